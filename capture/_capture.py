@@ -44,6 +44,7 @@ class CaptureReport:
     unseen: dict[str, list[float]] = field(default_factory=dict)  # profile -> unseen share per new sample
     renderer: dict[str, Any] = field(default_factory=dict)  # Renderer.settings of the workers
     failed: list[str] = field(default_factory=list)  # "<scene>/<profile>" without valid viewpoints
+    recaptured: int = 0  # existing samples whose cameras differed from the plan (written again)
 
     def unseen_mean(self) -> dict[str, float]:
         return {p: float(np.mean(v)) for p, v in self.unseen.items() if v}
@@ -85,6 +86,12 @@ def _job_seed(seed: int, scene: str, profile: str) -> int:
     return (seed * 1_000_003 + zlib.crc32(f"{scene}/{profile}".encode())) % (2**31)
 
 
+def _same_cameras(writer: DatasetWriter, sample_id: str, prev_cam: Any, cam: Any) -> bool:
+    """Whether an existing sample was rendered from exactly these cameras."""
+    meta = DatasetReader(writer.root)[sample_id].meta
+    return bool(meta.get("camera") == _camera_dict(cam) and meta.get("prev_camera") == _camera_dict(prev_cam))
+
+
 def _ids(scene: str, profile: str, n: int) -> list[str]:
     safe = scene.replace(":", "_")
     return [f"{safe}-{profile}-{i:04d}" for i in range(n)]
@@ -99,34 +106,37 @@ def _run_job(
 
     writer = DatasetWriter(out, settings)
     report = CaptureReport()
-    todo = {p: [i for i in _ids(scene_name, p, per_scene) if not writer.has(i)] for p in profiles}
-    report.skipped = sum(per_scene - len(v) for v in todo.values())
-    if queue is not None and report.skipped:
-        queue.put(report.skipped)
-    if not any(todo.values()):
-        return report
     scene, blockers = load_scene(scene_name, cache_dir, split, splits)
     w, h = size
+    plans: dict[str, list[tuple[str, Any, Any]]] = {}
+    for profile in profiles:
+        try:
+            pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
+                                      blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE)
+        except ViewpointError as err:
+            log.warning("%s (%s): %s", scene_name, profile, err)
+            report.failed.append(f"{scene_name}/{profile}")
+            continue
+        plans[profile] = []
+        for sid, (prev_cam, cam) in zip(_ids(scene_name, profile, per_scene), pairs):
+            if writer.has(sid) and _same_cameras(writer, sid, prev_cam, cam):
+                report.skipped += 1
+            else:
+                plans[profile].append((sid, prev_cam, cam))
+    if queue is not None and report.skipped:
+        queue.put(report.skipped)
+    if not any(plans.values()):
+        return report
     with Renderer(w, h) as renderer:
         report.renderer = renderer.settings
         renderer.load_scene(scene)
-        for profile in profiles:
-            if not todo[profile]:
-                continue
-            pairs = None
-            for coverage in VIEW_COVERAGE:
-                try:
-                    pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
-                                              blockers=blockers, aspect=w / h, min_coverage=coverage)
-                    break
-                except ViewpointError as err:
-                    log.warning("%s (%s): %s", scene_name, profile, err)
-            if pairs is None:
-                report.failed.append(f"{scene_name}/{profile}")
-                continue
-            for sid, (prev_cam, cam) in zip(_ids(scene_name, profile, per_scene), pairs):
+        for profile, plan in plans.items():
+            for sid, prev_cam, cam in plan:
                 if writer.has(sid):
-                    continue
+                    # Captured by an older rtp whose viewpoint stream differed; the new file is
+                    # newer than the sample's targets, so `rtp targets` recomputes them.
+                    log.warning("%s was captured from other cameras than this rtp plans; recapturing it", sid)
+                    report.recaptured += 1
                 prev = renderer.render(prev_cam)
                 frame = renderer.render(cam, prev)
                 geo = frame.mask > 0.5
@@ -193,6 +203,7 @@ def capture(
         report.skipped += r.skipped
         report.renderer = r.renderer or report.renderer
         report.failed.extend(r.failed)
+        report.recaptured += r.recaptured
         for p, v in r.unseen.items():
             report.unseen.setdefault(p, []).extend(v)
 

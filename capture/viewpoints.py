@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -311,7 +312,7 @@ def sample_viewpoints(
     voxel: float = 0.25,
     clearance: float = 0.3,
     pitch_limit: float = 20.0,
-    min_coverage: float = 0.85,
+    min_coverage: float | Sequence[float] = 0.85,
     max_distance: float = 100.0,
     rays: tuple[int, int] = (32, 18),
     aspect: float = 16 / 9,
@@ -333,19 +334,25 @@ def sample_viewpoints(
         voxel: voxel edge in metres (coarsened automatically above 24 M voxels).
         clearance: minimum distance from a camera to any triangle, metres.
         pitch_limit: pitch is drawn from U[-pitch_limit, pitch_limit] degrees.
-        min_coverage: minimum fraction of the ray grid that must hit drawn geometry.
+        min_coverage: minimum fraction of the ray grid that must hit drawn geometry, or a
+            decreasing sequence of them: when a pair cannot be found at one level within
+            ``max_attempts`` draws, sampling goes on at the next level (and stays there).
         max_distance: range of the coverage rays, metres.
         rays: ray grid (columns, rows) over the frustum.
         aspect, fov_y: the frustum of the cameras (fov_y is stored in the cameras).
         max_height: if set, free space is limited to voxels at most this high above a solid voxel
             below (keeps cameras near walkable floors in open maps).
-        max_attempts: candidate draws before giving up (default ``200 * n + 1000``).
+        max_attempts: candidate draws per pair and coverage level before moving to the next level
+            or giving up (default 1200).
         prev_tries: previous-viewpoint draws per accepted current view.
         stats: if a dict is given, it is filled with ``voxel``, ``grid_shape``, ``reachable``,
             ``candidates``, ``draws`` and ``rejected`` (counts per rule).
 
     Returns:
-        ``n`` tuples ``(previous_camera, current_camera)``.
+        ``n`` tuples ``(previous_camera, current_camera)``. The pairs are a stream: the first ``k``
+        pairs of a call with ``n > k`` are the pairs of the call with ``n = k`` (the fallback
+        between coverage levels included), so a dataset captured with a small ``n`` and extended
+        later holds the same cameras as one captured in one go.
 
     Raises:
         ViewpointError: no spawn point, no reachable free space, or fewer than ``n`` valid pairs
@@ -382,16 +389,29 @@ def sample_viewpoints(
 
     val = _Validator(tris)
     rng = np.random.default_rng(seed)
+    levels = [float(min_coverage)] if isinstance(min_coverage, (int, float)) else [float(c) for c in min_coverage]
+    if not levels:
+        raise ViewpointError("min_coverage: expected a number or a non-empty sequence of numbers")
     out: list[tuple[Camera, Camera]] = []
-    limit = max_attempts if max_attempts is not None else 200 * n + 1000
-    attempts = 0
+    limit = max_attempts if max_attempts is not None else 1200
+    level = 0
+    attempts = tries = 0  # draws in total, draws for the current pair at the current level
     rejected = {"clearance": 0, "coverage": 0, "previous": 0}
 
     def reachable(p: np.ndarray) -> bool:
         return bool(reach[tuple(grid.index(p))])
 
-    while len(out) < n and attempts < limit:
+    while len(out) < n:
+        if tries >= limit:
+            if level + 1 >= len(levels):
+                break
+            level += 1
+            tries = 0
+            log.info("%s (%s): no pair at coverage %.2f within %d draws; going on at %.2f", scene.name, prof.name,
+                     levels[level - 1], limit, levels[level])
         attempts += 1
+        tries += 1
+        coverage = levels[level]
         v = cand[rng.integers(len(cand))]
         pos = grid.centre(np.array([v]))[0] + rng.uniform(-0.5, 0.5, 3) * grid.voxel
         cam = Camera(tuple(float(x) for x in pos), yaw=float(rng.uniform(-180.0, 180.0)),
@@ -399,7 +419,7 @@ def sample_viewpoints(
         if not val.clearance(pos, clearance):
             rejected["clearance"] += 1
             continue
-        if _coverage(grid, cam, aspect, rays, max_distance) < min_coverage:
+        if _coverage(grid, cam, aspect, rays, max_distance) < coverage:
             rejected["coverage"] += 1
             continue
         for _ in range(prev_tries):
@@ -412,19 +432,20 @@ def sample_viewpoints(
                           pitch=float(np.clip(cam.pitch + dpitch, -pitch_limit, pitch_limit)), fov_y=fov_y)
             if not reachable(ppos) or not val.clearance(ppos, clearance) or not val.segment_clear(pos, ppos):
                 continue
-            if _coverage(grid, prev, aspect, rays, max_distance) < min_coverage:
+            if _coverage(grid, prev, aspect, rays, max_distance) < coverage:
                 continue
             out.append((prev, cam))
+            tries = 0
             break
         else:
             rejected["previous"] += 1
     if stats is not None:
         stats.update(voxel=grid.voxel, grid_shape=grid.shape, reachable=int(reach.sum()), candidates=len(cand),
-                     draws=attempts, rejected=dict(rejected))
+                     draws=attempts, rejected=dict(rejected), coverage=levels[level])
     if len(out) < n:
         raise ViewpointError(
             f"only {len(out)} of {n} valid viewpoints in {scene.name!r} after {attempts} draws "
-            f"(rejected: {rejected}); lower min_coverage or raise max_attempts"
+            f"(coverage down to {levels[level]:.2f}; rejected: {rejected}); lower min_coverage or raise max_attempts"
         )
     log.info("%s: %d viewpoints (%s) from %d draws, rejected %s", scene.name, n, prof.name, attempts, rejected)
     return out

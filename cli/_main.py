@@ -212,7 +212,9 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     if report.failed:
         print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
     unseen = ", ".join(f"{p} {100 * v:.1f}%" for p, v in report.unseen_mean().items())
-    print(f"{args.out}: {report.written} samples written, {report.skipped} already there"
+    print(f"{args.out}: {report.written} samples written"
+          + (f" ({report.recaptured} of them replace samples from other cameras)" if report.recaptured else "")
+          + f", {report.skipped} already there"
           + (f"; unseen pixels of the new samples: {unseen}" if unseen else ""))
     return 0
 

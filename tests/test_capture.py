@@ -86,7 +86,7 @@ def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkey
     tried: list[float] = []
 
     def picky(scene, n, seed, profile="slow", **kw):  # noqa: ANN001, ANN003, ANN202
-        tried.append(kw["min_coverage"])
+        tried.extend(kw["min_coverage"])
         if profile == "fast":
             raise viewpoints.ViewpointError("no valid viewpoint (test)")
         return real(scene, n, seed, profile, **kw)
@@ -96,3 +96,30 @@ def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkey
     assert r.written == 1 and r.failed == ["procedural:5/fast"]
     assert sorted(set(tried)) == sorted(set(VIEW_COVERAGE))  # every fallback was tried before giving up
     assert DatasetReader(tmp_path / "ds").manifest["failed"] == ["procedural:5/fast"]
+
+
+def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from rtp.capture import _capture
+    from rtp.train import compute_targets
+    from rtp.train._targets import TargetError, TargetStore
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=2, size=(96, 64), profiles=("slow",))
+    assert compute_targets(out, ["psnr"]) == 2
+    store = TargetStore(out)
+    old = DatasetReader(out)["procedural_5-slow-0001"].meta["camera"]
+    # An older rtp's viewpoint stream: the same first pair, another second one.
+    monkeypatch.setattr(_capture, "_job_seed", lambda seed, scene, profile: 12345)
+    r = capture(["procedural:5"], out, per_scene=2, size=(96, 64), profiles=("slow",))
+    assert r.recaptured == r.written == 2 and r.skipped == 0
+    assert DatasetReader(out)["procedural_5-slow-0001"].meta["camera"] != old
+    os.utime(store.path("procedural_5-slow-0001", "psnr"), (1, 1))  # mtime resolution of some file systems
+    assert not store.has("procedural_5-slow-0001", "psnr")
+    with pytest.raises(TargetError, match="older than the sample"):
+        store.load("procedural_5-slow-0001", "psnr", 16)
+    assert compute_targets(out, ["psnr"]) >= 1
+    assert store.has("procedural_5-slow-0001", "psnr")
+    again = capture(["procedural:5"], out, per_scene=2, size=(96, 64), profiles=("slow",))
+    assert (again.written, again.skipped) == (0, 2)

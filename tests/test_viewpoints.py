@@ -112,3 +112,15 @@ def test_viewpoint_errors(scene):
         sample_viewpoints(bare, 1, 0)
     with pytest.raises(ViewpointError, match="valid viewpoints"):
         sample_viewpoints(scene, 5, 0, min_coverage=1.01, max_attempts=20)
+
+
+def test_viewpoints_are_a_stream_through_the_coverage_fallback(scene):
+    """Extending a dataset (larger n) keeps the pairs already captured, fallback included."""
+    five = sample_viewpoints(scene, 5, seed=9, profile="fast")
+    assert sample_viewpoints(scene, 2, seed=9, profile="fast") == five[:2]
+    stats: dict = {}
+    lax = sample_viewpoints(scene, 3, seed=9, profile="fast", min_coverage=(1.01, 0.5), max_attempts=30, stats=stats)
+    assert stats["coverage"] == 0.5 and len(lax) == 3
+    assert sample_viewpoints(scene, 2, seed=9, profile="fast", min_coverage=(1.01, 0.5), max_attempts=30) == lax[:2]
+    with pytest.raises(ViewpointError, match="coverage down to 0.50"):
+        sample_viewpoints(scene, 2, seed=9, min_coverage=(1.01, 0.5), max_attempts=0)

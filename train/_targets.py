@@ -115,8 +115,17 @@ class TargetStore:
     def path(self, sample_id: str, metric: str) -> Path:
         return self.root / metric / f"{sample_id}.npz"
 
+    def _sample_path(self, sample_id: str) -> Path:
+        return self.root.parent / "samples" / f"{sample_id}.npz"
+
+    def stale(self, sample_id: str, metric: str) -> bool:
+        """Whether stored targets are older than their sample (it was captured again since)."""
+        sample = self._sample_path(sample_id)
+        return sample.is_file() and sample.stat().st_mtime > self.path(sample_id, metric).stat().st_mtime
+
     def has(self, sample_id: str, metric: str) -> bool:
-        return self.path(sample_id, metric).is_file()
+        """Whether up-to-date targets exist (missing or stale ones are computed by ``rtp targets``)."""
+        return self.path(sample_id, metric).is_file() and not self.stale(sample_id, metric)
 
     def write(self, sample_id: str, metric: str, values: np.ndarray, size: tuple[int, int]) -> None:
         """Store base-tile values (for PSNR: per-tile MSE) atomically."""
@@ -133,6 +142,9 @@ class TargetStore:
         p = self.path(sample_id, metric)
         if not p.is_file():
             raise TargetError(f"no {metric} targets for sample {sample_id!r}; run `rtp targets {self.root.parent}`")
+        if self.stale(sample_id, metric):
+            raise TargetError(f"{metric} targets of sample {sample_id!r} are older than the sample (captured again "
+                              f"since); run `rtp targets {self.root.parent}`")
         with np.load(p) as z:
             values, size = z["values"], tuple(int(v) for v in z["size"])
         mse = metric in _MSE_METRICS
