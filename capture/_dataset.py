@@ -114,7 +114,10 @@ def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.nda
         if a.dtype == np.uint8:
             return a
         return np.round(np.clip(a, 0.0, 1.0) * 255.0).astype(np.uint8)
-    return a.astype(np.float16)
+    # Saturate rather than overflow to inf: the motion of a point that was behind the previous
+    # camera can exceed float16's range (65504 pixels).
+    big = float(np.finfo(np.float16).max)
+    return np.clip(a, -big, big).astype(np.float16)
 
 
 def _decode(name: str, raw: np.ndarray) -> np.ndarray:

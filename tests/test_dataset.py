@@ -137,3 +137,12 @@ def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:
     mask = os.umask(0)
     os.umask(mask)
     assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_half_float_buffers_saturate_instead_of_overflowing(tmp_path: Path) -> None:
+    w = DatasetWriter(tmp_path / "ds")
+    bufs = _buffers()
+    bufs["motion"][0, 0] = (1e6, -1e6)  # a point that was behind the previous camera
+    w.write("s1", bufs, {})
+    m = DatasetReader(tmp_path / "ds")["s1"].buffer("motion")
+    assert np.isfinite(m).all() and m[0, 0, 0] == 65504.0 and m[0, 0, 1] == -65504.0
