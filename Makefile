@@ -9,11 +9,11 @@ STAMP  := $(VENV)/.rtp-installed
 # The shipped models' data: every split of scenes.yaml, both motion profiles (docs/results.md).
 DATA      ?= data
 SIZE      ?= 1280x720
-PER_SCENE ?= 2
-VAL_PER_SCENE ?= 3
+PER_SCENE ?= 4
+VAL_PER_SCENE ?= 6
 WORKERS   ?= 1
 METRIC    ?= jnyang
-STEPS     ?= 3000
+STEPS     ?= 4000
 # The recipe the shipped models were trained with (docs/results.md).
 TRAIN_ARGS ?= --batch 16 --crop 128 --lr 5e-4
 RTP       := $(BIN)/rtp

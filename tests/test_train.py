@@ -142,3 +142,12 @@ def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
                      "--crop", "32", "--val-scenes", "scene0"]) == 0
     assert "validation R2" in capsys.readouterr().out
     assert load_checkpoint(out).metadata.provenance["val_scenes"] == ("scene0",)
+
+
+def test_resuming_on_grown_data_is_refused(tmp_path: Path) -> None:
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_every=10, save_every=10)
+    train(TrainConfig(out=str(tmp_path / "m.pt"), steps=10, **cfg))
+    _dataset(tmp_path / "ds", n=9)  # more samples captured into the same folder
+    with pytest.raises(sdk.RtpError, match="differs in: samples"):
+        train(TrainConfig(out=str(tmp_path / "m.pt"), steps=20, **cfg))

@@ -8,6 +8,7 @@ scenes, and a safety margin calibrated on that validation data.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import platform
@@ -182,12 +183,18 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     out = Path(cfg.out)
     step, history = 0, []
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
+    # The samples themselves: a dataset grown since (more --per-scene) is another training run.
+    config_key["samples"] = {"train": len(train_ids), "val": len(val_ids), "sha256": hashlib.sha256(
+        json.dumps([train_ids, val_ids]).encode()).hexdigest()}
     config_key = json.loads(json.dumps(config_key))
     if out.is_file():
         prev = ckpt.load(out)
         state = prev.training or {}
-        if state.get("config") != config_key:
-            raise sdk.RtpError(f"{out} exists and was trained with another configuration; choose another --out")
+        before = state.get("config") or {}
+        if before != config_key:
+            diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
+            raise sdk.RtpError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
+                               "choose another --out or delete it")
         net.load_state_dict(prev.net.state_dict())
         opt.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])
