@@ -120,7 +120,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         val_scenes = tuple(map_names(args.val_split, args.scenes))
     cfg = TrainConfig(
         data=args.data, metric=args.metric, out=args.out, tile=args.tile, outputs=_csv(args.outputs),
-        inputs=_csv(args.inputs), transform=args.transform, logistic_k=args.k, steps=args.steps,
+        inputs=_csv(args.inputs), transform=args.transform, logistic_k=args.k, head=args.head, steps=args.steps,
         batch=args.batch, crop=args.crop, lr=args.lr, val_scenes=val_scenes, seed=args.seed,
         safety_quantile=args.safety_quantile, default_threshold=args.threshold, max_samples=args.max_samples,
     )
@@ -129,6 +129,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"))
     finally:
         bar.close()
+    if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
+        print(f"rtp train: error: {result.checkpoint}: output(s) {', '.join(result.dead_outputs)} predict the same "
+              f"value on every validation tile (a ReLU in the {cfg.head!r} head that stopped firing); such a model "
+              "would pick rates blindly. The checkpoint is kept; train again with --head linear or another --seed",
+              file=sys.stderr)
+        return 1
     v = result.val["transformed"]
     print(f"{result.checkpoint}: {result.steps} steps; validation R2 {v['r2']:.3f}, MAE {v['mae']:.4f}; "
           f"safety {result.safety:.4f} (underestimated tiles with it: {100 * result.under_share:.1f}%)")
@@ -315,6 +321,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--inputs", default="reprojected.r,seen,albedo.r,normal.z", help="input channels, in order")
     tr.add_argument("--transform", default="clamped", choices=["clamped", "logistic"])
     tr.add_argument("--k", type=float, default=10.0, help="growth rate of the logistic transform")
+    tr.add_argument("--head", default="paper", choices=["paper", "linear"],
+                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
     tr.add_argument("--steps", type=int, default=3000)
     tr.add_argument("--batch", type=int, default=8)
     tr.add_argument("--crop", type=int, default=128, help="square crop size in pixels (a multiple of --tile)")

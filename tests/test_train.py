@@ -139,15 +139,54 @@ def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     data = _dataset(tmp_path / "ds", n=6)
     out = tmp_path / "m.pt"
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "20",
-                     "--crop", "32", "--val-scenes", "scene0"]) == 0
+                     "--crop", "32", "--val-scenes", "scene0", "--head", "linear"]) == 0
     assert "validation R2" in capsys.readouterr().out
     assert load_checkpoint(out).metadata.provenance["val_scenes"] == ("scene0",)
 
 
 def test_resuming_on_grown_data_is_refused(tmp_path: Path) -> None:
     data = _dataset(tmp_path / "ds", n=6)
-    cfg = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_every=10, save_every=10)
+    cfg = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_every=10, save_every=10, head="linear")
     train(TrainConfig(out=str(tmp_path / "m.pt"), steps=10, **cfg))
     _dataset(tmp_path / "ds", n=9)  # more samples captured into the same folder
     with pytest.raises(sdk.RtpError, match="differs in: samples"):
         train(TrainConfig(out=str(tmp_path / "m.pt"), steps=20, **cfg))
+
+
+def test_heads_and_the_dead_output_check(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from rtp.train.model import MetricNet
+
+    paper, linear = MetricNet(head="paper"), MetricNet(head="linear")
+    assert sum(p.numel() for p in paper.parameters()) == sum(p.numel() for p in linear.parameters())
+    def relus(net: MetricNet) -> int:
+        return sum(isinstance(m, torch.nn.ReLU) for m in net.layers)
+
+    assert (relus(paper), relus(linear)) == (5, 4)
+    with pytest.raises(ValueError, match="head"):
+        MetricNet(head="relu6")
+    # An output whose last ReLU never fires predicts a constant: training names it and fails.
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=4, crop=32, batch=4,
+                      val_every=2, save_every=2)
+    real_init = MetricNet.__init__
+
+    def dead_2x1(self, *a, **kw):  # noqa: ANN001, ANN002, ANN003, ANN202
+        real_init(self, *a, **kw)
+        conv = [m for m in self.layers if isinstance(m, torch.nn.Conv2d)][-1]
+        with torch.no_grad():
+            conv.weight[1].zero_()
+            conv.bias[1] = -1.0
+
+    import unittest.mock
+
+    with unittest.mock.patch.object(MetricNet, "__init__", dead_2x1):
+        result = train(cfg)
+        assert "2x1" in result.dead_outputs
+        assert "2x1" in load_checkpoint(tmp_path / "m.pt").metadata.provenance["dead_outputs"]  # recorded, work kept
+        args = ["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "n.pt"), "--steps", "4",
+                "--crop", "32"]
+        assert rtp_main(args) == 1 and "--head linear" in capsys.readouterr().err
+    # On this toy data the paper's head loses outputs within a few steps; the linear head does not.
+    assert rtp_main([*args[:-4], "--out", str(tmp_path / "l.pt"), "--steps", "20", "--crop", "32", "--head", "linear"]) == 0
+    ck = load_checkpoint(tmp_path / "l.pt")
+    assert ck.net.config["head"] == "linear" and not ck.metadata.provenance["dead_outputs"]

@@ -55,6 +55,7 @@ class TrainConfig:
     transform: str = "clamped"
     logistic_k: float = 10.0
     width: int = 16
+    head: str = "paper"
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -77,6 +78,7 @@ class TrainResult:
     val: dict[str, Any] = field(default_factory=dict)
     safety: float = 0.0
     under_share: float = 0.0
+    dead_outputs: list[str] = field(default_factory=list)  # outputs that predict a constant (see DEAD_OUTPUT_STD)
 
 
 _RESUME_KEYS = ("data", "metric", "tile", "outputs", "inputs", "transform", "logistic_k", "width", "batch", "crop",
@@ -154,6 +156,19 @@ def _validate(net: MetricNet, val: _Split, t: sdk.Transform, cfg: TrainConfig, w
     return s, p, g
 
 
+#: An output whose predictions on the validation tiles spread less than this (in the network's
+#: (0, 1) output space) is dead; live outputs spread by about 0.1.
+DEAD_OUTPUT_STD = 1e-3
+
+
+def _dead_outputs(net: MetricNet, val: _Split, cfg: TrainConfig) -> list[str]:
+    net.eval()
+    preds = _predict_frames(net, val.x, cfg.tile)
+    net.train()
+    return [r for k, r in enumerate(cfg.outputs)
+            if float(np.concatenate([a[k].ravel() for a in preds]).std()) < DEAD_OUTPUT_STD]
+
+
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
     if cfg.metric not in sdk.KNOWN_METRICS:
@@ -177,13 +192,15 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     worse = 1.0 if transform.increasing != higher else -1.0
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
-    net = MetricNet(len(cfg.inputs), len(cfg.outputs), cfg.tile, cfg.width)
+    net = MetricNet(len(cfg.inputs), len(cfg.outputs), cfg.tile, cfg.width, cfg.head)
     opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
     out = Path(cfg.out)
     step, history = 0, []
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
+    if cfg.head != "paper":  # checkpoints from before the option compare equal to the paper head
+        config_key["head"] = cfg.head
     config_key["samples"] = {"train": len(train_ids), "val": len(val_ids), "sha256": hashlib.sha256(
         json.dumps([train_ids, val_ids]).encode()).hexdigest()}
     config_key = json.loads(json.dumps(config_key))
@@ -269,6 +286,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             save(done=False)
 
     val_scores, p, g = _validate(net, va, transform, cfg, worse)
+    dead = _dead_outputs(net, va, cfg)
     safety, under = calibrate_safety(p, g, worse=worse, quantile=cfg.safety_quantile)
     safe_scores = scores(p + worse * safety, g, worse=worse).as_dict()
     extra = {
@@ -276,9 +294,14 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "safety_rule": "mean underestimation" if cfg.safety_quantile is None else f"quantile {cfg.safety_quantile}",
         "underestimated_share_with_safety": under,
         "history": history[-20:],
+        "head": cfg.head,
+        "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)
+    if dead:
+        log.warning("%s: output(s) %s predict the same value on every validation tile (a ReLU in the %r head that "
+                    "stopped firing)", out, ", ".join(dead), cfg.head)
     log.info("done: val R2 %.3f MAE %.4f; safety %.4f leaves %.1f%% underestimated", val_scores["r2"],
              val_scores["mae"], safety, 100 * under)
-    return TrainResult(out, step, {"transformed": val_scores, "with_safety": safe_scores}, safety, under)
+    return TrainResult(out, step, {"transformed": val_scores, "with_safety": safe_scores}, safety, under, dead)
 

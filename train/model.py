@@ -16,6 +16,11 @@ layer  in channels  out channels  groups  pooling
 5      16           outputs       1       2
 =====  ===========  ============  ======  =======
 
+``head="paper"`` is that table exactly; its last block applies ReLU before BatchNorm and the
+sigmoid, so an output whose ReLU stops firing on every input predicts a constant (the "output
+floor" of the paper's own ONNX files) and gets no gradient to recover. ``head="linear"`` drops that
+last ReLU (conv -> BatchNorm -> sigmoid); it cannot die that way. Same parameter count.
+
 Generalised to tile sizes 1..32 (see :func:`layer_plan`): layer i > 1 pools by 2 while pooling is
 left; with ``w = 32`` the first layer pools as well. A hidden layer that follows p pooling steps
 uses ``min(4**p, width // 2)`` groups (at least two channels per group), rounded to a divisor of
@@ -26,13 +31,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import torch
 from torch import nn
 
-__all__ = ["LayerSpec", "MetricNet", "layer_plan"]
+__all__ = ["HEADS", "LayerSpec", "MetricNet", "layer_plan"]
 
 TILE_SIZES = (1, 2, 4, 8, 16, 32)
+#: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
+#: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
+HEADS = ("paper", "linear")
 
 
 @dataclass(frozen=True)
@@ -75,16 +84,20 @@ class MetricNet(nn.Module):
     ``(N, out_channels, H/tile, W/tile)`` in (0, 1).
     """
 
-    def __init__(self, in_channels: int = 4, out_channels: int = 4, tile: int = 16, width: int = 16) -> None:
+    def __init__(self, in_channels: int = 4, out_channels: int = 4, tile: int = 16, width: int = 16,
+                 head: str = "paper") -> None:
         super().__init__()
-        self.config = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile, "width": width}
+        if head not in HEADS:
+            raise ValueError(f"head must be one of {HEADS}, got {head!r}")
+        self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
+                                       "width": width, "head": head}
         layers: list[nn.Module] = []
-        for spec in layer_plan(in_channels, out_channels, tile, width):
-            layers += [
-                nn.Conv2d(spec.in_channels, spec.out_channels, 3, padding=1, groups=spec.groups),
-                nn.ReLU(inplace=True),
-                nn.BatchNorm2d(spec.out_channels),
-            ]
+        plan = layer_plan(in_channels, out_channels, tile, width)
+        for i, spec in enumerate(plan):
+            layers.append(nn.Conv2d(spec.in_channels, spec.out_channels, 3, padding=1, groups=spec.groups))
+            if head == "paper" or i < len(plan) - 1:
+                layers.append(nn.ReLU(inplace=True))
+            layers.append(nn.BatchNorm2d(spec.out_channels))
             if spec.pool > 1:
                 layers.append(nn.MaxPool2d(spec.pool))
         layers.append(nn.Sigmoid())
