@@ -36,3 +36,39 @@ def test_shipped_model_loads_by_name_and_predicts(name: str) -> None:
     out = by_name.predict(x)
     assert out.shape == (6, 5, 8) and np.all(np.isfinite(out))
     assert by_name.shading_rates(x).shape == (5, 8)
+
+
+
+@pytest.fixture(scope="module")
+def rendered_inputs() -> list:
+    """Two frames of the built-in procedural scene as the renderer hands them to a model."""
+    from rtp.capture._capture import load_scene
+    from rtp.cli._demo import _camera_path
+    from rtp.plugins.moderngl import Renderer
+
+    scene, blockers = load_scene("procedural:0", None, None, None)
+    w, h = 384, 224
+    frames = []
+    with Renderer(w, h) as r:
+        r.load_scene(scene)
+        for seed in (0, 1):
+            prev = None
+            for cam in _camera_path(scene, 2, blockers, w / h, seed):
+                prev = r.render(cam, prev)
+            frames.append(prev)
+    return frames
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_output_of_a_shipped_model_responds_to_the_frame(name: str, rendered_inputs: list) -> None:
+    # A dead output (a ReLU of the paper's head that stopped firing) predicts one constant whatever
+    # the frame shows: the LPIPS model once shipped with a dead 2x1 output (spread 0.0 here, live
+    # outputs 0.08 to 0.3). Synthetic stripes do not show it; rendered frames do.
+    p = sdk.load(name)
+    raw = np.concatenate([
+        p.predict_raw(np.stack([f.channel(c) for c in p.metadata.inputs]).astype(np.float32)).reshape(len(p.metadata.outputs), -1)
+        for f in rendered_inputs
+    ], axis=1)
+    spread = raw.std(axis=1)
+    assert (spread > 0.01).all(), dict(zip(p.metadata.outputs, spread.round(5)))
