@@ -86,9 +86,9 @@ def _job_seed(seed: int, scene: str, profile: str) -> int:
     return (seed * 1_000_003 + zlib.crc32(f"{scene}/{profile}".encode())) % (2**31)
 
 
-def _same_cameras(writer: DatasetWriter, sample_id: str, prev_cam: Any, cam: Any) -> bool:
+def _same_cameras(reader: DatasetReader, sample_id: str, prev_cam: Any, cam: Any) -> bool:
     """Whether an existing sample was rendered from exactly these cameras."""
-    meta = DatasetReader(writer.root)[sample_id].meta
+    meta = reader[sample_id].meta
     return bool(meta.get("camera") == _camera_dict(cam) and meta.get("prev_camera") == _camera_dict(prev_cam))
 
 
@@ -108,6 +108,7 @@ def _run_job(
     report = CaptureReport()
     scene, blockers = load_scene(scene_name, cache_dir, split, splits)
     w, h = size
+    reader = DatasetReader(out)
     plans: dict[str, list[tuple[str, Any, Any]]] = {}
     for profile in profiles:
         try:
@@ -119,7 +120,7 @@ def _run_job(
             continue
         plans[profile] = []
         for sid, (prev_cam, cam) in zip(_ids(scene_name, profile, per_scene), pairs):
-            if writer.has(sid) and _same_cameras(writer, sid, prev_cam, cam):
+            if writer.has(sid) and _same_cameras(reader, sid, prev_cam, cam):
                 report.skipped += 1
             else:
                 plans[profile].append((sid, prev_cam, cam))

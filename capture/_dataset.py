@@ -167,6 +167,11 @@ class Sample:
         return tuple(self.buffer("final_1x1").shape[:2])  # type: ignore[return-value]
 
 
+def sample_path(root: str | os.PathLike[str], sample_id: str) -> Path:
+    """Where the sample ``sample_id`` of the dataset folder ``root`` is stored."""
+    return Path(root) / "samples" / f"{sample_id}.npz"
+
+
 class DatasetWriter:
     """Writes samples into a dataset folder; resumable (``has`` tells which ids exist).
 
@@ -202,7 +207,7 @@ class DatasetWriter:
         return len(stale)
 
     def has(self, sample_id: str) -> bool:
-        return (self.samples_dir / f"{sample_id}.npz").is_file()
+        return sample_path(self.root, sample_id).is_file()
 
     def write(self, sample_id: str, buffers: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> Path:
         """Write one sample atomically. ``buffers`` must hold every buffer of :data:`BUFFERS`."""
@@ -215,7 +220,7 @@ class DatasetWriter:
         shape = tuple(np.asarray(buffers["final_1x1"]).shape[:2])
         encoded = {name: _encode(name, buffers[name], shape) for name in BUFFERS}  # type: ignore[arg-type]
         meta_json = json.dumps(dict(meta), sort_keys=True, allow_nan=False)
-        path = self.samples_dir / f"{sample_id}.npz"
+        path = sample_path(self.root, sample_id)
         with atomic_output(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, meta=np.frombuffer(meta_json.encode(), dtype=np.uint8), **encoded)
@@ -264,7 +269,7 @@ class DatasetReader:
         return (self[i] for i in self.ids)
 
     def __getitem__(self, sample_id: str) -> Sample:
-        path = self.root / "samples" / f"{sample_id}.npz"
+        path = sample_path(self.root, sample_id)
         if not path.is_file():
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")
         try:

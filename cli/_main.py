@@ -130,9 +130,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
-        print(f"rtp train: error: {result.checkpoint}: output(s) {', '.join(result.dead_outputs)} predict the same "
-              f"value on every validation tile (a ReLU in the {cfg.head!r} head that stopped firing); such a model "
-              "would pick rates blindly. The checkpoint is kept; train again with --head linear or another --seed",
+        print(f"rtp train: error: dead output(s) {', '.join(result.dead_outputs)} (see the warning above); "
+              f"{result.checkpoint} is kept, not fit to export: train again with --head linear or another --seed",
               file=sys.stderr)
         return 1
     v = result.val["transformed"]

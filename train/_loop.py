@@ -149,8 +149,9 @@ def _predict_frames(net: MetricNet, xs: Sequence[np.ndarray], tile: int) -> list
 def _validate(net: MetricNet, val: _Split, t: sdk.Transform, cfg: TrainConfig, worse: float) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     net.eval()
     preds = _predict_frames(net, val.x, cfg.tile)
-    p = np.concatenate([a.ravel() for a in preds])
-    g = np.concatenate([t.forward(y).ravel() for y in val.y])
+    # (outputs, tiles): one row per output rate, every validation tile along it
+    p = np.concatenate([a.reshape(len(a), -1) for a in preds], axis=1)
+    g = np.concatenate([t.forward(y).reshape(len(y), -1) for y in val.y], axis=1)
     s = scores(p, g, worse=worse).as_dict()
     net.train()
     return s, p, g
@@ -161,12 +162,9 @@ def _validate(net: MetricNet, val: _Split, t: sdk.Transform, cfg: TrainConfig, w
 DEAD_OUTPUT_STD = 1e-3
 
 
-def _dead_outputs(net: MetricNet, val: _Split, cfg: TrainConfig) -> list[str]:
-    net.eval()
-    preds = _predict_frames(net, val.x, cfg.tile)
-    net.train()
-    return [r for k, r in enumerate(cfg.outputs)
-            if float(np.concatenate([a[k].ravel() for a in preds]).std()) < DEAD_OUTPUT_STD]
+def _dead_outputs(pred: np.ndarray, outputs: Sequence[str]) -> list[str]:
+    """The outputs whose validation predictions (rows of ``pred``) are one constant."""
+    return [r for r, row in zip(outputs, pred) if float(row.std()) < DEAD_OUTPUT_STD]
 
 
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
@@ -198,9 +196,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     out = Path(cfg.out)
     step, history = 0, []
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
-    # The samples themselves: a dataset grown since (more --per-scene) is another training run.
     if cfg.head != "paper":  # checkpoints from before the option compare equal to the paper head
         config_key["head"] = cfg.head
+    # The samples themselves: a dataset grown since (more --per-scene) is another training run.
     config_key["samples"] = {"train": len(train_ids), "val": len(val_ids), "sha256": hashlib.sha256(
         json.dumps([train_ids, val_ids]).encode()).hexdigest()}
     config_key = json.loads(json.dumps(config_key))
@@ -286,7 +284,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             save(done=False)
 
     val_scores, p, g = _validate(net, va, transform, cfg, worse)
-    dead = _dead_outputs(net, va, cfg)
+    dead = _dead_outputs(p, cfg.outputs)
     safety, under = calibrate_safety(p, g, worse=worse, quantile=cfg.safety_quantile)
     safe_scores = scores(p + worse * safety, g, worse=worse).as_dict()
     extra = {
@@ -300,7 +298,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     save(done=True, safety=safety, extra=extra)
     if dead:
         log.warning("%s: output(s) %s predict the same value on every validation tile (a ReLU in the %r head that "
-                    "stopped firing)", out, ", ".join(dead), cfg.head)
+                    "stopped firing): such a model picks rates blindly", out, ", ".join(dead), cfg.head)
     log.info("done: val R2 %.3f MAE %.4f; safety %.4f leaves %.1f%% underestimated", val_scores["r2"],
              val_scores["mae"], safety, 100 * under)
     return TrainResult(out, step, {"transformed": val_scores, "with_safety": safe_scores}, safety, under, dead)

@@ -115,12 +115,11 @@ class TargetStore:
     def path(self, sample_id: str, metric: str) -> Path:
         return self.root / metric / f"{sample_id}.npz"
 
-    def _sample_path(self, sample_id: str) -> Path:
-        return self.root.parent / "samples" / f"{sample_id}.npz"
-
     def stale(self, sample_id: str, metric: str) -> bool:
         """Whether stored targets are older than their sample (it was captured again since)."""
-        sample = self._sample_path(sample_id)
+        from rtp.capture._dataset import sample_path
+
+        sample = sample_path(self.root.parent, sample_id)
         return sample.is_file() and sample.stat().st_mtime > self.path(sample_id, metric).stat().st_mtime
 
     def has(self, sample_id: str, metric: str) -> bool:
