@@ -63,8 +63,8 @@ def rendered_inputs() -> list:
 @pytest.mark.parametrize("name", SHIPPED)
 def test_every_output_of_a_shipped_model_responds_to_the_frame(name: str, rendered_inputs: list) -> None:
     # A dead output (a ReLU of the paper's head that stopped firing) predicts one constant whatever
-    # the frame shows: the LPIPS model once shipped with a dead 2x1 output (spread 0.0 here, live
-    # outputs 0.08 to 0.3). Synthetic stripes do not show it; rendered frames do.
+    # the frame shows: the LPIPS model once shipped with a dead 2x1 output, which this test caught
+    # (the failure message lists every output's spread). Synthetic stripes did not show it.
     p = sdk.load(name)
     raw = np.concatenate([
         p.predict_raw(np.stack([f.channel(c) for c in p.metadata.inputs]).astype(np.float32)).reshape(len(p.metadata.outputs), -1)
