@@ -15,7 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from rtp.capture._capture import capture
+from rtp.capture import capture
 
 
 def main() -> None:

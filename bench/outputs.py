@@ -15,8 +15,7 @@ import argparse
 import numpy as np
 
 from rtp import sdk
-from rtp.capture import DatasetReader
-from rtp.train import TargetStore
+from rtp.capture import DatasetReader, TargetStore
 
 
 def main() -> None:

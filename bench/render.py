@@ -18,8 +18,9 @@ import time
 
 import numpy as np
 
-from rtp.plugins.moderngl import Camera, Material, PointLight, Renderer, Scene, SunLight
-from rtp.plugins.moderngl._primitives import box_mesh, checker_texture, quad_mesh, sphere_mesh
+from rtp.plugins.moderngl import Renderer
+from rtp.scene import Camera, Material, PointLight, Scene, SunLight
+from rtp.scene import box_mesh, checker_texture, quad_mesh, sphere_mesh
 
 
 def _noise_texture(rng: np.random.Generator, size: int = 256) -> np.ndarray:

@@ -1,4 +1,11 @@
-"""Dataset capture: scene sources, viewpoint sampling, the capture driver and the dataset format."""
+"""Dataset capture: scene sources, viewpoint sampling, the capture driver, the dataset format and
+the per-tile target store.
+
+Importing this package needs only numpy; rendering (:func:`capture`) needs ``rtp[capture]`` and
+computing targets (:func:`compute_targets`) ``rtp[metrics]``, both imported when called.
+"""
+
+from ._capture import PROCEDURAL_PREFIX, CaptureReport, capture, load_scene
 
 from ._dataset import (
     BUFFERS,
@@ -11,15 +18,25 @@ from ._dataset import (
     open_dataset,
     write_png,
 )
+from ._targets import BASE_TILE, TargetError, TargetStore, compute_targets, pool_targets
 
 __all__ = [
+    "BASE_TILE",
     "BUFFERS",
+    "PROCEDURAL_PREFIX",
+    "CaptureReport",
     "DatasetError",
     "DatasetReader",
     "DatasetWriter",
     "PaperDatasetReader",
     "Sample",
+    "TargetError",
+    "TargetStore",
+    "capture",
+    "compute_targets",
     "contact_sheet",
+    "load_scene",
     "open_dataset",
+    "pool_targets",
     "write_png",
 ]

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from rtp.sdk import ALL_RATES, CHANNELS, InputShapeError, RtpError
-from rtp.sdk._io import atomic_output
+from rtp.sdk.files import atomic_output
 
 __all__ = [
     "BUFFERS",

@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtp.plugins.moderngl._camera import Camera
-from rtp.plugins.moderngl._scene import Scene
+from rtp.scene import Camera
+from rtp.scene import Scene
 from rtp.sdk import RtpError
 
 __all__ = [

@@ -42,7 +42,7 @@ def _camera_path(scene: Any, frames: int, blockers: Any, aspect: float, seed: in
     """A short camera move: a valid viewpoint pair of the scene (the capture's sampler, fast profile),
     interpolated over ``frames`` frames."""
     from rtp.capture.viewpoints import sample_viewpoints
-    from rtp.plugins.moderngl import Camera
+    from rtp.scene import Camera
 
     prev, cur = sample_viewpoints(scene, 1, seed, "fast", blockers=blockers, aspect=aspect)[0]
     cams = []
@@ -80,10 +80,10 @@ def run_demo(
     """Run the demo and write its pictures into ``out``."""
     from rtp import metrics
     from rtp.capture import write_png
-    from rtp.capture._capture import load_scene
+    from rtp.capture import load_scene
     from rtp.plugins.moderngl import Renderer
-    from rtp.train._evaluate import _fails
-    from rtp.train._plots import colorize, heatmaps
+    from rtp.evaluate import failing_tiles
+    from rtp.evaluate.plots import colorize, heatmaps
 
     predictor = sdk.load(model)
     meta = predictor.metadata
@@ -125,7 +125,7 @@ def run_demo(
         saved_per_tile[m] = sdk.work_saved(r)
         share[r] = float(m.mean())
     saved = float((saved_per_tile * pixels).sum() / pixels.sum())
-    over = float(_fails(rates, true, thr, meta.higher_is_better).mean())
+    over = float(failing_tiles(rates, true, thr, meta.higher_is_better).mean())
 
     files = []
 

@@ -68,7 +68,7 @@ def _csv(text: str) -> tuple[str, ...]:
 
 
 def _cmd_targets(args: argparse.Namespace) -> int:
-    from rtp.train import compute_targets
+    from rtp.capture import compute_targets
 
     ppd: float | str | None = None
     if args.ppd is not None:
@@ -144,7 +144,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from rtp.sdk import RtpError
-    from rtp.train import evaluate
+    from rtp.evaluate import evaluate
 
     if args.plots and not args.out:
         raise RtpError("--plots writes into --out; give an output folder")
@@ -197,7 +197,7 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
-    from rtp.capture._capture import capture
+    from rtp.capture import capture
 
     if args.scene:
         names = list(args.scene)

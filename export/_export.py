@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from rtp.sdk import METADATA_KEY, MetadataError, ModelLoadError, ModelMetadata, ModelNotFoundError, RtpError
-from rtp.sdk._io import atomic_output
+from rtp.sdk.files import atomic_output
 
 __all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "write_metadata"]
 

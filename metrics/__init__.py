@@ -18,30 +18,23 @@ import logging
 
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
 from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width
-from ._image import LUMA_WEIGHTS, luma
 from ._lpips import LPIPS_MIN_SIZE, load_lpips_weights, lpips_map, lpips_network, lpips_weights_path
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, squared_error_map, yang_map
-from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, pool_tiles, psnr_from_mse, tile_grid, weber_denominator
-from ._registry import METRICS, MetricInfo
-from ._targets import DEFAULT_TARGET_METRICS, DEFAULT_TILE, error_map, tile_metric, tile_targets
+from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, pool_tiles, weber_denominator
+from ._targets import error_map, tile_metric, tile_targets
 
 logging.getLogger("rtp.metrics").addHandler(logging.NullHandler())
 
 __all__ = [
     "DEFAULT_PPD",
-    "DEFAULT_TARGET_METRICS",
-    "DEFAULT_TILE",
     "DEFAULT_WEBER_L",
     "FLIP_DEFAULT_PPD",
     "LPIPS_MIN_SIZE",
-    "LUMA_WEIGHTS",
-    "METRICS",
     "PAPER_WEBER_L",
     "WEBER_BLOCK",
     "InputRangeError",
     "MetricDependencyError",
     "MetricError",
-    "MetricInfo",
     "MetricParameterError",
     "error_map",
     "flip_map",
@@ -51,13 +44,10 @@ __all__ = [
     "lpips_map",
     "lpips_network",
     "lpips_weights_path",
-    "luma",
     "pool_tiles",
     "ppd_from_width",
-    "psnr_from_mse",
     "psnr_tiles",
     "squared_error_map",
-    "tile_grid",
     "tile_metric",
     "tile_targets",
     "weber_denominator",

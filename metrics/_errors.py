@@ -7,7 +7,7 @@ Bad images raise the SDK's input errors (:class:`~rtp.sdk.InputShapeError`,
 
 from __future__ import annotations
 
-from rtp.sdk import InputError, RtpError
+from rtp.sdk import InputError, ParameterError, RtpError
 
 __all__ = ["InputRangeError", "MetricDependencyError", "MetricError", "MetricParameterError"]
 
@@ -32,5 +32,5 @@ class MetricError(RtpError):
     """A metric backend failed on input that passed validation (e.g. ``flip_evaluator`` exited)."""
 
 
-class MetricParameterError(RtpError, ValueError):
+class MetricParameterError(ParameterError):
     """A metric parameter (tile size, ``weber_l``, ``ppd``, metric or rate name) is invalid."""

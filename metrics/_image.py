@@ -14,14 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from rtp.sdk import luma
 from rtp.sdk import InputChannelError, InputDtypeError, InputShapeError, NonFiniteInputError
 
 from ._errors import InputRangeError
 
-__all__ = ["LUMA_WEIGHTS", "RANGE_TOLERANCE", "ImageBatch", "as_batch", "as_pair", "luma"]
+__all__ = ["RANGE_TOLERANCE", "ImageBatch", "as_batch", "as_pair"]
 
-#: Rec.601 luma weights applied to display-encoded (gamma) RGB, as the paper's code does.
-LUMA_WEIGHTS: tuple[float, float, float] = (0.299, 0.587, 0.114)
 #: Values within this distance outside [0, 1] are clipped silently (float16 round-off); anything
 #: further out raises :class:`~rtp.metrics.InputRangeError`.
 RANGE_TOLERANCE = 1e-6
@@ -150,9 +149,3 @@ def as_pair(reference: Any, test: Any) -> tuple[ImageBatch, ImageBatch]:
 def _shape(x: Any) -> tuple[int, ...]:
     return tuple(int(s) for s in x.shape)
 
-
-def luma(rgb: np.ndarray) -> np.ndarray:
-    """Rec.601 luma ``0.299 R + 0.587 G + 0.114 B`` of display values: ``(..., 3) -> (...)`` float32."""
-    r, g, b = LUMA_WEIGHTS
-    rgb = np.asarray(rgb, dtype=np.float32)
-    return (r * rgb[..., 0] + g * rgb[..., 1] + b * rgb[..., 2]).astype(np.float32, copy=False)

@@ -12,8 +12,10 @@ from typing import Any
 import numpy as np
 
 from ._flip import DEFAULT_PPD, Ppd, flip_pixels, resolve_ppd
-from ._image import as_pair, luma
-from ._pool import DEFAULT_WEBER_L, pool_tiles, psnr_from_mse, weber_denominator
+from rtp.sdk import DEFAULT_TILE_SIZE, luma, psnr_from_mse
+
+from ._image import as_pair
+from ._pool import DEFAULT_WEBER_L, pool_tiles, weber_denominator
 
 __all__ = ["jnflip_map", "jnyang_map", "psnr_tiles", "squared_error_map", "yang_map"]
 
@@ -25,7 +27,7 @@ def squared_error_map(reference: Any, test: Any) -> Any:
     return ref.wrap((d * d).mean(axis=-1))
 
 
-def psnr_tiles(reference: Any, test: Any, tile: int = 16) -> Any:
+def psnr_tiles(reference: Any, test: Any, tile: int = DEFAULT_TILE_SIZE) -> Any:
     """Per-tile PSNR in dB (peak 1): ``-10 log10(mse)`` of each tile's mean squared error.
 
     The MSE averages over the tile's pixels and the three channels; partial edge tiles average over

@@ -13,18 +13,18 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import InputShapeError
+from rtp.sdk import InputShapeError, tile_extents, tile_grid
 
 from ._errors import MetricParameterError
-from ._image import _is_torch, luma
+from rtp.sdk import luma
+
+from ._image import _is_torch
 
 __all__ = [
     "DEFAULT_WEBER_L",
     "PAPER_WEBER_L",
     "WEBER_BLOCK",
     "pool_tiles",
-    "psnr_from_mse",
-    "tile_grid",
     "weber_denominator",
 ]
 
@@ -46,15 +46,9 @@ def _check_tile(tile: int) -> int:
     return int(tile)
 
 
-def tile_grid(height: int, width: int, tile: int) -> tuple[int, int]:
-    """Number of tiles ``(ceil(height / tile), ceil(width / tile))``."""
-    tile = _check_tile(tile)
-    return math.ceil(height / tile), math.ceil(width / tile)
-
-
 def _pool_np(values: np.ndarray, tile: int, reduce: Reduce) -> np.ndarray:
     h, w = values.shape[-2:]
-    th, tw = math.ceil(h / tile), math.ceil(w / tile)
+    th, tw = tile_grid(h, w, tile)
     ph, pw = th * tile - h, tw * tile - w
     lead = values.shape[:-2]
     if reduce == "max":
@@ -67,9 +61,7 @@ def _pool_np(values: np.ndarray, tile: int, reduce: Reduce) -> np.ndarray:
     if ph or pw:
         v = np.pad(v, [(0, 0)] * len(lead) + [(0, ph), (0, pw)])
     sums = v.reshape(*lead, th, tile, tw, tile).sum(axis=(-3, -1))
-    rows = np.minimum(tile, h - tile * np.arange(th))
-    cols = np.minimum(tile, w - tile * np.arange(tw))
-    return sums / (rows[:, None] * cols[None, :])
+    return sums / np.outer(tile_extents(h, tile), tile_extents(w, tile))
 
 
 def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:
@@ -105,13 +97,6 @@ def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:
 
         return torch.from_numpy(out).to(device)
     return out
-
-
-def psnr_from_mse(mse: np.ndarray) -> np.ndarray:
-    """``-10 log10(mse)`` in dB for a peak of 1; ``+inf`` where ``mse == 0``. float32."""
-    mse = np.asarray(mse, dtype=np.float64)
-    with np.errstate(divide="ignore"):
-        return (-10.0 * np.log10(mse)).astype(np.float32)
 
 
 def check_weber_l(weber_l: float) -> float:

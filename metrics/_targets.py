@@ -10,24 +10,19 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import PREDICTED_RATES, InputShapeError
+from rtp.sdk import DEFAULT_TILE_SIZE, METRICS, PREDICTED_RATES, TARGET_METRICS, InputShapeError, luma, psnr_from_mse, tile_grid
 
 from ._errors import MetricParameterError
 from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, resolve_ppd
-from ._image import as_batch, luma
+from ._image import as_batch
 from ._lpips import _check_size, lpips_against, lpips_map
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, yang_map
-from ._pool import DEFAULT_WEBER_L, check_weber_l, pool_tiles, psnr_from_mse, tile_grid, weber_denominator
-from ._registry import METRICS
+from ._pool import DEFAULT_WEBER_L, check_weber_l, pool_tiles, weber_denominator
 
-__all__ = ["DEFAULT_TARGET_METRICS", "DEFAULT_TILE", "error_map", "tile_metric", "tile_targets"]
+__all__ = ["error_map", "tile_metric", "tile_targets"]
 
 log = logging.getLogger("rtp.metrics")
 
-#: The metrics the paper trains on, in the order ``tile_targets`` computes them by default.
-DEFAULT_TARGET_METRICS: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang")
-#: Default tile side in pixels (the SDK's and the paper's 16x16 tiles).
-DEFAULT_TILE = 16
 
 
 def _check_metric(metric: str) -> str:
@@ -68,7 +63,7 @@ def tile_metric(
     metric: str,
     reference: Any,
     test: Any,
-    tile: int = DEFAULT_TILE,
+    tile: int = DEFAULT_TILE_SIZE,
     *,
     ppd: Ppd = DEFAULT_PPD,
     weber_l: float = DEFAULT_WEBER_L,
@@ -88,8 +83,8 @@ def tile_metric(
 def tile_targets(
     reference: np.ndarray,
     images_by_rate: Mapping[str, np.ndarray],
-    metrics: Iterable[str] = DEFAULT_TARGET_METRICS,
-    tile: int = DEFAULT_TILE,
+    metrics: Iterable[str] = TARGET_METRICS,
+    tile: int = DEFAULT_TILE_SIZE,
     *,
     ppd: Ppd = DEFAULT_PPD,
     weber_l: float = DEFAULT_WEBER_L,
@@ -107,7 +102,7 @@ def tile_targets(
         reference: the 1x1-rate frame, numpy ``(H, W, 3)`` float in [0, 1] (display-encoded sRGB).
         images_by_rate: the same frame rendered at reduced rates, keyed by rate name
             (``"1x2"``, ``"2x1"``, ``"2x2"``, ``"2x4"``, ``"4x2"``, ``"4x4"``), each like ``reference``.
-        metrics: names from :data:`~rtp.metrics.METRICS`.
+        metrics: names from :data:`rtp.sdk.METRICS`.
         tile: tile side in pixels; edge tiles of frames that are not a multiple pool their real pixels.
         ppd: FLIP pixels per degree, a number or ``"width"`` (see :func:`~rtp.metrics.flip_map`).
         weber_l: environment luminance l of the JN metrics.

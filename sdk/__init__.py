@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import logging
 
-from . import adapters
+from . import adapters, files
 from ._channels import CHANNELS, DEFAULT_INPUTS, Channel
+from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._errors import (
     InferenceError,
     InputChannelError,
@@ -23,15 +24,18 @@ from ._errors import (
     ModelLoadError,
     ModelNotFoundError,
     NonFiniteInputError,
+    ParameterError,
     ProviderUnavailableError,
     RtpError,
 )
-from ._metadata import KNOWN_METRICS, METADATA_KEY, SCHEMA_VERSION, ModelMetadata
+from ._metadata import METADATA_KEY, SCHEMA_VERSION, ModelMetadata
+from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import draw_rate_overlay
 from ._predictor import ShadingRatePredictor, load, shipped_models
-from ._rates import ALL_RATES, PREDICTED_RATES, RATE_CODES, RATE_NAMES, select_rates, work_saved
+from ._rates import ALL_RATES, PREDICTED_RATES, RATE_CODES, RATE_NAMES, RateLike, rate_size, resolve_allowed, select_rates, work_saved
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
-from ._transforms import DEFAULT_EXTRAPOLATION_K, Transform, extrapolate
+from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, tile_extents, tile_grid
+from ._transforms import DEFAULT_EXTRAPOLATION_K, DEFAULT_OUTPUTS, LOGIT_EPS, OUTPUT_SETS, Transform, complete_rates, extrapolate
 
 logging.getLogger("rtp").addHandler(logging.NullHandler())
 
@@ -52,13 +56,20 @@ __all__ = [
     "CHANNELS",
     "DEFAULT_EXTRAPOLATION_K",
     "DEFAULT_INPUTS",
+    "DEFAULT_OUTPUTS",
     "DEFAULT_REPROJECTION_TOLERANCE",
-    "KNOWN_METRICS",
+    "DEFAULT_TILE_SIZE",
+    "LOGIT_EPS",
+    "LUMA_WEIGHTS",
     "METADATA_KEY",
+    "METRICS",
+    "OUTPUT_SETS",
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
     "SCHEMA_VERSION",
+    "TARGET_METRICS",
+    "TILE_SIZES",
     "Channel",
     "InferenceError",
     "InputChannelError",
@@ -68,20 +79,35 @@ __all__ = [
     "MetadataError",
     "ModelLoadError",
     "ModelMetadata",
+    "MetricInfo",
     "ModelNotFoundError",
     "NonFiniteInputError",
+    "ParameterError",
     "ProviderUnavailableError",
+    "RateLike",
     "RtpError",
     "ShadingRatePredictor",
     "Transform",
     "adapters",
+    "complete_rates",
     "draw_rate_overlay",
     "extrapolate",
+    "files",
+    "linear_to_srgb",
     "load",
+    "luma",
+    "mse_from_psnr",
+    "padded_size",
+    "psnr_from_mse",
+    "rate_size",
     "reproject",
     "reproject_positions",
+    "resolve_allowed",
     "select_rates",
     "shipped_models",
+    "srgb_to_linear",
+    "tile_extents",
+    "tile_grid",
     "work_saved",
 ]
 

@@ -13,6 +13,7 @@ working::
     │   │   └── InputChannelError                           wrong number of channels
     │   ├── InputDtypeError       (also TypeError)          not a float32 numpy array
     │   └── NonFiniteInputError                             NaN or inf in the input
+    ├── ParameterError            (also ValueError)         an argument out of its range (threshold, tile size, ...)
     ├── ProviderUnavailableError                            an execution provider that was asked for does not run
     └── InferenceError                                      onnxruntime failed while running the model
 
@@ -32,6 +33,7 @@ __all__ = [
     "ModelLoadError",
     "ModelNotFoundError",
     "NonFiniteInputError",
+    "ParameterError",
     "ProviderUnavailableError",
     "RtpError",
 ]
@@ -86,6 +88,17 @@ class InputDtypeError(InputError, TypeError):
 
 class NonFiniteInputError(InputError):
     """The input contains NaN or infinite values."""
+
+
+class ParameterError(RtpError, ValueError):
+    """An argument is of the wrong type or outside its range (a threshold, a tile size, a rate name).
+
+    ``name`` names the argument when there is one.
+    """
+
+    def __init__(self, message: str, name: str | None = None) -> None:
+        super().__init__(message)
+        self.name = name
 
 
 class ProviderUnavailableError(RtpError):

@@ -22,20 +22,16 @@ import numpy as np
 
 from ._channels import CHANNELS
 from ._errors import MetadataError
+from ._metrics import METRICS
+from ._tiles import TILE_SIZES
 from ._transforms import DEFAULT_EXTRAPOLATION_K, OUTPUT_SETS, Transform, extrapolate
 
-__all__ = ["KNOWN_METRICS", "METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
+__all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
 
 #: The ``metadata_props`` key that holds the JSON metadata.
 METADATA_KEY = "rtp.metadata"
 #: The schema version this SDK writes; it reads this version and every older one.
 SCHEMA_VERSION = 1
-#: Metrics rtp knows, with whether a higher value is better. Other names are allowed (a user's
-#: own metric) but must state ``higher_is_better`` themselves.
-KNOWN_METRICS: Mapping[str, bool] = MappingProxyType(
-    {"flip": False, "jnflip": False, "psnr": True, "lpips": False, "yang": False, "jnyang": False}
-)
-_TILE_SIZES = (1, 2, 4, 8, 16, 32)
 _METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 _FIELDS = (
     "schema_version",
@@ -130,16 +126,16 @@ class ModelMetadata:
             raise MetadataError(f"metric: expected a lower-case name such as 'jnyang', got {metric!r}", "metric")
         hib = d.get("higher_is_better")
         if hib is None:
-            if metric not in KNOWN_METRICS:
+            if metric not in METRICS:
                 raise MetadataError(
                     f"higher_is_better: required for the metric {metric!r}, which rtp does not know", "higher_is_better"
                 )
-            hib = KNOWN_METRICS[metric]
+            hib = METRICS[metric].higher_is_better
         if not isinstance(hib, bool):
             raise MetadataError(f"higher_is_better: expected true or false, got {hib!r}", "higher_is_better")
-        if metric in KNOWN_METRICS and hib != KNOWN_METRICS[metric]:
+        if metric in METRICS and hib != METRICS[metric].higher_is_better:
             raise MetadataError(
-                f"higher_is_better: {metric} is {'higher' if KNOWN_METRICS[metric] else 'lower'}-is-better, "
+                f"higher_is_better: {metric} is {'higher' if METRICS[metric].higher_is_better else 'lower'}-is-better, "
                 f"metadata says {hib}",
                 "higher_is_better",
             )
@@ -149,8 +145,8 @@ class ModelMetadata:
         transform = Transform.from_dict(d["transform"])
 
         tile = d.get("tile_size")
-        if isinstance(tile, bool) or tile not in _TILE_SIZES:
-            raise MetadataError(f"tile_size: expected one of {_TILE_SIZES}, got {tile!r}", "tile_size")
+        if isinstance(tile, bool) or tile not in TILE_SIZES:
+            raise MetadataError(f"tile_size: expected one of {TILE_SIZES}, got {tile!r}", "tile_size")
 
         inputs = d.get("inputs")
         if not isinstance(inputs, (list, tuple)) or not inputs or not all(isinstance(c, str) for c in inputs):

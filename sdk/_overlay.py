@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._errors import InputShapeError
+from ._tiles import tile_grid
 from ._rates import RATE_CODES, RATE_NAMES, rate_size
 
 __all__ = ["OVERLAY_COLOURS", "draw_rate_overlay"]
@@ -44,7 +45,7 @@ def draw_rate_overlay(
     if img.ndim != 3 or img.shape[2] not in (3, 4):
         raise InputShapeError(f"expected an (H, W, 3) image, got shape {img.shape}", tuple(img.shape), "(H, W, 3)")
     h, w = img.shape[:2]
-    th, tw = -(-h // tile_size), -(-w // tile_size)
+    th, tw = tile_grid(h, w, tile_size)
     rates = np.asarray(rates)
     if rates.shape != (th, tw):
         raise InputShapeError(

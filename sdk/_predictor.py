@@ -24,6 +24,7 @@ from ._errors import (
     ProviderUnavailableError,
 )
 from ._metadata import METADATA_KEY, ModelMetadata
+from ._tiles import padded_size, tile_grid
 from ._rates import PREDICTED_RATES, RateLike, select_rates
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
@@ -273,8 +274,7 @@ class ShadingRatePredictor:
     # -- inference ----------------------------------------------------------------------------
     def tiles(self, height: int, width: int) -> tuple[int, int]:
         """Number of tile rows and columns for a frame: ``(ceil(H/w), ceil(W/w))``."""
-        w = self._meta.tile_size
-        return -(-height // w), -(-width // w)
+        return tile_grid(height, width, self._meta.tile_size)
 
     def _check(self, x: Any) -> np.ndarray:
         if not isinstance(x, np.ndarray):
@@ -323,8 +323,7 @@ class ShadingRatePredictor:
         if self._static_hw is not None:
             ph, pw = self._static_hw
         else:
-            t = self._meta.tile_size
-            ph, pw = -(-h // t) * t, -(-w // t) * t
+            ph, pw = padded_size(h, w, self._meta.tile_size)
         if (ph, pw) == (h, w):
             return np.ascontiguousarray(x4)
         return np.pad(x4, ((0, 0), (0, 0), (0, ph - h), (0, pw - w)), mode="edge")

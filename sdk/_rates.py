@@ -20,6 +20,7 @@ __all__ = [
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
+    "RateLike",
     "rate_size",
     "resolve_allowed",
     "select_rates",

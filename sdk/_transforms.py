@@ -31,8 +31,11 @@ from ._rates import PREDICTED_RATES
 
 __all__ = [
     "DEFAULT_EXTRAPOLATION_K",
+    "DEFAULT_OUTPUTS",
+    "LOGIT_EPS",
     "OUTPUT_SETS",
     "Transform",
+    "complete_rates",
     "extrapolate",
 ]
 
@@ -45,9 +48,13 @@ OUTPUT_SETS: tuple[tuple[str, ...], ...] = (
     ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4"),
     ("2x2",),
 )
+#: The network outputs of the paper's models and rtp's default: the four rates the network predicts,
+#: 2x2 and 4x4 extrapolated (paper Section 4.3).
+DEFAULT_OUTPUTS: tuple[str, ...] = OUTPUT_SETS[1]
 
 TransformType = Literal["clamped", "logistic", "linear"]
-_LOGIT_EPS = 1e-7
+#: Transformed values are clipped to [eps, 1 - eps] before the logistic transform's logit.
+LOGIT_EPS = 1e-7
 
 
 def _sigmoid(x: np.ndarray | float) -> np.ndarray:
@@ -141,7 +148,7 @@ class Transform:
             return p * (2.0 * self.mu_y)  # type: ignore[operator]
         if self.type == "logistic":
             s0, s1 = self._s_bounds()
-            s = np.clip(p * (s1 - s0) + s0, _LOGIT_EPS, 1.0 - _LOGIT_EPS)
+            s = np.clip(p * (s1 - s0) + s0, LOGIT_EPS, 1.0 - LOGIT_EPS)
             return self.mu_y + np.log(s / (1.0 - s)) / self.k  # type: ignore[operator]
         return (p - self.offset) / self.factor  # type: ignore[operator]
 

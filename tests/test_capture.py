@@ -102,8 +102,7 @@ def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from rtp.capture import _capture
-    from rtp.train import compute_targets
-    from rtp.train._targets import TargetError, TargetStore
+    from rtp.capture import TargetError, TargetStore, compute_targets
 
     out = tmp_path / "ds"
     capture(["procedural:5"], out, per_scene=2, size=(96, 64), profiles=("slow",))

@@ -130,7 +130,7 @@ def test_paper_layout(tmp_path: Path) -> None:
 def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:
     import os
 
-    from rtp.sdk._io import atomic_output
+    from rtp.sdk.files import atomic_output
 
     with atomic_output(tmp_path / "f.bin") as tmp:
         tmp.write_bytes(b"x")

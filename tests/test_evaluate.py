@@ -11,20 +11,22 @@ import pytest
 from rtp import sdk
 from rtp.capture import BUFFERS, DatasetWriter
 from rtp.cli import main as rtp_main
-from rtp.train import (
+from rtp.capture import TargetStore
+from rtp.evaluate import (
     BaselineError,
     FidelityFX,
     Frame,
     ModelSelector,
     Oracle,
-    TargetStore,
     Yang2019,
     evaluate,
+    motion_factor_half,
+    motion_factor_quarter,
     plots,
+    restrict_rates,
+    spearman,
     tile_unseen_share,
 )
-from rtp.train._baselines import motion_factor_half, motion_factor_quarter, restrict_rates
-from rtp.train._evaluate import spearman
 
 from .conftest import PAPER_INPUTS, base_metadata, build_onnx
 
@@ -391,7 +393,7 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
 
 
 def test_matched_quality_interpolates_along_the_sweep() -> None:
-    from rtp.train._evaluate import _matched
+    from rtp.evaluate._evaluate import _matched
 
     sweep = [
         {"method": "a", "parameter": "t 1", "fail_share": 0.0, "work_saved": 0.2},

@@ -71,15 +71,15 @@ def test_all_is_explicit_and_importable() -> None:
         assert hasattr(M, name), name
 
 
-def test_descriptors_agree_with_sdk_known_metrics() -> None:
-    assert set(M.METRICS) == set(sdk.KNOWN_METRICS)
-    for name, info in M.METRICS.items():
+def test_metric_facts_cover_every_metric_the_room_computes() -> None:
+    assert set(sdk.TARGET_METRICS) < set(sdk.METRICS)
+    for name, info in sdk.METRICS.items():
         assert info.name == name
-        assert info.higher_is_better is sdk.KNOWN_METRICS[name]
         assert info.value_range[0] <= info.value_range[1]
         assert info.weber == name.startswith("jn")
-    assert M.METRICS["psnr"].higher_is_better and M.METRICS["psnr"].units == "dB"
-    assert not M.METRICS["jnflip"].higher_is_better
+        assert (info.pooling == "mse") == (name == "psnr")
+    assert sdk.METRICS["psnr"].higher_is_better and sdk.METRICS["psnr"].units == "dB"
+    assert not sdk.METRICS["jnflip"].higher_is_better
 
 
 def test_importing_metrics_does_not_need_torch() -> None:
@@ -90,7 +90,7 @@ def test_importing_metrics_does_not_need_torch() -> None:
 # --- zero error for identical images -------------------------------------------------------------
 
 
-@pytest.mark.parametrize("metric", sorted(sdk.KNOWN_METRICS))
+@pytest.mark.parametrize("metric", sorted(sdk.METRICS))
 def test_identical_images_give_zero_error(metric: str, ref: np.ndarray) -> None:
     tiles = M.tile_metric(metric, ref, ref.copy(), 16)
     assert tiles.shape == (4, 6) and tiles.dtype == np.float32
@@ -102,7 +102,7 @@ def test_identical_images_give_zero_error(metric: str, ref: np.ndarray) -> None:
 
 
 def test_identical_frame_tile_targets(ref: np.ndarray) -> None:
-    out = M.tile_targets(ref, {r: ref.copy() for r in sdk.PREDICTED_RATES}, metrics=tuple(sdk.KNOWN_METRICS))
+    out = M.tile_targets(ref, {r: ref.copy() for r in sdk.PREDICTED_RATES}, metrics=tuple(sdk.METRICS))
     for metric, v in out.items():
         assert v.shape == (6, 4, 6)
         assert np.isposinf(v).all() if metric == "psnr" else (v == 0).all()
@@ -121,7 +121,7 @@ def test_psnr_matches_formula_per_tile_including_edge_tiles() -> None:
     test[0:8, 0:8] = refimg[0:8, 0:8]  # identical tile -> +inf
     test[0:8, 8:16] = refimg[0:8, 8:16] + np.float32(0.1)  # uniform error 0.1 -> 20 dB
     got = M.psnr_tiles(refimg, test, t)
-    assert got.shape == (3, 4) == M.tile_grid(h, w, t)
+    assert got.shape == (3, 4) == sdk.tile_grid(h, w, t)
     d2 = ((refimg.astype(np.float64) - test) ** 2).mean(-1)
     for i in range(3):
         for j in range(4):
@@ -130,7 +130,7 @@ def test_psnr_matches_formula_per_tile_including_edge_tiles() -> None:
             assert got[i, j] == pytest.approx(expected, rel=1e-5), (i, j)
     assert np.isposinf(got[0, 0])
     assert got[0, 1] == pytest.approx(20.0, abs=1e-4)
-    assert M.psnr_from_mse(np.array([1.0, 0.01, 0.0])).tolist() == [0.0, 20.0, np.inf]
+    assert sdk.psnr_from_mse(np.array([1.0, 0.01, 0.0])).tolist() == [0.0, 20.0, np.inf]
 
 
 # --- pooling -------------------------------------------------------------------------------------
@@ -161,7 +161,7 @@ def test_max_pool_on_constructed_map_with_partial_tiles() -> None:
 @pytest.mark.parametrize("tile", [1, 3, 4, 16, 32, 100])
 def test_pool_any_tile_size_matches_brute_force(tile: int) -> None:
     emap = np.random.default_rng(tile).random((37, 50)).astype(np.float32)
-    th, tw = M.tile_grid(37, 50, tile)
+    th, tw = sdk.tile_grid(37, 50, tile)
     mx, mean = M.pool_tiles(emap, tile), M.pool_tiles(emap, tile, "mean")
     assert mx.shape == mean.shape == (th, tw) == (math.ceil(37 / tile), math.ceil(50 / tile))
     for i in range(th):

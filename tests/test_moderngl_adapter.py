@@ -7,7 +7,8 @@ import pytest
 
 from rtp import sdk
 from rtp.capture.scenes import procedural
-from rtp.plugins.moderngl import Adapter, Camera, Renderer, RendererError, create_context
+from rtp.plugins.moderngl import Adapter, Renderer, RendererError, create_context
+from rtp.scene import Camera
 from rtp.plugins.moderngl._glio import write_texture
 
 W, H = 128, 80

@@ -11,9 +11,9 @@ import torch
 
 from rtp import export, sdk
 from rtp.capture import DatasetReader
-from rtp.capture._capture import capture
+from rtp.capture import TargetStore, capture
 from rtp.cli import main as rtp_main
-from rtp.train import TargetStore, TrainConfig, train
+from rtp.train import TrainConfig, train
 from rtp.train.checkpoint import load as load_checkpoint
 
 pytestmark = [pytest.mark.gl, pytest.mark.slow]

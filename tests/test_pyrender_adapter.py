@@ -76,7 +76,8 @@ class _Setup:
 
     def __init__(self, flat: bool) -> None:
         from rtp.capture.scenes import procedural
-        from rtp.plugins.moderngl import Camera, Renderer, RendererError
+        from rtp.plugins.moderngl import Renderer, RendererError
+        from rtp.scene import Camera
         from rtp.plugins.pyrender import to_pyrender_scene
 
         pyrender = _pyrender_or_skip()

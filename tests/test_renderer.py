@@ -10,9 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rtp.plugins.moderngl import Camera, Material, Mesh, PointLight, Renderer, RendererError, Scene, SunLight
-from rtp.plugins.moderngl._primitives import box_mesh, checker_texture, quad_mesh
-from rtp.plugins.moderngl._renderer import RATES, create_context
+from rtp.plugins.moderngl import Renderer, RendererError
+from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SunLight
+from rtp.scene import box_mesh, checker_texture, quad_mesh
+from rtp.plugins.moderngl import create_context
+from rtp.sdk import ALL_RATES as RATES
 from rtp.sdk._reproject import reproject, reproject_positions
 
 # 162 x 98: not a multiple of 4, so the partial edge blocks (clamped shading samples) are exercised.

@@ -42,7 +42,7 @@ def test_shipped_model_loads_by_name_and_predicts(name: str) -> None:
 @pytest.fixture(scope="module")
 def rendered_inputs() -> list:
     """Two frames of the built-in procedural scene as the renderer hands them to a model."""
-    from rtp.capture._capture import load_scene
+    from rtp.capture import load_scene
     from rtp.cli._demo import _camera_path
     from rtp.plugins.moderngl import Renderer
 

@@ -16,8 +16,10 @@ import torch
 from rtp import export, sdk
 from rtp.capture import BUFFERS, DatasetWriter
 from rtp.cli import main as rtp_main
-from rtp.train import TargetStore, TrainConfig, calibrate_safety, scores, train
-from rtp.train._targets import mse_to_psnr, pool_targets
+from rtp.capture import TargetStore, pool_targets
+from rtp.evaluate import scores
+from rtp.sdk import psnr_from_mse as mse_to_psnr
+from rtp.train import TrainConfig, calibrate_safety, train
 from rtp.train.checkpoint import load as load_checkpoint
 
 H, W = 64, 96

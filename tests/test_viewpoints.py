@@ -19,7 +19,7 @@ from rtp.capture.viewpoints import (
     scene_triangles,
     segment_hits_triangles,
 )
-from rtp.plugins.moderngl._scene import Material, Scene, SpawnPoint
+from rtp.scene import Material, Scene, SpawnPoint
 
 
 @pytest.fixture(scope="module")

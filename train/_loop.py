@@ -26,8 +26,10 @@ from rtp.capture import DatasetReader
 
 from . import checkpoint as ckpt
 from . import transforms as tt
-from ._scores import calibrate_safety, scores
-from ._targets import TargetStore
+from rtp.capture import TargetStore
+from rtp.evaluate import scores
+
+from ._safety import calibrate_safety
 from .model import MetricNet
 
 __all__ = ["DEFAULT_THRESHOLDS", "TrainConfig", "TrainResult", "train"]
@@ -169,8 +171,8 @@ def _dead_outputs(pred: np.ndarray, outputs: Sequence[str]) -> list[str]:
 
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
-    if cfg.metric not in sdk.KNOWN_METRICS:
-        raise sdk.RtpError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.KNOWN_METRICS)}")
+    if cfg.metric not in sdk.METRICS:
+        raise sdk.RtpError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
     if cfg.crop % cfg.tile:
         raise sdk.RtpError(f"--crop {cfg.crop} must be a multiple of --tile {cfg.tile}")
     reader = DatasetReader(cfg.data)
@@ -186,7 +188,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.RtpError(f"--crop {cfg.crop} is larger than the frames ({w}x{h})")
 
     transform = _make_transform(cfg, tr)
-    higher = sdk.KNOWN_METRICS[cfg.metric]
+    higher = sdk.METRICS[cfg.metric].higher_is_better
     worse = 1.0 if transform.increasing != higher else -1.0
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)

@@ -25,7 +25,7 @@ from typing import Any
 import torch
 
 from rtp.sdk import MetadataError, ModelMetadata, ModelNotFoundError, RtpError
-from rtp.sdk._io import atomic_output
+from rtp.sdk.files import atomic_output
 
 from .model import MetricNet
 

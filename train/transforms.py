@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import torch
 
 from rtp.sdk import ModelMetadata, Transform
-from rtp.sdk._transforms import _LOGIT_EPS, OUTPUT_SETS, complete_rates
+from rtp.sdk import LOGIT_EPS, OUTPUT_SETS, complete_rates
 
 __all__ = ["decode", "extrapolate", "forward", "inverse"]
 
@@ -39,7 +39,7 @@ def inverse(p: torch.Tensor, t: Transform) -> torch.Tensor:
         return p * (2.0 * t.mu_y)  # type: ignore[operator]
     if t.type == "logistic":
         s0, s1 = _s_bounds(t)
-        s = torch.clamp(p * (s1 - s0) + s0, _LOGIT_EPS, 1.0 - _LOGIT_EPS)
+        s = torch.clamp(p * (s1 - s0) + s0, LOGIT_EPS, 1.0 - LOGIT_EPS)
         return t.mu_y + torch.log(s / (1.0 - s)) / t.k  # type: ignore[operator]
     return (p - t.offset) / t.factor  # type: ignore[operator]
 

@@ -42,7 +42,7 @@ from typing import Sequence
 
 import numpy as np
 
-from rtp.plugins.moderngl._scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
+from rtp.scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
 
 from ._errors import SceneFormatError, SceneNotFoundError
 from ._geometry import vertex_normals

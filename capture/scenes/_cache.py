@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtp.plugins.moderngl._scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
+from rtp.scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
 
 from ._errors import SceneFormatError
 

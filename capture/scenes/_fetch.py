@@ -30,7 +30,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from rtp.plugins.moderngl._scene import Scene
+from rtp.scene import Scene
 
 from ._bsp import BspConversion, convert_bsp
 from ._cache import CACHE_VERSION, load_scene_npz, save_scene_npz

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtp.plugins.moderngl._scene import Mesh
+from rtp.scene import Mesh
 
 __all__ = ["MeshBuilder", "face_normals", "vertex_normals"]
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtp.plugins.moderngl._scene import Material, Mesh, Scene, SpawnPoint
+from rtp.scene import Material, Mesh, Scene, SpawnPoint
 
 from ._errors import SceneFormatError, SceneNotFoundError
 from ._geometry import vertex_normals

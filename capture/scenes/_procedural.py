@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from rtp.plugins.moderngl._scene import Material, PointLight, Scene, SpawnPoint, SunLight
+from rtp.scene import Material, PointLight, Scene, SpawnPoint, SunLight
 
 from ._geometry import MeshBuilder
 from ._textures import make_texture

@@ -31,6 +31,7 @@ from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._glio import read_texture
+from ._shaders import load_source
 
 __all__ = ["CHANNEL_IDS", "Adapter"]
 
@@ -91,14 +92,13 @@ class Adapter(_AdapterBase):
             raise ValueError(f"frame size must be positive, got {width}x{height}")
         import moderngl
 
-        from ._renderer import _load_source
 
         self.ctx, self.width, self.height = ctx, int(width), int(height)
         self.tolerance = float(tolerance)
         self._flags = {"u_albedo_linear": albedo_linear, "u_normal_world": normal_space == "world",
                        "u_depth_window": depth_kind == "window"}
-        self._prog = ctx.program(vertex_shader=_load_source("fullscreen_vs.glsl"),
-                                 fragment_shader=_load_source("adapter_fs.glsl"))
+        self._prog = ctx.program(vertex_shader=load_source("fullscreen_vs.glsl"),
+                                 fragment_shader=load_source("adapter_fs.glsl"))
         self._vao = ctx.vertex_array(self._prog, [])
         n_targets = -(-len(self.channels) // 4)
         self._targets = [ctx.texture((self.width, self.height), 4, dtype="f4") for _ in range(n_targets)]

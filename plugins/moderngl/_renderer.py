@@ -21,27 +21,22 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 
-from rtp.sdk import RtpError
+from rtp.scene import Camera, Scene
+from rtp.sdk import ALL_RATES, RtpError
 
 from ._adapter import Adapter
-from ._camera import Camera
 from ._glio import read_texture, write_texture
-from ._scene import Scene
+from ._shaders import load_source
 
-__all__ = ["RATES", "Frame", "RenderResult", "Renderer", "RendererError", "create_context"]
+__all__ = ["Frame", "RenderResult", "Renderer", "RendererError", "create_context"]
 
 logger = logging.getLogger("rtp.plugins.moderngl")
 
-#: Every shading rate the renderer produces, finest first (D3D12 naming: W x H).
-RATES: tuple[str, ...] = ("1x1", "1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
-
-_SHADER_DIR = Path(__file__).with_name("shaders")
 _EGL_FIX = "apt-get install libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri"
 _GL_SRGB8_ALPHA8 = 0x8C43
 
@@ -187,21 +182,6 @@ def _set(prog: Any, name: str, value: Any) -> None:
         uniform.write(_mat(value) if value.ndim == 2 and value.shape[0] == value.shape[1] else value.astype(np.float32).tobytes())
     else:
         uniform.value = value
-
-
-def _load_source(name: str, defines: dict[str, Any] | None = None) -> str:
-    path = _SHADER_DIR / name
-    lines = path.read_text().splitlines()
-    out: list[str] = []
-    for i, line in enumerate(lines):
-        if line.startswith("#include"):
-            inc = line.split('"')[1]
-            out.extend((_SHADER_DIR / inc).read_text().splitlines())
-            continue
-        out.append(line)
-        if i == 0 and defines:
-            out.extend(f"#define {k} {v}" for k, v in defines.items())
-    return "\n".join(out) + "\n"
 
 
 @dataclass
@@ -365,7 +345,7 @@ class Renderer:
     # ------------------------------------------------------------------ set-up
     def _program(self, vs: str, fs: str, defines: dict[str, Any] | None = None) -> Any:
         try:
-            return self.ctx.program(vertex_shader=_load_source(vs, defines), fragment_shader=_load_source(fs, defines))
+            return self.ctx.program(vertex_shader=load_source(vs, defines), fragment_shader=load_source(fs, defines))
         except Exception as exc:
             raise RendererError(f"failed to build shader program {vs} + {fs}: {exc}") from exc
 
@@ -431,12 +411,12 @@ class Renderer:
         self._t_expo = tex(2, "f4", esize)
         self._fbo_expo = ctx.framebuffer(color_attachments=[self._t_expo])
         linear = (mgl.LINEAR, mgl.LINEAR)
-        self._t_ldr = {r: tex(4, "f2", filt=linear) for r in RATES}
-        self._t_final = {r: tex(4, "f2") for r in RATES}
+        self._t_ldr = {r: tex(4, "f2", filt=linear) for r in ALL_RATES}
+        self._t_final = {r: tex(4, "f2") for r in ALL_RATES}
         self._t_hdr: dict[str, Any] = {}
-        self._fbo_ldr = {r: ctx.framebuffer(color_attachments=[self._t_ldr[r]]) for r in RATES}
+        self._fbo_ldr = {r: ctx.framebuffer(color_attachments=[self._t_ldr[r]]) for r in ALL_RATES}
         self._fbo_ldr_debug: dict[str, Any] = {}
-        self._fbo_final = {r: ctx.framebuffer(color_attachments=[self._t_final[r]]) for r in RATES}
+        self._fbo_final = {r: ctx.framebuffer(color_attachments=[self._t_final[r]]) for r in ALL_RATES}
         self._t_prev_colour = tex(3, "f4")
         self._t_prev_depth = tex(1, "f4")
         self._reprojector = Adapter(ctx, ("reprojected.r", "reprojected.g", "reprojected.b", "seen"), self.width,
@@ -746,7 +726,7 @@ class Renderer:
         _set(p, "u_exposure", float(exposure))
         for k, v in sky_uniforms.items():
             _set(p, k, v)
-        for rate in RATES:
+        for rate in ALL_RATES:
             _set(p, "u_rate", _rate_size(rate))
             (self._debug_fbo(rate) if debug else self._fbo_ldr[rate]).use()
             self._fullscreen["coarse"].render(mgl.TRIANGLES, vertices=3)
@@ -755,7 +735,7 @@ class Renderer:
             p = self._p_fxaa
             _set(p, "u_ldr", 0)
             _set(p, "u_rcp", (1.0 / W, 1.0 / H))
-            for rate in RATES:
+            for rate in ALL_RATES:
                 self._t_ldr[rate].use(location=0)
                 self._fbo_final[rate].use()
                 self._fullscreen["fxaa"].render(mgl.TRIANGLES, vertices=3)
@@ -782,8 +762,8 @@ class Renderer:
         mat = read_texture(self._t_material)
         lit = read_texture(self._t_lit)
         final_src = self._t_final if self.fxaa else self._t_ldr
-        colour = {r: read_texture(final_src[r], 3) for r in RATES}
-        lighting = {r: read_texture(self._t_hdr[r], 3) for r in RATES} if debug else None
+        colour = {r: read_texture(final_src[r], 3) for r in ALL_RATES}
+        lighting = {r: read_texture(self._t_hdr[r], 3) for r in ALL_RATES} if debug else None
         if reprojected is None or seen is None:
             reprojected = np.zeros((H, W, 3), np.float32)
             seen = np.zeros((H, W), np.float32)

@@ -9,7 +9,7 @@ import numpy as np
 
 from rtp import sdk
 from rtp.capture.scenes import procedural
-from rtp.plugins.moderngl import Camera
+from rtp.scene import Camera
 from rtp.plugins.pyrender import Adapter, import_pyrender, to_pyrender_scene
 
 platform, out = sys.argv[1], sys.argv[2]

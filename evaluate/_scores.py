@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["Scores", "calibrate_safety", "scores"]
+__all__ = ["Scores", "scores"]
 
 
 @dataclass(frozen=True)
@@ -55,25 +55,3 @@ def scores(pred: np.ndarray, gt: np.ndarray, *, worse: float = 1.0) -> Scores:
         sigma=float(d.std()),
         n=int(p.size),
     )
-
-
-def calibrate_safety(pred: np.ndarray, gt: np.ndarray, *, worse: float = 1.0, quantile: float | None = None) -> tuple[float, float]:
-    """A safety margin in transformed space and the share of tiles still underestimated with it.
-
-    Without ``quantile``: the paper's margin, the mean underestimation over all values (counting 0
-    where there is none). With ``quantile = q``: the smallest margin that leaves at most a share q
-    of the values underestimated.
-    """
-    p = np.asarray(pred, dtype=np.float64).ravel()
-    g = np.asarray(gt, dtype=np.float64).ravel()
-    ok = np.isfinite(p) & np.isfinite(g)
-    short = worse * (g[ok] - p[ok])
-    if short.size == 0:
-        return 0.0, 0.0
-    if quantile is None:
-        s = float(np.maximum(short, 0.0).mean())
-    else:
-        if not 0.0 <= quantile < 1.0:
-            raise ValueError(f"quantile must be in [0, 1), got {quantile}")
-        s = max(0.0, float(np.quantile(short, 1.0 - quantile, method="higher")))
-    return s, float(np.mean(short > s))

@@ -1,4 +1,11 @@
-"""Atomic file output, shared by every writer in rtp (checkpoints, exports, datasets)."""
+"""Atomic file output, shared by every writer in rtp (checkpoints, exports, datasets, targets).
+
+Public so that every room (and a user's own tools) writes files the same way::
+
+    from rtp.sdk.files import atomic_output
+    with atomic_output("model.onnx") as tmp:
+        tmp.write_bytes(data)          # renamed over model.onnx only if this block succeeds
+"""
 
 from __future__ import annotations
 

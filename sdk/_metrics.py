@@ -1,4 +1,5 @@
-"""Metric descriptors: what each metric measures, its units and which direction is better."""
+"""Metric facts every room shares: what each metric measures, its units, which direction is better,
+and the PSNR <-> mean-squared-error conversion (targets store PSNR tiles as MSE)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
-__all__ = ["METRICS", "MetricInfo"]
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ["METRICS", "TARGET_METRICS", "MetricInfo", "mse_from_psnr", "psnr_from_mse"]
 
 
 @dataclass(frozen=True)
@@ -77,5 +81,19 @@ _ALL = (
     ),
 )
 
-#: Every metric rtp computes, by name. Agrees with :data:`rtp.sdk.KNOWN_METRICS`.
+#: Every metric rtp knows, by name. A model's metadata may name another metric (a user's own), but
+#: must then state ``higher_is_better`` itself.
 METRICS: Mapping[str, MetricInfo] = MappingProxyType({m.name: m for m in _ALL})
+#: The metrics rtp computes targets for and ships models of (the paper's five), in that order.
+TARGET_METRICS: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang")
+
+
+def psnr_from_mse(mse: ArrayLike) -> np.ndarray:
+    """PSNR in dB for a peak of 1: ``-10 log10(mse)``; ``+inf`` where ``mse == 0``. float32."""
+    with np.errstate(divide="ignore"):
+        return (-10.0 * np.log10(np.asarray(mse, dtype=np.float64))).astype(np.float32)
+
+
+def mse_from_psnr(psnr: ArrayLike) -> np.ndarray:
+    """Mean squared error (peak 1) of a PSNR in dB: ``10 ** (-psnr / 10)``; 0 where ``psnr == +inf``. float64."""
+    return np.power(10.0, -np.asarray(psnr, dtype=np.float64) / 10.0)

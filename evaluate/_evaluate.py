@@ -32,11 +32,11 @@ from rtp.sdk import PREDICTED_RATES, RATE_CODES, RtpError, select_rates, work_sa
 
 from ._baselines import FidelityFX, Yang2019
 from ._scores import scores
-from ._targets import TargetStore
+from rtp.capture import TargetStore
 
-__all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "spearman", "tile_unseen_share"]
+__all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "failing_tiles", "spearman", "tile_unseen_share"]
 
-log = logging.getLogger("rtp.train")
+log = logging.getLogger("rtp.evaluate")
 
 #: A tile counts as unseen when more than this share of its pixels is unseen.
 DEFAULT_UNSEEN_FRACTION = 0.5
@@ -50,7 +50,7 @@ def tile_unseen_share(seen: np.ndarray, tile: int) -> np.ndarray:
     ``(H, W)`` in [0, 1] -> ``(ceil(H/tile), ceil(W/tile))`` float64."""
     s = np.asarray(seen, dtype=np.float64)
     h, w = s.shape
-    th, tw = -(-h // tile), -(-w // tile)
+    th, tw = sdk.tile_grid(h, w, tile)
     pad = ((0, th * tile - h), (0, tw * tile - w))
     num = np.pad(s, pad).reshape(th, tile, tw, tile).sum(axis=(1, 3))
     den = np.pad(np.ones_like(s), pad).reshape(th, tile, tw, tile).sum(axis=(1, 3))
@@ -177,7 +177,7 @@ class EvaluationReport:
 
     def write(self, out_dir: str | os.PathLike[str], stem: str = "evaluation") -> list[Path]:
         """Write ``<stem>.md`` and ``<stem>.json`` into ``out_dir``; returns their paths."""
-        from rtp.sdk._io import atomic_output
+        from rtp.sdk.files import atomic_output
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -272,7 +272,7 @@ for _r in sdk.ALL_RATES:
     _SAVED[RATE_CODES[_r]] = work_saved(_r)
 
 
-def _fails(codes: np.ndarray, truth: np.ndarray, threshold: float, higher_is_better: bool) -> np.ndarray:
+def failing_tiles(codes: np.ndarray, truth: np.ndarray, threshold: float, higher_is_better: bool) -> np.ndarray:
     """Whether each tile's chosen rate fails the threshold by the true error (1x1 never fails)."""
     out = np.zeros(codes.shape, bool)
     for i, r in enumerate(PREDICTED_RATES):
@@ -314,7 +314,7 @@ def evaluate(
     rule. ``yang`` / ``fidelityfx`` replace the default baselines (built at the model's tile size;
     Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25).
     ``sweep`` also sweeps every method's threshold (cutoff) to compare the work saved at the
-    model's failure rate (``report.matched``). ``plots_dir`` writes the figures of :mod:`rtp.train._plots` for ``plot_sample`` (default: the
+    model's failure rate (``report.matched``). ``plots_dir`` writes the figures of :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the
     first sample). ``progress(done, total)`` is called after each sample.
     """
     from rtp.capture import DatasetReader
@@ -391,7 +391,7 @@ def evaluate(
 
     def tally(method: str, param: str, codes_: np.ndarray, gt_: np.ndarray) -> None:
         acc = sweep_acc.setdefault((method, param), [0.0, 0.0, 0.0])
-        acc[0] += float(_fails(codes_, gt_, thr, hib).sum())
+        acc[0] += float(failing_tiles(codes_, gt_, thr, hib).sum())
         acc[1] += float(_SAVED[codes_.astype(np.int64)].sum())
         acc[2] += codes_.size
     scene_counts: dict[str, int] = {}
@@ -423,7 +423,7 @@ def evaluate(
                 est = sel.predict(sample)
                 quality.setdefault((name, scene), _Quality()).add(fwd(est[rows]), g_t, est[rows], gt[rows], unseen)
         for name, c in codes.items():
-            decisions.setdefault((name, scene), _Decisions()).add(c, _fails(c, gt, thr, hib), unseen)
+            decisions.setdefault((name, scene), _Decisions()).add(c, failing_tiles(c, gt, thr, hib), unseen)
         if sweep:
             for t in model_grid:
                 tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib), gt)
@@ -564,7 +564,7 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
 
 
 def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: str) -> list[Path]:
-    from . import _plots as P
+    from . import plots as P
 
     out.mkdir(parents=True, exist_ok=True)
     sample = d["sample"]

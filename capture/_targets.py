@@ -23,32 +23,25 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import RtpError
-from rtp.sdk._io import atomic_output
+from rtp.sdk import METRICS, PREDICTED_RATES, TARGET_METRICS, RtpError, mse_from_psnr, psnr_from_mse, tile_extents, tile_grid
+from rtp.sdk.files import atomic_output
 
-__all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "mse_to_psnr", "pool_targets"]
+from ._dataset import DatasetReader, sample_path
+
+__all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
 
 FORMAT = "rtp-targets"
 FORMAT_VERSION = 1
 BASE_TILE = 4
-_MSE_METRICS = frozenset({"psnr"})
+
+
+def _stores_mse(metric: str) -> bool:
+    """PSNR targets are stored as the tile's mean squared error so that coarser tiles derive exactly."""
+    return metric in METRICS and METRICS[metric].pooling == "mse"
 
 
 class TargetError(RtpError):
     """Targets are missing for a sample/metric, or stored with another format or base tile."""
-
-
-def mse_to_psnr(mse: np.ndarray) -> np.ndarray:
-    """PSNR in dB for peak 1: ``-10 log10(mse)``; +inf where ``mse == 0``."""
-    with np.errstate(divide="ignore"):
-        return (-10.0 * np.log10(np.asarray(mse, dtype=np.float64))).astype(np.float32)
-
-
-def _tile_pixels(n: int, base: int) -> np.ndarray:
-    counts = np.full(-(-n // base), base, dtype=np.float64)
-    if n % base:
-        counts[-1] = n % base
-    return counts
 
 
 def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int, *, mse: bool) -> np.ndarray:
@@ -64,14 +57,14 @@ def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int
         return values.astype(np.float32)
     h, w = size
     th, tw = values.shape[-2:]
-    oh, ow = -(-th // f), -(-tw // f)
+    oh, ow = tile_grid(th, tw, f)
     ph, pw = oh * f - th, ow * f - tw
     pad = [(0, 0)] * (values.ndim - 2) + [(0, ph), (0, pw)]
     if not mse:
         v = np.pad(values.astype(np.float64), pad, constant_values=-np.inf)
         v = v.reshape(*values.shape[:-2], oh, f, ow, f)
         return v.max(axis=(-3, -1)).astype(np.float32)
-    wts = np.outer(_tile_pixels(h, base), _tile_pixels(w, base))
+    wts = np.outer(tile_extents(h, base), tile_extents(w, base)).astype(np.float64)
     wts = np.pad(wts, [(0, ph), (0, pw)])
     v = np.pad(values.astype(np.float64), pad) * wts
     num = v.reshape(*values.shape[:-2], oh, f, ow, f).sum(axis=(-3, -1))
@@ -117,8 +110,6 @@ class TargetStore:
 
     def stale(self, sample_id: str, metric: str) -> bool:
         """Whether stored targets are older than their sample (it was captured again since)."""
-        from rtp.capture._dataset import sample_path
-
         sample = sample_path(self.root.parent, sample_id)
         return sample.is_file() and sample.stat().st_mtime > self.path(sample_id, metric).stat().st_mtime
 
@@ -129,7 +120,7 @@ class TargetStore:
     def write(self, sample_id: str, metric: str, values: np.ndarray, size: tuple[int, int]) -> None:
         """Store base-tile values (for PSNR: per-tile MSE) atomically."""
         h, w = size
-        expected = (6, -(-h // self.base_tile), -(-w // self.base_tile))
+        expected = (6, *tile_grid(h, w, self.base_tile))
         if values.shape != expected:
             raise TargetError(f"{metric} targets of {sample_id}: expected shape {expected}, got {values.shape}")
         with atomic_output(self.path(sample_id, metric)) as tmp:
@@ -146,15 +137,13 @@ class TargetStore:
                               f"since); run `rtp targets {self.root.parent}`")
         with np.load(p) as z:
             values, size = z["values"], tuple(int(v) for v in z["size"])
-        mse = metric in _MSE_METRICS
+        mse = _stores_mse(metric)
         pooled = pool_targets(values, size, self.base_tile, tile, mse=mse)  # type: ignore[arg-type]
-        return mse_to_psnr(pooled) if mse else pooled
+        return psnr_from_mse(pooled) if mse else pooled
 
 
 def _compute_one(data_root: str, sample_id: str, metrics: tuple[str, ...], params: dict[str, Any]) -> str:
     from rtp import metrics as M
-    from rtp.capture import DatasetReader
-    from rtp.sdk import PREDICTED_RATES
 
     store = TargetStore(data_root)
     todo = tuple(m for m in metrics if not store.has(sample_id, m))
@@ -167,16 +156,16 @@ def _compute_one(data_root: str, sample_id: str, metrics: tuple[str, ...], param
     h, w = ref.shape[:2]
     for m in todo:
         v = values[m]
-        if m in _MSE_METRICS:  # store the tile MSE so that coarser tiles derive exactly
+        if _stores_mse(m):  # store the tile MSE so that coarser tiles derive exactly
             with np.errstate(over="ignore"):
-                v = np.power(10.0, -v.astype(np.float64) / 10.0)
+                v = mse_from_psnr(v)
         store.write(sample_id, m, v.astype(np.float32), (h, w))
     return sample_id
 
 
 def compute_targets(
     data_root: str | os.PathLike[str],
-    metrics: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang"),
+    metrics: tuple[str, ...] = TARGET_METRICS,
     *,
     ppd: float | str | None = None,
     weber_l: float | None = None,
@@ -188,11 +177,10 @@ def compute_targets(
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from rtp import metrics as M
-    from rtp.capture import DatasetReader
 
-    unknown = [m for m in metrics if m not in M.METRICS]
+    unknown = [m for m in metrics if m not in METRICS]
     if unknown:
-        raise TargetError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(M.METRICS)}")
+        raise TargetError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(METRICS)}")
     reader = DatasetReader(data_root)
     store = TargetStore(data_root)
     params = {"ppd": M.DEFAULT_PPD if ppd is None else ppd, "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
@@ -200,7 +188,7 @@ def compute_targets(
         p: dict[str, Any] = {}
         if m in ("flip", "jnflip"):
             p["ppd"] = params["ppd"]
-        if M.METRICS[m].weber:
+        if METRICS[m].weber:
             p["weber_l"] = params["weber_l"]
         if m == "lpips":
             p["net"] = "alex-v0.1"

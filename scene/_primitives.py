@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ._scene import Mesh
+from ._model import Mesh
 
 __all__ = ["box_mesh", "checker_texture", "quad_mesh", "sphere_mesh"]
 

@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
-from rtp.sdk import PREDICTED_RATES, RATE_CODES, InputShapeError, RtpError, select_rates
-from rtp.sdk._rates import RateLike, rate_size, resolve_allowed
+from rtp.sdk import LUMA_WEIGHTS, PREDICTED_RATES, RATE_CODES, InputShapeError, RtpError, select_rates, tile_grid
+from rtp.sdk import RateLike, rate_size, resolve_allowed
 
 if TYPE_CHECKING:
     from rtp.sdk import ShadingRatePredictor
@@ -34,7 +34,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FFX_LUMA",
-    "REC601_LUMA",
     "BaselineError",
     "FidelityFX",
     "Frame",
@@ -48,11 +47,9 @@ __all__ = [
     "restrict_rates",
 ]
 
-log = logging.getLogger("rtp.train")
+log = logging.getLogger("rtp.evaluate")
 
-#: Rec.601 luma weights on display values (NAS, RT-Percept's YangVRS and JNYang).
-REC601_LUMA = (0.299, 0.587, 0.114)
-#: FidelityFX VRS luma weights.
+#: FidelityFX VRS's own luma weights (Yang 2019 uses Rec.601, :data:`rtp.sdk.LUMA_WEIGHTS`).
 FFX_LUMA = (0.30, 0.59, 0.11)
 
 
@@ -121,14 +118,10 @@ def as_frame(source: Any) -> Frame:
 # -- tile helpers -------------------------------------------------------------------------------
 
 
-def _grid(h: int, w: int, t: int) -> tuple[int, int]:
-    return -(-h // t), -(-w // t)
-
-
 def _blocks(a: np.ndarray, t: int, mode: str = "edge") -> np.ndarray:
     """``(H, W)`` -> ``(th, t, tw, t)``, padded up to whole tiles (edge copies, or zeros)."""
     h, w = a.shape
-    th, tw = _grid(h, w, t)
+    th, tw = tile_grid(h, w, t)
     p = np.pad(a, ((0, th * t - h), (0, tw * t - w)), mode=mode)  # type: ignore[call-overload]
     return p.reshape(th, t, tw, t)
 
@@ -298,7 +291,7 @@ class Yang2019:
         and the per-tile mean luma ``(th, tw)``. Only neighbour pairs inside a tile count."""
         frame = as_frame(source)
         t = self.tile_size
-        lum = _luma(frame.reprojected, REC601_LUMA)
+        lum = _luma(frame.reprojected, LUMA_WEIGHTS)
         b = _blocks(lum, t)  # (th, t, tw, t), edge-padded: padded pairs differ by 0
         dy = np.abs(np.diff(b, axis=1))  # vertical neighbours -> error of halving vertically (1x2)
         dx = np.abs(np.diff(b, axis=3))  # horizontal neighbours -> 2x1
@@ -315,7 +308,7 @@ class Yang2019:
         """Per-tile speed per axis ``(2, th, tw)`` in pixels/frame, ``[|v_y|, |v_x|]`` (zeros
         without motion or with ``motion=False``), reduced over the tile by ``motion_reduce``."""
         frame = as_frame(source)
-        th, tw = _grid(*frame.size, self.tile_size)
+        th, tw = tile_grid(*frame.size, self.tile_size)
         if not self.motion or frame.motion is None:
             return np.zeros((2, th, tw))
         out = []
@@ -424,7 +417,7 @@ class FidelityFX:
         """Luma and motion length, padded (edge) up to whole tiles: ``(Hp, Wp)`` each."""
         t = self.tile_size
         h, w = frame.size
-        th, tw = _grid(h, w, t)
+        th, tw = tile_grid(h, w, t)
         pad = ((0, th * t - h), (0, tw * t - w))
         lum = np.pad(_luma(frame.reprojected, FFX_LUMA), pad, mode="edge")
         if frame.motion is None:
@@ -506,7 +499,7 @@ class FidelityFX:
         cells = self.tile_size // 4
         tx, ty = self._per_tile(ax_x, cells, "min"), self._per_tile(ax_y, cells, "min")
         h, w = frame.size
-        th, tw = _grid(h, w, self.tile_size)
+        th, tw = tile_grid(h, w, self.tile_size)
         out = ((tx << 2) | ty).astype(np.uint8)[:th, :tw]
         est = np.stack([self._per_tile(r, cells) for r in ranges])
         return restrict_rates(out, allowed, est)

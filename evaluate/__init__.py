@@ -1,0 +1,65 @@
+"""Evaluation: prediction quality, the classic baselines, rate decisions, sweeps and plots.
+
+No torch: a user who captured a dataset and computed its targets (``rtp[capture]``) evaluates any
+ONNX model with it::
+
+    from rtp import evaluate
+    report = evaluate.evaluate("models/jnyang.onnx", "data/test")
+    print(report.to_markdown())
+
+The baselines (:class:`Yang2019`, NVIDIA Adaptive Shading; :class:`FidelityFX`, AMD FidelityFX
+VRS) choose rates from the same frames as the model; :class:`Oracle` chooses from the true metric.
+"""
+
+from __future__ import annotations
+
+from . import plots
+from ._baselines import (
+    FFX_LUMA,
+    BaselineError,
+    FidelityFX,
+    Frame,
+    ModelSelector,
+    Oracle,
+    RateSelector,
+    Yang2019,
+    as_frame,
+    motion_factor_half,
+    motion_factor_quarter,
+    restrict_rates,
+)
+from ._evaluate import (
+    DEFAULT_UNSEEN_FRACTION,
+    SPLITS,
+    EvaluationReport,
+    evaluate,
+    failing_tiles,
+    spearman,
+    tile_unseen_share,
+)
+from ._scores import Scores, scores
+
+__all__ = [
+    "DEFAULT_UNSEEN_FRACTION",
+    "FFX_LUMA",
+    "SPLITS",
+    "BaselineError",
+    "EvaluationReport",
+    "FidelityFX",
+    "Frame",
+    "ModelSelector",
+    "Oracle",
+    "RateSelector",
+    "Scores",
+    "Yang2019",
+    "as_frame",
+    "evaluate",
+    "failing_tiles",
+    "motion_factor_half",
+    "motion_factor_quarter",
+    "plots",
+    "restrict_rates",
+    "scores",
+    "spearman",
+    "tile_unseen_share",
+]

@@ -1,0 +1,35 @@
+"""Colour facts shared by every room: Rec.601 luma of display values and the sRGB transfer curve.
+
+Final images are display-encoded (sRGB) in [0, 1] everywhere in rtp; metrics and baselines take
+their luma from those display values, as the paper's code and Yang et al. 2019 do. The GLSL copies
+of the sRGB curve (``plugins/*/shaders``) are checked against these functions by the tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ["LUMA_WEIGHTS", "linear_to_srgb", "luma", "srgb_to_linear"]
+
+#: Rec.601 luma weights of display-encoded R, G, B.
+LUMA_WEIGHTS: tuple[float, float, float] = (0.299, 0.587, 0.114)
+
+
+def luma(rgb: ArrayLike) -> np.ndarray:
+    """Rec.601 luma ``0.299 R + 0.587 G + 0.114 B`` of display values: ``(..., 3) -> (...)`` float32."""
+    r, g, b = LUMA_WEIGHTS
+    a = np.asarray(rgb, dtype=np.float32)
+    return (r * a[..., 0] + g * a[..., 1] + b * a[..., 2]).astype(np.float32, copy=False)
+
+
+def srgb_to_linear(c: ArrayLike) -> np.ndarray:
+    """The sRGB decoding curve (IEC 61966-2-1) of values in [0, 1], elementwise, float32 or float64 in."""
+    a = np.asarray(c, dtype=np.float64)
+    return np.where(a <= 0.04045, a / 12.92, ((np.maximum(a, 0.04045) + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c: ArrayLike) -> np.ndarray:
+    """The sRGB encoding curve (IEC 61966-2-1) of linear values in [0, 1], elementwise."""
+    a = np.asarray(c, dtype=np.float64)
+    return np.where(a <= 0.0031308, a * 12.92, 1.055 * np.maximum(a, 0.0031308) ** (1.0 / 2.4) - 0.055)
