@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
-from rtp.sdk import LUMA_WEIGHTS, PREDICTED_RATES, RATE_CODES, InputShapeError, RtpError, select_rates, tile_grid
+from rtp.sdk import DEFAULT_TILE_SIZE, LUMA_WEIGHTS, PREDICTED_RATES, RATE_CODES, InputShapeError, RtpError, select_rates, tile_grid
 from rtp.sdk import RateLike, rate_size, resolve_allowed
 
 if TYPE_CHECKING:
@@ -244,7 +244,7 @@ class Yang2019:
 
     def __init__(
         self,
-        tile_size: int = 16,
+        tile_size: int = DEFAULT_TILE_SIZE,
         *,
         threshold: float = 0.25,
         env_luminance: float = 0.02,
@@ -393,7 +393,7 @@ class FidelityFX:
 
     def __init__(
         self,
-        tile_size: int = 16,
+        tile_size: int = DEFAULT_TILE_SIZE,
         *,
         cutoff: float = 0.05,
         motion_factor: float = 0.05,

@@ -4,11 +4,10 @@ Importing this package needs torch (the ``rtp[train]`` extra). Scores and evalua
 :mod:`rtp.evaluate`'s (no torch); targets and the dataset are :mod:`rtp.capture`'s.
 """
 
-from ._loop import DEFAULT_THRESHOLDS, TrainConfig, TrainResult, train
+from ._loop import TrainConfig, TrainResult, train
 from ._safety import calibrate_safety
 
 __all__ = [
-    "DEFAULT_THRESHOLDS",
     "TrainConfig",
     "TrainResult",
     "calibrate_safety",

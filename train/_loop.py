@@ -32,18 +32,10 @@ from rtp.evaluate import scores
 from ._safety import calibrate_safety
 from .model import MetricNet
 
-__all__ = ["DEFAULT_THRESHOLDS", "TrainConfig", "TrainResult", "train"]
+__all__ = ["TrainConfig", "TrainResult", "train"]
 
 log = logging.getLogger("rtp.train")
 
-#: Starting thresholds per metric (metric units, per-tile max-pooled values), written as the
-#: model's default_threshold unless one is given. JNYang 0.25 and JNFLIP 0.2 are the paper code's
-#: values; PSNR 35 dB (mean target 37.6), FLIP 0.15 (mean 0.17) and LPIPS 0.1 (mean 0.19) are
-#: starting points at or below the mean training target of the shipped models' data; tune them on
-#: validation data for another renderer.
-DEFAULT_THRESHOLDS: dict[str, float] = {
-    "jnyang": 0.25, "jnflip": 0.2, "yang": 0.02, "flip": 0.15, "lpips": 0.1, "psnr": 35.0,
-}
 
 
 @dataclass
@@ -51,8 +43,8 @@ class TrainConfig:
     data: str
     metric: str
     out: str
-    tile: int = 16
-    outputs: tuple[str, ...] = ("1x2", "2x1", "2x4", "4x2")
+    tile: int = sdk.DEFAULT_TILE_SIZE
+    outputs: tuple[str, ...] = sdk.DEFAULT_OUTPUTS
     inputs: tuple[str, ...] = sdk.DEFAULT_INPUTS
     transform: str = "clamped"
     logistic_k: float = 10.0
@@ -230,7 +222,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             "outputs": list(cfg.outputs),
             "default_threshold": cfg.default_threshold
             if cfg.default_threshold is not None
-            else DEFAULT_THRESHOLDS[cfg.metric],
+            else sdk.METRICS[cfg.metric].default_threshold,
             "weber_l": weber if cfg.metric.startswith("jn") else None,
             "provenance": {
                 "data": str(cfg.data),

@@ -36,9 +36,10 @@ from typing import Any
 import torch
 from torch import nn
 
+from rtp.sdk import DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES
+
 __all__ = ["HEADS", "LayerSpec", "MetricNet", "layer_plan"]
 
-TILE_SIZES = (1, 2, 4, 8, 16, 32)
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
 HEADS = ("paper", "linear")
@@ -84,7 +85,8 @@ class MetricNet(nn.Module):
     ``(N, out_channels, H/tile, W/tile)`` in (0, 1).
     """
 
-    def __init__(self, in_channels: int = 4, out_channels: int = 4, tile: int = 16, width: int = 16,
+    def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
+                 tile: int = DEFAULT_TILE_SIZE, width: int = 16,
                  head: str = "paper") -> None:
         super().__init__()
         if head not in HEADS:

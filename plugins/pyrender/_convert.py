@@ -23,15 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from rtp.sdk import srgb_to_linear
+
 from ._gl import import_pyrender
 
-__all__ = ["srgb_to_linear", "to_pyrender_scene", "to_trimesh_scene"]
-
-
-def srgb_to_linear(c: Any) -> np.ndarray:
-    """sRGB decode (IEC 61966-2-1), elementwise, for values in [0, 1]."""
-    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+__all__ = ["to_pyrender_scene", "to_trimesh_scene"]
 
 
 def _baked_texture(material: Any) -> np.ndarray | None:
@@ -46,7 +42,7 @@ def _linear_factor(material: Any) -> np.ndarray:
     if material.texture is not None:
         return np.ones(4)
     bc = np.asarray(material.base_color, np.float64)
-    return np.concatenate([srgb_to_linear(bc[:3]), bc[3:4]])
+    return np.concatenate([srgb_to_linear(np.clip(bc[:3], 0.0, 1.0)), bc[3:4]])
 
 
 def _look_at_direction(direction: Any) -> np.ndarray:
