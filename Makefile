@@ -21,7 +21,7 @@ HEAD_lpips := linear
 HEAD      ?= $(or $(HEAD_$(METRIC)),paper)
 RTP       := $(BIN)/rtp
 
-.PHONY: install test bench clean dataset train evaluate demo
+.PHONY: install test lint typecheck check bench clean dataset train evaluate demo
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -39,6 +39,23 @@ install: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# The rooms' sources, linted and type-checked (configuration in pyproject.toml).
+SOURCES := sdk scene capture metrics evaluate train export cli plugins tests bench examples
+lint: $(STAMP)
+	$(BIN)/ruff check $(SOURCES)
+
+# mypy cannot follow setuptools' package-dir mapping (sdk/ -> rtp.sdk, ...): link the rooms into an
+# rtp/ tree under build/ and check that package.
+TYPECHECK := build/typecheck
+typecheck: $(STAMP)
+	rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/rtp/plugins
+	for d in sdk scene capture metrics evaluate train export cli models; do ln -s $(CURDIR)/$$d $(TYPECHECK)/rtp/$$d; done
+	for d in moderngl pyrender; do ln -s $(CURDIR)/plugins/$$d $(TYPECHECK)/rtp/plugins/$$d; done
+	ln -s $(CURDIR)/plugins/__init__.py $(TYPECHECK)/rtp/plugins/__init__.py
+	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p rtp
+
+check: lint typecheck test
 
 bench: $(STAMP)
 	$(BIN)/python bench/inference.py
