@@ -17,10 +17,9 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 import torch
-
 from _common import median_ms, paper_model  # bench/ is on sys.path when run as a script
-from rtp import sdk
 
+from rtp import sdk
 
 
 def main() -> None:
@@ -38,20 +37,20 @@ def main() -> None:
         rows = []
         for w, h in ((1920, 1080), (1280, 720)):
             x = np.random.default_rng(0).random((4, h, w), dtype=np.float32)
-            hp, wp = -(-h // 16) * 16, -(-w // 16) * 16
+            hp, wp = sdk.padded_size(h, w, pred.tile_size)
             xp = np.pad(x[None], ((0, 0), (0, 0), (0, hp - h), (0, wp - w)), mode="edge")
             xt = torch.from_numpy(xp)
 
-            def run_torch() -> object:
+            def run_torch(xt: torch.Tensor = xt) -> object:
                 with torch.inference_mode():
                     return net(xt)
 
             rows.append(
                 (
                     f"{w}x{h}",
-                    median_ms(lambda: pred.predict(x), args.repeats),
-                    median_ms(lambda: pred.shading_rates(x), args.repeats),
-                    median_ms(lambda: bare.run(None, {"input": xp}), args.repeats),
+                    median_ms(lambda x=x: pred.predict(x), args.repeats),
+                    median_ms(lambda x=x: pred.shading_rates(x), args.repeats),
+                    median_ms(lambda xp=xp: bare.run(None, {"input": xp}), args.repeats),
                     median_ms(run_torch, args.repeats),
                 )
             )

@@ -16,13 +16,13 @@ import functools
 import os
 import platform
 import tempfile
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
-
 from _common import median_ms, paper_model  # bench/ is on sys.path when run as a script
+
 from rtp import metrics, sdk
 
 TILE = 16

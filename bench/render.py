@@ -19,8 +19,7 @@ import time
 import numpy as np
 
 from rtp.plugins.moderngl import Renderer
-from rtp.scene import Camera, Material, PointLight, Scene, SunLight
-from rtp.scene import box_mesh, checker_texture, quad_mesh, sphere_mesh
+from rtp.scene import Camera, Material, PointLight, Scene, SunLight, box_mesh, checker_texture, quad_mesh, sphere_mesh
 
 
 def _noise_texture(rng: np.random.Generator, size: int = 256) -> np.ndarray:
@@ -31,7 +30,10 @@ def _noise_texture(rng: np.random.Generator, size: int = 256) -> np.ndarray:
         n = 2**octave
         g = rng.uniform(-1, 1, (n, n))
         idx = np.arange(size) * n // size
-        acc += np.kron(g, np.ones((size // n, size // n)))[:size, :size] / octave if size % n == 0 else g[np.ix_(idx, idx)] / octave
+        if size % n == 0:
+            acc += np.kron(g, np.ones((size // n, size // n)))[:size, :size] / octave
+        else:
+            acc += g[np.ix_(idx, idx)] / octave
     img = np.clip(base[None, None, :] * (0.75 + 0.25 * acc[..., None]), 0, 1)
     out = np.empty((size, size, 4), np.uint8)
     out[..., :3] = (img * 255).astype(np.uint8)

@@ -6,7 +6,6 @@ computing targets (:func:`compute_targets`) ``rtp[metrics]``, both imported when
 """
 
 from ._capture import PROCEDURAL_PREFIX, CaptureReport, capture, load_scene
-
 from ._dataset import (
     BUFFERS,
     DatasetError,

@@ -23,7 +23,16 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import METRICS, PREDICTED_RATES, TARGET_METRICS, RtpError, mse_from_psnr, psnr_from_mse, tile_extents, tile_grid
+from rtp.sdk import (
+    METRICS,
+    PREDICTED_RATES,
+    TARGET_METRICS,
+    RtpError,
+    mse_from_psnr,
+    psnr_from_mse,
+    tile_extents,
+    tile_grid,
+)
 from rtp.sdk.files import atomic_output
 
 from ._dataset import DatasetReader, sample_path

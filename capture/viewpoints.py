@@ -31,8 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtp.scene import Camera
-from rtp.scene import Scene
+from rtp.scene import Camera, Scene
 from rtp.sdk import RtpError
 
 __all__ = [

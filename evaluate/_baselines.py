@@ -24,8 +24,19 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_TILE_SIZE, LUMA_WEIGHTS, PREDICTED_RATES, RATE_CODES, InputShapeError, RtpError, select_rates, tile_grid
-from rtp.sdk import RateLike, rate_size, resolve_allowed
+from rtp.sdk import (
+    DEFAULT_TILE_SIZE,
+    LUMA_WEIGHTS,
+    PREDICTED_RATES,
+    RATE_CODES,
+    InputShapeError,
+    RateLike,
+    RtpError,
+    rate_size,
+    resolve_allowed,
+    select_rates,
+    tile_grid,
+)
 
 if TYPE_CHECKING:
     from rtp.sdk import ShadingRatePredictor
@@ -101,7 +112,9 @@ def as_frame(source: Any) -> Frame:
             pass
         frame = Frame(source.buffer("reprojected"), motion, seen)
     else:
-        raise BaselineError(f"expected a Sample, a Frame, a mapping of buffers or an (H, W, 3) array, got {type(source).__name__}")
+        raise BaselineError(
+            f"expected a Sample, a Frame, a mapping of buffers or an (H, W, 3) array, got {type(source).__name__}"
+        )
     rep = np.asarray(frame.reprojected, dtype=np.float32)
     if rep.ndim != 3 or rep.shape[2] < 3 or rep.shape[0] == 0 or rep.shape[1] == 0:
         raise InputShapeError(f"reprojected: expected (H, W, 3), got {rep.shape}", tuple(rep.shape), "(H, W, 3)")
@@ -411,7 +424,8 @@ class FidelityFX:
                 "additional_rates": self.additional_rates, "luma": "0.30/0.59/0.11"}
 
     def __repr__(self) -> str:
-        return f"<FidelityFX tile={self.tile_size} cutoff={self.cutoff:g} motion_factor={self.motion_factor:g} additional={self.additional_rates}>"
+        return (f"<FidelityFX tile={self.tile_size} cutoff={self.cutoff:g} motion_factor={self.motion_factor:g} "
+                f"additional={self.additional_rates}>")
 
     def _padded(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """Luma and motion length, padded (edge) up to whole tiles: ``(Hp, Wp)`` each."""
@@ -533,7 +547,9 @@ class Oracle:
 
     name = "oracle"
 
-    def __init__(self, store: TargetStore, metric: str, tile_size: int, *, threshold: float, higher_is_better: bool = False) -> None:
+    def __init__(
+        self, store: TargetStore, metric: str, tile_size: int, *, threshold: float, higher_is_better: bool = False
+    ) -> None:
         self.store, self.metric, self.tile_size = store, metric, tile_size
         self.threshold, self.higher_is_better = float(threshold), higher_is_better
 

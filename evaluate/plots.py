@@ -152,7 +152,9 @@ def heatmaps(
     """
     truth, prediction = np.asarray(truth), np.asarray(prediction)
     if truth.shape != prediction.shape or truth.ndim != 3 or truth.shape[0] != len(PREDICTED_RATES):
-        raise BaselineError(f"heatmaps: expected truth and prediction of one shape (6, th, tw), got {truth.shape} and {prediction.shape}")
+        raise BaselineError(
+            f"heatmaps: expected truth and prediction of one shape (6, th, tw), got {truth.shape} and {prediction.shape}"
+        )
     panels, labels = [], []
     for r in rates:
         if r not in PREDICTED_RATES:
@@ -181,8 +183,9 @@ def scatter(
     title: str = "",
 ) -> np.ndarray:
     """Predicted (y, up) against true (x) per-tile values as a log-density 2D histogram (dark =
-    many tiles; about ``2 sqrt(n)`` bins per axis, at most ``size``) with the diagonal in grey. Returns uint8 ``(size + SCATTER_MARGIN, size + SCATTER_MARGIN, 3)``: the
-    plot square with a left and a bottom margin holding the axis labels (and ``title``)."""
+    many tiles; about ``2 sqrt(n)`` bins per axis, at most ``size``) with the diagonal in grey.
+    Returns uint8 ``(size + SCATTER_MARGIN, size + SCATTER_MARGIN, 3)``: the plot square with a left
+    and a bottom margin holding the axis labels (and ``title``)."""
     from PIL import Image, ImageDraw
 
     p = np.asarray(prediction, np.float64).ravel()

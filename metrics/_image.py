@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import luma
 from rtp.sdk import InputChannelError, InputDtypeError, InputShapeError, NonFiniteInputError
 
 from ._errors import InputRangeError

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from ._flip import DEFAULT_PPD, Ppd, flip_pixels, resolve_ppd
 from rtp.sdk import DEFAULT_TILE_SIZE, luma, psnr_from_mse
 
+from ._flip import DEFAULT_PPD, Ppd, flip_pixels, resolve_ppd
 from ._image import as_pair
 from ._pool import DEFAULT_WEBER_L, pool_tiles, weber_denominator
 

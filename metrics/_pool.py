@@ -13,11 +13,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import InputShapeError, tile_extents, tile_grid
+from rtp.sdk import InputShapeError, luma, tile_extents, tile_grid
 
 from ._errors import MetricParameterError
-from rtp.sdk import luma
-
 from ._image import _is_torch
 
 __all__ = [

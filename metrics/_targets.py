@@ -10,7 +10,16 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_TILE_SIZE, METRICS, PREDICTED_RATES, TARGET_METRICS, InputShapeError, luma, psnr_from_mse, tile_grid
+from rtp.sdk import (
+    DEFAULT_TILE_SIZE,
+    METRICS,
+    PREDICTED_RATES,
+    TARGET_METRICS,
+    InputShapeError,
+    luma,
+    psnr_from_mse,
+    tile_grid,
+)
 
 from ._errors import MetricParameterError
 from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, resolve_ppd

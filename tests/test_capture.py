@@ -101,8 +101,7 @@ def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkey
 def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from rtp.capture import _capture
-    from rtp.capture import TargetError, TargetStore, compute_targets
+    from rtp.capture import TargetError, TargetStore, _capture, compute_targets
 
     out = tmp_path / "ds"
     capture(["procedural:5"], out, per_scene=2, size=(96, 64), profiles=("slow",))

@@ -56,8 +56,9 @@ def test_glsl_srgb_curves_match_the_sdk(plugin: str) -> None:
         vertex_shader="#version 330\nvoid main() { vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2); "
         "gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0); }",
         fragment_shader="#version 330\nuniform sampler2D xs; layout(location = 0) out vec4 dec; "
-        "layout(location = 1) out vec4 enc;\n%s\nvoid main() { vec3 c = texelFetch(xs, ivec2(gl_FragCoord.xy), 0).rgb; "
-        "dec = vec4(srgb_to_linear(c), 1.0); enc = vec4(linear_to_srgb(c), 1.0); }" % funcs,
+        "layout(location = 1) out vec4 enc;\n" + funcs + "\nvoid main() { "
+        "vec3 c = texelFetch(xs, ivec2(gl_FragCoord.xy), 0).rgb; "
+        "dec = vec4(srgb_to_linear(c), 1.0); enc = vec4(linear_to_srgb(c), 1.0); }",
     )
     xs = ctx.texture((n, 1), 3, x.tobytes(), dtype="f4")
     xs.filter = (ctx.NEAREST, ctx.NEAREST)

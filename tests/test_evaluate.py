@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from rtp import sdk
-from rtp.capture import BUFFERS, DatasetWriter
+from rtp.capture import BUFFERS, DatasetWriter, TargetStore
 from rtp.cli import main as rtp_main
-from rtp.capture import TargetStore
 from rtp.evaluate import (
     BaselineError,
     FidelityFX,

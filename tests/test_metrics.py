@@ -197,10 +197,10 @@ def test_weber_correction_on_known_luma() -> None:
     levels = np.array([[0.1, 0.5, 0.9], [0.0, 0.25, 1.0]], np.float32)
     refimg = np.repeat(np.repeat(levels, 4, 0), 4, 1)[..., None].repeat(3, -1)
     test = np.clip(refimg + 0.05, 0, 1)
-    for l in (M.DEFAULT_WEBER_L, M.PAPER_WEBER_L, 0.5):
-        denom = M.weber_denominator(refimg, l)
-        np.testing.assert_allclose(denom, np.repeat(np.repeat(levels, 4, 0), 4, 1) + l, rtol=1e-6)
-        jn = M.jnyang_map(refimg, test, weber_l=l)
+    for env in (M.DEFAULT_WEBER_L, M.PAPER_WEBER_L, 0.5):
+        denom = M.weber_denominator(refimg, env)
+        np.testing.assert_allclose(denom, np.repeat(np.repeat(levels, 4, 0), 4, 1) + env, rtol=1e-6)
+        jn = M.jnyang_map(refimg, test, weber_l=env)
         np.testing.assert_allclose(jn, M.yang_map(refimg, test) / denom, rtol=1e-6)
     jn = M.jnyang_map(refimg, test, weber_l=0.02)
     assert jn[0, 0] == pytest.approx(0.05 / 0.12, rel=1e-5)
@@ -320,9 +320,9 @@ def test_bad_parameters(ref: np.ndarray) -> None:
     for ppd in (0, -1.0, float("nan"), "foo", True):
         with pytest.raises(M.MetricParameterError):
             M.flip_map(ref, ref, ppd=ppd)  # type: ignore[arg-type]
-    for l in (0.0, -0.1, float("inf")):
+    for env in (0.0, -0.1, float("inf")):
         with pytest.raises(M.MetricParameterError):
-            M.jnyang_map(ref, ref, weber_l=l)
+            M.jnyang_map(ref, ref, weber_l=env)
     for tile in (0, -4, 2.5, True):
         with pytest.raises(M.MetricParameterError):
             M.pool_tiles(np.zeros((4, 4)), tile)  # type: ignore[arg-type]

@@ -10,8 +10,7 @@ import pytest
 import torch
 
 from rtp import export, sdk
-from rtp.capture import DatasetReader
-from rtp.capture import TargetStore, capture
+from rtp.capture import DatasetReader, TargetStore, capture
 from rtp.cli import main as rtp_main
 from rtp.train import TrainConfig, train
 from rtp.train.checkpoint import load as load_checkpoint

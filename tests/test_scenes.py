@@ -167,10 +167,10 @@ def write_test_bsp() -> bytes:
         vert_arr[i]["color"] = (255, 255, 255, 255)
     face_arr = np.concatenate(faces)
     ents = (
-        '{\n"classname" "worldspawn"\n}\n'
-        '{\n"classname" "info_player_deathmatch"\n"origin" "32 16 8"\n"angle" "90"\n}\n'
-        '{\n"classname" "light"\n"origin" "32 32 100"\n"light" "300"\n"_color" "1 0.5 0.5"\n}\n'
-    ).encode() + b"\0"
+        b'{\n"classname" "worldspawn"\n}\n'
+        b'{\n"classname" "info_player_deathmatch"\n"origin" "32 16 8"\n"angle" "90"\n}\n'
+        b'{\n"classname" "light"\n"origin" "32 32 100"\n"light" "300"\n"_color" "1 0.5 0.5"\n}\n'
+    ) + b"\0"
     lumps = [b""] * 17
     lumps[0], lumps[1], lumps[10] = ents, textures.tobytes(), vert_arr.tobytes()
     lumps[11], lumps[13] = np.asarray(meshverts, "<i4").tobytes(), face_arr.tobytes()

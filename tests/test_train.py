@@ -14,9 +14,8 @@ import pytest
 import torch
 
 from rtp import export, sdk
-from rtp.capture import BUFFERS, DatasetWriter
+from rtp.capture import BUFFERS, DatasetWriter, TargetStore, pool_targets
 from rtp.cli import main as rtp_main
-from rtp.capture import TargetStore, pool_targets
 from rtp.evaluate import scores
 from rtp.sdk import psnr_from_mse as mse_to_psnr
 from rtp.train import TrainConfig, calibrate_safety, train

@@ -22,13 +22,11 @@ import torch
 import torch.nn.functional as F
 
 from rtp import sdk
-from rtp.capture import DatasetReader
+from rtp.capture import DatasetReader, TargetStore
+from rtp.evaluate import scores
 
 from . import checkpoint as ckpt
 from . import transforms as tt
-from rtp.capture import TargetStore
-from rtp.evaluate import scores
-
 from ._safety import calibrate_safety
 from .model import MetricNet
 
@@ -140,7 +138,9 @@ def _predict_frames(net: MetricNet, xs: Sequence[np.ndarray], tile: int) -> list
     return out
 
 
-def _validate(net: MetricNet, val: _Split, t: sdk.Transform, cfg: TrainConfig, worse: float) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+def _validate(
+    net: MetricNet, val: _Split, t: sdk.Transform, cfg: TrainConfig, worse: float
+) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     net.eval()
     preds = _predict_frames(net, val.x, cfg.tile)
     # (outputs, tiles): one row per output rate, every validation tile along it

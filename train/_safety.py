@@ -10,7 +10,9 @@ from rtp.sdk import ParameterError
 __all__ = ["calibrate_safety"]
 
 
-def calibrate_safety(pred: np.ndarray, gt: np.ndarray, *, worse: float = 1.0, quantile: float | None = None) -> tuple[float, float]:
+def calibrate_safety(
+    pred: np.ndarray, gt: np.ndarray, *, worse: float = 1.0, quantile: float | None = None
+) -> tuple[float, float]:
     """A safety margin in transformed space and the share of tiles still underestimated with it.
 
     Without ``quantile``: the paper's margin, the mean underestimation over all values (counting 0

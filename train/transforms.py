@@ -11,8 +11,7 @@ from collections.abc import Sequence
 
 import torch
 
-from rtp.sdk import ModelMetadata, Transform
-from rtp.sdk import LOGIT_EPS, OUTPUT_SETS, complete_rates
+from rtp.sdk import LOGIT_EPS, OUTPUT_SETS, ModelMetadata, Transform, complete_rates
 
 __all__ = ["decode", "extrapolate", "forward", "inverse"]
 

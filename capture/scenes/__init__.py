@@ -16,7 +16,17 @@ from __future__ import annotations
 
 from ._bsp import BspConversion, convert_bsp, load_bsp
 from ._errors import FetchError, SceneError, SceneFormatError, SceneNotFoundError, UnlistedMapError
-from ._fetch import DEFAULT_SPLITS, PACKAGES, default_cache_dir, fetch, load_splits, main, map_names, scene_blockers, scene_by_name
+from ._fetch import (
+    DEFAULT_SPLITS,
+    PACKAGES,
+    default_cache_dir,
+    fetch,
+    load_splits,
+    main,
+    map_names,
+    scene_blockers,
+    scene_by_name,
+)
 from ._mesh import load_mesh_file
 from ._procedural import procedural
 

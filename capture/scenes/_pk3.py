@@ -6,9 +6,9 @@ from __future__ import annotations
 import logging
 import re
 import zipfile
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable
 
 from ._errors import SceneFormatError, SceneNotFoundError
 
@@ -46,7 +46,7 @@ class Pk3Set:
         for z in self._zips:
             z.close()
 
-    def __enter__(self) -> "Pk3Set":
+    def __enter__(self) -> Pk3Set:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -8,7 +8,7 @@ the ``numpy.random.Generator`` passed in, so the same generator state gives iden
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -2,9 +2,9 @@
 
 pyrender has no G-buffer outputs and draws every mesh with ``mesh.vert`` + ``mesh.frag``. The
 adapter's renderer keeps pyrender's whole pipeline (scene traversal, buffers, materials, culling,
-the main framebuffer and its read-back) and swaps only the fragment shader: a
-subclass of pyrender's ``ShaderProgramCache`` (``_program_cache_class``) hands out ``shaders/gbuffer.frag`` (a copy of ``mesh.frag`` that
-writes one G-buffer pass instead of lighting) with a define saying which pass.
+the main framebuffer and its read-back) and swaps only the fragment shader: a subclass of
+pyrender's ``ShaderProgramCache`` (``_program_cache_class``) hands out ``shaders/gbuffer.frag`` (a
+copy of ``mesh.frag`` that writes one G-buffer pass instead of lighting) with a define saying which pass.
 
 Quirks handled here (costs measured in docs/adapters.md):
 
