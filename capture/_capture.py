@@ -17,6 +17,7 @@ import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,7 +50,9 @@ class CaptureReport:
         return {p: float(np.mean(v)) for p, v in self.unseen.items() if v}
 
 
-def load_scene(name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None) -> tuple[Any, Any]:
+def load_scene(
+    name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None
+) -> tuple[Any, Any]:
     """A scene by name and its invisible blockers (a BSP map's sky); ``procedural:<seed>`` needs no cache."""
     from rtp.capture import scenes
 
@@ -61,8 +64,9 @@ def load_scene(name: str, cache_dir: str | os.PathLike[str] | None, split: str |
         return scenes.procedural(seed), None
     if cache_dir is None:
         raise RtpError(f"scene {name!r} is a game level: pass the cache folder of `rtp scenes fetch` (--cache)")
-    scene = scenes.scene_by_name(name, cache_dir, split=split, splits=splits)
-    return scene, scenes.scene_blockers(name, cache_dir, splits=splits)
+    cache = Path(cache_dir)
+    scene = scenes.scene_by_name(name, cache, split=split, splits=splits)
+    return scene, scenes.scene_blockers(name, cache, splits=splits)
 
 
 def sample_buffers(frame: Any) -> dict[str, np.ndarray]:

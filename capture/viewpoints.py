@@ -202,7 +202,7 @@ class VoxelGrid:
         pas = passable.ravel()
         visited = np.zeros(pas.size, bool)
         offs = np.array([1, -1, nz, -nz, ny * nz, -ny * nz], np.int64)
-        front = []
+        seeds_found: list[int] = []
         for s in np.atleast_2d(seeds):
             i = self.index(s)
             # nearest passable voxel within 2 voxels of the seed
@@ -213,8 +213,8 @@ class VoxelGrid:
             flat = np.ravel_multi_index(tuple(cand.T), self.shape)
             ok = flat[pas[flat]]
             if len(ok):
-                front.append(ok[0])
-        front = np.unique(np.array(front, np.int64))
+                seeds_found.append(int(ok[0]))
+        front = np.unique(np.array(seeds_found, np.int64))
         visited[front] = True
         while front.size:
             nb = (front[:, None] + offs[None, :]).ravel()
@@ -413,7 +413,7 @@ def sample_viewpoints(
         coverage = levels[level]
         v = cand[rng.integers(len(cand))]
         pos = grid.centre(np.array([v]))[0] + rng.uniform(-0.5, 0.5, 3) * grid.voxel
-        cam = Camera(tuple(float(x) for x in pos), yaw=float(rng.uniform(-180.0, 180.0)),
+        cam = Camera((float(pos[0]), float(pos[1]), float(pos[2])), yaw=float(rng.uniform(-180.0, 180.0)),
                      pitch=float(rng.uniform(-pitch_limit, pitch_limit)), fov_y=fov_y)
         if not val.clearance(pos, clearance):
             rejected["clearance"] += 1
@@ -423,11 +423,11 @@ def sample_viewpoints(
             continue
         for _ in range(prev_tries):
             d = rng.normal(size=3)
-            d /= max(np.linalg.norm(d), 1e-12)
+            d /= max(float(np.linalg.norm(d)), 1e-12)
             r = prof.max_translation * rng.random() ** (1 / 3)
             ppos = pos + d * r
             dyaw, dpitch = rng.uniform(-prof.max_rotation, prof.max_rotation, 2)
-            prev = Camera(tuple(float(x) for x in ppos), yaw=float((cam.yaw + dyaw + 180) % 360 - 180),
+            prev = Camera((float(ppos[0]), float(ppos[1]), float(ppos[2])), yaw=float((cam.yaw + dyaw + 180) % 360 - 180),
                           pitch=float(np.clip(cam.pitch + dpitch, -pitch_limit, pitch_limit)), fov_y=fov_y)
             if not reachable(ppos) or not val.clearance(ppos, clearance) or not val.segment_clear(pos, ppos):
                 continue

@@ -39,9 +39,8 @@ from rtp.sdk import (
 )
 
 if TYPE_CHECKING:
+    from rtp.capture import TargetStore
     from rtp.sdk import ShadingRatePredictor
-
-    from ._targets import TargetStore
 
 __all__ = [
     "FFX_LUMA",
@@ -212,14 +211,14 @@ def motion_factor_half(v: np.ndarray | float) -> np.ndarray:
     """Yang 2019 Eq. 20: ``b_H(v) = (1 + (1.05 v)^3.10)^-0.35`` for a speed ``v`` in pixels/frame
     (1 at rest, about 0.047 at 16 px)."""
     v = np.abs(np.asarray(v, dtype=np.float64))
-    return np.power(1.0 + np.power(1.05 * v, 3.10), -0.35)  # type: ignore[no-any-return]
+    return np.power(1.0 + np.power(1.05 * v, 3.10), -0.35)
 
 
 def motion_factor_quarter(v: np.ndarray | float, k: float = 2.13) -> np.ndarray:
     """Yang 2019 Eq. 21: ``b_Q(v) = k (1 + (0.55 v)^2.41)^-0.49`` with ``k = 2.13`` (the
     quarter-rate error ratio at rest; about 0.163 at 16 px)."""
     v = np.abs(np.asarray(v, dtype=np.float64))
-    return k * np.power(1.0 + np.power(0.55 * v, 2.41), -0.49)  # type: ignore[no-any-return]
+    return k * np.power(1.0 + np.power(0.55 * v, 2.41), -0.49)
 
 
 Norm = Literal["max", "rms"]
@@ -372,7 +371,7 @@ FFX_TILE_SIZES = (8, 16, 32)
 def _neighbour_reduce(a: np.ndarray, fn: Any) -> np.ndarray:
     """``fn`` over the 4-neighbourhood (up, down, left, right; edges clamped) of a 2D grid."""
     p = np.pad(a, 1, mode="edge")
-    return fn(fn(p[:-2, 1:-1], p[2:, 1:-1]), fn(p[1:-1, :-2], p[1:-1, 2:]))  # type: ignore[no-any-return]
+    return fn(fn(p[:-2, 1:-1], p[2:, 1:-1]), fn(p[1:-1, :-2], p[1:-1, 2:]))
 
 
 class FidelityFX:
@@ -444,7 +443,7 @@ class FidelityFX:
         """Reduce a grid with ``cells`` cells per tile side to ``(th, tw)``."""
         gh, gw = a.shape
         b = a.reshape(gh // cells, cells, gw // cells, cells)
-        return b.max(axis=(1, 3)) if fn == "max" else b.min(axis=(1, 3))  # type: ignore[no-any-return]
+        return b.max(axis=(1, 3)) if fn == "max" else b.min(axis=(1, 3))
 
     def _base(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         lum, speed = self._padded(frame)
@@ -468,7 +467,7 @@ class FidelityFX:
 
         def rng(w: int, h: int) -> np.ndarray:  # largest range over the aligned w-wide, h-tall sub-blocks
             s = blk.reshape(*blk.shape[:2], 4 // h, h, 4 // w, w)
-            return (s.max(axis=(3, 5)) - s.min(axis=(3, 5))).max(axis=(2, 3))  # type: ignore[no-any-return]
+            return (s.max(axis=(3, 5)) - s.min(axis=(3, 5))).max(axis=(2, 3))
 
         sub = self.motion_factor * speed.reshape(hp // 4, 4, wp // 4, 4).mean(axis=(1, 3))
         ranges = np.stack([rng(*rate_size(r)) for r in PREDICTED_RATES]) - sub
@@ -533,7 +532,7 @@ class ModelSelector:
     def _x(self, source: Any) -> np.ndarray:
         if isinstance(source, np.ndarray):
             return source
-        return source.inputs(self.predictor.metadata.inputs)  # type: ignore[no-any-return]
+        return source.inputs(self.predictor.metadata.inputs)
 
     def predict(self, source: Any) -> np.ndarray:
         return self.predictor.predict(self._x(source))

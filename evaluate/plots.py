@@ -73,7 +73,7 @@ def colorize(values: np.ndarray, vmin: float = 0.0, vmax: float = 1.0, cmap: str
     f = (x - i)[..., None]
     rgb = table[i] * (1.0 - f) + table[i + 1] * f
     rgb[nan] = 0.5
-    return np.round(rgb * 255.0).astype(np.uint8)  # type: ignore[no-any-return]
+    return np.round(rgb * 255.0).astype(np.uint8)
 
 
 def upsample_tiles(values: np.ndarray, tile: int, size: tuple[int, int]) -> np.ndarray:

@@ -137,7 +137,7 @@ def _network_class() -> type:
     nn = torch.nn
     F = torch.nn.functional
 
-    class LpipsAlex(nn.Module):  # type: ignore[name-defined,misc]
+    class LpipsAlex(nn.Module):  # type: ignore[name-defined]
         """LPIPS v0.1 with an AlexNet trunk; ``forward(x0, x1)`` takes NCHW in [-1, 1], returns ``(N, 1, H, W)``."""
 
         def __init__(self) -> None:

@@ -5,6 +5,7 @@ uint32 counter-clockwise triangles, top-left uvs."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -13,7 +14,7 @@ from ._model import Mesh
 __all__ = ["box_mesh", "checker_texture", "quad_mesh", "sphere_mesh"]
 
 
-def _mesh(pos: list, nrm: list, uv: list, idx: list, material: int) -> Mesh:
+def _mesh(pos: Any, nrm: Any, uv: Any, idx: Any, material: int) -> Mesh:
     return Mesh(
         positions=np.asarray(pos, np.float32).reshape(-1, 3),
         normals=np.asarray(nrm, np.float32).reshape(-1, 3),
@@ -50,7 +51,10 @@ def box_mesh(lo: Sequence[float], hi: Sequence[float], material: int = 0, uv_per
     faces = [  # (normal, u axis, v axis) with u x v = normal
         (x, -z, y), (-x, z, y), (y, x, -z), (-y, x, z), (z, x, y), (-z, -x, y),
     ]
-    pos, nrm, uv, idx = [], [], [], []
+    pos: list[np.ndarray] = []
+    nrm: list[np.ndarray] = []
+    uv: list[tuple[float, float]] = []
+    idx: list[int] = []
     for n, u, v in faces:
         fc = c + n * e
         hu, hv = u * e, v * e
@@ -71,7 +75,7 @@ def sphere_mesh(centre: Sequence[float], radius: float, material: int = 0, segme
     n = np.stack([np.sin(t) * np.cos(p), np.cos(t), -np.sin(t) * np.sin(p)], axis=-1).reshape(-1, 3)
     uv = np.stack([p / (2 * np.pi), t / np.pi], axis=-1).reshape(-1, 2)
     pos = np.asarray(centre, np.float64) + radius * n
-    idx = []
+    idx: list[int] = []
     for i in range(rings):
         for j in range(segments):
             a, b = i * (segments + 1) + j, (i + 1) * (segments + 1) + j

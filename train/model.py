@@ -114,4 +114,4 @@ class MetricNet(nn.Module):
         return [asdict(s) for s in layer_plan(c["in_channels"], c["out_channels"], c["tile"], c["width"])]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.layers(x)  # type: ignore[no-any-return]
+        return self.layers(x)

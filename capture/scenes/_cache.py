@@ -8,13 +8,13 @@ triangles). Bump :data:`CACHE_VERSION` whenever the conversion changes.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from rtp.scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
+from rtp.sdk.files import atomic_output
 
 from ._errors import SceneFormatError
 
@@ -35,12 +35,12 @@ def save_scene_npz(path: str | Path, scene: Scene, sky: np.ndarray | None = None
             arrays[f"tex{j}"] = np.ascontiguousarray(m.texture, np.uint8)
         mats.append(d)
     meshes = []
-    for i, m in enumerate(scene.meshes):
-        arrays[f"m{i}_pos"] = m.positions
-        arrays[f"m{i}_nrm"] = m.normals
-        arrays[f"m{i}_uv"] = m.uvs
-        arrays[f"m{i}_idx"] = m.indices
-        meshes.append(m.material)
+    for i, mesh in enumerate(scene.meshes):
+        arrays[f"m{i}_pos"] = mesh.positions
+        arrays[f"m{i}_nrm"] = mesh.normals
+        arrays[f"m{i}_uv"] = mesh.uvs
+        arrays[f"m{i}_idx"] = mesh.indices
+        meshes.append(mesh.material)
     meta = {
         "version": CACHE_VERSION,
         "name": scene.name,
@@ -55,11 +55,8 @@ def save_scene_npz(path: str | Path, scene: Scene, sky: np.ndarray | None = None
     }
     arrays["meta"] = np.array(json.dumps(meta))
     arrays["sky"] = np.zeros((0, 3, 3), np.float32) if sky is None else np.asarray(sky, np.float32)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
+    with atomic_output(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)  # type: ignore[arg-type]
 
 
 def load_scene_npz(path: str | Path) -> tuple[Scene, np.ndarray, dict]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,9 +52,14 @@ def _colour01(c, default=(0.8, 0.8, 0.8, 1.0)) -> tuple[float, float, float, flo
     return tuple(float(x) for x in np.clip(a[:4], 0.0, 1.0))  # type: ignore[return-value]
 
 
-def _material_of(geom, name: str) -> tuple[Material, bool]:
+def _rgb(value: Any) -> tuple[float, float, float]:
+    r, g, b = (float(x) for x in np.asarray(value, np.float64).ravel()[:3])
+    return r, g, b
+
+
+def _material_of(geom: Any, name: str) -> tuple[Material, bool]:
     """Material of a trimesh geometry and whether it carries texture coordinates."""
-    vis = getattr(geom, "visual", None)
+    vis: Any = getattr(geom, "visual", None)
     kind = getattr(vis, "kind", None)
     if kind == "texture" and getattr(vis, "material", None) is not None:
         m = vis.material
@@ -72,8 +78,7 @@ def _material_of(geom, name: str) -> tuple[Material, bool]:
                 texture=tex,
                 roughness=float(1.0 if rough is None else rough),
                 metallic=float(1.0 if metal is None else metal),
-                emissive=tuple(float(x) for x in np.asarray(emis, np.float64).ravel()[:3]) if emis is not None
-                else (0.0, 0.0, 0.0),
+                emissive=_rgb(emis) if emis is not None else (0.0, 0.0, 0.0),
                 alpha_cutoff=cutoff,
             ), has_uv
         # SimpleMaterial (OBJ/MTL)
@@ -109,7 +114,7 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     if not p.is_file():
         raise SceneNotFoundError(f"mesh file not found: {p}")
     try:
-        loaded = trimesh.load(str(p), force="scene", process=False)
+        loaded: Any = trimesh.load(str(p), force="scene", process=False)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types
         raise SceneFormatError(f"trimesh could not read {p}: {err}") from err
 

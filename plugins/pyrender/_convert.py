@@ -48,7 +48,7 @@ def _linear_factor(material: Any) -> np.ndarray:
 def _look_at_direction(direction: Any) -> np.ndarray:
     """A 4x4 pose whose -Z axis points along ``direction`` (pyrender's light/camera convention)."""
     d = np.asarray(direction, np.float64)
-    d = d / max(np.linalg.norm(d), 1e-12)
+    d = d / max(float(np.linalg.norm(d)), 1e-12)
     up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
     right = np.cross(d, up)
     right /= np.linalg.norm(right)
