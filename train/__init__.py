@@ -5,11 +5,16 @@ Importing this package needs torch (the ``rtp[train]`` extra). Scores and evalua
 """
 
 from ._loop import TrainConfig, TrainResult, train
+from ._recipe import SHIPPED_RECIPE, Recipe, RecipeError, load_recipe
 from ._safety import calibrate_safety
 
 __all__ = [
+    "SHIPPED_RECIPE",
+    "Recipe",
+    "RecipeError",
     "TrainConfig",
     "TrainResult",
     "calibrate_safety",
+    "load_recipe",
     "train",
 ]

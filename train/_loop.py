@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
 import platform
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ from rtp.evaluate import scores
 
 from . import checkpoint as ckpt
 from . import transforms as tt
+from ._recipe import load_recipe
 from ._safety import calibrate_safety
 from .model import MetricNet
 
@@ -61,6 +63,31 @@ class TrainConfig:
     safety_quantile: float | None = None
     default_threshold: float | None = None
     max_samples: int | None = None
+    #: Where the hyper-parameters came from (``Recipe.provenance()``), recorded in the model's provenance.
+    recipe: dict[str, Any] | None = None
+
+    @classmethod
+    def from_recipe(
+        cls,
+        recipe: str | os.PathLike[str],
+        *,
+        data: str,
+        metric: str,
+        out: str,
+        scenes: str | os.PathLike[str] | None = None,
+        **overrides: Any,
+    ) -> TrainConfig:
+        """A configuration from a recipe (a YAML path, or ``"shipped"``: the shipped models' recipe),
+        resolved for ``metric``; keyword ``overrides`` (TrainConfig fields) win over the recipe.
+        The recipe's ``val_split`` holds out that split's maps of ``scenes`` (default: the split list
+        shipped with rtp) unless ``val_scenes`` is overridden."""
+        from rtp.capture.scenes import map_names
+
+        r = load_recipe(recipe, metric)
+        values = {**r.values, **overrides}
+        if "val_scenes" not in overrides and r.val_split is not None:
+            values["val_scenes"] = tuple(map_names(r.val_split, scenes))
+        return cls(data=data, metric=metric, out=out, recipe=r.provenance(), **values)
 
 
 @dataclass
@@ -234,6 +261,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                 "target_parameters": store.metrics.get(cfg.metric, {}),
                 "steps": step,
                 "seed": cfg.seed,
+                **({"recipe": cfg.recipe} if cfg.recipe else {}),
                 "versions": {"rtp": str(sdk.__version__), "torch": str(torch.__version__),
                              "python": platform.python_version()},
                 **extra,

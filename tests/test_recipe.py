@@ -1,0 +1,66 @@
+"""Training recipes: the shipped models' recipe ships with rtp and is recorded in the provenance."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from rtp.capture.scenes import map_names
+from rtp.sdk import ParameterError
+from rtp.train import SHIPPED_RECIPE, RecipeError, TrainConfig, load_recipe, train
+from rtp.train.checkpoint import load as load_checkpoint
+
+from .test_train import _dataset
+
+
+def test_the_shipped_recipe_resolves_per_metric() -> None:
+    jn = load_recipe(SHIPPED_RECIPE, "jnyang")
+    lp = load_recipe(SHIPPED_RECIPE, "lpips")
+    assert jn.values == {"steps": 4000, "batch": 16, "crop": 128, "lr": 5e-4, "head": "paper"}
+    assert lp.values["head"] == "linear" and {k: v for k, v in lp.values.items() if k != "head"} == {
+        k: v for k, v in jn.values.items() if k != "head"}
+    assert jn.val_split == "validation" and jn.sha256 == lp.sha256 and len(jn.sha256) == 64
+
+
+def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", steps=10)
+    assert cfg.steps == 10 and cfg.batch == 16 and cfg.lr == 5e-4
+    assert cfg.val_scenes == tuple(map_names("validation")) and cfg.val_scenes
+    assert cfg.recipe is not None and cfg.recipe["name"] == SHIPPED_RECIPE and cfg.recipe["values"]["steps"] == 4000
+
+
+@pytest.mark.parametrize(("text", "needle"), [
+    ("stepz: 10\n", "unknown key(s) stepz"),
+    ("steps: ten\n", "'steps': expected int"),
+    ("steps: true\n", "'steps': expected int"),
+    ("lr: .nan\n", "'lr': expected float"),
+    ("inputs: 3\n", "'inputs': expected a list"),
+    ("- 1\n- 2\n", "expected a mapping"),
+    ("steps: [unclosed\n", "not valid YAML"),
+    ("per_metric: 3\n", "per_metric must map"),
+    ("val_split: 3\n", "'val_split': expected a split name"),
+    ("!!python/object/apply:os.system ['echo pwned']\n", "not valid YAML"),
+])
+def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needle: str) -> None:
+    path = tmp_path / "r.yaml"
+    path.write_text(text)
+    with pytest.raises(RecipeError) as err:
+        load_recipe(path, "jnyang")
+    assert needle in str(err.value)
+    assert isinstance(err.value, ParameterError)
+
+
+def test_a_missing_recipe_names_the_shipped_one(tmp_path: Path) -> None:
+    with pytest.raises(RecipeError, match="shipped"):
+        load_recipe(tmp_path / "nope.yaml", "jnyang")
+
+
+def test_the_recipe_is_recorded_in_the_model(tmp_path: Path) -> None:
+    data = _dataset(tmp_path / "d")
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("steps: 6\nbatch: 2\ncrop: 32\nhead: linear\nval_every: 3\nsave_every: 3\n")
+    cfg = TrainConfig.from_recipe(recipe, data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"))
+    train(cfg)
+    prov = load_checkpoint(tmp_path / "m.pt").metadata.provenance
+    assert prov["recipe"]["name"] == str(recipe) and prov["recipe"]["values"]["crop"] == 32

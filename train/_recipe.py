@@ -1,0 +1,120 @@
+"""Training recipes: the hyper-parameters of a model as a YAML file, recorded in its provenance.
+
+A recipe sets :class:`~rtp.train.TrainConfig` fields (everything but ``data``, ``metric`` and
+``out``), optionally ``val_split`` (hold out the maps of that split of ``scenes.yaml``) and
+``per_metric`` overrides. ``shipped`` names the recipe of rtp's shipped models, which ships with
+the package, so ``rtp train --data D --metric M --out M.pt`` reproduces a shipped model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import os
+import typing
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from rtp.sdk import ParameterError
+
+__all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe"]
+
+#: The name of the recipe rtp's shipped models were trained with.
+SHIPPED_RECIPE = "shipped"
+_SET_BY_CALLER = ("data", "metric", "out", "val_scenes", "recipe")
+
+
+class RecipeError(ParameterError):
+    """A recipe file is missing, not YAML, or sets an unknown key or a value of the wrong type."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Recipe:
+    """A recipe resolved for one metric: the values it sets, where it came from and its digest."""
+
+    name: str
+    sha256: str
+    values: dict[str, Any]
+    val_split: str | None = None
+
+    def provenance(self) -> dict[str, Any]:
+        """What a model's provenance records of its recipe."""
+        return {"name": self.name, "sha256": self.sha256, "values": dict(self.values), "val_split": self.val_split}
+
+
+def _recipe_text(source: str | os.PathLike[str]) -> tuple[str, str]:
+    if str(source) == SHIPPED_RECIPE:
+        return SHIPPED_RECIPE, resources.files("rtp.train").joinpath("recipes", "shipped.yaml").read_text()
+    path = Path(source)
+    if not path.is_file():
+        raise RecipeError(f"recipe {str(source)!r}: no such file (or pass {SHIPPED_RECIPE!r}, the shipped models' recipe)")
+    try:
+        return str(path), path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise RecipeError(f"recipe {path}: cannot be read as UTF-8 text ({err})") from err
+
+
+def _field_types() -> dict[str, Any]:
+    from ._loop import TrainConfig
+
+    hints = typing.get_type_hints(TrainConfig)
+    return {f.name: hints[f.name] for f in dataclasses.fields(TrainConfig) if f.name not in _SET_BY_CALLER}
+
+
+def _coerce(name: str, value: Any, kind: Any) -> Any:
+    """``value`` as the field type ``kind`` (int, float, str, tuple[str, ...], or optional of one)."""
+    args = typing.get_args(kind)
+    if type(None) in args:
+        if value is None:
+            return None
+        kind = next(a for a in args if a is not type(None))
+    if typing.get_origin(kind) is tuple:
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",") if v.strip()]
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise RecipeError(f"recipe key {name!r}: expected a list of names, got {value!r}")
+        return tuple(value)
+    if kind is bool or isinstance(value, bool):
+        raise RecipeError(f"recipe key {name!r}: expected {kind.__name__}, got {value!r}")
+    if kind is int and isinstance(value, int):
+        return value
+    if kind is float and isinstance(value, (int, float)) and math.isfinite(value):
+        return float(value)
+    if kind is str and isinstance(value, str):
+        return value
+    raise RecipeError(f"recipe key {name!r}: expected {getattr(kind, '__name__', kind)}, got {value!r}")
+
+
+def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
+    """Read a recipe (a YAML path, or :data:`SHIPPED_RECIPE`) and resolve it for ``metric``.
+
+    Raises :class:`RecipeError` naming the key at fault for unknown keys and wrong types.
+    """
+    name, text = _recipe_text(source)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise RecipeError(f"recipe {name}: not valid YAML ({err})") from err
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise RecipeError(f"recipe {name}: expected a mapping of TrainConfig fields, got {type(data).__name__}")
+    data = dict(data)
+    per_metric = data.pop("per_metric", None) or {}
+    if not isinstance(per_metric, dict) or not all(isinstance(v, dict) for v in per_metric.values()):
+        raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields")
+    merged = {**data, **per_metric.get(metric, {})}
+    val_split = merged.pop("val_split", None)
+    if val_split is not None and not isinstance(val_split, str):
+        raise RecipeError(f"recipe key 'val_split': expected a split name, got {val_split!r}")
+    types = _field_types()
+    unknown = sorted(set(merged) - set(types))
+    if unknown:
+        raise RecipeError(f"recipe {name}: unknown key(s) {', '.join(unknown)}; recipe keys are val_split, "
+                          f"per_metric, {', '.join(sorted(types))}")
+    values = {k: _coerce(k, v, types[k]) for k, v in merged.items()}
+    return Recipe(name, hashlib.sha256(text.encode()).hexdigest(), values, val_split)
