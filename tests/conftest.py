@@ -1,9 +1,16 @@
-"""Shared fixtures. SDK tests build their models with onnx.helper, so they need no torch."""
+"""Shared fixtures. SDK tests build their models with onnx.helper, so they need no torch.
+
+GL: every test marked ``gl`` gets the session's one headless EGL context (:func:`gl_context`) made
+current, and skips, naming the packages to install, where no EGL context can be created. Tests and
+fixtures that use it take the ``gl_context`` fixture; code that may run after another GL context
+(a pyrender renderer, a ``Renderer`` with its own context) became current calls
+:func:`make_current` first: moderngl never switches contexts by itself.
+"""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -100,3 +107,46 @@ def tiny_model(tmp_path: Path) -> Callable[..., Path]:
 @pytest.fixture(scope="session")
 def vectors() -> dict[str, Any]:
     return json.loads((DATA / "transform_vectors.json").read_text())
+
+
+# ----------------------------------------------------------------------------------------------------- GL
+#: What to install on Debian/Ubuntu for the headless GL tests (Mesa's EGL and GL drivers).
+EGL_PACKAGES = "apt-get install libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri"
+
+
+def open_gl_context() -> Any:
+    """A headless moderngl context through EGL, or ``pytest.skip`` saying what to install."""
+    try:
+        from rtp.plugins.moderngl import create_context
+    except ImportError as exc:
+        pytest.skip(f"moderngl is not installed (pip install 'rtp[moderngl]'): {exc}")
+    try:
+        return create_context()
+    except ImportError as exc:
+        pytest.skip(f"moderngl is not installed (pip install 'rtp[moderngl]'): {exc}")
+    except Exception as exc:  # RendererError: no EGL, no GL 3.3
+        cause = exc.__cause__ or exc
+        pytest.skip(f"no headless OpenGL context through EGL ({type(cause).__name__}: {cause}); "
+                    f"install Mesa's EGL and GL drivers: {EGL_PACKAGES}")
+
+
+def make_current(ctx: Any) -> Any:
+    """Make ``ctx`` the current GL context (moderngl never does it by itself) and return it."""
+    ctx.__enter__()  # moderngl's only call for it; never exited, so nothing is restored later
+    return ctx
+
+
+@pytest.fixture(scope="session")
+def gl_context() -> Iterator[Any]:
+    """The session's headless EGL moderngl context, created once; skips where EGL is missing."""
+    ctx = open_gl_context()
+    yield ctx
+    make_current(ctx)
+    ctx.release()
+
+
+@pytest.fixture(autouse=True)
+def _gl_marked_tests_get_the_context(request: pytest.FixtureRequest) -> None:
+    """Tests marked ``gl`` skip cleanly without EGL, and start with the shared context current."""
+    if request.node.get_closest_marker("gl") is not None:
+        make_current(request.getfixturevalue("gl_context"))

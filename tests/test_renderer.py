@@ -1,43 +1,36 @@
 """Tests of the reference deferred renderer (rtp.plugins.moderngl) and the numpy reprojection
 reference (rtp.sdk._reproject).
 
-The GL tests run on a headless EGL context (Mesa llvmpipe is enough). They skip only when no GL
-context can be created at all; the numpy tests always run.
+The GL tests run on the session's headless EGL context (``gl_context`` in conftest.py; Mesa
+llvmpipe is enough). They skip only when no GL context can be created at all; the numpy tests
+always run.
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 
 from rtp.plugins.moderngl import Renderer, RendererError
-from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SunLight
-from rtp.scene import box_mesh, checker_texture, quad_mesh
-from rtp.plugins.moderngl import create_context
+from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SunLight, box_mesh, checker_texture, quad_mesh
 from rtp.sdk import ALL_RATES as RATES
 from rtp.sdk._reproject import reproject, reproject_positions
+from tests.conftest import make_current
 
 # 162 x 98: not a multiple of 4, so the partial edge blocks (clamped shading samples) are exercised.
 W, H = 162, 98
 
 
 # ----------------------------------------------------------------------------- helpers
-def _gl_context():
-    try:
-        return create_context()
-    except (RendererError, ImportError) as exc:
-        return exc
-
-
 @pytest.fixture(scope="module")
-def renderer():
-    ctx = _gl_context()
-    if isinstance(ctx, Exception):
-        pytest.skip(f"no OpenGL context can be created here: {ctx}")
-    r = Renderer(W, H, ctx=ctx, shadow_map_size=1024)
+def renderer(gl_context: Any) -> Iterator[Renderer]:
+    r = Renderer(W, H, ctx=make_current(gl_context), shadow_map_size=1024)
     yield r
+    make_current(gl_context)
     r.release()
-    ctx.release()
 
 
 def _sample_index(n: int, block: int) -> np.ndarray:
@@ -369,10 +362,8 @@ def test_reprojection_moving_camera_matches_reference(renderer):
 
 
 @pytest.mark.gl
-def test_renderer_errors_and_lifetime():
-    ctx = _gl_context()
-    if isinstance(ctx, Exception):
-        pytest.skip(f"no OpenGL context can be created here: {ctx}")
+def test_renderer_errors_and_lifetime(gl_context):
+    ctx = gl_context
     with Renderer(32, 16, ctx=ctx, shadow_map_size=64) as r:
         with pytest.raises(RendererError, match="no scene"):
             r.render(Camera((0.0, 0.0, 0.0)))
@@ -389,4 +380,3 @@ def test_renderer_errors_and_lifetime():
                 r2.render(Camera((0.0, 0.0, 0.0)), f)
     with pytest.raises(RendererError, match="released"):
         r.render(Camera((0.0, 0.0, 0.0)))
-    ctx.release()
