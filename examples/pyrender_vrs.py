@@ -35,7 +35,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports PyO
 import numpy as np
 
 from rtp import sdk
-from rtp.plugins.pyrender import Adapter, import_pyrender, to_trimesh_scene
+from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_trimesh_scene
 
 log = logging.getLogger("pyrender_vrs")
 
@@ -162,14 +162,14 @@ def main(argv: list[str] | None = None) -> int:
         if scene.main_camera_node is None:
             scene.add(pyrender.PerspectiveCamera(yfov=math.radians(70.0), znear=0.05, zfar=200.0), pose=p0)
 
-        with Adapter(predictor.metadata.inputs, width, height) as adapter:
+        with Adapter.for_predictor(predictor, width, height) as adapter:
             # the displayed frames: pyrender's own lit images, drawn on the adapter's renderer
             # (pyrender binds a scene to one renderer; to use your own, pass Adapter(..., renderer=r))
             prev_colour, _ = adapter.render(scene, p0)
             colour, _ = adapter.render(scene, p1)
             # prev_depth=None: the adapter renders a point-sampled depth at p0 (pyrender's own depth is
             # an MSAA sample off the pixel centre; in a frame loop the previous call's depth is reused)
-            x = adapter.inputs(scene, p1, p0, prev_colour)
+            x = adapter.inputs(SceneFrame(scene, p1, p0, prev_colour))
         seen = predictor.metadata.inputs.index("seen") if "seen" in predictor.metadata.inputs else None
         if seen is not None:
             log.info("seen (reprojected and depth-tested): %.1f %% of the pixels", 100.0 * float(x[seen].mean()))

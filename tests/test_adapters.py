@@ -15,6 +15,12 @@ class FakeAdapter(adapters.Adapter):
     name = "fake"
     supported_channels = frozenset({"reprojected.r", "seen", "albedo.r", "normal.z"})
 
+    def inputs(self, frame: Any) -> Any:  # the contract itself: tests/test_adapter_contract.py
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
 
 @pytest.fixture
 def clean_registry(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -56,9 +62,9 @@ def test_entry_point_discovery_dedupes_and_survives_a_broken_plugin(
 
 
 def test_adapter_refuses_channels_it_cannot_produce() -> None:
-    a = FakeAdapter(sdk.DEFAULT_INPUTS)
+    a = FakeAdapter(sdk.DEFAULT_INPUTS, 16, 16)
     assert a.channels == sdk.DEFAULT_INPUTS
     with pytest.raises(adapters.UnsupportedChannelError, match="cannot produce motion.x"):
-        FakeAdapter(["seen", "motion.x"])
+        FakeAdapter(["seen", "motion.x"], 16, 16)
     with pytest.raises(adapters.UnsupportedChannelError, match="unknown channel"):
-        FakeAdapter(["colour"])
+        FakeAdapter(["colour"], 16, 16)

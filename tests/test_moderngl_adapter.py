@@ -2,60 +2,63 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from dataclasses import replace
+from typing import Any
+
 import numpy as np
 import pytest
 
 from rtp import sdk
 from rtp.capture.scenes import procedural
-from rtp.plugins.moderngl import Adapter, Renderer, RendererError, create_context
-from rtp.scene import Camera
+from rtp.plugins.moderngl import Adapter, Frame, GBufferTextures, Renderer
 from rtp.plugins.moderngl._glio import write_texture
+from rtp.scene import Camera
+from tests.conftest import make_current
 
 W, H = 128, 80
 pytestmark = pytest.mark.gl
 
 
 @pytest.fixture(scope="module")
-def frames():
-    try:
-        ctx = create_context()
-    except (RendererError, ImportError) as exc:
-        pytest.skip(f"no OpenGL context can be created here: {exc}")
+def frames(gl_context: Any) -> Iterator[tuple[Any, Frame, Frame]]:
+    ctx = make_current(gl_context)
     scene = procedural(3)
     sp = scene.spawn_points[0]
     prev_cam = Camera(sp.position, yaw=sp.yaw, pitch=-5.0)
     cam = Camera((sp.position[0] + 0.4, sp.position[1], sp.position[2] - 0.3), yaw=sp.yaw + 6.0, pitch=-3.0)
-    r = Renderer(W, H, ctx=ctx)
-    r.load_scene(scene)
-    prev = r.render(prev_cam)
-    cur = r.render(cam, prev)
+    with Renderer(W, H, ctx=ctx) as r:
+        r.load_scene(scene)
+        prev = r.render(prev_cam)
+        cur = r.render(cam, prev)
     yield ctx, prev, cur
-    r.release()
-    ctx.release()
 
 
-def _tex(ctx, image: np.ndarray):  # an engine's texture, uploaded from a top-left image
+def _tex(ctx: Any, image: np.ndarray) -> Any:  # an engine's texture, uploaded from a top-left image
     img = image if image.ndim == 3 else image[..., None]
     t = ctx.texture((img.shape[1], img.shape[0]), img.shape[2], dtype="f4")
     write_texture(t, img.astype(np.float32))
     return t
 
 
-def _engine_inputs(ctx, prev, cur, adapter: Adapter, **overrides) -> np.ndarray:
-    kw = dict(
+def _engine_frame(ctx: Any, prev: Frame, cur: Frame, **overrides: Any) -> GBufferTextures:
+    frame = GBufferTextures(
         albedo=_tex(ctx, cur.albedo), normal=_tex(ctx, cur.normal), depth=_tex(ctx, cur.depth),
         prev_colour=_tex(ctx, prev.colour["1x1"]), prev_depth=_tex(ctx, prev.depth),
         view=cur.camera.view(), projection=cur.camera.projection(W / H),
         prev_view_projection=prev.camera.view_projection(W, H),
     )
-    kw.update(overrides)
-    return adapter.inputs(**kw)
+    return replace(frame, **overrides)
+
+
+def _engine_inputs(ctx: Any, prev: Frame, cur: Frame, adapter: Adapter, **overrides: Any) -> np.ndarray:
+    return adapter.inputs(_engine_frame(ctx, prev, cur, **overrides))
 
 
 def test_inputs_in_the_declared_order_match_the_renderer_and_the_numpy_reference(frames) -> None:
     ctx, prev, cur = frames
     channels = ("normal.z", "seen", "albedo.r", "reprojected.r", "depth", "reprojected.b")
-    a = Adapter(ctx, channels, W, H)
+    a = Adapter(channels, W, H, ctx=ctx)
     x = _engine_inputs(ctx, prev, cur, a)
     assert x.shape == (6, H, W) and x.dtype == np.float32
     np.testing.assert_allclose(x[0], cur.normal[..., 2], atol=1e-3)
@@ -73,21 +76,22 @@ def test_inputs_in_the_declared_order_match_the_renderer_and_the_numpy_reference
     np.testing.assert_allclose(x[5][ok], ref_rp[..., 2][ok], atol=1e-5)
     assert 0.0 < x[1].mean() < 1.0  # the camera moved: some pixels are disoccluded or off-screen
     assert np.all(x[3][x[1] == 0] == 0)  # unseen pixels carry no stale colour
-    a.release()
+    a.close()
 
 
 def test_paper_inputs_feed_a_predictor(frames, tiny_model) -> None:
     ctx, prev, cur = frames
     pred = sdk.load(tiny_model())
-    a = sdk.adapters.get("moderngl")(ctx, pred.metadata.inputs, W, H)
-    rates = pred.shading_rates(_engine_inputs(ctx, prev, cur, a))
+    with sdk.adapters.get("moderngl").for_predictor(pred, W, H, ctx=ctx) as a:
+        assert a.channels == pred.metadata.inputs
+        rates = pred.shading_rates(_engine_inputs(ctx, prev, cur, a))
     assert rates.shape == pred.tiles(H, W)
 
 
 def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
     ctx, prev, cur = frames
     channels = ("depth", "normal.x", "normal.y", "normal.z", "albedo.g", "seen")
-    ref = _engine_inputs(ctx, prev, cur, Adapter(ctx, channels, W, H))
+    ref = _engine_inputs(ctx, prev, cur, Adapter(channels, W, H, ctx=ctx))
 
     def window(depth: np.ndarray, cam: Camera) -> np.ndarray:  # what a hardware depth buffer holds
         p = cam.projection(W / H)
@@ -97,7 +101,7 @@ def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
 
     world_n = cur.normal @ np.linalg.inv(cur.camera.view())[:3, :3].T
     linear_albedo = np.where(cur.albedo <= 0.04045, cur.albedo / 12.92, ((cur.albedo + 0.055) / 1.055) ** 2.4)
-    b = Adapter(ctx, channels, W, H, depth_kind="window", normal_space="world", albedo_linear=True)
+    b = Adapter(channels, W, H, ctx=ctx, depth_kind="window", normal_space="world", albedo_linear=True)
     x = _engine_inputs(ctx, prev, cur, b, depth=_tex(ctx, window(cur.depth, cur.camera)),
                        prev_depth=_tex(ctx, window(prev.depth, prev.camera)), normal=_tex(ctx, world_n),
                        albedo=_tex(ctx, linear_albedo))
@@ -109,13 +113,39 @@ def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
 
 def test_no_previous_frame_and_channel_errors(frames) -> None:
     ctx, prev, cur = frames
-    a = Adapter(ctx, ("seen", "reprojected.g", "albedo.b"), W, H)
-    x = a.inputs(albedo=_tex(ctx, cur.albedo), normal=_tex(ctx, cur.normal), depth=_tex(ctx, cur.depth),
-                 view=cur.camera.view(), projection=cur.camera.projection(W / H))
+    a = Adapter(("seen", "reprojected.g", "albedo.b"), W, H, ctx=ctx)
+    no_prev = _engine_frame(ctx, prev, cur, prev_colour=None, prev_depth=None, prev_view_projection=None)
+    x = a.inputs(no_prev)
     assert not x[:2].any() and x[2].any()
     with pytest.raises(sdk.adapters.UnsupportedChannelError, match="cannot produce motion.x"):
-        Adapter(ctx, ("seen", "motion.x"), W, H)
+        Adapter(("seen", "motion.x"), W, H, ctx=ctx)
+    with pytest.raises(TypeError, match="moderngl.Context"):
+        Adapter(("seen",), W, H, ctx=None)
     with pytest.raises(ValueError, match="prev_depth"):
-        a.inputs(albedo=_tex(ctx, cur.albedo), normal=_tex(ctx, cur.normal), depth=_tex(ctx, cur.depth),
-                 view=cur.camera.view(), projection=cur.camera.projection(W / H),
-                 prev_colour=_tex(ctx, prev.colour["1x1"]))
+        a.inputs(replace(no_prev, prev_colour=_tex(ctx, prev.colour["1x1"])))
+    with pytest.raises(sdk.adapters.AdapterFrameError, match="GBufferTextures"):
+        a.inputs({"albedo": no_prev.albedo})  # type: ignore[arg-type]
+    a.close()
+    with pytest.raises(sdk.adapters.AdapterClosedError):
+        a.inputs(no_prev)
+    with pytest.raises(sdk.adapters.AdapterClosedError):
+        a.read(0)
+
+
+def test_reference_frame_source_hands_over_the_renderer_g_buffers(frames) -> None:
+    """The generic path (frame_source -> adapter -> inputs) gives what the renderer computed."""
+    ctx, prev, cur = frames
+    channels = ("depth", "seen", "albedo.g", "normal.x", "reprojected.r")
+    with Adapter.frame_source(procedural(3), W, H, ctx=ctx) as source:
+        adapter = source.adapter(channels)
+        x = adapter.inputs(source.frame(cur.camera, prev.camera))
+        assert source.frames is not None
+        ref = source.frames[1]
+        np.testing.assert_array_equal(x[1], ref.seen)
+        for plane, name in zip(x, channels):  # normals are renormalised in the shader: 1 ulp
+            np.testing.assert_allclose(plane, ref.channel(name), rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(x[0], cur.depth, rtol=1e-6)  # the same frame as the fixture's own renderer
+        assert not adapter.closed
+    assert adapter.closed and source.closed  # the source closed the adapter it lent its context to
+    make_current(ctx)
+    ctx.texture((2, 2), 1).release()  # a borrowed context stays open (a released one raises here)

@@ -16,7 +16,8 @@ the measured numbers):
 * depth: relative error <= 1e-4 (24-bit depth buffer) on geometry.
 * rates of a random-weight MetricNet exported with rtp-export: >= 95 % of tiles agree.
 
-Runs wherever a headless GL context exists (EGL, Mesa llvmpipe is enough); skips only without one.
+Runs wherever a headless GL context exists (EGL, Mesa llvmpipe is enough; the ``gl`` mark gives every
+test the shared ``gl_context`` of conftest.py, which skips without one) and pyrender is installed.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ import numpy as np
 import pytest
 
 from rtp import sdk
-from rtp.sdk.adapters import UnsupportedChannelError
+from rtp.sdk.adapters import AdapterClosedError, UnsupportedChannelError
+from tests.conftest import make_current
 
 pytestmark = pytest.mark.gl
 
@@ -74,11 +76,11 @@ def _edges(frame: Any) -> np.ndarray:
 class _Setup:
     """Reference frames and a pyrender scene for one procedural scene and three camera moves."""
 
-    def __init__(self, flat: bool) -> None:
+    def __init__(self, flat: bool, gl_context: Any) -> None:
         from rtp.capture.scenes import procedural
-        from rtp.plugins.moderngl import Renderer, RendererError
-        from rtp.scene import Camera
+        from rtp.plugins.moderngl import Renderer
         from rtp.plugins.pyrender import to_pyrender_scene
+        from rtp.scene import Camera
 
         pyrender = _pyrender_or_skip()
         scene = procedural(3, rooms=(2, 2), texture_size=64)
@@ -96,15 +98,12 @@ class _Setup:
             c1 = Camera((sp.position[0] + 0.2, sp.position[1] + 0.05, sp.position[2] - 0.15), yaw=sp.yaw + 5.0,
                         pitch=-3.0)
             self.pairs.append((c0, c1))
-        try:
-            with Renderer(W, H) as r:
-                r.load_scene(scene)
-                self.frames = []
-                for c0, c1 in self.pairs:
-                    f0 = r.render(c0)
-                    self.frames.append((f0, r.render(c1, f0)))
-        except RendererError as exc:
-            pytest.skip(f"no headless GL context for the reference renderer: {exc}")
+        with Renderer(W, H, ctx=make_current(gl_context)) as r:  # pyrender's contexts may be current
+            r.load_scene(scene)
+            self.frames = []
+            for c0, c1 in self.pairs:
+                f0 = r.render(c0)
+                self.frames.append((f0, r.render(c1, f0)))
         self.scene = to_pyrender_scene(scene)
         c = self.pairs[0][0]
         self.camera = pyrender.PerspectiveCamera(yfov=np.radians(c.fov_y), znear=c.near, zfar=c.far)
@@ -112,10 +111,10 @@ class _Setup:
         self.edges = [_edges(f1) for _, f1 in self.frames]
 
     def inputs(self, channels: list[str], **kw: Any) -> list[np.ndarray]:
-        from rtp.plugins.pyrender import Adapter
+        from rtp.plugins.pyrender import Adapter, SceneFrame
 
         with Adapter(channels, W, H, **kw) as adapter:
-            return [adapter.inputs(self.scene, _pose(c1), _pose(c0), f0.colour["1x1"], f0.depth)
+            return [adapter.inputs(SceneFrame(self.scene, _pose(c1), _pose(c0), f0.colour["1x1"], f0.depth))
                     for (c0, c1), (f0, _) in zip(self.pairs, self.frames)]
 
     def errors(self, xs: list[np.ndarray], channels: list[str], name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -128,8 +127,8 @@ class _Setup:
 
 
 @pytest.fixture(scope="module")
-def textured() -> _Setup:
-    return _Setup(flat=False)
+def textured(gl_context: Any) -> _Setup:
+    return _Setup(flat=False, gl_context=gl_context)
 
 
 @pytest.fixture(scope="module")
@@ -138,8 +137,8 @@ def textured_inputs(textured: _Setup) -> list[np.ndarray]:
 
 
 @pytest.fixture(scope="module")
-def flat() -> _Setup:
-    return _Setup(flat=True)
+def flat(gl_context: Any) -> _Setup:
+    return _Setup(flat=True, gl_context=gl_context)
 
 
 # ---------------------------------------------------------------------------------------------- agreement
@@ -301,12 +300,12 @@ def _asymmetric_scene(pyrender: Any) -> Any:
 
 
 def test_orientation_is_top_left() -> None:
-    from rtp.plugins.pyrender import Adapter
+    from rtp.plugins.pyrender import Adapter, SceneFrame
 
     pyrender = _pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
     with Adapter(["albedo.r", "albedo.g", "normal.y", "normal.x", "depth"], 64, 48) as adapter:
-        x = adapter.inputs(scene, np.eye(4))
+        x = adapter.inputs(SceneFrame(scene, np.eye(4)))
     red, green, ny, nx, depth = x
     assert depth[0, 40:].max() == 0.0 and depth[-1].min() > 0.0  # sky on top, floor at the bottom
     assert red[-1, 40:].min() > 0.99 and ny[-1, 40:].min() > 0.99  # floor: red, normal up (+y in view space)
@@ -315,7 +314,7 @@ def test_orientation_is_top_left() -> None:
 
 
 def test_scene_is_restored_and_errors_are_typed() -> None:
-    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
 
     pyrender = _pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
@@ -326,33 +325,38 @@ def test_scene_is_restored_and_errors_are_typed() -> None:
     with Adapter(PAPER, 64, 48) as adapter:
         f_prev = adapter.gbuffers(scene, np.eye(4))
         prev_u8 = (np.random.default_rng(0).random((48, 64, 3)) * 255).astype(np.uint8)
-        a = adapter.inputs(scene, moved, np.eye(4), prev_u8, f_prev.depth)
-        b = adapter.inputs(scene, moved, np.eye(4), prev_u8.astype(np.float32) / 255.0)  # depth rendered
+        a = adapter.inputs(SceneFrame(scene, moved, np.eye(4), prev_u8, f_prev.depth))
+        b = adapter.inputs(SceneFrame(scene, moved, np.eye(4), prev_u8.astype(np.float32) / 255.0))  # depth rendered
         np.testing.assert_array_equal(a, b)
         assert 0.3 < a[1].mean() < 1.0
         np.testing.assert_array_equal(scene.get_pose(node), np.eye(4))
         np.testing.assert_array_equal(scene.bg_color, bg)
         assert isinstance(PyrenderAdapterError("x"), sdk.RtpError)
         with pytest.raises(PyrenderAdapterError, match="prev_pose"):
-            adapter.inputs(scene, moved)
+            adapter.inputs(SceneFrame(scene, moved))
         with pytest.raises(PyrenderAdapterError, match="prev_colour"):
-            adapter.inputs(scene, moved, np.eye(4), np.zeros((10, 10, 3)))
+            adapter.inputs(SceneFrame(scene, moved, np.eye(4), np.zeros((10, 10, 3))))
         with pytest.raises(PyrenderAdapterError, match="4x4"):
-            adapter.inputs(scene, np.eye(3), np.eye(4), prev_u8)
+            adapter.inputs(SceneFrame(scene, np.eye(3), np.eye(4), prev_u8))
         no_cam = pyrender.Scene()
         with pytest.raises(PyrenderAdapterError, match="no camera"):
-            adapter.inputs(no_cam, np.eye(4), np.eye(4), prev_u8)
+            adapter.inputs(SceneFrame(no_cam, np.eye(4), np.eye(4), prev_u8))
         # an explicit camera works on a scene without one, and leaves no node behind
         cam = pyrender.PerspectiveCamera(yfov=np.radians(60.0))
-        x = adapter.inputs(no_cam, moved, np.eye(4), prev_u8, camera=cam)
+        x = adapter.inputs(SceneFrame(no_cam, moved, np.eye(4), prev_u8, camera=cam))
         assert x.shape == (4, 48, 64) and no_cam.main_camera_node is None and len(no_cam.camera_nodes) == 0
-    with pytest.raises(PyrenderAdapterError, match="closed"):
-        adapter.inputs(scene, moved, np.eye(4), prev_u8)
+        with pytest.raises(sdk.adapters.AdapterFrameError, match="SceneFrame"):
+            adapter.inputs((scene, moved, np.eye(4), prev_u8))  # type: ignore[arg-type]
+    for use in (lambda: adapter.inputs(SceneFrame(scene, moved, np.eye(4), prev_u8)),
+                lambda: adapter.render(scene, moved), lambda: adapter.gbuffers(scene, moved)):
+        with pytest.raises(AdapterClosedError, match="pyrender adapter has been closed"):
+            use()
+    adapter.close()  # closing twice is fine
 
 
 def test_borrowed_renderer_and_bound_scene_error() -> None:
     """pyrender binds a scene to one renderer's context: borrow the user's, or say so clearly."""
-    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
 
     pyrender = _pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
@@ -361,15 +365,15 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
         before, before_depth = user.render(scene)  # the user's own lit image: the scene is now bound to `user`
         with Adapter(["seen", "albedo.g"], 64, 48) as own:
             with pytest.raises(PyrenderAdapterError, match="renderer=r"):
-                own.inputs(scene, np.eye(4), np.eye(4), before, before_depth)
+                own.inputs(SceneFrame(scene, np.eye(4), np.eye(4), before, before_depth))
         with pytest.raises(PyrenderAdapterError, match="64x48"):
             Adapter(["seen"], 32, 24, renderer=user)
         with Adapter(["seen", "albedo.g"], 64, 48, renderer=user) as adapter:
-            x = adapter.inputs(scene, np.eye(4), np.eye(4), before)  # prev depth: the adapter's own
+            x = adapter.inputs(SceneFrame(scene, np.eye(4), np.eye(4), before))  # prev depth: the adapter's own
             assert x[0].mean() == 1.0  # a static camera sees everything again
             # pyrender's display depth is an MSAA sample off the pixel centre: the grazing floor fails
             # the 2 % depth test far away (this is why prev_depth=None is recommended)
-            x_msaa = adapter.inputs(scene, np.eye(4), np.eye(4), before, before_depth)
+            x_msaa = adapter.inputs(SceneFrame(scene, np.eye(4), np.eye(4), before, before_depth))
             assert 0.5 < x_msaa[0].mean() < 1.0
             colour, _ = adapter.render(scene, np.eye(4))
             np.testing.assert_array_equal(colour, before)  # display draws are pyrender's own, MSAA included

@@ -1,4 +1,4 @@
-"""moderngl plugin: the reference deferred renderer with software VRS (headless EGL).
+"""moderngl plugin: the reference deferred renderer with software VRS, and the moderngl adapter.
 
     from rtp.plugins.moderngl import Renderer
     from rtp.scene import Camera
@@ -9,18 +9,23 @@
         frame = renderer.render(camera, prev)
         frame.colour["2x2"], frame.albedo, frame.seen  # float32, top-left origin
 
-Scenes and cameras are :mod:`rtp.scene`'s (no GL); :class:`Renderer` and :class:`Adapter` need the
-``rtp[moderngl]`` extra.
+:class:`Adapter` builds a model's inputs from an engine's G-buffer textures
+(:class:`GBufferTextures`); :class:`ReferenceFrameSource` is the reference renderer feeding it
+(``Adapter.frame_source(scene, width, height)``). Scenes and cameras are :mod:`rtp.scene`'s (no GL);
+:class:`Renderer` and :class:`Adapter` need the ``rtp[moderngl]`` extra.
 """
 
 from __future__ import annotations
 
-from ._adapter import Adapter
+from ._adapter import Adapter, GBufferTextures
 from ._renderer import Frame, Renderer, RendererError, RenderResult, create_context
+from ._source import ReferenceFrameSource
 
 __all__ = [
     "Adapter",
     "Frame",
+    "GBufferTextures",
+    "ReferenceFrameSource",
     "RenderResult",
     "Renderer",
     "RendererError",

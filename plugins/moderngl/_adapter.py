@@ -3,14 +3,14 @@
 For an engine that owns its moderngl context::
 
     from rtp import sdk
-    from rtp.plugins.moderngl import Adapter
+    from rtp.plugins.moderngl import Adapter, GBufferTextures
 
     predictor = sdk.load("jnyang.onnx")
-    adapter = Adapter(ctx, predictor.metadata.inputs, width, height)
-    x = adapter.inputs(albedo=gbuf_albedo, normal=gbuf_normal, depth=gbuf_depth,
-                       prev_colour=last_frame, prev_depth=last_depth,
-                       view=V, projection=P, prev_view_projection=prev_P @ prev_V)
-    rates = predictor.shading_rates(x)
+    with Adapter.for_predictor(predictor, width, height, ctx=ctx) as adapter:
+        x = adapter.inputs(GBufferTextures(albedo=gbuf_albedo, normal=gbuf_normal, depth=gbuf_depth,
+                                           view=V, projection=P, prev_colour=last_frame,
+                                           prev_depth=last_depth, prev_view_projection=prev_P @ prev_V))
+        rates = predictor.shading_rates(x)
 
 One fragment shader (``shaders/adapter_fs.glsl``) reprojects the previous frame with a depth test
 and packs the requested channels, in the order given, into up to four RGBA32F targets; only those
@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable
-from typing import Any, ClassVar
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -33,7 +34,10 @@ from rtp.sdk.adapters import UnsupportedChannelError
 from ._glio import read_texture
 from ._shaders import load_source
 
-__all__ = ["CHANNEL_IDS", "Adapter"]
+if TYPE_CHECKING:
+    from ._source import ReferenceFrameSource
+
+__all__ = ["CHANNEL_IDS", "Adapter", "GBufferTextures"]
 
 log = logging.getLogger("rtp.plugins.moderngl")
 
@@ -50,13 +54,48 @@ def _mat(m: np.ndarray) -> bytes:
     return np.ascontiguousarray(np.asarray(m, dtype=np.float64).T, dtype=np.float32).tobytes()
 
 
-class Adapter(_AdapterBase):
+@dataclass(frozen=True)
+class GBufferTextures:
+    """One frame of an engine's moderngl G-buffers: the frame :meth:`Adapter.inputs` reads.
+
+    Textures are ``moderngl.Texture`` objects of the adapter's context, at the adapter's size, with
+    the engine's bottom-left GL origin. Matrices are 4x4 numpy arrays.
+
+    Attributes:
+        albedo: base colour (RGB[A]); display-encoded unless the adapter has ``albedo_linear=True``.
+        normal: unit normals (RGB[A]), view space unless the adapter has ``normal_space="world"``.
+        depth: depth in component ``depth_component``: linear view depth (0 = background) or, with
+            ``depth_kind="window"``, the hardware depth buffer (1 = background).
+        view, projection: world-to-view and OpenGL view-to-clip of the current camera.
+        prev_colour, prev_depth, prev_view_projection: the previous displayed frame, its depth
+            and its camera's view-projection; needed for ``reprojected.*`` and ``seen`` (without
+            them those planes are 0).
+        prev_projection: the previous projection when it differs (window depth only).
+        depth_component, prev_depth_component: the component holding depth (e.g. 3 for a
+            normal+depth texture).
+    """
+
+    albedo: Any
+    normal: Any
+    depth: Any
+    view: np.ndarray
+    projection: np.ndarray
+    prev_colour: Any = None
+    prev_depth: Any = None
+    prev_view_projection: np.ndarray | None = None
+    prev_projection: np.ndarray | None = None
+    depth_component: int = 0
+    prev_depth_component: int = 0
+
+
+class Adapter(_AdapterBase[GBufferTextures]):
     """Builds model inputs from G-buffer textures of an engine's moderngl context.
 
     Args:
-        ctx: the engine's ``moderngl.Context`` (the adapter creates its program and targets in it).
         channels: channel names in network order, usually ``predictor.metadata.inputs``.
         width, height: frame size in pixels.
+        ctx: the engine's ``moderngl.Context`` (the adapter creates its program and targets in it;
+            the context stays the engine's: :meth:`close` frees only the adapter's objects).
         tolerance: relative depth tolerance of the disocclusion test (default 2 %).
         albedo_linear: the albedo texture holds linear values (they are sRGB-encoded to match
             ``sdk.CHANNELS``); default False: display-encoded.
@@ -68,32 +107,32 @@ class Adapter(_AdapterBase):
 
     name: ClassVar[str] = "moderngl"
     supported_channels: ClassVar[frozenset[str]] = frozenset(CHANNEL_IDS)
+    frame_type: ClassVar[type] = GBufferTextures
 
     def __init__(
         self,
-        ctx: Any,
         channels: Iterable[str],
         width: int,
         height: int,
         *,
+        ctx: Any,
         tolerance: float = 0.02,
         albedo_linear: bool = False,
         normal_space: str = "view",
         depth_kind: str = "linear",
     ) -> None:
-        super().__init__(channels)
+        super().__init__(channels, width, height)
         if len(self.channels) > _MAX_CHANNELS:
             raise UnsupportedChannelError(f"at most {_MAX_CHANNELS} channels, got {len(self.channels)}")
         if normal_space not in ("view", "world"):
             raise ValueError(f"normal_space must be 'view' or 'world', got {normal_space!r}")
         if depth_kind not in ("linear", "window"):
             raise ValueError(f"depth_kind must be 'linear' or 'window', got {depth_kind!r}")
-        if width < 1 or height < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
+        if not callable(getattr(ctx, "program", None)):
+            raise TypeError(f"ctx must be the engine's moderngl.Context, got {type(ctx).__name__}")
         import moderngl
 
-
-        self.ctx, self.width, self.height = ctx, int(width), int(height)
+        self.ctx = ctx
         self.tolerance = float(tolerance)
         self._flags = {"u_albedo_linear": albedo_linear, "u_normal_world": normal_space == "world",
                        "u_depth_window": depth_kind == "window"}
@@ -136,7 +175,9 @@ class Adapter(_AdapterBase):
         depth_component: int = 0,
         prev_depth_component: int = 0,
     ) -> None:
-        """Render the input planes into the adapter's targets (no readback); see :meth:`inputs`."""
+        """Render the input planes into the adapter's targets without reading them back (the
+        reference renderer's path; the keyword arguments are the fields of :class:`GBufferTextures`)."""
+        self._check_open()
         has_prev = prev_colour is not None
         if has_prev and (prev_depth is None or prev_view_projection is None):
             raise ValueError("prev_colour needs prev_depth and prev_view_projection as well")
@@ -165,24 +206,28 @@ class Adapter(_AdapterBase):
         self._fbo.use()
         self._vao.render(vertices=3)
 
-    def inputs(self, **textures_and_matrices: Any) -> np.ndarray:
-        """The model's input planes: float32 ``(C, H, W)``, top-left origin, channels in order.
-
-        Keyword arguments: ``albedo``, ``normal``, ``depth`` (moderngl textures of the current frame),
-        ``view`` and ``projection`` (4x4 numpy, world-to-view and OpenGL view-to-clip), and for the
-        reprojected channels ``prev_colour``, ``prev_depth`` and ``prev_view_projection`` (and
-        ``prev_projection`` with window depth when it differs). ``depth_component`` /
-        ``prev_depth_component`` pick the component holding depth (e.g. 3 for a normal+depth
-        texture). Without a previous frame the reprojected channels and ``seen`` are 0.
-        """
-        self.run(**textures_and_matrices)
+    def inputs(self, frame: GBufferTextures) -> np.ndarray:
+        """The model's input planes for ``frame``: float32 ``(C, H, W)``, top-left origin, channels
+        in order. Without a previous frame in ``frame`` the reprojected channels and ``seen`` are 0."""
+        self.run(**{f.name: getattr(frame, f.name) for f in fields(frame)})
         planes = np.concatenate([read_texture(t) for t in self._targets], axis=2)
         return np.ascontiguousarray(planes[..., : len(self.channels)].transpose(2, 0, 1))
 
     def read(self, index: int) -> np.ndarray:
         """Plane ``index`` of the last :meth:`run`, ``(H, W)`` float32 (reads back one target)."""
+        self._check_open()
         return read_texture(self._targets[index // 4])[..., index % 4]
 
-    def release(self) -> None:
+    def close(self) -> None:
+        """Free the adapter's program, targets and framebuffer (not the engine's context)."""
         for obj in (self._fbo, *self._targets, self._vao, self._prog):
             obj.release()
+
+    @classmethod
+    def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> ReferenceFrameSource:
+        """The reference renderer drawing ``scene`` (an :class:`rtp.scene.Scene`), handing over its
+        G-buffers as :class:`GBufferTextures`; ``options`` go to :class:`Renderer` (``ctx=`` to
+        borrow a context). See :class:`rtp.plugins.moderngl.ReferenceFrameSource`."""
+        from ._source import ReferenceFrameSource
+
+        return ReferenceFrameSource(cls, scene, width, height, **options)

@@ -419,8 +419,8 @@ class Renderer:
         self._fbo_final = {r: ctx.framebuffer(color_attachments=[self._t_final[r]]) for r in ALL_RATES}
         self._t_prev_colour = tex(3, "f4")
         self._t_prev_depth = tex(1, "f4")
-        self._reprojector = Adapter(ctx, ("reprojected.r", "reprojected.g", "reprojected.b", "seen"), self.width,
-                                    self.height, tolerance=self.reprojection_tolerance)
+        self._reprojector = Adapter(("reprojected.r", "reprojected.g", "reprojected.b", "seen"), self.width,
+                                    self.height, ctx=ctx, tolerance=self.reprojection_tolerance)
 
     def _debug_fbo(self, rate: str) -> Any:
         if rate not in self._fbo_ldr_debug:
@@ -809,7 +809,7 @@ class Renderer:
         if self._owns_ctx:
             self.ctx.release()
         else:
-            self._reprojector.release()
+            self._reprojector.close()
             for obj in list(vars(self).values()):
                 if isinstance(obj, dict):
                     for o in obj.values():

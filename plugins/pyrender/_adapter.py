@@ -6,8 +6,8 @@ import logging
 import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from types import TracebackType
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -17,7 +17,10 @@ from rtp.sdk.adapters import Adapter as _BaseAdapter
 from ._errors import PyrenderAdapterError
 from ._gbuffer import GBufferRenderer, GBuffers
 
-__all__ = ["Adapter"]
+if TYPE_CHECKING:
+    from ._source import PyrenderFrameSource
+
+__all__ = ["Adapter", "SceneFrame"]
 
 log = logging.getLogger("rtp.plugins.pyrender")
 
@@ -36,7 +39,39 @@ def _pose(value: Any, name: str) -> np.ndarray:
     return m
 
 
-class Adapter(_BaseAdapter):
+@dataclass(frozen=True)
+class SceneFrame:
+    """One frame of a ``pyrender.Scene``: the frame :meth:`Adapter.inputs` reads.
+
+    Attributes:
+        scene: the ``pyrender.Scene`` (static between the two frames; only the camera moves). Its
+            main camera node is moved to each pose while rendering and put back after.
+        pose: current 4x4 camera-to-world matrix (pyrender/OpenGL camera convention: the camera
+            looks down its -Z axis, Y up).
+        prev_pose: previous camera-to-world matrix; needed for ``reprojected.*``, ``seen`` and
+            ``motion.*``.
+        prev_colour: the previous displayed frame, ``(H, W, 3)`` (or RGBA) uint8 or float in
+            [0, 1], display-encoded, top-left origin (what ``OffscreenRenderer.render`` returns);
+            needed for ``reprojected.*`` and ``seen``.
+        prev_depth: its ``(H, W)`` linear depth, 0 on background. None (recommended): the depth of
+            the previous ``inputs`` call when it was at ``prev_pose`` with the same scene and camera
+            (the usual frame loop), else rendered (one extra pass). pyrender's own ``render()``
+            depth comes from its 4x MSAA target (a sample off the pixel centre), which costs the
+            disocclusion test on grazing surfaces (docs/adapters.md).
+        camera, prev_camera: ``pyrender`` cameras (for their projections); default: the scene's
+            main camera for both.
+    """
+
+    scene: Any
+    pose: Any
+    prev_pose: Any | None = None
+    prev_colour: Any | None = None
+    prev_depth: Any | None = None
+    camera: Any | None = None
+    prev_camera: Any | None = None
+
+
+class Adapter(_BaseAdapter[SceneFrame]):
     """Builds a model's input tensor from a ``pyrender.Scene`` (headless EGL or OSMesa).
 
     Channels (names and value conventions of :data:`rtp.sdk.CHANNELS`):
@@ -72,9 +107,9 @@ class Adapter(_BaseAdapter):
 
     Example::
 
-        with Adapter(predictor.metadata.inputs, 640, 360) as adapter:
-            prev_colour, prev_depth = adapter.render(scene, prev_pose)   # pyrender's lit image
-            x = adapter.inputs(scene, pose, prev_pose, prev_colour, prev_depth)   # (C, H, W) float32
+        with Adapter.for_predictor(predictor, 640, 360) as adapter:
+            prev_colour, _ = adapter.render(scene, prev_pose)   # pyrender's lit image
+            x = adapter.inputs(SceneFrame(scene, pose, prev_pose, prev_colour))   # (C, H, W) float32
             rates = predictor.shading_rates(x[None])
     """
 
@@ -82,6 +117,7 @@ class Adapter(_BaseAdapter):
     supported_channels: ClassVar[frozenset[str]] = frozenset(
         (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, "depth", *_MOTION)
     )
+    frame_type: ClassVar[type] = SceneFrame
 
     def __init__(
         self,
@@ -95,12 +131,9 @@ class Adapter(_BaseAdapter):
         platform: str | None = None,
         renderer: Any | None = None,
     ) -> None:
-        super().__init__(channels)
-        if int(width) < 1 or int(height) < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
+        super().__init__(channels, width, height)
         if not reprojection_tolerance >= 0.0:
             raise ValueError(f"reprojection_tolerance must be >= 0, got {reprojection_tolerance}")
-        self.width, self.height = int(width), int(height)
         self.reprojection_tolerance = float(reprojection_tolerance)
         self._gbuf = GBufferRenderer(self.width, self.height, msaa=msaa, normal_bits=normal_bits, platform=platform,
                                      renderer=renderer)
@@ -156,6 +189,7 @@ class Adapter(_BaseAdapter):
         """pyrender's own image of ``scene`` from ``pose``, on the adapter's renderer: what
         ``OffscreenRenderer.render(scene, flags)`` returns (by default ``(colour (H, W, 3) uint8,
         depth (H, W) float32)``, top-left origin), with the camera moved to ``pose`` and back."""
+        self._check_open()
         pose = _pose(pose, "pose")
         with self._posed(scene, camera, pose):
             return self._gbuf.draw(scene, flags)
@@ -169,6 +203,7 @@ class Adapter(_BaseAdapter):
             :class:`GBuffers`: ``depth`` ``(H, W)``, ``albedo`` ``(H, W, 3)``, ``normal`` ``(H, W, 3)``,
             float32, top-left origin, 0 on background.
         """
+        self._check_open()
         pose = _pose(pose, "pose")
         with self._posed(scene, camera, pose):
             return self._gbuf.render(scene, albedo=albedo, normals=tuple(normals))
@@ -186,38 +221,12 @@ class Adapter(_BaseAdapter):
             raise PyrenderAdapterError(f"{name} must be uint8 or float in [0, 1], got {a.dtype}")
         return np.clip(a.astype(np.float32), 0.0, 1.0)
 
-    def inputs(
-        self,
-        scene: Any,
-        pose: Any,
-        prev_pose: Any | None = None,
-        prev_colour: Any | None = None,
-        prev_depth: Any | None = None,
-        *,
-        camera: Any | None = None,
-        prev_camera: Any | None = None,
-    ) -> np.ndarray:
-        """The model input for the frame seen from ``pose``.
-
-        Args:
-            scene: the ``pyrender.Scene`` (static between the two frames; only the camera moves).
-                Its main camera node is moved to each pose while rendering and put back after.
-            pose: current 4x4 camera-to-world matrix (pyrender/OpenGL camera convention).
-            prev_pose: previous camera-to-world matrix; needed for ``reprojected.*``, ``seen`` and
-                ``motion.*``.
-            prev_colour: the previous displayed frame, ``(H, W, 3)`` (or RGBA) uint8 or float in
-                [0, 1], display-encoded, top-left origin (what ``OffscreenRenderer.render`` returns).
-            prev_depth: its ``(H, W)`` linear depth, 0 on background. None (recommended): the depth
-                of the previous ``inputs`` call when it was at ``prev_pose`` with the same scene and
-                camera (the usual frame loop), else rendered (one extra pass). pyrender's own
-                ``render()`` depth comes from its 4x MSAA target (a sample off the pixel centre),
-                which costs the disocclusion test on grazing surfaces (docs/adapters.md).
-            camera, prev_camera: ``pyrender`` cameras (for their projections); default: the
-                scene's main camera for both.
-
-        Returns:
-            float32 ``(C, H, W)`` in the order of :attr:`channels`, top-left origin.
-        """
+    def inputs(self, frame: SceneFrame) -> np.ndarray:
+        """The model input for ``frame`` (see :class:`SceneFrame`): float32 ``(C, H, W)`` in the
+        order of :attr:`channels`, top-left origin."""
+        scene, pose, prev_pose, prev_colour, prev_depth = (frame.scene, frame.pose, frame.prev_pose,
+                                                           frame.prev_colour, frame.prev_depth)
+        camera, prev_camera = frame.camera, frame.prev_camera
         t0 = time.perf_counter()
         pose = _pose(pose, "pose")
         wanted = set(self.channels)
@@ -280,12 +289,14 @@ class Adapter(_BaseAdapter):
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
-        """Free the adapter's GL context. Idempotent."""
+        """Free the adapter's GL context, or give a borrowed renderer its program cache back."""
         self._gbuf.close()
 
-    def __enter__(self) -> Adapter:
-        return self
+    @classmethod
+    def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> PyrenderFrameSource:
+        """pyrender drawing ``scene`` (an :class:`rtp.scene.Scene`, converted with
+        :func:`to_pyrender_scene`), handing over :class:`SceneFrame` s; ``options``:
+        ``platform=``. See :class:`rtp.plugins.pyrender.PyrenderFrameSource`."""
+        from ._source import PyrenderFrameSource
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
+        return PyrenderFrameSource(cls, scene, width, height, **options)

@@ -7,10 +7,9 @@ import sys
 
 import numpy as np
 
-from rtp import sdk
 from rtp.capture.scenes import procedural
+from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_pyrender_scene
 from rtp.scene import Camera
-from rtp.plugins.pyrender import Adapter, import_pyrender, to_pyrender_scene
 
 platform, out = sys.argv[1], sys.argv[2]
 pyrender = import_pyrender(platform)
@@ -27,5 +26,5 @@ channels = ("reprojected.r", "seen", "albedo.r", "normal.z", "depth")
 yy, xx = np.mgrid[0:H, 0:W]
 colour = np.stack([xx / W, yy / H, (xx + yy) % 7 / 7.0], axis=2).astype(np.float32)
 with Adapter(channels, W, H, platform=platform) as a:
-    x = a.inputs(ps, np.linalg.inv(cur.view()), np.linalg.inv(prev.view()), colour, camera=cam)
+    x = a.inputs(SceneFrame(ps, np.linalg.inv(cur.view()), np.linalg.inv(prev.view()), colour, camera=cam))
 np.save(out, x)

@@ -1,0 +1,105 @@
+"""The moderngl adapter's frame source: the reference renderer hands its G-buffers over as textures.
+
+This is how a caller that does not know moderngl drives :class:`rtp.plugins.moderngl.Adapter`
+(``sdk.adapters.get("moderngl").frame_source(scene, w, h)``); an engine of its own builds
+:class:`GBufferTextures` from its own textures instead.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from rtp.sdk.adapters import FrameSource
+
+from ._adapter import GBufferTextures
+from ._glio import write_texture
+from ._renderer import Frame, Renderer
+
+if TYPE_CHECKING:
+    from rtp.scene import Camera, Scene
+
+    from ._adapter import Adapter
+
+__all__ = ["ReferenceFrameSource"]
+
+log = logging.getLogger("rtp.plugins.moderngl")
+
+
+class ReferenceFrameSource(FrameSource[GBufferTextures]):
+    """The reference :class:`Renderer` drawing an :class:`rtp.scene.Scene`, as an engine feeding
+    the moderngl adapter: each :meth:`frame` draws the previous and the current camera and uploads
+    the current G-buffers (albedo, normal, depth) and the previous displayed frame (final 1x1
+    colour and depth) into textures of the renderer's context.
+
+    Args:
+        adapter_class: the adapter class :meth:`adapter` builds (``Adapter`` or a subclass).
+        scene: the scene to draw.
+        width, height: frame size in pixels.
+        **renderer_options: passed to :class:`Renderer` (``ctx=`` borrows a context, which the
+            source then leaves open).
+
+    The textures are reused: a frame is valid until the next :meth:`frame` call. moderngl never
+    switches contexts by itself, so :meth:`frame` makes the renderer's context current (and leaves
+    it current, for the adapter's ``inputs`` that follows), as pyrender does for its own.
+    """
+
+    def __init__(self, adapter_class: type[Adapter], scene: Scene, width: int, height: int,
+                 **renderer_options: Any) -> None:
+        super().__init__(adapter_class, width, height)
+        self.renderer = Renderer(self.width, self.height, **renderer_options)
+        try:
+            self._use()
+            self.renderer.load_scene(scene)
+            ctx = self.renderer.ctx
+            size = (self.width, self.height)
+            self._textures = {name: ctx.texture(size, components, dtype="f4")
+                              for name, components in (("albedo", 3), ("normal", 3), ("depth", 1),
+                                                       ("prev_colour", 3), ("prev_depth", 1))}
+        except BaseException:
+            self.renderer.release()
+            raise
+        for t in self._textures.values():
+            t.filter = (ctx.NEAREST, ctx.NEAREST)
+        self._last: tuple[Camera, Frame] | None = None
+        #: The reference frames of the last :meth:`frame` call: ``(previous, current)``.
+        self.frames: tuple[Frame, Frame] | None = None
+
+    def _use(self) -> None:
+        """Make the renderer's context current (moderngl's only call for it is ``__enter__``)."""
+        self.renderer.ctx.__enter__()
+
+    def adapter_options(self) -> dict[str, Any]:
+        return {"ctx": self.renderer.ctx}
+
+    def frame(self, camera: Camera, prev_camera: Camera) -> GBufferTextures:
+        self._use()
+        last = self._last
+        prev = last[1] if last is not None and last[0] == prev_camera else self.renderer.render(prev_camera)
+        cur = self.renderer.render(camera, prev)
+        self._last = (camera, cur)
+        self.frames = (prev, cur)
+        images = {"albedo": cur.albedo, "normal": cur.normal, "depth": cur.depth,
+                  "prev_colour": prev.colour["1x1"], "prev_depth": prev.depth}
+        for name, image in images.items():
+            write_texture(self._textures[name], np.asarray(image, np.float32))
+        t = self._textures
+        return GBufferTextures(
+            albedo=t["albedo"], normal=t["normal"], depth=t["depth"],
+            view=camera.view(), projection=camera.projection(self.width / self.height),
+            prev_colour=t["prev_colour"], prev_depth=t["prev_depth"],
+            prev_view_projection=prev_camera.view_projection(self.width, self.height),
+        )
+
+    def _close_dependents(self) -> None:
+        self._use()  # the adapters free their GL objects in this context
+        super()._close_dependents()
+
+    def close(self) -> None:
+        """Free the textures and the renderer (and its context, unless it was borrowed)."""
+        self._use()
+        for t in self._textures.values():
+            t.release()
+        self.renderer.release()

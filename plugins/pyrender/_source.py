@@ -1,0 +1,92 @@
+"""The pyrender adapter's frame source: pyrender draws an rtp scene, the adapter reads it.
+
+This is how a caller that does not know pyrender drives :class:`rtp.plugins.pyrender.Adapter`
+(``sdk.adapters.get("pyrender").frame_source(scene, w, h)``); an application with its own
+``pyrender.Scene`` builds :class:`SceneFrame` s itself.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from rtp.sdk.adapters import FrameSource
+
+from ._adapter import SceneFrame
+from ._convert import to_pyrender_scene
+from ._errors import PyrenderUnavailableError
+from ._gbuffer import _delete_renderer
+from ._gl import import_pyrender
+
+if TYPE_CHECKING:
+    from rtp.scene import Camera
+
+    from ._adapter import Adapter
+
+__all__ = ["PyrenderFrameSource"]
+
+log = logging.getLogger("rtp.plugins.pyrender")
+
+
+class PyrenderFrameSource(FrameSource[SceneFrame]):
+    """A pyrender ``OffscreenRenderer`` drawing a scene, as an application feeding the pyrender
+    adapter: each :meth:`frame` draws pyrender's lit image from the previous camera (the displayed
+    frame) and returns a :class:`SceneFrame` for the current camera.
+
+    Args:
+        adapter_class: the adapter class :meth:`adapter` builds (``Adapter`` or a subclass).
+        scene: an :class:`rtp.scene.Scene` (converted with :func:`to_pyrender_scene`) or a
+            ``pyrender.Scene`` (used as it is; the source adds a camera node and makes it the
+            main camera).
+        width, height: frame size in pixels.
+        platform: ``"egl"`` (default) or ``"osmesa"``, see :func:`import_pyrender`.
+
+    pyrender binds a scene to one renderer's GL context, so :meth:`adapter` lends the adapter this
+    source's renderer (``renderer=``); closing the source closes those adapters first.
+    """
+
+    def __init__(self, adapter_class: type[Adapter], scene: Any, width: int, height: int, *,
+                 platform: str | None = None) -> None:
+        super().__init__(adapter_class, width, height)
+        self._pyrender = pyrender = import_pyrender(platform)
+        self.scene = scene if isinstance(scene, pyrender.Scene) else to_pyrender_scene(scene)
+        try:
+            self.renderer = pyrender.OffscreenRenderer(self.width, self.height)
+        except Exception as exc:
+            raise PyrenderUnavailableError(
+                f"pyrender could not create a {os.environ.get('PYOPENGL_PLATFORM')} context "
+                f"({type(exc).__name__}: {exc}); on Debian/Ubuntu: apt-get install libegl1 libgl1 libegl-mesa0 "
+                "libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa)"
+            ) from exc
+        self._cameras: dict[tuple[float, float, float], Any] = {}
+        self._node = self.scene.add(self._camera_for(None), pose=np.eye(4))
+        self.scene.main_camera_node = self._node
+
+    def _camera_for(self, camera: Camera | None) -> Any:
+        """The ``pyrender.PerspectiveCamera`` with ``camera``'s field of view and clip planes."""
+        key = (70.0, 0.05, 200.0) if camera is None else (float(camera.fov_y), float(camera.near), float(camera.far))
+        if key not in self._cameras:
+            self._cameras[key] = self._pyrender.PerspectiveCamera(
+                yfov=np.radians(key[0]), aspectRatio=self.width / self.height, znear=key[1], zfar=key[2])
+        return self._cameras[key]
+
+    def adapter_options(self) -> dict[str, Any]:
+        return {"renderer": self.renderer}
+
+    def frame(self, camera: Camera, prev_camera: Camera) -> SceneFrame:
+        cam, prev_cam = self._camera_for(camera), self._camera_for(prev_camera)
+        pose, prev_pose = np.linalg.inv(camera.view()), np.linalg.inv(prev_camera.view())
+        self._node.camera = prev_cam
+        self.scene.set_pose(self._node, prev_pose)
+        prev_colour, _ = self.renderer.render(self.scene)  # pyrender's lit image: the displayed frame
+        self._node.camera = cam
+        self.scene.set_pose(self._node, pose)
+        return SceneFrame(scene=self.scene, pose=pose, prev_pose=prev_pose, prev_colour=prev_colour,
+                          camera=cam, prev_camera=prev_cam)
+
+    def close(self) -> None:
+        """Free the renderer's GL context (only its own: other renderers keep working)."""
+        _delete_renderer(self.renderer)
