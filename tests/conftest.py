@@ -145,6 +145,15 @@ def gl_context() -> Iterator[Any]:
     ctx.release()
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tests marked ``gl`` request ``gl_context`` first: being session-scoped, it is set up before
+    any module fixture of theirs, so that without EGL they skip before one tries to render."""
+    for item in items:
+        names = getattr(item, "fixturenames", None)
+        if item.get_closest_marker("gl") is not None and names is not None and "gl_context" not in names:
+            names.insert(0, "gl_context")
+
+
 @pytest.fixture(autouse=True)
 def _gl_marked_tests_get_the_context(request: pytest.FixtureRequest) -> None:
     """Tests marked ``gl`` skip cleanly without EGL, and start with the shared context current."""

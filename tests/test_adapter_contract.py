@@ -398,3 +398,10 @@ def test_the_gl_fixture_skips_naming_the_packages(monkeypatch: pytest.MonkeyPatc
     with pytest.raises(pytest.skip.Exception) as info:
         open_gl_context()
     assert EGL_PACKAGES in str(info.value) and "eglGetDisplay failed" in str(info.value)
+
+
+@pytest.mark.gl
+def test_gl_tests_set_up_the_shared_context_before_their_own_fixtures(request: pytest.FixtureRequest) -> None:
+    # conftest puts gl_context first, so that without EGL a gl test skips before a module fixture renders
+    assert request.fixturenames[0] == "gl_context"
+    assert request.getfixturevalue("gl_context").version_code >= 330
