@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -40,13 +41,8 @@ def _glsl_function(source: str, name: str) -> str:
 
 @pytest.mark.gl
 @pytest.mark.parametrize("plugin", sorted(SHADERS))
-def test_glsl_srgb_curves_match_the_sdk(plugin: str) -> None:
-    from rtp.plugins.moderngl import RendererError, create_context
-
-    try:
-        ctx = create_context()
-    except RendererError as exc:
-        pytest.skip(str(exc))
+def test_glsl_srgb_curves_match_the_sdk(plugin: str, gl_context: Any) -> None:
+    ctx = gl_context
     src = SHADERS[plugin].read_text()
     funcs = "\n".join(_glsl_function(src, n) for n in ("srgb_to_linear", "linear_to_srgb"))
     n = 256
@@ -71,7 +67,8 @@ def test_glsl_srgb_curves_match_the_sdk(plugin: str) -> None:
     got = np.stack([np.frombuffer(t.read(), np.float32).reshape(n, 4)[:, :3] for t in targets], axis=1)
     np.testing.assert_allclose(got[:, 0], sdk.srgb_to_linear(x), atol=2e-6)
     np.testing.assert_allclose(got[:, 1], sdk.linear_to_srgb(x), atol=2e-6)
-    ctx.release()
+    for obj in (*targets, fbo, xs, prog):
+        obj.release()
 
 
 def test_glsl_luma_weights_are_the_sdk_weights() -> None:
