@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 import numpy as np
 
 from ._channels import CHANNELS
-from ._errors import RtpError
+from ._errors import ParameterError, RtpError
 
 if TYPE_CHECKING:
     from ._predictor import ShadingRatePredictor
@@ -55,6 +55,7 @@ __all__ = [
     "AdapterNotFoundError",
     "AdapterOutputError",
     "FrameSource",
+    "NoFrameSourceError",
     "UnsupportedChannelError",
     "available",
     "get",
@@ -85,6 +86,11 @@ class AdapterClosedError(RtpError, RuntimeError):
 
 class AdapterFrameError(RtpError, TypeError):
     """:meth:`Adapter.inputs` was given a frame that is not of the adapter's :attr:`~Adapter.frame_type`."""
+
+
+class NoFrameSourceError(RtpError, NotImplementedError):
+    """The adapter cannot draw frames itself (:meth:`Adapter.frame_source`): an engine adapter whose
+    frames only the engine makes. Every adapter rtp registers has one."""
 
 
 class AdapterOutputError(RtpError, RuntimeError):
@@ -171,8 +177,9 @@ class _Closable:
     def _close_dependents(self) -> None:
         """Close what must go before this object does (a frame source's adapters)."""
 
-    def close(self) -> None:  # pragma: no cover - abstract in both subclasses
-        raise NotImplementedError
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Free the engine resources; idempotent (the base runs it once)."""
 
     def __enter__(self: _ClosableT) -> _ClosableT:
         self._check_open()
@@ -214,7 +221,7 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
 
     def __init__(self, channels: Iterable[str], width: int, height: int) -> None:
         if isinstance(channels, str):
-            raise TypeError(f"channels must be a sequence of channel names, got the string {channels!r}")
+            raise UnsupportedChannelError(f"channels must be a sequence of channel names, got the string {channels!r}")
         self._channels: tuple[str, ...] = tuple(channels)
         unknown = [c for c in self._channels if c not in CHANNELS]
         if unknown:
@@ -228,7 +235,7 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
         if not self._channels:
             raise UnsupportedChannelError("no channels requested; pass the model's inputs (predictor.metadata.inputs)")
         if int(width) < 1 or int(height) < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
+            raise ParameterError(f"frame size must be positive, got {width}x{height}")
         self._width, self._height = int(width), int(height)
         self.__dict__["_rtp_state"] = _OPEN
 
@@ -240,7 +247,9 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
         ``width`` x ``height``; ``options`` are the adapter's own (its engine objects and settings)."""
         inputs = getattr(getattr(predictor, "metadata", None), "inputs", None)
         if inputs is None:
-            raise TypeError(f"for_predictor needs a predictor (sdk.load(...)), got {type(predictor).__name__}")
+            raise AdapterFrameError(
+                f"for_predictor needs a predictor (from sdk.load(...)), got {type(predictor).__name__}"
+            )
         return cls(inputs, width, height, **options)
 
     @classmethod
@@ -250,9 +259,9 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
         of :attr:`frame_type` and the adapter that reads them (``source.adapter(channels)``).
 
         Every registered adapter provides one (``tests/test_adapter_contract.py`` drives each
-        through it); the base raises :class:`NotImplementedError`.
+        through it); the base raises :class:`NoFrameSourceError`.
         """
-        raise NotImplementedError(
+        raise NoFrameSourceError(
             f"the {cls.name or cls.__name__} adapter provides no frame source; implement "
             "frame_source(scene, width, height) (docs/adapters.md)"
         )
@@ -343,7 +352,7 @@ class FrameSource(_Closable, abc.ABC, Generic[FrameT]):
 
     def __init__(self, adapter_class: type[Adapter[FrameT]], width: int, height: int) -> None:
         if int(width) < 1 or int(height) < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
+            raise ParameterError(f"frame size must be positive, got {width}x{height}")
         self._adapter_class = adapter_class
         self._width, self._height = int(width), int(height)
         self._adapters: list[weakref.ref[Adapter[FrameT]]] = []
@@ -408,9 +417,9 @@ def _is_adapter_class(obj: Any) -> bool:
 def register(name: str, adapter: type[Adapter[Any]]) -> None:
     """Register an adapter class under ``name``; it takes precedence over entry points."""
     if not isinstance(name, str) or not name:
-        raise ValueError(f"adapter name must be a non-empty string, got {name!r}")
+        raise ParameterError(f"adapter name must be a non-empty string, got {name!r}")
     if not _is_adapter_class(adapter):
-        raise TypeError(f"an adapter must be a subclass of rtp.sdk.adapters.Adapter, got {adapter!r}")
+        raise ParameterError(f"an adapter must be a subclass of rtp.sdk.adapters.Adapter, got {adapter!r}")
     with _lock:
         _registered[name] = adapter
 

@@ -370,16 +370,16 @@ def test_an_override_chain_closes_once_even_when_close_fails() -> None:
 def test_construction_errors() -> None:
     with pytest.raises(UnsupportedChannelError, match="no channels"):
         NumpyAdapter([], W, H)
-    with pytest.raises(TypeError, match="sequence of channel names"):
+    with pytest.raises(UnsupportedChannelError, match="sequence of channel names"):
         NumpyAdapter("seen", W, H)
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(sdk.ParameterError, match="positive"):
         NumpyAdapter(["seen"], 0, H)
-    with pytest.raises(TypeError, match="needs a predictor"):
+    with pytest.raises(adapters.AdapterFrameError, match="needs a predictor"):
         NumpyAdapter.for_predictor(["seen"], W, H)  # type: ignore[arg-type]
 
 
 def test_the_registry_takes_only_adapters(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
-    with pytest.raises(TypeError, match="subclass of rtp.sdk.adapters.Adapter"):
+    with pytest.raises(sdk.ParameterError, match="subclass of rtp.sdk.adapters.Adapter"):
         sdk.adapters.register("callable", lambda *a: None)  # type: ignore[arg-type]
     fake = EntryPoint("not-an-adapter", "rtp.sdk:load", adapters.ENTRY_POINT_GROUP)
     monkeypatch.setattr(adapters, "entry_points", lambda group: [fake])

@@ -5,6 +5,7 @@ from __future__ import annotations
 from importlib.metadata import EntryPoint
 from typing import Any
 
+import numpy as np
 import pytest
 
 from rtp import sdk
@@ -16,7 +17,7 @@ class FakeAdapter(adapters.Adapter):
     supported_channels = frozenset({"reprojected.r", "seen", "albedo.r", "normal.z"})
 
     def inputs(self, frame: Any) -> Any:  # the contract itself: tests/test_adapter_contract.py
-        raise NotImplementedError
+        return np.zeros((len(self.channels), self.height, self.width), np.float32)
 
     def close(self) -> None:
         pass
@@ -68,3 +69,9 @@ def test_adapter_refuses_channels_it_cannot_produce() -> None:
         FakeAdapter(["seen", "motion.x"], 16, 16)
     with pytest.raises(adapters.UnsupportedChannelError, match="unknown channel"):
         FakeAdapter(["colour"], 16, 16)
+
+
+def test_an_adapter_without_a_frame_source_says_so() -> None:
+    with pytest.raises(adapters.NoFrameSourceError, match="fake adapter provides no frame source") as err:
+        FakeAdapter.frame_source(None, 8, 8)
+    assert isinstance(err.value, NotImplementedError) and isinstance(err.value, sdk.RtpError)
