@@ -43,6 +43,7 @@ from typing import Sequence
 import numpy as np
 
 from rtp.scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
+from rtp.sdk import srgb_to_linear
 
 from ._errors import SceneFormatError, SceneNotFoundError
 from ._geometry import vertex_normals
@@ -202,10 +203,6 @@ def _find_image(pk3: Pk3Set, path: str) -> str | None:
     return None
 
 
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
 class _MaterialFactory:
     """Resolves BSP texture names to materials (with caching of decoded images)."""
 
@@ -256,7 +253,7 @@ class _MaterialFactory:
             rgb = self.light_colour(shader, tex)
             mat.emissive = tuple(float(x) * 1.5 for x in rgb)  # type: ignore[assignment]
         elif "lava" in name.lower():
-            mean = _srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
+            mean = srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
             mat.emissive = tuple(float(x) * 2.0 for x in mean)  # type: ignore[assignment]
         return mat
 
@@ -265,7 +262,7 @@ class _MaterialFactory:
         if shader.light_rgb is not None:
             c = np.asarray(shader.light_rgb, np.float64)
         elif tex is not None:
-            c = _srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
+            c = srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
         else:
             c = np.ones(3)
         m = float(c.max())
@@ -589,7 +586,7 @@ def _sky_colour(pk3: Pk3Set, sh: Shader) -> tuple[float, float, float] | None:
         tex = _decode_image(pk3.read(p), p)
         if tex is None:
             continue
-        m = _srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
+        m = srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
         # keep the sky's hue (desaturated by half) at the default sky luminance
         default = np.asarray(Scene.__dataclass_fields__["sky_colour"].default)
         lum = np.array([0.2126, 0.7152, 0.0722])
