@@ -36,9 +36,9 @@ import logging
 import math
 import re
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -334,7 +334,54 @@ def load_bsp(source: str | Path, map_name: str | None = None, **kwargs) -> Scene
 
 def _convert(data: bytes, pk3: Pk3Set, map_name: str, patch_level: int, eye_units: float, max_lights: int,
              scene_name: str) -> BspConversion:
-    src = f"maps/{map_name}.bsp"
+    """Convert one map's bytes, its textures and shaders coming from ``pk3``."""
+    bsp = _read_bsp(data, f"maps/{map_name}.bsp")
+    shaders = _load_shaders(pk3)
+    tex_kind = _classify_textures(bsp, shaders)
+    face_kind = _face_kinds(bsp, tex_kind)
+    sky = _sky_triangles(bsp, face_kind)
+    per_tex, patches = _drawable_parts(bsp, face_kind, patch_level)
+    factory = _MaterialFactory(pk3, shaders)
+    meshes, materials = _meshes(per_tex, bsp.tex_names, factory)
+    spawns, entity_lights = _entities(bsp.entities, eye_units)
+    lights = _choose_lights(entity_lights, spawns, per_tex, bsp.tex_names, shaders, materials, max_lights)
+    sun, sky_colour = _sun_and_sky(pk3, shaders, bsp.tex_names, tex_kind)
+    scene = Scene(name=scene_name, meshes=meshes, materials=materials, sun=sun, point_lights=lights,
+                  spawn_points=spawns, sky_colour=sky_colour)
+    stats = _stats(bsp, face_kind, patches)
+    stats.update(triangles=scene.triangle_count, materials=len(materials), missing_textures=len(factory.missing),
+                 sky_triangles=len(sky), spawn_points=len(spawns), point_lights=len(lights))
+    log.info("converted %s: %d triangles, %d materials (%d without image), %d spawn points, %d lights",
+             map_name, scene.triangle_count, len(materials), len(factory.missing), len(spawns), len(lights))
+    return BspConversion(scene, sky, stats, factory.missing)
+
+
+#: Texture (and face) kinds: drawn, sky (not drawn; blocks viewpoints), dropped.
+_DRAW, _SKY, _DROP = 0, 1, 2
+
+#: One piece of a texture's geometry in Q3 space: positions, normals, uvs, triangles (local indices).
+_Part = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+@dataclass
+class _Bsp:
+    """The lumps a conversion reads, as arrays, plus what is derived from them once."""
+
+    source: str  # "maps/<name>.bsp", for messages
+    textures: np.ndarray  # TEXTURE_DT
+    verts: np.ndarray  # VERTEX_DT
+    meshverts: np.ndarray  # int64
+    faces: np.ndarray  # FACE_DT
+    entities: list[dict[str, str]]
+    tex_names: list[str]
+    face_tex: np.ndarray  # each face's texture index, int64
+    positions: np.ndarray  # vertex positions, Q3 space, float64
+    normals: np.ndarray  # vertex normals, Q3 space, float64
+    uvs: np.ndarray  # vertex texture coordinates, float64
+
+
+def _read_bsp(data: bytes, src: str) -> _Bsp:
+    """Check the header and read the texture, vertex, meshvert, face and entity lumps."""
     lumps = _lumps(data, src)
     textures = _lump_array(data, lumps[LUMP_TEXTURES], TEXTURE_DT, "texture", src)
     verts = _lump_array(data, lumps[LUMP_VERTEXES], VERTEX_DT, "vertex", src)
@@ -342,117 +389,156 @@ def _convert(data: bytes, pk3: Pk3Set, map_name: str, patch_level: int, eye_unit
     faces = _lump_array(data, lumps[LUMP_FACES], FACE_DT, "face", src)
     off, ln = lumps[LUMP_ENTITIES]
     entities = parse_entities(data[off : off + ln].split(b"\0", 1)[0].decode("latin-1"))
+    return _Bsp(
+        source=src, textures=textures, verts=verts, meshverts=meshverts, faces=faces, entities=entities,
+        tex_names=[t.split(b"\0", 1)[0].decode("latin-1") for t in textures["name"]],
+        face_tex=faces["texture"].astype(np.int64),
+        positions=verts["pos"].astype(np.float64), normals=verts["normal"].astype(np.float64),
+        uvs=verts["uv"].astype(np.float64),
+    )
 
+
+def _load_shaders(pk3: Pk3Set) -> dict[str, Shader]:
+    """Every ``scripts/*.shader`` of the archives; a script that fails to parse is skipped."""
     shaders: dict[str, Shader] = {}
     for script in pk3.names("scripts/", ".shader"):
         try:
             parse_shaders(pk3.read(script).decode("latin-1"), into=shaders)
         except Exception as err:  # noqa: BLE001 - one broken script must not stop the map
             log.warning("skipping shader script %s: %s", script, err)
+    return shaders
 
-    tex_names = [t.split(b"\0", 1)[0].decode("latin-1") for t in textures["name"]]
-    n_tex = len(textures)
-    # classify each texture: 0 draw, 1 sky, 2 drop
-    kind = np.zeros(n_tex, np.int8)
-    for i, nm in enumerate(tex_names):
+
+def _classify_textures(bsp: _Bsp, shaders: dict[str, Shader]) -> np.ndarray:
+    """Each texture's kind (``_DRAW``, ``_SKY`` or ``_DROP``) from its flags, contents and shader."""
+    textures = bsp.textures
+    kind = np.zeros(len(textures), np.int8)
+    for i, nm in enumerate(bsp.tex_names):
         fl, ct = int(textures["flags"][i]), int(textures["contents"][i])
         sh = shaders.get(nm.lower())
         low = nm.lower()
         parms = sh.surfaceparms if sh else set()
         if fl & SURF_SKY or "sky" in parms:
-            kind[i] = 1
+            kind[i] = _SKY
         elif (fl & (SURF_NODRAW | SURF_HINT | SURF_SKIP) or ct & CONTENTS_FOG or parms & {"nodraw", "fog"}
               or low.startswith("textures/common/") or low == "noshader"
               or (sh is not None and sh.is_additive_only())):
-            kind[i] = 2
+            kind[i] = _DROP
+    return kind
 
-    stats = {"faces": len(faces), "dropped_faces": 0, "sky_faces": 0, "patches": 0}
-    ftex = faces["texture"].astype(np.int64)
+
+def _face_kinds(bsp: _Bsp, tex_kind: np.ndarray) -> np.ndarray:
+    """Each face's kind (its texture's), after checking that the faces index inside the texture,
+    vertex and meshvert lumps."""
+    faces, ftex, n_tex, src = bsp.faces, bsp.face_tex, len(bsp.textures), bsp.source
     if len(faces) and (ftex.min() < 0 or ftex.max() >= n_tex):
         raise SceneFormatError(f"{src}: a face refers to texture {ftex.max()} of {n_tex}")
     if len(faces):
         vmax = (faces["vertex"].astype(np.int64) + faces["n_vertexes"]).max()
         mmax = (faces["meshvert"].astype(np.int64) + faces["n_meshverts"]).max()
-        if vmax > len(verts) or mmax > len(meshverts):
-            raise SceneFormatError(f"{src}: faces index past the vertex ({vmax}/{len(verts)}) or meshvert "
-                                   f"({mmax}/{len(meshverts)}) lumps")
-    fkind = kind[ftex] if len(faces) else np.zeros(0, np.int8)
-    ftype = faces["type"]
+        if vmax > len(bsp.verts) or mmax > len(bsp.meshverts):
+            raise SceneFormatError(f"{src}: faces index past the vertex ({vmax}/{len(bsp.verts)}) or meshvert "
+                                   f"({mmax}/{len(bsp.meshverts)}) lumps")
+    return tex_kind[ftex] if len(faces) else np.zeros(0, np.int8)
 
-    pos_q3 = verts["pos"].astype(np.float64)
-    nrm_q3 = verts["normal"].astype(np.float64)
-    uv_all = verts["uv"].astype(np.float64)
 
-    def triangle_soup(sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Triangles (global vertex indices, CCW) and their face ids for polygon/mesh faces ``sel``."""
-        f = faces[sel]
-        n = f["n_meshverts"].astype(np.int64)
-        n = n - n % 3
-        total = int(n.sum())
-        if total == 0:
-            return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-        starts = np.repeat(f["meshvert"].astype(np.int64), n)
-        within = np.arange(total) - np.repeat(np.cumsum(n) - n, n)
-        idx = meshverts[starts + within] + np.repeat(f["vertex"].astype(np.int64), n)
-        tri = idx.reshape(-1, 3)[:, ::-1]  # Q3 clockwise → CCW
-        fid = np.repeat(np.nonzero(sel)[0], n // 3)
-        ok = (tri >= 0).all(1) & (tri < len(verts)).all(1)
-        return tri[ok], fid[ok]
+def _triangle_soup(bsp: _Bsp, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles (global vertex indices, CCW) and their face ids for polygon/mesh faces ``sel``."""
+    f = bsp.faces[sel]
+    n = f["n_meshverts"].astype(np.int64)
+    n = n - n % 3
+    total = int(n.sum())
+    if total == 0:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    starts = np.repeat(f["meshvert"].astype(np.int64), n)
+    within = np.arange(total) - np.repeat(np.cumsum(n) - n, n)
+    idx = bsp.meshverts[starts + within] + np.repeat(f["vertex"].astype(np.int64), n)
+    tri = idx.reshape(-1, 3)[:, ::-1]  # Q3 clockwise → CCW
+    fid = np.repeat(np.nonzero(sel)[0], n // 3)
+    ok = (tri >= 0).all(1) & (tri < len(bsp.verts)).all(1)
+    return tri[ok], fid[ok]
 
-    soup_sel = np.isin(ftype, (1, 3))
-    stats["dropped_faces"] = int(((fkind == 2) | ~np.isin(ftype, (1, 2, 3))).sum())
-    stats["sky_faces"] = int((fkind == 1).sum())
 
-    # sky blockers
-    sky_tris, _ = triangle_soup(soup_sel & (fkind == 1))
-    sky_parts = [q3_to_world(pos_q3[sky_tris])] if len(sky_tris) else []
-    for fi in np.nonzero((ftype == 2) & (fkind == 1))[0]:
-        f = faces[fi]
-        p, _, _, t = _tessellate_patch(verts[f["vertex"] : f["vertex"] + f["n_vertexes"]], *f["size"], 2)
+def _patch(bsp: _Bsp, face: int | np.integer, level: int) -> _Part:
+    """Bezier patch face ``face`` tessellated at ``level`` segments per side (Q3 space)."""
+    f = bsp.faces[face]
+    w, h = f["size"]
+    return _tessellate_patch(bsp.verts[f["vertex"] : f["vertex"] + f["n_vertexes"]], w, h, level)
+
+
+def _sky_triangles(bsp: _Bsp, face_kind: np.ndarray) -> np.ndarray:
+    """The sky faces' triangles ``(K, 3, 3)`` float32 in world metres (patches at level 2)."""
+    ftype = bsp.faces["type"]
+    sky_tris, _ = _triangle_soup(bsp, np.isin(ftype, (1, 3)) & (face_kind == _SKY))
+    sky_parts = [q3_to_world(bsp.positions[sky_tris])] if len(sky_tris) else []
+    for fi in np.nonzero((ftype == 2) & (face_kind == _SKY))[0]:
+        p, _, _, t = _patch(bsp, fi, 2)
         if len(t):
             sky_parts.append(q3_to_world(p[t]))
-    sky = np.concatenate(sky_parts).astype(np.float32) if sky_parts else np.zeros((0, 3, 3), np.float32)
+    return np.concatenate(sky_parts).astype(np.float32) if sky_parts else np.zeros((0, 3, 3), np.float32)
 
-    # drawable geometry grouped by texture
-    draw_tris, draw_fid = triangle_soup(soup_sel & (fkind == 0))
-    per_tex: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {}
-    if len(draw_tris):
-        tex_of_tri = ftex[draw_fid]
-        order = np.argsort(tex_of_tri, kind="stable")
-        tex_sorted = tex_of_tri[order]
-        bounds = np.flatnonzero(np.diff(tex_sorted)) + 1
-        for grp in np.split(order, bounds):
-            t = int(tex_of_tri[grp[0]])
-            tri = draw_tris[grp]
-            used, inv = np.unique(tri, return_inverse=True)
-            per_tex.setdefault(t, []).append((pos_q3[used], nrm_q3[used], uv_all[used], inv.reshape(-1, 3)))
-    for fi in np.nonzero((ftype == 2) & (fkind == 0))[0]:
-        f = faces[fi]
-        p, nr, uv, t = _tessellate_patch(verts[f["vertex"] : f["vertex"] + f["n_vertexes"]], *f["size"], patch_level)
+
+def _drawable_parts(bsp: _Bsp, face_kind: np.ndarray, patch_level: int) -> tuple[dict[int, list[_Part]], int]:
+    """The drawn geometry grouped by texture index (polygon and mesh faces, then tessellated
+    patches), and the number of patches that produced triangles."""
+    ftype = bsp.faces["type"]
+    draw_tris, draw_fid = _triangle_soup(bsp, np.isin(ftype, (1, 3)) & (face_kind == _DRAW))
+    per_tex = _group_by_texture(bsp, draw_tris, draw_fid)
+    patches = 0
+    for fi in np.nonzero((ftype == 2) & (face_kind == _DRAW))[0]:
+        p, nr, uv, t = _patch(bsp, fi, patch_level)
         if len(t):
-            stats["patches"] += 1
-            per_tex.setdefault(int(f["texture"]), []).append((p, nr, uv, t))
+            patches += 1
+            per_tex.setdefault(int(bsp.faces[fi]["texture"]), []).append((p, nr, uv, t))
+    return per_tex, patches
 
-    factory = _MaterialFactory(pk3, shaders)
+
+def _group_by_texture(bsp: _Bsp, tris: np.ndarray, fids: np.ndarray) -> dict[int, list[_Part]]:
+    """Triangles (global indices) of faces ``fids`` as one part per texture, holding only the
+    vertices its triangles use."""
+    per_tex: dict[int, list[_Part]] = {}
+    if not len(tris):
+        return per_tex
+    tex_of_tri = bsp.face_tex[fids]
+    order = np.argsort(tex_of_tri, kind="stable")
+    bounds = np.flatnonzero(np.diff(tex_of_tri[order])) + 1
+    for grp in np.split(order, bounds):
+        tex = int(tex_of_tri[grp[0]])
+        used, inv = np.unique(tris[grp], return_inverse=True)
+        per_tex.setdefault(tex, []).append((bsp.positions[used], bsp.normals[used], bsp.uvs[used], inv.reshape(-1, 3)))
+    return per_tex
+
+
+def _meshes(
+    per_tex: dict[int, list[_Part]], tex_names: list[str], factory: _MaterialFactory
+) -> tuple[list[Mesh], list[Material]]:
+    """One mesh and one material per texture, in texture index order."""
     materials: list[Material] = []
     meshes: list[Mesh] = []
-    for t in sorted(per_tex):
-        parts = per_tex[t]
-        offs = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
-        pos = q3_to_world(np.concatenate([p[0] for p in parts])).astype(np.float32)
-        nrm = q3_to_world(np.concatenate([p[1] for p in parts]), 1.0)
-        idx = np.concatenate([p[3] + o for p, o in zip(parts, offs)]).astype(np.int64)
-        uv = np.concatenate([p[2] for p in parts]).astype(np.float32)
-        ln = np.linalg.norm(nrm, axis=1)
-        bad = ~(ln > 0.5)
-        if bad.any():  # missing or zero normals: recompute from the faces
-            nrm[bad] = vertex_normals(pos, idx)[bad]
-            ln[bad] = 1.0
-        nrm = (nrm / ln[:, None]).astype(np.float32)
-        meshes.append(Mesh(pos, nrm, uv, idx.astype(np.uint32), material=len(materials)))
-        materials.append(factory.material(tex_names[t]))
+    for tex in sorted(per_tex):
+        meshes.append(_mesh(per_tex[tex], material=len(materials)))
+        materials.append(factory.material(tex_names[tex]))
+    return meshes, materials
 
-    # entities
+
+def _mesh(parts: list[_Part], material: int) -> Mesh:
+    """Parts joined into one world-space mesh; missing or zero normals are recomputed from the faces."""
+    offs = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
+    pos = q3_to_world(np.concatenate([p[0] for p in parts])).astype(np.float32)
+    nrm = q3_to_world(np.concatenate([p[1] for p in parts]), 1.0)
+    idx = np.concatenate([p[3] + o for p, o in zip(parts, offs)]).astype(np.int64)
+    uv = np.concatenate([p[2] for p in parts]).astype(np.float32)
+    ln = np.linalg.norm(nrm, axis=1)
+    bad = ~(ln > 0.5)
+    if bad.any():
+        nrm[bad] = vertex_normals(pos, idx)[bad]
+        ln[bad] = 1.0
+    nrm = (nrm / ln[:, None]).astype(np.float32)
+    return Mesh(pos, nrm, uv, idx.astype(np.uint32), material=material)
+
+
+def _entities(entities: list[dict[str, str]], eye_units: float) -> tuple[list[SpawnPoint], list[PointLight]]:
+    """Spawn points (eye ``eye_units`` above the origin) and ``light`` entities."""
     spawns: list[SpawnPoint] = []
     lights: list[PointLight] = []
     for e in entities:
@@ -468,46 +554,79 @@ def _convert(data: bytes, pk3: Pk3Set, map_name: str, patch_level: int, eye_unit
             col = _vec(e.get("_color")) if e.get("_color") else np.ones(3)
             col = col / max(float(np.max(col)), 1e-6) if col is not None else np.ones(3)
             lights.append(_point_light(q3_to_world(origin), col, val))
+    return spawns, lights
+
+
+def _choose_lights(
+    lights: list[PointLight], spawns: list[SpawnPoint], per_tex: dict[int, list[_Part]], tex_names: list[str],
+    shaders: dict[str, Shader], materials: list[Material], max_lights: int,
+) -> list[PointLight]:
+    """The map's light entities if it kept any, else lights at clusters of light-emitting faces,
+    else one above each spawn point; at most ``max_lights``, the strongest."""
     if not lights:
-        values = {}
-        for t in per_tex:
-            sh = shaders.get(tex_names[t].lower())
-            if sh is not None and sh.surface_light > 0:
-                values[t] = sh.surface_light
-        if not values:  # no surface-light shaders: light-looking textures glow
-            values = {t: 500.0 for t in per_tex if any(k in tex_names[t].lower() for k in LIGHT_WORDS)}
+        values = _surface_light_values(per_tex, tex_names, shaders)
         lights = _surface_lights(per_tex, tex_names, shaders, materials, values, max_lights)
     if not lights:  # last resort: a light above each spawn point
         lights = [_point_light(np.asarray(sp.position) + [0.0, 1.0, 0.0], np.ones(3), 400.0)
                   for sp in spawns[:max_lights]]
     elif len(lights) > max_lights:
-        lights = sorted(lights, key=lambda l: -l.intensity)[:max_lights]
+        lights = sorted(lights, key=lambda light: -light.intensity)[:max_lights]
+    return lights
 
+
+def _surface_light_values(
+    per_tex: dict[int, list[_Part]], tex_names: list[str], shaders: dict[str, Shader]
+) -> dict[int, float]:
+    """Q3 surface-light value per drawn texture that emits: from ``q3map_surfacelight``, or, when no
+    shader has one, 500 for textures whose names look like lights."""
+    values = {}
+    for t in per_tex:
+        sh = shaders.get(tex_names[t].lower())
+        if sh is not None and sh.surface_light > 0:
+            values[t] = sh.surface_light
+    if not values:
+        values = {t: 500.0 for t in per_tex if any(k in tex_names[t].lower() for k in LIGHT_WORDS)}
+    return values
+
+
+def _sun_and_sky(
+    pk3: Pk3Set, shaders: dict[str, Shader], tex_names: list[str], tex_kind: np.ndarray
+) -> tuple[SunLight, tuple[float, float, float]]:
+    """The sun and sky colour from the first sky texture that has a shader (defaults otherwise)."""
     sun = SunLight()
     sky_colour = Scene.__dataclass_fields__["sky_colour"].default
-    for i in np.nonzero(kind == 1)[0]:
+    for i in np.nonzero(tex_kind == _SKY)[0]:
         sh = shaders.get(tex_names[i].lower())
         if sh is None:
             continue
         if sh.sun is not None:
-            r, g, b, inten, az, el = sh.sun
-            c = np.array([r, g, b], np.float64)
-            c = c / max(float(c.max()), 1e-6)
-            a, e_ = math.radians(az), math.radians(el)
-            to_sun = np.array([math.cos(e_) * math.cos(a), math.cos(e_) * math.sin(a), math.sin(e_)])
-            d = q3_to_world(-to_sun, 1.0)
-            sun = SunLight(direction=tuple(float(x) for x in d / np.linalg.norm(d)),
-                           colour=tuple(float(x) for x in c), intensity=float(np.clip(3.0 * inten / 100.0, 1.0, 6.0)))
+            sun = _sun_from_shader(sh.sun)
         sky_colour = _sky_colour(pk3, sh) or sky_colour
         break
+    return sun, sky_colour
 
-    scene = Scene(name=scene_name, meshes=meshes, materials=materials, sun=sun, point_lights=lights,
-                  spawn_points=spawns, sky_colour=sky_colour)
-    stats.update(triangles=scene.triangle_count, materials=len(materials), missing_textures=len(factory.missing),
-                 sky_triangles=len(sky), spawn_points=len(spawns), point_lights=len(lights))
-    log.info("converted %s: %d triangles, %d materials (%d without image), %d spawn points, %d lights",
-             map_name, scene.triangle_count, len(materials), len(factory.missing), len(spawns), len(lights))
-    return BspConversion(scene, sky, stats, factory.missing)
+
+def _sun_from_shader(q3_sun: tuple[float, ...]) -> SunLight:
+    """``q3map_sun`` / ``q3map_sunExt`` (r g b intensity azimuth elevation) as a sun light."""
+    r, g, b, inten, az, el = q3_sun
+    c = np.array([r, g, b], np.float64)
+    c = c / max(float(c.max()), 1e-6)
+    a, e_ = math.radians(az), math.radians(el)
+    to_sun = np.array([math.cos(e_) * math.cos(a), math.cos(e_) * math.sin(a), math.sin(e_)])
+    d = q3_to_world(-to_sun, 1.0)
+    return SunLight(direction=tuple(float(x) for x in d / np.linalg.norm(d)),
+                    colour=tuple(float(x) for x in c), intensity=float(np.clip(3.0 * inten / 100.0, 1.0, 6.0)))
+
+
+def _stats(bsp: _Bsp, face_kind: np.ndarray, patches: int) -> dict[str, int]:
+    """The face counters of a conversion report."""
+    ftype = bsp.faces["type"]
+    return {
+        "faces": len(bsp.faces),
+        "dropped_faces": int(((face_kind == _DROP) | ~np.isin(ftype, (1, 2, 3))).sum()),
+        "sky_faces": int((face_kind == _SKY).sum()),
+        "patches": patches,
+    }
 
 
 def _float(s: str | None, default: float) -> float:
