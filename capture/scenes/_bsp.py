@@ -225,6 +225,7 @@ class _MaterialFactory:
         return _decode_image(self.pk3.read(path), path), path
 
     def material(self, name: str) -> Material:
+        """The material of texture ``name``: its image, alpha test and emission (grey without an image)."""
         shader = self.shaders.get(name.lower())
         tex, path = self.image_for(name)
         rough, metal, spec = pbr_for_path(name)
@@ -234,27 +235,14 @@ class _MaterialFactory:
             log.warning("no image for %s: neutral grey material", name)
             mat.base_color = (0.5, 0.5, 0.5, 1.0)
             return mat
-        cutoff = None
-        if shader is not None:
-            af = shader.alpha_func
-            if af == "gt0":
-                cutoff = 0.05
-            elif af in ("ge128", "lt128"):
-                cutoff = 0.5
-            elif any(s.blend == ("gl_src_alpha", "gl_one_minus_src_alpha") for s in shader.stages):
-                cutoff = 0.5
-        if cutoff is not None and (tex[..., 3] == 255).all():
-            cutoff = None  # nothing to cut
+        cutoff = _alpha_cutoff(shader, tex)
         if cutoff is None:
             tex[..., 3] = 255
         mat.texture = tex
         mat.alpha_cutoff = cutoff
-        if shader is not None and shader.surface_light > 0:
-            rgb = self.light_colour(shader, tex)
-            mat.emissive = tuple(float(x) * 1.5 for x in rgb)  # type: ignore[assignment]
-        elif "lava" in name.lower():
-            mean = srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
-            mat.emissive = tuple(float(x) * 2.0 for x in mean)  # type: ignore[assignment]
+        emissive = _emissive(name, shader, tex)
+        if emissive is not None:
+            mat.emissive = emissive
         return mat
 
     @staticmethod
@@ -268,6 +256,34 @@ class _MaterialFactory:
         m = float(c.max())
         c = c / m if m > 1e-6 else np.ones(3)
         return (float(c[0]), float(c[1]), float(c[2]))
+
+
+def _alpha_cutoff(shader: Shader | None, tex: np.ndarray) -> float | None:
+    """The alpha test of a texture: from the shader's ``alphaFunc`` or alpha-blend stage (0.05 for
+    GT0, else 0.5), None without one or when every texel is opaque."""
+    cutoff = None
+    if shader is not None:
+        af = shader.alpha_func
+        if af == "gt0":
+            cutoff = 0.05
+        elif af in ("ge128", "lt128"):
+            cutoff = 0.5
+        elif any(s.blend == ("gl_src_alpha", "gl_one_minus_src_alpha") for s in shader.stages):
+            cutoff = 0.5
+    if cutoff is not None and (tex[..., 3] == 255).all():
+        cutoff = None  # nothing to cut
+    return cutoff
+
+
+def _emissive(name: str, shader: Shader | None, tex: np.ndarray) -> tuple[float, float, float] | None:
+    """Emission of a surface-light shader (its light colour) or of lava (its mean colour), else None."""
+    if shader is not None and shader.surface_light > 0:
+        r, g, b = _MaterialFactory.light_colour(shader, tex)
+        return (r * 1.5, g * 1.5, b * 1.5)
+    if "lava" in name.lower():
+        mean = srgb_to_linear(tex[..., :3].reshape(-1, 3).mean(0) / 255.0)
+        return (float(mean[0]) * 2.0, float(mean[1]) * 2.0, float(mean[2]) * 2.0)
+    return None
 
 
 # -- conversion -----------------------------------------------------------------------------------
