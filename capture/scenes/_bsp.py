@@ -673,10 +673,31 @@ def _point_light(pos: np.ndarray, colour, value: float) -> PointLight:
     )
 
 
-def _surface_lights(per_tex, tex_names, shaders, materials, values: dict[int, float], max_lights) -> list[PointLight]:
+def _surface_lights(
+    per_tex: dict[int, list[_Part]], tex_names: list[str], shaders: dict[str, Shader], materials: list[Material],
+    values: dict[int, float], max_lights: int,
+) -> list[PointLight]:
     """Point lights at clusters (4 m cells) of the faces of light-emitting textures ``values``
     (texture index → Q3 surface-light value), the strongest ``max_lights``."""
-    cells: dict[tuple[int, int, int], list] = {}
+    cells = _emitter_cells(per_tex, tex_names, shaders, materials, values)
+    lights = [_cluster(items) for items in cells.values()]
+    lights.sort(key=lambda x: -x[0])
+    out = []
+    for power, pos, col in lights[:max_lights]:
+        value = float(np.clip(300.0 * math.sqrt(power / 300.0), 100.0, 1000.0))
+        out.append(_point_light(pos, col / max(col.max(), 1e-6), value))
+    return out
+
+
+_Emitter = tuple[np.ndarray, float, np.ndarray]  # light position (world), power (m² x surface light), colour
+
+
+def _emitter_cells(
+    per_tex: dict[int, list[_Part]], tex_names: list[str], shaders: dict[str, Shader], materials: list[Material],
+    values: dict[int, float],
+) -> dict[tuple[int, ...], list[_Emitter]]:
+    """Every triangle of an emitting texture as an emitter 0.3 m in front of its centre, binned by 4 m cell."""
+    cells: dict[tuple[int, ...], list[_Emitter]] = {}
     for k, t in enumerate(sorted(per_tex)):
         if t not in values:
             continue
@@ -693,19 +714,16 @@ def _surface_lights(per_tex, tex_names, shaders, materials, values: dict[int, fl
             for ci, ai, ni in zip(c, area, n):
                 key = tuple(np.floor(ci / 4.0).astype(int))
                 cells.setdefault(key, []).append((ci + 0.3 * ni, ai * value, col))
-    lights = []
-    for items in cells.values():
-        w = np.array([i[1] for i in items])
-        pos = np.average(np.array([i[0] for i in items]), axis=0, weights=w + 1e-9)
-        col = np.average(np.array([i[2] for i in items]), axis=0, weights=w + 1e-9)
-        power = float(w.sum())  # m^2 * surfacelight
-        lights.append((power, pos, col))
-    lights.sort(key=lambda x: -x[0])
-    out = []
-    for power, pos, col in lights[:max_lights]:
-        value = float(np.clip(300.0 * math.sqrt(power / 300.0), 100.0, 1000.0))
-        out.append(_point_light(pos, col / max(col.max(), 1e-6), value))
-    return out
+    return cells
+
+
+def _cluster(items: list[_Emitter]) -> tuple[float, np.ndarray, np.ndarray]:
+    """A cell's emitters as one: total power, power-weighted position and colour."""
+    w = np.array([i[1] for i in items])
+    pos = np.average(np.array([i[0] for i in items]), axis=0, weights=w + 1e-9)
+    col = np.average(np.array([i[2] for i in items]), axis=0, weights=w + 1e-9)
+    power = float(w.sum())  # m^2 * surfacelight
+    return power, pos, col
 
 
 def _sky_colour(pk3: Pk3Set, sh: Shader) -> tuple[float, float, float] | None:
