@@ -28,11 +28,11 @@ from typing import Any
 import numpy as np
 
 from rtp import sdk
+from rtp.capture import TargetStore
 from rtp.sdk import PREDICTED_RATES, RATE_CODES, RtpError, select_rates, work_saved
 
 from ._baselines import FidelityFX, Yang2019
 from ._scores import scores
-from rtp.capture import TargetStore
 
 __all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "failing_tiles", "spearman", "tile_unseen_share"]
 
@@ -314,27 +314,61 @@ def evaluate(
     rule. ``yang`` / ``fidelityfx`` replace the default baselines (built at the model's tile size;
     Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25).
     ``sweep`` also sweeps every method's threshold (cutoff) to compare the work saved at the
-    model's failure rate (``report.matched``). ``plots_dir`` writes the figures of :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the
-    first sample). ``progress(done, total)`` is called after each sample.
-    """
-    from rtp.capture import DatasetReader
+    model's failure rate (``report.matched``). ``plots_dir`` writes the figures of
+    :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the first sample).
+    ``progress(done, total)`` is called after each sample.
 
+    The steps: load the model and the samples, build the baselines, take in each sample
+    (:class:`_Run`: predictions and targets, quality values, every method's rates, the sweeps),
+    then assemble the report and write the plots.
+    """
     if not 0.0 <= unseen_fraction < 1.0:
         raise RtpError(f"unseen_fraction must be in [0, 1), got {unseen_fraction}")
     predictor = sdk.load(model, metadata=metadata)
     meta = predictor.metadata
-    tile, metric, hib = meta.tile_size, meta.metric, meta.higher_is_better
     thr = float(meta.default_threshold if threshold is None else threshold)
+    store, samples = _load_samples(data, meta, scenes, max_samples)
+    selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
+    yang_scored = baselines and not meta.higher_is_better and "yang2019" in selectors
+    run = _Run(predictor, store, thr, unseen_fraction, selectors, yang_scored, sweep)
+    plot_id = _plot_sample_id(samples, plot_sample)
+    plot_data: dict[str, Any] | None = None
+    for n, sample in enumerate(samples, 1):
+        outcome = run.add(sample)
+        if plots_dir is not None and sample.id == plot_id:
+            plot_data = outcome
+        if progress:
+            progress(n, len(samples))
+    report = run.report(data)
+    if plots_dir is not None and plot_data is not None:
+        report.plots = run.plots(Path(plots_dir), plot_data)
+    return report
+
+
+def _load_samples(
+    data: str | os.PathLike[str], meta: sdk.ModelMetadata, scenes: Sequence[str] | None, max_samples: int | None
+) -> tuple[TargetStore, list[Any]]:
+    """The dataset's target store and the samples to evaluate, after checking that the targets
+    fit the model (metric, tile)."""
+    from rtp.capture import DatasetReader
+
     reader = DatasetReader(data)
     store = TargetStore(data)
-    if metric not in store.metrics:
+    if meta.metric not in store.metrics:
         raise RtpError(
-            f"{data} has no {metric} targets (it has {', '.join(store.metrics) or 'none'}); run `rtp targets {data} --metrics {metric}`"
+            f"{data} has no {meta.metric} targets (it has {', '.join(store.metrics) or 'none'}); "
+            f"run `rtp targets {data} --metrics {meta.metric}`"
         )
-    if tile % store.base_tile:
-        raise RtpError(f"the model's tile {tile} is not a multiple of the targets' base tile {store.base_tile}")
-    ids = list(reader.ids)
-    samples = [reader[i] for i in ids]
+    if meta.tile_size % store.base_tile:
+        raise RtpError(f"the model's tile {meta.tile_size} is not a multiple of the targets' base tile {store.base_tile}")
+    samples = _select_samples([reader[i] for i in list(reader.ids)], data, scenes, max_samples)
+    return store, samples
+
+
+def _select_samples(
+    samples: list[Any], data: str | os.PathLike[str], scenes: Sequence[str] | None, max_samples: int | None
+) -> list[Any]:
+    """The samples of ``scenes`` (all when None), the first ``max_samples`` of them; never none."""
     if scenes:
         wanted = set(scenes)
         have = {str(s.meta.get("scene", "?")) for s in samples}
@@ -346,157 +380,243 @@ def evaluate(
         samples = samples[:max_samples]
     if not samples:
         raise RtpError(f"no samples to evaluate in {data}")
-    no_safety = dataclasses.replace(meta, safety=0.0)
-    rows = [PREDICTED_RATES.index(r) for r in meta.outputs]
-    fwd = meta.transform.forward
-    worse_t = meta.worse_direction
-    worse_m = -1.0 if hib else 1.0
+    return samples
 
+
+def _baselines(
+    meta: sdk.ModelMetadata, thr: float, unseen_fraction: float, yang: Yang2019 | None, fidelityfx: FidelityFX | None
+) -> dict[str, Any]:
+    """The baseline selectors by name, at the model's tile size: Yang 2019 (and its variant that
+    shades unseen tiles fully) and FidelityFX (base and additional rates), or the ones given."""
+    tile = meta.tile_size
+    y_thr = thr if meta.metric == "jnyang" else 0.25
+    # Motion off: the targets are errors of still frames, and a viewpoint pair is a jump, not one
+    # frame of motion at 60 Hz, so the baselines' motion terms (which model motion blur hiding
+    # error) would only make them look worse than they are.
+    yang = yang or Yang2019(tile, threshold=y_thr, unseen_fraction=unseen_fraction, motion=False)
+    yang_full = None
+    if yang.unseen == "as_is":
+        kw = {k: v for k, v in yang.params().items() if k not in ("luma", "tile_size")}
+        yang_full = Yang2019(yang.tile_size, **{**kw, "unseen": "full"})
+    if fidelityfx is None:
+        ffx_tile = tile if tile in (8, 16, 32) else None
+        ffx = ([FidelityFX(ffx_tile, motion_factor=0.0), FidelityFX(ffx_tile, motion_factor=0.0, additional_rates=True)]
+               if ffx_tile else [])
+        if not ffx_tile:
+            log.warning("FidelityFX supports tiles of 8, 16 and 32 pixels; the model's %d-pixel tiles leave it out", tile)
+    else:
+        ffx = [fidelityfx]
     selectors: dict[str, Any] = {}
-    if baselines:
-        y_thr = thr if metric == "jnyang" else 0.25
-        # Motion off: the targets are errors of still frames, and a viewpoint pair is a jump, not one
-        # frame of motion at 60 Hz, so the baselines' motion terms (which model motion blur hiding
-        # error) would only make them look worse than they are.
-        yang = yang or Yang2019(tile, threshold=y_thr, unseen_fraction=unseen_fraction, motion=False)
-        yang_full = None
-        if yang.unseen == "as_is":
-            kw = {k: v for k, v in yang.params().items() if k not in ("luma", "tile_size")}
-            yang_full = Yang2019(yang.tile_size, **{**kw, "unseen": "full"})
-        if fidelityfx is None:
-            ffx_tile = tile if tile in (8, 16, 32) else None
-            ffx = ([FidelityFX(ffx_tile, motion_factor=0.0), FidelityFX(ffx_tile, motion_factor=0.0, additional_rates=True)]
-                   if ffx_tile else [])
-            if not ffx_tile:
-                log.warning("FidelityFX supports tiles of 8, 16 and 32 pixels; the model's %d-pixel tiles leave it out", tile)
-        else:
-            ffx = [fidelityfx]
-        for sel in [yang, yang_full, *ffx]:
-            if sel is not None:
-                if sel.tile_size != tile:
-                    raise RtpError(f"baseline {sel.name} uses {sel.tile_size}-pixel tiles, the model {tile}")
-                selectors[sel.name] = sel
-    yang_scored = baselines and not hib and "yang2019" in selectors
+    for sel in [yang, yang_full, *ffx]:
+        if sel is not None:
+            if sel.tile_size != tile:
+                raise RtpError(f"baseline {sel.name} uses {sel.tile_size}-pixel tiles, the model {tile}")
+            selectors[sel.name] = sel
+    return selectors
 
-    quality: dict[tuple[str, str], _Quality] = {}
-    decisions: dict[tuple[str, str], _Decisions] = {}
-    steps = [2.0 ** (k / 2) for k in range(-8, 9)]
-    model_grid = [thr + 2.0 * k for k in range(-8, 9)] if hib else [thr * f for f in steps]
-    yang_grid = [selectors["yang2019"].threshold * f for f in steps] if "yang2019" in selectors else []
-    ffx_grid = [0.05 * 2.0 ** (k / 2) for k in range(-8, 9, 2)]
-    ffx_sweepers = {name: [FidelityFX(sel.tile_size, cutoff=c, motion_factor=sel.motion_factor,
-                                      additional_rates=sel.additional_rates) for c in ffx_grid]
-                    for name, sel in selectors.items() if isinstance(sel, FidelityFX)} if sweep else {}
-    sweep_acc: dict[tuple[str, str], list[float]] = {}  # (method, parameter) -> [fails, saved, tiles]
 
-    def tally(method: str, param: str, codes_: np.ndarray, gt_: np.ndarray) -> None:
-        acc = sweep_acc.setdefault((method, param), [0.0, 0.0, 0.0])
-        acc[0] += float(failing_tiles(codes_, gt_, thr, hib).sum())
-        acc[1] += float(_SAVED[codes_.astype(np.int64)].sum())
-        acc[2] += codes_.size
-    scene_counts: dict[str, int] = {}
-    plot_data: dict[str, Any] | None = None
+def _plot_sample_id(samples: list[Any], plot_sample: str | None) -> str:
+    """The id of the sample the plots show: ``plot_sample``, by default the first sample."""
     plot_id = plot_sample or samples[0].id
     if plot_sample and plot_sample not in {s.id for s in samples}:
         raise RtpError(f"plot sample {plot_sample!r} is not among the evaluated samples")
+    return plot_id
 
-    for n, sample in enumerate(samples, 1):
+
+class _Sweep:
+    """Each method's threshold (FidelityFX: cutoff) swept over a grid: per (method, parameter), the
+    tiles whose rate fails the model's threshold, the work saved and the tiles counted."""
+
+    def __init__(self, thr: float, hib: bool, selectors: dict[str, Any]) -> None:
+        self.thr, self.hib, self.selectors = thr, hib, selectors
+        steps = [2.0 ** (k / 2) for k in range(-8, 9)]
+        self.model_grid = [thr + 2.0 * k for k in range(-8, 9)] if hib else [thr * f for f in steps]
+        self.yang_grid = [selectors["yang2019"].threshold * f for f in steps] if "yang2019" in selectors else []
+        ffx_grid = [0.05 * 2.0 ** (k / 2) for k in range(-8, 9, 2)]
+        self.ffx_sweepers = {name: [FidelityFX(sel.tile_size, cutoff=c, motion_factor=sel.motion_factor,
+                                               additional_rates=sel.additional_rates) for c in ffx_grid]
+                             for name, sel in selectors.items() if isinstance(sel, FidelityFX)}
+        self.acc: dict[tuple[str, str], list[float]] = {}  # (method, parameter) -> [fails, saved, tiles]
+
+    def add(self, sample: Any, pred: np.ndarray, gt: np.ndarray) -> None:
+        """Tally one sample at every grid point of every method."""
+        hib = self.hib
+        for t in self.model_grid:
+            self._tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib), gt)
+        if self.yang_grid:
+            est_y = self.selectors["yang2019"].predict(sample)
+            for t in self.yang_grid:
+                self._tally("yang2019", f"t {t:.4g}", select_rates(est_y, t), gt)
+        for name, sels in self.ffx_sweepers.items():
+            for sel in sels:
+                self._tally(name, f"cutoff {sel.cutoff:.4g}", sel.shading_rates(sample), gt)
+
+    def _tally(self, method: str, param: str, codes: np.ndarray, gt: np.ndarray) -> None:
+        acc = self.acc.setdefault((method, param), [0.0, 0.0, 0.0])
+        acc[0] += float(failing_tiles(codes, gt, self.thr, self.hib).sum())
+        acc[1] += float(_SAVED[codes.astype(np.int64)].sum())
+        acc[2] += codes.size
+
+    def rows(self) -> list[dict[str, Any]]:
+        """The report's sweep rows: fail share and work saved per (method, parameter)."""
+        return [{"method": m, "parameter": prm, "fail_share": a[0] / a[2], "work_saved": a[1] / a[2]}
+                for (m, prm), a in self.acc.items()]
+
+
+class _Run:
+    """One evaluation: the model and baselines, and per (method, scene) the tile values that the
+    quality and decision tables are computed from."""
+
+    def __init__(self, predictor: Any, store: TargetStore, thr: float, unseen_fraction: float,
+                 selectors: dict[str, Any], yang_scored: bool, sweep: bool) -> None:
+        self.predictor, self.store, self.thr, self.unseen_fraction = predictor, store, thr, unseen_fraction
+        self.meta: sdk.ModelMetadata = predictor.metadata
+        meta = self.meta
+        self.tile, self.metric, self.hib = meta.tile_size, meta.metric, meta.higher_is_better
+        self.no_safety = dataclasses.replace(meta, safety=0.0)
+        self.rows = [PREDICTED_RATES.index(r) for r in meta.outputs]  # the rates the network predicts
+        self.fwd = meta.transform.forward
+        self.worse_t = meta.worse_direction
+        self.worse_m = -1.0 if self.hib else 1.0
+        self.selectors, self.yang_scored = selectors, yang_scored
+        self.sweep = _Sweep(thr, self.hib, selectors) if sweep else None
+        self.quality: dict[tuple[str, str], _Quality] = {}
+        self.decisions: dict[tuple[str, str], _Decisions] = {}
+        self.scene_counts: dict[str, int] = {}
+
+    # -- per sample ------------------------------------------------------------------------------
+    def add(self, sample: Any) -> dict[str, Any]:
+        """Take in one sample; returns its sample, prediction, targets and every method's rates."""
         scene = str(sample.meta.get("scene", "?"))
-        scene_counts[scene] = scene_counts.get(scene, 0) + 1
-        x = sample.inputs(meta.inputs)
+        self.scene_counts[scene] = self.scene_counts.get(scene, 0) + 1
+        pred, pred0, gt = self._predict(sample)
+        unseen = tile_unseen_share(sample.channel("seen"), self.tile) > self.unseen_fraction
+        self._add_quality(sample, scene, pred, pred0, gt, unseen)
+        codes = self._add_decisions(sample, scene, pred, gt, unseen)
+        if self.sweep is not None:
+            self.sweep.add(sample, pred, gt)
+        return {"sample": sample, "pred": pred, "gt": gt, "codes": codes}
+
+    def _predict(self, sample: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The model's values with and without its safety margin, and the sample's targets."""
+        x = sample.inputs(self.meta.inputs)
         # predict() is decode(predict_raw()); decoding the one raw output twice gives the engine's
         # values (with the margin) and the margin-free ones without running the network twice.
-        raw = predictor.predict_raw(x)
-        pred = meta.decode(raw)
-        pred0 = no_safety.decode(raw)
-        gt = store.load(sample.id, metric, tile)
+        raw = self.predictor.predict_raw(x)
+        pred = self.meta.decode(raw)
+        pred0 = self.no_safety.decode(raw)
+        gt = self.store.load(sample.id, self.metric, self.tile)
         if gt.shape != pred.shape:
             raise RtpError(f"sample {sample.id}: targets have shape {gt.shape}, the model predicts {pred.shape}")
-        unseen = tile_unseen_share(sample.channel("seen"), tile) > unseen_fraction
+        return pred, pred0, gt
+
+    def _add_quality(self, sample: Any, scene: str, pred: np.ndarray, pred0: np.ndarray, gt: np.ndarray,
+                     unseen: np.ndarray) -> None:
+        """Record the scored rates' values of the model (with and without margin) and of Yang 2019."""
+        rows, fwd = self.rows, self.fwd
         g_t = fwd(gt[rows])
         for name, p in (("model", pred), ("model (no safety)", pred0)):
-            quality.setdefault((name, scene), _Quality()).add(fwd(p[rows]), g_t, p[rows], gt[rows], unseen)
-        codes = {"model": select_rates(pred, thr, higher_is_better=hib), "oracle": select_rates(gt, thr, higher_is_better=hib)}
-        for name, sel in selectors.items():
-            codes[name] = sel.shading_rates(sample)
-            if name == "yang2019" and yang_scored:
-                est = sel.predict(sample)
-                quality.setdefault((name, scene), _Quality()).add(fwd(est[rows]), g_t, est[rows], gt[rows], unseen)
-        for name, c in codes.items():
-            decisions.setdefault((name, scene), _Decisions()).add(c, failing_tiles(c, gt, thr, hib), unseen)
-        if sweep:
-            for t in model_grid:
-                tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib), gt)
-            if yang_grid:
-                est_y = selectors["yang2019"].predict(sample)
-                for t in yang_grid:
-                    tally("yang2019", f"t {t:.4g}", select_rates(est_y, t), gt)
-            for name, sels in ffx_sweepers.items():
-                for sel in sels:
-                    tally(name, f"cutoff {sel.cutoff:.4g}", sel.shading_rates(sample), gt)
-        if plots_dir is not None and sample.id == plot_id:
-            plot_data = {"sample": sample, "pred": pred, "gt": gt, "codes": codes}
-        if progress:
-            progress(n, len(samples))
+            self.quality.setdefault((name, scene), _Quality()).add(fwd(p[rows]), g_t, p[rows], gt[rows], unseen)
+        if self.yang_scored:
+            est = self.selectors["yang2019"].predict(sample)
+            self.quality.setdefault(("yang2019", scene), _Quality()).add(fwd(est[rows]), g_t, est[rows], gt[rows], unseen)
 
-    report = EvaluationReport(
-        model={
-            "path": str(predictor.path), "metric": metric, "higher_is_better": hib, "tile_size": tile,
+    def _add_decisions(self, sample: Any, scene: str, pred: np.ndarray, gt: np.ndarray,
+                       unseen: np.ndarray) -> dict[str, np.ndarray]:
+        """Every method's rates (model, oracle, baselines) and whether each tile's rate fails."""
+        thr, hib = self.thr, self.hib
+        codes = {"model": select_rates(pred, thr, higher_is_better=hib), "oracle": select_rates(gt, thr, higher_is_better=hib)}
+        for name, sel in self.selectors.items():
+            codes[name] = sel.shading_rates(sample)
+        for name, c in codes.items():
+            self.decisions.setdefault((name, scene), _Decisions()).add(c, failing_tiles(c, gt, thr, hib), unseen)
+        return codes
+
+    # -- the report ------------------------------------------------------------------------------
+    def report(self, data: str | os.PathLike[str]) -> EvaluationReport:
+        """The report: per scene (and all scenes together) the quality and decision rows, the
+        sweeps and the matched work, the notes."""
+        meta, scene_counts = self.meta, self.scene_counts
+        report = EvaluationReport(
+            model=self._model_summary(),
+            data=str(data),
+            samples=sum(scene_counts.values()),
+            scenes=dict(sorted(scene_counts.items())),
+            unseen_fraction=self.unseen_fraction,
+            rates=[PREDICTED_RATES[i] for i in self.rows],
+            threshold=self.thr,
+            baselines={name: sel.params() for name, sel in self.selectors.items()},
+            scene_roles=_scene_roles(meta, scene_counts),
+        )
+        scene_names = sorted(scene_counts) + ([ALL_SCENES] if len(scene_counts) > 1 else [])
+        for scene in scene_names:
+            report.quality += self._quality_rows(scene)
+            report.decisions += self._decision_rows(scene)
+        if self.sweep is not None:
+            report.sweep = self.sweep.rows()
+            target = next(r["fail_share"] for r in report.decisions
+                          if r["method"] == "model" and r["split"] == "all" and r["scene"] == scene_names[-1])
+            report.matched = _matched(report.sweep, target)
+        report.notes = _notes(self.metric, self.hib, self.thr, self.selectors, self.unseen_fraction, meta.outputs)
+        if report.scene_roles and all(r == "train" for r in report.scene_roles.values()):
+            report.notes.insert(0, "every evaluated scene was a training scene of this model: these scores are not a test")
+            log.warning("every evaluated scene was a training scene of %s", self.predictor.path)
+        return report
+
+    def _model_summary(self) -> dict[str, Any]:
+        """What the report says about the model."""
+        meta = self.meta
+        return {
+            "path": str(self.predictor.path), "metric": self.metric, "higher_is_better": self.hib, "tile_size": self.tile,
             "transform": meta.transform.to_dict(), "safety": meta.safety, "inputs": list(meta.inputs),
             "outputs": list(meta.outputs), "default_threshold": meta.default_threshold,
-        },
-        data=str(data),
-        samples=len(samples),
-        scenes=dict(sorted(scene_counts.items())),
-        unseen_fraction=unseen_fraction,
-        rates=[PREDICTED_RATES[i] for i in rows],
-        threshold=thr,
-        baselines={name: sel.params() for name, sel in selectors.items()},
-        scene_roles=_scene_roles(meta, scene_counts),
-    )
-    scene_names = sorted(scene_counts) + ([ALL_SCENES] if len(scene_counts) > 1 else [])
-    q_methods = ["model", "model (no safety)"] + (["yang2019"] if yang_scored else [])
-    for scene in scene_names:
-        for method in q_methods:
-            parts = [quality[(method, s)].merged() for s in sorted(scene_counts) if scene in (s, ALL_SCENES)]
-            p, g, pm, gm, un = (np.concatenate(a) for a in zip(*parts))
+        }
+
+    def _merged(self, acc: dict[tuple[str, str], Any], method: str, scene: str) -> tuple[np.ndarray, ...]:
+        """A method's accumulated arrays over one scene, or over every scene for ``ALL_SCENES``."""
+        parts = [acc[(method, s)].merged() for s in sorted(self.scene_counts) if scene in (s, ALL_SCENES)]
+        return tuple(np.concatenate(a) for a in zip(*parts))
+
+    def _quality_rows(self, scene: str) -> list[dict[str, Any]]:
+        """Quality rows of one scene: per scored method and split, the scores in transformed space
+        and the MAE in metric units."""
+        out = []
+        for method in ["model", "model (no safety)"] + (["yang2019"] if self.yang_scored else []):
+            p, g, pm, gm, un = self._merged(self.quality, method, scene)
             for split, mask in _split_masks(un.astype(bool)).items():
-                s = scores(p[mask], g[mask], worse=worse_t)
-                sm = scores(pm[mask], gm[mask], worse=worse_m)
-                report.quality.append({
+                s = scores(p[mask], g[mask], worse=self.worse_t)
+                sm = scores(pm[mask], gm[mask], worse=self.worse_m)
+                out.append({
                     "method": method, "scene": scene,
                     "split": split, "space": "transformed", **s.as_dict(),
                     "mae_metric": sm.mae, "mae_under_metric": sm.mae_under, "spearman": spearman(p[mask], g[mask]),
                 })
-        for method in ["model", "oracle", *selectors]:
-            parts = [decisions[(method, s)].merged() for s in sorted(scene_counts) if scene in (s, ALL_SCENES)]
-            c, f, un = (np.concatenate(a) for a in zip(*parts))
+        return out
+
+    def _decision_rows(self, scene: str) -> list[dict[str, Any]]:
+        """Decision rows of one scene: per method and split, the fail share, work saved and rate shares."""
+        out = []
+        for method in ["model", "oracle", *self.selectors]:
+            c, f, un = self._merged(self.decisions, method, scene)
             for split, mask in _split_masks(un.astype(bool)).items():
                 cm = c[mask].astype(np.int64)
                 n_t = int(cm.size)
                 shares = {r: float(np.mean(cm == RATE_CODES[r])) if n_t else float("nan") for r in sdk.ALL_RATES}
-                report.decisions.append({
+                out.append({
                     "method": method, "scene": scene, "split": split,
-                    "threshold": _method_threshold(method, thr, selectors), "n": n_t,
+                    "threshold": _method_threshold(method, self.thr, self.selectors), "n": n_t,
                     "fail_share": float(f[mask].mean()) if n_t else float("nan"),
                     "work_saved": float(_SAVED[cm].mean()) if n_t else float("nan"),
                     "rate_shares": shares,
                 })
-    if sweep:
-        report.sweep = [{"method": m, "parameter": prm, "fail_share": a[0] / a[2], "work_saved": a[1] / a[2]}
-                        for (m, prm), a in sweep_acc.items()]
-        target = next(r["fail_share"] for r in report.decisions
-                      if r["method"] == "model" and r["split"] == "all" and r["scene"] == scene_names[-1])
-        report.matched = _matched(report.sweep, target)
-    report.notes = _notes(metric, hib, thr, selectors, unseen_fraction, meta.outputs)
-    if report.scene_roles and all(r == "train" for r in report.scene_roles.values()):
-        report.notes.insert(0, "every evaluated scene was a training scene of this model: these scores are not a test")
-        log.warning("every evaluated scene was a training scene of %s", predictor.path)
-    if plots_dir is not None and plot_data is not None:
-        every = [quality[("model", sc)].merged() for sc in sorted(scene_counts)]
-        plot_data["scatter"] = (np.concatenate([e[0] for e in every]), np.concatenate([e[1] for e in every]))
-        report.plots = [str(p) for p in _write_plots(Path(plots_dir), plot_data, meta, Path(str(predictor.path)).stem)]
-    return report
+        return out
+
+    def plots(self, plots_dir: Path, plot_data: dict[str, Any]) -> list[str]:
+        """Write the plot sample's figures and the scatter of every model value; returns their paths."""
+        every = [self.quality[("model", sc)].merged() for sc in sorted(self.scene_counts)]
+        scatter = (np.concatenate([e[0] for e in every]), np.concatenate([e[1] for e in every]))
+        stem = Path(str(self.predictor.path)).stem
+        return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem)]
 
 
 def _matched(sweep: list[dict[str, Any]], target: float) -> list[dict[str, Any]]:
