@@ -51,9 +51,9 @@ def tile_unseen_share(seen: np.ndarray, tile: int) -> np.ndarray:
     s = np.asarray(seen, dtype=np.float64)
     h, w = s.shape
     th, tw = sdk.tile_grid(h, w, tile)
-    pad = ((0, th * tile - h), (0, tw * tile - w))
-    num = np.pad(s, pad).reshape(th, tile, tw, tile).sum(axis=(1, 3))
-    den = np.pad(np.ones_like(s), pad).reshape(th, tile, tw, tile).sum(axis=(1, 3))
+    ph, pw = sdk.padded_size(h, w, tile)
+    num = np.pad(s, ((0, ph - h), (0, pw - w))).reshape(th, tile, tw, tile).sum(axis=(1, 3))
+    den = np.outer(sdk.tile_extents(h, tile), sdk.tile_extents(w, tile))  # the pixels each tile holds
     return 1.0 - num / den  # type: ignore[no-any-return]
 
 
@@ -689,7 +689,7 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
     out.mkdir(parents=True, exist_ok=True)
     sample = d["sample"]
     h, w = sample.size
-    scale = max(1, -(-max(h, w) // 640))
+    scale = max(1, *sdk.tile_grid(h, w, 640))  # downscale so the longer side fits in 640 pixels
     fwd = meta.transform.forward
 
     def bright_is_worse(v: np.ndarray) -> np.ndarray:
