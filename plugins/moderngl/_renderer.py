@@ -261,6 +261,56 @@ class _GpuMaterial:
     alpha_cutoff: float
 
 
+@dataclass
+class _FrameSetup:
+    """What the passes of one frame share: the scene, cameras, matrices, sun and sky terms."""
+
+    scene: Scene
+    camera: Camera
+    prev_camera: Camera | None
+    size: tuple[float, float]  # frame size in pixels, for the shaders
+    view: np.ndarray  # world -> view
+    proj: np.ndarray  # view -> clip
+    inv_proj: np.ndarray
+    inv_view: np.ndarray
+    v2w: np.ndarray  # view -> world rotation
+    prev_vp: np.ndarray  # the previous camera's world -> clip (the current one's without a previous camera)
+    to_sun: np.ndarray  # unit vector towards the sun, world
+    sun_rad: np.ndarray  # sun radiance, float32
+    sky: tuple[float, ...]  # sky colour
+
+    def sky_uniforms(self) -> dict[str, Any]:
+        """The uniforms of the passes that shade background pixels with the sky."""
+        return {
+            "u_size": self.size, "u_inv_proj": self.inv_proj, "u_view_to_world": self.v2w, "u_sky_colour": self.sky,
+            "u_to_sun_world": tuple(float(c) for c in self.to_sun), "u_sun_radiance": tuple(float(c) for c in self.sun_rad),
+        }
+
+
+class _StageTimer:
+    """Wall time of each stage of a frame; with ``profile`` it waits for the GPU at every mark."""
+
+    def __init__(self, ctx: Any, profile: bool) -> None:
+        self.ctx, self.profile = ctx, profile
+        self.timings: dict[str, float] = {}
+        self.start = self.last = time.perf_counter()
+
+    def mark(self, name: str) -> None:
+        """Record the time since the previous mark as stage ``name``."""
+        if self.profile:
+            self.ctx.finish()
+        now = time.perf_counter()
+        self.timings[name] = now - self.last
+        self.last = now
+
+    def finish(self, width: int, height: int) -> None:
+        """Record the total time and log every stage's."""
+        t = self.timings
+        t["total"] = time.perf_counter() - self.start
+        logger.debug("frame %dx%d in %.3f s (%s)", width, height, t["total"],
+                     ", ".join(f"{k} {v * 1e3:.0f} ms" for k, v in t.items() if k != "total"))
+
+
 class Renderer:
     """Headless deferred renderer with software VRS.
 
@@ -573,45 +623,66 @@ class Renderer:
         Returns:
             A :class:`Frame` with the G-buffers, the 7 final images and the reprojection.
         """
+        scene = self._check_can_render(prev)
+        if prev_camera is None and prev is not None:
+            prev_camera = prev.camera
+        timer = _StageTimer(self.ctx, self.profile)
+        setup = self._frame_setup(scene, camera, prev_camera)
+        fit = self._shadow_pass(setup)
+        timer.mark("shadow")
+        self._gbuffer_pass(setup)
+        timer.mark("gbuffer")
+        self._ssao_pass(setup)
+        timer.mark("ssao")
+        self._lighting_pass(setup, fit)
+        timer.mark("lighting")
+        log_avg, exposure = self._exposure_pass(setup, exposure)
+        timer.mark("exposure")
+        self._vrs_tonemap_pass(setup, exposure, debug)
+        timer.mark("vrs_tonemap")
+        self._fxaa_pass()
+        timer.mark("fxaa")
+        reprojection = self._reprojection_pass(setup, prev)
+        timer.mark("reproject")
+        frame = self._read_back(setup, reprojection, exposure, log_avg, debug, timer.timings)
+        timer.mark("readback")
+        timer.finish(self.width, self.height)
+        return frame
+
+    # The steps of render(), in the order it runs them: each leaves its result in the GL targets.
+    def _check_can_render(self, prev: Frame | None) -> Scene:
+        """The loaded scene, after checking the renderer is alive and ``prev`` has the frame size."""
         self._check_alive()
         if self.scene is None:
             raise RendererError("no scene loaded; call load_scene(scene) first")
         if prev is not None and (prev.width, prev.height) != (self.width, self.height):
             raise RendererError(f"previous frame is {prev.width}x{prev.height}, the renderer draws {self.width}x{self.height}")
-        if prev_camera is None and prev is not None:
-            prev_camera = prev.camera
-        ctx, mgl, scene = self.ctx, self._mgl, self.scene
+        return self.scene
+
+    def _frame_setup(self, scene: Scene, camera: Camera, prev_camera: Camera | None) -> _FrameSetup:
+        """The frame's matrices and sun and sky terms."""
         W, H = self.width, self.height
-        size = (float(W), float(H))
-        timings: dict[str, float] = {}
-        t_start = t_last = time.perf_counter()
-
-        def mark(name: str) -> None:
-            nonlocal t_last
-            if self.profile:
-                ctx.finish()
-            now = time.perf_counter()
-            timings[name] = now - t_last
-            t_last = now
-
         view = camera.view()
         proj = camera.projection(W / H)
-        inv_proj = np.linalg.inv(proj)
         inv_view = np.linalg.inv(view)
-        v2w = inv_view[:3, :3]
-        prev_vp = prev_camera.view_projection(W, H) if prev_camera is not None else proj @ view
-
         sun = scene.sun
         to_sun = -np.asarray(sun.direction, np.float64)
-        to_sun = to_sun / max(np.linalg.norm(to_sun), 1e-12)
-        sun_rad = np.asarray(sun.colour, np.float32) * np.float32(sun.intensity)
-        sky = tuple(float(c) for c in scene.sky_colour)
+        to_sun = to_sun / max(float(np.linalg.norm(to_sun)), 1e-12)
+        return _FrameSetup(
+            scene=scene, camera=camera, prev_camera=prev_camera, size=(float(W), float(H)),
+            view=view, proj=proj, inv_proj=np.linalg.inv(proj), inv_view=inv_view, v2w=inv_view[:3, :3],
+            prev_vp=prev_camera.view_projection(W, H) if prev_camera is not None else proj @ view,
+            to_sun=to_sun, sun_rad=np.asarray(sun.colour, np.float32) * np.float32(sun.intensity),
+            sky=tuple(float(c) for c in scene.sky_colour),
+        )
 
-        # 1. sun shadow map
-        lo, hi = scene.bounds
+    def _shadow_pass(self, f: _FrameSetup) -> _SunFit | None:
+        """1. The sun shadow map, fitted to the view; None when the sun casts no shadow into it."""
+        ctx, mgl, sun = self.ctx, self._mgl, f.scene.sun
+        lo, hi = f.scene.bounds
         fit = None
         if self._meshes and sun.intensity > 0:
-            fit = _fit_sun_shadow(camera, W / H, np.asarray(sun.direction), lo, hi, self.shadow_distance)
+            fit = _fit_sun_shadow(f.camera, self.width / self.height, np.asarray(sun.direction), lo, hi, self.shadow_distance)
         if fit is not None:
             self._fbo_shadow.use()
             self._fbo_shadow.clear(depth=1.0)
@@ -625,18 +696,20 @@ class Renderer:
                 _set(p, "u_base_alpha", mat.base_color[3])
                 gm.vao_shadow.render(mgl.TRIANGLES)
             ctx.polygon_offset = (0.0, 0.0)
-        mark("shadow")
+        return fit
 
-        # 2. G-buffer
+    def _gbuffer_pass(self, f: _FrameSetup) -> None:
+        """2. The G-buffer: albedo, normal and depth, material, emissive, motion."""
+        ctx, mgl = self.ctx, self._mgl
         self._fbo_g.use()
         self._fbo_g.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(mgl.DEPTH_TEST | (mgl.CULL_FACE if self.cull_back_faces else 0))
         p = self._p_gbuffer
-        _set(p, "u_view", view)
-        _set(p, "u_proj", proj)
-        _set(p, "u_prev_vp", prev_vp)
-        _set(p, "u_has_prev", prev_camera is not None)
-        _set(p, "u_size", size)
+        _set(p, "u_view", f.view)
+        _set(p, "u_proj", f.proj)
+        _set(p, "u_prev_vp", f.prev_vp)
+        _set(p, "u_has_prev", f.prev_camera is not None)
+        _set(p, "u_size", f.size)
         for gm in self._meshes:
             mat = self._materials[gm.material]
             self._bind_material(p, mat)
@@ -645,15 +718,16 @@ class Renderer:
             _set(p, "u_emissive", mat.emissive)
             gm.vao.render(mgl.TRIANGLES)
         ctx.disable(mgl.DEPTH_TEST | mgl.CULL_FACE)
-        mark("gbuffer")
 
-        # 3. SSAO + blur
+    def _ssao_pass(self, f: _FrameSetup) -> None:
+        """3. SSAO at full rate, then its 4x4 blur."""
+        mgl = self._mgl
         self._t_nd.use(location=1)
         p = self._p_ssao
         _set(p, "u_normal_depth", 1)
-        _set(p, "u_proj", proj)
-        _set(p, "u_inv_proj", inv_proj)
-        _set(p, "u_size", size)
+        _set(p, "u_proj", f.proj)
+        _set(p, "u_inv_proj", f.inv_proj)
+        _set(p, "u_size", f.size)
         p["u_kernel"].write(self._ao_kernel.tobytes())
         _set(p, "u_radius", self.ao_radius)
         _set(p, "u_bias", 0.02 * self.ao_radius)
@@ -666,28 +740,34 @@ class Renderer:
         _set(p, "u_strength", self.ao_strength)
         self._fbo_ao.use()
         self._fullscreen["blur"].render(mgl.TRIANGLES, vertices=3)
-        mark("ssao")
 
-        # 4. lighting, full rate
+    def _lighting_pass(self, f: _FrameSetup, fit: _SunFit | None) -> None:
+        """4. Deferred lighting at full rate: sun (shadowed by ``fit``), point lights, ambient x AO, emissive."""
         for loc, t in enumerate((self._t_albedo, self._t_nd, self._t_material, self._t_emissive, self._t_ao)):
             t.use(location=loc)
         self._t_shadow.use(location=5)
         p = self._p_light
         for loc, name in enumerate(("u_albedo", "u_normal_depth", "u_material", "u_emissive", "u_ao", "u_shadow_map")):
             _set(p, name, loc)
-        _set(p, "u_size", size)
-        _set(p, "u_inv_proj", inv_proj)
-        _set(p, "u_view_to_world", v2w)
+        _set(p, "u_size", f.size)
+        _set(p, "u_inv_proj", f.inv_proj)
+        _set(p, "u_view_to_world", f.v2w)
         _set(p, "u_shadows", fit is not None)
         if fit is not None:
-            _set(p, "u_light_from_view", fit.light_vp @ inv_view)
+            _set(p, "u_light_from_view", fit.light_vp @ f.inv_view)
             _set(p, "u_shadow_texel", 1.0 / self.shadow_map_size)
             _set(p, "u_normal_offset", 1.5 * fit.texel / self.shadow_map_size)
-        _set(p, "u_to_sun_view", tuple(float(c) for c in view[:3, :3] @ to_sun))
-        _set(p, "u_sun_radiance", tuple(float(c) for c in sun_rad))
-        _set(p, "u_sky_colour", sky)
-        _set(p, "u_ambient", float(scene.ambient))
-        lpos, lcol = self._select_lights(scene, view, camera)
+        _set(p, "u_to_sun_view", tuple(float(c) for c in f.view[:3, :3] @ f.to_sun))
+        _set(p, "u_sun_radiance", tuple(float(c) for c in f.sun_rad))
+        _set(p, "u_sky_colour", f.sky)
+        _set(p, "u_ambient", float(f.scene.ambient))
+        self._set_point_lights(p, f)
+        self._fbo_lit.use()
+        self._fullscreen["light"].render(self._mgl.TRIANGLES, vertices=3)
+
+    def _set_point_lights(self, p: Any, f: _FrameSetup) -> None:
+        """Upload the point lights that touch the view (at most ``max_point_lights``)."""
+        lpos, lcol = self._select_lights(f.scene, f.view, f.camera)
         _set(p, "u_num_lights", len(lpos))
         if len(lpos):
             full_pos = np.zeros((self.max_point_lights, 4), np.float32)
@@ -695,92 +775,93 @@ class Renderer:
             full_pos[: len(lpos)], full_col[: len(lcol)] = lpos, lcol
             p["u_light_pos"].write(full_pos.tobytes())
             p["u_light_col"].write(full_col.tobytes())
-        self._fbo_lit.use()
-        self._fullscreen["light"].render(mgl.TRIANGLES, vertices=3)
-        mark("lighting")
 
-        sky_uniforms = {
-            "u_size": size, "u_inv_proj": inv_proj, "u_view_to_world": v2w, "u_sky_colour": sky,
-            "u_to_sun_world": tuple(float(c) for c in to_sun), "u_sun_radiance": tuple(float(c) for c in sun_rad),
-        }
-        # 5. auto-exposure from the 1x1 HDR image
+    def _exposure_pass(self, f: _FrameSetup, exposure: float | None) -> tuple[float, float]:
+        """5. Log-average luminance of the 1x1 HDR image, and the exposure: ``exposure`` if given,
+        else the auto-exposure from it."""
         self._t_lit.use(location=0)
         self._t_nd.use(location=1)
         p = self._p_expo
         _set(p, "u_lit", 0)
         _set(p, "u_normal_depth", 1)
-        for k, v in sky_uniforms.items():
+        for k, v in f.sky_uniforms().items():
             _set(p, k, v)
         self._fbo_expo.use()
-        self._fullscreen["expo"].render(mgl.TRIANGLES, vertices=3)
+        self._fullscreen["expo"].render(self._mgl.TRIANGLES, vertices=3)
         sums = read_texture(self._t_expo).astype(np.float64)
         log_avg = float(sums[..., 0].sum() / max(sums[..., 1].sum(), 1.0))
         if exposure is None:
             exposure = float(np.clip(self.exposure_key / math.exp(log_avg), 2.0**-10, 2.0**10))
-        mark("exposure")
+        return log_avg, exposure
 
-        # 6. software VRS + tone mapping, then FXAA, per rate
+    def _vrs_tonemap_pass(self, f: _FrameSetup, exposure: float, debug: bool) -> None:
+        """6a. Per shading rate: software VRS (each block shaded by its sample), tone map and sRGB encode."""
         p = self._p_coarse
         _set(p, "u_lit", 0)
         _set(p, "u_normal_depth", 1)
         _set(p, "u_exposure", float(exposure))
-        for k, v in sky_uniforms.items():
+        for k, v in f.sky_uniforms().items():
             _set(p, k, v)
         for rate in ALL_RATES:
             _set(p, "u_rate", _rate_size(rate))
             (self._debug_fbo(rate) if debug else self._fbo_ldr[rate]).use()
-            self._fullscreen["coarse"].render(mgl.TRIANGLES, vertices=3)
-        mark("vrs_tonemap")
-        if self.fxaa:
-            p = self._p_fxaa
-            _set(p, "u_ldr", 0)
-            _set(p, "u_rcp", (1.0 / W, 1.0 / H))
-            for rate in ALL_RATES:
-                self._t_ldr[rate].use(location=0)
-                self._fbo_final[rate].use()
-                self._fullscreen["fxaa"].render(mgl.TRIANGLES, vertices=3)
-        mark("fxaa")
+            self._fullscreen["coarse"].render(self._mgl.TRIANGLES, vertices=3)
 
-        # 7. reprojection of the previous final 1x1 colour, by the same adapter engines use
-        reprojected: np.ndarray | None = None
-        seen: np.ndarray | None = None
-        if prev is not None:
-            write_texture(self._t_prev_colour, prev.colour["1x1"])
-            write_texture(self._t_prev_depth, prev.depth)
-            self._reprojector.run(
-                albedo=self._t_albedo, normal=self._t_nd, depth=self._t_nd, depth_component=3,
-                view=view, projection=proj, prev_colour=self._t_prev_colour, prev_depth=self._t_prev_depth,
-                prev_view_projection=prev_camera.view_projection(W, H),  # type: ignore[union-attr]
-            )
-            rp = read_texture(self._reprojector._targets[0])
-            reprojected, seen = rp[..., :3], rp[..., 3]
-        mark("reproject")
+    def _fxaa_pass(self) -> None:
+        """6b. FXAA on every rate's image (when enabled)."""
+        if not self.fxaa:
+            return
+        p = self._p_fxaa
+        _set(p, "u_ldr", 0)
+        _set(p, "u_rcp", (1.0 / self.width, 1.0 / self.height))
+        for rate in ALL_RATES:
+            self._t_ldr[rate].use(location=0)
+            self._fbo_final[rate].use()
+            self._fullscreen["fxaa"].render(self._mgl.TRIANGLES, vertices=3)
 
-        # read back
+    def _reprojection_pass(self, f: _FrameSetup, prev: Frame | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """7. The previous frame's final 1x1 colour reprojected (by the same adapter engines use) and
+        the seen mask; None without a previous frame."""
+        if prev is None:
+            return None
+        write_texture(self._t_prev_colour, prev.colour["1x1"])
+        write_texture(self._t_prev_depth, prev.depth)
+        self._reprojector.run(
+            albedo=self._t_albedo, normal=self._t_nd, depth=self._t_nd, depth_component=3,
+            view=f.view, projection=f.proj, prev_colour=self._t_prev_colour, prev_depth=self._t_prev_depth,
+            prev_view_projection=f.prev_camera.view_projection(self.width, self.height),  # type: ignore[union-attr]
+        )
+        rp = read_texture(self._reprojector._targets[0])
+        return rp[..., :3], rp[..., 3]
+
+    def _read_back(
+        self, f: _FrameSetup, reprojection: tuple[np.ndarray, np.ndarray] | None, exposure: float, log_avg: float,
+        debug: bool, timings: dict[str, float],
+    ) -> Frame:
+        """Read every target back into a :class:`Frame`."""
         albedo = read_texture(self._t_albedo)
         nd = read_texture(self._t_nd)
-        mat = read_texture(self._t_material)
+        material = read_texture(self._t_material)
         lit = read_texture(self._t_lit)
         final_src = self._t_final if self.fxaa else self._t_ldr
         colour = {r: read_texture(final_src[r], 3) for r in ALL_RATES}
         lighting = {r: read_texture(self._t_hdr[r], 3) for r in ALL_RATES} if debug else None
-        if reprojected is None or seen is None:
-            reprojected = np.zeros((H, W, 3), np.float32)
-            seen = np.zeros((H, W), np.float32)
-        mask = albedo[..., 3]
-        frame = Frame(
-            camera=camera,
-            prev_camera=prev_camera,
+        if reprojection is None:
+            reprojection = np.zeros((self.height, self.width, 3), np.float32), np.zeros((self.height, self.width), np.float32)
+        reprojected, seen = reprojection
+        return Frame(
+            camera=f.camera,
+            prev_camera=f.prev_camera,
             albedo=albedo[..., :3],
             normal=nd[..., :3],
-            roughness=mat[..., 0],
-            metallic=mat[..., 1],
-            specular=mat[..., 2],
-            emissive=mat[..., 3],
+            roughness=material[..., 0],
+            metallic=material[..., 1],
+            specular=material[..., 2],
+            emissive=material[..., 3],
             depth=nd[..., 3],
             shadow=lit[..., 3],
             motion=read_texture(self._t_motion),
-            mask=mask,
+            mask=albedo[..., 3],
             ao=read_texture(self._t_ao)[..., 0],
             colour=colour,
             reprojected=reprojected,
@@ -790,11 +871,6 @@ class Renderer:
             lighting=lighting,
             timings=timings,
         )
-        mark("readback")
-        timings["total"] = time.perf_counter() - t_start
-        logger.debug("frame %dx%d in %.3f s (%s)", W, H, timings["total"],
-                     ", ".join(f"{k} {v * 1e3:.0f} ms" for k, v in timings.items() if k != "total"))
-        return frame
 
     # ------------------------------------------------------------------ lifetime
     def _check_alive(self) -> None:
