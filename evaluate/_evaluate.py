@@ -54,7 +54,7 @@ def tile_unseen_share(seen: np.ndarray, tile: int) -> np.ndarray:
     ph, pw = sdk.padded_size(h, w, tile)
     num = np.pad(s, ((0, ph - h), (0, pw - w))).reshape(th, tile, tw, tile).sum(axis=(1, 3))
     den = np.outer(sdk.tile_extents(h, tile), sdk.tile_extents(w, tile))  # the pixels each tile holds
-    return 1.0 - num / den  # type: ignore[no-any-return]
+    return 1.0 - num / den
 
 
 def _ranks(a: np.ndarray) -> np.ndarray:
@@ -104,7 +104,7 @@ class EvaluationReport:
     plots: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return _json_clean(dataclasses.asdict(self))  # type: ignore[no-any-return]
+        return _json_clean(dataclasses.asdict(self))
 
     def row(self, table: str, method: str, scene: str | None = None, split: str = "all") -> dict[str, Any]:
         """One row of ``quality`` or ``decisions``; ``scene`` defaults to all scenes together (the
@@ -113,12 +113,13 @@ class EvaluationReport:
             scene = ALL_SCENES if len(self.scenes) > 1 else next(iter(self.scenes))
         for r in getattr(self, table):
             if r["method"] == method and r["scene"] == scene and r["split"] == split:
-                return r  # type: ignore[no-any-return]
+                return r
         raise KeyError(f"no {table} row for {method}/{scene}/{split}")
 
     # -- rendering ----------------------------------------------------------------------------
     def _quality_table(self, markdown: bool) -> list[str]:
-        head = ["scene", "split", "method", "n", "R² %", "MAE", "MAE under.", "σ MAE", "under %", f"MAE [{self.model['metric']}]", "Spearman"]
+        head = ["scene", "split", "method", "n", "R² %", "MAE", "MAE under.", "σ MAE", "under %",
+                f"MAE [{self.model['metric']}]", "Spearman"]
         rows = [
             [r["scene"], r["split"], r["method"], str(r["n"]), _pct(r["r2"]), _e(r["mae"]), _e(r["mae_under"]),
              _e(r["sigma"]), _pct(r["under_share"]), _e(r["mae_metric"]), _f(r["spearman"])]
@@ -694,7 +695,7 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
 
     def bright_is_worse(v: np.ndarray) -> np.ndarray:
         t = fwd(v)
-        return 1.0 - t if meta.worse_direction < 0 else t  # type: ignore[no-any-return]
+        return 1.0 - t if meta.worse_direction < 0 else t
 
     paths = [out / f"{stem}_heatmaps.png", out / f"{stem}_scatter.png", out / f"{stem}_rates.png"]
     P.save_png(paths[0], P.heatmaps(bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w),

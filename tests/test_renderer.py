@@ -18,6 +18,7 @@ from rtp.plugins.moderngl import Renderer, RendererError
 from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SunLight, box_mesh, checker_texture, quad_mesh
 from rtp.sdk import ALL_RATES as RATES
 from rtp.sdk._reproject import reproject, reproject_positions
+from rtp.sdk.adapters import UnsupportedChannelError
 from tests.conftest import make_current
 
 # 162 x 98: not a multiple of 4, so the partial edge blocks (clamped shading samples) are exercised.
@@ -185,8 +186,10 @@ def test_gbuffer_sanity(renderer):
         assert plane.shape == (H, W), name
         assert np.all(plane >= CHANNELS[name].low) and np.all(plane <= CHANNELS[name].high), name
     assert np.array_equal(f.channel("albedo.g"), f.albedo[..., 1])
-    with pytest.raises(KeyError):
+    with pytest.raises(UnsupportedChannelError, match="does not exist"):
         f.channel("albedo.w")
+    with pytest.raises(UnsupportedChannelError, match="several components"):
+        f.channel("albedo")
 
 
 @pytest.mark.gl

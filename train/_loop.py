@@ -74,7 +74,7 @@ class TrainConfig:
         data: str,
         metric: str,
         out: str,
-        scenes: str | os.PathLike[str] | None = None,
+        scenes: str | Path | None = None,
         **overrides: Any,
     ) -> TrainConfig:
         """A configuration from a recipe (a YAML path, or ``"shipped"``: the shipped models' recipe),

@@ -48,7 +48,7 @@ class Recipe:
 
 def _recipe_text(source: str | os.PathLike[str]) -> tuple[str, str]:
     if str(source) == SHIPPED_RECIPE:
-        return SHIPPED_RECIPE, resources.files("rtp.train").joinpath("recipes", "shipped.yaml").read_text()
+        return SHIPPED_RECIPE, resources.files("rtp.train").joinpath("recipes/shipped.yaml").read_text()
     path = Path(source)
     if not path.is_file():
         raise RecipeError(f"recipe {str(source)!r}: no such file (or pass {SHIPPED_RECIPE!r}, the shipped models' recipe)")

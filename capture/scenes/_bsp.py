@@ -39,6 +39,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -182,13 +183,12 @@ def _decode_image(data: bytes, name: str) -> np.ndarray | None:
     except ImportError as err:  # pragma: no cover - pillow is a dependency of the scene extra
         raise ImportError("reading BSP textures needs pillow: pip install 'rtp[scenes]'") from err
     try:
-        im = Image.open(io.BytesIO(data))
-        im = im.convert("RGBA")
+        im: Image.Image = Image.open(io.BytesIO(data)).convert("RGBA")
     except Exception as err:  # noqa: BLE001 - any decoder failure means "unusable texture"
         log.warning("could not decode texture %s: %s", name, err)
         return None
     while max(im.size) > MAX_TEXTURE:
-        im = im.resize((max(1, im.size[0] // 2), max(1, im.size[1] // 2)), Image.BILINEAR)
+        im = im.resize((max(1, im.size[0] // 2), max(1, im.size[1] // 2)), Image.Resampling.BILINEAR)
     return np.asarray(im, dtype=np.uint8).copy()
 
 
@@ -564,7 +564,7 @@ def _entities(entities: list[dict[str, str]], eye_units: float) -> tuple[list[Sp
             continue
         if cls in SPAWN_CLASSES:
             eye = q3_to_world(origin + np.array([0.0, 0.0, eye_units]))
-            spawns.append(SpawnPoint(tuple(float(x) for x in eye), yaw=q3_angle_to_yaw(_float(e.get("angle"), 0.0))))
+            spawns.append(SpawnPoint(_vec3(eye), yaw=q3_angle_to_yaw(_float(e.get("angle"), 0.0))))
         elif cls == "light":
             val = _float(e.get("light", e.get("_light")), 300.0)
             col = _vec(e.get("_color")) if e.get("_color") else np.ones(3)
@@ -610,7 +610,7 @@ def _sun_and_sky(
 ) -> tuple[SunLight, tuple[float, float, float]]:
     """The sun and sky colour from the first sky texture that has a shader (defaults otherwise)."""
     sun = SunLight()
-    sky_colour = Scene.__dataclass_fields__["sky_colour"].default
+    sky_colour: tuple[float, float, float] = Scene("", [], []).sky_colour
     for i in np.nonzero(tex_kind == _SKY)[0]:
         sh = shaders.get(tex_names[i].lower())
         if sh is None:
@@ -622,6 +622,11 @@ def _sun_and_sky(
     return sun, sky_colour
 
 
+def _vec3(v: Any) -> tuple[float, float, float]:
+    x, y, z = (float(c) for c in np.asarray(v, np.float64).ravel()[:3])
+    return x, y, z
+
+
 def _sun_from_shader(q3_sun: tuple[float, ...]) -> SunLight:
     """``q3map_sun`` / ``q3map_sunExt`` (r g b intensity azimuth elevation) as a sun light."""
     r, g, b, inten, az, el = q3_sun
@@ -630,8 +635,8 @@ def _sun_from_shader(q3_sun: tuple[float, ...]) -> SunLight:
     a, e_ = math.radians(az), math.radians(el)
     to_sun = np.array([math.cos(e_) * math.cos(a), math.cos(e_) * math.sin(a), math.sin(e_)])
     d = q3_to_world(-to_sun, 1.0)
-    return SunLight(direction=tuple(float(x) for x in d / np.linalg.norm(d)),
-                    colour=tuple(float(x) for x in c), intensity=float(np.clip(3.0 * inten / 100.0, 1.0, 6.0)))
+    intensity = float(np.clip(3.0 * inten / 100.0, 1.0, 6.0))
+    return SunLight(direction=_vec3(d / np.linalg.norm(d)), colour=_vec3(c), intensity=intensity)
 
 
 def _stats(bsp: _Bsp, face_kind: np.ndarray, patches: int) -> dict[str, int]:
@@ -666,8 +671,8 @@ def _point_light(pos: np.ndarray, colour, value: float) -> PointLight:
     """Q3 light value (default 300, roughly the reach in units) → renderer units: intensity
     ``value / 30`` and radius ``1.5 * value`` units, clamped to sane ranges."""
     return PointLight(
-        position=tuple(float(x) for x in pos),
-        colour=tuple(float(x) for x in colour),
+        position=_vec3(pos),
+        colour=_vec3(colour),
         intensity=float(np.clip(value / 30.0, 1.0, 40.0)),
         radius=float(np.clip(value * 1.5 * UNIT, 2.0, 25.0)),
     )

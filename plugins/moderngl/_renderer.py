@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Camera, Scene
-from rtp.sdk import ALL_RATES, RtpError
+from rtp.sdk import ALL_RATES, RtpError, rate_size, tile_grid
+from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
 from ._glio import read_texture, write_texture
@@ -71,9 +72,12 @@ def create_context(require: int = 330) -> Any:
         ) from exc
 
 
-def _rate_size(rate: str) -> tuple[int, int]:
-    w, h = rate.split("x")
-    return int(w), int(h)
+def _floats(values: Any, n: int) -> Any:
+    """``n`` floats as a tuple (a material's colour factors as the GPU record holds them)."""
+    out = tuple(float(v) for v in values)
+    if len(out) != n:
+        raise RendererError(f"expected {n} colour components, got {len(out)}: {values!r}")
+    return out
 
 
 @dataclass(eq=False)
@@ -151,15 +155,16 @@ class Frame:
             "mask": self.mask, "ao": self.ao,
         }
         if base not in planes:
-            raise KeyError(f"unknown channel {name!r}; known planes: {', '.join(sorted(planes))}")
+            raise UnsupportedChannelError(f"unknown channel {name!r}; known planes: {', '.join(sorted(planes))}")
         arr = planes[base]
         if not comp:
             if arr.ndim != 2:
-                raise KeyError(f"{name!r} has several components; name one, e.g. {name}.{'r' if base in ('albedo', 'reprojected') else 'x'}")
+                example = f"{name}.{'r' if base in ('albedo', 'reprojected') else 'x'}"
+                raise UnsupportedChannelError(f"{name!r} has several components; name one, e.g. {example}")
             return arr
         index = {"r": 0, "g": 1, "b": 2, "x": 0, "y": 1, "z": 2}.get(comp)
         if arr.ndim != 3 or index is None or index >= arr.shape[2]:
-            raise KeyError(f"channel {name!r} does not exist")
+            raise UnsupportedChannelError(f"channel {name!r} does not exist")
         return arr[..., index]
 
 
@@ -228,11 +233,11 @@ def _fit_sun_shadow(
     z_far = -(max(sl[:, 2].min(), fl[:, 2].min()) - margin)
     if z_far <= z_near:
         z_far = z_near + 1.0
-    l, r = lo_xy[0], hi_xy[0]
+    left, r = lo_xy[0], hi_xy[0]
     b, t = lo_xy[1], hi_xy[1]
     ortho = np.array(
         [
-            [2 / (r - l), 0, 0, -(r + l) / (r - l)],
+            [2 / (r - left), 0, 0, -(r + left) / (r - left)],
             [0, 2 / (t - b), 0, -(t + b) / (t - b)],
             [0, 0, -2 / (z_far - z_near), -(z_far + z_near) / (z_far - z_near)],
             [0, 0, 0, 1],
@@ -240,7 +245,7 @@ def _fit_sun_shadow(
     )
     view = np.eye(4)
     view[:3, :3] = rot
-    return _SunFit(ortho @ view, float(max(r - l, t - b)))
+    return _SunFit(ortho @ view, float(max(r - left, t - b)))
 
 
 @dataclass
@@ -357,7 +362,7 @@ class Renderer:
         profile: bool = False,
     ) -> None:
         if int(width) < 1 or int(height) < 1:
-            raise ValueError(f"frame size must be positive, got {width}x{height}")
+            raise RendererError(f"frame size must be positive, got {width}x{height}")
         self._mgl = _import_moderngl()
         self.width, self.height = int(width), int(height)
         self._owns_ctx = ctx is None
@@ -457,7 +462,8 @@ class Renderer:
         self._fbo_ao = ctx.framebuffer(color_attachments=[self._t_ao])
         self._t_lit = tex(4, "f2")
         self._fbo_lit = ctx.framebuffer(color_attachments=[self._t_lit])
-        esize = (-(-self.width // 4), -(-self.height // 4))
+        rows, cols = tile_grid(self.height, self.width, 4)  # the exposure pass reduces 4x4 blocks
+        esize = (cols, rows)
         self._t_expo = tex(2, "f4", esize)
         self._fbo_expo = ctx.framebuffer(color_attachments=[self._t_expo])
         linear = (mgl.LINEAR, mgl.LINEAR)
@@ -520,8 +526,8 @@ class Renderer:
                     tex.anisotropy = min(self.anisotropy, float(self.ctx.max_anisotropy or 1.0))
             cutoff = -1.0 if m.alpha_cutoff is None else float(m.alpha_cutoff)
             self._materials.append(
-                _GpuMaterial(tex, tuple(float(c) for c in m.base_color), (m.roughness, m.metallic, m.specular),
-                             tuple(float(c) for c in m.emissive), cutoff)  # type: ignore[arg-type]
+                _GpuMaterial(tex, _floats(m.base_color, 4), (m.roughness, m.metallic, m.specular),
+                             _floats(m.emissive, 3), cutoff)
             )
         for i, mesh in enumerate(scene.meshes):
             pos = np.asarray(mesh.positions, np.float32)
@@ -531,7 +537,8 @@ class Renderer:
             n = len(pos)
             if pos.ndim != 2 or pos.shape[1] != 3 or nrm.shape != (n, 3) or uv.shape != (n, 2):
                 raise RendererError(
-                    f"mesh {i}: positions (N, 3), normals (N, 3) and uvs (N, 2) must agree; got {pos.shape}, {nrm.shape}, {uv.shape}"
+                    f"mesh {i}: positions (N, 3), normals (N, 3) and uvs (N, 2) must agree; "
+                    f"got {pos.shape}, {nrm.shape}, {uv.shape}"
                 )
             if idx.ndim != 2 or idx.shape[1] != 3:
                 raise RendererError(f"mesh {i}: indices must be (M, 3), got {idx.shape}")
@@ -803,7 +810,7 @@ class Renderer:
         for k, v in f.sky_uniforms().items():
             _set(p, k, v)
         for rate in ALL_RATES:
-            _set(p, "u_rate", _rate_size(rate))
+            _set(p, "u_rate", rate_size(rate))
             (self._debug_fbo(rate) if debug else self._fbo_ldr[rate]).use()
             self._fullscreen["coarse"].render(self._mgl.TRIANGLES, vertices=3)
 
