@@ -30,7 +30,7 @@ from ._errors import (
 )
 from ._metadata import METADATA_KEY, SCHEMA_VERSION, ModelMetadata
 from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
-from ._overlay import draw_rate_overlay
+from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import ALL_RATES, PREDICTED_RATES, RATE_CODES, RATE_NAMES, RateLike, rate_size, resolve_allowed, select_rates, work_saved
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
@@ -64,6 +64,7 @@ __all__ = [
     "METADATA_KEY",
     "METRICS",
     "OUTPUT_SETS",
+    "OVERLAY_COLOURS",
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",

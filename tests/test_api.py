@@ -26,6 +26,7 @@ def test_sdk_all_is_pinned() -> None:
         "METADATA_KEY",
         "METRICS",
         "OUTPUT_SETS",
+        "OVERLAY_COLOURS",
         "PREDICTED_RATES",
         "RATE_CODES",
         "RATE_NAMES",
