@@ -617,7 +617,7 @@ class _Run:
         every = [self.quality[("model", sc)].merged() for sc in sorted(self.scene_counts)]
         scatter = (np.concatenate([e[0] for e in every]), np.concatenate([e[1] for e in every]))
         stem = Path(str(self.predictor.path)).stem
-        return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem)]
+        return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem, self.thr)]
 
 
 def _matched(sweep: list[dict[str, Any]], target: float) -> list[dict[str, Any]]:
@@ -684,7 +684,7 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
     return notes
 
 
-def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: str) -> list[Path]:
+def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: str, threshold: float) -> list[Path]:
     from . import plots as P
 
     out.mkdir(parents=True, exist_ok=True)
@@ -697,10 +697,16 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
         t = fwd(v)
         return 1.0 - t if meta.worse_direction < 0 else t
 
+    # Transformed space (as the paper plots it): 0..1, oriented so that bright is worse for every metric.
+    label = f"{meta.metric} ({meta.transform.type} transform, 1 = worst)"
     paths = [out / f"{stem}_heatmaps.png", out / f"{stem}_scatter.png", out / f"{stem}_rates.png"]
-    P.save_png(paths[0], P.heatmaps(bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w),
-                                    seen=sample.channel("seen"), scale=scale))
+    P.save_image(paths[0], P.heatmaps(
+        bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w), seen=sample.channel("seen"),
+        scale=scale, label=label, threshold=float(bright_is_worse(np.float64(threshold))),
+        title=f"sample {sample.id}: true and predicted error per tile",
+    ))
     p_all, g_all = d["scatter"]
-    P.save_png(paths[1], P.scatter(p_all, g_all, title=f"{meta.metric}, transformed, {p_all.size} values"))
-    P.save_png(paths[2], P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale))
+    P.save_image(paths[1], P.scatter(p_all, g_all, label=label,
+                                     title=f"{meta.metric}: predicted vs true, {p_all.size} tile values"))
+    P.save_image(paths[2], P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale))
     return paths

@@ -1,79 +1,66 @@
-"""Evaluation figures in plain numpy + Pillow (no matplotlib): heatmaps, a density scatter, rate overlays.
+"""Evaluation figures, drawn with matplotlib (Agg, no display needed): heatmaps with a colour bar,
+a density scatter with real axes, rate overlays with a legend.
 
-Every function returns a uint8 ``(H, W, 3)`` image; :func:`save_png` writes one. Panels are laid
-out by :func:`grid`: a label strip of :data:`LABEL_H` pixels above each panel and :data:`GAP`
-pixels between panels, so sizes are predictable::
-
-    height = rows * (LABEL_H + panel_h) + (rows - 1) * GAP
-    width  = cols * panel_w + (cols - 1) * GAP
+Every figure function returns a uint8 ``(H, W, 3)`` RGB image, so a caller can show it, stack it or
+write it; :func:`save_image` writes one in the format its file extension names (``.png``, ``.jpg``,
+``.webp``, ...), atomically. Each figure says what its colours mean: a colour bar with the quantity
+and its range, titles on every panel, a legend for the rate classes.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from rtp.sdk import PREDICTED_RATES, draw_rate_overlay
+from rtp.sdk import OVERLAY_COLOURS, PREDICTED_RATES, RATE_NAMES, draw_rate_overlay, rate_size, work_saved
+from rtp.sdk.files import atomic_output
 
 from ._baselines import BaselineError
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 __all__ = [
-    "COLORMAPS",
-    "GAP",
-    "LABEL_H",
-    "SCATTER_MARGIN",
     "colorize",
-    "grid",
+    "figure_image",
     "heatmaps",
+    "rate_legend",
     "rate_overlays",
-    "save_png",
+    "save_image",
     "scatter",
     "upsample_tiles",
 ]
 
-#: Height of the label strip above each panel, pixels.
-LABEL_H = 14
-#: Gap between panels, pixels.
-GAP = 4
-#: Left and bottom margin of :func:`scatter` for the axis labels, pixels.
-SCATTER_MARGIN = 28
+#: Dots per inch of every figure: panels are drawn at (about) one figure pixel per image pixel.
+DPI = 100
+#: The colour of seen pixels in the seen-mask panels (unseen pixels are black).
+SEEN_GREY = "#bdbdbd"
 
-#: Perceptually uniform colour maps as 9 evenly spaced samples of matplotlib's ``magma`` and
-#: ``viridis`` (sRGB in [0, 1]), interpolated linearly in between: a close approximation, not
-#: the 256-entry tables.
-COLORMAPS: dict[str, np.ndarray] = {
-    "magma": np.array([
-        (0.001462, 0.000466, 0.013866), (0.078815, 0.054184, 0.211667), (0.232077, 0.059889, 0.437695),
-        (0.390384, 0.100379, 0.501864), (0.550287, 0.161158, 0.505719), (0.716387, 0.214982, 0.475290),
-        (0.868793, 0.287728, 0.409303), (0.967671, 0.439703, 0.359810), (0.987053, 0.991438, 0.749504),
-    ]),
-    "viridis": np.array([
-        (0.267004, 0.004874, 0.329415), (0.282623, 0.140926, 0.457517), (0.253935, 0.265254, 0.529983),
-        (0.206756, 0.371758, 0.553117), (0.163625, 0.471133, 0.558148), (0.127568, 0.566949, 0.550556),
-        (0.134692, 0.658636, 0.517649), (0.266941, 0.748751, 0.440573), (0.993248, 0.906157, 0.143936),
-    ]),
-}
+
+def _colormap(cmap: str) -> Any:
+    import matplotlib
+
+    try:
+        return matplotlib.colormaps[cmap]
+    except KeyError:
+        raise BaselineError(f"unknown colour map {cmap!r}; any of matplotlib's, e.g. magma, viridis, inferno") from None
 
 
 def colorize(values: np.ndarray, vmin: float = 0.0, vmax: float = 1.0, cmap: str = "magma") -> np.ndarray:
-    """Map values ``(...)`` to uint8 colours ``(..., 3)``; values are clipped to ``[vmin, vmax]``;
-    NaN is drawn mid grey."""
-    if cmap not in COLORMAPS:
-        raise BaselineError(f"unknown colour map {cmap!r}; known: {', '.join(COLORMAPS)}")
-    if not vmax > vmin:
-        raise BaselineError(f"vmax must exceed vmin, got {vmin}, {vmax}")
-    table = COLORMAPS[cmap]
+    """Map values ``(...)`` to uint8 colours ``(..., 3)`` through a matplotlib colour map; values are
+    clipped to ``[vmin, vmax]``; NaN is drawn mid grey."""
+    if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > vmin):
+        raise BaselineError(f"colour range: expected finite vmin < vmax, got {vmin}, {vmax}")
+    table = _colormap(cmap)
     v = np.asarray(values, dtype=np.float64)
     nan = np.isnan(v)
-    x = np.clip((np.where(nan, vmin, v) - vmin) / (vmax - vmin), 0.0, 1.0) * (len(table) - 1)
-    i = np.minimum(x.astype(np.int64), len(table) - 2)
-    f = (x - i)[..., None]
-    rgb = table[i] * (1.0 - f) + table[i + 1] * f
-    rgb[nan] = 0.5
-    return np.round(rgb * 255.0).astype(np.uint8)
+    x = np.clip((np.where(nan, vmin, v) - vmin) / (vmax - vmin), 0.0, 1.0)
+    rgb = np.round(table(x)[..., :3] * 255.0).astype(np.uint8)
+    rgb[nan] = 128
+    return rgb
 
 
 def upsample_tiles(values: np.ndarray, tile: int, size: tuple[int, int]) -> np.ndarray:
@@ -82,50 +69,28 @@ def upsample_tiles(values: np.ndarray, tile: int, size: tuple[int, int]) -> np.n
     return np.repeat(np.repeat(np.asarray(values), tile, axis=0), tile, axis=1)[:h, :w]
 
 
-def _font() -> Any:
-    from PIL import ImageFont
+def _figure(width_px: float, height_px: float) -> Figure:
+    from matplotlib.figure import Figure
 
-    return ImageFont.load_default()
-
-
-def _label(width: int, text: str) -> np.ndarray:
-    from PIL import Image, ImageDraw
-
-    im = Image.new("RGB", (max(width, 1), LABEL_H), (255, 255, 255))
-    ImageDraw.Draw(im).text((2, 1), text, fill=(0, 0, 0), font=_font())
-    return np.asarray(im)
+    return Figure(figsize=(width_px / DPI, height_px / DPI), dpi=DPI, layout="constrained")
 
 
-def _rgb8(img: np.ndarray) -> np.ndarray:
-    a = np.asarray(img)
-    if a.ndim == 2:
-        a = np.repeat(a[..., None], 3, axis=2)
-    if a.dtype != np.uint8:
-        a = np.round(np.clip(a[..., :3], 0.0, 1.0) * 255.0).astype(np.uint8)
-    return a[..., :3]
+def figure_image(fig: Figure) -> np.ndarray:
+    """Render a matplotlib figure (Agg) to a uint8 ``(H, W, 3)`` RGB image."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.array(canvas.buffer_rgba())[..., :3]
 
 
-def grid(panels: Sequence[Sequence[np.ndarray]], labels: Sequence[Sequence[str]] | None = None) -> np.ndarray:
-    """Lay out rows of equally sized panels (uint8 or float ``(h, w, 3)``, or ``(h, w)`` grey), each
-    with a label strip above it, on white. See the module docstring for the size."""
-    rows = [[_rgb8(p) for p in row] for row in panels]
-    if not rows or not rows[0]:
-        raise BaselineError("grid: no panels")
-    ph, pw = rows[0][0].shape[:2]
-    cols = max(len(r) for r in rows)
-    if any(p.shape[:2] != (ph, pw) for r in rows for p in r):
-        raise BaselineError("grid: panels must share one size")
-    height = len(rows) * (LABEL_H + ph) + (len(rows) - 1) * GAP
-    width = cols * pw + (cols - 1) * GAP
-    out = np.full((height, width, 3), 255, np.uint8)
-    for i, row in enumerate(rows):
-        y = i * (LABEL_H + ph + GAP)
-        for j, p in enumerate(row):
-            x = j * (pw + GAP)
-            text = labels[i][j] if labels is not None and j < len(labels[i]) else ""
-            out[y : y + LABEL_H, x : x + pw] = _label(pw, text)
-            out[y + LABEL_H : y + LABEL_H + ph, x : x + pw] = p
-    return out
+def _bare(ax: Any) -> None:
+    """An image panel: no ticks, a thin frame so light content does not merge with the page."""
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_edgecolor("#404040")
+        spine.set_linewidth(0.8)
 
 
 def heatmaps(
@@ -140,111 +105,157 @@ def heatmaps(
     vmax: float = 1.0,
     cmap: str = "magma",
     scale: int = 1,
+    label: str = "per-tile error",
+    threshold: float | None = None,
+    title: str = "",
 ) -> np.ndarray:
-    """Ground truth next to prediction, one row per rate: ``truth | seen mask | prediction`` (the
-    paper's Figure layout; the mask column only with ``seen``).
+    """True next to predicted per-tile values, one row per rate: ``truth | seen mask | prediction``
+    (the paper's figure layout; the mask column only with ``seen``), with one colour bar.
 
     ``truth`` and ``prediction`` are per-tile values ``(6, th, tw)`` (channel order
-    :data:`~rtp.sdk.PREDICTED_RATES`) already scaled so that ``[vmin, vmax]`` spans the colours
-    (the evaluation passes transformed values oriented so that bright means worse). ``size`` is the
-    frame ``(H, W)``; ``scale`` > 1 subsamples the panels. Returns uint8, see :func:`grid` for
-    the size with panels of ``(ceil(H/scale), ceil(W/scale))``.
+    :data:`~rtp.sdk.PREDICTED_RATES`); ``[vmin, vmax]`` spans the colours, ``label`` names the
+    quantity on the colour bar (with its units) and ``threshold``, if given, is marked on it.
+    ``size`` is the frame ``(H, W)``; ``scale`` > 1 draws the panels that many times smaller.
     """
     truth, prediction = np.asarray(truth), np.asarray(prediction)
     if truth.shape != prediction.shape or truth.ndim != 3 or truth.shape[0] != len(PREDICTED_RATES):
         raise BaselineError(
             f"heatmaps: expected truth and prediction of one shape (6, th, tw), got {truth.shape} and {prediction.shape}"
         )
-    panels, labels = [], []
-    for r in rates:
-        if r not in PREDICTED_RATES:
-            raise BaselineError(f"heatmaps: unknown rate {r!r}")
+    unknown = [r for r in rates if r not in PREDICTED_RATES]
+    if unknown or not rates:
+        raise BaselineError(f"heatmaps: expected rates among {', '.join(PREDICTED_RATES)}, got {list(rates)}")
+    import matplotlib.colors as mcolors
+
+    h, w = size
+    cols = 3 if seen is not None else 2
+    pw, ph = max(w / scale, 120), max(h / scale, 68)
+    fig = _figure(cols * pw + 110, len(rates) * (ph + 26) + (28 if title else 8))
+    axes = fig.subplots(len(rates), cols, squeeze=False)
+    norm = mcolors.Normalize(vmin, vmax)
+    image = None
+    for row, r in zip(axes, rates):
         c = PREDICTED_RATES.index(r)
-        row = [colorize(upsample_tiles(truth[c], tile, size), vmin, vmax, cmap)[::scale, ::scale]]
-        lab = [f"{r} ground truth"]
+        panels = [(truth[c], f"{r}: true")]
         if seen is not None:
-            row.append(_rgb8(np.clip(np.asarray(seen, np.float32), 0, 1))[::scale, ::scale])
-            lab.append("seen (black: unseen)")
-        row.append(colorize(upsample_tiles(prediction[c], tile, size), vmin, vmax, cmap)[::scale, ::scale])
-        lab.append(f"{r} prediction")
-        panels.append(row)
-        labels.append(lab)
-    return grid(panels, labels)
+            panels.append((None, "seen (grey) / unseen (black)"))
+        panels.append((prediction[c], f"{r}: predicted"))
+        for ax, (values, name) in zip(row, panels):
+            if values is None:
+                ax.imshow(np.clip(np.asarray(seen, np.float32), 0, 1),
+                          cmap=mcolors.ListedColormap(["black", SEEN_GREY]), vmin=0, vmax=1, interpolation="nearest")
+            else:
+                image = ax.imshow(upsample_tiles(values, tile, size), cmap=_colormap(cmap), norm=norm,
+                                  interpolation="nearest")
+            ax.set_title(name, fontsize=9)
+            _bare(ax)
+    over = bool(np.nanmax([np.nanmax(truth), np.nanmax(prediction)]) > vmax) if truth.size else False
+    marked = threshold is not None and vmin <= threshold <= vmax
+    bar = fig.colorbar(image, ax=axes.ravel().tolist(), extend="max" if over else "neither", shrink=0.9,
+                       label=label + ("\n(cyan line: the threshold)" if marked else ""))
+    if marked:
+        bar.ax.axhline(threshold, color="#00e5ff", linewidth=2.5)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return figure_image(fig)
 
 
 def scatter(
     prediction: np.ndarray,
     truth: np.ndarray,
     *,
-    size: int = 256,
+    size: int = 360,
     lo: float = 0.0,
     hi: float = 1.0,
-    cmap: str = "magma",
+    cmap: str = "magma_r",
     title: str = "",
+    label: str = "value",
 ) -> np.ndarray:
-    """Predicted (y, up) against true (x) per-tile values as a log-density 2D histogram (dark =
-    many tiles; about ``2 sqrt(n)`` bins per axis, at most ``size``) with the diagonal in grey.
-    Returns uint8 ``(size + SCATTER_MARGIN, size + SCATTER_MARGIN, 3)``: the plot square with a left
-    and a bottom margin holding the axis labels (and ``title``)."""
-    from PIL import Image, ImageDraw
-
+    """Predicted against true per-tile values as a 2D histogram with a logarithmic colour bar (tiles
+    per bin), the diagonal ``prediction = truth`` dashed, labelled axes and the title above the plot.
+    ``size`` is the plot's side in pixels (the image adds the axes, colour bar and title)."""
     p = np.asarray(prediction, np.float64).ravel()
     g = np.asarray(truth, np.float64).ravel()
     if p.shape != g.shape:
         raise BaselineError(f"scatter: prediction and truth differ in size: {p.shape} vs {g.shape}")
-    if not hi > lo or size < 8:
-        raise BaselineError(f"scatter: need hi > lo and size >= 8, got lo={lo}, hi={hi}, size={size}")
+    if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo) or size < 64:
+        raise BaselineError(f"scatter: need finite lo < hi and size >= 64, got lo={lo}, hi={hi}, size={size}")
+    import matplotlib.colors as mcolors
+
     ok = np.isfinite(p) & np.isfinite(g)
     p, g = np.clip(p[ok], lo, hi), np.clip(g[ok], lo, hi)
-    # Fewer, larger bins for few values so that single tiles stay visible; at most one per pixel.
-    bins = int(np.clip(2 * np.sqrt(max(p.size, 1)), 16, size))
-    hist, _, _ = np.histogram2d(p, g, bins=bins, range=[[lo, hi], [lo, hi]])  # rows: prediction, cols: truth
-    dens = np.log1p(hist[::-1])  # prediction grows upwards
-    dens = dens / dens.max() if dens.max() > 0 else dens
-    # sparse bins light, dense bins dark (the low end of the map), empty bins white
-    img = colorize(0.85 * (1.0 - dens), 0.0, 1.0, cmap)
-    img[dens == 0] = 255
-    idx = np.minimum(np.arange(size) * bins // size, bins - 1)
-    img = img[idx][:, idx]
-    diag = np.arange(size)
-    img[size - 1 - diag, diag] = (64, 64, 64)
-    m = SCATTER_MARGIN
-    out = np.full((size + m, size + m, 3), 255, np.uint8)
-    out[:size, m:] = img
-    im = Image.fromarray(out)
-    d = ImageDraw.Draw(im)
-    f = _font()
-    d.rectangle([m - 1, 0, m + size - 1, size], outline=(0, 0, 0))
-    d.text((m + 2, size + 2), f"{lo:g}", fill=(0, 0, 0), font=f)
-    d.text((m + size - 22, size + 2), f"{hi:g}", fill=(0, 0, 0), font=f)
-    d.text((m + size // 2 - 12, size + 14), "true", fill=(0, 0, 0), font=f)
-    d.text((2, size - 12), f"{lo:g}", fill=(0, 0, 0), font=f)
-    d.text((2, 2), f"{hi:g}", fill=(0, 0, 0), font=f)
-    d.text((2, size // 2 - 6), "pred", fill=(0, 0, 0), font=f)
-    if title:
-        d.text((m + 4, 2), title, fill=(0, 0, 0), font=f)
-    return np.asarray(im)
+    bins = int(np.clip(2 * np.sqrt(max(p.size, 1)), 16, 128))  # fewer, larger bins for few values
+    fig = _figure(size + 150, size + 90)
+    ax = fig.subplots()
+    hist, xe, ye = np.histogram2d(g, p, bins=bins, range=[[lo, hi], [lo, hi]])
+    mesh = ax.pcolormesh(xe, ye, np.ma.masked_equal(hist.T, 0), cmap=_colormap(cmap),
+                         norm=mcolors.LogNorm(vmin=1, vmax=max(hist.max(), 2)))
+    ax.plot([lo, hi], [lo, hi], color="#555555", linewidth=1, linestyle="--", label="prediction = truth")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"true {label}")
+    ax.set_ylabel(f"predicted {label}")
+    ax.legend(loc="upper left", fontsize=8, frameon=False)
+    ax.set_title(title or f"{p.size} tiles", fontsize=10)
+    fig.colorbar(mesh, ax=ax, label="tiles per bin (log)", shrink=0.85)
+    return figure_image(fig)
+
+
+def rate_legend() -> list[tuple[str, tuple[float, float, float] | None]]:
+    """The overlay's colour classes and the rates in each: ``[(label, colour or None for 1x1)]``."""
+    classes: dict[str, list[str]] = {"fine": [], "medium": [], "coarse": []}
+    for r in PREDICTED_RATES:
+        w, h = rate_size(r)
+        classes["fine" if w * h == 2 else "medium" if w * h == 4 else "coarse"].append(r)
+    out: list[tuple[str, tuple[float, float, float] | None]] = [("1x1 (untinted)", None)]
+    out += [(f"{k}: {', '.join(v)}", OVERLAY_COLOURS[k]) for k, v in classes.items()]
+    return out
+
+
+def _add_rate_legend(fig: Figure) -> None:
+    from matplotlib.patches import Patch
+
+    handles = [Patch(facecolor=c if c is not None else "white", edgecolor="#404040", label=name)
+               for name, c in rate_legend()]
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8, frameon=False)
 
 
 def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1) -> np.ndarray:
     """:func:`rtp.sdk.draw_rate_overlay` of each method's rate codes ``(th, tw)`` on the same
-    ``(H, W, 3)`` image, side by side, labelled with the method names and the shading work they
-    save. Panels are ``(ceil(H/scale), ceil(W/scale))``; see :func:`grid` for the size."""
-    from rtp.sdk import RATE_NAMES, work_saved
-
-    panels, labels = [], []
-    for name, codes in rates.items():
-        codes = np.asarray(codes)
-        saved = float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])) if codes.size else 0.0
-        panels.append(draw_rate_overlay(_rgb8(image), codes.astype(np.uint8), tile)[::scale, ::scale])
-        labels.append(f"{name} (saves {100 * saved:.0f}%)")
-    if not panels:
+    ``(H, W, 3)`` image, side by side, titled with the method and the shading work it saves (tile
+    average), with the legend of the rate colours below."""
+    if not rates:
         raise BaselineError("rate_overlays: no methods given")
-    return grid([panels], [labels])
+    img = np.asarray(image)
+    h, w = img.shape[:2]
+    fig = _figure(len(rates) * max(w / scale, 160) + 20, max(h / scale, 90) + 70)
+    axes = np.atleast_1d(fig.subplots(1, len(rates)))
+    for ax, (name, codes) in zip(axes, rates.items()):
+        codes = np.asarray(codes).astype(np.uint8)
+        saved = float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])) if codes.size else 0.0
+        ax.imshow(draw_rate_overlay(img, codes, tile), interpolation="nearest")
+        ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
+        _bare(ax)
+    _add_rate_legend(fig)
+    return figure_image(fig)
 
 
-def save_png(path: str | os.PathLike[str], image: np.ndarray) -> None:
-    """Write an image (uint8, or float in [0, 1]) as PNG, atomically."""
-    from rtp.capture import write_png
+def save_image(path: str | os.PathLike[str], image: np.ndarray) -> None:
+    """Write an image (uint8, or float in [0, 1]; ``(H, W)``, ``(H, W, 3)`` or ``(H, W, 4)``)
+    atomically, in the format the file extension names (``.png``, ``.jpg``, ``.webp``, ...)."""
+    from PIL import Image
 
-    write_png(path, image)
+    a = np.asarray(image)
+    if a.dtype != np.uint8:
+        a = np.round(np.clip(np.nan_to_num(a.astype(np.float64)), 0.0, 1.0) * 255.0).astype(np.uint8)
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (3, 4)):
+        raise BaselineError(f"save_image: expected (H, W), (H, W, 3) or (H, W, 4), got shape {a.shape}")
+    fmt = Image.registered_extensions().get(os.path.splitext(os.fspath(path))[1].lower())
+    if fmt is None:
+        raise BaselineError(f"save_image: {os.fspath(path)!r} has no image extension Pillow can write (.png, .jpg, ...)")
+    im = Image.fromarray(a)
+    if fmt == "JPEG" and im.mode == "RGBA":
+        im = im.convert("RGB")
+    with atomic_output(path) as tmp:
+        im.save(tmp, format=fmt)

@@ -344,25 +344,59 @@ def test_spearman() -> None:
 # -- plots ----------------------------------------------------------------------------------------
 
 
-def test_colorize_and_plot_sizes() -> None:
-    c = plots.colorize(np.array([0.0, 1.0, np.nan, 2.0]))
-    assert c.dtype == np.uint8 and c.shape == (4, 3)
-    np.testing.assert_array_equal(c[0], np.round(plots.COLORMAPS["magma"][0] * 255))
+def test_colorize_uses_the_full_colour_map() -> None:
+    import matplotlib
+
+    c = plots.colorize(np.array([0.0, 1.0, np.nan, 2.0, 0.5]))
+    assert c.dtype == np.uint8 and c.shape == (5, 3)
+    np.testing.assert_array_equal(c[0], np.round(np.array(matplotlib.colormaps["magma"](0.0)[:3]) * 255))
+    np.testing.assert_array_equal(c[4], np.round(np.array(matplotlib.colormaps["magma"](0.5)[:3]) * 255))
     np.testing.assert_array_equal(c[1], c[3])  # clipped
     assert (c[2] == 128).all()
+    with pytest.raises(BaselineError, match="unknown colour map"):
+        plots.colorize(np.zeros(2), cmap="no-such-map")
+    with pytest.raises(BaselineError, match="vmin < vmax"):
+        plots.colorize(np.zeros(2), 0.0, 0.0)
+
+
+def _has_colour(img: np.ndarray, rgb: tuple[float, float, float], tol: int = 3) -> bool:
+    want = np.round(np.array(rgb) * 255)
+    return bool((np.abs(img.astype(int) - want).max(axis=-1) <= tol).any())
+
+
+def test_figures_carry_their_colour_scale_and_legend() -> None:
+    import matplotlib
+
     truth = np.random.default_rng(0).random((6, 3, 4))
-    hm = plots.heatmaps(truth, truth, 16, (40, 60), seen=np.ones((40, 60)))
-    L, G = plots.LABEL_H, plots.GAP
-    assert hm.shape == (2 * (L + 40) + G, 3 * 60 + 2 * G, 3)
-    hm2 = plots.heatmaps(truth, truth, 16, (40, 60), rates=("1x2",), scale=2)
-    assert hm2.shape == (L + 20, 2 * 30 + G, 3)
-    sc = plots.scatter(np.linspace(0, 1, 500), np.linspace(0, 1, 500), size=64)
-    assert sc.shape == (64 + plots.SCATTER_MARGIN, 64 + plots.SCATTER_MARGIN, 3)
+    hm = plots.heatmaps(truth, truth, 16, (40, 60), seen=np.ones((40, 60)), threshold=0.5, label="jnyang")
+    assert hm.dtype == np.uint8 and hm.ndim == 3 and hm.shape[2] == 3
+    # the colour bar spans the map: its darkest and brightest colours are both drawn
+    magma = matplotlib.colormaps["magma"]
+    assert _has_colour(hm, magma(0.0)[:3]) and _has_colour(hm, magma(1.0)[:3])
+    assert _has_colour(hm, (0.0, 229 / 255, 1.0))  # the threshold's line on the colour bar
+    one = plots.heatmaps(truth, truth, 16, (40, 60), rates=("1x2",))
+    assert one.shape[0] < hm.shape[0] and one.shape[1] < hm.shape[1]  # one row, two columns
+    with pytest.raises(BaselineError, match="expected rates"):
+        plots.heatmaps(truth, truth, 16, (40, 60), rates=("3x3",))
+    sc = plots.scatter(np.linspace(0, 1, 500), np.linspace(0, 1, 500), size=128, label="jnyang")
+    assert sc.shape[0] > 128 and sc.shape[1] > 128
     codes = np.zeros((3, 4), np.uint8)
     ov = plots.rate_overlays(np.zeros((40, 60, 3), np.float32), {"a": codes, "b": codes + C["2x2"]}, 16)
-    assert ov.shape == (L + 40, 2 * 60 + G, 3)
-    with pytest.raises(BaselineError):
-        plots.colorize(np.zeros(2), cmap="jet")
+    for _, colour in plots.rate_legend()[1:]:  # every class of the legend is drawn at full colour
+        assert colour is not None and _has_colour(ov, colour)
+    assert [name.split(":")[0] for name, _ in plots.rate_legend()] == ["1x1 (untinted)", "fine", "medium", "coarse"]
+
+
+@pytest.mark.parametrize("ext", ["png", "jpg", "webp"])
+def test_save_image_writes_the_format_its_extension_names(tmp_path: Path, ext: str) -> None:
+    from PIL import Image
+
+    path = tmp_path / f"x.{ext}"
+    plots.save_image(path, np.zeros((8, 8, 3), np.float32))
+    with Image.open(path) as im:
+        assert im.format == {"png": "PNG", "jpg": "JPEG", "webp": "WEBP"}[ext] and im.size == (8, 8)
+    with pytest.raises(BaselineError, match="extension"):
+        plots.save_image(tmp_path / "x.nope", np.zeros((8, 8, 3)))
 
 
 # -- the CLI --------------------------------------------------------------------------------------
@@ -384,7 +418,7 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
         with Image.open(out / name) as im:
             assert im.mode == "RGB" and im.size[0] > 0
     with Image.open(out / "m_rates.png") as im:  # model, oracle and four baselines side by side
-        assert im.size == (6 * W + 5 * plots.GAP, plots.LABEL_H + H)
+        assert im.size[0] > 6 * W and im.size[1] > H
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scenes", "zzz"]) == 2
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scenes", "a,b", "--scenes", "b",
                      "--no-baselines", "--max-samples", "1"]) == 0
