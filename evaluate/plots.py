@@ -133,7 +133,6 @@ def heatmaps(
     fig = _figure(cols * pw + 110, len(rates) * (ph + 26) + (28 if title else 8))
     axes = fig.subplots(len(rates), cols, squeeze=False)
     norm = mcolors.Normalize(vmin, vmax)
-    image = None
     for row, r in zip(axes, rates):
         c = PREDICTED_RATES.index(r)
         panels = [(truth[c], f"{r}: true")]
@@ -145,15 +144,17 @@ def heatmaps(
                 ax.imshow(np.clip(np.asarray(seen, np.float32), 0, 1),
                           cmap=mcolors.ListedColormap(["black", SEEN_GREY]), vmin=0, vmax=1, interpolation="nearest")
             else:
-                image = ax.imshow(upsample_tiles(values, tile, size), cmap=_colormap(cmap), norm=norm,
-                                  interpolation="nearest")
+                ax.imshow(upsample_tiles(values, tile, size), cmap=_colormap(cmap), norm=norm, interpolation="nearest")
             ax.set_title(name, fontsize=9)
             _bare(ax)
     over = bool(np.nanmax([np.nanmax(truth), np.nanmax(prediction)]) > vmax) if truth.size else False
+    import matplotlib.cm as mcm
+
     marked = threshold is not None and vmin <= threshold <= vmax
-    bar = fig.colorbar(image, ax=axes.ravel().tolist(), extend="max" if over else "neither", shrink=0.9,
+    mappable = mcm.ScalarMappable(norm=norm, cmap=_colormap(cmap))
+    bar = fig.colorbar(mappable, ax=axes.ravel().tolist(), extend="max" if over else "neither", shrink=0.9,
                        label=label + ("\n(cyan line: the threshold)" if marked else ""))
-    if marked:
+    if marked and threshold is not None:
         bar.ax.axhline(threshold, color="#00e5ff", linewidth=2.5)
     if title:
         fig.suptitle(title, fontsize=10)
