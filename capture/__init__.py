@@ -5,7 +5,7 @@ Importing this package needs only numpy; rendering (:func:`capture`) needs ``rtp
 computing targets (:func:`compute_targets`) ``rtp[metrics]``, both imported when called.
 """
 
-from ._capture import PROCEDURAL_PREFIX, CaptureReport, capture, load_scene
+from ._capture import MESH_EXTENSIONS, PROCEDURAL_PREFIX, CaptureReport, capture, load_scene, scene_id
 from ._dataset import (
     BUFFERS,
     DatasetError,
@@ -22,6 +22,7 @@ from ._targets import BASE_TILE, TargetError, TargetStore, compute_targets, pool
 __all__ = [
     "BASE_TILE",
     "BUFFERS",
+    "MESH_EXTENSIONS",
     "PROCEDURAL_PREFIX",
     "CaptureReport",
     "DatasetError",
@@ -37,5 +38,6 @@ __all__ = [
     "load_scene",
     "open_dataset",
     "pool_targets",
+    "scene_id",
     "write_png",
 ]

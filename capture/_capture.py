@@ -13,6 +13,7 @@ import logging
 import multiprocessing as mp
 import os
 import platform
+import re
 import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -26,12 +27,17 @@ from rtp.sdk import ALL_RATES, RtpError
 
 from ._dataset import DatasetReader, DatasetWriter
 
-__all__ = ["PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "load_scene", "sample_buffers"]
+__all__ = [
+    "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "load_scene", "sample_buffers",
+    "scene_id",
+]
 
 log = logging.getLogger("rtp.capture")
 
 #: Scene names of the form ``procedural:<seed>`` select the built-in generator (no downloads).
 PROCEDURAL_PREFIX = "procedural:"
+#: File extensions :func:`load_scene` reads as your own scene (glTF, GLB, OBJ through trimesh).
+MESH_EXTENSIONS: tuple[str, ...] = (".gltf", ".glb", ".obj")
 #: Share of a view that must be covered by geometry, tried in turn: mostly-indoor views first; open
 #: maps whose sky fills most views fall back to the paper's 15 % foreground rule.
 VIEW_COVERAGE = (0.85, 0.5, 0.15)
@@ -53,20 +59,36 @@ class CaptureReport:
 def load_scene(
     name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None
 ) -> tuple[Any, Any]:
-    """A scene by name and its invisible blockers (a BSP map's sky); ``procedural:<seed>`` needs no cache."""
+    """A scene and its invisible blockers (a BSP map's sky), from one of three kinds of name:
+
+    * ``procedural:<seed>``: the built-in procedural scene, nothing to download;
+    * a path to your own glTF / GLB / OBJ file (anything with a mesh extension, or an existing file);
+    * a game level listed in ``scenes.yaml`` (``split`` restricts to one split), from the cache of
+      ``rtp scenes fetch`` (``cache_dir``, default :func:`rtp.capture.scenes.default_cache_dir`).
+    """
     from rtp.capture import scenes
 
-    if name.startswith(PROCEDURAL_PREFIX):
+    if name == PROCEDURAL_PREFIX.rstrip(":") or name.startswith(PROCEDURAL_PREFIX):
         try:
             seed = int(name[len(PROCEDURAL_PREFIX):])
         except ValueError as err:
-            raise RtpError(f"scene {name!r}: expected {PROCEDURAL_PREFIX}<integer seed>") from err
+            raise scenes.SceneNotFoundError(
+                f"scene {name!r}: the procedural scene needs a seed, e.g. {PROCEDURAL_PREFIX}0"
+            ) from err
         return scenes.procedural(seed), None
-    if cache_dir is None:
-        raise RtpError(f"scene {name!r} is a game level: pass the cache folder of `rtp scenes fetch` (--cache)")
-    cache = Path(cache_dir)
+    if Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file():
+        return scenes.load_mesh_file(name), None
+    cache = Path(scenes.default_cache_dir() if cache_dir is None else cache_dir)
     scene = scenes.scene_by_name(name, cache, split=split, splits=splits)
     return scene, scenes.scene_blockers(name, cache, splits=splits)
+
+
+def scene_id(name: str) -> str:
+    """The part of sample ids that names the scene: ``procedural:3`` -> ``procedural_3``; a file path
+    -> its stem (``levels/arena.glb`` -> ``arena``); a map name as it is."""
+    if Path(name).suffix.lower() in MESH_EXTENSIONS:
+        name = Path(name).stem
+    return re.sub(r"[^A-Za-z0-9_.]", "_", name)
 
 
 def sample_buffers(frame: Any) -> dict[str, np.ndarray]:
@@ -96,8 +118,7 @@ def _same_cameras(reader: DatasetReader, sample_id: str, prev_cam: Any, cam: Any
 
 
 def _ids(scene: str, profile: str, n: int) -> list[str]:
-    safe = scene.replace(":", "_")
-    return [f"{safe}-{profile}-{i:04d}" for i in range(n)]
+    return [f"{scene_id(scene)}-{profile}-{i:04d}" for i in range(n)]
 
 
 def _run_job(

@@ -121,3 +121,21 @@ def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
     assert store.has("procedural_5-slow-0001", "psnr")
     again = capture(["procedural:5"], out, per_scene=2, size=(96, 64), profiles=("slow",))
     assert (again.written, again.skipped) == (0, 2)
+
+
+def test_capture_takes_your_own_gltf_and_names_scenes_clearly(tmp_path: Path) -> None:
+    from rtp.capture import load_scene, open_dataset, scene_id
+    from rtp.capture.scenes import SceneNotFoundError, procedural
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    level = tmp_path / "levels" / "my level.glb"
+    level.parent.mkdir()
+    to_trimesh_scene(procedural(2)).export(level)
+    r = capture([str(level)], tmp_path / "ds", per_scene=1, size=(96, 64))
+    ds = open_dataset(tmp_path / "ds")
+    assert r.written == 2 and ds.ids == ["my_level-fast-0000", "my_level-slow-0000"]
+    assert ds[ds.ids[0]].meta["scene"] == str(level)
+    assert scene_id("procedural:3") == "procedural_3" and scene_id("a/b/arena.obj") == "arena"
+    for name in ("procedural", "procedural:x"):
+        with pytest.raises(SceneNotFoundError, match="procedural:0"):
+            load_scene(name, None, None, None)
