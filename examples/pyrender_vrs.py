@@ -1,7 +1,7 @@
 """Variable-rate shading for a pyrender scene: two frames of a camera move, a model, the rate overlay.
 
-    python examples/pyrender_vrs.py                       # procedural level -> GLB, random-weight model
-    python examples/pyrender_vrs.py --scene level.glb --model models/jnyang.onnx --out vrs.png
+    python examples/pyrender_vrs.py                       # procedural level -> GLB, the shipped JNYang model
+    python examples/pyrender_vrs.py --scene level.glb --model flip --out vrs.png   # your level, another model
 
 Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default here) or OSMesa.
 
@@ -14,9 +14,9 @@ Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default her
 4. The adapter builds the model's inputs for the second frame from the scene, the two poses and
    the first frame; ``predictor.shading_rates`` picks a rate per tile; the overlay is saved.
 
-Without ``--model`` the script builds a small random-weight network (``rtp.train.model.MetricNet``),
-saves it and exports it with ``rtp.export`` into a temporary folder: its rates mean nothing, it
-only shows the plumbing. Trained models ship later (``sdk.shipped_models()``).
+``--model`` is a shipped model's name (``sdk.shipped_models()``: jnyang by default, flip, jnflip,
+lpips, psnr) or the path of any rtp ONNX model. The pyrender adapter produces the paper's four
+input channels, which every shipped model uses.
 """
 
 from __future__ import annotations
@@ -95,41 +95,10 @@ def camera_poses(scene: Any, spawn: Any | None) -> tuple[np.ndarray, np.ndarray]
     return p0, p1
 
 
-def random_model(folder: Path, inputs: tuple[str, ...] = sdk.DEFAULT_INPUTS) -> Path:
-    """A random-weight MetricNet, saved and exported to ONNX with rtp's own tools."""
-    import torch
-
-    from rtp.export import export_checkpoint
-    from rtp.train.checkpoint import save
-    from rtp.train.model import MetricNet
-
-    torch.manual_seed(0)
-    net = MetricNet(in_channels=len(inputs), out_channels=4)
-    net.train()
-    with torch.no_grad():  # BatchNorm statistics and affine terms that are not the identity, as after training
-        net(torch.rand(4, len(inputs), 64, 64))
-        for m in net.modules():
-            if isinstance(m, torch.nn.BatchNorm2d):
-                m.weight.uniform_(0.5, 1.5)
-                m.bias.uniform_(-0.2, 0.2)
-    net.eval()
-    meta = {
-        "metric": "jnyang",
-        "transform": {"type": "clamped", "mu_y": 0.25},
-        "tile_size": 16,
-        "inputs": list(inputs),
-        "outputs": ["1x2", "2x1", "2x4", "4x2"],
-        "default_threshold": 0.25,
-        "weber_l": 0.02,
-        "description": "random weights: a plumbing demo, not a trained model",
-    }
-    return export_checkpoint(save(folder / "random.pt", net, meta), folder / "random.onnx")
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", type=Path, help="glTF/GLB/OBJ file (default: a procedural level written as GLB)")
-    ap.add_argument("--model", type=Path, help="rtp ONNX model (default: a random-weight model built in a temp dir)")
+    ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
     ap.add_argument("--out", type=Path, default=Path("pyrender_vrs.png"), help="overlay PNG to write")
     ap.add_argument("--size", type=int, nargs=2, default=(640, 360), metavar=("W", "H"))
     ap.add_argument("--threshold", type=float, help="error threshold (default: the model's)")
@@ -148,14 +117,8 @@ def main(argv: list[str] | None = None) -> int:
             scene_path, spawn = write_procedural_glb(folder / "level.glb", args.seed)
             log.info("wrote a procedural level (seed %d) to %s", args.seed, scene_path)
         scene = load_scene(scene_path)
-        if args.model is None:
-            log.warning("NO MODEL GIVEN: building a RANDOM-WEIGHT model; its rates are meaningless "
-                        "(shipped, trained models arrive later; pass --model)")
-            model_path = random_model(folder)
-        else:
-            model_path = args.model
-        predictor = sdk.load(model_path)
-        log.info("model %s: inputs %s, tile %d", model_path.name, ", ".join(predictor.metadata.inputs),
+        predictor = sdk.load(args.model)
+        log.info("model %s: inputs %s, tile %d", predictor.path, ", ".join(predictor.metadata.inputs),
                  predictor.metadata.tile_size)
 
         p0, p1 = camera_poses(scene, spawn)  # before adding a camera: a glTF camera, if any, is the start
@@ -173,12 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         seen = predictor.metadata.inputs.index("seen") if "seen" in predictor.metadata.inputs else None
         if seen is not None:
             log.info("seen (reprojected and depth-tested): %.1f %% of the pixels", 100.0 * float(x[seen].mean()))
-        threshold = args.threshold
-        if threshold is None and args.model is None:
-            # random weights: put the threshold mid-way through the predictions so the overlay shows a mix
-            threshold = float(np.median(predictor.predict(x[None]).min(axis=1)))
-            log.info("random model: threshold set to the median per-tile prediction, %.4g", threshold)
-        rates = predictor.shading_rates(x[None], threshold=threshold)[0]
+        rates = predictor.shading_rates(x[None], threshold=args.threshold)[0]
         names, counts = np.unique(rates, return_counts=True)
         log.info("rates: %s; shading work saved %.1f %%",
                  ", ".join(f"{sdk.RATE_NAMES[int(c)]} x{n}" for c, n in zip(names, counts)),
