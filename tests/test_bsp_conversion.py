@@ -224,3 +224,13 @@ def test_light_fallbacks(tmp_path: Path) -> None:
     (light,) = scene.point_lights
     np.testing.assert_allclose(light.position, np.asarray(scene.spawn_points[0].position) + [0.0, 1.0, 0.0])
     assert light.colour == (1.0, 1.0, 1.0) and light.intensity == pytest.approx(400.0 / 30.0)
+
+
+def test_missing_images_warn_once_per_map(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    textures = [("textures/test/wall", 0, 1)] + [(f"textures/gone/t{i}", 0, 1) for i in range(5)]
+    with caplog.at_level("WARNING", logger="rtp"):
+        conv = convert_bsp(_pk3(tmp_path / "gone.pk3", textures))
+    assert conv.missing_textures == [f"textures/gone/t{i}" for i in range(5)]
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warnings) == 1 and "5 textures have no image" in warnings[0] and "and 2 more" in warnings[0]
+    assert sum(m.base_color == (0.5, 0.5, 0.5, 1.0) for m in conv.scene.materials) == 5

@@ -232,7 +232,7 @@ class _MaterialFactory:
         mat = Material(name=name, roughness=rough, metallic=metal, specular=spec)
         if tex is None:
             self.missing.append(name)
-            log.warning("no image for %s: neutral grey material", name)
+            log.debug("no image for %s: neutral grey material", name)
             mat.base_color = (0.5, 0.5, 0.5, 1.0)
             return mat
         cutoff = _alpha_cutoff(shader, tex)
@@ -367,6 +367,10 @@ def _convert(data: bytes, pk3: Pk3Set, map_name: str, patch_level: int, eye_unit
     stats = _stats(bsp, face_kind, patches)
     stats.update(triangles=scene.triangle_count, materials=len(materials), missing_textures=len(factory.missing),
                  sky_triangles=len(sky), spawn_points=len(spawns), point_lights=len(lights))
+    if factory.missing:  # one line per map, not one per texture (a map can miss dozens)
+        shown = ", ".join(factory.missing[:3]) + (f" and {len(factory.missing) - 3} more" if len(factory.missing) > 3 else "")
+        log.warning("%s: %d textures have no image and get a neutral grey material (%s)", map_name,
+                    len(factory.missing), shown)
     log.info("converted %s: %d triangles, %d materials (%d without image), %d spawn points, %d lights",
              map_name, scene.triangle_count, len(materials), len(factory.missing), len(spawns), len(lights))
     return BspConversion(scene, sky, stats, factory.missing)
