@@ -17,6 +17,8 @@ from ._dataset import (
     open_dataset,
     write_png,
 )
+from ._images import figure_image, save_image
+from ._preview import preview_sheet
 from ._targets import BASE_TILE, TargetError, TargetStore, compute_targets, pool_targets
 
 __all__ = [
@@ -35,9 +37,12 @@ __all__ = [
     "capture",
     "compute_targets",
     "contact_sheet",
+    "figure_image",
     "load_scene",
     "open_dataset",
     "pool_targets",
+    "preview_sheet",
+    "save_image",
     "scene_id",
     "write_png",
 ]

@@ -2,21 +2,20 @@
 a density scatter with real axes, rate overlays with a legend.
 
 Every figure function returns a uint8 ``(H, W, 3)`` RGB image, so a caller can show it, stack it or
-write it; :func:`save_image` writes one in the format its file extension names (``.png``, ``.jpg``,
+write it; :func:`save_image` (``rtp.capture``'s) writes one in the format its file extension names (``.png``, ``.jpg``,
 ``.webp``, ...), atomically. Each figure says what its colours mean: a colour bar with the quantity
 and its range, titles on every panel, a legend for the rate classes.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from rtp.capture import figure_image, save_image
 from rtp.sdk import OVERLAY_COLOURS, PREDICTED_RATES, RATE_NAMES, draw_rate_overlay, rate_size, work_saved
-from rtp.sdk.files import atomic_output
 
 from ._baselines import BaselineError
 
@@ -73,15 +72,6 @@ def _figure(width_px: float, height_px: float) -> Figure:
     from matplotlib.figure import Figure
 
     return Figure(figsize=(width_px / DPI, height_px / DPI), dpi=DPI, layout="constrained")
-
-
-def figure_image(fig: Figure) -> np.ndarray:
-    """Render a matplotlib figure (Agg) to a uint8 ``(H, W, 3)`` RGB image."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    canvas = FigureCanvasAgg(fig)
-    canvas.draw()
-    return np.array(canvas.buffer_rgba())[..., :3]
 
 
 def _bare(ax: Any) -> None:
@@ -240,23 +230,3 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
         _bare(ax)
     _add_rate_legend(fig)
     return figure_image(fig)
-
-
-def save_image(path: str | os.PathLike[str], image: np.ndarray) -> None:
-    """Write an image (uint8, or float in [0, 1]; ``(H, W)``, ``(H, W, 3)`` or ``(H, W, 4)``)
-    atomically, in the format the file extension names (``.png``, ``.jpg``, ``.webp``, ...)."""
-    from PIL import Image
-
-    a = np.asarray(image)
-    if a.dtype != np.uint8:
-        a = np.round(np.clip(np.nan_to_num(a.astype(np.float64)), 0.0, 1.0) * 255.0).astype(np.uint8)
-    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (3, 4)):
-        raise BaselineError(f"save_image: expected (H, W), (H, W, 3) or (H, W, 4), got shape {a.shape}")
-    fmt = Image.registered_extensions().get(os.path.splitext(os.fspath(path))[1].lower())
-    if fmt is None:
-        raise BaselineError(f"save_image: {os.fspath(path)!r} has no image extension Pillow can write (.png, .jpg, ...)")
-    im = Image.fromarray(a)
-    if fmt == "JPEG" and im.mode == "RGBA":
-        im = im.convert("RGB")
-    with atomic_output(path) as tmp:
-        im.save(tmp, format=fmt)

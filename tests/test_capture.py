@@ -139,3 +139,17 @@ def test_capture_takes_your_own_gltf_and_names_scenes_clearly(tmp_path: Path) ->
     for name in ("procedural", "procedural:x"):
         with pytest.raises(SceneNotFoundError, match="procedural:0"):
             load_scene(name, None, None, None)
+
+
+def test_preview_sheet_labels_every_panel(tmp_path: Path) -> None:
+    from rtp.capture import open_dataset, preview_sheet, save_image
+
+    capture(["procedural:4"], tmp_path / "ds", per_scene=1, size=(96, 64))
+    ds = open_dataset(tmp_path / "ds")
+    sheet = preview_sheet(ds[ds.ids[0]])
+    assert sheet.dtype == np.uint8 and sheet.shape[0] > 4 * 64 and sheet.shape[1] > 4 * 96
+    save_image(tmp_path / "sheet.jpg", sheet)
+    from PIL import Image
+
+    with Image.open(tmp_path / "sheet.jpg") as im:
+        assert im.format == "JPEG"
