@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, RtpError
+from rtp.sdk import ALL_RATES, ParameterError
 
 from ._dataset import DatasetReader, DatasetWriter
 
@@ -198,15 +198,15 @@ def capture(
     EGL context each). ``progress(done, total)`` is called as samples complete (skipped ones count).
     """
     if per_scene < 1:
-        raise RtpError(f"per_scene must be >= 1, got {per_scene}")
+        raise ParameterError(f"per_scene must be >= 1, got {per_scene}")
     if not scene_names:
-        raise RtpError("no scenes to capture")
+        raise ParameterError("no scenes to capture")
     from rtp import sdk
     from rtp.capture.viewpoints import MOTION_PROFILES
 
     bad = [p for p in profiles if p not in MOTION_PROFILES]
     if bad:
-        raise RtpError(f"unknown motion profile {bad[0]!r}; profiles are {', '.join(MOTION_PROFILES)}")
+        raise ParameterError(f"unknown motion profile {bad[0]!r}; profiles are {', '.join(MOTION_PROFILES)}")
     w, h = size
     settings = {
         "size": [w, h],

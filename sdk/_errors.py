@@ -19,11 +19,18 @@ working::
 
 Messages say what was expected and what arrived. No bare onnxruntime exception leaves the SDK:
 they are re-raised as one of these, chained with ``from``.
+
+Every class carries the exit code the command-line tools (``rtp``, ``rtp-export``) return for it:
+:data:`EXIT_USAGE` (2) for errors about what the caller gave (arguments, files, metadata, arrays,
+a missing install: fix it and run again), :data:`EXIT_FAILED` (1) when the job itself ran and
+failed. :func:`exit_code` reads it; ``docs/errors.md`` lists every class with its code.
 """
 
 from __future__ import annotations
 
 __all__ = [
+    "EXIT_FAILED",
+    "EXIT_USAGE",
     "InferenceError",
     "InputChannelError",
     "InputDtypeError",
@@ -36,19 +43,33 @@ __all__ = [
     "ParameterError",
     "ProviderUnavailableError",
     "RtpError",
+    "exit_code",
 ]
+
+#: Exit code of a job that ran and failed.
+EXIT_FAILED = 1
+#: Exit code of bad usage or bad inputs (arguments, files, metadata, arrays, a missing install).
+EXIT_USAGE = 2
+#: Exit code of a command interrupted with Ctrl-C (128 + SIGINT), as shells report it.
+EXIT_INTERRUPTED = 130
 
 
 class RtpError(Exception):
-    """Base class of every error raised by rtp."""
+    """Base class of every error raised by rtp. ``exit_code``: what the command-line tools return."""
+
+    exit_code: int = EXIT_FAILED
 
 
 class ModelNotFoundError(RtpError, FileNotFoundError):
     """No model file at the given path and no shipped model of that name."""
 
+    exit_code = EXIT_USAGE
+
 
 class ModelLoadError(RtpError):
     """The file exists but onnxruntime cannot load it (corrupt, truncated, not ONNX)."""
+
+    exit_code = EXIT_USAGE
 
 
 class MetadataError(RtpError, ValueError):
@@ -57,6 +78,8 @@ class MetadataError(RtpError, ValueError):
     ``key`` names the offending metadata field when there is one.
     """
 
+    exit_code = EXIT_USAGE
+
     def __init__(self, message: str, key: str | None = None) -> None:
         super().__init__(message)
         self.key = key
@@ -64,6 +87,8 @@ class MetadataError(RtpError, ValueError):
 
 class InputError(RtpError, ValueError):
     """Base class of errors about the tensor passed to ``predict`` / ``shading_rates``."""
+
+    exit_code = EXIT_USAGE
 
 
 class InputShapeError(InputError):
@@ -96,6 +121,8 @@ class ParameterError(RtpError, ValueError):
     ``name`` names the argument when there is one.
     """
 
+    exit_code = EXIT_USAGE
+
     def __init__(self, message: str, name: str | None = None) -> None:
         super().__init__(message)
         self.name = name
@@ -104,6 +131,18 @@ class ParameterError(RtpError, ValueError):
 class ProviderUnavailableError(RtpError):
     """An execution provider that was asked for is not available or did not take the session."""
 
+    exit_code = EXIT_USAGE
+
 
 class InferenceError(RtpError):
     """onnxruntime failed while running the model, or produced an output of an unexpected shape."""
+
+
+def exit_code(error: BaseException) -> int:
+    """The exit code of a command that stopped on ``error``: the class's own for rtp errors,
+    :data:`EXIT_INTERRUPTED` for Ctrl-C, :data:`EXIT_FAILED` for anything else."""
+    if isinstance(error, RtpError):
+        return int(error.exit_code)
+    if isinstance(error, KeyboardInterrupt):
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED

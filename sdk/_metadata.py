@@ -54,7 +54,7 @@ def _number(d: Mapping[str, Any], key: str, *, default: Any = ..., minimum: floa
     if key not in d or d[key] is None:
         if default is ...:
             raise MetadataError(f"{key}: required, missing", key)
-        return default  # type: ignore[no-any-return]
+        return default
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise MetadataError(f"{key}: expected a finite number, got {v!r}", key)
@@ -186,7 +186,9 @@ class ModelMetadata:
 
         k = _number(d, "extrapolation_k", default=DEFAULT_EXTRAPOLATION_K)
         if k < 1.0:
-            raise MetadataError(f"extrapolation_k: expected >= 1 (a coarser rate never has less error), got {k}", "extrapolation_k")
+            raise MetadataError(
+                f"extrapolation_k: expected >= 1 (a coarser rate never has less error), got {k}", "extrapolation_k"
+            )
         return cls(
             metric=metric,
             higher_is_better=hib,

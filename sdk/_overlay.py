@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._errors import InputShapeError
-from ._tiles import tile_grid
 from ._rates import RATE_CODES, RATE_NAMES, rate_size
+from ._tiles import tile_grid
 
 __all__ = ["OVERLAY_COLOURS", "draw_rate_overlay"]
 

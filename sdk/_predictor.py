@@ -8,7 +8,7 @@ import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -24,14 +24,14 @@ from ._errors import (
     ProviderUnavailableError,
 )
 from ._metadata import METADATA_KEY, ModelMetadata
-from ._tiles import padded_size, tile_grid
 from ._rates import PREDICTED_RATES, RateLike, select_rates
+from ._tiles import padded_size, tile_grid
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 
 log = logging.getLogger("rtp.sdk")
 
-ProviderSpec = Union[str, tuple[str, Mapping[str, Any]]]
+ProviderSpec = str | tuple[str, Mapping[str, Any]]
 _CPU = "CPUExecutionProvider"
 # Providers that onnxruntime lists as available but that run no local kernels (the Azure EP forwards
 # requests to a remote endpoint); never picked by default, never reported as the one that runs.
@@ -330,7 +330,7 @@ class ShadingRatePredictor:
 
     def _run(self, x: np.ndarray) -> np.ndarray:
         try:
-            return self._session.run([self._out_name], {self._in_name: x})[0]  # type: ignore[no-any-return]
+            return self._session.run([self._out_name], {self._in_name: x})[0]
         except Exception as err:
             raise InferenceError(f"onnxruntime failed on an input of shape {x.shape}: {err}") from err
 

@@ -9,11 +9,11 @@ shading-rate attachments.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Union
 
 import numpy as np
 
-from ._errors import InputShapeError, RtpError
+from ._errors import InputShapeError, ParameterError
+from ._tiles import tile_extents, tile_grid
 
 __all__ = [
     "ALL_RATES",
@@ -52,13 +52,47 @@ RATE_CODES: dict[str, int] = {r: _code(r) for r in ALL_RATES}
 RATE_NAMES: dict[int, str] = {c: r for r, c in RATE_CODES.items()}
 
 
-def work_saved(rate: str) -> float:
-    """Fraction of shading work a rate saves: ``1 - 1/(W*H)``."""
-    w, h = rate_size(rate)
-    return 1.0 - 1.0 / (w * h)
+RateLike = str | int
 
 
-RateLike = Union[str, int]
+def work_saved(
+    rates: RateLike | np.ndarray, frame_size: tuple[int, int] | None = None, tile_size: int | None = None
+) -> float:
+    """Fraction of the shading work saved.
+
+    A rate name or code: ``1 - 1/(W*H)`` of that rate. A shading-rate image (uint8 codes ``(th, tw)``,
+    as :meth:`ShadingRatePredictor.shading_rates` returns): the frame-level figure, each tile weighted
+    by the pixels it covers; give the frame's ``frame_size = (H, W)`` and ``tile_size`` so partial
+    edge tiles count their real pixels (without them every tile counts alike).
+    """
+    if isinstance(rates, (str, int, np.integer)) and not isinstance(rates, bool):
+        name = rates if isinstance(rates, str) else RATE_NAMES.get(int(rates))
+        if name is None:
+            raise ParameterError(f"unknown shading-rate code {rates}; expected one of {sorted(RATE_NAMES)}", "rates")
+        w, h = rate_size(name)
+        return 1.0 - 1.0 / (w * h)
+    codes = np.asarray(rates)
+    if codes.ndim != 2 or codes.size == 0 or codes.dtype.kind not in "ui":
+        raise InputShapeError(f"work_saved: expected a rate name, a code, or a non-empty (th, tw) array of integer "
+                              f"codes, got {type(rates).__name__} {getattr(codes, 'shape', '')}")
+    table = np.full(256, np.nan)
+    for name, code in RATE_CODES.items():
+        w, h = rate_size(name)
+        table[code] = 1.0 - 1.0 / (w * h)
+    saved = table[np.clip(codes.astype(np.int64), 0, 255)]
+    if np.isnan(saved).any():
+        bad = sorted({int(c) for c in codes[np.isnan(saved)].ravel()})
+        raise ParameterError(f"unknown shading-rate code(s) {bad}; expected codes from {sorted(RATE_NAMES)}", "rates")
+    if (frame_size is None) != (tile_size is None):
+        raise ParameterError("work_saved: give frame_size and tile_size together (or neither)", "frame_size")
+    if frame_size is None or tile_size is None:
+        return float(saved.mean())
+    h, w = frame_size
+    if tile_grid(h, w, tile_size) != codes.shape:
+        raise InputShapeError(f"work_saved: {codes.shape[0]}x{codes.shape[1]} tiles do not cover a {w}x{h} frame "
+                              f"of {tile_size}-pixel tiles ({tile_grid(h, w, tile_size)} would)")
+    pixels = np.outer(tile_extents(h, tile_size), tile_extents(w, tile_size))
+    return float((saved * pixels).sum() / pixels.sum())
 
 
 def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
@@ -74,14 +108,14 @@ def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
     for item in allowed:
         if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
             if int(item) not in RATE_NAMES:
-                raise RtpError(f"unknown shading-rate code {int(item)}; expected one of {sorted(RATE_NAMES)}")
+                raise ParameterError(f"unknown shading-rate code {int(item)}; expected one of {sorted(RATE_NAMES)}")
             names.add(RATE_NAMES[int(item)])
         elif isinstance(item, str):
             if item not in RATE_CODES:
-                raise RtpError(f"unknown shading rate {item!r} in allowed; expected names from {', '.join(ALL_RATES)}")
+                raise ParameterError(f"unknown shading rate {item!r} in allowed; expected names from {', '.join(ALL_RATES)}")
             names.add(item)
         else:
-            raise RtpError(f"allowed rates must be names like '2x2' or integer codes, got {item!r}")
+            raise ParameterError(f"allowed rates must be names like '2x2' or integer codes, got {item!r}")
     return tuple(r for r in PREDICTED_RATES if r in names)
 
 
@@ -110,7 +144,7 @@ def select_rates(
     rates = resolve_allowed(allowed)
     threshold = float(threshold)
     if not np.isfinite(threshold):
-        raise RtpError(f"threshold must be a finite number, got {threshold}")
+        raise ParameterError(f"threshold must be a finite number, got {threshold}")
     # Orient every comparison as "smaller is better" so one code path serves both kinds.
     err = -values if higher_is_better else values
     thr = -threshold if higher_is_better else threshold

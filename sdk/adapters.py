@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 import numpy as np
 
 from ._channels import CHANNELS
-from ._errors import ParameterError, RtpError
+from ._errors import EXIT_USAGE, ParameterError, RtpError
 
 if TYPE_CHECKING:
     from ._predictor import ShadingRatePredictor
@@ -75,9 +75,13 @@ _AdapterT = TypeVar("_AdapterT", bound="Adapter[Any]")
 class AdapterNotFoundError(RtpError, LookupError):
     """No adapter of that name is registered or installed (or its plugin failed to import)."""
 
+    exit_code = EXIT_USAGE
+
 
 class UnsupportedChannelError(RtpError, ValueError):
     """A model asks for an input channel the adapter cannot produce honestly."""
+
+    exit_code = EXIT_USAGE
 
 
 class AdapterClosedError(RtpError, RuntimeError):
@@ -86,6 +90,8 @@ class AdapterClosedError(RtpError, RuntimeError):
 
 class AdapterFrameError(RtpError, TypeError):
     """:meth:`Adapter.inputs` was given a frame that is not of the adapter's :attr:`~Adapter.frame_type`."""
+
+    exit_code = EXIT_USAGE
 
 
 class NoFrameSourceError(RtpError, NotImplementedError):

@@ -26,7 +26,7 @@ def test_the_shipped_recipe_resolves_per_metric() -> None:
 def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", steps=10)
     assert cfg.steps == 10 and cfg.batch == 16 and cfg.lr == 5e-4
-    assert cfg.val_scenes == tuple(map_names("validation")) and cfg.val_scenes
+    assert cfg.val_split == "validation" and not cfg.val_scenes and map_names("validation")
     assert cfg.recipe is not None and cfg.recipe["name"] == SHIPPED_RECIPE and cfg.recipe["values"]["steps"] == 4000
 
 
@@ -64,3 +64,13 @@ def test_the_recipe_is_recorded_in_the_model(tmp_path: Path) -> None:
     train(cfg)
     prov = load_checkpoint(tmp_path / "m.pt").metadata.provenance
     assert prov["recipe"]["name"] == str(recipe) and prov["recipe"]["values"]["crop"] == 32
+
+
+def test_the_recipe_split_falls_back_to_the_last_scene(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    data = _dataset(tmp_path / "d")  # scenes scene0..scene2: none of them a validation map
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"),
+                                  steps=2, batch=2, crop=32, head="linear")
+    with caplog.at_level("WARNING", logger="rtp"):
+        train(cfg)
+    assert "holds none of the validation maps" in caplog.text
+    assert list(load_checkpoint(tmp_path / "m.pt").metadata.provenance["val_scenes"]) == ["scene2"]

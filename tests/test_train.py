@@ -133,7 +133,7 @@ def test_train_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert rtp_main(["train", "--data", str(tmp_path / "nope"), "--metric", "jnyang", "--out", "m.pt"]) == 2
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"),
                      "--crop", "20"]) == 2
-    assert "multiple of --tile" in capsys.readouterr().err
+    assert "multiple of the tile size" in capsys.readouterr().err
 
 
 def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from rtp import sdk
-from rtp.capture import DatasetReader, TargetStore
+from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore
 from rtp.evaluate import scores
 
 from . import checkpoint as ckpt
@@ -57,6 +57,10 @@ class TrainConfig:
     lr_decay: float = 1e-4
     weight_decay: float = 0.0
     val_scenes: tuple[str, ...] = ()
+    #: Hold out the maps of this split of ``splits`` that the data holds (``val_scenes`` wins; if the
+    #: data holds none of the split's maps, the last scene, with a warning).
+    val_split: str | None = None
+    splits: str | None = None
     val_every: int = 250
     save_every: int = 250
     seed: int = 0
@@ -86,7 +90,8 @@ class TrainConfig:
         r = load_recipe(recipe, metric)
         values = {**r.values, **overrides}
         if "val_scenes" not in overrides and r.val_split is not None:
-            values["val_scenes"] = tuple(map_names(r.val_split, scenes))
+            map_names(r.val_split, scenes)  # an unknown split is refused now, not after loading the data
+            values.update(val_split=r.val_split, splits=None if scenes is None else str(scenes))
         return cls(data=data, metric=metric, out=out, recipe=r.provenance(), **values)
 
 
@@ -126,12 +131,18 @@ def _split_ids(reader: DatasetReader, cfg: TrainConfig) -> tuple[list[str], list
         by_scene.setdefault(str(s.meta.get("scene", "?")), []).append(s.id)
     scenes = sorted(by_scene)
     val = list(cfg.val_scenes)
+    if not val and cfg.val_split is not None:
+        from rtp.capture.scenes import map_names
+
+        val = [s for s in map_names(cfg.val_split, cfg.splits) if s in by_scene]
+        if not val:
+            log.warning("%s holds none of the %s maps; validating on its last scene instead", cfg.data, cfg.val_split)
     unknown = [v for v in val if v not in by_scene]
     if unknown:
-        raise sdk.RtpError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}")
+        raise sdk.ParameterError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}")
     if not val:
         if len(scenes) < 2:
-            raise sdk.RtpError(f"{cfg.data} holds one scene ({scenes}); validation is split by scene, so capture at least two")
+            raise DatasetError(f"{cfg.data} holds one scene ({scenes}); validation is split by scene, so capture at least two")
         val = [scenes[-1]]
     train_ids = [i for s in scenes if s not in val for i in by_scene[s]]
     val_ids = [i for s in val for i in by_scene[s]]
@@ -145,13 +156,13 @@ def _make_transform(cfg: TrainConfig, train: _Split) -> sdk.Transform:
     allv = np.concatenate([y.ravel() for y in train.y])
     allv = allv[np.isfinite(allv)]
     if allv.size == 0:
-        raise sdk.RtpError("the training targets hold no finite value")
+        raise TargetError("the training targets hold no finite value")
     mu = float(allv.mean())
     if cfg.transform == "clamped":
         return sdk.Transform.clamped(mu)
     if cfg.transform == "logistic":
         return sdk.Transform.logistic(mu, cfg.logistic_k)
-    raise sdk.RtpError(f"transform must be clamped or logistic, got {cfg.transform!r}")
+    raise sdk.ParameterError(f"transform must be clamped or logistic, got {cfg.transform!r}")
 
 
 def _predict_frames(net: MetricNet, xs: Sequence[np.ndarray], tile: int) -> list[np.ndarray]:
@@ -191,20 +202,20 @@ def _dead_outputs(pred: np.ndarray, outputs: Sequence[str]) -> list[str]:
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
     if cfg.metric not in sdk.METRICS:
-        raise sdk.RtpError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
+        raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
     if cfg.crop % cfg.tile:
-        raise sdk.RtpError(f"--crop {cfg.crop} must be a multiple of --tile {cfg.tile}")
+        raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})")
     reader = DatasetReader(cfg.data)
     store = TargetStore(cfg.data)
     if cfg.metric not in store.metrics:
-        raise sdk.RtpError(f"{cfg.data} has no {cfg.metric} targets; run `rtp targets {cfg.data} --metrics {cfg.metric}`")
+        raise TargetError(f"{cfg.data} has no {cfg.metric} targets; run `rtp targets {cfg.data} --metrics {cfg.metric}`")
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
     h, w = tr.x[0].shape[-2:]
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
     if cfg.crop > min(full_h, full_w):
-        raise sdk.RtpError(f"--crop {cfg.crop} is larger than the frames ({w}x{h})")
+        raise sdk.ParameterError(f"crop ({cfg.crop}) is larger than the frames ({w}x{h})")
 
     transform = _make_transform(cfg, tr)
     higher = sdk.METRICS[cfg.metric].higher_is_better
@@ -219,6 +230,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
     if cfg.head != "paper":  # checkpoints from before the option compare equal to the paper head
         config_key["head"] = cfg.head
+    if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split
+        config_key["val_split"] = cfg.val_split
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
     config_key["samples"] = {"train": len(train_ids), "val": len(val_ids), "sha256": hashlib.sha256(
         json.dumps([train_ids, val_ids]).encode()).hexdigest()}
@@ -229,8 +242,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         before = state.get("config") or {}
         if before != config_key:
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
-            raise sdk.RtpError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
-                               "choose another --out or delete it")
+            raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
+                               "choose another output path or delete it")
         net.load_state_dict(prev.net.state_dict())
         opt.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])

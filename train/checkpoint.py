@@ -24,7 +24,7 @@ from typing import Any
 
 import torch
 
-from rtp.sdk import MetadataError, ModelMetadata, ModelNotFoundError, RtpError
+from rtp.sdk import EXIT_USAGE, MetadataError, ModelMetadata, ModelNotFoundError, RtpError
 from rtp.sdk.files import atomic_output
 
 from .model import MetricNet
@@ -38,6 +38,8 @@ _ARCHITECTURES = {"MetricNet": MetricNet}
 
 class CheckpointError(RtpError):
     """A checkpoint file is unreadable, of another format, or inconsistent."""
+
+    exit_code = EXIT_USAGE
 
 
 @dataclass

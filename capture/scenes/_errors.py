@@ -12,7 +12,7 @@
 
 from __future__ import annotations
 
-from rtp.sdk import RtpError
+from rtp.sdk import EXIT_USAGE, RtpError
 
 __all__ = ["FetchError", "SceneError", "SceneFormatError", "SceneNotFoundError", "UnlistedMapError"]
 
@@ -24,13 +24,19 @@ class SceneError(RtpError):
 class SceneNotFoundError(SceneError, FileNotFoundError):
     """A scene file, pk3 archive or map inside the archives is missing."""
 
+    exit_code = EXIT_USAGE
+
 
 class UnlistedMapError(SceneError, LookupError):
     """A map that is not listed in ``scenes.yaml`` (or not in the requested split) was requested."""
 
+    exit_code = EXIT_USAGE
+
 
 class SceneFormatError(SceneError, ValueError):
     """A scene file is malformed or uses an unsupported format version."""
+
+    exit_code = EXIT_USAGE
 
 
 class FetchError(SceneError):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rtp.sdk import RtpError
+from rtp.sdk import EXIT_USAGE, RtpError
 
 __all__ = ["PyrenderAdapterError", "PyrenderUnavailableError"]
 
@@ -14,3 +14,5 @@ class PyrenderAdapterError(RtpError, RuntimeError):
 
 class PyrenderUnavailableError(PyrenderAdapterError):
     """pyrender or its OpenGL platform (EGL / OSMesa) cannot be loaded or gives no context."""
+
+    exit_code = EXIT_USAGE
