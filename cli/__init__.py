@@ -1,6 +1,8 @@
-"""The ``rtp`` command. Each subcommand imports what it needs only when it runs, so ``rtp info``
-works with the runtime dependencies alone."""
+"""The command line: ``rtp`` and ``rtp-export``. Each command imports what it needs only when it runs,
+so ``rtp info`` works with the runtime dependencies alone; all share one set of common options and one
+error policy (exit codes in docs/errors.md)."""
 
+from ._export import build_export_parser, export_main
 from ._main import build_parser, main
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_export_parser", "build_parser", "export_main", "main"]

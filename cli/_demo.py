@@ -34,6 +34,7 @@ class DemoResult:
     rate_share: dict[str, float]
     over_threshold: float
     predict_ms: float
+    predict_runs: int
     composite_flip_mean: float
     files: list[str]
 
@@ -48,8 +49,8 @@ def _camera_path(scene: Any, frames: int, blockers: Any, aspect: float, seed: in
     cams = []
     for i in range(frames):
         t = i / max(frames - 1, 1)
-        pos = tuple(float(a + t * (b - a)) for a, b in zip(prev.position, cur.position))
-        cams.append(Camera(pos, yaw=prev.yaw + t * (cur.yaw - prev.yaw), pitch=prev.pitch + t * (cur.pitch - prev.pitch),
+        x, y, z = (float(a + t * (b - a)) for a, b in zip(prev.position, cur.position))
+        cams.append(Camera((x, y, z), yaw=prev.yaw + t * (cur.yaw - prev.yaw), pitch=prev.pitch + t * (cur.pitch - prev.pitch),
                            fov_y=cur.fov_y))
     return cams
 
@@ -76,18 +77,24 @@ def run_demo(
     frames: int = 3,
     cache_dir: str | None = None,
     seed: int = 0,
+    timing_runs: int = 11,
 ) -> DemoResult:
-    """Run the demo and write its pictures into ``out``."""
+    """Run the demo and write its pictures into ``out``. ``predict`` is timed as the median of
+    ``timing_runs`` runs after a warm-up."""
     from rtp import metrics
-    from rtp.capture import write_png
-    from rtp.capture import load_scene
-    from rtp.plugins.moderngl import Renderer
+    from rtp.capture import load_scene, save_image
     from rtp.evaluate import failing_tiles
-    from rtp.evaluate.plots import colorize, heatmaps
+    from rtp.evaluate.plots import heatmaps, rate_overlays, value_map
+    from rtp.plugins.moderngl import Renderer
 
     predictor = sdk.load(model)
     meta = predictor.metadata
     thr = meta.default_threshold if threshold is None else float(threshold)
+    # checked before any rendering: an error metric's threshold is a positive error
+    if not np.isfinite(thr) or (not meta.higher_is_better and thr <= 0):
+        raise sdk.ParameterError(
+            f"threshold: expected a finite {meta.metric} value" + ("" if meta.higher_is_better else " > 0")
+            + f" (the model's default is {meta.default_threshold:g}), got {thr:g}", "threshold")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     scn, blockers = load_scene(scene, cache_dir, None, None)
@@ -99,10 +106,13 @@ def run_demo(
             frame = renderer.render(cam, prev)
             prev = frame
     x = np.stack([frame.channel(c) for c in meta.inputs]).astype(np.float32)
-    predictor.predict(x)  # warm-up: onnxruntime allocates on the first run
-    t0 = time.perf_counter()
-    predicted = predictor.predict(x)
-    predict_ms = (time.perf_counter() - t0) * 1000
+    predicted = predictor.predict(x)  # warm-up: onnxruntime allocates on the first run
+    times = []
+    for _ in range(max(1, timing_runs)):
+        t0 = time.perf_counter()
+        predictor.predict(x)
+        times.append((time.perf_counter() - t0) * 1000)
+    predict_ms = float(np.median(times))
     rates = sdk.select_rates(predicted, thr, higher_is_better=meta.higher_is_better)
     ref = frame.colour["1x1"]
     images = {r: frame.colour[r] for r in sdk.PREDICTED_RATES}
@@ -113,37 +123,33 @@ def run_demo(
     vrs = composite(frame.colour, rates, meta.tile_size)
     flip = metrics.flip_map(ref, vrs)
 
-    # Work saved, weighted by the pixels each tile covers (edge tiles may be partial).
-    th, tw = rates.shape
-    ph = np.minimum(meta.tile_size, h - np.arange(th) * meta.tile_size)
-    pw = np.minimum(meta.tile_size, w - np.arange(tw) * meta.tile_size)
-    pixels = np.outer(ph, pw).astype(np.float64)
-    saved_per_tile = np.zeros(rates.shape)
-    share: dict[str, float] = {}
-    for r, code in sdk.RATE_CODES.items():
-        m = rates == code
-        saved_per_tile[m] = sdk.work_saved(r)
-        share[r] = float(m.mean())
-    saved = float((saved_per_tile * pixels).sum() / pixels.sum())
+    saved = sdk.work_saved(rates, (h, w), meta.tile_size)  # pixel-weighted: edge tiles may be partial
+    share = {r: float((rates == code).mean()) for r, code in sdk.RATE_CODES.items()}
     over = float(failing_tiles(rates, true, thr, meta.higher_is_better).mean())
 
     files = []
 
     def save(name: str, img: np.ndarray) -> None:
-        write_png(out / name, img)
+        save_image(out / name, img)
         files.append(name)
 
     save("frame.png", ref)
-    save("overlay.png", sdk.draw_rate_overlay(ref, rates, meta.tile_size))
+    save("overlay.png", rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, meta.tile_size))
     # Heatmaps in metric units, bright = worse; the colour range ends at the threshold's double.
     # (PSNR is negated so that bright means worse there too.)
     if meta.higher_is_better:
         sign, vmin, vmax = -1.0, -(thr + 20.0), -(thr - 20.0)
     else:
         sign, vmin, vmax = 1.0, 0.0, 2.0 * thr
-    save("predicted_vs_true.png", heatmaps(sign * true, sign * predicted, meta.tile_size, (h, w), seen=frame.seen,
-                                           vmin=vmin, vmax=vmax, scale=2))
+    units = sdk.METRICS[meta.metric].units if meta.metric in sdk.METRICS else meta.metric
+    save("predicted_vs_true.png", heatmaps(
+        sign * true, sign * predicted, meta.tile_size, (h, w), seen=frame.seen, vmin=vmin, vmax=vmax, scale=2,
+        label=f"{'-' if sign < 0 else ''}{meta.metric} ({units}), bright = worse", threshold=sign * thr,
+        title=f"{meta.metric} per {meta.tile_size}px tile: true (rendered at every rate) and predicted by "
+              f"{Path(str(predictor.path)).name}",
+    ))
     save("vrs_composite.png", vrs)
-    save("vrs_flip.png", colorize(flip, 0.0, 1.0))
+    save("vrs_flip.png", value_map(flip, label="FLIP error (0 = identical, 1 = worst)",
+                                   title="FLIP of the VRS composite against full-rate shading"))
     return DemoResult(out, str(predictor.path), meta.metric, thr, int(rates.size), saved, share, over, predict_ms,
-                      float(flip.mean()), files)
+                      len(times), float(flip.mean()), files)

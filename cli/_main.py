@@ -1,20 +1,91 @@
-"""``rtp`` subcommands. Exit codes: 0 success, 1 the job failed, 2 bad usage or bad inputs."""
+"""The ``rtp`` command: one parser, the same option names for the same things in every subcommand,
+every default shown in ``--help``, arguments checked before any work starts, and one error policy
+(:mod:`._run`). Each subcommand imports what it needs only when it runs, so ``rtp info`` works with
+the runtime dependencies alone."""
 
 from __future__ import annotations
 
 import argparse
 import json
-import logging
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ._run import Bar, Formatter, add_common, run
 
 __all__ = ["build_parser", "main"]
 
+EXAMPLES = """examples:
+  rtp demo                                        render the built-in scene, pick rates with the shipped model
+  rtp info jnyang                                 a model's metadata, inputs and outputs
+  rtp metric flip ref.png test.png --out map.png  FLIP (or psnr, lpips, jnflip, jnyang) of an image pair
+  rtp scenes list                                 the game levels, their split, and what is cached
+  rtp capture --scene procedural:1 --per-scene 2 --out data/toy
+  rtp targets data/toy && rtp train --data data/toy --metric jnyang --out toy.pt
+"""
 
-def _cmd_info(args: argparse.Namespace) -> int:
+
+# -- argument types: checked while parsing, before any work -------------------------------------
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x720, got {text!r}") from None
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text!r}")
+    return w, h
+
+
+def _positive(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def _csv(text: str) -> tuple[str, ...]:
+    return tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+def _choices_csv(allowed: Sequence[str]) -> Any:
+    def parse(text: str) -> tuple[str, ...]:
+        items = _csv(text)
+        bad = [i for i in items if i not in allowed]
+        if bad or not items:
+            raise argparse.ArgumentTypeError(f"expected comma-separated names from {', '.join(allowed)}, got {text!r}")
+        return items
+
+    return parse
+
+
+def _names(values: Sequence[str] | None) -> tuple[str, ...]:
+    """Repeatable options that also take comma-separated lists: ``--scene a,b --scene c``."""
+    return tuple(s for v in values or () for s in _csv(v))
+
+
+# -- subcommands ------------------------------------------------------------------------------
+
+def _load(args: argparse.Namespace) -> Any:
+    """``sdk.load`` of ``args.model``, with the missing-metadata hint in the command line's words."""
     from rtp import sdk
 
-    pred = sdk.load(args.model, metadata=args.metadata)
+    try:
+        return sdk.load(args.model, metadata=args.metadata)
+    except sdk.MetadataError as err:
+        if err.key == sdk.METADATA_KEY and args.metadata is None:
+            raise sdk.MetadataError(
+                f"{args.model} carries no rtp metadata: pass --metadata SIDECAR.yaml, or bake the sidecar in with "
+                "`rtp-export --adopt MODEL.onnx --metadata SIDECAR.yaml -o OUT.onnx`", err.key) from err
+        raise
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    pred = _load(args)
     m = pred.metadata
     if args.json:
         print(json.dumps({"path": str(pred.path), "provider": pred.provider, "metadata": m.to_dict()}, indent=2))
@@ -24,7 +95,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     rows = [
         ("model", str(pred.path)),
         ("provider", f"{pred.provider} (of {', '.join(pred.providers)})"),
-        ("input size", "any (padded to the tile size)" if pred.static_size is None else "fixed %dx%d" % pred.static_size[::-1]),
+        ("input size", "any (padded to the tile size)" if pred.static_size is None
+         else f"fixed {pred.static_size[1]}x{pred.static_size[0]}"),
         ("metric", f"{m.metric} ({'higher' if m.higher_is_better else 'lower'} is better)"),
         ("transform", f"{t.type} ({params})"),
         ("safety margin", f"{m.safety:g} (transformed units)"),
@@ -40,8 +112,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
     ]
     if m.description:
         rows.insert(1, ("description", m.description))
-    for key, value in _flatten(m.provenance, "provenance"):
-        rows.append((key, value))
+    rows += _flatten(m.provenance, "provenance")
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
@@ -49,8 +120,6 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _flatten(d: object, prefix: str) -> list[tuple[str, str]]:
-    from collections.abc import Mapping
-
     if isinstance(d, Mapping):
         out: list[tuple[str, str]] = []
         for k, v in d.items():
@@ -63,8 +132,68 @@ def _flatten(d: object, prefix: str) -> list[tuple[str, str]]:
     return [(prefix, str(d))]
 
 
-def _csv(text: str) -> tuple[str, ...]:
-    return tuple(t.strip() for t in text.split(",") if t.strip())
+def _cmd_scenes_fetch(args: argparse.Namespace) -> int:
+    from rtp.capture.scenes import fetch
+
+    found = fetch(args.cache_dir, _names(args.map) or None, splits=args.splits, convert=args.convert,
+                  progress=not (args.quiet or args.no_progress))
+    print(f"{len(found)} maps ready in {args.cache_dir}")
+    return 0
+
+
+def _cmd_scenes_list(args: argparse.Namespace) -> int:
+    from rtp.capture.scenes import scene_list
+
+    rows = scene_list(args.cache_dir, args.splits)
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'map':<16} {'split':<11} cache ({args.cache_dir})")
+    for r in rows:
+        state = "converted" if r["converted"] else "fetched" if r["fetched"] else "-"
+        print(f"{r['name']:<16} {r['split']:<11} {state}")
+    fetched = sum(r["fetched"] for r in rows)
+    print(f"{len(rows)} maps, {fetched} fetched" + ("" if fetched else ": run `rtp scenes fetch`"))
+    return 0
+
+
+def _cmd_capture(args: argparse.Namespace) -> int:
+    from rtp.capture import capture
+    from rtp.capture.scenes import map_names
+
+    if bool(args.scene) == bool(args.split):
+        raise _usage("give either --split NAME (every map of that split) or --scene NAME (repeatable)")
+    names = list(_names(args.scene)) if args.scene else map_names(args.split, args.splits)
+    total = len(names) * len(args.profiles) * args.per_scene
+    what = f"{len(names)} maps of the {args.split} split" if args.split else ", ".join(names)
+    print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
+          f"at {args.size[0]}x{args.size[1]} into {args.out}", file=sys.stderr)
+    with Bar(args, total, "capture", "sample") as bar:
+        report = capture(
+            names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
+            workers=args.workers, cache_dir=args.cache_dir, split=args.split, splits=args.splits,
+            progress=lambda done, _total: bar.update_to(done),
+        )
+    if report.failed:
+        print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
+    unseen = ", ".join(f"{p} {100 * v:.1f}%" for p, v in report.unseen_mean().items())
+    print(f"{args.out}: {report.written} samples written"
+          + (f" ({report.recaptured} of them replace samples from other cameras)" if report.recaptured else "")
+          + f", {report.skipped} already there"
+          + (f"; unseen pixels of the new samples: {unseen}" if unseen else ""))
+    return 0
+
+
+def _cmd_preview(args: argparse.Namespace) -> int:
+    from rtp.capture import open_dataset, preview_sheet, save_image
+
+    ds = open_dataset(args.data)
+    if not ds.ids:
+        raise _usage(f"{args.data} holds no samples")
+    sample_id = args.sample or ds.ids[0]
+    save_image(args.out, preview_sheet(ds[sample_id], scale=args.scale))
+    print(f"{args.out}: sample {sample_id} of {args.data}")
+    return 0
 
 
 def _cmd_targets(args: argparse.Namespace) -> int:
@@ -72,63 +201,33 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
     ppd: float | str | None = None
     if args.ppd is not None:
-        ppd = args.ppd if args.ppd == "width" else float(args.ppd)
-    bar = _Bar(total=0, desc="targets", unit="sample")
-    try:
-        n = compute_targets(args.data, _csv(args.metrics), ppd=ppd, weber_l=args.weber_l, workers=args.workers,
-                            progress=lambda done, total: (setattr(bar, "total", total), bar.update_to(done)))
-    finally:
-        bar.close()
-    print(f"{args.data}: targets computed for {n} samples ({', '.join(_csv(args.metrics))})")
+        try:
+            ppd = args.ppd if args.ppd == "width" else float(args.ppd)
+        except ValueError:
+            raise _usage(f"--ppd: expected a number or 'width', got {args.ppd!r}") from None
+    with Bar(args, 0, "targets", "sample") as bar:
+        n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=args.workers,
+                            progress=lambda done, total: bar.update_to(done, total))
+    print(f"{args.data}: targets computed for {n} samples ({', '.join(args.metrics)})")
     return 0
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from ._demo import run_demo
-
-    r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
-                 frames=args.frames, cache_dir=args.cache, seed=args.seed)
-    shares = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r.rate_share.items() if v > 0)
-    print(f"model      {r.model} ({r.metric}), threshold {r.threshold:g}")
-    print(f"rates      {shares} of {r.tiles} tiles")
-    print(f"work saved {100 * r.work_saved:.1f}% of the shading (pixel-weighted)")
-    print(f"over       {100 * r.over_threshold:.1f}% of the tiles have a true {r.metric} at or beyond the threshold at "
-          f"their chosen rate")
-    print(f"FLIP       mean {r.composite_flip_mean:.4f} of the VRS composite against full-rate shading")
-    print(f"predict    {r.predict_ms:.1f} ms (onnxruntime, {args.size[0]}x{args.size[1]})")
-    print(f"wrote      {', '.join(r.files)} in {r.out}")
-    return 0
-
-
-def _cmd_preview(args: argparse.Namespace) -> int:
-    from rtp.capture import contact_sheet, open_dataset, write_png
-
-    ds = open_dataset(args.data)
-    sample_id = args.sample or ds.ids[0]
-    write_png(args.out, contact_sheet(ds[sample_id], scale=args.scale))
-    print(f"{args.out}: sample {sample_id} of {args.data}")
-    return 0
+_RECIPE_FLAGS = ("tile", "outputs", "inputs", "transform", "logistic_k", "head", "steps", "batch", "crop", "lr", "seed",
+                 "safety_quantile", "max_samples")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from rtp.train import TrainConfig, train
 
-    val_scenes = _csv(args.val_scenes)
-    if args.val_split:
-        from rtp.capture.scenes import map_names
-
-        val_scenes = tuple(map_names(args.val_split, args.scenes))
-    cfg = TrainConfig(
-        data=args.data, metric=args.metric, out=args.out, tile=args.tile, outputs=_csv(args.outputs),
-        inputs=_csv(args.inputs), transform=args.transform, logistic_k=args.k, head=args.head, steps=args.steps,
-        batch=args.batch, crop=args.crop, lr=args.lr, val_scenes=val_scenes, seed=args.seed,
-        safety_quantile=args.safety_quantile, default_threshold=args.threshold, max_samples=args.max_samples,
-    )
-    bar = _Bar(total=cfg.steps, desc=f"train {cfg.metric}", unit="step")
-    try:
+    overrides = {k: getattr(args, k) for k in _RECIPE_FLAGS if getattr(args, k) is not None}
+    if args.val_scenes:
+        overrides["val_scenes"] = _names(args.val_scenes)
+    if args.threshold is not None:
+        overrides["default_threshold"] = args.threshold
+    cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
+                                  **overrides)
+    with Bar(args, cfg.steps, f"train {cfg.metric}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"))
-    finally:
-        bar.close()
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
         print(f"rtp train: error: dead output(s) {', '.join(result.dead_outputs)} (see the warning above); "
               f"{result.checkpoint} is kept, not fit to export: train again with --head linear or another --seed",
@@ -141,26 +240,19 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from rtp.sdk import RtpError
     from rtp.evaluate import evaluate
 
     if args.plots and not args.out:
-        raise RtpError("--plots writes into --out; give an output folder")
-    scenes = tuple(s for item in (args.scenes or []) for s in _csv(item)) or None
+        raise _usage("--plots writes into --out; give an output folder")
     reports = []
     for model in args.model:
-        bar = _Bar(total=0, desc=f"evaluate {Path(model).stem}", unit="sample")
-        try:
+        with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:
             rep = evaluate(
-                model, args.data, scenes=scenes, metadata=args.metadata, threshold=args.threshold,
+                model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata, threshold=args.threshold,
                 unseen_fraction=args.unseen_fraction, baselines=not args.no_baselines, max_samples=args.max_samples,
                 plots_dir=args.out if args.plots else None, plot_sample=args.plot_sample,
-                progress=lambda done, total: (setattr(bar, "total", total), bar.update_to(done)),
+                progress=bar.update_to,
             )
-        finally:
-            bar.close()
         reports.append(rep)
         print(rep.table() + "\n")
     if args.out:
@@ -174,206 +266,203 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x720, got {text!r}") from None
-    if w < 16 or h < 16:
-        raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text!r}")
-    return w, h
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from ._demo import run_demo
 
-
-def _default_cache() -> str:
-    from rtp.capture.scenes import default_cache_dir
-
-    return default_cache_dir()
-
-
-def _cmd_scenes(args: argparse.Namespace) -> int:
-    from rtp.capture import scenes
-
-    return int(scenes.main(args.rest))
-
-
-def _cmd_capture(args: argparse.Namespace) -> int:
-    from rtp.capture import capture
-
-    if args.scene:
-        names = list(args.scene)
-    else:
-        from rtp.capture.scenes import map_names
-
-        names = map_names(args.split, args.scenes)
-    bar = _Bar(total=len(names) * len(_csv(args.profiles)) * args.per_scene, desc="capture", unit="sample")
-    try:
-        report = capture(
-            names, args.out, per_scene=args.per_scene, size=args.size, profiles=_csv(args.profiles), seed=args.seed,
-            workers=args.workers, cache_dir=args.cache or _default_cache(), split=None if args.scene else args.split,
-            splits=args.scenes, progress=lambda done, total: bar.update_to(done),
-        )
-    finally:
-        bar.close()
-    if report.failed:
-        print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
-    unseen = ", ".join(f"{p} {100 * v:.1f}%" for p, v in report.unseen_mean().items())
-    print(f"{args.out}: {report.written} samples written"
-          + (f" ({report.recaptured} of them replace samples from other cameras)" if report.recaptured else "")
-          + f", {report.skipped} already there"
-          + (f"; unseen pixels of the new samples: {unseen}" if unseen else ""))
+    r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
+                 frames=args.frames, cache_dir=args.cache_dir, seed=args.seed)
+    shares = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r.rate_share.items() if v > 0)
+    print(f"model      {r.model} ({r.metric}), threshold {r.threshold:g}")
+    print(f"rates      {shares} of {r.tiles} tiles")
+    print(f"work saved {100 * r.work_saved:.1f}% of the shading (pixel-weighted)")
+    print(f"over       {100 * r.over_threshold:.1f}% of the tiles have a true {r.metric} at or beyond the threshold at "
+          f"their chosen rate")
+    print(f"FLIP       mean {r.composite_flip_mean:.4f} of the VRS composite against full-rate shading")
+    print(f"predict    {r.predict_ms:.1f} ms median of {r.predict_runs} runs (onnxruntime, {args.size[0]}x{args.size[1]})")
+    print(f"wrote      {', '.join(r.files)} in {r.out}")
     return 0
 
 
-class _Bar:
-    """A tqdm bar when tqdm is installed, else log lines every 10%."""
+def _cmd_metric(args: argparse.Namespace) -> int:
+    from ._metric import run_metric
 
-    def __init__(self, total: int, desc: str, unit: str) -> None:
-        self.total, self.desc, self.n = total, desc, 0
-        try:
-            from tqdm import tqdm
+    return run_metric(args)
 
-            self._bar: object | None = tqdm(total=total, desc=desc, unit=unit, dynamic_ncols=True)
-        except ImportError:
-            self._bar = None
 
-    def update_to(self, n: int, **postfix: str) -> None:
-        if self._bar is not None:
-            if self._bar.total != self.total:  # type: ignore[attr-defined]
-                self._bar.total = self.total  # type: ignore[attr-defined]
-            self._bar.update(n - self._bar.n)  # type: ignore[attr-defined]
-            if postfix:
-                self._bar.set_postfix(postfix, refresh=False)  # type: ignore[attr-defined]
-        elif self.total and (n * 10 // self.total) != (self.n * 10 // self.total):
-            logging.getLogger("rtp").warning("%s: %d/%d %s", self.desc, n, self.total, postfix)
-        self.n = n
+def _usage(message: str) -> Exception:
+    """A usage error found after parsing (exit 2, like argparse's own)."""
+    from rtp.sdk import ParameterError
 
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()  # type: ignore[attr-defined]
+    return ParameterError(message)
 
+
+# -- the parser -------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rtp", description="rtp: learned perceptual error prediction for variable-rate shading.")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress and show tracebacks")
+    from rtp.sdk import DEFAULT_TILE_SIZE, METRICS, OUTPUT_SETS, TARGET_METRICS, TILE_SIZES
+
+    p = argparse.ArgumentParser(prog="rtp", formatter_class=Formatter, epilog=EXAMPLES,
+                                description="rtp: learned perceptual error prediction for variable-rate shading.")
+    add_common(p, top=True)
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    info = sub.add_parser("info", help="show a model's metadata, inputs, outputs and provider")
+
+    def command(name: str, help: str, func: Any, **kw: Any) -> argparse.ArgumentParser:
+        sp = sub.add_parser(name, help=help, description=help[0].upper() + help[1:] + ".", formatter_class=Formatter,
+                            **kw)
+        add_common(sp, top=False)
+        sp.set_defaults(func=func)
+        return sp
+
+    def cache_dir(sp: argparse.ArgumentParser) -> None:
+        from rtp.capture.scenes import default_cache_dir
+
+        sp.add_argument("--cache-dir", default=default_cache_dir(), help="scene cache of `rtp scenes fetch` "
+                        "($RTP_SCENE_CACHE overrides the default)")
+
+    def splits(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--splits", default=None, metavar="SCENES.yaml",
+                        help="the train/validation/test lists (default: the copy shipped with rtp)")
+
+    def model_metadata(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--metadata", default=None, metavar="SIDECAR.yaml",
+                        help="metadata for a model that carries none (default: the model's own)")
+
+    info = command("info", "show a model's metadata, inputs, outputs and provider", _cmd_info)
     info.add_argument("model", help="an .onnx path or the name of a shipped model")
-    info.add_argument("--metadata", help="YAML sidecar for a model that carries no metadata")
+    model_metadata(info)
     info.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    info.set_defaults(func=_cmd_info)
 
-    sc = sub.add_parser("scenes", help="the real game levels: `rtp scenes fetch [--cache-dir DIR] [--maps a,b]`",
-                        add_help=False)
-    sc.add_argument("action", choices=["fetch"])
-    sc.add_argument("rest", nargs=argparse.REMAINDER)
-    sc.set_defaults(func=_cmd_scenes)
+    sc = command("scenes", "the freely licensed game levels: fetch them, list them", None)
+    ssub = sc.add_subparsers(dest="action", metavar="ACTION", required=True)
+    for name, help_, func in (("fetch", "download the levels' Debian packages into the cache and check the maps",
+                               _cmd_scenes_fetch),
+                              ("list", "the maps of every split and what the cache holds of them", _cmd_scenes_list)):
+        a = ssub.add_parser(name, help=help_, description=help_[0].upper() + help_[1:] + ".", formatter_class=Formatter)
+        add_common(a, top=False)
+        a.set_defaults(func=func)
+        cache_dir(a)
+        splits(a)
+    fetch_p = ssub.choices["fetch"]
+    fetch_p.add_argument("--map", action="append", default=None, help="only these listed maps (repeatable, or "
+                         "comma-separated; default: every listed map)")
+    fetch_p.add_argument("--convert", action="store_true", help="also convert the maps now (else at first use)")
+    ssub.choices["list"].add_argument("--json", action="store_true", help="print JSON instead of a table")
 
-    cap = sub.add_parser("capture", help="render a dataset from scenes (resumable)")
-    cap.add_argument("--scenes", default=None, help="scenes.yaml with the train/validation/test splits "
-                     "(default: the copy shipped with rtp)")
-    cap.add_argument("--split", default="train", choices=["train", "validation", "test"])
-    cap.add_argument("--scene", action="append", help="capture this scene instead of a split (repeatable); "
-                     "procedural:<seed> needs no download")
-    cap.add_argument("--per-scene", type=int, required=True, help="viewpoint pairs per scene and motion profile")
-    cap.add_argument("--size", type=_size, default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
+    cap = command("capture", "render a dataset from scenes (resumable: rerun to finish or grow it)", _cmd_capture)
+    src = cap.add_argument_group("what to capture (one of)")
+    src.add_argument("--split", default=None, choices=_split_names(),
+                     help="every map of this split of --splits")
+    src.add_argument("--scene", action="append", default=None,
+                     help="a scene (repeatable, or comma-separated): procedural:<seed>, a map name of `rtp scenes list`, "
+                     "or your own .glb/.gltf/.obj file")
+    cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
     cap.add_argument("--out", required=True, help="dataset folder (created, or resumed)")
-    cap.add_argument("--profiles", default="slow,fast", help="motion profiles (default slow,fast)")
-    cap.add_argument("--workers", type=int, default=1, help="parallel render processes")
-    cap.add_argument("--cache", default=None, help="scene cache of `rtp scenes fetch` "
-                     "(default $RTP_SCENE_CACHE or ~/.cache/rtp/scenes)")
-    cap.add_argument("--seed", type=int, default=0)
-    cap.set_defaults(func=_cmd_capture)
+    cap.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
+    cap.add_argument("--profiles", type=_choices_csv(("slow", "fast")), default="slow,fast",
+                     help="motion profiles, comma-separated")
+    cap.add_argument("--workers", type=_positive, default=1, help="parallel render processes")
+    cap.add_argument("--seed", type=int, default=0, help="viewpoint sampling seed")
+    cache_dir(cap)
+    splits(cap)
 
-    dm = sub.add_parser("demo", help="render a scene, pick VRS rates with a shipped model, show the result")
-    dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path (default jnyang)")
-    dm.add_argument("--threshold", type=float, default=None, help="default: the model's own")
-    dm.add_argument("--scene", default="procedural:0", help="procedural:<seed> (default) or a fetched map name")
-    dm.add_argument("--size", type=_size, default=(1280, 720))
-    dm.add_argument("--frames", type=int, default=3, help="frames of the camera move (the last one is shown)")
-    dm.add_argument("--cache", default=None, help="scene cache for a fetched map")
-    dm.add_argument("--seed", type=int, default=0, help="which viewpoint of the scene")
-    dm.add_argument("--out", default="rtp-demo", help="output folder (default ./rtp-demo)")
-    dm.set_defaults(func=_cmd_demo)
-
-    pv = sub.add_parser("preview", help="draw one sample of a dataset: final images at every rate, G-buffers, reprojection")
+    pv = command("preview", "draw one sample of a dataset: final images at every rate, G-buffers, reprojection",
+                 _cmd_preview)
     pv.add_argument("data", help="dataset folder (rtp's, or the paper's released layout)")
+    pv.add_argument("--out", required=True, help="image to write; its extension names the format (.png, .jpg, ...)")
     pv.add_argument("--sample", default=None, help="sample id (default: the first)")
-    pv.add_argument("--out", required=True, help="PNG to write")
-    pv.add_argument("--scale", type=int, default=1, help="subsample the panels by this factor")
-    pv.set_defaults(func=_cmd_preview)
+    pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller")
 
-    tg = sub.add_parser("targets", help="compute per-tile metric targets of a dataset (cached, resumable)")
+    tg = command("targets", "compute the per-tile metric targets of a dataset (cached, resumable)", _cmd_targets)
     tg.add_argument("data", help="dataset folder written by `rtp capture`")
-    tg.add_argument("--metrics", default="flip,psnr,lpips,jnflip,jnyang", help="comma-separated metric names")
+    tg.add_argument("--metrics", type=_choices_csv(tuple(METRICS)), default=",".join(TARGET_METRICS),
+                    help="comma-separated metric names")
     tg.add_argument("--ppd", default=None, help="FLIP pixels per degree: a number, or 'width' for the paper's "
-                    "width-based value (default 67.02, FLIP's own)")
-    tg.add_argument("--weber-l", type=float, default=None, help="environment luminance l of JNFLIP/JNYang (default 0.02)")
-    tg.add_argument("--workers", type=int, default=1, help="parallel processes")
-    tg.set_defaults(func=_cmd_targets)
+                    "width-based value (default: FLIP's own 67.02)")
+    tg.add_argument("--weber-l", type=float, default=None, help="environment luminance l of JNFLIP/JNYang "
+                    "(default: 0.02)")
+    tg.add_argument("--workers", type=_positive, default=1, help="parallel processes")
 
-    tr = sub.add_parser("train", help="train a metric-prediction model on a captured dataset")
+    tr = command("train", "train a metric-prediction model on a captured dataset", _cmd_train,
+                 epilog="Hyper-parameters come from --config (the shipped models' recipe by default: "
+                 "train/recipes/shipped.yaml); a flag given here overrides the recipe's value.")
     tr.add_argument("--data", required=True, help="dataset folder (with targets from `rtp targets`)")
-    tr.add_argument("--metric", required=True, choices=["flip", "psnr", "lpips", "jnflip", "jnyang", "yang"])
+    tr.add_argument("--metric", required=True, choices=tuple(METRICS))
     tr.add_argument("--out", required=True, help="checkpoint to write (resumed if it exists)")
-    tr.add_argument("--tile", type=int, default=16, choices=[1, 2, 4, 8, 16, 32])
-    tr.add_argument("--outputs", default="1x2,2x1,2x4,4x2", help="rates the network predicts (comma-separated)")
-    tr.add_argument("--inputs", default="reprojected.r,seen,albedo.r,normal.z", help="input channels, in order")
-    tr.add_argument("--transform", default="clamped", choices=["clamped", "logistic"])
-    tr.add_argument("--k", type=float, default=10.0, help="growth rate of the logistic transform")
-    tr.add_argument("--head", default="paper", choices=["paper", "linear"],
-                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
-    tr.add_argument("--steps", type=int, default=3000)
-    tr.add_argument("--batch", type=int, default=8)
-    tr.add_argument("--crop", type=int, default=128, help="square crop size in pixels (a multiple of --tile)")
-    tr.add_argument("--lr", type=float, default=1e-4)
-    tr.add_argument("--val-scenes", default="", help="scenes held out for validation (default: the last scene)")
-    tr.add_argument("--val-split", default=None, choices=["validation", "test", "train"],
-                    help="hold out the scenes of this split of --scenes instead")
-    tr.add_argument("--scenes", default=None, help="scenes.yaml for --val-split (default: the copy shipped with rtp)")
-    tr.add_argument("--seed", type=int, default=0)
-    tr.add_argument("--safety-quantile", type=float, default=None,
-                    help="calibrate the margin so at most this share of tiles is underestimated (default: the paper's mean underestimation)")
-    tr.add_argument("--threshold", type=float, default=None, help="default threshold written into the model")
-    tr.add_argument("--max-samples", type=int, default=None, help="use at most this many training samples")
-    tr.set_defaults(func=_cmd_train)
+    tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
+                    help="training recipe: a YAML file, or 'shipped' (the shipped models' recipe)")
+    r = tr.add_argument_group("recipe values (default: the recipe's)")
+    r.add_argument("--tile", type=int, default=None, choices=TILE_SIZES,
+                   help=f"tile size in pixels (default: {DEFAULT_TILE_SIZE})")
+    r.add_argument("--outputs", type=_choices_csv(OUTPUT_SETS[2]), default=None,
+                   help="rates the network predicts, one of " + "; ".join(",".join(s) for s in OUTPUT_SETS))
+    r.add_argument("--inputs", type=_csv, default=None, help="input channels, in order (default: the paper's four)")
+    r.add_argument("--transform", default=None, choices=("clamped", "logistic"), help="target transform")
+    r.add_argument("--k", dest="logistic_k", type=float, default=None, help="growth rate of the logistic transform")
+    r.add_argument("--head", default=None, choices=("paper", "linear"),
+                   help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
+    r.add_argument("--steps", type=_positive, default=None, help="training steps")
+    r.add_argument("--batch", type=_positive, default=None, help="crops per step")
+    r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")
+    r.add_argument("--lr", type=float, default=None, help="RMSprop learning rate")
+    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--safety-quantile", type=float, default=None,
+                   help="calibrate the margin so at most this share of tiles is underestimated "
+                   "(default: the paper's mean underestimation)")
+    r.add_argument("--max-samples", type=_positive, default=None, help="use at most this many training samples")
+    tr.add_argument("--val-scenes", action="append", default=None,
+                    help="hold out these scenes for validation (repeatable, or comma-separated; default: the "
+                    "recipe's split, or the last scene)")
+    tr.add_argument("--threshold", type=float, default=None, help="default threshold written into the model "
+                    "(default: the metric's starting threshold)")
+    splits(tr)
 
-    ev = sub.add_parser("evaluate", help="prediction quality and VRS decisions of models on a dataset, next to the "
-                        "Yang 2019 and FidelityFX baselines")
+    ev = command("evaluate", "prediction quality and VRS decisions of models on a dataset, next to the Yang 2019 "
+                 "and FidelityFX baselines", _cmd_evaluate)
     ev.add_argument("model", nargs="+", help="one or more .onnx paths or shipped model names; each is scored on "
                     "the targets of its own metric and tile size")
     ev.add_argument("--data", required=True, help="dataset folder with targets from `rtp targets`")
     ev.add_argument("--out", default=None, help="folder for evaluation.md, evaluation.json (and --plots)")
-    ev.add_argument("--scenes", action="append", default=None, help="evaluate only these scenes (comma-separated; repeatable)")
-    ev.add_argument("--metadata", default=None, help="YAML sidecar for a model that carries no metadata")
+    ev.add_argument("--scene", action="append", default=None,
+                    help="evaluate only these scenes (repeatable, or comma-separated; default: all)")
+    model_metadata(ev)
     ev.add_argument("--threshold", type=float, default=None, help="decision threshold in metric units "
                     "(default: the model's default_threshold)")
     ev.add_argument("--unseen-fraction", type=float, default=0.5,
-                    help="a tile is unseen when more than this share of its pixels is unseen (default 0.5)")
+                    help="a tile is unseen when more than this share of its pixels is unseen")
     ev.add_argument("--no-baselines", action="store_true", help="score only the model and the oracle")
-    ev.add_argument("--plots", action="store_true", help="write heatmaps, a scatter and rate overlays (PNG) into --out")
+    ev.add_argument("--plots", action="store_true", help="write heatmaps, a scatter and rate overlays into --out")
     ev.add_argument("--plot-sample", default=None, help="sample the heatmaps and overlays show (default: the first)")
-    ev.add_argument("--max-samples", type=int, default=None, help="evaluate at most this many samples")
-    ev.set_defaults(func=_cmd_evaluate)
+    ev.add_argument("--max-samples", type=_positive, default=None, help="evaluate at most this many samples")
+
+    dm = command("demo", "render a scene, pick VRS rates with a shipped model, show the result", _cmd_demo)
+    dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
+    dm.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    dm.add_argument("--scene", default="procedural:0",
+                    help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
+    dm.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
+    dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move (the last one is shown)")
+    dm.add_argument("--seed", type=int, default=0, help="which viewpoint of the scene")
+    dm.add_argument("--out", default="rtp-demo", help="output folder")
+    cache_dir(dm)
+
+    mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)
+    mt.add_argument("metric", choices=tuple(METRICS), help="the metric")
+    mt.add_argument("reference", help="the reference image (full-rate shading), any format Pillow reads")
+    mt.add_argument("test", help="the image to compare, same size")
+    mt.add_argument("--out", default=None, help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
+                    "bar to this image")
+    mt.add_argument("--tile", type=_positive, default=DEFAULT_TILE_SIZE, help="tile size in pixels")
+    mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")
     return p
 
 
+def _split_names() -> tuple[str, ...]:
+    from rtp.capture.scenes import SPLIT_NAMES
+
+    return tuple(SPLIT_NAMES)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    from rtp.sdk import RtpError
-
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    try:
-        return int(args.func(args))
-    except RtpError as err:
-        if args.verbose:
-            raise
-        print(f"rtp {args.command}: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"rtp {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
-        import os
-
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
+    prog = "rtp " + args.command + (f" {args.action}" if getattr(args, "action", None) else "")
+    return run(prog, args, args.func)

@@ -31,6 +31,7 @@ __all__ = [
     "save_image",
     "scatter",
     "upsample_tiles",
+    "value_map",
 ]
 
 #: Dots per inch of every figure: panels are drawn at (about) one figure pixel per image pixel.
@@ -81,6 +82,26 @@ def _bare(ax: Any) -> None:
     for spine in ax.spines.values():
         spine.set_edgecolor("#404040")
         spine.set_linewidth(0.8)
+
+
+def value_map(
+    values: np.ndarray, *, label: str, vmin: float = 0.0, vmax: float = 1.0, cmap: str = "magma", title: str = ""
+) -> np.ndarray:
+    """One per-pixel map ``(H, W)`` drawn at its own size with a colour bar naming the quantity."""
+    v = np.asarray(values, np.float64)
+    if v.ndim != 2 or v.size == 0:
+        raise BaselineError(f"value_map: expected a non-empty (H, W) array, got shape {v.shape}")
+    if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > vmin):
+        raise BaselineError(f"colour range: expected finite vmin < vmax, got {vmin}, {vmax}")
+    h, w = v.shape
+    fig = _figure(w + 130, h + (40 if title else 16))
+    ax = fig.subplots()
+    im = ax.imshow(v, cmap=_colormap(cmap), vmin=vmin, vmax=vmax, interpolation="nearest")
+    _bare(ax)
+    if title:
+        ax.set_title(title, fontsize=9)
+    fig.colorbar(im, ax=ax, label=label, extend="max" if np.nanmax(v) > vmax else "neither", shrink=0.9)
+    return figure_image(fig)
 
 
 def heatmaps(

@@ -66,17 +66,18 @@ def test_capture_survives_a_kill(tmp_path: Path) -> None:
     assert not list(samples.glob(".*.tmp"))
 
 
-def test_preview_draws_a_contact_sheet(tmp_path: Path) -> None:
+def test_preview_writes_the_format_its_extension_names(tmp_path: Path) -> None:
+    from PIL import Image
+
     from rtp.cli import main as rtp_main
 
     out = tmp_path / "ds"
     capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
-    png = tmp_path / "sheet.png"
-    assert rtp_main(["preview", str(out), "--out", str(png)]) == 0
-    from PIL import Image
-
-    with Image.open(png) as im:
-        assert im.size == (4 * 96, 4 * 64)
+    for name, fmt in (("sheet.png", "PNG"), ("sheet.jpg", "JPEG")):
+        assert rtp_main(["preview", str(out), "--out", str(tmp_path / name)]) == 0
+        with Image.open(tmp_path / name) as im:
+            assert im.format == fmt and im.size[0] > 4 * 96 and im.size[1] > 4 * 64
+    assert rtp_main(["preview", str(out), "--out", str(tmp_path / "sheet.nope")]) == 2
 
 
 def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -419,8 +419,8 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
             assert im.mode == "RGB" and im.size[0] > 0
     with Image.open(out / "m_rates.png") as im:  # model, oracle and four baselines side by side
         assert im.size[0] > 6 * W and im.size[1] > H
-    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scenes", "zzz"]) == 2
-    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scenes", "a,b", "--scenes", "b",
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "zzz"]) == 2
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "a,b", "--scene", "b",
                      "--no-baselines", "--max-samples", "1"]) == 0
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--plots"]) == 2  # --plots needs --out
 

@@ -110,7 +110,7 @@ def test_parity_failure_is_loud_and_writes_nothing(tmp_path: Path, monkeypatch: 
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "rtp.export", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "rtp.cli.export", *args], capture_output=True, text=True, timeout=300)
 
 
 def test_cli_exit_codes(tmp_path: Path) -> None:

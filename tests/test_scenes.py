@@ -399,6 +399,8 @@ def test_scene_by_name_converts_once_and_caches(tmp_path: Path):
 
 
 def test_fetch_cli_rejects_unlisted(tmp_path: Path, capsys):
-    assert scenes.main(["--cache-dir", str(tmp_path), "--maps", "hydronex", "--no-progress"]) == 1
+    from rtp.cli import main as rtp_main
+
+    assert rtp_main(["scenes", "fetch", "--cache-dir", str(tmp_path), "--map", "hydronex", "--no-progress"]) == 2
     assert "hydronex" in capsys.readouterr().err
     assert not (tmp_path / "debs").exists()  # nothing was downloaded

@@ -19,13 +19,14 @@ from ._errors import FetchError, SceneError, SceneFormatError, SceneNotFoundErro
 from ._fetch import (
     DEFAULT_SPLITS,
     PACKAGES,
+    SPLIT_NAMES,
     default_cache_dir,
     fetch,
     load_splits,
-    main,
     map_names,
     scene_blockers,
     scene_by_name,
+    scene_list,
 )
 from ._mesh import load_mesh_file
 from ._procedural import procedural
@@ -33,6 +34,7 @@ from ._procedural import procedural
 __all__ = [
     "DEFAULT_SPLITS",
     "PACKAGES",
+    "SPLIT_NAMES",
     "BspConversion",
     "FetchError",
     "SceneError",
@@ -45,9 +47,9 @@ __all__ = [
     "load_bsp",
     "load_mesh_file",
     "load_splits",
-    "main",
     "map_names",
     "procedural",
     "scene_blockers",
     "scene_by_name",
+    "scene_list",
 ]

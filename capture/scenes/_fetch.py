@@ -16,17 +16,16 @@ Cache layout::
 
 from __future__ import annotations
 
-import argparse
 import gzip
 import json
 import logging
 import shutil
 import subprocess
-import sys
 import time
 import zipfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,11 +40,12 @@ __all__ = [
     "default_cache_dir",
     "PACKAGES",
     "fetch",
+    "SPLIT_NAMES",
     "load_splits",
-    "main",
     "map_names",
     "scene_blockers",
     "scene_by_name",
+    "scene_list",
 ]
 
 log = logging.getLogger("rtp.capture")
@@ -287,45 +287,21 @@ def scene_blockers(name: str, cache_dir: str | Path, *, splits: str | Path | Non
     return _load_cached(name, cache, _read_index(cache))[1]
 
 
-# -- command line ---------------------------------------------------------------------------------
+def scene_list(cache_dir: str | Path | None = None, splits: str | Path | None = None) -> list[dict[str, Any]]:
+    """Every map of ``scenes.yaml``: its name, split, and whether the cache holds it fetched and
+    converted (``[{"name", "split", "fetched", "converted"}]`` in split order)."""
+    cache = Path(default_cache_dir() if cache_dir is None else cache_dir)
+    try:
+        fetched = set(_read_index(cache)["maps"])
+    except (SceneNotFoundError, OSError, ValueError, KeyError):
+        fetched = set()
+    s = load_splits(splits)
+    return [{"name": m, "split": split, "fetched": m in fetched, "converted": _cache_path(m, cache).is_file()}
+            for split in SPLIT_NAMES for m in s[split]]
+
 
 def default_cache_dir() -> str:
     """Where fetched and converted scenes live: ``$RTP_SCENE_CACHE``, else ``~/.cache/rtp/scenes``."""
     import os
 
     return os.environ.get("RTP_SCENE_CACHE", str(Path.home() / ".cache" / "rtp" / "scenes"))
-
-
-def build_parser(prog: str = "rtp scenes fetch") -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=prog, description="Download the freely licensed Quake-3-format levels "
-                                "(Debian packages) into a cache folder and check the maps of scenes.yaml.")
-    p.add_argument("--cache-dir", default=default_cache_dir(), help="cache folder (default: $RTP_SCENE_CACHE or "
-                   "~/.cache/rtp/scenes, here %(default)s)")
-    p.add_argument("--splits", default=None, help="scenes.yaml with the train/validation/test lists "
-                   "(default: the copy shipped with rtp)")
-    p.add_argument("--maps", default=None, help="comma-separated subset of listed maps (default: all listed)")
-    p.add_argument("--convert", action="store_true", help="also convert the maps into the cache now")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress; show tracebacks")
-    return p
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``rtp scenes fetch``: exit code 0 on success, 1 on a fetch/scene error, 2 on bad usage."""
-    args = build_parser().parse_args(argv)
-    if args.verbose:
-        logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    maps = [m.strip() for m in args.maps.split(",") if m.strip()] if args.maps else None
-    try:
-        found = fetch(args.cache_dir, maps, splits=args.splits, convert=args.convert, progress=not args.no_progress)
-    except (FetchError, UnlistedMapError, SceneNotFoundError, SceneFormatError) as err:
-        if args.verbose:
-            raise
-        print(f"rtp scenes fetch: error: {err}", file=sys.stderr)
-        return 1
-    print(f"{len(found)} maps ready in {args.cache_dir}")
-    return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -1,0 +1,70 @@
+"""``rtp-export``: bake a trained checkpoint into an ONNX model with its metadata, or adopt a foreign
+ONNX model with a metadata sidecar. Same options, output and exit codes as ``rtp`` (:mod:`._run`)."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+from ._run import Formatter, add_common, run
+
+__all__ = ["build_export_parser", "export_main"]
+
+EXAMPLES = """examples:
+  rtp-export model.pt -o jnyang.onnx
+  rtp-export --adopt Model.onnx --metadata sidecar.yaml -o adopted.onnx --dynamic
+"""
+
+
+def build_export_parser() -> argparse.ArgumentParser:
+    from rtp.export import DEFAULT_OPSET
+
+    p = argparse.ArgumentParser(
+        prog="rtp-export", formatter_class=Formatter, epilog=EXAMPLES,
+        description="Bake a trained rtp checkpoint into an ONNX model with embedded metadata, or adopt a "
+        "foreign ONNX model by baking a metadata sidecar into it.",
+    )
+    add_common(p, top=True)
+    p.add_argument("checkpoint", nargs="?", help="checkpoint written by `rtp train` (model.pt)")
+    p.add_argument("-o", "--output", help="output .onnx path (default: the checkpoint path with .onnx)")
+    p.add_argument("--opset", type=int, default=None, help=f"ONNX opset of a checkpoint's export (default: {DEFAULT_OPSET})")
+    p.add_argument("--metadata", metavar="SIDECAR.yaml",
+                   help="metadata fields: merged over the checkpoint's, or the whole sidecar with --adopt")
+    p.add_argument("--adopt", metavar="FOREIGN.onnx", help="bake --metadata into this ONNX model instead")
+    p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")
+    p.add_argument("--replace", action="store_true", help="with --adopt: overwrite metadata the model already has")
+    return p
+
+
+def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Every combination is checked before any work starts."""
+    if args.adopt:
+        if args.checkpoint:
+            parser.error("give either a checkpoint or --adopt FOREIGN.onnx, not both")
+        if not args.metadata or not args.output:
+            parser.error("--adopt needs --metadata SIDECAR.yaml and -o OUTPUT.onnx")
+        if args.opset is not None:
+            parser.error("--opset applies to exporting a checkpoint; an adopted model keeps its own opset")
+    elif not args.checkpoint:
+        parser.error("a checkpoint path is required (or --adopt FOREIGN.onnx)")
+    elif args.dynamic or args.replace:
+        parser.error("--dynamic and --replace apply to --adopt only")
+
+
+def _body(args: argparse.Namespace) -> int:
+    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint
+
+    if args.adopt:
+        out = adopt(args.adopt, args.metadata, args.output, dynamic=args.dynamic, replace=args.replace)
+    else:
+        out = export_checkpoint(args.checkpoint, args.output, opset=args.opset or DEFAULT_OPSET,
+                                extra_metadata=args.metadata)
+    print(out)
+    return 0
+
+
+def export_main(argv: Sequence[str] | None = None) -> int:
+    parser = build_export_parser()
+    args = parser.parse_args(argv)
+    _check(parser, args)
+    return run("rtp-export", args, _body)

@@ -1,0 +1,77 @@
+"""``rtp metric``: one metric of an image pair, per pixel and per tile, as flip-evaluator's CLI does for FLIP."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+import numpy as np
+
+__all__ = ["run_metric"]
+
+
+def _read(path: str) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    from rtp.sdk import ParameterError
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("RGB"), np.float32) / 255.0
+    except FileNotFoundError:
+        raise ParameterError(f"{path}: no such image") from None
+    except (UnidentifiedImageError, OSError) as err:
+        raise ParameterError(f"{path}: not an image Pillow can read ({err})") from None
+
+
+def run_metric(args: argparse.Namespace) -> int:
+    from rtp import metrics, sdk
+
+    ref, test = _read(args.reference), _read(args.test)
+    if ref.shape != test.shape:
+        raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "
+                                 f"{test.shape[1]}x{test.shape[0]}")
+    info = sdk.METRICS[args.metric]
+    tiles = metrics.tile_metric(args.metric, ref, test, args.tile)
+    pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test)
+    finite = tiles[np.isfinite(tiles)]
+    worst = (finite.min() if info.higher_is_better else finite.max()) if finite.size else float("nan")
+    if args.json:
+        print(json.dumps({"metric": args.metric, "units": info.units, "tile": args.tile,
+                          "tiles": [[None if not np.isfinite(v) else float(v) for v in row] for row in tiles]}))
+    else:
+        h, w = ref.shape[:2]
+        print(f"{args.metric} ({info.units}), {w}x{h}, {tiles.shape[1]}x{tiles.shape[0]} tiles of {args.tile}px")
+        if pixel_map is not None:
+            print(f"per pixel  mean {float(pixel_map.mean()):.4g}, max {float(pixel_map.max()):.4g}")
+        print(f"per tile   mean {float(finite.mean()) if finite.size else float('nan'):.4g}, "
+              f"{'worst (min)' if info.higher_is_better else 'worst (max)'} {float(worst):.4g}"
+              + (f", {tiles.size - finite.size} identical tiles (+inf dB)" if finite.size < tiles.size else ""))
+    if args.out:
+        _figure(args, ref, pixel_map, tiles, info)
+        print(f"wrote {args.out}")
+    return 0
+
+
+def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np.ndarray, info: Any) -> None:
+    from matplotlib.figure import Figure
+
+    from rtp.capture import figure_image, save_image
+
+    h, w = ref.shape[:2]
+    shown = pixel_map if pixel_map is not None else np.repeat(np.repeat(tiles, args.tile, 0), args.tile, 1)[:h, :w]
+    finite = shown[np.isfinite(shown)]
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    vmin, vmax = (0.0, max(hi, 1e-6)) if not info.higher_is_better else (lo, max(hi, lo + 1e-6))
+    fig = Figure(figsize=(w / 100 + 1.6, h / 100 + 0.6), dpi=100, layout="constrained")
+    ax = fig.subplots()
+    cmap = "magma_r" if info.higher_is_better else "magma"  # bright = worse for every metric
+    im = ax.imshow(np.where(np.isfinite(shown), shown, vmax if info.higher_is_better else vmin), cmap=cmap,
+                   vmin=vmin, vmax=vmax, interpolation="nearest")
+    kind = "per pixel" if pixel_map is not None else f"per {args.tile}px tile"
+    ax.set_title(f"{args.metric} {kind}: {args.reference} vs {args.test}", fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    fig.colorbar(im, ax=ax, label=f"{args.metric} ({info.units}); bright = worse")
+    save_image(args.out, figure_image(fig))

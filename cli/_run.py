@@ -1,0 +1,157 @@
+"""What every rtp command shares: the common options, logging through the progress bars, repeated
+warnings collapsed, progress bars, and the one error policy.
+
+Exit codes (``docs/errors.md``): 0 success; each :class:`~rtp.sdk.RtpError` its class's
+``exit_code`` (2 bad usage or inputs, 1 the job failed); 130 interrupted; argparse's 2 for usage
+errors it finds itself. An exception outside the rtp tree is a bug: it propagates with its
+traceback (exit 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import sys
+import traceback
+from collections.abc import Callable, Iterator
+from typing import Any
+
+__all__ = ["COMMON", "Bar", "Formatter", "add_common", "run", "version"]
+
+log = logging.getLogger("rtp")
+
+
+def version() -> str:
+    from rtp import sdk
+
+    return str(sdk.__version__)
+
+
+class Formatter(argparse.RawDescriptionHelpFormatter):
+    """Help that shows every default (unless the help text states it already, or there is none to
+    show: a required option, a flag, an option whose absence means something the help says) and
+    keeps the examples' line breaks."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if ("default" in text or action.required or action.default in (None, False, argparse.SUPPRESS)
+                or not action.option_strings):
+            return text
+        return text + " (default: %(default)s)"
+
+
+def add_common(parser: argparse.ArgumentParser, *, top: bool) -> None:
+    """The options every command takes, before or after the subcommand (``rtp -v capture`` and
+    ``rtp capture -v`` alike): a subcommand's copies default to SUPPRESS so they never undo the top's."""
+    default: Any = False if top else argparse.SUPPRESS
+    g = parser.add_argument_group("output")
+    g.add_argument("-v", "--verbose", action="store_true", default=default, help="log progress; show tracebacks")
+    g.add_argument("-q", "--quiet", action="store_true", default=default, help="only errors; no progress bars")
+    g.add_argument("--no-progress", action="store_true", default=default, help="no progress bars")
+    if top:
+        parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+
+
+COMMON = ("verbose", "quiet", "no_progress")
+
+
+class _Collapse(logging.Filter):
+    """Lets the first record of each (logger, message template, level) through and counts the rest;
+    :meth:`summary` reports the counts once the command ends."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: dict[tuple[str, str, int], list[Any]] = {}
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        key = (record.name, str(record.msg), record.levelno)
+        if key in self.seen:
+            self.seen[key][0] += 1
+            return False
+        self.seen[key] = [0, record.getMessage()]
+        return True
+
+    def summary(self) -> list[str]:
+        return [f"{n} more like: {first}" for (_, _, level), (n, first) in self.seen.items()
+                if n and level >= logging.WARNING]
+
+
+@contextlib.contextmanager
+def _logging(args: argparse.Namespace) -> Iterator[None]:
+    level = logging.INFO if args.verbose else logging.ERROR if args.quiet else logging.WARNING
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    collapse = _Collapse()
+    handler.addFilter(collapse)
+    root = logging.getLogger()
+    old_level = root.level
+    root.addHandler(handler)
+    root.setLevel(level)
+    try:
+        redirect: Any = contextlib.nullcontext()
+        with contextlib.suppress(ImportError):
+            from tqdm.contrib.logging import logging_redirect_tqdm
+
+            redirect = logging_redirect_tqdm(loggers=[root])
+        with redirect:
+            yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(old_level)
+        for line in collapse.summary():
+            print(f"WARNING (repeated): {line}", file=sys.stderr)
+
+
+class Bar:
+    """A tqdm progress bar (when tqdm is installed and bars are wanted), else nothing."""
+
+    def __init__(self, args: argparse.Namespace, total: int, desc: str, unit: str) -> None:
+        self.total = total
+        self._bar: Any = None
+        if args.quiet or args.no_progress:
+            return
+        with contextlib.suppress(ImportError):
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, desc=desc, unit=unit, dynamic_ncols=True)
+
+    def update_to(self, n: int, total: int | None = None, **postfix: str) -> None:
+        if self._bar is None:
+            return
+        if total is not None and total != self._bar.total:
+            self._bar.total = total
+        self._bar.update(n - self._bar.n)
+        if postfix:
+            self._bar.set_postfix(postfix, refresh=False)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+    def __enter__(self) -> Bar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace], int]) -> int:
+    """Run a command body under the one error policy (see the module docstring)."""
+    from rtp.sdk import RtpError, exit_code
+
+    with _logging(args):
+        try:
+            return int(body(args))
+        except RtpError as err:
+            if args.verbose:
+                traceback.print_exc()
+            print(f"{prog}: error: {err}", file=sys.stderr)
+            return exit_code(err)
+        except KeyboardInterrupt as err:
+            print(f"{prog}: interrupted", file=sys.stderr)
+            return exit_code(err)
+        except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 0
