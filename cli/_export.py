@@ -13,6 +13,7 @@ __all__ = ["build_export_parser", "export_main"]
 EXAMPLES = """examples:
   rtp-export model.pt -o jnyang.onnx
   rtp-export --adopt Model.onnx --metadata sidecar.yaml -o adopted.onnx --dynamic
+  rtp-export --restamp old.onnx
 """
 
 
@@ -33,11 +34,17 @@ def build_export_parser() -> argparse.ArgumentParser:
     p.add_argument("--adopt", metavar="FOREIGN.onnx", help="bake --metadata into this ONNX model instead")
     p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")
     p.add_argument("--replace", action="store_true", help="with --adopt: overwrite metadata the model already has")
+    p.add_argument("--restamp", metavar="MODEL.onnx", help="record the digest of graph and weights in an rtp model "
+                   "exported before rtp wrote digests (in place; predictions unchanged)")
     return p
 
 
 def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Every combination is checked before any work starts."""
+    if args.restamp:
+        if args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace:
+            parser.error("--restamp MODEL.onnx takes no other options")
+        return
     if args.adopt:
         if args.checkpoint:
             parser.error("give either a checkpoint or --adopt FOREIGN.onnx, not both")
@@ -52,9 +59,11 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
 
 
 def _body(args: argparse.Namespace) -> int:
-    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint
+    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint, restamp
 
-    if args.adopt:
+    if args.restamp:
+        out = restamp(args.restamp)
+    elif args.adopt:
         out = adopt(args.adopt, args.metadata, args.output, dynamic=args.dynamic, replace=args.replace)
     else:
         out = export_checkpoint(args.checkpoint, args.output, opset=args.opset or DEFAULT_OPSET,

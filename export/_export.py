@@ -24,7 +24,7 @@ import numpy as np
 from rtp.sdk import METADATA_KEY, MetadataError, ModelLoadError, ModelMetadata, ModelNotFoundError, RtpError
 from rtp.sdk.files import atomic_output
 
-__all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "restamp", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -67,13 +67,23 @@ def _read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def write_metadata(model: Any, meta: ModelMetadata) -> None:
-    """Set the rtp metadata on an ``onnx.ModelProto``, keeping every other metadata_props entry.
+    """Set the rtp metadata on an ``onnx.ModelProto``, keeping every other metadata_props entry, with
+    the digest of the model's graph and weights (``sdk.model_digest``) that ``sdk.load`` checks: call
+    it last, once the graph is final.
 
     ``onnx.helper.set_model_props`` replaces all entries, so existing ones are merged first; the
     key is written exactly once (the ONNX checker rejects duplicates).
     """
+    import dataclasses
+
     import onnx
 
+    from rtp import sdk
+
+    body = onnx.ModelProto()
+    body.CopyFrom(model)
+    del body.metadata_props[:]
+    meta = dataclasses.replace(meta, digest=sdk.model_digest(body.SerializeToString()))
     props = {p.key: p.value for p in model.metadata_props}
     props[METADATA_KEY] = meta.to_json()
     onnx.helper.set_model_props(model, props)
@@ -299,3 +309,32 @@ def adopt(
                 raise ExportError(f"the adopted model produced non-finite predictions at {w}x{h}")
     log.info("adopted %s -> %s", src, out)
     return out
+
+
+def restamp(model_path: str | os.PathLike[str]) -> Path:
+    """Rewrite an rtp model's metadata through :func:`write_metadata` so that it records the digest of
+    the graph and weights (models exported before rtp wrote digests). The graph, the weights and every
+    other metadata field stay as they are; the file is replaced atomically and loaded back to check
+    that it predicts exactly as before."""
+    import numpy as np
+    import onnx
+
+    from rtp import sdk
+
+    path = Path(model_path)
+    if not path.is_file():
+        raise ModelNotFoundError(f"no model at {str(path)!r}")
+    before = sdk.load(path, providers=["CPUExecutionProvider"])
+    try:
+        model = onnx.load(str(path))
+    except Exception as err:  # onnx raises DecodeError and friends
+        raise ModelLoadError(f"{str(path)!r} is not an ONNX model onnx can read: {err}") from err
+    write_metadata(model, before.metadata)
+    t = before.tile_size
+    x = np.random.default_rng(0).random((len(before.metadata.inputs), 5 * t, 7 * t), dtype=np.float32)
+    with atomic_output(path) as tmp:
+        _check_and_save(model, tmp)
+        after = sdk.load(tmp, providers=["CPUExecutionProvider"])
+        if not np.array_equal(before.predict_raw(x), after.predict_raw(x)):
+            raise ExportError(f"restamping {path} changed its predictions; the file is left as it was")
+    return path

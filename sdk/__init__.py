@@ -14,6 +14,7 @@ import logging
 from . import adapters, files
 from ._channels import CHANNELS, DEFAULT_INPUTS, Channel
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
+from ._digest import model_digest
 from ._errors import (
     EXIT_FAILED,
     EXIT_USAGE,
@@ -23,6 +24,7 @@ from ._errors import (
     InputError,
     InputShapeError,
     MetadataError,
+    ModelIntegrityError,
     ModelLoadError,
     ModelNotFoundError,
     NonFiniteInputError,
@@ -101,6 +103,7 @@ __all__ = [
     "InputError",
     "InputShapeError",
     "MetadataError",
+    "ModelIntegrityError",
     "ModelLoadError",
     "ModelMetadata",
     "MetricInfo",
@@ -121,6 +124,7 @@ __all__ = [
     "linear_to_srgb",
     "load",
     "luma",
+    "model_digest",
     "mse_from_psnr",
     "padded_size",
     "psnr_from_mse",

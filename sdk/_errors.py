@@ -7,6 +7,7 @@ working::
     RtpError
     ├── ModelNotFoundError        (also FileNotFoundError)  no file at the path, no shipped model of that name
     ├── ModelLoadError                                      the file exists but is not a loadable ONNX model
+    │   └── ModelIntegrityError                             graph or weights differ from the exported digest
     ├── MetadataError             (also ValueError)         metadata missing, malformed or inconsistent with the graph
     ├── InputError                (also ValueError)         base of the bad-input errors below
     │   ├── InputShapeError                                 wrong rank, size or layout
@@ -37,6 +38,7 @@ __all__ = [
     "InputError",
     "InputShapeError",
     "MetadataError",
+    "ModelIntegrityError",
     "ModelLoadError",
     "ModelNotFoundError",
     "NonFiniteInputError",
@@ -70,6 +72,11 @@ class ModelLoadError(RtpError):
     """The file exists but onnxruntime cannot load it (corrupt, truncated, not ONNX)."""
 
     exit_code = EXIT_USAGE
+
+
+class ModelIntegrityError(ModelLoadError):
+    """The model's graph or weights differ from what was exported: the digest its metadata records
+    does not match the file (corrupted, or modified after export)."""
 
 
 class MetadataError(RtpError, ValueError):

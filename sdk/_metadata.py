@@ -32,6 +32,8 @@ __all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
 METADATA_KEY = "rtp.metadata"
 #: The schema version this SDK writes; it reads this version and every older one.
 SCHEMA_VERSION = 1
+#: Largest extrapolation factor a model may declare (Yang et al. measured 2.13).
+MAX_EXTRAPOLATION_K = 100.0
 _METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 _FIELDS = (
     "schema_version",
@@ -47,10 +49,14 @@ _FIELDS = (
     "weber_l",
     "description",
     "provenance",
+    "digest",
 )
+_DIGEST_RE = re.compile(r"^sha256:[0-9a-f]{64}$")
 
 
-def _number(d: Mapping[str, Any], key: str, *, default: Any = ..., minimum: float | None = None) -> float:
+def _number(
+    d: Mapping[str, Any], key: str, *, default: Any = ..., minimum: float | None = None, maximum: float | None = None
+) -> float:
     if key not in d or d[key] is None:
         if default is ...:
             raise MetadataError(f"{key}: required, missing", key)
@@ -58,8 +64,10 @@ def _number(d: Mapping[str, Any], key: str, *, default: Any = ..., minimum: floa
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise MetadataError(f"{key}: expected a finite number, got {v!r}", key)
-    if minimum is not None and v < minimum:
-        raise MetadataError(f"{key}: expected >= {minimum}, got {v}", key)
+    if (minimum is not None and v < minimum) or (maximum is not None and v > maximum):
+        lo = "" if minimum is None else f">= {minimum:g}"
+        hi = "" if maximum is None else f"<= {maximum:g}"
+        raise MetadataError(f"{key}: expected a number {' and '.join(x for x in (lo, hi) if x)}, got {v:g}", key)
     return float(v)
 
 
@@ -100,6 +108,8 @@ class ModelMetadata:
     description: str = ""
     provenance: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     schema_version: int = SCHEMA_VERSION
+    #: ``"sha256:<hex>"`` of the graph and weights (``rtp-export`` writes it; ``sdk.load`` checks it), or None.
+    digest: str | None = None
 
     # -- parsing ------------------------------------------------------------------------------
     @classmethod
@@ -184,11 +194,13 @@ class ModelMetadata:
         except (TypeError, ValueError) as err:
             raise MetadataError(f"provenance: must hold only JSON values: {err}", "provenance") from err
 
-        k = _number(d, "extrapolation_k", default=DEFAULT_EXTRAPOLATION_K)
-        if k < 1.0:
-            raise MetadataError(
-                f"extrapolation_k: expected >= 1 (a coarser rate never has less error), got {k}", "extrapolation_k"
-            )
+        # >= 1: a coarser rate never has less error; <= MAX_EXTRAPOLATION_K: the paper's is 2.13
+        k = _number(d, "extrapolation_k", default=DEFAULT_EXTRAPOLATION_K, minimum=1.0, maximum=MAX_EXTRAPOLATION_K)
+        # an error metric's threshold is an error: never negative
+        threshold = _number(d, "default_threshold", minimum=None if hib else 0.0)
+        digest = d.get("digest")
+        if digest is not None and (not isinstance(digest, str) or not _DIGEST_RE.match(digest)):
+            raise MetadataError(f"digest: expected 'sha256:' and 64 hex digits, got {digest!r}", "digest")
         return cls(
             metric=metric,
             higher_is_better=hib,
@@ -196,21 +208,25 @@ class ModelMetadata:
             tile_size=int(tile),
             inputs=tuple(inputs),
             outputs=tuple(outputs),
-            default_threshold=_number(d, "default_threshold"),
-            safety=_number(d, "safety", default=0.0, minimum=0.0),
+            default_threshold=threshold,
+            # in transformed space, where the network's outputs lie in (0, 1)
+            safety=_number(d, "safety", default=0.0, minimum=0.0, maximum=1.0),
             extrapolation_k=k,
             weber_l=weber,
             description=description,
             provenance=_freeze(copy.deepcopy(dict(provenance))),
             schema_version=SCHEMA_VERSION,
+            digest=digest,
         )
 
     @classmethod
     def from_json(cls, text: str) -> ModelMetadata:
+        if not isinstance(text, (str, bytes, bytearray)):
+            raise MetadataError(f"{METADATA_KEY}: expected JSON text, got {type(text).__name__}", METADATA_KEY)
         try:
             d = json.loads(text)
-        except json.JSONDecodeError as err:
-            raise MetadataError(f"{METADATA_KEY}: not valid JSON ({err})", METADATA_KEY) from err
+        except (ValueError, RecursionError) as err:  # JSONDecodeError, bad UTF-8, huge ints, deep nesting
+            raise MetadataError(f"{METADATA_KEY}: not valid JSON ({type(err).__name__}: {err})", METADATA_KEY) from err
         return cls.from_dict(d)
 
     @classmethod
@@ -225,9 +241,11 @@ class ModelMetadata:
             from ._errors import ModelNotFoundError
 
             raise ModelNotFoundError(f"metadata sidecar not found: {p}") from err
+        except (OSError, UnicodeDecodeError) as err:
+            raise MetadataError(f"{p}: cannot be read as a UTF-8 YAML sidecar ({err})") from err
         try:
             d = yaml.safe_load(text)
-        except yaml.YAMLError as err:
+        except (yaml.YAMLError, RecursionError, ValueError) as err:
             raise MetadataError(f"{p}: not valid YAML ({err})") from err
         return cls.from_dict(d if d is not None else {})
 
@@ -246,6 +264,7 @@ class ModelMetadata:
             "weber_l": self.weber_l,
             "description": self.description,
             "provenance": _thaw(self.provenance),
+            **({"digest": self.digest} if self.digest is not None else {}),
         }
 
     def to_json(self) -> str:

@@ -12,15 +12,18 @@ from typing import Any
 
 import numpy as np
 
+from ._digest import model_digest
 from ._errors import (
     InferenceError,
     InputChannelError,
     InputDtypeError,
     InputShapeError,
     MetadataError,
+    ModelIntegrityError,
     ModelLoadError,
     ModelNotFoundError,
     NonFiniteInputError,
+    ParameterError,
     ProviderUnavailableError,
 )
 from ._metadata import METADATA_KEY, ModelMetadata
@@ -115,6 +118,23 @@ def _metadata_from_arg(metadata: ModelMetadata | Mapping[str, Any] | str | os.Pa
     raise MetadataError(f"metadata=: expected a dict, a ModelMetadata or a YAML path, got {type(metadata).__name__}")
 
 
+def _check_integrity(model_path: Path, meta: ModelMetadata) -> None:
+    """Refuse a file whose graph or weights differ from the digest its metadata records."""
+    if meta.digest is None:
+        log.info("%s records no digest (exported before rtp wrote them, or adopted): integrity not checked",
+                 model_path)
+        return
+    try:
+        actual = model_digest(model_path.read_bytes())
+    except (OSError, ValueError) as err:
+        raise ModelLoadError(f"{str(model_path)!r}: cannot be read back to check its digest ({err})") from err
+    if actual != meta.digest:
+        raise ModelIntegrityError(
+            f"{str(model_path)!r}: the graph or weights differ from what was exported (digest {actual}, the "
+            f"metadata records {meta.digest}); the file is corrupted or was modified after export: export it again"
+        )
+
+
 def load(
     path: str | os.PathLike[str],
     *,
@@ -136,7 +156,9 @@ def load(
     ort = _ort()
     model_path = _resolve_path(path)
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 0):
-        raise ValueError(f"threads: expected a non-negative integer (0 = onnxruntime's default), got {threads!r}")
+        raise ParameterError(
+            f"threads: expected a non-negative integer (0 = onnxruntime's default), got {threads!r}", "threads"
+        )
     requested = _normalise_providers(providers, strict)
     opts = ort.SessionOptions()
     opts.log_severity_level = 3
@@ -158,7 +180,10 @@ def load(
     if metadata is not None:
         meta = _metadata_from_arg(metadata)
     else:
-        props = session.get_modelmeta().custom_metadata_map
+        try:
+            props = session.get_modelmeta().custom_metadata_map
+        except Exception as err:  # a corrupted file can hold metadata that is not UTF-8
+            raise ModelLoadError(f"{str(model_path)!r}: its metadata_props cannot be read ({err})") from err
         if METADATA_KEY not in props:
             raise MetadataError(
                 f"{METADATA_KEY}: {str(model_path)!r} carries no rtp metadata; pass metadata= (a dict or a YAML "
@@ -166,6 +191,7 @@ def load(
                 METADATA_KEY,
             )
         meta = ModelMetadata.from_json(props[METADATA_KEY])
+        _check_integrity(model_path, meta)
     if meta.default_threshold != meta.saturation and (
         (meta.default_threshold > meta.saturation) != meta.higher_is_better
     ):

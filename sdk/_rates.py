@@ -142,9 +142,14 @@ def select_rates(
             expected="(..., 6, th, tw)",
         )
     rates = resolve_allowed(allowed)
+    if isinstance(threshold, (bool, np.bool_)) or not isinstance(threshold, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"threshold: expected a number, got {type(threshold).__name__} {threshold!r}", "threshold")
     threshold = float(threshold)
     if not np.isfinite(threshold):
-        raise ParameterError(f"threshold must be a finite number, got {threshold}")
+        raise ParameterError(f"threshold: expected a finite number, got {threshold}", "threshold")
+    if threshold < 0 and not higher_is_better:
+        raise ParameterError(f"threshold: expected >= 0 for an error metric (lower is better), got {threshold:g}",
+                             "threshold")
     # Orient every comparison as "smaller is better" so one code path serves both kinds.
     err = -values if higher_is_better else values
     thr = -threshold if higher_is_better else threshold

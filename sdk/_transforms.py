@@ -53,6 +53,8 @@ OUTPUT_SETS: tuple[tuple[str, ...], ...] = (
 DEFAULT_OUTPUTS: tuple[str, ...] = OUTPUT_SETS[1]
 
 TransformType = Literal["clamped", "logistic", "linear"]
+#: Largest magnitude a transform parameter may have: beyond it the decoded values overflow.
+MAX_PARAMETER = 1e6
 #: Transformed values are clipped to [eps, 1 - eps] before the logistic transform's logit.
 LOGIT_EPS = 1e-7
 
@@ -95,7 +97,7 @@ class Transform:
             "logistic": ("mu_y", "k"),
             "linear": ("factor", "offset"),
         }
-        if kind not in need:
+        if not isinstance(kind, str) or kind not in need:
             raise MetadataError(f"{key}.type: expected one of clamped, logistic, linear; got {kind!r}", f"{key}.type")
         unknown = set(d) - {"type", *need[kind]}
         if unknown:
@@ -106,8 +108,9 @@ class Transform:
             if name not in d:
                 raise MetadataError(f"{key}.{name}: required for a {kind} transform, missing", f"{key}.{name}")
             v = d[name]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise MetadataError(f"{key}.{name}: expected a finite number, got {v!r}", f"{key}.{name}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > MAX_PARAMETER:
+                raise MetadataError(f"{key}.{name}: expected a finite number of magnitude <= {MAX_PARAMETER:g}, got {v!r}",
+                                    f"{key}.{name}")
             vals[name] = float(v)
         if kind in ("clamped", "logistic") and vals["mu_y"] <= 0:
             raise MetadataError(f"{key}.mu_y: expected > 0 (the mean training target), got {vals['mu_y']}", f"{key}.mu_y")

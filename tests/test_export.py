@@ -64,7 +64,9 @@ def test_export_round_trip_matches_torch(tmp_path: Path, meta: dict) -> None:
     out = export.export_checkpoint(ck, tmp_path / "m.onnx")
     pred = sdk.load(out)
     m = pred.metadata
-    assert m.to_dict() | {"provenance": {}} == sdk.ModelMetadata.from_dict(meta).to_dict() | {"provenance": {}}
+    assert m.digest == sdk.model_digest(out.read_bytes())
+    assert m.to_dict() | {"provenance": {}, "digest": None} == (
+        sdk.ModelMetadata.from_dict(meta).to_dict() | {"provenance": {}, "digest": None})
     assert m.provenance["export"]["opset"] == export.DEFAULT_OPSET
     rng = np.random.default_rng(0)
     for h, w in ((64, 96), (72, 120)):  # the second is not a multiple of 16
