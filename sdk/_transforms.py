@@ -118,7 +118,7 @@ class Transform:
             raise MetadataError(f"{key}.k: expected > 0, got {vals['k']}", f"{key}.k")
         if kind == "linear" and vals["factor"] == 0:
             raise MetadataError(f"{key}.factor: must not be 0", f"{key}.factor")
-        return cls(type=kind, **vals)
+        return cls(type=kind, **vals)  # type: ignore[arg-type]  # kind is one of need's keys
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"type": self.type}
