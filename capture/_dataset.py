@@ -36,6 +36,7 @@ import logging
 import os
 import re
 import zipfile
+import zlib
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,6 +121,12 @@ def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.nda
     # camera can exceed float16's range (65504 pixels).
     big = float(np.finfo(np.float16).max)
     return np.clip(a, -big, big).astype(np.float16)
+
+
+#: What reading a corrupted .npz member raises: a bad CRC or zip structure, a bad .npy header or
+#: compressed stream, a truncated member, a dtype that will not convert, a zip feature zipfile lacks.
+_CORRUPT = (OSError, ValueError, KeyError, EOFError, TypeError, NotImplementedError, zipfile.BadZipFile, zlib.error,
+            RecursionError)
 
 
 def _decode(name: str, raw: np.ndarray) -> np.ndarray:
@@ -244,13 +251,17 @@ def _read_manifest(root: Path) -> dict[str, Any]:
     if not path.is_file():
         raise DatasetError(f"{root} is not an rtp dataset: no manifest.json")
     try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise DatasetError(f"{path}: not valid JSON ({err})") from err
-    if data.get("format") != FORMAT:
-        raise DatasetError(f"{path}: not an rtp dataset manifest (format {data.get('format')!r})")
-    if data.get("format_version", 0) > FORMAT_VERSION:
-        raise DatasetError(f"{path}: dataset format {data['format_version']} is newer than this rtp reads ({FORMAT_VERSION})")
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as err:  # unreadable, not UTF-8, not JSON
+        raise DatasetError(f"{path}: not a readable JSON manifest ({type(err).__name__}: {err})") from err
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        found = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise DatasetError(f"{path}: not an rtp dataset manifest (format {found!r})")
+    version = data.get("format_version", 0)
+    if isinstance(version, bool) or not isinstance(version, int) or version < 0:
+        raise DatasetError(f"{path}: format_version must be a non-negative integer, got {version!r}")
+    if version > FORMAT_VERSION:
+        raise DatasetError(f"{path}: dataset format {version} is newer than this rtp reads ({FORMAT_VERSION})")
     return data
 
 
@@ -277,14 +288,18 @@ class DatasetReader:
         try:
             npz = np.load(path, allow_pickle=False)
             meta = json.loads(bytes(npz["meta"]).decode())
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-            raise DatasetError(f"{path}: unreadable sample ({err})") from err
+        except _CORRUPT as err:
+            raise DatasetError(f"{path}: unreadable sample ({type(err).__name__}: {err})") from err
+        if not isinstance(meta, dict):
+            raise DatasetError(f"{path}: the sample's meta is not a JSON object")
 
         def load(name: str) -> np.ndarray:
+            if name not in npz.files:
+                raise DatasetError(f"{path}: buffer {name!r} missing")
             try:
                 return _decode(name, npz[name])
-            except KeyError as err:
-                raise DatasetError(f"{path}: buffer {name!r} missing") from err
+            except _CORRUPT as err:
+                raise DatasetError(f"{path}: buffer {name!r} is unreadable ({type(err).__name__}: {err})") from err
 
         return Sample(sample_id, load, meta)
 

@@ -8,7 +8,7 @@ shading-rate attachments.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -102,8 +102,11 @@ def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
     """
     if allowed is None:
         return PREDICTED_RATES
-    if isinstance(allowed, (str, int)):
+    if isinstance(allowed, (str, int, np.integer)):
         allowed = [allowed]
+    if isinstance(allowed, Mapping) or not isinstance(allowed, Iterable):
+        raise ParameterError(f"allowed: expected rate names or codes (a list), got {type(allowed).__name__} "
+                             f"{allowed!r}", "allowed")
     names: set[str] = set()
     for item in allowed:
         if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
