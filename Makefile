@@ -13,12 +13,11 @@ PER_SCENE ?= 4
 VAL_PER_SCENE ?= 6
 WORKERS   ?= 1
 METRIC    ?= jnyang
-STEPS     ?= 4000
-# The recipe the shipped models were trained with (docs/results.md). The paper's head for all but
-# LPIPS, whose 2x1 output died with it (rtp train reports dead outputs; docs/training.md).
-TRAIN_ARGS ?= --batch 16 --crop 128 --lr 5e-4
-HEAD_lpips := linear
-HEAD      ?= $(or $(HEAD_$(METRIC)),paper)
+# The recipe the shipped models were trained with: train/recipes/shipped.yaml (steps, batch, crop,
+# learning rate, the validation split, LPIPS's linear head). RECIPE=my.yaml trains with another;
+# STEPS=N overrides its steps.
+RECIPE    ?= shipped
+STEPS     ?=
 RTP       := $(BIN)/rtp
 
 .PHONY: install test lint typecheck check bench clean dataset train evaluate demo
@@ -76,7 +75,7 @@ dataset: $(STAMP)
 
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
-	$(RTP) train --data $(DATA)/train --metric $(METRIC) --val-split validation --steps $(STEPS) --head $(HEAD) $(TRAIN_ARGS) --out $(DATA)/$(METRIC).pt
+	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) --out $(DATA)/$(METRIC).pt
 	$(BIN)/rtp-export $(DATA)/$(METRIC).pt -o models/$(METRIC).onnx
 
 # make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines.
