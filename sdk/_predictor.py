@@ -316,7 +316,8 @@ class ShadingRatePredictor:
         if x4.shape[1] != c:
             hint = ""
             if x4.shape[-1] == c:
-                hint = "; the array looks channels-last (NHWC): transpose it with x.transpose(0, 3, 1, 2)"
+                order = "(2, 0, 1)" if x.ndim == 3 else "(0, 3, 1, 2)"
+                hint = f"; the array looks channels-last: transpose it with x.transpose{order}"
             raise InputChannelError(
                 f"expected {c} channels {list(self._meta.inputs)} on axis {x.ndim - 3}, got shape {x.shape}{hint}",
                 tuple(x.shape),

@@ -204,3 +204,13 @@ def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
     corrupt.write_bytes(b"junk")
     r = _cli("--adopt", str(corrupt), "--metadata", str(side), "-o", str(tmp_path / "x.onnx"))
     assert r.returncode == 2 and "not a readable ONNX model" in r.stderr
+
+
+def test_export_names_what_it_was_given_instead_of_a_checkpoint(tmp_path: Path) -> None:
+    side = tmp_path / "sidecar.yaml"
+    side.write_text("metric: jnyang\n")
+    junk = tmp_path / "model.pt"
+    junk.write_bytes(bytes(range(256)))
+    for path, needle in ((side, "is a metadata file, not a checkpoint"), (junk, "torch cannot read it")):
+        r = _cli(str(path))
+        assert r.returncode == 2 and needle in r.stderr and "weights_only" not in r.stderr, r.stderr

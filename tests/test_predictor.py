@@ -82,7 +82,8 @@ def test_properties(tiny_model: Callable[..., Path]) -> None:
         (np.zeros((16, 16), np.float32), sdk.InputShapeError, r"\(4, H, W\)"),
         (np.zeros((1, 1, 4, 16, 16), np.float32), sdk.InputShapeError, "got"),
         (np.zeros((3, 16, 16), np.float32), sdk.InputChannelError, "expected 4 channels"),
-        (np.zeros((1, 16, 16, 4), np.float32), sdk.InputChannelError, "channels-last"),
+        (np.zeros((1, 16, 16, 4), np.float32), sdk.InputChannelError, r"channels-last.*transpose\(0, 3, 1, 2\)"),
+        (np.zeros((16, 16, 4), np.float32), sdk.InputChannelError, r"channels-last.*transpose\(2, 0, 1\)"),
         (np.zeros((0, 4, 16, 16), np.float32), sdk.InputShapeError, "non-empty"),
     ],
 )

@@ -103,8 +103,15 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
         raise ModelNotFoundError(f"no checkpoint at {str(p)!r}")
     try:
         raw = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as err:
-        raise CheckpointError(f"{p}: not a readable torch checkpoint ({err})") from err
+    except Exception as err:  # torch raises UnpicklingError, RuntimeError, EOFError, ... with pages of advice
+        hint = ("; to bake a sidecar into a foreign ONNX model use "
+                "`rtp-export --adopt MODEL.onnx --metadata SIDECAR.yaml -o OUT.onnx`")
+        if p.suffix.lower() in (".yaml", ".yml", ".json"):
+            raise CheckpointError(f"{p} is a metadata file, not a checkpoint (the model.pt `rtp train` writes){hint}"
+                                  ) from err
+        raise CheckpointError(  # torch's own message is pages of weights_only advice: -v shows it
+            f"{p}: not a checkpoint (the model.pt `rtp train` writes): torch cannot read it ({type(err).__name__})"
+        ) from err
     if not isinstance(raw, dict) or raw.get("format") != FORMAT:
         raise CheckpointError(f"{p}: not an rtp checkpoint (expected format {FORMAT!r})")
     if raw.get("format_version", 0) > FORMAT_VERSION:
