@@ -19,7 +19,7 @@ __all__ = ["build_parser", "main"]
 EXAMPLES = """examples:
   rtp demo                                        render the built-in scene, pick rates with the shipped model
   rtp info jnyang                                 a model's metadata, inputs and outputs
-  rtp metric flip ref.png test.png --out map.png  FLIP (or psnr, lpips, jnflip, jnyang) of an image pair
+  rtp metric flip ref.png test.png --out map.png  FLIP (or another metric) of an image pair
   rtp scenes list                                 the game levels, their split, and what is cached
   rtp capture --scene procedural:1 --per-scene 2 --out data/toy
   rtp targets data/toy && rtp train --data data/toy --metric jnyang --out toy.pt
@@ -58,6 +58,19 @@ def _choices_csv(allowed: Sequence[str]) -> Any:
         bad = [i for i in items if i not in allowed]
         if bad or not items:
             raise argparse.ArgumentTypeError(f"expected comma-separated names from {', '.join(allowed)}, got {text!r}")
+        return items
+
+    return parse
+
+
+def _one_of_sets(allowed: Sequence[Sequence[str]]) -> Any:
+    """A comma-separated list that must be exactly one of ``allowed`` (order included)."""
+    sets = [tuple(s) for s in allowed]
+
+    def parse(text: str) -> tuple[str, ...]:
+        items = _csv(text)
+        if items not in sets:
+            raise argparse.ArgumentTypeError(f"expected one of {'; '.join(','.join(s) for s in sets)}, got {text!r}")
         return items
 
     return parse
@@ -299,7 +312,18 @@ def _usage(message: str) -> Exception:
 # -- the parser -------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
-    from rtp.sdk import DEFAULT_TILE_SIZE, METRICS, OUTPUT_SETS, TARGET_METRICS, TILE_SIZES
+    from rtp.capture.viewpoints import MOTION_PROFILES
+    from rtp.metrics import DEFAULT_PPD, DEFAULT_WEBER_L
+    from rtp.sdk import (
+        CHANNELS,
+        DEFAULT_INPUTS,
+        DEFAULT_OUTPUTS,
+        DEFAULT_TILE_SIZE,
+        METRICS,
+        OUTPUT_SETS,
+        TARGET_METRICS,
+        TILE_SIZES,
+    )
 
     p = argparse.ArgumentParser(prog="rtp", formatter_class=Formatter, epilog=EXAMPLES,
                                 description="rtp: learned perceptual error prediction for variable-rate shading.")
@@ -316,8 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     def cache_dir(sp: argparse.ArgumentParser) -> None:
         from rtp.capture.scenes import default_cache_dir
 
-        sp.add_argument("--cache-dir", default=default_cache_dir(), help="scene cache of `rtp scenes fetch` "
-                        "($RTP_SCENE_CACHE overrides the default)")
+        sp.add_argument("--cache-dir", default=default_cache_dir(), help="scene cache of `rtp scenes fetch`; "
+                        "$RTP_SCENE_CACHE sets the default")
 
     def splits(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--splits", default=None, metavar="SCENES.yaml",
@@ -358,7 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
     cap.add_argument("--out", required=True, help="dataset folder (created, or resumed)")
     cap.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
-    cap.add_argument("--profiles", type=_choices_csv(("slow", "fast")), default="slow,fast",
+    cap.add_argument("--profiles", type=_choices_csv(tuple(MOTION_PROFILES)), default=",".join(MOTION_PROFILES),
                      help="motion profiles, comma-separated")
     cap.add_argument("--workers", type=_positive, default=1, help="parallel render processes")
     cap.add_argument("--seed", type=int, default=0, help="viewpoint sampling seed")
@@ -377,26 +401,31 @@ def build_parser() -> argparse.ArgumentParser:
     tg.add_argument("--metrics", type=_choices_csv(tuple(METRICS)), default=",".join(TARGET_METRICS),
                     help="comma-separated metric names")
     tg.add_argument("--ppd", default=None, help="FLIP pixels per degree: a number, or 'width' for the paper's "
-                    "width-based value (default: FLIP's own 67.02)")
-    tg.add_argument("--weber-l", type=float, default=None, help="environment luminance l of JNFLIP/JNYang "
-                    "(default: 0.02)")
+                    f"width-based value (default: FLIP's own {DEFAULT_PPD:.2f})")
+    tg.add_argument("--weber-l", type=float, default=DEFAULT_WEBER_L,
+                    help="environment luminance l of JNFLIP/JNYang")
     tg.add_argument("--workers", type=_positive, default=1, help="parallel processes")
 
     tr = command("train", "train a metric-prediction model on a captured dataset", _cmd_train,
                  epilog="Hyper-parameters come from --config (the shipped models' recipe by default: "
                  "train/recipes/shipped.yaml); a flag given here overrides the recipe's value.")
     tr.add_argument("--data", required=True, help="dataset folder (with targets from `rtp targets`)")
-    tr.add_argument("--metric", required=True, choices=tuple(METRICS))
+    tr.add_argument("--metric", required=True, choices=tuple(METRICS), help="the metric whose targets the network "
+                    "learns (computed by `rtp targets`)")
     tr.add_argument("--out", required=True, help="checkpoint to write (resumed if it exists)")
     tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
                     help="training recipe: a YAML file, or 'shipped' (the shipped models' recipe)")
     r = tr.add_argument_group("recipe values (default: the recipe's)")
     r.add_argument("--tile", type=int, default=None, choices=TILE_SIZES,
-                   help=f"tile size in pixels (default: {DEFAULT_TILE_SIZE})")
-    r.add_argument("--outputs", type=_choices_csv(OUTPUT_SETS[2]), default=None,
-                   help="rates the network predicts, one of " + "; ".join(",".join(s) for s in OUTPUT_SETS))
-    r.add_argument("--inputs", type=_csv, default=None, help="input channels, in order (default: the paper's four)")
-    r.add_argument("--transform", default=None, choices=("clamped", "logistic"), help="target transform")
+                   help=f"tile size in pixels (default: {DEFAULT_TILE_SIZE}, unless the recipe sets one)")
+    r.add_argument("--outputs", type=_one_of_sets(OUTPUT_SETS), default=None,
+                   help="rates the network predicts, one of " + "; ".join(",".join(s) for s in OUTPUT_SETS)
+                   + f" (default: {','.join(DEFAULT_OUTPUTS)}, unless the recipe sets them)")
+    r.add_argument("--inputs", type=_choices_csv(tuple(CHANNELS)), default=None,
+                   help="input channels, in order, comma-separated (default: the paper's "
+                   f"{','.join(DEFAULT_INPUTS)}, unless the recipe sets them)")
+    r.add_argument("--transform", default=None, choices=_fitted_transforms(),
+                   help="target transform, fitted to the mean training target")
     r.add_argument("--k", dest="logistic_k", type=float, default=None, help="growth rate of the logistic transform")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
@@ -404,7 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--batch", type=_positive, default=None, help="crops per step")
     r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")
     r.add_argument("--lr", type=float, default=None, help="RMSprop learning rate")
-    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--seed", type=int, default=None, help="seed of the weights, crops and batches")
     r.add_argument("--safety-quantile", type=float, default=None,
                    help="calibrate the margin so at most this share of tiles is underestimated "
                    "(default: the paper's mean underestimation)")
@@ -451,9 +480,21 @@ def build_parser() -> argparse.ArgumentParser:
     mt.add_argument("test", help="the image to compare, same size")
     mt.add_argument("--out", default=None, help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
                     "bar to this image")
-    mt.add_argument("--tile", type=_positive, default=DEFAULT_TILE_SIZE, help="tile size in pixels")
+    mt.add_argument("--tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE, help="tile size in pixels")
     mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")
     return p
+
+
+def _fitted_transforms() -> tuple[str, ...]:
+    """The target transforms training can fit: the :class:`rtp.sdk.Transform` types whose constructor
+    takes ``mu_y``, the mean training target (``clamped``, ``logistic``; not ``linear``, which adopted
+    models use)."""
+    import inspect
+
+    from rtp.sdk import Transform
+
+    return tuple(name for name, attr in vars(Transform).items()
+                 if isinstance(attr, classmethod) and "mu_y" in inspect.signature(getattr(Transform, name)).parameters)
 
 
 def _split_names() -> tuple[str, ...]:

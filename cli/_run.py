@@ -18,7 +18,7 @@ import traceback
 from collections.abc import Callable, Iterator
 from typing import Any
 
-__all__ = ["COMMON", "Bar", "Formatter", "add_common", "run", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "add_common", "run", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -30,16 +30,22 @@ def version() -> str:
 
 
 class Formatter(argparse.RawDescriptionHelpFormatter):
-    """Help that shows every default (unless the help text states it already, or there is none to
-    show: a required option, a flag, an option whose absence means something the help says) and
-    keeps the examples' line breaks."""
+    """Help that shows every default (unless the help text states it already as ``default: ...``, or
+    there is none to show: a required option, a flag, an option whose absence means something the help
+    says) and keeps the examples' line breaks."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
-        if ("default" in text or action.required or action.default in (None, False, argparse.SUPPRESS)
+        if (states_default(text) or action.required or action.default in (None, False, argparse.SUPPRESS)
                 or not action.option_strings):
             return text
         return text + " (default: %(default)s)"
+
+
+def states_default(help_text: str) -> bool:
+    """Whether a help text says its default itself (``(default: ...)`` or ``...; default: ...``): a
+    help that merely mentions the word, such as "$RTP_SCENE_CACHE overrides the default", does not."""
+    return "default:" in help_text
 
 
 def add_common(parser: argparse.ArgumentParser, *, top: bool) -> None:

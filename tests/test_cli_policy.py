@@ -1,16 +1,26 @@
 """The command line's one policy: every subcommand's help exits 0 and shows its defaults, the same
-error class gives the same exit code in every entry point, and --version works everywhere."""
+error class gives the same exit code and the same one-line message in every entry point (``rtp``,
+``rtp scenes``, ``rtp-export``), and the choices come from the shared facts, not from lists of their own."""
 
 from __future__ import annotations
 
 import argparse
+import ast
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from rtp import sdk
 from rtp.cli import build_export_parser, build_parser, export_main, main
+
+from .test_errors_doc import all_errors
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
@@ -23,29 +33,48 @@ def _commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...] = ()) -> 
     return out
 
 
-COMMANDS = _commands(build_parser())
+def _subparser(parser: argparse.ArgumentParser, command: Sequence[str]) -> argparse.ArgumentParser:
+    for name in command:
+        parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[name]
+    return parser
+
+
+def _option(command: Sequence[str], dest: str) -> argparse.Action:
+    return next(a for a in _subparser(build_parser(), command)._actions if a.dest == dest)
+
+
+COMMANDS = [("rtp", c) for c in _commands(build_parser())] + [("rtp-export", ())]
+ENTRY: dict[str, tuple[Callable[[Sequence[str] | None], int], Callable[[], argparse.ArgumentParser]]] = {
+    "rtp": (main, build_parser), "rtp-export": (export_main, build_export_parser)}
 
 
 def test_the_parser_has_every_command() -> None:
-    assert {c[0] for c in COMMANDS if c} >= {"info", "scenes", "capture", "preview", "targets", "train", "evaluate",
-                                             "demo", "metric"}
-    assert ("scenes", "fetch") in COMMANDS and ("scenes", "list") in COMMANDS
+    assert {c[0] for _, c in COMMANDS if c} >= {"info", "scenes", "capture", "preview", "targets", "train", "evaluate",
+                                                "demo", "metric"}
+    assert ("rtp", ("scenes", "fetch")) in COMMANDS and ("rtp", ("scenes", "list")) in COMMANDS
 
 
-@pytest.mark.parametrize("command", COMMANDS, ids=lambda c: " ".join(c) or "rtp")
-def test_help_exits_0_and_shows_defaults(command: tuple[str, ...], capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(("prog", "command"), COMMANDS, ids=lambda c: " ".join(c) if isinstance(c, tuple) else c)
+def test_help_exits_0_and_shows_defaults(prog: str, command: tuple[str, ...], capsys: pytest.CaptureFixture[str]) -> None:
+    entry, build = ENTRY[prog]
     with pytest.raises(SystemExit) as exc:
-        main([*command, "--help"])
+        entry([*command, "--help"])
     assert exc.value.code == 0
-    text = capsys.readouterr().out
-    assert "usage: rtp" in text
-    parser = build_parser()
-    for name in command:
-        parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[name]
-    for action in parser._actions:
-        shown = action.default not in (None, False, argparse.SUPPRESS) and action.option_strings and not action.required
-        if shown and action.help and "default" not in action.help:
-            assert f"(default: {action.default}" in " ".join(text.split()), (command, action.dest)
+    text = " ".join(capsys.readouterr().out.split())
+    assert text.startswith(f"usage: {' '.join((prog, *command))}")
+    for action in _subparser(build(), command)._actions:
+        if action.default in (None, False, argparse.SUPPRESS) or not action.option_strings or action.required:
+            continue
+        assert action.help, (command, action.dest)
+        # the help states the default itself, or the formatter appends it
+        assert "default:" in action.help or f"(default: {action.default})" in text, (command, action.dest)
+
+
+@pytest.mark.parametrize("argv", [["-m", "rtp.cli", "scenes", "--help"], ["-m", "rtp.cli", "scenes", "fetch", "--help"],
+                                  ["-m", "rtp.cli.export", "--help"]], ids=" ".join)
+def test_help_of_the_installed_entry_points(argv: list[str]) -> None:
+    r = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("usage: ") and not r.stderr, r.stderr
 
 
 def test_rtp_export_help_and_versions(capsys: pytest.CaptureFixture[str]) -> None:
@@ -53,9 +82,6 @@ def test_rtp_export_help_and_versions(capsys: pytest.CaptureFixture[str]) -> Non
         with pytest.raises(SystemExit) as exc:
             entry(["--version"])
         assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"{prog} {sdk.__version__}"
-    with pytest.raises(SystemExit) as exc:
-        export_main(["--help"])
-    assert exc.value.code == 0 and "(default:" in capsys.readouterr().out
     assert build_export_parser().prog == "rtp-export"
 
 
@@ -65,15 +91,77 @@ def test_common_options_go_before_or_after_the_command(tmp_path: Path, capsys: p
     assert "Traceback" in capsys.readouterr().err  # -v shows it
 
 
-def test_one_error_class_one_exit_code_in_every_entry_point(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+# -- one error class, one exit code, one message, in every entry point ------------------------
+
+ERRORS = sorted(all_errors().items())
+
+
+def _raiser(error: BaseException) -> Callable[..., Any]:
+    def body(*_: Any, **__: Any) -> Any:
+        raise error
+
+    return body
+
+
+def _entry_points(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, error: BaseException) -> list[tuple[str, Callable[[
+        list[str]], int], list[str]]]:
+    """The three entry points, each made to meet ``error`` in the library call its command makes:
+    (the prog its messages start with, the entry point, its arguments)."""
+    import rtp.capture.scenes
+    import rtp.export
+
+    monkeypatch.setattr(sdk, "load", _raiser(error))
+    monkeypatch.setattr(rtp.capture.scenes, "fetch", _raiser(error))
+    monkeypatch.setattr(rtp.export, "export_checkpoint", _raiser(error))
+    return [("rtp info", main, ["info", "model.onnx"]),
+            ("rtp scenes fetch", main, ["scenes", "fetch", "--cache-dir", str(tmp_path)]),
+            ("rtp-export", export_main, [str(tmp_path / "model.pt")])]
+
+
+@pytest.mark.parametrize(("name", "cls"), ERRORS, ids=[n for n, _ in ERRORS])
+def test_one_error_class_one_exit_code_in_every_entry_point(name: str, cls: type[sdk.RtpError], tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    error = cls("what went wrong")
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, error):
+        assert entry(argv) == sdk.exit_code(error) == cls.exit_code, prog
+        assert capsys.readouterr().err == f"{prog}: error: what went wrong\n"  # one line, no traceback
+        assert entry([*argv, "--verbose"]) == cls.exit_code, prog
+        err = capsys.readouterr().err
+        assert err.startswith("Traceback") and f"{name}: what went wrong" in err, prog
+        assert err.endswith(f"{prog}: error: what went wrong\n"), prog
+
+
+def test_interrupts_exit_130_and_bugs_propagate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, KeyboardInterrupt()):
+        assert entry(argv) == 130, prog
+        assert capsys.readouterr().err == f"{prog}: interrupted\n"
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, ZeroDivisionError("a bug")):
+        with pytest.raises(ZeroDivisionError):  # not an rtp error: a bug, raised with its traceback (exit 1)
+            entry(argv)
+        assert "error:" not in capsys.readouterr().err, prog
+
+
+def test_real_errors_exit_the_same_in_every_entry_point(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = str(tmp_path / "nope.onnx")
     assert main(["info", missing]) == sdk.ModelNotFoundError.exit_code == 2
     assert main(["evaluate", missing, "--data", str(tmp_path)]) == 2
     assert export_main([str(tmp_path / "nope.pt")]) == 2
+    assert main(["scenes", "fetch", "--map", "no_such_map", "--cache-dir", str(tmp_path)]) == 2  # UnlistedMapError
+    assert main(["scenes", "list", "--splits", str(tmp_path / "nope.yaml")]) == 2
     err = capsys.readouterr().err
-    assert err.count("error:") == 3 and "rtp info: error:" in err and "rtp-export: error:" in err
-    with pytest.raises(SystemExit) as exc:  # argparse's own usage errors: 2 as well
-        main(["capture", "--per-scene", "0", "--out", str(tmp_path)])
+    assert err.count("error:") == 5 and "Traceback" not in err
+    for prefix in ("rtp info: error:", "rtp evaluate: error:", "rtp-export: error:", "rtp scenes fetch: error:",
+                   "rtp scenes list: error:"):
+        assert prefix in err
+    for argv in (["capture", "--per-scene", "0", "--out", str(tmp_path)], ["scenes"], ["scenes", "fetch", "--nope"],
+                 ["metric", "nope", "a.png", "b.png"]):
+        with pytest.raises(SystemExit) as exc:  # argparse's own usage errors: 2 as well
+            main(argv)
+        assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        export_main(["--adopt", "x.onnx"])
     assert exc.value.code == 2
 
 
@@ -95,3 +183,74 @@ def test_exit_code_of_non_rtp_errors() -> None:
     assert sdk.exit_code(KeyboardInterrupt()) == 130
     assert sdk.exit_code(RuntimeError()) == sdk.EXIT_FAILED == 1
     assert sdk.exit_code(sdk.InferenceError("x")) == 1 and sdk.exit_code(sdk.ParameterError("x")) == sdk.EXIT_USAGE
+
+    class ThirdParty(sdk.MetadataError):
+        """A subclass outside rtp inherits its parent's code."""
+
+    assert sdk.exit_code(ThirdParty("x")) == 2
+
+
+# -- the choices come from the shared facts -------------------------------------------------
+
+def _parse(*argv: str) -> argparse.Namespace:
+    return build_parser().parse_args(list(argv))
+
+
+def test_metric_tile_and_output_choices_are_the_sdks() -> None:
+    assert _option(("targets",), "metrics").default == ",".join(sdk.TARGET_METRICS)
+    assert _parse("targets", "d").metrics == sdk.TARGET_METRICS
+    assert _parse("targets", "d", "--metrics", ",".join(sdk.METRICS)).metrics == tuple(sdk.METRICS)
+    assert tuple(_option(("train",), "metric").choices or ()) == tuple(sdk.METRICS)
+    assert tuple(_option(("metric",), "metric").choices or ()) == tuple(sdk.METRICS)
+    assert tuple(_option(("train",), "tile").choices or ()) == sdk.TILE_SIZES
+    assert tuple(_option(("metric",), "tile").choices or ()) == sdk.TILE_SIZES
+    assert _option(("metric",), "tile").default == sdk.DEFAULT_TILE_SIZE
+    base = ("train", "--data", "d", "--metric", next(iter(sdk.METRICS)), "--out", "o.pt")
+    for outputs in sdk.OUTPUT_SETS:
+        assert _parse(*base, "--outputs", ",".join(outputs)).outputs == outputs
+    assert _parse(*base, "--inputs", ",".join(sdk.DEFAULT_INPUTS)).inputs == sdk.DEFAULT_INPUTS
+    assert ",".join(sdk.DEFAULT_OUTPUTS) in (_option(("train",), "outputs").help or "")
+    for bad in (("targets", "d", "--metrics", "nope"), (*base, "--outputs", ",".join(reversed(sdk.DEFAULT_OUTPUTS))),
+                (*base, "--inputs", "nope"), (*base, "--tile", "3"), ("metric", "flip", "a", "b", "--tile", "3")):
+        with pytest.raises(SystemExit) as exc:
+            _parse(*bad)
+        assert exc.value.code == 2, bad
+
+
+def test_split_profile_and_transform_choices_are_their_rooms() -> None:
+    from rtp import metrics
+    from rtp.capture.scenes import SPLIT_NAMES
+    from rtp.capture.viewpoints import MOTION_PROFILES
+
+    assert tuple(_option(("capture",), "split").choices or ()) == tuple(SPLIT_NAMES)
+    assert _parse("capture", "--per-scene", "1", "--out", "o").profiles == tuple(MOTION_PROFILES)
+    assert _option(("targets",), "weber_l").default == metrics.DEFAULT_WEBER_L
+    transforms = tuple(_option(("train",), "transform").choices or ())
+    assert transforms and "linear" not in transforms  # training fits mu_y; linear is for adopted models
+    for t in transforms:
+        assert getattr(sdk.Transform, t)(mu_y=0.1).type == t
+
+
+def test_head_choices_are_the_networks() -> None:
+    pytest.importorskip("torch")
+    from rtp.train.model import HEADS
+
+    assert tuple(_option(("train",), "head").choices or ()) == HEADS
+
+
+def test_cli_keeps_no_lists_of_metrics_tiles_or_rates() -> None:
+    """No tuple or list literal in cli/ holds two or more metric names, rate names or tile sizes: they
+    come from rtp.sdk (a single name, such as the demo's default model, is not a list)."""
+    names = set(sdk.METRICS) | set(sdk.ALL_RATES)
+    bad = []
+    for path in sorted((ROOT / "cli").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+                values = [e.value for e in node.elts if isinstance(e, ast.Constant)]
+                if (sum(v in names for v in values if isinstance(v, str)) >= 2
+                        or sum(v in sdk.TILE_SIZES for v in values if isinstance(v, int) and v > 2) >= 2):
+                    bad.append(f"{path.name}:{node.lineno}")
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.count(",") >= 1:
+                if sum(part.strip() in names for part in node.value.split(",")) >= 2:
+                    bad.append(f"{path.name}:{node.lineno}")
+    assert not bad, f"literal lists of metrics, rates or tile sizes in cli/: {bad}"
