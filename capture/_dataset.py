@@ -326,7 +326,7 @@ _PAPER_BUFFERS: dict[str, tuple[str, int | slice]] = {
 
 class PaperDatasetReader:
     """Reads the paper's released dataset layout: one folder per sample holding
-    ``<buffer>_<rate>.png`` files (notes/anchors.md 1.2).
+    ``<buffer>_<rate>.png`` files (the paper's released dataset; docs/dataset.md).
 
     Values are returned as stored: 8-bit sRGB-encoded PNG values in [0, 1]. In that layout the
     normals are view-space normals written through an sRGB target with negative components clamped

@@ -6,8 +6,8 @@ Each selector has the predictor's interface (``predict`` -> per-tile values ``(6
 :class:`Frame`, a mapping of buffers (``reprojected``, ``motion``, ``seen``) or a bare reprojected
 ``(H, W, 3)`` image.
 
-* :class:`Yang2019`: NVIDIA Adaptive Shading (Yang et al., I3D 2019; notes/anchors.md section 2).
-* :class:`FidelityFX`: AMD FidelityFX Variable Shading (notes/anchors.md section 3).
+* :class:`Yang2019`: NVIDIA Adaptive Shading (Yang et al., I3D 2019; docs/evaluation.md).
+* :class:`FidelityFX`: AMD FidelityFX Variable Shading (FidelityFX-VariableShading, docs/evaluation.md).
 * :class:`ModelSelector` and :class:`Oracle`: the model (through ``rtp.sdk``) and the true targets
   behind the same interface, so one loop compares all of them.
 
@@ -378,7 +378,7 @@ def _neighbour_reduce(a: np.ndarray, fn: Any) -> np.ndarray:
 
 
 class FidelityFX:
-    """AMD FidelityFX Variable Shading on the reprojected previous frame (notes/anchors.md section 3).
+    """AMD FidelityFX Variable Shading on the reprojected previous frame (docs/evaluation.md).
 
     Luma ``0.30 R + 0.59 G + 0.11 B``. The dataset's reprojected frame stands in for FFX's fetch of
     the previous frame at ``pos - round(mv)``; like FFX it does not know what is unseen (black there,

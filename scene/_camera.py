@@ -1,4 +1,4 @@
-"""Pinhole camera with the conventions of design.md: right-handed view space looking down -Z,
+"""Pinhole camera with the conventions of docs/architecture.md: right-handed view space looking down -Z,
 Y up, images with a top-left origin. Matrices are numpy float64, column vectors (``p' = M @ p``).
 """
 

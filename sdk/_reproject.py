@@ -4,7 +4,7 @@ The moderngl adapter, which the reference renderer also uses, runs the same comp
 (``plugins/moderngl/shaders/adapter_fs.glsl``); this module is the specification and the CPU
 fallback for adapters that have the previous frame on the host. numpy only.
 
-Conventions (design.md):
+Conventions (docs/architecture.md):
 
 * Images are row-major ``(H, W[, C])`` with a top-left origin. Pixel ``(x, y)`` has its centre at
   ``(x + 0.5, y + 0.5)``.

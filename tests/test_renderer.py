@@ -35,7 +35,7 @@ def renderer(gl_context: Any) -> Iterator[Renderer]:
 
 
 def _sample_index(n: int, block: int) -> np.ndarray:
-    """Index of the shading sample of every pixel along one axis (design.md, clamped)."""
+    """Index of the shading sample of every pixel along one axis (docs/renderer.md, clamped)."""
     i = np.arange(n)
     return np.minimum(i // block * block + block // 2, n - 1)
 

@@ -1,7 +1,7 @@
 """GL <-> image plumbing: the ONE place where rows are flipped.
 
 OpenGL textures have a bottom-left origin; every array this package hands out or takes in has a
-top-left origin (design.md). :func:`flip_rows` is the only flip, used when reading a texture back
+top-left origin (docs/architecture.md). :func:`flip_rows` is the only flip, used when reading a texture back
 (:func:`read_texture`) and when uploading an image into a texture (:func:`write_texture`).
 Material textures are not flipped: their row 0 is v = 0 and is uploaded first, so ``texture(t, uv)``
 with top-left uvs samples the right texel.
