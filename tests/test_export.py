@@ -132,7 +132,7 @@ def test_cli_exit_codes(tmp_path: Path) -> None:
 # -- adoption ---------------------------------------------------------------------------------
 
 PAPER_SIDECAR = {
-    # The paper's AdaptiveVRS model (the authors' Jaliborc/rt-percept, branch renderer; docs/export.md): JNYang, linear factor 0.7,
+    # The paper's AdaptiveVRS model (Jaliborc/rt-percept, branch renderer; docs/export.md): JNYang, linear factor 0.7,
     # safety 0.06, inputs albedo.r, specular.r, normal.z, shadow; channels 1x2 and 2x1.
     "metric": "jnyang",
     "transform": {"type": "linear", "factor": 0.7, "offset": 0.0},
