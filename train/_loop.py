@@ -170,7 +170,8 @@ def _predict_frames(net: MetricNet, xs: Sequence[np.ndarray], tile: int) -> list
     with torch.inference_mode():
         for x in xs:
             t = torch.from_numpy(x.astype(np.float32))[None]
-            th, tw = sdk.tile_grid(*t.shape[-2:], tile)
+            h, w = t.shape[-2:]
+            th, tw = sdk.tile_grid(int(h), int(w), tile)
             y = net(_pad_to_tiles(t, tile))[0, :, :th, :tw]
             out.append(y.numpy())
     return out
