@@ -12,6 +12,7 @@ import json
 import math
 import os
 import re
+import reprlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,8 +24,9 @@ import numpy as np
 from ._channels import CHANNELS
 from ._errors import MetadataError
 from ._metrics import METRICS
+from ._rates import MAX_THRESHOLD
 from ._tiles import TILE_SIZES
-from ._transforms import DEFAULT_EXTRAPOLATION_K, OUTPUT_SETS, Transform, extrapolate
+from ._transforms import DEFAULT_EXTRAPOLATION_K, MAX_EXTRAPOLATION_K, OUTPUT_SETS, Transform, as_float64, extrapolate
 
 __all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
 
@@ -32,8 +34,6 @@ __all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
 METADATA_KEY = "rtp.metadata"
 #: The schema version this SDK writes; it reads this version and every older one.
 SCHEMA_VERSION = 1
-#: Largest extrapolation factor a model may declare (Yang et al. measured 2.13).
-MAX_EXTRAPOLATION_K = 100.0
 _METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 _FIELDS = (
     "schema_version",
@@ -51,7 +51,8 @@ _FIELDS = (
     "provenance",
     "digest",
 )
-_DIGEST_RE = re.compile(r"^sha256:[0-9a-f]{64}$")
+#: The form of ``digest``: ``sha256:`` and 64 lower-case hex digits (``sdk.model_digest``).
+DIGEST_RE = re.compile(r"sha256:[0-9a-f]{64}")
 
 
 def _number(
@@ -62,13 +63,20 @@ def _number(
             raise MetadataError(f"{key}: required, missing", key)
         return default
     v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise MetadataError(f"{key}: expected a finite number, got {v!r}", key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v):
+        raise MetadataError(f"{key}: expected a finite number, got {reprlib.repr(v)}", key)
     if (minimum is not None and v < minimum) or (maximum is not None and v > maximum):
         lo = "" if minimum is None else f">= {minimum:g}"
         hi = "" if maximum is None else f"<= {maximum:g}"
         raise MetadataError(f"{key}: expected a number {' and '.join(x for x in (lo, hi) if x)}, got {v:g}", key)
     return float(v)
+
+
+def _finite(v: float) -> bool:
+    try:
+        return math.isfinite(v)
+    except OverflowError:  # an int too large for a float
+        return False
 
 
 def _freeze(value: Any) -> Any:
@@ -116,6 +124,9 @@ class ModelMetadata:
     def from_dict(cls, d: Mapping[str, Any]) -> ModelMetadata:
         if not isinstance(d, Mapping):
             raise MetadataError(f"metadata: expected a mapping, got {type(d).__name__}")
+        odd = [k for k in d if not isinstance(k, str)]
+        if odd:
+            raise MetadataError(f"metadata: field names must be strings, got {odd[0]!r}")
         unknown = sorted(set(d) - set(_FIELDS))
         if unknown:
             raise MetadataError(
@@ -132,7 +143,7 @@ class ModelMetadata:
             )
 
         metric = d.get("metric")
-        if not isinstance(metric, str) or not _METRIC_RE.match(metric):
+        if not isinstance(metric, str) or not _METRIC_RE.fullmatch(metric):
             raise MetadataError(f"metric: expected a lower-case name such as 'jnyang', got {metric!r}", "metric")
         hib = d.get("higher_is_better")
         if hib is None:
@@ -155,7 +166,7 @@ class ModelMetadata:
         transform = Transform.from_dict(d["transform"])
 
         tile = d.get("tile_size")
-        if isinstance(tile, bool) or tile not in TILE_SIZES:
+        if isinstance(tile, bool) or not isinstance(tile, int) or tile not in TILE_SIZES:
             raise MetadataError(f"tile_size: expected one of {TILE_SIZES}, got {tile!r}", "tile_size")
 
         inputs = d.get("inputs")
@@ -191,15 +202,15 @@ class ModelMetadata:
             raise MetadataError(f"provenance: expected a mapping, got {type(provenance).__name__}", "provenance")
         try:
             json.dumps(provenance, allow_nan=False)
-        except (TypeError, ValueError) as err:
+        except (TypeError, ValueError, RecursionError) as err:  # RecursionError: nested too deep
             raise MetadataError(f"provenance: must hold only JSON values: {err}", "provenance") from err
 
         # >= 1: a coarser rate never has less error; <= MAX_EXTRAPOLATION_K: the paper's is 2.13
         k = _number(d, "extrapolation_k", default=DEFAULT_EXTRAPOLATION_K, minimum=1.0, maximum=MAX_EXTRAPOLATION_K)
-        # an error metric's threshold is an error: never negative
-        threshold = _number(d, "default_threshold", minimum=None if hib else 0.0)
+        # an error metric's threshold is an error: never negative; PSNR's is any finite dB value
+        threshold = _number(d, "default_threshold", minimum=-MAX_THRESHOLD if hib else 0.0, maximum=MAX_THRESHOLD)
         digest = d.get("digest")
-        if digest is not None and (not isinstance(digest, str) or not _DIGEST_RE.match(digest)):
+        if digest is not None and (not isinstance(digest, str) or not DIGEST_RE.fullmatch(digest)):
             raise MetadataError(f"digest: expected 'sha256:' and 64 hex digits, got {digest!r}", "digest")
         return cls(
             metric=metric,
@@ -234,15 +245,17 @@ class ModelMetadata:
         """Read a YAML sidecar (the same fields as the JSON)."""
         import yaml
 
-        p = Path(path)
+        if not isinstance(path, (str, os.PathLike)):
+            raise MetadataError(f"metadata sidecar: expected a YAML file path, got {type(path).__name__}")
         try:
+            p = Path(path)
             text = p.read_text(encoding="utf-8")
         except FileNotFoundError as err:
             from ._errors import ModelNotFoundError
 
-            raise ModelNotFoundError(f"metadata sidecar not found: {p}") from err
-        except (OSError, UnicodeDecodeError) as err:
-            raise MetadataError(f"{p}: cannot be read as a UTF-8 YAML sidecar ({err})") from err
+            raise ModelNotFoundError(f"metadata sidecar not found: {path}") from err
+        except (OSError, ValueError, TypeError) as err:  # unreadable, not UTF-8, a NUL byte in the path
+            raise MetadataError(f"{reprlib.repr(str(path))}: cannot be read as a UTF-8 YAML sidecar ({err})") from err
         try:
             d = yaml.safe_load(text)
         except (yaml.YAMLError, RecursionError, ValueError) as err:
@@ -291,7 +304,7 @@ class ModelMetadata:
         Adds the safety margin in the conservative direction, applies the inverse transform and
         extrapolates the missing rates. Returns float32 with six channels on axis -3.
         """
-        p = np.asarray(raw, dtype=np.float64) + self.worse_direction * self.safety
+        p = as_float64(raw, "raw") + self.worse_direction * self.safety
         values = self.transform.inverse(p)
         full = extrapolate(values, self.outputs, self.extrapolation_k, higher_is_better=self.higher_is_better)
         return full.astype(np.float32)

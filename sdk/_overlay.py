@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._errors import InputShapeError
+from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
 from ._rates import RATE_CODES, RATE_NAMES, rate_size
 from ._tiles import tile_grid
 
@@ -16,6 +16,13 @@ OVERLAY_COLOURS: dict[str, tuple[float, float, float]] = {
     "medium": (1.0, 0.9, 0.0),
     "coarse": (1.0, 0.0, 0.0),
 }
+
+
+def _array(x: object, name: str) -> np.ndarray:
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as err:  # ragged nested lists and the like
+        raise InputDtypeError(f"{name}: expected an array, got {type(x).__name__} ({err})") from err
 
 
 def _class_of(code: int) -> str | None:
@@ -41,12 +48,22 @@ def draw_rate_overlay(
     red, 2x2 yellow, 1x2 and 2x1 green, 1x1 is left as is. With ``grid`` a faint line marks the
     tiles. Returns a new image of the same dtype and shape.
     """
-    img = np.asarray(image)
+    img = _array(image, "image")
+    if img.dtype.kind not in "buif":
+        raise InputDtypeError(f"image: expected uint8 or float values, got dtype {img.dtype}")
     if img.ndim != 3 or img.shape[2] not in (3, 4):
         raise InputShapeError(f"expected an (H, W, 3) image, got shape {img.shape}", tuple(img.shape), "(H, W, 3)")
+    if img.dtype.kind == "f" and not np.isfinite(img).all():
+        raise NonFiniteInputError("image: holds NaN or infinite values; expected colours in [0, 1]")
+    if isinstance(alpha, (bool, np.bool_)) or not isinstance(alpha, (int, float, np.integer, np.floating)) \
+            or not 0.0 <= alpha <= 1.0:
+        raise ParameterError(f"alpha: expected a number in [0, 1] (the tint's opacity), got {alpha!r}", "alpha")
     h, w = img.shape[:2]
     th, tw = tile_grid(h, w, tile_size)
-    rates = np.asarray(rates)
+    rates = _array(rates, "rates")
+    if rates.dtype.kind not in "ui":
+        raise InputDtypeError(f"rates: expected integer shading-rate codes (uint8, as shading_rates returns), got "
+                              f"dtype {rates.dtype}")
     if rates.shape != (th, tw):
         raise InputShapeError(
             f"expected rates of shape {(th, tw)} for a {w}x{h} image with {tile_size}-pixel tiles, got {rates.shape}",
@@ -55,7 +72,8 @@ def draw_rate_overlay(
         )
     unknown = set(np.unique(rates).tolist()) - set(RATE_CODES.values())
     if unknown:
-        raise ValueError(f"rates hold codes that are no shading rate: {sorted(unknown)}")
+        raise ParameterError(f"rates: hold codes that are no shading rate: {sorted(unknown)}; expected codes from "
+                             f"{sorted(RATE_NAMES)}", "rates")
     is_uint8 = img.dtype == np.uint8
     out = img[..., :3].astype(np.float32) / (255.0 if is_uint8 else 1.0)
     tint = np.zeros((th, tw, 3), np.float32)

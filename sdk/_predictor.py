@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import logging
 import math
 import os
+import reprlib
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -26,7 +28,7 @@ from ._errors import (
     ParameterError,
     ProviderUnavailableError,
 )
-from ._metadata import METADATA_KEY, ModelMetadata
+from ._metadata import DIGEST_RE, METADATA_KEY, ModelMetadata
 from ._rates import PREDICTED_RATES, RateLike, select_rates
 from ._tiles import padded_size, tile_grid
 
@@ -35,6 +37,8 @@ __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 log = logging.getLogger("rtp.sdk")
 
 ProviderSpec = str | tuple[str, Mapping[str, Any]]
+#: Most intra-op threads ``load(threads=...)`` accepts (onnxruntime takes a C int; no machine has more cores).
+MAX_THREADS = 4096
 _CPU = "CPUExecutionProvider"
 # Providers that onnxruntime lists as available but that run no local kernels (the Azure EP forwards
 # requests to a remote endpoint); never picked by default, never reported as the one that runs.
@@ -61,10 +65,17 @@ def shipped_models() -> list[str]:
 
 
 def _resolve_path(path: str | os.PathLike[str]) -> Path:
-    p = Path(path)
-    if p.is_file():
+    if not isinstance(path, (str, os.PathLike)):
+        raise ParameterError(f"path: expected a model file path or a shipped model's name, got {type(path).__name__} "
+                             f"{reprlib.repr(path)}", "path")
+    try:
+        p = Path(path)
+        is_file, exists = p.is_file(), p.exists()
+    except (OSError, ValueError, TypeError) as err:  # a name too long, a NUL byte, a PathLike returning junk
+        raise ModelNotFoundError(f"no model file at {reprlib.repr(str(path))}: {err}") from err
+    if is_file:
         return p
-    if p.exists():
+    if exists:
         raise ModelNotFoundError(f"model path {str(p)!r} exists but is not a file")
     # A bare name such as "jnyang" or "jnyang.onnx" finds a shipped model.
     if p.parent == Path(".") and (d := _models_dir()) is not None:
@@ -83,6 +94,10 @@ def _normalise_providers(providers: Sequence[ProviderSpec] | None, strict: bool)
         return [p for p in available if p != _CPU and p not in _NON_COMPUTE] + ([_CPU] if _CPU in available else [])
     if isinstance(providers, str):
         providers = [providers]
+    if not isinstance(providers, Sequence):
+        raise ProviderUnavailableError(
+            f"providers: expected a list of provider names or (name, options) pairs, got {type(providers).__name__}"
+        )
     out: list[ProviderSpec] = []
     for spec in providers:
         if isinstance(spec, str):
@@ -118,9 +133,20 @@ def _metadata_from_arg(metadata: ModelMetadata | Mapping[str, Any] | str | os.Pa
     raise MetadataError(f"metadata=: expected a dict, a ModelMetadata or a YAML path, got {type(metadata).__name__}")
 
 
-def _check_integrity(model_path: Path, meta: ModelMetadata) -> None:
+def _embedded_digest(props: Mapping[str, str]) -> str | None:
+    """The digest the model's own metadata records, when ``metadata=`` replaces that metadata: the file's
+    integrity is checked all the same. None when there is none or the embedded metadata is unreadable."""
+    try:
+        d = json.loads(props.get(METADATA_KEY, ""))
+    except (ValueError, RecursionError):
+        return None
+    digest = d.get("digest") if isinstance(d, dict) else None
+    return digest if isinstance(digest, str) and DIGEST_RE.fullmatch(digest) else None
+
+
+def _check_integrity(model_path: Path, digest: str | None) -> None:
     """Refuse a file whose graph or weights differ from the digest its metadata records."""
-    if meta.digest is None:
+    if digest is None:
         log.info("%s records no digest (exported before rtp wrote them, or adopted): integrity not checked",
                  model_path)
         return
@@ -128,10 +154,10 @@ def _check_integrity(model_path: Path, meta: ModelMetadata) -> None:
         actual = model_digest(model_path.read_bytes())
     except (OSError, ValueError) as err:
         raise ModelLoadError(f"{str(model_path)!r}: cannot be read back to check its digest ({err})") from err
-    if actual != meta.digest:
+    if actual != digest:
         raise ModelIntegrityError(
             f"{str(model_path)!r}: the graph or weights differ from what was exported (digest {actual}, the "
-            f"metadata records {meta.digest}); the file is corrupted or was modified after export: export it again"
+            f"metadata records {digest}); the file is corrupted or was modified after export: export it again"
         )
 
 
@@ -155,9 +181,12 @@ def load(
     """
     ort = _ort()
     model_path = _resolve_path(path)
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 0):
+    if threads is not None and (
+        isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= MAX_THREADS
+    ):
         raise ParameterError(
-            f"threads: expected a non-negative integer (0 = onnxruntime's default), got {threads!r}", "threads"
+            f"threads: expected an integer in [0, {MAX_THREADS}] (0 = onnxruntime's default), got "
+            f"{reprlib.repr(threads)}", "threads"
         )
     requested = _normalise_providers(providers, strict)
     opts = ort.SessionOptions()
@@ -177,13 +206,16 @@ def load(
             raise ProviderUnavailableError(msg)
         log.warning(msg)
 
+    try:
+        props = session.get_modelmeta().custom_metadata_map
+    except Exception as err:  # a corrupted file can hold metadata that is not UTF-8
+        if metadata is None:
+            raise ModelLoadError(f"{str(model_path)!r}: its metadata_props cannot be read ({err})") from err
+        props = {}
     if metadata is not None:
         meta = _metadata_from_arg(metadata)
+        _check_integrity(model_path, meta.digest or _embedded_digest(props))
     else:
-        try:
-            props = session.get_modelmeta().custom_metadata_map
-        except Exception as err:  # a corrupted file can hold metadata that is not UTF-8
-            raise ModelLoadError(f"{str(model_path)!r}: its metadata_props cannot be read ({err})") from err
         if METADATA_KEY not in props:
             raise MetadataError(
                 f"{METADATA_KEY}: {str(model_path)!r} carries no rtp metadata; pass metadata= (a dict or a YAML "
@@ -191,7 +223,7 @@ def load(
                 METADATA_KEY,
             )
         meta = ModelMetadata.from_json(props[METADATA_KEY])
-        _check_integrity(model_path, meta)
+        _check_integrity(model_path, meta.digest)
     if meta.default_threshold != meta.saturation and (
         (meta.default_threshold > meta.saturation) != meta.higher_is_better
     ):

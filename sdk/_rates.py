@@ -8,19 +8,23 @@ shading-rate attachments.
 
 from __future__ import annotations
 
+import math
+import reprlib
 from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-from ._errors import InputShapeError, ParameterError
+from ._errors import InputDtypeError, InputShapeError, ParameterError
 from ._tiles import tile_extents, tile_grid
 
 __all__ = [
     "ALL_RATES",
+    "MAX_THRESHOLD",
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
     "RateLike",
+    "check_threshold",
     "rate_size",
     "resolve_allowed",
     "select_rates",
@@ -33,10 +37,15 @@ ALL_RATES: tuple[str, ...] = ("1x1", "1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
 PREDICTED_RATES: tuple[str, ...] = ALL_RATES[1:]
 
 
+#: Largest magnitude of a threshold (metric units, dB for PSNR): every metric rtp knows stays far below
+#: it, and a threshold beyond everything a model can express would pass (or fail) every tile.
+MAX_THRESHOLD = 1e6
+
+
 def rate_size(rate: str) -> tuple[int, int]:
     """``(W, H)`` of a rate name such as ``"2x4"``."""
-    if rate not in ALL_RATES:
-        raise ValueError(f"unknown shading rate {rate!r}; expected one of {', '.join(ALL_RATES)}")
+    if not isinstance(rate, str) or rate not in ALL_RATES:
+        raise ParameterError(f"unknown shading rate {rate!r}; expected one of {', '.join(ALL_RATES)}", "rate")
     w, h = rate.split("x")
     return int(w), int(h)
 
@@ -71,7 +80,10 @@ def work_saved(
             raise ParameterError(f"unknown shading-rate code {rates}; expected one of {sorted(RATE_NAMES)}", "rates")
         w, h = rate_size(name)
         return 1.0 - 1.0 / (w * h)
-    codes = np.asarray(rates)
+    try:
+        codes = np.asarray(rates)
+    except (TypeError, ValueError, OverflowError) as err:  # ragged nested lists and the like
+        raise InputDtypeError(f"work_saved: expected a rate or an array of rate codes, got {type(rates).__name__}") from err
     if codes.ndim != 2 or codes.size == 0 or codes.dtype.kind not in "ui":
         raise InputShapeError(f"work_saved: expected a rate name, a code, or a non-empty (th, tw) array of integer "
                               f"codes, got {type(rates).__name__} {getattr(codes, 'shape', '')}")
@@ -79,7 +91,9 @@ def work_saved(
     for name, code in RATE_CODES.items():
         w, h = rate_size(name)
         table[code] = 1.0 - 1.0 / (w * h)
-    saved = table[np.clip(codes.astype(np.int64), 0, 255)]
+    # codes outside 0..255 (negative ones too) map to a NaN entry rather than clipping onto a real code
+    wide = codes.astype(np.int64)
+    saved = table[np.where((wide >= 0) & (wide <= 255), wide, 255)]
     if np.isnan(saved).any():
         bad = sorted({int(c) for c in codes[np.isnan(saved)].ravel()})
         raise ParameterError(f"unknown shading-rate code(s) {bad}; expected codes from {sorted(RATE_NAMES)}", "rates")
@@ -87,6 +101,8 @@ def work_saved(
         raise ParameterError("work_saved: give frame_size and tile_size together (or neither)", "frame_size")
     if frame_size is None or tile_size is None:
         return float(saved.mean())
+    if not isinstance(frame_size, (tuple, list)) or len(frame_size) != 2:
+        raise ParameterError(f"frame_size: expected (H, W), got {frame_size!r}", "frame_size")
     h, w = frame_size
     if tile_grid(h, w, tile_size) != codes.shape:
         raise InputShapeError(f"work_saved: {codes.shape[0]}x{codes.shape[1]} tiles do not cover a {w}x{h} frame "
@@ -107,8 +123,12 @@ def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
     if isinstance(allowed, Mapping) or not isinstance(allowed, Iterable):
         raise ParameterError(f"allowed: expected rate names or codes (a list), got {type(allowed).__name__} "
                              f"{allowed!r}", "allowed")
+    try:
+        items = list(allowed)
+    except TypeError as err:  # a 0-d array, an iterator that fails
+        raise ParameterError(f"allowed: expected rate names or codes (a list), got {allowed!r} ({err})", "allowed") from err
     names: set[str] = set()
-    for item in allowed:
+    for item in items:
         if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
             if int(item) not in RATE_NAMES:
                 raise ParameterError(f"unknown shading-rate code {int(item)}; expected one of {sorted(RATE_NAMES)}")
@@ -120,6 +140,24 @@ def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
         else:
             raise ParameterError(f"allowed rates must be names like '2x2' or integer codes, got {item!r}")
     return tuple(r for r in PREDICTED_RATES if r in names)
+
+
+def check_threshold(threshold: object, higher_is_better: bool) -> float:
+    """``threshold`` as a float if it makes sense, else :class:`ParameterError` with the range: a finite
+    number of magnitude <= :data:`MAX_THRESHOLD`, and >= 0 for an error metric (lower is better)."""
+    if isinstance(threshold, (bool, np.bool_)) or not isinstance(threshold, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"threshold: expected a number, got {type(threshold).__name__} {reprlib.repr(threshold)}",
+                             "threshold")
+    try:
+        value = float(threshold)
+    except OverflowError:  # an int too large for a float
+        value = math.inf if threshold > 0 else -math.inf
+    lo = -MAX_THRESHOLD if higher_is_better else 0.0
+    if not lo <= value <= MAX_THRESHOLD:  # NaN fails too
+        kind = "dB (higher is better)" if higher_is_better else "for an error metric (lower is better)"
+        raise ParameterError(f"threshold: expected a finite number in [{lo:g}, {MAX_THRESHOLD:g}] {kind}, got "
+                             f"{reprlib.repr(threshold)}", "threshold")
+    return value
 
 
 def select_rates(
@@ -137,24 +175,25 @@ def select_rates(
     and 2x1, 2x4 and 4x2) the one with the better predicted value wins. Tiles where nothing passes
     get 1x1. Returns uint8 D3D12/Vulkan codes with axis -3 removed.
     """
-    values = np.asarray(values)
+    try:
+        values = np.asarray(values)
+    except (TypeError, ValueError, OverflowError) as error:  # ragged nested lists and the like
+        raise InputDtypeError(f"values: expected a numeric array, got {type(values).__name__} ({error})") from error
+    if values.dtype.kind not in "biuf":
+        raise InputDtypeError(f"values: expected real numbers (predictions), got dtype {values.dtype}")
     if values.ndim < 3 or values.shape[-3] != len(PREDICTED_RATES):
         raise InputShapeError(
             f"expected predictions with {len(PREDICTED_RATES)} rate channels on axis -3, got shape {values.shape}",
             actual=tuple(values.shape),
             expected="(..., 6, th, tw)",
         )
+    if not isinstance(higher_is_better, (bool, np.bool_)):
+        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
     rates = resolve_allowed(allowed)
-    if isinstance(threshold, (bool, np.bool_)) or not isinstance(threshold, (int, float, np.integer, np.floating)):
-        raise ParameterError(f"threshold: expected a number, got {type(threshold).__name__} {threshold!r}", "threshold")
-    threshold = float(threshold)
-    if not np.isfinite(threshold):
-        raise ParameterError(f"threshold: expected a finite number, got {threshold}", "threshold")
-    if threshold < 0 and not higher_is_better:
-        raise ParameterError(f"threshold: expected >= 0 for an error metric (lower is better), got {threshold:g}",
-                             "threshold")
+    threshold = check_threshold(threshold, bool(higher_is_better))
     # Orient every comparison as "smaller is better" so one code path serves both kinds.
-    err = -values if higher_is_better else values
+    as_float = values.astype(np.float64, copy=False)  # bool and unsigned predictions negate correctly too
+    err = -as_float if higher_is_better else as_float
     thr = -threshold if higher_is_better else threshold
     out = np.zeros(values.shape[:-3] + values.shape[-2:], dtype=np.uint8)
     decided = np.zeros(out.shape, dtype=bool)

@@ -40,17 +40,56 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_REPROJECTION_TOLERANCE", "reproject", "reproject_positions"]
+from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
+
+__all__ = ["DEFAULT_REPROJECTION_TOLERANCE", "MAX_REPROJECTION_TOLERANCE", "reproject", "reproject_positions"]
 
 #: Relative depth tolerance of the disocclusion test (2 % of the expected depth).
 DEFAULT_REPROJECTION_TOLERANCE = 0.02
 
 
+#: Largest relative depth tolerance accepted: 1 already accepts any previous depth in [0, 2x] the expected one.
+MAX_REPROJECTION_TOLERANCE = 1.0
+
+
+def _real(x: object, name: str) -> np.ndarray:
+    """``x`` as a finite float64 array, or a typed error naming ``name``."""
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as err:  # ragged nested lists and the like
+        raise InputDtypeError(f"{name}: expected an array of numbers, got {type(x).__name__} ({err})") from err
+    if a.dtype.kind not in "biuf":
+        raise InputDtypeError(f"{name}: expected an array of numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64, copy=False)
+    if not np.isfinite(a).all():
+        raise NonFiniteInputError(f"{name}: holds NaN or infinite values")
+    return a
+
+
 def _matrix(m: np.ndarray, name: str) -> np.ndarray:
-    m = np.asarray(m, dtype=np.float64)
+    m = _real(m, name)
     if m.shape != (4, 4):
-        raise ValueError(f"{name} must be a 4x4 matrix, got shape {m.shape}")
+        raise InputShapeError(f"{name} must be a 4x4 matrix, got shape {m.shape}", tuple(m.shape), "(4, 4)")
     return m
+
+
+def _inverse(m: np.ndarray, name: str) -> np.ndarray:
+    try:
+        inv = np.linalg.inv(m)
+    except np.linalg.LinAlgError as err:
+        raise ParameterError(f"{name} is singular (not invertible): {err}", name) from err
+    if not np.isfinite(inv).all():
+        raise ParameterError(f"{name} is too close to singular to invert", name)
+    return inv
+
+
+def _depth(d: object, name: str) -> np.ndarray:
+    a = _real(d, name)
+    if a.ndim != 2 or a.size == 0:
+        raise InputShapeError(f"{name} must be a non-empty (H, W) array, got shape {a.shape}", tuple(a.shape), "(H, W)")
+    if (a < 0).any():
+        raise ParameterError(f"{name}: linear view depth must be >= 0 (0 marks background)", name)
+    return a
 
 
 def reproject_positions(
@@ -73,12 +112,10 @@ def reproject_positions(
         the top-left row is ``H - qy``) and the previous clip ``w`` (the expected previous linear
         depth for geometry; only its sign matters for background).
     """
-    depth = np.asarray(depth, dtype=np.float64)
-    if depth.ndim != 2:
-        raise ValueError(f"depth must be (H, W), got shape {depth.shape}")
+    depth = _depth(depth, "depth")
     h, w = depth.shape
-    inv_proj = np.linalg.inv(_matrix(cur_proj, "cur_proj"))
-    inv_view = np.linalg.inv(_matrix(cur_view, "cur_view"))
+    inv_proj = _inverse(_matrix(cur_proj, "cur_proj"), "cur_proj")
+    inv_view = _inverse(_matrix(cur_view, "cur_view"), "cur_view")
     prev_vp = _matrix(prev_view_proj, "prev_view_proj")
 
     xs = (np.arange(w, dtype=np.float64) + 0.5) / w * 2.0 - 1.0
@@ -130,15 +167,20 @@ def reproject(
         ``(reprojected, seen)``: ``reprojected`` has ``prev_colour``'s shape, float32, 0 where
         unseen; ``seen`` is ``(H, W)`` float32 in {0, 1}. See the module docstring for the rules.
     """
+    if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.integer, np.floating)) \
+            or not 0.0 <= tolerance <= MAX_REPROJECTION_TOLERANCE:
+        raise ParameterError(f"tolerance: expected a number in [0, {MAX_REPROJECTION_TOLERANCE:g}] (relative depth "
+                             f"tolerance, {DEFAULT_REPROJECTION_TOLERANCE} by default), got {tolerance!r}", "tolerance")
+    depth = _depth(depth, "depth")
+    prev_depth = _depth(prev_depth, "prev_depth")
+    if prev_depth.shape != depth.shape:
+        raise InputShapeError(f"depth and prev_depth must both be (H, W); got {depth.shape} and {prev_depth.shape}",
+                              tuple(prev_depth.shape), str(depth.shape))
+    colour = _real(prev_colour, "prev_colour")
+    if colour.ndim not in (2, 3) or colour.shape[:2] != depth.shape:
+        raise InputShapeError(f"prev_colour must be (H, W[, C]) with (H, W) = {depth.shape}; got {colour.shape}",
+                              tuple(colour.shape), f"({depth.shape[0]}, {depth.shape[1]}[, C])")
     prev_colour = np.asarray(prev_colour)
-    prev_depth = np.asarray(prev_depth, dtype=np.float64)
-    depth = np.asarray(depth, dtype=np.float64)
-    if depth.ndim != 2 or prev_depth.shape != depth.shape:
-        raise ValueError(f"depth and prev_depth must both be (H, W); got {depth.shape} and {prev_depth.shape}")
-    if prev_colour.shape[:2] != depth.shape:
-        raise ValueError(f"prev_colour must be (H, W[, C]) with (H, W) = {depth.shape}; got {prev_colour.shape}")
-    if not tolerance >= 0.0:
-        raise ValueError(f"tolerance must be >= 0, got {tolerance}")
     h, w = depth.shape
     qx, qy, cw = reproject_positions(depth, cur_view, cur_proj, prev_view_proj)
     on = (cw > 0.0) & (qx >= 0.0) & (qx < w) & (qy >= 0.0) & (qy < h)

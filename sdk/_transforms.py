@@ -20,19 +20,24 @@ vectors (``tests/data/transform_vectors.json``).
 from __future__ import annotations
 
 import math
+import reprlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
-from ._errors import MetadataError
+from ._errors import InputDtypeError, InputShapeError, MetadataError, ParameterError
 from ._rates import PREDICTED_RATES
 
 __all__ = [
     "DEFAULT_EXTRAPOLATION_K",
     "DEFAULT_OUTPUTS",
     "LOGIT_EPS",
+    "MAX_EXTRAPOLATION_K",
+    "MAX_PARAMETER",
+    "MIN_LOGISTIC_SPAN",
+    "MIN_PARAMETER",
     "OUTPUT_SETS",
     "Transform",
     "complete_rates",
@@ -41,6 +46,9 @@ __all__ = [
 
 #: Yang et al. 2019: the error of a quarter rate is about 2.13 times the error of the half rate.
 DEFAULT_EXTRAPOLATION_K = 2.13
+#: Largest extrapolation factor accepted: k >= 1 (a coarser rate never has less error) and at most
+#: this (a quarter rate 100 times worse than the half rate would make the extrapolated rates useless).
+MAX_EXTRAPOLATION_K = 100.0
 #: Sets of network output rates that ``extrapolate`` can complete to all six reduced rates.
 OUTPUT_SETS: tuple[tuple[str, ...], ...] = (
     ("1x2", "2x1"),
@@ -55,8 +63,48 @@ DEFAULT_OUTPUTS: tuple[str, ...] = OUTPUT_SETS[1]
 TransformType = Literal["clamped", "logistic", "linear"]
 #: Largest magnitude a transform parameter may have: beyond it the decoded values overflow.
 MAX_PARAMETER = 1e6
+#: Smallest magnitude of ``mu_y``, ``k`` and ``factor``: below it decoding divides by (almost) zero and a
+#: network output of 0.5 decodes to an error of 1e6 and more (float32 overflows near 1e300).
+MIN_PARAMETER = 1e-6
+#: Smallest ``S(1) - S(0)`` of a logistic transform: a flatter one (``mu_y`` far outside [0, 1] for its
+#: ``k``) maps every metric value in [0, 1] to almost the same transformed value, and its inverse, which
+#: clips S into (LOGIT_EPS, 1 - LOGIT_EPS), decodes every network output to the same constant.
+MIN_LOGISTIC_SPAN = 1e-3
 #: Transformed values are clipped to [eps, 1 - eps] before the logistic transform's logit.
 LOGIT_EPS = 1e-7
+
+
+def _finite(v: float | np.integer | np.floating) -> bool:
+    """``math.isfinite`` that is False (not OverflowError) for an int too large for a float."""
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
+def _array(x: Any, name: str) -> np.ndarray:
+    """``np.asarray(x)``, with InputDtypeError for what numpy cannot make an array of (ragged lists)."""
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise InputDtypeError(f"{name}: expected a numeric array, got {type(x).__name__} ({err})") from err
+
+
+def check_extrapolation_k(k: Any, name: str = "k") -> float:
+    """``k`` as a float if it is a finite number in [1, :data:`MAX_EXTRAPOLATION_K`], else ParameterError."""
+    if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, float, np.integer, np.floating)) or not _finite(k) \
+            or not 1.0 <= k <= MAX_EXTRAPOLATION_K:
+        raise ParameterError(f"{name}: expected a finite number in [1, {MAX_EXTRAPOLATION_K:g}] (the error ratio of a "
+                             f"quarter rate to a half rate, 2.13 by default), got {reprlib.repr(k)}", name)
+    return float(k)
+
+
+def as_float64(x: Any, name: str) -> np.ndarray:
+    """``x`` as a float64 array, or InputDtypeError naming ``name`` (strings, objects, ragged lists)."""
+    a = _array(x, name)
+    if a.dtype.kind not in "biuf":
+        raise InputDtypeError(f"{name}: expected real numbers, got {type(x).__name__} of dtype {a.dtype}")
+    return a.astype(np.float64, copy=False)
 
 
 def _sigmoid(x: np.ndarray | float) -> np.ndarray:
@@ -108,17 +156,29 @@ class Transform:
             if name not in d:
                 raise MetadataError(f"{key}.{name}: required for a {kind} transform, missing", f"{key}.{name}")
             v = d[name]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > MAX_PARAMETER:
-                raise MetadataError(f"{key}.{name}: expected a finite number of magnitude <= {MAX_PARAMETER:g}, got {v!r}",
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v) or abs(v) > MAX_PARAMETER:
+                raise MetadataError(f"{key}.{name}: expected a finite number of magnitude <= {MAX_PARAMETER:g}, got "
+                                    f"{reprlib.repr(v)}",
                                     f"{key}.{name}")
             vals[name] = float(v)
-        if kind in ("clamped", "logistic") and vals["mu_y"] <= 0:
-            raise MetadataError(f"{key}.mu_y: expected > 0 (the mean training target), got {vals['mu_y']}", f"{key}.mu_y")
-        if kind == "logistic" and vals["k"] <= 0:
-            raise MetadataError(f"{key}.k: expected > 0, got {vals['k']}", f"{key}.k")
-        if kind == "linear" and vals["factor"] == 0:
-            raise MetadataError(f"{key}.factor: must not be 0", f"{key}.factor")
-        return cls(type=kind, **vals)  # type: ignore[arg-type]  # kind is one of need's keys
+        if kind in ("clamped", "logistic") and vals["mu_y"] < MIN_PARAMETER:
+            raise MetadataError(f"{key}.mu_y: expected a number in [{MIN_PARAMETER:g}, {MAX_PARAMETER:g}] (the mean "
+                                f"training target), got {vals['mu_y']:g}", f"{key}.mu_y")
+        if kind == "logistic" and vals["k"] < MIN_PARAMETER:
+            raise MetadataError(f"{key}.k: expected a number in [{MIN_PARAMETER:g}, {MAX_PARAMETER:g}], got {vals['k']:g}",
+                                f"{key}.k")
+        if kind == "linear" and abs(vals["factor"]) < MIN_PARAMETER:
+            raise MetadataError(f"{key}.factor: expected a magnitude in [{MIN_PARAMETER:g}, {MAX_PARAMETER:g}] "
+                                f"(negative for models trained on 1 - T), got {vals['factor']:g}", f"{key}.factor")
+        t = cls(type=kind, **vals)  # type: ignore[arg-type]  # kind is one of need's keys
+        if kind == "logistic":
+            s0, s1 = t._s_bounds()
+            if not s1 - s0 >= MIN_LOGISTIC_SPAN:
+                raise MetadataError(
+                    f"{key}: a logistic transform with mu_y {vals['mu_y']:g} and k {vals['k']:g} is flat over [0, 1] "
+                    f"(S(1) - S(0) = {s1 - s0:.3g}, expected >= {MIN_LOGISTIC_SPAN:g}): every network output would "
+                    f"decode to the same value; choose mu_y inside [0, 1] or a smaller k", key)
+        return t
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"type": self.type}
@@ -136,7 +196,7 @@ class Transform:
 
     def forward(self, y: np.ndarray | float) -> np.ndarray:
         """Metric units to transformed space."""
-        y = np.asarray(y, dtype=np.float64)
+        y = as_float64(y, "y")
         if self.type == "clamped":
             return np.clip(y / (2.0 * self.mu_y), 0.0, 1.0)  # type: ignore[operator]
         if self.type == "logistic":
@@ -146,7 +206,7 @@ class Transform:
 
     def inverse(self, p: np.ndarray | float) -> np.ndarray:
         """Transformed space back to metric units (not clamped; see the module docstring)."""
-        p = np.asarray(p, dtype=np.float64)
+        p = as_float64(p, "p")
         if self.type == "clamped":
             return p * (2.0 * self.mu_y)  # type: ignore[operator]
         if self.type == "logistic":
@@ -184,15 +244,23 @@ def extrapolate(
     For a higher-is-better metric in decibels (PSNR), "worse" is the minimum and scaling an error
     amplitude by k lowers the value by ``20 log10 k`` dB.
     """
-    outputs = tuple(outputs)
-    if outputs not in OUTPUT_SETS:
+    if isinstance(outputs, str) or not isinstance(outputs, Sequence) or tuple(outputs) not in OUTPUT_SETS:
         raise MetadataError(
-            f"outputs: cannot extrapolate from {list(outputs)}; expected one of {[list(s) for s in OUTPUT_SETS]}",
+            f"outputs: cannot extrapolate from {outputs!r}; expected one of {[list(s) for s in OUTPUT_SETS]}",
             "outputs",
         )
-    v = np.asarray(values)
+    outputs = tuple(outputs)
+    k = check_extrapolation_k(k)
+    if not isinstance(higher_is_better, (bool, np.bool_)):
+        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
+    v = _array(values, "values")
+    if v.dtype.kind not in "biuf":
+        raise InputDtypeError(f"values: expected a real numeric array, got dtype {v.dtype}")
     if v.ndim < 3 or v.shape[-3] != len(outputs):
-        raise ValueError(f"expected {len(outputs)} channels on axis -3 for outputs {list(outputs)}, got shape {v.shape}")
+        raise InputShapeError(
+            f"values: expected {len(outputs)} channels on axis -3 for outputs {list(outputs)}, got shape {v.shape}",
+            tuple(v.shape), f"(..., {len(outputs)}, th, tw)",
+        )
     chans = complete_rates(
         {r: v[..., i, :, :] for i, r in enumerate(outputs)}, outputs, k, higher_is_better, np.maximum, np.minimum
     )
