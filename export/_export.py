@@ -21,7 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import METADATA_KEY, MetadataError, ModelLoadError, ModelMetadata, ModelNotFoundError, RtpError
+from rtp.sdk import (
+    METADATA_KEY,
+    MetadataError,
+    ModelLoadError,
+    ModelMetadata,
+    ModelNotFoundError,
+    ParameterError,
+    RtpError,
+)
 from rtp.sdk.files import atomic_output
 
 __all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "restamp", "write_metadata"]
@@ -128,8 +136,8 @@ def export_checkpoint(
     from rtp import sdk
     from rtp.train import checkpoint as ckpt_mod
 
-    if not 9 <= opset <= 20:
-        raise ExportError(f"opset {opset} is not supported; use 9 to 20 (default {DEFAULT_OPSET})")
+    if isinstance(opset, bool) or not isinstance(opset, int) or not 9 <= opset <= 20:
+        raise ParameterError(f"opset: expected 9 to 20 (default {DEFAULT_OPSET}), got {opset!r}", "opset")
     ckpt = ckpt_mod.load(checkpoint)
     out = Path(output) if output is not None else Path(checkpoint).with_suffix(".onnx")
     meta_dict = ckpt.metadata.to_dict()

@@ -126,7 +126,7 @@ def test_cli_exit_codes(tmp_path: Path) -> None:
     assert usage.returncode == 2 and "--metadata" in usage.stderr
     assert _cli().returncode == 2
     bad_opset = _cli(str(ck), "--opset", "3")
-    assert bad_opset.returncode == 1 and "opset" in bad_opset.stderr
+    assert bad_opset.returncode == 2 and "opset" in bad_opset.stderr
 
 
 # -- adoption ---------------------------------------------------------------------------------

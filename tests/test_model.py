@@ -93,7 +93,7 @@ def test_bad_checkpoint_files(tmp_path: Path) -> None:
         checkpoint.load(tmp_path / "missing.pt")
     junk = tmp_path / "junk.pt"
     junk.write_bytes(b"garbage")
-    with pytest.raises(checkpoint.CheckpointError, match="not a readable"):
+    with pytest.raises(checkpoint.CheckpointError, match="not a checkpoint"):
         checkpoint.load(junk)
     other = tmp_path / "other.pt"
     torch.save({"state_dict": {}}, other)
