@@ -35,9 +35,7 @@ import json
 import logging
 import os
 import re
-import zipfile
-import zlib
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -65,7 +63,7 @@ log = logging.getLogger("rtp.capture")
 
 FORMAT = "rtp-dataset"
 FORMAT_VERSION = 1
-_ID_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+_ID_RE = re.compile(r"[A-Za-z0-9_.-]+\Z")
 
 
 class DatasetError(RtpError):
@@ -123,14 +121,26 @@ def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.nda
     return np.clip(a, -big, big).astype(np.float16)
 
 
-#: What reading a corrupted .npz member raises: a bad CRC or zip structure, a bad .npy header or
-#: compressed stream, a truncated member, a dtype that will not convert, a zip feature zipfile lacks.
-_CORRUPT = (OSError, ValueError, KeyError, EOFError, TypeError, NotImplementedError, zipfile.BadZipFile, zlib.error,
-            RecursionError)
+def _unreadable(path: Path, what: str, err: Exception) -> DatasetError:
+    """The DatasetError for a file a third-party parser (numpy's .npz/.npy reader, Pillow) choked on.
+
+    Those parsers meet corrupted bytes with a wide, undocumented set of exceptions (BadZipFile,
+    zlib.error, EOFError, ValueError, KeyError, tokenize.TokenError and SyntaxError from a mangled .npy
+    header, MemoryError from a header claiming a huge shape, OSError, ...), so every reader call on a
+    dataset file is guarded with ``except Exception`` and re-raised as this, chained with ``from``.
+    """
+    return DatasetError(f"{path}: {what} ({type(err).__name__}: {err})")
 
 
-def _decode(name: str, raw: np.ndarray) -> np.ndarray:
-    if BUFFERS[name].dtype == "u8":
+_STORED = {"u8": np.dtype(np.uint8), "f16": np.dtype(np.float16)}
+
+
+def _decode(name: str, raw: Any) -> np.ndarray:
+    spec = BUFFERS[name]
+    if not isinstance(raw, np.ndarray) or raw.dtype != _STORED[spec.dtype]:
+        found = raw.dtype if isinstance(raw, np.ndarray) else type(raw).__name__
+        raise DatasetError(f"buffer {name!r}: stored as {found}, expected {_STORED[spec.dtype]}")
+    if spec.dtype == "u8":
         return raw.astype(np.float32) / 255.0
     return raw.astype(np.float32)
 
@@ -143,18 +153,37 @@ class Sample:
         self.meta: Mapping[str, Any] = meta
         self._loader = loader
         self._cache: dict[str, np.ndarray] = {}
+        self._hw: tuple[int, int] | None = None
 
     def buffer(self, name: str) -> np.ndarray:
-        """A buffer as float32 ``(H, W)`` or ``(H, W, C)`` (see :data:`BUFFERS`)."""
-        if name not in BUFFERS:
+        """A buffer as float32 ``(H, W)`` or ``(H, W, C)`` (see :data:`BUFFERS`).
+
+        A buffer of another shape than :data:`BUFFERS` gives, of another size than the sample's other
+        buffers, or holding NaN or infinite values is a malformed sample: :class:`DatasetError`.
+        """
+        if not isinstance(name, str) or name not in BUFFERS:
             raise DatasetError(f"unknown buffer {name!r}; buffers are {', '.join(BUFFERS)}")
         if name not in self._cache:
-            self._cache[name] = self._loader(name)
+            self._cache[name] = self._checked(name, self._loader(name))
         return self._cache[name]
+
+    def _checked(self, name: str, a: np.ndarray) -> np.ndarray:
+        n = len(BUFFERS[name].channels) or 3
+        want = f"(H, W, {n})" if n > 1 else "(H, W)"
+        if a.ndim != (3 if n > 1 else 2) or (n > 1 and a.shape[2] != n) or 0 in a.shape:
+            raise DatasetError(f"sample {self.id!r}: buffer {name!r} has shape {a.shape}, expected {want}")
+        hw = (int(a.shape[0]), int(a.shape[1]))
+        if self._hw is not None and hw != self._hw:
+            raise DatasetError(f"sample {self.id!r}: buffer {name!r} is {hw[1]}x{hw[0]}, the sample's other buffers "
+                               f"are {self._hw[1]}x{self._hw[0]}")
+        if not np.isfinite(a).all():
+            raise DatasetError(f"sample {self.id!r}: buffer {name!r} holds NaN or infinite values")
+        self._hw = hw
+        return a
 
     def channel(self, name: str) -> np.ndarray:
         """One input channel as float32 ``(H, W)``."""
-        if name not in _CHANNEL_SOURCE:
+        if not isinstance(name, str) or name not in _CHANNEL_SOURCE:
             raise DatasetError(f"unknown channel {name!r}; channels are {', '.join(CHANNELS)}")
         buf, i = _CHANNEL_SOURCE[name]
         b = self.buffer(buf)
@@ -162,11 +191,13 @@ class Sample:
 
     def inputs(self, names: Sequence[str]) -> np.ndarray:
         """Model input planes in ``names`` order: float32 ``(C, H, W)``, as ``predict`` takes them."""
+        if isinstance(names, str) or not isinstance(names, Iterable) or not (names := list(names)):
+            raise DatasetError(f"inputs: expected a non-empty list of channel names, got {names!r}")
         return np.stack([self.channel(n) for n in names]).astype(np.float32, copy=False)
 
     def final(self, rate: str) -> np.ndarray:
         """The final display-encoded image at ``rate``: float32 ``(H, W, 3)`` in [0, 1]."""
-        if rate not in ALL_RATES:
+        if not isinstance(rate, str) or rate not in ALL_RATES:
             raise DatasetError(f"unknown rate {rate!r}; rates are {', '.join(ALL_RATES)}")
         return self.buffer(f"final_{rate}")
 
@@ -265,15 +296,34 @@ def _read_manifest(root: Path) -> dict[str, Any]:
     return data
 
 
+def _folder(root: object) -> Path:
+    """``root`` as the Path of an existing folder, or DatasetError."""
+    if not isinstance(root, (str, os.PathLike)):
+        raise DatasetError(f"expected a dataset folder path, got {type(root).__name__}")
+    try:
+        p = Path(root)
+        is_dir = p.is_dir()
+    except (OSError, ValueError, TypeError) as err:  # a name too long, a NUL byte
+        raise DatasetError(f"no dataset folder at {str(root)[:200]!r} ({err})") from err
+    if not is_dir:
+        raise DatasetError(f"no dataset folder at {str(p)!r}")
+    return p
+
+
 class DatasetReader:
-    """Reads an rtp dataset folder. Iterating yields :class:`Sample` objects in id order."""
+    """Reads an rtp dataset folder. Iterating yields :class:`Sample` objects in id order.
+
+    Whatever is malformed (the manifest, a sample file, a buffer's dtype, shape or values) raises
+    :class:`DatasetError` naming the file, when the folder is opened or the buffer first read.
+    """
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
-        self.root = Path(root)
-        if not self.root.is_dir():
-            raise DatasetError(f"no dataset folder at {str(self.root)!r}")
+        self.root = _folder(root)
         self.manifest = _read_manifest(self.root)
-        self.ids = sorted(p.stem for p in (self.root / "samples").glob("*.npz"))
+        try:
+            self.ids = sorted(p.stem for p in (self.root / "samples").glob("*.npz") if _ID_RE.match(p.stem))
+        except OSError as err:
+            raise DatasetError(f"{self.root / 'samples'}: cannot be listed ({err})") from err
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -282,14 +332,20 @@ class DatasetReader:
         return (self[i] for i in self.ids)
 
     def __getitem__(self, sample_id: str) -> Sample:
+        if not isinstance(sample_id, str) or not _ID_RE.match(sample_id):
+            raise DatasetError(f"no sample {sample_id!r} in {self.root} (ids are letters, digits, '.', '_' and '-')")
         path = sample_path(self.root, sample_id)
         if not path.is_file():
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")
         try:
             npz = np.load(path, allow_pickle=False)
+            if not isinstance(npz, np.lib.npyio.NpzFile):
+                raise DatasetError(f"{path}: not an .npz archive (a {type(npz).__name__})")
             meta = json.loads(bytes(npz["meta"]).decode())
-        except _CORRUPT as err:
-            raise DatasetError(f"{path}: unreadable sample ({type(err).__name__}: {err})") from err
+        except RtpError:
+            raise
+        except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
+            raise _unreadable(path, "unreadable sample", err) from err
         if not isinstance(meta, dict):
             raise DatasetError(f"{path}: the sample's meta is not a JSON object")
 
@@ -298,8 +354,10 @@ class DatasetReader:
                 raise DatasetError(f"{path}: buffer {name!r} missing")
             try:
                 return _decode(name, npz[name])
-            except _CORRUPT as err:
-                raise DatasetError(f"{path}: buffer {name!r} is unreadable ({type(err).__name__}: {err})") from err
+            except RtpError as err:
+                raise DatasetError(f"{path}: {err}") from err
+            except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
+                raise _unreadable(path, f"buffer {name!r} is unreadable", err) from err
 
         return Sample(sample_id, load, meta)
 
@@ -335,10 +393,11 @@ class PaperDatasetReader:
     """
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
-        self.root = Path(root)
-        if not self.root.is_dir():
-            raise DatasetError(f"no dataset folder at {str(self.root)!r}")
-        self.ids = sorted(p.name for p in self.root.iterdir() if (p / "output_1x1.png").is_file())
+        self.root = _folder(root)
+        try:
+            self.ids = sorted(p.name for p in self.root.iterdir() if (p / "output_1x1.png").is_file())
+        except OSError as err:
+            raise DatasetError(f"{self.root}: cannot be listed ({err})") from err
         if not self.ids:
             raise DatasetError(f"{self.root}: no sample folders with output_1x1.png (the paper's layout)")
 
@@ -349,6 +408,8 @@ class PaperDatasetReader:
         return (self[i] for i in self.ids)
 
     def __getitem__(self, sample_id: str) -> Sample:
+        if not isinstance(sample_id, str) or sample_id not in self.ids:
+            raise DatasetError(f"no sample {sample_id!r} in {self.root}")
         folder = self.root / sample_id
         if not folder.is_dir():
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")
@@ -368,8 +429,11 @@ def _read_png(path: Path) -> np.ndarray:
 
     if not path.is_file():
         raise DatasetError(f"missing file {path}")
-    with Image.open(path) as im:
-        a = np.asarray(im.convert("RGBA"))
+    try:
+        with Image.open(path) as im:
+            a = np.asarray(im.convert("RGBA"))
+    except Exception as err:  # Pillow on corrupted bytes; see _unreadable
+        raise _unreadable(path, "not a readable PNG", err) from err
     return a.astype(np.float32) / 255.0
 
 
@@ -405,7 +469,7 @@ def contact_sheet(sample: Sample, *, scale: int = 1) -> np.ndarray:
 
 def open_dataset(root: str | os.PathLike[str]) -> DatasetReader | PaperDatasetReader:
     """Open an rtp dataset, or the paper's released layout, whichever the folder holds."""
-    p = Path(root)
+    p = _folder(root)
     if (p / "manifest.json").is_file():
         return DatasetReader(p)
     return PaperDatasetReader(p)

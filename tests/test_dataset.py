@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -105,6 +106,92 @@ def test_reader_errors(tmp_path: Path) -> None:
     (w.samples_dir / "bad.npz").write_bytes(b"junk")
     with pytest.raises(DatasetError, match="unreadable"):
         DatasetReader(tmp_path / "ds")["bad"]
+
+
+def _rewrite(path: Path, **changes: np.ndarray | None) -> None:
+    """Rewrite a sample archive with some members replaced (None: removed), as a corrupted file would be."""
+    members = dict(np.load(path))
+    members.update(changes)
+    with open(path, "wb") as f:
+        np.savez(f, **{k: v for k, v in members.items() if v is not None})  # type: ignore[arg-type]
+
+
+def _npy_with_header(a: np.ndarray, old: str, new: str) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, a)
+    raw = buf.getvalue()
+    n = int.from_bytes(raw[8:10], "little")
+    header = raw[10 : 10 + n].decode("latin1").replace(old, new)
+    return raw[:8] + len(header).to_bytes(2, "little") + header.encode("latin1") + raw[10 + n :]
+
+
+@pytest.mark.parametrize(
+    ("corrupt", "words"),
+    [
+        (lambda p: np.save(p.open("wb"), np.zeros(3)), "not an .npz archive"),
+        (lambda p: _rewrite(p, final_1x1=np.zeros(5, np.uint8)), "has shape (5,), expected (H, W, 3)"),
+        (lambda p: _rewrite(p, normal=np.zeros((24, 40, 2), np.float16)), "expected (H, W, 3)"),
+        (lambda p: _rewrite(p, albedo=np.zeros((10, 10, 3), np.uint8)), "the sample's other buffers are 40x24"),
+        (lambda p: _rewrite(p, depth=np.full((24, 40), np.nan, np.float16)), "NaN or infinite"),
+        (lambda p: _rewrite(p, depth=np.full((24, 40), 1j)), "stored as complex128, expected float16"),
+        (lambda p: _rewrite(p, seen=np.zeros((24, 40), np.float64)), "stored as float64, expected uint8"),
+        (lambda p: _rewrite(p, seen=None), "buffer 'seen' missing"),
+        (lambda p: _rewrite(p, meta=np.zeros(3)), "unreadable sample"),
+        (lambda p: _rewrite(p, meta=np.frombuffer(b"[1, 2]", np.uint8)), "meta is not a JSON object"),
+    ],
+    ids=["npy", "1-d", "channels", "size", "nan", "complex", "dtype", "missing", "meta-junk", "meta-list"],
+)
+def test_malformed_samples_are_dataset_errors(tmp_path: Path, corrupt: Any, words: str) -> None:
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {"scene": "a"})
+    corrupt(w.samples_dir / "s0.npz")
+    with pytest.raises(DatasetError) as err:
+        s = DatasetReader(tmp_path / "ds")["s0"]
+        s.inputs(sdk.CHANNELS)
+        for r in sdk.ALL_RATES:
+            s.final(r)
+    assert words in str(err.value)
+
+
+def test_a_mangled_npy_header_is_a_dataset_error(tmp_path: Path) -> None:
+    """numpy parses .npy headers with the tokenizer: a mangled one raised tokenize.TokenError, a huge
+    shape MemoryError; both come out as DatasetError naming the buffer."""
+    import zipfile
+
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {})
+    path = w.samples_dir / "s0.npz"
+    members = dict(np.load(path))
+    for old, new in [("(24, 40)", "(24, 40"), ("(24, 40)", "(4000000000, 4000000000)")]:
+        with zipfile.ZipFile(path, "w") as z:
+            for k, v in members.items():
+                z.writestr(f"{k}.npy", _npy_with_header(v, old, new) if k == "depth" else _npy_with_header(v, "", ""))
+        with pytest.raises(DatasetError, match="buffer 'depth' is unreadable"):
+            DatasetReader(tmp_path / "ds")["s0"].channel("depth")
+
+
+def test_bad_roots_and_ids_are_dataset_errors(tmp_path: Path) -> None:
+    for root in (5, None, "a" * 10000, "a\0b"):
+        with pytest.raises(DatasetError):
+            open_dataset(root)  # type: ignore[arg-type]
+        with pytest.raises(DatasetError):
+            DatasetReader(root)  # type: ignore[arg-type]
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {})
+    (tmp_path / "elsewhere.npz").write_bytes((w.samples_dir / "s0.npz").read_bytes())
+    r = DatasetReader(tmp_path / "ds")
+    for sid in ("../../elsewhere", 5, None, ""):
+        with pytest.raises(DatasetError, match="no sample"):
+            r[sid]  # type: ignore[index]
+    with pytest.raises(DatasetError, match="channel names"):
+        r["s0"].inputs("seen")
+    paper = tmp_path / "paper" / "x"
+    paper.mkdir(parents=True)
+    (paper / "output_1x1.png").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(40))
+    with pytest.raises(DatasetError, match="not a readable PNG"):
+        open_dataset(tmp_path / "paper")["x"].final("1x1")
 
 
 def test_paper_layout(tmp_path: Path) -> None:
