@@ -161,6 +161,37 @@ def _check_integrity(model_path: Path, digest: str | None) -> None:
         )
 
 
+def _provider_name(spec: ProviderSpec) -> str:
+    return spec if isinstance(spec, str) else spec[0]
+
+
+def _session(ort: Any, model_path: Path, opts: Any, requested: list[ProviderSpec], strict: bool) -> Any:
+    """The onnxruntime session, built with onnxruntime's own fallback off (it prints to stdout, and the
+    SDK never prints). If the requested providers cannot build it, CPU is tried: when CPU can, the
+    requested provider failed (``ProviderUnavailableError`` with ``strict``, else a logged warning and
+    the CPU session); when CPU cannot either, the file is not a loadable model (``ModelLoadError``)."""
+
+    def build(providers: list[ProviderSpec]) -> Any:
+        return ort.InferenceSession(str(model_path), sess_options=opts, providers=providers, enable_fallback=0)
+
+    try:
+        return build(requested)
+    except Exception as err:  # onnxruntime raises bare Exception subclasses (InvalidProtobuf, Fail, ...)
+        first = err
+    names = [_provider_name(p) for p in requested]
+    if names == [_CPU] or _CPU not in ort.get_available_providers():
+        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}: {first}") from first
+    try:
+        session = build([_CPU])
+    except Exception as err:  # the model itself does not load
+        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}: {err}") from err
+    msg = f"the session could not be built on {', '.join(names)} ({first}); it runs on {_CPU}"
+    if strict:
+        raise ProviderUnavailableError(msg) from first
+    log.warning(msg)
+    return session
+
+
 def load(
     path: str | os.PathLike[str],
     *,
@@ -193,10 +224,7 @@ def load(
     opts.log_severity_level = 3
     if threads:
         opts.intra_op_num_threads = threads
-    try:
-        session = ort.InferenceSession(str(model_path), sess_options=opts, providers=requested)
-    except Exception as err:  # onnxruntime raises bare Exception subclasses (InvalidProtobuf, Fail, ...)
-        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}: {err}") from err
+    session = _session(ort, model_path, opts, requested, strict)
 
     actual = [p for p in session.get_providers() if p not in _NON_COMPUTE]
     first = requested[0] if isinstance(requested[0], str) else requested[0][0]

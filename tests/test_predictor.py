@@ -213,3 +213,44 @@ def test_no_bare_onnxruntime_error_escapes(tiny_model: Callable[..., Path]) -> N
     p._in_name = "wrong_name"
     with pytest.raises(sdk.InferenceError, match="onnxruntime failed"):
         p.predict(np.zeros((4, 16, 16), np.float32))
+
+
+def test_a_corrupted_graph_is_refused_without_printing(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """onnxruntime's Python layer prints an "EP Error" banner to stdout and retries when a session fails
+    to build; the SDK never prints, so it turns that fallback off and refuses the file itself."""
+    data = bytearray(Path(sdk.load("jnyang").path or "").read_bytes())
+    data[data.find(b"\n\x05input") + 2] ^= 0x80  # a node input name that is no longer UTF-8
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(bytes(data))
+    capfd.readouterr()
+    with pytest.raises(sdk.ModelLoadError, match="onnxruntime cannot load"):
+        sdk.load(bad)
+    out, err = capfd.readouterr()
+    assert out == "" and "EP Error" not in err
+
+
+def test_a_provider_that_cannot_build_the_session_falls_back_to_cpu(
+    tiny_model: Callable[..., Path], monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    import types
+
+    import onnxruntime
+
+    from rtp.sdk import _predictor
+
+    def session(path: str, sess_options: object = None, providers: list[str] | None = None, **kw: object) -> object:
+        if providers != ["CPUExecutionProvider"]:
+            raise RuntimeError("FakeExecutionProvider: no device")
+        return onnxruntime.InferenceSession(path, sess_options=sess_options, providers=providers, **kw)
+
+    fake = types.SimpleNamespace(
+        InferenceSession=session, SessionOptions=onnxruntime.SessionOptions,
+        get_available_providers=lambda: ["FakeExecutionProvider", "CPUExecutionProvider"],
+    )
+    monkeypatch.setattr(_predictor, "_ort", lambda: fake)
+    path = tiny_model()
+    with caplog.at_level(logging.WARNING, logger="rtp"):
+        p = sdk.load(path, providers=["FakeExecutionProvider"])
+    assert p.provider == "CPUExecutionProvider" and "no device" in caplog.text
+    with pytest.raises(sdk.ProviderUnavailableError, match="could not be built on FakeExecutionProvider"):
+        sdk.load(path, providers=["FakeExecutionProvider"], strict=True)
