@@ -1,20 +1,28 @@
 """Malformed inputs for the runtime and the dataset reader, shared by tests/test_fuzz.py (a few
 thousand in CI) and bench/fuzz.py (tens of thousands, with a table).
 
-Each :class:`Target` has a hypothesis strategy of hostile inputs, a ``call`` that feeds one to rtp,
-and an ``absurd`` predicate naming the inputs that must be refused. Running an input ends in one of:
+Each :class:`Target` has a hypothesis strategy of hostile inputs, a ``call`` that feeds one to rtp and
+returns what rtp returned, and an ``absurd`` predicate that looks at an *accepted* input and its
+result and says whether accepting it made no sense. Running an input ends in one of:
 
 * ``typed``: an :class:`rtp.sdk.RtpError` (what every refusal must be);
-* ``accepted``: no error, and the input is not absurd;
-* ``absurd accepted``: no error although ``absurd`` says it should have been refused;
+* ``accepted``: no error, and the input and its result make sense;
+* ``absurd accepted``: no error although the input is absurd (a value outside its documented range,
+  an array that is not what the function takes) or the result is (non-finite, silently changed);
 * ``untyped``: any other exception: a bug.
+
+The ``absurd`` predicates state the documented ranges (docs/metadata.md, "Value ranges") and check
+results independently of the validation code where they can (a decoded prediction must be finite and
+not constant, a bit flip that is accepted must leave the network's output bit-identical).
 """
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
+import shutil
 import tempfile
 import zipfile
 from collections.abc import Callable
@@ -26,11 +34,20 @@ import numpy as np
 from hypothesis import strategies as st
 
 from rtp import sdk
-from rtp.capture import BUFFERS, DatasetReader, DatasetWriter
+from rtp.capture import BUFFERS, DatasetReader, DatasetWriter, open_dataset
 
 __all__ = ["OUTCOMES", "Target", "classify", "targets"]
 
 OUTCOMES = ("typed", "accepted", "absurd accepted", "untyped")
+
+#: The documented ranges (docs/metadata.md), restated here so that the fuzz checks the code against them.
+MAX_THRESHOLD = 1e6
+MAX_PARAMETER, MIN_PARAMETER = 1e6, 1e-6
+MAX_K = 100.0
+
+
+def _never(_value: Any, _result: Any) -> bool:
+    return False
 
 
 @dataclass(frozen=True)
@@ -38,26 +55,27 @@ class Target:
     name: str
     strategy: st.SearchStrategy[Any]
     call: Callable[[Any], Any]
-    absurd: Callable[[Any], bool] = lambda _: False
+    absurd: Callable[[Any, Any], bool] = _never
 
 
 def classify(target: Target, value: Any) -> tuple[str, BaseException | None]:
     try:
-        target.call(value)
+        result = target.call(value)
     except sdk.RtpError as err:
         return "typed", err
     except Exception as err:  # noqa: BLE001 - the point: anything else is an untyped escape
         return "untyped", err
-    return ("absurd accepted" if target.absurd(value) else "accepted"), None
+    return ("absurd accepted" if target.absurd(value, result) else "accepted"), None
 
 
 # -- shared building blocks ---------------------------------------------------------------------
 
 _WORK = Path(tempfile.mkdtemp(prefix="rtp-fuzz-"))
-_MODEL = Path(sdk.load("jnyang").path)
+_MODEL = Path(sdk.load("jnyang").path or "")
 _MODEL_BYTES = _MODEL.read_bytes()
 _PRED = sdk.load(_MODEL)
 _X = np.random.default_rng(0).random((4, 32, 48), dtype=np.float32)
+_RAW = _PRED.predict_raw(_X)
 
 json_scalars = st.one_of(
     st.none(), st.booleans(), st.integers(min_value=-(2**70), max_value=2**70),
@@ -67,10 +85,27 @@ json_values = st.recursive(json_scalars, lambda c: st.one_of(st.lists(c, max_siz
                                                               st.dictionaries(st.text(max_size=8), c, max_size=4)),
                            max_leaves=12)
 hostile_numbers = st.one_of(
-    st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([1e308, -1e308, 1e-320, -0.0, 0.0, -1.0, 1e6, 101.0]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([1e308, -1e308, 1e-320, -1e-320, -0.0, 0.0, -1.0, 1e6, 1e6 + 1, -1e6 - 1, 1e-6, 1e-7, 101.0,
+                     100.0, 1.0, 0.999, 10**400, -(10**400)]),
     st.integers(min_value=-(2**80), max_value=2**80), st.text(max_size=5), st.none(), st.booleans(),
     st.lists(st.floats(), max_size=3), st.dictionaries(st.text(max_size=3), st.integers(), max_size=2),
+    st.builds(np.float32, st.floats(width=32)), st.builds(np.int64, st.integers(-(2**63), 2**63 - 1)),
 )
+
+
+def _finite_number(v: Any) -> float | None:
+    """``v`` as a float when it is a real number (not bool) and finite, else None."""
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
+
+
+# -- metadata ----------------------------------------------------------------------------------
 
 _VALID = {
     "metric": "jnyang", "transform": {"type": "clamped", "mu_y": 0.25}, "tile_size": 16,
@@ -79,44 +114,77 @@ _VALID = {
 }
 _FIELDS = ("metric", "higher_is_better", "transform", "safety", "tile_size", "inputs", "outputs", "extrapolation_k",
            "default_threshold", "weber_l", "description", "provenance", "schema_version", "digest")
+_TRANSFORMS = {"clamped": {"mu_y": 0.25}, "logistic": {"mu_y": 0.25, "k": 10.0}, "linear": {"factor": 0.7, "offset": 0.0}}
 
-
-def _bad_metadata_value(meta: sdk.ModelMetadata) -> bool:
-    """An accepted metadata that makes no sense: the checks every accepted value must pass."""
-    t = meta.transform
-    params = [v for v in (t.mu_y, t.k, t.factor, t.offset) if v is not None]
-    return bool(
-        not math.isfinite(meta.default_threshold) or (not meta.higher_is_better and meta.default_threshold < 0)
-        or not 0.0 <= meta.safety <= 1.0 or not 1.0 <= meta.extrapolation_k <= 100.0
-        or not all(math.isfinite(v) and abs(v) <= 1e6 for v in params)
-        or not np.isfinite(meta.saturation)
-    )
-
-
-_accepted_meta: dict[int, sdk.ModelMetadata] = {}
-
-
-def _metadata_call(d: Any) -> None:
-    meta = sdk.ModelMetadata.from_dict(d)
-    _accepted_meta[id(d)] = meta
-    # an accepted metadata must decode a network output to finite values for every rate
-    out = meta.decode(np.full((len(meta.outputs), 1, 1), 0.5, np.float32))
-    if not np.isfinite(out).all():
-        raise AssertionError(f"accepted metadata decodes to non-finite values: {d}")
-
-
-def _metadata_absurd(d: Any) -> bool:
-    meta = _accepted_meta.pop(id(d), None)
-    return meta is not None and _bad_metadata_value(meta)
-
+transforms = st.one_of(
+    # a valid transform of each type with one parameter replaced by a hostile number
+    st.builds(lambda kind, i, v: {"type": kind, **{**_TRANSFORMS[kind], list(_TRANSFORMS[kind])[i % len(_TRANSFORMS[kind])]: v}},
+              st.sampled_from(list(_TRANSFORMS)), st.integers(0, 1), hostile_numbers),
+    # every parameter drawn, including ones far apart (a flat logistic, a tiny factor)
+    st.builds(lambda kind, a, b: {"type": kind, **dict(zip(_TRANSFORMS[kind], (a, b), strict=False))},
+              st.sampled_from(list(_TRANSFORMS)), st.floats(-1e7, 1e7) | st.floats(-1e-5, 1e-5), st.floats(-1e7, 1e7)),
+    st.builds(lambda k, v: {**_TRANSFORMS["clamped"], "type": "clamped", k: v},
+              st.sampled_from(["type", "mu_y", "k", "factor", "offset", "extra"]), json_values),
+    json_values,
+)
 
 metadata_dicts = st.one_of(
     st.fixed_dictionaries({}, optional={k: json_values for k in _FIELDS}),
     st.builds(lambda k, v: {**_VALID, k: v}, st.sampled_from(_FIELDS), st.one_of(json_values, hostile_numbers)),
-    st.builds(lambda k, v: {**_VALID, "transform": {**_VALID["transform"], k: v}},
-              st.sampled_from(["type", "mu_y", "k", "factor", "offset"]), st.one_of(json_values, hostile_numbers)),
+    st.builds(lambda t: {**_VALID, "transform": t}, transforms),
+    st.builds(lambda m, t, thr: {**_VALID, "metric": m, "weber_l": 0.02, "transform": t, "default_threshold": thr},
+              st.sampled_from(["psnr", "flip", "jnflip", "lpips", "yang", "jnyang"]),
+              st.sampled_from([{"type": "linear", "factor": -0.015, "offset": 1.0}, {"type": "clamped", "mu_y": 0.2}]),
+              hostile_numbers),
+    st.builds(lambda k, v: {**_VALID, k: v}, st.integers() | st.none() | st.tuples(st.integers()), st.integers()),
     json_values,
 )
+
+
+def _transform_absurd(t: sdk.Transform) -> bool:
+    """An accepted transform must have parameters in range and decode network outputs 0, 0.5 and 1 to
+    finite, distinct values (a flat one would decode every prediction to the same error)."""
+    params = {"mu_y": t.mu_y, "k": t.k, "factor": t.factor}
+    if any(v is not None and not MIN_PARAMETER <= abs(v) <= MAX_PARAMETER for v in params.values()):
+        return True
+    if t.offset is not None and not abs(t.offset) <= MAX_PARAMETER:
+        return True
+    if (t.mu_y is not None and t.mu_y <= 0) or (t.k is not None and t.k <= 0):
+        return True
+    y = t.inverse(np.array([0.0, 0.5, 1.0])).astype(np.float32)
+    return bool(not np.isfinite(y).all() or y[0] == y[2])
+
+
+def _metadata_absurd(_d: Any, meta: sdk.ModelMetadata) -> bool:
+    thr = meta.default_threshold
+    return bool(
+        not math.isfinite(thr) or abs(thr) > MAX_THRESHOLD or (not meta.higher_is_better and thr < 0)
+        or not 0.0 <= meta.safety <= 1.0 or not 1.0 <= meta.extrapolation_k <= MAX_K
+        or _transform_absurd(meta.transform)
+        or not np.isfinite(meta.saturation)
+        or not np.isfinite(meta.decode(np.full((len(meta.outputs), 2, 2), 0.5, np.float32))).all()
+        or meta.tile_size not in sdk.TILE_SIZES
+    )
+
+
+def _json_texts() -> st.SearchStrategy[Any]:
+    return st.one_of(
+        st.builds(lambda d: json.dumps(d, default=str, skipkeys=True), metadata_dicts),
+        st.text(max_size=300),
+        st.binary(max_size=64),
+        st.builds(lambda n: "[" * n + "]" * n, st.integers(1, 100_000)),
+        st.builds(lambda n: '{"metric": "jnyang", "safety": 1' + "0" * n + "}", st.integers(300, 5000)),
+        st.builds(lambda d, i, b: _flip_text(json.dumps(d), i, b), st.just(_VALID), st.integers(0, 10_000),
+                  st.integers(0, 7)),
+        st.sampled_from(["", "null", "NaN", '{"safety": NaN}', '{"safety": Infinity}', "\ud800", "\x00"]),
+        json_values,
+    )
+
+
+def _flip_text(text: str, pos: int, bit: int) -> str:
+    data = bytearray(text.encode())
+    data[pos % len(data)] ^= 1 << bit
+    return data.decode("utf-8", "surrogateescape")
 
 
 # -- model files ----------------------------------------------------------------------------
@@ -136,23 +204,55 @@ def _mutate_model(mutation: tuple[str, int, int, bytes]) -> bytes:
     return bytes(data)
 
 
-def _load_bytes(data: bytes) -> None:
+def _load_bytes(data: bytes) -> np.ndarray:
     path = _WORK / f"m{os.getpid()}.onnx"
     path.write_bytes(data)
     pred = sdk.load(path)
     pred.shading_rates(_X)
+    return pred.predict_raw(_X)
 
 
-model_mutations = st.tuples(st.sampled_from(["flip", "truncate", "overwrite", "insert"]), st.integers(0, 2**31),
-                            st.integers(0, 7), st.binary(min_size=1, max_size=16))
+def _silently_changed(_m: Any, raw: np.ndarray) -> bool:
+    """A corrupted file that loads must compute exactly what the original computes: the digest covers
+    the graph and the weights, so a change there must have been refused."""
+    return raw.shape != _RAW.shape or not np.array_equal(raw, _RAW)
 
 
-def _hostile_json_model(text: str) -> None:
+model_mutations = st.tuples(st.sampled_from(["flip", "flip", "truncate", "overwrite", "insert"]),
+                            st.integers(0, 2**31), st.integers(0, 7), st.binary(min_size=1, max_size=16))
+
+
+def _hostile_json_model(text: Any) -> None:
     import onnx
 
     model = onnx.load_from_string(_MODEL_BYTES)
-    onnx.helper.set_model_props(model, {sdk.METADATA_KEY: text})
+    value = text if isinstance(text, str) else json.dumps(text, default=str, skipkeys=True)
+    # protobuf strings are UTF-8: lone surrogates become "?" here (corrupted bytes are the other target's)
+    onnx.helper.set_model_props(model, {sdk.METADATA_KEY: value.encode("utf-8", "replace").decode("utf-8")})
     _load_bytes(model.SerializeToString())
+
+
+_load_args = st.fixed_dictionaries({
+    "path": st.one_of(st.just(str(_MODEL)), st.just("jnyang"), st.sampled_from(["", ".", "/", "a" * 5000, "a\0b",
+                                                                                  "/dev/null", str(_WORK)]),
+                      st.text(max_size=20), st.integers(), st.none(), st.binary(max_size=8), st.lists(st.text(), max_size=2)),
+    "threads": st.one_of(st.none(), st.integers(-(2**70), 2**70), st.floats(), st.text(max_size=3), st.booleans()),
+    "providers": st.one_of(st.none(), st.just(["CPUExecutionProvider"]), st.integers(), st.text(max_size=5),
+                           st.lists(st.one_of(st.text(max_size=5), st.integers(), st.tuples(st.text(max_size=5), st.integers())),
+                                    max_size=3)),
+    "metadata": st.one_of(st.none(), st.just(dict(_VALID)), metadata_dicts, st.integers(), st.text(max_size=10)),
+})
+
+
+def _load_call(kw: dict[str, Any]) -> sdk.ShadingRatePredictor:
+    return sdk.load(**kw)
+
+
+def _load_args_absurd(kw: dict[str, Any], pred: sdk.ShadingRatePredictor) -> bool:
+    """Loading succeeded: with a thread count in [0, 4096] and a model file that exists."""
+    t = kw["threads"]
+    threads_ok = t is None or (isinstance(t, int) and not isinstance(t, bool) and 0 <= t <= 4096)
+    return not threads_ok or pred.path is None or not pred.path.is_file() or not pred.provider
 
 
 # -- sidecars -------------------------------------------------------------------------------
@@ -160,21 +260,26 @@ def _hostile_json_model(text: str) -> None:
 _PWNED = _WORK / "pwned"
 yaml_texts = st.one_of(
     st.text(max_size=200),
-    st.builds(lambda v: json.dumps(v, default=str), json_values),
+    st.builds(lambda v: json.dumps(v, default=str, skipkeys=True), json_values),
+    st.builds(lambda d: "\n".join(f"{k}: {json.dumps(v, default=str, skipkeys=True)}" for k, v in d.items()),
+              metadata_dicts.filter(lambda d: isinstance(d, dict))),
     st.sampled_from([
         f"!!python/object/apply:os.system ['touch {_PWNED}']",
         f"metric: !!python/object/apply:pathlib.Path.touch [!!python/object/apply:pathlib.Path ['{_PWNED}']]",
+        f"!!python/object/new:subprocess.Popen [['touch', '{_PWNED}']]",
         "a: &a [*a]", "[" * 5000, "metric: jnyang\ntile_size: 16\ninputs: [1, 2]", "\udcff", "!!binary AAAA",
-        "default_threshold: .nan", "safety: 1e308", "extrapolation_k: .inf",
+        "default_threshold: .nan", "safety: 1e308", "extrapolation_k: .inf", "1: 2\na: 3", "? [a, b]\n: 1",
+        "provenance: !!set {a, b}", "description: 2001-12-14", "tile_size: 0x10", "safety: 1" + "0" * 400,
+        "a: &a {b: *a}\nprovenance: *a",
     ]),
 )
 
 
-def _sidecar(text: str) -> None:
+def _sidecar(text: str) -> sdk.ModelMetadata:
     path = _WORK / f"s{os.getpid()}.yaml"
     path.write_bytes(text.encode("utf-8", "surrogateescape"))
     try:
-        sdk.ModelMetadata.from_yaml(path)
+        return sdk.ModelMetadata.from_yaml(path)
     finally:
         if _PWNED.exists():
             raise AssertionError("a YAML sidecar executed code")
@@ -182,44 +287,205 @@ def _sidecar(text: str) -> None:
 
 # -- arrays and thresholds --------------------------------------------------------------------
 
-def _array(spec: tuple[str, tuple[int, ...], str]) -> Any:
+ArraySpec = tuple[str, tuple[int, ...], str]
+
+
+def _array(spec: ArraySpec) -> Any:
     kind, shape, fill = spec
     if kind == "list":
         return np.zeros(shape[:3]).tolist()
+    if kind == "ragged":
+        return [[0.0] * (i + 1) for i in range(3)]
     if kind == "object":
         return np.empty(shape[:2], dtype=object)
+    if kind == "str":
+        return np.full(shape[:3], "a")
     a = np.zeros(shape, dtype=kind)
     if a.size == 0:
         return a
-    if fill == "nan" and a.dtype.kind == "f":
+    if fill == "nan" and a.dtype.kind in "fc":
         a.flat[0] = np.nan
-    elif fill == "inf" and a.dtype.kind == "f":
+    elif fill == "inf" and a.dtype.kind in "fc":
         a.flat[-1] = -np.inf
-    elif fill == "random" and a.dtype.kind == "f":
+    elif fill == "random" and a.dtype.kind in "fc":
         a[...] = np.random.default_rng(a.size).random(shape)
+    elif fill == "random" and a.dtype.kind in "iu":
+        a[...] = np.random.default_rng(a.size).integers(0, 12, shape)
+    elif fill == "negative" and a.dtype.kind in "if":
+        a[...] = -1
     return a
 
 
-arrays = st.tuples(
-    st.sampled_from(["float32", "float64", "float16", "int32", "uint8", "bool", "list", "object"]),
-    st.lists(st.integers(0, 40), min_size=0, max_size=5).map(tuple).filter(lambda s: int(np.prod(s)) <= 200_000),
-    st.sampled_from(["zero", "nan", "inf", "random"]),
-)
+_DIMS = st.integers(0, 40)
+
+
+def _arrays(dims: st.SearchStrategy[int] = _DIMS, max_rank: int = 5) -> st.SearchStrategy[ArraySpec]:
+    return st.tuples(
+        st.sampled_from(["float32", "float32", "float64", "float16", "int32", "int8", "uint8", "bool", "complex64",
+                         "list", "ragged", "object", "str"]),
+        st.lists(dims, min_size=0, max_size=max_rank).map(tuple).filter(lambda s: int(np.prod(s)) <= 200_000),
+        st.sampled_from(["zero", "nan", "inf", "random", "negative"]),
+    )
+
+
+arrays = _arrays()
+_KINDS = st.sampled_from(["float32", "float32", "float32", "float64", "float16", "int32", "uint8", "bool"])
+_FILLS = st.sampled_from(["zero", "nan", "inf", "random", "random", "negative"])
+_SIDE = st.integers(1, 40)
+
+
+def _near(shape: st.SearchStrategy[tuple[int, ...]]) -> st.SearchStrategy[ArraySpec]:
+    """Arrays of nearly the right shape: the right layout, a dtype and a fill that may be wrong."""
+    return st.tuples(_KINDS, shape, _FILLS)
+
+
+#: (C, H, W) or (N, C, H, W) model inputs, C = 4 mostly.
+model_arrays = st.one_of(arrays, _near(st.tuples(st.sampled_from([4, 4, 4, 3]), _SIDE, _SIDE)),
+                         _near(st.tuples(st.integers(0, 3), st.sampled_from([4, 4, 5]), _SIDE, _SIDE)))
+#: (6, th, tw) or (N, 6, th, tw) predictions.
+prediction_arrays = st.one_of(_arrays(st.sampled_from([0, 1, 2, 3, 6]), 4),
+                              _near(st.tuples(st.just(6), st.integers(1, 5), st.integers(1, 5))),
+                              _near(st.tuples(st.integers(1, 2), st.just(6), st.integers(1, 5), st.integers(1, 5))))
 thresholds = st.one_of(hostile_numbers, st.just(None), st.floats(-10, 10), st.text(max_size=3))
 
 
-def _threshold_absurd(t: Any) -> bool:
+def _threshold_absurd(t: Any, higher_is_better: bool = False) -> bool:
+    """A threshold is a finite number of magnitude <= 1e6, >= 0 for an error metric; None means the default."""
     if t is None:
         return False
-    try:
-        v = float(t)
-    except (TypeError, ValueError):
-        return True
-    return isinstance(t, (bool, str)) or not math.isfinite(v) or v < 0
+    v = _finite_number(t)
+    return v is None or abs(v) > MAX_THRESHOLD or (not higher_is_better and v < 0)
+
+
+def _predict_absurd(spec: ArraySpec, _out: Any) -> bool:
+    """Accepted: a finite, non-empty float32 (C, H, W) or (N, C, H, W) array with the model's 4 channels."""
+    kind, shape, fill = spec
+    ok_shape = len(shape) in (3, 4) and shape[-3] == 4 and 0 not in shape
+    return not (kind == "float32" and ok_shape and fill not in ("nan", "inf"))
 
 
 allowed_values = st.one_of(st.none(), json_values, st.lists(st.one_of(st.integers(-3, 20), st.text(max_size=4)),
-                                                            max_size=4))
+                                                            max_size=4), st.builds(np.array, st.integers(0, 12)))
+
+
+def _select_call(v: tuple[ArraySpec, Any, Any]) -> np.ndarray:
+    spec, thr, hib = v
+    return sdk.select_rates(_array(spec), thr, higher_is_better=hib)
+
+
+def _select_absurd(v: tuple[ArraySpec, Any, Any], codes: np.ndarray) -> bool:
+    spec, thr, hib = v
+    kind, shape, _ = spec
+    return (
+        not isinstance(hib, bool) or _threshold_absurd(thr, hib) or thr is None
+        or kind in ("list", "ragged", "object", "str", "complex64") or len(shape) < 3 or shape[-3] != 6
+        or codes.dtype != np.uint8 or not set(np.unique(codes).tolist()) <= set(sdk.RATE_CODES.values())
+    )
+
+
+def _work_saved_call(v: tuple[ArraySpec, Any]) -> float:
+    spec, size = v
+    a = _array(spec)
+    return sdk.work_saved(a) if size is None else sdk.work_saved(a, size, 16)
+
+
+def _work_saved_absurd(v: tuple[ArraySpec, Any], saved: float) -> bool:
+    a = np.asarray(_array(v[0]))
+    known = set(sdk.RATE_CODES.values())
+    return not 0.0 <= saved < 1.0 or a.dtype.kind not in "ui" or not set(np.unique(a).tolist()) <= known
+
+
+def _extrapolate_call(v: tuple[ArraySpec, Any, Any, Any]) -> np.ndarray:
+    spec, outputs, k, hib = v
+    return sdk.extrapolate(_array(spec), outputs, k, higher_is_better=hib)
+
+
+def _extrapolate_absurd(v: tuple[ArraySpec, Any, Any, Any], out: np.ndarray) -> bool:
+    spec, outputs, k, hib = v
+    kv = _finite_number(k)
+    if kv is None or not 1.0 <= kv <= MAX_K or not isinstance(hib, bool) or tuple(outputs) not in sdk.OUTPUT_SETS:
+        return True
+    values = np.asarray(_array(spec), dtype=np.float64)
+    if out.shape[-3] != 6 or out.shape[:-3] != values.shape[:-3]:
+        return True
+    if np.isfinite(values).all() and not hib and tuple(outputs) in (("1x2", "2x1"), ("2x2",)):
+        # extrapolated coarser rates are never better than the finer ones they come from
+        e = {r: out[..., i, :, :] for i, r in enumerate(sdk.PREDICTED_RATES)}
+        ok = (e["2x2"] >= np.maximum(e["1x2"], e["2x1"])).all() and (e["4x4"] >= np.maximum(e["2x4"], e["4x2"])).all()
+        return not ok
+    return False
+
+
+def _overlay_case(tile: int, h: int, w: int, kind: str, fill: str, rates_kind: str, alpha: Any) -> tuple[Any, ...]:
+    th, tw = -(-h // tile), -(-w // tile)
+    return ((kind, (h, w, 3), fill), (rates_kind, (th, tw), "random"), tile, alpha)
+
+
+#: A right-sized image and rate image with a dtype, fill or alpha that may be wrong.
+overlays = st.builds(_overlay_case, st.sampled_from([1, 2, 4, 8, 16]), st.integers(1, 40), st.integers(1, 40),
+                     st.sampled_from(["uint8", "float32", "float64", "float16", "int32", "bool"]), _FILLS,
+                     st.sampled_from(["uint8", "uint8", "int32", "float32"]),
+                     st.one_of(st.floats(-0.5, 1.5), hostile_numbers))
+#: (th, tw) arrays of codes: the seven rates' codes and some that are none.
+code_arrays = st.tuples(st.sampled_from(["uint8", "int8", "int64"]), st.tuples(st.integers(1, 4), st.integers(1, 4)),
+                        st.sampled_from(["random", "negative", "zero"]))
+
+
+def _overlay_call(v: tuple[ArraySpec, ArraySpec, Any, Any]) -> np.ndarray:
+    img, rates, tile, alpha = v
+    return sdk.draw_rate_overlay(_array(img), _array(rates), tile, alpha=alpha)
+
+
+def _overlay_absurd(v: tuple[ArraySpec, ArraySpec, Any, Any], out: np.ndarray) -> bool:
+    a = _finite_number(v[3])
+    img = np.asarray(_array(v[0]))
+    return a is None or not 0.0 <= a <= 1.0 or out.shape != img.shape or not np.isfinite(out.astype(np.float64)).all()
+
+
+# -- reprojection -------------------------------------------------------------------------------
+
+_VIEW = np.eye(4)
+_PROJ = np.array([[1.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]])
+_REPROJ_VALID: dict[str, Any] = {"prev_colour": np.full((6, 8, 3), 0.5), "prev_depth": np.full((6, 8), 2.0),
+                                 "depth": np.full((6, 8), 2.0), "cur_view": _VIEW, "cur_proj": _PROJ,
+                                 "prev_view_proj": _PROJ, "tolerance": 0.02}
+
+
+def _reproject_value(v: Any, base: Any) -> Any:
+    if isinstance(v, tuple) and len(v) == 3 and isinstance(v[1], tuple):
+        return _array(v)
+    if v == "scaled":
+        return base * -1.0 if isinstance(base, np.ndarray) else base
+    return v
+
+
+reprojections = st.builds(
+    lambda key, v: (key, v),
+    st.sampled_from(list(_REPROJ_VALID)),
+    st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none()),
+)
+
+
+def _reproject_call(v: tuple[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    key, value = v
+    kw = dict(_REPROJ_VALID)
+    kw[key] = _reproject_value(value, kw[key])
+    return sdk.reproject(**kw)
+
+
+def _reproject_absurd(v: tuple[str, Any], result: tuple[np.ndarray, np.ndarray]) -> bool:
+    key, value = v
+    kw = dict(_REPROJ_VALID)
+    kw[key] = _reproject_value(value, kw[key])
+    out, seen = result
+    tol = _finite_number(kw["tolerance"])
+    depths_ok = all(np.asarray(kw[k]).dtype.kind in "biuf" and (np.asarray(kw[k]) >= 0).all()
+                    for k in ("depth", "prev_depth"))
+    return bool(
+        tol is None or not 0.0 <= tol <= 1.0 or not depths_ok
+        or not np.isfinite(out).all() or not set(np.unique(seen).tolist()) <= {0.0, 1.0}
+        or out.shape != np.asarray(kw["prev_colour"]).shape
+    )
 
 
 # -- the dataset reader ---------------------------------------------------------------------
@@ -236,14 +502,32 @@ def _dataset() -> Path:
     return root
 
 
-def _read_mutated_dataset(mutation: tuple[str, int, bytes]) -> None:
-    import shutil
+def _read_all(root: Path) -> dict[str, Any]:
+    """Everything a reader gives for a dataset folder: the manifest's format and every buffer and meta."""
+    reader = open_dataset(root)
+    out: dict[str, Any] = {}
+    for sid in reader.ids:
+        s = reader[sid]
+        out[sid] = ({n: s.buffer(n) for n in BUFFERS}, dict(s.meta), s.inputs(sdk.DEFAULT_INPUTS))
+    return out
 
-    which, pos, junk = mutation
+
+_ORIGINAL: dict[str, Any] = {}
+
+
+def _copy_dataset() -> tuple[Path, Path]:
     src = _dataset()
+    if not _ORIGINAL:
+        _ORIGINAL.update(_read_all(src))
     dst = _WORK / f"ds{os.getpid()}"
     shutil.rmtree(dst, ignore_errors=True)
     shutil.copytree(src, dst)
+    return src, dst
+
+
+def _read_mutated_dataset(mutation: tuple[str, int, bytes]) -> dict[str, Any]:
+    which, pos, junk = mutation
+    _, dst = _copy_dataset()
     files = sorted(p for p in dst.rglob("*") if p.is_file())
     target = files[{"manifest": 0, "sample": -1}[which] if which in ("manifest", "sample") else pos % len(files)]
     if which == "member":  # a well-formed archive whose members are junk
@@ -255,36 +539,116 @@ def _read_mutated_dataset(mutation: tuple[str, int, bytes]) -> None:
         p = pos % max(len(data), 1)
         data[p:p + len(junk)] = junk
         target.write_bytes(bytes(data))
-    reader = DatasetReader(dst)
-    for sid in reader.ids:
-        s = reader[sid]
-        s.inputs(sdk.DEFAULT_INPUTS)
-        s.final("1x1")
+    return _read_all(dst)
+
+
+def _same_as_original(_m: Any, got: dict[str, Any]) -> bool:
+    """Absurd: a corrupted dataset that reads without error but gives other data than was written
+    (the .npz members carry CRCs; an undetected change would be silent corruption)."""
+    if set(got) != set(_ORIGINAL):
+        return True
+    for sid, (bufs, meta, x) in got.items():
+        obufs, ometa, ox = _ORIGINAL[sid]
+        if meta != ometa or not np.array_equal(x, ox) or any(not np.array_equal(bufs[n], obufs[n]) for n in bufs):
+            return True
+    return False
 
 
 dataset_mutations = st.tuples(st.sampled_from(["manifest", "sample", "member", "any"]), st.integers(0, 2**20),
                               st.binary(min_size=1, max_size=64))
 
+_MEMBERS = [*BUFFERS, "meta"]
+member_replacements = st.tuples(st.sampled_from(_MEMBERS),
+                                st.one_of(_arrays(st.sampled_from([0, 1, 2, 3, 4, 24, 40]), 4),
+                                          st.builds(lambda d: ("meta-json", d), json_values)))
+
+
+def _replace_member(v: tuple[str, Any]) -> dict[str, Any]:
+    name, spec = v
+    _, dst = _copy_dataset()
+    path = dst / "samples" / "s0.npz"
+    members = dict(np.load(path))
+    if spec[0] == "meta-json":
+        members[name] = np.frombuffer(json.dumps(spec[1], default=str, skipkeys=True).encode(), np.uint8)
+    else:
+        a = _array(spec)
+        members[name] = np.asarray(a) if not isinstance(a, list) or spec[0] != "ragged" else np.array(a, dtype=object)
+    buf = io.BytesIO()
+    np.savez(buf, **members)  # type: ignore[arg-type]
+    path.write_bytes(buf.getvalue())
+    return _read_all(dst)
+
+
+def _member_absurd(v: tuple[str, Any], got: dict[str, Any]) -> bool:
+    name, spec = v
+    if spec[0] == "meta-json":  # JSON bytes: a meta that is an object, or a buffer that is not one
+        return name != "meta" or not isinstance(spec[1], dict)
+    if name == "meta":
+        return False
+    kind, shape, fill = spec
+    n = len(BUFFERS[name].channels) or 3
+    want = (24, 40, n) if n > 1 else (24, 40)
+    stored = "uint8" if BUFFERS[name].dtype == "u8" else "float16"
+    bufs = got["s0"][0]
+    return kind != stored or shape != want or fill in ("nan", "inf") or not all(np.isfinite(b).all() for b in bufs.values())
+
+
+manifests = st.one_of(
+    json_values,
+    st.builds(lambda k, v: {"format": "rtp-dataset", "format_version": 1, "settings": {}, k: v},
+              st.sampled_from(["format", "format_version", "settings", "samples"]), st.one_of(json_values, hostile_numbers)),
+    st.builds(lambda d: d, st.just({"format": "rtp-dataset", "format_version": 1, "settings": {}})),
+)
+
+
+def _manifest_call(m: Any) -> DatasetReader:
+    _, dst = _copy_dataset()
+    (dst / "manifest.json").write_text(json.dumps(m, default=str, skipkeys=True))
+    reader = DatasetReader(dst)
+    _read_all(dst)
+    return reader
+
+
+def _manifest_absurd(_m: Any, reader: DatasetReader) -> bool:
+    fv = reader.manifest.get("format_version", 0)
+    return reader.manifest.get("format") != "rtp-dataset" or not isinstance(fv, int) or isinstance(fv, bool) \
+        or not 0 <= fv <= 1
+
 
 def targets() -> list[Target]:
     return [
-        Target("load: corrupted model files", model_mutations, lambda m: _load_bytes(_mutate_model(m))),
-        Target("load: hostile metadata JSON", st.one_of(st.text(max_size=300),
-                                                        st.builds(lambda v: json.dumps(v), metadata_dicts)),
-               _hostile_json_model),
-        Target("ModelMetadata.from_dict", metadata_dicts, _metadata_call, _metadata_absurd),
-        Target("ModelMetadata.from_yaml (sidecars)", yaml_texts, _sidecar),
-        Target("Transform.from_dict", st.one_of(json_values, metadata_dicts.map(lambda d: d.get("transform")
-                                                                                if isinstance(d, dict) else d)),
-               lambda d: sdk.Transform.from_dict(d)),
-        Target("predict: arrays", arrays, lambda spec: _PRED.predict(_array(spec))),
+        Target("load: corrupted model files", model_mutations, lambda m: _load_bytes(_mutate_model(m)),
+               _silently_changed),
+        Target("load: hostile metadata JSON", _json_texts(), _hostile_json_model),
+        Target("load: arguments (path, threads, providers, metadata)", _load_args, _load_call, _load_args_absurd),
+        Target("ModelMetadata.from_dict", metadata_dicts, sdk.ModelMetadata.from_dict, _metadata_absurd),
+        Target("ModelMetadata.from_json", _json_texts(), sdk.ModelMetadata.from_json, _metadata_absurd),
+        Target("ModelMetadata.from_yaml (sidecars)", yaml_texts, _sidecar, _metadata_absurd),
+        Target("Transform.from_dict", transforms, sdk.Transform.from_dict, lambda _d, t: _transform_absurd(t)),
+        Target("predict: arrays", model_arrays, lambda spec: _PRED.predict(_array(spec)), _predict_absurd),
         Target("shading_rates: thresholds", thresholds, lambda t: _PRED.shading_rates(_X, threshold=t),
-               _threshold_absurd),
+               lambda t, _r: _threshold_absurd(t)),
         Target("shading_rates: allowed rates", allowed_values, lambda a: _PRED.shading_rates(_X, allowed=a)),
-        Target("select_rates / work_saved", st.tuples(arrays, thresholds),
-               lambda v: (sdk.select_rates(_array(v[0]), v[1]), sdk.work_saved(_array(v[0]))),
-               lambda v: _threshold_absurd(v[1]) and v[1] is not None),
-        Target("draw_rate_overlay", st.tuples(arrays, arrays, st.one_of(st.integers(-2, 40), hostile_numbers)),
-               lambda v: sdk.draw_rate_overlay(_array(v[0]), _array(v[1]), v[2])),
-        Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset),
+        Target("select_rates", st.tuples(prediction_arrays, thresholds, st.one_of(st.booleans(), st.booleans(), json_scalars)),
+               _select_call, _select_absurd),
+        Target("work_saved", st.tuples(st.one_of(_arrays(st.integers(0, 4), 3), code_arrays),
+                                       st.one_of(st.none(), st.tuples(st.integers(-2, 70), st.integers(-2, 70)),
+                                                 json_values)), _work_saved_call, _work_saved_absurd),
+        Target("extrapolate", st.one_of(
+                   st.tuples(_arrays(st.sampled_from([0, 1, 2, 4, 6]), 4),
+                             st.one_of(st.sampled_from([list(s) for s in sdk.OUTPUT_SETS]), json_values),
+                             hostile_numbers, st.one_of(st.booleans(), json_scalars)),
+                   st.sampled_from(sdk.OUTPUT_SETS).flatmap(lambda outs: st.tuples(
+                       _near(st.tuples(st.just(len(outs)), st.integers(1, 4), st.integers(1, 4))), st.just(list(outs)),
+                       st.one_of(hostile_numbers, st.floats(0.5, 120)), st.booleans()))),
+               _extrapolate_call, _extrapolate_absurd),
+        Target("draw_rate_overlay", st.one_of(
+                   st.tuples(_arrays(st.sampled_from([0, 1, 3, 4, 16, 17]), 3), _arrays(st.sampled_from([0, 1, 2]), 3),
+                             st.one_of(st.integers(-2, 40), hostile_numbers), hostile_numbers),
+                   overlays),
+               _overlay_call, _overlay_absurd),
+        Target("reproject", reprojections, _reproject_call, _reproject_absurd),
+        Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset, _same_as_original),
+        Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),
+        Target("dataset reader: manifests", manifests, _manifest_call, _manifest_absurd),
     ]
