@@ -52,6 +52,7 @@ typecheck: $(STAMP)
 	for d in sdk scene capture metrics evaluate train export cli models; do ln -s $(CURDIR)/$$d $(TYPECHECK)/rtp/$$d; done
 	for d in moderngl pyrender; do ln -s $(CURDIR)/plugins/$$d $(TYPECHECK)/rtp/plugins/$$d; done
 	ln -s $(CURDIR)/plugins/__init__.py $(TYPECHECK)/rtp/plugins/__init__.py
+	ln -s $(CURDIR)/cli/_package/__init__.py $(TYPECHECK)/rtp/__init__.py
 	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p rtp
 
 check: lint typecheck test

@@ -70,7 +70,8 @@ def test_help_exits_0_and_shows_defaults(prog: str, command: tuple[str, ...], ca
         assert "default:" in action.help or f"(default: {action.default})" in text, (command, action.dest)
 
 
-@pytest.mark.parametrize("argv", [["-m", "rtp.cli", "scenes", "--help"], ["-m", "rtp.cli", "scenes", "fetch", "--help"],
+@pytest.mark.parametrize("argv", [["-m", "rtp", "--help"], ["-m", "rtp.cli", "scenes", "--help"],
+                                  ["-m", "rtp.cli", "scenes", "fetch", "--help"],
                                   ["-m", "rtp.cli.export", "--help"]], ids=" ".join)
 def test_help_of_the_installed_entry_points(argv: list[str]) -> None:
     r = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=120)
@@ -83,6 +84,16 @@ def test_rtp_export_help_and_versions(capsys: pytest.CaptureFixture[str]) -> Non
             entry(["--version"])
         assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"{prog} {sdk.__version__}"
     assert build_export_parser().prog == "rtp-export"
+
+
+def test_python_m_rtp_and_the_package_version() -> None:
+    r = subprocess.run([sys.executable, "-m", "rtp", "--version"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == f"rtp {sdk.__version__}", r.stderr
+    # `import rtp` is light: it imports no room until asked for its version
+    code = "import sys, rtp; light = 'rtp.sdk' not in sys.modules; print(light, rtp.__version__)"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.stdout.split() == ["True", sdk.__version__], r.stderr
+    assert sdk.__version__ not in ("", "0+unknown")
 
 
 def test_common_options_go_before_or_after_the_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
