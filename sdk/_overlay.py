@@ -25,6 +25,55 @@ def _array(x: object, name: str) -> np.ndarray:
         raise InputDtypeError(f"{name}: expected an array, got {type(x).__name__} ({err})") from err
 
 
+#: The legend's rows: the class (None = full rate, drawn untinted) and the rates it holds.
+LEGEND_ROWS: tuple[tuple[str | None, str], ...] = (
+    (None, "1x1"), ("fine", "1x2,2x1"), ("medium", "2x2"), ("coarse", "2x4,4x2,4x4"),
+)
+
+# A 3x5 bitmap font for the legend's characters (the runtime draws text without a font library).
+_GLYPHS: dict[str, tuple[str, ...]] = {
+    "1": ("010", "110", "010", "010", "111"),
+    "2": ("111", "001", "111", "100", "111"),
+    "4": ("101", "101", "111", "001", "001"),
+    "x": ("000", "101", "010", "101", "000"),
+    ",": ("000", "000", "000", "010", "100"),
+}
+
+
+def _text_mask(text: str) -> np.ndarray:
+    """A (5, 4 * len(text) - 1) boolean mask of ``text`` in the 3x5 font."""
+    cols: list[np.ndarray] = []
+    for i, ch in enumerate(text):
+        if i:
+            cols.append(np.zeros((5, 1), bool))
+        cols.append(np.array([[c == "1" for c in row] for row in _GLYPHS[ch]], bool))
+    return np.concatenate(cols, axis=1)
+
+
+def _draw_legend(out: np.ndarray, alpha: float) -> None:
+    """Draw the rate legend into the bottom-left corner of ``out`` ((H, W, 3) float in [0, 1]), in place:
+    a dark box with one row per class, its swatch (tinted as the tiles are) and its rates. The legend
+    scales with the image (one font pixel per 270 image rows) and is left out where it does not fit."""
+    h, w = out.shape[:2]
+    s = max(1, h // 270)
+    masks = [_text_mask(label) for _, label in LEGEND_ROWS]
+    pad, row_h, swatch = 2 * s, 8 * s, 5 * s
+    box_w = pad + swatch + 2 * s + max(m.shape[1] for m in masks) * s + pad
+    box_h = pad + row_h * len(LEGEND_ROWS) - 3 * s + pad
+    if box_w > w or box_h > h:
+        return
+    y0, x0 = h - box_h, 0
+    out[y0:, :box_w] *= 0.25
+    grey = np.array([0.5, 0.5, 0.5], np.float32)
+    for i, ((cls, _), mask) in enumerate(zip(LEGEND_ROWS, masks, strict=True)):
+        top = y0 + pad + i * row_h
+        sw = out[top:top + swatch, x0 + pad:x0 + pad + swatch]
+        sw[...] = grey if cls is None else grey * (1.0 - alpha) + np.array(OVERLAY_COLOURS[cls], np.float32) * alpha
+        big = np.repeat(np.repeat(mask, s, 0), s, 1)
+        left = x0 + pad + swatch + 2 * s
+        out[top:top + big.shape[0], left:left + big.shape[1]][big] = 1.0
+
+
 def _class_of(code: int) -> str | None:
     w, h = rate_size(RATE_NAMES[code])
     area = w * h
@@ -40,13 +89,16 @@ def draw_rate_overlay(
     *,
     alpha: float = 0.45,
     grid: bool = True,
+    legend: bool = False,
 ) -> np.ndarray:
     """Tint each tile of ``image`` by the class of its shading rate.
 
     ``image`` is ``(H, W, 3)`` (uint8, or float in [0, 1]); ``rates`` is ``(ceil(H/w), ceil(W/w))``
     of uint8 rate codes as returned by ``shading_rates``. Coarser rates (2x4, 4x2, 4x4) are tinted
     red, 2x2 yellow, 1x2 and 2x1 green, 1x1 is left as is. With ``grid`` a faint line marks the
-    tiles. Returns a new image of the same dtype and shape.
+    tiles. With ``legend`` a key in the bottom-left corner names the rates of each colour (full rate
+    1x1 untinted; it is left out of images too small to hold it, under 52x35 pixels). Returns a new
+    image of the same dtype and shape.
     """
     img = _array(image, "image")
     if img.dtype.kind not in "buif":
@@ -91,6 +143,8 @@ def draw_rate_overlay(
     if grid and tile_size >= 4:
         out[::tile_size, :, :] *= 0.75
         out[:, ::tile_size, :] *= 0.75
+    if legend:
+        _draw_legend(out, alpha)
     out = np.clip(out, 0.0, 1.0)
     if is_uint8:
         res = np.round(out * 255.0).astype(np.uint8)

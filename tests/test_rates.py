@@ -108,6 +108,25 @@ def test_overlay_colours_tiles_by_rate_class() -> None:
     assert f.dtype == np.float32 and 0 <= f.min() and f.max() <= 1
 
 
+def test_overlay_legend_names_each_colour_in_the_corner() -> None:
+    img = np.full((270, 480, 3), 200, np.uint8)
+    rates = np.zeros((17, 30), np.uint8)
+    plain = sdk.draw_rate_overlay(img, rates, 16, grid=False)
+    keyed = sdk.draw_rate_overlay(img, rates, 16, grid=False, legend=True)
+    changed = np.argwhere((plain != keyed).any(axis=2))
+    # only a box in the bottom-left corner changes, and it shows the three tints and white text
+    assert len(changed) and changed[:, 0].min() > 270 - 60 and changed[:, 1].max() < 80
+    box = keyed[210:, :80].reshape(-1, 3).astype(int)
+    for colour in sdk.OVERLAY_COLOURS.values():
+        tint = np.round((np.array(colour) * 0.45 + 0.5 * 0.55) * 255)  # swatch: tint over grey
+        assert (np.abs(box - tint).max(axis=1) <= 1).any(), colour
+    assert (box == 255).all(axis=1).any()
+    # an image too small for the key is drawn without it
+    small = np.zeros((20, 40, 3), np.uint8)
+    assert np.array_equal(sdk.draw_rate_overlay(small, np.zeros((2, 3), np.uint8), 16, legend=True),
+                          sdk.draw_rate_overlay(small, np.zeros((2, 3), np.uint8), 16))
+
+
 def test_overlay_checks_the_tile_grid() -> None:
     with pytest.raises(sdk.InputShapeError, match=r"\(2, 3\)"):
         sdk.draw_rate_overlay(np.zeros((20, 40, 3), np.uint8), np.zeros((1, 3), np.uint8), 16)
