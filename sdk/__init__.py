@@ -49,7 +49,7 @@ from ._rates import (
     work_saved,
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
-from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, tile_extents, tile_grid
+from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, tile_extents, tile_grid
 from ._transforms import (
     DEFAULT_EXTRAPOLATION_K,
     DEFAULT_OUTPUTS,
@@ -127,6 +127,7 @@ __all__ = [
     "model_digest",
     "mse_from_psnr",
     "padded_size",
+    "pool_tiles",
     "psnr_from_mse",
     "rate_size",
     "reproject",

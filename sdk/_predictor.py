@@ -30,7 +30,7 @@ from ._errors import (
 )
 from ._metadata import DIGEST_RE, METADATA_KEY, ModelMetadata
 from ._rates import PREDICTED_RATES, RateLike, select_rates
-from ._tiles import padded_size, tile_grid
+from ._tiles import TILE_SIZES, padded_size, pool_tiles, tile_grid
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 
@@ -199,6 +199,7 @@ def load(
     threads: int | None = None,
     metadata: ModelMetadata | Mapping[str, Any] | str | os.PathLike[str] | None = None,
     strict: bool = False,
+    tile_size: int | None = None,
 ) -> ShadingRatePredictor:
     """Load an ONNX model and its metadata into a ready :class:`ShadingRatePredictor`.
 
@@ -209,6 +210,10 @@ def load(
     of a YAML sidecar) replaces the metadata embedded in the model, for a model that carries none.
     With ``strict=True`` a requested provider that is unavailable, or a session that does not run on
     the first requested provider, raises :class:`ProviderUnavailableError` instead of falling back.
+    ``tile_size`` is the shading-rate tile size the engine's hardware uses, when it is coarser than
+    the model's (a model with 8-pixel tiles on 16-pixel hardware tiles): ``predict`` and
+    ``shading_rates`` then give one value per hardware tile, the worst of the model tiles it covers
+    (:func:`pool_tiles`). The default is the model's own tile size.
     """
     ort = _ort()
     model_path = _resolve_path(path)
@@ -260,7 +265,7 @@ def load(
             "pass it; lower the threshold or retrain with a larger transform range",
             model_path.name, meta.default_threshold, meta.saturation,
         )
-    return ShadingRatePredictor(session, meta, model_path)
+    return ShadingRatePredictor(session, meta, model_path, tile_size=tile_size)
 
 
 def _dim(d: Any) -> int | None:
@@ -274,10 +279,23 @@ class ShadingRatePredictor:
     ``shading_rates`` may be called per frame.
     """
 
-    def __init__(self, session: Any, metadata: ModelMetadata, path: Path | None = None) -> None:
+    def __init__(
+        self, session: Any, metadata: ModelMetadata, path: Path | None = None, *, tile_size: int | None = None
+    ) -> None:
         self._session = session
         self._meta = metadata
         self._path = path
+        model_tile = metadata.tile_size
+        if tile_size is None:
+            tile_size = model_tile
+        elif (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in TILE_SIZES
+              or tile_size < model_tile):
+            raise ParameterError(
+                f"tile_size: expected one of {[t for t in TILE_SIZES if t >= model_tile]} (the hardware's "
+                f"shading-rate tile size, a multiple of the model's {model_tile}-pixel tiles), got "
+                f"{reprlib.repr(tile_size)}", "tile_size",
+            )
+        self._tile = tile_size
         inputs, outputs = session.get_inputs(), session.get_outputs()
         if len(inputs) != 1 or len(outputs) != 1:
             raise MetadataError(
@@ -329,7 +347,9 @@ class ShadingRatePredictor:
 
     @property
     def tile_size(self) -> int:
-        return self._meta.tile_size
+        """Pixels per side of the tiles ``predict`` and ``shading_rates`` give: the model's
+        (``metadata.tile_size``) unless ``load(tile_size=...)`` asked for coarser hardware tiles."""
+        return self._tile
 
     @property
     def providers(self) -> list[str]:
@@ -353,14 +373,15 @@ class ShadingRatePredictor:
     def __repr__(self) -> str:
         m = self._meta
         return (
-            f"<ShadingRatePredictor {m.metric} tile={m.tile_size} inputs={list(m.inputs)} "
+            f"<ShadingRatePredictor {m.metric} tile={self._tile}"
+            f"{f' (model {m.tile_size})' if self._tile != m.tile_size else ''} inputs={list(m.inputs)} "
             f"outputs={list(m.outputs)} provider={self.provider}>"
         )
 
     # -- inference ----------------------------------------------------------------------------
     def tiles(self, height: int, width: int) -> tuple[int, int]:
-        """Number of tile rows and columns for a frame: ``(ceil(H/w), ceil(W/w))``."""
-        return tile_grid(height, width, self._meta.tile_size)
+        """Number of tile rows and columns for a frame: ``(ceil(H/w), ceil(W/w))``, ``w`` = :attr:`tile_size`."""
+        return tile_grid(height, width, self._tile)
 
     def _check(self, x: Any) -> np.ndarray:
         if not isinstance(x, np.ndarray):
@@ -423,7 +444,8 @@ class ShadingRatePredictor:
 
     def predict_raw(self, x: np.ndarray) -> np.ndarray:
         """The network's own output (transformed space, one channel per metadata ``outputs`` rate),
-        cropped to ``(N, C, ceil(H/w), ceil(W/w))``. Same input rules as :meth:`predict`."""
+        cropped to ``(N, C, ceil(H/w), ceil(W/w))`` on the model's own tiles (``w`` =
+        ``metadata.tile_size``, never pooled). Same input rules as :meth:`predict`."""
         x4 = self._check(x)
         n, _, h, w = x4.shape
         xp = self._padded(x4)
@@ -442,7 +464,7 @@ class ShadingRatePredictor:
                 f"model output has shape {raw.shape}, expected {expect} from an input of {xp.shape} with "
                 f"tile_size {t} and outputs {list(self._meta.outputs)}; the metadata does not fit this model"
             )
-        th, tw = self.tiles(h, w)
+        th, tw = tile_grid(h, w, t)
         out = raw[:, :, :th, :tw]
         return out if x.ndim == 4 else out[0]
 
@@ -451,9 +473,12 @@ class ShadingRatePredictor:
 
         ``x`` is float32 ``(C, H, W)`` or ``(N, C, H, W)`` with the channels of
         ``metadata.inputs``. Returns float32 ``(6, ceil(H/w), ceil(W/w))`` (or with the batch axis),
-        channels in :attr:`rates` order, in the metric's units, the safety margin included.
+        channels in :attr:`rates` order, in the metric's units, the safety margin included; ``w`` is
+        :attr:`tile_size` (on hardware tiles coarser than the model's, the worst model tile of each).
         """
-        return self._meta.decode(self.predict_raw(x))
+        values = self._meta.decode(self.predict_raw(x))
+        factor = self._tile // self._meta.tile_size
+        return values if factor == 1 else pool_tiles(values, factor, higher_is_better=self._meta.higher_is_better)
 
     def shading_rates(
         self,

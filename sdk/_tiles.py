@@ -12,7 +12,7 @@ import numpy as np
 
 from ._errors import ParameterError
 
-__all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "padded_size", "tile_extents", "tile_grid"]
+__all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "padded_size", "pool_tiles", "tile_extents", "tile_grid"]
 
 #: The tile size of the paper and of NVIDIA's VRS hardware (16x16 pixels share one rate).
 DEFAULT_TILE_SIZE = 16
@@ -46,3 +46,28 @@ def tile_extents(length: int, tile_size: int = DEFAULT_TILE_SIZE) -> np.ndarray:
     t = _positive("tile_size", tile_size)
     n = _positive("length", length)
     return np.minimum(t, n - t * np.arange(-(-n // t), dtype=np.int64))
+
+
+def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = False) -> np.ndarray:
+    """Per-tile values on a grid ``factor`` times coarser: each coarse tile takes the worst of the
+    ``factor x factor`` fine tiles it covers (the maximum of an error, the minimum of a quality such as
+    PSNR), so a rate chosen for the coarse tile passes wherever it passed for every fine one.
+
+    ``values`` is ``(..., th, tw)``; the result ``(..., ceil(th / factor), ceil(tw / factor))``, which
+    is the coarse tile grid of the same frame (a partial coarse tile pools the fine tiles it has). Use
+    it to run a model with 8-pixel tiles on hardware with 16-pixel shading-rate tiles.
+    """
+    f = _positive("factor", factor)
+    v = np.asarray(values)
+    if v.ndim < 2 or v.shape[-2] < 1 or v.shape[-1] < 1:
+        raise ParameterError(f"values: expected an array of shape (..., tile rows, tile columns), got {v.shape}")
+    if f == 1:
+        return v.copy()
+    th, tw = v.shape[-2:]
+    ch, cw = -(-th // f), -(-tw // f)
+    fill = np.inf if higher_is_better else -np.inf
+    padded = np.full((*v.shape[:-2], ch * f, cw * f), fill, dtype=np.result_type(v.dtype, np.float32))
+    padded[..., :th, :tw] = v
+    blocks = padded.reshape(*v.shape[:-2], ch, f, cw, f)
+    pooled = blocks.min(axis=(-3, -1)) if higher_is_better else blocks.max(axis=(-3, -1))
+    return pooled.astype(v.dtype, copy=False)

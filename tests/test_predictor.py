@@ -254,3 +254,39 @@ def test_a_provider_that_cannot_build_the_session_falls_back_to_cpu(
     assert p.provider == "CPUExecutionProvider" and "no device" in caplog.text
     with pytest.raises(sdk.ProviderUnavailableError, match="could not be built on FakeExecutionProvider"):
         sdk.load(path, providers=["FakeExecutionProvider"], strict=True)
+
+
+# -- a model's tiles on coarser hardware tiles -------------------------------------------------------
+
+def test_pool_tiles_takes_the_worst_fine_tile() -> None:
+    v = np.arange(30, dtype=np.float32).reshape(1, 5, 6)  # a partial last row of coarse tiles
+    err = sdk.pool_tiles(v, 2)
+    assert err.shape == (1, 3, 3) and err.dtype == np.float32
+    assert err[0, 0, 0] == 7 and err[0, 2, 2] == 29  # max of [[0, 1], [6, 7]]; the partial tile pools its own
+    q = sdk.pool_tiles(v, 2, higher_is_better=True)  # PSNR: the lowest quality is the worst
+    assert q[0, 0, 0] == 0 and q[0, 2, 2] == 28
+    assert np.array_equal(sdk.pool_tiles(v, 1), v)
+    with pytest.raises(sdk.ParameterError):
+        sdk.pool_tiles(v, 0)
+
+
+def test_an_8_pixel_model_on_16_pixel_hardware_tiles(tiny_model: Callable[..., Path]) -> None:
+    meta = base_metadata(tile_size=8, default_threshold=0.5)
+    path = tiny_model(meta, tile=8)
+    fine, coarse = sdk.load(path), sdk.load(path, tile_size=16)
+    assert (fine.tile_size, coarse.tile_size, coarse.metadata.tile_size) == (8, 16, 8)
+    x = np.random.default_rng(3).standard_normal((4, 40, 56)).astype(np.float32)  # 5x7 fine, 3x4 coarse tiles
+    assert coarse.tiles(40, 56) == (3, 4) and coarse.predict(x).shape == (6, 3, 4)
+    np.testing.assert_array_equal(coarse.predict(x), sdk.pool_tiles(fine.predict(x), 2))
+    assert coarse.predict_raw(x).shape == fine.predict_raw(x).shape == (4, 5, 7)  # the network's own tiles
+    rates = coarse.shading_rates(x)
+    assert rates.shape == (3, 4)
+    # a coarse tile's rate passes on every fine tile it covers (the worst of them decided)
+    fine_pred = fine.predict(x)
+    for (r, c), code in np.ndenumerate(rates):
+        if code != sdk.RATE_CODES["1x1"]:
+            i = sdk.PREDICTED_RATES.index(sdk.RATE_NAMES[int(code)])
+            assert (fine_pred[i, 2 * r:2 * r + 2, 2 * c:2 * c + 2] < 0.5).all()
+    for bad in (4, 12, 64, True, "16"):
+        with pytest.raises(sdk.ParameterError, match="tile_size"):
+            sdk.load(path, tile_size=bad)  # type: ignore[arg-type]
