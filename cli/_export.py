@@ -12,6 +12,7 @@ __all__ = ["build_export_parser", "export_main"]
 
 EXAMPLES = """examples:
   rtp-export model.pt -o jnyang.onnx
+  rtp-export --adopt JNYang.onnx -o jnyang-paper.onnx        # a published model: no sidecar needed
   rtp-export --adopt Model.onnx --metadata sidecar.yaml -o adopted.onnx --dynamic
   rtp-export --restamp old.onnx
 """
@@ -30,8 +31,10 @@ def build_export_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="output .onnx path (default: the checkpoint path with .onnx)")
     p.add_argument("--opset", type=int, default=None, help=f"ONNX opset of a checkpoint's export (default: {DEFAULT_OPSET})")
     p.add_argument("--metadata", metavar="SIDECAR.yaml",
-                   help="metadata fields: merged over the checkpoint's, or the whole sidecar with --adopt")
-    p.add_argument("--adopt", metavar="FOREIGN.onnx", help="bake --metadata into this ONNX model instead")
+                   help="metadata fields: merged over the checkpoint's, or the whole sidecar with --adopt "
+                   "(default with --adopt: rtp's sidecar for a recognised published model)")
+    p.add_argument("--adopt", metavar="FOREIGN.onnx", help="bake --metadata into this ONNX model instead; the "
+                   "paper's six published models are recognised by their SHA-256 and need no --metadata")
     p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")
     p.add_argument("--replace", action="store_true", help="with --adopt: overwrite metadata the model already has")
     p.add_argument("--restamp", metavar="MODEL.onnx", help="record the digest of graph and weights in an rtp model "
@@ -48,8 +51,8 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     if args.adopt:
         if args.checkpoint:
             parser.error("give either a checkpoint or --adopt FOREIGN.onnx, not both")
-        if not args.metadata or not args.output:
-            parser.error("--adopt needs --metadata SIDECAR.yaml and -o OUTPUT.onnx")
+        if not args.output:
+            parser.error("--adopt needs -o OUTPUT.onnx")
         if args.opset is not None:
             parser.error("--opset applies to exporting a checkpoint; an adopted model keeps its own opset")
     elif not args.checkpoint:
@@ -64,6 +67,15 @@ def _body(args: argparse.Namespace) -> int:
     if args.restamp:
         out = restamp(args.restamp)
     elif args.adopt:
+        from pathlib import Path
+
+        from rtp import sdk
+        from rtp.export import identify
+
+        if args.metadata is None and Path(args.adopt).is_file() and identify(args.adopt) is None:
+            raise sdk.MetadataError(
+                f"{args.adopt} is not one of the paper's published models rtp recognises: pass its sidecar with "
+                "--metadata SIDECAR.yaml (docs/export.md)")
         out = adopt(args.adopt, args.metadata, args.output, dynamic=args.dynamic, replace=args.replace)
     else:
         out = export_checkpoint(args.checkpoint, args.output, opset=args.opset or DEFAULT_OPSET,

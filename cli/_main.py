@@ -264,7 +264,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                 model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata, threshold=args.threshold,
                 unseen_fraction=args.unseen_fraction, baselines=not args.no_baselines, max_samples=args.max_samples,
                 plots_dir=args.out if args.plots else None, plot_sample=args.plot_sample,
-                progress=bar.update_to,
+                progress=bar.update_to, tile_size=args.tile_size,
             )
         reports.append(rep)
         print(rep.table() + "\n")
@@ -462,6 +462,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--plots", action="store_true", help="write heatmaps, a scatter and rate overlays into --out")
     ev.add_argument("--plot-sample", default=None, help="sample the heatmaps and overlays show (default: the first)")
     ev.add_argument("--max-samples", type=_positive, default=None, help="evaluate at most this many samples")
+    ev.add_argument("--tile-size", type=_positive, default=None, help="hardware tile size coarser than the model's "
+                    "(an 8-pixel model on 16-pixel VRS tiles: each takes the worst of its model tiles; default: the "
+                    "model's own)")
 
     dm = command("demo", "render a scene, pick VRS rates with a shipped model, show the result", _cmd_demo)
     dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")

@@ -139,7 +139,10 @@ class EvaluationReport:
     def _header(self) -> list[str]:
         m = self.model
         return [
-            f"model {m['path']}: {m['metric']}, tile {m['tile_size']}, transform {_transform_text(m['transform'])}, "
+            f"model {m['path']}: {m['metric']}, tile {m['tile_size']}"
+            + (f" (pooled from the model's {m['model_tile_size']})" if m.get('model_tile_size', m['tile_size']) != m['tile_size']
+               else "")
+            + f", transform {_transform_text(m['transform'])}, "
             f"safety {m['safety']:g}, "
             f"outputs {','.join(m['outputs'])}",
             f"data {self.data}: {self.samples} samples, scenes "
@@ -307,6 +310,7 @@ def evaluate(
     plot_sample: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     sweep: bool = True,
+    tile_size: int | None = None,
 ) -> EvaluationReport:
     """Evaluate an ONNX model on a dataset with targets (``rtp targets``) for its metric and tile.
 
@@ -317,7 +321,10 @@ def evaluate(
     ``sweep`` also sweeps every method's threshold (cutoff) to compare the work saved at the
     model's failure rate (``report.matched``). ``plots_dir`` writes the figures of
     :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the first sample).
-    ``progress(done, total)`` is called after each sample.
+    ``progress(done, total)`` is called after each sample. ``tile_size`` evaluates the model on
+    coarser hardware tiles than its own (``sdk.load(tile_size=...)``: an 8-pixel model on NVIDIA's
+    16-pixel tiles, each hardware tile taking the worst of its model tiles), against targets of that
+    tile size.
 
     The steps: load the model and the samples, build the baselines, take in each sample
     (:class:`_Run`: predictions and targets, quality values, every method's rates, the sweeps),
@@ -325,8 +332,9 @@ def evaluate(
     """
     if not 0.0 <= unseen_fraction < 1.0:
         raise ParameterError(f"unseen_fraction must be in [0, 1), got {unseen_fraction}")
-    predictor = sdk.load(model, metadata=metadata)
-    meta = predictor.metadata
+    predictor = sdk.load(model, metadata=metadata, tile_size=tile_size)
+    # the metadata as evaluated: on the predictor's (hardware) tiles
+    meta = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
     thr = float(meta.default_threshold if threshold is None else threshold)
     store, samples = _load_samples(data, meta, scenes, max_samples)
     selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
@@ -471,7 +479,9 @@ class _Run:
     def __init__(self, predictor: Any, store: TargetStore, thr: float, unseen_fraction: float,
                  selectors: dict[str, Any], yang_scored: bool, sweep: bool) -> None:
         self.predictor, self.store, self.thr, self.unseen_fraction = predictor, store, thr, unseen_fraction
-        self.meta: sdk.ModelMetadata = predictor.metadata
+        # the metadata on the predictor's tiles (coarser than the model's with load(tile_size=...))
+        self.meta: sdk.ModelMetadata = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
+        self.pool = predictor.tile_size // predictor.metadata.tile_size
         meta = self.meta
         self.tile, self.metric, self.hib = meta.tile_size, meta.metric, meta.higher_is_better
         self.no_safety = dataclasses.replace(meta, safety=0.0)
@@ -506,6 +516,9 @@ class _Run:
         raw = self.predictor.predict_raw(x)
         pred = self.meta.decode(raw)
         pred0 = self.no_safety.decode(raw)
+        if self.pool > 1:  # the hardware tile takes the worst model tile it covers, as predict() does
+            pred = sdk.pool_tiles(pred, self.pool, higher_is_better=self.hib)
+            pred0 = sdk.pool_tiles(pred0, self.pool, higher_is_better=self.hib)
         gt = self.store.load(sample.id, self.metric, self.tile)
         if gt.shape != pred.shape:
             raise TargetError(f"sample {sample.id}: targets have shape {gt.shape}, the model predicts {pred.shape}")
@@ -571,6 +584,7 @@ class _Run:
             "path": str(self.predictor.path), "metric": self.metric, "higher_is_better": self.hib, "tile_size": self.tile,
             "transform": meta.transform.to_dict(), "safety": meta.safety, "inputs": list(meta.inputs),
             "outputs": list(meta.outputs), "default_threshold": meta.default_threshold,
+            "model_tile_size": self.predictor.metadata.tile_size,
         }
 
     def _merged(self, acc: dict[tuple[str, str], Any], method: str, scene: str) -> tuple[np.ndarray, ...]:

@@ -2,5 +2,7 @@
 :func:`rtp.cli.export_main`)."""
 
 from ._export import DEFAULT_OPSET, ExportError, adopt, export_checkpoint, restamp, write_metadata
+from ._published import PublishedModel, identify, published_models
 
-__all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "restamp", "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "ExportError", "PublishedModel", "adopt", "export_checkpoint", "identify",
+           "published_models", "restamp", "write_metadata"]

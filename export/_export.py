@@ -32,6 +32,8 @@ from rtp.sdk import (
 )
 from rtp.sdk.files import atomic_output
 
+from ._published import file_sha256, identify
+
 __all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "restamp", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
@@ -229,7 +231,7 @@ def _dims(value_info: Any) -> list[int | str]:
 
 def adopt(
     foreign: str | os.PathLike[str],
-    metadata: Mapping[str, Any] | str | os.PathLike[str],
+    metadata: Mapping[str, Any] | str | os.PathLike[str] | None,
     output: str | os.PathLike[str],
     *,
     dynamic: bool = False,
@@ -240,6 +242,11 @@ def adopt(
     Checks that the model has one float input ``(N, C, H, W)`` with C = len(inputs) and one output
     ``(N, R, H/w, W/w)`` with R = len(outputs) wherever the dims are fixed. With ``dynamic`` the
     batch, height and width become symbolic so any frame size runs (verified at a second size).
+
+    ``metadata`` (a sidecar path or a mapping) may be None for the paper's published models
+    (:func:`published_models`): the file is recognised by its SHA-256 and gets the sidecar rtp ships
+    for it. The adopted model's ``provenance.adopted`` records the source file's name and SHA-256,
+    where it was published (for a recognised file) and where its metadata came from.
     """
     import onnx
 
@@ -252,7 +259,27 @@ def adopt(
         model = onnx.load(str(src))
     except Exception as err:
         raise ModelLoadError(f"{src}: not a readable ONNX model ({err})") from err
-    d = _read_yaml(metadata) if isinstance(metadata, (str, os.PathLike)) else dict(metadata)
+    known = identify(src)
+    if metadata is None:
+        if known is None:
+            raise MetadataError(
+                f"{src}: metadata is required: the file is not one of the paper's published models rtp "
+                f"recognises (its SHA-256 is {file_sha256(src)[:16]}...); pass a sidecar (metadata=, or "
+                "--metadata SIDECAR.yaml on the command line)"
+            )
+        d, source = dict(known.metadata), "rtp's sidecar for this published model (rtp/export/published.yaml)"
+    elif isinstance(metadata, (str, os.PathLike)):
+        d, source = _read_yaml(metadata), str(metadata)
+    else:
+        d, source = dict(metadata), "given as a mapping"
+    adopted: dict[str, Any] = {"file": src.name, "sha256": file_sha256(src), "metadata": source,
+                               "rtp": str(sdk.__version__),
+                               "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()}
+    if known is not None:
+        adopted["published"] = known.origin
+        log.info("%s is the paper's published %s model (%s, %s)", src.name, known.name, known.repository, known.path)
+    d["provenance"] = _merge(dict(d.get("provenance") or {}) if isinstance(d.get("provenance"), Mapping) else {},
+                             {"adopted": adopted})
     meta = ModelMetadata.from_dict(d)
     props = {p.key: p.value for p in model.metadata_props}
     if METADATA_KEY in props and not replace:

@@ -123,7 +123,7 @@ def test_cli_exit_codes(tmp_path: Path) -> None:
     missing = _cli(str(tmp_path / "nope.pt"))
     assert missing.returncode == 2 and "no checkpoint" in missing.stderr and "Traceback" not in missing.stderr
     usage = _cli("--adopt", "x.onnx")
-    assert usage.returncode == 2 and "--metadata" in usage.stderr
+    assert usage.returncode == 2 and "-o OUTPUT.onnx" in usage.stderr
     assert _cli().returncode == 2
     bad_opset = _cli(str(ck), "--opset", "3")
     assert bad_opset.returncode == 2 and "opset" in bad_opset.stderr
@@ -204,6 +204,62 @@ def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
     corrupt.write_bytes(b"junk")
     r = _cli("--adopt", str(corrupt), "--metadata", str(side), "-o", str(tmp_path / "x.onnx"))
     assert r.returncode == 2 and "not a readable ONNX model" in r.stderr
+
+
+# -- the paper's published models ---------------------------------------------------------------
+
+PUBLISHED = Path(__file__).parent / "data" / "published"  # the six files, as published (LICENSE.md there)
+
+
+@pytest.mark.parametrize("name", ["Model", "FLIP", "JNFLIP", "JNYang", "LPIPS", "PSNR"])
+def test_published_models_adopt_without_a_sidecar(tmp_path: Path, name: str) -> None:
+    src = PUBLISHED / f"{name}.onnx"
+    known = export.identify(src)
+    assert known is not None and known.path.endswith(f"/{name}.onnx")
+    out = export.adopt(src, None, tmp_path / "a.onnx", dynamic=True)
+    pred = sdk.load(out)
+    m = pred.metadata
+    assert m.to_dict()["default_threshold"] == known.metadata["default_threshold"]
+    origin = m.provenance["adopted"]["published"]
+    assert origin["repository"] == "https://github.com/Jaliborc/rt-percept" and origin["branch"] == "renderer"
+    assert m.provenance["adopted"]["sha256"] == known.sha256 and m.digest
+    x = np.random.default_rng(0).random((len(m.inputs), 64, 96), dtype=np.float32)
+    y = pred.predict(x)
+    assert y.shape == (6, 64 // m.tile_size, 96 // m.tile_size) and np.isfinite(y).all()
+    if m.tile_size == 8:  # on NVIDIA's 16-pixel hardware tiles: the worst of each 2x2 block
+        assert np.array_equal(sdk.load(out, tile_size=16).predict(x), sdk.pool_tiles(y, 2, higher_is_better=m.higher_is_better))
+
+
+def test_a_sidecar_overrides_the_shipped_one_and_provenance_says_so(tmp_path: Path) -> None:
+    import yaml
+
+    side = tmp_path / "mine.yaml"
+    side.write_text(yaml.safe_dump({**export.identify(PUBLISHED / "Model.onnx").metadata, "default_threshold": 0.3}))
+    m = sdk.load(export.adopt(PUBLISHED / "Model.onnx", side, tmp_path / "a.onnx")).metadata
+    assert m.default_threshold == 0.3 and m.provenance["adopted"]["metadata"] == str(side)
+    assert m.provenance["adopted"]["published"]["name"] == "vrs-unseen"
+
+
+def test_an_unknown_file_without_a_sidecar_is_refused(tmp_path: Path) -> None:
+    src = _foreign(tmp_path, 64, 96)
+    assert export.identify(src) is None
+    with pytest.raises(sdk.MetadataError, match="metadata=.*--metadata"):
+        export.adopt(src, None, tmp_path / "a.onnx")
+    r = _cli("--adopt", str(src), "-o", str(tmp_path / "a.onnx"))
+    assert r.returncode == 2 and "--metadata SIDECAR.yaml" in r.stderr and "metadata=" not in r.stderr
+    assert not (tmp_path / "a.onnx").exists()
+    r = _cli("--adopt", str(PUBLISHED / "PSNR.onnx"), "-o", str(tmp_path / "psnr.onnx"))
+    assert r.returncode == 0 and sdk.load(tmp_path / "psnr.onnx").metadata.metric == "psnr", r.stderr
+
+
+def test_the_registry_matches_the_published_files() -> None:
+    import hashlib
+
+    files = sorted(PUBLISHED.glob("*.onnx"))
+    assert len(export.published_models()) == len(files) == 6
+    for f in files:
+        assert export.identify(f) is not None, f
+        assert hashlib.sha256(f.read_bytes()).hexdigest() in {m.sha256 for m in export.published_models()}
 
 
 def test_export_names_what_it_was_given_instead_of_a_checkpoint(tmp_path: Path) -> None:
