@@ -225,7 +225,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     return 0
 
 
-_RECIPE_FLAGS = ("tile", "outputs", "inputs", "transform", "logistic_k", "head", "steps", "batch", "crop", "lr", "seed",
+_RECIPE_FLAGS = ("arch", "width", "depth", "tile", "outputs", "inputs", "transform", "logistic_k", "head",
+                 "steps", "batch", "crop", "lr", "seed",
                  "safety_quantile", "max_samples")
 
 
@@ -427,6 +428,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--transform", default=None, choices=_fitted_transforms(),
                    help="target transform, fitted to the mean training target")
     r.add_argument("--k", dest="logistic_k", type=float, default=None, help="growth rate of the logistic transform")
+    r.add_argument("--arch", default=None, choices=("paper", "fast"),
+                   help="network: the paper's (full-resolution convolutions) or rtp's fast one (a strided stem, "
+                   "blocks at 1/4 resolution and below) (default: paper, unless the recipe sets one)")
+    r.add_argument("--width", type=_positive, default=None, help="channels of the hidden layers (default: 16)")
+    r.add_argument("--depth", type=int, default=None, help="3x3 blocks of the fast network (default: 3)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
     r.add_argument("--steps", type=_positive, default=None, help="training steps")

@@ -244,9 +244,10 @@ def test_split_profile_and_transform_choices_are_their_rooms() -> None:
 
 def test_head_choices_are_the_networks() -> None:
     pytest.importorskip("torch")
-    from rtp.train.model import HEADS
+    from rtp.train.model import ARCHS, HEADS
 
     assert tuple(_option(("train",), "head").choices or ()) == HEADS
+    assert tuple(_option(("train",), "arch").choices or ()) == tuple(ARCHS)
 
 
 def test_cli_keeps_no_lists_of_metrics_tiles_or_rates() -> None:

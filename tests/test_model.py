@@ -99,3 +99,32 @@ def test_bad_checkpoint_files(tmp_path: Path) -> None:
     torch.save({"state_dict": {}}, other)
     with pytest.raises(checkpoint.CheckpointError, match="not an rtp checkpoint"):
         checkpoint.load(other)
+
+
+@pytest.mark.parametrize("tile", [1, 2, 4, 8, 16, 32])
+def test_the_fast_network_is_fully_convolutional_for_every_tile_size(tile: int) -> None:
+    from rtp.train.model import FastNet
+
+    net = FastNet(in_channels=3, out_channels=2, tile=tile).eval()
+    for h, w in ((64, 96), (32, 160)):
+        y = net(torch.rand(2, 3, h, w))
+        assert y.shape == (2, 2, h // tile, w // tile)
+        assert torch.all((y > 0) & (y < 1))
+
+
+def test_the_fast_network_layout() -> None:
+    from rtp.train.model import ARCHS, FastNet, build_network
+
+    net = FastNet()
+    kinds = [type(m).__name__ for m in net.layers]
+    # strided stem; every convolution but the head is conv -> BatchNorm -> ReLU (BatchNorm folds at export)
+    assert kinds[:3] == ["Conv2d", "BatchNorm2d", "ReLU"] and net.layers[0].stride == (4, 4)
+    convs = [i for i, k in enumerate(kinds) if k == "Conv2d"]
+    assert all(kinds[i + 1:i + 3] == ["BatchNorm2d", "ReLU"] for i in convs[:-1])
+    assert kinds[-2:] == ["Conv2d", "Sigmoid"] and kinds.count("MaxPool2d") == 2
+    assert sum(p.numel() for p in net.parameters()) == 8132
+    assert set(ARCHS) == {"paper", "fast"} and isinstance(build_network("fast", 4, 4, 16), FastNet)
+    with pytest.raises(ValueError, match="arch"):
+        build_network("resnet", 4, 4, 16)
+    with pytest.raises(ValueError, match="tile"):
+        FastNet(tile=12)

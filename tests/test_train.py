@@ -191,3 +191,28 @@ def test_heads_and_the_dead_output_check(tmp_path: Path, capsys: pytest.CaptureF
     assert rtp_main([*args[:-4], "--out", str(tmp_path / "l.pt"), "--steps", "20", "--crop", "32", "--head", "linear"]) == 0
     ck = load_checkpoint(tmp_path / "l.pt")
     assert ck.net.config["head"] == "linear" and not ck.metadata.provenance["dead_outputs"]
+
+
+def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                                                   ) -> None:
+    data = _dataset(tmp_path / "ds", n=6)
+    out = tmp_path / "fast.pt"
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "30",
+                     "--crop", "32", "--val-scenes", "scene0", "--arch", "fast", "--depth", "4", "--width", "8"]) == 0
+    ck = load_checkpoint(out)
+    assert type(ck.net).__name__ == "FastNet" and ck.net.config["depth"] == 4 and ck.net.config["width"] == 8
+    assert ck.metadata.provenance["arch"] == "fast"
+    # rtp-export needs nothing special for it, and the SDK nothing new
+    onnx_path = export.export_checkpoint(out, tmp_path / "fast.onnx")
+    pred = sdk.load(onnx_path)
+    x = np.random.default_rng(4).random((4, H, W), dtype=np.float32)
+    with torch.inference_mode():
+        raw = ck.net(torch.from_numpy(x)[None])[0].numpy()
+    np.testing.assert_allclose(pred.predict_raw(x), raw, atol=1e-5)
+    assert pred.shading_rates(x).shape == pred.tiles(H, W)
+    # an unknown architecture is a usage error before any work
+    with pytest.raises(SystemExit) as exc:
+        rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "x.pt"), "--arch", "resnet"])
+    assert exc.value.code == 2 and "--arch" in capsys.readouterr().err
+    with pytest.raises(sdk.ParameterError, match="arch"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "y.pt"), arch="resnet", crop=32))

@@ -30,7 +30,7 @@ from . import checkpoint as ckpt
 from . import transforms as tt
 from ._recipe import load_recipe
 from ._safety import calibrate_safety
-from .model import MetricNet
+from .model import ARCHS, Network, build_network
 
 __all__ = ["TrainConfig", "TrainResult", "train"]
 
@@ -48,8 +48,12 @@ class TrainConfig:
     inputs: tuple[str, ...] = sdk.DEFAULT_INPUTS
     transform: str = "clamped"
     logistic_k: float = 10.0
+    #: The network: ``paper`` (the paper's, the reference) or ``fast`` (rtp's, train/model.py).
+    arch: str = "paper"
     width: int = 16
     head: str = "paper"
+    #: 3x3 blocks of the fast network.
+    depth: int = 3
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -165,7 +169,7 @@ def _make_transform(cfg: TrainConfig, train: _Split) -> sdk.Transform:
     raise sdk.ParameterError(f"transform must be clamped or logistic, got {cfg.transform!r}")
 
 
-def _predict_frames(net: MetricNet, xs: Sequence[np.ndarray], tile: int) -> list[np.ndarray]:
+def _predict_frames(net: Network, xs: Sequence[np.ndarray], tile: int) -> list[np.ndarray]:
     out = []
     with torch.inference_mode():
         for x in xs:
@@ -178,7 +182,7 @@ def _predict_frames(net: MetricNet, xs: Sequence[np.ndarray], tile: int) -> list
 
 
 def _validate(
-    net: MetricNet, val: _Split, t: sdk.Transform, cfg: TrainConfig, worse: float
+    net: Network, val: _Split, t: sdk.Transform, cfg: TrainConfig, worse: float
 ) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     net.eval()
     preds = _predict_frames(net, val.x, cfg.tile)
@@ -206,6 +210,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
     if cfg.crop % cfg.tile:
         raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})")
+    if cfg.arch not in ARCHS:
+        raise sdk.ParameterError(f"arch: expected one of {', '.join(ARCHS)}, got {cfg.arch!r}", "arch")
+    if cfg.width < 2 or cfg.depth < 0:
+        raise sdk.ParameterError(f"expected width >= 2 and depth >= 0, got {cfg.width} and {cfg.depth}")
     reader = DatasetReader(cfg.data)
     store = TargetStore(cfg.data)
     if cfg.metric not in store.metrics:
@@ -223,7 +231,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     worse = 1.0 if transform.increasing != higher else -1.0
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
-    net = MetricNet(len(cfg.inputs), len(cfg.outputs), cfg.tile, cfg.width, cfg.head)
+    net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
+                        depth=cfg.depth)
     opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
     out = Path(cfg.out)
@@ -231,6 +240,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
     if cfg.head != "paper":  # checkpoints from before the option compare equal to the paper head
         config_key["head"] = cfg.head
+    if cfg.arch != "paper":  # likewise for the architecture
+        config_key.update(arch=cfg.arch, depth=cfg.depth)
     if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split
         config_key["val_split"] = cfg.val_split
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
@@ -329,6 +340,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "underestimated_share_with_safety": under,
         "history": history[-20:],
         "head": cfg.head,
+        "arch": cfg.arch,
         "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)

@@ -4,8 +4,8 @@ Format (``torch.save`` of a dict, loaded with ``weights_only=True``; see docs/ex
 
     {
       "format": "rtp-checkpoint", "format_version": 1,
-      "architecture": {"name": "MetricNet", "config": {"in_channels", "out_channels", "tile", "width"}},
-      "state_dict": {...},                 # MetricNet weights and BatchNorm statistics
+      "architecture": {"name": "MetricNet" | "FastNet", "config": {"in_channels", "out_channels", "tile", ...}},
+      "state_dict": {...},                 # the network's weights and BatchNorm statistics
       "metadata": {...},                   # rtp.sdk.ModelMetadata.to_dict(): what rtp-export bakes in
       "training": {...} | None,            # optimizer / scheduler state and step, for resuming
       "versions": {"rtp": ..., "torch": ...},
@@ -27,13 +27,13 @@ import torch
 from rtp.sdk import EXIT_USAGE, MetadataError, ModelMetadata, ModelNotFoundError, RtpError
 from rtp.sdk.files import atomic_output
 
-from .model import MetricNet
+from .model import FastNet, MetricNet, Network
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "Checkpoint", "CheckpointError", "load", "save"]
 
 FORMAT = "rtp-checkpoint"
 FORMAT_VERSION = 1
-_ARCHITECTURES = {"MetricNet": MetricNet}
+_ARCHITECTURES: dict[str, type[MetricNet] | type[FastNet]] = {"MetricNet": MetricNet, "FastNet": FastNet}
 
 
 class CheckpointError(RtpError):
@@ -44,7 +44,7 @@ class CheckpointError(RtpError):
 
 @dataclass
 class Checkpoint:
-    net: MetricNet
+    net: Network
     metadata: ModelMetadata
     training: dict[str, Any] | None
     versions: dict[str, str]
@@ -56,7 +56,7 @@ def _versions() -> dict[str, str]:
     return {"rtp": str(sdk.__version__), "torch": str(torch.__version__)}
 
 
-def check_fits(net: MetricNet, meta: ModelMetadata) -> None:
+def check_fits(net: Network, meta: ModelMetadata) -> None:
     """Raise MetadataError when the metadata's inputs, outputs or tile size do not match the network."""
     c = net.config
     if len(meta.inputs) != c["in_channels"]:
@@ -73,14 +73,14 @@ def check_fits(net: MetricNet, meta: ModelMetadata) -> None:
 
 def save(
     path: str | os.PathLike[str],
-    net: MetricNet,
+    net: Network,
     metadata: ModelMetadata | Mapping[str, Any],
     training: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a checkpoint atomically. ``metadata`` is validated and must fit the network."""
     meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(metadata)
-    if not isinstance(net, MetricNet):
-        raise TypeError(f"expected a MetricNet, got {type(net).__name__}")
+    if not isinstance(net, (MetricNet, FastNet)):
+        raise TypeError(f"expected a MetricNet or FastNet, got {type(net).__name__}")
     check_fits(net, meta)
     payload = {
         "format": FORMAT,
