@@ -32,16 +32,23 @@ PAPER_METADATA = {
 }
 
 
-def paper_model(folder: Path) -> tuple[object, Path]:
-    """The paper's network with random weights (cost does not depend on them), exported with
-    rtp-export into ``folder``: returns ``(torch network, onnx path)``."""
+def paper_model(folder: Path, arch: str = "paper", **config: int) -> tuple[object, Path]:
+    """The paper's network (or ``arch`` with ``config``: width, depth) with random weights (cost does
+    not depend on them) and the paper's inputs and outputs, exported with rtp-export into ``folder``:
+    returns ``(torch network, onnx path)``."""
     import torch
 
     from rtp.export import export_checkpoint
     from rtp.train import checkpoint
-    from rtp.train.model import MetricNet
+    from rtp.train.model import build_network
 
     torch.manual_seed(0)
-    net = MetricNet().eval()
-    onnx_path = export_checkpoint(checkpoint.save(folder / "m.pt", net, PAPER_METADATA), folder / "m.onnx")
-    return net, onnx_path
+    net = build_network(arch, 4, 4, 16, **config).eval()
+    # trained BatchNorm statistics are not the identity: random ones keep folding honest
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+            m.running_var.uniform_(0.5, 1.5)
+    stem = f"{arch}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
+    ck = checkpoint.save(folder / f"{stem}.pt", net, PAPER_METADATA)
+    return net, export_checkpoint(ck, folder / f"{stem}.onnx")

@@ -1,10 +1,13 @@
-"""Inference cost of the paper's network: rtp.sdk predict vs the bare onnxruntime session vs torch.
+"""Inference cost: every shipped model and rtp's fast networks next to the paper's network, and the
+paper's network through rtp.sdk, the bare onnxruntime session and torch.
 
     python bench/inference.py [--repeats 7] [--threads 2]
 
-Builds the paper's configuration (4 inputs, outputs 1x2/2x1/2x4/4x2, 16x16 tiles, width 16) with
-random weights (cost does not depend on the weights), exports it with rtp-export, and times each
-path at 1920x1080 and 1280x720. Prints a Markdown table of medians (ms).
+The paper's configuration (4 inputs, outputs 1x2/2x1/2x4/4x2, 16x16 tiles, width 16) and the fast
+architectures (``rtp train --arch fast``) are built with random weights (cost does not depend on the
+weights) and exported with rtp-export; the shipped models are loaded from ``rtp.models``. Each is
+timed in the same run at 1920x1080 and 1280x720. Prints Markdown tables of medians (ms) and each
+model's speed-up over the paper's network.
 """
 
 from __future__ import annotations
@@ -20,6 +23,35 @@ import torch
 from _common import median_ms, paper_model  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
+
+FRAMES = ((1920, 1080), (1280, 720))
+#: rtp's fast networks timed next to the paper's (train/model.py FastNet): (width, depth).
+FAST = ((16, 3), (16, 5), (24, 4), (32, 3))
+
+
+def _params(path: Path) -> int:
+    import onnx
+
+    return int(sum(np.prod(t.dims) for t in onnx.load(str(path)).graph.initializer))
+
+
+def _models(folder: Path, threads: int) -> dict[str, tuple[sdk.ShadingRatePredictor, tuple[str, int]]]:
+    """The predictors to time, by name, with (architecture, parameter count)."""
+    out: dict[str, tuple[sdk.ShadingRatePredictor, tuple[str, int]]] = {}
+
+    def add(name: str, path: Path, arch: str) -> None:
+        pred = sdk.load(path, providers=["CPUExecutionProvider"], threads=threads)
+        out[name] = (pred, (arch, _params(path)))
+
+    add("paper's network (random weights)", paper_model(folder)[1], "paper")
+    for width, depth in FAST:
+        add(f"fast, width {width}, depth {depth} (random weights)",
+            paper_model(folder, "fast", width=width, depth=depth)[1], "fast")
+    for name in sdk.shipped_models():
+        pred = sdk.load(name)
+        arch = str(pred.metadata.provenance.get("arch", "paper"))
+        add(f"shipped {name}", Path(str(pred.path)), arch)
+    return out
 
 
 def main() -> None:
@@ -54,8 +86,20 @@ def main() -> None:
                     median_ms(run_torch, args.repeats),
                 )
             )
+        models = _models(Path(d), args.threads)
+        frames = {(w, h): np.random.default_rng(0).random((4, h, w), dtype=np.float32) for w, h in FRAMES}
+        times = {(name, wh): median_ms(lambda p=p, x=x: p.predict(x), args.repeats)
+                 for name, (p, _) in models.items() for wh, x in frames.items()}
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, torch {torch.__version__}, "
           f"{platform.processor() or platform.machine()}, {args.threads} threads, median of {args.repeats}\n")
+    paper = "paper's network (random weights)"
+    print("| model | architecture | stored values | " + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES)
+          + " | speed-up over the paper's at 1920x1080 |")
+    print("|---|---|---:|" + "---:|" * len(FRAMES) + "---:|")
+    for name, (_, (arch, n_params)) in models.items():
+        cells = " | ".join(f"{times[name, wh]:.1f}" for wh in FRAMES)
+        print(f"| {name} | {arch} | {n_params:,} | {cells} | {times[paper, FRAMES[0]] / times[name, FRAMES[0]]:.1f}x |")
+    print("\nThe paper's network by path:\n")
     print("| frame | sdk predict (ms) | sdk shading_rates (ms) | bare onnxruntime (ms) | torch eager (ms) |")
     print("|---|---|---|---|---|")
     for name, a, b, c, e in rows:
