@@ -198,10 +198,11 @@ def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path
     data = _dataset(tmp_path / "ds", n=6)
     out = tmp_path / "fast.pt"
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "30",
-                     "--crop", "32", "--val-scenes", "scene0", "--arch", "fast", "--depth", "4", "--width", "8"]) == 0
+                     "--crop", "32", "--val-scenes", "scene0", "--arch", "fast", "--depth", "4", "--width", "8",
+                     "--augment"]) == 0
     ck = load_checkpoint(out)
     assert type(ck.net).__name__ == "FastNet" and ck.net.config["depth"] == 4 and ck.net.config["width"] == 8
-    assert ck.metadata.provenance["arch"] == "fast"
+    assert ck.metadata.provenance["arch"] == "fast" and ck.metadata.provenance["augment"] is True
     # rtp-export needs nothing special for it, and the SDK nothing new
     onnx_path = export.export_checkpoint(out, tmp_path / "fast.onnx")
     pred = sdk.load(onnx_path)

@@ -28,6 +28,7 @@ from rtp.evaluate import scores
 
 from . import checkpoint as ckpt
 from . import transforms as tt
+from ._augment import SYMMETRIES, augment_batch
 from ._recipe import load_recipe
 from ._safety import calibrate_safety
 from .model import ARCHS, Network, build_network
@@ -54,6 +55,9 @@ class TrainConfig:
     head: str = "paper"
     #: 3x3 blocks of the fast network.
     depth: int = 3
+    #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
+    #: the direction-dependent channels changed to match (train/_augment.py).
+    augment: bool = False
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -212,6 +216,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})")
     if cfg.arch not in ARCHS:
         raise sdk.ParameterError(f"arch: expected one of {', '.join(ARCHS)}, got {cfg.arch!r}", "arch")
+    pairs = [("normal.x", "normal.y"), ("motion.x", "motion.y")]
+    if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
+        raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
+                                 f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
     if cfg.width < 2 or cfg.depth < 0:
         raise sdk.ParameterError(f"expected width >= 2 and depth >= 0, got {cfg.width} and {cfg.depth}")
     reader = DatasetReader(cfg.data)
@@ -242,6 +250,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["head"] = cfg.head
     if cfg.arch != "paper":  # likewise for the architecture
         config_key.update(arch=cfg.arch, depth=cfg.depth)
+    if cfg.augment:
+        config_key["augment"] = True
     if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split
         config_key["val_split"] = cfg.val_split
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
@@ -313,6 +323,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
             for i, y, x in zip(idx, oy, ox)
         ])
+        if cfg.augment:
+            xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs,
+                                   torch.randint(len(SYMMETRIES), (cfg.batch,), generator=gen).tolist())
         target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
         target = torch.nan_to_num(target, nan=1.0)
         loss = F.l1_loss(net(torch.from_numpy(xb.astype(np.float32))), target)
@@ -341,6 +354,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "history": history[-20:],
         "head": cfg.head,
         "arch": cfg.arch,
+        "augment": cfg.augment,
         "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)

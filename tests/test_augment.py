@@ -1,0 +1,60 @@
+"""Training augmentations keep the targets true (train/_augment.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rtp.train._augment import SYMMETRIES, augment_sample
+
+OUTPUTS = ("1x2", "2x1", "2x4", "4x2")
+
+
+def _crop() -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(0)
+    return rng.random((4, 32, 32), dtype=np.float32), rng.random((4, 2, 2), dtype=np.float32)
+
+
+def test_identity_and_involutions() -> None:
+    x, y = _crop()
+    ins = ("reprojected.r", "seen", "albedo.r", "normal.z")
+    x0, y0 = augment_sample(x, y, ins, OUTPUTS, 0)
+    assert np.array_equal(x0, x) and np.array_equal(y0, y)
+    for s in range(len(SYMMETRIES)):
+        xa, ya = augment_sample(x, y, ins, OUTPUTS, s)
+        assert xa.shape == x.shape and ya.shape == y.shape
+    xt, yt = augment_sample(*augment_sample(x, y, ins, OUTPUTS, 4), ins, OUTPUTS, 4)  # transpose twice
+    assert np.array_equal(xt, x) and np.array_equal(yt, y)
+
+
+def test_transpose_swaps_the_rates_of_transposed_blocks() -> None:
+    x, y = _crop()
+    xt, yt = augment_sample(x, y, ("reprojected.r", "seen", "albedo.r", "normal.z"), OUTPUTS, 4)
+    assert np.array_equal(xt[2], x[2].T)
+    assert np.array_equal(yt[0], y[1].T) and np.array_equal(yt[1], y[0].T)  # 1x2 <-> 2x1
+    assert np.array_equal(yt[2], y[3].T) and np.array_equal(yt[3], y[2].T)  # 2x4 <-> 4x2
+    six = ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
+    y6 = np.random.default_rng(1).random((6, 2, 2), dtype=np.float32)
+    _, y6t = augment_sample(x, y6, ("reprojected.r", "seen", "albedo.r", "normal.z"), six, 4)
+    assert np.array_equal(y6t[2], y6[2].T) and np.array_equal(y6t[5], y6[5].T)  # square rates stay
+
+
+def test_flips_move_tiles_and_turn_directions() -> None:
+    x, y = _crop()
+    ins = ("normal.x", "normal.y", "motion.x", "motion.y")
+    xh, yh = augment_sample(x, y, ins, OUTPUTS, SYMMETRIES.index((False, False, True)))  # columns reversed
+    assert np.array_equal(yh, y[:, :, ::-1])
+    assert np.allclose(xh[0], -x[0][:, ::-1]) and np.allclose(xh[1], x[1][:, ::-1])  # normal.x turns
+    assert np.allclose(xh[2], -x[2][:, ::-1]) and np.allclose(xh[3], x[3][:, ::-1])  # motion.x turns
+    xv, _ = augment_sample(x, y, ins, OUTPUTS, SYMMETRIES.index((False, True, False)))  # rows reversed
+    assert np.allclose(xv[1], -x[1][::-1]) and np.allclose(xv[3], -x[3][::-1])
+    xt, _ = augment_sample(x, y, ins, OUTPUTS, 4)
+    # the new right is the old down: normal.x' = -normal.y, motion.x' = motion.y
+    assert np.allclose(xt[0], -x[1].T) and np.allclose(xt[1], -x[0].T)
+    assert np.allclose(xt[2], x[3].T) and np.allclose(xt[3], x[2].T)
+
+
+def test_a_lone_direction_channel_cannot_be_transposed() -> None:
+    x, y = _crop()
+    with pytest.raises(ValueError, match="normal.y"):
+        augment_sample(x, y, ("normal.x", "seen", "albedo.r", "normal.z"), OUTPUTS, 4)
