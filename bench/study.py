@@ -1,0 +1,96 @@
+"""Architecture and recipe study (issue "Networks that beat the paper's"): train each configuration on
+the train maps, score it on the validation maps, time it at 1080p. Prints a Markdown table.
+
+    python bench/study.py --data data/train --metric jnyang --out data/study            # every config
+    python bench/study.py --data data/train --metric jnyang --out data/study --only fast-w16-d3,paper
+
+Each configuration is the shipped recipe (train/recipes/shipped.yaml) with a few fields changed
+(CONFIGS below). Trainings are resumable: rerunning skips finished checkpoints and continues
+interrupted ones. ``--reference NAME`` adds a row for an exported model (a shipped model's name or an
+.onnx path) scored the same way, without training. The scores are the validation maps' R² in
+transformed space over all tiles, and over the seen and unseen ones (a tile is unseen when more than
+half its pixels are); the time is ``sdk predict`` of a 1920x1080 frame, median of 7, 2 threads.
+Design choices are made on these validation maps only; the test split is reported once, at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from _common import median_ms  # bench/ is on sys.path when run as a script
+
+from rtp import sdk
+from rtp.capture.scenes import load_splits
+from rtp.evaluate import evaluate
+from rtp.export import export_checkpoint
+from rtp.train import TrainConfig, train
+
+#: name -> TrainConfig fields over the shipped recipe.
+CONFIGS: dict[str, dict[str, Any]] = {
+    "paper": {"arch": "paper"},
+    "paper-aug": {"arch": "paper", "augment": True},
+    "fast-w16-d3": {"arch": "fast", "width": 16, "depth": 3},
+    "fast-w16-d5": {"arch": "fast", "width": 16, "depth": 5},
+    "fast-w16-d5-aug": {"arch": "fast", "width": 16, "depth": 5, "augment": True},
+    "fast-w24-d5-aug": {"arch": "fast", "width": 24, "depth": 5, "augment": True},
+    "fast-w32-d5-aug": {"arch": "fast", "width": 32, "depth": 5, "augment": True},
+    "fast-w16-d7-aug": {"arch": "fast", "width": 16, "depth": 7, "augment": True},
+}
+
+
+def _score(model: str | Path, data: str, scenes: list[str]) -> dict[str, float]:
+    rep = evaluate(model, data, scenes=scenes, baselines=False, sweep=False)
+    return {split: rep.row("quality", "model", split=split)["r2"] for split in ("all", "seen", "unseen")}
+
+
+def _ms(model: str | Path) -> float:
+    pred = sdk.load(model, providers=["CPUExecutionProvider"], threads=2)
+    x = np.random.default_rng(0).random((len(pred.metadata.inputs), 1080, 1920), dtype=np.float32)
+    return median_ms(lambda: pred.predict(x), 7)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", required=True, help="dataset with targets holding the train and validation maps")
+    ap.add_argument("--metric", default="jnyang")
+    ap.add_argument("--out", required=True, help="folder for the checkpoints and exports")
+    ap.add_argument("--only", default=None, help="comma-separated configuration names (default: all)")
+    ap.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's)")
+    ap.add_argument("--reference", action="append", default=[], help="an exported model to score alongside")
+    args = ap.parse_args()
+    logging.basicConfig(level=logging.WARNING)
+    names = args.only.split(",") if args.only else list(CONFIGS)
+    unknown = [n for n in names if n not in CONFIGS]
+    if unknown:
+        sys.exit(f"unknown configuration(s) {unknown}; known: {', '.join(CONFIGS)}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    val_maps = load_splits()["validation"]
+    rows = []
+    for ref in args.reference:
+        rows.append((f"reference {ref}", _score(ref, args.data, val_maps), _ms(ref)))
+        print(f"| {rows[-1][0]} | {rows[-1][1]} | {rows[-1][2]:.1f} |", file=sys.stderr, flush=True)
+    for name in names:
+        overrides = dict(CONFIGS[name])
+        if args.steps:
+            overrides["steps"] = args.steps
+        cfg = TrainConfig.from_recipe("shipped", data=args.data, metric=args.metric,
+                                      out=str(out / f"{args.metric}-{name}.pt"), **overrides)
+        result = train(cfg)
+        onnx_path = export_checkpoint(result.checkpoint, out / f"{args.metric}-{name}.onnx")
+        rows.append((name, _score(onnx_path, args.data, val_maps), _ms(onnx_path)))
+        print(f"| {name} | {rows[-1][1]} | {rows[-1][2]:.1f} |", file=sys.stderr, flush=True)
+    print(f"{args.metric}, validation maps {', '.join(val_maps)}, {args.data}\n")
+    print("| configuration | R² all % | R² seen % | R² unseen % | 1080p sdk predict (ms) |")
+    print("|---|---:|---:|---:|---:|")
+    for name, r2, ms in rows:
+        print(f"| {name} | {100 * r2['all']:.1f} | {100 * r2['seen']:.1f} | {100 * r2['unseen']:.1f} | {ms:.1f} |")
+
+
+if __name__ == "__main__":
+    main()
