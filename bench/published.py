@@ -88,7 +88,7 @@ def main() -> None:
             lo, hi = np.percentile(e22, [1, 99])
             print(f"| {metric} | {thr:g}{unit} | {100 * f_ours:.1f}% / {100 * s_ours:.1f}% | {lo:.3g} to {hi:.3g} | "
                   f"{100 * f_same:.1f}% / "
-                  f"{100 * s_same:.1f}% | {t_best:.3g}{unit} | {100 * f_best:.1f}% / {100 * s_best:.1f}% |", flush=True)
+                  f"{100 * s_same:.1f}% | {t_best:.4g}{unit} | {100 * f_best:.1f}% / {100 * s_best:.1f}% |", flush=True)
 
 
 if __name__ == "__main__":

@@ -40,7 +40,32 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "fast-w24-d5-aug": {"arch": "fast", "width": 24, "depth": 5, "augment": True},
     "fast-w32-d5-aug": {"arch": "fast", "width": 32, "depth": 5, "augment": True},
     "fast-w16-d7-aug": {"arch": "fast", "width": 16, "depth": 7, "augment": True},
+    "fast-s2-w16-d5-aug": {"arch": "fast", "stem": 2, "width": 16, "depth": 5, "augment": True},
+    "fast-s2-w24-d6-aug": {"arch": "fast", "stem": 2, "width": 24, "depth": 6, "augment": True},
 }
+
+#: The input study (the paper's Table 1): input sets from what the dataset holds. Use as
+#: ``CONFIG+SET`` (for example ``fast-w16-d5-aug+normals``); "paper" is the paper's four channels.
+INPUT_SETS: dict[str, tuple[str, ...]] = {
+    "paper": ("reprojected.r", "seen", "albedo.r", "normal.z"),
+    "normals": ("reprojected.r", "seen", "albedo.r", "normal.x", "normal.y", "normal.z"),
+    "rgb": ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "normal.z"),
+    "albedo-rgb": ("reprojected.r", "seen", "albedo.r", "albedo.g", "albedo.b", "normal.z"),
+    "depth": ("reprojected.r", "seen", "albedo.r", "normal.z", "depth"),
+    "motion": ("reprojected.r", "seen", "albedo.r", "normal.z", "motion.x", "motion.y"),
+    "shadow": ("reprojected.r", "seen", "albedo.r", "normal.z", "shadow"),
+    "material": ("reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular"),
+    "emissive": ("reprojected.r", "seen", "albedo.r", "normal.z", "emissive"),
+    "both-adapters": ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
+                      "normal.x", "normal.y", "normal.z"),
+}
+
+
+def _config(name: str) -> dict[str, Any]:
+    base, _, inputs = name.partition("+")
+    if base not in CONFIGS or (inputs and inputs not in INPUT_SETS):
+        sys.exit(f"unknown configuration {name!r}; known: {', '.join(CONFIGS)}, optionally +{'/+'.join(INPUT_SETS)}")
+    return {**CONFIGS[base], **({"inputs": INPUT_SETS[inputs]} if inputs else {})}
 
 
 def _score(model: str | Path, data: str, scenes: list[str]) -> dict[str, float]:
@@ -65,9 +90,7 @@ def main() -> None:
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     names = args.only.split(",") if args.only else list(CONFIGS)
-    unknown = [n for n in names if n not in CONFIGS]
-    if unknown:
-        sys.exit(f"unknown configuration(s) {unknown}; known: {', '.join(CONFIGS)}")
+    configs = {n: _config(n) for n in names}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     val_maps = load_splits()["validation"]
@@ -76,7 +99,7 @@ def main() -> None:
         rows.append((f"reference {ref}", _score(ref, args.data, val_maps), _ms(ref)))
         print(f"| {rows[-1][0]} | {rows[-1][1]} | {rows[-1][2]:.1f} |", file=sys.stderr, flush=True)
     for name in names:
-        overrides = dict(CONFIGS[name])
+        overrides = dict(configs[name])
         if args.steps:
             overrides["steps"] = args.steps
         cfg = TrainConfig.from_recipe("shipped", data=args.data, metric=args.metric,

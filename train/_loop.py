@@ -55,6 +55,8 @@ class TrainConfig:
     head: str = "paper"
     #: 3x3 blocks of the fast network.
     depth: int = 3
+    #: Stride (and kernel) of the fast network's first convolution: 1, 2, 4 or 8.
+    stem: int = 4
     #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
@@ -220,8 +222,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
         raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
                                  f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
-    if cfg.width < 2 or cfg.depth < 0:
-        raise sdk.ParameterError(f"expected width >= 2 and depth >= 0, got {cfg.width} and {cfg.depth}")
+    if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8):
+        raise sdk.ParameterError(f"expected width >= 2, depth >= 0 and stem 1, 2, 4 or 8, got {cfg.width}, "
+                                 f"{cfg.depth} and {cfg.stem}")
     reader = DatasetReader(cfg.data)
     store = TargetStore(cfg.data)
     if cfg.metric not in store.metrics:
@@ -240,7 +243,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
-                        depth=cfg.depth)
+                        depth=cfg.depth, stem=cfg.stem)
     opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
     out = Path(cfg.out)
@@ -250,6 +253,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["head"] = cfg.head
     if cfg.arch != "paper":  # likewise for the architecture
         config_key.update(arch=cfg.arch, depth=cfg.depth)
+        if cfg.stem != 4:
+            config_key["stem"] = cfg.stem
     if cfg.augment:
         config_key["augment"] = True
     if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split

@@ -186,11 +186,11 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 
 
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
-                  head: str = "paper", depth: int = 3) -> Network:
+                  head: str = "paper", depth: int = 3, stem: int = 4) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
-    applies to the paper's network, ``depth`` to the fast one."""
+    applies to the paper's network, ``depth`` and ``stem`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
-        return FastNet(in_channels, out_channels, tile, width, depth)
+        return FastNet(in_channels, out_channels, tile, width, depth, stem)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
