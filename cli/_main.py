@@ -433,8 +433,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "blocks at 1/4 resolution and below) (default: paper, unless the recipe sets one)")
     r.add_argument("--width", type=_positive, default=None, help="channels of the hidden layers (default: 16)")
     r.add_argument("--depth", type=int, default=None, help="3x3 blocks of the fast network (default: 3)")
-    r.add_argument("--stem", type=int, default=None, choices=(1, 2, 4, 8),
-                   help="stride of the fast network's first convolution (default: 4)")
+    r.add_argument("--stem", type=_positive, default=None,
+                   help="stride of the fast network's first convolution: 1, 2, 4 or 8 (default: 4)")
     r.add_argument("--augment", action="store_true", default=None,
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
