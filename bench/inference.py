@@ -1,11 +1,12 @@
 """Inference cost: every shipped model and rtp's fast networks next to the paper's network, and the
 paper's network through rtp.sdk, the bare onnxruntime session and torch.
 
-    python bench/inference.py [--repeats 7] [--threads 2]
+    python bench/inference.py [--repeats 7] [--threads 2] [MODEL.onnx ...]
 
 The paper's configuration (4 inputs, outputs 1x2/2x1/2x4/4x2, 16x16 tiles, width 16) and the fast
 architectures (``rtp train --arch fast``) are built with random weights (cost does not depend on the
-weights) and exported with rtp-export; the shipped models are loaded from ``rtp.models``. Each is
+weights) and exported with rtp-export; the shipped models are loaded from ``rtp.models``, and any
+``MODEL.onnx`` given (for example the study's, ``data/study/*.onnx``) is added. Each is
 timed in the same run at 1920x1080 and 1280x720. Prints Markdown tables of medians (ms) and each
 model's speed-up over the paper's network.
 """
@@ -35,7 +36,7 @@ def _params(path: Path) -> int:
     return int(sum(np.prod(t.dims) for t in onnx.load(str(path)).graph.initializer))
 
 
-def _models(folder: Path, threads: int) -> dict[str, tuple[sdk.ShadingRatePredictor, tuple[str, int]]]:
+def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk.ShadingRatePredictor, tuple[str, int]]]:
     """The predictors to time, by name, with (architecture, parameter count)."""
     out: dict[str, tuple[sdk.ShadingRatePredictor, tuple[str, int]]] = {}
 
@@ -51,6 +52,9 @@ def _models(folder: Path, threads: int) -> dict[str, tuple[sdk.ShadingRatePredic
         pred = sdk.load(name)
         arch = str(pred.metadata.provenance.get("arch", "paper"))
         add(f"shipped {name}", Path(str(pred.path)), arch)
+    for path in extra:
+        arch = str(sdk.load(path).metadata.provenance.get("arch", "paper"))
+        add(Path(path).name, Path(path), arch)
     return out
 
 
@@ -58,6 +62,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op and torch threads")
+    ap.add_argument("models", nargs="*", help="more .onnx models to time")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     with tempfile.TemporaryDirectory() as d:
@@ -86,7 +91,7 @@ def main() -> None:
                     median_ms(run_torch, args.repeats),
                 )
             )
-        models = _models(Path(d), args.threads)
+        models = _models(Path(d), args.threads, args.models)
         frames = {(w, h): np.random.default_rng(0).random((4, h, w), dtype=np.float32) for w, h in FRAMES}
         times = {(name, wh): median_ms(lambda p=p, x=x: p.predict(x), args.repeats)
                  for name, (p, _) in models.items() for wh, x in frames.items()}
