@@ -47,6 +47,8 @@ CONFIGS: dict[str, dict[str, Any]] = {
     "fast-w16-d3-long": {"arch": "fast", "width": 16, "depth": 3, "steps": 12000},
     "fast-w32-d5-long": {"arch": "fast", "width": 32, "depth": 5, "steps": 12000},
     "fast-s2-w24-d3": {"arch": "fast", "stem": 2, "width": 24, "depth": 3},
+    "fast-s2-w16-d3-long": {"arch": "fast", "stem": 2, "width": 16, "depth": 3, "steps": 12000},
+    "fast-w16-d3-xlong": {"arch": "fast", "width": 16, "depth": 3, "steps": 24000},
     "fast-s2-w16-d3-aug": {"arch": "fast", "stem": 2, "width": 16, "depth": 3, "augment": True},
     "fast-s2-w24-d6-aug": {"arch": "fast", "stem": 2, "width": 24, "depth": 6, "augment": True},
 }
