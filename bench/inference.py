@@ -92,18 +92,24 @@ def main() -> None:
                 )
             )
         models = _models(Path(d), args.threads, args.models)
-        frames = {(w, h): np.random.default_rng(0).random((4, h, w), dtype=np.float32) for w, h in FRAMES}
-        times = {(name, wh): median_ms(lambda p=p, x=x: p.predict(x), args.repeats)
-                 for name, (p, _) in models.items() for wh, x in frames.items()}
+        channels = {len(p.metadata.inputs) for p, _ in models.values()}
+        frames = {(c, w, h): np.random.default_rng(0).random((c, h, w), dtype=np.float32)
+                  for c in channels for w, h in FRAMES}
+        times = {}
+        for name, (p, _) in models.items():
+            for w, h in FRAMES:
+                x = frames[len(p.metadata.inputs), w, h]
+                times[name, (w, h)] = median_ms(lambda p=p, x=x: p.predict(x), args.repeats)
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, torch {torch.__version__}, "
           f"{platform.processor() or platform.machine()}, {args.threads} threads, median of {args.repeats}\n")
     paper = "paper's network (random weights)"
-    print("| model | architecture | stored values | " + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES)
-          + " | speed-up over the paper's at 1920x1080 |")
-    print("|---|---|---:|" + "---:|" * len(FRAMES) + "---:|")
-    for name, (_, (arch, n_params)) in models.items():
+    print("| model | architecture | inputs | stored values | "
+          + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES) + " | speed-up over the paper's at 1920x1080 |")
+    print("|---|---|---:|---:|" + "---:|" * len(FRAMES) + "---:|")
+    for name, (pred, (arch, n_params)) in models.items():
         cells = " | ".join(f"{times[name, wh]:.1f}" for wh in FRAMES)
-        print(f"| {name} | {arch} | {n_params:,} | {cells} | {times[paper, FRAMES[0]] / times[name, FRAMES[0]]:.1f}x |")
+        ratio = times[paper, FRAMES[0]] / times[name, FRAMES[0]]
+        print(f"| {name} | {arch} | {len(pred.metadata.inputs)} | {n_params:,} | {cells} | {ratio:.1f}x |")
     print("\nThe paper's network by path:\n")
     print("| frame | sdk predict (ms) | sdk shading_rates (ms) | bare onnxruntime (ms) | torch eager (ms) |")
     print("|---|---|---|---|---|")
