@@ -16,7 +16,7 @@ import platform
 import re
 import zlib
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +26,7 @@ import numpy as np
 from rtp.sdk import ALL_RATES, ParameterError
 
 from ._dataset import DatasetReader, DatasetWriter
+from ._pool import worker_pool
 
 __all__ = [
     "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "load_scene", "sample_buffers",
@@ -246,7 +247,7 @@ def capture(
         ctx = mp.get_context("spawn")
         with ctx.Manager() as manager:
             queue = manager.Queue()
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            with worker_pool(workers) as pool:
                 futures = [pool.submit(_run_job, *a, queue=queue) for a in args]
                 pending = set(futures)
 

