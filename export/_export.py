@@ -260,6 +260,12 @@ def adopt(
     except Exception as err:
         raise ModelLoadError(f"{src}: not a readable ONNX model ({err})") from err
     known = identify(src)
+    carries = any(p.key == METADATA_KEY for p in model.metadata_props)
+    if metadata is None and known is None and carries:
+        raise MetadataError(
+            f"{src} already carries rtp metadata ({METADATA_KEY}): load it as it is (sdk.load), or pass a sidecar "
+            "(--metadata SIDECAR.yaml) with --replace to replace it", METADATA_KEY
+        )
     if metadata is None:
         if known is None:
             raise MetadataError(
@@ -281,8 +287,7 @@ def adopt(
     d["provenance"] = _merge(dict(d.get("provenance") or {}) if isinstance(d.get("provenance"), Mapping) else {},
                              {"adopted": adopted})
     meta = ModelMetadata.from_dict(d)
-    props = {p.key: p.value for p in model.metadata_props}
-    if METADATA_KEY in props and not replace:
+    if carries and not replace:
         raise MetadataError(
             f"{src} already carries {METADATA_KEY}; pass --replace to overwrite it", METADATA_KEY
         )

@@ -189,6 +189,10 @@ def test_adopt_checks_the_model_against_the_sidecar(tmp_path: Path) -> None:
         export.adopt(adopted, PAPER_SIDECAR, tmp_path / "b.onnx")
     export.adopt(adopted, {**PAPER_SIDECAR, "safety": 0.1}, tmp_path / "b.onnx", replace=True)
     assert sdk.load(tmp_path / "b.onnx").metadata.safety == 0.1
+    with pytest.raises(sdk.MetadataError, match="already carries rtp metadata"):  # not "not a published model"
+        export.adopt(adopted, None, tmp_path / "c.onnx")
+    r = _cli("--adopt", str(adopted), "-o", str(tmp_path / "c.onnx"))
+    assert r.returncode == 2 and "already carries rtp metadata" in r.stderr, r.stderr
 
 
 def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
