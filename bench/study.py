@@ -4,7 +4,7 @@ the train maps, score it on the validation maps, time it at 1080p. Prints a Mark
     python bench/study.py --data data/train --metric jnyang --out data/study            # every config
     python bench/study.py --data data/train --metric jnyang --out data/study --only fast-w16-d3,paper
 
-Each configuration is the shipped recipe (train/recipes/shipped.yaml) with a few fields changed
+Each configuration is the paper-net recipe (train/recipes/paper-net.yaml) with a few fields changed
 (CONFIGS below). Trainings are resumable: rerunning skips finished checkpoints and continues
 interrupted ones. ``--reference NAME`` adds a row for an exported model (a shipped model's name or an
 .onnx path) scored the same way, without training. The scores are the validation maps' R² in
@@ -142,7 +142,7 @@ def main() -> None:
         overrides = dict(configs[name])
         if args.steps:
             overrides["steps"] = args.steps
-        cfg = TrainConfig.from_recipe("shipped", data=args.data, metric=args.metric,
+        cfg = TrainConfig.from_recipe("paper-net", data=args.data, metric=args.metric,
                                       out=str(out / f"{args.metric}-{name}.pt"), **overrides)
         result = train(cfg)
         onnx_path = export_checkpoint(result.checkpoint, out / f"{args.metric}-{name}.onnx")

@@ -14,20 +14,31 @@ from rtp.train.checkpoint import load as load_checkpoint
 from .test_train import _dataset
 
 
-def test_the_shipped_recipe_resolves_per_metric() -> None:
+def test_the_shipped_recipe_is_the_fast_network_for_every_metric() -> None:
     jn = load_recipe(SHIPPED_RECIPE, "jnyang")
-    lp = load_recipe(SHIPPED_RECIPE, "lpips")
-    assert jn.values == {"steps": 4000, "batch": 16, "crop": 128, "lr": 5e-4, "head": "paper"}
+    assert jn.values == {"arch": "fast", "stem": 4, "width": 16, "depth": 3, "steps": 24000, "batch": 16, "crop": 128,
+                         "lr": 5e-4}
+    for metric in ("flip", "psnr", "lpips", "jnflip"):  # no per-metric special case
+        assert load_recipe(SHIPPED_RECIPE, metric) == jn
+    assert jn.val_split == "validation" and len(jn.sha256) == 64
+
+
+def test_the_paper_network_recipe_ships_by_name() -> None:
+    from rtp.train import packaged_recipes
+
+    assert packaged_recipes()[0] == SHIPPED_RECIPE and "paper-net" in packaged_recipes()
+    jn = load_recipe("paper-net", "jnyang")
+    lp = load_recipe("paper-net", "lpips")
+    assert jn.name == "paper-net" and jn.values == {"steps": 4000, "batch": 16, "crop": 128, "lr": 5e-4, "head": "paper"}
     assert lp.values["head"] == "linear" and {k: v for k, v in lp.values.items() if k != "head"} == {
         k: v for k, v in jn.values.items() if k != "head"}
-    assert jn.val_split == "validation" and jn.sha256 == lp.sha256 and len(jn.sha256) == 64
 
 
 def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", steps=10)
-    assert cfg.steps == 10 and cfg.batch == 16 and cfg.lr == 5e-4
+    assert cfg.steps == 10 and cfg.batch == 16 and cfg.lr == 5e-4 and cfg.arch == "fast"
     assert cfg.val_split == "validation" and not cfg.val_scenes and map_names("validation")
-    assert cfg.recipe is not None and cfg.recipe["name"] == SHIPPED_RECIPE and cfg.recipe["values"]["steps"] == 4000
+    assert cfg.recipe is not None and cfg.recipe["name"] == SHIPPED_RECIPE and cfg.recipe["values"]["steps"] == 24000
 
 
 @pytest.mark.parametrize(("text", "needle"), [
@@ -51,8 +62,8 @@ def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needl
     assert isinstance(err.value, ParameterError)
 
 
-def test_a_missing_recipe_names_the_shipped_one(tmp_path: Path) -> None:
-    with pytest.raises(RecipeError, match="shipped"):
+def test_a_missing_recipe_names_the_packaged_ones(tmp_path: Path) -> None:
+    with pytest.raises(RecipeError, match="shipped, paper-net"):
         load_recipe(tmp_path / "nope.yaml", "jnyang")
 
 

@@ -5,7 +5,7 @@ Importing this package needs torch (the ``rtp[train]`` extra). Scores and evalua
 """
 
 from ._loop import TrainConfig, TrainResult, train
-from ._recipe import SHIPPED_RECIPE, Recipe, RecipeError, load_recipe
+from ._recipe import SHIPPED_RECIPE, Recipe, RecipeError, load_recipe, packaged_recipes
 from ._safety import calibrate_safety
 
 __all__ = [
@@ -16,5 +16,6 @@ __all__ = [
     "TrainResult",
     "calibrate_safety",
     "load_recipe",
+    "packaged_recipes",
     "train",
 ]

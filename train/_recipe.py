@@ -3,7 +3,9 @@
 A recipe sets :class:`~rtp.train.TrainConfig` fields (everything but ``data``, ``metric`` and
 ``out``), optionally ``val_split`` (hold out the maps of that split of ``scenes.yaml``) and
 ``per_metric`` overrides. ``shipped`` names the recipe of rtp's shipped models, which ships with
-the package, so ``rtp train --data D --metric M --out M.pt`` reproduces a shipped model.
+the package, so ``rtp train --data D --metric M --out M.pt`` reproduces a shipped model. The other
+recipes in ``train/recipes/`` are found by name too (:func:`packaged_recipes`): ``paper-net`` is the
+recipe of the paper's network that rtp shipped before its fast network family.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import yaml
 
 from rtp.sdk import ParameterError
 
-__all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe"]
+__all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe", "packaged_recipes"]
 
 #: The name of the recipe rtp's shipped models were trained with.
 SHIPPED_RECIPE = "shipped"
@@ -46,12 +48,20 @@ class Recipe:
         return {"name": self.name, "sha256": self.sha256, "values": dict(self.values), "val_split": self.val_split}
 
 
+def packaged_recipes() -> list[str]:
+    """Names of the recipes that ship with rtp (``train/recipes/NAME.yaml``), ``shipped`` first."""
+    names = sorted(f.name.removesuffix(".yaml") for f in resources.files("rtp.train").joinpath("recipes").iterdir()
+                   if f.name.endswith(".yaml"))
+    return sorted(names, key=lambda n: n != SHIPPED_RECIPE)
+
+
 def _recipe_text(source: str | os.PathLike[str]) -> tuple[str, str]:
-    if str(source) == SHIPPED_RECIPE:
-        return SHIPPED_RECIPE, resources.files("rtp.train").joinpath("recipes/shipped.yaml").read_text()
     path = Path(source)
+    if not path.is_file() and str(source) in packaged_recipes():
+        return str(source), resources.files("rtp.train").joinpath(f"recipes/{source}.yaml").read_text()
     if not path.is_file():
-        raise RecipeError(f"recipe {str(source)!r}: no such file (or pass {SHIPPED_RECIPE!r}, the shipped models' recipe)")
+        raise RecipeError(f"recipe {str(source)!r}: no such file (or pass the name of one that ships with rtp: "
+                          f"{', '.join(packaged_recipes())}; {SHIPPED_RECIPE!r} is the shipped models' recipe)")
     try:
         return str(path), path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
@@ -90,7 +100,8 @@ def _coerce(name: str, value: Any, kind: Any) -> Any:
 
 
 def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
-    """Read a recipe (a YAML path, or :data:`SHIPPED_RECIPE`) and resolve it for ``metric``.
+    """Read a recipe (a YAML path, or the name of a packaged recipe such as :data:`SHIPPED_RECIPE`)
+    and resolve it for ``metric``.
 
     Raises :class:`RecipeError` naming the key at fault for unknown keys and wrong types.
     """
