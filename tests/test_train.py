@@ -112,7 +112,9 @@ def test_training_learns_resumes_and_exports(tmp_path: Path) -> None:
     # Resuming from a checkpoint half-way gives exactly the same model as one uninterrupted run.
     half = train(TrainConfig(out=str(tmp_path / "b.pt"), **{**cfg, "steps": 120}))
     assert half.steps == 120
-    full = train(TrainConfig(out=str(tmp_path / "b.pt"), **cfg))
+    seen: list[int] = []
+    full = train(TrainConfig(out=str(tmp_path / "b.pt"), **cfg), progress=lambda step, total, loss: seen.append(step))
+    assert seen[0] == 120 and seen[1] == 121 and seen[-1] == 240  # the progress bar starts where the run stopped
     a, b = load_checkpoint(result.checkpoint).net.state_dict(), load_checkpoint(full.checkpoint).net.state_dict()
     for k in a:
         assert torch.equal(a[k], b[k]), k

@@ -277,6 +277,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         gen.set_state(state["generator"])
         step, history = int(state["step"]), list(json.loads(state["history"]))
         log.info("resuming %s at step %d", out, step)
+        if progress and history and "train_l1" in history[-1]:
+            progress(step, cfg.steps, float(history[-1]["train_l1"]))  # a resumed run's bar starts where it stopped
     weber = store.metrics.get(cfg.metric, {}).get("weber_l")
 
     def metadata(safety: float, extra: dict[str, Any]) -> dict[str, Any]:
