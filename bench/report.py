@@ -1,6 +1,11 @@
 """Summary tables of `rtp evaluate` results (all scenes pooled), as quoted in docs/results.md.
 
     python bench/report.py data/eval-jnyang/evaluation.json [more evaluation.json ...]
+
+The last table gives each method's work saved at fixed shares of failing tiles (1, 2, 5, 10, 15%),
+read off its threshold sweep by linear interpolation between the sweep's points ("-": the sweep
+never fails that rarely). It compares two models of one metric (before / after a retraining) as
+well as methods.
 """
 
 from __future__ import annotations
@@ -35,6 +40,34 @@ def main(paths: list[str]) -> None:
             if d.get("matched"):
                 table(["method", "fails %", "work saved % at that failure rate", "parameter"], [
                     [m["method"], pct(m["fail_share"]), pct(m["work_saved"]), m["parameter"]] for m in d["matched"]])
+            at_levels(d)
+
+#: Shares of failing tiles at which the saving is read off the sweeps.
+FAIL_LEVELS = (0.01, 0.02, 0.05, 0.10, 0.15)
+
+
+def saved_at(points: list[tuple[float, float]], fail: float) -> float | None:
+    """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points."""
+    pts = sorted(points)
+    if not pts or pts[0][0] > fail:
+        return None
+    best = None
+    for (f0, w0), (f1, w1) in zip(pts, pts[1:] + [(float("inf"), pts[-1][1])]):
+        if f0 <= fail:
+            w = w0 if f1 == float("inf") or f1 <= f0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
+            best = w if best is None else max(best, w)
+    return best
+
+
+def at_levels(d: dict) -> None:
+    methods: dict[str, list[tuple[float, float]]] = {}
+    for r in d.get("sweep", []):
+        methods.setdefault(r["method"], []).append((r["fail_share"], r["work_saved"]))
+    if methods:
+        table(["method", *[f"saved % at {100 * f:g}% fails" for f in FAIL_LEVELS]], [
+            [m, *[pct(saved_at(p, f)) if saved_at(p, f) is not None else "-" for f in FAIL_LEVELS]]
+            for m, p in methods.items()])
+
 
 if __name__ == "__main__":
     main(sys.argv[1:])
