@@ -32,10 +32,21 @@ PAPER_METADATA = {
 }
 
 
-def paper_model(folder: Path, arch: str = "paper", **config: int) -> tuple[object, Path]:
-    """The paper's network (or ``arch`` with ``config``: width, depth) with random weights (cost does
-    not depend on them) and the paper's inputs and outputs, exported with rtp-export into ``folder``:
-    returns ``(torch network, onnx path)``."""
+#: Input sets by channel count for timing wider inputs: the paper's four, + normal x/y, and the ten
+#: channels both adapters produce (bench/study.py's "normals" and "both-adapters").
+TIMING_INPUTS = {
+    4: tuple(PAPER_METADATA["inputs"]),
+    6: ("reprojected.r", "seen", "albedo.r", "normal.x", "normal.y", "normal.z"),
+    10: ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
+         "normal.x", "normal.y", "normal.z"),
+}
+
+
+def paper_model(folder: Path, arch: str = "paper", inputs: int = 4, **config: int) -> tuple[object, Path]:
+    """The paper's network (or ``arch`` with ``config``: width, depth, stem) with random weights (cost
+    does not depend on them) and the paper's outputs, on ``inputs`` channels (4: the paper's; 6 or
+    10: :data:`TIMING_INPUTS`), exported with rtp-export into ``folder``: returns ``(torch network,
+    onnx path)``."""
     import torch
 
     from rtp.export import export_checkpoint
@@ -43,12 +54,12 @@ def paper_model(folder: Path, arch: str = "paper", **config: int) -> tuple[objec
     from rtp.train.model import build_network
 
     torch.manual_seed(0)
-    net = build_network(arch, 4, 4, 16, **config).eval()
+    net = build_network(arch, inputs, 4, 16, **config).eval()
     # trained BatchNorm statistics are not the identity: random ones keep folding honest
     for m in net.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.1, 0.1)
             m.running_var.uniform_(0.5, 1.5)
-    stem = f"{arch}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
-    ck = checkpoint.save(folder / f"{stem}.pt", net, PAPER_METADATA)
+    stem = f"{arch}-i{inputs}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
+    ck = checkpoint.save(folder / f"{stem}.pt", net, {**PAPER_METADATA, "inputs": list(TIMING_INPUTS[inputs])})
     return net, export_checkpoint(ck, folder / f"{stem}.onnx")
