@@ -179,11 +179,10 @@ def _cmd_weights_fetch(args: argparse.Namespace) -> int:
 
 
 def _cmd_weights_list(args: argparse.Namespace) -> int:
-    from rtp.metrics import MetricDependencyError, check_dependencies
-    from rtp.metrics._deps import NEEDS
+    from rtp.metrics import METRIC_DEPENDENCIES, MetricDependencyError, check_dependencies
 
     rows = []
-    for metric, needs in NEEDS.items():
+    for metric, needs in METRIC_DEPENDENCIES.items():
         try:
             check_dependencies((metric,))
             state = "ready"

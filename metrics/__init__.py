@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 
-from ._deps import check_dependencies
+from ._deps import METRIC_DEPENDENCIES, check_dependencies
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
 from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width
 from ._lpips import (
@@ -44,6 +44,7 @@ __all__ = [
     "FLIP_DEFAULT_PPD",
     "LPIPS_MIN_SIZE",
     "LPIPS_WEIGHTS_PACKAGE",
+    "METRIC_DEPENDENCIES",
     "PAPER_WEBER_L",
     "WEBER_BLOCK",
     "InputRangeError",

@@ -11,7 +11,7 @@ from ._flip import _flip_module
 from ._lpips import _torch, lpips_weights_path
 
 #: What each metric needs beyond numpy: checked by :func:`check_dependencies`.
-NEEDS: dict[str, tuple[str, ...]] = {
+METRIC_DEPENDENCIES: dict[str, tuple[str, ...]] = {
     "flip": ("flip-evaluator",),
     "jnflip": ("flip-evaluator",),
     "lpips": ("torch", "LPIPS weights"),
@@ -31,11 +31,11 @@ def check_dependencies(metrics: Iterable[str]) -> None:
         raise MetricParameterError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(METRICS)}")
     checks = {"flip-evaluator": _flip_module, "torch": _torch, "LPIPS weights": lpips_weights_path}
     problems: list[str] = []
-    for piece in dict.fromkeys(p for m in names for p in NEEDS.get(m, ())):
+    for piece in dict.fromkeys(p for m in names for p in METRIC_DEPENDENCIES.get(m, ())):
         try:
             checks[piece]()
         except MetricDependencyError as exc:
-            users = ", ".join(m for m in names if piece in NEEDS.get(m, ()))
+            users = ", ".join(m for m in names if piece in METRIC_DEPENDENCIES.get(m, ()))
             problems.append(f"{users}: {exc}")
     if problems:
         raise MetricDependencyError("missing before any work starts:\n  " + "\n  ".join(problems))

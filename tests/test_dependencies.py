@@ -115,6 +115,7 @@ with worker_pool(2) as pool:
     time.sleep(1.0)
     print(" ".join(str(p) for p in pool._processes), flush=True)
     if sys.argv[1] == "interrupt":
+        sys.stdin.readline()  # the test has seen the workers alive
         raise KeyboardInterrupt
     time.sleep(600)
 """
@@ -131,12 +132,16 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.parametrize("how", ["kill", "interrupt"])
 def test_pool_workers_stop_with_their_job(how: str) -> None:
-    proc = subprocess.Popen([sys.executable, "-c", _POOL_SCRIPT, how], stdout=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
+    proc = subprocess.Popen([sys.executable, "-c", _POOL_SCRIPT, how], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout is not None and proc.stdin is not None
     workers = [int(p) for p in proc.stdout.readline().split()]
     assert len(workers) == 2 and all(_alive(p) for p in workers)
     if how == "kill":
         proc.send_signal(signal.SIGKILL)  # no cleanup code runs in the parent
+    else:
+        proc.stdin.write("\n")
+        proc.stdin.flush()
     proc.wait(timeout=30)
     deadline = time.time() + 10
     while time.time() < deadline and any(_alive(p) for p in workers):

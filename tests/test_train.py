@@ -186,8 +186,8 @@ def test_heads_and_the_dead_output_check(tmp_path: Path, capsys: pytest.CaptureF
         result = train(cfg)
         assert "2x1" in result.dead_outputs
         assert "2x1" in load_checkpoint(tmp_path / "m.pt").metadata.provenance["dead_outputs"]  # recorded, work kept
-        args = ["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "n.pt"), "--steps", "4",
-                "--crop", "32"]
+        args = ["train", "--data", str(data), "--metric", "jnyang", "--config", "paper-net", "--out", str(tmp_path / "n.pt"),
+                "--steps", "4", "--crop", "32"]
         assert rtp_main(args) == 1 and "--head linear" in capsys.readouterr().err
     # On this toy data the paper's head loses outputs within a few steps; the linear head does not.
     assert rtp_main([*args[:-4], "--out", str(tmp_path / "l.pt"), "--steps", "20", "--crop", "32", "--head", "linear"]) == 0
