@@ -39,6 +39,7 @@ __all__ = [
     "MotionProfile",
     "ViewpointError",
     "VoxelGrid",
+    "free_space",
     "sample_viewpoints",
 ]
 
@@ -301,6 +302,42 @@ def _coverage(grid: VoxelGrid, cam: Camera, aspect: float, rays: tuple[int, int]
     return float((hits == SOLID).mean())
 
 
+def free_space(
+    scene: Scene,
+    *,
+    blockers: np.ndarray | None = None,
+    voxel: float = 0.25,
+    clearance: float = 0.3,
+    max_height: float | None = 6.0,
+) -> tuple[np.ndarray, VoxelGrid, np.ndarray, np.ndarray]:
+    """The valid viewpoint domain of ``scene``: ``(triangles, grid, reachable, candidates)``.
+
+    ``reachable`` (bool grid) is the free space flood-filled from the spawn points (at most
+    ``max_height`` above a solid voxel below, when set); ``candidates`` is the part of it at least
+    ``clearance`` (rounded up to whole voxels) from any geometry. :func:`sample_viewpoints` and the
+    camera paths of :mod:`rtp.capture.paths` draw from it. Raises :class:`ViewpointError` for a
+    scene without spawn points or triangles.
+    """
+    if not scene.spawn_points:
+        raise ViewpointError(f"scene {scene.name!r} has no spawn points to start the flood fill from")
+    tris = scene_triangles(scene)
+    if len(tris) == 0:
+        raise ViewpointError(f"scene {scene.name!r} has no triangles")
+    grid = VoxelGrid(tris, voxel, blockers)
+    passable = grid.occ == FREE
+    if max_height is not None:
+        solid = grid.occ != FREE
+        ny = grid.shape[1]
+        last = np.where(solid, np.arange(ny)[None, :, None], -1)
+        last = np.maximum.accumulate(last, axis=1)
+        height = (np.arange(ny)[None, :, None] - last) * grid.voxel
+        passable &= (last >= 0) & (height <= max_height)
+    seeds = np.array([sp.position for sp in scene.spawn_points], np.float64)
+    reach = grid.flood(seeds, passable)
+    k = int(math.ceil(clearance / grid.voxel))
+    return tris, grid, reach, reach & ~grid.dilate(grid.occ != FREE, k)
+
+
 def sample_viewpoints(
     scene: Scene,
     n: int,
@@ -360,24 +397,8 @@ def sample_viewpoints(
     prof = MOTION_PROFILES.get(profile) if isinstance(profile, str) else profile
     if prof is None:
         raise ViewpointError(f"unknown motion profile {profile!r}; expected one of {sorted(MOTION_PROFILES)}")
-    if not scene.spawn_points:
-        raise ViewpointError(f"scene {scene.name!r} has no spawn points to start the flood fill from")
-    tris = scene_triangles(scene)
-    if len(tris) == 0:
-        raise ViewpointError(f"scene {scene.name!r} has no triangles")
-    grid = VoxelGrid(tris, voxel, blockers)
-    passable = grid.occ == FREE
-    if max_height is not None:
-        solid = grid.occ != FREE
-        ny = grid.shape[1]
-        last = np.where(solid, np.arange(ny)[None, :, None], -1)
-        last = np.maximum.accumulate(last, axis=1)
-        height = (np.arange(ny)[None, :, None] - last) * grid.voxel
-        passable &= (last >= 0) & (height <= max_height)
-    seeds = np.array([sp.position for sp in scene.spawn_points], np.float64)
-    reach = grid.flood(seeds, passable)
-    k = int(math.ceil(clearance / grid.voxel))
-    cand_mask = reach & ~grid.dilate(grid.occ != FREE, k)
+    tris, grid, reach, cand_mask = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance,
+                                              max_height=max_height)
     cand = np.flatnonzero(cand_mask)
     if len(cand) == 0:
         cand = np.flatnonzero(reach)  # narrow levels: rely on the exact clearance test

@@ -1,0 +1,216 @@
+"""Camera paths at a fixed frame rate through a level's valid viewpoint domain.
+
+The closed-loop VRS benchmark moves a camera through a map the way a player would and lets every
+method choose rates frame after frame. :func:`camera_path` makes such a path, deterministic for a
+seed: a walker in the horizontal plane of a random start point inside the capture's viewpoint domain
+(:func:`rtp.capture.viewpoints.free_space`: flood-filled free space at least ``clearance`` from any
+geometry), steering away from walls it sees coming, smoothed, resampled at ``fps`` at the profile's
+speed; the view follows the direction of travel with a limited turn rate plus a look-around sway.
+Two profiles (:data:`PATH_PROFILES`): ``slow`` walks and turns gently, ``fast`` runs and turns
+quickly. :func:`unseen_shares` renders a path and gives each frame's unseen share, the part of the
+frame the previous one did not show.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rtp.scene import Camera, Scene
+
+from .viewpoints import ViewpointError, _Validator, free_space
+
+__all__ = ["PATH_PROFILES", "CameraPath", "PathProfile", "camera_path", "unseen_shares"]
+
+log = logging.getLogger("rtp.capture")
+
+
+@dataclass(frozen=True)
+class PathProfile:
+    """How a path moves: ``speed`` (m/s), peak yaw rate ``turn_rate`` (degrees/s), how sharply the
+    walker changes course (``wander``, degrees of heading noise per metre), and a look-around sway of
+    ``sway`` degrees with period ``sway_period`` seconds on top of the heading."""
+
+    name: str
+    speed: float
+    turn_rate: float
+    wander: float
+    sway: float
+    sway_period: float
+
+
+#: ``slow``: walking pace and gentle turns; ``fast``: running and quick turns.
+PATH_PROFILES: dict[str, PathProfile] = {
+    "slow": PathProfile("slow", speed=1.5, turn_rate=45.0, wander=8.0, sway=8.0, sway_period=5.0),
+    "fast": PathProfile("fast", speed=6.0, turn_rate=240.0, wander=20.0, sway=25.0, sway_period=1.6),
+}
+
+_STEP = 0.25  # metres per walker step
+_LOOK = 2.0  # metres of free space the walker wants ahead
+
+
+@dataclass
+class CameraPath:
+    """A camera path: ``cameras`` at ``fps`` frames per second, made by :func:`camera_path`."""
+
+    scene: str
+    profile: str
+    seed: int
+    fps: float
+    cameras: list[Camera] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    def length(self) -> float:
+        """Distance travelled, metres."""
+        p = np.array([c.position for c in self.cameras])
+        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
+
+
+def _smooth(a: np.ndarray, window: int) -> np.ndarray:
+    """Moving average along axis 0 with edge replication (``window`` odd, >= 1)."""
+    if window <= 1:
+        return a.copy()
+    pad = window // 2
+    padded = np.concatenate([np.repeat(a[:1], pad, 0), a, np.repeat(a[-1:], pad, 0)])
+    c = np.cumsum(np.concatenate([np.zeros((1, *a.shape[1:])), padded]), axis=0)
+    return (c[window:] - c[:-window]) / window
+
+
+def camera_path(
+    scene: Scene,
+    frames: int,
+    profile: str | PathProfile = "slow",
+    seed: int = 0,
+    *,
+    fps: float = 60.0,
+    blockers: np.ndarray | None = None,
+    voxel: float = 0.25,
+    clearance: float = 0.3,
+    fov_y: float = 70.0,
+    max_height: float | None = 6.0,
+) -> CameraPath:
+    """A ``frames``-long camera path through ``scene`` at ``fps`` (module docstring).
+
+    Deterministic: the same scene, profile, seed and arguments give the same cameras. Every camera
+    is inside the flood-filled free space, at least ``clearance`` from the geometry (exact test), and
+    the segment between consecutive cameras crosses no triangle. Raises :class:`ViewpointError`
+    when the scene has no free space for a path.
+    """
+    prof = PATH_PROFILES.get(profile) if isinstance(profile, str) else profile
+    if prof is None:
+        raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)}")
+    if frames < 1 or not fps > 0:
+        raise ViewpointError(f"expected frames >= 1 and fps > 0, got {frames} and {fps}")
+    tris, grid, _, cand = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance, max_height=max_height)
+    free = np.flatnonzero(cand)
+    if len(free) == 0:
+        raise ViewpointError(f"no free space in {scene.name!r} at {clearance} m from the geometry for a camera path")
+    val = _Validator(tris)
+    rng = np.random.default_rng(seed)
+
+    def inside(p: np.ndarray) -> bool:
+        return bool(cand[tuple(grid.index(p))])
+
+    def ahead(p: np.ndarray, h: float) -> float:
+        d = np.array([-math.sin(h), 0.0, -math.cos(h)])
+        n = int(_LOOK / _STEP)
+        for i in range(1, n + 1):
+            if not inside(p + d * (i * _STEP)):
+                return (i - 1) * _STEP
+        return _LOOK
+
+    need = (frames - 1) * prof.speed / fps + 2 * _LOOK
+    for _attempt in range(20):  # another start point when a walker gets stuck at once
+        start = grid.centre(np.array([free[rng.integers(len(free))]]))[0]
+        if not val.clearance(start, clearance):
+            continue
+        heading = float(rng.uniform(-math.pi, math.pi))
+        pts = [start]
+        stuck = 0
+        while (len(pts) - 1) * _STEP < need and stuck < 50:
+            heading += math.radians(float(rng.normal(0.0, prof.wander * math.sqrt(_STEP))))
+            best = None
+            for k in range(0, 37):  # 0, +10, -10, +20, ... degrees: the first with room ahead
+                off = math.radians(10.0 * ((k + 1) // 2) * (1 if k % 2 else -1))
+                h = heading + off
+                room = ahead(pts[-1], h)
+                if room >= _LOOK * 0.5:
+                    best = h
+                    break
+                if room > 0 and best is None:
+                    best = h
+            if best is None:
+                stuck += 1
+                heading += math.pi
+                continue
+            nxt = pts[-1] + np.array([-math.sin(best), 0.0, -math.cos(best)]) * _STEP
+            if not val.segment_clear(pts[-1], nxt):
+                stuck += 1
+                heading += math.pi / 2
+                continue
+            heading = best
+            pts.append(nxt)
+            stuck = 0
+        if (len(pts) - 1) * _STEP >= need:
+            break
+        log.debug("%s: camera path walker stuck after %.1f m; starting elsewhere", scene.name, (len(pts) - 1) * _STEP)
+    else:
+        raise ViewpointError(f"no camera path of {need:.1f} m found in {scene.name!r} (profile {prof.name})")
+
+    raw = np.array(pts)
+    for window in (9, 5, 3, 1):  # the smoothest path whose every camera is valid
+        path = _smooth(raw, window)
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        s = np.concatenate([[0.0], np.cumsum(seg)])
+        t = np.arange(frames) * prof.speed / fps  # arc length of each frame, metres
+        pos = np.stack([np.interp(t, s, path[:, i]) for i in range(3)], -1)
+        ok = all(val.clearance(p, clearance * 0.9) for p in pos) and all(
+            val.segment_clear(a, b) for a, b in zip(pos[:-1], pos[1:]))
+        if ok:
+            break
+    else:
+        raise ViewpointError(f"the camera path in {scene.name!r} could not be smoothed into valid cameras")
+    # heading towards the point 1 m further along the path, turned at most turn_rate degrees per
+    # second, plus the sway (t / speed is each frame's time in seconds)
+    look = np.stack([np.interp(t + 1.0, s, path[:, i]) for i in (0, 2)], -1) - pos[:, [0, 2]]
+    target = np.degrees(np.unwrap(np.arctan2(-look[:, 0], -look[:, 1])))
+    yaw = np.empty(frames)
+    yaw[0] = target[0]
+    limit = prof.turn_rate / fps
+    for i in range(1, frames):
+        yaw[i] = yaw[i - 1] + float(np.clip(target[i] - yaw[i - 1], -limit, limit))
+    phase = float(rng.uniform(0, 2 * math.pi))
+    sway = prof.sway * np.sin(2 * math.pi * t / (prof.speed * prof.sway_period) + phase)
+    pitch = 0.3 * prof.sway * np.sin(2 * math.pi * t / (prof.speed * prof.sway_period * 1.7) + 2 * phase)
+    cams = [Camera((float(p[0]), float(p[1]), float(p[2])), yaw=float((y + w + 180.0) % 360.0 - 180.0),
+                   pitch=float(q), fov_y=fov_y) for p, y, w, q in zip(pos, yaw, sway, pitch)]
+    return CameraPath(scene.name, prof.name, seed, fps, cams)
+
+
+def unseen_shares(path: CameraPath, scene: Scene, size: tuple[int, int] = (1280, 720), renderer: Any = None) -> np.ndarray:
+    """Render ``path`` (the reference renderer, ``size`` = (width, height), or a loaded ``renderer``)
+    and return each frame's unseen share: the part of its geometry the previous frame did not show
+    (the first frame, with no history, counts as 1)."""
+    from rtp.plugins.moderngl import Renderer
+
+    own = renderer is None
+    r = Renderer(*size) if own else renderer
+    try:
+        if own:
+            r.load_scene(scene)
+        out, prev = [], None
+        for cam in path.cameras:
+            frame = r.render(cam, prev)
+            geo = frame.mask > 0.5
+            out.append(float(1.0 - frame.seen[geo].mean()) if geo.any() and prev is not None else 1.0)
+            prev = frame
+        return np.array(out)
+    finally:
+        if own:
+            r.release()

@@ -1,0 +1,56 @@
+"""Camera paths for the closed-loop benchmark: deterministic, valid, at the profile's pace."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rtp.capture import load_scene
+from rtp.capture.paths import PATH_PROFILES, camera_path, unseen_shares
+from rtp.capture.viewpoints import ViewpointError, _Validator, free_space, scene_triangles
+
+
+@pytest.fixture(scope="module")
+def scene():  # noqa: ANN201
+    return load_scene("procedural:0", None, None, None)
+
+
+@pytest.mark.parametrize("profile", ["slow", "fast"])
+def test_paths_are_deterministic_valid_and_paced(scene, profile: str) -> None:  # noqa: ANN001
+    sc, blockers = scene
+    path = camera_path(sc, 90, profile, seed=3, blockers=blockers)
+    assert len(path) == 90 and path.fps == 60 and path.profile == profile
+    assert path.cameras == camera_path(sc, 90, profile, seed=3, blockers=blockers).cameras
+    assert path.cameras != camera_path(sc, 90, profile, seed=4, blockers=blockers).cameras
+    prof = PATH_PROFILES[profile]
+    pos = np.array([c.position for c in path.cameras])
+    steps = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    assert np.all(steps <= prof.speed / 60 * 1.01)  # never faster than the profile
+    assert path.length() > 0.8 * prof.speed * 89 / 60  # and not much slower (the path bends)
+    _, grid, reach, _ = free_space(sc, blockers=blockers)
+    val = _Validator(scene_triangles(sc))
+    for a, b in zip(pos[:-1], pos[1:]):
+        assert reach[tuple(grid.index(b))] and val.clearance(b, 0.25) and val.segment_clear(a, b)
+    yaw = np.array([c.yaw for c in path.cameras])
+    turn = np.abs((np.diff(yaw) + 180) % 360 - 180)
+    sway_rate = 2 * math.pi * prof.sway / prof.sway_period / 60  # the sway's own turning, per frame
+    assert turn.max() <= prof.turn_rate / 60 + sway_rate + 1e-6
+
+
+@pytest.mark.gl
+def test_fast_paths_uncover_more_of_each_frame(scene) -> None:  # noqa: ANN001
+    sc, blockers = scene
+    slow = unseen_shares(camera_path(sc, 24, "slow", seed=1, blockers=blockers), sc, (96, 64))
+    fast = unseen_shares(camera_path(sc, 24, "fast", seed=1, blockers=blockers), sc, (96, 64))
+    assert slow[0] == fast[0] == 1.0  # the first frame has no history
+    assert 0 <= slow[1:].mean() < fast[1:].mean() < 0.5
+
+
+def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
+    sc, _ = scene
+    with pytest.raises(ViewpointError, match="unknown path profile 'jog'"):
+        camera_path(sc, 10, "jog")
+    with pytest.raises(ViewpointError, match="frames >= 1"):
+        camera_path(sc, 0)
