@@ -24,7 +24,7 @@ from rtp.scene import Camera, Scene
 
 from .viewpoints import ViewpointError, _Validator, free_space
 
-__all__ = ["PATH_PROFILES", "CameraPath", "PathProfile", "camera_path", "unseen_shares"]
+__all__ = ["PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path", "composite", "unseen_shares"]
 
 log = logging.getLogger("rtp.capture")
 
@@ -214,3 +214,93 @@ def unseen_shares(path: CameraPath, scene: Scene, size: tuple[int, int] = (1280,
     finally:
         if own:
             r.release()
+
+
+@dataclass
+class PathFrame:
+    """One frame of a played path: ``frame`` (the renderer's :class:`~rtp.plugins.moderngl.Frame`:
+    G-buffers, every uniform rate's final image, motion) and where each of its pixels was in the
+    previous frame (``rows``, ``cols``: top-left indices, ``seen``: 1 where that pixel passed the
+    depth test; all 0 on the first frame). ``reproject(image)`` fetches any image of the previous
+    frame the way the renderer's reprojection does."""
+
+    index: int
+    frame: Any
+    rows: np.ndarray
+    cols: np.ndarray
+    seen: np.ndarray
+
+    def reproject(self, image: np.ndarray) -> np.ndarray:
+        """``image`` (the previous frame's, ``(H, W, 3)``) reprojected into this frame; 0 where unseen."""
+        flat = np.asarray(image, np.float32).reshape(-1, image.shape[-1])[self.rows * image.shape[1] + self.cols]
+        return (flat.reshape(image.shape) * (self.seen[..., None] > 0)).astype(np.float32, copy=False)
+
+
+def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np.ndarray:
+    """A VRS image put together from a frame's uniform-rate images (``Frame.colour``): every tile
+    taken from the final image of the rate chosen for it. Before post-processing this is exactly
+    what per-tile VRS shades (rate blocks never cross a tile); after it, pixels next to a tile of
+    another rate differ slightly from FXAA run over the VRS image (``Renderer.shade_rates``)."""
+    from rtp import sdk
+
+    h, w = colour["1x1"].shape[:2]
+    per_pixel = np.repeat(np.repeat(np.asarray(rates), tile, 0), tile, 1)[:h, :w]
+    out = np.empty_like(colour["1x1"])
+    for rate, code in sdk.RATE_CODES.items():
+        m = per_pixel == code
+        if m.any():
+            out[m] = colour[rate][m]
+    return out
+
+
+class PathPlayer:
+    """Plays a :class:`CameraPath` through the reference renderer for closed-loop VRS runs
+    (``rtp play``, :func:`rtp.evaluate.play`): :meth:`frames` renders each camera once (the
+    G-buffers and every uniform rate), and while a frame is current :meth:`shade` shades it with a
+    per-tile rate image, as an engine with VRS would display it. Any number of methods share one
+    render per frame, each keeping its own displayed frames as history (``PathFrame.reproject``).
+    ``exact=False`` shades by :func:`composite` instead (several times faster on a CPU; differs from
+    the renderer's VRS only by FXAA next to tiles of another rate)."""
+
+    def __init__(self, scene: Scene, size: tuple[int, int] = (1280, 720), *, renderer: Any = None,
+                 exact: bool = True) -> None:
+        from rtp.plugins.moderngl import Renderer
+
+        self.exact = bool(exact)
+        self._current: Any = None
+        self._own = renderer is None
+        self.renderer = Renderer(*size) if self._own else renderer
+        if self._own:
+            self.renderer.load_scene(scene)
+        self.size = (self.renderer.width, self.renderer.height)
+
+    def frames(self, path: CameraPath) -> Any:
+        """Yield a :class:`PathFrame` per camera of ``path``."""
+        prev = None
+        h, w = self.size[1], self.size[0]
+        for i, cam in enumerate(path.cameras):
+            frame = self.renderer.render(cam, prev)
+            self._current = frame
+            if prev is None:
+                zeros = np.zeros((h, w), np.intp)
+                yield PathFrame(i, frame, zeros, zeros, np.zeros((h, w), np.float32))
+            else:
+                rows, cols, seen = self.renderer.reprojection_source(prev.depth, prev.camera)
+                yield PathFrame(i, frame, rows, cols, seen)
+            prev = frame
+
+    def shade(self, rates: np.ndarray, tile_size: int) -> np.ndarray:
+        """The current frame shaded per tile at ``rates`` (uint8 codes), tone-mapped and post-processed."""
+        if not self.exact:
+            return composite(self._current.colour, rates, tile_size)
+        return np.asarray(self.renderer.shade_rates(rates, tile_size))
+
+    def close(self) -> None:
+        if self._own:
+            self.renderer.release()
+
+    def __enter__(self) -> PathPlayer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -55,18 +55,6 @@ def _camera_path(scene: Any, frames: int, blockers: Any, aspect: float, seed: in
     return cams
 
 
-def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np.ndarray:
-    """The VRS image: every tile taken from the final image of the rate chosen for it."""
-    h, w = colour["1x1"].shape[:2]
-    per_pixel = np.repeat(np.repeat(rates, tile, 0), tile, 1)[:h, :w]
-    out = np.empty_like(colour["1x1"])
-    for rate, code in sdk.RATE_CODES.items():
-        m = per_pixel == code
-        if m.any():
-            out[m] = colour[rate][m]
-    return out
-
-
 def run_demo(
     out: str | Path,
     *,
@@ -83,6 +71,7 @@ def run_demo(
     ``timing_runs`` runs after a warm-up."""
     from rtp import metrics
     from rtp.capture import load_scene, save_image
+    from rtp.capture.paths import composite
     from rtp.evaluate import failing_tiles
     from rtp.evaluate.plots import heatmaps, rate_overlays, value_map
     from rtp.plugins.moderngl import Renderer

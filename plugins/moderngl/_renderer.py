@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Camera, Scene
-from rtp.sdk import ALL_RATES, RtpError, rate_size, tile_grid
+from rtp.sdk import ALL_RATES, RATE_CODES, RtpError, rate_size, tile_grid
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
@@ -391,6 +391,8 @@ class Renderer:
         self._meshes: list[_GpuMesh] = []
         self._materials: list[_GpuMaterial] = []
         self._released = False
+        self._last: tuple[_FrameSetup, float] | None = None  # the frame rendered last, for shade_rates/reproject
+        self._vrs: tuple[Any, ...] | None = None  # rate map, LDR and final textures and framebuffers of shade_rates
         logger.debug(
             "renderer %dx%d on %s (GL %d)", self.width, self.height, self.ctx.info.get("GL_RENDERER"), self.ctx.version_code
         )
@@ -654,7 +656,99 @@ class Renderer:
         frame = self._read_back(setup, reprojection, exposure, log_avg, debug, timer.timings)
         timer.mark("readback")
         timer.finish(self.width, self.height)
+        self._last = (setup, exposure)
         return frame
+
+    # ------------------------------------------------------------------ closed-loop VRS
+    def _last_frame(self, what: str) -> tuple[_FrameSetup, float]:
+        self._check_alive()
+        if self._last is None:
+            raise RendererError(f"{what} works on the frame rendered last; call render() first")
+        return self._last
+
+    def shade_rates(self, rates: np.ndarray, tile_size: int) -> np.ndarray:
+        """Software VRS with a rate image: the frame rendered last, each ``tile_size`` tile shaded at
+        its own rate (``rates``: uint8 D3D12 codes ``(th, tw)``, top-left origin, as
+        :func:`rtp.sdk.select_rates` returns), then tone mapping and FXAA over the whole image, as an
+        engine's post-processing would run on its VRS output. Returns the final ``(H, W, 3)`` image
+        (display-encoded sRGB). A uniform rate image gives that rate's ``Frame.colour`` image exactly."""
+        setup, exposure = self._last_frame("shade_rates")
+        th, tw = tile_grid(self.height, self.width, int(tile_size))
+        codes = np.asarray(rates)
+        if codes.shape != (th, tw):
+            raise RendererError(f"rates: expected a {tw}x{th} tile grid ({th}, {tw}) for {tile_size}px tiles of a "
+                                f"{self.width}x{self.height} frame, got shape {codes.shape}")
+        if tile_size % 4 or tile_size < 4:
+            raise RendererError(f"tile_size must be a positive multiple of 4 (the largest rate), got {tile_size}")
+        valid = np.isin(codes, [RATE_CODES[r] for r in ALL_RATES])
+        if not valid.all():
+            bad = sorted({int(c) for c in codes[~valid]})
+            raise RendererError(f"rates: unknown rate codes {bad}; expected D3D12 codes of {', '.join(ALL_RATES)}")
+        if self._vrs is None or self._vrs[0].size != (tw, th):
+            mgl = self._mgl
+            if self._vrs is not None:
+                for obj in self._vrs:
+                    obj.release()
+            rate_map = self.ctx.texture((tw, th), 1, dtype="f4")
+            rate_map.filter = (mgl.NEAREST, mgl.NEAREST)
+            ldr = self.ctx.texture((self.width, self.height), 4, dtype="f2")
+            ldr.filter = (mgl.LINEAR, mgl.LINEAR)
+            ldr.repeat_x = ldr.repeat_y = False
+            final = self.ctx.texture((self.width, self.height), 4, dtype="f2")
+            self._vrs = (rate_map, ldr, final, self.ctx.framebuffer(color_attachments=[ldr]),
+                         self.ctx.framebuffer(color_attachments=[final]))
+        rate_map, ldr, final, fbo_ldr, fbo_final = self._vrs
+        write_texture(rate_map, codes.astype(np.float32))
+        p = self._p_coarse
+        self._t_lit.use(location=0)
+        self._t_nd.use(location=1)
+        rate_map.use(location=2)
+        _set(p, "u_lit", 0)
+        _set(p, "u_normal_depth", 1)
+        _set(p, "u_rate_map", 2)
+        _set(p, "u_tile", int(tile_size))
+        _set(p, "u_exposure", float(exposure))
+        for k, v in setup.sky_uniforms().items():
+            _set(p, k, v)
+        fbo_ldr.use()
+        self._fullscreen["coarse"].render(self._mgl.TRIANGLES, vertices=3)
+        _set(p, "u_tile", 0)
+        if not self.fxaa:
+            return read_texture(ldr, 3)
+        q = self._p_fxaa
+        _set(q, "u_ldr", 0)
+        _set(q, "u_rcp", (1.0 / self.width, 1.0 / self.height))
+        ldr.use(location=0)
+        fbo_final.use()
+        self._fullscreen["fxaa"].render(self._mgl.TRIANGLES, vertices=3)
+        return read_texture(final, 3)
+
+    def reproject(self, colour: np.ndarray, depth: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        """Reproject any earlier image into the frame rendered last, with the same depth test as
+        ``render(camera, prev)`` uses: ``colour`` ``(H, W, 3)`` was seen from ``camera`` with linear
+        ``depth`` ``(H, W)``. Returns ``(reprojected (H, W, 3), seen (H, W))``. A closed-loop VRS run
+        reprojects each method's own displayed frame this way."""
+        setup, _ = self._last_frame("reproject")
+        colour, depth = np.asarray(colour, np.float32), np.asarray(depth, np.float32)
+        if colour.shape != (self.height, self.width, 3) or depth.shape != (self.height, self.width):
+            raise RendererError(f"reproject: expected colour ({self.height}, {self.width}, 3) and depth "
+                                f"({self.height}, {self.width}), got {colour.shape} and {depth.shape}")
+        return self._reproject(setup, colour, depth, camera)
+
+    def reprojection_source(self, depth: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where :meth:`reproject` fetches each pixel of the frame rendered last: ``(rows, cols, seen)``,
+        ``(H, W)`` each, top-left pixel indices into the earlier image (0 where unseen). Colour does not
+        enter the depth test, so ``np.where(seen[..., None] > 0, image[rows, cols], 0)`` equals
+        ``reproject(image, depth, camera)[0]`` for every image seen from ``camera`` with ``depth``: one
+        GL pass serves any number of histories (the closed loop's methods)."""
+        setup, _ = self._last_frame("reprojection_source")
+        depth = np.asarray(depth, np.float32)
+        if depth.shape != (self.height, self.width):
+            raise RendererError(f"reprojection_source: expected depth ({self.height}, {self.width}), got {depth.shape}")
+        rows, cols = np.indices((self.height, self.width), dtype=np.float32)
+        coords = np.stack([cols, rows, np.zeros_like(rows)], -1)
+        src, seen = self._reproject(setup, coords, depth, camera)
+        return src[..., 1].astype(np.intp), src[..., 0].astype(np.intp), seen
 
     # The steps of render(), in the order it runs them: each leaves its result in the GL targets.
     def _check_can_render(self, prev: Frame | None) -> Scene:
@@ -806,6 +900,7 @@ class Renderer:
         p = self._p_coarse
         _set(p, "u_lit", 0)
         _set(p, "u_normal_depth", 1)
+        _set(p, "u_tile", 0)
         _set(p, "u_exposure", float(exposure))
         for k, v in f.sky_uniforms().items():
             _set(p, k, v)
@@ -831,12 +926,15 @@ class Renderer:
         the seen mask; None without a previous frame."""
         if prev is None:
             return None
-        write_texture(self._t_prev_colour, prev.colour["1x1"])
-        write_texture(self._t_prev_depth, prev.depth)
+        return self._reproject(f, prev.colour["1x1"], prev.depth, f.prev_camera)  # type: ignore[arg-type]
+
+    def _reproject(self, f: _FrameSetup, colour: np.ndarray, depth: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        write_texture(self._t_prev_colour, colour)
+        write_texture(self._t_prev_depth, depth)
         self._reprojector.run(
             albedo=self._t_albedo, normal=self._t_nd, depth=self._t_nd, depth_component=3,
             view=f.view, projection=f.proj, prev_colour=self._t_prev_colour, prev_depth=self._t_prev_depth,
-            prev_view_projection=f.prev_camera.view_projection(self.width, self.height),  # type: ignore[union-attr]
+            prev_view_projection=camera.view_projection(self.width, self.height),
         )
         rp = read_texture(self._reprojector._targets[0])
         return rp[..., :3], rp[..., 3]
@@ -893,6 +991,9 @@ class Renderer:
             self.ctx.release()
         else:
             self._reprojector.close()
+            for obj in self._vrs or ():
+                obj.release()
+            self._vrs = None
             for obj in list(vars(self).values()):
                 if isinstance(obj, dict):
                     for o in obj.values():

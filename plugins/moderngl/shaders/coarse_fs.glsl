@@ -6,10 +6,15 @@
 // to the frame for partial edge blocks. Where that sample is background the block shows the sky,
 // evaluated per pixel (the paper discards coarse invocations on background, leaving the
 // full-rate sky). Then exposure (shared by all rates), ACES and sRGB encoding, at full rate.
+// With u_tile > 0 the rate comes per tile from u_rate_map instead (a VRS rate image: one texel per
+// u_tile x u_tile tile, the rate's D3D12 code (log2 W << 2) | log2 H, rows uploaded top-left first
+// by write_texture, i.e. stored bottom-up like every texture here).
 
 uniform sampler2D u_lit;
 uniform sampler2D u_normal_depth;
 uniform ivec2 u_rate;
+uniform int u_tile;
+uniform sampler2D u_rate_map;
 uniform vec2 u_size;
 uniform float u_exposure;
 uniform mat4 u_inv_proj;
@@ -30,8 +35,14 @@ void main() {
     ivec2 g = ivec2(gl_FragCoord.xy);
     ivec2 size = ivec2(u_size);
     int yt = size.y - 1 - g.y;  // top-left row
-    int sx = min((g.x / u_rate.x) * u_rate.x + u_rate.x / 2, size.x - 1);
-    int syt = min((yt / u_rate.y) * u_rate.y + u_rate.y / 2, size.y - 1);
+    ivec2 rate = u_rate;
+    if (u_tile > 0) {
+        ivec2 grid = textureSize(u_rate_map, 0);
+        int code = int(texelFetch(u_rate_map, ivec2(g.x / u_tile, grid.y - 1 - yt / u_tile), 0).r + 0.5);
+        rate = ivec2(1 << (code >> 2), 1 << (code & 3));
+    }
+    int sx = min((g.x / rate.x) * rate.x + rate.x / 2, size.x - 1);
+    int syt = min((yt / rate.y) * rate.y + rate.y / 2, size.y - 1);
     ivec2 s = ivec2(sx, size.y - 1 - syt);
 
     vec3 hdr;
