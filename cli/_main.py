@@ -325,6 +325,26 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_play(args: argparse.Namespace) -> int:
+    from rtp.evaluate import play
+
+    paths = _names(args.path) or ["slow", "fast"]
+    done = [0]
+    with Bar(args, args.frames * len(paths), f"play {args.scene}", "frame") as bar:
+        def progress(n: int) -> None:
+            done[0] += n
+            bar.update_to(done[0])
+
+        rep = play(args.scene, args.methods, paths=paths, frames=args.frames, fps=args.fps, seed=args.seed,
+                   size=args.size, tile_size=args.tile_size, fail_metric=args.fail_metric,
+                   fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
+                   exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
+                   animation=not args.no_animation, progress=progress)
+    print(rep.to_markdown())
+    print(f"wrote {', '.join(rep.files)} in {args.out}")
+    return 0
+
+
 def _cmd_metric(args: argparse.Namespace) -> int:
     from ._metric import run_metric
 
@@ -526,6 +546,39 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--seed", type=int, default=0, help="which viewpoint of the scene")
     dm.add_argument("--out", default="rtp-demo", help="output folder")
     cache_dir(dm)
+
+    from rtp.capture.paths import PATH_PROFILES
+    from rtp.evaluate import METHOD_KINDS
+
+    pl = command("play", "closed-loop VRS on a moving camera: every method picks rates from its own last displayed "
+                 "frame, frame after frame, against full-rate shading", _cmd_play,
+                 epilog="methods: a shipped model name or .onnx path (NAME@k: run it every k-th frame, reproject its "
+                 "predictions in between), or\n" + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
+                 "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
+    pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")
+    pl.add_argument("--methods", default="jnyang,jnyang@4,yang2019,yang2019-unseen-1x1,fidelityfx,oracle",
+                    help="comma-separated methods (see below)")
+    pl.add_argument("--path", action="append", default=None,
+                    help=f"camera path profiles, repeatable or comma-separated: {', '.join(PATH_PROFILES)} "
+                    "(default: slow,fast)")
+    pl.add_argument("--frames", type=_positive, default=300, help="frames per path")
+    pl.add_argument("--fps", type=float, default=60.0, help="frame rate of the paths")
+    pl.add_argument("--seed", type=int, default=0, help="which path through the map")
+    pl.add_argument("--size", type=_size, default="640x360", help="WIDTHxHEIGHT")
+    pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
+    pl.add_argument("--fail-metric", default="jnyang", choices=("jnyang", "jnflip", "psnr", "flip"),
+                    help="a tile fails when its true error in this metric is over --fail-threshold")
+    pl.add_argument("--fail-threshold", type=float, default=None, help="default: the metric's starting threshold "
+                    "(JNYang 0.25)")
+    pl.add_argument("--no-sweep", action="store_true", help="run each method at its default parameter only")
+    pl.add_argument("--flip-every", type=int, default=20, help="FLIP of the displayed frames every N-th frame "
+                    "(default parameters; 0: never)")
+    pl.add_argument("--composite", action="store_true", help="shade by compositing the uniform-rate images "
+                    "(faster) instead of the renderer's per-tile VRS pass")
+    pl.add_argument("--out", default="rtp-play", help="output folder")
+    pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
+    pl.add_argument("--no-animation", action="store_true", help="no GIF")
+    cache_dir(pl)
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)
     mt.add_argument("metric", choices=tuple(METRICS), help="the metric")

@@ -37,18 +37,23 @@ from ._evaluate import (
     spearman,
     tile_unseen_share,
 )
+from ._play import METHOD_KINDS, MethodSpec, PlayError, PlayReport, parse_methods, play, saved_at
 from ._scores import Scores, scores
 
 __all__ = [
     "DEFAULT_UNSEEN_FRACTION",
+    "METHOD_KINDS",
     "FFX_LUMA",
     "SPLITS",
     "BaselineError",
     "EvaluationReport",
     "FidelityFX",
+    "MethodSpec",
     "Frame",
     "ModelSelector",
     "Oracle",
+    "PlayError",
+    "PlayReport",
     "RateSelector",
     "Scores",
     "Yang2019",
@@ -57,8 +62,11 @@ __all__ = [
     "failing_tiles",
     "motion_factor_half",
     "motion_factor_quarter",
+    "parse_methods",
+    "play",
     "plots",
     "restrict_rates",
+    "saved_at",
     "scores",
     "spearman",
     "tile_unseen_share",

@@ -26,6 +26,8 @@ __all__ = [
     "colorize",
     "figure_image",
     "heatmaps",
+    "play_curves",
+    "play_frames",
     "rate_legend",
     "rate_overlays",
     "save_image",
@@ -250,4 +252,71 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
         ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
         _bare(ax)
     _add_rate_legend(fig)
+    return figure_image(fig)
+
+
+def _method_colours(methods: Sequence[str]) -> dict[str, Any]:
+    import matplotlib
+
+    cmap = matplotlib.colormaps["tab10"]
+    return {m: cmap(i % 10) for i, m in enumerate(methods)}
+
+
+def play_curves(report: Any) -> np.ndarray:
+    """Closed-loop sweeps (:func:`rtp.evaluate.play`): per path, each method's work saved against
+    its share of failing tiles over its parameter sweep, the default parameter ringed, the matched
+    failing shares dashed."""
+    from ._play import FAIL_LEVELS
+
+    paths = list(report.unseen)
+    methods = list(dict.fromkeys(r["method"] for r in report.rows))
+    colours = _method_colours(methods)
+    fig = _figure(520 * len(paths) + 40, 420)
+    axes = np.atleast_1d(fig.subplots(1, len(paths), sharey=True))
+    s = report.settings
+    for ax, path in zip(axes, paths):
+        for m in methods:
+            rows = sorted((r for r in report.rows if r["path"] == path and r["method"] == m), key=lambda r: r["fail_share"])
+            if not rows:
+                continue
+            x = [100 * r["fail_share"] for r in rows]
+            y = [100 * r["work_saved"] for r in rows]
+            ax.plot(x, y, marker="o", markersize=3, linewidth=1.2, color=colours[m], label=m)
+            for r in rows:
+                if r["default"]:
+                    ax.plot([100 * r["fail_share"]], [100 * r["work_saved"]], marker="o", markersize=8,
+                            markerfacecolor="none", color=colours[m])
+        for f in FAIL_LEVELS:
+            ax.axvline(100 * f, color="#999999", linewidth=0.8, linestyle="--")
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_xlim(0, 100)
+        ax.set_xlabel(f"tiles failing ({s['fail_metric']} > {s['fail_threshold']:g}), % (symlog)")
+        ax.set_title(f"{s['scene']}, {path} path, {s['frames']} frames", fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("shading work saved, %")
+    axes[-1].legend(fontsize=8, loc="lower right")
+    return figure_image(fig)
+
+
+def play_frames(report: Any) -> np.ndarray:
+    """Closed-loop runs frame by frame at each method's default parameter: work saved, failing
+    tiles and the share of tiles whose rate changed, with the path's unseen share per frame."""
+    paths = list(report.unseen)
+    methods = list(dict.fromkeys(m for p in paths for m in report.frames[p]))
+    colours = _method_colours(methods)
+    s = report.settings
+    fig = _figure(1300, 300 * len(paths) + 40)
+    axes = np.atleast_2d(fig.subplots(len(paths), 4, squeeze=False))
+    for row, path in zip(axes, paths):
+        t = np.arange(len(report.unseen[path]))
+        for m, series in report.frames[path].items():
+            for ax, key in zip(row[:3], ("saved", "fail", "change")):
+                ax.plot(t[1:], 100 * np.asarray(series[key][1:], np.float64), linewidth=0.9, color=colours[m], label=m)
+        row[3].plot(t[1:], 100 * np.asarray(report.unseen[path][1:]), color="#333333", linewidth=0.9)
+        for ax, title in zip(row, ("work saved, %", f"tiles failing ({s['fail_metric']}), %",
+                                   "tiles whose rate changed, %", "unseen share of the frame, %")):
+            ax.set_title(f"{path}: {title}", fontsize=9)
+            ax.set_xlabel(f"frame ({s['fps']:g} Hz)", fontsize=8)
+            ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="best")
     return figure_image(fig)

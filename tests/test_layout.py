@@ -35,7 +35,7 @@ ROOMS: dict[str, tuple[str, frozenset[str]]] = {
 THIRD_PARTY: dict[str, frozenset[str]] = {
     "sdk": frozenset({"numpy", "onnxruntime", "yaml"}),
     "scene": frozenset({"numpy"}),
-    "evaluate": frozenset({"numpy", "PIL", "matplotlib", "tqdm"}),
+    "evaluate": frozenset({"numpy", "PIL", "matplotlib", "tqdm", "imageio"}),
 }
 
 

@@ -1,0 +1,557 @@
+"""Closed-loop VRS on moving cameras (``rtp play``; docs/evaluation.md "Closed loop").
+
+A camera moves along a :class:`~rtp.capture.paths.CameraPath` at 60 Hz. Every frame is rendered
+once (G-buffers and every uniform rate); then each method, at each value of its swept parameter,
+chooses rates from exactly what an engine would have: the current G-buffers and motion vectors and
+the frame it displayed last (its own VRS output, not the full-rate frame), reprojected with the
+renderer's depth test. Its rates shade the frame (software VRS, then tone mapping and FXAA over
+the composite) and that image becomes its next history. Per frame and method: the shading work
+saved, the share of tiles whose true error (``fail_metric``, rendered at every rate) is over
+``fail_threshold``, the FLIP of the displayed frame against full-rate shading (every
+``flip_every``-th frame, default parameters only: FLIP costs about 0.4 s per 640x360 frame here),
+the share of tiles whose rate changed since the previous frame, and the time the method took to
+choose. The first frame has no history and is left out of every summary.
+
+Methods (:func:`parse_methods`): ``full`` (always 1x1), ``oracle`` (the true ``fail_metric`` of the
+frame at ``fail_threshold``), any rtp model (a shipped name or an ``.onnx`` path; ``NAME@k`` runs the
+network every k-th frame and reprojects its per-tile predictions in between, tiles mostly unseen
+since the last prediction at full rate), ``yang2019`` (NVIDIA Adaptive Shading with its motion
+terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
+``fidelityfx-additional`` (with FFX's motion factor).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rtp import sdk
+
+from ._baselines import FidelityFX, Frame, Yang2019
+from ._evaluate import failing_tiles
+
+__all__ = [
+    "FAIL_LEVELS",
+    "METHOD_KINDS",
+    "MethodSpec",
+    "PlayError",
+    "PlayReport",
+    "parse_methods",
+    "play",
+    "saved_at",
+]
+
+log = logging.getLogger("rtp.evaluate")
+
+#: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
+FAIL_LEVELS = (0.01, 0.02, 0.05)
+
+#: Method kinds besides models: name -> what it is.
+METHOD_KINDS = {
+    "full": "every tile at 1x1 (the reference; saves nothing)",
+    "oracle": "the true error of the frame (rendered at every rate) at the failure threshold",
+    "yang2019": "NVIDIA Adaptive Shading (Yang et al. 2019) on the reprojected history, with its motion terms",
+    "yang2019-unseen-1x1": "yang2019 with tiles more than half unseen at full rate",
+    "fidelityfx": "AMD FidelityFX VRS (1x1, 1x2, 2x1, 2x2) with its motion factor",
+    "fidelityfx-additional": "AMD FidelityFX VRS with the additional rates (2x4, 4x2, 4x4)",
+}
+
+#: Each method's swept parameter, as factors of its default (PSNR models: dB added to it). The
+#: baselines' grids reach far lower: in the closed loop their history is their own coarse output,
+#: which looks flat, so they need a tiny sensitivity before they fail as rarely as 1% of the tiles.
+#: FidelityFX scales its cutoff and its motion factor together (at 60 Hz the motion term alone
+#: makes a running camera's tiles coarse at any cutoff).
+MODEL_SWEEP = (0.125, 0.25, 0.5, 0.7, 1.0)
+PSNR_SWEEP_DB = (12.0, 8.0, 4.0, 2.0, 0.0)
+BASELINE_SWEEP = (1 / 256, 1 / 32, 1 / 8, 1 / 2, 1.0)
+#: Default parameters of the baselines: Yang's sensitivity (JNYang units), FFX's cutoff (luma).
+YANG_THRESHOLD = 0.25
+FFX_CUTOFF = 0.05
+FFX_MOTION_FACTOR = 0.05
+
+
+class PlayError(sdk.ParameterError):
+    """Bad arguments to :func:`play` (an unknown method, a bad reuse interval, too few frames)."""
+
+    def __init__(self, message: str, parameter: str = "methods") -> None:
+        super().__init__(message, parameter)
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One method of a closed-loop run: ``name`` as reported, ``kind`` (a :data:`METHOD_KINDS` key or
+    ``"model"``), the ``model`` (shipped name or path) and its ``reuse`` interval k (1: every frame)."""
+
+    name: str
+    kind: str
+    model: str = ""
+    reuse: int = 1
+
+
+def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
+    """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
+    model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse."""
+    items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
+    if not items:
+        raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
+    out = []
+    for item in items:
+        if item in METHOD_KINDS:
+            out.append(MethodSpec(item, item))
+            continue
+        model, _, k = item.rpartition("@") if "@" in item else (item, "", "1")
+        if not k.isdigit() or int(k) < 1:
+            raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
+        out.append(MethodSpec(item, "model", model, int(k)))
+    if len({m.name for m in out}) != len(out):
+        raise PlayError(f"methods: each method once, got {', '.join(items)}")
+    return out
+
+
+def saved_at(points: Sequence[tuple[float, float]], fail: float) -> float | None:
+    """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points: the
+    best saving among points failing at most ``fail``, interpolated linearly towards the next point
+    that fails more. None when every point fails more than ``fail``."""
+    pts = sorted(points)
+    if not pts or pts[0][0] > fail:
+        return None
+    best = None
+    for (f0, w0), (f1, w1) in zip(pts, pts[1:] + [(math.inf, pts[-1][1])]):
+        if f0 <= fail:
+            w = w0 if f1 == math.inf or f1 <= f0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
+            best = w if best is None else max(best, w)
+    return best
+
+
+# -- one method at one parameter: its own history ---------------------------------------------------
+
+
+@dataclass
+class _Loop:
+    method: MethodSpec
+    param: float
+    label: str  # the parameter as reported
+    decide: Callable[[Any, np.ndarray | None, np.ndarray, _Loop], np.ndarray]
+    default: bool = False
+    history: np.ndarray | None = None  # the frame it displayed last
+    rates: np.ndarray | None = None  # the rates it chose last
+    cache: np.ndarray | None = None  # reuse: the per-tile estimates of the frame the network last ran on
+    index: np.ndarray | None = None  # reuse: per kept pixel, the tile of ``cache`` its surface was in
+    age: int = 0  # frames since the network ran
+    saved: list[float] = field(default_factory=list)
+    fail: list[float] = field(default_factory=list)
+    change: list[float] = field(default_factory=list)
+    flip: list[float] = field(default_factory=list)
+    ms: list[float] = field(default_factory=list)
+    ran: list[bool] = field(default_factory=list)  # reuse: whether the network ran this frame
+
+    def summary(self) -> dict[str, Any]:
+        def mean(v: list[float], skip: int = 1) -> float:
+            a = np.array(v[skip:], np.float64)
+            a = a[np.isfinite(a)]
+            return float(a.mean()) if a.size else float("nan")
+
+        return {
+            "method": self.method.name, "parameter": self.label, "value": self.param, "default": self.default,
+            "work_saved": mean(self.saved), "fail_share": mean(self.fail), "flip_mean": mean(self.flip),
+            "rate_change": mean(self.change, 2),
+            "predict_ms": float(np.median(self.ms[1:])) if len(self.ms) > 1 else float("nan"),
+            "network_frames": mean([float(r) for r in self.ran]) if self.method.kind == "model" else float("nan"),
+        }
+
+
+_REUSE_STEP = 2  # the tile-index map of prediction reuse keeps every second pixel per axis
+
+
+def _tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
+    """Per kept pixel (every ``_REUSE_STEP``-th per axis, padded to whole tiles) the index of its tile."""
+    h, w = shape
+    th, tw = sdk.tile_grid(h, w, tile)
+    ph, pw = sdk.padded_size(h, w, tile)
+    ys, xs = np.arange(0, ph, _REUSE_STEP), np.arange(0, pw, _REUSE_STEP)
+    return (ys[:, None] // tile) * tw + xs[None, :] // tile
+
+
+def _reproject_estimates(est: np.ndarray, index: np.ndarray, pf: Any, tile: int, hib: bool,
+                         unseen_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Carry the per-tile estimates ``est`` of the frame the network last ran on into this frame.
+
+    ``index`` maps each kept pixel of the previous frame to the tile of ``est`` its surface was in
+    (-1: unknown). Every kept pixel of this frame takes the index of where it was in the previous one
+    (``pf.rows``, ``pf.cols``), unseen pixels -1, background pixels the tile at their own position;
+    each tile then takes the worst estimate over its known pixels, and tiles with more than
+    ``unseen_fraction`` unknown the worst value there is (1x1). Warping the index per pixel rather
+    than the per-tile values keeps the tiles from dilating frame after frame. Returns the estimates
+    and the warped index."""
+    h, w = pf.seen.shape
+    th, tw = est.shape[1:]
+    own = _tile_index_map((h, w), tile)
+    gh, gw = own.shape
+    yc = np.minimum(np.arange(gh) * _REUSE_STEP, h - 1)
+    xc = np.minimum(np.arange(gw) * _REUSE_STEP, w - 1)
+    rows, cols = pf.rows[np.ix_(yc, xc)], pf.cols[np.ix_(yc, xc)]
+    prev = index[np.minimum(rows // _REUSE_STEP, gh - 1), np.minimum(cols // _REUSE_STEP, gw - 1)]
+    bg = pf.frame.mask[np.ix_(yc, xc)] <= 0.5
+    new = np.where(bg, own, np.where(pf.seen[np.ix_(yc, xc)] > 0, prev, -1))
+    known = new >= 0
+    fill = np.inf if hib else -np.inf  # neutral for the reduction below
+    vals = np.where(known[None], est.reshape(len(est), -1)[:, np.maximum(new, 0)], fill)
+    k = tile // _REUSE_STEP
+    blocks = vals.reshape(len(est), th, k, tw, k)
+    out = blocks.min(axis=(2, 4)) if hib else blocks.max(axis=(2, 4))
+    unseen = 1.0 - known.reshape(th, k, tw, k).mean(axis=(1, 3)) > unseen_fraction
+    worst = -np.inf if hib else np.inf
+    out[:, unseen] = worst
+    out[~np.isfinite(out)] = worst
+    return out.astype(np.float32), new
+
+
+# -- the run ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class PlayReport:
+    """What :func:`play` measured: per path and (method, parameter) the summaries (``rows``), the
+    matched-quality table (``matched``: saving at each :data:`FAIL_LEVELS` share), per-frame series
+    (``frames``: path -> method label -> field -> list), each path's unseen share per frame, the
+    settings and the files written."""
+
+    settings: dict[str, Any]
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    matched: list[dict[str, Any]] = field(default_factory=list)
+    frames: dict[str, dict[str, dict[str, list[float]]]] = field(default_factory=dict)
+    unseen: dict[str, list[float]] = field(default_factory=dict)
+    files: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"settings": self.settings, "rows": self.rows, "matched": self.matched, "frames": self.frames,
+                "unseen": self.unseen, "files": self.files}
+
+    def ratios(self, method: str, against: str, level: float = 0.05) -> dict[str, float]:
+        """Per path, ``method``'s saving over ``against``'s at the ``level`` failing share (nan where
+        either cannot reach it)."""
+        out = {}
+        for path in self.unseen:
+            a = next((m["work_saved"] for m in self.matched if m["path"] == path and m["method"] == method
+                      and m["fail_share"] == level), float("nan"))
+            b = next((m["work_saved"] for m in self.matched if m["path"] == path and m["method"] == against
+                      and m["fail_share"] == level), float("nan"))
+            out[path] = a / b if b and np.isfinite(a) and np.isfinite(b) and b > 0 else float("nan")
+        return out
+
+    def to_markdown(self) -> str:
+        s = self.settings
+        lines = [f"# Closed-loop VRS: {s['scene']}", "",
+                 f"Paths {', '.join(self.unseen)} ({s['frames']} frames at {s['fps']:g} Hz, seed {s['seed']}), "
+                 f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when its true "
+                 f"{s['fail_metric']} error is over {s['fail_threshold']:g}; FLIP of the displayed frame against "
+                 f"full-rate shading every {s['flip_every']}th frame. The first frame (no history) is left out.", ""]
+        for path, unseen in self.unseen.items():
+            u = np.array(unseen[1:])
+            lines += [f"## {path}", "", f"Unseen share per frame: mean {100 * u.mean():.2f}%, "
+                      f"95th percentile {100 * np.percentile(u, 95):.2f}%, max {100 * u.max():.2f}%.", "",
+                      "Matched quality (work saved where the method fails that share of tiles; - : its sweep never "
+                      "fails that rarely):", "",
+                      "| method | " + " | ".join(f"saved at {100 * f:g}% fails" for f in FAIL_LEVELS) + " |",
+                      "|---|" + "---:|" * len(FAIL_LEVELS)]
+            for method in dict.fromkeys(m["method"] for m in self.matched if m["path"] == path):
+                vals = [next(m["work_saved"] for m in self.matched if m["path"] == path and m["method"] == method
+                             and m["fail_share"] == f) for f in FAIL_LEVELS]
+                lines.append(f"| {method} | " + " | ".join("-" if not np.isfinite(v) else f"{100 * v:.1f}%" for v in vals) + " |")
+            lines += ["", "Every run (the default parameter in bold):", "",
+                      "| method | parameter | saved | failing tiles | mean FLIP | rate changes | choose (ms) | network runs |",
+                      "|---|---|---:|---:|---:|---:|---:|---:|"]
+            for r in (r for r in self.rows if r["path"] == path):
+                p = f"**{r['parameter']}**" if r["default"] else r["parameter"]
+                net = "" if not np.isfinite(r["network_frames"]) else f"{100 * r['network_frames']:.0f}%"
+                flip = "-" if not np.isfinite(r["flip_mean"]) else f"{r['flip_mean']:.4f}"
+                lines.append(f"| {r['method']} | {p} | {100 * r['work_saved']:.1f}% | {100 * r['fail_share']:.2f}% | "
+                             f"{flip} | {100 * r['rate_change']:.1f}% | {r['predict_ms']:.2f} | {net} |")
+            lines.append("")
+        return "\n".join(lines)
+
+
+def _check(frames: int, fps: float, flip_every: int, size: tuple[int, int], reuse: Iterable[int]) -> None:
+    if frames < 3:
+        raise PlayError(f"frames: expected at least 3 (the first has no history), got {frames}", "frames")
+    if not fps > 0:
+        raise PlayError(f"fps: expected > 0, got {fps}", "fps")
+    if flip_every < 0:
+        raise PlayError(f"flip_every: expected >= 0 (0: no FLIP), got {flip_every}", "flip_every")
+    if min(size) < 16:
+        raise PlayError(f"size: expected at least 16x16 pixels, got {size[0]}x{size[1]}", "size")
+
+
+def play(
+    scene: str,
+    methods: str | Iterable[str] = "jnyang,jnyang@4,yang2019,yang2019-unseen-1x1,fidelityfx,oracle",
+    *,
+    paths: Sequence[str] = ("slow", "fast"),
+    frames: int = 300,
+    fps: float = 60.0,
+    seed: int = 0,
+    size: tuple[int, int] = (640, 360),
+    tile_size: int = sdk.DEFAULT_TILE_SIZE,
+    fail_metric: str = "jnyang",
+    fail_threshold: float | None = None,
+    sweep: bool = True,
+    flip_every: int = 20,
+    unseen_fraction: float = 0.5,
+    cache_dir: str | None = None,
+    out: str | Path | None = None,
+    exact: bool = True,
+    plots: bool = True,
+    animation: bool = True,
+    progress: Callable[[int], None] | None = None,
+) -> PlayReport:
+    """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
+    each of ``paths`` (profiles of :data:`~rtp.capture.paths.PATH_PROFILES`), every method swept over
+    its parameter (``sweep=False``: defaults only). ``exact=False`` shades each method's frame by
+    compositing the uniform-rate images (:func:`rtp.capture.paths.composite`) instead of the
+    renderer's per-tile VRS pass. Writes ``play.md``, ``play.json``, and with
+    ``plots`` the curves, the per-frame plot and (``animation``) a GIF per path into ``out``.
+    ``progress(n)`` is called after every frame."""
+    from rtp import metrics
+    from rtp.capture import load_scene
+    from rtp.capture.paths import PATH_PROFILES, PathPlayer, camera_path
+
+    specs = parse_methods(methods)
+    _check(frames, fps, flip_every, size, (m.reuse for m in specs))
+    for p in paths:
+        if p not in PATH_PROFILES:
+            raise PlayError(f"paths: unknown profile {p!r}; known: {', '.join(PATH_PROFILES)}", "paths")
+    if fail_metric not in ("jnyang", "jnflip", "psnr", "flip"):
+        raise PlayError(f"fail_metric: expected jnyang, jnflip, psnr or flip (computed per frame), got {fail_metric!r}",
+                        "fail_metric")
+    info = sdk.METRICS[fail_metric]
+    fail_thr = info.default_threshold if fail_threshold is None else float(fail_threshold)
+    metrics.check_dependencies((fail_metric, "flip") if flip_every else (fail_metric,))
+    predictors = {m.model: sdk.load(m.model) for m in specs if m.kind == "model" and m.model is not None}
+    for m in specs:
+        if m.kind == "model" and predictors[m.model].tile_size != tile_size:
+            raise PlayError(f"method {m.name}: the model uses {predictors[m.model].tile_size}px tiles, the run "
+                            f"{tile_size}px (pass tile_size={predictors[m.model].tile_size})", "tile_size")
+    if any(m.kind.startswith("fidelityfx") for m in specs) and tile_size not in (8, 16, 32):
+        raise PlayError(f"FidelityFX supports 8, 16 and 32 pixel tiles, the run uses {tile_size}", "tile_size")
+
+    settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
+                "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
+                "fail_threshold": fail_thr, "sweep": sweep, "flip_every": flip_every,
+                "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
+                "models": {k: str(p.path) for k, p in predictors.items()}}
+    report = PlayReport(settings)
+    scn, blockers = load_scene(scene, cache_dir, None, None)
+    w, h = size
+    outdir = Path(out) if out is not None else None
+    if outdir is not None:
+        outdir.mkdir(parents=True, exist_ok=True)
+    with PathPlayer(scn, size, exact=exact) as player:
+        for pname in paths:
+            path = camera_path(scn, frames, pname, seed, fps=fps, blockers=blockers)
+            loops = _loops(specs, predictors, sweep, fail_thr, info.higher_is_better, tile_size, unseen_fraction)
+            unseen, keep = _run_path(player, path, loops, metrics, fail_metric, fail_thr, info.higher_is_better,
+                                     tile_size, flip_every, (h, w), progress, animation and plots and outdir is not None)
+            report.unseen[pname] = unseen
+            for lp in loops:
+                report.rows.append({"path": pname, **lp.summary()})
+            report.frames[pname] = {
+                lp.method.name: {"saved": lp.saved, "fail": lp.fail, "change": lp.change, "flip": lp.flip,
+                                 "ms": lp.ms} for lp in loops if lp.default}
+            for m in specs:
+                pts = [(r["fail_share"], r["work_saved"]) for r in report.rows
+                       if r["path"] == pname and r["method"] == m.name]
+                for level in FAIL_LEVELS:
+                    v = saved_at(pts, level)
+                    report.matched.append({"path": pname, "method": m.name, "fail_share": level,
+                                           "work_saved": float("nan") if v is None else v})
+            if outdir is not None and keep:
+                report.files += _write_animation(outdir / f"play_{pname}.gif", keep, tile_size)
+    if outdir is not None:
+        report.files += _write(report, outdir, plots)
+    return report
+
+
+def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fail_thr: float, fail_hib: bool,
+           tile: int, unseen_fraction: float) -> list[_Loop]:
+    loops: list[_Loop] = []
+    for m in specs:
+        if m.kind == "full":
+            loops.append(_Loop(m, 0.0, "1x1", lambda pf, rp, truth, lp: np.zeros(truth.shape[1:], np.uint8),
+                               default=True))
+        elif m.kind == "oracle":
+            loops.append(_Loop(m, fail_thr, f"threshold {fail_thr:g}", _oracle(fail_thr, fail_hib), default=True))
+        elif m.kind == "model":
+            pred = predictors[m.model]
+            meta = pred.metadata
+            thr0 = meta.default_threshold
+            if meta.higher_is_better:
+                values = [thr0 + d for d in (PSNR_SWEEP_DB if sweep else (0.0,))]
+            else:
+                values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
+            for v in values:
+                loops.append(_Loop(m, v, f"threshold {v:.4g}", _model(pred, v, m.reuse, tile, unseen_fraction),
+                                   default=v == thr0))
+        elif m.kind.startswith("yang2019"):
+            yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
+                           unseen="full" if m.kind == "yang2019-unseen-1x1" else "as_is")
+            for f in BASELINE_SWEEP if sweep else (1.0,):
+                loops.append(_Loop(m, YANG_THRESHOLD * f, f"t {YANG_THRESHOLD * f:.4g}", _baseline(yang, YANG_THRESHOLD * f),
+                                   default=f == 1.0))
+        else:
+            for f in BASELINE_SWEEP if sweep else (1.0,):
+                ffx = FidelityFX(tile, cutoff=FFX_CUTOFF * f, motion_factor=FFX_MOTION_FACTOR * f,
+                                 additional_rates=m.kind == "fidelityfx-additional")
+                loops.append(_Loop(m, f, f"cutoff {FFX_CUTOFF * f:.4g}, motion {FFX_MOTION_FACTOR * f:.4g}",
+                                   _baseline(ffx, FFX_CUTOFF * f), default=f == 1.0))
+    return loops
+
+
+def _oracle(thr: float, hib: bool) -> Callable[..., np.ndarray]:
+    def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
+        return sdk.select_rates(truth, thr, higher_is_better=hib)
+    return decide
+
+
+def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
+    def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
+        assert rp is not None
+        return np.asarray(sel.shading_rates(Frame(rp, pf.frame.motion, pf.seen), value))
+    return decide
+
+
+def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float) -> Callable[..., np.ndarray]:
+    meta = pred.metadata
+    hib = meta.higher_is_better
+
+    def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
+        assert rp is not None
+        if lp.cache is None or lp.age + 1 >= reuse:
+            planes = []
+            for c in meta.inputs:
+                base, _, comp = c.partition(".")
+                if base == "reprojected":
+                    planes.append(rp[..., "rgb".index(comp)])
+                elif c == "seen":
+                    planes.append(pf.seen)
+                else:
+                    planes.append(pf.frame.channel(c))
+            est = lp.cache = pred.predict(np.stack(planes).astype(np.float32))
+            lp.index = _tile_index_map(pf.seen.shape, tile) if reuse > 1 else None
+            lp.age, ran = 0, True
+        else:
+            assert lp.index is not None
+            est, lp.index = _reproject_estimates(lp.cache, lp.index, pf, tile, hib, unseen_fraction)
+            lp.age, ran = lp.age + 1, False
+        lp.ran.append(ran)
+        return sdk.select_rates(est, thr, higher_is_better=hib)
+    return decide
+
+
+def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
+              tile: int, flip_every: int, hw: tuple[int, int], progress: Callable[[int], None] | None,
+              animate: bool) -> tuple[list[float], list[tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]]]:
+    unseen: list[float] = []
+    keep: list[tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]] = []
+    anim_every = max(1, len(path) // 120)  # at most ~120 frames in the animation
+    for pf in player.frames(path):
+        frame = pf.frame
+        ref = frame.colour["1x1"]
+        truth = metrics.tile_targets(ref, {r: frame.colour[r] for r in sdk.PREDICTED_RATES}, (fail_metric,), tile)[fail_metric]
+        geo = frame.mask > 0.5
+        unseen.append(float(1.0 - pf.seen[geo].mean()) if geo.any() and pf.index > 0 else 1.0)
+        flip_frame = flip_every > 0 and pf.index > 0 and pf.index % flip_every == 0
+        anim_frame = animate and pf.index % anim_every == 0
+        shown: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for lp in loops:
+            measure_flip = flip_frame and lp.default
+            needs_history = lp.method.kind not in ("full", "oracle")
+            rp = None
+            if needs_history:
+                rp = pf.reproject(lp.history) if lp.history is not None else np.zeros(ref.shape, np.float32)
+            t0 = time.perf_counter()
+            rates = lp.decide(pf, rp, truth, lp)
+            lp.ms.append((time.perf_counter() - t0) * 1000)
+            if lp.method.kind == "full":
+                displayed = ref
+            elif needs_history or measure_flip or (anim_frame and lp.default):
+                displayed = player.shade(rates, tile)
+            else:
+                displayed = None
+            lp.saved.append(sdk.work_saved(rates, hw, tile))
+            lp.fail.append(float(failing_tiles(rates, truth, fail_thr, fail_hib).mean()))
+            lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None else float("nan"))
+            lp.flip.append(0.0 if lp.method.kind == "full" else
+                           float(metrics.flip_map(ref, displayed).mean()) if measure_flip and displayed is not None
+                           else float("nan"))
+            lp.history, lp.rates = (displayed if needs_history else None), rates
+            if anim_frame and lp.default and displayed is not None:
+                shown[lp.method.name] = (displayed, rates)
+        if shown:
+            keep.append((ref, shown))
+        if progress is not None:
+            progress(1)
+    return unseen, keep
+
+
+# -- pictures -------------------------------------------------------------------------------------------
+
+
+def _write_animation(path: Path, keep: list[tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]], tile: int) -> list[str]:
+    """A GIF: per kept frame, each method's displayed frame with its rate overlay, side by side."""
+    import imageio.v3 as iio
+
+    frames = []
+    for ref, shown in keep:
+        panels = [_label(ref, "full rate (reference)")]
+        panels += [_label(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0), name)
+                   for i, (name, (img, rates)) in enumerate(shown.items())]
+        cols = min(3, len(panels))
+        rows = -(-len(panels) // cols)
+        h, w = panels[0].shape[:2]
+        grid = np.zeros((rows * h, cols * w, 3), np.uint8)
+        for i, p in enumerate(panels):
+            r, c = divmod(i, cols)
+            grid[r * h:(r + 1) * h, c * w:(c + 1) * w] = p
+        frames.append(grid)
+    tmp = path.with_name(path.name + ".tmp")
+    iio.imwrite(tmp, np.stack(frames), extension=".gif", duration=1000 / 30, loop=0)
+    tmp.replace(path)
+    return [path.name]
+
+
+def _label(img: np.ndarray, text: str) -> np.ndarray:
+    from PIL import Image, ImageDraw
+
+    arr = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8) if img.dtype != np.uint8 else img
+    im = Image.fromarray(arr[..., :3])
+    d = ImageDraw.Draw(im)
+    d.rectangle((0, 0, 8 + 7 * len(text), 16), fill=(0, 0, 0))
+    d.text((4, 2), text, fill=(255, 255, 255))
+    return np.asarray(im)
+
+
+def _write(report: PlayReport, out: Path, plots: bool) -> list[str]:
+    import json
+
+    from ._evaluate import _json_clean
+
+    files = []
+    for name, text in (("play.md", report.to_markdown()), ("play.json", json.dumps(_json_clean(report.to_dict()), indent=1))):
+        tmp = out / (name + ".tmp")
+        tmp.write_text(text)
+        tmp.replace(out / name)
+        files.append(name)
+    if plots:
+        from .plots import play_curves, play_frames, save_image
+
+        for name, img in (("play_curves.png", play_curves(report)), ("play_frames.png", play_frames(report))):
+            save_image(out / name, img)
+            files.append(name)
+    return files

@@ -1,0 +1,178 @@
+"""Closed-loop VRS (``rtp play``): the renderer's rate-image shading and reprojection of any history,
+the loop itself (each method's history is its own displayed frame), prediction reuse, the report."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from rtp import sdk
+from rtp.capture import load_scene
+from rtp.capture.paths import PathFrame, PathPlayer, camera_path, composite
+from rtp.evaluate import PlayError, parse_methods, play, saved_at
+from rtp.evaluate._play import _reproject_estimates, _tile_index_map
+
+pytestmark = pytest.mark.gl
+W, H, TILE = 160, 96, 16
+
+
+@pytest.fixture(scope="module")
+def scene() -> Any:
+    return load_scene("procedural:0", None, None, None)
+
+
+@pytest.fixture(scope="module")
+def rendered(scene: Any, gl_context: Any) -> Any:
+    """A renderer (FXAA off, so a composite is exact) left on the third frame of a fast path, and
+    the two frames before it."""
+    from rtp.plugins.moderngl import Renderer
+
+    sc, blockers = scene
+    path = camera_path(sc, 3, "fast", seed=2, blockers=blockers)
+    r = Renderer(W, H, fxaa=False, ctx=gl_context)  # the context tests marked gl make current
+    r.load_scene(sc)
+    frames, prev = [], None
+    for cam in path.cameras:
+        prev = r.render(cam, prev)
+        frames.append(prev)
+    yield r, frames
+    r.release()
+
+
+def test_rate_images_shade_each_tile_at_its_rate(rendered: Any) -> None:
+    r, frames = rendered
+    cur = frames[-1]
+    th, tw = sdk.tile_grid(H, W, TILE)
+    for rate, code in sdk.RATE_CODES.items():
+        assert np.array_equal(r.shade_rates(np.full((th, tw), code, np.uint8), TILE), cur.colour[rate])
+    codes = np.random.default_rng(0).choice(list(sdk.RATE_CODES.values()), (th, tw)).astype(np.uint8)
+    assert np.array_equal(r.shade_rates(codes, TILE), composite(cur.colour, codes, TILE))  # no FXAA: exact
+
+
+def test_any_history_reprojects_like_the_renderer(rendered: Any) -> None:
+    r, frames = rendered
+    prev, cur = frames[-2], frames[-1]
+    rp, seen = r.reproject(prev.colour["1x1"], prev.depth, prev.camera)
+    assert np.array_equal(rp, cur.reprojected) and np.array_equal(seen, cur.seen)
+    rows, cols, seen2 = r.reprojection_source(prev.depth, prev.camera)
+    other = prev.colour["4x4"]
+    pf = PathFrame(2, cur, rows, cols, seen2)
+    assert np.array_equal(pf.reproject(other), r.reproject(other, prev.depth, prev.camera)[0])
+    assert 0.3 < seen2.mean() < 1.0
+
+
+def test_rate_images_and_histories_are_checked(rendered: Any) -> None:
+    from rtp.plugins.moderngl import Renderer, RendererError
+
+    r, frames = rendered
+    th, tw = sdk.tile_grid(H, W, TILE)
+    with pytest.raises(RendererError, match="tile grid"):
+        r.shade_rates(np.zeros((th + 1, tw), np.uint8), TILE)
+    with pytest.raises(RendererError, match="unknown rate codes"):
+        r.shade_rates(np.full((th, tw), 3, np.uint8), TILE)
+    with pytest.raises(RendererError, match="expected colour"):
+        r.reproject(np.zeros((H, W)), frames[0].depth, frames[0].camera)
+    with Renderer(W, H, ctx=r.ctx) as fresh, pytest.raises(RendererError, match="render\\(\\) first"):
+        fresh.shade_rates(np.zeros((th, tw), np.uint8), TILE)
+
+
+def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every history a method reprojects is an image it displayed on the frame before, never the
+    full-rate frame; the report holds every method, and its pictures are written."""
+    shaded: dict[int, int] = {}  # id of each displayed image -> the frame it was shown on
+    full: set[int] = set()
+    used: list[tuple[int, int]] = []  # (frame, id of the history reprojected into it)
+    shade, frames_of, reproject = PathPlayer.shade, PathPlayer.frames, PathFrame.reproject
+    current = [0]
+
+    def spy_frames(self: PathPlayer, path: Any) -> Any:
+        for pf in frames_of(self, path):
+            current[0] = pf.index
+            full.add(id(pf.frame.colour["1x1"]))
+            yield pf
+
+    def spy_shade(self: PathPlayer, rates: np.ndarray, tile: int) -> np.ndarray:
+        img = shade(self, rates, tile)
+        shaded[id(img)] = current[0]
+        return img
+
+    def spy_reproject(self: PathFrame, image: np.ndarray) -> np.ndarray:
+        used.append((self.index, id(image)))
+        return reproject(self, image)
+
+    monkeypatch.setattr(PathPlayer, "frames", spy_frames)
+    monkeypatch.setattr(PathPlayer, "shade", spy_shade)
+    monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
+    rep = play("procedural:0", "jnyang,jnyang@2,yang2019,fidelityfx,oracle,full", paths=("fast",), frames=5,
+               size=(W, H), sweep=False, flip_every=2, out=tmp_path)
+    assert len(used) == 4 * 4  # four methods with history, frames 1..4
+    for frame, image in used:
+        assert image not in full and shaded[image] == frame - 1
+    rows = {r["method"]: r for r in rep.rows}
+    assert set(rows) == {"jnyang", "jnyang@2", "yang2019", "fidelityfx", "oracle", "full"}
+    assert rows["oracle"]["fail_share"] == 0 and rows["full"]["work_saved"] == 0 == rows["full"]["fail_share"]
+    assert rows["jnyang@2"]["network_frames"] == 0.5 and rows["jnyang"]["network_frames"] == 1.0
+    assert 0 < rows["jnyang"]["work_saved"] < 1 and np.isfinite(rows["jnyang"]["flip_mean"])
+    assert len(rep.unseen["fast"]) == 5 and rep.unseen["fast"][0] == 1.0
+    for name in ("play.md", "play.json", "play_curves.png", "play_frames.png", "play_fast.gif"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert json.loads((tmp_path / "play.json").read_text())["settings"]["frames"] == 5
+
+
+def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
+    rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
+               plots=False)
+    for method in ("jnyang", "yang2019-unseen-1x1"):
+        rows = [r for r in rep.rows if r["method"] == method]
+        assert len(rows) == 5 and sum(r["default"] for r in rows) == 1
+        assert min(r["fail_share"] for r in rows) <= 0.01
+    assert "| jnyang |" in rep.to_markdown()
+
+
+def test_methods_are_parsed_and_checked() -> None:
+    specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019")
+    assert [(s.kind, s.model, s.reuse) for s in specs] == [
+        ("model", "jnyang", 1), ("model", "jnyang", 4), ("model", "models/psnr.onnx", 2), ("yang2019", "", 1)]
+    for bad, match in (("jnyang@0", "reuse interval"), ("jnyang@x", "reuse interval"), ("", "at least one"),
+                       ("oracle,oracle", "each method once")):
+        with pytest.raises(PlayError, match=match):
+            parse_methods(bad)
+    with pytest.raises(PlayError, match="unknown profile"):
+        play("procedural:0", "oracle", paths=("sprint",), frames=3)
+    with pytest.raises(PlayError, match="at least 3"):
+        play("procedural:0", "oracle", frames=2)
+
+
+def test_saved_at_reads_the_sweep() -> None:
+    pts = [(0.0, 0.1), (0.02, 0.3), (0.10, 0.6)]
+    assert saved_at(pts, 0.01) == pytest.approx(0.2)
+    assert saved_at(pts, 0.02) == pytest.approx(0.3)
+    assert saved_at(pts, 0.5) == pytest.approx(0.6)
+    assert saved_at([(0.05, 0.5)], 0.01) is None
+
+
+def test_reused_predictions_follow_the_surface() -> None:
+    """A still camera keeps every estimate; a whole-tile shift moves them; an unseen tile gets 1x1."""
+    th, tw = 3, 4
+    h, w = th * TILE, tw * TILE
+    est = np.random.default_rng(1).random((6, th, tw)).astype(np.float32)
+    rows, cols = np.indices((h, w))
+
+    class F:
+        mask = np.ones((h, w), np.float32)
+
+    still = PathFrame(1, F(), rows, cols, np.ones((h, w), np.float32))
+    index = _tile_index_map((h, w), TILE)
+    out, index2 = _reproject_estimates(est, index, still, TILE, False, 0.5)
+    assert np.array_equal(out, est) and np.array_equal(index2, index)
+    moved = PathFrame(1, F(), rows, np.maximum(cols - TILE, 0), np.ones((h, w), np.float32))
+    out, _ = _reproject_estimates(est, index, moved, TILE, False, 0.5)
+    assert np.array_equal(out[:, :, 1:], est[:, :, :-1])  # what was one tile left is here now
+    seen = np.ones((h, w), np.float32)
+    seen[:TILE, :TILE] = 0
+    out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5)
+    assert np.isinf(out[:, 0, 0]).all() and np.array_equal(out[:, 1:], est[:, 1:])
