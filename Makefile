@@ -20,7 +20,7 @@ RECIPE    ?= shipped
 STEPS     ?=
 RTP       := $(BIN)/rtp
 
-.PHONY: install test lint typecheck check bench clean dataset train evaluate demo
+.PHONY: install test lint typecheck check bench clean dataset train evaluate demo play
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -82,6 +82,15 @@ train: $(STAMP)
 # make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines.
 evaluate: $(STAMP)
 	$(RTP) evaluate models/$(METRIC).onnx --data $(DATA)/test --out $(DATA)/eval-$(METRIC) --plots
+
+# make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
+# slow and fast paths at 1280x720 (the models' training size), every method swept, both paths at
+# once (2 processes), the frames composited from the uniform-rate images (--composite: several times
+# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP).
+MAP    ?= 20kdm2
+FRAMES ?= 150
+play: $(STAMP)
+	$(RTP) play $(MAP) --frames $(FRAMES) --composite --workers 2 --out $(DATA)/play-$(MAP)
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 import sys
 
+from rtp.evaluate import saved_at
+
 
 def pct(v: float) -> str:
     return "-" if v is None or v != v else f"{100 * v:.1f}"
@@ -44,19 +46,6 @@ def main(paths: list[str]) -> None:
 
 #: Shares of failing tiles at which the saving is read off the sweeps.
 FAIL_LEVELS = (0.01, 0.02, 0.05, 0.10, 0.15)
-
-
-def saved_at(points: list[tuple[float, float]], fail: float) -> float | None:
-    """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points."""
-    pts = sorted(points)
-    if not pts or pts[0][0] > fail:
-        return None
-    best = None
-    for (f0, w0), (f1, w1) in zip(pts, pts[1:] + [(float("inf"), pts[-1][1])]):
-        if f0 <= fail:
-            w = w0 if f1 == float("inf") or f1 <= f0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
-            best = w if best is None else max(best, w)
-    return best
 
 
 def at_levels(d: dict) -> None:

@@ -339,7 +339,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    size=args.size, tile_size=args.tile_size, fail_metric=args.fail_metric,
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
-                   animation=not args.no_animation, progress=progress)
+                   animation=not args.no_animation, workers=args.workers, progress=progress)
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0
@@ -564,7 +564,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--frames", type=_positive, default=300, help="frames per path")
     pl.add_argument("--fps", type=float, default=60.0, help="frame rate of the paths")
     pl.add_argument("--seed", type=int, default=0, help="which path through the map")
-    pl.add_argument("--size", type=_size, default="640x360", help="WIDTHxHEIGHT")
+    pl.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
+                    "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
     pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
     pl.add_argument("--fail-metric", default="jnyang", choices=("jnyang", "jnflip", "psnr", "flip"),
                     help="a tile fails when its true error in this metric is over --fail-threshold")
@@ -578,6 +579,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out", default="rtp-play", help="output folder")
     pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
     pl.add_argument("--no-animation", action="store_true", help="no GIF")
+    pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once")
     cache_dir(pl)
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)

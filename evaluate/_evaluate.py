@@ -440,8 +440,12 @@ class _Sweep:
         self.thr, self.hib, self.selectors = thr, hib, selectors
         steps = [2.0 ** (k / 2) for k in range(-8, 9)]
         self.model_grid = [thr + 2.0 * k for k in range(-8, 9)] if hib else [thr * f for f in steps]
-        self.yang_grid = [selectors["yang2019"].threshold * f for f in steps] if "yang2019" in selectors else []
-        ffx_grid = [0.05 * 2.0 ** (k / 2) for k in range(-8, 9, 2)]
+        # The baselines' grids reach 1/256 of their defaults, so that every method that can fail as
+        # rarely as 1% of the tiles shows it (a black, unseen reprojection looks flat at any value).
+        low = [2.0 ** (k / 2) for k in range(-16, 9)]
+        self.yang_grids = {name: [sel.threshold * f for f in low] for name, sel in selectors.items()
+                           if isinstance(sel, Yang2019)}
+        ffx_grid = [0.05 * 2.0 ** (k / 2) for k in range(-16, 9, 2)]
         self.ffx_sweepers = {name: [FidelityFX(sel.tile_size, cutoff=c, motion_factor=sel.motion_factor,
                                                additional_rates=sel.additional_rates) for c in ffx_grid]
                              for name, sel in selectors.items() if isinstance(sel, FidelityFX)}
@@ -452,10 +456,10 @@ class _Sweep:
         hib = self.hib
         for t in self.model_grid:
             self._tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib), gt)
-        if self.yang_grid:
-            est_y = self.selectors["yang2019"].predict(sample)
-            for t in self.yang_grid:
-                self._tally("yang2019", f"t {t:.4g}", select_rates(est_y, t), gt)
+        for name, grid in self.yang_grids.items():
+            est_y = self.selectors[name].predict(sample)
+            for t in grid:
+                self._tally(name, f"t {t:.4g}", select_rates(est_y, t), gt)
         for name, sels in self.ffx_sweepers.items():
             for sel in sels:
                 self._tally(name, f"cutoff {sel.cutoff:.4g}", sel.shading_rates(sample), gt)

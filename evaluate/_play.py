@@ -297,7 +297,7 @@ def play(
     frames: int = 300,
     fps: float = 60.0,
     seed: int = 0,
-    size: tuple[int, int] = (640, 360),
+    size: tuple[int, int] = (1280, 720),
     tile_size: int = sdk.DEFAULT_TILE_SIZE,
     fail_metric: str = "jnyang",
     fail_threshold: float | None = None,
@@ -309,6 +309,7 @@ def play(
     exact: bool = True,
     plots: bool = True,
     animation: bool = True,
+    workers: int = 1,
     progress: Callable[[int], None] | None = None,
 ) -> PlayReport:
     """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
@@ -317,10 +318,10 @@ def play(
     compositing the uniform-rate images (:func:`rtp.capture.paths.composite`) instead of the
     renderer's per-tile VRS pass. Writes ``play.md``, ``play.json``, and with
     ``plots`` the curves, the per-frame plot and (``animation``) a GIF per path into ``out``.
-    ``progress(n)`` is called after every frame."""
+    ``workers`` > 1 plays the paths in that many processes at once. ``progress(n)`` is called after
+    every frame."""
     from rtp import metrics
-    from rtp.capture import load_scene
-    from rtp.capture.paths import PATH_PROFILES, PathPlayer, camera_path
+    from rtp.capture.paths import PATH_PROFILES
 
     specs = parse_methods(methods)
     _check(frames, fps, flip_every, size, (m.reuse for m in specs))
@@ -333,7 +334,7 @@ def play(
     info = sdk.METRICS[fail_metric]
     fail_thr = info.default_threshold if fail_threshold is None else float(fail_threshold)
     metrics.check_dependencies((fail_metric, "flip") if flip_every else (fail_metric,))
-    predictors = {m.model: sdk.load(m.model) for m in specs if m.kind == "model" and m.model is not None}
+    predictors = {m.model: sdk.load(m.model) for m in specs if m.kind == "model"}  # fails early on a bad model
     for m in specs:
         if m.kind == "model" and predictors[m.model].tile_size != tile_size:
             raise PlayError(f"method {m.name}: the model uses {predictors[m.model].tile_size}px tiles, the run "
@@ -341,41 +342,96 @@ def play(
     if any(m.kind.startswith("fidelityfx") for m in specs) and tile_size not in (8, 16, 32):
         raise PlayError(f"FidelityFX supports 8, 16 and 32 pixel tiles, the run uses {tile_size}", "tile_size")
 
+    if workers < 1:
+        raise PlayError(f"workers: expected >= 1, got {workers}", "workers")
     settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
                 "fail_threshold": fail_thr, "sweep": sweep, "flip_every": flip_every,
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "models": {k: str(p.path) for k, p in predictors.items()}}
     report = PlayReport(settings)
-    scn, blockers = load_scene(scene, cache_dir, None, None)
-    w, h = size
     outdir = Path(out) if out is not None else None
     if outdir is not None:
         outdir.mkdir(parents=True, exist_ok=True)
-    with PathPlayer(scn, size, exact=exact) as player:
-        for pname in paths:
-            path = camera_path(scn, frames, pname, seed, fps=fps, blockers=blockers)
-            loops = _loops(specs, predictors, sweep, fail_thr, info.higher_is_better, tile_size, unseen_fraction)
-            unseen, keep = _run_path(player, path, loops, metrics, fail_metric, fail_thr, info.higher_is_better,
-                                     tile_size, flip_every, (h, w), progress, animation and plots and outdir is not None)
-            report.unseen[pname] = unseen
-            for lp in loops:
-                report.rows.append({"path": pname, **lp.summary()})
-            report.frames[pname] = {
-                lp.method.name: {"saved": lp.saved, "fail": lp.fail, "change": lp.change, "flip": lp.flip,
-                                 "ms": lp.ms} for lp in loops if lp.default}
-            for m in specs:
-                pts = [(r["fail_share"], r["work_saved"]) for r in report.rows
-                       if r["path"] == pname and r["method"] == m.name]
-                for level in FAIL_LEVELS:
-                    v = saved_at(pts, level)
-                    report.matched.append({"path": pname, "method": m.name, "fail_share": level,
-                                           "work_saved": float("nan") if v is None else v})
-            if outdir is not None and keep:
-                report.files += _write_animation(outdir / f"play_{pname}.gif", keep, tile_size)
+    job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
+           "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
+           "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
+           "gif": str(outdir) if outdir is not None and plots and animation else None}
+    if workers > 1 and len(paths) > 1:
+        results = _in_workers(job, list(paths), min(workers, len(paths)), progress)
+    else:
+        results = {p: _play_path({**job, "path": p}, progress) for p in paths}
+    for pname in paths:
+        res = results[pname]
+        report.unseen[pname] = res["unseen"]
+        report.rows += res["rows"]
+        report.frames[pname] = res["frames"]
+        report.files += res["files"]
+        for m in specs:
+            pts = [(r["fail_share"], r["work_saved"]) for r in res["rows"] if r["method"] == m.name]
+            for level in FAIL_LEVELS:
+                v = saved_at(pts, level)
+                report.matched.append({"path": pname, "method": m.name, "fail_share": level,
+                                       "work_saved": float("nan") if v is None else v})
     if outdir is not None:
         report.files += _write(report, outdir, plots)
     return report
+
+
+def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """One path of :func:`play` (in this process or a worker's): its rows, per-frame series, unseen
+    shares and GIF."""
+    from rtp import metrics
+    from rtp.capture import load_scene
+    from rtp.capture.paths import PathPlayer, camera_path
+
+    specs = parse_methods(job["methods"])
+    predictors = {m.model: sdk.load(m.model) for m in specs if m.kind == "model"}
+    info = sdk.METRICS[job["fail_metric"]]
+    scn, blockers = load_scene(job["scene"], job["cache_dir"], None, None)
+    w, h = job["size"]
+    tile = job["tile_size"]
+    pname = job["path"]
+    path = camera_path(scn, job["frames"], pname, job["seed"], fps=job["fps"], blockers=blockers)
+    loops = _loops(specs, predictors, job["sweep"], job["fail_thr"], info.higher_is_better, tile, job["unseen_fraction"])
+    with PathPlayer(scn, (w, h), exact=job["exact"]) as player:
+        unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
+                                 tile, job["flip_every"], (h, w), progress, job["gif"] is not None)
+    files = []
+    if job["gif"] is not None and anim:
+        files = _write_animation(Path(job["gif"]) / f"play_{pname}.gif", anim)
+    return {
+        "unseen": unseen,
+        "rows": [{"path": pname, **lp.summary()} for lp in loops],
+        "frames": {lp.method.name: {"saved": lp.saved, "fail": lp.fail, "change": lp.change, "flip": lp.flip,
+                                    "ms": lp.ms} for lp in loops if lp.default},
+        "files": files,
+    }
+
+
+def _worker_path(job: dict[str, Any], ticks: Any) -> dict[str, Any]:
+    return _play_path(job, ticks.put)
+
+
+def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
+                progress: Callable[[int], None] | None) -> dict[str, dict[str, Any]]:
+    """The paths in ``workers`` processes (each its own renderer), progress ticks through a queue."""
+    import multiprocessing as mp
+    import queue
+
+    from rtp.capture import worker_pool
+
+    with mp.get_context("spawn").Manager() as manager, worker_pool(workers) as pool:
+        ticks = manager.Queue()
+        futures = {pool.submit(_worker_path, {**job, "path": p}, ticks): p for p in paths}
+        while not all(f.done() for f in futures):
+            try:
+                n = ticks.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            if progress is not None:
+                progress(n)
+        return {p: f.result() for f, p in futures.items()}
 
 
 def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fail_thr: float, fail_hib: bool,
@@ -456,10 +512,10 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float)
 
 def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
               tile: int, flip_every: int, hw: tuple[int, int], progress: Callable[[int], None] | None,
-              animate: bool) -> tuple[list[float], list[tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]]]:
+              animate: bool) -> tuple[list[float], list[np.ndarray]]:
     unseen: list[float] = []
-    keep: list[tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]] = []
-    anim_every = max(1, len(path) // 120)  # at most ~120 frames in the animation
+    keep: list[np.ndarray] = []
+    anim_every = max(1, -(-len(path) // _ANIM_FRAMES))
     for pf in player.frames(path):
         frame = pf.frame
         ref = frame.colour["1x1"]
@@ -494,7 +550,7 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             if anim_frame and lp.default and displayed is not None:
                 shown[lp.method.name] = (displayed, rates)
         if shown:
-            keep.append((ref, shown))
+            keep.append(_anim_frame(ref, shown, tile))
         if progress is not None:
             progress(1)
     return unseen, keep
@@ -503,23 +559,36 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
 # -- pictures -------------------------------------------------------------------------------------------
 
 
-def _write_animation(path: Path, keep: list[tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]], tile: int) -> list[str]:
-    """A GIF: per kept frame, each method's displayed frame with its rate overlay, side by side."""
+_ANIM_FRAMES = 100  # at most this many frames in a GIF
+_ANIM_PANEL_WIDTH = 480  # each panel at most this wide
+
+
+def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]], tile: int) -> np.ndarray:
+    """One GIF frame: the full-rate frame and each method's displayed frame with its rate overlay,
+    downscaled to panels at most ``_ANIM_PANEL_WIDTH`` wide, three per row, uint8."""
+    from PIL import Image
+
+    panels = [_label(ref, "full rate (reference)")]
+    panels += [_label(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0), name)
+               for i, (name, (img, rates)) in enumerate(shown.items())]
+    h, w = panels[0].shape[:2]
+    if w > _ANIM_PANEL_WIDTH:
+        size = (_ANIM_PANEL_WIDTH, max(1, round(h * _ANIM_PANEL_WIDTH / w)))
+        panels = [np.asarray(Image.fromarray(p).resize(size, Image.Resampling.BOX)) for p in panels]
+        h, w = panels[0].shape[:2]
+    cols = min(3, len(panels))
+    rows = -(-len(panels) // cols)
+    grid = np.zeros((rows * h, cols * w, 3), np.uint8)
+    for i, p in enumerate(panels):
+        r, c = divmod(i, cols)
+        grid[r * h:(r + 1) * h, c * w:(c + 1) * w] = p
+    return grid
+
+
+def _write_animation(path: Path, frames: list[np.ndarray]) -> list[str]:
+    """The GIF of :func:`_anim_frame` frames, written atomically."""
     import imageio.v3 as iio
 
-    frames = []
-    for ref, shown in keep:
-        panels = [_label(ref, "full rate (reference)")]
-        panels += [_label(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0), name)
-                   for i, (name, (img, rates)) in enumerate(shown.items())]
-        cols = min(3, len(panels))
-        rows = -(-len(panels) // cols)
-        h, w = panels[0].shape[:2]
-        grid = np.zeros((rows * h, cols * w, 3), np.uint8)
-        for i, p in enumerate(panels):
-            r, c = divmod(i, cols)
-            grid[r * h:(r + 1) * h, c * w:(c + 1) * w] = p
-        frames.append(grid)
     tmp = path.with_name(path.name + ".tmp")
     iio.imwrite(tmp, np.stack(frames), extension=".gif", duration=1000 / 30, loop=0)
     tmp.replace(path)
@@ -530,10 +599,11 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
     from PIL import Image, ImageDraw
 
     arr = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8) if img.dtype != np.uint8 else img
-    im = Image.fromarray(arr[..., :3])
+    im = Image.fromarray(np.ascontiguousarray(arr[..., :3]))
     d = ImageDraw.Draw(im)
-    d.rectangle((0, 0, 8 + 7 * len(text), 16), fill=(0, 0, 0))
-    d.text((4, 2), text, fill=(255, 255, 255))
+    scale = max(1, im.width // 480)  # legible after the panel is downscaled
+    d.rectangle((0, 0, (8 + 7 * len(text)) * scale, 16 * scale), fill=(0, 0, 0))
+    d.text((4 * scale, 2 * scale), text, fill=(255, 255, 255), font_size=11 * scale)
     return np.asarray(im)
 
 

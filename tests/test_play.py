@@ -86,6 +86,7 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     shaded: dict[int, int] = {}  # id of each displayed image -> the frame it was shown on
     full: set[int] = set()
     used: list[tuple[int, int]] = []  # (frame, id of the history reprojected into it)
+    alive: list[Any] = []  # every image seen, kept so that no id is reused
     shade, frames_of, reproject = PathPlayer.shade, PathPlayer.frames, PathFrame.reproject
     current = [0]
 
@@ -93,11 +94,13 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
         for pf in frames_of(self, path):
             current[0] = pf.index
             full.add(id(pf.frame.colour["1x1"]))
+            alive.append(pf.frame)
             yield pf
 
     def spy_shade(self: PathPlayer, rates: np.ndarray, tile: int) -> np.ndarray:
         img = shade(self, rates, tile)
         shaded[id(img)] = current[0]
+        alive.append(img)
         return img
 
     def spy_reproject(self: PathFrame, image: np.ndarray) -> np.ndarray:
@@ -176,3 +179,16 @@ def test_reused_predictions_follow_the_surface() -> None:
     seen[:TILE, :TILE] = 0
     out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5)
     assert np.isinf(out[:, 0, 0]).all() and np.array_equal(out[:, 1:], est[:, 1:])
+
+
+def test_paths_in_worker_processes_give_the_same_report() -> None:
+    kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (W, H), "sweep": False, "flip_every": 0,
+                          "plots": False}
+    ticks: list[int] = []
+    one = play("procedural:0", "jnyang,yang2019", **kw)
+    two = play("procedural:0", "jnyang,yang2019", workers=2, progress=ticks.append, **kw)
+    assert sum(ticks) == 6
+    def timeless(rows: list[dict[str, Any]]) -> str:  # the choosing times differ from run to run
+        return json.dumps([{k: v for k, v in r.items() if k != "predict_ms"} for r in rows])
+
+    assert len(one.rows) == 4 and timeless(one.rows) == timeless(two.rows)
