@@ -123,12 +123,12 @@ def main() -> None:
     ap.add_argument("--data", required=True, help="dataset with targets holding the train and validation maps")
     ap.add_argument("--metric", default="jnyang")
     ap.add_argument("--out", required=True, help="folder for the checkpoints and exports")
-    ap.add_argument("--only", default=None, help="comma-separated configuration names (default: all)")
+    ap.add_argument("--only", default=None, help="comma-separated configuration names (default: all; \"\": only the --reference models)")
     ap.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's)")
     ap.add_argument("--reference", action="append", default=[], help="an exported model to score alongside")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    names = args.only.split(",") if args.only else list(CONFIGS)
+    names = [n for n in args.only.split(",") if n] if args.only is not None else list(CONFIGS)  # --only "": references only
     configs = {n: _config(n) for n in names}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -339,7 +339,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    size=args.size, tile_size=args.tile_size, fail_metric=args.fail_metric,
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
-                   animation=not args.no_animation, workers=args.workers, progress=progress)
+                   animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop, progress=progress)
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0
@@ -580,6 +580,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
     pl.add_argument("--no-animation", action="store_true", help="no GIF")
     pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once")
+    pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "
+                    "frame, not its own displayed one")
     cache_dir(pl)
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)

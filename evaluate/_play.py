@@ -252,7 +252,9 @@ class PlayReport:
                  f"Paths {', '.join(self.unseen)} ({s['frames']} frames at {s['fps']:g} Hz, seed {s['seed']}), "
                  f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when its true "
                  f"{s['fail_metric']} error is over {s['fail_threshold']:g}; FLIP of the displayed frame against "
-                 f"full-rate shading every {s['flip_every']}th frame. The first frame (no history) is left out.", ""]
+                 f"full-rate shading every {s['flip_every']}th frame. Shading: {s.get('shading', 'renderer')}; each "
+                 f"method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is left "
+                 "out.", ""]
         for path, unseen in self.unseen.items():
             u = np.array(unseen[1:])
             lines += [f"## {path}", "", f"Unseen share per frame: mean {100 * u.mean():.2f}%, "
@@ -310,6 +312,7 @@ def play(
     plots: bool = True,
     animation: bool = True,
     workers: int = 1,
+    open_loop: bool = False,
     progress: Callable[[int], None] | None = None,
 ) -> PlayReport:
     """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
@@ -318,7 +321,9 @@ def play(
     compositing the uniform-rate images (:func:`rtp.capture.paths.composite`) instead of the
     renderer's per-tile VRS pass. Writes ``play.md``, ``play.json``, and with
     ``plots`` the curves, the per-frame plot and (``animation``) a GIF per path into ``out``.
-    ``workers`` > 1 plays the paths in that many processes at once. ``progress(n)`` is called after
+    ``workers`` > 1 plays the paths in that many processes at once. ``open_loop=True`` is the
+    ablation: every method's history is the full-rate frame instead of its own (what the dataset's
+    reprojection holds). ``progress(n)`` is called after
     every frame."""
     from rtp import metrics
     from rtp.capture.paths import PATH_PROFILES
@@ -348,6 +353,7 @@ def play(
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
                 "fail_threshold": fail_thr, "sweep": sweep, "flip_every": flip_every,
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
+                "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
@@ -355,7 +361,7 @@ def play(
         outdir.mkdir(parents=True, exist_ok=True)
     job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
            "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
-           "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
+           "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact, "open_loop": open_loop,
            "gif": str(outdir) if outdir is not None and plots and animation else None}
     if workers > 1 and len(paths) > 1:
         results = _in_workers(job, list(paths), min(workers, len(paths)), progress)
@@ -396,7 +402,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     loops = _loops(specs, predictors, job["sweep"], job["fail_thr"], info.higher_is_better, tile, job["unseen_fraction"])
     with PathPlayer(scn, (w, h), exact=job["exact"]) as player:
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
-                                 tile, job["flip_every"], (h, w), progress, job["gif"] is not None)
+                                 tile, job["flip_every"], (h, w), progress, job["gif"] is not None, job["open_loop"])
     files = []
     if job["gif"] is not None and anim:
         files = _write_animation(Path(job["gif"]) / f"play_{pname}.gif", anim)
@@ -512,7 +518,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float)
 
 def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
               tile: int, flip_every: int, hw: tuple[int, int], progress: Callable[[int], None] | None,
-              animate: bool) -> tuple[list[float], list[np.ndarray]]:
+              animate: bool, open_loop: bool = False) -> tuple[list[float], list[np.ndarray]]:
     unseen: list[float] = []
     keep: list[np.ndarray] = []
     anim_every = max(1, -(-len(path) // _ANIM_FRAMES))
@@ -546,7 +552,7 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             lp.flip.append(0.0 if lp.method.kind == "full" else
                            float(metrics.flip_map(ref, displayed).mean()) if measure_flip and displayed is not None
                            else float("nan"))
-            lp.history, lp.rates = (displayed if needs_history else None), rates
+            lp.history, lp.rates = (ref if open_loop else displayed) if needs_history else None, rates
             if anim_frame and lp.default and displayed is not None:
                 shown[lp.method.name] = (displayed, rates)
         if shown:
@@ -559,8 +565,9 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
 # -- pictures -------------------------------------------------------------------------------------------
 
 
-_ANIM_FRAMES = 100  # at most this many frames in a GIF
-_ANIM_PANEL_WIDTH = 480  # each panel at most this wide
+_ANIM_FRAMES = 60  # at most this many frames in a GIF
+_ANIM_FPS = 20  # its playback rate
+_ANIM_PANEL_WIDTH = 400  # each panel at most this wide
 
 
 def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]], tile: int) -> np.ndarray:
@@ -586,13 +593,20 @@ def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]]
 
 
 def _write_animation(path: Path, frames: list[np.ndarray]) -> list[str]:
-    """The GIF of :func:`_anim_frame` frames, written atomically."""
-    import imageio.v3 as iio
+    """The GIF of :func:`_anim_frame` frames (each quantised to its own palette, so the rate tints do
+    not shift the colours of the other panels) and its middle frame as a PNG, written atomically."""
+    from PIL import Image
 
+    from rtp.capture import save_image
+
+    images = [Image.fromarray(f).quantize(colors=255, method=Image.Quantize.MEDIANCUT) for f in frames]
     tmp = path.with_name(path.name + ".tmp")
-    iio.imwrite(tmp, np.stack(frames), extension=".gif", duration=1000 / 30, loop=0)
+    images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=round(1000 / _ANIM_FPS),
+                   loop=0, disposal=1)
     tmp.replace(path)
-    return [path.name]
+    still = path.with_suffix(".png")
+    save_image(still, frames[len(frames) // 2])
+    return [path.name, still.name]
 
 
 def _label(img: np.ndarray, text: str) -> np.ndarray:
@@ -601,7 +615,7 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
     arr = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8) if img.dtype != np.uint8 else img
     im = Image.fromarray(np.ascontiguousarray(arr[..., :3]))
     d = ImageDraw.Draw(im)
-    scale = max(1, im.width // 480)  # legible after the panel is downscaled
+    scale = max(1, im.width // 400)  # legible after the panel is downscaled
     d.rectangle((0, 0, (8 + 7 * len(text)) * scale, 16 * scale), fill=(0, 0, 0))
     d.text((4 * scale, 2 * scale), text, fill=(255, 255, 255), font_size=11 * scale)
     return np.asarray(im)
