@@ -556,8 +556,8 @@ def build_parser() -> argparse.ArgumentParser:
                  "predictions in between), or\n" + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
     pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")
-    pl.add_argument("--methods", default="jnyang,jnyang@4,yang2019,yang2019-unseen-1x1,fidelityfx,oracle",
-                    help="comma-separated methods (see below)")
+    methods = "jnyang,jnyang@4,yang2019,yang2019-unseen-1x1,fidelityfx,oracle"
+    pl.add_argument("--methods", default=methods, help=f"comma-separated methods (see below; default: {methods})")
     pl.add_argument("--path", action="append", default=None,
                     help=f"camera path profiles, repeatable or comma-separated: {', '.join(PATH_PROFILES)} "
                     "(default: slow,fast)")
@@ -567,8 +567,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
     pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
-    pl.add_argument("--fail-metric", default="jnyang", choices=("jnyang", "jnflip", "psnr", "flip"),
-                    help="a tile fails when its true error in this metric is over --fail-threshold")
+    pl.add_argument("--fail-metric", default="jnyang", help="a tile fails when its true error in this metric "
+                    "(one computed per frame: JNYang, JNFLIP, FLIP or PSNR) is over --fail-threshold")
     pl.add_argument("--fail-threshold", type=float, default=None, help="default: the metric's starting threshold "
                     "(JNYang 0.25)")
     pl.add_argument("--no-sweep", action="store_true", help="run each method at its default parameter only")

@@ -16,6 +16,8 @@ from rtp.capture.paths import PathFrame, PathPlayer, camera_path, composite
 from rtp.evaluate import PlayError, parse_methods, play, saved_at
 from rtp.evaluate._play import _reproject_estimates, _tile_index_map
 
+from tests.conftest import make_current
+
 pytestmark = pytest.mark.gl
 W, H, TILE = 160, 96, 16
 
@@ -33,7 +35,7 @@ def rendered(scene: Any, gl_context: Any) -> Any:
 
     sc, blockers = scene
     path = camera_path(sc, 3, "fast", seed=2, blockers=blockers)
-    r = Renderer(W, H, fxaa=False, ctx=gl_context)  # the context tests marked gl make current
+    r = Renderer(W, H, fxaa=False, ctx=make_current(gl_context))  # a module fixture runs before the autouse one
     r.load_scene(sc)
     frames, prev = [], None
     for cam in path.cameras:
