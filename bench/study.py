@@ -123,7 +123,8 @@ def main() -> None:
     ap.add_argument("--data", required=True, help="dataset with targets holding the train and validation maps")
     ap.add_argument("--metric", default="jnyang")
     ap.add_argument("--out", required=True, help="folder for the checkpoints and exports")
-    ap.add_argument("--only", default=None, help="comma-separated configuration names (default: all; \"\": only the --reference models)")
+    ap.add_argument("--only", default=None,
+                    help="comma-separated configuration names (default: all; \"\": only the --reference models)")
     ap.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's)")
     ap.add_argument("--reference", action="append", default=[], help="an exported model to score alongside")
     args = ap.parse_args()

@@ -15,7 +15,6 @@ from rtp.capture import load_scene
 from rtp.capture.paths import PathFrame, PathPlayer, camera_path, composite
 from rtp.evaluate import PlayError, parse_methods, play, saved_at
 from rtp.evaluate._play import _reproject_estimates, _tile_index_map
-
 from tests.conftest import make_current
 
 pytestmark = pytest.mark.gl
