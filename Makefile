@@ -14,7 +14,8 @@ VAL_PER_SCENE ?= 6
 WORKERS   ?= 1
 METRIC    ?= jnyang
 # The recipe the shipped models were trained with: train/recipes/shipped.yaml (steps, batch, crop,
-# learning rate, the validation split, LPIPS's linear head). RECIPE=my.yaml trains with another;
+# learning rate, the validation split); LPIPS trains with the linear head (a ReLU head left one of
+# its outputs dead, docs/results.md). RECIPE=my.yaml trains with another;
 # STEPS=N overrides its steps.
 RECIPE    ?= shipped
 STEPS     ?=
@@ -76,7 +77,7 @@ dataset: $(STAMP)
 
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
-	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) --out $(DATA)/$(METRIC).pt
+	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) $(if $(filter lpips,$(METRIC)),--head linear) --out $(DATA)/$(METRIC).pt
 	$(BIN)/rtp-export $(DATA)/$(METRIC).pt -o models/$(METRIC).onnx
 
 # make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines.
