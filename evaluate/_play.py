@@ -22,7 +22,6 @@ terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelit
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -47,8 +46,6 @@ __all__ = [
     "play",
     "saved_at",
 ]
-
-log = logging.getLogger("rtp.evaluate")
 
 #: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
 FAIL_LEVELS = (0.01, 0.02, 0.05)
