@@ -154,24 +154,47 @@ class TargetStore:
         return psnr_from_mse(pooled) if mse else pooled
 
 
-def _compute_one(data_root: str, sample_id: str, metrics: tuple[str, ...], params: dict[str, Any]) -> str:
+def sample_targets(sample: Any, metrics: tuple[str, ...], params: Mapping[str, Any], base_tile: int = BASE_TILE,
+                   ) -> dict[str, np.ndarray]:
+    """The stored form of one sample's targets: ``{metric: float32 (6, th, tw)}`` at ``base_tile``
+    (PSNR as the tile MSE so that coarser tiles derive exactly). ``params`` holds ``ppd`` and ``weber_l``."""
     from rtp import metrics as M
 
+    ref = sample.final("1x1")
+    images = {r: sample.final(r) for r in PREDICTED_RATES}
+    values = M.tile_targets(ref, images, metrics, base_tile, ppd=params["ppd"], weber_l=params["weber_l"],
+                            flip_backend=params.get("flip_backend"))
+    out = {}
+    for m in metrics:
+        v = values[m]
+        if _stores_mse(m):  # store the tile MSE so that coarser tiles derive exactly
+            with np.errstate(over="ignore"):
+                v = mse_from_psnr(v)
+        out[m] = v.astype(np.float32)
+    return out
+
+
+def _set_threads(threads: int | None) -> None:
+    """Torch's intra-op threads in a worker (two workers with two threads each on two cores thrash)."""
+    if threads:
+        try:
+            import torch
+        except ImportError:
+            return
+        torch.set_num_threads(threads)
+
+
+def _compute_one(data_root: str, sample_id: str, metrics: tuple[str, ...], params: dict[str, Any],
+                 threads: int | None = None) -> str:
+    _set_threads(threads)
     store = TargetStore(data_root)
     todo = tuple(m for m in metrics if not store.has(sample_id, m))
     if not todo:
         return sample_id
     s = DatasetReader(data_root)[sample_id]
-    ref = s.final("1x1")
-    images = {r: s.final(r) for r in PREDICTED_RATES}
-    values = M.tile_targets(ref, images, todo, store.base_tile, ppd=params["ppd"], weber_l=params["weber_l"])
-    h, w = ref.shape[:2]
-    for m in todo:
-        v = values[m]
-        if _stores_mse(m):  # store the tile MSE so that coarser tiles derive exactly
-            with np.errstate(over="ignore"):
-                v = mse_from_psnr(v)
-        store.write(sample_id, m, v.astype(np.float32), (h, w))
+    h, w = s.size
+    for m, v in sample_targets(s, todo, params, store.base_tile).items():
+        store.write(sample_id, m, v, (h, w))
     return sample_id
 
 
@@ -183,9 +206,14 @@ def compute_targets(
     weber_l: float | None = None,
     workers: int = 1,
     progress: Any = None,
+    flip_backend: str | None = None,
 ) -> int:
     """Compute (or complete) the per-tile targets of every sample of a dataset; returns how many
-    samples were processed. Existing targets are kept, so an interrupted run resumes."""
+    samples were processed. Existing targets are kept, so an interrupted run resumes.
+
+    ``flip_backend`` as in :func:`rtp.metrics.tile_targets` (default: the batched torch port when
+    torch is installed). With ``workers > 1`` each worker process gets an equal share of the CPU's
+    torch threads."""
     from concurrent.futures import as_completed
 
     from rtp import metrics as M
@@ -195,11 +223,13 @@ def compute_targets(
     unknown = [m for m in metrics if m not in METRICS]
     if unknown:
         raise TargetError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(METRICS)}")
+    if flip_backend is not None and flip_backend not in M.FLIP_BACKENDS:
+        raise TargetError(f"flip_backend must be one of {', '.join(M.FLIP_BACKENDS)} or None, got {flip_backend!r}")
     M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work
     reader = DatasetReader(data_root)
     store = TargetStore(data_root)
     params = {"ppd": M.DEFAULT_PPD if ppd is None else ppd, "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
-    for m in metrics:
+    for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)
         p: dict[str, Any] = {}
         if m in ("flip", "jnflip"):
             p["ppd"] = params["ppd"]
@@ -208,6 +238,7 @@ def compute_targets(
         if m == "lpips":
             p["net"] = "alex-v0.1"
         store.declare(m, p)
+    params["flip_backend"] = flip_backend
     ids = [i for i in reader.ids if not all(store.has(i, m) for m in metrics)]
     done = len(reader.ids) - len(ids)
     if progress:
@@ -220,7 +251,8 @@ def compute_targets(
                 progress(done, len(reader.ids))
     else:
         with worker_pool(workers) as pool:
-            futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
+            threads = max(1, (os.cpu_count() or 1) // workers)
+            futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params, threads) for i in ids]
             for f in as_completed(futures):
                 f.result()
                 done += 1

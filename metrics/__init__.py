@@ -33,7 +33,7 @@ from ._lpips import (
 )
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, squared_error_map, yang_map
 from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, pool_tiles, weber_denominator
-from ._targets import error_map, tile_metric, tile_targets
+from ._targets import FLIP_BACKENDS, error_map, tile_metric, tile_targets
 
 logging.getLogger("rtp.metrics").addHandler(logging.NullHandler())
 
@@ -41,6 +41,7 @@ __all__ = [
     "DEFAULT_PPD",
     "DEFAULT_WEBER_L",
     "FETCH_COMMAND",
+    "FLIP_BACKENDS",
     "FLIP_DEFAULT_PPD",
     "LPIPS_MIN_SIZE",
     "LPIPS_WEIGHTS_PACKAGE",

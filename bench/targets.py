@@ -1,0 +1,111 @@
+"""Cost of the per-tile targets of real samples: per metric, before / after, and end to end.
+
+    python bench/targets.py [--data data/val] [--samples 6] [--workers 1,2]
+
+Part 1 times ``tile_targets`` on ``--samples`` samples of a captured dataset (1280x720 by default),
+one metric at a time, in this process (torch on 2 threads), with FLIP through ``flip-evaluator`` image
+by image ("before", rtp <= 0.6) and through the batched torch port that filters the reference once
+("after"); JNFLIP shares FLIP's map, so its row is the FLIP map plus the Weber division. Part 2 runs
+``compute_targets`` over a copy of those samples (all five metrics, reading and writing included)
+with each worker count and prints the wall time per sample. Prints Markdown tables (medians).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+
+from rtp import metrics, sdk
+from rtp.capture import DatasetReader, compute_targets
+from rtp.capture._dataset import sample_path
+
+METRICS = ("flip", "jnflip", "lpips", "psnr", "jnyang")
+
+
+def per_metric(reader: DatasetReader, ids: list[str]) -> list[tuple[str, float, float]]:
+    rows = []
+    samples = [reader[i] for i in ids]
+    frames = [(s.final("1x1"), {r: s.final(r) for r in sdk.PREDICTED_RATES}) for s in samples]
+    metrics.tile_targets(*frames[0], ("lpips", "flip"), 4)  # warm-up: LPIPS weights, torch start-up
+    fresh = DatasetReader(reader.root)  # samples cache what they decoded: read through a new reader
+    t0 = time.perf_counter()
+    for i in ids:
+        s = fresh[i]
+        s.final("1x1"), [s.final(r) for r in sdk.PREDICTED_RATES]
+    rows.append(("read the 7 images", (time.perf_counter() - t0) * 1000 / len(samples), float("nan")))
+    for m in (*METRICS, "all five"):
+        names = METRICS if m == "all five" else (m,)
+        times = {}
+        for backend in ("flip-evaluator", "torch"):
+            ts = []
+            for ref, imgs in frames:
+                t0 = time.perf_counter()
+                metrics.tile_targets(ref, imgs, names, 4, flip_backend=backend)
+                ts.append((time.perf_counter() - t0) * 1000)
+            times[backend] = statistics.median(ts)
+        rows.append((m, times["flip-evaluator"], times["torch"]))
+    return rows
+
+
+def end_to_end(src: Path, ids: list[str], workers: int) -> float:
+    with tempfile.TemporaryDirectory(prefix="rtp-bench-targets-") as d:
+        root = Path(d) / "ds"
+        (root / "samples").mkdir(parents=True)
+        shutil.copy(src / "manifest.json", root / "manifest.json")
+        for i in ids:
+            os.link(sample_path(src, i), sample_path(root, i)) if _same_fs(src, root) else shutil.copy(
+                sample_path(src, i), sample_path(root, i))
+        _restrict_manifest(root, ids)
+        t0 = time.perf_counter()
+        compute_targets(root, METRICS, workers=workers)
+        return (time.perf_counter() - t0) / len(ids)
+
+
+def _same_fs(a: Path, b: Path) -> bool:
+    return os.stat(a).st_dev == os.stat(b).st_dev
+
+
+def _restrict_manifest(root: Path, ids: list[str]) -> None:
+    import json
+
+    m = json.loads((root / "manifest.json").read_text())
+    m["samples"] = ids
+    (root / "manifest.json").write_text(json.dumps(m))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default="data/val", help="a captured dataset (rtp capture)")
+    ap.add_argument("--samples", type=int, default=6)
+    ap.add_argument("--workers", default="1,2", help="worker counts for the end-to-end part")
+    args = ap.parse_args()
+    torch.set_num_threads(2)
+    reader = DatasetReader(args.data)
+    step = max(1, len(reader.ids) // args.samples)
+    ids = reader.ids[::step][: args.samples]
+    h, w = reader[ids[0]].size
+    print(f"{len(ids)} samples of {args.data} ({w}x{h}), {platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} CPUs, torch {torch.__version__} ({torch.get_num_threads()} threads)\n")
+    print("| per sample, six rates | before: flip-evaluator (ms) | after: batched port (ms) | speed-up |")
+    print("|---|---:|---:|---:|")
+    for name, before, after in per_metric(reader, ids):
+        if after != after:  # nan: not backend dependent
+            print(f"| {name} | {before:.0f} | {before:.0f} | |")
+        else:
+            print(f"| {name} | {before:.0f} | {after:.0f} | {before / after:.2f}x |")
+    print("\n| `compute_targets`, all five metrics | workers | s per sample |")
+    print("|---|---:|---:|")
+    for n in (int(x) for x in args.workers.split(",")):
+        print(f"| read, compute, write | {n} | {end_to_end(Path(args.data), ids, n):.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
