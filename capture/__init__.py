@@ -20,6 +20,7 @@ from ._dataset import (
 from ._images import figure_image, save_image
 from ._pool import worker_pool
 from ._preview import preview_sheet
+from ._ray import RayExecutorError, RayWorkerError
 from ._targets import BASE_TILE, TargetError, TargetStore, compute_targets, pool_targets
 
 __all__ = [
@@ -33,6 +34,8 @@ __all__ = [
     "DatasetReader",
     "DatasetWriter",
     "PaperDatasetReader",
+    "RayExecutorError",
+    "RayWorkerError",
     "Sample",
     "TargetError",
     "TargetStore",

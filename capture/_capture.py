@@ -122,11 +122,50 @@ def _ids(scene: str, profile: str, n: int) -> list[str]:
     return [f"{scene_id(scene)}-{profile}-{i:04d}" for i in range(n)]
 
 
+def _plan(scene_name: str, scene: Any, blockers: Any, profiles: Sequence[str], per_scene: int,
+          size: tuple[int, int], seed: int) -> tuple[dict[str, list[tuple[str, Any, Any]]], list[str]]:
+    """Every planned sample of a scene: ``{profile: [(sample id, previous camera, camera)]}``, and the
+    ``"<scene>/<profile>"`` jobs without valid viewpoints. Deterministic: any worker plans the same."""
+    from rtp.capture.viewpoints import ViewpointError, sample_viewpoints
+
+    w, h = size
+    plans: dict[str, list[tuple[str, Any, Any]]] = {}
+    failed: list[str] = []
+    for profile in profiles:
+        try:
+            pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
+                                      blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE)
+        except ViewpointError as err:
+            log.warning("%s (%s): %s", scene_name, profile, err)
+            failed.append(f"{scene_name}/{profile}")
+            continue
+        plans[profile] = [(sid, p, c) for sid, (p, c) in zip(_ids(scene_name, profile, per_scene), pairs)]
+    return plans, failed
+
+
+def _render(renderer: Any, scene_name: str, profile: str, prev_cam: Any, cam: Any,
+            ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Render one sample (the previous frame, then the current one with it reprojected): its buffers and meta."""
+    prev = renderer.render(prev_cam)
+    frame = renderer.render(cam, prev)
+    geo = frame.mask > 0.5
+    unseen = float(1.0 - frame.seen[geo].mean()) if geo.any() else 0.0
+    meta = {
+        "scene": scene_name, "profile": profile, "camera": _camera_dict(cam), "prev_camera": _camera_dict(prev_cam),
+        "exposure": float(frame.exposure), "unseen": unseen, "coverage": float(geo.mean()),
+    }
+    return sample_buffers(frame), meta
+
+
+def _todo(writer: DatasetWriter, reader: DatasetReader, planned: list[tuple[str, Any, Any]]) -> list[tuple[str, Any, Any]]:
+    """The planned samples that are not on disk yet, or were rendered from other cameras."""
+    return [(sid, p, c) for sid, p, c in planned if not (writer.has(sid) and _same_cameras(reader, sid, p, c))]
+
+
 def _run_job(
     scene_name: str, profiles: Sequence[str], per_scene: int, size: tuple[int, int], out: str, seed: int,
     cache_dir: str | None, split: str | None, splits: str | None, settings: dict[str, Any], queue: Any = None,
 ) -> CaptureReport:
-    from rtp.capture.viewpoints import ViewpointError, sample_viewpoints
     from rtp.plugins.moderngl import Renderer
 
     writer = DatasetWriter(out, settings)
@@ -134,21 +173,9 @@ def _run_job(
     scene, blockers = load_scene(scene_name, cache_dir, split, splits)
     w, h = size
     reader = DatasetReader(out)
-    plans: dict[str, list[tuple[str, Any, Any]]] = {}
-    for profile in profiles:
-        try:
-            pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
-                                      blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE)
-        except ViewpointError as err:
-            log.warning("%s (%s): %s", scene_name, profile, err)
-            report.failed.append(f"{scene_name}/{profile}")
-            continue
-        plans[profile] = []
-        for sid, (prev_cam, cam) in zip(_ids(scene_name, profile, per_scene), pairs):
-            if writer.has(sid) and _same_cameras(reader, sid, prev_cam, cam):
-                report.skipped += 1
-            else:
-                plans[profile].append((sid, prev_cam, cam))
+    planned, report.failed = _plan(scene_name, scene, blockers, profiles, per_scene, size, seed)
+    plans = {profile: _todo(writer, reader, plan) for profile, plan in planned.items()}
+    report.skipped = sum(len(planned[p]) - len(plans[p]) for p in plans)
     if queue is not None and report.skipped:
         queue.put(report.skipped)
     if not any(plans.values()):
@@ -163,17 +190,10 @@ def _run_job(
                     # newer than the sample's targets, so `rtp targets` recomputes them.
                     log.warning("%s was captured from other cameras than this rtp plans; recapturing it", sid)
                     report.recaptured += 1
-                prev = renderer.render(prev_cam)
-                frame = renderer.render(cam, prev)
-                geo = frame.mask > 0.5
-                unseen = float(1.0 - frame.seen[geo].mean()) if geo.any() else 0.0
-                writer.write(sid, sample_buffers(frame), {
-                    "scene": scene_name, "profile": profile, "camera": _camera_dict(cam),
-                    "prev_camera": _camera_dict(prev_cam), "exposure": float(frame.exposure),
-                    "unseen": unseen, "coverage": float(geo.mean()),
-                })
+                buffers, meta = _render(renderer, scene_name, profile, prev_cam, cam)
+                writer.write(sid, buffers, meta)
                 report.written += 1
-                report.unseen.setdefault(profile, []).append(unseen)
+                report.unseen.setdefault(profile, []).append(meta["unseen"])
                 if queue is not None:
                     queue.put(1)
     return report
@@ -187,19 +207,28 @@ def capture(
     size: tuple[int, int] = (1280, 720),
     profiles: Sequence[str] = ("slow", "fast"),
     seed: int = 0,
-    workers: int = 1,
+    workers: int | None = 1,
     cache_dir: str | os.PathLike[str] | None = None,
     split: str | None = None,
     splits: str | os.PathLike[str] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    ray: str | None = None,
+    _on_ray_actors: Callable[[list[Any]], None] | None = None,
 ) -> CaptureReport:
     """Capture ``per_scene`` samples per scene and motion profile into the dataset folder ``out``.
 
     ``size`` is ``(width, height)``. With ``workers > 1`` scenes render in parallel processes (one
     EGL context each). ``progress(done, total)`` is called as samples complete (skipped ones count).
+
+    ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
+    instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:
+    one worker per CPU of the cluster). Samples are the same as the local path's; workers send them
+    back as bytes and this process writes them, so no shared filesystem is needed.
     """
     if per_scene < 1:
         raise ParameterError(f"per_scene must be >= 1, got {per_scene}")
+    if workers is not None and workers < 1:
+        raise ParameterError(f"workers must be >= 1, got {workers}")
     if not scene_names:
         raise ParameterError("no scenes to capture")
     from rtp import sdk
@@ -233,7 +262,20 @@ def capture(
         for p, v in r.unseen.items():
             report.unseen.setdefault(p, []).extend(v)
 
-    if workers <= 1:
+    if ray is not None:
+        from ._ray import ray_capture
+
+        def advance(n: int) -> None:
+            nonlocal done
+            done += n
+            if progress:
+                progress(done, total)
+
+        merge(ray_capture(scene_names, str(out), profiles=tuple(profiles), per_scene=per_scene, size=(w, h), seed=seed,
+                          cache_dir=None if cache_dir is None else str(cache_dir), split=split,
+                          splits=None if splits is None else str(splits), settings=settings, address=ray,
+                          workers=workers, progress=advance, on_actors=_on_ray_actors))
+    elif (workers or 1) <= 1:
         class _Q:
             def put(self, n: int) -> None:
                 nonlocal done
@@ -247,7 +289,7 @@ def capture(
         ctx = mp.get_context("spawn")
         with ctx.Manager() as manager:
             queue = manager.Queue()
-            with worker_pool(workers) as pool:
+            with worker_pool(workers or 1) as pool:
                 futures = [pool.submit(_run_job, *a, queue=queue) for a in args]
                 pending = set(futures)
 

@@ -212,6 +212,30 @@ def sample_path(root: str | os.PathLike[str], sample_id: str) -> Path:
     return Path(root) / "samples" / f"{sample_id}.npz"
 
 
+def _check_id(sample_id: str) -> None:
+    if not isinstance(sample_id, str) or not _ID_RE.match(sample_id):
+        raise DatasetError(f"sample id {sample_id!r}: use letters, digits, '.', '_' and '-'")
+
+
+def encode_sample(sample_id: str, buffers: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> bytes:
+    """One sample as the bytes of its ``.npz`` file (what :meth:`DatasetWriter.write` stores).
+
+    Validates like ``write``: every buffer of :data:`BUFFERS`, shapes matching ``final_1x1``, finite
+    values, JSON-clean meta. Remote capture workers return these bytes; the driver writes them with
+    :meth:`DatasetWriter.write_encoded`."""
+    _check_id(sample_id)
+    missing = [b for b in BUFFERS if b not in buffers]
+    extra = [b for b in buffers if b not in BUFFERS]
+    if missing or extra:
+        raise DatasetError(f"sample {sample_id}: missing buffers {missing}, unknown buffers {extra}")
+    shape = tuple(np.asarray(buffers["final_1x1"]).shape[:2])
+    encoded = {name: _encode(name, buffers[name], shape) for name in BUFFERS}
+    meta_json = json.dumps(dict(meta), sort_keys=True, allow_nan=False)
+    out = io.BytesIO()
+    np.savez_compressed(out, meta=np.frombuffer(meta_json.encode(), dtype=np.uint8), **encoded)  # type: ignore[arg-type]
+    return out.getvalue()
+
+
 class DatasetWriter:
     """Writes samples into a dataset folder; resumable (``has`` tells which ids exist).
 
@@ -251,19 +275,26 @@ class DatasetWriter:
 
     def write(self, sample_id: str, buffers: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> Path:
         """Write one sample atomically. ``buffers`` must hold every buffer of :data:`BUFFERS`."""
-        if not _ID_RE.match(sample_id):
-            raise DatasetError(f"sample id {sample_id!r}: use letters, digits, '.', '_' and '-'")
-        missing = [b for b in BUFFERS if b not in buffers]
-        extra = [b for b in buffers if b not in BUFFERS]
-        if missing or extra:
-            raise DatasetError(f"sample {sample_id}: missing buffers {missing}, unknown buffers {extra}")
-        shape = tuple(np.asarray(buffers["final_1x1"]).shape[:2])
-        encoded = {name: _encode(name, buffers[name], shape) for name in BUFFERS}
-        meta_json = json.dumps(dict(meta), sort_keys=True, allow_nan=False)
+        return self.write_encoded(sample_id, encode_sample(sample_id, buffers, meta))
+
+    def write_encoded(self, sample_id: str, data: bytes) -> Path:
+        """Write a sample :func:`encode_sample` made (on this machine or a remote worker) atomically.
+
+        The archive's index is checked first (meta and every buffer present), so a truncated or
+        foreign payload raises :class:`DatasetError` and nothing is written."""
+        _check_id(sample_id)
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+                names = set(npz.files)
+                json.loads(bytes(npz["meta"]).decode())
+        except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
+            raise DatasetError(f"sample {sample_id}: the encoded sample is unreadable ({type(err).__name__}: {err})") from err
+        missing = [b for b in BUFFERS if b not in names]
+        if missing:
+            raise DatasetError(f"sample {sample_id}: the encoded sample lacks buffers {missing}")
         path = sample_path(self.root, sample_id)
         with atomic_output(path) as tmp:
-            with open(tmp, "wb") as f:
-                np.savez_compressed(f, meta=np.frombuffer(meta_json.encode(), dtype=np.uint8), **encoded)  # type: ignore[arg-type]
+            tmp.write_bytes(data)
         return path
 
     def finalize(self, extra: Mapping[str, Any] | None = None) -> None:
@@ -337,29 +368,7 @@ class DatasetReader:
         path = sample_path(self.root, sample_id)
         if not path.is_file():
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")
-        try:
-            npz = np.load(path, allow_pickle=False)
-            if not isinstance(npz, np.lib.npyio.NpzFile):
-                raise DatasetError(f"{path}: not an .npz archive (a {type(npz).__name__})")
-            meta = json.loads(bytes(npz["meta"]).decode())
-        except RtpError:
-            raise
-        except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
-            raise _unreadable(path, "unreadable sample", err) from err
-        if not isinstance(meta, dict):
-            raise DatasetError(f"{path}: the sample's meta is not a JSON object")
-
-        def load(name: str) -> np.ndarray:
-            if name not in npz.files:
-                raise DatasetError(f"{path}: buffer {name!r} missing")
-            try:
-                return _decode(name, npz[name])
-            except RtpError as err:
-                raise DatasetError(f"{path}: {err}") from err
-            except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
-                raise _unreadable(path, f"buffer {name!r} is unreadable", err) from err
-
-        return Sample(sample_id, load, meta)
+        return _open_sample(sample_id, path, path)
 
     def select(self, **meta: Any) -> list[str]:
         """Ids of samples whose meta has the given values, e.g. ``select(scene="oa_dm1")``."""
@@ -380,6 +389,37 @@ _PAPER_BUFFERS: dict[str, tuple[str, int | slice]] = {
     "shadow": ("extra_1x1", 0),
     **{f"final_{r}": (f"output_{r}", slice(0, 3)) for r in ALL_RATES},
 }
+
+
+def sample_from_bytes(sample_id: str, data: bytes) -> Sample:
+    """A :class:`Sample` read from the bytes of its ``.npz`` file (what :func:`encode_sample` makes)."""
+    return _open_sample(sample_id, io.BytesIO(data), f"sample {sample_id} (in memory)")
+
+
+def _open_sample(sample_id: str, source: Any, path: Any) -> Sample:
+    try:
+        npz = np.load(source, allow_pickle=False)
+        if not isinstance(npz, np.lib.npyio.NpzFile):
+            raise DatasetError(f"{path}: not an .npz archive (a {type(npz).__name__})")
+        meta = json.loads(bytes(npz["meta"]).decode())
+    except RtpError:
+        raise
+    except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
+        raise _unreadable(path, "unreadable sample", err) from err
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{path}: the sample's meta is not a JSON object")
+
+    def load(name: str) -> np.ndarray:
+        if name not in npz.files:
+            raise DatasetError(f"{path}: buffer {name!r} missing")
+        try:
+            return _decode(name, npz[name])
+        except RtpError as err:
+            raise DatasetError(f"{path}: {err}") from err
+        except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
+            raise _unreadable(path, f"buffer {name!r} is unreadable", err) from err
+
+    return Sample(sample_id, load, meta)
 
 
 class PaperDatasetReader:

@@ -204,16 +204,21 @@ def compute_targets(
     *,
     ppd: float | str | None = None,
     weber_l: float | None = None,
-    workers: int = 1,
+    workers: int | None = 1,
     progress: Any = None,
     flip_backend: str | None = None,
+    ray: str | None = None,
+    _on_ray_actors: Any = None,
 ) -> int:
     """Compute (or complete) the per-tile targets of every sample of a dataset; returns how many
     samples were processed. Existing targets are kept, so an interrupted run resumes.
 
     ``flip_backend`` as in :func:`rtp.metrics.tile_targets` (default: the batched torch port when
     torch is installed). With ``workers > 1`` each worker process gets an equal share of the CPU's
-    torch threads."""
+    torch threads.
+
+    ``ray`` computes on Ray instead (as in :func:`rtp.capture.capture`): each worker gets a sample's
+    bytes and returns its targets, which this process writes."""
     from concurrent.futures import as_completed
 
     from rtp import metrics as M
@@ -228,7 +233,8 @@ def compute_targets(
     M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work
     reader = DatasetReader(data_root)
     store = TargetStore(data_root)
-    params = {"ppd": M.DEFAULT_PPD if ppd is None else ppd, "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
+    params: dict[str, Any] = {"ppd": M.DEFAULT_PPD if ppd is None else ppd,
+                              "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
     for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)
         p: dict[str, Any] = {}
         if m in ("flip", "jnflip"):
@@ -243,15 +249,28 @@ def compute_targets(
     done = len(reader.ids) - len(ids)
     if progress:
         progress(done, len(reader.ids))
-    if workers <= 1:
+    if ray is not None and ids:
+        from ._ray import ray_targets
+
+        def advance(n: int) -> None:
+            nonlocal done
+            done += n
+            if progress:
+                progress(done, len(reader.ids))
+
+        todo = {i: tuple(m for m in metrics if not store.has(i, m)) for i in ids}
+        ray_targets(str(data_root), todo, params, address=ray, workers=workers, progress=advance,
+                    on_actors=_on_ray_actors)
+    elif ray is not None or (workers or 1) <= 1:  # (Ray with nothing to do starts no cluster)
         for i in ids:
             _compute_one(str(data_root), i, tuple(metrics), params)
             done += 1
             if progress:
                 progress(done, len(reader.ids))
     else:
-        with worker_pool(workers) as pool:
-            threads = max(1, (os.cpu_count() or 1) // workers)
+        n = workers or 1
+        with worker_pool(n) as pool:
+            threads = max(1, (os.cpu_count() or 1) // n)
             futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params, threads) for i in ids]
             for f in as_completed(futures):
                 f.result()

@@ -212,8 +212,8 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     with Bar(args, total, "capture", "sample") as bar:
         report = capture(
             names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
-            workers=args.workers, cache_dir=args.cache_dir, split=args.split, splits=args.splits,
-            progress=lambda done, _total: bar.update_to(done),
+            workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
+            progress=lambda done, _total: bar.update_to(done), ray=args.ray,
         )
     if report.failed:
         print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
@@ -223,6 +223,20 @@ def _cmd_capture(args: argparse.Namespace) -> int:
           + f", {report.skipped} already there"
           + (f"; unseen pixels of the new samples: {unseen}" if unseen else ""))
     return 0
+
+
+def _workers(args: argparse.Namespace) -> int | None:
+    """--workers, defaulting to 1 process locally and to one Ray worker per CPU with --ray."""
+    if args.workers is not None:
+        return int(args.workers)
+    return 1 if args.ray is None else None
+
+
+def _ray_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                        help="run on Ray (pip install 'rtp[ray]'): alone, a private Ray instance on this machine; "
+                        "'auto' or HOST:PORT / ray://HOST:10001 a cluster (default workers: one per CPU). "
+                        "Workers send results back; this machine writes the dataset (docs/scaling.md)")
 
 
 def _cmd_preview(args: argparse.Namespace) -> int:
@@ -247,8 +261,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
         except ValueError:
             raise _usage(f"--ppd: expected a number or 'width', got {args.ppd!r}") from None
     with Bar(args, 0, "targets", "sample") as bar:
-        n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=args.workers,
-                            progress=lambda done, total: bar.update_to(done, total))
+        n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
+                            progress=lambda done, total: bar.update_to(done, total), ray=args.ray)
     print(f"{args.data}: targets computed for {n} samples ({', '.join(args.metrics)})")
     return 0
 
@@ -445,7 +459,9 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
     cap.add_argument("--profiles", type=_choices_csv(tuple(MOTION_PROFILES)), default=",".join(MOTION_PROFILES),
                      help="motion profiles, comma-separated")
-    cap.add_argument("--workers", type=_positive, default=1, help="parallel render processes")
+    cap.add_argument("--workers", type=_positive, default=None,
+                     help="parallel render processes (default 1; with --ray, Ray workers)")
+    _ray_option(cap)
     cap.add_argument("--seed", type=int, default=0, help="viewpoint sampling seed")
     cache_dir(cap)
     splits(cap)
@@ -465,7 +481,9 @@ def build_parser() -> argparse.ArgumentParser:
                     f"width-based value (default: FLIP's own {DEFAULT_PPD:.2f})")
     tg.add_argument("--weber-l", type=float, default=DEFAULT_WEBER_L,
                     help="environment luminance l of JNFLIP/JNYang")
-    tg.add_argument("--workers", type=_positive, default=1, help="parallel processes")
+    tg.add_argument("--workers", type=_positive, default=None,
+                    help="parallel processes (default 1; with --ray, Ray workers)")
+    _ray_option(tg)
 
     tr = command("train", "train a metric-prediction model on a captured dataset", _cmd_train,
                  epilog="Hyper-parameters come from --config (the shipped models' recipe by default: "

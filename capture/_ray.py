@@ -1,0 +1,323 @@
+"""Capture and targets on a Ray cluster: ``rtp capture --ray [ADDRESS]``, ``rtp targets --ray [ADDRESS]``.
+
+The local process pool stays the default on one machine; Ray spreads the same work over a cluster
+(docs/scaling.md). The design:
+
+* **one long-lived actor per worker** holds what is expensive to set up: a capture worker its GL
+  context and the scene it rendered last (a scene loads once per worker, not once per sample), a
+  target worker the LPIPS network and torch's threads;
+* **one task per sample**: the driver plans (each scene's viewpoints are planned by a worker, which
+  keeps that scene loaded), skips what is on disk exactly as the local path does, and keeps every
+  worker two samples deep, preferring samples of the scene the worker already holds;
+* **no shared filesystem needed**: a capture worker returns the sample's ``.npz`` bytes and the
+  driver writes them atomically into the dataset; a target worker gets the sample's bytes and
+  returns the arrays. Scenes come from each node's own scene cache (``rtp scenes fetch`` there, or
+  ``$RTP_SCENE_CACHE`` on a shared disk);
+* **failures**: a worker process that dies is restarted and its samples retried by Ray
+  (``MAX_RETRIES`` times); the driver only ever writes complete samples, so nothing is lost and
+  nothing half-written appears. A run that is interrupted resumes like the local one.
+
+``ADDRESS`` is ``local`` (start a private Ray instance on this machine with ``workers`` CPUs), ``auto``
+(the cluster this machine belongs to) or a head node's ``host:port`` / ``ray://host:10001``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+from rtp.sdk import EXIT_USAGE, RtpError
+
+__all__ = ["MAX_RETRIES", "RAY_LOCAL", "RayExecutorError", "RayWorkerError", "ray_cluster"]
+
+log = logging.getLogger("rtp.capture")
+
+#: ``--ray`` without an address: a private Ray instance on this machine.
+RAY_LOCAL = "local"
+#: Times Ray restarts a dead worker and retries its samples before the job fails.
+MAX_RETRIES = 3
+#: Samples each worker has queued, so that it never waits for the driver to write.
+IN_FLIGHT = 2
+
+
+class RayExecutorError(RtpError):
+    """Ray is not installed, or the address given does not lead to a Ray cluster."""
+
+    exit_code = EXIT_USAGE
+
+
+class RayWorkerError(RayExecutorError):
+    """A Ray worker died more often than Ray retries, or failed with an error that is not rtp's own."""
+
+    exit_code = 1
+
+
+def _ray() -> Any:
+    try:
+        import ray
+    except ImportError as exc:
+        raise RayExecutorError("--ray needs Ray: pip install 'rtp[ray]' (or pip install 'ray>=2.40')") from exc
+    return ray
+
+
+def _check_reachable(address: str, timeout: float = 5.0) -> None:
+    """Fail in seconds, not minutes, on a head address nothing listens at (ray.init retries for long)."""
+    import socket
+
+    hostport = address.split("://", 1)[-1]
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit():
+        raise RayExecutorError(f"Ray address {address!r}: expected 'local', 'auto', HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise RayExecutorError(f"cannot start or reach Ray at {address!r}: nothing answers there ({exc}); "
+                               "start the head with `ray start --head` or pass --ray local") from exc
+
+
+@contextlib.contextmanager
+def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
+    """Connect to Ray (or start a private local instance); yields how many workers to start.
+
+    ``workers`` None means one per CPU of the cluster. A Ray already initialised in this process
+    (a notebook, a test) is used as it is and left running; one this function started is shut
+    down on exit."""
+    ray = _ray()
+    started = False
+    if not ray.is_initialized():
+        kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.WARNING,
+                                  "configure_logging": False}
+        try:
+            if address in (None, RAY_LOCAL):
+                ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+            else:
+                if address != "auto":
+                    _check_reachable(address)
+                ray.init(address=address, **kwargs)
+        except RayExecutorError:
+            raise
+        except Exception as exc:  # ConnectionError, RuntimeError, ValueError from ray.init
+            raise RayExecutorError(f"cannot start or reach Ray at {address or RAY_LOCAL!r}: {exc}") from exc
+        started = True
+    try:
+        n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        log.info("Ray: %d worker(s) on %s", n, address or RAY_LOCAL)
+        yield n
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _pick(pending: dict[str, deque[Any]], busy_on: dict[str, int], current: str | None) -> tuple[str, Any] | None:
+    """The next task for a worker that holds scene ``current``: one of that scene, else one of the
+    scene fewest other workers are on (most left first)."""
+    if current is not None and pending.get(current):
+        return current, pending[current].popleft()
+    open_keys = [k for k, q in pending.items() if q]
+    if not open_keys:
+        return None
+    key = min(open_keys, key=lambda k: (busy_on.get(k, 0), -len(pending[k])))
+    return key, pending[key].popleft()
+
+
+def _schedule(actors: Sequence[Any], tasks: dict[str, list[Any]], submit: Callable[[Any, Any], Any],
+              done: Callable[[Any, Any], None], what: str) -> None:
+    """Run ``tasks`` (grouped by an affinity key, a scene) on ``actors``, ``IN_FLIGHT`` per actor,
+    calling ``done(task, result)`` in the driver as each finishes."""
+    ray = _ray()
+    pending = {k: deque(v) for k, v in tasks.items() if v}
+    current: dict[int, str | None] = dict.fromkeys(range(len(actors)))
+    busy_on: dict[str, int] = {}
+    running: dict[Any, tuple[int, str, Any]] = {}
+
+    def feed(i: int) -> bool:
+        picked = _pick(pending, busy_on, current[i])
+        if picked is None:
+            return False
+        key, task = picked
+        current[i] = key
+        busy_on[key] = busy_on.get(key, 0) + 1
+        running[submit(actors[i], task)] = (i, key, task)
+        return True
+
+    for i in range(len(actors)):
+        for _ in range(IN_FLIGHT):
+            feed(i)
+    while running:
+        ready, _ = ray.wait(list(running), num_returns=1)
+        ref = ready[0]
+        i, key, task = running.pop(ref)
+        busy_on[key] -= 1
+        try:
+            result = ray.get(ref)
+        except ray.exceptions.RayActorError as exc:
+            raise RayWorkerError(f"a Ray worker died {MAX_RETRIES + 1} times on {what} {task[0]!r}; "
+                                   f"everything finished before is saved, rerun to resume: {exc}") from exc
+        except ray.exceptions.RayTaskError as exc:
+            cause = exc.cause if isinstance(getattr(exc, "cause", None), BaseException) else None
+            if isinstance(cause, RtpError):
+                raise cause from exc
+            raise RayWorkerError(f"{what} {task[0]!r} failed on a Ray worker: {exc}") from exc
+        done(task, result)
+        feed(i)
+
+
+# -- capture ----------------------------------------------------------------------------------------
+
+
+class _CaptureWorker:
+    """A Ray actor: a GL renderer of ``size`` and the scene it holds."""
+
+    def __init__(self, size: tuple[int, int], cache_dir: str | None, split: str | None, splits: str | None) -> None:
+        self.size, self.cache_dir, self.split, self.splits = size, cache_dir, split, splits
+        self._renderer: Any = None
+        self._scene: tuple[str, Any, Any] | None = None
+        self._uploaded: str | None = None
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def _load(self, scene_name: str) -> tuple[Any, Any]:
+        from ._capture import load_scene
+
+        if self._scene is None or self._scene[0] != scene_name:
+            scene, blockers = load_scene(scene_name, self.cache_dir, self.split, self.splits)
+            self._scene = (scene_name, scene, blockers)
+        return self._scene[1], self._scene[2]
+
+    def plan(self, scene_name: str, profiles: Sequence[str], per_scene: int, seed: int) -> Any:
+        from ._capture import _plan
+
+        scene, blockers = self._load(scene_name)
+        return _plan(scene_name, scene, blockers, profiles, per_scene, self.size, seed)
+
+    def render(self, scene_name: str, profile: str, sample_id: str, prev_cam: Any, cam: Any,
+               ) -> tuple[bytes, dict[str, Any], dict[str, Any]]:
+        from rtp.plugins.moderngl import Renderer
+
+        from ._capture import _render
+        from ._dataset import encode_sample
+
+        scene, _ = self._load(scene_name)
+        if self._renderer is None:
+            self._renderer = Renderer(*self.size)
+        if self._uploaded != scene_name:
+            self._renderer.load_scene(scene)
+            self._uploaded = scene_name
+        buffers, meta = _render(self._renderer, scene_name, profile, prev_cam, cam)
+        return encode_sample(sample_id, buffers, meta), meta, self._renderer.settings
+
+
+def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str], per_scene: int,
+                size: tuple[int, int], seed: int, cache_dir: str | None, split: str | None, splits: str | None,
+                settings: dict[str, Any], address: str | None, workers: int | None,
+                progress: Callable[[int], None], on_actors: Callable[[list[Any]], None] | None = None) -> Any:
+    """The Ray path of :func:`rtp.capture.capture` (same arguments; returns a ``CaptureReport``)."""
+    from ._capture import CaptureReport, _todo
+    from ._dataset import DatasetReader, DatasetWriter
+
+    ray = _ray()
+    writer = DatasetWriter(out, settings)
+    report = CaptureReport()
+    with ray_cluster(address, workers) as n:
+        cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
+        actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
+        if on_actors is not None:
+            on_actors(actors)
+        # Plan every scene (the worker that plans a scene keeps it loaded and renders it first).
+        planned: dict[str, dict[str, list[Any]]] = {}
+
+        def planned_one(task: Any, result: Any) -> None:
+            plans, failed = result
+            planned[task[0]] = plans
+            report.failed.extend(failed)
+
+        _schedule(actors, {s: [(s,)] for s in scene_names},
+                  lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed), planned_one, "scene")
+        reader = DatasetReader(out)
+        tasks: dict[str, list[Any]] = {}
+        for scene_name in scene_names:
+            for profile, plan in planned.get(scene_name, {}).items():
+                todo = _todo(writer, reader, plan)
+                report.skipped += len(plan) - len(todo)
+                tasks.setdefault(scene_name, []).extend((sid, scene_name, profile, p, c) for sid, p, c in todo)
+        if report.skipped:
+            progress(report.skipped)
+
+        def rendered(task: Any, result: Any) -> None:
+            sid, _, profile, _, _ = task
+            data, meta, renderer_settings = result
+            if writer.has(sid):
+                log.warning("%s was captured from other cameras than this rtp plans; recapturing it", sid)
+                report.recaptured += 1
+            writer.write_encoded(sid, data)
+            report.written += 1
+            report.renderer = renderer_settings
+            report.unseen.setdefault(profile, []).append(float(meta["unseen"]))
+            progress(1)
+
+        _schedule(actors, tasks, lambda a, t: a.render.remote(t[1], t[2], t[0], t[3], t[4]), rendered, "sample")
+        for a in actors:
+            ray.kill(a)
+    return report
+
+
+# -- targets ----------------------------------------------------------------------------------------
+
+
+class _TargetWorker:
+    """A Ray actor computing the stored targets of samples sent to it as bytes."""
+
+    def __init__(self, threads: int) -> None:
+        from ._targets import _set_threads
+
+        _set_threads(threads)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def compute(self, sample_id: str, data: bytes, metrics: tuple[str, ...], params: dict[str, Any],
+                base_tile: int) -> tuple[dict[str, Any], tuple[int, int]]:
+        from ._dataset import sample_from_bytes
+        from ._targets import sample_targets
+
+        sample = sample_from_bytes(sample_id, data)
+        return sample_targets(sample, metrics, params, base_tile), sample.size
+
+
+def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[str, Any], *, address: str | None,
+                workers: int | None, progress: Callable[[int], None],
+                on_actors: Callable[[list[Any]], None] | None = None) -> None:
+    """The Ray path of :func:`rtp.capture.compute_targets`: ``todo`` maps sample ids to the metrics
+    they lack; results are written into the dataset's target store by this process."""
+    from ._dataset import sample_path
+    from ._targets import TargetStore
+
+    ray = _ray()
+    store = TargetStore(data_root)
+    with ray_cluster(address, workers) as n:
+        cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_TargetWorker)
+        actors = [cls.remote(1) for _ in range(n)]
+        if on_actors is not None:
+            on_actors(actors)
+
+        def submit(actor: Any, task: Any) -> Any:
+            sid, metrics = task
+            return actor.compute.remote(sid, sample_path(data_root, sid).read_bytes(), metrics, params,
+                                        store.base_tile)
+
+        def done(task: Any, result: Any) -> None:
+            sid, _ = task
+            values, size = result
+            for m, v in values.items():
+                store.write(sid, m, v, size)
+            progress(1)
+
+        # One queue: targets have no affinity (every worker holds the same network).
+        _schedule(actors, {"": list(todo.items())}, submit, done, "sample")
+        for a in actors:
+            ray.kill(a)

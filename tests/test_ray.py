@@ -1,0 +1,132 @@
+"""Capture and targets on a local Ray cluster (2 CPUs): the same samples and targets as the local
+path, and a worker killed mid-task loses nothing (issue 10)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import ray
+
+from rtp.capture import BUFFERS, DatasetReader, TargetStore, capture, compute_targets
+from rtp.capture._ray import RayExecutorError, ray_cluster
+
+pytestmark = pytest.mark.gl
+
+SCENES = ["procedural:3", "procedural:4"]
+SIZE = (96, 64)
+METRICS = ("flip", "psnr", "lpips", "jnflip", "jnyang")
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[None]:
+    ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
+    yield
+    ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def local(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The reference: the same capture and targets through the local path (targets in a pool of two
+    one-thread workers like the Ray workers: torch's convolutions round the last bit of LPIPS
+    differently with another thread count, about 6e-8)."""
+    out = tmp_path_factory.mktemp("local") / "ds"
+    capture(SCENES, out, per_scene=2, size=SIZE)
+    compute_targets(out, METRICS, workers=2)
+    return out
+
+
+def assert_same_dataset(a: Path, b: Path, metrics: tuple[str, ...] = ()) -> None:
+    ra, rb = DatasetReader(a), DatasetReader(b)
+    assert ra.ids == rb.ids and len(ra.ids) == len(SCENES) * 2 * 2
+    for sid in ra.ids:
+        sa, sb = ra[sid], rb[sid]
+        assert sa.meta == sb.meta
+        for name in BUFFERS:
+            np.testing.assert_array_equal(sa.buffer(name), sb.buffer(name), err_msg=f"{sid}/{name}")
+    ta, tb = TargetStore(a), TargetStore(b)
+    assert ta.metrics == tb.metrics
+    for sid in ra.ids:
+        for m in metrics:
+            np.testing.assert_array_equal(ta.load(sid, m, 4), tb.load(sid, m, 4), err_msg=f"{sid}/{m}")
+    assert not list((b / "samples").glob(".*")) and not list((b / "targets").rglob(".*.tmp"))
+
+
+def test_ray_capture_and_targets_equal_the_local_path(cluster: None, local: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ray"
+    seen: list[tuple[int, int]] = []
+    report = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local",
+                     progress=lambda d, t: seen.append((d, t)))
+    assert (report.written, report.skipped, report.failed) == (8, 0, [])
+    assert seen[-1] == (8, 8) and [d for d, _ in seen] == sorted(d for d, _ in seen)
+    assert report.renderer and set(report.unseen) == {"slow", "fast"}
+    assert compute_targets(out, METRICS, workers=2, ray="local") == 8
+    assert_same_dataset(local, out, METRICS)
+    # Resumes like the local path: nothing left to do.
+    again = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local")
+    assert (again.written, again.skipped) == (0, 8)
+    assert compute_targets(out, METRICS, ray="local") == 0
+
+
+def _killer(victims: list[int]) -> tuple[Any, Any]:
+    """An ``on_actors`` hook noting the workers' pids and a progress callback that SIGKILLs the first
+    worker right after the first sample lands (it has another sample queued, so it dies mid-task)."""
+    killed: list[int] = []
+
+    def on_actors(actors: list[Any]) -> None:
+        victims.extend(ray.get([a.pid.remote() for a in actors]))
+
+    def progress(done: int, total: int) -> None:
+        if done >= 1 and not killed:
+            os.kill(victims[0], signal.SIGKILL)
+            killed.append(victims[0])
+
+    return on_actors, progress
+
+
+def test_a_worker_killed_mid_task_loses_nothing(cluster: None, local: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ray"
+    victims: list[int] = []
+    on_actors, progress = _killer(victims)
+    report = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local", progress=progress,
+                     _on_ray_actors=on_actors)
+    assert report.written == 8 and victims
+    with pytest.raises(ProcessLookupError):
+        os.kill(victims[0], 0)  # it really died
+    victims.clear()
+    on_actors, progress = _killer(victims)
+    assert compute_targets(out, METRICS, workers=2, ray="local", progress=progress, _on_ray_actors=on_actors) == 8
+    assert_same_dataset(local, out, METRICS)
+
+
+def test_ray_errors_are_typed(cluster: None, tmp_path: Path) -> None:
+    # A bad scene fails on the worker with the same typed error the local path raises.
+    from rtp.capture.scenes import SceneNotFoundError
+
+    with pytest.raises(SceneNotFoundError):
+        capture(["procedural:x"], tmp_path / "ds", per_scene=1, size=SIZE, ray="local")
+    ray.shutdown()
+    try:
+        with pytest.raises(RayExecutorError, match="cannot start or reach Ray"), ray_cluster("127.0.0.1:1", 1):
+            pass
+        with pytest.raises(RayExecutorError, match="HOST:PORT"), ray_cluster("no-port", 1):
+            pass
+    finally:
+        ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
+
+
+def test_cli_ray_flag(cluster: None, local: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from rtp.cli import main
+
+    out = tmp_path / "cli"
+    scenes = ",".join(SCENES)
+    assert main(["capture", "--scene", scenes, "--per-scene", "2", "--size", "96x64", "--out", str(out),
+                 "--ray", "--workers", "2", "--no-progress"]) == 0
+    assert main(["targets", str(out), "--ray", "--no-progress"]) == 0
+    assert "8 samples written" in capsys.readouterr().out
+    assert_same_dataset(local, out, METRICS)
