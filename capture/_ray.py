@@ -173,6 +173,9 @@ class _CaptureWorker:
     """A Ray actor: a GL renderer of ``size`` and the scene it holds."""
 
     def __init__(self, size: tuple[int, int], cache_dir: str | None, split: str | None, splits: str | None) -> None:
+        # Mesa's software rasteriser starts a thread per core; the worker holds one of Ray's CPUs, so
+        # it rasterises on one (set before the GL context exists, which is when Mesa reads it).
+        os.environ.setdefault("LP_NUM_THREADS", "1")
         self.size, self.cache_dir, self.split, self.splits = size, cache_dir, split, splits
         self._renderer: Any = None
         self._scene: tuple[str, Any, Any] | None = None

@@ -1,0 +1,76 @@
+"""Scaling on Ray: capture and targets with 1 and 2 local Ray workers, against the local pool.
+
+    python bench/scaling.py [--scenes procedural:0,procedural:1] [--per-scene 3] [--size 1280x720]
+                        [--workers 1,2] [--cache DIR]
+
+Each configuration captures ``len(scenes) x 2 profiles x per-scene`` samples into a fresh folder,
+then computes the targets of all five metrics. A private Ray instance is started per worker count
+(its start-up is reported apart, not in the per-sample times). Prints a Markdown table of seconds
+per sample and the speed-up over one worker; docs/scaling.md quotes it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import ray
+
+from rtp.capture import capture, compute_targets
+
+METRICS = ("flip", "psnr", "lpips", "jnflip", "jnyang")
+
+
+def run(scenes: list[str], per_scene: int, size: tuple[int, int], workers: int, mode: str, cache: str | None,
+        ) -> tuple[float, float, int]:
+    with tempfile.TemporaryDirectory(prefix="rtp-bench-ray-") as d:
+        out = Path(d) / "ds"
+        executor = "local" if mode == "ray" else None
+        t0 = time.perf_counter()
+        r = capture(scenes, out, per_scene=per_scene, size=size, workers=workers, ray=executor, cache_dir=cache)
+        t_cap = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        compute_targets(out, METRICS, workers=workers, ray=executor)
+        t_tg = time.perf_counter() - t0
+        return t_cap / r.written, t_tg / r.written, r.written
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", default="procedural:0,procedural:1")
+    ap.add_argument("--per-scene", type=int, default=3)
+    ap.add_argument("--size", default="1280x720")
+    ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--modes", default="ray,pool", help="ray (a private local Ray instance) and/or pool (local processes)")
+    ap.add_argument("--cache", default=None, help="scene cache for fetched maps")
+    args = ap.parse_args()
+    w, h = (int(v) for v in args.size.split("x"))
+    scenes = args.scenes.split(",")
+    print(f"{len(scenes)} scenes x 2 profiles x {args.per_scene} pairs at {w}x{h}; {platform.machine()}, "
+          f"{os.cpu_count()} CPUs, ray {ray.__version__}\n")
+    print("| executor | workers | capture s/sample | targets s/sample | capture speed-up | targets speed-up | Ray start s |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for mode in args.modes.split(","):
+        base: tuple[float, float] | None = None
+        for n in (int(x) for x in args.workers.split(",")):
+            start = 0.0
+            if mode == "ray":
+                t0 = time.perf_counter()
+                ray.init(num_cpus=n, include_dashboard=False, configure_logging=False)
+                start = time.perf_counter() - t0
+            try:
+                cap, tg, _ = run(scenes, args.per_scene, (w, h), n, mode, args.cache)
+            finally:
+                if mode == "ray":
+                    ray.shutdown()
+            base = base or (cap, tg)
+            print(f"| {'Ray (local)' if mode == 'ray' else 'process pool'} | {n} | {cap:.2f} | {tg:.2f} | "
+                  f"{base[0] / cap:.2f}x | {base[1] / tg:.2f}x | {start:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
