@@ -6,12 +6,18 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rtp-installed
 
-# The shipped models' data: every split of scenes.yaml, both motion profiles (docs/results.md).
+# The dataset: every split of scenes.yaml, both motion profiles (docs/results.md). 12 pairs per
+# train map and profile (51 maps: 1,224 samples), 12 per validation map (72; they live beside the
+# training samples, train/recipes hold them out), 8 per test map (80). About 17 MB per sample.
+# RAY=1 runs capture and targets on a private Ray instance, RAY=HOST:PORT on a cluster (docs/scaling.md).
 DATA      ?= data
 SIZE      ?= 1280x720
-PER_SCENE ?= 4
-VAL_PER_SCENE ?= 6
-WORKERS   ?= 1
+PER_SCENE ?= 12
+VAL_PER_SCENE ?= 12
+TEST_PER_SCENE ?= 8
+WORKERS   ?= 2
+RAY       ?=
+RAYFLAG   := $(if $(RAY),--ray $(if $(filter 1,$(RAY)),,$(RAY)))
 METRIC    ?= jnyang
 # The recipe the shipped models were trained with: train/recipes/shipped.yaml (steps, batch, crop,
 # learning rate, the validation split); LPIPS trains with the linear head (a ReLU head left one of
@@ -69,11 +75,11 @@ demo: $(STAMP)
 # Resumable: rerun after an interruption, or with a larger PER_SCENE to add samples.
 dataset: $(STAMP)
 	$(RTP) scenes fetch
-	$(RTP) capture --split train --per-scene $(PER_SCENE) --size $(SIZE) --workers $(WORKERS) --out $(DATA)/train
-	$(RTP) capture --split validation --per-scene $(VAL_PER_SCENE) --size $(SIZE) --workers $(WORKERS) --out $(DATA)/train
-	$(RTP) capture --split test --per-scene $(PER_SCENE) --size $(SIZE) --workers $(WORKERS) --out $(DATA)/test
-	$(RTP) targets $(DATA)/train --workers $(WORKERS)
-	$(RTP) targets $(DATA)/test --workers $(WORKERS)
+	$(RTP) capture --split train --per-scene $(PER_SCENE) --size $(SIZE) --workers $(WORKERS) $(RAYFLAG) --out $(DATA)/train
+	$(RTP) capture --split validation --per-scene $(VAL_PER_SCENE) --size $(SIZE) --workers $(WORKERS) $(RAYFLAG) --out $(DATA)/train
+	$(RTP) capture --split test --per-scene $(TEST_PER_SCENE) --size $(SIZE) --workers $(WORKERS) $(RAYFLAG) --out $(DATA)/test
+	$(RTP) targets $(DATA)/train --workers $(WORKERS) $(RAYFLAG)
+	$(RTP) targets $(DATA)/test --workers $(WORKERS) $(RAYFLAG)
 
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
