@@ -33,10 +33,12 @@ PAPER_METADATA = {
 
 
 #: Input sets by channel count for timing wider inputs: the paper's four, + normal x/y, and the ten
-#: channels both adapters produce (bench/study.py's "normals" and "both-adapters").
+#: channels both adapters produce, and the paper's four + roughness, metallic, specular (bench/study.py's
+#: "normals", "both-adapters" and "material").
 TIMING_INPUTS = {
     4: tuple(PAPER_METADATA["inputs"]),
     6: ("reprojected.r", "seen", "albedo.r", "normal.x", "normal.y", "normal.z"),
+    7: ("reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular"),
     10: ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
          "normal.x", "normal.y", "normal.z"),
 }
@@ -44,7 +46,7 @@ TIMING_INPUTS = {
 
 def paper_model(folder: Path, arch: str = "paper", inputs: int = 4, **config: int) -> tuple[object, Path]:
     """The paper's network (or ``arch`` with ``config``: width, depth, stem) with random weights (cost
-    does not depend on them) and the paper's outputs, on ``inputs`` channels (4: the paper's; 6 or
+    does not depend on them) and the paper's outputs, on ``inputs`` channels (4: the paper's; 6, 7 or
     10: :data:`TIMING_INPUTS`), exported with rtp-export into ``folder``: returns ``(torch network,
     onnx path)``."""
     import torch

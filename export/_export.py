@@ -114,9 +114,14 @@ def _export_provenance(opset: int) -> dict[str, Any]:
     }
 
 
-def _parity_sizes(tile: int) -> list[tuple[int, int]]:
+def _parity_sizes(tile: int, multiple: int | None = None) -> list[tuple[int, int]]:
+    """Frame sizes the exported model is checked at: two of whole tiles and, for a network that takes
+    partial tiles (``input_multiple`` below the tile size), one that ends in a partial tile."""
     base = max(tile, 16)
-    return [(base * 4, base * 6), (base * 3, base * 5)]
+    sizes = [(base * 4, base * 6), (base * 3, base * 5)]
+    if multiple is not None and multiple < tile:
+        sizes.append((base * 3 + multiple, base * 5 + tile - multiple))
+    return sizes
 
 
 def export_checkpoint(
@@ -147,8 +152,10 @@ def export_checkpoint(
         extra = _read_yaml(extra_metadata) if isinstance(extra_metadata, (str, os.PathLike)) else dict(extra_metadata)
         meta_dict = _merge(meta_dict, extra)
     meta_dict = _merge(meta_dict, {"provenance": {"export": _export_provenance(opset)}})
-    meta = ModelMetadata.from_dict(meta_dict)
     net = ckpt.net.eval()
+    # the network decides which frame sizes it takes (FastNet: multiples of its stem)
+    meta_dict["input_multiple"] = getattr(net, "input_multiple", None)
+    meta = ModelMetadata.from_dict(meta_dict)
     ckpt_mod.check_fits(net, meta)
 
     c, t = net.config["in_channels"], net.config["tile"]
@@ -212,7 +219,7 @@ def _torch_parity(path: Path, net: Any, meta: ModelMetadata) -> None:
 
     pred = sdk.load(path, providers=["CPUExecutionProvider"], metadata=None)
     gen = torch.Generator().manual_seed(1)
-    for h, w in _parity_sizes(meta.tile_size):
+    for h, w in _parity_sizes(meta.tile_size, meta.input_multiple):
         x = torch.rand(2, len(meta.inputs), h, w, generator=gen)
         with torch.inference_mode():
             ref = net(x).numpy()

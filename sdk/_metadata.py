@@ -32,8 +32,10 @@ __all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
 
 #: The ``metadata_props`` key that holds the JSON metadata.
 METADATA_KEY = "rtp.metadata"
-#: The schema version this SDK writes; it reads this version and every older one.
-SCHEMA_VERSION = 1
+#: The newest metadata schema this SDK reads (it reads every older one too). Version 2 added
+#: ``input_multiple``; metadata is written with the lowest version that holds its fields, so a model
+#: without ``input_multiple`` stays readable by an SDK that knows only version 1.
+SCHEMA_VERSION = 2
 _METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 _FIELDS = (
     "schema_version",
@@ -42,6 +44,7 @@ _FIELDS = (
     "transform",
     "safety",
     "tile_size",
+    "input_multiple",
     "inputs",
     "outputs",
     "extrapolation_k",
@@ -115,9 +118,18 @@ class ModelMetadata:
     weber_l: float | None = None
     description: str = ""
     provenance: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
-    schema_version: int = SCHEMA_VERSION
+    #: The network takes any frame whose height and width are multiples of this and returns
+    #: ``ceil(H/tile_size) x ceil(W/tile_size)`` tiles, a last partial tile seeing only the pixels it
+    #: covers; ``predict`` pads a frame only up to this multiple. None (models before schema 2, the
+    #: paper's network): the frame is padded up to whole tiles by repeating its last row and column.
+    input_multiple: int | None = None
+    schema_version: int = 1
     #: ``"sha256:<hex>"`` of the graph and weights (``rtp-export`` writes it; ``sdk.load`` checks it), or None.
     digest: str | None = None
+
+    def __post_init__(self) -> None:
+        # the lowest schema that holds the fields (see SCHEMA_VERSION)
+        object.__setattr__(self, "schema_version", 1 if self.input_multiple is None else 2)
 
     # -- parsing ------------------------------------------------------------------------------
     @classmethod
@@ -168,6 +180,16 @@ class ModelMetadata:
         tile = d.get("tile_size")
         if isinstance(tile, bool) or not isinstance(tile, int) or tile not in TILE_SIZES:
             raise MetadataError(f"tile_size: expected one of {TILE_SIZES}, got {tile!r}", "tile_size")
+
+        multiple = d.get("input_multiple")
+        if multiple is not None and (
+            isinstance(multiple, bool) or not isinstance(multiple, int) or multiple not in TILE_SIZES or multiple > tile
+        ):
+            raise MetadataError(
+                f"input_multiple: expected one of {[s for s in TILE_SIZES if s <= tile]} (a power of two up to "
+                f"tile_size {tile}) or null, got {multiple!r}",
+                "input_multiple",
+            )
 
         inputs = d.get("inputs")
         if not isinstance(inputs, (list, tuple)) or not inputs or not all(isinstance(c, str) for c in inputs):
@@ -226,7 +248,7 @@ class ModelMetadata:
             weber_l=weber,
             description=description,
             provenance=_freeze(copy.deepcopy(dict(provenance))),
-            schema_version=SCHEMA_VERSION,
+            input_multiple=None if multiple is None else int(multiple),
             digest=digest,
         )
 
@@ -270,6 +292,7 @@ class ModelMetadata:
             "transform": self.transform.to_dict(),
             "safety": self.safety,
             "tile_size": self.tile_size,
+            **({"input_multiple": self.input_multiple} if self.input_multiple is not None else {}),
             "inputs": list(self.inputs),
             "outputs": list(self.outputs),
             "extrapolation_k": self.extrapolation_k,
@@ -284,6 +307,12 @@ class ModelMetadata:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
     # -- decoding -----------------------------------------------------------------------------
+    @property
+    def pad_multiple(self) -> int:
+        """What a frame's height and width are padded up to before the network sees them:
+        ``input_multiple``, or ``tile_size`` for a model without one."""
+        return self.tile_size if self.input_multiple is None else self.input_multiple
+
     @property
     def worse_direction(self) -> float:
         """+1 when a larger transformed value means a worse image, -1 otherwise.

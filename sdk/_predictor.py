@@ -430,13 +430,16 @@ class ShadingRatePredictor:
         return x4
 
     def _padded(self, x4: np.ndarray) -> np.ndarray:
-        """Pad H and W up to a multiple of the tile size (or the model's fixed size) by repeating the
-        last row and column, so edge tiles see real content rather than an artificial border."""
+        """Pad H and W up to the model's fixed size, or up to ``metadata.pad_multiple`` (whole tiles,
+        or less for a network that takes partial tiles itself), by repeating the last row and
+        column, so edge tiles see real content rather than an artificial border. A frame already
+        of that size is passed as it is (no copy when it is C-contiguous): at 1920x1080 a network
+        with ``input_multiple`` 4 saves the 4 ms copy to 1088 rows."""
         _, _, h, w = x4.shape
         if self._static_hw is not None:
             ph, pw = self._static_hw
         else:
-            ph, pw = padded_size(h, w, self._meta.tile_size)
+            ph, pw = padded_size(h, w, self._meta.pad_multiple)
         if (ph, pw) == (h, w):
             return np.ascontiguousarray(x4)
         # np.pad(mode="edge") by hand: one copy into a fresh array (a millisecond less at 1080p)
@@ -468,7 +471,7 @@ class ShadingRatePredictor:
         else:
             raw = self._run(xp)
         t = self._meta.tile_size
-        expect = (n, len(self._meta.outputs), xp.shape[2] // t, xp.shape[3] // t)
+        expect = (n, len(self._meta.outputs), *tile_grid(xp.shape[2], xp.shape[3], t))
         if raw.shape != expect:
             raise InferenceError(
                 f"model output has shape {raw.shape}, expected {expect} from an input of {xp.shape} with "

@@ -46,10 +46,12 @@ def build_onnx(
     static: Sequence[int] | None = None,
     input_name: str = "input",
     output_name: str = "metric",
+    ceil_mode: bool = False,
 ) -> Path:
     """A tiny real model: 1x1 conv (weights ``(R, C)``) -> MaxPool(tile) -> Sigmoid.
 
-    Its output is known in closed form, so tests can check every step of ``predict``.
+    Its output is known in closed form, so tests can check every step of ``predict``. With
+    ``ceil_mode`` the pooling takes a partial last tile (a model for ``input_multiple``).
     """
     import onnx
     from onnx import TensorProto, helper
@@ -64,7 +66,8 @@ def build_onnx(
         in_shape, out_shape = [n, c, h, w], [n, r, h // tile, w // tile]
     nodes = [
         helper.make_node("Conv", [input_name, "W", "B"], ["conv"], kernel_shape=[1, 1]),
-        helper.make_node("MaxPool", ["conv"], ["pool"], kernel_shape=[tile, tile], strides=[tile, tile]),
+        helper.make_node("MaxPool", ["conv"], ["pool"], kernel_shape=[tile, tile], strides=[tile, tile],
+                         ceil_mode=int(ceil_mode)),
         helper.make_node("Sigmoid", ["pool"], [output_name]),
     ]
     graph = helper.make_graph(

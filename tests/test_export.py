@@ -74,6 +74,36 @@ def test_export_round_trip_matches_torch(tmp_path: Path, meta: dict) -> None:
         np.testing.assert_allclose(pred.predict(x), _torch_pipeline(net, m, x), rtol=1e-5, atol=1e-5)
 
 
+def test_a_fast_network_exports_taking_partial_tiles(tmp_path: Path) -> None:
+    from rtp.train.model import FastNet
+
+    torch.manual_seed(0)
+    net = FastNet()
+    with torch.no_grad():  # trained-like BatchNorm statistics
+        net.train()(torch.rand(4, 4, 64, 64))
+    net.eval()
+    out = export.export_checkpoint(checkpoint.save(tmp_path / "f.pt", net, base_metadata()), tmp_path / "f.onnx")
+    pred = sdk.load(out)
+    assert pred.metadata.input_multiple == 4 and pred.metadata.schema_version == 2
+    rng = np.random.default_rng(0)
+    x = rng.random((4, 72, 120), dtype=np.float32)  # whole 4-pixel steps, partial 16-pixel tiles: run as is
+    with torch.inference_mode():
+        ref = tt.decode(net(torch.from_numpy(x)[None]), pred.metadata)[0].numpy()
+    assert ref.shape == (6, 5, 8)
+    np.testing.assert_allclose(pred.predict(x), ref, rtol=1e-5, atol=1e-5)
+    y = x[:, :70, :118]  # padded to 72x120 by repeating the edge
+    np.testing.assert_allclose(pred.predict(y), _torch_pipeline_to(net, pred.metadata, y, 4), rtol=1e-5, atol=1e-5)
+
+
+def _torch_pipeline_to(net: torch.nn.Module, meta: sdk.ModelMetadata, x: np.ndarray, multiple: int) -> np.ndarray:
+    h, w = x.shape[-2:]
+    t = meta.tile_size
+    xt = F.pad(torch.from_numpy(x)[None], (0, -w % multiple, 0, -h % multiple), mode="replicate")
+    with torch.inference_mode():
+        raw = net(xt)[:, :, : -(-h // t), : -(-w // t)]
+    return tt.decode(raw, meta)[0].numpy()
+
+
 def test_export_writes_one_metadata_key_and_onnx_fields(tmp_path: Path) -> None:
     import onnx
 

@@ -19,7 +19,23 @@ def test_round_trip_through_json() -> None:
     again = sdk.ModelMetadata.from_json(m.to_json())
     assert again == m
     assert again.to_dict()["provenance"] == {"scenes": ["a", "b"], "val": {"r2": 0.8}}
-    assert json.loads(m.to_json())["schema_version"] == sdk.SCHEMA_VERSION
+    assert json.loads(m.to_json())["schema_version"] == 1  # the lowest schema that holds its fields
+
+
+def test_input_multiple_is_optional_validated_and_raises_the_schema() -> None:
+    m = sdk.ModelMetadata.from_dict(base_metadata())
+    assert m.input_multiple is None and m.pad_multiple == 16 and "input_multiple" not in m.to_dict()
+    m4 = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4))
+    assert m4.input_multiple == 4 and m4.pad_multiple == 4
+    d = json.loads(m4.to_json())
+    assert d["input_multiple"] == 4 and d["schema_version"] == 2 == sdk.SCHEMA_VERSION
+    assert sdk.ModelMetadata.from_json(m4.to_json()) == m4
+    for bad in (3, 32, 0, True, "4", 4.0):
+        with pytest.raises(sdk.MetadataError, match="input_multiple") as info:
+            sdk.ModelMetadata.from_dict(base_metadata(input_multiple=bad))
+        assert info.value.key == "input_multiple"
+    with pytest.raises(sdk.MetadataError, match="schema_version"):
+        sdk.ModelMetadata.from_dict(base_metadata(schema_version=sdk.SCHEMA_VERSION + 1))
 
 
 def test_defaults_and_frozen() -> None:

@@ -118,3 +118,19 @@ def test_the_fast_network_layout() -> None:
         build_network("resnet", 4, 4, 16)
     with pytest.raises(ValueError, match="tile"):
         FastNet(tile=12)
+
+
+def test_the_fast_network_takes_partial_tiles() -> None:
+    from rtp.train.model import FastNet
+
+    net = FastNet().eval()
+    assert net.input_multiple == 4 and FastNet(stem=8, tile=4).input_multiple == 4
+    assert MetricNet().input_multiple is None
+    x = torch.rand(1, 4, 64, 96)
+    with torch.inference_mode():
+        whole = net(x)
+        # 1920x1080 at 16-pixel tiles is 120 x 67.5 tiles: a frame 4 pixels past whole tiles gets the extra row
+        ragged = net(torch.nn.functional.pad(x, (0, 0, 0, 4)))
+    assert whole.shape == (1, 4, 4, 6) and ragged.shape == (1, 4, 5, 6)
+    # tiles whose receptive field stays inside the frame do not change
+    torch.testing.assert_close(ragged[:, :, :2], whole[:, :, :2])

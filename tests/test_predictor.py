@@ -54,6 +54,25 @@ def test_padding_repeats_the_edge_and_loses_no_tile(tiny_model: Callable[..., Pa
     assert p.tiles(20, 37) == (2, 3)
 
 
+def test_a_model_taking_partial_tiles_is_padded_only_to_its_multiple(tiny_model: Callable[..., Path]) -> None:
+    x = np.random.default_rng(3).standard_normal((4, 21, 37)).astype(np.float32)
+    padded = sdk.load(tiny_model())  # pads to 32x48 by repeating the edge
+    for multiple in (1, 4):
+        p = sdk.load(tiny_model(base_metadata(input_multiple=multiple), ceil_mode=True))
+        assert p.metadata.pad_multiple == multiple
+        # a max over a partial tile equals the max over the tile padded with its own edge
+        np.testing.assert_array_equal(p.predict_raw(x), padded.predict_raw(x))
+        np.testing.assert_array_equal(p.predict(x[:, :20]), padded.predict(x[:, :20]))
+        assert p.predict(x).shape == (6, 2, 3)
+
+
+def test_input_multiple_on_a_model_that_needs_whole_tiles_is_a_clear_error(tiny_model: Callable[..., Path]) -> None:
+    p = sdk.load(tiny_model(base_metadata(input_multiple=4)))  # floor-mode pooling drops the partial tile
+    assert p.predict(np.zeros((4, 32, 48), np.float32)).shape == (6, 2, 3)
+    with pytest.raises(sdk.InferenceError, match="does not fit this model"):
+        p.predict(np.zeros((4, 20, 36), np.float32))
+
+
 def test_shading_rates_uses_the_default_threshold(tiny_model: Callable[..., Path]) -> None:
     meta = base_metadata(default_threshold=0.3)
     p = sdk.load(tiny_model(meta))

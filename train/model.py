@@ -114,6 +114,11 @@ class MetricNet(nn.Module):
     def tile(self) -> int:
         return int(self.config["tile"])
 
+    @property
+    def input_multiple(self) -> None:
+        """None: floor-mode pooling needs whole tiles (the runtime pads frames up to them)."""
+        return None
+
     def plan(self) -> list[dict[str, int]]:
         c = self.config
         return [asdict(s) for s in layer_plan(c["in_channels"], c["out_channels"], c["tile"], c["width"])]
@@ -166,13 +171,21 @@ class FastNet(nn.Module):
             if i < depth:
                 layers += [nn.Conv2d(width, width, 3, padding=1, bias=False), nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
             if i < pools:
-                layers.append(nn.MaxPool2d(2))
+                # ceil_mode: a frame of any multiple of the stem gives ceil(H / tile) tile rows, the last
+                # partial tile pooling the pixels it has (identical to floor mode on whole tiles)
+                layers.append(nn.MaxPool2d(2, ceil_mode=True))
         layers += [nn.Conv2d(width, out_channels, 1), nn.Sigmoid()]
         self.layers = nn.Sequential(*layers)
 
     @property
     def tile(self) -> int:
         return int(self.config["tile"])
+
+    @property
+    def input_multiple(self) -> int:
+        """Frames need only be a multiple of the stem's stride (metadata ``input_multiple``): the
+        runtime pads a 1920x1080 frame not at all where whole 16-pixel tiles would need 1088 rows."""
+        return min(int(self.config["stem"]), self.tile)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.layers(x)
