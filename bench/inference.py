@@ -28,7 +28,7 @@ from rtp import sdk
 FRAMES = ((1920, 1080), (1280, 720))
 #: rtp's fast networks timed next to the paper's (train/model.py FastNet): (width, depth, stem, inputs).
 FAST = ((16, 3, 4, 4), (16, 5, 4, 4), (24, 4, 4, 4), (32, 3, 4, 4), (16, 3, 2, 4), (16, 3, 8, 4),
-        (16, 3, 4, 6), (16, 3, 4, 10))
+        (16, 3, 4, 6), (16, 3, 4, 7), (16, 3, 4, 10))
 
 
 def _params(path: Path) -> int:

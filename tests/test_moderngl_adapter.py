@@ -111,6 +111,28 @@ def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
     assert (x[5] != ref[5]).mean() < 0.002
 
 
+def test_material_channels_from_an_engine_texture(frames) -> None:
+    ctx, prev, cur = frames
+    channels = ("metallic", "seen", "roughness", "specular")
+    a = Adapter(channels, W, H, ctx=ctx)
+    rms = np.stack([cur.roughness, cur.metallic, cur.specular], axis=-1)
+    x = _engine_inputs(ctx, prev, cur, a, material=_tex(ctx, rms))
+    for plane, name in zip(x, channels):
+        np.testing.assert_allclose(plane, cur.channel(name), atol=1e-6, err_msg=name)
+    assert x[0].max() == 1.0 and 0.0 < x[2].mean() < 1.0  # the scene has metals and varied roughness
+    # a glTF occlusion-roughness-metallic texture: no specular there, so the dielectric default 0.5
+    orm = np.stack([np.ones_like(cur.roughness), cur.roughness, cur.metallic, np.zeros_like(cur.roughness)], -1)
+    y = _engine_inputs(ctx, prev, cur, a, material=_tex(ctx, orm), material_components=(1, 2, -1))
+    np.testing.assert_allclose(y[[0, 2]], x[[0, 2]], atol=1e-6)
+    geo = cur.depth > 0
+    assert np.all(y[3][geo] == 0.5) and not y[3][~geo].any()
+    with pytest.raises(ValueError, match="material texture"):
+        _engine_inputs(ctx, prev, cur, a)
+    with pytest.raises(ValueError, match="material_components"):
+        _engine_inputs(ctx, prev, cur, a, material=_tex(ctx, rms), material_components=(0, 1, 3))
+    a.close()
+
+
 def test_no_previous_frame_and_channel_errors(frames) -> None:
     ctx, prev, cur = frames
     a = Adapter(("seen", "reprojected.g", "albedo.b"), W, H, ctx=ctx)
@@ -135,7 +157,7 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
 def test_reference_frame_source_hands_over_the_renderer_g_buffers(frames) -> None:
     """The generic path (frame_source -> adapter -> inputs) gives what the renderer computed."""
     ctx, prev, cur = frames
-    channels = ("depth", "seen", "albedo.g", "normal.x", "reprojected.r")
+    channels = ("depth", "seen", "albedo.g", "normal.x", "reprojected.r", "roughness", "metallic", "specular")
     with Adapter.frame_source(procedural(3), W, H, ctx=ctx) as source:
         adapter = source.adapter(channels)
         x = adapter.inputs(source.frame(cur.camera, prev.camera))

@@ -46,7 +46,9 @@ CHANNEL_IDS: dict[str, int] = {
     "reprojected.r": 0, "reprojected.g": 1, "reprojected.b": 2, "seen": 3,
     "albedo.r": 4, "albedo.g": 5, "albedo.b": 6,
     "normal.x": 7, "normal.y": 8, "normal.z": 9, "depth": 10,
+    "roughness": 11, "metallic": 12, "specular": 13,
 }
+_MATERIAL = ("roughness", "metallic", "specular")
 _MAX_CHANNELS = 16
 
 
@@ -73,6 +75,13 @@ class GBufferTextures:
         prev_projection: the previous projection when it differs (window depth only).
         depth_component, prev_depth_component: the component holding depth (e.g. 3 for a
             normal+depth texture).
+        material: the material parameters (``roughness``, ``metallic``, ``specular`` channels,
+            ``sdk.CHANNELS`` conventions: GGX perceptual roughness, metalness, dielectric specular
+            scale with 0.5 = F0 of 4 %); needed only by models with those inputs.
+        material_components: the component of ``material`` holding roughness, metallic and
+            specular, in that order (default RGB); -1 where the G-buffer has none (specular then
+            reads 0.5, the glTF dielectric default, the others 0). A glTF occlusion-roughness-metallic
+            texture is ``(1, 2, -1)``.
     """
 
     albedo: Any
@@ -86,6 +95,8 @@ class GBufferTextures:
     prev_projection: np.ndarray | None = None
     depth_component: int = 0
     prev_depth_component: int = 0
+    material: Any = None
+    material_components: tuple[int, int, int] = (0, 1, 2)
 
 
 class Adapter(_AdapterBase[GBufferTextures]):
@@ -174,6 +185,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
         prev_projection: np.ndarray | None = None,
         depth_component: int = 0,
         prev_depth_component: int = 0,
+        material: Any = None,
+        material_components: tuple[int, int, int] = (0, 1, 2),
     ) -> None:
         """Render the input planes into the adapter's targets without reading them back (the
         reference renderer's path; the keyword arguments are the fields of :class:`GBufferTextures`)."""
@@ -184,9 +197,18 @@ class Adapter(_AdapterBase[GBufferTextures]):
         for c, tex in ((depth_component, depth), (prev_depth_component, prev_depth)):
             if tex is not None and not 0 <= c < tex.components:
                 raise ValueError(f"depth component {c} does not exist in a {tex.components}-component texture")
+        wanted = [c for c in self.channels if c in _MATERIAL]
+        if wanted and material is None:
+            raise ValueError(f"the inputs {wanted} need the material texture (GBufferTextures.material: roughness, "
+                             "metallic, specular)")
+        comps = tuple(int(c) for c in material_components)
+        if material is not None and (len(comps) != 3 or not all(-1 <= c < material.components for c in comps)):
+            raise ValueError(f"material_components: expected three component indices of the {material.components}"
+                             f"-component material texture (or -1), got {material_components!r}")
         textures = {"u_albedo": albedo, "u_normal": normal, "u_depth": depth,
                     "u_prev_colour": prev_colour if has_prev else albedo,
-                    "u_prev_depth": prev_depth if has_prev else depth}
+                    "u_prev_depth": prev_depth if has_prev else depth,
+                    "u_material": material if material is not None else albedo}
         for loc, (name, tex) in enumerate(textures.items()):
             tex.use(location=loc)
             self._set(name, loc)
@@ -195,6 +217,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
         for name, value in self._flags.items():
             self._set(name, value)
         self._set("u_has_prev", has_prev)
+        self._set("u_has_material", material is not None)
+        self._set("u_material_comp", comps)
         self._set("u_depth_comp", int(depth_component))
         self._set("u_prev_depth_comp", int(prev_depth_component))
         self._set("u_tolerance", self.tolerance)

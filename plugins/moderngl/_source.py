@@ -31,7 +31,7 @@ log = logging.getLogger("rtp.plugins.moderngl")
 class ReferenceFrameSource(FrameSource[GBufferTextures]):
     """The reference :class:`Renderer` drawing an :class:`rtp.scene.Scene`, as an engine feeding
     the moderngl adapter: each :meth:`frame` draws the previous and the current camera and uploads
-    the current G-buffers (albedo, normal, depth) and the previous displayed frame (final 1x1
+    the current G-buffers (albedo, normal, depth, material) and the previous displayed frame (final 1x1
     colour and depth) into textures of the renderer's context.
 
     Args:
@@ -57,7 +57,7 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
             size = (self.width, self.height)
             self._textures = {name: ctx.texture(size, components, dtype="f4")
                               for name, components in (("albedo", 3), ("normal", 3), ("depth", 1),
-                                                       ("prev_colour", 3), ("prev_depth", 1))}
+                                                       ("material", 3), ("prev_colour", 3), ("prev_depth", 1))}
         except BaseException:
             self.renderer.release()
             raise
@@ -82,6 +82,7 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
         self._last = (camera, cur)
         self.frames = (prev, cur)
         images = {"albedo": cur.albedo, "normal": cur.normal, "depth": cur.depth,
+                  "material": np.stack([cur.roughness, cur.metallic, cur.specular], axis=-1),
                   "prev_colour": prev.colour["1x1"], "prev_depth": prev.depth}
         for name, image in images.items():
             write_texture(self._textures[name], np.asarray(image, np.float32))
@@ -91,6 +92,7 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
             view=camera.view(), projection=camera.projection(self.width / self.height),
             prev_colour=t["prev_colour"], prev_depth=t["prev_depth"],
             prev_view_projection=prev_camera.view_projection(self.width, self.height),
+            material=t["material"],
         )
 
     def _close_dependents(self) -> None:

@@ -19,6 +19,9 @@ uniform sampler2D u_normal;         // xyz unit normal (view space, or world wit
 uniform sampler2D u_depth;          // depth in component u_depth_comp
 uniform sampler2D u_prev_colour;    // previous final colour, display-encoded rgb
 uniform sampler2D u_prev_depth;     // previous depth in component u_prev_depth_comp
+uniform sampler2D u_material;       // roughness, metallic, specular in components u_material_comp
+uniform ivec3 u_material_comp;      // component of each; -1: the default (specular 0.5, else 0)
+uniform bool u_has_material;
 uniform int u_depth_comp;
 uniform int u_prev_depth_comp;
 uniform bool u_depth_window;        // depth is window depth in [0, 1] (1 = background), not linear
@@ -96,7 +99,14 @@ void main() {
     if (u_normal_world) n = mat3(u_view) * n;
     n = geo ? normalize(n) : vec3(0.0);
     if (!geo) albedo = vec3(0.0);
-    float v[11] = float[11](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d);
+    vec3 mat = vec3(0.0, 0.0, 0.5);
+    if (u_has_material) {
+        vec4 m = texelFetch(u_material, g, 0);
+        for (int i = 0; i < 3; ++i) if (u_material_comp[i] >= 0) mat[i] = m[u_material_comp[i]];
+    }
+    if (!geo) mat = vec3(0.0);
+    float v[14] = float[14](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+                            mat.x, mat.y, mat.z);
     float outv[16];
     for (int i = 0; i < 16; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
