@@ -37,7 +37,7 @@ pytestmark = pytest.mark.gl
 
 W, H = 256, 144
 ALL = ["reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
-       "normal.x", "normal.y", "normal.z", "depth", "motion.x", "motion.y"]
+       "normal.x", "normal.y", "normal.z", "roughness", "metallic", "depth", "motion.x", "motion.y"]
 PAPER = ["reprojected.r", "seen", "albedo.r", "normal.z"]
 
 
@@ -189,6 +189,15 @@ def test_normals_within_12bit(textured: _Setup, textured_inputs: list[np.ndarray
         assert not err[~geo].any()  # background is 0 in both
 
 
+def test_material_within_12bit(textured: _Setup, textured_inputs: list[np.ndarray]) -> None:
+    for name in ("roughness", "metallic"):
+        err, edge, geo = textured.errors(textured_inputs, ALL, name)
+        assert np.all(err[geo & ~edge] <= 1.0 / 4095 + 2e-3), (name, err[geo & ~edge].max())
+        assert np.mean(err[geo] <= 0.01) >= 0.99, name
+    i = ALL.index("metallic")
+    assert any(x[i].max() == 1.0 for x in textured_inputs) and all(x[ALL.index("roughness")].std() > 0 for x in textured_inputs)
+
+
 def test_normals_8bit(textured: _Setup) -> None:
     chans = ["normal.x", "normal.y", "normal.z"]
     xs = textured.inputs(chans, normal_bits=8)
@@ -263,8 +272,8 @@ def test_rates_agree_on_most_tiles(tmp_path: Path, textured: _Setup, textured_in
 def test_unsupported_and_unknown_channels() -> None:
     from rtp.plugins.pyrender import Adapter
 
-    with pytest.raises(UnsupportedChannelError, match="roughness"):
-        Adapter(["albedo.r", "roughness"], W, H)
+    with pytest.raises(UnsupportedChannelError, match="specular"):
+        Adapter(["albedo.r", "roughness", "specular"], W, H)
     with pytest.raises(UnsupportedChannelError, match="unknown channel"):
         Adapter(["albedo.q"], W, H)
     assert "shadow" not in Adapter.supported_channels

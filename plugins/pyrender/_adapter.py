@@ -15,7 +15,7 @@ from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positio
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
 from ._errors import PyrenderAdapterError
-from ._gbuffer import GBufferRenderer, GBuffers
+from ._gbuffer import MATERIAL, GBufferRenderer, GBuffers
 
 if TYPE_CHECKING:
     from ._source import PyrenderFrameSource
@@ -81,13 +81,17 @@ class Adapter(_BaseAdapter[SceneFrame]):
       :func:`rtp.sdk.reproject` (the reference definition both plugins follow).
     * ``albedo.r/g/b``: glTF base colour (factor x texture x vertex colour), display-encoded sRGB.
     * ``normal.x/y/z``: unit view-space shading normal (normal maps included; two-sided).
+    * ``roughness``, ``metallic``: the glTF material's perceptual roughness and metalness (factor x
+      metallic-roughness texture; specular-glossiness materials: 1 - glossiness and 0), what
+      pyrender shades with; 12 bits, sharing passes with the normal components.
     * ``depth``: linear view depth from pyrender's 24-bit depth buffer.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.
 
-    Anything else (roughness, metallic, specular, shadow, emissive) raises
+    Anything else (specular, shadow, emissive) raises
     :class:`rtp.sdk.adapters.UnsupportedChannelError` at construction: pyrender's shading has no
-    buffer that means the same thing.
+    buffer that means the same thing (its metallic-roughness model has no specular scale: every
+    dielectric has F0 = 4 %).
 
     Args:
         channels: the channels to produce, in order; normally ``predictor.metadata.inputs``.
@@ -115,7 +119,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, "depth", *_MOTION)
+        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, *MATERIAL, "depth", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
 
@@ -195,18 +199,19 @@ class Adapter(_BaseAdapter[SceneFrame]):
             return self._gbuf.draw(scene, flags)
 
     def gbuffers(self, scene: Any, pose: Any, *, camera: Any | None = None, albedo: bool = True,
-                 normals: Iterable[str] = _NORMAL) -> GBuffers:
+                 normals: Iterable[str] = _NORMAL, material: Iterable[str] = ()) -> GBuffers:
         """Render the G-buffers of ``scene`` seen from ``pose`` (4x4 camera-to-world, OpenGL camera
         convention: the camera looks down its -Z axis, Y up).
 
         Returns:
             :class:`GBuffers`: ``depth`` ``(H, W)``, ``albedo`` ``(H, W, 3)``, ``normal`` ``(H, W, 3)``,
+            and the ``material`` scalars asked for (``"roughness"``, ``"metallic"``) ``(H, W)``,
             float32, top-left origin, 0 on background.
         """
         self._check_open()
         pose = _pose(pose, "pose")
         with self._posed(scene, camera, pose):
-            return self._gbuf.render(scene, albedo=albedo, normals=tuple(normals))
+            return self._gbuf.render(scene, albedo=albedo, normals=tuple(normals), material=tuple(material))
 
     def _frame(self, image: Any, name: str) -> np.ndarray:
         a = np.asarray(image)
@@ -240,8 +245,12 @@ class Adapter(_BaseAdapter[SceneFrame]):
         prev_cam = cam if prev_camera is None else prev_camera
 
         g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & set(_ALBEDO)),
-                          normals=[c for c in _NORMAL if c in wanted])
+                          normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
         planes: dict[str, np.ndarray] = {"depth": g.depth}
+        for name in MATERIAL:
+            value = getattr(g, name)
+            if value is not None:
+                planes[name] = value
         if g.albedo is not None:
             planes.update({c: g.albedo[..., i] for i, c in enumerate(_ALBEDO)})
         if g.normal is not None:

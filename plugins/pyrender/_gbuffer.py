@@ -44,7 +44,9 @@ log = logging.getLogger("rtp.plugins.pyrender")
 
 SHADER_DIR = Path(__file__).with_name("shaders")
 _MODE_ALBEDO, _MODE_8, _MODE_12 = 1, 2, 3
-_SLOTS = {"normal.x": 1, "normal.y": 2, "normal.z": 3}
+_SLOTS = {"normal.x": 1, "normal.y": 2, "normal.z": 3, "roughness": 4, "metallic": 5}
+#: The material scalars a pass can write (pyrender's metallic-roughness model has no specular scale).
+MATERIAL = ("roughness", "metallic")
 
 
 @dataclass
@@ -56,11 +58,15 @@ class GBuffers:
       24-bit depth buffer.
     * ``albedo`` ``(H, W, 3)`` or None: base colour, display-encoded sRGB in [0, 1].
     * ``normal`` ``(H, W, 3)`` or None: unit view-space normal (components not asked for are 0).
+    * ``roughness``, ``metallic`` ``(H, W)`` or None: the glTF material's perceptual roughness and
+      metalness (factor x metallic-roughness texture), as pyrender shades with them.
     """
 
     depth: np.ndarray
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
+    roughness: np.ndarray | None = None
+    metallic: np.ndarray | None = None
 
     @property
     def mask(self) -> np.ndarray:
@@ -205,10 +211,11 @@ class GBufferRenderer:
     def closed(self) -> bool:
         return self._renderer is None
 
-    def _passes(self, normals: Sequence[str]) -> list[tuple[dict[str, int], list[str]]]:
-        """``(defines, slots)`` of the normal passes for the components asked for."""
+    def _passes(self, scalars: Sequence[str]) -> list[tuple[dict[str, int], list[str]]]:
+        """``(defines, slots)`` of the scalar passes (normal components, roughness, metallic) for the
+        ones asked for, packed two per pass at 12 bits (or three at 8)."""
         per = 3 if self.normal_bits == 8 else 2
-        names = [n for n in ("normal.z", "normal.x", "normal.y") if n in normals]
+        names = [n for n in ("normal.z", "normal.x", "normal.y", *MATERIAL) if n in scalars]
         out = []
         for i in range(0, len(names), per):
             group = names[i : i + per]
@@ -257,20 +264,26 @@ class GBufferRenderer:
         colour, depth = out
         return np.ascontiguousarray(colour[..., :3]), np.ascontiguousarray(depth, dtype=np.float32)
 
-    def render(self, scene: Any, *, albedo: bool = False, normals: Sequence[str] = ()) -> GBuffers:
-        """Draw the passes needed for ``albedo`` and the normal components in ``normals``
-        (``"normal.x"``, ``"normal.y"``, ``"normal.z"``) from the scene's main camera.
+    def render(self, scene: Any, *, albedo: bool = False, normals: Sequence[str] = (),
+               material: Sequence[str] = ()) -> GBuffers:
+        """Draw the passes needed for ``albedo``, the normal components in ``normals``
+        (``"normal.x"``, ``"normal.y"``, ``"normal.z"``) and the material scalars in ``material``
+        (``"roughness"``, ``"metallic"``) from the scene's main camera; the scalars share passes.
 
         Depth always comes back (from the first pass; an albedo pass when nothing else is asked).
         """
+        unknown = [m for m in material if m not in MATERIAL]
+        if unknown:
+            raise ValueError(f"material: expected names from {MATERIAL}, got {unknown}")
         depth: np.ndarray | None = None
         out_albedo: np.ndarray | None = None
         out_normal: np.ndarray | None = None
+        scalars: dict[str, np.ndarray] = {}
         if albedo:
             rgb, depth = self._render(scene, {"RTP_GBUF_MODE": _MODE_ALBEDO})
             out_albedo = rgb.astype(np.float32) / 255.0
-        passes = self._passes(normals)
-        if passes:
+        passes = self._passes([*normals, *material])
+        if any(n.startswith("normal.") for _, group in passes for n in group):
             out_normal = np.zeros((self.height, self.width, 3), np.float32)
         for defines, group in passes:
             rgb, d = self._render(scene, defines)
@@ -280,7 +293,10 @@ class GBufferRenderer:
             else:
                 vals = list(unpack12(rgb))
             for name, v in zip(group, vals):
-                out_normal[..., "xyz".index(name[-1])] = v * 2.0 - 1.0  # type: ignore[index]
+                if name.startswith("normal."):
+                    out_normal[..., "xyz".index(name[-1])] = v * 2.0 - 1.0  # type: ignore[index]
+                else:
+                    scalars[name] = v
         if depth is None:
             _, depth = self._render(scene, {"RTP_GBUF_MODE": _MODE_ALBEDO})
         mask = depth > 0.0
@@ -288,4 +304,7 @@ class GBufferRenderer:
             out_albedo[~mask] = 0.0
         if out_normal is not None:
             out_normal[~mask] = 0.0
-        return GBuffers(depth=np.where(mask, depth, 0.0).astype(np.float32), albedo=out_albedo, normal=out_normal)
+        for v in scalars.values():
+            v[~mask] = 0.0
+        return GBuffers(depth=np.where(mask, depth, 0.0).astype(np.float32), albedo=out_albedo, normal=out_normal,
+                        roughness=scalars.get("roughness"), metallic=scalars.get("metallic"))

@@ -6,7 +6,9 @@
 //   1: display-encoded (sRGB) base colour, 8 bits per channel;
 //   2: three scalars (slots RTP_SLOT_R, RTP_SLOT_G, RTP_SLOT_B), 8 bits each;
 //   3: two scalars (slots RTP_SLOT_P, RTP_SLOT_Q), 12 bits each, packed across R, G and B.
-// Slots: 0 none, 1 normal.x, 2 normal.y, 3 normal.z (view space, mapped from [-1, 1] to [0, 1]).
+// Slots: 0 none, 1 normal.x, 2 normal.y, 3 normal.z (view space, mapped from [-1, 1] to [0, 1]),
+// 4 roughness, 5 metallic (glTF: factor x metallic-roughness texture G / B; specular-glossiness
+// materials: 1 - glossiness, and metallic 0).
 // Alpha is always 1, which turns pyrender's alpha blending (alphaMode BLEND) into a plain write.
 // pyrender substitutes defines textually: no define name here is a substring of another name.
 
@@ -147,10 +149,32 @@ vec3 view_normal() {
     return normalize(mat3(V) * n);
 }
 
+// GGX perceptual roughness and metalness, as pyrender's mesh.frag reads them.
+vec2 roughness_metallic() {
+    vec2 rm = vec2(1.0, 0.0);
+#ifdef USE_METALLIC_MATERIAL
+    rm = vec2(material.roughness_factor, material.metallic_factor);
+#ifdef HAS_METALLIC_ROUGHNESS_TEX
+    vec4 mr = texture(material.metallic_roughness_texture, uv_0);
+    rm *= vec2(mr.g, mr.b);
+#endif
+#endif
+#ifdef USE_GLOSSY_MATERIAL
+    float gloss = material.glossiness_factor;
+#ifdef HAS_SPECULAR_GLOSSINESS_TEX
+    gloss *= texture(material.specular_glossiness, uv_0).a;
+#endif
+    rm = vec2(1.0 - gloss, 0.0);
+#endif
+    return clamp(rm, 0.0, 1.0);
+}
+
 float slot(int id, vec3 n) {  // a scalar mapped to [0, 1]
     if (id == 1) return n.x * 0.5 + 0.5;
     if (id == 2) return n.y * 0.5 + 0.5;
     if (id == 3) return n.z * 0.5 + 0.5;
+    if (id == 4) return roughness_metallic().x;
+    if (id == 5) return roughness_metallic().y;
     return 0.0;
 }
 
