@@ -81,9 +81,10 @@ class Adapter(_BaseAdapter[SceneFrame]):
       :func:`rtp.sdk.reproject` (the reference definition both plugins follow).
     * ``albedo.r/g/b``: glTF base colour (factor x texture x vertex colour), display-encoded sRGB.
     * ``normal.x/y/z``: unit view-space shading normal (normal maps included; two-sided).
-    * ``roughness``, ``metallic``: the glTF material's perceptual roughness and metalness (factor x
-      metallic-roughness texture; specular-glossiness materials: 1 - glossiness and 0), what
-      pyrender shades with; 12 bits, sharing passes with the normal components.
+    * ``roughness``, ``metallic``: the material's perceptual roughness and metalness as pyrender
+      shades with them (factor x metallic-roughness texture, read from its R and G channels as
+      pyrender 0.1.45 does; specular-glossiness materials: 1 - glossiness and 0); 12 bits, sharing
+      passes with the normal components.
     * ``depth``: linear view depth from pyrender's 24-bit depth buffer.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.

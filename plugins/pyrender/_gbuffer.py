@@ -58,8 +58,8 @@ class GBuffers:
       24-bit depth buffer.
     * ``albedo`` ``(H, W, 3)`` or None: base colour, display-encoded sRGB in [0, 1].
     * ``normal`` ``(H, W, 3)`` or None: unit view-space normal (components not asked for are 0).
-    * ``roughness``, ``metallic`` ``(H, W)`` or None: the glTF material's perceptual roughness and
-      metalness (factor x metallic-roughness texture), as pyrender shades with them.
+    * ``roughness``, ``metallic`` ``(H, W)`` or None: the material's perceptual roughness and
+      metalness as pyrender shades with them (factor x metallic-roughness texture R / G).
     """
 
     depth: np.ndarray

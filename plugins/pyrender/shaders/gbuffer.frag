@@ -7,8 +7,8 @@
 //   2: three scalars (slots RTP_SLOT_R, RTP_SLOT_G, RTP_SLOT_B), 8 bits each;
 //   3: two scalars (slots RTP_SLOT_P, RTP_SLOT_Q), 12 bits each, packed across R, G and B.
 // Slots: 0 none, 1 normal.x, 2 normal.y, 3 normal.z (view space, mapped from [-1, 1] to [0, 1]),
-// 4 roughness, 5 metallic (glTF: factor x metallic-roughness texture G / B; specular-glossiness
-// materials: 1 - glossiness, and metallic 0).
+// 4 roughness, 5 metallic (factor x metallic-roughness texture R / G: the channels pyrender 0.1.45's
+// mesh.frag shades with, where glTF says G / B; specular-glossiness materials: 1 - glossiness, 0).
 // Alpha is always 1, which turns pyrender's alpha blending (alphaMode BLEND) into a plain write.
 // pyrender substitutes defines textually: no define name here is a substring of another name.
 
@@ -149,14 +149,15 @@ vec3 view_normal() {
     return normalize(mat3(V) * n);
 }
 
-// GGX perceptual roughness and metalness, as pyrender's mesh.frag reads them.
+// GGX perceptual roughness and metalness, read as pyrender's mesh.frag reads them: the model must see
+// the parameters the displayed image is shaded with (for a metallic-roughness texture pyrender reads
+// roughness from R and metalness from G, not glTF's G and B).
 vec2 roughness_metallic() {
     vec2 rm = vec2(1.0, 0.0);
 #ifdef USE_METALLIC_MATERIAL
     rm = vec2(material.roughness_factor, material.metallic_factor);
 #ifdef HAS_METALLIC_ROUGHNESS_TEX
-    vec4 mr = texture(material.metallic_roughness_texture, uv_0);
-    rm *= vec2(mr.g, mr.b);
+    rm *= texture(material.metallic_roughness_texture, uv_0).rg;
 #endif
 #endif
 #ifdef USE_GLOSSY_MATERIAL
