@@ -71,6 +71,8 @@ INPUT_SETS: dict[str, tuple[str, ...]] = {
     "shadow": ("reprojected.r", "seen", "albedo.r", "normal.z", "shadow"),
     "material": ("reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular"),
     "emissive": ("reprojected.r", "seen", "albedo.r", "normal.z", "emissive"),
+    # the material channels both adapters produce (pyrender has no specular scale)
+    "rough-metal": ("reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic"),
     "both-adapters": ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
                       "normal.x", "normal.y", "normal.z"),
 }

@@ -37,7 +37,7 @@ pytestmark = pytest.mark.gl
 
 W, H = 256, 144
 ALL = ["reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
-       "normal.x", "normal.y", "normal.z", "roughness", "metallic", "depth", "motion.x", "motion.y"]
+       "normal.x", "normal.y", "normal.z", "roughness", "metallic", "specular", "depth", "motion.x", "motion.y"]
 PAPER = ["reprojected.r", "seen", "albedo.r", "normal.z"]
 
 
@@ -196,6 +196,10 @@ def test_material_within_12bit(textured: _Setup, textured_inputs: list[np.ndarra
         assert np.mean(err[geo] <= 0.01) >= 0.99, name
     i = ALL.index("metallic")
     assert any(x[i].max() == 1.0 for x in textured_inputs) and all(x[ALL.index("roughness")].std() > 0 for x in textured_inputs)
+    # specular: pyrender shades every dielectric with F0 = 4 % (specular 0.5), whatever the rtp scene said
+    for x, (_, f1) in zip(textured_inputs, textured.frames):
+        geo = f1.depth > 0
+        assert np.all(x[ALL.index("specular")][geo] == 0.5) and not x[ALL.index("specular")][~geo].any()
 
 
 def test_normals_8bit(textured: _Setup) -> None:
@@ -272,8 +276,8 @@ def test_rates_agree_on_most_tiles(tmp_path: Path, textured: _Setup, textured_in
 def test_unsupported_and_unknown_channels() -> None:
     from rtp.plugins.pyrender import Adapter
 
-    with pytest.raises(UnsupportedChannelError, match="specular"):
-        Adapter(["albedo.r", "roughness", "specular"], W, H)
+    with pytest.raises(UnsupportedChannelError, match="emissive"):
+        Adapter(["albedo.r", "roughness", "emissive"], W, H)
     with pytest.raises(UnsupportedChannelError, match="unknown channel"):
         Adapter(["albedo.q"], W, H)
     assert "shadow" not in Adapter.supported_channels

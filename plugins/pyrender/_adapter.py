@@ -28,6 +28,9 @@ _REPROJECTED = ("reprojected.r", "reprojected.g", "reprojected.b")
 _ALBEDO = ("albedo.r", "albedo.g", "albedo.b")
 _NORMAL = ("normal.x", "normal.y", "normal.z")
 _MOTION = ("motion.x", "motion.y")
+#: The ``specular`` channel of everything pyrender shades: its dielectric F0 is a fixed 4 %
+#: (``mesh.frag``: ``dialectric_spec = vec3(0.04)``), specular 0.5 in ``sdk.CHANNELS`` terms.
+PYRENDER_SPECULAR = 0.5
 
 
 def _pose(value: Any, name: str) -> np.ndarray:
@@ -85,14 +88,15 @@ class Adapter(_BaseAdapter[SceneFrame]):
       shades with them (factor x metallic-roughness texture, read from its R and G channels as
       pyrender 0.1.45 does; specular-glossiness materials: 1 - glossiness and 0); 12 bits, sharing
       passes with the normal components.
+    * ``specular``: 0.5 on geometry. pyrender's metallic-roughness shading gives every dielectric
+      F0 = 4 %, which is specular 0.5 in rtp's convention: the value the image is shaded with (a
+      scene converted from rtp loses its own specular values, which pyrender cannot shade).
     * ``depth``: linear view depth from pyrender's 24-bit depth buffer.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.
 
-    Anything else (specular, shadow, emissive) raises
-    :class:`rtp.sdk.adapters.UnsupportedChannelError` at construction: pyrender's shading has no
-    buffer that means the same thing (its metallic-roughness model has no specular scale: every
-    dielectric has F0 = 4 %).
+    Anything else (shadow, emissive) raises :class:`rtp.sdk.adapters.UnsupportedChannelError` at
+    construction: pyrender's shading has no buffer that means the same thing.
 
     Args:
         channels: the channels to produce, in order; normally ``predictor.metadata.inputs``.
@@ -120,7 +124,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, *MATERIAL, "depth", *_MOTION)
+        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, *MATERIAL, "specular", "depth", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
 
@@ -252,6 +256,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
             value = getattr(g, name)
             if value is not None:
                 planes[name] = value
+        if "specular" in wanted:  # pyrender's fixed dielectric F0 of 4 %
+            planes["specular"] = np.where(g.depth > 0.0, np.float32(PYRENDER_SPECULAR), np.float32(0.0))
         if g.albedo is not None:
             planes.update({c: g.albedo[..., i] for i, c in enumerate(_ALBEDO)})
         if g.normal is not None:
