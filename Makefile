@@ -83,7 +83,7 @@ dataset: $(STAMP)
 
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
-	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) $(if $(filter lpips,$(METRIC)),--head linear) --out $(DATA)/$(METRIC).pt
+	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) --out $(DATA)/$(METRIC).pt
 	$(BIN)/rtp-export $(DATA)/$(METRIC).pt -o models/$(METRIC).onnx
 
 # make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines.

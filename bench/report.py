@@ -1,6 +1,8 @@
 """Summary tables of `rtp evaluate` results (all scenes pooled), as quoted in docs/results.md.
 
     python bench/report.py data/eval-jnyang/evaluation.json [more evaluation.json ...]
+    python bench/report.py --compact data/eval-*/evaluation.json    # one row per model
+
 
 The last table gives each method's work saved at fixed shares of failing tiles (1, 2, 5, 10, 15%),
 read off its threshold sweep by linear interpolation between the sweep's points ("-": the sweep
@@ -58,5 +60,25 @@ def at_levels(d: dict) -> None:
             for m, p in methods.items()])
 
 
+def compact(paths: list[str]) -> None:
+    """One row per model of every file: R² on all / seen / unseen tiles with the model's safety margin
+    and without it, and the work saved at 1, 2, 5 and 10% failing tiles (before / after tables)."""
+    rows = []
+    for path in paths:
+        for d in json.load(open(path, encoding="utf-8")):
+            q = {(r["split"], r["method"]): r["r2"] for r in d["quality"] if r["scene"] == "all scenes"}
+            sweep = [(r["fail_share"], r["work_saved"]) for r in d.get("sweep", []) if r["method"] == "model"]
+            rows.append([d["model"]["metric"], d["model"]["path"], str(d["samples"]),
+                         " / ".join(pct(q.get((s, "model"))) for s in ("all", "seen", "unseen")),
+                         " / ".join(pct(q.get((s, "model (no safety)"))) for s in ("all", "seen", "unseen")),
+                         " / ".join(pct(saved_at(sweep, f)) if saved_at(sweep, f) is not None else "-"
+                                    for f in FAIL_LEVELS[:4])])
+    table(["metric", "model", "samples", "R² all / seen / unseen %", "same, no safety margin",
+           "saved % at 1 / 2 / 5 / 10% fails"], rows)
+
+
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    if sys.argv[1:2] == ["--compact"]:
+        compact(sys.argv[2:])
+    else:
+        main(sys.argv[1:])

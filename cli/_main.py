@@ -108,8 +108,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
     rows = [
         ("model", str(pred.path)),
         ("provider", f"{pred.provider} (of {', '.join(pred.providers)})"),
-        ("input size", "any (padded to the tile size)" if pred.static_size is None
-         else f"fixed {pred.static_size[1]}x{pred.static_size[0]}"),
+        ("input size", (f"any (padded to a multiple of {m.input_multiple}: partial tiles run as they are)"
+                        if m.input_multiple is not None else "any (padded to the tile size)")
+         if pred.static_size is None else f"fixed {pred.static_size[1]}x{pred.static_size[0]}"),
         ("metric", f"{m.metric} ({'higher' if m.higher_is_better else 'lower'} is better)"),
         ("transform", f"{t.type} ({params})"),
         ("safety margin", f"{m.safety:g} (transformed units)"),

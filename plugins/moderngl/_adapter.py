@@ -9,7 +9,8 @@ For an engine that owns its moderngl context::
     with Adapter.for_predictor(predictor, width, height, ctx=ctx) as adapter:
         x = adapter.inputs(GBufferTextures(albedo=gbuf_albedo, normal=gbuf_normal, depth=gbuf_depth,
                                            view=V, projection=P, prev_colour=last_frame,
-                                           prev_depth=last_depth, prev_view_projection=prev_P @ prev_V))
+                                           prev_depth=last_depth, prev_view_projection=prev_P @ prev_V,
+                                           material=gbuf_material))   # roughness, metallic, specular
         rates = predictor.shading_rates(x)
 
 One fragment shader (``shaders/adapter_fs.glsl``) reprojects the previous frame with a depth test
