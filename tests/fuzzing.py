@@ -74,7 +74,7 @@ _WORK = Path(tempfile.mkdtemp(prefix="rtp-fuzz-"))
 _MODEL = Path(sdk.load("jnyang").path or "")
 _MODEL_BYTES = _MODEL.read_bytes()
 _PRED = sdk.load(_MODEL)
-_X = np.random.default_rng(0).random((4, 32, 48), dtype=np.float32)
+_X = np.random.default_rng(0).random((len(_PRED.metadata.inputs), 32, 48), dtype=np.float32)
 _RAW = _PRED.predict_raw(_X)
 
 json_scalars = st.one_of(

@@ -18,7 +18,7 @@ from rtp import sdk
 
 from .conftest import base_metadata, build_onnx
 
-_X = np.zeros((4, 32, 48), np.float32)
+_X = np.zeros((len(sdk.load("jnyang").metadata.inputs), 32, 48), np.float32)  # the shipped model's planes
 _I = np.eye(4)
 
 

@@ -208,7 +208,8 @@ def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path
     # rtp-export needs nothing special for it, and the SDK nothing new
     onnx_path = export.export_checkpoint(out, tmp_path / "fast.onnx")
     pred = sdk.load(onnx_path)
-    x = np.random.default_rng(4).random((4, H, W), dtype=np.float32)
+    assert len(pred.metadata.inputs) == 7  # the shipped recipe's planes: the paper's four + the material ones
+    x = np.random.default_rng(4).random((7, H, W), dtype=np.float32)
     with torch.inference_mode():
         raw = ck.net(torch.from_numpy(x)[None])[0].numpy()
     np.testing.assert_allclose(pred.predict_raw(x), raw, atol=1e-5)
