@@ -340,8 +340,9 @@ def _near(shape: st.SearchStrategy[tuple[int, ...]]) -> st.SearchStrategy[ArrayS
 
 
 #: (C, H, W) or (N, C, H, W) model inputs, C = 4 mostly.
-model_arrays = st.one_of(arrays, _near(st.tuples(st.sampled_from([4, 4, 4, 3]), _SIDE, _SIDE)),
-                         _near(st.tuples(st.integers(0, 3), st.sampled_from([4, 4, 5]), _SIDE, _SIDE)))
+_C = len(_PRED.metadata.inputs)  # the shipped model's planes
+model_arrays = st.one_of(arrays, _near(st.tuples(st.sampled_from([_C, _C, _C, _C - 1]), _SIDE, _SIDE)),
+                         _near(st.tuples(st.integers(0, 3), st.sampled_from([_C, _C, _C + 1]), _SIDE, _SIDE)))
 #: (6, th, tw) or (N, 6, th, tw) predictions.
 prediction_arrays = st.one_of(_arrays(st.sampled_from([0, 1, 2, 3, 6]), 4),
                               _near(st.tuples(st.just(6), st.integers(1, 5), st.integers(1, 5))),
@@ -358,9 +359,9 @@ def _threshold_absurd(t: Any, higher_is_better: bool = False) -> bool:
 
 
 def _predict_absurd(spec: ArraySpec, _out: Any) -> bool:
-    """Accepted: a finite, non-empty float32 (C, H, W) or (N, C, H, W) array with the model's 4 channels."""
+    """Accepted: a finite, non-empty float32 (C, H, W) or (N, C, H, W) array with the model's channels."""
     kind, shape, fill = spec
-    ok_shape = len(shape) in (3, 4) and shape[-3] == 4 and 0 not in shape
+    ok_shape = len(shape) in (3, 4) and shape[-3] == _C and 0 not in shape
     return not (kind == "float32" and ok_shape and fill not in ("nan", "inf"))
 
 
