@@ -4,7 +4,7 @@
 
 For each map (default: the test split of scenes.yaml, from the cache of `rtp scenes fetch`) and path
 profile (slow, fast), makes the seeded 60 Hz path of `rtp.capture.paths.camera_path`, renders it with
-the reference renderer and prints the share of each frame's geometry the previous frame did not show
+the reference renderer and prints the share of each frame's pixels the previous frame did not show
 (mean, 95th percentile, max; the first frame excluded). For comparison, the paper's datasets left 14%
 (slow) and 31% (fast) of the pixels unseen between the two frames of a training pair.
 """

@@ -24,7 +24,8 @@ from rtp.scene import Camera, Scene
 
 from .viewpoints import ViewpointError, _Validator, free_space
 
-__all__ = ["PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path", "composite", "unseen_shares"]
+__all__ = ["PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path", "composite",
+           "frame_unseen_share", "unseen_shares"]
 
 log = logging.getLogger("rtp.capture")
 
@@ -193,10 +194,19 @@ def camera_path(
     return CameraPath(scene.name, prof.name, seed, fps, cams)
 
 
+def frame_unseen_share(seen: np.ndarray) -> float:
+    """The unseen share of a frame: the part of its pixels the previous frame did not show, from its
+    ``seen`` plane. Background counts like geometry: sky reprojects as a direction at infinity and is
+    seen where the previous frame showed sky there (``sdk.reproject``), so a frame of open sky is
+    seen, not new (a share over geometry pixels alone read 100% when a few new pixels of geometry
+    were all a frame looking over a level's edge held)."""
+    return float(1.0 - np.mean(np.asarray(seen) > 0.5))
+
+
 def unseen_shares(path: CameraPath, scene: Scene, size: tuple[int, int] = (1280, 720), renderer: Any = None) -> np.ndarray:
     """Render ``path`` (the reference renderer, ``size`` = (width, height), or a loaded ``renderer``)
-    and return each frame's unseen share: the part of its geometry the previous frame did not show
-    (the first frame, with no history, counts as 1)."""
+    and return each frame's unseen share (:func:`frame_unseen_share`; the first frame, with no history,
+    counts as 1)."""
     from rtp.plugins.moderngl import Renderer
 
     own = renderer is None
@@ -207,8 +217,7 @@ def unseen_shares(path: CameraPath, scene: Scene, size: tuple[int, int] = (1280,
         out, prev = [], None
         for cam in path.cameras:
             frame = r.render(cam, prev)
-            geo = frame.mask > 0.5
-            out.append(float(1.0 - frame.seen[geo].mean()) if geo.any() and prev is not None else 1.0)
+            out.append(frame_unseen_share(frame.seen) if prev is not None else 1.0)
             prev = frame
         return np.array(out)
     finally:

@@ -516,6 +516,8 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float)
 def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
               tile: int, flip_every: int, hw: tuple[int, int], progress: Callable[[int], None] | None,
               animate: bool, open_loop: bool = False) -> tuple[list[float], list[np.ndarray]]:
+    from rtp.capture.paths import frame_unseen_share
+
     unseen: list[float] = []
     keep: list[np.ndarray] = []
     anim_every = max(1, -(-len(path) // _ANIM_FRAMES))
@@ -523,8 +525,7 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
         frame = pf.frame
         ref = frame.colour["1x1"]
         truth = metrics.tile_targets(ref, {r: frame.colour[r] for r in sdk.PREDICTED_RATES}, (fail_metric,), tile)[fail_metric]
-        geo = frame.mask > 0.5
-        unseen.append(float(1.0 - pf.seen[geo].mean()) if geo.any() and pf.index > 0 else 1.0)
+        unseen.append(frame_unseen_share(pf.seen) if pf.index > 0 else 1.0)
         flip_frame = flip_every > 0 and pf.index > 0 and pf.index % flip_every == 0
         anim_frame = animate and pf.index % anim_every == 0
         shown: dict[str, tuple[np.ndarray, np.ndarray]] = {}

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rtp.capture import load_scene
-from rtp.capture.paths import PATH_PROFILES, camera_path, unseen_shares
+from rtp.capture.paths import PATH_PROFILES, camera_path, frame_unseen_share, unseen_shares
 from rtp.capture.viewpoints import ViewpointError, _Validator, free_space, scene_triangles
 
 
@@ -46,6 +46,15 @@ def test_fast_paths_uncover_more_of_each_frame(scene) -> None:  # noqa: ANN001
     fast = unseen_shares(camera_path(sc, 24, "fast", seed=1, blockers=blockers), sc, (96, 64))
     assert slow[0] == fast[0] == 1.0  # the first frame has no history
     assert 0 <= slow[1:].mean() < fast[1:].mean() < 0.5
+
+
+def test_the_unseen_share_counts_every_pixel_sky_included() -> None:
+    """A frame looking over a level's edge is mostly sky that the previous frame showed too (sky is
+    seen when it was sky before): a few new pixels of geometry are a few pixels, not 100%."""
+    seen = np.ones((72, 128), np.float32)
+    seen[:3, :3] = 0.0  # the only geometry in view, all of it new
+    assert frame_unseen_share(seen) == pytest.approx(9 / (72 * 128))
+    assert frame_unseen_share(np.zeros((4, 4))) == 1.0 and frame_unseen_share(np.ones((4, 4))) == 0.0
 
 
 def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
