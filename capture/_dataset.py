@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError
+from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError, depth_edges
 from rtp.sdk.files import atomic_output
 
 __all__ = [
@@ -99,6 +99,8 @@ BUFFERS: dict[str, _Buffer] = {
 }
 # Every sdk channel has exactly one storage place (tests/test_dataset.py checks the coverage).
 _CHANNEL_SOURCE = {c: (name, i) for name, buf in BUFFERS.items() for i, c in enumerate(buf.channels)}
+#: Channels computed from stored buffers when read, by the SDK's definition (one source of truth).
+_DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth"))}
 
 
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:
@@ -183,6 +185,8 @@ class Sample:
 
     def channel(self, name: str) -> np.ndarray:
         """One input channel as float32 ``(H, W)``."""
+        if isinstance(name, str) and name in _DERIVED:
+            return _DERIVED[name](self)
         if not isinstance(name, str) or name not in _CHANNEL_SOURCE:
             raise DatasetError(f"unknown channel {name!r}; channels are {', '.join(CHANNELS)}")
         buf, i = _CHANNEL_SOURCE[name]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from . import adapters, files
-from ._channels import CHANNELS, DEFAULT_INPUTS, Channel
+from ._channels import CHANNELS, DEFAULT_INPUTS, Channel, depth_edges
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._digest import model_digest
 from ._errors import (
@@ -117,6 +117,7 @@ __all__ = [
     "Transform",
     "adapters",
     "complete_rates",
+    "depth_edges",
     "draw_rate_overlay",
     "exit_code",
     "extrapolate",

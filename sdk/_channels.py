@@ -11,7 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["CHANNELS", "DEFAULT_INPUTS", "Channel"]
+import numpy as np
+
+from ._errors import InputShapeError, NonFiniteInputError
+
+__all__ = ["CHANNELS", "DEFAULT_INPUTS", "Channel", "depth_edges"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +46,9 @@ _SPECS = [
     ("shadow", 0.0, 1.0, "main-light shadow-map visibility, 1 = lit"),
     ("emissive", 0.0, 1.0, "emissive luminance, display-encoded"),
     ("depth", 0.0, float("inf"), "linear view depth in scene units (distance along -z); 0 on background"),
+    ("depth.edge", 0.0, 1.0,
+     "depth discontinuity: second difference of inverse depth over its local maximum, the larger of x and y "
+     "(sdk.depth_edges); 0 on planes, 1 - d_near/d_far beside a step, 1 at silhouettes against background"),
     ("motion.x", float("-inf"), float("inf"), "screen motion in pixels, previous minus current position, x to the right"),
     ("motion.y", float("-inf"), float("inf"), "screen motion in pixels, previous minus current position, y down"),
 ]
@@ -51,3 +58,41 @@ CHANNELS: dict[str, Channel] = {name: Channel(name, lo, hi, desc) for name, lo, 
 
 #: The paper's recommended 4-channel input (Section 3.2, Table 1).
 DEFAULT_INPUTS: tuple[str, ...] = ("reprojected.r", "seen", "albedo.r", "normal.z")
+
+
+def depth_edges(depth: np.ndarray) -> np.ndarray:
+    """The ``depth.edge`` plane of a linear depth plane: where the geometry is discontinuous.
+
+    With ``z = 1 / depth`` (0 on background, ``depth == 0``), per pixel and per axis the second
+    difference ``|z[-1] + z[+1] - 2 z[0]|`` divided by the largest of the three ``z``; the plane is the
+    larger of the x and y values, clipped to [0, 1]. Inverse depth is affine in screen space over a
+    plane, so planes read 0 at any slope and resolution; the two pixels beside a step from depth
+    ``d_near`` to ``d_far`` read ``1 - d_near / d_far``; a silhouette against background reads 1.
+    The first and last column have no x value (0), the first and last row no y value. Adapters that
+    build the plane on a GPU follow this definition (the moderngl adapter's shader; tests compare).
+
+    Args:
+        depth: ``(H, W)`` linear view depth (scene units along -z, 0 = background), any float dtype.
+
+    Returns:
+        float32 ``(H, W)`` in [0, 1].
+    """
+    d = np.asarray(depth)
+    if d.ndim != 2 or 0 in d.shape or not np.issubdtype(d.dtype, np.number):
+        raise InputShapeError(f"depth_edges: expected a numeric (H, W) depth plane, got shape {d.shape} dtype {d.dtype}",
+                              tuple(d.shape), "(H, W)")
+    d = d.astype(np.float32, copy=False)
+    if not np.isfinite(d).all():
+        raise NonFiniteInputError("depth_edges: the depth plane holds NaN or infinite values")
+    with np.errstate(divide="ignore"):
+        z = np.where(d > 0, 1.0 / np.maximum(d, np.float32(1e-30)), np.float32(0)).astype(np.float32)
+    out = np.zeros_like(z)
+    for axis in (1, 0):
+        c = z[:, 1:-1] if axis == 1 else z[1:-1]
+        lo, hi = (z[:, :-2], z[:, 2:]) if axis == 1 else (z[:-2], z[2:])
+        top = np.maximum(np.maximum(lo, hi), c)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            e = np.where(top > 0, np.abs(lo + hi - 2 * c) / np.where(top > 0, top, 1), np.float32(0))
+        inner = out[:, 1:-1] if axis == 1 else out[1:-1]
+        np.maximum(inner, e, out=inner)
+    return np.clip(out, 0.0, 1.0).astype(np.float32, copy=False)

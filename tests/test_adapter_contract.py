@@ -59,6 +59,7 @@ AGREEMENT: dict[str, tuple[float, bool]] = {
     "depth": (1e-3, True),
     **{f"motion.{c}": (0.05, False) for c in "xy"},
     **{c: (0.01, False) for c in ("roughness", "metallic")},
+    "depth.edge": (0.02, False),
 }
 #: Channels that describe the engine's own shading model, compared with nothing and allowed to be
 #: constant: pyrender gives every dielectric F0 = 4 % (specular 0.5 everywhere); the moderngl

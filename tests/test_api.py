@@ -56,6 +56,7 @@ def test_sdk_all_is_pinned() -> None:
         "Transform",
         "adapters",
         "complete_rates",
+        "depth_edges",
         "draw_rate_overlay",
         "exit_code",
         "extrapolate",

@@ -55,9 +55,16 @@ def test_round_trip_with_stated_precision(tmp_path: Path) -> None:
     assert r.manifest["bytes_per_sample"] > 0
 
 
-def test_every_sdk_channel_is_stored() -> None:
+def test_every_sdk_channel_is_stored_or_derived(tmp_path: Path) -> None:
     stored = {c for spec in BUFFERS.values() for c in spec.channels}
-    assert stored == set(sdk.CHANNELS)
+    assert stored | {"depth.edge"} == set(sdk.CHANNELS)
+    w = DatasetWriter(tmp_path / "ds")
+    bufs = _buffers()
+    w.write("s0", bufs, {"scene": "a"})
+    s = DatasetReader(tmp_path / "ds")["s0"]
+    # derived when read, by the SDK's definition, from the stored (float16) depth
+    np.testing.assert_array_equal(s.channel("depth.edge"), sdk.depth_edges(s.buffer("depth")))
+    assert s.inputs(("seen", "depth.edge")).shape == (2, 24, 40)
 
 
 def test_writer_validates(tmp_path: Path) -> None:

@@ -111,6 +111,25 @@ def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
     assert (x[5] != ref[5]).mean() < 0.002
 
 
+def test_depth_edges_on_the_gpu_follow_the_sdk_definition(frames) -> None:
+    ctx, prev, cur = frames
+    a = Adapter(("depth.edge", "depth"), W, H, ctx=ctx)
+    x = _engine_inputs(ctx, prev, cur, a)
+    want = sdk.depth_edges(cur.depth)
+    np.testing.assert_allclose(x[0], want, atol=1e-4)
+    np.testing.assert_allclose(x[0], cur.channel("depth.edge"), atol=1e-4)
+    assert 0.0 < (want > 0.1).mean() < 0.2, "the moved camera sees silhouettes and steps"
+    # from a hardware depth buffer too (linearised first, then the same definition)
+    p = cur.camera.projection(W / H)
+    ndc = (p[2, 2] * -cur.depth + p[2, 3]) / cur.depth
+    window = np.where(cur.depth > 0, ndc * 0.5 + 0.5, 1.0).astype(np.float32)
+    b = Adapter(("depth.edge",), W, H, ctx=ctx, depth_kind="window")
+    y = _engine_inputs(ctx, prev, cur, b, depth=_tex(ctx, window), prev_depth=_tex(ctx, window))
+    assert np.mean(np.abs(y[0] - want) <= 0.01) >= 0.995
+    a.close()
+    b.close()
+
+
 def test_material_channels_from_an_engine_texture(frames) -> None:
     ctx, prev, cur = frames
     channels = ("metallic", "seen", "roughness", "specular")

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
+from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, depth_edges, reproject, reproject_positions
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
 from ._errors import PyrenderAdapterError
@@ -92,6 +92,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
       F0 = 4 %, which is specular 0.5 in rtp's convention: the value the image is shaded with (a
       scene converted from rtp loses its own specular values, which pyrender cannot shade).
     * ``depth``: linear view depth from pyrender's 24-bit depth buffer.
+    * ``depth.edge``: :func:`rtp.sdk.depth_edges` of that depth.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.
 
@@ -124,7 +125,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, *MATERIAL, "specular", "depth", *_MOTION)
+        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, *MATERIAL, "specular", "depth", "depth.edge", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
 
@@ -252,6 +253,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
         g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & set(_ALBEDO)),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
         planes: dict[str, np.ndarray] = {"depth": g.depth}
+        if "depth.edge" in wanted:
+            planes["depth.edge"] = depth_edges(g.depth)
         for name in MATERIAL:
             value = getattr(g, name)
             if value is not None:

@@ -51,6 +51,18 @@ float linear_depth(float raw, mat4 inv_proj) {
 }
 
 float depth_at(ivec2 g) { return linear_depth(texelFetch(u_depth, g, 0)[u_depth_comp], u_inv_proj); }
+float inv_depth(float d) { return d > 0.0 ? 1.0 / d : 0.0; }
+
+// depth.edge along one axis, as rtp.sdk.depth_edges: the second difference of inverse depth over the
+// largest of the three; 0 where a neighbour is off the frame.
+float edge_axis(ivec2 g, ivec2 step, float zc) {
+    ivec2 a = g - step, b = g + step;
+    if (any(lessThan(a, ivec2(0))) || any(greaterThanEqual(b, ivec2(u_size)))) return 0.0;
+    float za = inv_depth(depth_at(a)), zb = inv_depth(depth_at(b));
+    float top = max(max(za, zb), zc);
+    return top > 0.0 ? abs(za + zb - 2.0 * zc) / top : 0.0;
+}
+
 float prev_depth_at(ivec2 g) { return linear_depth(texelFetch(u_prev_depth, g, 0)[u_prev_depth_comp], u_prev_inv_proj); }
 
 vec4 reproject_prev(ivec2 g, float d) {
@@ -105,8 +117,10 @@ void main() {
         for (int i = 0; i < 3; ++i) if (u_material_comp[i] >= 0) mat[i] = m[u_material_comp[i]];
     }
     if (!geo) mat = vec3(0.0);
-    float v[14] = float[14](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
-                            mat.x, mat.y, mat.z);
+    float zc = inv_depth(d);
+    float edge = clamp(max(edge_axis(g, ivec2(1, 0), zc), edge_axis(g, ivec2(0, 1), zc)), 0.0, 1.0);
+    float v[15] = float[15](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+                            mat.x, mat.y, mat.z, edge);
     float outv[16];
     for (int i = 0; i < 16; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
