@@ -269,7 +269,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head",
-                 "steps", "batch", "crop", "lr", "seed",
+                 "loss", "steps", "batch", "crop", "lr", "seed",
                  "safety_quantile", "max_samples")
 
 
@@ -518,6 +518,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
+    r.add_argument("--loss", default=None, choices=("l1", "mse", "huber"),
+                   help="training loss in transformed space: the paper's l1, mse (what R² scores) or huber "
+                   "(default: l1, unless the recipe sets one)")
     r.add_argument("--steps", type=_positive, default=None, help="training steps")
     r.add_argument("--batch", type=_positive, default=None, help="crops per step")
     r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")

@@ -7,6 +7,7 @@ pipeline.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -99,7 +100,6 @@ def test_training_learns_resumes_and_exports(tmp_path: Path) -> None:
     result = train(TrainConfig(out=str(tmp_path / "a.pt"), **cfg))
     ck = load_checkpoint(result.checkpoint)
     state = ck.training
-    import json
 
     hist = json.loads(state["history"])
     assert hist[-1]["val"]["mae"] < hist[0]["val"]["mae"]  # validation loss went down
@@ -220,3 +220,25 @@ def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path
     assert exc.value.code == 2 and "--arch" in capsys.readouterr().err
     with pytest.raises(sdk.ParameterError, match="arch"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "y.pt"), arch="resnet", crop=32))
+
+
+def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=6)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--steps", "30", "--crop", "32", "--val-scenes", "scene0"]
+    for loss in ("mse", "huber"):
+        out = tmp_path / f"{loss}.pt"
+        assert rtp_main([*base, "--out", str(out), "--loss", loss]) == 0
+        ck = load_checkpoint(out)
+        assert ck.metadata.provenance["loss"] == loss and ck.training["config"]["loss"] == loss
+        assert json.loads(ck.training["history"])[-1]["train_loss"] >= 0
+    before = load_checkpoint(tmp_path / "mse.pt")
+    # resuming a checkpoint with another loss is another training run: refused, naming the field
+    with pytest.raises(sdk.RtpError, match="loss"):
+        train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(tmp_path / "mse.pt"),
+                                      steps=40, crop=32, val_scenes=("scene0",), loss="l1"))
+    assert before.training["step"] == 30 and load_checkpoint(tmp_path / "mse.pt").training["step"] == 30
+    with pytest.raises(sdk.ParameterError, match="loss: expected one of l1, mse, huber"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), loss="hinge", crop=32))
+    with pytest.raises(SystemExit) as exc:
+        rtp_main([*base, "--out", str(tmp_path / "x.pt"), "--loss", "hinge"])
+    assert exc.value.code == 2 and "--loss" in capsys.readouterr().err

@@ -60,6 +60,9 @@ class TrainConfig:
     #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
+    #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
+    #: ``huber`` (quadratic below 0.1, linear above).
+    loss: str = "l1"
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -127,6 +130,14 @@ class _Split:
         self.ids = list(ids)
         self.x = [reader[i].inputs(cfg.inputs).astype(np.float16) for i in self.ids]
         self.y = [store.load(i, cfg.metric, cfg.tile)[rows] for i in self.ids]
+
+
+#: Training losses, in transformed space (TrainConfig.loss).
+_LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
+    "l1": F.l1_loss,
+    "mse": F.mse_loss,
+    "huber": lambda p, t: F.huber_loss(p, t, delta=0.1),
+}
 
 
 def _pad_to_tiles(x: torch.Tensor, tile: int) -> torch.Tensor:
@@ -222,6 +233,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
         raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
                                  f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
+    if cfg.loss not in _LOSSES:
+        raise sdk.ParameterError(f"loss: expected one of {', '.join(_LOSSES)}, got {cfg.loss!r}", "loss")
+    loss_fn = _LOSSES[cfg.loss]
     if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8):
         raise sdk.ParameterError(f"expected width >= 2, depth >= 0 and stem 1, 2, 4 or 8, got {cfg.width}, "
                                  f"{cfg.depth} and {cfg.stem}")
@@ -257,6 +271,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["stem"] = cfg.stem
     if cfg.augment:
         config_key["augment"] = True
+    if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
+        config_key["loss"] = cfg.loss
     if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split
         config_key["val_split"] = cfg.val_split
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
@@ -277,8 +293,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         gen.set_state(state["generator"])
         step, history = int(state["step"]), list(json.loads(state["history"]))
         log.info("resuming %s at step %d", out, step)
-        if progress and history and "train_l1" in history[-1]:
-            progress(step, cfg.steps, float(history[-1]["train_l1"]))  # a resumed run's bar starts where it stopped
+        last = history[-1] if history else {}
+        if progress and ("train_loss" in last or "train_l1" in last):  # train_l1: checkpoints before --loss
+            # a resumed run's bar starts where it stopped
+            progress(step, cfg.steps, float(last.get("train_loss", last.get("train_l1"))))
     weber = store.metrics.get(cfg.metric, {}).get("weber_l")
 
     def metadata(safety: float, extra: dict[str, Any]) -> dict[str, Any]:
@@ -335,7 +353,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                                    torch.randint(len(SYMMETRIES), (cfg.batch,), generator=gen).tolist())
         target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
         target = torch.nan_to_num(target, nan=1.0)
-        loss = F.l1_loss(net(torch.from_numpy(xb.astype(np.float32))), target)
+        loss = loss_fn(net(torch.from_numpy(xb.astype(np.float32))), target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -345,8 +363,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             progress(step, cfg.steps, loss.item())
         if step % cfg.val_every == 0 or step == cfg.steps:
             s, _, _ = _validate(net, va, transform, cfg, worse)
-            history.append({"step": step, "train_l1": loss.item(), "val": s})
-            log.info("step %d: train L1 %.4f, val MAE %.4f, R2 %.3f", step, loss.item(), s["mae"], s["r2"])
+            history.append({"step": step, "train_loss": loss.item(), "val": s})
+            log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss.item(), s["mae"], s["r2"])
         if step % cfg.save_every == 0 and step < cfg.steps:
             save(done=False)
 
@@ -362,6 +380,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "head": cfg.head,
         "arch": cfg.arch,
         "augment": cfg.augment,
+        "loss": cfg.loss,
         "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)
