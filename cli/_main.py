@@ -268,8 +268,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     return 0
 
 
-_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head",
-                 "loss", "steps", "batch", "crop", "lr", "seed",
+_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "grow", "augment", "tile", "outputs", "inputs", "transform",
+                 "logistic_k", "head", "loss", "steps", "batch", "crop", "lr", "seed",
                  "safety_quantile", "max_samples")
 
 
@@ -514,6 +514,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--depth", type=int, default=None, help="3x3 blocks of the fast network (default: 3)")
     r.add_argument("--stem", type=_positive, default=None,
                    help="stride of the fast network's first convolution: 1, 2, 4 or 8 (default: 4)")
+    r.add_argument("--grow", type=int, default=None, choices=(1, 2),
+                   help="2: each block of the fast network after a pool doubles its channels (default: 1)")
     r.add_argument("--augment", action="store_true", default=None,
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),

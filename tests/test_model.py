@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -118,6 +120,34 @@ def test_the_fast_network_layout() -> None:
         build_network("resnet", 4, 4, 16)
     with pytest.raises(ValueError, match="tile"):
         FastNet(tile=12)
+    assert "grow" not in net.config  # configs of checkpoints from before the option stay as they were
+
+
+def test_the_growing_fast_network_doubles_channels_after_each_pool() -> None:
+    from rtp.export import export_checkpoint
+    from rtp.train.model import FastNet
+
+    net = FastNet(7, grow=2).eval()
+    widths = [m.out_channels for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    assert widths == [16, 16, 32, 64, 4] and net.config["grow"] == 2
+    assert [m.out_channels for m in FastNet(grow=2, depth=5).layers if isinstance(m, torch.nn.Conv2d)] == \
+        [16, 16, 32, 64, 64, 64, 4]  # blocks at tile resolution keep the last width
+    assert sum(p.numel() for p in net.parameters()) == 1792 + 2304 + 4608 + 18432 + 2 * (16 + 16 + 32 + 64) + 260
+    with pytest.raises(ValueError, match="grow"):
+        FastNet(grow=3)
+    # it round-trips through a checkpoint and exports like any other
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+    with tempfile.TemporaryDirectory() as d:
+        meta = base_metadata(inputs=["reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular"])
+        ck = checkpoint.save(Path(d) / "g.pt", net, meta)
+        assert checkpoint.load(ck).net.config["grow"] == 2
+        pred = sdk.load(export_checkpoint(ck, Path(d) / "g.onnx"))
+        x = np.random.default_rng(0).random((7, 48, 80), dtype=np.float32)
+        with torch.inference_mode():
+            want = net(torch.from_numpy(x)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
 
 
 def test_the_fast_network_takes_partial_tiles() -> None:

@@ -57,6 +57,8 @@ class TrainConfig:
     depth: int = 3
     #: Stride (and kernel) of the fast network's first convolution: 1, 2, 4 or 8.
     stem: int = 4
+    #: 2: each block of the fast network after a pool doubles its channels (1: ``width`` throughout).
+    grow: int = 1
     #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
@@ -236,9 +238,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.loss not in _LOSSES:
         raise sdk.ParameterError(f"loss: expected one of {', '.join(_LOSSES)}, got {cfg.loss!r}", "loss")
     loss_fn = _LOSSES[cfg.loss]
-    if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8):
-        raise sdk.ParameterError(f"expected width >= 2, depth >= 0 and stem 1, 2, 4 or 8, got {cfg.width}, "
-                                 f"{cfg.depth} and {cfg.stem}")
+    if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8) or cfg.grow not in (1, 2):
+        raise sdk.ParameterError(f"expected width >= 2, depth >= 0, stem 1, 2, 4 or 8 and grow 1 or 2, got {cfg.width}, "
+                                 f"{cfg.depth}, {cfg.stem} and {cfg.grow}")
     reader = DatasetReader(cfg.data)
     store = TargetStore(cfg.data)
     if cfg.metric not in store.metrics:
@@ -257,7 +259,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
-                        depth=cfg.depth, stem=cfg.stem)
+                        depth=cfg.depth, stem=cfg.stem, grow=cfg.grow)
     opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
     out = Path(cfg.out)
@@ -269,6 +271,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key.update(arch=cfg.arch, depth=cfg.depth)
         if cfg.stem != 4:
             config_key["stem"] = cfg.stem
+        if cfg.grow != 1:
+            config_key["grow"] = cfg.grow
     if cfg.augment:
         config_key["augment"] = True
     if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
@@ -379,6 +383,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "history": history[-20:],
         "head": cfg.head,
         "arch": cfg.arch,
+        **({"grow": cfg.grow} if cfg.grow != 1 else {}),
         "augment": cfg.augment,
         "loss": cfg.loss,
         "dead_outputs": dead,

@@ -137,7 +137,9 @@ class FastNet(nn.Module):
     tile resolution, where they are almost free and widen the context each tile sees; a 1x1
     convolution and a sigmoid give the outputs (no ReLU before it: no output can die). Every
     convolution is followed by BatchNorm before its ReLU, so BatchNorm folds into the convolution at
-    export. ``width`` channels throughout. For ``w = 16``, width 16, depth 3 the layers are:
+    export. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
+    them (16, 32, 64 for width 16 and depth 3), widening the cheap low-resolution end while the
+    full-resolution read stays at ``width``. For width 16, depth 3, grow 1 the layers are:
 
     =========  ============  =====================  ==========
     layer      resolution    channels               parameters
@@ -153,28 +155,35 @@ class FastNet(nn.Module):
     """
 
     def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
-                 tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4) -> None:
+                 tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
-        if width < 2 or depth < 0 or stem not in (1, 2, 4, 8):
-            raise ValueError(f"expected width >= 2, depth >= 0 and stem in (1, 2, 4, 8), got {width}, {depth}, {stem}")
+        if width < 2 or depth < 0 or stem not in (1, 2, 4, 8) or grow not in (1, 2):
+            raise ValueError(f"expected width >= 2, depth >= 0, stem in (1, 2, 4, 8) and grow 1 or 2, got {width}, "
+                             f"{depth}, {stem}, {grow}")
         if in_channels < 1 or out_channels < 1:
             raise ValueError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
         self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
                                        "width": width, "depth": depth, "stem": stem}
+        if grow != 1:  # checkpoints from before the option hold no "grow"
+            self.config["grow"] = grow
         s = min(stem, tile)
         pools = int(math.log2(tile // s))
         layers: list[nn.Module] = [nn.Conv2d(in_channels, width, s, stride=s, bias=False), nn.BatchNorm2d(width),
                                    nn.ReLU(inplace=True)]
+        c = width
         for i in range(max(depth, pools)):
             if i < depth:
-                layers += [nn.Conv2d(width, width, 3, padding=1, bias=False), nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
+                # grow 2: each block after a pool doubles the channels (cheap at 1/8 and 1/16 resolution)
+                out = width * grow ** min(i, pools)
+                layers += [nn.Conv2d(c, out, 3, padding=1, bias=False), nn.BatchNorm2d(out), nn.ReLU(inplace=True)]
+                c = out
             if i < pools:
                 # ceil_mode: a frame of any multiple of the stem gives ceil(H / tile) tile rows, the last
                 # partial tile pooling the pixels it has (identical to floor mode on whole tiles)
                 layers.append(nn.MaxPool2d(2, ceil_mode=True))
-        layers += [nn.Conv2d(width, out_channels, 1), nn.Sigmoid()]
+        layers += [nn.Conv2d(c, out_channels, 1), nn.Sigmoid()]
         self.layers = nn.Sequential(*layers)
 
     @property
@@ -199,11 +208,11 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 
 
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
-                  head: str = "paper", depth: int = 3, stem: int = 4) -> Network:
+                  head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
-    applies to the paper's network, ``depth`` and ``stem`` to the fast one."""
+    applies to the paper's network, ``depth``, ``stem`` and ``grow`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
-        return FastNet(in_channels, out_channels, tile, width, depth, stem)
+        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
