@@ -298,9 +298,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         step, history = int(state["step"]), list(json.loads(state["history"]))
         log.info("resuming %s at step %d", out, step)
         last = history[-1] if history else {}
-        if progress and ("train_loss" in last or "train_l1" in last):  # train_l1: checkpoints before --loss
-            # a resumed run's bar starts where it stopped
-            progress(step, cfg.steps, float(last.get("train_loss", last.get("train_l1"))))
+        last_loss = last.get("train_loss", last.get("train_l1"))  # train_l1: checkpoints from before --loss
+        if progress and last_loss is not None:  # a resumed run's bar starts where it stopped
+            progress(step, cfg.steps, float(last_loss))
     weber = store.metrics.get(cfg.metric, {}).get("weber_l")
 
     def metadata(safety: float, extra: dict[str, Any]) -> dict[str, Any]:
