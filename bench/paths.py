@@ -32,14 +32,14 @@ def main() -> None:
     w, h = (int(v) for v in args.size.split("x"))
     maps = args.maps.split(",") if args.maps else load_splits()["test"]
     print(f"{args.frames} frames at 60 Hz, {w}x{h}, seed {args.seed}\n")
-    print("| map | path | length (m) | unseen per frame: mean % | p95 % | max % |")
-    print("|---|---|---:|---:|---:|---:|")
+    print("| map | path | length (m) | eye (m) | unseen per frame: mean % | p95 % | max % |")
+    print("|---|---|---:|---:|---:|---:|---:|")
     for name in maps:
         scene, blockers = load_scene(name, None, None, None)
         for profile in PATH_PROFILES:
             path = camera_path(scene, args.frames, profile, args.seed, blockers=blockers)
             u = unseen_shares(path, scene, (w, h))[1:]
-            print(f"| {name} | {profile} | {path.length():.1f} | {100 * u.mean():.2f} | "
+            print(f"| {name} | {profile} | {path.length():.1f} | {path.eye_height:.2f} | {100 * u.mean():.2f} | "
                   f"{100 * np.percentile(u, 95):.2f} | {100 * u.max():.2f} |", flush=True)
 
 

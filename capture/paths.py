@@ -2,7 +2,9 @@
 
 The closed-loop VRS benchmark moves a camera through a map the way a player would and lets every
 method choose rates frame after frame. :func:`camera_path` makes such a path, deterministic for a
-seed: a walker in the horizontal plane of a random start point inside the capture's viewpoint domain
+seed: a walker on the level's floors, its eye at the player's eye height (measured from the map's
+own spawn points), climbing steps of at most ``_STEP_UP`` and stepping down
+ledges of at most ``_DROP`` (higher ones are walls), inside the capture's viewpoint domain
 (:func:`rtp.capture.viewpoints.free_space`: flood-filled free space at least ``clearance`` from any
 geometry), steering away from walls it sees coming, smoothed, resampled at ``fps`` at the profile's
 speed; the view follows the direction of travel with a limited turn rate plus a look-around sway.
@@ -22,7 +24,7 @@ import numpy as np
 
 from rtp.scene import Camera, Scene
 
-from .viewpoints import ViewpointError, _Validator, free_space
+from .viewpoints import SOLID, ViewpointError, VoxelGrid, _Validator, free_space
 
 __all__ = ["PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path", "composite",
            "frame_unseen_share", "unseen_shares"]
@@ -52,6 +54,9 @@ PATH_PROFILES: dict[str, PathProfile] = {
 
 _STEP = 0.25  # metres per walker step
 _LOOK = 2.0  # metres of free space the walker wants ahead
+_STEP_UP = 0.6  # the highest step the walker climbs, metres (Q3's 18 units plus a voxel of rounding)
+_DROP = 1.2  # the deepest ledge it steps down; deeper ones are walls (a path stays on its floors)
+_EYE = 1.6  # eye height above the floor where a scene's spawn points do not tell it, metres
 
 
 @dataclass
@@ -63,6 +68,7 @@ class CameraPath:
     seed: int
     fps: float
     cameras: list[Camera] = field(default_factory=list)
+    eye_height: float = _EYE  #: the walker's eye above its floor, metres
 
     def __len__(self) -> int:
         return len(self.cameras)
@@ -83,6 +89,41 @@ def _smooth(a: np.ndarray, window: int) -> np.ndarray:
     return (c[window:] - c[:-window]) / window
 
 
+class _Floors:
+    """The floor under a point: the centre of the highest drawn-geometry voxel at or below it in its
+    column (blockers such as a BSP map's sky are not floors)."""
+
+    def __init__(self, grid: VoxelGrid) -> None:
+        self.grid = grid
+        ny = grid.shape[1]
+        last = np.where(grid.occ == SOLID, np.arange(ny, dtype=np.int16)[None, :, None], np.int16(-1))
+        self.last = np.maximum.accumulate(last, axis=1)
+
+    def below(self, p: np.ndarray) -> float | None:
+        i = self.grid.index(p)
+        j = int(self.last[i[0], i[1], i[2]])
+        return None if j < 0 else float(self.grid.origin[1] + (j + 0.5) * self.grid.voxel)
+
+    def same_floor(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether no drawn geometry lies between two points of one column (``a`` below ``b``)."""
+        i, j = self.grid.index(a), self.grid.index(b)
+        return bool(self.last[i[0], i[1], i[2]] == self.last[j[0], j[1], j[2]])
+
+
+def _spawn_eye_height(scene: Scene, floors: _Floors) -> float:
+    """The player's eye height in ``scene``: the lowest height of a spawn point over the floor below
+    it (between 0.5 and 3 m), or :data:`_EYE` when no spawn point stands over a floor. The lowest,
+    because map authors lift spawn entities over the floor (a game drops them): on the test maps
+    spawns stand 1.39-1.67 m over their floors at the lowest and up to 2.37 m."""
+    heights = []
+    for sp in scene.spawn_points:
+        p = np.asarray(sp.position, np.float64)
+        f = floors.below(p)
+        if f is not None and 0.5 <= p[1] - f <= 3.0:
+            heights.append(p[1] - f)
+    return float(min(heights)) if heights else _EYE
+
+
 def camera_path(
     scene: Scene,
     frames: int,
@@ -95,13 +136,16 @@ def camera_path(
     clearance: float = 0.3,
     fov_y: float = 70.0,
     max_height: float | None = 6.0,
+    eye_height: float | None = None,
 ) -> CameraPath:
     """A ``frames``-long camera path through ``scene`` at ``fps`` (module docstring).
 
     Deterministic: the same scene, profile, seed and arguments give the same cameras. Every camera
-    is inside the flood-filled free space, at least ``clearance`` from the geometry (exact test), and
-    the segment between consecutive cameras crosses no triangle. Raises :class:`ViewpointError`
-    when the scene has no free space for a path.
+    is inside the flood-filled free space, at least ``clearance`` from the geometry (exact test),
+    ``eye_height`` (default: the spawn points' own, :attr:`CameraPath.eye_height`) over a floor
+    before smoothing, with nothing drawn between it and that floor, and the segment between
+    consecutive cameras crosses no triangle. Raises :class:`ViewpointError` when the scene has no
+    free space for a path.
     """
     prof = PATH_PROFILES.get(profile) if isinstance(profile, str) else profile
     if prof is None:
@@ -112,27 +156,52 @@ def camera_path(
     free = np.flatnonzero(cand)
     if len(free) == 0:
         raise ViewpointError(f"no free space in {scene.name!r} at {clearance} m from the geometry for a camera path")
+    if eye_height is not None and not 0 < eye_height < 10:
+        raise ViewpointError(f"expected an eye height in metres in (0, 10), got {eye_height}")
     val = _Validator(tris)
     rng = np.random.default_rng(seed)
+    floors = _Floors(grid)
+    eye = float(eye_height) if eye_height is not None else _spawn_eye_height(scene, floors)
 
     def inside(p: np.ndarray) -> bool:
         return bool(cand[tuple(grid.index(p))])
 
-    def ahead(p: np.ndarray, h: float) -> float:
-        d = np.array([-math.sin(h), 0.0, -math.cos(h)])
+    def stand(x: float, z: float, top: float, floor: float | None) -> tuple[np.ndarray, float] | None:
+        """The camera over ``(x, z)`` standing on the highest floor at or below ``top`` (at most
+        _DROP under ``floor`` when given), or None where there is none or no room for a body."""
+        probe = np.array([x, top, z])
+        f = floors.below(probe)
+        if f is None or (floor is not None and f < floor - _DROP):
+            return None
+        cam = np.array([x, f + eye, z])
+        if not inside(cam) or not floors.same_floor(np.array([x, min(top, cam[1]), z]), cam):
+            return None
+        return cam, f
+
+    def step(p: np.ndarray, floor: float, h: float, dist: float) -> tuple[np.ndarray, float] | None:
+        return stand(p[0] - math.sin(h) * dist, p[2] - math.cos(h) * dist, floor + _STEP_UP, floor)
+
+    def ahead(p: np.ndarray, floor: float, h: float) -> float:
         n = int(_LOOK / _STEP)
         for i in range(1, n + 1):
-            if not inside(p + d * (i * _STEP)):
+            nxt = step(p, floor, h, _STEP)
+            if nxt is None:
                 return (i - 1) * _STEP
+            p, floor = nxt
         return _LOOK
 
     need = (frames - 1) * prof.speed / fps + 2 * _LOOK
     for _attempt in range(20):  # another start point when a walker gets stuck at once
-        start = grid.centre(np.array([free[rng.integers(len(free))]]))[0]
-        if not val.clearance(start, clearance):
+        for _draw in range(200):  # a free voxel, dropped onto the floor below it
+            c = grid.centre(np.array([free[rng.integers(len(free))]]))[0]
+            got = stand(c[0], c[2], c[1], None)
+            if got is not None and val.clearance(got[0], clearance):
+                break
+        else:
             continue
+        assert got is not None
         heading = float(rng.uniform(-math.pi, math.pi))
-        pts = [start]
+        pts, fl = [got[0]], [got[1]]
         stuck = 0
         while (len(pts) - 1) * _STEP < need and stuck < 50:
             heading += math.radians(float(rng.normal(0.0, prof.wander * math.sqrt(_STEP))))
@@ -140,7 +209,7 @@ def camera_path(
             for k in range(0, 37):  # 0, +10, -10, +20, ... degrees: the first with room ahead
                 off = math.radians(10.0 * ((k + 1) // 2) * (1 if k % 2 else -1))
                 h = heading + off
-                room = ahead(pts[-1], h)
+                room = ahead(pts[-1], fl[-1], h)
                 if room >= _LOOK * 0.5:
                     best = h
                     break
@@ -150,13 +219,14 @@ def camera_path(
                 stuck += 1
                 heading += math.pi
                 continue
-            nxt = pts[-1] + np.array([-math.sin(best), 0.0, -math.cos(best)]) * _STEP
-            if not val.segment_clear(pts[-1], nxt):
+            got = step(pts[-1], fl[-1], best, _STEP)
+            if got is None or not val.segment_clear(pts[-1], got[0]):
                 stuck += 1
                 heading += math.pi / 2
                 continue
             heading = best
-            pts.append(nxt)
+            pts.append(got[0])
+            fl.append(got[1])
             stuck = 0
         if (len(pts) - 1) * _STEP >= need:
             break
@@ -191,7 +261,7 @@ def camera_path(
     pitch = 0.3 * prof.sway * np.sin(2 * math.pi * t / (prof.speed * prof.sway_period * 1.7) + 2 * phase)
     cams = [Camera((float(p[0]), float(p[1]), float(p[2])), yaw=float((y + w + 180.0) % 360.0 - 180.0),
                    pitch=float(q), fov_y=fov_y) for p, y, w, q in zip(pos, yaw, sway, pitch)]
-    return CameraPath(scene.name, prof.name, seed, fps, cams)
+    return CameraPath(scene.name, prof.name, seed, fps, cams, eye)
 
 
 def frame_unseen_share(seen: np.ndarray) -> float:

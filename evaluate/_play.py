@@ -258,7 +258,10 @@ class PlayReport:
                  "out.", ""]
         for path, unseen in self.unseen.items():
             u = np.array(unseen[1:])
-            lines += [f"## {path}", "", f"Unseen share per frame: mean {100 * u.mean():.2f}%, "
+            cam = s.get("cameras", {}).get(path)
+            walk = (f"The camera walks {cam['length_m']:.1f} m, its eye {cam['eye_height_m']:.2f} m over the floor. "
+                    if cam else "")
+            lines += [f"## {path}", "", f"{walk}Unseen share per frame: mean {100 * u.mean():.2f}%, "
                       f"95th percentile {100 * np.percentile(u, 95):.2f}%, max {100 * u.max():.2f}%.", "",
                       "Matched quality (work saved where the method fails that share of tiles; - : its sweep never "
                       "fails that rarely; >= : never that often, its saving at the largest share it reached, a lower "
@@ -374,6 +377,7 @@ def play(
     for pname in paths:
         res = results[pname]
         report.unseen[pname] = res["unseen"]
+        report.settings.setdefault("cameras", {})[pname] = res["camera"]
         report.rows += res["rows"]
         report.frames[pname] = res["frames"]
         report.files += res["files"]
@@ -414,6 +418,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
         files = _write_animation(Path(job["gif"]) / f"play_{pname}.gif", anim)
     return {
         "unseen": unseen,
+        "camera": {"length_m": path.length(), "eye_height_m": path.eye_height},
         "rows": [{"path": pname, **lp.summary()} for lp in loops],
         "frames": {lp.method.name: {"saved": lp.saved, "fail": lp.fail, "change": lp.change, "flip": lp.flip,
                                     "ms": lp.ms} for lp in loops if lp.default},

@@ -63,3 +63,24 @@ def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
         camera_path(sc, 10, "jog")
     with pytest.raises(ViewpointError, match="frames >= 1"):
         camera_path(sc, 0)
+
+
+def test_paths_walk_the_floors_at_the_spawn_points_eye_height(scene) -> None:  # noqa: ANN001
+    """A player's eye, not a free-floating camera: each camera stands over a floor at the eye height
+    the scene's spawn points give (the procedural rooms spawn at 1.6 m), steps included."""
+    from rtp.capture.paths import _Floors
+
+    sc, blockers = scene
+    _, grid, _, _ = free_space(sc, blockers=blockers)
+    floors = _Floors(grid)
+    for profile, seed in (("slow", 0), ("fast", 1)):
+        path = camera_path(sc, 120, profile, seed=seed, blockers=blockers)
+        assert abs(path.eye_height - 1.6) <= grid.voxel / 2 + 1e-6
+        over = np.array([c.position[1] - floors.below(np.array(c.position)) for c in path.cameras])
+        assert np.median(over) == pytest.approx(path.eye_height, abs=1e-6)
+        assert np.all(np.abs(over - path.eye_height) <= 0.6 + 1e-6)  # a step, smoothed, at most
+    own = camera_path(sc, 60, "slow", seed=0, blockers=blockers, eye_height=1.0)
+    assert own.eye_height == 1.0
+    assert np.median([c.position[1] - floors.below(np.array(c.position)) for c in own.cameras]) == pytest.approx(1.0)
+    with pytest.raises(ViewpointError, match="eye height"):
+        camera_path(sc, 10, eye_height=-1.0)
