@@ -4,6 +4,8 @@ the loop itself (each method's history is its own displayed frame), prediction r
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +18,8 @@ from rtp.capture.paths import PathFrame, PathPlayer, camera_path, composite
 from rtp.evaluate import PlayError, parse_methods, play, saved_at
 from rtp.evaluate._play import _reproject_estimates, _tile_index_map
 from tests.conftest import make_current
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.gl
 W, H, TILE = 160, 96, 16
@@ -124,7 +128,14 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     assert len(rep.unseen["fast"]) == 5 and rep.unseen["fast"][0] == 1.0
     for name in ("play.md", "play.json", "play_curves.png", "play_frames.png", "play_fast.gif"):
         assert (tmp_path / name).stat().st_size > 0
-    assert json.loads((tmp_path / "play.json").read_text())["settings"]["frames"] == 5
+    settings = json.loads((tmp_path / "play.json").read_text())["settings"]
+    assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
+    assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
+    assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
+    # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json")],
+                         capture_output=True, text=True, check=True).stdout
+    assert out.count("| procedural:0 | fast |") == 2 and "| jnyang / Yang |" in out  # savings row, targets row
 
 
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:

@@ -1,0 +1,90 @@
+"""The closed-loop benchmark over several maps: one table from the play.json files of `rtp play`.
+
+Reads each run's matched-quality rows (work saved where a method fails on 1%, 2% and 5% of the
+tiles) and prints, per map and path, every method's savings, then issue 12's targets: rtp against
+the better of the two Yang 2019 variants at equal failing share, rtp's share of the oracle's saving
+and prediction reuse against k = 1. Savings read at a share a method's sweep never failed that often
+are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios`.
+
+    python bench/play_report.py data/play-{20kdm2,oa_dm5,oacmpctf3,delta,oasago2}/play.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+LEVELS = (0.01, 0.02, 0.05)
+
+
+def _cell(m: dict[str, Any] | None) -> str:
+    if m is None or not math.isfinite(m["work_saved"]):
+        return "-"
+    return f"{'>= ' if m.get('capped') else ''}{100 * m['work_saved']:.1f}"
+
+
+def _readable(m: dict[str, Any] | None) -> bool:
+    return m is not None and not m.get("capped") and math.isfinite(m["work_saved"]) and m["work_saved"] > 0
+
+
+def _ratio(a: dict[str, Any] | None, b: dict[str, Any] | None) -> float:
+    return a["work_saved"] / b["work_saved"] if _readable(a) and _readable(b) else math.nan  # type: ignore[index]
+
+
+def _fmt(r: float, pct: bool = False) -> str:
+    return "-" if not math.isfinite(r) else (f"{100 * r:.0f}%" if pct else f"{r:.2f}x")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", type=Path, help="play.json files of `rtp play --out`")
+    ap.add_argument("--model", default="jnyang", help="the rtp method to compare (default jnyang)")
+    args = ap.parse_args()
+    model, reuse = args.model, f"{args.model}@4"
+    head = None
+    rows, targets = [], []
+    for run in args.runs:
+        rep = json.loads(run.read_text())
+        s = rep["settings"]
+        methods = s["methods"]
+        if head is None:
+            head = methods
+            print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]}, seed {s['seed']}; a tile fails "
+                  f"when its {s['fail_metric']} error is over {s['fail_threshold']:g}. Work saved % at "
+                  + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
+                  "method's sweep never failed that often; -: never that rarely).\n")
+        for path, unseen in rep["unseen"].items():
+            u = unseen[1:]
+            cam = s.get("cameras", {}).get(path, {})
+            eye = f"{cam['eye_height_m']:.2f}" if cam else "?"
+            at = {(m["method"], m["fail_share"]): {**m, "work_saved": math.nan if m["work_saved"] is None else m["work_saved"]}
+                  for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
+            cells = [" / ".join(_cell(at.get((meth, lv))) for lv in LEVELS) if meth != "oracle"
+                     else _cell(at.get((meth, LEVELS[0]))) for meth in methods]
+            rows.append(f"| {s['scene']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
+                        + " | ".join(cells) + " |")
+            yang = [max((m for y in ("yang2019", "yang2019-unseen-1x1") if _readable(m := at.get((y, lv)))),
+                        key=lambda m: m["work_saved"], default=None) for lv in LEVELS]
+            vs_yang = [_ratio(at.get((model, lv)), y) for lv, y in zip(LEVELS, yang)]
+            oracle = at.get(("oracle", LEVELS[0]))
+            of_oracle = [_ratio(at.get((model, lv)), oracle) for lv in LEVELS]
+            reused = [_ratio(at.get((reuse, lv)), at.get((model, lv))) for lv in LEVELS]
+            targets.append(f"| {s['scene']} | {path} | " + " | ".join(
+                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in ((vs_yang, False), (of_oracle, True), (reused, True))) + " |")
+    assert head is not None
+    print("| map | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
+    print("|---|---|---:|---|" + "---|" * len(head))
+    print("\n".join(rows))
+    print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
+          "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
+          "against k = 1 (>= 95%)\n")
+    print(f"| map | path | {model} / Yang | {model} / oracle | {reuse} / {model} |")
+    print("|---|---|---|---|---|")
+    print("\n".join(targets))
+
+
+if __name__ == "__main__":
+    main()
