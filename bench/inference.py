@@ -26,9 +26,10 @@ from _common import median_ms, paper_model  # bench/ is on sys.path when run as 
 from rtp import sdk
 
 FRAMES = ((1920, 1080), (1280, 720))
-#: rtp's fast networks timed next to the paper's (train/model.py FastNet): (width, depth, stem, inputs).
-FAST = ((16, 3, 4, 4), (16, 5, 4, 4), (24, 4, 4, 4), (32, 3, 4, 4), (16, 3, 2, 4), (16, 3, 8, 4),
-        (16, 3, 4, 6), (16, 3, 4, 7), (16, 3, 4, 10))
+#: rtp's fast networks timed next to the paper's (train/model.py FastNet): (width, depth, stem, inputs,
+#: stem layers).
+FAST = ((16, 3, 4, 4, 1), (16, 5, 4, 4, 1), (24, 4, 4, 4, 1), (32, 3, 4, 4, 1), (16, 3, 2, 4, 1), (16, 3, 8, 4, 1),
+        (16, 3, 4, 6, 1), (16, 3, 4, 7, 1), (16, 3, 4, 10, 1), (16, 3, 4, 4, 2), (16, 3, 4, 7, 2))
 
 
 def _params(path: Path) -> int:
@@ -46,9 +47,10 @@ def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk
         out[name] = (pred, (arch, _params(path)))
 
     add("paper's network (random weights)", paper_model(folder)[1], "paper")
-    for width, depth, stem, inputs in FAST:
-        add(f"fast, stem {stem}, width {width}, depth {depth}, {inputs} inputs (random weights)",
-            paper_model(folder, "fast", inputs, width=width, depth=depth, stem=stem)[1], "fast")
+    for width, depth, stem, inputs, layers in FAST:
+        split = {"stem_layers": layers} if layers != 1 else {}
+        add(f"fast, stem {stem}{' in two layers' if split else ''}, width {width}, depth {depth}, {inputs} inputs "
+            "(random weights)", paper_model(folder, "fast", inputs, width=width, depth=depth, stem=stem, **split)[1], "fast")
     for name in sdk.shipped_models():
         pred = sdk.load(name)
         arch = str(pred.metadata.provenance.get("arch", "paper"))

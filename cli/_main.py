@@ -268,8 +268,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     return 0
 
 
-_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "grow", "augment", "tile", "outputs", "inputs", "transform",
-                 "logistic_k", "head", "loss", "steps", "batch", "crop", "lr", "seed",
+_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "grow", "augment", "tile", "outputs", "inputs",
+                 "transform", "logistic_k", "head", "loss", "ema", "steps", "batch", "crop", "lr", "seed",
                  "safety_quantile", "max_samples")
 
 
@@ -514,6 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--depth", type=int, default=None, help="3x3 blocks of the fast network (default: 3)")
     r.add_argument("--stem", type=_positive, default=None,
                    help="stride of the fast network's first convolution: 1, 2, 4 or 8 (default: 4)")
+    r.add_argument("--stem-layers", dest="stem_layers", type=int, default=None, choices=(1, 2),
+                   help="2: the fast network's stem as two convolutions with a ReLU between (stem 4: two 2x2 "
+                   "stride-2 reads) (default: 1)")
     r.add_argument("--grow", type=int, default=None, choices=(1, 2),
                    help="2: each block of the fast network after a pool doubles its channels (default: 1)")
     r.add_argument("--augment", action="store_true", default=None,
@@ -523,6 +526,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--loss", default=None, choices=("l1", "mse", "huber"),
                    help="training loss in transformed space: the paper's l1, mse (what R² scores) or huber "
                    "(default: l1, unless the recipe sets one)")
+    r.add_argument("--ema", type=float, default=None,
+                   help="decay of a moving average of the weights, which is validated and saved (for example "
+                   "0.999; default 0: off)")
     r.add_argument("--steps", type=_positive, default=None, help="training steps")
     r.add_argument("--batch", type=_positive, default=None, help="crops per step")
     r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")

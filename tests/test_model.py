@@ -164,3 +164,35 @@ def test_the_fast_network_takes_partial_tiles() -> None:
     assert whole.shape == (1, 4, 4, 6) and ragged.shape == (1, 4, 5, 6)
     # tiles whose receptive field stays inside the frame do not change
     torch.testing.assert_close(ragged[:, :, :2], whole[:, :, :2])
+
+
+def test_the_two_layer_stem_reads_each_cell_twice() -> None:
+    from rtp.export import export_checkpoint
+    from rtp.train.model import FastNet, build_network
+
+    net = FastNet(7, stem_layers=2).eval()
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    # two 2x2 stride-2 reads (7 -> 8 -> 16 channels) with BatchNorm and ReLU between, then the blocks
+    assert [(c.kernel_size, c.stride, c.out_channels) for c in convs[:2]] == [((2, 2), (2, 2), 8), ((2, 2), (2, 2), 16)]
+    kinds = [type(m).__name__ for m in net.layers]
+    assert kinds[:6] == ["Conv2d", "BatchNorm2d", "ReLU", "Conv2d", "BatchNorm2d", "ReLU"]
+    assert net.config["stem_layers"] == 2 and net.input_multiple == 4
+    assert sum(p.numel() for p in net.parameters()) == 7 * 4 * 8 + 8 * 4 * 16 + 3 * 2304 + 2 * (8 + 4 * 16) + 68
+    assert [c.kernel_size for c in build_network("fast", 4, 4, 16, stem=8, stem_layers=2).layers
+            if isinstance(c, torch.nn.Conv2d)][:2] == [(4, 4), (2, 2)]
+    for bad in ({"stem_layers": 3}, {"stem_layers": 2, "stem": 1}):
+        with pytest.raises(ValueError, match="stem_layers"):
+            FastNet(**bad)
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+            m.running_var.uniform_(0.5, 1.5)
+    with tempfile.TemporaryDirectory() as d:
+        meta = base_metadata(inputs=["reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular"])
+        ck = checkpoint.save(Path(d) / "s.pt", net, meta)
+        assert checkpoint.load(ck).net.config["stem_layers"] == 2
+        pred = sdk.load(export_checkpoint(ck, Path(d) / "s.onnx"))
+        x = np.random.default_rng(0).random((7, 44, 84), dtype=np.float32)  # partial tiles: multiples of 4
+        with torch.inference_mode():
+            want = net(torch.from_numpy(x)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)

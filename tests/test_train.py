@@ -242,3 +242,37 @@ def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixtu
     with pytest.raises(SystemExit) as exc:
         rtp_main([*base, "--out", str(tmp_path / "x.pt"), "--loss", "hinge"])
     assert exc.value.code == 2 and "--loss" in capsys.readouterr().err
+
+
+def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path) -> None:
+    data = _dataset(tmp_path / "ds", n=6)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes", "scene0",
+            "--stem-layers", "2", "--ema", "0.9"]
+    assert rtp_main([*base, "--out", str(tmp_path / "a.pt"), "--steps", "24"]) == 0
+    a = load_checkpoint(tmp_path / "a.pt")
+    assert a.metadata.provenance["ema"] == 0.9 and a.metadata.provenance["stem_layers"] == 2
+    assert a.net.config["stem_layers"] == 2 and a.training["config"]["ema"] == 0.9
+    # the saved network is the average, the raw weights travel only to resume
+    raw = a.training["raw_weights"]
+    assert any(not torch.equal(v, raw[k]) for k, v in a.net.state_dict().items() if v.dtype.is_floating_point)
+    # stopped half-way and resumed: exactly the uninterrupted run, average and raw weights alike
+    assert rtp_main([*base, "--out", str(tmp_path / "b.pt"), "--steps", "12"]) == 0
+    assert rtp_main([*base, "--out", str(tmp_path / "b.pt"), "--steps", "24"]) == 0
+    b = load_checkpoint(tmp_path / "b.pt")
+    for k, v in a.net.state_dict().items():
+        assert torch.equal(v, b.net.state_dict()[k]) and torch.equal(raw[k], b.training["raw_weights"][k]), k
+    # another decay is another training run; a decay outside [0, 1) is refused before any work
+    with pytest.raises(sdk.RtpError, match="ema"):
+        train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(tmp_path / "b.pt"), steps=30,
+                                      crop=32, val_scenes=("scene0",), stem_layers=2, ema=0.99))
+    with pytest.raises(sdk.ParameterError, match=r"ema: expected a decay in \[0, 1\)"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "c.pt"), crop=32, ema=1.0))
+    with pytest.raises(sdk.ParameterError, match="stem_layers"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "c.pt"), crop=32, arch="fast", stem=1,
+                          stem_layers=2))
+    # an exported average predicts what it does in torch
+    pred = sdk.load(export.export_checkpoint(tmp_path / "a.pt", tmp_path / "a.onnx"))
+    x = np.random.default_rng(5).random((7, H, W), dtype=np.float32)
+    with torch.inference_mode():
+        want = a.net(torch.from_numpy(x)[None])[0].numpy()
+    np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)

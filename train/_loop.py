@@ -8,6 +8,7 @@ scenes, and a safety margin calibrated on that validation data.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import logging
@@ -59,12 +60,18 @@ class TrainConfig:
     stem: int = 4
     #: 2: each block of the fast network after a pool doubles its channels (1: ``width`` throughout).
     grow: int = 1
+    #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
+    #: between, at half resolution); 1: one ``stem x stem`` read.
+    stem_layers: int = 1
     #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
     #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
     #: ``huber`` (quadratic below 0.1, linear above).
     loss: str = "l1"
+    #: Decay of an exponential moving average of the weights (and BatchNorm statistics), updated
+    #: every step; the average is what is validated, calibrated and saved. 0: off (the raw weights).
+    ema: float = 0.0
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -223,6 +230,17 @@ def _dead_outputs(pred: np.ndarray, outputs: Sequence[str]) -> list[str]:
     return [r for r, row in zip(outputs, pred) if float(row.std()) < DEAD_OUTPUT_STD]
 
 
+@torch.no_grad()
+def _ema_update(avg: Network, net: Network, decay: float) -> None:
+    """``avg <- decay * avg + (1 - decay) * net`` for weights and BatchNorm statistics (the step
+    counters are copied). The decay ramps up from 0.1 over the first steps, so early weights fade."""
+    for a, b in zip(avg.state_dict().values(), net.state_dict().values()):
+        if a.dtype.is_floating_point:
+            a.mul_(decay).add_(b, alpha=1.0 - decay)
+        else:
+            a.copy_(b)
+
+
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
     if cfg.metric not in sdk.METRICS:
@@ -241,6 +259,11 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8) or cfg.grow not in (1, 2):
         raise sdk.ParameterError(f"expected width >= 2, depth >= 0, stem 1, 2, 4 or 8 and grow 1 or 2, got {cfg.width}, "
                                  f"{cfg.depth}, {cfg.stem} and {cfg.grow}")
+    if cfg.stem_layers not in (1, 2) or (cfg.stem_layers == 2 and min(cfg.stem, cfg.tile) < 2):
+        raise sdk.ParameterError(f"stem_layers: expected 1, or 2 with a stem of at least 2, got {cfg.stem_layers} with "
+                                 f"stem {cfg.stem}", "stem_layers")
+    if not 0.0 <= cfg.ema < 1.0:
+        raise sdk.ParameterError(f"ema: expected a decay in [0, 1) (0: off), got {cfg.ema}", "ema")
     reader = DatasetReader(cfg.data)
     store = TargetStore(cfg.data)
     if cfg.metric not in store.metrics:
@@ -259,7 +282,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
-                        depth=cfg.depth, stem=cfg.stem, grow=cfg.grow)
+                        depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers)
+    # with ema: `net` trains, `avg` (its moving average) is validated and saved
+    avg = copy.deepcopy(net) if cfg.ema else net
     opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
     out = Path(cfg.out)
@@ -273,10 +298,14 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["stem"] = cfg.stem
         if cfg.grow != 1:
             config_key["grow"] = cfg.grow
+        if cfg.stem_layers != 1:
+            config_key["stem_layers"] = cfg.stem_layers
     if cfg.augment:
         config_key["augment"] = True
     if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
         config_key["loss"] = cfg.loss
+    if cfg.ema:
+        config_key["ema"] = cfg.ema
     if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split
         config_key["val_split"] = cfg.val_split
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
@@ -291,7 +320,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
             raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
                                "choose another output path or delete it")
-        net.load_state_dict(prev.net.state_dict())
+        avg.load_state_dict(prev.net.state_dict())
+        if cfg.ema:
+            net.load_state_dict(state["raw_weights"])
         opt.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])
         gen.set_state(state["generator"])
@@ -333,14 +364,15 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         }
 
     def save(done: bool, safety: float = 0.0, extra: dict[str, Any] | None = None) -> None:
-        ckpt.save(out, net, metadata(safety, extra or {}), training={
+        ckpt.save(out, avg, metadata(safety, extra or {}), training={
             "config": config_key, "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
             "generator": gen.get_state(), "step": step, "history": json.dumps(history), "done": done,
+            **({"raw_weights": net.state_dict()} if cfg.ema else {}),
         })
 
     n_tiles = cfg.crop // cfg.tile
     if step == 0:  # the untrained network's score, the reference every later validation improves on
-        s0, _, _ = _validate(net, va, transform, cfg, worse)
+        s0, _, _ = _validate(avg, va, transform, cfg, worse)
         history.append({"step": 0, "val": s0})
     net.train()
     while step < cfg.steps:
@@ -363,16 +395,18 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         opt.step()
         sched.step()
         step += 1
+        if cfg.ema:
+            _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
         if progress:
             progress(step, cfg.steps, loss.item())
         if step % cfg.val_every == 0 or step == cfg.steps:
-            s, _, _ = _validate(net, va, transform, cfg, worse)
+            s, _, _ = _validate(avg, va, transform, cfg, worse)
             history.append({"step": step, "train_loss": loss.item(), "val": s})
             log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss.item(), s["mae"], s["r2"])
         if step % cfg.save_every == 0 and step < cfg.steps:
             save(done=False)
 
-    val_scores, p, g = _validate(net, va, transform, cfg, worse)
+    val_scores, p, g = _validate(avg, va, transform, cfg, worse)
     dead = _dead_outputs(p, cfg.outputs)
     safety, under = calibrate_safety(p, g, worse=worse, quantile=cfg.safety_quantile)
     safe_scores = scores(p + worse * safety, g, worse=worse).as_dict()
@@ -384,8 +418,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "head": cfg.head,
         "arch": cfg.arch,
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
+        **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         "augment": cfg.augment,
         "loss": cfg.loss,
+        **({"ema": cfg.ema} if cfg.ema else {}),
         "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)

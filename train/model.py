@@ -139,7 +139,11 @@ class FastNet(nn.Module):
     convolution is followed by BatchNorm before its ReLU, so BatchNorm folds into the convolution at
     export. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
     them (16, 32, 64 for width 16 and depth 3), widening the cheap low-resolution end while the
-    full-resolution read stays at ``width``. For width 16, depth 3, grow 1 the layers are:
+    full-resolution read stays at ``width``. ``stem_layers`` 2 splits the stem in two: a
+    ``stem/2 x stem/2`` convolution with that stride to ``width / 2`` channels, BatchNorm and ReLU,
+    then a 2x2 stride-2 one to ``width`` (for stem 4: two 2x2 reads, a nonlinearity at half
+    resolution that can see contrast inside each 4x4 cell, which one linear 4x4 read cannot). For
+    width 16, depth 3, grow 1, one stem layer, the layers are:
 
     =========  ============  =====================  ==========
     layer      resolution    channels               parameters
@@ -155,23 +159,35 @@ class FastNet(nn.Module):
     """
 
     def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
-                 tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1) -> None:
+                 tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
+                 stem_layers: int = 1) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
         if width < 2 or depth < 0 or stem not in (1, 2, 4, 8) or grow not in (1, 2):
             raise ValueError(f"expected width >= 2, depth >= 0, stem in (1, 2, 4, 8) and grow 1 or 2, got {width}, "
                              f"{depth}, {stem}, {grow}")
+        if stem_layers not in (1, 2) or (stem_layers == 2 and min(stem, tile) < 2):
+            raise ValueError(f"stem_layers must be 1, or 2 with a stem (and tile) of at least 2, got {stem_layers} "
+                             f"with stem {stem} and tile {tile}")
         if in_channels < 1 or out_channels < 1:
             raise ValueError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
         self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
                                        "width": width, "depth": depth, "stem": stem}
         if grow != 1:  # checkpoints from before the option hold no "grow"
             self.config["grow"] = grow
+        if stem_layers != 1:  # likewise
+            self.config["stem_layers"] = stem_layers
         s = min(stem, tile)
         pools = int(math.log2(tile // s))
-        layers: list[nn.Module] = [nn.Conv2d(in_channels, width, s, stride=s, bias=False), nn.BatchNorm2d(width),
-                                   nn.ReLU(inplace=True)]
+        layers: list[nn.Module] = []
+        if stem_layers == 2:
+            mid = max(width // 2, 1)
+            layers += [nn.Conv2d(in_channels, mid, s // 2, stride=s // 2, bias=False), nn.BatchNorm2d(mid),
+                       nn.ReLU(inplace=True), nn.Conv2d(mid, width, 2, stride=2, bias=False)]
+        else:
+            layers.append(nn.Conv2d(in_channels, width, s, stride=s, bias=False))
+        layers += [nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
         c = width
         for i in range(max(depth, pools)):
             if i < depth:
@@ -208,11 +224,11 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 
 
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
-                  head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1) -> Network:
+                  head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
-    applies to the paper's network, ``depth``, ``stem`` and ``grow`` to the fast one."""
+    applies to the paper's network, ``depth``, ``stem``, ``grow`` and ``stem_layers`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
-        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow)
+        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
