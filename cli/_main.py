@@ -269,7 +269,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "grow", "augment", "tile", "outputs", "inputs",
-                 "transform", "logistic_k", "head", "loss", "ema", "steps", "batch", "crop", "lr", "seed",
+                 "transform", "logistic_k", "head", "loss", "ema", "distill", "steps", "batch", "crop", "lr", "seed",
                  "safety_quantile", "max_samples")
 
 
@@ -279,6 +279,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     overrides = {k: getattr(args, k) for k in _RECIPE_FLAGS if getattr(args, k) is not None}
     if args.val_scenes:
         overrides["val_scenes"] = _names(args.val_scenes)
+    if args.teachers:
+        overrides["teachers"] = _names(args.teachers)
     if args.threshold is not None:
         overrides["default_threshold"] = args.threshold
     cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
@@ -529,6 +531,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ema", type=float, default=None,
                    help="decay of a moving average of the weights, which is validated and saved (for example "
                    "0.999; default 0: off)")
+    r.add_argument("--teachers", action="append", default=None,
+                   help="repeatable or comma-separated exported models (.onnx) of the same metric and data whose "
+                   "mean prediction is mixed into the targets (knowledge distillation)")
+    r.add_argument("--distill", type=float, default=None, help="weight of the teachers' mean in the targets (default 0.5)")
     r.add_argument("--steps", type=_positive, default=None, help="training steps")
     r.add_argument("--batch", type=_positive, default=None, help="crops per step")
     r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")

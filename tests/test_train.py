@@ -276,3 +276,38 @@ def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path)
     with torch.inference_mode():
         want = a.net(torch.from_numpy(x)[None])[0].numpy()
     np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+
+
+def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -> None:
+    from rtp.capture import DatasetReader, TargetStore
+    from rtp.train import _loop
+
+    data = _dataset(tmp_path / "ds", n=6)
+    base = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_scenes=("scene0",), arch="fast", loss="mse")
+    teachers = []
+    for seed in (0, 1):
+        train(TrainConfig(out=str(tmp_path / f"t{seed}.pt"), steps=8, seed=seed, **base))
+        teachers.append(str(export.export_checkpoint(tmp_path / f"t{seed}.pt", tmp_path / f"t{seed}.onnx")))
+    cfg = TrainConfig(out=str(tmp_path / "s.pt"), steps=8, teachers=tuple(teachers), distill=0.7, **base)
+    # the soft targets are the mean of what the teachers predict on each whole training frame
+    reader = DatasetReader(str(data))
+    ids = [s.id for s in reader if s.meta["scene"] != "scene0"]
+    split = _loop._Split(reader, TargetStore(str(data)), ids, cfg)
+    soft = _loop._teacher_targets(cfg, reader, split, _loop._make_transform(cfg, split))
+    for k, i in enumerate(ids):
+        x = reader[i].inputs(cfg.inputs)
+        want = np.mean([sdk.load(t).predict_raw(x) for t in teachers], axis=0)
+        np.testing.assert_allclose(soft[k], want, atol=1e-4)  # the teachers read the float16 training copy
+        assert soft[k].shape == split.y[k].shape
+    result = train(cfg)
+    prov = load_checkpoint(result.checkpoint).metadata.provenance
+    assert list(prov["teachers"]) == ["t0.onnx", "t1.onnx"] and prov["distill"] == 0.7
+    # through the command line too; a teacher on other tiles, or a weight outside (0, 1], is refused
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "c.pt"), "--steps",
+                     "4", "--crop", "32", "--val-scenes", "scene0", "--teachers", ",".join(teachers)]) == 0
+    assert load_checkpoint(tmp_path / "c.pt").metadata.provenance["distill"] == 0.5
+    with pytest.raises(sdk.ParameterError, match="teachers: .* on 16-pixel tiles.* the student needs jnyang on 8-pixel"):
+        train(TrainConfig(out=str(tmp_path / "p.pt"), steps=4, teachers=(teachers[0],), tile=8, **base))
+    with pytest.raises(sdk.ParameterError, match=r"distill: expected a weight in \(0, 1\]"):
+        train(TrainConfig(out=str(tmp_path / "q.pt"), steps=4, teachers=tuple(teachers), distill=0.0, **base))
+    assert not (tmp_path / "p.pt").exists() and not (tmp_path / "q.pt").exists()

@@ -72,6 +72,11 @@ class TrainConfig:
     #: Decay of an exponential moving average of the weights (and BatchNorm statistics), updated
     #: every step; the average is what is validated, calibrated and saved. 0: off (the raw weights).
     ema: float = 0.0
+    #: Teachers: exported models (.onnx) of the same metric, tile size and target transform, whose
+    #: mean prediction on each whole training frame is mixed into the targets with weight
+    #: ``distill`` (knowledge distillation: an ensemble's smoother function taught to one network).
+    teachers: tuple[str, ...] = ()
+    distill: float = 0.5
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -230,6 +235,42 @@ def _dead_outputs(pred: np.ndarray, outputs: Sequence[str]) -> list[str]:
     return [r for r, row in zip(outputs, pred) if float(row.std()) < DEAD_OUTPUT_STD]
 
 
+def _teacher_targets(cfg: TrainConfig, reader: DatasetReader, tr: _Split, transform: sdk.Transform) -> list[np.ndarray]:
+    """The teachers' mean prediction (transformed space, ``cfg.outputs`` rows) on every training
+    frame, on the frame's own tiles like the targets. Teachers must predict ``cfg.metric`` on
+    ``cfg.tile`` tiles with the student's target transform and every output the student has."""
+    teachers = []
+    for path in cfg.teachers:
+        try:
+            t = sdk.load(path, providers=["CPUExecutionProvider"])
+        except sdk.RtpError as e:
+            raise sdk.ParameterError(f"teachers: {path} is not a model rtp can load: {e}", "teachers") from e
+        m = t.metadata
+        want, got = transform.to_dict(), m.transform.to_dict()
+        same = want.keys() == got.keys() and all(
+            np.isclose(want[k], got[k], rtol=1e-5) if isinstance(want[k], float) else want[k] == got[k] for k in want)
+        missing = [r for r in cfg.outputs if r not in m.outputs]
+        if m.metric != cfg.metric or m.tile_size != cfg.tile or missing or not same:
+            raise sdk.ParameterError(
+                f"teachers: {path} predicts {m.metric} on {m.tile_size}-pixel tiles, outputs {', '.join(m.outputs)}, "
+                f"transform {got}; the student needs {cfg.metric} on {cfg.tile}-pixel tiles, outputs "
+                f"{', '.join(cfg.outputs)}, transform {want} (teachers trained on the same data and metric)", "teachers")
+        teachers.append((t, [list(m.outputs).index(r) for r in cfg.outputs]))
+    out = []
+    for k, i in enumerate(tr.ids):
+        preds = []
+        for t, rows in teachers:
+            names = t.metadata.inputs
+            x = tr.x[k].astype(np.float32) if tuple(names) == tuple(cfg.inputs) else reader[i].inputs(names)
+            preds.append(t.predict_raw(x)[rows])
+        out.append(np.mean(preds, axis=0).astype(np.float32))
+        if out[-1].shape != tr.y[k].shape:
+            raise sdk.ParameterError(f"teachers: predictions of shape {out[-1].shape} on {i}, targets {tr.y[k].shape}",
+                                     "teachers")
+    log.info("distilling %d teacher(s) with weight %g", len(teachers), cfg.distill)
+    return out
+
+
 @torch.no_grad()
 def _ema_update(avg: Network, net: Network, decay: float) -> None:
     """``avg <- decay * avg + (1 - decay) * net`` for weights and BatchNorm statistics (the step
@@ -262,6 +303,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.stem_layers not in (1, 2) or (cfg.stem_layers == 2 and min(cfg.stem, cfg.tile) < 2):
         raise sdk.ParameterError(f"stem_layers: expected 1, or 2 with a stem of at least 2, got {cfg.stem_layers} with "
                                  f"stem {cfg.stem}", "stem_layers")
+    if not 0.0 < cfg.distill <= 1.0:
+        raise sdk.ParameterError(f"distill: expected a weight in (0, 1], got {cfg.distill}", "distill")
     if not 0.0 <= cfg.ema < 1.0:
         raise sdk.ParameterError(f"ema: expected a decay in [0, 1) (0: off), got {cfg.ema}", "ema")
     reader = DatasetReader(cfg.data)
@@ -277,6 +320,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"crop ({cfg.crop}) is larger than the frames ({w}x{h})")
 
     transform = _make_transform(cfg, tr)
+    soft = _teacher_targets(cfg, reader, tr, transform) if cfg.teachers else None
     higher = sdk.METRICS[cfg.metric].higher_is_better
     worse = 1.0 if transform.increasing != higher else -1.0
     torch.manual_seed(cfg.seed)
@@ -306,6 +350,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["loss"] = cfg.loss
     if cfg.ema:
         config_key["ema"] = cfg.ema
+    if cfg.teachers:  # the teachers by content: a file replaced under the same name is another run
+        config_key.update(distill=cfg.distill, teachers=[hashlib.sha256(Path(t).read_bytes()).hexdigest()
+                                                          for t in cfg.teachers])
     if cfg.val_split is not None:  # likewise: only a split-held-out validation records its split
         config_key["val_split"] = cfg.val_split
     # The samples themselves: a dataset grown since (more --per-scene) is another training run.
@@ -385,10 +432,18 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             for i, y, x in zip(idx, oy, ox)
         ])
         if cfg.augment:
-            xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs,
-                                   torch.randint(len(SYMMETRIES), (cfg.batch,), generator=gen).tolist())
+            xb_raw, sym = xb, torch.randint(len(SYMMETRIES), (cfg.batch,), generator=gen).tolist()
+            xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs, sym)
         target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
         target = torch.nan_to_num(target, nan=1.0)
+        if soft is not None:  # distillation: where the target is known, mix in the teachers' mean
+            sb = torch.from_numpy(np.stack([
+                soft[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
+                for i, y, x in zip(idx, oy, ox)]))
+            if cfg.augment:
+                sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
+            known = torch.from_numpy(np.isfinite(yb))
+            target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb, target)
         loss = loss_fn(net(torch.from_numpy(xb.astype(np.float32))), target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -422,6 +477,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "augment": cfg.augment,
         "loss": cfg.loss,
         **({"ema": cfg.ema} if cfg.ema else {}),
+        **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
         "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)
