@@ -311,3 +311,28 @@ def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -
     with pytest.raises(sdk.ParameterError, match=r"distill: expected a weight in \(0, 1\]"):
         train(TrainConfig(out=str(tmp_path / "q.pt"), steps=4, teachers=tuple(teachers), distill=0.0, **base))
     assert not (tmp_path / "p.pt").exists() and not (tmp_path / "q.pt").exists()
+    # bench/ensemble.py scores the teachers and their mean (what distillation aims at) on a dataset
+    import subprocess
+    import sys
+
+    bench = Path(__file__).resolve().parents[1] / "bench" / "ensemble.py"
+    out = subprocess.run([sys.executable, str(bench), *teachers, "--data", str(data)], capture_output=True, text=True,
+                         check=True).stdout
+    rows = [line for line in out.splitlines() if line.startswith(("| t0.onnx", "| t1.onnx", "| mean of the 2"))]
+    assert len(rows) == 3 and all(len(r.split("|")) == 6 for r in rows)
+    from rtp.evaluate import scores as r2_scores  # the mean row is R² of the averaged outputs
+
+    ys, ps = [], []
+    for i in (s.id for s in reader):
+        ys.append(sdk.load(teachers[0]).metadata.transform.forward(TargetStore(str(data)).load(i, "jnyang", 16)[
+            [sdk.PREDICTED_RATES.index(r) for r in sdk.DEFAULT_OUTPUTS]]).reshape(4, -1))
+        x = reader[i].inputs(cfg.inputs)
+        ps.append(np.mean([sdk.load(t).predict_raw(x) for t in teachers], axis=0).reshape(4, -1))
+    want = 100 * r2_scores(np.concatenate(ps, 1), np.concatenate(ys, 1)).r2
+    assert f"| mean of the 2 | {want:.1f} |" in out
+    # models on other tiles cannot be averaged: refused, naming both
+    train(TrainConfig(out=str(tmp_path / "e.pt"), steps=2, tile=8, **base))
+    other = export.export_checkpoint(tmp_path / "e.pt", tmp_path / "e.onnx")
+    bad = subprocess.run([sys.executable, str(bench), teachers[0], str(other), "--data", str(data)],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "8-pixel tiles" in bad.stderr and "t0.onnx" in bad.stderr
