@@ -52,7 +52,7 @@ def main() -> None:
         methods = s["methods"]
         if head is None:
             head = methods
-            print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]}, seed {s['seed']}; a tile fails "
+            print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]} (seed: which path); a tile fails "
                   f"when its {s['fail_metric']} error is over {s['fail_threshold']:g}. Work saved % at "
                   + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
                   "method's sweep never failed that often; -: never that rarely).\n")
@@ -64,7 +64,7 @@ def main() -> None:
                   for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
             cells = [" / ".join(_cell(at.get((meth, lv))) for lv in LEVELS) if meth != "oracle"
                      else _cell(at.get((meth, LEVELS[0]))) for meth in methods]
-            rows.append(f"| {s['scene']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
+            rows.append(f"| {s['scene']} | {s['seed']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
                         + " | ".join(cells) + " |")
             yang = [max((m for y in ("yang2019", "yang2019-unseen-1x1") if _readable(m := at.get((y, lv)))),
                         key=lambda m: m["work_saved"], default=None) for lv in LEVELS]
@@ -72,17 +72,17 @@ def main() -> None:
             oracle = at.get(("oracle", LEVELS[0]))
             of_oracle = [_ratio(at.get((model, lv)), oracle) for lv in LEVELS]
             reused = [_ratio(at.get((reuse, lv)), at.get((model, lv))) for lv in LEVELS]
-            targets.append(f"| {s['scene']} | {path} | " + " | ".join(
+            targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(
                 " / ".join(_fmt(r, pct) for r in rs) for rs, pct in ((vs_yang, False), (of_oracle, True), (reused, True))) + " |")
     assert head is not None
-    print("| map | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
-    print("|---|---|---:|---|" + "---|" * len(head))
+    print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
+    print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))
     print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
           "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
           "against k = 1 (>= 95%)\n")
-    print(f"| map | path | {model} / Yang | {model} / oracle | {reuse} / {model} |")
-    print("|---|---|---|---|---|")
+    print(f"| map | seed | path | {model} / Yang | {model} / oracle | {reuse} / {model} |")
+    print("|---|---:|---|---|---|---|")
     print("\n".join(targets))
 
 

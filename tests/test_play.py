@@ -135,7 +135,7 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
     out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json")],
                          capture_output=True, text=True, check=True).stdout
-    assert out.count("| procedural:0 | fast |") == 2 and "| jnyang / Yang |" in out  # savings row, targets row
+    assert out.count("| procedural:0 | 0 | fast |") == 2 and "| jnyang / Yang |" in out  # savings row, targets row
 
 
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
