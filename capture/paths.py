@@ -152,7 +152,8 @@ def camera_path(
         raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)}")
     if frames < 1 or not fps > 0:
         raise ViewpointError(f"expected frames >= 1 and fps > 0, got {frames} and {fps}")
-    tris, grid, _, cand = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance, max_height=max_height)
+    tris, grid, _, cand = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance, max_height=max_height,
+                                   focus=True)
     free = np.flatnonzero(cand)
     if len(free) == 0:
         raise ViewpointError(f"no free space in {scene.name!r} at {clearance} m from the geometry for a camera path")

@@ -155,6 +155,37 @@ def segment_hits_triangles(p0: np.ndarray, p1: np.ndarray, tris: np.ndarray, eps
 
 # -- the voxel grid -------------------------------------------------------------------------------
 
+def _within(tris: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The parts of the triangles inside the box ``bounds`` = ``(lo, hi)``, as triangles: those wholly
+    inside as they are, those crossing its faces clipped to it (Sutherland-Hodgman, then a fan), so
+    that a kilometre-wide backdrop costs samples only where it is in the box."""
+    t = np.asarray(tris, np.float64)
+    if len(t) == 0:
+        return t
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    tmin, tmax = t.min(1), t.max(1)
+    overlap = np.all((tmin <= hi) & (tmax >= lo), axis=1)
+    inside = np.all((tmin >= lo) & (tmax <= hi), axis=1)
+    out = [t[inside]]
+    for tri in t[overlap & ~inside]:
+        poly = list(tri)
+        for axis in range(3):
+            for bound, sign in ((lo[axis], 1.0), (hi[axis], -1.0)):
+                if not poly:
+                    break
+                clipped = []
+                for a, b in zip(poly, poly[1:] + poly[:1]):
+                    da, db = sign * (a[axis] - bound), sign * (b[axis] - bound)
+                    if da >= 0:
+                        clipped.append(a)
+                    if (da >= 0) != (db >= 0):
+                        clipped.append(a + (b - a) * (da / (da - db)))
+                poly = clipped
+        if len(poly) >= 3:
+            out.append(np.array([[poly[0], poly[i], poly[i + 1]] for i in range(1, len(poly) - 1)]))
+    return np.concatenate(out)
+
+
 class VoxelGrid:
     """Occupancy of the scene bounds (padded by one voxel of ``OUTSIDE``) at ``voxel`` metres.
 
@@ -162,9 +193,13 @@ class VoxelGrid:
     """
 
     def __init__(self, triangles: np.ndarray, voxel: float, blockers: np.ndarray | None = None,
-                 max_voxels: int = 24_000_000) -> None:
-        allt = triangles if blockers is None or len(blockers) == 0 else np.concatenate([triangles, blockers])
-        lo, hi = allt.reshape(-1, 3).min(0), allt.reshape(-1, 3).max(0)
+                 max_voxels: int = 24_000_000, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        if bounds is not None:  # only the triangles that reach into the box; the rest is OUTSIDE
+            triangles, blockers = _within(triangles, bounds), None if blockers is None else _within(blockers, bounds)
+            lo, hi = (np.asarray(b, np.float64) for b in bounds)
+        else:
+            allt = triangles if blockers is None or len(blockers) == 0 else np.concatenate([triangles, blockers])
+            lo, hi = allt.reshape(-1, 3).min(0), allt.reshape(-1, 3).max(0)
         ext = hi - lo
         if np.prod(ext / voxel + 3) > max_voxels:
             new = float((np.prod(ext) / max_voxels) ** (1 / 3)) * 1.05
@@ -309,6 +344,7 @@ def free_space(
     voxel: float = 0.25,
     clearance: float = 0.3,
     max_height: float | None = 6.0,
+    focus: bool = False,
 ) -> tuple[np.ndarray, VoxelGrid, np.ndarray, np.ndarray]:
     """The valid viewpoint domain of ``scene``: ``(triangles, grid, reachable, candidates)``.
 
@@ -317,6 +353,16 @@ def free_space(
     ``clearance`` (rounded up to whole voxels) from any geometry. :func:`sample_viewpoints` and the
     camera paths of :mod:`rtp.capture.paths` draw from it. Raises :class:`ViewpointError` for a
     scene without spawn points or triangles.
+
+    A map whose geometry spans too much for ``voxel`` (more than :class:`VoxelGrid`'s voxel budget)
+    gets a coarser grid. ``focus=True`` (the camera paths, whose walker needs floors and steps)
+    then, when that grid is more than :data:`FOCUS_COARSENING` times coarser than ``voxel``, floods
+    it once and voxelises again only the box around what it reached and the spawn points (plus
+    :data:`FOCUS_MARGIN`, and ``max_height`` below), at ``voxel`` where that fits: oa_dm3's drawn
+    backdrop spans 590 x 280 x 630 m around a 75 x 9 x 48 m arena (1.72 m voxels over the whole
+    map, where no path was found). The test maps oacmpctf3 and oasago2 (0.32-0.39 m) keep their
+    whole-map grids, so their published paths stay as they were; the capture's viewpoints keep the
+    one grid (the datasets were captured with it).
     """
     if not scene.spawn_points:
         raise ViewpointError(f"scene {scene.name!r} has no spawn points to start the flood fill from")
@@ -324,6 +370,33 @@ def free_space(
     if len(tris) == 0:
         raise ViewpointError(f"scene {scene.name!r} has no triangles")
     grid = VoxelGrid(tris, voxel, blockers)
+    if focus and grid.voxel > FOCUS_COARSENING * voxel:
+        _, reach = _flood(scene, grid, max_height)
+        pts = np.concatenate([grid.centre(np.flatnonzero(reach)),
+                              np.array([sp.position for sp in scene.spawn_points], np.float64)])
+        pad = max(FOCUS_MARGIN, 2 * grid.voxel)
+        lo = pts.min(0) - pad - np.array([0.0, max_height or 0.0, 0.0])
+        hi = pts.max(0) + pad
+        log.info("%s: %.3f m voxels over the whole map; %.3f m around its %.0f x %.0f x %.0f m playable box",
+                 scene.name, grid.voxel, voxel, *(hi - lo))
+        grid = VoxelGrid(tris, voxel, blockers, bounds=(lo, hi))
+    _, reach = _flood(scene, grid, max_height)
+    k = int(math.ceil(clearance / grid.voxel))
+    return tris, grid, reach, reach & ~grid.dilate(grid.occ != FREE, k)
+
+
+#: How much coarser than asked the whole-map grid may be before ``free_space(focus=True)``
+#: voxelises again around the playable part.
+FOCUS_COARSENING = 2.0
+
+#: Metres kept around the spawn points and the coarse grid's reachable space when ``free_space``
+#: voxelises again around them (``focus=True``).
+FOCUS_MARGIN = 8.0
+
+
+def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(passable, reachable)`` of ``grid``: free voxels (at most ``max_height`` over a solid one,
+    when set), and those of them flood-filled from the spawn points."""
     passable = grid.occ == FREE
     if max_height is not None:
         solid = grid.occ != FREE
@@ -333,9 +406,7 @@ def free_space(
         height = (np.arange(ny)[None, :, None] - last) * grid.voxel
         passable &= (last >= 0) & (height <= max_height)
     seeds = np.array([sp.position for sp in scene.spawn_points], np.float64)
-    reach = grid.flood(seeds, passable)
-    k = int(math.ceil(clearance / grid.voxel))
-    return tris, grid, reach, reach & ~grid.dilate(grid.occ != FREE, k)
+    return passable, grid.flood(seeds, passable)
 
 
 def sample_viewpoints(

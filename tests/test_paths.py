@@ -84,3 +84,26 @@ def test_paths_walk_the_floors_at_the_spawn_points_eye_height(scene) -> None:  #
     assert np.median([c.position[1] - floors.below(np.array(c.position)) for c in own.cameras]) == pytest.approx(1.0)
     with pytest.raises(ViewpointError, match="eye height"):
         camera_path(sc, 10, eye_height=-1.0)
+
+
+def test_a_far_backdrop_does_not_coarsen_the_paths_floors(scene) -> None:  # noqa: ANN001
+    """A map whose drawn geometry spans far more than its arena (oa_dm3: a 560 m backdrop around a
+    75 m arena) gets a coarse whole-map grid; the paths voxelise again around the playable part and
+    still walk its floors at the eye height."""
+    import dataclasses
+
+    from rtp.scene import Mesh
+
+    sc, blockers = scene
+    far = np.array([[-1500, -200, -1500], [1500, -200, -1500], [0, 800, 1500]], np.float32)  # a 3 km backdrop
+    backdrop = Mesh(far, np.tile([0, 0, 1], (3, 1)).astype(np.float32), np.zeros((3, 2), np.float32),
+                    np.array([[0, 1, 2]], np.uint32), 0)
+    big = dataclasses.replace(sc, meshes=[*sc.meshes, backdrop])
+    _, coarse, _, _ = free_space(big, blockers=blockers)
+    _, fine, reach, cand = free_space(big, blockers=blockers, focus=True)
+    assert coarse.voxel > 1.0 and fine.voxel == 0.25 and cand.any()
+    _, plain, _, plain_cand = free_space(sc, blockers=blockers)
+    centres = plain.centre(np.flatnonzero(plain_cand))  # the arena's free space (away from walls), found again
+    assert reach[tuple(fine.index(centres).T)].mean() > 0.98
+    path = camera_path(big, 60, "slow", seed=0, blockers=blockers)
+    assert abs(path.eye_height - 1.6) <= 0.125
