@@ -7,6 +7,10 @@ and prediction reuse against k = 1. Savings read at a share a method's sweep nev
 are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios`.
 
     python bench/play_report.py data/play-{20kdm2,oa_dm5,oacmpctf3,delta,oasago2}/play.json
+    python bench/play_report.py data/play-*-seed1/play.json --reuse jnyang@4:worst,jnyang@4:mean
+
+Runs with different methods share one table: its columns are every method of any run, blank where
+a run did not play it.
 """
 
 from __future__ import annotations
@@ -42,16 +46,20 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=Path, help="play.json files of `rtp play --out`")
     ap.add_argument("--model", default="jnyang", help="the rtp method to compare (default jnyang)")
+    ap.add_argument("--reuse", default=None, help="comma-separated methods with prediction reuse to compare with "
+                    "--model (default MODEL@4)")
     args = ap.parse_args()
-    model, reuse = args.model, f"{args.model}@4"
-    head = None
+    model = args.model
+    reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
+    runs = [json.loads(run.read_text()) for run in args.runs]
+    head: list[str] = []
+    for rep in runs:
+        head += [m for m in rep["settings"]["methods"] if m not in head]
     rows, targets = [], []
-    for run in args.runs:
-        rep = json.loads(run.read_text())
+    for i, rep in enumerate(runs):
         s = rep["settings"]
         methods = s["methods"]
-        if head is None:
-            head = methods
+        if i == 0:
             print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]} (seed: which path); a tile fails "
                   f"when its {s['fail_metric']} error is over {s['fail_threshold']:g}. Work saved % at "
                   + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
@@ -62,8 +70,8 @@ def main() -> None:
             eye = f"{cam['eye_height_m']:.2f}" if cam else "?"
             at = {(m["method"], m["fail_share"]): {**m, "work_saved": math.nan if m["work_saved"] is None else m["work_saved"]}
                   for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
-            cells = [" / ".join(_cell(at.get((meth, lv))) for lv in LEVELS) if meth != "oracle"
-                     else _cell(at.get((meth, LEVELS[0]))) for meth in methods]
+            cells = ["" if meth not in methods else " / ".join(_cell(at.get((meth, lv))) for lv in LEVELS)
+                     if meth != "oracle" else _cell(at.get((meth, LEVELS[0]))) for meth in head]
             rows.append(f"| {s['scene']} | {s['seed']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
                         + " | ".join(cells) + " |")
             yang = [max((m for y in ("yang2019", "yang2019-unseen-1x1") if _readable(m := at.get((y, lv)))),
@@ -71,18 +79,18 @@ def main() -> None:
             vs_yang = [_ratio(at.get((model, lv)), y) for lv, y in zip(LEVELS, yang)]
             oracle = at.get(("oracle", LEVELS[0]))
             of_oracle = [_ratio(at.get((model, lv)), oracle) for lv in LEVELS]
-            reused = [_ratio(at.get((reuse, lv)), at.get((model, lv))) for lv in LEVELS]
+            reused = [[_ratio(at.get((r, lv)), at.get((model, lv))) for lv in LEVELS] for r in reuses]
             targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(
-                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in ((vs_yang, False), (of_oracle, True), (reused, True))) + " |")
-    assert head is not None
+                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in
+                ((vs_yang, False), (of_oracle, True), *((r, True) for r in reused))) + " |")
     print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
     print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))
     print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
           "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
           "against k = 1 (>= 95%)\n")
-    print(f"| map | seed | path | {model} / Yang | {model} / oracle | {reuse} / {model} |")
-    print("|---|---:|---|---|---|---|")
+    print(f"| map | seed | path | {model} / Yang | {model} / oracle | " + " | ".join(f"{r} / {model}" for r in reuses) + " |")
+    print("|---|---:|---|---|---|" + "---|" * len(reuses))
     print("\n".join(targets))
 
 

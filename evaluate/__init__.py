@@ -37,7 +37,7 @@ from ._evaluate import (
     spearman,
     tile_unseen_share,
 )
-from ._play import METHOD_KINDS, MethodSpec, PlayError, PlayReport, parse_methods, play, saved_at
+from ._play import METHOD_KINDS, REUSE_REDUCTIONS, MethodSpec, PlayError, PlayReport, parse_methods, play, saved_at
 from ._scores import Scores, scores
 
 __all__ = [
@@ -54,6 +54,7 @@ __all__ = [
     "Oracle",
     "PlayError",
     "PlayReport",
+    "REUSE_REDUCTIONS",
     "RateSelector",
     "Scores",
     "Yang2019",

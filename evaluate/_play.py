@@ -42,10 +42,19 @@ __all__ = [
     "MethodSpec",
     "PlayError",
     "PlayReport",
+    "REUSE_REDUCTIONS",
     "parse_methods",
     "play",
     "saved_at",
 ]
+
+#: How a tile of a frame between network runs reduces the estimates its pixels carry from the frame
+#: the network ran on (``NAME@k:reduction``; docs/evaluation.md "Prediction reuse").
+REUSE_REDUCTIONS = {
+    "worst": "the worst estimate over the tile's pixels (the most conservative)",
+    "mean": "the mean over the tile's pixels (each source tile weighted by the pixels it gives)",
+    "upper": "the upper quartile over the tile's pixels (PSNR: the lower; between the mean and the worst)",
+}
 
 #: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
 FAIL_LEVELS = (0.01, 0.02, 0.05)
@@ -86,17 +95,20 @@ class PlayError(sdk.ParameterError):
 @dataclass(frozen=True)
 class MethodSpec:
     """One method of a closed-loop run: ``name`` as reported, ``kind`` (a :data:`METHOD_KINDS` key or
-    ``"model"``), the ``model`` (shipped name or path) and its ``reuse`` interval k (1: every frame)."""
+    ``"model"``), the ``model`` (shipped name or path), its ``reuse`` interval k (1: every frame) and
+    how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`)."""
 
     name: str
     kind: str
     model: str = ""
     reuse: int = 1
+    reduce: str = "worst"
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
-    model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse."""
+    model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse and
+    ``@k:reduction`` (:data:`REUSE_REDUCTIONS`; ``jnyang@4:mean``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
@@ -106,9 +118,13 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
             out.append(MethodSpec(item, item))
             continue
         model, _, k = item.rpartition("@") if "@" in item else (item, "", "1")
+        k, colon, reduce = k.partition(":")
         if not k.isdigit() or int(k) < 1:
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
-        out.append(MethodSpec(item, "model", model, int(k)))
+        if colon and reduce not in REUSE_REDUCTIONS:
+            raise PlayError(f"method {item!r}: the reduction after ':' must be one of {', '.join(REUSE_REDUCTIONS)} "
+                            "(e.g. jnyang@4:mean)")
+        out.append(MethodSpec(item, "model", model, int(k), reduce or MethodSpec.reduce))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -179,13 +195,14 @@ def _tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
 
 
 def _reproject_estimates(est: np.ndarray, index: np.ndarray, pf: Any, tile: int, hib: bool,
-                         unseen_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+                         unseen_fraction: float, reduce: str = "worst") -> tuple[np.ndarray, np.ndarray]:
     """Carry the per-tile estimates ``est`` of the frame the network last ran on into this frame.
 
     ``index`` maps each kept pixel of the previous frame to the tile of ``est`` its surface was in
     (-1: unknown). Every kept pixel of this frame takes the index of where it was in the previous one
     (``pf.rows``, ``pf.cols``), unseen pixels -1, background pixels the tile at their own position;
-    each tile then takes the worst estimate over its known pixels, and tiles with more than
+    each tile then takes the worst (``reduce="worst"``), the mean (``"mean"``) or the upper quartile
+    (``"upper"``, towards the worse side) of the estimates over its known pixels, and tiles with more than
     ``unseen_fraction`` unknown the worst value there is (1x1). Warping the index per pixel rather
     than the per-tile values keeps the tiles from dilating frame after frame. Returns the estimates
     and the warped index."""
@@ -200,11 +217,26 @@ def _reproject_estimates(est: np.ndarray, index: np.ndarray, pf: Any, tile: int,
     bg = pf.frame.mask[np.ix_(yc, xc)] <= 0.5
     new = np.where(bg, own, np.where(pf.seen[np.ix_(yc, xc)] > 0, prev, -1))
     known = new >= 0
-    fill = np.inf if hib else -np.inf  # neutral for the reduction below
-    vals = np.where(known[None], est.reshape(len(est), -1)[:, np.maximum(new, 0)], fill)
     k = tile // _REUSE_STEP
-    blocks = vals.reshape(len(est), th, k, tw, k)
-    out = blocks.min(axis=(2, 4)) if hib else blocks.max(axis=(2, 4))
+    src = est.reshape(len(est), -1)[:, np.maximum(new, 0)]
+    if reduce == "mean":
+        kb = known.reshape(th, k, tw, k)
+        total = np.where(kb[None], src.reshape(len(est), th, k, tw, k), 0.0).sum(axis=(2, 4))
+        with np.errstate(invalid="ignore", divide="ignore"):  # no known pixel: nan, the worst below
+            out = total / kb.sum(axis=(1, 3))[None]
+    else:
+        fill = np.inf if hib else -np.inf  # neutral for the reduction below
+        blocks = np.where(known[None], src, fill).reshape(len(est), th, k, tw, k)
+        if reduce == "upper":  # sorted worst first, unknown pixels last; the quartile of the known ones
+            vals = blocks.transpose(0, 1, 3, 2, 4).reshape(len(est), th, tw, k * k)
+            vals = np.sort(vals if hib else -vals, axis=-1)
+            n = known.reshape(th, k, tw, k).sum(axis=(1, 3))
+            at = np.maximum(np.floor(0.25 * (n - 1)), 0).astype(np.int64)
+            out = np.take_along_axis(vals, np.broadcast_to(at[None, ..., None], vals.shape[:3] + (1,)), -1)[..., 0]
+            out = out if hib else -out
+            out[:, n == 0] = np.nan
+        else:
+            out = blocks.min(axis=(2, 4)) if hib else blocks.max(axis=(2, 4))
     unseen = 1.0 - known.reshape(th, k, tw, k).mean(axis=(1, 3)) > unseen_fraction
     worst = -np.inf if hib else np.inf
     out[:, unseen] = worst
@@ -469,7 +501,7 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
             else:
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
-                loops.append(_Loop(m, v, f"threshold {v:.4g}", _model(pred, v, m.reuse, tile, unseen_fraction),
+                loops.append(_Loop(m, v, f"threshold {v:.4g}", _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce),
                                    default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
@@ -499,7 +531,8 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
     return decide
 
 
-def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float) -> Callable[..., np.ndarray]:
+def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
+           reduce: str = "worst") -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
 
@@ -520,7 +553,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float)
             lp.age, ran = 0, True
         else:
             assert lp.index is not None
-            est, lp.index = _reproject_estimates(lp.cache, lp.index, pf, tile, hib, unseen_fraction)
+            est, lp.index = _reproject_estimates(lp.cache, lp.index, pf, tile, hib, unseen_fraction, reduce)
             lp.age, ran = lp.age + 1, False
         lp.ran.append(ran)
         return sdk.select_rates(est, thr, higher_is_better=hib)

@@ -171,11 +171,13 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 
 
 def test_methods_are_parsed_and_checked() -> None:
-    specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019")
-    assert [(s.kind, s.model, s.reuse) for s in specs] == [
-        ("model", "jnyang", 1), ("model", "jnyang", 4), ("model", "models/psnr.onnx", 2), ("yang2019", "", 1)]
+    specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean")
+    assert [(s.kind, s.model, s.reuse, s.reduce) for s in specs] == [
+        ("model", "jnyang", 1, "worst"), ("model", "jnyang", 4, "worst"), ("model", "models/psnr.onnx", 2, "worst"),
+        ("yang2019", "", 1, "worst"), ("model", "jnyang", 4, "worst"), ("model", "jnyang", 4, "mean")]
     for bad, match in (("jnyang@0", "reuse interval"), ("jnyang@x", "reuse interval"), ("", "at least one"),
-                       ("oracle,oracle", "each method once")):
+                       ("oracle,oracle", "each method once"), ("jnyang@4:median", "one of worst, mean, upper"),
+                       ("jnyang@4:", "one of worst, mean, upper")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     with pytest.raises(PlayError, match="unknown profile"):
@@ -213,6 +215,24 @@ def test_reused_predictions_follow_the_surface() -> None:
     seen[:TILE, :TILE] = 0
     out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5)
     assert np.isinf(out[:, 0, 0]).all() and np.array_equal(out[:, 1:], est[:, 1:])
+    # half a tile right: each tile's pixels come half from its own source tile, half from the one
+    # to its left; the worst takes the larger estimate, the mean their average
+    half = PathFrame(1, F(), rows, np.maximum(cols - TILE // 2, 0), np.ones((h, w), np.float32))
+    worst, _ = _reproject_estimates(est, index, half, TILE, False, 0.5)
+    mean, _ = _reproject_estimates(est, index, half, TILE, False, 0.5, "mean")
+    assert np.allclose(worst[:, :, 1:], np.maximum(est[:, :, 1:], est[:, :, :-1]))
+    assert np.allclose(mean[:, :, 1:], (est[:, :, 1:] + est[:, :, :-1]) / 2)
+    assert np.allclose(_reproject_estimates(est, index, half, TILE, False, 0.5, "upper")[0], worst)
+    # two pixels right: an eighth of each tile comes from its left neighbour; the upper quartile
+    # ignores that sliver, the worst does not (PSNR models: the lower quartile, the same tile)
+    sliver = PathFrame(1, F(), rows, np.maximum(cols - 2, 0), np.ones((h, w), np.float32))
+    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5, "upper")[0], est)
+    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, True, 0.5, "upper")[0], est)
+    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5)[0][:, :, 1:],
+                       np.maximum(est[:, :, 1:], est[:, :, :-1]))
+    for reduce in ("mean", "upper"):  # unseen tiles: 1x1 whatever the reduction
+        out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5, reduce)
+        assert np.isinf(out[:, 0, 0]).all()
 
 
 def test_paths_in_worker_processes_give_the_same_report() -> None:
