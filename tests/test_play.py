@@ -130,6 +130,7 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
         assert (tmp_path / name).stat().st_size > 0
     settings = json.loads((tmp_path / "play.json").read_text())["settings"]
     assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
+    assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean"}}  # what NAME@k meant in this run
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
@@ -173,8 +174,8 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 def test_methods_are_parsed_and_checked() -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean")
     assert [(s.kind, s.model, s.reuse, s.reduce) for s in specs] == [
-        ("model", "jnyang", 1, "worst"), ("model", "jnyang", 4, "worst"), ("model", "models/psnr.onnx", 2, "worst"),
-        ("yang2019", "", 1, "worst"), ("model", "jnyang", 4, "worst"), ("model", "jnyang", 4, "mean")]
+        ("model", "jnyang", 1, "mean"), ("model", "jnyang", 4, "mean"), ("model", "models/psnr.onnx", 2, "mean"),
+        ("yang2019", "", 1, "mean"), ("model", "jnyang", 4, "worst"), ("model", "jnyang", 4, "mean")]
     for bad, match in (("jnyang@0", "reuse interval"), ("jnyang@x", "reuse interval"), ("", "at least one"),
                        ("oracle,oracle", "each method once"), ("jnyang@4:median", "one of worst, mean, upper"),
                        ("jnyang@4:", "one of worst, mean, upper")):
@@ -218,8 +219,8 @@ def test_reused_predictions_follow_the_surface() -> None:
     # half a tile right: each tile's pixels come half from its own source tile, half from the one
     # to its left; the worst takes the larger estimate, the mean their average
     half = PathFrame(1, F(), rows, np.maximum(cols - TILE // 2, 0), np.ones((h, w), np.float32))
-    worst, _ = _reproject_estimates(est, index, half, TILE, False, 0.5)
-    mean, _ = _reproject_estimates(est, index, half, TILE, False, 0.5, "mean")
+    worst, _ = _reproject_estimates(est, index, half, TILE, False, 0.5, "worst")
+    mean, _ = _reproject_estimates(est, index, half, TILE, False, 0.5)
     assert np.allclose(worst[:, :, 1:], np.maximum(est[:, :, 1:], est[:, :, :-1]))
     assert np.allclose(mean[:, :, 1:], (est[:, :, 1:] + est[:, :, :-1]) / 2)
     assert np.allclose(_reproject_estimates(est, index, half, TILE, False, 0.5, "upper")[0], worst)
@@ -228,9 +229,9 @@ def test_reused_predictions_follow_the_surface() -> None:
     sliver = PathFrame(1, F(), rows, np.maximum(cols - 2, 0), np.ones((h, w), np.float32))
     assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5, "upper")[0], est)
     assert np.allclose(_reproject_estimates(est, index, sliver, TILE, True, 0.5, "upper")[0], est)
-    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5)[0][:, :, 1:],
+    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5, "worst")[0][:, :, 1:],
                        np.maximum(est[:, :, 1:], est[:, :, :-1]))
-    for reduce in ("mean", "upper"):  # unseen tiles: 1x1 whatever the reduction
+    for reduce in ("worst", "upper"):  # unseen tiles: 1x1 whatever the reduction
         out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5, reduce)
         assert np.isinf(out[:, 0, 0]).all()
 
