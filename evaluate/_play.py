@@ -51,7 +51,7 @@ __all__ = [
 #: How a tile of a frame between network runs reduces the estimates its pixels carry from the frame
 #: the network ran on (``NAME@k:reduction``; docs/evaluation.md "Prediction reuse"). ``NAME@k`` is
 #: ``:mean``: on the validation maps it kept 92.7% / 94.7% of k = 1's saving at 2% / 5% failing tiles
-#: (worst 86.8% / 91.8%, upper 90.3% / 93.0%; docs/results.md "Prediction reuse").
+#: (worst 86.8% / 91.8%, upper 90.3% / 93.2%; docs/results.md "Prediction reuse").
 REUSE_REDUCTIONS = {
     "worst": "the worst estimate over the tile's pixels (the most conservative)",
     "mean": "the mean over the tile's pixels (each source tile weighted by the pixels it gives)",
