@@ -589,7 +589,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl = command("play", "closed-loop VRS on a moving camera: every method picks rates from its own last displayed "
                  "frame, frame after frame, against full-rate shading", _cmd_play,
                  epilog="methods: a shipped model name or .onnx path (NAME@k: run it every k-th frame, reproject its "
-                 "predictions in between; NAME@k:mean or :worst, how a tile reduces them), or\n"
+                 "predictions in between; NAME@k:mean, :worst or :upper, how a tile reduces them; NAME@k:fresh, "
+                 "the network runs on crops around the tiles it did not see instead of shading them at 1x1), or\n"
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
     pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")

@@ -37,7 +37,17 @@ from ._evaluate import (
     spearman,
     tile_unseen_share,
 )
-from ._play import METHOD_KINDS, REUSE_REDUCTIONS, MethodSpec, PlayError, PlayReport, parse_methods, play, saved_at
+from ._play import (
+    METHOD_KINDS,
+    REUSE_REDUCTIONS,
+    REUSE_UNSEEN,
+    MethodSpec,
+    PlayError,
+    PlayReport,
+    parse_methods,
+    play,
+    saved_at,
+)
 from ._scores import Scores, scores
 
 __all__ = [
@@ -55,6 +65,7 @@ __all__ = [
     "PlayError",
     "PlayReport",
     "REUSE_REDUCTIONS",
+    "REUSE_UNSEEN",
     "RateSelector",
     "Scores",
     "Yang2019",

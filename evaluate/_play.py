@@ -43,20 +43,17 @@ __all__ = [
     "PlayError",
     "PlayReport",
     "REUSE_REDUCTIONS",
+    "REUSE_UNSEEN",
     "parse_methods",
     "play",
     "saved_at",
 ]
 
-#: How a tile of a frame between network runs reduces the estimates its pixels carry from the frame
-#: the network ran on (``NAME@k:reduction``; docs/evaluation.md "Prediction reuse"). ``NAME@k`` is
-#: ``:mean``: on the validation maps it kept 92.7% / 94.7% of k = 1's saving at 2% / 5% failing tiles
-#: (worst 86.8% / 91.8%, upper 90.3% / 93.2%; docs/results.md "Prediction reuse").
-REUSE_REDUCTIONS = {
-    "worst": "the worst estimate over the tile's pixels (the most conservative)",
-    "mean": "the mean over the tile's pixels (each source tile weighted by the pixels it gives)",
-    "upper": "the upper quartile over the tile's pixels (PSNR: the lower; between the mean and the worst)",
-}
+#: How a reused tile reduces the estimates its pixels carry (``NAME@k:reduction``) and what it does
+#: with tiles the network did not see (``NAME@k:full`` or ``:fresh``): the SDK's
+#: :class:`~rtp.sdk.PredictionReuse` options, which the closed loop runs.
+REUSE_REDUCTIONS = sdk.REUSE_REDUCTIONS
+REUSE_UNSEEN = sdk.REUSE_UNSEEN
 
 #: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
 FAIL_LEVELS = (0.01, 0.02, 0.05)
@@ -98,19 +95,22 @@ class PlayError(sdk.ParameterError):
 class MethodSpec:
     """One method of a closed-loop run: ``name`` as reported, ``kind`` (a :data:`METHOD_KINDS` key or
     ``"model"``), the ``model`` (shipped name or path), its ``reuse`` interval k (1: every frame) and
-    how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`)."""
+    how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`) and what it does
+    with tiles the network did not see (:data:`REUSE_UNSEEN`)."""
 
     name: str
     kind: str
     model: str = ""
     reuse: int = 1
     reduce: str = "mean"
+    unseen: str = "full"
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
-    model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse and
-    ``@k:reduction`` (:data:`REUSE_REDUCTIONS`; ``jnyang@4:mean``)."""
+    model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse, then
+    ``:reduction`` (:data:`REUSE_REDUCTIONS`) and ``:unseen`` (:data:`REUSE_UNSEEN`) in any order
+    (``jnyang@4:mean:fresh``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
@@ -120,13 +120,16 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
             out.append(MethodSpec(item, item))
             continue
         model, _, k = item.rpartition("@") if "@" in item else (item, "", "1")
-        k, colon, reduce = k.partition(":")
+        k, *options = k.split(":")
         if not k.isdigit() or int(k) < 1:
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
-        if colon and reduce not in REUSE_REDUCTIONS:
-            raise PlayError(f"method {item!r}: the reduction after ':' must be one of {', '.join(REUSE_REDUCTIONS)} "
-                            "(e.g. jnyang@4:mean)")
-        out.append(MethodSpec(item, "model", model, int(k), reduce or MethodSpec.reduce))
+        reduce = [o for o in options if o in REUSE_REDUCTIONS]
+        unseen = [o for o in options if o in REUSE_UNSEEN]
+        if len(reduce) > 1 or len(unseen) > 1 or len(reduce) + len(unseen) != len(options):
+            raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}) "
+                            f"and one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), e.g. jnyang@4:mean:fresh")
+        out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
+                              unseen[0] if unseen else MethodSpec.unseen))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -159,15 +162,12 @@ class _Loop:
     default: bool = False
     history: np.ndarray | None = None  # the frame it displayed last
     rates: np.ndarray | None = None  # the rates it chose last
-    cache: np.ndarray | None = None  # reuse: the per-tile estimates of the frame the network last ran on
-    index: np.ndarray | None = None  # reuse: per kept pixel, the tile of ``cache`` its surface was in
-    age: int = 0  # frames since the network ran
     saved: list[float] = field(default_factory=list)
     fail: list[float] = field(default_factory=list)
     change: list[float] = field(default_factory=list)
     flip: list[float] = field(default_factory=list)
     ms: list[float] = field(default_factory=list)
-    ran: list[bool] = field(default_factory=list)  # reuse: whether the network ran this frame
+    ran: list[float] = field(default_factory=list)  # models: the network's work per frame (1: the whole frame)
 
     def summary(self) -> dict[str, Any]:
         def mean(v: list[float], skip: int = 1) -> float:
@@ -182,69 +182,6 @@ class _Loop:
             "predict_ms": float(np.median(self.ms[1:])) if len(self.ms) > 1 else float("nan"),
             "network_frames": mean([float(r) for r in self.ran]) if self.method.kind == "model" else float("nan"),
         }
-
-
-_REUSE_STEP = 2  # the tile-index map of prediction reuse keeps every second pixel per axis
-
-
-def _tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
-    """Per kept pixel (every ``_REUSE_STEP``-th per axis, padded to whole tiles) the index of its tile."""
-    h, w = shape
-    th, tw = sdk.tile_grid(h, w, tile)
-    ph, pw = sdk.padded_size(h, w, tile)
-    ys, xs = np.arange(0, ph, _REUSE_STEP), np.arange(0, pw, _REUSE_STEP)
-    return (ys[:, None] // tile) * tw + xs[None, :] // tile
-
-
-def _reproject_estimates(est: np.ndarray, index: np.ndarray, pf: Any, tile: int, hib: bool,
-                         unseen_fraction: float, reduce: str = "mean") -> tuple[np.ndarray, np.ndarray]:
-    """Carry the per-tile estimates ``est`` of the frame the network last ran on into this frame.
-
-    ``index`` maps each kept pixel of the previous frame to the tile of ``est`` its surface was in
-    (-1: unknown). Every kept pixel of this frame takes the index of where it was in the previous one
-    (``pf.rows``, ``pf.cols``), unseen pixels -1, background pixels the tile at their own position;
-    each tile then takes the worst (``reduce="worst"``), the mean (``"mean"``) or the upper quartile
-    (``"upper"``, towards the worse side) of the estimates over its known pixels, and tiles with more than
-    ``unseen_fraction`` unknown the worst value there is (1x1). Warping the index per pixel rather
-    than the per-tile values keeps the tiles from dilating frame after frame. Returns the estimates
-    and the warped index."""
-    h, w = pf.seen.shape
-    th, tw = est.shape[1:]
-    own = _tile_index_map((h, w), tile)
-    gh, gw = own.shape
-    yc = np.minimum(np.arange(gh) * _REUSE_STEP, h - 1)
-    xc = np.minimum(np.arange(gw) * _REUSE_STEP, w - 1)
-    rows, cols = pf.rows[np.ix_(yc, xc)], pf.cols[np.ix_(yc, xc)]
-    prev = index[np.minimum(rows // _REUSE_STEP, gh - 1), np.minimum(cols // _REUSE_STEP, gw - 1)]
-    bg = pf.frame.mask[np.ix_(yc, xc)] <= 0.5
-    new = np.where(bg, own, np.where(pf.seen[np.ix_(yc, xc)] > 0, prev, -1))
-    known = new >= 0
-    k = tile // _REUSE_STEP
-    if reduce == "mean":  # per tile, the sums over its known pixels (bincount: a tenth of a 5-D sum's time)
-        dest, srcs = own[known], new[known]
-        flat = est.reshape(len(est), -1)
-        total = np.stack([np.bincount(dest, weights=flat[i, srcs], minlength=th * tw) for i in range(len(est))])
-        with np.errstate(invalid="ignore", divide="ignore"):  # no known pixel: nan, the worst below
-            out = (total / np.bincount(dest, minlength=th * tw)).reshape(len(est), th, tw)
-    else:
-        src = est.reshape(len(est), -1)[:, np.maximum(new, 0)]
-        fill = np.inf if hib else -np.inf  # neutral for the reduction below
-        blocks = np.where(known[None], src, fill).reshape(len(est), th, k, tw, k)
-        if reduce == "upper":  # sorted worst first, unknown pixels last; the quartile of the known ones
-            vals = blocks.transpose(0, 1, 3, 2, 4).reshape(len(est), th, tw, k * k)
-            vals = np.sort(vals if hib else -vals, axis=-1)
-            n = known.reshape(th, k, tw, k).sum(axis=(1, 3))
-            at = np.maximum(np.floor(0.25 * (n - 1)), 0).astype(np.int64)
-            out = np.take_along_axis(vals, np.broadcast_to(at[None, ..., None], vals.shape[:3] + (1,)), -1)[..., 0]
-            out = out if hib else -out
-            out[:, n == 0] = np.nan
-        else:
-            out = blocks.min(axis=(2, 4)) if hib else blocks.max(axis=(2, 4))
-    unseen = 1.0 - known.reshape(th, k, tw, k).mean(axis=(1, 3)) > unseen_fraction
-    worst = -np.inf if hib else np.inf
-    out[:, unseen] = worst
-    out[~np.isfinite(out)] = worst
-    return out.astype(np.float32), new
 
 
 # -- the run ------------------------------------------------------------------------------------------
@@ -386,6 +323,11 @@ def play(
         if m.kind == "model" and predictors[m.model].tile_size != tile_size:
             raise PlayError(f"method {m.name}: the model uses {predictors[m.model].tile_size}px tiles, the run "
                             f"{tile_size}px (pass tile_size={predictors[m.model].tile_size})", "tile_size")
+        static = predictors[m.model].static_size if m.kind == "model" else None
+        if m.unseen == "fresh" and static is not None:
+            h, w = static
+            raise PlayError(f"method {m.name}: ':fresh' runs the network on crops, but the model takes only "
+                            f"{w}x{h} frames (export it with dynamic sizes)")
     if any(m.kind.startswith("fidelityfx") for m in specs) and tile_size not in (8, 16, 32):
         raise PlayError(f"FidelityFX supports 8, 16 and 32 pixel tiles, the run uses {tile_size}", "tile_size")
 
@@ -397,7 +339,8 @@ def play(
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
-                "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce} for m in specs if m.kind == "model" and m.reuse > 1}}
+                "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen}
+                          for m in specs if m.kind == "model" and m.reuse > 1}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
     if outdir is not None:
@@ -505,8 +448,8 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
             else:
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
-                loops.append(_Loop(m, v, f"threshold {v:.4g}", _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce),
-                                   default=v == thr0))
+                decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen)
+                loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
                            unseen="full" if m.kind == "yang2019-unseen-1x1" else "as_is")
@@ -536,30 +479,29 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
 
 
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
-           reduce: str = "mean") -> Callable[..., np.ndarray]:
+           reduce: str = "mean", unseen: str = "full") -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
+    carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction)
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None
-        if lp.cache is None or lp.age + 1 >= reuse:
+
+        def inputs(ys: slice, xs: slice) -> np.ndarray:  # only where the network runs
             planes = []
             for c in meta.inputs:
                 base, _, comp = c.partition(".")
                 if base == "reprojected":
-                    planes.append(rp[..., "rgb".index(comp)])
+                    planes.append(rp[ys, xs, "rgb".index(comp)])
                 elif c == "seen":
-                    planes.append(pf.seen)
+                    planes.append(pf.seen[ys, xs])
                 else:
-                    planes.append(pf.frame.channel(c))
-            est = lp.cache = pred.predict(np.stack(planes).astype(np.float32))
-            lp.index = _tile_index_map(pf.seen.shape, tile) if reuse > 1 else None
-            lp.age, ran = 0, True
-        else:
-            assert lp.index is not None
-            est, lp.index = _reproject_estimates(lp.cache, lp.index, pf, tile, hib, unseen_fraction, reduce)
-            lp.age, ran = lp.age + 1, False
-        lp.ran.append(ran)
+                    planes.append(pf.frame.channel(c)[ys, xs])
+            return np.stack(planes).astype(np.float32)
+
+        fetch = (pf.rows, pf.cols) if pf.index > 0 else None
+        est = carry.predict(inputs, fetch, pf.seen, pf.frame.mask <= 0.5)
+        lp.ran.append(carry.work)
         return sdk.select_rates(est, thr, higher_is_better=hib)
     return decide
 

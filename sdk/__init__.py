@@ -49,6 +49,7 @@ from ._rates import (
     work_saved,
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
+from ._reuse import REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
 from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, tile_extents, tile_grid
 from ._transforms import (
     DEFAULT_EXTRAPOLATION_K,
@@ -93,6 +94,8 @@ __all__ = [
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
+    "REUSE_REDUCTIONS",
+    "REUSE_UNSEEN",
     "SCHEMA_VERSION",
     "TARGET_METRICS",
     "TILE_SIZES",
@@ -110,6 +113,7 @@ __all__ = [
     "ModelNotFoundError",
     "NonFiniteInputError",
     "ParameterError",
+    "PredictionReuse",
     "ProviderUnavailableError",
     "RateLike",
     "RtpError",

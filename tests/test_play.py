@@ -16,7 +16,6 @@ from rtp import sdk
 from rtp.capture import load_scene
 from rtp.capture.paths import PathFrame, PathPlayer, camera_path, composite
 from rtp.evaluate import PlayError, parse_methods, play, saved_at
-from rtp.evaluate._play import _reproject_estimates, _tile_index_map
 from tests.conftest import make_current
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,22 +114,24 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     monkeypatch.setattr(PathPlayer, "frames", spy_frames)
     monkeypatch.setattr(PathPlayer, "shade", spy_shade)
     monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
-    rep = play("procedural:0", "jnyang,jnyang@2,yang2019,fidelityfx,oracle,full", paths=("fast",), frames=5,
-               size=(W, H), sweep=False, flip_every=2, out=tmp_path)
-    assert len(used) == 4 * 4  # four methods with history, frames 1..4
+    rep = play("procedural:0", "jnyang,jnyang@2,jnyang@2:fresh,yang2019,fidelityfx,oracle,full", paths=("fast",),
+               frames=5, size=(W, H), sweep=False, flip_every=2, out=tmp_path)
+    assert len(used) == 5 * 4  # five methods with history, frames 1..4
     for frame, image in used:
         assert image not in full and shaded[image] == frame - 1
     rows = {r["method"]: r for r in rep.rows}
-    assert set(rows) == {"jnyang", "jnyang@2", "yang2019", "fidelityfx", "oracle", "full"}
+    assert set(rows) == {"jnyang", "jnyang@2", "jnyang@2:fresh", "yang2019", "fidelityfx", "oracle", "full"}
     assert rows["oracle"]["fail_share"] == 0 and rows["full"]["work_saved"] == 0 == rows["full"]["fail_share"]
     assert rows["jnyang@2"]["network_frames"] == 0.5 and rows["jnyang"]["network_frames"] == 1.0
+    assert 0.5 <= rows["jnyang@2:fresh"]["network_frames"] <= 1.0  # plus crops around what it did not see
     assert 0 < rows["jnyang"]["work_saved"] < 1 and np.isfinite(rows["jnyang"]["flip_mean"])
     assert len(rep.unseen["fast"]) == 5 and rep.unseen["fast"][0] == 1.0
     for name in ("play.md", "play.json", "play_curves.png", "play_frames.png", "play_fast.gif"):
         assert (tmp_path / name).stat().st_size > 0
     settings = json.loads((tmp_path / "play.json").read_text())["settings"]
     assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
-    assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean"}}  # what NAME@k meant in this run
+    assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean", "unseen": "full"},
+                                 "jnyang@2:fresh": {"k": 2, "reduce": "mean", "unseen": "fresh"}}  # what NAME@k meant in this run
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
@@ -172,13 +173,17 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 
 
 def test_methods_are_parsed_and_checked() -> None:
-    specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean")
-    assert [(s.kind, s.model, s.reuse, s.reduce) for s in specs] == [
-        ("model", "jnyang", 1, "mean"), ("model", "jnyang", 4, "mean"), ("model", "models/psnr.onnx", 2, "mean"),
-        ("yang2019", "", 1, "mean"), ("model", "jnyang", 4, "worst"), ("model", "jnyang", 4, "mean")]
+    specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
+                          "jnyang@4:fresh,jnyang@2:fresh:upper")
+    assert [(s.kind, s.model, s.reuse, s.reduce, s.unseen) for s in specs] == [
+        ("model", "jnyang", 1, "mean", "full"), ("model", "jnyang", 4, "mean", "full"),
+        ("model", "models/psnr.onnx", 2, "mean", "full"), ("yang2019", "", 1, "mean", "full"),
+        ("model", "jnyang", 4, "worst", "full"), ("model", "jnyang", 4, "mean", "full"),
+        ("model", "jnyang", 4, "mean", "fresh"), ("model", "jnyang", 2, "upper", "fresh")]
     for bad, match in (("jnyang@0", "reuse interval"), ("jnyang@x", "reuse interval"), ("", "at least one"),
-                       ("oracle,oracle", "each method once"), ("jnyang@4:median", "one of worst, mean, upper"),
-                       ("jnyang@4:", "one of worst, mean, upper")):
+                       ("oracle,oracle", "each method once"), ("jnyang@4:median", "worst, mean, upper"),
+                       ("jnyang@4:", "worst, mean, upper"), ("jnyang@4:mean:worst", "at most one"),
+                       ("jnyang@4:fresh:full", "full, fresh")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     with pytest.raises(PlayError, match="unknown profile"):
@@ -193,47 +198,6 @@ def test_saved_at_reads_the_sweep() -> None:
     assert saved_at(pts, 0.02) == pytest.approx(0.3)
     assert saved_at(pts, 0.5) == pytest.approx(0.6)
     assert saved_at([(0.05, 0.5)], 0.01) is None
-
-
-def test_reused_predictions_follow_the_surface() -> None:
-    """A still camera keeps every estimate; a whole-tile shift moves them; an unseen tile gets 1x1."""
-    th, tw = 3, 4
-    h, w = th * TILE, tw * TILE
-    est = np.random.default_rng(1).random((6, th, tw)).astype(np.float32)
-    rows, cols = np.indices((h, w))
-
-    class F:
-        mask = np.ones((h, w), np.float32)
-
-    still = PathFrame(1, F(), rows, cols, np.ones((h, w), np.float32))
-    index = _tile_index_map((h, w), TILE)
-    out, index2 = _reproject_estimates(est, index, still, TILE, False, 0.5)
-    assert np.array_equal(out, est) and np.array_equal(index2, index)
-    moved = PathFrame(1, F(), rows, np.maximum(cols - TILE, 0), np.ones((h, w), np.float32))
-    out, _ = _reproject_estimates(est, index, moved, TILE, False, 0.5)
-    assert np.array_equal(out[:, :, 1:], est[:, :, :-1])  # what was one tile left is here now
-    seen = np.ones((h, w), np.float32)
-    seen[:TILE, :TILE] = 0
-    out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5)
-    assert np.isinf(out[:, 0, 0]).all() and np.array_equal(out[:, 1:], est[:, 1:])
-    # half a tile right: each tile's pixels come half from its own source tile, half from the one
-    # to its left; the worst takes the larger estimate, the mean their average
-    half = PathFrame(1, F(), rows, np.maximum(cols - TILE // 2, 0), np.ones((h, w), np.float32))
-    worst, _ = _reproject_estimates(est, index, half, TILE, False, 0.5, "worst")
-    mean, _ = _reproject_estimates(est, index, half, TILE, False, 0.5)
-    assert np.allclose(worst[:, :, 1:], np.maximum(est[:, :, 1:], est[:, :, :-1]))
-    assert np.allclose(mean[:, :, 1:], (est[:, :, 1:] + est[:, :, :-1]) / 2)
-    assert np.allclose(_reproject_estimates(est, index, half, TILE, False, 0.5, "upper")[0], worst)
-    # two pixels right: an eighth of each tile comes from its left neighbour; the upper quartile
-    # ignores that sliver, the worst does not (PSNR models: the lower quartile, the same tile)
-    sliver = PathFrame(1, F(), rows, np.maximum(cols - 2, 0), np.ones((h, w), np.float32))
-    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5, "upper")[0], est)
-    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, True, 0.5, "upper")[0], est)
-    assert np.allclose(_reproject_estimates(est, index, sliver, TILE, False, 0.5, "worst")[0][:, :, 1:],
-                       np.maximum(est[:, :, 1:], est[:, :, :-1]))
-    for reduce in ("worst", "upper"):  # unseen tiles: 1x1 whatever the reduction
-        out, _ = _reproject_estimates(est, index, PathFrame(1, F(), rows, cols, seen), TILE, False, 0.5, reduce)
-        assert np.isinf(out[:, 0, 0]).all()
 
 
 def test_paths_in_worker_processes_give_the_same_report() -> None:

@@ -1,0 +1,338 @@
+"""Prediction reuse: run the network every k-th frame and carry its per-tile estimates in between.
+
+The paper's future work, measured in docs/results.md ("Prediction reuse"). On the frames between
+network runs every kept pixel (every second one per axis) carries the index of the estimate its
+surface had when the network last saw it, warped frame by frame with the reprojection's fetch
+positions; each tile then reduces the estimates its pixels carry (``REUSE_REDUCTIONS``). Warping
+the index per pixel rather than the per-tile values keeps coarse regions from dilating frame after
+frame. Tiles mostly unseen since then are shaded at 1x1 or predicted afresh on crops around them
+(``REUSE_UNSEEN``).
+
+This module is the numpy reference; an engine would warp the index on the GPU, where it is one
+gather per kept pixel. numpy only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ._errors import InputShapeError, ParameterError
+from ._rates import RateLike, select_rates
+from ._tiles import padded_size, tile_grid
+
+if TYPE_CHECKING:
+    from ._predictor import ShadingRatePredictor
+
+__all__ = ["REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse"]
+
+#: How a tile of a frame between network runs reduces the estimates its pixels carry. ``mean`` is
+#: the default: on the validation maps it kept 92.7% / 94.7% of k = 1's saving at 2% / 5% failing
+#: tiles (worst 86.8% / 91.8%, upper 90.3% / 93.2%; docs/results.md "Prediction reuse").
+REUSE_REDUCTIONS = {
+    "worst": "the worst estimate over the tile's pixels (the most conservative)",
+    "mean": "the mean over the tile's pixels (each source tile weighted by the pixels it gives)",
+    "upper": "the upper quartile over the tile's pixels (PSNR: the lower; between the mean and the worst)",
+}
+
+#: What prediction reuse does with a tile whose surface the network did not see (more than
+#: ``unseen_fraction`` of its pixels unknown).
+REUSE_UNSEEN = {
+    "full": "shade it at 1x1 (costs nothing, saves nothing there)",
+    "fresh": "run the network on crops around those tiles only (margin tiles of context each side); "
+             "when the crops would cover more than half the frame, on the whole frame",
+}
+
+#: Tiles of context around a fresh crop. The shipped models' outputs depend on at most two tiles
+#: (32 pixels) around their own: with two, a crop's inner estimates equal the whole frame's exactly
+#: (tests/test_reuse.py checks every shipped model).
+DEFAULT_MARGIN = 2
+#: The crops' share of the frame above which ``fresh`` runs the network on the whole frame instead
+#: (and restarts the interval from it).
+FRESH_FULL = 0.5
+
+#: ``x`` for :meth:`PredictionReuse.predict`: the inputs, or a function that builds them for a
+#: window ``(rows, cols)`` of the frame (called only where the network runs).
+Inputs = np.ndarray | Callable[[slice, slice], np.ndarray]
+
+
+def _step(tile: int) -> int:
+    return 2 if tile % 2 == 0 else 1
+
+
+def tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
+    """Per kept pixel (every ``_step(tile)``-th per axis, padded to whole tiles) the index of its tile."""
+    h, w = shape
+    s = _step(tile)
+    _, tw = tile_grid(h, w, tile)
+    ph, pw = padded_size(h, w, tile)
+    ys, xs = np.arange(0, ph, s), np.arange(0, pw, s)
+    return (ys[:, None] // tile) * tw + xs[None, :] // tile
+
+
+def carry_estimates(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: np.ndarray, seen: np.ndarray,
+                    background: np.ndarray | None, tile: int, higher_is_better: bool, unseen_fraction: float,
+                    reduce: str = "mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Carry the estimates ``est`` into this frame.
+
+    ``est`` is ``(outputs, entries)``: the tiles of the frame the network last ran on in row-major
+    order, then any tiles predicted afresh since. ``index`` maps each kept pixel of the previous frame
+    to the entry of ``est`` its surface was in (-1: unknown). Every kept pixel of this frame takes the
+    index of where it was in the previous one (``rows``, ``cols``: top-left pixel indices), unseen
+    pixels (``seen`` 0) -1, background pixels the tile at their own position; each tile then takes the
+    worst, the mean or the upper quartile (towards the worse side) of the estimates over its known
+    pixels, and tiles with more than ``unseen_fraction`` unknown the worst value there is (1x1).
+    Returns the ``(outputs, tile rows, tile cols)`` estimates, the warped index and the tiles given
+    the worst value for want of known pixels."""
+    h, w = seen.shape
+    th, tw = tile_grid(h, w, tile)
+    s = _step(tile)
+    own = tile_index_map((h, w), tile)
+    gh, gw = own.shape
+    yc = np.minimum(np.arange(gh) * s, h - 1)
+    xc = np.minimum(np.arange(gw) * s, w - 1)
+    r, c = rows[np.ix_(yc, xc)], cols[np.ix_(yc, xc)]
+    prev = index[np.minimum(r // s, gh - 1), np.minimum(c // s, gw - 1)]
+    new = np.where(seen[np.ix_(yc, xc)] > 0, prev, -1)
+    if background is not None:
+        new = np.where(background[np.ix_(yc, xc)] > 0.5, own, new)
+    known = new >= 0
+    k = tile // s
+    flat = est.reshape(len(est), -1)
+    if reduce == "mean":  # per tile, the sums over its known pixels (bincount: a tenth of a 5-D sum's time)
+        dest, srcs = own[known], new[known]
+        total = np.stack([np.bincount(dest, weights=flat[i, srcs], minlength=th * tw) for i in range(len(est))])
+        with np.errstate(invalid="ignore", divide="ignore"):  # no known pixel: nan, the worst below
+            out = (total / np.bincount(dest, minlength=th * tw)).reshape(len(est), th, tw)
+    else:
+        src = flat[:, np.maximum(new, 0)]
+        fill = np.inf if higher_is_better else -np.inf  # neutral for the reduction below
+        blocks = np.where(known[None], src, fill).reshape(len(est), th, k, tw, k)
+        if reduce == "upper":  # sorted worst first, unknown pixels last; the quartile of the known ones
+            vals = blocks.transpose(0, 1, 3, 2, 4).reshape(len(est), th, tw, k * k)
+            vals = np.sort(vals if higher_is_better else -vals, axis=-1)
+            n = known.reshape(th, k, tw, k).sum(axis=(1, 3))
+            at = np.maximum(np.floor(0.25 * (n - 1)), 0).astype(np.int64)
+            out = np.take_along_axis(vals, np.broadcast_to(at[None, ..., None], vals.shape[:3] + (1,)), -1)[..., 0]
+            out = out if higher_is_better else -out
+            out[:, n == 0] = np.nan
+        else:
+            out = blocks.min(axis=(2, 4)) if higher_is_better else blocks.max(axis=(2, 4))
+    missing = (1.0 - known.reshape(th, k, tw, k).mean(axis=(1, 3)) > unseen_fraction) | ~np.isfinite(out).all(axis=0)
+    out[:, missing] = -np.inf if higher_is_better else np.inf
+    return out.astype(np.float32), new, missing
+
+
+def cover(tiles: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
+    """Rectangles ``(top, bottom, left, right)`` in tiles (bottom and right exclusive) that hold every
+    True tile of ``tiles`` with ``margin`` tiles of context around it: the bounding boxes of the
+    connected groups of the dilated mask (runs of each row joined to the runs they touch in the row
+    above), merged where they overlap."""
+    th, tw = tiles.shape
+    if not tiles.any():
+        return []
+    grown = np.zeros((th + 2 * margin, tw + 2 * margin), bool)
+    for dy in range(2 * margin + 1):
+        for dx in range(2 * margin + 1):
+            grown[dy:dy + th, dx:dx + tw] |= tiles
+    grown = grown[margin:margin + th, margin:margin + tw]
+    edges = np.diff(np.pad(grown, ((0, 0), (1, 1))).astype(np.int8), axis=1)
+    parent: list[int] = []
+    boxes: list[list[int]] = []  # per run: top, bottom, left, right
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    above: list[tuple[int, int, int]] = []  # the previous row's runs: start, end, run number
+    for y in range(th):
+        here = []
+        for x0, x1 in zip(np.nonzero(edges[y] == 1)[0].tolist(), np.nonzero(edges[y] == -1)[0].tolist()):
+            i = len(parent)
+            parent.append(i)
+            boxes.append([y, y + 1, x0, x1])
+            for a0, a1, j in above:
+                if a0 < x1 and x0 < a1:  # touching (4-connected): one group
+                    ri, rj = root(i), root(j)
+                    if ri != rj:
+                        parent[rj] = ri
+            here.append((x0, x1, i))
+        above = here
+    groups: dict[int, list[int]] = {}
+    for i, b in enumerate(boxes):
+        g = groups.setdefault(root(i), list(b))
+        g[0], g[1], g[2], g[3] = min(g[0], b[0]), max(g[1], b[1]), min(g[2], b[2]), max(g[3], b[3])
+    out = list(groups.values())
+    merged = True
+    while merged:  # boxes of different groups can overlap: merge them
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                a, b = out[i], out[j]
+                if a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3]:
+                    out[i] = [min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])]
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return [(a[0], a[1], a[2], a[3]) for a in out]
+
+
+class PredictionReuse:
+    """Run a predictor's network every ``every``-th frame and carry its per-tile estimates between.
+
+        reuse = sdk.PredictionReuse(predictor, every=4, unseen="fresh")
+        rates = reuse.shading_rates(x)                              # first frame: the network runs
+        rates = reuse.shading_rates(x, fetch=(rows, cols), seen=seen, background=sky)   # each next one
+
+    ``fetch`` gives, per pixel of this frame, the top-left ``(row, col)`` of the previous frame's
+    pixel it reprojects from (the nearest texel of :func:`reproject_positions`, or the pixel minus
+    its motion vector), ``seen`` 1 where that pixel passed the disocclusion test (as
+    :func:`reproject` returns it) and ``background`` 1 on sky, which keeps the estimate at its own
+    screen position. A frame without ``fetch`` (the first, a camera cut) runs the network.
+
+    ``reduce`` (:data:`REUSE_REDUCTIONS`) is how a tile reduces the estimates its pixels carry,
+    ``unseen`` (:data:`REUSE_UNSEEN`) what becomes of tiles more than ``unseen_fraction`` unseen
+    since the network ran; ``margin`` the tiles of context around a fresh crop (two is exact for
+    the shipped models). After each frame :attr:`work` is the network's work on it as a share of a
+    whole-frame run (1, 0, or the crops' share). One instance per view; not thread-safe.
+    """
+
+    def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
+                 unseen: str = "full", unseen_fraction: float = 0.5, margin: int = DEFAULT_MARGIN) -> None:
+        if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+            raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
+                                 "every")
+        if reduce not in REUSE_REDUCTIONS:
+            raise ParameterError(f"reduce: expected one of {', '.join(REUSE_REDUCTIONS)}, got {reduce!r}", "reduce")
+        if unseen not in REUSE_UNSEEN:
+            raise ParameterError(f"unseen: expected one of {', '.join(REUSE_UNSEEN)}, got {unseen!r}", "unseen")
+        if not 0.0 <= unseen_fraction < 1.0:
+            raise ParameterError(f"unseen_fraction: expected a share in [0, 1), got {unseen_fraction!r}",
+                                 "unseen_fraction")
+        if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 0:
+            raise ParameterError(f"margin: expected an integer >= 0 (tiles), got {margin!r}", "margin")
+        if unseen == "fresh" and predictor.static_size is not None:
+            h, w = predictor.static_size
+            raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
+                                 "frames (export it with dynamic sizes)", "unseen")
+        self.predictor = predictor
+        self.every = int(every)
+        self.reduce = reduce
+        self.unseen = unseen
+        self.unseen_fraction = float(unseen_fraction)
+        self.margin = int(margin)
+        self.work = 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the carried estimates: the next frame runs the network."""
+        self._cache: np.ndarray | None = None
+        self._index: np.ndarray | None = None
+        self._shape: tuple[int, int] | None = None
+        self._age = 0
+
+    @property
+    def age(self) -> int | None:
+        """Frames since the network last ran on a whole frame (None before the first)."""
+        return None if self._cache is None else self._age
+
+    def __repr__(self) -> str:
+        return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
+                f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin})")
+
+    def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
+        if callable(x):
+            return x(ys, xs)
+        return x[:, ys, xs]
+
+    def _shape_of(self, x: Inputs, seen: np.ndarray | None) -> tuple[int, int]:
+        if isinstance(x, np.ndarray):
+            if x.ndim != 3:
+                raise InputShapeError(f"expected one frame's inputs (C, H, W), got shape {x.shape}", tuple(x.shape),
+                                      "(C, H, W)")
+            return int(x.shape[1]), int(x.shape[2])
+        if seen is None:
+            raise ParameterError("with inputs given as a function, pass seen (its shape is the frame's)", "seen")
+        return int(seen.shape[0]), int(seen.shape[1])
+
+    def _run(self, x: Inputs, hw: tuple[int, int]) -> np.ndarray:
+        h, w = hw
+        est = self.predictor.predict(self._window(x, slice(0, h), slice(0, w)))
+        self._cache = est.reshape(len(est), -1)
+        self._index = tile_index_map(hw, self.predictor.tile_size) if self.every > 1 else None
+        self._shape = hw
+        self._age = 0
+        self.work = 1.0
+        return est
+
+    @staticmethod
+    def _plane(a: object, name: str, hw: tuple[int, int], limit: int | None = None) -> np.ndarray:
+        arr = np.asarray(a)
+        if arr.shape != hw:
+            raise InputShapeError(f"{name}: expected shape {hw} (the frame's), got {arr.shape}", tuple(arr.shape),
+                                  str(hw))
+        if limit is not None:
+            if not np.issubdtype(arr.dtype, np.integer):
+                raise ParameterError(f"{name}: expected integer pixel indices, got dtype {arr.dtype}", "fetch")
+            if arr.size and (arr.min() < 0 or arr.max() >= limit):
+                raise ParameterError(f"{name}: expected indices in [0, {limit}) (the previous frame's pixels), got "
+                                     f"{arr.min()}..{arr.max()}", "fetch")
+        return arr
+
+    def predict(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None = None,
+                seen: np.ndarray | None = None, background: np.ndarray | None = None) -> np.ndarray:
+        """Per-tile estimates of this frame, as :meth:`ShadingRatePredictor.predict` returns them:
+        the network's on its frames, carried ones in between (1x1's worst value, or fresh ones, on
+        unseen tiles). ``x`` is the frame's inputs ``(C, H, W)`` or a function ``(rows, cols) ->``
+        the inputs of that window, called only where the network runs."""
+        hw = self._shape_of(x, seen)
+        if self._cache is None or fetch is None or self._age + 1 >= self.every or hw != self._shape:
+            return self._run(x, hw)
+        assert self._index is not None
+        rows = self._plane(fetch[0], "fetch rows", hw, hw[0])
+        cols = self._plane(fetch[1], "fetch cols", hw, hw[1])
+        seen_ = self._plane(np.ones(hw, np.float32) if seen is None else seen, "seen", hw)
+        bg = None if background is None else self._plane(background, "background", hw)
+        tile = self.predictor.tile_size
+        hib = self.predictor.metadata.higher_is_better
+        est, index, missing = carry_estimates(self._cache, self._index, rows, cols, seen_, bg, tile, hib,
+                                              self.unseen_fraction, self.reduce)
+        work = 0.0
+        if self.unseen == "fresh" and missing.any():
+            h, w = hw
+            boxes = cover(missing, self.margin)
+            area = sum((min(y1 * tile, h) - y0 * tile) * (min(x1 * tile, w) - x0 * tile) for y0, y1, x0, x1 in boxes)
+            if area > FRESH_FULL * h * w:  # cheaper to run the whole frame, and it restarts the interval
+                return self._run(x, hw)
+            for y0, y1, x0, x1 in boxes:
+                part = self.predictor.predict(self._window(x, slice(y0 * tile, min(y1 * tile, h)),
+                                                           slice(x0 * tile, min(x1 * tile, w))))
+                sel = missing[y0:y1, x0:x1]
+                est[:, y0:y1, x0:x1][:, sel] = part[:, sel]
+            work = area / (h * w)
+            # the fresh tiles become entries of the cache: their pixels carry them on from here
+            slot = np.full(missing.size, -1, np.int64)
+            slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()))
+            self._cache = np.concatenate([self._cache, est.reshape(len(est), -1)[:, missing.ravel()]], axis=1)
+            mine = slot[tile_index_map(hw, tile)]
+            index = np.where(mine >= 0, mine, index)
+        self._index = index
+        self._age += 1
+        self.work = work
+        return est
+
+    def shading_rates(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None = None,
+                      seen: np.ndarray | None = None, background: np.ndarray | None = None,
+                      threshold: float | None = None, allowed: Iterable[RateLike] | None = None) -> np.ndarray:
+        """:meth:`predict`, then per tile the cheapest allowed rate whose estimate passes ``threshold``
+        (default: the model's), as :meth:`ShadingRatePredictor.shading_rates` picks them."""
+        meta = self.predictor.metadata
+        thr = meta.default_threshold if threshold is None else threshold
+        return select_rates(self.predict(x, fetch, seen, background), thr, higher_is_better=meta.higher_is_better,
+                            allowed=allowed)

@@ -1,0 +1,202 @@
+"""Prediction reuse (``sdk.PredictionReuse``): carried estimates follow the surface, unseen tiles go
+to 1x1 or are predicted afresh on crops that give the whole frame's estimates, bad input is refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rtp import sdk
+from rtp.sdk._reuse import DEFAULT_MARGIN, carry_estimates, cover, tile_index_map
+
+TILE = 16
+
+
+def test_carried_estimates_follow_the_surface() -> None:
+    """A still camera keeps every estimate; a whole-tile shift moves them; an unseen tile gets 1x1."""
+    th, tw = 3, 4
+    h, w = th * TILE, tw * TILE
+    est = np.random.default_rng(1).random((6, th, tw)).astype(np.float32)
+    rows, cols = np.indices((h, w))
+    ones = np.ones((h, w), np.float32)
+    index = tile_index_map((h, w), TILE)
+
+    def carry(c: np.ndarray, seen: np.ndarray = ones, reduce: str = "mean", hib: bool = False) -> np.ndarray:
+        return carry_estimates(est, index, rows, c, seen, None, TILE, hib, 0.5, reduce)[0]
+
+    out, index2, missing = carry_estimates(est, index, rows, cols, ones, None, TILE, False, 0.5)
+    assert np.array_equal(out, est) and np.array_equal(index2, index) and not missing.any()
+    assert np.array_equal(carry(np.maximum(cols - TILE, 0))[:, :, 1:], est[:, :, :-1])  # one tile left before
+    seen = ones.copy()
+    seen[:TILE, :TILE] = 0
+    out, _, missing = carry_estimates(est, index, rows, cols, seen, None, TILE, False, 0.5)
+    assert np.isinf(out[:, 0, 0]).all() and np.array_equal(out[:, 1:], est[:, 1:])
+    assert missing[0, 0] and missing.sum() == 1
+    # half a tile right: each tile's pixels come half from its own source tile, half from the one
+    # to its left; the worst takes the larger estimate, the mean their average
+    half = np.maximum(cols - TILE // 2, 0)
+    worst = carry(half, reduce="worst")
+    assert np.allclose(worst[:, :, 1:], np.maximum(est[:, :, 1:], est[:, :, :-1]))
+    assert np.allclose(carry(half)[:, :, 1:], (est[:, :, 1:] + est[:, :, :-1]) / 2)
+    assert np.allclose(carry(half, reduce="upper"), worst)
+    # two pixels right: an eighth of each tile comes from its left neighbour; the upper quartile
+    # ignores that sliver, the worst does not (PSNR models: the lower quartile, the same tile)
+    sliver = np.maximum(cols - 2, 0)
+    assert np.allclose(carry(sliver, reduce="upper"), est)
+    assert np.allclose(carry(sliver, reduce="upper", hib=True), est)
+    assert np.allclose(carry(sliver, reduce="worst")[:, :, 1:], np.maximum(est[:, :, 1:], est[:, :, :-1]))
+    for reduce in ("worst", "upper"):  # unseen tiles: 1x1 whatever the reduction
+        assert np.isinf(carry(cols, seen, reduce)[:, 0, 0]).all()
+    # background keeps the estimate at its own screen position, seen or not
+    sky = np.zeros((h, w), np.float32)
+    sky[:TILE, :TILE] = 1
+    out = carry_estimates(est, index, rows, np.maximum(cols - TILE, 0), seen, sky, TILE, False, 0.5)[0]
+    assert np.array_equal(out[:, 0, 0], est[:, 0, 0])
+
+
+@pytest.mark.parametrize("name", sdk.shipped_models())
+def test_a_crop_with_its_margin_predicts_what_the_whole_frame_does(name: str) -> None:
+    """``unseen="fresh"`` runs the network on crops DEFAULT_MARGIN tiles wider than the tiles it needs:
+    their estimates must be the whole frame's, for every shipped model (a wider receptive field fails)."""
+    pred = sdk.load(name)
+    t = pred.tile_size
+    x = np.random.default_rng(3).random((len(pred.metadata.inputs), 12 * t, 20 * t), dtype=np.float32)
+    whole = pred.predict(x)
+    m = DEFAULT_MARGIN
+    part = pred.predict(x[:, (4 - m) * t:(7 + m) * t, (9 - m) * t:(15 + m) * t])
+    assert np.array_equal(part[:, m:m + 3, m:m + 6], whole[:, 4:7, 9:15])
+    # one tile less and they differ: the margin is not wider than it must be
+    part = pred.predict(x[:, (5 - m) * t:(6 + m) * t, (9 - m) * t:(15 + m) * t])
+    assert not np.array_equal(part[:, m - 1:m, m:m + 6], whole[:, 4:5, 9:15])
+
+
+def test_the_cover_holds_every_tile_with_its_margin() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        th, tw = int(rng.integers(1, 30)), int(rng.integers(1, 40))
+        tiles = rng.random((th, tw)) < rng.choice([0.005, 0.02, 0.1, 0.4])
+        tiles[rng.integers(th), rng.integers(tw)] = True
+        margin = int(rng.integers(0, 3))
+        boxes = cover(tiles, margin)
+        inside = np.zeros_like(tiles, int)
+        for y0, y1, x0, x1 in boxes:
+            inside[y0:y1, x0:x1] += 1
+        assert inside.max() == 1  # no tile in two boxes
+        for y, x in zip(*np.nonzero(tiles)):  # each tile with its margin (within the frame) in one box
+            assert any(y0 <= max(y - margin, 0) and min(y + margin + 1, th) <= y1 and x0 <= max(x - margin, 0)
+                       and min(x + margin + 1, tw) <= x1 for y0, y1, x0, x1 in boxes)
+    assert cover(np.zeros((5, 5), bool), 2) == []
+    one = np.zeros((10, 10), bool)
+    one[5, 5] = True
+    assert cover(one, 1) == [(4, 7, 4, 7)]
+    two = np.zeros((10, 20), bool)
+    two[5, 2] = two[5, 15] = True  # far apart: two boxes, not their hull
+    assert sorted(cover(two, 1)) == [(4, 7, 1, 4), (4, 7, 14, 17)]
+
+
+class _Scene:
+    """Random inputs of one frame for the shipped JNYang model and what the network says on them."""
+
+    def __init__(self, th: int = 9, tw: int = 16) -> None:
+        self.pred = sdk.load("jnyang")
+        self.h, self.w = th * TILE, tw * TILE
+        rng = np.random.default_rng(5)
+        self.x = rng.random((len(self.pred.metadata.inputs), self.h, self.w), dtype=np.float32)
+        self.rows, self.cols = np.indices((self.h, self.w))
+        self.seen_at = self.pred.metadata.inputs.index("seen")
+
+    def inputs(self, seen: np.ndarray) -> np.ndarray:
+        x = self.x.copy()
+        x[self.seen_at] = seen
+        return x
+
+
+def test_fresh_tiles_are_the_networks_and_are_carried_on() -> None:
+    """``unseen="fresh"``: a tile the network did not see gets what the network says on this frame,
+    computed on a crop only, and keeps it on the next reused frame."""
+    s = _Scene()
+    th, tw = s.h // TILE, s.w // TILE
+    reuse = sdk.PredictionReuse(s.pred, 4, unseen="fresh")
+    everything = np.ones((s.h, s.w), np.float32)
+    first = reuse.shading_rates(s.inputs(everything))
+    assert reuse.work == 1.0 and reuse.age == 0
+    seen = everything.copy()
+    seen[2 * TILE:4 * TILE, 11 * TILE:13 * TILE] = 0  # four tiles the network did not see
+    now = s.pred.shading_rates(s.inputs(seen))
+    windows: list[tuple[slice, slice]] = []
+
+    def lazily(ys: slice, xs: slice) -> np.ndarray:
+        windows.append((ys, xs))
+        return s.inputs(seen)[:, ys, xs]
+
+    second = reuse.shading_rates(lazily, (s.rows, s.cols), seen)
+    assert np.array_equal(second[2:4, 11:13], now[2:4, 11:13])  # the network's, not 1x1
+    assert np.array_equal(np.delete(second, [11, 12], axis=1), np.delete(first, [11, 12], axis=1))
+    m = DEFAULT_MARGIN
+    assert windows == [(slice(0, (4 + m) * TILE), slice((11 - m) * TILE, (13 + m) * TILE))]  # one crop
+    assert reuse.work == pytest.approx((4 + m) * (2 + 2 * m) / (th * tw)) and reuse.age == 1
+    third = reuse.shading_rates(s.inputs(everything), (s.rows, s.cols), everything)  # still: the fresh tiles stay
+    assert np.array_equal(third, second) and reuse.work == 0.0 and reuse.age == 2
+    # without "fresh" the same tiles are shaded at 1x1 and the network does not run
+    full = sdk.PredictionReuse(s.pred, 4)
+    full.predict(s.inputs(everything))
+    est = full.predict(s.inputs(seen), (s.rows, s.cols), seen)
+    assert np.isinf(est[:, 2:4, 11:13]).all() and full.work == 0.0
+
+
+def test_the_interval_and_the_fallbacks_run_the_whole_frame() -> None:
+    s = _Scene()
+    everything = np.ones((s.h, s.w), np.float32)
+    x = s.inputs(everything)
+    fetch = (s.rows, s.cols)
+    reuse = sdk.PredictionReuse(s.pred, 3)
+    works = []
+    for _ in range(7):
+        reuse.predict(x, fetch, everything)
+        works.append(reuse.work)
+    assert works == [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]  # every third frame
+    reuse.predict(x, None)  # no fetch positions (a camera cut): the network runs
+    assert reuse.work == 1.0 and reuse.age == 0
+    reuse.predict(x, fetch, everything)
+    reuse.reset()
+    assert reuse.age is None
+    reuse.predict(x, fetch, everything)
+    assert reuse.work == 1.0
+    # "fresh" with most of the frame unseen: the whole frame, and the interval restarts from it
+    fresh = sdk.PredictionReuse(s.pred, 4, unseen="fresh")
+    fresh.predict(x)
+    fresh.predict(x, fetch, everything)
+    nothing = np.zeros_like(everything)
+    est = fresh.predict(s.inputs(nothing), fetch, nothing)
+    assert fresh.work == 1.0 and fresh.age == 0
+    assert np.array_equal(est, s.pred.predict(s.inputs(nothing)))
+    # every=1: the network on every frame, whatever else is given
+    every = sdk.PredictionReuse(s.pred, 1)
+    for _ in range(3):
+        assert np.array_equal(every.predict(x, fetch, everything), s.pred.predict(x)) and every.work == 1.0
+
+
+def test_bad_arguments_are_refused() -> None:
+    s = _Scene(3, 4)
+    for kw, name in (({"every": 0}, "every"), ({"every": 2.5}, "every"), ({"reduce": "median"}, "reduce"),
+                     ({"unseen": "skip"}, "unseen"), ({"unseen_fraction": 1.0}, "unseen_fraction"),
+                     ({"margin": -1}, "margin")):
+        with pytest.raises(sdk.ParameterError, match=name) as err:
+            sdk.PredictionReuse(s.pred, **kw)  # type: ignore[arg-type]
+        assert err.value.name == name
+    reuse = sdk.PredictionReuse(s.pred, 4)
+    ones = np.ones((s.h, s.w), np.float32)
+    with pytest.raises(sdk.InputShapeError, match=r"\(C, H, W\)"):
+        reuse.predict(s.x[None])
+    reuse.predict(s.x)
+    with pytest.raises(sdk.InputShapeError, match="fetch rows"):
+        reuse.predict(s.x, (s.rows[:-1], s.cols), ones)
+    with pytest.raises(sdk.ParameterError, match="integer pixel indices"):
+        reuse.predict(s.x, (s.rows.astype(np.float32), s.cols), ones)
+    with pytest.raises(sdk.ParameterError, match=r"indices in \[0, 64\)"):
+        reuse.predict(s.x, (s.rows, s.cols + 1), ones)
+    with pytest.raises(sdk.InputShapeError, match="seen"):
+        reuse.predict(s.x, (s.rows, s.cols), ones[:, :-1])
+    with pytest.raises(sdk.ParameterError, match="pass seen"):
+        reuse.predict(lambda ys, xs: s.x[:, ys, xs], (s.rows, s.cols))
+    assert "every=4" in repr(reuse)
