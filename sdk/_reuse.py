@@ -14,12 +14,13 @@ gather per kept pixel. numpy only.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._errors import InputShapeError, ParameterError
+from ._errors import InputDtypeError, InputShapeError, ParameterError
 from ._rates import RateLike, select_rates
 from ._tiles import padded_size, tile_grid
 
@@ -208,11 +209,15 @@ class PredictionReuse:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
-        if reduce not in REUSE_REDUCTIONS:
+        if not isinstance(reduce, str) or reduce not in REUSE_REDUCTIONS:
             raise ParameterError(f"reduce: expected one of {', '.join(REUSE_REDUCTIONS)}, got {reduce!r}", "reduce")
-        if unseen not in REUSE_UNSEEN:
+        if not isinstance(unseen, str) or unseen not in REUSE_UNSEEN:
             raise ParameterError(f"unseen: expected one of {', '.join(REUSE_UNSEEN)}, got {unseen!r}", "unseen")
-        if not 0.0 <= unseen_fraction < 1.0:
+        try:
+            share = float(unseen_fraction)
+        except (TypeError, ValueError, OverflowError):
+            share = math.nan
+        if isinstance(unseen_fraction, (bool, str, bytes)) or not 0.0 <= share < 1.0:
             raise ParameterError(f"unseen_fraction: expected a share in [0, 1), got {unseen_fraction!r}",
                                  "unseen_fraction")
         if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 0:
@@ -225,7 +230,7 @@ class PredictionReuse:
         self.every = int(every)
         self.reduce = reduce
         self.unseen = unseen
-        self.unseen_fraction = float(unseen_fraction)
+        self.unseen_fraction = share
         self.margin = int(margin)
         self.work = 0.0
         self.reset()
@@ -257,8 +262,12 @@ class PredictionReuse:
                 raise InputShapeError(f"expected one frame's inputs (C, H, W), got shape {x.shape}", tuple(x.shape),
                                       "(C, H, W)")
             return int(x.shape[1]), int(x.shape[2])
-        if seen is None:
-            raise ParameterError("with inputs given as a function, pass seen (its shape is the frame's)", "seen")
+        if not callable(x):
+            raise InputDtypeError(f"expected the inputs as a float32 numpy array (C, H, W) or a function of a window, "
+                                  f"got {type(x).__name__}")
+        if not isinstance(seen, np.ndarray) or seen.ndim != 2:
+            raise ParameterError("with inputs given as a function, pass seen, an (H, W) array (its shape is the "
+                                 "frame's)", "seen")
         return int(seen.shape[0]), int(seen.shape[1])
 
     def _run(self, x: Inputs, hw: tuple[int, int]) -> np.ndarray:
@@ -273,7 +282,13 @@ class PredictionReuse:
 
     @staticmethod
     def _plane(a: object, name: str, hw: tuple[int, int], limit: int | None = None) -> np.ndarray:
-        arr = np.asarray(a)
+        if not isinstance(a, np.ndarray):
+            raise ParameterError(f"{name}: expected a numpy array of shape {hw}, got {type(a).__name__}",
+                                 "fetch" if limit is not None else name)
+        arr = a
+        if arr.dtype.kind not in "biuf":
+            raise ParameterError(f"{name}: expected a numeric array, got dtype {arr.dtype}",
+                                 "fetch" if limit is not None else name)
         if arr.shape != hw:
             raise InputShapeError(f"{name}: expected shape {hw} (the frame's), got {arr.shape}", tuple(arr.shape),
                                   str(hw))
@@ -295,6 +310,9 @@ class PredictionReuse:
         if self._cache is None or fetch is None or self._age + 1 >= self.every or hw != self._shape:
             return self._run(x, hw)
         assert self._index is not None
+        if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
+            raise ParameterError(f"fetch: expected (rows, cols), two integer arrays of the frame's shape, got "
+                                 f"{type(fetch).__name__}", "fetch")
         rows = self._plane(fetch[0], "fetch rows", hw, hw[0])
         cols = self._plane(fetch[1], "fetch cols", hw, hw[1])
         seen_ = self._plane(np.ones(hw, np.float32) if seen is None else seen, "seen", hw)

@@ -616,6 +616,57 @@ def _manifest_absurd(_m: Any, reader: DatasetReader) -> bool:
         or not 0 <= fv <= 1
 
 
+# -- prediction reuse ------------------------------------------------------------------------
+
+_RH, _RW = _X.shape[1:]
+_RPLANE = (_RH, _RW)
+#: (constructor arguments, fetch rows, fetch cols, seen, background): arrays of nearly the frame's
+#: shape, any dtype and fill, or None.
+_reuse_planes = st.one_of(st.none(), arrays, _near(st.sampled_from([_RPLANE, _RPLANE, _RPLANE, (_RH, _RW - 1)])))
+reuse_cases = st.tuples(
+    st.fixed_dictionaries({}, optional={
+        "every": st.one_of(st.integers(-2, 6), hostile_numbers), "reduce": st.one_of(st.sampled_from(
+            list(sdk.REUSE_REDUCTIONS)), json_scalars), "unseen": st.one_of(st.sampled_from(list(sdk.REUSE_UNSEEN)),
+                                                                          json_scalars),
+        "unseen_fraction": st.one_of(st.floats(-1, 2), hostile_numbers), "margin": st.one_of(st.integers(-2, 4),
+                                                                                              hostile_numbers)}),
+    _reuse_planes, _reuse_planes, _reuse_planes, _reuse_planes)
+
+
+def _reuse_call(v: tuple[dict[str, Any], Any, Any, Any, Any]) -> np.ndarray:
+    kw, rows, cols, seen, bg = v
+    reuse = sdk.PredictionReuse(_PRED, **kw)
+    reuse.predict(_X)
+    fetch = None if rows is None and cols is None else (None if rows is None else _array(rows),
+                                                         None if cols is None else _array(cols))
+    return reuse.predict(_X, fetch, None if seen is None else _array(seen), None if bg is None else _array(bg))
+
+
+def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray) -> bool:
+    """Accepted: arguments in range, and when the estimates were carried (every > 1 and fetch given)
+    integer fetch arrays of the frame's shape inside it and numeric seen / background of that shape."""
+    kw, rows, cols, seen, bg = v
+    every, fraction, margin = kw.get("every", 4), kw.get("unseen_fraction", 0.5), kw.get("margin", 2)
+    if (isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1
+            or kw.get("reduce", "mean") not in sdk.REUSE_REDUCTIONS or kw.get("unseen", "full") not in sdk.REUSE_UNSEEN
+            or _finite_number(fraction) is None or not 0 <= fraction < 1 or isinstance(margin, bool)
+            or not isinstance(margin, (int, np.integer)) or margin < 0):
+        return True
+    if est.shape != (6, *_PRED.tiles(_RH, _RW)) or est.dtype != np.float32:
+        return True
+    if every == 1 or (rows is None and cols is None):
+        return False
+    for spec in (rows, cols):
+        a = _array(spec) if spec is not None else None
+        if not isinstance(a, np.ndarray) or a.dtype.kind not in "iu" or a.shape != _RPLANE or a.min() < 0:
+            return True
+    for spec in (seen, bg):
+        a = _array(spec) if spec is not None else np.zeros(_RPLANE)
+        if not isinstance(a, np.ndarray) or a.dtype.kind not in "biuf" or a.shape != _RPLANE:
+            return True
+    return False
+
+
 def targets() -> list[Target]:
     return [
         Target("load: corrupted model files", model_mutations, lambda m: _load_bytes(_mutate_model(m)),
@@ -649,6 +700,7 @@ def targets() -> list[Target]:
                    overlays),
                _overlay_call, _overlay_absurd),
         Target("reproject", reprojections, _reproject_call, _reproject_absurd),
+        Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),
         Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset, _same_as_original),
         Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),
         Target("dataset reader: manifests", manifests, _manifest_call, _manifest_absurd),

@@ -197,6 +197,14 @@ def test_bad_arguments_are_refused() -> None:
         reuse.predict(s.x, (s.rows, s.cols + 1), ones)
     with pytest.raises(sdk.InputShapeError, match="seen"):
         reuse.predict(s.x, (s.rows, s.cols), ones[:, :-1])
+    with pytest.raises(sdk.ParameterError, match=r"fetch: expected \(rows, cols\)"):
+        reuse.predict(s.x, s.rows, ones)  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="seen: expected a numpy array"):
+        reuse.predict(s.x, (s.rows, s.cols), ones.tolist())  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="unseen_fraction"):
+        sdk.PredictionReuse(s.pred, unseen_fraction=10**400)
+    with pytest.raises(sdk.InputDtypeError, match="function of a window"):
+        reuse.predict(s.x.tolist(), (s.rows, s.cols), ones)  # type: ignore[arg-type]
     with pytest.raises(sdk.ParameterError, match="pass seen"):
         reuse.predict(lambda ys, xs: s.x[:, ys, xs], (s.rows, s.cols))
     assert "every=4" in repr(reuse)
