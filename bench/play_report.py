@@ -10,7 +10,9 @@ are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios
     python bench/play_report.py data/play-*-seed1/play.json --reuse jnyang@4:worst,jnyang@4:mean
 
 Runs with different methods share one table: its columns are every method of any run, blank where
-a run did not play it.
+a run did not play it. Runs of the same map, seed, frames, size and failure threshold are merged
+into one row per path (every method has its own history, so a method's numbers do not depend on
+which others ran beside it): `jnyang,jnyang@4` in one run and `jnyang@2` in another compare.
 """
 
 from __future__ import annotations
@@ -51,7 +53,19 @@ def main() -> None:
     args = ap.parse_args()
     model = args.model
     reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
-    runs = [json.loads(run.read_text()) for run in args.runs]
+    runs: list[dict[str, Any]] = []
+    for rep in (json.loads(run.read_text()) for run in args.runs):
+        s = rep["settings"]
+        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"])
+        same = next((r for r in runs if r["_key"] == key), None)
+        if same is None:
+            runs.append({**rep, "_key": key, "settings": {**s, "methods": list(s["methods"])},
+                         "matched": list(rep["matched"])})
+            continue
+        new = [m for m in s["methods"] if m not in same["settings"]["methods"]]
+        same["settings"]["methods"] += new
+        same["matched"] += [m for m in rep["matched"] if m["method"] in new]
+        same["rows"] = same.get("rows", []) + [r for r in rep.get("rows", []) if r["method"] in new]
     head: list[str] = []
     for rep in runs:
         head += [m for m in rep["settings"]["methods"] if m not in head]
@@ -80,15 +94,20 @@ def main() -> None:
             oracle = at.get(("oracle", LEVELS[0]))
             of_oracle = [_ratio(at.get((model, lv)), oracle) for lv in LEVELS]
             reused = [[_ratio(at.get((r, lv)), at.get((model, lv))) for lv in LEVELS] for r in reuses]
+            # the network's work per frame (a share of a whole-frame run) at each reuse method's default
+            work = [next((r["network_frames"] for r in rep.get("rows", []) if r["path"] == path and r["method"] == m
+                          and r["default"] and r.get("network_frames") is not None), math.nan) for m in reuses]
             targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(
-                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in
-                ((vs_yang, False), (of_oracle, True), *((r, True) for r in reused))) + " |")
+                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in ((vs_yang, False), (of_oracle, True))) + " | "
+                + " | ".join(" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else
+                                                                       f" (network {100 * w:.0f}%)")
+                             for rs, w in zip(reused, work)) + " |")
     print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
     print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))
     print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
           "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
-          "against k = 1 (>= 95%)\n")
+          "against k = 1 (>= 95%; in brackets the network's work per frame, a share of a whole-frame run)\n")
     print(f"| map | seed | path | {model} / Yang | {model} / oracle | " + " | ".join(f"{r} / {model}" for r in reuses) + " |")
     print("|---|---:|---|---|---|" + "---|" * len(reuses))
     print("\n".join(targets))

@@ -135,9 +135,12 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
-    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json")],
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
+                          str(tmp_path / "play.json"), "--reuse", "jnyang@2,jnyang@2:fresh"],
                          capture_output=True, text=True, check=True).stdout
-    assert out.count("| procedural:0 | 0 | fast |") == 2 and "| jnyang / Yang |" in out  # savings row, targets row
+    # a savings row and a targets row: runs of one map and seed merge into one row per path
+    assert out.count("| procedural:0 | 0 | fast |") == 2 and "| jnyang / Yang |" in out
+    assert "(network 50%)" in out  # the reuse columns give the network's work per frame
 
 
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
