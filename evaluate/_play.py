@@ -14,8 +14,9 @@ choose. The first frame has no history and is left out of every summary.
 
 Methods (:func:`parse_methods`): ``full`` (always 1x1), ``oracle`` (the true ``fail_metric`` of the
 frame at ``fail_threshold``), any rtp model (a shipped name or an ``.onnx`` path; ``NAME@k`` runs the
-network every k-th frame and reprojects its per-tile predictions in between, tiles mostly unseen
-since the last prediction at full rate), ``yang2019`` (NVIDIA Adaptive Shading with its motion
+network every k-th frame and reprojects its per-tile predictions in between with
+:class:`rtp.sdk.PredictionReuse`, tiles mostly unseen since the last prediction at full rate, or
+predicted afresh on crops with ``NAME@k:fresh``), ``yang2019`` (NVIDIA Adaptive Shading with its motion
 terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
