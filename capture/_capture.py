@@ -123,7 +123,8 @@ def _ids(scene: str, profile: str, n: int) -> list[str]:
 
 
 def _plan(scene_name: str, scene: Any, blockers: Any, profiles: Sequence[str], per_scene: int,
-          size: tuple[int, int], seed: int) -> tuple[dict[str, list[tuple[str, Any, Any]]], list[str]]:
+          size: tuple[int, int], seed: int, placement: str = "free",
+          ) -> tuple[dict[str, list[tuple[str, Any, Any]]], list[str]]:
     """Every planned sample of a scene: ``{profile: [(sample id, previous camera, camera)]}``, and the
     ``"<scene>/<profile>"`` jobs without valid viewpoints. Deterministic: any worker plans the same."""
     from rtp.capture.viewpoints import ViewpointError, sample_viewpoints
@@ -134,7 +135,8 @@ def _plan(scene_name: str, scene: Any, blockers: Any, profiles: Sequence[str], p
     for profile in profiles:
         try:
             pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
-                                      blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE)
+                                      blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE,
+                                      placement=placement)
         except ViewpointError as err:
             log.warning("%s (%s): %s", scene_name, profile, err)
             failed.append(f"{scene_name}/{profile}")
@@ -173,7 +175,8 @@ def _run_job(
     scene, blockers = load_scene(scene_name, cache_dir, split, splits)
     w, h = size
     reader = DatasetReader(out)
-    planned, report.failed = _plan(scene_name, scene, blockers, profiles, per_scene, size, seed)
+    planned, report.failed = _plan(scene_name, scene, blockers, profiles, per_scene, size, seed,
+                                   settings.get("placement", "free"))
     plans = {profile: _todo(writer, reader, plan) for profile, plan in planned.items()}
     report.skipped = sum(len(planned[p]) - len(plans[p]) for p in plans)
     if queue is not None and report.skipped:
@@ -213,12 +216,16 @@ def capture(
     splits: str | os.PathLike[str] | None = None,
     progress: Callable[[int, int], None] | None = None,
     ray: str | None = None,
+    placement: str = "free",
     _on_ray_actors: Callable[[list[Any]], None] | None = None,
 ) -> CaptureReport:
     """Capture ``per_scene`` samples per scene and motion profile into the dataset folder ``out``.
 
-    ``size`` is ``(width, height)``. With ``workers > 1`` scenes render in parallel processes (one
-    EGL context each). ``progress(done, total)`` is called as samples complete (skipped ones count).
+    ``size`` is ``(width, height)``. ``placement`` is where the cameras stand
+    (:data:`rtp.capture.viewpoints.PLACEMENTS`: ``"free"`` anywhere in the viewpoint domain, ``"eye"``
+    at the player's eye height over a floor); the dataset's manifest records it. With
+    ``workers > 1`` scenes render in parallel processes (one EGL context each). ``progress(done,
+    total)`` is called as samples complete (skipped ones count).
 
     ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
     instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:
@@ -232,11 +239,13 @@ def capture(
     if not scene_names:
         raise ParameterError("no scenes to capture")
     from rtp import sdk
-    from rtp.capture.viewpoints import MOTION_PROFILES
+    from rtp.capture.viewpoints import MOTION_PROFILES, PLACEMENTS
 
     bad = [p for p in profiles if p not in MOTION_PROFILES]
     if bad:
         raise ParameterError(f"unknown motion profile {bad[0]!r}; profiles are {', '.join(MOTION_PROFILES)}")
+    if placement not in PLACEMENTS:
+        raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
     w, h = size
     settings = {
         "size": [w, h],
@@ -244,6 +253,8 @@ def capture(
         "motion_profiles": {p: vars(MOTION_PROFILES[p]) for p in profiles},
         "seed": seed,
     }
+    if placement != "free":  # recorded only when not the default, so folders captured before it resume
+        settings["placement"] = placement
     writer = DatasetWriter(out, settings)  # validates the folder before any worker starts
     if writer.remove_stale():
         log.info("removed temporary files of an interrupted capture in %s", out)

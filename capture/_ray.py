@@ -192,11 +192,11 @@ class _CaptureWorker:
             self._scene = (scene_name, scene, blockers)
         return self._scene[1], self._scene[2]
 
-    def plan(self, scene_name: str, profiles: Sequence[str], per_scene: int, seed: int) -> Any:
+    def plan(self, scene_name: str, profiles: Sequence[str], per_scene: int, seed: int, placement: str) -> Any:
         from ._capture import _plan
 
         scene, blockers = self._load(scene_name)
-        return _plan(scene_name, scene, blockers, profiles, per_scene, self.size, seed)
+        return _plan(scene_name, scene, blockers, profiles, per_scene, self.size, seed, placement)
 
     def render(self, scene_name: str, profile: str, sample_id: str, prev_cam: Any, cam: Any,
                ) -> tuple[bytes, dict[str, Any], dict[str, Any]]:
@@ -240,7 +240,8 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
             report.failed.extend(failed)
 
         _schedule(actors, {s: [(s,)] for s in scene_names},
-                  lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed), planned_one, "scene")
+                  lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed, settings.get("placement", "free")),
+                  planned_one, "scene")
         reader = DatasetReader(out)
         tasks: dict[str, list[Any]] = {}
         for scene_name in scene_names:

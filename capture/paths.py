@@ -24,7 +24,16 @@ import numpy as np
 
 from rtp.scene import Camera, Scene
 
-from .viewpoints import SOLID, ViewpointError, VoxelGrid, _Validator, free_space
+from .viewpoints import (
+    _DROP,
+    _EYE,
+    _STEP_UP,
+    ViewpointError,
+    _Floors,
+    _spawn_eye_height,
+    _Validator,
+    free_space,
+)
 
 __all__ = ["PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path", "composite",
            "frame_unseen_share", "unseen_shares"]
@@ -54,9 +63,6 @@ PATH_PROFILES: dict[str, PathProfile] = {
 
 _STEP = 0.25  # metres per walker step
 _LOOK = 2.0  # metres of free space the walker wants ahead
-_STEP_UP = 0.6  # the highest step the walker climbs, metres (Q3's 18 units plus a voxel of rounding)
-_DROP = 1.2  # the deepest ledge it steps down; deeper ones are walls (a path stays on its floors)
-_EYE = 1.6  # eye height above the floor where a scene's spawn points do not tell it, metres
 
 
 @dataclass
@@ -87,41 +93,6 @@ def _smooth(a: np.ndarray, window: int) -> np.ndarray:
     padded = np.concatenate([np.repeat(a[:1], pad, 0), a, np.repeat(a[-1:], pad, 0)])
     c = np.cumsum(np.concatenate([np.zeros((1, *a.shape[1:])), padded]), axis=0)
     return (c[window:] - c[:-window]) / window
-
-
-class _Floors:
-    """The floor under a point: the centre of the highest drawn-geometry voxel at or below it in its
-    column (blockers such as a BSP map's sky are not floors)."""
-
-    def __init__(self, grid: VoxelGrid) -> None:
-        self.grid = grid
-        ny = grid.shape[1]
-        last = np.where(grid.occ == SOLID, np.arange(ny, dtype=np.int16)[None, :, None], np.int16(-1))
-        self.last = np.maximum.accumulate(last, axis=1)
-
-    def below(self, p: np.ndarray) -> float | None:
-        i = self.grid.index(p)
-        j = int(self.last[i[0], i[1], i[2]])
-        return None if j < 0 else float(self.grid.origin[1] + (j + 0.5) * self.grid.voxel)
-
-    def same_floor(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Whether no drawn geometry lies between two points of one column (``a`` below ``b``)."""
-        i, j = self.grid.index(a), self.grid.index(b)
-        return bool(self.last[i[0], i[1], i[2]] == self.last[j[0], j[1], j[2]])
-
-
-def _spawn_eye_height(scene: Scene, floors: _Floors) -> float:
-    """The player's eye height in ``scene``: the lowest height of a spawn point over the floor below
-    it (between 0.5 and 3 m), or :data:`_EYE` when no spawn point stands over a floor. The lowest,
-    because map authors lift spawn entities over the floor (a game drops them): on the test maps
-    spawns stand 1.39-1.67 m over their floors at the lowest and up to 2.37 m."""
-    heights = []
-    for sp in scene.spawn_points:
-        p = np.asarray(sp.position, np.float64)
-        f = floors.below(p)
-        if f is not None and 0.5 <= p[1] - f <= 3.0:
-            heights.append(p[1] - f)
-    return float(min(heights)) if heights else _EYE
 
 
 def camera_path(

@@ -36,6 +36,7 @@ from rtp.sdk import RtpError
 
 __all__ = [
     "MOTION_PROFILES",
+    "PLACEMENTS",
     "MotionProfile",
     "ViewpointError",
     "VoxelGrid",
@@ -71,6 +72,14 @@ class MotionProfile:
 MOTION_PROFILES: dict[str, MotionProfile] = {
     "slow": MotionProfile("slow", max_translation=0.35, max_rotation=4.5),
     "fast": MotionProfile("fast", max_translation=1.3, max_rotation=15.0),
+}
+
+
+#: Where :func:`sample_viewpoints` puts the cameras (``placement``).
+PLACEMENTS: dict[str, str] = {
+    "free": "anywhere in the viewpoint domain (reachable free space up to max_height over a solid voxel)",
+    "eye": "at the player's eye height over a floor (the spawn points' own), moving along the floors between "
+           "the two frames, as the camera paths of rtp play do",
 }
 
 
@@ -409,6 +418,48 @@ def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.
     return passable, grid.flood(seeds, passable)
 
 
+# -- standing on floors (eye-height viewpoints and the camera paths) --------------------------------
+
+_STEP_UP = 0.6  # the highest step a player climbs, metres (Q3's 18 units plus a voxel of rounding)
+_DROP = 1.2  # the deepest ledge a player steps down; deeper ones are walls
+_EYE = 1.6  # eye height above the floor where a scene's spawn points do not tell it, metres
+
+
+class _Floors:
+    """The floor under a point: the centre of the highest drawn-geometry voxel at or below it in its
+    column (blockers such as a BSP map's sky are not floors)."""
+
+    def __init__(self, grid: VoxelGrid) -> None:
+        self.grid = grid
+        ny = grid.shape[1]
+        last = np.where(grid.occ == SOLID, np.arange(ny, dtype=np.int16)[None, :, None], np.int16(-1))
+        self.last = np.maximum.accumulate(last, axis=1)
+
+    def below(self, p: np.ndarray) -> float | None:
+        i = self.grid.index(p)
+        j = int(self.last[i[0], i[1], i[2]])
+        return None if j < 0 else float(self.grid.origin[1] + (j + 0.5) * self.grid.voxel)
+
+    def same_floor(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether no drawn geometry lies between two points of one column (``a`` below ``b``)."""
+        i, j = self.grid.index(a), self.grid.index(b)
+        return bool(self.last[i[0], i[1], i[2]] == self.last[j[0], j[1], j[2]])
+
+
+def _spawn_eye_height(scene: Scene, floors: _Floors) -> float:
+    """The player's eye height in ``scene``: the lowest height of a spawn point over the floor below
+    it (between 0.5 and 3 m), or :data:`_EYE` when no spawn point stands over a floor. The lowest,
+    because map authors lift spawn entities over the floor (a game drops them): on the test maps
+    spawns stand 1.39-1.67 m over their floors at the lowest and up to 2.37 m."""
+    heights = []
+    for sp in scene.spawn_points:
+        p = np.asarray(sp.position, np.float64)
+        f = floors.below(p)
+        if f is not None and 0.5 <= p[1] - f <= 3.0:
+            heights.append(p[1] - f)
+    return float(min(heights)) if heights else _EYE
+
+
 def sample_viewpoints(
     scene: Scene,
     n: int,
@@ -428,6 +479,7 @@ def sample_viewpoints(
     max_attempts: int | None = None,
     prev_tries: int = 20,
     stats: dict | None = None,
+    placement: str = "free",
 ) -> list[tuple[Camera, Camera]]:
     """Sample ``n`` valid ``(previous, current)`` camera pairs in ``scene``.
 
@@ -454,6 +506,12 @@ def sample_viewpoints(
         prev_tries: previous-viewpoint draws per accepted current view.
         stats: if a dict is given, it is filled with ``voxel``, ``grid_shape``, ``reachable``,
             ``candidates``, ``draws`` and ``rejected`` (counts per rule).
+        placement: :data:`PLACEMENTS`. ``"free"`` (the default, every dataset so far): a candidate
+            voxel anywhere in the domain. ``"eye"``: the candidates are the voxels at the player's
+            eye height (:func:`_spawn_eye_height`) over a floor, one per standing column; the camera
+            stands exactly that high over its floor, and the previous one is moved horizontally
+            (uniform in a disc of ``max_translation``) and stands on its own floor, at most a step up
+            or a ledge down from the current one. Yaw, pitch and every test are as for ``"free"``.
 
     Returns:
         ``n`` tuples ``(previous_camera, current_camera)``. The pairs are a stream: the first ``k``
@@ -468,8 +526,17 @@ def sample_viewpoints(
     prof = MOTION_PROFILES.get(profile) if isinstance(profile, str) else profile
     if prof is None:
         raise ViewpointError(f"unknown motion profile {profile!r}; expected one of {sorted(MOTION_PROFILES)}")
+    if placement not in PLACEMENTS:
+        raise ViewpointError(f"unknown placement {placement!r}; expected one of {', '.join(PLACEMENTS)}")
     tris, grid, reach, cand_mask = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance,
                                               max_height=max_height)
+    floors = eye = None
+    if placement == "eye":
+        floors = _Floors(grid)
+        eye = _spawn_eye_height(scene, floors)
+        ny = grid.shape[1]
+        over = (np.arange(ny)[None, :, None] - floors.last) * grid.voxel  # centre height over the floor's centre
+        cand_mask = cand_mask & (floors.last >= 0) & (np.abs(over - eye) <= 0.5 * grid.voxel)
     cand = np.flatnonzero(cand_mask)
     if len(cand) == 0:
         cand = np.flatnonzero(reach)  # narrow levels: rely on the exact clearance test
@@ -488,6 +555,8 @@ def sample_viewpoints(
     level = 0
     attempts = tries = 0  # draws in total, draws for the current pair at the current level
     rejected = {"clearance": 0, "coverage": 0, "previous": 0}
+    if floors is not None:
+        rejected["floor"] = 0
 
     def reachable(p: np.ndarray) -> bool:
         return bool(reach[tuple(grid.index(p))])
@@ -505,6 +574,13 @@ def sample_viewpoints(
         coverage = levels[level]
         v = cand[rng.integers(len(cand))]
         pos = grid.centre(np.array([v]))[0] + rng.uniform(-0.5, 0.5, 3) * grid.voxel
+        floor = None
+        if floors is not None and eye is not None:
+            floor = floors.below(pos)
+            if floor is None:
+                rejected["floor"] += 1
+                continue
+            pos[1] = floor + eye
         cam = Camera((float(pos[0]), float(pos[1]), float(pos[2])), yaw=float(rng.uniform(-180.0, 180.0)),
                      pitch=float(rng.uniform(-pitch_limit, pitch_limit)), fov_y=fov_y)
         if not val.clearance(pos, clearance):
@@ -514,10 +590,19 @@ def sample_viewpoints(
             rejected["coverage"] += 1
             continue
         for _ in range(prev_tries):
-            d = rng.normal(size=3)
-            d /= max(float(np.linalg.norm(d)), 1e-12)
-            r = prof.max_translation * rng.random() ** (1 / 3)
-            ppos = pos + d * r
+            if floors is not None and eye is not None and floor is not None:  # a step along the floors
+                a = rng.uniform(0.0, 2.0 * math.pi)
+                r = prof.max_translation * math.sqrt(rng.random())
+                ppos = pos + np.array([math.cos(a) * r, 0.0, math.sin(a) * r])
+                pfloor = floors.below(ppos) if reachable(ppos) else None
+                if pfloor is None or not -_DROP <= pfloor - floor <= _STEP_UP:
+                    continue
+                ppos[1] = pfloor + eye
+            else:
+                d = rng.normal(size=3)
+                d /= max(float(np.linalg.norm(d)), 1e-12)
+                r = prof.max_translation * rng.random() ** (1 / 3)
+                ppos = pos + d * r
             dyaw, dpitch = rng.uniform(-prof.max_rotation, prof.max_rotation, 2)
             prev = Camera((float(ppos[0]), float(ppos[1]), float(ppos[2])), yaw=float((cam.yaw + dyaw + 180) % 360 - 180),
                           pitch=float(np.clip(cam.pitch + dpitch, -pitch_limit, pitch_limit)), fov_y=fov_y)
@@ -532,7 +617,9 @@ def sample_viewpoints(
             rejected["previous"] += 1
     if stats is not None:
         stats.update(voxel=grid.voxel, grid_shape=grid.shape, reachable=int(reach.sum()), candidates=len(cand),
-                     draws=attempts, rejected=dict(rejected), coverage=levels[level])
+                     draws=attempts, rejected=dict(rejected), coverage=levels[level], placement=placement)
+        if eye is not None:
+            stats["eye_height"] = eye
     if len(out) < n:
         raise ViewpointError(
             f"only {len(out)} of {n} valid viewpoints in {scene.name!r} after {attempts} draws "

@@ -209,12 +209,12 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     total = len(names) * len(args.profiles) * args.per_scene
     what = f"{len(names)} maps of the {args.split} split" if args.split else ", ".join(names)
     print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
-          f"at {args.size[0]}x{args.size[1]} into {args.out}", file=sys.stderr)
+          f"at {args.size[0]}x{args.size[1]}, cameras placed {args.placement}, into {args.out}", file=sys.stderr)
     with Bar(args, total, "capture", "sample") as bar:
         report = capture(
             names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
             workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
-            progress=lambda done, _total: bar.update_to(done), ray=args.ray,
+            progress=lambda done, _total: bar.update_to(done), ray=args.ray, placement=args.placement,
         )
     if report.failed:
         print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
@@ -378,7 +378,7 @@ def _usage(message: str) -> Exception:
 # -- the parser -------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
-    from rtp.capture.viewpoints import MOTION_PROFILES
+    from rtp.capture.viewpoints import MOTION_PROFILES, PLACEMENTS
     from rtp.metrics import DEFAULT_PPD, DEFAULT_WEBER_L
     from rtp.sdk import (
         CHANNELS,
@@ -466,6 +466,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="parallel render processes (default 1; with --ray, Ray workers)")
     _ray_option(cap)
     cap.add_argument("--seed", type=int, default=0, help="viewpoint sampling seed")
+    cap.add_argument("--placement", choices=tuple(PLACEMENTS), default="free",
+                     help="where the cameras stand: 'free' anywhere in the viewpoint domain (up to 6 m over a floor; "
+                     "every dataset before this option), 'eye' at the player's eye height over the floors, as the "
+                     "camera paths of `rtp play` walk")
     cache_dir(cap)
     splits(cap)
 

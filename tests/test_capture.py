@@ -154,3 +154,21 @@ def test_preview_sheet_labels_every_panel(tmp_path: Path) -> None:
 
     with Image.open(tmp_path / "sheet.jpg") as im:
         assert im.format == "JPEG"
+
+
+def test_capture_at_eye_height_records_its_placement(tmp_path: Path) -> None:
+    """--placement eye: the manifest says where the cameras stood, the cameras differ from the free
+    placement's, and a folder is resumed only with the placement it was captured with."""
+    out = tmp_path / "eye"
+    r = capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",), placement="eye")
+    assert r.written == 1
+    ds = DatasetReader(out)
+    assert ds.manifest["settings"]["placement"] == "eye"
+    free = tmp_path / "free"
+    capture(["procedural:5"], free, per_scene=1, size=(96, 64), profiles=("slow",))
+    assert "placement" not in DatasetReader(free).manifest["settings"]  # folders captured before it still resume
+    assert ds["procedural_5-slow-0000"].meta["camera"] != DatasetReader(free)["procedural_5-slow-0000"].meta["camera"]
+    with pytest.raises(sdk.RtpError, match="other settings"):
+        capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
+    with pytest.raises(sdk.ParameterError, match="unknown placement"):
+        capture(["procedural:5"], out, per_scene=1, size=(96, 64), placement="air")

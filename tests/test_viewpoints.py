@@ -124,3 +124,38 @@ def test_viewpoints_are_a_stream_through_the_coverage_fallback(scene):
     assert sample_viewpoints(scene, 2, seed=9, profile="fast", min_coverage=(1.01, 0.5), max_attempts=30) == lax[:2]
     with pytest.raises(ViewpointError, match="coverage down to 0.50"):
         sample_viewpoints(scene, 2, seed=9, min_coverage=(1.01, 0.5), max_attempts=0)
+
+
+def test_eye_placement_stands_on_the_floors_at_the_spawn_eye_height(scene):
+    """placement='eye': both cameras of a pair stand at the spawn points' eye height over their own
+    floor (the procedural rooms spawn at 1.6 m), the previous one moved along the floors (no
+    vertical motion on a flat floor, at most a step up or a ledge down), every 'free' rule kept."""
+    from rtp.capture.viewpoints import _Floors, _spawn_eye_height, free_space
+
+    tris = scene_triangles(scene)
+    _, grid, _, _ = free_space(scene)
+    floors = _Floors(grid)
+    eye = _spawn_eye_height(scene, floors)
+    assert eye == pytest.approx(1.6, abs=grid.voxel / 2)
+    stats: dict = {}
+    pairs = sample_viewpoints(scene, 10, seed=5, profile="fast", placement="eye", stats=stats)
+    assert stats["placement"] == "eye" and stats["eye_height"] == eye and "floor" in stats["rejected"]
+    prof = MOTION_PROFILES["fast"]
+    for prev, cam in pairs:
+        heights = []
+        for c in (prev, cam):
+            p = np.asarray(c.position)
+            heights.append(p[1] - floors.below(p))
+            assert point_triangle_distance(p, tris).min() >= 0.3 - 1e-9
+            assert abs(c.pitch) <= 20.0
+        assert heights == pytest.approx([eye, eye], abs=1e-9)
+        a, b = np.asarray(prev.position), np.asarray(cam.position)
+        assert np.hypot(*(a - b)[[0, 2]]) <= prof.max_translation + 1e-9
+        assert -1.2 - 1e-9 <= a[1] - b[1] <= 0.6 + 1e-9
+        assert not segment_hits_triangles(a, b, tris).any()
+    free = sample_viewpoints(scene, 10, seed=5, profile="fast")
+    free_over = [c.position[1] - floors.below(np.asarray(c.position)) for _, c in free]
+    assert np.std(free_over) > 0.1  # the default still floats the cameras: the two differ
+    assert sample_viewpoints(scene, 4, seed=5, profile="fast", placement="eye") == pairs[:4]  # a stream too
+    with pytest.raises(ViewpointError, match="unknown placement 'crouch'"):
+        sample_viewpoints(scene, 1, 0, placement="crouch")
