@@ -510,8 +510,9 @@ def sample_viewpoints(
             voxel anywhere in the domain. ``"eye"``: the candidates are the voxels at the player's
             eye height (:func:`_spawn_eye_height`) over a floor, one per standing column; the camera
             stands exactly that high over its floor, and the previous one is moved horizontally
-            (uniform in a disc of ``max_translation``) and stands on its own floor, at most a step up
-            or a ledge down from the current one. Yaw, pitch and every test are as for ``"free"``.
+            (uniform in a disc of ``max_translation``) and stands on its own floor, between
+            ``_DROP`` (1.2 m, a jump's height) below and ``_STEP_UP`` (0.6 m) above the current
+            one's. Yaw, pitch and every test are as for ``"free"``.
 
     Returns:
         ``n`` tuples ``(previous_camera, current_camera)``. The pairs are a stream: the first ``k``
@@ -595,7 +596,7 @@ def sample_viewpoints(
                 r = prof.max_translation * math.sqrt(rng.random())
                 ppos = pos + np.array([math.cos(a) * r, 0.0, math.sin(a) * r])
                 pfloor = floors.below(ppos) if reachable(ppos) else None
-                if pfloor is None or not -_DROP <= pfloor - floor <= _STEP_UP:
+                if pfloor is None or not -_DROP <= pfloor - floor <= _STEP_UP:  # from a jump up to a drop
                     continue
                 ppos[1] = pfloor + eye
             else:

@@ -129,7 +129,8 @@ def test_viewpoints_are_a_stream_through_the_coverage_fallback(scene):
 def test_eye_placement_stands_on_the_floors_at_the_spawn_eye_height(scene):
     """placement='eye': both cameras of a pair stand at the spawn points' eye height over their own
     floor (the procedural rooms spawn at 1.6 m), the previous one moved along the floors (no
-    vertical motion on a flat floor, at most a step up or a ledge down), every 'free' rule kept."""
+    vertical motion on a flat floor; its floor at most 1.2 m below or 0.6 m above the current
+    one's), every 'free' rule kept."""
     from rtp.capture.viewpoints import _Floors, _spawn_eye_height, free_space
 
     tris = scene_triangles(scene)
