@@ -73,6 +73,16 @@ def test_ray_capture_and_targets_equal_the_local_path(cluster: None, local: Path
     assert compute_targets(out, METRICS, ray="local") == 0
 
 
+def test_ray_capture_places_cameras_as_asked(cluster: None, tmp_path: Path) -> None:
+    """--placement reaches the Ray workers' plans: eye-height cameras, the local path's exactly."""
+    kw: dict[str, Any] = {"per_scene": 1, "size": SIZE, "profiles": ("slow",), "placement": "eye"}
+    capture(SCENES[:1], tmp_path / "local", **kw)
+    capture(SCENES[:1], tmp_path / "ray", workers=1, ray="local", **kw)
+    a, b = DatasetReader(tmp_path / "local"), DatasetReader(tmp_path / "ray")
+    assert b.manifest["settings"]["placement"] == "eye"
+    assert a.ids == b.ids and all(a[i].meta["camera"] == b[i].meta["camera"] for i in a.ids)
+
+
 def _killer(victims: list[int]) -> tuple[Any, Any]:
     """An ``on_actors`` hook noting the workers' pids and a progress callback that SIGKILLs the first
     worker right after the first sample lands (it has another sample queued, so it dies mid-task)."""
