@@ -8,6 +8,11 @@ are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios
 
     python bench/play_report.py data/play-{20kdm2,oa_dm5,oacmpctf3,delta,oasago2}/play.json
     python bench/play_report.py data/play-*-seed1/play.json --reuse jnyang@4:worst,jnyang@4:mean
+    python bench/play_report.py data/playlong-kaos/play.json --window 150
+
+``--window N`` adds, per path and method, the saving and the failing share at the method's default
+parameter in consecutive windows of N frames (the per-frame series of play.json; the first frame,
+which has no history, left out): whether a long path drifts.
 
 Runs with different methods share one table: its columns are every method of any run, blank where
 a run did not play it. Runs of the same map, seed, frames, size and failure threshold are merged
@@ -50,7 +55,11 @@ def main() -> None:
     ap.add_argument("--model", default="jnyang", help="the rtp method to compare (default jnyang)")
     ap.add_argument("--reuse", default=None, help="comma-separated methods with prediction reuse to compare with "
                     "--model (default MODEL@4)")
+    ap.add_argument("--window", type=int, default=0, help="also print each method's saving and failing share at its "
+                    "default in consecutive windows of this many frames")
     args = ap.parse_args()
+    if args.window < 0:
+        ap.error("--window: expected a number of frames >= 1")
     model = args.model
     reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
     runs: list[dict[str, Any]] = []
@@ -111,6 +120,31 @@ def main() -> None:
     print(f"| map | seed | path | {model} / Yang | {model} / oracle | " + " | ".join(f"{r} / {model}" for r in reuses) + " |")
     print("|---|---:|---|---|---|" + "---|" * len(reuses))
     print("\n".join(targets))
+    if args.window:
+        _windows(runs, args.window)
+
+
+def _windows(runs: list[dict[str, Any]], n: int) -> None:
+    """Per map, path and method: work saved / failing tiles % at the default in windows of ``n`` frames."""
+    print(f"\nAt each method's default, work saved / failing tiles % per window of {n} frames (frames counted from "
+          "the first with a history)\n")
+    out = []
+    longest = 0
+    for rep in runs:
+        s = rep["settings"]
+        for path, methods in rep.get("frames", {}).items():
+            for meth, series in methods.items():
+                saved, fail = series["saved"][1:], series["fail"][1:]
+                longest = max(longest, len(saved))
+                cells = []
+                for i in range(0, len(saved), n):
+                    w, f = saved[i:i + n], fail[i:i + n]
+                    cells.append(f"{100 * sum(w) / len(w):.1f} / {100 * sum(f) / len(f):.1f}")
+                out.append(f"| {s['scene']} | {s['seed']} | {path} | {meth} | " + " | ".join(cells) + " |")
+    starts = range(0, longest, n)
+    print("| map | seed | path | method | " + " | ".join(f"frames {1 + i}-{min(i + n, longest)}" for i in starts) + " |")
+    print("|---|---:|---|---|" + "---|" * len(starts))
+    print("\n".join(out))
 
 
 if __name__ == "__main__":

@@ -141,6 +141,14 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     # a savings row and a targets row: runs of one map and seed merge into one row per path
     assert out.count("| procedural:0 | 0 | fast |") == 2 and "| jnyang / Yang |" in out
     assert "(network 50%)" in out  # the reuse columns give the network's work per frame
+    # --window: each method's default, frame by frame, averaged over windows (frame 0 has no history)
+    win = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
+                          "--window", "3"], capture_output=True, text=True, check=True).stdout
+    assert "| frames 1-3 | frames 4-4 |" in win
+    series = json.loads((tmp_path / "play.json").read_text())["frames"]["fast"]["jnyang"]
+    saved, fail = series["saved"][1:], series["fail"][1:]
+    first = f"{100 * sum(saved[:3]) / 3:.1f} / {100 * sum(fail[:3]) / 3:.1f}"
+    assert f"| procedural:0 | 0 | fast | jnyang | {first} | {100 * saved[3]:.1f} / {100 * fail[3]:.1f} |" in win
 
 
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
