@@ -68,7 +68,7 @@ def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
 def test_paths_walk_the_floors_at_the_spawn_points_eye_height(scene) -> None:  # noqa: ANN001
     """A player's eye, not a free-floating camera: each camera stands over a floor at the eye height
     the scene's spawn points give (the procedural rooms spawn at 1.6 m), steps included."""
-    from rtp.capture.paths import _Floors
+    from rtp.capture.viewpoints import _Floors
 
     sc, blockers = scene
     _, grid, _, _ = free_space(sc, blockers=blockers)
