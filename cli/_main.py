@@ -529,9 +529,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
-    r.add_argument("--loss", default=None, choices=("l1", "mse", "huber"),
-                   help="training loss in transformed space: the paper's l1, mse (what R² scores) or huber "
-                   "(default: l1, unless the recipe sets one)")
+    r.add_argument("--loss", default=None, choices=("l1", "mse", "huber", "bce"),
+                   help="training loss in transformed space: the paper's l1, mse (what R² scores), huber or bce "
+                   "(cross-entropy with soft targets) (default: l1, unless the recipe sets one)")
     r.add_argument("--ema", type=float, default=None,
                    help="decay of a moving average of the weights, which is validated and saved (for example "
                    "0.999; default 0: off)")

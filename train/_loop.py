@@ -67,7 +67,7 @@ class TrainConfig:
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
     #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
-    #: ``huber`` (quadratic below 0.1, linear above).
+    #: ``huber`` (quadratic below 0.1, linear above) or ``bce`` (cross-entropy, soft targets).
     loss: str = "l1"
     #: Decay of an exponential moving average of the weights (and BatchNorm statistics), updated
     #: every step; the average is what is validated, calibrated and saved. 0: off (the raw weights).
@@ -151,6 +151,9 @@ _LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
     "l1": F.l1_loss,
     "mse": F.mse_loss,
     "huber": lambda p, t: F.huber_loss(p, t, delta=0.1),
+    # cross-entropy with the target as a soft label: its gradient at the logit is p - t, which does not
+    # vanish where the sigmoid saturates (targets at the transform's clamp, 1.0)
+    "bce": lambda p, t: F.binary_cross_entropy(p.clamp(1e-6, 1.0 - 1e-6), t.clamp(0.0, 1.0)),
 }
 
 
