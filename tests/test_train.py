@@ -225,7 +225,7 @@ def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path
 def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=6)
     base = ["train", "--data", str(data), "--metric", "jnyang", "--steps", "30", "--crop", "32", "--val-scenes", "scene0"]
-    for loss in ("mse", "huber"):
+    for loss in ("mse", "huber", "bce"):
         out = tmp_path / f"{loss}.pt"
         assert rtp_main([*base, "--out", str(out), "--loss", loss]) == 0
         ck = load_checkpoint(out)
@@ -237,7 +237,7 @@ def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixtu
         train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(tmp_path / "mse.pt"),
                                       steps=40, crop=32, val_scenes=("scene0",), loss="l1"))
     assert before.training["step"] == 30 and load_checkpoint(tmp_path / "mse.pt").training["step"] == 30
-    with pytest.raises(sdk.ParameterError, match="loss: expected one of l1, mse, huber"):
+    with pytest.raises(sdk.ParameterError, match="loss: expected one of l1, mse, huber, bce"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), loss="hinge", crop=32))
     with pytest.raises(SystemExit) as exc:
         rtp_main([*base, "--out", str(tmp_path / "x.pt"), "--loss", "hinge"])
@@ -336,3 +336,67 @@ def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -
     bad = subprocess.run([sys.executable, str(bench), teachers[0], str(other), "--data", str(data)],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "8-pixel tiles" in bad.stderr and "t0.onnx" in bad.stderr
+
+
+def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_path: Path) -> None:
+    import re
+    import subprocess
+    import sys
+
+    from rtp.capture import DatasetReader
+
+    data = _dataset(tmp_path / "ds", n=6)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=20, crop=32,
+                      val_scenes=("scene0",), loss="mse"))
+    model = export.export_checkpoint(tmp_path / "m.pt", tmp_path / "m.onnx")
+    bench = Path(__file__).resolve().parents[1] / "bench" / "residuals.py"
+    out = subprocess.run([sys.executable, str(bench), str(model), "--data", str(data)], capture_output=True,
+                         text=True, check=True).stdout
+    # the headline R² is the raw output's against the transformed truth, as bench/ensemble.py scores it
+    pred = sdk.load(model)
+    meta, reader, store = pred.metadata, DatasetReader(str(data)), TargetStore(str(data))
+    rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
+    ps, gs = [], []
+    for s in reader:
+        ps.append(pred.predict_raw(s.inputs(meta.inputs)).reshape(len(rows), -1))
+        gs.append(meta.transform.forward(store.load(s.id, "jnyang", 16)[rows]).reshape(len(rows), -1))
+    want = 100 * scores(np.concatenate(ps, 1), np.concatenate(gs, 1)).r2
+    assert f"R² {want:.1f}%" in out
+
+    def row(name: str) -> list[float]:
+        line = next(x for x in out.splitlines() if x.startswith(f"| {name}"))
+        return [float(v) for v in re.findall(r"[-+]?\d+\.\d+", line.split("|", 2)[2])]
+
+    # each partition of the tiles carries all of the squared error between its parts
+    assert row("seen")[1] + row("unseen")[1] == pytest.approx(100.0, abs=0.2)
+    assert sum(row(f"target fifth {k}")[1] for k in range(1, 6)) == pytest.approx(100.0, abs=0.3)
+    assert row("depth step > 0.5")[0] + row("depth step 0.1-0.5")[0] + row("no depth step")[0] == pytest.approx(
+        100.0, abs=0.2)
+    # per map and per frame, the best constant can only raise R²
+    r_all = row("all")
+    assert r_all[0] == pytest.approx(want, abs=0.06) and r_all[0] <= r_all[1] + 1e-9 <= r_all[2] + 1e-9
+    # the rate rules: saving more where more tiles may fail, never more than 4x4 everywhere (93.75%)
+    assert 0.0 <= float(re.search(r"the oracle saves (\d+\.\d+)%", out).group(1)) <= 93.75
+    for name in ("one threshold", "calibrated risk"):
+        v = [x for x in row(name) if x == x]
+        assert v and v == sorted(v) and all(0.0 <= x <= 93.75 for x in v)
+
+
+def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side() -> None:
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "residuals.py"
+    spec = importlib.util.spec_from_file_location("bench_residuals", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rng = np.random.default_rng(0)
+    est = rng.random((6, 4000)) * 50.0  # e.g. PSNR estimates in dB
+    bins = np.concatenate([[-np.inf], np.linspace(5, 45, 9), [np.inf]])
+    for hib in (True, False):
+        worse = est < 20.0 if hib else est > 30.0  # failing where the estimate is bad, plus noise
+        fails = worse ^ (rng.random(est.shape) < 0.05)
+        tab = mod._risk_table(est, fails, bins, hib)
+        steps = np.diff(tab, axis=1)
+        assert (steps <= 1e-12).all() if hib else (steps >= -1e-12).all()
+        assert tab[:, 0].mean() > 0.8 if hib else tab[:, -1].mean() > 0.8  # the bad end fails

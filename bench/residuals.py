@@ -1,0 +1,188 @@
+"""Where a model's squared error lies, and whether a smarter rate rule would use its estimates better.
+
+    python bench/residuals.py models/jnyang.onnx [--data data/val72]
+
+On every sample of a dataset with targets, the model's raw output (transformed space, no safety
+margin: what docs/results.md's "no safety margin" columns score) against the transformed truth.
+Prints three tables:
+
+1. **Anatomy**: R², and the share of the squared error carried by groups of tiles: at a depth
+   step (the largest ``sdk.depth_edges`` value in the tile over 0.5, or over 0.1), without one,
+   seen and unseen tiles, each fifth of the targets, and the tiles whose target sits at the
+   transform's upper clamp (1.0); the mean residual (prediction minus truth) of each group, and how
+   many points of R² the group costs (its squared error over the total variance).
+2. **Offsets**: R² per map, and R² after adding the best constant per map or per frame (an oracle:
+   how much a frame- or map-level correction could buy at most).
+3. **Rate rules** (the metric's failing threshold: a tile fails when its true error at the chosen
+   rate is over the default threshold): work saved at 1 / 2 / 5 / 10% failing tiles by the SDK's rule
+   (per tile the coarsest rate whose estimate passes one threshold, swept), and by a risk rule that
+   calibrates, per rate, the chance that a tile fails given its estimate (on the other maps: leave
+   one map out) and picks per tile the rate maximising saving minus lambda x that chance (swept).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from rtp import sdk
+from rtp.capture import DatasetReader, TargetStore
+from rtp.evaluate import DEFAULT_UNSEEN_FRACTION, tile_unseen_share
+
+#: Work saved by each predicted rate, in ``sdk.PREDICTED_RATES`` order.
+_SAVE = np.array([1.0 - 1.0 / (int(r[0]) * int(r[2])) for r in sdk.PREDICTED_RATES])
+_LEVELS = (0.01, 0.02, 0.05, 0.10)
+
+
+def _r2(p: np.ndarray, g: np.ndarray) -> float:
+    ok = np.isfinite(g)
+    d = g[ok] - g[ok].mean()
+    return float(1.0 - ((p[ok] - g[ok]) ** 2).sum() / (d * d).sum())
+
+
+def _tile_max(plane: np.ndarray, tile: int) -> np.ndarray:
+    h, w = plane.shape
+    th, tw = -(-h // tile), -(-w // tile)
+    pad = np.zeros((th * tile, tw * tile), np.float32)
+    pad[:h, :w] = plane
+    return pad.reshape(th, tile, tw, tile).max(axis=(1, 3)).reshape(-1)
+
+
+def _saved_at(points: list[tuple[float, float]], level: float) -> float:
+    ok = [s for f, s in points if f <= level]
+    return max(ok) if ok else float("nan")
+
+
+def _sweep(choose: Callable[[float], np.ndarray], fails: np.ndarray, values: np.ndarray) -> list[tuple[float, float]]:
+    """(failing share, work saved) per parameter; ``choose`` gives per tile a rate row or -1 (1x1)."""
+    cols = np.arange(fails.shape[1])
+    out = []
+    for v in values:
+        best = choose(float(v))
+        used = best >= 0
+        fail = np.where(used, fails[np.maximum(best, 0), cols], False)
+        out.append((float(fail.mean()), float(np.where(used, _SAVE[np.maximum(best, 0)], 0.0).mean())))
+    return out
+
+
+def _risk_table(pred: np.ndarray, fails: np.ndarray, bins: np.ndarray, higher_is_better: bool) -> np.ndarray:
+    """Per rate and bin of the estimate, the share of tiles that fail (smoothed, and made monotone:
+    never less likely to fail where the estimate is worse)."""
+    tab = np.zeros((len(pred), len(bins) - 1))
+    for i in range(len(pred)):
+        b = np.clip(np.digitize(pred[i], bins) - 1, 0, len(bins) - 2)
+        n = np.bincount(b, minlength=len(bins) - 1)
+        f = np.bincount(b, weights=fails[i].astype(np.float64), minlength=len(bins) - 1)
+        share = (f + 0.5) / (n + 1.0)
+        tab[i] = np.maximum.accumulate(share[::-1])[::-1] if higher_is_better else np.maximum.accumulate(share)
+    return tab
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("model", help="an exported model (.onnx)")
+    ap.add_argument("--data", default="data/val72", help="dataset with targets (default: data/val72)")
+    args = ap.parse_args(argv)
+    pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
+    meta = pred.metadata
+    reader, store = DatasetReader(args.data), TargetStore(args.data)
+    rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
+    hib = meta.higher_is_better
+    raw, truth, est, metric, edge, unseen, frame, scene = [], [], [], [], [], [], [], []
+    for k, i in enumerate(tqdm(reader.ids, desc="predicting", unit="sample")):
+        s = reader[i]
+        x = s.inputs(meta.inputs)
+        y = store.load(i, meta.metric, meta.tile_size)
+        r = pred.predict_raw(x)
+        raw.append(r.reshape(len(rows), -1))
+        truth.append(np.asarray(meta.transform.forward(y[rows])).reshape(len(rows), -1))
+        est.append(meta.decode(r[None])[0].reshape(6, -1))  # every rate, safety margin included
+        metric.append(y.reshape(6, -1))
+        n = raw[-1].shape[1]
+        edge.append(_tile_max(sdk.depth_edges(s.channel("depth")), meta.tile_size))
+        unseen.append(tile_unseen_share(s.channel("seen"), meta.tile_size).reshape(-1) > DEFAULT_UNSEEN_FRACTION)
+        frame.append(np.full(n, k))
+        scene.append(np.full(n, str(s.meta.get("scene", "?")), dtype=object))
+    p, g = np.concatenate(raw, 1), np.concatenate(truth, 1)
+    e, u = np.concatenate(edge), np.concatenate(unseen)
+    fr, sc = np.concatenate(frame), np.concatenate(scene)
+    ok = np.isfinite(g)
+    res2 = np.where(ok, (p - g) ** 2, 0.0)
+    total = res2.sum()
+    var = float(((g[ok] - g[ok].mean()) ** 2).sum())
+
+    print(f"\n{meta.metric}, {args.model} on {len(reader.ids)} samples of {args.data}: raw output, no safety margin; "
+          f"R² {100 * _r2(p, g):.1f}%\n")
+    print("| tiles | share of tiles % | share of squared error % | mean residual | R² points lost |")
+    print("|---|---:|---:|---:|---:|")
+    groups = [("depth step > 0.5", e > 0.5), ("depth step 0.1-0.5", (e > 0.1) & (e <= 0.5)),
+              ("no depth step (<= 0.1)", e <= 0.1), ("seen", ~u), ("unseen", u)]
+    q = np.quantile(g[ok], np.linspace(0.0, 1.0, 6))
+    band = np.minimum(np.searchsorted(q[1:-1], np.nan_to_num(g), side="right"), 4)  # a partition, ties included once
+    bands = [(f"target fifth {j + 1} ({q[j]:.2f}-{q[j + 1]:.2f})", band == j) for j in range(5)]
+    for name, m in groups + bands + [("target at the clamp (1.0)", g >= 1.0 - 1e-6)]:
+        m = np.broadcast_to(m, g.shape) & ok
+        print(f"| {name} | {100 * m.sum() / ok.sum():.1f} | {100 * res2[m].sum() / total:.1f} | "
+              f"{float(np.mean(p[m] - g[m])) if m.any() else float('nan'):+.4f} | {100 * res2[m].sum() / var:.1f} |")
+
+    print("\n| R² % | as predicted | + the best constant per map | + the best constant per frame |\n|---|---:|---:|---:|")
+    for name in [*sorted(set(sc)), "all"]:
+        m = np.ones(sc.shape, bool) if name == "all" else sc == name
+        pm, gm = p[:, m], g[:, m]
+        per_map = pm + np.nanmean(gm - pm)
+        per_frame = pm.copy()
+        for f in np.unique(fr[m]):
+            c = fr[m] == f
+            per_frame[:, c] += np.nanmean(gm[:, c] - pm[:, c])
+        if name == "all":
+            per_map = p.copy()
+            for s in set(sc):
+                c = sc == s
+                per_map[:, c] += np.nanmean(g[:, c] - p[:, c])
+        print(f"| {name} | {100 * _r2(pm, gm):.1f} | {100 * _r2(per_map, gm):.1f} | {100 * _r2(per_frame, gm):.1f} |")
+
+    est_, y_ = np.concatenate(est, 1), np.concatenate(metric, 1)
+    fails = np.where(np.isfinite(y_), (y_ < meta.default_threshold) if hib else (y_ > meta.default_threshold), False)
+    order = np.argsort(_SAVE)
+
+    def by_threshold(t: float) -> np.ndarray:
+        passes = est_ >= t if hib else est_ <= t
+        best = np.full(est_.shape[1], -1)
+        for r in order:  # the coarsest passing rate wins
+            best = np.where(passes[r], r, best)
+        return best
+
+    span = np.abs(meta.default_threshold) if meta.default_threshold else 1.0
+    thresholds = (meta.default_threshold + np.linspace(-20, 20, 161) if hib
+                  else np.geomspace(span / 16, span * 4, 161))
+    rule = _sweep(by_threshold, fails, thresholds)
+    # risk rule: the chance of failing per rate given the estimate, calibrated on the other maps
+    bins = np.concatenate([[-np.inf], np.quantile(est_[np.isfinite(est_)], np.linspace(0, 1, 41))[1:-1], [np.inf]])
+    chance = np.zeros_like(est_)
+    for s in set(sc):
+        c = sc == s
+        others = ~c if (~c).any() else c
+        tab = _risk_table(est_[:, others], fails[:, others], bins, hib)
+        for r in range(6):
+            chance[r, c] = tab[r][np.clip(np.digitize(est_[r, c], bins) - 1, 0, len(bins) - 2)]
+
+    def by_risk(lam: float) -> np.ndarray:
+        gain = _SAVE[:, None] - lam * chance
+        best = np.argmax(gain, 0)
+        return np.where(gain[best, np.arange(gain.shape[1])] > 0, best, -1)
+
+    risk = _sweep(by_risk, fails, np.geomspace(0.05, 500, 161))
+    oracle = float(np.where(fails, 0.0, _SAVE[:, None]).max(0).mean())
+    print(f"\nwork saved % at {' / '.join(f'{100 * v:g}' for v in _LEVELS)}% failing tiles (a tile fails over "
+          f"{meta.default_threshold:g}; the oracle saves {100 * oracle:.1f}% failing none)\n")
+    print("| rule | saved % |\n|---|---|")
+    for name, pts in (("one threshold, swept (the SDK's)", rule), ("calibrated risk, leave one map out", risk)):
+        print(f"| {name} | {' / '.join(f'{100 * _saved_at(pts, v):.1f}' for v in _LEVELS)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
