@@ -8,11 +8,14 @@ are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios
 
     python bench/play_report.py data/play-{20kdm2,oa_dm5,oacmpctf3,delta,oasago2}/play.json
     python bench/play_report.py data/play-*-seed1/play.json --reuse jnyang@4:worst,jnyang@4:mean
-    python bench/play_report.py data/playlong-kaos/play.json --window 150
+    python bench/play_report.py data/playlong-kaos/play.json --window 150 --by-age
 
 ``--window N`` adds, per path and method, the saving and the failing share at the method's default
 parameter in consecutive windows of N frames (the per-frame series of play.json; the first frame,
-which has no history, left out): whether a long path drifts.
+which has no history, left out): whether a long path drifts. ``--by-age`` adds, per path and
+method with prediction reuse (``NAME@k``, unseen tiles at 1x1: its network runs on every k-th
+frame), the same two figures grouped by frames since the network ran (0: it ran), beside the
+method without reuse on the same frames: whether reuse's loss grows with the estimates' age.
 
 Runs with different methods share one table: its columns are every method of any run, blank where
 a run did not play it. Runs of the same map, seed, frames, size and failure threshold are merged
@@ -57,6 +60,8 @@ def main() -> None:
                     "--model (default MODEL@4)")
     ap.add_argument("--window", type=int, default=0, help="also print each method's saving and failing share at its "
                     "default in consecutive windows of this many frames")
+    ap.add_argument("--by-age", action="store_true", help="also print each reuse method's saving and failing share at "
+                    "its default by frames since its network ran, beside the method without reuse")
     args = ap.parse_args()
     if args.window < 0:
         ap.error("--window: expected a number of frames >= 1")
@@ -122,6 +127,8 @@ def main() -> None:
     print("\n".join(targets))
     if args.window:
         _windows(runs, args.window)
+    if args.by_age:
+        _by_age(runs)
 
 
 def _windows(runs: list[dict[str, Any]], n: int) -> None:
@@ -144,6 +151,40 @@ def _windows(runs: list[dict[str, Any]], n: int) -> None:
     starts = range(0, longest, n)
     print("| map | seed | path | method | " + " | ".join(f"frames {1 + i}-{min(i + n, longest)}" for i in starts) + " |")
     print("|---|---:|---|---|" + "---|" * len(starts))
+    print("\n".join(out))
+
+
+def _by_age(runs: list[dict[str, Any]]) -> None:
+    """Per map, path and reuse method (unseen tiles at 1x1, so the network runs on frames 0, k, 2k, ...):
+    work saved / failing tiles % at the default by frames since the network ran, and the same frames
+    of the method without reuse (the model it names)."""
+    out = []
+    longest = 0
+    for rep in runs:
+        s = rep["settings"]
+        for path, methods in rep.get("frames", {}).items():
+            for meth, spec in s.get("reuse", {}).items():
+                base = meth.split("@", 1)[0]
+                if meth not in methods or spec.get("unseen", "full") != "full":
+                    continue
+                k = int(spec["k"])
+                longest = max(longest, k)
+                for name in (meth, base) if base in methods else (meth,):
+                    saved, fail = methods[name]["saved"], methods[name]["fail"]
+                    cells = []
+                    for age in range(k):
+                        idx = [i for i in range(1, len(saved)) if i % k == age]  # frame 0 has no history
+                        cells.append(f"{100 * sum(saved[i] for i in idx) / len(idx):.1f} / "
+                                     f"{100 * sum(fail[i] for i in idx) / len(idx):.1f}" if idx else "")
+                    label = name if name == meth else f"{name} (same frames)"
+                    out.append(f"| {s['scene']} | {s['seed']} | {path} | {label} | " + " | ".join(cells) + " |")
+    if not out:
+        print("\n--by-age: no run played a method with prediction reuse (NAME@k, unseen tiles at 1x1)")
+        return
+    print("\nAt each method's default, work saved / failing tiles % by frames since the reuse method's network ran "
+          "(0: it ran; the first frame, with no history, left out)\n")
+    print("| map | seed | path | method | " + " | ".join(f"age {a}" for a in range(longest)) + " |")
+    print("|---|---:|---|---|" + "---|" * longest)
     print("\n".join(out))
 
 

@@ -149,6 +149,16 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     saved, fail = series["saved"][1:], series["fail"][1:]
     first = f"{100 * sum(saved[:3]) / 3:.1f} / {100 * sum(fail[:3]) / 3:.1f}"
     assert f"| procedural:0 | 0 | fast | jnyang | {first} | {100 * saved[3]:.1f} / {100 * fail[3]:.1f} |" in win
+    # --by-age: jnyang@2's network runs on frames 0, 2, 4: frames 2 and 4 are age 0, frames 1 and 3 age 1;
+    # beside it jnyang on the same frames (jnyang@2:fresh, which may restart its interval, is left out)
+    age = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
+                          "--by-age"], capture_output=True, text=True, check=True).stdout
+    age = age[age.index("by frames since"):]
+    assert "| age 0 | age 1 |" in age and "jnyang@2:fresh" not in age
+    for name, label in (("jnyang@2", "jnyang@2"), ("jnyang", "jnyang (same frames)")):
+        sv, fl = (json.loads((tmp_path / "play.json").read_text())["frames"]["fast"][name][k] for k in ("saved", "fail"))
+        cells = [f"{100 * (sv[a] + sv[b]) / 2:.1f} / {100 * (fl[a] + fl[b]) / 2:.1f}" for a, b in ((2, 4), (1, 3))]
+        assert f"| procedural:0 | 0 | fast | {label} | {cells[0]} | {cells[1]} |" in age
 
 
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
