@@ -202,10 +202,18 @@ class PredictionReuse:
     since the network ran; ``margin`` the tiles of context around a fresh crop (two is exact for
     the shipped models). After each frame :attr:`work` is the network's work on it as a share of a
     whole-frame run (1, 0, or the crops' share). One instance per view; not thread-safe.
+
+    ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
+    on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
+    plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
+    warped estimates, reduced as above; the network's alone where the tile is unseen). With
+    ``every=1`` that runs the network on every frame and averages its estimates along the surfaces'
+    motion. Measured in docs/results.md ("Filtering the estimates over time").
     """
 
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
-                 unseen: str = "full", unseen_fraction: float = 0.5, margin: int = DEFAULT_MARGIN) -> None:
+                 unseen: str = "full", unseen_fraction: float = 0.5, margin: int = DEFAULT_MARGIN,
+                 history: float = 0.0) -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -222,6 +230,13 @@ class PredictionReuse:
                                  "unseen_fraction")
         if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 0:
             raise ParameterError(f"margin: expected an integer >= 0 (tiles), got {margin!r}", "margin")
+        try:
+            weight = float(history)
+        except (TypeError, ValueError, OverflowError):
+            weight = math.nan
+        if isinstance(history, (bool, str, bytes)) or not 0.0 <= weight < 1.0:
+            raise ParameterError(f"history: expected a weight in [0, 1) (0: the network's estimate alone), got "
+                                 f"{history!r}", "history")
         if unseen == "fresh" and predictor.static_size is not None:
             h, w = predictor.static_size
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
@@ -232,6 +247,7 @@ class PredictionReuse:
         self.unseen = unseen
         self.unseen_fraction = share
         self.margin = int(margin)
+        self.history = weight
         self.work = 0.0
         self.reset()
 
@@ -249,7 +265,7 @@ class PredictionReuse:
 
     def __repr__(self) -> str:
         return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
-                f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin})")
+                f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         if callable(x):
@@ -270,11 +286,16 @@ class PredictionReuse:
                                  "frame's)", "seen")
         return int(seen.shape[0]), int(seen.shape[1])
 
-    def _run(self, x: Inputs, hw: tuple[int, int]) -> np.ndarray:
+    def _run(self, x: Inputs, hw: tuple[int, int],
+             carried: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         h, w = hw
         est = self.predictor.predict(self._window(x, slice(0, h), slice(0, w)))
+        if carried is not None and self.history > 0:  # blend with the carried estimates where they are known
+            old, missing = carried
+            mix = ((1.0 - self.history) * est + self.history * np.where(missing[None], est, old)).astype(est.dtype)
+            est = np.where(missing[None], est, mix)
         self._cache = est.reshape(len(est), -1)
-        self._index = tile_index_map(hw, self.predictor.tile_size) if self.every > 1 else None
+        self._index = tile_index_map(hw, self.predictor.tile_size) if self.every > 1 or self.history > 0 else None
         self._shape = hw
         self._age = 0
         self.work = 1.0
@@ -307,7 +328,8 @@ class PredictionReuse:
         unseen tiles). ``x`` is the frame's inputs ``(C, H, W)`` or a function ``(rows, cols) ->``
         the inputs of that window, called only where the network runs."""
         hw = self._shape_of(x, seen)
-        if self._cache is None or fetch is None or self._age + 1 >= self.every or hw != self._shape:
+        runs = self._age + 1 >= self.every
+        if self._cache is None or fetch is None or hw != self._shape or (runs and self.history == 0):
             return self._run(x, hw)
         assert self._index is not None
         if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
@@ -321,13 +343,15 @@ class PredictionReuse:
         hib = self.predictor.metadata.higher_is_better
         est, index, missing = carry_estimates(self._cache, self._index, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce)
+        if runs:  # the network's frame, blended with what was carried here (history > 0)
+            return self._run(x, hw, (est, missing))
         work = 0.0
         if self.unseen == "fresh" and missing.any():
             h, w = hw
             boxes = cover(missing, self.margin)
             area = sum((min(y1 * tile, h) - y0 * tile) * (min(x1 * tile, w) - x0 * tile) for y0, y1, x0, x1 in boxes)
             if area > FRESH_FULL * h * w:  # cheaper to run the whole frame, and it restarts the interval
-                return self._run(x, hw)
+                return self._run(x, hw, (est, missing))
             for y0, y1, x0, x1 in boxes:
                 part = self.predictor.predict(self._window(x, slice(y0 * tile, min(y1 * tile, h)),
                                                            slice(x0 * tile, min(x1 * tile, w))))

@@ -629,7 +629,8 @@ reuse_cases = st.tuples(
             list(sdk.REUSE_REDUCTIONS)), json_scalars), "unseen": st.one_of(st.sampled_from(list(sdk.REUSE_UNSEEN)),
                                                                           json_scalars),
         "unseen_fraction": st.one_of(st.floats(-1, 2), hostile_numbers), "margin": st.one_of(st.integers(-2, 4),
-                                                                                              hostile_numbers)}),
+                                                                                              hostile_numbers),
+        "history": st.one_of(st.floats(-1, 2), hostile_numbers)}),
     _reuse_planes, _reuse_planes, _reuse_planes, _reuse_planes)
 
 
@@ -647,14 +648,16 @@ def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray)
     integer fetch arrays of the frame's shape inside it and numeric seen / background of that shape."""
     kw, rows, cols, seen, bg = v
     every, fraction, margin = kw.get("every", 4), kw.get("unseen_fraction", 0.5), kw.get("margin", 2)
+    history = kw.get("history", 0.0)
     if (isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1
+            or isinstance(history, (bool, str)) or _finite_number(history) is None or not 0 <= history < 1
             or kw.get("reduce", "mean") not in sdk.REUSE_REDUCTIONS or kw.get("unseen", "full") not in sdk.REUSE_UNSEEN
             or _finite_number(fraction) is None or not 0 <= fraction < 1 or isinstance(margin, bool)
             or not isinstance(margin, (int, np.integer)) or margin < 0):
         return True
     if est.shape != (6, *_PRED.tiles(_RH, _RW)) or est.dtype != np.float32:
         return True
-    if every == 1 or (rows is None and cols is None):
+    if (every == 1 and history == 0) or (rows is None and cols is None):
         return False
     for spec in (rows, cols):
         a = _array(spec) if spec is not None else None

@@ -176,11 +176,55 @@ def test_the_interval_and_the_fallbacks_run_the_whole_frame() -> None:
         assert np.array_equal(every.predict(x, fetch, everything), s.pred.predict(x)) and every.work == 1.0
 
 
+def test_history_filters_the_estimates_along_the_motion() -> None:
+    """``history=h``: each network frame's estimate is (1 - h) x the network's + h x the one carried
+    into the tile (recursively, so frame t weighs frame t - 2 by h squared); unseen tiles take the
+    network's alone; a shift by a whole tile moves the history with the surface."""
+    s = _Scene()
+    h = 0.25
+    rng = np.random.default_rng(9)
+    frames = [s.x * f for f in (1.0, 0.6, 1.3)]
+    frames[2] = np.clip(frames[2] + 0.2 * rng.random(frames[2].shape, dtype=np.float32), 0, 1)
+    nets = [s.pred.predict(x) for x in frames]
+    assert not np.allclose(nets[0], nets[1])  # the frames differ, so the filter has something to do
+    everything = np.ones((s.h, s.w), np.float32)
+    fetch = (s.rows, s.cols)
+    reuse = sdk.PredictionReuse(s.pred, 1, history=h)
+    assert np.array_equal(reuse.predict(frames[0]), nets[0])  # no history yet
+    second = reuse.predict(frames[1], fetch, everything)
+    assert reuse.work == 1.0
+    assert np.allclose(second, (1 - h) * nets[1] + h * nets[0], atol=1e-6)
+    seen = everything.copy()
+    seen[:TILE, :TILE] = 0  # one tile disoccluded: the network's estimate alone there
+    third = reuse.predict(frames[2], fetch, seen)
+    want = (1 - h) * nets[2] + h * second
+    want[:, 0, 0] = nets[2][:, 0, 0]
+    assert np.allclose(third, want, atol=1e-6)
+    # the camera pans one tile: tile (y, x) now shows what (y, x - 1) showed, and its history follows
+    pan = sdk.PredictionReuse(s.pred, 1, history=h)
+    pan.predict(frames[0])
+    moved = pan.predict(frames[1], (s.rows, np.maximum(s.cols - TILE, 0)), everything)
+    assert np.allclose(moved[:, :, 1:], (1 - h) * nets[1][:, :, 1:] + h * nets[0][:, :, :-1], atol=1e-6)
+    # with an interval, only the network's frames blend; the frames between carry the blend
+    both = sdk.PredictionReuse(s.pred, 2, history=h)
+    both.predict(frames[0])
+    carried = both.predict(frames[1], fetch, everything)
+    assert both.work == 0.0 and np.allclose(carried, nets[0])
+    blended = both.predict(frames[1], fetch, everything)
+    assert both.work == 1.0 and np.allclose(blended, (1 - h) * nets[1] + h * nets[0], atol=1e-6)
+    # history 0 is the network alone, and a camera cut (no fetch) restarts the filter
+    assert np.array_equal(reuse.predict(frames[1]), nets[1])
+    assert np.array_equal(sdk.PredictionReuse(s.pred, 1).predict(frames[1], fetch, everything), nets[1])
+    assert "history=0.25" in repr(reuse)
+
+
 def test_bad_arguments_are_refused() -> None:
     s = _Scene(3, 4)
     for kw, name in (({"every": 0}, "every"), ({"every": 2.5}, "every"), ({"reduce": "median"}, "reduce"),
                      ({"unseen": "skip"}, "unseen"), ({"unseen_fraction": 1.0}, "unseen_fraction"),
-                     ({"margin": -1}, "margin")):
+                     ({"margin": -1}, "margin"), ({"history": 1.0}, "history"), ({"history": -0.1}, "history"),
+                     ({"history": "0.5"}, "history"), ({"history": True}, "history"),
+                     ({"history": float("nan")}, "history")):
         with pytest.raises(sdk.ParameterError, match=name) as err:
             sdk.PredictionReuse(s.pred, **kw)  # type: ignore[arg-type]
         assert err.value.name == name
