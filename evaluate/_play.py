@@ -17,7 +17,8 @@ frame at ``fail_threshold``), any rtp model (a shipped name or an ``.onnx`` path
 network every k-th frame and reprojects its per-tile predictions in between with
 :class:`rtp.sdk.PredictionReuse`, tiles mostly unseen since the last prediction at full rate, or
 predicted afresh on crops with ``NAME@k:fresh``; ``NAME@k:hW`` also blends each network run's
-estimates with those carried from the previous frame, weight W on the carried ones), ``yang2019``
+estimates with those carried from the previous frame, weight W on the carried ones; ``NAME@k:rS``
+runs the network early once more than a share S of the tiles is unseen since it ran), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -107,6 +108,7 @@ class MethodSpec:
     reduce: str = "mean"
     unseen: str = "full"
     history: float = 0.0
+    refresh: float | None = None
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
@@ -128,27 +130,29 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
         reduce = [o for o in options if o in REUSE_REDUCTIONS]
         unseen = [o for o in options if o in REUSE_UNSEEN]
-        history = [_history(o, item) for o in options if o.startswith("h") and o not in REUSE_REDUCTIONS]
-        if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1
-                or len(reduce) + len(unseen) + len(history) != len(options)):
+        history = [_share(o, item, "history weight") for o in options if o[:1] == "h"]
+        refresh = [_share(o, item, "refresh share") for o in options if o[:1] == "r"]
+        if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1
+                or len(reduce) + len(unseen) + len(history) + len(refresh) != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
-                            f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}) and one ':hW' history weight in [0, 1), "
-                            "e.g. jnyang@4:mean:fresh or jnyang@1:h0.5")
+                            f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight and one ':rS' "
+                            "refresh share (both in [0, 1)), e.g. jnyang@4:mean:fresh, jnyang@1:h0.5 or jnyang@8:r0.02")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
-                              unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0))
+                              unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
+                              refresh[0] if refresh else None))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
 
 
-def _history(option: str, item: str) -> float:
+def _share(option: str, item: str, what: str) -> float:
     try:
         w = float(option[1:])
     except ValueError:
         w = math.nan
     if not 0.0 <= w < 1.0:
-        raise PlayError(f"method {item!r}: ':{option}' is not a history weight: expected ':h' and a number in [0, 1), "
-                        "e.g. jnyang@1:h0.5")
+        raise PlayError(f"method {item!r}: ':{option}' is not a {what}: expected ':{option[0]}' and a number in [0, 1), "
+                        f"e.g. jnyang@1:{option[0]}0.5")
     return w
 
 
@@ -356,7 +360,8 @@ def play(
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
-                "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history}
+                "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
+                                   "refresh": m.refresh}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
@@ -465,7 +470,7 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
             else:
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
-                decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history)
+                decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh)
                 loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
@@ -496,11 +501,12 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
 
 
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
-           reduce: str = "mean", unseen: str = "full", history: float = 0.0) -> Callable[..., np.ndarray]:
+           reduce: str = "mean", unseen: str = "full", history: float = 0.0,
+           refresh: float | None = None) -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction,
-                                history=history)
+                                history=history, refresh=refresh)
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None

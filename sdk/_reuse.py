@@ -203,6 +203,11 @@ class PredictionReuse:
     the shipped models). After each frame :attr:`work` is the network's work on it as a share of a
     whole-frame run (1, 0, or the crops' share). One instance per view; not thread-safe.
 
+    ``refresh`` (a share of the frame's tiles, or None) shortens the interval when the camera
+    uncovers much: once more than that share of the tiles is unseen since the network ran (tiles
+    that would go to 1x1, or to crops), it runs on the whole frame before the interval is up. The
+    interval so adapts to the camera's speed: a walk keeps ``every``, a run refreshes sooner.
+
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
     on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
     plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
@@ -213,7 +218,7 @@ class PredictionReuse:
 
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
                  unseen: str = "full", unseen_fraction: float = 0.5, margin: int = DEFAULT_MARGIN,
-                 history: float = 0.0) -> None:
+                 history: float = 0.0, refresh: float | None = None) -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -237,6 +242,14 @@ class PredictionReuse:
         if isinstance(history, (bool, str, bytes)) or not 0.0 <= weight < 1.0:
             raise ParameterError(f"history: expected a weight in [0, 1) (0: the network's estimate alone), got "
                                  f"{history!r}", "history")
+        if refresh is not None:
+            try:
+                limit = float(refresh)
+            except (TypeError, ValueError, OverflowError):
+                limit = math.nan
+            if isinstance(refresh, (bool, str, bytes)) or not 0.0 <= limit < 1.0:
+                raise ParameterError(f"refresh: expected None or a share of the frame's tiles in [0, 1), got {refresh!r}",
+                                     "refresh")
         if unseen == "fresh" and predictor.static_size is not None:
             h, w = predictor.static_size
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
@@ -248,6 +261,7 @@ class PredictionReuse:
         self.unseen_fraction = share
         self.margin = int(margin)
         self.history = weight
+        self.refresh = None if refresh is None else limit
         self.work = 0.0
         self.reset()
 
@@ -265,7 +279,8 @@ class PredictionReuse:
 
     def __repr__(self) -> str:
         return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
-                f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g})")
+                f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g}, "
+                f"refresh={self.refresh!r})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         if callable(x):
@@ -343,6 +358,8 @@ class PredictionReuse:
         hib = self.predictor.metadata.higher_is_better
         est, index, missing = carry_estimates(self._cache, self._index, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce)
+        if self.refresh is not None and missing.mean() > self.refresh:
+            runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
         if runs:  # the network's frame, blended with what was carried here (history > 0)
             return self._run(x, hw, (est, missing))
         work = 0.0

@@ -630,7 +630,8 @@ reuse_cases = st.tuples(
                                                                           json_scalars),
         "unseen_fraction": st.one_of(st.floats(-1, 2), hostile_numbers), "margin": st.one_of(st.integers(-2, 4),
                                                                                               hostile_numbers),
-        "history": st.one_of(st.floats(-1, 2), hostile_numbers)}),
+        "history": st.one_of(st.floats(-1, 2), hostile_numbers),
+        "refresh": st.one_of(st.none(), st.floats(-1, 2), hostile_numbers)}),
     _reuse_planes, _reuse_planes, _reuse_planes, _reuse_planes)
 
 
@@ -648,9 +649,10 @@ def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray)
     integer fetch arrays of the frame's shape inside it and numeric seen / background of that shape."""
     kw, rows, cols, seen, bg = v
     every, fraction, margin = kw.get("every", 4), kw.get("unseen_fraction", 0.5), kw.get("margin", 2)
-    history = kw.get("history", 0.0)
+    history, refresh = kw.get("history", 0.0), kw.get("refresh")
     if (isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1
             or isinstance(history, (bool, str)) or _finite_number(history) is None or not 0 <= history < 1
+            or (refresh is not None and (_finite_number(refresh) is None or not 0 <= refresh < 1))
             or kw.get("reduce", "mean") not in sdk.REUSE_REDUCTIONS or kw.get("unseen", "full") not in sdk.REUSE_UNSEEN
             or _finite_number(fraction) is None or not 0 <= fraction < 1 or isinstance(margin, bool)
             or not isinstance(margin, (int, np.integer)) or margin < 0):

@@ -218,13 +218,43 @@ def test_history_filters_the_estimates_along_the_motion() -> None:
     assert "history=0.25" in repr(reuse)
 
 
+def test_refresh_runs_the_network_early_when_much_is_unseen() -> None:
+    """``refresh=s``: a frame on which more than a share s of the tiles is unseen since the network
+    ran runs it on the whole frame (and restarts the interval); less than that is carried."""
+    s = _Scene()
+    th, tw = s.h // TILE, s.w // TILE
+    everything = np.ones((s.h, s.w), np.float32)
+    fetch = (s.rows, s.cols)
+    few, many = everything.copy(), everything.copy()
+    few[:TILE, :2 * TILE] = 0  # 2 tiles of 144
+    many[:2 * TILE, :4 * TILE] = 0  # 8 tiles: over 5%
+    assert 2 / (th * tw) < 0.05 < 8 / (th * tw)
+    reuse = sdk.PredictionReuse(s.pred, 8, refresh=0.05)
+    reuse.predict(s.inputs(everything))
+    works = []
+    for seen in (everything, few, few, many, everything):
+        est = reuse.predict(s.inputs(seen), fetch, seen)
+        works.append(reuse.work)
+    assert works == [0.0, 0.0, 0.0, 1.0, 0.0]  # the unseen tiles add up since the run: 2, 2, then 8 of them
+    assert reuse.age == 1 and np.isfinite(est).all()
+    # without refresh the same frames carry on, the unseen tiles at 1x1
+    plain = sdk.PredictionReuse(s.pred, 8)
+    plain.predict(s.inputs(everything))
+    for seen in (everything, few, few, many):
+        est = plain.predict(s.inputs(seen), fetch, seen)
+        assert plain.work == 0.0
+    assert np.isinf(est[:, :2, :4]).all()
+    assert "refresh=0.05" in repr(reuse)
+
+
 def test_bad_arguments_are_refused() -> None:
     s = _Scene(3, 4)
     for kw, name in (({"every": 0}, "every"), ({"every": 2.5}, "every"), ({"reduce": "median"}, "reduce"),
                      ({"unseen": "skip"}, "unseen"), ({"unseen_fraction": 1.0}, "unseen_fraction"),
                      ({"margin": -1}, "margin"), ({"history": 1.0}, "history"), ({"history": -0.1}, "history"),
                      ({"history": "0.5"}, "history"), ({"history": True}, "history"),
-                     ({"history": float("nan")}, "history")):
+                     ({"history": float("nan")}, "history"), ({"refresh": 1.0}, "refresh"), ({"refresh": -1}, "refresh"),
+                     ({"refresh": "0.1"}, "refresh"), ({"refresh": False}, "refresh")):
         with pytest.raises(sdk.ParameterError, match=name) as err:
             sdk.PredictionReuse(s.pred, **kw)  # type: ignore[arg-type]
         assert err.value.name == name
