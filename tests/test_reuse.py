@@ -54,6 +54,60 @@ def test_carried_estimates_follow_the_surface() -> None:
     assert np.array_equal(out[:, 0, 0], est[:, 0, 0])
 
 
+def _carry_by_loops(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: np.ndarray, seen: np.ndarray,
+                    sky: np.ndarray, tile: int, hib: bool, fraction: float, reduce: str) -> np.ndarray:
+    """carry_estimates written out pixel by pixel and tile by tile: the reference for the vectorised one."""
+    h, w = seen.shape
+    s = 2 if tile % 2 == 0 else 1
+    gh, gw = index.shape
+    th, tw = -(-h // tile), -(-w // tile)
+    k = tile // s
+    out = np.empty((len(est), th, tw))
+    worst = -np.inf if hib else np.inf
+    for ty in range(th):
+        for tx in range(tw):
+            known = []
+            for i in range(ty * k, ty * k + k):
+                for j in range(tx * k, tx * k + k):
+                    y, x = min(i * s, h - 1), min(j * s, w - 1)
+                    src = int(index[min(rows[y, x] // s, gh - 1), min(cols[y, x] // s, gw - 1)]) if seen[y, x] > 0 else -1
+                    src = ty * tw + tx if sky[y, x] > 0.5 else src
+                    if src >= 0:
+                        known.append(est[:, src])
+            if not known or 1 - len(known) / (k * k) > fraction:
+                out[:, ty, tx] = worst
+                continue
+            v = np.array(known, np.float64)  # (pixels, outputs)
+            if reduce == "mean":
+                out[:, ty, tx] = v.mean(axis=0)
+            elif reduce == "worst":
+                out[:, ty, tx] = v.min(axis=0) if hib else v.max(axis=0)
+            else:  # the quartile towards the worse side
+                order = np.sort(v, axis=0) if hib else -np.sort(-v, axis=0)
+                out[:, ty, tx] = order[max(int(np.floor(0.25 * (len(v) - 1))), 0)]
+    return out
+
+
+@pytest.mark.parametrize("reduce", sorted(sdk.REUSE_REDUCTIONS))
+def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
+    """Random motion, disocclusion and sky on frames that are not whole tiles (the kept pixels' padding
+    repeats the last row and column), odd tiles (every pixel kept), both error directions."""
+    rng = np.random.default_rng(7)
+    for h, w, tile in ((37, 53, 8), (48, 64, 16), (30, 21, 5), (50, 70, 16)):
+        index = tile_index_map((h, w), tile)
+        entries = index.max() + 1 + int(rng.integers(0, 9))  # the frame's tiles, then fresh ones
+        index = np.where(rng.random(index.shape) < 0.15, -1, rng.integers(0, entries, index.shape))
+        est = rng.random((6, entries)).astype(np.float32)
+        rows, cols = rng.integers(0, h, (h, w)), rng.integers(0, w, (h, w))
+        seen = (rng.random((h, w)) > 0.25).astype(np.float32)
+        sky = (rng.random((h, w)) > 0.9).astype(np.float32)
+        for hib in (False, True):
+            got, _, missing = carry_estimates(est, index, rows, cols, seen, sky, tile, hib, 0.5, reduce)
+            want = _carry_by_loops(est, index, rows, cols, seen, sky, tile, hib, 0.5, reduce)
+            assert np.allclose(got, want, rtol=1e-6), (h, w, tile, hib)
+            assert np.array_equal(missing, np.isinf(want).all(axis=0)), (h, w, tile, hib)
+
+
 @pytest.mark.parametrize("name", sdk.shipped_models())
 def test_a_crop_with_its_margin_predicts_what_the_whole_frame_does(name: str) -> None:
     """``unseen="fresh"`` runs the network on crops DEFAULT_MARGIN tiles wider than the tiles it needs:
