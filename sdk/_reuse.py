@@ -234,14 +234,17 @@ class PredictionReuse:
     ``refresh`` (a share of the frame's tiles, or None) shortens the interval when the camera
     uncovers much: once more than that share of the tiles is unseen since the network ran (tiles
     that would go to 1x1, or to crops), it runs on the whole frame before the interval is up. The
-    interval so adapts to the camera's speed: a walk keeps ``every``, a run refreshes sooner.
+    interval so adapts to the camera's speed: a walk keeps ``every``, a run refreshes sooner. At
+    equal network work it ties a fixed interval but lifts the worst path (docs/results.md "An
+    interval that adapts to the camera").
 
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
     on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
     plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
     warped estimates, reduced as above; the network's alone where the tile is unseen). With
     ``every=1`` that runs the network on every frame and averages its estimates along the surfaces'
-    motion. Measured in docs/results.md ("Filtering the estimates over time").
+    motion. It steadies the rates but costs saving at matched failing tiles: the network's errors
+    persist on a surface rather than average out (docs/results.md "Estimates filtered over time").
     """
 
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
