@@ -98,8 +98,10 @@ class PlayError(sdk.ParameterError):
 class MethodSpec:
     """One method of a closed-loop run: ``name`` as reported, ``kind`` (a :data:`METHOD_KINDS` key or
     ``"model"``), the ``model`` (shipped name or path), its ``reuse`` interval k (1: every frame) and
-    how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`) and what it does
-    with tiles the network did not see (:data:`REUSE_UNSEEN`)."""
+    how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`), what it does
+    with tiles the network did not see (:data:`REUSE_UNSEEN`), the ``history`` weight of the carried
+    estimates on the network's frames and the ``refresh`` share of unseen tiles that runs the network
+    early (``sdk.PredictionReuse``'s arguments of those names)."""
 
     name: str
     kind: str
@@ -114,8 +116,8 @@ class MethodSpec:
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
     model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse, then
-    ``:reduction`` (:data:`REUSE_REDUCTIONS`) and ``:unseen`` (:data:`REUSE_UNSEEN`) in any order
-    (``jnyang@4:mean:fresh``)."""
+    ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
+    weight W) and ``:rS`` (refresh share S) in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
