@@ -9,6 +9,7 @@ are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios
     python bench/play_report.py data/play-{20kdm2,oa_dm5,oacmpctf3,delta,oasago2}/play.json
     python bench/play_report.py data/play-*-seed1/play.json --reuse jnyang@4:worst,jnyang@4:mean
     python bench/play_report.py data/playlong-kaos/play.json --window 150 --by-age
+    python bench/play_report.py data/playr-*/play.json --reuse jnyang@4,jnyang@4:r0.05 --plot-reuse reuse.png
 
 ``--window N`` adds, per path and method, the saving and the failing share at the method's default
 parameter in consecutive windows of N frames (the per-frame series of play.json; the first frame,
@@ -16,6 +17,8 @@ which has no history, left out): whether a long path drifts. ``--by-age`` adds, 
 method with prediction reuse (``NAME@k``, unseen tiles at 1x1: its network runs on every k-th
 frame), the same two figures grouped by frames since the network ran (0: it ran), beside the
 method without reuse on the same frames: whether reuse's loss grows with the estimates' age.
+With several paths the report ends with each reuse method's mean over them (kept share at each
+level, worst path, network work); ``--plot-reuse PNG`` draws the kept share at 5% against the work.
 
 Runs with different methods share one table: its columns are every method of any run, blank where
 a run did not play it. Runs of the same map, seed, frames, size and failure threshold are merged
@@ -62,6 +65,8 @@ def main() -> None:
                     "default in consecutive windows of this many frames")
     ap.add_argument("--by-age", action="store_true", help="also print each reuse method's saving and failing share at "
                     "its default by frames since its network ran, beside the method without reuse")
+    ap.add_argument("--plot-reuse", type=Path, default=None, metavar="PNG", help="also plot each reuse method's kept "
+                    "share of MODEL's saving at 5%% failing tiles against its network work per frame, per path")
     args = ap.parse_args()
     if args.window < 0:
         ap.error("--window: expected a number of frames >= 1")
@@ -84,6 +89,7 @@ def main() -> None:
     for rep in runs:
         head += [m for m in rep["settings"]["methods"] if m not in head]
     rows, targets = [], []
+    kept: dict[str, list[tuple[str, list[float], float]]] = {r: [] for r in reuses}  # per path: ratios, work
     for i, rep in enumerate(runs):
         s = rep["settings"]
         methods = s["methods"]
@@ -111,6 +117,9 @@ def main() -> None:
             # the network's work per frame (a share of a whole-frame run) at each reuse method's default
             work = [next((r["network_frames"] for r in rep.get("rows", []) if r["path"] == path and r["method"] == m
                           and r["default"] and r.get("network_frames") is not None), math.nan) for m in reuses]
+            for r, rs, w in zip(reuses, reused, work):
+                if r in methods:
+                    kept[r].append((f"{s['scene']} {path}", rs, w))
             targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(
                 " / ".join(_fmt(r, pct) for r in rs) for rs, pct in ((vs_yang, False), (of_oracle, True))) + " | "
                 + " | ".join(" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else
@@ -125,10 +134,69 @@ def main() -> None:
     print(f"| map | seed | path | {model} / Yang | {model} / oracle | " + " | ".join(f"{r} / {model}" for r in reuses) + " |")
     print("|---|---:|---|---|---|" + "---|" * len(reuses))
     print("\n".join(targets))
+    _reuse_summary(kept, model)
+    if args.plot_reuse:
+        _plot_reuse(kept, model, args.plot_reuse)
     if args.window:
         _windows(runs, args.window)
     if args.by_age:
         _by_age(runs)
+
+
+def _reuse_summary(kept: dict[str, list[tuple[str, list[float], float]]], model: str) -> None:
+    """Per reuse method over every path it ran: the mean kept share (unrounded ratios) at each level,
+    the worst path at 5%, how many paths keep >= 95% there, and the mean network work per frame."""
+    if len(next(iter(kept.values()), [])) < 2:
+        return
+    print(f"\nOver the paths (mean of the unrounded ratios to {model}; paths whose ratio is not readable left out):\n")
+    print("| method | paths | network work per frame | kept at " + " / ".join(f"{100 * v:g}" for v in LEVELS)
+          + "% | worst path at 5% | paths >= 95% at 5% |")
+    print("|---|---:|---:|---|---:|---:|")
+    for r, per in kept.items():
+        if not per:
+            continue
+        means = []
+        for j in range(len(LEVELS)):
+            vals = [rs[j] for _, rs, _ in per if math.isfinite(rs[j])]
+            means.append(sum(vals) / len(vals) if vals else math.nan)
+        at5 = [(rs[-1], name) for name, rs, _ in per if math.isfinite(rs[-1])]
+        works = [w for _, _, w in per if math.isfinite(w)]
+        worst = min(at5) if at5 else (math.nan, "-")
+        print(f"| {r} | {len(per)} | {'-' if not works else f'{100 * sum(works) / len(works):.1f}%'} | "
+              + " / ".join("-" if not math.isfinite(m) else f"{100 * m:.1f}" for m in means) + "% | "
+              + ("-" if not at5 else f"{100 * worst[0]:.1f}% ({worst[1]})") + f" | {sum(v >= 0.95 for v, _ in at5)} |")
+
+
+def _plot_reuse(kept: dict[str, list[tuple[str, list[float], float]]], model: str, out: Path) -> None:
+    """Kept share of ``model``'s saving at 5% failing tiles against the network's work per frame: one
+    colour per reuse method, a small marker per path (hollow: slow, filled: fast), a large one for the mean."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, (r, per) in enumerate(kept.items()):
+        pts = [(100 * w, 100 * rs[-1], name) for name, rs, w in per if math.isfinite(w) and math.isfinite(rs[-1])]
+        if not pts:
+            continue
+        colour = f"C{i % 10}"
+        for x, y, name in pts:
+            ax.scatter(x, y, s=28, edgecolors=colour, facecolors="none" if name.endswith("slow") else colour)
+        mx, my = sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts)
+        ax.scatter(mx, my, s=150, marker="D", color=colour, edgecolors="black", label=f"{r} (mean)", zorder=3)
+    ax.axhline(95, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("network work per frame (% of a whole-frame run)")
+    ax.set_ylabel(f"kept of {model}'s saving at 5% failing tiles (%)")
+    ax.set_title("Prediction reuse: quality kept against network work\n(small: one path, hollow slow, filled fast; "
+                 "large: the mean)", fontsize=10)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    print(f"\nwrote {out}")
 
 
 def _windows(runs: list[dict[str, Any]], n: int) -> None:

@@ -238,3 +238,27 @@ def test_paths_in_worker_processes_give_the_same_report() -> None:
         return json.dumps([{k: v for k, v in r.items() if k != "predict_ms"} for r in rows])
 
     assert len(one.rows) == 4 and timeless(one.rows) == timeless(two.rows)
+
+
+def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> None:
+    """bench/play_report.py over two maps: per reuse method the mean of the per-path ratios to the
+    model at 1 / 2 / 5% failing tiles, the worst path at 5%, the paths >= 95% and the mean network
+    work; --plot-reuse writes the picture."""
+    runs = []
+    for scene, base, reused, work in (("a", 0.50, (0.45, 0.47, 0.48), 0.25), ("b", 0.40, (0.36, 0.38, 0.39), 0.50)):
+        settings = {"scene": scene, "seed": 0, "frames": 3, "fps": 60, "size": [64, 48], "fail_metric": "jnyang",
+                    "fail_threshold": 0.25, "methods": ["jnyang", "jnyang@4"]}
+        matched = [{"path": "fast", "method": "jnyang", "fail_share": lv, "work_saved": base} for lv in (0.01, 0.02, 0.05)]
+        matched += [{"path": "fast", "method": "jnyang@4", "fail_share": lv, "work_saved": v}
+                    for lv, v in zip((0.01, 0.02, 0.05), reused)]
+        rows = [{"path": "fast", "method": "jnyang@4", "default": True, "network_frames": work}]
+        path = tmp_path / f"{scene}.json"
+        path.write_text(json.dumps({"settings": settings, "unseen": {"fast": [1.0, 0.01, 0.02]}, "matched": matched,
+                                    "rows": rows}))
+        runs.append(str(path))
+    png = tmp_path / "reuse.png"
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), *runs, "--plot-reuse", str(png)],
+                         capture_output=True, text=True, check=True).stdout
+    # a: 90 / 94 / 96%, b: 90 / 95 / 97.5%; the worst at 5% is a's, both keep >= 95% there
+    assert "| jnyang@4 | 2 | 37.5% | 90.0 / 94.5 / 96.8% | 96.0% (a fast) | 2 |" in out
+    assert png.stat().st_size > 10_000
