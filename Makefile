@@ -93,10 +93,12 @@ evaluate: $(STAMP)
 # make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
 # slow and fast paths at 1280x720 (the models' training size), every method swept, both paths at
 # once (2 processes), the frames composited from the uniform-rate images (--composite: several times
-# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP).
+# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP). The maps are fetched
+# first (`rtp scenes fetch`: once, then a no-op), as `make dataset` does.
 MAP    ?= 20kdm2
 FRAMES ?= 150
 play: $(STAMP)
+	$(RTP) scenes fetch
 	$(RTP) play $(MAP) --frames $(FRAMES) --composite --workers 2 --out $(DATA)/play-$(MAP)
 
 clean:
