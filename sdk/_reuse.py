@@ -212,6 +212,17 @@ def cover(tiles: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
     return [(a[0], a[1], a[2], a[3]) for a in out]
 
 
+def _in_unit_interval(value: object, name: str, expected: str) -> float:
+    """``value`` as a float in [0, 1), or a ParameterError naming ``name`` and what was ``expected``."""
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        x = math.nan
+    if isinstance(value, (bool, str, bytes)) or not 0.0 <= x < 1.0:
+        raise ParameterError(f"{name}: expected {expected}, got {value!r}", name)
+    return x
+
+
 class PredictionReuse:
     """Run a predictor's network every ``every``-th frame and carry its per-tile estimates between.
 
@@ -257,30 +268,12 @@ class PredictionReuse:
             raise ParameterError(f"reduce: expected one of {', '.join(REUSE_REDUCTIONS)}, got {reduce!r}", "reduce")
         if not isinstance(unseen, str) or unseen not in REUSE_UNSEEN:
             raise ParameterError(f"unseen: expected one of {', '.join(REUSE_UNSEEN)}, got {unseen!r}", "unseen")
-        try:
-            share = float(unseen_fraction)
-        except (TypeError, ValueError, OverflowError):
-            share = math.nan
-        if isinstance(unseen_fraction, (bool, str, bytes)) or not 0.0 <= share < 1.0:
-            raise ParameterError(f"unseen_fraction: expected a share in [0, 1), got {unseen_fraction!r}",
-                                 "unseen_fraction")
+        share = _in_unit_interval(unseen_fraction, "unseen_fraction", "a share in [0, 1)")
         if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 0:
             raise ParameterError(f"margin: expected an integer >= 0 (tiles), got {margin!r}", "margin")
-        try:
-            weight = float(history)
-        except (TypeError, ValueError, OverflowError):
-            weight = math.nan
-        if isinstance(history, (bool, str, bytes)) or not 0.0 <= weight < 1.0:
-            raise ParameterError(f"history: expected a weight in [0, 1) (0: the network's estimate alone), got "
-                                 f"{history!r}", "history")
-        if refresh is not None:
-            try:
-                limit = float(refresh)
-            except (TypeError, ValueError, OverflowError):
-                limit = math.nan
-            if isinstance(refresh, (bool, str, bytes)) or not 0.0 <= limit < 1.0:
-                raise ParameterError(f"refresh: expected None or a share of the frame's tiles in [0, 1), got {refresh!r}",
-                                     "refresh")
+        weight = _in_unit_interval(history, "history", "a weight in [0, 1) (0: the network's estimate alone)")
+        limit = None if refresh is None else _in_unit_interval(refresh, "refresh",
+                                                               "None or a share of the frame's tiles in [0, 1)")
         if unseen == "fresh" and predictor.static_size is not None:
             h, w = predictor.static_size
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
@@ -292,7 +285,7 @@ class PredictionReuse:
         self.unseen_fraction = share
         self.margin = int(margin)
         self.history = weight
-        self.refresh = None if refresh is None else limit
+        self.refresh = limit
         self.work = 0.0
         self.reset()
 
