@@ -1,0 +1,86 @@
+"""bench/inference_gpu.py: its torch rebuild of an exported model is the model, and it refuses to run
+without a GPU in words (the timings themselves need CUDA and live in docs/performance.md)."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import pytest
+import torch
+
+from rtp import sdk
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+def _bench_module():  # type: ignore[no-untyped-def]
+    sys.path.insert(0, str(BENCH))
+    try:
+        spec = importlib.util.spec_from_file_location("inference_gpu", BENCH / "inference_gpu.py")
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        from _common import paper_model
+    finally:
+        sys.path.remove(str(BENCH))
+    return mod, paper_model
+
+
+def _onnxruntime(path: Path, x: np.ndarray) -> np.ndarray:
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    return session.run(None, {session.get_inputs()[0].name: x})[0]
+
+
+@pytest.mark.parametrize("name", sdk.shipped_models())
+def test_the_torch_rebuild_of_a_shipped_model_matches_onnxruntime(name: str) -> None:
+    mod, _ = _bench_module()
+    path = Path(str(sdk.load(name).path))
+    net = mod.torch_from_onnx(path)
+    # 68 x 100: not whole 16-pixel tiles, so the ceil-mode pooling of the last partial tile counts
+    x = np.random.default_rng(1).random((1, len(sdk.load(name).metadata.inputs), 68, 100), dtype=np.float32)
+    with torch.inference_mode():
+        got = net(torch.from_numpy(x)).numpy()
+    want = _onnxruntime(path, x)
+    assert got.shape == want.shape == (1, 4, 5, 7)
+    np.testing.assert_allclose(got, want, atol=2e-6)
+
+
+def test_the_torch_rebuild_keeps_the_papers_batchnorm_after_relu(tmp_path: Path) -> None:
+    mod, paper_model = _bench_module()
+    _, path = paper_model(tmp_path)  # random BatchNorm statistics: not the identity
+    net = mod.torch_from_onnx(path)
+    assert any(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules())
+    x = np.random.default_rng(2).random((1, 4, 64, 96), dtype=np.float32)
+    with torch.inference_mode():
+        got = net(torch.from_numpy(x)).numpy()
+    np.testing.assert_allclose(got, _onnxruntime(path, x), atol=2e-6)
+
+
+def test_the_torch_rebuild_names_an_op_it_does_not_know(tmp_path: Path) -> None:
+    mod, _ = _bench_module()
+    h = onnx.helper
+    graph = h.make_graph([h.make_node("Add", ["input", "input"], ["out"])], "g",
+                         [h.make_tensor_value_info("input", onnx.TensorProto.FLOAT, [1, 4, 16, 16])],
+                         [h.make_tensor_value_info("out", onnx.TensorProto.FLOAT, [1, 4, 16, 16])])
+    path = tmp_path / "add.onnx"
+    onnx.save(h.make_model(graph), str(path))
+    with pytest.raises(ValueError, match="op Add"):
+        mod.torch_from_onnx(path)
+
+
+def test_without_a_gpu_the_benchmark_says_so_and_exits_2() -> None:
+    env = {**os.environ, "CUDA_VISIBLE_DEVICES": ""}
+    out = subprocess.run([sys.executable, str(BENCH / "inference_gpu.py"), "--frames", "64x64"], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert "needs a CUDA GPU" in out.stderr
+    bad = subprocess.run([sys.executable, str(BENCH / "inference_gpu.py"), "--frames", "1920by1080"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert bad.returncode != 0 and "expected WxH" in bad.stderr
