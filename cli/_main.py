@@ -269,8 +269,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "grow", "augment", "tile", "outputs", "inputs",
-                 "transform", "logistic_k", "head", "loss", "ema", "distill", "steps", "batch", "crop", "lr", "seed",
-                 "safety_quantile", "max_samples")
+                 "transform", "logistic_k", "head", "loss", "ema", "distill", "steps", "batch", "crop", "context", "lr",
+                 "seed", "safety_quantile", "max_samples")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -542,6 +542,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--steps", type=_positive, default=None, help="training steps")
     r.add_argument("--batch", type=_positive, default=None, help="crops per step")
     r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")
+    r.add_argument("--context", type=int, default=None,
+                   help="pixels of input read around each crop and not scored (a multiple of the tile; default 0): "
+                   "the scored tiles see what they would in a whole frame instead of the crop's zero padding")
     r.add_argument("--lr", type=float, default=None, help="RMSprop learning rate")
     r.add_argument("--seed", type=int, default=None, help="seed of the weights, crops and batches")
     r.add_argument("--safety-quantile", type=float, default=None,

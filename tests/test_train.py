@@ -400,3 +400,49 @@ def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side() -> None
         steps = np.diff(tab, axis=1)
         assert (steps <= 1e-12).all() if hib else (steps >= -1e-12).all()
         assert tab[:, 0].mean() > 0.8 if hib else tab[:, -1].mean() > 0.8  # the bad end fails
+
+
+def test_context_scores_only_tiles_that_see_what_a_whole_frame_shows() -> None:
+    from rtp.train import _loop
+    from rtp.train.model import FastNet
+
+    # a window of 6x6 tiles with 1 tile of context: the outer ring is not scored, except on a side
+    # where the window meets the frame's border
+    inner = _loop._scored_tiles([16], [32], 6, 1, 16, 160, 224)[0, 0]
+    assert inner.sum() == 16 and inner[1:5, 1:5].all()
+    corner = _loop._scored_tiles([0], [128], 6, 1, 16, 96, 224)[0, 0]  # top and bottom at the border, right too
+    assert corner[:, 1:].all() and not corner[:, 0].any()
+    # with the shipped network (4x4 stem, depth 3: a 72-pixel receptive field) 32 pixels of context are
+    # enough: the scored tiles of a window predict exactly what the whole frame predicts there
+    torch.manual_seed(0)
+    net = FastNet(7, 4, 16).eval()
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.2, 0.2)
+    frame = torch.rand(1, 7, 160, 224)
+    with torch.inference_mode():
+        whole = net(frame)
+        window = net(frame[:, :, 32:160, 48:176])  # 8x8 tiles at tile (2, 3); the frame's bottom edge at 160
+        short = net(frame[:, :, 16:144, 48:176])  # 1 tile of context only: a 16-pixel margin is not enough
+    scored = _loop._scored_tiles([32], [48], 8, 2, 16, 160, 224)[0, 0]
+    assert scored.sum() == 4 * 6  # rows 2..7 (the bottom ring is on the frame's border), columns 2..5
+    rows, cols = np.nonzero(scored)
+    torch.testing.assert_close(window[0][:, rows, cols], whole[0][:, rows + 2, cols + 3])
+    rows1, cols1 = np.nonzero(_loop._scored_tiles([16], [48], 8, 1, 16, 160, 224)[0, 0])
+    assert not torch.allclose(short[0][:, rows1, cols1], whole[0][:, rows1 + 1, cols1 + 3], atol=1e-4)
+
+
+def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path: Path) -> None:
+    data = _dataset(tmp_path / "ds", n=6)
+    base = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_scenes=("scene0",), arch="fast", loss="mse")
+    result = train(TrainConfig(out=str(tmp_path / "c.pt"), steps=6, context=16, **base))
+    assert load_checkpoint(result.checkpoint).metadata.provenance["context"] == 16
+    with pytest.raises(sdk.ParameterError, match="another configuration"):  # resuming without it is another run
+        train(TrainConfig(out=str(tmp_path / "c.pt"), steps=8, **base))
+    with pytest.raises(sdk.ParameterError, match="multiple of the tile"):
+        train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=8, **base))
+    with pytest.raises(sdk.ParameterError, match="cannot be combined"):
+        train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=16, augment=True, **base))
+    with pytest.raises(sdk.ParameterError, match=r"crop \+ 2 x context \(96\) is larger than the frames \(96x64\)"):
+        train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=32, **base))
+    assert not (tmp_path / "d.pt").exists()

@@ -80,6 +80,11 @@ class TrainConfig:
     steps: int = 3000
     batch: int = 8
     crop: int = 128
+    #: Pixels of input read around each crop (a multiple of the tile) whose tiles are not scored, unless
+    #: they lie on the frame's border: the scored tiles then see what they see in a whole frame, not
+    #: the zero padding at the crop's edge (with 128-pixel crops and no context, 28 of a crop's 64
+    #: tiles are within reach of its edge, against about 5% of a 1280x720 frame's tiles). 0: off.
+    context: int = 0
     lr: float = 1e-4
     lr_decay: float = 1e-4
     weight_decay: float = 0.0
@@ -160,6 +165,21 @@ _LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
 def _pad_to_tiles(x: torch.Tensor, tile: int) -> torch.Tensor:
     h, w = x.shape[-2:]
     return F.pad(x, (0, -w % tile, 0, -h % tile), mode="replicate")
+
+
+def _scored_tiles(oy: Sequence[int], ox: Sequence[int], n: int, margin: int, tile: int, full_h: int,
+                  full_w: int) -> np.ndarray:
+    """``(B, 1, n, n)`` bool: the tiles of each ``n x n``-tile window (origins ``oy``, ``ox`` in pixels)
+    that are scored with ``margin`` tiles of context: all but the outer ``margin`` rings, except on a side
+    where the window meets the frame's border (those tiles are border tiles in a whole frame too)."""
+    out = np.zeros((len(oy), 1, n, n), dtype=bool)
+    for b, (y, x) in enumerate(zip(oy, ox)):
+        top = 0 if y == 0 else margin
+        bottom = n if y + n * tile >= full_h else n - margin
+        left = 0 if x == 0 else margin
+        right = n if x + n * tile >= full_w else n - margin
+        out[b, 0, top:bottom, left:right] = True
+    return out
 
 
 def _split_ids(reader: DatasetReader, cfg: TrainConfig) -> tuple[list[str], list[str], list[str], list[str]]:
@@ -319,8 +339,13 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
     h, w = tr.x[0].shape[-2:]
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
-    if cfg.crop > min(full_h, full_w):
-        raise sdk.ParameterError(f"crop ({cfg.crop}) is larger than the frames ({w}x{h})")
+    if cfg.context < 0 or cfg.context % cfg.tile:
+        raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}")
+    if cfg.context and cfg.augment:
+        raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
+    if cfg.crop + 2 * cfg.context > min(full_h, full_w):
+        what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
+        raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})")
 
     transform = _make_transform(cfg, tr)
     soft = _teacher_targets(cfg, reader, tr, transform) if cfg.teachers else None
@@ -349,6 +374,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["stem_layers"] = cfg.stem_layers
     if cfg.augment:
         config_key["augment"] = True
+    if cfg.context:  # likewise: checkpoints from before the option read no context
+        config_key["context"] = cfg.context
     if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
         config_key["loss"] = cfg.loss
     if cfg.ema:
@@ -420,7 +447,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             **({"raw_weights": net.state_dict()} if cfg.ema else {}),
         })
 
-    n_tiles = cfg.crop // cfg.tile
+    n_tiles = (cfg.crop + 2 * cfg.context) // cfg.tile  # the window read, in tiles
+    margin = cfg.context // cfg.tile
     if step == 0:  # the untrained network's score, the reference every later validation improves on
         s0, _, _ = _validate(avg, va, transform, cfg, worse)
         history.append({"step": 0, "val": s0})
@@ -429,7 +457,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         idx = torch.randint(len(tr.x), (cfg.batch,), generator=gen).tolist()
         oy = (torch.randint(full_h // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
         ox = (torch.randint(full_w // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
-        xb = np.stack([tr.x[i][:, y : y + cfg.crop, x : x + cfg.crop] for i, y, x in zip(idx, oy, ox)])
+        side = cfg.crop + 2 * cfg.context
+        xb = np.stack([tr.x[i][:, y : y + side, x : x + side] for i, y, x in zip(idx, oy, ox)])
         yb = np.stack([
             tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
             for i, y, x in zip(idx, oy, ox)
@@ -447,7 +476,12 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                 sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
             known = torch.from_numpy(np.isfinite(yb))
             target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb, target)
-        loss = loss_fn(net(torch.from_numpy(xb.astype(np.float32))), target)
+        pred = net(torch.from_numpy(xb.astype(np.float32)))
+        if margin:
+            scored = torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).expand_as(pred)
+            loss = loss_fn(pred[scored], target[scored])
+        else:
+            loss = loss_fn(pred, target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -478,6 +512,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         "augment": cfg.augment,
+        **({"context": cfg.context} if cfg.context else {}),
         "loss": cfg.loss,
         **({"ema": cfg.ema} if cfg.ema else {}),
         **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
