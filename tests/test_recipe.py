@@ -44,6 +44,9 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     assert cfg.steps == 10 and cfg.batch == 64 and cfg.crop == 64 and cfg.lr == 5e-4 and cfg.arch == "fast"
     assert cfg.val_split == "validation" and not cfg.val_scenes and map_names("validation")
     assert cfg.recipe is not None and cfg.recipe["name"] == SHIPPED_RECIPE and cfg.recipe["values"]["steps"] == 24000
+    assert cfg.recipe["overrides"] == {"steps": 10}  # the provenance says what the command line changed
+    same = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", crop=64)
+    assert same.recipe is not None and "overrides" not in same.recipe  # the recipe's own value is no override
 
 
 @pytest.mark.parametrize(("text", "needle"), [

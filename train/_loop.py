@@ -124,7 +124,11 @@ class TrainConfig:
         if "val_scenes" not in overrides and r.val_split is not None:
             map_names(r.val_split, scenes)  # an unknown split is refused now, not after loading the data
             values.update(val_split=r.val_split, splits=None if scenes is None else str(scenes))
-        return cls(data=data, metric=metric, out=out, recipe=r.provenance(), **values)
+        prov = r.provenance()
+        changed = {k: v for k, v in overrides.items() if k not in r.values or r.values[k] != v}
+        if changed:  # what the command line changed: a model says how it was really trained
+            prov["overrides"] = {k: list(v) if isinstance(v, tuple) else v for k, v in changed.items()}
+        return cls(data=data, metric=metric, out=out, recipe=prov, **values)
 
 
 @dataclass
