@@ -47,10 +47,8 @@ REUSE_UNSEEN = {
              "when the crops would cover more than half the frame, on the whole frame",
 }
 
-#: Tiles of context around a fresh crop. The shipped models' outputs depend on at most two tiles
-#: (32 pixels) around their own: with two, a crop's inner estimates equal the whole frame's exactly
-#: (tests/test_reuse.py checks every shipped model).
-DEFAULT_MARGIN = 2
+#: The most tiles of context :func:`context_tiles` looks for around a fresh crop.
+MAX_MARGIN = 8
 #: The crops' share of the frame above which ``fresh`` runs the network on the whole frame instead
 #: (and restarts the interval from it).
 FRESH_FULL = 0.5
@@ -154,6 +152,23 @@ def carry_estimates(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: 
     return out.astype(np.float32), new, missing
 
 
+def context_tiles(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
+    """The tiles of context a crop needs around a tile for the network's estimate there to be the
+    whole frame's: the model's reach (a deeper network reaches further), measured once on a random
+    frame of ``2 * limit + 1`` tiles square by cropping it ever wider around its middle tile (a few
+    small predictions). ``limit`` if even that many tiles do not give the whole frame's estimate."""
+    t = predictor.tile_size
+    n = 2 * limit + 1
+    x = np.random.default_rng(0).random((len(predictor.metadata.inputs), n * t, n * t), dtype=np.float32)
+    whole = predictor.predict(x)[:, limit, limit]
+    for m in range(limit):
+        part = predictor.predict(np.ascontiguousarray(x[:, (limit - m) * t:(limit + 1 + m) * t,
+                                                        (limit - m) * t:(limit + 1 + m) * t]))
+        if np.allclose(part[:, m, m], whole, rtol=1e-5, atol=1e-6):
+            return m
+    return limit
+
+
 def cover(tiles: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
     """Rectangles ``(top, bottom, left, right)`` in tiles (bottom and right exclusive) that hold every
     True tile of ``tiles`` with ``margin`` tiles of context around it: the bounding boxes of the
@@ -238,8 +253,9 @@ class PredictionReuse:
 
     ``reduce`` (:data:`REUSE_REDUCTIONS`) is how a tile reduces the estimates its pixels carry,
     ``unseen`` (:data:`REUSE_UNSEEN`) what becomes of tiles more than ``unseen_fraction`` unseen
-    since the network ran; ``margin`` the tiles of context around a fresh crop (two is exact for
-    the shipped models). After each frame :attr:`work` is the network's work on it as a share of a
+    since the network ran; ``margin`` the tiles of context around a fresh crop (None: the model's
+    own reach, measured by :func:`context_tiles` when ``unseen="fresh"``: two tiles for the
+    three-block shipped models, four for LPIPS's five blocks). After each frame :attr:`work` is the network's work on it as a share of a
     whole-frame run (1, 0, or the crops' share). One instance per view; not thread-safe.
 
     ``refresh`` (a share of the frame's tiles, or None) shortens the interval when the camera
@@ -259,7 +275,7 @@ class PredictionReuse:
     """
 
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
-                 unseen: str = "full", unseen_fraction: float = 0.5, margin: int = DEFAULT_MARGIN,
+                 unseen: str = "full", unseen_fraction: float = 0.5, margin: int | None = None,
                  history: float = 0.0, refresh: float | None = None) -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
@@ -269,8 +285,10 @@ class PredictionReuse:
         if not isinstance(unseen, str) or unseen not in REUSE_UNSEEN:
             raise ParameterError(f"unseen: expected one of {', '.join(REUSE_UNSEEN)}, got {unseen!r}", "unseen")
         share = _in_unit_interval(unseen_fraction, "unseen_fraction", "a share in [0, 1)")
-        if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 0:
-            raise ParameterError(f"margin: expected an integer >= 0 (tiles), got {margin!r}", "margin")
+        if margin is not None and (isinstance(margin, bool) or not isinstance(margin, (int, np.integer))
+                                   or margin < 0):
+            raise ParameterError(f"margin: expected None (the model's reach) or an integer >= 0 (tiles), "
+                                 f"got {margin!r}", "margin")
         weight = _in_unit_interval(history, "history", "a weight in [0, 1) (0: the network's estimate alone)")
         limit = None if refresh is None else _in_unit_interval(refresh, "refresh",
                                                                "None or a share of the frame's tiles in [0, 1)")
@@ -283,7 +301,9 @@ class PredictionReuse:
         self.reduce = reduce
         self.unseen = unseen
         self.unseen_fraction = share
-        self.margin = int(margin)
+        if margin is None and unseen == "fresh":  # only fresh crops need it: measure the model's reach
+            margin = context_tiles(predictor)
+        self.margin: int | None = None if margin is None else int(margin)
         self.history = weight
         self.refresh = limit
         self.work = 0.0
@@ -389,7 +409,7 @@ class PredictionReuse:
         work = 0.0
         if self.unseen == "fresh" and missing.any():
             h, w = hw
-            boxes = cover(missing, self.margin)
+            boxes = cover(missing, self.margin or 0)
             area = sum((min(y1 * tile, h) - y0 * tile) * (min(x1 * tile, w) - x0 * tile) for y0, y1, x0, x1 in boxes)
             if area > FRESH_FULL * h * w:  # cheaper to run the whole frame, and it restarts the interval
                 return self._run(x, hw, (est, missing))

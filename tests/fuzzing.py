@@ -648,14 +648,15 @@ def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray)
     """Accepted: arguments in range, and when the estimates were carried (every > 1 and fetch given)
     integer fetch arrays of the frame's shape inside it and numeric seen / background of that shape."""
     kw, rows, cols, seen, bg = v
-    every, fraction, margin = kw.get("every", 4), kw.get("unseen_fraction", 0.5), kw.get("margin", 2)
+    every, fraction, margin = kw.get("every", 4), kw.get("unseen_fraction", 0.5), kw.get("margin")
     history, refresh = kw.get("history", 0.0), kw.get("refresh")
     if (isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1
             or isinstance(history, (bool, str)) or _finite_number(history) is None or not 0 <= history < 1
             or (refresh is not None and (_finite_number(refresh) is None or not 0 <= refresh < 1))
             or kw.get("reduce", "mean") not in sdk.REUSE_REDUCTIONS or kw.get("unseen", "full") not in sdk.REUSE_UNSEEN
-            or _finite_number(fraction) is None or not 0 <= fraction < 1 or isinstance(margin, bool)
-            or not isinstance(margin, (int, np.integer)) or margin < 0):
+            or _finite_number(fraction) is None or not 0 <= fraction < 1
+            or (margin is not None and (isinstance(margin, bool) or not isinstance(margin, (int, np.integer))
+                                        or margin < 0))):
         return True
     if est.shape != (6, *_PRED.tiles(_RH, _RW)) or est.dtype != np.float32:
         return True

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rtp import sdk
-from rtp.sdk._reuse import DEFAULT_MARGIN, carry_estimates, cover, tile_index_map
+from rtp.sdk._reuse import carry_estimates, context_tiles, cover, tile_index_map
 
 TILE = 16
 
@@ -110,13 +110,16 @@ def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
 
 @pytest.mark.parametrize("name", sdk.shipped_models())
 def test_a_crop_with_its_margin_predicts_what_the_whole_frame_does(name: str) -> None:
-    """``unseen="fresh"`` runs the network on crops DEFAULT_MARGIN tiles wider than the tiles it needs:
-    their estimates must be the whole frame's, for every shipped model (a wider receptive field fails)."""
+    """``unseen="fresh"`` runs the network on crops ``context_tiles`` wider than the tiles it needs:
+    their estimates must be the whole frame's, for every shipped model (the deeper LPIPS reaches a
+    tile further), and not one tile less."""
     pred = sdk.load(name)
+    m = context_tiles(pred)
+    assert m == (4 if name == "lpips.onnx" else 2)  # three blocks reach two tiles around their own, five four
+    assert sdk.PredictionReuse(pred, unseen="fresh").margin == m and sdk.PredictionReuse(pred).margin is None
     t = pred.tile_size
     x = np.random.default_rng(3).random((len(pred.metadata.inputs), 12 * t, 20 * t), dtype=np.float32)
     whole = pred.predict(x)
-    m = DEFAULT_MARGIN
     part = pred.predict(x[:, (4 - m) * t:(7 + m) * t, (9 - m) * t:(15 + m) * t])
     assert np.array_equal(part[:, m:m + 3, m:m + 6], whole[:, 4:7, 9:15])
     # one tile less and they differ: the margin is not wider than it must be
@@ -186,7 +189,8 @@ def test_fresh_tiles_are_the_networks_and_are_carried_on() -> None:
     second = reuse.shading_rates(lazily, (s.rows, s.cols), seen)
     assert np.array_equal(second[2:4, 11:13], now[2:4, 11:13])  # the network's, not 1x1
     assert np.array_equal(np.delete(second, [11, 12], axis=1), np.delete(first, [11, 12], axis=1))
-    m = DEFAULT_MARGIN
+    m = reuse.margin
+    assert m is not None and m >= 1
     assert windows == [(slice(0, (4 + m) * TILE), slice((11 - m) * TILE, (13 + m) * TILE))]  # one crop
     assert reuse.work == pytest.approx((4 + m) * (2 + 2 * m) / (th * tw)) and reuse.age == 1
     third = reuse.shading_rates(s.inputs(everything), (s.rows, s.cols), everything)  # still: the fresh tiles stay
