@@ -255,8 +255,9 @@ class PredictionReuse:
     ``unseen`` (:data:`REUSE_UNSEEN`) what becomes of tiles more than ``unseen_fraction`` unseen
     since the network ran; ``margin`` the tiles of context around a fresh crop (None: the model's
     own reach, measured by :func:`context_tiles` when ``unseen="fresh"``: two tiles for the
-    three-block shipped models, four for LPIPS's five blocks). After each frame :attr:`work` is the network's work on it as a share of a
-    whole-frame run (1, 0, or the crops' share). One instance per view; not thread-safe.
+    three-block shipped models, four for LPIPS's five blocks). After each frame :attr:`work` is the
+    network's work on it as a share of a whole-frame run (1, 0, or the crops' share). One instance
+    per view; not thread-safe.
 
     ``refresh`` (a share of the frame's tiles, or None) shortens the interval when the camera
     uncovers much: once more than that share of the tiles is unseen since the network ran (tiles
