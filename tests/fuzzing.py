@@ -377,9 +377,11 @@ def _select_call(v: tuple[ArraySpec, Any, Any]) -> np.ndarray:
 def _select_absurd(v: tuple[ArraySpec, Any, Any], codes: np.ndarray) -> bool:
     spec, thr, hib = v
     kind, shape, _ = spec
+    if kind == "list":  # a nested list of zeros is array-like: np.asarray makes it a (6, th, tw) array when shaped so
+        shape = shape[:3]
     return (
         not isinstance(hib, bool) or _threshold_absurd(thr, hib) or thr is None
-        or kind in ("list", "ragged", "object", "str", "complex64") or len(shape) < 3 or shape[-3] != 6
+        or kind in ("ragged", "object", "str", "complex64") or len(shape) < 3 or shape[-3] != 6
         or codes.dtype != np.uint8 or not set(np.unique(codes).tolist()) <= set(sdk.RATE_CODES.values())
     )
 
