@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError, depth_edges
+from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError, depth_edges, luma
 from rtp.sdk.files import atomic_output
 
 __all__ = [
@@ -100,7 +100,9 @@ BUFFERS: dict[str, _Buffer] = {
 # Every sdk channel has exactly one storage place (tests/test_dataset.py checks the coverage).
 _CHANNEL_SOURCE = {c: (name, i) for name, buf in BUFFERS.items() for i, c in enumerate(buf.channels)}
 #: Channels computed from stored buffers when read, by the SDK's definition (one source of truth).
-_DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth"))}
+_DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth")),
+                            "reprojected.y": lambda s: luma(s.buffer("reprojected")),
+                            "albedo.y": lambda s: luma(s.buffer("albedo"))}
 
 
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:

@@ -54,7 +54,7 @@ ADAPTERS = [*REGISTERED, THIRD_PARTY]
 #: displayed frame is each engine's own lit image.
 AGREEMENT: dict[str, tuple[float, bool]] = {
     "seen": (0.0, False),
-    **{f"albedo.{c}": (0.05, False) for c in "rgb"},
+    **{f"albedo.{c}": (0.05, False) for c in "rgby"},
     **{f"normal.{c}": (0.01, False) for c in "xyz"},
     "depth": (1e-3, True),
     **{f"motion.{c}": (0.05, False) for c in "xy"},
@@ -226,9 +226,13 @@ def test_inputs_follow_the_channel_conventions(registry: None, reference: Any, n
     if "seen" in channels:  # unseen pixels carry no stale colour
         unseen = x[channels.index("seen")] == 0
         assert 0.0 < unseen.mean() < 0.5
-        for c in ("reprojected.r", "reprojected.g", "reprojected.b"):
+        for c in ("reprojected.r", "reprojected.g", "reprojected.b", "reprojected.y"):
             if c in channels:
                 assert not x[channels.index(c)][unseen].any(), c
+    for kind in ("reprojected", "albedo"):  # the luma planes are the luma of the adapter's own RGB planes
+        if {f"{kind}.{c}" for c in "rgby"} <= set(channels):
+            rgb = np.stack([x[channels.index(f"{kind}.{c}")] for c in "rgb"], axis=-1)
+            np.testing.assert_allclose(x[channels.index(f"{kind}.y")], sdk.luma(rgb), atol=1e-5, err_msg=kind)
     for plane, c in zip(x, channels):
         if c not in AGREEMENT:
             continue

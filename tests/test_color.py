@@ -72,6 +72,13 @@ def test_glsl_srgb_curves_match_the_sdk(plugin: str, gl_context: Any) -> None:
 
 
 def test_glsl_luma_weights_are_the_sdk_weights() -> None:
-    coarse = (ROOT / "plugins" / "moderngl" / "shaders" / "coarse_fs.glsl").read_text()
-    found = re.findall(r"vec3\((0\.\d+), (0\.\d+), (0\.\d+)\)", coarse)
-    assert found and all(tuple(map(float, f)) == sdk.LUMA_WEIGHTS for f in found)
+    shaders = ROOT / "plugins" / "moderngl" / "shaders"
+    common = (shaders / "common.glsl").read_text()
+    found = re.findall(r"display_luma\(vec3 c\) \{ return dot\(c, vec3\((0\.\d+), (0\.\d+), (0\.\d+)\)\)", common)
+    assert len(found) == 1 and tuple(map(float, found[0])) == sdk.LUMA_WEIGHTS
+    # every shader that takes luma of display values does it through display_luma, no copy of the weights
+    for path in shaders.glob("*.glsl"):
+        text = path.read_text()
+        assert "0.299" not in text or path.name == "common.glsl", path.name
+    assert "display_luma(" in (shaders / "coarse_fs.glsl").read_text()
+    assert "display_luma(" in (shaders / "adapter_fs.glsl").read_text()

@@ -47,10 +47,10 @@ CHANNEL_IDS: dict[str, int] = {
     "reprojected.r": 0, "reprojected.g": 1, "reprojected.b": 2, "seen": 3,
     "albedo.r": 4, "albedo.g": 5, "albedo.b": 6,
     "normal.x": 7, "normal.y": 8, "normal.z": 9, "depth": 10,
-    "roughness": 11, "metallic": 12, "specular": 13, "depth.edge": 14,
+    "roughness": 11, "metallic": 12, "specular": 13, "depth.edge": 14, "reprojected.y": 15, "albedo.y": 16,
 }
 _MATERIAL = ("roughness", "metallic", "specular")
-_MAX_CHANNELS = 16
+_MAX_CHANNELS = 20  # five RGBA float targets (adapter_fs.glsl)
 
 
 def _mat(m: np.ndarray) -> bytes:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Camera, Scene
-from rtp.sdk import ALL_RATES, RATE_CODES, RtpError, depth_edges, rate_size, tile_grid
+from rtp.sdk import ALL_RATES, RATE_CODES, RtpError, depth_edges, luma, rate_size, tile_grid
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
@@ -164,6 +164,8 @@ class Frame:
                 example = f"{name}.{'r' if base in ('albedo', 'reprojected') else 'x'}"
                 raise UnsupportedChannelError(f"{name!r} has several components; name one, e.g. {example}")
             return arr
+        if base in ("albedo", "reprojected") and comp == "y":  # colour planes: y is luma, as sdk.CHANNELS says
+            return luma(arr)
         index = {"r": 0, "g": 1, "b": 2, "x": 0, "y": 1, "z": 2}.get(comp)
         if arr.ndim != 3 or index is None or index >= arr.shape[2]:
             raise UnsupportedChannelError(f"channel {name!r} does not exist")

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, depth_edges, reproject, reproject_positions
+from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, depth_edges, luma, reproject, reproject_positions
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
 from ._errors import PyrenderAdapterError
@@ -28,6 +28,8 @@ _REPROJECTED = ("reprojected.r", "reprojected.g", "reprojected.b")
 _ALBEDO = ("albedo.r", "albedo.g", "albedo.b")
 _NORMAL = ("normal.x", "normal.y", "normal.z")
 _MOTION = ("motion.x", "motion.y")
+# Planes derived from the RGB ones: Rec.601 luma (sdk.luma), as the metrics measure it.
+_REPROJECTED_Y, _ALBEDO_Y = "reprojected.y", "albedo.y"
 #: The ``specular`` channel of everything pyrender shades: its dielectric F0 is a fixed 4 %
 #: (``mesh.frag``: ``dialectric_spec = vec3(0.04)``), specular 0.5 in ``sdk.CHANNELS`` terms.
 PYRENDER_SPECULAR = 0.5
@@ -82,6 +84,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
     * ``reprojected.r/g/b`` and ``seen``: the previous displayed frame fetched where each pixel
       was in the previous frame, with the depth-tested seen mask, computed on the CPU by
       :func:`rtp.sdk.reproject` (the reference definition both plugins follow).
+    * ``reprojected.y``, ``albedo.y``: the Rec.601 luma (:func:`rtp.sdk.luma`) of those RGB planes.
     * ``albedo.r/g/b``: glTF base colour (factor x texture x vertex colour), display-encoded sRGB.
     * ``normal.x/y/z``: unit view-space shading normal (normal maps included; two-sided).
     * ``roughness``, ``metallic``: the material's perceptual roughness and metalness as pyrender
@@ -125,7 +128,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, "seen", *_ALBEDO, *_NORMAL, *MATERIAL, "specular", "depth", "depth.edge", *_MOTION)
+        (*_REPROJECTED, _REPROJECTED_Y, "seen", *_ALBEDO, _ALBEDO_Y, *_NORMAL, *MATERIAL, "specular", "depth",
+         "depth.edge", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
 
@@ -241,16 +245,16 @@ class Adapter(_BaseAdapter[SceneFrame]):
         t0 = time.perf_counter()
         pose = _pose(pose, "pose")
         wanted = set(self.channels)
-        temporal = wanted & {*_REPROJECTED, "seen", *_MOTION}
+        temporal = wanted & {*_REPROJECTED, _REPROJECTED_Y, "seen", *_MOTION}
         if temporal and prev_pose is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(temporal))} need prev_pose")
-        reproj = wanted & {*_REPROJECTED, "seen"}
+        reproj = wanted & {*_REPROJECTED, _REPROJECTED_Y, "seen"}
         if reproj and prev_colour is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(reproj))} need prev_colour (the previous displayed frame)")
         cam = self._camera(scene, camera)
         prev_cam = cam if prev_camera is None else prev_camera
 
-        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & set(_ALBEDO)),
+        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y}),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
         planes: dict[str, np.ndarray] = {"depth": g.depth}
         if "depth.edge" in wanted:
@@ -263,6 +267,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
             planes["specular"] = np.where(g.depth > 0.0, np.float32(PYRENDER_SPECULAR), np.float32(0.0))
         if g.albedo is not None:
             planes.update({c: g.albedo[..., i] for i, c in enumerate(_ALBEDO)})
+            planes[_ALBEDO_Y] = luma(g.albedo)
         if g.normal is not None:
             planes.update({c: g.normal[..., i] for i, c in enumerate(_NORMAL)})
         if temporal:
@@ -285,6 +290,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
                     raise PyrenderAdapterError(f"prev_depth must be ({self.height}, {self.width}), got {pd.shape}")
                 rep, seen = reproject(colour, pd, g.depth, view, proj, prev_vp, tolerance=self.reprojection_tolerance)
                 planes.update({c: rep[..., i] for i, c in enumerate(_REPROJECTED)})
+                planes[_REPROJECTED_Y] = luma(rep)
                 planes["seen"] = seen
             if wanted & set(_MOTION):
                 planes.update(zip(_MOTION, self._motion(g.depth, view, proj, prev_vp)))

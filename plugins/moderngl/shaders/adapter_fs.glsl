@@ -35,13 +35,14 @@ uniform mat4 u_inv_proj;            // current projection, inverted
 uniform mat4 u_prev_inv_proj;       // previous projection, inverted (window depth only)
 uniform mat4 u_prev_vp;             // world -> previous clip
 uniform float u_tolerance;
-uniform int u_channels[16];         // channel ids, see CHANNEL_IDS in _adapter.py; -1 = unused
+uniform int u_channels[20];         // channel ids, see CHANNEL_IDS in _adapter.py; -1 = unused
 uniform int u_count;
 
 layout(location = 0) out vec4 o0;
 layout(location = 1) out vec4 o1;
 layout(location = 2) out vec4 o2;
 layout(location = 3) out vec4 o3;
+layout(location = 4) out vec4 o4;
 
 float linear_depth(float raw, mat4 inv_proj) {
     if (!u_depth_window) return raw;
@@ -119,12 +120,13 @@ void main() {
     if (!geo) mat = vec3(0.0);
     float zc = inv_depth(d);
     float edge = clamp(max(edge_axis(g, ivec2(1, 0), zc), edge_axis(g, ivec2(0, 1), zc)), 0.0, 1.0);
-    float v[15] = float[15](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
-                            mat.x, mat.y, mat.z, edge);
-    float outv[16];
-    for (int i = 0; i < 16; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
+    float v[17] = float[17](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+                            mat.x, mat.y, mat.z, edge, display_luma(rp.rgb), display_luma(albedo));
+    float outv[20];
+    for (int i = 0; i < 20; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
     o1 = vec4(outv[4], outv[5], outv[6], outv[7]);
     o2 = vec4(outv[8], outv[9], outv[10], outv[11]);
     o3 = vec4(outv[12], outv[13], outv[14], outv[15]);
+    o4 = vec4(outv[16], outv[17], outv[18], outv[19]);
 }

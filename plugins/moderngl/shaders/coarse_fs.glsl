@@ -54,5 +54,5 @@ void main() {
     }
     o_hdr = vec4(hdr, 1.0);
     vec3 ldr = linear_to_srgb(aces(max(hdr, vec3(0.0)) * u_exposure));
-    o_ldr = vec4(ldr, dot(ldr, vec3(0.299, 0.587, 0.114)));
+    o_ldr = vec4(ldr, display_luma(ldr));
 }

@@ -16,6 +16,9 @@ vec3 linear_to_srgb(vec3 c) {
 
 float luminance(vec3 c) { return dot(c, vec3(0.2126, 0.7152, 0.0722)); }
 
+// Rec.601 luma of display-encoded colour (rtp.sdk.luma, sdk.LUMA_WEIGHTS): what the metrics measure.
+float display_luma(vec3 c) { return dot(c, vec3(0.299, 0.587, 0.114)); }
+
 // Point on the view ray through GL pixel coordinate `frag` (pixel centres at .5), scaled so that
 // its view-space z is -1. `inv_proj` is the inverse of the current projection matrix.
 vec3 view_ray(vec2 frag, vec2 size, mat4 inv_proj) {
