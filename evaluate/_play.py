@@ -517,8 +517,8 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
             planes = []
             for c in meta.inputs:
                 base, _, comp = c.partition(".")
-                if base == "reprojected":
-                    planes.append(rp[ys, xs, "rgb".index(comp)])
+                if base == "reprojected":  # the method's own displayed frame, reprojected
+                    planes.append(sdk.luma(rp[ys, xs]) if comp == "y" else rp[ys, xs, "rgb".index(comp)])
                 elif c == "seen":
                     planes.append(pf.seen[ys, xs])
                 else:

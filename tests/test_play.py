@@ -163,6 +163,34 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
         assert f"| procedural:0 | 0 | fast | {label} | {cells[0]} | {cells[1]} |" in age
 
 
+def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shipped model that reads reprojected.y (JNFLIP) is fed the luma of the method's own
+    reprojected displayed frame, plane for plane what the dataset and the adapters give it."""
+    meta = sdk.load("jnflip").metadata
+    assert "reprojected.y" in meta.inputs and "albedo.y" in meta.inputs
+    seen: list[tuple[np.ndarray, np.ndarray]] = []  # (the planes fed, the history reprojected into that frame)
+    histories: list[np.ndarray] = []
+    reproject, predict = PathFrame.reproject, sdk.PredictionReuse.predict
+
+    def spy_reproject(self: PathFrame, image: np.ndarray) -> np.ndarray:
+        histories.append(reproject(self, image))
+        return histories[-1]
+
+    def spy_predict(self: sdk.PredictionReuse, inputs: Any, *args: Any, **kwargs: Any) -> np.ndarray:
+        seen.append((inputs(slice(None), slice(None)), histories[-1] if histories else None))
+        return predict(self, inputs, *args, **kwargs)
+
+    monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
+    monkeypatch.setattr(sdk.PredictionReuse, "predict", spy_predict)
+    rep = play("procedural:0", "jnflip", paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0, out=tmp_path)
+    assert len(seen) == 3 and 0.0 <= {r["method"]: r for r in rep.rows}["jnflip"]["work_saved"] < 1.0
+    assert seen[0][1] is None and all(rp is not None for _, rp in seen[1:])  # frame 0 has no history
+    for x, rp in seen[1:]:
+        assert rp is not None
+        np.testing.assert_allclose(x[meta.inputs.index("reprojected.y")], sdk.luma(rp), atol=1e-6)
+        assert x[meta.inputs.index("albedo.y")].max() > 0.0
+
+
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
     rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                plots=False)

@@ -22,7 +22,9 @@ def test_shipped_model_loads_by_name_and_predicts(name: str) -> None:
     assert by_name.path is not None and by_name.path.name == name
     m = by_name.metadata
     assert m.metric == name.removesuffix(".onnx")
-    assert m.tile_size == 16 and set(sdk.DEFAULT_INPUTS) <= set(m.inputs)
+    assert m.tile_size == 16 and {"seen", "normal.z"} <= set(m.inputs)
+    for kind in ("reprojected", "albedo"):  # the paper's brightness planes: red, or luma ("Luma instead of red")
+        assert len({f"{kind}.r", f"{kind}.y"} & set(m.inputs)) == 1, (kind, m.inputs)
     assert m.outputs == ("1x2", "2x1", "2x4", "4x2")
     for key in REQUIRED_PROVENANCE:
         assert key in m.provenance, key
