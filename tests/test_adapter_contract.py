@@ -87,8 +87,8 @@ class NumpyAdapter(Adapter[CpuFrame]):
 
     name: ClassVar[str] = THIRD_PARTY
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        {"reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
-         "normal.x", "normal.y", "normal.z", "depth"})
+        {"reprojected.r", "reprojected.g", "reprojected.b", "reprojected.y", "seen", "albedo.r", "albedo.g", "albedo.b",
+         "albedo.y", "normal.x", "normal.y", "normal.z", "depth"})
     frame_type: ClassVar[type] = CpuFrame
 
     def __init__(self, channels: Sequence[str], width: int, height: int, *,
@@ -100,10 +100,12 @@ class NumpyAdapter(Adapter[CpuFrame]):
     def inputs(self, frame: CpuFrame) -> np.ndarray:
         planes = {"depth": frame.depth}
         planes.update({f"albedo.{c}": frame.albedo[..., i] for i, c in enumerate("rgb")})
+        planes["albedo.y"] = sdk.luma(frame.albedo)
         planes.update({f"normal.{c}": frame.normal[..., i] for i, c in enumerate("xyz")})
         rep, seen = sdk.reproject(frame.prev_colour, frame.prev_depth, frame.depth, frame.view, frame.projection,
                                   frame.prev_view_projection, tolerance=self.tolerance)
         planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
+        planes["reprojected.y"] = sdk.luma(rep)
         planes["seen"] = seen
         return np.ascontiguousarray(np.stack([planes[c] for c in self.channels]), np.float32)
 
