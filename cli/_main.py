@@ -378,7 +378,7 @@ def _usage(message: str) -> Exception:
 # -- the parser -------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
-    from rtp.capture.viewpoints import MOTION_PROFILES, PLACEMENTS
+    from rtp.capture.viewpoints import DEFAULT_PROFILES, MOTION_PROFILES, PLACEMENTS
     from rtp.metrics import DEFAULT_PPD, DEFAULT_WEBER_L
     from rtp.sdk import (
         CHANNELS,
@@ -460,8 +460,9 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
     cap.add_argument("--out", required=True, help="dataset folder (created, or resumed)")
     cap.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
-    cap.add_argument("--profiles", type=_choices_csv(tuple(MOTION_PROFILES)), default=",".join(MOTION_PROFILES),
-                     help="motion profiles, comma-separated")
+    cap.add_argument("--profiles", type=_choices_csv(tuple(MOTION_PROFILES)), default=",".join(DEFAULT_PROFILES),
+                     help="motion profiles, comma-separated: slow, fast (the paper's 14 and 31%% unseen pixels), frame "
+                     "(one frame at 60 Hz of `rtp play`'s fast path)")
     cap.add_argument("--workers", type=_positive, default=None,
                      help="parallel render processes (default 1; with --ray, Ray workers)")
     _ray_option(cap)

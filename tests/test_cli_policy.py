@@ -231,10 +231,11 @@ def test_metric_tile_and_output_choices_are_the_sdks() -> None:
 def test_split_profile_and_transform_choices_are_their_rooms() -> None:
     from rtp import metrics
     from rtp.capture.scenes import SPLIT_NAMES
-    from rtp.capture.viewpoints import MOTION_PROFILES
+    from rtp.capture.viewpoints import DEFAULT_PROFILES, MOTION_PROFILES
 
     assert tuple(_option(("capture",), "split").choices or ()) == tuple(SPLIT_NAMES)
-    assert _parse("capture", "--per-scene", "1", "--out", "o").profiles == tuple(MOTION_PROFILES)
+    assert _parse("capture", "--per-scene", "1", "--out", "o").profiles == DEFAULT_PROFILES
+    assert set(DEFAULT_PROFILES) < set(MOTION_PROFILES)
     assert _option(("targets",), "weber_l").default == metrics.DEFAULT_WEBER_L
     transforms = tuple(_option(("train",), "transform").choices or ())
     assert transforms and "linear" not in transforms  # training fits mu_y; linear is for adopted models

@@ -29,7 +29,7 @@ def scene() -> Scene:
 
 @pytest.fixture(scope="module")
 def views(scene):
-    return {p: sample_viewpoints(scene, 12, seed=5, profile=p) for p in ("slow", "fast")}
+    return {p: sample_viewpoints(scene, 12, seed=5, profile=p) for p in ("slow", "fast", "frame")}
 
 
 def test_point_triangle_distance_matches_sampling():
@@ -93,6 +93,7 @@ def test_profiles_differ_in_motion(views):
         return np.mean([np.linalg.norm(np.subtract(p.position, c.position)) for p, c in pairs])
 
     assert mean_motion(views["fast"]) > 2 * mean_motion(views["slow"])
+    assert mean_motion(views["slow"]) > 2 * mean_motion(views["frame"])  # one 60 Hz frame of the fast path
 
 
 def test_viewpoints_deterministic(scene, views):
