@@ -280,11 +280,30 @@ class PathFrame:
     rows: np.ndarray
     cols: np.ndarray
     seen: np.ndarray
+    _gather: dict[Any, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False, compare=False)
+    _planes: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def reproject(self, image: np.ndarray) -> np.ndarray:
         """``image`` (the previous frame's, ``(H, W, 3)``) reprojected into this frame; 0 where unseen."""
-        flat = np.asarray(image, np.float32).reshape(-1, image.shape[-1])[self.rows * image.shape[1] + self.cols]
-        return (flat.reshape(image.shape) * (self.seen[..., None] > 0)).astype(np.float32, copy=False)
+        image = np.asarray(image, np.float32)
+        key = image.shape[:2]
+        cached = self._gather.get(key)
+        if cached is None:  # the flat source index and the seen mask, once per frame (every method reuses them)
+            cached = ((self.rows * image.shape[1] + self.cols).ravel(), (self.seen > 0)[..., None])
+            self._gather[key] = cached
+        index, seen = cached
+        out = np.take(image.reshape(-1, image.shape[-1]), index, axis=0).reshape(image.shape)
+        out *= seen
+        return out
+
+    def plane(self, name: str) -> np.ndarray:
+        """The frame's channel ``name`` (``Frame.channel``) as float32, computed once per frame: the
+        methods of a closed loop that read the same G-buffer planes share them."""
+        got = self._planes.get(name)
+        if got is None:
+            got = np.ascontiguousarray(self.frame.channel(name), np.float32)
+            self._planes[name] = got
+        return got
 
 
 def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np.ndarray:
@@ -294,13 +313,26 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
     another rate differ slightly from FXAA run over the VRS image (``Renderer.shade_rates``)."""
     from rtp import sdk
 
-    h, w = colour["1x1"].shape[:2]
-    per_pixel = np.repeat(np.repeat(np.asarray(rates), tile, 0), tile, 1)[:h, :w]
-    out = np.empty_like(colour["1x1"])
+    ref = colour["1x1"]
+    h, w = ref.shape[:2]
+    rates = np.asarray(rates)
+    out = np.empty(ref.shape, ref.dtype)
+    th, tw = h // tile, w // tile
+    if h % tile or w % tile or rates.shape[0] < th or rates.shape[1] < tw:  # ragged edge tiles: per pixel
+        per_pixel = np.repeat(np.repeat(rates, tile, 0), tile, 1)[:h, :w]
+        for rate, code in sdk.RATE_CODES.items():
+            m = per_pixel == code
+            if m.any():
+                out[m] = colour[rate][m]
+        return out
+    # whole tiles: copy each tile's block from its rate's image (one image's worth of copying)
+    blocks = out.reshape(th, tile, tw, tile, -1)
+    rates = rates[:th, :tw]
     for rate, code in sdk.RATE_CODES.items():
-        m = per_pixel == code
-        if m.any():
-            out[m] = colour[rate][m]
+        ys, xs = np.nonzero(rates == code)
+        if ys.size:
+            src = np.ascontiguousarray(colour[rate]).reshape(th, tile, tw, tile, -1)
+            blocks[ys, :, xs, :] = src[ys, :, xs, :]
     return out
 
 

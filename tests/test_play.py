@@ -57,6 +57,22 @@ def test_rate_images_shade_each_tile_at_its_rate(rendered: Any) -> None:
     assert np.array_equal(r.shade_rates(codes, TILE), composite(cur.colour, codes, TILE))  # no FXAA: exact
 
 
+@pytest.mark.parametrize("hw", [(96, 160), (100, 170)])  # whole tiles, and ragged edge tiles
+def test_composite_takes_each_tile_from_its_rate(hw: tuple[int, int]) -> None:
+    """The block copy over whole tiles (and the per-pixel path for ragged edges) equals choosing each
+    pixel from the image of its tile's rate."""
+    rng = np.random.default_rng(1)
+    h, w = hw
+    colour = {rate: rng.random((h, w, 3), dtype=np.float32) for rate in sdk.RATE_CODES}
+    codes = rng.choice(list(sdk.RATE_CODES.values()), sdk.tile_grid(h, w, TILE)).astype(np.uint8)
+    want = np.empty((h, w, 3), np.float32)
+    for y in range(h):
+        for x in range(w):
+            rate = next(k for k, v in sdk.RATE_CODES.items() if v == codes[y // TILE, x // TILE])
+            want[y, x] = colour[rate][y, x]
+    assert np.array_equal(composite(colour, codes, TILE), want)
+
+
 def test_any_history_reprojects_like_the_renderer(rendered: Any) -> None:
     r, frames = rendered
     prev, cur = frames[-2], frames[-1]
@@ -66,6 +82,11 @@ def test_any_history_reprojects_like_the_renderer(rendered: Any) -> None:
     other = prev.colour["4x4"]
     pf = PathFrame(2, cur, rows, cols, seen2)
     assert np.array_equal(pf.reproject(other), r.reproject(other, prev.depth, prev.camera)[0])
+    # the gather is cached per frame: a second history reprojects through the same index
+    again = prev.colour["1x2"]
+    assert np.array_equal(pf.reproject(again), r.reproject(again, prev.depth, prev.camera)[0])
+    assert np.array_equal(pf.plane("albedo.y"), sdk.luma(cur.albedo)) and pf.plane("albedo.y").dtype == np.float32
+    assert pf.plane("normal.z") is pf.plane("normal.z")
     assert 0.3 < seen2.mean() < 1.0
 
 
@@ -194,9 +215,11 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
     rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                plots=False)
-    for method in ("jnyang", "yang2019-unseen-1x1"):
+    from rtp.evaluate._play import BASELINE_SWEEP, MODEL_SWEEP
+
+    for method, grid in (("jnyang", MODEL_SWEEP), ("yang2019-unseen-1x1", BASELINE_SWEEP)):
         rows = [r for r in rep.rows if r["method"] == method]
-        assert len(rows) == 6 and sum(r["default"] for r in rows) == 1
+        assert len(rows) == len(grid) and sum(r["default"] for r in rows) == 1
         assert min(r["fail_share"] for r in rows) <= 0.01
         # and one step past the default, for maps where the default fails rarely
         assert rows[-1]["fail_share"] >= next(r for r in rows if r["default"])["fail_share"]
