@@ -73,10 +73,16 @@ def main() -> None:
     model = args.model
     reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
     runs: list[dict[str, Any]] = []
-    for rep in (json.loads(run.read_text()) for run in args.runs):
+    for run in args.runs:
+        rep = json.loads(run.read_text())
         s = rep["settings"]
-        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"])
+        # runs before 2026-11-26 do not record their sweep grids (six points per method then)
+        grids = json.dumps(s.get("grids"), sort_keys=True)
+        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"], grids)
         same = next((r for r in runs if r["_key"] == key), None)
+        if same is None and any(r["_key"][:-1] == key[:-1] for r in runs):
+            print(f"note: {run} was swept over other grids than a run of the same map and path before it: "
+                  "its rows are not merged\n")
         if same is None:
             runs.append({**rep, "_key": key, "settings": {**s, "methods": list(s["methods"])},
                          "matched": list(rep["matched"])})

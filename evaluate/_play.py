@@ -362,6 +362,9 @@ def play(
     settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
                 "fail_threshold": fail_thr, "sweep": sweep, "flip_every": flip_every,
+                # the grids, so that runs read off different grids are not mistaken for one another
+                "grids": {"model": list(MODEL_SWEEP), "psnr_db": list(PSNR_SWEEP_DB), "baseline": list(BASELINE_SWEEP)}
+                if sweep else None,
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},

@@ -215,7 +215,7 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
     rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                plots=False)
-    from rtp.evaluate._play import BASELINE_SWEEP, MODEL_SWEEP
+    from rtp.evaluate._play import BASELINE_SWEEP, MODEL_SWEEP, PSNR_SWEEP_DB
 
     for method, grid in (("jnyang", MODEL_SWEEP), ("yang2019-unseen-1x1", BASELINE_SWEEP)):
         rows = [r for r in rep.rows if r["method"] == method]
@@ -223,6 +223,8 @@ def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
         assert min(r["fail_share"] for r in rows) <= 0.01
         # and one step past the default, for maps where the default fails rarely
         assert rows[-1]["fail_share"] >= next(r for r in rows if r["default"])["fail_share"]
+    assert rep.settings["grids"] == {"model": list(MODEL_SWEEP), "psnr_db": list(PSNR_SWEEP_DB),
+                                     "baseline": list(BASELINE_SWEEP)}
     assert "| jnyang |" in rep.to_markdown()
 
 
@@ -313,3 +315,11 @@ def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> 
     # a: 90 / 94 / 96%, b: 90 / 95 / 97.5%; the worst at 5% is a's, both keep >= 95% there
     assert "| jnyang@4 | 2 | 37.5% | 90.0 / 94.5 / 96.8% | 96.0% (a fast) | 2 |" in out
     assert png.stat().st_size > 10_000
+    # a run of map a swept over other grids (the newer ones recorded in settings) is not merged with it
+    newer = json.loads(Path(runs[0]).read_text())
+    newer["settings"]["grids"] = {"model": [0.5, 1.0], "psnr_db": [0.0], "baseline": [1.0]}
+    (tmp_path / "a-grids.json").write_text(json.dumps(newer))
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), runs[0], str(tmp_path / "a-grids.json")],
+                         capture_output=True, text=True, check=True).stdout
+    assert "a-grids.json was swept over other grids" in out
+    assert out.count("| a | 0 | fast |") == 4  # two rows in each of the two tables
