@@ -1,7 +1,7 @@
 """How much averaging models would buy: R² of each model and of their mean prediction.
 
     python bench/ensemble.py data/study/jnyang-big-mse.onnx data/study/jnyang-big-mse-seed1.onnx \
-        [--data data/val72]
+        [--data data/val72 | --data data/train --scene kaos,oa_dm3,oacmpdm4]
 
 Every model must predict the same metric on the same tiles with the same target transform (models
 trained by one recipe on one dataset). Per model, and for the mean of their network outputs (what
@@ -35,6 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="+", help="exported models (.onnx) of one metric, tile size and transform")
     ap.add_argument("--data", default="data/val72", help="dataset with targets (default: data/val72)")
+    ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
+                    "maps of data/train")
     args = ap.parse_args(argv)
     preds = [sdk.load(m, providers=["CPUExecutionProvider"]) for m in args.models]
     m0 = preds[0].metadata
@@ -50,7 +52,14 @@ def main(argv: list[str] | None = None) -> int:
     rows = [sdk.PREDICTED_RATES.index(r) for r in m0.outputs]
     out: list[list[np.ndarray]] = [[] for _ in preds]
     truth, unseen = [], []
-    for i in tqdm(reader.ids, desc="predicting", unit="sample"):
+    ids = list(reader.ids)
+    if args.scene:
+        wanted = {n.strip() for n in args.scene.split(",") if n.strip()}
+        ids = [i for i in ids if reader[i].meta.get("scene") in wanted]
+        if not ids:
+            print(f"error: {args.data} holds no sample of {', '.join(sorted(wanted))}", file=sys.stderr)
+            return 2
+    for i in tqdm(ids, desc="predicting", unit="sample"):
         s = reader[i]
         y = store.load(i, m0.metric, m0.tile_size)[rows]
         truth.append(m0.transform.forward(y).reshape(len(rows), -1))
@@ -61,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     g, u = np.concatenate(truth, 1), np.concatenate(unseen, 1)
     table = [(Path(m).name, np.concatenate(o, 1)) for m, o in zip(args.models, out)]
     table.append((f"mean of the {len(preds)}", np.mean([p for _, p in table], axis=0)))
-    print(f"\n{m0.metric} on {len(reader.ids)} samples of {args.data}: R² without the safety margin\n")
+    where = f"{args.data} ({args.scene})" if args.scene else args.data
+    print(f"\n{m0.metric} on {len(ids)} samples of {where}: R² without the safety margin\n")
     print("| model | R² all % | R² seen % | R² unseen % |\n|---|---:|---:|---:|")
     for name, p in table:
         print(f"| {name} | {100 * _r2(p, g):.1f} | {100 * _r2(p[~u], g[~u]):.1f} | {100 * _r2(p[u], g[u]):.1f} |")

@@ -270,7 +270,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "grow", "augment", "tile", "outputs", "inputs",
                  "transform", "logistic_k", "head", "loss", "ema", "distill", "steps", "batch", "crop", "context", "lr",
-                 "seed", "safety_quantile", "max_samples")
+                 "optimizer", "schedule", "weight_decay", "seed", "safety_quantile", "max_samples")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -546,7 +546,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--context", type=int, default=None,
                    help="pixels of input read around each crop and not scored (a multiple of the tile; default 0): "
                    "the scored tiles see what they would in a whole frame instead of the crop's zero padding")
-    r.add_argument("--lr", type=float, default=None, help="RMSprop learning rate")
+    r.add_argument("--lr", type=float, default=None, help="learning rate (the schedule's peak)")
+    r.add_argument("--optimizer", default=None, choices=("rmsprop", "adamw"),
+                   help="rmsprop (the paper's, default) or adamw")
+    r.add_argument("--schedule", default=None, choices=("exponential", "cosine"),
+                   help="learning-rate schedule: exponential decay (the paper's, default) or a 2%% warm-up and a "
+                   "cosine to zero at the last step")
+    r.add_argument("--weight-decay", dest="weight_decay", type=float, default=None,
+                   help="weight decay (decoupled with adamw; default 0)")
     r.add_argument("--seed", type=int, default=None, help="seed of the weights, crops and batches")
     r.add_argument("--safety-quantile", type=float, default=None,
                    help="calibrate the margin so at most this share of tiles is underestimated "

@@ -278,6 +278,55 @@ def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path)
     np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
 
 
+def test_adamw_with_a_cosine_schedule_trains_resumes_exactly_and_is_recorded(tmp_path: Path) -> None:
+    from rtp.train import _loop
+
+    # the schedule: a linear warm-up over 2% of the steps, then half a cosine to zero at the last step
+    cfg = TrainConfig(data="-", metric="jnyang", out="-", steps=1000, lr=1e-3, optimizer="adamw", schedule="cosine")
+    opt, sched = _loop._optimizer(torch.nn.Linear(2, 1), cfg)
+    assert isinstance(opt, torch.optim.AdamW)
+    lrs = []
+    for _ in range(1000):
+        lrs.append(opt.param_groups[0]["lr"])
+        opt.step()
+        sched.step()
+    assert lrs[0] == pytest.approx(1e-3 / 20) and lrs[19] == pytest.approx(1e-3) and max(lrs) == pytest.approx(1e-3)
+    assert lrs[510] == pytest.approx(0.5e-3, rel=0.01) and lrs[-1] < 1e-8 and all(a >= b for a, b in zip(lrs[19:], lrs[20:]))
+    data = _dataset(tmp_path / "ds", n=6)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes", "scene0",
+            "--optimizer", "adamw", "--schedule", "cosine", "--weight-decay", "0.01"]
+    assert rtp_main([*base, "--out", str(tmp_path / "a.pt"), "--steps", "24"]) == 0
+    a = load_checkpoint(tmp_path / "a.pt")
+    assert a.training["config"]["optimizer"] == "adamw" and a.training["config"]["schedule"] == "cosine"
+    assert a.metadata.provenance["recipe"]["overrides"]["optimizer"] == "adamw"
+    # interrupted after a checkpoint and resumed: exactly the uninterrupted run (the schedule's step travels too)
+    kw = dict(data=str(data), metric="jnyang", crop=32, val_scenes=("scene0",), steps=24, save_every=8,
+              optimizer="adamw", schedule="cosine", weight_decay=0.01)
+
+    def stop_at_13(step: int, total: int, loss: float) -> None:
+        if step == 13:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **kw), progress=stop_at_13)
+    assert load_checkpoint(tmp_path / "b.pt").training["step"] == 8
+    train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **kw))
+    b = load_checkpoint(tmp_path / "b.pt")
+    for k, v in a.net.state_dict().items():
+        assert torch.equal(v, b.net.state_dict()[k]), k
+    # a cosine's length is part of its schedule: more steps is another run
+    with pytest.raises(sdk.ParameterError, match="schedule_steps"):
+        train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **{**kw, "steps": 30}))
+    # another optimizer is another training run; unknown names are refused before any work
+    with pytest.raises(sdk.ParameterError, match="optimizer"):
+        train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(tmp_path / "a.pt"), steps=30,
+                                      crop=32, val_scenes=("scene0",), schedule="cosine", weight_decay=0.01))
+    with pytest.raises(sdk.ParameterError, match="optimizer: expected one of rmsprop, adamw"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "c.pt"), crop=32, optimizer="sgd"))
+    with pytest.raises(sdk.ParameterError, match="schedule: expected one of exponential, cosine"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "c.pt"), crop=32, schedule="step"))
+
+
 def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -> None:
     from rtp.capture import DatasetReader, TargetStore
     from rtp.train import _loop
@@ -330,6 +379,10 @@ def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -
         ps.append(np.mean([sdk.load(t).predict_raw(x) for t in teachers], axis=0).reshape(4, -1))
     want = 100 * r2_scores(np.concatenate(ps, 1), np.concatenate(ys, 1)).r2
     assert f"| mean of the 2 | {want:.1f} |" in out
+    # --scene reads only those maps
+    one = subprocess.run([sys.executable, str(bench), *teachers, "--data", str(data), "--scene", "scene1"],
+                         capture_output=True, text=True, check=True).stdout
+    assert f"on {sum(s.meta['scene'] == 'scene1' for s in reader)} samples of {data} (scene1)" in one
     # models on other tiles cannot be averaged: refused, naming both
     train(TrainConfig(out=str(tmp_path / "e.pt"), steps=2, tile=8, **base))
     other = export.export_checkpoint(tmp_path / "e.pt", tmp_path / "e.onnx")
@@ -380,6 +433,46 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
     for name in ("one threshold", "calibrated risk"):
         v = [x for x in row(name) if x == x]
         assert v and v == sorted(v) and all(0.0 <= x <= 93.75 for x in v)
+
+
+def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_out_maps(tmp_path: Path) -> None:
+    import importlib.util
+    import subprocess
+    import sys
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "per_rate.py"
+    spec = importlib.util.spec_from_file_location("bench_per_rate", path)
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    # a model exact on every rate but 4x4, whose estimate is half the truth: one threshold lets 4x4 fail
+    # where a factor below 1 on 4x4 (a stricter threshold there) does not
+    rng = np.random.default_rng(3)
+    truth = np.sort(rng.random((20, 6, 6, 8)) * 0.5, axis=1)  # coarser rates err more
+    pred = truth.copy()
+    pred[:, 5] *= 0.5
+    f = mod._fit(pred, truth, 0.25, False, 0.05)
+    one = mod._saved_at(pred, truth, np.ones(6), 0.25, False, 0.05)
+    known = mod._saved_at(pred, truth, np.array([1, 1, 1, 1, 1, 0.5]), 0.25, False, 0.05)  # the exact correction
+    fitted = mod._saved_at(pred, truth, f, 0.25, False, 0.05)
+    assert one < known - 0.1 and fitted >= known - 1e-9
+    assert mod._saved_at(truth, truth, np.ones(6), 0.25, False, 0.0) == pytest.approx(mod._oracle(truth, 0.25, False))
+    # end to end: one row per held-out map, savings rising with the failing share, within 4x4's 93.75%
+    data = _dataset(tmp_path / "ds", n=6)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=10, crop=32,
+                      val_scenes=("scene0",), loss="mse"))
+    model = export.export_checkpoint(tmp_path / "m.pt", tmp_path / "m.onnx")
+    out = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,scene1,scene2"],
+                         capture_output=True, text=True, check=True).stdout
+    rows = [line.split("|") for line in out.splitlines() if line.startswith("| scene")]
+    assert [r[1].strip() for r in rows] == ["scene0", "scene1", "scene2"]
+    for r in rows:
+        for cell in (r[2], r[3]):
+            v = [float(x) for x in cell.split("/")]
+            assert v == sorted(v) and all(0.0 <= x <= 93.75 for x in v)
+    bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,nowhere"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "no sample of nowhere" in bad.stderr
 
 
 def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side() -> None:

@@ -12,6 +12,7 @@ import copy
 import hashlib
 import json
 import logging
+import math
 import os
 import platform
 from collections.abc import Callable, Sequence
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
+from torch import nn
 
 from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore
@@ -87,6 +89,11 @@ class TrainConfig:
     context: int = 0
     lr: float = 1e-4
     lr_decay: float = 1e-4
+    #: ``rmsprop`` (the paper's) or ``adamw`` (Adam with decoupled ``weight_decay``).
+    optimizer: str = "rmsprop"
+    #: ``exponential`` (the paper's: the learning rate times ``1 - lr_decay`` each step) or ``cosine``
+    #: (a linear warm-up over the first 2% of ``steps``, then half a cosine down to zero at ``steps``).
+    schedule: str = "exponential"
     weight_decay: float = 0.0
     val_scenes: tuple[str, ...] = ()
     #: Hold out the maps of this split of ``splits`` that the data holds (``val_scenes`` wins; if the
@@ -164,6 +171,29 @@ _LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
     # vanish where the sigmoid saturates (targets at the transform's clamp, 1.0)
     "bce": lambda p, t: F.binary_cross_entropy(p.clamp(1e-6, 1.0 - 1e-6), t.clamp(0.0, 1.0)),
 }
+
+
+#: TrainConfig.optimizer and TrainConfig.schedule: the names each accepts.
+OPTIMIZERS = ("rmsprop", "adamw")
+SCHEDULES = ("exponential", "cosine")
+
+
+def _optimizer(net: nn.Module, cfg: TrainConfig) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.LRScheduler]:
+    """The optimizer and learning-rate schedule ``cfg`` names (both stepped once per training step)."""
+    if cfg.optimizer == "adamw":
+        opt: torch.optim.Optimizer = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    else:
+        opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    if cfg.schedule == "cosine":
+        warm, total = max(1, cfg.steps // 50), cfg.steps
+
+        def factor(step: int) -> float:
+            if step < warm:
+                return (step + 1) / warm
+            return 0.5 * (1.0 + math.cos(math.pi * min(1.0, (step - warm) / max(1, total - warm))))
+
+        return opt, torch.optim.lr_scheduler.LambdaLR(opt, factor)
+    return opt, torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
 
 
 def _pad_to_tiles(x: torch.Tensor, tile: int) -> torch.Tensor:
@@ -324,6 +354,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.loss not in _LOSSES:
         raise sdk.ParameterError(f"loss: expected one of {', '.join(_LOSSES)}, got {cfg.loss!r}", "loss")
     loss_fn = _LOSSES[cfg.loss]
+    if cfg.optimizer not in OPTIMIZERS:
+        raise sdk.ParameterError(f"optimizer: expected one of {', '.join(OPTIMIZERS)}, got {cfg.optimizer!r}", "optimizer")
+    if cfg.schedule not in SCHEDULES:
+        raise sdk.ParameterError(f"schedule: expected one of {', '.join(SCHEDULES)}, got {cfg.schedule!r}", "schedule")
     if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8) or cfg.grow not in (1, 2):
         raise sdk.ParameterError(f"expected width >= 2, depth >= 0, stem 1, 2, 4 or 8 and grow 1 or 2, got {cfg.width}, "
                                  f"{cfg.depth}, {cfg.stem} and {cfg.grow}")
@@ -361,8 +395,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
-    opt = torch.optim.RMSprop(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=1.0 - cfg.lr_decay)
+    opt, sched = _optimizer(net, cfg)
     out = Path(cfg.out)
     step, history = 0, []
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
@@ -384,6 +417,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["loss"] = cfg.loss
     if cfg.ema:
         config_key["ema"] = cfg.ema
+    if cfg.optimizer != "rmsprop":  # likewise: checkpoints from before the options used the paper's
+        config_key["optimizer"] = cfg.optimizer
+    if cfg.schedule != "exponential":  # a cosine's length is part of it: resuming with other steps is another run
+        config_key.update(schedule=cfg.schedule, schedule_steps=cfg.steps)
     if cfg.teachers:  # the teachers by content: a file replaced under the same name is another run
         config_key.update(distill=cfg.distill, teachers=[hashlib.sha256(Path(t).read_bytes()).hexdigest()
                                                           for t in cfg.teachers])

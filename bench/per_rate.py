@@ -1,0 +1,129 @@
+"""Would a threshold per rate save more than one threshold for all six? An offline reading.
+
+    python bench/per_rate.py models/jnyang.onnx --data data/train --scene kaos,oa_dm3,oacmpdm4
+
+The runtime picks per tile the cheapest rate whose predicted error passes one threshold. A model
+that errs differently per rate (too low on 4x4, say) might save more at the same failing share with
+a factor per rate: rate r passes when its prediction is below ``threshold x factor[r]``. This script
+predicts every sample of ``--data`` (the validation maps of data/train by default), then for each
+map left out in turn fits the six factors on the other maps (coordinate ascent over a fixed set of
+multipliers, maximising the work saved at ``--fit`` failing tiles, the global threshold swept), and
+scores them on the map left out against one shared threshold. A tile fails when its true error at
+the chosen rate is over the model's default threshold (for PSNR: under it). Prints the work saved at
+1, 2 and 5% failing tiles per held-out map, the oracle's saving (every tile at its cheapest truly
+passing rate) and the fitted factors. Static viewpoint pairs, not the closed loop of ``rtp play``.
+For PSNR (higher is better) a factor f moves its rate's threshold by 3 log2(f) dB and the sweep moves
+the shared one by 6 log2 of the factor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+from tqdm import tqdm
+
+from rtp import sdk
+from rtp.capture import DatasetReader, TargetStore
+
+MULTIPLIERS = (0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0)
+#: The global threshold's sweep, as a factor of the model's default (log-spaced; PSNR: an offset in dB).
+SWEEP = np.exp(np.linspace(np.log(0.05), np.log(4.0), 80))
+SHARES = (0.01, 0.02, 0.05)
+_SAVED = {sdk.RATE_CODES[r]: 1.0 - 1.0 / (int(r[0]) * int(r[2])) for r in sdk.PREDICTED_RATES}
+
+
+def _outcome(pred: np.ndarray, truth: np.ndarray, factors: np.ndarray, g: float, thr: float,
+             hib: bool) -> tuple[float, float]:
+    """(failing share, work saved) of one global setting ``g`` with per-rate ``factors``."""
+    if hib:  # PSNR: factors and the sweep shift in dB; passing means above
+        codes = sdk.select_rates(pred - np.log2(factors)[None, :, None, None] * 3.0, thr + 6.0 * np.log2(g),
+                                 higher_is_better=True)
+    else:
+        codes = sdk.select_rates(pred / factors[None, :, None, None], thr * g)
+    saved = np.zeros(codes.shape)
+    fail = np.zeros(codes.shape, bool)
+    for i, r in enumerate(sdk.PREDICTED_RATES):
+        m = codes == sdk.RATE_CODES[r]
+        saved[m] = _SAVED[sdk.RATE_CODES[r]]
+        t = truth[:, i][m]
+        fail[m] = (t < thr) if hib else (t > thr)
+    return float(fail.mean()), float(saved.mean())
+
+
+def _saved_at(pred: np.ndarray, truth: np.ndarray, factors: np.ndarray, thr: float, hib: bool,
+              share: float) -> float:
+    pts = sorted(_outcome(pred, truth, factors, g, thr, hib) for g in SWEEP)
+    fails, saved = np.array([p[0] for p in pts]), np.maximum.accumulate(np.array([p[1] for p in pts]))
+    return float(np.interp(share, fails, saved))
+
+
+def _fit(pred: np.ndarray, truth: np.ndarray, thr: float, hib: bool, share: float) -> np.ndarray:
+    f = np.ones(len(sdk.PREDICTED_RATES))
+    for _ in range(2):
+        for i in range(len(f)):
+            best, best_v = f[i], -1.0
+            for m in MULTIPLIERS:
+                trial = f.copy()
+                trial[i] = f[i] * m
+                v = _saved_at(pred, truth, trial, thr, hib, share)
+                if v > best_v + 1e-9:
+                    best, best_v = trial[i], v
+            f[i] = best
+    return f
+
+
+def _oracle(truth: np.ndarray, thr: float, hib: bool) -> float:
+    best = np.zeros(truth[:, 0].shape)
+    for i, r in enumerate(sdk.PREDICTED_RATES):
+        ok = (truth[:, i] >= thr) if hib else (truth[:, i] <= thr)
+        best = np.where(ok, np.maximum(best, _SAVED[sdk.RATE_CODES[r]]), best)
+    return float(best.mean())
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("model", help="an exported model (.onnx) or a shipped model's name")
+    ap.add_argument("--data", default="data/train", help="dataset with targets (default: data/train)")
+    ap.add_argument("--scene", default="kaos,oa_dm3,oacmpdm4",
+                    help="maps of --data, comma-separated, at least two (default: the validation maps)")
+    ap.add_argument("--fit", type=float, default=0.05, help="failing share the factors are fitted at (default 0.05)")
+    args = ap.parse_args(argv)
+    pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
+    meta = pred.metadata
+    thr, hib = float(meta.default_threshold), bool(meta.higher_is_better)
+    scenes = [s.strip() for s in args.scene.split(",") if s.strip()]
+    if len(scenes) < 2:
+        print("error: --scene needs at least two maps (one is held out while the others fit)", file=sys.stderr)
+        return 2
+    reader, store = DatasetReader(args.data), TargetStore(args.data)
+    by_map: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {s: ([], []) for s in scenes}
+    for i in tqdm([i for i in reader.ids if reader[i].meta.get("scene") in by_map], desc="predicting", unit="sample"):
+        s = reader[i]
+        p, t = by_map[s.meta["scene"]]
+        p.append(pred.predict(s.inputs(meta.inputs)))
+        t.append(store.load(i, meta.metric, meta.tile_size))
+    missing = [s for s, (p, _) in by_map.items() if not p]
+    if missing:
+        print(f"error: {args.data} holds no sample of {', '.join(missing)}", file=sys.stderr)
+        return 2
+    data = {s: (np.stack(p), np.stack(t)) for s, (p, t) in by_map.items()}
+    print(f"\n{meta.metric}, {args.model}: work saved % at {' / '.join(f'{100 * x:g}' for x in SHARES)}% failing "
+          f"tiles (threshold {thr:g}); per-rate factors fitted at {100 * args.fit:g}% on the other maps\n")
+    print("| held-out map | one threshold | a factor per rate | oracle | factors (" + ", ".join(sdk.PREDICTED_RATES)
+          + ") |\n|---|---|---|---:|---|")
+    for held in tqdm(scenes, desc="fitting", unit="map", leave=False):
+        fit_p = np.concatenate([data[s][0] for s in scenes if s != held])
+        fit_t = np.concatenate([data[s][1] for s in scenes if s != held])
+        f = _fit(fit_p, fit_t, thr, hib, args.fit)
+        p, t = data[held]
+        one = [100 * _saved_at(p, t, np.ones(6), thr, hib, x) for x in SHARES]
+        per = [100 * _saved_at(p, t, f, thr, hib, x) for x in SHARES]
+        print(f"| {held} | {' / '.join(f'{v:.1f}' for v in one)} | {' / '.join(f'{v:.1f}' for v in per)} | "
+              f"{100 * _oracle(t, thr, hib):.1f} | {', '.join(f'{v:.2f}' for v in f)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
