@@ -1,6 +1,6 @@
 """Where a model's squared error lies, and whether a smarter rate rule would use its estimates better.
 
-    python bench/residuals.py models/jnyang.onnx [--data data/val72]
+    python bench/residuals.py models/jnyang.onnx [--data data/val72 | --data data/train --scene kaos,oa_dm3,oacmpdm4]
 
 On every sample of a dataset with targets, the model's raw output (transformed space, no safety
 margin: what docs/results.md's "no safety margin" columns score) against the transformed truth.
@@ -23,6 +23,7 @@ Prints three tables:
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
 
 import numpy as np
@@ -85,6 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model", help="an exported model (.onnx)")
     ap.add_argument("--data", default="data/val72", help="dataset with targets (default: data/val72)")
+    ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
+                    "maps of data/train")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
@@ -92,7 +95,14 @@ def main(argv: list[str] | None = None) -> int:
     rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
     hib = meta.higher_is_better
     raw, truth, est, metric, edge, unseen, frame, scene = [], [], [], [], [], [], [], []
-    for k, i in enumerate(tqdm(reader.ids, desc="predicting", unit="sample")):
+    ids = list(reader.ids)
+    if args.scene:
+        wanted = {n.strip() for n in args.scene.split(",") if n.strip()}
+        ids = [i for i in ids if reader[i].meta.get("scene") in wanted]
+        if not ids:
+            print(f"error: {args.data} holds no sample of {', '.join(sorted(wanted))}", file=sys.stderr)
+            return 2
+    for k, i in enumerate(tqdm(ids, desc="predicting", unit="sample")):
         s = reader[i]
         x = s.inputs(meta.inputs)
         y = store.load(i, meta.metric, meta.tile_size)
@@ -114,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     total = res2.sum()
     var = float(((g[ok] - g[ok].mean()) ** 2).sum())
 
-    print(f"\n{meta.metric}, {args.model} on {len(reader.ids)} samples of {args.data}: raw output, no safety margin; "
+    where = f"{args.data} ({args.scene})" if args.scene else args.data
+    print(f"\n{meta.metric}, {args.model} on {len(ids)} samples of {where}: raw output, no safety margin; "
           f"R² {100 * _r2(p, g):.1f}%\n")
     print("| tiles | share of tiles % | share of squared error % | mean residual | R² points lost |")
     print("|---|---:|---:|---:|---:|")
@@ -127,6 +138,15 @@ def main(argv: list[str] | None = None) -> int:
         m = np.broadcast_to(m, g.shape) & ok
         print(f"| {name} | {100 * m.sum() / ok.sum():.1f} | {100 * res2[m].sum() / total:.1f} | "
               f"{float(np.mean(p[m] - g[m])) if m.any() else float('nan'):+.4f} | {100 * res2[m].sum() / var:.1f} |")
+
+    # per output: the pooled R² also counts the difference between rates (a 4x4 errs more than a 1x2
+    # everywhere), which the network gets for free; each output's own R² is the per-tile part
+    print("\n| output | R² % | mean target | share at the clamp % |\n|---|---:|---:|---:|")
+    for j, name in enumerate(meta.outputs):
+        gj, pj = g[j], p[j]
+        fin = np.isfinite(gj)
+        print(f"| {name} | {100 * _r2(pj, gj):.1f} | {float(gj[fin].mean()):.3f} | "
+              f"{100 * float(np.mean(gj[fin] >= 1.0 - 1e-6)):.1f} |")
 
     print("\n| R² % | as predicted | + the best constant per map | + the best constant per frame |\n|---|---:|---:|---:|")
     for name in [*sorted(set(sc)), "all"]:

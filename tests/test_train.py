@@ -415,6 +415,14 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
         gs.append(meta.transform.forward(store.load(s.id, "jnyang", 16)[rows]).reshape(len(rows), -1))
     want = 100 * scores(np.concatenate(ps, 1), np.concatenate(gs, 1)).r2
     assert f"R² {want:.1f}%" in out
+    # each output's own R² (the per-tile part the pooled figure mixes with the difference between rates)
+    for j, r in enumerate(meta.outputs):
+        own = 100 * scores(np.concatenate(ps, 1)[j], np.concatenate(gs, 1)[j]).r2
+        assert f"| {r} | {own:.1f} |" in out
+    # --scene reads only those maps
+    one = subprocess.run([sys.executable, str(bench), str(model), "--data", str(data), "--scene", "scene2"],
+                         capture_output=True, text=True, check=True).stdout
+    assert f"on {sum(s.meta['scene'] == 'scene2' for s in reader)} samples of {data} (scene2)" in one
 
     def row(name: str) -> list[float]:
         line = next(x for x in out.splitlines() if x.startswith(f"| {name}"))
