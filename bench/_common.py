@@ -6,6 +6,15 @@ import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+
+def scene_ids(reader: Any, scenes: str | None) -> list[str]:
+    """The sample ids of ``reader`` (a ``rtp.capture.DatasetReader``) whose map is one of ``scenes``
+    (comma-separated; None or empty: every sample). Empty when none matches."""
+    ids = list(reader.ids)
+    wanted = {n.strip() for n in (scenes or "").split(",") if n.strip()}
+    return [i for i in ids if reader[i].meta.get("scene") in wanted] if wanted else ids
 
 
 def median_ms(fn: Callable[[], object], repeats: int) -> float:

@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _common import scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -52,13 +53,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = [sdk.PREDICTED_RATES.index(r) for r in m0.outputs]
     out: list[list[np.ndarray]] = [[] for _ in preds]
     truth, unseen = [], []
-    ids = list(reader.ids)
-    if args.scene:
-        wanted = {n.strip() for n in args.scene.split(",") if n.strip()}
-        ids = [i for i in ids if reader[i].meta.get("scene") in wanted]
-        if not ids:
-            print(f"error: {args.data} holds no sample of {', '.join(sorted(wanted))}", file=sys.stderr)
-            return 2
+    ids = scene_ids(reader, args.scene)
+    if not ids:
+        print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
+        return 2
     for i in tqdm(ids, desc="predicting", unit="sample"):
         s = reader[i]
         y = store.load(i, m0.metric, m0.tile_size)[rows]

@@ -27,6 +27,7 @@ import sys
 from collections.abc import Callable
 
 import numpy as np
+from _common import scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -95,13 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
     hib = meta.higher_is_better
     raw, truth, est, metric, edge, unseen, frame, scene = [], [], [], [], [], [], [], []
-    ids = list(reader.ids)
-    if args.scene:
-        wanted = {n.strip() for n in args.scene.split(",") if n.strip()}
-        ids = [i for i in ids if reader[i].meta.get("scene") in wanted]
-        if not ids:
-            print(f"error: {args.data} holds no sample of {', '.join(sorted(wanted))}", file=sys.stderr)
-            return 2
+    ids = scene_ids(reader, args.scene)
+    if not ids:
+        print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
+        return 2
     for k, i in enumerate(tqdm(ids, desc="predicting", unit="sample")):
         s = reader[i]
         x = s.inputs(meta.inputs)

@@ -483,10 +483,11 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     assert bad.returncode == 2 and "no sample of nowhere" in bad.stderr
 
 
-def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side() -> None:
+def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side(monkeypatch: pytest.MonkeyPatch) -> None:
     import importlib.util
 
     path = Path(__file__).resolve().parents[1] / "bench" / "residuals.py"
+    monkeypatch.syspath_prepend(str(path.parent))  # as when run as a script: bench/_common.py importable
     spec = importlib.util.spec_from_file_location("bench_residuals", path)
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
