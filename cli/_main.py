@@ -268,7 +268,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     return 0
 
 
-_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "grow", "augment", "tile", "outputs", "inputs",
+_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "augment", "tile", "outputs", "inputs",
                  "transform", "logistic_k", "head", "loss", "ema", "distill", "steps", "batch", "crop", "context", "lr",
                  "optimizer", "schedule", "weight_decay", "seed", "safety_quantile", "max_samples")
 
@@ -524,6 +524,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--stem-layers", dest="stem_layers", type=int, default=None, choices=(1, 2),
                    help="2: the fast network's stem as two convolutions with a ReLU between (stem 4: two 2x2 "
                    "stride-2 reads) (default: 1)")
+    r.add_argument("--energy-norm", dest="energy_norm", action="store_true", default=None,
+                   help="divide the fast network's features after its first block and pool by their energy at each "
+                   "position and append its log as a channel (LPIPS's normalisation) (default: off)")
     r.add_argument("--grow", type=int, default=None, choices=(1, 2),
                    help="2: each block of the fast network after a pool doubles its channels (default: 1)")
     r.add_argument("--augment", action="store_true", default=None,

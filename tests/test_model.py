@@ -166,6 +166,45 @@ def test_the_fast_network_takes_partial_tiles() -> None:
     torch.testing.assert_close(ragged[:, :, :2], whole[:, :, :2])
 
 
+def test_the_energy_norm_divides_by_the_local_energy_and_exports() -> None:
+    from rtp.export import export_checkpoint
+    from rtp.train.model import EnergyNorm, FastNet
+
+    # per position: channels over their root mean square, the log of the mean square appended
+    x = torch.tensor([[3.0, 0.0], [4.0, 0.0]]).reshape(1, 2, 1, 2)
+    y = EnergyNorm(eps=0.0 + 1e-2)(x)
+    e = (9.0 + 16.0) / 2 + 1e-2
+    torch.testing.assert_close(y[0, :, 0, 0], torch.tensor([3.0 / e ** 0.5, 4.0 / e ** 0.5, float(np.log(e))]))
+    # a dark, flat position stays finite: features 0, energy log(eps)
+    torch.testing.assert_close(y[0, :, 0, 1], torch.tensor([0.0, 0.0, float(np.log(1e-2))]))
+    # scaling a position's features leaves the normalised ones alone (up to eps) and shifts the log energy
+    z = torch.rand(1, 16, 3, 3) + 1.0
+    a, b = EnergyNorm()(z), EnergyNorm()(10 * z)
+    torch.testing.assert_close(a[:, :16], b[:, :16], atol=1e-2, rtol=0)
+    torch.testing.assert_close(b[:, 16] - a[:, 16], torch.full((1, 3, 3), float(np.log(100.0))), atol=1e-2, rtol=0)
+
+    net = FastNet(4, depth=5, energy_norm=True).eval()
+    kinds = [type(m).__name__ for m in net.layers]
+    # after the first block's pool (1/8 resolution), one more channel into the next block
+    assert kinds[:8] == ["Conv2d", "BatchNorm2d", "ReLU", "Conv2d", "BatchNorm2d", "ReLU", "MaxPool2d", "EnergyNorm"]
+    assert net.layers[8].in_channels == 17 and net.config["energy_norm"] is True
+    assert "energy_norm" not in FastNet(4).config  # checkpoints from before the option read the same
+    # without a pool (a stem as wide as the tile) it follows the stem
+    assert [type(m).__name__ for m in FastNet(4, tile=4, energy_norm=True).layers][3] == "EnergyNorm"
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+            m.running_var.uniform_(0.5, 1.5)
+    with tempfile.TemporaryDirectory() as d:
+        ck = checkpoint.save(Path(d) / "e.pt", net, base_metadata())
+        assert checkpoint.load(ck).net.config["energy_norm"] is True
+        pred = sdk.load(export_checkpoint(ck, Path(d) / "e.onnx"))
+        x = np.random.default_rng(1).random((4, 44, 84), dtype=np.float32)
+        with torch.inference_mode():
+            want = net(torch.from_numpy(x)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+
+
 def test_the_two_layer_stem_reads_each_cell_twice() -> None:
     from rtp.export import export_checkpoint
     from rtp.train.model import FastNet, build_network

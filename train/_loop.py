@@ -65,6 +65,9 @@ class TrainConfig:
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
+    #: The fast network's features after its first block and pool divided by their energy per
+    #: position, its log appended (train/model.py ``EnergyNorm``: LPIPS's normalisation).
+    energy_norm: bool = False
     #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
@@ -364,6 +367,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.stem_layers not in (1, 2) or (cfg.stem_layers == 2 and min(cfg.stem, cfg.tile) < 2):
         raise sdk.ParameterError(f"stem_layers: expected 1, or 2 with a stem of at least 2, got {cfg.stem_layers} with "
                                  f"stem {cfg.stem}", "stem_layers")
+    if cfg.energy_norm and cfg.arch != "fast":
+        raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
         raise sdk.ParameterError(f"distill: expected a weight in (0, 1], got {cfg.distill}", "distill")
     if not 0.0 <= cfg.ema < 1.0:
@@ -392,7 +397,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
-                        depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers)
+                        depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
+                        energy_norm=cfg.energy_norm)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -409,6 +415,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["grow"] = cfg.grow
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
+        if cfg.energy_norm:
+            config_key["energy_norm"] = True
     if cfg.augment:
         config_key["augment"] = True
     if cfg.context:  # likewise: checkpoints from before the option read no context
@@ -552,6 +560,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "arch": cfg.arch,
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
+        **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,
         **({"context": cfg.context} if cfg.context else {}),
         "loss": cfg.loss,

@@ -43,7 +43,7 @@ from torch import nn
 
 from rtp.sdk import DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES
 
-__all__ = ["ARCHS", "HEADS", "FastNet", "LayerSpec", "MetricNet", "Network", "build_network", "layer_plan"]
+__all__ = ["ARCHS", "HEADS", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network", "build_network", "layer_plan"]
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
@@ -127,6 +127,20 @@ class MetricNet(nn.Module):
         return self.layers(x)
 
 
+class EnergyNorm(nn.Module):
+    """Each position's channels divided by their root mean square, with the log of the mean square
+    appended as one more channel: ``(N, C, H, W) -> (N, C + 1, H, W)``. ``eps`` keeps a dark, flat
+    position (all channels 0 after a ReLU) finite: its features stay 0 and its energy reads log(eps)."""
+
+    def __init__(self, eps: float = 1e-2) -> None:
+        super().__init__()
+        self.eps = eps
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        e = x.pow(2).mean(dim=1, keepdim=True) + self.eps
+        return torch.cat([x * torch.rsqrt(e), torch.log(e)], dim=1)
+
+
 class FastNet(nn.Module):
     """rtp's fast network: a strided stem, then conv -> BatchNorm -> ReLU blocks at low resolution.
 
@@ -139,7 +153,11 @@ class FastNet(nn.Module):
     convolution is followed by BatchNorm before its ReLU, so BatchNorm folds into the convolution at
     export. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
     them (16, 32, 64 for width 16 and depth 3), widening the cheap low-resolution end while the
-    full-resolution read stays at ``width``. ``stem_layers`` 2 splits the stem in two: a
+    full-resolution read stays at ``width``. ``energy_norm`` divides the features after the first
+    block and pool (after the stem where there is no pool) at each position by their root mean square
+    over the channels and appends its logarithm as one more channel (:class:`EnergyNorm`, LPIPS's own
+    normalisation of AlexNet features), so a ratio of local energies, which LPIPS's value is, becomes
+    a difference the next blocks can take. ``stem_layers`` 2 splits the stem in two: a
     ``stem/2 x stem/2`` convolution with that stride to ``width / 2`` channels, BatchNorm and ReLU,
     then a 2x2 stride-2 one to ``width`` (for stem 4: two 2x2 reads, a nonlinearity at half
     resolution that can see contrast inside each 4x4 cell, which one linear 4x4 read cannot). For
@@ -160,7 +178,7 @@ class FastNet(nn.Module):
 
     def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
                  tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
-                 stem_layers: int = 1) -> None:
+                 stem_layers: int = 1, energy_norm: bool = False) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -178,6 +196,8 @@ class FastNet(nn.Module):
             self.config["grow"] = grow
         if stem_layers != 1:  # likewise
             self.config["stem_layers"] = stem_layers
+        if energy_norm:  # likewise
+            self.config["energy_norm"] = True
         s = min(stem, tile)
         pools = int(math.log2(tile // s))
         layers: list[nn.Module] = []
@@ -189,6 +209,9 @@ class FastNet(nn.Module):
             layers.append(nn.Conv2d(in_channels, width, s, stride=s, bias=False))
         layers += [nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
         c = width
+        if energy_norm and not pools:
+            layers.append(EnergyNorm())
+            c += 1
         for i in range(max(depth, pools)):
             if i < depth:
                 # grow 2: each block after a pool doubles the channels (cheap at 1/8 and 1/16 resolution)
@@ -199,6 +222,9 @@ class FastNet(nn.Module):
                 # ceil_mode: a frame of any multiple of the stem gives ceil(H / tile) tile rows, the last
                 # partial tile pooling the pixels it has (identical to floor mode on whole tiles)
                 layers.append(nn.MaxPool2d(2, ceil_mode=True))
+                if energy_norm and i == 0:  # after the first pool: a quarter of the stem's positions to normalise
+                    layers.append(EnergyNorm())
+                    c += 1
         layers += [nn.Conv2d(c, out_channels, 1), nn.Sigmoid()]
         self.layers = nn.Sequential(*layers)
 
@@ -224,11 +250,12 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 
 
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
-                  head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1) -> Network:
+                  head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
+                  energy_norm: bool = False) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
-    applies to the paper's network, ``depth``, ``stem``, ``grow`` and ``stem_layers`` to the fast one."""
+    applies to the paper's network, ``depth``, ``stem``, ``grow``, ``stem_layers`` and ``energy_norm`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
-        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers)
+        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
