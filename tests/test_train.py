@@ -244,6 +244,20 @@ def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert exc.value.code == 2 and "--loss" in capsys.readouterr().err
 
 
+def test_the_energy_norm_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=4)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes",
+            "scene0", "--arch", "fast", "--energy-norm", "--steps", "6"]
+    assert rtp_main([*base, "--out", str(tmp_path / "e.pt")]) == 0
+    ck = load_checkpoint(tmp_path / "e.pt")
+    assert ck.net.config["energy_norm"] is True and ck.metadata.provenance["energy_norm"] is True
+    assert any(type(m).__name__ == "EnergyNorm" for m in ck.net.modules())
+    # the same file without the option is another network: refused, not silently resumed
+    assert rtp_main([*base[:-3], "--steps", "12", "--out", str(tmp_path / "e.pt")]) != 0
+    assert "differs in: energy_norm" in capsys.readouterr().err
+
+
 def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path) -> None:
     data = _dataset(tmp_path / "ds", n=6)
     base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes", "scene0",
@@ -270,6 +284,8 @@ def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path)
     with pytest.raises(sdk.ParameterError, match="stem_layers"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "c.pt"), crop=32, arch="fast", stem=1,
                           stem_layers=2))
+    with pytest.raises(sdk.ParameterError, match="energy_norm: the fast network's option"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "c.pt"), crop=32, energy_norm=True))
     # an exported average predicts what it does in torch
     pred = sdk.load(export.export_checkpoint(tmp_path / "a.pt", tmp_path / "a.onnx"))
     x = np.random.default_rng(5).random((7, H, W), dtype=np.float32)
@@ -548,3 +564,40 @@ def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path
     with pytest.raises(sdk.ParameterError, match=r"crop \+ 2 x context \(96\) is larger than the frames \(96x64\)"):
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=32, **base))
     assert not (tmp_path / "d.pt").exists()
+
+
+def test_bench_target_ceiling_finds_no_phase_noise_where_the_grids_align(tmp_path: Path) -> None:
+    import re
+    import subprocess
+    import sys
+
+    data = _dataset(tmp_path / "ds", n=3)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=4, crop=32,
+                      val_scenes=("scene0",)))
+    model = export.export_checkpoint(tmp_path / "m.pt", tmp_path / "m.onnx")
+    bench = Path(__file__).resolve().parents[1] / "bench" / "target_ceiling.py"
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, str(bench), str(model), "--data", str(data), "--scene", "",
+                               "--margin", "0", *args], capture_output=True, text=True)
+
+    def rows(out: str) -> dict[str, list[float]]:
+        return {line.split("|")[1].strip(): [float(v) for v in re.findall(r"[-+]?\d+\.\d+", line.split("|", 2)[2])]
+                for line in out.splitlines() if re.match(r"\| (1x2|2x1|2x4|4x2|pooled) \|", line)}
+
+    # JNYang is per pixel but for its Weber denominator, a 4x4 block mean of the reference's luma on the
+    # frame's grid: shifts by whole blocks recompute exactly the same targets (a wrong offset in the
+    # bookkeeping would not: the frames are noise) ...
+    aligned = run("--shifts", "0,0 4,4 8,0 12,8")
+    assert aligned.returncode == 0, aligned.stderr
+    table = rows(aligned.stdout)
+    assert set(table) == {"1x2", "2x1", "2x4", "4x2", "pooled"}
+    for name, (ceil, vs_target, vs_content, spread) in table.items():
+        assert ceil == 100.0 and spread == 0.0 and vs_target == vs_content, name
+    # ... and shifts inside a block move the denominator's blocks against the content: some phase noise
+    inside = rows(run("--shifts", "0,0 1,3 2,2").stdout)
+    assert all(v[0] < 100.0 and v[3] > 0.0 for v in inside.values())
+    # bad phases are refused with what was expected
+    for bad, why in (("0,0 16,0", "in [0, 16)"), ("4,4 0,0", "the first one 0,0"), ("0,0 x", "'dy,dx' pairs")):
+        res = run("--shifts", bad)
+        assert res.returncode != 0 and why in res.stderr, (bad, res.stderr)
