@@ -17,6 +17,17 @@ def scene_ids(reader: Any, scenes: str | None) -> list[str]:
     return [i for i in ids if reader[i].meta.get("scene") in wanted] if wanted else ids
 
 
+def add_model_args(ap: Any, model_help: str, scene_help: str = "") -> None:
+    """The arguments the model-on-a-dataset scripts share: ``model``, ``--data`` (default data/train) and
+    ``--scene``, by default the maps of the ``validation`` split of scenes.yaml (the one list of them)."""
+    from rtp.capture.scenes import map_names
+
+    ap.add_argument("model", help=model_help)
+    ap.add_argument("--data", default="data/train", help="dataset with targets (default: data/train)")
+    ap.add_argument("--scene", default=",".join(map_names("validation")),
+                    help=f"maps of --data, comma-separated{scene_help} (default: the validation maps of scenes.yaml)")
+
+
 def median_ms(fn: Callable[[], object], repeats: int) -> float:
     """Median wall time of ``fn`` in milliseconds over ``repeats`` runs, after one warm-up run
     (first-call allocations, lazy construction, thread-pool start)."""

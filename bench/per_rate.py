@@ -22,6 +22,7 @@ import argparse
 import sys
 
 import numpy as np
+from _common import add_model_args  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -84,10 +85,7 @@ def _oracle(truth: np.ndarray, thr: float, hib: bool) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("model", help="an exported model (.onnx) or a shipped model's name")
-    ap.add_argument("--data", default="data/train", help="dataset with targets (default: data/train)")
-    ap.add_argument("--scene", default="kaos,oa_dm3,oacmpdm4",
-                    help="maps of --data, comma-separated, at least two (default: the validation maps)")
+    add_model_args(ap, "an exported model (.onnx) or a shipped model's name", ", at least two")
     ap.add_argument("--fit", type=float, default=0.05, help="failing share the factors are fitted at (default 0.05)")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])

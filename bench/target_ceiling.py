@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _common import scene_ids  # bench/ is on sys.path when run as a script
+from _common import add_model_args, scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import metrics as M
@@ -86,10 +86,7 @@ def r2(p: np.ndarray, g: np.ndarray) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("model", help="an exported model (.onnx): its metric, transform, outputs and tile size")
-    ap.add_argument("--data", default="data/train", help="dataset (default: data/train)")
-    ap.add_argument("--scene", default="kaos,oa_dm3,oacmpdm4",
-                    help="maps of --data (comma-separated; default: the validation maps)")
+    add_model_args(ap, "an exported model (.onnx): its metric, transform, outputs and tile size", "; '' for all")
     ap.add_argument("--samples", type=int, default=0, help="at most this many samples, spread evenly (0: all)")
     ap.add_argument("--shifts", default=DEFAULT_SHIFTS, help=f"phases, 'dy,dx' pixels (default: {DEFAULT_SHIFTS!r})")
     ap.add_argument("--margin", type=int, default=4, help="tiles left out along each window's edges (default: 4)")

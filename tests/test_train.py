@@ -459,12 +459,14 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
         assert v and v == sorted(v) and all(0.0 <= x <= 93.75 for x in v)
 
 
-def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_out_maps(tmp_path: Path) -> None:
+def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_out_maps(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import importlib.util
     import subprocess
     import sys
 
     path = Path(__file__).resolve().parents[1] / "bench" / "per_rate.py"
+    monkeypatch.syspath_prepend(str(path.parent))  # as when run as a script: bench/_common.py importable
     spec = importlib.util.spec_from_file_location("bench_per_rate", path)
     assert spec and spec.loader
     mod = importlib.util.module_from_spec(spec)
