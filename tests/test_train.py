@@ -603,3 +603,34 @@ def test_bench_target_ceiling_finds_no_phase_noise_where_the_grids_align(tmp_pat
     for bad, why in (("0,0 16,0", "in [0, 16)"), ("4,4 0,0", "the first one 0,0"), ("0,0 x", "'dy,dx' pairs")):
         res = run("--shifts", bad)
         assert res.returncode != 0 and why in res.stderr, (bad, res.stderr)
+
+
+def test_bench_input_ceiling_trains_and_scores_on_the_current_frame(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    import importlib.util
+
+    from rtp.capture import DatasetReader, Sample
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "input_ceiling.py"
+    monkeypatch.syspath_prepend(str(path.parent))
+    monkeypatch.setattr(Sample, "buffer", Sample.buffer)  # the study patches the class: undone after the test
+    spec = importlib.util.spec_from_file_location("bench_input_ceiling", path)
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    data = _dataset(tmp_path / "ds", n=6)
+    s = DatasetReader(str(data))["s000"]
+    before = s.inputs(["reprojected.r", "seen", "albedo.r"])
+    mod.use_current_frame()
+    s = DatasetReader(str(data))["s000"]
+    after = s.inputs(["reprojected.r", "seen", "albedo.r"])
+    # the reprojected plane is the frame itself, every pixel seen, the other planes untouched
+    np.testing.assert_array_equal(after[0], s.final("1x1")[..., 0])
+    assert (after[1] == 1).all() and not (before[1] == 1).all()
+    np.testing.assert_array_equal(after[2], before[2])
+    assert not np.array_equal(after[0], before[0])
+    out = tmp_path / "study" / "c.pt"
+    assert mod.main(["--metric", "jnyang", "--data", str(data), "--out", str(out), "--steps", "4", "--scene", "scene2"]) == 0
+    text = capsys.readouterr().out
+    assert out.with_suffix(".onnx").is_file() and (tmp_path / "evalval-c" / "evaluation.json").is_file()
+    assert "never to ship" in text and "| 1x2 |" in text  # residuals' per-output table
