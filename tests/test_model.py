@@ -150,6 +150,28 @@ def test_the_growing_fast_network_doubles_channels_after_each_pool() -> None:
         np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
 
 
+def test_max_width_caps_the_growing_channels_and_exports() -> None:
+    from rtp.export import export_checkpoint
+    from rtp.train.model import FastNet
+
+    net = FastNet(4, grow=2, depth=5, max_width=32).eval()
+    assert [m.out_channels for m in net.layers if isinstance(m, torch.nn.Conv2d)] == [16, 16, 32, 32, 32, 32, 4]
+    assert net.config["max_width"] == 32 and "max_width" not in FastNet(grow=2).config
+    assert sum(p.numel() for p in net.parameters()) == \
+        1024 + 2304 + 4608 + 3 * 9216 + 2 * (16 + 16 + 32 * 4) + 132
+    for bad in ({"max_width": 32}, {"grow": 2, "max_width": 8}):  # no grow to cap; a cap under the width
+        with pytest.raises(ValueError, match="max_width"):
+            FastNet(**bad)
+    with tempfile.TemporaryDirectory() as d:
+        ck = checkpoint.save(Path(d) / "m.pt", net, base_metadata())
+        assert checkpoint.load(ck).net.config["max_width"] == 32
+        pred = sdk.load(export_checkpoint(ck, Path(d) / "m.onnx"))
+        x = np.random.default_rng(1).random((4, 48, 80), dtype=np.float32)
+        with torch.inference_mode():
+            want = net(torch.from_numpy(x)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+
+
 def test_the_fast_network_takes_partial_tiles() -> None:
     from rtp.train.model import FastNet
 

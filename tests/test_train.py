@@ -258,6 +258,23 @@ def test_the_energy_norm_trains_from_the_command_line_and_is_recorded(tmp_path: 
     assert "differs in: energy_norm" in capsys.readouterr().err
 
 
+def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=4)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes",
+            "scene0", "--arch", "fast", "--grow", "2", "--depth", "4", "--steps", "6"]
+    assert rtp_main([*base, "--max-width", "32", "--out", str(tmp_path / "m.pt")]) == 0
+    ck = load_checkpoint(tmp_path / "m.pt")
+    assert ck.net.config["max_width"] == 32 and ck.metadata.provenance["max_width"] == 32
+    assert max(m.out_channels for m in ck.net.modules() if isinstance(m, torch.nn.Conv2d)) == 32
+    # resuming without the cap is another network: refused
+    assert rtp_main([*base[:-1], "12", "--out", str(tmp_path / "m.pt")]) != 0
+    assert "differs in: max_width" in capsys.readouterr().err
+    with pytest.raises(sdk.ParameterError, match="max_width caps grow 2's channels"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "b.pt"), arch="fast", crop=32,
+                          max_width=32))
+
+
 def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path) -> None:
     data = _dataset(tmp_path / "ds", n=6)
     base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes", "scene0",

@@ -62,6 +62,8 @@ class TrainConfig:
     stem: int = 4
     #: 2: each block of the fast network after a pool doubles its channels (1: ``width`` throughout).
     grow: int = 1
+    #: With grow 2: the most channels a block doubles to (0: no cap).
+    max_width: int = 0
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -364,6 +366,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8) or cfg.grow not in (1, 2):
         raise sdk.ParameterError(f"expected width >= 2, depth >= 0, stem 1, 2, 4 or 8 and grow 1 or 2, got {cfg.width}, "
                                  f"{cfg.depth}, {cfg.stem} and {cfg.grow}")
+    if cfg.max_width and (cfg.grow == 1 or cfg.max_width < cfg.width):
+        raise sdk.ParameterError(f"max_width caps grow 2's channels: expected 0 (none), or at least width ({cfg.width}) "
+                                 f"with grow 2, got {cfg.max_width} with grow {cfg.grow}", "max_width")
     if cfg.stem_layers not in (1, 2) or (cfg.stem_layers == 2 and min(cfg.stem, cfg.tile) < 2):
         raise sdk.ParameterError(f"stem_layers: expected 1, or 2 with a stem of at least 2, got {cfg.stem_layers} with "
                                  f"stem {cfg.stem}", "stem_layers")
@@ -398,7 +403,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
-                        energy_norm=cfg.energy_norm)
+                        energy_norm=cfg.energy_norm, max_width=cfg.max_width)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -413,6 +418,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["stem"] = cfg.stem
         if cfg.grow != 1:
             config_key["grow"] = cfg.grow
+        if cfg.max_width:
+            config_key["max_width"] = cfg.max_width
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -559,6 +566,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "head": cfg.head,
         "arch": cfg.arch,
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
+        **({"max_width": cfg.max_width} if cfg.max_width else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,

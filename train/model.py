@@ -153,7 +153,9 @@ class FastNet(nn.Module):
     convolution is followed by BatchNorm before its ReLU, so BatchNorm folds into the convolution at
     export. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
     them (16, 32, 64 for width 16 and depth 3), widening the cheap low-resolution end while the
-    full-resolution read stays at ``width``. ``energy_norm`` divides the features after the first
+    full-resolution read stays at ``width``; ``max_width`` caps what it doubles to (16, 32, 32, 32, 32
+    for depth 5 and ``max_width`` 32: most of the tile-resolution weights at a quarter of their cost).
+    ``energy_norm`` divides the features after the first
     block and pool (after the stem where there is no pool) at each position by their root mean square
     over the channels and appends its logarithm as one more channel (:class:`EnergyNorm`, LPIPS's own
     normalisation of AlexNet features), so a ratio of local energies, which LPIPS's value is, becomes
@@ -178,13 +180,16 @@ class FastNet(nn.Module):
 
     def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
                  tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
-                 stem_layers: int = 1, energy_norm: bool = False) -> None:
+                 stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
         if width < 2 or depth < 0 or stem not in (1, 2, 4, 8) or grow not in (1, 2):
             raise ValueError(f"expected width >= 2, depth >= 0, stem in (1, 2, 4, 8) and grow 1 or 2, got {width}, "
                              f"{depth}, {stem}, {grow}")
+        if max_width and (grow == 1 or max_width < width):
+            raise ValueError(f"max_width caps grow 2's channels: expected 0 (none), or >= width ({width}) with grow 2, "
+                             f"got {max_width} with grow {grow}")
         if stem_layers not in (1, 2) or (stem_layers == 2 and min(stem, tile) < 2):
             raise ValueError(f"stem_layers must be 1, or 2 with a stem (and tile) of at least 2, got {stem_layers} "
                              f"with stem {stem} and tile {tile}")
@@ -194,6 +199,8 @@ class FastNet(nn.Module):
                                        "width": width, "depth": depth, "stem": stem}
         if grow != 1:  # checkpoints from before the option hold no "grow"
             self.config["grow"] = grow
+        if max_width:  # likewise
+            self.config["max_width"] = max_width
         if stem_layers != 1:  # likewise
             self.config["stem_layers"] = stem_layers
         if energy_norm:  # likewise
@@ -216,6 +223,7 @@ class FastNet(nn.Module):
             if i < depth:
                 # grow 2: each block after a pool doubles the channels (cheap at 1/8 and 1/16 resolution)
                 out = width * grow ** min(i, pools)
+                out = min(out, max_width) if max_width else out
                 layers += [nn.Conv2d(c, out, 3, padding=1, bias=False), nn.BatchNorm2d(out), nn.ReLU(inplace=True)]
                 c = out
             if i < pools:
@@ -251,11 +259,12 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
-                  energy_norm: bool = False) -> Network:
+                  energy_norm: bool = False, max_width: int = 0) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
-    applies to the paper's network, ``depth``, ``stem``, ``grow``, ``stem_layers`` and ``energy_norm`` to the fast one."""
+    applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers`` and ``energy_norm`` to
+    the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
-        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm)
+        return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
