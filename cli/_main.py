@@ -268,9 +268,9 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     return 0
 
 
-_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "augment",
-                 "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "ema", "distill", "steps",
-                 "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
+_RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
+                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "ema", "distill",
+                 "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
 
 
@@ -530,6 +530,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "position and append its log as a channel (LPIPS's normalisation) (default: off)")
     r.add_argument("--grow", type=int, default=None, choices=(1, 2),
                    help="2: each block of the fast network after a pool doubles its channels (default: 1)")
+    r.add_argument("--separable", action="store_true", default=None,
+                   help="the fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across "
+                   "them: about a ninth of the work, room for more width) (default: off)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

@@ -172,6 +172,28 @@ def test_max_width_caps_the_growing_channels_and_exports() -> None:
         np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
 
 
+def test_separable_blocks_are_depthwise_then_pointwise_and_export() -> None:
+    from rtp.export import export_checkpoint
+    from rtp.train.model import FastNet
+
+    net = FastNet(4, width=32, depth=5, separable=True).eval()
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    assert [(m.kernel_size[0], m.groups) for m in convs[1:-1]] == [(3, 32), (1, 1)] * 5  # five blocks, each split
+    assert net.config["separable"] is True and "separable" not in FastNet().config
+    assert sum(p.numel() for p in net.parameters()) == 4 * 16 * 32 + 5 * (32 * 9 + 32 * 32 + 4 * 32) + 2 * 32 + 132
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+    with tempfile.TemporaryDirectory() as d:
+        ck = checkpoint.save(Path(d) / "s.pt", net, base_metadata())
+        assert checkpoint.load(ck).net.config["separable"] is True
+        pred = sdk.load(export_checkpoint(ck, Path(d) / "s.onnx"))
+        x = np.random.default_rng(2).random((4, 48, 80), dtype=np.float32)
+        with torch.inference_mode():
+            want = net(torch.from_numpy(x)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+
+
 def test_the_fast_network_takes_partial_tiles() -> None:
     from rtp.train.model import FastNet
 

@@ -270,6 +270,10 @@ def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_pat
     # resuming without the cap is another network: refused
     assert rtp_main([*base[:-1], "12", "--out", str(tmp_path / "m.pt")]) != 0
     assert "differs in: max_width" in capsys.readouterr().err
+    rtp_main([*base[:-2], "--separable", "--steps", "6", "--out", str(tmp_path / "s.pt")])  # 6 steps: kept even if dead
+    assert load_checkpoint(tmp_path / "s.pt").metadata.provenance["separable"] is True
+    with pytest.raises(sdk.ParameterError, match="separable: the fast network's option"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, separable=True))
     with pytest.raises(sdk.ParameterError, match="max_width caps grow 2's channels"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "b.pt"), arch="fast", crop=32,
                           max_width=32))

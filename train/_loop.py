@@ -64,6 +64,8 @@ class TrainConfig:
     grow: int = 1
     #: With grow 2: the most channels a block doubles to (0: no cap).
     max_width: int = 0
+    #: The fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across them).
+    separable: bool = False
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -372,6 +374,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.stem_layers not in (1, 2) or (cfg.stem_layers == 2 and min(cfg.stem, cfg.tile) < 2):
         raise sdk.ParameterError(f"stem_layers: expected 1, or 2 with a stem of at least 2, got {cfg.stem_layers} with "
                                  f"stem {cfg.stem}", "stem_layers")
+    if cfg.separable and cfg.arch != "fast":
+        raise sdk.ParameterError(f"separable: the fast network's option, got arch {cfg.arch!r}", "separable")
     if cfg.energy_norm and cfg.arch != "fast":
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
@@ -403,7 +407,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
-                        energy_norm=cfg.energy_norm, max_width=cfg.max_width)
+                        energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -420,6 +424,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["grow"] = cfg.grow
         if cfg.max_width:
             config_key["max_width"] = cfg.max_width
+        if cfg.separable:
+            config_key["separable"] = True
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -567,6 +573,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "arch": cfg.arch,
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
         **({"max_width": cfg.max_width} if cfg.max_width else {}),
+        **({"separable": True} if cfg.separable else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,
