@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -123,8 +124,26 @@ def test_the_fast_network_layout() -> None:
     assert "grow" not in net.config  # configs of checkpoints from before the option stay as they were
 
 
-def test_the_growing_fast_network_doubles_channels_after_each_pool() -> None:
+def _round_trip(net: torch.nn.Module, key: str, meta: dict[str, Any] | None = None, seed: int = 0) -> None:
+    """``net`` (BatchNorm statistics made non-trivial) saved, reloaded with its config's ``key``, exported,
+    and the SDK's raw prediction equal to torch's."""
     from rtp.export import export_checkpoint
+
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+    meta = meta or base_metadata()
+    with tempfile.TemporaryDirectory() as d:
+        ck = checkpoint.save(Path(d) / "n.pt", net, meta)
+        assert checkpoint.load(ck).net.config[key] == net.config[key]  # type: ignore[index]
+        pred = sdk.load(export_checkpoint(ck, Path(d) / "n.onnx"))
+        x = np.random.default_rng(seed).random((len(meta["inputs"]), 48, 80), dtype=np.float32)
+        with torch.inference_mode():
+            want = net(torch.from_numpy(x)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+
+
+def test_the_growing_fast_network_doubles_channels_after_each_pool() -> None:
     from rtp.train.model import FastNet
 
     net = FastNet(7, grow=2).eval()
@@ -136,22 +155,11 @@ def test_the_growing_fast_network_doubles_channels_after_each_pool() -> None:
     with pytest.raises(ValueError, match="grow"):
         FastNet(grow=3)
     # it round-trips through a checkpoint and exports like any other
-    for m in net.modules():
-        if isinstance(m, torch.nn.BatchNorm2d):
-            m.running_mean.uniform_(-0.1, 0.1)
-    with tempfile.TemporaryDirectory() as d:
-        meta = base_metadata(inputs=["reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular"])
-        ck = checkpoint.save(Path(d) / "g.pt", net, meta)
-        assert checkpoint.load(ck).net.config["grow"] == 2
-        pred = sdk.load(export_checkpoint(ck, Path(d) / "g.onnx"))
-        x = np.random.default_rng(0).random((7, 48, 80), dtype=np.float32)
-        with torch.inference_mode():
-            want = net(torch.from_numpy(x)[None])[0].numpy()
-        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+    _round_trip(net, "grow", base_metadata(inputs=["reprojected.r", "seen", "albedo.r", "normal.z", "roughness",
+                                                   "metallic", "specular"]))
 
 
 def test_max_width_caps_the_growing_channels_and_exports() -> None:
-    from rtp.export import export_checkpoint
     from rtp.train.model import FastNet
 
     net = FastNet(4, grow=2, depth=5, max_width=32).eval()
@@ -162,18 +170,10 @@ def test_max_width_caps_the_growing_channels_and_exports() -> None:
     for bad in ({"max_width": 32}, {"grow": 2, "max_width": 8}):  # no grow to cap; a cap under the width
         with pytest.raises(ValueError, match="max_width"):
             FastNet(**bad)
-    with tempfile.TemporaryDirectory() as d:
-        ck = checkpoint.save(Path(d) / "m.pt", net, base_metadata())
-        assert checkpoint.load(ck).net.config["max_width"] == 32
-        pred = sdk.load(export_checkpoint(ck, Path(d) / "m.onnx"))
-        x = np.random.default_rng(1).random((4, 48, 80), dtype=np.float32)
-        with torch.inference_mode():
-            want = net(torch.from_numpy(x)[None])[0].numpy()
-        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+    _round_trip(net, "max_width", seed=1)
 
 
 def test_separable_blocks_are_depthwise_then_pointwise_and_export() -> None:
-    from rtp.export import export_checkpoint
     from rtp.train.model import FastNet
 
     net = FastNet(4, width=32, depth=5, separable=True).eval()
@@ -181,17 +181,7 @@ def test_separable_blocks_are_depthwise_then_pointwise_and_export() -> None:
     assert [(m.kernel_size[0], m.groups) for m in convs[1:-1]] == [(3, 32), (1, 1)] * 5  # five blocks, each split
     assert net.config["separable"] is True and "separable" not in FastNet().config
     assert sum(p.numel() for p in net.parameters()) == 4 * 16 * 32 + 5 * (32 * 9 + 32 * 32 + 4 * 32) + 2 * 32 + 132
-    for m in net.modules():
-        if isinstance(m, torch.nn.BatchNorm2d):
-            m.running_mean.uniform_(-0.1, 0.1)
-    with tempfile.TemporaryDirectory() as d:
-        ck = checkpoint.save(Path(d) / "s.pt", net, base_metadata())
-        assert checkpoint.load(ck).net.config["separable"] is True
-        pred = sdk.load(export_checkpoint(ck, Path(d) / "s.onnx"))
-        x = np.random.default_rng(2).random((4, 48, 80), dtype=np.float32)
-        with torch.inference_mode():
-            want = net(torch.from_numpy(x)[None])[0].numpy()
-        np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
+    _round_trip(net, "separable", seed=2)
 
 
 def test_the_fast_network_takes_partial_tiles() -> None:
