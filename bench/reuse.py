@@ -1,5 +1,6 @@
 """Prediction reuse's cost on a CPU: a frame the network runs on against a frame whose estimates are
-carried (``sdk.PredictionReuse``, each reduction), and the ``unseen="fresh"`` crops.
+carried (``sdk.PredictionReuse``, each reduction, the mean also with ``step=4``), and the
+``unseen="fresh"`` crops.
 
     python bench/reuse.py [--model jnyang] [--repeats 7] [--threads 2]
 
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import platform
+from typing import Any
 
 import numpy as np
 import onnxruntime as ort
@@ -32,7 +34,8 @@ def _pan(h: int, w: int, strip: int) -> tuple[tuple[np.ndarray, np.ndarray], np.
     return (rows, np.maximum(cols - 3, 0)), seen
 
 
-def _carried(pred: sdk.ShadingRatePredictor, x: np.ndarray, strip: int, repeats: int, **kw: str) -> tuple[float, float]:
+def _carried(pred: sdk.ShadingRatePredictor, x: np.ndarray, strip: int, repeats: int,
+             **kw: Any) -> tuple[float, float]:
     """Median ms of a frame between network runs, and its network work share."""
     reuse = sdk.PredictionReuse(pred, every=10**9, **kw)
     fetch, seen = _pan(x.shape[1], x.shape[2], strip)
@@ -50,13 +53,14 @@ def main() -> None:
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"], threads=args.threads)
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {platform.processor() or platform.machine()}, "
           f"{args.threads} threads, median of {args.repeats}, model {args.model}\n")
-    print("| frame | network runs (sdk predict) | carried: mean | worst | upper | "
+    print("| frame | network runs (sdk predict) | carried: mean | worst | upper | mean, step 4 | "
           + " | ".join(f"fresh, {100 * s:g}% of the width new" for s in STRIPS) + " |")
-    print("|---|---:|---:|---:|---:|" + "---:|" * len(STRIPS))
+    print("|---|---:|---:|---:|---:|---:|" + "---:|" * len(STRIPS))
     for w, h in FRAMES:
         x = np.random.default_rng(0).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
         net = median_ms(lambda x=x: pred.predict(x), args.repeats)
         carried = [_carried(pred, x, 3, args.repeats, reduce=r)[0] for r in ("mean", "worst", "upper")]
+        carried.append(_carried(pred, x, 3, args.repeats, step=4)[0])
         fresh = [_carried(pred, x, int(s * w), args.repeats, unseen="fresh") for s in STRIPS]
         print(f"| {w}x{h} | {net:.1f} | " + " | ".join(f"{c:.1f}" for c in carried) + " | "
               + " | ".join(f"{ms:.1f} (crops {100 * work:.0f}%)" for ms, work in fresh) + " |")

@@ -103,8 +103,8 @@ class MethodSpec:
     ``"model"``), the ``model`` (shipped name or path), its ``reuse`` interval k (1: every frame) and
     how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`), what it does
     with tiles the network did not see (:data:`REUSE_UNSEEN`), the ``history`` weight of the carried
-    estimates on the network's frames and the ``refresh`` share of unseen tiles that runs the network
-    early (``sdk.PredictionReuse``'s arguments of those names)."""
+    estimates on the network's frames, the ``refresh`` share of unseen tiles that runs the network
+    early and the carry's pixel ``step`` (``sdk.PredictionReuse``'s arguments of those names)."""
 
     name: str
     kind: str
@@ -114,13 +114,15 @@ class MethodSpec:
     unseen: str = "full"
     history: float = 0.0
     refresh: float | None = None
+    step: int | None = None
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
     model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse, then
     ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
-    weight W) and ``:rS`` (refresh share S) in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``)."""
+    weight W), ``:rS`` (refresh share S) and ``:sN`` (the carry keeps one pixel of N per axis) in any
+    order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
@@ -137,17 +139,26 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         unseen = [o for o in options if o in REUSE_UNSEEN]
         history = [_share(o, item, "history weight") for o in options if o[:1] == "h"]
         refresh = [_share(o, item, "refresh share") for o in options if o[:1] == "r"]
-        if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1
-                or len(reduce) + len(unseen) + len(history) + len(refresh) != len(options)):
+        step = [_step(o, item) for o in options if o[:1] == "s"]
+        if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
+                or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
-                            f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight and one ':rS' "
-                            "refresh share (both in [0, 1)), e.g. jnyang@4:mean:fresh, jnyang@1:h0.5 or jnyang@8:r0.02")
+                            f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
+                            "refresh share (both in [0, 1)) and one ':sN' pixel step, e.g. jnyang@4:mean:fresh, "
+                            "jnyang@1:h0.5, jnyang@8:r0.02 or jnyang@4:s4")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
-                              refresh[0] if refresh else None))
+                              refresh[0] if refresh else None, step[0] if step else None))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
+
+
+def _step(option: str, item: str) -> int:
+    if not option[1:].isdigit() or int(option[1:]) < 1:
+        raise PlayError(f"method {item!r}: ':{option}' is not a pixel step: expected ':s' and an integer >= 1 that "
+                        "divides the model's tile size, e.g. jnyang@4:s4")
+    return int(option[1:])
 
 
 def _share(option: str, item: str, what: str) -> float:
@@ -369,7 +380,7 @@ def play(
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
-                                   "refresh": m.refresh}
+                                   "refresh": m.refresh, "step": m.step}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
@@ -478,7 +489,8 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
             else:
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
-                decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh)
+                decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh,
+                                m.step)
                 loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
@@ -510,11 +522,11 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
 
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
-           refresh: float | None = None) -> Callable[..., np.ndarray]:
+           refresh: float | None = None, step: int | None = None) -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction,
-                                history=history, refresh=refresh)
+                                history=history, refresh=refresh, step=step)
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None

@@ -1,14 +1,15 @@
 """Prediction reuse: run the network every k-th frame and carry its per-tile estimates in between.
 
 The paper's future work, measured in docs/results.md ("Prediction reuse"). On the frames between
-network runs every kept pixel (every second one per axis) carries the index of the estimate its
-surface had when the network last saw it, warped frame by frame with the reprojection's fetch
-positions; each tile then reduces the estimates its pixels carry (``REUSE_REDUCTIONS``). Warping
-the index per pixel rather than the per-tile values keeps coarse regions from dilating frame after
-frame. Tiles mostly unseen since then are shaded at 1x1 or predicted afresh on crops around them
-(``REUSE_UNSEEN``).
+network runs every kept pixel (one of every ``step`` per axis) carries where its surface was when
+the network last saw it, warped frame by frame with the reprojection's fetch positions, and so the
+index of the estimate it had there; each tile then reduces the estimates its pixels carry
+(``REUSE_REDUCTIONS``). Warping per pixel rather than the per-tile values keeps coarse regions from
+dilating frame after frame, and carrying the surface's position (not only its index) keeps the
+kept pixels' spacing from adding a rounding error every frame. Tiles mostly unseen since then are
+shaded at 1x1 or predicted afresh on crops around them (``REUSE_UNSEEN``).
 
-This module is the numpy reference; an engine would warp the index on the GPU, where it is one
+This module is the numpy reference; an engine would warp the positions on the GPU, where it is one
 gather per kept pixel. numpy only.
 """
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,14 +60,33 @@ FRESH_FULL = 0.5
 Inputs = np.ndarray | Callable[[slice, slice], np.ndarray]
 
 
-def _step(tile: int) -> int:
-    return 2 if tile % 2 == 0 else 1
+#: The fewest kept pixels per tile and axis the default step leaves (4: 16 of a tile's pixels).
+KEPT_PER_TILE = 4
+
+
+def default_step(tile: int) -> int:
+    """The pixels per axis the carry keeps one of by default: the largest divisor of the tile that
+    leaves at least :data:`KEPT_PER_TILE` kept pixels per tile and axis (4 for 16-pixel tiles, 2 for
+    8, 1 for odd tiles up to 7). On the validation maps every fourth pixel of 16-pixel tiles kept
+    as much of every frame's saving as every second to within 1.1 points at 1-5% failing tiles, at
+    two fifths of the cost (docs/results.md "Prediction reuse that follows the surfaces")."""
+    return max(d for d in range(1, tile + 1) if tile % d == 0 and tile // d >= KEPT_PER_TILE) if tile >= 4 else 1
+
+
+def _check_step(step: int | None, tile: int) -> int:
+    """``step`` (None: :func:`default_step`) as an int that divides ``tile``, or a ParameterError."""
+    if step is None:
+        return default_step(tile)
+    if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1 or tile % step:
+        divisors = [d for d in range(1, tile + 1) if tile % d == 0]
+        raise ParameterError(f"step: expected None (one pixel of every {default_step(tile)} per axis) or a divisor of the "
+                             f"model's {tile}-pixel tile ({', '.join(map(str, divisors))}), got {step!r}", "step")
+    return int(step)
 
 
 @functools.lru_cache(maxsize=8)
-def _tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
+def _tile_index_map(shape: tuple[int, int], tile: int, s: int) -> np.ndarray:
     h, w = shape
-    s = _step(tile)
     _, tw = tile_grid(h, w, tile)
     ph, pw = padded_size(h, w, tile)
     ys, xs = np.arange(0, ph, s), np.arange(0, pw, s)
@@ -74,21 +95,65 @@ def _tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
     return out
 
 
-def tile_index_map(shape: tuple[int, int], tile: int) -> np.ndarray:
-    """Per kept pixel (every ``_step(tile)``-th per axis, padded to whole tiles) the index of its tile
-    (read-only: one array per frame size, built once)."""
-    return _tile_index_map((int(shape[0]), int(shape[1])), int(tile))
+def tile_index_map(shape: tuple[int, int], tile: int, step: int | None = None) -> np.ndarray:
+    """Per kept pixel (every ``step``-th per axis, default :func:`default_step`, padded to whole
+    tiles) the index of its tile (read-only: one array per frame size, built once)."""
+    return _tile_index_map((int(shape[0]), int(shape[1])), int(tile), _check_step(step, int(tile)))
 
 
-def _kept(a: np.ndarray, s: int, gh: int, gw: int) -> np.ndarray:
+#: A place is packed into one int32, ``row << PLACE_BITS | column`` (one gather instead of two).
+PLACE_BITS = 16
+
+
+@dataclass(frozen=True)
+class Track:
+    """What each kept pixel of a frame carries between network runs (int32 arrays on the kept-pixel
+    grid of :func:`tile_index_map`): ``index``, the entry of the estimates its surface is in, and
+    ``place``, where that surface was (``row << PLACE_BITS | column``) on frame ``gen`` of the frames
+    the entries were predicted on (0: the network's whole-frame run; g: the g-th frame of fresh crops
+    since); both -1 where unknown. ``lut`` is ``(generations, tiles)``: the entry of each tile of each
+    of those frames (-1: none there)."""
+
+    index: np.ndarray
+    place: np.ndarray
+    gen: np.ndarray
+    lut: np.ndarray
+
+
+@functools.lru_cache(maxsize=8)
+def _start_places(shape: tuple[int, int], tile: int, s: int) -> np.ndarray:
+    h, w = shape
+    gh, gw = _tile_index_map(shape, tile, s).shape
+    ys = np.minimum(np.arange(gh, dtype=np.int32) * s, h - 1)
+    xs = np.minimum(np.arange(gw, dtype=np.int32) * s, w - 1)
+    out = (ys[:, None] << PLACE_BITS) | xs[None, :]
+    out.setflags(write=False)
+    return out
+
+
+def start_track(shape: tuple[int, int], tile: int, step: int | None = None) -> Track:
+    """The track of the frame the network ran on: each kept pixel in its own tile, at its own place."""
+    h, w = int(shape[0]), int(shape[1])
+    if h >= 1 << (31 - PLACE_BITS) or w >= 1 << PLACE_BITS:
+        raise InputShapeError(f"prediction reuse takes frames of fewer than {1 << (31 - PLACE_BITS)} rows and "
+                              f"{1 << PLACE_BITS} columns, got {w}x{h}", (h, w), "(H, W)")
+    s = _check_step(step, tile)
+    index = tile_index_map((h, w), tile, s)
+    th, tw = tile_grid(h, w, tile)
+    return Track(index, _start_places((h, w), int(tile), s), np.zeros(index.shape, np.int32),
+                 np.arange(th * tw, dtype=np.int32)[None])
+
+
+def _kept(a: np.ndarray, s: int, gh: int, gw: int, dtype: type | None = None) -> np.ndarray:
     """``a`` at the kept pixels: row ``min(i * s, H - 1)``, column ``min(j * s, W - 1)`` (the padding
-    repeats the last row and column). A strided view where the frame is whole tiles."""
+    repeats the last row and column), as ``dtype`` (None: ``a``'s). A strided view where the frame is
+    whole tiles and the dtype ``a``'s."""
     h, w = a.shape
     view = a[::s, ::s]
     ny, nx = view.shape
     if (ny, nx) == (gh, gw):
-        return view
-    out = np.empty((gh, gw), a.dtype)  # a strided copy and the padding: a fifth of np.ix_'s time
+        return view if dtype is None else view.astype(dtype)
+    out = np.empty((gh, gw), a.dtype if dtype is None else dtype)  # a strided copy and the padding: a fifth of np.ix_'s time
     out[:ny, :nx] = view
     out[:ny, nx:] = a[::s, w - 1:w]
     out[ny:, :nx] = a[h - 1, ::s]
@@ -96,39 +161,69 @@ def _kept(a: np.ndarray, s: int, gh: int, gw: int) -> np.ndarray:
     return out
 
 
-def carry_estimates(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: np.ndarray, seen: np.ndarray,
+def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.ndarray, seen: np.ndarray,
                     background: np.ndarray | None, tile: int, higher_is_better: bool, unseen_fraction: float,
-                    reduce: str = "mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    reduce: str = "mean", step: int | None = None) -> tuple[np.ndarray, Track, np.ndarray]:
     """Carry the estimates ``est`` into this frame.
 
     ``est`` is ``(outputs, entries)``: the tiles of the frame the network last ran on in row-major
-    order, then any tiles predicted afresh since. ``index`` maps each kept pixel of the previous frame
-    to the entry of ``est`` its surface was in (-1: unknown). Every kept pixel of this frame takes the
-    index of where it was in the previous one (``rows``, ``cols``: top-left pixel indices, inside the frame), unseen
-    pixels (``seen`` 0) -1, background pixels the tile at their own position; each tile then takes the
-    worst, the mean or the upper quartile (towards the worse side) of the estimates over its known
-    pixels, and tiles with more than ``unseen_fraction`` unknown the worst value there is (1x1).
-    Returns the ``(outputs, tile rows, tile cols)`` estimates, the warped index and the tiles given
-    the worst value for want of known pixels."""
+    order, then any tiles predicted afresh since. ``track`` is what each kept pixel of the previous
+    frame carries (:class:`Track`). Every kept pixel of this frame fetches the pixel it was at in
+    the previous one (``rows``, ``cols``: top-left pixel indices, inside the frame); its surface was
+    where the kept pixel at or above-left of that one (one of every ``step`` per axis) was, moved by
+    the fetched pixel's offset from it, so it takes the entry of the tile there (the kept pixel's own
+    entry where that tile has none). Unseen pixels (``seen`` 0) get -1, background pixels the tile
+    at their own position. Each tile then takes the worst, the mean or the upper quartile (towards
+    the worse side) of the estimates over its known pixels, and tiles with more than
+    ``unseen_fraction`` unknown the worst value there is (1x1). Returns the ``(outputs, tile rows,
+    tile cols)`` estimates, this frame's track and the tiles given the worst value for want of known
+    pixels. ``step``: a divisor of ``tile`` (None: :func:`default_step`), as ``track`` was built."""
     h, w = seen.shape
     th, tw = tile_grid(h, w, tile)
-    s = _step(tile)
-    own = tile_index_map((h, w), tile)
+    s = _check_step(step, tile)
+    own = tile_index_map((h, w), tile, s)
     gh, gw = own.shape
-    r, c = _kept(rows, s, gh, gw), _kept(cols, s, gh, gw)
-    # the previous frame's kept pixel each one fetches from, as a flat index (a 1-D take is 3x a 2-D gather;
-    # rows and cols lie in the frame, so r // s < gh; s is 1 or 2, a shift is a fifth of a division's time)
-    shift = s - 1
-    prev = np.take(index, (r >> shift) * gw + (c >> shift))
-    new = np.where(_kept(seen, s, gh, gw) > 0, prev, -1)
-    if background is not None:
-        new = np.where(_kept(background, s, gh, gw) > 0.5, own, new)
+    r, c = _kept(rows, s, gh, gw, np.int32), _kept(cols, s, gh, gw, np.int32)
+    # the previous frame's kept pixel at or above-left of the fetched one, as a flat index (a 1-D take is 3x a
+    # 2-D gather; rows and cols lie in the frame, so r // s < gh; a shift is a fifth of a division's time)
+    if s & (s - 1) == 0:
+        shift = s.bit_length() - 1
+        ky, kx = r >> shift, c >> shift
+    else:
+        ky, kx = r // s, c // s
+    k = ky * gw + kx
+    # where the fetched pixel's surface was: the kept pixel's place plus the offset (0 .. s - 1 each way)
+    # from it, so that the rounding to kept pixels does not add up frame after frame
+    place = np.take(track.place, k)
+    known = (_kept(seen, s, gh, gw) > 0) & (place >= 0)
+    place += ((r - ky * s) << PLACE_BITS) + (c - kx * s)
+    # the tile there (past the last row or column only by the padding's offset)
+    if tile & (tile - 1) == 0:
+        bits = tile.bit_length() - 1
+        ty, tx = place >> (PLACE_BITS + bits), (place & ((1 << PLACE_BITS) - 1)) >> bits
+    else:
+        ty, tx = (place >> PLACE_BITS) // tile, (place & ((1 << PLACE_BITS) - 1)) // tile
+    cell = np.minimum(ty, th - 1) * tw + np.minimum(tx, tw - 1)
+    if len(track.lut) == 1:  # only the whole-frame run's tiles: the tile is the entry
+        gen = track.gen
+        new = np.where(known, cell, -1)
+    else:  # and the tiles predicted afresh since, each frame of them a generation; none there: the kept pixel's
+        gen = np.take(track.gen, k)
+        moved = np.take(track.lut, gen * (th * tw) + np.where(known, cell, 0))
+        new = np.where(known, np.where(moved >= 0, moved, np.take(track.index, k)), -1)
+    place = np.where(known, place, -1)
+    if background is not None:  # the estimate at its own screen position, on the whole-frame run's grid
+        sky = _kept(background, s, gh, gw) > 0.5
+        if sky.any():
+            new = np.where(sky, own, new)
+            place = np.where(sky, _start_places((h, w), tile, s), place)
+            gen = np.where(sky, 0, gen)
     known = new >= 0
     k = tile // s
     # known pixels per tile (rows first: a column of a tile sums to at most k, 16 bits hold it)
     count = known.reshape(th, k, gw).sum(axis=1, dtype=np.int16).reshape(th, tw, k).sum(axis=-1, dtype=np.int64)
     flat = est.reshape(len(est), -1)
-    if reduce == "mean":  # per tile, the sums over its known pixels; float64 sums of <= 64 float32 values are exact
+    if reduce == "mean":  # per tile, the sums over its known pixels; float64 sums of a tile's float32 values are exact
         vals = np.take(np.pad(flat, ((0, 0), (0, 1))), new, axis=1)  # unknown (-1): the zero column appended
         # a tile's k rows first (whole rows add as vectors), then its k columns: twice reduceat's speed
         total = vals.reshape(len(est), th, k, gw).sum(axis=2, dtype=np.float64).reshape(len(est), th, tw, k).sum(axis=-1)
@@ -149,7 +244,7 @@ def carry_estimates(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: 
             out = pick.reduce(pick.reduce(src.reshape(len(est), th, k, gw), axis=2).reshape(len(est), th, tw, k), axis=-1)
     missing = (1.0 - count / (k * k) > unseen_fraction) | ~np.isfinite(out).all(axis=0)
     out[:, missing] = -np.inf if higher_is_better else np.inf
-    return out.astype(np.float32), new, missing
+    return out.astype(np.float32), Track(new, place, gen, track.lut), missing
 
 
 def context_tiles(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
@@ -266,6 +361,11 @@ class PredictionReuse:
     equal network work it ties a fixed interval but lifts the worst path (docs/results.md "An
     interval that adapts to the camera").
 
+    ``step`` is how densely the carry follows the surfaces: one pixel of every ``step`` per axis
+    carries its surface's place (a divisor of the tile size; None: every second). A larger step
+    costs less per carried frame (docs/performance.md "Prediction reuse on a CPU") and samples each
+    tile's surfaces more coarsely.
+
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
     on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
     plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
@@ -277,7 +377,7 @@ class PredictionReuse:
 
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
                  unseen: str = "full", unseen_fraction: float = 0.5, margin: int | None = None,
-                 history: float = 0.0, refresh: float | None = None) -> None:
+                 history: float = 0.0, refresh: float | None = None, step: int | None = None) -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -297,6 +397,7 @@ class PredictionReuse:
             h, w = predictor.static_size
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
                                  "frames (export it with dynamic sizes)", "unseen")
+        self.step = _check_step(step, predictor.tile_size)
         self.predictor = predictor
         self.every = int(every)
         self.reduce = reduce
@@ -313,7 +414,7 @@ class PredictionReuse:
     def reset(self) -> None:
         """Forget the carried estimates: the next frame runs the network."""
         self._cache: np.ndarray | None = None
-        self._index: np.ndarray | None = None
+        self._track: Track | None = None
         self._shape: tuple[int, int] | None = None
         self._age = 0
 
@@ -325,7 +426,7 @@ class PredictionReuse:
     def __repr__(self) -> str:
         return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
                 f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g}, "
-                f"refresh={self.refresh!r})")
+                f"refresh={self.refresh!r}, step={self.step})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         if callable(x):
@@ -355,7 +456,8 @@ class PredictionReuse:
             mix = ((1.0 - self.history) * est + self.history * np.where(missing[None], est, old)).astype(est.dtype)
             est = np.where(missing[None], est, mix)
         self._cache = est.reshape(len(est), -1)
-        self._index = tile_index_map(hw, self.predictor.tile_size) if self.every > 1 or self.history > 0 else None
+        self._track = (start_track(hw, self.predictor.tile_size, self.step) if self.every > 1 or self.history > 0
+                       else None)
         self._shape = hw
         self._age = 0
         self.work = 1.0
@@ -376,7 +478,9 @@ class PredictionReuse:
         if limit is not None:
             if not np.issubdtype(arr.dtype, np.integer):
                 raise ParameterError(f"{name}: expected integer pixel indices, got dtype {arr.dtype}", "fetch")
-            if arr.size and (arr.min() < 0 or arr.max() >= limit):
+            # one pass: read as unsigned, a negative index is larger than any limit (half the time of min and max)
+            unsigned = arr.view(np.dtype(f"u{arr.itemsize}")) if arr.dtype.kind == "i" else arr
+            if arr.size and unsigned.max() >= limit:
                 raise ParameterError(f"{name}: expected indices in [0, {limit}) (the previous frame's pixels), got "
                                      f"{arr.min()}..{arr.max()}", "fetch")
         return arr
@@ -391,7 +495,7 @@ class PredictionReuse:
         runs = self._age + 1 >= self.every
         if self._cache is None or fetch is None or hw != self._shape or (runs and self.history == 0):
             return self._run(x, hw)
-        assert self._index is not None
+        assert self._track is not None
         if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
             raise ParameterError(f"fetch: expected (rows, cols), two integer arrays of the frame's shape, got "
                                  f"{type(fetch).__name__}", "fetch")
@@ -401,8 +505,8 @@ class PredictionReuse:
         bg = None if background is None else self._plane(background, "background", hw)
         tile = self.predictor.tile_size
         hib = self.predictor.metadata.higher_is_better
-        est, index, missing = carry_estimates(self._cache, self._index, rows, cols, seen_, bg, tile, hib,
-                                              self.unseen_fraction, self.reduce)
+        est, track, missing = carry_estimates(self._cache, self._track, rows, cols, seen_, bg, tile, hib,
+                                              self.unseen_fraction, self.reduce, self.step)
         if self.refresh is not None and missing.mean() > self.refresh:
             runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
         if runs:  # the network's frame, blended with what was carried here (history > 0)
@@ -420,13 +524,17 @@ class PredictionReuse:
                 sel = missing[y0:y1, x0:x1]
                 est[:, y0:y1, x0:x1][:, sel] = part[:, sel]
             work = area / (h * w)
-            # the fresh tiles become entries of the cache: their pixels carry them on from here
+            # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
+            # carry them on from here, from where they are now
             slot = np.full(missing.size, -1, np.int32)
-            slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()))
+            slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
             self._cache = np.concatenate([self._cache, est.reshape(len(est), -1)[:, missing.ravel()]], axis=1)
-            mine = slot[tile_index_map(hw, tile)]
-            index = np.where(mine >= 0, mine, index)
-        self._index = index
+            here = start_track(hw, tile, self.step)
+            mine = slot[here.index]
+            fresh = mine >= 0
+            track = Track(np.where(fresh, mine, track.index), np.where(fresh, here.place, track.place),
+                          np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, slot[None]]))
+        self._track = track
         self._age += 1
         self.work = work
         return est

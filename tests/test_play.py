@@ -152,9 +152,9 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     settings = json.loads((tmp_path / "play.json").read_text())["settings"]
     assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
     assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean", "unseen": "full", "history": 0.0,
-                                              "refresh": None},
+                                              "refresh": None, "step": None},
                                  "jnyang@2:fresh": {"k": 2, "reduce": "mean", "unseen": "fresh",
-                                                    "history": 0.0, "refresh": None}}  # what NAME@k meant
+                                                    "history": 0.0, "refresh": None, "step": None}}  # what NAME@k meant
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
@@ -250,22 +250,27 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 
 def test_methods_are_parsed_and_checked() -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
-                          "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02")
+                          "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02,"
+                          "jnyang@4:s4:r0.05")
+    assert [s.step for s in specs] == [None] * 11 + [4]
     assert [(s.kind, s.model, s.reuse, s.reduce, s.unseen, s.history, s.refresh) for s in specs] == [
         ("model", "jnyang", 1, "mean", "full", 0, None), ("model", "jnyang", 4, "mean", "full", 0, None),
         ("model", "models/psnr.onnx", 2, "mean", "full", 0, None), ("yang2019", "", 1, "mean", "full", 0, None),
         ("model", "jnyang", 4, "worst", "full", 0, None), ("model", "jnyang", 4, "mean", "full", 0, None),
         ("model", "jnyang", 4, "mean", "fresh", 0, None), ("model", "jnyang", 2, "upper", "fresh", 0, None),
         ("model", "jnyang", 1, "mean", "full", 0.5, None), ("model", "jnyang", 4, "mean", "fresh", 0.25, None),
-        ("model", "jnyang", 8, "mean", "full", 0, 0.02)]
+        ("model", "jnyang", 8, "mean", "full", 0, 0.02), ("model", "jnyang", 4, "mean", "full", 0, 0.05)]
     for bad, match in (("jnyang@0", "reuse interval"), ("jnyang@x", "reuse interval"), ("", "at least one"),
                        ("oracle,oracle", "each method once"), ("jnyang@4:median", "worst, mean, upper"),
                        ("jnyang@4:", "worst, mean, upper"), ("jnyang@4:mean:worst", "at most one"),
                        ("jnyang@4:fresh:full", "full, fresh"), ("jnyang@1:h1.5", "history weight"),
                        ("jnyang@1:hx", "history weight"), ("jnyang@1:h0.5:h0.2", "at most one"), ("jnyang@8:r2", "refresh share"),
-                       ("jnyang@8:r0.1:r0.2", "at most one")):
+                       ("jnyang@8:r0.1:r0.2", "at most one"), ("jnyang@4:s0", "pixel step"), ("jnyang@4:sx", "pixel step"),
+                       ("jnyang@4:s2:s4", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
+    with pytest.raises(sdk.ParameterError, match=r"divisor of the model's 16-pixel tile \(1, 2, 4, 8, 16\), got 3"):
+        play("procedural:0", "jnyang@4:s3", frames=3, size=(64, 48), sweep=False)
     with pytest.raises(PlayError, match="unknown profile"):
         play("procedural:0", "oracle", paths=("sprint",), frames=3)
     with pytest.raises(PlayError, match="at least 3"):

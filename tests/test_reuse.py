@@ -7,29 +7,41 @@ import numpy as np
 import pytest
 
 from rtp import sdk
-from rtp.sdk._reuse import carry_estimates, context_tiles, cover, tile_index_map
+from rtp.sdk._reuse import (
+    PLACE_BITS,
+    Track,
+    carry_estimates,
+    context_tiles,
+    cover,
+    default_step,
+    start_track,
+    tile_index_map,
+)
 
 TILE = 16
 
 
 def test_carried_estimates_follow_the_surface() -> None:
-    """A still camera keeps every estimate; a whole-tile shift moves them; an unseen tile gets 1x1."""
+    """A still camera keeps every estimate; a whole-tile shift moves them; an unseen tile gets 1x1
+    (every second pixel kept per axis: the fractions below count eighths of a tile)."""
     th, tw = 3, 4
     h, w = th * TILE, tw * TILE
     est = np.random.default_rng(1).random((6, th, tw)).astype(np.float32)
     rows, cols = np.indices((h, w))
     ones = np.ones((h, w), np.float32)
-    index = tile_index_map((h, w), TILE)
+    track = start_track((h, w), TILE, 2)
 
     def carry(c: np.ndarray, seen: np.ndarray = ones, reduce: str = "mean", hib: bool = False) -> np.ndarray:
-        return carry_estimates(est, index, rows, c, seen, None, TILE, hib, 0.5, reduce)[0]
+        return carry_estimates(est, track, rows, c, seen, None, TILE, hib, 0.5, reduce, 2)[0]
 
-    out, index2, missing = carry_estimates(est, index, rows, cols, ones, None, TILE, False, 0.5)
-    assert np.array_equal(out, est) and np.array_equal(index2, index) and not missing.any()
+    out, track2, missing = carry_estimates(est, track, rows, cols, ones, None, TILE, False, 0.5, step=2)
+    assert np.array_equal(out, est) and not missing.any()
+    for a, b in zip((track2.index, track2.place, track2.gen), (track.index, track.place, track.gen)):
+        assert np.array_equal(a, b)
     assert np.array_equal(carry(np.maximum(cols - TILE, 0))[:, :, 1:], est[:, :, :-1])  # one tile left before
     seen = ones.copy()
     seen[:TILE, :TILE] = 0
-    out, _, missing = carry_estimates(est, index, rows, cols, seen, None, TILE, False, 0.5)
+    out, _, missing = carry_estimates(est, track, rows, cols, seen, None, TILE, False, 0.5, step=2)
     assert np.isinf(out[:, 0, 0]).all() and np.array_equal(out[:, 1:], est[:, 1:])
     assert missing[0, 0] and missing.sum() == 1
     # half a tile right: each tile's pixels come half from its own source tile, half from the one
@@ -50,19 +62,54 @@ def test_carried_estimates_follow_the_surface() -> None:
     # background keeps the estimate at its own screen position, seen or not
     sky = np.zeros((h, w), np.float32)
     sky[:TILE, :TILE] = 1
-    out = carry_estimates(est, index, rows, np.maximum(cols - TILE, 0), seen, sky, TILE, False, 0.5)[0]
+    out = carry_estimates(est, track, rows, np.maximum(cols - TILE, 0), seen, sky, TILE, False, 0.5, step=2)[0]
     assert np.array_equal(out[:, 0, 0], est[:, 0, 0])
 
 
-def _carry_by_loops(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: np.ndarray, seen: np.ndarray,
-                    sky: np.ndarray, tile: int, hib: bool, fraction: float, reduce: str) -> np.ndarray:
-    """carry_estimates written out pixel by pixel and tile by tile: the reference for the vectorised one."""
+def test_the_default_step_keeps_four_pixels_per_tile_and_axis() -> None:
+    assert {t: default_step(t) for t in (1, 4, 5, 7, 8, 12, 16, 32)} == {1: 1, 4: 1, 5: 1, 7: 1, 8: 2, 12: 3, 16: 4,
+                                                                         32: 8}
+    assert tile_index_map((48, 64), 16).shape == (12, 16) == start_track((48, 64), 16).place.shape
+
+
+@pytest.mark.parametrize("step", [2, 4, 8])
+def test_small_motions_add_up_as_one(step: int) -> None:
+    """A camera panning a pixel a frame carries the estimates by three pixels after three frames, as
+    one three-pixel pan does, whatever the kept pixels' spacing: the surfaces' positions are carried,
+    so rounding to the kept pixels does not add up (rounding down would move them a whole step a
+    frame; to the nearest, not at all)."""
+    th, tw = 3, 5
+    h, w = th * TILE, tw * TILE
+    est = np.random.default_rng(2).random((6, th * tw)).astype(np.float32)
+    rows, cols = np.indices((h, w))
+    ones = np.ones((h, w), np.float32)
+    for shift in (1, -1):
+        once = start_track((h, w), TILE, step)
+        for _ in range(3):  # a pixel a frame
+            out, once, _ = carry_estimates(est, once, rows, np.clip(cols - shift, 0, w - 1), ones, None, TILE, False,
+                                           0.5, step=step)
+        jump = carry_estimates(est, start_track((h, w), TILE, step), rows, np.clip(cols - 3 * shift, 0, w - 1), ones,
+                               None, TILE, False, 0.5, step=step)[0]
+        assert np.allclose(out, jump)
+        # the mean follows the surface: the kept pixels that moved 3 pixels out of their tile take the neighbour's
+        kept = np.arange(0, TILE, step) - 3 * shift
+        f = np.mean((kept < 0) | (kept >= TILE))
+        grid = est.reshape(6, th, tw)
+        mix = (1 - f) * grid + f * np.roll(grid, shift, axis=2)
+        inner = slice(1, tw) if shift > 0 else slice(0, tw - 1)
+        assert np.allclose(out[:, :, inner], mix[:, :, inner])
+
+
+def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.ndarray, seen: np.ndarray,
+                    sky: np.ndarray, tile: int, hib: bool, fraction: float, reduce: str,
+                    s: int) -> tuple[np.ndarray, np.ndarray]:
+    """carry_estimates written out pixel by pixel and tile by tile (one pixel of every ``s`` per axis):
+    the reference for the vectorised one. Returns the estimates and each kept pixel's entry."""
     h, w = seen.shape
-    s = 2 if tile % 2 == 0 else 1
-    gh, gw = index.shape
     th, tw = -(-h // tile), -(-w // tile)
     k = tile // s
     out = np.empty((len(est), th, tw))
+    entry = np.full((th * k, tw * k), -1)
     worst = -np.inf if hib else np.inf
     for ty in range(th):
         for tx in range(tw):
@@ -70,8 +117,19 @@ def _carry_by_loops(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: 
             for i in range(ty * k, ty * k + k):
                 for j in range(tx * k, tx * k + k):
                     y, x = min(i * s, h - 1), min(j * s, w - 1)
-                    src = int(index[min(rows[y, x] // s, gh - 1), min(cols[y, x] // s, gw - 1)]) if seen[y, x] > 0 else -1
-                    src = ty * tw + tx if sky[y, x] > 0.5 else src
+                    src = -1
+                    if sky[y, x] > 0.5:
+                        src = ty * tw + tx
+                    elif seen[y, x] > 0:
+                        r, c = int(rows[y, x]), int(cols[y, x])
+                        ki, kj = r // s, c // s  # the kept pixel at or above-left of the fetched one
+                        if track.index[ki, kj] >= 0:  # its surface's place, moved by the offset: that tile's entry
+                            py = (int(track.place[ki, kj]) >> PLACE_BITS) + r - ki * s
+                            px = (int(track.place[ki, kj]) & ((1 << PLACE_BITS) - 1)) + c - kj * s
+                            there = track.lut[track.gen[ki, kj], min(max(py // tile, 0), th - 1) * tw
+                                              + min(max(px // tile, 0), tw - 1)]
+                            src = int(there) if there >= 0 else int(track.index[ki, kj])
+                    entry[i, j] = src
                     if src >= 0:
                         known.append(est[:, src])
             if not known or 1 - len(known) / (k * k) > fraction:
@@ -85,27 +143,39 @@ def _carry_by_loops(est: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: 
             else:  # the quartile towards the worse side
                 order = np.sort(v, axis=0) if hib else -np.sort(-v, axis=0)
                 out[:, ty, tx] = order[max(int(np.floor(0.25 * (len(v) - 1))), 0)]
-    return out
+    return out, entry
 
 
 @pytest.mark.parametrize("reduce", sorted(sdk.REUSE_REDUCTIONS))
 def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
     """Random motion, disocclusion and sky on frames that are not whole tiles (the kept pixels' padding
-    repeats the last row and column), odd tiles (every pixel kept), both error directions."""
+    repeats the last row and column), odd tiles (every pixel kept by default), both error directions,
+    the default pixel step and others (a step that is not a power of two divides), tracks whose
+    surfaces lie anywhere on the frames of several generations, some of whose tiles are no entry."""
     rng = np.random.default_rng(7)
-    for h, w, tile in ((37, 53, 8), (48, 64, 16), (30, 21, 5), (50, 70, 16)):
-        index = tile_index_map((h, w), tile)
-        entries = index.max() + 1 + int(rng.integers(0, 9))  # the frame's tiles, then fresh ones
-        index = np.where(rng.random(index.shape) < 0.15, -1, rng.integers(0, entries, index.shape))
+    for h, w, tile, step in ((37, 53, 8, None), (48, 64, 16, None), (30, 21, 5, None), (50, 70, 16, None),
+                             (50, 70, 16, 4), (37, 53, 8, 8), (40, 29, 12, 3), (30, 21, 5, 5), (48, 64, 16, 1)):
+        s = default_step(tile) if step is None else step
+        shape = tile_index_map((h, w), tile, step).shape
+        assert shape == (-(-h // tile) * tile // s, -(-w // tile) * tile // s)
+        tiles = -(-h // tile) * -(-w // tile)
+        entries = tiles + int(rng.integers(0, 9))  # the frame's tiles, then fresh ones
+        lut = np.where(rng.random((3, tiles)) < 0.3, -1, rng.integers(0, entries, (3, tiles))).astype(np.int32)
+        lut[0] = np.arange(tiles)
+        index = np.where(rng.random(shape) < 0.15, -1, rng.integers(0, entries, shape)).astype(np.int32)
+        place = (rng.integers(0, h, shape) << PLACE_BITS) | rng.integers(0, w, shape)
+        track = Track(index, np.where(index >= 0, place, -1).astype(np.int32), rng.integers(0, 3, shape).astype(np.int32),
+                      lut)
         est = rng.random((6, entries)).astype(np.float32)
         rows, cols = rng.integers(0, h, (h, w)), rng.integers(0, w, (h, w))
         seen = (rng.random((h, w)) > 0.25).astype(np.float32)
         sky = (rng.random((h, w)) > 0.9).astype(np.float32)
         for hib in (False, True):
-            got, _, missing = carry_estimates(est, index, rows, cols, seen, sky, tile, hib, 0.5, reduce)
-            want = _carry_by_loops(est, index, rows, cols, seen, sky, tile, hib, 0.5, reduce)
-            assert np.allclose(got, want, rtol=1e-6), (h, w, tile, hib)
-            assert np.array_equal(missing, np.isinf(want).all(axis=0)), (h, w, tile, hib)
+            got, carried, missing = carry_estimates(est, track, rows, cols, seen, sky, tile, hib, 0.5, reduce, step)
+            want, entry = _carry_by_loops(est, track, rows, cols, seen, sky, tile, hib, 0.5, reduce, s)
+            assert np.allclose(got, want, rtol=1e-6), (h, w, tile, step, hib)
+            assert np.array_equal(missing, np.isinf(want).all(axis=0)), (h, w, tile, step, hib)
+            assert np.array_equal(carried.index, entry), (h, w, tile, step)
 
 
 @pytest.mark.parametrize("name", sdk.shipped_models())
@@ -170,12 +240,14 @@ class _Scene:
         return x
 
 
-def test_fresh_tiles_are_the_networks_and_are_carried_on() -> None:
+@pytest.mark.parametrize("step", [None, 2])
+def test_fresh_tiles_are_the_networks_and_are_carried_on(step: int | None) -> None:
     """``unseen="fresh"``: a tile the network did not see gets what the network says on this frame,
-    computed on a crop only, and keeps it on the next reused frame."""
+    computed on a crop only, and keeps it on the next reused frame (with the default pixel step and
+    a sparser one)."""
     s = _Scene()
     th, tw = s.h // TILE, s.w // TILE
-    reuse = sdk.PredictionReuse(s.pred, 4, unseen="fresh")
+    reuse = sdk.PredictionReuse(s.pred, 4, unseen="fresh", step=step)
     everything = np.ones((s.h, s.w), np.float32)
     first = reuse.shading_rates(s.inputs(everything))
     assert reuse.work == 1.0 and reuse.age == 0
@@ -314,7 +386,8 @@ def test_bad_arguments_are_refused() -> None:
                      ({"margin": -1}, "margin"), ({"history": 1.0}, "history"), ({"history": -0.1}, "history"),
                      ({"history": "0.5"}, "history"), ({"history": True}, "history"),
                      ({"history": float("nan")}, "history"), ({"refresh": 1.0}, "refresh"), ({"refresh": -1}, "refresh"),
-                     ({"refresh": "0.1"}, "refresh"), ({"refresh": False}, "refresh")):
+                     ({"refresh": "0.1"}, "refresh"), ({"refresh": False}, "refresh"), ({"step": 3}, "step"),
+                     ({"step": 0}, "step"), ({"step": 32}, "step"), ({"step": True}, "step"), ({"step": 4.0}, "step")):
         with pytest.raises(sdk.ParameterError, match=name) as err:
             sdk.PredictionReuse(s.pred, **kw)  # type: ignore[arg-type]
         assert err.value.name == name
@@ -329,6 +402,9 @@ def test_bad_arguments_are_refused() -> None:
         reuse.predict(s.x, (s.rows.astype(np.float32), s.cols), ones)
     with pytest.raises(sdk.ParameterError, match=r"indices in \[0, 64\)"):
         reuse.predict(s.x, (s.rows, s.cols + 1), ones)
+    for dtype in (np.int64, np.int32, np.int16):  # negative indices too, whatever the integer type
+        with pytest.raises(sdk.ParameterError, match=r"fetch rows: expected indices in \[0, \d+\) .* got -1\.\."):
+            reuse.predict(s.x, ((s.rows - 1).astype(dtype), s.cols), ones)
     with pytest.raises(sdk.InputShapeError, match="seen"):
         reuse.predict(s.x, (s.rows, s.cols), ones[:, :-1])
     with pytest.raises(sdk.ParameterError, match=r"fetch: expected \(rows, cols\)"):
@@ -341,4 +417,4 @@ def test_bad_arguments_are_refused() -> None:
         reuse.predict(s.x.tolist(), (s.rows, s.cols), ones)  # type: ignore[arg-type]
     with pytest.raises(sdk.ParameterError, match="pass seen"):
         reuse.predict(lambda ys, xs: s.x[:, ys, xs], (s.rows, s.cols))
-    assert "every=4" in repr(reuse)
+    assert "every=4" in repr(reuse) and "step=4" in repr(reuse) and sdk.PredictionReuse(s.pred, step=8).step == 8
