@@ -18,7 +18,8 @@ network every k-th frame and reprojects its per-tile predictions in between with
 :class:`rtp.sdk.PredictionReuse`, tiles mostly unseen since the last prediction at full rate, or
 predicted afresh on crops with ``NAME@k:fresh``; ``NAME@k:hW`` also blends each network run's
 estimates with those carried from the previous frame, weight W on the carried ones; ``NAME@k:rS``
-runs the network early once more than a share S of the tiles is unseen since it ran), ``yang2019``
+runs the network early once more than a share S of the tiles is unseen since it ran; ``NAME@k:sN``
+carries one pixel of every N per axis), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -370,6 +371,9 @@ def play(
 
     if workers < 1:
         raise PlayError(f"workers: expected >= 1, got {workers}", "workers")
+    # each reuse method's pixel step as the carry resolves it (a bad one fails here, before the run)
+    steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step).step
+             for m in specs if m.kind == "model"}
     settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
                 "fail_threshold": fail_thr, "sweep": sweep, "flip_every": flip_every,
@@ -380,7 +384,7 @@ def play(
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
-                                   "refresh": m.refresh, "step": m.step}
+                                   "refresh": m.refresh, "step": steps[m.name]}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
