@@ -21,8 +21,9 @@ With several paths the report ends with each reuse method's mean over them (kept
 level, worst path, network work); ``--plot-reuse PNG`` draws the kept share at 5% against the work.
 
 Runs with different methods share one table: its columns are every method of any run, blank where
-a run did not play it. Runs of the same map, seed, frames, size and failure threshold are merged
-into one row per path (every method has its own history, so a method's numbers do not depend on
+a run did not play it. Runs of the same map, seed, frames, size, failure threshold and sweep grids
+(as recorded, or read off the thresholds in the rows of runs from before the grids were recorded)
+are merged into one row per path (every method has its own history, so a method's numbers do not depend on
 which others ran beside it): `jnyang,jnyang@4` in one run and `jnyang@2` in another compare.
 """
 
@@ -33,6 +34,8 @@ import json
 import math
 from pathlib import Path
 from typing import Any
+
+from rtp.evaluate import METHOD_KINDS
 
 LEVELS = (0.01, 0.02, 0.05)
 
@@ -49,6 +52,35 @@ def _readable(m: dict[str, Any] | None) -> bool:
 
 def _ratio(a: dict[str, Any] | None, b: dict[str, Any] | None) -> float:
     return a["work_saved"] / b["work_saved"] if _readable(a) and _readable(b) else math.nan  # type: ignore[index]
+
+
+def _grids(rep: dict[str, Any]) -> dict[str, list[float]] | None:
+    """The sweep grids a run was read off: as recorded, or, for runs before 2026-11-26 that did not
+    record them, inferred from its rows (each model's and each baseline's swept values over its
+    default's; None if the rows do not tell). Keys: ``model`` (multiples of a model's threshold; a
+    PSNR model's dB offsets give other ratios and so never match) and ``baseline``."""
+    recorded = rep["settings"].get("grids")
+    if recorded:
+        return {k: [round(v, 6) for v in recorded[k]] for k in ("model", "baseline")}
+    baselines = set(METHOD_KINDS) - {"full", "oracle"}
+    out: dict[str, list[float]] = {}
+    for method in {r["method"] for r in rep.get("rows", [])} - {"full", "oracle"}:
+        rows = [r for r in rep["rows"] if r["method"] == method and r.get("value") is not None]
+        default = next((r["value"] for r in rows if r.get("default")), None)
+        if not default:
+            continue
+        grid = sorted({round(r["value"] / default, 6) for r in rows})
+        kind = "baseline" if method in baselines else "model"
+        if out.setdefault(kind, grid) != grid:  # two models swept differently: no one grid
+            out[kind] = []
+    return out or None
+
+
+def _same_grids(a: dict[str, list[float]] | None, b: dict[str, list[float]] | None) -> bool:
+    """Whether two runs were swept alike wherever both show a grid (two runs that do not tell: alike)."""
+    if a is None or b is None:
+        return a is None and b is None
+    return all(a[k] == b[k] and a[k] for k in a.keys() & b.keys())
 
 
 def _fmt(r: float, pct: bool = False) -> str:
@@ -76,17 +108,18 @@ def main() -> None:
     for run in args.runs:
         rep = json.loads(run.read_text())
         s = rep["settings"]
-        # runs before 2026-11-26 do not record their sweep grids (six points per method then)
-        grids = json.dumps(s.get("grids"), sort_keys=True)
-        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"], grids)
-        same = next((r for r in runs if r["_key"] == key), None)
-        if same is None and any(r["_key"][:-1] == key[:-1] for r in runs):
+        # runs before 2026-11-26 do not record their sweep grids (six points per method then): read off the rows
+        grids = _grids(rep)
+        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"])
+        same = next((r for r in runs if r["_key"] == key and _same_grids(r["_grids"], grids)), None)
+        if same is None and any(r["_key"] == key for r in runs):
             print(f"note: {run} was swept over other grids than a run of the same map and path before it: "
                   "its rows are not merged\n")
         if same is None:
-            runs.append({**rep, "_key": key, "settings": {**s, "methods": list(s["methods"])},
+            runs.append({**rep, "_key": key, "_grids": grids, "settings": {**s, "methods": list(s["methods"])},
                          "matched": list(rep["matched"])})
             continue
+        same["_grids"] = {**(grids or {}), **(same["_grids"] or {})} or None
         new = [m for m in s["methods"] if m not in same["settings"]["methods"]]
         same["settings"]["methods"] += new
         same["matched"] += [m for m in rep["matched"] if m["method"] in new]

@@ -328,3 +328,16 @@ def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> 
                          capture_output=True, text=True, check=True).stdout
     assert "a-grids.json was swept over other grids" in out
     assert out.count("| a | 0 | fast |") == 4  # two rows in each of the two tables
+    # a run from before the grids were recorded is read off its rows' thresholds: the same grid merges, another not
+    for values, merged in (((0.125, 0.25), True), ((0.0625, 0.25), False)):
+        older = json.loads(Path(runs[0]).read_text())
+        older["settings"]["methods"] = ["jnyang@2"]
+        older["rows"] = [{"path": "fast", "method": "jnyang@2", "default": v == 0.25, "value": v, "network_frames": 0.5}
+                         for v in values]
+        older["matched"] = [{"path": "fast", "method": "jnyang@2", "fail_share": lv, "work_saved": 0.49}
+                            for lv in (0.01, 0.02, 0.05)]
+        (tmp_path / "a-old.json").write_text(json.dumps(older))
+        out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "a-grids.json"),
+                              str(tmp_path / "a-old.json")], capture_output=True, text=True, check=True).stdout
+        assert ("swept over other grids" not in out) == merged
+        assert out.count("| a | 0 | fast |") == (2 if merged else 4)
