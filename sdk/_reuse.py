@@ -69,7 +69,7 @@ def default_step(tile: int) -> int:
     leaves at least :data:`KEPT_PER_TILE` kept pixels per tile and axis (4 for 16-pixel tiles, 2 for
     8, 1 for odd tiles up to 7). On the validation maps every fourth pixel of 16-pixel tiles kept
     as much of every frame's saving as every second to within 1.1 points at 1-5% failing tiles, at
-    two fifths of the cost (docs/results.md "Prediction reuse that follows the surfaces")."""
+    about half the cost (docs/results.md "Prediction reuse that follows the surfaces")."""
     return max(d for d in range(1, tile + 1) if tile % d == 0 and tile // d >= KEPT_PER_TILE) if tile >= 4 else 1
 
 
