@@ -269,6 +269,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
+                 "head_width",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
@@ -533,6 +534,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--separable", action="store_true", default=None,
                    help="the fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across "
                    "them: about a ninth of the work, room for more width) (default: off)")
+    r.add_argument("--head-width", dest="head_width", type=_positive, default=None,
+                   help="the fast network's head as a per-tile MLP: a 1x1 to N channels, BatchNorm, ReLU, then the 1x1 "
+                   "to the outputs (almost free at tile resolution) (default: a linear 1x1)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

@@ -184,6 +184,22 @@ def test_separable_blocks_are_depthwise_then_pointwise_and_export() -> None:
     _round_trip(net, "separable", seed=2)
 
 
+def test_the_mlp_head_reads_the_last_block_through_a_hidden_layer_and_exports() -> None:
+    from rtp.train.model import FastNet
+
+    net = FastNet(4, depth=5, head_width=64).eval()
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    # the 3x3 blocks stay at width 16; the head is 1x1 16 -> 64 (BatchNorm, ReLU), then 1x1 64 -> outputs
+    assert [(m.kernel_size[0], m.out_channels) for m in convs] == [(4, 16)] + [(3, 16)] * 5 + [(1, 64), (1, 4)]
+    assert isinstance(net.layers[-3], torch.nn.ReLU) and isinstance(net.layers[-1], torch.nn.Sigmoid)
+    assert net.config["head_width"] == 64 and "head_width" not in FastNet().config
+    plain = sum(p.numel() for p in FastNet(4, depth=5).parameters())
+    assert sum(p.numel() for p in net.parameters()) == plain - 68 + 16 * 64 + 2 * 64 + 64 * 4 + 4
+    with pytest.raises(ValueError, match="head_width"):
+        FastNet(head_width=-1)
+    _round_trip(net, "head_width", seed=3)
+
+
 def test_the_fast_network_takes_partial_tiles() -> None:
     from rtp.train.model import FastNet
 

@@ -244,6 +244,22 @@ def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert exc.value.code == 2 and "--loss" in capsys.readouterr().err
 
 
+def test_the_mlp_head_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=4)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes",
+            "scene0", "--arch", "fast", "--head-width", "32", "--steps", "6"]
+    assert rtp_main([*base, "--out", str(tmp_path / "h.pt")]) == 0
+    ck = load_checkpoint(tmp_path / "h.pt")
+    assert ck.net.config["head_width"] == 32 and ck.metadata.provenance["head_width"] == 32
+    assert [m.out_channels for m in ck.net.modules() if isinstance(m, torch.nn.Conv2d)][-2:] == [32, 4]
+    # the same file with a linear head is another network: refused, not silently resumed
+    assert rtp_main([*base[:-4], "--steps", "12", "--out", str(tmp_path / "h.pt")]) != 0
+    assert "differs in: head_width" in capsys.readouterr().err
+    with pytest.raises(sdk.ParameterError, match="head_width: the fast network's option"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, head_width=32))
+
+
 def test_the_energy_norm_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)

@@ -66,6 +66,9 @@ class TrainConfig:
     max_width: int = 0
     #: The fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across them).
     separable: bool = False
+    #: Hidden channels of the fast network's head: 0, a linear 1x1; N, a 1x1 to N, BatchNorm, ReLU, then
+    #: the 1x1 to the outputs (a per-tile MLP, almost free at tile resolution).
+    head_width: int = 0
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -376,6 +379,11 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                                  f"stem {cfg.stem}", "stem_layers")
     if cfg.separable and cfg.arch != "fast":
         raise sdk.ParameterError(f"separable: the fast network's option, got arch {cfg.arch!r}", "separable")
+    if cfg.head_width and cfg.arch != "fast":
+        raise sdk.ParameterError(f"head_width: the fast network's option, got arch {cfg.arch!r}", "head_width")
+    if cfg.head_width < 0:
+        raise sdk.ParameterError(f"head_width: expected 0 (a linear head) or the hidden channels of the head, got "
+                                 f"{cfg.head_width}", "head_width")
     if cfg.energy_norm and cfg.arch != "fast":
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
@@ -407,7 +415,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     gen = torch.Generator().manual_seed(cfg.seed)
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
-                        energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable)
+                        energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
+                        head_width=cfg.head_width)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -426,6 +435,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["max_width"] = cfg.max_width
         if cfg.separable:
             config_key["separable"] = True
+        if cfg.head_width:
+            config_key["head_width"] = cfg.head_width
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -574,6 +585,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
         **({"max_width": cfg.max_width} if cfg.max_width else {}),
         **({"separable": True} if cfg.separable else {}),
+        **({"head_width": cfg.head_width} if cfg.head_width else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,
