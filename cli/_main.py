@@ -48,6 +48,16 @@ def _positive(text: str) -> int:
     return v
 
 
+def _non_negative(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
+    return v
+
+
 def _csv(text: str) -> tuple[str, ...]:
     return tuple(t.strip() for t in text.split(",") if t.strip())
 
@@ -534,9 +544,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--separable", action="store_true", default=None,
                    help="the fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across "
                    "them: about a ninth of the work, room for more width) (default: off)")
-    r.add_argument("--head-width", dest="head_width", type=_positive, default=None,
+    r.add_argument("--head-width", dest="head_width", type=_non_negative, default=None,
                    help="the fast network's head as a per-tile MLP: a 1x1 to N channels, BatchNorm, ReLU, then the 1x1 "
-                   "to the outputs (almost free at tile resolution) (default: a linear 1x1)")
+                   "to the outputs (almost free at tile resolution); 0: a linear 1x1 (default: the recipe's; the "
+                   "shipped recipe's is 64 for JNYang, 0 for the other metrics)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

@@ -49,6 +49,8 @@ def test_the_paper_network_recipe_ships_by_name() -> None:
 def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", steps=10)
     assert cfg.steps == 10 and cfg.batch == 128 and cfg.crop == 64 and cfg.lr == 5e-4 and cfg.arch == "fast"
+    assert cfg.head_width == 64  # JNYang's MLP head; every other metric keeps the linear read-out
+    assert TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="flip", out="o.pt").head_width == 0
     assert cfg.val_split == "validation" and not cfg.val_scenes and map_names("validation")
     assert cfg.recipe is not None and cfg.recipe["name"] == SHIPPED_RECIPE and cfg.recipe["values"]["steps"] == 24000
     assert cfg.recipe["overrides"] == {"steps": 10}  # the provenance says what the command line changed

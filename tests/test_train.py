@@ -253,9 +253,15 @@ def test_the_mlp_head_trains_from_the_command_line_and_is_recorded(tmp_path: Pat
     ck = load_checkpoint(tmp_path / "h.pt")
     assert ck.net.config["head_width"] == 32 and ck.metadata.provenance["head_width"] == 32
     assert [m.out_channels for m in ck.net.modules() if isinstance(m, torch.nn.Conv2d)][-2:] == [32, 4]
-    # the same file with a linear head is another network: refused, not silently resumed
-    assert rtp_main([*base[:-4], "--steps", "12", "--out", str(tmp_path / "h.pt")]) != 0
+    # the same file with a linear head (0) is another network: refused, not silently resumed
+    assert rtp_main([*base[:-4], "--head-width", "0", "--steps", "12", "--out", str(tmp_path / "h.pt")]) != 0
     assert "differs in: head_width" in capsys.readouterr().err
+    # 0 overrides the recipe's head (the shipped recipe gives JNYang an MLP head of 64); negatives are refused
+    assert rtp_main([*base[:-4], "--head-width", "0", "--steps", "6", "--out", str(tmp_path / "l.pt")]) == 0
+    assert "head_width" not in load_checkpoint(tmp_path / "l.pt").net.config
+    with pytest.raises(SystemExit) as exc:
+        rtp_main([*base[:-4], "--head-width", "-1", "--out", str(tmp_path / "n.pt")])
+    assert exc.value.code == 2 and "expected an integer >= 0, got -1" in capsys.readouterr().err
     with pytest.raises(sdk.ParameterError, match="head_width: the fast network's option"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, head_width=32))
 
@@ -278,7 +284,7 @@ def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_pat
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)
     base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes",
-            "scene0", "--arch", "fast", "--grow", "2", "--depth", "4", "--steps", "6"]
+            "scene0", "--arch", "fast", "--grow", "2", "--depth", "4", "--head-width", "0", "--steps", "6"]
     assert rtp_main([*base, "--max-width", "32", "--out", str(tmp_path / "m.pt")]) == 0
     ck = load_checkpoint(tmp_path / "m.pt")
     assert ck.net.config["max_width"] == 32 and ck.metadata.provenance["max_width"] == 32
@@ -406,7 +412,8 @@ def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -
     assert list(prov["teachers"]) == ["t0.onnx", "t1.onnx"] and prov["distill"] == 0.7
     # through the command line too; a teacher on other tiles, or a weight outside (0, 1], is refused
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "c.pt"), "--steps",
-                     "4", "--crop", "32", "--val-scenes", "scene0", "--teachers", ",".join(teachers)]) == 0
+                     "4", "--crop", "32", "--val-scenes", "scene0", "--head-width", "0",  # as the teachers
+                     "--teachers", ",".join(teachers)]) == 0
     assert load_checkpoint(tmp_path / "c.pt").metadata.provenance["distill"] == 0.5
     with pytest.raises(sdk.ParameterError, match="teachers: .* on 16-pixel tiles.* the student needs jnyang on 8-pixel"):
         train(TrainConfig(out=str(tmp_path / "p.pt"), steps=4, teachers=(teachers[0],), tile=8, **base))
