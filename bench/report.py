@@ -2,6 +2,7 @@
 
     python bench/report.py data/eval-jnyang/evaluation.json [more evaluation.json ...]
     python bench/report.py --compact data/eval-*/evaluation.json    # one row per model
+    python bench/report.py --per-scene data/evalhold-*/evaluation.json    # one row per model and map
 
 
 The last table gives each method's work saved at fixed shares of failing tiles (1, 2, 5, 10, 15%),
@@ -12,8 +13,8 @@ well as methods.
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 
 from rtp.evaluate import saved_at
 
@@ -77,8 +78,47 @@ def compact(paths: list[str]) -> None:
            "saved % at 1 / 2 / 5 / 10% fails"], rows)
 
 
+def per_scene(paths: list[str]) -> None:
+    """One row per model and scene of every file: R² on all / seen / unseen tiles with the model's
+    safety margin and without it (a pooled R² mixes the maps' levels; held-out-map studies read these)."""
+    rows = []
+    for path in paths:
+        for d in json.load(open(path, encoding="utf-8")):
+            q = {(r["scene"], r["split"], r["method"]): r["r2"] for r in d["quality"]}
+            scenes = dict.fromkeys(r["scene"] for r in d["quality"] if r["scene"] != "all scenes")
+            for scene in [*scenes, "all scenes"]:
+                rows.append([d["model"]["path"], scene,
+                             " / ".join(pct(q.get((scene, s, "model"))) for s in ("all", "seen", "unseen")),
+                             " / ".join(pct(q.get((scene, s, "model (no safety)"))) for s in ("all", "seen", "unseen"))])
+    table(["model", "scene", "R² all / seen / unseen %", "same, no safety margin"], rows)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description="Summary tables of `rtp evaluate` results (evaluation.json files).")
+    ap.add_argument("paths", nargs="+", metavar="evaluation.json", help="files written by `rtp evaluate --out DIR`")
+    form = ap.add_mutually_exclusive_group()
+    form.add_argument("--compact", action="store_true", help="one row per model: R² and work saved at 1-10%% failing")
+    form.add_argument("--per-scene", action="store_true", help="one row per model and scene: R² with and without the margin")
+    args = ap.parse_args(argv)
+    missing = [p for p in args.paths if not open_ok(p)]
+    if missing:
+        ap.error(f"no such file: {', '.join(missing)} (expected the evaluation.json of an `rtp evaluate --out` folder)")
+    return args
+
+
+def open_ok(path: str) -> bool:
+    try:
+        with open(path, encoding="utf-8"):
+            return True
+    except OSError:
+        return False
+
+
 if __name__ == "__main__":
-    if sys.argv[1:2] == ["--compact"]:
-        compact(sys.argv[2:])
+    a = parse_args()
+    if a.compact:
+        compact(a.paths)
+    elif a.per_scene:
+        per_scene(a.paths)
     else:
-        main(sys.argv[1:])
+        main(a.paths)

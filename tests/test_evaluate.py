@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -423,6 +425,14 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "a,b", "--scene", "b",
                      "--no-baselines", "--max-samples", "1"]) == 0
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--plots"]) == 2  # --plots needs --out
+    # the summary tables docs/results.md quotes read the same file (bench/report.py)
+    report = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "report.py")]
+    for flag, expect in (("--compact", "saved % at 1 / 2 / 5 / 10% fails"), ("--per-scene", "| all scenes |")):
+        shown = subprocess.run([*report, flag, str(out / "evaluation.json")], capture_output=True, text=True,
+                               check=True).stdout
+        assert expect in shown and str(model) in shown
+    bad = subprocess.run([*report, str(tmp_path / "nope.json")], capture_output=True, text=True)
+    assert bad.returncode == 2 and "no such file" in bad.stderr
 
 
 def test_matched_quality_interpolates_along_the_sweep() -> None:
