@@ -32,7 +32,8 @@ def test_the_shipped_recipe_is_the_fast_network_for_every_metric() -> None:
     lp = load_recipe(SHIPPED_RECIPE, "lpips")  # the material inputs did not help LPIPS; its linear head; depth 5 did;
     # 64-pixel crops lost, 64 crops of 128 pixels a step won
     assert lp.values == {**fl.values, "crop": 128, "batch": 64,
-                         "inputs": ("reprojected.r", "seen", "albedo.r", "normal.z"), "head": "linear", "depth": 5}
+                         "inputs": ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g",
+                                          "albedo.b", "normal.z"), "head": "linear", "depth": 5}
     assert jn.val_split == "validation" and len(jn.sha256) == 64
 
 
