@@ -279,7 +279,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "head_width",
+                 "head_width", "context_pool",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
@@ -548,6 +548,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the fast network's head as a per-tile MLP: a 1x1 to N channels, BatchNorm, ReLU, then the 1x1 "
                    "to the outputs (almost free at tile resolution); 0: a linear 1x1 (default: the recipe's; the "
                    "shipped recipe's is 64 for JNYang, 0 for the other metrics)")
+    r.add_argument("--context-pool", dest="context_pool", type=_non_negative, default=None,
+                   help="an odd window K of tiles: the fast network appends the mean of its last features over K x K "
+                   "tiles before the head (the neighbourhood a tile's error can depend on); 0: none (default: 0)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

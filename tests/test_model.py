@@ -200,6 +200,25 @@ def test_the_mlp_head_reads_the_last_block_through_a_hidden_layer_and_exports() 
     _round_trip(net, "head_width", seed=3)
 
 
+def test_the_context_pool_appends_the_neighbourhood_mean_and_exports() -> None:
+    from rtp.train.model import ContextPool, FastNet
+
+    net = FastNet(8, depth=5, context_pool=9).eval()
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    assert isinstance(net.layers[-3], ContextPool) and (convs[-1].in_channels, convs[-1].out_channels) == (32, 4)
+    assert net.config["context_pool"] == 9 and "context_pool" not in FastNet().config
+    # the appended channels are each feature's mean over the window, the border averaging only what it has
+    pool = ContextPool(3)
+    x = torch.arange(16.0).reshape(1, 1, 4, 4)
+    y = pool(x)
+    assert torch.equal(y[:, :1], x) and y[0, 1, 0, 0] == (0 + 1 + 4 + 5) / 4 and y[0, 1, 1, 1] == x[0, 0, :3, :3].mean()
+    for bad in (-1, 1, 2, 8):
+        with pytest.raises(ValueError, match="context_pool"):
+            FastNet(context_pool=bad)
+    _round_trip(net, "context_pool", base_metadata(inputs=["reprojected.r", "reprojected.g", "reprojected.b", "seen",
+                                                           "albedo.r", "albedo.g", "albedo.b", "normal.z"]), seed=4)
+
+
 def test_the_fast_network_takes_partial_tiles() -> None:
     from rtp.train.model import FastNet
 

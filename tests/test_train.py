@@ -280,6 +280,26 @@ def test_the_energy_norm_trains_from_the_command_line_and_is_recorded(tmp_path: 
     assert "differs in: energy_norm" in capsys.readouterr().err
 
 
+def test_the_context_pool_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=4)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes",
+            "scene0", "--arch", "fast", "--head-width", "0", "--context-pool", "5", "--steps", "6"]
+    assert rtp_main([*base, "--out", str(tmp_path / "c.pt")]) == 0
+    ck = load_checkpoint(tmp_path / "c.pt")
+    assert ck.net.config["context_pool"] == 5 and ck.metadata.provenance["context_pool"] == 5
+    assert any(type(m).__name__ == "ContextPool" for m in ck.net.modules())
+    # the same file without the pool is another network: refused, not silently resumed
+    assert rtp_main([*base[:-4], "--steps", "12", "--out", str(tmp_path / "c.pt")]) != 0
+    assert "differs in: context_pool" in capsys.readouterr().err
+    for bad in ("4", "1"):  # even windows have no centre; 1 is the tile itself
+        with pytest.raises(sdk.ParameterError, match="context_pool: expected 0 .none. or an odd window"):
+            train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "b.pt"), arch="fast", crop=32,
+                              context_pool=int(bad)))
+    with pytest.raises(sdk.ParameterError, match="context_pool: the fast network's option"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, context_pool=5))
+
+
 def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_path: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)

@@ -69,6 +69,9 @@ class TrainConfig:
     #: Hidden channels of the fast network's head: 0, a linear 1x1; N, a 1x1 to N, BatchNorm, ReLU, then
     #: the 1x1 to the outputs (a per-tile MLP, almost free at tile resolution).
     head_width: int = 0
+    #: An odd window K (in tiles): the fast network appends the mean of its last features over K x K
+    #: tiles before the head (train/model.py ``ContextPool``); 0: none.
+    context_pool: int = 0
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -384,6 +387,11 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.head_width < 0:
         raise sdk.ParameterError(f"head_width: expected 0 (a linear head) or the hidden channels of the head, got "
                                  f"{cfg.head_width}", "head_width")
+    if cfg.context_pool and cfg.arch != "fast":
+        raise sdk.ParameterError(f"context_pool: the fast network's option, got arch {cfg.arch!r}", "context_pool")
+    if cfg.context_pool and (cfg.context_pool < 3 or cfg.context_pool % 2 == 0):
+        raise sdk.ParameterError(f"context_pool: expected 0 (none) or an odd window of at least 3 tiles, got "
+                                 f"{cfg.context_pool}", "context_pool")
     if cfg.energy_norm and cfg.arch != "fast":
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
@@ -416,7 +424,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
                         energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
-                        head_width=cfg.head_width)
+                        head_width=cfg.head_width, context_pool=cfg.context_pool)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -437,6 +445,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["separable"] = True
         if cfg.head_width:
             config_key["head_width"] = cfg.head_width
+        if cfg.context_pool:
+            config_key["context_pool"] = cfg.context_pool
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -586,6 +596,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"max_width": cfg.max_width} if cfg.max_width else {}),
         **({"separable": True} if cfg.separable else {}),
         **({"head_width": cfg.head_width} if cfg.head_width else {}),
+        **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,

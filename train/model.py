@@ -141,6 +141,24 @@ class EnergyNorm(nn.Module):
         return torch.cat([x * torch.rsqrt(e), torch.log(e)], dim=1)
 
 
+class ContextPool(nn.Module):
+    """The mean of each feature over a ``size x size`` window around each position, appended as
+    many channels again: ``(N, C, H, W) -> (N, 2C, H, W)``. Positions outside the frame (or the crop)
+    do not count (``count_include_pad=False``), so a tile at the border averages what it has. At tile
+    resolution a 9-tile window covers 144 pixels of a 16-pixel-tile frame: the neighbourhood whose
+    error LPIPS's deep AlexNet features pool (about 200 pixels), at the cost of one pooling pass over
+    the tile grid instead of more 3x3 blocks."""
+
+    def __init__(self, size: int) -> None:
+        super().__init__()
+        if size < 3 or size % 2 == 0:
+            raise ValueError(f"context_pool must be an odd window of at least 3 tiles, got {size}")
+        self.pool = nn.AvgPool2d(size, stride=1, padding=size // 2, count_include_pad=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.cat([x, self.pool(x)], dim=1)
+
+
 class FastNet(nn.Module):
     """rtp's fast network: a strided stem, then conv -> BatchNorm -> ReLU blocks at low resolution.
 
@@ -151,7 +169,9 @@ class FastNet(nn.Module):
     tile resolution, where they are almost free and widen the context each tile sees; a 1x1
     convolution and a sigmoid give the outputs (no ReLU before it: no output can die). Every
     convolution is followed by BatchNorm before its ReLU, so BatchNorm folds into the convolution at
-    export. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
+    export. ``context_pool`` K > 0 appends, before the head, the mean of the last block's features
+    over a K x K window of tiles (:class:`ContextPool`): what the neighbourhood holds, for a metric
+    whose per-tile value depends on it. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
     them (16, 32, 64 for width 16 and depth 3), widening the cheap low-resolution end while the
     full-resolution read stays at ``width``; ``max_width`` caps what it doubles to (16, 32, 32, 32, 32
     for depth 5 and ``max_width`` 32: most of the tile-resolution weights at a quarter of their cost).
@@ -189,7 +209,7 @@ class FastNet(nn.Module):
     def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
                  tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
-                 separable: bool = False, head_width: int = 0) -> None:
+                 separable: bool = False, head_width: int = 0, context_pool: int = 0) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -207,6 +227,8 @@ class FastNet(nn.Module):
         if head_width < 0:
             raise ValueError(f"head_width must be 0 (a linear 1x1 head) or the hidden channels of an MLP head, got "
                              f"{head_width}")
+        if context_pool and (context_pool < 3 or context_pool % 2 == 0):
+            raise ValueError(f"context_pool must be 0 (none) or an odd window of at least 3 tiles, got {context_pool}")
         self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
                                        "width": width, "depth": depth, "stem": stem}
         if grow != 1:  # checkpoints from before the option hold no "grow"
@@ -221,6 +243,8 @@ class FastNet(nn.Module):
             self.config["energy_norm"] = True
         if head_width:  # likewise
             self.config["head_width"] = head_width
+        if context_pool:  # likewise
+            self.config["context_pool"] = context_pool
         s = min(stem, tile)
         pools = int(math.log2(tile // s))
         layers: list[nn.Module] = []
@@ -254,6 +278,9 @@ class FastNet(nn.Module):
                 if energy_norm and i == 0:  # after the first pool: a quarter of the stem's positions to normalise
                     layers.append(EnergyNorm())
                     c += 1
+        if context_pool:
+            layers.append(ContextPool(context_pool))
+            c *= 2
         if head_width:
             layers += [nn.Conv2d(c, head_width, 1, bias=False), nn.BatchNorm2d(head_width), nn.ReLU(inplace=True)]
             c = head_width
@@ -284,13 +311,13 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
-                  head_width: int = 0) -> Network:
+                  head_width: int = 0, context_pool: int = 0) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
-    ``separable`` and ``head_width`` to the fast one."""
+    ``separable``, ``head_width`` and ``context_pool`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
-                       separable, head_width)
+                       separable, head_width, context_pool)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
