@@ -280,7 +280,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
                  "head_width", "context_pool",
-                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "ema", "distill",
+                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "focus", "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
 
@@ -561,6 +561,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--loss", default=None, choices=("l1", "mse", "huber", "bce"),
                    help="training loss in transformed space: the paper's l1, mse (what R² scores), huber or bce "
                    "(cross-entropy with soft targets) (default: l1, unless the recipe sets one)")
+    r.add_argument("--focus", type=float, default=None,
+                   help="extra loss weight of the tiles whose target lies near the default threshold (a band of "
+                   "0.15 in transformed space; for example 3: such a tile counts four times; default 0: off)")
     r.add_argument("--ema", type=float, default=None,
                    help="decay of a moving average of the weights, which is validated and saved (for example "
                    "0.999; default 0: off)")

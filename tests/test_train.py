@@ -244,6 +244,37 @@ def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert exc.value.code == 2 and "--loss" in capsys.readouterr().err
 
 
+def test_focus_weights_the_tiles_near_the_threshold(tmp_path: Path) -> None:
+    from rtp.train._loop import FOCUS_WIDTH, _focused
+
+    # two tiles with the same squared error: the one whose target is at the threshold counts 1 + focus
+    # times the one far from it, and 0 is the plain mean
+    p, t = torch.tensor([0.5, 0.1]), torch.tensor([0.6, 0.0])
+    far = float(np.exp(-0.5 * (0.6 / FOCUS_WIDTH) ** 2))
+    expected = (4.0 * 0.01 + (1.0 + 3.0 * far) * 0.01) / (4.0 + 1.0 + 3.0 * far)
+    assert float(_focused("mse", 3.0, 0.6)(p, t)) == pytest.approx(expected, rel=1e-6)
+    assert float(_focused("mse", 0.0, 0.6)(p, t)) == pytest.approx(0.01, rel=1e-6)
+    # the same error on the tile at the threshold costs more than on the one far from it
+    q = torch.tensor([0.4, 0.0])
+    assert float(_focused("l1", 3.0, 0.6)(q, t)) > float(_focused("l1", 3.0, 0.6)(torch.tensor([0.6, 0.2]), t))
+
+    data = _dataset(tmp_path / "ds", n=6)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--steps", "30", "--crop", "32", "--val-scenes",
+            "scene0", "--loss", "mse"]
+    out = tmp_path / "focus.pt"
+    assert rtp_main([*base, "--out", str(out), "--focus", "3"]) == 0
+    ck = load_checkpoint(out)
+    assert ck.metadata.provenance["focus"] == 3.0 and ck.training["config"]["focus"] == 3.0
+    assert ck.metadata.provenance["recipe"]["overrides"]["focus"] == 3.0
+    # resuming it without the focus is another training run: refused, naming the field
+    with pytest.raises(sdk.RtpError, match="focus"):
+        train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(out), steps=40, crop=32,
+                                      val_scenes=("scene0",), loss="mse"))
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(sdk.ParameterError, match="focus: expected a weight >= 0"):
+            train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), focus=bad, crop=32))
+
+
 def test_the_mlp_head_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)

@@ -84,6 +84,11 @@ class TrainConfig:
     #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
     #: ``huber`` (quadratic below 0.1, linear above) or ``bce`` (cross-entropy, soft targets).
     loss: str = "l1"
+    #: Extra weight of the tiles whose target lies near the default threshold (in transformed space, a
+    #: Gaussian band of half-width ``FOCUS_WIDTH`` around it): each tile's loss is weighted
+    #: ``1 + focus * exp(-d^2 / 2 FOCUS_WIDTH^2)``, ``d`` its target's distance from the threshold, so the
+    #: network spends its accuracy where the SDK's rate decisions are made. 0: off (every tile alike).
+    focus: float = 0.0
     #: Decay of an exponential moving average of the weights (and BatchNorm statistics), updated
     #: every step; the average is what is validated, calibrated and saved. 0: off (the raw weights).
     ema: float = 0.0
@@ -184,6 +189,25 @@ _LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
     # vanish where the sigmoid saturates (targets at the transform's clamp, 1.0)
     "bce": lambda p, t: F.binary_cross_entropy(p.clamp(1e-6, 1.0 - 1e-6), t.clamp(0.0, 1.0)),
 }
+#: The same losses per element, for a weighted mean (TrainConfig.focus).
+_ELEMENT_LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
+    "l1": lambda p, t: (p - t).abs(),
+    "mse": lambda p, t: (p - t) ** 2,
+    "huber": lambda p, t: F.huber_loss(p, t, delta=0.1, reduction="none"),
+    "bce": lambda p, t: F.binary_cross_entropy(p.clamp(1e-6, 1.0 - 1e-6), t.clamp(0.0, 1.0), reduction="none"),
+}
+#: Half-width (one standard deviation, transformed space) of TrainConfig.focus's band around the threshold.
+FOCUS_WIDTH = 0.15
+
+
+def _focused(loss: str, focus: float, centre: float) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """``loss``'s mean with each element weighted by ``1 + focus`` near ``centre`` (TrainConfig.focus)."""
+    element = _ELEMENT_LOSSES[loss]
+
+    def weighted(p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        w = 1.0 + focus * torch.exp(-0.5 * ((t - centre) / FOCUS_WIDTH) ** 2)
+        return (w * element(p, t)).sum() / w.sum()
+    return weighted
 
 
 #: TrainConfig.optimizer and TrainConfig.schedule: the names each accepts.
@@ -367,6 +391,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.loss not in _LOSSES:
         raise sdk.ParameterError(f"loss: expected one of {', '.join(_LOSSES)}, got {cfg.loss!r}", "loss")
     loss_fn = _LOSSES[cfg.loss]
+    if not (cfg.focus >= 0.0 and math.isfinite(cfg.focus)):
+        raise sdk.ParameterError(f"focus: expected a weight >= 0 (0: off), got {cfg.focus}", "focus")
     if cfg.optimizer not in OPTIMIZERS:
         raise sdk.ParameterError(f"optimizer: expected one of {', '.join(OPTIMIZERS)}, got {cfg.optimizer!r}", "optimizer")
     if cfg.schedule not in SCHEDULES:
@@ -416,6 +442,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})")
 
     transform = _make_transform(cfg, tr)
+    threshold = cfg.default_threshold if cfg.default_threshold is not None else sdk.METRICS[cfg.metric].default_threshold
+    if cfg.focus:  # the band's centre: the default threshold in transformed space
+        centre = float(tt.forward(torch.tensor([float(threshold)], dtype=torch.float64), transform)[0])
+        loss_fn = _focused(cfg.loss, cfg.focus, centre)
     soft = _teacher_targets(cfg, reader, tr, transform) if cfg.teachers else None
     higher = sdk.METRICS[cfg.metric].higher_is_better
     worse = 1.0 if transform.increasing != higher else -1.0
@@ -457,6 +487,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["context"] = cfg.context
     if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
         config_key["loss"] = cfg.loss
+    if cfg.focus:
+        config_key["focus"] = cfg.focus
     if cfg.ema:
         config_key["ema"] = cfg.ema
     if cfg.optimizer != "rmsprop":  # likewise: checkpoints from before the options used the paper's
@@ -602,6 +634,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "augment": cfg.augment,
         **({"context": cfg.context} if cfg.context else {}),
         "loss": cfg.loss,
+        **({"focus": cfg.focus} if cfg.focus else {}),
         **({"ema": cfg.ema} if cfg.ema else {}),
         **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
         "dead_outputs": dead,
