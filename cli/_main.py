@@ -280,7 +280,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
                  "head_width", "context_pool",
-                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "focus", "ema", "distill",
+                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus", "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
 
@@ -558,9 +558,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
-    r.add_argument("--loss", default=None, choices=("l1", "mse", "huber", "bce"),
-                   help="training loss in transformed space: the paper's l1, mse (what R² scores), huber or bce "
-                   "(cross-entropy with soft targets) (default: l1, unless the recipe sets one)")
+    r.add_argument("--loss", default=None, choices=("l1", "mse", "huber", "bce", "quantile"),
+                   help="training loss in transformed space: the paper's l1, mse (what R² scores), huber, bce "
+                   "(cross-entropy with soft targets) or quantile (the pinball loss of --quantile) (default: l1, "
+                   "unless the recipe sets one)")
+    r.add_argument("--quantile", type=float, default=None,
+                   help="with --loss quantile: the quantile of each tile's target the network predicts, in (0, 1) "
+                   "(default 0.75)")
     r.add_argument("--focus", type=float, default=None,
                    help="extra loss weight of the tiles whose target lies near the default threshold (a band of "
                    "0.15 in transformed space; for example 3: such a tile counts four times; default 0: off)")

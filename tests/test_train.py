@@ -237,11 +237,44 @@ def test_the_loss_is_a_recipe_choice(tmp_path: Path, capsys: pytest.CaptureFixtu
         train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(tmp_path / "mse.pt"),
                                       steps=40, crop=32, val_scenes=("scene0",), loss="l1"))
     assert before.training["step"] == 30 and load_checkpoint(tmp_path / "mse.pt").training["step"] == 30
-    with pytest.raises(sdk.ParameterError, match="loss: expected one of l1, mse, huber, bce"):
+    with pytest.raises(sdk.ParameterError, match="loss: expected one of l1, mse, huber, bce, quantile"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), loss="hinge", crop=32))
     with pytest.raises(SystemExit) as exc:
         rtp_main([*base, "--out", str(tmp_path / "x.pt"), "--loss", "hinge"])
     assert exc.value.code == 2 and "--loss" in capsys.readouterr().err
+
+
+def test_the_quantile_loss_predicts_an_upper_quantile(tmp_path: Path) -> None:
+    from rtp.train._loop import _pinball
+
+    # the pinball loss of q is smallest at the q-quantile of the targets: a constant fitted to it lands there
+    t = torch.from_numpy(np.random.default_rng(0).standard_normal(20000))
+    c = torch.zeros(1, dtype=torch.float64, requires_grad=True)
+    opt = torch.optim.SGD([c], lr=0.5)
+    for _ in range(300):
+        opt.zero_grad()
+        _pinball(0.8)(c.expand_as(t), t).mean().backward()
+        opt.step()
+    assert float(c.detach()) == pytest.approx(float(torch.quantile(t, 0.8)), abs=0.02)
+    # q 0.5 is half the absolute error
+    p = torch.tensor([0.2, 0.9])
+    assert torch.allclose(_pinball(0.5)(p, torch.tensor([0.5, 0.5])), 0.5 * torch.tensor([0.3, 0.4]))
+
+    data = _dataset(tmp_path / "ds", n=6)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--steps", "30", "--crop", "32", "--val-scenes", "scene0"]
+    out = tmp_path / "q.pt"
+    assert rtp_main([*base, "--out", str(out), "--loss", "quantile", "--quantile", "0.9"]) == 0
+    ck = load_checkpoint(out)
+    assert ck.metadata.provenance["loss"] == "quantile" and ck.metadata.provenance["quantile"] == 0.9
+    assert ck.training["config"]["quantile"] == 0.9
+    # resuming with another quantile is another training run: refused, naming the field
+    with pytest.raises(sdk.RtpError, match="quantile"):
+        train(TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(out), steps=40, crop=32,
+                                      val_scenes=("scene0",), loss="quantile", quantile=0.75))
+    for bad in (0.0, 1.0, -0.5):
+        with pytest.raises(sdk.ParameterError, match="quantile: expected a number in"):
+            train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), loss="quantile",
+                              quantile=bad, crop=32))
 
 
 def test_focus_weights_the_tiles_near_the_threshold(tmp_path: Path) -> None:

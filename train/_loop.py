@@ -82,8 +82,12 @@ class TrainConfig:
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
     #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
-    #: ``huber`` (quadratic below 0.1, linear above) or ``bce`` (cross-entropy, soft targets).
+    #: ``huber`` (quadratic below 0.1, linear above) or ``bce`` (cross-entropy, soft targets) or
+    #: ``quantile`` (the pinball loss of ``quantile``: the network predicts that quantile of a tile's
+    #: target given its inputs, a safety margin of its own per tile).
     loss: str = "l1"
+    #: With ``loss: quantile``: the quantile predicted, in (0, 1) (0.5: the median, as ``l1``).
+    quantile: float = 0.75
     #: Extra weight of the tiles whose target lies near the default threshold (in transformed space, a
     #: Gaussian band of half-width ``FOCUS_WIDTH`` around it): each tile's loss is weighted
     #: ``1 + focus * exp(-d^2 / 2 FOCUS_WIDTH^2)``, ``d`` its target's distance from the threshold, so the
@@ -189,6 +193,15 @@ _LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
     # vanish where the sigmoid saturates (targets at the transform's clamp, 1.0)
     "bce": lambda p, t: F.binary_cross_entropy(p.clamp(1e-6, 1.0 - 1e-6), t.clamp(0.0, 1.0)),
 }
+#: TrainConfig.loss's names (``quantile`` takes TrainConfig.quantile, so it is built in :func:`_loss`).
+LOSSES = (*_LOSSES, "quantile")
+
+
+def _pinball(q: float) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """The pinball loss of quantile ``q`` per element: minimised by that quantile of the target."""
+    return lambda p, t: torch.maximum(q * (t - p), (q - 1.0) * (t - p))
+
+
 #: The same losses per element, for a weighted mean (TrainConfig.focus).
 _ELEMENT_LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
     "l1": lambda p, t: (p - t).abs(),
@@ -200,9 +213,10 @@ _ELEMENT_LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]]
 FOCUS_WIDTH = 0.15
 
 
-def _focused(loss: str, focus: float, centre: float) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+def _focused(loss: str, focus: float, centre: float, quantile: float = 0.5
+             ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """``loss``'s mean with each element weighted by ``1 + focus`` near ``centre`` (TrainConfig.focus)."""
-    element = _ELEMENT_LOSSES[loss]
+    element = _pinball(quantile) if loss == "quantile" else _ELEMENT_LOSSES[loss]
 
     def weighted(p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         w = 1.0 + focus * torch.exp(-0.5 * ((t - centre) / FOCUS_WIDTH) ** 2)
@@ -388,9 +402,12 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
         raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
                                  f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
-    if cfg.loss not in _LOSSES:
-        raise sdk.ParameterError(f"loss: expected one of {', '.join(_LOSSES)}, got {cfg.loss!r}", "loss")
-    loss_fn = _LOSSES[cfg.loss]
+    if cfg.loss not in LOSSES:
+        raise sdk.ParameterError(f"loss: expected one of {', '.join(LOSSES)}, got {cfg.loss!r}", "loss")
+    if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
+        raise sdk.ParameterError(f"quantile: expected a number in (0, 1), got {cfg.quantile}", "quantile")
+    loss_fn = (_LOSSES[cfg.loss] if cfg.loss != "quantile"
+               else (lambda p, t, e=_pinball(cfg.quantile): e(p, t).mean()))
     if not (cfg.focus >= 0.0 and math.isfinite(cfg.focus)):
         raise sdk.ParameterError(f"focus: expected a weight >= 0 (0: off), got {cfg.focus}", "focus")
     if cfg.optimizer not in OPTIMIZERS:
@@ -445,7 +462,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     threshold = cfg.default_threshold if cfg.default_threshold is not None else sdk.METRICS[cfg.metric].default_threshold
     if cfg.focus:  # the band's centre: the default threshold in transformed space
         centre = float(tt.forward(torch.tensor([float(threshold)], dtype=torch.float64), transform)[0])
-        loss_fn = _focused(cfg.loss, cfg.focus, centre)
+        loss_fn = _focused(cfg.loss, cfg.focus, centre, cfg.quantile)
     soft = _teacher_targets(cfg, reader, tr, transform) if cfg.teachers else None
     higher = sdk.METRICS[cfg.metric].higher_is_better
     worse = 1.0 if transform.increasing != higher else -1.0
@@ -487,6 +504,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["context"] = cfg.context
     if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
         config_key["loss"] = cfg.loss
+    if cfg.loss == "quantile":
+        config_key["quantile"] = cfg.quantile
     if cfg.focus:
         config_key["focus"] = cfg.focus
     if cfg.ema:
@@ -634,6 +653,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         "augment": cfg.augment,
         **({"context": cfg.context} if cfg.context else {}),
         "loss": cfg.loss,
+        **({"quantile": cfg.quantile} if cfg.loss == "quantile" else {}),
         **({"focus": cfg.focus} if cfg.focus else {}),
         **({"ema": cfg.ema} if cfg.ema else {}),
         **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
