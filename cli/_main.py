@@ -280,7 +280,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
                  "head_width", "context_pool",
-                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus", "ema", "distill",
+                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
+                 "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
 

@@ -202,6 +202,12 @@ def _pinball(q: float) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     return lambda p, t: torch.maximum(q * (t - p), (q - 1.0) * (t - p))
 
 
+def _mean_pinball(q: float) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """The pinball loss of quantile ``q``, averaged (TrainConfig.loss ``quantile``)."""
+    element = _pinball(q)
+    return lambda p, t: element(p, t).mean()
+
+
 #: The same losses per element, for a weighted mean (TrainConfig.focus).
 _ELEMENT_LOSSES: dict[str, Callable[[torch.Tensor, torch.Tensor], torch.Tensor]] = {
     "l1": lambda p, t: (p - t).abs(),
@@ -406,8 +412,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"loss: expected one of {', '.join(LOSSES)}, got {cfg.loss!r}", "loss")
     if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
         raise sdk.ParameterError(f"quantile: expected a number in (0, 1), got {cfg.quantile}", "quantile")
-    loss_fn = (_LOSSES[cfg.loss] if cfg.loss != "quantile"
-               else (lambda p, t, e=_pinball(cfg.quantile): e(p, t).mean()))
+    loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
     if not (cfg.focus >= 0.0 and math.isfinite(cfg.focus)):
         raise sdk.ParameterError(f"focus: expected a weight >= 0 (0: off), got {cfg.focus}", "focus")
     if cfg.optimizer not in OPTIMIZERS:
