@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         fin = np.isfinite(short)
         tails = " / ".join(f"{100 * float(np.mean(short[fin] > d)):.1f}" for d in (0.2, 0.3))
         print(f"| {name} | {100 * r2:.1f} | {tails} | {' / '.join(f'{100 * v:.1f}' for v in sv)} | "
-              f"{' / '.join(f'{100 * v / oracle:.0f}' for v in sv)} |")
+              f"{' / '.join(f'{100 * v / oracle:.0f}' if oracle > 0 else 'nan' for v in sv)} |")
 
     row(f"the model ({args.model})", own, worse * (g - p), rule)
     shared = np.broadcast_to(rng.standard_normal((1, t_all.shape[1])), t_all.shape)  # one draw per tile

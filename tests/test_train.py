@@ -582,9 +582,14 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
     assert r_all[0] == pytest.approx(want, abs=0.06) and r_all[0] <= r_all[1] + 1e-9 <= r_all[2] + 1e-9
     # the rate rules: saving more where more tiles may fail, never more than 4x4 everywhere (93.75%)
     assert 0.0 <= float(re.search(r"the oracle saves (\d+\.\d+)%", out).group(1)) <= 93.75
-    for name in ("one threshold", "calibrated risk"):
+    for name in ("one threshold", "calibrated risk", "two thresholds"):
         v = [x for x in row(name) if x == x]
         assert v and v == sorted(v) and all(0.0 <= x <= 93.75 for x in v)
+    # the synthetic estimates: R² as named, and the same noise scaled down underestimates fewer tiles
+    noise = [[c.strip() for c in x.split("|")[2:4]] for x in out.splitlines() if x.startswith("| truth + noise (each")]
+    assert [float(r2) for r2, _ in noise[1:]] == [90.0, 95.0, 98.0]
+    tails = [[float(v) for v in t.split("/")] for _, t in noise[1:]]
+    assert all(a >= b for a, b in tails) and tails == sorted(tails, reverse=True)
 
 
 def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_out_maps(
