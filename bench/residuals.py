@@ -99,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
                     "maps of data/train")
     ap.add_argument("--noise-seed", type=int, default=0, help="seed of table 4's synthetic estimates (default 0)")
+    ap.add_argument("--plot", default=None, metavar="PNG",
+                    help="also draw table 4's curves (work saved against failing tiles) into this PNG")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
@@ -245,6 +247,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{' / '.join(f'{100 * v / oracle:.0f}' if oracle > 0 else 'nan' for v in sv)} |")
 
     row(f"the model ({args.model})", own, worse * (g - p), rule)
+    curves = [(f"the model (R² {100 * own:.1f}% per output)", rule)]
     shared = np.broadcast_to(rng.standard_normal((1, t_all.shape[1])), t_all.shape)  # one draw per tile
     for level, noise, kind in ((own, unit, "each rate its own"), (own, shared, "one per tile, all rates"),
                                (0.90, unit, "each rate its own"), (0.95, unit, "each rate its own"),
@@ -252,9 +255,40 @@ def main(argv: list[str] | None = None) -> int:
         # no safety margin: a constant in transformed space is one more threshold of the sweep
         noisy = t_all + noise * spread * np.sqrt(1.0 - level)
         syn = np.asarray(meta.transform.inverse(noisy))
-        row(f"truth + noise ({kind})", level, worse * (t_all[rows] - noisy[rows]), _sweep(threshold_rule(syn), fails,
-                                                                                          thresholds))
+        pts = _sweep(threshold_rule(syn), fails, thresholds)
+        row(f"truth + noise ({kind})", level, worse * (t_all[rows] - noisy[rows]), pts)
+        if kind.startswith("each"):
+            curves.append((f"truth + noise, R² {100 * level:.1f}%", pts))
+    if args.plot:
+        _plot(curves, oracle, f"{meta.metric}, {where}", args.plot)
     return 0
+
+
+def _plot(curves: list[tuple[str, list[tuple[float, float]]]], oracle: float, title: str, path: str) -> None:
+    """Work saved against failing tiles for each estimate of table 4, the oracle's saving as a line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, (name, pts) in enumerate(curves):
+        xy = sorted((100 * f, 100 * v) for f, v in pts if f <= 0.2)
+        ax.plot([x for x, _ in xy], [y for _, y in xy], color=f"C{i}", lw=2.2 if i == 0 else 1.4,
+                ls="-" if i == 0 else "--", label=name)
+    ax.axhline(100 * oracle, color="black", lw=0.8, label=f"the oracle (fails none): {100 * oracle:.1f}%")
+    for level in _LEVELS:
+        ax.axvline(100 * level, color="grey", lw=0.5, ls=":")
+    ax.set_xlim(0, 20)
+    ax.set_xlabel("failing tiles (%)")
+    ax.set_ylabel("work saved (%)")
+    ax.set_title(f"The SDK's rule on the model's estimates and on the truth plus noise\n{title}", fontsize=10)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    print(f"\nwrote {path}")
 
 
 if __name__ == "__main__":
