@@ -547,8 +547,10 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
                       val_scenes=("scene0",), loss="mse"))
     model = export.export_checkpoint(tmp_path / "m.pt", tmp_path / "m.onnx")
     bench = Path(__file__).resolve().parents[1] / "bench" / "residuals.py"
-    out = subprocess.run([sys.executable, str(bench), str(model), "--data", str(data)], capture_output=True,
-                         text=True, check=True).stdout
+    png = tmp_path / "accuracy.png"
+    out = subprocess.run([sys.executable, str(bench), str(model), "--data", str(data), "--plot", str(png)],
+                         capture_output=True, text=True, check=True).stdout
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"wrote {png}" in out
     # the headline R² is the raw output's against the transformed truth, as bench/ensemble.py scores it
     pred = sdk.load(model)
     meta, reader, store = pred.metadata, DatasetReader(str(data)), TargetStore(str(data))
