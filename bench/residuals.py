@@ -9,9 +9,11 @@ Prints three tables:
 1. **Anatomy**: R², and the share of the squared error carried by groups of tiles: at a depth
    step (the largest ``sdk.depth_edges`` value in the tile over 0.5, or over 0.1), without one,
    seen and unseen tiles, each fifth of the targets, and the tiles whose target sits at the
-   transform's upper clamp (1.0); the mean residual (prediction minus truth) of each group, its RMS,
-   how many points of R² the group costs (its squared error over the total variance), and its share
-   of the large underestimates (by more than 0.3 in transformed space: table 4's tail).
+   transform's upper clamp (1.0), the seen tiles whose reprojected frame is off the current full-rate
+   one by more than 0.05 in mean luma (what the network is shown is not what is shaded); the mean
+   residual (prediction minus truth) of each group, its RMS, how many points of R² the group costs
+   (its squared error over the total variance), and its share of the large underestimates (by more
+   than 0.3 in transformed space: table 4's tail).
 2. **Offsets**: R² per map, and R² after adding the best constant per map or per frame (an oracle:
    how much a frame- or map-level correction could buy at most).
 3. **Rate rules** (the metric's failing threshold: a tile fails when its true error at the chosen
@@ -62,6 +64,16 @@ def _tile_max(plane: np.ndarray, tile: int) -> np.ndarray:
     return pad.reshape(th, tile, tw, tile).max(axis=(1, 3)).reshape(-1)
 
 
+def _tile_mean(plane: np.ndarray, tile: int) -> np.ndarray:
+    h, w = plane.shape
+    th, tw = -(-h // tile), -(-w // tile)
+    pad = np.zeros((th * tile, tw * tile), np.float64)
+    pad[:h, :w] = plane
+    n = np.zeros_like(pad)
+    n[:h, :w] = 1.0
+    return (pad.reshape(th, tile, tw, tile).sum(axis=(1, 3)) / n.reshape(th, tile, tw, tile).sum(axis=(1, 3))).reshape(-1)
+
+
 def _saved_at(points: list[tuple[float, float]], level: float) -> float:
     ok = [s for f, s in points if f <= level]
     return max(ok) if ok else float("nan")
@@ -108,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
     hib = meta.higher_is_better
     raw, truth, est, metric, edge, unseen, frame, scene, every = [], [], [], [], [], [], [], [], []
+    moved = []  # per tile, the mean |luma| difference between the reprojected and the current full-rate frame
     ids = scene_ids(reader, args.scene)
     if not ids:
         print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
@@ -125,10 +138,11 @@ def main(argv: list[str] | None = None) -> int:
         n = raw[-1].shape[1]
         edge.append(_tile_max(sdk.depth_edges(s.channel("depth")), meta.tile_size))
         unseen.append(tile_unseen_share(s.channel("seen"), meta.tile_size).reshape(-1) > DEFAULT_UNSEEN_FRACTION)
+        moved.append(_tile_mean(np.abs(sdk.luma(s.final("1x1")) - s.channel("reprojected.y")), meta.tile_size))
         frame.append(np.full(n, k))
         scene.append(np.full(n, str(s.meta.get("scene", "?")), dtype=object))
     p, g = np.concatenate(raw, 1), np.concatenate(truth, 1)
-    e, u = np.concatenate(edge), np.concatenate(unseen)
+    e, u, mv = np.concatenate(edge), np.concatenate(unseen), np.concatenate(moved)
     fr, sc = np.concatenate(frame), np.concatenate(scene)
     ok = np.isfinite(g)
     res2 = np.where(ok, (p - g) ** 2, 0.0)
@@ -143,7 +157,9 @@ def main(argv: list[str] | None = None) -> int:
           "share of the underestimates by > 0.3 % |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     groups = [("depth step > 0.5", e > 0.5), ("depth step 0.1-0.5", (e > 0.1) & (e <= 0.5)),
-              ("no depth step (<= 0.1)", e <= 0.1), ("seen", ~u), ("unseen", u)]
+              ("no depth step (<= 0.1)", e <= 0.1), ("seen", ~u), ("unseen", u),
+              ("seen, reprojection off by > 0.05 (mean luma)", ~u & (mv > 0.05)),
+              ("seen, reprojection within 0.05", ~u & (mv <= 0.05))]
     q = np.quantile(g[ok], np.linspace(0.0, 1.0, 6))
     band = np.minimum(np.searchsorted(q[1:-1], np.nan_to_num(g), side="right"), 4)  # a partition, ties included once
     bands = [(f"target fifth {j + 1} ({q[j]:.2f}-{q[j + 1]:.2f})", band == j) for j in range(5)]
