@@ -279,7 +279,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "head_width", "context_pool",
+                 "head_width", "context_pool", "block_contrast",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
                  "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
@@ -552,6 +552,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--context-pool", dest="context_pool", type=_non_negative, default=None,
                    help="an odd window K of tiles: the fast network appends the mean of its last features over K x K "
                    "tiles before the head (the neighbourhood a tile's error can depend on); 0: none (default: 0)")
+    r.add_argument("--block-contrast", dest="block_contrast", type=_choices_csv(tuple(CHANNELS)), default=None,
+                   help="input channels (comma-separated, among --inputs) whose variance inside each reduced rate's "
+                   "blocks, per 4x4 cell, the fast network reads beside its stem: what the rate would lose of them, "
+                   "fixed arithmetic, not learned (default: none)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

@@ -219,6 +219,54 @@ def test_the_context_pool_appends_the_neighbourhood_mean_and_exports() -> None:
                                                            "albedo.r", "albedo.g", "albedo.b", "normal.z"]), seed=4)
 
 
+@pytest.mark.parametrize("cell", [2, 4, 8])
+def test_block_contrast_is_the_variance_inside_each_rates_blocks(cell: int) -> None:
+    from rtp.train.model import BlockContrast, haar_details
+
+    details = np.stack([d.ravel() for d in haar_details(cell)])
+    # with the cell's mean, an orthonormal basis of the cell
+    np.testing.assert_allclose(details @ details.T, np.eye(cell * cell - 1), atol=1e-12)
+    np.testing.assert_allclose(details.sum(axis=1), 0.0, atol=1e-12)
+    m = BlockContrast((2, 0), 3, cell, eps=0.0)
+    assert m.rates == (("1x2", "2x1", "2x2") if cell == 2 else ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4"))
+    x = torch.rand(2, 3, 2 * cell, 3 * cell, dtype=torch.float64).float()
+    out = m(x).exp()
+    assert out.shape == (2, 2 * len(m.rates), 2, 3)
+    r = len(m.rates)
+    for n, (i, j) in ((0, (0, 0)), (1, (1, 2))):
+        for a, plane in enumerate((2, 0)):
+            cellx = x[n, plane, i * cell:(i + 1) * cell, j * cell:(j + 1) * cell].numpy().astype(np.float64)
+            for k, rate in enumerate(m.rates):
+                w, h = sdk.rate_size(rate)
+                blocks = cellx.reshape(cell // h, h, cell // w, w)
+                want = ((blocks - blocks.mean(axis=(1, 3), keepdims=True)) ** 2).mean()
+                assert float(out[n, a * r + k, i, j]) == pytest.approx(want, rel=1e-4, abs=1e-6)
+    # a plane constant on 2x2 blocks loses nothing at 1x2, 2x1 and 2x2
+    flat = torch.rand(1, 3, cell // 2, cell).repeat_interleave(2, 2).repeat_interleave(2, 3)
+    assert torch.all(m(flat)[0, :3].exp() < 1e-9)
+    for bad in ((), (0, 0), (3,), (-1,)):
+        with pytest.raises(ValueError, match="block_contrast"):
+            BlockContrast(bad, 3, 4)
+    with pytest.raises(ValueError, match="power-of-two"):
+        haar_details(3)
+
+
+def test_the_fast_network_reads_block_contrast_beside_its_stem_and_exports() -> None:
+    from rtp.train.model import BlockContrast, FastNet
+
+    net = FastNet(7, head_width=64, block_contrast=(0, 2)).eval()
+    assert isinstance(net.contrast, BlockContrast) and net.config["block_contrast"] == [0, 2]
+    assert "block_contrast" not in FastNet().config and FastNet().contrast is None
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    assert convs[1].in_channels == 16 + 12  # the first 3x3 block reads the stem and 2 planes x 6 rates
+    # nothing fixed is stored: the checkpoint holds what trains, the Haar weights are rebuilt
+    assert not any("contrast.weight" in k or "contrast.reduce" in k for k in net.state_dict())
+    with pytest.raises(ValueError, match="block_contrast"):
+        FastNet(4, block_contrast=(4,))
+    _round_trip(net, "block_contrast", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
+                                                             "roughness", "metallic", "specular"]), seed=5)
+
+
 def test_the_fast_network_takes_partial_tiles() -> None:
     from rtp.train.model import FastNet
 

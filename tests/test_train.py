@@ -364,6 +364,29 @@ def test_the_context_pool_trains_from_the_command_line_and_is_recorded(tmp_path:
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, context_pool=5))
 
 
+def test_block_contrast_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=4)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--val-scenes", "scene0",
+            "--arch", "fast", "--inputs", "reprojected.y,seen,albedo.y,normal.z", "--block-contrast",
+            "albedo.y,reprojected.y", "--steps", "6"]
+    assert rtp_main([*base, "--out", str(tmp_path / "b.pt")]) == 0
+    ck = load_checkpoint(tmp_path / "b.pt")
+    assert ck.net.config["block_contrast"] == [2, 0]  # indices into the inputs, in the order given
+    assert list(ck.metadata.provenance["block_contrast"]) == ["albedo.y", "reprojected.y"]
+    # the same file without the contrast is another network: refused, not silently resumed
+    assert rtp_main([*base[:-4], "--steps", "12", "--out", str(tmp_path / "b.pt")]) != 0
+    assert "differs in: block_contrast" in capsys.readouterr().err
+    common = {"data": str(data), "metric": "jnyang", "crop": 32, "inputs": ("reprojected.y", "seen", "albedo.y")}
+    for bad in (("depth",), ("seen", "seen")):  # not an input; twice
+        with pytest.raises(sdk.ParameterError, match="block_contrast: expected distinct channels among the inputs"):
+            train(TrainConfig(out=str(tmp_path / "x.pt"), arch="fast", block_contrast=bad, **common))
+    with pytest.raises(sdk.ParameterError, match="block_contrast: the fast network's option"):
+        train(TrainConfig(out=str(tmp_path / "p.pt"), block_contrast=("seen",), **common))
+    with pytest.raises(sdk.ParameterError, match="block_contrast: needs a stem of at least 2 pixels"):
+        train(TrainConfig(out=str(tmp_path / "s.pt"), arch="fast", stem=1, block_contrast=("seen",), **common))
+
+
 def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_path: Path,
                                                                          capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)

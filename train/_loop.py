@@ -72,6 +72,9 @@ class TrainConfig:
     #: An odd window K (in tiles): the fast network appends the mean of its last features over K x K
     #: tiles before the head (train/model.py ``ContextPool``); 0: none.
     context_pool: int = 0
+    #: Input channels (names among ``inputs``) whose variance inside each reduced rate's blocks the
+    #: fast network reads beside its stem (train/model.py ``BlockContrast``); empty: none.
+    block_contrast: tuple[str, ...] = ()
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -440,6 +443,15 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.context_pool and (cfg.context_pool < 3 or cfg.context_pool % 2 == 0):
         raise sdk.ParameterError(f"context_pool: expected 0 (none) or an odd window of at least 3 tiles, got "
                                  f"{cfg.context_pool}", "context_pool")
+    if cfg.block_contrast and cfg.arch != "fast":
+        raise sdk.ParameterError(f"block_contrast: the fast network's option, got arch {cfg.arch!r}", "block_contrast")
+    missing = [c for c in cfg.block_contrast if c not in cfg.inputs]
+    if missing or len(set(cfg.block_contrast)) != len(cfg.block_contrast):
+        raise sdk.ParameterError(f"block_contrast: expected distinct channels among the inputs "
+                                 f"({', '.join(cfg.inputs)}), got {', '.join(cfg.block_contrast)}", "block_contrast")
+    if cfg.block_contrast and min(cfg.stem, cfg.tile) < 2:
+        raise sdk.ParameterError(f"block_contrast: needs a stem of at least 2 pixels, got {min(cfg.stem, cfg.tile)}",
+                                 "block_contrast")
     if cfg.energy_norm and cfg.arch != "fast":
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
@@ -476,7 +488,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
                         energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
-                        head_width=cfg.head_width, context_pool=cfg.context_pool)
+                        head_width=cfg.head_width, context_pool=cfg.context_pool,
+                        block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast))
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -499,6 +512,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["head_width"] = cfg.head_width
         if cfg.context_pool:
             config_key["context_pool"] = cfg.context_pool
+        if cfg.block_contrast:
+            config_key["block_contrast"] = list(cfg.block_contrast)
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -653,6 +668,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"separable": True} if cfg.separable else {}),
         **({"head_width": cfg.head_width} if cfg.head_width else {}),
         **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
+        **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,

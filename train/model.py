@@ -38,12 +38,13 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 
-from rtp.sdk import DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES
+from rtp.sdk import ALL_RATES, DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES, rate_size
 
-__all__ = ["ARCHS", "HEADS", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network", "build_network", "layer_plan"]
+__all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network", "build_network", "layer_plan"]
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
@@ -159,6 +160,77 @@ class ContextPool(nn.Module):
         return torch.cat([x, self.pool(x)], dim=1)
 
 
+def haar_details(cell: int) -> list[np.ndarray]:
+    """The ``cell * cell - 1`` detail kernels of the orthonormal 2D Haar pyramid of a ``cell x cell``
+    cell (a power of two): per level, each 2x2 group of the level's averages gives three differences
+    (horizontal, vertical, diagonal), the averages go on to the next level. With the cell's mean
+    they are an orthonormal basis of the cell."""
+    if cell < 2 or cell & (cell - 1):
+        raise ValueError(f"the Haar pyramid needs a power-of-two cell of at least 2, got {cell}")
+    grid = [[np.eye(cell * cell)[i * cell + j].reshape(cell, cell) for j in range(cell)] for i in range(cell)]
+    out: list[np.ndarray] = []
+    while len(grid) > 1:
+        n = len(grid) // 2
+        nxt = []
+        for i in range(n):
+            row = []
+            for j in range(n):
+                a, b, c, d = grid[2 * i][2 * j], grid[2 * i][2 * j + 1], grid[2 * i + 1][2 * j], grid[2 * i + 1][2 * j + 1]
+                out += [(a - b + c - d) / 2, (a + b - c - d) / 2, (a - b - c + d) / 2]
+                row.append((a + b + c + d) / 2)
+            nxt.append(row)
+        grid = nxt
+    return out
+
+
+class BlockContrast(nn.Module):
+    """What each reduced shading rate would lose of chosen input planes, per stem cell: for every
+    rate whose block fits in the ``cell x cell`` stem cell, the mean over the cell of the variance
+    inside the rate's blocks (the squared error of shading each block with its mean), as
+    ``log(variance + eps)``: ``(N, C, H, W) -> (N, len(planes) * rates, H / cell, W / cell)``,
+    plane-major.
+
+    The renderer's software VRS shades each block once and repeats the sample, so what a rate
+    loses of a plane that varies inside its blocks (the albedo of the current frame, the luma of
+    the reprojected one) is about that variance. One linear stem read cannot compute it (it needs
+    squares); here it is fixed arithmetic, nothing learned: the cell's orthonormal Haar details
+    (:func:`haar_details`; one strided convolution over the frame's planes, zero weights on the
+    others), squared; a rate's within-block error is the sum of the squared details that sum to
+    zero over each of its blocks (the others are constant on them), one fixed 1x1 convolution."""
+
+    def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, eps: float = 1e-4) -> None:
+        super().__init__()
+        if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
+            raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
+                             f"{list(planes)}")
+        self.planes = tuple(int(i) for i in planes)
+        self.eps = eps
+        self.rates = tuple(r for r in ALL_RATES[1:] if max(rate_size(r)) <= cell)
+        if not self.rates:
+            raise ValueError(f"block_contrast needs a stem of at least 2 pixels, got {cell}")
+        details = haar_details(cell)
+        k, n, r = len(self.planes), len(details), len(self.rates)
+        weight = torch.zeros(k * n, in_channels, cell, cell)
+        reduce = torch.zeros(k * r, k * n, 1, 1)
+        for j, rate in enumerate(self.rates):
+            w, h = rate_size(rate)
+            for i, d in enumerate(details):
+                sums = d.reshape(cell // h, h, cell // w, w).sum(axis=(1, 3))
+                if np.abs(sums).max() < 1e-9:  # zero on every block: part of what the rate loses
+                    for a in range(k):
+                        reduce[a * r + j, a * n + i] = 1.0 / (cell * cell)
+        for a, p in enumerate(self.planes):
+            weight[a * n:(a + 1) * n, p] = torch.tensor(np.stack(details), dtype=torch.float32)
+        self.register_buffer("weight", weight, persistent=False)
+        self.register_buffer("reduce", reduce, persistent=False)
+        self.cell = cell
+        self.channels = k * r
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        c = nn.functional.conv2d(x, self.weight, stride=self.cell)
+        return torch.log(nn.functional.conv2d(c * c, self.reduce) + self.eps)
+
+
 class FastNet(nn.Module):
     """rtp's fast network: a strided stem, then conv -> BatchNorm -> ReLU blocks at low resolution.
 
@@ -209,7 +281,8 @@ class FastNet(nn.Module):
     def __init__(self, in_channels: int = len(DEFAULT_INPUTS), out_channels: int = len(DEFAULT_OUTPUTS),
                  tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
-                 separable: bool = False, head_width: int = 0, context_pool: int = 0) -> None:
+                 separable: bool = False, head_width: int = 0, context_pool: int = 0,
+                 block_contrast: tuple[int, ...] | list[int] = ()) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -246,6 +319,9 @@ class FastNet(nn.Module):
         if context_pool:  # likewise
             self.config["context_pool"] = context_pool
         s = min(stem, tile)
+        self.contrast = BlockContrast(tuple(block_contrast), in_channels, s) if block_contrast else None
+        if self.contrast is not None:  # likewise
+            self.config["block_contrast"] = list(self.contrast.planes)
         pools = int(math.log2(tile // s))
         layers: list[nn.Module] = []
         if stem_layers == 2:
@@ -256,6 +332,10 @@ class FastNet(nn.Module):
             layers.append(nn.Conv2d(in_channels, width, s, stride=s, bias=False))
         layers += [nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
         c = width
+        self._stem_end = len(layers)
+        if self.contrast is not None:  # the fixed per-rate contrast beside the stem's features, normalised
+            self.contrast_bn = nn.BatchNorm2d(self.contrast.channels)
+            c += self.contrast.channels
         if energy_norm and not pools:
             layers.append(EnergyNorm())
             c += 1
@@ -298,7 +378,11 @@ class FastNet(nn.Module):
         return min(int(self.config["stem"]), self.tile)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.layers(x)
+        if self.contrast is None:
+            return self.layers(x)
+        h = self.layers[:self._stem_end](x)
+        h = torch.cat([h, self.contrast_bn(self.contrast(x))], dim=1)
+        return self.layers[self._stem_end:](h)
 
 
 #: A network rtp trains and exports.
@@ -311,13 +395,13 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
-                  head_width: int = 0, context_pool: int = 0) -> Network:
+                  head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = ()) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
-    ``separable``, ``head_width`` and ``context_pool`` to the fast one."""
+    ``separable``, ``head_width``, ``context_pool`` and ``block_contrast`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
-                       separable, head_width, context_pool)
+                       separable, head_width, context_pool, block_contrast)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
