@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError, depth_edges, luma
+from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError, depth_edges, luma, pixel_differences
 from rtp.sdk.files import atomic_output
 
 __all__ = [
@@ -102,7 +102,9 @@ _CHANNEL_SOURCE = {c: (name, i) for name, buf in BUFFERS.items() for i, c in enu
 #: Channels computed from stored buffers when read, by the SDK's definition (one source of truth).
 _DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth")),
                             "reprojected.y": lambda s: luma(s.buffer("reprojected")),
-                            "albedo.y": lambda s: luma(s.buffer("albedo"))}
+                            "albedo.y": lambda s: luma(s.buffer("albedo")),
+                            "reprojected.y.dx": lambda s: pixel_differences(luma(s.buffer("reprojected")))[0],
+                            "reprojected.y.dy": lambda s: pixel_differences(luma(s.buffer("reprojected")))[1]}
 
 
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from . import adapters, files
-from ._channels import CHANNELS, DEFAULT_INPUTS, Channel, depth_edges
+from ._channels import CHANNELS, DEFAULT_INPUTS, Channel, depth_edges, pixel_differences
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._digest import model_digest
 from ._errors import (
@@ -122,6 +122,7 @@ __all__ = [
     "adapters",
     "complete_rates",
     "depth_edges",
+    "pixel_differences",
     "draw_rate_overlay",
     "exit_code",
     "extrapolate",

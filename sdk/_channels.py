@@ -15,7 +15,7 @@ import numpy as np
 
 from ._errors import InputShapeError, NonFiniteInputError
 
-__all__ = ["CHANNELS", "DEFAULT_INPUTS", "Channel", "depth_edges"]
+__all__ = ["CHANNELS", "DEFAULT_INPUTS", "Channel", "depth_edges", "pixel_differences"]
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,12 @@ _SPECS = [
     ("reprojected.y", 0.0, 1.0,
      "Rec.601 luma (sdk.luma) of reprojected.r/g/b: the luma every metric measures its error and its Weber "
      "correction on; 0 where unseen"),
+    ("reprojected.y.dx", 0.0, 1.0,
+     "|reprojected.y to its right neighbour's| (sdk.pixel_differences): the luma a 2-pixel-wide shading block "
+     "would lose; 0 in the last column"),
+    ("reprojected.y.dy", 0.0, 1.0,
+     "|reprojected.y to the neighbour's below| (sdk.pixel_differences): the luma a 2-pixel-tall shading block "
+     "would lose; 0 in the last row"),
     ("seen", 0.0, 1.0, "1 where the reprojected position is on the previous frame and passes its depth test, else 0"),
     ("albedo.r", 0.0, 1.0, "surface base colour, display-encoded sRGB, red; 0 on background"),
     ("albedo.g", 0.0, 1.0, "as albedo.r, green"),
@@ -100,3 +106,35 @@ def depth_edges(depth: np.ndarray) -> np.ndarray:
         inner = out[:, 1:-1] if axis == 1 else out[1:-1]
         np.maximum(inner, e, out=inner)
     return np.clip(out, 0.0, 1.0).astype(np.float32, copy=False)
+
+
+def pixel_differences(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ``.dx`` and ``.dy`` planes of a plane: each pixel's absolute difference to its right and
+    to its lower neighbour (0 in the last column, resp. row).
+
+    What variable-rate shading loses is the variation inside each shading block (the block is
+    shaded once and its sample repeated); the network's strided first layer reads a cell linearly
+    and cannot take an absolute value of a difference inside it, so an adapter supplies them: on a
+    GPU one more fetch per pixel. Summed over a block's aligned pairs (the even columns for ``dx``,
+    the even rows for ``dy``) they are the luma a 2x1 or 1x2 block would lose (docs/results.md
+    "Differences inside the shading blocks"). Adapters that build the planes on a GPU follow this
+    definition (the moderngl adapter's shader; tests compare).
+
+    Args:
+        plane: ``(H, W)`` values, any float dtype (for example :func:`luma` of the reprojected frame).
+
+    Returns:
+        ``(dx, dy)``: float32 ``(H, W)`` each.
+    """
+    p = np.asarray(plane)
+    if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
+        raise InputShapeError(f"pixel_differences: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
+                              tuple(p.shape), "(H, W)")
+    p = p.astype(np.float32, copy=False)
+    if not np.isfinite(p).all():
+        raise NonFiniteInputError("pixel_differences: the plane holds NaN or infinite values")
+    dx = np.zeros_like(p)
+    dy = np.zeros_like(p)
+    np.abs(p[:, 1:] - p[:, :-1], out=dx[:, :-1])
+    np.abs(p[1:] - p[:-1], out=dy[:-1])
+    return dx, dy

@@ -44,7 +44,8 @@ from torch import nn
 
 from rtp.sdk import ALL_RATES, DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES, rate_size
 
-__all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network", "build_network", "layer_plan"]
+__all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network",
+           "build_network", "haar_details", "layer_plan"]
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
