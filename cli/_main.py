@@ -279,7 +279,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "head_width", "context_pool", "block_contrast",
+                 "head_width", "context_pool", "block_contrast", "contrast_cell",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
                  "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
@@ -556,6 +556,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="input channels (comma-separated, among --inputs) whose variance inside each reduced rate's "
                    "blocks, per 4x4 cell, the fast network reads beside its stem: what the rate would lose of them, "
                    "fixed arithmetic, not learned (default: none)")
+    r.add_argument("--contrast-cell", dest="contrast_cell", type=_positive, default=None,
+                   help="with --block-contrast: the cell in pixels it is measured over and joins the network at: the "
+                   "stem's (4, the default) or 8, after the first pool (a quarter of the positions, cheaper at 1080p)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

@@ -235,6 +235,9 @@ def test_inputs_follow_the_channel_conventions(registry: None, reference: Any, n
         if {f"{kind}.{c}" for c in "rgby"} <= set(channels):
             rgb = np.stack([x[channels.index(f"{kind}.{c}")] for c in "rgb"], axis=-1)
             np.testing.assert_allclose(x[channels.index(f"{kind}.y")], sdk.luma(rgb), atol=1e-5, err_msg=kind)
+    if {"reprojected.y", "reprojected.y.dx", "reprojected.y.dy"} <= set(channels):  # of the adapter's own luma
+        for plane, want in zip(("dx", "dy"), sdk.pixel_differences(x[channels.index("reprojected.y")])):
+            np.testing.assert_allclose(x[channels.index(f"reprojected.y.{plane}")], want, atol=1e-5, err_msg=plane)
     for plane, c in zip(x, channels):
         if c not in AGREEMENT:
             continue

@@ -70,6 +70,7 @@ def test_sdk_all_is_pinned() -> None:
         "model_digest",
         "mse_from_psnr",
         "padded_size",
+        "pixel_differences",
         "pool_tiles",
         "psnr_from_mse",
         "rate_size",

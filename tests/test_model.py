@@ -265,6 +265,18 @@ def test_the_fast_network_reads_block_contrast_beside_its_stem_and_exports() -> 
         FastNet(4, block_contrast=(4,))
     _round_trip(net, "block_contrast", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
                                                              "roughness", "metallic", "specular"]), seed=5)
+    # measured over 8-pixel cells it joins after the first pool, and frames must hold whole cells
+    net8 = FastNet(7, head_width=64, block_contrast=(0,), contrast_cell=8).eval()
+    assert net8.config["contrast_cell"] == 8 and net8.input_multiple == 8 and net.input_multiple == 4
+    kinds = [type(m).__name__ for m in net8.layers]
+    assert kinds[net8._contrast_at - 1] == "MaxPool2d"
+    assert [m.in_channels for m in net8.layers if isinstance(m, torch.nn.Conv2d)][:3] == [7, 16, 16 + 6]
+    assert "contrast_cell" not in FastNet(7, block_contrast=(0,), contrast_cell=4).config  # the stem's: the default
+    for bad in (2, 6, 32):
+        with pytest.raises(ValueError, match="contrast_cell"):
+            FastNet(7, block_contrast=(0,), contrast_cell=bad)
+    _round_trip(net8, "contrast_cell", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
+                                                              "roughness", "metallic", "specular"]), seed=6)
 
 
 def test_the_fast_network_takes_partial_tiles() -> None:

@@ -130,6 +130,20 @@ def test_depth_edges_on_the_gpu_follow_the_sdk_definition(frames) -> None:
     b.close()
 
 
+def test_pixel_differences_on_the_gpu_follow_the_sdk_definition(frames) -> None:
+    ctx, prev, cur = frames
+    a = Adapter(("reprojected.y.dy", "reprojected.y", "reprojected.y.dx"), W, H, ctx=ctx)
+    x = _engine_inputs(ctx, prev, cur, a)
+    dx, dy = sdk.pixel_differences(x[1])  # each neighbour reprojected as itself: exactly its own luma
+    np.testing.assert_allclose(x[2], dx, atol=1e-6)
+    np.testing.assert_allclose(x[0], dy, atol=1e-6)
+    ref_dx, ref_dy = sdk.pixel_differences(cur.channel("reprojected.y"))
+    np.testing.assert_allclose(cur.channel("reprojected.y.dx"), ref_dx)
+    assert np.mean(np.abs(x[2] - ref_dx) <= 1e-3) >= 0.99 and np.mean(np.abs(x[0] - ref_dy) <= 1e-3) >= 0.99
+    assert 0.01 < (dx > 0.02).mean() < 0.9 and 0.01 < (dy > 0.02).mean() < 0.9, "the room has edges and texture"
+    a.close()
+
+
 def test_material_channels_from_an_engine_texture(frames) -> None:
     ctx, prev, cur = frames
     channels = ("metallic", "seen", "roughness", "specular")

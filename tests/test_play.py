@@ -212,6 +212,40 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
         assert x[meta.inputs.index("albedo.y")].max() > 0.0
 
 
+def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_model: Any) -> None:
+    """reprojected.y.dx / .dy are sdk.pixel_differences of the method's own reprojected history, and
+    a window of the frame (fresh crops) reads what the whole frame reads there, its last column and
+    row included."""
+    from tests.conftest import base_metadata
+
+    model = tiny_model(base_metadata(inputs=["reprojected.y.dx", "seen", "reprojected.y", "reprojected.y.dy"]))
+    fed: list[tuple[Any, np.ndarray | None]] = []
+    histories: list[np.ndarray] = []
+    reproject, predict = PathFrame.reproject, sdk.PredictionReuse.predict
+
+    def spy_reproject(self: PathFrame, image: np.ndarray) -> np.ndarray:
+        histories.append(reproject(self, image))
+        return histories[-1]
+
+    def spy_predict(self: sdk.PredictionReuse, inputs: Any, *args: Any, **kwargs: Any) -> np.ndarray:
+        fed.append((inputs, histories[-1] if histories else None))
+        return predict(self, inputs, *args, **kwargs)
+
+    monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
+    monkeypatch.setattr(sdk.PredictionReuse, "predict", spy_predict)
+    play("procedural:0", str(model), paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0, out=tmp_path)
+    assert len(fed) == 3
+    for inputs, rp in fed[1:]:
+        assert rp is not None
+        x = inputs(slice(0, H), slice(0, W))
+        dx, dy = sdk.pixel_differences(sdk.luma(rp))
+        np.testing.assert_allclose(x[0], dx, atol=1e-6)
+        np.testing.assert_allclose(x[3], dy, atol=1e-6)
+        assert dx.max() > 0.0 and dy.max() > 0.0
+        np.testing.assert_allclose(inputs(slice(16, 48), slice(32, 96)), x[:, 16:48, 32:96], atol=1e-6)
+
+
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
     rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                plots=False)

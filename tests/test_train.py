@@ -383,6 +383,10 @@ def test_block_contrast_trains_from_the_command_line_and_is_recorded(tmp_path: P
             train(TrainConfig(out=str(tmp_path / "x.pt"), arch="fast", block_contrast=bad, **common))
     with pytest.raises(sdk.ParameterError, match="block_contrast: the fast network's option"):
         train(TrainConfig(out=str(tmp_path / "p.pt"), block_contrast=("seen",), **common))
+    with pytest.raises(sdk.ParameterError, match="contrast_cell: only with block_contrast"):
+        train(TrainConfig(out=str(tmp_path / "c.pt"), arch="fast", contrast_cell=8, **common))
+    with pytest.raises(sdk.ParameterError, match="contrast_cell: expected 0 .the stem's. or one of 4, 8, 16"):
+        train(TrainConfig(out=str(tmp_path / "c.pt"), arch="fast", block_contrast=("seen",), contrast_cell=6, **common))
     with pytest.raises(sdk.ParameterError, match="block_contrast: needs a stem of at least 2 pixels"):
         train(TrainConfig(out=str(tmp_path / "s.pt"), arch="fast", stem=1, block_contrast=("seen",), **common))
 

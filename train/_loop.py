@@ -75,6 +75,9 @@ class TrainConfig:
     #: Input channels (names among ``inputs``) whose variance inside each reduced rate's blocks the
     #: fast network reads beside its stem (train/model.py ``BlockContrast``); empty: none.
     block_contrast: tuple[str, ...] = ()
+    #: The cell (pixels) the block contrast is measured over and joins the network at: 0, the stem's
+    #: (after the stem); twice it, after the first pool (a quarter of the positions: cheaper).
+    contrast_cell: int = 0
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -449,6 +452,12 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if missing or len(set(cfg.block_contrast)) != len(cfg.block_contrast):
         raise sdk.ParameterError(f"block_contrast: expected distinct channels among the inputs "
                                  f"({', '.join(cfg.inputs)}), got {', '.join(cfg.block_contrast)}", "block_contrast")
+    if cfg.contrast_cell and not cfg.block_contrast:
+        raise sdk.ParameterError("contrast_cell: only with block_contrast (the planes to measure)", "contrast_cell")
+    cells = [min(cfg.stem, cfg.tile) * 2 ** i for i in range(8) if min(cfg.stem, cfg.tile) * 2 ** i <= cfg.tile]
+    if cfg.contrast_cell and cfg.contrast_cell not in cells:
+        raise sdk.ParameterError(f"contrast_cell: expected 0 (the stem's) or one of {', '.join(map(str, cells))} (the "
+                                 f"stem or a pooled resolution up to the tile), got {cfg.contrast_cell}", "contrast_cell")
     if cfg.block_contrast and min(cfg.stem, cfg.tile) < 2:
         raise sdk.ParameterError(f"block_contrast: needs a stem of at least 2 pixels, got {min(cfg.stem, cfg.tile)}",
                                  "block_contrast")
@@ -489,7 +498,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
                         energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
                         head_width=cfg.head_width, context_pool=cfg.context_pool,
-                        block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast))
+                        block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
+                        contrast_cell=cfg.contrast_cell)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -514,6 +524,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["context_pool"] = cfg.context_pool
         if cfg.block_contrast:
             config_key["block_contrast"] = list(cfg.block_contrast)
+        if cfg.contrast_cell:
+            config_key["contrast_cell"] = cfg.contrast_cell
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -669,6 +681,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"head_width": cfg.head_width} if cfg.head_width else {}),
         **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
         **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),
+        **({"contrast_cell": cfg.contrast_cell} if cfg.contrast_cell else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,

@@ -195,9 +195,9 @@ class BlockContrast(nn.Module):
     loses of a plane that varies inside its blocks (the albedo of the current frame, the luma of
     the reprojected one) is about that variance. One linear stem read cannot compute it (it needs
     squares); here it is fixed arithmetic, nothing learned: the cell's orthonormal Haar details
-    (:func:`haar_details`; one strided convolution over the frame's planes, zero weights on the
-    others), squared; a rate's within-block error is the sum of the squared details that sum to
-    zero over each of its blocks (the others are constant on them), one fixed 1x1 convolution."""
+    (:func:`haar_details`; per plane a slice and one strided convolution), squared; a rate's
+    within-block error is the sum of the squared details that sum to zero over each of its blocks
+    (the others are constant on them), one fixed 1x1 convolution."""
 
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, eps: float = 1e-4) -> None:
         super().__init__()
@@ -210,26 +210,27 @@ class BlockContrast(nn.Module):
         if not self.rates:
             raise ValueError(f"block_contrast needs a stem of at least 2 pixels, got {cell}")
         details = haar_details(cell)
-        k, n, r = len(self.planes), len(details), len(self.rates)
-        weight = torch.zeros(k * n, in_channels, cell, cell)
-        reduce = torch.zeros(k * r, k * n, 1, 1)
+        n, r = len(details), len(self.rates)
+        reduce = torch.zeros(r, n, 1, 1)
         for j, rate in enumerate(self.rates):
             w, h = rate_size(rate)
             for i, d in enumerate(details):
                 sums = d.reshape(cell // h, h, cell // w, w).sum(axis=(1, 3))
                 if np.abs(sums).max() < 1e-9:  # zero on every block: part of what the rate loses
-                    for a in range(k):
-                        reduce[a * r + j, a * n + i] = 1.0 / (cell * cell)
-        for a, p in enumerate(self.planes):
-            weight[a * n:(a + 1) * n, p] = torch.tensor(np.stack(details), dtype=torch.float32)
+                    reduce[j, i] = 1.0 / (cell * cell)
+        weight = torch.tensor(np.stack(details), dtype=torch.float32)[:, None]
         self.register_buffer("weight", weight, persistent=False)
         self.register_buffer("reduce", reduce, persistent=False)
+        self.in_channels = in_channels
         self.cell = cell
-        self.channels = k * r
+        self.channels = len(self.planes) * r
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        c = nn.functional.conv2d(x, self.weight, stride=self.cell)
-        return torch.log(nn.functional.conv2d(c * c, self.reduce) + self.eps)
+        out = []
+        for p in self.planes:  # a slice of one plane and a one-input convolution: a fraction of a dense one
+            c = nn.functional.conv2d(x[:, p:p + 1], self.weight, stride=self.cell)
+            out.append(torch.log(nn.functional.conv2d(c * c, self.reduce) + self.eps))
+        return out[0] if len(out) == 1 else torch.cat(out, dim=1)
 
 
 class FastNet(nn.Module):
@@ -283,7 +284,7 @@ class FastNet(nn.Module):
                  tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
-                 block_contrast: tuple[int, ...] | list[int] = ()) -> None:
+                 block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -320,10 +321,16 @@ class FastNet(nn.Module):
         if context_pool:  # likewise
             self.config["context_pool"] = context_pool
         s = min(stem, tile)
-        self.contrast = BlockContrast(tuple(block_contrast), in_channels, s) if block_contrast else None
+        pools = int(math.log2(tile // s))
+        cell = contrast_cell or s
+        if block_contrast and cell not in [s * 2 ** i for i in range(pools + 1)]:
+            raise ValueError(f"contrast_cell: expected the stem ({s}) or a pooled resolution up to the tile "
+                             f"({', '.join(str(s * 2 ** i) for i in range(pools + 1))}), got {contrast_cell}")
+        self.contrast = BlockContrast(tuple(block_contrast), in_channels, cell) if block_contrast else None
         if self.contrast is not None:  # likewise
             self.config["block_contrast"] = list(self.contrast.planes)
-        pools = int(math.log2(tile // s))
+            if contrast_cell and contrast_cell != s:
+                self.config["contrast_cell"] = contrast_cell
         layers: list[nn.Module] = []
         if stem_layers == 2:
             mid = max(width // 2, 1)
@@ -333,10 +340,11 @@ class FastNet(nn.Module):
             layers.append(nn.Conv2d(in_channels, width, s, stride=s, bias=False))
         layers += [nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
         c = width
-        self._stem_end = len(layers)
-        if self.contrast is not None:  # the fixed per-rate contrast beside the stem's features, normalised
+        self._contrast_at = len(layers)
+        if self.contrast is not None:  # the fixed per-rate contrast beside the features of its resolution
             self.contrast_bn = nn.BatchNorm2d(self.contrast.channels)
-            c += self.contrast.channels
+            if cell == s:
+                c += self.contrast.channels
         if energy_norm and not pools:
             layers.append(EnergyNorm())
             c += 1
@@ -359,6 +367,9 @@ class FastNet(nn.Module):
                 if energy_norm and i == 0:  # after the first pool: a quarter of the stem's positions to normalise
                     layers.append(EnergyNorm())
                     c += 1
+                if self.contrast is not None and cell == s * 2 ** (i + 1):
+                    self._contrast_at = len(layers)
+                    c += self.contrast.channels
         if context_pool:
             layers.append(ContextPool(context_pool))
             c *= 2
@@ -376,14 +387,15 @@ class FastNet(nn.Module):
     def input_multiple(self) -> int:
         """Frames need only be a multiple of the stem's stride (metadata ``input_multiple``): the
         runtime pads a 1920x1080 frame not at all where whole 16-pixel tiles would need 1088 rows."""
-        return min(int(self.config["stem"]), self.tile)
+        cell = self.contrast.cell if self.contrast is not None else 0  # its strided read takes whole cells
+        return max(min(int(self.config["stem"]), self.tile), cell)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self.contrast is None:
             return self.layers(x)
-        h = self.layers[:self._stem_end](x)
+        h = self.layers[:self._contrast_at](x)
         h = torch.cat([h, self.contrast_bn(self.contrast(x))], dim=1)
-        return self.layers[self._stem_end:](h)
+        return self.layers[self._contrast_at:](h)
 
 
 #: A network rtp trains and exports.
@@ -396,13 +408,14 @@ ARCHS: dict[str, type[MetricNet] | type[FastNet]] = {"paper": MetricNet, "fast":
 def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, width: int = 16,
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
-                  head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = ()) -> Network:
+                  head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
+                  contrast_cell: int = 0) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
-    ``separable``, ``head_width``, ``context_pool`` and ``block_contrast`` to the fast one."""
+    ``separable``, ``head_width``, ``context_pool``, ``block_contrast`` and ``contrast_cell`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
-                       separable, head_width, context_pool, block_contrast)
+                       separable, head_width, context_pool, block_contrast, contrast_cell)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")

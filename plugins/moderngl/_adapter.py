@@ -48,6 +48,7 @@ CHANNEL_IDS: dict[str, int] = {
     "albedo.r": 4, "albedo.g": 5, "albedo.b": 6,
     "normal.x": 7, "normal.y": 8, "normal.z": 9, "depth": 10,
     "roughness": 11, "metallic": 12, "specular": 13, "depth.edge": 14, "reprojected.y": 15, "albedo.y": 16,
+    "reprojected.y.dx": 17, "reprojected.y.dy": 18,
 }
 _MATERIAL = ("roughness", "metallic", "specular")
 _MAX_CHANNELS = 20  # five RGBA float targets (adapter_fs.glsl)
@@ -159,6 +160,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         ids = [CHANNEL_IDS[c] for c in self.channels] + [-1] * (_MAX_CHANNELS - len(self.channels))
         self._set("u_channels", ids)
         self._set("u_count", len(self.channels))
+        self._set("u_differences", bool({"reprojected.y.dx", "reprojected.y.dy"} & set(self.channels)))
         self._set("u_size", (float(self.width), float(self.height)))
 
     def _set(self, name: str, value: Any) -> None:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Camera, Scene
-from rtp.sdk import ALL_RATES, RATE_CODES, RtpError, depth_edges, luma, rate_size, tile_grid
+from rtp.sdk import ALL_RATES, RATE_CODES, RtpError, depth_edges, luma, pixel_differences, rate_size, tile_grid
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
@@ -146,9 +146,11 @@ class Frame:
 
     def channel(self, name: str) -> np.ndarray:
         """One ``(H, W)`` plane by its ``rtp.sdk`` channel name (``"albedo.r"``, ``"normal.z"``,
-        ``"seen"``, ``"reprojected.g"``, ``"motion.x"``, ``"depth"``, ``"depth.edge"``, ...)."""
+        ``"seen"``, ``"reprojected.g"``, ``"motion.x"``, ``"depth"``, ``"depth.edge"``, ``"reprojected.y.dx"``, ...)."""
         if name == "depth.edge":
             return depth_edges(self.depth)
+        if name in ("reprojected.y.dx", "reprojected.y.dy"):
+            return pixel_differences(luma(self.reprojected))[name.endswith(".dy")]
         base, _, comp = name.partition(".")
         planes = {
             "albedo": self.albedo, "normal": self.normal, "reprojected": self.reprojected, "motion": self.motion,

@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, depth_edges, luma, reproject, reproject_positions
+from rtp.sdk import (DEFAULT_REPROJECTION_TOLERANCE, depth_edges, luma, pixel_differences, reproject,
+                     reproject_positions)
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
 from ._errors import PyrenderAdapterError
@@ -30,6 +31,7 @@ _NORMAL = ("normal.x", "normal.y", "normal.z")
 _MOTION = ("motion.x", "motion.y")
 # Planes derived from the RGB ones: Rec.601 luma (sdk.luma), as the metrics measure it.
 _REPROJECTED_Y, _ALBEDO_Y = "reprojected.y", "albedo.y"
+_DIFFERENCES = ("reprojected.y.dx", "reprojected.y.dy")
 #: The ``specular`` channel of everything pyrender shades: its dielectric F0 is a fixed 4 %
 #: (``mesh.frag``: ``dialectric_spec = vec3(0.04)``), specular 0.5 in ``sdk.CHANNELS`` terms.
 PYRENDER_SPECULAR = 0.5
@@ -96,6 +98,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
       scene converted from rtp loses its own specular values, which pyrender cannot shade).
     * ``depth``: linear view depth from pyrender's 24-bit depth buffer.
     * ``depth.edge``: :func:`rtp.sdk.depth_edges` of that depth.
+    * ``reprojected.y.dx/dy``: :func:`rtp.sdk.pixel_differences` of ``reprojected.y``.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.
 
@@ -128,7 +131,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, _REPROJECTED_Y, "seen", *_ALBEDO, _ALBEDO_Y, *_NORMAL, *MATERIAL, "specular", "depth",
+        (*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_ALBEDO, _ALBEDO_Y, *_NORMAL, *MATERIAL, "specular", "depth",
          "depth.edge", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
@@ -245,10 +248,10 @@ class Adapter(_BaseAdapter[SceneFrame]):
         t0 = time.perf_counter()
         pose = _pose(pose, "pose")
         wanted = set(self.channels)
-        temporal = wanted & {*_REPROJECTED, _REPROJECTED_Y, "seen", *_MOTION}
+        temporal = wanted & {*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_MOTION}
         if temporal and prev_pose is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(temporal))} need prev_pose")
-        reproj = wanted & {*_REPROJECTED, _REPROJECTED_Y, "seen"}
+        reproj = wanted & {*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen"}
         if reproj and prev_colour is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(reproj))} need prev_colour (the previous displayed frame)")
         cam = self._camera(scene, camera)
@@ -291,6 +294,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 rep, seen = reproject(colour, pd, g.depth, view, proj, prev_vp, tolerance=self.reprojection_tolerance)
                 planes.update({c: rep[..., i] for i, c in enumerate(_REPROJECTED)})
                 planes[_REPROJECTED_Y] = luma(rep)
+                planes.update(zip(_DIFFERENCES, pixel_differences(planes[_REPROJECTED_Y])))
                 planes["seen"] = seen
             if wanted & set(_MOTION):
                 planes.update(zip(_MOTION, self._motion(g.depth, view, proj, prev_vp)))

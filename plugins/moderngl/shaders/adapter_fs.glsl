@@ -35,6 +35,7 @@ uniform mat4 u_inv_proj;            // current projection, inverted
 uniform mat4 u_prev_inv_proj;       // previous projection, inverted (window depth only)
 uniform mat4 u_prev_vp;             // world -> previous clip
 uniform float u_tolerance;
+uniform bool u_differences;        // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
 uniform int u_channels[20];         // channel ids, see CHANNEL_IDS in _adapter.py; -1 = unused
 uniform int u_count;
 
@@ -66,9 +67,9 @@ float edge_axis(ivec2 g, ivec2 step, float zc) {
 
 float prev_depth_at(ivec2 g) { return linear_depth(texelFetch(u_prev_depth, g, 0)[u_prev_depth_comp], u_prev_inv_proj); }
 
-vec4 reproject_prev(ivec2 g, float d) {
+vec4 reproject_prev(vec2 frag, float d) {
     ivec2 size = ivec2(u_size);
-    vec3 ray = view_ray(gl_FragCoord.xy, u_size, u_inv_proj);
+    vec3 ray = view_ray(frag, u_size, u_inv_proj);
     vec4 world = d > 0.0 ? u_inv_view * vec4(ray * d, 1.0) : u_inv_view * vec4(normalize(ray), 0.0);
     vec4 pc = u_prev_vp * world;
     if (pc.w <= 0.0) return vec4(0.0);
@@ -105,7 +106,17 @@ void main() {
     ivec2 g = ivec2(gl_FragCoord.xy);
     float d = depth_at(g);
     bool geo = d > 0.0;
-    vec4 rp = u_has_prev ? reproject_prev(g, d) : vec4(0.0);
+    vec4 rp = u_has_prev ? reproject_prev(gl_FragCoord.xy, d) : vec4(0.0);
+    // reprojected.y.dx / .dy, as rtp.sdk.pixel_differences: |luma| to the right neighbour and to the one
+    // below (top-left origin: GL row - 1), each reprojected as itself; 0 in the last column / row
+    float ry = display_luma(rp.rgb);
+    float rdx = 0.0, rdy = 0.0;
+    if (u_has_prev && u_differences) {
+        if (g.x + 1 < int(u_size.x))
+            rdx = abs(display_luma(reproject_prev(gl_FragCoord.xy + vec2(1.0, 0.0), depth_at(g + ivec2(1, 0))).rgb) - ry);
+        if (g.y > 0)
+            rdy = abs(display_luma(reproject_prev(gl_FragCoord.xy - vec2(0.0, 1.0), depth_at(g - ivec2(0, 1))).rgb) - ry);
+    }
     vec3 albedo = texelFetch(u_albedo, g, 0).rgb;
     if (u_albedo_linear) albedo = linear_to_srgb(albedo);
     vec3 n = texelFetch(u_normal, g, 0).xyz;
@@ -120,8 +131,8 @@ void main() {
     if (!geo) mat = vec3(0.0);
     float zc = inv_depth(d);
     float edge = clamp(max(edge_axis(g, ivec2(1, 0), zc), edge_axis(g, ivec2(0, 1), zc)), 0.0, 1.0);
-    float v[17] = float[17](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
-                            mat.x, mat.y, mat.z, edge, display_luma(rp.rgb), display_luma(albedo));
+    float v[19] = float[19](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+                            mat.x, mat.y, mat.z, edge, ry, display_luma(albedo), rdx, rdy);
     float outv[20];
     for (int i = 0; i < 20; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
