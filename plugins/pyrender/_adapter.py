@@ -11,8 +11,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import (DEFAULT_REPROJECTION_TOLERANCE, depth_edges, luma, pixel_differences, reproject,
-                     reproject_positions)
+from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, depth_edges, luma, pixel_differences, reproject, reproject_positions
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
 from ._errors import PyrenderAdapterError
