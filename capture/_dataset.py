@@ -42,7 +42,17 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, CHANNELS, EXIT_USAGE, InputShapeError, RtpError, depth_edges, luma, pixel_differences
+from rtp.sdk import (
+    ALL_RATES,
+    CHANNELS,
+    EXIT_USAGE,
+    InputShapeError,
+    RtpError,
+    block_variances,
+    depth_edges,
+    luma,
+    pixel_differences,
+)
 from rtp.sdk.files import atomic_output
 
 __all__ = [
@@ -104,7 +114,9 @@ _DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth"
                             "reprojected.y": lambda s: luma(s.buffer("reprojected")),
                             "albedo.y": lambda s: luma(s.buffer("albedo")),
                             "reprojected.y.dx": lambda s: pixel_differences(luma(s.buffer("reprojected")))[0],
-                            "reprojected.y.dy": lambda s: pixel_differences(luma(s.buffer("reprojected")))[1]}
+                            "reprojected.y.dy": lambda s: pixel_differences(luma(s.buffer("reprojected")))[1],
+                            "reprojected.y.blocks": lambda s: block_variances(luma(s.buffer("reprojected"))),
+                            "albedo.y.blocks": lambda s: block_variances(luma(s.buffer("albedo")))}
 
 
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:

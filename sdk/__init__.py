@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from . import adapters, files
-from ._channels import CHANNELS, DEFAULT_INPUTS, Channel, depth_edges, pixel_differences
+from ._channels import CHANNELS, DEFAULT_INPUTS, Channel, block_variances, depth_edges, pixel_differences
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._digest import model_digest
 from ._errors import (
@@ -120,6 +120,7 @@ __all__ = [
     "ShadingRatePredictor",
     "Transform",
     "adapters",
+    "block_variances",
     "complete_rates",
     "depth_edges",
     "draw_rate_overlay",

@@ -14,8 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._errors import InputShapeError, NonFiniteInputError
+from ._rates import ALL_RATES, rate_size
 
-__all__ = ["CHANNELS", "DEFAULT_INPUTS", "Channel", "depth_edges", "pixel_differences"]
+__all__ = ["BLOCK_CELL", "BLOCK_RATES", "CHANNELS", "DEFAULT_INPUTS", "Channel", "block_variances", "depth_edges",
+           "pixel_differences"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,10 @@ _SPECS = [
     ("reprojected.y.dy", 0.0, 1.0,
      "|reprojected.y to the neighbour's below| (sdk.pixel_differences): the luma a 2-pixel-tall shading block "
      "would lose; 0 in the last row"),
+    ("reprojected.y.blocks", 0.0, 1.0,
+     "per 4x4 cell, how much each reduced rate's blocks vary in reprojected.y (sdk.block_variances: the log "
+     "variance inside the blocks, one rate per pixel of the cell, packed)"),
+    ("albedo.y.blocks", 0.0, 1.0, "as reprojected.y.blocks, of albedo.y (sdk.block_variances)"),
     ("seen", 0.0, 1.0, "1 where the reprojected position is on the previous frame and passes its depth test, else 0"),
     ("albedo.r", 0.0, 1.0, "surface base colour, display-encoded sRGB, red; 0 on background"),
     ("albedo.g", 0.0, 1.0, "as albedo.r, green"),
@@ -138,3 +144,53 @@ def pixel_differences(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     np.abs(p[:, 1:] - p[:, :-1], out=dx[:, :-1])
     np.abs(p[1:] - p[:-1], out=dy[:-1])
     return dx, dy
+
+
+#: The cell :func:`block_variances` measures over (the fast network's stem reads 4x4 cells).
+BLOCK_CELL = 4
+#: The rates :func:`block_variances` packs, in raster order over the first pixels of each cell.
+BLOCK_RATES: tuple[str, ...] = tuple(ALL_RATES[1:])
+#: Variance floor of :func:`block_variances` (a flat block reads 0, a luma step of 1 inside every block about 0.85).
+BLOCK_EPS = 1e-4
+
+
+def block_variances(plane: np.ndarray) -> np.ndarray:
+    """The ``.blocks`` plane of a plane: per 4x4 cell, how much each reduced rate would lose of it.
+
+    Variable-rate shading shades each block once and repeats the sample, so what a rate loses of a
+    plane is about the variance inside its blocks. For each cell of :data:`BLOCK_CELL` pixels and each
+    rate of :data:`BLOCK_RATES` (1x2, 2x1, 2x2, 2x4, 4x2, 4x4, blocks aligned to the cell), the mean
+    over the cell of the variance inside the rate's blocks, as ``log(v + eps) / -log(eps) + 1``
+    (``eps`` = :data:`BLOCK_EPS`) clipped to [0, 1], is written to the cell's k-th pixel in raster
+    order (row 0: 1x2, 2x1, 2x2, 2x4; row 1: 4x2, 4x4); the cell's other pixels are 0. A network
+    whose first layer reads 4x4 cells (rtp's fast network) then reads the six values directly: a
+    nonlinear measure its linear first layer cannot compute (docs/results.md "Differences inside
+    the shading blocks"). A frame whose sides are not multiples of 4 is padded by repeating its
+    last row and column. Adapters that build the plane on a GPU follow this definition.
+
+    Args:
+        plane: ``(H, W)`` values in [0, 1], any float dtype (for example :func:`luma` of the albedo).
+
+    Returns:
+        float32 ``(H, W)``.
+    """
+    p = np.asarray(plane)
+    if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
+        raise InputShapeError(f"block_variances: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
+                              tuple(p.shape), "(H, W)")
+    p = p.astype(np.float64)
+    if not np.isfinite(p).all():
+        raise NonFiniteInputError("block_variances: the plane holds NaN or infinite values")
+    h, w = p.shape
+    c = BLOCK_CELL
+    q = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
+    ch, cw = q.shape[0] // c, q.shape[1] // c
+    out = np.zeros(q.shape, np.float32)
+    for k, rate in enumerate(BLOCK_RATES):
+        bw, bh = rate_size(rate)
+        blocks = q.reshape(ch * c // bh, bh, cw * c // bw, bw)
+        var = blocks.var(axis=(1, 3))  # per block
+        per_cell = var.reshape(ch, c // bh, cw, c // bw).mean(axis=(1, 3))
+        value = np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0)
+        out[k // c::c, k % c::c] = value
+    return out[:h, :w]

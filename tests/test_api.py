@@ -58,6 +58,7 @@ def test_sdk_all_is_pinned() -> None:
         "ShadingRatePredictor",
         "Transform",
         "adapters",
+        "block_variances",
         "complete_rates",
         "depth_edges",
         "draw_rate_overlay",

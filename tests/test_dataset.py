@@ -57,7 +57,9 @@ def test_round_trip_with_stated_precision(tmp_path: Path) -> None:
 
 def test_every_sdk_channel_is_stored_or_derived(tmp_path: Path) -> None:
     stored = {c for spec in BUFFERS.values() for c in spec.channels}
-    assert stored | {"depth.edge", "reprojected.y", "albedo.y", "reprojected.y.dx", "reprojected.y.dy"} == set(sdk.CHANNELS)
+    derived = {"depth.edge", "reprojected.y", "albedo.y", "reprojected.y.dx", "reprojected.y.dy", "reprojected.y.blocks",
+               "albedo.y.blocks"}
+    assert stored | derived == set(sdk.CHANNELS)
     w = DatasetWriter(tmp_path / "ds")
     bufs = _buffers()
     w.write("s0", bufs, {"scene": "a"})
@@ -71,6 +73,7 @@ def test_every_sdk_channel_is_stored_or_derived(tmp_path: Path) -> None:
     dx, dy = sdk.pixel_differences(sdk.luma(s.buffer("reprojected")))
     np.testing.assert_array_equal(s.channel("reprojected.y.dx"), dx)
     np.testing.assert_array_equal(s.channel("reprojected.y.dy"), dy)
+    np.testing.assert_array_equal(s.channel("albedo.y.blocks"), sdk.block_variances(sdk.luma(s.buffer("albedo"))))
 
 
 def test_writer_validates(tmp_path: Path) -> None:

@@ -1,4 +1,5 @@
-"""``sdk.pixel_differences``: the ``reprojected.y.dx`` / ``.dy`` input planes, defined once in the SDK."""
+"""``sdk.pixel_differences`` and ``sdk.block_variances``: derived input planes of what a shading block
+loses (``reprojected.y.dx`` / ``.dy``, ``*.y.blocks``), defined once in the SDK."""
 
 from __future__ import annotations
 
@@ -50,3 +51,51 @@ def test_they_are_registered_channels() -> None:
 def test_bad_planes_are_typed_errors(bad: np.ndarray, error: type[Exception]) -> None:
     with pytest.raises(error, match="pixel_differences"):
         sdk.pixel_differences(bad)
+
+
+# ------------------------------------------------------------------- sdk.block_variances: the .blocks planes
+def test_each_cell_packs_the_variance_inside_each_rates_blocks() -> None:
+    p = np.random.default_rng(1).random((8, 12)).astype(np.float32)
+    b = sdk.block_variances(p)
+    assert b.dtype == np.float32 and b.shape == p.shape
+    rates = ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
+    for cy in range(2):
+        for cx in range(3):
+            cell = p[4 * cy:4 * cy + 4, 4 * cx:4 * cx + 4].astype(np.float64)
+            got = b[4 * cy:4 * cy + 4, 4 * cx:4 * cx + 4].ravel()
+            for k, rate in enumerate(rates):
+                w, h = sdk.rate_size(rate)
+                var = cell.reshape(4 // h, h, 4 // w, w).var(axis=(1, 3)).mean()
+                want = np.clip(np.log(var + 1e-4) / -np.log(1e-4) + 1.0, 0.0, 1.0)
+                assert got[k] == pytest.approx(want, abs=1e-6), (cy, cx, rate)
+            assert not got[6:].any()  # the cell's other pixels are 0
+    # a larger block loses at least what the blocks inside it lose: 2x2 >= 1x2, 2x1; 4x4 >= 2x4, 4x2
+    r12, r21, r22, r24, r42, r44 = b[0::4, 0::4], b[0::4, 1::4], b[0::4, 2::4], b[0::4, 3::4], b[1::4, 0::4], b[1::4, 1::4]
+    assert np.all(r22 >= np.maximum(r12, r21) - 1e-6) and np.all(r44 >= np.maximum(r24, r42) - 1e-6)
+
+
+def test_flat_planes_read_zero_and_partial_cells_repeat_the_edge() -> None:
+    assert not sdk.block_variances(np.full((6, 9), 0.3, np.float32)).any()
+    p = np.random.default_rng(2).random((10, 13)).astype(np.float32)
+    padded = np.pad(p, ((0, 2), (0, 3)), mode="edge")
+    np.testing.assert_array_equal(sdk.block_variances(p), sdk.block_variances(padded)[:10, :13])
+    # a luma step of 1 inside every 1x2 block reads about 0.85
+    stripes = np.tile(np.array([[0.0], [1.0]], np.float32), (4, 4))
+    assert sdk.block_variances(stripes)[0, 0] == pytest.approx(np.log(0.25 + 1e-4) / -np.log(1e-4) + 1, abs=1e-6)
+    assert sdk.block_variances(stripes)[0, 1] == 0.0  # 2x1 blocks (side by side) see no step
+
+
+def test_the_blocks_planes_are_registered_channels() -> None:
+    for c in ("reprojected.y.blocks", "albedo.y.blocks"):
+        spec = sdk.CHANNELS[c]
+        assert (spec.low, spec.high) == (0.0, 1.0) and "block_variances" in spec.description
+
+
+@pytest.mark.parametrize(("bad", "error"), [
+    (np.zeros(5, np.float32), sdk.InputShapeError),
+    (np.zeros((3, 0), np.float32), sdk.InputShapeError),
+    (np.array([[0.0, np.inf]], np.float32), sdk.NonFiniteInputError),
+])
+def test_bad_planes_are_typed_errors_for_blocks(bad: np.ndarray, error: type[Exception]) -> None:
+    with pytest.raises(error, match="block_variances"):
+        sdk.block_variances(bad)

@@ -214,12 +214,14 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
 
 def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_model: Any) -> None:
-    """reprojected.y.dx / .dy are sdk.pixel_differences of the method's own reprojected history, and
+    """reprojected.y.dx / .dy and .blocks are sdk.pixel_differences and sdk.block_variances of the
+    method's own reprojected history, and
     a window of the frame (fresh crops) reads what the whole frame reads there, its last column and
     row included."""
     from tests.conftest import base_metadata
 
-    model = tiny_model(base_metadata(inputs=["reprojected.y.dx", "seen", "reprojected.y", "reprojected.y.dy"]))
+    model = tiny_model(base_metadata(inputs=["reprojected.y.dx", "seen", "reprojected.y", "reprojected.y.dy",
+                                             "reprojected.y.blocks", "albedo.y.blocks"]))
     fed: list[tuple[Any, np.ndarray | None]] = []
     histories: list[np.ndarray] = []
     reproject, predict = PathFrame.reproject, sdk.PredictionReuse.predict
@@ -243,6 +245,8 @@ def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         np.testing.assert_allclose(x[0], dx, atol=1e-6)
         np.testing.assert_allclose(x[3], dy, atol=1e-6)
         assert dx.max() > 0.0 and dy.max() > 0.0
+        np.testing.assert_allclose(x[4], sdk.block_variances(sdk.luma(rp)), atol=1e-6)
+        assert x[5].max() > 0.0
         np.testing.assert_allclose(inputs(slice(16, 48), slice(32, 96)), x[:, 16:48, 32:96], atol=1e-6)
 
 

@@ -199,6 +199,9 @@ class BlockContrast(nn.Module):
     within-block error is the sum of the squared details that sum to zero over each of its blocks
     (the others are constant on them), one fixed 1x1 convolution."""
 
+    weight: torch.Tensor
+    reduce: torch.Tensor
+
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, eps: float = 1e-4) -> None:
         super().__init__()
         if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:

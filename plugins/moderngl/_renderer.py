@@ -27,7 +27,17 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Camera, Scene
-from rtp.sdk import ALL_RATES, RATE_CODES, RtpError, depth_edges, luma, pixel_differences, rate_size, tile_grid
+from rtp.sdk import (
+    ALL_RATES,
+    RATE_CODES,
+    RtpError,
+    block_variances,
+    depth_edges,
+    luma,
+    pixel_differences,
+    rate_size,
+    tile_grid,
+)
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
@@ -151,6 +161,8 @@ class Frame:
             return depth_edges(self.depth)
         if name in ("reprojected.y.dx", "reprojected.y.dy"):
             return pixel_differences(luma(self.reprojected))[name.endswith(".dy")]
+        if name in ("reprojected.y.blocks", "albedo.y.blocks"):
+            return block_variances(luma(self.reprojected if name.startswith("r") else self.albedo))
         base, _, comp = name.partition(".")
         planes = {
             "albedo": self.albedo, "normal": self.normal, "reprojected": self.reprojected, "motion": self.motion,

@@ -11,7 +11,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, depth_edges, luma, pixel_differences, reproject, reproject_positions
+from rtp.sdk import (
+    DEFAULT_REPROJECTION_TOLERANCE,
+    block_variances,
+    depth_edges,
+    luma,
+    pixel_differences,
+    reproject,
+    reproject_positions,
+)
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
 from ._errors import PyrenderAdapterError
@@ -30,7 +38,7 @@ _NORMAL = ("normal.x", "normal.y", "normal.z")
 _MOTION = ("motion.x", "motion.y")
 # Planes derived from the RGB ones: Rec.601 luma (sdk.luma), as the metrics measure it.
 _REPROJECTED_Y, _ALBEDO_Y = "reprojected.y", "albedo.y"
-_DIFFERENCES = ("reprojected.y.dx", "reprojected.y.dy")
+_DIFFERENCES = ("reprojected.y.dx", "reprojected.y.dy", "reprojected.y.blocks")
 #: The ``specular`` channel of everything pyrender shades: its dielectric F0 is a fixed 4 %
 #: (``mesh.frag``: ``dialectric_spec = vec3(0.04)``), specular 0.5 in ``sdk.CHANNELS`` terms.
 PYRENDER_SPECULAR = 0.5
@@ -98,6 +106,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
     * ``depth``: linear view depth from pyrender's 24-bit depth buffer.
     * ``depth.edge``: :func:`rtp.sdk.depth_edges` of that depth.
     * ``reprojected.y.dx/dy``: :func:`rtp.sdk.pixel_differences` of ``reprojected.y``.
+    * ``reprojected.y.blocks``, ``albedo.y.blocks``: :func:`rtp.sdk.block_variances` of the luma.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.
 
@@ -130,8 +139,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_ALBEDO, _ALBEDO_Y, *_NORMAL, *MATERIAL, "specular", "depth",
-         "depth.edge", *_MOTION)
+        (*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_ALBEDO, _ALBEDO_Y, "albedo.y.blocks", *_NORMAL,
+         *MATERIAL, "specular", "depth", "depth.edge", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
 
@@ -256,7 +265,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
         cam = self._camera(scene, camera)
         prev_cam = cam if prev_camera is None else prev_camera
 
-        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y}),
+        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, "albedo.y.blocks"}),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
         planes: dict[str, np.ndarray] = {"depth": g.depth}
         if "depth.edge" in wanted:
@@ -270,6 +279,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
         if g.albedo is not None:
             planes.update({c: g.albedo[..., i] for i, c in enumerate(_ALBEDO)})
             planes[_ALBEDO_Y] = luma(g.albedo)
+            if "albedo.y.blocks" in wanted:
+                planes["albedo.y.blocks"] = block_variances(planes[_ALBEDO_Y])
         if g.normal is not None:
             planes.update({c: g.normal[..., i] for i, c in enumerate(_NORMAL)})
         if temporal:
@@ -293,7 +304,9 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 rep, seen = reproject(colour, pd, g.depth, view, proj, prev_vp, tolerance=self.reprojection_tolerance)
                 planes.update({c: rep[..., i] for i, c in enumerate(_REPROJECTED)})
                 planes[_REPROJECTED_Y] = luma(rep)
-                planes.update(zip(_DIFFERENCES, pixel_differences(planes[_REPROJECTED_Y])))
+                planes.update(zip(_DIFFERENCES[:2], pixel_differences(planes[_REPROJECTED_Y])))
+                if _DIFFERENCES[2] in wanted:
+                    planes[_DIFFERENCES[2]] = block_variances(planes[_REPROJECTED_Y])
                 planes["seen"] = seen
             if wanted & set(_MOTION):
                 planes.update(zip(_MOTION, self._motion(g.depth, view, proj, prev_vp)))
