@@ -144,6 +144,18 @@ def test_pixel_differences_on_the_gpu_follow_the_sdk_definition(frames) -> None:
     a.close()
 
 
+def test_block_variances_on_the_gpu_follow_the_sdk_definition(frames) -> None:
+    ctx, prev, cur = frames
+    a = Adapter(("albedo.y.blocks", "reprojected.y", "reprojected.y.blocks", "albedo.y"), W, H, ctx=ctx)
+    x = _engine_inputs(ctx, prev, cur, a)
+    for got, source in ((x[0], x[3]), (x[2], x[1])):  # each of the adapter's own luma planes
+        want = sdk.block_variances(source)
+        assert np.mean(np.abs(got - want) <= 1e-3) >= 0.999, np.abs(got - want).max()
+        assert 0.05 < (want > 0.2).mean() < 0.375  # textured and edged cells; at most 6 of 16 pixels carry values
+    np.testing.assert_allclose(cur.channel("albedo.y.blocks"), sdk.block_variances(sdk.luma(cur.albedo)))
+    a.close()
+
+
 def test_material_channels_from_an_engine_texture(frames) -> None:
     ctx, prev, cur = frames
     channels = ("metallic", "seen", "roughness", "specular")

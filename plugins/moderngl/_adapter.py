@@ -48,10 +48,10 @@ CHANNEL_IDS: dict[str, int] = {
     "albedo.r": 4, "albedo.g": 5, "albedo.b": 6,
     "normal.x": 7, "normal.y": 8, "normal.z": 9, "depth": 10,
     "roughness": 11, "metallic": 12, "specular": 13, "depth.edge": 14, "reprojected.y": 15, "albedo.y": 16,
-    "reprojected.y.dx": 17, "reprojected.y.dy": 18,
+    "reprojected.y.dx": 17, "reprojected.y.dy": 18, "reprojected.y.blocks": 19, "albedo.y.blocks": 20,
 }
 _MATERIAL = ("roughness", "metallic", "specular")
-_MAX_CHANNELS = 20  # five RGBA float targets (adapter_fs.glsl)
+_MAX_CHANNELS = 24  # six RGBA float targets (adapter_fs.glsl)
 
 
 def _mat(m: np.ndarray) -> bytes:
@@ -161,6 +161,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._set("u_channels", ids)
         self._set("u_count", len(self.channels))
         self._set("u_differences", bool({"reprojected.y.dx", "reprojected.y.dy"} & set(self.channels)))
+        self._set("u_blocks_reprojected", "reprojected.y.blocks" in self.channels)
+        self._set("u_blocks_albedo", "albedo.y.blocks" in self.channels)
         self._set("u_size", (float(self.width), float(self.height)))
 
     def _set(self, name: str, value: Any) -> None:

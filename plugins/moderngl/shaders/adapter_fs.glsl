@@ -36,7 +36,9 @@ uniform mat4 u_prev_inv_proj;       // previous projection, inverted (window dep
 uniform mat4 u_prev_vp;             // world -> previous clip
 uniform float u_tolerance;
 uniform bool u_differences;        // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
-uniform int u_channels[20];         // channel ids, see CHANNEL_IDS in _adapter.py; -1 = unused
+uniform bool u_blocks_reprojected; // reprojected.y.blocks wanted: reproject the pixel's 4x4 cell
+uniform bool u_blocks_albedo;      // albedo.y.blocks wanted
+uniform int u_channels[24];         // channel ids, see CHANNEL_IDS in _adapter.py; -1 = unused
 uniform int u_count;
 
 layout(location = 0) out vec4 o0;
@@ -44,6 +46,7 @@ layout(location = 1) out vec4 o1;
 layout(location = 2) out vec4 o2;
 layout(location = 3) out vec4 o3;
 layout(location = 4) out vec4 o4;
+layout(location = 5) out vec4 o5;
 
 float linear_depth(float raw, mat4 inv_proj) {
     if (!u_depth_window) return raw;
@@ -102,6 +105,44 @@ vec4 reproject_prev(vec2 frag, float d) {
     return seen ? vec4(texelFetch(u_prev_colour, pi, 0).rgb, 1.0) : vec4(0.0);
 }
 
+// *.y.blocks, as rtp.sdk.block_variances: per 4x4 cell (top-left origin, edge repeated past the frame)
+// the log variance inside the blocks of rate k (1x2, 2x1, 2x2, 2x4, 4x2, 4x4) on the cell's k-th pixel.
+const ivec2 BLOCK_RATES[6] = ivec2[6](ivec2(1, 2), ivec2(2, 1), ivec2(2, 2), ivec2(2, 4), ivec2(4, 2), ivec2(4, 4));
+const float BLOCK_EPS = 1e-4;
+
+float block_value(float vals[16], ivec2 rate) {
+    float acc = 0.0;
+    int blocks = 0;
+    for (int by = 0; by < 4; by += rate.y) {
+        for (int bx = 0; bx < 4; bx += rate.x) {
+            float s = 0.0, s2 = 0.0;
+            for (int y = by; y < by + rate.y; ++y)
+                for (int x = bx; x < bx + rate.x; ++x) { float v = vals[y * 4 + x]; s += v; s2 += v * v; }
+            float n = float(rate.x * rate.y);
+            float m = s / n;
+            acc += max(s2 / n - m * m, 0.0);
+            blocks += 1;
+        }
+    }
+    return clamp(log(acc / float(blocks) + BLOCK_EPS) / -log(BLOCK_EPS) + 1.0, 0.0, 1.0);
+}
+
+// The GL pixel of top-left (column, row), clamped to the frame.
+ivec2 top_left_texel(int col, int row) {
+    ivec2 size = ivec2(u_size);
+    return ivec2(min(col, size.x - 1), size.y - 1 - min(row, size.y - 1));
+}
+
+float albedo_luma_at(ivec2 t) {
+    if (depth_at(t) <= 0.0) return 0.0;
+    vec3 a = texelFetch(u_albedo, t, 0).rgb;
+    return display_luma(u_albedo_linear ? linear_to_srgb(a) : a);
+}
+
+float reprojected_luma_at(ivec2 t) {
+    return display_luma(reproject_prev(vec2(t) + 0.5, depth_at(t)).rgb);
+}
+
 void main() {
     ivec2 g = ivec2(gl_FragCoord.xy);
     float d = depth_at(g);
@@ -129,15 +170,30 @@ void main() {
         for (int i = 0; i < 3; ++i) if (u_material_comp[i] >= 0) mat[i] = m[u_material_comp[i]];
     }
     if (!geo) mat = vec3(0.0);
+    float rblocks = 0.0, ablocks = 0.0;
+    int row = int(u_size.y) - 1 - g.y;  // top-left origin
+    int k = (row % 4) * 4 + g.x % 4;
+    if (k < 6 && (u_blocks_albedo || (u_blocks_reprojected && u_has_prev))) {
+        int r0 = row - row % 4, c0 = g.x - g.x % 4;
+        float av[16], rv[16];
+        for (int i = 0; i < 16; ++i) {
+            ivec2 t = top_left_texel(c0 + i % 4, r0 + i / 4);
+            av[i] = u_blocks_albedo ? albedo_luma_at(t) : 0.0;
+            rv[i] = (u_blocks_reprojected && u_has_prev) ? reprojected_luma_at(t) : 0.0;
+        }
+        if (u_blocks_albedo) ablocks = block_value(av, BLOCK_RATES[k]);
+        if (u_blocks_reprojected && u_has_prev) rblocks = block_value(rv, BLOCK_RATES[k]);
+    }
     float zc = inv_depth(d);
     float edge = clamp(max(edge_axis(g, ivec2(1, 0), zc), edge_axis(g, ivec2(0, 1), zc)), 0.0, 1.0);
-    float v[19] = float[19](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
-                            mat.x, mat.y, mat.z, edge, ry, display_luma(albedo), rdx, rdy);
-    float outv[20];
-    for (int i = 0; i < 20; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
+    float v[21] = float[21](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+                            mat.x, mat.y, mat.z, edge, ry, display_luma(albedo), rdx, rdy, rblocks, ablocks);
+    float outv[24];
+    for (int i = 0; i < 24; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
     o1 = vec4(outv[4], outv[5], outv[6], outv[7]);
     o2 = vec4(outv[8], outv[9], outv[10], outv[11]);
     o3 = vec4(outv[12], outv[13], outv[14], outv[15]);
     o4 = vec4(outv[16], outv[17], outv[18], outv[19]);
+    o5 = vec4(outv[20], outv[21], outv[22], outv[23]);
 }
