@@ -414,6 +414,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
         raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
                                  f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
+    packed = [c for c in cfg.inputs if c.endswith(".blocks")]
+    if cfg.augment and packed:
+        raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one rate per pixel of each cell; a flipped or "
+                                 "transposed crop would read the wrong rates", "augment")
     if cfg.loss not in LOSSES:
         raise sdk.ParameterError(f"loss: expected one of {', '.join(LOSSES)}, got {cfg.loss!r}", "loss")
     if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
