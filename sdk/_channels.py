@@ -114,6 +114,18 @@ def depth_edges(depth: np.ndarray) -> np.ndarray:
     return np.clip(out, 0.0, 1.0).astype(np.float32, copy=False)
 
 
+def _finite_plane(plane: np.ndarray, fn: str, dtype: type[np.floating]) -> np.ndarray:
+    """``plane`` as a finite ``(H, W)`` array of ``dtype``, or the typed error naming ``fn``."""
+    p = np.asarray(plane)
+    if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
+        raise InputShapeError(f"{fn}: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
+                              tuple(p.shape), "(H, W)")
+    p = p.astype(dtype, copy=False)
+    if not np.isfinite(p).all():
+        raise NonFiniteInputError(f"{fn}: the plane holds NaN or infinite values")
+    return p
+
+
 def pixel_differences(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The ``.dx`` and ``.dy`` planes of a plane: each pixel's absolute difference to its right and
     to its lower neighbour (0 in the last column, resp. row).
@@ -132,13 +144,7 @@ def pixel_differences(plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Returns:
         ``(dx, dy)``: float32 ``(H, W)`` each.
     """
-    p = np.asarray(plane)
-    if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
-        raise InputShapeError(f"pixel_differences: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
-                              tuple(p.shape), "(H, W)")
-    p = p.astype(np.float32, copy=False)
-    if not np.isfinite(p).all():
-        raise NonFiniteInputError("pixel_differences: the plane holds NaN or infinite values")
+    p = _finite_plane(plane, "pixel_differences", np.float32)
     dx = np.zeros_like(p)
     dy = np.zeros_like(p)
     np.abs(p[:, 1:] - p[:, :-1], out=dx[:, :-1])
@@ -174,13 +180,7 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
     Returns:
         float32 ``(H, W)``.
     """
-    p = np.asarray(plane)
-    if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
-        raise InputShapeError(f"block_variances: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
-                              tuple(p.shape), "(H, W)")
-    p = p.astype(np.float64)
-    if not np.isfinite(p).all():
-        raise NonFiniteInputError("block_variances: the plane holds NaN or infinite values")
+    p = _finite_plane(plane, "block_variances", np.float64)
     h, w = p.shape
     c = BLOCK_CELL
     q = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")

@@ -184,12 +184,10 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
         assert f"| procedural:0 | 0 | fast | {label} | {cells[0]} | {cells[1]} |" in age
 
 
-def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """A shipped model that reads reprojected.y (JNFLIP) is fed the luma of the method's own
-    reprojected displayed frame, plane for plane what the dataset and the adapters give it."""
-    meta = sdk.load("jnflip").metadata
-    assert "reprojected.y" in meta.inputs and "albedo.y" in meta.inputs
-    seen: list[tuple[np.ndarray, np.ndarray]] = []  # (the planes fed, the history reprojected into that frame)
+def _spy_inputs(monkeypatch: pytest.MonkeyPatch) -> list[tuple[Any, np.ndarray | None]]:
+    """Per network run of the loop: (the function building its inputs for a window, the history
+    reprojected into that frame, None on the first)."""
+    fed: list[tuple[Any, np.ndarray | None]] = []
     histories: list[np.ndarray] = []
     reproject, predict = PathFrame.reproject, sdk.PredictionReuse.predict
 
@@ -198,12 +196,22 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
         return histories[-1]
 
     def spy_predict(self: sdk.PredictionReuse, inputs: Any, *args: Any, **kwargs: Any) -> np.ndarray:
-        seen.append((inputs(slice(None), slice(None)), histories[-1] if histories else None))
+        fed.append((inputs, histories[-1] if histories else None))
         return predict(self, inputs, *args, **kwargs)
 
     monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
     monkeypatch.setattr(sdk.PredictionReuse, "predict", spy_predict)
+    return fed
+
+
+def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shipped model that reads reprojected.y (JNFLIP) is fed the luma of the method's own
+    reprojected displayed frame, plane for plane what the dataset and the adapters give it."""
+    meta = sdk.load("jnflip").metadata
+    assert "reprojected.y" in meta.inputs and "albedo.y" in meta.inputs
+    fed = _spy_inputs(monkeypatch)
     rep = play("procedural:0", "jnflip", paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0, out=tmp_path)
+    seen = [(inputs(slice(0, H), slice(0, W)), rp) for inputs, rp in fed]
     assert len(seen) == 3 and 0.0 <= {r["method"]: r for r in rep.rows}["jnflip"]["work_saved"] < 1.0
     assert seen[0][1] is None and all(rp is not None for _, rp in seen[1:])  # frame 0 has no history
     for x, rp in seen[1:]:
@@ -222,20 +230,7 @@ def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
 
     model = tiny_model(base_metadata(inputs=["reprojected.y.dx", "seen", "reprojected.y", "reprojected.y.dy",
                                              "reprojected.y.blocks", "albedo.y.blocks"]))
-    fed: list[tuple[Any, np.ndarray | None]] = []
-    histories: list[np.ndarray] = []
-    reproject, predict = PathFrame.reproject, sdk.PredictionReuse.predict
-
-    def spy_reproject(self: PathFrame, image: np.ndarray) -> np.ndarray:
-        histories.append(reproject(self, image))
-        return histories[-1]
-
-    def spy_predict(self: sdk.PredictionReuse, inputs: Any, *args: Any, **kwargs: Any) -> np.ndarray:
-        fed.append((inputs, histories[-1] if histories else None))
-        return predict(self, inputs, *args, **kwargs)
-
-    monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
-    monkeypatch.setattr(sdk.PredictionReuse, "predict", spy_predict)
+    fed = _spy_inputs(monkeypatch)
     play("procedural:0", str(model), paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0, out=tmp_path)
     assert len(fed) == 3
     for inputs, rp in fed[1:]:
