@@ -12,7 +12,16 @@ from __future__ import annotations
 import logging
 
 from . import adapters, files
-from ._channels import CHANNELS, DEFAULT_INPUTS, Channel, block_variances, depth_edges, pixel_differences
+from ._channels import (
+    BLOCK_CELL,
+    BLOCK_RATES,
+    CHANNELS,
+    DEFAULT_INPUTS,
+    Channel,
+    block_variances,
+    depth_edges,
+    pixel_differences,
+)
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._digest import model_digest
 from ._errors import (
@@ -77,6 +86,8 @@ def __getattr__(name: str) -> str:
 
 __all__ = [
     "ALL_RATES",
+    "BLOCK_CELL",
+    "BLOCK_RATES",
     "CHANNELS",
     "DEFAULT_EXTRAPOLATION_K",
     "DEFAULT_INPUTS",

@@ -15,6 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_sdk_all_is_pinned() -> None:
     assert sdk.__all__ == [
         "ALL_RATES",
+        "BLOCK_CELL",
+        "BLOCK_RATES",
         "CHANNELS",
         "DEFAULT_EXTRAPOLATION_K",
         "DEFAULT_INPUTS",

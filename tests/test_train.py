@@ -800,3 +800,32 @@ def test_bench_input_ceiling_trains_and_scores_on_the_current_frame(tmp_path: Pa
     text = capsys.readouterr().out
     assert out.with_suffix(".onnx").is_file() and (tmp_path / "evalval-c" / "evaluation.json").is_file()
     assert "never to ship" in text and "| 1x2 |" in text  # residuals' per-output table
+
+
+@pytest.mark.parametrize("size", [(40, 56), (42, 57)])
+def test_training_frames_pack_block_planes_exactly(size: tuple[int, int]) -> None:
+    from rtp.train._frames import Frame
+
+    rng = np.random.default_rng(0)
+    h, w = size
+    y = rng.random((h, w)).astype(np.float32)
+    names = ["reprojected.y", "reprojected.y.blocks", "seen", "albedo.y.blocks"]
+    x = np.stack([y, sdk.block_variances(y), rng.random((h, w)), sdk.block_variances(y[::-1].copy())])
+    f = Frame(x, names)
+    want = x.astype(np.float16)
+    np.testing.assert_array_equal(f.full(), want)
+    assert f.full().dtype == np.float16 and f.shape == x.shape
+    for oy, ox, side in [(0, 0, 16), (8, 12, 24), (16, 32, 24), (4, 8, 32), (3, 5, 12)]:  # the last: off the cells
+        np.testing.assert_array_equal(f.crop(oy, ox, side), want[:, oy : oy + side, ox : ox + side])
+    dense = x.astype(np.float16).nbytes
+    if h % 4 == 0 and w % 4 == 0:  # the two .blocks planes packed to 6/16
+        assert f.nbytes == dense // 4 * 2 + 2 * (dense // 4 * 6 // 16)
+    else:  # a frame off the cell grid stays dense
+        assert f.nbytes == dense
+    # a plane named .blocks that is not zero off the value pixels stays dense, and exact
+    x[3, 2, 3] = 0.5  # row 2 of a cell holds no value
+    g = Frame(x, names)
+    assert g.nbytes == (dense if h % 4 or w % 4 else dense // 4 * 3 + dense // 4 * 6 // 16)
+    np.testing.assert_array_equal(g.crop(8, 12, 24), x.astype(np.float16)[:, 8:32, 12:36])
+    with pytest.raises(ValueError, match=r"expected planes of shape \(3, H, W\)"):
+        Frame(x, names[:3])

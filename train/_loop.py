@@ -32,6 +32,7 @@ from rtp.evaluate import scores
 from . import checkpoint as ckpt
 from . import transforms as tt
 from ._augment import SYMMETRIES, augment_batch
+from ._frames import Frame
 from ._recipe import load_recipe
 from ._safety import calibrate_safety
 from .model import ARCHS, Network, build_network
@@ -181,12 +182,12 @@ _RESUME_KEYS = ("data", "metric", "tile", "outputs", "inputs", "transform", "log
 
 
 class _Split:
-    """Inputs (float16, to fit many frames in memory) and targets of one side of the split."""
+    """Inputs (float16, ``.blocks`` planes packed, to fit many frames in memory) and targets of one side of the split."""
 
     def __init__(self, reader: DatasetReader, store: TargetStore, ids: Sequence[str], cfg: TrainConfig) -> None:
         rows = [sdk.PREDICTED_RATES.index(r) for r in cfg.outputs]
         self.ids = list(ids)
-        self.x = [reader[i].inputs(cfg.inputs).astype(np.float16) for i in self.ids]
+        self.x = [Frame(reader[i].inputs(cfg.inputs), cfg.inputs) for i in self.ids]
         self.y = [store.load(i, cfg.metric, cfg.tile)[rows] for i in self.ids]
 
 
@@ -320,11 +321,11 @@ def _make_transform(cfg: TrainConfig, train: _Split) -> sdk.Transform:
     raise sdk.ParameterError(f"transform must be clamped or logistic, got {cfg.transform!r}")
 
 
-def _predict_frames(net: Network, xs: Sequence[np.ndarray], tile: int) -> list[np.ndarray]:
+def _predict_frames(net: Network, xs: Sequence[Frame], tile: int) -> list[np.ndarray]:
     out = []
     with torch.inference_mode():
         for x in xs:
-            t = torch.from_numpy(x.astype(np.float32))[None]
+            t = torch.from_numpy(x.full().astype(np.float32))[None]
             h, w = t.shape[-2:]
             th, tw = sdk.tile_grid(int(h), int(w), tile)
             y = net(_pad_to_tiles(t, tile))[0, :, :th, :tw]
@@ -381,7 +382,7 @@ def _teacher_targets(cfg: TrainConfig, reader: DatasetReader, tr: _Split, transf
         preds = []
         for t, rows in teachers:
             names = t.metadata.inputs
-            x = tr.x[k].astype(np.float32) if tuple(names) == tuple(cfg.inputs) else reader[i].inputs(names)
+            x = tr.x[k].full().astype(np.float32) if tuple(names) == tuple(cfg.inputs) else reader[i].inputs(names)
             preds.append(t.predict_raw(x)[rows])
         out.append(np.mean(preds, axis=0).astype(np.float32))
         if out[-1].shape != tr.y[k].shape:
@@ -479,6 +480,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
     h, w = tr.x[0].shape[-2:]
+    log.info("%.1f GB of input planes in memory", sum(f.nbytes for f in (*tr.x, *va.x)) / 1e9)
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
     if cfg.context < 0 or cfg.context % cfg.tile:
         raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}")
@@ -628,7 +630,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         oy = (torch.randint(full_h // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
         ox = (torch.randint(full_w // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
         side = cfg.crop + 2 * cfg.context
-        xb = np.stack([tr.x[i][:, y : y + side, x : x + side] for i, y, x in zip(idx, oy, ox)])
+        xb = np.stack([tr.x[i].crop(y, x, side) for i, y, x in zip(idx, oy, ox)])
         yb = np.stack([
             tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
             for i, y, x in zip(idx, oy, ox)
