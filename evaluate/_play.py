@@ -543,7 +543,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
                 if comp in ("y.dx", "y.dy"):  # one pixel past the window: its last column / row as the frame's
                     ext = sdk.luma(rp[ys.start:ys.stop + 1, xs.start:xs.stop + 1])
                     planes[i] = sdk.pixel_differences(ext)[comp == "y.dy"][:seen.shape[0], :seen.shape[1]]
-                elif comp == "y.blocks":  # windows start on whole cells (tiles)
+                elif c == "reprojected.y.blocks":  # windows start on whole cells (tiles)
                     planes[i] = sdk.block_variances(sdk.luma(rp[ys, xs]))
                 elif base == "reprojected":  # the method's own displayed frame, reprojected
                     planes[i] = sdk.luma(rp[ys, xs]) if comp == "y" else rp[ys, xs, "rgb".index(comp)]

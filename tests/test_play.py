@@ -223,13 +223,13 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
 def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_model: Any) -> None:
     """reprojected.y.dx / .dy and .blocks are sdk.pixel_differences and sdk.block_variances of the
-    method's own reprojected history, and
+    method's own reprojected history, albedo.y.blocks those of the frame's albedo, and
     a window of the frame (fresh crops) reads what the whole frame reads there, its last column and
     row included."""
     from tests.conftest import base_metadata
 
     model = tiny_model(base_metadata(inputs=["reprojected.y.dx", "seen", "reprojected.y", "reprojected.y.dy",
-                                             "reprojected.y.blocks", "albedo.y.blocks"]))
+                                             "reprojected.y.blocks", "albedo.y.blocks", "albedo.y"]))
     fed = _spy_inputs(monkeypatch)
     play("procedural:0", str(model), paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0, out=tmp_path)
     assert len(fed) == 3
@@ -241,7 +241,10 @@ def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         np.testing.assert_allclose(x[3], dy, atol=1e-6)
         assert dx.max() > 0.0 and dy.max() > 0.0
         np.testing.assert_allclose(x[4], sdk.block_variances(sdk.luma(rp)), atol=1e-6)
-        assert x[5].max() > 0.0
+        # albedo.y.blocks is the current G-buffer's, never the history's (the loop once gave a model
+        # the reprojected frame's blocks under both names)
+        np.testing.assert_allclose(x[5], sdk.block_variances(x[6]), atol=1e-6)
+        assert x[5].max() > 0.0 and not np.allclose(x[5], x[4], atol=1e-3)
         np.testing.assert_allclose(inputs(slice(16, 48), slice(32, 96)), x[:, 16:48, 32:96], atol=1e-6)
 
 
