@@ -23,7 +23,9 @@ def test_the_shipped_recipe_is_the_fast_network_for_every_metric() -> None:
     jn = load_recipe(SHIPPED_RECIPE, "jnyang")  # more, smaller crops won for JNYang, FLIP, JNFLIP (same pixels per step)
     # and twice as many of them for JNYang (measured on two seeds)
     # and a per-tile MLP head (two seeds on the validation maps, then the test maps and the closed loop)
-    assert jn.values == {**fl.values, "batch": 128, "head_width": 64}
+    # and the luma's variance inside each rate's blocks (the validation maps, then the test maps and the loop)
+    assert jn.values == {**fl.values, "batch": 128, "head_width": 64,
+                         "inputs": (*luma, "reprojected.y.blocks", "albedo.y.blocks")}
     # MSE made PSNR worse and tied JNFLIP: the paper's L1
     assert load_recipe(SHIPPED_RECIPE, "jnflip").values == {**fl.values, "loss": "l1"}
     old_crops = {"crop": 128, "batch": 16}  # PSNR: 64-pixel crops lost on the test maps; luma tied, red stays
