@@ -18,22 +18,24 @@ def test_the_shipped_recipe_is_the_fast_network_for_every_metric() -> None:
     fl = load_recipe(SHIPPED_RECIPE, "flip")  # no per-metric special case but the measured ones
     # luma in place of the paper's red: measured for JNFLIP, JNYang and FLIP
     luma = ("reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular")
-    assert fl.values == {"arch": "fast", "stem": 4, "width": 16, "depth": 3, "steps": 24000, "batch": 64, "crop": 64,
-                         "lr": 5e-4, "loss": "mse", "inputs": luma}
+    base = {"arch": "fast", "stem": 4, "width": 16, "depth": 3, "steps": 24000, "batch": 64, "crop": 64,
+            "lr": 5e-4, "loss": "mse", "inputs": luma}
+    blocks = (*luma, "reprojected.y.blocks", "albedo.y.blocks")
+    # the luma's variance inside each rate's blocks: FLIP on the validation maps, then once on the test maps
+    assert fl.values == {**base, "inputs": blocks}
     jn = load_recipe(SHIPPED_RECIPE, "jnyang")  # more, smaller crops won for JNYang, FLIP, JNFLIP (same pixels per step)
     # and twice as many of them for JNYang (measured on two seeds)
     # and a per-tile MLP head (two seeds on the validation maps, then the test maps and the closed loop)
     # and the luma's variance inside each rate's blocks (the validation maps, then the test maps and the loop)
-    assert jn.values == {**fl.values, "batch": 128, "head_width": 64,
-                         "inputs": (*luma, "reprojected.y.blocks", "albedo.y.blocks")}
-    # MSE made PSNR worse and tied JNFLIP: the paper's L1
-    assert load_recipe(SHIPPED_RECIPE, "jnflip").values == {**fl.values, "loss": "l1"}
+    assert jn.values == {**base, "batch": 128, "head_width": 64, "inputs": blocks}
+    # MSE made PSNR worse and tied JNFLIP: the paper's L1 (the .blocks planes saved JNFLIP no more on the test maps)
+    assert load_recipe(SHIPPED_RECIPE, "jnflip").values == {**base, "loss": "l1"}
     old_crops = {"crop": 128, "batch": 16}  # PSNR: 64-pixel crops lost on the test maps; luma tied, red stays
     red = ("reprojected.r", "seen", "albedo.r", "normal.z", "roughness", "metallic", "specular")
-    assert load_recipe(SHIPPED_RECIPE, "psnr").values == {**fl.values, **old_crops, "loss": "l1", "inputs": red}
+    assert load_recipe(SHIPPED_RECIPE, "psnr").values == {**base, **old_crops, "loss": "l1", "inputs": red}
     lp = load_recipe(SHIPPED_RECIPE, "lpips")  # the material inputs did not help LPIPS; its linear head; depth 5 did;
     # 64-pixel crops lost, 64 crops of 128 pixels a step won
-    assert lp.values == {**fl.values, "crop": 128, "batch": 64,
+    assert lp.values == {**base, "crop": 128, "batch": 64,
                          "inputs": ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g",
                                           "albedo.b", "normal.z"), "head": "linear", "depth": 5}
     assert jn.val_split == "validation" and len(jn.sha256) == 64
