@@ -19,7 +19,8 @@ network every k-th frame and reprojects its per-tile predictions in between with
 predicted afresh on crops with ``NAME@k:fresh``; ``NAME@k:hW`` also blends each network run's
 estimates with those carried from the previous frame, weight W on the carried ones; ``NAME@k:rS``
 runs the network early once more than a share S of the tiles is unseen since it ran; ``NAME@k:sN``
-carries one pixel of every N per axis), ``yang2019``
+carries one pixel of every N per axis; ``NAME@k:vA`` rescales carried estimates by the blocks'
+variance, ``sdk.PredictionReuse(rescale=A)``), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -116,13 +117,15 @@ class MethodSpec:
     history: float = 0.0
     refresh: float | None = None
     step: int | None = None
+    rescale: float = 0.0
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
     model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse, then
     ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
-    weight W), ``:rS`` (refresh share S) and ``:sN`` (the carry keeps one pixel of N per axis) in any
+    weight W), ``:rS`` (refresh share S), ``:sN`` (the carry keeps one pixel of N per axis) and ``:vA``
+    (carried estimates rescaled by the blocks' variance to the power A) in any
     order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
@@ -141,15 +144,18 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         history = [_share(o, item, "history weight") for o in options if o[:1] == "h"]
         refresh = [_share(o, item, "refresh share") for o in options if o[:1] == "r"]
         step = [_step(o, item) for o in options if o[:1] == "s"]
+        rescale = [_exponent(o, item) for o in options if o[:1] == "v"]
         if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
-                or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) != len(options)):
+                or len(rescale) > 1
+                or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
                             f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
-                            "refresh share (both in [0, 1)) and one ':sN' pixel step, e.g. jnyang@4:mean:fresh, "
-                            "jnyang@1:h0.5, jnyang@8:r0.02 or jnyang@4:s4")
+                            "refresh share (both in [0, 1)), one ':sN' pixel step and one ':vA' rescale exponent, e.g. "
+                            "jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4 or jnyang@4:v0.5")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
-                              refresh[0] if refresh else None, step[0] if step else None))
+                              refresh[0] if refresh else None, step[0] if step else None,
+                              rescale[0] if rescale else 0.0))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -160,6 +166,17 @@ def _step(option: str, item: str) -> int:
         raise PlayError(f"method {item!r}: ':{option}' is not a pixel step: expected ':s' and an integer >= 1 that "
                         "divides the model's tile size, e.g. jnyang@4:s4")
     return int(option[1:])
+
+
+def _exponent(option: str, item: str) -> float:
+    try:
+        a = float(option[1:])
+    except ValueError:
+        a = math.nan
+    if not 0.0 <= a <= sdk.MAX_RESCALE:
+        raise PlayError(f"method {item!r}: ':{option}' is not a rescale exponent: expected ':v' and a number in "
+                        f"[0, {sdk.MAX_RESCALE:g}], e.g. jnyang@4:v0.5")
+    return a
 
 
 def _share(option: str, item: str, what: str) -> float:
@@ -372,7 +389,7 @@ def play(
     if workers < 1:
         raise PlayError(f"workers: expected >= 1, got {workers}", "workers")
     # each reuse method's pixel step as the carry resolves it (a bad one fails here, before the run)
-    steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step).step
+    steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step, rescale=m.rescale).step
              for m in specs if m.kind == "model"}
     settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
@@ -384,7 +401,7 @@ def play(
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
-                                   "refresh": m.refresh, "step": steps[m.name]}
+                                   "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
@@ -494,7 +511,7 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
                 decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh,
-                                m.step)
+                                m.step, m.rescale)
                 loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
@@ -526,11 +543,11 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
 
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
-           refresh: float | None = None, step: int | None = None) -> Callable[..., np.ndarray]:
+           refresh: float | None = None, step: int | None = None, rescale: float = 0.0) -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction,
-                                history=history, refresh=refresh, step=step)
+                                history=history, refresh=refresh, step=step, rescale=rescale)
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
 from ._errors import InputDtypeError, InputShapeError, ParameterError
 from ._rates import RateLike, select_rates
 from ._tiles import padded_size, tile_grid
@@ -30,7 +31,7 @@ from ._tiles import padded_size, tile_grid
 if TYPE_CHECKING:
     from ._predictor import ShadingRatePredictor
 
-__all__ = ["REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse"]
+__all__ = ["MAX_RESCALE", "REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse"]
 
 #: How a tile of a frame between network runs reduces the estimates its pixels carry. ``mean`` is
 #: the default: on the validation maps it kept 92.7% / 94.7% of k = 1's saving at 2% / 5% failing
@@ -322,6 +323,36 @@ def cover(tiles: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
     return [(a[0], a[1], a[2], a[3]) for a in out]
 
 
+#: The largest ``rescale`` exponent :class:`PredictionReuse` takes.
+MAX_RESCALE = 2.0
+
+
+def tile_block_levels(planes: np.ndarray, tile: int) -> np.ndarray:
+    """Per tile and reduced rate, the mean over the tile's 4x4 cells of ``.blocks`` planes
+    (:func:`block_variances`: each rate's log variance inside its blocks, normalised to [0, 1]),
+    averaged over the planes given: ``(P, H, W)`` -> float32 ``(6, tile rows, tile cols)`` in
+    :data:`BLOCK_RATES` order. ``tile`` must be a multiple of :data:`BLOCK_CELL`; a partial last
+    tile averages the cells it has."""
+    if planes.ndim != 3 or 0 in planes.shape:
+        raise InputShapeError(f"expected .blocks planes (P, H, W), got shape {planes.shape}", tuple(planes.shape),
+                              "(P, H, W)")
+    _, h, w = planes.shape
+    c = BLOCK_CELL
+    th, tw = tile_grid(h, w, tile)
+    m = tile // c
+    ch, cw = -(-h // c), -(-w // c)
+    out = np.empty((len(BLOCK_RATES), th, tw), np.float32)
+    for k in range(len(BLOCK_RATES)):
+        cells = planes[:, k // c::c, k % c::c].mean(axis=0, dtype=np.float64)[:ch, :cw]
+        total = np.zeros((th * m, tw * m))
+        count = np.zeros((th * m, tw * m))
+        total[:ch, :cw] = cells
+        count[:ch, :cw] = 1.0
+        total = total.reshape(th, m, tw, m).sum(axis=(1, 3))
+        out[k] = total / count.reshape(th, m, tw, m).sum(axis=(1, 3))
+    return out
+
+
 def _in_unit_interval(value: object, name: str, expected: str) -> float:
     """``value`` as a float in [0, 1), or a ParameterError naming ``name`` and what was ``expected``."""
     try:
@@ -366,6 +397,15 @@ class PredictionReuse:
     costs less per carried frame (docs/performance.md "Prediction reuse on a CPU") and samples each
     tile's surfaces more coarsely.
 
+    ``rescale`` > 0 (models with ``.blocks`` inputs, error metrics) rescales carried estimates by how
+    the content now falls on each rate's blocks: the carry holds each tile's estimate divided by
+    ``(v + eps) ** rescale``, ``v`` the geometric mean over the tile of the variance inside the
+    rate's blocks in the model's ``.blocks`` planes (:func:`block_variances`) where the network ran,
+    and a carried frame multiplies by the same of its own planes. The network's estimates follow
+    those planes, which change with every sub-pixel move of the camera; a carried estimate alone
+    cannot (docs/results.md "Carried estimates rescaled by the blocks' variance"). It reads the
+    frame's inputs on carried frames too (``x`` is called on the whole frame).
+
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
     on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
     plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
@@ -377,7 +417,8 @@ class PredictionReuse:
 
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
                  unseen: str = "full", unseen_fraction: float = 0.5, margin: int | None = None,
-                 history: float = 0.0, refresh: float | None = None, step: int | None = None) -> None:
+                 history: float = 0.0, refresh: float | None = None, step: int | None = None,
+                 rescale: float = 0.0) -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -398,6 +439,7 @@ class PredictionReuse:
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
                                  "frames (export it with dynamic sizes)", "unseen")
         self.step = _check_step(step, predictor.tile_size)
+        self.rescale, self._blocks = self._check_rescale(predictor, rescale)
         self.predictor = predictor
         self.every = int(every)
         self.reduce = reduce
@@ -410,6 +452,32 @@ class PredictionReuse:
         self.refresh = limit
         self.work = 0.0
         self.reset()
+
+    @staticmethod
+    def _check_rescale(predictor: ShadingRatePredictor, rescale: object) -> tuple[float, list[int]]:
+        try:
+            a = float(rescale)  # type: ignore[arg-type]
+        except (TypeError, ValueError, OverflowError):
+            a = math.nan
+        if isinstance(rescale, (bool, str, bytes)) or not 0.0 <= a <= MAX_RESCALE:
+            raise ParameterError(f"rescale: expected an exponent in [0, {MAX_RESCALE:g}] (0: carry the estimates as they "
+                                 f"are), got {rescale!r}", "rescale")
+        if a == 0.0:
+            return 0.0, []
+        meta = predictor.metadata
+        blocks = [i for i, c in enumerate(meta.inputs) if c.endswith(".blocks")]
+        problem = ("it has no .blocks input (sdk.block_variances)" if not blocks else
+                   "its metric is better when higher (rescale divides an error)" if meta.higher_is_better else
+                   f"its {predictor.tile_size}-pixel tiles are not whole {BLOCK_CELL}x{BLOCK_CELL} cells"
+                   if predictor.tile_size % BLOCK_CELL else "")
+        if problem:
+            raise ParameterError(f"rescale: this model cannot rescale carried estimates: {problem}", "rescale")
+        return a, blocks
+
+    def _levels(self, planes: np.ndarray) -> np.ndarray:
+        """Per tile and rate, the factor ``(v + eps) ** rescale`` of this frame's inputs."""
+        v = tile_block_levels(planes[self._blocks], self.predictor.tile_size)
+        return np.exp(self.rescale * -math.log(BLOCK_EPS) * v.astype(np.float64))
 
     def reset(self) -> None:
         """Forget the carried estimates: the next frame runs the network."""
@@ -426,7 +494,7 @@ class PredictionReuse:
     def __repr__(self) -> str:
         return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
                 f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g}, "
-                f"refresh={self.refresh!r}, step={self.step})")
+                f"refresh={self.refresh!r}, step={self.step}, rescale={self.rescale:g})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         if callable(x):
@@ -450,12 +518,14 @@ class PredictionReuse:
     def _run(self, x: Inputs, hw: tuple[int, int],
              carried: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         h, w = hw
-        est = self.predictor.predict(self._window(x, slice(0, h), slice(0, w)))
+        planes = self._window(x, slice(0, h), slice(0, w))
+        est = self.predictor.predict(planes)
         if carried is not None and self.history > 0:  # blend with the carried estimates where they are known
             old, missing = carried
             mix = ((1.0 - self.history) * est + self.history * np.where(missing[None], est, old)).astype(est.dtype)
             est = np.where(missing[None], est, mix)
-        self._cache = est.reshape(len(est), -1)
+        kept = est if not self.rescale else (est / self._levels(planes)).astype(np.float32)
+        self._cache = kept.reshape(len(kept), -1)
         self._track = (start_track(hw, self.predictor.tile_size, self.step) if self.every > 1 or self.history > 0
                        else None)
         self._shape = hw
@@ -509,6 +579,10 @@ class PredictionReuse:
                                               self.unseen_fraction, self.reduce, self.step)
         if self.refresh is not None and missing.mean() > self.refresh:
             runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
+        levels = None
+        if self.rescale and not (runs and self.history == 0):  # to this frame's blocks (unseen tiles stay worst)
+            levels = self._levels(self._window(x, slice(0, hw[0]), slice(0, hw[1])))
+            est = np.where(missing[None], est, est * levels).astype(np.float32)
         if runs:  # the network's frame, blended with what was carried here (history > 0)
             return self._run(x, hw, (est, missing))
         work = 0.0
@@ -528,7 +602,8 @@ class PredictionReuse:
             # carry them on from here, from where they are now
             slot = np.full(missing.size, -1, np.int32)
             slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
-            self._cache = np.concatenate([self._cache, est.reshape(len(est), -1)[:, missing.ravel()]], axis=1)
+            fresh_est = est if levels is None else (est / levels).astype(np.float32)  # the carry holds them divided
+            self._cache = np.concatenate([self._cache, fresh_est.reshape(len(est), -1)[:, missing.ravel()]], axis=1)
             here = start_track(hw, tile, self.step)
             mine = slot[here.index]
             fresh = mine >= 0

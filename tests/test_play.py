@@ -287,22 +287,25 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 def test_methods_are_parsed_and_checked() -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
                           "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02,"
-                          "jnyang@4:s4:r0.05")
-    assert [s.step for s in specs] == [None] * 11 + [4]
+                          "jnyang@4:s4:r0.05,jnyang@4:v0.5")
+    assert [s.step for s in specs] == [None] * 11 + [4, None]
+    assert [s.rescale for s in specs] == [0.0] * 12 + [0.5]
     assert [(s.kind, s.model, s.reuse, s.reduce, s.unseen, s.history, s.refresh) for s in specs] == [
         ("model", "jnyang", 1, "mean", "full", 0, None), ("model", "jnyang", 4, "mean", "full", 0, None),
         ("model", "models/psnr.onnx", 2, "mean", "full", 0, None), ("yang2019", "", 1, "mean", "full", 0, None),
         ("model", "jnyang", 4, "worst", "full", 0, None), ("model", "jnyang", 4, "mean", "full", 0, None),
         ("model", "jnyang", 4, "mean", "fresh", 0, None), ("model", "jnyang", 2, "upper", "fresh", 0, None),
         ("model", "jnyang", 1, "mean", "full", 0.5, None), ("model", "jnyang", 4, "mean", "fresh", 0.25, None),
-        ("model", "jnyang", 8, "mean", "full", 0, 0.02), ("model", "jnyang", 4, "mean", "full", 0, 0.05)]
+        ("model", "jnyang", 8, "mean", "full", 0, 0.02), ("model", "jnyang", 4, "mean", "full", 0, 0.05),
+        ("model", "jnyang", 4, "mean", "full", 0, None)]
     for bad, match in (("jnyang@0", "reuse interval"), ("jnyang@x", "reuse interval"), ("", "at least one"),
                        ("oracle,oracle", "each method once"), ("jnyang@4:median", "worst, mean, upper"),
                        ("jnyang@4:", "worst, mean, upper"), ("jnyang@4:mean:worst", "at most one"),
                        ("jnyang@4:fresh:full", "full, fresh"), ("jnyang@1:h1.5", "history weight"),
                        ("jnyang@1:hx", "history weight"), ("jnyang@1:h0.5:h0.2", "at most one"), ("jnyang@8:r2", "refresh share"),
                        ("jnyang@8:r0.1:r0.2", "at most one"), ("jnyang@4:s0", "pixel step"), ("jnyang@4:sx", "pixel step"),
-                       ("jnyang@4:s2:s4", "at most one")):
+                       ("jnyang@4:s2:s4", "at most one"), ("jnyang@4:vx", "rescale exponent"),
+                       ("jnyang@4:v3", "rescale exponent"), ("jnyang@4:v0.5:v1", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     with pytest.raises(sdk.ParameterError, match=r"divisor of the model's 16-pixel tile \(1, 2, 4, 8, 16\), got 3"):

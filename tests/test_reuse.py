@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from rtp import sdk
+from rtp.sdk._channels import BLOCK_EPS
 from rtp.sdk._reuse import (
     PLACE_BITS,
     Track,
@@ -15,6 +16,7 @@ from rtp.sdk._reuse import (
     cover,
     default_step,
     start_track,
+    tile_block_levels,
     tile_index_map,
 )
 
@@ -418,3 +420,70 @@ def test_bad_arguments_are_refused() -> None:
     with pytest.raises(sdk.ParameterError, match="pass seen"):
         reuse.predict(lambda ys, xs: s.x[:, ys, xs], (s.rows, s.cols))
     assert "every=4" in repr(reuse) and "step=4" in repr(reuse) and sdk.PredictionReuse(s.pred, step=8).step == 8
+
+
+def test_tile_block_levels_average_each_rates_cells_over_a_tile() -> None:
+    """Per tile and rate, the mean of that rate's value over the tile's 4x4 cells (the k-th pixel of
+    each cell in raster order), averaged over the planes; a partial last tile averages its own cells."""
+    h, w = 2 * TILE, TILE + 8  # a partial second tile column: two cells wide
+    planes = np.zeros((2, h, w), np.float32)
+    for k in range(len(sdk.BLOCK_RATES)):
+        planes[0, k // 4::4, k % 4::4] = 0.1 * (k + 1)
+        planes[1, k // 4::4, k % 4::4] = 0.3
+    planes[0, k // 4, k % 4] = 0.1 * (k + 1) + 1.6  # one cell of the first tile 4x4 higher (16 cells a tile)
+    v = tile_block_levels(planes, TILE)
+    assert v.shape == (6, 2, 2)
+    want = (0.1 * (np.arange(6) + 1) + 0.3) / 2
+    expect = np.broadcast_to(want[:, None, None], v.shape).copy()
+    expect[5, 0, 0] += 1.6 / 16 / 2
+    assert np.allclose(v, expect, atol=1e-6)
+    with pytest.raises(sdk.InputShapeError, match=r"\(P, H, W\)"):
+        tile_block_levels(planes[0], TILE)
+
+
+def test_rescale_scales_carried_estimates_by_the_blocks_variance() -> None:
+    """``rescale=a``: on a carried frame each seen tile's estimate is the carried one times
+    ((v_now + eps) / (v_then + eps)) ** a in its ``.blocks`` planes' geometric means; the unseen
+    tiles stay at 1x1 and the network's frames are the network's alone."""
+    s = _Scene()
+    a = 0.5
+    blocks = [i for i, c in enumerate(s.pred.metadata.inputs) if c.endswith(".blocks")]
+    assert len(blocks) == 2
+    everything = np.ones((s.h, s.w), np.float32)
+    fetch = (s.rows, s.cols)
+    x0 = s.inputs(everything)
+    x1 = x0.copy()
+    x1[blocks] = np.clip(x1[blocks] * 0.8 + 0.15, 0, 1)  # the content now falls differently on the blocks
+    reuse = sdk.PredictionReuse(s.pred, 4, rescale=a)
+    first = reuse.predict(x0)
+    assert np.array_equal(first, s.pred.predict(x0))
+    seen = everything.copy()
+    seen[:TILE, :TILE] = 0
+    carried = reuse.predict(x1, fetch, seen)
+    assert reuse.work == 0.0
+    ratio = np.exp(a * -np.log(BLOCK_EPS) * (tile_block_levels(x1[blocks], TILE) - tile_block_levels(x0[blocks], TILE)))
+    assert not np.allclose(ratio, 1.0)
+    want = first * ratio
+    assert np.isinf(carried[:, 0, 0]).all()
+    assert np.allclose(carried.reshape(6, -1)[:, 1:], want.reshape(6, -1)[:, 1:], rtol=1e-5)
+    # without rescale the carried estimates are the first frame's; the same frame carried is itself
+    plain = sdk.PredictionReuse(s.pred, 4)
+    plain.predict(x0)
+    assert np.allclose(plain.predict(x1, fetch, everything), first)
+    again = sdk.PredictionReuse(s.pred, 4, rescale=a)
+    again.predict(x0)
+    assert np.allclose(again.predict(x0, fetch, everything), first, rtol=1e-5)
+    assert "rescale=0.5" in repr(reuse)
+
+
+def test_rescale_needs_blocks_planes_and_an_error_metric() -> None:
+    s = _Scene(3, 4)
+    for bad in (-0.1, sdk.MAX_RESCALE + 0.1, float("nan"), True, "0.5"):
+        with pytest.raises(sdk.ParameterError, match="rescale: expected an exponent") as err:
+            sdk.PredictionReuse(s.pred, rescale=bad)  # type: ignore[arg-type]
+        assert err.value.name == "rescale"
+    with pytest.raises(sdk.ParameterError, match=r"no \.blocks input"):
+        sdk.PredictionReuse(sdk.load("lpips"), rescale=0.5)
+    with pytest.raises(sdk.ParameterError, match="rescale"):
+        sdk.PredictionReuse(sdk.load("psnr"), rescale=0.5)
+    assert sdk.PredictionReuse(sdk.load("psnr"), rescale=0).rescale == 0.0  # 0: nothing asked of the model
