@@ -541,6 +541,27 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
     return decide
 
 
+def model_inputs(pf: Any, rp: np.ndarray, channels: Sequence[str], ys: slice, xs: slice) -> np.ndarray:
+    """A model's input planes ``channels`` for the window ``(ys, xs)`` of a played frame ``pf``
+    (:class:`rtp.capture.paths.PathFrame`), ``rp`` the method's own displayed frame reprojected."""
+    seen = pf.seen[ys, xs]
+    planes = np.empty((len(channels),) + seen.shape, np.float32)
+    for i, c in enumerate(channels):
+        base, _, comp = c.partition(".")
+        if comp in ("y.dx", "y.dy"):  # one pixel past the window: its last column / row as the frame's
+            ext = sdk.luma(rp[ys.start:ys.stop + 1, xs.start:xs.stop + 1])
+            planes[i] = sdk.pixel_differences(ext)[comp == "y.dy"][:seen.shape[0], :seen.shape[1]]
+        elif c == "reprojected.y.blocks":  # windows start on whole cells (tiles)
+            planes[i] = sdk.block_variances(sdk.luma(rp[ys, xs]))
+        elif base == "reprojected":  # the method's own displayed frame, reprojected
+            planes[i] = sdk.luma(rp[ys, xs]) if comp == "y" else rp[ys, xs, "rgb".index(comp)]
+        elif c == "seen":
+            planes[i] = seen
+        else:  # G-buffer planes: converted once per frame, shared by every method
+            planes[i] = pf.plane(c)[ys, xs]
+    return planes
+
+
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
            refresh: float | None = None, step: int | None = None, rescale: float = 0.0) -> Callable[..., np.ndarray]:
@@ -553,22 +574,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
         assert rp is not None
 
         def inputs(ys: slice, xs: slice) -> np.ndarray:  # only where the network runs
-            seen = pf.seen[ys, xs]
-            planes = np.empty((len(meta.inputs),) + seen.shape, np.float32)
-            for i, c in enumerate(meta.inputs):
-                base, _, comp = c.partition(".")
-                if comp in ("y.dx", "y.dy"):  # one pixel past the window: its last column / row as the frame's
-                    ext = sdk.luma(rp[ys.start:ys.stop + 1, xs.start:xs.stop + 1])
-                    planes[i] = sdk.pixel_differences(ext)[comp == "y.dy"][:seen.shape[0], :seen.shape[1]]
-                elif c == "reprojected.y.blocks":  # windows start on whole cells (tiles)
-                    planes[i] = sdk.block_variances(sdk.luma(rp[ys, xs]))
-                elif base == "reprojected":  # the method's own displayed frame, reprojected
-                    planes[i] = sdk.luma(rp[ys, xs]) if comp == "y" else rp[ys, xs, "rgb".index(comp)]
-                elif c == "seen":
-                    planes[i] = seen
-                else:  # G-buffer planes: converted once per frame, shared by every method
-                    planes[i] = pf.plane(c)[ys, xs]
-            return planes
+            return model_inputs(pf, rp, meta.inputs, ys, xs)
 
         fetch = (pf.rows, pf.cols) if pf.index > 0 else None
         est = carry.predict(inputs, fetch, pf.seen, pf.frame.mask <= 0.5)
