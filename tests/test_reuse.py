@@ -487,3 +487,20 @@ def test_rescale_needs_blocks_planes_and_an_error_metric() -> None:
     with pytest.raises(sdk.ParameterError, match="rescale"):
         sdk.PredictionReuse(sdk.load("psnr"), rescale=0.5)
     assert sdk.PredictionReuse(sdk.load("psnr"), rescale=0).rescale == 0.0  # 0: nothing asked of the model
+
+
+def test_rescaled_fresh_tiles_are_the_networks_and_carry_on_unchanged() -> None:
+    """With ``unseen="fresh"`` and ``rescale``, a tile predicted afresh is the network's estimate as it
+    is, and on a next frame with the same inputs it carries on unchanged (the carry holds it divided
+    by its own frame's factor)."""
+    s = _Scene()
+    everything = np.ones((s.h, s.w), np.float32)
+    seen = everything.copy()
+    seen[2 * TILE:4 * TILE, 11 * TILE:13 * TILE] = 0
+    x0, x1 = s.inputs(everything), s.inputs(seen)
+    reuse = sdk.PredictionReuse(s.pred, 4, unseen="fresh", rescale=0.25)
+    reuse.predict(x0)
+    second = reuse.predict(x1, (s.rows, s.cols), seen)
+    assert np.allclose(second[:, 2:4, 11:13], s.pred.predict(x1)[:, 2:4, 11:13], rtol=1e-5)
+    third = reuse.predict(x1, (s.rows, s.cols), everything)
+    assert reuse.work == 0.0 and np.allclose(third, second, rtol=1e-5)
