@@ -152,9 +152,10 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     settings = json.loads((tmp_path / "play.json").read_text())["settings"]
     assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
     assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean", "unseen": "full", "history": 0.0,
-                                              "refresh": None, "step": 4},
+                                              "refresh": None, "step": 4, "rescale": 0.0},
                                  "jnyang@2:fresh": {"k": 2, "reduce": "mean", "unseen": "fresh",
-                                                    "history": 0.0, "refresh": None, "step": 4}}  # what NAME@k meant
+                                                    "history": 0.0, "refresh": None, "step": 4,
+                                                    "rescale": 0.0}}  # what NAME@k meant
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
