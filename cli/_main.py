@@ -279,7 +279,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "head_width", "context_pool", "block_contrast", "contrast_cell",
+                 "separable_tail", "head_width", "context_pool", "block_contrast", "contrast_cell",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
                  "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
@@ -545,6 +545,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--separable", action="store_true", default=None,
                    help="the fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across "
                    "them: about a ninth of the work, room for more width) (default: off)")
+    r.add_argument("--separable-tail", dest="separable_tail", action="store_true", default=None,
+                   help="only the fast network's blocks at tile resolution depthwise-separable (with --grow 2: a "
+                   "64-channel end at about a seventh of its cost) (default: off)")
     r.add_argument("--head-width", dest="head_width", type=_non_negative, default=None,
                    help="the fast network's head as a per-tile MLP: a 1x1 to N channels, BatchNorm, ReLU, then the 1x1 "
                    "to the outputs (almost free at tile resolution); 0: a linear 1x1 (default: the recipe's; the "

@@ -184,6 +184,20 @@ def test_separable_blocks_are_depthwise_then_pointwise_and_export() -> None:
     _round_trip(net, "separable", seed=2)
 
 
+def test_a_separable_tail_splits_only_the_tile_resolution_blocks_and_exports() -> None:
+    from rtp.train.model import FastNet
+
+    net = FastNet(4, depth=5, grow=2, separable_tail=True).eval()
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    # stem; full 3x3 blocks at 1/4 and 1/8 (16, 32); three split blocks at 1/16 (to 64); head
+    assert [(m.kernel_size[0], m.groups, m.out_channels) for m in convs[1:-1]] == [
+        (3, 1, 16), (3, 1, 32), (3, 32, 32), (1, 1, 64), (3, 64, 64), (1, 1, 64), (3, 64, 64), (1, 1, 64)]
+    assert net.config["separable_tail"] is True and "separable_tail" not in FastNet().config
+    full = FastNet(4, depth=5, grow=2)
+    assert sum(p.numel() for p in net.parameters()) < sum(p.numel() for p in full.parameters()) / 3
+    _round_trip(net, "separable_tail", seed=3)
+
+
 def test_the_mlp_head_reads_the_last_block_through_a_hidden_layer_and_exports() -> None:
     from rtp.train.model import FastNet
 

@@ -410,6 +410,11 @@ def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_pat
     assert "differs in: max_width" in capsys.readouterr().err
     rtp_main([*base[:-2], "--separable", "--steps", "6", "--out", str(tmp_path / "s.pt")])  # 6 steps: kept even if dead
     assert load_checkpoint(tmp_path / "s.pt").metadata.provenance["separable"] is True
+    rtp_main([*base[:-2], "--separable-tail", "--steps", "6", "--out", str(tmp_path / "t.pt")])
+    ck = load_checkpoint(tmp_path / "t.pt")
+    assert ck.metadata.provenance["separable_tail"] is True and ck.net.config["separable_tail"] is True
+    with pytest.raises(sdk.ParameterError, match="separable_tail: the fast network's option"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "q.pt"), crop=32, separable_tail=True))
     with pytest.raises(sdk.ParameterError, match="separable: the fast network's option"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, separable=True))
     with pytest.raises(sdk.ParameterError, match="max_width caps grow 2's channels"):

@@ -255,6 +255,8 @@ class FastNet(nn.Module):
     ``separable`` makes each 3x3 block depthwise-separable (a 3x3 convolution per channel, BatchNorm,
     ReLU, then a 1x1 across channels, BatchNorm, ReLU: MobileNet's block), about a ninth of a block's
     multiply-adds, so the network can be twice as wide for the same cost at 1/4 resolution.
+    ``separable_tail`` makes only the blocks at tile resolution (after the last pool) so: with
+    ``grow`` 2 a 64-channel end at about a seventh of its cost, the frame still read by full 3x3 blocks.
     ``head_width`` N > 0 makes the head a small per-tile MLP: a 1x1 convolution to N channels,
     BatchNorm, ReLU, then the 1x1 to the outputs. At tile resolution it is almost free (a 1080p frame
     has 8,160 16-pixel tiles: 1,000 multiply-adds per tile for N = 64 and width 16) and turns the
@@ -287,7 +289,8 @@ class FastNet(nn.Module):
                  tile: int = DEFAULT_TILE_SIZE, width: int = 16, depth: int = 3, stem: int = 4, grow: int = 1,
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
-                 block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0) -> None:
+                 block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0,
+                 separable_tail: bool = False) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -315,6 +318,8 @@ class FastNet(nn.Module):
             self.config["max_width"] = max_width
         if separable:  # likewise
             self.config["separable"] = True
+        if separable_tail:  # likewise
+            self.config["separable_tail"] = True
         if stem_layers != 1:  # likewise
             self.config["stem_layers"] = stem_layers
         if energy_norm:  # likewise
@@ -356,7 +361,7 @@ class FastNet(nn.Module):
                 # grow 2: each block after a pool doubles the channels (cheap at 1/8 and 1/16 resolution)
                 out = width * grow ** min(i, pools)
                 out = min(out, max_width) if max_width else out
-                if separable:
+                if separable or (separable_tail and i >= pools):
                     layers += [nn.Conv2d(c, c, 3, padding=1, groups=c, bias=False), nn.BatchNorm2d(c),
                                nn.ReLU(inplace=True), nn.Conv2d(c, out, 1, bias=False)]
                 else:
@@ -412,13 +417,14 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
                   head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
-                  contrast_cell: int = 0) -> Network:
+                  contrast_cell: int = 0, separable_tail: bool = False) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
-    ``separable``, ``head_width``, ``context_pool``, ``block_contrast`` and ``contrast_cell`` to the fast one."""
+    ``separable``, ``separable_tail``, ``head_width``, ``context_pool``, ``block_contrast`` and ``contrast_cell``
+    to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
-                       separable, head_width, context_pool, block_contrast, contrast_cell)
+                       separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
