@@ -327,12 +327,39 @@ def cover(tiles: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
 MAX_RESCALE = 2.0
 
 
+def _group_sums(a: np.ndarray, m: int, axis: int) -> np.ndarray:
+    """Sums of consecutive groups of ``m`` along ``axis`` (0 or 1) of a 2-D array, the last group
+    partial where the length is not a multiple: reshapes, not ``np.add.reduceat`` (slow on axis 0)."""
+    n = a.shape[axis]
+    full = n // m
+    b = a if axis == 0 else a.T
+    parts = [b[:full * m].reshape(full, m, *b.shape[1:]).sum(axis=1)] if full else []
+    if n % m:
+        parts.append(b[full * m:].sum(axis=0, keepdims=True))
+    out = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=0)
+    return out if axis == 0 else out.T
+
+
+def _to_length(a: np.ndarray, n: int, axis: int) -> np.ndarray:
+    """``a`` (2-D, at most ``n`` long on ``axis``) extended to ``n`` by repeating its last entry
+    (zeros if it has none)."""
+    have = a.shape[axis]
+    if have == n:
+        return a
+    shape = list(a.shape)
+    shape[axis] = n - have
+    edge = np.zeros(shape, a.dtype) if have == 0 else np.repeat(np.take(a, [-1], axis=axis), n - have, axis=axis)
+    return np.concatenate([a, edge], axis=axis)
+
+
 def tile_block_levels(planes: np.ndarray, tile: int) -> np.ndarray:
     """Per tile and reduced rate, the mean over the tile's 4x4 cells of ``.blocks`` planes
     (:func:`block_variances`: each rate's log variance inside its blocks, normalised to [0, 1]),
     averaged over the planes given: ``(P, H, W)`` -> float32 ``(6, tile rows, tile cols)`` in
     :data:`BLOCK_RATES` order. ``tile`` must be a multiple of :data:`BLOCK_CELL`; a partial last
-    tile averages the cells it has."""
+    tile averages the cells it has. Where a side is not a multiple of the cell, a value that
+    :func:`block_variances` cropped off the last cells is the same rate's in the cell before (zero
+    where there is none: a frame narrower than a cell)."""
     if planes.ndim != 3 or 0 in planes.shape:
         raise InputShapeError(f"expected .blocks planes (P, H, W), got shape {planes.shape}", tuple(planes.shape),
                               "(P, H, W)")
@@ -341,15 +368,19 @@ def tile_block_levels(planes: np.ndarray, tile: int) -> np.ndarray:
     th, tw = tile_grid(h, w, tile)
     m = tile // c
     ch, cw = -(-h // c), -(-w // c)
+    counts = np.outer(_group_sums(np.ones((ch, 1), np.float32), m, 0)[:, 0],
+                      _group_sums(np.ones((1, cw), np.float32), m, 1)[0])  # cells per tile
     out = np.empty((len(BLOCK_RATES), th, tw), np.float32)
-    for k in range(len(BLOCK_RATES)):
-        cells = planes[:, k // c::c, k % c::c].mean(axis=0, dtype=np.float64)[:ch, :cw]
-        total = np.zeros((th * m, tw * m))
-        count = np.zeros((th * m, tw * m))
-        total[:ch, :cw] = cells
-        count[:ch, :cw] = 1.0
-        total = total.reshape(th, m, tw, m).sum(axis=(1, 3))
-        out[k] = total / count.reshape(th, m, tw, m).sum(axis=(1, 3))
+    for row in range(-(-len(BLOCK_RATES) // c)):
+        rows = planes[:, row::c]  # the row-th pixel row of every cell: whole rows, each read once
+        level = rows[0].astype(np.float32)  # a copy: the planes are added into it
+        for plane in rows[1:]:
+            level += plane
+        summed = _group_sums(_to_length(level, ch, 0), m, 0) / len(planes)  # (tile rows, W)
+        for col in range(c):
+            k = row * c + col
+            if k < len(BLOCK_RATES):
+                out[k] = _group_sums(_to_length(summed[:, col::c], cw, 1), m, 1) / counts
     return out
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rtp import sdk
 from rtp.sdk._channels import BLOCK_EPS
@@ -439,6 +441,38 @@ def test_tile_block_levels_average_each_rates_cells_over_a_tile() -> None:
     assert np.allclose(v, expect, atol=1e-6)
     with pytest.raises(sdk.InputShapeError, match=r"\(P, H, W\)"):
         tile_block_levels(planes[0], TILE)
+
+
+def _slow_block_levels(planes: np.ndarray, tile: int) -> np.ndarray:
+    """tile_block_levels by loops over cells: rate k's value of cell (i, j) is its k-th pixel, or,
+    where block_variances cropped that pixel off a partial last cell, the same pixel of the cell
+    before it (zero on a frame too small to hold it at all)."""
+    _, h, w = planes.shape
+    ch, cw = -(-h // 4), -(-w // 4)
+    th, tw = -(-h // tile), -(-w // tile)
+    m = tile // 4
+    out = np.zeros((6, th, tw))
+    for k in range(6):
+        r, c = divmod(k, 4)
+        cells = np.zeros((ch, cw))
+        for i in range(ch):
+            for j in range(cw):
+                y, x = 4 * i + r, 4 * j + c
+                y, x = (y if y < h else y - 4), (x if x < w else x - 4)
+                cells[i, j] = planes[:, y, x].mean() if y >= 0 and x >= 0 else 0.0
+        for ti in range(th):
+            for tj in range(tw):
+                out[k, ti, tj] = cells[ti * m:(ti + 1) * m, tj * m:(tj + 1) * m].mean()
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 45), st.integers(1, 45), st.integers(1, 3), st.sampled_from([4, 8, 16]), st.integers(0, 2**31))
+def test_tile_block_levels_match_a_loop_over_cells_on_any_frame(h: int, w: int, p: int, tile: int, seed: int) -> None:
+    """Any frame size, multiples of the 4-pixel cell or not (a 1366-pixel-wide frame is not), and
+    any number of planes: the vectorised reduction equals the loop over cells."""
+    planes = np.random.default_rng(seed).random((p, h, w), dtype=np.float32)
+    assert np.allclose(tile_block_levels(planes, tile), _slow_block_levels(planes, tile), atol=1e-5)
 
 
 def test_rescale_scales_carried_estimates_by_the_blocks_variance() -> None:
