@@ -1,0 +1,119 @@
+"""Where a model's time goes: onnxruntime's own per-node profile of one 1080p (or any size) frame.
+
+    python bench/profile.py [MODEL ...] [--size 1920x1080] [--repeats 10] [--threads 2]
+
+MODEL is a shipped model's name (``lpips``) or an ``.onnx`` path; default: every shipped model. Each is
+run through an onnxruntime session built as ``rtp.sdk.load`` builds it (same threads, same graph
+optimisations, so BatchNorm folded and convolutions fused with their ReLU in onnxruntime's blocked
+NCHWc layout) with profiling on; the first run is a warm-up and not counted. Prints, per model, a
+Markdown table of its nodes in graph order: operator, output shape, multiply-adds (convolutions:
+output positions x output channels x input channels per group x kernel area), median kernel time
+over the runs, share of the summed kernel time, and the rate (G multiply-adds per second, where a
+node has them). What the table shows on a 2-core CPU: the stem, which reads every input plane once,
+runs far under the convolutions' rate (it is bound by memory, not arithmetic), and blocks at tile
+resolution cost little per block; the sum of the kernels is less than ``sdk predict``'s wall time
+(``bench/inference.py``) by the session's own overhead and the layout reorders.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import tempfile
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnxruntime as ort
+
+from rtp import sdk
+
+
+def _macs(args: dict[str, Any]) -> int:
+    """Multiply-adds of a Conv node from its profiled shapes (0 for any other operator)."""
+    if args.get("op_name") not in ("Conv", "FusedConv", "NchwcConv"):
+        return 0
+    shapes = args.get("input_type_shape", [])
+    out = args.get("output_type_shape", [])
+    if len(shapes) < 2 or not out:
+        return 0
+    weight = next(iter(shapes[1].values()))
+    y = next(iter(out[0].values()))
+    return int(np.prod(weight)) * int(np.prod(y[2:])) * int(y[0])
+
+
+def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, threads: int) -> list[dict[str, Any]]:
+    """Per node, in graph order: name, operator, output shape, multiply-adds and the median kernel ms."""
+    w, h = size
+    with tempfile.TemporaryDirectory() as d:
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = threads
+        so.enable_profiling = True
+        so.profile_file_prefix = str(Path(d) / "profile")
+        session = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+        x = np.random.default_rng(0).random((1, n_inputs, h, w), dtype=np.float32)
+        feed = {session.get_inputs()[0].name: x}
+        for _ in range(repeats + 1):
+            session.run(None, feed)
+        events = json.loads(Path(session.end_profiling()).read_text())
+    runs = sorted((e["ts"], e["ts"] + e["dur"]) for e in events if e.get("name") == "model_run")
+    if len(runs) < 2:
+        raise RuntimeError(f"onnxruntime recorded {len(runs)} runs of {path}, expected {repeats + 1}")
+    warm_end = runs[0][1]
+    times: dict[str, list[float]] = defaultdict(list)
+    info: dict[str, dict[str, Any]] = {}
+    order: dict[str, int] = {}
+    for e in events:
+        if e.get("cat") != "Node" or not e["name"].endswith("_kernel_time") or e["ts"] <= warm_end:
+            continue
+        name = e["name"].removesuffix("_kernel_time")
+        args = e.get("args", {})
+        times[name].append(e["dur"] / 1000.0)
+        order.setdefault(name, int(args.get("node_index", len(order))))
+        out = args.get("output_type_shape", [])
+        info[name] = {"op": args.get("op_name", "?"), "shape": next(iter(out[0].values())) if out else [],
+                      "macs": _macs(args)}
+    return [{"name": n, **info[n], "ms": statistics.median(times[n])} for n in sorted(times, key=order.__getitem__)]
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1920x1080, got {text!r}") from err
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive WIDTHxHEIGHT, got {text!r}")
+    return w, h
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("models", nargs="*", help="shipped model names or .onnx paths (default: every shipped model)")
+    ap.add_argument("--size", type=_size, default=(1920, 1080), help="frame WIDTHxHEIGHT (default 1920x1080)")
+    ap.add_argument("--repeats", type=int, default=10, help="profiled runs after one warm-up (default 10)")
+    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
+    args = ap.parse_args()
+    if args.repeats < 1:
+        ap.error(f"--repeats: expected at least 1, got {args.repeats}")
+    print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {args.threads} threads, "
+          f"{args.size[0]}x{args.size[1]}, median of {args.repeats} runs per node\n")
+    for model in args.models or list(sdk.shipped_models()):
+        pred = sdk.load(model, providers=["CPUExecutionProvider"])
+        pad = sdk.padded_size(args.size[1], args.size[0], pred.metadata.pad_multiple)
+        rows = profile(Path(str(pred.path)), len(pred.metadata.inputs), (pad[1], pad[0]), args.repeats, args.threads)
+        total = sum(r["ms"] for r in rows)
+        print(f"### {model} ({len(pred.metadata.inputs)} inputs, {total:.1f} ms of kernels)\n")
+        print("| node | operator | output | M multiply-adds | ms | share | G multiply-adds/s |")
+        print("|---|---|---|---:|---:|---:|---:|")
+        for r in rows:
+            rate = f"{r['macs'] / r['ms'] / 1e6:.0f}" if r["macs"] and r["ms"] > 0 else ""
+            macs = f"{r['macs'] / 1e6:.0f}" if r["macs"] else ""
+            shape = "x".join(str(v) for v in r["shape"])
+            print(f"| {r['name']} | {r['op']} | {shape} | {macs} | {r['ms']:.2f} | {100 * r['ms'] / total:.0f}% | {rate} |")
+        print()
+
+
+if __name__ == "__main__":
+    main()

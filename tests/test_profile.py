@@ -1,0 +1,51 @@
+"""bench/profile.py: onnxruntime's per-node profile of a model, with each convolution's multiply-adds."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import onnx
+import pytest
+
+from rtp import sdk
+
+BENCH = Path(__file__).resolve().parents[1] / "bench" / "profile.py"
+
+
+def _module() -> object:
+    spec = importlib.util.spec_from_file_location("bench_profile", BENCH)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_profile_lists_every_convolution_with_its_multiply_adds() -> None:
+    pred = sdk.load("lpips")
+    rows = _module().profile(Path(str(pred.path)), len(pred.metadata.inputs), (256, 128), 2, 1)  # type: ignore[attr-defined]
+    convs = [r for r in rows if r["macs"]]
+    # every convolution of the exported graph is profiled (BatchNorm folded, ReLU fused into it)
+    assert len(convs) == sum(n.op_type == "Conv" for n in onnx.load(str(pred.path)).graph.node) >= 3
+    stem = convs[0]
+    c = len(pred.metadata.inputs)
+    assert stem["shape"][2:] == [128 // 4, 256 // 4]
+    assert stem["macs"] == stem["shape"][1] * c * 4 * 4 * (128 // 4) * (256 // 4)
+    assert all(r["ms"] >= 0 for r in rows)
+    assert convs[-1]["shape"][2:] == [128 // 16, 256 // 16]  # the head at tile resolution
+
+
+def test_profile_cli_prints_a_table_and_rejects_a_bad_size() -> None:
+    out = subprocess.run([sys.executable, str(BENCH), "jnyang", "--size", "128x64", "--repeats", "1"],
+                         capture_output=True, text=True, check=True)
+    assert "### jnyang" in out.stdout and "| Conv |" in out.stdout
+    bad = subprocess.run([sys.executable, str(BENCH), "jnyang", "--size", "128by64"], capture_output=True, text=True)
+    assert bad.returncode != 0 and "WIDTHxHEIGHT" in bad.stderr
+
+
+@pytest.mark.parametrize("repeats", ["0"])
+def test_profile_cli_rejects_no_runs(repeats: str) -> None:
+    bad = subprocess.run([sys.executable, str(BENCH), "jnyang", "--repeats", repeats], capture_output=True, text=True)
+    assert bad.returncode != 0 and "--repeats" in bad.stderr
