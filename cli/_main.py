@@ -279,7 +279,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "separable_tail", "head_width", "context_pool", "block_contrast", "contrast_cell",
+                 "separable_tail", "tail_width", "head_width", "context_pool", "block_contrast", "contrast_cell",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
                  "ema", "distill",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
@@ -548,6 +548,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--separable-tail", dest="separable_tail", action="store_true", default=None,
                    help="only the fast network's blocks at tile resolution depthwise-separable (with --grow 2: a "
                    "64-channel end at about a seventh of its cost) (default: off)")
+    r.add_argument("--tail-width", dest="tail_width", type=_positive, default=None,
+                   help="channels of the fast network's blocks at tile resolution, whatever --grow gives them "
+                   "(width 16, depth 5, --tail-width 48: 16/16/48/48/48) (default: as --width and --grow say)")
     r.add_argument("--head-width", dest="head_width", type=_non_negative, default=None,
                    help="the fast network's head as a per-tile MLP: a 1x1 to N channels, BatchNorm, ReLU, then the 1x1 "
                    "to the outputs (almost free at tile resolution); 0: a linear 1x1 (default: the recipe's; the "

@@ -198,6 +198,25 @@ def test_a_separable_tail_splits_only_the_tile_resolution_blocks_and_exports() -
     _round_trip(net, "separable_tail", seed=3)
 
 
+def test_tail_width_widens_only_the_tile_resolution_blocks_and_exports() -> None:
+    from rtp.train.model import FastNet
+
+    net = FastNet(8, depth=5, tail_width=48).eval()
+    # stem and the blocks at 1/4 and 1/8 keep the width; the three at 1/16 take the tail's
+    assert [m.out_channels for m in net.layers if isinstance(m, torch.nn.Conv2d)] == [16, 16, 16, 48, 48, 48, 4]
+    assert net.config["tail_width"] == 48 and "tail_width" not in FastNet().config
+    assert sum(p.numel() for p in net.parameters()) == \
+        8 * 16 * 16 + 2 * 2304 + 16 * 48 * 9 + 2 * 48 * 48 * 9 + 2 * (3 * 16 + 3 * 48) + 4 * 48 + 4
+    # with grow 2 it overrides what grow gives the tail (16, 32, then 24 at 1/16)
+    assert [m.out_channels for m in FastNet(depth=4, grow=2, tail_width=24).layers
+            if isinstance(m, torch.nn.Conv2d)] == [16, 16, 32, 24, 24, 4]
+    for bad in ({"depth": 2, "tail_width": 48}, {"depth": 5, "tail_width": 1}):  # no tile block; too narrow
+        with pytest.raises(ValueError, match="tail_width"):
+            FastNet(**bad)
+    _round_trip(net, "tail_width", base_metadata(inputs=["reprojected.r", "reprojected.g", "reprojected.b", "seen",
+                                                         "albedo.r", "albedo.g", "albedo.b", "normal.z"]), seed=4)
+
+
 def test_the_mlp_head_reads_the_last_block_through_a_hidden_layer_and_exports() -> None:
     from rtp.train.model import FastNet
 

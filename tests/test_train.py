@@ -413,6 +413,12 @@ def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_pat
     rtp_main([*base[:-2], "--separable-tail", "--steps", "6", "--out", str(tmp_path / "t.pt")])
     ck = load_checkpoint(tmp_path / "t.pt")
     assert ck.metadata.provenance["separable_tail"] is True and ck.net.config["separable_tail"] is True
+    rtp_main([*base[:-2], "--tail-width", "24", "--steps", "6", "--out", str(tmp_path / "w.pt")])
+    ck = load_checkpoint(tmp_path / "w.pt")
+    assert ck.metadata.provenance["tail_width"] == 24 and ck.net.config["tail_width"] == 24
+    with pytest.raises(sdk.ParameterError, match="tail_width sets the channels"):  # depth 2: no block at 1/16
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "d.pt"), arch="fast", crop=32, depth=2,
+                          tail_width=24))
     with pytest.raises(sdk.ParameterError, match="separable_tail: the fast network's option"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "q.pt"), crop=32, separable_tail=True))
     with pytest.raises(sdk.ParameterError, match="separable: the fast network's option"):

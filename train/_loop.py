@@ -70,6 +70,9 @@ class TrainConfig:
     #: Only the fast network's blocks at tile resolution (after its last pool) depthwise-separable: with
     #: grow 2, a 64-channel end at about a seventh of its cost.
     separable_tail: bool = False
+    #: Channels of the fast network's blocks at tile resolution (after its last pool), whatever ``grow``
+    #: gives them; 0: as ``width`` and ``grow`` say.
+    tail_width: int = 0
     #: Hidden channels of the fast network's head: 0, a linear 1x1; N, a 1x1 to N, BatchNorm, ReLU, then
     #: the 1x1 to the outputs (a per-tile MLP, almost free at tile resolution).
     head_width: int = 0
@@ -446,6 +449,12 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"separable: the fast network's option, got arch {cfg.arch!r}", "separable")
     if cfg.separable_tail and cfg.arch != "fast":
         raise sdk.ParameterError(f"separable_tail: the fast network's option, got arch {cfg.arch!r}", "separable_tail")
+    if cfg.tail_width and cfg.arch != "fast":
+        raise sdk.ParameterError(f"tail_width: the fast network's option, got arch {cfg.arch!r}", "tail_width")
+    if cfg.tail_width and (cfg.tail_width < 2 or cfg.depth <= int(math.log2(cfg.tile // min(cfg.stem, cfg.tile)))):
+        raise sdk.ParameterError(f"tail_width sets the channels of the blocks at tile resolution: expected 0 (none), "
+                                 f"or >= 2 with blocks at tile resolution (depth {cfg.depth} with stem {cfg.stem} and "
+                                 f"tile {cfg.tile} has none), got {cfg.tail_width}", "tail_width")
     if cfg.head_width and cfg.arch != "fast":
         raise sdk.ParameterError(f"head_width: the fast network's option, got arch {cfg.arch!r}", "head_width")
     if cfg.head_width < 0:
@@ -510,7 +519,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
                         head_width=cfg.head_width, context_pool=cfg.context_pool,
                         block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
-                        contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail)
+                        contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
+                        tail_width=cfg.tail_width)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -531,6 +541,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["separable"] = True
         if cfg.separable_tail:
             config_key["separable_tail"] = True
+        if cfg.tail_width:
+            config_key["tail_width"] = cfg.tail_width
         if cfg.head_width:
             config_key["head_width"] = cfg.head_width
         if cfg.context_pool:
@@ -692,6 +704,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"max_width": cfg.max_width} if cfg.max_width else {}),
         **({"separable": True} if cfg.separable else {}),
         **({"separable_tail": True} if cfg.separable_tail else {}),
+        **({"tail_width": cfg.tail_width} if cfg.tail_width else {}),
         **({"head_width": cfg.head_width} if cfg.head_width else {}),
         **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
         **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),

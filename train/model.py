@@ -257,6 +257,10 @@ class FastNet(nn.Module):
     multiply-adds, so the network can be twice as wide for the same cost at 1/4 resolution.
     ``separable_tail`` makes only the blocks at tile resolution (after the last pool) so: with
     ``grow`` 2 a 64-channel end at about a seventh of its cost, the frame still read by full 3x3 blocks.
+    ``tail_width`` N > 0 gives the blocks at tile resolution (after the last pool) N channels whatever
+    ``grow`` gives them: with width 16 and depth 5, 16 / 16 / N / N / N, capacity where a block costs a
+    sixteenth of one at 1/4 resolution, the frame still read at 16 channels (``grow`` 2 also widens the
+    1/8 block, which costs four times as much per channel).
     ``head_width`` N > 0 makes the head a small per-tile MLP: a 1x1 convolution to N channels,
     BatchNorm, ReLU, then the 1x1 to the outputs. At tile resolution it is almost free (a 1080p frame
     has 8,160 16-pixel tiles: 1,000 multiply-adds per tile for N = 64 and width 16) and turns the
@@ -290,7 +294,7 @@ class FastNet(nn.Module):
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
                  block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0,
-                 separable_tail: bool = False) -> None:
+                 separable_tail: bool = False, tail_width: int = 0) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -305,6 +309,10 @@ class FastNet(nn.Module):
                              f"with stem {stem} and tile {tile}")
         if in_channels < 1 or out_channels < 1:
             raise ValueError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
+        pools = int(math.log2(tile // min(stem, tile)))
+        if tail_width and (tail_width < 2 or depth <= pools):
+            raise ValueError(f"tail_width sets the channels of the blocks at tile resolution: expected 0 (none), or >= 2 "
+                             f"with a depth over the {pools} pooled blocks, got {tail_width} with depth {depth}")
         if head_width < 0:
             raise ValueError(f"head_width must be 0 (a linear 1x1 head) or the hidden channels of an MLP head, got "
                              f"{head_width}")
@@ -320,6 +328,8 @@ class FastNet(nn.Module):
             self.config["separable"] = True
         if separable_tail:  # likewise
             self.config["separable_tail"] = True
+        if tail_width:  # likewise
+            self.config["tail_width"] = tail_width
         if stem_layers != 1:  # likewise
             self.config["stem_layers"] = stem_layers
         if energy_norm:  # likewise
@@ -361,6 +371,7 @@ class FastNet(nn.Module):
                 # grow 2: each block after a pool doubles the channels (cheap at 1/8 and 1/16 resolution)
                 out = width * grow ** min(i, pools)
                 out = min(out, max_width) if max_width else out
+                out = tail_width if tail_width and i >= pools else out
                 if separable or (separable_tail and i >= pools):
                     layers += [nn.Conv2d(c, c, 3, padding=1, groups=c, bias=False), nn.BatchNorm2d(c),
                                nn.ReLU(inplace=True), nn.Conv2d(c, out, 1, bias=False)]
@@ -417,14 +428,14 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
                   head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
-                  contrast_cell: int = 0, separable_tail: bool = False) -> Network:
+                  contrast_cell: int = 0, separable_tail: bool = False, tail_width: int = 0) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
-    ``separable``, ``separable_tail``, ``head_width``, ``context_pool``, ``block_contrast`` and ``contrast_cell``
+    ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast`` and ``contrast_cell``
     to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
-                       separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail)
+                       separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
