@@ -10,8 +10,9 @@ Markdown table of its nodes in graph order: operator, output shape, multiply-add
 output positions x output channels x input channels per group x kernel area), median kernel time
 over the runs, share of the summed kernel time, and the rate (G multiply-adds per second, where a
 node has them). onnxruntime's blocked layout pads a layer's channels to its block (8 or 16), so a
-narrow layer (the 4-output head) counts the multiply-adds the CPU does, not the ones the model has. What the table shows on a 2-core CPU: the stem, which reads every input plane once,
-runs far under the convolutions' rate (it is bound by memory, not arithmetic), and blocks at tile
+narrow layer (the 4-output head) counts the multiply-adds the CPU does, not the ones the model has.
+What the table shows on a 2-core CPU: the stem, which reads every input plane once,
+runs under the other convolutions' rate (it is bound by memory, not arithmetic), and blocks at tile
 resolution cost little per block; the sum of the kernels is less than ``sdk predict``'s wall time
 (``bench/inference.py``) by the session's own overhead and the layout reorders.
 """
