@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -64,24 +64,33 @@ TIMING_INPUTS = {
 }
 
 
-def paper_model(folder: Path, arch: str = "paper", inputs: int = 4, **config: int) -> tuple[object, Path]:
-    """The paper's network (or ``arch`` with ``config``: width, depth, stem) with random weights (cost
-    does not depend on them) and the paper's outputs, on ``inputs`` channels (4: the paper's; 6, 7 or
-    10: :data:`TIMING_INPUTS`), exported with rtp-export into ``folder``: returns ``(torch network,
-    onnx path)``."""
+def paper_model(folder: Path, arch: str = "paper", inputs: int | Sequence[str] = 4,
+                **config: Any) -> tuple[object, Path]:
+    """The paper's network (or ``arch`` with ``config``: width, depth, stem, or any other option of
+    ``rtp.train.model.build_network``) with random weights (cost does not depend on them) and the
+    paper's outputs, on ``inputs`` channels (4: the paper's; 6, 7 or 10: :data:`TIMING_INPUTS`; or
+    the channel names themselves, such as a shipped model's ``metadata.inputs``), exported with
+    rtp-export into ``folder``: returns ``(torch network, onnx path)``."""
     import torch
 
     from rtp.export import export_checkpoint
     from rtp.train import checkpoint
     from rtp.train.model import build_network
 
+    if isinstance(inputs, int):
+        if inputs not in TIMING_INPUTS:
+            raise ValueError(f"inputs: expected one of {sorted(TIMING_INPUTS)} channels or a list of channel names, "
+                             f"got {inputs}")
+        names = list(TIMING_INPUTS[inputs])
+    else:
+        names = list(inputs)
     torch.manual_seed(0)
-    net = build_network(arch, inputs, 4, 16, **config).eval()
+    net = build_network(arch, len(names), 4, 16, **config).eval()
     # trained BatchNorm statistics are not the identity: random ones keep folding honest
     for m in net.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.1, 0.1)
             m.running_var.uniform_(0.5, 1.5)
-    stem = f"{arch}-i{inputs}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
-    ck = checkpoint.save(folder / f"{stem}.pt", net, {**PAPER_METADATA, "inputs": list(TIMING_INPUTS[inputs])})
+    stem = f"{arch}-i{len(names)}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
+    ck = checkpoint.save(folder / f"{stem}.pt", net, {**PAPER_METADATA, "inputs": names})
     return net, export_checkpoint(ck, folder / f"{stem}.onnx")

@@ -1,8 +1,14 @@
 """Where a model's time goes: onnxruntime's own per-node profile of one 1080p (or any size) frame.
 
     python bench/profile.py [MODEL ...] [--size 1920x1080] [--repeats 10] [--threads 2]
+    python bench/profile.py lpips --fast grow=2,depth=5 --fast grow=2,depth=5,tail_width=48 --like lpips
 
-MODEL is a shipped model's name (``lpips``) or an ``.onnx`` path; default: every shipped model. Each is
+MODEL is a shipped model's name (``lpips``) or an ``.onnx`` path; default: every shipped model (none when
+``--fast`` is given). ``--fast OPTIONS`` (repeatable) adds rtp's fast network with those options of
+``rtp train`` (``rtp.train.model.build_network``'s keywords: width, depth, stem, grow, tail_width,
+separable, ...) and random weights, on the input planes of ``--like`` (a shipped model or ``.onnx``;
+default the paper's four), exported with rtp-export: what a configuration would cost before a
+30-minute training run says whether it is any good (the weights do not change the cost). Each is
 run through an onnxruntime session built as ``rtp.sdk.load`` builds it (same threads, same graph
 optimisations, so BatchNorm folded and convolutions fused with their ReLU in onnxruntime's blocked
 NCHWc layout) with profiling on; the first run is a warm-up and not counted. Prints, per model, a
@@ -14,14 +20,19 @@ narrow layer (the 4-output head) counts the multiply-adds the CPU does, not the 
 What the table shows on a 2-core CPU: the stem, which reads every input plane once,
 runs under the other convolutions' rate (it is bound by memory, not arithmetic), and blocks at tile
 resolution cost little per block; the sum of the kernels is less than ``sdk predict``'s wall time
-(``bench/inference.py``) by the session's own overhead and the layout reorders.
+(``bench/inference.py``) by the session's own overhead, the layout reorders and ``predict``'s check that
+the input is finite (one read of the frame). A last table sums each model's kernels and divides them by
+the first model's: on a machine whose speed drifts from one minute to the next, the ratios of one run
+are steadier than its milliseconds.
 """
 
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import statistics
+import sys
 import tempfile
 from collections import defaultdict
 from pathlib import Path
@@ -90,31 +101,89 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _fast_options(text: str) -> dict[str, Any]:
+    """``KEY=VALUE[,KEY=VALUE]`` with the keywords of the fast network (``build_network``) into a dict
+    of ints and booleans."""
+    from rtp.train.model import build_network
+
+    allowed = [k for k, v in inspect.signature(build_network).parameters.items()
+               if v.kind is inspect.Parameter.KEYWORD_ONLY and k not in ("head", "block_contrast")]
+    out: dict[str, Any] = {}
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        key, sep, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or key not in allowed:
+            raise argparse.ArgumentTypeError(f"expected KEY=VALUE pairs with KEY one of {', '.join(allowed)}, got {item!r}")
+        v = value.strip().lower()
+        if v in ("true", "false"):
+            out[key] = v == "true"
+        else:
+            try:
+                out[key] = int(v)
+            except ValueError as err:
+                raise argparse.ArgumentTypeError(f"{key}: expected an integer or true/false, got {value!r}") from err
+    return out
+
+
+def _random_fast(folder: Path, options: list[dict[str, Any]], like: str | None) -> list[tuple[str, Path]]:
+    """rtp's fast network with each of ``options`` and random weights, on the inputs of ``like``, exported
+    into ``folder``: (label, onnx path) per configuration."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _common import TIMING_INPUTS, paper_model
+
+    inputs = list(sdk.load(like, providers=["CPUExecutionProvider"]).metadata.inputs) if like else list(TIMING_INPUTS[4])
+    out = []
+    for i, opts in enumerate(options):
+        label = "fast " + (",".join(f"{k}={v}" for k, v in opts.items()) or "defaults") + " (random weights)"
+        try:
+            path = paper_model(folder / str(i), "fast", inputs, **opts)[1]
+        except ValueError as err:
+            raise SystemExit(f"profile.py: --fast {','.join(f'{k}={v}' for k, v in opts.items())}: {err}") from err
+        out.append((label, path))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="*", help="shipped model names or .onnx paths (default: every shipped model)")
     ap.add_argument("--size", type=_size, default=(1920, 1080), help="frame WIDTHxHEIGHT (default 1920x1080)")
     ap.add_argument("--repeats", type=int, default=10, help="profiled runs after one warm-up (default 10)")
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
+    ap.add_argument("--fast", type=_fast_options, action="append", default=[], metavar="KEY=VALUE[,...]",
+                    help="add rtp's fast network with these options and random weights (repeatable)")
+    ap.add_argument("--like", help="the --fast networks read this model's input planes (default: the paper's four)")
     args = ap.parse_args()
     if args.repeats < 1:
         ap.error(f"--repeats: expected at least 1, got {args.repeats}")
+    if args.like and not args.fast:
+        ap.error("--like sets the inputs of the --fast networks: give at least one --fast")
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {args.threads} threads, "
           f"{args.size[0]}x{args.size[1]}, median of {args.repeats} runs per node\n")
-    for model in args.models or list(sdk.shipped_models()):
-        pred = sdk.load(model, providers=["CPUExecutionProvider"])
-        pad = sdk.padded_size(args.size[1], args.size[0], pred.metadata.pad_multiple)
-        rows = profile(Path(str(pred.path)), len(pred.metadata.inputs), (pad[1], pad[0]), args.repeats, args.threads)
-        total = sum(r["ms"] for r in rows)
-        print(f"### {model} ({len(pred.metadata.inputs)} inputs, {total:.1f} ms of kernels)\n")
-        print("| node | operator | output | M multiply-adds | ms | share | G multiply-adds/s |")
-        print("|---|---|---|---:|---:|---:|---:|")
-        for r in rows:
-            rate = f"{r['macs'] / r['ms'] / 1e6:.0f}" if r["macs"] and r["ms"] > 0 else ""
-            macs = f"{r['macs'] / 1e6:.0f}" if r["macs"] else ""
-            shape = "x".join(str(v) for v in r["shape"])
-            print(f"| {r['name']} | {r['op']} | {shape} | {macs} | {r['ms']:.2f} | {100 * r['ms'] / total:.0f}% | {rate} |")
-        print()
+    with tempfile.TemporaryDirectory() as tmp:
+        models = [(m, m) for m in (args.models or ([] if args.fast else list(sdk.shipped_models())))]
+        models += [(label, str(path)) for label, path in _random_fast(Path(tmp), args.fast, args.like)]
+        totals = [(label, _report(label, model, args)) for label, model in models]
+    print("| model | ms of kernels | x the first |\n|---|---:|---:|")
+    for label, total in totals:
+        print(f"| {label} | {total:.1f} | {total / totals[0][1]:.2f} |")
+
+
+def _report(label: str, model: str, args: argparse.Namespace) -> float:
+    """Profile ``model`` and print its table; returns its summed kernel ms."""
+    pred = sdk.load(model, providers=["CPUExecutionProvider"])
+    pad = sdk.padded_size(args.size[1], args.size[0], pred.metadata.pad_multiple)
+    rows = profile(Path(str(pred.path)), len(pred.metadata.inputs), (pad[1], pad[0]), args.repeats, args.threads)
+    total = sum(r["ms"] for r in rows)
+    print(f"### {label} ({len(pred.metadata.inputs)} inputs, {total:.1f} ms of kernels)\n")
+    print("| node | operator | output | M multiply-adds | ms | share | G multiply-adds/s |")
+    print("|---|---|---|---:|---:|---:|---:|")
+    for r in rows:
+        rate = f"{r['macs'] / r['ms'] / 1e6:.0f}" if r["macs"] and r["ms"] > 0 else ""
+        macs = f"{r['macs'] / 1e6:.0f}" if r["macs"] else ""
+        shape = "x".join(str(v) for v in r["shape"])
+        print(f"| {r['name']} | {r['op']} | {shape} | {macs} | {r['ms']:.2f} | {100 * r['ms'] / total:.0f}% | {rate} |")
+    print()
+    return total
 
 
 if __name__ == "__main__":

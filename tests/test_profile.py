@@ -49,3 +49,23 @@ def test_profile_cli_prints_a_table_and_rejects_a_bad_size() -> None:
 def test_profile_cli_rejects_no_runs(repeats: str) -> None:
     bad = subprocess.run([sys.executable, str(BENCH), "jnyang", "--repeats", repeats], capture_output=True, text=True)
     assert bad.returncode != 0 and "--repeats" in bad.stderr
+
+
+def test_profile_cli_costs_random_fast_networks_on_a_models_inputs() -> None:
+    out = subprocess.run([sys.executable, str(BENCH), "lpips", "--fast", "grow=2,depth=5", "--fast", "depth=5",
+                          "--like", "lpips", "--size", "128x64", "--repeats", "1"], capture_output=True, text=True, check=True)
+    n = len(sdk.load("lpips").metadata.inputs)
+    assert f"### fast grow=2,depth=5 (random weights) ({n} inputs" in out.stdout
+    summary = out.stdout.split("| model | ms of kernels | x the first |")[1]
+    rows = [r for r in summary.splitlines() if r.startswith("| ") and "---" not in r]
+    assert [r.split(" | ")[0] for r in rows] == ["| lpips", "| fast grow=2,depth=5 (random weights)",
+                                                  "| fast depth=5 (random weights)"]
+    assert rows[0].endswith("| 1.00 |")
+
+
+@pytest.mark.parametrize(("flag", "message"), [("bogus=1", "KEY one of"), ("width=wide", "width: expected an integer"),
+                                               ("stem=3", "stem in (1, 2, 4, 8)")])
+def test_profile_cli_rejects_a_bad_fast_option(flag: str, message: str) -> None:
+    bad = subprocess.run([sys.executable, str(BENCH), "--fast", flag, "--size", "64x64", "--repeats", "1"],
+                         capture_output=True, text=True)
+    assert bad.returncode != 0 and message in bad.stderr
