@@ -60,7 +60,10 @@ def test_profile_cli_costs_random_fast_networks_on_a_models_inputs() -> None:
     rows = [r for r in summary.splitlines() if r.startswith("| ") and "---" not in r]
     assert [r.split(" | ")[0] for r in rows] == ["| lpips", "| fast grow=2,depth=5 (random weights)",
                                                   "| fast depth=5 (random weights)"]
-    assert rows[0].endswith("| 1.00 |")
+    cells = [[c.strip() for c in r.strip("|").split("|")] for r in rows]
+    assert cells[0][2] == "1.00" and all(len(c) == 5 for c in cells)
+    # sdk predict reads the frame at least once more than the kernels do: its wall time is not below the check's
+    assert all(float(c[3]) >= float(c[4]) >= 0 for c in cells)
 
 
 @pytest.mark.parametrize(("flag", "message"), [("bogus=1", "KEY one of"), ("width=wide", "width: expected an integer"),
