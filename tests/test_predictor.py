@@ -126,6 +126,20 @@ def test_non_finite_inputs_are_rejected(tiny_model: Callable[..., Path], bad: fl
         p.predict(x)
 
 
+def test_assume_finite_skips_the_check_and_nothing_else(tiny_model: Callable[..., Path]) -> None:
+    checked, trusted = sdk.load(tiny_model()), sdk.load(tiny_model(), assume_finite=True)
+    x = np.random.default_rng(0).random((4, 32, 48), dtype=np.float32)
+    np.testing.assert_array_equal(trusted.predict(x), checked.predict(x))
+    x[1, 5, 7] = np.nan
+    with pytest.raises(sdk.NonFiniteInputError):
+        checked.predict(x)
+    assert trusted.predict(x).shape == (6, 2, 3)  # the caller's promise: no error, the value is unspecified
+    with pytest.raises(sdk.InputChannelError):  # every other check still runs
+        trusted.predict(x[:3])
+    with pytest.raises(sdk.ParameterError, match="assume_finite"):
+        sdk.load(tiny_model(), assume_finite="yes")  # type: ignore[arg-type]
+
+
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(sdk.ModelNotFoundError) as info:
         sdk.load(tmp_path / "nope.onnx")
