@@ -46,7 +46,7 @@ import onnxruntime as ort
 from rtp import sdk
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import median_ms  # noqa: E402
+from _common import TIMING_INPUTS, median_ms, paper_model  # noqa: E402  (also when loaded by path, as the tests do)
 
 
 def _macs(args: dict[str, Any]) -> int:
@@ -133,8 +133,6 @@ def _fast_options(text: str) -> dict[str, Any]:
 def _random_fast(folder: Path, options: list[dict[str, Any]], like: str | None) -> list[tuple[str, Path]]:
     """rtp's fast network with each of ``options`` and random weights, on the inputs of ``like``, exported
     into ``folder``: (label, onnx path) per configuration."""
-    from _common import TIMING_INPUTS, paper_model
-
     inputs = list(sdk.load(like, providers=["CPUExecutionProvider"]).metadata.inputs) if like else list(TIMING_INPUTS[4])
     out = []
     for i, opts in enumerate(options):
