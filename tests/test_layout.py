@@ -120,3 +120,13 @@ def test_rooms_that_need_no_torch_do_not_load_it(modules: tuple[str, ...]) -> No
     )
     loaded = json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
     assert loaded == [], f"importing {modules} loads {loaded}"
+
+
+def test_no_script_folder_shadows_a_standard_library_module() -> None:
+    # a script runs with its own folder first on sys.path: bench/profile.py once shadowed the standard
+    # library's `profile`, which torch.optim imports (through cProfile), so every bench script that trained
+    # or fitted anything failed with "module 'profile' has no attribute 'run'"
+    for folder in ("bench", "examples", ".ci"):
+        names = {p.stem for p in (ROOT / folder).glob("*.py")}
+        clash = sorted(names & set(sys.stdlib_module_names))
+        assert not clash, f"{folder}/ holds scripts named like standard-library modules: {clash}"

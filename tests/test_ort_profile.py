@@ -1,4 +1,4 @@
-"""bench/profile.py: onnxruntime's per-node profile of a model, with each convolution's multiply-adds."""
+"""bench/ort_profile.py: onnxruntime's per-node profile of a model, with each convolution's multiply-adds."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ import pytest
 
 from rtp import sdk
 
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "profile.py"
+BENCH = Path(__file__).resolve().parents[1] / "bench" / "ort_profile.py"
 
 
 def _module() -> object:
-    spec = importlib.util.spec_from_file_location("bench_profile", BENCH)
+    spec = importlib.util.spec_from_file_location("bench_ort_profile", BENCH)
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

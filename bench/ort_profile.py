@@ -1,7 +1,7 @@
 """Where a model's time goes: onnxruntime's own per-node profile of one 1080p (or any size) frame.
 
-    python bench/profile.py [MODEL ...] [--size 1920x1080] [--repeats 10] [--threads 2]
-    python bench/profile.py lpips --fast grow=2,depth=5 --fast grow=2,depth=5,tail_width=48 --like lpips
+    python bench/ort_profile.py [MODEL ...] [--size 1920x1080] [--repeats 10] [--threads 2]
+    python bench/ort_profile.py lpips --fast grow=2,depth=5 --fast grow=2,depth=5,tail_width=48 --like lpips
 
 MODEL is a shipped model's name (``lpips``) or an ``.onnx`` path; default: every shipped model (none when
 ``--fast`` is given). ``--fast OPTIONS`` (repeatable) adds rtp's fast network with those options of
@@ -140,7 +140,7 @@ def _random_fast(folder: Path, options: list[dict[str, Any]], like: str | None) 
         try:
             path = paper_model(folder / str(i), "fast", inputs, **opts)[1]
         except ValueError as err:
-            raise SystemExit(f"profile.py: --fast {','.join(f'{k}={v}' for k, v in opts.items())}: {err}") from err
+            raise SystemExit(f"ort_profile.py: --fast {','.join(f'{k}={v}' for k, v in opts.items())}: {err}") from err
         out.append((label, path))
     return out
 
