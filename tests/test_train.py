@@ -844,3 +844,60 @@ def test_training_frames_pack_block_planes_exactly(size: tuple[int, int]) -> Non
     np.testing.assert_array_equal(g.crop(8, 12, 24), x.astype(np.float16)[:, 8:32, 12:36])
     with pytest.raises(ValueError, match=r"expected planes of shape \(3, H, W\)"):
         Frame(x, names[:3])
+
+
+def test_bench_error_features_fits_held_out_maps_and_scores_the_model(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.util
+    import re
+    import subprocess
+    import sys
+
+    from rtp.capture import DatasetReader
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "error_features.py"
+    monkeypatch.syspath_prepend(str(path.parent))  # as when run as a script: bench/_common.py importable
+    spec = importlib.util.spec_from_file_location("bench_error_features", path)
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    # the window mean is the plain mean over the edge-repeated neighbourhood
+    rng = np.random.default_rng(4)
+    grid = rng.random((5, 7))
+    padded = np.pad(grid, 1, mode="edge")
+    naive = np.array([[padded[i:i + 3, j:j + 3].mean() for j in range(7)] for i in range(5)])
+    np.testing.assert_allclose(mod.window_mean(grid, 3), naive)
+    assert mod.window_mean(grid, 1) is grid
+    # a target that is a nonlinear function of one column: the held-out fit finds it there and not in noise
+    x = rng.random((3000, 2))
+    y = np.sin(3 * x[:, 0]) + 0.01 * rng.standard_normal(3000)
+    groups = np.array(["a", "b", "c"])[np.arange(3000) % 3]
+    assert mod.held_out_r2(x[:, :1], y, groups, iterations=300) > 0.95
+    assert mod.held_out_r2(x[:, 1:], y, groups, iterations=300) < 0.1
+    with pytest.raises(ValueError, match="at least two maps"):
+        mod.held_out_r2(x, y, np.full(3000, "a"), iterations=2)
+    # end to end: one row per output; the model's column is its own per-output R²
+    data = _dataset(tmp_path / "ds", n=6)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=4, crop=32,
+                      val_scenes=("scene0",)))
+    model = export.export_checkpoint(tmp_path / "m.pt", tmp_path / "m.onnx")
+    out = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "", "--iterations", "20"],
+                         capture_output=True, text=True, check=True).stdout
+    pred = sdk.load(model)
+    meta, reader, store = pred.metadata, DatasetReader(str(data)), TargetStore(str(data))
+    rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
+    ps = np.concatenate([pred.predict_raw(s.inputs(meta.inputs)).reshape(len(rows), -1) for s in reader], 1)
+    gs = np.concatenate([meta.transform.forward(store.load(s.id, "jnyang", 16)[rows]).reshape(len(rows), -1)
+                         for s in reader], 1)
+    table = {line.split("|")[1].strip(): [float(v) for v in re.findall(r"[-+]?\d+\.\d+", line.split("|", 2)[2])]
+             for line in out.splitlines() if re.match(r"\| (1x2|2x1|2x4|4x2) \|", line)}
+    assert list(table) == list(meta.outputs)
+    for j, r in enumerate(meta.outputs):
+        assert len(table[r]) == 5 and table[r][0] == pytest.approx(100 * scores(ps[j], gs[j]).r2, abs=0.06)
+    # one map cannot be left out
+    one = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene1"],
+                         capture_output=True, text=True)
+    assert one.returncode == 2 and "at least two maps" in one.stderr
+    bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--iterations", "0"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "--iterations must be at least 1" in bad.stderr
