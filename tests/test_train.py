@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -44,6 +45,20 @@ def _dataset(root: Path, n: int = 12) -> Path:
         store.write(sid, "jnyang", np.stack([tiles * k for k in (1, 1.1, 1.2, 1.5, 1.6, 2)]).astype(np.float32), (H, W))
     w.finalize()
     return root
+
+
+def _bench_module(name: str, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Any]:
+    """bench/<name>.py and the module it is, imported as when run as a script (bench/ first on sys.path,
+    so bench/_common.py imports)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
+    monkeypatch.syspath_prepend(str(path.parent))
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return path, mod
 
 
 def test_pooling_targets_equals_computing_at_the_coarse_tile() -> None:
@@ -640,16 +655,10 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
 
 def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_out_maps(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import importlib.util
     import subprocess
     import sys
 
-    path = Path(__file__).resolve().parents[1] / "bench" / "per_rate.py"
-    monkeypatch.syspath_prepend(str(path.parent))  # as when run as a script: bench/_common.py importable
-    spec = importlib.util.spec_from_file_location("bench_per_rate", path)
-    assert spec and spec.loader
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    path, mod = _bench_module("per_rate", monkeypatch)
     # a model exact on every rate but 4x4, whose estimate is half the truth: one threshold lets 4x4 fail
     # where a factor below 1 on 4x4 (a stricter threshold there) does not
     rng = np.random.default_rng(3)
@@ -681,14 +690,7 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
 
 
 def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side(monkeypatch: pytest.MonkeyPatch) -> None:
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "bench" / "residuals.py"
-    monkeypatch.syspath_prepend(str(path.parent))  # as when run as a script: bench/_common.py importable
-    spec = importlib.util.spec_from_file_location("bench_residuals", path)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    path, mod = _bench_module("residuals", monkeypatch)
     rng = np.random.default_rng(0)
     est = rng.random((6, 4000)) * 50.0  # e.g. PSNR estimates in dB
     bins = np.concatenate([[-np.inf], np.linspace(5, 45, 9), [np.inf]])
@@ -786,17 +788,11 @@ def test_bench_target_ceiling_finds_no_phase_noise_where_the_grids_align(tmp_pat
 
 def test_bench_input_ceiling_trains_and_scores_on_the_current_frame(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    import importlib.util
 
     from rtp.capture import DatasetReader, Sample
 
-    path = Path(__file__).resolve().parents[1] / "bench" / "input_ceiling.py"
-    monkeypatch.syspath_prepend(str(path.parent))
     monkeypatch.setattr(Sample, "buffer", Sample.buffer)  # the study patches the class: undone after the test
-    spec = importlib.util.spec_from_file_location("bench_input_ceiling", path)
-    assert spec and spec.loader
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    path, mod = _bench_module("input_ceiling", monkeypatch)
     data = _dataset(tmp_path / "ds", n=6)
     s = DatasetReader(str(data))["s000"]
     before = s.inputs(["reprojected.r", "seen", "albedo.r"])
@@ -848,19 +844,13 @@ def test_training_frames_pack_block_planes_exactly(size: tuple[int, int]) -> Non
 
 def test_bench_error_features_fits_held_out_maps_and_scores_the_model(tmp_path: Path,
                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    import importlib.util
     import re
     import subprocess
     import sys
 
     from rtp.capture import DatasetReader
 
-    path = Path(__file__).resolve().parents[1] / "bench" / "error_features.py"
-    monkeypatch.syspath_prepend(str(path.parent))  # as when run as a script: bench/_common.py importable
-    spec = importlib.util.spec_from_file_location("bench_error_features", path)
-    assert spec and spec.loader
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    path, mod = _bench_module("error_features", monkeypatch)
     # the window mean is the plain mean over the edge-repeated neighbourhood
     rng = np.random.default_rng(4)
     grid = rng.random((5, 7))
