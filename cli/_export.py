@@ -37,8 +37,9 @@ def build_export_parser() -> argparse.ArgumentParser:
                    "paper's six published models are recognised by their SHA-256 and need no --metadata")
     p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")
     p.add_argument("--replace", action="store_true", help="with --adopt: overwrite metadata the model already has")
-    p.add_argument("--restamp", metavar="MODEL.onnx", help="record the digest of graph and weights in an rtp model "
-                   "exported before rtp wrote digests (in place; predictions unchanged)")
+    p.add_argument("--restamp", metavar="MODEL.onnx", help="bring an rtp model exported by an older rtp up to "
+                   "this one's format: the digest of graph and weights, and the finite probe where its first "
+                   "layer allows one (in place; predictions unchanged)")
     return p
 
 

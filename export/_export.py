@@ -2,7 +2,10 @@
 
 The exported graph has one input ``input`` ``(batch, C, height, width)`` and one output ``metric``
 ``(batch, rates, height/w, width/w)``, the same names as the paper's published models, so engine
-code written for either runs both. The metadata is written last, as one JSON value under
+code written for either runs both. Where the network's first layer allows it (rtp's fast network),
+a second output ``finite_probe`` (a float scalar, :func:`add_finite_probe`) lets ``rtp.sdk`` refuse
+NaN and infinite input without reading the frame once more; an engine that runs the file itself asks
+onnxruntime for ``metric`` alone and never computes it. The metadata is written last, as one JSON value under
 ``rtp.metadata`` (see docs/metadata.md), then the ONNX checker runs, then onnxruntime loads the
 file through ``rtp.sdk.load`` and is compared with torch. The output appears only when all of that
 passed (atomic rename).
@@ -10,6 +13,7 @@ passed (atomic rename).
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import logging
 import os
@@ -34,7 +38,7 @@ from rtp.sdk.files import atomic_output
 
 from ._published import file_sha256, identify
 
-__all__ = ["DEFAULT_OPSET", "ExportError", "adopt", "export_checkpoint", "restamp", "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "ExportError", "add_finite_probe", "adopt", "export_checkpoint", "restamp", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -42,6 +46,8 @@ log = logging.getLogger("rtp.export")
 DEFAULT_OPSET = 17
 INPUT_NAME = "input"
 OUTPUT_NAME = "metric"
+#: The second output :func:`add_finite_probe` gives a model (``metadata.finite_probe``).
+PROBE_NAME = "finite_probe"
 PARITY_TOLERANCE = 1e-4
 
 
@@ -97,6 +103,52 @@ def write_metadata(model: Any, meta: ModelMetadata) -> None:
     props = {p.key: p.value for p in model.metadata_props}
     props[METADATA_KEY] = meta.to_json()
     onnx.helper.set_model_props(model, props)
+
+
+def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
+    """Give an ``onnx.ModelProto`` the output :data:`PROBE_NAME`: the sum of its first convolution's
+    output before any activation, a float scalar that is NaN or infinite whenever the input holds a
+    NaN or an infinity (IEEE arithmetic: a product with one is one, or NaN for 0 x inf, and a sum
+    that holds one is one). ``sdk.ShadingRatePredictor`` checks that scalar instead of reading the
+    whole frame once more (``metadata.finite_probe``; docs/runtime.md). Returns the output's name,
+    or None, changing nothing, where the probe would not see every pixel or would not be cheaper than
+    reading the frame: the input must feed exactly one ``Conv``, with no padding or dilation, a kernel
+    equal to its stride (every pixel in exactly one window) and a stride that divides
+    ``pad_multiple`` (no row or column left over), with fewer output values than input values (rtp's
+    fast network: a 4x4 stride-4 stem, 16 channels from eight planes; the paper's full-resolution
+    3x3 first layer has none)."""
+    import onnx
+    from onnx import helper
+
+    graph = model.graph
+    if any(o.name == PROBE_NAME for o in graph.output):
+        return PROBE_NAME
+    init = {i.name: i for i in graph.initializer}
+    inputs = [i for i in graph.input if i.name not in init]
+    if len(inputs) != 1:
+        return None
+    consumers = [n for n in graph.node if inputs[0].name in n.input]
+    if len(consumers) != 1 or consumers[0].op_type != "Conv" or consumers[0].input[0] != inputs[0].name:
+        return None
+    conv = consumers[0]
+    attrs = {a.name: helper.get_attribute_value(a) for a in conv.attribute}
+    weight = init.get(conv.input[1])
+    if weight is None or len(weight.dims) != 4:
+        return None
+    kernel = list(attrs.get("kernel_shape", weight.dims[2:]))
+    strides = list(attrs.get("strides", [1, 1]))
+    auto_pad = attrs.get("auto_pad", b"NOTSET")
+    if (kernel != strides or any(v != 0 for v in attrs.get("pads", [0, 0, 0, 0]))
+            or any(v != 1 for v in attrs.get("dilations", [1, 1])) or auto_pad not in (b"NOTSET", "NOTSET")
+            or any(pad_multiple % st for st in strides)):
+        return None
+    in_channels = weight.dims[1] * attrs.get("group", 1)
+    if weight.dims[0] >= in_channels * strides[0] * strides[1]:
+        return None
+    graph.node.append(helper.make_node("ReduceSum", [conv.output[0]], [PROBE_NAME], keepdims=0,
+                                       name="rtp_finite_probe"))
+    graph.output.append(helper.make_tensor_value_info(PROBE_NAME, onnx.TensorProto.FLOAT, []))
+    return PROBE_NAME
 
 
 def _export_provenance(opset: int) -> dict[str, Any]:
@@ -171,6 +223,7 @@ def export_checkpoint(
         model.producer_name = "rtp-export"
         model.producer_version = str(sdk.__version__)
         model.doc_string = meta.description or f"rtp {meta.metric} predictor, {t}x{t} tiles"
+        meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
         write_metadata(model, meta)  # the last change to the model
         _check_and_save(model, tmp)
         _torch_parity(tmp, net, meta)
@@ -359,10 +412,12 @@ def adopt(
 
 
 def restamp(model_path: str | os.PathLike[str]) -> Path:
-    """Rewrite an rtp model's metadata through :func:`write_metadata` so that it records the digest of
-    the graph and weights (models exported before rtp wrote digests). The graph, the weights and every
-    other metadata field stay as they are; the file is replaced atomically and loaded back to check
-    that it predicts exactly as before."""
+    """Bring an rtp model exported by an older rtp up to this one's format: rewrite its metadata
+    through :func:`write_metadata` so that it records the digest of the graph and weights (models
+    exported before rtp wrote digests), and give it the finite probe (:func:`add_finite_probe`) where
+    its first layer allows one. The weights, the metric output and every other metadata field stay as
+    they are; the file is replaced atomically and loaded back to check that it predicts exactly as
+    before."""
     import numpy as np
     import onnx
 
@@ -376,7 +431,10 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
         model = onnx.load(str(path))
     except Exception as err:  # onnx raises DecodeError and friends
         raise ModelLoadError(f"{str(path)!r} is not an ONNX model onnx can read: {err}") from err
-    write_metadata(model, before.metadata)
+    meta = before.metadata
+    if meta.finite_probe is None:
+        meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
+    write_metadata(model, meta)
     t = before.tile_size
     x = np.random.default_rng(0).random((len(before.metadata.inputs), 5 * t, 7 * t), dtype=np.float32)
     with atomic_output(path) as tmp:

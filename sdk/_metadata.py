@@ -33,10 +33,11 @@ __all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
 #: The ``metadata_props`` key that holds the JSON metadata.
 METADATA_KEY = "rtp.metadata"
 #: The newest metadata schema this SDK reads (it reads every older one too). Version 2 added
-#: ``input_multiple``; metadata is written with the lowest version that holds its fields, so a model
-#: without ``input_multiple`` stays readable by an SDK that knows only version 1.
-SCHEMA_VERSION = 2
+#: ``input_multiple``, version 3 ``finite_probe``; metadata is written with the lowest version that
+#: holds its fields, so a model without them stays readable by an SDK that knows only version 1.
+SCHEMA_VERSION = 3
 _METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+_OUTPUT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]{0,127}")
 _FIELDS = (
     "schema_version",
     "metric",
@@ -45,6 +46,7 @@ _FIELDS = (
     "safety",
     "tile_size",
     "input_multiple",
+    "finite_probe",
     "inputs",
     "outputs",
     "extrapolation_k",
@@ -123,13 +125,19 @@ class ModelMetadata:
     #: covers; ``predict`` pads a frame only up to this multiple. None (models before schema 2, the
     #: paper's network): the frame is padded up to whole tiles by repeating its last row and column.
     input_multiple: int | None = None
+    #: The name of a second graph output, a float scalar that is NaN or infinite whenever the input
+    #: holds a NaN or an infinity (``rtp-export`` adds it: the sum of the first convolution's output
+    #: before its activation, which reads every pixel). ``predict`` then checks that scalar instead
+    #: of reading the whole frame once more. None: the SDK checks the frame itself.
+    finite_probe: str | None = None
     schema_version: int = 1
     #: ``"sha256:<hex>"`` of the graph and weights (``rtp-export`` writes it; ``sdk.load`` checks it), or None.
     digest: str | None = None
 
     def __post_init__(self) -> None:
         # the lowest schema that holds the fields (see SCHEMA_VERSION)
-        object.__setattr__(self, "schema_version", 1 if self.input_multiple is None else 2)
+        version = 3 if self.finite_probe is not None else 1 if self.input_multiple is None else 2
+        object.__setattr__(self, "schema_version", version)
 
     # -- parsing ------------------------------------------------------------------------------
     @classmethod
@@ -191,6 +199,14 @@ class ModelMetadata:
                 "input_multiple",
             )
 
+        probe = d.get("finite_probe")
+        if probe is not None and (not isinstance(probe, str) or not _OUTPUT_NAME_RE.fullmatch(probe)):
+            raise MetadataError(
+                f"finite_probe: expected the name of a graph output (letters, digits, '_', '.', ':', '/', '-') or "
+                f"null, got {reprlib.repr(probe)}",
+                "finite_probe",
+            )
+
         inputs = d.get("inputs")
         if not isinstance(inputs, (list, tuple)) or not inputs or not all(isinstance(c, str) for c in inputs):
             raise MetadataError(f"inputs: expected a non-empty list of channel names, got {inputs!r}", "inputs")
@@ -249,6 +265,7 @@ class ModelMetadata:
             description=description,
             provenance=_freeze(copy.deepcopy(dict(provenance))),
             input_multiple=None if multiple is None else int(multiple),
+            finite_probe=probe,
             digest=digest,
         )
 
@@ -293,6 +310,7 @@ class ModelMetadata:
             "safety": self.safety,
             "tile_size": self.tile_size,
             **({"input_multiple": self.input_multiple} if self.input_multiple is not None else {}),
+            **({"finite_probe": self.finite_probe} if self.finite_probe is not None else {}),
             "inputs": list(self.inputs),
             "outputs": list(self.outputs),
             "extrapolation_k": self.extrapolation_k,

@@ -215,10 +215,12 @@ def load(
     the model's (a model with 8-pixel tiles on 16-pixel hardware tiles): ``predict`` and
     ``shading_rates`` then give one value per hardware tile, the worst of the model tiles it covers
     (:func:`pool_tiles`). The default is the model's own tile size. ``assume_finite=True`` skips
-    ``predict``'s check that the input holds no NaN or infinity (one read of the whole frame: 2-3 ms
-    of a 1080p eight-plane frame on a 2-core CPU, a quarter of a shipped model's time), for an engine
-    that builds the planes itself and knows them finite, as scikit-learn's ``assume_finite``; a NaN
-    that gets through then gives unspecified predictions instead of :class:`NonFiniteInputError`.
+    ``predict``'s check that the input holds no NaN or infinity, for an engine that builds the planes
+    itself and knows them finite, as scikit-learn's ``assume_finite``; a NaN that gets through then
+    gives unspecified predictions instead of :class:`NonFiniteInputError`. The check is one read of
+    the whole frame (2-3 ms of a 1080p eight-plane frame on a 2-core CPU), or, for a model with a
+    finite probe (``metadata.finite_probe``: every shipped model), a reduction inside the graph that
+    costs a fraction of that.
     """
     ort = _ort()
     model_path = _resolve_path(path)
@@ -307,10 +309,21 @@ class ShadingRatePredictor:
             )
         self._tile = tile_size
         inputs, outputs = session.get_inputs(), session.get_outputs()
-        if len(inputs) != 1 or len(outputs) != 1:
+        probe = metadata.finite_probe
+        if probe is not None and probe not in [o.name for o in outputs]:
             raise MetadataError(
-                f"expected a model with one input and one output, got {len(inputs)} inputs and {len(outputs)} outputs"
+                f"finite_probe: the metadata names the output {probe!r}, the model's outputs are "
+                f"{[o.name for o in outputs]}",
+                "finite_probe",
             )
+        outputs = [o for o in outputs if o.name != probe]
+        if len(inputs) != 1 or len(outputs) != 1:
+            besides = f" besides the finite probe {probe!r}" if probe is not None else ""
+            raise MetadataError(
+                f"expected a model with one input and one output{besides}, got {len(inputs)} inputs and "
+                f"{len(outputs)} outputs"
+            )
+        self._probe_name = probe
         i, o = inputs[0], outputs[0]
         if i.type != "tensor(float)" or len(i.shape) != 4 or len(o.shape) != 4:
             raise MetadataError(
@@ -424,22 +437,27 @@ class ShadingRatePredictor:
                 tuple(x.shape),
                 f"(N, {c}, <= {sh}, <= {sw})",
             )
-        if self._assume_finite:
-            return x4
+        if self._assume_finite or self._probe_name is not None:
+            return x4  # nothing to check, or the graph checks it (_run's probe, then _exact_check)
         # One float32 reduction (pairwise and vectorised: a third of the cost of accumulating in
         # float64, 1.7 against 6 ms for a 1080p frame) instead of a boolean temporary; NaN and inf
         # both survive a sum. Finite values beyond ~1e34 can overflow it: the exact test decides.
         with np.errstate(over="ignore", invalid="ignore"):
             total = float(x4.sum())
         if not math.isfinite(total):
-            bad = ~np.isfinite(x4)
-            if bad.any():
-                where = np.argwhere(bad)[0].tolist()
-                raise NonFiniteInputError(
-                    f"input holds {int(bad.sum())} NaN or infinite values (first at index {tuple(where)}, channel "
-                    f"{self._meta.inputs[where[1]]!r})"
-                )
+            self._exact_check(x4)
         return x4
+
+    def _exact_check(self, x4: np.ndarray) -> None:
+        """:class:`NonFiniteInputError` naming the first NaN or infinity of ``x4``, if it holds one (a
+        reduction that overflowed on huge but finite values passes)."""
+        bad = ~np.isfinite(x4)
+        if bad.any():
+            where = np.argwhere(bad)[0].tolist()
+            raise NonFiniteInputError(
+                f"input holds {int(bad.sum())} NaN or infinite values (first at index {tuple(where)}, channel "
+                f"{self._meta.inputs[where[1]]!r})"
+            )
 
     def _padded(self, x4: np.ndarray) -> np.ndarray:
         """Pad H and W up to the model's fixed size, or up to ``metadata.pad_multiple`` (whole tiles,
@@ -461,11 +479,17 @@ class ShadingRatePredictor:
         out[:, :, :, w:] = out[:, :, :, w - 1 : w]
         return out
 
-    def _run(self, x: np.ndarray) -> np.ndarray:
+    def _run(self, x: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The metric output for ``x``, and whether the graph's finite probe (if the model has one
+        and the input is not assumed finite) says the input holds a NaN or an infinity."""
+        names = [self._out_name]
+        if self._probe_name is not None and not self._assume_finite:
+            names.append(self._probe_name)
         try:
-            return self._session.run([self._out_name], {self._in_name: x})[0]
+            outs = self._session.run(names, {self._in_name: x})
         except Exception as err:
             raise InferenceError(f"onnxruntime failed on an input of shape {x.shape}: {err}") from err
+        return outs[0], len(outs) > 1 and not bool(np.isfinite(outs[1]).all())
 
     def predict_raw(self, x: np.ndarray) -> np.ndarray:
         """The network's own output (transformed space, one channel per metadata ``outputs`` rate),
@@ -479,9 +503,12 @@ class ShadingRatePredictor:
                 raise InputShapeError(
                     f"this model has a fixed batch of {self._batch}, got {n}", tuple(x.shape), f"({self._batch}, ...)"
                 )
-            raw = np.concatenate([self._run(xp[i : i + 1]) for i in range(n)], axis=0)
+            runs = [self._run(xp[i : i + 1]) for i in range(n)]
+            raw, flagged = np.concatenate([r[0] for r in runs], axis=0), any(r[1] for r in runs)
         else:
-            raw = self._run(xp)
+            raw, flagged = self._run(xp)
+        if flagged:  # the graph saw a NaN or an infinity (or a sum that overflowed): the exact test decides
+            self._exact_check(x4)
         t = self._meta.tile_size
         expect = (n, len(self._meta.outputs), *tile_grid(xp.shape[2], xp.shape[3], t))
         if raw.shape != expect:

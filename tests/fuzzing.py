@@ -113,7 +113,8 @@ _VALID = {
     "default_threshold": 0.25, "weber_l": 0.02, "safety": 0.05,
 }
 _FIELDS = ("metric", "higher_is_better", "transform", "safety", "tile_size", "inputs", "outputs", "extrapolation_k",
-           "default_threshold", "weber_l", "description", "provenance", "schema_version", "digest")
+           "default_threshold", "weber_l", "description", "provenance", "schema_version", "digest", "input_multiple",
+           "finite_probe")
 _TRANSFORMS = {"clamped": {"mu_y": 0.25}, "logistic": {"mu_y": 0.25, "k": 10.0}, "linear": {"factor": 0.7, "offset": 0.0}}
 
 transforms = st.one_of(

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 import subprocess
 import sys
 import warnings
@@ -12,6 +14,8 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from rtp import export, sdk
 from rtp.train import checkpoint
@@ -84,7 +88,8 @@ def test_a_fast_network_exports_taking_partial_tiles(tmp_path: Path) -> None:
     net.eval()
     out = export.export_checkpoint(checkpoint.save(tmp_path / "f.pt", net, base_metadata()), tmp_path / "f.onnx")
     pred = sdk.load(out)
-    assert pred.metadata.input_multiple == 4 and pred.metadata.schema_version == 2
+    assert pred.metadata.input_multiple == 4 and pred.metadata.finite_probe == "finite_probe"
+    assert pred.metadata.schema_version == 3
     rng = np.random.default_rng(0)
     x = rng.random((4, 72, 120), dtype=np.float32)  # whole 4-pixel steps, partial 16-pixel tiles: run as is
     with torch.inference_mode():
@@ -304,3 +309,106 @@ def test_export_names_what_it_was_given_instead_of_a_checkpoint(tmp_path: Path) 
     for path, needle in ((side, "is a metadata file, not a checkpoint"), (junk, "torch cannot read it")):
         r = _cli(str(path))
         assert r.returncode == 2 and needle in r.stderr and "weights_only" not in r.stderr, r.stderr
+
+
+# -- the finite probe --------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def fast_onnx(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """rtp's fast network on eight planes, trained-like BatchNorm, exported (with its finite probe)."""
+    from rtp.train.model import FastNet
+
+    torch.manual_seed(3)
+    net = FastNet(in_channels=8)
+    with torch.no_grad():
+        net.train()(torch.rand(4, 8, 64, 64))
+    tmp = tmp_path_factory.mktemp("probe")
+    inputs = ["reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b", "normal.z"]
+    meta = base_metadata(metric="lpips", weber_l=None, default_threshold=0.1, inputs=inputs)
+    return export.export_checkpoint(checkpoint.save(tmp / "f.pt", net.eval(), meta), tmp / "f.onnx")
+
+
+def test_the_fast_network_is_exported_with_a_finite_probe_and_the_paper_network_without(
+    fast_onnx: Path, tmp_path: Path
+) -> None:
+    import onnx
+
+    model = onnx.load(str(fast_onnx))
+    assert [o.name for o in model.graph.output] == ["metric", "finite_probe"]
+    probe = [n for n in model.graph.node if n.output[0] == "finite_probe"][0]
+    stem = [n for n in model.graph.node if "input" in n.input][0]
+    assert probe.op_type == "ReduceSum" and probe.input[0] == stem.output[0] and stem.op_type == "Conv"
+    # the paper's first layer is a full-resolution 3x3 convolution: summing it would cost more than the frame
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    pred = sdk.load(export.export_checkpoint(ck))
+    assert pred.metadata.finite_probe is None and pred.metadata.schema_version == 1
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(h=st.integers(1, 40), w=st.integers(1, 40), batch=st.integers(1, 2), data=st.data(),
+       bad=st.sampled_from([np.nan, np.inf, -np.inf]))
+def test_the_probe_refuses_a_nan_or_an_infinity_anywhere(
+    fast_onnx: Path, h: int, w: int, batch: int, data: st.DataObject, bad: float
+) -> None:
+    """Any frame size (padded up to the stem's multiple of 4 by repeating the edge), any pixel, any plane,
+    any non-finite value: the probe (not a read of the frame) catches it and the error names it."""
+    pred = sdk.load(fast_onnx)
+    x = np.random.default_rng(h * 41 + w).random((batch, 8, h, w), dtype=np.float32)
+    clean = pred.predict(x)
+    assert np.isfinite(clean).all()
+    where = (data.draw(st.integers(0, batch - 1)), data.draw(st.integers(0, 7)), data.draw(st.integers(0, h - 1)),
+             data.draw(st.integers(0, w - 1)))
+    x[where] = bad
+    with pytest.raises(sdk.NonFiniteInputError, match=re.escape(f"first at index {where}")):
+        pred.predict(x)
+
+
+def test_the_probe_changes_no_prediction(fast_onnx: Path, tmp_path: Path) -> None:
+    """The same graph without the probe (what an engine running only ``metric`` computes) predicts the
+    same to the bit, and restamping it gives the probe back."""
+    import onnx
+
+    from rtp.export import write_metadata
+
+    model = onnx.load(str(fast_onnx))
+    del model.graph.output[1]
+    del model.graph.node[-1]
+    meta = dataclasses.replace(sdk.load(fast_onnx).metadata, finite_probe=None)
+    write_metadata(model, meta)
+    bare = tmp_path / "bare.onnx"
+    onnx.save(model, str(bare))
+    x = np.random.default_rng(5).random((8, 68, 100), dtype=np.float32)
+    assert sdk.load(bare).metadata.schema_version == 2
+    np.testing.assert_array_equal(sdk.load(bare).predict(x), sdk.load(fast_onnx).predict(x))
+    export.restamp(bare)
+    again = sdk.load(bare)
+    assert again.metadata.finite_probe == "finite_probe" and again.metadata.digest == sdk.model_digest(bare.read_bytes())
+    np.testing.assert_array_equal(again.predict(x), sdk.load(fast_onnx).predict(x))
+
+
+@pytest.mark.parametrize(
+    ("conv", "multiple"),
+    [
+        ({"kernel_shape": [4, 4], "strides": [4, 4], "pads": [1, 1, 1, 1]}, 4),   # padding
+        ({"kernel_shape": [5, 5], "strides": [4, 4]}, 4),                          # windows overlap, rows left over
+        ({"kernel_shape": [4, 4], "strides": [4, 4], "dilations": [2, 2]}, 4),     # holes between the taps
+        ({"kernel_shape": [4, 4], "strides": [4, 4]}, 2),                          # frames of 2k rows: 2 left over
+        ({"kernel_shape": [1, 1], "strides": [1, 1]}, 16),                         # as many values as the frame
+    ],
+    ids=["pads", "overlap", "dilation", "multiple", "not-cheaper"],
+)
+def test_no_probe_where_it_would_not_see_every_pixel_or_save_a_read(conv: dict, multiple: int) -> None:
+    import onnx
+    from onnx import helper
+
+    k = conv["kernel_shape"]
+    graph = helper.make_graph(
+        [helper.make_node("Conv", ["input", "W"], ["c"], **conv), helper.make_node("Relu", ["c"], ["metric"])], "g",
+        [helper.make_tensor_value_info("input", onnx.TensorProto.FLOAT, ["n", 4, "h", "w"])],
+        [helper.make_tensor_value_info("metric", onnx.TensorProto.FLOAT, None)],
+        initializer=[helper.make_tensor("W", onnx.TensorProto.FLOAT, [4, 4, *k], [0.1] * (16 * k[0] * k[1]))],
+    )
+    model = helper.make_model(graph)
+    before = model.SerializeToString()
+    assert export.add_finite_probe(model, multiple) is None
+    assert model.SerializeToString() == before

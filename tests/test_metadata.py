@@ -28,7 +28,7 @@ def test_input_multiple_is_optional_validated_and_raises_the_schema() -> None:
     m4 = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4))
     assert m4.input_multiple == 4 and m4.pad_multiple == 4
     d = json.loads(m4.to_json())
-    assert d["input_multiple"] == 4 and d["schema_version"] == 2 == sdk.SCHEMA_VERSION
+    assert d["input_multiple"] == 4 and d["schema_version"] == 2
     assert sdk.ModelMetadata.from_json(m4.to_json()) == m4
     for bad in (3, 32, 0, True, "4", 4.0):
         with pytest.raises(sdk.MetadataError, match="input_multiple") as info:
@@ -36,6 +36,22 @@ def test_input_multiple_is_optional_validated_and_raises_the_schema() -> None:
         assert info.value.key == "input_multiple"
     with pytest.raises(sdk.MetadataError, match="schema_version"):
         sdk.ModelMetadata.from_dict(base_metadata(schema_version=sdk.SCHEMA_VERSION + 1))
+
+
+def test_finite_probe_is_optional_validated_and_raises_the_schema() -> None:
+    m = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4))
+    assert m.finite_probe is None and "finite_probe" not in m.to_dict()
+    p = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4, finite_probe="finite_probe"))
+    d = json.loads(p.to_json())
+    assert p.finite_probe == "finite_probe" == d["finite_probe"]
+    assert d["schema_version"] == 3 == sdk.SCHEMA_VERSION  # the newest field: the newest schema
+    assert sdk.ModelMetadata.from_json(p.to_json()) == p
+    # written with the lowest schema that holds it, whatever the file said
+    assert sdk.ModelMetadata.from_dict(base_metadata(schema_version=3)).schema_version == 1
+    for bad in ("", "9lives", "a b", "x" * 200, 3, True, ["finite_probe"]):
+        with pytest.raises(sdk.MetadataError, match="finite_probe") as info:
+            sdk.ModelMetadata.from_dict(base_metadata(finite_probe=bad))
+        assert info.value.key == "finite_probe"
 
 
 def test_defaults_and_frozen() -> None:

@@ -237,6 +237,71 @@ def test_threshold_beyond_saturation_warns(tiny_model: Callable[..., Path], capl
     assert "every tile will pass" in caplog.text
 
 
+def _with_probe(path: Path, meta: dict | None = None, name: str = "probe") -> Path:
+    """The tiny model with a second output: the sum of its convolution's output (what rtp-export's
+    ``add_finite_probe`` adds to a fast network), named in the metadata as ``finite_probe``."""
+    import json
+
+    import onnx
+    from onnx import helper
+
+    model = onnx.load(str(path))
+    model.graph.node.append(helper.make_node("ReduceSum", ["conv"], [name], keepdims=0))
+    model.graph.output.append(helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, []))
+    helper.set_model_props(model, {"rtp.metadata": json.dumps(base_metadata(finite_probe=name) if meta is None
+                                                              else meta)})
+    onnx.save(model, str(path))
+    return path
+
+
+class _Recording:
+    """An onnxruntime session that records which outputs each run asked for."""
+
+    def __init__(self, session: object) -> None:
+        self.session, self.asked = session, []  # type: ignore[var-annotated]
+
+    def run(self, names: list[str], feed: dict) -> list:
+        self.asked.append(list(names))
+        return self.session.run(names, feed)  # type: ignore[attr-defined]
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self.session, name)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_finite_probe_replaces_the_frame_read_and_refuses_the_same_inputs(
+    tiny_model: Callable[..., Path], bad: float
+) -> None:
+    plain, probed = sdk.load(tiny_model()), sdk.load(_with_probe(tiny_model()))
+    assert probed.metadata.finite_probe == "probe" and probed.metadata.schema_version == 3
+    rec = probed._session = _Recording(probed._session)
+    x = np.random.default_rng(0).random((2, 4, 40, 56), dtype=np.float32)  # a batch, partial tiles
+    np.testing.assert_array_equal(probed.predict(x), plain.predict(x))
+    assert rec.asked == [["metric", "probe"]]
+    x[1, 2, 39, 55] = bad  # the last pixel of the second frame: the padded copy repeats it
+    for p in (plain, probed):
+        with pytest.raises(sdk.NonFiniteInputError, match=r"first at index \(1, 2, 39, 55\), channel 'albedo.r'"):
+            p.predict(x)
+    trusted = sdk.load(_with_probe(tiny_model()), assume_finite=True)
+    rec = trusted._session = _Recording(trusted._session)
+    assert trusted.predict(x).shape == (2, 6, 3, 4)  # the caller's promise; the probe is not even computed
+    assert rec.asked == [["metric"]]
+
+
+def test_a_probe_that_overflows_on_huge_finite_values_lets_them_through(tiny_model: Callable[..., Path]) -> None:
+    p = sdk.load(_with_probe(tiny_model()))
+    x = np.full((4, 32, 32), 3e38, np.float32)  # finite, but their sum is not
+    assert np.isfinite(p.predict(x)).all()
+
+
+def test_the_finite_probe_must_be_an_output_and_the_only_extra_one(tiny_model: Callable[..., Path]) -> None:
+    with pytest.raises(sdk.MetadataError, match="finite_probe: the metadata names the output 'nowhere'") as info:
+        sdk.load(_with_probe(tiny_model(), base_metadata(finite_probe="nowhere")))
+    assert info.value.key == "finite_probe"
+    with pytest.raises(sdk.MetadataError, match="one input and one output, got 1 inputs and 2 outputs"):
+        sdk.load(_with_probe(tiny_model(), base_metadata()))  # a second output the metadata does not explain
+
+
 def test_no_bare_onnxruntime_error_escapes(tiny_model: Callable[..., Path]) -> None:
     import onnxruntime
 
