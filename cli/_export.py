@@ -15,6 +15,7 @@ EXAMPLES = """examples:
   rtp-export --adopt JNYang.onnx -o jnyang-paper.onnx        # a published model: no sidecar needed
   rtp-export --adopt Model.onnx --metadata sidecar.yaml -o adopted.onnx --dynamic
   rtp-export --restamp old.onnx
+  rtp-export --strip-probe jnyang -o jnyang-engine.onnx     # for an engine that runs the file itself
 """
 
 
@@ -40,15 +41,29 @@ def build_export_parser() -> argparse.ArgumentParser:
     p.add_argument("--restamp", metavar="MODEL.onnx", help="bring an rtp model exported by an older rtp up to "
                    "this one's format: the digest of graph and weights, and the finite probe where its first "
                    "layer allows one (in place; predictions unchanged)")
+    p.add_argument("--no-finite-probe", action="store_true", help="export a checkpoint without the finite probe "
+                   "output (docs/export.md): for an engine that runs the file with its own onnxruntime session")
+    p.add_argument("--strip-probe", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
+                   "name) without its finite probe to -o OUTPUT.onnx (predictions unchanged)")
     return p
 
 
 def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Every combination is checked before any work starts."""
     if args.restamp:
-        if args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace:
+        if (args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace
+                or args.no_finite_probe or args.strip_probe):
             parser.error("--restamp MODEL.onnx takes no other options")
         return
+    if args.strip_probe:
+        if (args.checkpoint or args.adopt or args.metadata or args.opset or args.dynamic or args.replace
+                or args.no_finite_probe):
+            parser.error("--strip-probe MODEL takes only -o OUTPUT.onnx")
+        if not args.output:
+            parser.error("--strip-probe needs -o OUTPUT.onnx")
+        return
+    if args.no_finite_probe and not args.checkpoint:
+        parser.error("--no-finite-probe applies to exporting a checkpoint")
     if args.adopt:
         if args.checkpoint:
             parser.error("give either a checkpoint or --adopt FOREIGN.onnx, not both")
@@ -63,10 +78,12 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
 
 
 def _body(args: argparse.Namespace) -> int:
-    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint, restamp
+    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint, restamp, strip_finite_probe
 
     if args.restamp:
         out = restamp(args.restamp)
+    elif args.strip_probe:
+        out = strip_finite_probe(args.strip_probe, args.output)
     elif args.adopt:
         from pathlib import Path
 
@@ -81,7 +98,7 @@ def _body(args: argparse.Namespace) -> int:
         out = adopt(args.adopt, args.metadata, args.output, dynamic=args.dynamic, replace=args.replace)
     else:
         out = export_checkpoint(args.checkpoint, args.output, opset=args.opset or DEFAULT_OPSET,
-                                extra_metadata=args.metadata)
+                                extra_metadata=args.metadata, finite_probe=not args.no_finite_probe)
     print(out)
     return 0
 

@@ -126,8 +126,8 @@ class ModelMetadata:
     #: paper's network): the frame is padded up to whole tiles by repeating its last row and column.
     input_multiple: int | None = None
     #: The name of a second graph output, a float scalar that is NaN or infinite whenever the input
-    #: holds a NaN or an infinity (``rtp-export`` adds it: the sum of the first convolution's output
-    #: before its activation, which reads every pixel). ``predict`` then checks that scalar instead
+    #: holds a NaN or an infinity (``rtp-export`` adds it: the summed per-channel means of the first
+    #: convolution's output before its activation, which reads every pixel). ``predict`` then checks that scalar instead
     #: of reading the whole frame once more. None: the SDK checks the frame itself.
     finite_probe: str | None = None
     schema_version: int = 1

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import re
 import subprocess
@@ -335,9 +334,12 @@ def test_the_fast_network_is_exported_with_a_finite_probe_and_the_paper_network_
 
     model = onnx.load(str(fast_onnx))
     assert [o.name for o in model.graph.output] == ["metric", "finite_probe"]
-    probe = [n for n in model.graph.node if n.output[0] == "finite_probe"][0]
+    made = {n.output[0]: n for n in model.graph.node}
     stem = [n for n in model.graph.node if "input" in n.input][0]
-    assert probe.op_type == "ReduceSum" and probe.input[0] == stem.output[0] and stem.op_type == "Conv"
+    total = made["finite_probe"]
+    mean = made[total.input[0]]
+    assert (total.op_type, mean.op_type, stem.op_type) == ("ReduceSum", "GlobalAveragePool", "Conv")
+    assert mean.input[0] == stem.output[0]  # the stem's output before its ReLU
     # the paper's first layer is a full-resolution 3x3 convolution: summing it would cost more than the frame
     ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
     pred = sdk.load(export.export_checkpoint(ck))
@@ -363,27 +365,43 @@ def test_the_probe_refuses_a_nan_or_an_infinity_anywhere(
         pred.predict(x)
 
 
-def test_the_probe_changes_no_prediction(fast_onnx: Path, tmp_path: Path) -> None:
-    """The same graph without the probe (what an engine running only ``metric`` computes) predicts the
-    same to the bit, and restamping it gives the probe back."""
+def test_stripping_and_restamping_the_probe_change_no_prediction(fast_onnx: Path, tmp_path: Path) -> None:
+    """The graph without the probe (for an engine that runs the file itself) predicts the same to the
+    bit, holds exactly the nodes of an export without it, and restamping gives the probe back."""
     import onnx
 
-    from rtp.export import write_metadata
-
-    model = onnx.load(str(fast_onnx))
-    del model.graph.output[1]
-    del model.graph.node[-1]
-    meta = dataclasses.replace(sdk.load(fast_onnx).metadata, finite_probe=None)
-    write_metadata(model, meta)
-    bare = tmp_path / "bare.onnx"
-    onnx.save(model, str(bare))
+    bare = export.strip_finite_probe(fast_onnx, tmp_path / "bare.onnx")
     x = np.random.default_rng(5).random((8, 68, 100), dtype=np.float32)
-    assert sdk.load(bare).metadata.schema_version == 2
+    assert sdk.load(bare).metadata.finite_probe is None and sdk.load(bare).metadata.schema_version == 2
+    assert [o.name for o in onnx.load(str(bare)).graph.output] == ["metric"]
+    assert len(onnx.load(str(bare)).graph.node) == len(onnx.load(str(fast_onnx)).graph.node) - 2
     np.testing.assert_array_equal(sdk.load(bare).predict(x), sdk.load(fast_onnx).predict(x))
+    with pytest.raises(sdk.ParameterError, match="no finite probe"):
+        export.strip_finite_probe(bare, tmp_path / "again.onnx")
+    assert not (tmp_path / "again.onnx").exists()
     export.restamp(bare)
     again = sdk.load(bare)
     assert again.metadata.finite_probe == "finite_probe" and again.metadata.digest == sdk.model_digest(bare.read_bytes())
     np.testing.assert_array_equal(again.predict(x), sdk.load(fast_onnx).predict(x))
+
+
+def test_the_cli_exports_without_the_probe_and_strips_it(fast_onnx: Path, tmp_path: Path) -> None:
+    ck = fast_onnx.with_suffix(".pt")
+    cmd = [sys.executable, "-m", "rtp.cli.export"]
+    out = subprocess.run([*cmd, str(ck), "-o", str(tmp_path / "n.onnx"), "--no-finite-probe"], capture_output=True,
+                         text=True)
+    assert out.returncode == 0, out.stderr
+    assert sdk.load(tmp_path / "n.onnx").metadata.finite_probe is None
+    out = subprocess.run([*cmd, "--strip-probe", str(fast_onnx), "-o", str(tmp_path / "s.onnx")], capture_output=True,
+                         text=True)
+    assert out.returncode == 0 and out.stdout.strip() == str(tmp_path / "s.onnx")
+    assert sdk.load(tmp_path / "s.onnx").metadata.finite_probe is None
+    for bad, message in (([ "--strip-probe", str(fast_onnx)], "needs -o"),
+                         (["--strip-probe", str(fast_onnx), str(ck), "-o", "x.onnx"], "takes only -o"),
+                         (["--no-finite-probe", "--adopt", str(fast_onnx), "-o", "x.onnx"], "applies to exporting"),
+                         (["--restamp", str(fast_onnx), "--no-finite-probe"], "takes no other options")):
+        r = subprocess.run([*cmd, *bad], capture_output=True, text=True)
+        assert r.returncode == 2 and message in r.stderr, (bad, r.stderr)
 
 
 @pytest.mark.parametrize(

@@ -284,7 +284,7 @@ def test_a_finite_probe_replaces_the_frame_read_and_refuses_the_same_inputs(
             p.predict(x)
     trusted = sdk.load(_with_probe(tiny_model()), assume_finite=True)
     rec = trusted._session = _Recording(trusted._session)
-    assert trusted.predict(x).shape == (2, 6, 3, 4)  # the caller's promise; the probe is not even computed
+    assert trusted.predict(x).shape == (2, 6, 3, 4)  # the caller's promise: the probe is not fetched
     assert rec.asked == [["metric"]]
 
 
