@@ -159,12 +159,13 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
 
 
 def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:
-    """Write a copy of an rtp model (a path, or a shipped model's name) without its finite probe (:func:`add_finite_probe`): for an engine
-    that runs the file with its own onnxruntime session and checks its input itself. onnxruntime
-    computes every node whatever outputs a run asks for, so the probe costs such an engine its
-    reduction and the stem's unfused ReLU (about 0.9 ms of a 1080p frame on a 2-core CPU) for nothing.
-    The weights, the ``metric`` output and every other metadata field stay as they are; the copy is
-    checked to predict exactly as the model before it is written (atomically)."""
+    """Write a copy of an rtp model (a path, or a shipped model's name) without its finite probe
+    (:func:`add_finite_probe`): for an engine that runs the file with its own onnxruntime session and
+    checks its input itself. onnxruntime computes every node whatever outputs a run asks for, so the
+    probe costs such an engine its reduction and the stem's unfused ReLU (about 1 ms of a 1080p frame
+    on a 2-core CPU) for nothing. The weights, the ``metric`` output and every other metadata field
+    stay as they are; the copy is checked to predict exactly as the model before it is written
+    (atomically)."""
     import onnx
 
     from rtp import sdk
