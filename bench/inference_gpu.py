@@ -49,11 +49,19 @@ def _attrs(node: onnx.NodeProto) -> dict[str, object]:
 def torch_from_onnx(path: Path) -> nn.Sequential:
     """The chain of layers in ``path`` as a torch module with its weights. Only what rtp-export writes
     for rtp's networks is understood: a single chain of Conv, Relu, BatchNormalization, MaxPool,
-    Sigmoid and Identity nodes; anything else raises ``ValueError`` naming the op."""
+    Sigmoid and Identity nodes; anything else raises ``ValueError`` naming the op. Nodes the first
+    output (``metric``) does not need, the finite probe's (docs/export.md), are left out: the probe
+    is the SDK's check of its input on a CPU, not part of the network."""
     model = onnx.load(str(path))
     weights = {t.name: torch.from_numpy(numpy_helper.to_array(t).copy()) for t in model.graph.initializer}
+    needed = {model.graph.output[0].name}
+    for node in reversed(model.graph.node):  # topological order: walk back from the metric output
+        if needed & set(node.output):
+            needed.update(node.input)
     layers: list[nn.Module] = []
     for node in model.graph.node:
+        if not needed & set(node.output):
+            continue
         a = _attrs(node)
         if node.op_type == "Identity":
             if node.input[0] in weights:  # exported weight aliases

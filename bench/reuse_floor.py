@@ -21,6 +21,17 @@ sees the same inputs. If ``truth t, carried`` fails about as often as ``network 
 over ``network t+1``, the loss is the truth's motion, not the carry's.
 
     python bench/reuse_floor.py kaos --path slow --frames 40 --rescale 0.25     # a validation map; 2-3 min
+
+``--sweep`` (error metrics) also asks whether carried estimates want a threshold of their own. It
+sweeps the threshold over a fine grid (the default times 2^(j/16)) for the network's rows and mixes
+them as reuse at ``--every k`` does, one frame in k with the network's own estimates and k - 1 with
+carried ones (rescaled where the model has ``.blocks`` planes; all carried one frame, the
+open-loop approximation of a carry that the slow paths show losing a step at its first frame and
+little after): for 1 / 2 / 5% failing tiles it prints the most work saved with one threshold for
+both kinds of frame (what ``PredictionReuse`` does), with a threshold of each kind's own (the best
+pair on the grid), and the network on every frame, and the ratio of the carried frames' threshold
+to the network frames' that does best. If the pair keeps clearly more of k = 1's saving, a
+threshold for carried frames is worth building into ``PredictionReuse``.
 """
 
 from __future__ import annotations
@@ -49,10 +60,17 @@ def main() -> None:
     ap.add_argument("--model", default="jnyang", help="shipped model or .onnx (default: jnyang)")
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--rescale", type=float, default=0.25, help="exponent of the rescaled row (default: 0.25)")
+    ap.add_argument("--sweep", action="store_true", help="also sweep the threshold and compare one threshold for "
+                    "network and carried frames with one of each's own (error metrics)")
+    ap.add_argument("--every", type=int, default=4, help="with --sweep: the interval k of the reuse mixed (default: 4)")
     args = ap.parse_args()
+    if args.every < 2:
+        ap.error(f"--every: expected an interval >= 2, got {args.every}")
     pred = sdk.load(args.model)
     meta = pred.metadata
     metric, thr, hib = meta.metric, meta.default_threshold, meta.higher_is_better
+    if args.sweep and hib:
+        ap.error(f"--sweep: the model's metric {metric} is better when higher; the sweep scales an error threshold")
     tile = pred.tile_size
     w, h = (int(v) for v in args.size.split("x"))
     scn, blockers = load_scene(args.map, None, None, None)
@@ -61,6 +79,9 @@ def main() -> None:
     rows = ROWS if blocks else tuple(r for r in ROWS if not r.endswith("rescaled"))
     fail: dict[str, list[float]] = {r: [] for r in rows}
     saved: dict[str, list[float]] = {r: [] for r in rows}
+    grid = thr * 2.0 ** (np.arange(-48, 33) / 16)  # the sweep's thresholds
+    swept = [r for r in rows if r.startswith("network")]
+    curves: dict[str, list[np.ndarray]] = {r: [] for r in swept}  # per pair: (2, thresholds) failing, saved
 
     def levels(x: np.ndarray) -> np.ndarray:  # (v + eps) ** rescale per tile and rate, as PredictionReuse
         return np.exp(args.rescale * -np.log(BLOCK_EPS) * tile_block_levels(x[blocks], tile).astype(np.float64))
@@ -95,6 +116,10 @@ def main() -> None:
                     rates = sdk.select_rates(est, thr, higher_is_better=hib)
                     fail[name].append(float(failing_tiles(rates, truth, thr, hib).mean()))
                     saved[name].append(sdk.work_saved(rates, (h, w), tile))
+                    if args.sweep and name in curves:  # fails are judged at the metric's threshold, always
+                        rs = [sdk.select_rates(est, t, higher_is_better=hib) for t in grid]
+                        curves[name].append(np.array([[failing_tiles(r, truth, thr, hib).mean() for r in rs],
+                                                      [sdk.work_saved(r, (h, w), tile) for r in rs]]))
             prev = (net, truth, ref, lv)
     n = len(fail[rows[0]])
     print(f"{args.map}, {args.path} path (seed {args.seed}), {n} pairs of consecutive frames at {w}x{h}; "
@@ -104,6 +129,48 @@ def main() -> None:
     print("|---|---:|---:|")
     for r in rows:
         print(f"| {r} | {100 * np.mean(fail[r]):.2f} | {100 * np.mean(saved[r]):.1f} |")
+    if args.sweep:
+        _print_sweep({r: np.mean(c, axis=0) for r, c in curves.items()}, grid / thr, args.every)
+
+
+def best_saving(fail: np.ndarray, saved: np.ndarray, share: float) -> tuple[float, int]:
+    """The most work saved among the points whose failing share is at most ``share`` (nan if none),
+    and the flat index of that point."""
+    ok = fail <= share
+    if not ok.any():
+        return float("nan"), -1
+    i = int(np.argmax(np.where(ok, saved, -np.inf)))
+    return float(saved.flat[i]), i
+
+
+def mix_curves(fresh: np.ndarray, carried: np.ndarray, every: int) -> tuple[np.ndarray, np.ndarray]:
+    """Failing share and work saved of reuse at interval ``every`` for every pair of thresholds (network
+    frames', carried frames'): one frame in ``every`` with ``fresh`` (2, T), the others with ``carried``."""
+    q = (every - 1) / every
+    return ((1 - q) * fresh[0][:, None] + q * carried[0][None, :],
+            (1 - q) * fresh[1][:, None] + q * carried[1][None, :])
+
+
+def _print_sweep(curves: dict[str, np.ndarray], factors: np.ndarray, every: int) -> None:
+    fresh = curves["network t+1"]
+    print(f"\nReuse at k = {every}, mixed open-loop from the sweep ({len(factors)} thresholds, "
+          f"{factors[0]:.3g}-{factors[-1]:.3g}x the default): work saved % at most 1 / 2 / 5% failing tiles "
+          "(in brackets: % of k = 1's), and the best carried frames' threshold as a multiple of the network "
+          "frames'\n")
+    print("| carried estimates | one threshold | a threshold each | carried / network threshold |")
+    print("|---|---|---|---|")
+    k1 = [best_saving(fresh[0], fresh[1], s)[0] for s in (0.01, 0.02, 0.05)]
+    for name in (r for r in curves if r != "network t+1"):
+        f, v = mix_curves(fresh, curves[name], every)
+        one, pair, ratio = [], [], []
+        for share, base in zip((0.01, 0.02, 0.05), k1, strict=True):
+            a = best_saving(np.diagonal(f), np.diagonal(v), share)[0]
+            b, i = best_saving(f, v, share)
+            one.append(f"{100 * a:.1f} ({100 * a / base:.1f}%)")
+            pair.append(f"{100 * b:.1f} ({100 * b / base:.1f}%)")
+            ratio.append("-" if i < 0 else f"{factors[i % len(factors)] / factors[i // len(factors)]:.2f}")
+        print(f"| {name} | {' / '.join(one)} | {' / '.join(pair)} | {' / '.join(ratio)} |")
+    print(f"| (network t+1 on every frame, k = 1) | {' / '.join(f'{100 * v:.1f}' for v in k1)} | | |")
 
 
 if __name__ == "__main__":

@@ -538,3 +538,27 @@ def test_rescaled_fresh_tiles_are_the_networks_and_carry_on_unchanged() -> None:
     assert np.allclose(second[:, 2:4, 11:13], s.pred.predict(x1)[:, 2:4, 11:13], rtol=1e-5)
     third = reuse.predict(x1, (s.rows, s.cols), everything)
     assert reuse.work == 0.0 and np.allclose(third, second, rtol=1e-5)
+
+
+def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench/reuse_floor.py --sweep: one frame in k with the network's curve, k - 1 with the carried one;
+    one threshold for both is the diagonal of the pairs, and the best pair is never worse."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "reuse_floor.py"
+    monkeypatch.syspath_prepend(str(path.parent))
+    spec = importlib.util.spec_from_file_location("bench_reuse_floor", path)
+    assert spec and spec.loader
+    floor = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(floor)
+    fresh = np.array([[0.00, 0.02, 0.06], [0.10, 0.30, 0.50]])  # failing share, work saved per threshold
+    carried = np.array([[0.01, 0.04, 0.10], [0.10, 0.30, 0.50]])
+    fail, saved = floor.mix_curves(fresh, carried, 4)
+    assert fail.shape == saved.shape == (3, 3)
+    assert fail[2, 1] == pytest.approx(0.25 * 0.06 + 0.75 * 0.04) and saved[2, 1] == pytest.approx(0.35)
+    one, _ = floor.best_saving(np.diagonal(fail), np.diagonal(saved), 0.05)
+    pair, i = floor.best_saving(fail, saved, 0.05)
+    assert one == pytest.approx(0.30) and pair == pytest.approx(0.35) and divmod(i, 3) == (2, 1)
+    assert np.isnan(floor.best_saving(fail, saved, 0.001)[0])  # nothing fails that little
+    assert floor.mix_curves(fresh, carried, 2)[0][0, 2] == pytest.approx(0.05)
