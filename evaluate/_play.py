@@ -20,7 +20,8 @@ predicted afresh on crops with ``NAME@k:fresh``; ``NAME@k:hW`` also blends each 
 estimates with those carried from the previous frame, weight W on the carried ones; ``NAME@k:rS``
 runs the network early once more than a share S of the tiles is unseen since it ran; ``NAME@k:sN``
 carries one pixel of every N per axis; ``NAME@k:vA`` rescales carried estimates by the blocks'
-variance, ``sdk.PredictionReuse(rescale=A)``), ``yang2019``
+variance, ``sdk.PredictionReuse(rescale=A)``; ``NAME@k:cF`` multiplies carried estimates by F,
+``sdk.PredictionReuse(carry_scale=F)``), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -118,15 +119,16 @@ class MethodSpec:
     refresh: float | None = None
     step: int | None = None
     rescale: float = 0.0
+    carry_scale: float = 1.0
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     """``"jnyang,jnyang@4,yang2019,fidelityfx"`` -> specs. Anything not in :data:`METHOD_KINDS` is a
     model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse, then
     ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
-    weight W), ``:rS`` (refresh share S), ``:sN`` (the carry keeps one pixel of N per axis) and ``:vA``
-    (carried estimates rescaled by the blocks' variance to the power A) in any
-    order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``)."""
+    weight W), ``:rS`` (refresh share S), ``:sN`` (the carry keeps one pixel of N per axis), ``:vA``
+    (carried estimates rescaled by the blocks' variance to the power A) and ``:cF`` (carried estimates
+    multiplied by F) in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
@@ -145,17 +147,20 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         refresh = [_share(o, item, "refresh share") for o in options if o[:1] == "r"]
         step = [_step(o, item) for o in options if o[:1] == "s"]
         rescale = [_exponent(o, item) for o in options if o[:1] == "v"]
+        scale = [_carry_scale(o, item) for o in options if o[:1] == "c"]
         if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
-                or len(rescale) > 1
-                or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) != len(options)):
+                or len(rescale) > 1 or len(scale) > 1
+                or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) + len(scale)
+                != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
                             f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
-                            "refresh share (both in [0, 1)), one ':sN' pixel step and one ':vA' rescale exponent, e.g. "
-                            "jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4 or jnyang@4:v0.5")
+                            "refresh share (both in [0, 1)), one ':sN' pixel step, one ':vA' rescale exponent and "
+                            "one ':cF' carry scale, e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, "
+                            "jnyang@4:s4, jnyang@4:v0.5 or jnyang@4:c1.08")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
                               refresh[0] if refresh else None, step[0] if step else None,
-                              rescale[0] if rescale else 0.0))
+                              rescale[0] if rescale else 0.0, scale[0] if scale else 1.0))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -177,6 +182,19 @@ def _exponent(option: str, item: str) -> float:
         raise PlayError(f"method {item!r}: ':{option}' is not a rescale exponent: expected ':v' and a number in "
                         f"[0, {sdk.MAX_RESCALE:g}], e.g. jnyang@4:v0.5")
     return a
+
+
+def _carry_scale(option: str, item: str) -> float:
+    from rtp.sdk._reuse import MAX_CARRY_SCALE
+
+    try:
+        f = float(option[1:])
+    except ValueError:
+        f = math.nan
+    if not 1.0 / MAX_CARRY_SCALE <= f <= MAX_CARRY_SCALE:
+        raise PlayError(f"method {item!r}: ':{option}' is not a carry scale: expected ':c' and a factor in "
+                        f"[{1 / MAX_CARRY_SCALE:g}, {MAX_CARRY_SCALE:g}], e.g. jnyang@4:c1.08")
+    return f
 
 
 def _share(option: str, item: str, what: str) -> float:
@@ -389,7 +407,8 @@ def play(
     if workers < 1:
         raise PlayError(f"workers: expected >= 1, got {workers}", "workers")
     # each reuse method's pixel step as the carry resolves it (a bad one fails here, before the run)
-    steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step, rescale=m.rescale).step
+    steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step, rescale=m.rescale,
+                                         carry_scale=m.carry_scale).step
              for m in specs if m.kind == "model"}
     settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
@@ -401,7 +420,8 @@ def play(
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
-                                   "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale}
+                                   "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale,
+                                   "carry_scale": m.carry_scale}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
@@ -511,7 +531,7 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
                 decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh,
-                                m.step, m.rescale)
+                                m.step, m.rescale, m.carry_scale)
                 loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
@@ -564,11 +584,12 @@ def model_inputs(pf: Any, rp: np.ndarray, channels: Sequence[str], ys: slice, xs
 
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
-           refresh: float | None = None, step: int | None = None, rescale: float = 0.0) -> Callable[..., np.ndarray]:
+           refresh: float | None = None, step: int | None = None, rescale: float = 0.0,
+           carry_scale: float = 1.0) -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction,
-                                history=history, refresh=refresh, step=step, rescale=rescale)
+                                history=history, refresh=refresh, step=step, rescale=rescale, carry_scale=carry_scale)
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None

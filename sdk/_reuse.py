@@ -325,6 +325,8 @@ def cover(tiles: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
 
 #: The largest ``rescale`` exponent :class:`PredictionReuse` takes.
 MAX_RESCALE = 2.0
+#: ``PredictionReuse(carry_scale=...)`` lies in [1 / this, this].
+MAX_CARRY_SCALE = 4.0
 
 
 def _group_sums(a: np.ndarray, m: int, axis: int) -> np.ndarray:
@@ -437,6 +439,13 @@ class PredictionReuse:
     cannot (docs/results.md "Carried estimates rescaled by the blocks' variance"). It reads the
     frame's inputs on carried frames too (``x`` is called on the whole frame).
 
+    ``carry_scale`` (error metrics) multiplies the carried estimates of the frames the network does not
+    run on (not unseen tiles, not fresh crops): above 1 the carried frames choose as if under a
+    threshold that much lower. Carried estimates miss what the network would read on the new frame,
+    so a slightly stricter threshold for them and a looser one overall (the engine's threshold
+    sweep) keep more work at the same failing share (docs/results.md "A threshold of their own for
+    carried estimates").
+
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
     on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
     plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
@@ -449,7 +458,7 @@ class PredictionReuse:
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
                  unseen: str = "full", unseen_fraction: float = 0.5, margin: int | None = None,
                  history: float = 0.0, refresh: float | None = None, step: int | None = None,
-                 rescale: float = 0.0) -> None:
+                 rescale: float = 0.0, carry_scale: float = 1.0) -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -469,6 +478,17 @@ class PredictionReuse:
             h, w = predictor.static_size
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
                                  "frames (export it with dynamic sizes)", "unseen")
+        try:
+            scale = float(carry_scale)  # type: ignore[arg-type]
+        except (TypeError, ValueError, OverflowError):
+            scale = math.nan
+        if isinstance(carry_scale, (bool, str, bytes)) or not 1.0 / MAX_CARRY_SCALE <= scale <= MAX_CARRY_SCALE:
+            raise ParameterError(f"carry_scale: expected a factor in [{1 / MAX_CARRY_SCALE:g}, {MAX_CARRY_SCALE:g}] "
+                                 f"(1: carried estimates as they are), got {carry_scale!r}", "carry_scale")
+        if scale != 1.0 and predictor.metadata.higher_is_better:
+            raise ParameterError("carry_scale: this model's metric is better when higher; carry_scale multiplies an "
+                                 "error estimate", "carry_scale")
+        self.carry_scale = scale
         self.step = _check_step(step, predictor.tile_size)
         self.rescale, self._blocks = self._check_rescale(predictor, rescale)
         self.predictor = predictor
@@ -525,7 +545,8 @@ class PredictionReuse:
     def __repr__(self) -> str:
         return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
                 f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g}, "
-                f"refresh={self.refresh!r}, step={self.step}, rescale={self.rescale:g})")
+                f"refresh={self.refresh!r}, step={self.step}, rescale={self.rescale:g}, "
+                f"carry_scale={self.carry_scale:g})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         if callable(x):
@@ -616,6 +637,8 @@ class PredictionReuse:
             est = np.where(missing[None], est, est * levels).astype(np.float32)
         if runs:  # the network's frame, blended with what was carried here (history > 0)
             return self._run(x, hw, (est, missing))
+        if self.carry_scale != 1.0:  # a stricter threshold for carried estimates (unseen tiles stay worst)
+            est = np.where(missing[None], est, est * self.carry_scale).astype(np.float32)
         work = 0.0
         if self.unseen == "fresh" and missing.any():
             h, w = hw

@@ -152,10 +152,10 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     settings = json.loads((tmp_path / "play.json").read_text())["settings"]
     assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
     assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean", "unseen": "full", "history": 0.0,
-                                              "refresh": None, "step": 4, "rescale": 0.0},
+                                              "refresh": None, "step": 4, "rescale": 0.0, "carry_scale": 1.0},
                                  "jnyang@2:fresh": {"k": 2, "reduce": "mean", "unseen": "fresh",
                                                     "history": 0.0, "refresh": None, "step": 4,
-                                                    "rescale": 0.0}}  # what NAME@k meant
+                                                    "rescale": 0.0, "carry_scale": 1.0}}  # what NAME@k meant
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
@@ -288,9 +288,10 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 def test_methods_are_parsed_and_checked() -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
                           "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02,"
-                          "jnyang@4:s4:r0.05,jnyang@4:v0.5")
+                          "jnyang@4:s4:r0.05,jnyang@4:v0.5:c1.08")
     assert [s.step for s in specs] == [None] * 11 + [4, None]
     assert [s.rescale for s in specs] == [0.0] * 12 + [0.5]
+    assert [s.carry_scale for s in specs] == [1.0] * 12 + [1.08]
     assert [(s.kind, s.model, s.reuse, s.reduce, s.unseen, s.history, s.refresh) for s in specs] == [
         ("model", "jnyang", 1, "mean", "full", 0, None), ("model", "jnyang", 4, "mean", "full", 0, None),
         ("model", "models/psnr.onnx", 2, "mean", "full", 0, None), ("yang2019", "", 1, "mean", "full", 0, None),
@@ -306,7 +307,9 @@ def test_methods_are_parsed_and_checked() -> None:
                        ("jnyang@1:hx", "history weight"), ("jnyang@1:h0.5:h0.2", "at most one"), ("jnyang@8:r2", "refresh share"),
                        ("jnyang@8:r0.1:r0.2", "at most one"), ("jnyang@4:s0", "pixel step"), ("jnyang@4:sx", "pixel step"),
                        ("jnyang@4:s2:s4", "at most one"), ("jnyang@4:vx", "rescale exponent"),
-                       ("jnyang@4:v3", "rescale exponent"), ("jnyang@4:v0.5:v1", "at most one")):
+                       ("jnyang@4:v3", "rescale exponent"), ("jnyang@4:v0.5:v1", "at most one"),
+                       ("jnyang@4:c5", "carry scale"), ("jnyang@4:cx", "carry scale"),
+                       ("jnyang@4:c1.1:c1.2", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     with pytest.raises(sdk.ParameterError, match=r"divisor of the model's 16-pixel tile \(1, 2, 4, 8, 16\), got 3"):

@@ -562,3 +562,27 @@ def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(mo
     assert one == pytest.approx(0.30) and pair == pytest.approx(0.35) and divmod(i, 3) == (2, 1)
     assert np.isnan(floor.best_saving(fail, saved, 0.001)[0])  # nothing fails that little
     assert floor.mix_curves(fresh, carried, 2)[0][0, 2] == pytest.approx(0.05)
+
+
+def test_carry_scale_multiplies_carried_estimates_only() -> None:
+    """``carry_scale=f``: a carried frame's seen tiles are the plain carry's times f; the network's
+    frames and the unseen tiles (1x1's worst value) are untouched."""
+    s = _Scene(3, 4)
+    everything = np.ones((s.h, s.w), np.float32)
+    seen = everything.copy()
+    seen[:TILE, :TILE] = 0  # one tile the network did not see
+    plain, scaled = sdk.PredictionReuse(s.pred, 4), sdk.PredictionReuse(s.pred, 4, carry_scale=1.25)
+    assert "carry_scale=1.25" in repr(scaled)
+    x = s.inputs(everything)
+    np.testing.assert_array_equal(scaled.predict(x), plain.predict(x))  # the network's frame
+    a = plain.predict(x, (s.rows, s.cols), seen)
+    b = scaled.predict(x, (s.rows, s.cols), seen)
+    np.testing.assert_array_equal(b[:, 0, 0], a[:, 0, 0])  # unseen: worst either way
+    np.testing.assert_allclose(b[:, 1:, 1:], 1.25 * a[:, 1:, 1:], rtol=1e-6)
+    for bad in (0.2, 5.0, float("nan"), True, "1.1"):
+        with pytest.raises(sdk.ParameterError, match="carry_scale: expected a factor") as err:
+            sdk.PredictionReuse(s.pred, carry_scale=bad)  # type: ignore[arg-type]
+        assert err.value.name == "carry_scale"
+    with pytest.raises(sdk.ParameterError, match="better when higher"):
+        sdk.PredictionReuse(sdk.load("psnr"), carry_scale=1.1)
+    assert sdk.PredictionReuse(sdk.load("psnr"), carry_scale=1).carry_scale == 1.0
