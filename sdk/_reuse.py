@@ -479,7 +479,7 @@ class PredictionReuse:
             raise ParameterError(f"unseen='fresh' runs the network on crops, but this model takes only {w}x{h} "
                                  "frames (export it with dynamic sizes)", "unseen")
         try:
-            scale = float(carry_scale)  # type: ignore[arg-type]
+            scale = float(carry_scale)
         except (TypeError, ValueError, OverflowError):
             scale = math.nan
         if isinstance(carry_scale, (bool, str, bytes)) or not 1.0 / MAX_CARRY_SCALE <= scale <= MAX_CARRY_SCALE:
