@@ -185,15 +185,13 @@ def _exponent(option: str, item: str) -> float:
 
 
 def _carry_scale(option: str, item: str) -> float:
-    from rtp.sdk._reuse import MAX_CARRY_SCALE
-
     try:
         f = float(option[1:])
     except ValueError:
         f = math.nan
-    if not 1.0 / MAX_CARRY_SCALE <= f <= MAX_CARRY_SCALE:
+    if not 1.0 / sdk.MAX_CARRY_SCALE <= f <= sdk.MAX_CARRY_SCALE:
         raise PlayError(f"method {item!r}: ':{option}' is not a carry scale: expected ':c' and a factor in "
-                        f"[{1 / MAX_CARRY_SCALE:g}, {MAX_CARRY_SCALE:g}], e.g. jnyang@4:c1.08")
+                        f"[{1 / sdk.MAX_CARRY_SCALE:g}, {sdk.MAX_CARRY_SCALE:g}], e.g. jnyang@4:c1.08")
     return f
 
 

@@ -58,7 +58,7 @@ from ._rates import (
     work_saved,
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
-from ._reuse import MAX_RESCALE, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
+from ._reuse import MAX_CARRY_SCALE, MAX_RESCALE, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
 from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, tile_extents, tile_grid
 from ._transforms import (
     DEFAULT_EXTRAPOLATION_K,
@@ -98,6 +98,7 @@ __all__ = [
     "EXIT_USAGE",
     "LOGIT_EPS",
     "LUMA_WEIGHTS",
+    "MAX_CARRY_SCALE",
     "MAX_RESCALE",
     "METADATA_KEY",
     "METRICS",

@@ -27,6 +27,7 @@ def test_sdk_all_is_pinned() -> None:
         "EXIT_USAGE",
         "LOGIT_EPS",
         "LUMA_WEIGHTS",
+        "MAX_CARRY_SCALE",
         "MAX_RESCALE",
         "METADATA_KEY",
         "METRICS",
