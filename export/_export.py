@@ -191,14 +191,22 @@ def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.Path
     del graph.output[:]
     graph.output.extend(outs)
     write_metadata(model, dataclasses.replace(before.metadata, finite_probe=None))
+    _save_unchanged(model, before, out, f"stripping the probe of {src} changed its predictions; nothing written")
+    return out
+
+
+def _save_unchanged(model: Any, before: Any, out: Path, failure: str) -> None:
+    """Check and save ``model`` to ``out`` atomically if it predicts exactly as the predictor ``before``
+    (on a random frame of 5 x 7 of its tiles); else :class:`ExportError` with ``failure``, nothing written."""
+    from rtp import sdk
+
     t = before.tile_size
     x = np.random.default_rng(0).random((len(before.metadata.inputs), 5 * t, 7 * t), dtype=np.float32)
     with atomic_output(out) as tmp:
         _check_and_save(model, tmp)
         after = sdk.load(tmp, providers=["CPUExecutionProvider"])
         if not np.array_equal(before.predict_raw(x), after.predict_raw(x)):
-            raise ExportError(f"stripping the probe of {src} changed its predictions; nothing written")
-    return out
+            raise ExportError(failure)
 
 
 def _export_provenance(opset: int) -> dict[str, Any]:
@@ -473,7 +481,6 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
     its first layer allows one. The weights, the metric output and every other metadata field stay as
     they are; the file is replaced atomically and loaded back to check that it predicts exactly as
     before."""
-    import numpy as np
     import onnx
 
     from rtp import sdk
@@ -490,11 +497,5 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
     if meta.finite_probe is None:
         meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
     write_metadata(model, meta)
-    t = before.tile_size
-    x = np.random.default_rng(0).random((len(before.metadata.inputs), 5 * t, 7 * t), dtype=np.float32)
-    with atomic_output(path) as tmp:
-        _check_and_save(model, tmp)
-        after = sdk.load(tmp, providers=["CPUExecutionProvider"])
-        if not np.array_equal(before.predict_raw(x), after.predict_raw(x)):
-            raise ExportError(f"restamping {path} changed its predictions; the file is left as it was")
+    _save_unchanged(model, before, path, f"restamping {path} changed its predictions; the file is left as it was")
     return path
