@@ -281,7 +281,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
                  "separable_tail", "tail_width", "head_width", "context_pool", "block_contrast", "contrast_cell",
                  "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
-                 "ema", "distill",
+                 "ema", "distill", "aux_weight",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
 
@@ -294,6 +294,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         overrides["val_scenes"] = _names(args.val_scenes)
     if args.teachers:
         overrides["teachers"] = _names(args.teachers)
+    if args.aux_metrics:
+        overrides["aux_metrics"] = _names(args.aux_metrics)
     if args.threshold is not None:
         overrides["default_threshold"] = args.threshold
     cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
@@ -589,6 +591,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="repeatable or comma-separated exported models (.onnx) of the same metric and data whose "
                    "mean prediction is mixed into the targets (knowledge distillation)")
     r.add_argument("--distill", type=float, default=None, help="weight of the teachers' mean in the targets (default 0.5)")
+    r.add_argument("--aux-metrics", dest="aux_metrics", action="append", default=None,
+                   help="repeatable or comma-separated metrics the fast network also learns to predict on the same "
+                   "tiles (multi-task training; their targets must be in --data); the saved model keeps only "
+                   "--metric's outputs, so they cost nothing at run time (default: none)")
+    r.add_argument("--aux-weight", dest="aux_weight", type=float, default=None,
+                   help="weight of the auxiliary metrics' mean loss beside the metric's own (default 0.5)")
     r.add_argument("--steps", type=_positive, default=None, help="training steps")
     r.add_argument("--batch", type=_positive, default=None, help="crops per step")
     r.add_argument("--crop", type=_positive, default=None, help="square crop size in pixels (a multiple of the tile)")

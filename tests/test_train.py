@@ -26,10 +26,14 @@ from rtp.train.checkpoint import load as load_checkpoint
 H, W = 64, 96
 
 
-def _dataset(root: Path, n: int = 12) -> Path:
+def _dataset(root: Path, n: int = 12, flip: bool = False) -> Path:
+    """``n`` samples over three scenes with JNYang targets (and, with ``flip``, FLIP targets: another function of
+    the same texture contrast)."""
     w = DatasetWriter(root)
     store = TargetStore(root)
     store.declare("jnyang", {"weber_l": 0.02})
+    if flip:
+        store.declare("flip", {})
     rng = np.random.default_rng(0)
     for i in range(n):
         bufs = {}
@@ -43,6 +47,9 @@ def _dataset(root: Path, n: int = 12) -> Path:
         edge = np.abs(np.diff(bufs["albedo"][..., 0], axis=1, append=0.5))
         tiles = edge.reshape(H // 4, 4, W // 4, 4).max(axis=(1, 3))
         store.write(sid, "jnyang", np.stack([tiles * k for k in (1, 1.1, 1.2, 1.5, 1.6, 2)]).astype(np.float32), (H, W))
+        if flip:
+            store.write(sid, "flip", np.stack([np.sqrt(tiles) * k for k in (0, .3, .3, .5, .5, .7)]).astype(np.float32),
+                        (H, W))
     w.finalize()
     return root
 
@@ -543,7 +550,7 @@ def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -
     reader = DatasetReader(str(data))
     ids = [s.id for s in reader if s.meta["scene"] != "scene0"]
     split = _loop._Split(reader, TargetStore(str(data)), ids, cfg)
-    soft = _loop._teacher_targets(cfg, reader, split, _loop._make_transform(cfg, split))
+    soft = _loop._teacher_targets(cfg, reader, split, _loop._make_transform(cfg, split.y))
     for k, i in enumerate(ids):
         x = reader[i].inputs(cfg.inputs)
         want = np.mean([sdk.load(t).predict_raw(x) for t in teachers], axis=0)
@@ -591,6 +598,56 @@ def test_distillation_mixes_the_teachers_mean_into_the_targets(tmp_path: Path) -
     bad = subprocess.run([sys.executable, str(bench), teachers[0], str(other), "--data", str(data)],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "8-pixel tiles" in bad.stderr and "t0.onnx" in bad.stderr
+
+
+def test_auxiliary_metrics_train_extra_outputs_and_save_only_the_metrics(tmp_path: Path) -> None:
+    from rtp.train.model import FastNet, keep_outputs
+
+    # keep_outputs cuts the head to its first rows and leaves those outputs' predictions unchanged
+    net = FastNet(7, 12, 16, width=8, depth=3, head_width=16).eval()
+    x = torch.rand(1, 7, 64, 96)
+    cut = keep_outputs(net, 4)
+    assert cut.config["out_channels"] == 4 and not cut.training
+    torch.testing.assert_close(cut(x), net(x)[:, :4])
+    with pytest.raises(ValueError, match="expected 1 to 12 outputs, got 13"):
+        keep_outputs(net, 13)
+
+    data = _dataset(tmp_path / "ds", n=6, flip=True)
+    base = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_scenes=("scene0",), arch="fast", loss="mse")
+    cfg = TrainConfig(out=str(tmp_path / "a.pt"), steps=6, save_every=3, aux_metrics=("flip",), aux_weight=0.3, **base)
+    result = train(cfg)
+    ck = load_checkpoint(result.checkpoint)
+    # the saved network has the metric's four outputs and exports like any other; the training state keeps all eight
+    assert ck.net.config["out_channels"] == 4 and ck.metadata.outputs == sdk.DEFAULT_OUTPUTS
+    assert list(ck.metadata.provenance["aux_metrics"]) == ["flip"] and ck.metadata.provenance["aux_weight"] == 0.3
+    full = ck.training["full_weights"]
+    head = [k for k in full if k.endswith(".weight") and full[k].ndim == 4][-1]
+    assert full[head].shape[0] == 8
+    torch.testing.assert_close(ck.net.state_dict()[head], full[head][:4])
+    onnx = export.export_checkpoint(result.checkpoint, tmp_path / "a.onnx")
+    assert sdk.load(onnx).predict_raw(np.random.default_rng(0).random((4, 64, 96), dtype=np.float32)).shape[0] == 4
+    # resumable like any run: the same command resumes from the full weights and finishes where it was
+    again = train(TrainConfig(out=str(tmp_path / "a.pt"), steps=9, save_every=3, aux_metrics=("flip",),
+                              aux_weight=0.3, **base))
+    assert again.steps == 9
+    with pytest.raises(sdk.ParameterError, match="differs in: aux_metrics, aux_weight"):
+        train(TrainConfig(out=str(tmp_path / "a.pt"), steps=9, **base))
+    # bad settings are refused before any work, naming what was expected
+    for kw, match in [(dict(aux_metrics=("jnyang",)), "other than jnyang"),
+                      (dict(aux_metrics=("ssim",)), "expected distinct metrics"),
+                      (dict(aux_metrics=("flip",), aux_weight=0.0), "aux_weight: expected a weight > 0"),
+                      (dict(aux_metrics=("flip",), augment=True), "cannot be combined"),
+                      (dict(aux_metrics=("psnr",)), r"no psnr targets \(aux_metrics\); run `rtp targets")]:
+        with pytest.raises((sdk.ParameterError, sdk.RtpError), match=match):
+            train(TrainConfig(out=str(tmp_path / "b.pt"), steps=2, **{**base, **kw}))
+    with pytest.raises(sdk.ParameterError, match="the fast network's option"):
+        train(TrainConfig(out=str(tmp_path / "b.pt"), steps=2, **{**base, "arch": "paper"}, aux_metrics=("flip",)))
+    assert not (tmp_path / "b.pt").exists()
+    # through the command line
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "c.pt"), "--steps", "12",
+                     "--crop", "32", "--val-scenes", "scene0", "--aux-metrics", "flip", "--aux-weight", "0.25"]) == 0
+    prov = load_checkpoint(tmp_path / "c.pt").metadata.provenance
+    assert list(prov["aux_metrics"]) == ["flip"] and prov["aux_weight"] == 0.25
 
 
 def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_path: Path) -> None:

@@ -35,7 +35,7 @@ from ._augment import SYMMETRIES, augment_batch
 from ._frames import Frame
 from ._recipe import load_recipe
 from ._safety import calibrate_safety
-from .model import ARCHS, Network, build_network
+from .model import ARCHS, Network, build_network, keep_outputs
 
 __all__ = ["TrainConfig", "TrainResult", "train"]
 
@@ -114,6 +114,13 @@ class TrainConfig:
     #: ``distill`` (knowledge distillation: an ensemble's smoother function taught to one network).
     teachers: tuple[str, ...] = ()
     distill: float = 0.5
+    #: Auxiliary metrics (multi-task training): the network also learns to predict these metrics'
+    #: targets on the same tiles (extra outputs of the head, each metric in its own transform), so its
+    #: features are taught by their supervision too; the saved network keeps only ``metric``'s outputs
+    #: (train/model.py ``keep_outputs``), so the extra outputs cost nothing at run time. Fast network only.
+    aux_metrics: tuple[str, ...] = ()
+    #: Weight of the auxiliary metrics' mean loss beside the metric's own.
+    aux_weight: float = 0.5
     steps: int = 3000
     batch: int = 8
     crop: int = 128
@@ -195,6 +202,8 @@ class _Split:
         self.ids = list(ids)
         self.x = [Frame(reader[i].inputs(cfg.inputs), cfg.inputs) for i in self.ids]
         self.y = [store.load(i, cfg.metric, cfg.tile)[rows] for i in self.ids]
+        #: per sample, each auxiliary metric's targets (TrainConfig.aux_metrics), in that order
+        self.aux = [[store.load(i, m, cfg.tile)[rows] for m in cfg.aux_metrics] for i in self.ids]
 
 
 #: Training losses, in transformed space (TrainConfig.loss).
@@ -314,11 +323,12 @@ def _split_ids(reader: DatasetReader, cfg: TrainConfig) -> tuple[list[str], list
     return train_ids, val_ids, train_scenes, sorted(val)
 
 
-def _make_transform(cfg: TrainConfig, train: _Split) -> sdk.Transform:
-    allv = np.concatenate([y.ravel() for y in train.y])
+def _make_transform(cfg: TrainConfig, targets: Sequence[np.ndarray], what: str = "training") -> sdk.Transform:
+    """The target transform of ``cfg.transform`` with ``mu_Y`` measured on ``targets`` (the training frames')."""
+    allv = np.concatenate([y.ravel() for y in targets])
     allv = allv[np.isfinite(allv)]
     if allv.size == 0:
-        raise TargetError("the training targets hold no finite value")
+        raise TargetError(f"the {what} targets hold no finite value")
     mu = float(allv.mean())
     if cfg.transform == "clamped":
         return sdk.Transform.clamped(mu)
@@ -327,14 +337,15 @@ def _make_transform(cfg: TrainConfig, train: _Split) -> sdk.Transform:
     raise sdk.ParameterError(f"transform must be clamped or logistic, got {cfg.transform!r}")
 
 
-def _predict_frames(net: Network, xs: Sequence[Frame], tile: int) -> list[np.ndarray]:
+def _predict_frames(net: Network, xs: Sequence[Frame], tile: int, n: int | None = None) -> list[np.ndarray]:
+    """The network's outputs on whole frames (the first ``n`` outputs: the metric's, without auxiliary ones)."""
     out = []
     with torch.inference_mode():
         for x in xs:
             t = torch.from_numpy(x.full().astype(np.float32))[None]
             h, w = t.shape[-2:]
             th, tw = sdk.tile_grid(int(h), int(w), tile)
-            y = net(_pad_to_tiles(t, tile))[0, :, :th, :tw]
+            y = net(_pad_to_tiles(t, tile))[0, :n, :th, :tw]
             out.append(y.numpy())
     return out
 
@@ -343,7 +354,7 @@ def _validate(
     net: Network, val: _Split, t: sdk.Transform, cfg: TrainConfig, worse: float
 ) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     net.eval()
-    preds = _predict_frames(net, val.x, cfg.tile)
+    preds = _predict_frames(net, val.x, cfg.tile, len(cfg.outputs))
     # (outputs, tiles): one row per output rate, every validation tile along it
     p = np.concatenate([a.reshape(len(a), -1) for a in preds], axis=1)
     g = np.concatenate([t.forward(y).reshape(len(y), -1) for y in val.y], axis=1)
@@ -430,6 +441,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
         raise sdk.ParameterError(f"quantile: expected a number in (0, 1), got {cfg.quantile}", "quantile")
     loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
+    aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     if not (cfg.focus >= 0.0 and math.isfinite(cfg.focus)):
         raise sdk.ParameterError(f"focus: expected a weight >= 0 (0: off), got {cfg.focus}", "focus")
     if cfg.optimizer not in OPTIMIZERS:
@@ -484,12 +496,27 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
         raise sdk.ParameterError(f"distill: expected a weight in (0, 1], got {cfg.distill}", "distill")
+    bad = [m for m in cfg.aux_metrics if m not in sdk.METRICS or m == cfg.metric]
+    if bad or len(set(cfg.aux_metrics)) != len(cfg.aux_metrics):
+        raise sdk.ParameterError(f"aux_metrics: expected distinct metrics among {', '.join(sdk.METRICS)} other than "
+                                 f"{cfg.metric}, got {', '.join(cfg.aux_metrics)}", "aux_metrics")
+    if cfg.aux_metrics and cfg.arch != "fast":
+        raise sdk.ParameterError(f"aux_metrics: the fast network's option, got arch {cfg.arch!r}", "aux_metrics")
+    if cfg.aux_metrics and cfg.augment:
+        raise sdk.ParameterError("aux_metrics and augment cannot be combined (the auxiliary targets are not "
+                                 "transformed with the crop)", "aux_metrics")
+    if not (cfg.aux_weight > 0.0 and math.isfinite(cfg.aux_weight)):
+        raise sdk.ParameterError(f"aux_weight: expected a weight > 0, got {cfg.aux_weight}", "aux_weight")
     if not 0.0 <= cfg.ema < 1.0:
         raise sdk.ParameterError(f"ema: expected a decay in [0, 1) (0: off), got {cfg.ema}", "ema")
     reader = DatasetReader(cfg.data)
     store = TargetStore(cfg.data)
     if cfg.metric not in store.metrics:
         raise TargetError(f"{cfg.data} has no {cfg.metric} targets; run `rtp targets {cfg.data} --metrics {cfg.metric}`")
+    absent = [m for m in cfg.aux_metrics if m not in store.metrics]
+    if absent:
+        raise TargetError(f"{cfg.data} has no {', '.join(absent)} targets (aux_metrics); run `rtp targets {cfg.data} "
+                          f"--metrics {','.join(absent)}`")
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
@@ -504,7 +531,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
         raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})")
 
-    transform = _make_transform(cfg, tr)
+    transform = _make_transform(cfg, tr.y)
+    aux_transforms = [_make_transform(cfg, [a[k] for a in tr.aux], f"{m} (aux_metrics)")
+                      for k, m in enumerate(cfg.aux_metrics)]
     threshold = cfg.default_threshold if cfg.default_threshold is not None else sdk.METRICS[cfg.metric].default_threshold
     if cfg.focus:  # the band's centre: the default threshold in transformed space
         centre = float(tt.forward(torch.tensor([float(threshold)], dtype=torch.float64), transform)[0])
@@ -514,7 +543,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     worse = 1.0 if transform.increasing != higher else -1.0
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
-    net = build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs), cfg.tile, width=cfg.width, head=cfg.head,
+    n_out = len(cfg.outputs)
+    net = build_network(cfg.arch, len(cfg.inputs), n_out * (1 + len(cfg.aux_metrics)), cfg.tile, width=cfg.width, head=cfg.head,
                         depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
                         energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
                         head_width=cfg.head_width, context_pool=cfg.context_pool,
@@ -571,6 +601,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         config_key["optimizer"] = cfg.optimizer
     if cfg.schedule != "exponential":  # a cosine's length is part of it: resuming with other steps is another run
         config_key.update(schedule=cfg.schedule, schedule_steps=cfg.steps)
+    if cfg.aux_metrics:
+        config_key.update(aux_metrics=list(cfg.aux_metrics), aux_weight=cfg.aux_weight)
     if cfg.teachers:  # the teachers by content: a file replaced under the same name is another run
         config_key.update(distill=cfg.distill, teachers=[hashlib.sha256(Path(t).read_bytes()).hexdigest()
                                                           for t in cfg.teachers])
@@ -588,7 +620,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
             raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
                                "choose another output path or delete it")
-        avg.load_state_dict(prev.net.state_dict())
+        avg.load_state_dict(state["full_weights"] if cfg.aux_metrics else prev.net.state_dict())
         if cfg.ema:
             net.load_state_dict(state["raw_weights"])
         opt.load_state_dict(state["optimizer"])
@@ -632,10 +664,12 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         }
 
     def save(done: bool, safety: float = 0.0, extra: dict[str, Any] | None = None) -> None:
-        ckpt.save(out, avg, metadata(safety, extra or {}), training={
+        saved = keep_outputs(avg, n_out) if cfg.aux_metrics else avg  # type: ignore[arg-type]
+        ckpt.save(out, saved, metadata(safety, extra or {}), training={
             "config": config_key, "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
             "generator": gen.get_state(), "step": step, "history": json.dumps(history), "done": done,
             **({"raw_weights": net.state_dict()} if cfg.ema else {}),
+            **({"full_weights": avg.state_dict()} if cfg.aux_metrics else {}),
         })
 
     n_tiles = (cfg.crop + 2 * cfg.context) // cfg.tile  # the window read, in tiles
@@ -667,12 +701,20 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                 sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
             known = torch.from_numpy(np.isfinite(yb))
             target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb, target)
-        pred = net(torch.from_numpy(xb.astype(np.float32)))
-        if margin:
-            scored = torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).expand_as(pred)
-            loss = loss_fn(pred[scored], target[scored])
-        else:
-            loss = loss_fn(pred, target)
+        out_all = net(torch.from_numpy(xb.astype(np.float32)))
+        pred = out_all[:, :n_out]
+        scored = (torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).expand_as(pred)
+                  if margin else None)
+        loss = loss_fn(pred[scored], target[scored]) if scored is not None else loss_fn(pred, target)
+        if cfg.aux_metrics:  # multi-task: each auxiliary metric's outputs against its own transformed targets
+            aux_losses = []
+            for k, at in enumerate(aux_transforms):
+                ab = np.stack([tr.aux[i][k][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
+                               for i, y, x in zip(idx, oy, ox)])
+                atgt = torch.nan_to_num(tt.forward(torch.from_numpy(ab.astype(np.float64)), at).float(), nan=1.0)
+                ap = out_all[:, n_out * (k + 1) : n_out * (k + 2)]
+                aux_losses.append(aux_loss_fn(ap[scored], atgt[scored]) if scored is not None else aux_loss_fn(ap, atgt))
+            loss = loss + cfg.aux_weight * torch.stack(aux_losses).mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -718,6 +760,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"focus": cfg.focus} if cfg.focus else {}),
         **({"ema": cfg.ema} if cfg.ema else {}),
         **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
+        **({"aux_metrics": list(cfg.aux_metrics), "aux_weight": cfg.aux_weight} if cfg.aux_metrics else {}),
         "dead_outputs": dead,
     }
     save(done=True, safety=safety, extra=extra)

@@ -45,7 +45,7 @@ from torch import nn
 from rtp.sdk import ALL_RATES, DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES, rate_size
 
 __all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network",
-           "build_network", "haar_details", "layer_plan"]
+           "build_network", "haar_details", "keep_outputs", "layer_plan"]
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
@@ -439,3 +439,22 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
                        separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
+
+
+def keep_outputs(net: FastNet, n: int) -> FastNet:
+    """A copy of ``net`` with only its first ``n`` outputs: the head's last 1x1 convolution cut to its
+    first ``n`` rows, every other weight as it is (the predictions of those outputs are unchanged).
+    Training with auxiliary targets (``TrainConfig.aux_metrics``) saves the network so: the extra
+    outputs taught the features and cost nothing at run time."""
+    if not isinstance(net, FastNet):
+        raise TypeError(f"keep_outputs: expected a FastNet, got {type(net).__name__}")
+    total = int(net.config["out_channels"])
+    if not 1 <= n <= total:
+        raise ValueError(f"keep_outputs: expected 1 to {total} outputs, got {n}")
+    out = FastNet(**{**net.config, "out_channels": n})
+    head = len(net.layers) - 2  # the last 1x1 convolution, before the sigmoid
+    state = {k: (v[:n] if k in (f"layers.{head}.weight", f"layers.{head}.bias") else v)
+             for k, v in net.state_dict().items()}
+    out.load_state_dict(state)
+    out.train(net.training)
+    return out
