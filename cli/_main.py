@@ -300,6 +300,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         overrides["default_threshold"] = args.threshold
     cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
                                   **overrides)
+    if args.aux_weight is not None and not cfg.aux_metrics:
+        raise _usage("--aux-weight weighs the auxiliary metrics' loss: give them with --aux-metrics")
     with Bar(args, cfg.steps, f"train {cfg.metric}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"))
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting

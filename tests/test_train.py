@@ -648,6 +648,10 @@ def test_auxiliary_metrics_train_extra_outputs_and_save_only_the_metrics(tmp_pat
                      "--crop", "32", "--val-scenes", "scene0", "--aux-metrics", "flip", "--aux-weight", "0.25"]) == 0
     prov = load_checkpoint(tmp_path / "c.pt").metadata.provenance
     assert list(prov["aux_metrics"]) == ["flip"] and prov["aux_weight"] == 0.25
+    # a weight without auxiliary metrics is a usage error, not ignored
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "d.pt"), "--steps", "2",
+                     "--crop", "32", "--val-scenes", "scene0", "--aux-weight", "0.25"]) == 2
+    assert not (tmp_path / "d.pt").exists()
 
 
 def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_path: Path) -> None:
