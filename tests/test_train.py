@@ -702,6 +702,8 @@ def test_bench_residuals_splits_the_squared_error_and_compares_rate_rules(tmp_pa
     # per map and per frame, the best constant can only raise R²
     r_all = row("all")
     assert r_all[0] == pytest.approx(want, abs=0.06) and r_all[0] <= r_all[1] + 1e-9 <= r_all[2] + 1e-9
+    assert len(r_all) == 4  # and the affine fitted on the other maps; one map has no other to fit on:
+    assert next(x for x in one.splitlines() if x.startswith("| all |")).rstrip().endswith("| - |")
     # the rate rules: saving more where more tiles may fail, never more than 4x4 everywhere (93.75%)
     assert 0.0 <= float(re.search(r"the oracle saves (\d+\.\d+)%", out).group(1)) <= 93.75
     for name in ("one threshold", "calibrated risk", "two thresholds"):
@@ -748,6 +750,25 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,nowhere"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "no sample of nowhere" in bad.stderr
+
+
+def test_bench_residuals_affine_is_fitted_on_the_other_maps_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    path, mod = _bench_module("residuals", monkeypatch)
+    rng = np.random.default_rng(5)
+    g = rng.random((2, 300))
+    maps = np.array(["a"] * 100 + ["b"] * 100 + ["c"] * 100)
+    # the same affine miscalibration on every map (and a NaN target): undone exactly on each held-out map
+    p = (g - 0.1) / np.array([[0.8], [1.25]])
+    g[1, 7] = np.nan
+    fixed = mod._affine_lomo(p, g, maps)
+    ok = np.isfinite(g)
+    assert fixed is not None and np.allclose(fixed[ok], g[ok])
+    # a map's own tiles never enter its fit: a miscalibration only map c has stays there
+    p2 = p.copy()
+    p2[:, maps == "c"] += 0.3
+    fixed2 = mod._affine_lomo(p2, g, maps)
+    assert fixed2 is not None and np.allclose(fixed2[0, maps == "c"] - g[0, maps == "c"], 0.8 * 0.3)
+    assert mod._affine_lomo(p, g, np.array(["a"] * 300)) is None
 
 
 def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side(monkeypatch: pytest.MonkeyPatch) -> None:
