@@ -183,14 +183,46 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
     p = _finite_plane(plane, "block_variances", np.float64)
     h, w = p.shape
     c = BLOCK_CELL
-    q = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
-    ch, cw = q.shape[0] // c, q.shape[1] // c
-    out = np.zeros(q.shape, np.float32)
+    if h % c or w % c:
+        x = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
+    else:  # changed in place below: never the caller's array
+        x = p.copy() if np.may_share_memory(p, plane) else p
+    # One pass of sums instead of a variance per rate: per cell, the mean over a rate's blocks of
+    # their variance is (S2 - sum over blocks of S1^2 / n) / 16, S1 and S2 the sums of the values and
+    # of their squares, n a block's pixels; S2 over the cell is the same for every rate, and each
+    # rate's block sums add up from the smaller rate's. Values are taken relative to the cell's first
+    # pixel (float64) so that the difference does not cancel: a flat cell reads exactly 0.
+    ref = np.repeat(x[::c, ::c], c, axis=1)
+    for i in range(c):
+        x[i::c] -= ref
+    s2 = _cell_sums(np.square(x), c, c)
+    sums: dict[tuple[int, int], np.ndarray] = {(1, 1): x}
+    out = np.zeros(x.shape, np.float32)
     for k, rate in enumerate(BLOCK_RATES):
         bw, bh = rate_size(rate)
-        blocks = q.reshape(ch * c // bh, bh, cw * c // bw, bw)
-        var = blocks.var(axis=(1, 3))  # per block
-        per_cell = var.reshape(ch, c // bh, cw, c // bw).mean(axis=(1, 3))
+        s1 = _block_sums(sums, bh, bw)
+        per_cell = np.maximum(s2 - _cell_sums(np.square(s1), c // bh, c // bw) / (bw * bh), 0.0) / (c * c)
         value = np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0)
         out[k // c::c, k % c::c] = value
     return out[:h, :w]
+
+
+def _cell_sums(a: np.ndarray, by: int, bx: int) -> np.ndarray:
+    """The sum of each ``by x bx`` group of ``a`` (strided adds, whose inner loops run along rows)."""
+    if bx > 1:
+        a = sum((a[:, i::bx] for i in range(1, bx)), a[:, 0::bx])
+    if by > 1:
+        a = sum((a[i::by] for i in range(1, by)), a[0::by])
+    return a
+
+
+def _block_sums(sums: dict[tuple[int, int], np.ndarray], bh: int, bw: int) -> np.ndarray:
+    """The sum over each ``bh x bw`` block, built from the next smaller block's sums (memoised in ``sums``)."""
+    if (bh, bw) not in sums:
+        if bw > 1:
+            a = _block_sums(sums, bh, bw // 2)
+            sums[bh, bw] = a[:, 0::2] + a[:, 1::2]
+        else:
+            a = _block_sums(sums, bh // 2, bw)
+            sums[bh, bw] = a[0::2] + a[1::2]
+    return sums[bh, bw]

@@ -3,6 +3,10 @@ loses (``reprojected.y.dx`` / ``.dy``, ``*.y.blocks``), defined once in the SDK.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -57,6 +61,43 @@ def test_each_cell_packs_the_variance_inside_each_rates_blocks() -> None:
     assert np.all(r22 >= np.maximum(r12, r21) - 1e-6) and np.all(r44 >= np.maximum(r24, r42) - 1e-6)
 
 
+def _block_variances_by_definition(plane: np.ndarray) -> np.ndarray:
+    """The ``.blocks`` plane computed as its docstring defines it: a variance per block, per rate."""
+    p = np.asarray(plane, np.float64)
+    h, w = p.shape
+    q = np.pad(p, ((0, -h % 4), (0, -w % 4)), mode="edge")
+    out = np.zeros(q.shape, np.float32)
+    for k, rate in enumerate(sdk.BLOCK_RATES):
+        bw, bh = sdk.rate_size(rate)
+        var = q.reshape(q.shape[0] // bh, bh, q.shape[1] // bw, bw).var(axis=(1, 3))
+        per_cell = var.reshape(q.shape[0] // 4, 4 // bh, q.shape[1] // 4, 4 // bw).mean(axis=(1, 3))
+        out[k // 4::4, k % 4::4] = np.clip(np.log(per_cell + 1e-4) / -np.log(1e-4) + 1.0, 0.0, 1.0)
+    return out[:h, :w]
+
+
+@settings(max_examples=60, deadline=None)
+@given(hnp.arrays(st.sampled_from([np.float32, np.float64]),
+                  hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=21),
+                  elements=st.floats(0, 1, width=32)))
+def test_the_fast_sums_equal_a_variance_per_block(p: np.ndarray) -> None:
+    """block_variances adds block sums up from one rate to the next (several times faster than a
+    variance per block and rate); it must read the same as the definition, flat cells exactly 0, and
+    leave the caller's plane alone."""
+    before = p.copy()
+    got = sdk.block_variances(p)
+    np.testing.assert_allclose(got, _block_variances_by_definition(p), rtol=0, atol=2e-6)
+    np.testing.assert_array_equal(p, before)
+
+
+def test_the_fast_sums_keep_flat_and_stepped_cells_exact() -> None:
+    rng = np.random.default_rng(3)
+    levels = np.round(rng.random((36, 52)) * 3) / 3  # few values: many flat blocks, many exact steps
+    levels[:8, :8] = 0.7
+    got = sdk.block_variances(levels)
+    assert not got[:8, :8].any()
+    np.testing.assert_array_equal(got, _block_variances_by_definition(levels))
+
+
 def test_flat_planes_read_zero_and_partial_cells_repeat_the_edge() -> None:
     assert not sdk.block_variances(np.full((6, 9), 0.3, np.float32)).any()
     p = np.random.default_rng(2).random((10, 13)).astype(np.float32)
@@ -90,3 +131,12 @@ def test_the_planes_are_registered_channels(fn: str, channels: tuple[str, ...]) 
 def test_bad_planes_are_typed_errors(fn: str, bad: np.ndarray, error: type[Exception]) -> None:
     with pytest.raises(error, match=fn):
         getattr(sdk, fn)(bad)
+
+
+def test_the_planes_benchmark_times_the_same_plane_as_the_definition() -> None:
+    """bench/planes.py refuses to time a block_variances that differs from its definition."""
+    script = Path(__file__).resolve().parents[1] / "bench" / "planes.py"
+    out = subprocess.run([sys.executable, str(script), "--sizes", "36x20", "--repeats", "1"],
+                         capture_output=True, text=True, check=True).stdout
+    row = [line for line in out.splitlines() if line.startswith("| 36x20 |")]
+    assert len(row) == 1 and len(row[0].split("|")) == 8, out
