@@ -28,6 +28,19 @@ def add_model_args(ap: Any, model_help: str, scene_help: str = "") -> None:
                     help=f"maps of --data, comma-separated{scene_help} (default: the validation maps of scenes.yaml)")
 
 
+def frame_size(text: str, minimum: int = 1) -> tuple[int, int]:
+    """An argparse type: ``WIDTHxHEIGHT`` into ``(width, height)``, each at least ``minimum``."""
+    import argparse
+
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1920x1080, got {text!r}") from None
+    if w < minimum or h < minimum:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT of at least {minimum}x{minimum}, got {text!r}")
+    return w, h
+
+
 def median_ms(fn: Callable[[], object], repeats: int) -> float:
     """Median wall time of ``fn`` in milliseconds over ``repeats`` runs, after one warm-up run
     (first-call allocations, lazy construction, thread-pool start)."""

@@ -51,7 +51,7 @@ import onnxruntime as ort
 from rtp import sdk
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import TIMING_INPUTS, median_ms, paper_model  # noqa: E402  (also when loaded by path, as the tests do)
+from _common import TIMING_INPUTS, frame_size, median_ms, paper_model  # noqa: E402  (also when loaded by path, as the tests do)
 
 
 def _macs(args: dict[str, Any]) -> int:
@@ -101,16 +101,6 @@ def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, thre
     return [{"name": n, **info[n], "ms": statistics.median(times[n])} for n in sorted(times, key=order.__getitem__)]
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1920x1080, got {text!r}") from err
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive WIDTHxHEIGHT, got {text!r}")
-    return w, h
-
-
 def _fast_options(text: str) -> dict[str, Any]:
     """``KEY=VALUE[,KEY=VALUE]`` with the keywords of the fast network (``build_network``) into a dict
     of ints and booleans."""
@@ -153,7 +143,7 @@ def _random_fast(folder: Path, options: list[dict[str, Any]], like: str | None) 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="*", help="shipped model names or .onnx paths (default: every shipped model)")
-    ap.add_argument("--size", type=_size, default=(1920, 1080), help="frame WIDTHxHEIGHT (default 1920x1080)")
+    ap.add_argument("--size", type=frame_size, default=(1920, 1080), help="frame WIDTHxHEIGHT (default 1920x1080)")
     ap.add_argument("--repeats", type=int, default=10, help="profiled runs after one warm-up (default 10)")
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     ap.add_argument("--fast", type=_fast_options, action="append", default=[], metavar="KEY=VALUE[,...]",

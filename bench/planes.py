@@ -18,7 +18,7 @@ import argparse
 import platform
 
 import numpy as np
-from _common import median_ms  # bench/ is on sys.path when run as a script
+from _common import frame_size, median_ms  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.sdk._reuse import tile_block_levels
@@ -40,20 +40,10 @@ def block_variances_by_definition(plane: np.ndarray) -> np.ndarray:
     return out[:h, :w]
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1920x1080, got {text!r}") from None
-    if w < 4 or h < 4:
-        raise argparse.ArgumentTypeError(f"frames must be at least 4x4 pixels, got {text!r}")
-    return w, h
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--sizes", type=lambda s: [_size(v) for v in s.split(",")],
+    ap.add_argument("--sizes", type=lambda s: [frame_size(v, minimum=4) for v in s.split(",")],
                     default=[(1920, 1080), (1280, 720)], help="comma-separated WIDTHxHEIGHT")
     args = ap.parse_args()
     if args.repeats < 1:
