@@ -178,6 +178,35 @@ def test_material_channels_from_an_engine_texture(frames) -> None:
     a.close()
 
 
+def test_each_channel_is_the_same_whatever_else_the_adapter_builds(frames) -> None:
+    """The shader is compiled for each adapter's channel list (the rest is dropped as dead code):
+    an adapter of every channel and adapters of one channel each give the same planes, bit for bit."""
+    ctx, prev, cur = frames
+    rms = _tex(ctx, np.stack([cur.roughness, cur.metallic, cur.specular], axis=-1))
+    every = tuple(reversed(sorted(Adapter.supported_channels)))  # not the id order either
+    with Adapter(every, W, H, ctx=ctx) as a:
+        x = _engine_inputs(ctx, prev, cur, a, material=rms)
+    assert x.shape == (len(every), H, W)
+    for i, name in enumerate(every):
+        with Adapter((name,), W, H, ctx=ctx) as one:
+            y = _engine_inputs(ctx, prev, cur, one, material=rms)
+        np.testing.assert_array_equal(y[0], x[i], err_msg=name)
+        assert name == "seen" or np.ptp(y[0]) > 0, name  # every plane carries something on this frame
+
+
+def test_the_adapter_benchmark_times_every_shipped_channel_list() -> None:
+    """bench/adapter.py builds each shipped model's inputs and the renderer's reprojection."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, str(root / "bench" / "adapter.py"), "--sizes", "48x32", "--repeats", "1"],
+                         capture_output=True, text=True, check=True).stdout
+    rows = [line.split("|")[1].strip() for line in out.splitlines() if line.startswith("| ") and "ms" not in line]
+    assert rows == ["reprojection (renderer)"] + sorted(p.stem for p in (root / "models").glob("*.onnx")), out
+
+
 def test_no_previous_frame_and_channel_errors(frames) -> None:
     ctx, prev, cur = frames
     a = Adapter(("seen", "reprojected.g", "albedo.b"), W, H, ctx=ctx)

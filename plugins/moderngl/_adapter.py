@@ -14,7 +14,7 @@ For an engine that owns its moderngl context::
         rates = predictor.shading_rates(x)
 
 One fragment shader (``shaders/adapter_fs.glsl``) reprojects the previous frame with a depth test
-and packs the requested channels, in the order given, into up to four RGBA32F targets; only those
+and packs the requested channels, in the order given, into up to six RGBA32F targets; only those
 are read back (a single flip to the top-left origin, in ``_glio``). The reference renderer builds its
 ``reprojected`` and ``seen`` planes with this very adapter, so captured training inputs and run-time
 inputs come from one code path.
@@ -147,22 +147,25 @@ class Adapter(_AdapterBase[GBufferTextures]):
 
         self.ctx = ctx
         self.tolerance = float(tolerance)
-        self._flags = {"u_albedo_linear": albedo_linear, "u_normal_world": normal_space == "world",
-                       "u_depth_window": depth_kind == "window"}
+        ids = [CHANNEL_IDS[c] for c in self.channels] + [-1] * (_MAX_CHANNELS - len(self.channels))
+        wanted = set(self.channels)
+        flags = {  # compiled in (adapter_fs.glsl): the shader keeps only the work these channels need
+            "RTP_ALBEDO_LINEAR": albedo_linear, "RTP_NORMAL_WORLD": normal_space == "world",
+            "RTP_DEPTH_WINDOW": depth_kind == "window",
+            "RTP_DIFFERENCES": bool({"reprojected.y.dx", "reprojected.y.dy"} & wanted),
+            "RTP_BLOCKS_REPROJECTED": "reprojected.y.blocks" in wanted,
+            "RTP_BLOCKS_ALBEDO": "albedo.y.blocks" in wanted,
+        }
+        defines: dict[str, Any] = {k: str(bool(v)).lower() for k, v in flags.items()}
+        defines.update(RTP_CHANNELS=", ".join(map(str, ids)), RTP_COUNT=len(self.channels))
         self._prog = ctx.program(vertex_shader=load_source("fullscreen_vs.glsl"),
-                                 fragment_shader=load_source("adapter_fs.glsl"))
+                                 fragment_shader=load_source("adapter_fs.glsl", defines))
         self._vao = ctx.vertex_array(self._prog, [])
         n_targets = -(-len(self.channels) // 4)
         self._targets = [ctx.texture((self.width, self.height), 4, dtype="f4") for _ in range(n_targets)]
         for t in self._targets:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._fbo = ctx.framebuffer(color_attachments=self._targets)
-        ids = [CHANNEL_IDS[c] for c in self.channels] + [-1] * (_MAX_CHANNELS - len(self.channels))
-        self._set("u_channels", ids)
-        self._set("u_count", len(self.channels))
-        self._set("u_differences", bool({"reprojected.y.dx", "reprojected.y.dy"} & set(self.channels)))
-        self._set("u_blocks_reprojected", "reprojected.y.blocks" in self.channels)
-        self._set("u_blocks_albedo", "albedo.y.blocks" in self.channels)
         self._set("u_size", (float(self.width), float(self.height)))
 
     def _set(self, name: str, value: Any) -> None:
@@ -219,8 +222,6 @@ class Adapter(_AdapterBase[GBufferTextures]):
             self._set(name, loc)
         view = np.asarray(view, dtype=np.float64)
         projection = np.asarray(projection, dtype=np.float64)
-        for name, value in self._flags.items():
-            self._set(name, value)
         self._set("u_has_prev", has_prev)
         self._set("u_has_material", material is not None)
         self._set("u_material_comp", comps)

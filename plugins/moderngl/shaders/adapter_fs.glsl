@@ -24,9 +24,6 @@ uniform ivec3 u_material_comp;      // component of each; -1: the default (specu
 uniform bool u_has_material;
 uniform int u_depth_comp;
 uniform int u_prev_depth_comp;
-uniform bool u_depth_window;        // depth is window depth in [0, 1] (1 = background), not linear
-uniform bool u_albedo_linear;
-uniform bool u_normal_world;
 uniform bool u_has_prev;
 uniform vec2 u_size;
 uniform mat4 u_view;                // current world -> view
@@ -35,11 +32,18 @@ uniform mat4 u_inv_proj;            // current projection, inverted
 uniform mat4 u_prev_inv_proj;       // previous projection, inverted (window depth only)
 uniform mat4 u_prev_vp;             // world -> previous clip
 uniform float u_tolerance;
-uniform bool u_differences;        // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
-uniform bool u_blocks_reprojected; // reprojected.y.blocks wanted: reproject the pixel's 4x4 cell
-uniform bool u_blocks_albedo;      // albedo.y.blocks wanted
-uniform int u_channels[24];         // channel ids, see CHANNEL_IDS in _adapter.py; -1 = unused
-uniform int u_count;
+// What the adapter was built for is fixed when it is constructed, so it is compiled in: the adapter
+// (_adapter.py) #defines RTP_CHANNELS (24 channel ids, see CHANNEL_IDS; -1 = unused), RTP_COUNT and
+// the flags below (true / false). The compiler then drops every value no channel reads; left to
+// uniforms, llvmpipe ran all of them (the "reproject" stage of bench/render.py, docs/performance.md).
+const bool u_depth_window = RTP_DEPTH_WINDOW;          // depth is window depth in [0, 1] (1 = background), not linear
+const bool u_albedo_linear = RTP_ALBEDO_LINEAR;
+const bool u_normal_world = RTP_NORMAL_WORLD;
+const bool u_differences = RTP_DIFFERENCES;            // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
+const bool u_blocks_reprojected = RTP_BLOCKS_REPROJECTED;  // reprojected.y.blocks wanted: reproject the pixel's 4x4 cell
+const bool u_blocks_albedo = RTP_BLOCKS_ALBEDO;        // albedo.y.blocks wanted
+const int u_channels[24] = int[24](RTP_CHANNELS);
+const int u_count = RTP_COUNT;
 
 layout(location = 0) out vec4 o0;
 layout(location = 1) out vec4 o1;

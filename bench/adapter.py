@@ -1,0 +1,89 @@
+"""Benchmark the moderngl adapter: the time to build each shipped model's inputs on the GPU.
+
+    .venv/bin/python bench/adapter.py [--sizes 1280x720,1920x1080] [--repeats 5] [--models models]
+
+Renders one frame of bench/render.py's room after another (so the previous frame is there to
+reproject), then times ``Adapter.inputs`` (render the input planes and read them back, ``(C, H, W)``
+float32) for the channel list of every ``*.onnx`` in ``--models``, and for the renderer's own
+reprojection (``reprojected.rgb`` + ``seen``). Each adapter compiles its shader for its channels
+(``adapter_fs.glsl``), so the cost follows what the channels need: the ``.blocks`` planes reproject a
+4x4 cell per pixel and cost the most. On Mesa's llvmpipe this is CPU time; a GPU runs the same shader
+in well under a millisecond. Prints a markdown table (median ms of ``--repeats`` runs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+from pathlib import Path
+
+import numpy as np
+from _common import frame_size, median_ms  # bench/ is on sys.path when run as a script
+from render import build_scene
+
+from rtp import sdk
+from rtp.plugins.moderngl import Adapter, GBufferTextures, Renderer
+from rtp.plugins.moderngl._glio import write_texture
+from rtp.scene import Camera
+
+REPROJECTION = ("reprojected.r", "reprojected.g", "reprojected.b", "seen")
+
+
+def channel_lists(models: Path) -> dict[str, tuple[str, ...]]:
+    """The renderer's reprojection and each model's input channels, by name."""
+    lists = {"reprojection (renderer)": REPROJECTION}
+    for path in sorted(models.glob("*.onnx")):
+        lists[path.stem] = tuple(sdk.load(path).metadata.inputs)
+    return lists
+
+
+def time_size(width: int, height: int, lists: dict[str, tuple[str, ...]], repeats: int) -> dict[str, float]:
+    """Median ms of ``Adapter.inputs`` per channel list at one frame size."""
+    cams = [Camera((-1.0 + 0.1 * i, 1.7, 8.0 - 0.05 * i), yaw=-8.0 + 1.5 * i, pitch=-6.0) for i in range(2)]
+    out: dict[str, float] = {}
+    with Renderer(width, height) as r:
+        r.load_scene(build_scene())
+        prev = r.render(cams[0])
+        cur = r.render(cams[1], prev)
+        # The renderer's own textures as an engine's G-buffers (private names: a benchmark, not an API).
+        write_texture(r._t_prev_colour, prev.colour["1x1"])
+        write_texture(r._t_prev_depth, prev.depth)
+        frame = GBufferTextures(
+            albedo=r._t_albedo, normal=r._t_nd, depth=r._t_nd, depth_component=3,
+            view=cur.camera.view(), projection=cur.camera.projection(width / height),
+            prev_colour=r._t_prev_colour, prev_depth=r._t_prev_depth,
+            prev_view_projection=prev.camera.view_projection(width, height), material=r._t_material)
+        for name, channels in lists.items():
+            with Adapter(channels, width, height, ctx=r.ctx) as adapter:
+                x = adapter.inputs(frame)
+                if x.shape != (len(channels), height, width) or not np.isfinite(x).all():
+                    raise SystemExit(f"{name}: the adapter gave {x.shape} with non-finite values; expected "
+                                     f"{(len(channels), height, width)} finite planes")
+                out[name] = median_ms(lambda a=adapter: a.inputs(frame), repeats)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="1280x720,1920x1080", help="comma-separated WIDTHxHEIGHT")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--models", type=Path, default=Path(__file__).resolve().parents[1] / "models",
+                    help="folder of .onnx models whose channel lists to time (default: the shipped ones)")
+    args = ap.parse_args()
+    if args.repeats < 1:
+        ap.error("--repeats must be >= 1")
+    sizes = [frame_size(s, 4) for s in args.sizes.split(",")]
+    lists = channel_lists(args.models)
+    with Renderer(16, 16) as probe:
+        gl = probe.ctx.info["GL_RENDERER"]
+    print(f"moderngl adapter, Adapter.inputs (render + read back), median of {args.repeats}; {gl}; "
+          f"{platform.processor() or platform.machine()}\n")
+    rows = {f"{w}x{h}": time_size(w, h, lists, args.repeats) for w, h in sizes}
+    print("| channels | planes | " + " | ".join(f"{s} ms" for s in rows) + " |")
+    print("|---|---|" + "---|" * len(rows))
+    for name, channels in lists.items():
+        print(f"| {name} | {len(channels)} | " + " | ".join(f"{t[name]:.1f}" for t in rows.values()) + " |")
+
+
+if __name__ == "__main__":
+    main()
