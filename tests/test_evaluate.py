@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rtp import sdk
 from rtp.capture import BUFFERS, DatasetWriter, TargetStore
@@ -144,6 +146,41 @@ def test_fidelityfx_anti_burn_in_and_parameters() -> None:
     assert FidelityFX(16).shading_rates(grey(np.full((40, 50), 0.3))).shape == (3, 4)
     with pytest.raises(sdk.InputShapeError):
         FidelityFX(16).predict(np.zeros((8, 8), np.float32))
+
+
+@given(h=st.integers(8, 40), w=st.integers(8, 40), tile=st.sampled_from([8, 16]), seed=st.integers(0, 2**31 - 1))
+@settings(max_examples=40, deadline=None)
+def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile: int, seed: int) -> None:
+    """Yang's half-rate errors, tile means and tile speeds, and FidelityFX's sub-block ranges (built
+    rate from rate, without copies when the frame is whole tiles) equal a tile-by-tile loop over
+    the definitions, on whole and ragged frames (edge tiles padded with copies of the last pixel)."""
+    rng = np.random.default_rng(seed)
+    img = rng.uniform(0, 1, (h, w, 3)).astype(np.float32)
+    motion = rng.normal(0, 3, (h, w, 2)).astype(np.float32)
+    frame = Frame(img, motion)
+    th, tw = -(-h // tile), -(-w // tile)
+    lum = (0.299 * img[..., 0] + 0.587 * img[..., 1] + 0.114 * img[..., 2]).astype(np.float64)
+    edge = np.pad(lum, ((0, th * tile - h), (0, tw * tile - w)), mode="edge")
+    speed = np.pad(np.abs(motion), ((0, th * tile - h), (0, tw * tile - w), (0, 0)), mode="edge")
+    (e_y, e_x), mean = Yang2019(tile).half_rate_error(frame)
+    v = Yang2019(tile, motion_scale=0.5).tile_motion(frame)
+    for i in range(th):
+        for j in range(tw):
+            t = edge[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile]
+            assert e_y[i, j] == np.abs(np.diff(t, axis=0)).max() and e_x[i, j] == np.abs(np.diff(t, axis=1)).max()
+            assert mean[i, j] == pytest.approx(lum[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile].mean(), rel=1e-12)
+            m = speed[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile]
+            assert v[0, i, j] == 0.5 * float(m[..., 1].min()) and v[1, i, j] == 0.5 * float(m[..., 0].min())
+    ffx = FidelityFX(tile, additional_rates=True, motion_factor=0.0)
+    ranges = ffx._additional(frame)
+    flum = np.pad((0.30 * img[..., 0] + 0.59 * img[..., 1] + 0.11 * img[..., 2]).astype(np.float64),
+                  ((0, th * tile - h), (0, tw * tile - w)), mode="edge")
+    for k, rate in enumerate(sdk.PREDICTED_RATES):
+        rw, rh = sdk.rate_size(rate)
+        for bi, bj in ((0, 0), (th * tile // 4 - 1, tw * tile // 4 - 1), (th * tile // 8, tw * tile // 8)):
+            blk = flum[bi * 4:bi * 4 + 4, bj * 4:bj * 4 + 4]
+            want = max(float(np.ptp(blk[y:y + rh, x:x + rw])) for y in range(0, 4, rh) for x in range(0, 4, rw))
+            assert ranges[k, bi, bj] == want, (rate, bi, bj)
 
 
 def test_restrict_rates_demotes_per_axis() -> None:
