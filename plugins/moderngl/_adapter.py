@@ -15,7 +15,10 @@ For an engine that owns its moderngl context::
 
 One fragment shader (``shaders/adapter_fs.glsl``) reprojects the previous frame with a depth test
 and packs the requested channels, in the order given, into up to six RGBA32F targets; only those
-are read back (a single flip to the top-left origin, in ``_glio``). The reference renderer builds its
+are read back (a single flip to the top-left origin, in ``_glio``). Each adapter compiles the shader
+for its channel list, so it runs only the work those channels need; when a plane reads other
+pixels' lumas (``reprojected.y.dx`` / ``.dy``, the ``.blocks`` planes), a first run of the same
+shader writes every pixel's reprojected and albedo luma, and the second fetches them. The reference renderer builds its
 ``reprojected`` and ``seen`` planes with this very adapter, so captured training inputs and run-time
 inputs come from one code path.
 """
@@ -51,6 +54,7 @@ CHANNEL_IDS: dict[str, int] = {
     "reprojected.y.dx": 17, "reprojected.y.dy": 18, "reprojected.y.blocks": 19, "albedo.y.blocks": 20,
 }
 _MATERIAL = ("roughness", "metallic", "specular")
+_LUMA_PASS = ("reprojected.y", "albedo.y")  # the first pass of adapters whose planes read neighbours' lumas
 _MAX_CHANNELS = 24  # six RGBA float targets (adapter_fs.glsl)
 
 
@@ -156,6 +160,13 @@ class Adapter(_AdapterBase[GBufferTextures]):
             "RTP_BLOCKS_REPROJECTED": "reprojected.y.blocks" in wanted,
             "RTP_BLOCKS_ALBEDO": "albedo.y.blocks" in wanted,
         }
+        # Planes that read other pixels' lumas (.dx / .dy, .blocks) take them from a first pass that
+        # writes every pixel's reprojected and albedo luma, instead of reprojecting each neighbour again.
+        self._luma: Adapter | None = None
+        if flags["RTP_DIFFERENCES"] or flags["RTP_BLOCKS_REPROJECTED"] or flags["RTP_BLOCKS_ALBEDO"]:
+            self._luma = Adapter(_LUMA_PASS, width, height, ctx=ctx, tolerance=tolerance, albedo_linear=albedo_linear,
+                                 normal_space=normal_space, depth_kind=depth_kind)
+        flags["RTP_LUMA_PASS"] = self._luma is not None
         defines: dict[str, Any] = {k: str(bool(v)).lower() for k, v in flags.items()}
         defines.update(RTP_CHANNELS=", ".join(map(str, ids)), RTP_COUNT=len(self.channels))
         self._prog = ctx.program(vertex_shader=load_source("fullscreen_vs.glsl"),
@@ -213,10 +224,17 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if material is not None and (len(comps) != 3 or not all(-1 <= c < material.components for c in comps)):
             raise ValueError(f"material_components: expected three component indices of the {material.components}"
                              f"-component material texture (or -1), got {material_components!r}")
+        if self._luma is not None:  # first pass: every pixel's lumas, read by the second
+            self._luma.run(albedo=albedo, normal=normal, depth=depth, view=view, projection=projection,
+                           prev_colour=prev_colour, prev_depth=prev_depth, prev_view_projection=prev_view_projection,
+                           prev_projection=prev_projection, depth_component=depth_component,
+                           prev_depth_component=prev_depth_component)
         textures = {"u_albedo": albedo, "u_normal": normal, "u_depth": depth,
                     "u_prev_colour": prev_colour if has_prev else albedo,
                     "u_prev_depth": prev_depth if has_prev else depth,
                     "u_material": material if material is not None else albedo}
+        if self._luma is not None:
+            textures["u_luma"] = self._luma._targets[0]
         for loc, (name, tex) in enumerate(textures.items()):
             tex.use(location=loc)
             self._set(name, loc)
@@ -252,6 +270,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
         """Free the adapter's program, targets and framebuffer (not the engine's context)."""
         for obj in (self._fbo, *self._targets, self._vao, self._prog):
             obj.release()
+        if self._luma is not None:
+            self._luma.close()
 
     @classmethod
     def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> ReferenceFrameSource:

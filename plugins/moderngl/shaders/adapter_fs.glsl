@@ -44,6 +44,11 @@ const bool u_blocks_reprojected = RTP_BLOCKS_REPROJECTED;  // reprojected.y.bloc
 const bool u_blocks_albedo = RTP_BLOCKS_ALBEDO;        // albedo.y.blocks wanted
 const int u_channels[24] = int[24](RTP_CHANNELS);
 const int u_count = RTP_COUNT;
+// RTP_LUMA_PASS: the lumas of other pixels (the .dx / .dy neighbours, the 16 texels of a .blocks cell)
+// are fetched from u_luma, which a first run of this shader for ("reprojected.y", "albedo.y") filled,
+// instead of reprojecting each neighbour again (up to 18 reprojections a pixel otherwise).
+const bool u_luma_pass = RTP_LUMA_PASS;
+uniform sampler2D u_luma;           // x: reprojected.y, y: albedo.y of every pixel (with RTP_LUMA_PASS)
 
 layout(location = 0) out vec4 o0;
 layout(location = 1) out vec4 o1;
@@ -138,12 +143,14 @@ ivec2 top_left_texel(int col, int row) {
 }
 
 float albedo_luma_at(ivec2 t) {
+    if (u_luma_pass) return texelFetch(u_luma, t, 0).y;
     if (depth_at(t) <= 0.0) return 0.0;
     vec3 a = texelFetch(u_albedo, t, 0).rgb;
     return display_luma(u_albedo_linear ? linear_to_srgb(a) : a);
 }
 
 float reprojected_luma_at(ivec2 t) {
+    if (u_luma_pass) return texelFetch(u_luma, t, 0).x;
     return display_luma(reproject_prev(vec2(t) + 0.5, depth_at(t)).rgb);
 }
 
@@ -154,13 +161,13 @@ void main() {
     vec4 rp = u_has_prev ? reproject_prev(gl_FragCoord.xy, d) : vec4(0.0);
     // reprojected.y.dx / .dy, as rtp.sdk.pixel_differences: |luma| to the right neighbour and to the one
     // below (top-left origin: GL row - 1), each reprojected as itself; 0 in the last column / row
-    float ry = display_luma(rp.rgb);
+    float ry = u_luma_pass ? reprojected_luma_at(g) : display_luma(rp.rgb);
     float rdx = 0.0, rdy = 0.0;
     if (u_has_prev && u_differences) {
         if (g.x + 1 < int(u_size.x))
-            rdx = abs(display_luma(reproject_prev(gl_FragCoord.xy + vec2(1.0, 0.0), depth_at(g + ivec2(1, 0))).rgb) - ry);
+            rdx = abs(reprojected_luma_at(g + ivec2(1, 0)) - ry);
         if (g.y > 0)
-            rdy = abs(display_luma(reproject_prev(gl_FragCoord.xy - vec2(0.0, 1.0), depth_at(g - ivec2(0, 1))).rgb) - ry);
+            rdy = abs(reprojected_luma_at(g - ivec2(0, 1)) - ry);
     }
     vec3 albedo = texelFetch(u_albedo, g, 0).rgb;
     if (u_albedo_linear) albedo = linear_to_srgb(albedo);
