@@ -14,6 +14,13 @@ consecutive frames (t, t + 1) it chooses the rates of frame t + 1 from
   ``sdk.PredictionReuse(rescale=A)`` does (``--rescale A``; models with ``.blocks`` inputs),
 - ``truth t, carried``: the true errors of frame t carried the same way (an oracle one frame late),
 - ``truth t+1``: the oracle,
+- with ``--model CHECKPOINT.pt`` of a fast network whose block contrast joins at tile resolution
+  (``rtp train --block-contrast ... --contrast-cell TILE``), also ``trunk t carried, tail t+1``: the
+  network's features before the contrast joins, computed on frame t and carried like estimates (the
+  mean over each tile's kept pixels), then the contrast of frame t + 1 and the layers after it (a
+  3x3 block at tile resolution and the head, almost free) run on the new frame. That is the split a
+  reuse scheme could run every frame while the trunk runs every k-th (not built into the SDK),
+
 
 and prints each one's failing share and work saved at the model's default threshold, mean over the
 pairs. The histories are the full-rate frames (open loop, as the dataset's pairs), so every row
@@ -37,6 +44,7 @@ threshold for carried frames is worth building into ``PredictionReuse``.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import numpy as np
 
@@ -49,6 +57,44 @@ from rtp.sdk._channels import BLOCK_EPS
 from rtp.sdk._reuse import carry_estimates, start_track, tile_block_levels
 
 ROWS = ("network t+1", "network t, carried", "network t, carried, rescaled", "truth t, carried", "truth t+1")
+SPLIT_ROW = "trunk t carried, tail t+1"
+
+
+class CheckpointModel:
+    """A trained checkpoint run in torch with the predictor's decoding: ``predict(x)`` as
+    ``ShadingRatePredictor.predict``, and for a network whose block contrast joins at tile resolution
+    ``trunk(x)`` (the features before it, ``(C, th, tw)``) and ``tail(features, x)`` (the estimates from
+    carried features and a new frame's contrast)."""
+
+    def __init__(self, path: str) -> None:
+        import torch
+
+        from rtp.train.checkpoint import load
+
+        self.torch = torch
+        ck = load(path)
+        self.net, self.metadata = ck.net, ck.metadata
+        self.tile_size = self.metadata.tile_size
+        contrast = getattr(self.net, "contrast", None)
+        self.splits = contrast is not None and contrast.cell == self.tile_size
+
+    def _decode(self, raw: object) -> np.ndarray:
+        return np.asarray(self.metadata.decode(np.asarray(raw)[0]), np.float32)
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        with self.torch.no_grad():
+            return self._decode(self.net(self.torch.from_numpy(x[None])).numpy())
+
+    def trunk(self, x: np.ndarray) -> np.ndarray:
+        with self.torch.no_grad():
+            return self.net.layers[:self.net._contrast_at](self.torch.from_numpy(x[None])).numpy()[0]
+
+    def tail(self, features: np.ndarray, x: np.ndarray) -> np.ndarray:
+        t, net = self.torch, self.net
+        with t.no_grad():
+            fresh = net.contrast_bn(net.contrast(t.from_numpy(x[None])))
+            h = t.cat([t.from_numpy(np.ascontiguousarray(features[None], np.float32)), fresh], dim=1)
+            return self._decode(net.layers[net._contrast_at:](h).numpy())
 
 
 def main() -> None:
@@ -57,7 +103,8 @@ def main() -> None:
     ap.add_argument("--path", default="slow", help="camera path profile (default: slow)")
     ap.add_argument("--frames", type=int, default=40, help="frames of the path (default: 40)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--model", default="jnyang", help="shipped model or .onnx (default: jnyang)")
+    ap.add_argument("--model", default="jnyang", help="shipped model, .onnx, or a checkpoint .pt run in torch "
+                    "(default: jnyang)")
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--rescale", type=float, default=0.25, help="exponent of the rescaled row (default: 0.25)")
     ap.add_argument("--sweep", action="store_true", help="also sweep the threshold and compare one threshold for "
@@ -66,8 +113,9 @@ def main() -> None:
     args = ap.parse_args()
     if args.every < 2:
         ap.error(f"--every: expected an interval >= 2, got {args.every}")
-    pred = sdk.load(args.model)
+    pred: Any = CheckpointModel(args.model) if args.model.endswith(".pt") else sdk.load(args.model)
     meta = pred.metadata
+    split = isinstance(pred, CheckpointModel) and pred.splits
     metric, thr, hib = meta.metric, meta.default_threshold, meta.higher_is_better
     if args.sweep and hib:
         ap.error(f"--sweep: the model's metric {metric} is better when higher; the sweep scales an error threshold")
@@ -77,16 +125,18 @@ def main() -> None:
     path = camera_path(scn, args.frames, args.path, args.seed, blockers=blockers)
     blocks = [i for i, c in enumerate(meta.inputs) if c.endswith(".blocks")]
     rows = ROWS if blocks else tuple(r for r in ROWS if not r.endswith("rescaled"))
+    rows = (*rows[:-2], SPLIT_ROW, *rows[-2:]) if split else rows
     fail: dict[str, list[float]] = {r: [] for r in rows}
     saved: dict[str, list[float]] = {r: [] for r in rows}
     grid = thr * 2.0 ** (np.arange(-48, 33) / 16)  # the sweep's thresholds
-    swept = [r for r in rows if r.startswith("network")]
+    swept = [r for r in rows if r.startswith("network") or r == SPLIT_ROW]
     curves: dict[str, list[np.ndarray]] = {r: [] for r in swept}  # per pair: (2, thresholds) failing, saved
 
     def levels(x: np.ndarray) -> np.ndarray:  # (v + eps) ** rescale per tile and rate, as PredictionReuse
         return np.exp(args.rescale * -np.log(BLOCK_EPS) * tile_block_levels(x[blocks], tile).astype(np.float64))
 
     prev: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None  # network, truth, frame, levels of t
+    trunk = np.zeros(0)  # the split network's features on frame t
     with PathPlayer(scn, (w, h), exact=False) as player:
         for pf in player.frames(path):
             ref = pf.frame.colour["1x1"]
@@ -112,6 +162,12 @@ def main() -> None:
                 if blocks:
                     r = "network t, carried, rescaled"
                     carried[r] = np.where(missing[None], carried[r], carried[r] * lv).astype(np.float32)
+                if split and trunk.size:
+                    feats, _, gone = carry_estimates(trunk.reshape(len(trunk), -1), start_track((h, w), tile),
+                                                     pf.rows, pf.cols, pf.seen, sky, tile, hib, 0.5)
+                    est = pred.tail(np.where(gone[None], 0.0, feats), x)
+                    est[:, gone] = -np.inf if hib else np.inf  # tiles without carried features: 1x1, as the carry
+                    carried[SPLIT_ROW] = est
                 for name, est in (("network t+1", net), *carried.items(), ("truth t+1", truth)):
                     rates = sdk.select_rates(est, thr, higher_is_better=hib)
                     fail[name].append(float(failing_tiles(rates, truth, thr, hib).mean()))
@@ -121,6 +177,7 @@ def main() -> None:
                         curves[name].append(np.array([[failing_tiles(r, truth, thr, hib).mean() for r in rs],
                                                       [sdk.work_saved(r, (h, w), tile) for r in rs]]))
             prev = (net, truth, ref, lv)
+            trunk = pred.trunk(x) if split else trunk
     n = len(fail[rows[0]])
     print(f"{args.map}, {args.path} path (seed {args.seed}), {n} pairs of consecutive frames at {w}x{h}; "
           f"{args.model} ({metric}) at its default threshold {thr:g}; histories at full rate; rescaled: "

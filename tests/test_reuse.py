@@ -3,6 +3,8 @@ to 1x1 or are predicted afresh on crops that give the whole frame's estimates, b
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -544,7 +546,6 @@ def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(mo
     """bench/reuse_floor.py --sweep: one frame in k with the network's curve, k - 1 with the carried one;
     one threshold for both is the diagonal of the pairs, and the best pair is never worse."""
     import importlib.util
-    from pathlib import Path
 
     path = Path(__file__).resolve().parents[1] / "bench" / "reuse_floor.py"
     monkeypatch.syspath_prepend(str(path.parent))
@@ -562,6 +563,48 @@ def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(mo
     assert one == pytest.approx(0.30) and pair == pytest.approx(0.35) and divmod(i, 3) == (2, 1)
     assert np.isnan(floor.best_saving(fail, saved, 0.001)[0])  # nothing fails that little
     assert floor.mix_curves(fresh, carried, 2)[0][0, 2] == pytest.approx(0.05)
+
+
+def test_reuse_floor_splits_a_checkpoint_at_its_tile_resolution_contrast(tmp_path: Path,
+                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench/reuse_floor.py --model CHECKPOINT.pt: for a fast network whose block contrast joins at tile
+    resolution, the tail on the trunk's own features of the same frame is the whole network (so a
+    carried trunk row differs from k = 1 only by what the carry changes); other networks do not split."""
+    import importlib.util
+
+    import torch
+
+    from rtp.train import checkpoint
+    from rtp.train.model import FastNet
+
+    from .conftest import base_metadata
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "reuse_floor.py"
+    monkeypatch.syspath_prepend(str(path.parent))
+    spec = importlib.util.spec_from_file_location("bench_reuse_floor", path)
+    assert spec and spec.loader
+    floor = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(floor)
+    inputs = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular"]
+    meta = base_metadata(inputs=inputs)
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 1, (7, 48, 64)).astype(np.float32)
+    for cell, splits in ((16, True), (4, False)):
+        net = FastNet(7, head_width=16, block_contrast=(0, 2), contrast_cell=cell)
+        for m in net.modules():  # BatchNorm statistics that are not the identity
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.2, 0.2)
+                m.running_var.uniform_(0.5, 2.0)
+        ck = checkpoint.save(tmp_path / f"c{cell}.pt", net.eval(), meta)
+        model = floor.CheckpointModel(str(ck))
+        assert model.splits is splits
+        whole = model.predict(x)
+        assert whole.shape == (6, 3, 4) and np.isfinite(whole).all()
+        if splits:
+            feats = model.trunk(x)
+            assert feats.shape == (16, 3, 4)
+            np.testing.assert_allclose(model.tail(feats, x), whole, rtol=1e-5, atol=1e-6)
+            assert not np.allclose(model.tail(feats, x[:, ::-1].copy()), whole)  # the tail reads the new frame
 
 
 def test_carry_scale_multiplies_carried_estimates_only() -> None:
