@@ -280,7 +280,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
                  "separable_tail", "tail_width", "head_width", "context_pool", "block_contrast", "contrast_cell",
-                 "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss", "quantile", "focus",
+                 "contrast_max", "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss",
+                 "quantile", "focus",
                  "ema", "distill", "aux_weight",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
                  "safety_quantile", "max_samples")
@@ -568,7 +569,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "fixed arithmetic, not learned (default: none)")
     r.add_argument("--contrast-cell", dest="contrast_cell", type=_positive, default=None,
                    help="with --block-contrast: the cell in pixels it is measured over and joins the network at: the "
-                   "stem's (4, the default) or 8, after the first pool (a quarter of the positions, cheaper at 1080p)")
+                   "stem's (4, the default), 8, after the first pool (a quarter of the positions, cheaper at 1080p), "
+                   "up to the tile (16: the contrast joins at tile resolution, before the last block and the head)")
+    r.add_argument("--contrast-max", dest="contrast_max", action="store_true", default=None,
+                   help="with --contrast-cell over 4: also the worst 4x4 cell's contrast in each cell, beside the "
+                   "mean (default: off)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")

@@ -252,7 +252,7 @@ def test_the_context_pool_appends_the_neighbourhood_mean_and_exports() -> None:
                                                            "albedo.r", "albedo.g", "albedo.b", "normal.z"]), seed=4)
 
 
-@pytest.mark.parametrize("cell", [2, 4, 8])
+@pytest.mark.parametrize("cell", [2, 4, 8, 16])
 def test_block_contrast_is_the_variance_inside_each_rates_blocks(cell: int) -> None:
     from rtp.train.model import BlockContrast, haar_details
 
@@ -282,6 +282,27 @@ def test_block_contrast_is_the_variance_inside_each_rates_blocks(cell: int) -> N
             BlockContrast(bad, 3, 4)
     with pytest.raises(ValueError, match="power-of-two"):
         haar_details(3)
+
+
+def test_block_contrast_of_a_large_cell_adds_its_worst_4x4_cell_with_tile_max() -> None:
+    """``tile_max``: per plane the cell means, then the maxima over the cell's 4x4 cells of theirs."""
+    from rtp.train.model import BlockContrast, FastNet
+
+    x = torch.rand(1, 2, 32, 48)
+    mean_only, both = BlockContrast((1, 0), 2, 16, eps=0.0), BlockContrast((1, 0), 2, 16, eps=0.0, tile_max=True)
+    fine = BlockContrast((1, 0), 2, 4, eps=0.0)(x).exp()  # (1, 12, 8, 12): every 4x4 cell
+    out = both(x).exp()
+    assert both.channels == 24 and out.shape == (1, 24, 2, 3)
+    torch.testing.assert_close(out[:, [*range(6), *range(12, 18)]], mean_only(x).exp())
+    for a in range(2):  # plane a: means at 12a .. 12a + 5, maxima at 12a + 6 .. 12a + 11
+        want = torch.nn.functional.max_pool2d(fine[:, 6 * a:6 * a + 6], 4)
+        torch.testing.assert_close(out[:, 12 * a + 6:12 * a + 12], want)
+    net = FastNet(7, head_width=16, block_contrast=(0, 2), contrast_cell=16, contrast_max=True).eval()
+    assert net.config["contrast_max"] is True and net.contrast is not None and net.contrast.channels == 24
+    assert net(torch.rand(1, 7, 32, 32)).shape == (1, 4, 2, 2)
+    for bad in ({"contrast_cell": 4}, {"block_contrast": ()}):
+        with pytest.raises(ValueError, match="contrast_max"):
+            FastNet(7, **{"block_contrast": (0,), "contrast_cell": 16, "contrast_max": True, **bad})
 
 
 def test_the_fast_network_reads_block_contrast_beside_its_stem_and_exports() -> None:

@@ -85,6 +85,9 @@ class TrainConfig:
     #: The cell (pixels) the block contrast is measured over and joins the network at: 0, the stem's
     #: (after the stem); twice it, after the first pool (a quarter of the positions: cheaper).
     contrast_cell: int = 0
+    #: With a contrast cell over 4 pixels: also the worst 4x4 cell's contrast in each cell, beside the
+    #: mean (``BlockContrast(tile_max=True)``).
+    contrast_max: bool = False
     #: 2: the fast network's stem as two convolutions (for stem 4: two 2x2 stride-2 reads with a ReLU
     #: between, at half resolution); 1: one ``stem x stem`` read.
     stem_layers: int = 1
@@ -489,6 +492,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.contrast_cell and cfg.contrast_cell not in cells:
         raise sdk.ParameterError(f"contrast_cell: expected 0 (the stem's) or one of {', '.join(map(str, cells))} (the "
                                  f"stem or a pooled resolution up to the tile), got {cfg.contrast_cell}", "contrast_cell")
+    if cfg.contrast_max and (not cfg.block_contrast or (cfg.contrast_cell or min(cfg.stem, cfg.tile)) <= 4):
+        raise sdk.ParameterError("contrast_max: only with block_contrast and a contrast_cell over 4 pixels (the worst "
+                                 "4x4 cell of each larger one)", "contrast_max")
     if cfg.block_contrast and min(cfg.stem, cfg.tile) < 2:
         raise sdk.ParameterError(f"block_contrast: needs a stem of at least 2 pixels, got {min(cfg.stem, cfg.tile)}",
                                  "block_contrast")
@@ -550,7 +556,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         head_width=cfg.head_width, context_pool=cfg.context_pool,
                         block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
                         contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
-                        tail_width=cfg.tail_width)
+                        tail_width=cfg.tail_width, contrast_max=cfg.contrast_max)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -581,6 +587,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["block_contrast"] = list(cfg.block_contrast)
         if cfg.contrast_cell:
             config_key["contrast_cell"] = cfg.contrast_cell
+        if cfg.contrast_max:
+            config_key["contrast_max"] = True
         if cfg.stem_layers != 1:
             config_key["stem_layers"] = cfg.stem_layers
         if cfg.energy_norm:
@@ -751,6 +759,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
         **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),
         **({"contrast_cell": cfg.contrast_cell} if cfg.contrast_cell else {}),
+        **({"contrast_max": True} if cfg.contrast_max else {}),
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,

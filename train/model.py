@@ -197,12 +197,15 @@ class BlockContrast(nn.Module):
     squares); here it is fixed arithmetic, nothing learned: the cell's orthonormal Haar details
     (:func:`haar_details`; per plane a slice and one strided convolution), squared; a rate's
     within-block error is the sum of the squared details that sum to zero over each of its blocks
-    (the others are constant on them), one fixed 1x1 convolution."""
+    (the others are constant on them), one fixed 1x1 convolution. A cell larger than 4 pixels takes
+    the mean of its 4x4 cells' values (the same number: every rate's blocks fit in 4x4 cells), and
+    with ``tile_max`` also their maximum, as more channels (per plane: the means, then the maxima)."""
 
     weight: torch.Tensor
     reduce: torch.Tensor
 
-    def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, eps: float = 1e-4) -> None:
+    def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, eps: float = 1e-4,
+                 tile_max: bool = False) -> None:
         super().__init__()
         if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
             raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
@@ -212,27 +215,38 @@ class BlockContrast(nn.Module):
         self.rates = tuple(r for r in ALL_RATES[1:] if max(rate_size(r)) <= cell)
         if not self.rates:
             raise ValueError(f"block_contrast needs a stem of at least 2 pixels, got {cell}")
-        details = haar_details(cell)
+        # Every rate's blocks fit in 4x4 cells: a larger cell's mean is the mean of its 4x4 cells' (the
+        # cell's coarser Haar details are constant on every block), so measure 4x4 cells and average
+        # them (16 taps a pixel per plane instead of cell * cell)
+        base = min(cell, 4)
+        details = haar_details(base)
         n, r = len(details), len(self.rates)
         reduce = torch.zeros(r, n, 1, 1)
         for j, rate in enumerate(self.rates):
             w, h = rate_size(rate)
             for i, d in enumerate(details):
-                sums = d.reshape(cell // h, h, cell // w, w).sum(axis=(1, 3))
+                sums = d.reshape(base // h, h, base // w, w).sum(axis=(1, 3))
                 if np.abs(sums).max() < 1e-9:  # zero on every block: part of what the rate loses
-                    reduce[j, i] = 1.0 / (cell * cell)
+                    reduce[j, i] = 1.0 / (base * base)
+        self.base, self.pool, self.tile_max = base, cell // base, bool(tile_max and cell > base)
         weight = torch.tensor(np.stack(details), dtype=torch.float32)[:, None]
         self.register_buffer("weight", weight, persistent=False)
         self.register_buffer("reduce", reduce, persistent=False)
         self.in_channels = in_channels
         self.cell = cell
-        self.channels = len(self.planes) * r
+        self.channels = len(self.planes) * r * (2 if self.tile_max else 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         out = []
         for p in self.planes:  # a slice of one plane and a one-input convolution: a fraction of a dense one
-            c = nn.functional.conv2d(x[:, p:p + 1], self.weight, stride=self.cell)
-            out.append(torch.log(nn.functional.conv2d(c * c, self.reduce) + self.eps))
+            c = nn.functional.conv2d(x[:, p:p + 1], self.weight, stride=self.base)
+            v = nn.functional.conv2d(c * c, self.reduce)
+            if self.pool > 1:
+                out.append(torch.log(nn.functional.avg_pool2d(v, self.pool) + self.eps))
+                if self.tile_max:  # the worst 4x4 cell as well: the targets are the worst error in a tile
+                    out.append(torch.log(nn.functional.max_pool2d(v, self.pool) + self.eps))
+            else:
+                out.append(torch.log(v + self.eps))
         return out[0] if len(out) == 1 else torch.cat(out, dim=1)
 
 
@@ -294,7 +308,7 @@ class FastNet(nn.Module):
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
                  block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0,
-                 separable_tail: bool = False, tail_width: int = 0) -> None:
+                 separable_tail: bool = False, tail_width: int = 0, contrast_max: bool = False) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -344,11 +358,17 @@ class FastNet(nn.Module):
         if block_contrast and cell not in [s * 2 ** i for i in range(pools + 1)]:
             raise ValueError(f"contrast_cell: expected the stem ({s}) or a pooled resolution up to the tile "
                              f"({', '.join(str(s * 2 ** i) for i in range(pools + 1))}), got {contrast_cell}")
-        self.contrast = BlockContrast(tuple(block_contrast), in_channels, cell) if block_contrast else None
+        if contrast_max and (not block_contrast or cell <= 4):
+            raise ValueError(f"contrast_max adds the worst 4x4 cell of a larger contrast cell: expected block_contrast "
+                             f"and a contrast_cell over 4, got {cell}")
+        self.contrast = (BlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
+                         if block_contrast else None)
         if self.contrast is not None:  # likewise
             self.config["block_contrast"] = list(self.contrast.planes)
             if contrast_cell and contrast_cell != s:
                 self.config["contrast_cell"] = contrast_cell
+            if contrast_max:
+                self.config["contrast_max"] = True
         layers: list[nn.Module] = []
         if stem_layers == 2:
             mid = max(width // 2, 1)
@@ -428,16 +448,18 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
                   head: str = "paper", depth: int = 3, stem: int = 4, grow: int = 1, stem_layers: int = 1,
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
                   head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
-                  contrast_cell: int = 0, separable_tail: bool = False, tail_width: int = 0) -> Network:
+                  contrast_cell: int = 0, separable_tail: bool = False, tail_width: int = 0,
+                  contrast_max: bool = False) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
-    ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast`` and ``contrast_cell``
-    to the fast one."""
+    ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast``, ``contrast_cell``
+    and ``contrast_max`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
-                       separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width)
+                       separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width,
+                       contrast_max)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
 
 
