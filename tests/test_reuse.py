@@ -4,6 +4,7 @@ to 1x1 or are predicted afresh on crops that give the whole frame's estimates, b
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -542,9 +543,8 @@ def test_rescaled_fresh_tiles_are_the_networks_and_carry_on_unchanged() -> None:
     assert reuse.work == 0.0 and np.allclose(third, second, rtol=1e-5)
 
 
-def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(monkeypatch: pytest.MonkeyPatch) -> None:
-    """bench/reuse_floor.py --sweep: one frame in k with the network's curve, k - 1 with the carried one;
-    one threshold for both is the diagonal of the pairs, and the best pair is never worse."""
+def _reuse_floor(monkeypatch: pytest.MonkeyPatch) -> Any:
+    """bench/reuse_floor.py as a module (bench/ on the path for its own imports)."""
     import importlib.util
 
     path = Path(__file__).resolve().parents[1] / "bench" / "reuse_floor.py"
@@ -553,6 +553,13 @@ def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(mo
     assert spec and spec.loader
     floor = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(floor)
+    return floor
+
+
+def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench/reuse_floor.py --sweep: one frame in k with the network's curve, k - 1 with the carried one;
+    one threshold for both is the diagonal of the pairs, and the best pair is never worse."""
+    floor = _reuse_floor(monkeypatch)
     fresh = np.array([[0.00, 0.02, 0.06], [0.10, 0.30, 0.50]])  # failing share, work saved per threshold
     carried = np.array([[0.01, 0.04, 0.10], [0.10, 0.30, 0.50]])
     fail, saved = floor.mix_curves(fresh, carried, 4)
@@ -570,8 +577,6 @@ def test_reuse_floor_splits_a_checkpoint_at_its_tile_resolution_contrast(tmp_pat
     """bench/reuse_floor.py --model CHECKPOINT.pt: for a fast network whose block contrast joins at tile
     resolution, the tail on the trunk's own features of the same frame is the whole network (so a
     carried trunk row differs from k = 1 only by what the carry changes); other networks do not split."""
-    import importlib.util
-
     import torch
 
     from rtp.train import checkpoint
@@ -579,12 +584,7 @@ def test_reuse_floor_splits_a_checkpoint_at_its_tile_resolution_contrast(tmp_pat
 
     from .conftest import base_metadata
 
-    path = Path(__file__).resolve().parents[1] / "bench" / "reuse_floor.py"
-    monkeypatch.syspath_prepend(str(path.parent))
-    spec = importlib.util.spec_from_file_location("bench_reuse_floor", path)
-    assert spec and spec.loader
-    floor = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(floor)
+    floor = _reuse_floor(monkeypatch)
     inputs = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular"]
     meta = base_metadata(inputs=inputs)
     rng = np.random.default_rng(0)
