@@ -87,14 +87,13 @@ class CheckpointModel:
 
     def trunk(self, x: np.ndarray) -> np.ndarray:
         with self.torch.no_grad():
-            return self.net.layers[:self.net._contrast_at](self.torch.from_numpy(x[None])).numpy()[0]
+            return self.net.trunk(self.torch.from_numpy(x[None])).numpy()[0]
 
     def tail(self, features: np.ndarray, x: np.ndarray) -> np.ndarray:
-        t, net = self.torch, self.net
+        t = self.torch
         with t.no_grad():
-            fresh = net.contrast_bn(net.contrast(t.from_numpy(x[None])))
-            h = t.cat([t.from_numpy(np.ascontiguousarray(features[None], np.float32)), fresh], dim=1)
-            return self._decode(net.layers[net._contrast_at:](h).numpy())
+            f = t.from_numpy(np.ascontiguousarray(features[None], np.float32))
+            return self._decode(self.net.tail(f, t.from_numpy(x[None])).numpy())
 
 
 def main() -> None:

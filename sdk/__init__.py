@@ -14,6 +14,7 @@ import logging
 from . import adapters, files
 from ._channels import (
     BLOCK_CELL,
+    BLOCK_EPS,
     BLOCK_RATES,
     CHANNELS,
     DEFAULT_INPUTS,
@@ -87,6 +88,7 @@ def __getattr__(name: str) -> str:
 __all__ = [
     "ALL_RATES",
     "BLOCK_CELL",
+    "BLOCK_EPS",
     "BLOCK_RATES",
     "CHANNELS",
     "DEFAULT_EXTRAPOLATION_K",

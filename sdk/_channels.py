@@ -16,7 +16,7 @@ import numpy as np
 from ._errors import InputShapeError, NonFiniteInputError
 from ._rates import ALL_RATES, rate_size
 
-__all__ = ["BLOCK_CELL", "BLOCK_RATES", "CHANNELS", "DEFAULT_INPUTS", "Channel", "block_variances", "depth_edges",
+__all__ = ["BLOCK_CELL", "BLOCK_EPS", "BLOCK_RATES", "CHANNELS", "DEFAULT_INPUTS", "Channel", "block_variances", "depth_edges",
            "pixel_differences"]
 
 

@@ -16,6 +16,7 @@ def test_sdk_all_is_pinned() -> None:
     assert sdk.__all__ == [
         "ALL_RATES",
         "BLOCK_CELL",
+        "BLOCK_EPS",
         "BLOCK_RATES",
         "CHANNELS",
         "DEFAULT_EXTRAPOLATION_K",

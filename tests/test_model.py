@@ -305,6 +305,46 @@ def test_block_contrast_of_a_large_cell_adds_its_worst_4x4_cell_with_tile_max() 
             FastNet(7, **{"block_contrast": (0,), "contrast_cell": 16, "contrast_max": True, **bad})
 
 
+@pytest.mark.parametrize("cell", [4, 16])
+def test_stored_block_contrast_reads_the_blocks_planes_as_the_computed_contrast(cell: int) -> None:
+    """``.blocks`` planes (``sdk.block_variances``) read by ``StoredBlockContrast`` give what
+    ``BlockContrast`` computes from the luma planes, means and worst cells alike."""
+    from rtp.train.model import BlockContrast, StoredBlockContrast
+
+    rng = np.random.default_rng(cell)
+    luma = rng.uniform(0, 1, (2, 32, 48)).astype(np.float32)
+    luma[0, :16, :16] = 0.5  # a flat tile: the variance floor
+    blocks = np.stack([sdk.block_variances(p) for p in luma])
+    x = torch.from_numpy(np.concatenate([luma, blocks])[None])
+    want = BlockContrast((0, 1), 4, cell, tile_max=cell > 4)(x)
+    got = StoredBlockContrast((2, 3), 4, cell, tile_max=cell > 4)(x)
+    assert got.shape == want.shape == (1, 2 * 6 * (2 if cell > 4 else 1), 32 // cell, 48 // cell)
+    torch.testing.assert_close(got, want, rtol=1e-4, atol=2e-4)
+
+
+def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports() -> None:
+    """``contrast_stored``: the stem never reads the .blocks planes (the trunk ignores them), the tail
+    on the trunk's own features is the whole network, and it exports."""
+    from rtp.train.model import FastNet, StoredBlockContrast
+
+    net = FastNet(9, head_width=16, block_contrast=(7, 8), contrast_cell=16, contrast_max=True,
+                  contrast_stored=True).eval()
+    assert isinstance(net.contrast, StoredBlockContrast) and net.trunk_channels == 7
+    assert net.config["contrast_stored"] is True
+    x = torch.rand(1, 9, 32, 48)
+    y = x.clone()
+    y[:, 7:] = torch.rand(1, 2, 32, 48)  # other .blocks planes
+    with torch.inference_mode():
+        torch.testing.assert_close(net.trunk(x), net.trunk(y))
+        torch.testing.assert_close(net.tail(net.trunk(x), x), net(x))
+        assert not torch.allclose(net(x), net(y))
+    with pytest.raises(ValueError, match="last input channels"):
+        FastNet(9, block_contrast=(0, 8), contrast_cell=16, contrast_stored=True)
+    _round_trip(net, "contrast_stored", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
+                                                              "roughness", "metallic", "specular",
+                                                              "reprojected.y.blocks", "albedo.y.blocks"]), seed=6)
+
+
 def test_the_fast_network_reads_block_contrast_beside_its_stem_and_exports() -> None:
     from rtp.train.model import BlockContrast, FastNet
 

@@ -492,6 +492,12 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.contrast_cell and cfg.contrast_cell not in cells:
         raise sdk.ParameterError(f"contrast_cell: expected 0 (the stem's) or one of {', '.join(map(str, cells))} (the "
                                  f"stem or a pooled resolution up to the tile), got {cfg.contrast_cell}", "contrast_cell")
+    stored = [c for c in cfg.block_contrast if c.endswith(".blocks")]
+    if stored and (len(stored) != len(cfg.block_contrast)
+                   or list(cfg.inputs[len(cfg.inputs) - len(stored):]) != sorted(stored, key=cfg.inputs.index)):
+        raise sdk.ParameterError(f"block_contrast: .blocks planes ({', '.join(stored)}) are read as stored variances, by "
+                                 "the contrast alone: name only .blocks planes, and put them last among the inputs",
+                                 "block_contrast")
     if cfg.contrast_max and (not cfg.block_contrast or (cfg.contrast_cell or min(cfg.stem, cfg.tile)) <= 4):
         raise sdk.ParameterError("contrast_max: only with block_contrast and a contrast_cell over 4 pixels (the worst "
                                  "4x4 cell of each larger one)", "contrast_max")
@@ -556,7 +562,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         head_width=cfg.head_width, context_pool=cfg.context_pool,
                         block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
                         contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
-                        tail_width=cfg.tail_width, contrast_max=cfg.contrast_max)
+                        tail_width=cfg.tail_width, contrast_max=cfg.contrast_max,
+                        contrast_stored=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".blocks"))
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)

@@ -42,10 +42,20 @@ import numpy as np
 import torch
 from torch import nn
 
-from rtp.sdk import ALL_RATES, DEFAULT_INPUTS, DEFAULT_OUTPUTS, DEFAULT_TILE_SIZE, TILE_SIZES, rate_size
+from rtp.sdk import (
+    ALL_RATES,
+    BLOCK_CELL,
+    BLOCK_EPS,
+    BLOCK_RATES,
+    DEFAULT_INPUTS,
+    DEFAULT_OUTPUTS,
+    DEFAULT_TILE_SIZE,
+    TILE_SIZES,
+    rate_size,
+)
 
 __all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network",
-           "build_network", "haar_details", "keep_outputs", "layer_plan"]
+           "StoredBlockContrast", "build_network", "haar_details", "keep_outputs", "layer_plan"]
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
@@ -250,6 +260,51 @@ class BlockContrast(nn.Module):
         return out[0] if len(out) == 1 else torch.cat(out, dim=1)
 
 
+class StoredBlockContrast(nn.Module):
+    """:class:`BlockContrast` read from ``.blocks`` input planes instead of computed from the luma:
+    ``sdk.block_variances`` stores, per 4x4 cell, each rate's ``log(variance + eps)`` rescaled to
+    [0, 1] on one pixel of the cell, so a fixed one-hot 4x4 read with stride 4 picks the six values,
+    and undoing the rescale gives ``variance + eps``; a larger ``cell`` takes their mean (and with
+    ``tile_max`` their maximum) over its 4x4 cells, then the log, as :class:`BlockContrast` does.
+    The adapters build the planes (on the GPU in the moderngl adapter), so the network pays only for
+    the read: what makes a split network (the contrast at tile resolution) as cheap as one that
+    reads the planes with its stem."""
+
+    pick: torch.Tensor
+
+    def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, tile_max: bool = False) -> None:
+        super().__init__()
+        if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
+            raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
+                             f"{list(planes)}")
+        if cell % BLOCK_CELL:
+            raise ValueError(f"block_contrast from .blocks planes: the cell must be a multiple of {BLOCK_CELL}, got {cell}")
+        self.planes = tuple(int(i) for i in planes)
+        self.rates = tuple(BLOCK_RATES)
+        pick = torch.zeros(len(self.rates), 1, BLOCK_CELL, BLOCK_CELL)
+        for k in range(len(self.rates)):  # rate k on the cell's k-th pixel in raster order
+            pick[k, 0, k // BLOCK_CELL, k % BLOCK_CELL] = 1.0
+        self.register_buffer("pick", pick, persistent=False)
+        self.scale = -math.log(BLOCK_EPS)
+        self.cell, self.pool = cell, cell // BLOCK_CELL
+        self.tile_max = bool(tile_max and self.pool > 1)
+        self.in_channels = in_channels
+        self.channels = len(self.planes) * len(self.rates) * (2 if self.tile_max else 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        out = []
+        for p in self.planes:
+            stored = nn.functional.conv2d(x[:, p:p + 1], self.pick, stride=BLOCK_CELL)
+            if self.pool == 1:
+                out.append((stored - 1.0) * self.scale)  # log(variance + eps)
+                continue
+            v = torch.exp((stored - 1.0) * self.scale)  # variance + eps
+            out.append(torch.log(nn.functional.avg_pool2d(v, self.pool)))
+            if self.tile_max:
+                out.append(torch.log(nn.functional.max_pool2d(v, self.pool)))
+        return out[0] if len(out) == 1 else torch.cat(out, dim=1)
+
+
 class FastNet(nn.Module):
     """rtp's fast network: a strided stem, then conv -> BatchNorm -> ReLU blocks at low resolution.
 
@@ -308,7 +363,8 @@ class FastNet(nn.Module):
                  stem_layers: int = 1, energy_norm: bool = False, max_width: int = 0,
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
                  block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0,
-                 separable_tail: bool = False, tail_width: int = 0, contrast_max: bool = False) -> None:
+                 separable_tail: bool = False, tail_width: int = 0, contrast_max: bool = False,
+                 contrast_stored: bool = False) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -361,21 +417,33 @@ class FastNet(nn.Module):
         if contrast_max and (not block_contrast or cell <= 4):
             raise ValueError(f"contrast_max adds the worst 4x4 cell of a larger contrast cell: expected block_contrast "
                              f"and a contrast_cell over 4, got {cell}")
-        self.contrast = (BlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
-                         if block_contrast else None)
+        if contrast_stored and (not block_contrast or sorted(block_contrast) != list(
+                range(in_channels - len(block_contrast), in_channels))):
+            raise ValueError(f"contrast_stored reads the block contrast from .blocks planes that only it reads: "
+                             f"expected block_contrast to be the last input channels, got {list(block_contrast)} of "
+                             f"{in_channels}")
+        self.contrast: BlockContrast | StoredBlockContrast | None = None
+        if block_contrast and contrast_stored:
+            self.contrast = StoredBlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
+        elif block_contrast:
+            self.contrast = BlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
+        #: the input channels the stem reads (all but stored .blocks planes, which only the contrast reads)
+        self.trunk_channels = in_channels - (len(block_contrast) if contrast_stored else 0)
         if self.contrast is not None:  # likewise
             self.config["block_contrast"] = list(self.contrast.planes)
             if contrast_cell and contrast_cell != s:
                 self.config["contrast_cell"] = contrast_cell
             if contrast_max:
                 self.config["contrast_max"] = True
+            if contrast_stored:
+                self.config["contrast_stored"] = True
         layers: list[nn.Module] = []
         if stem_layers == 2:
             mid = max(width // 2, 1)
-            layers += [nn.Conv2d(in_channels, mid, s // 2, stride=s // 2, bias=False), nn.BatchNorm2d(mid),
+            layers += [nn.Conv2d(self.trunk_channels, mid, s // 2, stride=s // 2, bias=False), nn.BatchNorm2d(mid),
                        nn.ReLU(inplace=True), nn.Conv2d(mid, width, 2, stride=2, bias=False)]
         else:
-            layers.append(nn.Conv2d(in_channels, width, s, stride=s, bias=False))
+            layers.append(nn.Conv2d(self.trunk_channels, width, s, stride=s, bias=False))
         layers += [nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
         c = width
         self._contrast_at = len(layers)
@@ -429,12 +497,23 @@ class FastNet(nn.Module):
         cell = self.contrast.cell if self.contrast is not None else 0  # its strided read takes whole cells
         return max(min(int(self.config["stem"]), self.tile), cell)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def trunk(self, x: torch.Tensor) -> torch.Tensor:
+        """The features before the block contrast joins (the whole network's output without one)."""
+        if self.trunk_channels < self.config["in_channels"]:  # the .blocks planes only the contrast reads
+            x = x[:, :self.trunk_channels]
+        return self.layers(x) if self.contrast is None else self.layers[:self._contrast_at](x)
+
+    def tail(self, features: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """The outputs from :meth:`trunk`'s features (of this frame, or carried from an earlier one)
+        and the block contrast of ``x``."""
         if self.contrast is None:
-            return self.layers(x)
-        h = self.layers[:self._contrast_at](x)
-        h = torch.cat([h, self.contrast_bn(self.contrast(x))], dim=1)
+            raise ValueError("a network without block contrast does not split: its trunk is the whole network")
+        h = torch.cat([features, self.contrast_bn(self.contrast(x))], dim=1)
         return self.layers[self._contrast_at:](h)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = self.trunk(x)
+        return h if self.contrast is None else self.tail(h, x)
 
 
 #: A network rtp trains and exports.
@@ -449,17 +528,17 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
                   head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
                   contrast_cell: int = 0, separable_tail: bool = False, tail_width: int = 0,
-                  contrast_max: bool = False) -> Network:
+                  contrast_max: bool = False, contrast_stored: bool = False) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
     ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast``, ``contrast_cell``
-    and ``contrast_max`` to the fast one."""
+    ``contrast_max`` and ``contrast_stored`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
                        separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width,
-                       contrast_max)
+                       contrast_max, contrast_stored)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
 
 
