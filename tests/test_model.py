@@ -340,6 +340,16 @@ def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports()
         assert not torch.allclose(net(x), net(y))
     with pytest.raises(ValueError, match="last input channels"):
         FastNet(9, block_contrast=(0, 8), contrast_cell=16, contrast_stored=True)
+    # frames need only be multiples of 4: the partial last tile pools the cells it has, in the trunk and the
+    # contrast alike (a 1080-row frame is not padded to 1088)
+    assert net.input_multiple == 4
+    with torch.inference_mode():
+        z = torch.rand(1, 9, 36, 52)
+        assert net(z).shape == (1, 4, 3, 4) and torch.isfinite(net(z)).all()
+        c = net.contrast(z)  # the corner tile holds one 4x4 cell: its mean and its maximum are that cell's
+        cell = (z[0, 7, 32:36, 48:52].reshape(-1)[:6] - 1.0) * net.contrast.scale
+        torch.testing.assert_close(c[0, :6, 2, 3], cell, rtol=1e-4, atol=1e-4)
+        torch.testing.assert_close(c[0, 6:12, 2, 3], cell, rtol=1e-4, atol=1e-4)
     _round_trip(net, "contrast_stored", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
                                                               "roughness", "metallic", "specular",
                                                               "reprojected.y.blocks", "albedo.y.blocks"]), seed=6)

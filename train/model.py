@@ -299,9 +299,11 @@ class StoredBlockContrast(nn.Module):
                 out.append((stored - 1.0) * self.scale)  # log(variance + eps)
                 continue
             v = torch.exp((stored - 1.0) * self.scale)  # variance + eps
-            out.append(torch.log(nn.functional.avg_pool2d(v, self.pool)))
+            # ceil mode: a partial last cell of a frame of any multiple of 4 pools the 4x4 cells it has
+            # (as the trunk's max-pools do), so frames need not be padded to whole cells
+            out.append(torch.log(nn.functional.avg_pool2d(v, self.pool, ceil_mode=True)))
             if self.tile_max:
-                out.append(torch.log(nn.functional.max_pool2d(v, self.pool)))
+                out.append(torch.log(nn.functional.max_pool2d(v, self.pool, ceil_mode=True)))
         return out[0] if len(out) == 1 else torch.cat(out, dim=1)
 
 
@@ -494,7 +496,10 @@ class FastNet(nn.Module):
     def input_multiple(self) -> int:
         """Frames need only be a multiple of the stem's stride (metadata ``input_multiple``): the
         runtime pads a 1920x1080 frame not at all where whole 16-pixel tiles would need 1088 rows."""
-        cell = self.contrast.cell if self.contrast is not None else 0  # its strided read takes whole cells
+        # a computed contrast's strided read takes whole cells; a stored one reads 4x4 cells and pools them
+        # in ceil mode
+        cell = 0 if self.contrast is None else BLOCK_CELL if isinstance(self.contrast, StoredBlockContrast) \
+            else self.contrast.cell
         return max(min(int(self.config["stem"]), self.tile), cell)
 
     def trunk(self, x: torch.Tensor) -> torch.Tensor:
