@@ -107,7 +107,7 @@ def _fast_options(text: str) -> dict[str, Any]:
     from rtp.train.model import build_network
 
     allowed = [k for k, v in inspect.signature(build_network).parameters.items()
-               if v.kind is inspect.Parameter.KEYWORD_ONLY and k not in ("head", "block_contrast")]
+               if v.kind is inspect.Parameter.KEYWORD_ONLY and k != "head"]
     out: dict[str, Any] = {}
     for item in filter(None, (t.strip() for t in text.split(","))):
         key, sep, value = item.partition("=")
@@ -115,7 +115,13 @@ def _fast_options(text: str) -> dict[str, Any]:
         if not sep or key not in allowed:
             raise argparse.ArgumentTypeError(f"expected KEY=VALUE pairs with KEY one of {', '.join(allowed)}, got {item!r}")
         v = value.strip().lower()
-        if v in ("true", "false"):
+        if key == "block_contrast":  # input channel indices joined by '+': block_contrast=7+8
+            try:
+                out[key] = tuple(int(t) for t in v.split("+"))
+            except ValueError as err:
+                raise argparse.ArgumentTypeError(f"block_contrast: expected channel indices joined by '+', got "
+                                                 f"{value!r}") from err
+        elif v in ("true", "false"):
             out[key] = v == "true"
         else:
             try:

@@ -21,7 +21,8 @@ estimates with those carried from the previous frame, weight W on the carried on
 runs the network early once more than a share S of the tiles is unseen since it ran; ``NAME@k:sN``
 carries one pixel of every N per axis; ``NAME@k:vA`` rescales carried estimates by the blocks'
 variance, ``sdk.PredictionReuse(rescale=A)``; ``NAME@k:cF`` multiplies carried estimates by F,
-``sdk.PredictionReuse(carry_scale=F)``), ``yang2019``
+``sdk.PredictionReuse(carry_scale=F)``; ``NAME@k:features`` carries a splitting model's trunk features
+and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -48,6 +49,7 @@ __all__ = [
     "MethodSpec",
     "PlayError",
     "PlayReport",
+    "REUSE_CARRIES",
     "REUSE_REDUCTIONS",
     "REUSE_UNSEEN",
     "parse_methods",
@@ -60,6 +62,8 @@ __all__ = [
 #: :class:`~rtp.sdk.PredictionReuse` options, which the closed loop runs.
 REUSE_REDUCTIONS = sdk.REUSE_REDUCTIONS
 REUSE_UNSEEN = sdk.REUSE_UNSEEN
+#: What a reused frame carries (``NAME@k:features``): the SDK's.
+REUSE_CARRIES = sdk.REUSE_CARRIES
 
 #: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
 FAIL_LEVELS = (0.01, 0.02, 0.05)
@@ -120,6 +124,7 @@ class MethodSpec:
     step: int | None = None
     rescale: float = 0.0
     carry_scale: float = 1.0
+    carry: str = "estimates"
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
@@ -127,8 +132,9 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     model (a shipped name or an ``.onnx`` path), optionally ``@k`` for prediction reuse, then
     ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
     weight W), ``:rS`` (refresh share S), ``:sN`` (the carry keeps one pixel of N per axis), ``:vA``
-    (carried estimates rescaled by the blocks' variance to the power A) and ``:cF`` (carried estimates
-    multiplied by F) in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``)."""
+    (carried estimates rescaled by the blocks' variance to the power A), ``:cF`` (carried estimates
+    multiplied by F) and ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features)
+    in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``, ``split.onnx@4:features``)."""
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
@@ -147,20 +153,23 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         refresh = [_share(o, item, "refresh share") for o in options if o[:1] == "r"]
         step = [_step(o, item) for o in options if o[:1] == "s"]
         rescale = [_exponent(o, item) for o in options if o[:1] == "v"]
-        scale = [_carry_scale(o, item) for o in options if o[:1] == "c"]
+        carry = [o for o in options if o in REUSE_CARRIES]
+        scale = [_carry_scale(o, item) for o in options if o[:1] == "c" and o not in REUSE_CARRIES]
         if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
-                or len(rescale) > 1 or len(scale) > 1
+                or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1
                 or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) + len(scale)
-                != len(options)):
+                + len(carry) != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
                             f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
                             "refresh share (both in [0, 1)), one ':sN' pixel step, one ':vA' rescale exponent and "
-                            "one ':cF' carry scale, e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, "
-                            "jnyang@4:s4, jnyang@4:v0.5 or jnyang@4:c1.08")
+                            f"one ':cF' carry scale and one ':carry' ({', '.join(REUSE_CARRIES)}), e.g. "
+                            "jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, jnyang@4:v0.5, "
+                            "jnyang@4:c1.08 or split.onnx@4:features")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
                               refresh[0] if refresh else None, step[0] if step else None,
-                              rescale[0] if rescale else 0.0, scale[0] if scale else 1.0))
+                              rescale[0] if rescale else 0.0, scale[0] if scale else 1.0,
+                              carry[0] if carry else MethodSpec.carry))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -406,7 +415,8 @@ def play(
         raise PlayError(f"workers: expected >= 1, got {workers}", "workers")
     # each reuse method's pixel step as the carry resolves it (a bad one fails here, before the run)
     steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step, rescale=m.rescale,
-                                         carry_scale=m.carry_scale).step
+                                         carry_scale=m.carry_scale, carry=m.carry, reduce=m.reduce,
+                                         history=m.history).step
              for m in specs if m.kind == "model"}
     settings = {"scene": scene, "methods": [m.name for m in specs], "paths": list(paths), "frames": frames, "fps": fps,
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
@@ -419,7 +429,7 @@ def play(
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
                                    "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale,
-                                   "carry_scale": m.carry_scale}
+                                   "carry_scale": m.carry_scale, "carry": m.carry}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
@@ -529,7 +539,7 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
                 decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh,
-                                m.step, m.rescale, m.carry_scale)
+                                m.step, m.rescale, m.carry_scale, m.carry)
                 loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
@@ -583,11 +593,12 @@ def model_inputs(pf: Any, rp: np.ndarray, channels: Sequence[str], ys: slice, xs
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
            refresh: float | None = None, step: int | None = None, rescale: float = 0.0,
-           carry_scale: float = 1.0) -> Callable[..., np.ndarray]:
+           carry_scale: float = 1.0, carries: str = "estimates") -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction,
-                                history=history, refresh=refresh, step=step, rescale=rescale, carry_scale=carry_scale)
+                                history=history, refresh=refresh, step=step, rescale=rescale, carry_scale=carry_scale,
+                                carry=carries)
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None

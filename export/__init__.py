@@ -8,6 +8,7 @@ from ._export import (
     add_finite_probe,
     adopt,
     export_checkpoint,
+    merge_slices,
     restamp,
     strip_finite_probe,
     write_metadata,
@@ -15,4 +16,4 @@ from ._export import (
 from ._published import PublishedModel, identify, published_models
 
 __all__ = ["DEFAULT_OPSET", "PROBE_NODES", "ExportError", "PublishedModel", "add_finite_probe", "adopt",
-           "export_checkpoint", "identify", "published_models", "restamp", "strip_finite_probe", "write_metadata"]
+           "export_checkpoint", "identify", "merge_slices", "published_models", "restamp", "strip_finite_probe", "write_metadata"]

@@ -13,6 +13,7 @@ passed (atomic rename).
 
 from __future__ import annotations
 
+import base64
 import dataclasses
 import datetime as _dt
 import logging
@@ -39,7 +40,7 @@ from rtp.sdk.files import atomic_output
 from ._published import file_sha256, identify
 
 __all__ = ["DEFAULT_OPSET", "PROBE_NODES", "ExportError", "add_finite_probe", "adopt", "export_checkpoint", "restamp",
-           "strip_finite_probe", "write_metadata"]
+           "merge_slices", "strip_finite_probe", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -130,8 +131,10 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     inputs = [i for i in graph.input if i.name not in init]
     if len(inputs) != 1:
         return None
-    consumers = [n for n in graph.node if inputs[0].name in n.input]
-    if len(consumers) != 1 or consumers[0].op_type != "Conv" or consumers[0].input[0] != inputs[0].name:
+    # one convolution reads the frame (other nodes may read it too: a split network's slices of its .blocks
+    # planes; the stem sees those planes as well, with weights held at zero, and 0 x NaN is NaN)
+    consumers = [n for n in graph.node if n.op_type == "Conv" and inputs[0].name in n.input]
+    if len(consumers) != 1 or consumers[0].input[0] != inputs[0].name:
         return None
     conv = consumers[0]
     attrs = {a.name: helper.get_attribute_value(a) for a in conv.attribute}
@@ -156,6 +159,67 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     graph.node.append(helper.make_node("ReduceSum", [mean], [PROBE_NAME], keepdims=0, name=PROBE_NODES[1]))
     graph.output.append(helper.make_tensor_value_info(PROBE_NAME, onnx.TensorProto.FLOAT, []))
     return PROBE_NAME
+
+
+def merge_slices(model: Any) -> int:
+    """Merge each chain of ONNX ``Slice`` nodes with constant parameters on distinct axes into one
+    ``Slice`` of the chain's first input, in place; returns how many were merged away. The TorchScript
+    exporter writes ``x[:, 7:8, 0::4, 1::4]`` as three slices, and onnxruntime runs each as a copy: the
+    first of two full-resolution planes, where the merged one reads only the pixels it keeps (a split
+    network's stored block contrast, :class:`rtp.train.model.StoredBlockContrast`)."""
+    from onnx import helper, numpy_helper
+
+    graph = model.graph
+    consts: dict[str, np.ndarray] = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
+    for n in graph.node:
+        if n.op_type == "Constant" and n.attribute and n.attribute[0].name == "value":
+            consts[n.output[0]] = numpy_helper.to_array(n.attribute[0].t)
+    producer = {o: n for n in graph.node for o in n.output}
+    outputs = {o.name for o in graph.output}
+
+    def params(node: Any) -> list[np.ndarray] | None:
+        names = list(node.input[1:]) + [""] * (5 - len(node.input))
+        if any(name and name not in consts for name in names[:2]) or (names[2] and names[2] not in consts) \
+                or (names[3] and names[3] not in consts):
+            return None
+        starts, ends = consts[names[0]].astype(np.int64), consts[names[1]].astype(np.int64)
+        axes = consts[names[2]].astype(np.int64) if names[2] else np.arange(len(starts), dtype=np.int64)
+        steps = consts[names[3]].astype(np.int64) if names[3] else np.ones(len(starts), dtype=np.int64)
+        return None if (axes < 0).any() else [starts, ends, axes, steps]
+
+    merged = 0
+    for node in list(graph.node):
+        if node.op_type != "Slice":
+            continue
+        first = producer.get(node.input[0])
+        if first is None or first.op_type != "Slice" or first.output[0] in outputs:
+            continue
+        a, b = params(first), params(node)
+        if a is None or b is None or set(a[2].tolist()) & set(b[2].tolist()):
+            continue
+        name = node.name or node.output[0]
+        tensors = []
+        for i, label in enumerate(("starts", "ends", "axes", "steps")):
+            t = numpy_helper.from_array(np.concatenate([a[i], b[i]]), f"{name}_merged_{label}")
+            graph.initializer.append(t)
+            consts[t.name] = numpy_helper.to_array(t)
+            tensors.append(t.name)
+        new = helper.make_node("Slice", [first.input[0], *tensors], list(node.output), name=name)
+        graph.node.insert(list(graph.node).index(node), new)
+        graph.node.remove(node)
+        producer[node.output[0]] = new
+        merged += 1
+    # slices no node reads any more (every reader now reads their input)
+    read = {i for n in graph.node for i in n.input} | outputs
+    for node in [n for n in graph.node if n.op_type == "Slice" and n.output[0] not in read]:
+        graph.node.remove(node)
+    # and the constants only they read (onnxruntime warns of unused initializers)
+    read = {i for n in graph.node for i in n.input}
+    for node in [n for n in graph.node if n.op_type == "Constant" and n.output[0] not in read]:
+        graph.node.remove(node)
+    for init in [i for i in graph.initializer if i.name not in read]:
+        graph.initializer.remove(init)
+    return merged
 
 
 def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:
@@ -275,18 +339,25 @@ def export_checkpoint(
     c, t = net.config["in_channels"], net.config["tile"]
     h, w = _parity_sizes(t)[0]
     dummy = torch.rand(1, c, h, w, generator=torch.Generator().manual_seed(0))
+    split = bool(net.config.get("contrast_stored"))  # a trunk to carry across frames and a tail: two graphs
     t0 = time.perf_counter()
     with atomic_output(out) as tmp:
         try:
-            _torch_export(net, dummy, tmp, opset)
+            _torch_export(_with_features(net) if split else net, (dummy,), tmp, opset, split=split)
         except Exception as err:
             raise ExportError(f"torch.onnx.export failed: {err}") from err
         model = onnx.load(str(tmp))
+        merge_slices(model)
         model.producer_name = "rtp-export"
         model.producer_version = str(sdk.__version__)
         model.doc_string = meta.description or f"rtp {meta.metric} predictor, {t}x{t} tiles"
         if finite_probe:
             meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
+        if split:
+            tail = _tail_model(net, dummy, Path(str(tmp) + ".tail"), opset)
+            onnx.helper.set_model_props(model, {**{p.key: p.value for p in model.metadata_props},
+                                                sdk.TAIL_KEY: base64.b64encode(tail).decode("ascii")})
+            meta = dataclasses.replace(meta, tail=sdk.model_digest(tail))
         write_metadata(model, meta)  # the last change to the model
         _check_and_save(model, tmp)
         _torch_parity(tmp, net, meta)
@@ -294,22 +365,84 @@ def export_checkpoint(
     return out
 
 
-def _torch_export(net: Any, dummy: Any, path: Path, opset: int) -> None:
+def _with_features(net: Any) -> Any:
+    """A splitting network (``FastNet`` with ``contrast_stored``) as a module whose graph also outputs the
+    trunk's features (``sdk.FEATURES_NAME``)."""
     import torch
+
+    class WithFeatures(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.net = net
+
+        def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            h = self.net.trunk(x)
+            return self.net.tail(h, x), h
+
+    return WithFeatures().eval()
+
+
+def _tail_model(net: Any, dummy: Any, path: Path, opset: int) -> bytes:
+    """The serialized ONNX tail of a splitting network: ``(features, input) -> metric``, its slices merged."""
+    import onnx
+    import torch
+
+    from rtp import sdk
+
+    class Tail(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.net = net
+
+        def forward(self, features: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+            return self.net.tail(features, x)
+
+    with torch.inference_mode():
+        features = net.trunk(dummy)
+    try:
+        _torch_export(Tail().eval(), (features, dummy), path, opset, tail=True)
+        model = onnx.load(str(path))
+    except Exception as err:
+        raise ExportError(f"torch.onnx.export failed on the tail: {err}") from err
+    finally:
+        path.unlink(missing_ok=True)
+    merge_slices(model)
+    model.producer_name = "rtp-export"
+    model.producer_version = str(sdk.__version__)
+    model.doc_string = "rtp split network: the tail (trunk features and a frame -> per-tile outputs)"
+    try:
+        onnx.checker.check_model(model, full_check=True)
+    except Exception as err:
+        raise ExportError(f"the ONNX checker rejected the tail: {err}") from err
+    return bytes(model.SerializeToString())
+
+
+def _torch_export(net: Any, args: tuple[Any, ...], path: Path, opset: int, *, split: bool = False,
+                  tail: bool = False) -> None:
+    """torch.onnx.export with rtp's names: ``input`` -> ``metric`` (``split``: and ``features``; ``tail``:
+    ``features``, ``input`` -> ``metric``)."""
+    import torch
+
+    from rtp import sdk
 
     with warnings.catch_warnings():
         # The TorchScript exporter is chosen on purpose (fast, no onnxscript dependency, the same
         # graph for this network); its deprecation notice is not addressed to our users.
         warnings.filterwarnings("ignore", category=DeprecationWarning)
+        # strided slices (a split network's stored block contrast) are not folded, and need not be: they read
+        # the input, and merge_slices merges them
+        warnings.filterwarnings("ignore", message="Constant folding - Only steps=1")
+        tiles = {0: "batch", 2: "tiles_y", 3: "tiles_x"}
         torch.onnx.export(
             net,
-            (dummy,),
+            args,
             str(path),
-            input_names=[INPUT_NAME],
-            output_names=[OUTPUT_NAME],
+            input_names=[sdk.FEATURES_NAME, INPUT_NAME] if tail else [INPUT_NAME],
+            output_names=[OUTPUT_NAME, sdk.FEATURES_NAME] if split else [OUTPUT_NAME],
             dynamic_axes={
                 INPUT_NAME: {0: "batch", 2: "height", 3: "width"},
-                OUTPUT_NAME: {0: "batch", 2: "tiles_y", 3: "tiles_x"},
+                OUTPUT_NAME: tiles,
+                **({sdk.FEATURES_NAME: tiles} if split or tail else {}),
             },
             opset_version=opset,
             do_constant_folding=True,
@@ -346,6 +479,18 @@ def _torch_parity(path: Path, net: Any, meta: ModelMetadata) -> None:
                 f"onnxruntime and torch disagree at {w}x{h}: max abs difference {err:.3g} > {PARITY_TOLERANCE}"
             )
         log.info("parity at %dx%d: max abs difference %.2g", w, h, err)
+        if pred.splits:  # the trunk's features, and the tail on them and on another frame's
+            with torch.inference_mode():
+                feats = [net.trunk(x[i:i + 1]) for i in range(2)]
+                want = [net.tail(feats[1], x[:1]).numpy()[0], feats[0].numpy()[0]]
+            est, got_feats = pred.predict_split(x[0].numpy())
+            carried = pred.predict_tail(np.ascontiguousarray(feats[1].numpy()[0]), x[0].numpy())
+            for name, a, b in (("features", got_feats, want[1]), ("tail", carried, meta.decode(want[0])),
+                               ("split", est, meta.decode(ref[0]))):
+                err = float(np.max(np.abs(a - b)))
+                if not err <= PARITY_TOLERANCE:
+                    raise ExportError(f"onnxruntime and torch disagree on the {name} at {w}x{h}: max abs difference "
+                                      f"{err:.3g} > {PARITY_TOLERANCE}")
 
 
 def _dims(value_info: Any) -> list[int | str]:

@@ -43,7 +43,7 @@ from ._errors import (
     RtpError,
     exit_code,
 )
-from ._metadata import METADATA_KEY, SCHEMA_VERSION, ModelMetadata
+from ._metadata import FEATURES_NAME, METADATA_KEY, SCHEMA_VERSION, TAIL_KEY, ModelMetadata
 from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
 from ._predictor import ShadingRatePredictor, load, shipped_models
@@ -59,7 +59,7 @@ from ._rates import (
     work_saved,
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
-from ._reuse import MAX_CARRY_SCALE, MAX_RESCALE, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
+from ._reuse import MAX_CARRY_SCALE, MAX_RESCALE, REUSE_CARRIES, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
 from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, tile_extents, tile_grid
 from ._transforms import (
     DEFAULT_EXTRAPOLATION_K,
@@ -98,6 +98,7 @@ __all__ = [
     "DEFAULT_TILE_SIZE",
     "EXIT_FAILED",
     "EXIT_USAGE",
+    "FEATURES_NAME",
     "LOGIT_EPS",
     "LUMA_WEIGHTS",
     "MAX_CARRY_SCALE",
@@ -109,9 +110,11 @@ __all__ = [
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
+    "REUSE_CARRIES",
     "REUSE_REDUCTIONS",
     "REUSE_UNSEEN",
     "SCHEMA_VERSION",
+    "TAIL_KEY",
     "TARGET_METRICS",
     "TILE_SIZES",
     "Channel",

@@ -28,14 +28,19 @@ from ._rates import MAX_THRESHOLD
 from ._tiles import TILE_SIZES
 from ._transforms import DEFAULT_EXTRAPOLATION_K, MAX_EXTRAPOLATION_K, OUTPUT_SETS, Transform, as_float64, extrapolate
 
-__all__ = ["METADATA_KEY", "SCHEMA_VERSION", "ModelMetadata"]
+__all__ = ["FEATURES_NAME", "METADATA_KEY", "SCHEMA_VERSION", "TAIL_KEY", "ModelMetadata"]
 
 #: The ``metadata_props`` key that holds the JSON metadata.
 METADATA_KEY = "rtp.metadata"
 #: The newest metadata schema this SDK reads (it reads every older one too). Version 2 added
-#: ``input_multiple``, version 3 ``finite_probe``; metadata is written with the lowest version that
-#: holds its fields, so a model without them stays readable by an SDK that knows only version 1.
-SCHEMA_VERSION = 3
+#: ``input_multiple``, version 3 ``finite_probe``, version 4 ``tail``; metadata is written with the
+#: lowest version that holds its fields, so a model without them stays readable by an SDK that knows
+#: only version 1.
+SCHEMA_VERSION = 4
+#: The ``metadata_props`` key of a splitting model's tail graph (``ModelMetadata.tail``), base64.
+TAIL_KEY = "rtp.tail"
+#: The graph output of a splitting model's trunk features (``ModelMetadata.tail``).
+FEATURES_NAME = "features"
 _METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 _OUTPUT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]{0,127}")
 _FIELDS = (
@@ -47,6 +52,7 @@ _FIELDS = (
     "tile_size",
     "input_multiple",
     "finite_probe",
+    "tail",
     "inputs",
     "outputs",
     "extrapolation_k",
@@ -130,13 +136,19 @@ class ModelMetadata:
     #: convolution's output before its activation, which reads every pixel). ``predict`` then checks that scalar instead
     #: of reading the whole frame once more. None: the SDK checks the frame itself.
     finite_probe: str | None = None
+    #: A network that splits (``docs/runtime.md`` "Carrying a split network's features"): the digest
+    #: (``"sha256:<hex>"``, :func:`sdk.model_digest`) of its tail, a second ONNX graph held base64 under
+    #: the ``metadata_props`` key ``rtp.tail``, which maps the trunk's per-tile features (the model's
+    #: output ``features``) and a frame to the outputs. None: the model does not split.
+    tail: str | None = None
     schema_version: int = 1
     #: ``"sha256:<hex>"`` of the graph and weights (``rtp-export`` writes it; ``sdk.load`` checks it), or None.
     digest: str | None = None
 
     def __post_init__(self) -> None:
         # the lowest schema that holds the fields (see SCHEMA_VERSION)
-        version = 3 if self.finite_probe is not None else 1 if self.input_multiple is None else 2
+        version = (4 if self.tail is not None else 3 if self.finite_probe is not None
+                   else 1 if self.input_multiple is None else 2)
         object.__setattr__(self, "schema_version", version)
 
     # -- parsing ------------------------------------------------------------------------------
@@ -247,6 +259,11 @@ class ModelMetadata:
         k = _number(d, "extrapolation_k", default=DEFAULT_EXTRAPOLATION_K, minimum=1.0, maximum=MAX_EXTRAPOLATION_K)
         # an error metric's threshold is an error: never negative; PSNR's is any finite dB value
         threshold = _number(d, "default_threshold", minimum=-MAX_THRESHOLD if hib else 0.0, maximum=MAX_THRESHOLD)
+        tail = d.get("tail")
+        if tail is not None and (not isinstance(tail, str) or not DIGEST_RE.fullmatch(tail)):
+            raise MetadataError(f"tail: expected the digest of the tail graph ('sha256:' and 64 hex digits) or null, got "
+                                f"{reprlib.repr(tail)}", "tail")
+
         digest = d.get("digest")
         if digest is not None and (not isinstance(digest, str) or not DIGEST_RE.fullmatch(digest)):
             raise MetadataError(f"digest: expected 'sha256:' and 64 hex digits, got {digest!r}", "digest")
@@ -266,6 +283,7 @@ class ModelMetadata:
             provenance=_freeze(copy.deepcopy(dict(provenance))),
             input_multiple=None if multiple is None else int(multiple),
             finite_probe=probe,
+            tail=tail,
             digest=digest,
         )
 
@@ -311,6 +329,7 @@ class ModelMetadata:
             "tile_size": self.tile_size,
             **({"input_multiple": self.input_multiple} if self.input_multiple is not None else {}),
             **({"finite_probe": self.finite_probe} if self.finite_probe is not None else {}),
+            **({"tail": self.tail} if self.tail is not None else {}),
             "inputs": list(self.inputs),
             "outputs": list(self.outputs),
             "extrapolation_k": self.extrapolation_k,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import base64
+import binascii
 import importlib.util
 import json
 import logging
@@ -28,7 +30,7 @@ from ._errors import (
     ParameterError,
     ProviderUnavailableError,
 )
-from ._metadata import DIGEST_RE, METADATA_KEY, ModelMetadata
+from ._metadata import DIGEST_RE, FEATURES_NAME, METADATA_KEY, TAIL_KEY, ModelMetadata
 from ._rates import PREDICTED_RATES, RateLike, select_rates
 from ._tiles import TILE_SIZES, padded_size, pool_tiles, tile_grid
 
@@ -272,7 +274,29 @@ def load(
             "pass it; lower the threshold or retrain with a larger transform range",
             model_path.name, meta.default_threshold, meta.saturation,
         )
-    return ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite)
+    tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
+    return ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
+                                tail=tail)
+
+
+def _tail_session(ort: Any, props: Mapping[str, str], digest: str, model_path: Path, opts: Any, session: Any) -> Any:
+    """The onnxruntime session of a splitting model's tail (``metadata.tail``), on the main session's providers."""
+    text = props.get(TAIL_KEY)
+    if text is None:
+        raise MetadataError(f"tail: the metadata names a tail graph but {str(model_path)!r} holds no {TAIL_KEY!r} entry",
+                            "tail")
+    try:
+        data = base64.b64decode(text, validate=True)
+        found = model_digest(data)
+    except (binascii.Error, ValueError) as err:
+        raise ModelLoadError(f"{str(model_path)!r}: its tail graph ({TAIL_KEY}) is not base64 ONNX ({err})") from err
+    if found != digest:
+        raise ModelIntegrityError(f"{str(model_path)!r}: its tail graph ({TAIL_KEY}) does not match metadata.tail (digest "
+                             f"{found}, expected {digest}): the file is damaged; export it again")
+    try:
+        return ort.InferenceSession(data, sess_options=opts, providers=session.get_providers())
+    except Exception as err:
+        raise ModelLoadError(f"{str(model_path)!r}: onnxruntime cannot load its tail graph ({err})") from err
 
 
 def _dim(d: Any) -> int | None:
@@ -288,7 +312,7 @@ class ShadingRatePredictor:
 
     def __init__(
         self, session: Any, metadata: ModelMetadata, path: Path | None = None, *, tile_size: int | None = None,
-        assume_finite: bool = False,
+        assume_finite: bool = False, tail: Any = None,
     ) -> None:
         if not isinstance(assume_finite, bool):
             raise ParameterError(f"assume_finite: expected True or False, got {reprlib.repr(assume_finite)}",
@@ -316,9 +340,14 @@ class ShadingRatePredictor:
                 f"{[o.name for o in outputs]}",
                 "finite_probe",
             )
-        outputs = [o for o in outputs if o.name != probe]
+        self._tail = tail
+        if tail is not None and FEATURES_NAME not in [o.name for o in outputs]:
+            raise MetadataError(f"tail: the model splits, but its outputs {[o.name for o in outputs]} hold no "
+                                f"{FEATURES_NAME!r}", "tail")
+        outputs = [o for o in outputs if o.name != probe and not (tail is not None and o.name == FEATURES_NAME)]
         if len(inputs) != 1 or len(outputs) != 1:
             besides = f" besides the finite probe {probe!r}" if probe is not None else ""
+            besides += f" and the features {FEATURES_NAME!r}" if tail is not None else ""
             raise MetadataError(
                 f"expected a model with one input and one output{besides}, got {len(inputs)} inputs and "
                 f"{len(outputs)} outputs"
@@ -531,6 +560,76 @@ class ShadingRatePredictor:
         values = self._meta.decode(self.predict_raw(x))
         factor = self._tile // self._meta.tile_size
         return values if factor == 1 else pool_tiles(values, factor, higher_is_better=self._meta.higher_is_better)
+
+    # -- a network that splits (metadata.tail) ------------------------------------------------------
+    @property
+    def splits(self) -> bool:
+        """Whether the network splits into a trunk and a tail (``metadata.tail``): :meth:`predict_split`
+        and :meth:`predict_tail`, which ``PredictionReuse(carry="features")`` uses."""
+        return self._tail is not None
+
+    def _split_frame(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
+        """One frame's checked and padded input ``(x4, xp)`` for the split methods."""
+        if self._tail is None:
+            raise ParameterError("this model does not split (metadata.tail is null): it has no trunk features to carry; "
+                                 "export a network trained with --block-contrast on .blocks planes", "carry")
+        if isinstance(x, np.ndarray) and x.ndim != 3:
+            c = len(self._meta.inputs)
+            raise InputShapeError(f"expected one frame's inputs ({c}, H, W), got shape {x.shape}", tuple(x.shape),
+                                  f"({c}, H, W)")
+        if self._tile != self._meta.tile_size:
+            raise ParameterError(f"the split methods work on the model's own {self._meta.tile_size}-pixel tiles, not "
+                                 f"pooled {self._tile}-pixel ones: load the model without tile_size", "tile_size")
+        x4 = self._check(x)
+        return x4, self._padded(x4)
+
+    def predict_split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`predict` on one frame ``(C, H, W)``, and the trunk's features that gave it: float32
+        ``(features, ceil(H/w), ceil(W/w))``, what :meth:`predict_tail` takes, on this frame or carried
+        to a later one. One network run (the features are an output of the same graph)."""
+        x4, xp = self._split_frame(x)
+        names = [self._out_name, FEATURES_NAME]
+        if self._probe_name is not None and not self._assume_finite:
+            names.append(self._probe_name)
+        try:
+            outs = self._session.run(names, {self._in_name: xp})
+        except Exception as err:
+            raise InferenceError(f"onnxruntime failed on an input of shape {xp.shape}: {err}") from err
+        if len(outs) > 2 and not bool(np.isfinite(outs[2]).all()):
+            self._exact_check(x4)
+        th, tw = tile_grid(x4.shape[2], x4.shape[3], self._meta.tile_size)
+        raw, feats = outs[0][:, :, :th, :tw], outs[1][0, :, :th, :tw]
+        return self._meta.decode(raw)[0], np.ascontiguousarray(feats, dtype=np.float32)
+
+    def predict_tail(self, features: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """:meth:`predict` of one frame ``(C, H, W)`` from trunk features (:meth:`predict_split`'s, of this
+        frame or carried from an earlier one) and this frame's inputs: the tail alone runs, at tile
+        resolution (it reads only the frame's ``.blocks`` planes). With the frame's own features it
+        gives what :meth:`predict` gives."""
+        x4, xp = self._split_frame(x)
+        th, tw = tile_grid(x4.shape[2], x4.shape[3], self._meta.tile_size)
+        gh, gw = tile_grid(xp.shape[2], xp.shape[3], self._meta.tile_size)
+        if not isinstance(features, np.ndarray) or features.ndim != 3 or features.shape[1:] != (th, tw):
+            got = features.shape if isinstance(features, np.ndarray) else type(features).__name__
+            raise InputShapeError(f"features: expected (channels, {th}, {tw}) for this frame's tiles, got {got}",
+                                  tuple(getattr(features, "shape", ())), f"(C, {th}, {tw})")
+        f = features.astype(np.float32, copy=False)[None]
+        if (gh, gw) != (th, tw):  # a frame padded past its last tile row or column: repeat the last ones
+            f = np.pad(f, ((0, 0), (0, 0), (0, gh - th), (0, gw - tw)), mode="edge")
+        if not self._assume_finite:  # the tail reads the .blocks planes: they alone need the check
+            planes = [i for i, c in enumerate(self._meta.inputs) if c.endswith(".blocks")]
+            read = x4[:, planes[0]:planes[-1] + 1] if planes == list(range(planes[0], planes[-1] + 1)) else x4[:, planes]
+            with np.errstate(over="ignore", invalid="ignore"):
+                if not math.isfinite(float(read.sum())) or not math.isfinite(float(f.sum())):
+                    self._exact_check(x4)
+                    raise NonFiniteInputError("features: expected finite values (the trunk's features), got NaN or "
+                                              "infinite ones")
+        try:
+            raw = self._tail.run([self._out_name], {FEATURES_NAME: f, self._in_name: xp})[0]
+        except Exception as err:
+            raise InferenceError(f"onnxruntime failed on the tail, features {f.shape} and input {xp.shape}: {err}") \
+                from err
+        return self._meta.decode(raw[:, :, :th, :tw])[0]
 
     def shading_rates(
         self,

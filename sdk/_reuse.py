@@ -31,7 +31,7 @@ from ._tiles import padded_size, tile_grid
 if TYPE_CHECKING:
     from ._predictor import ShadingRatePredictor
 
-__all__ = ["MAX_RESCALE", "REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse"]
+__all__ = ["MAX_RESCALE", "REUSE_CARRIES", "REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse"]
 
 #: How a tile of a frame between network runs reduces the estimates its pixels carry. ``mean`` is
 #: the default: on the validation maps it kept 92.7% / 94.7% of k = 1's saving at 2% / 5% failing
@@ -44,6 +44,12 @@ REUSE_REDUCTIONS = {
 
 #: What prediction reuse does with a tile whose surface the network did not see (more than
 #: ``unseen_fraction`` of its pixels unknown).
+#: What a reused frame carries from the frame the network ran on (``PredictionReuse(carry=...)``).
+REUSE_CARRIES = {
+    "estimates": "the network's per-tile estimates (any model)",
+    "features": "the trunk's per-tile features, and the tail runs on each frame (a model that splits: "
+                "ShadingRatePredictor.splits)",
+}
 REUSE_UNSEEN = {
     "full": "shade it at 1x1 (costs nothing, saves nothing there)",
     "fresh": "run the network on crops around those tiles only (margin tiles of context each side); "
@@ -446,6 +452,15 @@ class PredictionReuse:
     sweep) keep more work at the same failing share (docs/results.md "A threshold of their own for
     carried estimates").
 
+    ``carry="features"`` (a model that splits, :attr:`ShadingRatePredictor.splits`) carries the trunk's
+    per-tile features instead of the estimates (each tile the mean of its carried pixels' features)
+    and runs the network's tail on every carried frame: the tail reads what changes with every
+    sub-pixel move of the camera (the variance inside each rate's blocks, from the frame's ``.blocks``
+    planes) at tile resolution, where it costs a small part of a network run, and the trunk, which
+    reads the frame at full resolution, runs every ``every``-th frame. Unseen tiles go to 1x1 or to
+    fresh crops as with estimates; ``x`` is read on every frame. Not with ``rescale`` or ``history``
+    (both act on carried estimates), and ``reduce`` must be ``"mean"`` (docs/runtime.md).
+
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
     on the frames the network runs, each tile's estimate is ``(1 - history)`` times the network's
     plus ``history`` times the estimate carried into that tile from the previous frame (its pixels'
@@ -458,7 +473,7 @@ class PredictionReuse:
     def __init__(self, predictor: ShadingRatePredictor, every: int = 4, *, reduce: str = "mean",
                  unseen: str = "full", unseen_fraction: float = 0.5, margin: int | None = None,
                  history: float = 0.0, refresh: float | None = None, step: int | None = None,
-                 rescale: float = 0.0, carry_scale: float = 1.0) -> None:
+                 rescale: float = 0.0, carry_scale: float = 1.0, carry: str = "estimates") -> None:
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -488,6 +503,20 @@ class PredictionReuse:
         if scale != 1.0 and predictor.metadata.higher_is_better:
             raise ParameterError("carry_scale: this model's metric is better when higher; carry_scale multiplies an "
                                  "error estimate", "carry_scale")
+        if not isinstance(carry, str) or carry not in REUSE_CARRIES:
+            raise ParameterError(f"carry: expected one of {', '.join(REUSE_CARRIES)}, got {carry!r}", "carry")
+        if carry == "features":
+            clash = ("the model does not split (ShadingRatePredictor.splits is False: metadata.tail is null)"
+                     if not predictor.splits else
+                     f"the predictor pools the model's {predictor.metadata.tile_size}-pixel tiles to "
+                     f"{predictor.tile_size} (load it without tile_size)"
+                     if predictor.tile_size != predictor.metadata.tile_size else
+                     "rescale acts on carried estimates" if rescale else
+                     "history blends carried estimates" if history else
+                     f"features are carried as each tile's mean, not reduce={reduce!r}" if reduce != "mean" else "")
+            if clash:
+                raise ParameterError(f"carry='features': {clash}", "carry")
+        self.carry = carry
         self.carry_scale = scale
         self.step = _check_step(step, predictor.tile_size)
         self.rescale, self._blocks = self._check_rescale(predictor, rescale)
@@ -546,7 +575,7 @@ class PredictionReuse:
         return (f"PredictionReuse(every={self.every}, reduce={self.reduce!r}, unseen={self.unseen!r}, "
                 f"unseen_fraction={self.unseen_fraction:g}, margin={self.margin}, history={self.history:g}, "
                 f"refresh={self.refresh!r}, step={self.step}, rescale={self.rescale:g}, "
-                f"carry_scale={self.carry_scale:g})")
+                f"carry_scale={self.carry_scale:g}, carry={self.carry!r})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         if callable(x):
@@ -571,6 +600,12 @@ class PredictionReuse:
              carried: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         h, w = hw
         planes = self._window(x, slice(0, h), slice(0, w))
+        if self.carry == "features":  # the trunk's features are what the frames between carry
+            est, feats = self.predictor.predict_split(planes)
+            self._cache = feats.reshape(len(feats), -1)
+            self._track = start_track(hw, self.predictor.tile_size, self.step) if self.every > 1 else None
+            self._shape, self._age, self.work = hw, 0, 1.0
+            return est
         est = self.predictor.predict(planes)
         if carried is not None and self.history > 0:  # blend with the carried estimates where they are known
             old, missing = carried
@@ -631,6 +666,12 @@ class PredictionReuse:
                                               self.unseen_fraction, self.reduce, self.step)
         if self.refresh is not None and missing.mean() > self.refresh:
             runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
+        feats = None
+        if self.carry == "features" and not runs:  # the tail on the carried features and this frame
+            feats = est
+            feats[:, missing] = 0.0  # (their estimates go to 1x1 or fresh crops below)
+            est = self.predictor.predict_tail(feats, self._window(x, slice(0, hw[0]), slice(0, hw[1])))
+            est[:, missing] = -np.inf if hib else np.inf
         levels = None
         if self.rescale and not (runs and self.history == 0):  # to this frame's blocks (unseen tiles stay worst)
             levels = self._levels(self._window(x, slice(0, hw[0]), slice(0, hw[1])))
@@ -647,17 +688,21 @@ class PredictionReuse:
             if area > FRESH_FULL * h * w:  # cheaper to run the whole frame, and it restarts the interval
                 return self._run(x, hw, (est, missing))
             for y0, y1, x0, x1 in boxes:
-                part = self.predictor.predict(self._window(x, slice(y0 * tile, min(y1 * tile, h)),
-                                                           slice(x0 * tile, min(x1 * tile, w))))
+                window = self._window(x, slice(y0 * tile, min(y1 * tile, h)), slice(x0 * tile, min(x1 * tile, w)))
                 sel = missing[y0:y1, x0:x1]
+                if feats is not None:  # the crop's features join the carry too
+                    part, part_feats = self.predictor.predict_split(window)
+                    feats[:, y0:y1, x0:x1][:, sel] = part_feats[:, sel]
+                else:
+                    part = self.predictor.predict(window)
                 est[:, y0:y1, x0:x1][:, sel] = part[:, sel]
             work = area / (h * w)
             # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
             # carry them on from here, from where they are now
             slot = np.full(missing.size, -1, np.int32)
             slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
-            fresh_est = est if levels is None else (est / levels).astype(np.float32)  # the carry holds them divided
-            self._cache = np.concatenate([self._cache, fresh_est.reshape(len(est), -1)[:, missing.ravel()]], axis=1)
+            kept = feats if feats is not None else est if levels is None else (est / levels).astype(np.float32)
+            self._cache = np.concatenate([self._cache, kept.reshape(len(kept), -1)[:, missing.ravel()]], axis=1)
             here = start_track(hw, tile, self.step)
             mine = slot[here.index]
             fresh = mine >= 0

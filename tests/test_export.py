@@ -430,3 +430,38 @@ def test_no_probe_where_it_would_not_see_every_pixel_or_save_a_read(conv: dict, 
     before = model.SerializeToString()
     assert export.add_finite_probe(model, multiple) is None
     assert model.SerializeToString() == before
+
+
+def test_merge_slices_merges_chains_and_keeps_the_outputs(tmp_path: Path) -> None:
+    """Chained single-axis slices (what the TorchScript exporter writes for ``x[:, 1:3, 0::4, 1::4]``)
+    become one Slice of the chain's input; slices on a shared axis, or whose output is read by anything
+    but slices it merges into, are left alone; the graph computes the same."""
+    import onnx
+    import onnxruntime as ort
+    import torch
+
+    from rtp.export import merge_slices
+
+    class Net(torch.nn.Module):
+        def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            a = x[:, 1:3, 0::4, 1::4]
+            b = x[:, 0:2][:, 1:2]  # the same axis twice: not merged
+            return a * 2.0, b + 1.0
+
+    path = tmp_path / "s.onnx"
+    torch.onnx.export(Net(), (torch.rand(1, 4, 16, 16),), str(path), input_names=["input"], output_names=["a", "b"],
+                      dynamic_axes={"input": {2: "h", 3: "w"}}, opset_version=17, dynamo=False)
+    model = onnx.load(str(path))
+    before = [n for n in model.graph.node if n.op_type == "Slice"]
+    assert len(before) >= 5
+    merged = merge_slices(model)
+    after = [n for n in model.graph.node if n.op_type == "Slice"]
+    assert merged == 2 and len(after) == len(before) - 2
+    assert sum(n.input[0] == "input" for n in after) == 2  # the merged one and the first of the pair
+    onnx.checker.check_model(model, full_check=True)
+    x = np.random.default_rng(0).random((1, 4, 20, 28), dtype=np.float32)
+    old = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).run(None, {"input": x})
+    new = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"input": x})
+    for o, n in zip(old, new):
+        np.testing.assert_array_equal(o, n)
+    np.testing.assert_array_equal(new[0], x[:, 1:3, 0::4, 1::4] * 2.0)

@@ -44,7 +44,7 @@ def test_finite_probe_is_optional_validated_and_raises_the_schema() -> None:
     p = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4, finite_probe="finite_probe"))
     d = json.loads(p.to_json())
     assert p.finite_probe == "finite_probe" == d["finite_probe"]
-    assert d["schema_version"] == 3 == sdk.SCHEMA_VERSION  # the newest field: the newest schema
+    assert d["schema_version"] == 3
     assert sdk.ModelMetadata.from_json(p.to_json()) == p
     # written with the lowest schema that holds it, whatever the file said
     assert sdk.ModelMetadata.from_dict(base_metadata(schema_version=3)).schema_version == 1
@@ -52,6 +52,22 @@ def test_finite_probe_is_optional_validated_and_raises_the_schema() -> None:
         with pytest.raises(sdk.MetadataError, match="finite_probe") as info:
             sdk.ModelMetadata.from_dict(base_metadata(finite_probe=bad))
         assert info.value.key == "finite_probe"
+
+
+def test_tail_is_optional_validated_and_raises_the_schema() -> None:
+    """``tail``: the digest of a splitting model's tail graph (schema 4, the newest)."""
+    digest = "sha256:" + "ab" * 32
+    m = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4, finite_probe="finite_probe"))
+    assert m.tail is None and "tail" not in m.to_dict()
+    t = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4, finite_probe="finite_probe", tail=digest))
+    d = json.loads(t.to_json())
+    assert t.tail == digest == d["tail"]
+    assert d["schema_version"] == 4 == sdk.SCHEMA_VERSION  # the newest field: the newest schema
+    assert sdk.ModelMetadata.from_json(t.to_json()) == t
+    for bad in ("", "sha256:ab", "md5:" + "ab" * 32, 3, True, [digest]):
+        with pytest.raises(sdk.MetadataError, match="tail") as info:
+            sdk.ModelMetadata.from_dict(base_metadata(tail=bad))
+        assert info.value.key == "tail"
 
 
 def test_defaults_and_frozen() -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import base64
+import copy
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -323,13 +325,24 @@ def test_stored_block_contrast_reads_the_blocks_planes_as_the_computed_contrast(
 
 
 def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports() -> None:
-    """``contrast_stored``: the stem never reads the .blocks planes (the trunk ignores them), the tail
-    on the trunk's own features is the whole network, and it exports."""
+    """``contrast_stored``: the stem reads every plane but is blind to the .blocks planes (weights held at
+    zero, through training too: the trunk ignores them), the tail on the trunk's own features is the whole
+    network, and it exports."""
     from rtp.train.model import FastNet, StoredBlockContrast
 
     net = FastNet(9, head_width=16, block_contrast=(7, 8), contrast_cell=16, contrast_max=True,
-                  contrast_stored=True).eval()
-    assert isinstance(net.contrast, StoredBlockContrast) and net.trunk_channels == 7
+                  contrast_stored=True)
+    assert isinstance(net.contrast, StoredBlockContrast) and net.blind == 2
+    stem = net.layers[0]
+    assert stem.weight.shape[1] == 9 and not stem.weight[:, 7:].any() and stem.weight[:, :7].abs().sum() > 0
+    trained = copy.deepcopy(net)
+    opt = torch.optim.AdamW(trained.parameters(), lr=0.1, weight_decay=0.1)
+    for _ in range(3):  # training leaves the blind weights at exactly zero
+        opt.zero_grad()
+        trained(torch.rand(2, 9, 32, 32)).square().mean().backward()
+        opt.step()
+    assert not trained.layers[0].weight[:, 7:].any() and trained.layers[0].weight[:, :7].ne(stem.weight[:, :7]).any()
+    net.eval()
     assert net.config["contrast_stored"] is True
     x = torch.rand(1, 9, 32, 48)
     y = x.clone()
@@ -353,6 +366,55 @@ def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports()
     _round_trip(net, "contrast_stored", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
                                                               "roughness", "metallic", "specular",
                                                               "reprojected.y.blocks", "albedo.y.blocks"]), seed=6)
+    # exported, each rate's value is one Slice of the frame (not a chain of copies), the stem is still the
+    # frame's only convolution (so the finite probe stays), and a frame with partial tiles matches torch
+    import onnx
+
+    from rtp.export import export_checkpoint
+
+    meta = base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular",
+                                 "reprojected.y.blocks", "albedo.y.blocks"])
+    with tempfile.TemporaryDirectory() as d:
+        path = export_checkpoint(checkpoint.save(Path(d) / "n.pt", net, meta), Path(d) / "n.onnx")
+        graph = onnx.load(str(path)).graph
+        slices = [n for n in graph.node if n.op_type == "Slice"]
+        made = {o for n in slices for o in n.output}
+        assert len([n for n in slices if n.input[0] == "input"]) == 12 and not any(n.input[0] in made for n in slices)
+        pred = sdk.load(path)
+        assert pred.metadata.finite_probe
+        z = np.random.default_rng(7).random((9, 36, 52), dtype=np.float32)
+        with torch.inference_mode():
+            want = net(torch.from_numpy(z)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_raw(z), want, atol=1e-5)
+        # the SDK runs the two graphs: the features with the prediction, the tail on them (or carried ones)
+        assert pred.splits and pred.metadata.tail and pred.metadata.schema_version == 4
+        est, feats = pred.predict_split(z)
+        np.testing.assert_allclose(est, pred.predict(z), atol=1e-6)
+        assert feats.shape == (16, 3, 4) and feats.dtype == np.float32
+        np.testing.assert_allclose(pred.predict_tail(feats, z), est, atol=1e-6)
+        other = np.random.default_rng(8).random((9, 36, 52), dtype=np.float32)
+        _, moved = pred.predict_split(other)
+        with torch.inference_mode():
+            ref = net.tail(torch.from_numpy(moved)[None], torch.from_numpy(z)[None])[0].numpy()
+        np.testing.assert_allclose(pred.predict_tail(moved, z), pred.metadata.decode(ref), atol=1e-5)
+        with pytest.raises(sdk.InputShapeError, match="features"):
+            pred.predict_tail(feats[:, :2], z)
+        bad = z.copy()
+        bad[8, 3, 3] = np.nan
+        with pytest.raises(sdk.NonFiniteInputError):
+            pred.predict_tail(feats, bad)
+        with pytest.raises(sdk.ParameterError, match="does not split"):
+            sdk.load("jnyang").predict_split(z[:, :32, :48])
+        # a damaged tail graph is refused at load
+        model = onnx.load(str(path))
+        props = {p.key: p.value for p in model.metadata_props}
+        raw = bytearray(base64.b64decode(props[sdk.TAIL_KEY]))
+        raw[-20] ^= 1
+        props[sdk.TAIL_KEY] = base64.b64encode(bytes(raw)).decode()
+        onnx.helper.set_model_props(model, props)
+        onnx.save(model, str(Path(d) / "damaged.onnx"))
+        with pytest.raises(sdk.ModelLoadError, match="tail"):
+            sdk.load(Path(d) / "damaged.onnx")
 
 
 def test_the_fast_network_reads_block_contrast_beside_its_stem_and_exports() -> None:

@@ -152,10 +152,12 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     settings = json.loads((tmp_path / "play.json").read_text())["settings"]
     assert settings["frames"] == 5 and settings["cameras"]["fast"]["length_m"] > 0
     assert settings["reuse"] == {"jnyang@2": {"k": 2, "reduce": "mean", "unseen": "full", "history": 0.0,
-                                              "refresh": None, "step": 4, "rescale": 0.0, "carry_scale": 1.0},
+                                              "refresh": None, "step": 4, "rescale": 0.0, "carry_scale": 1.0,
+                                              "carry": "estimates"},
                                  "jnyang@2:fresh": {"k": 2, "reduce": "mean", "unseen": "fresh",
                                                     "history": 0.0, "refresh": None, "step": 4,
-                                                    "rescale": 0.0, "carry_scale": 1.0}}  # what NAME@k meant
+                                                    "rescale": 0.0, "carry_scale": 1.0,
+                                                    "carry": "estimates"}}  # what NAME@k meant
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
@@ -219,6 +221,20 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
         assert rp is not None
         np.testing.assert_allclose(x[meta.inputs.index("reprojected.y")], sdk.luma(rp), atol=1e-6)
         assert x[meta.inputs.index("albedo.y")].max() > 0.0
+
+
+def test_a_splitting_model_carries_its_features_in_the_loop(tmp_path: Path) -> None:
+    """``NAME@k:features``: a splitting model's trunk runs every k-th frame, its tail on every frame; the
+    loop records the network's share of frames and the carry it used."""
+    from tests.conftest import split_model
+
+    model = split_model(tmp_path)
+    name = f"{model}@2:features"
+    rep = play("procedural:0", f"{model},{name}", paths=("fast",), frames=5, size=(W, H), sweep=False, flip_every=0)
+    rows = {r["method"]: r for r in rep.rows}
+    assert rows[name]["network_frames"] == 0.5 and rows[str(model)]["network_frames"] == 1.0
+    assert 0.0 <= rows[name]["work_saved"] <= 1.0 and np.isfinite(rows[name]["fail_share"])
+    assert rep.settings["reuse"][name]["carry"] == "features"
 
 
 def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
@@ -288,7 +304,10 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
 def test_methods_are_parsed_and_checked() -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
                           "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02,"
-                          "jnyang@4:s4:r0.05,jnyang@4:v0.5:c1.08")
+                          "jnyang@4:s4:r0.05,jnyang@4:v0.5:c1.08,split.onnx@4:features:fresh")
+    assert [s.carry for s in specs] == ["estimates"] * 13 + ["features"]
+    assert (specs[-1].model, specs[-1].reuse, specs[-1].unseen) == ("split.onnx", 4, "fresh")
+    specs = specs[:-1]
     assert [s.step for s in specs] == [None] * 11 + [4, None]
     assert [s.rescale for s in specs] == [0.0] * 12 + [0.5]
     assert [s.carry_scale for s in specs] == [1.0] * 12 + [1.08]
@@ -309,11 +328,13 @@ def test_methods_are_parsed_and_checked() -> None:
                        ("jnyang@4:s2:s4", "at most one"), ("jnyang@4:vx", "rescale exponent"),
                        ("jnyang@4:v3", "rescale exponent"), ("jnyang@4:v0.5:v1", "at most one"),
                        ("jnyang@4:c5", "carry scale"), ("jnyang@4:cx", "carry scale"),
-                       ("jnyang@4:c1.1:c1.2", "at most one")):
+                       ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     with pytest.raises(sdk.ParameterError, match=r"divisor of the model's 16-pixel tile \(1, 2, 4, 8, 16\), got 3"):
         play("procedural:0", "jnyang@4:s3", frames=3, size=(64, 48), sweep=False)
+    with pytest.raises(sdk.ParameterError, match="does not split"):
+        play("procedural:0", "jnyang@4:features", frames=3, size=(64, 48), sweep=False)
     with pytest.raises(PlayError, match="unknown profile"):
         play("procedural:0", "oracle", paths=("sprint",), frames=3)
     with pytest.raises(PlayError, match="at least 3"):

@@ -629,3 +629,67 @@ def test_carry_scale_multiplies_carried_estimates_only() -> None:
     with pytest.raises(sdk.ParameterError, match="better when higher"):
         sdk.PredictionReuse(sdk.load("psnr"), carry_scale=1.1)
     assert sdk.PredictionReuse(sdk.load("psnr"), carry_scale=1).carry_scale == 1.0
+
+
+def _split_predictor(folder: Path) -> sdk.ShadingRatePredictor:
+    from .conftest import split_model
+
+    return sdk.load(split_model(folder))
+
+
+def _split_frame(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    planes = rng.uniform(0, 1, (7, h, w)).astype(np.float32)
+    return np.concatenate([planes, np.stack([sdk.block_variances(planes[i]) for i in (0, 2)])])
+
+
+def test_carried_features_run_the_tail_on_each_new_frame(tmp_path: Path) -> None:
+    """``carry="features"``: the network's frame gives what ``predict`` gives; a carried frame runs the
+    tail on the carried features and the new frame's inputs (so its estimates follow the new frame's
+    .blocks planes); unseen tiles go to 1x1 or to fresh crops, whose features are carried on."""
+    pred = _split_predictor(tmp_path)
+    assert pred.splits
+    h, w = 64, 96
+    rng = np.random.default_rng(3)
+    x0, x1 = _split_frame(rng, h, w), _split_frame(rng, h, w)
+    rows, cols = np.indices((h, w))
+    everything = np.ones((h, w), np.float32)
+    reuse = sdk.PredictionReuse(pred, 4, carry="features")
+    first = reuse.predict(x0)
+    np.testing.assert_allclose(first, pred.predict(x0), rtol=1e-6)
+    assert reuse.work == 1.0 and "carry='features'" in repr(reuse)
+    second = reuse.predict(x1, (rows, cols), everything)
+    _, feats0 = pred.predict_split(x0)
+    np.testing.assert_allclose(second, pred.predict_tail(feats0, x1), rtol=1e-5)  # a still camera: the same features
+    assert reuse.work == 0.0 and reuse.age == 1 and not np.allclose(second, first)
+    seen = everything.copy()
+    seen[:TILE, :TILE] = 0  # one tile the network did not see: 1x1
+    third = reuse.predict(x1, (rows, cols), seen)
+    assert np.isinf(third[:, 0, 0]).all() and np.isfinite(third.reshape(6, -1)[:, 1:]).all()
+    fourth = reuse.predict(x1, (rows, cols), everything)  # unseen since the network ran: still 1x1
+    assert np.isinf(fourth[:, 0, 0]).all() and reuse.work == 0.0 and reuse.age == 3
+    np.testing.assert_allclose(reuse.predict(x1, (rows, cols), everything), pred.predict(x1), rtol=1e-6)
+    assert reuse.work == 1.0 and reuse.age == 0  # the 5th frame: the network again
+    # unseen="fresh": the unseen tile is the network's on a crop, and its features are carried on
+    fresh = sdk.PredictionReuse(pred, 4, carry="features", unseen="fresh")
+    fresh.predict(x0)
+    est = fresh.predict(x1, (rows, cols), seen)
+    np.testing.assert_allclose(est[:, 0, 0], pred.predict(x1)[:, 0, 0], rtol=1e-5)
+    assert 0.0 < fresh.work < 1.0
+    after = fresh.predict(x1, (rows, cols), everything)
+    assert np.isfinite(after).all() and fresh.work == 0.0
+
+
+def test_carrying_features_needs_a_model_that_splits(tmp_path: Path) -> None:
+    jnyang = sdk.load("jnyang")
+    with pytest.raises(sdk.ParameterError, match="does not split") as info:
+        sdk.PredictionReuse(jnyang, 4, carry="features")
+    assert info.value.name == "carry"
+    with pytest.raises(sdk.ParameterError, match="carry: expected one of estimates, features"):
+        sdk.PredictionReuse(jnyang, 4, carry="trunk")
+    pred = _split_predictor(tmp_path)
+    for kw, word in (({"rescale": 0.25}, "rescale"), ({"history": 0.5}, "history"), ({"reduce": "worst"}, "reduce")):
+        with pytest.raises(sdk.ParameterError, match=f"carry='features': .*{word}"):
+            sdk.PredictionReuse(pred, 4, carry="features", **kw)
+    coarse = sdk.load(pred.path, tile_size=32)
+    with pytest.raises(sdk.ParameterError, match="tile_size"):
+        sdk.PredictionReuse(coarse, 4, carry="features")

@@ -263,14 +263,18 @@ class BlockContrast(nn.Module):
 class StoredBlockContrast(nn.Module):
     """:class:`BlockContrast` read from ``.blocks`` input planes instead of computed from the luma:
     ``sdk.block_variances`` stores, per 4x4 cell, each rate's ``log(variance + eps)`` rescaled to
-    [0, 1] on one pixel of the cell, so a fixed one-hot 4x4 read with stride 4 picks the six values,
-    and undoing the rescale gives ``variance + eps``; a larger ``cell`` takes their mean (and with
-    ``tile_max`` their maximum) over its 4x4 cells, then the log, as :class:`BlockContrast` does.
-    The adapters build the planes (on the GPU in the moderngl adapter), so the network pays only for
-    the read: what makes a split network (the contrast at tile resolution) as cheap as one that
-    reads the planes with its stem."""
+    [0, 1] on one pixel of the cell (rate k on the cell's k-th pixel in raster order), so strided
+    slices pick the six values (``rtp-export`` merges each chain of slices into one ONNX ``Slice``,
+    which reads only those pixels), and undoing the rescale gives ``log(variance + eps)``; a larger
+    ``cell`` takes the log of the mean of ``variance + eps`` (and with ``tile_max`` the maximum) over
+    its 4x4 cells, as :class:`BlockContrast` does. The adapters build the planes (on the GPU in the
+    moderngl adapter), so the network pays only for the read: what makes a split network (the
+    contrast at tile resolution) as cheap as one that reads the planes with its stem.
 
-    pick: torch.Tensor
+    The cells of a partial last tile (a 1080-row frame has half a tile row at the bottom) pool the
+    cells they have, as the trunk's ceil-mode max-pools do; the mean is computed as a sum over the
+    tile with the frame padded by zeros, divided by the number of its cells inside the frame
+    (onnxruntime runs a ceil-mode average pool several times slower than this)."""
 
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, tile_max: bool = False) -> None:
         super().__init__()
@@ -281,10 +285,6 @@ class StoredBlockContrast(nn.Module):
             raise ValueError(f"block_contrast from .blocks planes: the cell must be a multiple of {BLOCK_CELL}, got {cell}")
         self.planes = tuple(int(i) for i in planes)
         self.rates = tuple(BLOCK_RATES)
-        pick = torch.zeros(len(self.rates), 1, BLOCK_CELL, BLOCK_CELL)
-        for k in range(len(self.rates)):  # rate k on the cell's k-th pixel in raster order
-            pick[k, 0, k // BLOCK_CELL, k % BLOCK_CELL] = 1.0
-        self.register_buffer("pick", pick, persistent=False)
         self.scale = -math.log(BLOCK_EPS)
         self.cell, self.pool = cell, cell // BLOCK_CELL
         self.tile_max = bool(tile_max and self.pool > 1)
@@ -292,19 +292,57 @@ class StoredBlockContrast(nn.Module):
         self.channels = len(self.planes) * len(self.rates) * (2 if self.tile_max else 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        out = []
-        for p in self.planes:
-            stored = nn.functional.conv2d(x[:, p:p + 1], self.pick, stride=BLOCK_CELL)
-            if self.pool == 1:
-                out.append((stored - 1.0) * self.scale)  # log(variance + eps)
-                continue
-            v = torch.exp((stored - 1.0) * self.scale)  # variance + eps
-            # ceil mode: a partial last cell of a frame of any multiple of 4 pools the 4x4 cells it has
-            # (as the trunk's max-pools do), so frames need not be padded to whole cells
-            out.append(torch.log(nn.functional.avg_pool2d(v, self.pool, ceil_mode=True)))
-            if self.tile_max:
-                out.append(torch.log(nn.functional.max_pool2d(v, self.pool, ceil_mode=True)))
-        return out[0] if len(out) == 1 else torch.cat(out, dim=1)
+        n = len(self.rates)
+        # plane-major: rate k of plane p on pixel (k // 4, k % 4) of every 4x4 cell
+        stored = torch.cat([x[:, p:p + 1, k // BLOCK_CELL::BLOCK_CELL, k % BLOCK_CELL::BLOCK_CELL]
+                            for p in self.planes for k in range(n)], dim=1)
+        if self.pool == 1:
+            return (stored - 1.0) * self.scale  # log(variance + eps)
+        q = self.pool
+        # variance + eps up to the factor eps (taken back after the log); zeros beyond the frame, so a
+        # floor-mode pool of the padded cells sums each tile's cells, and the same pool of a plane of
+        # ones counts the share of them inside the frame
+        v = nn.functional.pad(torch.exp(stored * self.scale), (0, q - 1, 0, q - 1))
+        inside = nn.functional.pad(torch.ones_like(stored[:, :1]), (0, q - 1, 0, q - 1))
+        mean = torch.log(nn.functional.avg_pool2d(v, q)) - torch.log(nn.functional.avg_pool2d(inside, q)) - self.scale
+        if not self.tile_max:
+            return mean
+        worst = (nn.functional.max_pool2d(stored, q, ceil_mode=True) - 1.0) * self.scale
+        return torch.cat([t for i in range(len(self.planes))
+                          for t in (mean[:, i * n:(i + 1) * n], worst[:, i * n:(i + 1) * n])], dim=1)
+
+
+class BlindConv2d(nn.Conv2d):
+    """A strided stem convolution (kernel = stride, no bias) whose weights from the last ``blind``
+    input channels are held at exactly zero: made zero at construction and whenever a state is
+    loaded, and in training multiplied by a fixed mask, so no gradient reaches them (AdamW's decay
+    keeps a zero at zero); evaluation and export read the plain weights (one ``Conv`` node that
+    BatchNorm folds into). A split network's
+    stem reads every input plane in one pass this way, the .blocks planes included, without its
+    features depending on them: cheaper at run time than slicing the other planes out of the frame
+    (onnxruntime copies a slice), and the trunk stays a function of the planes it may carry across
+    frames."""
+
+    mask: torch.Tensor
+
+    def __init__(self, in_channels: int, out_channels: int, kernel: int, blind: int = 0) -> None:
+        super().__init__(in_channels, out_channels, kernel, stride=kernel, bias=False)
+        if not 0 < blind < in_channels:
+            raise ValueError(f"blind: expected 1 to {in_channels - 1} input channels, got {blind}")
+        mask = torch.ones_like(self.weight)
+        mask[:, in_channels - blind:] = 0.0
+        self.blind = blind
+        self.register_buffer("mask", mask, persistent=False)
+        with torch.no_grad():
+            self.weight.mul_(mask)
+
+    def _load_from_state_dict(self, *args: Any, **kwargs: Any) -> None:
+        super()._load_from_state_dict(*args, **kwargs)
+        with torch.no_grad():
+            self.weight.mul_(self.mask)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self._conv_forward(x, self.weight * self.mask if self.training else self.weight, None)
 
 
 class FastNet(nn.Module):
@@ -429,8 +467,8 @@ class FastNet(nn.Module):
             self.contrast = StoredBlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
         elif block_contrast:
             self.contrast = BlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
-        #: the input channels the stem reads (all but stored .blocks planes, which only the contrast reads)
-        self.trunk_channels = in_channels - (len(block_contrast) if contrast_stored else 0)
+        #: the last input channels the stem is blind to (stored .blocks planes, which only the contrast reads)
+        self.blind = len(block_contrast) if contrast_stored else 0
         if self.contrast is not None:  # likewise
             self.config["block_contrast"] = list(self.contrast.planes)
             if contrast_cell and contrast_cell != s:
@@ -440,12 +478,17 @@ class FastNet(nn.Module):
             if contrast_stored:
                 self.config["contrast_stored"] = True
         layers: list[nn.Module] = []
+        def stem_conv(out: int, k: int) -> nn.Conv2d:  # a plain convolution unless some planes are hidden from it
+            if self.blind:
+                return BlindConv2d(in_channels, out, k, self.blind)
+            return nn.Conv2d(in_channels, out, k, stride=k, bias=False)
+
         if stem_layers == 2:
             mid = max(width // 2, 1)
-            layers += [nn.Conv2d(self.trunk_channels, mid, s // 2, stride=s // 2, bias=False), nn.BatchNorm2d(mid),
+            layers += [stem_conv(mid, s // 2), nn.BatchNorm2d(mid),
                        nn.ReLU(inplace=True), nn.Conv2d(mid, width, 2, stride=2, bias=False)]
         else:
-            layers.append(nn.Conv2d(self.trunk_channels, width, s, stride=s, bias=False))
+            layers.append(stem_conv(width, s))
         layers += [nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
         c = width
         self._contrast_at = len(layers)
@@ -503,9 +546,8 @@ class FastNet(nn.Module):
         return max(min(int(self.config["stem"]), self.tile), cell)
 
     def trunk(self, x: torch.Tensor) -> torch.Tensor:
-        """The features before the block contrast joins (the whole network's output without one)."""
-        if self.trunk_channels < self.config["in_channels"]:  # the .blocks planes only the contrast reads
-            x = x[:, :self.trunk_channels]
+        """The features before the block contrast joins (the whole network's output without one); with
+        ``contrast_stored`` they do not depend on the .blocks planes."""
         return self.layers(x) if self.contrast is None else self.layers[:self._contrast_at](x)
 
     def tail(self, features: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
