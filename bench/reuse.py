@@ -1,7 +1,8 @@
 """Prediction reuse's cost on a CPU: a frame the network runs on against a frame whose estimates are
 carried (``sdk.PredictionReuse``, each reduction at the default pixel step, the mean also at every
-second and every eighth pixel, rescaled by the blocks' variance for models with ``.blocks`` inputs),
-and the ``unseen="fresh"`` crops.
+second and every eighth pixel, rescaled by the blocks' variance for models with ``.blocks`` inputs,
+the trunk's features carried and the tail run for a model that splits, ``carry="features"``), and the
+``unseen="fresh"`` crops.
 
     python bench/reuse.py [--model jnyang] [--repeats 7] [--threads 2]
 
@@ -56,9 +57,9 @@ def main() -> None:
           f"{args.threads} threads, median of {args.repeats}, model {args.model}\n")
     blocks = any(c.endswith(".blocks") for c in pred.metadata.inputs)
     print("| frame | network runs (sdk predict) | carried: mean | worst | upper | mean, step 2 | mean, step 8 | "
-          + ("mean, rescale 0.25 | " if blocks else "")
+          + ("mean, rescale 0.25 | " if blocks else "") + ("features carried, tail run | " if pred.splits else "")
           + " | ".join(f"fresh, {100 * s:g}% of the width new" for s in STRIPS) + " |")
-    print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks))
+    print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks + pred.splits))
     for w, h in FRAMES:
         x = np.random.default_rng(0).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
         net = median_ms(lambda x=x: pred.predict(x), args.repeats)
@@ -66,6 +67,8 @@ def main() -> None:
         carried += [_carried(pred, x, 3, args.repeats, step=step)[0] for step in (2, 8)]
         if blocks:  # the inputs given on carried frames too: the .blocks planes' per-tile means
             carried.append(_carried(pred, x, 3, args.repeats, rescale=0.25)[0])
+        if pred.splits:
+            carried.append(_carried(pred, x, 3, args.repeats, carry="features")[0])
         fresh = [_carried(pred, x, int(s * w), args.repeats, unseen="fresh") for s in STRIPS]
         print(f"| {w}x{h} | {net:.1f} | " + " | ".join(f"{c:.1f}" for c in carried) + " | "
               + " | ".join(f"{ms:.1f} (crops {100 * work:.0f}%)" for ms, work in fresh) + " |")
