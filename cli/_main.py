@@ -672,7 +672,9 @@ def build_parser() -> argparse.ArgumentParser:
                  "the network runs on crops around the tiles it did not see instead of shading them at 1x1; "
                  "NAME@k:rS, run it early once more than a share S of the tiles is unseen since it ran; "
                  "NAME@k:hW, blend its estimates with weight W on those carried from the last frame; NAME@k:sN, "
-                 "carry one pixel of every N per axis, default four per tile and axis), or\n"
+                 "carry one pixel of every N per axis, default four per tile and axis; NAME@k:vA, rescale carried "
+                 "estimates by the blocks' variance; NAME@k:cF, multiply them by F; NAME@k:features, a model that "
+                 "splits carries its trunk's features and runs its tail on every frame), or\n"
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
     pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")
