@@ -57,9 +57,9 @@ def main() -> None:
           f"{args.threads} threads, median of {args.repeats}, model {args.model}\n")
     blocks = any(c.endswith(".blocks") for c in pred.metadata.inputs)
     print("| frame | network runs (sdk predict) | carried: mean | worst | upper | mean, step 2 | mean, step 8 | "
-          + ("mean, rescale 0.25 | " if blocks else "") + ("features carried, tail run | " if pred.splits else "")
+          + ("mean, rescale 0.25 | " if blocks else "") + ("features carried, tail run | the tail alone | " if pred.splits else "")
           + " | ".join(f"fresh, {100 * s:g}% of the width new" for s in STRIPS) + " |")
-    print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks + pred.splits))
+    print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks + 2 * pred.splits))
     for w, h in FRAMES:
         x = np.random.default_rng(0).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
         net = median_ms(lambda x=x: pred.predict(x), args.repeats)
@@ -69,6 +69,8 @@ def main() -> None:
             carried.append(_carried(pred, x, 3, args.repeats, rescale=0.25)[0])
         if pred.splits:
             carried.append(_carried(pred, x, 3, args.repeats, carry="features")[0])
+            feats = pred.predict_split(x)[1]
+            carried.append(median_ms(lambda x=x, feats=feats: pred.predict_tail(feats, x), args.repeats))
         fresh = [_carried(pred, x, int(s * w), args.repeats, unseen="fresh") for s in STRIPS]
         print(f"| {w}x{h} | {net:.1f} | " + " | ".join(f"{c:.1f}" for c in carried) + " | "
               + " | ".join(f"{ms:.1f} (crops {100 * work:.0f}%)" for ms, work in fresh) + " |")

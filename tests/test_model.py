@@ -366,8 +366,9 @@ def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports()
     _round_trip(net, "contrast_stored", base_metadata(inputs=["reprojected.y", "seen", "albedo.y", "normal.z",
                                                               "roughness", "metallic", "specular",
                                                               "reprojected.y.blocks", "albedo.y.blocks"]), seed=6)
-    # exported, each rate's value is one Slice of the frame (not a chain of copies), the stem is still the
-    # frame's only convolution (so the finite probe stays), and a frame with partial tiles matches torch
+    # exported, the rates' values are one Slice of the cells' first rows (no chain of copies) and a one-hot
+    # convolution, the stem is still the only convolution of the frame (so the finite probe stays), and a frame
+    # with partial tiles matches torch
     import onnx
 
     from rtp.export import export_checkpoint
@@ -379,7 +380,11 @@ def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports()
         graph = onnx.load(str(path)).graph
         slices = [n for n in graph.node if n.op_type == "Slice"]
         made = {o for n in slices for o in n.output}
-        assert len([n for n in slices if n.input[0] == "input"]) == 12 and not any(n.input[0] in made for n in slices)
+        assert not any(n.input[0] in made for n in slices)
+        shapes = {i.name: list(i.dims) for i in graph.initializer}
+        shapes.update({n.output[0]: list(n.attribute[0].t.dims) for n in graph.node if n.op_type == "Constant"})
+        assert [n for n in graph.node if n.op_type == "Conv" and shapes.get(n.input[1]) == [12, 2, 2, 4]]
+        assert sum(n.op_type == "Conv" and n.input[0] == "input" for n in graph.node) == 1
         pred = sdk.load(path)
         assert pred.metadata.finite_probe
         z = np.random.default_rng(7).random((9, 36, 52), dtype=np.float32)

@@ -263,9 +263,11 @@ class BlockContrast(nn.Module):
 class StoredBlockContrast(nn.Module):
     """:class:`BlockContrast` read from ``.blocks`` input planes instead of computed from the luma:
     ``sdk.block_variances`` stores, per 4x4 cell, each rate's ``log(variance + eps)`` rescaled to
-    [0, 1] on one pixel of the cell (rate k on the cell's k-th pixel in raster order), so strided
-    slices pick the six values (``rtp-export`` merges each chain of slices into one ONNX ``Slice``,
-    which reads only those pixels), and undoing the rescale gives ``log(variance + eps)``; a larger
+    [0, 1] on one pixel of the cell (rate k on the cell's k-th pixel in raster order: the first two
+    rows of the cell), so one slice of those rows (a reshape of the frame into cells, free, then
+    one ONNX ``Slice`` of the planes' first two rows of each cell) and a fixed one-hot 2x4
+    convolution with stride (2, 4) pick the six values of each plane, and undoing the rescale gives
+    ``log(variance + eps)`` (at 1080p a third less time than a strided slice per value); a larger
     ``cell`` takes the log of the mean of ``variance + eps`` (and with ``tile_max`` the maximum) over
     its 4x4 cells, as :class:`BlockContrast` does. The adapters build the planes (on the GPU in the
     moderngl adapter), so the network pays only for the read: what makes a split network (the
@@ -283,8 +285,16 @@ class StoredBlockContrast(nn.Module):
                              f"{list(planes)}")
         if cell % BLOCK_CELL:
             raise ValueError(f"block_contrast from .blocks planes: the cell must be a multiple of {BLOCK_CELL}, got {cell}")
+        if list(planes) != list(range(min(planes), min(planes) + len(planes))):
+            raise ValueError(f"block_contrast from .blocks planes: expected consecutive input channels, got {list(planes)}")
         self.planes = tuple(int(i) for i in planes)
         self.rates = tuple(BLOCK_RATES)
+        self.rows = -(-len(self.rates) // BLOCK_CELL)  # the cell rows that hold the rates' values
+        pick = torch.zeros(len(self.planes) * len(self.rates), len(self.planes), self.rows, BLOCK_CELL)
+        for p in range(len(self.planes)):  # plane-major: rate k of plane p on pixel (k // 4, k % 4) of the cell
+            for k in range(len(self.rates)):
+                pick[p * len(self.rates) + k, p, k // BLOCK_CELL, k % BLOCK_CELL] = 1.0
+        self.register_buffer("pick", pick, persistent=False)
         self.scale = -math.log(BLOCK_EPS)
         self.cell, self.pool = cell, cell // BLOCK_CELL
         self.tile_max = bool(tile_max and self.pool > 1)
@@ -293,9 +303,11 @@ class StoredBlockContrast(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         n = len(self.rates)
-        # plane-major: rate k of plane p on pixel (k // 4, k % 4) of every 4x4 cell
-        stored = torch.cat([x[:, p:p + 1, k // BLOCK_CELL::BLOCK_CELL, k % BLOCK_CELL::BLOCK_CELL]
-                            for p in self.planes for k in range(n)], dim=1)
+        b, c, h, w = x.shape
+        lo, hi = self.planes[0], self.planes[-1] + 1
+        rows = x.reshape(b, c, h // BLOCK_CELL, BLOCK_CELL, w)[:, lo:hi, :, :self.rows]  # the cells' first rows
+        stored = nn.functional.conv2d(rows.reshape(b, hi - lo, h // BLOCK_CELL * self.rows, w), self.pick,
+                                      stride=(self.rows, BLOCK_CELL))
         if self.pool == 1:
             return (stored - 1.0) * self.scale  # log(variance + eps)
         q = self.pool
