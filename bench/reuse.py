@@ -57,7 +57,8 @@ def main() -> None:
           f"{args.threads} threads, median of {args.repeats}, model {args.model}\n")
     blocks = any(c.endswith(".blocks") for c in pred.metadata.inputs)
     print("| frame | network runs (sdk predict) | carried: mean | worst | upper | mean, step 2 | mean, step 8 | "
-          + ("mean, rescale 0.25 | " if blocks else "") + ("features carried, tail run | the tail alone | " if pred.splits else "")
+          + ("mean, rescale 0.25 | " if blocks else "")
+          + ("features carried, tail run | the tail alone | " if pred.splits else "")
           + " | ".join(f"fresh, {100 * s:g}% of the width new" for s in STRIPS) + " |")
     print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks + 2 * pred.splits))
     for w, h in FRAMES:

@@ -278,6 +278,8 @@ class StoredBlockContrast(nn.Module):
     tile with the frame padded by zeros, divided by the number of its cells inside the frame
     (onnxruntime runs a ceil-mode average pool several times slower than this)."""
 
+    pick: torch.Tensor
+
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, tile_max: bool = False) -> None:
         super().__init__()
         if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
