@@ -508,17 +508,19 @@ class ShadingRatePredictor:
         out[:, :, :, w:] = out[:, :, :, w - 1 : w]
         return out
 
-    def _run(self, x: np.ndarray) -> tuple[np.ndarray, bool]:
-        """The metric output for ``x``, and whether the graph's finite probe (if the model has one
-        and the input is not assumed finite) says the input holds a NaN or an infinity."""
-        names = [self._out_name]
+    def _run(self, x: np.ndarray, extra: tuple[str, ...] = ()) -> tuple[list[np.ndarray], bool]:
+        """The metric output for ``x`` then the ``extra`` outputs (a splitting model's features), and
+        whether the graph's finite probe (if the model has one and the input is not assumed finite)
+        says the input holds a NaN or an infinity."""
+        names = [self._out_name, *extra]
         if self._probe_name is not None and not self._assume_finite:
             names.append(self._probe_name)
         try:
             outs = self._session.run(names, {self._in_name: x})
         except Exception as err:
             raise InferenceError(f"onnxruntime failed on an input of shape {x.shape}: {err}") from err
-        return outs[0], len(outs) > 1 and not bool(np.isfinite(outs[1]).all())
+        k = 1 + len(extra)
+        return outs[:k], len(outs) > k and not bool(np.isfinite(outs[k]).all())
 
     def predict_raw(self, x: np.ndarray) -> np.ndarray:
         """The network's own output (transformed space, one channel per metadata ``outputs`` rate),
@@ -533,9 +535,9 @@ class ShadingRatePredictor:
                     f"this model has a fixed batch of {self._batch}, got {n}", tuple(x.shape), f"({self._batch}, ...)"
                 )
             runs = [self._run(xp[i : i + 1]) for i in range(n)]
-            raw, flagged = np.concatenate([r[0] for r in runs], axis=0), any(r[1] for r in runs)
+            raw, flagged = np.concatenate([r[0][0] for r in runs], axis=0), any(r[1] for r in runs)
         else:
-            raw, flagged = self._run(xp)
+            (raw,), flagged = self._run(xp)
         if flagged:  # the graph saw a NaN or an infinity (or a sum that overflowed): the exact test decides
             self._exact_check(x4)
         t = self._meta.tile_size
@@ -588,14 +590,8 @@ class ShadingRatePredictor:
         ``(features, ceil(H/w), ceil(W/w))``, what :meth:`predict_tail` takes, on this frame or carried
         to a later one. One network run (the features are an output of the same graph)."""
         x4, xp = self._split_frame(x)
-        names = [self._out_name, FEATURES_NAME]
-        if self._probe_name is not None and not self._assume_finite:
-            names.append(self._probe_name)
-        try:
-            outs = self._session.run(names, {self._in_name: xp})
-        except Exception as err:
-            raise InferenceError(f"onnxruntime failed on an input of shape {xp.shape}: {err}") from err
-        if len(outs) > 2 and not bool(np.isfinite(outs[2]).all()):
+        outs, flagged = self._run(xp, (FEATURES_NAME,))
+        if flagged:
             self._exact_check(x4)
         th, tw = tile_grid(x4.shape[2], x4.shape[3], self._meta.tile_size)
         raw, feats = outs[0][:, :, :th, :tw], outs[1][0, :, :th, :tw]
