@@ -52,6 +52,7 @@ from rtp.sdk import (
     depth_edges,
     luma,
     pixel_differences,
+    tile_variances,
 )
 from rtp.sdk.files import atomic_output
 
@@ -116,7 +117,9 @@ _DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth"
                             "reprojected.y.dx": lambda s: pixel_differences(luma(s.buffer("reprojected")))[0],
                             "reprojected.y.dy": lambda s: pixel_differences(luma(s.buffer("reprojected")))[1],
                             "reprojected.y.blocks": lambda s: block_variances(luma(s.buffer("reprojected"))),
-                            "albedo.y.blocks": lambda s: block_variances(luma(s.buffer("albedo")))}
+                            "albedo.y.blocks": lambda s: block_variances(luma(s.buffer("albedo"))),
+                            "reprojected.y.tiles": lambda s: tile_variances(luma(s.buffer("reprojected"))),
+                            "albedo.y.tiles": lambda s: tile_variances(luma(s.buffer("albedo")))}
 
 
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:

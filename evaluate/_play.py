@@ -581,6 +581,8 @@ def model_inputs(pf: Any, rp: np.ndarray, channels: Sequence[str], ys: slice, xs
             planes[i] = sdk.pixel_differences(ext)[comp == "y.dy"][:seen.shape[0], :seen.shape[1]]
         elif c == "reprojected.y.blocks":  # windows start on whole cells (tiles)
             planes[i] = sdk.block_variances(sdk.luma(rp[ys, xs]))
+        elif c == "reprojected.y.tiles":  # windows start on whole tiles
+            planes[i] = sdk.tile_variances(sdk.luma(rp[ys, xs]))
         elif base == "reprojected":  # the method's own displayed frame, reprojected
             planes[i] = sdk.luma(rp[ys, xs]) if comp == "y" else rp[ys, xs, "rgb".index(comp)]
         elif c == "seen":

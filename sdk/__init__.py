@@ -16,12 +16,14 @@ from ._channels import (
     BLOCK_CELL,
     BLOCK_EPS,
     BLOCK_RATES,
+    BLOCK_TILE,
     CHANNELS,
     DEFAULT_INPUTS,
     Channel,
     block_variances,
     depth_edges,
     pixel_differences,
+    tile_variances,
 )
 from ._color import LUMA_WEIGHTS, linear_to_srgb, luma, srgb_to_linear
 from ._digest import model_digest
@@ -90,6 +92,7 @@ __all__ = [
     "BLOCK_CELL",
     "BLOCK_EPS",
     "BLOCK_RATES",
+    "BLOCK_TILE",
     "CHANNELS",
     "DEFAULT_EXTRAPOLATION_K",
     "DEFAULT_INPUTS",
@@ -163,6 +166,7 @@ __all__ = [
     "srgb_to_linear",
     "tile_extents",
     "tile_grid",
+    "tile_variances",
     "work_saved",
 ]
 

@@ -16,8 +16,8 @@ import numpy as np
 from ._errors import InputShapeError, NonFiniteInputError
 from ._rates import ALL_RATES, rate_size
 
-__all__ = ["BLOCK_CELL", "BLOCK_EPS", "BLOCK_RATES", "CHANNELS", "DEFAULT_INPUTS", "Channel", "block_variances", "depth_edges",
-           "pixel_differences"]
+__all__ = ["BLOCK_CELL", "BLOCK_EPS", "BLOCK_RATES", "BLOCK_TILE", "CHANNELS", "DEFAULT_INPUTS", "Channel", "block_variances",
+           "depth_edges", "pixel_differences", "tile_variances"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,10 @@ _SPECS = [
      "per 4x4 cell, how much each reduced rate's blocks vary in reprojected.y (sdk.block_variances: the log "
      "variance inside the blocks, one rate per pixel of the cell, packed)"),
     ("albedo.y.blocks", 0.0, 1.0, "as reprojected.y.blocks, of albedo.y (sdk.block_variances)"),
+    ("reprojected.y.tiles", 0.0, 1.0,
+     "per 16x16 tile, each reduced rate's block variance in reprojected.y over the tile's 4x4 cells, mean and "
+     "maximum (sdk.tile_variances: the .blocks values summarised, twelve values on the tile's first pixels)"),
+    ("albedo.y.tiles", 0.0, 1.0, "as reprojected.y.tiles, of albedo.y (sdk.tile_variances)"),
     ("seen", 0.0, 1.0, "1 where the reprojected position is on the previous frame and passes its depth test, else 0"),
     ("albedo.r", 0.0, 1.0, "surface base colour, display-encoded sRGB, red; 0 on background"),
     ("albedo.g", 0.0, 1.0, "as albedo.r, green"),
@@ -183,6 +187,19 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
     p = _finite_plane(plane, "block_variances", np.float64)
     h, w = p.shape
     c = BLOCK_CELL
+    values = _cell_variances(p, plane)
+    out = np.zeros((-(-h // c) * c, -(-w // c) * c), np.float32)
+    for k, value in enumerate(values):
+        out[k // c::c, k % c::c] = value
+    return out[:h, :w]
+
+
+def _cell_variances(p: np.ndarray, plane: np.ndarray) -> list[np.ndarray]:
+    """Per rate of :data:`BLOCK_RATES`, each 4x4 cell's normalised log variance inside the rate's
+    blocks (float32 ``(ceil(H / 4), ceil(W / 4))``): :func:`block_variances`'s values before packing.
+    ``p`` is the finite float64 plane, ``plane`` the caller's array (never changed)."""
+    h, w = p.shape
+    c = BLOCK_CELL
     if h % c or w % c:
         x = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
     else:  # changed in place below: never the caller's array
@@ -197,13 +214,61 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
         x[i::c] -= ref
     s2 = _cell_sums(np.square(x), c, c)
     sums: dict[tuple[int, int], np.ndarray] = {(1, 1): x}
-    out = np.zeros(x.shape, np.float32)
-    for k, rate in enumerate(BLOCK_RATES):
+    values = []
+    for rate in BLOCK_RATES:
         bw, bh = rate_size(rate)
         s1 = _block_sums(sums, bh, bw)
         per_cell = np.maximum(s2 - _cell_sums(np.square(s1), c // bh, c // bw) / (bw * bh), 0.0) / (c * c)
-        value = np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0)
-        out[k // c::c, k % c::c] = value
+        values.append(np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0).astype(np.float32))
+    return values
+
+
+#: The tile :func:`tile_variances` summarises (the shipped models' tile size).
+BLOCK_TILE = 16
+
+
+def tile_variances(plane: np.ndarray) -> np.ndarray:
+    """The ``.tiles`` plane of a plane: per 16x16 tile, each reduced rate's block variance over the
+    tile's 4x4 cells, mean and maximum: the block contrast a split network's tail reads at tile
+    resolution (``rtp.train.model.TileContrast``), so that neither the network nor a frame whose
+    trunk features are carried touches a pixel plane at a finer resolution.
+
+    With ``v`` the cell values of :func:`block_variances` (each rate's ``log(var + eps) / s + 1``,
+    ``s = -log(eps)``, ``eps`` = :data:`BLOCK_EPS`; float32, as the ``.blocks`` plane stores them), per
+    tile of :data:`BLOCK_TILE` pixels and rate ``k`` of :data:`BLOCK_RATES`: the mean
+    ``log(mean over the tile's cells of exp(s (v - 1))) / s + 1`` (the log of the mean variance, in
+    the same units) is written to value ``k`` and the maximum of ``v`` to value ``6 + k``; value ``j``
+    (0 to 11) sits on pixel ``(j // 4, j % 4)`` of the tile (its first three rows, four columns), the
+    tile's other pixels are 0. A partial last tile (a 1080-row frame has half a tile row at the
+    bottom) summarises the cells it has; with sides that are multiples of 4 (every model's
+    ``input_multiple``) all twelve values of every tile are inside the frame. Adapters that build
+    the plane on a GPU follow this definition (the moderngl adapter's shader; tests compare).
+
+    Args:
+        plane: ``(H, W)`` values in [0, 1], any float dtype (for example :func:`luma` of the albedo).
+
+    Returns:
+        float32 ``(H, W)``.
+    """
+    p = _finite_plane(plane, "tile_variances", np.float64)
+    h, w = p.shape
+    values = _cell_variances(p, plane)
+    m = BLOCK_TILE // BLOCK_CELL  # cells per tile side
+    ch, cw = values[0].shape
+    th, tw = -(-ch // m), -(-cw // m)
+    s = -np.log(BLOCK_EPS)
+    out = np.zeros((th * BLOCK_TILE, tw * BLOCK_TILE), np.float32)
+    for k, v in enumerate(values):
+        e = np.exp(s * (v.astype(np.float64) - 1.0))  # variance + eps, from the stored value
+        padded = np.zeros((th * m, tw * m))
+        padded[:ch, :cw] = e
+        top = np.zeros((th * m, tw * m), np.float32)
+        top[:ch, :cw] = v  # values are >= 0: a zero beyond the frame never wins the maximum
+        count = np.zeros((th * m, tw * m))
+        count[:ch, :cw] = 1.0
+        mean = padded.reshape(th, m, tw, m).sum(axis=(1, 3)) / count.reshape(th, m, tw, m).sum(axis=(1, 3))
+        for j, stat in ((k, np.log(mean) / s + 1.0), (6 + k, top.reshape(th, m, tw, m).max(axis=(1, 3)))):
+            out[j // BLOCK_CELL::BLOCK_TILE, j % BLOCK_CELL::BLOCK_TILE] = stat
     return out[:h, :w]
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ._channels import BLOCK_TILE
 from ._digest import model_digest
 from ._errors import (
     InferenceError,
@@ -574,7 +575,7 @@ class ShadingRatePredictor:
         """One frame's checked and padded input ``(x4, xp)`` for the split methods."""
         if self._tail is None:
             raise ParameterError("this model does not split (metadata.tail is null): it has no trunk features to carry; "
-                                 "export a network trained with --block-contrast on .blocks planes", "carry")
+                                 "export a network trained with --block-contrast on .blocks or .tiles planes", "carry")
         if isinstance(x, np.ndarray) and x.ndim != 3:
             c = len(self._meta.inputs)
             raise InputShapeError(f"expected one frame's inputs ({c}, H, W), got shape {x.shape}", tuple(x.shape),
@@ -600,8 +601,8 @@ class ShadingRatePredictor:
     def predict_tail(self, features: np.ndarray, x: np.ndarray) -> np.ndarray:
         """:meth:`predict` of one frame ``(C, H, W)`` from trunk features (:meth:`predict_split`'s, of this
         frame or carried from an earlier one) and this frame's inputs: the tail alone runs, at tile
-        resolution (it reads only the frame's ``.blocks`` planes). With the frame's own features it
-        gives what :meth:`predict` gives."""
+        resolution (it reads only the frame's ``.blocks`` planes, or of its ``.tiles`` planes twelve pixels
+        a tile). With the frame's own features it gives what :meth:`predict` gives."""
         x4, xp = self._split_frame(x)
         th, tw = tile_grid(x4.shape[2], x4.shape[3], self._meta.tile_size)
         gh, gw = tile_grid(xp.shape[2], xp.shape[3], self._meta.tile_size)
@@ -612,11 +613,9 @@ class ShadingRatePredictor:
         f = features.astype(np.float32, copy=False)[None]
         if (gh, gw) != (th, tw):  # a frame padded past its last tile row or column: repeat the last ones
             f = np.pad(f, ((0, 0), (0, 0), (0, gh - th), (0, gw - tw)), mode="edge")
-        if not self._assume_finite:  # the tail reads the .blocks planes: they alone need the check
-            planes = [i for i, c in enumerate(self._meta.inputs) if c.endswith(".blocks")]
-            read = x4[:, planes[0]:planes[-1] + 1] if planes == list(range(planes[0], planes[-1] + 1)) else x4[:, planes]
+        if not self._assume_finite:  # the tail reads the .blocks or .tiles planes: they alone need the check
             with np.errstate(over="ignore", invalid="ignore"):
-                if not math.isfinite(float(read.sum())) or not math.isfinite(float(f.sum())):
+                if not math.isfinite(self._tail_read_sum(x4)) or not math.isfinite(float(f.sum())):
                     self._exact_check(x4)
                     raise NonFiniteInputError("features: expected finite values (the trunk's features), got NaN or "
                                               "infinite ones")
@@ -626,6 +625,15 @@ class ShadingRatePredictor:
             raise InferenceError(f"onnxruntime failed on the tail, features {f.shape} and input {xp.shape}: {err}") \
                 from err
         return self._meta.decode(raw[:, :, :th, :tw])[0]
+
+    def _tail_read_sum(self, x4: np.ndarray) -> float:
+        """The sum of what the tail reads of a frame: its .blocks planes, or of its .tiles planes the first
+        three rows of each tile (the twelve values a tile; a fifth of the planes, the rest never read)."""
+        planes = [i for i, c in enumerate(self._meta.inputs) if c.endswith((".blocks", ".tiles"))]
+        read = x4[:, planes[0]:planes[-1] + 1] if planes == list(range(planes[0], planes[-1] + 1)) else x4[:, planes]
+        if self._meta.inputs[planes[0]].endswith(".tiles"):
+            return float(sum(read[:, :, r::BLOCK_TILE].sum() for r in range(3)))
+        return float(read.sum())
 
     def shading_rates(
         self,

@@ -457,8 +457,9 @@ class PredictionReuse:
     ``carry="features"`` (a model that splits, :attr:`ShadingRatePredictor.splits`) carries the trunk's
     per-tile features instead of the estimates (each tile the mean of its carried pixels' features)
     and runs the network's tail on every carried frame: the tail reads what changes with every
-    sub-pixel move of the camera (the variance inside each rate's blocks, from the frame's ``.blocks``
-    planes) at tile resolution, where it costs a small part of a network run, and the trunk, which
+    sub-pixel move of the camera (the variance inside each rate's blocks, from the frame's ``.tiles``
+    planes, which summarise it per tile, or its ``.blocks`` planes) at tile resolution, where it costs a
+    small part of a network run (a tenth with ``.tiles`` planes on a CPU), and the trunk, which
     reads the frame at full resolution, runs every ``every``-th frame. Unseen tiles go to 1x1 or to
     fresh crops as with estimates; ``x`` is read on every frame. Not with ``rescale`` or ``history``
     (both act on carried estimates), and ``reduce`` must be ``"mean"`` (docs/runtime.md).

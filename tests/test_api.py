@@ -18,6 +18,7 @@ def test_sdk_all_is_pinned() -> None:
         "BLOCK_CELL",
         "BLOCK_EPS",
         "BLOCK_RATES",
+        "BLOCK_TILE",
         "CHANNELS",
         "DEFAULT_EXTRAPOLATION_K",
         "DEFAULT_INPUTS",
@@ -91,6 +92,7 @@ def test_sdk_all_is_pinned() -> None:
         "srgb_to_linear",
         "tile_extents",
         "tile_grid",
+        "tile_variances",
         "work_saved",
     ]
     public = sorted(n for n in vars(sdk) if not n.startswith("_") and n not in ("annotations", "logging"))

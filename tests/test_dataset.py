@@ -58,7 +58,7 @@ def test_round_trip_with_stated_precision(tmp_path: Path) -> None:
 def test_every_sdk_channel_is_stored_or_derived(tmp_path: Path) -> None:
     stored = {c for spec in BUFFERS.values() for c in spec.channels}
     derived = {"depth.edge", "reprojected.y", "albedo.y", "reprojected.y.dx", "reprojected.y.dy", "reprojected.y.blocks",
-               "albedo.y.blocks"}
+               "albedo.y.blocks", "reprojected.y.tiles", "albedo.y.tiles"}
     assert stored | derived == set(sdk.CHANNELS)
     w = DatasetWriter(tmp_path / "ds")
     bufs = _buffers()
@@ -74,6 +74,7 @@ def test_every_sdk_channel_is_stored_or_derived(tmp_path: Path) -> None:
     np.testing.assert_array_equal(s.channel("reprojected.y.dx"), dx)
     np.testing.assert_array_equal(s.channel("reprojected.y.dy"), dy)
     np.testing.assert_array_equal(s.channel("albedo.y.blocks"), sdk.block_variances(sdk.luma(s.buffer("albedo"))))
+    np.testing.assert_array_equal(s.channel("reprojected.y.tiles"), sdk.tile_variances(sdk.luma(s.buffer("reprojected"))))
 
 
 def test_writer_validates(tmp_path: Path) -> None:

@@ -156,6 +156,20 @@ def test_block_variances_on_the_gpu_follow_the_sdk_definition(frames) -> None:
     a.close()
 
 
+def test_tile_variances_on_the_gpu_follow_the_sdk_definition(frames) -> None:
+    ctx, prev, cur = frames
+    a = Adapter(("reprojected.y.tiles", "albedo.y", "albedo.y.tiles", "reprojected.y"), W, H, ctx=ctx)
+    x = _engine_inputs(ctx, prev, cur, a)
+    tiles = np.prod(sdk.tile_grid(H, W, sdk.BLOCK_TILE))
+    for got, source in ((x[0], x[3]), (x[2], x[1])):  # each of the adapter's own luma planes
+        want = sdk.tile_variances(source)
+        assert np.abs(got - want).max() <= 1e-3, np.abs(got - want).max()
+        assert 0.3 * tiles <= (want > 0.2).sum() <= 12 * tiles  # textured and edged tiles; 12 values a tile
+        assert not want.reshape(H // 16, 16, W // 16, 16)[:, 3:].any()  # below the tile's first three rows: 0
+    np.testing.assert_allclose(cur.channel("albedo.y.tiles"), sdk.tile_variances(sdk.luma(cur.albedo)))
+    a.close()
+
+
 def test_material_channels_from_an_engine_texture(frames) -> None:
     ctx, prev, cur = frames
     channels = ("metallic", "seen", "roughness", "specular")

@@ -1,5 +1,6 @@
-"""``sdk.pixel_differences`` and ``sdk.block_variances``: derived input planes of what a shading block
-loses (``reprojected.y.dx`` / ``.dy``, ``*.y.blocks``), defined once in the SDK."""
+"""``sdk.pixel_differences``, ``sdk.block_variances`` and ``sdk.tile_variances``: derived input planes of
+what a shading block loses (``reprojected.y.dx`` / ``.dy``, ``*.y.blocks``, ``*.y.tiles``), defined once in
+the SDK."""
 
 from __future__ import annotations
 
@@ -109,9 +110,34 @@ def test_flat_planes_read_zero_and_partial_cells_repeat_the_edge() -> None:
     assert sdk.block_variances(stripes)[0, 1] == 0.0  # 2x1 blocks (side by side) see no step
 
 
+# ------------------------------------------------------------------- sdk.tile_variances: the .tiles planes
+def test_each_tile_holds_the_mean_and_maximum_of_its_cells_block_variances() -> None:
+    """Per 16x16 tile and rate: the log of the mean of the cells' variances (through the .blocks values)
+    on value k, their maximum on value 6 + k, value j on the tile's pixel (j // 4, j % 4), 0 elsewhere; a
+    partial tile summarises the cells it has."""
+    rng = np.random.default_rng(4)
+    p = (rng.random((40, 36)) ** 2).astype(np.float32)
+    p[:16, :16] = 0.25  # a flat tile
+    b, t = sdk.block_variances(p), sdk.tile_variances(p)
+    assert t.dtype == np.float32 and t.shape == p.shape
+    s = -np.log(sdk.BLOCK_EPS)
+    for ty, tx in ((0, 0), (0, 1), (2, 2), (1, 2)):  # (2, 2): 8x4 pixels, two cells
+        for k in range(6):
+            cells = b[16 * ty + k // 4:16 * ty + 16:4, 16 * tx + k % 4:16 * tx + 16:4].astype(np.float64)
+            mean = np.log(np.exp(s * (cells - 1.0)).mean()) / s + 1.0
+            assert t[16 * ty + k // 4, 16 * tx + k % 4] == pytest.approx(mean, abs=1e-6)
+            assert t[16 * ty + (6 + k) // 4, 16 * tx + (6 + k) % 4] == pytest.approx(cells.max(), abs=1e-7)
+    assert not t[:16, :16].any()  # flat: the variance floor reads 0
+    mask = np.ones((16, 16), bool)
+    mask[:3, :4] = False
+    assert not np.pad(t, ((0, 8), (0, 12))).reshape(3, 16, 3, 16).transpose(1, 3, 0, 2)[mask].any()
+    assert 0.0 <= t.min() and t.max() <= 1.0
+
+
 @pytest.mark.parametrize(("fn", "channels"), [
     ("pixel_differences", ("reprojected.y.dx", "reprojected.y.dy")),
     ("block_variances", ("reprojected.y.blocks", "albedo.y.blocks")),
+    ("tile_variances", ("reprojected.y.tiles", "albedo.y.tiles")),
 ])
 def test_the_planes_are_registered_channels(fn: str, channels: tuple[str, ...]) -> None:
     for c in channels:
@@ -119,7 +145,7 @@ def test_the_planes_are_registered_channels(fn: str, channels: tuple[str, ...]) 
         assert (spec.low, spec.high) == (0.0, 1.0) and fn in spec.description
 
 
-@pytest.mark.parametrize("fn", ["pixel_differences", "block_variances"])
+@pytest.mark.parametrize("fn", ["pixel_differences", "block_variances", "tile_variances"])
 @pytest.mark.parametrize(("bad", "error"), [
     (np.zeros(5, np.float32), sdk.InputShapeError),
     (np.zeros((0, 3), np.float32), sdk.InputShapeError),

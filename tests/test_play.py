@@ -223,12 +223,13 @@ def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, m
         assert x[meta.inputs.index("albedo.y")].max() > 0.0
 
 
-def test_a_splitting_model_carries_its_features_in_the_loop(tmp_path: Path) -> None:
+@pytest.mark.parametrize("planes", ["blocks", "tiles"])
+def test_a_splitting_model_carries_its_features_in_the_loop(tmp_path: Path, planes: str) -> None:
     """``NAME@k:features``: a splitting model's trunk runs every k-th frame, its tail on every frame; the
     loop records the network's share of frames and the carry it used."""
     from tests.conftest import split_model
 
-    model = split_model(tmp_path)
+    model = split_model(tmp_path, planes)
     name = f"{model}@2:features"
     rep = play("procedural:0", f"{model},{name}", paths=("fast",), frames=5, size=(W, H), sweep=False, flip_every=0)
     rows = {r["method"]: r for r in rep.rows}
@@ -246,7 +247,8 @@ def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
     from tests.conftest import base_metadata
 
     model = tiny_model(base_metadata(inputs=["reprojected.y.dx", "seen", "reprojected.y", "reprojected.y.dy",
-                                             "reprojected.y.blocks", "albedo.y.blocks", "albedo.y"]))
+                                             "reprojected.y.blocks", "albedo.y.blocks", "albedo.y",
+                                             "reprojected.y.tiles"]))
     fed = _spy_inputs(monkeypatch)
     play("procedural:0", str(model), paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0, out=tmp_path)
     assert len(fed) == 3
@@ -258,6 +260,7 @@ def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         np.testing.assert_allclose(x[3], dy, atol=1e-6)
         assert dx.max() > 0.0 and dy.max() > 0.0
         np.testing.assert_allclose(x[4], sdk.block_variances(sdk.luma(rp)), atol=1e-6)
+        np.testing.assert_allclose(x[7], sdk.tile_variances(sdk.luma(rp)), atol=1e-6)
         # albedo.y.blocks is the current G-buffer's, never the history's (the loop once gave a model
         # the reprojected frame's blocks under both names)
         np.testing.assert_allclose(x[5], sdk.block_variances(x[6]), atol=1e-6)

@@ -17,7 +17,7 @@ One fragment shader (``shaders/adapter_fs.glsl``) reprojects the previous frame 
 and packs the requested channels, in the order given, into up to six RGBA32F targets; only those
 are read back (a single flip to the top-left origin, in ``_glio``). Each adapter compiles the shader
 for its channel list, so it runs only the work those channels need; when a plane reads other
-pixels' lumas (``reprojected.y.dx`` / ``.dy``, the ``.blocks`` planes), a first run of the same
+pixels' lumas (``reprojected.y.dx`` / ``.dy``, the ``.blocks`` and ``.tiles`` planes), a first run of the same
 shader writes every pixel's reprojected and albedo luma, and the second fetches them. The reference renderer builds its
 ``reprojected`` and ``seen`` planes with this very adapter, so captured training inputs and run-time
 inputs come from one code path.
@@ -52,6 +52,7 @@ CHANNEL_IDS: dict[str, int] = {
     "normal.x": 7, "normal.y": 8, "normal.z": 9, "depth": 10,
     "roughness": 11, "metallic": 12, "specular": 13, "depth.edge": 14, "reprojected.y": 15, "albedo.y": 16,
     "reprojected.y.dx": 17, "reprojected.y.dy": 18, "reprojected.y.blocks": 19, "albedo.y.blocks": 20,
+    "reprojected.y.tiles": 21, "albedo.y.tiles": 22,
 }
 _MATERIAL = ("roughness", "metallic", "specular")
 _LUMA_PASS = ("reprojected.y", "albedo.y")  # the first pass of adapters whose planes read neighbours' lumas
@@ -159,11 +160,14 @@ class Adapter(_AdapterBase[GBufferTextures]):
             "RTP_DIFFERENCES": bool({"reprojected.y.dx", "reprojected.y.dy"} & wanted),
             "RTP_BLOCKS_REPROJECTED": "reprojected.y.blocks" in wanted,
             "RTP_BLOCKS_ALBEDO": "albedo.y.blocks" in wanted,
+            "RTP_TILES_REPROJECTED": "reprojected.y.tiles" in wanted,
+            "RTP_TILES_ALBEDO": "albedo.y.tiles" in wanted,
         }
-        # Planes that read other pixels' lumas (.dx / .dy, .blocks) take them from a first pass that
+        # Planes that read other pixels' lumas (.dx / .dy, .blocks, .tiles) take them from a first pass that
         # writes every pixel's reprojected and albedo luma, instead of reprojecting each neighbour again.
         self._luma: Adapter | None = None
-        if flags["RTP_DIFFERENCES"] or flags["RTP_BLOCKS_REPROJECTED"] or flags["RTP_BLOCKS_ALBEDO"]:
+        if any(flags[f] for f in ("RTP_DIFFERENCES", "RTP_BLOCKS_REPROJECTED", "RTP_BLOCKS_ALBEDO",
+                                  "RTP_TILES_REPROJECTED", "RTP_TILES_ALBEDO")):
             self._luma = Adapter(_LUMA_PASS, width, height, ctx=ctx, tolerance=tolerance, albedo_linear=albedo_linear,
                                  normal_space=normal_space, depth_kind=depth_kind)
         flags["RTP_LUMA_PASS"] = self._luma is not None

@@ -37,6 +37,7 @@ from rtp.sdk import (
     pixel_differences,
     rate_size,
     tile_grid,
+    tile_variances,
 )
 from rtp.sdk.adapters import UnsupportedChannelError
 
@@ -163,6 +164,8 @@ class Frame:
             return pixel_differences(luma(self.reprojected))[name.endswith(".dy")]
         if name in ("reprojected.y.blocks", "albedo.y.blocks"):
             return block_variances(luma(self.reprojected if name.startswith("r") else self.albedo))
+        if name in ("reprojected.y.tiles", "albedo.y.tiles"):
+            return tile_variances(luma(self.reprojected if name.startswith("r") else self.albedo))
         base, _, comp = name.partition(".")
         planes = {
             "albedo": self.albedo, "normal": self.normal, "reprojected": self.reprojected, "motion": self.motion,

@@ -19,6 +19,7 @@ from rtp.sdk import (
     pixel_differences,
     reproject,
     reproject_positions,
+    tile_variances,
 )
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 
@@ -38,7 +39,8 @@ _NORMAL = ("normal.x", "normal.y", "normal.z")
 _MOTION = ("motion.x", "motion.y")
 # Planes derived from the RGB ones: Rec.601 luma (sdk.luma), as the metrics measure it.
 _REPROJECTED_Y, _ALBEDO_Y = "reprojected.y", "albedo.y"
-_DIFFERENCES = ("reprojected.y.dx", "reprojected.y.dy", "reprojected.y.blocks")
+_DIFFERENCES = ("reprojected.y.dx", "reprojected.y.dy", "reprojected.y.blocks", "reprojected.y.tiles")
+_ALBEDO_VARIANCES = ("albedo.y.blocks", "albedo.y.tiles")
 #: The ``specular`` channel of everything pyrender shades: its dielectric F0 is a fixed 4 %
 #: (``mesh.frag``: ``dialectric_spec = vec3(0.04)``), specular 0.5 in ``sdk.CHANNELS`` terms.
 PYRENDER_SPECULAR = 0.5
@@ -107,6 +109,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
     * ``depth.edge``: :func:`rtp.sdk.depth_edges` of that depth.
     * ``reprojected.y.dx/dy``: :func:`rtp.sdk.pixel_differences` of ``reprojected.y``.
     * ``reprojected.y.blocks``, ``albedo.y.blocks``: :func:`rtp.sdk.block_variances` of the luma.
+    * ``reprojected.y.tiles``, ``albedo.y.tiles``: :func:`rtp.sdk.tile_variances` of the luma.
     * ``motion.x/y``: screen motion of a static scene under the camera move (pixels, previous
       minus current position, x right, y down), from depth and the two cameras; 0 on background.
 
@@ -139,7 +142,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     name: ClassVar[str] = "pyrender"
     supported_channels: ClassVar[frozenset[str]] = frozenset(
-        (*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_ALBEDO, _ALBEDO_Y, "albedo.y.blocks", *_NORMAL,
+        (*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_ALBEDO, _ALBEDO_Y, *_ALBEDO_VARIANCES, *_NORMAL,
          *MATERIAL, "specular", "depth", "depth.edge", *_MOTION)
     )
     frame_type: ClassVar[type] = SceneFrame
@@ -265,7 +268,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
         cam = self._camera(scene, camera)
         prev_cam = cam if prev_camera is None else prev_camera
 
-        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, "albedo.y.blocks"}),
+        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, *_ALBEDO_VARIANCES}),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
         planes: dict[str, np.ndarray] = {"depth": g.depth}
         if "depth.edge" in wanted:
@@ -281,6 +284,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
             planes[_ALBEDO_Y] = luma(g.albedo)
             if "albedo.y.blocks" in wanted:
                 planes["albedo.y.blocks"] = block_variances(planes[_ALBEDO_Y])
+            if "albedo.y.tiles" in wanted:
+                planes["albedo.y.tiles"] = tile_variances(planes[_ALBEDO_Y])
         if g.normal is not None:
             planes.update({c: g.normal[..., i] for i, c in enumerate(_NORMAL)})
         if temporal:
@@ -307,6 +312,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 planes.update(zip(_DIFFERENCES[:2], pixel_differences(planes[_REPROJECTED_Y])))
                 if _DIFFERENCES[2] in wanted:
                     planes[_DIFFERENCES[2]] = block_variances(planes[_REPROJECTED_Y])
+                if _DIFFERENCES[3] in wanted:
+                    planes[_DIFFERENCES[3]] = tile_variances(planes[_REPROJECTED_Y])
                 planes["seen"] = seen
             if wanted & set(_MOTION):
                 planes.update(zip(_MOTION, self._motion(g.depth, view, proj, prev_vp)))

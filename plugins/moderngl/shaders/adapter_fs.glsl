@@ -42,9 +42,11 @@ const bool u_normal_world = RTP_NORMAL_WORLD;
 const bool u_differences = RTP_DIFFERENCES;            // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
 const bool u_blocks_reprojected = RTP_BLOCKS_REPROJECTED;  // reprojected.y.blocks wanted: reproject the pixel's 4x4 cell
 const bool u_blocks_albedo = RTP_BLOCKS_ALBEDO;        // albedo.y.blocks wanted
+const bool u_tiles_reprojected = RTP_TILES_REPROJECTED;  // reprojected.y.tiles wanted: the block variances of the pixel's 16x16 tile
+const bool u_tiles_albedo = RTP_TILES_ALBEDO;          // albedo.y.tiles wanted
 const int u_channels[24] = int[24](RTP_CHANNELS);
 const int u_count = RTP_COUNT;
-// RTP_LUMA_PASS: the lumas of other pixels (the .dx / .dy neighbours, the 16 texels of a .blocks cell)
+// RTP_LUMA_PASS: the lumas of other pixels (the .dx / .dy neighbours, the 16 texels of a .blocks cell, the 256 of a .tiles tile)
 // are fetched from u_luma, which a first run of this shader for ("reprojected.y", "albedo.y") filled,
 // instead of reprojecting each neighbour again (up to 18 reprojections a pixel otherwise).
 const bool u_luma_pass = RTP_LUMA_PASS;
@@ -154,6 +156,32 @@ float reprojected_luma_at(ivec2 t) {
     return display_luma(reproject_prev(vec2(t) + 0.5, depth_at(t)).rgb);
 }
 
+// *.y.tiles, as rtp.sdk.tile_variances: per 16x16 tile, value j (0-11) on pixel (j / 4, j % 4) of the tile:
+// for rate k = j % 6, over the tile's 4x4 cells inside the frame, the mean (j < 6, as log(mean of
+// exp(s (v - 1))) / s + 1) or the maximum (j >= 6) of the cells' .blocks values v.
+float tile_value(bool reprojected, int j, int c0, int r0) {
+    ivec2 rate = BLOCK_RATES[j % 6];
+    float s = -log(BLOCK_EPS);
+    float acc = 0.0, top = 0.0;
+    int cells = 0;
+    for (int cy = 0; cy < 4; ++cy) {
+        for (int cx = 0; cx < 4; ++cx) {
+            int x0 = c0 + 4 * cx, y0 = r0 + 4 * cy;
+            if (x0 >= int(u_size.x) || y0 >= int(u_size.y)) continue;
+            float vals[16];
+            for (int i = 0; i < 16; ++i) {
+                ivec2 t = top_left_texel(x0 + i % 4, y0 + i / 4);
+                vals[i] = reprojected ? reprojected_luma_at(t) : albedo_luma_at(t);
+            }
+            float v = block_value(vals, rate);
+            acc += exp(s * (v - 1.0));
+            top = max(top, v);
+            cells += 1;
+        }
+    }
+    return j < 6 ? log(acc / float(cells)) / s + 1.0 : top;
+}
+
 void main() {
     ivec2 g = ivec2(gl_FragCoord.xy);
     float d = depth_at(g);
@@ -195,10 +223,18 @@ void main() {
         if (u_blocks_albedo) ablocks = block_value(av, BLOCK_RATES[k]);
         if (u_blocks_reprojected && u_has_prev) rblocks = block_value(rv, BLOCK_RATES[k]);
     }
+    float rtiles = 0.0, atiles = 0.0;
+    int trow = row % 16, tcol = g.x % 16;
+    if (trow < 3 && tcol < 4 && (u_tiles_albedo || (u_tiles_reprojected && u_has_prev))) {
+        int j = trow * 4 + tcol;
+        if (u_tiles_albedo) atiles = tile_value(false, j, g.x - tcol, row - trow);
+        if (u_tiles_reprojected && u_has_prev) rtiles = tile_value(true, j, g.x - tcol, row - trow);
+    }
     float zc = inv_depth(d);
     float edge = clamp(max(edge_axis(g, ivec2(1, 0), zc), edge_axis(g, ivec2(0, 1), zc)), 0.0, 1.0);
-    float v[21] = float[21](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
-                            mat.x, mat.y, mat.z, edge, ry, display_luma(albedo), rdx, rdy, rblocks, ablocks);
+    float v[23] = float[23](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+                            mat.x, mat.y, mat.z, edge, ry, display_luma(albedo), rdx, rdy, rblocks, ablocks,
+                            rtiles, atiles);
     float outv[24];
     for (int i = 0; i < 24; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
