@@ -566,7 +566,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--block-contrast", dest="block_contrast", type=_choices_csv(tuple(CHANNELS)), default=None,
                    help="input channels (comma-separated, among --inputs) whose variance inside each reduced rate's "
                    "blocks, per 4x4 cell, the fast network reads beside its stem: what the rate would lose of them, "
-                   "fixed arithmetic, not learned (default: none)")
+                   "fixed arithmetic, not learned; .blocks planes (last among --inputs): that variance as stored by the "
+                   "adapter, the stem blind to them, a network whose trunk features can be carried across frames; "
+                   ".tiles planes (last, with --contrast-cell 16): the same summarised per 16-pixel tile by the adapter, "
+                   "the contrast read at tile resolution (default: none)")
     r.add_argument("--contrast-cell", dest="contrast_cell", type=_positive, default=None,
                    help="with --block-contrast: the cell in pixels it is measured over and joins the network at: the "
                    "stem's (4, the default), 8, after the first pool (a quarter of the positions, cheaper at 1080p), "

@@ -116,11 +116,12 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     that holds one is one). ``sdk.ShadingRatePredictor`` checks that scalar instead of reading the
     whole frame once more (``metadata.finite_probe``; docs/runtime.md). Returns the output's name,
     or None, changing nothing, where the probe would not see every pixel or would not be cheaper than
-    reading the frame: the input must feed exactly one ``Conv``, with no padding or dilation, a kernel
-    equal to its stride (every pixel in exactly one window) and a stride that divides
-    ``pad_multiple`` (no row or column left over), with fewer output values than input values (rtp's
-    fast network: a 4x4 stride-4 stem, 16 channels from eight planes; the paper's full-resolution
-    3x3 first layer has none)."""
+    reading the frame: exactly one of the ``Conv`` nodes the input feeds must have no padding or
+    dilation, a kernel equal to its stride (every pixel in exactly one window) and a stride that
+    divides ``pad_multiple`` (no row or column left over), with fewer output values than input values
+    (rtp's fast network: a 4x4 stride-4 stem, 16 channels from eight planes, beside which a split
+    network's tile contrast reads a few pixels of each tile; the paper's full-resolution 3x3 first
+    layer has none)."""
     import onnx
     from onnx import helper
 
@@ -131,26 +132,16 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     inputs = [i for i in graph.input if i.name not in init]
     if len(inputs) != 1:
         return None
-    # one convolution reads the frame (other nodes may read it too: a split network's slices of its .blocks
-    # planes; the stem sees those planes as well, with weights held at zero, and 0 x NaN is NaN)
-    consumers = [n for n in graph.node if n.op_type == "Conv" and inputs[0].name in n.input]
-    if len(consumers) != 1 or consumers[0].input[0] != inputs[0].name:
+    # one convolution that reads the frame sees every pixel (other nodes may read it too: a split network's
+    # contrast of its .blocks or .tiles planes; the stem sees those planes as well, with weights held at
+    # zero, and 0 x NaN is NaN)
+    readers = [n for n in graph.node if n.op_type == "Conv" and n.input[0] == inputs[0].name]
+    if any(inputs[0].name in n.input[1:] for n in readers):
         return None
-    conv = consumers[0]
-    attrs = {a.name: helper.get_attribute_value(a) for a in conv.attribute}
-    weight = init.get(conv.input[1])
-    if weight is None or len(weight.dims) != 4:
+    covering = [n for n in readers if _reads_every_pixel(n, init, pad_multiple)]
+    if len(covering) != 1:
         return None
-    kernel = list(attrs.get("kernel_shape", weight.dims[2:]))
-    strides = list(attrs.get("strides", [1, 1]))
-    auto_pad = attrs.get("auto_pad", b"NOTSET")
-    if (kernel != strides or any(v != 0 for v in attrs.get("pads", [0, 0, 0, 0]))
-            or any(v != 1 for v in attrs.get("dilations", [1, 1])) or auto_pad not in (b"NOTSET", "NOTSET")
-            or any(pad_multiple % st for st in strides)):
-        return None
-    in_channels = weight.dims[1] * attrs.get("group", 1)
-    if weight.dims[0] >= in_channels * strides[0] * strides[1]:
-        return None
+    conv = covering[0]
     # GlobalAveragePool, not one ReduceSum over the whole tensor: onnxruntime's CPU provider runs it in
     # the convolution's blocked (NCHWc) layout, where a ReduceSum would first reorder the 1/4-resolution
     # tensor back (about 0.8 ms more at 1080p); the ReduceSum then adds up one value per channel
@@ -159,6 +150,27 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     graph.node.append(helper.make_node("ReduceSum", [mean], [PROBE_NAME], keepdims=0, name=PROBE_NODES[1]))
     graph.output.append(helper.make_tensor_value_info(PROBE_NAME, onnx.TensorProto.FLOAT, []))
     return PROBE_NAME
+
+
+def _reads_every_pixel(conv: Any, init: dict[str, Any], pad_multiple: int) -> bool:
+    """Whether ``conv`` reads each pixel of its input exactly once and leaves fewer values than it
+    reads: no padding or dilation, a kernel equal to its stride, a stride that divides
+    ``pad_multiple`` (no row or column left over)."""
+    from onnx import helper
+
+    attrs = {a.name: helper.get_attribute_value(a) for a in conv.attribute}
+    weight = init.get(conv.input[1]) if len(conv.input) > 1 else None
+    if weight is None or len(weight.dims) != 4:
+        return False
+    kernel = list(attrs.get("kernel_shape", weight.dims[2:]))
+    strides = list(attrs.get("strides", [1, 1]))
+    auto_pad = attrs.get("auto_pad", b"NOTSET")
+    if (kernel != strides or any(v != 0 for v in attrs.get("pads", [0, 0, 0, 0]))
+            or any(v != 1 for v in attrs.get("dilations", [1, 1])) or auto_pad not in (b"NOTSET", "NOTSET")
+            or any(pad_multiple % st for st in strides)):
+        return False
+    in_channels = weight.dims[1] * attrs.get("group", 1)
+    return bool(weight.dims[0] < in_channels * strides[0] * strides[1])
 
 
 def merge_slices(model: Any) -> int:

@@ -164,10 +164,11 @@ def _gl_marked_tests_get_the_context(request: pytest.FixtureRequest) -> None:
         make_current(request.getfixturevalue("gl_context"))
 
 
-def split_model(folder: Path) -> Path:
-    """A JNYang network that splits (``contrast_stored``: the block contrast from the .blocks planes joins
-    at tile resolution) on the shipped JNYang's nine planes, random weights and BatchNorm statistics,
-    exported with its tail into ``folder``: the ONNX path."""
+def split_model(folder: Path, planes: str = "blocks") -> Path:
+    """A JNYang network that splits (``contrast_stored``: the block contrast from the ``.blocks`` planes, or
+    with ``planes="tiles"`` from the ``.tiles`` planes, joins at tile resolution) on the shipped JNYang's
+    nine planes, random weights and BatchNorm statistics, exported with its tail into ``folder``: the ONNX
+    path."""
     import torch
 
     from rtp.export import export_checkpoint
@@ -175,12 +176,13 @@ def split_model(folder: Path) -> Path:
     from rtp.train.model import FastNet
 
     torch.manual_seed(0)
-    net = FastNet(9, head_width=16, block_contrast=(7, 8), contrast_cell=16, contrast_max=True, contrast_stored=True)
+    net = FastNet(9, head_width=16, block_contrast=(7, 8), contrast_cell=16, contrast_max=True, contrast_stored=True,
+                  contrast_tiles=planes == "tiles")
     for m in net.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.2, 0.2)
             m.running_var.uniform_(0.5, 2.0)
     inputs = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular",
-              "reprojected.y.blocks", "albedo.y.blocks"]
-    ck = checkpoint.save(folder / "split.pt", net.eval(), base_metadata(inputs=inputs))
-    return export_checkpoint(ck, folder / "split.onnx")
+              f"reprojected.y.{planes}", f"albedo.y.{planes}"]
+    ck = checkpoint.save(folder / f"split-{planes}.pt", net.eval(), base_metadata(inputs=inputs))
+    return export_checkpoint(ck, folder / f"split-{planes}.onnx")

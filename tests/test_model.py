@@ -422,6 +422,84 @@ def test_a_network_with_stored_contrast_splits_into_trunk_and_tail_and_exports()
             sdk.load(Path(d) / "damaged.onnx")
 
 
+def test_tile_contrast_reads_the_tiles_planes_as_the_stored_contrast() -> None:
+    """``.tiles`` planes (``sdk.tile_variances``) read by ``TileContrast`` give what ``StoredBlockContrast``
+    computes from the ``.blocks`` planes of the same lumas, partial tiles included, with and without the
+    maxima; its weights are fixed buffers, not parameters."""
+    from rtp.train.model import StoredBlockContrast, TileContrast
+
+    rng = np.random.default_rng(5)
+    for h, w in ((32, 48), (36, 52), (44, 20)):
+        luma = rng.uniform(0, 1, (2, h, w)).astype(np.float32) ** 2
+        luma[0, :16, :16] = 0.5  # a flat tile: the variance floor
+        x = torch.from_numpy(np.concatenate([np.stack([sdk.block_variances(p) for p in luma]),
+                                             np.stack([sdk.tile_variances(p) for p in luma])])[None])
+        for tile_max in (True, False):
+            want = StoredBlockContrast((0, 1), 4, 16, tile_max=tile_max)(x)
+            module = TileContrast((2, 3), 4, 16, tile_max=tile_max)
+            got = module(x)
+            assert got.shape == want.shape == (1, 2 * 6 * (2 if tile_max else 1), -(-h // 16), -(-w // 16))
+            torch.testing.assert_close(got, want, rtol=1e-4, atol=2e-5)
+            assert not list(module.parameters())
+    with pytest.raises(ValueError, match="the cell must be their tile, 16"):
+        TileContrast((0,), 2, 8)
+
+
+def test_a_network_with_tile_contrast_splits_and_exports_a_tail_that_reads_the_tile_grid(tmp_path: Path) -> None:
+    """``contrast_tiles``: the same network as ``contrast_stored`` on .blocks planes (the same weights give
+    the same outputs on the same frame); exported, its contrast is one strided convolution beside the stem
+    (the finite probe stays on the stem), the tail reads nothing finer than the tile grid, and the SDK's
+    split methods match torch at partial tiles."""
+    import onnx
+
+    from rtp.train.model import FastNet, TileContrast
+
+    from .conftest import split_model
+
+    torch.manual_seed(0)
+    blocks = FastNet(9, head_width=16, block_contrast=(7, 8), contrast_cell=16, contrast_max=True,
+                     contrast_stored=True).eval()
+    tiles = FastNet(9, head_width=16, block_contrast=(7, 8), contrast_cell=16, contrast_max=True,
+                    contrast_stored=True, contrast_tiles=True).eval()
+    tiles.load_state_dict(blocks.state_dict())
+    assert isinstance(tiles.contrast, TileContrast) and tiles.config["contrast_tiles"] is True and tiles.blind == 2
+    assert tiles.input_multiple == 4
+    rng = np.random.default_rng(9)
+    planes = rng.uniform(0, 1, (7, 36, 52)).astype(np.float32)
+    xb = np.concatenate([planes, np.stack([sdk.block_variances(planes[i]) for i in (0, 2)])])
+    xt = np.concatenate([planes, np.stack([sdk.tile_variances(planes[i]) for i in (0, 2)])])
+    with torch.inference_mode():
+        torch.testing.assert_close(tiles(torch.from_numpy(xt)[None]), blocks(torch.from_numpy(xb)[None]),
+                                   rtol=1e-4, atol=1e-5)
+    for bad in ({"contrast_cell": 8}, {"contrast_stored": False}):
+        with pytest.raises(ValueError, match="contrast_tiles reads the block contrast from .tiles planes"):
+            FastNet(9, **{"block_contrast": (7, 8), "contrast_cell": 16, "contrast_stored": True, "contrast_tiles": True,
+                          **bad})
+    path = split_model(tmp_path, "tiles")
+    graph = onnx.load(str(path)).graph
+    readers = [n for n in graph.node if n.op_type == "Conv" and n.input[0] == "input"]
+    assert len(readers) == 2 and not any(n.op_type in ("Slice", "Exp", "AveragePool") for n in graph.node)
+    pred = sdk.load(path)
+    assert pred.metadata.finite_probe and pred.splits
+    tail = onnx.load_from_string(base64.b64decode(
+        {p.key: p.value for p in onnx.load(str(path)).metadata_props}[sdk.TAIL_KEY]))
+    convs = [n for n in tail.graph.node if n.op_type == "Conv" and n.input[0] == "input"]
+    strides = [list(a.ints) for n in convs for a in n.attribute if a.name == "strides"]
+    assert strides == [[16, 16]]  # the tail's one read of the frame: twelve pixels a tile
+    est, feats = pred.predict_split(xt)
+    with torch.inference_mode():
+        net = checkpoint.load(tmp_path / "split-tiles.pt").net.eval()
+        want = net(torch.from_numpy(xt)[None])[0].numpy()
+    np.testing.assert_allclose(pred.predict_raw(xt), want, atol=1e-5)
+    np.testing.assert_allclose(pred.predict_tail(feats, xt), est, atol=1e-6)
+    bad = xt.copy()
+    bad[8, 16 + 2, 3] = np.inf  # a value the tail reads (tile row 1, column 0: third row, fourth column)
+    with pytest.raises(sdk.NonFiniteInputError):
+        pred.predict_tail(feats, bad)
+    with pytest.raises(sdk.NonFiniteInputError):
+        pred.predict(bad)
+
+
 def test_the_fast_network_reads_block_contrast_beside_its_stem_and_exports() -> None:
     from rtp.train.model import BlockContrast, FastNet
 

@@ -631,26 +631,28 @@ def test_carry_scale_multiplies_carried_estimates_only() -> None:
     assert sdk.PredictionReuse(sdk.load("psnr"), carry_scale=1).carry_scale == 1.0
 
 
-def _split_predictor(folder: Path) -> sdk.ShadingRatePredictor:
+def _split_predictor(folder: Path, planes: str = "blocks") -> sdk.ShadingRatePredictor:
     from .conftest import split_model
 
-    return sdk.load(split_model(folder))
+    return sdk.load(split_model(folder, planes))
 
 
-def _split_frame(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+def _split_frame(rng: np.random.Generator, h: int, w: int, kind: str = "blocks") -> np.ndarray:
     planes = rng.uniform(0, 1, (7, h, w)).astype(np.float32)
-    return np.concatenate([planes, np.stack([sdk.block_variances(planes[i]) for i in (0, 2)])])
+    derive = sdk.tile_variances if kind == "tiles" else sdk.block_variances
+    return np.concatenate([planes, np.stack([derive(planes[i]) for i in (0, 2)])])
 
 
-def test_carried_features_run_the_tail_on_each_new_frame(tmp_path: Path) -> None:
+@pytest.mark.parametrize("kind", ["blocks", "tiles"])
+def test_carried_features_run_the_tail_on_each_new_frame(tmp_path: Path, kind: str) -> None:
     """``carry="features"``: the network's frame gives what ``predict`` gives; a carried frame runs the
     tail on the carried features and the new frame's inputs (so its estimates follow the new frame's
-    .blocks planes); unseen tiles go to 1x1 or to fresh crops, whose features are carried on."""
-    pred = _split_predictor(tmp_path)
+    .blocks or .tiles planes); unseen tiles go to 1x1 or to fresh crops, whose features are carried on."""
+    pred = _split_predictor(tmp_path, kind)
     assert pred.splits
     h, w = 64, 96
     rng = np.random.default_rng(3)
-    x0, x1 = _split_frame(rng, h, w), _split_frame(rng, h, w)
+    x0, x1 = _split_frame(rng, h, w, kind), _split_frame(rng, h, w, kind)
     rows, cols = np.indices((h, w))
     everything = np.ones((h, w), np.float32)
     reuse = sdk.PredictionReuse(pred, 4, carry="features")

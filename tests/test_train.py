@@ -407,7 +407,7 @@ def test_block_contrast_trains_from_the_command_line_and_is_recorded(tmp_path: P
             train(TrainConfig(out=str(tmp_path / "x.pt"), arch="fast", block_contrast=bad, **common))
     with pytest.raises(sdk.ParameterError, match="block_contrast: the fast network's option"):
         train(TrainConfig(out=str(tmp_path / "p.pt"), block_contrast=("seen",), **common))
-    with pytest.raises(sdk.ParameterError, match="augment: albedo.y.blocks pack one rate per pixel"):
+    with pytest.raises(sdk.ParameterError, match="augment: albedo.y.blocks pack one value per pixel"):
         train(TrainConfig(out=str(tmp_path / "a.pt"), augment=True,
                           **{**common, "inputs": ("reprojected.y", "seen", "albedo.y.blocks")}))
     with pytest.raises(sdk.ParameterError, match="contrast_cell: only with block_contrast"):
@@ -416,6 +416,18 @@ def test_block_contrast_trains_from_the_command_line_and_is_recorded(tmp_path: P
         train(TrainConfig(out=str(tmp_path / "c.pt"), arch="fast", block_contrast=("seen",), contrast_cell=6, **common))
     with pytest.raises(sdk.ParameterError, match="block_contrast: needs a stem of at least 2 pixels"):
         train(TrainConfig(out=str(tmp_path / "s.pt"), arch="fast", stem=1, block_contrast=("seen",), **common))
+    # stored planes: .blocks or .tiles, not both, last among the inputs; .tiles summarise 16-pixel tiles
+    stored = {**common, "inputs": ("reprojected.y", "seen", "reprojected.y.blocks", "albedo.y.tiles")}
+    with pytest.raises(sdk.ParameterError, match="only .blocks planes or only .tiles planes"):
+        train(TrainConfig(out=str(tmp_path / "m.pt"), arch="fast", block_contrast=stored["inputs"][2:], contrast_cell=16,
+                          **{k: v for k, v in stored.items() if k != "crop"}))
+    tiles = {**common, "inputs": ("reprojected.y", "seen", "reprojected.y.tiles", "albedo.y.tiles")}
+    for bad in ({"contrast_cell": 8}, {"tile": 32, "contrast_cell": 16}):
+        with pytest.raises(sdk.ParameterError, match="tiles planes summarise 16-pixel tiles"):
+            train(TrainConfig(out=str(tmp_path / "t.pt"), arch="fast", block_contrast=tiles["inputs"][2:],
+                              **{**tiles, "crop": 64, **bad}))
+    with pytest.raises(sdk.ParameterError, match="augment: reprojected.y.tiles, albedo.y.tiles pack one value"):
+        train(TrainConfig(out=str(tmp_path / "a.pt"), augment=True, **tiles))
 
 
 def test_max_width_trains_from_the_command_line_and_bad_caps_are_refused(tmp_path: Path,
@@ -922,6 +934,29 @@ def test_training_frames_pack_block_planes_exactly(size: tuple[int, int]) -> Non
     np.testing.assert_array_equal(g.crop(8, 12, 24), x.astype(np.float16)[:, 8:32, 12:36])
     with pytest.raises(ValueError, match=r"expected planes of shape \(3, H, W\)"):
         Frame(x, names[:3])
+
+
+@pytest.mark.parametrize("size", [(48, 64), (40, 56)])
+def test_training_frames_pack_tile_planes_exactly(size: tuple[int, int]) -> None:
+    """``.tiles`` planes hold twelve values a 16x16 tile: packed to 12/256 of a dense plane, unpacked
+    exactly for tile-aligned crops and for any other window; a frame off the tile grid stays dense."""
+    from rtp.train._frames import Frame
+
+    rng = np.random.default_rng(1)
+    h, w = size
+    y = rng.random((h, w)).astype(np.float32)
+    names = ["reprojected.y", "reprojected.y.tiles", "albedo.y.blocks", "albedo.y.tiles"]
+    x = np.stack([y, sdk.tile_variances(y), sdk.block_variances(y), sdk.tile_variances(rng.random((h, w)) ** 3)])
+    f = Frame(x, names)
+    want = x.astype(np.float16)
+    np.testing.assert_array_equal(f.full(), want)
+    for oy, ox, side in [(0, 0, 16), (16, 16, 16), (0, 32, 16), (4, 8, 32), (3, 5, 12)]:  # the last two: off the tiles
+        np.testing.assert_array_equal(f.crop(oy, ox, side), want[:, oy : oy + side, ox : ox + side])
+    plane = x[0].astype(np.float16).nbytes
+    if h % 16 == 0 and w % 16 == 0:
+        assert f.nbytes == plane + plane * 6 // 16 + 2 * (plane * 12 // 256)
+    else:  # the .tiles planes stay dense, the .blocks plane is still packed
+        assert f.nbytes == 3 * plane + plane * 6 // 16
 
 
 def test_bench_error_features_fits_held_out_maps_and_scores_the_model(tmp_path: Path,

@@ -435,10 +435,10 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
         raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
                                  f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
-    packed = [c for c in cfg.inputs if c.endswith(".blocks")]
+    packed = [c for c in cfg.inputs if c.endswith((".blocks", ".tiles"))]
     if cfg.augment and packed:
-        raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one rate per pixel of each cell; a flipped or "
-                                 "transposed crop would read the wrong rates", "augment")
+        raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
+                                 "flipped or transposed crop would read the wrong rates", "augment")
     if cfg.loss not in LOSSES:
         raise sdk.ParameterError(f"loss: expected one of {', '.join(LOSSES)}, got {cfg.loss!r}", "loss")
     if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
@@ -492,12 +492,16 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.contrast_cell and cfg.contrast_cell not in cells:
         raise sdk.ParameterError(f"contrast_cell: expected 0 (the stem's) or one of {', '.join(map(str, cells))} (the "
                                  f"stem or a pooled resolution up to the tile), got {cfg.contrast_cell}", "contrast_cell")
-    stored = [c for c in cfg.block_contrast if c.endswith(".blocks")]
-    if stored and (len(stored) != len(cfg.block_contrast)
+    stored = [c for c in cfg.block_contrast if c.endswith((".blocks", ".tiles"))]
+    if stored and (len(stored) != len(cfg.block_contrast) or len({c.rsplit(".", 1)[1] for c in stored}) != 1
                    or list(cfg.inputs[len(cfg.inputs) - len(stored):]) != sorted(stored, key=cfg.inputs.index)):
-        raise sdk.ParameterError(f"block_contrast: .blocks planes ({', '.join(stored)}) are read as stored variances, by "
-                                 "the contrast alone: name only .blocks planes, and put them last among the inputs",
-                                 "block_contrast")
+        raise sdk.ParameterError(f"block_contrast: .blocks or .tiles planes ({', '.join(stored)}) are read as stored "
+                                 "variances, by the contrast alone: name only .blocks planes or only .tiles planes, and "
+                                 "put them last among the inputs", "block_contrast")
+    if stored and stored[0].endswith(".tiles") and not cfg.tile == cfg.contrast_cell == sdk.BLOCK_TILE:
+        raise sdk.ParameterError(f"block_contrast: .tiles planes summarise {sdk.BLOCK_TILE}-pixel tiles: expected tile "
+                                 f"{sdk.BLOCK_TILE} and contrast_cell {sdk.BLOCK_TILE}, got tile {cfg.tile} and "
+                                 f"contrast_cell {cfg.contrast_cell}", "block_contrast")
     if cfg.contrast_max and (not cfg.block_contrast or (cfg.contrast_cell or min(cfg.stem, cfg.tile)) <= 4):
         raise sdk.ParameterError("contrast_max: only with block_contrast and a contrast_cell over 4 pixels (the worst "
                                  "4x4 cell of each larger one)", "contrast_max")
@@ -563,7 +567,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
                         contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
                         tail_width=cfg.tail_width, contrast_max=cfg.contrast_max,
-                        contrast_stored=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".blocks"))
+                        contrast_stored=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith((".blocks", ".tiles")),
+                        contrast_tiles=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".tiles"))
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)

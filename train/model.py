@@ -47,6 +47,7 @@ from rtp.sdk import (
     BLOCK_CELL,
     BLOCK_EPS,
     BLOCK_RATES,
+    BLOCK_TILE,
     DEFAULT_INPUTS,
     DEFAULT_OUTPUTS,
     DEFAULT_TILE_SIZE,
@@ -55,7 +56,7 @@ from rtp.sdk import (
 )
 
 __all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network",
-           "StoredBlockContrast", "build_network", "haar_details", "keep_outputs", "layer_plan"]
+           "StoredBlockContrast", "TileContrast", "build_network", "haar_details", "keep_outputs", "layer_plan"]
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
@@ -326,6 +327,50 @@ class StoredBlockContrast(nn.Module):
                           for t in (mean[:, i * n:(i + 1) * n], worst[:, i * n:(i + 1) * n])], dim=1)
 
 
+class TileContrast(nn.Module):
+    """:class:`StoredBlockContrast` with ``cell`` = the tile, read from ``.tiles`` input planes
+    (``sdk.tile_variances``), which hold each tile's twelve values (per rate the log of the mean block
+    variance over the tile's 4x4 cells, then the maximum) on its first pixels: one convolution with
+    the tile as its stride and fixed one-hot weights (scaled to undo the planes' [0, 1] encoding)
+    picks them, so the contrast costs a read of twelve pixels per tile and plane instead of a pass
+    over the 4x4 cells. The same numbers as :class:`StoredBlockContrast` on the ``.blocks`` planes of
+    the same frame (tests compare, partial tiles included): a network trained on either computes the
+    same function. Its weight and bias are fixed buffers, not parameters.
+
+    An adapter builds the planes (on the GPU in the moderngl adapter), so a split network's tail
+    reads nothing finer than the tile grid, and a frame whose trunk features are carried costs a
+    small fraction of a network run (docs/results.md "The tail at tile resolution")."""
+
+    weight: torch.Tensor
+    bias: torch.Tensor
+
+    def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, tile_max: bool = False) -> None:
+        super().__init__()
+        if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
+            raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
+                             f"{list(planes)}")
+        if cell != BLOCK_TILE:
+            raise ValueError(f"block_contrast from .tiles planes: the cell must be their tile, {BLOCK_TILE}, got {cell}")
+        self.planes = tuple(int(i) for i in planes)
+        self.rates = tuple(BLOCK_RATES)
+        self.cell = cell
+        self.tile_max = bool(tile_max)
+        per = len(self.rates) * (2 if self.tile_max else 1)  # the values read of each plane
+        self.channels = len(self.planes) * per
+        self.in_channels = in_channels
+        scale = -math.log(BLOCK_EPS)
+        rows = -(-per // BLOCK_CELL)
+        weight = torch.zeros(self.channels, in_channels, rows, BLOCK_CELL)
+        for p, channel in enumerate(self.planes):  # plane-major: means, then maxima, as StoredBlockContrast
+            for j in range(per):
+                weight[p * per + j, channel, j // BLOCK_CELL, j % BLOCK_CELL] = scale
+        self.register_buffer("weight", weight, persistent=False)
+        self.register_buffer("bias", torch.full((self.channels,), -scale), persistent=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return nn.functional.conv2d(x, self.weight, self.bias, stride=self.cell)  # (v - 1) * scale
+
+
 class BlindConv2d(nn.Conv2d):
     """A strided stem convolution (kernel = stride, no bias) whose weights from the last ``blind``
     input channels are held at exactly zero: made zero at construction and whenever a state is
@@ -418,7 +463,7 @@ class FastNet(nn.Module):
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
                  block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0,
                  separable_tail: bool = False, tail_width: int = 0, contrast_max: bool = False,
-                 contrast_stored: bool = False) -> None:
+                 contrast_stored: bool = False, contrast_tiles: bool = False) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -473,15 +518,21 @@ class FastNet(nn.Module):
                              f"and a contrast_cell over 4, got {cell}")
         if contrast_stored and (not block_contrast or sorted(block_contrast) != list(
                 range(in_channels - len(block_contrast), in_channels))):
-            raise ValueError(f"contrast_stored reads the block contrast from .blocks planes that only it reads: "
+            raise ValueError(f"contrast_stored reads the block contrast from .blocks or .tiles planes that only it reads: "
                              f"expected block_contrast to be the last input channels, got {list(block_contrast)} of "
                              f"{in_channels}")
-        self.contrast: BlockContrast | StoredBlockContrast | None = None
-        if block_contrast and contrast_stored:
+        if contrast_tiles and not (contrast_stored and cell == tile == BLOCK_TILE):
+            raise ValueError(f"contrast_tiles reads the block contrast from .tiles planes of {BLOCK_TILE}-pixel tiles: "
+                             f"expected contrast_stored, tile {BLOCK_TILE} and contrast_cell {BLOCK_TILE}, got "
+                             f"contrast_stored={contrast_stored}, tile {tile}, contrast_cell {cell}")
+        self.contrast: BlockContrast | StoredBlockContrast | TileContrast | None = None
+        if block_contrast and contrast_tiles:
+            self.contrast = TileContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
+        elif block_contrast and contrast_stored:
             self.contrast = StoredBlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
         elif block_contrast:
             self.contrast = BlockContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
-        #: the last input channels the stem is blind to (stored .blocks planes, which only the contrast reads)
+        #: the last input channels the stem is blind to (stored .blocks or .tiles planes, which only the contrast reads)
         self.blind = len(block_contrast) if contrast_stored else 0
         if self.contrast is not None:  # likewise
             self.config["block_contrast"] = list(self.contrast.planes)
@@ -491,6 +542,8 @@ class FastNet(nn.Module):
                 self.config["contrast_max"] = True
             if contrast_stored:
                 self.config["contrast_stored"] = True
+            if contrast_tiles:
+                self.config["contrast_tiles"] = True
         layers: list[nn.Module] = []
         def stem_conv(out: int, k: int) -> nn.Conv2d:  # a plain convolution unless some planes are hidden from it
             if self.blind:
@@ -554,14 +607,15 @@ class FastNet(nn.Module):
         """Frames need only be a multiple of the stem's stride (metadata ``input_multiple``): the
         runtime pads a 1920x1080 frame not at all where whole 16-pixel tiles would need 1088 rows."""
         # a computed contrast's strided read takes whole cells; a stored one reads 4x4 cells and pools them
-        # in ceil mode
-        cell = 0 if self.contrast is None else BLOCK_CELL if isinstance(self.contrast, StoredBlockContrast) \
+        # in ceil mode (.tiles planes: a tile's values lie on its first 3 rows and 4 columns, inside any
+        # multiple of 4)
+        cell = 0 if self.contrast is None else BLOCK_CELL if isinstance(self.contrast, (StoredBlockContrast, TileContrast)) \
             else self.contrast.cell
         return max(min(int(self.config["stem"]), self.tile), cell)
 
     def trunk(self, x: torch.Tensor) -> torch.Tensor:
         """The features before the block contrast joins (the whole network's output without one); with
-        ``contrast_stored`` they do not depend on the .blocks planes."""
+        ``contrast_stored`` they do not depend on the .blocks or .tiles planes."""
         return self.layers(x) if self.contrast is None else self.layers[:self._contrast_at](x)
 
     def tail(self, features: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
@@ -589,17 +643,17 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
                   head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
                   contrast_cell: int = 0, separable_tail: bool = False, tail_width: int = 0,
-                  contrast_max: bool = False, contrast_stored: bool = False) -> Network:
+                  contrast_max: bool = False, contrast_stored: bool = False, contrast_tiles: bool = False) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
     ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast``, ``contrast_cell``
-    ``contrast_max`` and ``contrast_stored`` to the fast one."""
+    ``contrast_max``, ``contrast_stored`` and ``contrast_tiles`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
                        separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width,
-                       contrast_max, contrast_stored)
+                       contrast_max, contrast_stored, contrast_tiles)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
 
 
