@@ -233,9 +233,16 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     if reduce == "mean":  # per tile, the sums over its known pixels; float64 sums of a tile's float32 values are exact
         # entries as rows (unknown, -1: the zero row appended), so one gather fetches all of a pixel's values
         # together (1.6x faster than a gather per output for the 16 features of a split network's trunk)
-        vals = np.take(np.pad(flat.T, ((0, 1), (0, 0))), new, axis=0)
-        # a tile's k rows first (whole rows add as vectors), then its k columns: twice reduceat's speed
-        total = vals.reshape(th, k, gw, len(est)).sum(axis=1, dtype=np.float64).reshape(th, tw, k, len(est)).sum(axis=2)
+        vals = np.take(np.pad(flat.T, ((0, 1), (0, 0))), new, axis=0).reshape(th, k, gw, len(est))
+        # a tile's k rows first (whole rows add as vectors), then its k columns, each an in-place add in float64
+        # (the same exact sums as numpy's sum with dtype float64, in 0.6 of its time)
+        rows = vals[:, 0].astype(np.float64)
+        for i in range(1, k):
+            rows += vals[:, i]
+        cols = rows.reshape(th, tw, k, len(est))
+        total = cols[:, :, 0].copy()
+        for j in range(1, k):
+            total += cols[:, :, j]
         with np.errstate(invalid="ignore", divide="ignore"):  # no known pixel: nan, the worst below
             out = np.moveaxis(total, -1, 0) / count
     else:
@@ -624,7 +631,7 @@ class PredictionReuse:
         return est
 
     @staticmethod
-    def _plane(a: object, name: str, hw: tuple[int, int], limit: int | None = None) -> np.ndarray:
+    def _plane(a: object, name: str, hw: tuple[int, int], limit: int | None = None, step: int = 1) -> np.ndarray:
         if not isinstance(a, np.ndarray):
             raise ParameterError(f"{name}: expected a numpy array of shape {hw}, got {type(a).__name__}",
                                  "fetch" if limit is not None else name)
@@ -638,9 +645,12 @@ class PredictionReuse:
         if limit is not None:
             if not np.issubdtype(arr.dtype, np.integer):
                 raise ParameterError(f"{name}: expected integer pixel indices, got dtype {arr.dtype}", "fetch")
-            # one pass: read as unsigned, a negative index is larger than any limit (half the time of min and max)
+            # one pass: read as unsigned, a negative index is larger than any limit (half the time of min and max);
+            # only the pixels the carry reads (one of every `step` per axis, and the last row and column: _kept's),
+            # a sixteenth of the map at the default step
             unsigned = arr.view(np.dtype(f"u{arr.itemsize}")) if arr.dtype.kind == "i" else arr
-            if arr.size and unsigned.max() >= limit:
+            read = unsigned if step == 1 else (unsigned[::step, ::step], unsigned[::step, -1:], unsigned[-1:, ::step])
+            if arr.size and max(int(r.max()) for r in (read if isinstance(read, tuple) else (read,))) >= limit:
                 raise ParameterError(f"{name}: expected indices in [0, {limit}) (the previous frame's pixels), got "
                                      f"{arr.min()}..{arr.max()}", "fetch")
         return arr
@@ -659,11 +669,12 @@ class PredictionReuse:
         if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
             raise ParameterError(f"fetch: expected (rows, cols), two integer arrays of the frame's shape, got "
                                  f"{type(fetch).__name__}", "fetch")
-        rows = self._plane(fetch[0], "fetch rows", hw, hw[0])
-        cols = self._plane(fetch[1], "fetch cols", hw, hw[1])
+        tile = self.predictor.tile_size
+        step = _check_step(self.step, tile)
+        rows = self._plane(fetch[0], "fetch rows", hw, hw[0], step)
+        cols = self._plane(fetch[1], "fetch cols", hw, hw[1], step)
         seen_ = self._plane(np.ones(hw, np.float32) if seen is None else seen, "seen", hw)
         bg = None if background is None else self._plane(background, "background", hw)
-        tile = self.predictor.tile_size
         hib = self.predictor.metadata.higher_is_better
         est, track, missing = carry_estimates(self._cache, self._track, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce, self.step)
