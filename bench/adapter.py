@@ -8,7 +8,8 @@ float32) for the channel list of every ``*.onnx`` in ``--models``, and for the r
 reprojection (``reprojected.rgb`` + ``seen``). Each adapter compiles its shader for its channels
 (``adapter_fs.glsl``), so the cost follows what the channels need: the ``.blocks`` planes read a
 4x4 cell's lumas per value pixel, the ``.tiles`` planes a 16x16 tile's, and cost the most. On Mesa's
-llvmpipe this is CPU time; a GPU runs the same shader in well under a millisecond. Prints a markdown table (median ms of ``--repeats`` runs).
+llvmpipe this is CPU time; a GPU runs the same shader in well under a millisecond. Prints a markdown
+table (median ms of ``--repeats`` runs).
 """
 
 from __future__ import annotations
