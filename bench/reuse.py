@@ -1,8 +1,8 @@
 """Prediction reuse's cost on a CPU: a frame the network runs on against a frame whose estimates are
 carried (``sdk.PredictionReuse``, each reduction at the default pixel step, the mean also at every
 second and every eighth pixel, rescaled by the blocks' variance for models with ``.blocks`` inputs,
-the trunk's features carried and the tail run for a model that splits, ``carry="features"``), and the
-``unseen="fresh"`` crops.
+the trunk's features carried and the tail run for a model that splits, ``carry="features"``, at the
+default step and at every eighth pixel), and the ``unseen="fresh"`` crops.
 
     python bench/reuse.py [--model jnyang] [--repeats 7] [--threads 2]
 
@@ -58,9 +58,9 @@ def main() -> None:
     blocks = any(c.endswith(".blocks") for c in pred.metadata.inputs)
     print("| frame | network runs (sdk predict) | carried: mean | worst | upper | mean, step 2 | mean, step 8 | "
           + ("mean, rescale 0.25 | " if blocks else "")
-          + ("features carried, tail run | the tail alone | " if pred.splits else "")
+          + ("features carried, tail run | the same, step 8 | the tail alone | " if pred.splits else "")
           + " | ".join(f"fresh, {100 * s:g}% of the width new" for s in STRIPS) + " |")
-    print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks + 2 * pred.splits))
+    print("|---|---:|---:|---:|---:|---:|---:|" + "---:|" * (len(STRIPS) + blocks + 3 * pred.splits))
     for w, h in FRAMES:
         x = np.random.default_rng(0).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
         net = median_ms(lambda x=x: pred.predict(x), args.repeats)
@@ -69,7 +69,7 @@ def main() -> None:
         if blocks:  # the inputs given on carried frames too: the .blocks planes' per-tile means
             carried.append(_carried(pred, x, 3, args.repeats, rescale=0.25)[0])
         if pred.splits:
-            carried.append(_carried(pred, x, 3, args.repeats, carry="features")[0])
+            carried += [_carried(pred, x, 3, args.repeats, carry="features", step=step)[0] for step in (None, 8)]
             feats = pred.predict_split(x)[1]
             carried.append(median_ms(lambda x=x, feats=feats: pred.predict_tail(feats, x), args.repeats))
         fresh = [_carried(pred, x, int(s * w), args.repeats, unseen="fresh") for s in STRIPS]
