@@ -184,20 +184,19 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
     Returns:
         float32 ``(H, W)``.
     """
-    p = _finite_plane(plane, "block_variances", np.float64)
-    h, w = p.shape
+    h, w, values = _cell_variances(plane, "block_variances")
     c = BLOCK_CELL
-    values = _cell_variances(p, plane)
     out = np.zeros((-(-h // c) * c, -(-w // c) * c), np.float32)
     for k, value in enumerate(values):
         out[k // c::c, k % c::c] = value
     return out[:h, :w]
 
 
-def _cell_variances(p: np.ndarray, plane: np.ndarray) -> list[np.ndarray]:
-    """Per rate of :data:`BLOCK_RATES`, each 4x4 cell's normalised log variance inside the rate's
-    blocks (float32 ``(ceil(H / 4), ceil(W / 4))``): :func:`block_variances`'s values before packing.
-    ``p`` is the finite float64 plane, ``plane`` the caller's array (never changed)."""
+def _cell_variances(plane: np.ndarray, fn: str) -> tuple[int, int, list[np.ndarray]]:
+    """The plane's height and width and, per rate of :data:`BLOCK_RATES`, each 4x4 cell's normalised
+    log variance inside the rate's blocks (float32 ``(ceil(H / 4), ceil(W / 4))``): :func:`block_variances`'s
+    values before packing. ``plane`` (the caller's array, never changed) is checked as ``fn``'s."""
+    p = _finite_plane(plane, fn, np.float64)
     h, w = p.shape
     c = BLOCK_CELL
     if h % c or w % c:
@@ -220,7 +219,7 @@ def _cell_variances(p: np.ndarray, plane: np.ndarray) -> list[np.ndarray]:
         s1 = _block_sums(sums, bh, bw)
         per_cell = np.maximum(s2 - _cell_sums(np.square(s1), c // bh, c // bw) / (bw * bh), 0.0) / (c * c)
         values.append(np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0).astype(np.float32))
-    return values
+    return h, w, values
 
 
 #: The tile :func:`tile_variances` summarises (the shipped models' tile size).
@@ -250,9 +249,7 @@ def tile_variances(plane: np.ndarray) -> np.ndarray:
     Returns:
         float32 ``(H, W)``.
     """
-    p = _finite_plane(plane, "tile_variances", np.float64)
-    h, w = p.shape
-    values = _cell_variances(p, plane)
+    h, w, values = _cell_variances(plane, "tile_variances")
     m = BLOCK_TILE // BLOCK_CELL  # cells per tile side
     ch, cw = values[0].shape
     th, tw = -(-ch // m), -(-cw // m)

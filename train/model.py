@@ -195,6 +195,13 @@ def haar_details(cell: int) -> list[np.ndarray]:
     return out
 
 
+def _check_planes(planes: tuple[int, ...], in_channels: int) -> None:
+    """A block contrast's planes: distinct input channel indices, or a ValueError."""
+    if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
+        raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
+                         f"{list(planes)}")
+
+
 class BlockContrast(nn.Module):
     """What each reduced shading rate would lose of chosen input planes, per stem cell: for every
     rate whose block fits in the ``cell x cell`` stem cell, the mean over the cell of the variance
@@ -218,9 +225,7 @@ class BlockContrast(nn.Module):
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, eps: float = 1e-4,
                  tile_max: bool = False) -> None:
         super().__init__()
-        if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
-            raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
-                             f"{list(planes)}")
+        _check_planes(planes, in_channels)
         self.planes = tuple(int(i) for i in planes)
         self.eps = eps
         self.rates = tuple(r for r in ALL_RATES[1:] if max(rate_size(r)) <= cell)
@@ -283,9 +288,7 @@ class StoredBlockContrast(nn.Module):
 
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, tile_max: bool = False) -> None:
         super().__init__()
-        if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
-            raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
-                             f"{list(planes)}")
+        _check_planes(planes, in_channels)
         if cell % BLOCK_CELL:
             raise ValueError(f"block_contrast from .blocks planes: the cell must be a multiple of {BLOCK_CELL}, got {cell}")
         if list(planes) != list(range(min(planes), min(planes) + len(planes))):
@@ -346,9 +349,7 @@ class TileContrast(nn.Module):
 
     def __init__(self, planes: tuple[int, ...], in_channels: int, cell: int, tile_max: bool = False) -> None:
         super().__init__()
-        if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
-            raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
-                             f"{list(planes)}")
+        _check_planes(planes, in_channels)
         if cell != BLOCK_TILE:
             raise ValueError(f"block_contrast from .tiles planes: the cell must be their tile, {BLOCK_TILE}, got {cell}")
         self.planes = tuple(int(i) for i in planes)
