@@ -284,7 +284,7 @@ _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm",
                  "quantile", "focus",
                  "ema", "distill", "aux_weight",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
-                 "safety_quantile", "max_samples")
+                 "safety_quantile", "max_samples", "per_scene")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -514,7 +514,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr = command("train", "train a metric-prediction model on a captured dataset", _cmd_train,
                  epilog="Hyper-parameters come from --config (the shipped models' recipe by default: "
                  "train/recipes/shipped.yaml); a flag given here overrides the recipe's value.")
-    tr.add_argument("--data", required=True, help="dataset folder (with targets from `rtp targets`)")
+    tr.add_argument("--data", required=True, help="dataset folder (with targets from `rtp targets`), or several, "
+                    "comma-separated, read as one (for example the usual pairs and 60 Hz ones: data/train,data/train-frame)")
     tr.add_argument("--metric", required=True, choices=tuple(METRICS), help="the metric whose targets the network "
                     "learns (computed by `rtp targets`)")
     tr.add_argument("--out", required=True, help="checkpoint to write (resumed if it exists)")
@@ -626,6 +627,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="calibrate the margin so at most this share of tiles is underestimated "
                    "(default: the paper's mean underestimation)")
     r.add_argument("--max-samples", type=_positive, default=None, help="use at most this many training samples")
+    r.add_argument("--per-scene", dest="per_scene", type=_positive, default=None,
+                   help="use at most this many training samples of each map and motion profile, the first by id "
+                   "(validation keeps all; default: all)")
     tr.add_argument("--val-scenes", action="append", default=None,
                     help="hold out these scenes for validation (repeatable, or comma-separated; default: the "
                     "recipe's split, or the last scene)")

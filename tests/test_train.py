@@ -26,12 +26,13 @@ from rtp.train.checkpoint import load as load_checkpoint
 H, W = 64, 96
 
 
-def _dataset(root: Path, n: int = 12, flip: bool = False) -> Path:
+def _dataset(root: Path, n: int = 12, flip: bool = False, prefix: str = "s", profile: str | None = None,
+             weber_l: float = 0.02) -> Path:
     """``n`` samples over three scenes with JNYang targets (and, with ``flip``, FLIP targets: another function of
-    the same texture contrast)."""
+    the same texture contrast); ids ``{prefix}000`` on, each of motion ``profile`` where one is given."""
     w = DatasetWriter(root)
     store = TargetStore(root)
-    store.declare("jnyang", {"weber_l": 0.02})
+    store.declare("jnyang", {"weber_l": weber_l})
     if flip:
         store.declare("flip", {})
     rng = np.random.default_rng(0)
@@ -42,8 +43,8 @@ def _dataset(root: Path, n: int = 12, flip: bool = False) -> Path:
             bufs[name] = rng.random((H, W, c) if c > 1 else (H, W), dtype=np.float32)
         amp = rng.random((H // 4, W // 4)).repeat(4, 0).repeat(4, 1)
         bufs["albedo"][..., 0] = 0.5 + amp * (rng.random((H, W)) - 0.5)
-        sid = f"s{i:03d}"
-        w.write(sid, bufs, {"scene": f"scene{i % 3}"})
+        sid = f"{prefix}{i:03d}"
+        w.write(sid, bufs, {"scene": f"scene{i % 3}", **({"profile": profile} if profile else {})})
         edge = np.abs(np.diff(bufs["albedo"][..., 0], axis=1, append=0.5))
         tiles = edge.reshape(H // 4, 4, W // 4, 4).max(axis=(1, 3))
         store.write(sid, "jnyang", np.stack([tiles * k for k in (1, 1.1, 1.2, 1.5, 1.6, 2)]).astype(np.float32), (H, W))
@@ -158,6 +159,29 @@ def test_train_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"),
                      "--crop", "20"]) == 2
     assert "multiple of the tile size" in capsys.readouterr().err
+
+
+def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    usual = _dataset(tmp_path / "usual", n=12, profile="slow")
+    frame = _dataset(tmp_path / "frame", n=9, prefix="f", profile="frame")
+    out = tmp_path / "m.pt"
+    # scene2 validates (all 4 + 3 of its samples); of the training maps' 8 + 6, the first 2 of each map and profile
+    assert rtp_main(["train", "--data", f"{usual},{frame}", "--metric", "jnyang", "--out", str(out), "--steps", "20",
+                     "--crop", "32", "--head", "linear", "--val-scenes", "scene2",
+                     "--per-scene", "2"]) == 0
+    prov = load_checkpoint(out).metadata.provenance
+    assert prov["train_samples"] == 8 and prov["val_samples"] == 7 and prov["per_scene"] == 2
+    assert prov["data"] == f"{usual},{frame}" and prov["train_scenes"] == ("scene0", "scene1")
+    # a sample in two of the folders, targets of other parameters, a folder twice: refused, naming what is wrong
+    twice = _dataset(tmp_path / "twice", n=3)
+    assert rtp_main(["train", "--data", f"{usual},{twice}", "--metric", "jnyang", "--out", str(tmp_path / "x.pt")]) == 2
+    assert "sample s000 is in both" in capsys.readouterr().err
+    other = _dataset(tmp_path / "other", n=3, prefix="o", weber_l=0.05)
+    assert rtp_main(["train", "--data", f"{usual},{other}", "--metric", "jnyang", "--out", str(tmp_path / "x.pt")]) == 2
+    assert "different parameters" in capsys.readouterr().err
+    assert rtp_main(["train", "--data", f"{usual},{usual}", "--metric", "jnyang", "--out", str(tmp_path / "x.pt")]) == 2
+    assert "each once" in capsys.readouterr().err
+    assert not (tmp_path / "x.pt").exists()
 
 
 def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

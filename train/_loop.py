@@ -45,6 +45,8 @@ log = logging.getLogger("rtp.train")
 
 @dataclass
 class TrainConfig:
+    #: A dataset folder with targets (``rtp targets``), or several, comma-separated, whose samples train and
+    #: validate together (each with the metric's targets computed with the same parameters; no sample id twice).
     data: str
     metric: str
     out: str
@@ -151,6 +153,10 @@ class TrainConfig:
     safety_quantile: float | None = None
     default_threshold: float | None = None
     max_samples: int | None = None
+    #: At most this many training samples of each map and motion profile (the first by sample id); the
+    #: validation maps' samples are all kept. With a second dataset in ``data`` (another motion profile),
+    #: it keeps the loader's memory where one dataset's is.
+    per_scene: int | None = None
     #: Where the hyper-parameters came from (``Recipe.provenance()``), recorded in the model's provenance.
     recipe: dict[str, Any] | None = None
 
@@ -197,10 +203,60 @@ _RESUME_KEYS = ("data", "metric", "tile", "outputs", "inputs", "transform", "log
                 "lr", "lr_decay", "weight_decay", "val_scenes", "seed", "max_samples")
 
 
+def data_folders(data: str | os.PathLike[str]) -> list[str]:
+    """The dataset folders of ``TrainConfig.data`` (one, or several comma-separated), each named once."""
+    folders = [f.strip() for f in str(data).split(",")]
+    if not all(folders) or len(set(folders)) != len(folders):
+        raise sdk.ParameterError(f"data: expected a dataset folder or several, comma-separated, each once, got {str(data)!r}",
+                                 "data")
+    return folders
+
+
+class _Sources:
+    """The samples and targets of one or more dataset folders as one dataset: what :func:`train` reads
+    through ``DatasetReader`` and ``TargetStore``. The folders must not share a sample id, and each must
+    hold the targets :func:`train` needs, computed with the same parameters (a JNYang of another Weber
+    ``l`` is another metric)."""
+
+    def __init__(self, data: str, metrics: Sequence[str]) -> None:
+        self.folders = data_folders(data)
+        self.readers = [DatasetReader(f) for f in self.folders]
+        self.stores = [TargetStore(f) for f in self.folders]
+        for f, store in zip(self.folders, self.stores):
+            absent = [m for m in metrics if m not in store.metrics]
+            if absent:
+                raise TargetError(f"{f} has no {', '.join(absent)} targets; run `rtp targets {f} --metrics "
+                                  f"{','.join(absent)}`")
+        for m in metrics:
+            params = {f: s.metrics[m] for f, s in zip(self.folders, self.stores)}
+            if len({json.dumps(v, sort_keys=True) for v in params.values()}) > 1:
+                raise TargetError(f"the {m} targets of the datasets were computed with different parameters: "
+                                  + "; ".join(f"{f}: {v}" for f, v in params.items()))
+        self.where: dict[str, int] = {}
+        for k, reader in enumerate(self.readers):
+            for s in reader:
+                if s.id in self.where:
+                    raise DatasetError(f"sample {s.id} is in both {self.folders[self.where[s.id]]} and "
+                                       f"{self.folders[k]}; training reads each sample once")
+                self.where[s.id] = k
+        #: the targets' parameters per metric (the same in every folder)
+        self.metrics: dict[str, Any] = dict(self.stores[0].metrics)
+
+    def __iter__(self) -> Any:
+        for reader in self.readers:
+            yield from reader
+
+    def __getitem__(self, sample_id: str) -> Any:
+        return self.readers[self.where[sample_id]][sample_id]
+
+    def load(self, sample_id: str, metric: str, tile: int) -> np.ndarray:
+        return self.stores[self.where[sample_id]].load(sample_id, metric, tile)
+
+
 class _Split:
     """Inputs (float16, ``.blocks`` planes packed, to fit many frames in memory) and targets of one side of the split."""
 
-    def __init__(self, reader: DatasetReader, store: TargetStore, ids: Sequence[str], cfg: TrainConfig) -> None:
+    def __init__(self, reader: _Sources, store: _Sources, ids: Sequence[str], cfg: TrainConfig) -> None:
         rows = [sdk.PREDICTED_RATES.index(r) for r in cfg.outputs]
         self.ids = list(ids)
         self.x = [Frame(reader[i].inputs(cfg.inputs), cfg.inputs) for i in self.ids]
@@ -298,7 +354,7 @@ def _scored_tiles(oy: Sequence[int], ox: Sequence[int], n: int, margin: int, til
     return out
 
 
-def _split_ids(reader: DatasetReader, cfg: TrainConfig) -> tuple[list[str], list[str], list[str], list[str]]:
+def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str], list[str], list[str]]:
     """Training and validation sample ids, and the scenes of each side."""
     by_scene: dict[str, list[str]] = {}
     for s in reader:
@@ -320,6 +376,12 @@ def _split_ids(reader: DatasetReader, cfg: TrainConfig) -> tuple[list[str], list
         val = [scenes[-1]]
     train_ids = [i for s in scenes if s not in val for i in by_scene[s]]
     val_ids = [i for s in val for i in by_scene[s]]
+    if cfg.per_scene:
+        kept: dict[tuple[str, str], list[str]] = {}
+        for i in sorted(train_ids):
+            kept.setdefault((reader[i].meta.get("scene", "?"), reader[i].meta.get("profile", "?")), []).append(i)
+        first = {i for ids in kept.values() for i in ids[: cfg.per_scene]}
+        train_ids = [i for i in train_ids if i in first]
     if cfg.max_samples:
         train_ids = train_ids[: cfg.max_samples]
     train_scenes = sorted(s for s in scenes if s not in val and set(by_scene[s]) & set(train_ids))
@@ -376,7 +438,7 @@ def _dead_outputs(pred: np.ndarray, outputs: Sequence[str]) -> list[str]:
     return [r for r, row in zip(outputs, pred) if float(row.std()) < DEAD_OUTPUT_STD]
 
 
-def _teacher_targets(cfg: TrainConfig, reader: DatasetReader, tr: _Split, transform: sdk.Transform) -> list[np.ndarray]:
+def _teacher_targets(cfg: TrainConfig, reader: _Sources, tr: _Split, transform: sdk.Transform) -> list[np.ndarray]:
     """The teachers' mean prediction (transformed space, ``cfg.outputs`` rows) on every training
     frame, on the frame's own tiles like the targets. Teachers must predict ``cfg.metric`` on
     ``cfg.tile`` tiles with the student's target transform and every output the student has."""
@@ -525,18 +587,18 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"aux_weight: expected a weight > 0, got {cfg.aux_weight}", "aux_weight")
     if not 0.0 <= cfg.ema < 1.0:
         raise sdk.ParameterError(f"ema: expected a decay in [0, 1) (0: off), got {cfg.ema}", "ema")
-    reader = DatasetReader(cfg.data)
-    store = TargetStore(cfg.data)
-    if cfg.metric not in store.metrics:
-        raise TargetError(f"{cfg.data} has no {cfg.metric} targets; run `rtp targets {cfg.data} --metrics {cfg.metric}`")
-    absent = [m for m in cfg.aux_metrics if m not in store.metrics]
-    if absent:
-        raise TargetError(f"{cfg.data} has no {', '.join(absent)} targets (aux_metrics); run `rtp targets {cfg.data} "
-                          f"--metrics {','.join(absent)}`")
+    if cfg.per_scene is not None and cfg.per_scene < 1:
+        raise sdk.ParameterError(f"per_scene: expected at least 1 sample per map and motion profile, got {cfg.per_scene}",
+                                 "per_scene")
+    reader = store = _Sources(cfg.data, [cfg.metric, *cfg.aux_metrics])
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
     h, w = tr.x[0].shape[-2:]
+    other = next(((i, f.shape) for i, f in zip((*tr.ids, *va.ids), (*tr.x, *va.x)) if f.shape[-2:] != (h, w)), None)
+    if other is not None:
+        raise DatasetError(f"sample {other[0]} is {other[1][2]}x{other[1][1]}, the first training sample {w}x{h}: "
+                           f"capture the datasets of one training run at one size")
     log.info("%.1f GB of input planes in memory", sum(f.nbytes for f in (*tr.x, *va.x)) / 1e9)
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
     if cfg.context < 0 or cfg.context % cfg.tile:
@@ -575,6 +637,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     out = Path(cfg.out)
     step, history = 0, []
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
+    if cfg.per_scene:  # checkpoints from before the option hold no "per_scene"
+        config_key["per_scene"] = cfg.per_scene
     if cfg.head != "paper":  # checkpoints from before the option compare equal to the paper head
         config_key["head"] = cfg.head
     if cfg.arch != "paper":  # likewise for the architecture
@@ -671,6 +735,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                 "train_scenes": train_scenes,
                 "val_scenes": val_scenes,
                 "train_samples": len(train_ids),
+                **({"per_scene": cfg.per_scene} if cfg.per_scene else {}),
                 "val_samples": len(val_ids),
                 "resolution": [int(w), int(h)],
                 "target_parameters": store.metrics.get(cfg.metric, {}),
