@@ -279,7 +279,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "separable_tail", "tail_width", "head_width", "context_pool", "block_contrast", "contrast_cell",
+                 "separable_tail", "tail_width", "head_width", "context_pool", "coarse", "coarse_width", "block_contrast", "contrast_cell",
                  "contrast_max", "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss",
                  "quantile", "focus",
                  "ema", "distill", "aux_weight",
@@ -564,6 +564,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--context-pool", dest="context_pool", type=_non_negative, default=None,
                    help="an odd window K of tiles: the fast network appends the mean of its last features over K x K "
                    "tiles before the head (the neighbourhood a tile's error can depend on); 0: none (default: 0)")
+    r.add_argument("--coarse", type=_non_negative, default=None,
+                   help="N 3x3 blocks at twice the tile's scale whose features join after the fast network's first "
+                   "block at tile resolution: a wider, learned view of the neighbourhood; 0: none (default: 0)")
+    r.add_argument("--coarse-width", dest="coarse_width", type=_positive, default=None,
+                   help="channels of the --coarse blocks (default: 64)")
     r.add_argument("--block-contrast", dest="block_contrast", type=_choices_csv(tuple(CHANNELS)), default=None,
                    help="input channels (comma-separated, among --inputs) whose variance inside each reduced rate's "
                    "blocks, per 4x4 cell, the fast network reads beside its stem: what the rate would lose of them, "

@@ -254,6 +254,30 @@ def test_the_context_pool_appends_the_neighbourhood_mean_and_exports() -> None:
                                                            "albedo.r", "albedo.g", "albedo.b", "normal.z"]), seed=4)
 
 
+def test_the_coarse_context_appends_features_at_twice_the_tile_scale_and_exports() -> None:
+    from rtp.train.model import CoarseContext, FastNet
+
+    net = FastNet(8, depth=5, coarse=2).eval()
+    kinds = [type(m).__name__ for m in net.layers]
+    # after the first block at tile resolution (the third 3x3 block), so the two after it read 32 channels
+    assert kinds.index("CoarseContext") == kinds.index("MaxPool2d", kinds.index("MaxPool2d") + 1) + 4
+    convs = [m for m in net.layers if isinstance(m, torch.nn.Conv2d)]
+    assert [(m.in_channels, m.out_channels) for m in convs[-3:]] == [(32, 16), (16, 16), (16, 4)]
+    assert net.config["coarse"] == 2 and net.config["coarse_width"] == 64 and "coarse" not in FastNet().config
+    ctx = next(m for m in net.layers if isinstance(m, CoarseContext))
+    assert sum(p.numel() for p in ctx.parameters()) == 16 * 64 * 9 + 64 * 64 * 9 + 64 * 16 + 2 * (64 + 64 + 16)
+    # each coarse position covers its 2x2 tiles; a partial last row and column of tiles keep theirs (3x5 tiles)
+    x = torch.rand(1, 16, 3, 5)
+    y = ctx.eval()(x)
+    assert y.shape == (1, 32, 3, 5) and torch.equal(y[:, :16], x)
+    assert torch.equal(y[:, 16:, 0, 0], y[:, 16:, 1, 1]) and torch.equal(y[:, 16:, 2, 4], ctx.body(x)[:, :, 1, 2])
+    for bad in ({"depth": 2, "coarse": 2}, {"depth": 5, "coarse": -1}, {"depth": 5, "coarse": 1, "coarse_width": 1}):
+        with pytest.raises(ValueError, match="coarse"):
+            FastNet(**bad)
+    _round_trip(net, "coarse", base_metadata(inputs=["reprojected.r", "reprojected.g", "reprojected.b", "seen",
+                                                     "albedo.r", "albedo.g", "albedo.b", "normal.z"]), seed=5)
+
+
 @pytest.mark.parametrize("cell", [2, 4, 8, 16])
 def test_block_contrast_is_the_variance_inside_each_rates_blocks(cell: int) -> None:
     from rtp.train.model import BlockContrast, haar_details

@@ -412,6 +412,25 @@ def test_the_context_pool_trains_from_the_command_line_and_is_recorded(tmp_path:
         train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, context_pool=5))
 
 
+def test_the_coarse_context_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    data = _dataset(tmp_path / "ds", n=4)
+    base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "64", "--val-scenes", "scene0", "--arch",
+            "fast", "--head-width", "0", "--depth", "4", "--coarse", "1", "--coarse-width", "8", "--steps", "6"]
+    assert rtp_main([*base, "--out", str(tmp_path / "c.pt")]) == 0
+    ck = load_checkpoint(tmp_path / "c.pt")
+    assert (ck.net.config["coarse"], ck.net.config["coarse_width"]) == (1, 8)
+    assert (ck.metadata.provenance["coarse"], ck.metadata.provenance["coarse_width"]) == (1, 8)
+    # the same file without it is another network: refused, not silently resumed
+    assert rtp_main([*base[:-6], "--steps", "12", "--out", str(tmp_path / "c.pt")]) != 0
+    assert "differs in: coarse" in capsys.readouterr().err
+    with pytest.raises(sdk.ParameterError, match="coarse: expected 0 .none., or blocks at twice the tile's scale"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "b.pt"), arch="fast", crop=32, depth=2,
+                          coarse=1))
+    with pytest.raises(sdk.ParameterError, match="coarse: the fast network's option"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "p.pt"), crop=32, coarse=1))
+
+
 def test_block_contrast_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)

@@ -81,6 +81,11 @@ class TrainConfig:
     #: An odd window K (in tiles): the fast network appends the mean of its last features over K x K
     #: tiles before the head (train/model.py ``ContextPool``); 0: none.
     context_pool: int = 0
+    #: Blocks of the fast network at twice the tile's scale, whose features join after its first block at
+    #: tile resolution (train/model.py ``CoarseContext``: a wider, learned view of the neighbourhood); 0: none.
+    coarse: int = 0
+    #: Channels of those blocks.
+    coarse_width: int = 64
     #: Input channels (names among ``inputs``) whose variance inside each reduced rate's blocks the
     #: fast network reads beside its stem (train/model.py ``BlockContrast``); empty: none.
     block_contrast: tuple[str, ...] = ()
@@ -542,6 +547,13 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.context_pool and (cfg.context_pool < 3 or cfg.context_pool % 2 == 0):
         raise sdk.ParameterError(f"context_pool: expected 0 (none) or an odd window of at least 3 tiles, got "
                                  f"{cfg.context_pool}", "context_pool")
+    if cfg.coarse and cfg.arch != "fast":
+        raise sdk.ParameterError(f"coarse: the fast network's option, got arch {cfg.arch!r}", "coarse")
+    pooled = int(math.log2(cfg.tile // min(cfg.stem, cfg.tile)))
+    if cfg.coarse < 0 or (cfg.coarse and (cfg.depth <= pooled or cfg.coarse_width < 2)):
+        raise sdk.ParameterError(f"coarse: expected 0 (none), or blocks at twice the tile's scale after a block at tile "
+                                 f"resolution (depth {cfg.depth} with stem {cfg.stem} and tile {cfg.tile} needs over "
+                                 f"{pooled}) of coarse_width >= 2, got {cfg.coarse} blocks of {cfg.coarse_width}", "coarse")
     if cfg.block_contrast and cfg.arch != "fast":
         raise sdk.ParameterError(f"block_contrast: the fast network's option, got arch {cfg.arch!r}", "block_contrast")
     missing = [c for c in cfg.block_contrast if c not in cfg.inputs]
@@ -630,7 +642,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                         contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
                         tail_width=cfg.tail_width, contrast_max=cfg.contrast_max,
                         contrast_stored=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith((".blocks", ".tiles")),
-                        contrast_tiles=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".tiles"))
+                        contrast_tiles=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".tiles"),
+                        coarse=cfg.coarse, coarse_width=cfg.coarse_width)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -659,6 +672,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["head_width"] = cfg.head_width
         if cfg.context_pool:
             config_key["context_pool"] = cfg.context_pool
+        if cfg.coarse:
+            config_key.update(coarse=cfg.coarse, coarse_width=cfg.coarse_width)
         if cfg.block_contrast:
             config_key["block_contrast"] = list(cfg.block_contrast)
         if cfg.contrast_cell:
@@ -834,6 +849,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"tail_width": cfg.tail_width} if cfg.tail_width else {}),
         **({"head_width": cfg.head_width} if cfg.head_width else {}),
         **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
+        **({"coarse": cfg.coarse, "coarse_width": cfg.coarse_width} if cfg.coarse else {}),
         **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),
         **({"contrast_cell": cfg.contrast_cell} if cfg.contrast_cell else {}),
         **({"contrast_max": True} if cfg.contrast_max else {}),

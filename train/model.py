@@ -172,6 +172,33 @@ class ContextPool(nn.Module):
         return torch.cat([x, self.pool(x)], dim=1)
 
 
+class CoarseContext(nn.Module):
+    """Features of the neighbourhood at twice the tile's scale, appended: ``(N, C, H, W) -> (N, 2C, H, W)``.
+    A 2x2 max-pool (ceil mode: a partial last tile pools what it has), ``blocks`` 3x3 conv -> BatchNorm ->
+    ReLU blocks of ``width`` channels, a 1x1 back to ``C`` (BatchNorm, ReLU), then each coarse position
+    repeated over the 2x2 tiles it covers (nearest-neighbour upsampling, cut to the tile grid). A block at
+    1/32 resolution costs a quarter of one at tile resolution and sees twice as far: two of them widen
+    what a tile's features see by about 256 pixels, towards the 200-pixel neighbourhood LPIPS's deep
+    AlexNet features pool, with learned 3x3 mixing where :class:`ContextPool` only averages."""
+
+    def __init__(self, channels: int, width: int = 64, blocks: int = 2) -> None:
+        super().__init__()
+        if channels < 1 or width < 2 or blocks < 1:
+            raise ValueError(f"coarse context: expected channels >= 1, width >= 2 and blocks >= 1, got {channels}, "
+                             f"{width}, {blocks}")
+        layers: list[nn.Module] = [nn.MaxPool2d(2, ceil_mode=True)]
+        c = channels
+        for _ in range(blocks):
+            layers += [nn.Conv2d(c, width, 3, padding=1, bias=False), nn.BatchNorm2d(width), nn.ReLU(inplace=True)]
+            c = width
+        layers += [nn.Conv2d(c, channels, 1, bias=False), nn.BatchNorm2d(channels), nn.ReLU(inplace=True)]
+        self.body = nn.Sequential(*layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = nn.functional.interpolate(self.body(x), scale_factor=2.0, mode="nearest")
+        return torch.cat([x, y[:, :, : x.shape[2], : x.shape[3]]], dim=1)
+
+
 def haar_details(cell: int) -> list[np.ndarray]:
     """The ``cell * cell - 1`` detail kernels of the orthonormal 2D Haar pyramid of a ``cell x cell``
     cell (a power of two): per level, each 2x2 group of the level's averages gives three differences
@@ -417,7 +444,10 @@ class FastNet(nn.Module):
     convolution is followed by BatchNorm before its ReLU, so BatchNorm folds into the convolution at
     export. ``context_pool`` K > 0 appends, before the head, the mean of the last block's features
     over a K x K window of tiles (:class:`ContextPool`): what the neighbourhood holds, for a metric
-    whose per-tile value depends on it. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
+    whose per-tile value depends on it. ``coarse`` N > 0 appends, after the first block at tile
+    resolution, features of the neighbourhood from N 3x3 blocks of ``coarse_width`` channels at twice
+    the tile's scale (:class:`CoarseContext`): a wider view, learned, at a quarter of a tile block's
+    cost per channel. ``width`` channels throughout, unless ``grow`` is 2: then each block after a pool doubles
     them (16, 32, 64 for width 16 and depth 3), widening the cheap low-resolution end while the
     full-resolution read stays at ``width``; ``max_width`` caps what it doubles to (16, 32, 32, 32, 32
     for depth 5 and ``max_width`` 32: most of the tile-resolution weights at a quarter of their cost).
@@ -464,7 +494,8 @@ class FastNet(nn.Module):
                  separable: bool = False, head_width: int = 0, context_pool: int = 0,
                  block_contrast: tuple[int, ...] | list[int] = (), contrast_cell: int = 0,
                  separable_tail: bool = False, tail_width: int = 0, contrast_max: bool = False,
-                 contrast_stored: bool = False, contrast_tiles: bool = False) -> None:
+                 contrast_stored: bool = False, contrast_tiles: bool = False, coarse: int = 0,
+                 coarse_width: int = 64) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
             raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
@@ -488,6 +519,10 @@ class FastNet(nn.Module):
                              f"{head_width}")
         if context_pool and (context_pool < 3 or context_pool % 2 == 0):
             raise ValueError(f"context_pool must be 0 (none) or an odd window of at least 3 tiles, got {context_pool}")
+        if coarse < 0 or (coarse and (depth <= pools or coarse_width < 2)):
+            raise ValueError(f"coarse: expected 0 (none), or the blocks at twice the tile's scale after the first block at "
+                             f"tile resolution (a depth over the {pools} pooled blocks, coarse_width >= 2), got coarse "
+                             f"{coarse} with depth {depth} and coarse_width {coarse_width}")
         self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
                                        "width": width, "depth": depth, "stem": stem}
         if grow != 1:  # checkpoints from before the option hold no "grow"
@@ -508,6 +543,8 @@ class FastNet(nn.Module):
             self.config["head_width"] = head_width
         if context_pool:  # likewise
             self.config["context_pool"] = context_pool
+        if coarse:  # likewise
+            self.config.update(coarse=coarse, coarse_width=coarse_width)
         s = min(stem, tile)
         pools = int(math.log2(tile // s))
         cell = contrast_cell or s
@@ -580,6 +617,9 @@ class FastNet(nn.Module):
                     layers.append(nn.Conv2d(c, out, 3, padding=1, bias=False))
                 layers += [nn.BatchNorm2d(out), nn.ReLU(inplace=True)]
                 c = out
+                if coarse and i == pools:  # after the first block at tile resolution, so the next ones mix it in
+                    layers.append(CoarseContext(c, coarse_width, coarse))
+                    c *= 2
             if i < pools:
                 # ceil_mode: a frame of any multiple of the stem gives ceil(H / tile) tile rows, the last
                 # partial tile pooling the pixels it has (identical to floor mode on whole tiles)
@@ -644,17 +684,18 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
                   energy_norm: bool = False, max_width: int = 0, separable: bool = False,
                   head_width: int = 0, context_pool: int = 0, block_contrast: tuple[int, ...] = (),
                   contrast_cell: int = 0, separable_tail: bool = False, tail_width: int = 0,
-                  contrast_max: bool = False, contrast_stored: bool = False, contrast_tiles: bool = False) -> Network:
+                  contrast_max: bool = False, contrast_stored: bool = False, contrast_tiles: bool = False,
+                  coarse: int = 0, coarse_width: int = 64) -> Network:
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
     ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast``, ``contrast_cell``
-    ``contrast_max``, ``contrast_stored`` and ``contrast_tiles`` to the fast one."""
+    ``contrast_max``, ``contrast_stored``, ``contrast_tiles``, ``coarse`` and ``coarse_width`` to the fast one."""
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
                        separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width,
-                       contrast_max, contrast_stored, contrast_tiles)
+                       contrast_max, contrast_stored, contrast_tiles, coarse, coarse_width)
     raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
 
 
