@@ -279,7 +279,8 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
 
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
-                 "separable_tail", "tail_width", "head_width", "context_pool", "coarse", "coarse_width", "block_contrast", "contrast_cell",
+                 "separable_tail", "tail_width", "head_width", "context_pool", "coarse", "coarse_width", "block_contrast",
+                 "contrast_cell",
                  "contrast_max", "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss",
                  "quantile", "focus",
                  "ema", "distill", "aux_weight",
