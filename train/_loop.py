@@ -223,15 +223,17 @@ class _Sources:
     hold the targets :func:`train` needs, computed with the same parameters (a JNYang of another Weber
     ``l`` is another metric)."""
 
-    def __init__(self, data: str, metrics: Sequence[str]) -> None:
+    def __init__(self, data: str, metric: str, aux_metrics: Sequence[str] = ()) -> None:
         self.folders = data_folders(data)
         self.readers = [DatasetReader(f) for f in self.folders]
         self.stores = [TargetStore(f) for f in self.folders]
+        metrics = [metric, *aux_metrics]
         for f, store in zip(self.folders, self.stores):
-            absent = [m for m in metrics if m not in store.metrics]
-            if absent:
-                raise TargetError(f"{f} has no {', '.join(absent)} targets; run `rtp targets {f} --metrics "
-                                  f"{','.join(absent)}`")
+            for want, what in (([metric], ""), (list(aux_metrics), " (aux_metrics)")):
+                absent = [m for m in want if m not in store.metrics]
+                if absent:
+                    raise TargetError(f"{f} has no {', '.join(absent)} targets{what}; run `rtp targets {f} --metrics "
+                                      f"{','.join(absent)}`")
         for m in metrics:
             params = {f: s.metrics[m] for f, s in zip(self.folders, self.stores)}
             if len({json.dumps(v, sort_keys=True) for v in params.values()}) > 1:
@@ -602,7 +604,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.per_scene is not None and cfg.per_scene < 1:
         raise sdk.ParameterError(f"per_scene: expected at least 1 sample per map and motion profile, got {cfg.per_scene}",
                                  "per_scene")
-    reader = store = _Sources(cfg.data, [cfg.metric, *cfg.aux_metrics])
+    reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
