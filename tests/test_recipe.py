@@ -54,6 +54,23 @@ def test_the_paper_network_recipe_ships_by_name() -> None:
         k: v for k, v in jn.values.items() if k != "head"}
 
 
+def test_the_reuse_recipe_is_the_one_jnyang_reuse_was_trained_with() -> None:
+    from rtp import sdk
+
+    recipe = load_recipe("reuse", "jnyang")
+    trained = sdk.load("jnyang-reuse").metadata.provenance["recipe"]  # the shipped recipe and its flags
+    want = {**trained["values"], **trained.get("overrides", {})}
+
+    def plain(values: dict) -> dict:
+        return {k: list(v) if isinstance(v, (tuple, list)) else v for k, v in values.items()}
+
+    assert plain(recipe.values) == plain(want)
+    assert recipe.val_split == trained["val_split"] == "validation"
+    assert recipe.values["contrast_max"] is True  # a bool key
+    with pytest.raises(RecipeError, match="recipe reuse is for jnyang .*got metric 'flip'"):
+        load_recipe("reuse", "flip")  # measured for JNYang only
+
+
 def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", steps=10)
     assert cfg.steps == 10 and cfg.batch == 128 and cfg.crop == 64 and cfg.lr == 5e-4 and cfg.arch == "fast"
@@ -76,6 +93,11 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("steps: [unclosed\n", "not valid YAML"),
     ("per_metric: 3\n", "per_metric must map"),
     ("val_split: 3\n", "'val_split': expected a split name"),
+    ("metrics: jnyang\n", "'metrics': expected a list of metric names"),
+    ("metrics: []\n", "'metrics': expected a list of metric names"),
+    ("metrics: [flip]\n", "is for flip (measured for those only), got metric 'jnyang'"),
+    ("augment: 1\n", "'augment': expected bool"),
+    ("steps: true\n", "'steps': expected int"),
     ("!!python/object/apply:os.system ['echo pwned']\n", "not valid YAML"),
 ])
 def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needle: str) -> None:

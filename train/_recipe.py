@@ -1,11 +1,13 @@
 """Training recipes: the hyper-parameters of a model as a YAML file, recorded in its provenance.
 
 A recipe sets :class:`~rtp.train.TrainConfig` fields (everything but ``data``, ``metric`` and
-``out``), optionally ``val_split`` (hold out the maps of that split of ``scenes.yaml``) and
-``per_metric`` overrides. ``shipped`` names the recipe of rtp's shipped models, which ships with
-the package, so ``rtp train --data D --metric M --out M.pt`` reproduces a shipped model. The other
-recipes in ``train/recipes/`` are found by name too (:func:`packaged_recipes`): ``paper-net`` is the
-recipe of the paper's network that rtp shipped before its fast network family.
+``out``), optionally ``val_split`` (hold out the maps of that split of ``scenes.yaml``),
+``per_metric`` overrides and ``metrics`` (the metrics it is for, when not every one). ``shipped``
+names the recipe of rtp's shipped models, which ships with the package, so ``rtp train --data D
+--metric M --out M.pt`` reproduces a shipped model. The other recipes in ``train/recipes/`` are
+found by name too (:func:`packaged_recipes`): ``paper-net`` is the recipe of the paper's network
+that rtp shipped before its fast network family, ``reuse`` the recipe of ``jnyang-reuse``, the
+JNYang model that splits for prediction reuse.
 """
 
 from __future__ import annotations
@@ -76,7 +78,7 @@ def _field_types() -> dict[str, Any]:
 
 
 def _coerce(name: str, value: Any, kind: Any) -> Any:
-    """``value`` as the field type ``kind`` (int, float, str, tuple[str, ...], or optional of one)."""
+    """``value`` as the field type ``kind`` (bool, int, float, str, tuple[str, ...], or optional of one)."""
     args = typing.get_args(kind)
     if type(None) in args:
         if value is None:
@@ -88,7 +90,9 @@ def _coerce(name: str, value: Any, kind: Any) -> Any:
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
             raise RecipeError(f"recipe key {name!r}: expected a list of names, got {value!r}")
         return tuple(value)
-    if kind is bool or isinstance(value, bool):
+    if kind is bool and isinstance(value, bool):
+        return value
+    if kind is bool or isinstance(value, bool):  # YAML's true is no number, nor 1 a switch
         raise RecipeError(f"recipe key {name!r}: expected {kind.__name__}, got {value!r}")
     if kind is int and isinstance(value, int):
         return value
@@ -118,6 +122,13 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     per_metric = data.pop("per_metric", None) or {}
     if not isinstance(per_metric, dict) or not all(isinstance(v, dict) for v in per_metric.values()):
         raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields")
+    metrics = data.pop("metrics", None)
+    if metrics is not None:  # a recipe measured for some metrics only (``reuse``: JNYang)
+        if not isinstance(metrics, list) or not metrics or not all(isinstance(m, str) for m in metrics):
+            raise RecipeError(f"recipe key 'metrics': expected a list of metric names, got {metrics!r}")
+        if metric not in metrics:
+            raise RecipeError(f"recipe {name} is for {', '.join(metrics)} (measured for those only), got metric "
+                              f"{metric!r}; the shipped recipe, {SHIPPED_RECIPE!r}, trains every metric")
     merged = {**data, **per_metric.get(metric, {})}
     val_split = merged.pop("val_split", None)
     if val_split is not None and not isinstance(val_split, str):
@@ -126,6 +137,6 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     unknown = sorted(set(merged) - set(types))
     if unknown:
         raise RecipeError(f"recipe {name}: unknown key(s) {', '.join(unknown)}; recipe keys are val_split, "
-                          f"per_metric, {', '.join(sorted(types))}")
+                          f"per_metric, metrics, {', '.join(sorted(types))}")
     values = {k: _coerce(k, v, types[k]) for k, v in merged.items()}
     return Recipe(name, hashlib.sha256(text.encode()).hexdigest(), values, val_split)
