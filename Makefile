@@ -25,6 +25,9 @@ METRIC    ?= jnyang
 # STEPS=N overrides its steps.
 RECIPE    ?= shipped
 STEPS     ?=
+# The model's file name under models/ (METRIC by default): make train METRIC=jnyang RECIPE=reuse
+# NAME=jnyang-reuse trains the JNYang model that splits for prediction reuse (train/recipes/reuse.yaml).
+NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
 .PHONY: install test lint typecheck check bench clean dataset train evaluate demo play
@@ -83,12 +86,13 @@ dataset: $(STAMP)
 
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
-	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) --out $(DATA)/$(METRIC).pt
-	$(BIN)/rtp-export $(DATA)/$(METRIC).pt -o models/$(METRIC).onnx
+	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) --out $(DATA)/$(NAME).pt
+	$(BIN)/rtp-export $(DATA)/$(NAME).pt -o models/$(NAME).onnx
 
-# make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines.
+# make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines
+# (NAME=jnyang-reuse: that model).
 evaluate: $(STAMP)
-	$(RTP) evaluate models/$(METRIC).onnx --data $(DATA)/test --out $(DATA)/eval-$(METRIC) --plots
+	$(RTP) evaluate models/$(NAME).onnx --data $(DATA)/test --out $(DATA)/eval-$(NAME) --plots
 
 # make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
 # slow and fast paths at 1280x720 (the models' training size), every method swept, both paths at

@@ -676,7 +676,7 @@ def build_parser() -> argparse.ArgumentParser:
     cache_dir(dm)
 
     from rtp.capture.paths import PATH_PROFILES
-    from rtp.evaluate import METHOD_KINDS
+    from rtp.evaluate import DEFAULT_METHODS, METHOD_KINDS
 
     pl = command("play", "closed-loop VRS on a moving camera: every method picks rates from its own last displayed "
                  "frame, frame after frame, against full-rate shading", _cmd_play,
@@ -691,8 +691,8 @@ def build_parser() -> argparse.ArgumentParser:
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
     pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")
-    methods = "jnyang,jnyang@4,yang2019,yang2019-unseen-1x1,fidelityfx,oracle"
-    pl.add_argument("--methods", default=methods, help=f"comma-separated methods (see below; default: {methods})")
+    pl.add_argument("--methods", default=DEFAULT_METHODS,
+                    help=f"comma-separated methods (see below; default: {DEFAULT_METHODS})")
     pl.add_argument("--path", action="append", default=None,
                     help=f"camera path profiles, repeatable or comma-separated: {', '.join(PATH_PROFILES)} "
                     "(default: slow,fast)")

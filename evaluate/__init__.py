@@ -38,6 +38,7 @@ from ._evaluate import (
     tile_unseen_share,
 )
 from ._play import (
+    DEFAULT_METHODS,
     METHOD_KINDS,
     REUSE_REDUCTIONS,
     REUSE_UNSEEN,
@@ -51,6 +52,7 @@ from ._play import (
 from ._scores import Scores, scores
 
 __all__ = [
+    "DEFAULT_METHODS",
     "DEFAULT_UNSEEN_FRACTION",
     "METHOD_KINDS",
     "FFX_LUMA",

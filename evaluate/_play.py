@@ -44,6 +44,7 @@ from ._baselines import FidelityFX, Frame, Yang2019
 from ._evaluate import failing_tiles
 
 __all__ = [
+    "DEFAULT_METHODS",
     "FAIL_LEVELS",
     "METHOD_KINDS",
     "MethodSpec",
@@ -64,6 +65,12 @@ REUSE_REDUCTIONS = sdk.REUSE_REDUCTIONS
 REUSE_UNSEEN = sdk.REUSE_UNSEEN
 #: What a reused frame carries (``NAME@k:features``): the SDK's.
 REUSE_CARRIES = sdk.REUSE_CARRIES
+
+#: What ``rtp play`` and :func:`play` run by default: the shipped JNYang on every frame and every
+#: fourth frame (its estimates carried), the shipped model for reuse with its features carried
+#: (``jnyang-reuse``, docs/runtime.md), the baselines and the oracle.
+DEFAULT_METHODS = ("jnyang,jnyang@4,jnyang-reuse@4:features,yang2019,yang2019-unseen-1x1,fidelityfx,"
+                   "oracle")
 
 #: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
 FAIL_LEVELS = (0.01, 0.02, 0.05)
@@ -352,7 +359,7 @@ def _check(frames: int, fps: float, flip_every: int, size: tuple[int, int], reus
 
 def play(
     scene: str,
-    methods: str | Iterable[str] = "jnyang,jnyang@4,yang2019,yang2019-unseen-1x1,fidelityfx,oracle",
+    methods: str | Iterable[str] = DEFAULT_METHODS,
     *,
     paths: Sequence[str] = ("slow", "fast"),
     frames: int = 300,

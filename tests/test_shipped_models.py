@@ -16,12 +16,55 @@ def test_the_jnyang_model_ships() -> None:
     assert "jnyang.onnx" in SHIPPED
 
 
+def test_every_shipped_model_is_named_for_its_metric() -> None:
+    # One model per metric, named for it; a variant for a use is METRIC-USE (the model for
+    # prediction reuse, jnyang-reuse: docs/runtime.md), beside its metric's every-frame model.
+    metrics = {n.removesuffix(".onnx") for n in SHIPPED if "-" not in n}
+    assert metrics == {"jnyang", "psnr", "flip", "jnflip", "lpips"}
+    variants = {n.removesuffix(".onnx") for n in SHIPPED} - metrics
+    assert variants == {"jnyang-reuse"}
+    for v in variants:
+        assert v.split("-")[0] in metrics
+
+
+def test_the_reuse_model_splits_and_carries_its_features() -> None:
+    # jnyang-reuse is the network that splits (docs/results.md "The tail at tile resolution"): its
+    # trunk's features are carried between network runs and its tail runs on every frame.
+    pred = sdk.load("jnyang-reuse")
+    assert pred.splits and pred.metadata.metric == "jnyang"
+    assert {"reprojected.y.tiles", "albedo.y.tiles"} <= set(pred.metadata.inputs)
+    reuse = sdk.PredictionReuse(pred, 4, carry="features")
+    assert reuse.carry == "features" and reuse.every == 4
+    # A camera that does not move: the frames between network runs read only the .tiles planes (the
+    # variance inside each rate's blocks) of the new frame, the trunk's features are the last run's;
+    # every fourth frame the whole network runs again.
+    rng = np.random.default_rng(5)
+    h, w = 96, 160
+    rows, cols = np.indices((h, w))
+    tiles = [pred.metadata.inputs.index(c) for c in ("reprojected.y.tiles", "albedo.y.tiles")]
+    seen = pred.metadata.inputs.index("seen")
+    ran = None
+    for i in range(8):
+        x = rng.random((len(pred.metadata.inputs), h, w), dtype=np.float32)
+        x[seen] = 1.0
+        got = reuse.predict(x, (rows, cols))
+        if i % 4 == 0:
+            ran = x.copy()
+            assert np.allclose(got, pred.predict(x), atol=1e-5), i
+        else:  # the last run's trunk with this frame's tail
+            assert ran is not None
+            mixed = ran.copy()
+            mixed[tiles] = x[tiles]
+            assert np.allclose(got, pred.predict(mixed), atol=1e-4), i
+            assert not np.allclose(got, pred.predict(x), atol=1e-2), i
+
+
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_model_loads_by_name_and_predicts(name: str) -> None:
     by_name = sdk.load(name.removesuffix(".onnx"))
     assert by_name.path is not None and by_name.path.name == name
     m = by_name.metadata
-    assert m.metric == name.removesuffix(".onnx")
+    assert m.metric == name.removesuffix(".onnx").split("-")[0]  # jnyang-reuse: a JNYang model
     assert m.tile_size == 16 and {"seen", "normal.z"} <= set(m.inputs)
     for kind in ("reprojected", "albedo"):  # the paper's brightness planes: red, or luma ("Luma instead of red")
         assert len({f"{kind}.r", f"{kind}.y"} & set(m.inputs)) == 1, (kind, m.inputs)
