@@ -15,8 +15,9 @@ Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default her
    the first frame; ``predictor.shading_rates`` picks a rate per tile; the overlay is saved.
 
 ``--model`` is a shipped model's name (``sdk.shipped_models()``: jnyang by default, flip, jnflip,
-lpips, psnr) or the path of any rtp ONNX model. The pyrender adapter produces every input plane
-the shipped models read (luma, RGB, material parameters, the ``.blocks`` planes: docs/adapters.md).
+lpips, psnr, jnyang-reuse) or the path of any rtp ONNX model. The pyrender adapter produces every
+input plane the shipped models read (luma, RGB, material parameters, the ``.blocks`` and ``.tiles``
+planes: docs/adapters.md).
 """
 
 from __future__ import annotations
