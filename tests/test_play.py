@@ -238,6 +238,23 @@ def test_a_splitting_model_carries_its_features_in_the_loop(tmp_path: Path, plan
     assert rep.settings["reuse"][name]["carry"] == "features"
 
 
+def test_the_default_methods_run_the_shipped_reuse_model_with_its_features() -> None:
+    """``rtp play``'s defaults name only shipped models and include ``jnyang-reuse`` carrying its
+    features; that model runs in the loop (its trunk every other frame here, its tail on each)."""
+    from rtp.evaluate import DEFAULT_METHODS
+
+    specs = parse_methods(DEFAULT_METHODS)
+    shipped = {n.removesuffix(".onnx") for n in sdk.shipped_models()}
+    assert {s.model for s in specs if s.kind == "model"} <= shipped
+    assert any(s.model == "jnyang-reuse" and s.reuse == 4 and s.carry == "features" for s in specs)
+    name = "jnyang-reuse@2:features"
+    rep = play("procedural:0", f"jnyang-reuse,{name}", paths=("fast",), frames=5, size=(W, H), sweep=False,
+               flip_every=0)
+    rows = {r["method"]: r for r in rep.rows}
+    assert rows[name]["network_frames"] == 0.5 and rows["jnyang-reuse"]["network_frames"] == 1.0
+    assert rep.settings["reuse"][name]["carry"] == "features"
+
+
 def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tiny_model: Any) -> None:
     """reprojected.y.dx / .dy and .blocks are sdk.pixel_differences and sdk.block_variances of the
