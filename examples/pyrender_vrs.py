@@ -1,7 +1,8 @@
-"""Variable-rate shading for a pyrender scene: two frames of a camera move, a model, the rate overlay.
+"""Variable-rate shading for a pyrender scene: a camera move, a model, the rate overlay.
 
     python examples/pyrender_vrs.py                       # procedural level -> GLB, the shipped JNYang model
     python examples/pyrender_vrs.py --scene level.glb --model flip --out vrs.png   # your level, another model
+    python examples/pyrender_vrs.py --model jnyang-reuse --frames 24 --every 4 --gif vrs.gif   # a frame loop
 
 Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default here) or OSMesa.
 
@@ -13,6 +14,13 @@ Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default her
    on the adapter's renderer: pyrender binds a scene to one renderer's GL context.
 4. The adapter builds the model's inputs for the second frame from the scene, the two poses and
    the first frame; ``predictor.shading_rates`` picks a rate per tile; the overlay is saved.
+
+``--frames N`` (more than 2) keeps the camera moving the same way for N frames, as a frame loop in
+an engine: ``sdk.PredictionReuse`` runs the network every ``--every``-th frame, and in between
+carries its per-tile estimates (or, for a model that splits such as ``jnyang-reuse``, its trunk's
+features, running only the tail) along the surfaces, fetching each pixel from where the adapter's
+motion vectors say it was (docs/runtime.md). Each frame's line says whether the network ran and
+what choosing the rates cost; ``--gif`` writes the overlays as an animation (imageio).
 
 ``--model`` is a shipped model's name (``sdk.shipped_models()``: jnyang by default, flip, jnflip,
 lpips, psnr, jnyang-reuse) or the path of any rtp ONNX model. The pyrender adapter produces every
@@ -96,6 +104,30 @@ def camera_poses(scene: Any, spawn: Any | None) -> tuple[np.ndarray, np.ndarray]
     return p0, p1
 
 
+def fetch_from_motion(motion_x: np.ndarray, motion_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel, the top-left ``(row, col)`` of the previous frame's pixel it comes from (what
+    ``PredictionReuse`` fetches): the nearest texel of the pixel centre moved by its motion vector
+    (pixels, previous minus current position, x right and y down), kept inside the frame."""
+    h, w = motion_x.shape
+    ys, xs = np.indices((h, w), dtype=np.float32)
+    rows = np.clip(np.floor(ys + 0.5 + motion_y), 0, h - 1).astype(np.intp)
+    cols = np.clip(np.floor(xs + 0.5 + motion_x), 0, w - 1).astype(np.intp)
+    return rows, cols
+
+
+def walk(p0: np.ndarray, frames: int, turn: float = 1.0, move: float = 0.05) -> list[np.ndarray]:
+    """``frames`` camera poses from ``p0``, each ``move`` metres sideways (and half that forward)
+    and ``turn`` degrees to the left of the one before: at 60 frames a second, by default a walk of
+    3 m/s turning 60 degrees a second (the two-frame move above is four of these steps)."""
+    step = np.eye(4)
+    step[:3, :3] = _rotation(turn, turn / 4)
+    step[:3, 3] = (move, 0.0, -move / 2)
+    poses = [p0]
+    for _ in range(frames - 1):
+        poses.append(poses[-1] @ step)
+    return poses
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", type=Path, help="glTF/GLB/OBJ file (default: a procedural level written as GLB)")
@@ -104,7 +136,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", type=int, nargs=2, default=(640, 360), metavar=("W", "H"))
     ap.add_argument("--threshold", type=float, help="error threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
+    ap.add_argument("--frames", type=int, default=2,
+                    help="frames of the camera move (default 2: one prediction; more: a frame loop with reuse)")
+    ap.add_argument("--every", type=int, default=4, help="in a frame loop, run the network every this many frames")
+    ap.add_argument("--gif", type=Path, help="in a frame loop, write the rate overlays as an animated GIF")
     args = ap.parse_args(argv)
+    if args.frames < 2 or args.every < 1:
+        ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("OpenGL").setLevel(logging.WARNING)
     width, height = args.size
@@ -126,6 +164,8 @@ def main(argv: list[str] | None = None) -> int:
         if scene.main_camera_node is None:
             scene.add(pyrender.PerspectiveCamera(yfov=math.radians(70.0), znear=0.05, zfar=200.0), pose=p0)
 
+        if args.frames > 2:
+            return loop(args, scene, predictor, walk(p0, args.frames), width, height)
         with Adapter.for_predictor(predictor, width, height) as adapter:
             # the displayed frames: pyrender's own lit images, drawn on the adapter's renderer
             # (pyrender binds a scene to one renderer; to use your own, pass Adapter(..., renderer=r))
@@ -149,6 +189,55 @@ def main(argv: list[str] | None = None) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         Image.fromarray(img).save(args.out)
         log.info("saved the rate overlay to %s", args.out)
+    return 0
+
+
+def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredictor, poses: list[np.ndarray],
+         width: int, height: int) -> int:
+    """The frame loop: the adapter's inputs every frame, the network every ``args.every``-th."""
+    import time
+
+    from PIL import Image
+
+    inputs = predictor.metadata.inputs
+    carry = "features" if predictor.splits else "estimates"
+    reuse = sdk.PredictionReuse(predictor, args.every, carry=carry)
+    log.info("frame loop: %d frames, the network every %d, carrying its %s", len(poses) - 1, args.every, carry)
+    # the model's planes, then what the loop needs besides: motion vectors (where each pixel was) and depth (sky)
+    channels = (*inputs, "motion.x", "motion.y", "depth")
+    overlays, saved, ran = [], [], []
+    with Adapter(channels, width, height) as adapter:
+        prev_colour, _ = adapter.render(scene, poses[0])
+        for i in range(1, len(poses)):
+            colour, _ = adapter.render(scene, poses[i])
+            planes = adapter.inputs(SceneFrame(scene, poses[i], poses[i - 1], prev_colour))
+            x, (motion_x, motion_y, depth) = planes[:len(inputs)], planes[len(inputs):]
+            fetch = fetch_from_motion(motion_x, motion_y)
+            seen = x[inputs.index("seen")] if "seen" in inputs else None
+            t0 = time.perf_counter()
+            rates = reuse.shading_rates(x, fetch=fetch if i > 1 else None, seen=seen, background=depth <= 0.0,
+                                        threshold=args.threshold)
+            ms = 1000.0 * (time.perf_counter() - t0)
+            saved.append(sdk.work_saved(rates, (height, width), predictor.metadata.tile_size))
+            ran.append(reuse.work)
+            log.info("frame %2d: %s, %.1f ms, shading work saved %.1f %%", i,
+                     "network ran" if reuse.work >= 1.0 else f"carried ({reuse.work:.0%} of a network run on crops)"
+                     if reuse.work > 0 else f"{carry} carried, age {reuse.age}", ms, 100.0 * saved[-1])
+            overlay = sdk.draw_rate_overlay(colour, rates, predictor.metadata.tile_size)
+            overlays.append(overlay if overlay.dtype == np.uint8 else
+                            (np.clip(overlay, 0, 1) * 255 + 0.5).astype(np.uint8))
+            prev_colour = colour  # what the frame displayed (a VRS engine: its own shaded frame)
+    log.info("%d frames: the network on %.0f %% of them, %.1f %% of the shading work saved on average",
+             len(saved), 100.0 * float(np.mean(ran)), 100.0 * float(np.mean(saved)))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(overlays[-1]).save(args.out)
+    log.info("saved the last frame's rate overlay to %s", args.out)
+    if args.gif is not None:
+        import imageio.v3 as iio
+
+        args.gif.parent.mkdir(parents=True, exist_ok=True)
+        iio.imwrite(args.gif, np.stack(overlays), duration=1000 / 15, loop=0)
+        log.info("saved the overlays of every frame to %s", args.gif)
     return 0
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -18,3 +19,25 @@ def test_pyrender_example_uses_a_shipped_model(tmp_path: Path) -> None:
                         "--out", str(out)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "jnyang.onnx" in r.stderr and "RANDOM" not in r.stderr and out.is_file()
+
+
+@pytest.mark.gl
+def test_pyrender_example_loops_with_the_reuse_model(tmp_path: Path) -> None:
+    # --frames N: a frame loop in which PredictionReuse runs jnyang-reuse every --every-th frame and
+    # carries its features (fetched along the adapter's motion vectors) in between
+    import imageio.v3 as iio
+
+    out, gif = tmp_path / "vrs.png", tmp_path / "vrs.gif"
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--model", "jnyang-reuse",
+                        "--frames", "7", "--every", "3", "--size", "160", "96", "--out", str(out), "--gif", str(gif)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if re.match(r"frame +\d+:", ln)]
+    assert len(lines) == 6, r.stderr
+    assert ["network ran" in ln for ln in lines] == [True, False, False, True, False, False], lines
+    assert all("features carried" in ln for ln in lines[1:3] + lines[4:]), lines
+    assert "the network on 33 % of them" in r.stderr
+    assert out.is_file() and iio.imread(gif).shape == (6, 96, 160, 3)
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--frames", "1"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "expected --frames >= 2" in r.stderr
