@@ -15,6 +15,11 @@ Printed per output and pooled over the outputs (as ``rtp evaluate``'s R² is): t
 model's R² (raw output, no safety margin) against the unshifted target, and against the content
 part (the mean over the phases) on the same tiles. Only tiles well inside every window count
 (``--margin`` tiles from its edges), so the frame border's padding does not pass for phase.
+
+``--mirror`` also recomputes the targets on the frame mirrored left-right and mirrors them back, and
+prints how well they agree with the targets (R²) beside how well each shifted phase's do: how true
+the labels of ``rtp train --mirror`` are for a metric whose filters are not symmetric (LPIPS's
+AlexNet). A pointwise metric mirrors exactly.
 """
 
 from __future__ import annotations
@@ -90,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samples", type=int, default=0, help="at most this many samples, spread evenly (0: all)")
     ap.add_argument("--shifts", default=DEFAULT_SHIFTS, help=f"phases, 'dy,dx' pixels (default: {DEFAULT_SHIFTS!r})")
     ap.add_argument("--margin", type=int, default=4, help="tiles left out along each window's edges (default: 4)")
+    ap.add_argument("--mirror", action="store_true",
+                    help="also the targets of the frame mirrored left-right, mirrored back, against the targets")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
@@ -112,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     if "weber_l" in settings:
         params["weber_l"] = float(settings["weber_l"])
     m = args.margin
-    phases, model = [], []
+    phases, model, mirrored = [], [], []
     for i in tqdm(ids, desc=f"{meta.metric} at {len(shifts)} phases", unit="sample"):
         s = reader[i]
         h, w = s.size
@@ -123,6 +130,12 @@ def main(argv: list[str] | None = None) -> int:
         t = phase_targets(ref, {r: s.final(r) for r in meta.outputs}, meta.metric, shifts, tile, params)
         t = t[..., m:t.shape[-2] - m, m:t.shape[-1] - m]
         phases.append(np.asarray(meta.transform.forward(t)).reshape(len(shifts), len(meta.outputs), -1))
+        if args.mirror:  # the mirrored frame's tiles are the frame's, in reverse column order
+            mt = phase_targets(np.ascontiguousarray(ref[:, ::-1]), {r: np.ascontiguousarray(s.final(r)[:, ::-1])
+                                                                   for r in meta.outputs},
+                               meta.metric, [(0, 0)], tile, params)[0, ..., ::-1]
+            mt = mt[..., m:mt.shape[-2] - m, m:mt.shape[-1] - m]
+            mirrored.append(np.asarray(meta.transform.forward(mt)).reshape(len(meta.outputs), -1))
         raw = pred.predict_raw(s.inputs(meta.inputs))[:, 1 + m:h // tile - 1 - m, 1 + m:w // tile - 1 - m]
         model.append(raw.reshape(len(meta.outputs), -1))
     t = np.concatenate(phases, axis=-1)  # (phases, outputs, tiles)
@@ -145,6 +158,18 @@ def main(argv: list[str] | None = None) -> int:
     print(f"| pooled | {100 * ceiling(tp):.1f} | {100 * r2(p.reshape(-1)[k], tp[0]):.1f} | "
           f"{100 * r2(p.reshape(-1)[k], content.reshape(-1)[k]):.1f} | "
           f"{float(np.sqrt(tp.var(axis=0, ddof=1).mean())):.3f} |")
+    if mirrored:
+        mt = np.concatenate(mirrored, axis=-1)  # (outputs, tiles)
+        print("\nThe mirrored frame's targets, mirrored back, against the targets (R² %), and each shifted "
+              "phase's (the mean over the phases, and the lowest):\n")
+        print("| output | mirrored | shifted phases, mean | shifted phases, lowest |")
+        print("|---|---:|---:|---:|")
+        rows = [(rate, ok[j] & np.isfinite(mt[j]), mt[j], t[:, j]) for j, rate in enumerate(meta.outputs)]
+        rows.append(("pooled", k & np.isfinite(mt.reshape(-1)), mt.reshape(-1), t.reshape(len(shifts), -1)))
+        for rate, kk, mj, tj in rows:
+            shifted = [r2(tj[q, kk], tj[0, kk]) for q in range(1, len(shifts))]
+            print(f"| {rate} | {100 * r2(mj[kk], tj[0, kk]):.1f} | {100 * float(np.mean(shifted)):.1f} | "
+                  f"{100 * min(shifted):.1f} |")
     return 0
 
 

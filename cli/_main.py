@@ -281,7 +281,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 _RECIPE_FLAGS = ("arch", "width", "depth", "stem", "stem_layers", "energy_norm", "grow", "max_width", "separable",
                  "separable_tail", "tail_width", "head_width", "context_pool", "coarse", "coarse_width", "block_contrast",
                  "contrast_cell",
-                 "contrast_max", "augment", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss",
+                 "contrast_max", "augment", "mirror", "tile", "outputs", "inputs", "transform", "logistic_k", "head", "loss",
                  "quantile", "focus",
                  "ema", "distill", "aux_weight",
                  "steps", "batch", "crop", "context", "lr", "optimizer", "schedule", "weight_decay", "seed",
@@ -589,6 +589,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: no cap)")
     r.add_argument("--augment", action="store_true", default=None,
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
+    r.add_argument("--mirror", action="store_true", default=None,
+                   help="random left-right mirrors of each crop only, up kept up (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
                    help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
     r.add_argument("--loss", default=None, choices=("l1", "mse", "huber", "bce", "quantile"),

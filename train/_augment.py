@@ -15,7 +15,8 @@ import numpy as np
 
 __all__ = ["SYMMETRIES", "augment_batch", "augment_sample"]
 
-#: (transpose, flip rows, flip columns), applied in that order; index 0 is the identity.
+#: (transpose, flip rows, flip columns), applied in that order; index 0 is the identity, index 1 the
+#: left-right mirror (``TrainConfig.mirror`` draws from the first two).
 SYMMETRIES: tuple[tuple[bool, bool, bool], ...] = tuple(
     (t, v, h) for t in (False, True) for v in (False, True) for h in (False, True)
 )

@@ -104,6 +104,9 @@ class TrainConfig:
     #: Random flips and transposes of each crop (the 8 symmetries of the square), with the targets and
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
+    #: Random left-right mirrors of each crop only (the one symmetry a level keeps: up stays up), the
+    #: targets and normal x / motion x mirrored with it (train/_augment.py); with ``context`` too.
+    mirror: bool = False
     #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
     #: ``huber`` (quadratic below 0.1, linear above) or ``bce`` (cross-entropy, soft targets) or
     #: ``quantile`` (the pinball loss of ``quantile``: the network predicts that quantile of a tile's
@@ -508,6 +511,11 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and packed:
         raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
                                  "flipped or transposed crop would read the wrong rates", "augment")
+    if cfg.mirror and packed:
+        raise sdk.ParameterError(f"mirror: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
+                                 "mirrored crop would read the wrong rates", "mirror")
+    if cfg.mirror and cfg.augment:
+        raise sdk.ParameterError("mirror: augment's eight symmetries include the mirror; give one of the two", "mirror")
     if cfg.loss not in LOSSES:
         raise sdk.ParameterError(f"loss: expected one of {', '.join(LOSSES)}, got {cfg.loss!r}", "loss")
     if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
@@ -594,9 +602,9 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                                  f"{cfg.metric}, got {', '.join(cfg.aux_metrics)}", "aux_metrics")
     if cfg.aux_metrics and cfg.arch != "fast":
         raise sdk.ParameterError(f"aux_metrics: the fast network's option, got arch {cfg.arch!r}", "aux_metrics")
-    if cfg.aux_metrics and cfg.augment:
-        raise sdk.ParameterError("aux_metrics and augment cannot be combined (the auxiliary targets are not "
-                                 "transformed with the crop)", "aux_metrics")
+    if cfg.aux_metrics and (cfg.augment or cfg.mirror):
+        raise sdk.ParameterError(f"aux_metrics and {'augment' if cfg.augment else 'mirror'} cannot be combined (the "
+                                 "auxiliary targets are not transformed with the crop)", "aux_metrics")
     if not (cfg.aux_weight > 0.0 and math.isfinite(cfg.aux_weight)):
         raise sdk.ParameterError(f"aux_weight: expected a weight > 0, got {cfg.aux_weight}", "aux_weight")
     if not 0.0 <= cfg.ema < 1.0:
@@ -688,6 +696,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             config_key["energy_norm"] = True
     if cfg.augment:
         config_key["augment"] = True
+    if cfg.mirror:
+        config_key["mirror"] = True
     if cfg.context:  # likewise: checkpoints from before the option read no context
         config_key["context"] = cfg.context
     if cfg.loss != "l1":  # likewise: checkpoints from before the option trained with L1
@@ -790,8 +800,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
             for i, y, x in zip(idx, oy, ox)
         ])
-        if cfg.augment:
-            xb_raw, sym = xb, torch.randint(len(SYMMETRIES), (cfg.batch,), generator=gen).tolist()
+        if cfg.augment or cfg.mirror:  # SYMMETRIES[1] is the left-right mirror; with context the window mirrors whole
+            xb_raw, sym = xb, torch.randint(len(SYMMETRIES) if cfg.augment else 2, (cfg.batch,), generator=gen).tolist()
             xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs, sym)
         target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
         target = torch.nan_to_num(target, nan=1.0)
@@ -799,7 +809,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             sb = torch.from_numpy(np.stack([
                 soft[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
                 for i, y, x in zip(idx, oy, ox)]))
-            if cfg.augment:
+            if cfg.augment or cfg.mirror:
                 sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
             known = torch.from_numpy(np.isfinite(yb))
             target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb, target)
@@ -858,6 +868,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
         **({"energy_norm": True} if cfg.energy_norm else {}),
         "augment": cfg.augment,
+        **({"mirror": True} if cfg.mirror else {}),
         **({"context": cfg.context} if cfg.context else {}),
         "loss": cfg.loss,
         **({"quantile": cfg.quantile} if cfg.loss == "quantile" else {}),
