@@ -58,3 +58,31 @@ def test_a_lone_direction_channel_cannot_be_transposed() -> None:
     x, y = _crop()
     with pytest.raises(ValueError, match="normal.y"):
         augment_sample(x, y, ("normal.x", "seen", "albedo.r", "normal.z"), OUTPUTS, 4)
+
+
+def test_packed_planes_flip_by_whole_cells_and_stay_true() -> None:
+    # A flipped crop's .blocks and .tiles planes are exactly those of the flipped luma: the cells change
+    # places and keep their layout (a rate's blocks, aligned to the cell, mirror onto the same blocks)
+    from rtp.sdk import block_variances, tile_variances
+
+    rng = np.random.default_rng(4)
+    luma = rng.random((48, 64)).astype(np.float32)
+    luma[:, 20:30] *= 0.1  # some structure besides noise
+    ins = ("reprojected.y", "reprojected.y.blocks", "reprojected.y.tiles")
+    x = np.stack([luma, block_variances(luma), tile_variances(luma)])
+    y = rng.random((len(OUTPUTS), 3, 4)).astype(np.float32)
+    for sym in (SYMMETRIES.index((False, False, True)), SYMMETRIES.index((False, True, False)),
+                SYMMETRIES.index((False, True, True))):
+        _, flip_rows, flip_cols = SYMMETRIES[sym]
+        want = luma[::-1] if flip_rows else luma
+        want = want[:, ::-1] if flip_cols else want
+        xm, ym = augment_sample(x, y, ins, OUTPUTS, sym)
+        assert np.array_equal(xm[0], want)
+        assert np.allclose(xm[1], block_variances(want), atol=1e-5), sym
+        assert np.allclose(xm[2], tile_variances(want), atol=1e-5), sym
+        assert not np.allclose(xm[1], x[1][:, ::-1] if flip_cols else x[1][::-1], atol=1e-3)  # not a plain flip
+    assert np.array_equal(augment_sample(x, y, ins, OUTPUTS, 0)[0], x)
+    with pytest.raises(ValueError, match="never transpose"):
+        augment_sample(x, y, ins, OUTPUTS, 4)
+    with pytest.raises(ValueError, match="flip on whole cells"):
+        augment_sample(x[:, :, :40], y, ins, OUTPUTS, 1)  # 40 columns: not whole 16-pixel tiles

@@ -433,7 +433,8 @@ def test_the_coarse_context_trains_from_the_command_line_and_is_recorded(tmp_pat
 
 def test_the_mirror_trains_with_context_and_is_recorded(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    # --mirror: each crop (with its context) mirrored left-right or not, never flipped upside down or transposed
+    # --mirror: each crop (with its context) mirrored left-right or not, never flipped upside down or transposed;
+    # the .blocks planes mirror by whole cells (tests/test_augment.py)
     import rtp.train._loop as loop
     from rtp.train._augment import SYMMETRIES, augment_batch
 
@@ -447,8 +448,9 @@ def test_the_mirror_trains_with_context_and_is_recorded(tmp_path: Path, capsys: 
     assert SYMMETRIES[1] == (False, False, True)  # the left-right mirror
     data = _dataset(tmp_path / "ds", n=4)
     base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--context", "16", "--val-scenes",
-            "scene0", "--arch", "fast", "--head-width", "0", "--inputs", "reprojected.y,seen,albedo.y,normal.x",
-            "--batch", "16", "--mirror", "--steps", "6"]
+            "scene0", "--arch", "fast", "--head-width", "0", "--inputs",
+            "reprojected.y,seen,albedo.y,normal.x,reprojected.y.blocks,albedo.y.blocks", "--batch", "16", "--mirror",
+            "--steps", "6"]
     assert rtp_main([*base, "--out", str(tmp_path / "m.pt")]) == 0
     assert set(drawn) == {0, 1} and len(drawn) == 6 * 16  # each crop mirrored or not
     ck = load_checkpoint(tmp_path / "m.pt")
@@ -459,8 +461,6 @@ def test_the_mirror_trains_with_context_and_is_recorded(tmp_path: Path, capsys: 
     common = {"data": str(data), "metric": "jnyang", "crop": 32, "arch": "fast", "mirror": True}
     with pytest.raises(sdk.ParameterError, match="augment's eight symmetries include the mirror"):
         train(TrainConfig(out=str(tmp_path / "a.pt"), augment=True, **common))
-    with pytest.raises(sdk.ParameterError, match="mirror: reprojected.y.tiles pack one value"):
-        train(TrainConfig(out=str(tmp_path / "t.pt"), inputs=("reprojected.y", "seen", "reprojected.y.tiles"), **common))
     with pytest.raises(sdk.ParameterError, match="aux_metrics and mirror cannot be combined"):
         train(TrainConfig(out=str(tmp_path / "x.pt"), aux_metrics=("flip",), **common))
 

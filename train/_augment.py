@@ -5,6 +5,12 @@ shape, so each rate's target moves with its tile. A transpose (rows <-> columns)
 into an H x W one: the targets of 1x2 and 2x1, and of 2x4 and 4x2, swap. Channels that hold a
 direction change with the image: view-space normal x points right and y up, screen motion x right
 and y down (rtp.sdk.CHANNELS).
+
+The packed planes (``.blocks``: six values on the first pixels of each 4x4 cell; ``.tiles``: twelve on
+the first pixels of each 16x16 tile) flip by cells: the cells (tiles) change places and each keeps
+its layout, because a cell's values are unchanged by a flip (a rate's blocks, aligned to the cell,
+are mirrored onto the same blocks; a tile's mean and maximum over its cells do not depend on their
+order). A transpose would swap values inside a cell, so it refuses them.
 """
 
 from __future__ import annotations
@@ -12,6 +18,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+
+from rtp.sdk import BLOCK_CELL, BLOCK_TILE
 
 __all__ = ["SYMMETRIES", "augment_batch", "augment_sample"]
 
@@ -42,10 +50,29 @@ def _transpose_channels(x: np.ndarray, inputs: Sequence[str]) -> np.ndarray:
     return out
 
 
+def packed_cell(name: str) -> int:
+    """The cell a packed plane keeps its values in (``.blocks``: 4, ``.tiles``: 16), or 0 for a plain plane."""
+    return BLOCK_CELL if name.endswith(".blocks") else BLOCK_TILE if name.endswith(".tiles") else 0
+
+
+def _flip_cells(plane: np.ndarray, cell: int, axis: int) -> np.ndarray:
+    """``plane`` (H, W) with the order of its ``cell``-pixel cells reversed along ``axis``, each cell as it was."""
+    h, w = plane.shape
+    if axis == 0:
+        return plane.reshape(h // cell, cell, w)[::-1].reshape(h, w)
+    return plane.reshape(h, w // cell, cell)[:, ::-1].reshape(h, w)
+
+
 def augment_sample(x: np.ndarray, y: np.ndarray, inputs: Sequence[str], outputs: Sequence[str],
                    symmetry: int) -> tuple[np.ndarray, np.ndarray]:
     """One crop ``x`` (C, H, W) and its targets ``y`` (R, th, tw) under ``SYMMETRIES[symmetry]``."""
     transpose, flip_rows, flip_cols = SYMMETRIES[symmetry]
+    packed = [(i, packed_cell(n)) for i, n in enumerate(inputs) if packed_cell(n)]
+    if packed and (transpose or (flip_rows or flip_cols) and any(x.shape[1 + a] % c for _, c in packed for a in (0, 1))):
+        names = ", ".join(inputs[i] for i, _ in packed)
+        raise ValueError(f"augment: {names} pack values per cell or tile: they flip on whole cells, never transpose"
+                         if transpose else f"augment: {names} flip on whole cells; the crop {x.shape[1:]} is not")
+    original = x
     if transpose:
         x = _transpose_channels(x, inputs)
         order = [list(outputs).index(_SWAPPED_RATES.get(r, r)) for r in outputs]
@@ -59,6 +86,15 @@ def augment_sample(x: np.ndarray, y: np.ndarray, inputs: Sequence[str], outputs:
         sign[[i for i, n in enumerate(inputs) if n in ("normal.x", "motion.x")]] *= -1
     if (sign != 1).any():
         x = x * sign[:, None, None]
+    if packed and (flip_rows or flip_cols):
+        x = np.array(x)  # a copy: the packed planes are rebuilt from the crop's own
+        for i, c in packed:
+            plane = original[i]
+            if flip_rows:
+                plane = _flip_cells(plane, c, 0)
+            if flip_cols:
+                plane = _flip_cells(plane, c, 1)
+            x[i] = plane
     return np.ascontiguousarray(x), np.ascontiguousarray(y)
 
 

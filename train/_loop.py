@@ -105,7 +105,8 @@ class TrainConfig:
     #: the direction-dependent channels changed to match (train/_augment.py).
     augment: bool = False
     #: Random left-right mirrors of each crop only (the one symmetry a level keeps: up stays up), the
-    #: targets and normal x / motion x mirrored with it (train/_augment.py); with ``context`` too.
+    #: targets and normal x / motion x mirrored with it, ``.blocks`` and ``.tiles`` planes by whole cells
+    #: (train/_augment.py); with ``context`` too.
     mirror: bool = False
     #: Training loss in transformed space: ``l1`` (the paper's), ``mse`` (what R² scores) or
     #: ``huber`` (quadratic below 0.1, linear above) or ``bce`` (cross-entropy, soft targets) or
@@ -511,9 +512,6 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.augment and packed:
         raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
                                  "flipped or transposed crop would read the wrong rates", "augment")
-    if cfg.mirror and packed:
-        raise sdk.ParameterError(f"mirror: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
-                                 "mirrored crop would read the wrong rates", "mirror")
     if cfg.mirror and cfg.augment:
         raise sdk.ParameterError("mirror: augment's eight symmetries include the mirror; give one of the two", "mirror")
     if cfg.loss not in LOSSES:
