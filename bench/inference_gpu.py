@@ -6,7 +6,8 @@ CUDA provider where the installed onnxruntime has it).
 Needs a CUDA GPU: where torch sees none it says so and exits with status 2. The networks timed are the
 exported ONNX files themselves (every shipped model, the paper's network with random weights as
 ``bench/inference.py`` builds it, any ``MODEL.onnx`` given), rebuilt op for op as torch modules from
-their graphs (Conv, Relu, BatchNormalization, MaxPool, Sigmoid: the ops ``rtp-export`` writes), so the
+their graphs (Conv, Relu, BatchNormalization, MaxPool, Sigmoid, and Concat where a network that splits
+joins its tail's block contrast: the ops ``rtp-export`` writes), so the
 weights, the folded BatchNorm and the ceil-mode pooling are the shipped ones. Each is timed at batch 1
 on an input already on the GPU (an engine's G-buffers live there) in three ways:
 
@@ -46,12 +47,32 @@ def _attrs(node: onnx.NodeProto) -> dict[str, object]:
     return {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
 
 
-def torch_from_onnx(path: Path) -> nn.Sequential:
-    """The chain of layers in ``path`` as a torch module with its weights. Only what rtp-export writes
-    for rtp's networks is understood: a single chain of Conv, Relu, BatchNormalization, MaxPool,
-    Sigmoid and Identity nodes; anything else raises ``ValueError`` naming the op. Nodes the first
-    output (``metric``) does not need, the finite probe's (docs/export.md), are left out: the probe
-    is the SDK's check of its input on a CPU, not part of the network."""
+class OnnxGraph(nn.Module):
+    """An ONNX graph's layers run in the graph's order, each reading the tensors its node names: a
+    chain, or the branches of a network that splits (its block contrast read from the input and
+    joined to the trunk's features by a Concat)."""
+
+    def __init__(self, layers: list[nn.Module], plan: list[tuple[int, list[str], str]], source: str,
+                 result: str) -> None:
+        super().__init__()
+        self.layers = nn.ModuleList(layers)
+        self.plan = plan  # (layer index, or -1 for a Concat over channels; input names; output name)
+        self.source, self.result = source, result
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        values = {self.source: x}
+        for i, ins, out in self.plan:
+            values[out] = torch.cat([values[n] for n in ins], dim=1) if i < 0 else self.layers[i](values[ins[0]])
+        return values[self.result]
+
+
+def torch_from_onnx(path: Path) -> nn.Module:
+    """The layers in ``path`` as a torch module with its weights (:class:`OnnxGraph`). Only what
+    rtp-export writes for rtp's networks is understood: Conv, Relu, BatchNormalization, MaxPool,
+    Sigmoid, Identity and Concat over channels; anything else raises ``ValueError`` naming the op.
+    Nodes the first output (``metric``) does not need, the finite probe's (docs/export.md) and a split
+    network's second output, are left out: the probe is the SDK's check of its input on a CPU, not
+    part of the network."""
     model = onnx.load(str(path))
     weights = {t.name: torch.from_numpy(numpy_helper.to_array(t).copy()) for t in model.graph.initializer}
     needed = {model.graph.output[0].name}
@@ -59,6 +80,7 @@ def torch_from_onnx(path: Path) -> nn.Sequential:
         if needed & set(node.output):
             needed.update(node.input)
     layers: list[nn.Module] = []
+    plan: list[tuple[int, list[str], str]] = []
     for node in model.graph.node:
         if not needed & set(node.output):
             continue
@@ -66,7 +88,15 @@ def torch_from_onnx(path: Path) -> nn.Sequential:
         if node.op_type == "Identity":
             if node.input[0] in weights:  # exported weight aliases
                 weights[node.output[0]] = weights[node.input[0]]
+            else:
+                plan.append((-1, [node.input[0]], node.output[0]))  # a Concat of one: the tensor itself
             continue
+        if node.op_type == "Concat":
+            if int(a.get("axis", 0)) != 1:  # type: ignore[call-overload]
+                raise ValueError(f"{path}: Concat over axis {a.get('axis')} is not supported (only channels)")
+            plan.append((-1, list(node.input), node.output[0]))
+            continue
+        plan.append((len(layers), [node.input[0]], node.output[0]))
         if node.op_type == "Conv":
             w = weights[node.input[1]]
             pads = list(a.get("pads", [0, 0, 0, 0]))  # type: ignore[call-overload]
@@ -100,7 +130,7 @@ def torch_from_onnx(path: Path) -> nn.Sequential:
             layers.append(bn)
         else:
             raise ValueError(f"{path}: op {node.op_type} is not one rtp-export writes for its networks")
-    return nn.Sequential(*layers).eval()
+    return OnnxGraph(layers, plan, model.graph.input[0].name, model.graph.output[0].name).eval()
 
 
 def _cuda_ms(fn, repeats: int) -> float:  # type: ignore[no-untyped-def]

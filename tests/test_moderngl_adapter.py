@@ -218,7 +218,7 @@ def test_the_adapter_benchmark_times_every_shipped_channel_list() -> None:
     out = subprocess.run([sys.executable, str(root / "bench" / "adapter.py"), "--sizes", "48x32", "--repeats", "1"],
                          capture_output=True, text=True, check=True).stdout
     rows = [line.split("|")[1].strip() for line in out.splitlines() if line.startswith("| ") and "ms" not in line]
-    assert rows == ["reprojection (renderer)"] + sorted(p.stem for p in (root / "models").glob("*.onnx")), out
+    assert rows == ["reprojection (renderer)"] + [p.stem for p in sorted((root / "models").glob("*.onnx"))], out
 
 
 def test_no_previous_frame_and_channel_errors(frames) -> None:
