@@ -11,7 +11,9 @@
 
 :class:`Adapter` builds a model's inputs from an engine's G-buffer textures
 (:class:`GBufferTextures`); :class:`ReferenceFrameSource` is the reference renderer feeding it
-(``Adapter.frame_source(scene, width, height)``). Scenes and cameras are :mod:`rtp.scene`'s (no GL);
+(``Adapter.frame_source(scene, width, height)``). :class:`RateSelector` makes the runtime's decision
+(decode and rate selection) in a compute shader, from the network's output to the shading-rate image.
+Scenes and cameras are :mod:`rtp.scene`'s (no GL);
 :class:`Renderer` and :class:`Adapter` need the ``rtp[moderngl]`` extra.
 """
 
@@ -19,12 +21,14 @@ from __future__ import annotations
 
 from ._adapter import Adapter, GBufferTextures
 from ._renderer import Frame, Renderer, RendererError, RenderResult, create_context
+from ._select import RateSelector
 from ._source import ReferenceFrameSource
 
 __all__ = [
     "Adapter",
     "Frame",
     "GBufferTextures",
+    "RateSelector",
     "ReferenceFrameSource",
     "RenderResult",
     "Renderer",

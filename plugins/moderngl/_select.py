@@ -1,0 +1,174 @@
+"""The runtime's per-tile decision as a GLSL compute shader (``shaders/select_rates_cs.glsl``).
+
+``ShadingRatePredictor.shading_rates`` decodes the network's output and picks the rates on the CPU
+(numpy). An engine that runs the network on the GPU wants the decision there too, so the prediction
+never travels back: :class:`RateSelector` runs the same rules (``ModelMetadata.decode``, then
+``select_rates``) in one compute dispatch, from the network's raw output in a GPU buffer to the
+shading-rate image, an ``r8ui`` texture of D3D12 / Vulkan rate codes. It is also the reference to port:
+the shader is 100 lines of GLSL 4.30 and its results are tested against the SDK's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from rtp import sdk
+
+from ._renderer import RendererError, create_context
+from ._shaders import load_source
+
+__all__ = ["RateSelector"]
+
+_TRANSFORMS = {"clamped": 0, "logistic": 1, "linear": 2}
+_GROUP = 8  # the shader's local size, both axes
+
+
+class RateSelector:
+    """The decision of ``ShadingRatePredictor.shading_rates`` on the GPU, for one model's metadata.
+
+    ``model`` is an ``sdk.ShadingRatePredictor`` (its metadata is taken) or an ``sdk.ModelMetadata``;
+    ``ctx`` a moderngl context of OpenGL 4.3 or later (compute shaders; default: a new headless one
+    through EGL). Decisions are made on the model's own tiles (``metadata.tile_size``)::
+
+        selector = RateSelector(predictor, ctx)
+        rates = selector.select(predictor.predict_raw(x))          # (th, tw) uint8, as shading_rates(x)
+        texture = selector.select_buffer(raw_buffer, (th, tw))     # stays on the GPU: an r8ui texture
+
+    The shader computes in float32 where the SDK decodes in float64, so a tile whose value lies within
+    float32 rounding of the threshold (or of the other rate of its cost class) can decide the other
+    way; everywhere else the codes are the SDK's.
+    """
+
+    def __init__(self, model: sdk.ShadingRatePredictor | sdk.ModelMetadata, ctx: Any | None = None) -> None:
+        meta = model.metadata if isinstance(model, sdk.ShadingRatePredictor) else model
+        if not isinstance(meta, sdk.ModelMetadata):
+            raise TypeError(f"RateSelector: expected an sdk.ShadingRatePredictor or sdk.ModelMetadata, got "
+                            f"{type(model).__name__}")
+        self._meta = meta
+        self._own_ctx = ctx is None
+        self.ctx = create_context(430) if ctx is None else ctx
+        if self.ctx.version_code < 430:
+            raise RendererError(f"RateSelector needs compute shaders (OpenGL 4.3), got a context of version "
+                                f"{self.ctx.version_code // 100}.{self.ctx.version_code % 100 // 10}")
+        self._program = self.ctx.compute_shader(load_source("select_rates_cs.glsl"))
+        t = meta.transform
+        outputs = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
+        uniforms: dict[str, Any] = {
+            "u_outputs": tuple(outputs + [-1] * (6 - len(outputs))),
+            "u_shift": meta.worse_direction * meta.safety,
+            "u_transform": _TRANSFORMS[t.type],
+            "u_k": meta.extrapolation_k,
+            "u_higher_is_better": meta.higher_is_better,
+        }
+        if t.type in ("clamped", "logistic"):
+            uniforms["u_mu_y"] = float(t.mu_y)  # type: ignore[arg-type]
+        if t.type == "logistic":
+            k, mu = float(t.k), float(t.mu_y)  # type: ignore[arg-type]
+            uniforms["u_logistic_k"] = k
+            uniforms["u_s_bounds"] = (1.0 / (1.0 + math.exp(k * mu)), 1.0 / (1.0 + math.exp(-k * (1.0 - mu))),
+                                      1.0 / (1.0 + math.exp(k * (1.0 - mu))))  # S(0), S(1), 1 - S(1)
+        if t.type == "linear":
+            uniforms.update(u_factor=float(t.factor), u_offset=float(t.offset))  # type: ignore[arg-type]
+        for name, value in uniforms.items():
+            if name in self._program:
+                self._program[name].value = value
+        self._tiles: tuple[int, int] | None = None
+        self._texture: Any = None
+        self._decoded: Any = None
+        self._raw: Any = None
+
+    @property
+    def metadata(self) -> sdk.ModelMetadata:
+        return self._meta
+
+    def _targets(self, tiles: tuple[int, int]) -> None:
+        """The rate texture and the decoded buffer for a grid of ``tiles`` (rows, columns)."""
+        if self._tiles == tiles:
+            return
+        for obj in (self._texture, self._decoded):
+            if obj is not None:
+                obj.release()
+        th, tw = tiles
+        self._texture = self.ctx.texture((tw, th), 1, dtype="u1")
+        self._decoded = self.ctx.buffer(reserve=6 * th * tw * 4)
+        self._tiles = tiles
+
+    def select_buffer(self, raw: Any, tiles: tuple[int, int], threshold: float | None = None,
+                      allowed: Iterable[sdk.RateLike] | None = None) -> Any:
+        """Rates from the network's output already on the GPU: ``raw`` a moderngl buffer holding the
+        output planes of one frame, float32 ``(len(metadata.outputs), th, tw)`` row-major, ``tiles``
+        ``(th, tw)``. Returns the ``r8ui`` texture of rate codes (``tw`` x ``th`` texels, texel row 0 the
+        top tile row); it is reused by the next call of the same grid."""
+        th, tw = (int(v) for v in tiles)
+        if th < 1 or tw < 1:
+            raise sdk.ParameterError(f"tiles: expected (rows, columns) of at least one tile, got {tiles!r}", "tiles")
+        need = len(self._meta.outputs) * th * tw * 4
+        if raw.size < need:
+            raise sdk.InputShapeError(
+                f"raw buffer holds {raw.size} bytes, expected at least {need} for {len(self._meta.outputs)} float32 "
+                f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
+        thr = self._meta.default_threshold if threshold is None else threshold
+        # the SDK's own checks and messages for the threshold and the allowed rates (one tile of zeros)
+        sdk.select_rates(np.zeros((6, 1, 1), np.float32), thr, higher_is_better=self._meta.higher_is_better,
+                         allowed=allowed)
+        mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
+        self._targets((th, tw))
+        self._program["u_tiles"].value = (tw, th)
+        self._program["u_threshold"].value = float(thr)
+        self._program["u_allowed"].value = mask
+        raw.bind_to_storage_buffer(0)
+        self._decoded.bind_to_storage_buffer(1)
+        self._texture.bind_to_image(0, read=False, write=True)
+        self._program.run(-(-tw // _GROUP), -(-th // _GROUP))
+        return self._texture
+
+    def select(self, raw: np.ndarray, threshold: float | None = None,
+               allowed: Iterable[sdk.RateLike] | None = None) -> np.ndarray:
+        """Rates from the network's output in host memory (``ShadingRatePredictor.predict_raw``: float
+        ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 ``(th, tw)`` codes, as
+        ``shading_rates`` returns them."""
+        a = np.asarray(raw)
+        if a.ndim == 4 and a.shape[0] == 1:
+            a = a[0]
+        n = len(self._meta.outputs)
+        if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f":
+            raise sdk.InputShapeError(
+                f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
+                f"{a.dtype} {a.shape}", tuple(a.shape), f"({n}, th, tw)")
+        data = np.ascontiguousarray(a, dtype=np.float32).tobytes()
+        if self._raw is None or self._raw.size != len(data):
+            if self._raw is not None:
+                self._raw.release()
+            self._raw = self.ctx.buffer(data)
+        else:
+            self._raw.write(data)
+        texture = self.select_buffer(self._raw, a.shape[1:], threshold, allowed)
+        th, tw = a.shape[1:]
+        return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(th, tw).copy()
+
+    def decoded(self) -> np.ndarray:
+        """The six rates' decoded values of the last call, float32 ``(6, th, tw)`` (``predict``'s)."""
+        if self._tiles is None:
+            raise RuntimeError("RateSelector.decoded: nothing selected yet")
+        th, tw = self._tiles
+        return np.frombuffer(self._decoded.read(), np.float32).reshape(6, th, tw).copy()
+
+    def close(self) -> None:
+        """Release the GPU objects (and the context when the selector made it)."""
+        for obj in (self._texture, self._decoded, self._raw, self._program):
+            if obj is not None:
+                obj.release()
+        self._texture = self._decoded = self._raw = None
+        self._tiles = None
+        if self._own_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> RateSelector:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

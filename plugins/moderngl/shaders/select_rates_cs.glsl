@@ -1,0 +1,97 @@
+#version 430
+// The runtime's per-tile decision on the GPU: the network's raw output (transformed space, one plane
+// per metadata `outputs` rate) -> the metric for all six reduced rates -> the shading-rate image.
+// A port of rtp.sdk's ModelMetadata.decode (safety margin, inverse transform, extrapolation; paper
+// Section 4.3) and select_rates (the cheapest allowed rate whose value passes the threshold, the
+// better value among rates of equal cost, else 1x1), one invocation per tile, in float32 where the
+// SDK computes in float64 (docs/runtime.md, "The decision on the GPU"). An engine that runs the
+// network on the GPU binds its output buffer here and never reads the prediction back.
+layout(local_size_x = 8, local_size_y = 8) in;
+
+// the network's output for one frame, planar (C, th, tw) float32 as onnxruntime returns it
+layout(std430, binding = 0) readonly buffer Raw { float raw[]; };
+// the decoded metric of the six rates, planar (6, th, tw): what sdk's predict returns
+layout(std430, binding = 1) writeonly buffer Decoded { float decoded[]; };
+// the D3D12 / Vulkan rate codes, one texel a tile (top-left origin: row 0 is the top tile row)
+layout(r8ui, binding = 0) uniform writeonly uimage2D u_rates;
+
+uniform ivec2 u_tiles;           // (tw, th): tiles across and down
+uniform int u_outputs[6];        // the PREDICTED_RATES index of each output plane; -1 past the last
+uniform float u_shift;           // safety margin x its conservative direction, added in transformed space
+uniform int u_transform;         // 0 clamped, 1 logistic, 2 linear
+uniform float u_mu_y;            // clamped, logistic
+uniform float u_logistic_k;      // logistic
+uniform vec3 u_s_bounds;         // logistic: S(0), S(1), 1 - S(1)
+uniform float u_factor;          // linear
+uniform float u_offset;          // linear
+uniform float u_k;               // extrapolation_k
+uniform bool u_higher_is_better; // PSNR: values pass above the threshold
+uniform float u_threshold;       // in metric units
+uniform uint u_allowed;          // bit i: PREDICTED_RATES[i] may be chosen (1x2, 2x1, 2x2, 2x4, 4x2, 4x4)
+
+const float LOGIT_EPS = 1e-7;
+// PREDICTED_RATES order
+const int R12 = 0, R21 = 1, R22 = 2, R24 = 3, R42 = 4, R44 = 5;
+const uint CODES[6] = uint[6](1u, 4u, 5u, 6u, 9u, 10u);  // sdk.RATE_CODES
+
+float inverse_transform(float p) {
+    if (isnan(p)) return p;  // GLSL's clamp would turn a NaN into a number; numpy's clip keeps it
+    if (u_transform == 0) return p * (2.0 * u_mu_y);
+    if (u_transform == 1) {
+        // S and 1 - S each from p (1 - S from 1 - S(1), computed on the CPU), not 1 - S in float32: near
+        // the clamp 1 - S would cancel to a few ulps and the logit would miss the SDK's by a percent
+        float span = u_s_bounds.y - u_s_bounds.x;
+        float s = clamp(p * span + u_s_bounds.x, LOGIT_EPS, 1.0 - LOGIT_EPS);
+        float r = clamp(u_s_bounds.z + (1.0 - p) * span, LOGIT_EPS, 1.0 - LOGIT_EPS);
+        return u_mu_y + (log(s) - log(r)) / u_logistic_k;
+    }
+    return (p - u_offset) / u_factor;
+}
+
+// the worse of two values; NaN if either is (as numpy's maximum: GLSL's max may return the other operand),
+// so a rate extrapolated from a NaN output never passes either
+float worse(float a, float b) {
+    if (isnan(a) || isnan(b)) return isnan(a) ? a : b;
+    return u_higher_is_better ? min(a, b) : max(a, b);
+}
+// a k times larger error amplitude: k x the error, or 20 log10 k dB less PSNR
+float scaled(float v) { return u_higher_is_better ? v - 20.0 * log(u_k) / log(10.0) : v * u_k; }
+
+void main() {
+    ivec2 t = ivec2(gl_GlobalInvocationID.xy);
+    if (t.x >= u_tiles.x || t.y >= u_tiles.y) return;
+    int plane = u_tiles.x * u_tiles.y;
+    int at = t.y * u_tiles.x + t.x;
+
+    float v[6];
+    bool have[6] = bool[6](false, false, false, false, false, false);
+    for (int i = 0; i < 6; ++i) {
+        int r = u_outputs[i];
+        if (r < 0) break;
+        v[r] = inverse_transform(raw[i * plane + at] + u_shift);
+        have[r] = true;
+    }
+    // complete the six rates (sdk complete_rates)
+    if (have[R22] && !have[R12]) { v[R12] = v[R22]; v[R21] = v[R22]; }  // a single 2x2 output: an upper bound
+    if (!have[R22]) v[R22] = worse(v[R12], v[R21]);
+    if (!have[R24]) { v[R24] = worse(scaled(v[R12]), v[R22]); v[R42] = worse(scaled(v[R21]), v[R22]); }
+    if (!have[R44]) v[R44] = worse(v[R24], v[R42]);
+    for (int r = 0; r < 6; ++r) decoded[r * plane + at] = v[r];
+
+    // the cheapest cost class with a passing rate; within a class the better value (the first on a tie);
+    // NaN never passes (every comparison with it is false)
+    uint code = 0u;  // 1x1
+    const int CLASSES[6] = int[6](R44, R24, R42, R22, R12, R21);
+    const int CLASS_OF[6] = int[6](0, 1, 1, 2, 3, 3);
+    for (int c = 0; c < 4 && code == 0u; ++c) {
+        float best = 0.0;
+        for (int j = 0; j < 6; ++j) {
+            int r = CLASSES[j];
+            if (CLASS_OF[j] != c || (u_allowed & (1u << uint(r))) == 0u) continue;
+            float e = u_higher_is_better ? -v[r] : v[r];
+            float thr = u_higher_is_better ? -u_threshold : u_threshold;
+            if (e < thr && (code == 0u || e < best)) { code = CODES[r]; best = e; }
+        }
+    }
+    imageStore(u_rates, t, uvec4(code, 0u, 0u, 0u));
+}

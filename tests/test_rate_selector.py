@@ -1,0 +1,137 @@
+"""rtp.plugins.moderngl.RateSelector: the runtime's decision in a compute shader, against the SDK's."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from rtp import sdk
+from rtp.plugins.moderngl import RateSelector
+from tests.conftest import base_metadata
+from tests.test_moderngl_adapter import H, W, frames  # noqa: F401  (frames: a fixture)
+
+pytestmark = pytest.mark.gl
+
+#: the reduced rates by cost class, cheapest first (select_rates' order of preference)
+CLASSES = (("4x4",), ("2x4", "4x2"), ("2x2",), ("1x2", "2x1"))
+
+
+def _robust(values: np.ndarray, threshold: float, higher_is_better: bool, allowed: tuple[str, ...]) -> np.ndarray:
+    """Tiles whose decision float32 rounding cannot change: no allowed rate's value within a hair of the
+    threshold, nor within a hair of (but not equal to) the other rate of its cost class."""
+    v = values.astype(np.float64)
+    hair = 1e-4 * (1.0 + np.abs(v))
+    ok = np.ones(v.shape[1:], bool)
+    idx = {r: sdk.PREDICTED_RATES.index(r) for r in sdk.PREDICTED_RATES}
+    for r in allowed:
+        ok &= ~(np.abs(v[idx[r]] - threshold) < hair[idx[r]])
+    for a, b in (("2x4", "4x2"), ("1x2", "2x1")):
+        if a in allowed and b in allowed:  # an exact tie (one extrapolated from the same 2x2) decides alike
+            d = np.abs(v[idx[a]] - v[idx[b]])
+            both_pass = (v[idx[a]] > threshold) & (v[idx[b]] > threshold) if higher_is_better else \
+                (v[idx[a]] < threshold) & (v[idx[b]] < threshold)
+            ok &= ~(both_pass & (d > 0) & (d < hair[idx[a]]))
+    return ok
+
+
+def test_every_shipped_model_decides_as_the_sdk_on_a_rendered_frame(frames, gl_context: Any) -> None:  # noqa: F811
+    ctx, _, cur = frames
+    for name in sdk.shipped_models():
+        pred = sdk.load(name)
+        x = np.stack([cur.channel(c) for c in pred.metadata.inputs])  # what the adapters build from it
+        raw = pred.predict_raw(x)
+        with RateSelector(pred, ctx) as selector:
+            seen: set[int] = set()
+            for scale in (0.5, 1.0, 2.0):
+                thr = pred.metadata.default_threshold * scale
+                gpu = selector.select(raw, thr)
+                seen |= set(np.unique(gpu).tolist())
+                cpu = pred.shading_rates(x, thr)
+                assert gpu.shape == cpu.shape == pred.tiles(H, W) and gpu.dtype == np.uint8
+                values = pred.predict(x)
+                ok = _robust(values, thr, pred.metadata.higher_is_better, sdk.PREDICTED_RATES)
+                assert ok.mean() > 0.99, name
+                np.testing.assert_array_equal(gpu[ok], cpu[ok], err_msg=f"{name} at threshold {thr}")
+                np.testing.assert_allclose(selector.decoded(), values, rtol=1e-5, atol=1e-6)
+            assert len(seen) >= 3, (name, seen)  # the frame and thresholds exercise several rates
+
+
+_TRANSFORMS = st.one_of(
+    st.builds(lambda mu: {"type": "clamped", "mu_y": mu}, st.floats(0.02, 2.0)),
+    st.builds(lambda mu, k: {"type": "logistic", "mu_y": mu, "k": k}, st.floats(0.02, 0.9), st.floats(2.0, 30.0)),
+    st.builds(lambda f, o: {"type": "linear", "factor": f, "offset": o},
+              st.sampled_from([-1.0, 1.0]).flatmap(lambda s: st.floats(0.05, 5.0).map(lambda f: s * f)),
+              st.floats(-0.5, 0.5)),
+)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(transform=_TRANSFORMS,
+       outputs=st.sampled_from([["1x2", "2x1"], ["1x2", "2x1", "2x4", "4x2"], list(sdk.PREDICTED_RATES), ["2x2"]]),
+       psnr=st.booleans(), k=st.floats(1.0, 8.0), safety=st.floats(0.0, 0.2),
+       quantile=st.floats(0.05, 0.95),
+       allowed=st.sets(st.sampled_from(sdk.PREDICTED_RATES)).map(lambda s: tuple(r for r in sdk.PREDICTED_RATES if r in s)),
+       tiles=st.tuples(st.integers(1, 20), st.integers(1, 20)), seed=st.integers(0, 2**16))
+def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any], outputs: list[str], psnr: bool,
+                                          k: float, safety: float, quantile: float, allowed: tuple[str, ...],
+                                          tiles: tuple[int, int], seed: int) -> None:
+    """Every transform, output set, metric direction, margin, extrapolation factor, allowed set and grid
+    (odd sizes: the shader's 8x8 groups overhang the edge): the codes of select_rates(decode(raw)), and
+    the decoded values."""
+    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety)
+    if psnr:
+        meta_d.update(metric="psnr", default_threshold=35.0)
+        del meta_d["weber_l"]
+    try:
+        meta = sdk.ModelMetadata.from_dict(meta_d)
+    except sdk.MetadataError:
+        assume(False)
+    rng = np.random.default_rng(seed)
+    raw = rng.random((len(outputs), *tiles)).astype(np.float32)
+    raw.flat[rng.integers(raw.size)] = np.nan  # NaN never passes: its tile takes another rate or 1x1
+    values = meta.decode(raw)
+    finite = values[np.isfinite(values)]
+    assume(finite.size > 0)
+    threshold = float(np.quantile(finite, quantile))  # a threshold that splits the tiles
+    if not psnr:
+        threshold = max(threshold, 0.0)
+    selector = RateSelector(meta, gl_context)
+    try:
+        gpu = selector.select(raw, threshold, allowed=list(allowed) or ["1x1"])
+        decoded = selector.decoded()
+    finally:
+        selector.close()
+    cpu = sdk.select_rates(values, threshold, higher_is_better=meta.higher_is_better, allowed=list(allowed) or ["1x1"])
+    ok = _robust(values, threshold, meta.higher_is_better, allowed)
+    np.testing.assert_array_equal(gpu[ok], cpu[ok])
+    both = np.isfinite(values)
+    np.testing.assert_array_equal(np.isfinite(decoded), both)
+    np.testing.assert_allclose(decoded[both], values[both], rtol=2e-4, atol=2e-5)
+    if not allowed:
+        assert (gpu == 0).all()
+
+
+def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> None:
+    meta = sdk.load("jnyang").metadata
+    raw = np.random.default_rng(1).random((4, 9, 13)).astype(np.float32)
+    with RateSelector(meta, gl_context) as selector:
+        buffer = gl_context.buffer(raw.tobytes())
+        texture = selector.select_buffer(buffer, (9, 13))
+        assert texture.size == (13, 9) and texture.dtype == "u1" and texture.components == 1
+        codes = np.frombuffer(texture.read(alignment=1), np.uint8).reshape(9, 13)
+        np.testing.assert_array_equal(codes, selector.select(raw))  # the same from host memory
+        with pytest.raises(sdk.InputShapeError, match=r"holds 1872 bytes, expected at least 2080"):
+            selector.select_buffer(buffer, (10, 13))
+        with pytest.raises(sdk.InputShapeError, match=r"expected the network's float output \(4, th, tw\)"):
+            selector.select(raw[:2])
+        with pytest.raises(sdk.ParameterError, match="threshold"):
+            selector.select(raw, -1.0)
+        with pytest.raises(sdk.ParameterError, match="allowed"):
+            selector.select(raw, allowed=["3x3"])
+        buffer.release()
+    with pytest.raises(TypeError, match="ModelMetadata"):
+        RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
