@@ -75,14 +75,16 @@ _TRANSFORMS = st.one_of(
        psnr=st.booleans(), k=st.floats(1.0, 8.0), safety=st.floats(0.0, 0.2),
        quantile=st.floats(0.05, 0.95),
        allowed=st.sets(st.sampled_from(sdk.PREDICTED_RATES)).map(lambda s: tuple(r for r in sdk.PREDICTED_RATES if r in s)),
-       tiles=st.tuples(st.integers(1, 20), st.integers(1, 20)), seed=st.integers(0, 2**16))
+       tiles=st.tuples(st.integers(1, 20), st.integers(1, 20)), pool=st.sampled_from([1, 1, 2, 4]),
+       seed=st.integers(0, 2**16))
 def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any], outputs: list[str], psnr: bool,
                                           k: float, safety: float, quantile: float, allowed: tuple[str, ...],
-                                          tiles: tuple[int, int], seed: int) -> None:
-    """Every transform, output set, metric direction, margin, extrapolation factor, allowed set and grid
-    (odd sizes: the shader's 8x8 groups overhang the edge): the codes of select_rates(decode(raw)), and
-    the decoded values."""
-    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety)
+                                          tiles: tuple[int, int], pool: int, seed: int) -> None:
+    """Every transform, output set, metric direction, margin, extrapolation factor, allowed set, grid
+    (odd sizes: the shader's 8x8 groups overhang the edge) and hardware tile (8-pixel model tiles pooled
+    into 16 and 32): the codes of select_rates(pool_tiles(decode(raw))), and the values."""
+    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety,
+                           tile_size=8 if pool > 1 else 16)
     if psnr:
         meta_d.update(metric="psnr", default_threshold=35.0)
         del meta_d["weber_l"]
@@ -93,13 +95,13 @@ def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, A
     rng = np.random.default_rng(seed)
     raw = rng.random((len(outputs), *tiles)).astype(np.float32)
     raw.flat[rng.integers(raw.size)] = np.nan  # NaN never passes: its tile takes another rate or 1x1
-    values = meta.decode(raw)
+    values = sdk.pool_tiles(meta.decode(raw), pool, higher_is_better=meta.higher_is_better)
     finite = values[np.isfinite(values)]
     assume(finite.size > 0)
     threshold = float(np.quantile(finite, quantile))  # a threshold that splits the tiles
     if not psnr:
         threshold = max(threshold, 0.0)
-    selector = RateSelector(meta, gl_context)
+    selector = RateSelector(meta, gl_context, tile_size=meta.tile_size * pool)
     try:
         gpu = selector.select(raw, threshold, allowed=list(allowed) or ["1x1"])
         decoded = selector.decoded()
@@ -135,3 +137,22 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
         buffer.release()
     with pytest.raises(TypeError, match="ModelMetadata"):
         RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
+    for bad in (8, 24, 2.0):  # finer than the model's 16-pixel tiles; not a tile size; not an int
+        with pytest.raises(sdk.ParameterError, match="tile_size"):
+            RateSelector(meta, gl_context, tile_size=bad)  # type: ignore[arg-type]
+
+
+def test_hardware_tiles_coarser_than_the_model_s_as_load_pools_them(tiny_model, gl_context: Any) -> None:
+    """A model of 8-pixel tiles loaded for 16-pixel hardware tiles: the selector takes the predictor's
+    tile size and returns what its shading_rates returns, one code per hardware tile."""
+    pred = sdk.load(tiny_model(base_metadata(tile_size=8), tile=8), tile_size=16)
+    x = np.random.default_rng(3).random((4, 72, 104)).astype(np.float32)  # 9 x 13 model tiles: partial pools
+    with RateSelector(pred, gl_context) as selector:
+        assert selector.pool == 2 and selector.tile_size == 16
+        for thr in (0.05, 0.2, 0.4):
+            gpu = selector.select(pred.predict_raw(x), thr)
+            assert gpu.shape == pred.tiles(72, 104) == (5, 7)
+            values = pred.predict(x)
+            ok = _robust(values, thr, False, sdk.PREDICTED_RATES)
+            np.testing.assert_array_equal(gpu[ok], pred.shading_rates(x, thr)[ok])
+            np.testing.assert_allclose(selector.decoded(), values, rtol=1e-5, atol=1e-6)

@@ -30,9 +30,11 @@ _GROUP = 8  # the shader's local size, both axes
 class RateSelector:
     """The decision of ``ShadingRatePredictor.shading_rates`` on the GPU, for one model's metadata.
 
-    ``model`` is an ``sdk.ShadingRatePredictor`` (its metadata is taken) or an ``sdk.ModelMetadata``;
-    ``ctx`` a moderngl context of OpenGL 4.3 or later (compute shaders; default: a new headless one
-    through EGL). Decisions are made on the model's own tiles (``metadata.tile_size``)::
+    ``model`` is an ``sdk.ShadingRatePredictor`` (its metadata and hardware tile size are taken) or an
+    ``sdk.ModelMetadata``; ``ctx`` a moderngl context of OpenGL 4.3 or later (compute shaders; default: a
+    new headless one through EGL). ``tile_size`` is the hardware's shading-rate tile when coarser than
+    the model's (``sdk.load(..., tile_size=)``: each hardware tile takes the worst of the model tiles it
+    covers, ``sdk.pool_tiles``); default: the predictor's, or the model's own tiles::
 
         selector = RateSelector(predictor, ctx)
         rates = selector.select(predictor.predict_raw(x))          # (th, tw) uint8, as shading_rates(x)
@@ -43,12 +45,21 @@ class RateSelector:
     way; everywhere else the codes are the SDK's.
     """
 
-    def __init__(self, model: sdk.ShadingRatePredictor | sdk.ModelMetadata, ctx: Any | None = None) -> None:
+    def __init__(self, model: sdk.ShadingRatePredictor | sdk.ModelMetadata, ctx: Any | None = None,
+                 tile_size: int | None = None) -> None:
         meta = model.metadata if isinstance(model, sdk.ShadingRatePredictor) else model
         if not isinstance(meta, sdk.ModelMetadata):
             raise TypeError(f"RateSelector: expected an sdk.ShadingRatePredictor or sdk.ModelMetadata, got "
                             f"{type(model).__name__}")
+        if tile_size is None:
+            tile_size = model.tile_size if isinstance(model, sdk.ShadingRatePredictor) else meta.tile_size
+        if (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in sdk.TILE_SIZES
+                or tile_size < meta.tile_size):
+            raise sdk.ParameterError(f"tile_size: expected one of {sdk.TILE_SIZES} no finer than the model's tiles "
+                                     f"({meta.tile_size}), got {tile_size!r}", "tile_size")
         self._meta = meta
+        #: model tiles per hardware tile side
+        self.pool = tile_size // meta.tile_size
         self._own_ctx = ctx is None
         self.ctx = create_context(430) if ctx is None else ctx
         if self.ctx.version_code < 430:
@@ -63,6 +74,7 @@ class RateSelector:
             "u_transform": _TRANSFORMS[t.type],
             "u_k": meta.extrapolation_k,
             "u_higher_is_better": meta.higher_is_better,
+            "u_pool": self.pool,
         }
         if t.type in ("clamped", "logistic"):
             uniforms["u_mu_y"] = float(t.mu_y)  # type: ignore[arg-type]
@@ -85,8 +97,13 @@ class RateSelector:
     def metadata(self) -> sdk.ModelMetadata:
         return self._meta
 
+    @property
+    def tile_size(self) -> int:
+        """The hardware tile the rates are for (pixels per side)."""
+        return self._meta.tile_size * self.pool
+
     def _targets(self, tiles: tuple[int, int]) -> None:
-        """The rate texture and the decoded buffer for a grid of ``tiles`` (rows, columns)."""
+        """The rate texture and the decoded buffer for a grid of hardware ``tiles`` (rows, columns)."""
         if self._tiles == tiles:
             return
         for obj in (self._texture, self._decoded):
@@ -101,8 +118,9 @@ class RateSelector:
                       allowed: Iterable[sdk.RateLike] | None = None) -> Any:
         """Rates from the network's output already on the GPU: ``raw`` a moderngl buffer holding the
         output planes of one frame, float32 ``(len(metadata.outputs), th, tw)`` row-major, ``tiles``
-        ``(th, tw)``. Returns the ``r8ui`` texture of rate codes (``tw`` x ``th`` texels, texel row 0 the
-        top tile row); it is reused by the next call of the same grid."""
+        ``(th, tw)`` on the model's tiles. Returns the ``r8ui`` texture of rate codes, one texel a hardware
+        tile (``ceil(tw / pool)`` x ``ceil(th / pool)``, texel row 0 the top tile row); it is reused by the
+        next call of the same grid."""
         th, tw = (int(v) for v in tiles)
         if th < 1 or tw < 1:
             raise sdk.ParameterError(f"tiles: expected (rows, columns) of at least one tile, got {tiles!r}", "tiles")
@@ -116,21 +134,22 @@ class RateSelector:
         sdk.select_rates(np.zeros((6, 1, 1), np.float32), thr, higher_is_better=self._meta.higher_is_better,
                          allowed=allowed)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
-        self._targets((th, tw))
+        self._targets((-(-th // self.pool), -(-tw // self.pool)))
         self._program["u_tiles"].value = (tw, th)
         self._program["u_threshold"].value = float(thr)
         self._program["u_allowed"].value = mask
         raw.bind_to_storage_buffer(0)
         self._decoded.bind_to_storage_buffer(1)
         self._texture.bind_to_image(0, read=False, write=True)
-        self._program.run(-(-tw // _GROUP), -(-th // _GROUP))
+        gh, gw = self._tiles  # type: ignore[misc]
+        self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
         return self._texture
 
     def select(self, raw: np.ndarray, threshold: float | None = None,
                allowed: Iterable[sdk.RateLike] | None = None) -> np.ndarray:
         """Rates from the network's output in host memory (``ShadingRatePredictor.predict_raw``: float
-        ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 ``(th, tw)`` codes, as
-        ``shading_rates`` returns them."""
+        ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 codes, one per hardware tile,
+        as ``shading_rates`` returns them."""
         a = np.asarray(raw)
         if a.ndim == 4 and a.shape[0] == 1:
             a = a[0]
@@ -147,11 +166,12 @@ class RateSelector:
         else:
             self._raw.write(data)
         texture = self.select_buffer(self._raw, a.shape[1:], threshold, allowed)
-        th, tw = a.shape[1:]
-        return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(th, tw).copy()
+        gh, gw = self._tiles  # type: ignore[misc]
+        return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(gh, gw).copy()
 
     def decoded(self) -> np.ndarray:
-        """The six rates' decoded values of the last call, float32 ``(6, th, tw)`` (``predict``'s)."""
+        """The six rates' decoded values of the last call, float32 ``(6, rows, columns)`` on the hardware
+        tiles (``predict``'s)."""
         if self._tiles is None:
             raise RuntimeError("RateSelector.decoded: nothing selected yet")
         th, tw = self._tiles

@@ -15,7 +15,8 @@ layout(std430, binding = 1) writeonly buffer Decoded { float decoded[]; };
 // the D3D12 / Vulkan rate codes, one texel a tile (top-left origin: row 0 is the top tile row)
 layout(r8ui, binding = 0) uniform writeonly uimage2D u_rates;
 
-uniform ivec2 u_tiles;           // (tw, th): tiles across and down
+uniform ivec2 u_tiles;           // (tw, th): the model's tiles across and down
+uniform int u_pool;              // hardware tiles of u_pool x u_pool model tiles (1: the model's own)
 uniform int u_outputs[6];        // the PREDICTED_RATES index of each output plane; -1 past the last
 uniform float u_shift;           // safety margin x its conservative direction, added in transformed space
 uniform int u_transform;         // 0 clamped, 1 logistic, 2 linear
@@ -57,13 +58,8 @@ float worse(float a, float b) {
 // a k times larger error amplitude: k x the error, or 20 log10 k dB less PSNR
 float scaled(float v) { return u_higher_is_better ? v - 20.0 * log(u_k) / log(10.0) : v * u_k; }
 
-void main() {
-    ivec2 t = ivec2(gl_GlobalInvocationID.xy);
-    if (t.x >= u_tiles.x || t.y >= u_tiles.y) return;
-    int plane = u_tiles.x * u_tiles.y;
-    int at = t.y * u_tiles.x + t.x;
-
-    float v[6];
+// the six rates of model tile `at` (sdk ModelMetadata.decode: margin, inverse transform, complete_rates)
+void decode(int at, int plane, out float v[6]) {
     bool have[6] = bool[6](false, false, false, false, false, false);
     for (int i = 0; i < 6; ++i) {
         int r = u_outputs[i];
@@ -71,12 +67,33 @@ void main() {
         v[r] = inverse_transform(raw[i * plane + at] + u_shift);
         have[r] = true;
     }
-    // complete the six rates (sdk complete_rates)
     if (have[R22] && !have[R12]) { v[R12] = v[R22]; v[R21] = v[R22]; }  // a single 2x2 output: an upper bound
     if (!have[R22]) v[R22] = worse(v[R12], v[R21]);
     if (!have[R24]) { v[R24] = worse(scaled(v[R12]), v[R22]); v[R42] = worse(scaled(v[R21]), v[R22]); }
     if (!have[R44]) v[R44] = worse(v[R24], v[R42]);
-    for (int r = 0; r < 6; ++r) decoded[r * plane + at] = v[r];
+}
+
+void main() {
+    ivec2 t = ivec2(gl_GlobalInvocationID.xy);  // a hardware tile
+    ivec2 grid = (u_tiles + u_pool - 1) / u_pool;
+    if (t.x >= grid.x || t.y >= grid.y) return;
+    int plane = u_tiles.x * u_tiles.y;
+
+    // the worst of the model tiles the hardware tile covers (sdk pool_tiles; a partial one pools those it has)
+    float v[6];
+    bool first = true;
+    for (int dy = 0; dy < u_pool; ++dy) {
+        for (int dx = 0; dx < u_pool; ++dx) {
+            ivec2 m = t * u_pool + ivec2(dx, dy);
+            if (m.x >= u_tiles.x || m.y >= u_tiles.y) continue;
+            float w[6];
+            decode(m.y * u_tiles.x + m.x, plane, w);
+            for (int r = 0; r < 6; ++r) v[r] = first ? w[r] : worse(v[r], w[r]);
+            first = false;
+        }
+    }
+    int out_plane = grid.x * grid.y;
+    for (int r = 0; r < 6; ++r) decoded[r * out_plane + t.y * grid.x + t.x] = v[r];
 
     // the cheapest cost class with a passing rate; within a class the better value (the first on a tie);
     // NaN never passes (every comparison with it is false)
