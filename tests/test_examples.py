@@ -41,3 +41,22 @@ def test_pyrender_example_loops_with_the_reuse_model(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--frames", "1"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "expected --frames >= 2" in r.stderr
+
+
+@pytest.mark.gl
+def test_moderngl_example_decides_on_the_gpu_and_shades_the_rates(tmp_path: Path) -> None:
+    # G-buffers -> the adapter's planes -> onnxruntime -> RateSelector's compute shader -> software VRS
+    import imageio.v3 as iio
+
+    out, gif = tmp_path / "vrs.png", tmp_path / "vrs.gif"
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--model", "flip", "--frames", "3",
+                        "--size", "160", "96", "--out", str(out), "--gif", str(gif)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "flip.onnx" in r.stderr
+    found = [tuple(map(int, m)) for m in re.findall(r"GPU decision = CPU decision on (\d+) of (\d+) tiles", r.stderr)]
+    assert len(found) == 3 and all(n == 60 and same >= 57 for same, n in found), r.stderr
+    assert iio.imread(out).shape == (96, 160, 3) and iio.imread(gif).shape == (3, 96, 160, 3)
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--frames", "0"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "--frames: expected at least 1" in r.stderr

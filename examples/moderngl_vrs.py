@@ -1,0 +1,102 @@
+"""Variable-rate shading with the decision on the GPU: the moderngl path from G-buffers to VRS.
+
+    python examples/moderngl_vrs.py                          # a walk through a procedural level, shipped JNYang
+    python examples/moderngl_vrs.py --model flip --frames 12 --gif vrs.gif --out vrs.png
+
+What an engine on the GPU does each frame, with rtp's reference pieces standing in for its own:
+
+1. The reference deferred renderer (``rtp.plugins.moderngl.Renderer``, through
+   ``Adapter.frame_source``) draws the frame and leaves its G-buffers and the previous displayed frame
+   in textures of its GL context, as an engine's G-buffer pass would.
+2. The moderngl adapter builds the model's input planes from those textures in a fragment shader
+   (reprojection, luma, the material planes, the ``.blocks`` variances: docs/adapters.md).
+3. onnxruntime runs the network (``predictor.predict_raw``: here on the CPU; an engine binds its GPU
+   provider's output buffer instead).
+4. ``RateSelector`` decodes the prediction and picks each tile's rate in a compute shader
+   (docs/runtime.md, "The decision on the GPU"): the shading-rate image, an ``r8ui`` texture.
+5. The renderer shades each tile at its rate (software VRS, then tone mapping and FXAA) and the
+   overlay of the last frame is written to ``--out``; ``--gif`` writes every frame's overlay.
+
+Each frame's line gives the work saved and checks the GPU's decision against
+``predictor.shading_rates`` on the CPU (the same codes but where a value lies within float32
+rounding of the threshold). Headless through Mesa's EGL; OpenGL 4.3 for the compute shader.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rtp import sdk
+from rtp.capture.scenes import procedural
+from rtp.plugins.moderngl import Adapter, RateSelector, create_context
+from rtp.scene import Camera
+
+log = logging.getLogger("moderngl_vrs")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
+    ap.add_argument("--out", type=Path, default=Path("moderngl_vrs.png"), help="overlay PNG of the last frame")
+    ap.add_argument("--gif", type=Path, help="also write every frame's overlay as an animated GIF (imageio)")
+    ap.add_argument("--size", type=int, nargs=2, default=(640, 360), metavar=("W", "H"))
+    ap.add_argument("--frames", type=int, default=6, help="frames of the walk (default: 6)")
+    ap.add_argument("--threshold", type=float, help="threshold (default: the model's)")
+    ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.frames < 1:
+        ap.error(f"--frames: expected at least 1, got {args.frames}")
+    width, height = args.size
+
+    predictor = sdk.load(args.model)
+    log.info("model %s (%s), inputs %s", predictor.path, predictor.metadata.metric, ", ".join(predictor.metadata.inputs))
+    threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
+    level = procedural(args.seed)
+    spawn = level.spawn_points[0]
+
+    def camera(i: int) -> Camera:  # a walk at 60 Hz: 3 m/s forward, turning 30 degrees a second
+        yaw = spawn.yaw + 0.5 * i
+        step = 0.05 * i
+        x = spawn.position[0] + step * math.sin(math.radians(spawn.yaw))
+        z = spawn.position[2] - step * math.cos(math.radians(spawn.yaw))
+        return Camera((x, spawn.position[1], z), yaw=yaw, pitch=-3.0)
+
+    ctx = create_context(430)  # compute shaders
+    overlays = []
+    with Adapter.frame_source(level, width, height, ctx=ctx) as source, RateSelector(predictor, ctx) as selector:
+        adapter = source.adapter(predictor.metadata.inputs)
+        for i in range(1, args.frames + 1):
+            x = adapter.inputs(source.frame(camera(i), camera(i - 1)))      # 1-2: G-buffers -> planes
+            raw = predictor.predict_raw(x)                                     # 3: the network
+            t0 = time.perf_counter()
+            rates = selector.select(raw, threshold)                            # 4: the decision, on the GPU
+            ms = 1e3 * (time.perf_counter() - t0)
+            cpu = predictor.shading_rates(x, threshold)
+            final = source.renderer.shade_rates(rates, selector.tile_size)     # 5: software VRS
+            overlay = sdk.draw_rate_overlay(final, rates, selector.tile_size)  # float in [0, 1], as the frame
+            overlays.append((np.clip(overlay, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+            saved = sdk.work_saved(rates, (height, width), selector.tile_size)
+            log.info("frame %2d: work saved %.1f%%, GPU decision = CPU decision on %d of %d tiles, decided in %.2f ms",
+                     i, 100 * saved, int((rates == cpu).sum()), rates.size, ms)
+    ctx.release()
+
+    import imageio.v3 as iio
+
+    iio.imwrite(args.out, overlays[-1])
+    log.info("wrote %s", args.out)
+    if args.gif:
+        iio.imwrite(args.gif, np.stack(overlays), duration=1000 / 15, loop=0)
+        log.info("wrote %s (%d frames)", args.gif, len(overlays))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
