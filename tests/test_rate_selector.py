@@ -135,6 +135,9 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
         with pytest.raises(sdk.ParameterError, match="allowed"):
             selector.select(raw, allowed=["3x3"])
         buffer.release()
+    selector.close()  # twice: nothing released twice
+    with pytest.raises(RuntimeError, match="closed"):
+        selector.select(raw)
     with pytest.raises(TypeError, match="ModelMetadata"):
         RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
     for bad in (8, 24, 2.0):  # finer than the model's 16-pixel tiles; not a tile size; not an int

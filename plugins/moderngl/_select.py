@@ -129,6 +129,8 @@ class RateSelector:
             raise sdk.InputShapeError(
                 f"raw buffer holds {raw.size} bytes, expected at least {need} for {len(self._meta.outputs)} float32 "
                 f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
+        if self._program is None:
+            raise RuntimeError("RateSelector: closed")
         thr = self._meta.default_threshold if threshold is None else threshold
         # the SDK's own checks and messages for the threshold and the allowed rates (one tile of zeros)
         sdk.select_rates(np.zeros((6, 1, 1), np.float32), thr, higher_is_better=self._meta.higher_is_better,
@@ -182,10 +184,11 @@ class RateSelector:
         for obj in (self._texture, self._decoded, self._raw, self._program):
             if obj is not None:
                 obj.release()
-        self._texture = self._decoded = self._raw = None
+        self._texture = self._decoded = self._raw = self._program = None
         self._tiles = None
         if self._own_ctx:
             self.ctx.release()
+            self._own_ctx = False  # closing twice releases nothing twice
 
     def __enter__(self) -> RateSelector:
         return self
