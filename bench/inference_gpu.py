@@ -6,8 +6,9 @@ CUDA provider where the installed onnxruntime has it).
 Needs a CUDA GPU: where torch sees none it says so and exits with status 2. The networks timed are the
 exported ONNX files themselves (every shipped model, the paper's network with random weights as
 ``bench/inference.py`` builds it, any ``MODEL.onnx`` given), rebuilt op for op as torch modules from
-their graphs (Conv, Relu, BatchNormalization, MaxPool, Sigmoid, and Concat where a network that splits
-joins its tail's block contrast: the ops ``rtp-export`` writes), so the
+their graphs (Conv, Relu, BatchNormalization, MaxPool, Sigmoid, Concat where a network that splits
+joins its tail's block contrast, and Sum where a model's planes come in groups: the ops ``rtp-export``
+writes), so the
 weights, the folded BatchNorm and the ceil-mode pooling are the shipped ones. Each is timed at batch 1
 on an input already on the GPU (an engine's G-buffers live there) in three ways:
 
@@ -50,26 +51,47 @@ def _attrs(node: onnx.NodeProto) -> dict[str, object]:
 class OnnxGraph(nn.Module):
     """An ONNX graph's layers run in the graph's order, each reading the tensors its node names: a
     chain, or the branches of a network that splits (its block contrast read from the input and
-    joined to the trunk's features by a Concat)."""
+    joined to the trunk's features by a Concat). The graph's inputs are consecutive planes of the one
+    tensor ``forward`` takes (``sources``: name, first plane, end), as ``rtp.sdk`` feeds them; a Sum
+    adds the convolutions of the groups a model's planes come in (``rtp.export.split_input_planes``)."""
 
-    def __init__(self, layers: list[nn.Module], plan: list[tuple[int, list[str], str]], source: str,
-                 result: str) -> None:
+    def __init__(self, layers: list[nn.Module], plan: list[tuple[int, list[str], str]],
+                 sources: list[tuple[str, int, int]], result: str) -> None:
         super().__init__()
         self.layers = nn.ModuleList(layers)
-        self.plan = plan  # (layer index, or -1 for a Concat over channels; input names; output name)
-        self.source, self.result = source, result
+        self.plan, self.sources, self.result = plan, sources, result
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        values = {self.source: x}
+        values = {name: x[:, a:b] for name, a, b in self.sources}
         for i, ins, out in self.plan:
-            values[out] = torch.cat([values[n] for n in ins], dim=1) if i < 0 else self.layers[i](values[ins[0]])
+            if i == CONCAT:
+                values[out] = torch.cat([values[n] for n in ins], dim=1)
+            elif i == SUM:
+                values[out] = sum((values[n] for n in ins[1:]), values[ins[0]])
+            else:
+                values[out] = self.layers[i](values[ins[0]])
         return values[self.result]
+
+
+#: Plan entries that are not layers: a Concat over channels and a Sum.
+CONCAT, SUM = -1, -2
+
+
+def _sources(model: onnx.ModelProto) -> list[tuple[str, int, int]]:
+    """``(name, first plane, end)`` of each graph input, as ``rtp.sdk`` feeds them."""
+    weights = {t.name for t in model.graph.initializer}
+    inputs = [i for i in model.graph.input if i.name not in weights]
+    if len(inputs) == 1:
+        return [(inputs[0].name, 0, 1 << 30)]
+    sizes = [i.type.tensor_type.shape.dim[1].dim_value for i in inputs]
+    bounds = np.cumsum([0, *sizes]).tolist()
+    return [(i.name, int(a), int(b)) for i, a, b in zip(inputs, bounds[:-1], bounds[1:])]
 
 
 def torch_from_onnx(path: Path) -> nn.Module:
     """The layers in ``path`` as a torch module with its weights (:class:`OnnxGraph`). Only what
     rtp-export writes for rtp's networks is understood: Conv, Relu, BatchNormalization, MaxPool,
-    Sigmoid, Identity and Concat over channels; anything else raises ``ValueError`` naming the op.
+    Sigmoid, Identity, Concat over channels and Sum; anything else raises ``ValueError`` naming the op.
     Nodes the first output (``metric``) does not need, the finite probe's (docs/export.md) and a split
     network's second output, are left out: the probe is the SDK's check of its input on a CPU, not
     part of the network."""
@@ -89,12 +111,15 @@ def torch_from_onnx(path: Path) -> nn.Module:
             if node.input[0] in weights:  # exported weight aliases
                 weights[node.output[0]] = weights[node.input[0]]
             else:
-                plan.append((-1, [node.input[0]], node.output[0]))  # a Concat of one: the tensor itself
+                plan.append((CONCAT, [node.input[0]], node.output[0]))  # a Concat of one: the tensor itself
             continue
         if node.op_type == "Concat":
             if int(a.get("axis", 0)) != 1:  # type: ignore[call-overload]
                 raise ValueError(f"{path}: Concat over axis {a.get('axis')} is not supported (only channels)")
-            plan.append((-1, list(node.input), node.output[0]))
+            plan.append((CONCAT, list(node.input), node.output[0]))
+            continue
+        if node.op_type == "Sum":
+            plan.append((SUM, list(node.input), node.output[0]))
             continue
         plan.append((len(layers), [node.input[0]], node.output[0]))
         if node.op_type == "Conv":
@@ -130,7 +155,7 @@ def torch_from_onnx(path: Path) -> nn.Module:
             layers.append(bn)
         else:
             raise ValueError(f"{path}: op {node.op_type} is not one rtp-export writes for its networks")
-    return OnnxGraph(layers, plan, model.graph.input[0].name, model.graph.output[0].name).eval()
+    return OnnxGraph(layers, plan, _sources(model), model.graph.output[0].name).eval()
 
 
 def _cuda_ms(fn, repeats: int) -> float:  # type: ignore[no-untyped-def]

@@ -77,7 +77,9 @@ def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, thre
         so.profile_file_prefix = str(Path(d) / "profile")
         session = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
         x = np.random.default_rng(0).random((1, n_inputs, h, w), dtype=np.float32)
-        feed = {session.get_inputs()[0].name: x}
+        ins = session.get_inputs()  # the planes in one input, or in groups (rtp.export.split_input_planes)
+        ends = np.cumsum([0] + [i.shape[1] for i in ins]).tolist() if len(ins) > 1 else [0, n_inputs]
+        feed = {i.name: x[:, a:b] for i, a, b in zip(ins, ends[:-1], ends[1:])}
         for _ in range(repeats + 1):
             session.run(None, feed)
         events = json.loads(Path(session.end_profiling()).read_text())

@@ -43,6 +43,8 @@ def build_export_parser() -> argparse.ArgumentParser:
                    "layer allows one (in place; predictions unchanged)")
     p.add_argument("--no-finite-probe", action="store_true", help="export a checkpoint without the finite probe "
                    "output (docs/export.md): for an engine that runs the file with its own onnxruntime session")
+    p.add_argument("--one-input", action="store_true", help="export a checkpoint with every input plane in the one "
+                   "input `input`, not in groups of at most seven (docs/export.md \"Input planes in groups\")")
     p.add_argument("--strip-probe", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
                    "name) without its finite probe to -o OUTPUT.onnx (predictions unchanged)")
     return p
@@ -52,18 +54,20 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Every combination is checked before any work starts."""
     if args.restamp:
         if (args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace
-                or args.no_finite_probe or args.strip_probe):
+                or args.no_finite_probe or args.one_input or args.strip_probe):
             parser.error("--restamp MODEL.onnx takes no other options")
         return
     if args.strip_probe:
         if (args.checkpoint or args.adopt or args.metadata or args.opset or args.dynamic or args.replace
-                or args.no_finite_probe):
+                or args.no_finite_probe or args.one_input):
             parser.error("--strip-probe MODEL takes only -o OUTPUT.onnx")
         if not args.output:
             parser.error("--strip-probe needs -o OUTPUT.onnx")
         return
     if args.no_finite_probe and not args.checkpoint:
         parser.error("--no-finite-probe applies to exporting a checkpoint")
+    if args.one_input and not args.checkpoint:
+        parser.error("--one-input applies to exporting a checkpoint")
     if args.adopt:
         if args.checkpoint:
             parser.error("give either a checkpoint or --adopt FOREIGN.onnx, not both")
@@ -98,7 +102,8 @@ def _body(args: argparse.Namespace) -> int:
         out = adopt(args.adopt, args.metadata, args.output, dynamic=args.dynamic, replace=args.replace)
     else:
         out = export_checkpoint(args.checkpoint, args.output, opset=args.opset or DEFAULT_OPSET,
-                                extra_metadata=args.metadata, finite_probe=not args.no_finite_probe)
+                                extra_metadata=args.metadata, finite_probe=not args.no_finite_probe,
+                                split_planes=not args.one_input)
     print(out)
     return 0
 

@@ -111,7 +111,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     pred = _load(args)
     m = pred.metadata
     if args.json:
-        print(json.dumps({"path": str(pred.path), "provider": pred.provider, "metadata": m.to_dict()}, indent=2))
+        print(json.dumps({"path": str(pred.path), "provider": pred.provider, "metadata": m.to_dict(),
+                          "graph_inputs": {name: list(planes) for name, planes in pred.graph_inputs}}, indent=2))
         return 0
     t = m.transform
     params = ", ".join(f"{k}={v:g}" for k, v in t.to_dict().items() if k != "type")
@@ -126,6 +127,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         ("safety margin", f"{m.safety:g} (transformed units)"),
         ("tile size", f"{m.tile_size}x{m.tile_size}"),
         ("inputs", ", ".join(m.inputs)),
+        ("graph inputs", "; ".join(f"{name} ({len(planes)} planes)" for name, planes in pred.graph_inputs)),
         ("network outputs", ", ".join(m.outputs)),
         ("predicted rates", ", ".join(pred.rates)),
         ("extrapolation k", f"{m.extrapolation_k:g}"),

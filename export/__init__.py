@@ -3,6 +3,7 @@
 
 from ._export import (
     DEFAULT_OPSET,
+    PLANES_PER_INPUT,
     PROBE_NODES,
     ExportError,
     add_finite_probe,
@@ -10,10 +11,12 @@ from ._export import (
     export_checkpoint,
     merge_slices,
     restamp,
+    split_input_planes,
     strip_finite_probe,
     write_metadata,
 )
 from ._published import PublishedModel, identify, published_models
 
-__all__ = ["DEFAULT_OPSET", "PROBE_NODES", "ExportError", "PublishedModel", "add_finite_probe", "adopt",
-           "export_checkpoint", "identify", "merge_slices", "published_models", "restamp", "strip_finite_probe", "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "PublishedModel", "add_finite_probe",
+           "adopt", "export_checkpoint", "identify", "merge_slices", "published_models", "restamp", "split_input_planes",
+           "strip_finite_probe", "write_metadata"]

@@ -1,8 +1,9 @@
 """Bake a trained checkpoint (or a foreign ONNX model) into an ONNX file that carries its metadata.
 
-The exported graph has one input ``input`` ``(batch, C, height, width)`` and one output ``metric``
-``(batch, rates, height/w, width/w)``, the same names as the paper's published models, so engine
-code written for either runs both. Where the network's first layer allows it (rtp's fast network),
+The exported graph takes its planes in one input ``input`` ``(batch, C, height, width)``, or, with
+more than seven planes, in several that hold consecutive planes (``input``, ``input.K`` from plane
+``K``: :func:`split_input_planes`), and has one output ``metric`` ``(batch, rates, height/w, width/w)``,
+the names of the paper's published models. Where the network's first layer allows it (rtp's fast network),
 a second output ``finite_probe`` (a float scalar, :func:`add_finite_probe`) lets ``rtp.sdk`` refuse
 NaN and infinite input without reading the frame once more; an engine that runs the file itself asks
 onnxruntime for ``metric`` alone and never computes it. The metadata is written last, as one JSON value under
@@ -39,8 +40,8 @@ from rtp.sdk.files import atomic_output
 
 from ._published import file_sha256, identify
 
-__all__ = ["DEFAULT_OPSET", "PROBE_NODES", "ExportError", "add_finite_probe", "adopt", "export_checkpoint", "restamp",
-           "merge_slices", "strip_finite_probe", "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "add_finite_probe", "adopt",
+           "export_checkpoint", "merge_slices", "restamp", "split_input_planes", "strip_finite_probe", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -53,6 +54,13 @@ OUTPUT_NAME = "metric"
 PROBE_NAME = "finite_probe"
 PROBE_NODES = ("rtp_finite_probe_mean", "rtp_finite_probe")
 PARITY_TOLERANCE = 1e-4
+#: The most input planes one graph input holds (:func:`split_input_planes`): onnxruntime's blocked (NCHWc)
+#: convolution reads a layer's input where it lies only when it has fewer channels than the CPU's block
+#: (8 with AVX2, 16 with AVX-512); with more it runs the generic im2col path, 2.3x slower for the stem.
+PLANES_PER_INPUT = 7
+#: How far a graph pass that reorders float sums (:func:`split_input_planes`) may move the network's
+#: output (transformed space: 0 to 1), relative to the value: a few float32 ulps.
+REASSOCIATION_TOLERANCE = 1e-5
 
 
 class ExportError(RtpError):
@@ -128,28 +136,47 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     graph = model.graph
     if any(o.name == PROBE_NAME for o in graph.output):
         return PROBE_NAME
-    init = {i.name: i for i in graph.initializer}
-    inputs = [i for i in graph.input if i.name not in init]
-    if len(inputs) != 1:
+    stem = _stem_output(graph, pad_multiple)
+    if stem is None:
         return None
-    # one convolution that reads the frame sees every pixel (other nodes may read it too: a split network's
-    # contrast of its .blocks or .tiles planes; the stem sees those planes as well, with weights held at
-    # zero, and 0 x NaN is NaN)
-    readers = [n for n in graph.node if n.op_type == "Conv" and n.input[0] == inputs[0].name]
-    if any(inputs[0].name in n.input[1:] for n in readers):
-        return None
-    covering = [n for n in readers if _reads_every_pixel(n, init, pad_multiple)]
-    if len(covering) != 1:
-        return None
-    conv = covering[0]
     # GlobalAveragePool, not one ReduceSum over the whole tensor: onnxruntime's CPU provider runs it in
     # the convolution's blocked (NCHWc) layout, where a ReduceSum would first reorder the 1/4-resolution
     # tensor back (about 0.8 ms more at 1080p); the ReduceSum then adds up one value per channel
     mean = PROBE_NAME + "_mean"
-    graph.node.append(helper.make_node("GlobalAveragePool", [conv.output[0]], [mean], name=PROBE_NODES[0]))
+    graph.node.append(helper.make_node("GlobalAveragePool", [stem], [mean], name=PROBE_NODES[0]))
     graph.node.append(helper.make_node("ReduceSum", [mean], [PROBE_NAME], keepdims=0, name=PROBE_NODES[1]))
     graph.output.append(helper.make_tensor_value_info(PROBE_NAME, onnx.TensorProto.FLOAT, []))
     return PROBE_NAME
+
+
+def _stem_output(graph: Any, pad_multiple: int) -> str | None:
+    """The tensor of a graph that has seen every pixel of every input plane once, before any activation:
+    the output of the one convolution of the input that reads every pixel (other nodes may read it too:
+    a split network's contrast of its .blocks or .tiles planes; the stem sees those planes as well, with
+    weights held at zero, and 0 x NaN is NaN), or for planes in groups (:func:`split_input_planes`) the
+    Sum of such a convolution of each group. None where there is none."""
+    init = {i.name: i for i in graph.initializer}
+    inputs = [i.name for i in graph.input if i.name not in init]
+    covering = []
+    for name in inputs:
+        readers = [n for n in graph.node if n.op_type == "Conv" and n.input[0] == name]
+        if not readers or any(name in n.input[1:] for n in readers):
+            return None
+        found = [n for n in readers if _reads_every_pixel(n, init, pad_multiple)]
+        if len(found) != 1:
+            return None
+        covering.append(found[0].output[0])
+    if len(covering) == 1:
+        return covering[0]
+    # follow the first group's convolution through the Sums that add the others' to it, one by one
+    summed, tensor = {covering[0]}, covering[0]
+    while summed != set(covering):
+        users = [n for n in graph.node if tensor in n.input]
+        if len(users) != 1 or users[0].op_type != "Sum" or not set(users[0].input) - {tensor} <= set(covering):
+            return None
+        summed |= set(users[0].input) - {tensor}
+        tensor = users[0].output[0]
+    return tensor
 
 
 def _reads_every_pixel(conv: Any, init: dict[str, Any], pad_multiple: int) -> bool:
@@ -234,6 +261,91 @@ def merge_slices(model: Any) -> int:
     return merged
 
 
+def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
+    """Give an ``onnx.ModelProto`` whose one input holds more than ``most`` planes that many planes per
+    input instead, in place: ``input`` holds the first group, ``input.K`` the group that starts at plane
+    ``K``, in plane order, as few groups as can be and as even as can be (nine planes: 5 and 4). Each
+    convolution that reads the input becomes one convolution per group (the weights' slices, the bias on
+    the first) and a ``Sum`` of them, which onnxruntime folds into the convolutions (each accumulates into
+    the last one's output); the sum keeps the name the convolution's output had, so the finite probe and
+    the rest of the graph read what they read before. Returns the number of inputs the planes now come in
+    (1: unchanged, because there are ``most`` or fewer, or because a node other than a plain convolution
+    reads them).
+
+    Why: onnxruntime's CPU provider runs a convolution in its blocked layout (NCHWc) straight from the
+    caller's planes only when they are fewer than its block, 8 channels with AVX2 and 16 with AVX-512;
+    eight or more planes on an AVX2-only CPU (most desktop and laptop CPUs) take the generic im2col path
+    instead: the 4x4 stride-4 stem of a nine-plane model costs 21 ms of a 31 ms 1080p frame there, split
+    in two 9 ms (docs/performance.md "Input planes on AVX2 CPUs"). ``rtp.sdk`` feeds each input its planes
+    as views of the one array it is given, so splitting copies nothing."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    graph = model.graph
+    init = {i.name: i for i in graph.initializer}
+    inputs = [i for i in graph.input if i.name not in init]
+    if len(inputs) != 1:
+        return len(inputs)
+    x = inputs[0]
+    dims = x.type.tensor_type.shape.dim
+    c = dims[1].dim_value if len(dims) == 4 else 0
+    if c <= most:
+        return 1
+    readers = [n for n in graph.node if x.name in n.input]
+
+    def plain(n: Any) -> bool:
+        attrs = {a.name: helper.get_attribute_value(a) for a in n.attribute}
+        return (n.op_type == "Conv" and n.input[0] == x.name and x.name not in n.input[1:] and len(n.input) > 1
+                and n.input[1] in init and attrs.get("group", 1) == 1 and attrs.get("auto_pad", b"NOTSET")
+                in (b"NOTSET", "NOTSET"))
+
+    if not readers or not all(plain(n) for n in readers):
+        log.debug("split_input_planes: %s is read by %s, not only by plain convolutions; left whole", x.name,
+                  sorted({n.op_type for n in readers}))
+        return 1
+    k = -(-c // most)
+    sizes = [c // k + (1 if g < c % k else 0) for g in range(k)]
+    bounds = np.cumsum([0, *sizes]).tolist()
+    names = [x.name] + [f"{x.name}.{a}" for a in bounds[1:-1]]
+    new_inputs = []
+    for name, n_planes in zip(names, sizes):
+        vi = onnx.ValueInfoProto()
+        vi.CopyFrom(x)
+        vi.name = name
+        vi.type.tensor_type.shape.dim[1].dim_value = n_planes
+        new_inputs.append(vi)
+    nodes = []
+    for node in graph.node:
+        if node not in readers:
+            nodes.append(node)
+            continue
+        w = numpy_helper.to_array(init[node.input[1]])
+        label = node.name or node.output[0]
+        parts = []
+        for g, (name, a, b) in enumerate(zip(names, bounds[:-1], bounds[1:])):
+            wname = f"{label}/planes{a}_weight"
+            graph.initializer.append(numpy_helper.from_array(np.ascontiguousarray(w[:, a:b]), wname))
+            ins = [name, wname] + ([node.input[2]] if g == 0 and len(node.input) > 2 and node.input[2] else [])
+            out = f"{label}/planes{a}"
+            nodes.append(helper.make_node("Conv", ins, [out], name=out))
+            nodes[-1].attribute.extend(node.attribute)
+            parts.append(out)
+        acc = parts[0]
+        for j, part in enumerate(parts[1:], 1):  # Sums of two: onnxruntime folds each into a convolution
+            out = node.output[0] if j == len(parts) - 1 else f"{label}/planes_sum{j}"
+            nodes.append(helper.make_node("Sum", [acc, part], [out], name=f"{label}/planes_sum{j}"))
+            acc = out
+    del graph.node[:]
+    graph.node.extend(nodes)
+    read = {i for n in graph.node for i in n.input}
+    for t in [i for i in graph.initializer if i.name not in read]:
+        graph.initializer.remove(t)
+    others = [i for i in graph.input if i.name != x.name and (i.name not in init or i.name in read)]
+    del graph.input[:]
+    graph.input.extend(new_inputs + others)
+    return k
+
+
 def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:
     """Write a copy of an rtp model (a path, or a shipped model's name) without its finite probe
     (:func:`add_finite_probe`): for an engine that runs the file with its own onnxruntime session and
@@ -271,9 +383,11 @@ def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.Path
     return out
 
 
-def _save_unchanged(model: Any, before: Any, out: Path, failure: str) -> None:
+def _save_unchanged(model: Any, before: Any, out: Path, failure: str, *, reassociated: bool = False) -> None:
     """Check and save ``model`` to ``out`` atomically if it predicts exactly as the predictor ``before``
-    (on a random frame of 5 x 7 of its tiles); else :class:`ExportError` with ``failure``, nothing written."""
+    (on a random frame of 5 x 7 of its tiles), or within :data:`REASSOCIATION_TOLERANCE` where a pass
+    reordered float sums (``reassociated``: :func:`split_input_planes`); else :class:`ExportError` with
+    ``failure``, nothing written."""
     from rtp import sdk
 
     t = before.tile_size
@@ -281,7 +395,9 @@ def _save_unchanged(model: Any, before: Any, out: Path, failure: str) -> None:
     with atomic_output(out) as tmp:
         _check_and_save(model, tmp)
         after = sdk.load(tmp, providers=["CPUExecutionProvider"])
-        if not np.array_equal(before.predict_raw(x), after.predict_raw(x)):
+        want, got = before.predict_raw(x), after.predict_raw(x)
+        tol = REASSOCIATION_TOLERANCE if reassociated else 0.0
+        if want.shape != got.shape or not np.allclose(got, want, rtol=tol, atol=tol):
             raise ExportError(failure)
 
 
@@ -317,13 +433,15 @@ def export_checkpoint(
     opset: int = DEFAULT_OPSET,
     extra_metadata: Mapping[str, Any] | str | os.PathLike[str] | None = None,
     finite_probe: bool = True,
+    split_planes: bool = True,
 ) -> Path:
     """Export a checkpoint written by ``rtp.train.checkpoint.save`` to ONNX with its metadata.
 
     ``extra_metadata`` (a mapping or a YAML path) is merged over the checkpoint's metadata, e.g. to
     set a description or a default threshold. ``finite_probe=False`` leaves out the finite probe
-    (:func:`add_finite_probe`) for an engine that runs the file itself. Returns the output path
-    (default: the checkpoint's path with ``.onnx``).
+    (:func:`add_finite_probe`) for an engine that runs the file itself. ``split_planes=False`` keeps
+    every input plane in the one input ``input`` where :func:`split_input_planes` would give more than
+    seven planes several inputs. Returns the output path (default: the checkpoint's path with ``.onnx``).
     """
     import onnx
     import torch
@@ -335,6 +453,8 @@ def export_checkpoint(
         raise ParameterError(f"opset: expected 9 to 20 (default {DEFAULT_OPSET}), got {opset!r}", "opset")
     if not isinstance(finite_probe, bool):
         raise ParameterError(f"finite_probe: expected True or False, got {finite_probe!r}", "finite_probe")
+    if not isinstance(split_planes, bool):
+        raise ParameterError(f"split_planes: expected True or False, got {split_planes!r}", "split_planes")
     ckpt = ckpt_mod.load(checkpoint)
     out = Path(output) if output is not None else Path(checkpoint).with_suffix(".onnx")
     meta_dict = ckpt.metadata.to_dict()
@@ -365,6 +485,8 @@ def export_checkpoint(
         model.doc_string = meta.description or f"rtp {meta.metric} predictor, {t}x{t} tiles"
         if finite_probe:
             meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
+        if split_planes:  # after the probe, which reads the stem's output: the groups' sum keeps its name
+            split_input_planes(model)
         if split:
             tail = _tail_model(net, dummy, Path(str(tmp) + ".tail"), opset)
             onnx.helper.set_model_props(model, {**{p.key: p.value for p in model.metadata_props},
@@ -634,10 +756,11 @@ def adopt(
 def restamp(model_path: str | os.PathLike[str]) -> Path:
     """Bring an rtp model exported by an older rtp up to this one's format: rewrite its metadata
     through :func:`write_metadata` so that it records the digest of the graph and weights (models
-    exported before rtp wrote digests), and give it the finite probe (:func:`add_finite_probe`) where
-    its first layer allows one. The weights, the metric output and every other metadata field stay as
-    they are; the file is replaced atomically and loaded back to check that it predicts exactly as
-    before."""
+    exported before rtp wrote digests), give it the finite probe (:func:`add_finite_probe`) where
+    its first layer allows one, and its planes in groups of at most seven inputs
+    (:func:`split_input_planes`). The weights, the metric output and every other metadata field stay as
+    they are; the file is replaced atomically and loaded back to check that it predicts as before
+    (exactly, or within float rounding where the planes were split)."""
     import onnx
 
     from rtp import sdk
@@ -653,6 +776,9 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
     meta = before.metadata
     if meta.finite_probe is None:
         meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
+    whole = len(model.graph.input) == 1  # not already split
+    split = split_input_planes(model) > 1 and whole
     write_metadata(model, meta)
-    _save_unchanged(model, before, path, f"restamping {path} changed its predictions; the file is left as it was")
+    _save_unchanged(model, before, path, f"restamping {path} changed its predictions; the file is left as it was",
+                    reassociated=split)
     return path

@@ -304,6 +304,40 @@ def _dim(d: Any) -> int | None:
     return d if isinstance(d, int) and d > 0 else None
 
 
+def _plane_groups(inputs: list[Any], metadata: ModelMetadata) -> tuple[tuple[str, int, int], ...]:
+    """``(name, first plane, end)`` of each graph input, in graph order. A model takes its planes
+    (``metadata.inputs``) in one input or in several that hold consecutive planes (rtp-export splits
+    eight or more planes into groups of at most seven so that onnxruntime's blocked convolution reads
+    each group where it lies on any x86 CPU; docs/export.md "Input planes in groups"). With several, each
+    declares its number of planes, they add up to the metadata's, and their other dimensions agree."""
+    c = len(metadata.inputs)
+    if len(inputs) == 1:
+        c_in = _dim(inputs[0].shape[1])
+        if c_in is not None and c_in != c:
+            raise MetadataError(
+                f"inputs: metadata declares {c} channels {list(metadata.inputs)} but the model input "
+                f"{inputs[0].name!r} has {c_in}",
+                "inputs",
+            )
+        return ((inputs[0].name, 0, c),)
+    sizes = [_dim(i.shape[1]) for i in inputs]
+    if any(n is None for n in sizes):
+        raise MetadataError(f"a model whose planes come in several inputs must give each a fixed number of planes, got "
+                            f"{[(i.name, i.shape[1]) for i in inputs]}", "inputs")
+    if sum(n or 0 for n in sizes) != c:
+        raise MetadataError(
+            f"inputs: metadata declares {c} channels {list(metadata.inputs)} but the model's inputs hold "
+            f"{' + '.join(str(n) for n in sizes)} ({', '.join(i.name for i in inputs)})",
+            "inputs",
+        )
+    rest = {tuple(i.shape[k] for k in (0, 2, 3)) for i in inputs}
+    if len(rest) != 1:
+        raise MetadataError(f"the model's inputs disagree on batch, height or width: "
+                            f"{[(i.name, i.shape) for i in inputs]}", "inputs")
+    bounds = np.cumsum([0, *sizes]).tolist()
+    return tuple((i.name, int(a), int(b)) for i, a, b in zip(inputs, bounds[:-1], bounds[1:]))
+
+
 class ShadingRatePredictor:
     """Predicts per-tile error of every reduced shading rate and picks rates from it.
 
@@ -342,33 +376,31 @@ class ShadingRatePredictor:
                 "finite_probe",
             )
         self._tail = tail
+        # a tail graph reads the whole padded frame through its one input besides the features
+        self._tail_input = next((i.name for i in tail.get_inputs() if i.name != FEATURES_NAME), "") if tail else ""
         if tail is not None and FEATURES_NAME not in [o.name for o in outputs]:
             raise MetadataError(f"tail: the model splits, but its outputs {[o.name for o in outputs]} hold no "
                                 f"{FEATURES_NAME!r}", "tail")
         outputs = [o for o in outputs if o.name != probe and not (tail is not None and o.name == FEATURES_NAME)]
-        if len(inputs) != 1 or len(outputs) != 1:
+        if not inputs or len(outputs) != 1:
             besides = f" besides the finite probe {probe!r}" if probe is not None else ""
             besides += f" and the features {FEATURES_NAME!r}" if tail is not None else ""
             raise MetadataError(
-                f"expected a model with one input and one output{besides}, got {len(inputs)} inputs and "
-                f"{len(outputs)} outputs"
+                f"expected a model with one output{besides} and its input planes in one or more inputs, got "
+                f"{len(inputs)} inputs and {len(outputs)} outputs"
             )
         self._probe_name = probe
-        i, o = inputs[0], outputs[0]
-        if i.type != "tensor(float)" or len(i.shape) != 4 or len(o.shape) != 4:
-            raise MetadataError(
-                f"expected a float32 NCHW input and a rank-4 output, got input {i.name} {i.type} {i.shape} "
-                f"and output {o.name} {o.shape}"
-            )
-        self._in_name, self._out_name = i.name, o.name
+        o = outputs[0]
+        for i in inputs:
+            if i.type != "tensor(float)" or len(i.shape) != 4:
+                raise MetadataError(f"expected float32 NCHW inputs, got input {i.name} {i.type} {i.shape}")
+        if len(o.shape) != 4:
+            raise MetadataError(f"expected a rank-4 output, got output {o.name} {o.shape}")
+        self._out_name = o.name
+        self._groups = _plane_groups(inputs, metadata)
+        i = inputs[0]
         self._batch = _dim(i.shape[0])
-        c_in, c_out = _dim(i.shape[1]), _dim(o.shape[1])
-        if c_in is not None and c_in != len(metadata.inputs):
-            raise MetadataError(
-                f"inputs: metadata declares {len(metadata.inputs)} channels {list(metadata.inputs)} but the model "
-                f"input {i.name!r} has {c_in}",
-                "inputs",
-            )
+        c_out = _dim(o.shape[1])
         if c_out is not None and c_out != len(metadata.outputs):
             raise MetadataError(
                 f"outputs: metadata declares {len(metadata.outputs)} rates {list(metadata.outputs)} but the model "
@@ -417,6 +449,14 @@ class ShadingRatePredictor:
     @property
     def path(self) -> Path | None:
         return self._path
+
+    @property
+    def graph_inputs(self) -> tuple[tuple[str, tuple[str, ...]], ...]:
+        """The onnxruntime inputs the planes go to, in order, each with the planes (``metadata.inputs``
+        names) it takes: one ``("input", all planes)``, or consecutive groups for a model whose planes
+        come in several inputs (docs/export.md "Input planes in groups"). ``predict`` feeds them itself;
+        an engine that runs the file with its own session binds each to its slice of the planes."""
+        return tuple((name, self._meta.inputs[a:b]) for name, a, b in self._groups)
 
     @property
     def static_size(self) -> tuple[int, int] | None:
@@ -509,6 +549,13 @@ class ShadingRatePredictor:
         out[:, :, :, w:] = out[:, :, :, w - 1 : w]
         return out
 
+    def _feed(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """The session's inputs from one padded array: each graph input its consecutive planes (a view,
+        no copy, for a C-contiguous batch of one; see :func:`_plane_groups`)."""
+        if len(self._groups) == 1:
+            return {self._groups[0][0]: x}
+        return {name: np.ascontiguousarray(x[:, a:b]) for name, a, b in self._groups}
+
     def _run(self, x: np.ndarray, extra: tuple[str, ...] = ()) -> tuple[list[np.ndarray], bool]:
         """The metric output for ``x`` then the ``extra`` outputs (a splitting model's features), and
         whether the graph's finite probe (if the model has one and the input is not assumed finite)
@@ -517,7 +564,7 @@ class ShadingRatePredictor:
         if self._probe_name is not None and not self._assume_finite:
             names.append(self._probe_name)
         try:
-            outs = self._session.run(names, {self._in_name: x})
+            outs = self._session.run(names, self._feed(x))
         except Exception as err:
             raise InferenceError(f"onnxruntime failed on an input of shape {x.shape}: {err}") from err
         k = 1 + len(extra)
@@ -620,7 +667,7 @@ class ShadingRatePredictor:
                     raise NonFiniteInputError("features: expected finite values (the trunk's features), got NaN or "
                                               "infinite ones")
         try:
-            raw = self._tail.run([self._out_name], {FEATURES_NAME: f, self._in_name: xp})[0]
+            raw = self._tail.run([self._out_name], {FEATURES_NAME: f, self._tail_input: xp})[0]
         except Exception as err:
             raise InferenceError(f"onnxruntime failed on the tail, features {f.shape} and input {xp.shape}: {err}") \
                 from err

@@ -40,8 +40,11 @@ def _bench_module():  # type: ignore[no-untyped-def]
 
 
 def _onnxruntime(path: Path, x: np.ndarray) -> np.ndarray:
+    """The first output of ``path`` on ``x``, its planes fed to the graph's inputs as rtp.sdk feeds them."""
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    return session.run(None, {session.get_inputs()[0].name: x})[0]
+    ins = session.get_inputs()
+    ends = np.cumsum([0] + [i.shape[1] for i in ins]).tolist() if len(ins) > 1 else [0, x.shape[1]]
+    return session.run(None, {i.name: x[:, a:b] for i, a, b in zip(ins, ends[:-1], ends[1:])})[0]
 
 
 @pytest.mark.parametrize("name", sdk.shipped_models())

@@ -29,10 +29,13 @@ def test_profile_lists_every_convolution_with_its_multiply_adds() -> None:
     convs = [r for r in rows if r["macs"]]
     # every convolution of the exported graph is profiled (BatchNorm folded, ReLU fused into it)
     assert len(convs) == sum(n.op_type == "Conv" for n in onnx.load(str(pred.path)).graph.node) >= 3
-    stem = convs[0]
+    # the stem: one convolution per group of input planes (rtp.export.split_input_planes), the groups'
+    # planes adding up to the model's
+    groups = pred.graph_inputs
+    stems = convs[: len(groups)]
     c = len(pred.metadata.inputs)
-    assert stem["shape"][2:] == [128 // 4, 256 // 4]
-    assert stem["macs"] == stem["shape"][1] * c * 4 * 4 * (128 // 4) * (256 // 4)
+    assert len(groups) == 2 and all(s["shape"][2:] == [128 // 4, 256 // 4] for s in stems)
+    assert sum(s["macs"] for s in stems) == stems[0]["shape"][1] * c * 4 * 4 * (128 // 4) * (256 // 4)
     assert all(r["ms"] >= 0 for r in rows)
     assert convs[-1]["shape"][2:] == [128 // 16, 256 // 16]  # the head at tile resolution
     # the finite probe: a mean per channel of the stem's output (in onnxruntime's blocked layout), then their sum

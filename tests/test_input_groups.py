@@ -1,0 +1,185 @@
+"""Input planes in groups: rtp-export gives a model of more than seven planes several graph inputs of at
+most seven consecutive planes (onnxruntime's blocked convolution then reads each where it lies on an
+AVX2 CPU), and rtp.sdk feeds each its planes as views of the one array it is given."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from onnx import helper
+
+from rtp import export, sdk
+from rtp.train import checkpoint
+from rtp.train.model import FastNet
+
+from .conftest import base_metadata
+
+NINE = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular", "reprojected.y.blocks",
+        "albedo.y.blocks"]
+
+
+@pytest.fixture(scope="module")
+def nine_pt(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """rtp's fast network on the shipped JNYang's nine planes, trained-like BatchNorm, as a checkpoint."""
+    torch.manual_seed(4)
+    net = FastNet(in_channels=9)
+    with torch.no_grad():
+        net.train()(torch.rand(4, 9, 64, 64))
+    return checkpoint.save(tmp_path_factory.mktemp("groups") / "nine.pt", net.eval(), base_metadata(inputs=NINE))
+
+
+def _graph_inputs(path: Path) -> list[tuple[str, int]]:
+    return [(i.name, i.type.tensor_type.shape.dim[1].dim_value) for i in onnx.load(str(path)).graph.input]
+
+
+def test_nine_planes_export_in_two_inputs_and_predict_as_one(nine_pt: Path, tmp_path: Path) -> None:
+    grouped = export.export_checkpoint(nine_pt, tmp_path / "grouped.onnx")
+    whole = export.export_checkpoint(nine_pt, tmp_path / "whole.onnx", split_planes=False)
+    assert _graph_inputs(grouped) == [("input", 5), ("input.5", 4)]
+    assert _graph_inputs(whole) == [("input", 9)]
+    a, b = sdk.load(grouped), sdk.load(whole)
+    assert a.graph_inputs == (("input", tuple(NINE[:5])), ("input.5", tuple(NINE[5:])))
+    assert b.graph_inputs == (("input", tuple(NINE)),)
+    x = np.random.default_rng(0).random((9, 75, 130), dtype=np.float32)  # partial tiles, padded rows and columns
+    np.testing.assert_allclose(a.predict(x), b.predict(x), rtol=1e-5, atol=1e-6)
+    assert not np.array_equal(a.predict_raw(x), np.zeros_like(a.predict_raw(x)))
+    # the stem's group convolutions are summed by one Sum, which keeps the name the stem's output had
+    nodes = onnx.load(str(grouped)).graph.node
+    sums = [n for n in nodes if n.op_type == "Sum"]
+    assert len(sums) == 1 and sums[0].output[0] in {n.output[0] for n in onnx.load(str(whole)).graph.node}
+
+
+def test_predict_feeds_each_input_a_view_of_the_frame(nine_pt: Path, tmp_path: Path) -> None:
+    """No copy for a frame that needs no padding: each input is a slice of the caller's planes."""
+    pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
+    fed: list[dict[str, np.ndarray]] = []
+    real = pred._session
+
+    class Recording:
+        def __getattr__(self, name: str) -> object:
+            return getattr(real, name)
+
+        def run(self, names: list[str], feed: dict[str, np.ndarray]) -> list[np.ndarray]:
+            fed.append(feed)
+            return real.run(names, feed)
+
+    pred._session = Recording()
+    x = np.random.default_rng(1).random((9, 64, 96), dtype=np.float32)
+    pred.predict(x)
+    assert [(k, v.shape) for k, v in fed[0].items()] == [("input", (1, 5, 64, 96)), ("input.5", (1, 4, 64, 96))]
+    assert all(np.shares_memory(v, x) for v in fed[0].values())
+
+
+@pytest.mark.parametrize("plane", [0, 4, 5, 8])
+def test_a_nan_in_either_group_is_refused_by_the_probe(nine_pt: Path, tmp_path: Path, plane: int) -> None:
+    pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
+    assert pred.metadata.finite_probe == "finite_probe"
+    x = np.random.default_rng(2).random((9, 32, 48), dtype=np.float32)
+    x[plane, 17, 33] = np.nan
+    with pytest.raises(sdk.NonFiniteInputError, match=re.escape(f"first at index (0, {plane}, 17, 33)")):
+        pred.predict(x)
+
+
+def test_restamp_splits_a_model_of_one_input_and_keeps_its_predictions(nine_pt: Path, tmp_path: Path) -> None:
+    path = export.export_checkpoint(nine_pt, tmp_path / "old.onnx", split_planes=False)
+    x = np.random.default_rng(3).random((9, 64, 80), dtype=np.float32)
+    before = sdk.load(path).predict_raw(x)
+    export.restamp(path)
+    assert _graph_inputs(path) == [("input", 5), ("input.5", 4)]
+    after = sdk.load(path)
+    assert after.metadata.digest == sdk.model_digest(path.read_bytes())
+    np.testing.assert_allclose(after.predict_raw(x), before, rtol=1e-5, atol=1e-6)
+    once = path.read_bytes()
+    export.restamp(path)  # already in groups: nothing to change but the bytes of the same graph
+    np.testing.assert_array_equal(sdk.load(path).predict_raw(x), after.predict_raw(x))
+    assert _graph_inputs(path) == [("input", 5), ("input.5", 4)] and len(path.read_bytes()) == len(once)
+
+
+def test_the_cli_keeps_one_input_when_asked(nine_pt: Path, tmp_path: Path) -> None:
+    cmd = [sys.executable, "-m", "rtp.cli.export"]
+    out = subprocess.run([*cmd, str(nine_pt), "-o", str(tmp_path / "one.onnx"), "--one-input"], capture_output=True,
+                         text=True)
+    assert out.returncode == 0, out.stderr
+    assert _graph_inputs(tmp_path / "one.onnx") == [("input", 9)]
+    bad = subprocess.run([*cmd, "--restamp", str(tmp_path / "one.onnx"), "--one-input"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "takes no other options" in bad.stderr
+
+
+def _graph(c: int, reader: str = "Conv") -> onnx.ModelProto:
+    w = helper.make_tensor("w", onnx.TensorProto.FLOAT, [2, c, 4, 4], np.ones(2 * c * 16, np.float32))
+    node = (helper.make_node("Conv", ["input", "w"], ["metric"], kernel_shape=[4, 4], strides=[4, 4]) if reader == "Conv"
+            else helper.make_node("Relu", ["input"], ["metric"]))
+    out_c = 2 if reader == "Conv" else c
+    graph = helper.make_graph([node], "g", [helper.make_tensor_value_info("input", onnx.TensorProto.FLOAT,
+                                                                          ["batch", c, "height", "width"])],
+                              [helper.make_tensor_value_info("metric", onnx.TensorProto.FLOAT,
+                                                             ["batch", out_c, "th", "tw"])], [w])
+    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+
+
+@pytest.mark.parametrize(("planes", "sizes"), [(7, [7]), (8, [4, 4]), (9, [5, 4]), (12, [6, 6]), (15, [5, 5, 5]),
+                                               (16, [6, 5, 5])])
+def test_groups_are_as_few_and_as_even_as_can_be(planes: int, sizes: list[int]) -> None:
+    import onnxruntime as ort
+
+    model = _graph(planes)
+    x = np.random.default_rng(planes).random((1, planes, 16, 24), dtype=np.float32)
+    want = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"input": x})[0]
+    assert export.split_input_planes(model) == len(sizes)
+    onnx.checker.check_model(model, full_check=True)
+    got_sizes = [i.type.tensor_type.shape.dim[1].dim_value for i in model.graph.input]
+    assert got_sizes == sizes and max(sizes) <= export.PLANES_PER_INPUT
+    ends = np.cumsum([0, *sizes])
+    session = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
+    feed = {i.name: x[:, a:b] for i, a, b in zip(session.get_inputs(), ends[:-1], ends[1:])}
+    np.testing.assert_allclose(session.run(None, feed)[0], want, rtol=1e-5)
+
+
+def test_a_graph_whose_planes_another_op_reads_is_left_whole() -> None:
+    model = _graph(9, reader="Relu")
+    before = model.SerializeToString()
+    assert export.split_input_planes(model) == 1
+    assert model.SerializeToString() == before
+
+
+def _grouped_model(tmp_path: Path, sizes: list[int | str], planes: int) -> Path:
+    """A graph whose input planes come in inputs of ``sizes`` planes, with rtp metadata of ``planes`` planes."""
+    inputs, nodes, parts = [], [], []
+    for g, n in enumerate(sizes):
+        name = "input" if g == 0 else f"input.{g}"
+        inputs.append(helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, [1, n, "h", "w"]))
+        k = n if isinstance(n, int) else 1
+        w = helper.make_tensor(f"w{g}", onnx.TensorProto.FLOAT, [6, k, 16, 16], np.ones(6 * k * 256, np.float32))
+        nodes.append(helper.make_node("Conv", [name, f"w{g}"], [f"c{g}"], kernel_shape=[16, 16], strides=[16, 16]))
+        parts.append((f"c{g}", w))
+    nodes.append(helper.make_node("Sum", [p for p, _ in parts], ["metric"]))
+    graph = helper.make_graph(nodes, "g", inputs, [helper.make_tensor_value_info("metric", onnx.TensorProto.FLOAT,
+                                                                                 [1, 6, "th", "tw"])],
+                              [w for _, w in parts])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    meta = base_metadata(inputs=NINE[:planes], outputs=["1x2", "2x1", "2x2", "2x4", "4x2", "4x4"])
+    export.write_metadata(model, sdk.ModelMetadata.from_dict(meta))
+    path = tmp_path / "grouped.onnx"
+    onnx.save(model, str(path))
+    return path
+
+
+def test_inputs_that_do_not_add_up_to_the_planes_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(sdk.MetadataError, match=r"metadata declares 9 channels .* hold 5 \+ 3 \(input, input.1\)"):
+        sdk.load(_grouped_model(tmp_path, [5, 3], 9))
+    ok = sdk.load(_grouped_model(tmp_path, [5, 4], 9))
+    assert [n for n, _ in ok.graph_inputs] == ["input", "input.1"]
+    x = np.ones((9, 32, 32), np.float32)
+    np.testing.assert_allclose(ok.predict_raw(x), 9 * 256, rtol=1e-6)  # every plane reached its input
+
+
+def test_inputs_without_a_fixed_number_of_planes_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(sdk.MetadataError, match="must give each a fixed number of planes"):
+        sdk.load(_grouped_model(tmp_path, [5, "c"], 9))
