@@ -266,8 +266,8 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     input instead, in place: ``input`` holds the first group, ``input.K`` the group that starts at plane
     ``K``, in plane order, as few groups as can be and as even as can be (nine planes: 5 and 4). Each
     convolution that reads the input becomes one convolution per group (the weights' slices, the bias on
-    the first) and a ``Sum`` of them, which onnxruntime folds into the convolutions (each accumulates into
-    the last one's output); the sum keeps the name the convolution's output had, so the finite probe and
+    the first) and a ``Sum`` of them (onnxruntime runs it in the blocked layout too); the sum keeps the
+    name the convolution's output had, so the finite probe and
     the rest of the graph read what they read before. Returns the number of inputs the planes now come in
     (1: unchanged, because there are ``most`` or fewer, or because a node other than a plain convolution
     reads them).
@@ -275,8 +275,8 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     Why: onnxruntime's CPU provider runs a convolution in its blocked layout (NCHWc) straight from the
     caller's planes only when they are fewer than its block, 8 channels with AVX2 and 16 with AVX-512;
     eight or more planes on an AVX2-only CPU (most desktop and laptop CPUs) take the generic im2col path
-    instead: the 4x4 stride-4 stem of a nine-plane model costs 21 ms of a 31 ms 1080p frame there, split
-    in two 9 ms (docs/performance.md "Input planes on AVX2 CPUs"). ``rtp.sdk`` feeds each input its planes
+    instead: the 4x4 stride-4 stem of a nine-plane model costs 21.5 ms of 32.3 ms of kernels for a 1080p
+    frame there, split in two 9.4 ms and their sum 2.3 (docs/performance.md "Input planes on AVX2 CPUs"). ``rtp.sdk`` feeds each input its planes
     as views of the one array it is given, so splitting copies nothing."""
     import onnx
     from onnx import helper, numpy_helper
@@ -331,7 +331,7 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
             nodes[-1].attribute.extend(node.attribute)
             parts.append(out)
         acc = parts[0]
-        for j, part in enumerate(parts[1:], 1):  # Sums of two: onnxruntime folds each into a convolution
+        for j, part in enumerate(parts[1:], 1):  # Sums of two, the first group's convolution first
             out = node.output[0] if j == len(parts) - 1 else f"{label}/planes_sum{j}"
             nodes.append(helper.make_node("Sum", [acc, part], [out], name=f"{label}/planes_sum{j}"))
             acc = out

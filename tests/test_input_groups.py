@@ -183,3 +183,21 @@ def test_inputs_that_do_not_add_up_to_the_planes_are_refused(tmp_path: Path) -> 
 def test_inputs_without_a_fixed_number_of_planes_are_refused(tmp_path: Path) -> None:
     with pytest.raises(sdk.MetadataError, match="must give each a fixed number of planes"):
         sdk.load(_grouped_model(tmp_path, [5, "c"], 9))
+
+
+def test_bench_same_decisions_reads_a_dataset_and_refuses_two_models(nine_pt: Path, tmp_path: Path) -> None:
+    from .test_train import _dataset
+
+    data = _dataset(tmp_path / "ds", n=3)
+    grouped = export.export_checkpoint(nine_pt, tmp_path / "grouped.onnx")
+    whole = export.export_checkpoint(nine_pt, tmp_path / "whole.onnx", split_planes=False)
+    script = Path(__file__).resolve().parents[1] / "bench" / "same_decisions.py"
+    out = subprocess.run([sys.executable, str(script), str(whole), str(grouped), "--data", str(data)],
+                         capture_output=True, text=True, check=True).stdout
+    assert "3 samples" in out
+    raw, est, differ = [c.strip() for c in out.strip().splitlines()[-1].strip("|").split("|")]
+    assert 0.0 <= float(raw) < 1e-5 and float(est) < 1e-4
+    assert [int(v) for v in differ.split(" / ")] == [0, 0, 0]
+    bad = subprocess.run([sys.executable, str(script), "lpips", str(grouped), "--data", str(data)],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "not one model" in bad.stderr
