@@ -276,8 +276,9 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     caller's planes only when they are fewer than its block, 8 channels with AVX2 and 16 with AVX-512;
     eight or more planes on an AVX2-only CPU (most desktop and laptop CPUs) take the generic im2col path
     instead: the 4x4 stride-4 stem of a nine-plane model costs 21.5 ms of 32.3 ms of kernels for a 1080p
-    frame there, split in two 9.4 ms and their sum 2.3 (docs/performance.md "Input planes on AVX2 CPUs"). ``rtp.sdk`` feeds each input its planes
-    as views of the one array it is given, so splitting copies nothing."""
+    frame there, split in two 9.4 ms and their sum 2.3 (docs/performance.md "Input planes on AVX2
+    CPUs"). ``rtp.sdk`` feeds each input its planes as views of the one array it is given, so splitting
+    copies nothing."""
     import onnx
     from onnx import helper, numpy_helper
 
