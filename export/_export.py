@@ -149,6 +149,12 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     return PROBE_NAME
 
 
+def _plane_inputs(graph: Any) -> list[Any]:
+    """The graph's inputs that are not weights (an older IR lists initializers among the inputs)."""
+    init = {i.name for i in graph.initializer}
+    return [i for i in graph.input if i.name not in init]
+
+
 def _stem_output(graph: Any, pad_multiple: int) -> str | None:
     """The tensor of a graph that has seen every pixel of every input plane once, before any activation:
     the output of the one convolution of the input that reads every pixel (other nodes may read it too:
@@ -156,7 +162,7 @@ def _stem_output(graph: Any, pad_multiple: int) -> str | None:
     weights held at zero, and 0 x NaN is NaN), or for planes in groups (:func:`split_input_planes`) the
     Sum of such a convolution of each group. None where there is none."""
     init = {i.name: i for i in graph.initializer}
-    inputs = [i.name for i in graph.input if i.name not in init]
+    inputs = [i.name for i in _plane_inputs(graph)]
     covering = []
     for name in inputs:
         readers = [n for n in graph.node if n.op_type == "Conv" and n.input[0] == name]
@@ -267,10 +273,10 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     ``K``, in plane order, as few groups as can be and as even as can be (nine planes: 5 and 4). Each
     convolution that reads the input becomes one convolution per group (the weights' slices, the bias on
     the first) and a ``Sum`` of them (onnxruntime runs it in the blocked layout too); the sum keeps the
-    name the convolution's output had, so the finite probe and
-    the rest of the graph read what they read before. Returns the number of inputs the planes now come in
-    (1: unchanged, because there are ``most`` or fewer, or because a node other than a plain convolution
-    reads them).
+    name the convolution's output had, so the finite probe and the rest of the graph read what they read
+    before. Returns the number of inputs the planes now come in (1: unchanged, because there are ``most``
+    or fewer, or because a node other than a plain convolution reads them; more than 1 and unchanged for
+    a graph already split).
 
     Why: onnxruntime's CPU provider runs a convolution in its blocked layout (NCHWc) straight from the
     caller's planes only when they are fewer than its block, 8 channels with AVX2 and 16 with AVX-512;
@@ -284,7 +290,7 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
 
     graph = model.graph
     init = {i.name: i for i in graph.initializer}
-    inputs = [i for i in graph.input if i.name not in init]
+    inputs = _plane_inputs(graph)
     if len(inputs) != 1:
         return len(inputs)
     x = inputs[0]
@@ -695,8 +701,7 @@ def adopt(
             f"{src} already carries {METADATA_KEY}; pass --replace to overwrite it", METADATA_KEY
         )
     graph = model.graph
-    init_names = {i.name for i in graph.initializer}
-    inputs = [i for i in graph.input if i.name not in init_names]
+    inputs = _plane_inputs(graph)
     if len(inputs) != 1 or len(graph.output) != 1:
         raise MetadataError(
             f"{src}: expected one input and one output, found inputs {[i.name for i in inputs]} and outputs "
@@ -777,7 +782,7 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
     meta = before.metadata
     if meta.finite_probe is None:
         meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
-    whole = len(model.graph.input) == 1  # not already split
+    whole = len(_plane_inputs(model.graph)) == 1  # not split before
     split = split_input_planes(model) > 1 and whole
     write_metadata(model, meta)
     _save_unchanged(model, before, path, f"restamping {path} changed its predictions; the file is left as it was",
