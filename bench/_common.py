@@ -9,6 +9,24 @@ from pathlib import Path
 from typing import Any
 
 
+def cpu_description() -> str:
+    """The CPU for a benchmark's header: its model name and its widest vector unit (AVX-512, AVX2, or
+    what the platform module says where /proc/cpuinfo is not there). onnxruntime's blocked convolutions
+    depend on it: an eight-plane first layer ran twice as slowly on an AVX2-only CPU before rtp-export
+    split the planes (docs/performance.md "Input planes on AVX2 CPUs")."""
+    import platform
+
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return platform.processor() or platform.machine()
+    fields = dict(line.split(":", 1) for line in info.splitlines() if ":" in line)
+    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    flags = set(fields.get("flags", "").split())
+    vector = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "no AVX2"
+    return f"{fields.get('model name', platform.machine())} ({vector}, {platform.machine()})"
+
+
 def scene_ids(reader: Any, scenes: str | None) -> list[str]:
     """The sample ids of ``reader`` (a ``rtp.capture.DatasetReader``) whose map is one of ``scenes``
     (comma-separated; None or empty: every sample). Empty when none matches."""

@@ -14,14 +14,13 @@ model's speed-up over the paper's network.
 from __future__ import annotations
 
 import argparse
-import platform
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
 import torch
-from _common import median_ms, paper_model  # bench/ is on sys.path when run as a script
+from _common import cpu_description, median_ms, paper_model  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 
@@ -104,7 +103,7 @@ def main() -> None:
                 x = frames[len(p.metadata.inputs), w, h]
                 times[name, (w, h)] = median_ms(lambda p=p, x=x: p.predict(x), args.repeats)
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, torch {torch.__version__}, "
-          f"{platform.processor() or platform.machine()}, {args.threads} threads, median of {args.repeats}\n")
+          f"{cpu_description()}, {args.threads} threads, median of {args.repeats}\n")
     paper = "paper's network (random weights)"
     print("| model | architecture | inputs | stored values | "
           + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES) + " | speed-up over the paper's at 1920x1080 |")

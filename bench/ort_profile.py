@@ -51,7 +51,7 @@ import onnxruntime as ort
 from rtp import sdk
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import TIMING_INPUTS, frame_size, median_ms, paper_model  # noqa: E402  (also when loaded by path, as the tests do)
+from _common import TIMING_INPUTS, cpu_description, frame_size, median_ms, paper_model  # noqa: E402  (also when loaded by path, as the tests do)
 
 
 def _macs(args: dict[str, Any]) -> int:
@@ -162,7 +162,7 @@ def main() -> None:
         ap.error(f"--repeats: expected at least 1, got {args.repeats}")
     if args.like and not args.fast:
         ap.error("--like sets the inputs of the --fast networks: give at least one --fast")
-    print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {args.threads} threads, "
+    print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {cpu_description()}, {args.threads} threads, "
           f"{args.size[0]}x{args.size[1]}, median of {args.repeats} runs per node\n")
     with tempfile.TemporaryDirectory() as tmp:
         models = [(m, m) for m in (args.models or ([] if args.fast else list(sdk.shipped_models())))]
