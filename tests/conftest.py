@@ -164,6 +164,20 @@ def _gl_marked_tests_get_the_context(request: pytest.FixtureRequest) -> None:
         make_current(request.getfixturevalue("gl_context"))
 
 
+def trained_like_fast_net(planes: int, seed: int) -> Any:
+    """rtp's fast network on ``planes`` input planes, random weights, its BatchNorm statistics those of
+    one training-mode pass (not the identity), in eval mode."""
+    import torch
+
+    from rtp.train.model import FastNet
+
+    torch.manual_seed(seed)
+    net = FastNet(in_channels=planes)
+    with torch.no_grad():
+        net.train()(torch.rand(4, planes, 64, 64))
+    return net.eval()
+
+
 def split_model(folder: Path, planes: str = "blocks") -> Path:
     """A JNYang network that splits (``contrast_stored``: the block contrast from the ``.blocks`` planes, or
     with ``planes="tiles"`` from the ``.tiles`` planes, joins at tile resolution) on the shipped JNYang's

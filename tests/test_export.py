@@ -21,7 +21,7 @@ from rtp.train import checkpoint
 from rtp.train import transforms as tt
 from rtp.train.model import MetricNet
 
-from .conftest import base_metadata
+from .conftest import base_metadata, trained_like_fast_net
 
 
 def _trained_like_net(out_channels: int = 4, tile: int = 16, seed: int = 0) -> MetricNet:
@@ -315,16 +315,11 @@ def test_export_names_what_it_was_given_instead_of_a_checkpoint(tmp_path: Path) 
 @pytest.fixture(scope="module")
 def fast_onnx(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """rtp's fast network on eight planes, trained-like BatchNorm, exported (with its finite probe)."""
-    from rtp.train.model import FastNet
-
-    torch.manual_seed(3)
-    net = FastNet(in_channels=8)
-    with torch.no_grad():
-        net.train()(torch.rand(4, 8, 64, 64))
     tmp = tmp_path_factory.mktemp("probe")
     inputs = ["reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b", "normal.z"]
     meta = base_metadata(metric="lpips", weber_l=None, default_threshold=0.1, inputs=inputs)
-    return export.export_checkpoint(checkpoint.save(tmp / "f.pt", net.eval(), meta), tmp / "f.onnx")
+    return export.export_checkpoint(checkpoint.save(tmp / "f.pt", trained_like_fast_net(8, seed=3), meta),
+                                    tmp / "f.onnx")
 
 
 def test_the_fast_network_is_exported_with_a_finite_probe_and_the_paper_network_without(

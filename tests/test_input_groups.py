@@ -12,14 +12,12 @@ from pathlib import Path
 import numpy as np
 import onnx
 import pytest
-import torch
 from onnx import helper
 
 from rtp import export, sdk
 from rtp.train import checkpoint
-from rtp.train.model import FastNet
 
-from .conftest import base_metadata
+from .conftest import base_metadata, trained_like_fast_net
 
 NINE = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular", "reprojected.y.blocks",
         "albedo.y.blocks"]
@@ -28,11 +26,8 @@ NINE = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic"
 @pytest.fixture(scope="module")
 def nine_pt(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """rtp's fast network on the shipped JNYang's nine planes, trained-like BatchNorm, as a checkpoint."""
-    torch.manual_seed(4)
-    net = FastNet(in_channels=9)
-    with torch.no_grad():
-        net.train()(torch.rand(4, 9, 64, 64))
-    return checkpoint.save(tmp_path_factory.mktemp("groups") / "nine.pt", net.eval(), base_metadata(inputs=NINE))
+    return checkpoint.save(tmp_path_factory.mktemp("groups") / "nine.pt", trained_like_fast_net(9, seed=4),
+                           base_metadata(inputs=NINE))
 
 
 def _graph_inputs(path: Path) -> list[tuple[str, int]]:
