@@ -118,13 +118,14 @@ def depth_edges(depth: np.ndarray) -> np.ndarray:
     return np.clip(out, 0.0, 1.0).astype(np.float32, copy=False)
 
 
-def _finite_plane(plane: np.ndarray, fn: str, dtype: type[np.floating]) -> np.ndarray:
-    """``plane`` as a finite ``(H, W)`` array of ``dtype``, or the typed error naming ``fn``."""
+def _finite_plane(plane: np.ndarray, fn: str, dtype: type[np.floating] | None) -> np.ndarray:
+    """``plane`` as a finite ``(H, W)`` array of ``dtype`` (None: its own), or the typed error naming ``fn``."""
     p = np.asarray(plane)
     if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
         raise InputShapeError(f"{fn}: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
                               tuple(p.shape), "(H, W)")
-    p = p.astype(dtype, copy=False)
+    if dtype is not None:
+        p = p.astype(dtype, copy=False)
     if not np.isfinite(p).all():
         raise NonFiniteInputError(f"{fn}: the plane holds NaN or infinite values")
     return p
@@ -196,28 +197,30 @@ def _cell_variances(plane: np.ndarray, fn: str) -> tuple[int, int, list[np.ndarr
     """The plane's height and width and, per rate of :data:`BLOCK_RATES`, each 4x4 cell's normalised
     log variance inside the rate's blocks (float32 ``(ceil(H / 4), ceil(W / 4))``): :func:`block_variances`'s
     values before packing. ``plane`` (the caller's array, never changed) is checked as ``fn``'s."""
-    p = _finite_plane(plane, fn, np.float64)
+    p = _finite_plane(plane, fn, None)
     h, w = p.shape
     c = BLOCK_CELL
     if h % c or w % c:
-        x = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
-    else:  # changed in place below: never the caller's array
-        x = p.copy() if np.may_share_memory(p, plane) else p
+        p = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
+    hc, wc = p.shape[0] // c, p.shape[1] // c
     # One pass of sums instead of a variance per rate: per cell, the mean over a rate's blocks of
     # their variance is (S2 - sum over blocks of S1^2 / n) / 16, S1 and S2 the sums of the values and
     # of their squares, n a block's pixels; S2 over the cell is the same for every rate, and each
     # rate's block sums add up from the smaller rate's. Values are taken relative to the cell's first
-    # pixel (float64) so that the difference does not cancel: a flat cell reads exactly 0.
-    ref = np.repeat(x[::c, ::c], c, axis=1)
-    for i in range(c):
-        x[i::c] -= ref
-    s2 = _cell_sums(np.square(x), c, c)
+    # pixel (float64) so that the difference does not cancel: a flat cell reads exactly 0. The
+    # frame is laid out as 16 planes, one per pixel position inside the cell (``x[i, j]``: row i,
+    # column j of every cell), so that every sum is an add of whole planes a sixteenth of the frame.
+    cells = p.reshape(hc, c, wc, c).transpose(1, 3, 0, 2)
+    x = np.empty((c, c, hc, wc))
+    np.subtract(cells, cells[0, 0].astype(np.float64), out=x)
+    s2 = _sum_cells([[np.square(x[i, j]) for j in range(c)] for i in range(c)])
     sums: dict[tuple[int, int], np.ndarray] = {(1, 1): x}
     values = []
     for rate in BLOCK_RATES:
         bw, bh = rate_size(rate)
         s1 = _block_sums(sums, bh, bw)
-        per_cell = np.maximum(s2 - _cell_sums(np.square(s1), c // bh, c // bw) / (bw * bh), 0.0) / (c * c)
+        sq = [[np.square(s1[i, j]) for j in range(s1.shape[1])] for i in range(s1.shape[0])]
+        per_cell = np.maximum(s2 - _sum_cells(sq) / (bw * bh), 0.0) / (c * c)
         values.append(np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0).astype(np.float32))
     return h, w, values
 
@@ -269,17 +272,16 @@ def tile_variances(plane: np.ndarray) -> np.ndarray:
     return out[:h, :w]
 
 
-def _cell_sums(a: np.ndarray, by: int, bx: int) -> np.ndarray:
-    """The sum of each ``by x bx`` group of ``a`` (strided adds, whose inner loops run along rows)."""
-    if bx > 1:
-        a = sum((a[:, i::bx] for i in range(1, bx)), a[:, 0::bx])
-    if by > 1:
-        a = sum((a[i::by] for i in range(1, by)), a[0::by])
-    return a
+def _sum_cells(a: list[list[np.ndarray]]) -> np.ndarray:
+    """The sum of the planes ``a[i][j]`` (the blocks of each cell, row i, column j): each row's
+    left to right, then the rows top to bottom, in float64."""
+    rows = [sum(r[1:], r[0]) for r in a]
+    return sum(rows[1:], rows[0])
 
 
 def _block_sums(sums: dict[tuple[int, int], np.ndarray], bh: int, bw: int) -> np.ndarray:
-    """The sum over each ``bh x bw`` block, built from the next smaller block's sums (memoised in ``sums``)."""
+    """The sum over each ``bh x bw`` block of every cell, ``(4 // bh, 4 // bw, H / 4, W / 4)`` (block
+    row, block column, cell), built from the next smaller block's sums (memoised in ``sums``)."""
     if (bh, bw) not in sums:
         if bw > 1:
             a = _block_sums(sums, bh, bw // 2)
