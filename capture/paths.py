@@ -282,19 +282,26 @@ class PathFrame:
     seen: np.ndarray
     _gather: dict[Any, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False, compare=False)
     _planes: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    #: Terms the methods compute from this frame's motion and ``seen`` alone, shared among them (the
+    #: classic methods' per-tile speeds: ``rtp.evaluate.Frame.terms``).
+    terms: dict[Any, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def reproject(self, image: np.ndarray) -> np.ndarray:
         """``image`` (the previous frame's, ``(H, W, 3)``) reprojected into this frame; 0 where unseen."""
         image = np.asarray(image, np.float32)
         key = image.shape[:2]
         cached = self._gather.get(key)
-        if cached is None:  # the flat source index and the seen mask, once per frame (every method reuses them)
-            cached = ((self.rows * image.shape[1] + self.cols).ravel(), (self.seen > 0)[..., None])
+        if cached is None:  # the flat source index and the unseen pixels, once per frame (every method reuses them)
+            cached = ((self.rows * image.shape[1] + self.cols).ravel(), np.flatnonzero(~(self.seen > 0)))
             self._gather[key] = cached
-        index, seen = cached
-        out = np.take(image.reshape(-1, image.shape[-1]), index, axis=0).reshape(image.shape)
-        out *= seen
-        return out
+        index, unseen = cached
+        # The indices are in range by construction: mode="clip" only spares numpy's bounds check (2.5x
+        # faster at 720p), and zeroing the unseen pixels by index beats multiplying every channel by a
+        # broadcast mask; both give exactly the values of the gather-and-multiply (displayed values are
+        # finite and >= 0).
+        out = np.take(image.reshape(-1, image.shape[-1]), index, axis=0, mode="clip")
+        out[unseen] = 0.0
+        return out.reshape(image.shape)
 
     def plane(self, name: str) -> np.ndarray:
         """The frame's channel ``name`` (``Frame.channel``) as float32, computed once per frame: the
