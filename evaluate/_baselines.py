@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
@@ -85,11 +85,27 @@ class Frame:
     reprojected: np.ndarray
     motion: np.ndarray | None = None
     seen: np.ndarray | None = None
+    #: Terms computed from ``motion`` and ``seen`` alone (per-tile speeds, unseen shares), keyed by the
+    #: method's parameters: frames given the same dict share them. For callers that run many methods on
+    #: one camera frame with different reprojected images (``rtp play``'s closed loop: each method's
+    #: own history); a dict must not outlive the ``motion`` and ``seen`` arrays it was filled from.
+    terms: dict[Any, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     @property
     def size(self) -> tuple[int, int]:
         """``(H, W)``."""
         return int(self.reprojected.shape[0]), int(self.reprojected.shape[1])
+
+    def term(self, key: Any, compute: Any) -> np.ndarray:
+        """``compute()``, or the value frames sharing :attr:`terms` already computed for ``key``."""
+        if self.terms is None:
+            return compute()
+        got = self.terms.get(key)
+        if got is None:
+            got = np.asarray(compute())
+            got.flags.writeable = False  # shared: a method that changed it would change the others' input
+            self.terms[key] = got
+        return got
 
 
 def as_frame(source: Any) -> Frame:
@@ -127,7 +143,7 @@ def as_frame(source: Any) -> Frame:
     seen = None if frame.seen is None else np.asarray(frame.seen, dtype=np.float32)
     if seen is not None and seen.shape != (h, w):
         raise InputShapeError(f"seen: expected {(h, w)}, got {seen.shape}", tuple(seen.shape), f"({h}, {w})")
-    return Frame(rep[..., :3], motion, seen)
+    return Frame(rep[..., :3], motion, seen, terms=frame.terms)
 
 
 # -- tile helpers -------------------------------------------------------------------------------
@@ -346,6 +362,11 @@ class Yang2019:
         th, tw = tile_grid(*frame.size, self.tile_size)
         if not self.motion or frame.motion is None:
             return np.zeros((2, th, tw))
+        return frame.term(("yang2019.tile_motion", self.tile_size, self.motion_scale, self.motion_reduce),
+                          lambda: self._tile_motion(frame))
+
+    def _tile_motion(self, frame: Frame) -> np.ndarray:
+        assert frame.motion is not None
         if self.motion_reduce == "mean":
             return np.stack([_tile_mean(np.abs(frame.motion[..., axis].astype(np.float64)) * self.motion_scale,
                                         self.tile_size) for axis in (1, 0)])  # y then x: the 1x2, 2x1 order
@@ -373,7 +394,8 @@ class Yang2019:
         if self.unseen == "full":
             if frame.seen is None:
                 raise BaselineError("Yang2019(unseen='full') needs the seen mask of the frame")
-            unseen = 1.0 - _tile_mean(frame.seen, self.tile_size)
+            seen = frame.seen
+            unseen = frame.term(("yang2019.unseen", self.tile_size), lambda: 1.0 - _tile_mean(seen, self.tile_size))
             est[:, unseen > self.unseen_fraction] = np.inf
         return est.astype(np.float32)
 
@@ -457,7 +479,9 @@ class FidelityFX:
         if frame.motion is None:
             speed = np.zeros_like(lum)
         else:
-            speed = _pad_to_tiles(np.hypot(frame.motion[..., 0], frame.motion[..., 1]).astype(np.float64), t)
+            motion = frame.motion
+            speed = frame.term(("fidelityfx.speed", t), lambda: _pad_to_tiles(
+                np.hypot(motion[..., 0], motion[..., 1]).astype(np.float64), t))
         return lum, speed
 
     def _per_tile(self, a: np.ndarray, cells: int, fn: str = "max") -> np.ndarray:

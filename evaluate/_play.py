@@ -572,7 +572,7 @@ def _oracle(thr: float, hib: bool) -> Callable[..., np.ndarray]:
 def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None
-        return np.asarray(sel.shading_rates(Frame(rp, pf.frame.motion, pf.seen), value))
+        return np.asarray(sel.shading_rates(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms), value))
     return decide
 
 
@@ -581,17 +581,24 @@ def model_inputs(pf: Any, rp: np.ndarray, channels: Sequence[str], ys: slice, xs
     (:class:`rtp.capture.paths.PathFrame`), ``rp`` the method's own displayed frame reprojected."""
     seen = pf.seen[ys, xs]
     planes = np.empty((len(channels),) + seen.shape, np.float32)
+    lum: list[np.ndarray] = []  # the window's luma, once for every plane that reads it
+
+    def luma() -> np.ndarray:
+        if not lum:
+            lum.append(sdk.luma(rp[ys, xs]))
+        return lum[0]
+
     for i, c in enumerate(channels):
         base, _, comp = c.partition(".")
         if comp in ("y.dx", "y.dy"):  # one pixel past the window: its last column / row as the frame's
             ext = sdk.luma(rp[ys.start:ys.stop + 1, xs.start:xs.stop + 1])
             planes[i] = sdk.pixel_differences(ext)[comp == "y.dy"][:seen.shape[0], :seen.shape[1]]
         elif c == "reprojected.y.blocks":  # windows start on whole cells (tiles)
-            planes[i] = sdk.block_variances(sdk.luma(rp[ys, xs]))
+            planes[i] = sdk.block_variances(luma())
         elif c == "reprojected.y.tiles":  # windows start on whole tiles
-            planes[i] = sdk.tile_variances(sdk.luma(rp[ys, xs]))
+            planes[i] = sdk.tile_variances(luma())
         elif base == "reprojected":  # the method's own displayed frame, reprojected
-            planes[i] = sdk.luma(rp[ys, xs]) if comp == "y" else rp[ys, xs, "rgb".index(comp)]
+            planes[i] = luma() if comp == "y" else rp[ys, xs, "rgb".index(comp)]
         elif c == "seen":
             planes[i] = seen
         else:  # G-buffer planes: converted once per frame, shared by every method

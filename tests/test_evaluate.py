@@ -183,6 +183,29 @@ def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile:
             assert ranges[k, bi, bj] == want, (rate, bi, bj)
 
 
+def test_frames_sharing_terms_decide_as_alone() -> None:
+    """Frames of one camera frame given one ``terms`` dict (``rtp play``: every method's own history,
+    the same motion and seen mask) compute the per-tile speeds and unseen shares once and decide
+    exactly as frames that do not share; the shared arrays are read-only."""
+    rng = np.random.default_rng(3)
+    motion = rng.normal(0, 3, (48, 64, 2)).astype(np.float32)
+    seen = (rng.random((48, 64)) > 0.3).astype(np.float32)
+    terms: dict = {}
+    methods = [Yang2019(16, threshold=t) for t in (0.1, 0.3)] + [Yang2019(16, unseen="full")]
+    methods += [FidelityFX(16, cutoff=c, additional_rates=a) for c in (0.05, 0.2) for a in (False, True)]
+    for _ in range(2):  # histories differ per method; the terms stay
+        for m in methods:
+            img = rng.uniform(0, 1, (48, 64, 3)).astype(np.float32)
+            alone = m.shading_rates(Frame(img, motion, seen))
+            assert np.array_equal(m.shading_rates(Frame(img, motion, seen, terms=terms)), alone), m
+            assert np.array_equal(m.shading_rates({"reprojected": img, "motion": motion, "seen": seen}), alone)
+    assert {k[0] for k in terms} == {"yang2019.tile_motion", "yang2019.unseen", "fidelityfx.speed"}
+    assert not any(v.flags.writeable for v in terms.values())
+    shared = Frame(np.zeros((48, 64, 3), np.float32), motion, seen, terms=terms)
+    with pytest.raises(ValueError):
+        Yang2019(16).tile_motion(shared)[0, 0, 0] = 1.0
+
+
 def test_restrict_rates_demotes_per_axis() -> None:
     codes = np.array([[C["4x4"], C["2x4"]], [C["2x2"], C["1x1"]]], np.uint8)
     est = np.zeros((6, 2, 2))
