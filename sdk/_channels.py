@@ -211,18 +211,27 @@ def _cell_variances(plane: np.ndarray, fn: str) -> tuple[int, int, list[np.ndarr
     # frame is laid out as 16 planes, one per pixel position inside the cell (``x[i, j]``: row i,
     # column j of every cell), so that every sum is an add of whole planes a sixteenth of the frame.
     cells = p.reshape(hc, c, wc, c).transpose(1, 3, 0, 2)
-    x = np.empty((c, c, hc, wc))
-    np.subtract(cells, cells[0, 0].astype(np.float64), out=x)
-    s2 = _sum_cells([[np.square(x[i, j]) for j in range(c)] for i in range(c)])
-    sums: dict[tuple[int, int], np.ndarray] = {(1, 1): x}
-    values = []
-    for rate in BLOCK_RATES:
-        bw, bh = rate_size(rate)
-        s1 = _block_sums(sums, bh, bw)
-        sq = [[np.square(s1[i, j]) for j in range(s1.shape[1])] for i in range(s1.shape[0])]
-        per_cell = np.maximum(s2 - _sum_cells(sq) / (bw * bh), 0.0) / (c * c)
-        values.append(np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0).astype(np.float32))
+    values = [np.empty((hc, wc), np.float32) for _ in BLOCK_RATES]
+    # in bands of cell rows whose planes stay in the cache (every value is of one cell: the same values)
+    band = max(1, _BAND_VALUES // wc)
+    for r0 in range(0, hc, band):
+        r1 = min(hc, r0 + band)
+        part = cells[:, :, r0:r1]
+        x = np.empty((c, c, r1 - r0, wc))
+        np.subtract(part, part[0, 0].astype(np.float64), out=x)
+        s2 = _sum_cells([[np.square(x[i, j]) for j in range(c)] for i in range(c)])
+        sums: dict[tuple[int, int], np.ndarray] = {(1, 1): x}
+        for k, rate in enumerate(BLOCK_RATES):
+            bw, bh = rate_size(rate)
+            s1 = _block_sums(sums, bh, bw)
+            sq = [[np.square(s1[i, j]) for j in range(s1.shape[1])] for i in range(s1.shape[0])]
+            per_cell = np.maximum(s2 - _sum_cells(sq) / (bw * bh), 0.0) / (c * c)
+            values[k][r0:r1] = np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0)
     return h, w, values
+
+
+#: Cells per band of :func:`_cell_variances` (its 16 float64 planes then take 2 MiB).
+_BAND_VALUES = 16384
 
 
 #: The tile :func:`tile_variances` summarises (the shipped models' tile size).
