@@ -267,15 +267,15 @@ def tile_variances(plane: np.ndarray) -> np.ndarray:
     th, tw = -(-ch // m), -(-cw // m)
     s = -np.log(BLOCK_EPS)
     out = np.zeros((th * BLOCK_TILE, tw * BLOCK_TILE), np.float32)
+    count = np.zeros((th * m, tw * m))
+    count[:ch, :cw] = 1.0
+    cells = count.reshape(th, m, tw, m).sum(axis=(1, 3))  # per tile, the cells the frame holds
+    padded = np.zeros((th * m, tw * m))  # beyond the frame: zeros, for every rate
+    top = np.zeros((th * m, tw * m), np.float32)
     for k, v in enumerate(values):
-        e = np.exp(s * (v.astype(np.float64) - 1.0))  # variance + eps, from the stored value
-        padded = np.zeros((th * m, tw * m))
-        padded[:ch, :cw] = e
-        top = np.zeros((th * m, tw * m), np.float32)
+        np.exp(s * (v.astype(np.float64) - 1.0), out=padded[:ch, :cw])  # variance + eps, from the stored value
         top[:ch, :cw] = v  # values are >= 0: a zero beyond the frame never wins the maximum
-        count = np.zeros((th * m, tw * m))
-        count[:ch, :cw] = 1.0
-        mean = padded.reshape(th, m, tw, m).sum(axis=(1, 3)) / count.reshape(th, m, tw, m).sum(axis=(1, 3))
+        mean = padded.reshape(th, m, tw, m).sum(axis=(1, 3)) / cells
         for j, stat in ((k, np.log(mean) / s + 1.0), (6 + k, top.reshape(th, m, tw, m).max(axis=(1, 3)))):
             out[j // BLOCK_CELL::BLOCK_TILE, j % BLOCK_CELL::BLOCK_TILE] = stat
     return out[:h, :w]
