@@ -16,6 +16,7 @@ EXAMPLES = """examples:
   rtp-export --adopt Model.onnx --metadata sidecar.yaml -o adopted.onnx --dynamic
   rtp-export --restamp old.onnx
   rtp-export --strip-probe jnyang -o jnyang-engine.onnx     # for an engine that runs the file itself
+  rtp-export --join-planes jnyang -o jnyang-one-input.onnx  # every plane in one input tensor
 """
 
 
@@ -47,6 +48,9 @@ def build_export_parser() -> argparse.ArgumentParser:
                    "input `input`, not in groups of at most seven (docs/export.md \"Input planes in groups\")")
     p.add_argument("--strip-probe", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
                    "name) without its finite probe to -o OUTPUT.onnx (predictions unchanged)")
+    p.add_argument("--join-planes", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
+                   "name) whose planes come in groups with every plane in the one input `input` to -o OUTPUT.onnx "
+                   "(predictions unchanged but for float rounding; docs/export.md \"Input planes in groups\")")
     return p
 
 
@@ -54,15 +58,17 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Every combination is checked before any work starts."""
     if args.restamp:
         if (args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace
-                or args.no_finite_probe or args.one_input or args.strip_probe):
+                or args.no_finite_probe or args.one_input or args.strip_probe or args.join_planes):
             parser.error("--restamp MODEL.onnx takes no other options")
         return
-    if args.strip_probe:
+    for flag, given in (("--strip-probe", args.strip_probe), ("--join-planes", args.join_planes)):
+        if not given:
+            continue
         if (args.checkpoint or args.adopt or args.metadata or args.opset or args.dynamic or args.replace
-                or args.no_finite_probe or args.one_input):
-            parser.error("--strip-probe MODEL takes only -o OUTPUT.onnx")
+                or args.no_finite_probe or args.one_input or (args.strip_probe and args.join_planes)):
+            parser.error(f"{flag} MODEL takes only -o OUTPUT.onnx")
         if not args.output:
-            parser.error("--strip-probe needs -o OUTPUT.onnx")
+            parser.error(f"{flag} needs -o OUTPUT.onnx")
         return
     if args.no_finite_probe and not args.checkpoint:
         parser.error("--no-finite-probe applies to exporting a checkpoint")
@@ -82,12 +88,14 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
 
 
 def _body(args: argparse.Namespace) -> int:
-    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint, restamp, strip_finite_probe
+    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint, join_input_planes, restamp, strip_finite_probe
 
     if args.restamp:
         out = restamp(args.restamp)
     elif args.strip_probe:
         out = strip_finite_probe(args.strip_probe, args.output)
+    elif args.join_planes:
+        out = join_input_planes(args.join_planes, args.output)
     elif args.adopt:
         from pathlib import Path
 

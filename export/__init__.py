@@ -9,6 +9,7 @@ from ._export import (
     add_finite_probe,
     adopt,
     export_checkpoint,
+    join_input_planes,
     merge_slices,
     restamp,
     split_input_planes,
@@ -17,6 +18,8 @@ from ._export import (
 )
 from ._published import PublishedModel, identify, published_models
 
-__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "PublishedModel", "add_finite_probe",
-           "adopt", "export_checkpoint", "identify", "merge_slices", "published_models", "restamp", "split_input_planes",
-           "strip_finite_probe", "write_metadata"]
+__all__ = [
+    "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "PublishedModel", "add_finite_probe", "adopt",
+    "export_checkpoint", "identify", "join_input_planes", "merge_slices", "published_models", "restamp",
+    "split_input_planes", "strip_finite_probe", "write_metadata"
+]

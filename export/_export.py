@@ -41,7 +41,8 @@ from rtp.sdk.files import atomic_output
 from ._published import file_sha256, identify
 
 __all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "add_finite_probe", "adopt",
-           "export_checkpoint", "merge_slices", "restamp", "split_input_planes", "strip_finite_probe", "write_metadata"]
+           "export_checkpoint", "join_input_planes", "merge_slices", "restamp", "split_input_planes", "strip_finite_probe",
+           "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -351,6 +352,105 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     del graph.input[:]
     graph.input.extend(new_inputs + others)
     return k
+
+
+def _join_groups(model: Any) -> int:
+    """Undo :func:`split_input_planes` on an ``onnx.ModelProto``, in place: the planes of the inputs
+    ``input``, ``input.K``, ... in one input ``input`` again, each set of per-group convolutions and
+    the Sums that add them one convolution of the concatenated weights (the first group's bias), whose
+    output keeps the last Sum's name. Returns the number of inputs the planes came in; raises
+    :class:`ExportError` for a graph whose inputs are not groups of one input's planes."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    graph = model.graph
+    init = {i.name: i for i in graph.initializer}
+    inputs = _plane_inputs(graph)
+    if len(inputs) < 2:
+        return len(inputs)
+    first = inputs[0]
+
+    def planes(vi: Any) -> int:
+        dims = vi.type.tensor_type.shape.dim
+        return dims[1].dim_value if len(dims) == 4 and dims[1].HasField("dim_value") else 0
+
+    sizes = [planes(i) for i in inputs]
+    bounds = np.cumsum([0, *sizes]).tolist()
+    if 0 in sizes or [i.name for i in inputs] != [first.name] + [f"{first.name}.{b}" for b in bounds[1:-1]]:
+        raise ExportError(f"the graph's inputs {[i.name for i in inputs]} are not planes in groups as rtp-export "
+                          f"writes them ({first.name}, {first.name}.K, ... of fixed plane counts): nothing joined")
+    group = {i.name: g for g, i in enumerate(inputs)}
+    producer = {o: n for n in graph.node for o in n.output}
+    readers = {i.name: [n for n in graph.node if i.name in n.input] for i in inputs}
+    joined: dict[int, Any] = {}  # index of the first group's convolution -> the convolution that replaces it
+    dropped: set[int] = set()
+    index = {id(n): k for k, n in enumerate(graph.node)}
+    failure = ExportError(f"{first.name}'s planes are read by nodes other than one convolution per group added by "
+                          "Sums (rtp-export's split_input_planes): nothing joined")
+    for conv in readers[first.name]:
+        if conv.op_type != "Conv" or conv.input[0] != first.name or conv.input[1] not in init:
+            raise failure
+        convs, sums, acc = [conv], [], conv.output[0]
+        while len(convs) < len(inputs):
+            users = [n for n in graph.node if acc in n.input]
+            if len(users) != 1 or users[0].op_type != "Sum" or len(users[0].input) != 2:
+                raise failure
+            other = producer.get([i for i in users[0].input if i != acc][0])
+            if (other is None or other.op_type != "Conv" or group.get(other.input[0]) != len(convs)
+                    or other.input[1] not in init or len([i for i in other.input if i]) != 2
+                    or list(other.attribute) != list(conv.attribute)):
+                raise failure
+            convs.append(other)
+            sums.append(users[0])
+            acc = users[0].output[0]
+        w = np.concatenate([numpy_helper.to_array(init[c.input[1]]) for c in convs], axis=1)
+        label = acc
+        graph.initializer.append(numpy_helper.from_array(w, f"{label}/joined_weight"))
+        ins = [first.name, f"{label}/joined_weight", *[i for i in conv.input[2:] if i]]
+        new = helper.make_node("Conv", ins, [acc], name=conv.name.rsplit("/planes", 1)[0] or acc)
+        new.attribute.extend(conv.attribute)
+        joined[index[id(conv)]] = new
+        dropped |= {index[id(n)] for n in convs[1:] + sums}
+    for name, nodes in readers.items():  # every group read only by the convolutions joined above
+        if name != first.name and {index[id(n)] for n in nodes} - dropped:
+            raise failure
+    nodes = [joined.get(k, n) for k, n in enumerate(graph.node) if k not in dropped]
+    del graph.node[:]
+    graph.node.extend(nodes)
+    read = {i for n in graph.node for i in n.input}
+    for t in [i for i in graph.initializer if i.name not in read]:
+        graph.initializer.remove(t)
+    one = onnx.ValueInfoProto()
+    one.CopyFrom(first)
+    one.type.tensor_type.shape.dim[1].dim_value = int(bounds[-1])
+    others = [i for i in graph.input if i.name not in group and (i.name not in init or i.name in read)]
+    del graph.input[:]
+    graph.input.extend([one, *others])
+    return len(inputs)
+
+
+def join_input_planes(model_path: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:
+    """Write a copy of an rtp model (a path, or a shipped model's name) whose planes come in groups
+    (:func:`split_input_planes`) with every plane in the one input ``input`` again: for an engine that
+    binds one tensor and runs on an AVX-512 CPU or a GPU, where the groups gain nothing
+    (docs/export.md "Input planes in groups"). The weights and every metadata field stay as they are;
+    the copy is checked to predict as the model within float rounding (the stem's sums are reordered)
+    before it is written (atomically). A split network's tail graph has one input already and stays."""
+    import onnx
+
+    from rtp import sdk
+
+    before = sdk.load(model_path, providers=["CPUExecutionProvider"])
+    src, out = Path(str(before.path)), Path(output)
+    if len(before.graph_inputs) < 2:
+        raise ParameterError(f"{src} takes its planes in one input already ({before.graph_inputs[0][0]}): "
+                             "nothing to join")
+    model = onnx.load(str(src))
+    _join_groups(model)
+    write_metadata(model, before.metadata)
+    _save_unchanged(model, before, out, f"joining the input planes of {src} changed its predictions; nothing "
+                    "written", reassociated=True)
+    return out
 
 
 def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:

@@ -107,6 +107,48 @@ def test_the_cli_keeps_one_input_when_asked(nine_pt: Path, tmp_path: Path) -> No
     assert bad.returncode == 2 and "takes no other options" in bad.stderr
 
 
+def test_join_planes_gives_back_the_one_input_model(nine_pt: Path, tmp_path: Path) -> None:
+    """``rtp-export --join-planes`` (``export.join_input_planes``) undoes the groups of an exported file: one
+    input of nine planes, one stem convolution, the predictions of the checkpoint exported with
+    ``--one-input`` to the bit, the probe still refusing a NaN in any plane, the metadata kept."""
+    grouped = export.export_checkpoint(nine_pt, tmp_path / "grouped.onnx")
+    whole = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "whole.onnx", split_planes=False))
+    cmd = [sys.executable, "-m", "rtp.cli.export"]
+    out = subprocess.run([*cmd, "--join-planes", str(grouped), "-o", str(tmp_path / "joined.onnx")],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    joined = sdk.load(tmp_path / "joined.onnx")
+    assert _graph_inputs(tmp_path / "joined.onnx") == [("input", 9)]
+    assert joined.graph_inputs == (("input", tuple(NINE)),)
+    graph = onnx.load(str(tmp_path / "joined.onnx")).graph
+    assert not [n for n in graph.node if n.op_type == "Sum"]
+    assert {n.op_type for n in graph.node} == {n.op_type for n in onnx.load(str(tmp_path / "whole.onnx")).graph.node}
+    x = np.random.default_rng(5).random((9, 75, 130), dtype=np.float32)
+    np.testing.assert_array_equal(joined.predict_raw(x), whole.predict_raw(x))
+    assert joined.metadata.to_dict() | {"digest": None} == sdk.load(grouped).metadata.to_dict() | {"digest": None}
+    for plane in (0, 8):
+        bad = x.copy()
+        bad[plane, 3, 4] = np.nan
+        with pytest.raises(sdk.NonFiniteInputError):
+            joined.predict(bad)
+    with pytest.raises(sdk.ParameterError, match="in one input already"):
+        export.join_input_planes(tmp_path / "joined.onnx", tmp_path / "again.onnx")
+    assert not (tmp_path / "again.onnx").exists()
+    for args, message in (([str(grouped)], "needs -o OUTPUT.onnx"),
+                          ([str(grouped), "-o", "x.onnx", "--strip-probe", str(grouped)], "takes only -o")):
+        bad_cli = subprocess.run([*cmd, "--join-planes", *args], capture_output=True, text=True, cwd=tmp_path)
+        assert bad_cli.returncode == 2 and message in bad_cli.stderr, bad_cli.stderr
+
+
+def test_join_planes_refuses_inputs_rtp_export_did_not_split(tmp_path: Path) -> None:
+    """Inputs named otherwise than ``input``, ``input.K`` (K the first plane of the group) are not
+    rtp-export's groups: a typed error, nothing written."""
+    path = _grouped_model(tmp_path, [5, 4], 9)  # input, input.1: not input, input.5
+    with pytest.raises(export.ExportError, match="not planes in groups"):
+        export.join_input_planes(path, tmp_path / "joined.onnx")
+    assert not (tmp_path / "joined.onnx").exists()
+
+
 def _graph(c: int, reader: str = "Conv") -> onnx.ModelProto:
     w = helper.make_tensor("w", onnx.TensorProto.FLOAT, [2, c, 4, 4], np.ones(2 * c * 16, np.float32))
     node = (helper.make_node("Conv", ["input", "w"], ["metric"], kernel_shape=[4, 4], strides=[4, 4]) if reader == "Conv"
