@@ -7,8 +7,8 @@ reprojected frame's and the albedo's luma); the moderngl adapter builds them in 
 pyrender adapter, the dataset reader and ``rtp play`` in numpy. This times the SDK's numpy helpers
 on random planes (their cost does not depend on the values): ``sdk.luma`` of an RGB frame,
 ``sdk.pixel_differences``, ``sdk.block_variances`` and, for comparison, the same plane computed as
-its docstring defines it (a variance per block and rate, the implementation before 2026-11-29), and
-``tile_block_levels`` (the per-tile means ``PredictionReuse(rescale=...)`` takes of both planes).
+its docstring defines it (a variance per block and rate, the implementation before 2026-11-29),
+``sdk.tile_variances`` (the ``.tiles`` plane ``jnyang-reuse`` reads) and ``tile_block_levels`` (the per-tile means ``PredictionReuse(rescale=...)`` takes of both planes).
 Prints a Markdown table of medians (ms).
 """
 
@@ -51,9 +51,9 @@ def main() -> None:
     rng = np.random.default_rng(0)
     print(f"rtp {sdk.__version__}, numpy {np.__version__}, {platform.processor() or platform.machine()}, "
           f"median of {args.repeats}\n")
-    print("| frame | luma of RGB | pixel_differences | block_variances | the same by definition | "
+    print("| frame | luma of RGB | pixel_differences | block_variances | the same by definition | tile_variances | "
           "tile_block_levels, two planes |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|")
     for w, h in args.sizes:
         print(f"| {w}x{h} | " + " | ".join(f"{v:.1f}" for v in _row(rng, w, h, args.repeats)) + " |")
 
@@ -69,6 +69,7 @@ def _row(rng: np.random.Generator, w: int, h: int, repeats: int) -> list[float]:
             median_ms(lambda: sdk.pixel_differences(y), repeats),
             median_ms(lambda: sdk.block_variances(y), repeats),
             median_ms(lambda: block_variances_by_definition(y), repeats),
+            median_ms(lambda: sdk.tile_variances(y), repeats),
             median_ms(lambda: tile_block_levels(planes, 16), repeats)]
 
 if __name__ == "__main__":
