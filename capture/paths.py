@@ -270,7 +270,8 @@ def unseen_shares(path: CameraPath, scene: Scene, size: tuple[int, int] = (1280,
 @dataclass
 class PathFrame:
     """One frame of a played path: ``frame`` (the renderer's :class:`~rtp.plugins.moderngl.Frame`:
-    G-buffers, every uniform rate's final image, motion) and where each of its pixels was in the
+    G-buffers, every uniform rate's final image, motion; not its reprojection, whose ``reprojected``
+    and ``seen`` are 0: each method reprojects its own history) and where each of its pixels was in the
     previous frame (``rows``, ``cols``: top-left indices, ``seen``: 1 where that pixel passed the
     depth test; all 0 on the first frame). ``reproject(image)`` fetches any image of the previous
     frame the way the renderer's reprojection does."""
@@ -369,7 +370,10 @@ class PathPlayer:
         prev = None
         h, w = self.size[1], self.size[0]
         for i, cam in enumerate(path.cameras):
-            frame = self.renderer.render(cam, prev)
+            # the previous camera for the motion vectors, not the previous frame: every method reprojects
+            # its own history through reprojection_source, so the renderer's reprojection of the
+            # full-rate frame (Frame.reprojected and .seen, left 0 here) would be read by none
+            frame = self.renderer.render(cam, prev_camera=prev.camera if prev is not None else None)
             self._current = frame
             if prev is None:
                 zeros = np.zeros((h, w), np.intp)
