@@ -8,7 +8,8 @@ pyrender adapter, the dataset reader and ``rtp play`` in numpy. This times the S
 on random planes (their cost does not depend on the values): ``sdk.luma`` of an RGB frame,
 ``sdk.pixel_differences``, ``sdk.block_variances`` and, for comparison, the same plane computed as
 its docstring defines it (a variance per block and rate, the implementation before 2026-11-29),
-``sdk.tile_variances`` (the ``.tiles`` plane ``jnyang-reuse`` reads) and ``tile_block_levels`` (the per-tile means ``PredictionReuse(rescale=...)`` takes of both planes).
+``sdk.tile_variances`` (the ``.tiles`` plane ``jnyang-reuse`` reads) and ``tile_block_levels`` (the
+per-tile means ``PredictionReuse(rescale=...)`` takes of both planes).
 Prints a Markdown table of medians (ms).
 """
 
