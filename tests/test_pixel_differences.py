@@ -165,4 +165,6 @@ def test_the_planes_benchmark_times_the_same_plane_as_the_definition() -> None:
     out = subprocess.run([sys.executable, str(script), "--sizes", "36x20", "--repeats", "1"],
                          capture_output=True, text=True, check=True).stdout
     row = [line for line in out.splitlines() if line.startswith("| 36x20 |")]
-    assert len(row) == 1 and len(row[0].split("|")) == 8, out
+    header = [line for line in out.splitlines() if line.startswith("| frame |")]
+    assert len(row) == 1 and len(header) == 1 and "tile_variances" in header[0], out
+    assert len(row[0].split("|")) == len(header[0].split("|")) == 9, out  # seven timed columns
