@@ -10,6 +10,7 @@ fixtures that use it take the ``gl_context`` fixture; code that may run after an
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,15 @@ import numpy as np
 import pytest
 
 DATA = Path(__file__).parent / "data"
+
+#: The thread pools a worker of ``pytest -n N`` (``make test``) limits to one thread each, before torch
+#: or a BLAS is imported: N workers on N cores then compute on N threads, not N² that take turns (on
+#: the 2-core CI machine two workers of two torch threads each took 9 minutes, of one each 6.6).
+#: Subprocesses the tests start inherit it. A variable already set is kept.
+_ONE_THREAD = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in _ONE_THREAD:
+        os.environ.setdefault(_var, "1")
 
 PAPER_INPUTS = ["reprojected.r", "seen", "albedo.r", "normal.z"]
 
