@@ -478,7 +478,8 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     from rtp.capture.paths import PathPlayer, camera_path
 
     specs = parse_methods(job["methods"])
-    predictors = {m.model: sdk.load(m.model) for m in specs if m.kind == "model"}
+    # in a worker process, its share of the cores (capture.worker_threads); alone, onnxruntime's default
+    predictors = {m.model: sdk.load(m.model, threads=job.get("threads", 0)) for m in specs if m.kind == "model"}
     info = sdk.METRICS[job["fail_metric"]]
     scn, blockers = load_scene(job["scene"], job["cache_dir"], None, None)
     w, h = job["size"]
@@ -512,11 +513,12 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
     import multiprocessing as mp
     import queue
 
-    from rtp.capture import worker_pool
+    from rtp.capture import worker_pool, worker_threads
 
+    threads = worker_threads(workers)
     with mp.get_context("spawn").Manager() as manager, worker_pool(workers) as pool:
         ticks = manager.Queue()
-        futures = {pool.submit(_worker_path, {**job, "path": p}, ticks): p for p in paths}
+        futures = {pool.submit(_worker_path, {**job, "path": p, "threads": threads}, ticks): p for p in paths}
         while not all(f.done() for f in futures):
             try:
                 n = ticks.get(timeout=0.5)
