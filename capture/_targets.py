@@ -175,7 +175,8 @@ def sample_targets(sample: Any, metrics: tuple[str, ...], params: Mapping[str, A
 
 
 def _set_threads(threads: int | None) -> None:
-    """Torch's intra-op threads in a worker (two workers with two threads each on two cores thrash)."""
+    """Torch's intra-op threads in a Ray worker (two workers with two threads each on two cores thrash;
+    a local pool's workers are set so by ``worker_pool``)."""
     if threads:
         try:
             import torch
@@ -269,9 +270,8 @@ def compute_targets(
                 progress(done, len(reader.ids))
     else:
         n = workers or 1
-        with worker_pool(n) as pool:
-            threads = max(1, (os.cpu_count() or 1) // n)
-            futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params, threads) for i in ids]
+        with worker_pool(n) as pool:  # each worker's torch on its share of the cores (worker_threads)
+            futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
             for f in as_completed(futures):
                 f.result()
                 done += 1

@@ -155,7 +155,9 @@ from rtp.capture import worker_pool, worker_threads
 from rtp.capture._pool import THREAD_VARIABLES
 with worker_pool(2) as pool:
     seen = {v: pool.submit(os.getenv, v).result() for v in THREAD_VARIABLES}
-print(json.dumps({"share": worker_threads(2), "cores": len(os.sched_getaffinity(0)), "seen": seen}))
+    torch_threads = pool.submit(eval, "__import__('torch').get_num_threads()").result()
+print(json.dumps({"share": worker_threads(2), "cores": len(os.sched_getaffinity(0)), "seen": seen,
+                  "torch": torch_threads}))
 """
 
 
@@ -166,11 +168,12 @@ def test_pool_workers_compute_on_their_share_of_the_cores() -> None:
     cores = len(os.sched_getaffinity(0))
     assert worker_threads(1) == cores and worker_threads(cores) == 1 and worker_threads(4 * cores) == 1
     assert worker_threads(0) == cores  # never a division by zero
-    # in a job whose environment names no pool size but MKL's (a user's choice, kept)
-    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES} | {"MKL_NUM_THREADS": "3"}
+    # in a job whose environment names no pool size but llvmpipe's (a user's choice, kept)
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES} | {"LP_NUM_THREADS": "3"}
     out = subprocess.run([sys.executable, "-c", _THREADS_SCRIPT], env=env, capture_output=True, text=True,
                          check=True, timeout=120).stdout
     got = json.loads(out)
     share = str(max(1, got["cores"] // 2))
     assert got["share"] == int(share)
-    assert got["seen"] == {v: "3" if v == "MKL_NUM_THREADS" else share for v in THREAD_VARIABLES}
+    assert got["seen"] == {v: "3" if v == "LP_NUM_THREADS" else share for v in THREAD_VARIABLES}
+    assert got["torch"] == int(share)  # torch, imported in the worker after the pool set its threads
