@@ -12,7 +12,8 @@ OpenMP (torch), the BLAS and Mesa's llvmpipe are limited to it before they start
 onnxruntime sessions are given it (``rtp play``). Without that, two workers on two cores ran four
 or more threads that took turns, onnxruntime's spinning between runs among them; with it, `rtp play
 20kdm2 --frames 16 --composite --workers 2` took 100-113 s instead of 120-125 on the 2-core AVX2
-EPYC of 2026-12-01, every figure the same. A variable the user set is kept.
+EPYC of 2026-12-01, every figure the same (capture and targets, which run no onnxruntime, the same
+time as before: docs/scaling.md). A variable the user set is kept.
 """
 
 from __future__ import annotations
