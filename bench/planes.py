@@ -1,6 +1,7 @@
 """The derived input planes on a CPU: what an adapter without a GPU path pays per frame to build them.
 
     python bench/planes.py [--repeats 7] [--sizes 1920x1080,1280x720]
+    python bench/planes.py --against REV [--scenes procedural:0,20kdm2] [--frames 30]
 
 The shipped JNYang, FLIP and PSNR read two ``.blocks`` planes (``sdk.block_variances`` of the
 reprojected frame's and the albedo's luma); the moderngl adapter builds them in a shader, the
@@ -11,15 +12,21 @@ its docstring defines it (a variance per block and rate, the implementation befo
 ``sdk.tile_variances`` (the ``.tiles`` plane ``jnyang-reuse`` reads) and ``tile_block_levels`` (the
 per-tile means ``PredictionReuse(rescale=...)`` takes of both planes).
 Prints a Markdown table of medians (ms).
+
+``--against REV`` times nothing: it loads ``sdk/_channels.py`` as it was at git revision ``REV`` and
+counts the values of the ``.blocks`` and ``.tiles`` planes that differ from this checkout's, on the
+lumas of rendered frames (the final colour at full rate and at 4x4, the albedo, the same in float64,
+and a crop whose sides are not multiples of 4; every tenth frame of each scene's fast camera path)
+and on random, flat, two-level, near-flat and wide-range planes of many sizes. Exits 1 if any differ:
+a faster implementation must give the planes the shipped models were trained and scored on.
 """
 
 from __future__ import annotations
 
 import argparse
-import platform
 
 import numpy as np
-from _common import frame_size, median_ms  # bench/ is on sys.path when run as a script
+from _common import cpu_description, frame_size, median_ms  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.sdk._reuse import tile_block_levels
@@ -46,11 +53,16 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--sizes", type=lambda s: [frame_size(v, minimum=4) for v in s.split(",")],
                     default=[(1920, 1080), (1280, 720)], help="comma-separated WIDTHxHEIGHT")
+    ap.add_argument("--against", metavar="REV", help="compare the planes with those of sdk/_channels.py at git REV")
+    ap.add_argument("--scenes", default="procedural:0", help="with --against: scenes whose frames are compared")
+    ap.add_argument("--frames", type=int, default=30, help="with --against: frames of each scene's path")
     args = ap.parse_args()
+    if args.against:
+        raise SystemExit(_against(args.against, args.scenes.split(","), args.frames))
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
     rng = np.random.default_rng(0)
-    print(f"rtp {sdk.__version__}, numpy {np.__version__}, {platform.processor() or platform.machine()}, "
+    print(f"rtp {sdk.__version__}, numpy {np.__version__}, {cpu_description()}, "
           f"median of {args.repeats}\n")
     print("| frame | luma of RGB | pixel_differences | block_variances | the same by definition | tile_variances | "
           "tile_block_levels, two planes |")
@@ -72,6 +84,66 @@ def _row(rng: np.random.Generator, w: int, h: int, repeats: int) -> list[float]:
             median_ms(lambda: block_variances_by_definition(y), repeats),
             median_ms(lambda: sdk.tile_variances(y), repeats),
             median_ms(lambda: tile_block_levels(planes, 16), repeats)]
+
+
+def _against(rev: str, scenes: list[str], frames: int) -> int:
+    """Count the ``.blocks`` and ``.tiles`` values that differ from ``sdk/_channels.py`` at ``rev``."""
+    import importlib.util
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from rtp.capture import load_scene
+    from rtp.capture.paths import PathPlayer, camera_path
+
+    root = Path(__file__).resolve().parents[1]
+    src = subprocess.run(["git", "show", f"{rev}:sdk/_channels.py"], cwd=root, capture_output=True, text=True, check=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "_channels_then.py"
+        path.write_text(src.stdout)
+        spec = importlib.util.spec_from_file_location("rtp.sdk._channels_then", path)
+        assert spec is not None and spec.loader is not None
+        then = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = then  # its relative imports resolve in rtp.sdk
+        spec.loader.exec_module(then)
+    pairs = {"block_variances": (then.block_variances, sdk.block_variances),
+             "tile_variances": (then.tile_variances, sdk.tile_variances)}
+    counts = {name: [0, 0] for name in pairs}
+
+    def compare(plane: np.ndarray) -> None:
+        for name, (old, new) in pairs.items():
+            a, b = old(plane), new(plane)
+            counts[name][0] += a.size if a.shape != b.shape or a.dtype != b.dtype else int((a != b).sum())
+            counts[name][1] += a.size
+
+    for name in scenes:
+        scn, blockers = load_scene(name, None, None, None)
+        path = camera_path(scn, frames, "fast", 0, blockers=blockers)
+        with PathPlayer(scn, (1280, 720), exact=False) as player:
+            for pf in player.frames(path):
+                if pf.index % 10 == 0:
+                    f = pf.frame
+                    y = sdk.luma(f.colour["1x1"])
+                    for plane in (y, sdk.luma(f.colour["4x4"]), sdk.luma(f.albedo), y.astype(np.float64), y[3:-5, 1:-2]):
+                        compare(plane)
+    rng = np.random.default_rng(1)
+    for trial in range(300):
+        h, w = (int(v) for v in rng.integers(1, 80, 2))
+        kind = trial % 5
+        plane = (rng.random((h, w), dtype=np.float32),
+                 np.full((h, w), rng.random(), np.float32),
+                 (rng.random((h, w)) > 0.5).astype(np.float32) * np.float32(rng.random()),
+                 (0.5 + 1e-3 * rng.standard_normal((h, w))).astype(np.float32),
+                 rng.random((h, w)) * 10 ** rng.uniform(-6, 2))[kind]
+        compare(plane)
+    print(f"against {rev}: scenes {', '.join(scenes)}, every tenth of {frames} frames, and 300 synthetic planes\n")
+    print("| plane | values compared | values that differ |")
+    print("|---|---:|---:|")
+    for name, (differ, total) in counts.items():
+        print(f"| {name} | {total:,} | {differ:,} |")
+    return 1 if any(d for d, _ in counts.values()) else 0
+
 
 if __name__ == "__main__":
     main()

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._errors import InputShapeError, NonFiniteInputError
-from ._rates import ALL_RATES, rate_size
+from ._rates import ALL_RATES
 
 __all__ = ["BLOCK_CELL", "BLOCK_EPS", "BLOCK_RATES", "BLOCK_TILE", "CHANNELS", "DEFAULT_INPUTS", "Channel", "block_variances",
            "depth_edges", "pixel_differences", "tile_variances"]
@@ -193,45 +193,69 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
     return out[:h, :w]
 
 
-def _cell_variances(plane: np.ndarray, fn: str) -> tuple[int, int, list[np.ndarray]]:
+def _cell_variances(plane: np.ndarray, fn: str) -> tuple[int, int, np.ndarray]:
     """The plane's height and width and, per rate of :data:`BLOCK_RATES`, each 4x4 cell's normalised
-    log variance inside the rate's blocks (float32 ``(ceil(H / 4), ceil(W / 4))``): :func:`block_variances`'s
-    values before packing. ``plane`` (the caller's array, never changed) is checked as ``fn``'s."""
+    log variance inside the rate's blocks (float32 ``(6, ceil(H / 4), ceil(W / 4))``, rates in
+    :data:`BLOCK_RATES` order): :func:`block_variances`'s values before packing. ``plane`` (the
+    caller's array, never changed) is checked as ``fn``'s."""
     p = _finite_plane(plane, fn, None)
     h, w = p.shape
     c = BLOCK_CELL
     if h % c or w % c:
         p = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
     hc, wc = p.shape[0] // c, p.shape[1] // c
-    # One pass of sums instead of a variance per rate: per cell, the mean over a rate's blocks of
-    # their variance is (S2 - sum over blocks of S1^2 / n) / 16, S1 and S2 the sums of the values and
-    # of their squares, n a block's pixels; S2 over the cell is the same for every rate, and each
-    # rate's block sums add up from the smaller rate's. Values are taken relative to the cell's first
-    # pixel (float64) so that the difference does not cancel: a flat cell reads exactly 0. The
-    # frame is laid out as 16 planes, one per pixel position inside the cell (``x[i, j]``: row i,
-    # column j of every cell), so that every sum is an add of whole planes a sixteenth of the frame.
+    # A rate's blocks, aligned to the cell, lose what the cell's Haar details finer than the block
+    # hold. Per 2x2 quarter of the cell (pixels a b / c d), the details h = (a - b) + (c - d),
+    # v = (a + b) - (c + d) and d = (a - b) - (c - d); over the quarters' sums S, the same three at
+    # twice the scale, H, V and D. The squared distance of the cell's 16 values to their blocks' means
+    # is then: 1x2 (columns of two rows) (sum v^2 + sum d^2) / 4; 2x1 (sum h^2 + sum d^2) / 4; 2x2
+    # (sum h^2 + v^2 + d^2) / 4; 2x4 that plus (V^2 + D^2) / 16; 4x2 plus (H^2 + D^2) / 16; 4x4
+    # plus (H^2 + V^2 + D^2) / 16 (the sums over the four quarters; an orthogonal basis, so no
+    # cancellation: a flat cell reads exactly 0). Divided by the cell's 16 pixels: the mean over the
+    # cell of the variance inside each block. In float64, on the frame laid out as 16 planes, one
+    # per pixel position in the cell (``x[i, j]``: row i, column j of every cell), in bands of cell
+    # rows whose planes stay in the cache (every value is of one cell: the same values).
     cells = p.reshape(hc, c, wc, c).transpose(1, 3, 0, 2)
-    values = [np.empty((hc, wc), np.float32) for _ in BLOCK_RATES]
-    # in bands of cell rows whose planes stay in the cache (every value is of one cell: the same values)
+    values = np.empty((len(BLOCK_RATES), hc, wc), np.float32)
     band = max(1, _BAND_VALUES // wc)
+    x = np.empty((c, c, min(band, hc), wc))
+    rss = np.empty((len(BLOCK_RATES), min(band, hc), wc))
     for r0 in range(0, hc, band):
         r1 = min(hc, r0 + band)
-        part = cells[:, :, r0:r1]
-        x = np.empty((c, c, r1 - r0, wc))
-        np.subtract(part, part[0, 0].astype(np.float64), out=x)
-        s2 = _sum_cells([[np.square(x[i, j]) for j in range(c)] for i in range(c)])
-        sums: dict[tuple[int, int], np.ndarray] = {(1, 1): x}
-        for k, rate in enumerate(BLOCK_RATES):
-            bw, bh = rate_size(rate)
-            s1 = _block_sums(sums, bh, bw)
-            sq = [[np.square(s1[i, j]) for j in range(s1.shape[1])] for i in range(s1.shape[0])]
-            per_cell = np.maximum(s2 - _sum_cells(sq) / (bw * bh), 0.0) / (c * c)
-            values[k][r0:r1] = np.clip(np.log(per_cell + BLOCK_EPS) / -np.log(BLOCK_EPS) + 1.0, 0.0, 1.0)
+        xb, r = x[:, :, :r1 - r0], rss[:, :r1 - r0]
+        xb[...] = cells[:, :, r0:r1]
+        pair_sum, pair_diff = xb[:, 0::2] + xb[:, 1::2], xb[:, 0::2] - xb[:, 1::2]  # columns in pairs
+        hd, dd = pair_diff[0::2] + pair_diff[1::2], pair_diff[0::2] - pair_diff[1::2]  # (2, 2, rows, wc): quarters
+        vd, sq = pair_sum[0::2] - pair_sum[1::2], pair_sum[0::2] + pair_sum[1::2]
+        hs, vs, ds = (np.einsum("ij...,ij...->...", t, t) for t in (hd, vd, dd))
+        lr = sq[:, 0] - sq[:, 1]  # left minus right quarter, per quarter row
+        h2, d2 = np.square(lr[0] + lr[1]), np.square(lr[0] - lr[1])
+        v2 = np.square((sq[0, 0] + sq[0, 1]) - (sq[1, 0] + sq[1, 1]))
+        np.add(vs, ds, out=r[0])  # 1x2
+        np.add(hs, ds, out=r[1])  # 2x1
+        np.add(r[1], vs, out=r[2])  # 2x2
+        np.multiply(r[2], 4.0, out=r[3])
+        r[3] += d2
+        r[4] = r[3]
+        r[3] += v2  # 2x4
+        r[4] += h2  # 4x2
+        np.add(r[3], h2, out=r[5])  # 4x4
+        r /= _CELL_DIVISORS
+        r += BLOCK_EPS
+        np.log(r, out=r)
+        r /= -np.log(BLOCK_EPS)
+        r += 1.0
+        np.clip(r, 0.0, 1.0, out=r)
+        values[:, r0:r1] = r
     return h, w, values
 
 
-#: Cells per band of :func:`_cell_variances` (its 16 float64 planes then take 2 MiB).
-_BAND_VALUES = 16384
+#: What each rate's squared distances (:func:`_cell_variances`) are divided by: the details' scale
+#: (4 for the quarters' details, 16 for the cell's) times the cell's 16 pixels.
+_CELL_DIVISORS = np.array([64.0, 64.0, 64.0, 256.0, 256.0, 256.0])[:, None, None]
+
+#: Cells per band of :func:`_cell_variances` (its 16 float64 planes then take 1 MiB).
+_BAND_VALUES = 8192
 
 
 #: The tile :func:`tile_variances` summarises (the shipped models' tile size).
@@ -263,7 +287,7 @@ def tile_variances(plane: np.ndarray) -> np.ndarray:
     """
     h, w, values = _cell_variances(plane, "tile_variances")
     m = BLOCK_TILE // BLOCK_CELL  # cells per tile side
-    ch, cw = values[0].shape
+    n, ch, cw = values.shape
     th, tw = -(-ch // m), -(-cw // m)
     s = -np.log(BLOCK_EPS)
     out = np.zeros((th * BLOCK_TILE, tw * BLOCK_TILE), np.float32)
@@ -271,31 +295,27 @@ def tile_variances(plane: np.ndarray) -> np.ndarray:
     count[:ch, :cw] = 1.0
     cells = count.reshape(th, m, tw, m).sum(axis=(1, 3))  # per tile, the cells the frame holds
     padded = np.zeros((th * m, tw * m))  # beyond the frame: zeros, for every rate
-    top = np.zeros((th * m, tw * m), np.float32)
+    top = np.zeros((n, th * m, tw * m), np.float32)
+    top[:, :ch, :cw] = values  # values are >= 0: a zero beyond the frame never wins the maximum
+    peaks = _block_max(top, m)
     for k, v in enumerate(values):
         np.exp(s * (v.astype(np.float64) - 1.0), out=padded[:ch, :cw])  # variance + eps, from the stored value
-        top[:ch, :cw] = v  # values are >= 0: a zero beyond the frame never wins the maximum
         mean = padded.reshape(th, m, tw, m).sum(axis=(1, 3)) / cells
-        for j, stat in ((k, np.log(mean) / s + 1.0), (6 + k, top.reshape(th, m, tw, m).max(axis=(1, 3)))):
+        for j, stat in ((k, np.log(mean) / s + 1.0), (n + k, peaks[k])):
             out[j // BLOCK_CELL::BLOCK_TILE, j % BLOCK_CELL::BLOCK_TILE] = stat
     return out[:h, :w]
 
 
-def _sum_cells(a: list[list[np.ndarray]]) -> np.ndarray:
-    """The sum of the planes ``a[i][j]`` (the blocks of each cell, row i, column j): each row's
-    left to right, then the rows top to bottom, in float64."""
-    rows = [sum(r[1:], r[0]) for r in a]
-    return sum(rows[1:], rows[0])
-
-
-def _block_sums(sums: dict[tuple[int, int], np.ndarray], bh: int, bw: int) -> np.ndarray:
-    """The sum over each ``bh x bw`` block of every cell, ``(4 // bh, 4 // bw, H / 4, W / 4)`` (block
-    row, block column, cell), built from the next smaller block's sums (memoised in ``sums``)."""
-    if (bh, bw) not in sums:
-        if bw > 1:
-            a = _block_sums(sums, bh, bw // 2)
-            sums[bh, bw] = a[:, 0::2] + a[:, 1::2]
-        else:
-            a = _block_sums(sums, bh // 2, bw)
-            sums[bh, bw] = a[0::2] + a[1::2]
-    return sums[bh, bw]
+def _block_max(a: np.ndarray, m: int) -> np.ndarray:
+    """The maximum over each ``m x m`` block of the last two axes of ``a`` (sides multiples of ``m``), as
+    elementwise maxima of strided views: a reduction over two short axes (``.max(axis=(-3, -1))`` of a
+    reshape) takes ten times as long."""
+    cols = a.reshape(*a.shape[:-1], a.shape[-1] // m, m)
+    c = np.maximum(cols[..., 0], cols[..., 1])
+    for i in range(2, m):
+        np.maximum(c, cols[..., i], out=c)
+    rows = c.reshape(*c.shape[:-2], c.shape[-2] // m, m, c.shape[-1])
+    r = np.maximum(rows[..., 0, :], rows[..., 1, :])
+    for i in range(2, m):
+        np.maximum(r, rows[..., i, :], out=r)
+    return r

@@ -81,7 +81,7 @@ def _block_variances_by_definition(plane: np.ndarray) -> np.ndarray:
                   hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=21),
                   elements=st.floats(0, 1, width=32)))
 def test_the_fast_sums_equal_a_variance_per_block(p: np.ndarray) -> None:
-    """block_variances adds block sums up from one rate to the next (several times faster than a
+    """block_variances sums the squares of each cell's Haar details (several times faster than a
     variance per block and rate); it must read the same as the definition, flat cells exactly 0, and
     leave the caller's plane alone."""
     before = p.copy()
