@@ -269,23 +269,31 @@ def merge_slices(model: Any) -> int:
 
 
 def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
-    """Give an ``onnx.ModelProto`` whose one input holds more than ``most`` planes that many planes per
-    input instead, in place: ``input`` holds the first group, ``input.K`` the group that starts at plane
-    ``K``, in plane order, as few groups as can be and as even as can be (nine planes: 5 and 4). Each
-    convolution that reads the input becomes one convolution per group (the weights' slices, the bias on
-    the first) and a ``Sum`` of them (onnxruntime runs it in the blocked layout too); the sum keeps the
-    name the convolution's output had, so the finite probe and the rest of the graph read what they read
-    before. Returns the number of inputs the planes now come in (1: unchanged, because there are ``most``
-    or fewer, or because a node other than a plain convolution reads them; more than 1 and unchanged for
-    a graph already split).
+    """Give an ``onnx.ModelProto`` whose one input holds its planes several inputs of consecutive planes,
+    in place, where that lets onnxruntime read less or read faster; ``input`` holds the first group,
+    ``input.K`` the group that starts at plane ``K``, in plane order. Returns the number of inputs the
+    planes now come in (1: unchanged; more than 1 and unchanged for a graph already split, or one whose
+    planes a node other than a plain convolution reads).
 
-    Why: onnxruntime's CPU provider runs a convolution in its blocked layout (NCHWc) straight from the
-    caller's planes only when they are fewer than its block, 8 channels with AVX2 and 16 with AVX-512;
-    eight or more planes on an AVX2-only CPU (most desktop and laptop CPUs) take the generic im2col path
-    instead: the 4x4 stride-4 stem of a nine-plane model costs 21.5 ms of 32.3 ms of kernels for a 1080p
-    frame there, split in two 9.4 ms and their sum 2.3 (docs/performance.md "Input planes on AVX2
-    CPUs"). ``rtp.sdk`` feeds each input its planes as views of the one array it is given, so splitting
-    copies nothing."""
+    Two rules make the groups. Planes that different convolutions read (a weight not zero) go to
+    different groups, each convolution then reading only its own: a split network's stem weighs its
+    ``.tiles`` planes zero and its tile contrast reads nothing else, so those planes come in a group of
+    their own that the stem no longer reads (``jnyang-reuse``: 7 + 2 planes, the stem's two dead planes
+    a 1080p frame's 16 MB unread). And no group holds more than ``most`` planes: a run of more is
+    split as evenly as can be (nine planes all read by the stem: 5 and 4). Each convolution becomes
+    one convolution per group it reads (its weights' slices, its bias on the first) and ``Sum`` s of
+    them (onnxruntime runs them in the blocked layout too); the last keeps the name the convolution's
+    output had, so the rest of the graph reads what it read before. The finite probe
+    (:func:`add_finite_probe`), which reads the stem's output, gets the mean of every group the stem no
+    longer reads added, so that a NaN in any plane still reaches it.
+
+    Why the limit: onnxruntime's CPU provider runs a convolution in its blocked layout (NCHWc) straight
+    from the caller's planes only when they are fewer than its block, 8 channels with AVX2 and 16 with
+    AVX-512; eight or more planes on an AVX2-only CPU (most desktop and laptop CPUs) take the generic
+    im2col path instead: the 4x4 stride-4 stem of a nine-plane model costs 21.5 ms of 32.3 ms of kernels
+    for a 1080p frame there, split in two 9.4 ms and their sum 2.3 (docs/performance.md "Input planes on
+    AVX2 CPUs"). ``rtp.sdk`` feeds each input its planes as views of the one array it is given, so
+    splitting copies nothing."""
     import onnx
     from onnx import helper, numpy_helper
 
@@ -297,8 +305,6 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     x = inputs[0]
     dims = x.type.tensor_type.shape.dim
     c = dims[1].dim_value if len(dims) == 4 else 0
-    if c <= most:
-        return 1
     readers = [n for n in graph.node if x.name in n.input]
 
     def plain(n: Any) -> bool:
@@ -307,13 +313,22 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
                 and n.input[1] in init and attrs.get("group", 1) == 1 and attrs.get("auto_pad", b"NOTSET")
                 in (b"NOTSET", "NOTSET"))
 
-    if not readers or not all(plain(n) for n in readers):
-        log.debug("split_input_planes: %s is read by %s, not only by plain convolutions; left whole", x.name,
-                  sorted({n.op_type for n in readers}))
+    if c < 2 or not readers or not all(plain(n) for n in readers):
+        if readers and not all(plain(n) for n in readers):
+            log.debug("split_input_planes: %s is read by %s, not only by plain convolutions; left whole", x.name,
+                      sorted({n.op_type for n in readers}))
         return 1
-    k = -(-c // most)
-    sizes = [c // k + (1 if g < c % k else 0) for g in range(k)]
-    bounds = np.cumsum([0, *sizes]).tolist()
+    weights = [numpy_helper.to_array(init[n.input[1]]) for n in readers]
+    runs = _reader_runs([frozenset(k for k, w in enumerate(weights) if np.any(w[:, p])) for p in range(c)])
+    if len(runs) == 1 and c <= most:
+        return 1
+    bounds, group_readers = [0], []
+    for a, b, who in runs:  # each run as few and as even groups as can be
+        k = -(-(b - a) // most)
+        for g in range(k):
+            bounds.append(bounds[-1] + (b - a) // k + (1 if g < (b - a) % k else 0))
+            group_readers.append(who)
+    sizes = np.diff(bounds).tolist()
     names = [x.name] + [f"{x.name}.{a}" for a in bounds[1:-1]]
     new_inputs = []
     for name, n_planes in zip(names, sizes):
@@ -322,20 +337,22 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
         vi.name = name
         vi.type.tensor_type.shape.dim[1].dim_value = n_planes
         new_inputs.append(vi)
-    nodes = []
+    nodes, seen_by = [], {}
     for node in graph.node:
         if node not in readers:
             nodes.append(node)
             continue
-        w = numpy_helper.to_array(init[node.input[1]])
-        label = node.name or node.output[0]
-        parts = []
-        for g, (name, a, b) in enumerate(zip(names, bounds[:-1], bounds[1:])):
+        k = readers.index(node)
+        groups = [g for g, who in enumerate(group_readers) if k in who] or [0]  # a convolution of zeros: the first
+        seen_by[node.output[0]] = set(groups)
+        w, label, parts = weights[k], node.name or node.output[0], []
+        for j, g in enumerate(groups):
+            a, b = bounds[g], bounds[g + 1]
             wname = f"{label}/planes{a}_weight"
             graph.initializer.append(numpy_helper.from_array(np.ascontiguousarray(w[:, a:b]), wname))
-            ins = [name, wname] + ([node.input[2]] if g == 0 and len(node.input) > 2 and node.input[2] else [])
-            out = f"{label}/planes{a}"
-            nodes.append(helper.make_node("Conv", ins, [out], name=out))
+            ins = [names[g], wname] + ([node.input[2]] if j == 0 and len(node.input) > 2 and node.input[2] else [])
+            out = node.output[0] if len(groups) == 1 else f"{label}/planes{a}"
+            nodes.append(helper.make_node("Conv", ins, [out], name=f"{label}/planes{a}"))
             nodes[-1].attribute.extend(node.attribute)
             parts.append(out)
         acc = parts[0]
@@ -343,6 +360,7 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
             out = node.output[0] if j == len(parts) - 1 else f"{label}/planes_sum{j}"
             nodes.append(helper.make_node("Sum", [acc, part], [out], name=f"{label}/planes_sum{j}"))
             acc = out
+    nodes += _probe_every_group(nodes, names, seen_by)
     del graph.node[:]
     graph.node.extend(nodes)
     read = {i for n in graph.node for i in n.input}
@@ -351,15 +369,61 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     others = [i for i in graph.input if i.name != x.name and (i.name not in init or i.name in read)]
     del graph.input[:]
     graph.input.extend(new_inputs + others)
-    return k
+    return len(names)
+
+
+def _reader_runs(reads: list[frozenset[int]]) -> list[tuple[int, int, frozenset[int]]]:
+    """``(first plane, end, readers)`` of each run of consecutive planes that the same convolutions read
+    (``reads[p]``: the convolutions with a weight on plane ``p`` that is not zero). A plane that none
+    reads joins the run before it (the first planes: the run after them), so that every group is read."""
+    known = [r for r in reads if r]
+    if not known:
+        return [(0, len(reads), frozenset())]
+    filled, last = [], known[0]
+    for r in reads:
+        last = r or last
+        filled.append(last)
+    runs: list[tuple[int, int, frozenset[int]]] = []
+    for p, r in enumerate(filled):
+        if runs and runs[-1][2] == r:
+            runs[-1] = (runs[-1][0], p + 1, r)
+        else:
+            runs.append((p, p + 1, r))
+    return runs
+
+
+def _probe_every_group(nodes: list[Any], names: list[str], seen_by: dict[str, set[int]]) -> list[Any]:
+    """The nodes that make the finite probe (:func:`add_finite_probe`, if ``nodes`` hold it) see every
+    group of input planes: the mean of each group the tensor it reads does not cover (``seen_by``: the
+    groups each convolution's output has seen), summed with it. Renames the probe's own reduction's output."""
+    from onnx import helper
+
+    probe = next((n for n in nodes if n.name == PROBE_NODES[1]), None)
+    mean = next((n for n in nodes if n.name == PROBE_NODES[0]), None)
+    if probe is None or mean is None:
+        return []
+    missing = [g for g in range(len(names)) if g not in seen_by.get(mean.input[0], set())]
+    if not missing:
+        return []
+    extra, parts = [], [f"{PROBE_NAME}/stem"]
+    probe.output[0] = parts[0]
+    for g in missing:
+        extra.append(helper.make_node("GlobalAveragePool", [names[g]], [f"{PROBE_NAME}/{names[g]}_mean"],
+                                      name=f"{PROBE_NODES[0]}/{names[g]}"))
+        extra.append(helper.make_node("ReduceSum", [extra[-1].output[0]], [f"{PROBE_NAME}/{names[g]}"], keepdims=0,
+                                      name=f"{PROBE_NODES[1]}/{names[g]}"))
+        parts.append(extra[-1].output[0])
+    extra.append(helper.make_node("Sum", parts, [PROBE_NAME], name=f"{PROBE_NODES[1]}/groups"))
+    return extra
 
 
 def _join_groups(model: Any) -> int:
     """Undo :func:`split_input_planes` on an ``onnx.ModelProto``, in place: the planes of the inputs
-    ``input``, ``input.K``, ... in one input ``input`` again, each set of per-group convolutions and
-    the Sums that add them one convolution of the concatenated weights (the first group's bias), whose
-    output keeps the last Sum's name. Returns the number of inputs the planes came in; raises
-    :class:`ExportError` for a graph whose inputs are not groups of one input's planes."""
+    ``input``, ``input.K``, ... in one input ``input`` again, each set of per-group convolutions and the
+    Sums that add them one convolution of the concatenated weights (zeros for the planes of a group it
+    did not read; the bias it had), whose output keeps the last Sum's name, and the finite probe back to
+    the stem's output alone (which now sees every plane again). Returns the number of inputs the planes
+    came in; raises :class:`ExportError` for a graph whose inputs are not groups of one input's planes."""
     import onnx
     from onnx import helper, numpy_helper
 
@@ -380,43 +444,50 @@ def _join_groups(model: Any) -> int:
         raise ExportError(f"the graph's inputs {[i.name for i in inputs]} are not planes in groups as rtp-export "
                           f"writes them ({first.name}, {first.name}.K, ... of fixed plane counts): nothing joined")
     group = {i.name: g for g, i in enumerate(inputs)}
-    producer = {o: n for n in graph.node for o in n.output}
-    readers = {i.name: [n for n in graph.node if i.name in n.input] for i in inputs}
-    joined: dict[int, Any] = {}  # index of the first group's convolution -> the convolution that replaces it
-    dropped: set[int] = set()
-    index = {id(n): k for k, n in enumerate(graph.node)}
     failure = ExportError(f"{first.name}'s planes are read by nodes other than one convolution per group added by "
                           "Sums (rtp-export's split_input_planes): nothing joined")
-    for conv in readers[first.name]:
-        if conv.op_type != "Conv" or conv.input[0] != first.name or conv.input[1] not in init:
-            raise failure
-        convs, sums, acc = [conv], [], conv.output[0]
-        while len(convs) < len(inputs):
-            users = [n for n in graph.node if acc in n.input]
-            if len(users) != 1 or users[0].op_type != "Sum" or len(users[0].input) != 2:
+    nodes = [n for n in graph.node if not n.name.startswith((f"{PROBE_NODES[0]}/", f"{PROBE_NODES[1]}/"))]
+    for n in nodes:  # the probe reads the stem's output alone again
+        if n.name == PROBE_NODES[1]:
+            n.output[0] = PROBE_NAME
+    members: dict[str, list[Any]] = {}  # tensor -> the per-group convolutions whose sum it is
+    summed: set[str] = set()
+    dropped: set[int] = set()
+    for n in nodes:
+        if n.input and n.input[0] in group:
+            if n.op_type != "Conv" or n.input[1] not in init or any(i in group for i in n.input[1:]):
                 raise failure
-            other = producer.get([i for i in users[0].input if i != acc][0])
-            if (other is None or other.op_type != "Conv" or group.get(other.input[0]) != len(convs)
-                    or other.input[1] not in init or len([i for i in other.input if i]) != 2
-                    or list(other.attribute) != list(conv.attribute)):
-                raise failure
-            convs.append(other)
-            sums.append(users[0])
-            acc = users[0].output[0]
-        w = np.concatenate([numpy_helper.to_array(init[c.input[1]]) for c in convs], axis=1)
-        label = acc
-        graph.initializer.append(numpy_helper.from_array(w, f"{label}/joined_weight"))
-        ins = [first.name, f"{label}/joined_weight", *[i for i in conv.input[2:] if i]]
-        new = helper.make_node("Conv", ins, [acc], name=conv.name.rsplit("/planes", 1)[0] or acc)
-        new.attribute.extend(conv.attribute)
-        joined[index[id(conv)]] = new
-        dropped |= {index[id(n)] for n in convs[1:] + sums}
-    for name, nodes in readers.items():  # every group read only by the convolutions joined above
-        if name != first.name and {index[id(n)] for n in nodes} - dropped:
+            members[n.output[0]] = [n]
+        elif n.op_type == "Sum" and len(n.input) == 2 and all(i in members for i in n.input):
+            members[n.output[0]] = members[n.input[0]] + members[n.input[1]]
+            summed |= set(n.input)
+            dropped.add(id(n))
+        elif any(i in group for i in n.input):
             raise failure
-    nodes = [joined.get(k, n) for k, n in enumerate(graph.node) if k not in dropped]
+    joined: dict[int, Any] = {}
+    for tensor, convs in members.items():
+        if tensor in summed:
+            continue
+        groups = [group[c.input[0]] for c in convs]
+        biases = [c.input[2] for c in convs if len(c.input) > 2 and c.input[2]]
+        if len(set(groups)) != len(groups) or len(biases) > 1 or any(list(c.attribute) != list(convs[0].attribute)
+                                                                      for c in convs):
+            raise failure
+        parts = {g: numpy_helper.to_array(init[c.input[1]]) for g, c in zip(groups, convs)}
+        shape = next(iter(parts.values())).shape
+        if any(w.shape[1] != sizes[g] or w.shape[0] != shape[0] or w.shape[2:] != shape[2:] for g, w in parts.items()):
+            raise failure
+        w = np.concatenate([parts.get(g, np.zeros((shape[0], sizes[g], *shape[2:]), np.float32))
+                            for g in range(len(inputs))], axis=1)
+        graph.initializer.append(numpy_helper.from_array(w, f"{tensor}/joined_weight"))
+        new = helper.make_node("Conv", [first.name, f"{tensor}/joined_weight", *biases], [tensor],
+                               name=convs[0].name.rsplit("/planes", 1)[0] or tensor)
+        new.attribute.extend(convs[0].attribute)
+        joined[id(convs[0])] = new
+        dropped |= {id(c) for c in convs[1:]}
+    rebuilt = [joined.get(id(n), n) for n in nodes if id(n) not in dropped]
     del graph.node[:]
-    graph.node.extend(nodes)
+    graph.node.extend(rebuilt)
     read = {i for n in graph.node for i in n.input}
     for t in [i for i in graph.initializer if i.name not in read]:
         graph.initializer.remove(t)
@@ -863,8 +934,8 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
     """Bring an rtp model exported by an older rtp up to this one's format: rewrite its metadata
     through :func:`write_metadata` so that it records the digest of the graph and weights (models
     exported before rtp wrote digests), give it the finite probe (:func:`add_finite_probe`) where
-    its first layer allows one, and its planes in groups of at most seven inputs
-    (:func:`split_input_planes`). The weights, the metric output and every other metadata field stay as
+    its first layer allows one, and its planes in the groups :func:`split_input_planes` gives them
+    today (a model in groups is joined first). The weights, the metric output and every other metadata field stay as
     they are; the file is replaced atomically and loaded back to check that it predicts as before
     (exactly, or within float rounding where the planes were split)."""
     import onnx
@@ -880,11 +951,11 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
     except Exception as err:  # onnx raises DecodeError and friends
         raise ModelLoadError(f"{str(path)!r} is not an ONNX model onnx can read: {err}") from err
     meta = before.metadata
+    grouped = _join_groups(model) > 1  # one input again, then the groups of today's rules
     if meta.finite_probe is None:
         meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
-    whole = len(_plane_inputs(model.graph)) == 1  # not split before
-    split = split_input_planes(model) > 1 and whole
+    split = split_input_planes(model) > 1
     write_metadata(model, meta)
     _save_unchanged(model, before, path, f"restamping {path} changed its predictions; the file is left as it was",
-                    reassociated=split)
+                    reassociated=split or grouped)
     return path

@@ -17,7 +17,7 @@ from onnx import helper
 from rtp import export, sdk
 from rtp.train import checkpoint
 
-from .conftest import base_metadata, trained_like_fast_net
+from .conftest import base_metadata, split_model, trained_like_fast_net
 
 NINE = ["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "metallic", "specular", "reprojected.y.blocks",
         "albedo.y.blocks"]
@@ -138,6 +138,38 @@ def test_join_planes_gives_back_the_one_input_model(nine_pt: Path, tmp_path: Pat
                           ([str(grouped), "-o", "x.onnx", "--strip-probe", str(grouped)], "takes only -o")):
         bad_cli = subprocess.run([*cmd, "--join-planes", *args], capture_output=True, text=True, cwd=tmp_path)
         assert bad_cli.returncode == 2 and message in bad_cli.stderr, bad_cli.stderr
+
+
+def test_planes_only_the_tile_contrast_reads_come_in_a_group_the_stem_does_not_read(tmp_path: Path) -> None:
+    """A split network's stem weighs its ``.tiles`` planes zero and its tile contrast reads nothing else:
+    the planes come in 7 + 2 inputs, each convolution reads only its own, the predictions and the split
+    path's are the one-input export's, the probe still refuses a NaN anywhere (a pixel the contrast never
+    reads too), and joining gives back the one-input graph to the bit."""
+    grouped = split_model(tmp_path, "tiles")
+    whole = sdk.load(export.export_checkpoint(tmp_path / "split-tiles.pt", tmp_path / "whole.onnx", split_planes=False))
+    assert _graph_inputs(grouped) == [("input", 7), ("input.7", 2)]
+    graph = onnx.load(str(grouped)).graph
+    convs = {n.output[0]: n.input[0] for n in graph.node if n.op_type == "Conv" and n.input[0].startswith("input")}
+    assert sorted(convs.values()) == ["input", "input.7"] and not [n for n in graph.node if n.name.endswith("planes_sum1")]
+    pred = sdk.load(grouped)
+    x = np.random.default_rng(6).random((9, 64, 96), dtype=np.float32)
+    x[7:] = sdk.tile_variances(x[0])[None]
+    np.testing.assert_allclose(pred.predict_raw(x), whole.predict_raw(x), rtol=1e-5, atol=1e-6)
+    errors, feats = pred.predict_split(x)
+    np.testing.assert_allclose(feats, whole.predict_split(x)[1], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(pred.predict_tail(feats, x), errors, rtol=1e-5, atol=1e-6)
+    for plane, y, xx in ((3, 40, 50), (8, 5, 9), (7, 63, 95)):  # (5, 9) and (63, 95): pixels the contrast skips
+        bad = x.copy()
+        bad[plane, y, xx] = np.inf
+        with pytest.raises(sdk.NonFiniteInputError):
+            pred.predict(bad)
+    joined = sdk.load(export.join_input_planes(grouped, tmp_path / "joined.onnx"))
+    assert joined.graph_inputs == (("input", tuple(whole.metadata.inputs)),)
+    np.testing.assert_array_equal(joined.predict_raw(x), whole.predict_raw(x))
+    export.restamp(tmp_path / "joined.onnx")  # back to today's groups
+    assert _graph_inputs(tmp_path / "joined.onnx") == [("input", 7), ("input.7", 2)]
+    np.testing.assert_allclose(sdk.load(tmp_path / "joined.onnx").predict_raw(x), whole.predict_raw(x), rtol=1e-5,
+                               atol=1e-6)
 
 
 def test_join_planes_refuses_inputs_rtp_export_did_not_split(tmp_path: Path) -> None:
