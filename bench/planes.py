@@ -1,7 +1,7 @@
 """The derived input planes on a CPU: what an adapter without a GPU path pays per frame to build them.
 
     python bench/planes.py [--repeats 7] [--sizes 1920x1080,1280x720]
-    python bench/planes.py --against REV [--scenes procedural:0,20kdm2] [--frames 30]
+    python bench/planes.py --against REV [--scenes procedural:0,20kdm2] [--frames 30] [--data data/test]
 
 The shipped JNYang, FLIP and PSNR read two ``.blocks`` planes (``sdk.block_variances`` of the
 reprojected frame's and the albedo's luma); the moderngl adapter builds them in a shader, the
@@ -16,9 +16,12 @@ Prints a Markdown table of medians (ms).
 ``--against REV`` times nothing: it loads ``sdk/_channels.py`` as it was at git revision ``REV`` and
 counts the values of the ``.blocks`` and ``.tiles`` planes that differ from this checkout's, on the
 lumas of rendered frames (the final colour at full rate and at 4x4, the albedo, the same in float64,
-and a crop whose sides are not multiples of 4; every tenth frame of each scene's fast camera path)
-and on random, flat, two-level, near-flat and wide-range planes of many sizes. Exits 1 if any differ:
-a faster implementation must give the planes the shipped models were trained and scored on.
+and a crop whose sides are not multiples of 4; every tenth frame of each scene's fast camera path),
+of a dataset's samples (``--data``: the reprojected frame's and the albedo's, which the models read)
+and of random, flat, two-level, near-flat and wide-range planes of many sizes. For every ``.blocks``
+value that differs it computes the cell's block variances in exact rationals and says which of the
+two values is nearer. Exits 1 if ``REV``'s ever is: a faster implementation must give the planes the
+shipped models were trained and scored on, or more exact ones.
 """
 
 from __future__ import annotations
@@ -56,9 +59,10 @@ def main() -> None:
     ap.add_argument("--against", metavar="REV", help="compare the planes with those of sdk/_channels.py at git REV")
     ap.add_argument("--scenes", default="procedural:0", help="with --against: scenes whose frames are compared")
     ap.add_argument("--frames", type=int, default=30, help="with --against: frames of each scene's path")
+    ap.add_argument("--data", help="with --against: a dataset folder whose samples' lumas are compared too")
     args = ap.parse_args()
     if args.against:
-        raise SystemExit(_against(args.against, args.scenes.split(","), args.frames))
+        raise SystemExit(_against(args.against, args.scenes.split(","), args.frames, args.data))
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
     rng = np.random.default_rng(0)
@@ -86,15 +90,16 @@ def _row(rng: np.random.Generator, w: int, h: int, repeats: int) -> list[float]:
             median_ms(lambda: tile_block_levels(planes, 16), repeats)]
 
 
-def _against(rev: str, scenes: list[str], frames: int) -> int:
-    """Count the ``.blocks`` and ``.tiles`` values that differ from ``sdk/_channels.py`` at ``rev``."""
+def _against(rev: str, scenes: list[str], frames: int, data: str | None) -> int:
+    """Count the ``.blocks`` and ``.tiles`` values that differ from ``sdk/_channels.py`` at ``rev``, and
+    for each ``.blocks`` value that differs which of the two is nearer its exact value. 1 where ``rev``'s is."""
     import importlib.util
     import subprocess
     import sys
     import tempfile
     from pathlib import Path
 
-    from rtp.capture import load_scene
+    from rtp.capture import DatasetReader, load_scene
     from rtp.capture.paths import PathPlayer, camera_path
 
     root = Path(__file__).resolve().parents[1]
@@ -109,13 +114,22 @@ def _against(rev: str, scenes: list[str], frames: int) -> int:
         spec.loader.exec_module(then)
     pairs = {"block_variances": (then.block_variances, sdk.block_variances),
              "tile_variances": (then.tile_variances, sdk.tile_variances)}
-    counts = {name: [0, 0] for name in pairs}
+    counts = {(source, name): [0, 0] for source in ("frames", "dataset", "synthetic") for name in pairs}
+    nearer = {"this checkout": 0, rev: 0, "neither": 0}
 
-    def compare(plane: np.ndarray) -> None:
+    def compare(plane: np.ndarray, source: str) -> None:
         for name, (old, new) in pairs.items():
             a, b = old(plane), new(plane)
-            counts[name][0] += a.size if a.shape != b.shape or a.dtype != b.dtype else int((a != b).sum())
-            counts[name][1] += a.size
+            if a.shape != b.shape or a.dtype != b.dtype:
+                raise SystemExit(f"{name}: {rev} gives {a.shape} {a.dtype}, this checkout {b.shape} {b.dtype}")
+            differ = np.argwhere(a != b)
+            counts[source, name][0] += len(differ)
+            counts[source, name][1] += a.size
+            if name == "block_variances":
+                for y, x in differ:
+                    want = _exact_block_value(plane, int(y), int(x))
+                    da, db = abs(float(a[y, x]) - want), abs(float(b[y, x]) - want)
+                    nearer["this checkout" if db < da else rev if da < db else "neither"] += 1
 
     for name in scenes:
         scn, blockers = load_scene(name, None, None, None)
@@ -126,7 +140,12 @@ def _against(rev: str, scenes: list[str], frames: int) -> int:
                     f = pf.frame
                     y = sdk.luma(f.colour["1x1"])
                     for plane in (y, sdk.luma(f.colour["4x4"]), sdk.luma(f.albedo), y.astype(np.float64), y[3:-5, 1:-2]):
-                        compare(plane)
+                        compare(plane, "frames")
+    if data:
+        reader = DatasetReader(data)
+        for sid in reader.ids:
+            for buffer in ("reprojected", "albedo"):  # the lumas whose planes the models read
+                compare(sdk.luma(reader[sid].buffer(buffer)), "dataset")
     rng = np.random.default_rng(1)
     for trial in range(300):
         h, w = (int(v) for v in rng.integers(1, 80, 2))
@@ -136,13 +155,39 @@ def _against(rev: str, scenes: list[str], frames: int) -> int:
                  (rng.random((h, w)) > 0.5).astype(np.float32) * np.float32(rng.random()),
                  (0.5 + 1e-3 * rng.standard_normal((h, w))).astype(np.float32),
                  rng.random((h, w)) * 10 ** rng.uniform(-6, 2))[kind]
-        compare(plane)
-    print(f"against {rev}: scenes {', '.join(scenes)}, every tenth of {frames} frames, and 300 synthetic planes\n")
-    print("| plane | values compared | values that differ |")
-    print("|---|---:|---:|")
-    for name, (differ, total) in counts.items():
-        print(f"| {name} | {total:,} | {differ:,} |")
-    return 1 if any(d for d, _ in counts.values()) else 0
+        compare(plane, "synthetic")
+    what = {"frames": f"scenes {', '.join(scenes)}, every tenth of {frames} frames",
+            "dataset": f"the reprojected and albedo luma of every sample of {data}", "synthetic": "300 synthetic planes"}
+    print(f"against {rev}\n")
+    print("| planes | plane | values compared | values that differ |")
+    print("|---|---|---:|---:|")
+    for (source, name), (differ, total) in counts.items():
+        if total:
+            print(f"| {what[source]} | {name} | {total:,} | {differ:,} |")
+    print("\n.blocks values that differ, nearer their exact value (a variance per block in exact rationals): "
+          + ", ".join(f"{k} {v}" for k, v in nearer.items()))
+    return 1 if nearer[rev] else 0
+
+
+def _exact_block_value(plane: np.ndarray, y: int, x: int) -> float:
+    """The ``.blocks`` value at pixel ``(y, x)`` of ``plane`` from the cell's block variances computed in
+    exact rationals (the normalised log in float64)."""
+    from fractions import Fraction
+
+    c = sdk.BLOCK_CELL
+    h, w = plane.shape
+    padded = np.pad(np.asarray(plane), ((0, -h % c), (0, -w % c)), mode="edge")
+    cy, cx = y - y % c, x - x % c
+    bw, bh = sdk.rate_size(sdk.BLOCK_RATES[(y - cy) * c + (x - cx)])
+    cell = [[Fraction(float(v)) for v in row] for row in padded[cy:cy + c, cx:cx + c]]
+    total = Fraction(0)
+    for by in range(0, c, bh):
+        for bx in range(0, c, bw):
+            values = [cell[i][j] for i in range(by, by + bh) for j in range(bx, bx + bw)]
+            mean = sum(values, Fraction(0)) / len(values)
+            total += sum(((v - mean) ** 2 for v in values), Fraction(0))
+    v = np.log(float(total / (c * c)) + sdk.BLOCK_EPS) / -np.log(sdk.BLOCK_EPS) + 1.0
+    return float(np.clip(v, 0.0, 1.0))
 
 
 if __name__ == "__main__":
