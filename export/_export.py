@@ -464,6 +464,8 @@ def _join_groups(model: Any) -> int:
             dropped.add(id(n))
         elif any(i in group for i in n.input):
             raise failure
+    if any(sum(t in n.input for n in nodes) != 1 for t in summed):  # a partial sum read by another node too
+        raise failure
     joined: dict[int, Any] = {}
     for tensor, convs in members.items():
         if tensor in summed:

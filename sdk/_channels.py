@@ -205,8 +205,8 @@ def _cell_variances(plane: np.ndarray, fn: str) -> tuple[int, int, np.ndarray]:
         p = np.pad(p, ((0, -h % c), (0, -w % c)), mode="edge")
     hc, wc = p.shape[0] // c, p.shape[1] // c
     # A rate's blocks, aligned to the cell, lose what the cell's Haar details finer than the block
-    # hold. Per 2x2 quarter of the cell (pixels a b / c d), the details h = (a - b) + (c - d),
-    # v = (a + b) - (c + d) and d = (a - b) - (c - d); over the quarters' sums S, the same three at
+    # hold. Per 2x2 quarter of the cell (pixels a, b in its top row, c, e under them), the details
+    # h = (a - b) + (c - e), v = (a + b) - (c + e) and d = (a - b) - (c - e); over the quarters' sums, the same three at
     # twice the scale, H, V and D. The squared distance of the cell's 16 values to their blocks' means
     # is then: 1x2 (columns of two rows) (sum v^2 + sum d^2) / 4; 2x1 (sum h^2 + sum d^2) / 4; 2x2
     # (sum h^2 + v^2 + d^2) / 4; 2x4 that plus (V^2 + D^2) / 16; 4x2 plus (H^2 + D^2) / 16; 4x4
