@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import onnx
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from onnx import helper
 
 from rtp import export, sdk
@@ -209,6 +211,75 @@ def test_groups_are_as_few_and_as_even_as_can_be(planes: int, sizes: list[int]) 
     session = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
     feed = {i.name: x[:, a:b] for i, a, b in zip(session.get_inputs(), ends[:-1], ends[1:])}
     np.testing.assert_allclose(session.run(None, feed)[0], want, rtol=1e-5)
+
+
+def _zero_plane_graph(planes: int, dead: list[list[bool]]) -> onnx.ModelProto:
+    """A stem (4x4, stride 4, every pixel once) and ``len(dead) - 1`` tile readers (3x4, stride 16) of the
+    same planes, weights zero on the planes ``dead[k]`` marks, pooled to the tile grid and concatenated,
+    with rtp's finite probe on the stem."""
+    rng = np.random.default_rng(planes + 10 * len(dead))
+    inits, nodes, outs = [], [], []
+    for k, zero in enumerate(dead):
+        kernel, stride = ((4, 4), 4) if k == 0 else ((3, 4), 16)
+        w = rng.standard_normal((3, planes, *kernel)).astype(np.float32)
+        w[:, np.array(zero, bool)] = 0.0
+        inits.append(helper.make_tensor(f"w{k}", onnx.TensorProto.FLOAT, w.shape, w.ravel()))
+        nodes.append(helper.make_node("Conv", ["input", f"w{k}"], [f"c{k}"], kernel_shape=list(kernel),
+                                      strides=[stride, stride], name=f"conv{k}"))
+        if k == 0:
+            nodes.append(helper.make_node("MaxPool", ["c0"], ["p0"], kernel_shape=[4, 4], strides=[4, 4]))
+        outs.append("p0" if k == 0 else f"c{k}")
+    nodes.append(helper.make_node("Concat", outs, ["metric"], axis=1))
+    graph = helper.make_graph(nodes, "g", [helper.make_tensor_value_info("input", onnx.TensorProto.FLOAT,
+                                                                         [1, planes, "h", "w"])],
+                              [helper.make_tensor_value_info("metric", onnx.TensorProto.FLOAT,
+                                                             [1, 3 * len(dead), "th", "tw"])], inits)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    assert export.add_finite_probe(model, 16) == "finite_probe"
+    return model
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(2, 12).flatmap(lambda c: st.lists(st.lists(st.booleans(), min_size=c, max_size=c),
+                                                      min_size=1, max_size=3)))
+def test_groups_follow_the_planes_each_convolution_reads(dead: list[list[bool]]) -> None:
+    """Any pattern of planes the convolutions weigh zero: after the split each convolution reads the groups
+    holding planes it weighs and no other (but groups of planes none weighs), no group holds more than
+    seven, the outputs are the one-input graph's within float rounding, a NaN in any plane reaches the
+    probe, and joining gives back the one-input graph's outputs to the bit."""
+
+    import onnxruntime as ort
+
+    planes = len(dead[0])
+    model = _zero_plane_graph(planes, dead)
+    run = lambda m, feed: ort.InferenceSession(m.SerializeToString(),  # noqa: E731
+                                               providers=["CPUExecutionProvider"]).run(None, feed)
+    x = np.random.default_rng(planes).random((1, planes, 32, 48), dtype=np.float32)
+    want = run(model, {"input": x})
+    split = onnx.ModelProto()
+    split.CopyFrom(model)
+    export.split_input_planes(split)
+    onnx.checker.check_model(split, full_check=True)
+    groups = [(i.name, i.type.tensor_type.shape.dim[1].dim_value) for i in split.graph.input]
+    starts = np.cumsum([0] + [n for _, n in groups])
+    assert starts[-1] == planes and max(n for _, n in groups) <= export.PLANES_PER_INPUT
+    feed = lambda a: {name: a[:, s:s + n] for (name, n), s in zip(groups, starts)}  # noqa: E731
+    unweighed = {name for (name, n), s in zip(groups, starts) if all(all(z[s:s + n]) for z in dead)}
+    for k, zero in enumerate(dead):  # planes no convolution weighs ride with a neighbouring group's readers
+        read = {n.input[0] for n in split.graph.node if n.op_type == "Conv" and n.name.startswith(f"conv{k}")}
+        weighed = {name for (name, n), s in zip(groups, starts) if not all(zero[s:s + n])}
+        if weighed:
+            assert weighed <= read <= weighed | unweighed, (k, read, weighed)
+        else:  # a convolution of zeros reads the first group
+            assert read == {"input"}, (k, read)
+    got = run(split, feed(x))
+    np.testing.assert_allclose(got[0], want[0], rtol=1e-5, atol=1e-5)
+    for plane in range(planes):
+        bad = x.copy()
+        bad[0, plane, 31, 47] = np.nan
+        assert not np.isfinite(run(split, feed(bad))[1]), plane
+    export._export._join_groups(split)
+    np.testing.assert_array_equal(run(split, {"input": x})[0], want[0])
 
 
 def test_a_graph_whose_planes_another_op_reads_is_left_whole() -> None:
