@@ -164,6 +164,7 @@ def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile:
     speed = np.pad(np.abs(motion), ((0, th * tile - h), (0, tw * tile - w), (0, 0)), mode="edge")
     (e_y, e_x), mean = Yang2019(tile).half_rate_error(frame)
     v = Yang2019(tile, motion_scale=0.5).tile_motion(frame)
+    v_max = Yang2019(tile, motion_scale=0.5, motion_reduce="max").tile_motion(frame)
     for i in range(th):
         for j in range(tw):
             t = edge[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile]
@@ -171,6 +172,7 @@ def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile:
             assert mean[i, j] == pytest.approx(lum[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile].mean(), rel=1e-12)
             m = speed[i * tile:(i + 1) * tile, j * tile:(j + 1) * tile]
             assert v[0, i, j] == 0.5 * float(m[..., 1].min()) and v[1, i, j] == 0.5 * float(m[..., 0].min())
+            assert v_max[0, i, j] == 0.5 * float(m[..., 1].max()) and v_max[1, i, j] == 0.5 * float(m[..., 0].max())
     ffx = FidelityFX(tile, additional_rates=True, motion_factor=0.0)
     ranges = ffx._additional(frame)
     flum = np.pad((0.30 * img[..., 0] + 0.59 * img[..., 1] + 0.11 * img[..., 2]).astype(np.float64),
