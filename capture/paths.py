@@ -324,6 +324,13 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
     ref = colour["1x1"]
     h, w = ref.shape[:2]
     rates = np.asarray(rates)
+    known = sorted(sdk.RATE_CODES.values())
+    ok = rates.dtype.kind in "iu" and (rates.size == 0 or int(rates.min()) >= 0)
+    counts = np.bincount(rates.ravel(), minlength=known[-1] + 1) if ok else np.zeros(0, np.intp)
+    if not ok or np.any(np.delete(counts, known)):
+        got = sorted({int(c) for c in np.unique(rates)} - set(known)) if rates.dtype.kind in "iu" else rates.dtype
+        raise sdk.ParameterError(f"rates: expected the rate codes of {', '.join(sdk.ALL_RATES)} ({known}), got {got}",
+                                 "rates")
     out = np.empty(ref.shape, ref.dtype)
     th, tw = h // tile, w // tile
     if h % tile or w % tile or rates.shape[0] < th or rates.shape[1] < tw:  # ragged edge tiles: per pixel
@@ -333,10 +340,17 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
             if m.any():
                 out[m] = colour[rate][m]
         return out
-    # whole tiles: copy each tile's block from its rate's image (one image's worth of copying)
+    # whole tiles: the commonest rate's image copied whole (one contiguous copy), then every other tile's
+    # block from its rate's image (a gather and a scatter per tile: about twice a plain copy's time a byte)
+    if rates.shape != (th, tw):
+        rates = rates[:th, :tw]
+        counts = np.bincount(rates.ravel(), minlength=len(counts))
+    common = int(np.argmax(counts))
+    np.copyto(out, colour[sdk.RATE_NAMES[common]])
     blocks = out.reshape(th, tile, tw, tile, -1)
-    rates = rates[:th, :tw]
     for rate, code in sdk.RATE_CODES.items():
+        if code == common:
+            continue
         ys, xs = np.nonzero(rates == code)
         if ys.size:
             src = np.ascontiguousarray(colour[rate]).reshape(th, tile, tw, tile, -1)

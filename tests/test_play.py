@@ -71,6 +71,10 @@ def test_composite_takes_each_tile_from_its_rate(hw: tuple[int, int]) -> None:
             rate = next(k for k, v in sdk.RATE_CODES.items() if v == codes[y // TILE, x // TILE])
             want[y, x] = colour[rate][y, x]
     assert np.array_equal(composite(colour, codes, TILE), want)
+    assert np.array_equal(composite(colour, codes.astype(np.int64), TILE), want)
+    for bad in (np.full_like(codes, 3), np.full(codes.shape, -1), codes.astype(np.float32)):  # 3: no rate's code
+        with pytest.raises(sdk.ParameterError, match="rate codes"):
+            composite(colour, bad, TILE)
 
 
 def test_any_history_reprojects_like_the_renderer(rendered: Any) -> None:

@@ -18,9 +18,10 @@ __all__ = ["flip_rows", "read_texture", "write_texture"]
 _DTYPES = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 
-def flip_rows(image: np.ndarray) -> np.ndarray:
-    """Swap the row order (GL bottom-left origin <-> image top-left origin), contiguous copy."""
-    return np.ascontiguousarray(image[::-1])
+def flip_rows(image: np.ndarray, dtype: Any = None) -> np.ndarray:
+    """Swap the row order (GL bottom-left origin <-> image top-left origin), contiguous copy (converted
+    to ``dtype`` in the same pass when given)."""
+    return np.array(image[::-1], dtype=dtype, order="C")
 
 
 def read_texture(texture: Any, components: int | None = None) -> np.ndarray:
@@ -33,7 +34,7 @@ def read_texture(texture: Any, components: int | None = None) -> np.ndarray:
     arr = raw.reshape(h, w, texture.components)
     if components is not None:
         arr = arr[..., :components]
-    out = flip_rows(arr).astype(np.float32, copy=False)
+    out = flip_rows(arr, np.float32)  # one pass: the flip and float16's widening (read back on every frame)
     if texture.dtype == "f1":
         out = out / np.float32(255.0)
     return out
@@ -47,4 +48,4 @@ def write_texture(texture: Any, image: np.ndarray) -> None:
         arr = arr[..., None]
     if arr.shape != (h, w, texture.components):
         raise ValueError(f"image of shape {arr.shape} does not fit a {w}x{h} texture with {texture.components} components")
-    texture.write(flip_rows(arr.astype(_DTYPES[texture.dtype], copy=False)).tobytes(), alignment=1)
+    texture.write(flip_rows(arr, _DTYPES[texture.dtype]).tobytes(), alignment=1)
