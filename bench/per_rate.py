@@ -18,11 +18,12 @@ the shared one by 6 log2 of the factor.
 Two more columns ask whether the estimates' order across rates matters. A rate's blocks contain those
 of every rate no wider and no taller (2x2's contain 1x2's and 2x1's; 4x4's every other rate's), so an
 error estimate should not fall from a rate to a coarser one: "monotone estimates" replaces each
-estimate by the largest over the rates its blocks contain (one threshold, swept) and "oracle,
-monotone" is the oracle on the truth made so. The true error does fall in places (the coarser rate's
-one sample lands on a better pixel); the oracle keeps that luck, a predictor of monotone estimates
-cannot, so the second oracle is a ceiling nearer what such a predictor can reach. Also printed: the
-share of (tile, rate, contained rate) triples where the estimates and the truth fall.
+estimate by the largest over the rates its blocks contain (``evaluate.monotone_over_rates``; one
+threshold, swept) and "oracle, monotone" is the oracle on the truth made so. The true error does
+fall in places (the coarser rate's one sample lands on a better pixel); the oracle keeps that luck,
+a predictor of monotone estimates cannot, so the second oracle is a ceiling nearer what such a
+predictor can reach. Also printed: the share of (tile, rate, contained rate) triples where the
+estimates and the truth fall.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
+from rtp.evaluate import CONTAINED_RATES, monotone_over_rates
 
 MULTIPLIERS = (0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0)
 #: The global threshold's sweep, as a factor of the model's default (log-spaced; PSNR: an offset in dB).
@@ -92,29 +94,11 @@ def _oracle(truth: np.ndarray, thr: float, hib: bool) -> float:
     return float(best.mean())
 
 
-#: For each rate (``sdk.PREDICTED_RATES`` order, finer before coarser) the indices of the other rates
-#: whose blocks its blocks contain: no wider and no taller.
-CONTAINED = [[j for j, q in enumerate(sdk.PREDICTED_RATES) if q != r
-              and sdk.rate_size(q)[0] <= sdk.rate_size(r)[0] and sdk.rate_size(q)[1] <= sdk.rate_size(r)[1]]
-             for r in sdk.PREDICTED_RATES]
-
-
-def monotone(values: np.ndarray, hib: bool) -> np.ndarray:
-    """``(N, 6, th, tw)`` values made monotone over the rates: each rate's the worst of its own and those of
-    the rates its blocks contain (their envelopes are final first: finer rates come first)."""
-    out = values.copy()
-    worst = np.minimum if hib else np.maximum
-    for i, below in enumerate(CONTAINED):
-        for j in below:
-            out[:, i] = worst(out[:, i], out[:, j])
-    return out
-
-
 def falls(values: np.ndarray, hib: bool) -> float:
     """The share of (tile, rate, contained rate) triples where the coarser rate's value is the better."""
-    n = sum(len(b) for b in CONTAINED) * values[:, 0].size
+    n = sum(len(b) for b in CONTAINED_RATES) * values[:, 0].size
     better = sum(int(((values[:, i] > values[:, j]) if hib else (values[:, i] < values[:, j])).sum())
-                 for i, below in enumerate(CONTAINED) for j in below)
+                 for i, below in enumerate(CONTAINED_RATES) for j in below)
     return better / n
 
 
@@ -153,15 +137,16 @@ def main(argv: list[str] | None = None) -> int:
         p, t = data[held]
         one = [100 * _saved_at(p, t, np.ones(6), thr, hib, x) for x in SHARES]
         per = [100 * _saved_at(p, t, f, thr, hib, x) for x in SHARES]
-        mono = [100 * _saved_at(monotone(p, hib), t, np.ones(6), thr, hib, x) for x in SHARES]
+        mono = [100 * _saved_at(monotone_over_rates(p, hib), t, np.ones(6), thr, hib, x) for x in SHARES]
         print(f"| {held} | {' / '.join(f'{v:.1f}' for v in one)} | {' / '.join(f'{v:.1f}' for v in per)} | "
               f"{' / '.join(f'{v:.1f}' for v in mono)} | {100 * _oracle(t, thr, hib):.1f} | "
-              f"{100 * _oracle(monotone(t, hib), thr, hib):.1f} | {', '.join(f'{v:.2f}' for v in f)} |")
+              f"{100 * _oracle(monotone_over_rates(t, hib), thr, hib):.1f} | {', '.join(f'{v:.2f}' for v in f)} |")
     p_all = np.concatenate([data[s][0] for s in scenes])
     t_all = np.concatenate([data[s][1] for s in scenes])
+    mono_all = monotone_over_rates(t_all, hib)
     print(f"\nA coarser rate's value the better (share of tile, rate, contained-rate triples): estimates "
           f"{100 * falls(p_all, hib):.1f}%, truth {100 * falls(t_all, hib):.1f}%; over all maps the oracle saves "
-          f"{100 * _oracle(t_all, thr, hib):.1f}%, on the monotone truth {100 * _oracle(monotone(t_all, hib), thr, hib):.1f}%")
+          f"{100 * _oracle(t_all, thr, hib):.1f}%, on the monotone truth {100 * _oracle(mono_all, thr, hib):.1f}%")
     return 0
 
 

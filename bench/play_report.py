@@ -38,6 +38,9 @@ from typing import Any
 from rtp.evaluate import METHOD_KINDS
 
 LEVELS = (0.01, 0.02, 0.05)
+#: The methods that are not swept: the oracle, and the oracle on the monotone truth (the ceiling of a
+#: predictor that orders the rates; its column in the targets appears when a run played it).
+ORACLES = ("oracle", "oracle-monotone")
 
 
 def _cell(m: dict[str, Any] | None) -> str:
@@ -62,9 +65,9 @@ def _grids(rep: dict[str, Any]) -> dict[str, list[float]] | None:
     recorded = rep["settings"].get("grids")
     if recorded:
         return {k: [round(v, 6) for v in recorded[k]] for k in ("model", "baseline")}
-    baselines = set(METHOD_KINDS) - {"full", "oracle"}
+    baselines = set(METHOD_KINDS) - set(ORACLES) - {"full"}
     out: dict[str, list[float]] = {}
-    for method in {r["method"] for r in rep.get("rows", [])} - {"full", "oracle"}:
+    for method in {r["method"] for r in rep.get("rows", [])} - set(ORACLES) - {"full"}:
         rows = [r for r in rep["rows"] if r["method"] == method and r.get("value") is not None]
         default = next((r["value"] for r in rows if r.get("default")), None)
         if not default:
@@ -144,14 +147,14 @@ def main() -> None:
             at = {(m["method"], m["fail_share"]): {**m, "work_saved": math.nan if m["work_saved"] is None else m["work_saved"]}
                   for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
             cells = ["" if meth not in methods else " / ".join(_cell(at.get((meth, lv))) for lv in LEVELS)
-                     if meth != "oracle" else _cell(at.get((meth, LEVELS[0]))) for meth in head]
+                     if meth not in ORACLES else _cell(at.get((meth, LEVELS[0]))) for meth in head]
             rows.append(f"| {s['scene']} | {s['seed']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
                         + " | ".join(cells) + " |")
             yang = [max((m for y in ("yang2019", "yang2019-unseen-1x1") if _readable(m := at.get((y, lv)))),
                         key=lambda m: m["work_saved"], default=None) for lv in LEVELS]
             vs_yang = [_ratio(at.get((model, lv)), y) for lv, y in zip(LEVELS, yang)]
-            oracle = at.get(("oracle", LEVELS[0]))
-            of_oracle = [_ratio(at.get((model, lv)), oracle) for lv in LEVELS]
+            of_oracles = [[_ratio(at.get((model, lv)), at.get((o, LEVELS[0]))) for lv in LEVELS]
+                          for o in ORACLES if o in head]
             reused = [[_ratio(at.get((r, lv)), at.get((model, lv))) for lv in LEVELS] for r in reuses]
             # the network's work per frame (a share of a whole-frame run) at each reuse method's default
             work = [next((r["network_frames"] for r in rep.get("rows", []) if r["path"] == path and r["method"] == m
@@ -160,7 +163,8 @@ def main() -> None:
                 if r in methods:
                     kept[r].append((f"{s['scene']} {path}", rs, w))
             targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(
-                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in ((vs_yang, False), (of_oracle, True))) + " | "
+                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in [(vs_yang, False)] + [(o, True) for o in of_oracles])
+                + " | "
                 + " | ".join(" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else
                                                                        f" (network {100 * w:.0f}%)")
                              for rs, w in zip(reused, work)) + " |")
@@ -170,8 +174,9 @@ def main() -> None:
     print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
           "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
           "against k = 1 (>= 95%; in brackets the network's work per frame, a share of a whole-frame run)\n")
-    print(f"| map | seed | path | {model} / Yang | {model} / oracle | " + " | ".join(f"{r} / {model}" for r in reuses) + " |")
-    print("|---|---:|---|---|---|" + "---|" * len(reuses))
+    oracles = [o for o in ORACLES if o in head]
+    print(f"| map | seed | path | {model} / Yang | " + " | ".join(f"{model} / {o}" for o in oracles + reuses) + " |")
+    print("|---|---:|---|---|" + "---|" * len(oracles + reuses))
     print("\n".join(targets))
     _reuse_summary(kept, model)
     if args.plot_reuse:

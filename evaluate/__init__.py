@@ -29,11 +29,13 @@ from ._baselines import (
     restrict_rates,
 )
 from ._evaluate import (
+    CONTAINED_RATES,
     DEFAULT_UNSEEN_FRACTION,
     SPLITS,
     EvaluationReport,
     evaluate,
     failing_tiles,
+    monotone_over_rates,
     spearman,
     tile_unseen_share,
 )
@@ -52,6 +54,7 @@ from ._play import (
 from ._scores import Scores, scores
 
 __all__ = [
+    "CONTAINED_RATES",
     "DEFAULT_METHODS",
     "DEFAULT_UNSEEN_FRACTION",
     "METHOD_KINDS",
@@ -74,6 +77,7 @@ __all__ = [
     "as_frame",
     "evaluate",
     "failing_tiles",
+    "monotone_over_rates",
     "motion_factor_half",
     "motion_factor_quarter",
     "parse_methods",

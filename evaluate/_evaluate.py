@@ -287,6 +287,34 @@ def failing_tiles(codes: np.ndarray, truth: np.ndarray, threshold: float, higher
     return out
 
 
+#: For each predicted rate (``PREDICTED_RATES`` order, finer before coarser) the indices of the other
+#: rates whose blocks its blocks contain, those no wider and no taller: 2x2's contain 1x2's and 2x1's,
+#: 2x4's and 4x2's those and 2x2's, 4x4's all five.
+CONTAINED_RATES: tuple[tuple[int, ...], ...] = tuple(
+    tuple(j for j, q in enumerate(PREDICTED_RATES)
+          if q != r and sdk.rate_size(q)[0] <= sdk.rate_size(r)[0] and sdk.rate_size(q)[1] <= sdk.rate_size(r)[1])
+    for r in PREDICTED_RATES)
+
+
+def monotone_over_rates(values: np.ndarray, higher_is_better: bool = False) -> np.ndarray:
+    """Per-tile values of the six rates (``(..., 6, th, tw)``) made monotone over the rates: each rate's
+    value the worst of its own and those of the rates its blocks contain (:data:`CONTAINED_RATES`).
+    The true error of a coarser rate can be the better one (its one sample per block lands on a
+    better pixel than the finer rate's); a predictor that orders the rates cannot know that luck, so
+    the oracle on the truth made so (``rtp play``'s ``oracle-monotone``) is what such a predictor
+    can reach. A copy; finer rates come first, so each envelope is final before a coarser one reads it."""
+    values = np.asarray(values)
+    if values.ndim < 3 or values.shape[-3] != len(PREDICTED_RATES):
+        raise sdk.InputShapeError(f"expected values with {len(PREDICTED_RATES)} rate channels on axis -3, got shape "
+                                  f"{values.shape}", tuple(values.shape), "(..., 6, th, tw)")
+    out = values.copy()
+    worst = np.minimum if higher_is_better else np.maximum
+    for i, below in enumerate(CONTAINED_RATES):
+        for j in below:
+            worst(out[..., i, :, :], out[..., j, :, :], out=out[..., i, :, :])
+    return out
+
+
 def _split_masks(unseen: np.ndarray) -> dict[str, np.ndarray]:
     return {"all": np.ones(unseen.shape, bool), "seen": ~unseen, "unseen": unseen}
 

@@ -13,7 +13,8 @@ the share of tiles whose rate changed since the previous frame, and the time the
 choose. The first frame has no history and is left out of every summary.
 
 Methods (:func:`parse_methods`): ``full`` (always 1x1), ``oracle`` (the true ``fail_metric`` of the
-frame at ``fail_threshold``), any rtp model (a shipped name or an ``.onnx`` path; ``NAME@k`` runs the
+frame at ``fail_threshold``), ``oracle-monotone`` (the same on the truth made monotone over the rates:
+:func:`~rtp.evaluate.monotone_over_rates`), any rtp model (a shipped name or an ``.onnx`` path; ``NAME@k`` runs the
 network every k-th frame and reprojects its per-tile predictions in between with
 :class:`rtp.sdk.PredictionReuse`, tiles mostly unseen since the last prediction at full rate, or
 predicted afresh on crops with ``NAME@k:fresh``; ``NAME@k:hW`` also blends each network run's
@@ -41,7 +42,7 @@ import numpy as np
 from rtp import sdk
 
 from ._baselines import FidelityFX, Frame, Yang2019
-from ._evaluate import failing_tiles
+from ._evaluate import failing_tiles, monotone_over_rates
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -72,6 +73,9 @@ REUSE_CARRIES = sdk.REUSE_CARRIES
 DEFAULT_METHODS = ("jnyang,jnyang@4,jnyang-reuse@4:features,yang2019,yang2019-unseen-1x1,fidelityfx,"
                    "oracle")
 
+#: Method kinds that read no history (nor are swept): the reference and the oracles.
+_NO_HISTORY = ("full", "oracle", "oracle-monotone")
+
 #: Failing-tile shares at which the matched-quality table reads each method's saving off its sweep.
 FAIL_LEVELS = (0.01, 0.02, 0.05)
 
@@ -79,6 +83,8 @@ FAIL_LEVELS = (0.01, 0.02, 0.05)
 METHOD_KINDS = {
     "full": "every tile at 1x1 (the reference; saves nothing)",
     "oracle": "the true error of the frame (rendered at every rate) at the failure threshold",
+    "oracle-monotone": "the oracle on the true error made monotone over the rates (evaluate.monotone_over_rates): "
+                       "what a predictor that orders the rates can reach",
     "yang2019": "NVIDIA Adaptive Shading (Yang et al. 2019) on the reprojected history, with its motion terms",
     "yang2019-unseen-1x1": "yang2019 with tiles more than half unseen at full rate",
     "fidelityfx": "AMD FidelityFX VRS (1x1, 1x2, 2x1, 2x2) with its motion factor",
@@ -462,7 +468,7 @@ def play(
             for level in FAIL_LEVELS:
                 v = saved_at(pts, level)
                 # a swept method whose sweep never fails this often: its best saving, a lower bound
-                capped = v is not None and m.kind not in ("full", "oracle") and max(f for f, _ in pts) < level
+                capped = v is not None and m.kind not in _NO_HISTORY and max(f for f, _ in pts) < level
                 report.matched.append({"path": pname, "method": m.name, "fail_share": level,
                                        "work_saved": float("nan") if v is None else v, "capped": capped})
     if outdir is not None:
@@ -536,8 +542,9 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
         if m.kind == "full":
             loops.append(_Loop(m, 0.0, "1x1", lambda pf, rp, truth, lp: np.zeros(truth.shape[1:], np.uint8),
                                default=True))
-        elif m.kind == "oracle":
-            loops.append(_Loop(m, fail_thr, f"threshold {fail_thr:g}", _oracle(fail_thr, fail_hib), default=True))
+        elif m.kind in ("oracle", "oracle-monotone"):
+            loops.append(_Loop(m, fail_thr, f"threshold {fail_thr:g}",
+                               _oracle(fail_thr, fail_hib, m.kind == "oracle-monotone"), default=True))
         elif m.kind == "model":
             pred = predictors[m.model]
             meta = pred.metadata
@@ -565,9 +572,9 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
     return loops
 
 
-def _oracle(thr: float, hib: bool) -> Callable[..., np.ndarray]:
+def _oracle(thr: float, hib: bool, monotone: bool = False) -> Callable[..., np.ndarray]:
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
-        return sdk.select_rates(truth, thr, higher_is_better=hib)
+        return sdk.select_rates(monotone_over_rates(truth, hib) if monotone else truth, thr, higher_is_better=hib)
     return decide
 
 
@@ -649,7 +656,7 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
         shown: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for lp in loops:
             measure_flip = flip_frame and lp.default
-            needs_history = lp.method.kind not in ("full", "oracle")
+            needs_history = lp.method.kind not in _NO_HISTORY
             rp = None
             if needs_history:
                 rp = pf.reproject(lp.history) if lp.history is not None else np.zeros(ref.shape, np.float32)

@@ -185,6 +185,24 @@ def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile:
             assert ranges[k, bi, bj] == want, (rate, bi, bj)
 
 
+def test_monotone_over_rates_takes_the_worst_of_the_contained_rates() -> None:
+    from rtp.evaluate import CONTAINED_RATES, monotone_over_rates
+
+    names = [[sdk.PREDICTED_RATES[j] for j in c] for c in CONTAINED_RATES]
+    assert names == [[], [], ["1x2", "2x1"], ["1x2", "2x1", "2x2"], ["1x2", "2x1", "2x2"],
+                     ["1x2", "2x1", "2x2", "2x4", "4x2"]]
+    rng = np.random.default_rng(2)
+    v = rng.random((3, 6, 4, 5)).astype(np.float32)
+    m = monotone_over_rates(v)
+    assert m.dtype == v.dtype and m is not v and np.array_equal(monotone_over_rates(m), m)  # a copy; idempotent
+    for i, below in enumerate(CONTAINED_RATES):
+        assert np.array_equal(m[:, i], np.max(v[:, [i, *below]], axis=1))  # the contained rates' own, transitively
+    assert np.array_equal(monotone_over_rates(v[0]), m[0])  # one frame (6, th, tw)
+    assert np.array_equal(monotone_over_rates(-v, higher_is_better=True), -m)  # PSNR: the worst is the lowest
+    with pytest.raises(sdk.InputShapeError, match="6 rate channels"):
+        monotone_over_rates(np.zeros((5, 4, 4)))
+
+
 def test_frames_sharing_terms_decide_as_alone() -> None:
     """Frames of one camera frame given one ``terms`` dict (``rtp play``: every method's own history,
     the same motion and seen mask) compute the per-tile speeds and unseen shares once and decide

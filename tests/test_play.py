@@ -139,14 +139,19 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     monkeypatch.setattr(PathPlayer, "frames", spy_frames)
     monkeypatch.setattr(PathPlayer, "shade", spy_shade)
     monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
-    rep = play("procedural:0", "jnyang,jnyang@2,jnyang@2:fresh,yang2019,fidelityfx,oracle,full", paths=("fast",),
+    rep = play("procedural:0", "jnyang,jnyang@2,jnyang@2:fresh,yang2019,fidelityfx,oracle,oracle-monotone,full",
+               paths=("fast",),
                frames=5, size=(W, H), sweep=False, flip_every=2, out=tmp_path)
     assert len(used) == 5 * 4  # five methods with history, frames 1..4
     for frame, image in used:
         assert image not in full and shaded[image] == frame - 1
     rows = {r["method"]: r for r in rep.rows}
-    assert set(rows) == {"jnyang", "jnyang@2", "jnyang@2:fresh", "yang2019", "fidelityfx", "oracle", "full"}
+    assert set(rows) == {"jnyang", "jnyang@2", "jnyang@2:fresh", "yang2019", "fidelityfx", "oracle", "oracle-monotone",
+                         "full"}
     assert rows["oracle"]["fail_share"] == 0 and rows["full"]["work_saved"] == 0 == rows["full"]["fail_share"]
+    # the oracle on the monotone truth never fails either, and never saves more than the oracle on any frame
+    assert rows["oracle-monotone"]["fail_share"] == 0
+    assert all(m <= o for m, o in zip(rep.frames["fast"]["oracle-monotone"]["saved"], rep.frames["fast"]["oracle"]["saved"]))
     assert rows["jnyang@2"]["network_frames"] == 0.5 and rows["jnyang"]["network_frames"] == 1.0
     assert 0.5 <= rows["jnyang@2:fresh"]["network_frames"] <= 1.0  # plus crops around what it did not see
     assert 0 < rows["jnyang"]["work_saved"] < 1 and np.isfinite(rows["jnyang"]["flip_mean"])
@@ -169,7 +174,8 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
                           str(tmp_path / "play.json"), "--reuse", "jnyang@2,jnyang@2:fresh"],
                          capture_output=True, text=True, check=True).stdout
     # a savings row and a targets row: runs of one map and seed merge into one row per path
-    assert out.count("| procedural:0 | 0 | fast |") == 2 and "| jnyang / Yang |" in out
+    assert out.count("| procedural:0 | 0 | fast |") == 2
+    assert "| jnyang / Yang | jnyang / oracle | jnyang / oracle-monotone |" in out
     assert "(network 50%)" in out  # the reuse columns give the network's work per frame
     # --window: each method's default, frame by frame, averaged over windows (frame 0 has no history)
     win = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),

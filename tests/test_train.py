@@ -823,16 +823,12 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     fitted = mod._saved_at(pred, truth, f, 0.25, False, 0.05)
     assert one < known - 0.1 and fitted >= known - 1e-9
     assert mod._saved_at(truth, truth, np.ones(6), 0.25, False, 0.0) == pytest.approx(mod._oracle(truth, 0.25, False))
-    # the envelope over contained rates: 2x2 >= 1x2, 2x1; 2x4, 4x2 >= 2x2; 4x4 >= all; a monotone truth stays as it is
-    assert [[sdk.PREDICTED_RATES[j] for j in c] for c in mod.CONTAINED] == [
-        [], [], ["1x2", "2x1"], ["1x2", "2x1", "2x2"], ["1x2", "2x1", "2x2"], ["1x2", "2x1", "2x2", "2x4", "4x2"]]
-    assert np.array_equal(mod.monotone(truth, False), truth) and mod.falls(truth, False) == 0.0
+    # the share of (tile, rate, contained rate) triples whose coarser value is the better: none on a sorted truth,
+    # five of the thirteen where 4x4 dips under every other rate
+    assert mod.falls(truth, False) == 0.0
     dip = truth.copy()
-    dip[:, 5] = 0.0  # 4x4 better than everything: every one of its five pairs falls
-    m = mod.monotone(dip, False)
-    assert np.array_equal(m[:, 5], truth[:, :5].max(axis=1)) and np.array_equal(m[:, :5], truth[:, :5])
-    assert mod.falls(dip, False) == pytest.approx(5 / 13)
-    assert np.array_equal(mod.monotone(-dip, True), -m)  # higher is better: the worst is the lowest
+    dip[:, 5] = 0.0
+    assert mod.falls(dip, False) == pytest.approx(5 / 13) and mod.falls(-dip, True) == pytest.approx(5 / 13)
     # end to end: one row per held-out map, savings rising with the failing share, within 4x4's 93.75%
     data = _dataset(tmp_path / "ds", n=6)
     train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=10, crop=32,
