@@ -175,7 +175,8 @@ def main() -> None:
           "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
           "against k = 1 (>= 95%; in brackets the network's work per frame, a share of a whole-frame run)\n")
     oracles = [o for o in ORACLES if o in head]
-    print(f"| map | seed | path | {model} / Yang | " + " | ".join(f"{model} / {o}" for o in oracles + reuses) + " |")
+    print(f"| map | seed | path | {model} / Yang | "
+          + " | ".join([f"{model} / {o}" for o in oracles] + [f"{r} / {model}" for r in reuses]) + " |")
     print("|---|---:|---|---|" + "---|" * len(oracles + reuses))
     print("\n".join(targets))
     _reuse_summary(kept, model)

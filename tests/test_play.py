@@ -175,7 +175,8 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
                          capture_output=True, text=True, check=True).stdout
     # a savings row and a targets row: runs of one map and seed merge into one row per path
     assert out.count("| procedural:0 | 0 | fast |") == 2
-    assert "| jnyang / Yang | jnyang / oracle | jnyang / oracle-monotone |" in out
+    assert ("| jnyang / Yang | jnyang / oracle | jnyang / oracle-monotone | jnyang@2 / jnyang | jnyang@2:fresh / jnyang |"
+            in out)
     assert "(network 50%)" in out  # the reuse columns give the network's work per frame
     # --window: each method's default, frame by frame, averaged over windows (frame 0 has no history)
     win = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
