@@ -132,6 +132,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
         ("predicted rates", ", ".join(pred.rates)),
         ("extrapolation k", f"{m.extrapolation_k:g}"),
         ("default threshold", f"{m.default_threshold:g}"),
+        *([("threshold factors", ", ".join(f"{r} {f:g}" for r, f in m.to_dict()["rate_factors"].items()))]
+          if "rate_factors" in m.to_dict() else []),
         ("saturation", f"{m.saturation:.4g} (the worst value the model can express)"),
         ("weber l", "-" if m.weber_l is None else f"{m.weber_l:g}"),
         ("schema version", str(m.schema_version)),

@@ -51,6 +51,7 @@ from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import (
     ALL_RATES,
+    MAX_RATE_FACTOR,
     PREDICTED_RATES,
     RATE_CODES,
     RATE_NAMES,
@@ -105,6 +106,7 @@ __all__ = [
     "LOGIT_EPS",
     "LUMA_WEIGHTS",
     "MAX_CARRY_SCALE",
+    "MAX_RATE_FACTOR",
     "MAX_RESCALE",
     "METADATA_KEY",
     "METRICS",

@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 
 from ._channels import CHANNELS
-from ._errors import MetadataError
+from ._errors import MetadataError, ParameterError
 from ._metrics import METRICS
-from ._rates import MAX_THRESHOLD
+from ._rates import MAX_THRESHOLD, PREDICTED_RATES, check_rate_factors
 from ._tiles import TILE_SIZES
 from ._transforms import DEFAULT_EXTRAPOLATION_K, MAX_EXTRAPOLATION_K, OUTPUT_SETS, Transform, as_float64, extrapolate
 
@@ -33,10 +33,10 @@ __all__ = ["FEATURES_NAME", "METADATA_KEY", "SCHEMA_VERSION", "TAIL_KEY", "Model
 #: The ``metadata_props`` key that holds the JSON metadata.
 METADATA_KEY = "rtp.metadata"
 #: The newest metadata schema this SDK reads (it reads every older one too). Version 2 added
-#: ``input_multiple``, version 3 ``finite_probe``, version 4 ``tail``; metadata is written with the
-#: lowest version that holds its fields, so a model without them stays readable by an SDK that knows
-#: only version 1.
-SCHEMA_VERSION = 4
+#: ``input_multiple``, version 3 ``finite_probe``, version 4 ``tail``, version 5 ``rate_factors``;
+#: metadata is written with the lowest version that holds its fields, so a model without them stays
+#: readable by an SDK that knows only version 1.
+SCHEMA_VERSION = 5
 #: The ``metadata_props`` key of a splitting model's tail graph (``ModelMetadata.tail``), base64.
 TAIL_KEY = "rtp.tail"
 #: The graph output of a splitting model's trunk features (``ModelMetadata.tail``).
@@ -57,6 +57,7 @@ _FIELDS = (
     "outputs",
     "extrapolation_k",
     "default_threshold",
+    "rate_factors",
     "weber_l",
     "description",
     "provenance",
@@ -141,14 +142,22 @@ class ModelMetadata:
     #: the ``metadata_props`` key ``rtp.tail``, which maps the trunk's per-tile features (the model's
     #: output ``features``) and a frame to the outputs. None: the model does not split.
     tail: str | None = None
+    #: Each reduced rate's threshold factor, :data:`PREDICTED_RATES` order (``select_rates(factors=)``):
+    #: rate r passes below ``threshold x rate_factors[r]`` (PSNR: above ``threshold - 20 log10`` of it).
+    #: All 1 (the default): one threshold for every rate.
+    rate_factors: tuple[float, ...] = (1.0,) * len(PREDICTED_RATES)
     schema_version: int = 1
     #: ``"sha256:<hex>"`` of the graph and weights (``rtp-export`` writes it; ``sdk.load`` checks it), or None.
     digest: str | None = None
 
     def __post_init__(self) -> None:
+        try:  # a tuple of six checked factors however it was built (dataclasses.replace included)
+            object.__setattr__(self, "rate_factors", check_rate_factors(self.rate_factors, "rate_factors"))
+        except ParameterError as err:
+            raise MetadataError(str(err), "rate_factors") from err
         # the lowest schema that holds the fields (see SCHEMA_VERSION)
-        version = (4 if self.tail is not None else 3 if self.finite_probe is not None
-                   else 1 if self.input_multiple is None else 2)
+        version = (5 if any(f != 1.0 for f in self.rate_factors) else 4 if self.tail is not None
+                   else 3 if self.finite_probe is not None else 1 if self.input_multiple is None else 2)
         object.__setattr__(self, "schema_version", version)
 
     # -- parsing ------------------------------------------------------------------------------
@@ -259,6 +268,14 @@ class ModelMetadata:
         k = _number(d, "extrapolation_k", default=DEFAULT_EXTRAPOLATION_K, minimum=1.0, maximum=MAX_EXTRAPOLATION_K)
         # an error metric's threshold is an error: never negative; PSNR's is any finite dB value
         threshold = _number(d, "default_threshold", minimum=-MAX_THRESHOLD if hib else 0.0, maximum=MAX_THRESHOLD)
+        factors = d.get("rate_factors")
+        if factors is not None and not isinstance(factors, Mapping):
+            raise MetadataError(f"rate_factors: expected a mapping of rate names ({', '.join(PREDICTED_RATES)}) to "
+                                f"threshold factors, or null, got {reprlib.repr(factors)}", "rate_factors")
+        try:
+            rate_factors = check_rate_factors(factors, "rate_factors")
+        except ParameterError as err:
+            raise MetadataError(str(err), "rate_factors") from err
         tail = d.get("tail")
         if tail is not None and (not isinstance(tail, str) or not DIGEST_RE.fullmatch(tail)):
             raise MetadataError(f"tail: expected the digest of the tail graph ('sha256:' and 64 hex digits) or null, got "
@@ -284,6 +301,7 @@ class ModelMetadata:
             input_multiple=None if multiple is None else int(multiple),
             finite_probe=probe,
             tail=tail,
+            rate_factors=rate_factors,
             digest=digest,
         )
 
@@ -334,6 +352,8 @@ class ModelMetadata:
             "outputs": list(self.outputs),
             "extrapolation_k": self.extrapolation_k,
             "default_threshold": self.default_threshold,
+            **({"rate_factors": dict(zip(PREDICTED_RATES, self.rate_factors))}
+               if any(f != 1.0 for f in self.rate_factors) else {}),
             "weber_l": self.weber_l,
             "description": self.description,
             "provenance": _thaw(self.provenance),

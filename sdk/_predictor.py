@@ -692,8 +692,11 @@ class ShadingRatePredictor:
 
         Passing means below the threshold for error metrics and above it for PSNR. ``threshold``
         defaults to ``metadata.default_threshold``; ``allowed`` restricts the rates (names or codes)
-        for hardware without 4x4 or without 2x4/4x2. Returns uint8 D3D12/Vulkan rate codes of shape
-        ``(ceil(H/w), ceil(W/w))`` (or ``(N, ...)``), ready to upload as a shading-rate image.
+        for hardware without 4x4 or without 2x4/4x2. A model whose metadata holds ``rate_factors`` gives
+        each rate that factor of the threshold (``select_rates(factors=)``). Returns uint8 D3D12/Vulkan
+        rate codes of shape ``(ceil(H/w), ceil(W/w))`` (or ``(N, ...)``), ready to upload as a
+        shading-rate image.
         """
         thr = self._meta.default_threshold if threshold is None else threshold
-        return select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed)
+        return select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
+                            factors=self._meta.rate_factors)

@@ -19,11 +19,13 @@ from ._tiles import tile_extents, tile_grid
 
 __all__ = [
     "ALL_RATES",
+    "MAX_RATE_FACTOR",
     "MAX_THRESHOLD",
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
     "RateLike",
+    "check_rate_factors",
     "check_threshold",
     "rate_size",
     "resolve_allowed",
@@ -40,6 +42,9 @@ PREDICTED_RATES: tuple[str, ...] = ALL_RATES[1:]
 #: Largest magnitude of a threshold (metric units, dB for PSNR): every metric rtp knows stays far below
 #: it, and a threshold beyond everything a model can express would pass (or fail) every tile.
 MAX_THRESHOLD = 1e6
+#: Largest factor of a rate's threshold (and the inverse, the smallest): ``select_rates(factors=)`` and
+#: the metadata field ``rate_factors``. A factor of 4 already moves JNYang's 0.25 to 1 or 0.0625.
+MAX_RATE_FACTOR = 4.0
 
 
 def rate_size(rate: str) -> tuple[int, int]:
@@ -160,12 +165,48 @@ def check_threshold(threshold: object, higher_is_better: bool) -> float:
     return value
 
 
+def check_rate_factors(factors: object, name: str = "factors") -> tuple[float, ...]:
+    """Six per-rate threshold factors in :data:`PREDICTED_RATES` order from ``None`` (all 1), a mapping
+    of rate names to factors (a rate left out: 1) or a sequence of six numbers; each finite and within
+    ``[1 / MAX_RATE_FACTOR, MAX_RATE_FACTOR]``, else :class:`ParameterError` naming ``name``."""
+    n = len(PREDICTED_RATES)
+    if factors is None:
+        return (1.0,) * n
+    if isinstance(factors, Mapping):
+        odd = [k for k in factors if k not in PREDICTED_RATES]
+        if odd:
+            raise ParameterError(f"{name}: unknown rate {reprlib.repr(odd[0])}; expected names from "
+                                 f"{', '.join(PREDICTED_RATES)} (1x1 is never reduced)", name)
+        items = [factors.get(r, 1.0) for r in PREDICTED_RATES]
+    elif isinstance(factors, (str, bytes)) or not isinstance(factors, Iterable):
+        raise ParameterError(f"{name}: expected a mapping of rate names to factors or {n} numbers in the order "
+                             f"{', '.join(PREDICTED_RATES)}, got {type(factors).__name__} {reprlib.repr(factors)}", name)
+    else:
+        items = list(factors)
+        if len(items) != n:
+            raise ParameterError(f"{name}: expected {n} factors ({', '.join(PREDICTED_RATES)}), got {len(items)}", name)
+    out = []
+    for r, f in zip(PREDICTED_RATES, items):
+        value = math.nan
+        if not isinstance(f, (bool, np.bool_)) and isinstance(f, (int, float, np.integer, np.floating)):
+            try:
+                value = float(f)
+            except OverflowError:  # an int too large for a float
+                pass
+        if not 1.0 / MAX_RATE_FACTOR <= value <= MAX_RATE_FACTOR:  # NaN fails too
+            raise ParameterError(f"{name}: {r}'s factor must be a number in [{1 / MAX_RATE_FACTOR:g}, "
+                                 f"{MAX_RATE_FACTOR:g}] (1: the threshold as it is), got {reprlib.repr(f)}", name)
+        out.append(value)
+    return tuple(out)
+
+
 def select_rates(
     values: np.ndarray,
     threshold: float,
     *,
     higher_is_better: bool = False,
     allowed: Iterable[RateLike] | None = None,
+    factors: Mapping[str, float] | Iterable[float] | None = None,
 ) -> np.ndarray:
     """Pick per tile the cheapest allowed rate whose predicted value passes ``threshold``.
 
@@ -174,6 +215,11 @@ def select_rates(
     metrics) or above it (``higher_is_better``, e.g. PSNR). Among passing rates of equal cost (1x2
     and 2x1, 2x4 and 4x2) the one with the better predicted value wins. Tiles where nothing passes
     get 1x1. Returns uint8 D3D12/Vulkan codes with axis -3 removed.
+
+    ``factors`` (:func:`check_rate_factors`; a model's ``metadata.rate_factors``) gives each rate a
+    threshold of its own: an error passes below ``threshold x factor``, a PSNR above ``threshold - 20
+    log10(factor)`` dB (a factor on the error's amplitude, as ``extrapolation_k``). Rates of equal cost
+    then compare their values over their own thresholds.
     """
     try:
         values = np.asarray(values)
@@ -191,9 +237,13 @@ def select_rates(
         raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
     rates = resolve_allowed(allowed)
     threshold = check_threshold(threshold, bool(higher_is_better))
+    scale = check_rate_factors(factors)
     # Orient every comparison as "smaller is better" so one code path serves both kinds.
     as_float = values.astype(np.float64, copy=False)  # bool and unsigned predictions negate correctly too
     err = -as_float if higher_is_better else as_float
+    if any(f != 1.0 for f in scale):  # each rate's value against its own threshold: over the factor, or dB added
+        f = np.asarray(scale, np.float64)[:, None, None]
+        err = err - 20.0 * np.log10(f) if higher_is_better else err / f
     thr = -threshold if higher_is_better else threshold
     out = np.zeros(values.shape[:-3] + values.shape[-2:], dtype=np.uint8)
     decided = np.zeros(out.shape, dtype=bool)

@@ -735,4 +735,4 @@ class PredictionReuse:
         meta = self.predictor.metadata
         thr = meta.default_threshold if threshold is None else threshold
         return select_rates(self.predict(x, fetch, seen, background), thr, higher_is_better=meta.higher_is_better,
-                            allowed=allowed)
+                            allowed=allowed, factors=meta.rate_factors)

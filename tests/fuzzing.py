@@ -387,6 +387,32 @@ def _select_absurd(v: tuple[ArraySpec, Any, Any], codes: np.ndarray) -> bool:
     )
 
 
+rate_factor_values = st.one_of(
+    st.none(), json_values,
+    st.lists(st.one_of(st.floats(), st.integers(-2, 6), st.booleans()), max_size=7),
+    st.dictionaries(st.sampled_from([*sdk.ALL_RATES, "3x3", "4X4"]), st.one_of(st.floats(), json_scalars), max_size=7),
+)
+
+
+def _factor_ok(f: Any) -> bool:
+    return (not isinstance(f, bool) and isinstance(f, (int, float)) and math.isfinite(f)
+            and 1 / sdk.MAX_RATE_FACTOR <= f <= sdk.MAX_RATE_FACTOR)
+
+
+def _factors_absurd(factors: Any, codes: np.ndarray) -> bool:
+    """Returned rates although the factors are not six numbers in [1/4, 4] (a mapping of predicted rates, or None)."""
+    if factors is None:
+        ok = True
+    elif isinstance(factors, dict):
+        ok = set(factors) <= set(sdk.PREDICTED_RATES) and all(_factor_ok(v) for v in factors.values())
+    else:
+        ok = isinstance(factors, list) and len(factors) == 6 and all(_factor_ok(v) for v in factors)
+    return not ok or codes.shape != (4, 5) or not set(np.unique(codes).tolist()) <= set(sdk.RATE_CODES.values())
+
+
+_VALUES = np.random.default_rng(7).random((6, 4, 5)).astype(np.float32)
+
+
 def _work_saved_call(v: tuple[ArraySpec, Any]) -> float:
     spec, size = v
     a = _array(spec)
@@ -692,6 +718,8 @@ def targets() -> list[Target]:
         Target("shading_rates: allowed rates", allowed_values, lambda a: _PRED.shading_rates(_X, allowed=a)),
         Target("select_rates", st.tuples(prediction_arrays, thresholds, st.one_of(st.booleans(), st.booleans(), json_scalars)),
                _select_call, _select_absurd),
+        Target("select_rates: factors", rate_factor_values, lambda f: sdk.select_rates(_VALUES, 0.5, factors=f),
+               _factors_absurd),
         Target("work_saved", st.tuples(st.one_of(_arrays(st.integers(0, 4), 3), code_arrays),
                                        st.one_of(st.none(), st.tuples(st.integers(-2, 70), st.integers(-2, 70)),
                                                  json_values)), _work_saved_call, _work_saved_absurd),

@@ -31,6 +31,7 @@ def test_sdk_all_is_pinned() -> None:
         "LOGIT_EPS",
         "LUMA_WEIGHTS",
         "MAX_CARRY_SCALE",
+        "MAX_RATE_FACTOR",
         "MAX_RESCALE",
         "METADATA_KEY",
         "METRICS",

@@ -55,19 +55,44 @@ def test_finite_probe_is_optional_validated_and_raises_the_schema() -> None:
 
 
 def test_tail_is_optional_validated_and_raises_the_schema() -> None:
-    """``tail``: the digest of a splitting model's tail graph (schema 4, the newest)."""
+    """``tail``: the digest of a splitting model's tail graph (schema 4)."""
     digest = "sha256:" + "ab" * 32
     m = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4, finite_probe="finite_probe"))
     assert m.tail is None and "tail" not in m.to_dict()
     t = sdk.ModelMetadata.from_dict(base_metadata(input_multiple=4, finite_probe="finite_probe", tail=digest))
     d = json.loads(t.to_json())
     assert t.tail == digest == d["tail"]
-    assert d["schema_version"] == 4 == sdk.SCHEMA_VERSION  # the newest field: the newest schema
+    assert d["schema_version"] == 4
     assert sdk.ModelMetadata.from_json(t.to_json()) == t
     for bad in ("", "sha256:ab", "md5:" + "ab" * 32, 3, True, [digest]):
         with pytest.raises(sdk.MetadataError, match="tail") as info:
             sdk.ModelMetadata.from_dict(base_metadata(tail=bad))
         assert info.value.key == "tail"
+
+
+def test_rate_factors_are_optional_validated_and_raise_the_schema() -> None:
+    """``rate_factors``: a threshold factor per reduced rate (schema 5, the newest); rates left out keep 1,
+    all 1 is no field at all (and no newer schema)."""
+    m = sdk.ModelMetadata.from_dict(base_metadata())
+    assert m.rate_factors == (1.0,) * 6 and "rate_factors" not in m.to_dict() and m.schema_version == 1
+    assert sdk.ModelMetadata.from_dict(base_metadata(rate_factors={"2x2": 1})).schema_version == 1
+    assert sdk.ModelMetadata.from_dict(base_metadata(rate_factors=None)) == m
+    f = sdk.ModelMetadata.from_dict(base_metadata(rate_factors={"1x2": 1.2, "2x1": 1.2, "4x4": 0.85}))
+    d = json.loads(f.to_json())
+    assert f.rate_factors == (1.2, 1.2, 1.0, 1.0, 1.0, 0.85)
+    assert d["rate_factors"] == {"1x2": 1.2, "2x1": 1.2, "2x2": 1.0, "2x4": 1.0, "4x2": 1.0, "4x4": 0.85}
+    assert d["schema_version"] == 5 == sdk.SCHEMA_VERSION  # the newest field: the newest schema
+    assert sdk.ModelMetadata.from_json(f.to_json()) == f
+    for bad, words in (({"1x1": 2.0}, "unknown rate '1x1'"), ({"3x3": 2.0}, "unknown rate"),
+                       ({"2x2": 0.0}, "in \\[0.25, 4\\]"), ({"2x2": 5}, "2x2's factor"), ({"2x2": float("nan")}, "2x2"),
+                       ({"2x2": True}, "2x2"), ({"2x2": "1.2"}, "2x2"), ([1.2] * 6, "mapping"), ("1.2", "mapping")):
+        with pytest.raises(sdk.MetadataError, match=words) as info:
+            sdk.ModelMetadata.from_dict(base_metadata(rate_factors=bad))
+        assert info.value.key == "rate_factors"
+    with pytest.raises(sdk.MetadataError, match="rate_factors"):  # however the metadata is built
+        import dataclasses
+
+        dataclasses.replace(m, rate_factors=(1.0, 1.0))
 
 
 def test_defaults_and_frozen() -> None:

@@ -76,15 +76,20 @@ _TRANSFORMS = st.one_of(
        quantile=st.floats(0.05, 0.95),
        allowed=st.sets(st.sampled_from(sdk.PREDICTED_RATES)).map(lambda s: tuple(r for r in sdk.PREDICTED_RATES if r in s)),
        tiles=st.tuples(st.integers(1, 20), st.integers(1, 20)), pool=st.sampled_from([1, 1, 2, 4]),
-       seed=st.integers(0, 2**16))
+       seed=st.integers(0, 2**16),
+       factors=st.one_of(st.none(), st.lists(st.floats(0.25, 4.0), min_size=6, max_size=6)))
 def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any], outputs: list[str], psnr: bool,
                                           k: float, safety: float, quantile: float, allowed: tuple[str, ...],
-                                          tiles: tuple[int, int], pool: int, seed: int) -> None:
+                                          tiles: tuple[int, int], pool: int, seed: int,
+                                          factors: list[float] | None) -> None:
     """Every transform, output set, metric direction, margin, extrapolation factor, allowed set, grid
-    (odd sizes: the shader's 8x8 groups overhang the edge) and hardware tile (8-pixel model tiles pooled
-    into 16 and 32): the codes of select_rates(pool_tiles(decode(raw))), and the values."""
+    (odd sizes: the shader's 8x8 groups overhang the edge), hardware tile (8-pixel model tiles pooled
+    into 16 and 32) and threshold factors per rate: the codes of select_rates(pool_tiles(decode(raw))),
+    and the values."""
     meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety,
                            tile_size=8 if pool > 1 else 16)
+    if factors is not None:
+        meta_d["rate_factors"] = dict(zip(sdk.PREDICTED_RATES, factors))
     if psnr:
         meta_d.update(metric="psnr", default_threshold=35.0)
         del meta_d["weber_l"]
@@ -107,8 +112,15 @@ def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, A
         decoded = selector.decoded()
     finally:
         selector.close()
-    cpu = sdk.select_rates(values, threshold, higher_is_better=meta.higher_is_better, allowed=list(allowed) or ["1x1"])
-    ok = _robust(values, threshold, meta.higher_is_better, allowed)
+    cpu = sdk.select_rates(values, threshold, higher_is_better=meta.higher_is_better, allowed=list(allowed) or ["1x1"],
+                           factors=meta.rate_factors)
+    # each rate against its own threshold is the threshold against the values over the factors (PSNR: plus 20 log10)
+    f = np.asarray(meta.rate_factors)[:, None, None]
+    with np.errstate(invalid="ignore"):
+        own = values + 20.0 * np.log10(f) if meta.higher_is_better else values / f
+    np.testing.assert_array_equal(cpu, sdk.select_rates(own, threshold, higher_is_better=meta.higher_is_better,
+                                                        allowed=list(allowed) or ["1x1"]))
+    ok = _robust(own, threshold, meta.higher_is_better, allowed)
     np.testing.assert_array_equal(gpu[ok], cpu[ok])
     both = np.isfinite(values)
     np.testing.assert_array_equal(np.isfinite(decoded), both)

@@ -88,6 +88,31 @@ def test_selection_is_per_tile_and_batched() -> None:
     assert got[0, 0, 0] == 10 and got[1, 1, 2] == 1 and int(got.sum()) == 11
 
 
+def test_a_threshold_factor_per_rate() -> None:
+    """``factors``: rate r passes below threshold x factor (PSNR: above threshold - 20 log10 factor); rates of
+    equal cost compare their values over their factors; all 1 decides as no factors, bit for bit."""
+    v = _tile(0.1, 0.12, 0.15, 0.18, 0.19, 0.22)  # 4x4 fails 0.2; a factor of 1.2 lets it pass, 0.8 on 2x4/4x2 not
+    pick = lambda thr, f: sdk.RATE_NAMES[int(sdk.select_rates(v, thr, factors=f)[0, 0])]  # noqa: E731
+    assert pick(0.2, None) == "2x4" and pick(0.2, {"4x4": 1.2}) == "4x4"
+    assert pick(0.2, {"2x4": 0.8, "4x2": 0.8}) == "2x2" and pick(0.2, [1, 1, 0.5, 0.8, 0.8, 1]) == "1x2"
+    # equal cost: 4x2 (0.19 of 0.2 x 1.25) is further under its threshold than 2x4 (0.18 of 0.2)
+    assert pick(0.2, {"4x2": 1.25}) == "4x2" and pick(0.2, None) == "2x4"
+    psnr = _tile(45, 44, 41, 38, 36, 30)
+    hib = lambda thr, f: sdk.RATE_NAMES[int(sdk.select_rates(psnr, thr, higher_is_better=True, factors=f)[0, 0])]  # noqa: E731
+    assert hib(35, None) == "2x4" and hib(35, {"4x4": 1.5}) == "2x4"  # 30 < 35 - 20 log10(1.5) = 31.48
+    assert hib(35, {"4x4": 2.0}) == "4x4"  # 30 > 35 - 20 log10(2) = 28.98
+    assert hib(35, {"2x4": 0.25, "4x2": 0.25}) == "2x2"  # 38 and 36 < 35 + 12.04
+    rng = np.random.default_rng(0)
+    many = rng.random((3, 6, 9, 11)).astype(np.float32)
+    for f in (None, [1.0] * 6, {"2x2": 1.0}):
+        np.testing.assert_array_equal(sdk.select_rates(many, 0.5, factors=f), sdk.select_rates(many, 0.5))
+    for bad, words in (({"1x1": 2.0}, "unknown rate"), ([1.0] * 5, "expected 6 factors"), ({"2x2": 4.5}, "2x2's factor"),
+                       ("1.2", "a mapping"), ([1, 1, 1, 1, 1, float("inf")], "4x4's factor")):
+        with pytest.raises(sdk.ParameterError, match=words) as info:
+            sdk.select_rates(many, 0.5, factors=bad)  # type: ignore[arg-type]
+        assert info.value.name == "factors"
+
+
 def test_selection_rejects_the_wrong_channel_count() -> None:
     with pytest.raises(sdk.InputShapeError):
         sdk.select_rates(np.zeros((4, 2, 2)), 0.2)

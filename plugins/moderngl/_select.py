@@ -75,6 +75,7 @@ class RateSelector:
             "u_k": meta.extrapolation_k,
             "u_higher_is_better": meta.higher_is_better,
             "u_pool": self.pool,
+            "u_rate_factors": tuple(float(f) for f in meta.rate_factors),
         }
         if t.type in ("clamped", "logistic"):
             uniforms["u_mu_y"] = float(t.mu_y)  # type: ignore[arg-type]

@@ -28,6 +28,7 @@ uniform float u_offset;          // linear
 uniform float u_k;               // extrapolation_k
 uniform bool u_higher_is_better; // PSNR: values pass above the threshold
 uniform float u_threshold;       // in metric units
+uniform float u_rate_factors[6]; // metadata rate_factors (PREDICTED_RATES order): each rate's threshold factor
 uniform uint u_allowed;          // bit i: PREDICTED_RATES[i] may be chosen (1x2, 2x1, 2x2, 2x4, 4x2, 4x4)
 
 const float LOGIT_EPS = 1e-7;
@@ -105,7 +106,10 @@ void main() {
         for (int j = 0; j < 6; ++j) {
             int r = CLASSES[j];
             if (CLASS_OF[j] != c || (u_allowed & (1u << uint(r))) == 0u) continue;
-            float e = u_higher_is_better ? -v[r] : v[r];
+            // against the rate's own threshold (sdk select_rates(factors=)): an error over its factor, a PSNR
+            // plus 20 log10 of it
+            float f = u_rate_factors[r];
+            float e = u_higher_is_better ? -(v[r] + 20.0 * log(f) / log(10.0)) : v[r] / f;
             float thr = u_higher_is_better ? -u_threshold : u_threshold;
             if (e < thr && (code == 0u || e < best)) { code = CODES[r]; best = e; }
         }
