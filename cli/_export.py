@@ -17,6 +17,7 @@ EXAMPLES = """examples:
   rtp-export --restamp old.onnx
   rtp-export --strip-probe jnyang -o jnyang-engine.onnx     # for an engine that runs the file itself
   rtp-export --join-planes jnyang -o jnyang-one-input.onnx  # every plane in one input tensor
+  rtp-export --retune jnyang --metadata factors.yaml -o jnyang-tuned.onnx   # thresholds per rate
 """
 
 
@@ -51,6 +52,10 @@ def build_export_parser() -> argparse.ArgumentParser:
     p.add_argument("--join-planes", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
                    "name) whose planes come in groups with every plane in the one input `input` to -o OUTPUT.onnx "
                    "(predictions unchanged but for float rounding; docs/export.md \"Input planes in groups\")")
+    p.add_argument("--retune", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's name) "
+                   "to -o OUTPUT.onnx whose decision fields (default_threshold, rate_factors, description) are those "
+                   "of --metadata SIDECAR.yaml (predictions unchanged; e.g. the factors `python bench/per_rate.py "
+                   "--sidecar` fits on validation data, docs/export.md)")
     return p
 
 
@@ -58,8 +63,15 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Every combination is checked before any work starts."""
     if args.restamp:
         if (args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace
-                or args.no_finite_probe or args.one_input or args.strip_probe or args.join_planes):
+                or args.no_finite_probe or args.one_input or args.strip_probe or args.join_planes or args.retune):
             parser.error("--restamp MODEL.onnx takes no other options")
+        return
+    if args.retune:
+        if (args.checkpoint or args.adopt or args.opset or args.dynamic or args.replace or args.no_finite_probe
+                or args.one_input or args.strip_probe or args.join_planes):
+            parser.error("--retune MODEL takes only --metadata SIDECAR.yaml and -o OUTPUT.onnx")
+        if not args.metadata or not args.output:
+            parser.error("--retune needs --metadata SIDECAR.yaml (the decision fields) and -o OUTPUT.onnx")
         return
     for flag, given in (("--strip-probe", args.strip_probe), ("--join-planes", args.join_planes)):
         if not given:
@@ -88,10 +100,20 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
 
 
 def _body(args: argparse.Namespace) -> int:
-    from rtp.export import DEFAULT_OPSET, adopt, export_checkpoint, join_input_planes, restamp, strip_finite_probe
+    from rtp.export import (
+        DEFAULT_OPSET,
+        adopt,
+        export_checkpoint,
+        join_input_planes,
+        restamp,
+        retune,
+        strip_finite_probe,
+    )
 
     if args.restamp:
         out = restamp(args.restamp)
+    elif args.retune:
+        out = retune(args.retune, args.metadata, args.output)
     elif args.strip_probe:
         out = strip_finite_probe(args.strip_probe, args.output)
     elif args.join_planes:

@@ -5,6 +5,7 @@ from ._export import (
     DEFAULT_OPSET,
     PLANES_PER_INPUT,
     PROBE_NODES,
+    RETUNE_FIELDS,
     ExportError,
     add_finite_probe,
     adopt,
@@ -12,6 +13,7 @@ from ._export import (
     join_input_planes,
     merge_slices,
     restamp,
+    retune,
     split_input_planes,
     strip_finite_probe,
     write_metadata,
@@ -19,7 +21,7 @@ from ._export import (
 from ._published import PublishedModel, identify, published_models
 
 __all__ = [
-    "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "PublishedModel", "add_finite_probe", "adopt",
-    "export_checkpoint", "identify", "join_input_planes", "merge_slices", "published_models", "restamp",
-    "split_input_planes", "strip_finite_probe", "write_metadata"
+    "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "ExportError", "PublishedModel",
+    "add_finite_probe", "adopt", "export_checkpoint", "identify", "join_input_planes", "merge_slices", "published_models",
+    "restamp", "retune", "split_input_planes", "strip_finite_probe", "write_metadata"
 ]

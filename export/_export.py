@@ -40,9 +40,9 @@ from rtp.sdk.files import atomic_output
 
 from ._published import file_sha256, identify
 
-__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "ExportError", "add_finite_probe", "adopt",
-           "export_checkpoint", "join_input_planes", "merge_slices", "restamp", "split_input_planes", "strip_finite_probe",
-           "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "ExportError", "add_finite_probe",
+           "adopt", "export_checkpoint", "join_input_planes", "merge_slices", "restamp", "retune", "split_input_planes",
+           "strip_finite_probe", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -523,6 +523,53 @@ def join_input_planes(model_path: str | os.PathLike[str], output: str | os.PathL
     write_metadata(model, before.metadata)
     _save_unchanged(model, before, out, f"joining the input planes of {src} changed its predictions; nothing "
                     "written", reassociated=True)
+    return out
+
+
+#: The metadata fields :func:`retune` may change: how the runtime decides, never what the network predicts.
+RETUNE_FIELDS = ("default_threshold", "rate_factors", "description")
+
+
+def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str | os.PathLike[str],
+           output: str | os.PathLike[str]) -> Path:
+    """Write a copy of an rtp model (a path, or a shipped model's name) whose decision fields
+    (:data:`RETUNE_FIELDS`: the default threshold, the threshold factors per rate, the description) are
+    replaced by those of ``metadata`` (a YAML sidecar or a mapping; ``rate_factors: null`` returns to one
+    threshold for every rate). Graph, weights, tail and every other field stay; the copy records what changed in
+    ``provenance.retuned`` and is checked to predict exactly as the model before it is written
+    (atomically; ``output`` may be the model itself). Other fields are refused: a safety margin or a
+    transform changes the predictions, and belongs to training (``rtp train``) or export."""
+    import onnx
+
+    from rtp import sdk
+
+    before = sdk.load(model_path, providers=["CPUExecutionProvider"])
+    src, out = Path(str(before.path)), Path(output)
+    d = _read_yaml(metadata) if isinstance(metadata, (str, os.PathLike)) else metadata
+    if not isinstance(d, Mapping):
+        raise MetadataError(f"retune: expected a mapping of metadata fields, got {type(d).__name__}")
+    other = sorted(str(k) for k in d if k not in RETUNE_FIELDS)
+    if other:
+        raise MetadataError(f"{other[0]}: retune changes only the decision fields {', '.join(RETUNE_FIELDS)}; "
+                            f"{other[0]} changes what the model predicts (set it in training or at export)", other[0])
+    if not d:
+        raise MetadataError(f"retune: the sidecar sets none of {', '.join(RETUNE_FIELDS)}: nothing to change")
+    if d.get("default_threshold", 0.0) is None:
+        raise MetadataError("default_threshold: retune replaces it, it cannot be removed (null)", "default_threshold")
+    fields = before.metadata.to_dict()
+    for k, v in d.items():  # null: rate_factors back to one threshold, description empty
+        fields.pop(k, None)
+        if v is not None:
+            fields[k] = v
+    fields["provenance"] = _merge(fields.get("provenance") or {}, {"retuned": {
+        "fields": sorted(str(k) for k in d), "from": src.name, "rtp": str(sdk.__version__),
+        "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()}})
+    fields.pop("schema_version", None)  # written as the lowest version that holds the fields
+    meta = ModelMetadata.from_dict(fields)
+    model = onnx.load(str(src))
+    write_metadata(model, meta)
+    _save_unchanged(model, before, out, f"retuning {src} changed its predictions; nothing written")
+    log.info("retuned %s -> %s (%s)", src, out, ", ".join(sorted(str(k) for k in d)))
     return out
 
 

@@ -402,6 +402,44 @@ def test_the_cli_exports_without_the_probe_and_strips_it(fast_onnx: Path, tmp_pa
         assert r.returncode == 2 and message in r.stderr, (bad, r.stderr)
 
 
+def test_retune_changes_the_decision_and_nothing_the_model_predicts(fast_onnx: Path, tmp_path: Path) -> None:
+    """rtp-export --retune: the decision fields (threshold factors per rate, default threshold) from a
+    sidecar, the same graph, weights, digest and predictions; other fields refused, nothing written."""
+    before = sdk.load(fast_onnx)
+    side = tmp_path / "factors.yaml"
+    side.write_text("rate_factors: {1x2: 1.2, 2x1: 1.2, 4x4: 0.85}\ndefault_threshold: 0.3\n")
+    out = export.retune(fast_onnx, side, tmp_path / "tuned.onnx")
+    tuned = sdk.load(out)
+    m = tuned.metadata
+    assert m.rate_factors == (1.2, 1.2, 1.0, 1.0, 1.0, 0.85) and m.default_threshold == 0.3 and m.schema_version == 5
+    assert m.digest == before.metadata.digest and m.safety == before.metadata.safety and m.inputs == before.metadata.inputs
+    assert list(m.provenance["retuned"]["fields"]) == ["default_threshold", "rate_factors"]
+    assert m.provenance["retuned"]["from"] == fast_onnx.name and m.provenance["export"] == before.metadata.provenance["export"]
+    x = np.random.default_rng(2).random((len(m.inputs), 96, 160), dtype=np.float32)
+    est = before.predict(x)
+    np.testing.assert_array_equal(tuned.predict_raw(x), before.predict_raw(x))
+    np.testing.assert_array_equal(tuned.shading_rates(x), sdk.select_rates(est, 0.3, factors=m.rate_factors))
+    thresholds = np.quantile(est, [0.2, 0.5, 0.8])  # the factors decide differently somewhere
+    assert any((tuned.shading_rates(x, t) != before.shading_rates(x, t)).any() for t in thresholds)
+    # back to one threshold (null), in place
+    export.retune(out, {"rate_factors": None}, out)
+    assert sdk.load(out).metadata.rate_factors == (1.0,) * 6 and sdk.load(out).metadata.default_threshold == 0.3
+    for bad, words in (({"safety": 0.1}, "safety: retune changes only"), ({}, "nothing to change"),
+                       ({"rate_factors": {"1x1": 2.0}}, "unknown rate"), ({"default_threshold": None}, "cannot be removed")):
+        with pytest.raises(sdk.MetadataError, match=words):
+            export.retune(fast_onnx, bad, tmp_path / "bad.onnx")
+        assert not (tmp_path / "bad.onnx").exists()
+    cmd = [sys.executable, "-m", "rtp.cli.export"]
+    r = subprocess.run([*cmd, "--retune", str(fast_onnx), "--metadata", str(side), "-o", str(tmp_path / "c.onnx")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == str(tmp_path / "c.onnx"), r.stderr
+    assert sdk.load(tmp_path / "c.onnx").metadata.rate_factors[-1] == 0.85
+    for args, words in ((["--retune", str(fast_onnx), "-o", "x.onnx"], "needs --metadata"),
+                        (["--retune", str(fast_onnx), "--metadata", str(side), "--dynamic", "-o", "x.onnx"], "takes only")):
+        r = subprocess.run([*cmd, *args], capture_output=True, text=True)
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize(
     ("conv", "multiple"),
     [
