@@ -12,8 +12,12 @@ scores them on the map left out against one shared threshold. A tile fails when 
 the chosen rate is over the model's default threshold (for PSNR: under it). Prints the work saved at
 1, 2 and 5% failing tiles per held-out map, the oracle's saving (every tile at its cheapest truly
 passing rate) and the fitted factors. Static viewpoint pairs, not the closed loop of ``rtp play``.
-For PSNR (higher is better) a factor f moves its rate's threshold by 3 log2(f) dB and the sweep moves
-the shared one by 6 log2 of the factor.
+For PSNR (higher is better) a factor f moves its rate's threshold by 20 log10(f) dB (``select_rates``)
+and the sweep moves the shared one by 6 log2 of the factor.
+
+``--sidecar OUT.yaml`` also fits the factors on every map given and writes them as a metadata sidecar
+that ``rtp-export --retune MODEL --metadata OUT.yaml -o MODEL2.onnx`` bakes into a model: the runtime
+(``shading_rates``, ``rtp play``, ``rtp evaluate``) then gives each rate its factor of the threshold.
 
 Two more columns ask whether the estimates' order across rates matters. A rate's blocks contain those
 of every rate no wider and no taller (2x2's contain 1x2's and 2x1's; 4x4's every other rate's), so an
@@ -48,12 +52,10 @@ _SAVED = {sdk.RATE_CODES[r]: 1.0 - 1.0 / (int(r[0]) * int(r[2])) for r in sdk.PR
 
 def _outcome(pred: np.ndarray, truth: np.ndarray, factors: np.ndarray, g: float, thr: float,
              hib: bool) -> tuple[float, float]:
-    """(failing share, work saved) of one global setting ``g`` with per-rate ``factors``."""
-    if hib:  # PSNR: factors and the sweep shift in dB; passing means above
-        codes = sdk.select_rates(pred - np.log2(factors)[None, :, None, None] * 3.0, thr + 6.0 * np.log2(g),
-                                 higher_is_better=True)
-    else:
-        codes = sdk.select_rates(pred / factors[None, :, None, None], thr * g)
+    """(failing share, work saved) of one global setting ``g`` with per-rate ``factors`` (the SDK's
+    ``select_rates(factors=)``, as a model with ``rate_factors`` in its metadata decides)."""
+    setting = thr + 6.0 * np.log2(g) if hib else thr * g  # PSNR: the sweep is an offset in dB
+    codes = sdk.select_rates(pred, setting, higher_is_better=hib, factors=factors)
     saved = np.zeros(codes.shape)
     fail = np.zeros(codes.shape, bool)
     for i, r in enumerate(sdk.PREDICTED_RATES):
@@ -106,6 +108,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_model_args(ap, "an exported model (.onnx) or a shipped model's name", ", at least two")
     ap.add_argument("--fit", type=float, default=0.05, help="failing share the factors are fitted at (default 0.05)")
+    ap.add_argument("--sidecar", metavar="OUT.yaml", help="fit the factors on every map given and write them as a "
+                    "metadata sidecar for `rtp-export --retune` (rate_factors)")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
@@ -147,7 +151,28 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nA coarser rate's value the better (share of tile, rate, contained-rate triples): estimates "
           f"{100 * falls(p_all, hib):.1f}%, truth {100 * falls(t_all, hib):.1f}%; over all maps the oracle saves "
           f"{100 * _oracle(t_all, thr, hib):.1f}%, on the monotone truth {100 * _oracle(mono_all, thr, hib):.1f}%")
+    if args.sidecar:
+        f = _fit(p_all, t_all, thr, hib, args.fit)
+        one = [100 * _saved_at(p_all, t_all, np.ones(6), thr, hib, x) for x in SHARES]
+        per = [100 * _saved_at(p_all, t_all, f, thr, hib, x) for x in SHARES]
+        print(f"\nFitted on {', '.join(scenes)} together (in sample): {' / '.join(f'{v:.1f}' for v in one)} with one "
+              f"threshold, {' / '.join(f'{v:.1f}' for v in per)} with the factors")
+        _write_sidecar(args.sidecar, f, f"python bench/per_rate.py {args.model} --data {args.data} --scene "
+                       f"{','.join(scenes)} --fit {args.fit:g} --sidecar {args.sidecar}")
+        print(f"wrote {args.sidecar}: rtp-export --retune {args.model} --metadata {args.sidecar} -o OUT.onnx")
     return 0
+
+
+def _write_sidecar(path: str, factors: np.ndarray, command: str) -> None:
+    """The factors as a metadata sidecar (``rate_factors``), written atomically."""
+    import yaml
+
+    from rtp.sdk.files import atomic_output
+
+    body = {"rate_factors": {r: round(float(v), 4) for r, v in zip(sdk.PREDICTED_RATES, factors)}}
+    with atomic_output(path) as tmp:
+        tmp.write_text(f"# threshold factors per rate, fitted by: {command}\n" + yaml.safe_dump(body, sort_keys=False),
+                       encoding="utf-8")
 
 
 if __name__ == "__main__":

@@ -168,11 +168,12 @@ def main() -> None:
                     est[:, gone] = -np.inf if hib else np.inf  # tiles without carried features: 1x1, as the carry
                     carried[SPLIT_ROW] = est
                 for name, est in (("network t+1", net), *carried.items(), ("truth t+1", truth)):
-                    rates = sdk.select_rates(est, thr, higher_is_better=hib)
+                    own = None if est is truth else meta.rate_factors  # the model's thresholds per rate, if any
+                    rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=own)
                     fail[name].append(float(failing_tiles(rates, truth, thr, hib).mean()))
                     saved[name].append(sdk.work_saved(rates, (h, w), tile))
                     if args.sweep and name in curves:  # fails are judged at the metric's threshold, always
-                        rs = [sdk.select_rates(est, t, higher_is_better=hib) for t in grid]
+                        rs = [sdk.select_rates(est, t, higher_is_better=hib, factors=own) for t in grid]
                         curves[name].append(np.array([[failing_tiles(r, truth, thr, hib).mean() for r in rs],
                                                       [sdk.work_saved(r, (h, w), tile) for r in rs]]))
             prev = (net, truth, ref, lv)

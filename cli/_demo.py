@@ -103,7 +103,7 @@ def run_demo(
         predictor.predict(x)
         times.append((time.perf_counter() - t0) * 1000)
     predict_ms = float(np.median(times))
-    rates = sdk.select_rates(predicted, thr, higher_is_better=meta.higher_is_better)
+    rates = sdk.select_rates(predicted, thr, higher_is_better=meta.higher_is_better, factors=meta.rate_factors)
     ref = frame.colour["1x1"]
     images = {r: frame.colour[r] for r in sdk.PREDICTED_RATES}
     kw: dict[str, Any] = {}

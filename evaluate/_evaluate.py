@@ -464,8 +464,9 @@ class _Sweep:
     """Each method's threshold (FidelityFX: cutoff) swept over a grid: per (method, parameter), the
     tiles whose rate fails the model's threshold, the work saved and the tiles counted."""
 
-    def __init__(self, thr: float, hib: bool, selectors: dict[str, Any]) -> None:
-        self.thr, self.hib, self.selectors = thr, hib, selectors
+    def __init__(self, thr: float, hib: bool, selectors: dict[str, Any],
+                 factors: tuple[float, ...] | None = None) -> None:
+        self.thr, self.hib, self.selectors, self.factors = thr, hib, selectors, factors
         steps = [2.0 ** (k / 2) for k in range(-8, 9)]
         self.model_grid = [thr + 2.0 * k for k in range(-8, 9)] if hib else [thr * f for f in steps]
         # The baselines' grids reach 1/256 of their defaults, so that every method that can fail as
@@ -483,7 +484,8 @@ class _Sweep:
         """Tally one sample at every grid point of every method."""
         hib = self.hib
         for t in self.model_grid:
-            self._tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib), gt)
+            self._tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib, factors=self.factors),
+                        gt)
         for name, grid in self.yang_grids.items():
             est_y = self.selectors[name].predict(sample)
             for t in grid:
@@ -522,7 +524,7 @@ class _Run:
         self.worse_t = meta.worse_direction
         self.worse_m = -1.0 if self.hib else 1.0
         self.selectors, self.yang_scored = selectors, yang_scored
-        self.sweep = _Sweep(thr, self.hib, selectors) if sweep else None
+        self.sweep = _Sweep(thr, self.hib, selectors, meta.rate_factors) if sweep else None
         self.quality: dict[tuple[str, str], _Quality] = {}
         self.decisions: dict[tuple[str, str], _Decisions] = {}
         self.scene_counts: dict[str, int] = {}
@@ -571,7 +573,8 @@ class _Run:
                        unseen: np.ndarray) -> dict[str, np.ndarray]:
         """Every method's rates (model, oracle, baselines) and whether each tile's rate fails."""
         thr, hib = self.thr, self.hib
-        codes = {"model": select_rates(pred, thr, higher_is_better=hib), "oracle": select_rates(gt, thr, higher_is_better=hib)}
+        codes = {"model": select_rates(pred, thr, higher_is_better=hib, factors=self.meta.rate_factors),
+                 "oracle": select_rates(gt, thr, higher_is_better=hib)}
         for name, sel in self.selectors.items():
             codes[name] = sel.shading_rates(sample)
         for name, c in codes.items():

@@ -634,7 +634,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
         fetch = (pf.rows, pf.cols) if pf.index > 0 else None
         est = carry.predict(inputs, fetch, pf.seen, pf.frame.mask <= 0.5)
         lp.ran.append(carry.work)
-        return sdk.select_rates(est, thr, higher_is_better=hib)
+        return sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors)
     return decide
 
 

@@ -842,6 +842,14 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
         for cell in (r[2], r[3], r[4]):
             v = [float(x) for x in cell.split("/")]
             assert v == sorted(v) and all(0.0 <= x <= 93.75 for x in v)
+    # --sidecar: the factors fitted on every map, as metadata rtp-export --retune bakes into the model
+    side = tmp_path / "factors.yaml"
+    out = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,scene1,scene2",
+                          "--sidecar", str(side)], capture_output=True, text=True, check=True).stdout
+    assert f"wrote {side}" in out and "Fitted on scene0, scene1, scene2 together" in out
+    tuned = sdk.load(export.retune(model, side, tmp_path / "tuned.onnx"))
+    assert all(0.25 <= f <= 4.0 for f in tuned.metadata.rate_factors)
+    assert side.read_text().startswith("# threshold factors per rate, fitted by: python bench/per_rate.py")
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,nowhere"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "no sample of nowhere" in bad.stderr
