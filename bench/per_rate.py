@@ -15,7 +15,9 @@ passing rate) and the fitted factors. Static viewpoint pairs, not the closed loo
 For PSNR (higher is better) a factor f moves its rate's threshold by 20 log10(f) dB (``select_rates``)
 and the sweep moves the shared one by 6 log2 of the factor.
 
-``--sidecar OUT.yaml`` also fits the factors on every map given and writes them as a metadata sidecar
+``--sidecar OUT.yaml`` also fits the factors on every map given, scales all six by one number so
+that the default threshold fails on as many tiles as with one threshold (the factors then change
+what a failing share saves, not where the default setting sits), and writes them as a metadata sidecar
 that ``rtp-export --retune MODEL --metadata OUT.yaml -o MODEL2.onnx`` bakes into a model: the runtime
 (``shading_rates``, ``rtp play``, ``rtp evaluate``) then gives each rate its factor of the threshold.
 
@@ -88,6 +90,17 @@ def _fit(pred: np.ndarray, truth: np.ndarray, thr: float, hib: bool, share: floa
     return f
 
 
+def _keep_default(pred: np.ndarray, truth: np.ndarray, f: np.ndarray, thr: float, hib: bool) -> np.ndarray:
+    """``f`` times the common scale that makes the model's default threshold fail on the share of tiles it
+    fails with one threshold (the nearest on a grid of 0.7-1.4x; the smallest change on a tie): the factors
+    then move the curve of saving against failing tiles and leave the default setting where it was."""
+    want = _outcome(pred, truth, np.ones(len(f)), 1.0, thr, hib)[0]
+    lo, hi = 1.0 / (sdk.MAX_RATE_FACTOR * f.min()), sdk.MAX_RATE_FACTOR / f.max()
+    grid = [c for c in np.exp(np.linspace(np.log(0.7), np.log(1.4), 141)) if lo <= c <= hi]
+    best = min(grid, key=lambda c: (abs(_outcome(pred, truth, f * c, 1.0, thr, hib)[0] - want), abs(np.log(c))))
+    return f * best
+
+
 def _oracle(truth: np.ndarray, thr: float, hib: bool) -> float:
     best = np.zeros(truth[:, 0].shape)
     for i, r in enumerate(sdk.PREDICTED_RATES):
@@ -152,11 +165,17 @@ def main(argv: list[str] | None = None) -> int:
           f"{100 * falls(p_all, hib):.1f}%, truth {100 * falls(t_all, hib):.1f}%; over all maps the oracle saves "
           f"{100 * _oracle(t_all, thr, hib):.1f}%, on the monotone truth {100 * _oracle(mono_all, thr, hib):.1f}%")
     if args.sidecar:
-        f = _fit(p_all, t_all, thr, hib, args.fit)
+        fitted = _fit(p_all, t_all, thr, hib, args.fit)
+        f = _keep_default(p_all, t_all, fitted, thr, hib)
         one = [100 * _saved_at(p_all, t_all, np.ones(6), thr, hib, x) for x in SHARES]
         per = [100 * _saved_at(p_all, t_all, f, thr, hib, x) for x in SHARES]
+        d1, df = (_outcome(p_all, t_all, v, 1.0, thr, hib) for v in (np.ones(6), f))
         print(f"\nFitted on {', '.join(scenes)} together (in sample): {' / '.join(f'{v:.1f}' for v in one)} with one "
-              f"threshold, {' / '.join(f'{v:.1f}' for v in per)} with the factors")
+              f"threshold, {' / '.join(f'{v:.1f}' for v in per)} with the factors ({', '.join(f'{v:.2f}' for v in fitted)}"
+              f" as fitted, x {f[0] / fitted[0]:.3f} so that the default threshold fails as often: "
+              f"{', '.join(f'{v:.4g}' for v in f)}). At the default threshold {thr:g}: {100 * d1[0]:.1f}% failing, "
+              f"{100 * d1[1]:.1f}% saved with one threshold; {100 * df[0]:.1f}% failing, {100 * df[1]:.1f}% saved "
+              "with the factors")
         _write_sidecar(args.sidecar, f, f"python bench/per_rate.py {args.model} --data {args.data} --scene "
                        f"{','.join(scenes)} --fit {args.fit:g} --sidecar {args.sidecar}")
         print(f"wrote {args.sidecar}: rtp-export --retune {args.model} --metadata {args.sidecar} -o OUT.onnx")

@@ -823,6 +823,13 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     fitted = mod._saved_at(pred, truth, f, 0.25, False, 0.05)
     assert one < known - 0.1 and fitted >= known - 1e-9
     assert mod._saved_at(truth, truth, np.ones(6), 0.25, False, 0.0) == pytest.approx(mod._oracle(truth, 0.25, False))
+    # the sidecar's factors keep the default setting: scaled so that the default threshold fails as often as one
+    # threshold does, the ratios between rates as fitted
+    loose = np.array([1.2, 1.2, 1.0, 1.0, 1.0, 0.85]) * 1.3
+    kept = mod._keep_default(pred, truth, loose, 0.25, False)
+    assert np.allclose(kept / kept[0], loose / loose[0]) and kept[0] < loose[0]
+    fails = [mod._outcome(pred, truth, f, 1.0, 0.25, False)[0] for f in (np.ones(6), kept, loose)]
+    assert abs(fails[1] - fails[0]) < abs(fails[2] - fails[0])
     # the share of (tile, rate, contained rate) triples whose coarser value is the better: none on a sorted truth,
     # five of the thirteen where 4x4 dips under every other rate
     assert mod.falls(truth, False) == 0.0
