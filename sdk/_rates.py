@@ -182,7 +182,11 @@ def check_rate_factors(factors: object, name: str = "factors") -> tuple[float, .
         raise ParameterError(f"{name}: expected a mapping of rate names to factors or {n} numbers in the order "
                              f"{', '.join(PREDICTED_RATES)}, got {type(factors).__name__} {reprlib.repr(factors)}", name)
     else:
-        items = list(factors)
+        try:
+            items = list(factors)
+        except TypeError as err:  # a 0-d array, an iterator that fails
+            raise ParameterError(f"{name}: expected {n} numbers ({', '.join(PREDICTED_RATES)}), got "
+                                 f"{reprlib.repr(factors)} ({err})", name) from err
         if len(items) != n:
             raise ParameterError(f"{name}: expected {n} factors ({', '.join(PREDICTED_RATES)}), got {len(items)}", name)
     out = []

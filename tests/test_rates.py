@@ -107,7 +107,8 @@ def test_a_threshold_factor_per_rate() -> None:
     for f in (None, [1.0] * 6, {"2x2": 1.0}):
         np.testing.assert_array_equal(sdk.select_rates(many, 0.5, factors=f), sdk.select_rates(many, 0.5))
     for bad, words in (({"1x1": 2.0}, "unknown rate"), ([1.0] * 5, "expected 6 factors"), ({"2x2": 4.5}, "2x2's factor"),
-                       ("1.2", "a mapping"), ([1, 1, 1, 1, 1, float("inf")], "4x4's factor")):
+                       ("1.2", "a mapping"), ([1, 1, 1, 1, 1, float("inf")], "4x4's factor"),
+                       (np.array(1.0), "expected 6 numbers"), (np.ones((6, 2)), "1x2's factor"), ([1] * 5 + [10**400], "4x4")):
         with pytest.raises(sdk.ParameterError, match=words) as info:
             sdk.select_rates(many, 0.5, factors=bad)  # type: ignore[arg-type]
         assert info.value.name == "factors"
