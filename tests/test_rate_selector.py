@@ -46,7 +46,7 @@ def test_every_shipped_model_decides_as_the_sdk_on_a_rendered_frame(frames, gl_c
         raw = pred.predict_raw(x)
         with RateSelector(pred, ctx) as selector:
             seen: set[int] = set()
-            for scale in (0.5, 1.0, 2.0):
+            for scale in (0.5, 1.0, 2.0, 4.0):  # 4: rates whose own factor is small (LPIPS 4x4 0.47) pass too
                 thr = pred.metadata.default_threshold * scale
                 gpu = selector.select(raw, thr)
                 seen |= set(np.unique(gpu).tolist())
