@@ -708,8 +708,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
     pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
-    pl.add_argument("--fail-metric", default="jnyang", help="a tile fails when its true error in this metric "
-                    "(one computed per frame: JNYang, JNFLIP, FLIP or PSNR) is over --fail-threshold")
+    pl.add_argument("--fail-metric", default="jnyang", choices=tuple(METRICS),
+                    help="a tile fails when its true error in this metric, computed on every frame for the six rates, "
+                    "is over --fail-threshold (PSNR: under; FLIP and LPIPS add about a second a 720p frame)")
     pl.add_argument("--fail-threshold", type=float, default=None, help="default: the metric's starting threshold "
                     "(JNYang 0.25)")
     pl.add_argument("--no-sweep", action="store_true", help="run each method at its default parameter only")

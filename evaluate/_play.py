@@ -405,9 +405,9 @@ def play(
     for p in paths:
         if p not in PATH_PROFILES:
             raise PlayError(f"paths: unknown profile {p!r}; known: {', '.join(PATH_PROFILES)}", "paths")
-    if fail_metric not in ("jnyang", "jnflip", "psnr", "flip"):
-        raise PlayError(f"fail_metric: expected jnyang, jnflip, psnr or flip (computed per frame), got {fail_metric!r}",
-                        "fail_metric")
+    if fail_metric not in sdk.METRICS:
+        raise PlayError(f"fail_metric: expected one of {', '.join(sdk.METRICS)} (computed per frame and rate), "
+                        f"got {fail_metric!r}", "fail_metric")
     info = sdk.METRICS[fail_metric]
     fail_thr = info.default_threshold if fail_threshold is None else float(fail_threshold)
     metrics.check_dependencies((fail_metric, "flip") if flip_every else (fail_metric,))

@@ -296,6 +296,47 @@ def test_a_model_reading_pixel_differences_gets_those_of_its_own_history(
         np.testing.assert_allclose(inputs(slice(16, 48), slice(32, 96)), x[:, 16:48, 32:96], atol=1e-6)
 
 
+@pytest.mark.parametrize("metric", ["lpips", "psnr"])
+def test_tiles_fail_by_the_metric_the_run_names(metric: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``fail_metric`` judges every method by that metric's true per-tile error of the frame (LPIPS,
+    PSNR below its threshold, ...): each frame's failing share is the share of tiles whose chosen
+    rate fails that metric's default threshold, and the oracle decides on the same values."""
+    from rtp import metrics
+    from rtp.evaluate import failing_tiles
+
+    truths: list[np.ndarray] = []
+    decided: list[np.ndarray] = []
+    tile_targets, select_rates = metrics.tile_targets, sdk.select_rates
+
+    def spy_targets(ref: np.ndarray, images: Any, names: Any, tile: int) -> dict[str, np.ndarray]:
+        assert tuple(names) == (metric,)  # the loop computes the named metric and no other
+        out = tile_targets(ref, images, names, tile)
+        truths.append(out[metric])
+        return out
+
+    def spy_select(*args: Any, **kwargs: Any) -> np.ndarray:
+        decided.append(select_rates(*args, **kwargs))
+        return decided[-1]
+
+    monkeypatch.setattr(metrics, "tile_targets", spy_targets)
+    monkeypatch.setattr(sdk, "select_rates", spy_select)
+    rep = play("procedural:0", f"{metric},oracle", paths=("fast",), frames=3, size=(W, H), sweep=False, flip_every=0,
+               plots=False, fail_metric=metric)
+    info = sdk.METRICS[metric]
+    assert rep.settings["fail_threshold"] == info.default_threshold and len(truths) == 3 and len(decided) == 6
+    series = rep.frames["fast"]
+    for i, truth in enumerate(truths):  # per frame the model decides first, then the oracle
+        model_rates, oracle_rates = decided[2 * i], decided[2 * i + 1]
+        want = failing_tiles(model_rates, truth, info.default_threshold, info.higher_is_better).mean()
+        assert series[metric]["fail"][i] == pytest.approx(want)
+        assert series["oracle"]["fail"][i] == 0
+        np.testing.assert_array_equal(oracle_rates, select_rates(truth, info.default_threshold,
+                                                                  higher_is_better=info.higher_is_better))
+    assert max(series[metric]["fail"]) > 0  # the test would see a wrong metric or direction
+    with pytest.raises(PlayError, match="expected one of flip, jnflip, psnr, lpips"):
+        play("procedural:0", "oracle", frames=3, size=(W, H), fail_metric="ssim")
+
+
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
     rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                plots=False)
