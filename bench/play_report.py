@@ -35,7 +35,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from rtp.evaluate import METHOD_KINDS
+from rtp.evaluate import METHOD_KINDS, fail_rule
 
 LEVELS = (0.01, 0.02, 0.05)
 #: The methods that are not swept: the oracle, and the oracle on the monotone truth (the ceiling of a
@@ -137,7 +137,7 @@ def main() -> None:
         methods = s["methods"]
         if i == 0:
             print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]} (seed: which path); a tile fails "
-                  f"when its {s['fail_metric']} error is over {s['fail_threshold']:g}. Work saved % at "
+                  f"when {fail_rule(s['fail_metric'], s['fail_threshold'])}. Work saved % at "
                   + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
                   "method's sweep never failed that often; -: never that rarely).\n")
         for path, unseen in rep["unseen"].items():

@@ -228,6 +228,14 @@ def _share(option: str, item: str, what: str) -> float:
     return w
 
 
+def fail_rule(metric: str, threshold: float) -> str:
+    """When a tile fails, in words: ``its true jnyang error is over 0.25``; PSNR, a higher-is-better
+    metric, ``its true psnr is under 35``."""
+    if sdk.METRICS[metric].higher_is_better:
+        return f"its true {metric} is under {threshold:g}"
+    return f"its true {metric} error is over {threshold:g}"
+
+
 def saved_at(points: Sequence[tuple[float, float]], fail: float) -> float | None:
     """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points: the
     best saving among points failing at most ``fail``, interpolated linearly towards the next point
@@ -316,8 +324,8 @@ class PlayReport:
         s = self.settings
         lines = [f"# Closed-loop VRS: {s['scene']}", "",
                  f"Paths {', '.join(self.unseen)} ({s['frames']} frames at {s['fps']:g} Hz, seed {s['seed']}), "
-                 f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when its true "
-                 f"{s['fail_metric']} error is over {s['fail_threshold']:g}; FLIP of the displayed frame against "
+                 f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when "
+                 f"{fail_rule(s['fail_metric'], s['fail_threshold'])}; FLIP of the displayed frame against "
                  f"full-rate shading every {s['flip_every']}th frame. Shading: {s.get('shading', 'renderer')}; each "
                  f"method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is left "
                  "out.", ""]
