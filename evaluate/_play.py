@@ -322,13 +322,14 @@ class PlayReport:
 
     def to_markdown(self) -> str:
         s = self.settings
+        flip = (f"FLIP of the displayed frame against full-rate shading once every {s['flip_every']} frames"
+                if s["flip_every"] else "no FLIP of the displayed frames")
         lines = [f"# Closed-loop VRS: {s['scene']}", "",
                  f"Paths {', '.join(self.unseen)} ({s['frames']} frames at {s['fps']:g} Hz, seed {s['seed']}), "
                  f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when "
-                 f"{fail_rule(s['fail_metric'], s['fail_threshold'])}; FLIP of the displayed frame against "
-                 f"full-rate shading every {s['flip_every']}th frame. Shading: {s.get('shading', 'renderer')}; each "
-                 f"method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is left "
-                 "out.", ""]
+                 f"{fail_rule(s['fail_metric'], s['fail_threshold'])}; {flip}. Shading: {s.get('shading', 'renderer')}; "
+                 f"each method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is "
+                 "left out.", ""]
         for path, unseen in self.unseen.items():
             u = np.array(unseen[1:])
             cam = s.get("cameras", {}).get(path)
