@@ -125,3 +125,17 @@ def paper_model(folder: Path, arch: str = "paper", inputs: int | Sequence[str] =
     stem = f"{arch}-i{len(names)}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
     ck = checkpoint.save(folder / f"{stem}.pt", net, {**PAPER_METADATA, "inputs": names})
     return net, export_checkpoint(ck, folder / f"{stem}.onnx")
+
+
+def write_factors_sidecar(path: str, factors: Sequence[float], command: str) -> None:
+    """Thresholds per rate as a metadata sidecar (``rate_factors``, in ``sdk.PREDICTED_RATES`` order) for
+    ``rtp-export --retune``, written atomically, headed by the command that fitted them."""
+    import yaml
+
+    from rtp import sdk
+    from rtp.sdk.files import atomic_output
+
+    body = {"rate_factors": {r: round(float(v), 4) for r, v in zip(sdk.PREDICTED_RATES, factors)}}
+    with atomic_output(path) as tmp:
+        tmp.write_text(f"# threshold factors per rate, fitted by: {command}\n" + yaml.safe_dump(body, sort_keys=False),
+                       encoding="utf-8")

@@ -38,7 +38,7 @@ import argparse
 import sys
 
 import numpy as np
-from _common import add_model_args  # bench/ is on sys.path when run as a script
+from _common import add_model_args, write_factors_sidecar  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -176,22 +176,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{', '.join(f'{v:.4g}' for v in f)}). At the default threshold {thr:g}: {100 * d1[0]:.1f}% failing, "
               f"{100 * d1[1]:.1f}% saved with one threshold; {100 * df[0]:.1f}% failing, {100 * df[1]:.1f}% saved "
               "with the factors")
-        _write_sidecar(args.sidecar, f, f"python bench/per_rate.py {args.model} --data {args.data} --scene "
+        write_factors_sidecar(args.sidecar, f, f"python bench/per_rate.py {args.model} --data {args.data} --scene "
                        f"{','.join(scenes)} --fit {args.fit:g} --sidecar {args.sidecar}")
         print(f"wrote {args.sidecar}: rtp-export --retune {args.model} --metadata {args.sidecar} -o OUT.onnx")
     return 0
-
-
-def _write_sidecar(path: str, factors: np.ndarray, command: str) -> None:
-    """The factors as a metadata sidecar (``rate_factors``), written atomically."""
-    import yaml
-
-    from rtp.sdk.files import atomic_output
-
-    body = {"rate_factors": {r: round(float(v), 4) for r, v in zip(sdk.PREDICTED_RATES, factors)}}
-    with atomic_output(path) as tmp:
-        tmp.write_text(f"# threshold factors per rate, fitted by: {command}\n" + yaml.safe_dump(body, sort_keys=False),
-                       encoding="utf-8")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
+import yaml
 
 from rtp import export, sdk
 from rtp.capture import BUFFERS, DatasetWriter, TargetStore, pool_targets
@@ -861,6 +862,51 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,nowhere"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "no sample of nowhere" in bad.stderr
+
+
+@pytest.mark.parametrize("metric", ["flip", "psnr"])
+def test_bench_loop_scale_finds_where_the_swept_model_fails_as_often_as_one_threshold(
+        metric: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench/loop_scale.py on two play.json runs: the model with its factors swept fails 2, 6 and 10% of
+    the tiles (mean of the paths) at 0.5, 1 and 2 times its default (PSNR: +6, 0, -6 dB); one threshold
+    fails 8% at its default: the crossing is halfway between 1x and 2x in log threshold (-3 dB), and the
+    sidecar's factors are the model's times that scale."""
+    import subprocess
+    import sys
+
+    path, _ = _bench_module("loop_scale", monkeypatch)
+    meta = sdk.load(metric).metadata
+    thr, hib = meta.default_threshold, meta.higher_is_better
+    values = [thr + 6.0, thr, thr - 6.0] if hib else [thr * 0.5, thr, thr * 2.0]
+    runs = []
+    for i, (scene, shift) in enumerate((("a", -0.01), ("b", 0.01))):  # the paths' mean is what counts
+        rows = [{"path": "slow", "method": metric, "value": v, "default": v == thr, "fail_share": f + shift,
+                 "work_saved": 0.3 + 0.1 * k} for k, (v, f) in enumerate(zip(values, (0.02, 0.06, 0.10)))]
+        rows.append({"path": "slow", "method": "one.onnx", "value": thr, "default": True, "fail_share": 0.08 + shift,
+                     "work_saved": 0.35})
+        run = {"settings": {"scene": scene, "methods": [metric, "one.onnx"], "models": {metric: metric}},
+               "unseen": {"slow": [1.0, 0.0]}, "rows": rows}
+        runs.append(tmp_path / f"run{i}.json")
+        runs[-1].write_text(json.dumps(run))
+    side = tmp_path / "scaled.yaml"
+    out = subprocess.run([sys.executable, str(path), *map(str, runs), "--method", metric, "--one", "one.onnx",
+                          "--sidecar", str(side)], capture_output=True, text=True, check=True).stdout
+    scale = 10.0 ** (3.0 / 20.0) if hib else 2.0 ** 0.5  # PSNR: 3 dB lower is each factor x 10^(3/20)
+    want = np.array(meta.rate_factors) * scale
+    got = yaml.safe_load(side.read_text())["rate_factors"]
+    assert list(got) == list(sdk.PREDICTED_RATES) and np.allclose(list(got.values()), want, atol=1e-4)
+    assert f"x {scale:.4f}" in out and "| mean | | 8.0 / 35.0 | 6.0 / 40.0 | 8.0 / 45.0 |" in out
+    assert side.read_text().startswith("# threshold factors per rate, fitted by: python bench/loop_scale.py")
+    # a sweep that never fails as often as one threshold cannot be read: nothing written
+    run = json.loads(runs[0].read_text())
+    run["rows"][-1]["fail_share"] = 0.2
+    runs[0].write_text(json.dumps(run))
+    never = subprocess.run([sys.executable, str(path), str(runs[0]), "--method", metric, "--one", "one.onnx",
+                            "--sidecar", str(tmp_path / "never.yaml")], capture_output=True, text=True)
+    assert never.returncode == 2 and "never 20.00%" in never.stderr and not (tmp_path / "never.yaml").exists()
+    bad = subprocess.run([sys.executable, str(path), str(runs[0]), "--method", "nothing", "--one", "one.onnx"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "hold no model 'nothing'" in bad.stderr
 
 
 def test_bench_residuals_affine_is_fitted_on_the_other_maps_only(monkeypatch: pytest.MonkeyPatch) -> None:
