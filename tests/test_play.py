@@ -178,6 +178,9 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     assert ("| jnyang / Yang | jnyang / oracle | jnyang / oracle-monotone | jnyang@2 / jnyang | jnyang@2:fresh / jnyang |"
             in out)
     assert "(network 50%)" in out  # the reuse columns give the network's work per frame
+    other = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
+                            "--model", "psnr"], capture_output=True, text=True, check=True).stdout
+    assert "(No targets: the runs did not play psnr;" in other and "Targets" not in other
     # --window: each method's default, frame by frame, averaged over windows (frame 0 has no history)
     win = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
                           "--window", "3"], capture_output=True, text=True, check=True).stdout
