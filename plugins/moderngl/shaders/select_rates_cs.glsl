@@ -36,15 +36,19 @@ const float LOGIT_EPS = 1e-7;
 const int R12 = 0, R21 = 1, R22 = 2, R24 = 3, R42 = 4, R44 = 5;
 const uint CODES[6] = uint[6](1u, 4u, 5u, 6u, 9u, 10u);  // sdk.RATE_CODES
 
-float inverse_transform(float p) {
+// the network output x plus the margin's shift, back to metric units
+float inverse_transform(float x, float shift) {
+    float p = x + shift;
     if (isnan(p)) return p;  // GLSL's clamp would turn a NaN into a number; numpy's clip keeps it
     if (u_transform == 0) return p * (2.0 * u_mu_y);
     if (u_transform == 1) {
         // S and 1 - S each from p (1 - S from 1 - S(1), computed on the CPU), not 1 - S in float32: near
-        // the clamp 1 - S would cancel to a few ulps and the logit would miss the SDK's by a percent
+        // the clamp 1 - S would cancel to a few ulps and the logit would miss the SDK's by a percent.
+        // 1 - p as (1 - x) - shift: x + shift rounded to float32 past 1 loses the ulps that 1 - S is
+        // made of when the margin pushes p over 1 (the SDK adds them in float64)
         float span = u_s_bounds.y - u_s_bounds.x;
         float s = clamp(p * span + u_s_bounds.x, LOGIT_EPS, 1.0 - LOGIT_EPS);
-        float r = clamp(u_s_bounds.z + (1.0 - p) * span, LOGIT_EPS, 1.0 - LOGIT_EPS);
+        float r = clamp(u_s_bounds.z + ((1.0 - x) - shift) * span, LOGIT_EPS, 1.0 - LOGIT_EPS);
         return u_mu_y + (log(s) - log(r)) / u_logistic_k;
     }
     return (p - u_offset) / u_factor;
@@ -65,7 +69,7 @@ void decode(int at, int plane, out float v[6]) {
     for (int i = 0; i < 6; ++i) {
         int r = u_outputs[i];
         if (r < 0) break;
-        v[r] = inverse_transform(raw[i * plane + at] + u_shift);
+        v[r] = inverse_transform(raw[i * plane + at], u_shift);
         have[r] = true;
     }
     if (have[R22] && !have[R12]) { v[R12] = v[R22]; v[R21] = v[R22]; }  // a single 2x2 output: an upper bound
