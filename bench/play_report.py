@@ -130,6 +130,11 @@ def main() -> None:
     head: list[str] = []
     for rep in runs:
         head += [m for m in rep["settings"]["methods"] if m not in head]
+    # reuse columns only for methods the runs played (by default MODEL@4 where it was)
+    unplayed = [r for r in reuses if r not in head]
+    if unplayed and args.reuse:
+        print(f"note: the runs did not play {', '.join(unplayed)} (--reuse): no column for it\n")
+    reuses = [r for r in reuses if r in head]
     rows, targets = [], []
     kept: dict[str, list[tuple[str, list[float], float]]] = {r: [] for r in reuses}  # per path: ratios, work
     for i, rep in enumerate(runs):
@@ -162,12 +167,10 @@ def main() -> None:
             for r, rs, w in zip(reuses, reused, work):
                 if r in methods:
                     kept[r].append((f"{s['scene']} {path}", rs, w))
-            targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(
-                " / ".join(_fmt(r, pct) for r in rs) for rs, pct in [(vs_yang, False)] + [(o, True) for o in of_oracles])
-                + " | "
-                + " | ".join(" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else
-                                                                       f" (network {100 * w:.0f}%)")
-                             for rs, w in zip(reused, work)) + " |")
+            cells = [" / ".join(_fmt(r, pct) for r in rs) for rs, pct in [(vs_yang, False)] + [(o, True) for o in of_oracles]]
+            cells += [" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else f" (network {100 * w:.0f}%)")
+                      for rs, w in zip(reused, work)]
+            targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
     print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
     print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))

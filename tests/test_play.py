@@ -185,6 +185,7 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     win = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
                           "--window", "3"], capture_output=True, text=True, check=True).stdout
     assert "| frames 1-3 | frames 4-4 |" in win
+    assert "jnyang@4 / jnyang" not in win  # no column for the default reuse method the run did not play
     series = json.loads((tmp_path / "play.json").read_text())["frames"]["fast"]["jnyang"]
     saved, fail = series["saved"][1:], series["fail"][1:]
     first = f"{100 * sum(saved[:3]) / 3:.1f} / {100 * sum(fail[:3]) / 3:.1f}"
