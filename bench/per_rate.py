@@ -20,6 +20,9 @@ that the default threshold fails on as many tiles as with one threshold (the fac
 what a failing share saves, not where the default setting sits), and writes them as a metadata sidecar
 that ``rtp-export --retune MODEL --metadata OUT.yaml -o MODEL2.onnx`` bakes into a model: the runtime
 (``shading_rates``, ``rtp play``, ``rtp evaluate``) then gives each rate its factor of the threshold.
+``--held-out PREFIX`` writes each held-out row's factors (fitted on the other maps, not scaled) as
+``PREFIX-MAP.yaml``: a model retuned with them can be played in the closed loop on MAP without having
+been fitted on it (docs/results.md "JNFLIP and `jnyang-reuse` in the closed loop").
 
 Two more columns ask whether the estimates' order across rates matters. A rate's blocks contain those
 of every rate no wider and no taller (2x2's contain 1x2's and 2x1's; 4x4's every other rate's), so an
@@ -123,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fit", type=float, default=0.05, help="failing share the factors are fitted at (default 0.05)")
     ap.add_argument("--sidecar", metavar="OUT.yaml", help="fit the factors on every map given and write them as a "
                     "metadata sidecar for `rtp-export --retune` (rate_factors)")
+    ap.add_argument("--held-out", metavar="PREFIX", help="also write each held-out map's factors, fitted on the "
+                    "other maps, as the sidecar PREFIX-MAP.yaml")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
@@ -158,6 +163,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {held} | {' / '.join(f'{v:.1f}' for v in one)} | {' / '.join(f'{v:.1f}' for v in per)} | "
               f"{' / '.join(f'{v:.1f}' for v in mono)} | {100 * _oracle(t, thr, hib):.1f} | "
               f"{100 * _oracle(monotone_over_rates(t, hib), thr, hib):.1f} | {', '.join(f'{v:.2f}' for v in f)} |")
+        if args.held_out:
+            write_factors_sidecar(f"{args.held_out}-{held}.yaml", f, f"python bench/per_rate.py {args.model} --data "
+                                  f"{args.data} --scene {','.join(scenes)} --fit {args.fit:g} --held-out "
+                                  f"{args.held_out} (fitted without {held})")
+    if args.held_out:
+        print(f"\nwrote {', '.join(f'{args.held_out}-{s}.yaml' for s in scenes)}: each map's factors fitted without it")
     p_all = np.concatenate([data[s][0] for s in scenes])
     t_all = np.concatenate([data[s][1] for s in scenes])
     mono_all = monotone_over_rates(t_all, hib)

@@ -859,6 +859,12 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     tuned = sdk.load(export.retune(model, side, tmp_path / "tuned.onnx"))
     assert all(0.25 <= f <= 4.0 for f in tuned.metadata.rate_factors)
     assert side.read_text().startswith("# threshold factors per rate, fitted by: python bench/per_rate.py")
+    # --held-out: each row's factors, fitted without its map, as a sidecar of that map
+    out = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,scene1,scene2",
+                          "--held-out", str(tmp_path / "ho")], capture_output=True, text=True, check=True).stdout
+    for r in (line.split("|") for line in out.splitlines() if line.startswith("| scene")):
+        held = yaml.safe_load((tmp_path / f"ho-{r[1].strip()}.yaml").read_text())["rate_factors"]
+        assert list(held.values()) == pytest.approx([float(x) for x in r[7].split(",")], abs=0.006)
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,nowhere"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "no sample of nowhere" in bad.stderr
