@@ -862,7 +862,9 @@ def test_bench_per_rate_finds_a_rate_the_model_underestimates_and_scores_held_ou
     # --held-out: each row's factors, fitted without its map, as a sidecar of that map
     out = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,scene1,scene2",
                           "--held-out", str(tmp_path / "ho")], capture_output=True, text=True, check=True).stdout
-    for r in (line.split("|") for line in out.splitlines() if line.startswith("| scene")):
+    rows = [line.split("|") for line in out.splitlines() if line.startswith("| scene")]
+    assert len(rows) == 3 and f"wrote {tmp_path / 'ho'}-scene0.yaml" in out
+    for r in rows:
         held = yaml.safe_load((tmp_path / f"ho-{r[1].strip()}.yaml").read_text())["rate_factors"]
         assert list(held.values()) == pytest.approx([float(x) for x in r[7].split(",")], abs=0.006)
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--scene", "scene0,nowhere"],
