@@ -43,6 +43,8 @@ ProviderSpec = str | tuple[str, Mapping[str, Any]]
 #: Most intra-op threads ``load(threads=...)`` accepts (onnxruntime takes a C int; no machine has more cores).
 MAX_THREADS = 4096
 _CPU = "CPUExecutionProvider"
+#: onnxruntime's session option that stops the intra-op worker threads spinning when a run returns.
+FORCE_SPINNING_STOP = "session.force_spinning_stop"
 # Providers that onnxruntime lists as available but that run no local kernels (the Azure EP forwards
 # requests to a remote endpoint); never picked by default, never reported as the one that runs.
 _NON_COMPUTE = frozenset({"AzureExecutionProvider"})
@@ -204,6 +206,7 @@ def load(
     strict: bool = False,
     tile_size: int | None = None,
     assume_finite: bool = False,
+    spin_between_runs: bool = False,
 ) -> ShadingRatePredictor:
     """Load an ONNX model and its metadata into a ready :class:`ShadingRatePredictor`.
 
@@ -224,6 +227,14 @@ def load(
     the whole frame (2-3 ms of a 1080p eight-plane frame on a 2-core CPU), or, for a model with a
     finite probe (``metadata.finite_probe``: every shipped model), a reduction inside the graph that
     onnxruntime computes anyway (about 1 ms): ``assume_finite`` then saves next to nothing.
+
+    onnxruntime's worker threads spin-wait for more work after each run by default, on every core
+    they were given; an engine that calls ``predict`` once a frame and renders in between would lose
+    those cores to them (about 16 ms of CPU time in the 16.7 ms after a 1080p ``predict`` on a 2-core
+    CPU: ``python bench/spinning.py``). The SDK stops them when a run returns (onnxruntime's
+    ``session.force_spinning_stop``); within a run they spin as before, so ``predict`` costs the
+    same. ``spin_between_runs=True`` keeps onnxruntime's default, for a process that does nothing but
+    run one model back to back.
     """
     ort = _ort()
     model_path = _resolve_path(path)
@@ -234,11 +245,19 @@ def load(
             f"threads: expected an integer in [0, {MAX_THREADS}] (0 = onnxruntime's default), got "
             f"{reprlib.repr(threads)}", "threads"
         )
+    if not isinstance(spin_between_runs, bool):
+        raise ParameterError(
+            f"spin_between_runs: expected True or False, got {reprlib.repr(spin_between_runs)}", "spin_between_runs"
+        )
     requested = _normalise_providers(providers, strict)
     opts = ort.SessionOptions()
     opts.log_severity_level = 3
     if threads:
         opts.intra_op_num_threads = threads
+    if not spin_between_runs:
+        # The worker threads stop spinning when a run ends (the tail's session, built with the same
+        # options, too): the engine's own threads get the cores back between frames.
+        opts.add_session_config_entry(FORCE_SPINNING_STOP, "1")
     session = _session(ort, model_path, opts, requested, strict)
 
     actual = [p for p in session.get_providers() if p not in _NON_COMPUTE]

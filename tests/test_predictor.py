@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -138,6 +139,42 @@ def test_assume_finite_skips_the_check_and_nothing_else(tiny_model: Callable[...
         trusted.predict(x[:3])
     with pytest.raises(sdk.ParameterError, match="assume_finite"):
         sdk.load(tiny_model(), assume_finite="yes")  # type: ignore[arg-type]
+
+
+def _config(session: object, key: str) -> str | None:
+    try:
+        return session.get_session_options().get_session_config_entry(key)  # type: ignore[attr-defined, no-any-return]
+    except RuntimeError:  # onnxruntime: "SessionOptions does not have configuration with key"
+        return None
+
+
+def test_onnxruntime_threads_stop_spinning_when_a_run_returns() -> None:
+    """By default the worker threads stop spinning when ``predict`` returns (a splitting model's tail
+    session too); ``spin_between_runs=True`` leaves onnxruntime's default."""
+    from rtp.sdk._predictor import FORCE_SPINNING_STOP
+
+    reuse = sdk.load("jnyang-reuse")
+    assert reuse.splits
+    for session in (reuse._session, reuse._tail):
+        assert _config(session, FORCE_SPINNING_STOP) == "1"
+    assert _config(sdk.load("jnyang", spin_between_runs=True)._session, FORCE_SPINNING_STOP) is None
+    with pytest.raises(sdk.ParameterError, match="spin_between_runs"):
+        sdk.load("jnyang", spin_between_runs=1)  # type: ignore[arg-type]
+
+
+def test_an_idle_predictor_leaves_the_cores_to_the_engine() -> None:
+    """The behaviour the option is for: after ``predict`` returns, a caller that does something else (here
+    it sleeps for three 60 Hz frames) gets the cores; with onnxruntime's default its two worker threads
+    spin there, about 45 ms of CPU time (bench/spinning.py)."""
+    p = sdk.load("jnyang", threads=2, providers=["CPUExecutionProvider"])
+    x = np.random.default_rng(0).random((len(p.metadata.inputs), 360, 640), dtype=np.float32)
+    burned = []
+    for _ in range(3):
+        p.predict(x)
+        c0 = time.process_time()
+        time.sleep(0.05)
+        burned.append(time.process_time() - c0)
+    assert sorted(burned)[1] < 0.005, f"the process used {burned} s of CPU while the caller slept 0.05 s"
 
 
 def test_missing_file(tmp_path: Path) -> None:
