@@ -38,22 +38,29 @@ def channel_lists(models: Path) -> dict[str, tuple[str, ...]]:
     return lists
 
 
+def engine_frame(r: Renderer) -> GBufferTextures:
+    """Two frames of bench/render.py's room rendered by ``r``, the second's G-buffers and the first's
+    colour and depth left in ``r``'s textures as an engine's would be: what the adapter reads."""
+    width, height = r.width, r.height
+    cams = [Camera((-1.0 + 0.1 * i, 1.7, 8.0 - 0.05 * i), yaw=-8.0 + 1.5 * i, pitch=-6.0) for i in range(2)]
+    r.load_scene(build_scene())
+    prev = r.render(cams[0])
+    cur = r.render(cams[1], prev)
+    # The renderer's own textures as an engine's G-buffers (private names: a benchmark, not an API).
+    write_texture(r._t_prev_colour, prev.colour["1x1"])
+    write_texture(r._t_prev_depth, prev.depth)
+    return GBufferTextures(
+        albedo=r._t_albedo, normal=r._t_nd, depth=r._t_nd, depth_component=3,
+        view=cur.camera.view(), projection=cur.camera.projection(width / height),
+        prev_colour=r._t_prev_colour, prev_depth=r._t_prev_depth,
+        prev_view_projection=prev.camera.view_projection(width, height), material=r._t_material)
+
+
 def time_size(width: int, height: int, lists: dict[str, tuple[str, ...]], repeats: int) -> dict[str, float]:
     """Median ms of ``Adapter.inputs`` per channel list at one frame size."""
-    cams = [Camera((-1.0 + 0.1 * i, 1.7, 8.0 - 0.05 * i), yaw=-8.0 + 1.5 * i, pitch=-6.0) for i in range(2)]
     out: dict[str, float] = {}
     with Renderer(width, height) as r:
-        r.load_scene(build_scene())
-        prev = r.render(cams[0])
-        cur = r.render(cams[1], prev)
-        # The renderer's own textures as an engine's G-buffers (private names: a benchmark, not an API).
-        write_texture(r._t_prev_colour, prev.colour["1x1"])
-        write_texture(r._t_prev_depth, prev.depth)
-        frame = GBufferTextures(
-            albedo=r._t_albedo, normal=r._t_nd, depth=r._t_nd, depth_component=3,
-            view=cur.camera.view(), projection=cur.camera.projection(width / height),
-            prev_colour=r._t_prev_colour, prev_depth=r._t_prev_depth,
-            prev_view_projection=prev.camera.view_projection(width, height), material=r._t_material)
+        frame = engine_frame(r)
         for name, channels in lists.items():
             with Adapter(channels, width, height, ctx=r.ctx) as adapter:
                 x = adapter.inputs(frame)

@@ -7,14 +7,18 @@ The paper's configuration (4 inputs, outputs 1x2/2x1/2x4/4x2, 16x16 tiles, width
 architectures (``rtp train --arch fast``) are built with random weights (cost does not depend on the
 weights) and exported with rtp-export; the shipped models are loaded from ``rtp.models``, and any
 ``MODEL.onnx`` given (for example the study's, ``data/study/*.onnx``) is added. Each is
-timed in the same run at 1920x1080 and 1280x720. Prints Markdown tables of medians (ms) and each
-model's speed-up over the paper's network.
+timed in the same run at 1920x1080 and 1280x720, in rounds (each model once a round, ``--repeats``
+rounds). Prints Markdown tables of medians (ms) and each model's speed-up over the paper's network:
+the median over the rounds of the two times' ratio within a round, and its range.
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
+import time
+from collections.abc import Callable, Hashable
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +64,22 @@ def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk
     return out
 
 
+def interleaved_ms(runs: dict[Hashable, Callable[[], object]], rounds: int) -> dict[Hashable, list[float]]:
+    """Wall ms of every run in each of ``rounds`` rounds, after one warm-up round. A round runs each
+    once, in turn, so a slow spell of the machine (these are shared 2-core VMs) falls on every model
+    in the round instead of on the one being timed, and a ratio of two models' times within a round
+    compares them under the same conditions."""
+    for fn in runs.values():
+        fn()
+    out: dict[Hashable, list[float]] = {key: [] for key in runs}
+    for _ in range(rounds):
+        for key, fn in runs.items():
+            t0 = time.perf_counter()
+            fn()
+            out[key].append((time.perf_counter() - t0) * 1000)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=7)
@@ -97,21 +117,24 @@ def main() -> None:
         channels = {len(p.metadata.inputs) for p, _ in models.values()}
         frames = {(c, w, h): np.random.default_rng(0).random((c, h, w), dtype=np.float32)
                   for c in channels for w, h in FRAMES}
-        times = {}
+        runs: dict[Hashable, Callable[[], object]] = {}
         for name, (p, _) in models.items():
             for w, h in FRAMES:
                 x = frames[len(p.metadata.inputs), w, h]
-                times[name, (w, h)] = median_ms(lambda p=p, x=x: p.predict(x), args.repeats)
+                runs[name, (w, h)] = lambda p=p, x=x: p.predict(x)
+        times = interleaved_ms(runs, args.repeats)
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, torch {torch.__version__}, "
-          f"{cpu_description()}, {args.threads} threads, median of {args.repeats}\n")
+          f"{cpu_description()}, {args.threads} threads, median of {args.repeats}; the models in rounds\n")
     paper = "paper's network (random weights)"
     print("| model | architecture | inputs | stored values | "
-          + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES) + " | speed-up over the paper's at 1920x1080 |")
+          + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES)
+          + " | speed-up over the paper's at 1920x1080 (the rounds' median; their range) |")
     print("|---|---|---:|---:|" + "---:|" * len(FRAMES) + "---:|")
     for name, (pred, (arch, n_params)) in models.items():
-        cells = " | ".join(f"{times[name, wh]:.1f}" for wh in FRAMES)
-        ratio = times[paper, FRAMES[0]] / times[name, FRAMES[0]]
-        print(f"| {name} | {arch} | {len(pred.metadata.inputs)} | {n_params:,} | {cells} | {ratio:.1f}x |")
+        cells = " | ".join(f"{statistics.median(times[name, wh]):.1f}" for wh in FRAMES)
+        ratios = [a / b for a, b in zip(times[paper, FRAMES[0]], times[name, FRAMES[0]], strict=True)]
+        ratio = f"{statistics.median(ratios):.1f}x ({min(ratios):.1f}-{max(ratios):.1f})"
+        print(f"| {name} | {arch} | {len(pred.metadata.inputs)} | {n_params:,} | {cells} | {ratio} |")
     print("\nThe paper's network by path:\n")
     print("| frame | sdk predict (ms) | sdk shading_rates (ms) | bare onnxruntime (ms) | torch eager (ms) |")
     print("|---|---|---|---|---|")

@@ -1,0 +1,145 @@
+"""What onnxruntime's spinning worker threads cost the engine around a predictor: ``sdk.load``'s
+default (``spin_between_runs=False``: the threads stop spinning when a run returns) next to
+onnxruntime's own (``spin_between_runs=True``: they spin on, waiting for the next run).
+
+    python bench/spinning.py [--size 1920x1080] [--repeats 15] [--threads 2] [--blocks 2] [--model jnyang]
+
+Three tables, every setting measured in ``--blocks`` alternating blocks (the same setting's rows of
+two blocks differ by the machine's noise, not by the setting):
+
+1. **After a run**, per shipped model: ``predict`` back to back (median ms), and the CPU time the
+   process burns in the 16.7 ms after ``predict`` returns while the caller sleeps: the cores a
+   60 Hz engine would lose between frames.
+2. **An engine's frame** on this machine: the moderngl adapter renders ``--model``'s input planes on
+   Mesa's llvmpipe (CPU threads, as an engine's GPU passes would be on a GPU) and reads them back,
+   then ``predict`` runs; median ms of each and of the frame. The adapter's threads run right after
+   the previous frame's ``predict``.
+3. **Every shipped model in one process, in turn** (as ``rtp play`` and ``rtp evaluate`` run their
+   methods): median ``predict`` ms per model; each session's spinning threads compete with the next
+   session's run.
+
+Prints Markdown tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+import onnxruntime as ort
+from _common import cpu_description, frame_size  # bench/ is on sys.path when run as a script
+
+from rtp import sdk
+
+#: The wait after ``predict`` in table 1: one frame at 60 Hz.
+FRAME_S = 1 / 60
+SETTINGS = ((False, "stop after a run (`sdk.load` default)"), (True, "spin between runs (onnxruntime default)"))
+
+
+def _frame(channels: int, width: int, height: int) -> np.ndarray:
+    return np.random.default_rng(0).random((channels, height, width), dtype=np.float32)
+
+
+def _ms(fn: Callable[[], object]) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return (time.perf_counter() - t0) * 1000
+
+
+def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float]:
+    """Median ``predict`` ms back to back, and median CPU ms the process uses in the FRAME_S after it."""
+    pred = sdk.load(name, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+    x = _frame(len(pred.metadata.inputs), *size)
+    pred.predict(x)
+    back_to_back = statistics.median(_ms(lambda: pred.predict(x)) for _ in range(repeats))
+    burned = []
+    for _ in range(repeats):
+        pred.predict(x)
+        c0 = time.process_time()
+        time.sleep(FRAME_S)
+        burned.append((time.process_time() - c0) * 1000)
+    return back_to_back, statistics.median(burned)
+
+
+def engine_frames(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float, float]:
+    """Median ms of the adapter's planes, of ``predict`` and of the frame, in a loop of both."""
+    from adapter import engine_frame
+
+    from rtp.plugins.moderngl import Adapter, Renderer
+
+    pred = sdk.load(name, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+    width, height = size
+    rows = []
+    with Renderer(width, height) as r:
+        frame = engine_frame(r)
+        with Adapter(pred.metadata.inputs, width, height, ctx=r.ctx) as adapter:
+            pred.predict(adapter.inputs(frame))
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                x = adapter.inputs(frame)
+                t1 = time.perf_counter()
+                pred.predict(x)
+                t2 = time.perf_counter()
+                rows.append(((t1 - t0) * 1000, (t2 - t1) * 1000, (t2 - t0) * 1000))
+    a, p, f = (statistics.median(col) for col in zip(*rows, strict=True))
+    return a, p, f
+
+
+def in_turn(spin: bool, size: tuple[int, int], threads: int, repeats: int) -> dict[str, float]:
+    """Median ``predict`` ms of every shipped model, the models run one after another ``repeats`` times."""
+    preds = {n: sdk.load(n, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+             for n in sdk.shipped_models()}
+    xs = {n: _frame(len(p.metadata.inputs), *size) for n, p in preds.items()}
+    for n, p in preds.items():
+        p.predict(xs[n])
+    times: dict[str, list[float]] = {n: [] for n in preds}
+    for _ in range(repeats):
+        for n, p in preds.items():
+            times[n].append(_ms(lambda p=p, x=xs[n]: p.predict(x)))
+    return {n: statistics.median(t) for n, t in times.items()}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1920, 1080), help="WIDTHxHEIGHT")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--blocks", type=int, default=2, help="alternating blocks of each setting")
+    ap.add_argument("--model", default="jnyang", help="the model of the engine-frame table (default: jnyang)")
+    args = ap.parse_args()
+    if args.repeats < 1 or args.blocks < 1:
+        ap.error("--repeats and --blocks must be >= 1")
+    w, h = args.size
+    print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {cpu_description()}, {args.threads} threads, "
+          f"{w}x{h}, median of {args.repeats}, {args.blocks} blocks a setting\n")
+    blocks = [(b, spin, label) for b in range(1, args.blocks + 1) for spin, label in SETTINGS]
+
+    print(f"After a run: `predict` back to back, and CPU ms the process uses in the {FRAME_S * 1000:.1f} ms after it\n")
+    print("| model | threads after a run | block | predict (ms) | CPU in the next frame (ms) |")
+    print("|---|---|---:|---:|---:|")
+    for name in sdk.shipped_models():
+        for b, spin, label in blocks:
+            t, burned = after_a_run(name, spin, args.size, args.threads, args.repeats)
+            print(f"| {name.removesuffix('.onnx')} | {label} | {b} | {t:.1f} | {burned:.1f} |")
+
+    print(f"\nAn engine's frame: the moderngl adapter's planes for {args.model} on llvmpipe, then `predict`\n")
+    print("| threads after a run | block | adapter (ms) | predict (ms) | frame (ms) |")
+    print("|---|---:|---:|---:|---:|")
+    for b, spin, label in blocks:
+        a, p, f = engine_frames(args.model, spin, args.size, args.threads, args.repeats)
+        print(f"| {label} | {b} | {a:.1f} | {p:.1f} | {f:.1f} |")
+
+    print("\nEvery shipped model in one process, in turn: `predict` (ms)\n")
+    names = sdk.shipped_models()
+    print("| threads after a run | block | " + " | ".join(n.removesuffix(".onnx") for n in names) + " |")
+    print("|---|---:|" + "---:|" * len(names))
+    for b, spin, label in blocks:
+        t = in_turn(spin, args.size, args.threads, args.repeats)
+        print(f"| {label} | {b} | " + " | ".join(f"{t[n]:.1f}" for n in names) + " |")
+
+
+if __name__ == "__main__":
+    main()
