@@ -36,6 +36,12 @@ from rtp import sdk
 
 #: The wait after ``predict`` in table 1: one frame at 60 Hz.
 FRAME_S = 1 / 60
+#: Runs before timing (first-run allocations).
+WARM_UP = 3
+#: Seconds to wait after ``sdk.load``: a new session's worker threads spin for 35-45 ms of CPU time
+#: before its first run whatever the setting (``jnyang-reuse``'s tail session, which ``predict`` never
+#: runs, too), a one-off cost of loading that would otherwise land in the first frames measured.
+SETTLE_S = 0.2
 SETTINGS = ((False, "stop after a run (`sdk.load` default)"), (True, "spin between runs (onnxruntime default)"))
 
 
@@ -52,8 +58,10 @@ def _ms(fn: Callable[[], object]) -> float:
 def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float]:
     """Median ``predict`` ms back to back, and median CPU ms the process uses in the FRAME_S after it."""
     pred = sdk.load(name, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+    time.sleep(SETTLE_S)
     x = _frame(len(pred.metadata.inputs), *size)
-    pred.predict(x)
+    for _ in range(WARM_UP):
+        pred.predict(x)
     back_to_back = statistics.median(_ms(lambda: pred.predict(x)) for _ in range(repeats))
     burned = []
     for _ in range(repeats):
@@ -71,6 +79,7 @@ def engine_frames(name: str, spin: bool, size: tuple[int, int], threads: int, re
     from rtp.plugins.moderngl import Adapter, Renderer
 
     pred = sdk.load(name, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+    time.sleep(SETTLE_S)
     width, height = size
     rows = []
     with Renderer(width, height) as r:
@@ -92,6 +101,7 @@ def in_turn(spin: bool, size: tuple[int, int], threads: int, repeats: int) -> di
     """Median ``predict`` ms of every shipped model, the models run one after another ``repeats`` times."""
     preds = {n: sdk.load(n, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
              for n in sdk.shipped_models()}
+    time.sleep(SETTLE_S)
     xs = {n: _frame(len(p.metadata.inputs), *size) for n, p in preds.items()}
     for n, p in preds.items():
         p.predict(xs[n])

@@ -1,0 +1,31 @@
+"""bench/spinning.py: the three tables of what onnxruntime's spinning threads cost around a predictor."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from rtp import sdk
+
+BENCH = Path(__file__).resolve().parents[1] / "bench" / "spinning.py"
+
+
+def test_the_tables_have_a_row_per_model_and_setting_and_the_default_leaves_the_cores_idle() -> None:
+    out = subprocess.run([sys.executable, str(BENCH), "--size", "256x144", "--repeats", "3", "--blocks", "1"],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    models = [n.removesuffix(".onnx") for n in sdk.shipped_models()]
+    after = [line for line in out.stdout.splitlines() if re.match(r"\| [\w-]+ \| (stop|spin)", line)]
+    assert sorted({row.split(" | ")[0][2:] for row in after}) == sorted(models) and len(after) == 2 * len(models)
+    for row in after:  # the SDK's default: the threads stop when the run returns, the process idles
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        if cells[1].startswith("stop"):
+            assert float(cells[4]) < 5.0, row
+    engine = [line for line in out.stdout.splitlines() if re.match(r"\| (stop|spin)[^|]*\| 1 \| [\d.]+ \| [\d.]+ \| [\d.]+ \|$", line)]
+    assert len(engine) == 2
+    in_turn = [line for line in out.stdout.splitlines() if re.match(r"\| (stop|spin)[^|]*\| 1 \|( [\d.]+ \|){6}$", line)]
+    assert len(in_turn) == 2 and len(models) == 6
+    bad = subprocess.run([sys.executable, str(BENCH), "--repeats", "0"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--repeats" in bad.stderr
