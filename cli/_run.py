@@ -139,7 +139,11 @@ class Bar:
     def __enter__(self) -> Bar:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
+        if exc_type is not None and self._bar is not None and self._bar.n == 0:
+            # The job failed before any progress (a bad argument found by the job itself): a terminal
+            # erases the empty bar, so that the error message stands alone.
+            self._bar.leave = False
         self.close()
 
 

@@ -267,3 +267,22 @@ def test_cli_keeps_no_lists_of_metrics_tiles_or_rates() -> None:
                 if sum(part.strip() in names for part in node.value.split(",")) >= 2:
                     bad.append(f"{path.name}:{node.lineno}")
     assert not bad, f"literal lists of metrics, rates or tile sizes in cli/: {bad}"
+
+
+def test_a_job_that_fails_before_any_progress_erases_its_empty_bar() -> None:
+    """`rtp play nomap` used to leave "play nomap: 0%| 0/10" above its error; the bar of a job that fails
+    before its first step is not left on the terminal, one that fails later is (it shows how far it got)."""
+    import io
+
+    from rtp.cli._run import Bar
+
+    args = argparse.Namespace(quiet=False, no_progress=False)
+    for steps, leaves in ((0, False), (3, True)):
+        with pytest.raises(sdk.ParameterError), Bar(args, 10, "play nomap", "frame") as bar:
+            bar._bar.fp = io.StringIO()
+            bar.update_to(steps)
+            raise sdk.ParameterError("map 'nomap' is not listed", "scene")
+        assert bar._bar.leave is leaves
+    with Bar(args, 10, "play", "frame") as bar:  # a job that ends well keeps its bar
+        bar._bar.fp = io.StringIO()
+    assert bar._bar.leave is True
