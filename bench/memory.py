@@ -1,0 +1,91 @@
+"""Memory a predictor takes: every shipped model (and any MODEL.onnx given), each in a process of its
+own, the resident set (RSS) that onnxruntime's library adds when imported, that ``sdk.load`` adds
+when it builds the session, and that ``predict`` adds when it first runs at each frame size
+(onnxruntime's arena and the SDK's own buffers: what an engine budgets on top of its input planes,
+which the table gives beside it).
+
+    python bench/memory.py [--sizes 1280x720,1920x1080] [--threads 2] [MODEL.onnx ...]
+
+Read from /proc/self/status (Linux). Prints a Markdown table (MB).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from _common import frame_size  # bench/ is on sys.path when run as a script
+
+from rtp import sdk
+
+#: Runs at each size before the reading (the arena grows on the first; the later ones must not).
+RUNS = 3
+
+
+def _rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise SystemExit("no VmRSS in /proc/self/status: this script reads Linux's process status")
+
+
+def measure(model: str, sizes: list[tuple[int, int]], threads: int) -> dict[str, float]:
+    """In this process: MB added by the load, by the input planes and by the runs at each size."""
+    import numpy as np
+
+    before = _rss_mb()
+    import onnxruntime  # noqa: F401  (its library, apart from the session)
+
+    library = _rss_mb()
+    pred = sdk.load(model, providers=["CPUExecutionProvider"], threads=threads)
+    out = {"library": library - before, "load": _rss_mb() - library}
+    c = len(pred.metadata.inputs)
+    for w, h in sizes:
+        x = np.random.default_rng(0).random((c, h, w), dtype=np.float32)
+        base = _rss_mb()
+        for _ in range(RUNS):
+            pred.predict(x)
+        out[f"{w}x{h}"] = _rss_mb() - base
+        out[f"{w}x{h} input"] = x.nbytes / 2**20
+        del x
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="1280x720,1920x1080", help="comma-separated WIDTHxHEIGHT, in this order")
+    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--one", help=argparse.SUPPRESS)  # a child process: measure this model, print JSON
+    ap.add_argument("models", nargs="*", help="more .onnx models")
+    args = ap.parse_args()
+    try:
+        sizes = [frame_size(s, 16) for s in args.sizes.split(",")]
+    except argparse.ArgumentTypeError as err:
+        ap.error(f"--sizes: {err}")
+    if args.one:
+        print(json.dumps(measure(args.one, sizes, args.threads)))
+        return
+    models = [n.removesuffix(".onnx") for n in sdk.shipped_models()] + list(args.models)
+    rows = {}
+    for m in models:
+        run = subprocess.run([sys.executable, __file__, "--one", m, "--sizes", args.sizes, "--threads", str(args.threads)],
+                             capture_output=True, text=True, check=False)
+        if run.returncode != 0:
+            raise SystemExit(f"{m}: {run.stderr.strip().splitlines()[-1] if run.stderr.strip() else run.returncode}")
+        rows[m] = json.loads(run.stdout.strip().splitlines()[-1])
+    labels = [f"{w}x{h}" for w, h in sizes]
+    print(f"rtp {sdk.__version__}, {args.threads} threads, resident memory added (MB), each model in a process of "
+          f"its own, after {RUNS} runs at each size in turn\n")
+    print("| model | onnxruntime's library | the session (`sdk.load`) | "
+          + " | ".join(f"first runs at {s} (its input planes)" for s in labels) + " |")
+    print("|---|---:|---:|" + "---:|" * len(labels))
+    for m, r in rows.items():
+        cells = " | ".join(f"{r[s]:.0f} ({r[s + ' input']:.0f})" for s in labels)
+        print(f"| {m} | {r['library']:.0f} | {r['load']:.0f} | {cells} |")
+
+
+if __name__ == "__main__":
+    main()
