@@ -72,6 +72,7 @@ check: lint typecheck test
 bench: $(STAMP)
 	$(BIN)/python bench/inference.py
 	$(BIN)/python bench/spinning.py
+	$(BIN)/python bench/memory.py
 	$(BIN)/python bench/metrics.py
 	$(BIN)/python bench/capture.py
 
