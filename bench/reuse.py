@@ -4,7 +4,7 @@ second and every eighth pixel, rescaled by the blocks' variance for models with 
 the trunk's features carried and the tail run for a model that splits, ``carry="features"``, at the
 default step and at every eighth pixel), and the ``unseen="fresh"`` crops.
 
-    python bench/reuse.py [--model jnyang] [--repeats 7] [--threads 2]
+    python bench/reuse.py [--model jnyang] [--repeats 7] [--threads 2] [--spin-between-runs]
 
 The camera pans: every pixel comes from 3 pixels to its left, and a strip at the left edge is new
 (unseen). With a 3-pixel strip no tile is more than half unseen (nothing to predict afresh); wider
@@ -51,8 +51,11 @@ def main() -> None:
     ap.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--spin-between-runs", action="store_true",
+                    help="onnxruntime's worker threads spin on between runs (its default; sdk.load stops them)")
     args = ap.parse_args()
-    pred = sdk.load(args.model, providers=["CPUExecutionProvider"], threads=args.threads)
+    pred = sdk.load(args.model, providers=["CPUExecutionProvider"], threads=args.threads,
+                    spin_between_runs=args.spin_between_runs)
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {platform.processor() or platform.machine()}, "
           f"{args.threads} threads, median of {args.repeats}, model {args.model}\n")
     blocks = any(c.endswith(".blocks") for c in pred.metadata.inputs)
@@ -64,7 +67,8 @@ def main() -> None:
     for w, h in FRAMES:
         # a session of its own per frame size, as an engine runs at one: onnxruntime sessions that ran at
         # another size first ran a split model's tail at 720p in 8.5 ms instead of 4.8
-        pred = sdk.load(args.model, providers=["CPUExecutionProvider"], threads=args.threads)
+        pred = sdk.load(args.model, providers=["CPUExecutionProvider"], threads=args.threads,
+                        spin_between_runs=args.spin_between_runs)
         x = np.random.default_rng(0).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
         net = median_ms(lambda x=x, pred=pred: pred.predict(x), args.repeats)
         carried = [_carried(pred, x, 3, args.repeats, reduce=r)[0] for r in ("mean", "worst", "upper")]

@@ -2,14 +2,14 @@
 default (``spin_between_runs=False``: the threads stop spinning when a run returns) next to
 onnxruntime's own (``spin_between_runs=True``: they spin on, waiting for the next run).
 
-    python bench/spinning.py [--size 1920x1080] [--repeats 15] [--threads 2] [--blocks 2] [--model jnflip]
+    python bench/spinning.py [--size 1920x1080] [--repeats 15] [--threads 2] [--blocks 2] [--long-ms 500] [--model jnflip]
 
 Three tables, every setting measured in ``--blocks`` alternating blocks (the same setting's rows of
 two blocks differ by the machine's noise, not by the setting):
 
 1. **After a run**, per shipped model: ``predict`` back to back (median ms), and the CPU time the
-   process burns in the 16.7 ms after ``predict`` returns while the caller sleeps: the cores a
-   60 Hz engine would lose between frames.
+   process burns in the 16.7 ms after ``predict`` returns while the caller sleeps (the cores a
+   60 Hz engine would lose between frames), and in the ``--long-ms`` after it (the whole spin).
 2. **An engine's frame** on this machine: the moderngl adapter renders ``--model``'s input planes on
    Mesa's llvmpipe (CPU threads, as an engine's GPU passes would be on a GPU) and reads them back,
    then ``predict`` runs; median ms of each and of the frame. The adapter's threads run right after
@@ -36,11 +36,14 @@ from rtp import sdk
 
 #: The wait after ``predict`` in table 1: one frame at 60 Hz.
 FRAME_S = 1 / 60
+#: How often table 1 waits the longer time after ``predict`` (``--long-ms``), to see the whole of the spin.
+LONG_REPEATS = 3
 #: Runs before timing (first-run allocations).
 WARM_UP = 3
-#: Seconds to wait after ``sdk.load``: a new session's worker threads spin for 35-45 ms of CPU time
-#: before its first run whatever the setting (``jnyang-reuse``'s tail session, which ``predict`` never
-#: runs, too), a one-off cost of loading that would otherwise land in the first frames measured.
+#: Seconds to wait after ``sdk.load`` (table 1 gives the CPU time used meanwhile): a new session's
+#: worker threads spin before its first run whatever the setting (``jnyang-reuse``'s tail session,
+#: which ``predict`` never runs, too), a one-off cost of loading that would otherwise land in the
+#: first frames measured.
 SETTLE_S = 0.2
 SETTINGS = ((False, "stop after a run (`sdk.load` default)"), (True, "spin between runs (onnxruntime default)"))
 
@@ -55,10 +58,15 @@ def _ms(fn: Callable[[], object]) -> float:
     return (time.perf_counter() - t0) * 1000
 
 
-def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float]:
-    """Median ``predict`` ms back to back, and median CPU ms the process uses in the FRAME_S after it."""
+def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int,
+                long_s: float) -> tuple[float, float, float, float]:
+    """CPU ms the process uses in the SETTLE_S after ``sdk.load``; median ``predict`` ms back to back;
+    median CPU ms the process uses in the FRAME_S after it and in the ``long_s`` after it (the whole
+    spin)."""
     pred = sdk.load(name, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+    c0 = time.process_time()
     time.sleep(SETTLE_S)
+    settle = (time.process_time() - c0) * 1000
     x = _frame(len(pred.metadata.inputs), *size)
     for _ in range(WARM_UP):
         pred.predict(x)
@@ -69,7 +77,13 @@ def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repe
         c0 = time.process_time()
         time.sleep(FRAME_S)
         burned.append((time.process_time() - c0) * 1000)
-    return back_to_back, statistics.median(burned)
+    whole = []
+    for _ in range(LONG_REPEATS):
+        pred.predict(x)
+        c0 = time.process_time()
+        time.sleep(long_s)
+        whole.append((time.process_time() - c0) * 1000)
+    return settle, back_to_back, statistics.median(burned), statistics.median(whole)
 
 
 def engine_frames(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float, float]:
@@ -117,24 +131,29 @@ def main() -> None:
     ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1920, 1080), help="WIDTHxHEIGHT")
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--long-ms", type=float, default=500, help="the longer wait after a run in table 1 (ms)")
     ap.add_argument("--blocks", type=int, default=2, help="alternating blocks of each setting")
     ap.add_argument("--model", default="jnflip",
                     help="the model of the engine-frame table (default: jnflip, whose planes llvmpipe builds fastest)")
     args = ap.parse_args()
-    if args.repeats < 1 or args.blocks < 1:
-        ap.error("--repeats and --blocks must be >= 1")
+    if args.repeats < 1 or args.blocks < 1 or args.long_ms < 0:
+        ap.error("--repeats and --blocks must be >= 1, --long-ms >= 0")
     w, h = args.size
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {cpu_description()}, {args.threads} threads, "
           f"{w}x{h}, median of {args.repeats}, {args.blocks} blocks a setting\n")
     blocks = [(b, spin, label) for b in range(1, args.blocks + 1) for spin, label in SETTINGS]
 
-    print(f"After a run: `predict` back to back, and CPU ms the process uses in the {FRAME_S * 1000:.1f} ms after it\n")
-    print("| model | threads after a run | block | predict (ms) | CPU in the next frame (ms) |")
-    print("|---|---|---:|---:|---:|")
+    print(f"After a run: `predict` back to back, and CPU ms the process uses in the {FRAME_S * 1000:.1f} ms after it "
+          f"and in the {args.long_ms:.0f} ms after it (median of {LONG_REPEATS})\n")
+    print(f"| model | threads after a run | block | CPU in the {SETTLE_S * 1000:.0f} ms after `sdk.load` (ms) | "
+          f"predict (ms) | CPU in the next frame (ms) | CPU in the next {args.long_ms:.0f} ms (ms) |")
+    print("|---|---|---:|---:|---:|---:|---:|")
     for name in sdk.shipped_models():
         for b, spin, label in blocks:
-            t, burned = after_a_run(name, spin, args.size, args.threads, args.repeats)
-            print(f"| {name.removesuffix('.onnx')} | {label} | {b} | {t:.1f} | {burned:.1f} |")
+            settle, t, burned, whole = after_a_run(name, spin, args.size, args.threads, args.repeats,
+                                                   args.long_ms / 1000)
+            print(f"| {name.removesuffix('.onnx')} | {label} | {b} | {settle:.1f} | {t:.1f} | {burned:.1f} | "
+                  f"{whole:.1f} |")
 
     print(f"\nAn engine's frame: the moderngl adapter's planes for {args.model} on llvmpipe, then `predict`\n")
     print("| threads after a run | block | adapter (ms) | predict (ms) | frame (ms) |")

@@ -234,8 +234,8 @@ def load(
     CPU: ``python bench/spinning.py``). The SDK stops them when a run returns (onnxruntime's
     ``session.force_spinning_stop``); within a run they spin as before, so ``predict`` costs the
     same. ``spin_between_runs=True`` keeps onnxruntime's default, for a process that does nothing but
-    run one model back to back. (A new session's threads spin for 35-45 ms of CPU time after it is
-    built either way: a one-off cost of loading.)
+    run one model back to back. (A new session's threads spin for a while after it is built either
+    way: a one-off cost of loading.)
     """
     ort = _ort()
     model_path = _resolve_path(path)
