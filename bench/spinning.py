@@ -2,7 +2,8 @@
 default (``spin_between_runs=False``: the threads stop spinning when a run returns) next to
 onnxruntime's own (``spin_between_runs=True``: they spin on, waiting for the next run).
 
-    python bench/spinning.py [--size 1920x1080] [--repeats 15] [--threads 2] [--blocks 2] [--long-ms 500] [--model jnflip]
+    python bench/spinning.py [--size 1920x1080] [--repeats 15] [--threads 2] [--blocks 2] [--long-ms 500]
+                             [--model jnflip] [--plot PNG]
 
 Three tables, every setting measured in ``--blocks`` alternating blocks (the same setting's rows of
 two blocks differ by the machine's noise, not by the setting):
@@ -18,7 +19,8 @@ two blocks differ by the machine's noise, not by the setting):
    methods): median ``predict`` ms per model; each session's spinning threads compete with the next
    session's run.
 
-Prints Markdown tables.
+Prints Markdown tables; ``--plot PNG`` also draws the CPU time the process uses after a run of
+``--model``, sampled every millisecond, with each setting (docs/img/spinning.png).
 """
 
 from __future__ import annotations
@@ -86,6 +88,56 @@ def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repe
     return settle, back_to_back, statistics.median(burned), statistics.median(whole)
 
 
+def cpu_trace(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int,
+              window_s: float = 0.08, step_s: float = 0.001) -> tuple[list[float], list[float]]:
+    """The process's CPU ms used since ``predict`` returned, sampled every ``step_s`` for ``window_s``
+    while the caller sleeps (the mean of ``repeats`` runs): ``(wall ms, CPU ms)``."""
+    import numpy as np
+
+    pred = sdk.load(name, providers=["CPUExecutionProvider"], threads=threads, spin_between_runs=spin)
+    time.sleep(SETTLE_S)
+    x = _frame(len(pred.metadata.inputs), *size)
+    for _ in range(WARM_UP):
+        pred.predict(x)
+    n = round(window_s / step_s)
+    wall, cpu = np.zeros(n + 1), np.zeros(n + 1)
+    for _ in range(repeats):
+        pred.predict(x)
+        t0, c0 = time.perf_counter(), time.process_time()
+        for i in range(1, n + 1):
+            time.sleep(max(0.0, t0 + i * step_s - time.perf_counter()))
+            wall[i] += (time.perf_counter() - t0) * 1000
+            cpu[i] += (time.process_time() - c0) * 1000
+    return list(wall / repeats), list(cpu / repeats)
+
+
+def plot_traces(traces: dict[str, tuple[list[float], list[float]]], cores: int, model: str, out: str) -> None:
+    """Cumulative CPU time after ``predict`` returns against wall time, one curve per setting."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    end = max(w[-1] for w, _ in traces.values())
+    ax.plot([0, end], [0, cores * end], color="grey", lw=0.8, ls="--", label=f"all {cores} cores busy")
+    for label, (wall, cpu) in traces.items():
+        ax.plot(wall, cpu, lw=2, label=label)
+    top = 1.6 * max(max(c) for _, c in traces.values())
+    ax.set_ylim(-0.02 * top, top)
+    ax.axvline(FRAME_S * 1000, color="black", lw=0.8, ls=":")
+    ax.text(FRAME_S * 1000 + 0.8, 0.05 * top, "a 60 Hz frame later", fontsize=8)
+    ax.set_xlabel("ms since `predict` returned (the caller asleep)")
+    ax.set_ylabel("CPU time the process used (ms)")
+    ax.set_title(f"onnxruntime's worker threads after a {model} run", fontsize=10)
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    print(f"\nwrote {out}")
+
+
 def engine_frames(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float, float]:
     """Median ms of the adapter's planes, of ``predict`` and of the frame, in a loop of both."""
     from adapter import engine_frame
@@ -133,6 +185,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
     ap.add_argument("--long-ms", type=float, default=500, help="the longer wait after a run in table 1 (ms)")
     ap.add_argument("--blocks", type=int, default=2, help="alternating blocks of each setting")
+    ap.add_argument("--plot", metavar="PNG", help="also draw the CPU time after a run of --model, both settings")
     ap.add_argument("--model", default="jnflip",
                     help="the model of the engine-frame table (default: jnflip, whose planes llvmpipe builds fastest)")
     args = ap.parse_args()
@@ -169,6 +222,9 @@ def main() -> None:
     for b, spin, label in blocks:
         t = in_turn(spin, args.size, args.threads, args.repeats)
         print(f"| {label} | {b} | " + " | ".join(f"{t[n]:.1f}" for n in names) + " |")
+    if args.plot:
+        traces = {label: cpu_trace(args.model, spin, args.size, args.threads, args.repeats) for spin, label in SETTINGS}
+        plot_traces(traces, args.threads, args.model, args.plot)
 
 
 if __name__ == "__main__":
