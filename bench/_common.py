@@ -139,3 +139,15 @@ def write_factors_sidecar(path: str, factors: Sequence[float], command: str) -> 
     with atomic_output(path) as tmp:
         tmp.write_text(f"# threshold factors per rate, fitted by: {command}\n" + yaml.safe_dump(body, sort_keys=False),
                        encoding="utf-8")
+
+
+def save_figure(fig: Any, path: str | Path) -> None:
+    """Write a benchmark's matplotlib figure (laid out, 110 dpi, its folder made), close it and say where."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    print(f"\nwrote {path}")

@@ -35,6 +35,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from _common import save_figure  # bench/ is on sys.path when run as a script
+
 from rtp.evaluate import METHOD_KINDS, fail_rule
 
 LEVELS = (0.01, 0.02, 0.05)
@@ -243,11 +245,7 @@ def _plot_reuse(kept: dict[str, list[tuple[str, list[float], float]]], model: st
                  "large: the mean)", fontsize=10)
     ax.legend(fontsize=8, loc="lower right")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    print(f"\nwrote {out}")
+    save_figure(fig, out)
 
 
 def _windows(runs: list[dict[str, Any]], n: int) -> None:

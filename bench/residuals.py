@@ -41,7 +41,7 @@ import sys
 from collections.abc import Callable
 
 import numpy as np
-from _common import scene_ids  # bench/ is on sys.path when run as a script
+from _common import save_figure, scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -324,10 +324,7 @@ def _plot(curves: list[tuple[str, list[tuple[float, float]]]], oracle: float, ti
     ax.set_title(f"The SDK's rule on the model's estimates and on the truth plus noise\n{title}", fontsize=10)
     ax.legend(fontsize=8, loc="lower right")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    print(f"\nwrote {path}")
+    save_figure(fig, path)
 
 
 if __name__ == "__main__":

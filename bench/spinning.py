@@ -32,7 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 import onnxruntime as ort
-from _common import cpu_description, frame_size  # bench/ is on sys.path when run as a script
+from _common import cpu_description, frame_size, save_figure  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 
@@ -60,6 +60,17 @@ def _ms(fn: Callable[[], object]) -> float:
     return (time.perf_counter() - t0) * 1000
 
 
+def _cpu_after(run: Callable[[], object], wait_s: float, repeats: int) -> float:
+    """Median CPU ms the process uses in the ``wait_s`` after ``run`` returns, the caller asleep."""
+    used = []
+    for _ in range(repeats):
+        run()
+        c0 = time.process_time()
+        time.sleep(wait_s)
+        used.append((time.process_time() - c0) * 1000)
+    return statistics.median(used)
+
+
 def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int,
                 long_s: float) -> tuple[float, float, float, float]:
     """CPU ms the process uses in the SETTLE_S after ``sdk.load``; median ``predict`` ms back to back;
@@ -73,19 +84,8 @@ def after_a_run(name: str, spin: bool, size: tuple[int, int], threads: int, repe
     for _ in range(WARM_UP):
         pred.predict(x)
     back_to_back = statistics.median(_ms(lambda: pred.predict(x)) for _ in range(repeats))
-    burned = []
-    for _ in range(repeats):
-        pred.predict(x)
-        c0 = time.process_time()
-        time.sleep(FRAME_S)
-        burned.append((time.process_time() - c0) * 1000)
-    whole = []
-    for _ in range(LONG_REPEATS):
-        pred.predict(x)
-        c0 = time.process_time()
-        time.sleep(long_s)
-        whole.append((time.process_time() - c0) * 1000)
-    return settle, back_to_back, statistics.median(burned), statistics.median(whole)
+    return (settle, back_to_back, _cpu_after(lambda: pred.predict(x), FRAME_S, repeats),
+            _cpu_after(lambda: pred.predict(x), long_s, LONG_REPEATS))
 
 
 def cpu_trace(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int,
@@ -132,10 +132,7 @@ def plot_traces(traces: dict[str, tuple[list[float], list[float]]], cores: int, 
     ax.set_title(f"onnxruntime's worker threads after a {model} run", fontsize=10)
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    print(f"\nwrote {out}")
+    save_figure(fig, out)
 
 
 def engine_frames(name: str, spin: bool, size: tuple[int, int], threads: int, repeats: int) -> tuple[float, float, float]:

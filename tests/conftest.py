@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 
 DATA = Path(__file__).parent / "data"
+#: The benchmark scripts (run as ``python bench/<name>.py``).
+BENCH = Path(__file__).resolve().parents[1] / "bench"
 
 #: The thread pools a worker of ``pytest -n N`` (``make test``) limits to one thread each, before torch
 #: or a BLAS is imported: N workers on N cores then compute on N threads, not N² that take turns (on
@@ -30,6 +32,28 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
         os.environ.setdefault(_var, "1")
 
 PAPER_INPUTS = ["reprojected.r", "seen", "albedo.r", "normal.z"]
+
+
+def bench_module(name: str, monkeypatch: pytest.MonkeyPatch | None = None) -> Any:
+    """``bench/<name>.py`` imported as a module, as when it runs as a script: ``bench/`` first on
+    ``sys.path`` (its ``_common`` and sibling imports) while it imports, or for the whole test with
+    ``monkeypatch``, for a script whose functions import its siblings when they run."""
+    import importlib.util
+    import sys
+
+    if monkeypatch is not None:
+        monkeypatch.syspath_prepend(str(BENCH))
+    else:
+        sys.path.insert(0, str(BENCH))
+    try:
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", BENCH / f"{name}.py")
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+    finally:
+        if monkeypatch is None:
+            sys.path.remove(str(BENCH))
+    return mod
 
 
 def base_metadata(**overrides: Any) -> dict[str, Any]:

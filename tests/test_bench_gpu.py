@@ -3,7 +3,6 @@ without a GPU in words (the timings themselves need CUDA and live in docs/perfor
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -17,7 +16,7 @@ import torch
 
 from rtp import sdk
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
+from .conftest import BENCH, bench_module
 
 # torch and onnxruntime run the same float32 graph with kernels of their own, which sum in an order
 # that depends on the CPU's vector width (AVX2 and AVX-512 machines differ): a few float32 ulps per
@@ -27,16 +26,7 @@ FLOAT32_KERNELS = {"rtol": 3e-5, "atol": 3e-6}
 
 
 def _bench_module():  # type: ignore[no-untyped-def]
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("inference_gpu", BENCH / "inference_gpu.py")
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        from _common import paper_model
-    finally:
-        sys.path.remove(str(BENCH))
-    return mod, paper_model
+    return bench_module("inference_gpu"), bench_module("_common").paper_model
 
 
 def _onnxruntime(path: Path, x: np.ndarray) -> np.ndarray:

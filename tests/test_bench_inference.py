@@ -3,22 +3,11 @@ compares two models under the same conditions."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-BENCH = Path(__file__).resolve().parents[1] / "bench"
+from .conftest import bench_module
 
 
 def test_interleaved_runs_every_model_once_a_round_after_a_warm_up_round() -> None:
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("bench_inference", BENCH / "inference.py")
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    finally:
-        sys.path.remove(str(BENCH))
+    mod = bench_module("inference")
     calls: list[str] = []
     runs = {name: (lambda name=name: calls.append(name)) for name in ("paper", "a", "b")}
     times = mod.interleaved_ms(runs, 3)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -12,15 +11,13 @@ import pytest
 
 from rtp import sdk
 
+from .conftest import bench_module
+
 BENCH = Path(__file__).resolve().parents[1] / "bench" / "ort_profile.py"
 
 
 def _module() -> object:
-    spec = importlib.util.spec_from_file_location("bench_ort_profile", BENCH)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return bench_module("ort_profile")
 
 
 def test_profile_lists_every_convolution_with_its_multiply_adds() -> None:

@@ -25,6 +25,8 @@ from rtp.sdk._reuse import (
     tile_index_map,
 )
 
+from .conftest import bench_module
+
 TILE = 16
 
 
@@ -554,15 +556,7 @@ def test_rescaled_fresh_tiles_are_the_networks_and_carry_on_unchanged() -> None:
 
 def _reuse_floor(monkeypatch: pytest.MonkeyPatch) -> Any:
     """bench/reuse_floor.py as a module (bench/ on the path for its own imports)."""
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "bench" / "reuse_floor.py"
-    monkeypatch.syspath_prepend(str(path.parent))
-    spec = importlib.util.spec_from_file_location("bench_reuse_floor", path)
-    assert spec and spec.loader
-    floor = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(floor)
-    return floor
+    return bench_module("reuse_floor", monkeypatch)
 
 
 def test_reuse_floor_mixes_network_and_carried_frames_and_finds_the_best_pair(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -24,6 +24,8 @@ from rtp.sdk import psnr_from_mse as mse_to_psnr
 from rtp.train import TrainConfig, calibrate_safety, train
 from rtp.train.checkpoint import load as load_checkpoint
 
+from .conftest import BENCH, bench_module
+
 H, W = 64, 96
 
 
@@ -59,15 +61,7 @@ def _dataset(root: Path, n: int = 12, flip: bool = False, prefix: str = "s", pro
 def _bench_module(name: str, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Any]:
     """bench/<name>.py and the module it is, imported as when run as a script (bench/ first on sys.path,
     so bench/_common.py imports)."""
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
-    monkeypatch.syspath_prepend(str(path.parent))
-    spec = importlib.util.spec_from_file_location(f"bench_{name}", path)
-    assert spec and spec.loader
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return path, mod
+    return BENCH / f"{name}.py", bench_module(name, monkeypatch)
 
 
 def test_pooling_targets_equals_computing_at_the_coarse_tile() -> None:
