@@ -74,6 +74,33 @@ def test_predict_feeds_each_input_a_view_of_the_frame(nine_pt: Path, tmp_path: P
     assert all(np.shares_memory(v, x) for v in fed[0].values())
 
 
+def test_a_batch_runs_frame_by_frame_on_views(nine_pt: Path, tmp_path: Path) -> None:
+    """A batch's groups would be copies (a frame's planes of one group are not next to the next frame's),
+    so a grouped model runs a batch one frame at a time on views: the same values as one run on copies."""
+    pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
+    fed: list[dict[str, np.ndarray]] = []
+    real = pred._session
+
+    class Recording:
+        def __getattr__(self, name: str) -> object:
+            return getattr(real, name)
+
+        def run(self, names: list[str], feed: dict[str, np.ndarray]) -> list[np.ndarray]:
+            fed.append(feed)
+            return real.run(names, feed)
+
+    pred._session = Recording()
+    x = np.random.default_rng(2).random((3, 9, 64, 96), dtype=np.float32)
+    batched = pred.predict(x)
+    assert len(fed) == 3
+    for i, feed in enumerate(fed):
+        assert [v.shape for v in feed.values()] == [(1, 5, 64, 96), (1, 4, 64, 96)]
+        assert all(np.shares_memory(v, x[i]) for v in feed.values())
+    one_run = real.run([pred._out_name], {"input": np.ascontiguousarray(x[:, :5]), "input.5": np.ascontiguousarray(x[:, 5:])})
+    np.testing.assert_allclose(pred.predict_raw(x), one_run[0][:, :, :4, :6], rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(batched[1], pred.predict(x[1]))
+
+
 @pytest.mark.parametrize("plane", [0, 4, 5, 8])
 def test_a_nan_in_either_group_is_refused_by_the_probe(nine_pt: Path, tmp_path: Path, plane: int) -> None:
     pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
