@@ -249,25 +249,19 @@ def select_rates(
         f = np.asarray(scale, np.float64)[:, None, None]
         err = err - 20.0 * np.log10(f) if higher_is_better else err / f
     thr = -threshold if higher_is_better else threshold
-    out = np.zeros(values.shape[:-3] + values.shape[-2:], dtype=np.uint8)
-    decided = np.zeros(out.shape, dtype=bool)
-    # Walk cost classes from cheapest (largest area) to dearest; within a class prefer the
-    # smaller error. NaN never passes (comparisons with NaN are False).
-    by_area: dict[int, list[str]] = {}
-    for r in rates:
-        w, h = rate_size(r)
-        by_area.setdefault(w * h, []).append(r)
-    for area in sorted(by_area, reverse=True):
-        best_err = np.full(out.shape, np.inf, dtype=np.float64)
-        best_code = np.zeros(out.shape, dtype=np.uint8)
-        found = np.zeros(out.shape, dtype=bool)
-        for r in by_area[area]:
-            e = err[..., PREDICTED_RATES.index(r), :, :]
-            better = (e < thr) & (e < best_err)
-            best_err = np.where(better, e, best_err)
-            best_code = np.where(better, np.uint8(RATE_CODES[r]), best_code)
-            found |= better
-        take = ~decided & found
-        out[take] = best_code[take]
-        decided |= take
-    return out
+    # The allowed rates from cheapest (largest area) to dearest, in channel order within a cost class.
+    # A tile takes the cheapest class with a passing rate, then that class's smallest error (the first
+    # in channel order on a tie); NaN never passes (comparisons with NaN are False). A handful of whole-
+    # array operations, not a few per rate: each releases the GIL, and a thread waiting to take it back
+    # beside Python that holds it waits a switch interval (5 ms) for each (docs/runtime.md "Threads").
+    order = sorted(rates, key=lambda r: (-rate_size(r)[0] * rate_size(r)[1], PREDICTED_RATES.index(r)))
+    if not order:
+        return np.full(values.shape[:-3] + values.shape[-2:], RATE_CODES["1x1"], dtype=np.uint8)
+    areas = [rate_size(r)[0] * rate_size(r)[1] for r in order]
+    rank = np.array([sorted(set(areas), reverse=True).index(a) for a in areas], np.int8)
+    e = np.take(err, [PREDICTED_RATES.index(r) for r in order], axis=-3)
+    passing = e < thr
+    best = np.where(passing, rank[:, None, None], np.int8(len(order))).min(axis=-3, keepdims=True)
+    pick = np.where(passing & (rank[:, None, None] == best), e, np.inf).argmin(axis=-3)
+    codes = np.array([RATE_CODES[r] for r in order], np.uint8)
+    return np.where(best[..., 0, :, :] < len(order), codes[pick], np.uint8(RATE_CODES["1x1"]))

@@ -33,6 +33,22 @@ def test_predict_matches_the_closed_form(tiny_model: Callable[..., Path]) -> Non
     np.testing.assert_allclose(p.predict_raw(x), raw, rtol=1e-5, atol=1e-6)
 
 
+def test_one_predictor_serves_several_threads_at_once(tiny_model: Callable[..., Path]) -> None:
+    """docs/runtime.md "Threads": predict and shading_rates keep no state between calls, so threads may
+    share one predictor (onnxruntime's run is thread-safe); each gets its own frame's answer."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    p = sdk.load(tiny_model(base_metadata()), threads=1)
+    frames = [np.random.default_rng(i).random((4, 96, 160), dtype=np.float32) for i in range(8)]
+    serial = [(p.predict(f), p.shading_rates(f)) for f in frames]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(5):
+            got = list(pool.map(lambda f: (p.predict(f), p.shading_rates(f)), frames))
+            for (values, rates), (v0, r0) in zip(got, serial, strict=True):
+                np.testing.assert_array_equal(values, v0)
+                np.testing.assert_array_equal(rates, r0)
+
+
 def test_batched_and_single_frames_agree(tiny_model: Callable[..., Path]) -> None:
     p = sdk.load(tiny_model())
     x = np.random.default_rng(1).random((3, 4, 32, 32), dtype=np.float32)

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from rtp import sdk
 
@@ -156,3 +159,49 @@ def test_overlay_legend_names_each_colour_in_the_corner() -> None:
 def test_overlay_checks_the_tile_grid() -> None:
     with pytest.raises(sdk.InputShapeError, match=r"\(2, 3\)"):
         sdk.draw_rate_overlay(np.zeros((20, 40, 3), np.uint8), np.zeros((1, 3), np.uint8), 16)
+
+
+def _select_rate_by_rate(err: np.ndarray, thr: float, allowed: list[str]) -> np.ndarray:
+    """The selection as sdk.select_rates did it until 2026-12-02, a few operations per rate: cost
+    classes from the cheapest, within a class the smaller error, the first on a tie ("smaller is better"
+    values, the factors already applied)."""
+    out = np.zeros(err.shape[:-3] + err.shape[-2:], dtype=np.uint8)
+    decided = np.zeros(out.shape, dtype=bool)
+    by_area: dict[int, list[str]] = {}
+    for r in allowed:
+        w, h = (int(v) for v in r.split("x"))
+        by_area.setdefault(w * h, []).append(r)
+    for area in sorted(by_area, reverse=True):
+        best_err = np.full(out.shape, np.inf)
+        best_code = np.zeros(out.shape, dtype=np.uint8)
+        found = np.zeros(out.shape, dtype=bool)
+        for r in by_area[area]:
+            e = err[..., sdk.PREDICTED_RATES.index(r), :, :]
+            better = (e < thr) & (e < best_err)
+            best_err = np.where(better, e, best_err)
+            best_code = np.where(better, np.uint8(sdk.RATE_CODES[r]), best_code)
+            found |= better
+        take = ~decided & found
+        out[take] = best_code[take]
+        decided |= take
+    return out
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    values=hnp.arrays(np.float64, st.tuples(st.integers(1, 2), st.just(6), st.integers(1, 4), st.integers(1, 5)),
+                      elements=st.one_of(st.sampled_from([0.1, 0.2, 0.25, 0.3, np.nan, -np.inf, np.inf]),
+                                         st.floats(-1, 1))),
+    allowed=st.lists(st.sampled_from(sdk.PREDICTED_RATES), unique=True),
+    threshold=st.sampled_from([0.0, 0.2, 0.25, 0.5]),
+    factors=st.one_of(st.none(), st.lists(st.sampled_from([0.5, 1.0, 2.0]), min_size=6, max_size=6)),
+)
+def test_selection_agrees_with_a_rate_by_rate_walk(values: np.ndarray, allowed: list[str], threshold: float,
+                                                   factors: list[float] | None) -> None:
+    """Ties (equal values of equal-cost rates), NaN, infinities, any allowed subset in any order, factors."""
+    got = sdk.select_rates(values, threshold, allowed=allowed, factors=factors)
+    scaled = values / np.asarray(factors or [1.0] * 6)[:, None, None]
+    in_channel_order = [r for r in sdk.PREDICTED_RATES if r in allowed]
+    np.testing.assert_array_equal(got, _select_rate_by_rate(scaled, threshold, in_channel_order))
+    psnr = sdk.select_rates(-values, -threshold, higher_is_better=True, allowed=allowed)
+    np.testing.assert_array_equal(psnr, _select_rate_by_rate(values, threshold, in_channel_order))
