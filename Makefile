@@ -73,6 +73,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/inference.py
 	$(BIN)/python bench/spinning.py
 	$(BIN)/python bench/memory.py
+	$(BIN)/python bench/views.py
 	$(BIN)/python bench/metrics.py
 	$(BIN)/python bench/capture.py
 
