@@ -9,7 +9,8 @@ weights) and exported with rtp-export; the shipped models are loaded from ``rtp.
 ``MODEL.onnx`` given (for example the study's, ``data/study/*.onnx``) is added. Each is
 timed in the same run at 1920x1080 and 1280x720, in rounds (each model once a round, ``--repeats``
 rounds). Prints Markdown tables of medians (ms) and each model's speed-up over the paper's network:
-the median over the rounds of the two times' ratio within a round, and its range.
+the median over the rounds of the two times' ratio within a round, and its range; and the machine's
+memory speed (a copy of nine 1080p planes), which bounds the shipped models on CPUs with little of it.
 """
 
 from __future__ import annotations
@@ -123,8 +124,15 @@ def main() -> None:
                 x = frames[len(p.metadata.inputs), w, h]
                 runs[name, (w, h)] = lambda p=p, x=x: p.predict(x)
         times = interleaved_ms(runs, args.repeats)
+        nine = np.random.default_rng(0).random((9, 1080, 1920), dtype=np.float32)
+        into = np.empty_like(nine)
+        copy_ms = median_ms(lambda: np.copyto(into, nine), 2 * args.repeats + 1)
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, torch {torch.__version__}, "
           f"{cpu_description()}, {args.threads} threads, median of {args.repeats}; the models in rounds\n")
+    # The memory floor: the shipped models are bound by the planes they read on CPUs with little bandwidth
+    # (docs/performance.md "Input planes on AVX2 CPUs").
+    print(f"Memory: a numpy copy of nine 1920x1080 planes ({nine.nbytes / 2**20:.0f} MB) {copy_ms:.1f} ms, "
+          f"{2 * nine.nbytes / copy_ms / 1e6:.1f} GB/s read and written\n")
     paper = "paper's network (random weights)"
     print("| model | architecture | inputs | stored values | "
           + " | ".join(f"{w}x{h} sdk predict (ms)" for w, h in FRAMES)
