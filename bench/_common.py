@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import statistics
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+K = TypeVar("K", bound=Hashable)
 
 
 def cpu_description() -> str:
@@ -69,6 +71,22 @@ def median_ms(fn: Callable[[], object], repeats: int) -> float:
         fn()
         times.append((time.perf_counter() - t0) * 1000)
     return statistics.median(times)
+
+
+def interleaved_ms(runs: dict[K, Callable[[], object]], rounds: int) -> dict[K, list[float]]:
+    """Wall ms of every run in each of ``rounds`` rounds, after one warm-up round. A round runs each
+    once, in turn, so a slow spell of the machine (these are shared 2-core VMs) falls on every model
+    in the round instead of on the one being timed, and a ratio of two models' times within a round
+    compares them under the same conditions."""
+    for fn in runs.values():
+        fn()
+    out: dict[K, list[float]] = {key: [] for key in runs}
+    for _ in range(rounds):
+        for key, fn in runs.items():
+            t0 = time.perf_counter()
+            fn()
+            out[key].append((time.perf_counter() - t0) * 1000)
+    return out
 
 
 #: The paper's configuration: 4 inputs, outputs 1x2/2x1/2x4/4x2, 16x16 tiles.

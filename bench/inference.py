@@ -18,14 +18,18 @@ from __future__ import annotations
 import argparse
 import statistics
 import tempfile
-import time
 from collections.abc import Callable, Hashable
 from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
 import torch
-from _common import cpu_description, median_ms, paper_model  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    cpu_description,
+    interleaved_ms,
+    median_ms,
+    paper_model,
+)
 
 from rtp import sdk
 
@@ -62,22 +66,6 @@ def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk
     for path in extra:
         arch = str(sdk.load(path).metadata.provenance.get("arch", "paper"))
         add(Path(path).name, Path(path), arch)
-    return out
-
-
-def interleaved_ms(runs: dict[Hashable, Callable[[], object]], rounds: int) -> dict[Hashable, list[float]]:
-    """Wall ms of every run in each of ``rounds`` rounds, after one warm-up round. A round runs each
-    once, in turn, so a slow spell of the machine (these are shared 2-core VMs) falls on every model
-    in the round instead of on the one being timed, and a ratio of two models' times within a round
-    compares them under the same conditions."""
-    for fn in runs.values():
-        fn()
-    out: dict[Hashable, list[float]] = {key: [] for key in runs}
-    for _ in range(rounds):
-        for key, fn in runs.items():
-            t0 = time.perf_counter()
-            fn()
-            out[key].append((time.perf_counter() - t0) * 1000)
     return out
 
 

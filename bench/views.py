@@ -38,7 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import onnxruntime as ort
-from _common import cpu_description, frame_size  # bench/ is on sys.path when run as a script
+from _common import cpu_description, frame_size, interleaved_ms, median_ms  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 
@@ -90,14 +90,7 @@ def views_table(model: str, size: tuple[int, int], views: int, threads: int, rou
         "a thread per view, one predictor of 1 thread": bool(
             np.array_equal(np.stack(list(pool.map(single.predict, frames))), first)),
     }
-    for fn in ways.values():  # warm-up round
-        fn()
-    times: dict[str, list[float]] = {k: [] for k in ways}
-    for _ in range(rounds):
-        for key, fn in ways.items():
-            t0 = time.perf_counter()
-            fn()
-            times[key].append((time.perf_counter() - t0) * 1000)
+    times = interleaved_ms(ways, rounds)
     pool.shutdown()
     groups = len(pred.graph_inputs)
     return {"model": model, "groups": groups, "ms": {k: statistics.median(v) for k, v in times.items()}, "same": same}
@@ -179,16 +172,7 @@ def gil_waits(model: str, size: tuple[int, int], switch: float = 0.05, repeats: 
                                                  factors=pred.metadata.rate_factors),
     }
 
-    def median(fn: Callable[[], object], n: int) -> float:
-        fn()
-        times = []
-        for _ in range(n):
-            t0 = time.perf_counter()
-            fn()
-            times.append((time.perf_counter() - t0) * 1000)
-        return statistics.median(times)
-
-    alone = {k: median(fn, 11 * repeats) for k, fn in steps.items()}
+    alone = {k: median_ms(fn, 11 * repeats) for k, fn in steps.items()}
     before = sys.getswitchinterval()
     sys.setswitchinterval(switch)
     stop = threading.Event()
@@ -196,7 +180,7 @@ def gil_waits(model: str, size: tuple[int, int], switch: float = 0.05, repeats: 
     loop.start()
     try:
         time.sleep(2 * switch)
-        beside = {k: median(fn, repeats) for k, fn in steps.items()}
+        beside = {k: median_ms(fn, repeats) for k, fn in steps.items()}
     finally:
         stop.set()
         loop.join()

@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import onnx
@@ -53,9 +54,8 @@ def test_nine_planes_export_in_two_inputs_and_predict_as_one(nine_pt: Path, tmp_
     assert len(sums) == 1 and sums[0].output[0] in {n.output[0] for n in onnx.load(str(whole)).graph.node}
 
 
-def test_predict_feeds_each_input_a_view_of_the_frame(nine_pt: Path, tmp_path: Path) -> None:
-    """No copy for a frame that needs no padding: each input is a slice of the caller's planes."""
-    pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
+def _recording(pred: sdk.ShadingRatePredictor) -> tuple[list[dict[str, np.ndarray]], Any]:
+    """Swap ``pred``'s session for one that records what each run is fed: (the feeds, the real session)."""
     fed: list[dict[str, np.ndarray]] = []
     real = pred._session
 
@@ -68,6 +68,13 @@ def test_predict_feeds_each_input_a_view_of_the_frame(nine_pt: Path, tmp_path: P
             return real.run(names, feed)
 
     pred._session = Recording()
+    return fed, real
+
+
+def test_predict_feeds_each_input_a_view_of_the_frame(nine_pt: Path, tmp_path: Path) -> None:
+    """No copy for a frame that needs no padding: each input is a slice of the caller's planes."""
+    pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
+    fed, _ = _recording(pred)
     x = np.random.default_rng(1).random((9, 64, 96), dtype=np.float32)
     pred.predict(x)
     assert [(k, v.shape) for k, v in fed[0].items()] == [("input", (1, 5, 64, 96)), ("input.5", (1, 4, 64, 96))]
@@ -78,18 +85,7 @@ def test_a_batch_runs_frame_by_frame_on_views(nine_pt: Path, tmp_path: Path) -> 
     """A batch's groups would be copies (a frame's planes of one group are not next to the next frame's),
     so a grouped model runs a batch one frame at a time on views: the same values as one run on copies."""
     pred = sdk.load(export.export_checkpoint(nine_pt, tmp_path / "g.onnx"))
-    fed: list[dict[str, np.ndarray]] = []
-    real = pred._session
-
-    class Recording:
-        def __getattr__(self, name: str) -> object:
-            return getattr(real, name)
-
-        def run(self, names: list[str], feed: dict[str, np.ndarray]) -> list[np.ndarray]:
-            fed.append(feed)
-            return real.run(names, feed)
-
-    pred._session = Recording()
+    fed, real = _recording(pred)
     x = np.random.default_rng(2).random((3, 9, 64, 96), dtype=np.float32)
     batched = pred.predict(x)
     assert len(fed) == 3
