@@ -367,6 +367,27 @@ def test_scene_is_restored_and_errors_are_typed() -> None:
     adapter.close()  # closing twice is fine
 
 
+def test_no_gl_context_is_a_typed_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where pyrender imports but cannot create its context (a missing driver), the adapter and the frame
+    source both raise PyrenderUnavailableError naming the platform and the packages, and keep the cause."""
+    from rtp.capture.scenes import procedural
+    from rtp.plugins.pyrender import Adapter, PyrenderUnavailableError
+    from rtp.plugins.pyrender._source import PyrenderFrameSource
+
+    pyrender = _pyrender_or_skip()
+
+    def no_context(width: int, height: int) -> None:
+        raise RuntimeError("eglInitialize failed")
+
+    monkeypatch.setattr(pyrender, "OffscreenRenderer", no_context)
+    for build in (lambda: Adapter(PAPER, 64, 48),
+                  lambda: PyrenderFrameSource(Adapter, procedural(3, rooms=(1, 1), texture_size=16), 64, 48)):
+        with pytest.raises(PyrenderUnavailableError, match="could not create a egl context .*eglInitialize "
+                                                           "failed.*libegl-mesa0") as info:
+            build()
+        assert isinstance(info.value.__cause__, RuntimeError)
+
+
 def test_borrowed_renderer_and_bound_scene_error() -> None:
     """pyrender binds a scene to one renderer's context: borrow the user's, or say so clearly."""
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame

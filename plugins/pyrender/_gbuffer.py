@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from ._errors import PyrenderAdapterError, PyrenderUnavailableError
-from ._gl import import_pyrender
+from ._errors import PyrenderAdapterError
+from ._gl import import_pyrender, offscreen_renderer
 
 __all__ = ["GBufferRenderer", "GBuffers", "unpack12"]
 
@@ -164,14 +164,7 @@ class GBufferRenderer:
         self._pyrender = import_pyrender(platform)
         self._owns = renderer is None
         if renderer is None:
-            try:
-                renderer = self._pyrender.OffscreenRenderer(self.width, self.height)
-            except Exception as exc:
-                raise PyrenderUnavailableError(
-                    f"pyrender could not create a {os.environ.get('PYOPENGL_PLATFORM')} context "
-                    f"({type(exc).__name__}: {exc}); on Debian/Ubuntu: apt-get install libegl1 libgl1 libegl-mesa0 "
-                    "libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa)"
-                ) from exc
+            renderer = offscreen_renderer(self._pyrender, self.width, self.height)
         elif (renderer.viewport_width, renderer.viewport_height) != (self.width, self.height):
             raise PyrenderAdapterError(
                 f"the renderer draws {renderer.viewport_width}x{renderer.viewport_height}, the adapter "

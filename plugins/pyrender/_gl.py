@@ -24,7 +24,7 @@ import numpy as np
 
 from ._errors import PyrenderUnavailableError
 
-__all__ = ["PLATFORMS", "import_pyrender"]
+__all__ = ["PLATFORMS", "import_pyrender", "offscreen_renderer"]
 
 log = logging.getLogger("rtp.plugins.pyrender")
 
@@ -109,3 +109,16 @@ def import_pyrender(platform: str | None = None) -> Any:
     _pyrender = pyrender
     log.debug("pyrender %s on PYOPENGL_PLATFORM=%s", getattr(pyrender, "__version__", "?"), wanted)
     return pyrender
+
+
+def offscreen_renderer(pyrender: Any, width: int, height: int) -> Any:
+    """A ``pyrender.OffscreenRenderer`` of ``width`` x ``height``, or a :class:`PyrenderUnavailableError`
+    naming the platform and the Debian packages when its GL context cannot be created."""
+    try:
+        return pyrender.OffscreenRenderer(width, height)
+    except Exception as exc:
+        raise PyrenderUnavailableError(
+            f"pyrender could not create a {os.environ.get('PYOPENGL_PLATFORM')} context "
+            f"({type(exc).__name__}: {exc}); on Debian/Ubuntu: apt-get install libegl1 libgl1 libegl-mesa0 "
+            "libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa)"
+        ) from exc

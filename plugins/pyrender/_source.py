@@ -8,7 +8,6 @@ This is how a caller that does not know pyrender drives :class:`rtp.plugins.pyre
 from __future__ import annotations
 
 import logging
-import os
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,9 +16,8 @@ from rtp.sdk.adapters import FrameSource
 
 from ._adapter import SceneFrame
 from ._convert import to_pyrender_scene
-from ._errors import PyrenderUnavailableError
 from ._gbuffer import _delete_renderer
-from ._gl import import_pyrender
+from ._gl import import_pyrender, offscreen_renderer
 
 if TYPE_CHECKING:
     from rtp.scene import Camera
@@ -53,14 +51,7 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         super().__init__(adapter_class, width, height)
         self._pyrender = pyrender = import_pyrender(platform)
         self.scene = scene if isinstance(scene, pyrender.Scene) else to_pyrender_scene(scene)
-        try:
-            self.renderer = pyrender.OffscreenRenderer(self.width, self.height)
-        except Exception as exc:
-            raise PyrenderUnavailableError(
-                f"pyrender could not create a {os.environ.get('PYOPENGL_PLATFORM')} context "
-                f"({type(exc).__name__}: {exc}); on Debian/Ubuntu: apt-get install libegl1 libgl1 libegl-mesa0 "
-                "libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa)"
-            ) from exc
+        self.renderer = offscreen_renderer(pyrender, self.width, self.height)
         self._cameras: dict[tuple[float, float, float], Any] = {}
         self._node = self.scene.add(self._camera_for(None), pose=np.eye(4))
         self.scene.main_camera_node = self._node
