@@ -637,8 +637,9 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None
 
-        def inputs(ys: slice, xs: slice) -> np.ndarray:  # only where the network runs
-            return model_inputs(pf, rp, meta.inputs, ys, xs)
+        def inputs(ys: slice, xs: slice, channels: Sequence[str] = meta.inputs) -> np.ndarray:
+            # only where the frame's planes are read, and only those (a carried frame's tail: its .tiles planes)
+            return model_inputs(pf, rp, channels, ys, xs)
 
         fetch = (pf.rows, pf.cols) if pf.index > 0 else None
         est = carry.predict(inputs, fetch, pf.seen, pf.frame.mask <= 0.5)

@@ -641,6 +641,16 @@ class ShadingRatePredictor:
         and :meth:`predict_tail`, which ``PredictionReuse(carry="features")`` uses."""
         return self._tail is not None
 
+    @property
+    def tail_inputs(self) -> tuple[str, ...]:
+        """The input channels the tail reads (:meth:`predict_tail`): the ``.blocks`` or ``.tiles`` planes of
+        a model that splits, () for one that does not. On a frame whose trunk features are carried the
+        other planes are never read: ``PredictionReuse(carry="features")`` asks an input function that
+        takes ``channels`` for these alone (docs/runtime.md)."""
+        if self._tail is None:
+            return ()
+        return tuple(c for c in self._meta.inputs if c.endswith((".blocks", ".tiles")))
+
     def _split_frame(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
         """One frame's checked and padded input ``(x4, xp)`` for the split methods."""
         if self._tail is None:
@@ -699,7 +709,8 @@ class ShadingRatePredictor:
     def _tail_read_sum(self, x4: np.ndarray) -> float:
         """The sum of what the tail reads of a frame: its .blocks planes, or of its .tiles planes the first
         three rows of each tile (the twelve values a tile; a fifth of the planes, the rest never read)."""
-        planes = [i for i, c in enumerate(self._meta.inputs) if c.endswith((".blocks", ".tiles"))]
+        names = self.tail_inputs
+        planes = [i for i, c in enumerate(self._meta.inputs) if c in names]
         read = x4[:, planes[0]:planes[-1] + 1] if planes == list(range(planes[0], planes[-1] + 1)) else x4[:, planes]
         if self._meta.inputs[planes[0]].endswith(".tiles"):
             return float(sum(read[:, :, r::BLOCK_TILE].sum() for r in range(3)))

@@ -16,6 +16,7 @@ gather per kept pixel. numpy only.
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -63,8 +64,18 @@ MAX_MARGIN = 8
 FRESH_FULL = 0.5
 
 #: ``x`` for :meth:`PredictionReuse.predict`: the inputs, or a function that builds them for a
-#: window ``(rows, cols)`` of the frame (called only where the network runs).
-Inputs = np.ndarray | Callable[[slice, slice], np.ndarray]
+#: window ``(rows, cols)`` of the frame (called only where the frame's planes are read); a function
+#: with a ``channels`` parameter is asked for the planes read there alone (``channels=`` their names).
+Inputs = np.ndarray | Callable[..., np.ndarray]
+
+
+def _takes_channels(fn: object) -> bool:
+    """Whether an input function has a ``channels`` parameter (it may be passed by keyword)."""
+    try:
+        p = inspect.signature(fn).parameters.get("channels")  # type: ignore[arg-type]
+    except (TypeError, ValueError):  # a builtin or a callable object without a signature
+        return False
+    return p is not None and p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
 
 
 #: The fewest kept pixels per tile and axis the default step leaves (4: 16 of a tile's pixels).
@@ -452,7 +463,8 @@ class PredictionReuse:
     and a carried frame multiplies by the same of its own planes. The network's estimates follow
     those planes, which change with every sub-pixel move of the camera; a carried estimate alone
     cannot (docs/results.md "Carried estimates rescaled by the blocks' variance"). It reads the
-    frame's inputs on carried frames too (``x`` is called on the whole frame).
+    frame's inputs on carried frames too (``x`` is called on the whole frame, or for its ``.blocks``
+    planes alone when it takes ``channels``).
 
     ``carry_scale`` (error metrics) multiplies the carried estimates of the frames the network does not
     run on (not unseen tiles, not fresh crops): above 1 the carried frames choose as if under a
@@ -468,7 +480,8 @@ class PredictionReuse:
     planes, which summarise it per tile, or its ``.blocks`` planes) at tile resolution, where it costs a
     small part of a network run (a tenth with ``.tiles`` planes on a CPU), and the trunk, which
     reads the frame at full resolution, runs every ``every``-th frame. Unseen tiles go to 1x1 or to
-    fresh crops as with estimates; ``x`` is read on every frame. Not with ``rescale`` or ``history``
+    fresh crops as with estimates; ``x`` is read on every frame (an input function that takes
+    ``channels`` is asked for the tail's planes alone there). Not with ``rescale`` or ``history``
     (both act on carried estimates), and ``reduce`` must be ``"mean"`` (docs/runtime.md).
 
     ``history`` > 0 also filters the estimates over time, as temporal anti-aliasing filters colour:
@@ -564,9 +577,9 @@ class PredictionReuse:
             raise ParameterError(f"rescale: this model cannot rescale carried estimates: {problem}", "rescale")
         return a, blocks
 
-    def _levels(self, planes: np.ndarray) -> np.ndarray:
-        """Per tile and rate, the factor ``(v + eps) ** rescale`` of this frame's inputs."""
-        v = tile_block_levels(planes[self._blocks], self.predictor.tile_size)
+    def _levels(self, blocks: np.ndarray) -> np.ndarray:
+        """Per tile and rate, the factor ``(v + eps) ** rescale`` of this frame's ``.blocks`` planes."""
+        v = tile_block_levels(blocks, self.predictor.tile_size)
         return np.exp(self.rescale * -math.log(BLOCK_EPS) * v.astype(np.float64))
 
     def reset(self) -> None:
@@ -575,6 +588,7 @@ class PredictionReuse:
         self._track: Track | None = None
         self._shape: tuple[int, int] | None = None
         self._age = 0
+        self._zeros: np.ndarray | None = None
 
     @property
     def age(self) -> int | None:
@@ -588,9 +602,46 @@ class PredictionReuse:
                 f"carry_scale={self.carry_scale:g}, carry={self.carry!r})")
 
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
+        """Every input plane of a window of the frame."""
         if callable(x):
-            return x(ys, xs)
+            return self._asked(x, ys, xs, self.predictor.metadata.inputs) if _takes_channels(x) else x(ys, xs)
         return x[:, ys, xs]
+
+    def _some(self, x: Inputs, hw: tuple[int, int], which: list[int]) -> np.ndarray:
+        """The input planes ``which`` (indices into ``metadata.inputs``) of the whole frame: an input
+        function that takes ``channels`` builds those alone."""
+        ys, xs = slice(0, hw[0]), slice(0, hw[1])
+        if callable(x) and _takes_channels(x):
+            names = self.predictor.metadata.inputs
+            return self._asked(x, ys, xs, tuple(names[i] for i in which))
+        return self._window(x, ys, xs)[which]
+
+    def _tail_frame(self, x: Inputs, hw: tuple[int, int]) -> np.ndarray:
+        """A carried frame's inputs for the tail: the whole frame, or where the input function takes
+        ``channels``, the tail's planes in a frame whose other planes (which the tail never reads) are 0."""
+        if not (callable(x) and _takes_channels(x)):
+            return self._window(x, slice(0, hw[0]), slice(0, hw[1]))
+        names = self.predictor.metadata.inputs
+        which = [i for i, c in enumerate(names) if c in self.predictor.tail_inputs]
+        shape = (len(names), *hw)
+        if self._zeros is None or self._zeros.shape != shape:  # kept: only the tail's planes are written again
+            self._zeros = np.zeros(shape, np.float32)
+        self._zeros[which] = self._some(x, hw, which)
+        return self._zeros
+
+    def _asked(self, x: Callable[..., np.ndarray], ys: slice, xs: slice, names: tuple[str, ...]) -> np.ndarray:
+        """``x(ys, xs, channels=names)``, checked: float32 ``(len(names), rows, cols)``."""
+        planes = x(ys, xs, channels=names)
+        want = (len(names), ys.stop - ys.start, xs.stop - xs.start)
+        if not isinstance(planes, np.ndarray) or planes.dtype != np.float32:
+            got = f"dtype {planes.dtype}" if isinstance(planes, np.ndarray) else type(planes).__name__
+            raise InputDtypeError(f"the input function, asked for channels {list(names)}: expected a float32 numpy "
+                                  f"array, got {got}")
+        if planes.shape != want:
+            raise InputShapeError(f"the input function, asked for channels {list(names)} of rows {ys.start}:{ys.stop} "
+                                  f"and columns {xs.start}:{xs.stop}: expected shape {want}, got {planes.shape}",
+                                  tuple(planes.shape), str(want))
+        return planes
 
     def _shape_of(self, x: Inputs, seen: np.ndarray | None) -> tuple[int, int]:
         if isinstance(x, np.ndarray):
@@ -621,7 +672,7 @@ class PredictionReuse:
             old, missing = carried
             mix = ((1.0 - self.history) * est + self.history * np.where(missing[None], est, old)).astype(est.dtype)
             est = np.where(missing[None], est, mix)
-        kept = est if not self.rescale else (est / self._levels(planes)).astype(np.float32)
+        kept = est if not self.rescale else (est / self._levels(planes[self._blocks])).astype(np.float32)
         self._cache = kept.reshape(len(kept), -1)
         self._track = (start_track(hw, self.predictor.tile_size, self.step) if self.every > 1 or self.history > 0
                        else None)
@@ -660,7 +711,11 @@ class PredictionReuse:
         """Per-tile estimates of this frame, as :meth:`ShadingRatePredictor.predict` returns them:
         the network's on its frames, carried ones in between (1x1's worst value, or fresh ones, on
         unseen tiles). ``x`` is the frame's inputs ``(C, H, W)`` or a function ``(rows, cols) ->``
-        the inputs of that window, called only where the network runs."""
+        the inputs of that window, called only where the frame's planes are read. A function with a
+        ``channels`` parameter is called ``x(rows, cols, channels=names)`` and returns those planes
+        alone, float32 ``(len(names), rows, cols)``: every plane where the network runs, the tail's
+        (:attr:`ShadingRatePredictor.tail_inputs`) on a frame whose features are carried, the
+        ``.blocks`` planes for ``rescale``."""
         hw = self._shape_of(x, seen)
         runs = self._age + 1 >= self.every
         if self._cache is None or fetch is None or hw != self._shape or (runs and self.history == 0):
@@ -684,11 +739,11 @@ class PredictionReuse:
         if self.carry == "features" and not runs:  # the tail on the carried features and this frame
             feats = est
             feats[:, missing] = 0.0  # (their estimates go to 1x1 or fresh crops below)
-            est = self.predictor.predict_tail(feats, self._window(x, slice(0, hw[0]), slice(0, hw[1])))
+            est = self.predictor.predict_tail(feats, self._tail_frame(x, hw))
             est[:, missing] = -np.inf if hib else np.inf
         levels = None
         if self.rescale and not (runs and self.history == 0):  # to this frame's blocks (unseen tiles stay worst)
-            levels = self._levels(self._window(x, slice(0, hw[0]), slice(0, hw[1])))
+            levels = self._levels(self._some(x, hw, self._blocks))
             est = np.where(missing[None], est, est * levels).astype(np.float32)
         if runs:  # the network's frame, blended with what was carried here (history > 0)
             return self._run(x, hw, (est, missing))

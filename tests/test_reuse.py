@@ -698,3 +698,114 @@ def test_carrying_features_needs_a_model_that_splits(tmp_path: Path) -> None:
     coarse = sdk.load(pred.path, tile_size=32)
     with pytest.raises(sdk.ParameterError, match="tile_size"):
         sdk.PredictionReuse(coarse, 4, carry="features")
+
+
+class _Asked:
+    """An engine's input function that takes ``channels``: it builds only the planes asked for (from a
+    frame it holds) and records what each call asked."""
+
+    def __init__(self, names: tuple[str, ...]) -> None:
+        self.names, self.frame, self.calls = names, np.zeros(0, np.float32), []
+
+    def __call__(self, ys: slice, xs: slice, channels: tuple[str, ...] = ()) -> np.ndarray:
+        self.calls.append(tuple(channels))
+        return np.ascontiguousarray(self.frame[[self.names.index(c) for c in channels], ys, xs])
+
+
+@pytest.mark.parametrize("kind", ["blocks", "tiles"])
+def test_an_input_function_with_channels_builds_only_what_the_tail_reads(tmp_path: Path, kind: str) -> None:
+    """``carry="features"`` with an input function that takes ``channels``: the network's frames ask for every
+    plane, a carried frame for the tail's planes alone (``predictor.tail_inputs``), a fresh crop for every plane
+    of its window; the estimates are those of the same frames given whole, to the bit."""
+    pred = _split_predictor(tmp_path, kind)
+    names = pred.metadata.inputs
+    assert pred.tail_inputs == (f"reprojected.y.{kind}", f"albedo.y.{kind}")
+    assert sdk.load("jnyang").tail_inputs == ()
+    h, w = 64, 96
+    rng = np.random.default_rng(4)
+    frames = [_split_frame(rng, h, w, kind) for _ in range(6)]
+    rows, cols = np.indices((h, w))
+    seen = np.ones((h, w), np.float32)
+    seen[:TILE, :TILE] = 0
+    for unseen in ("full", "fresh"):
+        whole = sdk.PredictionReuse(pred, 4, carry="features", unseen=unseen)
+        asked = sdk.PredictionReuse(pred, 4, carry="features", unseen=unseen)
+        fn = _Asked(names)
+        for i, x in enumerate(frames):
+            fn.frame, fn.calls = x, []
+            fetch = None if i == 0 else (rows, cols)
+            want = whole.predict(x, fetch, seen)
+            got = asked.predict(fn, fetch, seen)
+            assert np.array_equal(got, want), (unseen, i)
+            assert asked.work == whole.work
+            if i % 4 == 0:  # the network's frame
+                assert fn.calls == [names]
+            elif unseen == "fresh":  # the tail's planes, then the crop around the unseen tile
+                assert fn.calls == [pred.tail_inputs, names] and 0 < asked.work < 1
+            else:
+                assert fn.calls == [pred.tail_inputs]
+
+
+def test_an_input_function_with_channels_builds_only_the_blocks_planes_to_rescale() -> None:
+    """``rescale``: a carried frame asks an input function that takes ``channels`` for the ``.blocks`` planes
+    alone; the estimates are those of the frames given whole. A function without ``channels`` is asked for the
+    whole frame, as before."""
+    s = _Scene()
+    names = s.pred.metadata.inputs
+    blocks = tuple(c for c in names if c.endswith(".blocks"))
+    everything = np.ones((s.h, s.w), np.float32)
+    fetch = (s.rows, s.cols)
+    x0 = s.inputs(everything)
+    x1 = x0.copy()
+    x1[[names.index(c) for c in blocks]] *= 0.7
+    whole = sdk.PredictionReuse(s.pred, 4, rescale=0.25)
+    asked = sdk.PredictionReuse(s.pred, 4, rescale=0.25)
+    plain = sdk.PredictionReuse(s.pred, 4, rescale=0.25)
+    fn = _Asked(names)
+    windows: list[tuple[slice, slice]] = []
+
+    def old_style(ys: slice, xs: slice) -> np.ndarray:
+        windows.append((ys, xs))
+        return fn.frame[:, ys, xs]
+
+    for i, x in enumerate((x0, x1, x1)):
+        fn.frame, fn.calls = x, []
+        f = None if i == 0 else fetch
+        want = whole.predict(x, f, everything)
+        assert np.array_equal(asked.predict(fn, f, everything), want)
+        assert fn.calls == ([names] if i == 0 else [blocks])
+        assert np.array_equal(plain.predict(old_style, f, everything), want)
+    assert windows == [(slice(0, s.h), slice(0, s.w))] * 3
+
+
+def test_an_input_function_that_returns_the_wrong_planes_is_refused(tmp_path: Path) -> None:
+    pred = _split_predictor(tmp_path, "tiles")
+    h, w = 32, 48
+    x = _split_frame(np.random.default_rng(0), h, w, "tiles")
+    rows, cols = np.indices((h, w))
+    seen = np.ones((h, w), np.float32)
+    reuse = sdk.PredictionReuse(pred, 4, carry="features")
+    reuse.predict(x)
+    with pytest.raises(sdk.InputShapeError, match=r"asked for channels \['reprojected.y.tiles', 'albedo.y.tiles'\].*"
+                                                  r"expected shape \(2, 32, 48\), got \(9, 32, 48\)"):
+        reuse.predict(lambda ys, xs, channels: x[:, ys, xs], (rows, cols), seen)
+    with pytest.raises(sdk.InputDtypeError, match="expected a float32 numpy array, got dtype float64"):
+        reuse.predict(lambda ys, xs, channels: x[7:, ys, xs].astype(np.float64), (rows, cols), seen)
+    assert np.isfinite(reuse.predict(lambda ys, xs, channels: x[7:, ys, xs], (rows, cols), seen)).all()
+
+
+def test_the_shipped_reuse_models_tail_reads_only_its_tail_inputs() -> None:
+    """What lets a carried frame skip the other planes: the shipped ``jnyang-reuse``'s tail gives the same
+    estimates when every plane but ``tail_inputs`` is 0."""
+    pred = sdk.load("jnyang-reuse")
+    names = pred.metadata.inputs
+    assert pred.tail_inputs == ("reprojected.y.tiles", "albedo.y.tiles")
+    rng = np.random.default_rng(1)
+    x = rng.random((len(names), 96, 160), dtype=np.float32)
+    for c in pred.tail_inputs:
+        x[names.index(c)] = sdk.tile_variances(x[names.index(c.removesuffix(".tiles"))])
+    _, feats = pred.predict_split(x)
+    only = np.zeros_like(x)
+    keep = [names.index(c) for c in pred.tail_inputs]
+    only[keep] = x[keep]
+    assert np.array_equal(pred.predict_tail(feats, only), pred.predict_tail(feats, x))
