@@ -420,7 +420,14 @@ def play(
     info = sdk.METRICS[fail_metric]
     fail_thr = info.default_threshold if fail_threshold is None else float(fail_threshold)
     metrics.check_dependencies((fail_metric, "flip") if flip_every else (fail_metric,))
-    predictors = {m.model: sdk.load(m.model) for m in specs if m.kind == "model"}  # fails early on a bad model
+    predictors: dict[str, sdk.ShadingRatePredictor] = {}
+    for m in specs:  # fails early on a bad model
+        if m.kind == "model" and m.model not in predictors:
+            try:
+                predictors[m.model] = sdk.load(m.model)
+            except sdk.ModelNotFoundError as err:  # a typo of a method's name reads as a missing model
+                raise PlayError(f"method {m.name!r}: not one of the methods ({', '.join(METHOD_KINDS)}), so a model, "
+                                f"and {err}") from err
     for m in specs:
         if m.kind == "model" and predictors[m.model].tile_size != tile_size:
             raise PlayError(f"method {m.name}: the model uses {predictors[m.model].tile_size}px tiles, the run "
