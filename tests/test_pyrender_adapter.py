@@ -417,6 +417,36 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
         user.delete()
 
 
+def test_adapters_sharing_one_renderer_each_draw_their_own_passes() -> None:
+    """Two adapters may borrow one renderer (a light one every frame, a full one where the network runs:
+    examples/pyrender_vrs.py); each gives what it gives alone, in whichever order they were built and run
+    (the first built used to draw pyrender's lit image for every pass once the second had replaced the
+    renderer's program cache)."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame
+
+    pyrender = _pyrender_or_skip()
+    scene = _asymmetric_scene(pyrender)
+    full_ch, light_ch = ["albedo.g", "normal.y", "roughness", "depth"], ["albedo.r", "depth"]
+    moved = np.eye(4)
+    moved[:3, 3] = (0.2, 0.0, 0.0)
+    user = pyrender.OffscreenRenderer(64, 48)
+    try:
+        with Adapter(full_ch, 64, 48, renderer=user) as alone:
+            want_full = alone.inputs(SceneFrame(scene, moved))
+        with Adapter(light_ch, 64, 48, renderer=user) as alone:
+            want_light = alone.inputs(SceneFrame(scene, moved))
+        lit_before, _ = user.render(scene)
+        with Adapter(full_ch, 64, 48, renderer=user) as full, Adapter(light_ch, 64, 48, renderer=user) as light:
+            for _ in range(2):
+                np.testing.assert_array_equal(full.inputs(SceneFrame(scene, moved)), want_full)
+                np.testing.assert_array_equal(light.inputs(SceneFrame(scene, moved)), want_light)
+            lit, _ = full.render(scene, np.eye(4))
+        np.testing.assert_array_equal(lit, lit_before)  # the displayed frame: pyrender's own draw
+        np.testing.assert_array_equal(user.render(scene)[0], lit_before)
+    finally:
+        user.delete()
+
+
 def test_osmesa_gives_the_inputs_egl_gives(tmp_path) -> None:
     """The OSMesa platform (needs libosmesa6 and PyOpenGL >= 3.1.5) against EGL, each in its own process."""
     import ctypes.util

@@ -149,8 +149,9 @@ class GBufferRenderer:
         platform: ``"egl"`` or ``"osmesa"`` (see :func:`rtp.plugins.pyrender._gl.import_pyrender`).
         renderer: a ``pyrender.OffscreenRenderer`` of the same size to borrow (pyrender binds a
             scene's meshes to one renderer's context, so the one that draws the displayed frames
-            must also draw the G-buffers). Its program cache is replaced while borrowed; its own
-            draws are unchanged. Default: a renderer of its own.
+            must also draw the G-buffers). Its program cache is replaced during this renderer's own
+            passes only (so several adapters may borrow one renderer); its own draws are unchanged.
+            Default: a renderer of its own.
     """
 
     def __init__(self, width: int, height: int, *, msaa: bool = False, normal_bits: int = 12,
@@ -171,11 +172,10 @@ class GBufferRenderer:
                 f"{self.width}x{self.height}"
             )
         self._renderer: Any | None = renderer
-        inner = renderer._renderer  # pyrender.Renderer: owns the one program cache the patch replaces
-        self._original_cache = inner._program_cache
+        # pyrender.Renderer owns one program cache; this one stands in for it during the G-buffer passes
+        # (_render), so that adapters sharing a renderer each draw with their own
         self._cache = _program_cache_class()()
         self._cache.msaa = self.msaa
-        inner._program_cache = self._cache
 
     @property
     def renderer(self) -> Any:
@@ -185,20 +185,19 @@ class GBufferRenderer:
         return self._renderer
 
     def close(self) -> None:
-        """Free the GL context, or give a borrowed renderer its own program cache back. Idempotent."""
+        """Free the G-buffer programs and, unless the renderer is borrowed, the GL context. Idempotent."""
         r, self._renderer = self._renderer, None
         if r is None:
             return
-        if self._owns:
-            _delete_renderer(r)
-            return
         try:
             r._platform.make_current()
-            self._cache.clear()  # our programs live in the borrowed context
-            r._platform.make_uncurrent()
+            self._cache.clear()  # our programs live in the renderer's context
+            if not self._owns:
+                r._platform.make_uncurrent()
         except Exception as exc:  # pragma: no cover - a context already gone
             log.debug("could not free the G-buffer programs: %s", exc)
-        r._renderer._program_cache = self._original_cache
+        if self._owns:
+            _delete_renderer(r)
 
     @property
     def closed(self) -> bool:
@@ -247,6 +246,8 @@ class GBufferRenderer:
             raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
 
     def _render(self, scene: Any, defines: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+        inner = self.renderer._renderer
+        before, inner._program_cache = inner._program_cache, self._cache
         self._cache.defines = defines
         try:
             with self._black_background(scene):
@@ -254,6 +255,7 @@ class GBufferRenderer:
                 out = self.draw(scene)
         finally:
             self._cache.defines = None
+            inner._program_cache = before
         colour, depth = out
         return np.ascontiguousarray(colour[..., :3]), np.ascontiguousarray(depth, dtype=np.float32)
 
