@@ -809,3 +809,39 @@ def test_the_shipped_reuse_models_tail_reads_only_its_tail_inputs() -> None:
     keep = [names.index(c) for c in pred.tail_inputs]
     only[keep] = x[keep]
     assert np.array_equal(pred.predict_tail(feats, only), pred.predict_tail(feats, x))
+
+
+@settings(max_examples=12, deadline=None)
+@given(model=st.sampled_from(["jnyang", "jnyang-reuse", "psnr"]), every=st.integers(1, 4),
+       unseen=st.sampled_from(["full", "fresh"]), option=st.sampled_from(["", "features", "rescale", "refresh"]),
+       sizes=st.lists(st.sampled_from([(48, 80), (64, 96), (36, 52)]), min_size=1, max_size=3),
+       seed=st.integers(0, 2**16))
+def test_a_channels_function_gives_what_the_whole_frame_gives_in_any_sequence(
+        model: str, every: int, unseen: str, option: str, sizes: list[tuple[int, int]], seed: int) -> None:
+    """Any sequence of frames (sizes that change, fetches that move and go missing, unseen pixels), any reuse
+    settings the model allows: estimates of the frame's tile grid, no NaN, and from an input function that
+    takes ``channels`` the same as from the whole frame, to the bit."""
+    pred = sdk.load(model)
+    names = pred.metadata.inputs
+    kw: dict[str, Any] = {"every": every, "unseen": unseen}
+    if option == "features" and pred.splits:
+        kw["carry"] = "features"
+    elif option == "rescale" and any(c.endswith(".blocks") for c in names) and not pred.metadata.higher_is_better:
+        kw["rescale"] = 0.25
+    elif option == "refresh":
+        kw["refresh"] = 0.05
+    whole, asked = sdk.PredictionReuse(pred, **kw), sdk.PredictionReuse(pred, **kw)
+    rng = np.random.default_rng(seed)
+    for f, (h, w) in enumerate(s for s in sizes for _ in range(3)):
+        x = rng.random((len(names), h, w), dtype=np.float32)
+        for i, c in enumerate(names):
+            if c.endswith((".blocks", ".tiles")):
+                x[i] = (sdk.tile_variances if c.endswith(".tiles") else sdk.block_variances)(x[0])
+        seen = (rng.random((h, w)) > 0.1).astype(np.float32)
+        rows, cols = np.indices((h, w))
+        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, h - 1),
+                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, w - 1)) if f and rng.random() < 0.9 else None
+        want = whole.predict(x, fetch, seen)
+        got = asked.predict(lambda ys, xs, channels, x=x: x[[names.index(c) for c in channels], ys, xs], fetch, seen)
+        assert want.shape == (6, -(-h // TILE), -(-w // TILE)) and not np.isnan(want).any()
+        assert np.array_equal(got, want) and asked.work == whole.work and asked.age == whole.age
