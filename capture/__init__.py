@@ -17,7 +17,7 @@ from ._dataset import (
     open_dataset,
     write_png,
 )
-from ._images import figure_image, save_image
+from ._images import check_image_output, figure_image, save_image
 from ._pool import worker_pool, worker_threads
 from ._preview import preview_sheet
 from ._ray import RayExecutorError, RayWorkerError
@@ -42,6 +42,7 @@ __all__ = [
     "TargetStore",
     "capture",
     "compute_targets",
+    "check_image_output",
     "contact_sheet",
     "figure_image",
     "load_scene",

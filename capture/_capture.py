@@ -69,19 +69,47 @@ def load_scene(
     """
     from rtp.capture import scenes
 
-    if name == PROCEDURAL_PREFIX.rstrip(":") or name.startswith(PROCEDURAL_PREFIX):
-        try:
-            seed = int(name[len(PROCEDURAL_PREFIX):])
-        except ValueError as err:
-            raise scenes.SceneNotFoundError(
-                f"scene {name!r}: the procedural scene needs a seed, e.g. {PROCEDURAL_PREFIX}0"
-            ) from err
+    seed = _procedural_seed(name)
+    if seed is not None:
         return scenes.procedural(seed), None
     if Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file():
         return scenes.load_mesh_file(name), None
     cache = Path(scenes.default_cache_dir() if cache_dir is None else cache_dir)
     scene = scenes.scene_by_name(name, cache, split=split, splits=splits)
     return scene, scenes.scene_blockers(name, cache, splits=splits)
+
+
+def check_scene(name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None) -> None:
+    """What :func:`load_scene` would refuse, found without loading anything: a bad procedural seed, a
+    missing scene file, a map not listed or not fetched. Jobs call it before they write."""
+    from rtp.capture import scenes
+
+    if _procedural_seed(name) is not None:
+        return
+    if Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file():
+        if not Path(name).is_file():
+            raise scenes.SceneNotFoundError(f"scene {name!r}: no such file")
+        return
+    scenes.check_map(name, Path(scenes.default_cache_dir() if cache_dir is None else cache_dir), split=split,
+                     splits=splits)
+
+
+def _procedural_seed(name: str) -> int | None:
+    """The seed of a ``procedural:<seed>`` name, None for any other name."""
+    from rtp.capture import scenes
+
+    if not (name == PROCEDURAL_PREFIX.rstrip(":") or name.startswith(PROCEDURAL_PREFIX)):
+        return None
+    try:
+        seed = int(name[len(PROCEDURAL_PREFIX):])
+    except ValueError as err:
+        raise scenes.SceneNotFoundError(
+            f"scene {name!r}: the procedural scene needs a seed, e.g. {PROCEDURAL_PREFIX}0"
+        ) from err
+    if seed < 0:  # numpy's generator refuses it in its own words, deep in the scene builder
+        raise scenes.SceneNotFoundError(
+            f"scene {name!r}: the procedural scene's seed is a non-negative integer, e.g. {PROCEDURAL_PREFIX}0")
+    return seed
 
 
 def scene_id(name: str) -> str:
@@ -247,6 +275,15 @@ def capture(
     if placement not in PLACEMENTS:
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
     w, h = size
+    if ray is None:  # (a Ray driver may have no OpenGL of its own: its workers say so)
+        from rtp.plugins.moderngl import Renderer
+
+        limit = Renderer.max_frame_side()
+        if min(w, h) < 1 or max(w, h) > limit:
+            raise ParameterError(f"size: expected 1 to {limit} pixels a side (this OpenGL's largest texture), "
+                                 f"got {w}x{h}", "size")
+    for name in scene_names:  # every name now: not after the manifest, or an hour into the first map
+        check_scene(name, cache_dir, split, None if splits is None else str(splits))
     settings = {
         "size": [w, h],
         "renderer": "rtp.plugins.moderngl reference deferred renderer",

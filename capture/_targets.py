@@ -232,6 +232,12 @@ def compute_targets(
     if flip_backend is not None and flip_backend not in M.FLIP_BACKENDS:
         raise TargetError(f"flip_backend must be one of {', '.join(M.FLIP_BACKENDS)} or None, got {flip_backend!r}")
     M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work
+    # The parameters too, before they are declared in the manifest: a bad one stored there would refuse
+    # every later run, good values included.
+    if ppd is not None:
+        M.resolve_ppd(ppd, 1)
+    if weber_l is not None:
+        M.check_weber_l(weber_l)
     reader = DatasetReader(data_root)
     store = TargetStore(data_root)
     params: dict[str, Any] = {"ppd": M.DEFAULT_PPD if ppd is None else ppd,

@@ -131,7 +131,7 @@ def _body(args: argparse.Namespace) -> int:
                 "--metadata SIDECAR.yaml (docs/export.md)")
         out = adopt(args.adopt, args.metadata, args.output, dynamic=args.dynamic, replace=args.replace)
     else:
-        out = export_checkpoint(args.checkpoint, args.output, opset=args.opset or DEFAULT_OPSET,
+        out = export_checkpoint(args.checkpoint, args.output, opset=DEFAULT_OPSET if args.opset is None else args.opset,
                                 extra_metadata=args.metadata, finite_probe=not args.no_finite_probe,
                                 split_planes=not args.one_input)
     print(out)

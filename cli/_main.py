@@ -28,6 +28,11 @@ EXAMPLES = """examples:
 
 # -- argument types: checked while parsing, before any work -------------------------------------
 
+# The largest frame side a command accepts while parsing: Mesa's llvmpipe and the desktop GPUs' usual
+# GL_MAX_TEXTURE_SIZE. The renderer checks its own context's limit as well (Renderer.max_frame_side).
+MAX_SIDE = 16384
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -35,7 +40,43 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x720, got {text!r}") from None
     if w < 16 or h < 16:
         raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text!r}")
+    if w > MAX_SIDE or h > MAX_SIDE:
+        raise argparse.ArgumentTypeError(f"size must be at most {MAX_SIDE}x{MAX_SIDE} (the largest OpenGL texture "
+                                         f"the renderer can count on), got {text!r}")
     return w, h
+
+
+def _out_folder(text: str) -> str:
+    """An argparse type: a folder that can be created or written (not an existing file)."""
+    return _checked_path(text, folder=True)
+
+
+def _out_file(text: str) -> str:
+    """An argparse type: a file that can be written (not a folder, not on a read-only place)."""
+    return _checked_path(text, folder=False)
+
+
+def _out_image(text: str) -> str:
+    """An argparse type: an image file Pillow can write, in a place that can be written."""
+    from rtp.capture import check_image_output
+    from rtp.sdk import ParameterError
+
+    try:
+        check_image_output(text, what="path")
+    except ParameterError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix("path: ")) from None
+    return text
+
+
+def _checked_path(text: str, *, folder: bool) -> str:
+    from rtp.sdk import ParameterError
+    from rtp.sdk.files import check_output
+
+    try:
+        check_output(text, folder=folder, what="path")
+    except ParameterError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix("path: ")) from None
+    return text
 
 
 def _int_at_least(minimum: int) -> Callable[[str], int]:
@@ -481,7 +522,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a scene (repeatable, or comma-separated): procedural:<seed>, a map name of `rtp scenes list`, "
                      "or your own .glb/.gltf/.obj file")
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
-    cap.add_argument("--out", required=True, help="dataset folder (created, or resumed)")
+    cap.add_argument("--out", type=_out_folder, required=True, help="dataset folder (created, or resumed)")
     cap.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
     cap.add_argument("--profiles", type=_choices_csv(tuple(MOTION_PROFILES)), default=",".join(DEFAULT_PROFILES),
                      help="motion profiles, comma-separated: slow, fast (the paper's 14 and 31%% unseen pixels), frame "
@@ -500,7 +541,8 @@ def build_parser() -> argparse.ArgumentParser:
     pv = command("preview", "draw one sample of a dataset: final images at every rate, G-buffers, reprojection",
                  _cmd_preview)
     pv.add_argument("data", help="dataset folder (rtp's, or the paper's released layout)")
-    pv.add_argument("--out", required=True, help="image to write; its extension names the format (.png, .jpg, ...)")
+    pv.add_argument("--out", type=_out_image, required=True,
+                    help="image to write; its extension names the format (.png, .jpg, ...)")
     pv.add_argument("--sample", default=None, help="sample id (default: the first)")
     pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller")
 
@@ -523,7 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "comma-separated, read as one (for example the usual pairs and 60 Hz ones: data/train,data/train-frame)")
     tr.add_argument("--metric", required=True, choices=tuple(METRICS), help="the metric whose targets the network "
                     "learns (computed by `rtp targets`)")
-    tr.add_argument("--out", required=True, help="checkpoint to write (resumed if it exists)")
+    tr.add_argument("--out", type=_out_file, required=True, help="checkpoint to write (resumed if it exists)")
     tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
                     help="training recipe: a YAML file, or 'shipped' (the shipped models' recipe)")
     r = tr.add_argument_group("recipe values (default: the recipe's)")
@@ -654,7 +696,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("model", nargs="+", help="one or more .onnx paths or shipped model names; each is scored on "
                     "the targets of its own metric and tile size")
     ev.add_argument("--data", required=True, help="dataset folder with targets from `rtp targets`")
-    ev.add_argument("--out", default=None, help="folder for evaluation.md, evaluation.json (and --plots)")
+    ev.add_argument("--out", type=_out_folder, default=None,
+                    help="folder for evaluation.md, evaluation.json (and --plots)")
     ev.add_argument("--scene", action="append", default=None,
                     help="evaluate only these scenes (repeatable, or comma-separated; default: all)")
     model_metadata(ev)
@@ -677,8 +720,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
     dm.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
     dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move (the last one is shown)")
-    dm.add_argument("--seed", type=int, default=0, help="which viewpoint of the scene")
-    dm.add_argument("--out", default="rtp-demo", help="output folder")
+    dm.add_argument("--seed", type=_non_negative, default=0, help="which viewpoint of the scene")
+    dm.add_argument("--out", type=_out_folder, default="rtp-demo", help="output folder")
     cache_dir(dm)
 
     from rtp.capture.paths import PATH_PROFILES
@@ -704,7 +747,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "(default: slow,fast)")
     pl.add_argument("--frames", type=_positive, default=300, help="frames per path")
     pl.add_argument("--fps", type=float, default=60.0, help="frame rate of the paths")
-    pl.add_argument("--seed", type=int, default=0, help="which path through the map")
+    pl.add_argument("--seed", type=_non_negative, default=0, help="which path through the map")
     pl.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
     pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
@@ -718,7 +761,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "(default parameters; 0: never)")
     pl.add_argument("--composite", action="store_true", help="shade by compositing the uniform-rate images "
                     "(faster) instead of the renderer's per-tile VRS pass")
-    pl.add_argument("--out", default="rtp-play", help="output folder")
+    pl.add_argument("--out", type=_out_folder, default="rtp-play", help="output folder")
     pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
     pl.add_argument("--no-animation", action="store_true", help="no GIF")
     pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once")
@@ -730,7 +773,8 @@ def build_parser() -> argparse.ArgumentParser:
     mt.add_argument("metric", choices=tuple(METRICS), help="the metric")
     mt.add_argument("reference", help="the reference image (full-rate shading), any format Pillow reads")
     mt.add_argument("test", help="the image to compare, same size")
-    mt.add_argument("--out", default=None, help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
+    mt.add_argument("--out", type=_out_image, default=None,
+                    help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
                     "bar to this image")
     mt.add_argument("--tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE, help="tile size in pixels")
     mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import logging
 import os
 import sys
@@ -113,6 +114,9 @@ def _logging(args: argparse.Namespace) -> Iterator[None]:
 class Bar:
     """A tqdm progress bar (when tqdm is installed and bars are wanted), else nothing."""
 
+    #: Seconds before a bar first shows.
+    DELAY = 0.5
+
     def __init__(self, args: argparse.Namespace, total: int, desc: str, unit: str) -> None:
         self.total = total
         self._bar: Any = None
@@ -121,7 +125,9 @@ class Bar:
         with contextlib.suppress(ImportError):
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, desc=desc, unit=unit, dynamic_ncols=True)
+            # delay: a job that fails at once (a bad argument found by the job itself) never shows a bar,
+            # so its error stands alone on the terminal and in a log.
+            self._bar = tqdm(total=total, desc=desc, unit=unit, dynamic_ncols=True, delay=self.DELAY)
 
     def update_to(self, n: int, total: int | None = None, **postfix: str) -> None:
         if self._bar is None:
@@ -141,15 +147,22 @@ class Bar:
 
     def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
         if exc_type is not None and self._bar is not None and self._bar.n == 0:
-            # The job failed before any progress (a bad argument found by the job itself): a terminal
-            # erases the empty bar, so that the error message stands alone.
-            self._bar.leave = False
+            # The job failed before any progress: a terminal erases the empty bar, so that the error
+            # message stands alone. A file or a pipe cannot erase: there the bar ends its line instead
+            # of leaving its text and carriage returns in front of the error.
+            tty = getattr(self._bar.fp, "isatty", lambda: False)()
+            self._bar.leave = not tty
         self.close()
+
+
+#: The errors of a path that is wrong in itself (a usage error, exit 2), not of a job that failed.
+_PATH_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EEXIST, errno.EACCES, errno.EPERM,
+                          errno.EROFS, errno.ENAMETOOLONG})
 
 
 def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace], int]) -> int:
     """Run a command body under the one error policy (see the module docstring)."""
-    from rtp.sdk import RtpError, exit_code
+    from rtp.sdk import EXIT_FAILED, EXIT_USAGE, RtpError, exit_code
 
     with _logging(args):
         try:
@@ -165,3 +178,13 @@ def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace]
         except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 0
+        except OSError as err:
+            if err.filename is None:  # not about a path the user gave: a bug, with its traceback
+                raise
+            # A path the system refused (a folder where a file was asked, a read-only place, a full
+            # disk): the user's to fix, said in one line; 2 where the path itself is wrong.
+            if args.verbose:
+                traceback.print_exc()
+            where = f"{err.filename!r}" + (f" -> {err.filename2!r}" if err.filename2 else "")
+            print(f"{prog}: error: {err.strerror or type(err).__name__}: {where}", file=sys.stderr)
+            return EXIT_USAGE if err.errno in _PATH_ERRNOS else EXIT_FAILED

@@ -36,7 +36,7 @@ from rtp.sdk import (
     ParameterError,
     RtpError,
 )
-from rtp.sdk.files import atomic_output
+from rtp.sdk.files import atomic_output, check_output, yaml_problem
 
 from ._published import file_sha256, identify
 
@@ -68,6 +68,17 @@ class ExportError(RtpError):
     """The export itself failed: the exporter, the ONNX checker, or the onnxruntime/torch parity check."""
 
 
+def _output(source: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:
+    """``output`` as a path a copy of ``source`` may be written to: not ``source`` itself (a checkpoint
+    exported over itself was lost; a model's copy over the model is what ``--restamp`` is for), and
+    a place that can be written (:func:`rtp.sdk.files.check_output`), checked before any work."""
+    out = Path(output)
+    if out.exists() and Path(source).exists() and os.path.samefile(out, source):
+        raise ParameterError(f"output {str(out)!r} is the input itself; write the result to another path", "output")
+    check_output(out, what="output")
+    return out
+
+
 def _merge(base: dict[str, Any], extra: Mapping[str, Any]) -> dict[str, Any]:
     out = dict(base)
     for k, v in extra.items():
@@ -87,7 +98,9 @@ def _read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         d = yaml.safe_load(p.read_text(encoding="utf-8"))
     except yaml.YAMLError as err:
-        raise MetadataError(f"{p}: not valid YAML ({err})") from err
+        raise MetadataError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
+    except UnicodeDecodeError as err:
+        raise MetadataError(f"{p}: not a YAML sidecar, not even UTF-8 text ({err.reason} at byte {err.start})") from err
     if d is None:
         return {}
     if not isinstance(d, dict):
@@ -514,7 +527,8 @@ def join_input_planes(model_path: str | os.PathLike[str], output: str | os.PathL
     from rtp import sdk
 
     before = sdk.load(model_path, providers=["CPUExecutionProvider"])
-    src, out = Path(str(before.path)), Path(output)
+    src = Path(str(before.path))
+    out = _output(src, output)
     if len(before.graph_inputs) < 2:
         raise ParameterError(f"{src} takes its planes in one input already ({before.graph_inputs[0][0]}): "
                              "nothing to join")
@@ -544,7 +558,8 @@ def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str
     from rtp import sdk
 
     before = sdk.load(model_path, providers=["CPUExecutionProvider"])
-    src, out = Path(str(before.path)), Path(output)
+    src = Path(str(before.path))
+    out = _output(src, output)
     d = _read_yaml(metadata) if isinstance(metadata, (str, os.PathLike)) else metadata
     if not isinstance(d, Mapping):
         raise MetadataError(f"retune: expected a mapping of metadata fields, got {type(d).__name__}")
@@ -586,7 +601,8 @@ def strip_finite_probe(model_path: str | os.PathLike[str], output: str | os.Path
     from rtp import sdk
 
     before = sdk.load(model_path, providers=["CPUExecutionProvider"])  # a path or a shipped model's name
-    src, out = Path(str(before.path)), Path(output)
+    src = Path(str(before.path))
+    out = _output(src, output)
     probe = before.metadata.finite_probe
     if probe is None:
         raise ParameterError(f"{src} has no finite probe (metadata.finite_probe is null): nothing to strip")
@@ -683,7 +699,7 @@ def export_checkpoint(
     if not isinstance(split_planes, bool):
         raise ParameterError(f"split_planes: expected True or False, got {split_planes!r}", "split_planes")
     ckpt = ckpt_mod.load(checkpoint)
-    out = Path(output) if output is not None else Path(checkpoint).with_suffix(".onnx")
+    out = _output(checkpoint, output if output is not None else Path(checkpoint).with_suffix(".onnx"))
     meta_dict = ckpt.metadata.to_dict()
     if extra_metadata is not None:
         extra = _read_yaml(extra_metadata) if isinstance(extra_metadata, (str, os.PathLike)) else dict(extra_metadata)
@@ -884,6 +900,7 @@ def adopt(
     src = Path(foreign)
     if not src.is_file():
         raise ModelNotFoundError(f"no ONNX model at {str(src)!r}")
+    out = _output(src, output)
     try:
         model = onnx.load(str(src))
     except Exception as err:
@@ -959,7 +976,6 @@ def adopt(
                     dim.dim_param = name
         del graph.value_info[:]  # intermediate shapes were inferred for the fixed size
     write_metadata(model, meta)
-    out = Path(output)
     with atomic_output(out) as tmp:
         _check_and_save(model, tmp)
         pred = sdk.load(tmp, providers=["CPUExecutionProvider"])

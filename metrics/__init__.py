@@ -19,7 +19,7 @@ import logging
 
 from ._deps import METRIC_DEPENDENCIES, check_dependencies
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
-from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width
+from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width, resolve_ppd
 from ._lpips import (
     FETCH_COMMAND,
     LPIPS_MIN_SIZE,
@@ -32,7 +32,7 @@ from ._lpips import (
     lpips_weights_path,
 )
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, squared_error_map, yang_map
-from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, pool_tiles, weber_denominator
+from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, check_weber_l, pool_tiles, weber_denominator
 from ._targets import FLIP_BACKENDS, error_map, tile_metric, tile_targets
 
 logging.getLogger("rtp.metrics").addHandler(logging.NullHandler())
@@ -53,6 +53,7 @@ __all__ = [
     "MetricError",
     "MetricParameterError",
     "check_dependencies",
+    "check_weber_l",
     "default_weights_cache",
     "error_map",
     "fetch_lpips_weights",
@@ -66,6 +67,7 @@ __all__ = [
     "pool_tiles",
     "ppd_from_width",
     "psnr_tiles",
+    "resolve_ppd",
     "squared_error_map",
     "tile_metric",
     "tile_targets",

@@ -334,7 +334,9 @@ class ModelMetadata:
         try:
             d = yaml.safe_load(text)
         except (yaml.YAMLError, RecursionError, ValueError) as err:
-            raise MetadataError(f"{p}: not valid YAML ({err})") from err
+            from .files import yaml_problem
+
+            raise MetadataError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
         return cls.from_dict(d if d is not None else {})
 
     def to_dict(self) -> dict[str, Any]:

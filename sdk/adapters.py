@@ -32,6 +32,7 @@ from __future__ import annotations
 import abc
 import functools
 import logging
+import numbers
 import threading
 import weakref
 from collections.abc import Callable, Iterable
@@ -89,7 +90,8 @@ class AdapterClosedError(RtpError, RuntimeError):
 
 
 class AdapterFrameError(RtpError, TypeError):
-    """:meth:`Adapter.inputs` was given a frame that is not of the adapter's :attr:`~Adapter.frame_type`."""
+    """:meth:`Adapter.inputs` was given a frame that is not of the adapter's :attr:`~Adapter.frame_type`,
+    or an adapter an engine object of the wrong type (the moderngl adapter's ``ctx``)."""
 
     exit_code = EXIT_USAGE
 
@@ -240,8 +242,8 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
             )
         if not self._channels:
             raise UnsupportedChannelError("no channels requested; pass the model's inputs (predictor.metadata.inputs)")
-        if int(width) < 1 or int(height) < 1:
-            raise ParameterError(f"frame size must be positive, got {width}x{height}")
+        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1 for v in (width, height)):
+            raise ParameterError(f"frame size: expected positive integers (pixels), got {width!r} x {height!r}", "size")
         self._width, self._height = int(width), int(height)
         self.__dict__["_rtp_state"] = _OPEN
 

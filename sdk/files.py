@@ -5,6 +5,9 @@ Public so that every room (and a user's own tools) writes files the same way::
     from rtp.sdk.files import atomic_output
     with atomic_output("model.onnx") as tmp:
         tmp.write_bytes(data)          # renamed over model.onnx only if this block succeeds
+
+and checks an output path before the work that fills it (:func:`check_output`), so that a job
+that would fail at its first write fails before it starts.
 """
 
 from __future__ import annotations
@@ -15,7 +18,9 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_output"]
+from ._errors import ParameterError
+
+__all__ = ["atomic_output", "check_output", "yaml_problem"]
 
 
 def _default_mode() -> int:
@@ -48,3 +53,35 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
+
+
+def check_output(path: str | os.PathLike[str], *, folder: bool = False, what: str = "output") -> Path:
+    """``path`` as a :class:`~pathlib.Path` if a file (``folder=False``) or a folder (``folder=True``)
+    can be written there, else a :class:`~rtp.sdk.ParameterError` that says why, naming ``what`` (the
+    option). Nothing is created: the nearest existing folder above ``path`` is probed with a
+    temporary file, removed at once (a read-only or pseudo file system fails there, as it would at
+    the first write of a long job)."""
+    target = Path(path)
+    if target.exists() and target.is_dir() != folder:
+        kind = "a folder" if target.is_dir() else "a file"
+        raise ParameterError(f"{what}: {str(target)!r} is {kind}; expected {'a folder' if folder else 'a file'} path",
+                             what)
+    parent = target if folder else target.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ParameterError(f"{what}: cannot write {str(target)!r}: {str(parent)!r} is a file, not a folder", what)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".rtp-write-check.", dir=parent)
+    except OSError as err:
+        raise ParameterError(f"{what}: cannot write {str(target)!r}: {err.strerror or err} in {str(parent)!r}",
+                             what) from err
+    os.close(fd)
+    os.unlink(probe)
+    return target
+
+
+def yaml_problem(err: BaseException) -> str:
+    """A YAML parser's error (problem, context, the line quoted with a caret under it) as one line,
+    for the one-line messages of rtp's errors."""
+    return " ".join(line.strip() for line in str(err).splitlines() if line.strip() and set(line.strip()) != {"^"})

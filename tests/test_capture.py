@@ -77,7 +77,9 @@ def test_preview_writes_the_format_its_extension_names(tmp_path: Path) -> None:
         assert rtp_main(["preview", str(out), "--out", str(tmp_path / name)]) == 0
         with Image.open(tmp_path / name) as im:
             assert im.format == fmt and im.size[0] > 4 * 96 and im.size[1] > 4 * 64
-    assert rtp_main(["preview", str(out), "--out", str(tmp_path / "sheet.nope")]) == 2
+    with pytest.raises(SystemExit) as exc:  # refused while parsing, before the dataset is read
+        rtp_main(["preview", str(out), "--out", str(tmp_path / "sheet.nope")])
+    assert exc.value.code == 2 and not (tmp_path / "sheet.nope").exists()
 
 
 def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -154,6 +154,68 @@ def test_interrupts_exit_130_and_bugs_propagate(tmp_path: Path, monkeypatch: pyt
         assert "error:" not in capsys.readouterr().err, prog
 
 
+def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """An OSError about a path (a folder where a file was asked, a read-only place, a full disk) is the
+    user's to fix: one line, 2 where the path itself is wrong, 1 where the job failed; an OSError without
+    a path is a bug and keeps its traceback."""
+    import errno
+
+    cases = ((IsADirectoryError(errno.EISDIR, "Is a directory", "out"), 2),
+             (OSError(errno.ENOSPC, "No space left on device", "big.onnx"), 1))
+    for error, code in cases:
+        for prog, entry, argv in _entry_points(monkeypatch, tmp_path, error):
+            assert entry(argv) == code, prog
+            err = capsys.readouterr().err
+            assert err == f"{prog}: error: {error.strerror}: {error.filename!r}\n", err
+    for _, entry, argv in _entry_points(monkeypatch, tmp_path, OSError("a bug")):
+        with pytest.raises(OSError, match="a bug"):
+            entry(argv)
+
+
+def test_arguments_that_would_fail_later_fail_while_parsing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Found by trying bad values: each used to fail after work had begun (or in a native crash, or
+    with a library's traceback); now argparse refuses it (exit 2) and nothing is written."""
+    (tmp_path / "file").write_text("x")
+    folder = str(tmp_path / "folder")
+    bad = [["demo", "--size", "99999999x16"], ["play", "procedural:0", "--size", "100000x16"],
+           ["demo", "--seed", "-1"], ["play", "procedural:1", "--seed", "-1"],
+           ["evaluate", "jnyang", "--data", folder, "--out", str(tmp_path / "file")],
+           ["demo", "--out", str(tmp_path / "file")], ["capture", "--scene", "procedural:1", "--per-scene", "1",
+                                                        "--out", str(tmp_path / "file" / "x")],
+           ["train", "--data", folder, "--metric", "jnyang", "--out", str(tmp_path)],
+           ["preview", folder, "--out", str(tmp_path / "p.xyz")], ["metric", "psnr", "a.png", "b.png", "--out", "x.xyz"]]
+    for argv in bad:
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 2, argv
+        assert "argument --" in capsys.readouterr().err, argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_jobs_check_their_values_before_they_write(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp targets --ppd -1` stored the bad value in the targets' manifest, which then refused every
+    later run; `rtp capture` wrote a manifest for a scene it could not load or a size it could not draw;
+    `rtp train` checked its learning rate and threshold only at its first save, 250 steps in."""
+    data = tmp_path / "data"
+    assert main(["capture", "--scene", "procedural:1", "--per-scene", "1", "--size", "64x48", "--out", str(data),
+                 "-q"]) == 0
+    for argv in (["targets", str(data), "--metrics", "flip", "--ppd", "-1"],
+                 ["targets", str(data), "--metrics", "jnyang", "--weber-l", "-1"]):
+        assert main([*argv, "-q"]) == 2
+    assert not (data / "targets").exists()
+    for scene in ("procedural:-1", "no_such_map", str(tmp_path / "missing.glb")):
+        out = tmp_path / "c"
+        assert main(["capture", "--scene", scene, "--per-scene", "1", "--size", "64x48", "--out", str(out), "-q"]) == 2
+        assert not out.exists(), scene
+    for flag, value in (("--lr", "-1"), ("--lr", "nan"), ("--threshold", "-1"), ("--threshold", "nan"),
+                        ("--weight-decay", "-0.5"), ("--k", "0")):
+        assert main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"), flag, value,
+                     "-q"]) == 2, flag
+        assert "expected" in capsys.readouterr().err
+    assert not (tmp_path / "m.pt").exists()
+
+
 def test_real_errors_exit_the_same_in_every_entry_point(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = str(tmp_path / "nope.onnx")
     assert main(["info", missing]) == sdk.ModelNotFoundError.exit_code == 2
@@ -276,13 +338,26 @@ def test_a_job_that_fails_before_any_progress_erases_its_empty_bar() -> None:
 
     from rtp.cli._run import Bar
 
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
     args = argparse.Namespace(quiet=False, no_progress=False)
-    for steps, leaves in ((0, False), (3, True)):
+    for terminal, steps, leaves in ((True, 0, False), (True, 3, True), (False, 0, True), (False, 3, True)):
+        # (a file or a pipe cannot erase the bar: it ends the bar's line, the error then has its own)
         with pytest.raises(sdk.ParameterError), Bar(args, 10, "play nomap", "frame") as bar:
-            bar._bar.fp = io.StringIO()
+            bar._bar.fp = Terminal() if terminal else io.StringIO()
             bar.update_to(steps)
             raise sdk.ParameterError("map 'nomap' is not listed", "scene")
         assert bar._bar.leave is leaves
     with Bar(args, 10, "play", "frame") as bar:  # a job that ends well keeps its bar
-        bar._bar.fp = io.StringIO()
+        bar._bar.fp = Terminal()
     assert bar._bar.leave is True
+
+
+def test_a_job_that_fails_at_once_leaves_only_its_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp evaluate nomodel` printed "evaluate nomodel: 0sample [00:00, ?sample/s]\\r   \\r" in front of
+    its error in a log: a bar shows only after Bar.DELAY seconds."""
+    assert main(["evaluate", str(tmp_path / "nomodel.onnx"), "--data", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rtp evaluate: error:") and err.count("\n") == 1, err

@@ -159,8 +159,10 @@ def test_cli_exit_codes(tmp_path: Path) -> None:
     usage = _cli("--adopt", "x.onnx")
     assert usage.returncode == 2 and "-o OUTPUT.onnx" in usage.stderr
     assert _cli().returncode == 2
-    bad_opset = _cli(str(ck), "--opset", "3")
-    assert bad_opset.returncode == 2 and "opset" in bad_opset.stderr
+    for opset in ("3", "0"):  # (0 used to mean the default)
+        bad_opset = _cli(str(ck), "--opset", opset, "-o", str(tmp_path / "bad.onnx"))
+        assert bad_opset.returncode == 2 and "opset" in bad_opset.stderr, opset
+    assert not (tmp_path / "bad.onnx").exists()
 
 
 # -- adoption ---------------------------------------------------------------------------------
@@ -501,3 +503,44 @@ def test_merge_slices_merges_chains_and_keeps_the_outputs(tmp_path: Path) -> Non
     for o, n in zip(old, new):
         np.testing.assert_array_equal(o, n)
     np.testing.assert_array_equal(new[0], x[:, 1:3, 0::4, 1::4] * 2.0)
+
+
+def test_no_export_writes_over_its_own_input_or_where_it_cannot_write(fast_onnx: Path, tmp_path: Path) -> None:
+    """`rtp-export ck.pt -o ck.pt` used to replace the checkpoint by the model (exit 0): the training was
+    lost. Each copying tool refuses its input as output, and an output it cannot write, before any work."""
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    before = ck.read_bytes()
+    with pytest.raises(sdk.ParameterError, match="is the input itself"):
+        export.export_checkpoint(ck, ck)
+    with pytest.raises(sdk.ParameterError, match="is the input itself"):
+        export.export_checkpoint(ck, tmp_path / "." / "m.pt")
+    assert ck.read_bytes() == before
+    copy = tmp_path / "copy.onnx"
+    copy.write_bytes(fast_onnx.read_bytes())
+    for write in (export.strip_finite_probe, export.join_input_planes):
+        with pytest.raises(sdk.ParameterError, match="is the input itself"):
+            write(copy, copy)
+    with pytest.raises(sdk.ParameterError, match="is the input itself"):
+        export.retune(copy, {"default_threshold": 0.2}, copy)
+    with pytest.raises(sdk.ParameterError, match="is the input itself"):
+        export.adopt(copy, None, copy, replace=True)
+    assert copy.read_bytes() == fast_onnx.read_bytes()
+    with pytest.raises(sdk.ParameterError, match="is a folder"):
+        export.export_checkpoint(ck, tmp_path)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(sdk.ParameterError, match="is a file, not a folder"):
+        export.strip_finite_probe(copy, tmp_path / "file" / "x.onnx")
+    cli = _cli(str(ck), "-o", str(ck))
+    assert cli.returncode == 2 and "is the input itself" in cli.stderr and "Traceback" not in cli.stderr
+    assert ck.read_bytes() == before
+
+
+def test_a_sidecar_that_is_not_text_or_not_yaml_is_a_metadata_error(fast_onnx: Path, tmp_path: Path) -> None:
+    binary, broken = tmp_path / "bin.yaml", tmp_path / "broken.yaml"
+    binary.write_bytes(b"\x00\xff\xfe\x80 binary")
+    broken.write_text("default_threshold: [0.2\nrate_factors: {")
+    for sidecar in (binary, broken):
+        with pytest.raises(sdk.MetadataError) as err:
+            export.retune(fast_onnx, sidecar, tmp_path / "out.onnx")
+        assert "\n" not in str(err.value)  # one line, YAML's caret and context folded in
+    assert not (tmp_path / "out.onnx").exists()

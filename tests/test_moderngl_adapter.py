@@ -231,8 +231,18 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         Adapter(("seen", "motion.x"), W, H, ctx=ctx)
     with pytest.raises(TypeError, match="moderngl.Context"):
         Adapter(("seen",), W, H, ctx=None)
-    with pytest.raises(ValueError, match="prev_depth"):
+    with pytest.raises(sdk.ParameterError, match="prev_depth"):
         a.inputs(replace(no_prev, prev_colour=_tex(ctx, prev.colour["1x1"])))
+    # every bad setting or frame field an RtpError (a ParameterError, still a ValueError), never a bare one
+    with pytest.raises(sdk.ParameterError, match="material texture"):
+        Adapter(("seen", "roughness"), W, H, ctx=ctx).inputs(replace(no_prev, material=None))
+    for options in ({"normal_space": "bogus"}, {"depth_kind": "bogus"}, {"tolerance": float("nan")},
+                    {"tolerance": -1.0}, {"tolerance": "0.02"}):
+        with pytest.raises(sdk.ParameterError):
+            Adapter(("seen",), W, H, ctx=ctx, **options)
+    for size in ((2.7, H), ("abc", H), (W, None), (W, float("inf")), (0, H), (True, H)):
+        with pytest.raises(sdk.ParameterError, match="positive integers"):
+            Adapter(("seen",), *size, ctx=ctx)  # type: ignore[arg-type]
     with pytest.raises(sdk.adapters.AdapterFrameError, match="GBufferTextures"):
         a.inputs({"albedo": no_prev.albedo})  # type: ignore[arg-type]
     a.close()

@@ -10,7 +10,8 @@ from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from rtp import sdk
-from rtp.plugins.moderngl import RateSelector
+from rtp.plugins.moderngl import RateSelector, RendererError
+from rtp.sdk.adapters import AdapterFrameError
 from tests.conftest import base_metadata
 from tests.test_moderngl_adapter import H, W, frames  # noqa: F401  (frames: a fixture)
 
@@ -150,10 +151,23 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
             selector.select(raw, -1.0)
         with pytest.raises(sdk.ParameterError, match="allowed"):
             selector.select(raw, allowed=["3x3"])
+        # an empty frame used to reach moderngl (a raw moderngl.Error) and leave the selector broken
+        with pytest.raises(sdk.InputShapeError):
+            selector.select(raw[:, :0])
+        with pytest.raises(sdk.InputDtypeError, match="moderngl.Buffer"):
+            selector.select_buffer(None, (9, 13))
+        with pytest.raises(sdk.ParameterError, match="tiles"):
+            selector.select_buffer(buffer, (9,))  # type: ignore[arg-type]
+        np.testing.assert_array_equal(codes, selector.select(raw))  # still works after every refusal
         buffer.release()
     selector.close()  # twice: nothing released twice
-    with pytest.raises(RuntimeError, match="closed"):
-        selector.select(raw)
+    for call in (lambda: selector.select(raw), selector.decoded):
+        with pytest.raises(RendererError, match="closed"):  # (an RtpError and a RuntimeError)
+            call()
+    with RateSelector(meta, gl_context) as fresh, pytest.raises(RendererError, match="nothing selected"):
+        fresh.decoded()
+    with pytest.raises(AdapterFrameError, match="moderngl.Context"):
+        RateSelector(meta, object())
     with pytest.raises(TypeError, match="ModelMetadata"):
         RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
     for bad in (8, 24, 2.0):  # finer than the model's 16-pixel tiles; not a tile size; not an int

@@ -383,3 +383,14 @@ def test_renderer_errors_and_lifetime(gl_context):
                 r2.render(Camera((0.0, 0.0, 0.0)), f)
     with pytest.raises(RendererError, match="released"):
         r.render(Camera((0.0, 0.0, 0.0)))
+    # past the context's largest texture moderngl only said "the framebuffer is not complete"
+    limit = Renderer.max_frame_side(ctx)
+    assert limit >= 4096
+    for size, options in (((limit + 1, 16), {}), ((16, 16), {"shadow_map_size": limit + 1})):
+        with pytest.raises(RendererError, match=f"at most {limit} pixels a side"):
+            Renderer(*size, ctx=ctx, **options)
+    for size, options in (((2.5, 16), {}), (("abc", 16), {}), ((16, 16), {"shadow_map_size": 0})):
+        with pytest.raises(RendererError, match="positive integer"):
+            Renderer(*size, ctx=ctx, **options)  # type: ignore[arg-type]
+    make_current(ctx)
+    ctx.texture((2, 2), 1).release()  # a borrowed context stays open after a refused size

@@ -28,6 +28,7 @@ from torch import nn
 from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore
 from rtp.evaluate import scores
+from rtp.sdk.files import check_output
 
 from . import checkpoint as ckpt
 from . import transforms as tt
@@ -500,6 +501,18 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
     if cfg.metric not in sdk.METRICS:
         raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
+    # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
+    check_output(cfg.out, what="out")
+    for key, value, ok, expected in (
+            ("lr", cfg.lr, cfg.lr > 0, "a finite learning rate > 0"),
+            ("lr_decay", cfg.lr_decay, cfg.lr_decay >= 0, "a finite decay >= 0"),
+            ("weight_decay", cfg.weight_decay, cfg.weight_decay >= 0, "a finite weight decay >= 0"),
+            ("logistic_k", cfg.logistic_k, cfg.logistic_k > 0, "a finite growth rate > 0"),
+            ("default_threshold", cfg.default_threshold,
+             cfg.default_threshold is None or sdk.METRICS[cfg.metric].higher_is_better or cfg.default_threshold >= 0,
+             "a finite threshold in metric units, >= 0 for an error metric")):
+        if value is not None and not (math.isfinite(value) and ok):
+            raise sdk.ParameterError(f"{key}: expected {expected}, got {value}", key)
     if cfg.crop % cfg.tile:
         raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})")
     if cfg.arch not in ARCHS:

@@ -24,6 +24,7 @@ from typing import Any
 import yaml
 
 from rtp.sdk import ParameterError
+from rtp.sdk.files import yaml_problem
 
 __all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe", "packaged_recipes"]
 
@@ -113,7 +114,7 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise RecipeError(f"recipe {name}: not valid YAML ({err})") from err
+        raise RecipeError(f"recipe {name}: not valid YAML ({yaml_problem(err)})") from err
     if data is None:
         data = {}
     if not isinstance(data, dict):

@@ -78,7 +78,14 @@ def load_splits(path: str | Path | None = None) -> dict[str, list[str]]:
     p = Path(path) if path is not None else DEFAULT_SPLITS
     if not p.is_file():
         raise SceneNotFoundError(f"split file not found: {p}")
-    data = yaml.safe_load(p.read_text())
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as err:
+        raise SceneFormatError(f"{p}: not a split file, not even UTF-8 text ({err.reason} at byte {err.start})") from err
+    except yaml.YAMLError as err:
+        from rtp.sdk.files import yaml_problem
+
+        raise SceneFormatError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
     if not isinstance(data, dict):
         raise SceneFormatError(f"{p}: expected a mapping with keys {SPLIT_NAMES}, got {type(data).__name__}")
     out: dict[str, list[str]] = {}
@@ -119,6 +126,18 @@ def _check_listed(name: str, split: str | None, splits: str | Path | None) -> No
 
 
 # -- fetch ----------------------------------------------------------------------------------------
+
+def check_map(name: str, cache_dir: str | Path, *, split: str | None = None,
+              splits: str | Path | None = None) -> None:
+    """That ``name`` is listed (in ``split``) and fetched into ``cache_dir``, without loading it: what
+    a job checks before it writes anything. Raises :class:`UnlistedMapError` or
+    :class:`SceneNotFoundError`, as :func:`scene_by_name` would."""
+    _check_listed(name, split, splits)
+    cache = Path(cache_dir)
+    if name not in _read_index(cache)["maps"]:
+        raise SceneNotFoundError(f"map {name!r} is not in the scene cache {cache}: run `rtp scenes fetch --cache-dir "
+                                 f"{cache}` first")
+
 
 def _run(cmd: Sequence[str], cwd: Path) -> None:
     exe = shutil.which(cmd[0])

@@ -26,14 +26,17 @@ inputs come from one code path.
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from rtp.sdk import ParameterError
 from rtp.sdk.adapters import Adapter as _AdapterBase
-from rtp.sdk.adapters import UnsupportedChannelError
+from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
 from ._glio import read_texture
 from ._shaders import load_source
@@ -143,11 +146,14 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if len(self.channels) > _MAX_CHANNELS:
             raise UnsupportedChannelError(f"at most {_MAX_CHANNELS} channels, got {len(self.channels)}")
         if normal_space not in ("view", "world"):
-            raise ValueError(f"normal_space must be 'view' or 'world', got {normal_space!r}")
+            raise ParameterError(f"normal_space must be 'view' or 'world', got {normal_space!r}", "normal_space")
         if depth_kind not in ("linear", "window"):
-            raise ValueError(f"depth_kind must be 'linear' or 'window', got {depth_kind!r}")
+            raise ParameterError(f"depth_kind must be 'linear' or 'window', got {depth_kind!r}", "depth_kind")
+        if isinstance(tolerance, bool) or not isinstance(tolerance, numbers.Real) or not 0.0 <= tolerance < math.inf:
+            raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
+                                 "tolerance")
         if not callable(getattr(ctx, "program", None)):
-            raise TypeError(f"ctx must be the engine's moderngl.Context, got {type(ctx).__name__}")
+            raise AdapterFrameError(f"ctx must be the engine's moderngl.Context, got {type(ctx).__name__}")
         import moderngl
 
         self.ctx = ctx
@@ -216,18 +222,20 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._check_open()
         has_prev = prev_colour is not None
         if has_prev and (prev_depth is None or prev_view_projection is None):
-            raise ValueError("prev_colour needs prev_depth and prev_view_projection as well")
+            raise ParameterError("prev_colour needs prev_depth and prev_view_projection as well", "prev_colour")
         for c, tex in ((depth_component, depth), (prev_depth_component, prev_depth)):
             if tex is not None and not 0 <= c < tex.components:
-                raise ValueError(f"depth component {c} does not exist in a {tex.components}-component texture")
+                raise ParameterError(f"depth component {c} does not exist in a {tex.components}-component texture",
+                                     "depth_component")
         wanted = [c for c in self.channels if c in _MATERIAL]
         if wanted and material is None:
-            raise ValueError(f"the inputs {wanted} need the material texture (GBufferTextures.material: roughness, "
-                             "metallic, specular)")
+            raise ParameterError(f"the inputs {wanted} need the material texture (GBufferTextures.material: "
+                                 "roughness, metallic, specular)", "material")
         comps = tuple(int(c) for c in material_components)
         if material is not None and (len(comps) != 3 or not all(-1 <= c < material.components for c in comps)):
-            raise ValueError(f"material_components: expected three component indices of the {material.components}"
-                             f"-component material texture (or -1), got {material_components!r}")
+            raise ParameterError(f"material_components: expected three component indices of the "
+                                 f"{material.components}-component material texture (or -1), got "
+                                 f"{material_components!r}", "material_components")
         if self._luma is not None:  # first pass: every pixel's lumas, read by the second
             self._luma.run(albedo=albedo, normal=normal, depth=depth, view=view, projection=projection,
                            prev_colour=prev_colour, prev_depth=prev_depth, prev_view_projection=prev_view_projection,

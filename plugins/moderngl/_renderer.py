@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -363,6 +364,19 @@ class Renderer:
             times (slightly slower); otherwise only ``timings["total"]`` is meaningful.
     """
 
+    @staticmethod
+    def max_frame_side(ctx: Any | None = None) -> int:
+        """The largest frame side (and shadow map) ``ctx`` draws, its ``GL_MAX_TEXTURE_SIZE`` and
+        ``GL_MAX_RENDERBUFFER_SIZE``; without ``ctx``, a headless context's (made and released for the
+        question): a job checks its frame size with it before it writes anything."""
+        own = ctx is None
+        ctx = create_context() if ctx is None else ctx
+        try:
+            return min(int(ctx.info["GL_MAX_TEXTURE_SIZE"]), int(ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
+        finally:
+            if own:
+                ctx.release()
+
     def __init__(
         self,
         width: int,
@@ -382,8 +396,12 @@ class Renderer:
         cull_back_faces: bool = False,
         profile: bool = False,
     ) -> None:
-        if int(width) < 1 or int(height) < 1:
-            raise RendererError(f"frame size must be positive, got {width}x{height}")
+        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in (width, height)) \
+                or int(width) < 1 or int(height) < 1:
+            raise RendererError(f"frame size: expected positive integers (pixels), got {width!r}x{height!r}")
+        if shadow_map_size is not None and (not isinstance(shadow_map_size, numbers.Integral)
+                                            or isinstance(shadow_map_size, bool) or int(shadow_map_size) < 1):
+            raise RendererError(f"shadow_map_size: expected a positive integer (pixels), got {shadow_map_size!r}")
         self._mgl = _import_moderngl()
         self.width, self.height = int(width), int(height)
         self._owns_ctx = ctx is None
@@ -393,6 +411,15 @@ class Renderer:
         if shadow_map_size is None:
             shadow_map_size = 1024 if max(self.width, self.height) <= 1024 else 2048
         self.shadow_map_size = int(shadow_map_size)
+        # The context's own limit, before any texture: past it moderngl only says "the framebuffer is not complete".
+        limit = self.max_frame_side(self.ctx)
+        for what, side in (("frame size", max(self.width, self.height)), ("shadow_map_size", self.shadow_map_size)):
+            if side > limit:
+                if self._owns_ctx:
+                    self.ctx.release()
+                raise RendererError(f"{what}: this OpenGL context draws at most {limit} pixels a side "
+                                    f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}, shadow map "
+                                    f"{self.shadow_map_size}")
         self.shadow_distance = shadow_distance
         self.ao_samples = int(ao_samples)
         self.ao_radius = float(ao_radius)

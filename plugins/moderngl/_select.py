@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from rtp import sdk
+from rtp.sdk.adapters import AdapterFrameError
 
 from ._renderer import RendererError, create_context
 from ._shaders import load_source
@@ -60,6 +61,8 @@ class RateSelector:
         self._meta = meta
         #: model tiles per hardware tile side
         self.pool = tile_size // meta.tile_size
+        if ctx is not None and not callable(getattr(ctx, "compute_shader", None)):
+            raise AdapterFrameError(f"ctx must be a moderngl.Context, got {type(ctx).__name__}")
         self._own_ctx = ctx is None
         self.ctx = create_context(430) if ctx is None else ctx
         if self.ctx.version_code < 430:
@@ -122,20 +125,22 @@ class RateSelector:
         ``(th, tw)`` on the model's tiles. Returns the ``r8ui`` texture of rate codes, one texel a hardware
         tile (``ceil(tw / pool)`` x ``ceil(th / pool)``, texel row 0 the top tile row); it is reused by the
         next call of the same grid."""
-        th, tw = (int(v) for v in tiles)
+        try:
+            th, tw = (int(v) for v in tiles)
+        except (TypeError, ValueError):
+            th = tw = 0
         if th < 1 or tw < 1:
             raise sdk.ParameterError(f"tiles: expected (rows, columns) of at least one tile, got {tiles!r}", "tiles")
+        if not callable(getattr(raw, "bind_to_storage_buffer", None)):
+            raise sdk.InputDtypeError(f"raw: expected a moderngl.Buffer of the network's output, got "
+                                      f"{type(raw).__name__} (select() takes an array)")
         need = len(self._meta.outputs) * th * tw * 4
         if raw.size < need:
             raise sdk.InputShapeError(
                 f"raw buffer holds {raw.size} bytes, expected at least {need} for {len(self._meta.outputs)} float32 "
                 f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
-        if self._program is None:
-            raise RuntimeError("RateSelector: closed")
-        thr = self._meta.default_threshold if threshold is None else threshold
-        # the SDK's own checks and messages for the threshold and the allowed rates (one tile of zeros)
-        sdk.select_rates(np.zeros((6, 1, 1), np.float32), thr, higher_is_better=self._meta.higher_is_better,
-                         allowed=allowed)
+        self._check_open()
+        thr = self._check_decision(threshold, allowed)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets((-(-th // self.pool), -(-tw // self.pool)))
         self._program["u_tiles"].value = (tw, th)
@@ -157,7 +162,11 @@ class RateSelector:
         if a.ndim == 4 and a.shape[0] == 1:
             a = a[0]
         n = len(self._meta.outputs)
-        if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f":
+        # Every check before the GPU is touched: moderngl refuses an empty buffer, and a failed upload left
+        # the selector holding a released buffer that broke every later call.
+        self._check_open()
+        self._check_decision(threshold, allowed)
+        if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f" or 0 in a.shape:
             raise sdk.InputShapeError(
                 f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
                 f"{a.dtype} {a.shape}", tuple(a.shape), f"({n}, th, tw)")
@@ -172,11 +181,24 @@ class RateSelector:
         gh, gw = self._tiles  # type: ignore[misc]
         return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(gh, gw).copy()
 
+    def _check_open(self) -> None:
+        if self._program is None:
+            raise RendererError("RateSelector: closed")
+
+    def _check_decision(self, threshold: float | None, allowed: Iterable[sdk.RateLike] | None) -> float:
+        """The threshold to use, after the SDK's own checks and messages for it and for the allowed rates
+        (``select_rates`` on one tile of zeros)."""
+        thr = self._meta.default_threshold if threshold is None else threshold
+        sdk.select_rates(np.zeros((6, 1, 1), np.float32), thr, higher_is_better=self._meta.higher_is_better,
+                         allowed=allowed)
+        return float(thr)
+
     def decoded(self) -> np.ndarray:
         """The six rates' decoded values of the last call, float32 ``(6, rows, columns)`` on the hardware
         tiles (``predict``'s)."""
+        self._check_open()
         if self._tiles is None:
-            raise RuntimeError("RateSelector.decoded: nothing selected yet")
+            raise RendererError("RateSelector.decoded: nothing selected yet")
         th, tw = self._tiles
         return np.frombuffer(self._decoded.read(), np.float32).reshape(6, th, tw).copy()
 
