@@ -20,6 +20,11 @@ def luma(rgb: ArrayLike) -> np.ndarray:
     """Rec.601 luma ``0.299 R + 0.587 G + 0.114 B`` of display values: ``(..., 3) -> (...)`` float32."""
     r, g, b = LUMA_WEIGHTS
     a = np.asarray(rgb, dtype=np.float32)
+    if a.ndim < 1 or a.shape[-1] != 3:  # a planar (3, H, W) image would be read as rows of pixels
+        from ._errors import InputShapeError
+
+        raise InputShapeError(f"luma: expected colours on the last axis (..., 3), got shape {a.shape} (a planar "
+                              "(3, H, W) image: luma(np.moveaxis(image, 0, -1)))", tuple(a.shape), "(..., 3)")
     return (r * a[..., 0] + g * a[..., 1] + b * a[..., 2]).astype(np.float32, copy=False)
 
 

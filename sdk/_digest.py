@@ -60,5 +60,17 @@ def _without_field(data: bytes, field: int) -> bytes:
 
 def model_digest(data: bytes) -> str:
     """``"sha256:<hex>"`` of a serialized ONNX model's graph and weights (everything but its
-    metadata_props). Raises ``ValueError`` for bytes that are not a protobuf message."""
+    metadata_props). Raises :class:`~rtp.sdk.ParameterError` (a ``ValueError``) for anything but the
+    bytes of a protobuf message."""
+    from ._errors import ParameterError
+
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise ParameterError(f"model_digest: expected the bytes of an ONNX model, got {type(data).__name__}")
+    try:
+        return _digest(bytes(data))
+    except ValueError as err:
+        raise ParameterError(f"model_digest: not the bytes of an ONNX model ({err})") from err
+
+
+def _digest(data: bytes) -> str:
     return f"{DIGEST_ALGORITHM}:{hashlib.sha256(_without_field(data, _METADATA_PROPS)).hexdigest()}"

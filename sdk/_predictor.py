@@ -246,6 +246,8 @@ def load(
             f"threads: expected an integer in [0, {MAX_THREADS}] (0 = onnxruntime's default), got "
             f"{reprlib.repr(threads)}", "threads"
         )
+    if not isinstance(strict, bool):
+        raise ParameterError(f"strict: expected True or False, got {reprlib.repr(strict)}", "strict")
     if not isinstance(spin_between_runs, bool):
         raise ParameterError(
             f"spin_between_runs: expected True or False, got {reprlib.repr(spin_between_runs)}", "spin_between_runs"
@@ -398,6 +400,8 @@ class ShadingRatePredictor:
         self._tail = tail
         # a tail graph reads the whole padded frame through its one input besides the features
         self._tail_input = next((i.name for i in tail.get_inputs() if i.name != FEATURES_NAME), "") if tail else ""
+        dims = next((i.shape for i in tail.get_inputs() if i.name == FEATURES_NAME), None) if tail else None
+        self._tail_channels = dims[1] if dims is not None and len(dims) == 4 and isinstance(dims[1], int) else None
         if tail is not None and FEATURES_NAME not in [o.name for o in outputs]:
             raise MetadataError(f"tail: the model splits, but its outputs {[o.name for o in outputs]} hold no "
                                 f"{FEATURES_NAME!r}", "tail")
@@ -690,6 +694,11 @@ class ShadingRatePredictor:
             got = features.shape if isinstance(features, np.ndarray) else type(features).__name__
             raise InputShapeError(f"features: expected (channels, {th}, {tw}) for this frame's tiles, got {got}",
                                   tuple(getattr(features, "shape", ())), f"(C, {th}, {tw})")
+        if features.dtype.kind not in "fiu":
+            raise InputDtypeError(f"features: expected float32 values (the trunk's), got dtype {features.dtype}")
+        if self._tail_channels is not None and len(features) != self._tail_channels:
+            raise InputShapeError(f"features: expected {self._tail_channels} channels (the trunk's, from predict_split), "
+                                  f"got {len(features)}", tuple(features.shape), f"({self._tail_channels}, {th}, {tw})")
         f = features.astype(np.float32, copy=False)[None]
         if (gh, gw) != (th, tw):  # a frame padded past its last tile row or column: repeat the last ones
             f = np.pad(f, ((0, 0), (0, 0), (0, gh - th), (0, gw - tw)), mode="edge")

@@ -497,6 +497,11 @@ class PredictionReuse:
                  unseen: str = "full", unseen_fraction: float = 0.5, margin: int | None = None,
                  history: float = 0.0, refresh: float | None = None, step: int | None = None,
                  rescale: float = 0.0, carry_scale: float = 1.0, carry: str = "estimates") -> None:
+        from ._predictor import ShadingRatePredictor  # (its module imports this one)
+
+        if not isinstance(predictor, ShadingRatePredictor):
+            raise ParameterError(f"predictor: expected an sdk.ShadingRatePredictor (sdk.load(...)), got "
+                                 f"{type(predictor).__name__}", "predictor")
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -604,7 +609,10 @@ class PredictionReuse:
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         """Every input plane of a window of the frame."""
         if callable(x):
-            return self._asked(x, ys, xs, self.predictor.metadata.inputs) if _takes_channels(x) else x(ys, xs)
+            names = self.predictor.metadata.inputs
+            if _takes_channels(x):
+                return self._asked(x, ys, xs, names)
+            return self._checked(x(ys, xs), ys, xs, names, "the input function")
         return x[:, ys, xs]
 
     def _some(self, x: Inputs, hw: tuple[int, int], which: list[int]) -> np.ndarray:
@@ -631,16 +639,20 @@ class PredictionReuse:
 
     def _asked(self, x: Callable[..., np.ndarray], ys: slice, xs: slice, names: tuple[str, ...]) -> np.ndarray:
         """``x(ys, xs, channels=names)``, checked: float32 ``(len(names), rows, cols)``."""
-        planes = x(ys, xs, channels=names)
+        return self._checked(x(ys, xs, channels=names), ys, xs, names,
+                             f"the input function, asked for channels {list(names)}")
+
+    @staticmethod
+    def _checked(planes: object, ys: slice, xs: slice, names: tuple[str, ...], what: str) -> np.ndarray:
+        """What an input function returned, checked: float32 ``(len(names), rows, cols)`` of the window
+        it was asked for (a larger frame would have been read as this one, with no error)."""
         want = (len(names), ys.stop - ys.start, xs.stop - xs.start)
         if not isinstance(planes, np.ndarray) or planes.dtype != np.float32:
             got = f"dtype {planes.dtype}" if isinstance(planes, np.ndarray) else type(planes).__name__
-            raise InputDtypeError(f"the input function, asked for channels {list(names)}: expected a float32 numpy "
-                                  f"array, got {got}")
+            raise InputDtypeError(f"{what}: expected a float32 numpy array, got {got}")
         if planes.shape != want:
-            raise InputShapeError(f"the input function, asked for channels {list(names)} of rows {ys.start}:{ys.stop} "
-                                  f"and columns {xs.start}:{xs.stop}: expected shape {want}, got {planes.shape}",
-                                  tuple(planes.shape), str(want))
+            raise InputShapeError(f"{what}, of rows {ys.start}:{ys.stop} and columns {xs.start}:{xs.stop}: expected "
+                                  f"shape {want}, got {planes.shape}", tuple(planes.shape), str(want))
         return planes
 
     def _shape_of(self, x: Inputs, seen: np.ndarray | None) -> tuple[int, int]:

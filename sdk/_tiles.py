@@ -18,11 +18,13 @@ __all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "padded_size", "pool_tiles", "tile
 DEFAULT_TILE_SIZE = 16
 #: Tile sizes a model's metadata may declare (powers of two, the network halves resolution per block).
 TILE_SIZES: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
+#: The largest length in pixels (or tiles) the tile helpers take: far past any frame, inside int64 sums.
+MAX_PIXELS = 2**31 - 1
 
 
 def _positive(name: str, value: object) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < 1:
-        raise ParameterError(f"{name}: expected a positive integer, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= int(value) <= MAX_PIXELS:
+        raise ParameterError(f"{name}: expected a positive integer (at most {MAX_PIXELS}), got {value!r}")
     return int(value)
 
 
@@ -61,9 +63,12 @@ def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = Fals
     v = np.asarray(values)
     if v.ndim < 2 or v.shape[-2] < 1 or v.shape[-1] < 1:
         raise ParameterError(f"values: expected an array of shape (..., tile rows, tile columns), got {v.shape}")
+    if v.dtype.kind not in "biuf":
+        raise ParameterError(f"values: expected numbers, got dtype {v.dtype}")
     if f == 1:
         return v.copy()
     th, tw = v.shape[-2:]
+    f = min(f, max(th, tw))  # any larger factor pools the same one coarse tile (and would pad to its size)
     ch, cw = -(-th // f), -(-tw // f)
     fill = np.inf if higher_is_better else -np.inf
     padded = np.full((*v.shape[:-2], ch * f, cw * f), fill, dtype=np.result_type(v.dtype, np.float32))

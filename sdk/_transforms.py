@@ -290,6 +290,9 @@ def complete_rates(
             return x * k
 
     ch = dict(ch)
+    missing = [r for r in outputs if r not in ch]
+    if missing:
+        raise ParameterError(f"complete_rates: the planes of outputs {list(outputs)} are needed, {missing} missing")
     if outputs == ("2x2",):
         ch["1x2"] = ch["2x1"] = ch["2x2"]
     if "2x2" not in ch:

@@ -421,6 +421,30 @@ def test_pool_tiles_takes_the_worst_fine_tile() -> None:
     assert np.array_equal(sdk.pool_tiles(v, 1), v)
     with pytest.raises(sdk.ParameterError):
         sdk.pool_tiles(v, 0)
+    # a factor past the grid pools one tile without padding to its size (100000: 224 GiB before)
+    assert np.array_equal(sdk.pool_tiles(v, 100000), v.max(axis=(-2, -1), keepdims=True))
+    with pytest.raises(sdk.ParameterError, match="numbers"):
+        sdk.pool_tiles(np.array([["a", "b"], ["c", "d"]]), 2)
+
+
+def test_the_small_helpers_refuse_what_they_cannot_read() -> None:
+    """Found by an error-handling audit: each gave a bare IndexError, TypeError, OverflowError or
+    KeyError, or read a planar image as rows of pixels."""
+    with pytest.raises(sdk.InputShapeError, match=r"\(\.\.\., 3\)"):
+        sdk.luma(0.5)
+    with pytest.raises(sdk.InputShapeError, match="planar"):
+        sdk.luma(np.zeros((3, 8, 16), np.float32))
+    assert sdk.luma(np.ones((2, 3), np.float32)).shape == (2,)
+    for bad in (b"garbage\xff\xff", "a string", None):
+        with pytest.raises(sdk.ParameterError, match="model_digest"):
+            sdk.model_digest(bad)  # type: ignore[arg-type]
+    for length in (2**70, 0, 1.5):
+        with pytest.raises(sdk.ParameterError, match="length"):
+            sdk.tile_extents(length)  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="strict"):
+        sdk.load("jnyang", strict="yes")  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match=r"\['2x1'\] missing"):
+        sdk.complete_rates({"1x2": np.zeros(2)}, ("1x2", "2x1"), 2.13, False, np.maximum, np.minimum)
 
 
 def test_an_8_pixel_model_on_16_pixel_hardware_tiles(tiny_model: Callable[..., Path]) -> None:

@@ -809,6 +809,29 @@ def test_the_shipped_reuse_models_tail_reads_only_its_tail_inputs() -> None:
     keep = [names.index(c) for c in pred.tail_inputs]
     only[keep] = x[keep]
     assert np.array_equal(pred.predict_tail(feats, only), pred.predict_tail(feats, x))
+    # features of another trunk: onnxruntime's own words (InferenceError) before; complex ones cast silently
+    with pytest.raises(sdk.InputShapeError, match=f"expected {len(feats)} channels"):
+        pred.predict_tail(feats[:3], x)
+    with pytest.raises(sdk.InputDtypeError, match="complex"):
+        pred.predict_tail(feats.astype(np.complex64), x)
+
+
+def test_reuse_refuses_what_is_not_a_predictor_and_an_input_function_s_wrong_window() -> None:
+    """PredictionReuse(None) was an AttributeError; a function without ``channels`` that returned a larger
+    frame than ``seen`` gave estimates of another grid, then carried a mismatched cache."""
+    for bad in (None, "jnyang"):
+        with pytest.raises(sdk.ParameterError, match="ShadingRatePredictor"):
+            sdk.PredictionReuse(bad)  # type: ignore[arg-type]
+    pred = sdk.load("jnyang")
+    frame = np.random.default_rng(0).random((len(pred.metadata.inputs), 64, 96), dtype=np.float32)
+    larger = np.random.default_rng(0).random((len(pred.metadata.inputs), 80, 96), dtype=np.float32)
+    seen = np.ones((64, 96), np.float32)
+    reuse = sdk.PredictionReuse(pred, 2)
+    with pytest.raises(sdk.InputShapeError, match=r"expected shape \(9, 64, 96\), got \(9, 80, 96\)"):
+        reuse.predict(lambda ys, xs: larger, seen=seen)
+    with pytest.raises(sdk.InputDtypeError, match="float32"):
+        reuse.predict(lambda ys, xs: frame[:, ys, xs].astype(np.float64), seen=seen)
+    np.testing.assert_array_equal(reuse.predict(lambda ys, xs: frame[:, ys, xs], seen=seen), pred.predict(frame))
 
 
 @settings(max_examples=12, deadline=None)
