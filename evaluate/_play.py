@@ -431,12 +431,17 @@ def play(
     for m in specs:
         if m.kind == "model" and predictors[m.model].tile_size != tile_size:
             raise PlayError(f"method {m.name}: the model uses {predictors[m.model].tile_size}px tiles, the run "
-                            f"{tile_size}px (pass tile_size={predictors[m.model].tile_size})", "tile_size")
+                            f"{tile_size}px (run at {predictors[m.model].tile_size}px tiles: tile_size=, --tile-size)",
+                            "tile_size")
         static = predictors[m.model].static_size if m.kind == "model" else None
         if m.unseen == "fresh" and static is not None:
             h, w = static
             raise PlayError(f"method {m.name}: ':fresh' runs the network on crops, but the model takes only "
                             f"{w}x{h} frames (export it with dynamic sizes)")
+    if isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size < 4 or tile_size % 4:
+        # (the renderer's VRS pass refused it only once the first frame was drawn: exit 1, not 2)
+        raise PlayError(f"tile_size: expected a positive multiple of 4 pixels (the largest rate), got {tile_size!r}",
+                        "tile_size")
     if any(m.kind.startswith("fidelityfx") for m in specs) and tile_size not in (8, 16, 32):
         raise PlayError(f"FidelityFX supports 8, 16 and 32 pixel tiles, the run uses {tile_size}", "tile_size")
 

@@ -128,12 +128,20 @@ def walk(p0: np.ndarray, frames: int, turn: float = 1.0, move: float = 0.05) -> 
     return poses
 
 
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x360, got {text!r}") from None
+    return w, h
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", type=Path, help="glTF/GLB/OBJ file (default: a procedural level written as GLB)")
     ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
     ap.add_argument("--out", type=Path, default=Path("pyrender_vrs.png"), help="overlay PNG to write")
-    ap.add_argument("--size", type=int, nargs=2, default=(640, 360), metavar=("W", "H"))
+    ap.add_argument("--size", type=_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
     ap.add_argument("--threshold", type=float, help="error threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
     ap.add_argument("--frames", type=int, default=2,
@@ -202,7 +210,8 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
     inputs = predictor.metadata.inputs
     carry = "features" if predictor.splits else "estimates"
     reuse = sdk.PredictionReuse(predictor, args.every, carry=carry)
-    log.info("frame loop: %d frames, the network every %d, carrying its %s", len(poses) - 1, args.every, carry)
+    log.info("frame loop: %d frames decided (the first of the %d only draws the previous image), the network every "
+             "%d, carrying its %s", len(poses) - 1, len(poses), args.every, carry)
     # the model's planes, then what the loop needs besides: motion vectors (where each pixel was) and depth (sky)
     channels = (*inputs, "motion.x", "motion.y", "depth")
     overlays, saved, ran = [], [], []

@@ -283,8 +283,9 @@ def load(
     else:
         if METADATA_KEY not in props:
             raise MetadataError(
-                f"{METADATA_KEY}: {str(model_path)!r} carries no rtp metadata; pass metadata= (a dict or a YAML "
-                f"sidecar) or bake it in with `rtp-export --adopt MODEL --metadata SIDECAR.yaml -o OUT.onnx`",
+                f"{METADATA_KEY}: {str(model_path)!r} carries no rtp metadata; pass its sidecar (sdk.load(..., "
+                f"metadata=), the commands' --metadata SIDECAR.yaml) or bake it in with "
+                f"`rtp-export --adopt MODEL --metadata SIDECAR.yaml -o OUT.onnx`",
                 METADATA_KEY,
             )
         meta = ModelMetadata.from_json(props[METADATA_KEY])

@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.gl
 def test_pyrender_example_uses_a_shipped_model(tmp_path: Path) -> None:
     out = tmp_path / "vrs.png"
-    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--size", "160", "96",
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--size", "160x96",
                         "--out", str(out)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "jnyang.onnx" in r.stderr and "RANDOM" not in r.stderr and out.is_file()
@@ -29,7 +29,7 @@ def test_pyrender_example_loops_with_the_reuse_model(tmp_path: Path) -> None:
 
     out, gif = tmp_path / "vrs.png", tmp_path / "vrs.gif"
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--model", "jnyang-reuse",
-                        "--frames", "7", "--every", "3", "--size", "160", "96", "--out", str(out), "--gif", str(gif)],
+                        "--frames", "7", "--every", "3", "--size", "160x96", "--out", str(out), "--gif", str(gif)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if re.match(r"frame +\d+:", ln)]
@@ -50,7 +50,7 @@ def test_moderngl_example_decides_on_the_gpu_and_shades_the_rates(tmp_path: Path
 
     out, gif = tmp_path / "vrs.png", tmp_path / "vrs.gif"
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--model", "flip", "--frames", "3",
-                        "--size", "160", "96", "--out", str(out), "--gif", str(gif)],
+                        "--size", "160x96", "--out", str(out), "--gif", str(gif)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "flip.onnx" in r.stderr

@@ -420,6 +420,9 @@ def test_methods_are_parsed_and_checked() -> None:
         play("procedural:0", "oracle", paths=("sprint",), frames=3)
     with pytest.raises(PlayError, match="at least 3"):
         play("procedural:0", "oracle", frames=2)
+    for tile in (3, 6, 0):  # (the VRS pass refused 3 and 6 only after the first frame, as a RendererError)
+        with pytest.raises(PlayError, match="multiple of 4"):
+            play("procedural:0", "full", frames=3, size=(64, 48), tile_size=tile, sweep=False)
 
 
 def test_saved_at_reads_the_sweep() -> None:
