@@ -235,7 +235,7 @@ def compute_targets(
     # The parameters too, before they are declared in the manifest: a bad one stored there would refuse
     # every later run, good values included.
     if ppd is not None:
-        M.resolve_ppd(ppd, 1)
+        M.resolve_ppd(ppd, 1)  # type: ignore[arg-type]  # (a string other than 'width' is what it refuses)
     if weber_l is not None:
         M.check_weber_l(weber_l)
     reader = DatasetReader(data_root)

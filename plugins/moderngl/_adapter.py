@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import logging
 import math
-import numbers
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -149,7 +148,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
             raise ParameterError(f"normal_space must be 'view' or 'world', got {normal_space!r}", "normal_space")
         if depth_kind not in ("linear", "window"):
             raise ParameterError(f"depth_kind must be 'linear' or 'window', got {depth_kind!r}", "depth_kind")
-        if isinstance(tolerance, bool) or not isinstance(tolerance, numbers.Real) or not 0.0 <= tolerance < math.inf:
+        number = isinstance(tolerance, (int, float, np.integer, np.floating)) and not isinstance(tolerance, bool)
+        if not number or not 0.0 <= tolerance < math.inf:
             raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
                                  "tolerance")
         if not callable(getattr(ctx, "program", None)):
