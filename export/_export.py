@@ -68,12 +68,13 @@ class ExportError(RtpError):
     """The export itself failed: the exporter, the ONNX checker, or the onnxruntime/torch parity check."""
 
 
-def _output(source: str | os.PathLike[str], output: str | os.PathLike[str]) -> Path:
-    """``output`` as a path a copy of ``source`` may be written to: not ``source`` itself (a checkpoint
-    exported over itself was lost; a model's copy over the model is what ``--restamp`` is for), and
-    a place that can be written (:func:`rtp.sdk.files.check_output`), checked before any work."""
+def _output(source: str | os.PathLike[str], output: str | os.PathLike[str], *, in_place: bool = True) -> Path:
+    """``output`` as a place that can be written (:func:`rtp.sdk.files.check_output`), checked before
+    any work; with ``in_place=False`` not ``source`` itself either (a checkpoint exported over itself
+    was replaced by its model, the training lost). A model's copy may replace the model: each is
+    written atomically and only once it predicts as the model did."""
     out = Path(output)
-    if out.exists() and Path(source).exists() and os.path.samefile(out, source):
+    if not in_place and out.exists() and Path(source).exists() and os.path.samefile(out, source):
         raise ParameterError(f"output {str(out)!r} is the input itself; write the result to another path", "output")
     check_output(out, what="output")
     return out
@@ -699,7 +700,7 @@ def export_checkpoint(
     if not isinstance(split_planes, bool):
         raise ParameterError(f"split_planes: expected True or False, got {split_planes!r}", "split_planes")
     ckpt = ckpt_mod.load(checkpoint)
-    out = _output(checkpoint, output if output is not None else Path(checkpoint).with_suffix(".onnx"))
+    out = _output(checkpoint, output if output is not None else Path(checkpoint).with_suffix(".onnx"), in_place=False)
     meta_dict = ckpt.metadata.to_dict()
     if extra_metadata is not None:
         extra = _read_yaml(extra_metadata) if isinstance(extra_metadata, (str, os.PathLike)) else dict(extra_metadata)

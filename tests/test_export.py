@@ -505,9 +505,10 @@ def test_merge_slices_merges_chains_and_keeps_the_outputs(tmp_path: Path) -> Non
     np.testing.assert_array_equal(new[0], x[:, 1:3, 0::4, 1::4] * 2.0)
 
 
-def test_no_export_writes_over_its_own_input_or_where_it_cannot_write(fast_onnx: Path, tmp_path: Path) -> None:
+def test_no_export_writes_over_its_checkpoint_or_where_it_cannot_write(fast_onnx: Path, tmp_path: Path) -> None:
     """`rtp-export ck.pt -o ck.pt` used to replace the checkpoint by the model (exit 0): the training was
-    lost. Each copying tool refuses its input as output, and an output it cannot write, before any work."""
+    lost. An export refuses its checkpoint as output, and every tool an output it cannot write, before
+    any work (a model's copy may replace the model: `--retune M -o M` is documented)."""
     ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
     before = ck.read_bytes()
     with pytest.raises(sdk.ParameterError, match="is the input itself"):
@@ -517,19 +518,15 @@ def test_no_export_writes_over_its_own_input_or_where_it_cannot_write(fast_onnx:
     assert ck.read_bytes() == before
     copy = tmp_path / "copy.onnx"
     copy.write_bytes(fast_onnx.read_bytes())
-    for write in (export.strip_finite_probe, export.join_input_planes):
-        with pytest.raises(sdk.ParameterError, match="is the input itself"):
-            write(copy, copy)
-    with pytest.raises(sdk.ParameterError, match="is the input itself"):
-        export.retune(copy, {"default_threshold": 0.2}, copy)
-    with pytest.raises(sdk.ParameterError, match="is the input itself"):
-        export.adopt(copy, None, copy, replace=True)
-    assert copy.read_bytes() == fast_onnx.read_bytes()
     with pytest.raises(sdk.ParameterError, match="is a folder"):
         export.export_checkpoint(ck, tmp_path)
     (tmp_path / "file").write_text("x")
-    with pytest.raises(sdk.ParameterError, match="is a file, not a folder"):
-        export.strip_finite_probe(copy, tmp_path / "file" / "x.onnx")
+    for write in (export.strip_finite_probe, export.join_input_planes):
+        with pytest.raises(sdk.ParameterError, match="is a file, not a folder"):
+            write(copy, tmp_path / "file" / "x.onnx")
+    with pytest.raises(sdk.ParameterError, match="is a folder"):
+        export.retune(copy, {"default_threshold": 0.2}, tmp_path)
+    assert copy.read_bytes() == fast_onnx.read_bytes()
     cli = _cli(str(ck), "-o", str(ck))
     assert cli.returncode == 2 and "is the input itself" in cli.stderr and "Traceback" not in cli.stderr
     assert ck.read_bytes() == before
