@@ -37,13 +37,26 @@ def scene_ids(reader: Any, scenes: str | None) -> list[str]:
     return [i for i in ids if reader[i].meta.get("scene") in wanted] if wanted else ids
 
 
+def dataset_folder(text: str) -> str:
+    """An argparse type: a dataset folder ``rtp capture`` wrote (its ``manifest.json``), else a usage
+    error that says how to make one, instead of a traceback once the script has loaded its model."""
+    import argparse
+
+    if not (Path(text) / "manifest.json").is_file():
+        raise argparse.ArgumentTypeError(
+            f"no dataset at {text!r}: capture one first, e.g. `rtp capture --split validation --per-scene 12 "
+            f"--size 1280x720 --out {text} && rtp targets {text}` (the validation maps), or `make dataset` "
+            "(data/train and data/test: about 3 hours)")
+    return text
+
+
 def add_model_args(ap: Any, model_help: str, scene_help: str = "") -> None:
     """The arguments the model-on-a-dataset scripts share: ``model``, ``--data`` (default data/train) and
     ``--scene``, by default the maps of the ``validation`` split of scenes.yaml (the one list of them)."""
     from rtp.capture.scenes import map_names
 
     ap.add_argument("model", help=model_help)
-    ap.add_argument("--data", default="data/train", help="dataset with targets (default: data/train)")
+    ap.add_argument("--data", type=dataset_folder, default="data/train", help="dataset with targets (default: data/train)")
     ap.add_argument("--scene", default=",".join(map_names("validation")),
                     help=f"maps of --data, comma-separated{scene_help} (default: the validation maps of scenes.yaml)")
 

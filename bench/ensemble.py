@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _common import scene_ids  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -35,7 +35,7 @@ def _r2(p: np.ndarray, g: np.ndarray) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="+", help="exported models (.onnx) of one metric, tile size and transform")
-    ap.add_argument("--data", default="data/val72", help="dataset with targets (default: data/val72)")
+    ap.add_argument("--data", type=dataset_folder, default="data/val72", help="dataset with targets (default: data/val72)")
     ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
                     "maps of data/train")
     args = ap.parse_args(argv)

@@ -41,7 +41,7 @@ import sys
 from collections.abc import Callable
 
 import numpy as np
-from _common import save_figure, scene_ids  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, save_figure, scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -126,7 +126,7 @@ def _risk_table(pred: np.ndarray, fails: np.ndarray, bins: np.ndarray, higher_is
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model", help="an exported model (.onnx)")
-    ap.add_argument("--data", default="data/val72", help="dataset with targets (default: data/val72)")
+    ap.add_argument("--data", type=dataset_folder, default="data/val72", help="dataset with targets (default: data/val72)")
     ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
                     "maps of data/train")
     ap.add_argument("--noise-seed", type=int, default=0, help="seed of table 4's synthetic estimates (default 0)")

@@ -19,6 +19,7 @@ import argparse
 import sys
 
 import numpy as np
+from _common import dataset_folder  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -29,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("old", help="a model: an .onnx path or a shipped model's name")
     ap.add_argument("new", help="the same model in another file")
-    ap.add_argument("--data", required=True, help="a dataset folder written by rtp capture")
+    ap.add_argument("--data", type=dataset_folder, required=True, help="a dataset folder written by rtp capture")
     ap.add_argument("--limit", type=int, default=None, help="the first N samples only")
     args = ap.parse_args(argv)
     a, b = sdk.load(args.old), sdk.load(args.new)

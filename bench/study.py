@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import median_ms  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, median_ms  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.capture.scenes import load_splits
@@ -122,7 +122,8 @@ def _ms(model: str | Path) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", required=True, help="dataset with targets holding the train and validation maps")
+    ap.add_argument("--data", type=dataset_folder, required=True,
+                    help="dataset with targets holding the train and validation maps")
     ap.add_argument("--metric", default="jnyang")
     ap.add_argument("--out", required=True, help="folder for the checkpoints and exports")
     ap.add_argument("--only", default=None,

@@ -1155,3 +1155,18 @@ def test_bench_error_features_fits_held_out_maps_and_scores_the_model(tmp_path: 
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--iterations", "0"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "--iterations must be at least 1" in bad.stderr
+
+
+def test_bench_scripts_say_how_to_make_a_missing_dataset(tmp_path: Path) -> None:
+    """`python bench/per_rate.py jnyang --data data/val` on a checkout without data/val ended in a
+    DatasetError traceback once the model had loaded; now argparse says how to capture it (exit 2)."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1] / "bench"
+    for script in ("per_rate.py", "same_decisions.py"):
+        argv = ["jnyang"] if script == "per_rate.py" else ["jnyang", "jnyang"]
+        r = subprocess.run([sys.executable, str(root / script), *argv, "--data", str(tmp_path / "val")],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+        assert "no dataset at" in r.stderr and "rtp capture --split validation" in r.stderr, r.stderr
