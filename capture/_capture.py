@@ -29,7 +29,8 @@ from ._dataset import DatasetReader, DatasetWriter
 from ._pool import worker_pool
 
 __all__ = [
-    "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "load_scene", "sample_buffers",
+    "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "check_scene", "load_scene",
+    "sample_buffers",
     "scene_id",
 ]
 
@@ -89,6 +90,7 @@ def check_scene(name: str, cache_dir: str | os.PathLike[str] | None, split: str 
     if Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file():
         if not Path(name).is_file():
             raise scenes.SceneNotFoundError(f"scene {name!r}: no such file")
+        scenes.load_mesh_file(name)  # read once more by the worker: a file it cannot read fails here, first
         return
     scenes.check_map(name, Path(scenes.default_cache_dir() if cache_dir is None else cache_dir), split=split,
                      splits=splits)
@@ -278,10 +280,10 @@ def capture(
     if ray is None:  # (a Ray driver may have no OpenGL of its own: its workers say so)
         from rtp.plugins.moderngl import Renderer
 
-        limit = Renderer.max_frame_side()
-        if min(w, h) < 1 or max(w, h) > limit:
-            raise ParameterError(f"size: expected 1 to {limit} pixels a side (this OpenGL's largest texture), "
-                                 f"got {w}x{h}", "size")
+        # A renderer of that size, made and released: a size this OpenGL cannot draw (past its largest
+        # texture, or past its memory within it) is refused before the manifest records it.
+        with Renderer(w, h):
+            pass
     for name in scene_names:  # every name now: not after the manifest, or an hour into the first map
         check_scene(name, cache_dir, split, None if splits is None else str(splits))
     settings = {

@@ -86,8 +86,8 @@ def run_demo(
             + f" (the model's default is {meta.default_threshold:g}), got {thr:g}", "threshold")
     metrics.check_dependencies((meta.metric, "flip"))  # the true error map and the FLIP picture, before rendering
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     scn, blockers = load_scene(scene, cache_dir, None, None)
+    out.mkdir(parents=True, exist_ok=True)  # (after the scene: a name it cannot load leaves no empty folder)
     w, h = size
     with Renderer(w, h) as renderer:
         renderer.load_scene(scn)

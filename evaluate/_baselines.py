@@ -339,10 +339,13 @@ class Yang2019:
             raise BaselineError(f"motion_reduce must be min, mean or max, got {motion_reduce!r}")
         if unseen not in ("as_is", "full"):
             raise BaselineError(f"unseen must be 'as_is' or 'full', got {unseen!r}")
-        if not (threshold > 0 and env_luminance >= 0 and k >= 1 and motion_scale >= 0 and 0 <= unseen_fraction < 1):
-            raise BaselineError(
-                "expected threshold > 0, env_luminance >= 0, k >= 1, motion_scale >= 0 and 0 <= unseen_fraction < 1"
-            )
+        for name, value, ok, expected in (
+                ("threshold", threshold, threshold > 0, "> 0 (its JNYang threshold)"),
+                ("env_luminance", env_luminance, env_luminance >= 0, ">= 0"), ("k", k, k >= 1, ">= 1"),
+                ("motion_scale", motion_scale, motion_scale >= 0, ">= 0"),
+                ("unseen_fraction", unseen_fraction, 0 <= unseen_fraction < 1, "in [0, 1)")):
+            if not ok:  # (NaN fails every comparison)
+                raise BaselineError(f"Yang 2019's {name}: expected a number {expected}, got {value!r}")
         self.threshold, self.env_luminance, self.norm, self.k = float(threshold), float(env_luminance), norm, float(k)
         self.motion, self.motion_scale, self.motion_reduce = motion, float(motion_scale), motion_reduce
         self.allow_4x4, self.unseen, self.unseen_fraction = allow_4x4, unseen, float(unseen_fraction)

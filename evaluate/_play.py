@@ -465,6 +465,9 @@ def play(
                                    "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale,
                                    "carry_scale": m.carry_scale, "carry": m.carry}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
+    from rtp.capture import check_scene
+
+    check_scene(scene, cache_dir, None, None)  # a scene it cannot load fails before the output folder is made
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
     if outdir is not None:

@@ -101,12 +101,15 @@ def draw_rate_overlay(
     image of the same dtype and shape.
     """
     img = _array(image, "image")
-    if img.dtype.kind not in "buif":
-        raise InputDtypeError(f"image: expected uint8 or float values, got dtype {img.dtype}")
+    if img.dtype != np.uint8 and img.dtype.kind != "f":  # (a uint16 image read as floats came back white)
+        raise InputDtypeError(f"image: expected uint8 or float values in [0, 1], got dtype {img.dtype}")
     if img.ndim != 3 or img.shape[2] not in (3, 4):
         raise InputShapeError(f"expected an (H, W, 3) image, got shape {img.shape}", tuple(img.shape), "(H, W, 3)")
     if img.dtype.kind == "f" and not np.isfinite(img).all():
         raise NonFiniteInputError("image: holds NaN or infinite values; expected colours in [0, 1]")
+    for name, flag in (("grid", grid), ("legend", legend)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise ParameterError(f"{name}: expected True or False, got {flag!r}", name)
     if isinstance(alpha, (bool, np.bool_)) or not isinstance(alpha, (int, float, np.integer, np.floating)) \
             or not 0.0 <= alpha <= 1.0:
         raise ParameterError(f"alpha: expected a number in [0, 1] (the tint's opacity), got {alpha!r}", "alpha")

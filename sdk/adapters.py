@@ -228,8 +228,9 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
     frame_type: ClassVar[type] = object
 
     def __init__(self, channels: Iterable[str], width: int, height: int) -> None:
-        if isinstance(channels, str):
-            raise UnsupportedChannelError(f"channels must be a sequence of channel names, got the string {channels!r}")
+        if isinstance(channels, str) or not isinstance(channels, Iterable):
+            what = f"the string {channels!r}" if isinstance(channels, str) else type(channels).__name__
+            raise UnsupportedChannelError(f"channels must be a sequence of channel names, got {what}")
         self._channels: tuple[str, ...] = tuple(channels)
         unknown = [c for c in self._channels if c not in CHANNELS]
         if unknown:

@@ -204,12 +204,17 @@ def test_jobs_check_their_values_before_they_write(tmp_path: Path, capsys: pytes
                  ["targets", str(data), "--metrics", "jnyang", "--weber-l", "-1"]):
         assert main([*argv, "-q"]) == 2
     assert not (data / "targets").exists()
-    for scene in ("procedural:-1", "no_such_map", str(tmp_path / "missing.glb")):
+    (tmp_path / "bad.glb").write_text("not a GLB")
+    for scene in ("procedural:-1", "no_such_map", str(tmp_path / "missing.glb"), str(tmp_path / "bad.glb")):
         out = tmp_path / "c"
         assert main(["capture", "--scene", scene, "--per-scene", "1", "--size", "64x48", "--out", str(out), "-q"]) == 2
         assert not out.exists(), scene
+        for command in (["demo", "--scene", scene], ["play", scene, "--frames", "3", "--methods", "full"]):
+            assert main([*command, "--size", "64x48", "--out", str(out), "-q"]) == 2, (command, scene)
+            assert not out.exists(), (command, scene)  # (an empty output folder was left before)
     for flag, value in (("--lr", "-1"), ("--lr", "nan"), ("--threshold", "-1"), ("--threshold", "nan"),
-                        ("--weight-decay", "-0.5"), ("--k", "0")):
+                        ("--weight-decay", "-0.5"), ("--k", "0"), ("--safety-quantile", "2"),
+                        ("--safety-quantile", "nan")):
         assert main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"), flag, value,
                      "-q"]) == 2, flag
         assert "expected" in capsys.readouterr().err

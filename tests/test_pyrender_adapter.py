@@ -222,10 +222,22 @@ def test_msaa_costs_accuracy_at_edges(textured: _Setup, textured_inputs: list[np
     assert bad_msaa > 0.02 and np.mean(ref[geo & edge] > 0.05) < 0.001, (bad_msaa, np.mean(ref[geo & edge] > 0.05))
     seen, _, _ = textured.errors(xs, chans, "seen")
     assert np.mean(seen[~edge] == 0) >= 0.999
-    with pytest.raises(ValueError, match="normal_bits=8"):
-        from rtp.plugins.pyrender import Adapter
+    from rtp.plugins.pyrender import Adapter, PyrenderUnavailableError
 
+    with pytest.raises(sdk.ParameterError, match="normal_bits=8"):  # (an RtpError, still a ValueError)
         Adapter(["normal.z"], W, H, msaa=True)
+    # each setting an RtpError naming it: bare ValueError, TypeError or AttributeError before
+    for options, error, word in (({"normal_bits": 0}, sdk.ParameterError, "normal_bits"),
+                                 ({"normal_bits": "12"}, sdk.ParameterError, "normal_bits"),
+                                 ({"msaa": "yes"}, sdk.ParameterError, "msaa"),
+                                 ({"reprojection_tolerance": float("nan")}, sdk.ParameterError, "reprojection_tolerance"),
+                                 ({"reprojection_tolerance": "x"}, sdk.ParameterError, "reprojection_tolerance"),
+                                 ({"platform": 5}, PyrenderUnavailableError, "platform"),
+                                 ({"renderer": object()}, sdk.adapters.AdapterFrameError, "renderer")):
+        with pytest.raises(error, match=word):
+            Adapter(["normal.z"], W, H, **options)
+    with pytest.raises(sdk.adapters.UnsupportedChannelError, match="NoneType"):
+        Adapter(None, W, H)  # type: ignore[arg-type]
 
 
 def test_depth_and_motion(textured: _Setup, textured_inputs: list[np.ndarray]) -> None:

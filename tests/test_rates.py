@@ -159,6 +159,13 @@ def test_overlay_legend_names_each_colour_in_the_corner() -> None:
 def test_overlay_checks_the_tile_grid() -> None:
     with pytest.raises(sdk.InputShapeError, match=r"\(2, 3\)"):
         sdk.draw_rate_overlay(np.zeros((20, 40, 3), np.uint8), np.zeros((1, 3), np.uint8), 16)
+    rates = np.zeros((2, 3), np.uint8)
+    for dtype in (np.uint16, np.int32, np.bool_):  # a uint16 image came back all white, read as floats
+        with pytest.raises(sdk.InputDtypeError, match="uint8 or float"):
+            sdk.draw_rate_overlay(np.zeros((20, 40, 3), dtype), rates, 16)
+    for flag in ("grid", "legend"):
+        with pytest.raises(sdk.ParameterError, match=flag):
+            sdk.draw_rate_overlay(np.zeros((20, 40, 3), np.uint8), rates, 16, **{flag: "no"})
 
 
 def _select_rate_by_rate(err: np.ndarray, thr: float, allowed: list[str]) -> np.ndarray:

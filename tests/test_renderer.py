@@ -365,6 +365,14 @@ def test_reprojection_moving_camera_matches_reference(renderer):
 
 
 @pytest.mark.gl
+def test_a_frame_within_the_side_limit_but_past_the_context_s_memory_is_a_renderer_error() -> None:
+    """llvmpipe takes 16384 a side but cannot allocate a 16384x16384 frame's targets: moderngl said only
+    "the framebuffer is not complete", and `rtp capture` had written its manifest by then."""
+    with pytest.raises(RendererError, match="could not allocate the render targets of a 16384x16384 frame"):
+        Renderer(16384, 16384)
+
+
+@pytest.mark.gl
 def test_renderer_errors_and_lifetime(gl_context):
     ctx = gl_context
     with Renderer(32, 16, ctx=ctx, shadow_map_size=64) as r:
@@ -392,5 +400,10 @@ def test_renderer_errors_and_lifetime(gl_context):
     for size, options in (((2.5, 16), {}), (("abc", 16), {}), ((16, 16), {"shadow_map_size": 0})):
         with pytest.raises(RendererError, match="positive integer"):
             Renderer(*size, ctx=ctx, **options)  # type: ignore[arg-type]
+    for options, word in (({"ao_samples": -1}, "ao_samples"), ({"max_point_lights": 10**6}, "max_point_lights"),
+                          ({"exposure_key": float("nan")}, "exposure_key"), ({"ao_radius": 0.0}, "ao_radius"),
+                          ({"shadow_distance": -1.0}, "shadow_distance")):
+        with pytest.raises(RendererError, match=f"^{word}: expected"):  # a GLSL compiler dump, or nothing, before
+            Renderer(16, 16, ctx=ctx, **options)
     make_current(ctx)
     ctx.texture((2, 2), 1).release()  # a borrowed context stays open after a refused size

@@ -508,6 +508,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
             ("lr_decay", cfg.lr_decay, cfg.lr_decay >= 0, "a finite decay >= 0"),
             ("weight_decay", cfg.weight_decay, cfg.weight_decay >= 0, "a finite weight decay >= 0"),
             ("logistic_k", cfg.logistic_k, cfg.logistic_k > 0, "a finite growth rate > 0"),
+            ("safety_quantile", cfg.safety_quantile,
+             cfg.safety_quantile is None or 0.0 <= cfg.safety_quantile < 1.0, "None or a share in [0, 1)"),
             ("default_threshold", cfg.default_threshold,
              cfg.default_threshold is None or sdk.METRICS[cfg.metric].higher_is_better or cfg.default_threshold >= 0,
              "a finite threshold in metric units, >= 0 for an error metric")):

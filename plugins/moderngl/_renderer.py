@@ -420,6 +420,14 @@ class Renderer:
                 raise RendererError(f"{what}: this OpenGL context draws at most {limit} pixels a side "
                                     f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}, shadow map "
                                     f"{self.shadow_map_size}")
+        try:
+            self._check_settings(ao_samples=ao_samples, max_point_lights=max_point_lights, ao_radius=ao_radius,
+                                 ao_strength=ao_strength, anisotropy=anisotropy, exposure_key=exposure_key,
+                                 reprojection_tolerance=reprojection_tolerance, shadow_distance=shadow_distance)
+        except RendererError:
+            if self._owns_ctx:
+                self.ctx.release()
+            raise
         self.shadow_distance = shadow_distance
         self.ao_samples = int(ao_samples)
         self.ao_radius = float(ao_radius)
@@ -444,8 +452,45 @@ class Renderer:
         logger.debug(
             "renderer %dx%d on %s (GL %d)", self.width, self.height, self.ctx.info.get("GL_RENDERER"), self.ctx.version_code
         )
-        self._build_programs()
-        self._allocate_targets()
+        try:
+            self._build_programs()
+            self._allocate_targets()
+        except Exception as exc:
+            self.release()
+            if isinstance(exc, RendererError):
+                raise
+            # Within the side limit, a context can still run out of room for the frame's targets (llvmpipe at
+            # 16384x16384): moderngl says only "the framebuffer is not complete".
+            raise RendererError(f"could not allocate the render targets of a {self.width}x{self.height} frame on "
+                                f"this OpenGL context ({type(exc).__name__}: {exc}); try a smaller size") from exc
+
+    #: The settings' ranges: the SSAO kernel and the point lights are arrays in the shaders (a uniform
+    #: array's size is capped by the context; these stay far inside every GL 3.3 one).
+    MAX_AO_SAMPLES = 64
+    MAX_POINT_LIGHTS = 256
+
+    @classmethod
+    def _check_settings(cls, **values: Any) -> None:
+        """Each setting of the constructor in its range, as a :class:`RendererError` naming it: out of
+        range they failed as a GLSL compiler dump (``ao_samples=-1``) or not at all (``exposure_key=nan``)."""
+        def number(v: Any) -> bool:
+            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+        ranges = {"ao_samples": (1, cls.MAX_AO_SAMPLES, True), "max_point_lights": (1, cls.MAX_POINT_LIGHTS, True),
+                  "ao_radius": (0.0, math.inf, False), "ao_strength": (0.0, math.inf, False),
+                  "anisotropy": (1.0, math.inf, False), "exposure_key": (0.0, math.inf, False),
+                  "reprojection_tolerance": (0.0, math.inf, False), "shadow_distance": (0.0, math.inf, False)}
+        for name, v in values.items():
+            lo, hi, integral = ranges[name]
+            if name == "shadow_distance" and v is None:
+                continue
+            ok = number(v) and (not integral or isinstance(v, (int, np.integer))) and lo <= v <= hi and v < math.inf
+            if name in ("ao_radius", "exposure_key", "shadow_distance") and ok:
+                ok = v > 0
+            if not ok:
+                strict = name in ("ao_radius", "exposure_key", "shadow_distance")
+                bound = f"an integer in [{lo}, {hi}]" if integral else f"a finite number {'>' if strict else '>='} {lo:g}"
+                raise RendererError(f"{name}: expected {bound}, got {v!r}")
 
     # ------------------------------------------------------------------ set-up
     def _program(self, vs: str, fs: str, defines: dict[str, Any] | None = None) -> Any:
@@ -1038,7 +1083,8 @@ class Renderer:
         if self._owns_ctx:
             self.ctx.release()
         else:
-            self._reprojector.close()
+            if hasattr(self, "_reprojector"):  # (a constructor that failed part-way releases what it made)
+                self._reprojector.close()
             for obj in self._vrs or ():
                 obj.release()
             self._vrs = None

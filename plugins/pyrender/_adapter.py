@@ -13,6 +13,7 @@ import numpy as np
 
 from rtp.sdk import (
     DEFAULT_REPROJECTION_TOLERANCE,
+    ParameterError,
     block_variances,
     depth_edges,
     luma,
@@ -22,6 +23,7 @@ from rtp.sdk import (
     tile_variances,
 )
 from rtp.sdk.adapters import Adapter as _BaseAdapter
+from rtp.sdk.adapters import AdapterFrameError
 
 from ._errors import PyrenderAdapterError
 from ._gbuffer import MATERIAL, GBufferRenderer, GBuffers
@@ -160,8 +162,13 @@ class Adapter(_BaseAdapter[SceneFrame]):
         renderer: Any | None = None,
     ) -> None:
         super().__init__(channels, width, height)
-        if not reprojection_tolerance >= 0.0:
-            raise ValueError(f"reprojection_tolerance must be >= 0, got {reprojection_tolerance}")
+        tol = reprojection_tolerance
+        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not 0.0 <= tol < np.inf:
+            raise ParameterError(f"reprojection_tolerance: expected a finite relative depth tolerance >= 0, got {tol!r}",
+                                 "reprojection_tolerance")
+        if renderer is not None and not hasattr(renderer, "viewport_width"):
+            raise AdapterFrameError(f"renderer: expected a pyrender.OffscreenRenderer to borrow, got "
+                                    f"{type(renderer).__name__}")
         self.reprojection_tolerance = float(reprojection_tolerance)
         self._gbuf = GBufferRenderer(self.width, self.height, msaa=msaa, normal_bits=normal_bits, platform=platform,
                                      renderer=renderer)

@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from rtp.sdk import ParameterError
+
 from ._errors import PyrenderAdapterError
 from ._gl import import_pyrender, offscreen_renderer
 
@@ -156,10 +158,13 @@ class GBufferRenderer:
 
     def __init__(self, width: int, height: int, *, msaa: bool = False, normal_bits: int = 12,
                  platform: str | None = None, renderer: Any | None = None) -> None:
-        if normal_bits not in (8, 12):
-            raise ValueError(f"normal_bits must be 8 or 12, got {normal_bits}")
+        if isinstance(normal_bits, bool) or normal_bits not in (8, 12):
+            raise ParameterError(f"normal_bits: expected 8 or 12, got {normal_bits!r}", "normal_bits")
+        if not isinstance(msaa, bool):
+            raise ParameterError(f"msaa: expected True or False, got {msaa!r}", "msaa")
         if msaa and normal_bits != 8:
-            raise ValueError("msaa=True averages samples, which breaks 12-bit packed normals; use normal_bits=8")
+            raise ParameterError("msaa=True averages samples, which breaks 12-bit packed normals; use normal_bits=8",
+                                 "msaa")
         self.width, self.height = int(width), int(height)
         self.msaa, self.normal_bits = bool(msaa), int(normal_bits)
         self._pyrender = import_pyrender(platform)

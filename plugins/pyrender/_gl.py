@@ -65,6 +65,8 @@ def import_pyrender(platform: str | None = None) -> Any:
     """
     global _pyrender
     current = os.environ.get("PYOPENGL_PLATFORM")
+    if platform is not None and not isinstance(platform, str):
+        raise PyrenderUnavailableError(f"platform: expected one of {', '.join(PLATFORMS)}, got {platform!r}")
     wanted = (platform or current or "egl").lower()
     if wanted not in PLATFORMS:
         raise PyrenderUnavailableError(
