@@ -95,7 +95,8 @@ def _read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     p = Path(path)
     if not p.is_file():
-        raise ModelNotFoundError(f"metadata file not found: {str(p)!r}")
+        what = "is a folder, not a sidecar file" if p.is_dir() else "not found"
+        raise ModelNotFoundError(f"metadata file {what}: {str(p)!r}")
     try:
         d = yaml.safe_load(p.read_text(encoding="utf-8"))
     except yaml.YAMLError as err:

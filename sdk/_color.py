@@ -19,7 +19,7 @@ LUMA_WEIGHTS: tuple[float, float, float] = (0.299, 0.587, 0.114)
 def luma(rgb: ArrayLike) -> np.ndarray:
     """Rec.601 luma ``0.299 R + 0.587 G + 0.114 B`` of display values: ``(..., 3) -> (...)`` float32."""
     r, g, b = LUMA_WEIGHTS
-    a = np.asarray(rgb, dtype=np.float32)
+    a = as_numbers(rgb, "luma", np.float32)
     if a.ndim < 1 or a.shape[-1] != 3:  # a planar (3, H, W) image would be read as rows of pixels
         from ._errors import InputShapeError
 
@@ -28,13 +28,27 @@ def luma(rgb: ArrayLike) -> np.ndarray:
     return (r * a[..., 0] + g * a[..., 1] + b * a[..., 2]).astype(np.float32, copy=False)
 
 
+def as_numbers(value: ArrayLike, what: str, dtype: type[np.floating]) -> np.ndarray:
+    """``value`` as a real array of ``dtype``, or an :class:`~rtp.sdk.InputDtypeError` naming ``what``
+    (strings, objects and complex values were a bare numpy error, or a warning and a dropped imaginary
+    part)."""
+    from ._errors import InputDtypeError
+
+    if np.iscomplexobj(value):
+        raise InputDtypeError(f"{what}: expected real numbers, got complex ones")
+    try:
+        return np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as err:
+        raise InputDtypeError(f"{what}: expected numbers, got {type(value).__name__} ({err})") from err
+
+
 def srgb_to_linear(c: ArrayLike) -> np.ndarray:
     """The sRGB decoding curve (IEC 61966-2-1) of values in [0, 1], elementwise, float32 or float64 in."""
-    a = np.asarray(c, dtype=np.float64)
+    a = as_numbers(c, "srgb_to_linear", np.float64)
     return np.where(a <= 0.04045, a / 12.92, ((np.maximum(a, 0.04045) + 0.055) / 1.055) ** 2.4)
 
 
 def linear_to_srgb(c: ArrayLike) -> np.ndarray:
     """The sRGB encoding curve (IEC 61966-2-1) of linear values in [0, 1], elementwise."""
-    a = np.asarray(c, dtype=np.float64)
+    a = as_numbers(c, "linear_to_srgb", np.float64)
     return np.where(a <= 0.0031308, a * 12.92, 1.055 * np.maximum(a, 0.0031308) ** (1.0 / 2.4) - 0.055)

@@ -11,6 +11,8 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._color import as_numbers
+
 __all__ = ["METRICS", "TARGET_METRICS", "MetricInfo", "mse_from_psnr", "psnr_from_mse"]
 
 
@@ -101,9 +103,9 @@ TARGET_METRICS: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang")
 def psnr_from_mse(mse: ArrayLike) -> np.ndarray:
     """PSNR in dB for a peak of 1: ``-10 log10(mse)``; ``+inf`` where ``mse == 0``. float32."""
     with np.errstate(divide="ignore"):
-        return (-10.0 * np.log10(np.asarray(mse, dtype=np.float64))).astype(np.float32)
+        return (-10.0 * np.log10(as_numbers(mse, "psnr_from_mse", np.float64))).astype(np.float32)
 
 
 def mse_from_psnr(psnr: ArrayLike) -> np.ndarray:
     """Mean squared error (peak 1) of a PSNR in dB: ``10 ** (-psnr / 10)``; 0 where ``psnr == +inf``. float64."""
-    return np.power(10.0, -np.asarray(psnr, dtype=np.float64) / 10.0)
+    return np.power(10.0, -as_numbers(psnr, "mse_from_psnr", np.float64) / 10.0)

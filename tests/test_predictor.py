@@ -443,6 +443,10 @@ def test_the_small_helpers_refuse_what_they_cannot_read() -> None:
             sdk.tile_extents(length)  # type: ignore[arg-type]
     with pytest.raises(sdk.ParameterError, match="strict"):
         sdk.load("jnyang", strict="yes")  # type: ignore[arg-type]
+    for fn in (sdk.luma, sdk.srgb_to_linear, sdk.linear_to_srgb, sdk.psnr_from_mse, sdk.mse_from_psnr):
+        for bad, words in (("abc", "expected numbers"), (np.ones((2, 3), complex), "real numbers")):
+            with pytest.raises(sdk.InputDtypeError, match=words):
+                fn(bad)
     with pytest.raises(sdk.ParameterError, match=r"\['2x1'\] missing"):
         sdk.complete_rates({"1x2": np.zeros(2)}, ("1x2", "2x1"), 2.13, False, np.maximum, np.minimum)
 
