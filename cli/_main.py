@@ -349,6 +349,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
                                   **overrides)
     if args.aux_weight is not None and not cfg.aux_metrics:
         raise _usage("--aux-weight weighs the auxiliary metrics' loss: give them with --aux-metrics")
+    if args.quantile is not None and cfg.loss != "quantile":  # (it was taken and ignored)
+        raise _usage(f"--quantile sets the quantile loss's quantile: give --loss quantile (the loss is {cfg.loss})")
+    if args.distill is not None and not cfg.teachers:
+        raise _usage("--distill weighs the teachers' predictions: give them with --teachers")
     with Bar(args, cfg.steps, f"train {cfg.metric}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"))
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
