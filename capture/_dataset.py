@@ -46,6 +46,7 @@ from rtp.sdk import (
     ALL_RATES,
     CHANNELS,
     EXIT_USAGE,
+    InputDtypeError,
     InputShapeError,
     RtpError,
     block_variances,
@@ -125,6 +126,10 @@ _DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth"
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:
     spec = BUFFERS[name]
     a = np.asarray(arr)
+    if a.dtype != np.uint8 and a.dtype.kind != "f":  # an int64 image of 0-255 was stored as all 1.0
+        raise InputDtypeError(f"buffer {name!r}: expected float values (or uint8 for an 8-bit buffer), got {a.dtype}")
+    if 0 in a.shape:
+        raise InputShapeError(f"buffer {name!r}: empty, shape {a.shape}", tuple(a.shape), "(H, W, ...) with H, W >= 1")
     n = len(spec.channels) or 3
     expected = (n,) if n > 1 else ()
     if a.ndim not in (2, 3) or tuple(a.shape[2:]) != expected or (shape is not None and a.shape[:2] != shape):
@@ -327,6 +332,9 @@ class DatasetWriter:
         data["samples"] = [p.stem for p in files]
         data["bytes_per_sample"] = int(sum(p.stat().st_size for p in files) / max(len(files), 1))
         if extra:
+            reserved = sorted(set(extra) & {"format", "format_version", "settings", "samples", "bytes_per_sample"})
+            if reserved:  # (format "mine" left a folder no reader opens)
+                raise DatasetError(f"finalize: {reserved} are the manifest's own keys, not extra ones")
             data.update(json.loads(json.dumps(dict(extra))))
         self._write_manifest(data)
 

@@ -36,7 +36,7 @@ from rtp.sdk import (
 )
 from rtp.sdk.files import atomic_output
 
-from ._dataset import DatasetReader, sample_path
+from ._dataset import DatasetReader, _check_id, sample_path
 
 __all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
 
@@ -107,6 +107,8 @@ class TargetStore:
 
     def declare(self, metric: str, params: Mapping[str, Any]) -> None:
         """Record the parameters a metric's targets are computed with; refuse a silent change."""
+        if metric not in METRICS:
+            raise TargetError(f"unknown metric {metric!r}; metrics are {', '.join(METRICS)}")
         params = json.loads(json.dumps(dict(params)))
         if metric in self.metrics and self.metrics[metric] != params:
             raise TargetError(
@@ -118,6 +120,9 @@ class TargetStore:
             self._save_manifest()
 
     def path(self, sample_id: str, metric: str) -> Path:
+        if metric not in METRICS:  # (a name such as "../samples" wrote over the captured sample)
+            raise TargetError(f"unknown metric {metric!r}; metrics are {', '.join(METRICS)}")
+        _check_id(sample_id)
         return self.root / metric / f"{sample_id}.npz"
 
     def stale(self, sample_id: str, metric: str) -> bool:

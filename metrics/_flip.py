@@ -46,6 +46,11 @@ def ppd_from_width(width_px: int, monitor_width_m: float = 0.7, distance_m: floa
     return float(distance_m * (width_px / monitor_width_m) * math.pi / 180.0)
 
 
+#: The pixels per degree FLIP takes: a viewer from very far to a phone held at the nose (its filters'
+#: kernels grow with the value; outside the range they fill memory, or turn the maps to NaN).
+MIN_PPD, MAX_PPD = 1.0, 1000.0
+
+
 def resolve_ppd(ppd: Ppd, width_px: int) -> float:
     """Turn a ``ppd`` argument into a number: a positive float as is, ``"width"`` via :func:`ppd_from_width`."""
     if isinstance(ppd, str):
@@ -58,8 +63,10 @@ def resolve_ppd(ppd: Ppd, width_px: int) -> float:
         value = float(ppd)
     except (TypeError, ValueError):
         raise MetricParameterError(f"ppd must be a positive number or 'width', got {ppd!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise MetricParameterError(f"ppd must be a positive finite number, got {ppd!r}")
+    if not math.isfinite(value) or not MIN_PPD <= value <= MAX_PPD:
+        # (1e10 made the filters' kernels grow until the process was killed; 1e-10 gave NaN maps)
+        raise MetricParameterError(f"ppd must be a number of pixels per degree in [{MIN_PPD:g}, {MAX_PPD:g}] (FLIP's "
+                                   f"default {DEFAULT_PPD:.2f}), got {ppd!r}")
     return value
 
 

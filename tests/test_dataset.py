@@ -90,7 +90,34 @@ def test_writer_validates(tmp_path: Path) -> None:
         w.write("a", {**bufs, "depth": nan}, {})
     with pytest.raises(DatasetError, match="sample id"):
         w.write("../evil", bufs, {})
+    # an int64 image of 0-255 was stored as all 1.0; an empty buffer was written and refused on reading
+    with pytest.raises(sdk.InputDtypeError, match="final_1x1"):
+        w.write("a", {**bufs, "final_1x1": (bufs["final_1x1"] * 255).astype(np.int64)}, {})
+    with pytest.raises(sdk.InputShapeError, match="empty"):
+        w.write("a", {k: v[:0] for k, v in bufs.items()}, {})
     assert not list((tmp_path / "ds" / "samples").iterdir())
+    w.write("a", bufs, {})
+    for key in ("format", "samples", "settings"):  # ("format": "mine" left a folder no reader opens)
+        with pytest.raises(DatasetError, match="the manifest's own keys"):
+            w.finalize({key: "mine"})
+    w.finalize({"note": "kept"})
+    assert DatasetReader(tmp_path / "ds").manifest["note"] == "kept"
+
+
+def test_the_target_store_keeps_to_its_folder(tmp_path: Path) -> None:
+    """A metric name such as "../samples" wrote targets over the captured sample."""
+    from rtp.capture import TargetError, TargetStore
+
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("a", _buffers(), {})
+    before = (tmp_path / "ds" / "samples" / "a.npz").read_bytes()
+    store = TargetStore(tmp_path / "ds")
+    for metric, sample in (("../samples", "a"), ("nope", "a"), ("jnyang", "../a")):
+        with pytest.raises((TargetError, DatasetError)):
+            store.write(sample, metric, np.zeros((6, 2, 3), np.float32), (24, 40))
+    with pytest.raises(TargetError, match="unknown metric"):
+        store.declare("nope", {})
+    assert (tmp_path / "ds" / "samples" / "a.npz").read_bytes() == before
 
 
 def test_interrupted_write_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -519,3 +519,11 @@ def test_tile_targets_edge_tiles_missing_and_unknown_rates() -> None:
         M.tile_targets(refimg, {"1x1": refimg}, metrics=("yang",), missing="nan")
     with pytest.raises(sdk.InputShapeError):
         M.tile_targets(refimg, {"2x2": refimg[:-1]}, metrics=("yang",), missing="nan")
+
+
+def test_ppd_outside_what_flip_can_filter_is_refused(ref: np.ndarray, rates: dict[str, np.ndarray]) -> None:
+    """ppd=1e10 grew FLIP's filter kernels until the process was killed (24 GB); 1e-10 gave NaN maps."""
+    for bad in (1e10, 1001.0, 1e-10, 0.5):
+        with pytest.raises(M.MetricParameterError, match=r"pixels per degree in \[1, 1000\]"):
+            M.flip_map(ref, rates["2x2"], ppd=bad)
+    assert M.resolve_ppd(1000.0, 1920) == 1000.0 and M.resolve_ppd(1.0, 1920) == 1.0

@@ -1170,3 +1170,29 @@ def test_bench_scripts_say_how_to_make_a_missing_dataset(tmp_path: Path) -> None
                            capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
         assert "no dataset at" in r.stderr and "rtp capture --split validation" in r.stderr, r.stderr
+
+
+def test_a_checkpoint_that_would_not_load_back_is_not_saved(tmp_path: Path) -> None:
+    """A numpy scalar in `training` saved, then replaced a good checkpoint by one `load` refuses."""
+    from rtp.train import checkpoint
+    from rtp.train.model import MetricNet
+
+    from .conftest import base_metadata
+
+    path = checkpoint.save(tmp_path / "m.pt", MetricNet(4, 4, 16), base_metadata(), {"step": 5})
+    before = path.read_bytes()
+    for training in ({"step": np.int64(5)}, {"f": object()}):
+        with pytest.raises(checkpoint.CheckpointError, match="would not load back"):
+            checkpoint.save(path, MetricNet(4, 4, 16), base_metadata(), training)
+    assert path.read_bytes() == before and load_checkpoint(path).training == {"step": 5}
+
+
+@pytest.mark.parametrize(("key", "value"), [("steps", -5), ("steps", 0), ("batch", 0), ("crop", 0), ("val_every", 0),
+                                            ("save_every", 0), ("tile", 0), ("outputs", ("9x9",)), ("head", "nope")])
+def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path, key: str, value: Any) -> None:
+    """steps=-5 wrote an untrained checkpoint; the others failed in numpy, torch or a division, some only
+    after training had started."""
+    cfg = TrainConfig(data=str(tmp_path / "none"), metric="jnyang", out=str(tmp_path / "m.pt"), **{key: value})
+    with pytest.raises(sdk.ParameterError, match=key):
+        train(cfg)
+    assert not (tmp_path / "m.pt").exists()

@@ -36,7 +36,7 @@ from ._augment import SYMMETRIES, augment_batch
 from ._frames import Frame
 from ._recipe import load_recipe
 from ._safety import calibrate_safety
-from .model import ARCHS, Network, build_network, keep_outputs
+from .model import ARCHS, HEADS, Network, build_network, keep_outputs
 
 __all__ = ["TrainConfig", "TrainResult", "train"]
 
@@ -503,6 +503,18 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
     # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
     check_output(cfg.out, what="out")
+    for key, value, minimum in (("steps", cfg.steps, 1), ("batch", cfg.batch, 1), ("crop", cfg.crop, 1),
+                                ("val_every", cfg.val_every, 1), ("save_every", cfg.save_every, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            # (steps=-5 wrote an untrained checkpoint; batch, crop, val_every or save_every 0 failed in numpy or torch)
+            raise sdk.ParameterError(f"{key}: expected an integer >= {minimum}, got {value!r}", key)
+    if cfg.tile not in sdk.TILE_SIZES:
+        raise sdk.ParameterError(f"tile: expected one of {sdk.TILE_SIZES}, got {cfg.tile!r}", "tile")
+    if tuple(cfg.outputs) not in {tuple(o) for o in sdk.OUTPUT_SETS}:
+        raise sdk.ParameterError(f"outputs: expected one of {[list(o) for o in sdk.OUTPUT_SETS]}, got {cfg.outputs!r}",
+                                 "outputs")
+    if cfg.head not in HEADS:
+        raise sdk.ParameterError(f"head: expected one of {', '.join(HEADS)}, got {cfg.head!r}", "head")
     for key, value, ok, expected in (
             ("lr", cfg.lr, cfg.lr > 0, "a finite learning rate > 0"),
             ("lr_decay", cfg.lr_decay, cfg.lr_decay >= 0, "a finite decay >= 0"),

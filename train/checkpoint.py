@@ -93,6 +93,12 @@ def save(
     }
     with atomic_output(path) as tmp:
         torch.save(payload, tmp)
+        try:  # what load() will do, before the file replaces a good one (a numpy scalar in training did not)
+            torch.load(tmp, map_location="cpu", weights_only=True)
+        except Exception as err:
+            raise CheckpointError(f"{path}: not saved, the checkpoint would not load back with weights_only=True "
+                                  f"({type(err).__name__}): keep `training` to Python numbers, strings, lists, dicts "
+                                  "and tensors") from err
     return Path(path)
 
 
