@@ -503,11 +503,11 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
     # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
     check_output(cfg.out, what="out")
-    for key, value, minimum in (("steps", cfg.steps, 1), ("batch", cfg.batch, 1), ("crop", cfg.crop, 1),
-                                ("val_every", cfg.val_every, 1), ("save_every", cfg.save_every, 1)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+    for name, count in (("steps", cfg.steps), ("batch", cfg.batch), ("crop", cfg.crop), ("val_every", cfg.val_every),
+                        ("save_every", cfg.save_every)):
+        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
             # (steps=-5 wrote an untrained checkpoint; batch, crop, val_every or save_every 0 failed in numpy or torch)
-            raise sdk.ParameterError(f"{key}: expected an integer >= {minimum}, got {value!r}", key)
+            raise sdk.ParameterError(f"{name}: expected an integer >= 1, got {count!r}", name)
     if cfg.tile not in sdk.TILE_SIZES:
         raise sdk.ParameterError(f"tile: expected one of {sdk.TILE_SIZES}, got {cfg.tile!r}", "tile")
     if tuple(cfg.outputs) not in {tuple(o) for o in sdk.OUTPUT_SETS}:
