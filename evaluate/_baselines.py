@@ -30,7 +30,9 @@ from rtp.sdk import (
     LUMA_WEIGHTS,
     PREDICTED_RATES,
     RATE_CODES,
+    InputDtypeError,
     InputShapeError,
+    NonFiniteInputError,
     RateLike,
     RtpError,
     rate_size,
@@ -133,7 +135,15 @@ def as_frame(source: Any) -> Frame:
         raise BaselineError(
             f"expected a Sample, a Frame, a mapping of buffers or an (H, W, 3) array, got {type(source).__name__}"
         )
-    rep = np.asarray(frame.reprojected, dtype=np.float32)
+    raw = np.asarray(frame.reprojected)
+    if not isinstance(source, Frame):  # (a Frame passed on is the one checked here before)
+        if raw.dtype.kind != "f":  # uint8 0-255 read as colours in [0, 1]: FidelityFX chose 1x1 everywhere
+            raise InputDtypeError(f"reprojected: expected float colours in [0, 1], got dtype {raw.dtype} "
+                                  "(an 8-bit image: image / 255)")
+        with np.errstate(over="ignore", invalid="ignore"):
+            if not np.isfinite(raw.sum(dtype=np.float64)):  # one pass; NaN made Yang 2019 choose 4x4 everywhere
+                raise NonFiniteInputError("reprojected: holds NaN or infinite values; expected colours in [0, 1]")
+    rep = np.asarray(raw, dtype=np.float32)
     if rep.ndim != 3 or rep.shape[2] < 3 or rep.shape[0] == 0 or rep.shape[1] == 0:
         raise InputShapeError(f"reprojected: expected (H, W, 3), got {rep.shape}", tuple(rep.shape), "(H, W, 3)")
     h, w = rep.shape[:2]

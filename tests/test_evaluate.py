@@ -529,3 +529,16 @@ def test_matched_quality_interpolates_along_the_sweep() -> None:
     assert got["b"]["work_saved"] != got["b"]["work_saved"]  # NaN: b never fails as rarely as 10%
     exact = {m["method"]: m for m in _matched(sweep, 0.2)}
     assert exact["a"]["work_saved"] == pytest.approx(0.6) and exact["a"]["parameter"] == "t 2"
+
+
+def test_the_baselines_refuse_frames_they_would_misread() -> None:
+    """A NaN frame made Yang 2019 choose 4x4 for every tile, and an 8-bit one FidelityFX 1x1 everywhere:
+    both silent wrong answers, now typed errors."""
+    nan = np.full((48, 64, 3), np.nan, np.float32)
+    eight_bit = np.full((48, 64, 3), 128, np.uint8)
+    for method in (Yang2019(16), FidelityFX(16)):
+        with pytest.raises(sdk.NonFiniteInputError, match="reprojected"):
+            method.shading_rates(nan)
+        with pytest.raises(sdk.InputDtypeError, match="255"):
+            method.shading_rates(eight_bit)
+        assert method.shading_rates(eight_bit / np.float32(255)).shape == (3, 4)
