@@ -3,6 +3,6 @@ so ``rtp info`` works with the runtime dependencies alone; all share one set of 
 error policy (exit codes in docs/errors.md)."""
 
 from ._export import build_export_parser, export_main
-from ._main import build_parser, main
+from ._main import MAX_SIDE, build_parser, frame_size, main
 
-__all__ = ["build_export_parser", "build_parser", "export_main", "main"]
+__all__ = ["MAX_SIDE", "build_export_parser", "build_parser", "export_main", "frame_size", "main"]

@@ -33,7 +33,9 @@ EXAMPLES = """examples:
 MAX_SIDE = 16384
 
 
-def _size(text: str) -> tuple[int, int]:
+def frame_size(text: str) -> tuple[int, int]:
+    """The argparse type of every ``--size``: ``WIDTHxHEIGHT`` into ``(width, height)``, 16 to
+    :data:`MAX_SIDE` pixels a side (public: the examples take their ``--size`` the same way)."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -527,7 +529,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "or your own .glb/.gltf/.obj file")
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
     cap.add_argument("--out", type=_out_folder, required=True, help="dataset folder (created, or resumed)")
-    cap.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
+    cap.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT")
     cap.add_argument("--profiles", type=_choices_csv(tuple(MOTION_PROFILES)), default=",".join(DEFAULT_PROFILES),
                      help="motion profiles, comma-separated: slow, fast (the paper's 14 and 31%% unseen pixels), frame "
                      "(one frame at 60 Hz of `rtp play`'s fast path)")
@@ -722,7 +724,7 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
     dm.add_argument("--scene", default="procedural:0",
                     help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
-    dm.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT")
+    dm.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT")
     dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move (the last one is shown)")
     dm.add_argument("--seed", type=_non_negative, default=0, help="which viewpoint of the scene")
     dm.add_argument("--out", type=_out_folder, default="rtp-demo", help="output folder")
@@ -752,7 +754,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--frames", type=_positive, default=300, help="frames per path")
     pl.add_argument("--fps", type=float, default=60.0, help="frame rate of the paths")
     pl.add_argument("--seed", type=_non_negative, default=0, help="which path through the map")
-    pl.add_argument("--size", type=_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
+    pl.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
     pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
     pl.add_argument("--fail-metric", default="jnyang", choices=tuple(METRICS),

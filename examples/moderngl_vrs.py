@@ -35,18 +35,11 @@ import numpy as np
 
 from rtp import sdk
 from rtp.capture.scenes import procedural
+from rtp.cli import frame_size  # the WIDTHxHEIGHT of every rtp command
 from rtp.plugins.moderngl import Adapter, RateSelector, create_context
 from rtp.scene import Camera
 
 log = logging.getLogger("moderngl_vrs")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x360, got {text!r}") from None
-    return w, h
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -54,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
     ap.add_argument("--out", type=Path, default=Path("moderngl_vrs.png"), help="overlay PNG of the last frame")
     ap.add_argument("--gif", type=Path, help="also write every frame's overlay as an animated GIF (imageio)")
-    ap.add_argument("--size", type=_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
+    ap.add_argument("--size", type=frame_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
     ap.add_argument("--frames", type=int, default=6, help="frames of the walk (default: 6)")
     ap.add_argument("--threshold", type=float, help="threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")

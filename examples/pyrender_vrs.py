@@ -44,6 +44,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports PyO
 import numpy as np
 
 from rtp import sdk
+from rtp.cli import frame_size  # the WIDTHxHEIGHT of every rtp command
 from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_trimesh_scene
 
 log = logging.getLogger("pyrender_vrs")
@@ -128,20 +129,12 @@ def walk(p0: np.ndarray, frames: int, turn: float = 1.0, move: float = 0.05) -> 
     return poses
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x360, got {text!r}") from None
-    return w, h
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", type=Path, help="glTF/GLB/OBJ file (default: a procedural level written as GLB)")
     ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
     ap.add_argument("--out", type=Path, default=Path("pyrender_vrs.png"), help="overlay PNG to write")
-    ap.add_argument("--size", type=_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
+    ap.add_argument("--size", type=frame_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
     ap.add_argument("--threshold", type=float, help="error threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
     ap.add_argument("--frames", type=int, default=2,
