@@ -45,6 +45,15 @@ FORMAT_VERSION = 1
 BASE_TILE = 4
 
 
+def _version_ok(v: Any) -> bool:
+    return not isinstance(v, bool) and isinstance(v, int) and 0 <= v <= FORMAT_VERSION
+
+
+def _unreadable(path: Path, what: str, err: Exception) -> TargetError:
+    """The TargetError for a targets file a parser choked on (as :func:`._dataset._unreadable`)."""
+    return TargetError(f"{path}: {what} ({type(err).__name__}: {err})")
+
+
 def _stores_mse(metric: str) -> bool:
     """PSNR targets are stored as the tile's mean squared error so that coarser tiles derive exactly."""
     return metric in METRICS and METRICS[metric].pooling == "mse"
@@ -62,6 +71,8 @@ def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int
     Max-pooling for max-pooled maps; a pixel-weighted mean for per-tile MSE. Edge tiles that the
     frame only partly covers are pooled over the pixels they hold.
     """
+    if isinstance(tile, bool) or not isinstance(tile, (int, np.integer)) or tile < 1:
+        raise TargetError(f"tile must be a positive integer, got {tile!r}")
     if tile % base:
         raise TargetError(f"tile {tile} is not a multiple of the stored base tile {base}")
     f = tile // base
@@ -69,6 +80,7 @@ def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int
         return values.astype(np.float32)
     h, w = size
     th, tw = values.shape[-2:]
+    f = min(f, max(th, tw))  # any larger factor pools the same one tile (and would pad to its size)
     oh, ow = tile_grid(th, tw, f)
     ph, pw = oh * f - th, ow * f - tw
     pad = [(0, 0)] * (values.ndim - 2) + [(0, ph), (0, pw)]
@@ -91,11 +103,19 @@ class TargetStore:
         self.root = Path(data_root) / "targets"
         manifest = self.root / "manifest.json"
         if manifest.is_file():
-            d = json.loads(manifest.read_text())
-            if d.get("format") != FORMAT or d.get("format_version", 0) > FORMAT_VERSION:
+            try:
+                d = json.loads(manifest.read_text())
+            except (OSError, UnicodeDecodeError, ValueError) as e:  # (JSONDecodeError is a ValueError)
+                raise _unreadable(manifest, "not a readable targets manifest; delete the targets folder to "
+                                  "recompute", e) from e
+            if not isinstance(d, dict) or d.get("format") != FORMAT or not _version_ok(d.get("format_version", 0)):
                 raise TargetError(f"{manifest}: not rtp targets of a supported version")
-            self.base_tile = int(d["base_tile"])
-            self.metrics: dict[str, Any] = dict(d.get("metrics", {}))
+            base, metrics = d.get("base_tile"), d.get("metrics", {})
+            if isinstance(base, bool) or not isinstance(base, int) or base < 1 or not isinstance(metrics, dict):
+                raise TargetError(f"{manifest}: expected a positive integer base_tile and a metrics mapping, "
+                                  f"got base_tile={base!r}, metrics of type {type(metrics).__name__}")
+            self.base_tile = base
+            self.metrics: dict[str, Any] = dict(metrics)
         else:
             self.base_tile = base_tile
             self.metrics = {}
@@ -152,8 +172,15 @@ class TargetStore:
         if self.stale(sample_id, metric):
             raise TargetError(f"{metric} targets of sample {sample_id!r} are older than the sample (captured again "
                               f"since); run `rtp targets {self.root.parent}`")
-        with np.load(p) as z:
-            values, size = z["values"], tuple(int(v) for v in z["size"])
+        try:
+            with np.load(p) as z:
+                values, size = np.asarray(z["values"]), tuple(int(v) for v in z["size"])
+        except Exception as e:  # numpy's reader meets corrupt bytes with many exceptions (see _unreadable)
+            raise _unreadable(p, "unreadable targets; delete the file and run `rtp targets` again", e) from e
+        if len(size) != 2 or min(size) < 1 or values.shape != (6, *tile_grid(*size, self.base_tile)) or values.dtype.kind != "f":
+            raise TargetError(f"{p}: expected float values of shape (6, tile rows, tile columns) of a frame of size "
+                              f"(H, W) at base tile {self.base_tile}, got {values.dtype} {values.shape}, size {size}; "
+                              "delete the file and run `rtp targets` again")
         mse = _stores_mse(metric)
         pooled = pool_targets(values, size, self.base_tile, tile, mse=mse)  # type: ignore[arg-type]
         return psnr_from_mse(pooled) if mse else pooled

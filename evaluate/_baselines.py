@@ -170,6 +170,12 @@ def _pad_to_tiles(a: np.ndarray, t: int, mode: str = "edge") -> np.ndarray:
     return np.pad(a, pad, mode=mode)  # type: ignore[call-overload]
 
 
+def _frame_tile(t: int, size: tuple[int, int]) -> int:
+    """The tile side to pool a frame of ``size`` with: ``t``, or the frame's longer side when ``t`` is
+    larger (the same one tile per axis, without padding up to ``t x t`` pixels)."""
+    return min(t, max(size))
+
+
 def _blocks(a: np.ndarray, t: int, mode: str = "edge") -> np.ndarray:
     """``(H, W)`` -> ``(th, t, tw, t)``, padded up to whole tiles (edge copies, or zeros)."""
     p = _pad_to_tiles(a, t, mode)
@@ -378,7 +384,7 @@ class Yang2019:
         """Per-tile half-rate errors ``(2, th, tw)`` in luma units, ``[E_y (1x2), E_x (2x1)]``,
         and the per-tile mean luma ``(th, tw)``. Only neighbour pairs inside a tile count."""
         frame = as_frame(source)
-        t = self.tile_size
+        t = _frame_tile(self.tile_size, frame.size)
         lum = _luma(frame.reprojected, LUMA_WEIGHTS)
         # vertical neighbours -> error of halving vertically (1x2); horizontal -> 2x1
         if self.norm == "max":
@@ -405,12 +411,13 @@ class Yang2019:
 
     def _tile_motion(self, frame: Frame) -> np.ndarray:
         assert frame.motion is not None
+        t = _frame_tile(self.tile_size, frame.size)
         if self.motion_reduce == "mean":
             return np.stack([_tile_mean(np.abs(frame.motion[..., axis].astype(np.float64)) * self.motion_scale,
-                                        self.tile_size) for axis in (1, 0)])  # y then x: the 1x2, 2x1 order
+                                        t) for axis in (1, 0)])  # y then x: the 1x2, 2x1 order
         # min / max: the extreme of |v| per tile in the motion's own precision, then scaled (scaling
         # is monotone, so these are the extremes of the scaled speeds: the same values, 3x faster)
-        t, fn = self.tile_size, np.minimum if self.motion_reduce == "min" else np.maximum
+        fn = np.minimum if self.motion_reduce == "min" else np.maximum
         out = [_cell_reduce(_pad_to_tiles(np.abs(frame.motion[..., axis]), t), t, t, fn) for axis in (1, 0)]
         return np.stack(out).astype(np.float64) * self.motion_scale
 
@@ -431,7 +438,7 @@ class Yang2019:
             if frame.seen is None:
                 raise BaselineError("Yang2019(unseen='full') needs the seen mask of the frame")
             seen = frame.seen
-            unseen = frame.term(("yang2019.unseen", self.tile_size), lambda: 1.0 - _tile_mean(seen, self.tile_size))
+            unseen = frame.term(("yang2019.unseen", self.tile_size), lambda: 1.0 - _tile_mean(seen, _frame_tile(self.tile_size, frame.size)))
             est[:, unseen > self.unseen_fraction] = np.inf
         return est.astype(np.float32)
 

@@ -46,6 +46,7 @@ def _check_tile(tile: int) -> int:
 
 def _pool_np(values: np.ndarray, tile: int, reduce: Reduce) -> np.ndarray:
     h, w = values.shape[-2:]
+    tile = min(tile, max(h, w))  # any larger tile pools the same one tile (and would pad to its size)
     th, tw = tile_grid(h, w, tile)
     ph, pw = th * tile - h, tw * tile - w
     lead = values.shape[:-2]

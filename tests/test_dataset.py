@@ -120,6 +120,48 @@ def test_the_target_store_keeps_to_its_folder(tmp_path: Path) -> None:
     assert (tmp_path / "ds" / "samples" / "a.npz").read_bytes() == before
 
 
+@pytest.mark.parametrize("corrupt", ["manifest", "manifest-json", "manifest-base", "npz", "npz-shape"])
+def test_corrupt_targets_are_target_errors(tmp_path: Path, corrupt: str) -> None:
+    """A damaged targets manifest or file leaked JSONDecodeError / BadZipFile out of evaluate()."""
+    from rtp.capture import TargetError, TargetStore
+
+    DatasetWriter(tmp_path / "ds").write("a", _buffers(), {})
+    store = TargetStore(tmp_path / "ds")
+    store.declare("jnyang", {"weber_l": 0.02})
+    store.write("a", "jnyang", np.ones((6, 6, 10), np.float32), (24, 40))
+    assert store.load("a", "jnyang", 16).shape == (6, 2, 3)
+    manifest, npz = tmp_path / "ds" / "targets" / "manifest.json", store.path("a", "jnyang")
+    if corrupt == "manifest":
+        manifest.write_bytes(b"\x00\xff{")
+    elif corrupt == "manifest-json":
+        manifest.write_text("[1, 2]")
+    elif corrupt == "manifest-base":
+        manifest.write_text('{"format": "rtp-targets", "format_version": 1, "base_tile": "4"}')
+    elif corrupt == "npz":
+        npz.write_bytes(npz.read_bytes()[:40])
+    else:
+        with open(npz, "wb") as f:
+            np.savez(f, values=np.ones((6, 3, 3), np.float32), size=np.array([24, 40]))
+    with pytest.raises(TargetError, match=r"manifest\.json|a\.npz"):
+        TargetStore(tmp_path / "ds").load("a", "jnyang", 16)
+
+
+def test_targets_at_a_tile_past_the_frame_pool_without_padding(tmp_path: Path) -> None:
+    """A tile far larger than the frame padded the base tiles to its size (tile**2 / 16 floats)."""
+    from rtp.capture import TargetError, TargetStore
+
+    DatasetWriter(tmp_path / "ds").write("a", _buffers(), {})
+    store = TargetStore(tmp_path / "ds")
+    values = np.random.default_rng(0).random((6, 6, 10)).astype(np.float32)
+    store.write("a", "jnyang", values, (24, 40))
+    store.write("a", "psnr", values, (24, 40))
+    assert np.array_equal(store.load("a", "jnyang", 4 * 2**40), values.max(axis=(1, 2), keepdims=True))
+    assert np.array_equal(store.load("a", "psnr", 4 * 2**40), store.load("a", "psnr", 40))
+    for tile in (0, -4, 6, 4.0):
+        with pytest.raises(TargetError, match="tile"):
+            store.load("a", "jnyang", tile)  # type: ignore[arg-type]
+
+
 def test_interrupted_write_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     w = DatasetWriter(tmp_path / "ds")
 

@@ -185,6 +185,16 @@ def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile:
             assert ranges[k, bi, bj] == want, (rate, bi, bj)
 
 
+@pytest.mark.parametrize("options", [{}, {"unseen": "full"}, {"norm": "max"}, {"motion_reduce": "max"}])
+def test_yang_with_a_tile_past_the_frame_estimates_the_one_tile(options: dict[str, Any]) -> None:
+    """Yang2019(tile_size=10**6) padded the frame to 10**12 pixels before estimating its one tile."""
+    rng = np.random.default_rng(1)
+    frame = Frame(rng.random((37, 53, 3)).astype(np.float32), rng.normal(0, 3, (37, 53, 2)).astype(np.float32),
+                  (rng.random((37, 53)) > 0.3).astype(np.float32))
+    whole = Yang2019(53, **options).predict(frame)
+    assert whole.shape == (6, 1, 1) and np.array_equal(Yang2019(10**6, **options).predict(frame), whole)
+
+
 def test_monotone_over_rates_takes_the_worst_of_the_contained_rates() -> None:
     from rtp.evaluate import CONTAINED_RATES, monotone_over_rates
 

@@ -171,6 +171,15 @@ def test_pool_any_tile_size_matches_brute_force(tile: int) -> None:
             assert mean[i, j] == pytest.approx(block.mean(), rel=1e-6)
 
 
+def test_a_tile_past_the_frame_pools_the_one_tile_without_padding() -> None:
+    """A tile of 2**40 padded the map to 2**80 pixels (numpy's MemoryError, or the OOM killer)."""
+    emap = np.random.default_rng(0).random((2, 37, 50)).astype(np.float32)
+    assert np.array_equal(M.pool_tiles(emap, 2**40), emap.max(axis=(1, 2), keepdims=True))
+    assert M.pool_tiles(emap, 2**40, "mean") == pytest.approx(emap.mean(axis=(1, 2), keepdims=True), rel=1e-6)
+    ref, test = emap[0, ..., None].repeat(3, -1), emap[1, ..., None].repeat(3, -1)
+    assert M.tile_metric("psnr", ref, test, 2**40) == M.tile_metric("psnr", ref, test, 50)
+
+
 # --- Yang, Weber correction ----------------------------------------------------------------------
 
 
