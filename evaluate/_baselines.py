@@ -438,7 +438,8 @@ class Yang2019:
             if frame.seen is None:
                 raise BaselineError("Yang2019(unseen='full') needs the seen mask of the frame")
             seen = frame.seen
-            unseen = frame.term(("yang2019.unseen", self.tile_size), lambda: 1.0 - _tile_mean(seen, _frame_tile(self.tile_size, frame.size)))
+            t = _frame_tile(self.tile_size, frame.size)
+            unseen = frame.term(("yang2019.unseen", self.tile_size), lambda: 1.0 - _tile_mean(seen, t))
             est[:, unseen > self.unseen_fraction] = np.inf
         return est.astype(np.float32)
 
