@@ -29,7 +29,9 @@ from .viewpoints import (
     _EYE,
     _STEP_UP,
     ViewpointError,
+    _count,
     _Floors,
+    _real,
     _spawn_eye_height,
     _Validator,
     free_space,
@@ -121,15 +123,16 @@ def camera_path(
     prof = PATH_PROFILES.get(profile) if isinstance(profile, str) else profile
     if prof is None:
         raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)}")
-    if frames < 1 or not fps > 0:
-        raise ViewpointError(f"expected frames >= 1 and fps > 0, got {frames} and {fps}")
+    frames, seed = _count("frames", frames, 1), _count("seed", seed)
+    fps = _real("fps", fps, 0.0, lo_open=True)
+    _real("fov_y", fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
+    if eye_height is not None:
+        _real("eye_height (metres)", eye_height, 0.0, 10.0, lo_open=True, hi_open=True)
     tris, grid, _, cand = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance, max_height=max_height,
                                    focus=True)
     free = np.flatnonzero(cand)
     if len(free) == 0:
         raise ViewpointError(f"no free space in {scene.name!r} at {clearance} m from the geometry for a camera path")
-    if eye_height is not None and not 0 < eye_height < 10:
-        raise ViewpointError(f"expected an eye height in metres in (0, 10), got {eye_height}")
     val = _Validator(tris)
     rng = np.random.default_rng(seed)
     floors = _Floors(grid)

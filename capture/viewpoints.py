@@ -92,6 +92,41 @@ PLACEMENTS: dict[str, str] = {
 }
 
 
+# -- parameter checks ----------------------------------------------------------------------------
+
+
+def _real(name: str, value: object, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+          hi_open: bool = False) -> float:
+    """``value`` as a float in the range given, or a ViewpointError saying what was expected."""
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    v = float(value) if ok else math.nan  # type: ignore[arg-type]
+    if ok and math.isfinite(v):
+        ok = (lo is None or (v > lo if lo_open else v >= lo)) and (hi is None or (v < hi if hi_open else v <= hi))
+    else:
+        ok = False
+    if not ok:
+        lo_s = "" if lo is None else f"{'>' if lo_open else '>='} {lo:g}"
+        hi_s = "" if hi is None else f"{'<' if hi_open else '<='} {hi:g}"
+        raise ViewpointError(f"{name}: expected a finite number {' and '.join(x for x in (lo_s, hi_s) if x)}, "
+                             f"got {value!r}")
+    return v
+
+
+def _count(name: str, value: object, lo: int = 0) -> int:
+    """``value`` as an integer >= ``lo``, or a ViewpointError (numpy's generator refuses negative seeds in its
+    own words; a float count failed in ``range``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        raise ViewpointError(f"{name}: expected an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def _check_space(voxel: float, clearance: float, max_height: float | None) -> None:
+    _real("voxel", voxel, 0.0, lo_open=True)
+    _real("clearance", clearance, 0.0)
+    if max_height is not None:
+        _real("max_height", max_height, 0.0, lo_open=True)
+
+
 # -- geometry helpers -----------------------------------------------------------------------------
 
 def scene_triangles(scene: Scene) -> np.ndarray:
@@ -282,7 +317,7 @@ class VoxelGrid:
         """Dilate ``mask`` by ``k`` voxels in the 26-neighbourhood (a cube of side 2k+1)."""
         out = mask.copy()
         for axis in range(3):
-            for _ in range(k):
+            for _ in range(min(k, out.shape[axis])):  # (past the grid's side it changes nothing more)
                 cur = out.copy()
                 sl_a = [slice(None)] * 3
                 sl_b = [slice(None)] * 3
@@ -382,6 +417,7 @@ def free_space(
     whole-map grids, so their published paths stay as they were; the capture's viewpoints keep the
     one grid (the datasets were captured with it).
     """
+    _check_space(voxel, clearance, max_height)
     if not scene.spawn_points:
         raise ViewpointError(f"scene {scene.name!r} has no spawn points to start the flood fill from")
     tris = scene_triangles(scene)
@@ -538,6 +574,21 @@ def sample_viewpoints(
         raise ViewpointError(f"unknown motion profile {profile!r}; expected one of {sorted(MOTION_PROFILES)}")
     if placement not in PLACEMENTS:
         raise ViewpointError(f"unknown placement {placement!r}; expected one of {', '.join(PLACEMENTS)}")
+    n, seed, prev_tries = _count("n", n), _count("seed", seed), _count("prev_tries", prev_tries, 1)
+    if max_attempts is not None:
+        _count("max_attempts", max_attempts)
+    pitch_limit = _real("pitch_limit", pitch_limit, 0.0, 90.0)
+    _real("max_distance", max_distance, 0.0, lo_open=True)
+    _real("aspect", aspect, 0.0, lo_open=True)
+    _real("fov_y", fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
+    if not isinstance(rays, (tuple, list)) or len(rays) != 2:
+        raise ViewpointError(f"rays: expected (columns, rows), got {rays!r}")
+    rays = (_count("rays' columns", rays[0], 1), _count("rays' rows", rays[1], 1))
+    coverages = [min_coverage] if isinstance(min_coverage, (int, float, np.number)) else min_coverage
+    if not isinstance(coverages, Sequence) or not coverages:
+        raise ViewpointError(f"min_coverage: expected a number or a non-empty sequence of numbers, got {min_coverage!r}")
+    levels = [_real("min_coverage", c, 0.0) for c in coverages]  # (above 1: never met)
+    _check_space(voxel, clearance, max_height)
     tris, grid, reach, cand_mask = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance,
                                               max_height=max_height)
     floors = eye = None
@@ -557,9 +608,6 @@ def sample_viewpoints(
 
     val = _Validator(tris)
     rng = np.random.default_rng(seed)
-    levels = [float(min_coverage)] if isinstance(min_coverage, (int, float)) else [float(c) for c in min_coverage]
-    if not levels:
-        raise ViewpointError("min_coverage: expected a number or a non-empty sequence of numbers")
     out: list[tuple[Camera, Camera]] = []
     limit = max_attempts if max_attempts is not None else 1200
     level = 0

@@ -61,8 +61,12 @@ def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
     sc, _ = scene
     with pytest.raises(ViewpointError, match="unknown path profile 'jog'"):
         camera_path(sc, 10, "jog")
-    with pytest.raises(ViewpointError, match="frames >= 1"):
-        camera_path(sc, 0)
+    for kwargs, words in (({"frames": 0}, "frames: expected an integer >= 1"), ({"frames": 2.5}, "frames"),
+                          ({"seed": -1}, "seed: expected an integer >= 0"), ({"fps": float("nan")}, "fps"),
+                          ({"fov_y": 180}, "fov_y"), ({"clearance": -1}, "clearance"), ({"voxel": 0}, "voxel"),
+                          ({"max_height": float("inf")}, "max_height")):
+        with pytest.raises(ViewpointError, match=words):  # (seed -1 was numpy's ValueError, fps nan accepted)
+            camera_path(sc, **{"frames": 10, **kwargs})  # type: ignore[arg-type]
 
 
 def test_paths_walk_the_floors_at_the_spawn_points_eye_height(scene) -> None:  # noqa: ANN001
@@ -82,7 +86,7 @@ def test_paths_walk_the_floors_at_the_spawn_points_eye_height(scene) -> None:  #
     own = camera_path(sc, 60, "slow", seed=0, blockers=blockers, eye_height=1.0)
     assert own.eye_height == 1.0
     assert np.median([c.position[1] - floors.below(np.array(c.position)) for c in own.cameras]) == pytest.approx(1.0)
-    with pytest.raises(ViewpointError, match="eye height"):
+    with pytest.raises(ViewpointError, match="eye_height"):
         camera_path(sc, 10, eye_height=-1.0)
 
 

@@ -13,6 +13,7 @@ from rtp.capture.viewpoints import (
     MotionProfile,
     ViewpointError,
     VoxelGrid,
+    free_space,
     point_triangle_distance,
     ray_grid,
     sample_viewpoints,
@@ -112,7 +113,22 @@ def test_viewpoint_errors(scene):
     with pytest.raises(ViewpointError, match="spawn"):
         sample_viewpoints(bare, 1, 0)
     with pytest.raises(ViewpointError, match="valid viewpoints"):
-        sample_viewpoints(scene, 5, 0, min_coverage=1.01, max_attempts=20)
+        sample_viewpoints(scene, 5, 0, clearance=50.0, max_attempts=20)
+    for kwargs, words in (({"seed": -1}, "seed: expected an integer >= 0"), ({"n": 2.5}, "n: expected an integer"),
+                          ({"clearance": float("nan")}, "clearance"), ({"min_coverage": -0.1}, "min_coverage"),
+                          ({"min_coverage": []}, "min_coverage"), ({"rays": (0, 3)}, "rays"), ({"fov_y": 0}, "fov_y"),
+                          ({"pitch_limit": 91}, "pitch_limit"), ({"max_attempts": -1}, "max_attempts"),
+                          ({"aspect": -1}, "aspect"), ({"voxel": float("inf")}, "voxel")):
+        with pytest.raises(ViewpointError, match=words):  # (seed -1 and nan were numpy's ValueErrors)
+            sample_viewpoints(scene, **{"n": 1, "seed": 0, **kwargs})  # type: ignore[arg-type]
+
+
+def test_a_clearance_past_the_level_is_refused_in_seconds(scene):
+    """clearance=1e6 dilated the solid voxels 4 million times (minutes) before refusing every draw."""
+    with pytest.raises(ViewpointError, match="valid viewpoints"):
+        sample_viewpoints(scene, 1, 0, clearance=1e6, max_attempts=50)
+    _, _, reach, cand = free_space(scene, clearance=1e6)
+    assert reach.any() and not cand.any()
 
 
 def test_viewpoints_are_a_stream_through_the_coverage_fallback(scene):
