@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._checks import real, vector
+
 __all__ = ["Camera"]
 
 
@@ -26,6 +28,14 @@ class Camera:
     fov_y: float = 70.0
     near: float = 0.05
     far: float = 200.0
+
+    def __post_init__(self) -> None:
+        vector("Camera", "position", self.position, 3)
+        real("Camera", "yaw", self.yaw)
+        real("Camera", "pitch", self.pitch)
+        real("Camera", "fov_y", self.fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
+        real("Camera", "near", self.near, 0.0, lo_open=True)
+        real("Camera", "far", self.far, float(self.near), lo_open=True)
 
     @property
     def forward(self) -> np.ndarray:

@@ -10,6 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rtp.sdk import ParameterError
+
+from ._checks import array, real, vector
+
 __all__ = ["Material", "Mesh", "PointLight", "Scene", "SpawnPoint", "SunLight"]
 
 
@@ -32,6 +36,20 @@ class Material:
     emissive: tuple[float, float, float] = (0.0, 0.0, 0.0)
     alpha_cutoff: float | None = None
 
+    def __post_init__(self) -> None:
+        vector("Material", "base_color", self.base_color, 4, 0.0, 1.0)
+        for key in ("roughness", "metallic", "specular"):
+            real("Material", key, getattr(self, key), 0.0, 1.0)
+        vector("Material", "emissive", self.emissive, 3, 0.0)
+        if self.alpha_cutoff is not None:
+            real("Material", "alpha_cutoff", self.alpha_cutoff, 0.0, 1.0)
+        t = self.texture
+        if t is not None and (not isinstance(t, np.ndarray) or t.dtype != np.uint8 or t.ndim != 3 or t.shape[2] != 4
+                              or t.shape[0] < 1 or t.shape[1] < 1):
+            got = f"{t.dtype} {t.shape}" if isinstance(t, np.ndarray) else type(t).__name__
+            raise ParameterError(f"Material.texture: expected None or a uint8 array of shape (H, W, 4), got {got}",
+                                 "texture")
+
 
 @dataclass
 class Mesh:
@@ -44,6 +62,23 @@ class Mesh:
     indices: np.ndarray  # (M, 3) uint32
     material: int  # index into Scene.materials
 
+    def __post_init__(self) -> None:
+        self.positions = array("Mesh", "positions", self.positions, 3, "f")
+        n = len(self.positions)
+        self.normals = array("Mesh", "normals", self.normals, 3, "f")
+        self.uvs = array("Mesh", "uvs", self.uvs, 2, "f")
+        self.indices = array("Mesh", "indices", self.indices, 3, "iu")
+        for key, a in (("normals", self.normals), ("uvs", self.uvs)):
+            if len(a) != n:
+                raise ParameterError(f"Mesh.{key}: expected one row per vertex ({n}), got {len(a)}", key)
+        if self.indices.size and (int(self.indices.min()) < 0 or int(self.indices.max()) >= n):
+            raise ParameterError(f"Mesh.indices: expected vertex indices in [0, {n}), got "
+                                 f"[{int(self.indices.min())}, {int(self.indices.max())}]", "indices")
+        m = self.material
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 0:
+            raise ParameterError(f"Mesh.material: expected an index into Scene.materials (an integer >= 0), got {m!r}",
+                                 "material")
+
 
 @dataclass
 class SunLight:
@@ -52,6 +87,13 @@ class SunLight:
     direction: tuple[float, float, float] = (-0.4, -1.0, -0.3)
     colour: tuple[float, float, float] = (1.0, 0.95, 0.85)
     intensity: float = 3.0
+
+    def __post_init__(self) -> None:
+        vector("SunLight", "direction", self.direction, 3)
+        if not any(float(x) for x in self.direction):
+            raise ParameterError("SunLight.direction: expected a non-zero vector, got (0, 0, 0)", "direction")
+        vector("SunLight", "colour", self.colour, 3, 0.0)
+        real("SunLight", "intensity", self.intensity, 0.0)
 
 
 @dataclass
@@ -63,6 +105,12 @@ class PointLight:
     intensity: float = 10.0
     radius: float = 10.0
 
+    def __post_init__(self) -> None:
+        vector("PointLight", "position", self.position, 3)
+        vector("PointLight", "colour", self.colour, 3, 0.0)
+        real("PointLight", "intensity", self.intensity, 0.0)
+        real("PointLight", "radius", self.radius, 0.0, lo_open=True)
+
 
 @dataclass
 class SpawnPoint:
@@ -71,6 +119,10 @@ class SpawnPoint:
 
     position: tuple[float, float, float]
     yaw: float = 0.0
+
+    def __post_init__(self) -> None:
+        vector("SpawnPoint", "position", self.position, 3)
+        real("SpawnPoint", "yaw", self.yaw)
 
 
 @dataclass
@@ -85,6 +137,22 @@ class Scene:
     sky_colour: tuple[float, float, float] = (0.45, 0.6, 0.85)  # linear radiance of the sky / ambient
     ambient: float = 0.35  # strength of the sky-coloured ambient (hemisphere) light
     spawn_points: list[SpawnPoint] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        for key, items, kind in (("meshes", self.meshes, Mesh), ("materials", self.materials, Material),
+                                 ("point_lights", self.point_lights, PointLight),
+                                 ("spawn_points", self.spawn_points, SpawnPoint)):
+            if not isinstance(items, list) or not all(isinstance(x, kind) for x in items):
+                raise ParameterError(f"Scene.{key}: expected a list of {kind.__name__}, got "
+                                     f"{type(items).__name__ if not isinstance(items, list) else 'other items'}", key)
+        if not isinstance(self.sun, SunLight):
+            raise ParameterError(f"Scene.sun: expected a SunLight, got {type(self.sun).__name__}", "sun")
+        for i, m in enumerate(self.meshes):
+            if m.material >= len(self.materials):
+                raise ParameterError(f"Scene.meshes[{i}].material: expected an index below the {len(self.materials)} "
+                                     f"materials, got {m.material}", "meshes")
+        vector("Scene", "sky_colour", self.sky_colour, 3, 0.0)
+        real("Scene", "ambient", self.ambient, 0.0)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

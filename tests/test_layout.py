@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: room -> (folder, rooms it may import). The "may import" column of docs/architecture.md.
 ROOMS: dict[str, tuple[str, frozenset[str]]] = {
     "sdk": ("sdk", frozenset()),
-    "scene": ("scene", frozenset()),
+    "scene": ("scene", frozenset({"sdk"})),
     "plugins.moderngl": ("plugins/moderngl", frozenset({"sdk", "scene"})),
     "plugins.pyrender": ("plugins/pyrender", frozenset({"sdk", "scene"})),
     "metrics": ("metrics", frozenset({"sdk"})),

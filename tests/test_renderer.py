@@ -378,8 +378,9 @@ def test_renderer_errors_and_lifetime(gl_context):
     with Renderer(32, 16, ctx=ctx, shadow_map_size=64) as r:
         with pytest.raises(RendererError, match="no scene"):
             r.render(Camera((0.0, 0.0, 0.0)))
-        bad = Mesh(np.zeros((3, 3), np.float32), np.zeros((2, 3), np.float32), np.zeros((3, 2), np.float32),
+        bad = Mesh(np.zeros((3, 3), np.float32), np.zeros((3, 3), np.float32), np.zeros((3, 2), np.float32),
                    np.array([[0, 1, 2]], np.uint32), 0)
+        bad.normals = np.zeros((2, 3), np.float32)  # changed after it was made (its constructor refuses this)
         with pytest.raises(RendererError, match="mesh 0"):
             r.load_scene(Scene("bad", [bad], [Material("m")]))
         r.load_scene(Scene("empty", [], [Material("m")]))

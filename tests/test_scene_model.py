@@ -1,0 +1,71 @@
+"""The scene model refuses what the renderer would draw wrongly: each bad field is a ParameterError
+naming the class and field when the object is made (a NaN camera gave NaN matrices and a black
+frame; a mesh with an index past its vertices, a GL error or garbage later)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from rtp import sdk
+from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SpawnPoint, SunLight, box_mesh
+
+
+def _mesh(**changes: Any) -> Mesh:
+    fields = {"positions": np.zeros((3, 3), np.float32), "normals": np.tile([0, 1, 0], (3, 1)).astype(np.float32),
+              "uvs": np.zeros((3, 2), np.float32), "indices": np.array([[0, 1, 2]], np.uint32), "material": 0}
+    return Mesh(**{**fields, **changes})
+
+
+BAD: list[tuple[str, Any, str]] = [
+    ("camera nan position", lambda: Camera((math.nan, 0.0, 0.0)), "Camera.position"),
+    ("camera 2d position", lambda: Camera((0.0, 0.0)), "Camera.position"),  # type: ignore[arg-type]
+    ("camera inf yaw", lambda: Camera((0.0, 0.0, 0.0), yaw=math.inf), "Camera.yaw"),
+    ("camera fov 0", lambda: Camera((0.0, 0.0, 0.0), fov_y=0.0), "Camera.fov_y"),
+    ("camera fov 180", lambda: Camera((0.0, 0.0, 0.0), fov_y=180.0), "Camera.fov_y"),
+    ("camera near 0", lambda: Camera((0.0, 0.0, 0.0), near=0.0), "Camera.near"),
+    ("camera far before near", lambda: Camera((0.0, 0.0, 0.0), near=1.0, far=0.5), "Camera.far"),
+    ("camera string pitch", lambda: Camera((0.0, 0.0, 0.0), pitch="5"), "Camera.pitch"),  # type: ignore[arg-type]
+    ("mesh nan positions", lambda: _mesh(positions=np.full((3, 3), np.nan, np.float32)), "Mesh.positions"),
+    ("mesh flat positions", lambda: _mesh(positions=np.zeros(9, np.float32)), "Mesh.positions"),
+    ("mesh normals short", lambda: _mesh(normals=np.zeros((2, 3), np.float32)), "Mesh.normals"),
+    ("mesh uvs 3 columns", lambda: _mesh(uvs=np.zeros((3, 3), np.float32)), "Mesh.uvs"),
+    ("mesh float indices", lambda: _mesh(indices=np.array([[0.0, 1.0, 2.0]])), "Mesh.indices"),
+    ("mesh index past vertices", lambda: _mesh(indices=np.array([[0, 1, 3]], np.uint32)), "Mesh.indices"),
+    ("mesh negative index", lambda: _mesh(indices=np.array([[0, 1, -1]], np.int64)), "Mesh.indices"),
+    ("mesh material -1", lambda: _mesh(material=-1), "Mesh.material"),
+    ("material colour 3", lambda: Material("m", base_color=(1.0, 1.0, 1.0)), "Material.base_color"),  # type: ignore[arg-type]
+    ("material colour 255", lambda: Material("m", base_color=(255, 0, 0, 255)), "Material.base_color"),
+    ("material roughness nan", lambda: Material("m", roughness=math.nan), "Material.roughness"),
+    ("material emissive < 0", lambda: Material("m", emissive=(-1.0, 0.0, 0.0)), "Material.emissive"),
+    ("material cutoff 2", lambda: Material("m", alpha_cutoff=2.0), "Material.alpha_cutoff"),
+    ("material rgb texture", lambda: Material("m", texture=np.zeros((4, 4, 3), np.uint8)), "Material.texture"),
+    ("material float texture", lambda: Material("m", texture=np.zeros((4, 4, 4), np.float32)), "Material.texture"),
+    ("sun zero direction", lambda: SunLight(direction=(0.0, 0.0, 0.0)), "SunLight.direction"),
+    ("sun negative intensity", lambda: SunLight(intensity=-1.0), "SunLight.intensity"),
+    ("point light radius 0", lambda: PointLight((0.0, 0.0, 0.0), radius=0.0), "PointLight.radius"),
+    ("spawn nan", lambda: SpawnPoint((0.0, math.nan, 0.0)), "SpawnPoint.position"),
+    ("scene material past the list", lambda: Scene("s", [_mesh(material=1)], [Material("m")]), r"meshes\[0\].material"),
+    ("scene a tuple of meshes", lambda: Scene("s", (_mesh(),), [Material("m")]), "Scene.meshes"),  # type: ignore[arg-type]
+    ("scene a dict as material", lambda: Scene("s", [], [{"name": "m"}]), "Scene.materials"),  # type: ignore[list-item]
+    ("scene ambient -1", lambda: Scene("s", [], [], ambient=-1.0), "Scene.ambient"),
+    ("scene sun None", lambda: Scene("s", [], [], sun=None), "Scene.sun"),  # type: ignore[arg-type]
+]
+
+
+@pytest.mark.parametrize("make, words", [(m, w) for _, m, w in BAD], ids=[n for n, _, _ in BAD])
+def test_bad_fields_are_parameter_errors(make: Any, words: str) -> None:
+    with pytest.raises(sdk.ParameterError, match=words):
+        make()
+
+
+def test_good_scenes_are_taken_as_given() -> None:
+    mesh = box_mesh((0, 0, 0), (1, 1, 1), 0)
+    scene = Scene("ok", [mesh], [Material("m", texture=np.zeros((2, 2, 4), np.uint8), alpha_cutoff=0.5)],
+                  point_lights=[PointLight((0.0, 1.0, 0.0))], spawn_points=[SpawnPoint((0.0, 1.6, 0.0), yaw=np.float64(30))])
+    assert scene.meshes[0] is mesh and mesh.positions.dtype == np.float32
+    cam = Camera((np.float32(1.0), 2, 3.0), yaw=np.float64(10.0), pitch=-95.0)  # numpy numbers; pitch past 90 wraps
+    assert np.isfinite(cam.view_projection(64, 32)).all()
