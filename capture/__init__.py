@@ -5,7 +5,16 @@ Importing this package needs only numpy; rendering (:func:`capture`) needs ``rtp
 computing targets (:func:`compute_targets`) ``rtp[metrics]``, both imported when called.
 """
 
-from ._capture import MESH_EXTENSIONS, PROCEDURAL_PREFIX, CaptureReport, capture, check_scene, load_scene, scene_id
+from ._capture import (
+    MESH_EXTENSIONS,
+    PROCEDURAL_PREFIX,
+    CaptureReport,
+    capture,
+    check_frame_size,
+    check_scene,
+    load_scene,
+    scene_id,
+)
 from ._dataset import (
     BUFFERS,
     DatasetError,
@@ -41,6 +50,7 @@ __all__ = [
     "TargetError",
     "TargetStore",
     "capture",
+    "check_frame_size",
     "check_scene",
     "compute_targets",
     "check_image_output",

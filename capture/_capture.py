@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
+import numbers
 import os
 import platform
 import re
@@ -94,6 +95,32 @@ def check_scene(name: str, cache_dir: str | os.PathLike[str] | None, split: str 
         return
     scenes.check_map(name, Path(scenes.default_cache_dir() if cache_dir is None else cache_dir), split=split,
                      splits=splits)
+
+
+def _names(key: str, value: str | Sequence[str]) -> list[str]:
+    """A list of names from one name or a sequence of them (a string is one name, not its letters)."""
+    items = [value] if isinstance(value, str) else value
+    if not isinstance(items, (list, tuple)) or not all(isinstance(v, str) for v in items):
+        raise ParameterError(f"{key}: expected a name or a list of names, got {value!r}", key)
+    return list(items)
+
+
+def check_frame_size(size: Sequence[int], what: str = "size", *, renderer: bool = True) -> tuple[int, int]:
+    """``size`` as ``(width, height)`` after checking it: two integers of at least 16 pixels, and with
+    ``renderer`` a frame the reference renderer can draw here (one is made and released: a size past
+    the GL context's largest texture, or past its memory within it, is a ``RendererError``). What
+    :func:`capture` and :func:`rtp.evaluate.play` check before they write anything."""
+    ok = isinstance(size, (tuple, list)) and len(size) == 2 and all(
+        isinstance(v, numbers.Integral) and not isinstance(v, bool) and int(v) >= 16 for v in size)
+    if not ok:
+        raise ParameterError(f"{what}: expected (width, height), integers of at least 16 pixels, got {size!r}", what)
+    w, h = int(size[0]), int(size[1])
+    if renderer:
+        from rtp.plugins.moderngl import Renderer
+
+        with Renderer(w, h):
+            pass
+    return w, h
 
 
 def _procedural_seed(name: str) -> int | None:
@@ -250,6 +277,7 @@ def capture(
     _on_ray_actors: Callable[[list[Any]], None] | None = None,
 ) -> CaptureReport:
     """Capture ``per_scene`` samples per scene and motion profile into the dataset folder ``out``.
+``scene_names`` and ``profiles`` are one name or a list of them.
 
     ``size`` is ``(width, height)``. ``placement`` is where the cameras stand
     (:data:`rtp.capture.viewpoints.PLACEMENTS`: ``"free"`` anywhere in the viewpoint domain, ``"eye"``
@@ -262,10 +290,12 @@ def capture(
     one worker per CPU of the cluster). Samples are the same as the local path's; workers send them
     back as bytes and this process writes them, so no shared filesystem is needed.
     """
-    if per_scene < 1:
-        raise ParameterError(f"per_scene must be >= 1, got {per_scene}")
-    if workers is not None and workers < 1:
-        raise ParameterError(f"workers must be >= 1, got {workers}")
+    scene_names, profiles = _names("scene_names", scene_names), _names("profiles", profiles)
+    for key, value in (("per_scene", per_scene), ("workers", 1 if workers is None else workers)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+            raise ParameterError(f"{key} must be an integer >= 1, got {value!r}", key)
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise ParameterError(f"seed must be an integer, got {seed!r}", "seed")
     if not scene_names:
         raise ParameterError("no scenes to capture")
     from rtp import sdk
@@ -276,14 +306,7 @@ def capture(
         raise ParameterError(f"unknown motion profile {bad[0]!r}; profiles are {', '.join(MOTION_PROFILES)}")
     if placement not in PLACEMENTS:
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
-    w, h = size
-    if ray is None:  # (a Ray driver may have no OpenGL of its own: its workers say so)
-        from rtp.plugins.moderngl import Renderer
-
-        # A renderer of that size, made and released: a size this OpenGL cannot draw (past its largest
-        # texture, or past its memory within it) is refused before the manifest records it.
-        with Renderer(w, h):
-            pass
+    w, h = check_frame_size(size, renderer=ray is None)  # (a Ray driver may have no OpenGL: its workers say so)
     for name in scene_names:  # every name now: not after the manifest, or an hour into the first map
         check_scene(name, cache_dir, split, None if splits is None else str(splits))
     settings = {

@@ -182,7 +182,7 @@ class TargetStore:
                               f"(H, W) at base tile {self.base_tile}, got {values.dtype} {values.shape}, size {size}; "
                               "delete the file and run `rtp targets` again")
         mse = _stores_mse(metric)
-        pooled = pool_targets(values, size, self.base_tile, tile, mse=mse)  # type: ignore[arg-type]
+        pooled = pool_targets(values, size, self.base_tile, tile, mse=mse)
         return psnr_from_mse(pooled) if mse else pooled
 
 

@@ -342,7 +342,7 @@ def evaluate(
 ) -> EvaluationReport:
     """Evaluate an ONNX model on a dataset with targets (``rtp targets``) for its metric and tile.
 
-    ``scenes`` restricts the samples (``meta["scene"]``); ``threshold`` (metric units) replaces the
+    ``scenes`` restricts the samples (``meta["scene"]``; one name or a list); ``threshold`` (metric units) replaces the
     model's ``default_threshold`` for the decision table; ``unseen_fraction`` is the seen/unseen
     rule. ``yang`` / ``fidelityfx`` replace the default baselines (built at the model's tile size;
     Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25).
@@ -358,12 +358,25 @@ def evaluate(
     (:class:`_Run`: predictions and targets, quality values, every method's rates, the sweeps),
     then assemble the report and write the plots.
     """
-    if not 0.0 <= unseen_fraction < 1.0:
-        raise ParameterError(f"unseen_fraction must be in [0, 1), got {unseen_fraction}")
+    if isinstance(unseen_fraction, bool) or not isinstance(unseen_fraction, (int, float, np.number)) \
+            or not 0.0 <= unseen_fraction < 1.0:
+        raise ParameterError(f"unseen_fraction must be a share in [0, 1), got {unseen_fraction!r}", "unseen_fraction")
+    if max_samples is not None and (isinstance(max_samples, bool) or not isinstance(max_samples, (int, np.integer))
+                                    or max_samples < 1):
+        raise ParameterError(f"max_samples must be None (all) or an integer >= 1, got {max_samples!r}", "max_samples")
+    scenes = [scenes] if isinstance(scenes, str) else scenes  # (one name, not its letters)
+    if scenes is not None and (not isinstance(scenes, (list, tuple, set, frozenset))
+                               or not all(isinstance(x, str) for x in scenes)):
+        raise ParameterError(f"scenes must be None (all), a scene name or a list of them, got {scenes!r}", "scenes")
+    for key, flag in (("baselines", baselines), ("sweep", sweep)):
+        if not isinstance(flag, bool):  # ("no" is a true string)
+            raise ParameterError(f"{key} must be True or False, got {flag!r}", key)
+    if plot_sample is not None and not isinstance(plot_sample, str):
+        raise ParameterError(f"plot_sample must be None or a sample id, got {plot_sample!r}", "plot_sample")
     predictor = sdk.load(model, metadata=metadata, tile_size=tile_size)
     # the metadata as evaluated: on the predictor's (hardware) tiles
     meta = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
-    thr = float(meta.default_threshold if threshold is None else threshold)
+    thr = meta.default_threshold if threshold is None else sdk.check_threshold(threshold, meta.higher_is_better)
     store, samples = _load_samples(data, meta, scenes, max_samples)
     selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
     yang_scored = baselines and not meta.higher_is_better and "yang2019" in selectors

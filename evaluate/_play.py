@@ -361,15 +361,32 @@ class PlayReport:
         return "\n".join(lines)
 
 
+def _integer(key: str, value: Any, lo: int, what: str = "") -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        raise PlayError(f"{key}: expected an integer of at least {lo}{what}, got {value!r}", key)
+    return int(value)
+
+
 def _check(frames: int, fps: float, flip_every: int, size: tuple[int, int], reuse: Iterable[int]) -> None:
-    if frames < 3:
-        raise PlayError(f"frames: expected at least 3 (the first has no history), got {frames}", "frames")
-    if not fps > 0:
-        raise PlayError(f"fps: expected > 0, got {fps}", "fps")
-    if flip_every < 0:
-        raise PlayError(f"flip_every: expected >= 0 (0: no FLIP), got {flip_every}", "flip_every")
-    if min(size) < 16:
-        raise PlayError(f"size: expected at least 16x16 pixels, got {size[0]}x{size[1]}", "size")
+    _integer("frames", frames, 3, " (the first has no history)")
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or not (math.isfinite(fps) and fps > 0):
+        raise PlayError(f"fps: expected a finite number > 0, got {fps!r}", "fps")
+    _integer("flip_every", flip_every, 0, " (0: no FLIP)")
+    if not isinstance(size, (tuple, list)) or len(size) != 2 or not all(
+            isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 16 for v in size):
+        raise PlayError(f"size: expected (width, height), integers of at least 16 pixels, got {size!r}", "size")
+
+
+def _check_options(seed: Any, workers: Any, unseen_fraction: Any, flags: dict[str, Any]) -> None:
+    """The arguments of :func:`play` that only travel to the frames: checked before any work."""
+    _integer("seed", seed, 0, " (which path through the map)")
+    _integer("workers", workers, 1)
+    if isinstance(unseen_fraction, bool) or not isinstance(unseen_fraction, (int, float, np.number)) \
+            or not 0.0 <= unseen_fraction < 1.0:
+        raise PlayError(f"unseen_fraction: expected a share in [0, 1), got {unseen_fraction!r}", "unseen_fraction")
+    for key, value in flags.items():  # ("no" is a true string)
+        if not isinstance(value, bool):
+            raise PlayError(f"{key}: expected True or False, got {value!r}", key)
 
 
 def play(
@@ -397,7 +414,7 @@ def play(
     progress: Callable[[int], None] | None = None,
 ) -> PlayReport:
     """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
-    each of ``paths`` (profiles of :data:`~rtp.capture.paths.PATH_PROFILES`), every method swept over
+    each of ``paths`` (profiles of :data:`~rtp.capture.paths.PATH_PROFILES`: one name or a list), every method swept over
     its parameter (``sweep=False``: defaults only). ``exact=False`` shades each method's frame by
     compositing the uniform-rate images (:func:`rtp.capture.paths.composite`) instead of the
     renderer's per-tile VRS pass. Writes ``play.md``, ``play.json``, and with
@@ -411,6 +428,11 @@ def play(
 
     specs = parse_methods(methods)
     _check(frames, fps, flip_every, size, (m.reuse for m in specs))
+    _check_options(seed, workers, unseen_fraction, {"sweep": sweep, "exact": exact, "plots": plots,
+                                                     "animation": animation, "open_loop": open_loop})
+    paths = [paths] if isinstance(paths, str) else paths  # (one name, not its letters)
+    if not isinstance(paths, (list, tuple)) or not paths:
+        raise PlayError(f"paths: expected a profile name or a non-empty list of them, got {paths!r}", "paths")
     for p in paths:
         if p not in PATH_PROFILES:
             raise PlayError(f"paths: unknown profile {p!r}; known: {', '.join(PATH_PROFILES)}", "paths")
@@ -418,7 +440,11 @@ def play(
         raise PlayError(f"fail_metric: expected one of {', '.join(sdk.METRICS)} (computed per frame and rate), "
                         f"got {fail_metric!r}", "fail_metric")
     info = sdk.METRICS[fail_metric]
-    fail_thr = info.default_threshold if fail_threshold is None else float(fail_threshold)
+    try:
+        fail_thr = info.default_threshold if fail_threshold is None else sdk.check_threshold(fail_threshold,
+                                                                                              info.higher_is_better)
+    except sdk.ParameterError as err:
+        raise PlayError(f"fail_{err}", "fail_threshold") from None
     metrics.check_dependencies((fail_metric, "flip") if flip_every else (fail_metric,))
     predictors: dict[str, sdk.ShadingRatePredictor] = {}
     for m in specs:  # fails early on a bad model
@@ -445,8 +471,6 @@ def play(
     if any(m.kind.startswith("fidelityfx") for m in specs) and tile_size not in (8, 16, 32):
         raise PlayError(f"FidelityFX supports 8, 16 and 32 pixel tiles, the run uses {tile_size}", "tile_size")
 
-    if workers < 1:
-        raise PlayError(f"workers: expected >= 1, got {workers}", "workers")
     # each reuse method's pixel step as the carry resolves it (a bad one fails here, before the run)
     steps = {m.name: sdk.PredictionReuse(predictors[m.model], m.reuse, step=m.step, rescale=m.rescale,
                                          carry_scale=m.carry_scale, carry=m.carry, reduce=m.reduce,
@@ -465,9 +489,11 @@ def play(
                                    "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale,
                                    "carry_scale": m.carry_scale, "carry": m.carry}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
-    from rtp.capture import check_scene
+    from rtp.capture import check_frame_size, check_scene
 
-    check_scene(scene, cache_dir, None, None)  # a scene it cannot load fails before the output folder is made
+    # a scene it cannot load, or a size the renderer cannot draw, fails before the output folder is made
+    check_scene(scene, cache_dir, None, None)
+    check_frame_size(size)
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
     if outdir is not None:

@@ -69,6 +69,7 @@ def test_sdk_all_is_pinned() -> None:
         "Transform",
         "adapters",
         "block_variances",
+        "check_threshold",
         "complete_rates",
         "depth_edges",
         "draw_rate_overlay",

@@ -174,3 +174,19 @@ def test_capture_at_eye_height_records_its_placement(tmp_path: Path) -> None:
         capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
     with pytest.raises(sdk.ParameterError, match="unknown placement"):
         capture(["procedural:5"], out, per_scene=1, size=(96, 64), placement="air")
+
+
+def test_capture_checks_its_arguments_before_writing(tmp_path: Path) -> None:
+    """Strings for counts were compared (a TypeError), a string of scene names or profiles was split
+    into its letters, and a float size reached the renderer."""
+    out = tmp_path / "ds"
+    for kwargs, words in (({"per_scene": "2"}, "per_scene must be an integer"), ({"workers": 0}, "workers"),
+                          ({"seed": 1.5}, "seed"), ({"size": (96.0, 64)}, "size: expected"), ({"size": (8, 64)}, "size"),
+                          ({"profiles": "slow,fast"}, "unknown motion profile 'slow,fast'"),
+                          ({"scene_names": [0]}, "scene_names")):
+        args = {"scene_names": ["procedural:5"], "out": out, "per_scene": 1, "size": (96, 64), **kwargs}
+        with pytest.raises(sdk.ParameterError, match=words):
+            capture(**args)  # type: ignore[arg-type]
+    assert not out.exists()
+    r = capture("procedural:5", out, per_scene=1, size=(96, 64), profiles="slow")  # one name each, not letters
+    assert r.written == 1 and DatasetReader(out).ids == ["procedural_5-slow-0000"]

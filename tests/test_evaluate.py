@@ -420,6 +420,13 @@ def test_evaluate_options_and_errors(dataset: Path, model: Path, tmp_path: Path)
     assert rep.row("quality", "model")["scene"] == "b"
     with pytest.raises(sdk.RtpError, match="not in"):
         evaluate(model, dataset, scenes=["nowhere"])
+    assert evaluate(model, dataset, scenes="b", baselines=False).samples == 1  # one name, not "b"'s letters
+    for kwargs, words in (({"threshold": "0.3"}, "threshold: expected a number"), ({"threshold": -1.0}, "threshold"),
+                          ({"unseen_fraction": "0.5"}, "unseen_fraction"), ({"max_samples": 0}, "max_samples"),
+                          ({"max_samples": 1.5}, "max_samples"), ({"scenes": [1]}, "scenes"),
+                          ({"baselines": "no"}, "baselines must be True or False"), ({"plot_sample": 3}, "plot_sample")):
+        with pytest.raises(sdk.ParameterError, match=words):  # (strings were compared or passed on)
+            evaluate(model, dataset, **kwargs)  # type: ignore[arg-type]
     other = build_onnx(tmp_path / "flip.onnx", weights=np.eye(2, 4, dtype=np.float32), tile=T,
                        metadata=base_metadata(metric="flip", outputs=["1x2", "2x1"], weber_l=None))
     with pytest.raises(sdk.RtpError, match="rtp targets"):

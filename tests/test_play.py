@@ -379,7 +379,7 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
     assert rep.ratios("jnyang", "yang2019", 0.05)["slow"] == pytest.approx(0.826 / 0.865)
 
 
-def test_methods_are_parsed_and_checked() -> None:
+def test_methods_are_parsed_and_checked(tmp_path: Path) -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
                           "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02,"
                           "jnyang@4:s4:r0.05,jnyang@4:v0.5:c1.08,split.onnx@4:features:fresh")
@@ -423,6 +423,22 @@ def test_methods_are_parsed_and_checked() -> None:
     for tile in (3, 6, 0):  # (the VRS pass refused 3 and 6 only after the first frame, as a RendererError)
         with pytest.raises(PlayError, match="multiple of 4"):
             play("procedural:0", "full", frames=3, size=(64, 48), tile_size=tile, sweep=False)
+    # strings for numbers were compared or passed on (a TypeError deep in the run, or "no" read as True), and
+    # a string paths was split into its letters ("unknown profile 'f'")
+    for kwargs, words in (({"frames": "5"}, "frames: expected an integer"), ({"fps": "60"}, "fps: expected a finite"),
+                          ({"fps": float("nan")}, "fps"), ({"flip_every": 2.5}, "flip_every"),
+                          ({"size": (64.0, 48)}, "size"), ({"size": "64x48"}, "size"), ({"seed": -1}, "seed"),
+                          ({"workers": 0}, "workers"), ({"unseen_fraction": "0.5"}, "unseen_fraction"),
+                          ({"sweep": "no"}, "sweep: expected True or False"), ({"open_loop": 1}, "open_loop"),
+                          ({"fail_threshold": "0.3"}, "fail_threshold: expected a number"),
+                          ({"fail_threshold": -1.0}, "fail_threshold"), ({"paths": []}, "paths"),
+                          ({"paths": "sprint"}, "unknown profile 'sprint'")):
+        with pytest.raises(PlayError, match=words):
+            play("procedural:0", "full", **{"frames": 3, "size": (64, 48), **kwargs})  # type: ignore[arg-type]
+    # a size this OpenGL cannot draw fails before the output folder is made (it was after the scene loaded)
+    with pytest.raises(sdk.RtpError, match="frame size|render targets"):
+        play("procedural:0", "full", frames=3, size=(16384, 16384), out=str(tmp_path / "out"))
+    assert not (tmp_path / "out").exists()
 
 
 def test_saved_at_reads_the_sweep() -> None:
