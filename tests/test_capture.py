@@ -156,6 +156,9 @@ def test_preview_sheet_labels_every_panel(tmp_path: Path) -> None:
 
     with Image.open(tmp_path / "sheet.jpg") as im:
         assert im.format == "JPEG"
+    for scale in (0, -2, 1.5):  # (0 was a ZeroDivisionError)
+        with pytest.raises(sdk.ParameterError, match="scale"):
+            preview_sheet(ds[ds.ids[0]], scale=scale)  # type: ignore[arg-type]
 
 
 def test_capture_at_eye_height_records_its_placement(tmp_path: Path) -> None:

@@ -560,3 +560,6 @@ def test_the_baselines_refuse_frames_they_would_misread() -> None:
         with pytest.raises(sdk.InputDtypeError, match="255"):
             method.shading_rates(eight_bit)
         assert method.shading_rates(eight_bit / np.float32(255)).shape == (3, 4)
+        for bad in (float("nan"), -1.0, "0.05"):  # (FidelityFX read nan as 1x1 everywhere and -1 the same)
+            with pytest.raises(sdk.ParameterError, match="threshold"):
+                method.shading_rates(eight_bit / np.float32(255), bad)  # type: ignore[arg-type]

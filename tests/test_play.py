@@ -405,7 +405,8 @@ def test_methods_are_parsed_and_checked(tmp_path: Path) -> None:
                        ("jnyang@8:r0.1:r0.2", "at most one"), ("jnyang@4:s0", "pixel step"), ("jnyang@4:sx", "pixel step"),
                        ("jnyang@4:s2:s4", "at most one"), ("jnyang@4:vx", "rescale exponent"),
                        ("jnyang@4:v3", "rescale exponent"), ("jnyang@4:v0.5:v1", "at most one"),
-                       ("jnyang@4:c5", "carry scale"), ("jnyang@4:cx", "carry scale"),
+                       ("jnyang@4:c5", "carry scale"), ("jnyang@4:cx", "carry scale"), ("jnyang@²", "reuse interval"),
+                       ("jnyang@4:s²", "pixel step"),
                        ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)

@@ -168,7 +168,7 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
         fresh.decoded()
     with pytest.raises(AdapterFrameError, match="moderngl.Context"):
         RateSelector(meta, object())
-    with pytest.raises(TypeError, match="ModelMetadata"):
+    with pytest.raises(sdk.ParameterError, match="ModelMetadata"):
         RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
     for bad in (8, 24, 2.0):  # finer than the model's 16-pixel tiles; not a tile size; not an int
         with pytest.raises(sdk.ParameterError, match="tile_size"):

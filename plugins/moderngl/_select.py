@@ -50,8 +50,8 @@ class RateSelector:
                  tile_size: int | None = None) -> None:
         meta = model.metadata if isinstance(model, sdk.ShadingRatePredictor) else model
         if not isinstance(meta, sdk.ModelMetadata):
-            raise TypeError(f"RateSelector: expected an sdk.ShadingRatePredictor or sdk.ModelMetadata, got "
-                            f"{type(model).__name__}")
+            raise sdk.ParameterError(f"RateSelector: expected an sdk.ShadingRatePredictor or sdk.ModelMetadata, got "
+                                     f"{type(model).__name__}", "model")
         if tile_size is None:
             tile_size = model.tile_size if isinstance(model, sdk.ShadingRatePredictor) else meta.tile_size
         if (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in sdk.TILE_SIZES
