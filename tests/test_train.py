@@ -1187,6 +1187,34 @@ def test_a_checkpoint_that_would_not_load_back_is_not_saved(tmp_path: Path) -> N
     assert path.read_bytes() == before and load_checkpoint(path).training == {"step": 5}
 
 
+@pytest.mark.parametrize(("key", "value"), [("format_version", "1"), ("format_version", -1), ("architecture", "FastNet"),
+                                            ("architecture", {"name": "MetricNet", "config": [4, 4]}),
+                                            ("state_dict", None), ("metadata", [1]), ("training", 5), ("versions", "x")])
+def test_a_malformed_checkpoint_is_a_checkpoint_error(tmp_path: Path, key: str, value: Any) -> None:
+    """A damaged or hand-made checkpoint raised TypeError ("'>' not supported"), AttributeError or
+    ValueError from the lines that read its fields."""
+    from rtp.train import checkpoint
+    from rtp.train.model import MetricNet
+
+    from .conftest import base_metadata
+
+    path = checkpoint.save(tmp_path / "m.pt", MetricNet(4, 4, 16), base_metadata(), {"step": 5})
+    raw = torch.load(path, weights_only=True)
+    raw[key] = value
+    torch.save(raw, path)
+    with pytest.raises(checkpoint.CheckpointError, match=key.split("_")[0]):
+        load_checkpoint(path)
+
+
+def test_network_constructors_raise_parameter_errors() -> None:
+    from rtp.train.model import FastNet, MetricNet, build_network, keep_outputs
+
+    for make in (lambda: MetricNet(4, 4, 3), lambda: FastNet(4, 6, 16, width=1), lambda: build_network("nope", 4, 6, 16),
+                 lambda: keep_outputs(MetricNet(4, 6, 16), 2)):  # type: ignore[arg-type]
+        with pytest.raises(sdk.ParameterError):
+            make()
+
+
 @pytest.mark.parametrize(("key", "value"), [("steps", -5), ("steps", 0), ("batch", 0), ("crop", 0), ("val_every", 0),
                                             ("save_every", 0), ("tile", 0), ("outputs", ("9x9",)), ("head", "nope")])
 def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path, key: str, value: Any) -> None:

@@ -80,7 +80,7 @@ def save(
     """Write a checkpoint atomically. ``metadata`` is validated and must fit the network."""
     meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(metadata)
     if not isinstance(net, (MetricNet, FastNet)):
-        raise TypeError(f"expected a MetricNet or FastNet, got {type(net).__name__}")
+        raise CheckpointError(f"expected a MetricNet or FastNet, got {type(net).__name__}")
     check_fits(net, meta)
     payload = {
         "format": FORMAT,
@@ -120,11 +120,23 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
         ) from err
     if not isinstance(raw, dict) or raw.get("format") != FORMAT:
         raise CheckpointError(f"{p}: not an rtp checkpoint (expected format {FORMAT!r})")
-    if raw.get("format_version", 0) > FORMAT_VERSION:
-        raise CheckpointError(
-            f"{p}: checkpoint format {raw.get('format_version')} is newer than this rtp reads ({FORMAT_VERSION})"
-        )
+    version = raw.get("format_version", 0)
+    if isinstance(version, bool) or not isinstance(version, int) or version < 0:
+        raise CheckpointError(f"{p}: format_version must be a non-negative integer, got {version!r}")
+    if version > FORMAT_VERSION:
+        raise CheckpointError(f"{p}: checkpoint format {version} is newer than this rtp reads ({FORMAT_VERSION})")
+    # the other fields' shapes, so that a damaged or hand-made file is a CheckpointError, not an
+    # AttributeError or ValueError from the lines that read them
     arch = raw.get("architecture", {})
+    for key, value, ok in (("architecture", arch, isinstance(arch, dict)),
+                           ("architecture.config", arch.get("config") if isinstance(arch, dict) else None,
+                            isinstance(arch, dict) and isinstance(arch.get("config"), dict)),
+                           ("state_dict", raw.get("state_dict"), isinstance(raw.get("state_dict"), dict)),
+                           ("metadata", raw.get("metadata"), isinstance(raw.get("metadata"), (dict, type(None)))),
+                           ("training", raw.get("training"), isinstance(raw.get("training"), (dict, type(None)))),
+                           ("versions", raw.get("versions"), isinstance(raw.get("versions"), (dict, type(None))))):
+        if not ok:
+            raise CheckpointError(f"{p}: {key} must be a mapping, got {type(value).__name__}")
     cls = _ARCHITECTURES.get(arch.get("name"))
     if cls is None:
         raise CheckpointError(f"{p}: unknown architecture {arch.get('name')!r}; known: {', '.join(_ARCHITECTURES)}")

@@ -52,6 +52,7 @@ from rtp.sdk import (
     DEFAULT_OUTPUTS,
     DEFAULT_TILE_SIZE,
     TILE_SIZES,
+    ParameterError,
     rate_size,
 )
 
@@ -74,11 +75,11 @@ class LayerSpec:
 def layer_plan(in_channels: int, out_channels: int, tile: int, width: int) -> list[LayerSpec]:
     """The five layers of :class:`MetricNet` for a tile size and width."""
     if tile not in TILE_SIZES:
-        raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
+        raise ParameterError(f"tile must be one of {TILE_SIZES}, got {tile}")
     if width < 2:
-        raise ValueError(f"width must be at least 2, got {width}")
+        raise ParameterError(f"width must be at least 2, got {width}")
     if in_channels < 1 or out_channels < 1:
-        raise ValueError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
+        raise ParameterError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
     n_pools = int(math.log2(tile))
     pools = [2] * 5 if n_pools == 5 else [1] + [2] * n_pools + [1] * (4 - n_pools)
     plan: list[LayerSpec] = []
@@ -108,7 +109,7 @@ class MetricNet(nn.Module):
                  head: str = "paper") -> None:
         super().__init__()
         if head not in HEADS:
-            raise ValueError(f"head must be one of {HEADS}, got {head!r}")
+            raise ParameterError(f"head must be one of {HEADS}, got {head!r}")
         self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
                                        "width": width, "head": head}
         layers: list[nn.Module] = []
@@ -165,7 +166,7 @@ class ContextPool(nn.Module):
     def __init__(self, size: int) -> None:
         super().__init__()
         if size < 3 or size % 2 == 0:
-            raise ValueError(f"context_pool must be an odd window of at least 3 tiles, got {size}")
+            raise ParameterError(f"context_pool must be an odd window of at least 3 tiles, got {size}")
         self.pool = nn.AvgPool2d(size, stride=1, padding=size // 2, count_include_pad=False)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -184,7 +185,7 @@ class CoarseContext(nn.Module):
     def __init__(self, channels: int, width: int = 64, blocks: int = 2) -> None:
         super().__init__()
         if channels < 1 or width < 2 or blocks < 1:
-            raise ValueError(f"coarse context: expected channels >= 1, width >= 2 and blocks >= 1, got {channels}, "
+            raise ParameterError(f"coarse context: expected channels >= 1, width >= 2 and blocks >= 1, got {channels}, "
                              f"{width}, {blocks}")
         layers: list[nn.Module] = [nn.MaxPool2d(2, ceil_mode=True)]
         c = channels
@@ -205,7 +206,7 @@ def haar_details(cell: int) -> list[np.ndarray]:
     (horizontal, vertical, diagonal), the averages go on to the next level. With the cell's mean
     they are an orthonormal basis of the cell."""
     if cell < 2 or cell & (cell - 1):
-        raise ValueError(f"the Haar pyramid needs a power-of-two cell of at least 2, got {cell}")
+        raise ParameterError(f"the Haar pyramid needs a power-of-two cell of at least 2, got {cell}")
     grid = [[np.eye(cell * cell)[i * cell + j].reshape(cell, cell) for j in range(cell)] for i in range(cell)]
     out: list[np.ndarray] = []
     while len(grid) > 1:
@@ -225,7 +226,7 @@ def haar_details(cell: int) -> list[np.ndarray]:
 def _check_planes(planes: tuple[int, ...], in_channels: int) -> None:
     """A block contrast's planes: distinct input channel indices, or a ValueError."""
     if not planes or len(set(planes)) != len(planes) or min(planes) < 0 or max(planes) >= in_channels:
-        raise ValueError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
+        raise ParameterError(f"block_contrast: expected distinct input channel indices below {in_channels}, got "
                          f"{list(planes)}")
 
 
@@ -257,7 +258,7 @@ class BlockContrast(nn.Module):
         self.eps = eps
         self.rates = tuple(r for r in ALL_RATES[1:] if max(rate_size(r)) <= cell)
         if not self.rates:
-            raise ValueError(f"block_contrast needs a stem of at least 2 pixels, got {cell}")
+            raise ParameterError(f"block_contrast needs a stem of at least 2 pixels, got {cell}")
         # Every rate's blocks fit in 4x4 cells: a larger cell's mean is the mean of its 4x4 cells' (the
         # cell's coarser Haar details are constant on every block), so measure 4x4 cells and average
         # them (16 taps a pixel per plane instead of cell * cell)
@@ -317,9 +318,9 @@ class StoredBlockContrast(nn.Module):
         super().__init__()
         _check_planes(planes, in_channels)
         if cell % BLOCK_CELL:
-            raise ValueError(f"block_contrast from .blocks planes: the cell must be a multiple of {BLOCK_CELL}, got {cell}")
+            raise ParameterError(f"block_contrast from .blocks planes: the cell must be a multiple of {BLOCK_CELL}, got {cell}")
         if list(planes) != list(range(min(planes), min(planes) + len(planes))):
-            raise ValueError(f"block_contrast from .blocks planes: expected consecutive input channels, got {list(planes)}")
+            raise ParameterError(f"block_contrast from .blocks planes: expected consecutive input channels, got {list(planes)}")
         self.planes = tuple(int(i) for i in planes)
         self.rates = tuple(BLOCK_RATES)
         self.rows = -(-len(self.rates) // BLOCK_CELL)  # the cell rows that hold the rates' values
@@ -378,7 +379,7 @@ class TileContrast(nn.Module):
         super().__init__()
         _check_planes(planes, in_channels)
         if cell != BLOCK_TILE:
-            raise ValueError(f"block_contrast from .tiles planes: the cell must be their tile, {BLOCK_TILE}, got {cell}")
+            raise ParameterError(f"block_contrast from .tiles planes: the cell must be their tile, {BLOCK_TILE}, got {cell}")
         self.planes = tuple(int(i) for i in planes)
         self.rates = tuple(BLOCK_RATES)
         self.cell = cell
@@ -415,7 +416,7 @@ class BlindConv2d(nn.Conv2d):
     def __init__(self, in_channels: int, out_channels: int, kernel: int, blind: int = 0) -> None:
         super().__init__(in_channels, out_channels, kernel, stride=kernel, bias=False)
         if not 0 < blind < in_channels:
-            raise ValueError(f"blind: expected 1 to {in_channels - 1} input channels, got {blind}")
+            raise ParameterError(f"blind: expected 1 to {in_channels - 1} input channels, got {blind}")
         mask = torch.ones_like(self.weight)
         mask[:, in_channels - blind:] = 0.0
         self.blind = blind
@@ -498,29 +499,29 @@ class FastNet(nn.Module):
                  coarse_width: int = 64) -> None:
         super().__init__()
         if tile not in TILE_SIZES:
-            raise ValueError(f"tile must be one of {TILE_SIZES}, got {tile}")
+            raise ParameterError(f"tile must be one of {TILE_SIZES}, got {tile}")
         if width < 2 or depth < 0 or stem not in (1, 2, 4, 8) or grow not in (1, 2):
-            raise ValueError(f"expected width >= 2, depth >= 0, stem in (1, 2, 4, 8) and grow 1 or 2, got {width}, "
+            raise ParameterError(f"expected width >= 2, depth >= 0, stem in (1, 2, 4, 8) and grow 1 or 2, got {width}, "
                              f"{depth}, {stem}, {grow}")
         if max_width and (grow == 1 or max_width < width):
-            raise ValueError(f"max_width caps grow 2's channels: expected 0 (none), or >= width ({width}) with grow 2, "
+            raise ParameterError(f"max_width caps grow 2's channels: expected 0 (none), or >= width ({width}) with grow 2, "
                              f"got {max_width} with grow {grow}")
         if stem_layers not in (1, 2) or (stem_layers == 2 and min(stem, tile) < 2):
-            raise ValueError(f"stem_layers must be 1, or 2 with a stem (and tile) of at least 2, got {stem_layers} "
+            raise ParameterError(f"stem_layers must be 1, or 2 with a stem (and tile) of at least 2, got {stem_layers} "
                              f"with stem {stem} and tile {tile}")
         if in_channels < 1 or out_channels < 1:
-            raise ValueError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
+            raise ParameterError(f"in_channels and out_channels must be >= 1, got {in_channels}, {out_channels}")
         pools = int(math.log2(tile // min(stem, tile)))
         if tail_width and (tail_width < 2 or depth <= pools):
-            raise ValueError(f"tail_width sets the channels of the blocks at tile resolution: expected 0 (none), or >= 2 "
+            raise ParameterError(f"tail_width sets the channels of the blocks at tile resolution: expected 0 (none), or >= 2 "
                              f"with a depth over the {pools} pooled blocks, got {tail_width} with depth {depth}")
         if head_width < 0:
-            raise ValueError(f"head_width must be 0 (a linear 1x1 head) or the hidden channels of an MLP head, got "
+            raise ParameterError(f"head_width must be 0 (a linear 1x1 head) or the hidden channels of an MLP head, got "
                              f"{head_width}")
         if context_pool and (context_pool < 3 or context_pool % 2 == 0):
-            raise ValueError(f"context_pool must be 0 (none) or an odd window of at least 3 tiles, got {context_pool}")
+            raise ParameterError(f"context_pool must be 0 (none) or an odd window of at least 3 tiles, got {context_pool}")
         if coarse < 0 or (coarse and (depth <= pools or coarse_width < 2)):
-            raise ValueError(f"coarse: expected 0 (none), or the blocks at twice the tile's scale after the first block at "
+            raise ParameterError(f"coarse: expected 0 (none), or the blocks at twice the tile's scale after the first block at "
                              f"tile resolution (a depth over the {pools} pooled blocks, coarse_width >= 2), got coarse "
                              f"{coarse} with depth {depth} and coarse_width {coarse_width}")
         self.config: dict[str, Any] = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile,
@@ -549,18 +550,18 @@ class FastNet(nn.Module):
         pools = int(math.log2(tile // s))
         cell = contrast_cell or s
         if block_contrast and cell not in [s * 2 ** i for i in range(pools + 1)]:
-            raise ValueError(f"contrast_cell: expected the stem ({s}) or a pooled resolution up to the tile "
+            raise ParameterError(f"contrast_cell: expected the stem ({s}) or a pooled resolution up to the tile "
                              f"({', '.join(str(s * 2 ** i) for i in range(pools + 1))}), got {contrast_cell}")
         if contrast_max and (not block_contrast or cell <= 4):
-            raise ValueError(f"contrast_max adds the worst 4x4 cell of a larger contrast cell: expected block_contrast "
+            raise ParameterError(f"contrast_max adds the worst 4x4 cell of a larger contrast cell: expected block_contrast "
                              f"and a contrast_cell over 4, got {cell}")
         if contrast_stored and (not block_contrast or sorted(block_contrast) != list(
                 range(in_channels - len(block_contrast), in_channels))):
-            raise ValueError(f"contrast_stored reads the block contrast from .blocks or .tiles planes that only it reads: "
+            raise ParameterError(f"contrast_stored reads the block contrast from .blocks or .tiles planes that only it reads: "
                              f"expected block_contrast to be the last input channels, got {list(block_contrast)} of "
                              f"{in_channels}")
         if contrast_tiles and not (contrast_stored and cell == tile == BLOCK_TILE):
-            raise ValueError(f"contrast_tiles reads the block contrast from .tiles planes of {BLOCK_TILE}-pixel tiles: "
+            raise ParameterError(f"contrast_tiles reads the block contrast from .tiles planes of {BLOCK_TILE}-pixel tiles: "
                              f"expected contrast_stored, tile {BLOCK_TILE} and contrast_cell {BLOCK_TILE}, got "
                              f"contrast_stored={contrast_stored}, tile {tile}, contrast_cell {cell}")
         self.contrast: BlockContrast | StoredBlockContrast | TileContrast | None = None
@@ -663,7 +664,7 @@ class FastNet(nn.Module):
         """The outputs from :meth:`trunk`'s features (of this frame, or carried from an earlier one)
         and the block contrast of ``x``."""
         if self.contrast is None:
-            raise ValueError("a network without block contrast does not split: its trunk is the whole network")
+            raise ParameterError("a network without block contrast does not split: its trunk is the whole network")
         h = torch.cat([features, self.contrast_bn(self.contrast(x))], dim=1)
         return self.layers[self._contrast_at:](h)
 
@@ -696,7 +697,7 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
                        separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width,
                        contrast_max, contrast_stored, contrast_tiles, coarse, coarse_width)
-    raise ValueError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
+    raise ParameterError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
 
 
 def keep_outputs(net: FastNet, n: int) -> FastNet:
@@ -705,10 +706,10 @@ def keep_outputs(net: FastNet, n: int) -> FastNet:
     Training with auxiliary targets (``TrainConfig.aux_metrics``) saves the network so: the extra
     outputs taught the features and cost nothing at run time."""
     if not isinstance(net, FastNet):
-        raise TypeError(f"keep_outputs: expected a FastNet, got {type(net).__name__}")
+        raise ParameterError(f"keep_outputs: expected a FastNet, got {type(net).__name__}")
     total = int(net.config["out_channels"])
     if not 1 <= n <= total:
-        raise ValueError(f"keep_outputs: expected 1 to {total} outputs, got {n}")
+        raise ParameterError(f"keep_outputs: expected 1 to {total} outputs, got {n}")
     out = FastNet(**{**net.config, "out_channels": n})
     head = len(net.layers) - 2  # the last 1x1 convolution, before the sigmoid
     state = {k: (v[:n] if k in (f"layers.{head}.weight", f"layers.{head}.bias") else v)
