@@ -317,9 +317,12 @@ def capture(
     }
     if placement != "free":  # recorded only when not the default, so folders captured before it resume
         settings["placement"] = placement
-    writer = DatasetWriter(out, settings)  # validates the folder before any worker starts
-    if writer.remove_stale():
-        log.info("removed temporary files of an interrupted capture in %s", out)
+    # An existing folder is checked (its settings, stale files) before any worker starts. A new one on
+    # Ray is made only once Ray answers (ray_capture), so an address that is not Ray's leaves nothing.
+    if ray is None or (Path(out) / "manifest.json").exists():
+        writer = DatasetWriter(out, settings)
+        if writer.remove_stale():
+            log.info("removed temporary files of an interrupted capture in %s", out)
     total = len(scene_names) * len(profiles) * per_scene
     done = 0
     report = CaptureReport()

@@ -26,8 +26,10 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 from rtp.sdk import EXIT_USAGE, RtpError
@@ -80,6 +82,28 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
 
 
 @contextlib.contextmanager
+def _native_stderr_to_log() -> Iterator[None]:
+    """Ray's C++ client writes its connection retries straight to file descriptor 2 (a line a second
+    for 20 s at an address where something that is not Ray answers), above the one-line error. While
+    connecting, that descriptor goes to a temporary file, whose lines are logged at debug level (``-v``
+    shows them) afterwards."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            for line in tmp.read().decode(errors="replace").splitlines():
+                log.debug("ray: %s", line)
+
+
+@contextlib.contextmanager
 def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
     """Connect to Ray (or start a private local instance); yields how many workers to start.
 
@@ -97,7 +121,8 @@ def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
             else:
                 if address != "auto":
                     _check_reachable(address)
-                ray.init(address=address, **kwargs)
+                with _native_stderr_to_log():
+                    ray.init(address=address, **kwargs)
         except RayExecutorError:
             raise
         except Exception as exc:  # ConnectionError, RuntimeError, ValueError from ray.init
@@ -224,9 +249,13 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
     from ._dataset import DatasetReader, DatasetWriter
 
     ray = _ray()
-    writer = DatasetWriter(out, settings)
+    # An existing folder's settings are checked before Ray starts; a new folder is made only once Ray
+    # answers (an address that is not Ray's left a manifest and an empty folder behind).
+    writer = DatasetWriter(out, settings) if (Path(out) / "manifest.json").exists() else None
     report = CaptureReport()
     with ray_cluster(address, workers) as n:
+        if writer is None:
+            writer = DatasetWriter(out, settings)
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
         actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
         if on_actors is not None:

@@ -126,6 +126,10 @@ def test_ray_errors_are_typed(cluster: None, tmp_path: Path) -> None:
             pass
         with pytest.raises(RayExecutorError, match="HOST:PORT"), ray_cluster("no-port", 1):
             pass
+        # a new folder is made only once Ray answers (it was made, manifest and all, before connecting)
+        with pytest.raises(RayExecutorError, match="cannot start or reach Ray"):
+            capture(["procedural:0"], tmp_path / "new", per_scene=1, size=SIZE, ray="127.0.0.1:1")
+        assert not (tmp_path / "new").exists()
     finally:
         ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
 
@@ -140,3 +144,19 @@ def test_cli_ray_flag(cluster: None, local: Path, tmp_path: Path, capsys: pytest
     assert main(["targets", str(out), "--ray", "--no-progress"]) == 0
     assert "8 samples written" in capsys.readouterr().out
     assert_same_dataset(local, out, METRICS)
+
+
+def test_ray_clients_native_lines_go_to_the_debug_log(capfd: pytest.CaptureFixture[str],
+                                                      caplog: pytest.LogCaptureFixture) -> None:
+    """Ray's C++ client wrote a retry line a second for 20 s to file descriptor 2, above the error."""
+    import logging
+
+    from rtp.capture._ray import _native_stderr_to_log
+
+    with caplog.at_level(logging.DEBUG, logger="rtp.capture"), pytest.raises(RuntimeError):
+        with _native_stderr_to_log():
+            os.write(2, b"gcs_client.cc:210: Failed to get cluster ID\n")
+            raise RuntimeError("ray.init failed")
+    os.write(2, b"after\n")
+    assert capfd.readouterr().err == "after\n"
+    assert "ray: gcs_client.cc:210: Failed to get cluster ID" in caplog.text
