@@ -319,6 +319,7 @@ def capture(
         settings["placement"] = placement
     # An existing folder is checked (its settings, stale files) before any worker starts. A new one on
     # Ray is made only once Ray answers (ray_capture), so an address that is not Ray's leaves nothing.
+    writer: DatasetWriter | None = None
     if ray is None or (Path(out) / "manifest.json").exists():
         writer = DatasetWriter(out, settings)
         if writer.remove_stale():
@@ -386,6 +387,8 @@ def capture(
     for sample in DatasetReader(out):
         unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))
     previous = DatasetReader(out).manifest.get("renderer_settings")
+    if writer is None:  # (a new folder on Ray: made by ray_capture once Ray answered)
+        writer = DatasetWriter(out, settings)
     writer.finalize({
         "renderer_settings": report.renderer or previous,
         "failed": report.failed,
