@@ -1,4 +1,11 @@
-"""Helpers shared by the benchmark scripts (run them as `python bench/<name>.py`)."""
+"""Helpers shared by the benchmark scripts (run them as `python bench/<name>.py`).
+
+Every script ends in ``run_main(main)``: an rtp error (a model, map or dataset that is not there, a
+bad value found by the library) prints one line, ``NAME.py: error: ...``, with rtp's exit code
+(docs/errors.md), as the ``rtp`` commands do; ``RTP_TRACEBACK=1`` shows the traceback above it. The
+argparse types below (:func:`positive`, :func:`count`, :func:`frame_size`, :func:`frame_sizes`,
+:func:`dataset_folder`, :func:`json_file`) refuse bad arguments before any work.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +14,8 @@ import time
 from collections.abc import Callable, Hashable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
+
+from rtp.sdk import EXIT_USAGE, RtpError
 
 K = TypeVar("K", bound=Hashable)
 
@@ -47,7 +56,91 @@ def dataset_folder(text: str) -> str:
             f"no dataset at {text!r}: capture one first, e.g. `rtp capture --split validation --per-scene 12 "
             f"--size 1280x720 --out {text} && rtp targets {text}` (the validation maps), or `make dataset` "
             "(data/train and data/test: about 3 hours)")
+    from rtp.capture import open_dataset
+    from rtp.sdk import RtpError
+
+    try:  # a manifest.json of something else, or of a newer format
+        open_dataset(text)
+    except RtpError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
     return text
+
+
+class UsageError(RtpError):
+    """What a benchmark refuses in its own words (a dataset without the maps asked for, runs without the
+    method named): :func:`run_main` prints it in one line and exits 2."""
+
+    exit_code = EXIT_USAGE
+
+
+def run_main(main: Callable[[], int | None]) -> None:
+    """Run a script's ``main`` under rtp's error policy (module docstring) and exit with its code."""
+    import os
+    import sys
+
+    from rtp.cli import run_guarded
+
+    prog = Path(sys.argv[0]).name  # (as argparse names it in its usage errors)
+    sys.exit(run_guarded(prog, main, verbose=os.environ.get("RTP_TRACEBACK", "") not in ("", "0")))
+
+
+def _integer(text: str, minimum: int) -> int:
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}")
+    return value
+
+
+def positive(text: str) -> int:
+    """An argparse type: an integer >= 1 (repeats, threads, frames, samples, workers, steps)."""
+    return _integer(text, 1)
+
+
+def count(text: str) -> int:
+    """An argparse type: an integer >= 0 (seeds, and counts where 0 means none or all, as the help says)."""
+    return _integer(text, 0)
+
+
+def json_file(text: str) -> Any:
+    """An argparse type: the parsed contents of a JSON file (a report ``rtp play`` or a benchmark wrote),
+    or a usage error that names the file and what is wrong with it."""
+    import argparse
+    import json
+
+    try:
+        return json.loads(Path(text).read_text(encoding="utf-8"))
+    except OSError as err:
+        raise argparse.ArgumentTypeError(f"{text!r}: {err.strerror or err}") from None
+    except ValueError as err:  # JSONDecodeError, UnicodeDecodeError
+        raise argparse.ArgumentTypeError(f"{text!r} is not JSON ({err})") from None
+
+
+def report_file(kind: str, keys: set[str], made_by: str, *, many: bool = False) -> Callable[[str], Path]:
+    """An argparse type: the path of a JSON report holding ``keys`` (a list of such objects with ``many``),
+    checked when parsed: a missing file, bad JSON or another JSON is a usage error, not a traceback (or,
+    for another JSON, an empty table) once the script runs."""
+    import argparse
+
+    def parse(text: str) -> Path:
+        data = json_file(text)
+        items = data if many and isinstance(data, list) else [data]
+        if not items or not all(isinstance(d, dict) and keys <= set(d) for d in items):
+            raise argparse.ArgumentTypeError(f"{text!r} is not {kind} (the file {made_by} writes)")
+        return Path(text)
+
+    return parse
+
+
+#: The ``play.json`` of ``rtp play --out DIR``.
+PLAY_JSON = report_file("a play.json", {"settings", "rows", "matched"}, "`rtp play --out DIR`")
+#: The ``evaluation.json`` of ``rtp evaluate --out DIR`` (a list of reports, one per model).
+EVALUATION_JSON = report_file("an evaluation.json", {"model", "quality", "decisions"}, "`rtp evaluate --out DIR`",
+                              many=True)
 
 
 def add_model_args(ap: Any, model_help: str, scene_help: str = "") -> None:
@@ -72,6 +165,14 @@ def frame_size(text: str, minimum: int = 1) -> tuple[int, int]:
     if w < minimum or h < minimum:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT of at least {minimum}x{minimum}, got {text!r}")
     return w, h
+
+
+def frame_sizes(minimum: int = 1) -> Callable[[str], list[tuple[int, int]]]:
+    """An argparse type: comma-separated ``WIDTHxHEIGHT`` sizes (:func:`frame_size` each)."""
+    def parse(text: str) -> list[tuple[int, int]]:
+        return [frame_size(v, minimum) for v in text.split(",")]
+
+    return parse
 
 
 def median_ms(fn: Callable[[], object], repeats: int) -> float:

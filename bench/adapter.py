@@ -19,7 +19,7 @@ import platform
 from pathlib import Path
 
 import numpy as np
-from _common import frame_size, median_ms  # bench/ is on sys.path when run as a script
+from _common import frame_sizes, median_ms, positive, run_main  # bench/ is on sys.path when run as a script
 from render import build_scene
 
 from rtp import sdk
@@ -73,14 +73,14 @@ def time_size(width: int, height: int, lists: dict[str, tuple[str, ...]], repeat
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", default="1280x720,1920x1080", help="comma-separated WIDTHxHEIGHT")
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--sizes", type=frame_sizes(4), default="1280x720,1920x1080", help="comma-separated WIDTHxHEIGHT")
+    ap.add_argument("--repeats", type=positive, default=5)
     ap.add_argument("--models", type=Path, default=Path(__file__).resolve().parents[1] / "models",
                     help="folder of .onnx models whose channel lists to time (default: the shipped ones)")
     args = ap.parse_args()
-    if args.repeats < 1:
-        ap.error("--repeats must be >= 1")
-    sizes = [frame_size(s, 4) for s in args.sizes.split(",")]
+    sizes = args.sizes
+    if not args.models.is_dir() or not any(args.models.glob("*.onnx")):
+        ap.error(f"--models: expected a folder of .onnx models, got {str(args.models)!r}")
     lists = channel_lists(args.models)
     with Renderer(16, 16) as probe:
         gl = probe.ctx.info["GL_RENDERER"]
@@ -94,4 +94,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

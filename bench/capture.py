@@ -15,15 +15,17 @@ import tempfile
 import time
 from pathlib import Path
 
+from _common import positive, run_main  # bench/ is on sys.path when run as a script
+
 from rtp.capture import capture
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--samples", type=int, default=4, help="samples per size (slow profile)")
+    ap.add_argument("--samples", type=positive, default=4, help="samples per size (slow profile)")
     ap.add_argument("--scene", default="procedural:0", help="a scene name (procedural:<seed> or a fetched map)")
     ap.add_argument("--cache", default=None, help="scene cache for fetched maps")
-    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--workers", type=positive, default=1)
     args = ap.parse_args()
     rows = []
     for w, h in ((640, 360), (1280, 720)):
@@ -47,4 +49,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -16,6 +16,7 @@ import argparse
 from collections import defaultdict
 
 import numpy as np
+from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -25,11 +26,15 @@ from rtp.capture.scenes import load_splits
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", nargs="+", default=["data/train", "data/test"], help="dataset folders")
-    ap.add_argument("--per-map", type=int, default=4, help="samples read per map (spread evenly)")
+    ap.add_argument("--data", nargs="+", type=dataset_folder, default=["data/train", "data/test"],
+                    help="dataset folders (default: data/train data/test, from `make dataset`)")
+    ap.add_argument("--per-map", type=positive, default=4, help="samples read per map (spread evenly)")
     args = ap.parse_args()
-    if args.per_map < 1:
-        ap.error("--per-map must be >= 1")
+    for folder in args.data:  # (argparse does not apply a type to a list default)
+        try:
+            dataset_folder(folder)
+        except argparse.ArgumentTypeError as err:
+            ap.error(f"argument --data: {err}")
     split_of = {m: name for name, maps in load_splits().items() for m in maps}
     rows = []
     for folder in args.data:
@@ -52,4 +57,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -1,7 +1,7 @@
 """How much averaging models would buy: R² of each model and of their mean prediction.
 
     python bench/ensemble.py data/study/jnyang-big-mse.onnx data/study/jnyang-big-mse-seed1.onnx \
-        [--data data/val72 | --data data/train --scene kaos,oa_dm3,oacmpdm4]
+        [--data data/val | --data data/train --scene kaos,oa_dm3,oacmpdm4]
 
 Every model must predict the same metric on the same tiles with the same target transform (models
 trained by one recipe on one dataset). Per model, and for the mean of their network outputs (what
@@ -14,11 +14,10 @@ network (docs/training.md).
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
-from _common import dataset_folder, scene_ids  # bench/ is on sys.path when run as a script
+from _common import UsageError, dataset_folder, run_main, scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -35,7 +34,8 @@ def _r2(p: np.ndarray, g: np.ndarray) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="+", help="exported models (.onnx) of one metric, tile size and transform")
-    ap.add_argument("--data", type=dataset_folder, default="data/val72", help="dataset with targets (default: data/val72)")
+    ap.add_argument("--data", type=dataset_folder, default="data/val",
+                    help="dataset with targets (default: data/val, the 72 validation samples of docs/export.md)")
     ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
                     "maps of data/train")
     args = ap.parse_args(argv)
@@ -45,18 +45,16 @@ def main(argv: list[str] | None = None) -> int:
         m = p.metadata
         if (m.metric, m.tile_size, tuple(m.outputs), m.transform.to_dict()) != \
                 (m0.metric, m0.tile_size, tuple(m0.outputs), m0.transform.to_dict()):
-            print(f"error: {path} predicts {m.metric} {list(m.outputs)} on {m.tile_size}-pixel tiles with transform "
+            raise UsageError(f"{path} predicts {m.metric} {list(m.outputs)} on {m.tile_size}-pixel tiles with transform "
                   f"{m.transform.to_dict()}; {args.models[0]}: {m0.metric} {list(m0.outputs)}, {m0.tile_size}, "
-                  f"{m0.transform.to_dict()}", file=sys.stderr)
-            return 2
+                  f"{m0.transform.to_dict()}")
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     rows = [sdk.PREDICTED_RATES.index(r) for r in m0.outputs]
     out: list[list[np.ndarray]] = [[] for _ in preds]
     truth, unseen = [], []
     ids = scene_ids(reader, args.scene)
     if not ids:
-        print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
-        return 2
+        raise UsageError(f"{args.data} holds no sample of {args.scene}")
     for i in tqdm(ids, desc="predicting", unit="sample"):
         s = reader[i]
         y = store.load(i, m0.metric, m0.tile_size)[rows]
@@ -77,4 +75,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_main(main)

@@ -23,10 +23,16 @@ error (LPIPS: deep features of the neighbourhood), and better error estimates ca
 from __future__ import annotations
 
 import argparse
-import sys
 
 import numpy as np
-from _common import add_model_args, scene_ids  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    UsageError,
+    add_model_args,
+    count,
+    positive,
+    run_main,
+    scene_ids,
+)
 from tqdm import tqdm
 
 from rtp import sdk
@@ -122,19 +128,17 @@ def held_out_r2(x: np.ndarray, y: np.ndarray, groups: np.ndarray, *, iterations:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_model_args(ap, "an exported model (.onnx); its metric's targets are scored")
-    ap.add_argument("--iterations", type=int, default=1500, help="Adam steps of each fit (default 1500)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the fits (default 0)")
+    ap.add_argument("--iterations", type=positive, default=1500, help="Adam steps of each fit (default 1500)")
+    ap.add_argument("--seed", type=count, default=0, help="seed of the fits (default 0)")
     args = ap.parse_args(argv)
     if args.iterations < 1:
-        print(f"error: --iterations must be at least 1, got {args.iterations}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--iterations must be at least 1, got {args.iterations}")
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     ids = scene_ids(reader, args.scene)
     if not ids:
-        print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
-        return 2
+        raise UsageError(f"{args.data} holds no sample of {args.scene}")
     rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
     t = meta.tile_size
     feats: list[list[np.ndarray]] = [[] for _ in rows]
@@ -156,8 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         maps.append(np.full(th * tw, str(s.meta.get("scene", "?")), dtype=object))
     groups = np.concatenate(maps)
     if len(np.unique(groups)) < 2:
-        print(f"error: leave-one-map-out needs samples of at least two maps, got {sorted(set(groups))}", file=sys.stderr)
-        return 2
+        raise UsageError(f"leave-one-map-out needs samples of at least two maps, got {sorted(set(groups))}")
     nc = len(CONTENT)
     print(f"\n{meta.metric}, {args.model} on {len(ids)} samples of {args.data} ({args.scene or 'every map'}): "
           f"R² % of each output, transformed space, no safety margin; the fits leave one map out\n")
@@ -174,4 +177,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _common import count, positive, run_main  # noqa: E402  # bench/ is on sys.path when run as a script
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 
 from tests.fuzzing import OUTCOMES, Target, classify, targets  # noqa: E402
@@ -38,8 +39,8 @@ def _fuzz(target: Target, counts: Counter[str], bad: list[tuple[str, ...]], n: i
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--per-target", type=int, default=1000, help="generated inputs per target")
-    ap.add_argument("--show", type=int, default=2, help="examples of untyped or absurd-accepted inputs to print")
+    ap.add_argument("--per-target", type=positive, default=1000, help="generated inputs per target")
+    ap.add_argument("--show", type=count, default=2, help="examples of untyped or absurd-accepted inputs to print")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     rows, bad = [], []
@@ -60,4 +61,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -24,11 +24,13 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 import torch
-from _common import (  # bench/ is on sys.path when run as a script
+from _common import (
     cpu_description,
     interleaved_ms,
     median_ms,
     paper_model,
+    positive,
+    run_main,
 )
 
 from rtp import sdk
@@ -71,8 +73,8 @@ def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op and torch threads")
+    ap.add_argument("--repeats", type=positive, default=7)
+    ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op and torch threads")
     ap.add_argument("models", nargs="*", help="more .onnx models to time")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -139,4 +141,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

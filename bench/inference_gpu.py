@@ -36,6 +36,7 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 import torch
+from _common import frame_sizes, paper_model, positive, run_main  # bench/ is on sys.path when run as a script
 from onnx import numpy_helper
 from torch import nn
 
@@ -188,30 +189,17 @@ def _graphed(net: nn.Module, x: torch.Tensor):  # type: ignore[no-untyped-def]
     return graph.replay
 
 
-def _frames(text: str) -> list[tuple[int, int]]:
-    try:
-        out = [tuple(int(v) for v in f.lower().split("x")) for f in text.split(",")]
-    except ValueError:
-        raise SystemExit(f"--frames: expected WxH[,WxH...], got {text!r}") from None
-    if any(len(f) != 2 or min(f) < 1 for f in out):
-        raise SystemExit(f"--frames: expected WxH[,WxH...] with positive sizes, got {text!r}")
-    return out  # type: ignore[return-value]
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=200)
-    ap.add_argument("--frames", default=DEFAULT_FRAMES, help="frame sizes, WxH comma-separated")
+    ap.add_argument("--repeats", type=positive, default=200)
+    ap.add_argument("--frames", type=frame_sizes(1), default=DEFAULT_FRAMES, help="frame sizes, WxH comma-separated")
     ap.add_argument("models", nargs="*", help="more .onnx models to time")
     args = ap.parse_args()
-    frames = _frames(args.frames)
+    frames = args.frames
     if not torch.cuda.is_available():
         print("bench/inference_gpu.py needs a CUDA GPU, and torch sees none (CPU timings: bench/inference.py)",
               file=sys.stderr)
         raise SystemExit(2)
-    sys.path.insert(0, str(Path(__file__).parent))
-    from _common import paper_model
-
     torch.backends.cudnn.benchmark = True
     dev = torch.device("cuda")
     with tempfile.TemporaryDirectory() as d:
@@ -273,4 +261,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -23,6 +23,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from _common import positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp.capture import Sample
 from rtp.capture.scenes import map_names
@@ -48,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--metric", required=True, help="the metric whose shipped recipe is trained")
     ap.add_argument("--data", default="data/train", help="dataset with targets (default: data/train)")
     ap.add_argument("--out", default=None, help="checkpoint (default: data/study/METRIC-current-frame.pt)")
-    ap.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's)")
+    ap.add_argument("--steps", type=positive, default=None, help="training steps (default: the recipe's)")
     ap.add_argument("--scene", default=",".join(map_names("validation")),
                     help="maps scored (default: the validation maps of scenes.yaml, which training holds out)")
     args = ap.parse_args(argv)
@@ -80,4 +81,4 @@ def _export(ckpt: Path, onnx: Path) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

@@ -24,12 +24,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import write_factors_sidecar  # bench/ is on sys.path when run as a script
+from _common import PLAY_JSON, UsageError, run_main, write_factors_sidecar  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 
@@ -72,7 +71,7 @@ def _crossing(values: np.ndarray, fails: np.ndarray, want: float, hib: bool) -> 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("runs", nargs="+", help="play.json files of `rtp play` (the validation maps)")
+    ap.add_argument("runs", nargs="+", type=PLAY_JSON, help="play.json files of `rtp play` (the validation maps)")
     ap.add_argument("--method", required=True, help="the model with its factors, as the runs name it")
     ap.add_argument("--one", required=True, help="the same model with one threshold, as the runs name it")
     ap.add_argument("--sidecar", metavar="OUT.yaml", help="write the scaled factors for `rtp-export --retune`")
@@ -80,8 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = [json.loads(Path(p).read_text()) for p in args.runs]
     models = {k: v for rep in runs for k, v in rep["settings"].get("models", {}).items()}
     if args.method not in models:
-        print(f"error: the runs hold no model {args.method!r}; they hold {', '.join(models) or 'none'}", file=sys.stderr)
-        return 2
+        raise UsageError(f"the runs hold no model {args.method!r}; they hold {', '.join(models) or 'none'}")
     meta = sdk.load(models[args.method], providers=["CPUExecutionProvider"]).metadata
     hib, thr = bool(meta.higher_is_better), float(meta.default_threshold)
     factors = np.array(meta.rate_factors if meta.rate_factors is not None else [1.0] * 6, np.float64)
@@ -91,8 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         want = float(ofail[:, odefault].mean())
         cross = _crossing(values, fail.mean(axis=0), want, hib)
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(str(err)) from None
     scale = 10.0 ** (-(cross - thr) / 20.0) if hib else cross / thr
     scaled = factors * scale
     x = values if hib else np.log(values)
@@ -113,8 +110,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{', '.join(f'{v:.4g}' for v in scaled)}")
     if args.sidecar:
         if scaled.min() < 1.0 / sdk.MAX_RATE_FACTOR or scaled.max() > sdk.MAX_RATE_FACTOR:
-            print(f"error: a scaled factor leaves [1/{sdk.MAX_RATE_FACTOR:g}, {sdk.MAX_RATE_FACTOR:g}]", file=sys.stderr)
-            return 2
+            raise UsageError(f"a scaled factor leaves [1/{sdk.MAX_RATE_FACTOR:g}, {sdk.MAX_RATE_FACTOR:g}]")
         write_factors_sidecar(args.sidecar, scaled, "python bench/loop_scale.py " + " ".join(
             [*args.runs, "--method", args.method, "--one", args.one, "--sidecar", args.sidecar]))
         print(f"wrote {args.sidecar}: rtp-export --retune {models[args.method]} --metadata {args.sidecar} -o OUT.onnx")
@@ -122,4 +118,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_main(main)

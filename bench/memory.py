@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import frame_size  # bench/ is on sys.path when run as a script
+from _common import count, frame_size, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 
@@ -70,8 +70,8 @@ def measure(model: str, sizes: list[tuple[int, int]], threads: int, warm_up: int
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="1280x720,1920x1080", help="comma-separated WIDTHxHEIGHT, in this order")
-    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
-    ap.add_argument("--warm-up", type=int, default=0, metavar="N",
+    ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--warm-up", type=count, default=0, metavar="N",
                     help="predict N times on a zero frame at each size before the timed runs (default 0)")
     ap.add_argument("--one", help=argparse.SUPPRESS)  # a child process: measure this model, print JSON
     ap.add_argument("models", nargs="*", help="more .onnx models")
@@ -114,4 +114,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import median_ms, paper_model  # bench/ is on sys.path when run as a script
+from _common import median_ms, paper_model, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
 
@@ -53,8 +53,8 @@ CASES: dict[str, Callable[[np.ndarray, np.ndarray], object]] = {
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--threads", type=int, default=2, help="torch intra-op threads (LPIPS)")
+    ap.add_argument("--repeats", type=positive, default=3)
+    ap.add_argument("--threads", type=positive, default=2, help="torch intra-op threads (LPIPS)")
     ap.add_argument("--targets", action="store_true", help="also time tile_targets over six rates (slow)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -92,4 +92,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

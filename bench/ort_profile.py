@@ -51,7 +51,7 @@ import onnxruntime as ort
 from rtp import sdk
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import TIMING_INPUTS, cpu_description, frame_size, median_ms, paper_model  # noqa: E402  (also when loaded by path, as the tests do)
+from _common import TIMING_INPUTS, cpu_description, frame_size, median_ms, paper_model, positive, run_main  # noqa: E402  (also when loaded by path, as the tests do)
 
 
 def _macs(args: dict[str, Any]) -> int:
@@ -152,8 +152,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="*", help="shipped model names or .onnx paths (default: every shipped model)")
     ap.add_argument("--size", type=frame_size, default=(1920, 1080), help="frame WIDTHxHEIGHT (default 1920x1080)")
-    ap.add_argument("--repeats", type=int, default=10, help="profiled runs after one warm-up (default 10)")
-    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
+    ap.add_argument("--repeats", type=positive, default=10, help="profiled runs after one warm-up (default 10)")
+    ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op threads (default 2)")
     ap.add_argument("--fast", type=_fast_options, action="append", default=[], metavar="KEY=VALUE[,...]",
                     help="add rtp's fast network with these options and random weights (repeatable)")
     ap.add_argument("--like", help="the --fast networks read this model's input planes (default: the paper's four)")
@@ -213,4 +213,4 @@ def _report(label: str, model: str, args: argparse.Namespace) -> tuple[float, fl
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

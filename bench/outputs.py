@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from _common import dataset_folder  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
@@ -21,9 +21,9 @@ from rtp.capture import DatasetReader, TargetStore
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("models", nargs="+")
+    ap.add_argument("models", nargs="+", help="shipped model names or .onnx paths whose outputs to check")
     ap.add_argument("--data", type=dataset_folder, required=True, help="dataset folder with targets")
-    ap.add_argument("--every", type=int, default=4, help="use every n-th sample (default 4)")
+    ap.add_argument("--every", type=positive, default=4, help="use every n-th sample (default 4)")
     args = ap.parse_args()
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     ids = reader.ids[:: args.every]
@@ -45,4 +45,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

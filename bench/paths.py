@@ -15,6 +15,7 @@ import argparse
 import logging
 
 import numpy as np
+from _common import count, frame_size, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp.capture import load_scene
 from rtp.capture.paths import PATH_PROFILES, camera_path, unseen_shares
@@ -23,13 +24,14 @@ from rtp.capture.scenes import load_splits
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--maps", default=None, help="comma-separated maps (default: the test split)")
-    ap.add_argument("--frames", type=int, default=300)
-    ap.add_argument("--size", default="640x360")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--maps", default=None, help="comma-separated maps of scenes.yaml, fetched by `rtp scenes fetch` "
+                    "(default: the test split)")
+    ap.add_argument("--frames", type=positive, default=300, help="frames of each path at 60 Hz (default: 300)")
+    ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(640, 360), help="WIDTHxHEIGHT (default 640x360)")
+    ap.add_argument("--seed", type=count, default=0, help="which path through each map (default: 0)")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    w, h = (int(v) for v in args.size.split("x"))
+    w, h = args.size
     maps = args.maps.split(",") if args.maps else load_splits()["test"]
     print(f"{args.frames} frames at 60 Hz, {w}x{h}, seed {args.seed}\n")
     print("| map | path | length (m) | eye (m) | unseen per frame: mean % | p95 % | max % |")
@@ -44,4 +46,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -38,10 +38,14 @@ estimates and the truth fall.
 from __future__ import annotations
 
 import argparse
-import sys
 
 import numpy as np
-from _common import add_model_args, write_factors_sidecar  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    UsageError,
+    add_model_args,
+    run_main,
+    write_factors_sidecar,
+)
 from tqdm import tqdm
 
 from rtp import sdk
@@ -134,8 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     thr, hib = float(meta.default_threshold), bool(meta.higher_is_better)
     scenes = [s.strip() for s in args.scene.split(",") if s.strip()]
     if len(scenes) < 2:
-        print("error: --scene needs at least two maps (one is held out while the others fit)", file=sys.stderr)
-        return 2
+        raise UsageError("--scene needs at least two maps (one is held out while the others fit)")
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     by_map: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {s: ([], []) for s in scenes}
     for i in tqdm([i for i in reader.ids if reader[i].meta.get("scene") in by_map], desc="predicting", unit="sample"):
@@ -145,8 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         t.append(store.load(i, meta.metric, meta.tile_size))
     missing = [s for s, (p, _) in by_map.items() if not p]
     if missing:
-        print(f"error: {args.data} holds no sample of {', '.join(missing)}", file=sys.stderr)
-        return 2
+        raise UsageError(f"{args.data} holds no sample of {', '.join(missing)}")
     data = {s: (np.stack(p), np.stack(t)) for s, (p, t) in by_map.items()}
     print(f"\n{meta.metric}, {args.model}: work saved % at {' / '.join(f'{100 * x:g}' for x in SHARES)}% failing "
           f"tiles (threshold {thr:g}); per-rate factors fitted at {100 * args.fit:g}% on the other maps\n")
@@ -194,4 +196,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_main(main)

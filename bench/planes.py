@@ -29,7 +29,14 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from _common import cpu_description, frame_size, median_ms  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    cpu_description,
+    dataset_folder,
+    frame_size,
+    median_ms,
+    positive,
+    run_main,
+)
 
 from rtp import sdk
 from rtp.sdk._reuse import tile_block_levels
@@ -53,13 +60,14 @@ def block_variances_by_definition(plane: np.ndarray) -> np.ndarray:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--repeats", type=positive, default=7)
     ap.add_argument("--sizes", type=lambda s: [frame_size(v, minimum=4) for v in s.split(",")],
                     default=[(1920, 1080), (1280, 720)], help="comma-separated WIDTHxHEIGHT")
     ap.add_argument("--against", metavar="REV", help="compare the planes with those of sdk/_channels.py at git REV")
     ap.add_argument("--scenes", default="procedural:0", help="with --against: scenes whose frames are compared")
-    ap.add_argument("--frames", type=int, default=30, help="with --against: frames of each scene's path")
-    ap.add_argument("--data", help="with --against: a dataset folder whose samples' lumas are compared too")
+    ap.add_argument("--frames", type=positive, default=30, help="with --against: frames of each scene's path")
+    ap.add_argument("--data", type=dataset_folder,
+                    help="with --against: a dataset folder whose samples' lumas are compared too")
     args = ap.parse_args()
     if args.against:
         raise SystemExit(_against(args.against, args.scenes.split(","), args.frames, args.data))
@@ -103,7 +111,10 @@ def _against(rev: str, scenes: list[str], frames: int, data: str | None) -> int:
     from rtp.capture.paths import PathPlayer, camera_path
 
     root = Path(__file__).resolve().parents[1]
-    src = subprocess.run(["git", "show", f"{rev}:sdk/_channels.py"], cwd=root, capture_output=True, text=True, check=True)
+    src = subprocess.run(["git", "show", f"{rev}:sdk/_channels.py"], cwd=root, capture_output=True, text=True)
+    if src.returncode:
+        raise SystemExit(f"planes.py: error: --against {rev}: git cannot show sdk/_channels.py there "
+                         f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "_channels_then.py"
         path.write_text(src.stdout)
@@ -191,4 +202,4 @@ def _exact_block_value(plane: np.ndarray, y: int, x: int) -> float:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

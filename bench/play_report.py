@@ -35,7 +35,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from _common import save_figure  # bench/ is on sys.path when run as a script
+from _common import PLAY_JSON, count, run_main, save_figure  # bench/ is on sys.path when run as a script
 
 from rtp.evaluate import METHOD_KINDS, fail_rule
 
@@ -94,11 +94,11 @@ def _fmt(r: float, pct: bool = False) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("runs", nargs="+", type=Path, help="play.json files of `rtp play --out`")
+    ap.add_argument("runs", nargs="+", type=PLAY_JSON, help="play.json files of `rtp play --out`")
     ap.add_argument("--model", default="jnyang", help="the rtp method to compare (default jnyang)")
     ap.add_argument("--reuse", default=None, help="comma-separated methods with prediction reuse to compare with "
                     "--model (default MODEL@4)")
-    ap.add_argument("--window", type=int, default=0, help="also print each method's saving and failing share at its "
+    ap.add_argument("--window", type=count, default=0, help="also print each method's saving and failing share at its "
                     "default in consecutive windows of this many frames")
     ap.add_argument("--by-age", action="store_true", help="also print each reuse method's saving and failing share at "
                     "its default by frames since its network ran, beside the method without reuse")
@@ -306,4 +306,4 @@ def _by_age(runs: list[dict[str, Any]]) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

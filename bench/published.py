@@ -22,6 +22,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from _common import dataset_folder, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import export, sdk
 from rtp.capture import DatasetReader, TargetStore
@@ -48,8 +49,10 @@ def _score(preds: list[np.ndarray], gts: list[np.ndarray], t: float, thr: float,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", required=True, help="validation samples with targets of every metric")
-    ap.add_argument("--data-l0", required=True, help="the same samples with JNYang targets at Weber l = 1e-10")
+    ap.add_argument("--data", required=True, type=dataset_folder, help="validation samples with targets of every metric")
+    ap.add_argument("--data-l0", required=True, type=dataset_folder,
+                    help="the same samples with JNYang targets at Weber l = 1e-10: a copy of --data without its "
+                    "targets/ folder, then `rtp targets COPY --metrics jnyang --weber-l 1e-10`")
     ap.add_argument("--models", default=str(PUBLISHED), help="folder of the published .onnx files")
     args = ap.parse_args()
     reader = DatasetReader(args.data)
@@ -92,4 +95,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -17,6 +17,7 @@ import statistics
 import time
 
 import numpy as np
+from _common import frame_sizes, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp.plugins.moderngl import Renderer
 from rtp.scene import Camera, Material, PointLight, Scene, SunLight, box_mesh, checker_texture, quad_mesh, sphere_mesh
@@ -99,8 +100,9 @@ def bench(width: int, height: int, frames: int, scene: Scene) -> tuple[float, di
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=5)
-    ap.add_argument("--sizes", default="640x360,1280x720")
+    ap.add_argument("--frames", type=positive, default=5, help="frames timed per size (default: 5)")
+    ap.add_argument("--sizes", type=frame_sizes(16), default="640x360,1280x720",
+                    help="comma-separated WIDTHxHEIGHT (default: 640x360,1280x720)")
     args = ap.parse_args()
     scene = build_scene()
     with Renderer(16, 16) as probe:
@@ -109,10 +111,9 @@ def main() -> None:
           f"{len(scene.point_lights)} point lights; {gl}; {platform.processor() or platform.machine()}")
     print(f"median of {args.frames} frames; each frame = G-buffers + 7 rates + reprojection, read back to numpy\n")
     rows = []
-    for size in args.sizes.split(","):
-        w, h = (int(v) for v in size.split("x"))
+    for w, h in args.sizes:
         t, stages = bench(w, h, args.frames, scene)
-        rows.append((size, t, stages))
+        rows.append((f"{w}x{h}", t, stages))
     print("| size | ms/frame | frames/s |")
     print("|---|---|---|")
     for size, t, _ in rows:
@@ -126,4 +127,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -15,6 +15,9 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
+
+from _common import EVALUATION_JSON, run_main  # bench/ is on sys.path when run as a script
 
 from rtp.evaluate import saved_at
 
@@ -30,7 +33,7 @@ def table(header: list[str], rows: list[list[str]]) -> None:
         print("| " + " | ".join(r) + " |")
 
 
-def main(paths: list[str]) -> None:
+def main(paths: list[Path]) -> None:
     for path in paths:
         for d in json.load(open(path, encoding="utf-8")):
             print(f"\n### {d['model']['metric']} ({d['model']['path']} on {d['data']}, {d['samples']} samples)")
@@ -61,7 +64,7 @@ def at_levels(d: dict) -> None:
             for m, p in methods.items()])
 
 
-def compact(paths: list[str]) -> None:
+def compact(paths: list[Path]) -> None:
     """One row per model of every file: R² on all / seen / unseen tiles with the model's safety margin
     and without it, and the work saved at 1, 2, 5 and 10% failing tiles (before / after tables)."""
     rows = []
@@ -78,7 +81,7 @@ def compact(paths: list[str]) -> None:
            "saved % at 1 / 2 / 5 / 10% fails"], rows)
 
 
-def per_scene(paths: list[str]) -> None:
+def per_scene(paths: list[Path]) -> None:
     """One row per model and scene of every file: R² on all / seen / unseen tiles with the model's
     safety margin and without it (a pooled R² mixes the maps' levels; held-out-map studies read these)."""
     rows = []
@@ -95,30 +98,23 @@ def per_scene(paths: list[str]) -> None:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description="Summary tables of `rtp evaluate` results (evaluation.json files).")
-    ap.add_argument("paths", nargs="+", metavar="evaluation.json", help="files written by `rtp evaluate --out DIR`")
+    ap.add_argument("paths", nargs="+", type=EVALUATION_JSON, metavar="evaluation.json",
+                    help="files written by `rtp evaluate --out DIR`")
     form = ap.add_mutually_exclusive_group()
     form.add_argument("--compact", action="store_true", help="one row per model: R² and work saved at 1-10%% failing")
     form.add_argument("--per-scene", action="store_true", help="one row per model and scene: R² with and without the margin")
-    args = ap.parse_args(argv)
-    missing = [p for p in args.paths if not open_ok(p)]
-    if missing:
-        ap.error(f"no such file: {', '.join(missing)} (expected the evaluation.json of an `rtp evaluate --out` folder)")
-    return args
+    return ap.parse_args(argv)
 
 
-def open_ok(path: str) -> bool:
-    try:
-        with open(path, encoding="utf-8"):
-            return True
-    except OSError:
-        return False
-
-
-if __name__ == "__main__":
-    a = parse_args()
+def run(argv: list[str] | None = None) -> None:
+    a = parse_args(argv)
     if a.compact:
         compact(a.paths)
     elif a.per_scene:
         per_scene(a.paths)
     else:
         main(a.paths)
+
+
+if __name__ == "__main__":
+    run_main(run)

@@ -1,6 +1,6 @@
 """Where a model's squared error lies, and whether a smarter rate rule would use its estimates better.
 
-    python bench/residuals.py models/jnyang.onnx [--data data/val72 | --data data/train --scene kaos,oa_dm3,oacmpdm4]
+    python bench/residuals.py models/jnyang.onnx [--data data/val | --data data/train --scene kaos,oa_dm3,oacmpdm4]
 
 On every sample of a dataset with targets, the model's raw output (transformed space, no safety
 margin: what docs/results.md's "no safety margin" columns score) against the transformed truth.
@@ -37,11 +37,17 @@ Prints three tables:
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 
 import numpy as np
-from _common import dataset_folder, save_figure, scene_ids  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    UsageError,
+    count,
+    dataset_folder,
+    run_main,
+    save_figure,
+    scene_ids,
+)
 from tqdm import tqdm
 
 from rtp import sdk
@@ -126,10 +132,11 @@ def _risk_table(pred: np.ndarray, fails: np.ndarray, bins: np.ndarray, higher_is
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model", help="an exported model (.onnx)")
-    ap.add_argument("--data", type=dataset_folder, default="data/val72", help="dataset with targets (default: data/val72)")
+    ap.add_argument("--data", type=dataset_folder, default="data/val",
+                    help="dataset with targets (default: data/val, the 72 validation samples of docs/export.md)")
     ap.add_argument("--scene", default=None, help="only these maps of --data (comma-separated), e.g. the validation "
                     "maps of data/train")
-    ap.add_argument("--noise-seed", type=int, default=0, help="seed of table 4's synthetic estimates (default 0)")
+    ap.add_argument("--noise-seed", type=count, default=0, help="seed of table 4's synthetic estimates (default 0)")
     ap.add_argument("--plot", default=None, metavar="PNG",
                     help="also draw table 4's curves (work saved against failing tiles) into this PNG")
     args = ap.parse_args(argv)
@@ -142,8 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     moved = []  # per tile, the mean |luma| difference between the reprojected and the current full-rate frame
     ids = scene_ids(reader, args.scene)
     if not ids:
-        print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
-        return 2
+        raise UsageError(f"{args.data} holds no sample of {args.scene}")
     for k, i in enumerate(tqdm(ids, desc="predicting", unit="sample")):
         s = reader[i]
         x = s.inputs(meta.inputs)
@@ -328,4 +334,4 @@ def _plot(curves: list[tuple[str, list[tuple[float, float]]]], oracle: float, ti
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_main(main)

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import onnxruntime as ort
-from _common import median_ms  # bench/ is on sys.path when run as a script
+from _common import median_ms, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 
@@ -49,8 +49,8 @@ def _carried(pred: sdk.ShadingRatePredictor, x: np.ndarray, strip: int, repeats:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
-    ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--repeats", type=positive, default=7)
+    ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op threads")
     ap.add_argument("--spin-between-runs", action="store_true",
                     help="onnxruntime's worker threads spin on between runs (its default; sdk.load stops them)")
     args = ap.parse_args()
@@ -86,4 +86,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

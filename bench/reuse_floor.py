@@ -47,10 +47,11 @@ import argparse
 from typing import Any
 
 import numpy as np
+from _common import count, frame_size, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
 from rtp.capture import load_scene
-from rtp.capture.paths import PathPlayer, camera_path
+from rtp.capture.paths import PATH_PROFILES, PathPlayer, camera_path
 from rtp.evaluate._evaluate import failing_tiles
 from rtp.evaluate._play import model_inputs
 from rtp.sdk._channels import BLOCK_EPS
@@ -96,19 +97,26 @@ class CheckpointModel:
             return self._decode(self.net.tail(f, t.from_numpy(x[None])).numpy())
 
 
+def _frames(text: str) -> int:
+    n = positive(text)
+    if n < 3:  # (2 frames give no pair of a carried frame: a table of nan)
+        raise argparse.ArgumentTypeError(f"expected at least 3 frames, got {text!r}")
+    return n
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("map", help="a map of scenes.yaml (tune on the validation maps only)")
-    ap.add_argument("--path", default="slow", help="camera path profile (default: slow)")
-    ap.add_argument("--frames", type=int, default=40, help="frames of the path (default: 40)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("map", help="a map of scenes.yaml, fetched by `rtp scenes fetch` (tune on the validation maps only)")
+    ap.add_argument("--path", default="slow", choices=sorted(PATH_PROFILES), help="camera path profile (default: slow)")
+    ap.add_argument("--frames", type=_frames, default=40, help="frames of the path, at least 3 (default: 40)")
+    ap.add_argument("--seed", type=count, default=0, help="which path through the map (default: 0)")
     ap.add_argument("--model", default="jnyang", help="shipped model, .onnx, or a checkpoint .pt run in torch "
                     "(default: jnyang)")
-    ap.add_argument("--size", default="1280x720")
+    ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
     ap.add_argument("--rescale", type=float, default=0.25, help="exponent of the rescaled row (default: 0.25)")
     ap.add_argument("--sweep", action="store_true", help="also sweep the threshold and compare one threshold for "
                     "network and carried frames with one of each's own (error metrics)")
-    ap.add_argument("--every", type=int, default=4, help="with --sweep: the interval k of the reuse mixed (default: 4)")
+    ap.add_argument("--every", type=positive, default=4, help="with --sweep: the interval k of the reuse mixed (default: 4)")
     args = ap.parse_args()
     if args.every < 2:
         ap.error(f"--every: expected an interval >= 2, got {args.every}")
@@ -119,7 +127,7 @@ def main() -> None:
     if args.sweep and hib:
         ap.error(f"--sweep: the model's metric {metric} is better when higher; the sweep scales an error threshold")
     tile = pred.tile_size
-    w, h = (int(v) for v in args.size.split("x"))
+    w, h = args.size
     scn, blockers = load_scene(args.map, None, None, None)
     path = camera_path(scn, args.frames, args.path, args.seed, blockers=blockers)
     blocks = [i for i, c in enumerate(meta.inputs) if c.endswith(".blocks")]
@@ -231,4 +239,4 @@ def _print_sweep(curves: dict[str, np.ndarray], factors: np.ndarray, every: int)
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

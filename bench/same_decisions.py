@@ -16,10 +16,9 @@ evaluation's figures can too; where none does, every work-saved and failing-tile
 from __future__ import annotations
 
 import argparse
-import sys
 
 import numpy as np
-from _common import dataset_folder  # bench/ is on sys.path when run as a script
+from _common import UsageError, dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -31,13 +30,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("old", help="a model: an .onnx path or a shipped model's name")
     ap.add_argument("new", help="the same model in another file")
     ap.add_argument("--data", type=dataset_folder, required=True, help="a dataset folder written by rtp capture")
-    ap.add_argument("--limit", type=int, default=None, help="the first N samples only")
+    ap.add_argument("--limit", type=positive, default=None, help="the first N samples only")
     args = ap.parse_args(argv)
     a, b = sdk.load(args.old), sdk.load(args.new)
     if a.metadata.inputs != b.metadata.inputs or a.metadata.metric != b.metadata.metric:
-        print(f"error: the two files are not one model: {a.metadata.metric} on {list(a.metadata.inputs)} against "
-              f"{b.metadata.metric} on {list(b.metadata.inputs)}", file=sys.stderr)
-        return 2
+        raise UsageError(f"the two files are not one model: {a.metadata.metric} on {list(a.metadata.inputs)} against "
+              f"{b.metadata.metric} on {list(b.metadata.inputs)}")
     meta = a.metadata
     t = meta.default_threshold
     thresholds = (t - 3.0, t, t + 3.0) if meta.higher_is_better else (0.5 * t, t, 2.0 * t)
@@ -63,4 +61,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

@@ -19,10 +19,18 @@ import time
 from pathlib import Path
 
 import ray
+from _common import frame_size, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp.capture import capture, compute_targets
 
 METRICS = ("flip", "psnr", "lpips", "jnflip", "jnyang")
+
+
+def _modes(text: str) -> list[str]:
+    modes = [m.strip() for m in text.split(",") if m.strip()]
+    if not modes or any(m not in ("ray", "pool") for m in modes):
+        raise argparse.ArgumentTypeError(f"expected ray and/or pool, comma-separated, got {text!r}")
+    return modes
 
 
 def run(scenes: list[str], per_scene: int, size: tuple[int, int], workers: int, mode: str, cache: str | None,
@@ -42,21 +50,23 @@ def run(scenes: list[str], per_scene: int, size: tuple[int, int], workers: int, 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", default="procedural:0,procedural:1")
-    ap.add_argument("--per-scene", type=int, default=3)
-    ap.add_argument("--size", default="1280x720")
-    ap.add_argument("--workers", default="1,2")
-    ap.add_argument("--modes", default="ray,pool", help="ray (a private local Ray instance) and/or pool (local processes)")
+    ap.add_argument("--per-scene", type=positive, default=3)
+    ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
+    ap.add_argument("--workers", type=lambda s: [positive(v) for v in s.split(",")], default="1,2",
+                    help="comma-separated worker counts (default: 1,2)")
+    ap.add_argument("--modes", type=_modes, default="ray,pool",
+                    help="ray (a private local Ray instance) and/or pool (local processes), comma-separated (default: both)")
     ap.add_argument("--cache", default=None, help="scene cache for fetched maps")
     args = ap.parse_args()
-    w, h = (int(v) for v in args.size.split("x"))
+    w, h = args.size
     scenes = args.scenes.split(",")
     print(f"{len(scenes)} scenes x 2 profiles x {args.per_scene} pairs at {w}x{h}; {platform.machine()}, "
           f"{os.cpu_count()} CPUs, ray {ray.__version__}\n")
     print("| executor | workers | capture s/sample | targets s/sample | capture speed-up | targets speed-up | Ray start s |")
     print("|---|---:|---:|---:|---:|---:|---:|")
-    for mode in args.modes.split(","):
+    for mode in args.modes:
         base: tuple[float, float] | None = None
-        for n in (int(x) for x in args.workers.split(",")):
+        for n in args.workers:
             start = 0.0
             if mode == "ray":
                 t0 = time.perf_counter()
@@ -73,4 +83,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

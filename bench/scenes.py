@@ -1,7 +1,7 @@
 """Scene sources benchmark: converts maps of scenes.yaml, loads them from the cache, samples
 viewpoints, and prints a markdown table (the numbers in docs/scenes.md come from this script).
 
-    python bench/scenes.py --cache-dir .cache/scenes --maps 20kdm2,oa_dm5,oacmpctf3,oa_dm1 --views 20
+    python bench/scenes.py --maps 20kdm2,oa_dm5,oacmpctf3,oa_dm1 --views 20
 
 Needs the cache filled by ``rtp scenes fetch`` (``rtp.capture.scenes.fetch``).
 """
@@ -11,11 +11,12 @@ from __future__ import annotations
 import argparse
 import logging
 import platform
-import sys
 import time
 from pathlib import Path
 
-from rtp.capture.scenes import load_splits, procedural
+from _common import count, run_main  # bench/ is on sys.path when run as a script
+
+from rtp.capture.scenes import default_cache_dir, load_splits, procedural
 from rtp.capture.scenes._cache import load_scene_npz, save_scene_npz
 from rtp.capture.scenes._fetch import _cache_path, _check_listed, convert_from_cache, fetch
 from rtp.capture.viewpoints import sample_viewpoints
@@ -23,15 +24,16 @@ from rtp.capture.viewpoints import sample_viewpoints
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cache-dir", default=".cache/scenes")
+    ap.add_argument("--cache-dir", default=default_cache_dir(),
+                    help="the scene cache `rtp scenes fetch` fills (default: $RTP_SCENE_CACHE, else ~/.cache/rtp/scenes)")
     ap.add_argument("--maps", default="20kdm2,oa_dm5,oacmpctf3,oa_dm1,oacmpdm5,kaos")
-    ap.add_argument("--views", type=int, default=20, help="viewpoint pairs sampled per map (0: skip)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--views", type=count, default=20, help="viewpoint pairs sampled per map (0: skip)")
+    ap.add_argument("--seed", type=count, default=0)
     ap.add_argument("--fetch", action="store_true", help="run fetch first (downloads with apt-get if needed)")
-    ap.add_argument("--unseen", type=int, default=0, metavar="N",
+    ap.add_argument("--unseen", type=count, default=0, metavar="N",
                     help="render N pairs per scene and profile with the moderngl renderer (320x180) and "
                     "report the unseen-pixel fraction 1 - mean(seen) (the motion-profile calibration)")
-    ap.add_argument("--unseen-seed", type=int, default=11)
+    ap.add_argument("--unseen-seed", type=count, default=11)
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     maps = [m.strip() for m in args.maps.split(",") if m.strip()]
@@ -106,4 +108,4 @@ def unseen(rows, n: int, seed: int) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

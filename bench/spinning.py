@@ -32,7 +32,13 @@ from collections.abc import Callable
 
 import numpy as np
 import onnxruntime as ort
-from _common import cpu_description, frame_size, save_figure  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    cpu_description,
+    frame_size,
+    positive,
+    run_main,
+    save_figure,
+)
 
 from rtp import sdk
 
@@ -178,10 +184,10 @@ def in_turn(spin: bool, size: tuple[int, int], threads: int, repeats: int) -> di
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1920, 1080), help="WIDTHxHEIGHT")
-    ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
+    ap.add_argument("--repeats", type=positive, default=15)
+    ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op threads")
     ap.add_argument("--long-ms", type=float, default=500, help="the longer wait after a run in table 1 (ms)")
-    ap.add_argument("--blocks", type=int, default=2, help="alternating blocks of each setting")
+    ap.add_argument("--blocks", type=positive, default=2, help="alternating blocks of each setting")
     ap.add_argument("--plot", metavar="PNG", help="also draw the CPU time after a run of --model, both settings")
     ap.add_argument("--model", default="jnflip",
                     help="the model of the engine-frame table (default: jnflip, whose planes llvmpipe builds fastest)")
@@ -225,4 +231,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

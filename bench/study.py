@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import dataset_folder, median_ms  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, median_ms, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.capture.scenes import load_splits
@@ -121,18 +121,20 @@ def _ms(model: str | Path) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=dataset_folder, required=True,
                     help="dataset with targets holding the train and validation maps")
-    ap.add_argument("--metric", default="jnyang")
+    ap.add_argument("--metric", default="jnyang", choices=sorted(sdk.METRICS), help="the metric trained (default: jnyang)")
     ap.add_argument("--out", required=True, help="folder for the checkpoints and exports")
     ap.add_argument("--only", default=None,
                     help="comma-separated configuration names (default: all; \"\": only the --reference models)")
-    ap.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's)")
+    ap.add_argument("--steps", type=positive, default=None, help="training steps (default: the recipe's)")
     ap.add_argument("--reference", action="append", default=[], help="an exported model to score alongside")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     names = [n for n in args.only.split(",") if n] if args.only is not None else list(CONFIGS)  # --only "": references only
+    if not names and not args.reference:
+        ap.error('--only "" scores the --reference models only: give at least one --reference')
     configs = {n: _config(n) for n in names}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -162,4 +164,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

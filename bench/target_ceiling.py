@@ -25,11 +25,10 @@ AlexNet). A pointwise metric mirrors exactly.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
-from _common import add_model_args, scene_ids  # bench/ is on sys.path when run as a script
+from _common import UsageError, add_model_args, count, run_main, scene_ids  # bench/ is on sys.path when run as a script
 from tqdm import tqdm
 
 from rtp import metrics as M
@@ -47,12 +46,12 @@ def parse_shifts(text: str, tile: int) -> list[tuple[int, int]]:
         try:
             dy, dx = (int(v) for v in part.split(","))
         except ValueError:
-            raise SystemExit(f"error: --shifts takes 'dy,dx' pairs separated by spaces, got {part!r}") from None
+            raise UsageError(f"--shifts takes 'dy,dx' pairs separated by spaces, got {part!r}") from None
         if not (0 <= dy < tile and 0 <= dx < tile):
-            raise SystemExit(f"error: each shift must lie in [0, {tile}) pixels (one tile), got {part!r}")
+            raise UsageError(f"each shift must lie in [0, {tile}) pixels (one tile), got {part!r}")
         out.append((dy, dx))
     if len(out) < 2 or out[0] != (0, 0) or len(set(out)) != len(out):
-        raise SystemExit("error: --shifts needs at least two distinct phases, the first one 0,0")
+        raise UsageError("--shifts needs at least two distinct phases, the first one 0,0")
     return out
 
 
@@ -92,25 +91,23 @@ def r2(p: np.ndarray, g: np.ndarray) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_model_args(ap, "an exported model (.onnx): its metric, transform, outputs and tile size", "; '' for all")
-    ap.add_argument("--samples", type=int, default=0, help="at most this many samples, spread evenly (0: all)")
+    ap.add_argument("--samples", type=count, default=0, help="at most this many samples, spread evenly (0: all)")
     ap.add_argument("--shifts", default=DEFAULT_SHIFTS, help=f"phases, 'dy,dx' pixels (default: {DEFAULT_SHIFTS!r})")
-    ap.add_argument("--margin", type=int, default=4, help="tiles left out along each window's edges (default: 4)")
+    ap.add_argument("--margin", type=count, default=4, help="tiles left out along each window's edges (default: 4)")
     ap.add_argument("--mirror", action="store_true",
                     help="also the targets of the frame mirrored left-right, mirrored back, against the targets")
     args = ap.parse_args(argv)
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
     if meta.metric == "psnr":
-        print("error: PSNR is computed per pixel and pooled by mean: every phase gives the same target "
-              "(its ceiling is 100% by construction)", file=sys.stderr)
-        return 2
+        raise UsageError("PSNR is computed per pixel and pooled by mean: every phase gives the same target "
+              "(its ceiling is 100% by construction)")
     tile = meta.tile_size
     shifts = parse_shifts(args.shifts, tile)
     reader = DatasetReader(args.data)
     ids = scene_ids(reader, args.scene)
     if not ids:
-        print(f"error: {args.data} holds no sample of {args.scene}", file=sys.stderr)
-        return 2
+        raise UsageError(f"{args.data} holds no sample of {args.scene}")
     if args.samples > 0 and len(ids) > args.samples:
         ids = [ids[i] for i in np.linspace(0, len(ids) - 1, args.samples).round().astype(int)]
     # the parameters the dataset's targets were computed with (a window's width must not change FLIP's ppd)
@@ -124,8 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         s = reader[i]
         h, w = s.size
         if h % tile or w % tile or min(h, w) // tile < 2 * m + 4:
-            print(f"error: {i}: {w}x{h} is not whole {tile}-pixel tiles with room for --margin {m}", file=sys.stderr)
-            return 2
+            raise UsageError(f"{i}: {w}x{h} is not whole {tile}-pixel tiles with room for --margin {m}")
         ref = s.final("1x1")
         t = phase_targets(ref, {r: s.final(r) for r in meta.outputs}, meta.metric, shifts, tile, params)
         t = t[..., m:t.shape[-2] - m, m:t.shape[-1] - m]
@@ -174,4 +170,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

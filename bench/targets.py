@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 import torch
-from _common import dataset_folder  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
 from rtp.capture import DatasetReader, compute_targets
@@ -85,7 +85,7 @@ def _restrict_manifest(root: Path, ids: list[str]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=dataset_folder, default="data/val", help="a captured dataset (rtp capture)")
-    ap.add_argument("--samples", type=int, default=6)
+    ap.add_argument("--samples", type=positive, default=6)
     ap.add_argument("--workers", default="1,2", help="worker counts for the end-to-end part")
     args = ap.parse_args()
     torch.set_num_threads(2)
@@ -109,4 +109,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -38,7 +38,14 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import onnxruntime as ort
-from _common import cpu_description, frame_size, interleaved_ms, median_ms  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    cpu_description,
+    frame_size,
+    interleaved_ms,
+    median_ms,
+    positive,
+    run_main,
+)
 
 from rtp import sdk
 
@@ -192,9 +199,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="*", help="shipped model names or .onnx paths (default: every shipped model)")
     ap.add_argument("--size", type=frame_size, default=(1920, 1080), help="WIDTHxHEIGHT of each view (default 1920x1080)")
-    ap.add_argument("--views", type=int, default=2, help="views a frame (default 2: stereo)")
-    ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads of the predictor (default 2)")
-    ap.add_argument("--rounds", type=int, default=7, help="timed rounds (default 7)")
+    ap.add_argument("--views", type=positive, default=2, help="views a frame (default 2: stereo)")
+    ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op threads of the predictor (default 2)")
+    ap.add_argument("--rounds", type=positive, default=7, help="timed rounds (default 7)")
     ap.add_argument("--seconds", type=float, default=2.0, help="length of each Python-loop reading (default 2)")
     ap.add_argument("--switch", default="0.005,0.0005",
                     help="comma-separated sys.setswitchinterval values in seconds for the second table (default "
@@ -237,4 +244,4 @@ def main() -> None:
         print(f"| {step} | {ms:.2f} | {waits:.0f} |")
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -4,5 +4,6 @@ error policy (exit codes in docs/errors.md)."""
 
 from ._export import build_export_parser, export_main
 from ._main import MAX_SIDE, build_parser, frame_size, main
+from ._run import run_guarded
 
-__all__ = ["MAX_SIDE", "build_export_parser", "build_parser", "export_main", "frame_size", "main"]
+__all__ = ["MAX_SIDE", "build_export_parser", "build_parser", "export_main", "frame_size", "main", "run_guarded"]

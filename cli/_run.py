@@ -19,7 +19,7 @@ import traceback
 from collections.abc import Callable, Iterator
 from typing import Any
 
-__all__ = ["COMMON", "Bar", "Formatter", "add_common", "run", "states_default", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "add_common", "run", "run_guarded", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -162,29 +162,37 @@ _PATH_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EEXIS
 
 def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace], int]) -> int:
     """Run a command body under the one error policy (see the module docstring)."""
+    with _logging(args):
+        return run_guarded(prog, lambda: body(args), verbose=args.verbose)
+
+
+def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False) -> int:
+    """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,
+    ``PROG: error: MESSAGE``, and returns its class's exit code (``verbose``: the traceback above it); an
+    ``OSError`` naming a path likewise (2 for a wrong path, 1 otherwise); Ctrl-C 130; a closed pipe 0.
+    Anything else propagates with its traceback. The benchmark scripts under ``bench/`` run through it."""
     from rtp.sdk import EXIT_FAILED, EXIT_USAGE, RtpError, exit_code
 
-    with _logging(args):
-        try:
-            return int(body(args))
-        except RtpError as err:
-            if args.verbose:
-                traceback.print_exc()
-            print(f"{prog}: error: {err}", file=sys.stderr)
-            return exit_code(err)
-        except KeyboardInterrupt as err:
-            print(f"{prog}: interrupted", file=sys.stderr)
-            return exit_code(err)
-        except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            return 0
-        except OSError as err:
-            if err.filename is None:  # not about a path the user gave: a bug, with its traceback
-                raise
-            # A path the system refused (a folder where a file was asked, a read-only place, a full
-            # disk): the user's to fix, said in one line; 2 where the path itself is wrong.
-            if args.verbose:
-                traceback.print_exc()
-            where = f"{err.filename!r}" + (f" -> {err.filename2!r}" if err.filename2 else "")
-            print(f"{prog}: error: {err.strerror or type(err).__name__}: {where}", file=sys.stderr)
-            return EXIT_USAGE if err.errno in _PATH_ERRNOS else EXIT_FAILED
+    try:
+        return int(body() or 0)
+    except RtpError as err:
+        if verbose:
+            traceback.print_exc()
+        print(f"{prog}: error: {err}", file=sys.stderr)
+        return exit_code(err)
+    except KeyboardInterrupt as err:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return exit_code(err)
+    except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except OSError as err:
+        if err.filename is None:  # not about a path the user gave: a bug, with its traceback
+            raise
+        # A path the system refused (a folder where a file was asked, a read-only place, a full
+        # disk): the user's to fix, said in one line; 2 where the path itself is wrong.
+        if verbose:
+            traceback.print_exc()
+        where = f"{err.filename!r}" + (f" -> {err.filename2!r}" if err.filename2 else "")
+        print(f"{prog}: error: {err.strerror or type(err).__name__}: {where}", file=sys.stderr)
+        return EXIT_USAGE if err.errno in _PATH_ERRNOS else EXIT_FAILED

@@ -35,7 +35,7 @@ import numpy as np
 
 from rtp import sdk
 from rtp.capture.scenes import procedural
-from rtp.cli import frame_size  # the WIDTHxHEIGHT of every rtp command
+from rtp.cli import frame_size, run_guarded  # the WIDTHxHEIGHT of every rtp command; its error policy
 from rtp.plugins.moderngl import Adapter, RateSelector, create_context
 from rtp.scene import Camera
 
@@ -59,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
 
     predictor = sdk.load(args.model)
     log.info("model %s (%s), inputs %s", predictor.path, predictor.metadata.metric, ", ".join(predictor.metadata.inputs))
-    threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
+    threshold = predictor.metadata.default_threshold if args.threshold is None else \
+        sdk.check_threshold(args.threshold, predictor.metadata.higher_is_better)  # refused now, not at frame 1
     level = procedural(args.seed)
     spawn = level.spawn_points[0]
 
@@ -91,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import imageio.v3 as iio
 
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     iio.imwrite(args.out, overlays[-1])
     log.info("wrote %s", args.out)
     if args.gif:
@@ -100,4 +102,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_guarded(Path(__file__).name, main))  # an rtp error in one line, as the rtp commands print it

@@ -44,7 +44,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports PyO
 import numpy as np
 
 from rtp import sdk
-from rtp.cli import frame_size  # the WIDTHxHEIGHT of every rtp command
+from rtp.cli import frame_size, run_guarded  # the WIDTHxHEIGHT of every rtp command; its error policy
 from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_trimesh_scene
 
 log = logging.getLogger("pyrender_vrs")
@@ -64,7 +64,10 @@ def load_scene(path: Path) -> Any:
     import trimesh
 
     pyrender = import_pyrender()
-    tm = trimesh.load(str(path), force="scene", process=False)
+    try:
+        tm = trimesh.load(str(path), force="scene", process=False)
+    except Exception as err:  # trimesh refuses an unknown or broken file with many exception types
+        raise sdk.ParameterError(f"--scene {path}: trimesh cannot read it ({type(err).__name__}: {err})") from err
     scene = pyrender.Scene.from_trimesh_scene(tm, bg_color=(0.45, 0.6, 0.85, 1.0), ambient_light=(0.3, 0.3, 0.3))
     # pyrender's shading needs a light; a sun-like directional light from above
     sun = np.eye(4)
@@ -144,6 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.frames < 2 or args.every < 1:
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
+    if args.scene is not None and not args.scene.is_file():
+        ap.error(f"--scene: no file at {str(args.scene)!r} (a glTF, GLB or OBJ file)")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("OpenGL").setLevel(logging.WARNING)
     width, height = args.size
@@ -158,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
             log.info("wrote a procedural level (seed %d) to %s", args.seed, scene_path)
         scene = load_scene(scene_path)
         predictor = sdk.load(args.model)
+        if args.threshold is not None:  # refused now, not at the first frame
+            sdk.check_threshold(args.threshold, predictor.metadata.higher_is_better)
         log.info("model %s: inputs %s, tile %d", predictor.path, ", ".join(predictor.metadata.inputs),
                  predictor.metadata.tile_size)
 
@@ -244,4 +251,4 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_guarded(Path(__file__).name, main))  # an rtp error in one line, as the rtp commands print it

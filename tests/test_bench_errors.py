@@ -1,0 +1,58 @@
+"""The benchmark scripts and examples follow rtp's error policy (docs/errors.md): bad arguments are
+argparse's usage errors, and an rtp error found while running (a model, map or dataset that is not
+there) prints one line, ``NAME.py: error: ...``, with rtp's exit code, instead of a traceback."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from .conftest import BENCH
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_script_runs_its_main_under_the_error_policy() -> None:
+    """Each bench script's ``__main__`` block is ``run_main(...)`` (bench/_common.py), and no script
+    prints its own "error: ..." line (they had three formats, some without the program's name)."""
+    for path in sorted(BENCH.glob("*.py")):
+        if path.name == "_common.py":
+            continue
+        tree = ast.parse(path.read_text())
+        blocks = [n for n in tree.body if isinstance(n, ast.If) and "__main__" in ast.unparse(n.test)]
+        assert blocks and "run_main(" in ast.unparse(blocks[0]), f"{path.name}: its __main__ is not run_main(...)"
+        assert '"error: ' not in path.read_text(), f"{path.name} prints its own error line"
+
+
+def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, *args], cwd=cwd, capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize(("args", "code", "words"), [
+    (["bench/inference.py", "nosuchmodel"], 2, "inference.py: error: no model file at 'nosuchmodel'"),
+    (["bench/inference.py", "--repeats", "0"], 2, "argument --repeats: expected an integer >= 1"),
+    (["bench/paths.py", "--size", "12x"], 2, "argument --size: expected WIDTHxHEIGHT"),
+    (["bench/paths.py", "--maps", "nosuchmap", "--frames", "3"], 2, "paths.py: error: map 'nosuchmap' is not listed"),
+    (["bench/scaling.py", "--modes", "nosuch"], 2, "argument --modes: expected ray and/or pool"),
+    (["bench/report.py", "README.md"], 2, "is not JSON"),
+    (["examples/moderngl_vrs.py", "--model", "nosuch"], 2, "moderngl_vrs.py: error: no model file at 'nosuch'"),
+])
+def test_bad_input_is_one_line(args: list[str], code: int, words: str) -> None:
+    run = _run(args, ROOT)
+    assert run.returncode == code, run.stderr
+    assert "Traceback" not in run.stderr and words in run.stderr.strip().splitlines()[-1], run.stderr
+
+
+def test_a_json_of_another_kind_and_a_folder_that_is_not_a_dataset(tmp_path: Path) -> None:
+    (tmp_path / "other.json").write_text(json.dumps({"settings": {}}))
+    run = _run([str(BENCH / "play_report.py"), str(tmp_path / "other.json")], tmp_path)
+    assert run.returncode == 2 and "is not a play.json (the file `rtp play --out DIR` writes)" in run.stderr
+    (tmp_path / "fake").mkdir()
+    (tmp_path / "fake" / "manifest.json").write_text(json.dumps({"format": "mine"}))
+    run = _run([str(BENCH / "outputs.py"), "jnyang", "--data", str(tmp_path / "fake")], tmp_path)
+    assert run.returncode == 2 and "Traceback" not in run.stderr and "argument --data" in run.stderr, run.stderr
