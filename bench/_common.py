@@ -137,7 +137,7 @@ def report_file(kind: str, keys: set[str], made_by: str, *, many: bool = False) 
 
 
 #: The ``play.json`` of ``rtp play --out DIR``.
-PLAY_JSON = report_file("a play.json", {"settings", "rows", "matched"}, "`rtp play --out DIR`")
+PLAY_JSON = report_file("a play.json", {"settings", "rows"}, "`rtp play --out DIR`")
 #: The ``evaluation.json`` of ``rtp evaluate --out DIR`` (a list of reports, one per model).
 EVALUATION_JSON = report_file("an evaluation.json", {"model", "quality", "decisions"}, "`rtp evaluate --out DIR`",
                               many=True)

@@ -131,8 +131,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--iterations", type=positive, default=1500, help="Adam steps of each fit (default 1500)")
     ap.add_argument("--seed", type=count, default=0, help="seed of the fits (default 0)")
     args = ap.parse_args(argv)
-    if args.iterations < 1:
-        raise UsageError(f"--iterations must be at least 1, got {args.iterations}")
     pred = sdk.load(args.model, providers=["CPUExecutionProvider"])
     meta = pred.metadata
     reader, store = DatasetReader(args.data), TargetStore(args.data)

@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         if scaled.min() < 1.0 / sdk.MAX_RATE_FACTOR or scaled.max() > sdk.MAX_RATE_FACTOR:
             raise UsageError(f"a scaled factor leaves [1/{sdk.MAX_RATE_FACTOR:g}, {sdk.MAX_RATE_FACTOR:g}]")
         write_factors_sidecar(args.sidecar, scaled, "python bench/loop_scale.py " + " ".join(
-            [*args.runs, "--method", args.method, "--one", args.one, "--sidecar", args.sidecar]))
+            [*map(str, args.runs), "--method", args.method, "--one", args.one, "--sidecar", args.sidecar]))
         print(f"wrote {args.sidecar}: rtp-export --retune {models[args.method]} --metadata {args.sidecar} -o OUT.onnx")
     return 0
 

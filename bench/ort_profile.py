@@ -158,8 +158,6 @@ def main() -> None:
                     help="add rtp's fast network with these options and random weights (repeatable)")
     ap.add_argument("--like", help="the --fast networks read this model's input planes (default: the paper's four)")
     args = ap.parse_args()
-    if args.repeats < 1:
-        ap.error(f"--repeats: expected at least 1, got {args.repeats}")
     if args.like and not args.fast:
         ap.error("--like sets the inputs of the --fast networks: give at least one --fast")
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {cpu_description()}, {args.threads} threads, "

@@ -105,8 +105,6 @@ def main() -> None:
     ap.add_argument("--plot-reuse", type=Path, default=None, metavar="PNG", help="also plot each reuse method's kept "
                     "share of MODEL's saving at 5%% failing tiles against its network work per frame, per path")
     args = ap.parse_args()
-    if args.window < 0:
-        ap.error("--window: expected a number of frames >= 1")
     model = args.model
     reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
     runs: list[dict[str, Any]] = []

@@ -35,6 +35,7 @@ import json
 import logging
 import os
 import re
+import reprlib
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,6 +77,9 @@ log = logging.getLogger("rtp.capture")
 FORMAT = "rtp-dataset"
 FORMAT_VERSION = 1
 _ID_RE = re.compile(r"[A-Za-z0-9_.-]+\Z")
+#: The longest sample id: its file name, with the temporary prefix of an atomic write, stays within
+#: the 255 bytes a file system allows (a longer one was the system's "File name too long").
+MAX_ID_LENGTH = 200
 
 
 class DatasetError(RtpError):
@@ -241,8 +245,9 @@ def sample_path(root: str | os.PathLike[str], sample_id: str) -> Path:
 
 
 def _check_id(sample_id: str) -> None:
-    if not isinstance(sample_id, str) or not _ID_RE.match(sample_id):
-        raise DatasetError(f"sample id {sample_id!r}: use letters, digits, '.', '_' and '-'")
+    if not isinstance(sample_id, str) or not _ID_RE.match(sample_id) or len(sample_id) > MAX_ID_LENGTH:
+        raise DatasetError(f"sample id {reprlib.repr(sample_id)}: use letters, digits, '.', '_' and '-', at most "
+                           f"{MAX_ID_LENGTH} of them")
 
 
 def encode_sample(sample_id: str, buffers: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> bytes:
@@ -394,8 +399,9 @@ class DatasetReader:
         return (self[i] for i in self.ids)
 
     def __getitem__(self, sample_id: str) -> Sample:
-        if not isinstance(sample_id, str) or not _ID_RE.match(sample_id):
-            raise DatasetError(f"no sample {sample_id!r} in {self.root} (ids are letters, digits, '.', '_' and '-')")
+        if not isinstance(sample_id, str) or not _ID_RE.match(sample_id) or len(sample_id) > MAX_ID_LENGTH:
+            raise DatasetError(f"no sample {reprlib.repr(sample_id)} in {self.root} (ids are letters, digits, '.', '_' "
+                               f"and '-', at most {MAX_ID_LENGTH} of them)")
         path = sample_path(self.root, sample_id)
         if not path.is_file():
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")

@@ -45,6 +45,14 @@ FORMAT_VERSION = 1
 BASE_TILE = 4
 
 
+def _frame_size(size: Any) -> tuple[int, int]:
+    """``(H, W)`` of positive integers, or a TargetError."""
+    if not isinstance(size, (tuple, list, np.ndarray)) or len(size) != 2 or not all(
+            isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1 for v in size):
+        raise TargetError(f"size: expected (height, width) in pixels, got {size!r}")
+    return int(size[0]), int(size[1])
+
+
 def _version_ok(v: Any) -> bool:
     return not isinstance(v, bool) and isinstance(v, int) and 0 <= v <= FORMAT_VERSION
 
@@ -71,14 +79,22 @@ def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int
     Max-pooling for max-pooled maps; a pixel-weighted mean for per-tile MSE. Edge tiles that the
     frame only partly covers are pooled over the pixels they hold.
     """
-    if isinstance(tile, bool) or not isinstance(tile, (int, np.integer)) or tile < 1:
-        raise TargetError(f"tile must be a positive integer, got {tile!r}")
+    for key, value in (("tile", tile), ("base", base)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise TargetError(f"{key} must be a positive integer, got {value!r}")
+    h, w = _frame_size(size)
+    try:
+        values = np.asarray(values)
+    except (TypeError, ValueError) as err:
+        raise TargetError(f"values: expected an array of numbers, got {type(values).__name__} ({err})") from err
+    if values.dtype.kind not in "biuf" or values.ndim < 2 or values.shape[-2:] != tile_grid(h, w, base):
+        raise TargetError(f"values: expected numbers of shape (..., {', '.join(map(str, tile_grid(h, w, base)))}) for a "
+                          f"{h}x{w} frame at base tile {base}, got {values.dtype} {values.shape}")
     if tile % base:
         raise TargetError(f"tile {tile} is not a multiple of the stored base tile {base}")
     f = tile // base
     if f == 1:
         return values.astype(np.float32)
-    h, w = size
     th, tw = values.shape[-2:]
     f = min(f, max(th, tw))  # any larger factor pools the same one tile (and would pad to its size)
     oh, ow = tile_grid(th, tw, f)
@@ -100,12 +116,14 @@ class TargetStore:
     """Reads and writes the targets of one dataset folder."""
 
     def __init__(self, data_root: str | os.PathLike[str], *, base_tile: int = BASE_TILE) -> None:
+        if not isinstance(data_root, (str, os.PathLike)):
+            raise TargetError(f"expected a dataset folder path, got {type(data_root).__name__}")
         self.root = Path(data_root) / "targets"
         manifest = self.root / "manifest.json"
         if manifest.is_file():
             try:
                 d = json.loads(manifest.read_text())
-            except (OSError, UnicodeDecodeError, ValueError) as e:  # (JSONDecodeError is a ValueError)
+            except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:  # (JSONDecodeError: a ValueError)
                 raise _unreadable(manifest, "not a readable targets manifest; delete the targets folder to "
                                   "recompute", e) from e
             if not isinstance(d, dict) or d.get("format") != FORMAT or not _version_ok(d.get("format_version", 0)):
@@ -127,9 +145,15 @@ class TargetStore:
 
     def declare(self, metric: str, params: Mapping[str, Any]) -> None:
         """Record the parameters a metric's targets are computed with; refuse a silent change."""
-        if metric not in METRICS:
+        if not isinstance(metric, str) or metric not in METRICS:
             raise TargetError(f"unknown metric {metric!r}; metrics are {', '.join(METRICS)}")
-        params = json.loads(json.dumps(dict(params)))
+        if not isinstance(params, Mapping):
+            raise TargetError(f"params of {metric}: expected a mapping of parameter names to values, got "
+                              f"{type(params).__name__}")
+        try:
+            params = json.loads(json.dumps(dict(params)))
+        except (TypeError, ValueError) as err:  # a value JSON cannot hold
+            raise TargetError(f"params of {metric}: expected JSON values, got {dict(params)!r} ({err})") from err
         if metric in self.metrics and self.metrics[metric] != params:
             raise TargetError(
                 f"targets for {metric} in {self.root} were computed with {self.metrics[metric]}, not {params}; "
@@ -140,15 +164,17 @@ class TargetStore:
             self._save_manifest()
 
     def path(self, sample_id: str, metric: str) -> Path:
-        if metric not in METRICS:  # (a name such as "../samples" wrote over the captured sample)
+        if not isinstance(metric, str) or metric not in METRICS:  # ("../samples" wrote over the captured sample)
             raise TargetError(f"unknown metric {metric!r}; metrics are {', '.join(METRICS)}")
         _check_id(sample_id)
         return self.root / metric / f"{sample_id}.npz"
 
     def stale(self, sample_id: str, metric: str) -> bool:
         """Whether stored targets are older than their sample (it was captured again since)."""
-        sample = sample_path(self.root.parent, sample_id)
-        return sample.is_file() and sample.stat().st_mtime > self.path(sample_id, metric).stat().st_mtime
+        sample, stored = sample_path(self.root.parent, sample_id), self.path(sample_id, metric)
+        if not stored.is_file():
+            raise TargetError(f"no {metric} targets for sample {sample_id!r}; run `rtp targets {self.root.parent}`")
+        return sample.is_file() and sample.stat().st_mtime > stored.stat().st_mtime
 
     def has(self, sample_id: str, metric: str) -> bool:
         """Whether up-to-date targets exist (missing or stale ones are computed by ``rtp targets``)."""
@@ -156,10 +182,11 @@ class TargetStore:
 
     def write(self, sample_id: str, metric: str, values: np.ndarray, size: tuple[int, int]) -> None:
         """Store base-tile values (for PSNR: per-tile MSE) atomically."""
-        h, w = size
+        h, w = _frame_size(size)
         expected = (6, *tile_grid(h, w, self.base_tile))
-        if values.shape != expected:
-            raise TargetError(f"{metric} targets of {sample_id}: expected shape {expected}, got {values.shape}")
+        if not isinstance(values, np.ndarray) or values.dtype.kind not in "biuf" or values.shape != expected:
+            got = f"{values.dtype} {values.shape}" if isinstance(values, np.ndarray) else type(values).__name__
+            raise TargetError(f"{metric} targets of {sample_id}: expected numbers of shape {expected}, got {got}")
         with atomic_output(self.path(sample_id, metric)) as tmp:
             with open(tmp, "wb") as f:
                 np.savez(f, values=values.astype(np.float32), size=np.array([h, w], np.int64))

@@ -121,7 +121,7 @@ def camera_path(
     free space for a path.
     """
     prof = PATH_PROFILES.get(profile) if isinstance(profile, str) else profile
-    if prof is None:
+    if not isinstance(prof, PathProfile):
         raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)}")
     frames, seed = _count("frames", frames, 1), _count("seed", seed)
     fps = _real("fps", fps, 0.0, lo_open=True)

@@ -99,7 +99,10 @@ def _real(name: str, value: object, lo: float | None = None, hi: float | None = 
           hi_open: bool = False) -> float:
     """``value`` as a float in the range given, or a ViewpointError saying what was expected."""
     ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
-    v = float(value) if ok else math.nan  # type: ignore[arg-type]
+    try:
+        v = float(value) if ok else math.nan  # type: ignore[arg-type]
+    except OverflowError:  # an int past float's range
+        v = math.nan
     if ok and math.isfinite(v):
         ok = (lo is None or (v > lo if lo_open else v >= lo)) and (hi is None or (v < hi if hi_open else v <= hi))
     else:
@@ -120,9 +123,18 @@ def _count(name: str, value: object, lo: int = 0) -> int:
     return int(value)
 
 
+#: The largest distances the checks take, metres: far past any level (oa_dm3's backdrop spans 630 m),
+#: short of what would fill memory (a ray march of max_distance, a dilation of clearance voxels).
+MAX_METRES = 1000.0
+
+
+#: The most coverage rays a camera may cast (a ray grid of 10**7 x 10**7 asked numpy for 728 TiB).
+MAX_RAYS = 512 * 512
+
+
 def _check_space(voxel: float, clearance: float, max_height: float | None) -> None:
-    _real("voxel", voxel, 0.0, lo_open=True)
-    _real("clearance", clearance, 0.0)
+    _real("voxel", voxel, 0.0, MAX_METRES, lo_open=True)
+    _real("clearance", clearance, 0.0, MAX_METRES)
     if max_height is not None:
         _real("max_height", max_height, 0.0, lo_open=True)
 
@@ -418,6 +430,15 @@ def free_space(
     one grid (the datasets were captured with it).
     """
     _check_space(voxel, clearance, max_height)
+    if not isinstance(scene, Scene):
+        raise ViewpointError(f"scene: expected an rtp.scene.Scene (rtp.capture.load_scene makes one from a name), got "
+                             f"{type(scene).__name__}")
+    if blockers is not None:
+        ok = isinstance(blockers, np.ndarray) and blockers.dtype.kind in "iuf" and blockers.ndim == 3 \
+            and blockers.shape[1:] == (3, 3)
+        if not ok or not np.isfinite(blockers).all():
+            got = f"{blockers.dtype} {blockers.shape}" if isinstance(blockers, np.ndarray) else type(blockers).__name__
+            raise ViewpointError(f"blockers: expected finite triangles of shape (K, 3, 3), got {got}")
     if not scene.spawn_points:
         raise ViewpointError(f"scene {scene.name!r} has no spawn points to start the flood fill from")
     tris = scene_triangles(scene)
@@ -570,20 +591,27 @@ def sample_viewpoints(
             within ``max_attempts`` draws.
     """
     prof = MOTION_PROFILES.get(profile) if isinstance(profile, str) else profile
-    if prof is None:
-        raise ViewpointError(f"unknown motion profile {profile!r}; expected one of {sorted(MOTION_PROFILES)}")
-    if placement not in PLACEMENTS:
+    if not isinstance(prof, MotionProfile):
+        raise ViewpointError(f"unknown motion profile {profile!r}; expected one of {sorted(MOTION_PROFILES)} or a "
+                             "MotionProfile")
+    _real("max_translation", prof.max_translation, 0.0, MAX_METRES)
+    _real("max_rotation", prof.max_rotation, 0.0, 180.0)
+    if not isinstance(placement, str) or placement not in PLACEMENTS:
         raise ViewpointError(f"unknown placement {placement!r}; expected one of {', '.join(PLACEMENTS)}")
     n, seed, prev_tries = _count("n", n), _count("seed", seed), _count("prev_tries", prev_tries, 1)
     if max_attempts is not None:
         _count("max_attempts", max_attempts)
     pitch_limit = _real("pitch_limit", pitch_limit, 0.0, 90.0)
-    _real("max_distance", max_distance, 0.0, lo_open=True)
+    _real("max_distance", max_distance, 0.0, MAX_METRES, lo_open=True)
+    if stats is not None and not isinstance(stats, dict):
+        raise ViewpointError(f"stats: expected None or a dict to fill, got {type(stats).__name__}")
     _real("aspect", aspect, 0.0, lo_open=True)
     _real("fov_y", fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
     if not isinstance(rays, (tuple, list)) or len(rays) != 2:
         raise ViewpointError(f"rays: expected (columns, rows), got {rays!r}")
     rays = (_count("rays' columns", rays[0], 1), _count("rays' rows", rays[1], 1))
+    if rays[0] * rays[1] > MAX_RAYS:
+        raise ViewpointError(f"rays: expected at most {MAX_RAYS} rays in all (the default is 32 x 18), got {rays}")
     coverages = [min_coverage] if isinstance(min_coverage, (int, float, np.number)) else min_coverage
     if not isinstance(coverages, Sequence) or not coverages:
         raise ViewpointError(f"min_coverage: expected a number or a non-empty sequence of numbers, got {min_coverage!r}")

@@ -33,6 +33,7 @@ from rtp.sdk import (
     InputDtypeError,
     InputShapeError,
     NonFiniteInputError,
+    ParameterError,
     RateLike,
     RtpError,
     check_threshold,
@@ -111,6 +112,18 @@ class Frame:
         return got
 
 
+def as_real(value: Any, what: str, dtype: Any = None) -> np.ndarray:
+    """``value`` as an array of real numbers (of ``dtype`` when given), or an ``InputDtypeError`` naming
+    ``what``: a ragged list, strings or objects were numpy's ValueError or TypeError."""
+    try:
+        a = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise InputDtypeError(f"{what}: expected numbers, got {type(value).__name__} ({err})") from err
+    if a.dtype.kind not in "biuf":
+        raise InputDtypeError(f"{what}: expected real numbers, got dtype {a.dtype}")
+    return a
+
+
 def as_frame(source: Any) -> Frame:
     """A :class:`Frame` from a Sample, a Frame, a mapping of buffers or a reprojected image."""
     if isinstance(source, Frame):
@@ -136,7 +149,8 @@ def as_frame(source: Any) -> Frame:
         raise BaselineError(
             f"expected a Sample, a Frame, a mapping of buffers or an (H, W, 3) array, got {type(source).__name__}"
         )
-    raw = np.asarray(frame.reprojected)
+    raw = as_real(frame.reprojected, "reprojected", None) if not isinstance(frame.reprojected, np.ndarray) \
+        else frame.reprojected
     if not isinstance(source, Frame):  # (a Frame passed on is the one checked here before)
         if raw.dtype.kind != "f":  # uint8 0-255 read as colours in [0, 1]: FidelityFX chose 1x1 everywhere
             raise InputDtypeError(f"reprojected: expected float colours in [0, 1], got dtype {raw.dtype} "
@@ -144,14 +158,14 @@ def as_frame(source: Any) -> Frame:
         with np.errstate(over="ignore", invalid="ignore"):
             if not np.isfinite(raw.sum(dtype=np.float64)):  # one pass; NaN made Yang 2019 choose 4x4 everywhere
                 raise NonFiniteInputError("reprojected: holds NaN or infinite values; expected colours in [0, 1]")
-    rep = np.asarray(raw, dtype=np.float32)
+    rep = as_real(raw, "reprojected", np.float32)
     if rep.ndim != 3 or rep.shape[2] < 3 or rep.shape[0] == 0 or rep.shape[1] == 0:
         raise InputShapeError(f"reprojected: expected (H, W, 3), got {rep.shape}", tuple(rep.shape), "(H, W, 3)")
     h, w = rep.shape[:2]
-    motion = None if frame.motion is None else np.asarray(frame.motion, dtype=np.float32)
+    motion = None if frame.motion is None else as_real(frame.motion, "motion", np.float32)
     if motion is not None and motion.shape != (h, w, 2):
         raise InputShapeError(f"motion: expected {(h, w, 2)}, got {motion.shape}", tuple(motion.shape), f"({h}, {w}, 2)")
-    seen = None if frame.seen is None else np.asarray(frame.seen, dtype=np.float32)
+    seen = None if frame.seen is None else as_real(frame.seen, "seen", np.float32)
     if seen is not None and seen.shape != (h, w):
         raise InputShapeError(f"seen: expected {(h, w)}, got {seen.shape}", tuple(seen.shape), f"({h}, {w})")
     return Frame(rep[..., :3], motion, seen, terms=frame.terms)
@@ -237,6 +251,17 @@ def _check_tile(tile: int, allowed: Iterable[int] | None = None) -> int:
     return int(tile)
 
 
+def _real_param(owner: str, name: str, value: Any) -> float:
+    """A baseline's parameter as a float, or a BaselineError (a string or None was compared, an int past
+    float's range converted)."""
+    try:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise TypeError
+        return float(value)
+    except (TypeError, OverflowError):
+        raise BaselineError(f"{owner} {name}: expected a number, got {value!r}") from None
+
+
 def restrict_rates(codes: np.ndarray, allowed: Iterable[RateLike] | None, estimates: np.ndarray | None = None) -> np.ndarray:
     """Demote rates that ``allowed`` excludes to the coarsest allowed rate that is not coarser on
     either axis (1x1 at worst). Between equally cheap candidates (2x4 and 4x2 for a forbidden 4x4)
@@ -245,6 +270,15 @@ def restrict_rates(codes: np.ndarray, allowed: Iterable[RateLike] | None, estima
     ok = set(resolve_allowed(allowed))
     if ok == set(PREDICTED_RATES):
         return codes
+    codes = as_real(codes, "codes")
+    if codes.dtype != np.uint8 or codes.ndim < 1 or int(codes.max(initial=0)) > max(RATE_CODES.values()):
+        raise ParameterError(f"codes: expected uint8 rate codes ({', '.join(f'{r} {c}' for r, c in RATE_CODES.items())}), "
+                             f"got {codes.dtype} {codes.shape}", "codes")
+    if estimates is not None:
+        estimates = as_real(estimates, "estimates", np.float64)
+        if estimates.shape != (len(PREDICTED_RATES), *codes.shape):
+            raise InputShapeError(f"estimates: expected {(len(PREDICTED_RATES), *codes.shape)}, got {estimates.shape}",
+                                  tuple(estimates.shape), f"(6, {', '.join(map(str, codes.shape))})")
     out = codes.copy()
     for rate in PREDICTED_RATES:
         if rate in ok:
@@ -356,6 +390,10 @@ class Yang2019:
             raise BaselineError(f"motion_reduce must be min, mean or max, got {motion_reduce!r}")
         if unseen not in ("as_is", "full"):
             raise BaselineError(f"unseen must be 'as_is' or 'full', got {unseen!r}")
+        threshold, env_luminance, k, motion_scale, unseen_fraction = (
+            _real_param("Yang 2019's", name, value) for name, value in (
+                ("threshold", threshold), ("env_luminance", env_luminance), ("k", k), ("motion_scale", motion_scale),
+                ("unseen_fraction", unseen_fraction)))
         for name, value, ok, expected in (
                 ("threshold", threshold, threshold > 0, "> 0 (its JNYang threshold)"),
                 ("env_luminance", env_luminance, env_luminance >= 0, ">= 0"), ("k", k, k >= 1, ">= 1"),
@@ -503,6 +541,8 @@ class FidelityFX:
         additional_rates: bool = False,
     ) -> None:
         self.tile_size = _check_tile(tile_size, FFX_TILE_SIZES)
+        cutoff, motion_factor = (_real_param("FidelityFX's", n, v) for n, v in (("cutoff", cutoff),
+                                                                                 ("motion_factor", motion_factor)))
         if not (cutoff >= 0 and motion_factor >= 0):
             raise BaselineError(f"cutoff and motion_factor must be >= 0, got {cutoff}, {motion_factor}")
         self.cutoff, self.motion_factor, self.additional_rates = float(cutoff), float(motion_factor), additional_rates

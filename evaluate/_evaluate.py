@@ -31,7 +31,7 @@ from rtp import sdk
 from rtp.capture import DatasetError, TargetError, TargetStore
 from rtp.sdk import PREDICTED_RATES, RATE_CODES, ParameterError, select_rates, work_saved
 
-from ._baselines import FidelityFX, Yang2019
+from ._baselines import FidelityFX, Yang2019, as_real
 from ._scores import scores
 
 __all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "failing_tiles", "spearman", "tile_unseen_share"]
@@ -303,7 +303,7 @@ def monotone_over_rates(values: np.ndarray, higher_is_better: bool = False) -> n
     better pixel than the finer rate's); a predictor that orders the rates cannot know that luck, so
     the oracle on the truth made so (``rtp play``'s ``oracle-monotone``) is what such a predictor
     can reach. A copy; finer rates come first, so each envelope is final before a coarser one reads it."""
-    values = np.asarray(values)
+    values = as_real(values, "values")
     if values.ndim < 3 or values.shape[-3] != len(PREDICTED_RATES):
         raise sdk.InputShapeError(f"expected values with {len(PREDICTED_RATES)} rate channels on axis -3, got shape "
                                   f"{values.shape}", tuple(values.shape), "(..., 6, th, tw)")

@@ -148,6 +148,8 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     (carried estimates rescaled by the blocks' variance to the power A), ``:cF`` (carried estimates
     multiplied by F) and ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features)
     in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``, ``split.onnx@4:features``)."""
+    if not isinstance(text, str) and (not isinstance(text, Iterable) or not all(isinstance(t, str) for t in text)):
+        raise PlayError(f"methods: expected a comma-separated string or a list of method names, got {text!r}")
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
@@ -158,7 +160,7 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
             continue
         model, _, k = item.rpartition("@") if "@" in item else (item, "", "1")
         k, *options = k.split(":")
-        if not (k.isascii() and k.isdigit()) or int(k) < 1:  # ("²".isdigit(), and int() refuses it)
+        if not (k.isascii() and k.isdigit()) or len(k) > 6 or int(k) < 1:  # ("²".isdigit(); int() refuses 5000 digits)
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
         reduce = [o for o in options if o in REUSE_REDUCTIONS]
         unseen = [o for o in options if o in REUSE_UNSEEN]
@@ -189,7 +191,7 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
 
 
 def _step(option: str, item: str) -> int:
-    if not (option[1:].isascii() and option[1:].isdigit()) or int(option[1:]) < 1:
+    if not (option[1:].isascii() and option[1:].isdigit()) or len(option) > 7 or int(option[1:]) < 1:
         raise PlayError(f"method {item!r}: ':{option}' is not a pixel step: expected ':s' and an integer >= 1 that "
                         "divides the model's tile size, e.g. jnyang@4:s4")
     return int(option[1:])
@@ -240,7 +242,12 @@ def saved_at(points: Sequence[tuple[float, float]], fail: float) -> float | None
     """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points: the
     best saving among points failing at most ``fail``, interpolated linearly towards the next point
     that fails more. None when every point fails more than ``fail``."""
-    pts = sorted(points)
+    try:
+        pts = sorted((float(f), float(w)) for f, w in points)
+        fail = float(fail)
+    except (TypeError, ValueError, OverflowError):
+        raise sdk.ParameterError(f"saved_at: expected (fail share, work saved) pairs of numbers and a fail share, got "
+                                 f"{points!r} and {fail!r}") from None
     if not pts or pts[0][0] > fail:
         return None
     best = None

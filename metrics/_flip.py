@@ -38,7 +38,9 @@ def ppd_from_width(width_px: int, monitor_width_m: float = 0.7, distance_m: floa
     paper's 0.7 m monitor at 0.7 m) this is ``width_px * pi / 180``: 33.51 at 1920, 22.34 at 1280.
     For crops pass the width of the full frame, not of the crop.
     """
-    if width_px <= 0 or monitor_width_m <= 0 or distance_m <= 0:
+    numbers = (width_px, monitor_width_m, distance_m)
+    if not all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) for v in numbers) \
+            or width_px <= 0 or monitor_width_m <= 0 or distance_m <= 0:
         raise MetricParameterError(
             f"ppd_from_width needs positive arguments, got width_px={width_px}, "
             f"monitor_width_m={monitor_width_m}, distance_m={distance_m}"
@@ -61,7 +63,7 @@ def resolve_ppd(ppd: Ppd, width_px: int) -> float:
         raise MetricParameterError(f"ppd must be a positive number or 'width', got {ppd!r}")
     try:
         value = float(ppd)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # (OverflowError: an int past float's range)
         raise MetricParameterError(f"ppd must be a positive number or 'width', got {ppd!r}") from None
     if not math.isfinite(value) or not MIN_PPD <= value <= MAX_PPD:
         # (1e10 made the filters' kernels grow until the process was killed; 1e-10 gave NaN maps)

@@ -300,9 +300,9 @@ def lpips_network(weights: str | os.PathLike[str] | None = None) -> Any:
     ``(N, 1, H, W)``, like ``lpips.LPIPS(net='alex', spatial=True)(x0, x1)``. Do not modify it: it is
     shared by every caller.
     """
-    if weights is not None and not isinstance(weights, (str, os.PathLike)):
+    if weights is not None and (not isinstance(weights, (str, os.PathLike)) or "\0" in os.fspath(weights)):
         raise MetricParameterError(f"weights: expected None (rtp's cache) or the path of an LPIPS-alex weights file, "
-                                   f"got {type(weights).__name__}")
+                                   f"got {weights!r}")
     return _cached_network(None if weights is None else str(Path(weights).resolve()))
 
 

@@ -13,7 +13,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import InputShapeError, luma, tile_extents, tile_grid
+from rtp.sdk import InputDtypeError, InputShapeError, luma, tile_extents, tile_grid
 
 from ._errors import MetricParameterError
 from ._image import _is_torch
@@ -83,7 +83,14 @@ def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:
         device = values.device
         arr = values.detach().to("cpu").float().numpy()
     else:
-        arr = np.asarray(values)
+        try:
+            arr = np.asarray(values)
+        except (TypeError, ValueError) as err:  # a ragged list
+            raise InputDtypeError(f"values: expected a map of numbers, got {type(values).__name__} ({err})") from err
+    if arr.dtype.kind not in "biuf":
+        raise InputDtypeError(f"values: expected a map of numbers, got dtype {arr.dtype}")
+    if arr.dtype.kind != "f":  # (an integer map's partial tiles are padded with -inf)
+        arr = arr.astype(np.float32)
     if arr.ndim < 2 or arr.shape[-1] == 0 or arr.shape[-2] == 0:
         raise InputShapeError(
             f"expected a map of shape (..., H, W) with H, W >= 1, got {arr.shape}",
@@ -102,7 +109,7 @@ def check_weber_l(weber_l: float) -> float:
     """Validate the environment luminance ``l``: a finite number > 0."""
     try:
         value = float(weber_l)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # (OverflowError: an int past float's range)
         raise MetricParameterError(f"weber_l must be a number, got {weber_l!r}") from None
     if not math.isfinite(value) or value <= 0.0:
         raise MetricParameterError(f"weber_l (environment luminance l) must be finite and > 0, got {weber_l!r}")
@@ -125,6 +132,9 @@ def weber_denominator(reference: np.ndarray, weber_l: float = DEFAULT_WEBER_L) -
     """
     weber_l = check_weber_l(weber_l)
     y = luma(reference)
+    if y.ndim < 2:
+        raise InputShapeError(f"reference: expected an image (..., H, W, 3), got shape {np.shape(reference)}",
+                              tuple(np.shape(reference)), "(..., H, W, 3)")
     h, w = y.shape[-2:]
     means = _pool_np(y, WEBER_BLOCK, "mean")
     up = np.repeat(np.repeat(means, WEBER_BLOCK, axis=-2), WEBER_BLOCK, axis=-1)[..., :h, :w]

@@ -35,7 +35,7 @@ log = logging.getLogger("rtp.metrics")
 
 
 def _check_metric(metric: str) -> str:
-    if metric not in METRICS:
+    if not isinstance(metric, str) or metric not in METRICS:
         raise MetricParameterError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}")
     return metric
 
@@ -156,6 +156,11 @@ def tile_targets(
         ``{metric: float32 array (6, ceil(H/tile), ceil(W/tile))}``, axis 0 in
         :data:`rtp.sdk.PREDICTED_RATES` order. PSNR is ``+inf`` on identical tiles.
     """
+    if not isinstance(metrics, (str, list, tuple)):
+        raise MetricParameterError(f"metrics: expected a metric name or a list of them, got {type(metrics).__name__}")
+    if not isinstance(images_by_rate, Mapping):
+        raise MetricParameterError(f"images_by_rate: expected a mapping of rate names to images, got "
+                                   f"{type(images_by_rate).__name__}")
     names = list(dict.fromkeys(_check_metric(m) for m in ([metrics] if isinstance(metrics, str) else metrics)))
     if not names:
         raise MetricParameterError("metrics is empty")

@@ -61,6 +61,7 @@ class Camera:
 
     def projection(self, aspect: float) -> np.ndarray:
         """4x4 OpenGL projection (clip z in [-w, w]) for ``aspect = width / height``."""
+        real("Camera.projection", "aspect", aspect, 0.0, lo_open=True)  # (0 was a ZeroDivisionError)
         f = 1.0 / math.tan(math.radians(self.fov_y) / 2.0)
         n, fa = self.near, self.far
         m = np.zeros((4, 4))
@@ -72,4 +73,6 @@ class Camera:
         return m
 
     def view_projection(self, width: int, height: int) -> np.ndarray:
+        real("Camera.view_projection", "width", width, 0.0, lo_open=True)
+        real("Camera.view_projection", "height", height, 0.0, lo_open=True)
         return self.projection(width / height) @ self.view()

@@ -15,10 +15,18 @@ def _is_number(v: Any) -> bool:
     return not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
 
 
+def _finite(v: Any) -> bool:
+    """A finite real number (an int past float's range is not: it has no float)."""
+    try:
+        return _is_number(v) and math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
 def real(owner: str, name: str, v: Any, lo: float | None = None, hi: float | None = None, *,
          lo_open: bool = False, hi_open: bool = False) -> None:
     """``v`` is a finite number in the range given."""
-    ok = _is_number(v) and math.isfinite(float(v))
+    ok = _finite(v)
     if ok:
         x = float(v)
         ok = (lo is None or (x > lo if lo_open else x >= lo)) and (hi is None or (x < hi if hi_open else x <= hi))
@@ -35,7 +43,7 @@ def vector(owner: str, name: str, v: Any, n: int, lo: float | None = None, hi: f
         items = list(v)
     except TypeError:
         items = None
-    if items is None or len(items) != n or not all(_is_number(x) and math.isfinite(float(x)) for x in items) or (
+    if items is None or len(items) != n or not all(_finite(x) for x in items) or (
             lo is not None and min(float(x) for x in items) < lo) or (hi is not None and max(float(x) for x in items) > hi):
         bounds = "" if lo is None and hi is None else f" in [{'-inf' if lo is None else f'{lo:g}'}, " \
                                                       f"{'inf' if hi is None else f'{hi:g}'}]"
@@ -44,7 +52,11 @@ def vector(owner: str, name: str, v: Any, n: int, lo: float | None = None, hi: f
 
 def array(owner: str, name: str, v: Any, columns: int, kinds: str, *, finite: bool = True) -> np.ndarray:
     """``v`` as an ndarray ``(N, columns)`` whose dtype kind is one of ``kinds``, finite when asked."""
-    a = np.asarray(v) if not isinstance(v, np.ndarray) else v
+    try:
+        a = np.asarray(v) if not isinstance(v, np.ndarray) else v
+    except (TypeError, ValueError, OverflowError) as err:  # a ragged list
+        raise ParameterError(f"{owner}.{name}: expected an array of shape (N, {columns}), got {type(v).__name__} "
+                             f"({err})", name) from err
     if a.ndim != 2 or a.shape[1] != columns or a.dtype.kind not in kinds:
         what = {"f": "floats", "iu": "integers", "u": "unsigned integers"}.get(kinds, kinds)
         raise ParameterError(f"{owner}.{name}: expected an array of shape (N, {columns}) of {what}, got "

@@ -34,9 +34,9 @@ def as_numbers(value: ArrayLike, what: str, dtype: type[np.floating]) -> np.ndar
     part)."""
     from ._errors import InputDtypeError
 
-    if np.iscomplexobj(value):
-        raise InputDtypeError(f"{what}: expected real numbers, got complex ones")
     try:
+        if np.iscomplexobj(value):
+            raise InputDtypeError(f"{what}: expected real numbers, got complex ones")
         return np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as err:
         raise InputDtypeError(f"{what}: expected numbers, got {type(value).__name__} ({err})") from err

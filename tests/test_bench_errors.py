@@ -49,7 +49,7 @@ def test_bad_input_is_one_line(args: list[str], code: int, words: str) -> None:
 
 
 def test_a_json_of_another_kind_and_a_folder_that_is_not_a_dataset(tmp_path: Path) -> None:
-    (tmp_path / "other.json").write_text(json.dumps({"settings": {}}))
+    (tmp_path / "other.json").write_text(json.dumps({"settings": {}, "matched": []}))
     run = _run([str(BENCH / "play_report.py"), str(tmp_path / "other.json")], tmp_path)
     assert run.returncode == 2 and "is not a play.json (the file `rtp play --out DIR` writes)" in run.stderr
     (tmp_path / "fake").mkdir()

@@ -82,4 +82,4 @@ def test_without_a_gpu_the_benchmark_says_so_and_exits_2() -> None:
     assert "needs a CUDA GPU" in out.stderr
     bad = subprocess.run([sys.executable, str(BENCH / "inference_gpu.py"), "--frames", "1920by1080"],
                          capture_output=True, text=True, env=env, timeout=120)
-    assert bad.returncode != 0 and "expected WxH" in bad.stderr
+    assert bad.returncode != 0 and "expected WIDTHxHEIGHT" in bad.stderr

@@ -39,4 +39,4 @@ def test_a_warm_up_runs_before_the_timed_runs() -> None:
     assert out.returncode == 0, out.stderr
     assert "first 3 timed `predict` calls at each size in turn, after 1 on a zero frame" in out.stdout
     bad = subprocess.run([sys.executable, str(BENCH), "--warm-up", "-1"], capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and "--warm-up: expected a count >= 0" in bad.stderr
+    assert bad.returncode == 2 and "argument --warm-up: expected an integer >= 0" in bad.stderr

@@ -530,7 +530,7 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
                                check=True).stdout
         assert expect in shown and str(model) in shown
     bad = subprocess.run([*report, str(tmp_path / "nope.json")], capture_output=True, text=True)
-    assert bad.returncode == 2 and "no such file" in bad.stderr
+    assert bad.returncode == 2 and "No such file or directory" in bad.stderr
 
 
 def test_matched_quality_interpolates_along_the_sweep() -> None:

@@ -86,7 +86,7 @@ def test_target_store(tmp_path: Path) -> None:
     store.write("a", "psnr", mse, (16, 24))
     assert TargetStore(tmp_path).load("a", "psnr", 8).shape == (6, 2, 3)
     np.testing.assert_allclose(store.load("a", "psnr", 4), 30.0, rtol=1e-5)
-    with pytest.raises(sdk.RtpError, match="expected shape"):
+    with pytest.raises(sdk.RtpError, match="expected numbers of shape"):
         store.write("b", "psnr", mse[:, :2], (16, 24))
     with pytest.raises(sdk.RtpError, match="rtp targets"):
         store.load("missing", "psnr", 4)
@@ -1154,7 +1154,7 @@ def test_bench_error_features_fits_held_out_maps_and_scores_the_model(tmp_path: 
     assert one.returncode == 2 and "at least two maps" in one.stderr
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--iterations", "0"],
                          capture_output=True, text=True)
-    assert bad.returncode == 2 and "--iterations must be at least 1" in bad.stderr
+    assert bad.returncode == 2 and "argument --iterations: expected an integer >= 1" in bad.stderr
 
 
 def test_bench_scripts_say_how_to_make_a_missing_dataset(tmp_path: Path) -> None:

@@ -124,10 +124,13 @@ def test_viewpoint_errors(scene):
 
 
 def test_a_clearance_past_the_level_is_refused_in_seconds(scene):
-    """clearance=1e6 dilated the solid voxels 4 million times (minutes) before refusing every draw."""
+    """clearance=1e6 dilated the solid voxels 4 million times (minutes) before refusing every draw: now
+    past MAX_METRES it is refused at once, and within it a dilation stops at the grid's side."""
+    with pytest.raises(ViewpointError, match="clearance: expected a finite number >= 0 and <= 1000"):
+        sample_viewpoints(scene, 1, 0, clearance=1e6)
     with pytest.raises(ViewpointError, match="valid viewpoints"):
-        sample_viewpoints(scene, 1, 0, clearance=1e6, max_attempts=50)
-    _, _, reach, cand = free_space(scene, clearance=1e6)
+        sample_viewpoints(scene, 1, 0, clearance=900.0, max_attempts=50)
+    _, _, reach, cand = free_space(scene, clearance=900.0)
     assert reach.any() and not cand.any()
 
 
