@@ -84,26 +84,18 @@ def run_main(main: Callable[[], int | None]) -> None:
     sys.exit(run_guarded(prog, main, verbose=os.environ.get("RTP_TRACEBACK", "") not in ("", "0")))
 
 
-def _integer(text: str, minimum: int) -> int:
-    import argparse
-
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < minimum:
-        raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}")
-    return value
-
-
 def positive(text: str) -> int:
     """An argparse type: an integer >= 1 (repeats, threads, frames, samples, workers, steps)."""
-    return _integer(text, 1)
+    from rtp.cli import int_at_least
+
+    return int_at_least(1)(text)
 
 
 def count(text: str) -> int:
     """An argparse type: an integer >= 0 (seeds, and counts where 0 means none or all, as the help says)."""
-    return _integer(text, 0)
+    from rtp.cli import int_at_least
+
+    return int_at_least(0)(text)
 
 
 def json_file(text: str) -> Any:

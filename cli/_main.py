@@ -81,8 +81,9 @@ def _checked_path(text: str, *, folder: bool) -> str:
     return text
 
 
-def _int_at_least(minimum: int) -> Callable[[str], int]:
-    """An argparse type: an integer no smaller than ``minimum``, a clear message otherwise."""
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse type: an integer no smaller than ``minimum``, a clear message otherwise (public: the
+    benchmark scripts take their counts the same way)."""
     what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
 
     def parse(text: str) -> int:
@@ -97,8 +98,8 @@ def _int_at_least(minimum: int) -> Callable[[str], int]:
     return parse
 
 
-_positive = _int_at_least(1)
-_non_negative = _int_at_least(0)
+_positive = int_at_least(1)
+_non_negative = int_at_least(0)
 
 
 def _csv(text: str) -> tuple[str, ...]:

@@ -1154,7 +1154,7 @@ def test_bench_error_features_fits_held_out_maps_and_scores_the_model(tmp_path: 
     assert one.returncode == 2 and "at least two maps" in one.stderr
     bad = subprocess.run([sys.executable, str(path), str(model), "--data", str(data), "--iterations", "0"],
                          capture_output=True, text=True)
-    assert bad.returncode == 2 and "argument --iterations: expected an integer >= 1" in bad.stderr
+    assert bad.returncode == 2 and "argument --iterations: expected a positive integer" in bad.stderr
 
 
 def test_bench_scripts_say_how_to_make_a_missing_dataset(tmp_path: Path) -> None:
