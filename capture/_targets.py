@@ -116,8 +116,8 @@ class TargetStore:
     """Reads and writes the targets of one dataset folder."""
 
     def __init__(self, data_root: str | os.PathLike[str], *, base_tile: int = BASE_TILE) -> None:
-        if not isinstance(data_root, (str, os.PathLike)):
-            raise TargetError(f"expected a dataset folder path, got {type(data_root).__name__}")
+        if not isinstance(data_root, (str, os.PathLike)) or "\0" in str(os.fspath(data_root)):
+            raise TargetError(f"expected a dataset folder path, got {data_root!r}")
         self.root = Path(data_root) / "targets"
         manifest = self.root / "manifest.json"
         if manifest.is_file():

@@ -601,7 +601,7 @@ def sample_viewpoints(
     n, seed, prev_tries = _count("n", n), _count("seed", seed), _count("prev_tries", prev_tries, 1)
     if max_attempts is not None:
         _count("max_attempts", max_attempts)
-    pitch_limit = _real("pitch_limit", pitch_limit, 0.0, 90.0)
+    pitch_limit = _real("pitch_limit", pitch_limit, 0.0, 90.0) + 0.0  # (-0.0: numpy's "high - low < 0")
     _real("max_distance", max_distance, 0.0, MAX_METRES, lo_open=True)
     if stats is not None and not isinstance(stats, dict):
         raise ViewpointError(f"stats: expected None or a dict to fill, got {type(stats).__name__}")

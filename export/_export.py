@@ -73,11 +73,37 @@ def _output(source: str | os.PathLike[str], output: str | os.PathLike[str], *, i
     any work; with ``in_place=False`` not ``source`` itself either (a checkpoint exported over itself
     was replaced by its model, the training lost). A model's copy may replace the model: each is
     written atomically and only once it predicts as the model did."""
-    out = Path(output)
+    out = _path(output, "output")
     if not in_place and out.exists() and Path(source).exists() and os.path.samefile(out, source):
         raise ParameterError(f"output {str(out)!r} is the input itself; write the result to another path", "output")
     check_output(out, what="output")
     return out
+
+
+def _path(value: Any, what: str) -> Path:
+    """``value`` as a Path, or a ParameterError (None, bytes and numbers reached pathlib's TypeError)."""
+    if not isinstance(value, (str, os.PathLike)):
+        raise ParameterError(f"{what}: expected a path, got {type(value).__name__}", what)
+    return Path(value)
+
+
+def _fields(value: Any, what: str) -> dict[str, Any]:
+    """Metadata fields from a YAML sidecar's path or a mapping, or a MetadataError."""
+    if isinstance(value, (str, os.PathLike)):
+        return _read_yaml(value)
+    if not isinstance(value, Mapping):
+        raise MetadataError(f"{what}: expected a sidecar's path or a mapping of metadata fields, got "
+                            f"{type(value).__name__}")
+    return dict(value)
+
+
+def _model(model: Any) -> Any:
+    """``model`` if it is an ``onnx.ModelProto``, else a ParameterError (None reached ``.graph``)."""
+    import onnx
+
+    if not isinstance(model, onnx.ModelProto):
+        raise ParameterError(f"model: expected an onnx.ModelProto, got {type(model).__name__}", "model")
+    return model
 
 
 def _merge(base: dict[str, Any], extra: Mapping[str, Any]) -> dict[str, Any]:
@@ -124,6 +150,9 @@ def write_metadata(model: Any, meta: ModelMetadata) -> None:
 
     from rtp import sdk
 
+    _model(model)
+    if not isinstance(meta, ModelMetadata):
+        raise ParameterError(f"meta: expected an sdk.ModelMetadata, got {type(meta).__name__}", "meta")
     body = onnx.ModelProto()
     body.CopyFrom(model)
     del body.metadata_props[:]
@@ -149,7 +178,7 @@ def add_finite_probe(model: Any, pad_multiple: int) -> str | None:
     import onnx
     from onnx import helper
 
-    graph = model.graph
+    graph = _model(model).graph
     if any(o.name == PROBE_NAME for o in graph.output):
         return PROBE_NAME
     stem = _stem_output(graph, pad_multiple)
@@ -188,6 +217,8 @@ def _stem_output(graph: Any, pad_multiple: int) -> str | None:
         if len(found) != 1:
             return None
         covering.append(found[0].output[0])
+    if not covering:  # (a graph without inputs)
+        return None
     if len(covering) == 1:
         return covering[0]
     # follow the first group's convolution through the Sums that add the others' to it, one by one
@@ -230,7 +261,7 @@ def merge_slices(model: Any) -> int:
     network's stored block contrast, :class:`rtp.train.model.StoredBlockContrast`)."""
     from onnx import helper, numpy_helper
 
-    graph = model.graph
+    graph = _model(model).graph
     consts: dict[str, np.ndarray] = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     for n in graph.node:
         if n.op_type == "Constant" and n.attribute and n.attribute[0].name == "value":
@@ -312,7 +343,7 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     import onnx
     from onnx import helper, numpy_helper
 
-    graph = model.graph
+    graph = _model(model).graph
     init = {i.name: i for i in graph.initializer}
     inputs = _plane_inputs(graph)
     if len(inputs) != 1:
@@ -704,7 +735,7 @@ def export_checkpoint(
     out = _output(checkpoint, output if output is not None else Path(checkpoint).with_suffix(".onnx"), in_place=False)
     meta_dict = ckpt.metadata.to_dict()
     if extra_metadata is not None:
-        extra = _read_yaml(extra_metadata) if isinstance(extra_metadata, (str, os.PathLike)) else dict(extra_metadata)
+        extra = _fields(extra_metadata, "extra_metadata")
         meta_dict = _merge(meta_dict, extra)
     meta_dict = _merge(meta_dict, {"provenance": {"export": _export_provenance(opset)}})
     net = ckpt.net.eval()
@@ -899,7 +930,7 @@ def adopt(
 
     from rtp import sdk
 
-    src = Path(foreign)
+    src = _path(foreign, "foreign")
     if not src.is_file():
         raise ModelNotFoundError(f"no ONNX model at {str(src)!r}")
     out = _output(src, output)
@@ -925,7 +956,7 @@ def adopt(
     elif isinstance(metadata, (str, os.PathLike)):
         d, source = _read_yaml(metadata), str(metadata)
     else:
-        d, source = dict(metadata), "given as a mapping"
+        d, source = _fields(metadata, "metadata"), "given as a mapping"
     adopted: dict[str, Any] = {"file": src.name, "sha256": file_sha256(src), "metadata": source,
                                "rtp": str(sdk.__version__),
                                "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()}
@@ -1009,7 +1040,7 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
 
     from rtp import sdk
 
-    path = Path(model_path)
+    path = _path(model_path, "model_path")
     if not path.is_file():
         raise ModelNotFoundError(f"no model at {str(path)!r}")
     before = sdk.load(path, providers=["CPUExecutionProvider"])

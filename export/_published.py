@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rtp.sdk import ModelNotFoundError, ParameterError
+
 __all__ = ["PublishedModel", "file_sha256", "identify", "published_models"]
 
 _REGISTRY = Path(__file__).with_name("published.yaml")
@@ -50,6 +52,11 @@ def published_models() -> tuple[PublishedModel, ...]:
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:
+    # (an int is a file descriptor to open(): identify(1) read and closed stdout)
+    if not isinstance(path, (str, os.PathLike)):
+        raise ParameterError(f"path: expected a file's path, got {type(path).__name__}", "path")
+    if not Path(path).is_file():
+        raise ModelNotFoundError(f"no file at {str(path)!r}")
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):

@@ -45,7 +45,10 @@ def ppd_from_width(width_px: int, monitor_width_m: float = 0.7, distance_m: floa
             f"ppd_from_width needs positive arguments, got width_px={width_px}, "
             f"monitor_width_m={monitor_width_m}, distance_m={distance_m}"
         )
-    return float(distance_m * (width_px / monitor_width_m) * math.pi / 180.0)
+    try:
+        return float(distance_m * (width_px / monitor_width_m) * math.pi / 180.0)
+    except OverflowError:  # (an int past float's range)
+        raise MetricParameterError(f"ppd_from_width: width_px={width_px!r} is past any screen") from None
 
 
 #: The pixels per degree FLIP takes: a viewer from very far to a phone held at the nose (its filters'

@@ -61,6 +61,8 @@ def check_output(path: str | os.PathLike[str], *, folder: bool = False, what: st
     option). Nothing is created: the nearest existing folder above ``path`` is probed with a
     temporary file, removed at once (a read-only or pseudo file system fails there, as it would at
     the first write of a long job)."""
+    if not isinstance(path, (str, os.PathLike)) or "\0" in str(os.fspath(path)):  # (NUL: the system's ValueError)
+        raise ParameterError(f"{what}: expected a path, got {path!r}", what)
     target = Path(path)
     if target.exists() and target.is_dir() != folder:
         kind = "a folder" if target.is_dir() else "a file"

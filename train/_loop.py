@@ -34,7 +34,7 @@ from . import checkpoint as ckpt
 from . import transforms as tt
 from ._augment import SYMMETRIES, augment_batch
 from ._frames import Frame
-from ._recipe import load_recipe
+from ._recipe import check_fields, load_recipe
 from ._safety import calibrate_safety
 from .model import ARCHS, HEADS, Network, build_network, keep_outputs
 
@@ -185,8 +185,16 @@ class TrainConfig:
         resolved for ``metric``; keyword ``overrides`` (TrainConfig fields) win over the recipe.
         The recipe's ``val_split`` holds out that split's maps of ``scenes`` (default: the split list
         shipped with rtp) unless ``val_scenes`` is overridden."""
+        import dataclasses
+
         from rtp.capture.scenes import map_names
 
+        if scenes is not None and not isinstance(scenes, (str, os.PathLike)):
+            raise sdk.ParameterError(f"scenes: expected None or the path of a scenes.yaml, got {type(scenes).__name__}",
+                                     "scenes")
+        unknown = sorted(set(overrides) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:  # (a TypeError from the constructor's keywords)
+            raise sdk.ParameterError(f"unknown TrainConfig field(s) {', '.join(unknown)}", unknown[0])
         r = load_recipe(recipe, metric)
         values = {**r.values, **overrides}
         if "val_scenes" not in overrides and r.val_split is not None:
@@ -499,6 +507,9 @@ def _ema_update(avg: Network, net: Network, decay: float) -> None:
 
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
+    if not isinstance(cfg, TrainConfig):
+        raise sdk.ParameterError(f"train: expected a TrainConfig, got {type(cfg).__name__}")
+    check_fields(cfg)  # every field of its type, before the checks of their ranges below
     if cfg.metric not in sdk.METRICS:
         raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
     # What the first save or the optimizer would refuse, now rather than 250 steps of training later.

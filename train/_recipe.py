@@ -15,7 +15,9 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import numbers
 import os
+import reprlib
 import typing
 from importlib import resources
 from pathlib import Path
@@ -23,7 +25,7 @@ from typing import Any
 
 import yaml
 
-from rtp.sdk import ParameterError
+from rtp.sdk import METRICS, ParameterError
 from rtp.sdk.files import yaml_problem
 
 __all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe", "packaged_recipes"]
@@ -59,6 +61,9 @@ def packaged_recipes() -> list[str]:
 
 
 def _recipe_text(source: str | os.PathLike[str]) -> tuple[str, str]:
+    if not isinstance(source, (str, os.PathLike)):
+        raise RecipeError(f"recipe: expected a YAML path or the name of a packaged recipe ({', '.join(packaged_recipes())}), "
+                          f"got {type(source).__name__}", "recipe")
     path = Path(source)
     if not path.is_file() and str(source) in packaged_recipes():
         return str(source), resources.files("rtp.train").joinpath(f"recipes/{source}.yaml").read_text()
@@ -78,7 +83,7 @@ def _field_types() -> dict[str, Any]:
     return {f.name: hints[f.name] for f in dataclasses.fields(TrainConfig) if f.name not in _SET_BY_CALLER}
 
 
-def _coerce(name: str, value: Any, kind: Any) -> Any:
+def _coerce(name: str, value: Any, kind: Any, what: str = "recipe key") -> Any:
     """``value`` as the field type ``kind`` (bool, int, float, str, tuple[str, ...], or optional of one)."""
     args = typing.get_args(kind)
     if type(None) in args:
@@ -88,20 +93,46 @@ def _coerce(name: str, value: Any, kind: Any) -> Any:
     if typing.get_origin(kind) is tuple:
         if isinstance(value, str):
             value = [v.strip() for v in value.split(",") if v.strip()]
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise RecipeError(f"recipe key {name!r}: expected a list of names, got {value!r}")
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+            raise RecipeError(f"{what} {name!r}: expected a list of names, got {value!r}", name)
         return tuple(value)
     if kind is bool and isinstance(value, bool):
         return value
     if kind is bool or isinstance(value, bool):  # YAML's true is no number, nor 1 a switch
-        raise RecipeError(f"recipe key {name!r}: expected {kind.__name__}, got {value!r}")
-    if kind is int and isinstance(value, int):
-        return value
-    if kind is float and isinstance(value, (int, float)) and math.isfinite(value):
+        raise RecipeError(f"{what} {name!r}: expected {kind.__name__}, got {value!r}", name)
+    if kind is int and isinstance(value, numbers.Integral):
+        return int(value)
+    if kind is float and isinstance(value, (numbers.Integral, numbers.Real)) and _finite(value):
         return float(value)
     if kind is str and isinstance(value, str):
         return value
-    raise RecipeError(f"recipe key {name!r}: expected {getattr(kind, '__name__', kind)}, got {value!r}")
+    raise RecipeError(f"{what} {name!r}: expected {getattr(kind, '__name__', kind)}, got {reprlib.repr(value)}", name)
+
+
+def _finite(value: Any) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int past float's range
+        return False
+
+
+def check_fields(cfg: Any) -> None:
+    """Every field of a ``TrainConfig`` of its annotated type (``train`` calls this before any work: a
+    list for the metric, a string for a rate or a float for the outputs failed deep in the checks as a
+    TypeError). ``data`` and ``out`` may be paths."""
+    from ._loop import TrainConfig
+
+    hints = typing.get_type_hints(TrainConfig)
+    for f in dataclasses.fields(TrainConfig):
+        value = getattr(cfg, f.name)
+        if f.name in ("data", "out") and isinstance(value, os.PathLike):
+            continue
+        if f.name == "recipe":
+            if value is not None and not isinstance(value, dict):
+                raise RecipeError(f"field 'recipe': expected None or the recipe's provenance mapping, got "
+                                  f"{type(value).__name__}", "recipe")
+            continue
+        _coerce(f.name, value, hints[f.name], what="field")
 
 
 def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
@@ -110,6 +141,8 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
 
     Raises :class:`RecipeError` naming the key at fault for unknown keys and wrong types.
     """
+    if not isinstance(metric, str) or metric not in METRICS:
+        raise RecipeError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}", "metric")
     name, text = _recipe_text(source)
     try:
         data = yaml.safe_load(text)
@@ -119,9 +152,13 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
         data = {}
     if not isinstance(data, dict):
         raise RecipeError(f"recipe {name}: expected a mapping of TrainConfig fields, got {type(data).__name__}")
+    keys = [k for k in data if not isinstance(k, str)]
+    if keys:  # ("0:" is a key YAML reads as the number 0)
+        raise RecipeError(f"recipe {name}: keys are field names, got {keys[0]!r}")
     data = dict(data)
     per_metric = data.pop("per_metric", None) or {}
-    if not isinstance(per_metric, dict) or not all(isinstance(v, dict) for v in per_metric.values()):
+    if not isinstance(per_metric, dict) or not all(isinstance(v, dict) and all(isinstance(k, str) for k in v)
+                                                   for v in per_metric.values()):
         raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields")
     metrics = data.pop("metrics", None)
     if metrics is not None:  # a recipe measured for some metrics only (``reuse``: JNYang)

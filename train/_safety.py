@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import math
+import reprlib
+
 import numpy as np
 
 from rtp.sdk import ParameterError
@@ -19,8 +22,21 @@ def calibrate_safety(
     where there is none). With ``quantile = q``: the smallest margin that leaves at most a share q
     of the values underestimated.
     """
-    p = np.asarray(pred, dtype=np.float64).ravel()
-    g = np.asarray(gt, dtype=np.float64).ravel()
+    try:
+        p = np.asarray(pred, dtype=np.float64).ravel()
+        g = np.asarray(gt, dtype=np.float64).ravel()
+    except (TypeError, ValueError) as err:
+        raise ParameterError(f"pred, gt: expected arrays of numbers ({err})") from err
+    if p.shape != g.shape:
+        raise ParameterError(f"pred, gt: expected arrays of one shape, got {np.shape(pred)} and {np.shape(gt)}")
+    for key, value in (("worse", worse), ("quantile", 0.0 if quantile is None else quantile)):
+        try:
+            number = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating)) \
+                and math.isfinite(value)
+        except OverflowError:  # an int past float's range
+            number = False
+        if not number:
+            raise ParameterError(f"{key}: expected a finite number, got {reprlib.repr(value)}", key)
     ok = np.isfinite(p) & np.isfinite(g)
     short = worse * (g[ok] - p[ok])
     if short.size == 0:

@@ -104,6 +104,8 @@ def save(
 
 def load(path: str | os.PathLike[str]) -> Checkpoint:
     """Read a checkpoint, rebuild the network in eval mode and validate its metadata."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise CheckpointError(f"expected the path of a checkpoint, got {type(path).__name__}")
     p = Path(path)
     if not p.is_file():
         raise ModelNotFoundError(f"no checkpoint at {str(p)!r}")
@@ -137,7 +139,8 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
                            ("versions", raw.get("versions"), isinstance(raw.get("versions"), (dict, type(None))))):
         if not ok:
             raise CheckpointError(f"{p}: {key} must be a mapping, got {type(value).__name__}")
-    cls = _ARCHITECTURES.get(arch.get("name"))
+    name = arch.get("name")
+    cls = _ARCHITECTURES.get(name) if isinstance(name, str) else None
     if cls is None:
         raise CheckpointError(f"{p}: unknown architecture {arch.get('name')!r}; known: {', '.join(_ARCHITECTURES)}")
     try:

@@ -691,6 +691,21 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
     ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast``, ``contrast_cell``
     ``contrast_max``, ``contrast_stored``, ``contrast_tiles``, ``coarse`` and ``coarse_width`` to the fast one."""
+    counts = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile, "width": width, "depth": depth,
+              "stem": stem, "grow": grow, "stem_layers": stem_layers, "max_width": max_width, "head_width": head_width,
+              "context_pool": context_pool, "contrast_cell": contrast_cell, "tail_width": tail_width, "coarse": coarse,
+              "coarse_width": coarse_width}
+    flags = {"energy_norm": energy_norm, "separable": separable, "separable_tail": separable_tail,
+             "contrast_max": contrast_max, "contrast_stored": contrast_stored, "contrast_tiles": contrast_tiles}
+    for key, value in counts.items():  # (True for a channel count reached torch as a bool size)
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+            raise ParameterError(f"{key}: expected an integer >= 0, got {value!r}")
+    for key, value in flags.items():
+        if not isinstance(value, bool):
+            raise ParameterError(f"{key}: expected True or False, got {value!r}")
+    if not isinstance(block_contrast, (tuple, list)) or not all(
+            isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in block_contrast):
+        raise ParameterError(f"block_contrast: expected input channel indices, got {block_contrast!r}")
     if arch == "paper":
         return MetricNet(in_channels, out_channels, tile, width, head)
     if arch == "fast":
