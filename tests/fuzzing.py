@@ -23,7 +23,10 @@ import json
 import math
 import os
 import shutil
+import signal
 import tempfile
+import threading
+import warnings
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -742,3 +745,73 @@ def targets() -> list[Target]:
         Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),
         Target("dataset reader: manifests", manifests, _manifest_call, _manifest_absurd),
     ]
+
+
+#: Seconds one call may take before it counts as a hang.
+HANG_S = 10.0
+
+
+class Hang(BaseException):
+    """A call that did not return within HANG_S (a BaseException: no ``except Exception`` in rtp hides it)."""
+
+
+def bounded(call: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    """``call`` with a SIGALRM watchdog (main thread only) and numpy's warnings silenced: a warning is
+    not an escape, a hang is."""
+
+    def run(value: Any) -> Any:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+                return call(value)
+
+            def alarm(_signum: int, _frame: Any) -> None:
+                raise Hang(f"no answer within {HANG_S:g} s")
+
+            old = signal.signal(signal.SIGALRM, alarm)
+            signal.setitimer(signal.ITIMER_REAL, HANG_S)
+            try:
+                return call(value)
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+                signal.signal(signal.SIGALRM, old)
+
+    return run
+
+
+def small_or_absurd(v: Any) -> bool:
+    """Keep a count that sizes an allocation or a loop either <= 40 or not a count at all."""
+    return isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) <= 40
+
+
+def classify_bounded(target: Target, value: Any) -> tuple[str, BaseException | None]:
+    """:func:`classify` of one value with the watchdog of :func:`bounded`: ``"hang"`` when the call
+    did not return within :data:`HANG_S`."""
+    guarded = Target(target.name, target.strategy, bounded(target.call), target.absurd)
+    try:
+        return classify(guarded, value)
+    except Hang as err:
+        return "hang", err
+
+
+def fuzz_bounded(target: Target, examples: int, refused: tuple[str, ...] = ("untyped", "hang")) -> None:
+    """Run ``target`` on ``examples`` generated values (no example database: each run draws anew) and
+    fail on the first whose outcome (:func:`classify_bounded`) is one of ``refused``."""
+    from hypothesis import HealthCheck, given, settings
+
+    @settings(max_examples=examples, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(target.strategy)
+    def run(value: object) -> None:
+        outcome, err = classify_bounded(target, value)
+        assert outcome not in refused, f"{outcome} for {value!r}: {err!r}"
+
+    run()
+
+
+def scratch_folder(prefix: str) -> Path:
+    """A temporary folder for a fuzz module's files, removed when the process ends."""
+    import atexit
+
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    return folder

@@ -12,25 +12,19 @@ at once: shrinking a failing example never walks through a value that would real
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import io
 import json
 import os
 import shutil
-import signal
-import tempfile
-import threading
-import warnings
 import zipfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rtp import evaluate as E
@@ -47,47 +41,17 @@ from .fuzzing import (
     _near,
     allowed_values,
     arrays,
-    classify,
     code_arrays,
+    fuzz_bounded,
     hostile_numbers,
     json_scalars,
     json_values,
     prediction_arrays,
+    scratch_folder,
+    small_or_absurd,
 )
 
-_WORK = Path(tempfile.mkdtemp(prefix="rtp-fuzz-rooms-"))
-atexit.register(shutil.rmtree, _WORK, ignore_errors=True)
-
-#: Seconds one call may take before it counts as a hang.
-HANG_S = 10.0
-
-
-class Hang(BaseException):
-    """A call that did not return within HANG_S (a BaseException: no ``except Exception`` in rtp hides it)."""
-
-
-def _bounded(call: Callable[[Any], Any]) -> Callable[[Any], Any]:
-    """``call`` with a SIGALRM watchdog (main thread only) and numpy's warnings silenced: a warning is
-    not an escape, a hang is."""
-
-    def run(value: Any) -> Any:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
-                return call(value)
-
-            def alarm(_signum: int, _frame: Any) -> None:
-                raise Hang(f"no answer within {HANG_S:g} s")
-
-            old = signal.signal(signal.SIGALRM, alarm)
-            signal.setitimer(signal.ITIMER_REAL, HANG_S)
-            try:
-                return call(value)
-            finally:
-                signal.setitimer(signal.ITIMER_REAL, 0)
-                signal.signal(signal.SIGALRM, old)
-
-    return run
+_WORK = scratch_folder("rtp-fuzz-rooms-")
 
 
 def _val(x: Any) -> Any:
@@ -113,13 +77,8 @@ def _torch(a: Any) -> Any:
     return torch.from_numpy(np.ascontiguousarray(np.moveaxis(a, -1, -3)))
 
 
-def _small_or_absurd(v: Any) -> bool:
-    """Keep a count that sizes an allocation or a loop either <= 40 or not a count at all."""
-    return isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) <= 40
-
-
 #: hostile_numbers without the mid-sized integers that would really allocate or loop (see the docstring).
-hostile_counts = hostile_numbers.filter(_small_or_absurd)
+hostile_counts = hostile_numbers.filter(small_or_absurd)
 numbers = st.one_of(st.floats(-10, 10), hostile_numbers)
 tiles = st.one_of(st.integers(-2, 40), hostile_numbers)
 ppds = st.one_of(st.floats(1, 1000), st.just("width"), hostile_numbers, st.text(max_size=5))
@@ -648,16 +607,6 @@ store_cases = st.tuples(
          "size": st.one_of(st.tuples(st.integers(-1, 48), st.integers(-1, 48)), st.tuples(numbers, numbers), json_values)}),
 )
 
-@contextlib.contextmanager
-def _inside(folder: Path) -> Iterator[None]:
-    """The working directory ``folder`` for a while (contextlib.chdir before Python 3.11)."""
-    old = os.getcwd()
-    os.chdir(folder)
-    try:
-        yield
-    finally:
-        os.chdir(old)
-
 
 def _store_call(v: tuple[str, dict[str, Any]]) -> Any:
     method, kw = v
@@ -671,7 +620,7 @@ def _store_call(v: tuple[str, dict[str, Any]]) -> Any:
     scratch.mkdir()
     if root == "empty":
         root = scratch
-    with _inside(scratch):  # a relative root writes there, not into the checkout
+    with contextlib.chdir(scratch):  # a relative root writes there, not into the checkout
         return _store_method(TargetStore(root) if base_tile is None else TargetStore(root, base_tile=base_tile),
                              method, sample_id, metric, tile, params, values, size)
 
@@ -866,20 +815,6 @@ CASES: list[tuple[Target, int]] = [
 ]
 
 
-def _outcome(target: Target, value: Any) -> tuple[str, BaseException | None]:
-    bounded = Target(target.name, target.strategy, _bounded(target.call), target.absurd)
-    try:
-        return classify(bounded, value)
-    except Hang as err:
-        return "hang", err
-
-
 @pytest.mark.parametrize(("target", "examples"), CASES, ids=[t.name for t, _ in CASES])
 def test_malformed_inputs_to_the_rooms_are_typed_errors(target: Target, examples: int) -> None:
-    @settings(max_examples=examples, deadline=None, database=None, suppress_health_check=list(HealthCheck))
-    @given(target.strategy)
-    def run(value: object) -> None:
-        outcome, err = _outcome(target, value)
-        assert outcome not in ("untyped", "hang"), f"{outcome} for {value!r}: {err!r}"
-
-    run()
+    fuzz_bounded(target, examples, refused=("untyped", "hang"))

@@ -11,14 +11,8 @@ that size a network are drawn either small or not counts at all.
 
 from __future__ import annotations
 
-import atexit
-import os
+import contextlib
 import shutil
-import signal
-import tempfile
-import threading
-import warnings
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +20,6 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rtp import export as X
@@ -35,56 +28,30 @@ from rtp import train as T
 from rtp.train import checkpoint as C
 from rtp.train.model import build_network
 
-from .fuzzing import Target, _array, arrays, classify, hostile_numbers, json_scalars, json_values
+from .fuzzing import (
+    Target,
+    _array,
+    arrays,
+    fuzz_bounded,
+    hostile_numbers,
+    json_scalars,
+    json_values,
+    scratch_folder,
+    small_or_absurd,
+)
 
-_WORK = Path(tempfile.mkdtemp(prefix="rtp-fuzz-train-export-"))
-atexit.register(shutil.rmtree, _WORK, ignore_errors=True)
+_WORK = scratch_folder("rtp-fuzz-train-export-")
 
 
 @pytest.fixture(autouse=True, scope="module")
 def _in_scratch() -> Any:
     """Drawn text is a valid relative output path too: the exports write it inside the scratch folder,
     not into the checkout the tests run from."""
-    old = os.getcwd()
-    os.chdir(_WORK)
-    try:
+    with contextlib.chdir(_WORK):
         yield
-    finally:
-        os.chdir(old)
-
-HANG_S = 10.0
 
 
-class Hang(BaseException):
-    """A call that did not return within HANG_S."""
-
-
-def _bounded(call: Callable[[Any], Any]) -> Callable[[Any], Any]:
-    def run(value: Any) -> Any:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
-                return call(value)
-
-            def alarm(_signum: int, _frame: Any) -> None:
-                raise Hang(f"no answer within {HANG_S:g} s")
-
-            old = signal.signal(signal.SIGALRM, alarm)
-            signal.setitimer(signal.ITIMER_REAL, HANG_S)
-            try:
-                return call(value)
-            finally:
-                signal.setitimer(signal.ITIMER_REAL, 0)
-                signal.signal(signal.SIGALRM, old)
-
-    return run
-
-
-def _small_or_absurd(v: Any) -> bool:
-    return isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) <= 40
-
-
-hostile_counts = hostile_numbers.filter(_small_or_absurd)
+hostile_counts = hostile_numbers.filter(small_or_absurd)
 _counter = iter(range(10**9))
 
 
@@ -450,20 +417,6 @@ CASES: list[tuple[Target, int]] = [
 ]
 
 
-def _outcome(target: Target, value: Any) -> tuple[str, BaseException | None]:
-    bounded = Target(target.name, target.strategy, _bounded(target.call), target.absurd)
-    try:
-        return classify(bounded, value)
-    except Hang as err:
-        return "hang", err
-
-
 @pytest.mark.parametrize(("target", "examples"), CASES, ids=[t.name for t, _ in CASES])
 def test_malformed_inputs_to_train_and_export_are_typed_errors(target: Target, examples: int) -> None:
-    @settings(max_examples=examples, deadline=None, database=None, suppress_health_check=list(HealthCheck))
-    @given(target.strategy)
-    def run(value: object) -> None:
-        outcome, err = _outcome(target, value)
-        assert outcome not in ("untyped", "hang", "absurd accepted"), f"{outcome} for {value!r}: {err!r}"
-
-    run()
+    fuzz_bounded(target, examples, refused=("untyped", "hang", "absurd accepted"))
