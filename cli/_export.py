@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ._run import Formatter, add_common, run
+from ._run import Formatter, Parser, add_common, run
 
 __all__ = ["build_export_parser", "export_main"]
 
@@ -24,7 +24,7 @@ EXAMPLES = """examples:
 def build_export_parser() -> argparse.ArgumentParser:
     from rtp.export import DEFAULT_OPSET
 
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="rtp-export", formatter_class=Formatter, epilog=EXAMPLES,
         description="Bake a trained rtp checkpoint into an ONNX model with embedded metadata, or adopt a "
         "foreign ONNX model by baking a metadata sidecar into it.",

@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._run import Bar, Formatter, add_common, run
+from ._run import Bar, Formatter, Parser, add_common, run
 
 __all__ = ["build_parser", "main"]
 
@@ -462,7 +462,7 @@ def build_parser() -> argparse.ArgumentParser:
         TILE_SIZES,
     )
 
-    p = argparse.ArgumentParser(prog="rtp", formatter_class=Formatter, epilog=EXAMPLES,
+    p = Parser(prog="rtp", formatter_class=Formatter, epilog=EXAMPLES,
                                 description="rtp: learned perceptual error prediction for variable-rate shading.")
     add_common(p, top=True)
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)

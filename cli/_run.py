@@ -19,7 +19,7 @@ import traceback
 from collections.abc import Callable, Iterator
 from typing import Any
 
-__all__ = ["COMMON", "Bar", "Formatter", "add_common", "run", "run_guarded", "states_default", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "run", "run_guarded", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -28,6 +28,19 @@ def version() -> str:
     from rtp import sdk
 
     return str(sdk.__version__)
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser (its subcommands' too), with one fix: ``--flag=--`` gives the flag the value
+    ``--``, refused or taken by its type like any other. Python 3.11's argparse strips the ``--`` and
+    passes an empty list, which reached the commands (``float([])``, ``[].split``) as a TypeError."""
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
+        if action.option_strings and action.nargs is None and arg_strings == ["--"]:
+            value = self._get_value(action, "--")
+            self._check_value(action, value)
+            return value
+        return super()._get_values(action, arg_strings)
 
 
 class Formatter(argparse.RawDescriptionHelpFormatter):

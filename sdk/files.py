@@ -64,7 +64,12 @@ def check_output(path: str | os.PathLike[str], *, folder: bool = False, what: st
     if not isinstance(path, (str, os.PathLike)) or "\0" in str(os.fspath(path)):  # (NUL: the system's ValueError)
         raise ParameterError(f"{what}: expected a path, got {path!r}", what)
     target = Path(path)
-    if target.exists() and target.is_dir() != folder:
+    try:
+        exists = target.exists()
+    except OSError as err:  # a name too long for the file system
+        shown = str(target) if len(str(target)) <= 120 else str(target)[:117] + "..."
+        raise ParameterError(f"{what}: cannot write {shown!r}: {err.strerror or err}", what) from err
+    if exists and target.is_dir() != folder:
         kind = "a folder" if target.is_dir() else "a file"
         raise ParameterError(f"{what}: {str(target)!r} is {kind}; expected {'a folder' if folder else 'a file'} path",
                              what)
