@@ -11,8 +11,8 @@ result and says whether accepting it made no sense. Running an input ends in one
   an array that is not what the function takes) or the result is (non-finite, silently changed);
 * ``untyped``: any other exception: a bug.
 
-The ``absurd`` predicates state the documented ranges (docs/metadata.md, "Value ranges") and check
-results independently of the validation code where they can (a decoded prediction must be finite and
+The ``absurd`` predicates state the documented ranges (docs/metadata.md, the fields table and the
+paragraph after it) and check results independently of the validation code where they can (a decoded prediction must be finite and
 not constant, a bit flip that is accepted must leave the network's output bit-identical).
 """
 
