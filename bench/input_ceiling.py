@@ -23,11 +23,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _common import positive, run_main  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp.capture import Sample
 from rtp.capture.scenes import map_names
 from rtp.cli import main as rtp_main
+from rtp.sdk import METRICS
 
 
 def use_current_frame() -> None:
@@ -46,8 +47,10 @@ def use_current_frame() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--metric", required=True, help="the metric whose shipped recipe is trained")
-    ap.add_argument("--data", default="data/train", help="dataset with targets (default: data/train)")
+    # (checked here, not by the ``rtp train`` this runs: its usage line would name the wrong command)
+    ap.add_argument("--metric", required=True, choices=tuple(METRICS), help="the metric whose shipped recipe is trained")
+    ap.add_argument("--data", type=dataset_folder, default="data/train",
+                    help="dataset with targets (default: data/train)")
     ap.add_argument("--out", default=None, help="checkpoint (default: data/study/METRIC-current-frame.pt)")
     ap.add_argument("--steps", type=positive, default=None, help="training steps (default: the recipe's)")
     ap.add_argument("--scene", default=",".join(map_names("validation")),

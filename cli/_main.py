@@ -537,7 +537,8 @@ def build_parser() -> argparse.ArgumentParser:
     cap.add_argument("--workers", type=_positive, default=None,
                      help="parallel render processes (default 1; with --ray, Ray workers)")
     _ray_option(cap)
-    cap.add_argument("--seed", type=int, default=0, help="viewpoint sampling seed")
+    cap.add_argument("--seed", type=int, default=0,
+                     help="viewpoint sampling seed (any integer; the same seed, the same viewpoints)")
     cap.add_argument("--placement", choices=tuple(PLACEMENTS), default="free",
                      help="where the cameras stand: 'free' anywhere in the viewpoint domain (up to 6 m over a floor; "
                      "every dataset before this option), 'eye' at the player's eye height over the floors, as the "
@@ -683,7 +684,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "cosine to zero at the last step")
     r.add_argument("--weight-decay", dest="weight_decay", type=float, default=None,
                    help="weight decay (decoupled with adamw; default 0)")
-    r.add_argument("--seed", type=int, default=None, help="seed of the weights, crops and batches")
+    r.add_argument("--seed", type=int, default=None,
+                   help="seed of the weights, crops and batches (any integer; default: the recipe's, else 0)")
     r.add_argument("--safety-quantile", type=float, default=None,
                    help="calibrate the margin so at most this share of tiles is underestimated "
                    "(default: the paper's mean underestimation)")

@@ -40,6 +40,8 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     (["bench/paths.py", "--maps", "nosuchmap", "--frames", "3"], 2, "paths.py: error: map 'nosuchmap' is not listed"),
     (["bench/scaling.py", "--modes", "nosuch"], 2, "argument --modes: expected ray and/or pool"),
     (["bench/report.py", "README.md"], 2, "is not JSON"),
+    # input_ceiling.py runs ``rtp train`` in-process: its own parser refuses what that one would
+    (["bench/input_ceiling.py", "--metric", "nosuch"], 2, "input_ceiling.py: error: argument --metric"),
     (["examples/moderngl_vrs.py", "--model", "nosuch"], 2, "moderngl_vrs.py: error: no model file at 'nosuch'"),
 ])
 def test_bad_input_is_one_line(args: list[str], code: int, words: str) -> None:
