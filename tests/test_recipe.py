@@ -109,6 +109,22 @@ def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needl
     assert isinstance(err.value, ParameterError)
 
 
+@pytest.mark.parametrize(("text", "field"), [
+    ("width: 1\n", "expected width >= 2"),
+    ("crop: 40\n", "multiple of the tile size"),
+    ("lr: -1.0\n", "lr: expected a finite learning rate > 0"),
+    ("arch: paper\nseparable: true\n", "separable: the fast network's option"),
+])
+def test_a_recipe_out_of_range_is_refused_when_read(tmp_path: Path, text: str, field: str) -> None:
+    """Types are checked by load_recipe, ranges and combinations by TrainConfig.from_recipe: a recipe
+    that train() would refuse is refused when read, before any data is looked for ("d" is none)."""
+    path = tmp_path / "r.yaml"
+    path.write_text(text)
+    load_recipe(path, "jnyang")  # of the right types
+    with pytest.raises(ParameterError, match=field):
+        TrainConfig.from_recipe(path, data="d", metric="jnyang", out=str(tmp_path / "m.pt"))
+
+
 def test_a_missing_recipe_names_the_packaged_ones(tmp_path: Path) -> None:
     with pytest.raises(RecipeError, match="shipped, paper-net"):
         load_recipe(tmp_path / "nope.yaml", "jnyang")

@@ -204,7 +204,9 @@ class TrainConfig:
         changed = {k: v for k, v in overrides.items() if k not in r.values or r.values[k] != v}
         if changed:  # what the command line changed: a model says how it was really trained
             prov["overrides"] = {k: list(v) if isinstance(v, tuple) else v for k, v in changed.items()}
-        return cls(data=data, metric=metric, out=out, recipe=prov, **values)
+        cfg = cls(data=data, metric=metric, out=out, recipe=prov, **values)
+        check_config(cfg)  # a recipe's ranges and combinations too, when it is read (train() checks again)
+        return cfg
 
 
 @dataclass
@@ -505,15 +507,14 @@ def _ema_update(avg: Network, net: Network, decay: float) -> None:
             a.copy_(b)
 
 
-def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
-    """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
-    if not isinstance(cfg, TrainConfig):
-        raise sdk.ParameterError(f"train: expected a TrainConfig, got {type(cfg).__name__}")
+def check_config(cfg: TrainConfig) -> None:
+    """Refuse a configuration :func:`train` cannot run, before any work: every field of its type, then
+    the ranges and combinations of the fields (``TrainConfig.from_recipe`` runs this too, so that a
+    recipe's ``width: 1`` fails when the recipe is read). What needs the data (a crop larger than the
+    frames) is checked once it is loaded. Raises :class:`rtp.sdk.ParameterError` naming the field."""
     check_fields(cfg)  # every field of its type, before the checks of their ranges below
     if cfg.metric not in sdk.METRICS:
         raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
-    # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
-    check_output(cfg.out, what="out")
     for name, count in (("steps", cfg.steps), ("batch", cfg.batch), ("crop", cfg.crop), ("val_every", cfg.val_every),
                         ("save_every", cfg.save_every)):
         if isinstance(count, bool) or not isinstance(count, int) or count < 1:
@@ -556,8 +557,6 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         raise sdk.ParameterError(f"loss: expected one of {', '.join(LOSSES)}, got {cfg.loss!r}", "loss")
     if cfg.loss == "quantile" and not 0.0 < cfg.quantile < 1.0:
         raise sdk.ParameterError(f"quantile: expected a number in (0, 1), got {cfg.quantile}", "quantile")
-    loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
-    aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     if not (cfg.focus >= 0.0 and math.isfinite(cfg.focus)):
         raise sdk.ParameterError(f"focus: expected a weight >= 0 (0: off), got {cfg.focus}", "focus")
     if cfg.optimizer not in OPTIMIZERS:
@@ -648,6 +647,21 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     if cfg.per_scene is not None and cfg.per_scene < 1:
         raise sdk.ParameterError(f"per_scene: expected at least 1 sample per map and motion profile, got {cfg.per_scene}",
                                  "per_scene")
+    if cfg.context < 0 or cfg.context % cfg.tile:
+        raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}")
+    if cfg.context and cfg.augment:
+        raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
+
+
+def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
+    """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
+    if not isinstance(cfg, TrainConfig):
+        raise sdk.ParameterError(f"train: expected a TrainConfig, got {type(cfg).__name__}")
+    check_config(cfg)
+    # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
+    check_output(cfg.out, what="out")
+    loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
+    aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
@@ -659,10 +673,6 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                            f"capture the datasets of one training run at one size")
     log.info("%.1f GB of input planes in memory", sum(f.nbytes for f in (*tr.x, *va.x)) / 1e9)
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
-    if cfg.context < 0 or cfg.context % cfg.tile:
-        raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}")
-    if cfg.context and cfg.augment:
-        raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
     if cfg.crop + 2 * cfg.context > min(full_h, full_w):
         what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
         raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})")
