@@ -809,6 +809,13 @@ def _split_names() -> tuple[str, ...]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv:  # `rtp` alone: the commands, as `rtp -h` lists them (argparse says only that one is required)
+        from rtp.sdk import EXIT_USAGE
+
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE  # as argparse's own usage errors
+    args = parser.parse_args(argv)
     prog = "rtp " + args.command + (f" {args.action}" if getattr(args, "action", None) else "")
     return run(prog, args, args.func)

@@ -70,6 +70,12 @@ def test_help_exits_0_and_shows_defaults(prog: str, command: tuple[str, ...], ca
         assert "default:" in action.help or f"(default: {action.default})" in text, (command, action.dest)
 
 
+def test_rtp_alone_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([]) == 2  # a usage error, with the commands rather than "COMMAND is required"
+    err = capsys.readouterr().err
+    assert "usage: rtp" in err and "capture" in err and "play" in err and "examples:" in err
+
+
 @pytest.mark.parametrize("argv", [["-m", "rtp", "--help"], ["-m", "rtp.cli", "scenes", "--help"],
                                   ["-m", "rtp.cli", "scenes", "fetch", "--help"],
                                   ["-m", "rtp.cli.export", "--help"]], ids=" ".join)
