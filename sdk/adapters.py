@@ -232,7 +232,7 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
             what = f"the string {channels!r}" if isinstance(channels, str) else type(channels).__name__
             raise UnsupportedChannelError(f"channels must be a sequence of channel names, got {what}")
         self._channels: tuple[str, ...] = tuple(channels)
-        unknown = [c for c in self._channels if c not in CHANNELS]
+        unknown = [c for c in self._channels if not isinstance(c, str) or c not in CHANNELS]  # ([] is unhashable)
         if unknown:
             raise UnsupportedChannelError(f"unknown channel {unknown[0]!r}; known channels: {', '.join(CHANNELS)}")
         missing = [c for c in self._channels if c not in self.supported_channels]
@@ -360,8 +360,11 @@ class FrameSource(_Closable, abc.ABC, Generic[FrameT]):
     _open_only: ClassVar[tuple[str, ...]] = ("frame",)
 
     def __init__(self, adapter_class: type[Adapter[FrameT]], width: int, height: int) -> None:
-        if int(width) < 1 or int(height) < 1:
-            raise ParameterError(f"frame size must be positive, got {width}x{height}")
+        if not isinstance(adapter_class, type) or not issubclass(adapter_class, Adapter):
+            raise ParameterError(f"adapter_class: expected an rtp.sdk.adapters.Adapter subclass, got {adapter_class!r}",
+                                 "adapter_class")
+        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1 for v in (width, height)):
+            raise ParameterError(f"frame size: expected positive integers (pixels), got {width!r} x {height!r}", "size")
         self._adapter_class = adapter_class
         self._width, self._height = int(width), int(height)
         self._adapters: list[weakref.ref[Adapter[FrameT]]] = []

@@ -403,6 +403,7 @@ def test_no_gl_context_is_a_typed_error(monkeypatch: pytest.MonkeyPatch) -> None
 def test_borrowed_renderer_and_bound_scene_error() -> None:
     """pyrender binds a scene to one renderer's context: borrow the user's, or say so clearly."""
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
+    from rtp.plugins.pyrender._gbuffer import _delete_renderer
 
     pyrender = _pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
@@ -426,7 +427,7 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
         after, _ = user.render(scene)  # the borrowed renderer got its own program cache back
         np.testing.assert_array_equal(after, before)
     finally:
-        user.delete()
+        _delete_renderer(user)  # not user.delete(): pyrender's terminates the EGL display every context shares
 
 
 def test_adapters_sharing_one_renderer_each_draw_their_own_passes() -> None:
@@ -435,6 +436,7 @@ def test_adapters_sharing_one_renderer_each_draw_their_own_passes() -> None:
     (the first built used to draw pyrender's lit image for every pass once the second had replaced the
     renderer's program cache)."""
     from rtp.plugins.pyrender import Adapter, SceneFrame
+    from rtp.plugins.pyrender._gbuffer import _delete_renderer
 
     pyrender = _pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
@@ -456,7 +458,7 @@ def test_adapters_sharing_one_renderer_each_draw_their_own_passes() -> None:
         np.testing.assert_array_equal(lit, lit_before)  # the displayed frame: pyrender's own draw
         np.testing.assert_array_equal(user.render(scene)[0], lit_before)
     finally:
-        user.delete()
+        _delete_renderer(user)  # not user.delete(): pyrender's terminates the EGL display every context shares
 
 
 def test_osmesa_gives_the_inputs_egl_gives(tmp_path) -> None:

@@ -65,6 +65,35 @@ def _mat(m: np.ndarray) -> bytes:
     return np.ascontiguousarray(np.asarray(m, dtype=np.float64).T, dtype=np.float32).tobytes()
 
 
+def _matrix(value: Any, name: str, *, invertible: bool = False) -> np.ndarray:
+    """``value`` as a finite float64 4x4 matrix (finite in float32, the shader's precision), or a
+    :class:`ParameterError` naming the field."""
+    try:
+        m = np.asarray(value)
+        ok = m.dtype.kind in "iuf" and m.shape == (4, 4)
+        if ok:
+            m = m.astype(np.float64)
+            with np.errstate(all="ignore"):
+                ok = bool(np.isfinite(m.astype(np.float32)).all())
+            if ok and invertible:
+                with np.errstate(all="ignore"):
+                    ok = bool(np.isfinite(np.linalg.inv(m).astype(np.float32)).all())
+    except (TypeError, ValueError, OverflowError, np.linalg.LinAlgError):
+        ok = False
+    if not ok:
+        what = "an invertible" if invertible else "a"
+        got = f"{m.dtype} {m.shape}" if isinstance(value, np.ndarray) else type(value).__name__
+        raise ParameterError(f"{name}: expected {what} finite 4x4 matrix, got {got}", name)
+    return m
+
+
+def _component(value: Any, name: str, lo: int, hi: int) -> int:
+    """``value`` as an integer component index in ``[lo, hi)``, else a :class:`ParameterError`."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value < hi:
+        raise ParameterError(f"{name}: expected a component index in [{lo}, {hi - 1}], got {value!r}", name)
+    return int(value)
+
+
 @dataclass(frozen=True)
 class GBufferTextures:
     """One frame of an engine's moderngl G-buffers: the frame :meth:`Adapter.inputs` reads.
@@ -152,10 +181,16 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if not number or not 0.0 <= tolerance < math.inf:
             raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
                                  "tolerance")
-        if not callable(getattr(ctx, "program", None)):
+        if not isinstance(albedo_linear, (bool, np.bool_)):
+            raise ParameterError(f"albedo_linear: expected True or False, got {albedo_linear!r}", "albedo_linear")
+        if not callable(getattr(ctx, "program", None)) or not hasattr(ctx, "info"):
             raise AdapterFrameError(f"ctx must be the engine's moderngl.Context, got {type(ctx).__name__}")
         import moderngl
 
+        limit = min(int(ctx.info["GL_MAX_TEXTURE_SIZE"]), int(ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
+        if max(self.width, self.height) > limit:
+            raise ParameterError(f"frame size: this OpenGL context draws at most {limit} pixels a side "
+                                 f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}", "size")
         self.ctx = ctx
         self.tolerance = float(tolerance)
         ids = [CHANNEL_IDS[c] for c in self.channels] + [-1] * (_MAX_CHANNELS - len(self.channels))
@@ -223,19 +258,33 @@ class Adapter(_AdapterBase[GBufferTextures]):
         has_prev = prev_colour is not None
         if has_prev and (prev_depth is None or prev_view_projection is None):
             raise ParameterError("prev_colour needs prev_depth and prev_view_projection as well", "prev_colour")
-        for c, tex in ((depth_component, depth), (prev_depth_component, prev_depth)):
-            if tex is not None and not 0 <= c < tex.components:
-                raise ParameterError(f"depth component {c} does not exist in a {tex.components}-component texture",
-                                     "depth_component")
+        for name, tex in (("albedo", albedo), ("normal", normal), ("depth", depth), ("prev_colour", prev_colour),
+                          ("prev_depth", prev_depth), ("material", material)):
+            if tex is None and name in ("albedo", "normal", "depth"):
+                raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
+            self._check_texture(tex, name)
+        view = _matrix(view, "view", invertible=True)
+        projection = _matrix(projection, "projection", invertible=True)
+        if prev_view_projection is not None:
+            prev_view_projection = _matrix(prev_view_projection, "prev_view_projection")
+        if prev_projection is not None:
+            prev_projection = _matrix(prev_projection, "prev_projection", invertible=True)
+        for c, tex, name in ((depth_component, depth, "depth_component"),
+                             (prev_depth_component, prev_depth, "prev_depth_component")):
+            _component(c, name, 0, 4 if tex is None else tex.components)
         wanted = [c for c in self.channels if c in _MATERIAL]
         if wanted and material is None:
             raise ParameterError(f"the inputs {wanted} need the material texture (GBufferTextures.material: "
                                  "roughness, metallic, specular)", "material")
-        comps = tuple(int(c) for c in material_components)
-        if material is not None and (len(comps) != 3 or not all(-1 <= c < material.components for c in comps)):
-            raise ParameterError(f"material_components: expected three component indices of the "
-                                 f"{material.components}-component material texture (or -1), got "
-                                 f"{material_components!r}", "material_components")
+        try:
+            comps = tuple(material_components)
+        except TypeError:
+            comps = ()
+        n_material = 4 if material is None else material.components
+        if len(comps) != 3:
+            raise ParameterError(f"material_components: expected three component indices of the material texture "
+                                 f"(or -1), got {material_components!r}", "material_components")
+        comps = tuple(_component(c, "material_components", -1, n_material) for c in comps)
         if self._luma is not None:  # first pass: every pixel's lumas, read by the second
             self._luma.run(albedo=albedo, normal=normal, depth=depth, view=view, projection=projection,
                            prev_colour=prev_colour, prev_depth=prev_depth, prev_view_projection=prev_view_projection,
@@ -250,8 +299,6 @@ class Adapter(_AdapterBase[GBufferTextures]):
         for loc, (name, tex) in enumerate(textures.items()):
             tex.use(location=loc)
             self._set(name, loc)
-        view = np.asarray(view, dtype=np.float64)
-        projection = np.asarray(projection, dtype=np.float64)
         self._set("u_has_prev", has_prev)
         self._set("u_has_material", material is not None)
         self._set("u_material_comp", comps)
@@ -266,6 +313,19 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._fbo.use()
         self._vao.render(vertices=3)
 
+    def _check_texture(self, tex: Any, name: str) -> None:
+        """``tex``, unless None, is a moderngl texture of the adapter's size (one frame of its G-buffers)."""
+        if tex is None:
+            return
+        import moderngl
+
+        if not isinstance(tex, moderngl.Texture):
+            raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got "
+                                 f"{type(tex).__name__}", name)
+        if tuple(tex.size) != (self.width, self.height):
+            raise ParameterError(f"{name}: expected a texture of the adapter's size {self.width}x{self.height}, got "
+                                 f"{tex.size[0]}x{tex.size[1]}", name)
+
     def inputs(self, frame: GBufferTextures) -> np.ndarray:
         """The model's input planes for ``frame``: float32 ``(C, H, W)``, top-left origin, channels
         in order. Without a previous frame in ``frame`` the reprojected channels and ``seen`` are 0."""
@@ -276,6 +336,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
     def read(self, index: int) -> np.ndarray:
         """Plane ``index`` of the last :meth:`run`, ``(H, W)`` float32 (reads back one target)."""
         self._check_open()
+        index = _component(index, "index", 0, len(self.channels))
         return read_texture(self._targets[index // 4])[..., index % 4]
 
     def close(self) -> None:

@@ -31,6 +31,7 @@ from rtp.scene import Camera, Scene
 from rtp.sdk import (
     ALL_RATES,
     RATE_CODES,
+    ParameterError,
     RtpError,
     block_variances,
     depth_edges,
@@ -71,8 +72,13 @@ def _import_moderngl() -> Any:
 def create_context(require: int = 330) -> Any:
     """Create a headless moderngl context through EGL (Mesa llvmpipe works; no display needed).
 
-    Raises :class:`RendererError` naming the packages to install when EGL is unavailable.
+    Raises :class:`RendererError` naming the packages to install when EGL is unavailable, and
+    :class:`rtp.sdk.ParameterError` when ``require`` is not an OpenGL version such as 330 or 430.
     """
+    if not isinstance(require, numbers.Integral) or isinstance(require, bool) or not 100 <= int(require) <= 999:
+        raise ParameterError(f"require: expected an OpenGL version as an integer such as 330 or 430, got {require!r}",
+                             "require")
+    require = int(require)
     moderngl = _import_moderngl()
     try:
         return moderngl.create_standalone_context(backend="egl", require=require)
@@ -90,6 +96,43 @@ def _floats(values: Any, n: int) -> Any:
     if len(out) != n:
         raise RendererError(f"expected {n} colour components, got {len(out)}: {values!r}")
     return out
+
+
+def _check_ctx(ctx: Any) -> Any:
+    """``ctx`` when it is a moderngl context (what ``create_context`` returns), else a :class:`RendererError`."""
+    if not all(callable(getattr(ctx, name, None)) for name in ("program", "texture", "framebuffer")) \
+            or not isinstance(getattr(ctx, "version_code", None), int):
+        raise RendererError(f"ctx: expected a moderngl.Context, got {type(ctx).__name__}")
+    return ctx
+
+
+def _image(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    """``value`` as a finite float32 array of ``shape``, or a :class:`RendererError` naming ``what``."""
+    try:
+        a = np.asarray(value)
+        ok = a.dtype.kind in "biuf"
+        if ok:
+            a = a.astype(np.float32, copy=False)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or a.shape != shape:
+        got = f"{a.dtype} {a.shape}" if ok or isinstance(value, np.ndarray) else type(value).__name__
+        raise RendererError(f"{what}: expected a real array of shape {shape}, got {got}")
+    if not np.isfinite(a).all():
+        raise RendererError(f"{what}: expected finite values, got NaN or infinity")
+    return a
+
+
+def _check_camera(camera: Any, what: str) -> Camera:
+    if not isinstance(camera, Camera):
+        raise RendererError(f"{what}: expected an rtp.scene.Camera, got {type(camera).__name__}")
+    return camera
+
+
+def _check_flag(value: Any, what: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise RendererError(f"{what}: expected True or False, got {value!r}")
+    return bool(value)
 
 
 @dataclass(eq=False)
@@ -159,6 +202,8 @@ class Frame:
     def channel(self, name: str) -> np.ndarray:
         """One ``(H, W)`` plane by its ``rtp.sdk`` channel name (``"albedo.r"``, ``"normal.z"``,
         ``"seen"``, ``"reprojected.g"``, ``"motion.x"``, ``"depth"``, ``"depth.edge"``, ``"reprojected.y.dx"``, ...)."""
+        if not isinstance(name, str):
+            raise UnsupportedChannelError(f"channel: expected a channel name (str), got {type(name).__name__}")
         if name == "depth.edge":
             return depth_edges(self.depth)
         if name in ("reprojected.y.dx", "reprojected.y.dy"):
@@ -370,7 +415,7 @@ class Renderer:
         ``GL_MAX_RENDERBUFFER_SIZE``; without ``ctx``, a headless context's (made and released for the
         question): a job checks its frame size with it before it writes anything."""
         own = ctx is None
-        ctx = create_context() if ctx is None else ctx
+        ctx = create_context() if ctx is None else _check_ctx(ctx)
         try:
             return min(int(ctx.info["GL_MAX_TEXTURE_SIZE"]), int(ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
         finally:
@@ -402,10 +447,12 @@ class Renderer:
         if shadow_map_size is not None and (not isinstance(shadow_map_size, numbers.Integral)
                                             or isinstance(shadow_map_size, bool) or int(shadow_map_size) < 1):
             raise RendererError(f"shadow_map_size: expected a positive integer (pixels), got {shadow_map_size!r}")
+        for name, flag in (("fxaa", fxaa), ("cull_back_faces", cull_back_faces), ("profile", profile)):
+            _check_flag(flag, name)
         self._mgl = _import_moderngl()
         self.width, self.height = int(width), int(height)
         self._owns_ctx = ctx is None
-        self.ctx = create_context() if ctx is None else ctx
+        self.ctx = create_context() if ctx is None else _check_ctx(ctx)
         if self.ctx.version_code < 330:
             raise RendererError(f"the renderer needs OpenGL >= 3.3, the context offers {self.ctx.version_code}")
         if shadow_map_size is None:
@@ -463,6 +510,9 @@ class Renderer:
             # 16384x16384): moderngl says only "the framebuffer is not complete".
             raise RendererError(f"could not allocate the render targets of a {self.width}x{self.height} frame on "
                                 f"this OpenGL context ({type(exc).__name__}: {exc}); try a smaller size") from exc
+
+    #: The range of a fixed ``render(..., exposure=)`` (the auto-exposure stays within 2**-10 .. 2**10).
+    MIN_EXPOSURE, MAX_EXPOSURE = 2.0**-20, 2.0**20
 
     #: The settings' ranges: the SSAO kernel and the point lights are arrays in the shaders (a uniform
     #: array's size is capped by the context; these stay far inside every GL 3.3 one).
@@ -602,6 +652,8 @@ class Renderer:
         filtering where the driver offers it. Raises :class:`RendererError` on malformed meshes.
         """
         self._check_alive()
+        if not isinstance(scene, Scene):
+            raise RendererError(f"load_scene: expected an rtp.scene.Scene, got {type(scene).__name__}")
         self._release_scene()
         mgl = self._mgl
         t0 = time.perf_counter()
@@ -725,9 +777,18 @@ class Renderer:
         Returns:
             A :class:`Frame` with the G-buffers, the 7 final images and the reprojection.
         """
+        _check_camera(camera, "camera")
+        _check_flag(debug, "debug")
+        if exposure is not None:
+            number = isinstance(exposure, (int, float, np.integer, np.floating)) and not isinstance(exposure, bool)
+            if not number or not self.MIN_EXPOSURE <= exposure <= self.MAX_EXPOSURE:
+                raise RendererError(f"exposure: expected None (auto-exposure) or a finite multiplier in "
+                                    f"[2**-20, 2**20], got {exposure!r}")
         scene = self._check_can_render(prev)
         if prev_camera is None and prev is not None:
             prev_camera = prev.camera
+        if prev_camera is not None:
+            _check_camera(prev_camera, "prev_camera" if prev is None else "prev_camera (or prev.camera)")
         timer = _StageTimer(self.ctx, self.profile)
         setup = self._frame_setup(scene, camera, prev_camera)
         fit = self._shadow_pass(setup)
@@ -759,6 +820,9 @@ class Renderer:
             raise RendererError(f"{what} works on the frame rendered last; call render() first")
         return self._last
 
+    #: The largest ``shade_rates`` tile (pixels a side).
+    MAX_TILE = 1 << 16
+
     def shade_rates(self, rates: np.ndarray, tile_size: int) -> np.ndarray:
         """Software VRS with a rate image: the frame rendered last, each ``tile_size`` tile shaded at
         its own rate (``rates``: uint8 D3D12 codes ``(th, tw)``, top-left origin, as
@@ -766,16 +830,24 @@ class Renderer:
         engine's post-processing would run on its VRS output. Returns the final ``(H, W, 3)`` image
         (display-encoded sRGB). A uniform rate image gives that rate's ``Frame.colour`` image exactly."""
         setup, exposure = self._last_frame("shade_rates")
-        th, tw = tile_grid(self.height, self.width, int(tile_size))
-        codes = np.asarray(rates)
+        if (not isinstance(tile_size, numbers.Integral) or isinstance(tile_size, bool) or int(tile_size) % 4
+                or not 4 <= int(tile_size) <= self.MAX_TILE):
+            raise RendererError(f"tile_size must be a positive multiple of 4 (the largest rate) up to {self.MAX_TILE}, "
+                                f"got {tile_size!r}")
+        tile_size = int(tile_size)
+        th, tw = tile_grid(self.height, self.width, tile_size)
+        try:
+            codes = np.asarray(rates)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise RendererError(f"rates: expected an array of D3D12 rate codes, got {type(rates).__name__}") from exc
         if codes.shape != (th, tw):
             raise RendererError(f"rates: expected a {tw}x{th} tile grid ({th}, {tw}) for {tile_size}px tiles of a "
                                 f"{self.width}x{self.height} frame, got shape {codes.shape}")
-        if tile_size % 4 or tile_size < 4:
-            raise RendererError(f"tile_size must be a positive multiple of 4 (the largest rate), got {tile_size}")
+        if codes.dtype.kind not in "iuf":
+            raise RendererError(f"rates: expected integer D3D12 rate codes (uint8), got {codes.dtype}")
         valid = np.isin(codes, [RATE_CODES[r] for r in ALL_RATES])
         if not valid.all():
-            bad = sorted({int(c) for c in codes[~valid]})
+            bad = np.unique(codes[~valid]).tolist()[:8]
             raise RendererError(f"rates: unknown rate codes {bad}; expected D3D12 codes of {', '.join(ALL_RATES)}")
         if self._vrs is None or self._vrs[0].size != (tw, th):
             mgl = self._mgl
@@ -822,11 +894,9 @@ class Renderer:
         ``depth`` ``(H, W)``. Returns ``(reprojected (H, W, 3), seen (H, W))``. A closed-loop VRS run
         reprojects each method's own displayed frame this way."""
         setup, _ = self._last_frame("reproject")
-        colour, depth = np.asarray(colour, np.float32), np.asarray(depth, np.float32)
-        if colour.shape != (self.height, self.width, 3) or depth.shape != (self.height, self.width):
-            raise RendererError(f"reproject: expected colour ({self.height}, {self.width}, 3) and depth "
-                                f"({self.height}, {self.width}), got {colour.shape} and {depth.shape}")
-        return self._reproject(setup, colour, depth, camera)
+        colour = _image(colour, (self.height, self.width, 3), "reproject: colour")
+        depth = _image(depth, (self.height, self.width), "reproject: depth")
+        return self._reproject(setup, colour, depth, _check_camera(camera, "reproject: camera"))
 
     def reprojection_source(self, depth: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where :meth:`reproject` fetches each pixel of the frame rendered last: ``(rows, cols, seen)``,
@@ -835,9 +905,8 @@ class Renderer:
         ``reproject(image, depth, camera)[0]`` for every image seen from ``camera`` with ``depth``: one
         GL pass serves any number of histories (the closed loop's methods)."""
         setup, _ = self._last_frame("reprojection_source")
-        depth = np.asarray(depth, np.float32)
-        if depth.shape != (self.height, self.width):
-            raise RendererError(f"reprojection_source: expected depth ({self.height}, {self.width}), got {depth.shape}")
+        depth = _image(depth, (self.height, self.width), "reprojection_source: depth")
+        _check_camera(camera, "reprojection_source: camera")
         rows, cols = np.indices((self.height, self.width), dtype=np.float32)
         coords = np.stack([cols, rows, np.zeros_like(rows)], -1)
         src, seen = self._reproject(setup, coords, depth, camera)
@@ -849,8 +918,16 @@ class Renderer:
         self._check_alive()
         if self.scene is None:
             raise RendererError("no scene loaded; call load_scene(scene) first")
-        if prev is not None and (prev.width, prev.height) != (self.width, self.height):
+        if prev is None:
+            return self.scene
+        if not isinstance(prev, Frame):
+            raise RendererError(f"prev: expected the previous Frame (or None), got {type(prev).__name__}")
+        depth = np.asarray(prev.depth) if isinstance(prev.depth, np.ndarray) else None
+        if depth is not None and depth.ndim == 2 and depth.shape != (self.height, self.width):
             raise RendererError(f"previous frame is {prev.width}x{prev.height}, the renderer draws {self.width}x{self.height}")
+        colour = prev.colour.get("1x1") if isinstance(prev.colour, dict) else None
+        _image(colour, (self.height, self.width, 3), "prev.colour['1x1']")
+        _image(prev.depth, (self.height, self.width), "prev.depth")
         return self.scene
 
     def _frame_setup(self, scene: Scene, camera: Camera, prev_camera: Camera | None) -> _FrameSetup:

@@ -126,10 +126,11 @@ class RateSelector:
         tile (``ceil(tw / pool)`` x ``ceil(th / pool)``, texel row 0 the top tile row); it is reused by the
         next call of the same grid."""
         try:
-            th, tw = (int(v) for v in tiles)
+            th, tw = tiles
+            ok = all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in (th, tw))
         except (TypeError, ValueError):
-            th = tw = 0
-        if th < 1 or tw < 1:
+            ok = False
+        if not ok or th < 1 or tw < 1:
             raise sdk.ParameterError(f"tiles: expected (rows, columns) of at least one tile, got {tiles!r}", "tiles")
         if not callable(getattr(raw, "bind_to_storage_buffer", None)):
             raise sdk.InputDtypeError(f"raw: expected a moderngl.Buffer of the network's output, got "
@@ -158,7 +159,11 @@ class RateSelector:
         """Rates from the network's output in host memory (``ShadingRatePredictor.predict_raw``: float
         ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 codes, one per hardware tile,
         as ``shading_rates`` returns them."""
-        a = np.asarray(raw)
+        try:
+            a = np.asarray(raw)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise sdk.InputShapeError(f"raw: expected the network's float output array, got {type(raw).__name__}",
+                                      (), "(C, th, tw)") from exc
         if a.ndim == 4 and a.shape[0] == 1:
             a = a[0]
         n = len(self._meta.outputs)
@@ -170,14 +175,15 @@ class RateSelector:
             raise sdk.InputShapeError(
                 f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
                 f"{a.dtype} {a.shape}", tuple(a.shape), f"({n}, th, tw)")
-        data = np.ascontiguousarray(a, dtype=np.float32).tobytes()
+        with np.errstate(over="ignore"):
+            data = np.ascontiguousarray(a, dtype=np.float32).tobytes()
         if self._raw is None or self._raw.size != len(data):
             if self._raw is not None:
                 self._raw.release()
             self._raw = self.ctx.buffer(data)
         else:
             self._raw.write(data)
-        texture = self.select_buffer(self._raw, a.shape[1:], threshold, allowed)
+        texture = self.select_buffer(self._raw, (int(a.shape[1]), int(a.shape[2])), threshold, allowed)
         gh, gw = self._tiles  # type: ignore[misc]
         return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(gh, gw).copy()
 

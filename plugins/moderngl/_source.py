@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from rtp.scene import Camera
+from rtp.sdk import ParameterError
 from rtp.sdk.adapters import FrameSource
 
 from ._adapter import GBufferTextures
@@ -19,7 +21,7 @@ from ._glio import write_texture
 from ._renderer import Frame, Renderer
 
 if TYPE_CHECKING:
-    from rtp.scene import Camera, Scene
+    from rtp.scene import Scene
 
     from ._adapter import Adapter
 
@@ -75,6 +77,9 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
         return {"ctx": self.renderer.ctx}
 
     def frame(self, camera: Camera, prev_camera: Camera) -> GBufferTextures:
+        for name, cam in (("camera", camera), ("prev_camera", prev_camera)):
+            if not isinstance(cam, Camera):
+                raise ParameterError(f"{name}: expected an rtp.scene.Camera, got {type(cam).__name__}", name)
         self._use()
         last = self._last
         prev = last[1] if last is not None and last[0] == prev_camera else self.renderer.render(prev_camera)

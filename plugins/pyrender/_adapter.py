@@ -49,12 +49,40 @@ PYRENDER_SPECULAR = 0.5
 
 
 def _pose(value: Any, name: str) -> np.ndarray:
-    m = np.asarray(value, dtype=np.float64)
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise PyrenderAdapterError(f"{name} must be a finite 4x4 camera-to-world matrix, got shape {m.shape}")
+    try:
+        m = np.asarray(value)
+        real = m.dtype.kind in "iuf"
+        m = m.astype(np.float64) if real else m
+    except (TypeError, ValueError, OverflowError):
+        real, m = False, np.empty(0)
+    with np.errstate(all="ignore"):  # finite in float32 too: pyrender and the shaders compute in float32
+        finite = real and m.shape == (4, 4) and bool(np.isfinite(m.astype(np.float32)).all())
+    if not finite:
+        got = f"{m.dtype} {m.shape}" if real or isinstance(value, np.ndarray) else type(value).__name__
+        raise PyrenderAdapterError(f"{name} must be a finite 4x4 camera-to-world matrix, got {got}")
     if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0)):
         raise PyrenderAdapterError(f"{name} must be affine (last row 0, 0, 0, 1), got {m[3].tolist()}")
+    try:
+        with np.errstate(all="ignore"):
+            invertible = bool(np.isfinite(np.linalg.inv(m).astype(np.float32)).all())
+    except np.linalg.LinAlgError:
+        invertible = False
+    if not invertible:
+        raise PyrenderAdapterError(f"{name} must be an invertible camera-to-world matrix, got a singular one")
     return m
+
+
+def _names(value: Any, allowed: tuple[str, ...], name: str) -> tuple[str, ...]:
+    """``value`` as a tuple of names from ``allowed`` (a :class:`ParameterError` naming ``name`` otherwise)."""
+    items = None
+    if not isinstance(value, (str, bytes)) and isinstance(value, Iterable):
+        try:
+            items = tuple(value)
+        except (TypeError, ValueError):
+            items = None
+    if items is None or not all(isinstance(v, str) and v in allowed for v in items):
+        raise ParameterError(f"{name}: expected names from {allowed}, got {value!r}", name)
+    return items
 
 
 @dataclass(frozen=True)
@@ -178,7 +206,17 @@ class Adapter(_BaseAdapter[SceneFrame]):
                   ", ".join(self.channels), self.msaa, self.normal_bits)
 
     # ------------------------------------------------------------------ cameras
+    def _check_scene(self, scene: Any, camera: Any | None = None, prev_camera: Any | None = None) -> None:
+        """``scene`` is a ``pyrender.Scene`` and the cameras, where given, ``pyrender`` cameras."""
+        pyrender = self._gbuf._pyrender
+        if not isinstance(scene, pyrender.Scene):
+            raise PyrenderAdapterError(f"scene: expected a pyrender.Scene, got {type(scene).__name__}")
+        for name, cam in (("camera", camera), ("prev_camera", prev_camera)):
+            if cam is not None and not isinstance(cam, pyrender.Camera):
+                raise PyrenderAdapterError(f"{name}: expected a pyrender camera (or None), got {type(cam).__name__}")
+
     def _camera(self, scene: Any, camera: Any | None) -> Any:
+        self._check_scene(scene, camera)
         if camera is not None:
             return camera
         node = scene.main_camera_node
@@ -225,7 +263,14 @@ class Adapter(_BaseAdapter[SceneFrame]):
         ``OffscreenRenderer.render(scene, flags)`` returns (by default ``(colour (H, W, 3) uint8,
         depth (H, W) float32)``, top-left origin), with the camera moved to ``pose`` and back."""
         self._check_open()
+        self._check_scene(scene, camera)
         pose = _pose(pose, "pose")
+        all_flags = sum(v for k, v in vars(self._gbuf._pyrender.RenderFlags).items() if k.isupper() and
+                        isinstance(v, int) and v & (v - 1) == 0)
+        if flags is not None and (isinstance(flags, bool) or not isinstance(flags, (int, np.integer))
+                                  or flags < 0 or flags & ~all_flags):
+            raise ParameterError(f"flags: expected None or pyrender.RenderFlags values combined with |, got {flags!r}",
+                                 "flags")
         with self._posed(scene, camera, pose):
             return self._gbuf.draw(scene, flags)
 
@@ -240,12 +285,20 @@ class Adapter(_BaseAdapter[SceneFrame]):
             float32, top-left origin, 0 on background.
         """
         self._check_open()
+        self._check_scene(scene, camera)
         pose = _pose(pose, "pose")
+        if not isinstance(albedo, (bool, np.bool_)):
+            raise ParameterError(f"albedo: expected True or False, got {albedo!r}", "albedo")
+        normals, material = _names(normals, _NORMAL, "normals"), _names(material, MATERIAL, "material")
         with self._posed(scene, camera, pose):
-            return self._gbuf.render(scene, albedo=albedo, normals=tuple(normals), material=tuple(material))
+            return self._gbuf.render(scene, albedo=bool(albedo), normals=normals, material=material)
 
     def _frame(self, image: Any, name: str) -> np.ndarray:
-        a = np.asarray(image)
+        try:
+            a = np.asarray(image)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise PyrenderAdapterError(f"{name} must be an (H, W, 3) or (H, W, 4) image, got {type(image).__name__}") \
+                from exc
         if a.ndim != 3 or a.shape[:2] != (self.height, self.width) or a.shape[2] not in (3, 4):
             raise PyrenderAdapterError(
                 f"{name} must be (H, W, 3) or (H, W, 4) with (H, W) = ({self.height}, {self.width}), got {a.shape}"
@@ -255,6 +308,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
             return a.astype(np.float32) / 255.0
         if not np.issubdtype(a.dtype, np.floating):
             raise PyrenderAdapterError(f"{name} must be uint8 or float in [0, 1], got {a.dtype}")
+        if not np.isfinite(a).all():
+            raise PyrenderAdapterError(f"{name} must be finite, got NaN or infinity")
         return np.clip(a.astype(np.float32), 0.0, 1.0)
 
     def inputs(self, frame: SceneFrame) -> np.ndarray:
@@ -264,6 +319,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
                                                            frame.prev_colour, frame.prev_depth)
         camera, prev_camera = frame.camera, frame.prev_camera
         t0 = time.perf_counter()
+        self._check_scene(scene, camera, prev_camera)
         pose = _pose(pose, "pose")
         wanted = set(self.channels)
         temporal = wanted & {*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_MOTION}
@@ -310,9 +366,19 @@ class Adapter(_BaseAdapter[SceneFrame]):
                     else:
                         log.debug("no prev_depth given: rendering it at prev_pose")
                         prev_depth = self.gbuffers(scene, prev_pose, camera=prev_cam, albedo=False, normals=()).depth
-                pd = np.asarray(prev_depth, dtype=np.float32)
-                if pd.shape != (self.height, self.width):
-                    raise PyrenderAdapterError(f"prev_depth must be ({self.height}, {self.width}), got {pd.shape}")
+                try:
+                    pd = np.asarray(prev_depth)
+                    real = pd.dtype.kind in "iuf"
+                except (TypeError, ValueError, OverflowError):
+                    real, pd = False, np.empty(0)
+                if not real or pd.shape != (self.height, self.width):
+                    got = f"{pd.dtype} {pd.shape}" if real or isinstance(prev_depth, np.ndarray) else \
+                        type(prev_depth).__name__
+                    raise PyrenderAdapterError(f"prev_depth must be a real ({self.height}, {self.width}) array, got {got}")
+                with np.errstate(over="ignore"):
+                    pd = pd.astype(np.float32)
+                if not np.isfinite(pd).all() or (pd < 0).any():
+                    raise PyrenderAdapterError("prev_depth must be finite linear depth >= 0 (0 on background)")
                 rep, seen = reproject(colour, pd, g.depth, view, proj, prev_vp, tolerance=self.reprojection_tolerance)
                 planes.update({c: rep[..., i] for i, c in enumerate(_REPROJECTED)})
                 planes[_REPROJECTED_Y] = luma(rep)

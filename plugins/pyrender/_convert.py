@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import srgb_to_linear
+from rtp.scene import Scene
+from rtp.sdk import ParameterError, srgb_to_linear
 
 from ._gl import import_pyrender
 
@@ -43,6 +44,16 @@ def _linear_factor(material: Any) -> np.ndarray:
         return np.ones(4)
     bc = np.asarray(material.base_color, np.float64)
     return np.concatenate([srgb_to_linear(np.clip(bc[:3], 0.0, 1.0)), bc[3:4]])
+
+
+def _check_scene(scene: Any, **flags: Any) -> None:
+    """``scene`` is an :class:`rtp.scene.Scene` (its fields were checked when it was made) and the
+    ``flags`` are True or False: a :class:`rtp.sdk.ParameterError` otherwise."""
+    if not isinstance(scene, Scene):
+        raise ParameterError(f"scene: expected an rtp.scene.Scene, got {type(scene).__name__}", "scene")
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ParameterError(f"{name}: expected True or False, got {value!r}", name)
 
 
 def _look_at_direction(direction: Any) -> np.ndarray:
@@ -70,6 +81,7 @@ def to_pyrender_scene(scene: Any, *, double_sided: bool = True, lights: bool = T
     Returns:
         A ``pyrender.Scene`` without a camera; add one (``scene.add(camera, pose=...)``).
     """
+    _check_scene(scene, double_sided=double_sided, lights=lights)
     pyrender = import_pyrender()
     sky = np.asarray(getattr(scene, "sky_colour", (0.45, 0.6, 0.85)), np.float64)
     amb = float(getattr(scene, "ambient", 0.35)) if lights else 0.0
@@ -119,6 +131,7 @@ def to_trimesh_scene(scene: Any) -> Any:
     """Build a ``trimesh.Scene`` (PBR materials, textures as images) from an rtp scene, ready to
     export as glTF/GLB: ``to_trimesh_scene(s).export("level.glb")``. Same conventions as
     :func:`to_pyrender_scene` (factor baked into textures; double-sided)."""
+    _check_scene(scene)
     import trimesh
     from PIL import Image
 

@@ -70,6 +70,18 @@ class GBuffers:
     roughness: np.ndarray | None = None
     metallic: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        d = self.depth
+        if not isinstance(d, np.ndarray) or d.ndim != 2 or d.dtype.kind != "f":
+            got = f"{d.dtype} {d.shape}" if isinstance(d, np.ndarray) else type(d).__name__
+            raise ParameterError(f"GBuffers.depth: expected a float (H, W) array, got {got}", "depth")
+        for name, channels in (("albedo", 3), ("normal", 3), ("roughness", 0), ("metallic", 0)):
+            v = getattr(self, name)
+            shape = (*d.shape, channels) if channels else d.shape
+            if v is not None and (not isinstance(v, np.ndarray) or v.shape != shape or v.dtype.kind != "f"):
+                got = f"{v.dtype} {v.shape}" if isinstance(v, np.ndarray) else type(v).__name__
+                raise ParameterError(f"GBuffers.{name}: expected None or a float {shape} array, got {got}", name)
+
     @property
     def mask(self) -> np.ndarray:
         """``(H, W)`` bool, True on geometry."""
@@ -274,7 +286,7 @@ class GBufferRenderer:
         """
         unknown = [m for m in material if m not in MATERIAL]
         if unknown:
-            raise ValueError(f"material: expected names from {MATERIAL}, got {unknown}")
+            raise ParameterError(f"material: expected names from {MATERIAL}, got {unknown}", "material")
         depth: np.ndarray | None = None
         out_albedo: np.ndarray | None = None
         out_normal: np.ndarray | None = None

@@ -15,12 +15,15 @@ pyrender 0.1.45 has two import-time quirks this module deals with, once, before 
 from __future__ import annotations
 
 import logging
+import numbers
 import os
 import sys
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import numpy as np
+
+from rtp.sdk import ParameterError
 
 from ._errors import PyrenderUnavailableError
 
@@ -67,7 +70,7 @@ def import_pyrender(platform: str | None = None) -> Any:
     current = os.environ.get("PYOPENGL_PLATFORM")
     if platform is not None and not isinstance(platform, str):
         raise PyrenderUnavailableError(f"platform: expected one of {', '.join(PLATFORMS)}, got {platform!r}")
-    wanted = (platform or current or "egl").lower()
+    wanted = (current or "egl" if platform is None else platform).lower()  # ("" is no platform, not the default)
     if wanted not in PLATFORMS:
         raise PyrenderUnavailableError(
             f"PYOPENGL_PLATFORM {wanted!r} cannot render headless; use one of {', '.join(PLATFORMS)}"
@@ -115,12 +118,28 @@ def import_pyrender(platform: str | None = None) -> Any:
 
 def offscreen_renderer(pyrender: Any, width: int, height: int) -> Any:
     """A ``pyrender.OffscreenRenderer`` of ``width`` x ``height``, or a :class:`PyrenderUnavailableError`
-    naming the platform and the Debian packages when its GL context cannot be created."""
+    naming the platform and the Debian packages when its GL context cannot be created.
+
+    A size past the context's ``GL_MAX_TEXTURE_SIZE`` / ``GL_MAX_RENDERBUFFER_SIZE`` is a
+    :class:`rtp.sdk.ParameterError` (pyrender makes its targets only at the first draw, where it failed)."""
+    if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and int(v) >= 1 for v in (width, height)):
+        raise ParameterError(f"frame size: expected positive integers (pixels), got {width!r} x {height!r}", "size")
     try:
-        return pyrender.OffscreenRenderer(width, height)
+        renderer = pyrender.OffscreenRenderer(int(width), int(height))
     except Exception as exc:
         raise PyrenderUnavailableError(
             f"pyrender could not create a {os.environ.get('PYOPENGL_PLATFORM')} context "
             f"({type(exc).__name__}: {exc}); on Debian/Ubuntu: apt-get install libegl1 libgl1 libegl-mesa0 "
             "libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa)"
         ) from exc
+    from OpenGL import GL
+
+    renderer._platform.make_current()
+    limit = min(int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE)), int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)))
+    if max(int(width), int(height)) > limit:
+        from ._gbuffer import _delete_renderer
+
+        _delete_renderer(renderer)
+        raise ParameterError(f"frame size: this OpenGL context draws at most {limit} pixels a side "
+                             f"(GL_MAX_TEXTURE_SIZE), got {width}x{height}", "size")
+    return renderer

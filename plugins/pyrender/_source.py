@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from rtp.scene import Camera
+from rtp.sdk import ParameterError
 from rtp.sdk.adapters import FrameSource
 
 from ._adapter import SceneFrame
@@ -20,8 +22,6 @@ from ._gbuffer import _delete_renderer
 from ._gl import import_pyrender, offscreen_renderer
 
 if TYPE_CHECKING:
-    from rtp.scene import Camera
-
     from ._adapter import Adapter
 
 __all__ = ["PyrenderFrameSource"]
@@ -68,6 +68,9 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         return {"renderer": self.renderer}
 
     def frame(self, camera: Camera, prev_camera: Camera) -> SceneFrame:
+        for name, cam in (("camera", camera), ("prev_camera", prev_camera)):
+            if not isinstance(cam, Camera):
+                raise ParameterError(f"{name}: expected an rtp.scene.Camera, got {type(cam).__name__}", name)
         cam, prev_cam = self._camera_for(camera), self._camera_for(prev_camera)
         pose, prev_pose = np.linalg.inv(camera.view()), np.linalg.inv(prev_camera.view())
         self._node.camera = prev_cam
