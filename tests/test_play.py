@@ -103,7 +103,7 @@ def test_rate_images_and_histories_are_checked(rendered: Any) -> None:
         r.shade_rates(np.zeros((th + 1, tw), np.uint8), TILE)
     with pytest.raises(RendererError, match="unknown rate codes"):
         r.shade_rates(np.full((th, tw), 3, np.uint8), TILE)
-    with pytest.raises(RendererError, match="expected colour"):
+    with pytest.raises(RendererError, match="reproject: colour: expected a real array of shape"):
         r.reproject(np.zeros((H, W)), frames[0].depth, frames[0].camera)
     with Renderer(W, H, ctx=r.ctx) as fresh, pytest.raises(RendererError, match="render\\(\\) first"):
         fresh.shade_rates(np.zeros((th, tw), np.uint8), TILE)
