@@ -83,3 +83,46 @@ def test_a_broken_citation_is_found(tmp_path: Path) -> None:
     names = _anchors(DOCS / "results.md")
     assert any(a.startswith("Which R²") for a in names)
     assert not any(a.startswith("A section nobody wrote") for a in names)
+
+
+#: Dotted names that start with ``rtp.`` but are not Python objects.
+NOT_OBJECTS = {
+    "rtp.adapters": "the entry-point group adapters register in",
+    "rtp.metadata": "the ONNX metadata_props key of a model's metadata",
+    "rtp.tail": "the ONNX metadata_props key of a split network's tail",
+    "rtp.demo": "a logger's name",
+    "rtp.x._y": "architecture.md's example of a private module",
+    "rtp.sdk._channels_then": "bench/planes.py's name for an old revision's module",
+}
+_DOTTED = re.compile(r"(?<![\w./-])rtp(?:\.[A-Za-z_]\w*)+")
+
+
+def _resolves(name: str) -> bool:
+    """``name`` is a module of rtp or an attribute path inside one."""
+    import importlib
+
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for attr in parts[i:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_dotted_names_of_rtp_objects_exist() -> None:
+    """Every ``rtp.room.name`` the docs, docstrings and comments mention is a module or an object
+    there (``rtp.plugins.moderngl._scene.Scene`` outlived its move to ``rtp.scene`` in five places)."""
+    found: dict[str, set[str]] = {}
+    for citer in CITERS:
+        for name in _DOTTED.findall(citer.read_text(encoding="utf-8", errors="replace")):
+            found.setdefault(name.rstrip("."), set()).add(str(citer.relative_to(ROOT)))
+    assert len(found) > 100, len(found)
+    missing = {n: sorted(f) for n, f in found.items() if n not in NOT_OBJECTS and not _resolves(n)}
+    assert not missing, f"names that are no module or object of rtp: {missing}"
+    assert not _resolves("rtp.plugins.moderngl._scene") and _resolves("rtp.scene.Scene")

@@ -1,5 +1,5 @@
 """Scene sources for capture: every function returns a
-:class:`rtp.plugins.moderngl._scene.Scene` (numpy data, world metres, Y up, CCW front faces,
+:class:`rtp.scene.Scene` (numpy data, world metres, Y up, CCW front faces,
 top-left texture origin).
 
 * :func:`procedural` - a seeded generator of indoor levels; no downloads (tests, demo).

@@ -1,7 +1,7 @@
 """Geometry helpers shared by the scene sources: a per-material triangle builder with primitives
 (quads, boxes, cylinders, spheres) and small mesh utilities.
 
-Conventions (those of ``rtp.plugins.moderngl._scene``): right-handed world, Y up, metres;
+Conventions (those of ``rtp.scene``): right-handed world, Y up, metres;
 triangles are counter-clockwise seen from the side their normal points to; texture coordinates
 have a top-left origin (v grows downwards), with world-space planar mapping so textures keep a
 constant texel density and tile (the renderer wraps with REPEAT).

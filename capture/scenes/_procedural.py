@@ -145,7 +145,7 @@ def procedural(
         name: scene name, default ``"procedural-<seed>"``.
 
     Returns:
-        A :class:`~rtp.plugins.moderngl._scene.Scene` with one mesh per used material, a sun,
+        A :class:`~rtp.scene.Scene` with one mesh per used material, a sun,
         one ceiling point light per room (plus a few extras) and one spawn point per room centre.
     """
     nx, nz = rooms

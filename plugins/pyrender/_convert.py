@@ -1,4 +1,4 @@
-"""rtp scenes (``rtp.plugins.moderngl.Scene``: numpy meshes, sRGB materials) as pyrender or
+"""rtp scenes (``rtp.scene.Scene``: numpy meshes, sRGB materials) as pyrender or
 trimesh scenes, so the same procedural level can be drawn by both renderers.
 
 The rtp scene is read by duck typing (``meshes``, ``materials``, ``sun``, ``point_lights``,
@@ -73,7 +73,7 @@ def to_pyrender_scene(scene: Any, *, double_sided: bool = True, lights: bool = T
     """Build a ``pyrender.Scene`` from an rtp scene.
 
     Args:
-        scene: an ``rtp.plugins.moderngl.Scene`` (for example ``rtp.capture.scenes.procedural(0)``).
+        scene: an ``rtp.scene.Scene`` (for example ``rtp.capture.scenes.procedural(0)``).
         double_sided: draw every material two-sided (the reference renderer's default).
         lights: add the sun (a ``DirectionalLight``), the point lights and the ambient term, for
             a lit display image (pyrender's own shading, not the reference renderer's).
