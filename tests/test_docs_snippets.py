@@ -1,0 +1,200 @@
+"""Every Python block of docs/*.md runs, so the pages cannot drift from the code (the README's blocks:
+tests/test_readme.py).
+
+A page's snippet names what an engine would have (``predictor``, ``x``, the engine's textures and
+matrices): :data:`SETUP` gives each block that context, made from the built-in procedural scene and
+the shipped models, and a check of what the block produced. A block that needs what CI does not
+have (the game levels of ``rtp scenes fetch``, ten minutes of rendering) is listed in
+:data:`NOT_RUN` with the reason; its imports still run and the whole block must compile. A block in
+neither list fails the first test, so a new snippet is either run or declared."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+_MODEL = """
+import numpy as np
+from rtp import sdk
+predictor = sdk.load("jnyang")
+H, W = 72, 128
+x = np.random.default_rng(0).random((len(predictor.metadata.inputs), H, W), dtype=np.float32)
+"""
+_SCENE = """
+from rtp.capture.scenes import procedural
+from rtp.capture.viewpoints import sample_viewpoints
+scene = procedural(0)
+prev_camera, camera = sample_viewpoints(scene, 1, seed=0)[0]
+"""
+_SOURCE = _MODEL + _SCENE + """
+width, height = W, H
+source = sdk.adapters.get("moderngl").frame_source(scene, width, height)
+frame = source.frame(camera, prev_camera)
+"""
+
+#: (page, key) -> (what the block needs, a check of what it made). The key is the block's first line
+#: that is not an import, without its comment.
+SETUP: dict[tuple[str, str], tuple[str, str]] = {
+    ("adapters.md", 'Adapter = sdk.adapters.get("moderngl")'): (
+        _SOURCE + "engine_objects = source.adapter_options()\nengine_frames = [frame, source.frame(camera, camera)]\n",
+        "assert rates.shape == sdk.tile_grid(height, width, predictor.tile_size) and rates.dtype == np.uint8",
+    ),
+    ("adapters.md", "Adapter = sdk.adapters.get(name)"): (
+        _MODEL + _SCENE + 'name, width, height = "moderngl", W, H\n',
+        "assert x.shape == (len(predictor.metadata.inputs), height, width) and x[1].mean() > 0.5  # seen",
+    ),
+    ("adapters.md", 'Adapter = sdk.adapters.get("pyrender")'): (
+        "",
+        'assert {"moderngl", "pyrender"} <= set(sdk.adapters.available())',
+    ),
+    ("adapters.md", "@dataclass(frozen=True)"): (  # the adapter skeleton, driven with a frame of arrays
+        "",
+        """
+rng = np.random.default_rng(0)
+frame = MyFrame(rng.random((32, 48, 3)), rng.random((32, 48, 3)) * 2 - 1, 1 + rng.random((32, 48)), np.eye(4),
+                np.eye(4), rng.random((32, 48, 3)), 1 + rng.random((32, 48)), np.eye(4))
+with MyEngineAdapter(["reprojected.y", "seen", "albedo.y", "normal.z", "reprojected.y.blocks"], 48, 32) as a:
+    x = a.inputs(frame)
+assert x.shape == (5, 32, 48) and x.dtype == np.float32 and np.isfinite(x).all()
+""",
+    ),
+    ("adapters.md", "scene = pyrender.Scene(ambient_light=(0.3, 0.3, 0.3))"): (
+        "",
+        "assert rates.shape == (1, 23, 40) and x.shape == (len(predictor.metadata.inputs), 360, 640)",
+    ),
+    ("metrics.md", "emap = metrics.flip_map(reference, test)"): (
+        """
+import numpy as np
+rng = np.random.default_rng(0)
+reference = rng.random((40, 56, 3), dtype=np.float32)
+test, i12, i21, i22, i24, i42, i44 = (np.clip(reference + 0.05 * rng.standard_normal(reference.shape), 0, 1)
+                                      .astype(np.float32) for _ in range(7))
+""",
+        'assert emap.shape == (40, 56) and tiles.shape == psnr.shape == (3, 4) and targets["jnflip"].shape == (6, 3, 4)',
+    ),
+    ("quickstart.md", 'predictor = sdk.load("jnyang.onnx")'): (
+        "",
+        'assert predictor.tile_size == 16 and predictor.provider == "CPUExecutionProvider"',
+    ),
+    ("quickstart.md", "errors = predictor.predict(x)"): (
+        _MODEL,
+        "assert errors.shape == (6, 5, 8) and rates.shape == (5, 8)",
+    ),
+    ("quickstart.md", "overlay = sdk.draw_rate_overlay(frame_rgb, rates, predictor.tile_size)"): (
+        _MODEL + "rates = predictor.shading_rates(x)\nframe_rgb = np.full((H, W, 3), 0.5, np.float32)\n",
+        "assert overlay.shape == frame_rgb.shape",
+    ),
+    ("renderer.md", "with Renderer(1280, 720) as renderer:"): (
+        _SCENE,
+        'assert frame.colour["2x2"].shape == (720, 1280, 3) and frame.seen.mean() > 0.5',
+    ),
+    ("runtime.md", "selector = RateSelector(predictor, ctx)"): (
+        _MODEL
+        + """
+from rtp.plugins.moderngl import create_context
+ctx = create_context(430)
+th, tw = sdk.tile_grid(H, W, predictor.tile_size)
+raw_buffer = ctx.buffer(np.ascontiguousarray(predictor.predict_raw(x), np.float32).tobytes())
+""",
+        "assert (rates == predictor.shading_rates(x)).all() and texture.size == (tw, th)",
+    ),
+    ("runtime.md", "reuse = sdk.PredictionReuse(predictor, every=4)"): (
+        _MODEL
+        + """
+rows, cols = np.indices((H, W), dtype=np.int32)     # a static camera: every pixel where it was
+seen = np.ones((H, W), np.float32)
+sky = np.zeros((H, W), bool)
+""",
+        "assert rates.shape == (5, 8) and reuse.age == 1  # the second frame carried the first one's estimates",
+    ),
+    ("runtime.md", 'predictor = sdk.load("jnyang-reuse")'): (
+        "from rtp import sdk\n",
+        "assert predictor.metadata.tail is not None",
+    ),
+    ("runtime.md", 'Adapter = sdk.adapters.get("moderngl")'): (
+        _SOURCE
+        + """
+ctx = source.adapter_options()["ctx"]
+tex_albedo, tex_normal, tex_depth = frame.albedo, frame.normal, frame.depth
+V, P, prev_VP = frame.view, frame.projection, frame.prev_view_projection
+tex_prev, tex_prev_depth, tex_orm = frame.prev_colour, frame.prev_depth, frame.material
+""",
+        "assert rates.shape == (5, 8) and x.shape == (len(predictor.metadata.inputs), height, width)",
+    ),
+}
+
+#: (page, key) -> why CI does not run the block (its imports run, and it must compile).
+NOT_RUN: dict[tuple[str, str], str] = {
+    ("evaluation.md", 'scene, blockers = load_scene("oa_dm5", None, None, None)'):
+        "a game level: needs `rtp scenes fetch` (tests/test_paths.py runs camera_path on the procedural scene)",
+    ("evaluation.md", 'report = play("20kdm2", "jnyang,jnyang@4,yang2019,fidelityfx,oracle", out="play")'):
+        "a game level and ten minutes (tests/test_play.py runs play on the procedural scene)",
+    ("scenes.md", "scene = procedural(seed=0)"):
+        "a game level: needs `rtp scenes fetch` (tests/test_viewpoints.py samples the procedural scene)",
+}
+
+
+def _blocks() -> list[tuple[str, int, str]]:
+    """``(page, line, code)`` of every Python block of docs/*.md."""
+    out = []
+    for page in sorted(DOCS.glob("*.md")):
+        text = page.read_text(encoding="utf-8")
+        for m in re.finditer(r"^```python\n(.*?)^```", text, re.S | re.M):
+            out.append((page.name, text.count("\n", 0, m.start()) + 1, m.group(1)))
+    return out
+
+
+def _key(code: str) -> str:
+    for line in code.splitlines():
+        s = line.split("  #")[0].split(" # ")[0].strip()
+        if s and not s.startswith(("from ", "import ")):
+            return s
+    return ""
+
+
+def _imports(code: str) -> str:
+    return "\n".join(line for line in code.splitlines() if line.startswith(("from ", "import ")))
+
+
+BLOCKS = _blocks()
+
+
+def test_every_block_is_run_or_declared() -> None:
+    assert len(BLOCKS) >= 15
+    keys = [(page, _key(code)) for page, _, code in BLOCKS]
+    unknown = [f"{page}:{line} {key!r}" for (page, key), (_, line, _) in zip(keys, BLOCKS)
+               if (page, key) not in SETUP and (page, key) not in NOT_RUN]
+    assert not unknown, f"Python blocks neither run nor declared (add them to SETUP or NOT_RUN): {unknown}"
+    assert len(set(keys)) == len(keys), "two blocks of a page share a key"
+    stale = (set(SETUP) | set(NOT_RUN)) - set(keys)
+    assert not stale, f"entries for blocks the docs no longer have: {sorted(stale)}"
+
+
+def _run(code: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYOPENGL_PLATFORM": os.environ.get("PYOPENGL_PLATFORM", "egl")}
+    return subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=300)
+
+
+@pytest.mark.parametrize(("page", "line", "code"), BLOCKS, ids=[f"{p}:{n}" for p, n, _ in BLOCKS])
+def test_the_block_runs(page: str, line: int, code: str, tmp_path: Path) -> None:
+    key = (page, _key(code))
+    compile(code, f"{page}:{line}", "exec")
+    if key in NOT_RUN:
+        r = _run(_imports(code), tmp_path)
+        assert r.returncode == 0, f"docs/{page} line {line}: its imports fail:\n{r.stderr[-3000:]}"
+        return
+    setup, check = SETUP[key]
+    program = "\n".join([textwrap.dedent(setup), code, textwrap.dedent(check), "print('ran')"])
+    r = _run(program, tmp_path)
+    assert r.returncode == 0 and r.stdout.strip().endswith("ran"), (
+        f"docs/{page} line {line} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-3000:]}")
