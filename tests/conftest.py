@@ -56,6 +56,18 @@ def bench_module(name: str, monkeypatch: pytest.MonkeyPatch | None = None) -> An
     return mod
 
 
+def pyrender_or_skip() -> Any:
+    """``import_pyrender()``, or a skip naming what is missing (pyrender itself, or a headless GL platform)."""
+    from rtp.plugins.pyrender import PyrenderUnavailableError, import_pyrender
+
+    try:
+        return import_pyrender()
+    except ImportError as exc:
+        pytest.skip(f"pyrender not installed (pip install 'rtp[pyrender]'): {exc}")
+    except PyrenderUnavailableError as exc:
+        pytest.skip(f"no headless GL platform for pyrender: {exc}")
+
+
 def base_metadata(**overrides: Any) -> dict[str, Any]:
     d: dict[str, Any] = {
         "metric": "jnyang",

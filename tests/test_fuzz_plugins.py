@@ -31,7 +31,7 @@ from hypothesis import strategies as st
 from rtp import sdk
 from rtp.scene import Camera, Material, Scene, box_mesh
 
-from .conftest import make_current
+from .conftest import make_current, pyrender_or_skip
 from .fuzzing import (
     HANG_S,
     Target,
@@ -700,24 +700,13 @@ def _source_absurd(kw: dict[str, Any], x: np.ndarray) -> bool:
 # -- pyrender ------------------------------------------------------------------------------------------
 
 
-def _pyrender() -> Any:
-    from rtp.plugins.pyrender import PyrenderUnavailableError, import_pyrender
-
-    try:
-        return import_pyrender()
-    except ImportError as exc:
-        pytest.skip(f"pyrender not installed (pip install 'rtp[pyrender]'): {exc}")
-    except PyrenderUnavailableError as exc:
-        pytest.skip(f"no headless GL platform for pyrender: {exc}")
-
-
 class _PR:
     """The module's pyrender objects: a scene with a camera, one adapter, its previous frame."""
 
     def __init__(self) -> None:
         from rtp.plugins.pyrender import Adapter, to_pyrender_scene
 
-        self.pyrender = pr = _pyrender()
+        self.pyrender = pr = pyrender_or_skip()
         self.scene = to_pyrender_scene(_scene())
         self.camera = pr.PerspectiveCamera(yfov=np.radians(60.0))
         self.scene.add(self.camera, pose=np.eye(4))

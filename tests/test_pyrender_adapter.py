@@ -31,7 +31,7 @@ import pytest
 
 from rtp import sdk
 from rtp.sdk.adapters import AdapterClosedError, UnsupportedChannelError
-from tests.conftest import make_current
+from tests.conftest import make_current, pyrender_or_skip
 
 pytestmark = pytest.mark.gl
 
@@ -39,17 +39,6 @@ W, H = 256, 144
 ALL = ["reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g", "albedo.b",
        "normal.x", "normal.y", "normal.z", "roughness", "metallic", "specular", "depth", "motion.x", "motion.y"]
 PAPER = ["reprojected.r", "seen", "albedo.r", "normal.z"]
-
-
-def _pyrender_or_skip() -> Any:
-    from rtp.plugins.pyrender import PyrenderUnavailableError, import_pyrender
-
-    try:
-        return import_pyrender()
-    except ImportError as exc:
-        pytest.skip(f"pyrender not installed (pip install 'rtp[pyrender]'): {exc}")
-    except PyrenderUnavailableError as exc:
-        pytest.skip(f"no headless GL platform for pyrender: {exc}")
 
 
 def _pose(camera: Any) -> np.ndarray:
@@ -82,7 +71,7 @@ class _Setup:
         from rtp.plugins.pyrender import to_pyrender_scene
         from rtp.scene import Camera
 
-        pyrender = _pyrender_or_skip()
+        pyrender = pyrender_or_skip()
         scene = procedural(3, rooms=(2, 2), texture_size=64)
         rng = np.random.default_rng(1)
         mats = []
@@ -327,7 +316,7 @@ def _asymmetric_scene(pyrender: Any) -> Any:
 def test_orientation_is_top_left() -> None:
     from rtp.plugins.pyrender import Adapter, SceneFrame
 
-    pyrender = _pyrender_or_skip()
+    pyrender = pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
     with Adapter(["albedo.r", "albedo.g", "normal.y", "normal.x", "depth"], 64, 48) as adapter:
         x = adapter.inputs(SceneFrame(scene, np.eye(4)))
@@ -341,7 +330,7 @@ def test_orientation_is_top_left() -> None:
 def test_scene_is_restored_and_errors_are_typed() -> None:
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
 
-    pyrender = _pyrender_or_skip()
+    pyrender = pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
     node = scene.main_camera_node
     bg = np.array(scene.bg_color)
@@ -386,7 +375,7 @@ def test_no_gl_context_is_a_typed_error(monkeypatch: pytest.MonkeyPatch) -> None
     from rtp.plugins.pyrender import Adapter, PyrenderUnavailableError
     from rtp.plugins.pyrender._source import PyrenderFrameSource
 
-    pyrender = _pyrender_or_skip()
+    pyrender = pyrender_or_skip()
 
     def no_context(width: int, height: int) -> None:
         raise RuntimeError("eglInitialize failed")
@@ -405,7 +394,7 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
     from rtp.plugins.pyrender._gbuffer import _delete_renderer
 
-    pyrender = _pyrender_or_skip()
+    pyrender = pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
     user = pyrender.OffscreenRenderer(64, 48)
     try:
@@ -438,7 +427,7 @@ def test_adapters_sharing_one_renderer_each_draw_their_own_passes() -> None:
     from rtp.plugins.pyrender import Adapter, SceneFrame
     from rtp.plugins.pyrender._gbuffer import _delete_renderer
 
-    pyrender = _pyrender_or_skip()
+    pyrender = pyrender_or_skip()
     scene = _asymmetric_scene(pyrender)
     full_ch, light_ch = ["albedo.g", "normal.y", "roughness", "depth"], ["albedo.r", "depth"]
     moved = np.eye(4)
