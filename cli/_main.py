@@ -808,14 +808,26 @@ def _split_names() -> tuple[str, ...]:
     return tuple(SPLIT_NAMES)
 
 
+def _subparser(parser: argparse.ArgumentParser, name: str | None) -> argparse.ArgumentParser | None:
+    """``parser``'s sub-command ``name`` (None: any, the first), or None where it has none of that name."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            choices: dict[str, argparse.ArgumentParser] = action.choices
+            return next(iter(choices.values()), None) if name is None else choices.get(name)
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    if not argv:  # `rtp` alone: the commands, as `rtp -h` lists them (argparse says only that one is required)
+    # `rtp` alone, `rtp scenes` alone: the commands or actions, as -h lists them (argparse's error said only
+    # that one is required)
+    sub = _subparser(parser, argv[0]) if len(argv) == 1 else None
+    if not argv or (sub is not None and _subparser(sub, None) is not None):
         from rtp.sdk import EXIT_USAGE
 
-        parser.print_help(sys.stderr)
-        return EXIT_USAGE  # as argparse's own usage errors
+        (sub or parser).print_help(sys.stderr)
+        parser.exit(EXIT_USAGE)  # SystemExit(2), as argparse's own usage errors
     args = parser.parse_args(argv)
     prog = "rtp " + args.command + (f" {args.action}" if getattr(args, "action", None) else "")
     return run(prog, args, args.func)

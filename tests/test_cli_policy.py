@@ -71,9 +71,16 @@ def test_help_exits_0_and_shows_defaults(prog: str, command: tuple[str, ...], ca
 
 
 def test_rtp_alone_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main([]) == 2  # a usage error, with the commands rather than "COMMAND is required"
+    with pytest.raises(SystemExit) as exc:  # a usage error, with the commands rather than "COMMAND is required"
+        main([])
     err = capsys.readouterr().err
-    assert "usage: rtp" in err and "capture" in err and "play" in err and "examples:" in err
+    assert exc.value.code == 2 and "usage: rtp" in err and "capture" in err and "play" in err and "examples:" in err
+    for argv in (["scenes"], ["weights"], ["info"]):  # the actions likewise; a command alone: argparse's error
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2
+        assert ("fetch" in err and "list" in err) if argv[0] != "info" else "required: model" in err, err
 
 
 @pytest.mark.parametrize("argv", [["-m", "rtp", "--help"], ["-m", "rtp.cli", "scenes", "--help"],
