@@ -119,6 +119,8 @@ class TargetStore:
         if not isinstance(data_root, (str, os.PathLike)) or "\0" in str(os.fspath(data_root)):
             raise TargetError(f"expected a dataset folder path, got {data_root!r}")
         self.root = Path(data_root) / "targets"
+        if Path(data_root).exists() and not Path(data_root).is_dir():  # (/dev/null: NotADirectoryError at the first write)
+            raise TargetError(f"expected a dataset folder, got {os.fspath(data_root)!r}, which is not a folder")
         manifest = self.root / "manifest.json"
         if manifest.is_file():
             try:

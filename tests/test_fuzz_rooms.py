@@ -31,7 +31,7 @@ from rtp import evaluate as E
 from rtp import metrics as M
 from rtp import scene as S
 from rtp import sdk
-from rtp.capture import BUFFERS, DatasetReader, DatasetWriter, TargetStore, check_frame_size, pool_targets
+from rtp.capture import BUFFERS, DatasetReader, DatasetWriter, TargetError, TargetStore, check_frame_size, pool_targets
 
 from .fuzzing import (
     _FILLS,
@@ -818,3 +818,10 @@ CASES: list[tuple[Target, int]] = [
 @pytest.mark.parametrize(("target", "examples"), CASES, ids=[t.name for t, _ in CASES])
 def test_malformed_inputs_to_the_rooms_are_typed_errors(target: Target, examples: int) -> None:
     fuzz_bounded(target, examples, refused=("untyped", "hang"))
+
+
+@pytest.mark.parametrize("method", ["declare", "write", "load", "has"])
+def test_a_target_store_on_a_file_is_a_typed_error(method: str) -> None:
+    """A drawn case one run in twenty met: TargetStore("/dev/null").declare(...) was a NotADirectoryError."""
+    with pytest.raises(TargetError, match="not a folder"):
+        _store_call((method, {"root": "/dev/null"}))
