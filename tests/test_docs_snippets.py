@@ -214,8 +214,8 @@ def _commands() -> list[tuple[str, str]]:
     return out
 
 
-def _placeholder(arg: str) -> bool:
-    """A shell variable, an optional part in brackets, or a capitalised placeholder (``M``, ``MAP``)."""
+def _stands_in(arg: str) -> bool:
+    """An argument the reader fills in: a shell variable, an optional part in brackets, a capitalised name (``M``, ``MAP``)."""
     return "$" in arg or "[" in arg or "{" in arg or "<" in arg or (arg.isupper() and arg.isalpha())
 
 
@@ -235,7 +235,7 @@ def test_the_commands_in_the_docs_name_flags_and_choices_that_exist() -> None:
     broken, parsed = [], 0
     for page, command in commands:
         argv = shlex.split(command)
-        if any(_placeholder(a) for a in argv[1:]):
+        if any(_stands_in(a) for a in argv[1:]):
             continue
         parser = build_parser() if argv[0] == "rtp" else build_export_parser()
         err = io.StringIO()
