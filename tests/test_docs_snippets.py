@@ -6,7 +6,11 @@ matrices): :data:`SETUP` gives each block that context, made from the built-in p
 the shipped models, and a check of what the block produced. A block that needs what CI does not
 have (the game levels of ``rtp scenes fetch``, ten minutes of rendering) is listed in
 :data:`NOT_RUN` with the reason; its imports still run and the whole block must compile. A block in
-neither list fails the first test, so a new snippet is either run or declared."""
+neither list fails the first test, so a new snippet is either run or declared.
+
+The ``rtp``, ``rtp-export`` and ``python bench/...`` commands of the pages are parsed by their own
+parsers (not run: they read datasets CI does not capture), so a flag, choice or script the code no
+longer has fails here."""
 
 from __future__ import annotations
 
@@ -251,3 +255,92 @@ def test_the_commands_in_the_docs_name_flags_and_choices_that_exist() -> None:
         parsed += 1
     assert parsed > 200, parsed
     assert not broken, "documented commands the parser refuses:\n" + "\n".join(broken)
+
+
+def _bench_commands() -> list[tuple[str, bool, list[str]]]:
+    """``(page, whole, argv)`` of every ``python bench/NAME.py ...`` command of the docs and the README,
+    ``argv[0]`` the script's name: ``whole`` for a shell block's command, not for inline code, where
+    prose may name a script or a flag without the files it reads (`python bench/report.py --compact`)."""
+    import shlex
+
+    out = []
+    for page in [*sorted(DOCS.rglob("*.md")), ROOT / "README.md"]:
+        text = page.read_text(encoding="utf-8")
+        spans = [(True, m.group(1).replace("\\\n", " "))
+                 for m in re.finditer(r"^```(?:bash|sh)\n(.*?)^```", text, re.S | re.M)]
+        spans += [(False, t) for t in re.findall(r"(?<!`)`([^`\n]*python bench/[^`\n]*)`(?!`)", text)]
+        for whole, span in spans:
+            for line in span.splitlines():
+                for part in re.split(r"\s*(?:&&|;|\|\||\|)\s*", line.split(" #")[0].strip()):
+                    m = re.search(r"python3? bench/(\w+)\.py(.*)", part)
+                    if m:
+                        try:
+                            args = shlex.split(m.group(2))
+                        except ValueError:  # an unbalanced quote: a command cut off in prose
+                            continue
+                        out.append((str(page.relative_to(ROOT)), whole, [m.group(1), *args]))
+    return out
+
+
+class _Parsed(Exception):
+    """Raised in place of parsing: carries the parser a bench script built."""
+
+
+def _bench_parser(script: str) -> object:
+    """The argparse parser ``bench/<script>.py`` builds, caught as its ``main`` asks it to parse, with
+    the argument types that open files (datasets, reports, JSON) taking the text as it is: those files
+    are made by commands the pages give, not by CI."""
+    import argparse
+    import importlib
+    from unittest import mock
+
+    sys.path.insert(0, str(ROOT / "bench"))
+    try:
+        common = importlib.import_module("_common")
+        module = importlib.import_module(script)
+    finally:
+        sys.path.remove(str(ROOT / "bench"))
+
+    def catch(self: argparse.ArgumentParser, *args: object, **kwargs: object) -> None:
+        raise _Parsed(self)
+
+    with mock.patch.object(argparse.ArgumentParser, "parse_args", catch), pytest.raises(_Parsed) as caught:
+        # report.py builds its parser in a ``parse_args`` of its own (other scripts import it); the rest in ``main``
+        (module.parse_args if callable(getattr(module, "parse_args", None)) else module.main)()
+    parser = caught.value.args[0]
+    opens_files = {common.dataset_folder, common.json_file, common.PLAY_JSON, common.EVALUATION_JSON}
+    for action in parser._actions:
+        if action.type in opens_files or getattr(action.type, "__qualname__", "").startswith("report_file."):
+            action.type = None
+    return parser
+
+
+def test_the_bench_commands_in_the_docs_name_flags_and_choices_that_exist() -> None:
+    """Every documented ``python bench/...`` command parses as far as its flags, choices and values go
+    (sizes, counts): a renamed flag or a script that is gone fails here; the files it reads are the
+    reader's to make."""
+    import contextlib
+    import io
+
+    commands = _bench_commands()
+    assert len(commands) > 200, len(commands)
+    scripts = {name for _, _, (name, *_) in commands}
+    missing = sorted(s for s in scripts if not (ROOT / "bench" / f"{s}.py").is_file())
+    assert not missing, f"the docs run bench scripts that do not exist: {missing}"
+    parsers = {s: _bench_parser(s) for s in sorted(scripts)}
+    broken, parsed = [], 0
+    for page, whole, (script, *argv) in commands:
+        if any(_stands_in(a) for a in argv):
+            continue
+        err = io.StringIO()
+        try:
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                parsers[script].parse_args(argv)  # type: ignore[attr-defined]
+        except SystemExit as exit_:
+            words = (err.getvalue().strip().splitlines() or [""])[-1]
+            if exit_.code and (whole or "arguments are required" not in words):
+                broken.append(f"{page}: python bench/{script}.py {' '.join(argv)}\n    {words}")
+                continue
+        parsed += 1
+    assert parsed > 150, parsed
+    assert not broken, "documented bench commands their parser refuses:\n" + "\n".join(broken)
