@@ -269,3 +269,25 @@ def test_reference_frame_source_hands_over_the_renderer_g_buffers(frames) -> Non
     assert adapter.closed and source.closed  # the source closed the adapter it lent its context to
     make_current(ctx)
     ctx.texture((2, 2), 1).release()  # a borrowed context stays open (a released one raises here)
+
+
+def test_leaving_a_with_ctx_block_unbinds_every_context(gl_context) -> None:
+    """Why the adapter runs in the current context instead of wrapping its passes in ``with ctx:``
+    (docs/adapters.md "Frame sources"): on EGL, leaving the block makes no context current, not the
+    one current before it, so the engine's context would be unbound after each call. If glcontext
+    ever restores the previous context, this fails and the adapter can switch and restore."""
+    import moderngl
+
+    outer, inner = (moderngl.create_standalone_context(backend="egl") for _ in range(2))
+    try:
+        make_current(outer)
+        assert outer.buffer(b"abcd").read() == b"abcd"
+        with inner:
+            assert inner.buffer(b"efgh").read() == b"efgh"
+        with pytest.raises(moderngl.Error, match="cannot create buffer"):
+            outer.buffer(b"abcd")
+    finally:
+        for ctx in (inner, outer):
+            make_current(ctx)
+            ctx.release()
+        make_current(gl_context)
