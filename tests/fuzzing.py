@@ -794,12 +794,21 @@ def classify_bounded(target: Target, value: Any) -> tuple[str, BaseException | N
         return "hang", err
 
 
+def scaled(examples: int) -> int:
+    """``examples`` times ``RTP_FUZZ_SCALE`` (an integer >= 1, default 1): every fuzz suite's example
+    count, so a deep run needs no edit (``RTP_FUZZ_SCALE=20 pytest tests/test_fuzz*.py``)."""
+    text = os.environ.get("RTP_FUZZ_SCALE", "1")
+    if not text.isdigit() or int(text) < 1:
+        raise ValueError(f"RTP_FUZZ_SCALE: expected an integer >= 1, got {text!r}")
+    return examples * int(text)
+
+
 def fuzz_bounded(target: Target, examples: int, refused: tuple[str, ...] = ("untyped", "hang")) -> None:
     """Run ``target`` on ``examples`` generated values (no example database: each run draws anew) and
     fail on the first whose outcome (:func:`classify_bounded`) is one of ``refused``."""
     from hypothesis import HealthCheck, given, settings
 
-    @settings(max_examples=examples, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @settings(max_examples=scaled(examples), deadline=None, database=None, suppress_health_check=list(HealthCheck))
     @given(target.strategy)
     def run(value: object) -> None:
         outcome, err = classify_bounded(target, value)

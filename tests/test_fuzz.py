@@ -8,14 +8,14 @@ from __future__ import annotations
 import pytest
 from hypothesis import HealthCheck, given, settings
 
-from .fuzzing import classify, targets
+from .fuzzing import classify, scaled, targets
 
 TARGETS = targets()
 
 
 @pytest.mark.parametrize("target", TARGETS, ids=[t.name for t in TARGETS])
 def test_malformed_inputs_are_typed_errors_and_nothing_absurd_is_accepted(target: object) -> None:
-    @settings(max_examples=150, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @settings(max_examples=scaled(150), deadline=None, database=None, suppress_health_check=list(HealthCheck))
     @given(target.strategy)  # type: ignore[attr-defined]
     def run(value: object) -> None:
         outcome, err = classify(target, value)  # type: ignore[arg-type]

@@ -29,6 +29,8 @@ from hypothesis import strategies as st
 
 from rtp import cli
 
+from .fuzzing import scaled
+
 #: Seconds one command may take before it counts as a hang (its input is missing: it must fail at once).
 HANG_S = 10.0
 EXAMPLES = 25
@@ -224,7 +226,7 @@ def _check(entry: Callable[[list[str]], int], argv: list[str], prefixes: tuple[s
     assert last.startswith(prefixes), f"{argv!r}: last stderr line {last!r} does not start with {prefixes}"
 
 
-_SETTINGS = settings(max_examples=EXAMPLES, deadline=None, database=None, suppress_health_check=list(HealthCheck),
+_SETTINGS = settings(max_examples=scaled(EXAMPLES), deadline=None, database=None, suppress_health_check=list(HealthCheck),
                      report_multiple_bugs=False)
 
 

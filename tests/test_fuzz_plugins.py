@@ -1246,6 +1246,19 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
     ("moderngl: Adapter.inputs with hostile GBufferTextures", {"material_components": None}, sdk.ParameterError),
     ("moderngl: Adapter.inputs with hostile GBufferTextures", {"material_components": ("a", 1, 2)}, sdk.ParameterError),
     ("moderngl: Adapter.inputs with hostile GBufferTextures", {"material_components": (0.5, 1, 2)}, sdk.ParameterError),
+    # a one-component depth texture as the normals drew NaN normal.z where the previous depth was 0 under
+    # geometry (normalize of a zero vector); textures read as .rgb need 3 components (found by a run of CI's draw)
+    (
+        "moderngl: Adapter.inputs with hostile GBufferTextures",
+        {"normal": "prev_depth", "prev_view_projection": "prev_vp"},
+        sdk.ParameterError,
+    ),
+    ("moderngl: Adapter.inputs with hostile GBufferTextures", {"albedo": "depth"}, sdk.ParameterError),
+    (
+        "moderngl: Adapter.inputs with hostile GBufferTextures",
+        {"prev_colour": "prev_depth", "prev_view_projection": "prev_vp"},
+        sdk.ParameterError,
+    ),
     # RateSelector: ragged raw was a bare ValueError; tiles of inf an OverflowError, tiles of 1.5 truncated to 1
     (
         "moderngl: RateSelector constructor, select, select_buffer",

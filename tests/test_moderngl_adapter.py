@@ -252,6 +252,29 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         a.read(0)
 
 
+def test_zero_normals_on_geometry_read_zero_and_rgb_fields_need_three_components(frames) -> None:
+    """A G-buffer with zero normals under geometry (a degenerate mesh's) gives normal.z 0 there, as on
+    the background, not NaN; the other pixels are unchanged. A texture of fewer than three components
+    where the shader reads .rgb (albedo, normal, prev_colour) is refused by name."""
+    ctx, prev, cur = frames
+    a = Adapter(("normal.z", "albedo.y", "seen"), W, H, ctx=ctx)
+    normal = cur.normal.copy()
+    zeroed = np.zeros(normal.shape[:2], bool)
+    zeroed[: H // 2] = cur.depth[: H // 2] > 0  # the upper half's geometry
+    assert zeroed.any()
+    normal[zeroed] = 0.0
+    full = _engine_inputs(ctx, prev, cur, a)
+    x = _engine_inputs(ctx, prev, cur, a, normal=_tex(ctx, normal))
+    assert np.isfinite(x).all()
+    assert not x[0][zeroed].any()
+    np.testing.assert_array_equal(x[0][~zeroed], full[0][~zeroed])
+    np.testing.assert_array_equal(x[1:], full[1:])
+    for field in ("albedo", "normal", "prev_colour"):
+        with pytest.raises(sdk.ParameterError, match=f"{field}: expected a texture of at least 3 components"):
+            _engine_inputs(ctx, prev, cur, a, **{field: _tex(ctx, cur.depth)})
+    a.close()
+
+
 def test_reference_frame_source_hands_over_the_renderer_g_buffers(frames) -> None:
     """The generic path (frame_source -> adapter -> inputs) gives what the renderer computed."""
     ctx, prev, cur = frames

@@ -59,6 +59,7 @@ CHANNEL_IDS: dict[str, int] = {
 _MATERIAL = ("roughness", "metallic", "specular")
 _LUMA_PASS = ("reprojected.y", "albedo.y")  # the first pass of adapters whose planes read neighbours' lumas
 _MAX_CHANNELS = 24  # six RGBA float targets (adapter_fs.glsl)
+_RGB_TEXTURES = {"albedo": 3, "normal": 3, "prev_colour": 3}  # GBufferTextures fields the shader reads as .rgb
 
 
 def _mat(m: np.ndarray) -> bytes:
@@ -262,7 +263,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
                           ("prev_depth", prev_depth), ("material", material)):
             if tex is None and name in ("albedo", "normal", "depth"):
                 raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
-            self._check_texture(tex, name)
+            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 1))
         view = _matrix(view, "view", invertible=True)
         projection = _matrix(projection, "projection", invertible=True)
         if prev_view_projection is not None:
@@ -313,8 +314,9 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._fbo.use()
         self._vao.render(vertices=3)
 
-    def _check_texture(self, tex: Any, name: str) -> None:
-        """``tex``, unless None, is a moderngl texture of the adapter's size (one frame of its G-buffers)."""
+    def _check_texture(self, tex: Any, name: str, components: int = 1) -> None:
+        """``tex``, unless None, is a moderngl texture of the adapter's size (one frame of its G-buffers)
+        with at least ``components`` components."""
         if tex is None:
             return
         import moderngl
@@ -325,6 +327,10 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if tuple(tex.size) != (self.width, self.height):
             raise ParameterError(f"{name}: expected a texture of the adapter's size {self.width}x{self.height}, got "
                                  f"{tex.size[0]}x{tex.size[1]}", name)
+        if tex.components < components:
+            raise ParameterError(f"{name}: expected a texture of at least {components} components (RGB[A]), got "
+                                 f"{tex.components} (the shader reads .rgb: a depth or two-component texture here "
+                                 "would be read as a colour or a normal)", name)
 
     def inputs(self, frame: GBufferTextures) -> np.ndarray:
         """The model's input planes for ``frame``: float32 ``(C, H, W)``, top-left origin, channels

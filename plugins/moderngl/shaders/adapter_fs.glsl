@@ -201,7 +201,8 @@ void main() {
     if (u_albedo_linear) albedo = linear_to_srgb(albedo);
     vec3 n = texelFetch(u_normal, g, 0).xyz;
     if (u_normal_world) n = mat3(u_view) * n;
-    n = geo ? normalize(n) : vec3(0.0);
+    float n_length = length(n);  // a zero normal on geometry (a degenerate mesh's) reads 0 like the background, not NaN
+    n = geo && n_length > 0.0 ? n / n_length : vec3(0.0);
     if (!geo) albedo = vec3(0.0);
     vec3 mat = vec3(0.0, 0.0, 0.5);
     if (u_has_material) {
