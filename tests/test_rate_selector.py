@@ -158,6 +158,16 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
             selector.select_buffer(None, (9, 13))
         with pytest.raises(sdk.ParameterError, match="tiles"):
             selector.select_buffer(buffer, (9,))  # type: ignore[arg-type]
+        # numpy rows wrapped the byte count to 0 (2**62 x 4 tiles passed the size check) and the driver aborted
+        with pytest.raises(sdk.ParameterError, match="at most .* hardware tiles a side"):
+            selector.select_buffer(buffer, (np.int64(2**62), np.int64(4)))
+        with pytest.raises(sdk.InputShapeError, match="holds 1872 bytes"):
+            selector.select_buffer(buffer, (np.int64(2**13), np.int64(2**13)))
+        limit = gl_context.info["GL_MAX_TEXTURE_SIZE"]
+        wide = gl_context.buffer(reserve=4 * (limit + 1) * 4)
+        with pytest.raises(sdk.ParameterError, match=f"at most {limit} hardware tiles a side"):
+            selector.select_buffer(wide, (1, limit + 1))
+        wide.release()
         np.testing.assert_array_equal(codes, selector.select(raw))  # still works after every refusal
         buffer.release()
     selector.close()  # twice: nothing released twice

@@ -37,7 +37,7 @@ from rtp.sdk import ParameterError
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
-from ._glio import read_texture
+from ._glio import max_texture_side, read_texture
 from ._shaders import load_source
 
 if TYPE_CHECKING:
@@ -188,7 +188,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
             raise AdapterFrameError(f"ctx must be the engine's moderngl.Context, got {type(ctx).__name__}")
         import moderngl
 
-        limit = min(int(ctx.info["GL_MAX_TEXTURE_SIZE"]), int(ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
+        limit = max_texture_side(ctx)
         if max(self.width, self.height) > limit:
             raise ParameterError(f"frame size: this OpenGL context draws at most {limit} pixels a side "
                                  f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}", "size")

@@ -13,9 +13,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["flip_rows", "read_texture", "write_texture"]
+__all__ = ["flip_rows", "max_texture_side", "read_texture", "write_texture"]
 
 _DTYPES = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
+
+
+def max_texture_side(ctx: Any) -> int:
+    """The largest texture or render-target side ``ctx`` takes: ``GL_MAX_TEXTURE_SIZE`` and
+    ``GL_MAX_RENDERBUFFER_SIZE``, the smaller. Past it moderngl makes an unusable object (a GL error it
+    does not check) or the driver aborts, so every size is checked against it first."""
+    return min(int(ctx.info["GL_MAX_TEXTURE_SIZE"]), int(ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
 
 
 def flip_rows(image: np.ndarray, dtype: Any = None) -> np.ndarray:

@@ -44,7 +44,7 @@ from rtp.sdk import (
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
-from ._glio import read_texture, write_texture
+from ._glio import max_texture_side, read_texture, write_texture
 from ._shaders import load_source
 
 __all__ = ["Frame", "RenderResult", "Renderer", "RendererError", "create_context"]
@@ -417,7 +417,7 @@ class Renderer:
         own = ctx is None
         ctx = create_context() if ctx is None else _check_ctx(ctx)
         try:
-            return min(int(ctx.info["GL_MAX_TEXTURE_SIZE"]), int(ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
+            return max_texture_side(ctx)
         finally:
             if own:
                 ctx.release()

@@ -19,6 +19,7 @@ import numpy as np
 from rtp import sdk
 from rtp.sdk.adapters import AdapterFrameError
 
+from ._glio import max_texture_side
 from ._renderer import RendererError, create_context
 from ._shaders import load_source
 
@@ -132,6 +133,12 @@ class RateSelector:
             ok = False
         if not ok or th < 1 or tw < 1:
             raise sdk.ParameterError(f"tiles: expected (rows, columns) of at least one tile, got {tiles!r}", "tiles")
+        th, tw = int(th), int(tw)  # numpy integers wrap: int64 rows of 2**62 made the byte count below 0
+        grid = (-(-th // self.pool), -(-tw // self.pool))
+        limit = max_texture_side(self.ctx)
+        if max(grid) > limit:
+            raise sdk.ParameterError(f"tiles: this OpenGL context's rate texture holds at most {limit} hardware tiles "
+                                     f"a side (GL_MAX_TEXTURE_SIZE), got {grid[0]}x{grid[1]} for {tiles!r}", "tiles")
         if not callable(getattr(raw, "bind_to_storage_buffer", None)):
             raise sdk.InputDtypeError(f"raw: expected a moderngl.Buffer of the network's output, got "
                                       f"{type(raw).__name__} (select() takes an array)")
@@ -143,7 +150,7 @@ class RateSelector:
         self._check_open()
         thr = self._check_decision(threshold, allowed)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
-        self._targets((-(-th // self.pool), -(-tw // self.pool)))
+        self._targets(grid)
         self._program["u_tiles"].value = (tw, th)
         self._program["u_threshold"].value = float(thr)
         self._program["u_allowed"].value = mask
