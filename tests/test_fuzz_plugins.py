@@ -1135,6 +1135,8 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
     # a junk previous frame was an AttributeError, its wrong-sized colour a bare ValueError from write_texture
     ("moderngl: Renderer.render arguments and previous frames", {"camera": None}, sdk.RtpError),
     ("moderngl: Renderer.render arguments and previous frames", {"camera": "camera"}, sdk.RtpError),
+    # a previous Frame whose camera is None, no prev_camera: an AttributeError in the reprojection (RTP_FUZZ_SCALE=20)
+    ("moderngl: Renderer.render arguments and previous frames", {"camera": CAM2, "prev": ("camera", None)}, sdk.RtpError),
     (
         "moderngl: Renderer.render arguments and previous frames",
         {"camera": CAM2, "exposure": float("nan")},
@@ -1284,6 +1286,11 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
     (
         "moderngl: RateSelector constructor, select, select_buffer",
         ("select_buffer", (1.5, 2), None, "buffer"),
+        sdk.ParameterError,
+    ),
+    (  # numpy rows of 2**62 wrapped the byte check to 0 and Mesa aborted the process (RTP_FUZZ_SCALE=20)
+        "moderngl: RateSelector constructor, select, select_buffer",
+        ("select_buffer", (np.int64(2**62), np.int64(4)), None, "buffer"),
         sdk.ParameterError,
     ),
     # ReferenceFrameSource: a size that is not an integer was a bare ValueError / TypeError from int() in

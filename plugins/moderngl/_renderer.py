@@ -787,7 +787,7 @@ class Renderer:
         scene = self._check_can_render(prev)
         if prev_camera is None and prev is not None:
             prev_camera = prev.camera
-        if prev_camera is not None:
+        if prev_camera is not None or prev is not None:  # a previous frame needs its camera (a Frame with camera=None)
             _check_camera(prev_camera, "prev_camera" if prev is None else "prev_camera (or prev.camera)")
         timer = _StageTimer(self.ctx, self.profile)
         setup = self._frame_setup(scene, camera, prev_camera)
