@@ -6,9 +6,10 @@ a file that is not what is asked). Whatever arrives, the command must fail fast 
 says: one line ``PROG: error: MESSAGE`` on stderr, exit code 2 or 1, no traceback, no exception out of
 ``main`` (argparse's own ``SystemExit(2)`` is its usage error).
 
-Subcommands that can start long work with valid arguments (capture, demo, play, scenes fetch) are not
-fuzzed here. Every path is relative to a fresh temporary folder that is the working directory while a
-command runs, so nothing is written into the repository. Values never name a shipped model.
+The subcommands that render (``play``, ``capture``, ``demo``) are given a map that no split of
+scenes.yaml lists, so none can start long work; ``scenes fetch`` (downloads) is not fuzzed here.
+Every path is relative to a fresh temporary folder that is the working directory while a command
+runs, so nothing is written into the repository. Values never name a shipped model.
 """
 
 from __future__ import annotations
@@ -171,6 +172,31 @@ _EXPORT = _argv(
      ("--one-input", None), ("--strip-probe", paths), ("--join-planes", paths), ("--retune", paths)])
 
 
+# The commands that render: their map is one no split lists (the main input that does not exist), so
+# whatever the other flags say they must stop before any rendering. capture's --split would replace the
+# map, and is mutually exclusive with --scene: given, it is a usage error.
+_UNLISTED = "nosuchmap"
+
+_PLAY = _argv(
+    ["play", _UNLISTED], [],
+    [("--methods", hostile), ("--path", hostile), ("--frames", numbers), ("--fps", numbers), ("--seed", numbers),
+     ("--size", hostile), ("--tile-size", numbers), ("--fail-metric", hostile), ("--fail-threshold", numbers),
+     ("--no-sweep", None), ("--flip-every", numbers), ("--composite", None), ("--out", paths), ("--no-plots", None),
+     ("--no-animation", None), ("--workers", numbers), ("--open-loop", None), ("--cache-dir", paths)])
+
+_CAPTURE = _argv(
+    ["capture", f"--scene={_UNLISTED}"],
+    [("--out", st.one_of(st.just("data_out"), paths))],
+    [("--per-scene", numbers), ("--size", hostile), ("--profiles", hostile), ("--workers", numbers),
+     ("--ray", hostile), ("--seed", numbers), ("--placement", hostile), ("--cache-dir", paths), ("--splits", paths),
+     ("--split", hostile), ("--scene", hostile)])
+
+_DEMO = _argv(
+    ["demo", f"--scene={_UNLISTED}"], [],
+    [("--model", paths), ("--threshold", numbers), ("--size", hostile), ("--frames", numbers), ("--seed", numbers),
+     ("--out", paths), ("--cache-dir", paths)])
+
+
 # -- running one command ---------------------------------------------------------------------------
 
 class Hang(BaseException):
@@ -240,6 +266,9 @@ CASES = [
     ("targets", _TARGETS),
     ("train", _TRAIN),
     ("preview", _PREVIEW),
+    ("play", _PLAY),
+    ("capture", _CAPTURE),
+    ("demo", _DEMO),
 ]
 
 
