@@ -16,13 +16,15 @@ def _read(path: str) -> np.ndarray:
 
     from rtp.sdk import ParameterError
 
+    if "\0" in path:  # (the system's ValueError, from Pillow's open)
+        raise ParameterError(f"{path!r}: expected the path of an image, got a text with a NUL byte")
     try:
         with Image.open(path) as im:
             return np.asarray(im.convert("RGB"), np.float32) / 255.0
     except FileNotFoundError:
-        raise ParameterError(f"{path}: no such image") from None
-    except (UnidentifiedImageError, OSError) as err:
-        raise ParameterError(f"{path}: not an image Pillow can read ({err})") from None
+        raise ParameterError(f"{path!r}: no such image") from None
+    except (UnidentifiedImageError, OSError, Image.DecompressionBombError) as err:
+        raise ParameterError(f"{path!r}: not an image Pillow can read ({err})") from None
 
 
 def run_metric(args: argparse.Namespace) -> int:

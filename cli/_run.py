@@ -17,9 +17,9 @@ import os
 import sys
 import traceback
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import Any, NoReturn
 
-__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "run", "run_guarded", "states_default", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "one_line", "run", "run_guarded", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -30,10 +30,23 @@ def version() -> str:
     return str(sdk.__version__)
 
 
+def one_line(message: str) -> str:
+    """``message`` with every character that is not printable (a newline or NUL from a path the user
+    typed, a lone surrogate) written as its escape, so that an error stays the one line docs/errors.md
+    promises and says exactly what was typed."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse's parser (its subcommands' too), with one fix: ``--flag=--`` gives the flag the value
-    ``--``, refused or taken by its type like any other. Python 3.11's argparse strips the ``--`` and
-    passes an empty list, which reached the commands (``float([])``, ``[].split``) as a TypeError."""
+    """argparse's parser (its subcommands' too), with two fixes: ``--flag=--`` gives the flag the value
+    ``--``, refused or taken by its type like any other (Python 3.11's argparse strips the ``--`` and
+    passes an empty list, which reached the commands, ``float([])``, ``[].split``, as a TypeError); and
+    a usage error is one line even when it quotes an argument holding a newline."""
+
+    def error(self, message: str) -> NoReturn:
+        """argparse's usage error, on one line whatever the arguments it quotes hold: a control
+        character (a newline in ``--out=$'\\n'``) or a lone surrogate is written as its escape."""
+        super().error(one_line(message))
 
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
         if action.option_strings and action.nargs is None and arg_strings == ["--"]:
@@ -191,7 +204,7 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     except RtpError as err:
         if verbose:
             traceback.print_exc()
-        print(f"{prog}: error: {err}", file=sys.stderr)
+        print(f"{prog}: error: {one_line(str(err))}", file=sys.stderr)
         return exit_code(err)
     except KeyboardInterrupt as err:
         print(f"{prog}: interrupted", file=sys.stderr)

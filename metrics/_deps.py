@@ -38,4 +38,4 @@ def check_dependencies(metrics: Iterable[str]) -> None:
             users = ", ".join(m for m in names if piece in METRIC_DEPENDENCIES.get(m, ()))
             problems.append(f"{users}: {exc}")
     if problems:
-        raise MetricDependencyError("missing before any work starts:\n  " + "\n  ".join(problems))
+        raise MetricDependencyError("missing before any work starts: " + "; ".join(problems))
