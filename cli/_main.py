@@ -106,6 +106,15 @@ def _csv(text: str) -> tuple[str, ...]:
     return tuple(t.strip() for t in text.split(",") if t.strip())
 
 
+def _names_text(text: str) -> str:
+    """An argparse type for the repeatable name lists (``--map``, ``--scene``, ``--path``, ...): the text
+    as typed, refused when it names nothing (``--map ""``, from an unset shell variable, meant every
+    map: ``rtp scenes fetch`` then fetched all of them)."""
+    if not _csv(text):
+        raise argparse.ArgumentTypeError(f"expected one or more names, comma-separated, got {text!r}")
+    return text
+
+
 def _choices_csv(allowed: Sequence[str]) -> Any:
     def parse(text: str) -> tuple[str, ...]:
         items = _csv(text)
@@ -504,7 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
         cache_dir(a)
         splits(a)
     fetch_p = ssub.choices["fetch"]
-    fetch_p.add_argument("--map", action="append", default=None, help="only these listed maps (repeatable, or "
+    fetch_p.add_argument("--map", action="append", default=None, type=_names_text, help="only these listed maps (repeatable, or "
                          "comma-separated; default: every listed map)")
     fetch_p.add_argument("--convert", action="store_true", help="also convert the maps now (else at first use)")
     ssub.choices["list"].add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -525,7 +534,7 @@ def build_parser() -> argparse.ArgumentParser:
     src = cap.add_argument_group("what to capture (one of)")
     src.add_argument("--split", default=None, choices=_split_names(),
                      help="every map of this split of --splits")
-    src.add_argument("--scene", action="append", default=None,
+    src.add_argument("--scene", action="append", default=None, type=_names_text,
                      help="a scene (repeatable, or comma-separated): procedural:<seed>, a map name of `rtp scenes list`, "
                      "or your own .glb/.gltf/.obj file")
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
@@ -660,11 +669,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ema", type=float, default=None,
                    help="decay of a moving average of the weights, which is validated and saved (for example "
                    "0.999; default 0: off)")
-    r.add_argument("--teachers", action="append", default=None,
+    r.add_argument("--teachers", action="append", default=None, type=_names_text,
                    help="repeatable or comma-separated exported models (.onnx) of the same metric and data whose "
                    "mean prediction is mixed into the targets (knowledge distillation)")
     r.add_argument("--distill", type=float, default=None, help="weight of the teachers' mean in the targets (default 0.5)")
-    r.add_argument("--aux-metrics", dest="aux_metrics", action="append", default=None,
+    r.add_argument("--aux-metrics", dest="aux_metrics", action="append", default=None, type=_names_text,
                    help="repeatable or comma-separated metrics the fast network also learns to predict on the same "
                    "tiles (multi-task training; their targets must be in --data); the saved model keeps only "
                    "--metric's outputs, so they cost nothing at run time (default: none)")
@@ -693,7 +702,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--per-scene", dest="per_scene", type=_positive, default=None,
                    help="use at most this many training samples of each map and motion profile, the first by id "
                    "(validation keeps all; default: all)")
-    tr.add_argument("--val-scenes", action="append", default=None,
+    tr.add_argument("--val-scenes", action="append", default=None, type=_names_text,
                     help="hold out these scenes for validation (repeatable, or comma-separated; default: the "
                     "recipe's split, or the last scene)")
     tr.add_argument("--threshold", type=float, default=None, help="default threshold written into the model "
@@ -707,7 +716,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", required=True, help="dataset folder with targets from `rtp targets`")
     ev.add_argument("--out", type=_out_folder, default=None,
                     help="folder for evaluation.md, evaluation.json (and --plots)")
-    ev.add_argument("--scene", action="append", default=None,
+    ev.add_argument("--scene", action="append", default=None, type=_names_text,
                     help="evaluate only these scenes (repeatable, or comma-separated; default: all)")
     model_metadata(ev)
     ev.add_argument("--threshold", type=float, default=None, help="decision threshold in metric units "
@@ -751,7 +760,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")
     pl.add_argument("--methods", default=DEFAULT_METHODS,
                     help=f"comma-separated methods (see below; default: {DEFAULT_METHODS})")
-    pl.add_argument("--path", action="append", default=None,
+    pl.add_argument("--path", action="append", default=None, type=_names_text,
                     help=f"camera path profiles, repeatable or comma-separated: {', '.join(PATH_PROFILES)} "
                     "(default: slow,fast)")
     pl.add_argument("--frames", type=_positive, default=300, help="frames per path")

@@ -197,7 +197,12 @@ def test_arguments_that_would_fail_later_fail_while_parsing(tmp_path: Path, caps
            ["demo", "--out", str(tmp_path / "file")], ["capture", "--scene", "procedural:1", "--per-scene", "1",
                                                         "--out", str(tmp_path / "file" / "x")],
            ["train", "--data", folder, "--metric", "jnyang", "--out", str(tmp_path)],
-           ["preview", folder, "--out", str(tmp_path / "p.xyz")], ["metric", "psnr", "a.png", "b.png", "--out", "x.xyz"]]
+           ["preview", folder, "--out", str(tmp_path / "p.xyz")], ["metric", "psnr", "a.png", "b.png", "--out", "x.xyz"],
+           # a name list that names nothing (an unset shell variable) meant "all": every map fetched, both paths
+           ["scenes", "fetch", "--map", "", "--cache-dir", folder], ["scenes", "fetch", "--map", ",", "--cache-dir", folder],
+           ["capture", "--scene", " ", "--out", folder], ["play", "procedural:0", "--path", "", "--out", folder],
+           ["evaluate", "jnyang", "--data", folder, "--scene", ""],
+           ["train", "--data", folder, "--metric", "jnyang", "--out", str(tmp_path / "m.pt"), "--val-scenes", ""]]
     for argv in bad:
         with pytest.raises(SystemExit) as exc:
             main(argv)
