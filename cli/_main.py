@@ -70,6 +70,20 @@ def _out_image(text: str) -> str:
     return text
 
 
+def _path_text(text: str) -> str:
+    """An argparse type: a path that may be read or written later (a cache, perhaps read-only): only
+    text the system cannot take as a path (a NUL byte) is refused now."""
+    import os
+
+    if "\0" in text:
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (a NUL byte)")
+    try:
+        os.fsencode(text)
+    except UnicodeEncodeError:  # a lone surrogate no file system name decodes to (an in-process caller's)
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (not encodable as a file name)") from None
+    return text
+
+
 def _checked_path(text: str, *, folder: bool) -> str:
     from rtp.sdk import ParameterError
     from rtp.sdk.files import check_output
@@ -486,7 +500,7 @@ def build_parser() -> argparse.ArgumentParser:
     def cache_dir(sp: argparse.ArgumentParser) -> None:
         from rtp.capture.scenes import default_cache_dir
 
-        sp.add_argument("--cache-dir", default=default_cache_dir(), help="scene cache of `rtp scenes fetch`; "
+        sp.add_argument("--cache-dir", default=default_cache_dir(), type=_path_text, help="scene cache of `rtp scenes fetch`; "
                         "$RTP_SCENE_CACHE sets the default")
 
     def splits(sp: argparse.ArgumentParser) -> None:
@@ -526,7 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
         a = wsub.add_parser(name, help=help_, description=help_[0].upper() + help_[1:] + ".", formatter_class=Formatter)
         add_common(a, top=False)
         a.set_defaults(func=func)
-    wsub.choices["fetch"].add_argument("--cache-dir", default=None, help="where to write them (default: "
+    wsub.choices["fetch"].add_argument("--cache-dir", default=None, type=_out_folder, help="where to write them (default: "
                                        "$RTP_WEIGHTS_CACHE, else ~/.cache/rtp/weights; commands look there)")
     wsub.choices["list"].add_argument("--json", action="store_true", help="print JSON instead of a table")
 
