@@ -57,7 +57,7 @@ class Mesh:
     ``indices`` are counter-clockwise front faces."""
 
     positions: np.ndarray  # (N, 3) float32, world metres
-    normals: np.ndarray  # (N, 3) float32, unit
+    normals: np.ndarray  # (N, 3) float32, unit; a zero row is drawn with the geometric normal
     uvs: np.ndarray  # (N, 2) float32
     indices: np.ndarray  # (M, 3) uint32
     material: int  # index into Scene.materials

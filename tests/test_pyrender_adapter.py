@@ -327,6 +327,33 @@ def test_orientation_is_top_left() -> None:
     assert nx[24, :5].min() > 0.99  # its visible side faces right (+x)
 
 
+def test_zero_mesh_normals_give_the_geometric_normal() -> None:
+    """A mesh whose normals are zero read normal.z -1 everywhere (the normalised zero vector); the
+    geometric normal is drawn instead, as for a mesh without normals: on procedural(0)'s flat faces,
+    the normals the mesh should have had."""
+    import copy
+
+    from rtp.capture.scenes import procedural
+    from rtp.capture.viewpoints import sample_viewpoints
+
+    pyrender_or_skip()
+    scene = procedural(0)
+    prev_camera, camera = sample_viewpoints(scene, 1, seed=0)[0]
+    flat = copy.deepcopy(scene)
+    for mesh in flat.meshes:
+        mesh.normals = np.zeros_like(mesh.normals)
+    planes = []
+    for s in (scene, flat):
+        with sdk.adapters.get("pyrender").frame_source(s, W, H) as source, sdk.adapters.get("pyrender")(
+            ["normal.x", "normal.y", "normal.z", "depth"], W, H, **source.adapter_options()
+        ) as adapter:
+            planes.append(adapter.inputs(source.frame(camera, prev_camera)))
+    want, got = planes
+    geo = want[3] > 0
+    assert np.isfinite(got).all()
+    assert ((got[:3] * want[:3]).sum(0)[geo] > 0.99).mean() > 0.999
+
+
 def test_scene_is_restored_and_errors_are_typed() -> None:
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
 

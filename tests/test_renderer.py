@@ -193,6 +193,30 @@ def test_gbuffer_sanity(renderer):
 
 
 @pytest.mark.gl
+def test_zero_mesh_normals_draw_the_geometric_normal(renderer):
+    """A mesh whose normals are zero (degenerate vertices, or an asset without them) drew NaN normals,
+    which the lighting pass and every model input then read; the geometric normal facing the camera is
+    drawn instead, and on this scene of flat faces it is the mesh normal."""
+    import copy
+
+    from rtp.capture.scenes import procedural
+    from rtp.capture.viewpoints import sample_viewpoints
+
+    scene = procedural(0)
+    camera = sample_viewpoints(scene, 1, seed=0)[0][1]
+    flat = copy.deepcopy(scene)
+    for mesh in flat.meshes:
+        mesh.normals = np.zeros_like(mesh.normals)
+    renderer.load_scene(scene)
+    want = renderer.render(camera)
+    renderer.load_scene(flat)
+    got = renderer.render(camera)
+    geo = want.depth > 0
+    assert np.isfinite(got.normal).all() and np.isfinite(got.colour["1x1"]).all()
+    np.testing.assert_allclose(np.linalg.norm(got.normal[geo], axis=-1), 1.0, atol=1e-5)
+    assert ((got.normal * want.normal).sum(-1)[geo] > 0.99).mean() > 0.999
+
+
 def test_linear_depth_and_normal_of_a_facing_quad(renderer):
     renderer.load_scene(_flat_scene())
     f = renderer.render(Camera((0.0, 0.0, 0.0)))

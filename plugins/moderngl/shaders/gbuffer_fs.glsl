@@ -30,8 +30,15 @@ void main() {
     }
     if (u_alpha_cutoff >= 0.0 && albedo.a < u_alpha_cutoff) discard;
 
-    vec3 n = normalize(v_normal_view);
-    if (!gl_FrontFacing) n = -n;  // two-sided: back faces are shaded with the flipped normal
+    vec3 n = v_normal_view;
+    if (dot(n, n) > 0.0) {
+        n = normalize(n);
+        if (!gl_FrontFacing) n = -n;  // two-sided: back faces are shaded with the flipped normal
+    } else {  // a mesh's zero normal (degenerate, or none given): the geometric one, facing the camera, not NaN
+        n = cross(dFdx(v_pos_view), dFdy(v_pos_view));
+        n = dot(n, n) > 0.0 ? normalize(n) : vec3(0.0, 0.0, 1.0);
+        if (dot(n, v_pos_view) > 0.0) n = -n;
+    }
 
     o_albedo = vec4(clamp(albedo.rgb, 0.0, 1.0), 1.0);
     o_normal_depth = vec4(n, -v_pos_view.z);

@@ -92,7 +92,9 @@ vec3 linear_to_srgb(vec3 c) {
 // pyrender would use the direction to the camera.
 vec3 world_normal() {
 #ifdef NORMAL_LOC
-    vec3 ng = normalize(frag_normal);
+    // a zero normal (a degenerate vertex's) takes the geometric one, as a mesh without normals does, not NaN
+    vec3 ng = dot(frag_normal, frag_normal) > 0.0 ? normalize(frag_normal)
+                                                   : normalize(cross(dFdx(frag_position), dFdy(frag_position)));
 #else
     vec3 ng = normalize(cross(dFdx(frag_position), dFdy(frag_position)));
 #endif
