@@ -352,6 +352,17 @@ def test_zero_mesh_normals_give_the_geometric_normal() -> None:
     geo = want[3] > 0
     assert np.isfinite(got).all()
     assert ((got[:3] * want[:3]).sum(0)[geo] > 0.99).mean() > 0.999
+    # seen from behind (two-sided), the geometric normal faces the camera as the flipped mesh normal does
+    # (pyrender's mesh.vert normalises the zero normal into NaN; that read -1 here)
+    from rtp.scene import Camera, Material, Scene, quad_mesh
+
+    back = quad_mesh((0.0, 0.0, -5.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))  # front normal (0, 0, -1): away
+    back.normals = np.zeros_like(back.normals)
+    eye = Camera(position=(0.0, 0.0, 0.0), yaw=0.0, pitch=0.0, fov_y=60.0, near=0.05, far=100.0)
+    with sdk.adapters.get("pyrender").frame_source(Scene("back", [back], [Material("m")]), 64, 48) as source, \
+            sdk.adapters.get("pyrender")(["normal.z", "depth"], 64, 48, **source.adapter_options()) as adapter:
+        nz, depth = adapter.inputs(source.frame(eye, eye))
+    assert (depth > 0).mean() > 0.05 and np.allclose(nz[depth > 0], 1.0, atol=1e-3)
 
 
 def test_scene_is_restored_and_errors_are_typed() -> None:

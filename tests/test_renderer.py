@@ -215,6 +215,11 @@ def test_zero_mesh_normals_draw_the_geometric_normal(renderer):
     assert np.isfinite(got.normal).all() and np.isfinite(got.colour["1x1"]).all()
     np.testing.assert_allclose(np.linalg.norm(got.normal[geo], axis=-1), 1.0, atol=1e-5)
     assert ((got.normal * want.normal).sum(-1)[geo] > 0.99).mean() > 0.999
+    back = quad_mesh((0.0, 0.0, -5.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))  # seen from behind (two-sided)
+    back.normals = np.zeros_like(back.normals)
+    renderer.load_scene(Scene("back", [back], [Material("m")]))
+    f = renderer.render(Camera(position=(0.0, 0.0, 0.0), yaw=0.0, pitch=0.0, fov_y=60.0, near=0.05, far=100.0))
+    assert (f.depth > 0).mean() > 0.05 and np.allclose(f.normal[f.depth > 0], (0.0, 0.0, 1.0), atol=1e-5)
 
 
 def test_linear_depth_and_normal_of_a_facing_quad(renderer):

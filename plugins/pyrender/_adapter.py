@@ -127,7 +127,9 @@ class Adapter(_BaseAdapter[SceneFrame]):
       :func:`rtp.sdk.reproject` (the reference definition both plugins follow).
     * ``reprojected.y``, ``albedo.y``: the Rec.601 luma (:func:`rtp.sdk.luma`) of those RGB planes.
     * ``albedo.r/g/b``: glTF base colour (factor x texture x vertex colour), display-encoded sRGB.
-    * ``normal.x/y/z``: unit view-space shading normal (normal maps included; two-sided).
+    * ``normal.x/y/z``: unit view-space shading normal (normal maps included; two-sided). Where the
+      mesh has no normals, or a zero one, the geometric normal (screen-space derivatives), facing the
+      camera as the reference renderer's does.
     * ``roughness``, ``metallic``: the material's perceptual roughness and metalness as pyrender
       shades with them (factor x metallic-roughness texture, read from its R and G channels as
       pyrender 0.1.45 does; specular-glossiness materials: 1 - glossiness and 0); 12 bits, sharing

@@ -90,13 +90,26 @@ vec3 linear_to_srgb(vec3 c) {
 // World-space shading normal, as pyrender's get_normal() computes it (normal maps included), but
 // with the geometric normal (screen-space derivatives) where the mesh has no normals, where
 // pyrender would use the direction to the camera.
+// Set by world_normal(): the normal is the geometric one, turned to face the camera, which is right
+// for back faces too, so view_normal() must not flip it.
+bool g_geometric = false;
+
+// The geometric normal (screen-space derivatives), facing the camera whichever way the frame's rows run.
+vec3 geometric_normal() {
+    vec3 n = cross(dFdx(frag_position), dFdy(frag_position));
+    n = dot(n, n) > 0.0 ? normalize(n) : normalize(cam_pos - frag_position);
+    return dot(n, cam_pos - frag_position) < 0.0 ? -n : n;
+}
+
 vec3 world_normal() {
 #ifdef NORMAL_LOC
-    // a zero normal (a degenerate vertex's) takes the geometric one, as a mesh without normals does, not NaN
-    vec3 ng = dot(frag_normal, frag_normal) > 0.0 ? normalize(frag_normal)
-                                                   : normalize(cross(dFdx(frag_position), dFdy(frag_position)));
+    // a zero normal (a degenerate vertex's) takes the geometric one, as a mesh without normals does;
+    // pyrender's mesh.vert has normalised it already, so it arrives NaN (no comparison holds) or zero
+    g_geometric = !(dot(frag_normal, frag_normal) > 0.0);
+    vec3 ng = g_geometric ? geometric_normal() : normalize(frag_normal);
 #else
-    vec3 ng = normalize(cross(dFdx(frag_position), dFdy(frag_position)));
+    g_geometric = true;
+    vec3 ng = geometric_normal();
 #endif
 #ifdef HAS_NORMAL_TEX
 #ifdef TEXCOORD_0_LOC
@@ -147,7 +160,7 @@ vec3 base_colour() {
 
 vec3 view_normal() {
     vec3 n = world_normal();
-    if (!gl_FrontFacing) n = -n;  // two-sided surfaces: back faces show the flipped normal
+    if (!gl_FrontFacing && !g_geometric) n = -n;  // two-sided surfaces: back faces show the flipped normal
     return normalize(mat3(V) * n);
 }
 
