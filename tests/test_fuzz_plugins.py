@@ -1361,28 +1361,15 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
         {"scene": "scene", "pose": "eye", "prev_pose": "eye", "prev_colour": "prev", "prev_depth": "x"},
         sdk.RtpError,
     ),
-    (
-        "pyrender: Adapter.inputs with hostile SceneFrames",
-        {
-            "scene": "scene",
-            "pose": "eye",
-            "prev_pose": "eye",
-            "prev_colour": "prev",
-            "prev_depth": ("float32", (H, W), "nan"),
-        },
-        sdk.RtpError,
-    ),
-    (
-        "pyrender: Adapter.inputs with hostile SceneFrames",
-        {
-            "scene": "scene",
-            "pose": "eye",
-            "prev_pose": "eye",
-            "prev_colour": "prev",
-            "prev_depth": ("float32", (H, W), "negative"),
-        },
-        sdk.RtpError,
-    ),
+    *[
+        (
+            "pyrender: Adapter.inputs with hostile SceneFrames",
+            {"scene": "scene", "pose": "eye", "prev_pose": "eye", "prev_colour": "prev",
+             "prev_depth": ("float32", (H, W), kind)},
+            sdk.RtpError,
+        )
+        for kind in ("nan", "negative")
+    ],
     # render / gbuffers / projection: junk scenes, cameras, flags and name lists
     ("pyrender: Adapter.render, gbuffers, projection", ("render", {"scene": None, "pose": "eye"}), sdk.RtpError),
     (
