@@ -6,6 +6,7 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from rtp.cli import main
@@ -31,3 +32,65 @@ def test_info_errors_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     with pytest.raises(SystemExit) as info:
         main(["frobnicate"])
     assert info.value.code == 2
+
+
+def _image_pair(tmp_path: Path, w: int = 40, h: int = 24) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    """Two PNGs: a smooth reference and a copy with its left half noised (its right half identical)."""
+    from PIL import Image
+
+    y, x = np.mgrid[0:h, 0:w]
+    ref = np.stack([x * 255 // (w - 1), y * 255 // (h - 1), np.full_like(x, 128)], -1).astype(np.uint8)
+    test = ref.copy()
+    rng = np.random.default_rng(0)
+    test[:, : w // 2] = np.clip(test[:, : w // 2].astype(int) + rng.integers(-60, 61, (h, w // 2, 3)), 0, 255)
+    a, b = tmp_path / "ref.png", tmp_path / "test.png"
+    Image.fromarray(ref).save(a)
+    Image.fromarray(test).save(b)
+    return a, b, ref.astype(np.float32) / 255.0, test.astype(np.float32) / 255.0
+
+
+@pytest.mark.parametrize("metric", ["flip", "psnr"])
+def test_metric_prints_the_librarys_tile_values(metric: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp metric M ref test --json` prints what `rtp.metrics.tile_metric` gives for the two images,
+    an identical tile's +inf dB (PSNR) as null; the text form says how many tiles are identical."""
+    from rtp import metrics
+
+    a, b, ref, test = _image_pair(tmp_path)
+    want = metrics.tile_metric(metric, ref, test, 8)
+    assert main(["metric", metric, str(a), str(b), "--tile", "8", "--json"]) == 0
+    raw = capsys.readouterr().out
+    got = json.loads(raw, parse_constant=lambda c: pytest.fail(f"not JSON: {c}"))  # +inf is null, not Infinity
+    assert (got["metric"], got["tile"]) == (metric, 8) and np.array(got["tiles"]).shape == (3, 5)
+    as_float = np.array([[np.inf if v is None else v for v in row] for row in got["tiles"]])
+    np.testing.assert_allclose(as_float, want, rtol=1e-6)
+    # the identical right half: +inf dB; FLIP's filters reach a few pixels past the noise, not 12
+    assert (np.isinf(as_float[:, 3:]).all() and np.isfinite(as_float[:, :2]).all()) if metric == "psnr" \
+        else (as_float[:, 4:] == 0).all() and (as_float[:, :2] > 0.1).all()
+    assert main(["metric", metric, str(a), str(b), "--tile", "8"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{metric} (") and "40x24, 5x3 tiles of 8px" in out
+    finite = want[np.isfinite(want)]
+    worst = finite.min() if metric == "psnr" else finite.max()
+    assert f"per tile   mean {finite.mean():.4g}, worst ({'min' if metric == 'psnr' else 'max'}) {worst:.4g}" in out
+    assert ("6 identical tiles (+inf dB)" in out) == (metric == "psnr")
+    assert ("per pixel  mean" in out) == (metric == "flip")
+
+
+def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--out writes the per-pixel map (PSNR: the per-tile values) as an image; a pair of two sizes
+    is a one-line error naming both."""
+    from PIL import Image
+
+    a, b, _, _ = _image_pair(tmp_path)
+    for metric in ("flip", "psnr"):
+        out = tmp_path / f"{metric}.png"
+        assert main(["metric", metric, str(a), str(b), "--out", str(out)]) == 0
+        assert f"wrote {out}" in capsys.readouterr().out
+        with Image.open(out) as im:
+            picture = np.asarray(im.convert("RGB"))
+        assert picture.shape[0] > 24 and picture.shape[1] > 40 and picture.std() > 10  # a figure, not a blank
+    small = tmp_path / "small.png"
+    Image.fromarray(np.zeros((10, 12, 3), np.uint8)).save(small)
+    assert main(["metric", "flip", str(a), str(small)]) == 2
+    err = capsys.readouterr().err
+    assert "the images differ in size: 40x24 and 12x10" in err and "Traceback" not in err
