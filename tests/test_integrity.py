@@ -96,3 +96,26 @@ def test_malformed_digests_are_refused() -> None:
             sdk.ModelMetadata.from_dict({**base_metadata(), "digest": bad})
     with pytest.raises(ValueError):
         sdk.model_digest(b"\xff\xff\xff\xff")
+
+
+def test_the_digest_skips_exactly_the_metadata_entries_of_any_wire_type() -> None:
+    """model_digest walks the protobuf wire format itself (the runtime has no onnx package): every
+    top-level field but metadata_props (14) is hashed, whatever its wire type (varint, fixed64,
+    length-delimited, fixed32), and malformed bytes are a ParameterError naming the fault."""
+    import hashlib
+
+    kept = (b"\x08\x96\x01"  # field 1, varint 150
+            + b"\x11" + bytes(range(8))  # field 2, fixed64
+            + b"\x22\x02xy"  # field 4, 2 bytes
+            + b"\x1d" + b"\x01\x02\x03\x04")  # field 3, fixed32 (a metadata entry right after it)
+    meta = b"\x72\x03abc"  # field 14: metadata_props, dropped wherever it stands
+    data = meta + kept[:3] + meta + kept[3:] + meta
+    assert sdk.model_digest(data) == "sha256:" + hashlib.sha256(kept).hexdigest()
+    assert sdk.model_digest(bytearray(data)) == sdk.model_digest(memoryview(kept))
+    for bad, why in ((b"\x00\x01", "field number 0"), (b"\x0b", "unsupported wire type 3"),
+                     (b"\x22\x05ab", "truncated field"), (b"\x11\x00\x00", "truncated field"),
+                     (b"\x1d\x00", "truncated field"), (b"\x08\x80", "truncated or malformed varint")):
+        with pytest.raises(sdk.ParameterError, match=f"not the bytes of an ONNX model \\({why}\\)"):
+            sdk.model_digest(bad)
+    with pytest.raises(sdk.ParameterError, match="expected the bytes of an ONNX model, got str"):
+        sdk.model_digest("model.onnx")  # type: ignore[arg-type]

@@ -409,6 +409,108 @@ def test_a_provider_that_cannot_build_the_session_falls_back_to_cpu(
         sdk.load(path, providers=["FakeExecutionProvider"], strict=True)
 
 
+
+def test_a_session_that_quietly_lands_on_another_provider(
+    tiny_model: Callable[..., Path], monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """onnxruntime may build a session for a provider and still place it on CPU (a provider that
+    accepts no node of the graph): a warning naming both, an error with strict=True."""
+    import types
+
+    import onnxruntime
+
+    from rtp.sdk import _predictor
+
+    def session(path: str, sess_options: object = None, providers: list[str] | None = None, **kw: object) -> object:
+        return onnxruntime.InferenceSession(path, sess_options=sess_options, providers=["CPUExecutionProvider"], **kw)
+
+    fake = types.SimpleNamespace(
+        InferenceSession=session, SessionOptions=onnxruntime.SessionOptions,
+        get_available_providers=lambda: ["FakeExecutionProvider", "CPUExecutionProvider"],
+    )
+    monkeypatch.setattr(_predictor, "_ort", lambda: fake)
+    path = tiny_model()
+    with caplog.at_level(logging.WARNING, logger="rtp"):
+        assert sdk.load(path, providers="FakeExecutionProvider").provider == "CPUExecutionProvider"  # one name
+    assert "requested FakeExecutionProvider but the session runs on CPUExecutionProvider" in caplog.text
+    with pytest.raises(sdk.ProviderUnavailableError, match="requested FakeExecutionProvider but the session runs on CPU"):
+        sdk.load(path, providers="FakeExecutionProvider", strict=True)
+
+
+def test_providers_that_name_nothing_available(tiny_model: Callable[..., Path], caplog: pytest.LogCaptureFixture) -> None:
+    """A list of providers none of which this onnxruntime has falls back to CPU with a warning; with
+    strict=True an empty list is refused, not silently run on CPU."""
+    path = tiny_model()
+    with caplog.at_level(logging.WARNING, logger="rtp"):
+        assert sdk.load(path, providers=["NoSuchExecutionProvider"]).provider == "CPUExecutionProvider"
+    assert "none of the requested providers is available; falling back to CPUExecutionProvider" in caplog.text
+    with pytest.raises(sdk.ProviderUnavailableError, match=r"none of the requested providers \[\] is available"):
+        sdk.load(path, providers=[], strict=True)
+    assert sdk.load(path, providers="CPUExecutionProvider", strict=True).provider == "CPUExecutionProvider"
+
+
+def test_metadata_given_as_an_object_or_nothing_usable(tmp_path: Path) -> None:
+    """load(metadata=) takes a ModelMetadata as it is (the engine's own, edited), and names what it
+    takes when given something else."""
+    path = build_onnx(tmp_path / "bare.onnx", weights=np.eye(4, dtype=np.float32))
+    meta = sdk.ModelMetadata.from_dict(base_metadata(default_threshold=0.125))
+    assert sdk.load(path, metadata=meta).metadata == meta
+    with pytest.raises(sdk.MetadataError, match="metadata=: expected a dict, a ModelMetadata or a YAML path, got int"):
+        sdk.load(path, metadata=42)  # type: ignore[arg-type]
+
+
+def test_a_fixed_batch_model_takes_exactly_its_batch(tmp_path: Path) -> None:
+    """A model exported for a batch of 2 (say, two eyes) runs a batch of 2 as one run and refuses
+    any other batch with the shape it expects (only a fixed batch of 1 is looped over frames)."""
+    path = build_onnx(tmp_path / "m.onnx", weights=np.ones((2, 4), np.float32), static=(2, 32, 48))
+    p = sdk.load(path, metadata=base_metadata(outputs=["1x2", "2x1"]))
+    x = np.random.default_rng(0).random((2, 4, 32, 48), dtype=np.float32)
+    assert p.predict(x).shape == (2, 6, 2, 3)
+    for bad in (x[0], np.concatenate([x, x[:1]])):
+        with pytest.raises(sdk.InputShapeError, match="this model has a fixed batch of 2, got [13]") as info:
+            p.predict(bad)
+        assert info.value.expected == "(2, ...)"
+
+
+def _odd_model(path: Path, *, int_input: bool = False, rank3_output: bool = False) -> Path:
+    """The tiny model's conv, with an int32 input cast to float or an output reduced to rank 3."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    nodes, src = [], "input"
+    if int_input:
+        nodes.append(helper.make_node("Cast", ["input"], ["as_float"], to=TensorProto.FLOAT))
+        src = "as_float"
+    nodes.append(helper.make_node("Conv", [src, "W"], ["conv"], kernel_shape=[1, 1]))
+    nodes.append(helper.make_node("MaxPool", ["conv"], ["pool"], kernel_shape=[16, 16], strides=[16, 16]))
+    if rank3_output:
+        nodes.append(helper.make_node("ReduceMax", ["pool"], ["metric"], keepdims=0, axes=[0]))
+        out = helper.make_tensor_value_info("metric", TensorProto.FLOAT, [4, "ty", "tx"])
+    else:
+        nodes.append(helper.make_node("Identity", ["pool"], ["metric"]))
+        out = helper.make_tensor_value_info("metric", TensorProto.FLOAT, ["n", 4, "ty", "tx"])
+    graph = helper.make_graph(
+        nodes, "odd",
+        [helper.make_tensor_value_info("input", TensorProto.INT32 if int_input else TensorProto.FLOAT, ["n", 4, "h", "w"])],
+        [out], initializer=[helper.make_tensor("W", TensorProto.FLOAT, [4, 4, 1, 1], np.eye(4).ravel().tolist())],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+    return path
+
+
+def test_models_that_are_not_float_nchw_are_refused_at_load(tmp_path: Path) -> None:
+    """The SDK feeds float32 NCHW planes and reads an NCHW grid of tiles: a model taking integers or
+    giving a rank-3 output is refused when loaded, naming the input or output, not at predict."""
+    with pytest.raises(sdk.MetadataError, match=r"expected float32 NCHW inputs, got input input tensor\(int32\)"):
+        sdk.load(_odd_model(tmp_path / "int.onnx", int_input=True), metadata=base_metadata())
+    with pytest.raises(sdk.MetadataError, match="expected a rank-4 output, got output metric"):
+        sdk.load(_odd_model(tmp_path / "r3.onnx", rank3_output=True), metadata=base_metadata())
+    p = sdk.load(_odd_model(tmp_path / "ok.onnx"), metadata=base_metadata())  # the same graph, float and rank 4
+    assert p.predict_raw(np.ones((4, 32, 32), np.float32)).shape == (4, 2, 2)
+
 # -- a model's tiles on coarser hardware tiles -------------------------------------------------------
 
 def test_pool_tiles_takes_the_worst_fine_tile() -> None:
