@@ -22,7 +22,6 @@ from ._dataset import (
     DatasetWriter,
     PaperDatasetReader,
     Sample,
-    contact_sheet,
     open_dataset,
     write_png,
 )
@@ -54,7 +53,6 @@ __all__ = [
     "check_scene",
     "compute_targets",
     "check_image_output",
-    "contact_sheet",
     "figure_image",
     "load_scene",
     "open_dataset",

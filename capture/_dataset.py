@@ -67,7 +67,6 @@ __all__ = [
     "DatasetWriter",
     "PaperDatasetReader",
     "Sample",
-    "contact_sheet",
     "open_dataset",
     "write_png",
 ]
@@ -512,36 +511,6 @@ def _read_png(path: Path) -> np.ndarray:
     except Exception as err:  # Pillow on corrupted bytes; see _unreadable
         raise _unreadable(path, "not a readable PNG", err) from err
     return a.astype(np.float32) / 255.0
-
-
-def contact_sheet(sample: Sample, *, scale: int = 1) -> np.ndarray:
-    """A picture of one sample: the seven final images, then the G-buffers and the reprojection.
-
-    Rows of four panels (``(H, W, 3)`` each, float in [0, 1]): final 1x1, 1x2, 2x1, 2x2 / final
-    2x4, 4x2, 4x4, |1x1 - 4x4| x 4 / albedo, normal (x, y, z as RGB), depth, shadow / roughness,
-    metallic, reprojected colour, seen mask. ``scale`` > 1 subsamples the panels.
-    """
-
-    def grey(a: np.ndarray) -> np.ndarray:
-        return np.repeat(np.clip(a, 0.0, 1.0)[..., None], 3, axis=2)
-
-    depth = sample.channel("depth")
-    far = float(np.percentile(depth[depth > 0], 99)) if np.any(depth > 0) else 1.0
-    panels = [sample.final(r) for r in ALL_RATES]
-    panels.append(np.clip(np.abs(sample.final("1x1") - sample.final("4x4")) * 4.0, 0.0, 1.0))
-    panels += [
-        sample.buffer("albedo"),
-        np.clip(sample.buffer("normal") * 0.5 + 0.5, 0.0, 1.0) * (depth > 0)[..., None],
-        grey(depth / far),
-        grey(sample.channel("shadow")),
-        grey(sample.channel("roughness")),
-        grey(sample.channel("metallic")),
-        sample.buffer("reprojected"),
-        grey(sample.channel("seen")),
-    ]
-    panels = [p[::scale, ::scale] for p in panels]
-    rows = [np.concatenate(panels[i : i + 4], axis=1) for i in range(0, len(panels), 4)]
-    return np.concatenate(rows, axis=0)
 
 
 def open_dataset(root: str | os.PathLike[str]) -> DatasetReader | PaperDatasetReader:

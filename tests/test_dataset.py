@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -298,6 +299,18 @@ def test_paper_layout(tmp_path: Path) -> None:
     assert s.inputs(sdk.DEFAULT_INPUTS).shape == (4, 16, 32)
     with pytest.raises(DatasetError, match="no 'depth'"):
         s.channel("depth")
+    with pytest.raises(DatasetError, match="the paper's layout has no 'depth' buffer"):
+        s.buffer("depth")
+    assert len(ds) == 1 and [x.id for x in ds] == ["0000"]
+    for sid in ("0001", "..", "../Bistro/0000"):  # only the listed sample folders, never a path out of them
+        with pytest.raises(DatasetError, match=f"no sample '{re.escape(sid)}'"):
+            ds[sid]
+    (folder / "specular_1x1.png").unlink()  # a sample folder missing one of its images
+    with pytest.raises(DatasetError, match=r"missing file .*specular_1x1\.png"):
+        ds["0000"].channel("roughness")  # (a fresh sample: s holds what it read)
+    (tmp_path / "Empty" / "0000").mkdir(parents=True)  # folders, but none holds output_1x1.png
+    with pytest.raises(DatasetError, match="no sample folders with output_1x1.png"):
+        open_dataset(tmp_path / "Empty")
 
 
 def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:

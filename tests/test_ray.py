@@ -160,3 +160,20 @@ def test_ray_clients_native_lines_go_to_the_debug_log(capfd: pytest.CaptureFixtu
     os.write(2, b"after\n")
     assert capfd.readouterr().err == "after\n"
     assert "ray: gcs_client.cc:210: Failed to get cluster ID" in caplog.text
+
+
+def test_without_ray_installed_the_flag_says_what_to_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """rtp[ray] is optional: without it `--ray` is a one-line error naming the extra, and nothing is
+    written (Ray is the only way the flag can run)."""
+    import sys
+
+    from rtp.cli import main
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
+    with pytest.raises(RayExecutorError, match=r"--ray needs Ray: pip install 'rtp\[ray\]'"):
+        capture(["procedural:0"], tmp_path / "ds", per_scene=1, size=SIZE, ray="local")
+    assert main(["capture", "--scene", "procedural:0", "--per-scene", "1", "--size", "96x64", "--ray",
+                 "--no-progress", "--out", str(tmp_path / "ds")]) == 2
+    assert "pip install 'rtp[ray]'" in capsys.readouterr().err
+    assert not (tmp_path / "ds").exists()
