@@ -94,3 +94,31 @@ def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, ca
     assert main(["metric", "flip", str(a), str(small)]) == 2
     err = capsys.readouterr().err
     assert "the images differ in size: 40x24 and 12x10" in err and "Traceback" not in err
+
+
+def test_scenes_list_shows_each_maps_split_and_cache_state(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp scenes list`: every map of scenes.yaml in split order with what the cache holds of it
+    (fetched, converted or nothing), a count, and the hint to fetch when nothing is; --json the same rows."""
+    from rtp.capture.scenes import load_splits
+    from rtp.capture.scenes._fetch import INDEX_VERSION, _cache_path
+
+    splits = load_splits()
+    names = splits["train"] + splits["validation"] + splits["test"]
+    cache = tmp_path / "cache"
+    for fetched in (False, True):
+        if fetched:  # an index naming two maps, the second also converted
+            cache.mkdir()
+            (cache / "index.json").write_text(json.dumps({"version": INDEX_VERSION, "groups": {},
+                                                          "maps": {names[0]: "a.pk3", names[-1]: "b.pk3"}}))
+            _cache_path(names[-1], cache).parent.mkdir()
+            _cache_path(names[-1], cache).write_bytes(b"")
+        want = {names[0]: "fetched", names[-1]: "converted"} if fetched else {}
+        assert main(["scenes", "list", "--cache-dir", str(cache)]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        assert lines[0].split() == ["map", "split", "cache", f"({cache})"]
+        rows = [line.split() for line in lines[1:-1]]
+        assert rows == [[m, s, want.get(m, "-")] for s in ("train", "validation", "test") for m in splits[s]]
+        assert lines[-1] == f"{len(names)} maps, " + ("2 fetched" if fetched else "0 fetched: run `rtp scenes fetch`")
+        assert main(["scenes", "list", "--cache-dir", str(cache), "--json"]) == 0
+        assert [(r["name"], r["split"], r["fetched"], r["converted"]) for r in json.loads(capsys.readouterr().out)] == [
+            (m, s, m in want, want.get(m) == "converted") for s in ("train", "validation", "test") for m in splits[s]]
