@@ -393,7 +393,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from rtp.evaluate import evaluate
+    from rtp.evaluate import evaluate, write_reports
 
     if args.plots and not args.out:
         raise _usage("--plots writes into --out; give an output folder")
@@ -409,13 +409,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         reports.append(rep)
         print(rep.table() + "\n")
     if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "evaluation.md").write_text("\n".join(r.to_markdown() for r in reports), encoding="utf-8")
-        (out / "evaluation.json").write_text(json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False),
-                                             encoding="utf-8")
+        md, js = write_reports(reports, args.out)
         extra = [p for r in reports for p in r.plots]
-        print(f"wrote {out / 'evaluation.md'}, {out / 'evaluation.json'}" + (f" and {len(extra)} plots" if extra else ""))
+        print(f"wrote {md}, {js}" + (f" and {len(extra)} plots" if extra else ""))
     return 0
 
 

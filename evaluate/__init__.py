@@ -38,6 +38,7 @@ from ._evaluate import (
     monotone_over_rates,
     spearman,
     tile_unseen_share,
+    write_reports,
 )
 from ._play import (
     DEFAULT_METHODS,
@@ -90,4 +91,5 @@ __all__ = [
     "scores",
     "spearman",
     "tile_unseen_share",
+    "write_reports",
 ]

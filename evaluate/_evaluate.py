@@ -20,6 +20,7 @@ import json
 import logging
 import math
 import os
+import reprlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +35,8 @@ from rtp.sdk import PREDICTED_RATES, RATE_CODES, ParameterError, select_rates, w
 from ._baselines import FidelityFX, Yang2019, as_real
 from ._scores import scores
 
-__all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "failing_tiles", "spearman", "tile_unseen_share"]
+__all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "failing_tiles", "spearman", "tile_unseen_share",
+           "write_reports"]
 
 log = logging.getLogger("rtp.evaluate")
 
@@ -180,17 +182,29 @@ class EvaluationReport:
         return "\n".join(lines) + "\n"
 
     def write(self, out_dir: str | os.PathLike[str], stem: str = "evaluation") -> list[Path]:
-        """Write ``<stem>.md`` and ``<stem>.json`` into ``out_dir``; returns their paths."""
-        from rtp.sdk.files import atomic_output
+        """Write ``<stem>.md`` and ``<stem>.json`` into ``out_dir`` as :func:`write_reports` does for
+        this one report (what ``rtp evaluate MODEL --out DIR`` writes); returns their paths."""
+        return write_reports([self], out_dir, stem)
 
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        paths = [out / f"{stem}.md", out / f"{stem}.json"]
-        with atomic_output(paths[0]) as tmp:
-            tmp.write_text(self.to_markdown(), encoding="utf-8")
-        with atomic_output(paths[1]) as tmp:
-            tmp.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False), encoding="utf-8")
-        return paths
+
+def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLike[str],
+                  stem: str = "evaluation") -> list[Path]:
+    """Write ``<stem>.md`` (each report's markdown in turn) and ``<stem>.json`` (a list of their
+    ``to_dict()``: what ``rtp evaluate --out`` writes and ``bench/report.py`` reads) into ``out_dir``,
+    each atomically (an interrupted write leaves the previous file); returns their paths."""
+    from rtp.sdk.files import atomic_output
+
+    reports = list(reports)
+    if not reports or not all(isinstance(r, EvaluationReport) for r in reports):
+        raise ParameterError(f"reports: expected one or more EvaluationReport, got {reprlib.repr(reports)}", "reports")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / f"{stem}.md", out / f"{stem}.json"]
+    with atomic_output(paths[0]) as tmp:
+        tmp.write_text("\n".join(r.to_markdown() for r in reports), encoding="utf-8")
+    with atomic_output(paths[1]) as tmp:
+        tmp.write_text(json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False), encoding="utf-8")
+    return paths
 
 
 def _transform_text(t: dict[str, Any]) -> str:

@@ -533,6 +533,30 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
     assert bad.returncode == 2 and "No such file or directory" in bad.stderr
 
 
+
+def test_the_library_writes_the_files_the_cli_writes(dataset: Path, model: Path, tmp_path: Path) -> None:
+    """EvaluationReport.write and write_reports give what `rtp evaluate --out` gives: evaluation.json
+    a list with an entry per model (report.write wrote a bare dict, which bench/report.py could not
+    read), evaluation.md each report in turn; an empty or foreign list is refused, nothing written."""
+    from rtp.evaluate import write_reports
+
+    a = evaluate(model, dataset, scenes=["a"], baselines=False)
+    b = evaluate(model, dataset, scenes=["b"], baselines=False)
+    md, js = a.write(tmp_path / "one")
+    assert (md.name, js.name) == ("evaluation.md", "evaluation.json")
+    assert json.loads(js.read_text()) == [json.loads(json.dumps(a.to_dict()))]
+    assert md.read_text() == a.to_markdown()
+    md, js = write_reports([a, b], tmp_path / "two", stem="both")
+    assert [d["scenes"] for d in json.loads(js.read_text())] == [a.to_dict()["scenes"], b.to_dict()["scenes"]]
+    assert md.read_text() == a.to_markdown() + "\n" + b.to_markdown() and md.name == "both.md"
+    report = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "report.py"), "--compact"]
+    shown = subprocess.run([*report, str(tmp_path / "one" / "evaluation.json")], capture_output=True, text=True)
+    assert shown.returncode == 0 and str(model) in shown.stdout, shown.stderr
+    for bad in ([], [a.to_dict()]):
+        with pytest.raises(sdk.ParameterError, match="expected one or more EvaluationReport"):
+            write_reports(bad, tmp_path / "bad")  # type: ignore[arg-type]
+    assert not (tmp_path / "bad").exists()
+
 def test_matched_quality_interpolates_along_the_sweep() -> None:
     from rtp.evaluate._evaluate import _matched
 
