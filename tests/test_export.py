@@ -246,6 +246,47 @@ def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
     assert r.returncode == 2 and "not a readable ONNX model" in r.stderr
 
 
+
+def test_adopt_refuses_graphs_that_are_not_one_plane_input_to_one_grid(tmp_path: Path) -> None:
+    """Adoption names what the graph should be before writing anything: a model with a second output,
+    an integer input or a rank-3 output is refused with the inputs and outputs it found."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    def graph(name: str, *, outputs: int = 1, in_type: int = TensorProto.FLOAT, rank3: bool = False) -> Path:
+        nodes = [helper.make_node("Cast", ["input"], ["x"], to=TensorProto.FLOAT),
+                 helper.make_node("Conv", ["x", "W"], ["c"], kernel_shape=[1, 1]),
+                 helper.make_node("MaxPool", ["c"], ["metric"], kernel_shape=[16, 16], strides=[16, 16])]
+        outs = [helper.make_tensor_value_info("metric", TensorProto.FLOAT, [1, 2, 4, 6])]
+        if outputs == 2:
+            nodes.append(helper.make_node("Identity", ["metric"], ["second"]))
+            outs.append(helper.make_tensor_value_info("second", TensorProto.FLOAT, [1, 2, 4, 6]))
+        if rank3:
+            nodes[-1].output[0] = "pooled"
+            nodes.append(helper.make_node("Squeeze", ["pooled", "axes"], ["metric"]))
+            outs = [helper.make_tensor_value_info("metric", TensorProto.FLOAT, [2, 4, 6])]
+        inits = [helper.make_tensor("W", TensorProto.FLOAT, [2, 4, 1, 1], np.ones(8).tolist()),
+                 helper.make_tensor("axes", TensorProto.INT64, [1], [0])]
+        g = helper.make_graph(nodes, name, [helper.make_tensor_value_info("input", in_type, [1, 4, 64, 96])], outs,
+                              initializer=inits)
+        model = helper.make_model(g, opset_imports=[helper.make_opsetid("", 17)])
+        model.ir_version = 8
+        onnx.checker.check_model(model)
+        path = tmp_path / f"{name}.onnx"
+        onnx.save(model, str(path))
+        return path
+
+    out = tmp_path / "adopted.onnx"
+    with pytest.raises(sdk.MetadataError, match=r"expected one input and one output, found inputs \['input'\] and "
+                                                r"outputs \['metric', 'second'\]"):
+        export.adopt(graph("two", outputs=2), PAPER_SIDECAR, out)
+    for path in (graph("ints", in_type=TensorProto.INT32), graph("rank3", rank3=True)):
+        with pytest.raises(sdk.MetadataError, match=r"expected a float32 \(N, C, H, W\) input and a rank-4 output"):
+            export.adopt(path, PAPER_SIDECAR, out)
+    assert not out.exists()
+    assert sdk.load(export.adopt(graph("fine"), PAPER_SIDECAR, out)).predict(np.zeros((4, 64, 96), np.float32)).shape \
+        == (6, 4, 6)  # the same graph, one float input to one rank-4 grid
+
 # -- the paper's published models ---------------------------------------------------------------
 
 PUBLISHED = Path(__file__).parent / "data" / "published"  # the six files, as published (LICENSE.md there)
