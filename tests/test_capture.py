@@ -41,6 +41,25 @@ def test_capture_writes_complete_samples_and_resumes(tmp_path: Path) -> None:
         capture(["procedural:5"], out, per_scene=1, size=(128, 64))
 
 
+
+def test_parallel_capture_writes_what_one_process_writes(tmp_path: Path) -> None:
+    """`--workers 2` (make dataset's default: a process a scene) writes the same samples, byte for
+    byte in every buffer, as one process, and its progress counts every sample once, to the total."""
+    from rtp.capture import BUFFERS
+
+    scenes, kw = ["procedural:3", "procedural:4"], {"per_scene": 1, "size": (96, 64), "profiles": ("slow",)}
+    one = capture(scenes, tmp_path / "one", **kw)
+    ticks: list[tuple[int, int]] = []
+    two = capture(scenes, tmp_path / "two", workers=2, progress=lambda d, t: ticks.append((d, t)), **kw)
+    assert (two.written, two.skipped, two.failed) == (one.written, 0, []) == (2, 0, [])
+    assert ticks[-1] == (2, 2) and [d for d, _ in ticks] == sorted(d for d, _ in ticks)
+    a, b = DatasetReader(tmp_path / "one"), DatasetReader(tmp_path / "two")
+    assert a.ids == b.ids and a.manifest["unseen_share"] == b.manifest["unseen_share"]
+    for sid in a.ids:
+        assert a[sid].meta == b[sid].meta
+        for name in BUFFERS:
+            np.testing.assert_array_equal(a[sid].buffer(name), b[sid].buffer(name), err_msg=f"{sid}/{name}")
+
 def test_capture_survives_a_kill(tmp_path: Path) -> None:
     out = tmp_path / "ds"
     cmd = [sys.executable, "-m", "rtp.cli", "capture", "--scene", "procedural:7", "--per-scene", "4",
