@@ -337,6 +337,30 @@ def test_fixed_exposure_overrides_auto_exposure(renderer):
     assert dark.colour["1x1"].mean() < auto.colour["1x1"].mean()
 
 
+
+@pytest.mark.gl
+def test_past_max_point_lights_the_strongest_light_the_frame(gl_context):
+    """With more point lights touching the view than max_point_lights, the frame is lit by the
+    strongest (radiance over squared distance) as if the others did not exist; a light out of reach
+    of the view never takes a slot, however bright."""
+    wall = quad_mesh((0.0, 0.0, -4.0), (4.0, 0, 0), (0, 3.0, 0), 0)
+    strong = PointLight((-1.0, 0.0, -3.0), colour=(1.0, 0.2, 0.1), intensity=8.0, radius=5.0)
+    weak = PointLight((1.0, 0.0, -3.0), colour=(0.1, 0.2, 1.0), intensity=2.0, radius=5.0)
+    behind = PointLight((0.0, 0.0, 30.0), intensity=1e4, radius=5.0)  # behind the camera: would outrank both
+
+    def lit(lights: list[PointLight], n: int) -> np.ndarray:
+        scene = Scene("wall", [wall], [Material("m", base_color=(0.8, 0.8, 0.8, 1.0), roughness=1.0, specular=0.0)],
+                      point_lights=lights, sun=SunLight(intensity=0.0), ambient=0.0)
+        with Renderer(64, 48, ctx=make_current(gl_context), shadow_map_size=64, max_point_lights=n) as r:
+            r.load_scene(scene)
+            return r.render(Camera((0.0, 0.0, 0.0)), exposure=1.0, debug=True).lighting["1x1"]
+
+    one = lit([behind, weak, strong], 1)
+    np.testing.assert_array_equal(one, lit([strong], 1))
+    assert one[..., 0].mean() > 3 * one[..., 2].mean() > 0  # red: the strong light's colour
+    both = lit([behind, weak, strong], 2)
+    np.testing.assert_allclose(both, lit([strong], 1) + lit([weak], 1), rtol=2e-3, atol=1e-5)  # (half-float targets)
+
 @pytest.mark.gl
 def test_alpha_cutoff_cuts_holes(renderer):
     tex = checker_texture(64, 8, alpha_holes=True)
