@@ -1225,3 +1225,29 @@ def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path
     with pytest.raises(sdk.ParameterError, match=key):
         train(cfg)
     assert not (tmp_path / "m.pt").exists()
+
+
+@pytest.mark.parametrize("fields, key, words", [
+    ({"augment": True, "inputs": ("albedo.r", "normal.x", "normal.z", "seen")}, "augment", "needs both normal.x and normal.y"),
+    ({"arch": "paper", "tail_width": 8}, "tail_width", "the fast network's option"),
+    ({"arch": "fast", "head_width": -1}, "head_width", "expected 0 .a linear head."),
+    ({"arch": "fast", "contrast_max": True}, "contrast_max", "only with block_contrast"),
+    ({"per_scene": 0}, "per_scene", "at least 1 sample per map"),
+    ({"arch": "paper", "separable": True}, "separable", "the fast network's option"),
+    ({"arch": "paper", "energy_norm": True}, "energy_norm", "the fast network's option"),
+    ({"distill": 0.0}, "distill", r"a weight in \(0, 1\]"),
+    ({"ema": 1.0}, "ema", r"a decay in \[0, 1\)"),
+    ({"aux_metrics": ("jnyang",)}, "aux_metrics", "other than jnyang"),
+])
+def test_train_refuses_a_combination_naming_its_field_before_reading_data(fields: dict[str, Any], key: str, words: str,
+                                                                           tmp_path: Path) -> None:
+    """train() checks the whole configuration before it opens the data (which does not exist here):
+    each refused combination is a ParameterError naming the field to change (its .name)."""
+    with pytest.raises(sdk.ParameterError, match=f"^{key}: .*{words}") as info:
+        train(TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), **fields))
+    assert info.value.name == key and not (tmp_path / "m.pt").exists()
+
+
+def test_train_takes_a_config_object() -> None:
+    with pytest.raises(sdk.ParameterError, match="train: expected a TrainConfig, got dict"):
+        train({"data": "d", "metric": "jnyang", "out": "m.pt"})  # type: ignore[arg-type]
