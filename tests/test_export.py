@@ -445,6 +445,41 @@ def test_the_cli_exports_without_the_probe_and_strips_it(fast_onnx: Path, tmp_pa
         assert r.returncode == 2 and message in r.stderr, (bad, r.stderr)
 
 
+
+@pytest.mark.parametrize("argv, words", [
+    (["--one-input", "--adopt", "f.onnx", "-o", "x.onnx"], "--one-input applies to exporting a checkpoint"),
+    (["m.pt", "--adopt", "f.onnx", "-o", "x.onnx"], "give either a checkpoint or --adopt FOREIGN.onnx, not both"),
+    (["--adopt", "f.onnx", "-o", "x.onnx", "--opset", "17"], "--opset applies to exporting a checkpoint"),
+    (["m.pt", "--dynamic"], "--dynamic and --replace apply to --adopt only"),
+    (["m.pt", "--replace"], "--dynamic and --replace apply to --adopt only"),
+    (["--retune", "jnyang", "-o", "x.onnx"], "--retune needs --metadata SIDECAR.yaml"),
+    (["--retune", "jnyang", "--metadata", "s.yaml", "-o", "x.onnx", "--dynamic"], "--retune MODEL takes only"),
+    (["--join-planes", "m.onnx"], "--join-planes needs -o OUTPUT.onnx"),
+    (["--join-planes", "m.onnx", "--strip-probe", "m.onnx", "-o", "x.onnx"], "--strip-probe MODEL takes only -o"),
+])
+def test_rtp_export_refuses_flags_that_do_not_go_together(argv: list[str], words: str,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Every combination is a usage error (exit 2) naming the flags, before any file is opened."""
+    from rtp.cli import export_main
+
+    with pytest.raises(SystemExit) as info:
+        export_main(argv)
+    assert info.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_rtp_export_restamp_records_the_digest_in_place(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp-export --restamp MODEL.onnx` (a model exported before digests) writes the digest into the
+    file itself and prints its path; the model then loads with its integrity checked."""
+    from rtp.cli import export_main
+
+    from .conftest import build_onnx
+
+    path = build_onnx(tmp_path / "old.onnx", weights=np.eye(4, dtype=np.float32), metadata=base_metadata())
+    assert sdk.load(path).metadata.digest is None
+    assert export_main(["--restamp", str(path)]) == 0
+    assert capsys.readouterr().out.strip() == str(path)
+    assert sdk.load(path).metadata.digest == sdk.model_digest(path.read_bytes())
+
 def test_retune_changes_the_decision_and_nothing_the_model_predicts(fast_onnx: Path, tmp_path: Path) -> None:
     """rtp-export --retune: the decision fields (threshold factors per rate, default threshold) from a
     sidecar, the same graph, weights, digest and predictions; other fields refused, nothing written."""
