@@ -252,6 +252,37 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         a.read(0)
 
 
+
+def test_read_gives_one_plane_of_the_last_run_and_frame_fields_are_checked(frames) -> None:
+    """Adapter.read(i) is plane i of the last inputs()/run() (six planes: two render targets), an index
+    past the planes a ParameterError; a texture of another size, a missing albedo and material
+    components that are not three indices are refused by name."""
+    from rtp.plugins.moderngl._adapter import _MAX_CHANNELS
+
+    ctx, prev, cur = frames
+    channels = ("seen", "reprojected.g", "albedo.b", "normal.z", "depth", "albedo.r")
+    a = Adapter(channels, W, H, ctx=ctx)
+    x = _engine_inputs(ctx, prev, cur, a)
+    for i in range(len(channels)):
+        np.testing.assert_array_equal(a.read(i), x[i])
+    for bad in (len(channels), -1):
+        with pytest.raises(sdk.ParameterError, match="index"):
+            a.read(bad)
+    small = _tex(ctx, cur.albedo[: H // 2, : W // 2])
+    with pytest.raises(sdk.ParameterError, match=f"albedo: expected a texture of the adapter's size {W}x{H}, got "
+                                                 f"{W // 2}x{H // 2}"):
+        _engine_inputs(ctx, prev, cur, a, albedo=small)
+    with pytest.raises(sdk.ParameterError, match="albedo: expected a moderngl.Texture of the adapter's context, got None"):
+        _engine_inputs(ctx, prev, cur, a, albedo=None)
+    m = Adapter(("roughness", "seen"), W, H, ctx=ctx)
+    for comps in ((0, 1), 5, (0, 1, 2, 3)):
+        with pytest.raises(sdk.ParameterError, match="material_components: expected three component indices"):
+            _engine_inputs(ctx, prev, cur, m, material=_tex(ctx, cur.albedo), material_components=comps)
+    with pytest.raises(sdk.adapters.UnsupportedChannelError, match=f"at most {_MAX_CHANNELS} channels"):
+        Adapter(("seen",) * (_MAX_CHANNELS + 1), W, H, ctx=ctx)  # (the adapter makes 23 channels; repeats count)
+    a.close()
+    m.close()
+
 def test_zero_normals_on_geometry_read_zero_and_rgb_fields_need_three_components(frames) -> None:
     """A G-buffer with zero normals under geometry (a degenerate mesh's) gives normal.z 0 there, as on
     the background, not NaN; the other pixels are unchanged. A texture of fewer than three components
