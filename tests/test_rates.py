@@ -21,6 +21,10 @@ def test_codes_follow_d3d12_and_vulkan() -> None:
 
 def test_work_saved() -> None:
     assert [sdk.work_saved(r) for r in sdk.ALL_RATES] == [0, 0.5, 0.5, 0.75, 0.875, 0.875, 0.9375]
+    assert [sdk.work_saved(sdk.RATE_CODES[r]) for r in sdk.ALL_RATES] == [sdk.work_saved(r) for r in sdk.ALL_RATES]
+    for code in (3, 99, -1):  # codes between the named ones, past them, below them
+        with pytest.raises(sdk.ParameterError, match=f"unknown shading-rate code {code}; expected one of"):
+            sdk.work_saved(code)
 
 
 def _tile(*values: float) -> np.ndarray:

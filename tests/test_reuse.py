@@ -396,7 +396,9 @@ def test_bad_arguments_are_refused() -> None:
                      ({"history": "0.5"}, "history"), ({"history": True}, "history"),
                      ({"history": float("nan")}, "history"), ({"refresh": 1.0}, "refresh"), ({"refresh": -1}, "refresh"),
                      ({"refresh": "0.1"}, "refresh"), ({"refresh": False}, "refresh"), ({"step": 3}, "step"),
-                     ({"step": 0}, "step"), ({"step": 32}, "step"), ({"step": True}, "step"), ({"step": 4.0}, "step")):
+                     ({"step": 0}, "step"), ({"step": 32}, "step"), ({"step": True}, "step"), ({"step": 4.0}, "step"),
+                     ({"carry_scale": [2.0]}, "carry_scale"), ({"carry_scale": "2"}, "carry_scale"),
+                     ({"rescale": [0.5]}, "rescale")):
         with pytest.raises(sdk.ParameterError, match=name) as err:
             sdk.PredictionReuse(s.pred, **kw)  # type: ignore[arg-type]
         assert err.value.name == name
@@ -523,6 +525,20 @@ def test_rescale_scales_carried_estimates_by_the_blocks_variance() -> None:
     assert np.allclose(again.predict(x0, fetch, everything), first, rtol=1e-5)
     assert "rescale=0.5" in repr(reuse)
 
+
+
+def test_fresh_predictions_need_a_model_of_any_size(tmp_path: Path) -> None:
+    """unseen='fresh' runs the network on crops of the frame: a model exported for one frame size
+    cannot, and says how to export one that can."""
+    from .conftest import base_metadata, build_onnx
+
+    static = sdk.load(build_onnx(tmp_path / "s.onnx", weights=np.eye(4, dtype=np.float32), static=(1, 64, 96)),
+                      metadata=base_metadata())
+    with pytest.raises(sdk.ParameterError, match=r"unseen='fresh' runs the network on crops, but this model takes only "
+                                                 r"96x64 frames \(export it with dynamic sizes\)") as err:
+        sdk.PredictionReuse(static, 4, unseen="fresh")
+    assert err.value.name == "unseen"
+    assert sdk.PredictionReuse(static, 4).every == 4  # the other modes run on whole frames
 
 def test_rescale_needs_blocks_planes_and_an_error_metric() -> None:
     s = _Scene(3, 4)
