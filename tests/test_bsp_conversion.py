@@ -1,6 +1,8 @@
 """The BSP conversion rules of docs/scenes.md that the tiny map of test_scenes.py does not reach:
 dropped surfaces, alpha tests, emission, the light fallbacks (entities, surface lights, light-looking
-textures, lights above the spawns), the sun and the sky colour. Each case is a synthetic map."""
+textures, lights above the spawns), the sun and the sky colour; the patch, normal, entity, texture and sky
+fallbacks; and the malformed files (BSP lumps and faces, sources, damaged pk3 members) that must raise
+SceneFormatError. Each case is a synthetic map."""
 
 from __future__ import annotations
 
@@ -14,9 +16,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rtp.capture.scenes import convert_bsp
+from rtp.capture.scenes import SceneFormatError, convert_bsp
 from rtp.capture.scenes._bsp import FACE_DT, TEXTURE_DT, UNIT, VERTEX_DT
-from rtp.scene import Scene
+from rtp.scene import Scene, SunLight
 from rtp.sdk import srgb_to_linear
 
 SURF_SKY, SURF_NODRAW, CONTENTS_FOG = 0x4, 0x80, 0x40
@@ -109,25 +111,38 @@ def _quad(x0: float, y0: float, size: float, z: float, up: bool) -> tuple[list, 
 def _map(textures: list[tuple[str, int, int]], entities: str) -> bytes:
     """An IBSP v46 map with one 64-unit square per texture ``(name, flags, contents)``, the i-th at
     x = 100 i, facing down from z = 128; ``entities`` is the entity lump's text."""
+    faces = []
+    for i in range(len(textures)):
+        vs, mv = _quad(100.0 * i, 0.0, 64.0, 128.0, up=False)
+        faces.append((1, i, vs, mv, (0, 0)))
+    return _faces_map(textures, faces, entities)
+
+
+#: A face of :func:`_faces_map`: type (1 polygon, 2 patch, 3 mesh), texture index, vertices
+#: ``[(pos, uv, normal)]``, meshverts, patch size ``(width, height)``.
+Face = tuple[int, int, list, list[int], tuple[int, int]]
+
+
+def _faces_map(textures: list[tuple[str, int, int]], faces: list[Face], entities: str) -> bytes:
+    """An IBSP v46 map of ``faces`` over ``textures`` ``(name, flags, contents)``."""
     tex = np.zeros(len(textures), TEXTURE_DT)
     tex["name"] = [t[0].encode() for t in textures]
     tex["flags"] = [t[1] for t in textures]
     tex["contents"] = [t[2] for t in textures]
     verts: list = []
     meshverts: list[int] = []
-    faces = np.zeros(len(textures), FACE_DT)
-    for i in range(len(textures)):
-        vs, mv = _quad(100.0 * i, 0.0, 64.0, 128.0, up=False)
-        faces[i]["texture"], faces[i]["type"], faces[i]["vertex"], faces[i]["n_vertexes"] = i, 1, len(verts), 4
-        faces[i]["meshvert"], faces[i]["n_meshverts"] = len(meshverts), 6
+    farr = np.zeros(len(faces), FACE_DT)
+    for i, (ftype, t, vs, mv, size) in enumerate(faces):
+        farr[i]["texture"], farr[i]["type"], farr[i]["vertex"], farr[i]["n_vertexes"] = t, ftype, len(verts), len(vs)
+        farr[i]["meshvert"], farr[i]["n_meshverts"], farr[i]["size"] = len(meshverts), len(mv), size
         verts += vs
         meshverts += mv
     varr = np.zeros(len(verts), VERTEX_DT)
-    for i, (p, uv, n) in enumerate(verts):
-        varr[i]["pos"], varr[i]["uv"], varr[i]["normal"], varr[i]["color"] = p, uv, n, (255, 255, 255, 255)
+    for i, (pos, uv, n) in enumerate(verts):
+        varr[i]["pos"], varr[i]["uv"], varr[i]["normal"], varr[i]["color"] = pos, uv, n, (255, 255, 255, 255)
     lumps = [b""] * 17
     lumps[0], lumps[1], lumps[10] = entities.encode() + b"\0", tex.tobytes(), varr.tobytes()
-    lumps[11], lumps[13] = np.asarray(meshverts, "<i4").tobytes(), faces.tobytes()
+    lumps[11], lumps[13] = np.asarray(meshverts, "<i4").tobytes(), farr.tobytes()
     body, directory = b"", []
     for lump in lumps:
         directory.append((8 + 17 * 8 + len(body), len(lump)))
@@ -138,9 +153,14 @@ def _map(textures: list[tuple[str, int, int]], entities: str) -> bytes:
 SPAWN = '{\n"classname" "info_player_deathmatch"\n"origin" "32 16 8"\n"angle" "90"\n}\n'
 
 
-def _pk3(path: Path, textures: list[tuple[str, int, int]], entities: str = SPAWN, shaders: str = SHADERS) -> Path:
+def _pk3(path: Path, textures: list[tuple[str, int, int]], entities: str = SPAWN, shaders: str = SHADERS,
+         faces: list[Face] | None = None, extra: dict[str, bytes] | None = None) -> Path:
+    """A pk3 of map ``maps/m.bsp`` (one square per texture, or ``faces``), the test images, the
+    shader script and the ``extra`` files (stored, not compressed)."""
     with zipfile.ZipFile(path, "w") as z:
-        z.writestr("maps/m.bsp", _map(textures, entities))
+        z.writestr("maps/m.bsp", _map(textures, entities) if faces is None else _faces_map(textures, faces, entities))
+        for name, data in (extra or {}).items():
+            z.writestr(name, data)
         z.writestr("textures/test/wall.png", _png(WALL_RGB))
         z.writestr("textures/test/glow.png", _png((250, 250, 200)))
         z.writestr("textures/test/lava_1.png", _png(LAVA_RGB))
@@ -234,3 +254,245 @@ def test_missing_images_warn_once_per_map(tmp_path: Path, caplog: pytest.LogCapt
     warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert len(warnings) == 1 and "5 textures have no image" in warnings[0] and "and 2 more" in warnings[0]
     assert sum(m.base_color == (0.5, 0.5, 0.5, 1.0) for m in conv.scene.materials) == 5
+
+
+# -- patches, normals, entities, sky and texture fallbacks ----------------------------------------------
+
+def _grid(x0: float, z: float, up: bool, w: int = 3, h: int = 3) -> list:
+    """A flat ``w`` x ``h`` patch control grid (row-major, 32-unit spacing) at height ``z`` whose
+    normals face +Z (``up``) or -Z."""
+    n = (0.0, 0.0, 1.0 if up else -1.0)
+    return [((x0 + 32.0 * c, 32.0 * r, z), (c / (w - 1), r / max(h - 1, 1)), n) for r in range(h) for c in range(w)]
+
+
+def _facing(mesh) -> np.ndarray:
+    """Each triangle's geometric normal (unit, world space)."""
+    p = mesh.positions[mesh.indices.astype(np.int64)]
+    g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    return g / np.linalg.norm(g, axis=1, keepdims=True)
+
+
+def test_patches_face_their_normals_and_malformed_patches_are_skipped(tmp_path: Path) -> None:
+    """A bezier patch is wound so its triangles face the way its vertex normals do, whichever way the
+    control grid runs; patches of even or too small size, or with fewer control points than the size
+    needs, are skipped (no triangles, not counted), not a crash."""
+    textures = [("textures/test/up", 0, 1), ("textures/test/down", 0, 1), ("textures/test/even", 0, 1),
+                ("textures/test/short", 0, 1)]
+    faces: list[Face] = [(2, 0, _grid(0.0, 0.0, up=True), [], (3, 3)),
+                         (2, 1, _grid(200.0, 64.0, up=False), [], (3, 3)),
+                         (2, 2, _grid(400.0, 0.0, up=True, w=4), [], (4, 3)),
+                         (2, 3, _grid(600.0, 0.0, up=True)[:8], [], (3, 3))]
+    conv = convert_bsp(_pk3(tmp_path / "patches.pk3", textures, faces=faces), patch_level=4)
+    assert conv.stats["patches"] == 2
+    assert [m.name for m in conv.scene.materials] == ["textures/test/up", "textures/test/down"]
+    up, down = conv.scene.meshes
+    assert len(up.indices) == len(down.indices) == 4 * 4 * 2
+    np.testing.assert_allclose(up.normals, [[0.0, 1.0, 0.0]] * len(up.normals), atol=1e-6)
+    np.testing.assert_allclose(_facing(up), [[0.0, 1.0, 0.0]] * len(up.indices), atol=1e-6)
+    np.testing.assert_allclose(down.normals, [[0.0, -1.0, 0.0]] * len(down.normals), atol=1e-6)
+    np.testing.assert_allclose(_facing(down), [[0.0, -1.0, 0.0]] * len(down.indices), atol=1e-6)
+
+
+def test_sky_patches_seal_the_level(tmp_path: Path) -> None:
+    """A curved sky (a patch on a sky texture) is not drawn but tessellated at level 2 into the
+    blocker triangles, in world metres; a map of patches only converts."""
+    textures = [("textures/test/wall", 0, 1), ("textures/skies/dome", SURF_SKY, 1)]
+    faces: list[Face] = [(2, 0, _grid(0.0, 0.0, up=True), [], (3, 3)), (2, 1, _grid(0.0, 512.0, up=False), [], (3, 3))]
+    conv = convert_bsp(_pk3(tmp_path / "dome.pk3", textures, faces=faces))
+    assert [m.name for m in conv.scene.materials] == ["textures/test/wall"]
+    assert conv.sky_triangles.shape == (2 * 2 * 2, 3, 3) and conv.stats["sky_faces"] == 1
+    np.testing.assert_allclose(conv.sky_triangles[..., 1], 512.0 * UNIT, rtol=1e-6)
+    np.testing.assert_allclose([conv.sky_triangles[..., 0].max(), conv.sky_triangles[..., 2].min()],
+                               [64.0 * UNIT, -64.0 * UNIT], rtol=1e-6)
+
+
+def test_zero_vertex_normals_are_recomputed_from_the_faces(tmp_path: Path) -> None:
+    """Vertices stored without a normal (zero vectors) get the normals of their faces."""
+    vs, mv = _quad(0.0, 0.0, 64.0, 128.0, up=False)
+    faces: list[Face] = [(1, 0, [(p, uv, (0.0, 0.0, 0.0)) for p, uv, _ in vs], mv, (0, 0))]
+    (mesh,) = convert_bsp(_pk3(tmp_path / "flat.pk3", [("textures/test/wall", 0, 1)], faces=faces)).scene.meshes
+    np.testing.assert_allclose(mesh.normals, [[0.0, -1.0, 0.0]] * 4, atol=1e-6)
+    np.testing.assert_allclose(_facing(mesh), [[0.0, -1.0, 0.0]] * 2, atol=1e-6)
+
+
+def test_malformed_entity_values_fall_back(tmp_path: Path) -> None:
+    """Entity keys that do not parse: an unreadable angle faces 0 (yaw -90), an origin that is not
+    three numbers drops the entity, an unreadable light value is 300 and an unreadable colour white;
+    entities that are neither spawn points nor lights are ignored."""
+    ents = ('{\n"classname" "info_player_start"\n"origin" "0 0 0"\n"angle" "east"\n}\n'
+            '{\n"classname" "info_player_deathmatch"\n"origin" "10 20"\n}\n'
+            '{\n"classname" "team_CTF_redspawn"\n"origin" "a b c"\n}\n'
+            '{\n"classname" "item_health"\n"origin" "5 5 5"\n}\n'
+            '{\n"classname" "light"\n"origin" "0 0 64"\n"light" "bright"\n"_color" "red"\n}\n')
+    scene = convert_bsp(_pk3(tmp_path / "ents.pk3", [("textures/test/wall", 0, 1)], ents)).scene
+    (spawn,) = scene.spawn_points
+    assert spawn.position == pytest.approx((0.0, 35.0 * UNIT, 0.0)) and spawn.yaw == pytest.approx(-90.0)
+    (light,) = scene.point_lights
+    assert light.position == pytest.approx((0.0, 64.0 * UNIT, 0.0))
+    assert light.colour == (1.0, 1.0, 1.0) and light.intensity == pytest.approx(10.0)
+
+
+SKY_SHADER = """
+textures/skies/clouds
+{{
+    surfaceparm sky
+    skyparms {farbox} 512 -
+    {{
+        map {image}
+    }}
+}}
+"""
+
+
+@pytest.mark.parametrize(("farbox", "image", "rgb"), [
+    ("env/absent", "textures/skies/clouds.png", SKY_RGB),  # no far box images: the stage's image
+    ("env/broken", "textures/skies/clouds.png", SKY_RGB),  # far box image undecodable: the stage's image
+    ("env/absent", "textures/skies/black.png", None),  # a black sky gives no hue: the default sky colour
+])
+def test_sky_colour_fallbacks(tmp_path: Path, farbox: str, image: str, rgb: tuple[int, int, int] | None) -> None:
+    """The sky colour comes from the first sky texture that has a shader (a sky texture without one is
+    passed over): its far box top, else its first stage image; a shader without ``q3map_sun`` keeps the
+    default sun."""
+    textures = [("textures/test/wall", 0, 1), ("textures/skies/bare", SURF_SKY, 1), ("textures/skies/clouds", SURF_SKY, 1)]
+    extra = {"env/broken_up.png": b"\x89PNG\r\n\x1a\n not an image", "textures/skies/clouds.png": _png(SKY_RGB),
+             "textures/skies/black.png": _png((0, 0, 0))}
+    shaders = SKY_SHADER.format(farbox=farbox, image=image)
+    scene = convert_bsp(_pk3(tmp_path / "sky.pk3", textures, shaders=shaders, extra=extra)).scene
+    assert scene.sun == SunLight()
+    default = np.asarray(Scene.__dataclass_fields__["sky_colour"].default)
+    if rgb is None:
+        assert scene.sky_colour == tuple(default)
+    else:
+        m = srgb_to_linear(np.array(rgb) / 255.0)
+        np.testing.assert_allclose(scene.sky_colour, (0.5 * m / (m @ LUM709) + 0.5) * (default @ LUM709))
+
+
+TEXTURE_SHADERS = """
+textures/test/edited
+{
+    qer_editorimage textures/test/wall.png
+    {
+        map textures/test/gone.tga
+    }
+}
+textures/test/lamp
+{
+    q3map_surfacelight 400
+}
+"""
+
+
+def test_texture_fallbacks(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An image that does not decode gives a grey material (with a warning naming it); an image over
+    1024 texels is halved until it fits; a shader whose stage image is missing falls back to its editor
+    image; a surface light without any image shines white."""
+    huge = io.BytesIO()
+    Image.new("RGBA", (2048, 4), (10, 200, 10, 255)).save(huge, format="PNG")
+    textures = [("textures/test/broken", 0, 1), ("textures/test/huge", 0, 1), ("textures/test/edited", 0, 1),
+                ("textures/test/lamp", 0, 1)]
+    extra = {"textures/test/broken.png": b"\x89PNG\r\n\x1a\n truncated", "textures/test/huge.png": huge.getvalue()}
+    with caplog.at_level("WARNING", logger="rtp"):
+        conv = convert_bsp(_pk3(tmp_path / "tex.pk3", textures, shaders=TEXTURE_SHADERS, extra=extra))
+    assert any("could not decode texture textures/test/broken.png" in r.getMessage() for r in caplog.records)
+    broken, huge_mat, edited, lamp = conv.scene.materials
+    assert conv.missing_textures == ["textures/test/broken", "textures/test/lamp"]
+    assert broken.texture is None and broken.base_color == (0.5, 0.5, 0.5, 1.0)
+    assert huge_mat.texture is not None and huge_mat.texture.shape == (2, 1024, 4)
+    assert tuple(huge_mat.texture[0, 0]) == (10, 200, 10, 255)
+    assert edited.texture is not None and tuple(edited.texture[0, 0, :3]) == WALL_RGB
+    assert lamp.texture is None
+    (light,) = conv.scene.point_lights
+    assert light.colour == (1.0, 1.0, 1.0)
+
+
+# -- malformed files ------------------------------------------------------------------------------------
+
+def _set_lump(data: bytes, lump: int, offset: int | None = None, length: int | None = None) -> bytes:
+    """``data`` with lump ``lump``'s directory entry changed."""
+    off, ln = struct.unpack_from("<ii", data, 8 + 8 * lump)
+    out = bytearray(data)
+    struct.pack_into("<ii", out, 8 + 8 * lump, off if offset is None else offset, ln if length is None else length)
+    return bytes(out)
+
+
+def _set_face(data: bytes, face: int, **fields: int) -> bytes:
+    """``data`` with fields of face ``face`` changed."""
+    off, ln = struct.unpack_from("<ii", data, 8 + 8 * 13)
+    faces = np.frombuffer(data, FACE_DT, count=ln // FACE_DT.itemsize, offset=off).copy()
+    for k, v in fields.items():
+        faces[face][k] = v
+    return data[:off] + faces.tobytes() + data[off + ln:]
+
+
+TWO_WALLS = [("textures/test/wall", 0, 1), ("textures/test/lava_1", 0, 1)]
+
+
+@pytest.mark.parametrize(("damage", "message"), [
+    (lambda d: d[:100], "too short for a BSP header"),
+    (lambda d: _set_lump(d, 13, length=1 << 20), r"lump 13 \(offset \d+, length 1048576\) runs past the file end"),
+    (lambda d: _set_lump(d, 13, offset=-4), r"lump 13 \(offset -4, .*\) runs past the file end"),
+    (lambda d: _set_lump(d, 1, length=71), "texture lump length 71 is not a multiple of 72"),
+    (lambda d: _set_lump(d, 10, length=43), "vertex lump length 43 is not a multiple of 44"),
+    (lambda d: _set_face(d, 1, texture=5), "a face refers to texture 5 of 2"),
+    (lambda d: _set_face(d, 1, texture=-1), "a face refers to texture -1 of 2"),
+    (lambda d: _set_face(d, 1, n_vertexes=99), r"faces index past the vertex \(103/8\)"),
+    (lambda d: _set_face(d, 0, n_meshverts=60), r"meshvert \(60/12\) lumps"),
+    (lambda d: _set_face(d, 1, n_meshverts=-3), "negative vertex or meshvert offset or count"),
+    (lambda d: _set_face(d, 1, meshvert=-6), "negative vertex or meshvert offset or count"),
+    (lambda d: _set_face(d, 1, vertex=-4), "negative vertex or meshvert offset or count"),
+])
+def test_malformed_bsp_raises_scene_format_error(tmp_path: Path, damage, message: str) -> None:
+    """A truncated or inconsistent BSP raises SceneFormatError naming the problem (never an IndexError,
+    a numpy error or a map silently built from the wrong vertices)."""
+    path = tmp_path / "bad.bsp"
+    path.write_bytes(damage(_map(TWO_WALLS, SPAWN)))
+    with pytest.raises(SceneFormatError, match=message):
+        convert_bsp(path)
+
+
+def test_unusable_sources_raise_typed_errors(tmp_path: Path) -> None:
+    """Only .bsp and .pk3 files are converted, and a pk3 without exactly one map needs ``map_name``."""
+    other = tmp_path / "m.zip"
+    other.write_bytes(_map(TWO_WALLS, SPAWN))
+    with pytest.raises(SceneFormatError, match=r"expected a \.bsp or \.pk3 file"):
+        convert_bsp(other)
+    two = tmp_path / "two.pk3"
+    with zipfile.ZipFile(two, "w") as z:
+        z.writestr("maps/a.bsp", _map(TWO_WALLS, SPAWN))
+        z.writestr("maps/b.bsp", _map(TWO_WALLS, SPAWN))
+    with pytest.raises(SceneFormatError, match=r"holds 2 maps \(\['maps/a.bsp', 'maps/b.bsp'\]\); pass map_name"):
+        convert_bsp(two)
+    assert convert_bsp(two, "b").scene.name == "b"
+    none = tmp_path / "none.pk3"
+    with zipfile.ZipFile(none, "w") as z:
+        z.writestr("textures/test/wall.png", _png(WALL_RGB))
+    with pytest.raises(SceneFormatError, match="holds 0 maps"):
+        convert_bsp(none)
+
+
+def _damage(pk3: Path, member: str) -> None:
+    """Flip a byte of stored member ``member`` of ``pk3``, so that reading it fails its CRC check."""
+    with zipfile.ZipFile(pk3) as z:
+        info = z.getinfo(member)
+    data = bytearray(pk3.read_bytes())
+    name_len, extra_len = struct.unpack_from("<HH", data, info.header_offset + 26)
+    data[info.header_offset + 30 + name_len + extra_len] ^= 0xFF
+    pk3.write_bytes(bytes(data))
+
+
+def test_damaged_pk3_members(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A damaged shader script is skipped with a warning (the map converts without its shaders); a
+    damaged map or texture raises SceneFormatError naming the member, not zipfile.BadZipFile."""
+    textures = [("textures/test/wall", 0, 1), ("textures/test/fence", 0, 1)]
+    path = _pk3(tmp_path / "shader.pk3", textures)
+    _damage(path, "scripts/test.shader")
+    with caplog.at_level("WARNING", logger="rtp"):
+        conv = convert_bsp(path)
+    assert any("skipping shader script scripts/test.shader" in r.getMessage() for r in caplog.records)
+    fence = conv.scene.materials[1]
+    assert fence.alpha_cutoff is None and (fence.texture[..., 3] == 255).all()  # its alphaFunc was not read
+    for member in ("maps/m.bsp", "textures/test/wall.png"):
+        path = _pk3(tmp_path / f"{member.replace('/', '_')}.pk3", textures)
+        _damage(path, member)
+        with pytest.raises(SceneFormatError, match=f"{member} in .* is damaged: Bad CRC-32"):
+            convert_bsp(path)

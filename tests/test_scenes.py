@@ -1,12 +1,15 @@
 """Scene sources: procedural generator, Quake-3 BSP importer (on a BSP the test writes), glTF/OBJ
-through trimesh, the split list and the converted-scene cache. No network."""
+through trimesh, pk3 archives and shader scripts, the split list, the scene index, fetching (apt-get and
+dpkg-deb replaced by a local fake) and the converted-scene cache. No network."""
 
 from __future__ import annotations
 
+import gzip
 import io
 import json
 import math
 import struct
+import sys
 import time
 import zipfile
 from pathlib import Path
@@ -26,9 +29,9 @@ from rtp.capture.scenes import (
     scene_by_name,
 )
 from rtp.capture.scenes._bsp import FACE_DT, TEXTURE_DT, UNIT, VERTEX_DT, q3_angle_to_yaw
-from rtp.capture.scenes._cache import load_scene_npz, save_scene_npz
+from rtp.capture.scenes._cache import CACHE_VERSION, load_scene_npz, save_scene_npz
 from rtp.capture.scenes._materials import pbr_for_path
-from rtp.capture.scenes._pk3 import parse_shaders
+from rtp.capture.scenes._pk3 import Pk3Set, parse_shaders
 from rtp.sdk import RtpError
 
 PIL = pytest.importorskip("PIL.Image")
@@ -404,3 +407,401 @@ def test_fetch_cli_rejects_unlisted(tmp_path: Path, capsys):
     assert rtp_main(["scenes", "fetch", "--cache-dir", str(tmp_path), "--map", "hydronex", "--no-progress"]) == 2
     assert "hydronex" in capsys.readouterr().err
     assert not (tmp_path / "debs").exists()  # nothing was downloaded
+
+
+# -- pk3 archives and shader scripts --------------------------------------------------------------
+
+def _flip_first_data_byte(pk3: Path, member: str) -> None:
+    """Damage member ``member`` of ``pk3`` in place: its first data byte inverted."""
+    with zipfile.ZipFile(pk3) as z:
+        info = z.getinfo(member)
+    data = bytearray(pk3.read_bytes())
+    name_len, extra_len = struct.unpack_from("<HH", data, info.header_offset + 26)
+    data[info.header_offset + 30 + name_len + extra_len] ^= 0xFF
+    pk3.write_bytes(bytes(data))
+
+
+def test_pk3_archives(tmp_path: Path):
+    """Pk3Set: a missing archive is SceneNotFoundError, a file that is not a zip SceneFormatError, a
+    path no archive holds SceneNotFoundError; paths are case-insensitive, the first archive holding one
+    wins, directory entries are not files; ``with`` closes the archives; a damaged member (bad CRC,
+    broken deflate stream) is SceneFormatError naming it, not zipfile.BadZipFile or zlib.error."""
+    first, second = tmp_path / "first.pk3", tmp_path / "second.pk3"
+    with zipfile.ZipFile(first, "w") as z:
+        z.writestr(zipfile.ZipInfo("Textures/"), b"")
+        z.writestr("Textures/Wall.JPG", b"first")
+    with zipfile.ZipFile(second, "w") as z:
+        z.writestr("textures/wall.jpg", b"second")
+        z.writestr("textures/only.jpg", b"only")
+    with pytest.raises(SceneNotFoundError, match="pk3 archive not found: .*absent.pk3"):
+        Pk3Set([first, tmp_path / "absent.pk3"])
+    junk = tmp_path / "junk.pk3"
+    junk.write_bytes(b"PK\x03\x04 cut short")
+    with pytest.raises(SceneFormatError, match=r"junk.pk3 is not a pk3 \(zip\) archive"):
+        Pk3Set([junk])
+    with Pk3Set([first, second]) as pk3:
+        assert pk3.names() == ["textures/only.jpg", "textures/wall.jpg"] and "textures/" not in pk3
+        assert pk3.read("TEXTURES/WALL.jpg") == b"first" and pk3.archive_of("textures/wall.jpg") == first
+        assert pk3.read("textures/only.jpg") == b"only"
+        with pytest.raises(SceneNotFoundError, match="textures/gone.jpg is not in any of"):
+            pk3.read("textures/gone.jpg")
+    assert all(z.fp is None for z in pk3._zips)  # closed
+    for compression in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+        damaged = tmp_path / f"damaged{compression}.pk3"
+        with zipfile.ZipFile(damaged, "w", compression) as z:
+            z.writestr("scripts/a.shader", "textures/a\n{\n surfaceparm nodraw\n}\n" * 20)
+        _flip_first_data_byte(damaged, "scripts/a.shader")
+        with Pk3Set([damaged]) as pk3, pytest.raises(SceneFormatError, match=r"scripts/a.shader in .*damaged\d.pk3 is damaged"):
+            pk3.read("scripts/a.shader")
+
+
+SHADER_DETAILS = """
+textures/test/chrome
+{
+    {
+        map textures/test/chrome.jpg
+        tcGen environment
+    }
+    {
+        map textures/test/chrome2.jpg
+        tcgen environmentModel
+    }
+}
+textures/test/mixed
+{
+    {
+        map textures/test/chrome.jpg
+        tcGen environment
+    }
+    {
+        map textures/test/base.jpg
+    }
+}
+textures/test/anim
+{
+    {
+        animMap 5 textures/test/frame1.jpg textures/test/frame2.jpg
+        blendFunc GL_ONE GL_ZERO
+    }
+}
+textures/test/glass
+{
+    {
+        map textures/test/glass.jpg
+        blendFunc GL_DST_COLOR GL_ONE
+    }
+}
+textures/test/bare
+{
+    surfaceparm nomarks
+}
+textures/test/sloppy
+{
+    q3map_sun 1 1 one 100 45 60
+    q3map_surfacelight lots
+    q3map_lightRGB 1 half 1
+    {
+        map textures/test/sloppy.jpg
+        {
+            map textures/test/nested.jpg
+        }
+    }
+}
+{
+    qer_editorimage textures/test/nameless.jpg
+}
+textures/test/last
+{
+}
+}
+textures/test/after
+{
+}
+"""
+
+
+def test_shader_script_details(caplog: pytest.LogCaptureFixture):
+    """What the converter reads of a shader: environment-mapped stages come last when choosing the
+    image (first of them if all are), ``animMap``'s first frame, explicit ``blendFunc`` factors; a
+    shader with no stages or an opaque GL_ONE GL_ZERO stage is not blended-only; malformed numbers
+    are ignored (the rest of the shader kept), blocks nested too deep and blocks without a name are
+    skipped, and an unbalanced '}' ends the script (logged)."""
+    with caplog.at_level("DEBUG", logger="rtp"):
+        sh = parse_shaders(SHADER_DETAILS)
+    assert list(sh) == ["textures/test/chrome", "textures/test/mixed", "textures/test/anim", "textures/test/glass",
+                        "textures/test/bare", "textures/test/sloppy", "textures/test/last"]
+    assert any("unbalanced '}'" in r.getMessage() for r in caplog.records)
+    chrome = sh["textures/test/chrome"]
+    assert [s.tcgen_environment for s in chrome.stages] == [True, True]
+    assert chrome.first_image() == "textures/test/chrome.jpg"
+    assert sh["textures/test/mixed"].first_image() == "textures/test/base.jpg"
+    (anim,) = sh["textures/test/anim"].stages
+    assert anim.map == "textures/test/frame1.jpg" and anim.blend == ("gl_one", "gl_zero")
+    assert not sh["textures/test/anim"].is_additive_only()
+    assert sh["textures/test/glass"].stages[0].blend == ("gl_dst_color", "gl_one")
+    assert sh["textures/test/glass"].is_additive_only()
+    bare = sh["textures/test/bare"]
+    assert bare.stages == [] and not bare.is_additive_only() and bare.first_image() is None
+    sloppy = sh["textures/test/sloppy"]
+    assert (sloppy.sun, sloppy.surface_light, sloppy.light_rgb) == (None, 0.0, None)
+    assert [s.map for s in sloppy.stages] == ["textures/test/sloppy.jpg"]
+
+
+# -- glTF / OBJ / PLY materials and geometry ------------------------------------------------------
+
+QUAD_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+QUAD_F = np.array([[0, 1, 2], [0, 2, 3]])
+QUAD_UV = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+
+
+def test_mesh_file_materials(tmp_path: Path):
+    """Materials from the file: glTF emission and alpha MASK (its cutoff, 0.5 by default), an OBJ
+    diffuse colour and Phong exponent (roughness sqrt(2 / (n + 2))), vertex and face colours as their
+    mean; a geometry without texture coordinates gets zero uvs."""
+    trimesh = pytest.importorskip("trimesh")
+    PBR = trimesh.visual.material.PBRMaterial
+
+    def textured(material):
+        return trimesh.Trimesh(QUAD_V, QUAD_F, visual=trimesh.visual.TextureVisuals(uv=QUAD_UV, material=material),
+                               process=False)
+
+    files = {
+        "glow.glb": textured(PBR(baseColorFactor=[0.2, 0.4, 0.6, 1.0], emissiveFactor=[1.0, 0.5, 0.0], alphaMode="MASK",
+                                 alphaCutoff=0.3)),
+        "mask.glb": textured(PBR(baseColorFactor=[51, 102, 153, 255], alphaMode="MASK")),
+        "kd.obj": textured(trimesh.visual.material.SimpleMaterial(diffuse=[51, 102, 153, 255], glossiness=10.0)),
+        "vertex.ply": trimesh.Trimesh(QUAD_V, QUAD_F, vertex_colors=[[255, 0, 0, 255]] * 2 + [[0, 0, 255, 255]] * 2,
+                                      process=False),
+        "face.ply": trimesh.Trimesh(QUAD_V, QUAD_F, face_colors=[[255, 0, 0, 255], [0, 255, 0, 255]], process=False),
+    }
+    mats = {}
+    for name, mesh in files.items():
+        mesh.export(tmp_path / name)
+        scene = scenes.load_mesh_file(tmp_path / name)
+        mats[name] = scene.materials[0]
+        if name.endswith(".ply"):
+            np.testing.assert_array_equal(scene.meshes[0].uvs, 0.0)
+    glow, mask, kd = mats["glow.glb"], mats["mask.glb"], mats["kd.obj"]
+    assert glow.base_color == pytest.approx((0.2, 0.4, 0.6, 1.0)) and glow.emissive == pytest.approx((1.0, 0.5, 0.0))
+    assert glow.alpha_cutoff == pytest.approx(0.3) and mask.alpha_cutoff == 0.5
+    assert mask.base_color == pytest.approx((0.2, 0.4, 0.6, 1.0)) and mask.emissive == (0.0, 0.0, 0.0)
+    assert kd.texture is None and kd.base_color == pytest.approx((0.2, 0.4, 0.6, 1.0))
+    assert kd.roughness == pytest.approx(math.sqrt(2.0 / 12.0))
+    assert mats["vertex.ply"].base_color == pytest.approx((0.5, 0.0, 0.5, 1.0))
+    assert mats["face.ply"].base_color == pytest.approx((0.5, 0.5, 0.0, 1.0))
+
+
+def test_mesh_file_geometry_fallbacks(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """A mirroring node transform flips the winding so triangles still face their normals; normals
+    stored as zero vectors are recomputed; a texture that fails to decode leaves the material
+    untextured (with a warning); geometry without faces (a point cloud) is skipped."""
+    trimesh, mesh = _textured_quad()
+    sc = trimesh.Scene()
+    sc.add_geometry(trimesh.Trimesh(QUAD_V, QUAD_F, process=False), node_name="mirrored",
+                    transform=np.diag([-1.0, 1.0, 1.0, 1.0]))
+    sc.add_geometry(trimesh.PointCloud(QUAD_V + 5.0), node_name="points")
+    sc.export(tmp_path / "mirror.glb")
+    s = scenes.load_mesh_file(tmp_path / "mirror.glb")
+    (m,) = s.meshes
+    p = m.positions[m.indices.astype(np.int64)]
+    geometric = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    np.testing.assert_allclose(geometric / np.linalg.norm(geometric, axis=1, keepdims=True), [[0, 0, 1]] * 2, atol=1e-6)
+    np.testing.assert_allclose(m.normals, [[0, 0, 1]] * 4, atol=1e-6)
+    assert s.bounds[1][0] == pytest.approx(0.0)  # the quad, mirrored; no points
+    trimesh.Trimesh(QUAD_V, QUAD_F, vertex_normals=np.zeros((4, 3)), process=False).export(tmp_path / "zero.glb")
+    np.testing.assert_allclose(scenes.load_mesh_file(tmp_path / "zero.glb").meshes[0].normals, [[0, 0, 1]] * 4, atol=1e-6)
+    glb = bytearray(mesh.export(file_type="glb"))
+    at = glb.find(b"IDAT")  # the PNG's pixel data, overwritten in place: it opens, but does not decode
+    n = struct.unpack(">I", glb[at - 4 : at])[0]
+    glb[at + 4 : at + 4 + n] = b"\0" * n
+    (tmp_path / "badtex.glb").write_bytes(bytes(glb))
+    with caplog.at_level("WARNING", logger="rtp"):
+        bad = scenes.load_mesh_file(tmp_path / "badtex.glb")
+    assert bad.materials[0].texture is None and bad.triangle_count == 2
+    assert any("could not convert texture image" in r.getMessage() for r in caplog.records)
+
+
+def test_mesh_file_format_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A file without triangles or one trimesh cannot read is SceneFormatError; without trimesh,
+    loading says what to install."""
+    trimesh = pytest.importorskip("trimesh")
+    trimesh.PointCloud(QUAD_V).export(tmp_path / "points.ply")
+    (tmp_path / "lines.obj").write_text("v 0 0 0\nv 1 0 0\nl 1 2\n")
+    for name in ("points.ply", "lines.obj"):
+        with pytest.raises(SceneFormatError, match=f"{name} contains no triangles"):
+            scenes.load_mesh_file(tmp_path / name)
+    (tmp_path / "junk.glb").write_bytes(b"glTF junk")
+    with pytest.raises(SceneFormatError, match="trimesh could not read .*junk.glb"):
+        scenes.load_mesh_file(tmp_path / "junk.glb")
+    monkeypatch.setitem(sys.modules, "trimesh", None)
+    with pytest.raises(ImportError, match=r"needs trimesh and pillow: pip install 'rtp\[scenes\]'"):
+        scenes.load_mesh_file(tmp_path / "junk.glb")
+
+
+# -- fetching: apt-get and dpkg-deb replaced by a local fake ------------------------------------------
+
+SPLITS = "train: [m1, m2]\nvalidation: []\ntest: [m3]\n"
+OA = "usr/share/games/openarena/baseoa"
+
+
+def _pk3_bytes(files: dict[str, bytes | str]) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for name, data in files.items():
+            z.writestr(name, data)
+    return buf.getvalue()
+
+
+def _packages() -> dict[str, dict[str, bytes]]:
+    """The files of fake Debian packages: map m1 in an OpenArena archive whose textures and shaders
+    are in another archive of the group, map m2 gzipped as libirrlicht-doc ships its level."""
+    return {
+        "openarena-081-maps": {f"{OA}/map-m1.pk3": _pk3_bytes({"maps/m1.bsp": write_test_bsp()})},
+        "openarena-081-textures": {f"{OA}/pak-tex.pk3": _pk3_bytes({
+            "textures/test/wall.jpg": _jpg((200, 30, 30)), "textures/test/other.png": _png((20, 40, 220)),
+            "scripts/test.shader": SHADER})},
+        "openarena-oacmp1": {},
+        "libirrlicht-doc": {"usr/share/doc/irrlicht/media/map-m2.pk3.gz": gzip.compress(
+            _pk3_bytes({"maps/m2.bsp": write_test_bsp()}))},
+    }
+
+
+def _fake_apt(monkeypatch: pytest.MonkeyPatch, packages: dict[str, dict[str, bytes]]) -> list[list[str]]:
+    """Replace ``_fetch._run``, the one function that runs ``apt-get download`` (the network) and
+    ``dpkg-deb -x``: the fake writes ``<package>_1.0_all.deb`` (a zip of the package's files here) and
+    unpacks it. Returns the commands run."""
+    calls: list[list[str]] = []
+
+    def run(cmd, cwd: Path) -> None:
+        calls.append(list(cmd))
+        if list(cmd[:2]) == ["apt-get", "download"]:
+            for pkg in cmd[2:]:
+                (cwd / f"{pkg}_1.0_all.deb").write_bytes(_pk3_bytes(packages[pkg]))
+        else:
+            assert list(cmd[:2]) == ["dpkg-deb", "-x"], cmd
+            with zipfile.ZipFile(cmd[2]) as z:
+                z.extractall(cmd[3])
+
+    monkeypatch.setattr(scenes._fetch, "_run", run)
+    return calls
+
+
+def test_fetch_downloads_unpacks_once_and_indexes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """fetch: downloads only the packages not in ``debs/``, unpacks each package once, gunzips
+    ``*.pk3.gz``, indexes the maps (paths relative to the cache) with the OpenArena archives as one
+    texture group, converts with ``convert=True``, and works without tqdm; a listed map the
+    packages lack is FetchError."""
+    monkeypatch.setitem(sys.modules, "tqdm.auto", None)
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    calls = _fake_apt(monkeypatch, _packages())
+    out = scenes.fetch(cache, ["m1", "m2"], splits=splits, convert=True)
+    assert calls[0] == ["apt-get", "download", *scenes.PACKAGES]
+    assert sorted(c[2].rsplit("/", 1)[-1] for c in calls[1:]) == sorted(f"{p}_1.0_all.deb" for p in scenes.PACKAGES)
+    index = json.loads((cache / "index.json").read_text())
+    m1, tex, m2 = f"root/{OA}/map-m1.pk3", f"root/{OA}/pak-tex.pk3", "pk3/map-m2.pk3"
+    assert index["maps"] == {"m1": m1, "m2": m2}
+    assert index["groups"] == {"openarena": [m1, tex], "map-m2": [m2]}
+    assert out == {"m1": cache / m1, "m2": cache / m2}
+    assert sorted(p.name for p in (cache / "converted").iterdir()) == [f"m1.v{CACHE_VERSION}.npz", f"m2.v{CACHE_VERSION}.npz"]
+    wall = scene_by_name("m1", cache, splits=splits).materials[0]
+    assert wall.texture is not None and wall.texture[0, 0, 0] > 150  # from the group's texture archive
+    assert scene_by_name("m2", cache, splits=splits).materials[0].texture is None  # a stand-alone archive
+    assert scenes.scene_list(cache, splits) == [
+        {"name": "m1", "split": "train", "fetched": True, "converted": True},
+        {"name": "m2", "split": "train", "fetched": True, "converted": True},
+        {"name": "m3", "split": "test", "fetched": False, "converted": False}]
+    calls.clear()
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / m1}
+    assert calls == []  # nothing downloaded or unpacked again
+    with pytest.raises(scenes.FetchError, match=r"not found in the packages .*: \['m3'\]"):
+        scenes.fetch(cache, ["m1", "m3"], splits=splits, progress=False)
+
+
+@pytest.mark.parametrize(("package", "files", "message"), [
+    ("libirrlicht-doc", {"usr/share/doc/irrlicht/media/map-m2.pk3.gz": b"\x1f\x8b\x08 cut short"},
+     r"could not gunzip .*map-m2.pk3.gz"),
+    ("libirrlicht-doc", {"usr/share/doc/irrlicht/media/map-m2.pk3.gz": b"not gzip"}, r"could not gunzip .*map-m2.pk3.gz"),
+    ("openarena-081-maps", {f"{OA}/map-m1.pk3": b"not a zip"}, r"map-m1.pk3 is not a pk3 \(zip\) archive"),
+])
+def test_fetch_damaged_archives_raise_fetch_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, package: str,
+                                                  files: dict[str, bytes], message: str):
+    """A damaged archive in the packages is FetchError naming it (not gzip.BadGzipFile, EOFError or
+    zipfile.BadZipFile), and leaves no half-written archive behind."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    _fake_apt(monkeypatch, _packages() | {package: files})
+    with pytest.raises(scenes.FetchError, match=message):
+        scenes.fetch(tmp_path / "cache", ["m1"], splits=splits, progress=False)
+    assert not list((tmp_path / "cache" / "pk3").glob("*.tmp"))
+
+
+def test_run_turns_command_failures_into_fetch_errors(tmp_path: Path):
+    """apt-get/dpkg-deb failures are FetchError: a missing program (saying what to do instead), a
+    command that cannot start, a non-zero exit (with the last 5 lines of its stderr)."""
+    from rtp.capture.scenes._fetch import _run
+
+    with pytest.raises(scenes.FetchError, match=r"rtp-no-such-tool not found: fetching needs a Debian/Ubuntu system"):
+        _run(["rtp-no-such-tool", "download"], tmp_path)
+    with pytest.raises(scenes.FetchError, match="could not run"):
+        _run([sys.executable, "-c", "pass"], tmp_path / "no-such-folder")
+    script = "import sys; sys.stderr.write(''.join(f'line {i}\\n' for i in range(7))); sys.exit(3)"
+    with pytest.raises(scenes.FetchError, match=r"failed with exit code 3: line 2 \| line 3 \| line 4 \| line 5 \| line 6$"):
+        _run([sys.executable, "-c", script], tmp_path)
+    _run([sys.executable, "-c", "pass"], tmp_path)  # success: no error
+
+
+def _fake_cache(tmp_path: Path) -> Path:
+    """A fetched cache whose one archive holds the tiny map as the listed map oa_dm1."""
+    cache = tmp_path / "cache"
+    (cache / "pk3").mkdir(parents=True)
+    with zipfile.ZipFile(cache / "pk3" / "x.pk3", "w") as z:
+        z.writestr("maps/oa_dm1.bsp", write_test_bsp())
+    index = {"version": 1, "maps": {"oa_dm1": "pk3/x.pk3"}, "groups": {"x": ["pk3/x.pk3"]}}
+    (cache / "index.json").write_text(json.dumps(index))
+    return cache
+
+
+def test_unreadable_converted_cache_is_rebuilt(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """A converted-scene file that is empty, truncated or not an npz is ignored (with a warning) and
+    rebuilt, not an EOFError or zipfile.BadZipFile."""
+    cache = _fake_cache(tmp_path)
+    good = scene_by_name("oa_dm1", cache)
+    path = cache / "converted" / f"oa_dm1.v{CACHE_VERSION}.npz"
+    whole = path.read_bytes()
+    for damaged in (b"", whole[: len(whole) // 2], b"junk" * 8):
+        path.write_bytes(damaged)
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp"):
+            assert scene_by_name("oa_dm1", cache).triangle_count == good.triangle_count
+        assert any("ignoring unreadable cache" in r.getMessage() for r in caplog.records)
+        assert load_scene_npz(path)[0].triangle_count == good.triangle_count
+
+
+def test_scene_index_and_split_file_errors(tmp_path: Path):
+    """A scene index that is not JSON, not an object or lacks its tables is SceneFormatError (one of
+    another version SceneNotFoundError), each saying to fetch again, and scene_list still lists the maps
+    as not fetched; a listed map missing from the cache is SceneNotFoundError; a split file with unknown
+    keys is SceneFormatError; an unknown split name is UnlistedMapError."""
+    cache = _fake_cache(tmp_path)
+    index = cache / "index.json"
+    for text, err, message in [("{trunc", SceneFormatError, "is not a scene index .*Expecting"),
+                               ("[]", SceneFormatError, "is not a scene index \\(a JSON list"),
+                               ('{"version": 1}', SceneFormatError, "lacks the 'maps' or 'groups' table"),
+                               ('{"version": 0, "maps": {}, "groups": {}}', SceneNotFoundError, "another rtp version")]:
+        index.write_text(text)
+        with pytest.raises(err, match=f"{message}.*run `rtp scenes fetch"):
+            scene_by_name("oa_dm1", cache)
+        assert not any(m["fetched"] for m in scenes.scene_list(cache))
+    index.write_text(json.dumps({"version": 1, "maps": {"oa_dm1": "pk3/x.pk3"}, "groups": {}}))
+    with pytest.raises(SceneNotFoundError, match="'oa_dm2' is not in the scene cache"):
+        scenes.check_map("oa_dm2", cache)
+    with pytest.raises(SceneNotFoundError, match="'oa_dm2' is not in the fetched packages"):
+        scenes._fetch.convert_from_cache("oa_dm2", cache)
+    extra = tmp_path / "extra.yaml"
+    extra.write_text("train: [a]\nvalidation: []\ntest: []\nholdout: [b]\n")
+    with pytest.raises(SceneFormatError, match=r"unknown keys \['holdout'\]"):
+        load_splits(extra)
+    with pytest.raises(UnlistedMapError, match="unknown split 'training'"):
+        scenes.map_names("training")

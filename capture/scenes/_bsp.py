@@ -452,8 +452,11 @@ def _face_kinds(bsp: _Bsp, tex_kind: np.ndarray) -> np.ndarray:
     vertex and meshvert lumps."""
     faces, ftex, n_tex, src = bsp.faces, bsp.face_tex, len(bsp.textures), bsp.source
     if len(faces) and (ftex.min() < 0 or ftex.max() >= n_tex):
-        raise SceneFormatError(f"{src}: a face refers to texture {ftex.max()} of {n_tex}")
+        bad = ftex[(ftex < 0) | (ftex >= n_tex)][0]
+        raise SceneFormatError(f"{src}: a face refers to texture {bad} of {n_tex}")
     if len(faces):
+        if min(int(faces[k].min()) for k in ("vertex", "n_vertexes", "meshvert", "n_meshverts")) < 0:
+            raise SceneFormatError(f"{src}: a face has a negative vertex or meshvert offset or count")
         vmax = (faces["vertex"].astype(np.int64) + faces["n_vertexes"]).max()
         mmax = (faces["meshvert"].astype(np.int64) + faces["n_meshverts"]).max()
         if vmax > len(bsp.verts) or mmax > len(bsp.meshverts):

@@ -23,6 +23,7 @@ import shutil
 import subprocess
 import time
 import zipfile
+import zlib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -162,8 +163,12 @@ def _scan_archives(root: Path, pk3_dir: Path) -> dict:
         out = pk3_dir / gz.name[:-3]
         if not out.exists():
             tmp = out.with_suffix(".tmp")
-            with gzip.open(gz, "rb") as src, open(tmp, "wb") as dst:
-                shutil.copyfileobj(src, dst)
+            try:
+                with gzip.open(gz, "rb") as src, open(tmp, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
+            except (OSError, EOFError, zlib.error) as err:  # BadGzipFile is an OSError, a cut file an EOFError
+                tmp.unlink(missing_ok=True)
+                raise FetchError(f"could not gunzip {gz}: {err}") from err
             tmp.replace(out)
     archives = {p.resolve() for p in [*root.rglob("*.pk3"), *pk3_dir.glob("*.pk3")] if p.is_file()}
     maps: dict[str, str] = {}
@@ -172,11 +177,15 @@ def _scan_archives(root: Path, pk3_dir: Path) -> dict:
         # OpenArena archives share textures and shader scripts; others stand alone
         group = "openarena" if "openarena" in a.parts or "baseoa" in a.parts else a.stem
         groups.setdefault(group, []).append(str(a))
-        with zipfile.ZipFile(a) as z:
-            for n in z.namelist():
-                low = n.lower()
-                if low.startswith("maps/") and low.endswith(".bsp"):
-                    maps.setdefault(Path(low).stem, str(a))
+        try:
+            with zipfile.ZipFile(a) as z:
+                names = z.namelist()
+        except zipfile.BadZipFile as err:
+            raise FetchError(f"{a} is not a pk3 (zip) archive: {err}") from err
+        for n in names:
+            low = n.lower()
+            if low.startswith("maps/") and low.endswith(".bsp"):
+                maps.setdefault(Path(low).stem, str(a))
     # paths relative to the cache folder, so the folder can move
     base = root.parent.resolve()
     rel = lambda s: str(Path(s).relative_to(base)) if Path(s).is_relative_to(base) else s  # noqa: E731
@@ -226,9 +235,9 @@ def fetch(
     for d in _progress(todo, desc="unpack", unit="deb", disable=not progress or not todo):
         _run(["dpkg-deb", "-x", str(d), str(root)], cache)
         have.append(d.name)
-        stamp.write_text("\n".join(have))
+        _write_text(stamp, "\n".join(have))
     index = _scan_archives(root, cache / "pk3")
-    (cache / "index.json").write_text(json.dumps(index, indent=1, sort_keys=True))
+    _write_text(cache / "index.json", json.dumps(index, indent=1, sort_keys=True))
     absent = [m for m in wanted if m not in index["maps"]]
     if absent:
         raise FetchError(f"maps listed in scenes.yaml but not found in the packages {list(PACKAGES)}: {absent}")
@@ -239,15 +248,31 @@ def fetch(
     return {m: cache / index["maps"][m] for m in wanted}
 
 
+def _write_text(path: Path, text: str) -> None:
+    """Write ``path`` atomically: a fetch killed mid-write leaves the previous file, never half of one."""
+    from rtp.sdk.files import atomic_output
+
+    with atomic_output(path) as tmp:
+        tmp.write_text(text)
+
+
 # -- loading --------------------------------------------------------------------------------------
 
 def _read_index(cache: Path) -> dict:
     p = cache / "index.json"
     if not p.is_file():
         raise SceneNotFoundError(f"no scene index at {p}: run `rtp scenes fetch --cache-dir {cache}` first")
-    index = json.loads(p.read_text())
+    again = f"run `rtp scenes fetch --cache-dir {cache}` again"
+    try:
+        index = json.loads(p.read_text())
+    except ValueError as err:  # a truncated or overwritten file (also UnicodeDecodeError)
+        raise SceneFormatError(f"{p} is not a scene index ({err}): {again}") from err
+    if not isinstance(index, dict):
+        raise SceneFormatError(f"{p} is not a scene index (a JSON {type(index).__name__}, not an object): {again}")
     if index.get("version") != INDEX_VERSION:
         raise SceneNotFoundError(f"{p} was written by another rtp version: run `rtp scenes fetch` again")
+    if not isinstance(index.get("maps"), dict) or not isinstance(index.get("groups"), dict):
+        raise SceneFormatError(f"{p} lacks the 'maps' or 'groups' table of a scene index: {again}")
     return index
 
 
@@ -261,7 +286,7 @@ def _load_cached(name: str, cache: Path, index: dict) -> tuple[Scene, np.ndarray
         try:
             scene, sky, _ = load_scene_npz(path)
             return scene, sky
-        except (SceneFormatError, OSError, ValueError, KeyError) as err:
+        except (SceneFormatError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
             log.warning("ignoring unreadable cache %s: %s", path, err)
     conv = convert_from_cache(name, cache, index)
     save_scene_npz(path, conv.scene, conv.sky_triangles, conv.stats)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import re
 import zipfile
+import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,7 +66,10 @@ class Pk3Set:
             k, real = self._index[path.lower()]
         except KeyError:
             raise SceneNotFoundError(f"{path} is not in any of {[str(p) for p in self.paths]}") from None
-        return self._zips[k].read(real)
+        try:
+            return self._zips[k].read(real)
+        except (zipfile.BadZipFile, zlib.error, EOFError) as err:  # a damaged member: bad CRC, broken deflate stream
+            raise SceneFormatError(f"{real} in {self.paths[k]} is damaged: {err}") from err
 
     def archive_of(self, path: str) -> Path:
         return self.paths[self._index[path.lower()][0]]
