@@ -414,6 +414,42 @@ def test_evaluation_matches_the_engine_path(dataset: Path, model: Path) -> None:
     assert oracle.shading_rates(s).shape == (2, 4)
 
 
+
+def test_evaluation_on_coarser_hardware_tiles_scores_the_pooled_values(dataset: Path, model: Path) -> None:
+    """tile_size=2T (hardware tiles twice the model's, `rtp evaluate --tile-size`): each hardware tile
+    is predicted as the worst model tile it covers, as predict() gives an engine, and scored against
+    the targets pooled to that tile."""
+    rep = evaluate(model, dataset, tile_size=2 * T, baselines=False)
+    ps, gs = [], []
+    for i in range(3):
+        pred = np.clip(_expected_raw(i) + 0.05, 0, 1)
+        ps.append(sdk.pool_tiles(pred, 2, higher_is_better=False))
+        gs.append(np.clip(TargetStore(dataset).load(f"s{i}", "jnyang", 2 * T)[:2] / 0.5, 0, 1))
+    p, g = (np.concatenate([a.ravel() for a in x]) for x in (ps, gs))
+    row = rep.row("quality", "model", "all scenes", "all")
+    assert row["n"] == p.size == 3 * 2 * 1 * 2
+    for k, v in _hand_scores(p, g).items():
+        assert row[k] == pytest.approx(v, rel=1e-5, abs=1e-7), k
+    assert rep.row("decisions", "oracle")["n"] == 3 * 2
+
+
+def test_a_run_on_training_scenes_only_is_flagged(dataset: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A model whose provenance lists every evaluated scene among its training scenes: the report
+    says these scores are not a test (first note, and a logged warning); one new scene clears it."""
+    weights = np.zeros((2, 4), np.float32)
+    weights[0, 2] = 1.0
+    trained = build_onnx(tmp_path / "t.onnx", weights=weights, tile=T,
+                         metadata={**META, "provenance": {"train_scenes": ["a", "b"]}})
+    with caplog.at_level("WARNING", logger="rtp"):
+        rep = evaluate(trained, dataset, baselines=False)
+    assert rep.scene_roles == {"a": "train", "b": "train"}
+    assert rep.notes[0] == "every evaluated scene was a training scene of this model: these scores are not a test"
+    assert "every evaluated scene was a training scene" in caplog.text and "not a test" in rep.to_markdown()
+    half = build_onnx(tmp_path / "h.onnx", weights=weights, tile=T,
+                      metadata={**META, "provenance": {"train_scenes": ["a"], "val_scenes": ["b"]}})
+    rep = evaluate(half, dataset, baselines=False)
+    assert rep.scene_roles == {"a": "train", "b": "validation"} and not any("not a test" in n for n in rep.notes)
+
 def test_evaluate_options_and_errors(dataset: Path, model: Path, tmp_path: Path) -> None:
     rep = evaluate(model, dataset, scenes=["b"], baselines=False, threshold=0.3)
     assert rep.samples == 1 and rep.threshold == 0.3 and {r["method"] for r in rep.decisions} == {"model", "oracle"}
