@@ -68,6 +68,20 @@ def pyrender_or_skip() -> Any:
         pytest.skip(f"no headless GL platform for pyrender: {exc}")
 
 
+
+def damage_zip_member(archive: Path, member: str) -> None:
+    """Damage member ``member`` of the zip (pk3) ``archive`` in place: its first data byte inverted, so
+    reading it fails its CRC check (stored) or its deflate stream (compressed)."""
+    import struct
+    import zipfile
+
+    with zipfile.ZipFile(archive) as z:
+        info = z.getinfo(member)
+    data = bytearray(archive.read_bytes())
+    name_len, extra_len = struct.unpack_from("<HH", data, info.header_offset + 26)
+    data[info.header_offset + 30 + name_len + extra_len] ^= 0xFF
+    archive.write_bytes(bytes(data))
+
 def base_metadata(**overrides: Any) -> dict[str, Any]:
     d: dict[str, Any] = {
         "metric": "jnyang",

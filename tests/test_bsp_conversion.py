@@ -21,6 +21,8 @@ from rtp.capture.scenes._bsp import FACE_DT, TEXTURE_DT, UNIT, VERTEX_DT
 from rtp.scene import Scene, SunLight
 from rtp.sdk import srgb_to_linear
 
+from .conftest import damage_zip_member
+
 SURF_SKY, SURF_NODRAW, CONTENTS_FOG = 0x4, 0x80, 0x40
 
 SHADERS = """
@@ -470,22 +472,12 @@ def test_unusable_sources_raise_typed_errors(tmp_path: Path) -> None:
         convert_bsp(none)
 
 
-def _damage(pk3: Path, member: str) -> None:
-    """Flip a byte of stored member ``member`` of ``pk3``, so that reading it fails its CRC check."""
-    with zipfile.ZipFile(pk3) as z:
-        info = z.getinfo(member)
-    data = bytearray(pk3.read_bytes())
-    name_len, extra_len = struct.unpack_from("<HH", data, info.header_offset + 26)
-    data[info.header_offset + 30 + name_len + extra_len] ^= 0xFF
-    pk3.write_bytes(bytes(data))
-
-
 def test_damaged_pk3_members(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     """A damaged shader script is skipped with a warning (the map converts without its shaders); a
     damaged map or texture raises SceneFormatError naming the member, not zipfile.BadZipFile."""
     textures = [("textures/test/wall", 0, 1), ("textures/test/fence", 0, 1)]
     path = _pk3(tmp_path / "shader.pk3", textures)
-    _damage(path, "scripts/test.shader")
+    damage_zip_member(path, "scripts/test.shader")
     with caplog.at_level("WARNING", logger="rtp"):
         conv = convert_bsp(path)
     assert any("skipping shader script scripts/test.shader" in r.getMessage() for r in caplog.records)
@@ -493,6 +485,6 @@ def test_damaged_pk3_members(tmp_path: Path, caplog: pytest.LogCaptureFixture) -
     assert fence.alpha_cutoff is None and (fence.texture[..., 3] == 255).all()  # its alphaFunc was not read
     for member in ("maps/m.bsp", "textures/test/wall.png"):
         path = _pk3(tmp_path / f"{member.replace('/', '_')}.pk3", textures)
-        _damage(path, member)
+        damage_zip_member(path, member)
         with pytest.raises(SceneFormatError, match=f"{member} in .* is damaged: Bad CRC-32"):
             convert_bsp(path)

@@ -382,25 +382,33 @@ def test_a_corrupted_graph_is_refused_without_printing(tmp_path: Path, capfd: py
     assert out == "" and "EP Error" not in err
 
 
-def test_a_provider_that_cannot_build_the_session_falls_back_to_cpu(
-    tiny_model: Callable[..., Path], monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
-) -> None:
+def _fake_provider(monkeypatch: pytest.MonkeyPatch, build: Callable[..., object]) -> None:
+    """onnxruntime as the SDK sees it, listing a FakeExecutionProvider before CPU and building its
+    sessions with ``build(path, sess_options, providers, **kw)``."""
     import types
 
     import onnxruntime
 
     from rtp.sdk import _predictor
 
+    fake = types.SimpleNamespace(
+        InferenceSession=build, SessionOptions=onnxruntime.SessionOptions,
+        get_available_providers=lambda: ["FakeExecutionProvider", "CPUExecutionProvider"],
+    )
+    monkeypatch.setattr(_predictor, "_ort", lambda: fake)
+
+
+def test_a_provider_that_cannot_build_the_session_falls_back_to_cpu(
+    tiny_model: Callable[..., Path], monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    import onnxruntime
+
     def session(path: str, sess_options: object = None, providers: list[str] | None = None, **kw: object) -> object:
         if providers != ["CPUExecutionProvider"]:
             raise RuntimeError("FakeExecutionProvider: no device")
         return onnxruntime.InferenceSession(path, sess_options=sess_options, providers=providers, **kw)
 
-    fake = types.SimpleNamespace(
-        InferenceSession=session, SessionOptions=onnxruntime.SessionOptions,
-        get_available_providers=lambda: ["FakeExecutionProvider", "CPUExecutionProvider"],
-    )
-    monkeypatch.setattr(_predictor, "_ort", lambda: fake)
+    _fake_provider(monkeypatch, session)
     path = tiny_model()
     with caplog.at_level(logging.WARNING, logger="rtp"):
         p = sdk.load(path, providers=["FakeExecutionProvider"])
@@ -415,20 +423,12 @@ def test_a_session_that_quietly_lands_on_another_provider(
 ) -> None:
     """onnxruntime may build a session for a provider and still place it on CPU (a provider that
     accepts no node of the graph): a warning naming both, an error with strict=True."""
-    import types
-
     import onnxruntime
-
-    from rtp.sdk import _predictor
 
     def session(path: str, sess_options: object = None, providers: list[str] | None = None, **kw: object) -> object:
         return onnxruntime.InferenceSession(path, sess_options=sess_options, providers=["CPUExecutionProvider"], **kw)
 
-    fake = types.SimpleNamespace(
-        InferenceSession=session, SessionOptions=onnxruntime.SessionOptions,
-        get_available_providers=lambda: ["FakeExecutionProvider", "CPUExecutionProvider"],
-    )
-    monkeypatch.setattr(_predictor, "_ort", lambda: fake)
+    _fake_provider(monkeypatch, session)
     path = tiny_model()
     with caplog.at_level(logging.WARNING, logger="rtp"):
         assert sdk.load(path, providers="FakeExecutionProvider").provider == "CPUExecutionProvider"  # one name

@@ -34,6 +34,8 @@ from rtp.capture.scenes._materials import pbr_for_path
 from rtp.capture.scenes._pk3 import Pk3Set, parse_shaders
 from rtp.sdk import RtpError
 
+from .conftest import damage_zip_member
+
 PIL = pytest.importorskip("PIL.Image")
 
 
@@ -411,16 +413,6 @@ def test_fetch_cli_rejects_unlisted(tmp_path: Path, capsys):
 
 # -- pk3 archives and shader scripts --------------------------------------------------------------
 
-def _flip_first_data_byte(pk3: Path, member: str) -> None:
-    """Damage member ``member`` of ``pk3`` in place: its first data byte inverted."""
-    with zipfile.ZipFile(pk3) as z:
-        info = z.getinfo(member)
-    data = bytearray(pk3.read_bytes())
-    name_len, extra_len = struct.unpack_from("<HH", data, info.header_offset + 26)
-    data[info.header_offset + 30 + name_len + extra_len] ^= 0xFF
-    pk3.write_bytes(bytes(data))
-
-
 def test_pk3_archives(tmp_path: Path):
     """Pk3Set: a missing archive is SceneNotFoundError, a file that is not a zip SceneFormatError, a
     path no archive holds SceneNotFoundError; paths are case-insensitive, the first archive holding one
@@ -450,7 +442,7 @@ def test_pk3_archives(tmp_path: Path):
         damaged = tmp_path / f"damaged{compression}.pk3"
         with zipfile.ZipFile(damaged, "w", compression) as z:
             z.writestr("scripts/a.shader", "textures/a\n{\n surfaceparm nodraw\n}\n" * 20)
-        _flip_first_data_byte(damaged, "scripts/a.shader")
+        damage_zip_member(damaged, "scripts/a.shader")
         with Pk3Set([damaged]) as pk3, pytest.raises(SceneFormatError, match=r"scripts/a.shader in .*damaged\d.pk3 is damaged"):
             pk3.read("scripts/a.shader")
 
