@@ -26,12 +26,14 @@ from ._dataset import (
     write_png,
 )
 from ._images import check_image_output, figure_image, save_image
-from ._pool import worker_pool, worker_threads
+from ._pool import tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
 from ._ray import RayExecutorError, RayWorkerError
 from ._targets import BASE_TILE, TargetError, TargetStore, compute_targets, pool_targets
 
 __all__ = [
+    "tick_queue",
+    "with_ticks",
     "worker_pool",
     "worker_threads",
     "BASE_TILE",

@@ -10,7 +10,6 @@ stopped: existing samples are skipped and never half-written.
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
 import numbers
 import os
 import platform
@@ -27,7 +26,7 @@ import numpy as np
 from rtp.sdk import ALL_RATES, ParameterError
 
 from ._dataset import DatasetReader, DatasetWriter
-from ._pool import worker_pool
+from ._pool import tick_queue, with_ticks, worker_pool
 
 __all__ = [
     "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "check_scene", "load_scene",
@@ -363,26 +362,23 @@ def capture(
         for a in args:
             merge(_run_job(*a, queue=_Q()))
     else:
-        ctx = mp.get_context("spawn")
-        with ctx.Manager() as manager:
-            queue = manager.Queue()
-            with worker_pool(workers or 1) as pool:
-                futures = [pool.submit(_run_job, *a, queue=queue) for a in args]
-                pending = set(futures)
+        queue = tick_queue()
 
-                def drain() -> None:
-                    nonlocal done
-                    while not queue.empty():
-                        done += queue.get()
-                        if progress:
-                            progress(done, total)
+        def drain() -> None:
+            nonlocal done
+            while not queue.empty():
+                done += queue.get()
+                if progress:
+                    progress(done, total)
 
-                while pending:
-                    finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                    drain()
-                    for f in finished:
-                        merge(f.result())
+        with worker_pool(workers or 1, ticks=queue) as pool:
+            pending = {pool.submit(with_ticks, _run_job, *a) for a in args}
+            while pending:
+                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
                 drain()
+                for f in finished:
+                    merge(f.result())
+        drain()  # (after the workers exited: their last ticks are flushed)
     unseen: dict[str, list[float]] = {}
     for sample in DatasetReader(out):
         unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))

@@ -7,6 +7,11 @@ the workers at once, and every worker watches its parent and exits within a seco
 (``kill -9`` of ``rtp targets`` included). Work already finished is on disk (samples and targets
 are written atomically); what a terminated worker was computing is redone by the next run.
 
+Progress comes back through a plain queue handed to the workers when they start
+(:func:`tick_queue`, ``worker_pool(n, ticks=q)``, ``pool.submit(with_ticks, fn, ...)``), not a
+``multiprocessing.Manager``: a manager is a server process of its own, and ``kill -9`` of ``rtp
+capture --workers 2`` left it (and with it multiprocessing's resource tracker) running for good.
+
 Each worker computes on its share of the cores (:func:`worker_threads`): the thread pools of
 OpenMP (torch), the BLAS and Mesa's llvmpipe are limited to it before they start, and a worker's
 onnxruntime sessions are given it (``rtp play``). Without that, two workers on two cores ran four
@@ -24,8 +29,9 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 #: Seconds between a worker's checks that its parent is still alive.
 PARENT_POLL_S = 0.5
@@ -48,9 +54,14 @@ def worker_threads(workers: int) -> int:
     return max(1, _cores() // max(1, workers))
 
 
-def _init_worker(parent: int, threads: int) -> None:
-    """Worker initializer: its thread pools on its share of the cores, and exit as soon as the process
-    that started the pool is gone."""
+_TICKS: Any = None  # in a pool worker: the pool's tick queue (worker_pool(ticks=...)), else None
+
+
+def _init_worker(parent: int, threads: int, ticks: Any = None) -> None:
+    """Worker initializer: its thread pools on its share of the cores, the pool's tick queue, and exit
+    as soon as the process that started the pool is gone."""
+    global _TICKS
+    _TICKS = ticks
     for var in THREAD_VARIABLES:
         os.environ.setdefault(var, str(threads))
     torch = sys.modules.get("torch")  # imported while the initializer was unpickled: tell it directly
@@ -72,12 +83,25 @@ def _watch_parent(parent: int) -> None:
     threading.Thread(target=watch, name="rtp-parent-watch", daemon=True).start()
 
 
+def tick_queue() -> Any:
+    """A queue for :func:`worker_pool`'s ``ticks``: the workers put progress on it, the job reads it
+    (``get``, ``empty``). It lives in the processes that use it, with no server process to outlive them."""
+    return mp.get_context("spawn").Queue()
+
+
+def with_ticks(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """Run in a pool worker (``pool.submit(with_ticks, fn, *args)``): ``fn(*args, queue=ticks, **kwargs)``
+    with the pool's tick queue (None without one)."""
+    return fn(*args, queue=_TICKS, **kwargs)
+
+
 @contextlib.contextmanager
-def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor]:
     """A ``spawn`` process pool of ``workers`` processes that die with the job, each on
-    :func:`worker_threads` threads (module docstring)."""
+    :func:`worker_threads` threads (module docstring); ``ticks``, a :func:`tick_queue`, is handed to
+    every worker for :func:`with_ticks`."""
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                               initializer=_init_worker, initargs=(os.getpid(), worker_threads(workers)))
+                               initializer=_init_worker, initargs=(os.getpid(), worker_threads(workers), ticks))
     try:
         yield pool
     except BaseException:

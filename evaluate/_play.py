@@ -566,22 +566,21 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     }
 
 
-def _worker_path(job: dict[str, Any], ticks: Any) -> dict[str, Any]:
-    return _play_path(job, ticks.put)
+def _worker_path(job: dict[str, Any], queue: Any) -> dict[str, Any]:
+    return _play_path(job, queue.put)
 
 
 def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
                 progress: Callable[[int], None] | None) -> dict[str, dict[str, Any]]:
     """The paths in ``workers`` processes (each its own renderer), progress ticks through a queue."""
-    import multiprocessing as mp
     import queue
 
-    from rtp.capture import worker_pool, worker_threads
+    from rtp.capture import tick_queue, with_ticks, worker_pool, worker_threads
 
     threads = worker_threads(workers)
-    with mp.get_context("spawn").Manager() as manager, worker_pool(workers) as pool:
-        ticks = manager.Queue()
-        futures = {pool.submit(_worker_path, {**job, "path": p, "threads": threads}, ticks): p for p in paths}
+    ticks = tick_queue()
+    with worker_pool(workers, ticks=ticks) as pool:
+        futures = {pool.submit(with_ticks, _worker_path, {**job, "path": p, "threads": threads}): p for p in paths}
         while not all(f.done() for f in futures):
             try:
                 n = ticks.get(timeout=0.5)
@@ -589,7 +588,11 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
                 continue
             if progress is not None:
                 progress(n)
-        return {p: f.result() for f, p in futures.items()}
+    while not ticks.empty():  # (the workers exited: their last ticks are flushed)
+        n = ticks.get()
+        if progress is not None:
+            progress(n)
+    return {p: f.result() for f, p in futures.items()}
 
 
 def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fail_thr: float, fail_hib: bool,

@@ -85,6 +85,56 @@ def test_capture_survives_a_kill(tmp_path: Path) -> None:
     assert not list(samples.glob(".*.tmp"))
 
 
+
+def _children(pid: int) -> list[int]:
+    """The live processes whose parent is ``pid`` (/proc; zombies are dead)."""
+    out = []
+    for p in Path("/proc").iterdir():
+        try:
+            state, ppid = (p / "stat").read_text().rsplit(")", 1)[1].split()[:2] if p.name.isdigit() else ("Z", "0")
+        except OSError:
+            continue
+        if int(ppid) == pid and state != "Z":
+            out.append(int(p.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process parents from /proc (Linux)")
+def test_a_parallel_capture_killed_outright_leaves_no_process_behind(tmp_path: Path) -> None:
+    """kill -9 of `rtp capture --workers 2`: every process it started exits within seconds (the pool's
+    workers watch their parent; progress comes back on a plain queue, not a multiprocessing Manager,
+    whose server process, with the resource tracker, ran on for good)."""
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "rtp.cli", "capture", "--scene", "procedural:3,procedural:4", "--per-scene", "20",
+           "--size", "96x64", "--workers", "2", "--no-progress", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    kids: list[int] = []
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and proc.poll() is None:
+            kids = _children(proc.pid)
+            if len(kids) >= 3 and any((out / "samples").glob("*.npz")):  # two workers (and a tracker) at work
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None and len(kids) >= 3, "the capture finished or never started its workers"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        deadline = time.time() + 20
+        while time.time() < deadline and any(_alive(k) for k in kids):
+            time.sleep(0.1)
+        assert not [k for k in kids if _alive(k)], "processes of the killed capture are still running"
+    finally:
+        for k in [proc.pid, *kids]:
+            if _alive(k):
+                os.kill(k, signal.SIGKILL)
+
 def test_preview_writes_the_format_its_extension_names(tmp_path: Path) -> None:
     from PIL import Image
 
