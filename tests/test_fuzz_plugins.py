@@ -1131,6 +1131,9 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
     ("moderngl: Renderer settings", {"ctx": 1.5}, sdk.RtpError),
     ("moderngl: Renderer settings", {"fxaa": "no"}, sdk.RtpError),
     ("moderngl: Renderer settings", {"profile": [True]}, sdk.RtpError),
+    # an int past float's range passed the range check (exact int-float comparison), then float() overflowed
+    # (RTP_FUZZ_SCALE=10, 2026-12-03)
+    ("moderngl: Renderer settings", {"anisotropy": 10**400}, sdk.RtpError),
     # render: a camera that is not one was an AttributeError; a NaN or zero exposure drew a black/NaN frame;
     # a junk previous frame was an AttributeError, its wrong-sized colour a bare ValueError from write_texture
     ("moderngl: Renderer.render arguments and previous frames", {"camera": None}, sdk.RtpError),
@@ -1223,6 +1226,9 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
     ),
     ("moderngl: Adapter constructor", {"channels": list(PAPER), "width": 2**31, "height": 8}, sdk.ParameterError),
     ("moderngl: Adapter constructor", {"channels": list(PAPER), "width": 10**30, "height": 8}, sdk.ParameterError),
+    # an int tolerance past float's range passed `< inf` (exact comparison) and overflowed in float() (2026-12-03)
+    ("moderngl: Adapter constructor", {"channels": list(PAPER), "width": 8, "height": 8, "tolerance": 10**400},
+     sdk.ParameterError),
     # Adapter.inputs: junk textures were AttributeErrors (.use / .components), a texture of another size was
     # sampled silently, NaN or singular matrices gave NaN planes, non-integer components TypeErrors
     ("moderngl: Adapter.inputs with hostile GBufferTextures", {"albedo": "x"}, sdk.ParameterError),

@@ -26,7 +26,7 @@ inputs come from one code path.
 from __future__ import annotations
 
 import logging
-import math
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -179,7 +179,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if depth_kind not in ("linear", "window"):
             raise ParameterError(f"depth_kind must be 'linear' or 'window', got {depth_kind!r}", "depth_kind")
         number = isinstance(tolerance, (int, float, np.integer, np.floating)) and not isinstance(tolerance, bool)
-        if not number or not 0.0 <= tolerance < math.inf:
+        if not number or not 0.0 <= tolerance <= sys.float_info.max:  # (an int past float's range passed `< inf`)
             raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
                                  "tolerance")
         if not isinstance(albedo_linear, (bool, np.bool_)):

@@ -524,7 +524,12 @@ class Renderer:
         """Each setting of the constructor in its range, as a :class:`RendererError` naming it: out of
         range they failed as a GLSL compiler dump (``ao_samples=-1``) or not at all (``exposure_key=nan``)."""
         def number(v: Any) -> bool:
-            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            if not isinstance(v, (int, float, np.integer, np.floating)) or isinstance(v, bool):
+                return False
+            try:
+                return math.isfinite(float(v))
+            except OverflowError:  # an int past float's range (compared exactly, it passed `v < inf`)
+                return False
 
         ranges = {"ao_samples": (1, cls.MAX_AO_SAMPLES, True), "max_point_lights": (1, cls.MAX_POINT_LIGHTS, True),
                   "ao_radius": (0.0, math.inf, False), "ao_strength": (0.0, math.inf, False),
@@ -534,7 +539,7 @@ class Renderer:
             lo, hi, integral = ranges[name]
             if name == "shadow_distance" and v is None:
                 continue
-            ok = number(v) and (not integral or isinstance(v, (int, np.integer))) and lo <= v <= hi and v < math.inf
+            ok = number(v) and (not integral or isinstance(v, (int, np.integer))) and lo <= v <= hi
             if name in ("ao_radius", "exposure_key", "shadow_distance") and ok:
                 ok = v > 0
             if not ok:
