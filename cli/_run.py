@@ -38,10 +38,12 @@ def one_line(message: str) -> str:
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse's parser (its subcommands' too), with two fixes: ``--flag=--`` gives the flag the value
-    ``--``, refused or taken by its type like any other (Python 3.11's argparse strips the ``--`` and
-    passes an empty list, which reached the commands, ``float([])``, ``[].split``, as a TypeError); and
-    a usage error is one line even when it quotes an argument holding a newline."""
+    """argparse's parser (its subcommands' too), with two fixes: ``--flag=--``, and a literal ``--``
+    given as a positional after the ``--`` that ends the options (``rtp metric flip -- -- b.png``), give
+    the value ``--``, refused or taken by its type like any other (Python 3.11's argparse strips the
+    ``--`` and passes an empty list, which reached the commands, ``float([])``, ``[].split``, Pillow's
+    ``open([])``, as a TypeError or AttributeError); and a usage error is one line even when it quotes
+    an argument holding a newline."""
 
     def error(self, message: str) -> NoReturn:
         """argparse's usage error, on one line whatever the arguments it quotes hold: a control
@@ -49,7 +51,9 @@ class Parser(argparse.ArgumentParser):
         super().error(one_line(message))
 
     def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
-        if action.option_strings and action.nargs is None and arg_strings == ["--"]:
+        # (a positional is handed ["--"] only for a literal "--": the "--" that ends the options goes
+        # with the strings before it, and a single value must include one that is not an option)
+        if action.nargs is None and arg_strings == ["--"]:
             value = self._get_value(action, "--")
             self._check_value(action, value)
             return value

@@ -122,3 +122,14 @@ def test_scenes_list_shows_each_maps_split_and_cache_state(tmp_path: Path, capsy
         assert main(["scenes", "list", "--cache-dir", str(cache), "--json"]) == 0
         assert [(r["name"], r["split"], r["fetched"], r["converted"]) for r in json.loads(capsys.readouterr().out)] == [
             (m, s, m in want, want.get(m) == "converted") for s in ("train", "validation", "test") for m in splits[s]]
+
+
+def test_a_literal_double_dash_after_the_options_end_is_a_value(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """After the `--` that ends the options, a second `--` is a value (POSIX): here an image path that
+    does not exist, not the empty list Python 3.11's argparse passed on (Pillow's open([]) raised)."""
+    a, _, _, _ = _image_pair(tmp_path)
+    assert main(["metric", "flip", "--", "--", str(a)]) == 2
+    err = capsys.readouterr().err
+    assert "'--': no such image" in err and "Traceback" not in err
+    assert main(["metric", "flip", "--", str(a), "--json"]) == 2  # ("--json" is a path here too)
+    assert "'--json': no such image" in capsys.readouterr().err
