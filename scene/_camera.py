@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtp.sdk import ParameterError
+
 from ._checks import real, vector
 
 __all__ = ["Camera"]
@@ -34,6 +36,10 @@ class Camera:
         real("Camera", "yaw", self.yaw)
         real("Camera", "pitch", self.pitch)
         real("Camera", "fov_y", self.fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
+        t = math.tan(math.radians(float(self.fov_y)) / 2.0)
+        if not (t > 0.0 and math.isfinite(1.0 / t)):  # (5e-324 degrees: a ZeroDivisionError in projection())
+            raise ParameterError(f"Camera.fov_y: expected a field of view whose projection is finite, got {self.fov_y!r} "
+                                 "degrees", "fov_y")
         real("Camera", "near", self.near, 0.0, lo_open=True)
         real("Camera", "far", self.far, float(self.near), lo_open=True)
 
@@ -66,6 +72,9 @@ class Camera:
         n, fa = self.near, self.far
         m = np.zeros((4, 4))
         m[0, 0] = f / aspect
+        if not math.isfinite(m[0, 0]):  # (an aspect of 5e-324 gave an infinite matrix)
+            raise ParameterError(f"Camera.projection.aspect: expected a width / height whose projection is finite, got "
+                                 f"{aspect!r} (fov_y {self.fov_y!r})", "aspect")
         m[1, 1] = f
         m[2, 2] = (fa + n) / (n - fa)
         m[2, 3] = 2.0 * fa * n / (n - fa)

@@ -26,6 +26,11 @@ BAD: list[tuple[str, Any, str]] = [
     ("camera inf yaw", lambda: Camera((0.0, 0.0, 0.0), yaw=math.inf), "Camera.yaw"),
     ("camera fov 0", lambda: Camera((0.0, 0.0, 0.0), fov_y=0.0), "Camera.fov_y"),
     ("camera fov 180", lambda: Camera((0.0, 0.0, 0.0), fov_y=180.0), "Camera.fov_y"),
+    # a denormal field of view: tan() of it is 0 (a ZeroDivisionError in projection(); rooms fuzz suite at
+    # RTP_FUZZ_SCALE=10, 2026-12-03), or its inverse infinite
+    ("camera fov 5e-324", lambda: Camera((0.0, 0.0, 0.0), fov_y=5e-324), "Camera.fov_y: .*projection is finite"),
+    ("camera fov 1e-308", lambda: Camera((0.0, 0.0, 0.0), fov_y=1e-308), "Camera.fov_y: .*projection is finite"),
+    ("camera aspect 5e-324", lambda: Camera((0.0, 0.0, 0.0)).projection(5e-324), "Camera.projection.aspect"),
     ("camera near 0", lambda: Camera((0.0, 0.0, 0.0), near=0.0), "Camera.near"),
     ("camera far before near", lambda: Camera((0.0, 0.0, 0.0), near=1.0, far=0.5), "Camera.far"),
     ("camera string pitch", lambda: Camera((0.0, 0.0, 0.0), pitch="5"), "Camera.pitch"),  # type: ignore[arg-type]
