@@ -197,6 +197,14 @@ def _session(ort: Any, model_path: Path, opts: Any, requested: list[ProviderSpec
     return session
 
 
+def _usable_cores() -> int:
+    """The logical cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def load(
     path: str | os.PathLike[str],
     *,
@@ -213,7 +221,8 @@ def load(
     ``path`` is a file path, or the name of a shipped model (``"jnyang"`` or ``"jnyang.onnx"``).
     ``providers`` are onnxruntime execution providers in order of preference (names or
     ``(name, options)`` pairs); the default is every available provider, CPU last. ``threads`` sets
-    onnxruntime's intra-op thread count. ``metadata`` (a dict, a :class:`ModelMetadata` or the path
+    onnxruntime's intra-op thread count (more than the cores the process may run on is logged as a
+    warning: each of those threads spin-waits on a core). ``metadata`` (a dict, a :class:`ModelMetadata` or the path
     of a YAML sidecar) replaces the metadata embedded in the model, for a model that carries none.
     With ``strict=True`` a requested provider that is unavailable, or a session that does not run on
     the first requested provider, raises :class:`ProviderUnavailableError` instead of falling back.
@@ -257,6 +266,12 @@ def load(
     opts.log_severity_level = 3
     if threads:
         opts.intra_op_num_threads = threads
+        if threads > (cores := _usable_cores()):
+            log.warning(
+                "threads=%d is more than the %d cores this process may run on: onnxruntime starts that many "
+                "worker threads, which spin-wait when the session is built and during each run, and take the "
+                "cores from every other thread of the process", threads, cores
+            )
     if not spin_between_runs:
         # The worker threads stop spinning when a run ends (the tail's session, built with the same
         # options, too): the engine's own threads get the cores back between frames.

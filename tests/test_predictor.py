@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -108,6 +109,26 @@ def test_properties(tiny_model: Callable[..., Path]) -> None:
     assert p.provider == "CPUExecutionProvider"
     assert p.tile_size == 16 and p.static_size is None
     assert "jnyang" in repr(p)
+
+
+def test_more_threads_than_cores_loads_with_a_warning(
+    tiny_model: Callable[..., Path], caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from rtp.sdk import _predictor
+
+    monkeypatch.setattr(_predictor, "_usable_cores", lambda: 2)
+    with caplog.at_level("WARNING", logger="rtp.sdk"):
+        sdk.load(tiny_model(), threads=2)
+        assert not caplog.records
+        p = sdk.load(tiny_model(), threads=3)
+    assert [r.getMessage() for r in caplog.records] == [
+        "threads=3 is more than the 2 cores this process may run on: onnxruntime starts that many worker threads, "
+        "which spin-wait when the session is built and during each run, and take the cores from every other thread "
+        "of the process"
+    ]
+    assert p.predict(np.zeros((4, 16, 16), np.float32)).shape[-2:] == (1, 1)  # still loaded and running
+    monkeypatch.undo()
+    assert 1 <= _predictor._usable_cores() <= (os.cpu_count() or 1)
 
 
 @pytest.mark.parametrize(

@@ -162,6 +162,8 @@ CASES: list[tuple[str, Callable[[], Any], type[Exception], str]] = [
     ("load None", lambda: sdk.load(None), sdk.ParameterError, "path"),  # type: ignore[arg-type]
     ("load a name too long", lambda: sdk.load("a" * 10000), sdk.ModelNotFoundError, "no model file"),
     ("load threads 2**40", lambda: sdk.load("jnyang", threads=2**40), sdk.ParameterError, "[0, 4096]"),
+    ("load threads 4097", lambda: sdk.load("jnyang", threads=4097), sdk.ParameterError, "[0, 4096]"),
+    ("load threads -1", lambda: sdk.load("jnyang", threads=-1), sdk.ParameterError, "[0, 4096]"),
     ("load providers an int", lambda: sdk.load("jnyang", providers=5), sdk.ProviderUnavailableError, "providers"),  # type: ignore[arg-type]
 ]
 
