@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import copy
+import inspect
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -105,6 +106,78 @@ def test_bad_checkpoint_files(tmp_path: Path) -> None:
     torch.save({"state_dict": {}}, other)
     with pytest.raises(checkpoint.CheckpointError, match="not an rtp checkpoint"):
         checkpoint.load(other)
+
+
+def _refuse_large_layers(monkeypatch: pytest.MonkeyPatch, where: str) -> None:
+    """Conv2d and Linear check each layer before it allocates: one of over a million weights, or a
+    thousandth layer, fails the test unless it is built on torch's meta device (a real one of the old
+    checkpoint code took 21 GB and the process), and so does a ten-thousandth layer on meta (whose
+    module objects still take memory: a billion of them filled 15 GB)."""
+    built, planned = [0], [0]
+
+    def guarded(init: Any) -> Any:
+        def run(self: torch.nn.Module, *a: Any, **k: Any) -> None:
+            planned[0] += 1
+            assert planned[0] <= 10**4, f"building layer {planned[0]} even on meta, {where}"
+            if torch.get_default_device().type != "meta":
+                args = inspect.signature(init).bind(self, *a, **k).arguments
+                ins, outs = (args.get(n) for n in (("in_channels", "out_channels") if "in_channels" in args
+                                                   else ("in_features", "out_features")))
+                built[0] += 1
+                assert ins * outs <= 10**6 and built[0] <= 1000, f"building layer {built[0]}, {ins}x{outs}, {where}"
+            init(self, *a, **k)
+        return run
+
+    for cls in (torch.nn.Conv2d, torch.nn.Linear):
+        monkeypatch.setattr(cls, "__init__", guarded(cls.__init__))
+
+
+@pytest.mark.parametrize("change", [
+    {"name": "MetricNet", "config": {"width": 24390}},  # the fuzz run's file: 21 GB of weights, the process OOM-killed
+    {"name": "FastNet", "config": {"width": 2**20}},
+    {"name": "FastNet", "config": {"depth": 10**9}},  # a billion blocks: a loop, before any allocation
+    {"name": "FastNet", "config": {"head_width": 10**7}},
+])
+def test_a_checkpoint_whose_architecture_is_not_its_weights_allocates_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, change: dict[str, Any]
+) -> None:
+    """A damaged architecture.config is refused before the network it names is built in memory."""
+    from rtp.train.model import FastNet
+
+    net = _net() if change["name"] == "MetricNet" else FastNet()
+    good = tmp_path / "good.pt"
+    checkpoint.save(good, net, base_metadata())
+    raw = torch.load(good, map_location="cpu", weights_only=True)
+    raw["architecture"]["config"].update(change["config"])
+    bad = tmp_path / "bad.pt"
+    torch.save(raw, bad)
+
+    _refuse_large_layers(monkeypatch, f"from a file of {bad.stat().st_size:,} bytes")
+    key = next(iter(change["config"]))
+    with pytest.raises(checkpoint.CheckpointError, match=f"weights do not fit the architecture.*{key}|is \\["):
+        checkpoint.load(bad)
+    assert isinstance(checkpoint.load(good).net, type(net))  # the guard lets a real one through
+
+
+@pytest.mark.parametrize("arch, sizes, words", [
+    ("fast", {"width": 30000}, r"would hold 24,302,280,004 parameters \(90.5 GiB"),  # a width with extra digits
+    ("paper", {"width": 30000}, "would hold"),
+    ("fast", {"head_width": 10**7}, "head_width 10000000"),
+    ("fast", {"depth": 257}, r"depth in \[0, 256\]"),
+    ("fast", {"depth": 10**9}, r"depth in \[0, 256\]"),  # refused before a billion-block loop
+    ("fast", {"depth": 300, "coarse": 300}, r"depth in \[0, 256\]"),
+    ("fast", {"depth": 3, "coarse": 10**9, "coarse_width": 8}, "coarse"),
+])
+def test_networks_past_the_size_limits_are_refused_before_their_memory_is_taken(
+    monkeypatch: pytest.MonkeyPatch, arch: str, sizes: dict[str, int], words: str
+) -> None:
+    from rtp.train.model import MAX_PARAMETERS, build_network
+
+    _refuse_large_layers(monkeypatch, f"build_network({arch!r}, **{sizes})")
+    with pytest.raises(sdk.ParameterError, match=words):
+        build_network(arch, 4, 4, 16, **sizes)
+    big = build_network("fast", 4, 4, 16, width=512, depth=3)  # large but real networks are built
+    assert 10**6 < sum(p.numel() for p in big.parameters()) <= MAX_PARAMETERS
 
 
 def test_the_fast_network_layout() -> None:

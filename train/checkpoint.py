@@ -102,6 +102,34 @@ def save(
     return Path(path)
 
 
+def _check_fits_weights(p: Path, cls: type[MetricNet] | type[FastNet], arch: dict[str, Any],
+                        state: dict[str, Any]) -> None:
+    """Refuse an architecture whose weights are not the file's before any of its memory is allocated.
+
+    A damaged or hand-made ``architecture.config`` (a width of 24,390 took 21 GB and the process) is
+    built on torch's ``meta`` device first, which allocates nothing, and its tensor shapes compared with
+    the file's: the real network is then exactly as large as the weights already read. Counts of layers
+    are bounded by the file's tensors first, as each layer holds at least one.
+    """
+    config = arch["config"]
+    for key in ("depth", "coarse"):
+        v = config.get(key)
+        if isinstance(v, int) and not isinstance(v, bool) and v > len(state):
+            raise CheckpointError(f"{p}: weights do not fit the architecture: {key} {v} needs more weight tensors "
+                                  f"than the file's {len(state)}")
+    try:
+        with torch.device("meta"):
+            shapes = {k: tuple(v.shape) for k, v in cls(**config).state_dict().items()}
+    except (KeyError, TypeError, RuntimeError, ValueError) as err:
+        raise CheckpointError(f"{p}: weights do not fit the architecture {arch}: {err}") from err
+    stored = {k: tuple(v.shape) for k, v in state.items() if isinstance(v, torch.Tensor)}
+    wrong = sorted(k for k in shapes.keys() & stored.keys() if shapes[k] != stored[k])
+    if wrong:
+        k, more = wrong[0], f" ({len(wrong) - 1} more)" if len(wrong) > 1 else ""
+        raise CheckpointError(f"{p}: weights do not fit the architecture {arch}: {k} is {list(stored[k])} in the file, "
+                              f"the architecture's is {list(shapes[k])}{more}")
+
+
 def load(path: str | os.PathLike[str]) -> Checkpoint:
     """Read a checkpoint, rebuild the network in eval mode and validate its metadata."""
     if not isinstance(path, (str, os.PathLike)):
@@ -143,6 +171,7 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
     cls = _ARCHITECTURES.get(name) if isinstance(name, str) else None
     if cls is None:
         raise CheckpointError(f"{p}: unknown architecture {arch.get('name')!r}; known: {', '.join(_ARCHITECTURES)}")
+    _check_fits_weights(p, cls, arch, raw["state_dict"])
     try:
         net = cls(**arch["config"])
         net.load_state_dict(raw["state_dict"])
