@@ -1248,6 +1248,16 @@ def test_train_refuses_a_combination_naming_its_field_before_reading_data(fields
     assert info.value.name == key and not (tmp_path / "m.pt").exists()
 
 
+@pytest.mark.parametrize("fields", [{"arch": "fast", "width": 30000}, {"arch": "paper", "width": 30000},
+                                    {"arch": "fast", "depth": 10**6}])
+def test_a_network_too_large_to_build_is_refused_before_reading_data(fields: dict[str, Any], tmp_path: Path) -> None:
+    """The network is sized on torch's meta device by check_config: a mistyped width is a one-line
+    ParameterError instead of a 14 GB allocation after the data was read (here it does not exist)."""
+    with pytest.raises(sdk.ParameterError, match="would hold|depth in"):
+        train(TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), **fields))
+    assert not (tmp_path / "m.pt").exists()
+
+
 def test_train_takes_a_config_object() -> None:
     with pytest.raises(sdk.ParameterError, match="train: expected a TrainConfig, got dict"):
         train({"data": "d", "metric": "jnyang", "out": "m.pt"})  # type: ignore[arg-type]

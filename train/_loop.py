@@ -651,6 +651,22 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}")
     if cfg.context and cfg.augment:
         raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
+    with torch.device("meta"):  # the network itself (its size included), before any data is read; allocates nothing
+        _network(cfg)
+
+
+def _network(cfg: TrainConfig) -> Network:
+    """The untrained network ``cfg`` describes (its outputs: the metric's rates, then each auxiliary metric's)."""
+    return build_network(cfg.arch, len(cfg.inputs), len(cfg.outputs) * (1 + len(cfg.aux_metrics)), cfg.tile,
+                         width=cfg.width, head=cfg.head, depth=cfg.depth, stem=cfg.stem, grow=cfg.grow,
+                         stem_layers=cfg.stem_layers, energy_norm=cfg.energy_norm, max_width=cfg.max_width,
+                         separable=cfg.separable, head_width=cfg.head_width, context_pool=cfg.context_pool,
+                         block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
+                         contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
+                         tail_width=cfg.tail_width, contrast_max=cfg.contrast_max,
+                         contrast_stored=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith((".blocks", ".tiles")),
+                         contrast_tiles=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".tiles"),
+                         coarse=cfg.coarse, coarse_width=cfg.coarse_width)
 
 
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
@@ -690,16 +706,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     n_out = len(cfg.outputs)
-    net = build_network(cfg.arch, len(cfg.inputs), n_out * (1 + len(cfg.aux_metrics)), cfg.tile, width=cfg.width, head=cfg.head,
-                        depth=cfg.depth, stem=cfg.stem, grow=cfg.grow, stem_layers=cfg.stem_layers,
-                        energy_norm=cfg.energy_norm, max_width=cfg.max_width, separable=cfg.separable,
-                        head_width=cfg.head_width, context_pool=cfg.context_pool,
-                        block_contrast=tuple(cfg.inputs.index(c) for c in cfg.block_contrast),
-                        contrast_cell=cfg.contrast_cell, separable_tail=cfg.separable_tail,
-                        tail_width=cfg.tail_width, contrast_max=cfg.contrast_max,
-                        contrast_stored=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith((".blocks", ".tiles")),
-                        contrast_tiles=bool(cfg.block_contrast) and cfg.block_contrast[0].endswith(".tiles"),
-                        coarse=cfg.coarse, coarse_width=cfg.coarse_width)
+    net = _network(cfg)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)

@@ -56,8 +56,15 @@ from rtp.sdk import (
     rate_size,
 )
 
-__all__ = ["ARCHS", "HEADS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec", "MetricNet", "Network",
-           "StoredBlockContrast", "TileContrast", "build_network", "haar_details", "keep_outputs", "layer_plan"]
+__all__ = ["ARCHS", "HEADS", "MAX_BLOCKS", "MAX_PARAMETERS", "BlockContrast", "EnergyNorm", "FastNet", "LayerSpec",
+           "MetricNet", "Network", "StoredBlockContrast", "TileContrast", "build_network", "haar_details", "keep_outputs",
+           "layer_plan"]
+
+#: Most parameters :func:`build_network` builds (400 MB of float32 weights; rtp's networks hold 4,500-15,000):
+#: a width or head typed with extra digits is refused before its memory is allocated, not OOM-killed.
+MAX_PARAMETERS = 100_000_000
+#: Most blocks (``depth``, ``coarse``) of the fast network.
+MAX_BLOCKS = 256
 
 #: ``paper``: the last block is conv -> ReLU -> BatchNorm -> sigmoid as in the paper's table;
 #: ``linear``: conv -> BatchNorm -> sigmoid (no output can die).
@@ -500,9 +507,9 @@ class FastNet(nn.Module):
         super().__init__()
         if tile not in TILE_SIZES:
             raise ParameterError(f"tile must be one of {TILE_SIZES}, got {tile}")
-        if width < 2 or depth < 0 or stem not in (1, 2, 4, 8) or grow not in (1, 2):
-            raise ParameterError(f"expected width >= 2, depth >= 0, stem in (1, 2, 4, 8) and grow 1 or 2, got {width}, "
-                             f"{depth}, {stem}, {grow}")
+        if width < 2 or not 0 <= depth <= MAX_BLOCKS or stem not in (1, 2, 4, 8) or grow not in (1, 2):
+            raise ParameterError(f"expected width >= 2, depth in [0, {MAX_BLOCKS}], stem in (1, 2, 4, 8) and grow 1 or 2, "
+                             f"got {width}, {depth}, {stem}, {grow}")
         if max_width and (grow == 1 or max_width < width):
             raise ParameterError(f"max_width caps grow 2's channels: expected 0 (none), or >= width ({width}) with grow 2, "
                              f"got {max_width} with grow {grow}")
@@ -520,7 +527,7 @@ class FastNet(nn.Module):
                              f"{head_width}")
         if context_pool and (context_pool < 3 or context_pool % 2 == 0):
             raise ParameterError(f"context_pool must be 0 (none) or an odd window of at least 3 tiles, got {context_pool}")
-        if coarse < 0 or (coarse and (depth <= pools or coarse_width < 2)):
+        if not 0 <= coarse <= MAX_BLOCKS or (coarse and (depth <= pools or coarse_width < 2)):
             raise ParameterError(f"coarse: expected 0 (none), or the blocks at twice the tile's scale after the first block at "
                              f"tile resolution (a depth over the {pools} pooled blocks, coarse_width >= 2), got coarse "
                              f"{coarse} with depth {depth} and coarse_width {coarse_width}")
@@ -706,13 +713,26 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
     if not isinstance(block_contrast, (tuple, list)) or not all(
             isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in block_contrast):
         raise ParameterError(f"block_contrast: expected input channel indices, got {block_contrast!r}")
-    if arch == "paper":
-        return MetricNet(in_channels, out_channels, tile, width, head)
-    if arch == "fast":
+    if not isinstance(arch, str) or arch not in ARCHS:
+        raise ParameterError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
+
+    def build() -> Network:
+        if arch == "paper":
+            return MetricNet(in_channels, out_channels, tile, width, head)
         return FastNet(in_channels, out_channels, tile, width, depth, stem, grow, stem_layers, energy_norm, max_width,
                        separable, head_width, context_pool, block_contrast, contrast_cell, separable_tail, tail_width,
                        contrast_max, contrast_stored, contrast_tiles, coarse, coarse_width)
-    raise ParameterError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
+
+    try:  # first on torch's meta device, which allocates nothing: its size is known before its memory is taken
+        with torch.device("meta"):
+            n = sum(p.numel() for p in build().parameters())
+    except RuntimeError as err:  # (a size past what torch can describe)
+        raise ParameterError(f"the {arch} network of these sizes cannot be built: {err}") from err
+    if n > MAX_PARAMETERS:
+        raise ParameterError(f"the {arch} network would hold {n:,} parameters ({4 * n / 2**30:.1f} GiB of weights), more "
+                             f"than {MAX_PARAMETERS:,}: check the widths (width {width}, head_width {head_width}, "
+                             f"tail_width {tail_width}, coarse_width {coarse_width}, max_width {max_width})")
+    return build()
 
 
 def keep_outputs(net: FastNet, n: int) -> FastNet:
