@@ -24,6 +24,7 @@ time as before: docs/scaling.md). A variable the user set is kept.
 from __future__ import annotations
 
 import contextlib
+import logging
 import multiprocessing as mp
 import os
 import sys
@@ -32,6 +33,8 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
+
+log = logging.getLogger("rtp.capture")
 
 #: Seconds between a worker's checks that its parent is still alive.
 PARENT_POLL_S = 0.5
@@ -100,6 +103,10 @@ def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor
     """A ``spawn`` process pool of ``workers`` processes that die with the job, each on
     :func:`worker_threads` threads (module docstring); ``ticks``, a :func:`tick_queue`, is handed to
     every worker for :func:`with_ticks`."""
+    if workers > (cores := _cores()):
+        log.warning("%d worker processes on the %d core%s this process may run on: each is a whole renderer or "
+                    "metric process (hundreds of MB, torch's for targets), and more processes than cores add "
+                    "memory, not speed", workers, cores, "" if cores == 1 else "s")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
                                initializer=_init_worker, initargs=(os.getpid(), worker_threads(workers), ticks))
     try:

@@ -268,9 +268,9 @@ def load(
         opts.intra_op_num_threads = threads
         if threads > (cores := _usable_cores()):
             log.warning(
-                "threads=%d is more than the %d cores this process may run on: onnxruntime starts that many "
+                "threads=%d is more than the %d core%s this process may run on: onnxruntime starts that many "
                 "worker threads, which spin-wait when the session is built and during each run, and take the "
-                "cores from every other thread of the process", threads, cores
+                "cores from every other thread of the process", threads, cores, "" if cores == 1 else "s"
             )
     if not spin_between_runs:
         # The worker threads stop spinning when a run ends (the tail's session, built with the same

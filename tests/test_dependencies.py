@@ -218,3 +218,19 @@ def test_pool_workers_compute_on_their_share_of_the_cores() -> None:
     assert got["share"] == int(share)
     assert got["seen"] == {v: "3" if v == "LP_NUM_THREADS" else share for v in THREAD_VARIABLES}
     assert got["torch"] == int(share)  # torch, imported in the worker after the pool set its threads
+
+
+def test_a_pool_past_the_cores_runs_with_a_warning(caplog: pytest.LogCaptureFixture,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    from rtp.capture import _pool, worker_pool
+
+    monkeypatch.setattr(_pool, "_cores", lambda: 1)
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        with worker_pool(1) as pool:
+            assert pool.submit(abs, -1).result(timeout=60) == 1
+        assert not caplog.records
+        with worker_pool(2) as pool:
+            assert pool.submit(abs, -2).result(timeout=60) == 2  # still runs
+    assert [r.getMessage().split(":")[0] for r in caplog.records] == [
+        "2 worker processes on the 1 core this process may run on"
+    ]
