@@ -73,7 +73,16 @@ def classify(target: Target, value: Any) -> tuple[str, BaseException | None]:
 
 # -- shared building blocks ---------------------------------------------------------------------
 
-_WORK = Path(tempfile.mkdtemp(prefix="rtp-fuzz-"))
+def scratch_folder(prefix: str) -> Path:
+    """A temporary folder for a fuzz module's files, removed when the process ends."""
+    import atexit
+
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    return folder
+
+
+_WORK = scratch_folder("rtp-fuzz-")  # (a plain mkdtemp before: one folder left in /tmp per process that imported this)
 _MODEL = Path(sdk.load("jnyang").path or "")
 _MODEL_BYTES = _MODEL.read_bytes()
 _PRED = sdk.load(_MODEL)
@@ -84,9 +93,15 @@ json_scalars = st.one_of(
     st.none(), st.booleans(), st.integers(min_value=-(2**70), max_value=2**70),
     st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12),
 )
-json_values = st.recursive(json_scalars, lambda c: st.one_of(st.lists(c, max_size=4),
-                                                              st.dictionaries(st.text(max_size=8), c, max_size=4)),
-                           max_leaves=12)
+
+
+def _json_containers(c: st.SearchStrategy[Any]) -> st.SearchStrategy[Any]:
+    # a def, not a lambda over two lines: hypothesis reads a lambda's source to check it recurses, and
+    # warned (HypothesisDeprecationWarning, "doesn't use it's argument") on the wrapped one
+    return st.one_of(st.lists(c, max_size=4), st.dictionaries(st.text(max_size=8), c, max_size=4))
+
+
+json_values = st.recursive(json_scalars, _json_containers, max_leaves=12)
 hostile_numbers = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from([1e308, -1e308, 1e-320, -1e-320, -0.0, 0.0, -1.0, 1e6, 1e6 + 1, -1e6 - 1, 1e-6, 1e-7, 101.0,
@@ -820,10 +835,3 @@ def fuzz_bounded(target: Target, examples: int, refused: tuple[str, ...] = ("unt
     run()
 
 
-def scratch_folder(prefix: str) -> Path:
-    """A temporary folder for a fuzz module's files, removed when the process ends."""
-    import atexit
-
-    folder = Path(tempfile.mkdtemp(prefix=prefix))
-    atexit.register(shutil.rmtree, folder, ignore_errors=True)
-    return folder
