@@ -17,7 +17,7 @@ import torch
 import yaml
 
 from rtp import export, sdk
-from rtp.capture import BUFFERS, DatasetWriter, TargetStore, pool_targets
+from rtp.capture import BUFFERS, DatasetError, DatasetWriter, TargetStore, pool_targets
 from rtp.cli import main as rtp_main
 from rtp.evaluate import scores
 from rtp.sdk import psnr_from_mse as mse_to_psnr
@@ -1255,6 +1255,42 @@ def test_a_network_too_large_to_build_is_refused_before_reading_data(fields: dic
     ParameterError instead of a 14 GB allocation after the data was read (here it does not exist)."""
     with pytest.raises(sdk.ParameterError, match="would hold|depth in"):
         train(TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), **fields))
+    assert not (tmp_path / "m.pt").exists()
+
+
+def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    """A batch whose training step cannot fit in memory failed after the data was read, as numpy's
+    MemoryError traceback (batch 10**6) or, under the machine's size, the system's OOM killer: now a
+    usage error naming batch, from the network's activations measured on torch's meta device."""
+    from rtp.train import _loop
+
+    cfg = TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), crop=64)
+    one = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1))
+    crops = 4 * 64 * 64 * 6
+    assert 1.4 * 2**20 < one - crops < 1.6 * 2**20  # the paper's network keeps about 1.5 MiB of a 64-pixel crop
+    assert _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=300)) == 300 * one
+    fast = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1, arch="fast"))
+    assert crops < fast < one / 4  # the strided stem keeps far less
+
+    monkeypatch.setattr(_loop, "_memory", lambda field: {"MemTotal": 4 * 2**30, "MemAvailable": 2**30}[field])
+    with pytest.raises(sdk.ParameterError, match=r"^batch: 4000 crops of 64 pixels take about 6\.1 GiB .* more than "
+                                                 r"this machine's 4\.0 GiB of memory: lower batch or crop") as info:
+        train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=4000))
+    assert info.value.name == "batch"
+    with caplog.at_level("WARNING", logger="rtp.train"), pytest.raises(DatasetError, match="no dataset folder"):
+        train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1000))  # fits, not now: warned
+    assert [r.getMessage().split(", more")[0] for r in caplog.records] == [
+        "1000 crops of 64 pixels take about 1.5 GiB in a training step (what autograd keeps of the paper network's "
+        "activations, and the crops)"]
+    monkeypatch.undo()
+
+    data = _dataset(tmp_path / "d", n=3)
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"),
+                     "--batch", "100000000"]) == 2  # on the real machine's memory
+    err = capsys.readouterr().err
+    assert "rtp train: error: batch: 100000000 crops of 64 pixels take about" in err and "lower batch" in err
     assert not (tmp_path / "m.pt").exists()
 
 

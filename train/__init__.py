@@ -4,7 +4,7 @@ Importing this package needs torch (the ``rtp[train]`` extra). Scores and evalua
 :mod:`rtp.evaluate`'s (no torch); targets and the dataset are :mod:`rtp.capture`'s.
 """
 
-from ._loop import TrainConfig, TrainResult, train
+from ._loop import TrainConfig, TrainResult, step_bytes, train
 from ._recipe import SHIPPED_RECIPE, Recipe, RecipeError, load_recipe, packaged_recipes
 from ._safety import calibrate_safety
 
@@ -17,5 +17,6 @@ __all__ = [
     "calibrate_safety",
     "load_recipe",
     "packaged_recipes",
+    "step_bytes",
     "train",
 ]
