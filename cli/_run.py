@@ -199,7 +199,8 @@ def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace]
 def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False) -> int:
     """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,
     ``PROG: error: MESSAGE``, and returns its class's exit code (``verbose``: the traceback above it); an
-    ``OSError`` naming a path likewise (2 for a wrong path, 1 otherwise); Ctrl-C 130; a closed pipe 0.
+    ``OSError`` naming a path likewise (2 for a wrong path, 1 otherwise); a ``MemoryError`` one line
+    (1); Ctrl-C 130; a closed pipe 0.
     Anything else propagates with its traceback. The benchmark scripts under ``bench/`` run through it."""
     from rtp.sdk import EXIT_FAILED, EXIT_USAGE, RtpError, exit_code
 
@@ -213,6 +214,11 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     except KeyboardInterrupt as err:
         print(f"{prog}: interrupted", file=sys.stderr)
         return exit_code(err)
+    except MemoryError as err:  # numpy's "Unable to allocate 30.5 GiB for an array ...": the machine's limit, not a bug
+        if verbose:
+            traceback.print_exc()
+        print(f"{prog}: error: out of memory: {one_line(str(err)) or 'an allocation failed'}", file=sys.stderr)
+        return EXIT_FAILED
     except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

@@ -186,6 +186,17 @@ def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
             entry(argv)
 
 
+def test_running_out_of_memory_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """numpy's MemoryError ("Unable to allocate ...") is the machine's limit, not a bug: one line, exit 1."""
+    message = "Unable to allocate 30.5 GiB for an array with shape (1000000, 4, 64, 64) and data type float16"
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, MemoryError(message)):
+        assert entry(argv) == 1, prog
+        assert capsys.readouterr().err == f"{prog}: error: out of memory: {message}\n", prog
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, MemoryError()):
+        assert entry(argv) == 1 and capsys.readouterr().err == f"{prog}: error: out of memory: an allocation failed\n"
+
+
 def test_arguments_that_would_fail_later_fail_while_parsing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Found by trying bad values: each used to fail after work had begun (or in a native crash, or
     with a library's traceback); now argparse refuses it (exit 2) and nothing is written."""
