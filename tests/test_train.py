@@ -21,7 +21,7 @@ from rtp.capture import BUFFERS, DatasetError, DatasetWriter, TargetStore, pool_
 from rtp.cli import main as rtp_main
 from rtp.evaluate import scores
 from rtp.sdk import psnr_from_mse as mse_to_psnr
-from rtp.train import TrainConfig, calibrate_safety, train
+from rtp.train import TrainConfig, _frames, calibrate_safety, train
 from rtp.train.checkpoint import load as load_checkpoint
 
 from .conftest import BENCH, bench_module
@@ -1267,12 +1267,15 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
     from rtp.train import _loop
 
     cfg = TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), crop=64)
-    one = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1))
+    two = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=2))
     crops = 4 * 64 * 64 * 6
-    assert 1.4 * 2**20 < one - crops < 1.6 * 2**20  # the paper's network keeps about 1.5 MiB of a 64-pixel crop
-    assert _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=300)) == 300 * one
-    fast = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1, arch="fast"))
-    assert crops < fast < one / 4  # the strided stem keeps far less
+    assert 1.4 * 2**20 < two / 2 - crops < 1.6 * 2**20  # the paper's network keeps about 1.5 MiB of a 64-pixel crop
+    assert _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=300)) == 150 * two
+    fast = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=2, arch="fast"))
+    assert 2 * crops < fast < two / 4  # the strided stem keeps far less
+    with pytest.raises(sdk.ParameterError, match="^batch: 1 crop of 16 pixels leaves a BatchNorm layer of the fast "
+                                                 "network one value per channel"):  # was a ValueError once training began
+        train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=16, batch=1, arch="fast"))
 
     monkeypatch.setattr(_loop, "_memory", lambda field: {"MemTotal": 4 * 2**30, "MemAvailable": 2**30}[field])
     with pytest.raises(sdk.ParameterError, match=r"^batch: 4000 crops of 64 pixels take about 6\.1 GiB .* more than "
@@ -1292,6 +1295,32 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
     err = capsys.readouterr().err
     assert "rtp train: error: batch: 100000000 crops of 64 pixels take about" in err and "lower batch" in err
     assert not (tmp_path / "m.pt").exists()
+
+
+def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Training holds every sample's planes in memory (16.8 GB for the shipped LPIPS run): a dataset
+    past the machine's memory is refused from its first sample's size, before the rest are read."""
+    from rtp.train import _loop
+
+    data = _dataset(tmp_path / "d")  # 12 samples of four 96x64 float16 planes: 48 KiB each
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), arch="fast", batch=2, crop=16,
+                      steps=2, val_every=2)
+    memory = {"MemTotal": 300 * 1024, "MemAvailable": 300 * 1024}
+    monkeypatch.setattr(_loop, "_memory", lambda field: memory[field])
+    read = []
+    monkeypatch.setattr(_loop, "Frame", lambda planes, names: read.append(1) or _frames.Frame(planes, names))
+    with pytest.raises(sdk.ParameterError, match=r"^max_samples: the 12 samples' 4 input planes take about 0\.0 GiB .* "
+                                                 r"more than this machine's 0\.0 GiB: train on fewer") as info:
+        train(cfg)
+    assert info.value.name == "max_samples" and len(read) == 1 and not (tmp_path / "m.pt").exists()
+    memory["MemTotal"] = 2**34
+    with caplog.at_level("WARNING", logger="rtp.train"):
+        train(cfg)  # fits the machine, not what is free now: a warning, and it trains
+    assert [r.getMessage().split(" (")[0] for r in caplog.records if "input planes" in r.getMessage()] == [
+        "the 12 samples' 4 input planes take about 0.0 GiB in memory"]
+    assert (tmp_path / "m.pt").exists()
 
 
 def test_train_takes_a_config_object() -> None:

@@ -665,6 +665,25 @@ def check_config(cfg: TrainConfig) -> None:
                     said, available / 2**30)
 
 
+def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: Sequence[str], cfg: TrainConfig) -> None:
+    """Refuse a dataset whose input planes cannot all be held in memory before they are read: its first
+    sample's planes as training keeps them (float16, ``.blocks`` and ``.tiles`` packed), times the
+    samples (one size for all, as checked once they are read). Past the memory available now: a warning."""
+    ids = [*train_ids, *val_ids]
+    if not ids:
+        return
+    one = Frame(reader[ids[0]].inputs(cfg.inputs), cfg.inputs).nbytes
+    need, total, available = one * len(ids), _memory("MemTotal"), _memory("MemAvailable")
+    said = (f"the {len(ids):,} samples' {len(cfg.inputs)} input planes take about {need / 2**30:.1f} GiB in memory "
+            f"(training holds them all)")
+    if total and need > total:
+        raise sdk.ParameterError(f"max_samples: {said}, more than this machine's {total / 2**30:.1f} GiB: train on fewer "
+                                 f"(max_samples, per_scene) or fewer planes", "max_samples")
+    if available and need > available:
+        log.warning("%s, more than the %.1f GiB of memory available now: the system may kill the training",
+                    said, available / 2**30)
+
+
 def _memory(field: str) -> int:
     """A ``/proc/meminfo`` field in bytes (``MemTotal``, ``MemAvailable``); 0 where there is none."""
     try:
@@ -680,19 +699,23 @@ def _memory(field: str) -> int:
 
 def step_bytes(cfg: TrainConfig) -> int:
     """Bytes a training step of ``cfg`` holds for its batch: the crops (stored as float16, then float32)
-    and what autograd saves of the network's forward pass over them for the backward pass.
+    and what autograd saves of the network's forward pass over them for the backward pass. A batch and
+    crop that leave a BatchNorm layer one value per channel (a single 16-pixel crop through the fast
+    network) cannot train at all: :class:`~rtp.sdk.ParameterError` naming ``batch``.
 
-    The forward pass runs on one crop on torch's ``meta`` device, which allocates nothing, with a
-    saved-tensors hook adding up what each operation keeps; times the batch. It is a slight underestimate
-    of what a real step adds to the process's peak memory (64-pixel crops, batches of 1,000 and 8,000
-    against 8: the paper's network 1,562 MiB estimated, 1,637 MiB measured; the fast one 1,955 and
-    2,284), so refusing past it refuses nothing that would have fitted.
+    The forward pass runs on two crops (one for a batch of one) on torch's ``meta`` device, which
+    allocates nothing, with a saved-tensors hook adding up what each operation keeps; scaled to the
+    batch. It is a slight underestimate of what a real step adds to the process's peak memory
+    (64-pixel crops, batches of 1,000 and 8,000 against 8: the paper's network 1,562 MiB estimated,
+    1,637 MiB measured; the fast one 1,955 and 2,284), so refusing past it refuses nothing that would
+    have fitted.
     """
     side = cfg.crop + 2 * cfg.context
     crops = len(cfg.inputs) * side * side * (2 + 4)
+    n = min(cfg.batch, 2)  # (BatchNorm refuses a batch of one 1x1 map, as it would in training)
     with torch.device("meta"):
         net = _network(cfg).train()
-        x = torch.empty(1, len(cfg.inputs), side, side)
+        x = torch.empty(n, len(cfg.inputs), side, side)
     weights = {id(p) for p in net.parameters()}
     saved: dict[int, int] = {}  # storage -> bytes: a tensor saved by two operations (or in place) is held once
 
@@ -705,9 +728,14 @@ def step_bytes(cfg: TrainConfig) -> int:
     try:
         with torch.autograd.graph.saved_tensors_hooks(pack, lambda t: t):
             net(x)
+    except ValueError as err:  # torch's BatchNorm: "Expected more than 1 value per channel when training"
+        raise sdk.ParameterError(f"batch: {cfg.batch} crop{'s' if cfg.batch > 1 else ''} of {side} pixels "
+                                 f"leave{'' if cfg.batch > 1 else 's'} a "
+                                 f"BatchNorm layer of the {cfg.arch} network one value per channel, which it cannot "
+                                 f"normalise ({err}): a larger batch or crop", "batch") from err
     except (NotImplementedError, RuntimeError) as err:  # an operation without a meta kernel: the crops alone
         log.debug("the activations of %s could not be measured on meta: %s", cfg.arch, err)
-    return cfg.batch * (crops + sum(saved.values()))
+    return cfg.batch * crops + cfg.batch * sum(saved.values()) // n
 
 
 def _network(cfg: TrainConfig) -> Network:
@@ -735,6 +763,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
+    _check_fits_in_memory(reader, train_ids, val_ids, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
     tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
     h, w = tr.x[0].shape[-2:]
