@@ -1312,7 +1312,7 @@ def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
     read = []
     monkeypatch.setattr(_loop, "Frame", lambda planes, names: read.append(1) or _frames.Frame(planes, names))
     with pytest.raises(sdk.ParameterError, match=r"^max_samples: the 12 samples' 4 input planes take about 0\.0 GiB .* "
-                                                 r"more than this machine's 0\.0 GiB: train on fewer") as info:
+                                                 r"more than this machine's 0\.0 GiB of memory: train on fewer") as info:
         train(cfg)
     assert info.value.name == "max_samples" and len(read) == 1 and not (tmp_path / "m.pt").exists()
     memory["MemTotal"] = 2**34

@@ -653,13 +653,18 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
     with torch.device("meta"):  # the network itself (its size included), before any data is read; allocates nothing
         _network(cfg)
-    need, total, available = step_bytes(cfg), _memory("MemTotal"), _memory("MemAvailable")
-    side = cfg.crop + 2 * cfg.context
-    said = (f"{cfg.batch} crops of {side} pixels take about {need / 2**30:.1f} GiB in a training step (what autograd "
-            f"keeps of the {cfg.arch} network's activations, and the crops)")
+    need = step_bytes(cfg)
+    _check_memory(need, f"{cfg.batch} crops of {cfg.crop + 2 * cfg.context} pixels take about {need / 2**30:.1f} GiB in "
+                        f"a training step (what autograd keeps of the {cfg.arch} network's activations, and the crops)",
+                  "batch", "of memory: lower batch or crop")
+
+
+def _check_memory(need: int, said: str, name: str, advice: str) -> None:
+    """Refuse ``need`` bytes past the machine's memory (a :class:`~rtp.sdk.ParameterError` naming ``name``:
+    "NAME: SAID, more than this machine's N GiB ADVICE"); warn past the memory available now."""
+    total, available = _memory("MemTotal"), _memory("MemAvailable")
     if total and need > total:
-        raise sdk.ParameterError(f"batch: {said}, more than this machine's {total / 2**30:.1f} GiB of memory: lower "
-                                 f"batch or crop", "batch")
+        raise sdk.ParameterError(f"{name}: {said}, more than this machine's {total / 2**30:.1f} GiB {advice}", name)
     if available and need > available:
         log.warning("%s, more than the %.1f GiB of memory available now: the system may kill the training",
                     said, available / 2**30)
@@ -673,15 +678,10 @@ def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: S
     if not ids:
         return
     one = Frame(reader[ids[0]].inputs(cfg.inputs), cfg.inputs).nbytes
-    need, total, available = one * len(ids), _memory("MemTotal"), _memory("MemAvailable")
-    said = (f"the {len(ids):,} samples' {len(cfg.inputs)} input planes take about {need / 2**30:.1f} GiB in memory "
-            f"(training holds them all)")
-    if total and need > total:
-        raise sdk.ParameterError(f"max_samples: {said}, more than this machine's {total / 2**30:.1f} GiB: train on fewer "
-                                 f"(max_samples, per_scene) or fewer planes", "max_samples")
-    if available and need > available:
-        log.warning("%s, more than the %.1f GiB of memory available now: the system may kill the training",
-                    said, available / 2**30)
+    need = one * len(ids)
+    _check_memory(need, f"the {len(ids):,} samples' {len(cfg.inputs)} input planes take about {need / 2**30:.1f} GiB in "
+                        f"memory (training holds them all)",
+                  "max_samples", "of memory: train on fewer (max_samples, per_scene) or fewer planes")
 
 
 def _memory(field: str) -> int:
