@@ -9,6 +9,7 @@ stopped: existing samples are skipped and never half-written.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import numbers
 import os
@@ -24,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from rtp.sdk import ALL_RATES, ParameterError
+from rtp.sdk.files import writer_lock
 
-from ._dataset import DatasetReader, DatasetWriter
+from ._dataset import DatasetError, DatasetReader, DatasetWriter
 from ._pool import tick_queue, with_ticks, worker_pool
 
 __all__ = [
@@ -258,6 +260,12 @@ def _run_job(
     return report
 
 
+def _writer_lock(out: str | os.PathLike[str]) -> Any:
+    """The dataset folder's writer lock for a capture (:func:`rtp.sdk.files.writer_lock`)."""
+    return writer_lock(out, "rtp capture", lambda holder: DatasetError(
+        f"{out} is being written by another capture ({holder}): wait for it to end, or capture into another folder"))
+
+
 def capture(
     scene_names: Sequence[str],
     out: str | os.PathLike[str],
@@ -318,77 +326,83 @@ def capture(
         settings["placement"] = placement
     # An existing folder is checked (its settings, stale files) before any worker starts. A new one on
     # Ray is made only once Ray answers (ray_capture), so an address that is not Ray's leaves nothing.
+    # The folder's writer lock is held to the end: a second capture into it would delete this one's
+    # files in flight as stale and render the same samples again. (A new folder on Ray: ray_capture
+    # holds it from when it makes the folder until the samples are written.)
     writer: DatasetWriter | None = None
+    guard = contextlib.ExitStack()
     if ray is None or (Path(out) / "manifest.json").exists():
         writer = DatasetWriter(out, settings)
-        if writer.remove_stale():
+        guard.enter_context(_writer_lock(out))
+    with guard:
+        if writer is not None and writer.remove_stale():
             log.info("removed temporary files of an interrupted capture in %s", out)
-    total = len(scene_names) * len(profiles) * per_scene
-    done = 0
-    report = CaptureReport()
-    args = [(s, tuple(profiles), per_scene, (w, h), str(out), seed, None if cache_dir is None else str(cache_dir),
-             split, None if splits is None else str(splits), settings) for s in scene_names]
+        total = len(scene_names) * len(profiles) * per_scene
+        done = 0
+        report = CaptureReport()
+        args = [(s, tuple(profiles), per_scene, (w, h), str(out), seed, None if cache_dir is None else str(cache_dir),
+                 split, None if splits is None else str(splits), settings) for s in scene_names]
 
-    def merge(r: CaptureReport) -> None:
-        report.written += r.written
-        report.skipped += r.skipped
-        report.renderer = r.renderer or report.renderer
-        report.failed.extend(r.failed)
-        report.recaptured += r.recaptured
-        for p, v in r.unseen.items():
-            report.unseen.setdefault(p, []).extend(v)
+        def merge(r: CaptureReport) -> None:
+            report.written += r.written
+            report.skipped += r.skipped
+            report.renderer = r.renderer or report.renderer
+            report.failed.extend(r.failed)
+            report.recaptured += r.recaptured
+            for p, v in r.unseen.items():
+                report.unseen.setdefault(p, []).extend(v)
 
-    if ray is not None:
-        from ._ray import ray_capture
+        if ray is not None:
+            from ._ray import ray_capture
 
-        def advance(n: int) -> None:
-            nonlocal done
-            done += n
-            if progress:
-                progress(done, total)
-
-        merge(ray_capture(scene_names, str(out), profiles=tuple(profiles), per_scene=per_scene, size=(w, h), seed=seed,
-                          cache_dir=None if cache_dir is None else str(cache_dir), split=split,
-                          splits=None if splits is None else str(splits), settings=settings, address=ray,
-                          workers=workers, progress=advance, on_actors=_on_ray_actors))
-    elif (workers or 1) <= 1:
-        class _Q:
-            def put(self, n: int) -> None:
+            def advance(n: int) -> None:
                 nonlocal done
                 done += n
                 if progress:
                     progress(done, total)
 
-        for a in args:
-            merge(_run_job(*a, queue=_Q()))
-    else:
-        queue = tick_queue()
+            merge(ray_capture(scene_names, str(out), profiles=tuple(profiles), per_scene=per_scene, size=(w, h), seed=seed,
+                              cache_dir=None if cache_dir is None else str(cache_dir), split=split,
+                              splits=None if splits is None else str(splits), settings=settings, address=ray,
+                              workers=workers, progress=advance, on_actors=_on_ray_actors))
+        elif (workers or 1) <= 1:
+            class _Q:
+                def put(self, n: int) -> None:
+                    nonlocal done
+                    done += n
+                    if progress:
+                        progress(done, total)
 
-        def drain() -> None:
-            nonlocal done
-            while not queue.empty():
-                done += queue.get()
-                if progress:
-                    progress(done, total)
+            for a in args:
+                merge(_run_job(*a, queue=_Q()))
+        else:
+            queue = tick_queue()
 
-        with worker_pool(workers or 1, ticks=queue) as pool:
-            pending = {pool.submit(with_ticks, _run_job, *a) for a in args}
-            while pending:
-                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                drain()
-                for f in finished:
-                    merge(f.result())
-        drain()  # (after the workers exited: their last ticks are flushed)
-    unseen: dict[str, list[float]] = {}
-    for sample in DatasetReader(out):
-        unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))
-    previous = DatasetReader(out).manifest.get("renderer_settings")
-    if writer is None:  # (a new folder on Ray: made by ray_capture once Ray answered)
-        writer = DatasetWriter(out, settings)
-    writer.finalize({
-        "renderer_settings": report.renderer or previous,
-        "failed": report.failed,
-        "versions": {"rtp": str(sdk.__version__), "numpy": np.__version__, "python": platform.python_version()},
-        "unseen_share": {p: float(np.mean(v)) for p, v in sorted(unseen.items())},
-    })
-    return report
+            def drain() -> None:
+                nonlocal done
+                while not queue.empty():
+                    done += queue.get()
+                    if progress:
+                        progress(done, total)
+
+            with worker_pool(workers or 1, ticks=queue) as pool:
+                pending = {pool.submit(with_ticks, _run_job, *a) for a in args}
+                while pending:
+                    finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                    drain()
+                    for f in finished:
+                        merge(f.result())
+            drain()  # (after the workers exited: their last ticks are flushed)
+        unseen: dict[str, list[float]] = {}
+        for sample in DatasetReader(out):
+            unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))
+        previous = DatasetReader(out).manifest.get("renderer_settings")
+        if writer is None:  # (a new folder on Ray: made by ray_capture once Ray answered)
+            writer = DatasetWriter(out, settings)
+        writer.finalize({
+            "renderer_settings": report.renderer or previous,
+            "failed": report.failed,
+            "versions": {"rtp": str(sdk.__version__), "numpy": np.__version__, "python": platform.python_version()},
+            "unseen_share": {p: float(np.mean(v)) for p, v in sorted(unseen.items())},
+        })
+        return report

@@ -245,7 +245,7 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
                 settings: dict[str, Any], address: str | None, workers: int | None,
                 progress: Callable[[int], None], on_actors: Callable[[list[Any]], None] | None = None) -> Any:
     """The Ray path of :func:`rtp.capture.capture` (same arguments; returns a ``CaptureReport``)."""
-    from ._capture import CaptureReport, _todo
+    from ._capture import CaptureReport, _todo, _writer_lock
     from ._dataset import DatasetReader, DatasetWriter
 
     ray = _ray()
@@ -253,9 +253,10 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
     # answers (an address that is not Ray's left a manifest and an empty folder behind).
     writer = DatasetWriter(out, settings) if (Path(out) / "manifest.json").exists() else None
     report = CaptureReport()
-    with ray_cluster(address, workers) as n:
+    with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
         if writer is None:
             writer = DatasetWriter(out, settings)
+            guard.enter_context(_writer_lock(out))  # (a folder that existed: capture() holds its lock)
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
         actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
         if on_actors is not None:

@@ -34,7 +34,7 @@ from rtp.sdk import (
     tile_extents,
     tile_grid,
 )
-from rtp.sdk.files import atomic_output
+from rtp.sdk.files import atomic_output, writer_lock
 
 from ._dataset import DatasetReader, _check_id, sample_path
 
@@ -301,47 +301,52 @@ def compute_targets(
         M.check_weber_l(weber_l)
     reader = DatasetReader(data_root)
     store = TargetStore(data_root)
-    params: dict[str, Any] = {"ppd": M.DEFAULT_PPD if ppd is None else ppd,
-                              "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
-    for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)
-        p: dict[str, Any] = {}
-        if m in ("flip", "jnflip"):
-            p["ppd"] = params["ppd"]
-        if METRICS[m].weber:
-            p["weber_l"] = params["weber_l"]
-        if m == "lpips":
-            p["net"] = "alex-v0.1"
-        store.declare(m, p)
-    params["flip_backend"] = flip_backend
-    ids = [i for i in reader.ids if not all(store.has(i, m) for m in metrics)]
-    done = len(reader.ids) - len(ids)
-    if progress:
-        progress(done, len(reader.ids))
-    if ray is not None and ids:
-        from ._ray import ray_targets
+    store.root.mkdir(exist_ok=True)
+    # Held to the end: a second job on the same targets would compute them again, and its declare could
+    # write the manifest over this one's.
+    with writer_lock(store.root, "rtp targets", lambda holder: TargetError(
+            f"{store.root} is being written by another targets job ({holder}): wait for it to end")):
+        params: dict[str, Any] = {"ppd": M.DEFAULT_PPD if ppd is None else ppd,
+                                  "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
+        for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)
+            p: dict[str, Any] = {}
+            if m in ("flip", "jnflip"):
+                p["ppd"] = params["ppd"]
+            if METRICS[m].weber:
+                p["weber_l"] = params["weber_l"]
+            if m == "lpips":
+                p["net"] = "alex-v0.1"
+            store.declare(m, p)
+        params["flip_backend"] = flip_backend
+        ids = [i for i in reader.ids if not all(store.has(i, m) for m in metrics)]
+        done = len(reader.ids) - len(ids)
+        if progress:
+            progress(done, len(reader.ids))
+        if ray is not None and ids:
+            from ._ray import ray_targets
 
-        def advance(n: int) -> None:
-            nonlocal done
-            done += n
-            if progress:
-                progress(done, len(reader.ids))
+            def advance(n: int) -> None:
+                nonlocal done
+                done += n
+                if progress:
+                    progress(done, len(reader.ids))
 
-        todo = {i: tuple(m for m in metrics if not store.has(i, m)) for i in ids}
-        ray_targets(str(data_root), todo, params, address=ray, workers=workers, progress=advance,
-                    on_actors=_on_ray_actors)
-    elif ray is not None or (workers or 1) <= 1:  # (Ray with nothing to do starts no cluster)
-        for i in ids:
-            _compute_one(str(data_root), i, tuple(metrics), params)
-            done += 1
-            if progress:
-                progress(done, len(reader.ids))
-    else:
-        n = workers or 1
-        with worker_pool(n) as pool:  # each worker's torch on its share of the cores (worker_threads)
-            futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
-            for f in as_completed(futures):
-                f.result()
+            todo = {i: tuple(m for m in metrics if not store.has(i, m)) for i in ids}
+            ray_targets(str(data_root), todo, params, address=ray, workers=workers, progress=advance,
+                        on_actors=_on_ray_actors)
+        elif ray is not None or (workers or 1) <= 1:  # (Ray with nothing to do starts no cluster)
+            for i in ids:
+                _compute_one(str(data_root), i, tuple(metrics), params)
                 done += 1
                 if progress:
                     progress(done, len(reader.ids))
-    return len(ids)
+        else:
+            n = workers or 1
+            with worker_pool(n) as pool:  # each worker's torch on its share of the cores (worker_threads)
+                futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
+                for f in as_completed(futures):
+                    f.result()
+                    done += 1
+                    if progress:
+                        progress(done, len(reader.ids))
+        return len(ids)

@@ -7,7 +7,8 @@ Public so that every room (and a user's own tools) writes files the same way::
         tmp.write_bytes(data)          # renamed over model.onnx only if this block succeeds
 
 and checks an output path before the work that fills it (:func:`check_output`), so that a job
-that would fail at its first write fails before it starts.
+that would fail at its first write fails before it starts. :func:`writer_lock` keeps a second job
+from writing a folder a first one is writing.
 """
 
 from __future__ import annotations
@@ -15,12 +16,15 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ._errors import ParameterError
 
-__all__ = ["atomic_output", "check_output", "yaml_problem"]
+__all__ = ["LOCK_NAME", "atomic_output", "check_output", "writer_lock", "yaml_problem"]
+
+#: The lock file :func:`writer_lock` keeps in a folder it guards.
+LOCK_NAME = ".rtp-writer.lock"
 
 
 def _default_mode() -> int:
@@ -53,6 +57,35 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
+
+
+@contextlib.contextmanager
+def writer_lock(folder: str | os.PathLike[str], job: str, busy: Callable[[str], Exception]) -> Iterator[None]:
+    """Hold ``folder``'s writer lock (an exclusive ``flock`` on its :data:`LOCK_NAME` file) for the
+    block; while another process holds it, raise ``busy(holder)`` at once, ``holder`` what that
+    process wrote there (``"rtp capture, pid 1234"``; ``job`` is what this one writes).
+
+    The system releases the lock when its process exits, however it ends (``kill -9`` included), so
+    a crash leaves no stale lock to clear by hand. The lock is advisory: it keeps rtp's jobs apart,
+    not other programs. Where the system has no ``flock`` (Windows) the block runs unguarded.
+    """
+    try:
+        import fcntl
+    except ImportError:  # (not POSIX)
+        yield
+        return
+    fd = os.open(Path(folder) / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "another process"
+            raise busy(holder) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{job}, pid {os.getpid()}".encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # (releases the lock)
 
 
 def check_output(path: str | os.PathLike[str], *, folder: bool = False, what: str = "output") -> Path:

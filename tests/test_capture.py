@@ -86,6 +86,41 @@ def test_capture_survives_a_kill(tmp_path: Path) -> None:
 
 
 
+def test_a_second_job_on_a_folder_being_written_is_refused_and_a_killed_one_leaves_no_lock(tmp_path: Path) -> None:
+    """A second capture into a folder a first one is writing deleted the first's files in flight as
+    stale and rendered the same samples again; a second targets job wrote the manifest over the first's.
+    Now each takes the folder's writer lock, which the system frees when its holder dies."""
+    from rtp.capture import DatasetError, TargetError, compute_targets
+    from rtp.sdk.files import LOCK_NAME, writer_lock
+
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "rtp.cli", "capture", "--scene", "procedural:7", "--per-scene", "30",
+           "--size", "96x64", "--profiles", "slow", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    lock, deadline = out / LOCK_NAME, time.time() + 120
+    try:
+        while time.time() < deadline and proc.poll() is None and not (
+                lock.is_file() and lock.read_text() == f"rtp capture, pid {proc.pid}"):
+            time.sleep(0.05)
+        assert proc.poll() is None, "the first capture ended (or never took the lock) before the second started"
+        with pytest.raises(DatasetError, match=f"^{out} is being written by another capture \\(rtp capture, pid "
+                                               f"{proc.pid}\\): wait for it to end, or capture into another folder"):
+            capture(["procedural:7"], out, per_scene=30, size=(96, 64), profiles=("slow",))
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    before = len(DatasetReader(out))
+    assert before < 30
+    again = capture(["procedural:7"], out, per_scene=30, size=(96, 64), profiles=("slow",))  # no stale lock
+    assert (again.written, again.skipped) == (30 - before, before)
+
+    (out / "targets").mkdir()
+    with writer_lock(out / "targets", "rtp targets", RuntimeError):  # (another open file: refused in one process too)
+        with pytest.raises(TargetError, match="targets is being written by another targets job \\(rtp targets, pid "):
+            compute_targets(out, ["psnr"])
+    assert compute_targets(out, ["psnr"]) == 30
+
+
 def _children(pid: int) -> list[int]:
     """The live processes whose parent is ``pid`` (/proc; zombies are dead)."""
     out = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 from typing import Any
@@ -323,6 +324,35 @@ def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:
     mask = os.umask(0)
     os.umask(mask)
     assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_a_writer_lock_refuses_a_second_holder_names_the_first_and_is_freed_with_it(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from rtp.sdk.files import LOCK_NAME, writer_lock
+
+    class Busy(Exception):
+        pass
+
+    with writer_lock(tmp_path, "job one", Busy):
+        assert (tmp_path / LOCK_NAME).read_text() == f"job one, pid {os.getpid()}"
+        with pytest.raises(Busy, match=f"^job one, pid {os.getpid()}$"), writer_lock(tmp_path, "job two", Busy):
+            pass  # (not reached)
+    with writer_lock(tmp_path, "job two", Busy):  # freed at the end of the block, even though the file stays
+        assert (tmp_path / LOCK_NAME).read_text() == f"job two, pid {os.getpid()}"
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from rtp.sdk.files import writer_lock\n"
+                               f"with writer_lock({str(tmp_path)!r}, 'sleeper', RuntimeError):\n"
+                               "    print('held', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        with pytest.raises(Busy, match=f"^sleeper, pid {holder.pid}$"), writer_lock(tmp_path, "job three", Busy):
+            pass
+    finally:
+        holder.kill()  # SIGKILL: no cleanup runs in the holder
+        holder.wait()
+    with writer_lock(tmp_path, "job three", Busy):  # the system freed it with the process
+        pass
 
 
 def test_half_float_buffers_saturate_instead_of_overflowing(tmp_path: Path) -> None:
