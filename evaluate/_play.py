@@ -30,6 +30,7 @@ and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``), ``
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -58,6 +59,8 @@ __all__ = [
     "play",
     "saved_at",
 ]
+
+log = logging.getLogger("rtp.evaluate")
 
 #: How a reused tile reduces the estimates its pixels carry (``NAME@k:reduction``) and what it does
 #: with tiles the network did not see (``NAME@k:full`` or ``:fresh``): the SDK's
@@ -509,10 +512,26 @@ def play(
            "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
            "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact, "open_loop": open_loop,
            "gif": str(outdir) if outdir is not None and plots and animation else None}
-    if workers > 1 and len(paths) > 1:
-        results = _in_workers(job, list(paths), min(workers, len(paths)), progress)
+    # A path finished by an interrupted run of the same job into the same folder is read back, not
+    # played again; each path is kept as it finishes, until the report is written.
+    key = _resume_key(job, predictors) if outdir is not None else ""
+    results = {p: r for p in dict.fromkeys(paths) if outdir is not None and (r := _load_path(outdir, p, key)) is not None}
+    if results:
+        log.info("%s: %s played by an interrupted run of this job; playing the rest", outdir, ", ".join(results))
+        if progress is not None:
+            progress(frames * len(results))
+    todo = [p for p in dict.fromkeys(paths) if p not in results]
+
+    def finished(pname: str, res: dict[str, Any]) -> None:
+        results[pname] = res
+        if outdir is not None:
+            _save_path(outdir, pname, key, res)
+
+    if workers > 1 and len(todo) > 1:
+        _in_workers(job, todo, min(workers, len(todo)), progress, finished)
     else:
-        results = {p: _play_path({**job, "path": p}, progress) for p in paths}
+        for pname in todo:
+            finished(pname, _play_path({**job, "path": pname}, progress))
     for pname in paths:
         res = results[pname]
         report.unseen[pname] = res["unseen"]
@@ -530,7 +549,55 @@ def play(
                                        "work_saved": float("nan") if v is None else v, "capped": capped})
     if outdir is not None:
         report.files += _write(report, outdir, plots)
+        for pname in paths:
+            (outdir / _PARTIAL.format(pname)).unlink(missing_ok=True)
     return report
+
+
+#: A path's results, kept in the output folder while the job runs (:func:`play` resumes from them).
+_PARTIAL = ".play-{}.partial.json"
+
+
+def _resume_key(job: dict[str, Any], predictors: dict[str, sdk.ShadingRatePredictor]) -> str:
+    """What a path's kept results must have been played with to be reused: the job's settings, rtp's
+    version and the bytes of every model (a model exported again since is played again)."""
+    import hashlib
+    import json
+
+    models = {k: hashlib.sha256(Path(str(p.path)).read_bytes()).hexdigest() for k, p in sorted(predictors.items())}
+    settings = {k: v for k, v in job.items() if k not in ("gif", "threads")}
+    return json.dumps({"job": settings, "models": models, "rtp": sdk.__version__}, sort_keys=True, default=str)
+
+
+def _save_path(outdir: Path, pname: str, key: str, res: dict[str, Any]) -> None:
+    import json
+
+    from rtp.sdk.files import atomic_output
+
+    def plain(v: Any) -> Any:  # numpy scalars and arrays as JSON numbers and lists (NaN kept)
+        return v.item() if isinstance(v, np.generic) else v.tolist() if isinstance(v, np.ndarray) else str(v)
+
+    with atomic_output(outdir / _PARTIAL.format(pname)) as tmp:
+        tmp.write_text(json.dumps({"key": key, "result": res}, default=plain))
+
+
+def _load_path(outdir: Path, pname: str, key: str) -> dict[str, Any] | None:
+    """The kept results of path ``pname``, or None: none kept, kept for another job, or unreadable."""
+    import json
+
+    f = outdir / _PARTIAL.format(pname)
+    try:
+        kept = json.loads(f.read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:
+        log.warning("%s: not readable (%s); playing %s again", f, err, pname)
+        return None
+    if not isinstance(kept, dict) or kept.get("key") != key or not isinstance(kept.get("result"), dict):
+        log.info("%s was played with other settings or models; playing %s again", f, pname)
+        return None
+    result: dict[str, Any] = kept["result"]
+    return result
 
 
 def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = None) -> dict[str, Any]:
@@ -570,9 +637,10 @@ def _worker_path(job: dict[str, Any], queue: Any) -> dict[str, Any]:
     return _play_path(job, queue.put)
 
 
-def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
-                progress: Callable[[int], None] | None) -> dict[str, dict[str, Any]]:
-    """The paths in ``workers`` processes (each its own renderer), progress ticks through a queue."""
+def _in_workers(job: dict[str, Any], paths: list[str], workers: int, progress: Callable[[int], None] | None,
+                finished: Callable[[str, dict[str, Any]], None]) -> None:
+    """The paths in ``workers`` processes (each its own renderer), progress ticks through a queue,
+    ``finished(path, results)`` as each ends."""
     import queue
 
     from rtp.capture import tick_queue, with_ticks, worker_pool, worker_threads
@@ -581,7 +649,9 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
     ticks = tick_queue()
     with worker_pool(workers, ticks=ticks) as pool:
         futures = {pool.submit(with_ticks, _worker_path, {**job, "path": p, "threads": threads}): p for p in paths}
-        while not all(f.done() for f in futures):
+        while futures:
+            for f in [f for f in futures if f.done()]:
+                finished(futures.pop(f), f.result())
             try:
                 n = ticks.get(timeout=0.5)
             except queue.Empty:
@@ -592,7 +662,6 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int,
         n = ticks.get()
         if progress is not None:
             progress(n)
-    return {p: f.result() for f, p in futures.items()}
 
 
 def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fail_thr: float, fail_hib: bool,

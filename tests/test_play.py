@@ -463,6 +463,54 @@ def test_paths_in_worker_processes_give_the_same_report() -> None:
     assert len(one.rows) == 4 and timeless(one.rows) == timeless(two.rows)
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int
+) -> None:
+    """`make play` is 15 minutes a map: a run stopped on its second path kept nothing. Each finished
+    path is kept in the output folder until the report is written, and the same job resumes from it."""
+    from rtp.evaluate import _play
+
+    kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (W, H), "sweep": False, "flip_every": 0,
+                          "plots": False, "workers": workers}
+    whole = play("procedural:0", "jnyang,yang2019", **kw)
+    played: list[str] = []
+    real = _play._play_path
+
+    def stopped_on_fast(job: dict[str, Any], progress: Any = None) -> dict[str, Any]:
+        played.append(job["path"])
+        if job["path"] == "fast":
+            raise KeyboardInterrupt
+        return real(job, progress)
+
+    monkeypatch.setattr(_play, "_play_path", stopped_on_fast)
+    with pytest.raises(KeyboardInterrupt):
+        play("procedural:0", "jnyang,yang2019", out=tmp_path, **{**kw, "workers": 1})
+    assert played == ["slow", "fast"] and [f.name for f in tmp_path.iterdir()] == [".play-slow.partial.json"]
+
+    monkeypatch.setattr(_play, "_play_path", lambda job, progress=None: played.append(job["path"]) or real(job, progress))
+    ticks: list[int] = []
+    resumed = play("procedural:0", "jnyang,yang2019", out=tmp_path, progress=ticks.append, **kw)
+    assert played == ["slow", "fast", "fast"] and sum(ticks) == 6  # (one path left: played in this process)
+
+    def timeless(rows: list[dict[str, Any]]) -> str:  # the choosing times differ from run to run
+        return json.dumps([{k: v for k, v in r.items() if k != "predict_ms"} for r in rows])
+
+    assert timeless(resumed.rows) == timeless(whole.rows) and resumed.unseen == whole.unseen
+    assert not list(tmp_path.glob(".play-*")) and (tmp_path / "play.md").is_file()  # removed once the report is out
+
+    if workers > 1:  # paths played in worker processes are kept as each ends, too
+        kept: list[str] = []
+        monkeypatch.setattr(_play, "_save_path", lambda outdir, pname, key, res: kept.append(pname))
+        play("procedural:0", "jnyang,yang2019", out=tmp_path / "w", **kw)
+        assert sorted(kept) == ["fast", "slow"]
+    for kept_text in ("{", json.dumps({"key": "another job's settings", "result": {}})):  # damaged, or another job's
+        (tmp_path / ".play-slow.partial.json").write_text(kept_text)
+        played.clear()
+        play("procedural:0", "jnyang,yang2019", out=tmp_path, **{**kw, "workers": 1, "paths": ("slow",)})
+        assert played == ["slow"] and not list(tmp_path.glob(".play-*"))
+
+
 def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> None:
     """bench/play_report.py over two maps: per reuse method the mean of the per-path ratios to the
     model at 1 / 2 / 5% failing tiles, the worst path at 5%, the paths >= 95% and the mean network
