@@ -60,31 +60,47 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def writer_lock(folder: str | os.PathLike[str], job: str, busy: Callable[[str], Exception]) -> Iterator[None]:
-    """Hold ``folder``'s writer lock (an exclusive ``flock`` on its :data:`LOCK_NAME` file) for the
-    block; while another process holds it, raise ``busy(holder)`` at once, ``holder`` what that
-    process wrote there (``"rtp capture, pid 1234"``; ``job`` is what this one writes).
+def writer_lock(folder: str | os.PathLike[str], job: str, busy: Callable[[str], Exception], *,
+                name: str = LOCK_NAME, remove: bool = False) -> Iterator[None]:
+    """Hold the writer lock of ``folder`` (an exclusive ``flock`` on its file ``name``) for the block;
+    while another process holds it, raise ``busy(holder)`` at once, ``holder`` what that process
+    wrote there (``"rtp capture, pid 1234"``; ``job`` is what this one writes).
 
     The system releases the lock when its process exits, however it ends (``kill -9`` included), so
-    a crash leaves no stale lock to clear by hand. The lock is advisory: it keeps rtp's jobs apart,
-    not other programs. Where the system has no ``flock`` (Windows) the block runs unguarded.
+    a crash leaves no stale lock to clear by hand. ``remove=True`` deletes the lock file at the end of
+    the block (a lock beside a file rather than in a folder of its own); a process that locked the
+    file just as it was deleted finds it gone and locks the new one. The lock is advisory: it keeps
+    rtp's jobs apart, not other programs. Where the system has no ``flock`` (Windows) the block runs
+    unguarded.
     """
     try:
         import fcntl
     except ImportError:  # (not POSIX)
         yield
         return
-    fd = os.open(Path(folder) / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o666)
-    try:
+    path = Path(folder) / name
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "another process"
+            os.close(fd)
             raise busy(holder) from None
+        try:
+            if os.fstat(fd).st_ino == os.stat(path).st_ino:
+                break  # (else a holder removed the file between our open and lock: lock the one there now)
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{job}, pid {os.getpid()}".encode(), 0)
         yield
     finally:
+        if remove:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()  # (while still held, so nobody holds the name in between)
         os.close(fd)  # (releases the lock)
 
 

@@ -355,6 +355,26 @@ def test_a_writer_lock_refuses_a_second_holder_names_the_first_and_is_freed_with
         pass
 
 
+def test_a_removed_writer_lock_is_not_held_twice(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """remove=True deletes the lock file at the end; a process that opened the file just before that
+    and locks it after would hold a lock nobody else sees: it finds the name gone and locks anew."""
+    from rtp.sdk.files import writer_lock
+
+    real_open, opened = os.open, []
+
+    def racing_open(path: Any, flags: int, mode: int = 0o777) -> int:
+        fd = real_open(path, flags, mode)
+        opened.append(path)
+        if len(opened) == 1:
+            os.unlink(path)  # the holder ended and removed it between this open and the lock
+        return fd
+
+    monkeypatch.setattr(os, "open", racing_open)
+    with writer_lock(tmp_path, "job", RuntimeError, name=".m.pt.lock", remove=True):
+        assert (tmp_path / ".m.pt.lock").read_text() == f"job, pid {os.getpid()}"  # the file there now is held
+    assert len(opened) == 2 and not (tmp_path / ".m.pt.lock").exists()
+
+
 def test_half_float_buffers_saturate_instead_of_overflowing(tmp_path: Path) -> None:
     w = DatasetWriter(tmp_path / "ds")
     bufs = _buffers()

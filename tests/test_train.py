@@ -8,6 +8,7 @@ pipeline.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -1321,6 +1322,27 @@ def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
     assert [r.getMessage().split(" (")[0] for r in caplog.records if "input planes" in r.getMessage()] == [
         "the 12 samples' 4 input planes take about 0.0 GiB in memory"]
     assert (tmp_path / "m.pt").exists()
+
+
+def test_a_second_training_into_the_same_checkpoint_is_refused(tmp_path: Path) -> None:
+    """Two trainings into one --out both resumed from the same checkpoint and saved over each other."""
+    from rtp.sdk.files import writer_lock
+    from rtp.train.checkpoint import CheckpointError
+
+    data = _dataset(tmp_path / "d")
+    out = tmp_path / "models" / "m.pt"
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(out), arch="fast", steps=2, val_every=2, crop=32)
+    lock = ".m.pt.rtp-writer.lock"
+    (tmp_path / "models").mkdir()
+    with writer_lock(tmp_path / "models", "rtp train", RuntimeError, name=lock, remove=True):
+        with pytest.raises(CheckpointError, match=f"^{out} is being written by another training \\(rtp train, pid "
+                                                  f"{os.getpid()}\\): wait for it to end, or train into another file"):
+            train(cfg)
+        assert not out.exists()
+        other = out.with_name("other.pt")  # another file beside it: its own lock
+        assert train(TrainConfig(**{**vars(cfg), "out": str(other)})) and other.is_file()
+    assert train(cfg) and out.is_file()
+    assert sorted(f.name for f in out.parent.iterdir()) == ["m.pt", "other.pt"]  # the lock files are gone with their jobs
 
 
 def test_train_takes_a_config_object() -> None:

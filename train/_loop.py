@@ -28,7 +28,7 @@ from torch import nn
 from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore
 from rtp.evaluate import scores
-from rtp.sdk.files import check_output
+from rtp.sdk.files import check_output, writer_lock
 
 from . import checkpoint as ckpt
 from . import transforms as tt
@@ -753,12 +753,25 @@ def _network(cfg: TrainConfig) -> Network:
 
 
 def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
-    """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``."""
+    """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``.
+
+    While it runs it holds the checkpoint's writer lock (``.NAME.rtp-writer.lock`` beside it, removed
+    at the end): a second training into the same ``out`` would resume from the same checkpoint and the
+    two would save over each other, so it is refused (:class:`~rtp.train.checkpoint.CheckpointError`).
+    """
     if not isinstance(cfg, TrainConfig):
         raise sdk.ParameterError(f"train: expected a TrainConfig, got {type(cfg).__name__}")
     check_config(cfg)
     # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
-    check_output(cfg.out, what="out")
+    out = check_output(cfg.out, what="out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with writer_lock(out.parent, "rtp train", lambda holder: ckpt.CheckpointError(
+            f"{out} is being written by another training ({holder}): wait for it to end, or train into another "
+            f"file"), name=f".{out.name}.rtp-writer.lock", remove=True):
+        return _train(cfg, progress)
+
+
+def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None) -> TrainResult:
     loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
     aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
