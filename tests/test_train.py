@@ -1343,6 +1343,9 @@ def test_a_second_training_into_the_same_checkpoint_is_refused(tmp_path: Path) -
         assert train(TrainConfig(**{**vars(cfg), "out": str(other)})) and other.is_file()
     assert train(cfg) and out.is_file()
     assert sorted(f.name for f in out.parent.iterdir()) == ["m.pt", "other.pt"]  # the lock files are gone with their jobs
+    with pytest.raises(DatasetError):  # a training that fails before saving leaves no folder it made for its lock
+        train(TrainConfig(**{**vars(cfg), "data": str(tmp_path / "nowhere"), "out": str(tmp_path / "a" / "b" / "m.pt")}))
+    assert not (tmp_path / "a").exists()
 
 
 def test_train_takes_a_config_object() -> None:

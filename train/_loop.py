@@ -8,6 +8,7 @@ scenes, and a safety margin calibrated on that validation data.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import hashlib
 import json
@@ -764,11 +765,17 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     check_config(cfg)
     # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
     out = check_output(cfg.out, what="out")
+    made = [d for d in (out.parent, *out.parent.parents) if not d.exists()]  # (the folders the lock needs made)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with writer_lock(out.parent, "rtp train", lambda holder: ckpt.CheckpointError(
-            f"{out} is being written by another training ({holder}): wait for it to end, or train into another "
-            f"file"), name=f".{out.name}.rtp-writer.lock", remove=True):
-        return _train(cfg, progress)
+    try:
+        with writer_lock(out.parent, "rtp train", lambda holder: ckpt.CheckpointError(
+                f"{out} is being written by another training ({holder}): wait for it to end, or train into another "
+                f"file"), name=f".{out.name}.rtp-writer.lock", remove=True):
+            return _train(cfg, progress)
+    finally:
+        for d in made:  # a training that failed before its first save leaves no empty folders behind
+            with contextlib.suppress(OSError):
+                d.rmdir()
 
 
 def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None) -> TrainResult:
