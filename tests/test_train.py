@@ -1278,11 +1278,19 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
                                                  "network one value per channel"):  # was a ValueError once training began
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=16, batch=1, arch="fast"))
 
-    monkeypatch.setattr(_loop, "_memory", lambda field: {"MemTotal": 4 * 2**30, "MemAvailable": 2**30}[field])
+    memory = {"MemTotal": 4 * 2**30, "MemAvailable": 2**30}
+    monkeypatch.setattr(_loop, "_memory", lambda field: memory.get(field, 0))
     with pytest.raises(sdk.ParameterError, match=r"^batch: 4000 crops of 64 pixels take about 6\.1 GiB .* more than "
                                                  r"this machine's 4\.0 GiB of memory: lower batch or crop") as info:
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=4000))
     assert info.value.name == "batch"
+    memory["SwapTotal"] = 4 * 2**30  # with swap the job may still end (slowly): refused past both
+    with pytest.raises(sdk.ParameterError, match=r"more than this machine's 8\.0 GiB of memory and swap: lower batch"):
+        train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=6000))
+    with caplog.at_level("WARNING", logger="rtp.train"), pytest.raises(DatasetError, match="no dataset folder"):
+        train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=4000))  # fits: warned
+    del memory["SwapTotal"]
+    caplog.clear()
     with caplog.at_level("WARNING", logger="rtp.train"), pytest.raises(DatasetError, match="no dataset folder"):
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1000))  # fits, not now: warned
     assert [r.getMessage().split(", more")[0] for r in caplog.records] == [
@@ -1309,7 +1317,7 @@ def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
     cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), arch="fast", batch=2, crop=16,
                       steps=2, val_every=2)
     memory = {"MemTotal": 300 * 1024, "MemAvailable": 300 * 1024}
-    monkeypatch.setattr(_loop, "_memory", lambda field: memory[field])
+    monkeypatch.setattr(_loop, "_memory", lambda field: memory.get(field, 0))
     read = []
     monkeypatch.setattr(_loop, "Frame", lambda planes, names: read.append(1) or _frames.Frame(planes, names))
     with pytest.raises(sdk.ParameterError, match=r"^max_samples: the 12 samples' 4 input planes take about 0\.0 GiB .* "

@@ -661,11 +661,14 @@ def check_config(cfg: TrainConfig) -> None:
 
 
 def _check_memory(need: int, said: str, name: str, advice: str) -> None:
-    """Refuse ``need`` bytes past the machine's memory (a :class:`~rtp.sdk.ParameterError` naming ``name``:
-    "NAME: SAID, more than this machine's N GiB ADVICE"); warn past the memory available now."""
-    total, available = _memory("MemTotal"), _memory("MemAvailable")
-    if total and need > total:
-        raise sdk.ParameterError(f"{name}: {said}, more than this machine's {total / 2**30:.1f} GiB {advice}", name)
+    """Refuse ``need`` bytes past the machine's memory and swap (a :class:`~rtp.sdk.ParameterError`
+    naming ``name``: "NAME: SAID, more than this machine's N GiB ADVICE"); warn past the memory
+    available now. (Swap counts for the refusal: a job past the memory may still end, slowly.)"""
+    memory, swap, available = _memory("MemTotal"), _memory("SwapTotal"), _memory("MemAvailable")
+    if memory and need > memory + swap:
+        advice = advice.replace("of memory", "of memory and swap", 1) if swap else advice
+        raise sdk.ParameterError(f"{name}: {said}, more than this machine's {(memory + swap) / 2**30:.1f} GiB {advice}",
+                                 name)
     if available and need > available:
         log.warning("%s, more than the %.1f GiB of memory available now: the system may kill the training",
                     said, available / 2**30)
@@ -686,7 +689,7 @@ def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: S
 
 
 def _memory(field: str) -> int:
-    """A ``/proc/meminfo`` field in bytes (``MemTotal``, ``MemAvailable``); 0 where there is none."""
+    """A ``/proc/meminfo`` field in bytes (``MemTotal``, ``SwapTotal``, ``MemAvailable``); 0 where there is none."""
     try:
         with open("/proc/meminfo", encoding="ascii") as f:
             for line in f:
