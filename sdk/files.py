@@ -14,6 +14,7 @@ from writing a folder a first one is writing.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterator
@@ -22,6 +23,8 @@ from pathlib import Path
 from ._errors import ParameterError
 
 __all__ = ["LOCK_NAME", "atomic_output", "check_output", "writer_lock", "yaml_problem"]
+
+log = logging.getLogger("rtp.sdk.files")
 
 #: The lock file :func:`writer_lock` keeps in a folder it guards.
 LOCK_NAME = ".rtp-writer.lock"
@@ -71,7 +74,7 @@ def writer_lock(folder: str | os.PathLike[str], job: str, busy: Callable[[str], 
     the block (a lock beside a file rather than in a folder of its own); a process that locked the
     file just as it was deleted finds it gone and locks the new one. The lock is advisory: it keeps
     rtp's jobs apart, not other programs. Where the system has no ``flock`` (Windows) the block runs
-    unguarded.
+    unguarded, and so it does, with a warning, on a file system that refuses locks (some NFS mounts).
     """
     try:
         import fcntl
@@ -87,12 +90,21 @@ def writer_lock(folder: str | os.PathLike[str], job: str, busy: Callable[[str], 
             holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "another process"
             os.close(fd)
             raise busy(holder) from None
+        except OSError as err:  # a file system without locks (some NFS and FUSE mounts: ENOLCK, EOPNOTSUPP)
+            os.close(fd)
+            log.warning("%s: this file system takes no locks (%s); %s runs without its writer lock", path,
+                        err.strerror or err, job)
+            fd = -1
+            break
         try:
             if os.fstat(fd).st_ino == os.stat(path).st_ino:
                 break  # (else a holder removed the file between our open and lock: lock the one there now)
         except FileNotFoundError:
             pass
         os.close(fd)
+    if fd < 0:
+        yield
+        return
     try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{job}, pid {os.getpid()}".encode(), 0)

@@ -375,6 +375,25 @@ def test_a_removed_writer_lock_is_not_held_twice(tmp_path: Path, monkeypatch: py
     assert len(opened) == 2 and not (tmp_path / ".m.pt.lock").exists()
 
 
+def test_a_file_system_without_locks_runs_the_job_with_a_warning(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    import errno
+    import fcntl
+
+    from rtp.sdk.files import writer_lock
+
+    def no_locks(fd: int, op: int) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    ran = []
+    with caplog.at_level("WARNING", logger="rtp.sdk.files"), writer_lock(tmp_path, "rtp capture", RuntimeError):
+        ran.append(1)
+    assert ran and [r.getMessage().split(": ", 1)[1] for r in caplog.records] == [
+        "this file system takes no locks (No locks available); rtp capture runs without its writer lock"]
+
+
 def test_half_float_buffers_saturate_instead_of_overflowing(tmp_path: Path) -> None:
     w = DatasetWriter(tmp_path / "ds")
     bufs = _buffers()
