@@ -1306,6 +1306,29 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
     assert not (tmp_path / "m.pt").exists()
 
 
+def test_a_network_that_cannot_run_on_meta_is_sized_by_its_crops_with_a_warning(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Every network rtp builds runs on torch's meta device; one with an operation that cannot (a
+    layer a user added) still trains, its step sized by the crops alone, and the log says so."""
+    from rtp.train import _loop
+    from rtp.train.model import MetricNet
+
+    cfg = TrainConfig(data="nowhere", metric="jnyang", out="m.pt", crop=64, batch=10)
+    measured = _loop.step_bytes(cfg)
+    crops = 10 * 4 * 64 * 64 * 6
+
+    def no_meta_kernel(self: Any, x: Any) -> Any:
+        raise NotImplementedError("Could not run 'aten::my_op' with arguments from the 'Meta' backend")
+
+    monkeypatch.setattr(MetricNet, "forward", no_meta_kernel)
+    with caplog.at_level("WARNING", logger="rtp.train"):
+        assert _loop.step_bytes(cfg) == crops < measured
+    assert [r.getMessage().split(" (")[0] for r in caplog.records] == [
+        "the activations of the paper network could not be measured on torch's meta device"]
+    assert caplog.records[0].getMessage().endswith("the memory check of a training step counts the crops only")
+
+
 def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -712,7 +712,8 @@ def step_bytes(cfg: TrainConfig) -> int:
     batch. It is a slight underestimate of what a real step adds to the process's peak memory
     (64-pixel crops, batches of 1,000 and 8,000 against 8: the paper's network 1,562 MiB estimated,
     1,637 MiB measured; the fast one 1,955 and 2,284), so refusing past it refuses nothing that would
-    have fitted.
+    have fitted. A network with an operation torch cannot run on ``meta`` is counted by its crops
+    alone, with a warning that says so.
     """
     side = cfg.crop + 2 * cfg.context
     crops = len(cfg.inputs) * side * side * (2 + 4)
@@ -737,8 +738,13 @@ def step_bytes(cfg: TrainConfig) -> int:
                                  f"leave{'' if cfg.batch > 1 else 's'} a "
                                  f"BatchNorm layer of the {cfg.arch} network one value per channel, which it cannot "
                                  f"normalise ({err}): a larger batch or crop", "batch") from err
-    except (NotImplementedError, RuntimeError) as err:  # an operation without a meta kernel: the crops alone
-        log.debug("the activations of %s could not be measured on meta: %s", cfg.arch, err)
+    except (NotImplementedError, RuntimeError) as err:
+        # An operation torch cannot run on meta (no meta kernel, or one that reads values): every network
+        # rtp.train.model builds measures (each packaged recipe, each metric), so this is a changed or
+        # added layer. The activations are then unknown and left out, and the user is told so.
+        log.warning("the activations of the %s network could not be measured on torch's meta device (%s): the "
+                    "memory check of a training step counts the crops only", cfg.arch, err)
+        return cfg.batch * crops
     return cfg.batch * crops + cfg.batch * sum(saved.values()) // n
 
 
