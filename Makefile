@@ -89,6 +89,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/views.py
 	$(BIN)/python bench/metrics.py
 	$(BIN)/python bench/capture.py
+	$(BIN)/python bench/job_memory.py
 
 demo: $(STAMP)
 	$(RTP) demo

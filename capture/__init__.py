@@ -26,6 +26,7 @@ from ._dataset import (
     write_png,
 )
 from ._images import check_image_output, figure_image, save_image
+from ._memory import check_frame_memory, check_memory, job_bytes
 from ._pool import tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
 from ._ray import RayExecutorError, RayWorkerError
@@ -51,11 +52,14 @@ __all__ = [
     "TargetError",
     "TargetStore",
     "capture",
+    "check_frame_memory",
     "check_frame_size",
+    "check_memory",
     "check_scene",
     "compute_targets",
     "check_image_output",
     "figure_image",
+    "job_bytes",
     "load_scene",
     "open_dataset",
     "pool_targets",

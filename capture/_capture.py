@@ -28,7 +28,8 @@ from rtp.sdk import ALL_RATES, ParameterError
 from rtp.sdk.files import writer_lock
 
 from ._dataset import DatasetError, DatasetReader, DatasetWriter
-from ._pool import tick_queue, with_ticks, worker_pool
+from ._memory import check_frame_memory
+from ._pool import cores, tick_queue, with_ticks, worker_pool
 
 __all__ = [
     "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "check_scene", "load_scene",
@@ -313,7 +314,11 @@ def capture(
         raise ParameterError(f"unknown motion profile {bad[0]!r}; profiles are {', '.join(MOTION_PROFILES)}")
     if placement not in PLACEMENTS:
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
-    w, h = check_frame_size(size, renderer=ray is None)  # (a Ray driver may have no OpenGL: its workers say so)
+    w, h = check_frame_size(size, renderer=False)
+    if ray in (None, "local"):  # (on a cluster the frames are drawn on its nodes, in memory this process cannot see)
+        check_frame_memory("capture", (w, h), processes=min(workers or (cores() if ray == "local" else 1), len(scene_names)))
+    if ray is None:  # (a Ray driver may have no OpenGL: its workers say so)
+        check_frame_size((w, h))
     for name in scene_names:  # every name now: not after the manifest, or an hour into the first map
         check_scene(name, cache_dir, split, None if splits is None else str(splits))
     settings = {

@@ -44,7 +44,8 @@ PARENT_POLL_S = 0.5
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "LP_NUM_THREADS")
 
 
-def _cores() -> int:
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity; the CPU count where there is none)."""
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
@@ -54,7 +55,7 @@ def _cores() -> int:
 def worker_threads(workers: int) -> int:
     """The compute threads each of ``workers`` processes gets: the cores this process may run on,
     shared out, at least one."""
-    return max(1, _cores() // max(1, workers))
+    return max(1, cores() // max(1, workers))
 
 
 _TICKS: Any = None  # in a pool worker: the pool's tick queue (worker_pool(ticks=...)), else None
@@ -103,10 +104,10 @@ def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor
     """A ``spawn`` process pool of ``workers`` processes that die with the job, each on
     :func:`worker_threads` threads (module docstring); ``ticks``, a :func:`tick_queue`, is handed to
     every worker for :func:`with_ticks`."""
-    if workers > (cores := _cores()):
+    if workers > (n := cores()):
         log.warning("%d worker processes on the %d core%s this process may run on: each is a whole renderer or "
                     "metric process (hundreds of MB, torch's for targets), and more processes than cores add "
-                    "memory, not speed", workers, cores, "" if cores == 1 else "s")
+                    "memory, not speed", workers, n, "" if n == 1 else "s")
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
                                initializer=_init_worker, initargs=(os.getpid(), worker_threads(workers), ticks))
     try:

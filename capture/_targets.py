@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,8 @@ from rtp.sdk import (
 from rtp.sdk.files import atomic_output, writer_lock
 
 from ._dataset import DatasetReader, _check_id, sample_path
+from ._memory import check_memory, job_bytes, meminfo
+from ._pool import cores
 
 __all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
 
@@ -260,6 +262,25 @@ def _compute_one(data_root: str, sample_id: str, metrics: tuple[str, ...], param
     return sample_id
 
 
+def _check_memory(reader: DatasetReader, metrics: Sequence[str], workers: int | None, ray: str | None) -> None:
+    """A dataset whose targets cannot be computed in this machine's memory is refused before any
+    is: a :class:`TargetError` (FLIP's targets of a 3840x2160 sample take about 11 GB in a process).
+    Where one process would fit and ``workers`` do not, the advice is fewer workers."""
+    settings = reader.manifest.get("settings")
+    size = settings.get("size") if isinstance(settings, dict) else None
+    if ray not in (None, "local") or not (isinstance(size, list) and len(size) == 2
+                                          and all(isinstance(v, int) and v > 0 for v in size)):
+        return  # (a cluster's nodes compute them, in memory this process cannot see)
+    n, (w, h) = workers or (cores() if ray == "local" else 1), size  # (a private Ray instance: a worker per core)
+    one = job_bytes("targets", (w, h), metrics=metrics)
+    fewer = n > 1 and one <= meminfo("MemTotal") + meminfo("SwapTotal")
+    each = f" ({one / 2**30:.1f} GiB in each of {n} processes)" if n > 1 else ""
+    check_memory(n * one, f"the {', '.join(metrics)} targets of its {w}x{h} samples take about {n * one / 2**30:.1f} "
+                          f"GiB{each}", "workers" if fewer else "data",
+                 "of memory: fewer workers" if fewer else "of memory: compute them on a larger machine (or on a Ray "
+                 "cluster's: --ray ADDRESS)", job="the targets job", error=lambda message, name: TargetError(message))
+
+
 def compute_targets(
     data_root: str | os.PathLike[str],
     metrics: tuple[str, ...] = TARGET_METRICS,
@@ -300,6 +321,7 @@ def compute_targets(
     if weber_l is not None:
         M.check_weber_l(weber_l)
     reader = DatasetReader(data_root)
+    _check_memory(reader, metrics, workers, ray)
     store = TargetStore(data_root)
     store.root.mkdir(exist_ok=True)
     # Held to the end: a second job on the same targets would compute them again, and its declare could

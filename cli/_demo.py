@@ -70,7 +70,7 @@ def run_demo(
     """Run the demo and write its pictures into ``out``. ``predict`` is timed as the median of
     ``timing_runs`` runs after a warm-up."""
     from rtp import metrics
-    from rtp.capture import load_scene, save_image
+    from rtp.capture import check_frame_memory, load_scene, save_image
     from rtp.capture.paths import composite
     from rtp.evaluate import failing_tiles
     from rtp.evaluate.plots import heatmaps, rate_overlays, value_map
@@ -85,6 +85,7 @@ def run_demo(
             f"threshold: expected a finite {meta.metric} value" + ("" if meta.higher_is_better else " > 0")
             + f" (the model's default is {meta.default_threshold:g}), got {thr:g}", "threshold")
     metrics.check_dependencies((meta.metric, "flip"))  # the true error map and the FLIP picture, before rendering
+    check_frame_memory("demo", size, metrics=(meta.metric,))  # (not the system's OOM killer, minutes in)
     out = Path(out)
     scn, blockers = load_scene(scene, cache_dir, None, None)
     out.mkdir(parents=True, exist_ok=True)  # (after the scene: a name it cannot load leaves no empty folder)

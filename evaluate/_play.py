@@ -499,11 +499,16 @@ def play(
                                    "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale,
                                    "carry_scale": m.carry_scale, "carry": m.carry}
                           for m in specs if m.kind == "model" and (m.reuse > 1 or m.history > 0)}}
-    from rtp.capture import check_frame_size, check_scene
+    from rtp.capture import check_frame_memory, check_frame_size, check_scene
 
-    # a scene it cannot load, or a size the renderer cannot draw, fails before the output folder is made
+    # a scene it cannot load, a size past this machine's memory or one the renderer cannot draw fails
+    # before the output folder is made
     check_scene(scene, cache_dir, None, None)
-    check_frame_size(size)
+    w, h = check_frame_size(size, renderer=False)
+    check_frame_memory("play", (w, h), processes=min(workers, len(dict.fromkeys(paths))), metrics=(fail_metric,),
+                       loops=sum(_loop_count(m, sweep, predictors) for m in specs), models=len(predictors),
+                       error=PlayError)
+    check_frame_size((w, h))
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
     if outdir is not None:
@@ -699,6 +704,15 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                 loops.append(_Loop(m, f, f"cutoff {FFX_CUTOFF * f:.4g}, motion {FFX_MOTION_FACTOR * f:.4g}",
                                    _baseline(ffx, FFX_CUTOFF * f), default=f == 1.0))
     return loops
+
+
+def _loop_count(m: MethodSpec, sweep: bool, predictors: dict[str, Any]) -> int:
+    """How many loops :func:`_loops` makes of ``m``: one per swept parameter."""
+    if not sweep or m.kind in ("full", "oracle", "oracle-monotone"):
+        return 1
+    if m.kind == "model":
+        return len(PSNR_SWEEP_DB if predictors[m.model].metadata.higher_is_better else MODEL_SWEEP)
+    return len(BASELINE_SWEEP)
 
 
 def _oracle(thr: float, hib: bool, monotone: bool = False) -> Callable[..., np.ndarray]:

@@ -167,6 +167,23 @@ def tiny_model(tmp_path: Path) -> Callable[..., Path]:
     return make
 
 
+@pytest.fixture
+def machine_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Callable[..., None]:
+    """The memory rtp's jobs see (``rtp.capture``'s ``MEMINFO``, a file of this test): call it with
+    ``/proc/meminfo`` fields in bytes, ``machine_memory(MemTotal=4 * 2**30, MemAvailable=2**30)``;
+    until then the file is empty and no job checks its memory."""
+    from rtp.capture import _memory
+
+    path = tmp_path / "meminfo"
+    path.write_text("")
+    monkeypatch.setattr(_memory, "MEMINFO", str(path))
+
+    def set_fields(**fields: int) -> None:
+        path.write_text("".join(f"{k}:  {v // 1024} kB\n" for k, v in fields.items()))
+
+    return set_fields
+
+
 @pytest.fixture(scope="session")
 def vectors() -> dict[str, Any]:
     return json.loads((DATA / "transform_vectors.json").read_text())

@@ -224,7 +224,7 @@ def test_a_pool_past_the_cores_runs_with_a_warning(caplog: pytest.LogCaptureFixt
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     from rtp.capture import _pool, worker_pool
 
-    monkeypatch.setattr(_pool, "_cores", lambda: 1)
+    monkeypatch.setattr(_pool, "cores", lambda: 1)
     with caplog.at_level("WARNING", logger="rtp.capture"):
         with worker_pool(1) as pool:
             assert pool.submit(abs, -1).result(timeout=60) == 1

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -379,7 +380,7 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
     assert rep.ratios("jnyang", "yang2019", 0.05)["slow"] == pytest.approx(0.826 / 0.865)
 
 
-def test_methods_are_parsed_and_checked(tmp_path: Path) -> None:
+def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable[..., None]) -> None:
     specs = parse_methods("jnyang, jnyang@4,models/psnr.onnx@2,yang2019,jnyang@4:worst,jnyang@4:mean,"
                           "jnyang@4:fresh,jnyang@2:fresh:upper,jnyang@1:h0.5,jnyang@4:h0.25:fresh,jnyang@8:r0.02,"
                           "jnyang@4:s4:r0.05,jnyang@4:v0.5:c1.08,split.onnx@4:features:fresh")
@@ -437,6 +438,10 @@ def test_methods_are_parsed_and_checked(tmp_path: Path) -> None:
         with pytest.raises(PlayError, match=words):
             play("procedural:0", "full", **{"frames": 3, "size": (64, 48), **kwargs})  # type: ignore[arg-type]
     # a size this OpenGL cannot draw fails before the output folder is made (it was after the scene loaded)
+    machine_memory(MemTotal=24 * 2**30, MemAvailable=20 * 2**30)  # a machine like this one
+    with pytest.raises(PlayError, match=r"^size: the closed loop at 16384x16384 holds about 16\d\.\d GiB"):
+        play("procedural:0", "full", frames=3, size=(16384, 16384), out=str(tmp_path / "out"))
+    machine_memory(MemTotal=2**50, MemAvailable=2**50)  # on a machine with the memory: the renderer's refusal
     with pytest.raises(sdk.RtpError, match="frame size|render targets"):
         play("procedural:0", "full", frames=3, size=(16384, 16384), out=str(tmp_path / "out"))
     assert not (tmp_path / "out").exists()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -1260,11 +1261,13 @@ def test_a_network_too_large_to_build_is_refused_before_reading_data(fields: dic
 
 
 def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture,
+    machine_memory: Callable[..., None]
 ) -> None:
     """A batch whose training step cannot fit in memory failed after the data was read, as numpy's
     MemoryError traceback (batch 10**6) or, under the machine's size, the system's OOM killer: now a
     usage error naming batch, from the network's activations measured on torch's meta device."""
+    from rtp.capture import _memory
     from rtp.train import _loop
 
     cfg = TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), crop=64)
@@ -1279,24 +1282,24 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=16, batch=1, arch="fast"))
 
     memory = {"MemTotal": 4 * 2**30, "MemAvailable": 2**30}
-    monkeypatch.setattr(_loop, "_memory", lambda field: memory.get(field, 0))
+    machine_memory(**memory)
     with pytest.raises(sdk.ParameterError, match=r"^batch: 4000 crops of 64 pixels take about 6\.1 GiB .* more than "
                                                  r"this machine's 4\.0 GiB of memory: lower batch or crop") as info:
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=4000))
     assert info.value.name == "batch"
-    memory["SwapTotal"] = 4 * 2**30  # with swap the job may still end (slowly): refused past both
+    machine_memory(**memory, SwapTotal=4 * 2**30)  # with swap the job may still end (slowly): refused past both
     with pytest.raises(sdk.ParameterError, match=r"more than this machine's 8\.0 GiB of memory and swap: lower batch"):
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=6000))
     with caplog.at_level("WARNING", logger="rtp.train"), pytest.raises(DatasetError, match="no dataset folder"):
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=4000))  # fits: warned
-    del memory["SwapTotal"]
+    machine_memory(**memory)
     caplog.clear()
     with caplog.at_level("WARNING", logger="rtp.train"), pytest.raises(DatasetError, match="no dataset folder"):
         train(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=1000))  # fits, not now: warned
     assert [r.getMessage().split(", more")[0] for r in caplog.records] == [
         "1000 crops of 64 pixels take about 1.5 GiB in a training step (what autograd keeps of the paper network's "
         "activations, and the crops)"]
-    monkeypatch.undo()
+    monkeypatch.setattr(_memory, "MEMINFO", "/proc/meminfo")  # the real machine's again
 
     data = _dataset(tmp_path / "d", n=3)
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"),
@@ -1330,7 +1333,7 @@ def test_a_network_that_cannot_run_on_meta_is_sized_by_its_crops_with_a_warning(
 
 
 def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, machine_memory: Callable[..., None]
 ) -> None:
     """Training holds every sample's planes in memory (16.8 GB for the shipped LPIPS run): a dataset
     past the machine's memory is refused from its first sample's size, before the rest are read."""
@@ -1339,15 +1342,14 @@ def test_a_dataset_past_the_machines_memory_is_refused_before_it_is_read(
     data = _dataset(tmp_path / "d")  # 12 samples of four 96x64 float16 planes: 48 KiB each
     cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), arch="fast", batch=2, crop=16,
                       steps=2, val_every=2)
-    memory = {"MemTotal": 300 * 1024, "MemAvailable": 300 * 1024}
-    monkeypatch.setattr(_loop, "_memory", lambda field: memory.get(field, 0))
+    machine_memory(MemTotal=300 * 1024, MemAvailable=300 * 1024)
     read = []
     monkeypatch.setattr(_loop, "Frame", lambda planes, names: read.append(1) or _frames.Frame(planes, names))
     with pytest.raises(sdk.ParameterError, match=r"^max_samples: the 12 samples' 4 input planes take about 0\.0 GiB .* "
                                                  r"more than this machine's 0\.0 GiB of memory: train on fewer") as info:
         train(cfg)
     assert info.value.name == "max_samples" and len(read) == 1 and not (tmp_path / "m.pt").exists()
-    memory["MemTotal"] = 2**34
+    machine_memory(MemTotal=2**34, MemAvailable=300 * 1024)
     with caplog.at_level("WARNING", logger="rtp.train"):
         train(cfg)  # fits the machine, not what is free now: a warning, and it trains
     assert [r.getMessage().split(" (")[0] for r in caplog.records if "input planes" in r.getMessage()] == [

@@ -27,7 +27,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from rtp import sdk
-from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore
+from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore, check_memory
 from rtp.evaluate import scores
 from rtp.sdk.files import check_output, writer_lock
 
@@ -655,23 +655,9 @@ def check_config(cfg: TrainConfig) -> None:
     with torch.device("meta"):  # the network itself (its size included), before any data is read; allocates nothing
         _network(cfg)
     need = step_bytes(cfg)
-    _check_memory(need, f"{cfg.batch} crops of {cfg.crop + 2 * cfg.context} pixels take about {need / 2**30:.1f} GiB in "
-                        f"a training step (what autograd keeps of the {cfg.arch} network's activations, and the crops)",
-                  "batch", "of memory: lower batch or crop")
-
-
-def _check_memory(need: int, said: str, name: str, advice: str) -> None:
-    """Refuse ``need`` bytes past the machine's memory and swap (a :class:`~rtp.sdk.ParameterError`
-    naming ``name``: "NAME: SAID, more than this machine's N GiB ADVICE"); warn past the memory
-    available now. (Swap counts for the refusal: a job past the memory may still end, slowly.)"""
-    memory, swap, available = _memory("MemTotal"), _memory("SwapTotal"), _memory("MemAvailable")
-    if memory and need > memory + swap:
-        advice = advice.replace("of memory", "of memory and swap", 1) if swap else advice
-        raise sdk.ParameterError(f"{name}: {said}, more than this machine's {(memory + swap) / 2**30:.1f} GiB {advice}",
-                                 name)
-    if available and need > available:
-        log.warning("%s, more than the %.1f GiB of memory available now: the system may kill the training",
-                    said, available / 2**30)
+    check_memory(need, f"{cfg.batch} crops of {cfg.crop + 2 * cfg.context} pixels take about {need / 2**30:.1f} GiB in "
+                       f"a training step (what autograd keeps of the {cfg.arch} network's activations, and the crops)",
+                 "batch", "of memory: lower batch or crop", job="the training", logger=log)
 
 
 def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: Sequence[str], cfg: TrainConfig) -> None:
@@ -683,22 +669,10 @@ def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: S
         return
     one = Frame(reader[ids[0]].inputs(cfg.inputs), cfg.inputs).nbytes
     need = one * len(ids)
-    _check_memory(need, f"the {len(ids):,} samples' {len(cfg.inputs)} input planes take about {need / 2**30:.1f} GiB in "
-                        f"memory (training holds them all)",
-                  "max_samples", "of memory: train on fewer (max_samples, per_scene) or fewer planes")
-
-
-def _memory(field: str) -> int:
-    """A ``/proc/meminfo`` field in bytes (``MemTotal``, ``SwapTotal``, ``MemAvailable``); 0 where there is none."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                key, _, value = line.partition(":")
-                if key == field:
-                    return int(value.split()[0]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return 0
+    check_memory(need, f"the {len(ids):,} samples' {len(cfg.inputs)} input planes take about {need / 2**30:.1f} GiB in "
+                       f"memory (training holds them all)",
+                 "max_samples", "of memory: train on fewer (max_samples, per_scene) or fewer planes", job="the training",
+                 logger=log)
 
 
 def step_bytes(cfg: TrainConfig) -> int:

@@ -1,0 +1,133 @@
+"""Peak memory of rtp's frame jobs, measured, beside the estimate they are refused by.
+
+    python bench/job_memory.py [--sizes 640x384,1280x768] [--jobs capture,targets,demo,play] [--frames 3]
+
+Each configuration below runs as an ``rtp`` command in a process of its own at each size; its peak
+resident set (the process and every child it waited for: ``os.wait4``) is read. The table gives
+both peaks, the slope between them in bytes per pixel, the slope and the peak at the larger size
+that ``rtp.capture.job_bytes`` estimates (the numbers ``rtp capture``, ``rtp targets``, ``rtp
+demo`` and ``rtp play`` refuse a frame size by, past the machine's memory and swap), and the ratio
+of the estimated to the measured peak. The configurations:
+
+- capture: ``rtp capture --scene procedural:1 --per-scene 1`` (two samples, one process)
+- targets: ``rtp targets --metrics M`` of that capture, for each metric
+- demo: ``rtp demo --model M``, for each shipped model
+- play: ``rtp play procedural:0 --path fast --frames N --no-plots`` with the oracle alone, JNYang
+  alone, the default methods (each without and with the sweep), and the oracle failing by FLIP,
+  JNFLIP and LPIPS
+
+The slopes are what ``rtp.capture``'s tables (``PER_PIXEL``, ``METRIC_PER_PIXEL``) hold: rerun this
+after a change that holds more or fewer full-frame images. Linux only (``os.wait4``). Prints a
+Markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from _common import frame_sizes, positive, run_main  # bench/ is on sys.path when run as a script
+
+from rtp import sdk
+from rtp.capture import job_bytes
+
+JOBS = ("capture", "targets", "demo", "play")
+RTP = [sys.executable, "-m", "rtp", "-q"]
+
+
+@dataclass
+class Config:
+    """One measured command: ``job`` and its label, the ``rtp`` arguments after the size (``{out}`` and
+    ``{data}`` filled in), and what :func:`rtp.capture.job_bytes` is told of it."""
+
+    job: str
+    label: str
+    args: list[str]
+    metrics: tuple[str, ...] = ()
+    loops: int = 0
+    models: int = 0
+    peaks: list[int] = field(default_factory=list)
+
+
+def configs(frames: int) -> Iterator[Config]:
+    from rtp.evaluate import DEFAULT_METHODS, parse_methods
+    from rtp.evaluate._play import _loop_count
+
+    yield Config("capture", "procedural:1, 2 samples",
+                 ["capture", "--scene", "procedural:1", "--per-scene", "1", "--out", "{data}"])
+    for m in sdk.TARGET_METRICS:
+        yield Config("targets", m, ["targets", "{data}", "--metrics", m], metrics=(m,))
+    for name in sdk.shipped_models():
+        model = name.removesuffix(".onnx")
+        yield Config("demo", model, ["demo", "--model", model, "--out", "{out}"], metrics=(sdk.load(model).metadata.metric,))
+    predictors = {m.model: sdk.load(m.model) for m in parse_methods(DEFAULT_METHODS) if m.kind == "model"}
+    for methods, sweep in (("oracle", False), ("jnyang", False), (DEFAULT_METHODS, False), (DEFAULT_METHODS, True)):
+        specs = parse_methods(methods)
+        label = ("default methods" if methods == DEFAULT_METHODS else methods) + (", swept" if sweep else "")
+        yield Config("play", label,
+                     ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",
+                      "--methods", methods, *([] if sweep else ["--no-sweep"])],
+                     metrics=("jnyang",), loops=sum(_loop_count(m, sweep, predictors) for m in specs),
+                     models=len({m.model for m in specs if m.kind == "model"}))
+    for metric in ("flip", "jnflip", "lpips"):
+        yield Config("play", f"oracle, failing by {metric}",
+                     ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",
+                      "--methods", "oracle", "--no-sweep", "--fail-metric", metric], metrics=(metric,), loops=1)
+
+
+def peak(argv: list[str]) -> int:
+    """Run ``argv``; its peak resident set in bytes (its children's included), or exit with its error."""
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(argv[2:])}: exit {proc.returncode}: {err.strip().splitlines()[-1:] or ''}")
+    return int(usage.ru_maxrss) * 1024  # (KiB on Linux)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=frame_sizes(16), default="640x384,1280x768",
+                    help="two comma-separated WIDTHxHEIGHT, the smaller first")
+    ap.add_argument("--jobs", default=",".join(JOBS), help=f"comma-separated, of {', '.join(JOBS)}")
+    ap.add_argument("--frames", type=positive, default=3, help="frames of each closed-loop run")
+    args = ap.parse_args()
+    jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]
+    if not jobs or any(j not in JOBS for j in jobs):
+        ap.error(f"--jobs: expected a comma-separated list of {', '.join(JOBS)}, got {args.jobs!r}")
+    if len(args.sizes) != 2 or args.sizes[0][0] * args.sizes[0][1] >= args.sizes[1][0] * args.sizes[1][1]:
+        ap.error("--sizes: expected two sizes, the smaller first")
+    if "targets" in jobs and "capture" not in jobs:
+        ap.error("--jobs: targets are computed on the capture's samples: add capture")
+    chosen = [c for c in configs(args.frames) if c.job in jobs]
+    with tempfile.TemporaryDirectory(prefix="rtp-job-memory-") as tmp:
+        for w, h in args.sizes:
+            data, out = Path(tmp) / f"data-{w}x{h}", Path(tmp) / "out"
+            for c in chosen:
+                size = [] if c.job == "targets" else ["--size", f"{w}x{h}"]  # (targets: the capture's)
+                c.peaks.append(peak([*RTP, *(a.format(out=out, data=data) for a in c.args), *size]))
+                shutil.rmtree(out, ignore_errors=True)
+    (w0, h0), (w1, h1) = args.sizes
+    pixels = w1 * h1 - w0 * h0
+    print(f"rtp {sdk.__version__}, peak resident set of each command (MB), each in a process of its own; "
+          f"slopes in bytes per pixel between {w0}x{h0} and {w1}x{h1}\n")
+    print(f"| job | configuration | peak at {w0}x{h0} | peak at {w1}x{h1} | slope | estimated slope | "
+          f"estimated peak at {w1}x{h1} | estimated / measured |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    for c in chosen:
+        est = [job_bytes(c.job, size, metrics=c.metrics, loops=c.loops, models=c.models) for size in args.sizes]
+        print(f"| {c.job} | {c.label} | {c.peaks[0] / 1e6:.0f} | {c.peaks[1] / 1e6:.0f} | "
+              f"{(c.peaks[1] - c.peaks[0]) / pixels:.0f} | {(est[1] - est[0]) / pixels:.0f} | {est[1] / 1e6:.0f} | "
+              f"{est[1] / c.peaks[1]:.2f} |")
+
+
+if __name__ == "__main__":
+    run_main(main)

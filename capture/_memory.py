@@ -1,0 +1,122 @@
+"""The memory a job will need, checked before it starts.
+
+A job past the machine's memory is not refused by anything on Linux: it runs until the kernel's
+OOM killer ends it without a word, often after minutes of work (``rtp demo --size 8192x8192``
+holds about 45 GB; ``rtp play`` at 3840x2160 with ``--workers 2`` about 27 GB). Each frame job
+(capture, targets, the demo, the closed loop) sizes itself from its frame size with the slopes of
+:data:`PER_PIXEL`, measured, and :func:`check_memory` refuses it past the machine's memory and
+swap (a :class:`~rtp.sdk.ParameterError` naming ``size``, before anything is drawn or written) and
+warns past the memory available now. Training sizes its steps and its dataset the same way
+(:func:`rtp.train.step_bytes`).
+
+``python bench/job_memory.py`` runs every job at two sizes, each in a process of its own, and
+prints its measured peak (the resident set, children included) beside :func:`job_bytes`'s
+estimate: rerun it after a change that holds more or fewer full-frame images, and update the
+tables here from its slopes.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable
+
+from rtp.sdk import ParameterError
+
+log = logging.getLogger("rtp.capture")
+
+#: Where the machine's memory is read (Linux). Elsewhere nothing is checked.
+MEMINFO = "/proc/meminfo"
+
+#: Bytes a job's process holds for each pixel of its frames, at its peak: the slope of the peak
+#: resident set between 640x384 and 1280x768 (``python bench/job_memory.py``, 2026-12-03).
+#: ``play.loop`` is added for each of a closed-loop run's method loops (one per swept parameter:
+#: its displayed frame, its reprojection); ``play.model`` for each distinct model it loads (its
+#: input planes, onnxruntime's buffers).
+PER_PIXEL: dict[str, float] = {
+    "capture": 770.0,  # a sample: two frames' G-buffers, the seven rates' colour, the reprojection, its files
+    "targets": 120.0,  # a sample read back, and JNYang's or PSNR's targets
+    "demo": 670.0,  # a rendered path, the frame at every rate, JNYang's targets, the FLIP picture, the pictures
+    "play": 650.0,  # a path's frame at every rate, the failing metric's truth (JNYang's; others add theirs)
+    "play.loop": 14.0,
+    "play.model": 90.0,
+}
+
+#: Bytes a job adds per pixel for a metric's per-tile targets over what JNYang's take (the batched
+#: FLIP port's feature maps for six images; AlexNet's for LPIPS). Metrics not named add nothing.
+METRIC_PER_PIXEL: dict[str, dict[str, float]] = {
+    "targets": {"flip": 1280.0, "jnflip": 1140.0, "lpips": 190.0},
+    "demo": {"flip": 1020.0, "jnflip": 540.0, "lpips": 20.0},
+    "play": {"flip": 1090.0, "jnflip": 930.0, "lpips": 160.0},
+}
+
+#: Bytes a job's process holds at any frame size (Python, numpy, the GL context, onnxruntime, torch).
+BASE: dict[str, float] = {
+    "capture": 150 * 2**20,
+    "targets": 230 * 2**20,
+    "demo": 390 * 2**20,
+    "play": 330 * 2**20,
+}
+
+
+#: How the messages name each job.
+_NOUNS = {"capture": "a capture", "targets": "the targets", "demo": "the demo", "play": "the closed loop"}
+
+
+def job_bytes(job: str, size: tuple[int, int], *, processes: int = 1, metrics: Iterable[str] = (), loops: int = 0,
+              models: int = 0) -> int:
+    """The peak bytes of ``job`` (a key of :data:`BASE`) on frames of ``size`` (width, height), in
+    each of ``processes`` processes at once, computing ``metrics``' targets (the largest counts: they
+    run one after another), with ``loops`` closed-loop method loops and ``models`` distinct models."""
+    if job not in BASE:
+        raise ParameterError(f"job: expected one of {', '.join(BASE)}, got {job!r}", "job")
+    w, h = size
+    extras = METRIC_PER_PIXEL.get(job, {})
+    per_pixel = PER_PIXEL[job] + max((extras.get(m, 0.0) for m in metrics), default=0.0)
+    if job == "play":
+        per_pixel += loops * PER_PIXEL["play.loop"] + models * PER_PIXEL["play.model"]
+    return int(max(1, processes) * (BASE[job] + per_pixel * w * h))
+
+
+def meminfo(field: str) -> int:
+    """A field of :data:`MEMINFO` in bytes (``MemTotal``, ``SwapTotal``, ``MemAvailable``); 0 where
+    there is none (not Linux, or a kernel without it)."""
+    try:
+        with open(MEMINFO, encoding="ascii") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                if key == field:
+                    return int(value.split()[0]) * 1024
+    except (OSError, ValueError, IndexError, UnicodeDecodeError):
+        pass
+    return 0
+
+
+def check_memory(need: int, said: str, name: str, advice: str, *, job: str = "the job",
+                 error: Callable[[str, str], Exception] = ParameterError, logger: logging.Logger | None = None) -> None:
+    """Refuse ``need`` bytes past the machine's memory and swap: ``error(message, name)`` (a
+    :class:`~rtp.sdk.ParameterError` by default), "NAME: SAID, more than this machine's N GiB of
+    memory ADVICE" (``advice`` starts "of memory"; "and swap" is added where there is swap: a job
+    past the memory may still end, slowly). Past the memory available now: a warning that the
+    system may kill ``job`` (logged to ``logger``, by default ``rtp.capture``'s)."""
+    memory, swap, available = meminfo("MemTotal"), meminfo("SwapTotal"), meminfo("MemAvailable")
+    if memory and need > memory + swap:
+        advice = advice.replace("of memory", "of memory and swap", 1) if swap else advice
+        raise error(f"{name}: {said}, more than this machine's {(memory + swap) / 2**30:.1f} GiB {advice}", name)
+    if available and need > available:
+        (logger or log).warning("%s, more than the %.1f GiB of memory available now: the system may kill %s",
+                                said, available / 2**30, job)
+
+
+def check_frame_memory(job: str, size: tuple[int, int], *, processes: int = 1, metrics: Iterable[str] = (),
+                       loops: int = 0, models: int = 0, error: Callable[[str, str], Exception] = ParameterError) -> None:
+    """:func:`check_memory` of :func:`job_bytes` for a job whose frame size the user chose: "size: the
+    demo at WxH holds about N GiB [(M GiB in each of P processes)], more than this machine's T GiB of
+    memory: a smaller size [or fewer workers, where one process would fit]"."""
+    metrics = tuple(metrics)
+    one = job_bytes(job, size, metrics=metrics, loops=loops, models=models)
+    n = max(1, processes)
+    w, h = size
+    each = f" ({one / 2**30:.1f} GiB in each of {n} processes)" if n > 1 else ""
+    fewer = n > 1 and one <= meminfo("MemTotal") + meminfo("SwapTotal")
+    check_memory(n * one, f"{_NOUNS[job]} at {w}x{h} holds about {n * one / 2**30:.1f} GiB{each}", "size",
+                 "of memory: a smaller size" + (" or fewer workers" if fewer else ""), job=_NOUNS[job], error=error)
