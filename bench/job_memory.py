@@ -15,6 +15,7 @@ of the estimated to the measured peak. The configurations:
 - play: ``rtp play procedural:0 --path fast --frames N --no-plots`` with the oracle alone, JNYang
   alone, the default methods (each without and with the sweep), and the oracle failing by FLIP,
   JNFLIP and LPIPS
+- metric: ``rtp metric M REF TEST --out MAP.png`` of two noise images of the size, for each metric
 
 The slopes are what ``rtp.capture``'s tables (``PER_PIXEL``, ``METRIC_PER_PIXEL``) hold: rerun this
 after a change that holds more or fewer full-frame images. Linux only (``os.wait4``). Prints a
@@ -38,7 +39,7 @@ from _common import frame_sizes, positive, run_main  # bench/ is on sys.path whe
 from rtp import sdk
 from rtp.capture import job_bytes
 
-JOBS = ("capture", "targets", "demo", "play")
+JOBS = ("capture", "targets", "demo", "play", "metric")
 RTP = [sys.executable, "-m", "rtp", "-q"]
 
 
@@ -80,6 +81,22 @@ def configs(frames: int) -> Iterator[Config]:
         yield Config("play", f"oracle, failing by {metric}",
                      ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",
                       "--methods", "oracle", "--no-sweep", "--fail-metric", metric], metrics=(metric,), loops=1)
+    for m in sdk.METRICS:
+        yield Config("metric", m, ["metric", m, "{ref}", "{test}", "--out", "{out}.png"], metrics=(m,))
+
+
+def image_pair(folder: Path, size: tuple[int, int]) -> tuple[Path, Path]:
+    """Two PNGs of ``size``: uniform noise, and the same with noise of +-20 levels added."""
+    import numpy as np
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    ref = (rng.random((size[1], size[0], 3)) * 255).astype(np.uint8)
+    test = np.clip(ref.astype(np.int16) + rng.integers(-20, 21, ref.shape), 0, 255).astype(np.uint8)
+    paths = folder / f"ref-{size[0]}x{size[1]}.png", folder / f"test-{size[0]}x{size[1]}.png"
+    for path, img in zip(paths, (ref, test), strict=True):
+        Image.fromarray(img).save(path)
+    return paths
 
 
 def peak(argv: list[str]) -> int:
@@ -111,10 +128,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="rtp-job-memory-") as tmp:
         for w, h in args.sizes:
             data, out = Path(tmp) / f"data-{w}x{h}", Path(tmp) / "out"
+            ref, test = image_pair(Path(tmp), (w, h)) if "metric" in jobs else ("", "")
             for c in chosen:
-                size = [] if c.job == "targets" else ["--size", f"{w}x{h}"]  # (targets: the capture's)
-                c.peaks.append(peak([*RTP, *(a.format(out=out, data=data) for a in c.args), *size]))
+                # (targets: the capture's size; metric: its images')
+                size = [] if c.job in ("targets", "metric") else ["--size", f"{w}x{h}"]
+                c.peaks.append(peak([*RTP, *(a.format(out=out, data=data, ref=ref, test=test) for a in c.args), *size]))
                 shutil.rmtree(out, ignore_errors=True)
+                Path(f"{out}.png").unlink(missing_ok=True)
     (w0, h0), (w1, h1) = args.sizes
     pixels = w1 * h1 - w0 * h0
     print(f"rtp {sdk.__version__}, peak resident set of each command (MB), each in a process of its own; "

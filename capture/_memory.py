@@ -3,7 +3,7 @@
 A job past the machine's memory is not refused by anything on Linux: it runs until the kernel's
 OOM killer ends it without a word, often after minutes of work (``rtp demo --size 8192x8192``
 holds about 45 GB; ``rtp play`` at 3840x2160 with ``--workers 2`` about 27 GB). Each frame job
-(capture, targets, the demo, the closed loop) sizes itself from its frame size with the slopes of
+(capture, targets, the demo, the closed loop, ``rtp metric``'s image pair) sizes itself from its frame size with the slopes of
 :data:`PER_PIXEL`, measured, and :func:`check_memory` refuses it past the machine's memory and
 swap (a :class:`~rtp.sdk.ParameterError` naming ``size``, before anything is drawn or written) and
 warns past the memory available now. Training sizes its steps and its dataset the same way
@@ -39,6 +39,7 @@ PER_PIXEL: dict[str, float] = {
     "play": 650.0,  # a path's frame at every rate, the failing metric's truth (JNYang's; others add theirs)
     "play.loop": 14.0,
     "play.model": 90.0,
+    "metric": 160.0,  # ``rtp metric``: the pair decoded, the per-pixel map, the figure of --out
 }
 
 #: Bytes a job adds per pixel for a metric's per-tile targets over what JNYang's take (the batched
@@ -47,6 +48,7 @@ METRIC_PER_PIXEL: dict[str, dict[str, float]] = {
     "targets": {"flip": 1280.0, "jnflip": 1140.0, "lpips": 190.0},
     "demo": {"flip": 1020.0, "jnflip": 540.0, "lpips": 20.0},
     "play": {"flip": 1090.0, "jnflip": 930.0, "lpips": 160.0},
+    "metric": {"lpips": 30.0},
 }
 
 #: Bytes a job's process holds at any frame size (Python, numpy, the GL context, onnxruntime, torch).
@@ -55,11 +57,17 @@ BASE: dict[str, float] = {
     "targets": 230 * 2**20,
     "demo": 390 * 2**20,
     "play": 330 * 2**20,
+    "metric": 90 * 2**20,
 }
+
+#: Bytes a metric adds to a job's base where the base was measured without it (torch and AlexNet's
+#: weights for LPIPS in ``rtp metric``; the frame jobs hold torch whatever their metric).
+METRIC_BASE: dict[str, dict[str, float]] = {"metric": {"lpips": 210 * 2**20}}
 
 
 #: How the messages name each job.
-_NOUNS = {"capture": "a capture", "targets": "the targets", "demo": "the demo", "play": "the closed loop"}
+_NOUNS = {"capture": "a capture", "targets": "the targets", "demo": "the demo", "play": "the closed loop",
+          "metric": "the metric"}
 
 
 def job_bytes(job: str, size: tuple[int, int], *, processes: int = 1, metrics: Iterable[str] = (), loops: int = 0,
@@ -74,7 +82,8 @@ def job_bytes(job: str, size: tuple[int, int], *, processes: int = 1, metrics: I
     per_pixel = PER_PIXEL[job] + max((extras.get(m, 0.0) for m in metrics), default=0.0)
     if job == "play":
         per_pixel += loops * PER_PIXEL["play.loop"] + models * PER_PIXEL["play.model"]
-    return int(max(1, processes) * (BASE[job] + per_pixel * w * h))
+    base = BASE[job] + max((METRIC_BASE.get(job, {}).get(m, 0.0) for m in metrics), default=0.0)
+    return int(max(1, processes) * (base + per_pixel * w * h))
 
 
 def meminfo(field: str) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from typing import Any
 
 import numpy as np
@@ -27,9 +28,29 @@ def _read(path: str) -> np.ndarray:
         raise ParameterError(f"{path!r}: not an image Pillow can read ({err})") from None
 
 
+def _check_memory(args: argparse.Namespace) -> None:
+    """An image pair whose metric cannot be computed in this machine's memory is refused before it
+    is decoded (Pillow takes images up to 179 million pixels: about 28 GiB for LPIPS)."""
+    from PIL import Image
+
+    from rtp.capture import check_memory, job_bytes
+
+    try:
+        with warnings.catch_warnings():  # (Pillow's warning past 89 million pixels: _read gives it, once)
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(args.reference) as im:  # (the header only)
+                w, h = im.size
+    except (OSError, ValueError, Image.DecompressionBombError):  # (_read says what is wrong with it)
+        return
+    need = job_bytes("metric", (w, h), metrics=(args.metric,))
+    check_memory(need, f"{args.metric} of a {w}x{h} image pair takes about {need / 2**30:.1f} GiB", "reference",
+                 "of memory: smaller images", job="rtp metric")
+
+
 def run_metric(args: argparse.Namespace) -> int:
     from rtp import metrics, sdk
 
+    _check_memory(args)
     ref, test = _read(args.reference), _read(args.test)
     if ref.shape != test.shape:
         raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "

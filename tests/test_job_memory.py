@@ -12,7 +12,7 @@ import pytest
 
 from rtp import sdk
 from rtp.capture import TargetError, capture, check_memory, compute_targets, job_bytes
-from rtp.capture._memory import BASE, METRIC_PER_PIXEL, PER_PIXEL, meminfo
+from rtp.capture._memory import BASE, METRIC_BASE, METRIC_PER_PIXEL, PER_PIXEL, meminfo
 from rtp.cli import main as rtp_main
 from rtp.evaluate import DEFAULT_METHODS, PlayError, parse_methods, play
 from rtp.evaluate._play import _loop_count, _loops
@@ -31,7 +31,10 @@ def test_job_bytes_add_the_metrics_loops_models_and_processes() -> None:
     loops = job_bytes("play", (100, 10), loops=55, models=2) - job_bytes("play", (100, 10))
     assert loops == int(1000 * (55 * PER_PIXEL["play.loop"] + 2 * PER_PIXEL["play.model"]))
     assert job_bytes("demo", (100, 10), loops=55) == job_bytes("demo", (100, 10))  # (a closed loop's only)
-    with pytest.raises(sdk.ParameterError, match="^job: expected one of capture, targets, demo, play, got 'render'"):
+    lpips = job_bytes("metric", (100, 10), metrics=("psnr", "lpips"))  # torch and AlexNet: a base of their own
+    assert lpips == int(BASE["metric"] + METRIC_BASE["metric"]["lpips"]
+                        + (PER_PIXEL["metric"] + METRIC_PER_PIXEL["metric"]["lpips"]) * 1000)
+    with pytest.raises(sdk.ParameterError, match="^job: expected one of capture, targets, demo, play, metric, got 'render'"):
         job_bytes("render", (100, 10))
 
 
@@ -177,3 +180,31 @@ def test_bench_job_memory_prints_the_measured_peak_beside_the_estimate() -> None
                         (["--sizes", "128x96,64x48"], "--sizes: expected two sizes, the smaller first")):
         bad = subprocess.run([sys.executable, str(bench), *args], capture_output=True, text=True, timeout=120)
         assert bad.returncode == 2 and words in bad.stderr, (args, bad.stderr)
+
+
+def test_rtp_metric_refuses_an_image_pair_past_memory_before_decoding_it(
+    machine_memory: Callable[..., None], tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Pillow decodes images of up to 179 million pixels; LPIPS of such a pair takes about 33 GiB."""
+    import numpy as np
+    from PIL import Image
+
+    from rtp.cli import _metric
+
+    ref, test = tmp_path / "ref.png", tmp_path / "test.png"
+    Image.fromarray(np.full((96, 160, 3), 128, np.uint8)).save(ref)
+    Image.fromarray(np.full((96, 160, 3), 120, np.uint8)).save(test)
+    need = job_bytes("metric", (160, 96), metrics=("lpips",))
+    machine_memory(MemTotal=need - 2**20, MemAvailable=need - 2**20)
+    decoded: list[str] = []
+    read = _metric._read
+    monkeypatch.setattr(_metric, "_read", lambda path: decoded.append(path))
+    assert rtp_main(["metric", "lpips", str(ref), str(test)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"rtp metric: error: reference: lpips of a 160x96 image pair takes about {need / GiB:.1f} GiB, more than this "
+        f"machine's {(need - 2**20) / GiB:.1f} GiB of memory: smaller images")
+    assert decoded == []  # refused from the header
+    monkeypatch.setattr(_metric, "_read", read)
+    assert rtp_main(["metric", "psnr", str(ref), str(test)]) == 0  # the same machine: without torch's base it fits
+    assert "psnr (dB), 160x96" in capsys.readouterr().out
