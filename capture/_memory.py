@@ -3,10 +3,10 @@
 A job past the machine's memory is not refused by anything on Linux: it runs until the kernel's
 OOM killer ends it without a word, often after minutes of work (``rtp demo --size 8192x8192``
 holds about 45 GB; ``rtp play`` at 3840x2160 with ``--workers 2`` about 27 GB). Each frame job
-(capture, targets, the demo, the closed loop, ``rtp metric``'s image pair) sizes itself from its frame size with the slopes of
-:data:`PER_PIXEL`, measured, and :func:`check_memory` refuses it past the machine's memory and
-swap (a :class:`~rtp.sdk.ParameterError` naming ``size``, before anything is drawn or written) and
-warns past the memory available now. Training sizes its steps and its dataset the same way
+(capture, targets, the demo, the closed loop, ``rtp metric``'s image pair) sizes itself from its
+frame size with the slopes of :data:`PER_PIXEL`, measured, and :func:`check_memory` refuses it past
+the machine's memory and swap (a :class:`~rtp.sdk.ParameterError` naming ``size``, before anything
+is drawn or written) and warns past the memory available now. Training sizes its steps and its dataset the same way
 (:func:`rtp.train.step_bytes`).
 
 ``python bench/job_memory.py`` runs every job at two sizes, each in a process of its own, and
