@@ -18,9 +18,12 @@ tables here from its slopes.
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 from collections.abc import Callable, Iterable
+from typing import Any
 
-from rtp.sdk import ParameterError
+from rtp.sdk import METRICS, ParameterError
 
 log = logging.getLogger("rtp.capture")
 
@@ -75,15 +78,39 @@ def job_bytes(job: str, size: tuple[int, int], *, processes: int = 1, metrics: I
     """The peak bytes of ``job`` (a key of :data:`BASE`) on frames of ``size`` (width, height), in
     each of ``processes`` processes at once, computing ``metrics``' targets (the largest counts: they
     run one after another), with ``loops`` closed-loop method loops and ``models`` distinct models."""
-    if job not in BASE:
+    if not isinstance(job, str) or job not in BASE:
         raise ParameterError(f"job: expected one of {', '.join(BASE)}, got {job!r}", "job")
-    w, h = size
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise ParameterError(f"size: expected (width, height), got {size!r}", "size")
+    w, h = (_count("size", v, 1) for v in size)
+    processes, loops, models = _count("processes", processes, 1), _count("loops", loops, 0), _count("models", models, 0)
+    metrics = _metric_names(metrics)
     extras = METRIC_PER_PIXEL.get(job, {})
     per_pixel = PER_PIXEL[job] + max((extras.get(m, 0.0) for m in metrics), default=0.0)
     if job == "play":
         per_pixel += loops * PER_PIXEL["play.loop"] + models * PER_PIXEL["play.model"]
     base = BASE[job] + max((METRIC_BASE.get(job, {}).get(m, 0.0) for m in metrics), default=0.0)
-    return int(max(1, processes) * (base + per_pixel * w * h))
+    return int(processes * (base + per_pixel * w * h))
+
+
+def _count(name: str, value: Any, least: int) -> int:
+    """``value`` as an int in ``[least, 2**31 - 1]`` (a GL size; past it float arithmetic would overflow)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not least <= int(value) <= 2**31 - 1:
+        raise ParameterError(f"{name}: expected an integer in [{least}, {2**31 - 1}], got {value!r}", name)
+    return int(value)
+
+
+def _metric_names(metrics: Any) -> tuple[str, ...]:
+    """``metrics`` as a tuple of names of :data:`rtp.sdk.METRICS` (one name alone is one metric)."""
+    names = (metrics,) if isinstance(metrics, str) else metrics
+    try:
+        names = tuple(names)
+    except TypeError:
+        raise ParameterError(f"metrics: expected metric names, got {metrics!r}", "metrics") from None
+    bad = [m for m in names if not isinstance(m, str) or m not in METRICS]
+    if bad:
+        raise ParameterError(f"metrics: expected names of {', '.join(METRICS)}, got {bad[0]!r}", "metrics")
+    return names
 
 
 def meminfo(field: str) -> int:
@@ -107,6 +134,13 @@ def check_memory(need: int, said: str, name: str, advice: str, *, job: str = "th
     memory ADVICE" (``advice`` starts "of memory"; "and swap" is added where there is swap: a job
     past the memory may still end, slowly). Past the memory available now: a warning that the
     system may kill ``job`` (logged to ``logger``, by default ``rtp.capture``'s)."""
+    if (isinstance(need, bool) or not isinstance(need, numbers.Real) or need < 0
+            or not (isinstance(need, numbers.Integral) or math.isfinite(need))):  # (math.isfinite(10**400) overflows)
+        raise ParameterError(f"need: expected a number of bytes >= 0, got {need!r}", "need")
+    texts = {"said": said, "name": name, "advice": advice, "job": job}
+    bad = next((k for k, v in texts.items() if not isinstance(v, str)), None)
+    if bad is not None:
+        raise ParameterError(f"{bad}: expected a text, got {texts[bad]!r}", bad)
     memory, swap, available = meminfo("MemTotal"), meminfo("SwapTotal"), meminfo("MemAvailable")
     if memory and need > memory + swap:
         advice = advice.replace("of memory", "of memory and swap", 1) if swap else advice
@@ -121,10 +155,9 @@ def check_frame_memory(job: str, size: tuple[int, int], *, processes: int = 1, m
     """:func:`check_memory` of :func:`job_bytes` for a job whose frame size the user chose: "size: the
     demo at WxH holds about N GiB [(M GiB in each of P processes)], more than this machine's T GiB of
     memory: a smaller size [or fewer workers, where one process would fit]"."""
-    metrics = tuple(metrics)
     one = job_bytes(job, size, metrics=metrics, loops=loops, models=models)
-    n = max(1, processes)
-    w, h = size
+    n = _count("processes", processes, 1)
+    w, h = (int(v) for v in size)
     each = f" ({one / 2**30:.1f} GiB in each of {n} processes)" if n > 1 else ""
     fewer = n > 1 and one <= meminfo("MemTotal") + meminfo("SwapTotal")
     check_memory(n * one, f"{_NOUNS[job]} at {w}x{h} holds about {n * one / 2**30:.1f} GiB{each}", "size",

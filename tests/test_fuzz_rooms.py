@@ -31,7 +31,18 @@ from rtp import evaluate as E
 from rtp import metrics as M
 from rtp import scene as S
 from rtp import sdk
-from rtp.capture import BUFFERS, DatasetReader, DatasetWriter, TargetError, TargetStore, check_frame_size, pool_targets
+from rtp.capture import (
+    BUFFERS,
+    DatasetReader,
+    DatasetWriter,
+    TargetError,
+    TargetStore,
+    check_frame_memory,
+    check_frame_size,
+    check_memory,
+    job_bytes,
+    pool_targets,
+)
 
 from .fuzzing import (
     _FILLS,
@@ -713,6 +724,29 @@ frame_size_cases = st.tuples(
     st.one_of(st.just("size"), st.text(max_size=5), json_scalars),
 )
 
+job_memory_cases = st.tuples(
+    st.one_of(st.sampled_from(["capture", "targets", "demo", "play", "metric"]), json_scalars),
+    frame_size_cases.map(lambda case: case[0]),
+    st.one_of(st.integers(-2, 40), hostile_numbers),  # processes
+    st.one_of(st.sampled_from(list(sdk.METRICS)), st.lists(st.one_of(st.sampled_from(list(sdk.METRICS)), json_scalars),
+                                                           max_size=3), json_values),
+    st.one_of(st.integers(-2, 100), hostile_numbers),  # loops
+    st.one_of(st.integers(-2, 10), hostile_numbers),  # models
+    st.one_of(st.integers(0, 2**45), hostile_numbers),  # bytes needed
+    st.one_of(st.text(max_size=5), json_scalars),  # what is said of them
+)
+
+
+def _job_memory_call(v: tuple[Any, ...]) -> None:
+    job, size, processes, metrics, loops, models, need, said = v
+    kw = {"processes": processes, "metrics": metrics, "loops": loops, "models": models}
+    with contextlib.suppress(sdk.ParameterError):  # (each call on its own: the second runs after the first's refusal)
+        job_bytes(job, _val(size), **kw)
+    with contextlib.suppress(sdk.ParameterError):
+        check_frame_memory(job, _val(size), **kw)
+    check_memory(need, said, "size", "of memory: less")
+
+
 # -- rtp.capture.viewpoints ---------------------------------------------------------------------------
 
 
@@ -812,6 +846,7 @@ CASES: list[tuple[Target, int]] = [
     (Target("capture: check_frame_size(renderer=False)", frame_size_cases,
             lambda v: check_frame_size(_val(v[0]), v[1], renderer=False)), 100),
     (Target("capture: sample_viewpoints on procedural(0)", viewpoint_cases, _viewpoints_call), 80),
+    (Target("capture: job_bytes, check_frame_memory, check_memory", job_memory_cases, _job_memory_call), 100),
 ]
 
 

@@ -36,6 +36,18 @@ def test_job_bytes_add_the_metrics_loops_models_and_processes() -> None:
                         + (PER_PIXEL["metric"] + METRIC_PER_PIXEL["metric"]["lpips"]) * 1000)
     with pytest.raises(sdk.ParameterError, match="^job: expected one of capture, targets, demo, play, metric, got 'render'"):
         job_bytes("render", (100, 10))
+    assert job_bytes("demo", (100, 10), metrics="flip") == job_bytes("demo", (100, 10), metrics=["flip"])  # one name
+    for kw, words in (({"size": (0, 10)}, r"^size: expected an integer in \[1, 2147483647\], got 0"),
+                      ({"size": (100,)}, r"^size: expected \(width, height\)"),
+                      ({"size": (2**40, 10)}, r"^size: expected an integer in"),  # (float products would overflow)
+                      ({"processes": 0}, "^processes: expected an integer in"),
+                      ({"loops": -1}, r"^loops: expected an integer in \[0,"),
+                      ({"metrics": ("flip", "flipp")}, "^metrics: expected names of flip, .*, got 'flipp'")):
+        with pytest.raises(sdk.ParameterError, match=words):
+            job_bytes("demo", **{"size": (100, 10), **kw})
+    for need in (-1, float("nan"), float("inf"), "1 GB", True):
+        with pytest.raises(sdk.ParameterError, match="^need: expected a number of bytes >= 0"):
+            check_memory(need, "a job", "size", "of memory: less")  # type: ignore[arg-type]
 
 
 def test_meminfo_reads_linux_fields_and_nothing_elsewhere(machine_memory: Callable[..., None], tmp_path: Path,
