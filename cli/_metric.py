@@ -30,7 +30,7 @@ def _read(path: str) -> np.ndarray:
 
 def _check_memory(args: argparse.Namespace) -> None:
     """An image pair whose metric cannot be computed in this machine's memory is refused before it
-    is decoded (Pillow takes images up to 179 million pixels: about 28 GiB for LPIPS)."""
+    is decoded (Pillow takes images up to 179 million pixels: about 32 GiB for LPIPS)."""
     from PIL import Image
 
     from rtp.capture import check_memory, job_bytes

@@ -198,7 +198,7 @@ def test_rtp_metric_refuses_an_image_pair_past_memory_before_decoding_it(
     machine_memory: Callable[..., None], tmp_path: Path, capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Pillow decodes images of up to 179 million pixels; LPIPS of such a pair takes about 33 GiB."""
+    """Pillow decodes images of up to 179 million pixels; LPIPS of such a pair takes about 32 GiB."""
     import numpy as np
     from PIL import Image
 
