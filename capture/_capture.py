@@ -315,7 +315,7 @@ def capture(
     if placement not in PLACEMENTS:
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
     w, h = check_frame_size(size, renderer=False)
-    if ray in (None, "local"):  # (on a cluster the frames are drawn on its nodes, in memory this process cannot see)
+    if ray in (None, "local"):  # (on a cluster each node's workers are checked against its memory: ray_capture)
         check_frame_memory("capture", (w, h), processes=min(workers or (cores() if ray == "local" else 1), len(scene_names)))
     if ray is None:  # (a Ray driver may have no OpenGL: its workers say so)
         check_frame_size((w, h))

@@ -32,7 +32,9 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from rtp.sdk import EXIT_USAGE, RtpError
+from rtp.sdk import EXIT_USAGE, ParameterError, RtpError
+
+from ._memory import job_bytes
 
 __all__ = ["MAX_RETRIES", "RAY_LOCAL", "RayExecutorError", "RayWorkerError", "ray_cluster"]
 
@@ -191,6 +193,42 @@ def _schedule(actors: Sequence[Any], tasks: dict[str, list[Any]], submit: Callab
         feed(i)
 
 
+def _kill(actors: Sequence[Any]) -> None:
+    """End a job's actors (Ray shut down already, or an actor gone: nothing to end)."""
+    ray = _ray()
+    for a in actors:
+        with contextlib.suppress(Exception):
+            ray.kill(a)
+
+
+def _node_memory() -> tuple[str, int, int]:
+    """In a Ray worker: its node's id, memory and swap, and memory available now (bytes; 0 unknown)."""
+    from ._memory import meminfo
+
+    return _ray().get_runtime_context().get_node_id(), meminfo("MemTotal") + meminfo("SwapTotal"), meminfo("MemAvailable")
+
+
+def _check_node_memory(actors: Sequence[Any], one: int, said: str, name: str, advice: str,
+                       error: Callable[[str, str], Exception]) -> None:
+    """Each Ray node's workers together against that node's memory and swap, as
+    :func:`rtp.capture.check_memory` checks this machine's: ``one`` bytes a worker, ``said`` what
+    they hold ("a capture at 8192x8192"). Past a node's memory and swap, ``error(message, name)``;
+    past what it has available now, a warning. "fewer workers" is advised where one would fit."""
+    ray = _ray()
+    nodes: dict[str, list[int]] = {}
+    for node, total, available in ray.get([a.node_memory.remote() for a in actors]):
+        nodes.setdefault(node, [0, total, available])[0] += 1
+    for node, (count, total, available) in nodes.items():
+        need, each = count * one, f" ({one / 2**30:.1f} GiB in each of its {count} workers)" if count > 1 else ""
+        where = f"{said} holds about {need / 2**30:.1f} GiB on Ray node {node[:12]}{each}"
+        if total and need > total:
+            fewer = " or fewer workers" if count > 1 and one <= total else ""
+            raise error(f"{name}: {where}, more than its {total / 2**30:.1f} GiB of memory and swap: {advice}{fewer}", name)
+        if available and need > available:
+            log.warning("%s, more than the %.1f GiB of memory it has available now: the system may kill its workers",
+                        where, available / 2**30)
+
+
 # -- capture ----------------------------------------------------------------------------------------
 
 
@@ -208,6 +246,9 @@ class _CaptureWorker:
 
     def pid(self) -> int:
         return os.getpid()
+
+    def node_memory(self) -> tuple[str, int, int]:
+        return _node_memory()
 
     def _load(self, scene_name: str) -> tuple[Any, Any]:
         from ._capture import load_scene
@@ -254,11 +295,15 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
     writer = DatasetWriter(out, settings) if (Path(out) / "manifest.json").exists() else None
     report = CaptureReport()
     with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
+        cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
+        actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
+        guard.callback(_kill, actors)  # (however the job ends: in a Ray the caller started they would hold its CPUs)
+        # every node's workers against its memory, before the folder is made or anything is drawn
+        _check_node_memory(actors, job_bytes("capture", size), f"a capture at {size[0]}x{size[1]}", "size",
+                           "a smaller size", ParameterError)
         if writer is None:
             writer = DatasetWriter(out, settings)
             guard.enter_context(_writer_lock(out))  # (a folder that existed: capture() holds its lock)
-        cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
-        actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
         if on_actors is not None:
             on_actors(actors)
         # Plan every scene (the worker that plans a scene keeps it loaded and renders it first).
@@ -295,8 +340,6 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
             progress(1)
 
         _schedule(actors, tasks, lambda a, t: a.render.remote(t[1], t[2], t[0], t[3], t[4]), rendered, "sample")
-        for a in actors:
-            ray.kill(a)
     return report
 
 
@@ -314,6 +357,9 @@ class _TargetWorker:
     def pid(self) -> int:
         return os.getpid()
 
+    def node_memory(self) -> tuple[str, int, int]:
+        return _node_memory()
+
     def compute(self, sample_id: str, data: bytes, metrics: tuple[str, ...], params: dict[str, Any],
                 base_tile: int) -> tuple[dict[str, Any], tuple[int, int]]:
         from ._dataset import sample_from_bytes
@@ -328,14 +374,22 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
                 on_actors: Callable[[list[Any]], None] | None = None) -> None:
     """The Ray path of :func:`rtp.capture.compute_targets`: ``todo`` maps sample ids to the metrics
     they lack; results are written into the dataset's target store by this process."""
-    from ._dataset import sample_path
-    from ._targets import TargetStore
+    from ._dataset import DatasetReader, sample_path
+    from ._targets import TargetError, TargetStore
 
     ray = _ray()
     store = TargetStore(data_root)
-    with ray_cluster(address, workers) as n:
+    settings = DatasetReader(data_root).manifest.get("settings")
+    size = settings.get("size") if isinstance(settings, dict) else None
+    metrics = tuple(dict.fromkeys(m for ms in todo.values() for m in ms))
+    with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_TargetWorker)
         actors = [cls.remote(1) for _ in range(n)]
+        guard.callback(_kill, actors)
+        if isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0 for v in size):
+            _check_node_memory(actors, job_bytes("targets", (size[0], size[1]), metrics=metrics),
+                               f"the {', '.join(metrics)} targets of its {size[0]}x{size[1]} samples", "data",
+                               "a node with more memory", lambda message, name: TargetError(message))
         if on_actors is not None:
             on_actors(actors)
 
@@ -353,5 +407,3 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
 
         # One queue: targets have no affinity (every worker holds the same network).
         _schedule(actors, {"": list(todo.items())}, submit, done, "sample")
-        for a in actors:
-            ray.kill(a)

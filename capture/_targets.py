@@ -270,7 +270,7 @@ def _check_memory(reader: DatasetReader, metrics: Sequence[str], workers: int | 
     size = settings.get("size") if isinstance(settings, dict) else None
     if ray not in (None, "local") or not (isinstance(size, list) and len(size) == 2
                                           and all(isinstance(v, int) and v > 0 for v in size)):
-        return  # (a cluster's nodes compute them, in memory this process cannot see)
+        return  # (on a cluster each node's workers are checked against its memory: ray_targets)
     n, (w, h) = workers or (cores() if ray == "local" else 1), size  # (a private Ray instance: a worker per core)
     one = job_bytes("targets", (w, h), metrics=metrics)
     fewer = n > 1 and one <= meminfo("MemTotal") + meminfo("SwapTotal")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -177,3 +178,37 @@ def test_without_ray_installed_the_flag_says_what_to_install(tmp_path: Path, mon
                  "--no-progress", "--out", str(tmp_path / "ds")]) == 2
     assert "pip install 'rtp[ray]'" in capsys.readouterr().err
     assert not (tmp_path / "ds").exists()
+
+
+def test_each_ray_nodes_workers_are_sized_against_its_memory(cluster: None, local: Path, tmp_path: Path) -> None:
+    """On a cluster the driver cannot see where the frames are drawn: each worker reports its node's
+    memory and the driver adds up the workers of each node before anything is drawn or written (a
+    16384x16384 capture holds about 193 GiB a worker; machines like this one have 24)."""
+    import json
+    import shutil
+
+    from rtp.capture import TargetError, job_bytes
+    from rtp.sdk import ParameterError
+
+    one = job_bytes("capture", (16384, 16384))
+    with pytest.raises(ParameterError, match=rf"^size: a capture at 16384x16384 holds about {2 * one / 2**30:.1f} GiB "
+                                             rf"on Ray node \w+ \({one / 2**30:.1f} GiB in each of its 2 workers\), more "
+                                             r"than its [\d.]+ GiB of memory and swap: a smaller size$") as info:
+        capture(["procedural:1"], tmp_path / "new", per_scene=1, size=(16384, 16384), workers=2, ray="auto")
+    assert info.value.name == "size" and not (tmp_path / "new").exists()
+    # its workers are ended with the job, in a Ray the caller started too (they held its two CPUs, and
+    # the next job's workers waited for them for good)
+    deadline = time.monotonic() + 30
+    while ray.available_resources().get("CPU", 0) < 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert ray.available_resources().get("CPU", 0) == 2
+    # a dataset whose manifest says its samples are that large: its targets are refused the same way
+    data = tmp_path / "big"
+    shutil.copytree(local, data, ignore=shutil.ignore_patterns("targets"))
+    manifest = json.loads((data / "manifest.json").read_text())
+    manifest["settings"]["size"] = [16384, 16384]
+    (data / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(TargetError, match=r"^data: the flip, psnr targets of its 16384x16384 samples holds about .* on "
+                                          r"Ray node \w+, more than its .* a node with more memory$"):
+        compute_targets(data, ("flip", "psnr"), workers=1, ray="auto")
+    assert not list((data / "targets").rglob("*.npz"))
