@@ -212,7 +212,7 @@ def _check_node_memory(actors: Sequence[Any], one: int, said: str, name: str, ad
                        error: Callable[[str, str], Exception]) -> None:
     """Each Ray node's workers together against that node's memory and swap, as
     :func:`rtp.capture.check_memory` checks this machine's: ``one`` bytes a worker, ``said`` what
-    they hold ("a capture at 8192x8192"). Past a node's memory and swap, ``error(message, name)``;
+    holds them ("a capture at 8192x8192 holds"). Past a node's memory and swap, ``error(message, name)``;
     past what it has available now, a warning. "fewer workers" is advised where one would fit."""
     ray = _ray()
     nodes: dict[str, list[int]] = {}
@@ -220,7 +220,7 @@ def _check_node_memory(actors: Sequence[Any], one: int, said: str, name: str, ad
         nodes.setdefault(node, [0, total, available])[0] += 1
     for node, (count, total, available) in nodes.items():
         need, each = count * one, f" ({one / 2**30:.1f} GiB in each of its {count} workers)" if count > 1 else ""
-        where = f"{said} holds about {need / 2**30:.1f} GiB on Ray node {node[:12]}{each}"
+        where = f"{said} about {need / 2**30:.1f} GiB on Ray node {node[:12]}{each}"
         if total and need > total:
             fewer = " or fewer workers" if count > 1 and one <= total else ""
             raise error(f"{name}: {where}, more than its {total / 2**30:.1f} GiB of memory and swap: {advice}{fewer}", name)
@@ -299,7 +299,7 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
         actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
         guard.callback(_kill, actors)  # (however the job ends: in a Ray the caller started they would hold its CPUs)
         # every node's workers against its memory, before the folder is made or anything is drawn
-        _check_node_memory(actors, job_bytes("capture", size), f"a capture at {size[0]}x{size[1]}", "size",
+        _check_node_memory(actors, job_bytes("capture", size), f"a capture at {size[0]}x{size[1]} holds", "size",
                            "a smaller size", ParameterError)
         if writer is None:
             writer = DatasetWriter(out, settings)
@@ -388,7 +388,7 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
         guard.callback(_kill, actors)
         if isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0 for v in size):
             _check_node_memory(actors, job_bytes("targets", (size[0], size[1]), metrics=metrics),
-                               f"the {', '.join(metrics)} targets of its {size[0]}x{size[1]} samples", "data",
+                               f"the {', '.join(metrics)} targets of its {size[0]}x{size[1]} samples take", "data",
                                "a node with more memory", lambda message, name: TargetError(message))
         if on_actors is not None:
             on_actors(actors)

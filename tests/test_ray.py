@@ -208,7 +208,7 @@ def test_each_ray_nodes_workers_are_sized_against_its_memory(cluster: None, loca
     manifest = json.loads((data / "manifest.json").read_text())
     manifest["settings"]["size"] = [16384, 16384]
     (data / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(TargetError, match=r"^data: the flip, psnr targets of its 16384x16384 samples holds about .* on "
+    with pytest.raises(TargetError, match=r"^data: the flip, psnr targets of its 16384x16384 samples take about .* on "
                                           r"Ray node \w+, more than its .* a node with more memory$"):
         compute_targets(data, ("flip", "psnr"), workers=1, ray="auto")
     assert not list((data / "targets").rglob("*.npz"))
