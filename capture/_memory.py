@@ -13,6 +13,11 @@ is drawn or written) and warns past the memory available now. Training sizes its
 prints its measured peak (the resident set, children included) beside :func:`job_bytes`'s
 estimate: rerun it after a change that holds more or fewer full-frame images, and update the
 tables here from its slopes.
+
+The tables were measured on Mesa's software GL, which keeps the renderer's images in host memory; a
+hardware driver keeps them on the GPU, so there the estimates of the rendering jobs overstate host
+memory. ``RTP_MEMORY_CHECK`` (:data:`CHECK_ENV`) sets what a job past the machine's memory does:
+``refuse`` (the default), ``warn`` (log the same sentence and run), ``off`` (check nothing).
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import os
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -29,6 +35,12 @@ log = logging.getLogger("rtp.capture")
 
 #: Where the machine's memory is read (Linux). Elsewhere nothing is checked.
 MEMINFO = "/proc/meminfo"
+
+#: The environment variable that sets what a job past the machine's memory does (:data:`CHECK_MODES`).
+CHECK_ENV = "RTP_MEMORY_CHECK"
+
+#: Its values, the default first: refuse the job; warn and run it; check nothing.
+CHECK_MODES = ("refuse", "warn", "off")
 
 #: Bytes a job's process holds for each pixel of its frames, at its peak: the slope of the peak
 #: resident set between 640x384 and 1280x768 (``python bench/job_memory.py``, 2026-12-03).
@@ -127,13 +139,35 @@ def meminfo(field: str) -> int:
     return 0
 
 
+def check_mode() -> str:
+    """What a job past the machine's memory does, from :data:`CHECK_ENV` (one of
+    :data:`CHECK_MODES`; unset or empty: ``refuse``). Another value is a
+    :class:`~rtp.sdk.ParameterError` naming the variable."""
+    mode = os.environ.get(CHECK_ENV, "").strip().lower() or CHECK_MODES[0]
+    if mode not in CHECK_MODES:
+        raise ParameterError(f"{CHECK_ENV}: expected one of {', '.join(CHECK_MODES)}, got {os.environ[CHECK_ENV]!r}",
+                             CHECK_ENV)
+    return mode
+
+
+def refuse(message: str, name: str, error: Callable[[str, str], Exception], logger: logging.Logger | None = None) -> None:
+    """A job past the memory, as :func:`check_mode` says: ``error(message + HINT, name)`` raised
+    (the hint names :data:`CHECK_ENV`), or ``message`` logged as a warning with ``warn``."""
+    if check_mode() == "warn":
+        (logger or log).warning("%s (%s=warn: running it anyway)", message, CHECK_ENV)
+        return
+    raise error(f"{message} ({CHECK_ENV}=warn runs it anyway)", name)
+
+
 def check_memory(need: int, said: str, name: str, advice: str, *, job: str = "the job",
                  error: Callable[[str, str], Exception] = ParameterError, logger: logging.Logger | None = None) -> None:
     """Refuse ``need`` bytes past the machine's memory and swap: ``error(message, name)`` (a
     :class:`~rtp.sdk.ParameterError` by default), "NAME: SAID, more than this machine's N GiB of
     memory ADVICE" (``advice`` starts "of memory"; "and swap" is added where there is swap: a job
-    past the memory may still end, slowly). Past the memory available now: a warning that the
-    system may kill ``job`` (logged to ``logger``, by default ``rtp.capture``'s)."""
+    past the memory may still end, slowly; the message ends naming :data:`CHECK_ENV`). With
+    ``RTP_MEMORY_CHECK=warn`` that sentence is a warning instead; with ``off`` nothing is checked.
+    Past the memory available now: a warning that the system may kill ``job`` (logged to
+    ``logger``, by default ``rtp.capture``'s)."""
     if (isinstance(need, bool) or not isinstance(need, numbers.Real) or need < 0
             or not (isinstance(need, numbers.Integral) or math.isfinite(need))):  # (math.isfinite(10**400) overflows)
         raise ParameterError(f"need: expected a number of bytes >= 0, got {need!r}", "need")
@@ -141,11 +175,13 @@ def check_memory(need: int, said: str, name: str, advice: str, *, job: str = "th
     bad = next((k for k, v in texts.items() if not isinstance(v, str)), None)
     if bad is not None:
         raise ParameterError(f"{bad}: expected a text, got {texts[bad]!r}", bad)
+    if check_mode() == "off":
+        return
     memory, swap, available = meminfo("MemTotal"), meminfo("SwapTotal"), meminfo("MemAvailable")
     if memory and need > memory + swap:
         advice = advice.replace("of memory", "of memory and swap", 1) if swap else advice
-        raise error(f"{name}: {said}, more than this machine's {(memory + swap) / 2**30:.1f} GiB {advice}", name)
-    if available and need > available:
+        refuse(f"{name}: {said}, more than this machine's {(memory + swap) / 2**30:.1f} GiB {advice}", name, error, logger)
+    elif available and need > available:
         (logger or log).warning("%s, more than the %.1f GiB of memory available now: the system may kill %s",
                                 said, available / 2**30, job)
 

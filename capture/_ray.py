@@ -212,8 +212,13 @@ def _check_node_memory(actors: Sequence[Any], one: int, said: str, name: str, ad
                        error: Callable[[str, str], Exception]) -> None:
     """Each Ray node's workers together against that node's memory and swap, as
     :func:`rtp.capture.check_memory` checks this machine's: ``one`` bytes a worker, ``said`` what
-    holds them ("a capture at 8192x8192 holds"). Past a node's memory and swap, ``error(message, name)``;
-    past what it has available now, a warning. "fewer workers" is advised where one would fit."""
+    holds them ("a capture at 8192x8192 holds"). Past a node's memory and swap, ``error(message, name)``
+    (or a warning, or nothing, as ``RTP_MEMORY_CHECK`` says on the driver); past what it has available
+    now, a warning. "fewer workers" is advised where one would fit."""
+    from ._memory import check_mode, refuse
+
+    if check_mode() == "off":
+        return
     ray = _ray()
     nodes: dict[str, list[int]] = {}
     for node, total, available in ray.get([a.node_memory.remote() for a in actors]):
@@ -223,8 +228,8 @@ def _check_node_memory(actors: Sequence[Any], one: int, said: str, name: str, ad
         where = f"{said} about {need / 2**30:.1f} GiB on Ray node {node[:12]}{each}"
         if total and need > total:
             fewer = " or fewer workers" if count > 1 and one <= total else ""
-            raise error(f"{name}: {where}, more than its {total / 2**30:.1f} GiB of memory and swap: {advice}{fewer}", name)
-        if available and need > available:
+            refuse(f"{name}: {where}, more than its {total / 2**30:.1f} GiB of memory and swap: {advice}{fewer}", name, error)
+        elif available and need > available:
             log.warning("%s, more than the %.1f GiB of memory it has available now: the system may kill its workers",
                         where, available / 2**30)
 

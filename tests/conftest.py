@@ -177,6 +177,7 @@ def machine_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Callable[
     path = tmp_path / "meminfo"
     path.write_text("")
     monkeypatch.setattr(_memory, "MEMINFO", str(path))
+    monkeypatch.delenv(_memory.CHECK_ENV, raising=False)  # the default (refuse), whatever the shell says
 
     def set_fields(**fields: int) -> None:
         path.write_text("".join(f"{k}:  {v // 1024} kB\n" for k, v in fields.items()))

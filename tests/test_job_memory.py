@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -18,6 +19,9 @@ from rtp.evaluate import DEFAULT_METHODS, PlayError, parse_methods, play
 from rtp.evaluate._play import _loop_count, _loops
 
 GiB = 2**30
+#: How every refusal past memory ends: the variable that lets a job run anyway (a regex; then as said).
+HINT = r" \(RTP_MEMORY_CHECK=warn runs it anyway\)$"
+SAID_HINT = " (RTP_MEMORY_CHECK=warn runs it anyway)"
 
 
 def test_job_bytes_add_the_metrics_loops_models_and_processes() -> None:
@@ -71,11 +75,12 @@ def test_check_memory_refuses_past_memory_and_swap_and_warns_past_what_is_free(
     machine_memory: Callable[..., None], caplog: pytest.LogCaptureFixture
 ) -> None:
     machine_memory(MemTotal=4 * GiB, MemAvailable=1 * GiB)
-    with pytest.raises(sdk.ParameterError, match=r"^size: a job, more than this machine's 4\.0 GiB of memory: less$") as info:
+    with pytest.raises(sdk.ParameterError,
+                       match=r"^size: a job, more than this machine's 4\.0 GiB of memory: less" + HINT) as info:
         check_memory(5 * GiB, "a job", "size", "of memory: less")
     assert info.value.name == "size"
     machine_memory(MemTotal=4 * GiB, SwapTotal=2 * GiB, MemAvailable=1 * GiB)
-    with pytest.raises(sdk.ParameterError, match=r"6\.0 GiB of memory and swap: less$"):
+    with pytest.raises(sdk.ParameterError, match=r"6\.0 GiB of memory and swap: less" + HINT):
         check_memory(7 * GiB, "a job", "size", "of memory: less")
     with pytest.raises(TargetError, match="^data: a job"):
         check_memory(7 * GiB, "a job", "data", "of memory: less", error=lambda message, name: TargetError(message))
@@ -96,12 +101,12 @@ def test_a_capture_past_the_machines_memory_is_refused_before_anything_is_drawn(
     out = tmp_path / "ds"
     machine_memory(MemTotal=8 * GiB, MemAvailable=8 * GiB)
     with pytest.raises(sdk.ParameterError, match=r"^size: a capture at 4096x4096 holds about 12\.2 GiB, more than this "
-                                                 r"machine's 8\.0 GiB of memory: a smaller size$") as info:
+                                                 r"machine's 8\.0 GiB of memory: a smaller size" + HINT) as info:
         capture(["procedural:1"], out, per_scene=1, size=(4096, 4096))
     assert info.value.name == "size" and not out.exists()
     # two scenes in two processes: each would fit alone
     with pytest.raises(sdk.ParameterError, match=r"at 3072x2048 holds about 9\.3 GiB \(4\.7 GiB in each of 2 processes\)"
-                                                 r".* a smaller size or fewer workers$"):
+                                                 r".* a smaller size or fewer workers" + HINT):
         capture(["procedural:1", "procedural:2"], out, per_scene=1, size=(3072, 2048), workers=2)
     assert not out.exists()
     assert job_bytes("capture", (3072, 2048)) < 8 * GiB  # (one scene would be one process: it would be drawn)
@@ -128,7 +133,7 @@ def test_targets_past_the_machines_memory_are_refused_before_any_is_computed(
     assert not (data / "targets").exists()
     machine_memory(MemTotal=one + 1, MemAvailable=one + 1)
     with pytest.raises(TargetError, match=r"^workers: the jnyang, flip targets .* \(0\.\d GiB in each of 2 processes\), "
-                                          r".* of memory: fewer workers$"):
+                                          r".* of memory: fewer workers" + HINT):
         compute_targets(data, ("jnyang", "flip"), workers=2)
     assert not (data / "targets").exists()
     assert compute_targets(data, ("jnyang", "flip")) == 1  # one process fits
@@ -145,14 +150,14 @@ def test_the_closed_loop_counts_its_loops_and_refuses_a_size_past_memory(
     out = tmp_path / "play"
     machine_memory(MemTotal=8 * GiB, MemAvailable=8 * GiB)
     with pytest.raises(PlayError, match=r"^size: the closed loop at 3072x2048 holds about 9\.7 GiB, more than this "
-                                        r"machine's 8\.0 GiB of memory: a smaller size$") as info:
+                                        r"machine's 8\.0 GiB of memory: a smaller size" + HINT) as info:
         play("procedural:0", size=(3072, 2048), out=out)
     assert info.value.name == "size" and not out.exists()
-    with pytest.raises(PlayError, match=r"\(4\.2 GiB in each of 2 processes\), .* a smaller size or fewer workers$"):
+    with pytest.raises(PlayError, match=r"\(4\.2 GiB in each of 2 processes\), .* a smaller size or fewer workers" + HINT):
         play("procedural:0", "oracle", size=(3072, 2048), sweep=False, workers=2, out=out)
     # FLIP's truth on six rates: one path alone would not fit either, so fewer workers would not do
     with pytest.raises(PlayError, match=r"at 3072x2048 holds about 21\.2 GiB \(10\.6 GiB in each of 2 processes\), "
-                                        r"more than this machine's 8\.0 GiB of memory: a smaller size$"):
+                                        r"more than this machine's 8\.0 GiB of memory: a smaller size" + HINT):
         play("procedural:0", "oracle", size=(3072, 2048), sweep=False, workers=2, fail_metric="flip", out=out)
     assert not out.exists()
 
@@ -164,7 +169,7 @@ def test_rtp_demo_refuses_a_size_past_memory_in_one_line(
     machine_memory(MemTotal=8 * GiB, MemAvailable=8 * GiB)
     assert rtp_main(["demo", "--size", "4096x3072", "--out", str(out)]) == 2
     assert capsys.readouterr().err.strip() == ("rtp demo: error: size: the demo at 4096x3072 holds about 8.2 GiB, more "
-                                               "than this machine's 8.0 GiB of memory: a smaller size")
+                                               "than this machine's 8.0 GiB of memory: a smaller size" + SAID_HINT)
     assert not out.exists()
     assert rtp_main(["demo", "--model", "flip", "--size", "3072x2048", "--out", str(out)]) == 2  # FLIP's targets
     assert "size: the demo at 3072x2048 holds about 10.3 GiB" in capsys.readouterr().err  # (JNYang's: 4.3 GiB)
@@ -215,8 +220,80 @@ def test_rtp_metric_refuses_an_image_pair_past_memory_before_decoding_it(
     assert rtp_main(["metric", "lpips", str(ref), str(test)]) == 2
     assert capsys.readouterr().err.strip() == (
         f"rtp metric: error: reference: lpips of a 160x96 image pair takes about {need / GiB:.1f} GiB, more than this "
-        f"machine's {(need - 2**20) / GiB:.1f} GiB of memory: smaller images")
+        f"machine's {(need - 2**20) / GiB:.1f} GiB of memory: smaller images" + SAID_HINT)
     assert decoded == []  # refused from the header
     monkeypatch.setattr(_metric, "_read", read)
     assert rtp_main(["metric", "psnr", str(ref), str(test)]) == 0  # the same machine: without torch's base it fits
     assert "psnr (dB), 160x96" in capsys.readouterr().out
+
+
+def test_rtp_memory_check_turns_the_refusal_into_a_warning_or_off(
+    machine_memory: Callable[..., None], tmp_path: Path, caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The tables were measured on Mesa's software GL; with a hardware driver the renderer's images
+    live on the GPU and a refusal can be a false one: RTP_MEMORY_CHECK=warn runs the job anyway,
+    saying what it would have refused; off checks nothing; another value is a usage error."""
+    need = job_bytes("capture", (64, 48))
+    machine_memory(MemTotal=need - 2**20, MemAvailable=need - 2**20)
+    with pytest.raises(sdk.ParameterError, match=r"^size: a capture at 64x48 .* a smaller size" + HINT):
+        capture(["procedural:1"], tmp_path / "refused", per_scene=1, size=(64, 48), profiles="slow")
+    assert not (tmp_path / "refused").exists()
+    monkeypatch.setenv("RTP_MEMORY_CHECK", " Warn ")  # (case and spaces as a shell may leave them)
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        assert capture(["procedural:1"], tmp_path / "warned", per_scene=1, size=(64, 48), profiles="slow").written == 1
+    said = [r.getMessage() for r in caplog.records if r.name == "rtp.capture" and "GiB" in r.getMessage()]
+    assert len(said) == 1 and said[0].startswith("size: a capture at 64x48 holds about")
+    assert said[0].endswith("of memory: a smaller size (RTP_MEMORY_CHECK=warn: running it anyway)")
+    caplog.clear()
+    monkeypatch.setenv("RTP_MEMORY_CHECK", "off")
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        assert capture(["procedural:1"], tmp_path / "off", per_scene=1, size=(64, 48), profiles="slow").written == 1
+        check_memory(2**60, "a job", "size", "of memory: less")  # not even the warning past what is free
+    assert not [r for r in caplog.records if "GiB" in r.getMessage()]
+    monkeypatch.setenv("RTP_MEMORY_CHECK", "ignore")
+    with pytest.raises(sdk.ParameterError, match="^RTP_MEMORY_CHECK: expected one of refuse, warn, off, got 'ignore'$"):
+        check_memory(1, "a small job", "size", "of memory: less")  # a typo is said, whatever the job's size
+    assert rtp_main(["capture", "--scene", "procedural:1", "--per-scene", "1", "--size", "64x48", "--no-progress",
+                     "--out", str(tmp_path / "typo")]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "rtp capture: error: RTP_MEMORY_CHECK: expected one of refuse, warn, off, got 'ignore'")
+    assert not (tmp_path / "typo").exists()
+
+
+def test_ray_nodes_follow_rtp_memory_check(monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """Each Ray node's workers against its memory (capture/_ray.py) read the same variable on the
+    driver: refused, warned, or not asked (the workers' memory is not even fetched)."""
+    from rtp.capture import _ray
+
+    asked: list[int] = []
+
+    class Worker:  # a Ray actor's handle as _check_node_memory uses it: node id, memory + swap, available
+        class node_memory:  # noqa: N801
+            @staticmethod
+            def remote() -> tuple[str, int, int]:
+                asked.append(1)
+                return ("node0123456789", 4 * GiB, 4 * GiB)
+
+    class FakeRay:
+        @staticmethod
+        def get(refs: list[Any]) -> list[Any]:
+            return refs
+
+    monkeypatch.setattr(_ray, "_ray", lambda: FakeRay)
+    check = lambda: _ray._check_node_memory([Worker(), Worker()], 3 * GiB, "a capture at 8x8 holds", "size",  # noqa: E731
+                                            "a smaller size", sdk.ParameterError)
+    monkeypatch.delenv("RTP_MEMORY_CHECK", raising=False)
+    with pytest.raises(sdk.ParameterError, match=r"^size: a capture at 8x8 holds about 6\.0 GiB on Ray node node01234567 "
+                                                 r"\(3\.0 GiB in each of its 2 workers\), more than its 4\.0 GiB of memory "
+                                                 r"and swap: a smaller size or fewer workers" + HINT):
+        check()
+    monkeypatch.setenv("RTP_MEMORY_CHECK", "warn")
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        check()
+    assert [r.getMessage().endswith("or fewer workers (RTP_MEMORY_CHECK=warn: running it anyway)")
+            for r in caplog.records] == [True]
+    asked.clear()
+    monkeypatch.setenv("RTP_MEMORY_CHECK", "off")
+    check()
+    assert asked == []
