@@ -170,6 +170,36 @@ def _provider_name(spec: ProviderSpec) -> str:
     return spec if isinstance(spec, str) else spec[0]
 
 
+#: The first onnxruntime release whose ``InferenceSession`` takes ``enable_fallback=0``.
+_FALLBACK_KWARG = (1, 23)
+
+
+def _version(ort: Any) -> tuple[int, ...]:
+    """onnxruntime's release as numbers (``1.17.3`` -> (1, 17, 3)); a build without ``__version__``
+    (a stand-in) reads as the newest."""
+    parts = str(getattr(ort, "__version__", "")).split(".")
+    numbers = [int(p) for p in (x.split("+")[0] for x in parts[:3]) if p.isdigit()]
+    return tuple(numbers) if len(numbers) >= 2 else (10**6,)
+
+
+def _inference_session(ort: Any, source: str | bytes, opts: Any, providers: Sequence[ProviderSpec]) -> Any:
+    """``ort.InferenceSession`` with onnxruntime's own fallback off: when a session fails to build,
+    onnxruntime's Python layer prints an "EP Error" banner to stdout and retries on other providers;
+    the SDK never prints, and chooses its providers itself. Releases from 1.23 take
+    ``enable_fallback=0``; the earlier ones the SDK supports (1.17-1.22, released and unchanging) read
+    only the flag their constructor sets, so the session is built by a subclass that clears it
+    before the build (where those releases check it, after a failed build)."""
+    if _version(ort) >= _FALLBACK_KWARG:
+        return ort.InferenceSession(source, sess_options=opts, providers=list(providers), enable_fallback=0)
+
+    class _NoFallback(ort.InferenceSession):
+        def _create_inference_session(self, *args: Any, **kwargs: Any) -> Any:
+            self._enable_fallback = False
+            return super()._create_inference_session(*args, **kwargs)
+
+    return _NoFallback(source, sess_options=opts, providers=list(providers))
+
+
 def _session(ort: Any, model_path: Path, opts: Any, requested: list[ProviderSpec], strict: bool) -> Any:
     """The onnxruntime session, built with onnxruntime's own fallback off (it prints to stdout, and the
     SDK never prints). If the requested providers cannot build it, CPU is tried: when CPU can, the
@@ -177,7 +207,7 @@ def _session(ort: Any, model_path: Path, opts: Any, requested: list[ProviderSpec
     the CPU session); when CPU cannot either, the file is not a loadable model (``ModelLoadError``)."""
 
     def build(providers: list[ProviderSpec]) -> Any:
-        return ort.InferenceSession(str(model_path), sess_options=opts, providers=providers, enable_fallback=0)
+        return _inference_session(ort, str(model_path), opts, providers)
 
     try:
         return build(requested)
@@ -333,7 +363,7 @@ def _tail_session(ort: Any, props: Mapping[str, str], digest: str, model_path: P
         raise ModelIntegrityError(f"{str(model_path)!r}: its tail graph ({TAIL_KEY}) does not match metadata.tail (digest "
                              f"{found}, expected {digest}): the file is damaged; export it again")
     try:
-        return ort.InferenceSession(data, sess_options=opts, providers=session.get_providers())
+        return _inference_session(ort, data, opts, session.get_providers())
     except Exception as err:
         raise ModelLoadError(f"{str(model_path)!r}: onnxruntime cannot load its tail graph ({err})") from err
 

@@ -403,6 +403,64 @@ def test_a_corrupted_graph_is_refused_without_printing(tmp_path: Path, capfd: py
     assert out == "" and "EP Error" not in err
 
 
+def test_releases_before_the_fallback_switch_are_quiet_too(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """onnxruntime 1.17-1.22 (``onnxruntime>=1.17`` is the SDK's floor) have no ``enable_fallback``
+    argument: a bad model printed the "EP Error" banner there (found running the SDK's tests on the
+    floor's versions). Their session is built by a subclass that clears the flag; here that path is
+    forced on the installed release, which reads the same flag."""
+    from rtp.sdk import _predictor
+
+    assert _predictor._version(type("ort", (), {"__version__": "1.17.3"})) == (1, 17, 3)
+    assert _predictor._version(type("ort", (), {"__version__": "1.23.0rc1+cpu"})) >= _predictor._FALLBACK_KWARG
+    assert _predictor._version(object()) >= _predictor._FALLBACK_KWARG  # a stand-in without a version
+    monkeypatch.setattr(_predictor, "_FALLBACK_KWARG", (10**9,))
+    assert sdk.load("jnyang").predict(np.zeros((9, 64, 96), np.float32)).shape == (6, 4, 6)  # it builds sessions
+    data = bytearray(Path(sdk.load("jnyang").path or "").read_bytes())
+    data[data.find(b"\n\x05input") + 2] ^= 0x80
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(bytes(data))
+    capfd.readouterr()
+    with pytest.raises(sdk.ModelLoadError, match="onnxruntime cannot load"):
+        sdk.load(bad)
+    out, err = capfd.readouterr()
+    assert out == "" and "EP Error" not in err
+
+
+@pytest.mark.parametrize("old_release", [False, True])
+def test_a_tail_graph_that_does_not_load_is_refused_without_printing(
+    old_release: bool, tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A splitting model whose tail graph matches its digest but does not load (a foreign exporter's
+    bug) is a ModelLoadError naming the tail; its session was built with onnxruntime's fallback on,
+    so it printed the "EP Error" banner first."""
+    import base64
+    import json
+
+    import onnx
+
+    from rtp.sdk import _predictor
+
+    if old_release:
+        monkeypatch.setattr(_predictor, "_FALLBACK_KWARG", (10**9,))
+    model = onnx.load(str(sdk.load("jnyang-reuse").path))
+    props = {p.key: p.value for p in model.metadata_props}
+    raw = bytearray(base64.b64decode(props[sdk.TAIL_KEY]))
+    raw[raw.find(b"\n\x05input") + 2] ^= 0x80  # as above: a name that is no longer UTF-8
+    props[sdk.TAIL_KEY] = base64.b64encode(bytes(raw)).decode()
+    meta = json.loads(props[sdk.METADATA_KEY])
+    meta["tail"] = sdk.model_digest(bytes(raw))  # the digest matches: only onnxruntime can refuse it
+    props[sdk.METADATA_KEY] = json.dumps(meta)
+    onnx.helper.set_model_props(model, props)
+    onnx.save(model, str(tmp_path / "tail.onnx"))
+    capfd.readouterr()
+    with pytest.raises(sdk.ModelLoadError, match="onnxruntime cannot load its tail graph"):
+        sdk.load(tmp_path / "tail.onnx")
+    out, err = capfd.readouterr()
+    assert out == "" and "EP Error" not in err
+
+
 def _fake_provider(monkeypatch: pytest.MonkeyPatch, build: Callable[..., object]) -> None:
     """onnxruntime as the SDK sees it, listing a FakeExecutionProvider before CPU and building its
     sessions with ``build(path, sess_options, providers, **kw)``."""
