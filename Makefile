@@ -30,7 +30,7 @@ STEPS     ?=
 NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
-.PHONY: install test lint typecheck check coverage bench clean dataset train evaluate demo play
+.PHONY: install test test-floor lint typecheck check coverage bench clean dataset train evaluate demo play
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -68,6 +68,28 @@ typecheck: $(STAMP)
 	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p rtp
 
 check: lint typecheck test
+
+# The runtime at the floor of what pyproject.toml allows: numpy, onnxruntime and pyyaml (and onnx, the
+# exporter's, which the tests build models with) at their lowest versions, in a virtualenv of their
+# own, under the tests of the runtime (the SDK, its models, its fuzz suite). An engine pinned to an
+# older onnxruntime met what no test on the newest could see (onnxruntime 1.17-1.22 printed an "EP
+# Error" banner on a bad model). About 2 minutes: part of CI. (One test of those files runs a benchmark
+# that reads a dataset, the toolchain's extras; `make test` runs it.)
+FLOOR_VENV  ?= .venv-floor
+FLOOR_PINS   = $$(grep -oE '"(numpy|onnxruntime|pyyaml|onnx)>=[0-9.]+"' pyproject.toml | tr -d '"' | sed 's/>=/==/')
+FLOOR_TESTS := tests/test_predictor.py tests/test_rates.py tests/test_metadata.py tests/test_reuse.py \
+	tests/test_integrity.py tests/test_transforms.py tests/test_pixel_differences.py tests/test_depth_edges.py \
+	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py
+test-floor:
+	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
+	$(FLOOR_VENV)/bin/pip install -q -U pip
+	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
+	$(FLOOR_VENV)/bin/pip install -q $(FLOOR_PINS) "setuptools>=77" pytest pytest-xdist hypothesis scipy
+	$(FLOOR_VENV)/bin/pip install -q --no-deps --no-build-isolation .
+	$(FLOOR_VENV)/bin/python -c "import numpy, onnxruntime, yaml, onnx; print('floor:', 'numpy', numpy.__version__, \
+		'onnxruntime', onnxruntime.__version__, 'pyyaml', yaml.__version__, 'onnx', onnx.__version__)"
+	$(FLOOR_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider $(FLOOR_TESTS) \
+		--deselect tests/test_input_groups.py::test_bench_same_decisions_reads_a_dataset_and_refuses_two_models
 
 # The test suite under coverage.py (lines and branches, `rtp ...` subprocesses included; configuration
 # in pyproject.toml): a line per room, then every file with what it misses; HTML in build/coverage/html.
