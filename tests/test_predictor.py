@@ -389,43 +389,48 @@ def test_no_bare_onnxruntime_error_escapes(tiny_model: Callable[..., Path]) -> N
         p.predict(np.zeros((4, 16, 16), np.float32))
 
 
-def test_a_corrupted_graph_is_refused_without_printing(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
-    """onnxruntime's Python layer prints an "EP Error" banner to stdout and retries when a session fails
-    to build; the SDK never prints, so it turns that fallback off and refuses the file itself."""
-    data = bytearray(Path(sdk.load("jnyang").path or "").read_bytes())
-    data[data.find(b"\n\x05input") + 2] ^= 0x80  # a node input name that is no longer UTF-8
-    bad = tmp_path / "bad.onnx"
-    bad.write_bytes(bytes(data))
+def _undecodable(data: bytes | bytearray) -> bytes:
+    """An ONNX graph's bytes with a node input name that is no longer UTF-8: onnxruntime refuses it."""
+    data = bytearray(data)
+    data[data.find(b"\n\x05input") + 2] ^= 0x80
+    return bytes(data)
+
+
+def _refused_quietly(capfd: pytest.CaptureFixture[str], path: Path, match: str) -> None:
+    """``sdk.load(path)`` is a ModelLoadError matching ``match``, and nothing was printed on the way."""
     capfd.readouterr()
-    with pytest.raises(sdk.ModelLoadError, match="onnxruntime cannot load"):
-        sdk.load(bad)
+    with pytest.raises(sdk.ModelLoadError, match=match):
+        sdk.load(path)
     out, err = capfd.readouterr()
     assert out == "" and "EP Error" not in err
 
 
-def test_releases_before_the_fallback_switch_are_quiet_too(
-    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize("old_release", [False, True])
+def test_a_corrupted_graph_is_refused_without_printing(
+    old_release: bool, tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """onnxruntime 1.17-1.22 (``onnxruntime>=1.17`` is the SDK's floor) have no ``enable_fallback``
-    argument: a bad model printed the "EP Error" banner there (found running the SDK's tests on the
-    floor's versions). Their session is built by a subclass that clears the flag; here that path is
-    forced on the installed release, which reads the same flag."""
+    """onnxruntime's Python layer prints an "EP Error" banner to stdout and retries when a session fails
+    to build; the SDK never prints, so it turns that fallback off and refuses the file itself. Releases
+    1.17-1.22 (``onnxruntime>=1.17`` is the SDK's floor) have no ``enable_fallback`` argument: the
+    banner printed there (found by ``make test-floor``); their sessions are built by a subclass that
+    clears the flag, a path forced here on the installed release, which reads the same flag."""
+    from rtp.sdk import _predictor
+
+    if old_release:
+        monkeypatch.setattr(_predictor, "_FALLBACK_KWARG", (10**9,))
+        assert sdk.load("jnyang").predict(np.zeros((9, 64, 96), np.float32)).shape == (6, 4, 6)  # it builds sessions
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(_undecodable(Path(sdk.load("jnyang").path or "").read_bytes()))
+    _refused_quietly(capfd, bad, "onnxruntime cannot load")
+
+
+def test_onnxruntime_releases_are_read_as_numbers() -> None:
     from rtp.sdk import _predictor
 
     assert _predictor._version(type("ort", (), {"__version__": "1.17.3"})) == (1, 17, 3)
+    assert _predictor._version(type("ort", (), {"__version__": "1.22.1"})) < _predictor._FALLBACK_KWARG
     assert _predictor._version(type("ort", (), {"__version__": "1.23.0rc1+cpu"})) >= _predictor._FALLBACK_KWARG
     assert _predictor._version(object()) >= _predictor._FALLBACK_KWARG  # a stand-in without a version
-    monkeypatch.setattr(_predictor, "_FALLBACK_KWARG", (10**9,))
-    assert sdk.load("jnyang").predict(np.zeros((9, 64, 96), np.float32)).shape == (6, 4, 6)  # it builds sessions
-    data = bytearray(Path(sdk.load("jnyang").path or "").read_bytes())
-    data[data.find(b"\n\x05input") + 2] ^= 0x80
-    bad = tmp_path / "bad.onnx"
-    bad.write_bytes(bytes(data))
-    capfd.readouterr()
-    with pytest.raises(sdk.ModelLoadError, match="onnxruntime cannot load"):
-        sdk.load(bad)
-    out, err = capfd.readouterr()
-    assert out == "" and "EP Error" not in err
 
 
 @pytest.mark.parametrize("old_release", [False, True])
@@ -446,19 +451,14 @@ def test_a_tail_graph_that_does_not_load_is_refused_without_printing(
         monkeypatch.setattr(_predictor, "_FALLBACK_KWARG", (10**9,))
     model = onnx.load(str(sdk.load("jnyang-reuse").path))
     props = {p.key: p.value for p in model.metadata_props}
-    raw = bytearray(base64.b64decode(props[sdk.TAIL_KEY]))
-    raw[raw.find(b"\n\x05input") + 2] ^= 0x80  # as above: a name that is no longer UTF-8
-    props[sdk.TAIL_KEY] = base64.b64encode(bytes(raw)).decode()
+    raw = _undecodable(base64.b64decode(props[sdk.TAIL_KEY]))
+    props[sdk.TAIL_KEY] = base64.b64encode(raw).decode()
     meta = json.loads(props[sdk.METADATA_KEY])
-    meta["tail"] = sdk.model_digest(bytes(raw))  # the digest matches: only onnxruntime can refuse it
+    meta["tail"] = sdk.model_digest(raw)  # the digest matches: only onnxruntime can refuse it
     props[sdk.METADATA_KEY] = json.dumps(meta)
     onnx.helper.set_model_props(model, props)
     onnx.save(model, str(tmp_path / "tail.onnx"))
-    capfd.readouterr()
-    with pytest.raises(sdk.ModelLoadError, match="onnxruntime cannot load its tail graph"):
-        sdk.load(tmp_path / "tail.onnx")
-    out, err = capfd.readouterr()
-    assert out == "" and "EP Error" not in err
+    _refused_quietly(capfd, tmp_path / "tail.onnx", "onnxruntime cannot load its tail graph")
 
 
 def _fake_provider(monkeypatch: pytest.MonkeyPatch, build: Callable[..., object]) -> None:
