@@ -91,6 +91,28 @@ def _finite(v: float) -> bool:
         return False
 
 
+#: The deepest nesting of ``provenance`` (the shipped models' is 4). Deeper is a MetadataError: it
+#: was left to ``json.dumps``'s RecursionError, which Python 3.12 and later raise only past about
+#: 10,000 levels while the copy, freeze and thaw of the metadata fail past about 1,000 (a bare
+#: RecursionError from ``from_dict`` on 3.13).
+MAX_PROVENANCE_DEPTH = 100
+
+
+def _depth_over(value: Any, limit: int) -> bool:
+    """Whether ``value`` (mappings, lists and tuples of values) nests more than ``limit`` levels deep;
+    walked without recursion, so any depth is answered."""
+    stack = [(value, 0)]
+    while stack:
+        v, level = stack.pop()
+        children = v.values() if isinstance(v, Mapping) else v if isinstance(v, (list, tuple)) else None
+        if children is None:
+            continue
+        if level >= limit:
+            return True
+        stack.extend((c, level + 1) for c in children)
+    return False
+
+
 def _freeze(value: Any) -> Any:
     if isinstance(value, Mapping):
         return MappingProxyType({k: _freeze(v) for k, v in value.items()})
@@ -259,6 +281,8 @@ class ModelMetadata:
         provenance = d.get("provenance", {})
         if not isinstance(provenance, Mapping):
             raise MetadataError(f"provenance: expected a mapping, got {type(provenance).__name__}", "provenance")
+        if _depth_over(provenance, MAX_PROVENANCE_DEPTH):
+            raise MetadataError(f"provenance: nested more than {MAX_PROVENANCE_DEPTH} levels deep", "provenance")
         try:
             json.dumps(provenance, allow_nan=False)
         except (TypeError, ValueError, RecursionError) as err:  # RecursionError: nested too deep
