@@ -76,11 +76,13 @@ check: lint typecheck test
 # own, under the tests of the runtime (the SDK, its models, its fuzz suite). An engine pinned to an
 # older onnxruntime met what no test on the newest could see (onnxruntime 1.17-1.22 printed an "EP
 # Error" banner on a bad model). About 2 minutes: part of CI. (One test of those files runs a benchmark
-# that reads a dataset, the toolchain's extras; `make test` runs it.)
+# that reads a dataset, the toolchain's extras, and the shipped models' rendered-frame tests need GL:
+# `make test` runs them.)
 FLOOR_VENV  ?= .venv-floor
 FLOOR_TESTS := tests/test_predictor.py tests/test_rates.py tests/test_metadata.py tests/test_reuse.py \
 	tests/test_integrity.py tests/test_transforms.py tests/test_pixel_differences.py tests/test_depth_edges.py \
-	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py
+	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py \
+	tests/test_shipped_models.py
 test-floor:
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip
@@ -89,7 +91,7 @@ test-floor:
 	$(FLOOR_VENV)/bin/pip install -q --no-deps --no-build-isolation .
 	$(FLOOR_VENV)/bin/python -c "import numpy, onnxruntime, yaml, onnx; print('floor:', 'numpy', numpy.__version__, \
 		'onnxruntime', onnxruntime.__version__, 'pyyaml', yaml.__version__, 'onnx', onnx.__version__)"
-	$(FLOOR_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider $(FLOOR_TESTS) \
+	$(FLOOR_VENV)/bin/python -m pytest -q -n auto --dist worksteal -p no:cacheprovider $(FLOOR_TESTS) -m "not gl" \
 		--deselect tests/test_input_groups.py::test_bench_same_decisions_reads_a_dataset_and_refuses_two_models
 
 # Every extra at its floor (tests/floors.py --all: matplotlib, moderngl, pillow, ray, trimesh, ...; the
