@@ -704,7 +704,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--weight-decay", dest="weight_decay", type=float, default=None,
                    help="weight decay (decoupled with adamw; default 0)")
     r.add_argument("--seed", type=int, default=None,
-                   help="seed of the weights, crops and batches (any integer; default: the recipe's, else 0)")
+                   help="seed of the weights, crops and batches (a 64-bit integer, signed or not; default: the recipe's, else 0)")
     r.add_argument("--safety-quantile", type=float, default=None,
                    help="calibrate the margin so at most this share of tiles is underestimated "
                    "(default: the paper's mean underestimation)")

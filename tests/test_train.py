@@ -1260,6 +1260,19 @@ def test_a_network_too_large_to_build_is_refused_before_reading_data(fields: dic
     assert not (tmp_path / "m.pt").exists()
 
 
+@pytest.mark.parametrize("seed", [-2**63 - 1, 2**64, 2**70])
+def test_a_seed_torch_cannot_take_is_refused_before_reading_data(seed: int, tmp_path: Path) -> None:
+    """A seed past 64 bits was torch.manual_seed's ValueError once the data had been loaded; now a
+    ParameterError naming seed from check_config. The range's ends themselves are taken."""
+    with pytest.raises(sdk.ParameterError, match=r"seed: expected an integer in \[-9223372036854775808, "
+                                                 r"18446744073709551615\]") as info:
+        train(TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), seed=seed))
+    assert info.value.name == "seed" and not (tmp_path / "m.pt").exists()
+    for ok in (-2**63, 2**64 - 1):  # the data is what fails here, after the seed was taken
+        with pytest.raises(DatasetError, match="no dataset"):
+            train(TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), seed=ok))
+
+
 def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture,
     machine_memory: Callable[..., None]

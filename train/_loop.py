@@ -508,6 +508,10 @@ def _ema_update(avg: Network, net: Network, decay: float) -> None:
             a.copy_(b)
 
 
+#: The seeds torch's generator takes (a signed or an unsigned 64-bit integer).
+SEED_RANGE = (-2**63, 2**64 - 1)
+
+
 def check_config(cfg: TrainConfig) -> None:
     """Refuse a configuration :func:`train` cannot run, before any work: every field of its type, then
     the ranges and combinations of the fields (``TrainConfig.from_recipe`` runs this too, so that a
@@ -521,6 +525,9 @@ def check_config(cfg: TrainConfig) -> None:
         if isinstance(count, bool) or not isinstance(count, int) or count < 1:
             # (steps=-5 wrote an untrained checkpoint; batch, crop, val_every or save_every 0 failed in numpy or torch)
             raise sdk.ParameterError(f"{name}: expected an integer >= 1, got {count!r}", name)
+    if not SEED_RANGE[0] <= cfg.seed <= SEED_RANGE[1]:
+        # (torch.manual_seed's range: 2**70 was an OverflowError once the data had been loaded)
+        raise sdk.ParameterError(f"seed: expected an integer in [{SEED_RANGE[0]}, {SEED_RANGE[1]}], got {cfg.seed}", "seed")
     if cfg.tile not in sdk.TILE_SIZES:
         raise sdk.ParameterError(f"tile: expected one of {sdk.TILE_SIZES}, got {cfg.tile!r}", "tile")
     if tuple(cfg.outputs) not in {tuple(o) for o in sdk.OUTPUT_SETS}:
