@@ -87,7 +87,7 @@ test-floor:
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip
 	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
-	$(FLOOR_VENV)/bin/pip install -q $$($(PYTHON) tests/floors.py) "setuptools>=77" pytest pytest-xdist hypothesis scipy
+	$(FLOOR_VENV)/bin/pip install -q $$($(PYTHON) tests/floors.py) "setuptools>=77" pytest pytest-xdist pytest-timeout hypothesis scipy
 	$(FLOOR_VENV)/bin/pip install -q --no-deps --no-build-isolation .
 	$(FLOOR_VENV)/bin/python -c "import numpy, onnxruntime, yaml, onnx; print('floor:', 'numpy', numpy.__version__, \
 		'onnxruntime', onnxruntime.__version__, 'pyyaml', yaml.__version__, 'onnx', onnx.__version__)"
@@ -120,7 +120,7 @@ test-python:
 	@test -n "$(PY)" || { echo "make test-python PY=<a python interpreter>"; exit 2; }
 	rm -rf $(PY_VENV) && $(PY) -m venv $(PY_VENV)
 	$(PY_VENV)/bin/pip install -q -U pip
-	$(PY_VENV)/bin/pip install -q numpy onnxruntime pyyaml onnx "setuptools>=77" pytest pytest-xdist hypothesis scipy
+	$(PY_VENV)/bin/pip install -q numpy onnxruntime pyyaml onnx "setuptools>=77" pytest pytest-xdist pytest-timeout hypothesis scipy
 	$(PY_VENV)/bin/pip install -q --no-deps --no-build-isolation .
 	$(PY_VENV)/bin/python -c "import sys, numpy, onnxruntime; print('python', sys.version.split()[0], 'numpy', \
 		numpy.__version__, 'onnxruntime', onnxruntime.__version__)"
