@@ -16,21 +16,24 @@ of the estimated to the measured peak. The configurations:
   alone, the default methods (each without and with the sweep), and the oracle failing by FLIP,
   JNFLIP and LPIPS
 - metric: ``rtp metric M REF TEST --out MAP.png`` of two noise images of the size, for each metric
+- examples: ``examples/moderngl_vrs.py`` and ``examples/pyrender_vrs.py``, each alone and with a GIF
+  of 9 frames; their estimate is the example's own ``peak_bytes`` (its constants ``PEAK_*``)
 
-The slopes are what ``rtp.capture``'s tables (``PER_PIXEL``, ``METRIC_PER_PIXEL``) hold: rerun this
-after a change that holds more or fewer full-frame images. Linux only (``os.wait4``). Prints a
-Markdown table.
+The slopes are what ``rtp.capture``'s tables (``PER_PIXEL``, ``METRIC_PER_PIXEL``) and the examples'
+``PEAK_*`` constants hold: rerun this after a change that holds more or fewer full-frame images.
+Linux only (``os.wait4``). Prints a Markdown table.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,14 +42,16 @@ from _common import frame_sizes, positive, run_main  # bench/ is on sys.path whe
 from rtp import sdk
 from rtp.capture import job_bytes
 
-JOBS = ("capture", "targets", "demo", "play", "metric")
+JOBS = ("capture", "targets", "demo", "play", "metric", "examples")
 RTP = [sys.executable, "-m", "rtp", "-q"]
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
 @dataclass
 class Config:
     """One measured command: ``job`` and its label, the ``rtp`` arguments after the size (``{out}`` and
-    ``{data}`` filled in), and what :func:`rtp.capture.job_bytes` is told of it."""
+    ``{data}`` filled in; ``command`` instead of ``rtp``), and what :func:`rtp.capture.job_bytes` is
+    told of it (or ``estimate``, the peak bytes at a size)."""
 
     job: str
     label: str
@@ -55,6 +60,22 @@ class Config:
     loops: int = 0
     models: int = 0
     peaks: list[int] = field(default_factory=list)
+    command: list[str] = field(default_factory=lambda: list(RTP))
+    estimate: Callable[[tuple[int, int]], int] | None = None
+
+    def estimated(self, size: tuple[int, int]) -> int:
+        if self.estimate is not None:
+            return self.estimate(size)
+        return job_bytes(self.job, size, metrics=self.metrics, loops=self.loops, models=self.models)
+
+
+def example(name: str) -> object:
+    """``examples/NAME.py`` as a module (its ``peak_bytes``), without running its main."""
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def configs(frames: int) -> Iterator[Config]:
@@ -83,6 +104,14 @@ def configs(frames: int) -> Iterator[Config]:
                       "--methods", "oracle", "--no-sweep", "--fail-metric", metric], metrics=(metric,), loops=1)
     for m in sdk.METRICS:
         yield Config("metric", m, ["metric", m, "{ref}", "{test}", "--out", "{out}.png"], metrics=(m,))
+    for name, model, frames in (("moderngl_vrs", "jnyang", 3), ("pyrender_vrs", "jnyang-reuse", 5)):
+        peak_bytes = example(name).peak_bytes  # type: ignore[attr-defined]
+        for gif in (False, True):
+            n = 9 if gif else frames
+            yield Config("examples", f"{name}.py, {n} frames" + (", GIF" if gif else ""),
+                         ["--model", model, "--frames", str(n), "--out", "{out}.png", *(["--gif", "{out}.gif"] if gif else [])],
+                         command=[sys.executable, str(EXAMPLES / f"{name}.py")],
+                         estimate=lambda size, f=peak_bytes, n=n, gif=gif: f(*size, n, gif))
 
 
 def image_pair(folder: Path, size: tuple[int, int]) -> tuple[Path, Path]:
@@ -106,7 +135,7 @@ def peak(argv: list[str]) -> int:
     proc.returncode = os.waitstatus_to_exitcode(status)
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if proc.returncode != 0:
-        raise SystemExit(f"{' '.join(argv[2:])}: exit {proc.returncode}: {err.strip().splitlines()[-1:] or ''}")
+        raise SystemExit(f"{' '.join(argv[1:])}: exit {proc.returncode}: {err.strip().splitlines()[-1:] or ''}")
     return int(usage.ru_maxrss) * 1024  # (KiB on Linux)
 
 
@@ -132,9 +161,10 @@ def main() -> None:
             for c in chosen:
                 # (targets: the capture's size; metric: its images')
                 size = [] if c.job in ("targets", "metric") else ["--size", f"{w}x{h}"]
-                c.peaks.append(peak([*RTP, *(a.format(out=out, data=data, ref=ref, test=test) for a in c.args), *size]))
+                c.peaks.append(peak([*c.command, *(a.format(out=out, data=data, ref=ref, test=test) for a in c.args), *size]))
                 shutil.rmtree(out, ignore_errors=True)
-                Path(f"{out}.png").unlink(missing_ok=True)
+                for suffix in (".png", ".gif"):
+                    Path(f"{out}{suffix}").unlink(missing_ok=True)
     (w0, h0), (w1, h1) = args.sizes
     pixels = w1 * h1 - w0 * h0
     print(f"rtp {sdk.__version__}, peak resident set of each command (MB), each in a process of its own; "
@@ -143,7 +173,7 @@ def main() -> None:
           f"estimated peak at {w1}x{h1} | estimated / measured |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for c in chosen:
-        est = [job_bytes(c.job, size, metrics=c.metrics, loops=c.loops, models=c.models) for size in args.sizes]
+        est = [c.estimated(size) for size in args.sizes]
         print(f"| {c.job} | {c.label} | {c.peaks[0] / 1e6:.0f} | {c.peaks[1] / 1e6:.0f} | "
               f"{(c.peaks[1] - c.peaks[0]) / pixels:.0f} | {(est[1] - est[0]) / pixels:.0f} | {est[1] / 1e6:.0f} | "
               f"{est[1] / c.peaks[1]:.2f} |")

@@ -34,12 +34,24 @@ from pathlib import Path
 import numpy as np
 
 from rtp import sdk
+from rtp.capture import check_memory
 from rtp.capture.scenes import procedural
 from rtp.cli import frame_size, run_guarded  # the WIDTHxHEIGHT of every rtp command; its error policy
 from rtp.plugins.moderngl import Adapter, RateSelector, create_context
 from rtp.scene import Camera
 
 log = logging.getLogger("moderngl_vrs")
+
+#: This example's peak memory, measured (``python bench/job_memory.py --jobs examples``, 2026-12-04, on
+#: Mesa's software GL: a hardware driver keeps the renderer's images on the GPU): bytes at any size,
+#: bytes a pixel of ``--size``, and bytes a pixel for each frame of ``--gif`` (its overlays, kept until
+#: the GIF is written).
+PEAK_BASE, PEAK_PER_PIXEL, PEAK_PER_GIF_PIXEL = 190 * 2**20, 1000.0, 8.0
+
+
+def peak_bytes(width: int, height: int, frames: int, gif: bool) -> int:
+    """The peak bytes of a run at ``width`` x ``height`` with ``frames`` frames (``gif``: written as a GIF)."""
+    return int(PEAK_BASE + width * height * (PEAK_PER_PIXEL + (frames * PEAK_PER_GIF_PIXEL if gif else 0.0)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,6 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.frames < 1:
         ap.error(f"--frames: expected at least 1, got {args.frames}")
     width, height = args.size
+    need = peak_bytes(width, height, args.frames, args.gif is not None)  # refused now, not by the OOM killer later
+    check_memory(need, f"the example at {width}x{height}" + (f" with a GIF of {args.frames} frames" if args.gif else "")
+                 + f" holds about {need / 2**30:.1f} GiB", "size",
+                 "of memory: a smaller --size" + (" or fewer --frames" if args.gif else ""), job="the example")
 
     predictor = sdk.load(args.model)
     log.info("model %s (%s), inputs %s", predictor.path, predictor.metadata.metric, ", ".join(predictor.metadata.inputs))
@@ -84,7 +100,8 @@ def main(argv: list[str] | None = None) -> int:
             cpu = predictor.shading_rates(x, threshold)
             final = source.renderer.shade_rates(rates, selector.tile_size)     # 5: software VRS
             overlay = sdk.draw_rate_overlay(final, rates, selector.tile_size)  # float in [0, 1], as the frame
-            overlays.append((np.clip(overlay, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+            if args.gif or i == args.frames:  # (without --gif only the last is written)
+                overlays.append((np.clip(overlay, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
             saved = sdk.work_saved(rates, (height, width), selector.tile_size)
             log.info("frame %2d: work saved %.1f%%, GPU decision = CPU decision on %d of %d tiles, decided in %.2f ms",
                      i, 100 * saved, int((rates == cpu).sum()), rates.size, ms)

@@ -44,10 +44,22 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports PyO
 import numpy as np
 
 from rtp import sdk
+from rtp.capture import check_memory
 from rtp.cli import frame_size, run_guarded  # the WIDTHxHEIGHT of every rtp command; its error policy
 from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_trimesh_scene
 
 log = logging.getLogger("pyrender_vrs")
+
+#: This example's peak memory, measured (``python bench/job_memory.py --jobs examples``, 2026-12-04, on
+#: Mesa's EGL: a hardware driver keeps the renderer's images on the GPU): bytes at any size, bytes a
+#: pixel of ``--size`` (a frame loop's, the larger), and bytes a pixel for each frame of ``--gif`` (its
+#: overlays, kept until the GIF is written).
+PEAK_BASE, PEAK_PER_PIXEL, PEAK_PER_GIF_PIXEL = 280 * 2**20, 530.0, 6.0
+
+
+def peak_bytes(width: int, height: int, frames: int, gif: bool) -> int:
+    """The peak bytes of a run at ``width`` x ``height`` with ``frames`` frames (``gif``: written as a GIF)."""
+    return int(PEAK_BASE + width * height * (PEAK_PER_PIXEL + (frames * PEAK_PER_GIF_PIXEL if gif else 0.0)))
 
 
 def write_procedural_glb(path: Path, seed: int) -> tuple[Path, Any]:
@@ -152,6 +164,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("OpenGL").setLevel(logging.WARNING)
     width, height = args.size
+    gif = args.gif is not None and args.frames > 2
+    need = peak_bytes(width, height, args.frames, gif)  # refused now, not by the OOM killer later
+    check_memory(need, f"the example at {width}x{height}" + (f" with a GIF of {args.frames} frames" if gif else "")
+                 + f" holds about {need / 2**30:.1f} GiB", "size",
+                 "of memory: a smaller --size" + (" or fewer --frames" if gif else ""), job="the example")
     pyrender = import_pyrender()
 
     with tempfile.TemporaryDirectory(prefix="rtp-pyrender-") as tmp:
@@ -232,9 +249,10 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
             log.info("frame %2d: %s, %.1f ms, shading work saved %.1f %%", i,
                      "network ran" if reuse.work >= 1.0 else f"carried ({reuse.work:.0%} of a network run on crops)"
                      if reuse.work > 0 else f"{carry} carried, age {reuse.age}", ms, 100.0 * saved[-1])
-            overlay = sdk.draw_rate_overlay(colour, rates, predictor.metadata.tile_size)
-            overlays.append(overlay if overlay.dtype == np.uint8 else
-                            (np.clip(overlay, 0, 1) * 255 + 0.5).astype(np.uint8))
+            if args.gif is not None or i == len(poses) - 1:  # (without --gif only the last is written)
+                overlay = sdk.draw_rate_overlay(colour, rates, predictor.metadata.tile_size)
+                overlays.append(overlay if overlay.dtype == np.uint8 else
+                                (np.clip(overlay, 0, 1) * 255 + 0.5).astype(np.uint8))
             prev_colour = colour  # what the frame displayed (a VRS engine: its own shaded frame)
     log.info("%d frames: the network on %.0f %% of them, %.1f %% of the shading work saved on average",
              len(saved), 100.0 * float(np.mean(ran)), 100.0 * float(np.mean(saved)))

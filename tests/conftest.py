@@ -49,6 +49,7 @@ def bench_module(name: str, monkeypatch: pytest.MonkeyPatch | None = None) -> An
         spec = importlib.util.spec_from_file_location(f"bench_{name}", BENCH / f"{name}.py")
         assert spec is not None and spec.loader is not None
         mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod  # (a dataclass resolves its string annotations in its module)
         spec.loader.exec_module(mod)
     finally:
         if monkeypatch is None:

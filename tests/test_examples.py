@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -60,3 +61,33 @@ def test_moderngl_example_decides_on_the_gpu_and_shades_the_rates(tmp_path: Path
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--frames", "0"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "--frames: expected at least 1" in r.stderr
+
+
+@pytest.mark.parametrize("name", ["moderngl_vrs", "pyrender_vrs"])
+def test_an_example_past_the_machines_memory_is_refused_before_it_renders(
+    name: str, tmp_path: Path, machine_memory: Callable[..., None]
+) -> None:
+    """`--size 8192x8192` needs about 63 GiB in the moderngl example (34 in the pyrender one) and was the OOM killer's, after
+    the model loaded and rendering began; a GIF's overlays add 8 bytes a pixel a frame. Now each
+    example sizes its run from its measured constants (`bench/job_memory.py --jobs examples`) and
+    refuses it as rtp's commands do, naming the size, before loading anything or writing."""
+    from rtp import sdk
+
+    from .conftest import bench_module
+
+    module = bench_module("job_memory").example(name)
+    out, gif = tmp_path / "vrs.png", tmp_path / "vrs.gif"
+    need = module.peak_bytes(8192, 8192, 4, False)
+    assert need == int(module.PEAK_BASE + 8192 * 8192 * module.PEAK_PER_PIXEL) and need > 30 * 2**30
+    machine_memory(MemTotal=need - 2**30, SwapTotal=0, MemAvailable=need - 2**30)
+    with pytest.raises(sdk.ParameterError, match=rf"^size: the example at 8192x8192 holds about {need / 2**30:.1f} GiB, "
+                                                 r"more than this machine's .* GiB of memory: a smaller --size \(") as e:
+        module.main(["--size", "8192x8192", "--frames", "4", "--out", str(out)])
+    assert e.value.name == "size"
+    with_gif = module.peak_bytes(8192, 8192, 4, True)
+    assert with_gif == need + 4 * 8192 * 8192 * module.PEAK_PER_GIF_PIXEL
+    machine_memory(MemTotal=need + 2**20, SwapTotal=0, MemAvailable=need + 2**20)  # fits without the GIF, not with it
+    with pytest.raises(sdk.ParameterError, match=r"^size: the example at 8192x8192 with a GIF of 4 frames holds about "
+                                                 r".*: a smaller --size or fewer --frames \("):
+        module.main(["--size", "8192x8192", "--frames", "4", "--out", str(out), "--gif", str(gif)])
+    assert not out.exists() and not gif.exists()
