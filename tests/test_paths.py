@@ -64,7 +64,8 @@ def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
     for kwargs, words in (({"frames": 0}, "frames: expected an integer >= 1"), ({"frames": 2.5}, "frames"),
                           ({"seed": -1}, "seed: expected an integer >= 0"), ({"fps": float("nan")}, "fps"),
                           ({"fov_y": 180}, "fov_y"), ({"clearance": -1}, "clearance"), ({"voxel": 0}, "voxel"),
-                          ({"max_height": float("inf")}, "max_height")):
+                          ({"max_height": float("inf")}, "max_height"),
+                          ({"clearance": 5.0}, r"^no free space in 'procedural-\d+' at 5.0 m from the geometry for a camera path")):
         with pytest.raises(ViewpointError, match=words):  # (seed -1 was numpy's ValueError, fps nan accepted)
             camera_path(sc, **{"frames": 10, **kwargs})  # type: ignore[arg-type]
 
