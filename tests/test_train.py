@@ -1397,3 +1397,24 @@ def test_a_second_training_into_the_same_checkpoint_is_refused(tmp_path: Path) -
 def test_train_takes_a_config_object() -> None:
     with pytest.raises(sdk.ParameterError, match="train: expected a TrainConfig, got dict"):
         train({"data": "d", "metric": "jnyang", "out": "m.pt"})  # type: ignore[arg-type]
+
+
+def test_validation_that_holds_out_every_scene_is_refused_naming_what_held_them_out(tmp_path: Path) -> None:
+    """Every scene of the data held out for validation (by val_scenes, or by val_split on a dataset of
+    that split's maps only) left no training sample: an IndexError once the frames were loaded. Now a
+    ParameterError naming the field that held them out; nothing is written."""
+    data = _dataset(tmp_path / "d", n=6)
+    out = tmp_path / "m.pt"
+    with pytest.raises(sdk.ParameterError, match=r"^val_scenes: every scene of .* \(scene0, scene1, scene2\) is held "
+                                                 r"out for validation; leave at least one to train on$") as e:
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, val_scenes=("scene0", "scene1", "scene2")))
+    assert e.value.name == "val_scenes" and not out.exists()
+    splits = tmp_path / "splits.yaml"
+    splits.write_text(yaml.safe_dump({"train": ["elsewhere"], "validation": ["scene0", "scene1", "scene2"],
+                                      "test": ["further"]}))
+    with pytest.raises(sdk.ParameterError, match=r"^val_split: every scene of") as e:
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, val_split="validation",
+                          splits=str(splits)))
+    assert e.value.name == "val_split" and not out.exists()
+    with pytest.raises(sdk.ParameterError, match=r"validation scenes \['scene9'\] are not in"):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, val_scenes=("scene9",)))

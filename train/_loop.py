@@ -398,6 +398,10 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
             raise DatasetError(f"{cfg.data} holds one scene ({scenes}); validation is split by scene, so capture at least two")
         val = [scenes[-1]]
     train_ids = [i for s in scenes if s not in val for i in by_scene[s]]
+    if not train_ids:  # (was an IndexError once the split was loaded)
+        key = "val_scenes" if cfg.val_scenes else "val_split"
+        raise sdk.ParameterError(f"{key}: every scene of {cfg.data} ({', '.join(scenes)}) is held out for validation; "
+                                 "leave at least one to train on", key)
     val_ids = [i for s in val for i in by_scene[s]]
     if cfg.per_scene:
         kept: dict[tuple[str, str], list[str]] = {}
