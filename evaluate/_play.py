@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from rtp import sdk
+from rtp.sdk.files import atomic_output
 
 from ._baselines import FidelityFX, Frame, Yang2019
 from ._evaluate import failing_tiles, monotone_over_rates
@@ -577,8 +578,6 @@ def _resume_key(job: dict[str, Any], predictors: dict[str, sdk.ShadingRatePredic
 def _save_path(outdir: Path, pname: str, key: str, res: dict[str, Any]) -> None:
     import json
 
-    from rtp.sdk.files import atomic_output
-
     def plain(v: Any) -> Any:  # numpy scalars and arrays as JSON numbers and lists (NaN kept)
         return v.item() if isinstance(v, np.generic) else v.tolist() if isinstance(v, np.ndarray) else str(v)
 
@@ -867,10 +866,9 @@ def _write_animation(path: Path, frames: list[np.ndarray]) -> list[str]:
     from rtp.capture import save_image
 
     images = [Image.fromarray(f).quantize(colors=255, method=Image.Quantize.MEDIANCUT) for f in frames]
-    tmp = path.with_name(path.name + ".tmp")
-    images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=round(1000 / _ANIM_FPS),
-                   loop=0, disposal=1)
-    tmp.replace(path)
+    with atomic_output(path) as tmp:
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=round(1000 / _ANIM_FPS),
+                       loop=0, disposal=1)
     still = path.with_suffix(".png")
     save_image(still, frames[len(frames) // 2])
     return [path.name, still.name]
@@ -895,9 +893,8 @@ def _write(report: PlayReport, out: Path, plots: bool) -> list[str]:
 
     files = []
     for name, text in (("play.md", report.to_markdown()), ("play.json", json.dumps(_json_clean(report.to_dict()), indent=1))):
-        tmp = out / (name + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(out / name)
+        with atomic_output(out / name) as tmp:
+            tmp.write_text(text, encoding="utf-8")
         files.append(name)
     if plots:
         from .plots import play_curves, play_frames, save_image

@@ -752,6 +752,8 @@ def export_checkpoint(
     with atomic_output(out) as tmp:
         try:
             _torch_export(_with_features(net) if split else net, (dummy,), tmp, opset, split=split)
+        except OSError:  # the file system's (a full disk): atomic_output names the file
+            raise
         except Exception as err:
             raise ExportError(f"torch.onnx.export failed: {err}") from err
         model = onnx.load(str(tmp))
@@ -812,6 +814,8 @@ def _tail_model(net: Any, dummy: Any, path: Path, opset: int) -> bytes:
     try:
         _torch_export(Tail().eval(), (features, dummy), path, opset, tail=True)
         model = onnx.load(str(path))
+    except OSError:  # the file system's (a full disk): the caller's atomic_output names the file
+        raise
     except Exception as err:
         raise ExportError(f"torch.onnx.export failed on the tail: {err}") from err
     finally:

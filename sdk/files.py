@@ -43,7 +43,9 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it is fsynced and renamed over ``path``.
 
     If the body raises, the temporary file is removed and ``path`` keeps its previous content, so a
-    reader never sees a half-written file.
+    reader never sees a half-written file. A system error that names no file (a full disk, a quota,
+    an I/O error: what a write into an open file raises) is raised again naming ``path``, the file
+    that could not be written, as an ``OSError`` of the same ``errno``.
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -56,9 +58,12 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
             os.fsync(f.fileno())
         os.chmod(tmp_path, _default_mode())
         os.replace(tmp_path, target)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
+        if isinstance(err, OSError) and err.filename is None and err.errno is not None:
+            # ("[Errno 28] No space left on device" alone: which file, and so which disk, is the user's to know)
+            raise OSError(err.errno, err.strerror or os.strerror(err.errno), str(target)) from err
         raise
 
 

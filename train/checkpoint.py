@@ -16,6 +16,7 @@ Writes are atomic: a crash while saving leaves the previous checkpoint intact.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -91,8 +92,10 @@ def save(
         "training": dict(training) if training is not None else None,
         "versions": _versions(),
     }
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)  # (in memory, then written: torch's own writer on a full disk was an "enforce fail")
     with atomic_output(path) as tmp:
-        torch.save(payload, tmp)
+        tmp.write_bytes(buffer.getbuffer())
         try:  # what load() will do, before the file replaces a good one (a numpy scalar in training did not)
             torch.load(tmp, map_location="cpu", weights_only=True)
         except Exception as err:

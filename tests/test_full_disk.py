@@ -1,0 +1,104 @@
+"""Outputs that do not fit on the disk: every writer goes through rtp.sdk.files.atomic_output, which
+names the file it could not write. A full disk was a traceback ending "OSError: [Errno 28] No space
+left on device" in `rtp capture`, `rtp targets` and `rtp play` (no file named, so the error policy
+took it for a bug), a torch "enforce fail" in `rtp train`, "torch.onnx.export failed" in
+`rtp-export`; `rtp play` left its GIF's `.tmp` behind.
+
+The commands run in processes whose files may not grow past a few bytes (RLIMIT_FSIZE: a write past
+it fails with EFBIG, "File too large", as a write to a full disk fails with ENOSPC: neither names a
+file), so no disk has to be filled."""
+
+from __future__ import annotations
+
+import errno
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rtp.sdk.files import atomic_output
+
+
+def test_atomic_output_names_the_file_a_write_into_an_open_file_could_not_grow(tmp_path: Path) -> None:
+    target = tmp_path / "model.onnx"
+    target.write_bytes(b"the previous model")
+    with pytest.raises(OSError) as e:
+        with atomic_output(target) as tmp:
+            tmp.write_bytes(b"half")
+            raise OSError(errno.ENOSPC, "No space left on device")  # what f.write raises on a full disk
+    assert (e.value.errno, e.value.strerror, e.value.filename) == (errno.ENOSPC, "No space left on device", str(target))
+    assert isinstance(e.value.__cause__, OSError) and e.value.__cause__.filename is None
+    assert target.read_bytes() == b"the previous model" and sorted(p.name for p in tmp_path.iterdir()) == ["model.onnx"]
+    with pytest.raises(PermissionError) as denied:  # the errno's own class, as OSError(errno, ...) gives it
+        with atomic_output(target):
+            raise OSError(errno.EACCES, "")
+    assert denied.value.filename == str(target) and denied.value.strerror == "Permission denied"
+    for kept in (FileNotFoundError(errno.ENOENT, "No such file or directory", "/elsewhere/input.npz"),  # names its file
+                 OSError("not a system error")):  # (no errno: not the file system's)
+        with pytest.raises(OSError) as other:
+            with atomic_output(target):
+                raise kept
+        assert other.value is kept
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.onnx"]
+
+
+def _limited(limit: int) -> None:
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))  # (CPython ignores SIGXFSZ: the write fails with EFBIG)
+
+
+#: How each command runs here (the console scripts' entry points, with this interpreter).
+_COMMANDS = {"rtp": [sys.executable, "-m", "rtp"],
+             "rtp-export": [sys.executable, "-c", "import sys; from rtp.cli import export_main; sys.exit(export_main())"]}
+
+
+def _run(args: list[str], limit: int, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """The command ``args`` in a process whose files may not grow past ``limit`` bytes."""
+    return subprocess.run([*_COMMANDS[args[0]], *args[1:]], capture_output=True, text=True, timeout=300, cwd=cwd,
+                          preexec_fn=lambda: _limited(limit))
+
+
+def _said(run: subprocess.CompletedProcess[str], prog: str, path: Path) -> None:
+    """One line naming the file, exit 1, and no temporary file left beside it."""
+    assert run.returncode == 1, run.stderr
+    assert run.stderr.strip().splitlines()[-1] == f"{prog}: error: File too large: {str(path)!r}", run.stderr
+    assert "Traceback" not in run.stderr
+    assert not list(path.parent.glob(".*.tmp")) and not list(path.parent.glob("*.tmp"))
+
+
+@pytest.mark.gl
+def test_a_capture_that_cannot_write_its_sample_names_it_and_leaves_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "data"
+    run = _run(["rtp", "-q", "capture", "--scene", "procedural:1", "--per-scene", "1", "--profiles", "slow",
+                "--size", "160x96", "--out", str(out)], 20_000, tmp_path)
+    _said(run, "rtp capture", out / "samples" / "procedural_1-slow-0000.npz")
+
+
+def test_training_and_export_that_cannot_write_their_files_name_them(tmp_path: Path) -> None:
+    from rtp.cli import main as rtp_main
+
+    from .test_train import _dataset
+
+    data = _dataset(tmp_path / "d", n=6)
+    ckpt = tmp_path / "m.pt"
+    args = ["train", "--data", str(data), "--metric", "jnyang", "--steps", "2", "--batch", "2", "--crop", "32",
+            "--arch", "fast", "--val-scenes", "scene0", "--out", str(ckpt)]
+    _said(_run(["rtp", "-q", *args], 4_000, tmp_path), "rtp train", ckpt)
+    assert not ckpt.exists()
+    assert rtp_main(["-q", *args]) in (0, 1)  # (1: an output the two steps left constant; the file is kept either way)
+    assert ckpt.is_file()
+    onnx = tmp_path / "m.onnx"
+    _said(_run(["rtp-export", "-q", str(ckpt), "--out", str(onnx)], 4_000, tmp_path), "rtp-export", onnx)
+    assert not onnx.exists()
+
+
+@pytest.mark.gl
+def test_a_closed_loop_that_cannot_write_its_report_names_the_file_and_leaves_no_tmp(tmp_path: Path) -> None:
+    out = tmp_path / "play"
+    run = _run(["rtp", "-q", "play", "procedural:0", "--path", "fast", "--frames", "3", "--size", "64x48", "--methods",
+                "oracle", "--no-sweep", "--out", str(out)], 2_000, tmp_path)
+    assert run.returncode == 1, run.stderr
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"rtp play: error: File too large: '{out}/") and "Traceback" not in run.stderr, run.stderr
+    assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
