@@ -79,7 +79,7 @@ check: lint typecheck test
 # that reads a dataset, the toolchain's extras, and the shipped models' rendered-frame tests need GL:
 # `make test` runs them.)
 FLOOR_VENV  ?= .venv-floor
-FLOOR_TESTS := tests/test_predictor.py tests/test_rates.py tests/test_metadata.py tests/test_reuse.py \
+FLOOR_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_rates.py tests/test_metadata.py tests/test_reuse.py \
 	tests/test_integrity.py tests/test_transforms.py tests/test_pixel_differences.py tests/test_depth_edges.py \
 	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py \
 	tests/test_shipped_models.py
@@ -113,7 +113,7 @@ test-floor-all:
 # found provenance nesting refused by a bare RecursionError on Python 3.13. About 1-2 minutes; CI runs
 # it on Python 3.13 where the machine has one.
 PY_VENV  ?= .venv-py
-PY_TESTS := tests/test_predictor.py tests/test_rates.py tests/test_metadata.py tests/test_ranges.py \
+PY_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_rates.py tests/test_metadata.py tests/test_ranges.py \
 	tests/test_integrity.py tests/test_pixel_differences.py tests/test_depth_edges.py tests/test_adapters.py \
 	tests/test_fuzz.py tests/test_api.py
 test-python:

@@ -732,7 +732,10 @@ class ShadingRatePredictor:
         """:meth:`predict` of one frame ``(C, H, W)`` from trunk features (:meth:`predict_split`'s, of this
         frame or carried from an earlier one) and this frame's inputs: the tail alone runs, at tile
         resolution (it reads only the frame's ``.blocks`` planes, or of its ``.tiles`` planes twelve pixels
-        a tile). With the frame's own features it gives what :meth:`predict` gives."""
+        a tile). With the frame's own features it gives what :meth:`predict` gives, but on a model of a
+        fixed input size given a smaller frame: there the tail runs on the padded frame with the frame's
+        last row and column of features repeated (the trunk's features of the padded tiles are not
+        kept), and its last tile row and column differ from :meth:`predict`'s."""
         x4, xp = self._split_frame(x)
         th, tw = tile_grid(x4.shape[2], x4.shape[3], self._meta.tile_size)
         gh, gw = tile_grid(xp.shape[2], xp.shape[3], self._meta.tile_size)
