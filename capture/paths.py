@@ -37,8 +37,8 @@ from .viewpoints import (
     free_space,
 )
 
-__all__ = ["PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path", "composite",
-           "frame_unseen_share", "unseen_shares"]
+__all__ = ["MAX_FRAMES", "PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path",
+           "composite", "frame_unseen_share", "unseen_shares"]
 
 log = logging.getLogger("rtp.capture")
 
@@ -62,6 +62,11 @@ PATH_PROFILES: dict[str, PathProfile] = {
     "slow": PathProfile("slow", speed=1.5, turn_rate=45.0, wander=8.0, sway=8.0, sway_period=5.0),
     "fast": PathProfile("fast", speed=6.0, turn_rate=240.0, wander=20.0, sway=25.0, sway_period=1.6),
 }
+
+#: The longest camera path, in frames: ten minutes at 60 frames a second (the benchmark's are 150-300).
+#: Planning one takes about 0.8 ms a frame and playing it about a second a frame and method on 2 cores,
+#: so a mistyped count (``--frames 1000000000``) would run for days without a word; it is refused.
+MAX_FRAMES = 36_000
 
 _STEP = 0.25  # metres per walker step
 _LOOK = 2.0  # metres of free space the walker wants ahead
@@ -124,6 +129,8 @@ def camera_path(
     if not isinstance(prof, PathProfile):
         raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)}")
     frames, seed = _count("frames", frames, 1), _count("seed", seed)
+    if frames > MAX_FRAMES:
+        raise ViewpointError(f"frames: expected at most {MAX_FRAMES} (ten minutes at 60 frames a second), got {frames}")
     fps = _real("fps", fps, 0.0, lo_open=True)
     _real("fov_y", fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
     if eye_height is not None:

@@ -71,11 +71,13 @@ def run_demo(
     ``timing_runs`` runs after a warm-up."""
     from rtp import metrics
     from rtp.capture import check_frame_memory, load_scene, save_image
-    from rtp.capture.paths import composite
+    from rtp.capture.paths import MAX_FRAMES, composite
     from rtp.evaluate import failing_tiles
     from rtp.evaluate.plots import heatmaps, rate_overlays, value_map
     from rtp.plugins.moderngl import Renderer
 
+    if isinstance(frames, bool) or not isinstance(frames, int) or not 1 <= frames <= MAX_FRAMES:
+        raise sdk.ParameterError(f"frames: expected an integer in [1, {MAX_FRAMES}], got {frames!r}", "frames")
     predictor = sdk.load(model)
     meta = predictor.metadata
     thr = meta.default_threshold if threshold is None else float(threshold)

@@ -379,7 +379,11 @@ def _integer(key: str, value: Any, lo: int, what: str = "") -> int:
 
 
 def _check(frames: int, fps: float, flip_every: int, size: tuple[int, int], reuse: Iterable[int]) -> None:
-    _integer("frames", frames, 3, " (the first has no history)")
+    from rtp.capture.paths import MAX_FRAMES
+
+    if _integer("frames", frames, 3, " (the first has no history)") > MAX_FRAMES:
+        raise PlayError(f"frames: expected at most {MAX_FRAMES} a path (ten minutes at 60 frames a second), got {frames}",
+                        "frames")
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or not (math.isfinite(fps) and fps > 0):
         raise PlayError(f"fps: expected a finite number > 0, got {fps!r}", "fps")
     _integer("flip_every", flip_every, 0, " (0: no FLIP)")

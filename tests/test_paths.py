@@ -65,7 +65,8 @@ def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
                           ({"seed": -1}, "seed: expected an integer >= 0"), ({"fps": float("nan")}, "fps"),
                           ({"fov_y": 180}, "fov_y"), ({"clearance": -1}, "clearance"), ({"voxel": 0}, "voxel"),
                           ({"max_height": float("inf")}, "max_height"),
-                          ({"clearance": 5.0}, r"^no free space in 'procedural-\d+' at 5.0 m from the geometry for a camera path")):
+                          ({"frames": 36_001}, r"^frames: expected at most 36000 \(ten minutes at 60 frames a second\)"),
+                          ({"clearance": 5.0}, r"^no free space in 'procedural-\d+' at 5.0 m from the geometry")):
         with pytest.raises(ViewpointError, match=words):  # (seed -1 was numpy's ValueError, fps nan accepted)
             camera_path(sc, **{"frames": 10, **kwargs})  # type: ignore[arg-type]
 

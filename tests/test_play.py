@@ -428,6 +428,8 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
     # strings for numbers were compared or passed on (a TypeError deep in the run, or "no" read as True), and
     # a string paths was split into its letters ("unknown profile 'f'")
     for kwargs, words in (({"frames": "5"}, "frames: expected an integer"), ({"fps": "60"}, "fps: expected a finite"),
+                          # (a mistyped count planned its path for days without a word)
+                          ({"frames": 36_001}, r"^frames: expected at most 36000 a path \(ten minutes at 60 frames"),
                           ({"fps": float("nan")}, "fps"), ({"flip_every": 2.5}, "flip_every"),
                           ({"size": (64.0, 48)}, "size"), ({"size": "64x48"}, "size"), ({"seed": -1}, "seed"),
                           ({"workers": 0}, "workers"), ({"unseen_fraction": "0.5"}, "unseen_fraction"),
