@@ -102,3 +102,56 @@ def test_a_closed_loop_that_cannot_write_its_report_names_the_file_and_leaves_no
     last = run.stderr.strip().splitlines()[-1]
     assert last.startswith(f"rtp play: error: File too large: '{out}/") and "Traceback" not in run.stderr, run.stderr
     assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def _free(monkeypatch: pytest.MonkeyPatch, free: int) -> None:
+    """The disk of every folder has ``free`` bytes free (what ``rtp.capture`` reads of it)."""
+    import shutil
+
+    from rtp.capture import _capture
+
+    monkeypatch.setattr(_capture.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**13, 10**13 - free, free))
+
+
+@pytest.mark.gl
+def test_a_capture_whose_samples_cannot_fit_on_the_disk_is_refused_before_anything_is_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`rtp capture --per-scene 1000000000` planned two billion viewpoints in silence (34,000 TB of
+    samples); a capture past the disk filled it and stopped hours in. Refused now from the samples'
+    least size on disk, naming per_scene, before the folder is made."""
+    from rtp.cli import main as rtp_main
+
+    _free(monkeypatch, 10**8)
+    out = tmp_path / "data"
+    assert rtp_main(["capture", "--scene", "procedural:1", "--per-scene", "1000", "--size", "160x96", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "rtp capture: error: per_scene: 2,000 samples at 160x96 take at least 0.2 GB on disk (typically 0.6 GB), more "
+        f"than the 0.1 GB free in {str(tmp_path)!r}: fewer samples, or --out on a larger disk")
+    assert not out.exists()
+
+
+def test_the_disk_check_counts_the_samples_already_written_and_warns_past_their_typical_size(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    from rtp import sdk
+    from rtp.capture import check_disk
+
+    out = tmp_path / "data"
+    (out / "samples").mkdir(parents=True)
+    for i in range(3):
+        (out / "samples" / f"s{i}.npz").write_bytes(b"")
+    _free(monkeypatch, 0)
+    check_disk(out, (1280, 720), 3)  # all written: a resumed capture writes nothing
+    with pytest.raises(sdk.ParameterError, match=r"^per_scene: 1 samples at 1280x720 take at least 0.0 GB") as e:
+        check_disk(out, (1280, 720), 4)
+    assert e.value.name == "per_scene"
+    _free(monkeypatch, 10**10)  # 10 GB: 1,000 samples at least 4.6 GB, typically 17.0
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        check_disk(out, (1280, 720), 1003)
+    assert "1,000 samples at 1280x720 take about 17.0 GB on disk, more than the 10.0 GB free in" in caplog.text
+    assert "it resumes where it stopped" in caplog.text
+    caplog.clear()
+    _free(monkeypatch, 2 * 10**10)
+    check_disk(tmp_path / "new" / "deeper", (1280, 720), 1000)  # a folder not made yet: its first existing parent's disk
+    assert not caplog.text
