@@ -37,7 +37,7 @@ from .viewpoints import (
     free_space,
 )
 
-__all__ = ["MAX_FRAMES", "PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path",
+__all__ = ["MAX_FRAMES", "MAX_SECONDS", "PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path",
            "composite", "frame_unseen_share", "unseen_shares"]
 
 log = logging.getLogger("rtp.capture")
@@ -67,6 +67,9 @@ PATH_PROFILES: dict[str, PathProfile] = {
 #: Planning one takes about 0.8 ms a frame and playing it about a second a frame and method on 2 cores,
 #: so a mistyped count (``--frames 1000000000``) would run for days without a word; it is refused.
 MAX_FRAMES = 36_000
+#: The longest camera path in time, seconds (ten minutes): at a low ``fps`` a few frames walk far (at
+#: 0.01 frames a second ten frames asked for a 5 km walk, and failed after 13 s; at 1e-10, for ever).
+MAX_SECONDS = 600.0
 
 _STEP = 0.25  # metres per walker step
 _LOOK = 2.0  # metres of free space the walker wants ahead
@@ -132,6 +135,9 @@ def camera_path(
     if frames > MAX_FRAMES:
         raise ViewpointError(f"frames: expected at most {MAX_FRAMES} (ten minutes at 60 frames a second), got {frames}")
     fps = _real("fps", fps, 0.0, lo_open=True)
+    if (frames - 1) / fps > MAX_SECONDS:
+        raise ViewpointError(f"fps: {frames} frames at {fps:g} frames a second last {(frames - 1) / fps:,.0f} s; expected "
+                             f"a path of at most {MAX_SECONDS:.0f} s (ten minutes): more frames a second, or fewer frames")
     _real("fov_y", fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
     if eye_height is not None:
         _real("eye_height (metres)", eye_height, 0.0, 10.0, lo_open=True, hi_open=True)
@@ -228,7 +234,9 @@ def camera_path(
         if ok:
             break
     else:
-        raise ViewpointError(f"the camera path in {scene.name!r} could not be smoothed into valid cameras")
+        raise ViewpointError(f"the camera path in {scene.name!r} could not be smoothed into valid cameras "
+                             f"({prof.speed / fps:.2g} m between frames at {fps:g} frames a second: at a higher rate "
+                             "they are closer)")
     # heading towards the point 1 m further along the path, turned at most turn_rate degrees per
     # second, plus the sway (t / speed is each frame's time in seconds)
     look = np.stack([np.interp(t + 1.0, s, path[:, i]) for i in (0, 2)], -1) - pos[:, [0, 2]]

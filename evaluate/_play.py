@@ -379,13 +379,16 @@ def _integer(key: str, value: Any, lo: int, what: str = "") -> int:
 
 
 def _check(frames: int, fps: float, flip_every: int, size: tuple[int, int], reuse: Iterable[int]) -> None:
-    from rtp.capture.paths import MAX_FRAMES
+    from rtp.capture.paths import MAX_FRAMES, MAX_SECONDS
 
     if _integer("frames", frames, 3, " (the first has no history)") > MAX_FRAMES:
         raise PlayError(f"frames: expected at most {MAX_FRAMES} a path (ten minutes at 60 frames a second), got {frames}",
                         "frames")
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or not (math.isfinite(fps) and fps > 0):
         raise PlayError(f"fps: expected a finite number > 0, got {fps!r}", "fps")
+    if (frames - 1) / fps > MAX_SECONDS:  # (a long walk: its planning took seconds to hours, then failed)
+        raise PlayError(f"fps: {frames} frames at {fps:g} frames a second last {(frames - 1) / fps:,.0f} s; expected a path "
+                        f"of at most {MAX_SECONDS:.0f} s (ten minutes): more frames a second, or fewer frames", "fps")
     _integer("flip_every", flip_every, 0, " (0: no FLIP)")
     if not isinstance(size, (tuple, list)) or len(size) != 2 or not all(
             isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 16 for v in size):

@@ -66,9 +66,14 @@ def test_bad_path_requests_are_refused(scene) -> None:  # noqa: ANN001
                           ({"fov_y": 180}, "fov_y"), ({"clearance": -1}, "clearance"), ({"voxel": 0}, "voxel"),
                           ({"max_height": float("inf")}, "max_height"),
                           ({"frames": 36_001}, r"^frames: expected at most 36000 \(ten minutes at 60 frames a second\)"),
+                          ({"fps": 1e-10}, r"^fps: 10 frames at 1e-10 frames a second last 90,000,000,000 s; expected"),
                           ({"clearance": 5.0}, r"^no free space in 'procedural-\d+' at 5.0 m from the geometry")):
         with pytest.raises(ViewpointError, match=words):  # (seed -1 was numpy's ValueError, fps nan accepted)
             camera_path(sc, **{"frames": 10, **kwargs})  # type: ignore[arg-type]
+    # running at one frame a second: cameras 6 m apart, which no smoothing keeps clear of the walls
+    with pytest.raises(ViewpointError, match=r"could not be smoothed into valid cameras \(6 m between frames at 1 frames "
+                                             r"a second: at a higher rate they are closer\)$"):
+        camera_path(sc, 100, "fast", fps=1.0)
 
 
 def test_paths_walk_the_floors_at_the_spawn_points_eye_height(scene) -> None:  # noqa: ANN001

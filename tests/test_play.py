@@ -430,6 +430,8 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
     for kwargs, words in (({"frames": "5"}, "frames: expected an integer"), ({"fps": "60"}, "fps: expected a finite"),
                           # (a mistyped count planned its path for days without a word)
                           ({"frames": 36_001}, r"^frames: expected at most 36000 a path \(ten minutes at 60 frames"),
+                          ({"fps": 0.001}, r"^fps: 3 frames at 0.001 frames a second last 2,000 s; expected a path of at "
+                                           r"most 600 s \(ten minutes\): more frames a second, or fewer frames"),
                           ({"fps": float("nan")}, "fps"), ({"flip_every": 2.5}, "flip_every"),
                           ({"size": (64.0, 48)}, "size"), ({"size": "64x48"}, "size"), ({"seed": -1}, "seed"),
                           ({"workers": 0}, "workers"), ({"unseen_fraction": "0.5"}, "unseen_fraction"),
