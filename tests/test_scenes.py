@@ -664,7 +664,7 @@ def _fake_apt(monkeypatch: pytest.MonkeyPatch, packages: dict[str, dict[str, byt
     unpacks it. Returns the commands run."""
     calls: list[list[str]] = []
 
-    def run(cmd, cwd: Path) -> None:
+    def run(cmd, cwd: Path, debs: Path | None = None) -> None:
         calls.append(list(cmd))
         if list(cmd[:2]) == ["apt-get", "download"]:
             for pkg in cmd[2:]:
@@ -727,6 +727,54 @@ def test_fetch_damaged_archives_raise_fetch_error(tmp_path: Path, monkeypatch: p
     with pytest.raises(scenes.FetchError, match=message):
         scenes.fetch(tmp_path / "cache", ["m1"], splits=splits, progress=False)
     assert not list((tmp_path / "cache" / "pk3").glob("*.tmp"))
+
+
+def test_a_failed_download_leaves_no_package_cut_short_and_a_damaged_one_is_fetched_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    """apt-get download on a full disk (or a dropped connection) left its .deb files cut short in
+    ``debs/``, which every later fetch took for packages: dpkg-deb failed on them until the user
+    deleted the cache by hand. The download now goes to a folder of its own, moved into ``debs/``
+    only once it succeeded; a damaged package already there (an older rtp's) is removed when
+    dpkg-deb fails on it, so the next fetch downloads it again."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    packages = _packages()
+    calls = _fake_apt(monkeypatch, packages)
+    working = scenes._fetch._run
+
+    def full_disk(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
+        if list(cmd[:2]) == ["apt-get", "download"]:
+            (cwd / f"{cmd[2]}_1.0_all.deb").write_bytes(_pk3_bytes(packages[cmd[2]])[:100])  # cut short
+            (cwd / f"{cmd[3]}_1.0_all.deb").write_bytes(b"")
+            raise scenes.FetchError("apt-get download ... failed with exit code 100: ... (28: No space left on device)")
+        working(cmd, cwd)
+
+    monkeypatch.setattr(scenes._fetch, "_run", full_disk)
+    with pytest.raises(scenes.FetchError, match="No space left on device"):
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert list((cache / "debs").iterdir()) == []  # no package, no download folder
+    monkeypatch.setattr(scenes._fetch, "_run", working)
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
+    # a package cut short by an older rtp: dpkg-deb fails on it, it is removed, the next fetch takes it again
+    cut = cache / "debs" / "openarena-081-textures_1.0_all.deb"
+    cut.write_bytes(cut.read_bytes()[:100])
+    (cache / "root" / ".unpacked").write_text("")
+
+    def dpkg_fails_on_cut(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
+        if list(cmd[:2]) == ["dpkg-deb", "-x"] and Path(cmd[2]).stat().st_size == 100:
+            raise scenes.FetchError(f"dpkg-deb -x {cmd[2]} {cmd[3]} failed with exit code 2: tar: Unexpected EOF in archive")
+        working(cmd, cwd)
+
+    monkeypatch.setattr(scenes._fetch, "_run", dpkg_fails_on_cut)
+    with pytest.raises(scenes.FetchError, match=r"Unexpected EOF in archive \(removed openarena-081-textures_1\.0_all\.deb: "
+                                                r"the next `rtp scenes fetch` downloads it again\)$"):
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert not cut.exists()
+    calls.clear()
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
+    assert calls[0] == ["apt-get", "download", "openarena-081-textures"] and cut.stat().st_size > 100
 
 
 def test_run_turns_command_failures_into_fetch_errors(tmp_path: Path):

@@ -19,8 +19,10 @@ from __future__ import annotations
 import gzip
 import json
 import logging
+import os
 import shutil
 import subprocess
+import tempfile
 import time
 import zipfile
 import zlib
@@ -140,12 +142,14 @@ def check_map(name: str, cache_dir: str | Path, *, split: str | None = None,
                                  f"{cache}` first")
 
 
-def _run(cmd: Sequence[str], cwd: Path) -> None:
+def _run(cmd: Sequence[str], cwd: Path, debs: Path | None = None) -> None:
+    """``cmd`` in ``cwd``, a :class:`FetchError` if it cannot run or fails (``debs``: the folder the
+    packages go to, named where the command is missing; default ``cwd``)."""
     exe = shutil.which(cmd[0])
     if exe is None:
         raise FetchError(
             f"{cmd[0]} not found: fetching needs a Debian/Ubuntu system (or put the packages' .deb files "
-            f"{list(PACKAGES)} into {cwd} yourself)"
+            f"{list(PACKAGES)} into {debs or cwd} yourself)"
         )
     try:
         res = subprocess.run([exe, *cmd[1:]], cwd=cwd, capture_output=True, text=True, check=False)
@@ -227,13 +231,17 @@ def fetch(
     missing = [p for p in PACKAGES if not list(debs.glob(f"{p}_*.deb"))]
     if missing:
         log.info("downloading %s into %s", " ".join(missing), debs)
-        _run(["apt-get", "download", *missing], debs)
+        _download(missing, debs)
     stamp = root / ".unpacked"
     deb_files = sorted(debs.glob("*.deb"))
     have = stamp.read_text().split("\n") if stamp.exists() else []
     todo = [d for d in deb_files if d.name not in have]
     for d in _progress(todo, desc="unpack", unit="deb", disable=not progress or not todo):
-        _run(["dpkg-deb", "-x", str(d), str(root)], cache)
+        try:
+            _run(["dpkg-deb", "-x", str(d), str(root)], cache)
+        except FetchError as err:  # a damaged package (cut short by an older rtp's failed download): fetched again next time
+            d.unlink(missing_ok=True)
+            raise FetchError(f"{err} (removed {d.name}: the next `rtp scenes fetch` downloads it again)") from err
         have.append(d.name)
         _write_text(stamp, "\n".join(have))
     index = _scan_archives(root, cache / "pk3")
@@ -246,6 +254,19 @@ def fetch(
         for m in _progress(wanted, desc="convert", unit="map", disable=not progress):
             _load_cached(m, cache, index)
     return {m: cache / index["maps"][m] for m in wanted}
+
+
+def _download(packages: Sequence[str], debs: Path) -> None:
+    """``apt-get download`` of ``packages`` into a folder of its own inside ``debs``, each ``.deb`` moved
+    into ``debs`` once all are downloaded: a download that fails (a full disk, the network) leaves no
+    file cut short for the next fetch to take for a package."""
+    part = Path(tempfile.mkdtemp(prefix=".download-", dir=debs))
+    try:
+        _run(["apt-get", "download", *packages], part, debs)
+        for f in sorted(part.glob("*.deb")):
+            os.replace(f, debs / f.name)
+    finally:
+        shutil.rmtree(part, ignore_errors=True)
 
 
 def _write_text(path: Path, text: str) -> None:
