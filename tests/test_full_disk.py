@@ -11,6 +11,7 @@ file), so no disk has to be filled."""
 from __future__ import annotations
 
 import errno
+import os
 import resource
 import subprocess
 import sys
@@ -54,9 +55,11 @@ _COMMANDS = {"rtp": [sys.executable, "-m", "rtp"],
 
 
 def _run(args: list[str], limit: int, cwd: Path) -> subprocess.CompletedProcess[str]:
-    """The command ``args`` in a process whose files may not grow past ``limit`` bytes."""
+    """The command ``args`` in a process whose files may not grow past ``limit`` bytes (not followed by
+    ``make coverage``: its data file would not grow either)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("COVERAGE")}
     return subprocess.run([*_COMMANDS[args[0]], *args[1:]], capture_output=True, text=True, timeout=300, cwd=cwd,
-                          preexec_fn=lambda: _limited(limit))
+                          env=env, preexec_fn=lambda: _limited(limit))
 
 
 def _said(run: subprocess.CompletedProcess[str], prog: str, path: Path) -> None:
