@@ -30,6 +30,7 @@ and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``), ``
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
@@ -41,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from rtp import sdk
-from rtp.sdk.files import atomic_output
+from rtp.sdk.files import atomic_output, writer_lock
 
 from ._baselines import FidelityFX, Frame, Yang2019
 from ._evaluate import failing_tiles, monotone_over_rates
@@ -519,51 +520,58 @@ def play(
     check_frame_size((w, h))
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
+    guard = contextlib.ExitStack()
     if outdir is not None:
         outdir.mkdir(parents=True, exist_ok=True)
-    job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
-           "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
-           "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact, "open_loop": open_loop,
-           "gif": str(outdir) if outdir is not None and plots and animation else None}
-    # A path finished by an interrupted run of the same job into the same folder is read back, not
-    # played again; each path is kept as it finishes, until the report is written.
-    key = _resume_key(job, predictors) if outdir is not None else ""
-    results = {p: r for p in dict.fromkeys(paths) if outdir is not None and (r := _load_path(outdir, p, key)) is not None}
-    if results:
-        log.info("%s: %s played by an interrupted run of this job; playing the rest", outdir, ", ".join(results))
-        if progress is not None:
-            progress(frames * len(results))
-    todo = [p for p in dict.fromkeys(paths) if p not in results]
+        # a second play into the folder would read this one's kept paths and write its files among them
+        guard.enter_context(writer_lock(outdir, "rtp play", lambda holder: PlayError(
+            f"out: {outdir} is being written by another closed loop ({holder}): wait for it to end, or play into "
+            "another folder", "out"), remove=True))
+    with guard:
+        job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
+               "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
+               "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
+               "open_loop": open_loop, "gif": str(outdir) if outdir is not None and plots and animation else None}
+        # A path finished by an interrupted run of the same job into the same folder is read back, not
+        # played again; each path is kept as it finishes, until the report is written.
+        key = _resume_key(job, predictors) if outdir is not None else ""
+        results = {p: r for p in dict.fromkeys(paths)
+                   if outdir is not None and (r := _load_path(outdir, p, key)) is not None}
+        if results:
+            log.info("%s: %s played by an interrupted run of this job; playing the rest", outdir, ", ".join(results))
+            if progress is not None:
+                progress(frames * len(results))
+        todo = [p for p in dict.fromkeys(paths) if p not in results]
 
-    def finished(pname: str, res: dict[str, Any]) -> None:
-        results[pname] = res
-        if outdir is not None:
-            _save_path(outdir, pname, key, res)
+        def finished(pname: str, res: dict[str, Any]) -> None:
+            results[pname] = res
+            if outdir is not None:
+                _save_path(outdir, pname, key, res)
 
-    if workers > 1 and len(todo) > 1:
-        _in_workers(job, todo, min(workers, len(todo)), progress, finished)
-    else:
-        for pname in todo:
-            finished(pname, _play_path({**job, "path": pname}, progress))
-    for pname in paths:
-        res = results[pname]
-        report.unseen[pname] = res["unseen"]
-        report.settings.setdefault("cameras", {})[pname] = res["camera"]
-        report.rows += res["rows"]
-        report.frames[pname] = res["frames"]
-        report.files += res["files"]
-        for m in specs:
-            pts = [(r["fail_share"], r["work_saved"]) for r in res["rows"] if r["method"] == m.name]
-            for level in FAIL_LEVELS:
-                v = saved_at(pts, level)
-                # a swept method whose sweep never fails this often: its best saving, a lower bound
-                capped = v is not None and m.kind not in _NO_HISTORY and max(f for f, _ in pts) < level
-                report.matched.append({"path": pname, "method": m.name, "fail_share": level,
-                                       "work_saved": float("nan") if v is None else v, "capped": capped})
-    if outdir is not None:
-        report.files += _write(report, outdir, plots)
+        if workers > 1 and len(todo) > 1:
+            _in_workers(job, todo, min(workers, len(todo)), progress, finished)
+        else:
+            for pname in todo:
+                finished(pname, _play_path({**job, "path": pname}, progress))
         for pname in paths:
-            (outdir / _PARTIAL.format(pname)).unlink(missing_ok=True)
+            res = results[pname]
+            report.unseen[pname] = res["unseen"]
+            report.settings.setdefault("cameras", {})[pname] = res["camera"]
+            report.rows += res["rows"]
+            report.frames[pname] = res["frames"]
+            report.files += res["files"]
+            for m in specs:
+                pts = [(r["fail_share"], r["work_saved"]) for r in res["rows"] if r["method"] == m.name]
+                for level in FAIL_LEVELS:
+                    v = saved_at(pts, level)
+                    # a swept method whose sweep never fails this often: its best saving, a lower bound
+                    capped = v is not None and m.kind not in _NO_HISTORY and max(f for f, _ in pts) < level
+                    report.matched.append({"path": pname, "method": m.name, "fail_share": level,
+                                           "work_saved": float("nan") if v is None else v, "capped": capped})
+        if outdir is not None:
+            report.files += _write(report, outdir, plots)
+            for pname in paths:
+                (outdir / _PARTIAL.format(pname)).unlink(missing_ok=True)
     return report
 
 

@@ -563,3 +563,21 @@ def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> 
                               str(tmp_path / "a-old.json")], capture_output=True, text=True, check=True).stdout
         assert ("swept over other grids" not in out) == merged
         assert out.count("| a | 0 | fast |") == (2 if merged else 4)
+
+
+def test_a_second_play_into_a_folder_being_played_into_is_refused(tmp_path: Path) -> None:
+    """Two closed loops into one --out read each other's kept paths and wrote their files among each
+    other's; the second is now refused naming the first, and the folder's lock goes with the run."""
+    import os
+
+    from rtp.sdk.files import LOCK_NAME, writer_lock
+
+    out = tmp_path / "play"
+    out.mkdir()
+    with writer_lock(out, "rtp play", RuntimeError):
+        with pytest.raises(PlayError, match=rf"^out: {out} is being written by another closed loop \(rtp play, pid "
+                                            rf"{os.getpid()}\): wait for it to end, or play into another folder$") as e:
+            play("procedural:0", "oracle", paths=("fast",), frames=3, size=(64, 48), sweep=False, plots=False, out=str(out))
+        assert e.value.name == "out"
+    play("procedural:0", "oracle", paths=("fast",), frames=3, size=(64, 48), sweep=False, plots=False, out=str(out))
+    assert (out / "play.md").is_file() and not (out / LOCK_NAME).exists()
