@@ -799,8 +799,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)
     mt.add_argument("metric", choices=tuple(METRICS), help="the metric")
-    mt.add_argument("reference", help="the reference image (full-rate shading), any format Pillow reads")
-    mt.add_argument("test", help="the image to compare, same size")
+    mt.add_argument("reference", type=_path_text, help="the reference image (full-rate shading), any format Pillow reads")
+    mt.add_argument("test", type=_path_text, help="the image to compare, same size")
     mt.add_argument("--out", type=_out_image, default=None,
                     help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
                     "bar to this image")
