@@ -3,6 +3,10 @@ viewpoints, and prints a markdown table (the numbers in docs/scenes.md come from
 
     python bench/scenes.py --maps 20kdm2,oa_dm5,oacmpctf3,oa_dm1 --views 20
 
+"to the first pair s" is the free space (the voxels and their flood) and the first pair; "ms a pair"
+the time between the first pair and the last, per pair: what ``rtp capture`` spends planning each
+sample before its scene renders.
+
 Needs the cache filled by ``rtp scenes fetch`` (``rtp.capture.scenes.fetch``).
 """
 
@@ -62,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     hdr = "| scene | split | triangles | materials | no image | spawns | lights | convert s | cached load s |"
     if args.views:
-        hdr += f" {args.views} views s (slow) | draws | voxel m |"
+        hdr += f" {args.views} views s (slow) | to the first pair s | ms a pair | draws | voxel m |"
     print(hdr)
     print("|" + "---|" * (hdr.count("|") - 1))
     for name, split, scene, t_conv, t_load, missing, sky in rows:
@@ -71,10 +75,14 @@ def main(argv: list[str] | None = None) -> int:
                 + ("-" if t_load != t_load else f"{t_load:.3f}") + " |")
         if args.views:
             st: dict = {}
+            found: list[float] = []  # when each pair was found
             t0 = time.perf_counter()
-            sample_viewpoints(scene, args.views, args.seed, "slow", blockers=sky, stats=st)
+            sample_viewpoints(scene, args.views, args.seed, "slow", blockers=sky, stats=st,
+                              progress=lambda _, found=found: found.append(time.perf_counter()))
             t_vp = time.perf_counter() - t0
-            line += f" {t_vp:.2f} | {st['draws']} | {st['voxel']:.3f} |"
+            t_space = found[0] - t0  # the voxels and their flood, and the first pair
+            pair_ms = f"{1000 * (found[-1] - found[0]) / (len(found) - 1):.1f}" if len(found) > 1 else "-"
+            line += f" {t_vp:.2f} | {t_space:.2f} | {pair_ms} | {st['draws']} | {st['voxel']:.3f} |"
         print(line, flush=True)
     if args.unseen:
         unseen(rows, args.unseen, args.unseen_seed)

@@ -218,22 +218,26 @@ def _ids(scene: str, profile: str, n: int) -> list[str]:
 
 def _plan(scene_name: str, scene: Any, blockers: Any, profiles: Sequence[str], per_scene: int,
           size: tuple[int, int], seed: int, placement: str = "free",
+          planning: Callable[[str, int, int], None] | None = None,
           ) -> tuple[dict[str, list[tuple[str, Any, Any]]], list[str]]:
     """Every planned sample of a scene: ``{profile: [(sample id, previous camera, camera)]}``, and the
-    ``"<scene>/<profile>"`` jobs without valid viewpoints. Deterministic: any worker plans the same."""
+    ``"<scene>/<profile>"`` jobs without valid viewpoints. Deterministic: any worker plans the same.
+    ``planning(job, found, per_scene)`` as each pair is found (:func:`capture`'s ``planning``)."""
     from rtp.capture.viewpoints import ViewpointError, sample_viewpoints
 
     w, h = size
     plans: dict[str, list[tuple[str, Any, Any]]] = {}
     failed: list[str] = []
     for profile in profiles:
+        job = f"{scene_name}/{profile}"
+        found = None if planning is None else (lambda k, job=job: planning(job, k, per_scene))
         try:
             pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
                                       blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE,
-                                      placement=placement)
+                                      placement=placement, progress=found)
         except ViewpointError as err:
             log.warning("%s (%s): %s", scene_name, profile, err)
-            failed.append(f"{scene_name}/{profile}")
+            failed.append(job)
             continue
         plans[profile] = [(sid, p, c) for sid, (p, c) in zip(_ids(scene_name, profile, per_scene), pairs)]
     return plans, failed
@@ -269,8 +273,9 @@ def _run_job(
     scene, blockers = load_scene(scene_name, cache_dir, split, splits)
     w, h = size
     reader = DatasetReader(out)
+    planning = None if queue is None else (lambda job, found, total: queue.put((job, found, total)))
     planned, report.failed = _plan(scene_name, scene, blockers, profiles, per_scene, size, seed,
-                                   settings.get("placement", "free"))
+                                   settings.get("placement", "free"), planning)
     plans = {profile: _todo(writer, reader, plan) for profile, plan in planned.items()}
     report.skipped = sum(len(planned[p]) - len(plans[p]) for p in plans)
     if queue is not None and report.skipped:
@@ -317,6 +322,7 @@ def capture(
     progress: Callable[[int, int], None] | None = None,
     ray: str | None = None,
     placement: str = "free",
+    planning: Callable[[str, int, int], None] | None = None,
     _on_ray_actors: Callable[[list[Any]], None] | None = None,
 ) -> CaptureReport:
     """Capture ``per_scene`` samples per scene and motion profile into the dataset folder ``out``.
@@ -326,7 +332,10 @@ def capture(
     (:data:`rtp.capture.viewpoints.PLACEMENTS`: ``"free"`` anywhere in the viewpoint domain, ``"eye"``
     at the player's eye height over a floor); the dataset's manifest records it. With
     ``workers > 1`` scenes render in parallel processes (one EGL context each). ``progress(done,
-    total)`` is called as samples complete (skipped ones count).
+    total)`` is called as samples complete (skipped ones count). Before a scene renders, its
+    viewpoints are planned (a few milliseconds a pair: minutes for a hundred thousand):
+    ``planning(job, found, asked)`` is called as each pair is found, ``job`` being
+    ``"<scene>/<profile>"`` (not on Ray, whose workers plan on their own).
 
     ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
     instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:
@@ -393,26 +402,27 @@ def capture(
             for p, v in r.unseen.items():
                 report.unseen.setdefault(p, []).extend(v)
 
+        def tick(item: int | tuple[str, int, int]) -> None:
+            """A worker's news: samples done (an int), or a job's pairs planned (job, found, asked)."""
+            nonlocal done
+            if isinstance(item, tuple):
+                if planning:
+                    planning(*item)
+                return
+            done += item
+            if progress:
+                progress(done, total)
+
         if ray is not None:
             from ._ray import ray_capture
-
-            def advance(n: int) -> None:
-                nonlocal done
-                done += n
-                if progress:
-                    progress(done, total)
 
             merge(ray_capture(scene_names, str(out), profiles=tuple(profiles), per_scene=per_scene, size=(w, h), seed=seed,
                               cache_dir=None if cache_dir is None else str(cache_dir), split=split,
                               splits=None if splits is None else str(splits), settings=settings, address=ray,
-                              workers=workers, progress=advance, on_actors=_on_ray_actors))
+                              workers=workers, progress=tick, on_actors=_on_ray_actors))
         elif (workers or 1) <= 1:
             class _Q:
-                def put(self, n: int) -> None:
-                    nonlocal done
-                    done += n
-                    if progress:
-                        progress(done, total)
+                put = staticmethod(tick)
 
             for a in args:
                 merge(_run_job(*a, queue=_Q()))
@@ -420,11 +430,8 @@ def capture(
             queue = tick_queue()
 
             def drain() -> None:
-                nonlocal done
                 while not queue.empty():
-                    done += queue.get()
-                    if progress:
-                        progress(done, total)
+                    tick(queue.get())
 
             with worker_pool(workers or 1, ticks=queue) as pool:
                 pending = {pool.submit(with_ticks, _run_job, *a) for a in args}

@@ -296,6 +296,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
             names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
             workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
             progress=lambda done, _total: bar.update_to(done), ray=args.ray, placement=args.placement,
+            planning=lambda job, found, asked: bar.status(f"planning {job}'s viewpoints: {found}/{asked}"),
         )
     if report.failed:
         print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)

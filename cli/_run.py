@@ -15,6 +15,7 @@ import errno
 import logging
 import os
 import sys
+import time
 import traceback
 from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
@@ -150,6 +151,8 @@ class Bar:
     def __init__(self, args: argparse.Namespace, total: int, desc: str, unit: str) -> None:
         self.total = total
         self._bar: Any = None
+        self._status = ""
+        self._drawn = 0.0
         if args.quiet or args.no_progress:
             return
         with contextlib.suppress(ImportError):
@@ -164,9 +167,26 @@ class Bar:
             return
         if total is not None and total != self._bar.total:
             self._bar.total = total
+        if self._status and n != self._bar.n:  # the count moves: what held it is over
+            self._status = ""
+            self._bar.set_postfix_str("", refresh=False)
         self._bar.update(n - self._bar.n)
         if postfix:
             self._bar.set_postfix(postfix, refresh=False)
+
+    def status(self, text: str = "") -> None:
+        """Show ``text`` after the count (empty: nothing) while the count does not move, as a long
+        first step runs (the next step clears it); drawn at most ten times a second, and not before
+        the bar's delay."""
+        bar = self._bar
+        if bar is None or text == self._status:
+            return
+        self._status = text
+        bar.set_postfix_str(text, refresh=False)
+        now = time.time()  # (tqdm's clock)
+        if now - bar.start_t >= self.DELAY and now - self._drawn >= 0.1:
+            self._drawn = now
+            bar.refresh()
 
     def close(self) -> None:
         if self._bar is not None:

@@ -44,15 +44,20 @@ def test_capture_writes_complete_samples_and_resumes(tmp_path: Path) -> None:
 
 def test_parallel_capture_writes_what_one_process_writes(tmp_path: Path) -> None:
     """`--workers 2` (make dataset's default: a process a scene) writes the same samples, byte for
-    byte in every buffer, as one process, and its progress counts every sample once, to the total."""
+    byte in every buffer, as one process, and its progress counts every sample once, to the total.
+    Both report each job's viewpoints as they are planned (`rtp capture` shows it while it plans)."""
     from rtp.capture import BUFFERS
 
-    scenes, kw = ["procedural:3", "procedural:4"], {"per_scene": 1, "size": (96, 64), "profiles": ("slow",)}
-    one = capture(scenes, tmp_path / "one", **kw)
+    scenes, kw = ["procedural:3", "procedural:4"], {"per_scene": 2, "size": (96, 64), "profiles": ("slow",)}
+    planned: dict[int, list[tuple[str, int, int]]] = {1: [], 2: []}
+    one = capture(scenes, tmp_path / "one", planning=lambda *a: planned[1].append(a), **kw)
     ticks: list[tuple[int, int]] = []
-    two = capture(scenes, tmp_path / "two", workers=2, progress=lambda d, t: ticks.append((d, t)), **kw)
-    assert (two.written, two.skipped, two.failed) == (one.written, 0, []) == (2, 0, [])
-    assert ticks[-1] == (2, 2) and [d for d, _ in ticks] == sorted(d for d, _ in ticks)
+    two = capture(scenes, tmp_path / "two", workers=2, progress=lambda d, t: ticks.append((d, t)),
+                  planning=lambda *a: planned[2].append(a), **kw)
+    assert (two.written, two.skipped, two.failed) == (one.written, 0, []) == (4, 0, [])
+    assert ticks[-1] == (4, 4) and [d for d, _ in ticks] == sorted(d for d, _ in ticks)
+    jobs = [(f"{s}/slow", k, 2) for s in scenes for k in (1, 2)]
+    assert planned[1] == jobs and sorted(planned[2]) == jobs
     a, b = DatasetReader(tmp_path / "one"), DatasetReader(tmp_path / "two")
     assert a.ids == b.ids and a.manifest["unseen_share"] == b.manifest["unseen_share"]
     for sid in a.ids:

@@ -393,6 +393,31 @@ def test_a_job_that_fails_before_any_progress_erases_its_empty_bar() -> None:
     assert bar._bar.leave is True
 
 
+def test_a_long_first_step_says_what_it_does(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp capture --per-scene 100000` planned its viewpoints for minutes before the bar moved (or
+    showed at all): the bar says what it plans meanwhile, and stops saying it once samples come."""
+    from rtp.cli._run import Bar
+
+    args = argparse.Namespace(quiet=False, no_progress=False)
+    capsys.readouterr()
+    with Bar(args, 10, "capture", "sample") as bar:
+        bar.status("planning a/slow's viewpoints: 1/10")  # before the bar's delay: not drawn
+        assert capsys.readouterr().err == ""
+        bar._bar.start_t -= Bar.DELAY
+        bar.status("planning a/slow's viewpoints: 2/10")
+        assert capsys.readouterr().err.endswith("planning a/slow's viewpoints: 2/10]")
+        bar.update_to(1)  # the count moves: the text goes
+        assert "planning" not in capsys.readouterr().err.rsplit("\r", 1)[-1]
+    monkeypatch.setattr(Bar, "DELAY", 0.0)
+    assert main(["capture", "--scene", "procedural:1", "--per-scene", "2", "--size", "64x48", "--profiles", "slow",
+                 "--out", str(tmp_path / "data")]) == 0
+    err = capsys.readouterr().err
+    assert "planning procedural:1/slow's viewpoints: 1/2]" in err
+    last = err.rsplit("\r", 1)[-1]
+    assert "2/2 [" in last and "planning" not in last, err
+
+
 def test_a_job_that_fails_at_once_leaves_only_its_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp evaluate nomodel` printed "evaluate nomodel: 0sample [00:00, ?sample/s]\\r   \\r" in front of
     its error in a log: a bar shows only after Bar.DELAY seconds."""

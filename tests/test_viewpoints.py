@@ -180,3 +180,66 @@ def test_eye_placement_stands_on_the_floors_at_the_spawn_eye_height(scene):
     assert sample_viewpoints(scene, 4, seed=5, profile="fast", placement="eye") == pairs[:4]  # a stream too
     with pytest.raises(ViewpointError, match="unknown placement 'crouch'"):
         sample_viewpoints(scene, 1, 0, placement="crouch")
+
+
+def test_the_viewpoint_stream_is_the_one_datasets_were_captured_with():
+    """A dataset resumes or grows only while capture plans the cameras it planned before (its samples
+    are compared with the plan and recaptured when they differ). These pairs were planned before the
+    coverage march was made faster (2026-12-04); a change here recaptures every dataset. (Should numpy
+    change its generator's stream, this fails too: that is the same news.)"""
+    def pairs(placement, profile):
+        got = sample_viewpoints(procedural(0), 2, 7, profile, placement=placement, min_coverage=(0.85, 0.6))
+        return [[[*c.position, c.yaw, c.pitch] for c in pair] for pair in got]
+
+    assert pairs("free", "slow") == [
+        [[5.066531207119099, 2.9987628461204103, -3.3703790086353442, -73.71284559058502, 12.947968324757433],
+         [5.055094923631065, 2.743921419581066, -3.2767861236449303, -71.94013743195885, 14.942137815850472]],
+        [[1.3535271665883741, 2.4910053858075565, 5.427564804815528, 16.200955051537903, 20.0],
+         [1.394508870302203, 2.6612690734904296, 5.54304914359691, 19.25904674681729, 19.820011337375703]]]
+    assert pairs("eye", "fast") == [
+        [[5.56427723253923, 1.6, 2.3725467257873984, -77.84916462737944, 8.294906178873672],
+         [5.305094923631065, 1.6, 3.2232138763550697, -71.94013743195885, 14.942137815850472]],
+        [[1.6660952647432383, 1.6, -2.9457499907625833, 33.92785117727385, 11.279272284443671],
+         [1.394508870302203, 1.6, -1.9569508564030897, 19.25904674681729, 19.820011337375703]]]
+
+
+def test_the_coverage_march_meets_what_a_plain_march_meets(scene):
+    """VoxelGrid.march reads a point outside the grid from the grid's border (all OUTSIDE) instead of
+    testing it, and steps in growing chunks: it must meet, ray for ray, what a march that tests every
+    point meets, from inside the level and from outside its bounds."""
+    from rtp.capture.viewpoints import FREE, OUTSIDE
+
+    grid = VoxelGrid(scene_triangles(scene), 0.25)
+
+    def plain(origin, dirs, max_distance):
+        step = grid.voxel * 0.5
+        hi = np.array(grid.shape)
+        res = np.zeros(len(dirs), np.uint8)
+        for r, d in enumerate(dirs):
+            for t in np.arange(step, max_distance + step, step):
+                i = np.floor((origin + d * t - grid.origin) / grid.voxel).astype(np.int64)
+                v = grid.occ[tuple(i)] if ((i >= 0) & (i < hi)).all() else OUTSIDE
+                if v != FREE:
+                    res[r] = v
+                    break
+        return res
+
+    rng = np.random.default_rng(3)
+    lo, hi = scene.bounds
+    origins = [np.asarray(c.position) for pair in sample_viewpoints(scene, 3, 1) for c in pair]
+    origins += [np.asarray(hi) + 2.0, np.asarray(lo) - 5.0]  # outside the bounds: the border is met at once
+    for origin in origins:
+        dirs = rng.normal(size=(40, 3))
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        for max_distance in (1.0, 30.0):  # (short: rays that meet nothing stay FREE)
+            got = grid.march(origin, dirs, max_distance)
+            np.testing.assert_array_equal(got, plain(origin, dirs, max_distance))
+    assert (grid.march(origins[0], dirs, 0.5) == FREE).any()
+
+
+def test_sample_viewpoints_reports_each_pair_as_it_is_found(scene):
+    found: list[int] = []
+    pairs = sample_viewpoints(scene, 4, 2, progress=found.append)
+    assert found == [1, 2, 3, 4] and pairs == sample_viewpoints(scene, 4, 2)
+    with pytest.raises(ViewpointError, match="progress: expected None or a function"):
+        sample_viewpoints(scene, 1, 0, progress=3)  # type: ignore[arg-type]
