@@ -344,7 +344,9 @@ class VoxelGrid:
         step = self.voxel * 0.5
         ts = np.arange(step, max_distance + step, step)
         res = np.zeros(len(dirs), np.uint8)
-        todo = np.arange(len(dirs))
+        finite = np.isfinite(dirs).all(1) & bool(np.isfinite(origin).all())
+        res[~finite] = OUTSIDE  # (a ray that goes nowhere, as an absurd aspect's overflow makes: sky)
+        todo = np.flatnonzero(finite)
         top = np.array(self.shape, np.float64) - 1
         _, ny, nz = self.shape
         occ = self.occ.ravel()
