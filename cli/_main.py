@@ -381,7 +381,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.distill is not None and not cfg.teachers:
         raise _usage("--distill weighs the teachers' predictions: give them with --teachers")
     with Bar(args, cfg.steps, f"train {cfg.metric}", "step") as bar:
-        result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"))
+        result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
+                       loading=lambda read, samples: bar.status(f"reading samples: {read}/{samples}"))
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
         print(f"rtp train: error: dead output(s) {', '.join(result.dead_outputs)} (see the warning above); "
               f"{result.checkpoint} is kept, not fit to export: train again with --head linear or another --seed",

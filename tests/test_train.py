@@ -133,8 +133,11 @@ def test_training_learns_resumes_and_exports(tmp_path: Path) -> None:
     half = train(TrainConfig(out=str(tmp_path / "b.pt"), **{**cfg, "steps": 120}))
     assert half.steps == 120
     seen: list[int] = []
-    full = train(TrainConfig(out=str(tmp_path / "b.pt"), **cfg), progress=lambda step, total, loss: seen.append(step))
+    read: list[tuple[int, int]] = []
+    full = train(TrainConfig(out=str(tmp_path / "b.pt"), **cfg), progress=lambda step, total, loss: seen.append(step),
+                 loading=lambda k, n: read.append((k, n)))
     assert seen[0] == 120 and seen[1] == 121 and seen[-1] == 240  # the progress bar starts where the run stopped
+    assert read == [(k, 12) for k in range(1, 13)]  # (the samples are read first, each reported: 8 trained on, 4 validated)
     a, b = load_checkpoint(result.checkpoint).net.state_dict(), load_checkpoint(full.checkpoint).net.state_dict()
     for k in a:
         assert torch.equal(a[k], b[k]), k
@@ -181,12 +184,18 @@ def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.C
     assert not (tmp_path / "x.pt").exists()
 
 
-def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """(Its bar says it reads the samples before the first step: minutes for the shipped recipe's.)"""
+    from rtp.cli._run import Bar
+
+    monkeypatch.setattr(Bar, "DELAY", 0.0)
     data = _dataset(tmp_path / "ds", n=6)
     out = tmp_path / "m.pt"
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "20",
                      "--crop", "32", "--val-scenes", "scene0", "--head", "linear"]) == 0
-    assert "validation R2" in capsys.readouterr().out
+    got = capsys.readouterr()
+    assert "validation R2" in got.out
+    assert "reading samples: 1/6]" in got.err and "reading samples" not in got.err.rsplit("\r", 1)[-1], got.err
     assert load_checkpoint(out).metadata.provenance["val_scenes"] == ("scene0",)
 
 

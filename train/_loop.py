@@ -279,13 +279,19 @@ class _Sources:
 class _Split:
     """Inputs (float16, ``.blocks`` planes packed, to fit many frames in memory) and targets of one side of the split."""
 
-    def __init__(self, reader: _Sources, store: _Sources, ids: Sequence[str], cfg: TrainConfig) -> None:
+    def __init__(self, reader: _Sources, store: _Sources, ids: Sequence[str], cfg: TrainConfig,
+                 read: Callable[[], None] = lambda: None) -> None:
         rows = [sdk.PREDICTED_RATES.index(r) for r in cfg.outputs]
         self.ids = list(ids)
-        self.x = [Frame(reader[i].inputs(cfg.inputs), cfg.inputs) for i in self.ids]
-        self.y = [store.load(i, cfg.metric, cfg.tile)[rows] for i in self.ids]
+        self.x: list[Frame] = []
+        self.y: list[np.ndarray] = []
         #: per sample, each auxiliary metric's targets (TrainConfig.aux_metrics), in that order
-        self.aux = [[store.load(i, m, cfg.tile)[rows] for m in cfg.aux_metrics] for i in self.ids]
+        self.aux: list[list[np.ndarray]] = []
+        for i in self.ids:  # ``read()`` after each sample
+            self.x.append(Frame(reader[i].inputs(cfg.inputs), cfg.inputs))
+            self.y.append(store.load(i, cfg.metric, cfg.tile)[rows])
+            self.aux.append([store.load(i, m, cfg.tile)[rows] for m in cfg.aux_metrics])
+            read()
 
 
 #: Training losses, in transformed space (TrainConfig.loss).
@@ -747,8 +753,13 @@ def _network(cfg: TrainConfig) -> Network:
                          coarse=cfg.coarse, coarse_width=cfg.coarse_width)
 
 
-def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None) -> TrainResult:
+def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None = None, *,
+          loading: Callable[[int, int], None] | None = None) -> TrainResult:
     """Train (or resume) a model as ``cfg`` says and write the checkpoint to ``cfg.out``.
+
+    ``progress(step, steps, loss)`` is called as steps complete; before the first, the samples are
+    read into memory (a few minutes for the shipped recipe's 1,224): ``loading(read, samples)`` is
+    called as each is read, training and validation samples together.
 
     While it runs it holds the checkpoint's writer lock (``.NAME.rtp-writer.lock`` beside it, removed
     at the end): a second training into the same ``out`` would resume from the same checkpoint and the
@@ -765,21 +776,30 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         with writer_lock(out.parent, "rtp train", lambda holder: ckpt.CheckpointError(
                 f"{out} is being written by another training ({holder}): wait for it to end, or train into another "
                 f"file"), name=f".{out.name}.rtp-writer.lock", remove=True):
-            return _train(cfg, progress)
+            return _train(cfg, progress, loading)
     finally:
         for d in made:  # a training that failed before its first save leaves no empty folders behind
             with contextlib.suppress(OSError):
                 d.rmdir()
 
 
-def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None) -> TrainResult:
+def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
+           loading: Callable[[int, int], None] | None = None) -> TrainResult:
     loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
     aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     _check_fits_in_memory(reader, train_ids, val_ids, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
-    tr, va = _Split(reader, store, train_ids, cfg), _Split(reader, store, val_ids, cfg)
+    read, samples = 0, len(train_ids) + len(val_ids)
+
+    def one_read() -> None:
+        nonlocal read
+        read += 1
+        if loading is not None:
+            loading(read, samples)
+
+    tr, va = _Split(reader, store, train_ids, cfg, one_read), _Split(reader, store, val_ids, cfg, one_read)
     h, w = tr.x[0].shape[-2:]
     other = next(((i, f.shape) for i, f in zip((*tr.ids, *va.ids), (*tr.x, *va.x)) if f.shape[-2:] != (h, w)), None)
     if other is not None:
