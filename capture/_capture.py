@@ -335,7 +335,7 @@ def capture(
     total)`` is called as samples complete (skipped ones count). Before a scene renders, its
     viewpoints are planned (a few milliseconds a pair: minutes for a hundred thousand):
     ``planning(job, found, asked)`` is called as each pair is found, ``job`` being
-    ``"<scene>/<profile>"`` (not on Ray, whose workers plan on their own).
+    ``"<scene>/<profile>"`` (on Ray once per job, when the worker that planned it is done).
 
     ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
     instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:
@@ -419,7 +419,7 @@ def capture(
             merge(ray_capture(scene_names, str(out), profiles=tuple(profiles), per_scene=per_scene, size=(w, h), seed=seed,
                               cache_dir=None if cache_dir is None else str(cache_dir), split=split,
                               splits=None if splits is None else str(splits), settings=settings, address=ray,
-                              workers=workers, progress=tick, on_actors=_on_ray_actors))
+                              workers=workers, progress=tick, on_actors=_on_ray_actors, planning=planning))
         elif (workers or 1) <= 1:
             class _Q:
                 put = staticmethod(tick)

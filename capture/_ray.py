@@ -289,8 +289,10 @@ class _CaptureWorker:
 def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str], per_scene: int,
                 size: tuple[int, int], seed: int, cache_dir: str | None, split: str | None, splits: str | None,
                 settings: dict[str, Any], address: str | None, workers: int | None,
-                progress: Callable[[int], None], on_actors: Callable[[list[Any]], None] | None = None) -> Any:
-    """The Ray path of :func:`rtp.capture.capture` (same arguments; returns a ``CaptureReport``)."""
+                progress: Callable[[int], None], on_actors: Callable[[list[Any]], None] | None = None,
+                planning: Callable[[str, int, int], None] | None = None) -> Any:
+    """The Ray path of :func:`rtp.capture.capture` (same arguments; returns a ``CaptureReport``).
+    ``planning`` hears of a scene's jobs once the worker planning them is done (not pair by pair)."""
     from ._capture import CaptureReport, _todo, _writer_lock
     from ._dataset import DatasetReader, DatasetWriter
 
@@ -318,6 +320,9 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
             plans, failed = result
             planned[task[0]] = plans
             report.failed.extend(failed)
+            for profile, plan in plans.items():
+                if planning is not None:
+                    planning(f"{task[0]}/{profile}", len(plan), per_scene)
 
         _schedule(actors, {s: [(s,)] for s in scene_names},
                   lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed, settings.get("placement", "free")),

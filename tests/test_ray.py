@@ -64,10 +64,12 @@ def assert_same_dataset(a: Path, b: Path, metrics: tuple[str, ...] = ()) -> None
 def test_ray_capture_and_targets_equal_the_local_path(cluster: None, local: Path, tmp_path: Path) -> None:
     out = tmp_path / "ray"
     seen: list[tuple[int, int]] = []
+    planned: list[tuple[str, int, int]] = []
     report = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local",
-                     progress=lambda d, t: seen.append((d, t)))
+                     progress=lambda d, t: seen.append((d, t)), planning=lambda *a: planned.append(a))
     assert (report.written, report.skipped, report.failed) == (8, 0, [])
     assert seen[-1] == (8, 8) and [d for d, _ in seen] == sorted(d for d, _ in seen)
+    assert sorted(planned) == sorted((f"{s}/{p}", 2, 2) for s in SCENES for p in ("slow", "fast"))  # (a job as it is planned)
     assert report.renderer and set(report.unseen) == {"slow", "fast"}
     assert compute_targets(out, METRICS, workers=2, ray="local") == 8
     assert_same_dataset(local, out, METRICS)
