@@ -320,8 +320,8 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
             plans, failed = result
             planned[task[0]] = plans
             report.failed.extend(failed)
-            for profile, plan in plans.items():
-                if planning is not None:
+            if planning is not None:
+                for profile, plan in plans.items():
                     planning(f"{task[0]}/{profile}", len(plan), per_scene)
 
         _schedule(actors, {s: [(s,)] for s in scene_names},

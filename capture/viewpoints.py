@@ -131,6 +131,9 @@ MAX_METRES = 1000.0
 #: The most coverage rays a camera may cast (a ray grid of 10**7 x 10**7 asked numpy for 728 TiB).
 MAX_RAYS = 512 * 512
 
+#: The widest frustum, width over height: far past any screen; at 1e308 the rays overflowed to nan.
+MAX_ASPECT = 1e6
+
 
 def _check_space(voxel: float, clearance: float, max_height: float | None) -> None:
     _real("voxel", voxel, 0.0, MAX_METRES, lo_open=True)
@@ -620,7 +623,7 @@ def sample_viewpoints(
         raise ViewpointError(f"stats: expected None or a dict to fill, got {type(stats).__name__}")
     if progress is not None and not callable(progress):
         raise ViewpointError(f"progress: expected None or a function of the pairs found, got {type(progress).__name__}")
-    _real("aspect", aspect, 0.0, lo_open=True)
+    _real("aspect", aspect, 0.0, MAX_ASPECT, lo_open=True)
     _real("fov_y", fov_y, 0.0, 180.0, lo_open=True, hi_open=True)
     if not isinstance(rays, (tuple, list)) or len(rays) != 2:
         raise ViewpointError(f"rays: expected (columns, rows), got {rays!r}")
