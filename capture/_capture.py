@@ -16,6 +16,7 @@ import os
 import platform
 import re
 import shutil
+import time
 import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
@@ -231,6 +232,7 @@ def _plan(scene_name: str, scene: Any, blockers: Any, profiles: Sequence[str], p
     for profile in profiles:
         job = f"{scene_name}/{profile}"
         found = None if planning is None else (lambda k, job=job: planning(job, k, per_scene))
+        start = time.perf_counter()
         try:
             pairs = sample_viewpoints(scene, per_scene, _job_seed(seed, scene_name, profile), profile,
                                       blockers=blockers, aspect=w / h, min_coverage=VIEW_COVERAGE,
@@ -239,6 +241,7 @@ def _plan(scene_name: str, scene: Any, blockers: Any, profiles: Sequence[str], p
             log.warning("%s (%s): %s", scene_name, profile, err)
             failed.append(job)
             continue
+        log.info("%s: %d viewpoint pairs planned in %.1f s", job, per_scene, time.perf_counter() - start)
         plans[profile] = [(sid, p, c) for sid, (p, c) in zip(_ids(scene_name, profile, per_scene), pairs)]
     return plans, failed
 

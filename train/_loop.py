@@ -16,6 +16,7 @@ import logging
 import math
 import os
 import platform
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -799,13 +800,15 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         if loading is not None:
             loading(read, samples)
 
+    start = time.perf_counter()
     tr, va = _Split(reader, store, train_ids, cfg, one_read), _Split(reader, store, val_ids, cfg, one_read)
     h, w = tr.x[0].shape[-2:]
     other = next(((i, f.shape) for i, f in zip((*tr.ids, *va.ids), (*tr.x, *va.x)) if f.shape[-2:] != (h, w)), None)
     if other is not None:
         raise DatasetError(f"sample {other[0]} is {other[1][2]}x{other[1][1]}, the first training sample {w}x{h}: "
                            f"capture the datasets of one training run at one size")
-    log.info("%.1f GB of input planes in memory", sum(f.nbytes for f in (*tr.x, *va.x)) / 1e9)
+    log.info("%.1f GB of input planes in memory, read in %.1f s", sum(f.nbytes for f in (*tr.x, *va.x)) / 1e9,
+             time.perf_counter() - start)
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
     if cfg.crop + 2 * cfg.context > min(full_h, full_w):
         what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
