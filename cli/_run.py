@@ -185,7 +185,7 @@ class Bar:
         bar.set_postfix_str(text, refresh=False)
         now = time.time()  # (tqdm's clock)
         if now - bar.start_t >= self.DELAY and now - self._drawn >= 0.1:
-            self._drawn = now
+            self._drawn = bar.last_print_t = now  # (tqdm's close ends or erases only a bar it knows it drew)
             bar.refresh()
 
     def close(self) -> None:

@@ -8,6 +8,7 @@ import argparse
 import ast
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -397,6 +398,8 @@ def test_a_long_first_step_says_what_it_does(tmp_path: Path, capsys: pytest.Capt
                                              monkeypatch: pytest.MonkeyPatch) -> None:
     """`rtp capture --per-scene 100000` planned its viewpoints for minutes before the bar moved (or
     showed at all): the bar says what it plans meanwhile, and stops saying it once samples come."""
+    import io
+
     from rtp.cli._run import Bar
 
     args = argparse.Namespace(quiet=False, no_progress=False)
@@ -409,6 +412,18 @@ def test_a_long_first_step_says_what_it_does(tmp_path: Path, capsys: pytest.Capt
         assert capsys.readouterr().err.endswith("planning a/slow's viewpoints: 2/10]")
         bar.update_to(1)  # the count moves: the text goes
         assert "planning" not in capsys.readouterr().err.rsplit("\r", 1)[-1]
+    # Stopped while it planned (Ctrl-C): the bar it drew is ended (a pipe, a log) or erased (a
+    # terminal) before the error's line, as a bar that counted would be. (Drawn by status() alone,
+    # tqdm took it for never shown and left "...planning ...: 3/10]rtp capture: interrupted".)
+    monkeypatch.setattr(Bar, "DELAY", 0.05)
+    for terminal, end in ((False, "\n"), (True, "\r")):
+        fp = type("Terminal", (io.StringIO,), {"isatty": lambda self: True})() if terminal else io.StringIO()
+        with pytest.raises(KeyboardInterrupt), Bar(args, 10, "capture", "sample") as bar:
+            bar._bar.fp = fp  # (where tqdm's close writes its last character)
+            time.sleep(0.06)  # (past the bar's delay, as a long plan is)
+            bar.status("planning a/slow's viewpoints: 3/10")
+            raise KeyboardInterrupt
+        assert "3/10" in capsys.readouterr().err and fp.getvalue() == end, terminal
     monkeypatch.setattr(Bar, "DELAY", 0.0)
     assert main(["capture", "--scene", "procedural:1", "--per-scene", "2", "--size", "64x48", "--profiles", "slow",
                  "--out", str(tmp_path / "data")]) == 0
