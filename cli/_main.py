@@ -448,7 +448,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    size=args.size, tile_size=args.tile_size, fail_metric=args.fail_metric,
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
-                   animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop, progress=progress)
+                   animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop, progress=progress,
+                   stage=bar.status)
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0

@@ -15,6 +15,7 @@ import errno
 import logging
 import os
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
@@ -147,12 +148,17 @@ class Bar:
 
     #: Seconds before a bar first shows.
     DELAY = 0.5
+    #: Seconds between two draws of :meth:`status`.
+    STATUS_EVERY = 0.1
 
     def __init__(self, args: argparse.Namespace, total: int, desc: str, unit: str) -> None:
         self.total = total
         self._bar: Any = None
         self._status = ""
         self._drawn = 0.0
+        self._lock = threading.Lock()  # (the status's state, shared with its timer)
+        self._timer: threading.Timer | None = None
+        self._closed = False
         if args.quiet or args.no_progress:
             return
         with contextlib.suppress(ImportError):
@@ -168,27 +174,47 @@ class Bar:
         if total is not None and total != self._bar.total:
             self._bar.total = total
         if self._status and n != self._bar.n:  # the count moves: what held it is over
-            self._status = ""
-            self._bar.set_postfix_str("", refresh=False)
+            with self._lock:
+                self._status = ""
+                self._bar.set_postfix_str("", refresh=False)
         self._bar.update(n - self._bar.n)
         if postfix:
             self._bar.set_postfix(postfix, refresh=False)
 
     def status(self, text: str = "") -> None:
         """Show ``text`` after the count (empty: nothing) while the count does not move, as a long
-        first step runs (the next step clears it); drawn at most ten times a second, and not before
-        the bar's delay."""
+        first step runs (the next step clears it); drawn at most every ``STATUS_EVERY`` s and not before
+        the bar's delay: a text that comes sooner is drawn then (by a timer) if it is still the one
+        to show, so that the last step of a quick succession is on screen while it runs."""
         bar = self._bar
         if bar is None or text == self._status:
             return
-        self._status = text
-        bar.set_postfix_str(text, refresh=False)
-        now = time.time()  # (tqdm's clock)
-        if now - bar.start_t >= self.DELAY and now - self._drawn >= 0.1:
-            self._drawn = bar.last_print_t = now  # (tqdm's close ends or erases only a bar it knows it drew)
-            bar.refresh()
+        with self._lock:
+            self._status = text
+            bar.set_postfix_str(text, refresh=False)
+        self._draw_status()
+
+    def _draw_status(self) -> None:
+        with self._lock:
+            self._timer = None if self._timer is threading.current_thread() else self._timer
+            if self._closed or not self._status:
+                return
+            bar = self._bar
+            now = time.time()  # (tqdm's clock)
+            wait = max(bar.start_t + self.DELAY - now, self._drawn + self.STATUS_EVERY - now)
+            if wait <= 0:
+                self._drawn = bar.last_print_t = now  # (tqdm's close ends or erases only a bar it knows it drew)
+                bar.refresh()
+            elif self._timer is None:
+                self._timer = threading.Timer(wait, self._draw_status)
+                self._timer.daemon = True
+                self._timer.start()
 
     def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            if self._timer is not None:
+                self._timer.cancel()
         if self._bar is not None:
             self._bar.close()
 
@@ -196,6 +222,9 @@ class Bar:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
+        if exc_type is None and self._bar is not None and self._status:
+            # a job that ended well ends on its count, not on the last step it was in
+            self._bar.set_postfix_str("", refresh=False)
         if exc_type is not None and self._bar is not None and self._bar.n == 0:
             # The job failed before any progress: a terminal erases the empty bar, so that the error
             # message stands alone. A file or a pipe cannot erase: there the bar ends its line instead

@@ -431,6 +431,7 @@ def play(
     workers: int = 1,
     open_loop: bool = False,
     progress: Callable[[int], None] | None = None,
+    stage: Callable[[str], None] | None = None,
 ) -> PlayReport:
     """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
     each of ``paths`` (profiles of :data:`~rtp.capture.paths.PATH_PROFILES`: one name or a list), every method swept over
@@ -441,7 +442,9 @@ def play(
     ``workers`` > 1 plays the paths in that many processes at once. ``open_loop=True`` is the
     ablation: every method's history is the full-rate frame instead of its own (what the dataset's
     reprojection holds). ``progress(n)`` is called after
-    every frame."""
+    every frame; ``stage(text)`` as each step between frames begins (a path's map loaded, its cameras
+    planned, its renderer started, its first frame, its GIF, then the report and plots: seconds on a
+    large map, while ``progress`` does not move), as ``"fast: planning the camera path"``."""
     from rtp import metrics
     from rtp.capture.paths import PATH_PROFILES
 
@@ -549,10 +552,10 @@ def play(
                 _save_path(outdir, pname, key, res)
 
         if workers > 1 and len(todo) > 1:
-            _in_workers(job, todo, min(workers, len(todo)), progress, finished)
+            _in_workers(job, todo, min(workers, len(todo)), progress, finished, stage)
         else:
             for pname in todo:
-                finished(pname, _play_path({**job, "path": pname}, progress))
+                finished(pname, _play_path({**job, "path": pname}, progress, stage))
         for pname in paths:
             res = results[pname]
             report.unseen[pname] = res["unseen"]
@@ -569,6 +572,8 @@ def play(
                     report.matched.append({"path": pname, "method": m.name, "fail_share": level,
                                            "work_saved": float("nan") if v is None else v, "capped": capped})
         if outdir is not None:
+            if stage is not None:
+                stage("writing the report" + (" and its plots" if plots else ""))
             report.files += _write(report, outdir, plots)
             for pname in paths:
                 (outdir / _PARTIAL.format(pname)).unlink(missing_ok=True)
@@ -619,13 +624,21 @@ def _load_path(outdir: Path, pname: str, key: str) -> dict[str, Any] | None:
     return result
 
 
-def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = None) -> dict[str, Any]:
+def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = None,
+               stage: Callable[[str], None] | None = None) -> dict[str, Any]:
     """One path of :func:`play` (in this process or a worker's): its rows, per-frame series, unseen
-    shares and GIF."""
+    shares and GIF; ``stage`` hears of each step before the frames and after them."""
     from rtp import metrics
     from rtp.capture import load_scene
     from rtp.capture.paths import PathPlayer, camera_path
 
+    pname = job["path"]
+
+    def step(text: str) -> None:
+        if stage is not None:
+            stage(f"{pname}: {text}")
+
+    step(f"loading {job['scene']}")
     specs = parse_methods(job["methods"])
     # in a worker process, its share of the cores (capture.worker_threads); alone, onnxruntime's default
     predictors = {m.model: sdk.load(m.model, threads=job.get("threads", 0)) for m in specs if m.kind == "model"}
@@ -633,14 +646,17 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     scn, blockers = load_scene(job["scene"], job["cache_dir"], None, None)
     w, h = job["size"]
     tile = job["tile_size"]
-    pname = job["path"]
+    step("planning the camera path")
     path = camera_path(scn, job["frames"], pname, job["seed"], fps=job["fps"], blockers=blockers)
     loops = _loops(specs, predictors, job["sweep"], job["fail_thr"], info.higher_is_better, tile, job["unseen_fraction"])
+    step("starting the renderer")
     with PathPlayer(scn, (w, h), exact=job["exact"]) as player:
+        step("the first frame (rendered at every rate, then each method)")
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
                                  tile, job["flip_every"], (h, w), progress, job["gif"] is not None, job["open_loop"])
     files = []
     if job["gif"] is not None and anim:
+        step(f"writing play_{pname}.gif")
         files = _write_animation(Path(job["gif"]) / f"play_{pname}.gif", anim)
     return {
         "unseen": unseen,
@@ -653,16 +669,23 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
 
 
 def _worker_path(job: dict[str, Any], queue: Any) -> dict[str, Any]:
-    return _play_path(job, queue.put)
+    return _play_path(job, queue.put, queue.put)
 
 
 def _in_workers(job: dict[str, Any], paths: list[str], workers: int, progress: Callable[[int], None] | None,
-                finished: Callable[[str, dict[str, Any]], None]) -> None:
-    """The paths in ``workers`` processes (each its own renderer), progress ticks through a queue,
-    ``finished(path, results)`` as each ends."""
+                finished: Callable[[str, dict[str, Any]], None], stage: Callable[[str], None] | None = None) -> None:
+    """The paths in ``workers`` processes (each its own renderer), progress ticks (frames, ints) and
+    stages (str) through a queue, ``finished(path, results)`` as each ends."""
     import queue
 
     from rtp.capture import tick_queue, with_ticks, worker_pool, worker_threads
+
+    def news(item: int | str) -> None:
+        if isinstance(item, str):
+            if stage is not None:
+                stage(item)
+        elif progress is not None:
+            progress(item)
 
     threads = worker_threads(workers)
     ticks = tick_queue()
@@ -672,15 +695,11 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int, progress: C
             for f in [f for f in futures if f.done()]:
                 finished(futures.pop(f), f.result())
             try:
-                n = ticks.get(timeout=0.5)
+                news(ticks.get(timeout=0.5))
             except queue.Empty:
                 continue
-            if progress is not None:
-                progress(n)
     while not ticks.empty():  # (the workers exited: their last ticks are flushed)
-        n = ticks.get()
-        if progress is not None:
-            progress(n)
+        news(ticks.get())
 
 
 def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fail_thr: float, fail_hib: bool,

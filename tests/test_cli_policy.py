@@ -433,6 +433,61 @@ def test_a_long_first_step_says_what_it_does(tmp_path: Path, capsys: pytest.Capt
     assert "2/2 [" in last and "planning" not in last, err
 
 
+def test_a_step_that_comes_too_soon_to_draw_is_drawn_when_it_may_be(capsys: pytest.CaptureFixture[str],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp play`'s steps before its first frame come in quick succession, the last of them for
+    seconds: a status held back by the bar's delay or its rate is drawn by a timer once it may be, if
+    it is still the one to show; never after the bar is closed."""
+    from rtp.cli._run import Bar
+
+    args = argparse.Namespace(quiet=False, no_progress=False)
+    monkeypatch.setattr(Bar, "DELAY", 0.1)
+    capsys.readouterr()
+    with Bar(args, 10, "play", "frame") as bar:
+        bar.status("slow: loading a")
+        bar.status("slow: the first frame")  # both before the delay: neither drawn yet
+        assert capsys.readouterr().err == ""
+        time.sleep(0.4)
+        err = capsys.readouterr().err.rstrip()  # (a shorter line is padded over the last)
+        assert err.endswith("slow: the first frame]") and "loading" not in err, err
+        bar.status("slow: writing play_slow.gif")  # drawn at once (past the delay, not drawn for 0.3 s)
+        bar.status("writing the report")  # within STATUS_EVERY: held back, then drawn by the timer
+        assert capsys.readouterr().err.rstrip().endswith("play_slow.gif]")
+        time.sleep(0.3)
+        assert capsys.readouterr().err.rstrip().endswith("writing the report]")
+        bar.update_to(10)
+    assert "writing" not in capsys.readouterr().err.rsplit("\r", 1)[-1]  # a job that ended well ends on its count
+    import threading
+
+    with Bar(args, 10, "play", "frame") as bar:
+        bar.status("slow: loading a")
+    time.sleep(0.03)  # (a cancelled timer's thread ends at once; one left running would wait out the delay)
+    assert not [t for t in threading.enumerate() if isinstance(t, threading.Timer)]
+    time.sleep(0.2)
+    assert "loading" not in capsys.readouterr().err  # closed before its delay: nothing drawn after
+
+
+def test_play_says_what_it_does_between_its_frames(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp play` at 1280x720 sat at 0/N for about 11 s (the map, its camera path, the renderer, the
+    first frame at every rate) and at N/N for seconds (the GIF, the report and plots): the bar says
+    which step runs, and ends on its count."""
+    from rtp.cli._run import Bar
+
+    monkeypatch.setattr(Bar, "DELAY", 0.0)
+    monkeypatch.setattr(Bar, "STATUS_EVERY", 0.0)
+    capsys.readouterr()
+    assert main(["play", "procedural:0", "--path", "fast", "--frames", "3", "--size", "64x48", "--methods", "full",
+                 "--no-sweep", "--flip-every", "0", "--out", str(tmp_path / "play")]) == 0
+    err = capsys.readouterr().err
+    steps = ["0/3 [", "fast: loading procedural:0]", "fast: planning the camera path]", "fast: starting the renderer]",
+             "fast: the first frame", "3/3 [", "fast: writing play_fast.gif]", "writing the report and its plots]"]
+    at = [err.find(s) for s in steps]
+    assert -1 not in at and at == sorted(at), (at, err)
+    last = err.rsplit("\r", 1)[-1]
+    assert "3/3 [" in last and "writing" not in last, err
+
+
 def test_a_job_that_fails_at_once_leaves_only_its_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp evaluate nomodel` printed "evaluate nomodel: 0sample [00:00, ?sample/s]\\r   \\r" in front of
     its error in a log: a bar shows only after Bar.DELAY seconds."""

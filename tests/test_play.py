@@ -463,9 +463,12 @@ def test_paths_in_worker_processes_give_the_same_report() -> None:
     kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (W, H), "sweep": False, "flip_every": 0,
                           "plots": False}
     ticks: list[int] = []
-    one = play("procedural:0", "jnyang,yang2019", **kw)
-    two = play("procedural:0", "jnyang,yang2019", workers=2, progress=ticks.append, **kw)
+    stages: list[list[str]] = [[], []]
+    one = play("procedural:0", "jnyang,yang2019", stage=stages[0].append, **kw)
+    two = play("procedural:0", "jnyang,yang2019", workers=2, progress=ticks.append, stage=stages[1].append, **kw)
     assert sum(ticks) == 6
+    # what each path does between its frames is heard from the workers too (on the tick queue)
+    assert sorted(stages[1]) == sorted(stages[0]) and len(stages[0]) == 8, stages
     def timeless(rows: list[dict[str, Any]]) -> str:  # the choosing times differ from run to run
         return json.dumps([{k: v for k, v in r.items() if k != "predict_ms"} for r in rows])
 
@@ -486,18 +489,18 @@ def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
     played: list[str] = []
     real = _play._play_path
 
-    def stopped_on_fast(job: dict[str, Any], progress: Any = None) -> dict[str, Any]:
+    def stopped_on_fast(job: dict[str, Any], *rest: Any) -> dict[str, Any]:
         played.append(job["path"])
         if job["path"] == "fast":
             raise KeyboardInterrupt
-        return real(job, progress)
+        return real(job, *rest)
 
     monkeypatch.setattr(_play, "_play_path", stopped_on_fast)
     with pytest.raises(KeyboardInterrupt):
         play("procedural:0", "jnyang,yang2019", out=tmp_path, **{**kw, "workers": 1})
     assert played == ["slow", "fast"] and [f.name for f in tmp_path.iterdir()] == [".play-slow.partial.json"]
 
-    monkeypatch.setattr(_play, "_play_path", lambda job, progress=None: played.append(job["path"]) or real(job, progress))
+    monkeypatch.setattr(_play, "_play_path", lambda job, *rest: played.append(job["path"]) or real(job, *rest))
     ticks: list[int] = []
     resumed = play("procedural:0", "jnyang,yang2019", out=tmp_path, progress=ticks.append, **kw)
     assert played == ["slow", "fast", "fast"] and sum(ticks) == 6  # (one path left: played in this process)
