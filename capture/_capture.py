@@ -338,7 +338,7 @@ def capture(
     total)`` is called as samples complete (skipped ones count). Before a scene renders, its
     viewpoints are planned (a few milliseconds a pair: minutes for a hundred thousand):
     ``planning(job, found, asked)`` is called as each pair is found, ``job`` being
-    ``"<scene>/<profile>"`` (on Ray once per job, when the worker that planned it is done).
+    ``"<scene>/<profile>"`` (on Ray at most every ``PLAN_NEWS_S`` a job, and when it is planned).
 
     ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
     instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
 import sys
+import time
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -46,6 +48,8 @@ RAY_LOCAL = "local"
 MAX_RETRIES = 3
 #: Samples each worker has queued, so that it never waits for the driver to write.
 IN_FLIGHT = 2
+#: Seconds between two reports of a job's planning from a worker (and between the driver's reads).
+PLAN_NEWS_S = 0.25
 
 
 class RayExecutorError(RtpError):
@@ -152,9 +156,10 @@ def _pick(pending: dict[str, deque[Any]], busy_on: dict[str, int], current: str 
 
 
 def _schedule(actors: Sequence[Any], tasks: dict[str, list[Any]], submit: Callable[[Any, Any], Any],
-              done: Callable[[Any, Any], None], what: str) -> None:
+              done: Callable[[Any, Any], None], what: str, poll: Callable[[], None] | None = None) -> None:
     """Run ``tasks`` (grouped by an affinity key, a scene) on ``actors``, ``IN_FLIGHT`` per actor,
-    calling ``done(task, result)`` in the driver as each finishes."""
+    calling ``done(task, result)`` in the driver as each finishes, and ``poll()`` at least every
+    ``PLAN_NEWS_S`` while they run and before each ``done``."""
     ray = _ray()
     pending = {k: deque(v) for k, v in tasks.items() if v}
     current: dict[int, str | None] = dict.fromkeys(range(len(actors)))
@@ -175,7 +180,11 @@ def _schedule(actors: Sequence[Any], tasks: dict[str, list[Any]], submit: Callab
         for _ in range(IN_FLIGHT):
             feed(i)
     while running:
-        ready, _ = ray.wait(list(running), num_returns=1)
+        ready, _ = ray.wait(list(running), num_returns=1, timeout=None if poll is None else PLAN_NEWS_S)
+        if poll is not None:
+            poll()
+        if not ready:
+            continue
         ref = ready[0]
         i, key, task = running.pop(ref)
         busy_on[key] -= 1
@@ -263,11 +272,27 @@ class _CaptureWorker:
             self._scene = (scene_name, scene, blockers)
         return self._scene[1], self._scene[2]
 
-    def plan(self, scene_name: str, profiles: Sequence[str], per_scene: int, seed: int, placement: str) -> Any:
+    def plan(self, scene_name: str, profiles: Sequence[str], per_scene: int, seed: int, placement: str,
+             news: Any = None) -> Any:
+        """The scene's plans (``_plan``); with ``news`` (a ``ray.util.queue.Queue``) each job's pairs
+        found so far are put on it as ``(job, found, asked)``, at most every ``PLAN_NEWS_S``."""
         from ._capture import _plan
 
         scene, blockers = self._load(scene_name)
-        return _plan(scene_name, scene, blockers, profiles, per_scene, self.size, seed, placement)
+        planning = None
+        if news is not None:
+            sent: dict[str, float] = {}
+
+            def planning(job: str, found: int, asked: int) -> None:
+                now = time.monotonic()
+                if now - sent.get(job, -math.inf) >= PLAN_NEWS_S:  # (each put is a round trip to the queue's actor)
+                    sent[job] = now
+                    try:
+                        news.put_nowait((job, found, asked))
+                    except Exception as err:  # noqa: BLE001 (a progress report lost never fails the plan)
+                        log.debug("planning news of %s lost: %s", job, err)
+                        sent[job] = math.inf
+        return _plan(scene_name, scene, blockers, profiles, per_scene, self.size, seed, placement, planning)
 
     def render(self, scene_name: str, profile: str, sample_id: str, prev_cam: Any, cam: Any,
                ) -> tuple[bytes, dict[str, Any], dict[str, Any]]:
@@ -292,7 +317,8 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
                 progress: Callable[[int], None], on_actors: Callable[[list[Any]], None] | None = None,
                 planning: Callable[[str, int, int], None] | None = None) -> Any:
     """The Ray path of :func:`rtp.capture.capture` (same arguments; returns a ``CaptureReport``).
-    ``planning`` hears of a scene's jobs once the worker planning them is done (not pair by pair)."""
+    ``planning`` hears of each job's pairs as its worker finds them (through a queue actor, at most
+    every ``PLAN_NEWS_S`` a job) and once more when the job is planned."""
     from ._capture import CaptureReport, _todo, _writer_lock
     from ._dataset import DatasetReader, DatasetWriter
 
@@ -324,9 +350,31 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
                 for profile, plan in plans.items():
                     planning(f"{task[0]}/{profile}", len(plan), per_scene)
 
+        news = None
+        if planning is not None:
+            from ray.util.queue import Queue
+
+            # (no CPU: Ray's default of one for scheduling an actor would wait for a worker's)
+            news = Queue(actor_options={"num_cpus": 0})
+            guard.callback(_kill, [news.actor])
+
+        def heard() -> None:
+            nonlocal news
+            if news is None or planning is None:
+                return
+            try:
+                items = news.get_nowait_batch(news.qsize())
+            except Exception as err:  # noqa: BLE001 (the queue's actor lost: the plans still come, unreported)
+                log.warning("planning progress lost (%s); each scene is reported when planned", err)
+                news = None
+                return
+            for item in items:
+                planning(*item)
+
         _schedule(actors, {s: [(s,)] for s in scene_names},
-                  lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed, settings.get("placement", "free")),
-                  planned_one, "scene")
+                  lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed, settings.get("placement", "free"),
+                                             news),
+                  planned_one, "scene", heard)
         reader = DatasetReader(out)
         tasks: dict[str, list[Any]] = {}
         for scene_name in scene_names:

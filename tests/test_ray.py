@@ -69,7 +69,13 @@ def test_ray_capture_and_targets_equal_the_local_path(cluster: None, local: Path
                      progress=lambda d, t: seen.append((d, t)), planning=lambda *a: planned.append(a))
     assert (report.written, report.skipped, report.failed) == (8, 0, [])
     assert seen[-1] == (8, 8) and [d for d, _ in seen] == sorted(d for d, _ in seen)
-    assert sorted(planned) == sorted((f"{s}/{p}", 2, 2) for s in SCENES for p in ("slow", "fast"))  # (a job as it is planned)
+    # each job's pairs as its worker finds them (its first at once, through the queue actor), then all
+    heard: dict[str, list[int]] = {}
+    for job, found, asked in planned:
+        assert asked == 2
+        heard.setdefault(job, []).append(found)
+    assert sorted(heard) == sorted(f"{s}/{p}" for s in SCENES for p in ("slow", "fast"))
+    assert all(v[0] == 1 and v[-1] == 2 and v == sorted(v) for v in heard.values()), heard
     assert report.renderer and set(report.unseen) == {"slow", "fast"}
     assert compute_targets(out, METRICS, workers=2, ray="local") == 8
     assert_same_dataset(local, out, METRICS)
@@ -103,6 +109,28 @@ def _killer(victims: list[int]) -> tuple[Any, Any]:
             killed.append(victims[0])
 
     return on_actors, progress
+
+
+def test_a_lost_planning_queue_loses_only_the_planning_news(cluster: None, tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch,
+                                                             caplog: pytest.LogCaptureFixture) -> None:
+    """The workers' planning counts travel through a queue actor: if it is gone (killed, its node
+    lost), the workers plan on and the driver reports each job when planned, as it did before."""
+    import ray.util.queue
+
+    real = ray.util.queue.Queue
+
+    def dead_queue(*args: Any, **kwargs: Any) -> Any:
+        q = real(*args, **kwargs)
+        ray.kill(q.actor)
+        return q
+
+    monkeypatch.setattr(ray.util.queue, "Queue", dead_queue)
+    planned: list[tuple[str, int, int]] = []
+    report = capture(SCENES[:1], tmp_path / "ds", per_scene=1, size=SIZE, profiles=("slow",), workers=1, ray="local",
+                     planning=lambda *a: planned.append(a))
+    assert report.written == 1 and planned == [(f"{SCENES[0]}/slow", 1, 1)]
+    assert "planning progress lost" in caplog.text
 
 
 def test_a_worker_killed_mid_task_loses_nothing(cluster: None, local: Path, tmp_path: Path) -> None:
