@@ -176,6 +176,20 @@ def _schedule(actors: Sequence[Any], tasks: dict[str, list[Any]], submit: Callab
         running[submit(actors[i], task)] = (i, key, task)
         return True
 
+    try:
+        _drive(ray, actors, running, busy_on, feed, done, what, poll)
+    except BaseException:
+        # (stopped, Ctrl-C or a failure: the tasks still queued are cancelled before their actors are
+        # killed, so that Ray does not announce their retries on the terminal)
+        for ref in running:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref)
+        raise
+
+
+def _drive(ray: Any, actors: Sequence[Any], running: dict[Any, tuple[int, str, Any]], busy_on: dict[str, int],
+           feed: Callable[[int], bool], done: Callable[[Any, Any], None], what: str,
+           poll: Callable[[], None] | None) -> None:
     for i in range(len(actors)):
         for _ in range(IN_FLIGHT):
             feed(i)

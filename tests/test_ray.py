@@ -133,6 +133,36 @@ def test_a_lost_planning_queue_loses_only_the_planning_news(cluster: None, tmp_p
     assert "planning progress lost" in caplog.text
 
 
+def test_a_stopped_capture_does_not_announce_retries(tmp_path: Path) -> None:
+    """Ctrl-C during a Ray capture printed "(raylet) Task _CaptureWorker.render failed. There are 3
+    retries remaining, so the task will be retried" under the bar: the workers were killed with tasks
+    queued. Those tasks are cancelled first; the samples written stay, and the capture resumes. (Its
+    own process: the message reaches a driver that started its Ray, as `rtp capture --ray local` does.)"""
+    import subprocess
+    import sys
+
+    out = tmp_path / "ds"
+    script = f"""
+import time
+from rtp.capture import capture
+def stop(done, total):
+    if done >= 1:
+        raise KeyboardInterrupt
+try:
+    capture({SCENES!r}, {str(out)!r}, per_scene=4, size={SIZE!r}, workers=2, ray="local", progress=stop)
+except KeyboardInterrupt:
+    time.sleep(3)  # (Ray's messages reach the driver's stderr from a thread)
+"""
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "RAY_DEDUP_LOGS": "0"})
+    assert run.returncode == 0, run.stderr
+    assert "retries remaining" not in run.stdout + run.stderr, run.stdout  # (Ray prints them on stdout)
+    written = len(DatasetReader(out).ids)
+    assert written >= 1
+    again = capture(SCENES, out, per_scene=4, size=SIZE, workers=2)
+    assert (again.skipped, again.written) == (written, 16 - written)
+
+
 def test_a_worker_killed_mid_task_loses_nothing(cluster: None, local: Path, tmp_path: Path) -> None:
     out = tmp_path / "ray"
     victims: list[int] = []
