@@ -44,21 +44,23 @@ def preview_sheet(sample: Any, *, scale: int = 1, title: str | None = None) -> n
     """A labelled picture of one sample (uint8 ``(H, W, 3)``): four rows of four panels, the seven
     final images and the 1x1 - 4x4 difference, then the G-buffers and the reprojection, each with a
     title (and a colour bar where the values are not colours). ``scale`` > 1 draws the panels that
-    many times smaller."""
+    many times smaller, down to panels of 160x90 pixels (a larger ``scale`` draws those: it
+    subsampled the images below their panels, to a single pixel at ``--scale 1000``)."""
     from matplotlib.figure import Figure
 
     if isinstance(scale, bool) or not isinstance(scale, (int, np.integer)) or scale < 1:  # (0: ZeroDivisionError)
         raise ParameterError(f"scale: expected an integer >= 1 (1: full size), got {scale!r}", "scale")
     panels = _panels(sample)
     h, w = panels[0][1].shape[:2]
-    pw, ph = max(w / scale, 160), max(h / scale, 90)
+    step = max(1, min(int(scale), w // 160, h // 90))  # (no finer than the smallest panel shows)
+    pw, ph = max(w / step, 160), max(h / step, 90)
     rows = -(-len(panels) // _COLS)
     fig = Figure(figsize=(_COLS * (pw + 70) / 100, rows * (ph + 30) / 100 + 0.4), dpi=100, layout="constrained")
     axes = fig.subplots(rows, _COLS, squeeze=False).ravel()
     for ax, (name, img, opts) in zip(axes, panels):
         opts = dict(opts)
         bar = opts.pop("colorbar", False)
-        shown = ax.imshow(img[::scale, ::scale], interpolation="nearest", **opts)
+        shown = ax.imshow(img[::step, ::step], interpolation="nearest", **opts)
         ax.set_title(name, fontsize=8)
         ax.set_xticks([])
         ax.set_yticks([])

@@ -574,7 +574,7 @@ def build_parser() -> argparse.ArgumentParser:
     pv.add_argument("--out", type=_out_image, required=True,
                     help="image to write; its extension names the format (.png, .jpg, ...)")
     pv.add_argument("--sample", default=None, help="sample id (default: the first)")
-    pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller")
+    pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller, down to 160x90 pixels")
 
     tg = command("targets", "compute the per-tile metric targets of a dataset (cached, resumable)", _cmd_targets)
     tg.add_argument("data", help="dataset folder written by `rtp capture`")

@@ -265,6 +265,8 @@ def test_preview_sheet_labels_every_panel(tmp_path: Path) -> None:
 
     with Image.open(tmp_path / "sheet.jpg") as im:
         assert im.format == "JPEG"
+    # past the smallest panel (160x90) a scale draws that: --scale 1000 showed one pixel a panel
+    np.testing.assert_array_equal(preview_sheet(ds[ds.ids[0]], scale=1000), sheet)
     for scale in (0, -2, 1.5):  # (0 was a ZeroDivisionError)
         with pytest.raises(sdk.ParameterError, match="scale"):
             preview_sheet(ds[ds.ids[0]], scale=scale)  # type: ignore[arg-type]
