@@ -68,9 +68,12 @@ def run_metric(args: argparse.Namespace) -> int:
         print(f"{args.metric} ({info.units}), {w}x{h}, {tiles.shape[1]}x{tiles.shape[0]} tiles of {args.tile}px")
         if pixel_map is not None:
             print(f"per pixel  mean {float(pixel_map.mean()):.4g}, max {float(pixel_map.max()):.4g}")
-        print(f"per tile   mean {float(finite.mean()) if finite.size else float('nan'):.4g}, "
-              f"{'worst (min)' if info.higher_is_better else 'worst (max)'} {float(worst):.4g}"
-              + (f", {tiles.size - finite.size} identical tiles (+inf dB)" if finite.size < tiles.size else ""))
+        if not finite.size:  # (identical images: no finite tile to average, "mean nan, worst (min) nan")
+            print(f"per tile   all {tiles.size} tiles identical (+inf dB)")
+        else:
+            print(f"per tile   mean {float(finite.mean()):.4g}, "
+                  f"{'worst (min)' if info.higher_is_better else 'worst (max)'} {float(worst):.4g}"
+                  + (f", {tiles.size - finite.size} identical tiles (+inf dB)" if finite.size < tiles.size else ""))
     if args.out:
         _figure(args, ref, pixel_map, tiles, info)
         print(f"wrote {args.out}")
@@ -93,7 +96,8 @@ def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np
     im = ax.imshow(np.where(np.isfinite(shown), shown, vmax if info.higher_is_better else vmin), cmap=cmap,
                    vmin=vmin, vmax=vmax, interpolation="nearest")
     kind = "per pixel" if pixel_map is not None else f"per {args.tile}px tile"
-    ax.set_title(f"{args.metric} {kind}: {args.reference} vs {args.test}", fontsize=9)
+    same = "" if finite.size else f" (every {'tile' if pixel_map is None else 'pixel'} identical: +inf {info.units})"
+    ax.set_title(f"{args.metric} {kind}: {args.reference} vs {args.test}{same}", fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     fig.colorbar(im, ax=ax, label=f"{args.metric} ({info.units}); bright = worse")

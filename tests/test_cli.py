@@ -74,6 +74,10 @@ def test_metric_prints_the_librarys_tile_values(metric: str, tmp_path: Path, cap
     assert f"per tile   mean {finite.mean():.4g}, worst ({'min' if metric == 'psnr' else 'max'}) {worst:.4g}" in out
     assert ("6 identical tiles (+inf dB)" in out) == (metric == "psnr")
     assert ("per pixel  mean" in out) == (metric == "flip")
+    # an image against itself: every PSNR tile +inf dB, no mean or worst to print ("mean nan, worst (min) nan")
+    assert main(["metric", metric, str(a), str(a), "--tile", "8"]) == 0
+    out = capsys.readouterr().out
+    assert "nan" not in out and ("per tile   all 15 tiles identical (+inf dB)" in out) == (metric == "psnr"), out
 
 
 def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
