@@ -97,14 +97,18 @@ COMMON = ("verbose", "quiet", "no_progress")
 
 
 class _Collapse(logging.Filter):
-    """Lets the first record of each (logger, message template, level) through and counts the rest;
-    :meth:`summary` reports the counts once the command ends."""
+    """Lets the first warning or error of each (logger, message template, level) through and counts
+    the rest; :meth:`summary` reports the counts once the command ends. Progress (INFO, ``-v``) is
+    never collapsed: it collapsed too, so `rtp -v train` logged its first validation step only and `rtp
+    -v capture` the first job's planning time."""
 
     def __init__(self) -> None:
         super().__init__()
         self.seen: dict[tuple[str, str, int], list[Any]] = {}
 
     def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno < logging.WARNING:
+            return True
         key = (record.name, str(record.msg), record.levelno)
         if key in self.seen:
             self.seen[key][0] += 1
@@ -113,8 +117,7 @@ class _Collapse(logging.Filter):
         return True
 
     def summary(self) -> list[str]:
-        return [f"{n} more like: {first}" for (_, _, level), (n, first) in self.seen.items()
-                if n and level >= logging.WARNING]
+        return [f"{n} more like: {first}" for (n, first) in self.seen.values() if n]
 
 
 @contextlib.contextmanager

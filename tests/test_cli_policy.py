@@ -488,6 +488,32 @@ def test_play_says_what_it_does_between_its_frames(tmp_path: Path, capsys: pytes
     assert "3/3 [" in last and "writing" not in last, err
 
 
+def test_verbose_progress_is_logged_whole_and_repeated_warnings_once(capsys: pytest.CaptureFixture[str]) -> None:
+    """-v logs progress: every INFO line (a validation step of `rtp -v train`, each job's planning
+    time), none collapsed as repeats (only the first of each template was shown); a warning repeated
+    with other values shows once, then a count at the end."""
+    import logging
+
+    from rtp.cli._run import run
+
+    log = logging.getLogger("rtp.train")
+
+    def body(args: argparse.Namespace) -> int:
+        for step in (100, 200, 300):
+            log.info("step %d: val R2 %.3f", step, step / 1000)
+        for sid in ("a", "b", "c"):
+            log.warning("sample %s has no targets", sid)
+        return 0
+
+    for verbose in (True, False):
+        assert run("rtp train", argparse.Namespace(verbose=verbose, quiet=False, no_progress=True), body) == 0
+        err = capsys.readouterr().err
+        steps = [f"INFO rtp.train: step {n}: val R2 {n / 1000:.3f}" for n in (100, 200, 300)]
+        assert all((line in err) == verbose for line in steps), err
+        assert err.count("has no targets") == 2 and "WARNING rtp.train: sample a has no targets" in err
+        assert "WARNING (repeated): 2 more like: sample a has no targets" in err
+
+
 def test_a_job_that_fails_at_once_leaves_only_its_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp evaluate nomodel` printed "evaluate nomodel: 0sample [00:00, ?sample/s]\\r   \\r" in front of
     its error in a log: a bar shows only after Bar.DELAY seconds."""
