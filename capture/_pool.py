@@ -11,6 +11,9 @@ Progress comes back through a plain queue handed to the workers when they start
 (:func:`tick_queue`, ``worker_pool(n, ticks=q)``, ``pool.submit(with_ticks, fn, ...)``), not a
 ``multiprocessing.Manager``: a manager is a server process of its own, and ``kill -9`` of ``rtp
 capture --workers 2`` left it (and with it multiprocessing's resource tracker) running for good.
+Log records come back the same way, on a queue of their own that a thread of the parent hands to its
+loggers (:class:`_LogForwarder`): ``-v`` shows what the workers log, and their warnings go through the
+CLI's handler (its format, its collapse of repeats, the progress bar's redirection).
 
 Each worker computes on its share of the cores (:func:`worker_threads`): the thread pools of
 OpenMP (torch), the BLAS and Mesa's llvmpipe are limited to it before they start, and a worker's
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import logging.handlers
 import multiprocessing as mp
 import os
 import sys
@@ -61,11 +65,16 @@ def worker_threads(workers: int) -> int:
 _TICKS: Any = None  # in a pool worker: the pool's tick queue (worker_pool(ticks=...)), else None
 
 
-def _init_worker(parent: int, threads: int, ticks: Any = None) -> None:
-    """Worker initializer: its thread pools on its share of the cores, the pool's tick queue, and exit
-    as soon as the process that started the pool is gone."""
+def _init_worker(parent: int, threads: int, ticks: Any = None, logs: Any = None, level: int = logging.WARNING) -> None:
+    """Worker initializer: its thread pools on its share of the cores, the pool's tick queue, its log
+    records sent to the parent (``logs``: those at ``level``, the parent's, and above), and exit as
+    soon as the process that started the pool is gone."""
     global _TICKS
     _TICKS = ticks
+    if logs is not None:
+        root = logging.getLogger()
+        root.handlers[:] = [logging.handlers.QueueHandler(logs)]
+        root.setLevel(level)
     for var in THREAD_VARIABLES:
         os.environ.setdefault(var, str(threads))
     torch = sys.modules.get("torch")  # imported while the initializer was unpickled: tell it directly
@@ -108,8 +117,11 @@ def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor
         log.warning("%d worker processes on the %d core%s this process may run on: each is a whole renderer or "
                     "metric process (hundreds of MB, torch's for targets), and more processes than cores add "
                     "memory, not speed", workers, n, "" if n == 1 else "s")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                               initializer=_init_worker, initargs=(os.getpid(), worker_threads(workers), ticks))
+    logs = mp.get_context("spawn").Queue()
+    forward = _LogForwarder(logs)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+                               initargs=(os.getpid(), worker_threads(workers), ticks, logs,
+                                         logging.getLogger().getEffectiveLevel()))
     try:
         yield pool
     except BaseException:
@@ -119,5 +131,39 @@ def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor
             p.terminate()
         for p in procs:
             p.join(5)
+        forward.stop()
         raise
     pool.shutdown(wait=True)
+    forward.stop()  # (after the workers exited: their last records are handled)
+
+
+class _LogForwarder:
+    """A thread of the parent that hands the workers' log records to its own loggers, so that they
+    reach its handlers (``-v``, the collapse of repeats, the progress bar's redirection) as its own
+    records do. A worker process starts with no logging set up: its INFO lines (each job's planning
+    time) were lost and its warnings printed bare by Python's last-resort handler."""
+
+    def __init__(self, queue: Any) -> None:
+        self.queue = queue
+        self._stopped = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="rtp-worker-logs", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import queue as queue_module
+
+        while True:
+            try:
+                record = self.queue.get(timeout=0.1)
+            except queue_module.Empty:
+                if self._stopped.is_set():
+                    return
+                continue
+            except Exception:  # noqa: BLE001 (the queue closed, or a worker terminated mid-record broke it)
+                return
+            logging.getLogger(record.name).handle(record)
+
+    def stop(self) -> None:
+        """Hand over what is queued, then end the thread (at most a second's wait)."""
+        self._stopped.set()
+        self._thread.join(timeout=1.0)

@@ -42,18 +42,26 @@ def test_capture_writes_complete_samples_and_resumes(tmp_path: Path) -> None:
 
 
 
-def test_parallel_capture_writes_what_one_process_writes(tmp_path: Path) -> None:
+def test_parallel_capture_writes_what_one_process_writes(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     """`--workers 2` (make dataset's default: a process a scene) writes the same samples, byte for
     byte in every buffer, as one process, and its progress counts every sample once, to the total.
-    Both report each job's viewpoints as they are planned (`rtp capture` shows it while it plans)."""
+    Both report each job's viewpoints as they are planned (`rtp capture` shows it while it plans), and
+    the workers' log records reach this process's loggers (`-v`: each job's planning time; they were
+    lost in the worker processes, and their warnings printed bare)."""
+    import logging
+
     from rtp.capture import BUFFERS
 
     scenes, kw = ["procedural:3", "procedural:4"], {"per_scene": 2, "size": (96, 64), "profiles": ("slow",)}
     planned: dict[int, list[tuple[str, int, int]]] = {1: [], 2: []}
     one = capture(scenes, tmp_path / "one", planning=lambda *a: planned[1].append(a), **kw)
     ticks: list[tuple[int, int]] = []
-    two = capture(scenes, tmp_path / "two", workers=2, progress=lambda d, t: ticks.append((d, t)),
-                  planning=lambda *a: planned[2].append(a), **kw)
+    with caplog.at_level(logging.INFO):
+        two = capture(scenes, tmp_path / "two", workers=2, progress=lambda d, t: ticks.append((d, t)),
+                      planning=lambda *a: planned[2].append(a), **kw)
+    timed = [r for r in caplog.records if "viewpoint pairs planned in" in r.getMessage()]
+    assert sorted(r.getMessage().partition(": ")[0] for r in timed) == [f"{s}/slow" for s in scenes]
+    assert all(r.process != os.getpid() and r.name == "rtp.capture" for r in timed)
     assert (two.written, two.skipped, two.failed) == (one.written, 0, []) == (4, 0, [])
     assert ticks[-1] == (4, 4) and [d for d, _ in ticks] == sorted(d for d, _ in ticks)
     jobs = [(f"{s}/slow", k, 2) for s in scenes for k in (1, 2)]
