@@ -31,6 +31,7 @@ import logging
 import logging.handlers
 import multiprocessing as mp
 import os
+import signal
 import sys
 import threading
 import time
@@ -71,6 +72,10 @@ def _init_worker(parent: int, threads: int, ticks: Any = None, logs: Any = None,
     soon as the process that started the pool is gone."""
     global _TICKS
     _TICKS = ticks
+    # Ctrl-C reaches the whole process group: the job stops its workers itself (worker_pool); a worker
+    # that took it too could die between two tasks, and the job then failed on a BrokenProcessPool
+    # traceback instead of "interrupted"
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if logs is not None:
         root = logging.getLogger()
         root.handlers[:] = [logging.handlers.QueueHandler(logs)]

@@ -190,6 +190,34 @@ def test_pool_workers_stop_with_their_job(how: str) -> None:
     assert not any(_alive(p) for p in workers), "pool workers outlived their job"
 
 
+_CTRL_C_SCRIPT = """
+import signal, sys
+from rtp.capture._pool import worker_pool
+try:
+    with worker_pool(2) as pool:
+        print(pool.submit(signal.getsignal, signal.SIGINT).result() is signal.SIG_IGN, flush=True)
+        sys.stdin.readline()  # the test presses Ctrl-C meanwhile
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+"""
+
+
+def test_ctrl_c_stops_the_job_not_its_workers() -> None:
+    """A terminal's Ctrl-C reaches the whole process group. Workers took it too, racing the job: one
+    that died of it (between two tasks, or sending a result) broke the pool, and `rtp -v capture
+    --workers 2` once ended on a BrokenProcessPool traceback instead of "interrupted". Workers
+    ignore it; the job stops them (worker_pool)."""
+    proc = subprocess.Popen([sys.executable, "-c", _CTRL_C_SCRIPT], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "True"  # the worker ignores SIGINT
+    time.sleep(0.5)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and out.strip() == "interrupted", (out, err)
+    assert "Traceback" not in err, err
+
+
 _THREADS_SCRIPT = """
 import json, os
 from rtp.capture import worker_pool, worker_threads
