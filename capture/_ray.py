@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import logging.handlers
 import math
 import os
 import sys
@@ -257,17 +258,79 @@ def _check_node_memory(actors: Sequence[Any], one: int, said: str, name: str, ad
                         where, available / 2**30)
 
 
+# -- news from the workers -------------------------------------------------------------------------
+
+
+class _News:
+    """The channel from the actors to the driver: a ``ray.util.queue.Queue`` (an actor that takes no
+    CPU: Ray's default of one for scheduling an actor would wait for a worker's) carrying each job's
+    planning counts and the workers' log records. The driver reads it between its waits
+    (:meth:`read`); a lost queue loses only the news."""
+
+    def __init__(self, guard: contextlib.ExitStack, planning: Callable[[str, int, int], None] | None) -> None:
+        from ray.util.queue import Queue
+
+        self.queue: Any = Queue(actor_options={"num_cpus": 0})
+        self.planning = planning
+        guard.callback(_kill, [self.queue.actor])
+
+    def read(self) -> None:
+        if self.queue is None:
+            return
+        try:
+            items = self.queue.get_nowait_batch(self.queue.qsize())
+        except Exception as err:  # noqa: BLE001 (the queue's actor lost: the work goes on, unreported)
+            log.warning("the workers' progress and logs are lost (%s); each scene is reported when planned", err)
+            self.queue = None
+            return
+        for item in items:
+            if isinstance(item, logging.LogRecord):
+                logging.getLogger(item.name).handle(item)
+            elif self.planning is not None:
+                self.planning(*item)
+
+
+class _NewsLogHandler(logging.handlers.QueueHandler):
+    """In an actor: its ``rtp`` log records onto the news queue (a record that cannot be sent is dropped:
+    the queue's actor lost)."""
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        pass
+
+
+class _Reporting:
+    """An actor that sends news: the queue comes with its tasks (an actor handle among an actor's
+    constructor arguments is kept in Ray's object store, which Ray warns a restart may not survive),
+    and on the first one ``rtp``'s records at ``level`` (the driver's) and above go to the driver
+    through it, as its own records do (a worker process has no logging set up: its INFO was lost, its
+    warnings printed bare by Ray's log forwarding)."""
+
+    level: int = logging.WARNING
+    news: Any = None
+
+    def _listen(self, news: Any) -> None:
+        if news is None or self.news is not None:
+            return
+        self.news = news
+        rtp_log = logging.getLogger("rtp")
+        rtp_log.handlers[:] = [_NewsLogHandler(news)]
+        rtp_log.setLevel(self.level)
+        rtp_log.propagate = False
+
+
 # -- capture ----------------------------------------------------------------------------------------
 
 
-class _CaptureWorker:
+class _CaptureWorker(_Reporting):
     """A Ray actor: a GL renderer of ``size`` and the scene it holds."""
 
-    def __init__(self, size: tuple[int, int], cache_dir: str | None, split: str | None, splits: str | None) -> None:
+    def __init__(self, size: tuple[int, int], cache_dir: str | None, split: str | None, splits: str | None,
+                 level: int = logging.WARNING) -> None:
         # Mesa's software rasteriser starts a thread per core; the worker holds one of Ray's CPUs, so
         # it rasterises on one (set before the GL context exists, which is when Mesa reads it).
         os.environ.setdefault("LP_NUM_THREADS", "1")
         self.size, self.cache_dir, self.split, self.splits = size, cache_dir, split, splits
+        self.level = level
         self._renderer: Any = None
         self._scene: tuple[str, Any, Any] | None = None
         self._uploaded: str | None = None
@@ -287,14 +350,16 @@ class _CaptureWorker:
         return self._scene[1], self._scene[2]
 
     def plan(self, scene_name: str, profiles: Sequence[str], per_scene: int, seed: int, placement: str,
-             news: Any = None) -> Any:
-        """The scene's plans (``_plan``); with ``news`` (a ``ray.util.queue.Queue``) each job's pairs
-        found so far are put on it as ``(job, found, asked)``, at most every ``PLAN_NEWS_S``."""
+             report: bool = False, news: Any = None) -> Any:
+        """The scene's plans (``_plan``); with ``report`` each job's pairs found so far are put on the
+        news queue as ``(job, found, asked)``, at most every ``PLAN_NEWS_S``."""
         from ._capture import _plan
 
+        self._listen(news)
         scene, blockers = self._load(scene_name)
         planning = None
-        if news is not None:
+        news = self.news
+        if report and news is not None:
             sent: dict[str, float] = {}
 
             def planning(job: str, found: int, asked: int) -> None:
@@ -308,13 +373,14 @@ class _CaptureWorker:
                         sent[job] = math.inf
         return _plan(scene_name, scene, blockers, profiles, per_scene, self.size, seed, placement, planning)
 
-    def render(self, scene_name: str, profile: str, sample_id: str, prev_cam: Any, cam: Any,
+    def render(self, scene_name: str, profile: str, sample_id: str, prev_cam: Any, cam: Any, news: Any = None,
                ) -> tuple[bytes, dict[str, Any], dict[str, Any]]:
         from rtp.plugins.moderngl import Renderer
 
         from ._capture import _render
         from ._dataset import encode_sample
 
+        self._listen(news)
         scene, _ = self._load(scene_name)
         if self._renderer is None:
             self._renderer = Renderer(*self.size)
@@ -331,8 +397,9 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
                 progress: Callable[[int], None], on_actors: Callable[[list[Any]], None] | None = None,
                 planning: Callable[[str, int, int], None] | None = None) -> Any:
     """The Ray path of :func:`rtp.capture.capture` (same arguments; returns a ``CaptureReport``).
-    ``planning`` hears of each job's pairs as its worker finds them (through a queue actor, at most
-    every ``PLAN_NEWS_S`` a job) and once more when the job is planned."""
+    ``planning`` hears of each job's pairs as its worker finds them (through the news queue, at most
+    every ``PLAN_NEWS_S`` a job) and once more when the job is planned; the workers' log records come
+    the same way."""
     from ._capture import CaptureReport, _todo, _writer_lock
     from ._dataset import DatasetReader, DatasetWriter
 
@@ -342,8 +409,10 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
     writer = DatasetWriter(out, settings) if (Path(out) / "manifest.json").exists() else None
     report = CaptureReport()
     with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
+        news = _News(guard, planning)
+        level = logging.getLogger().getEffectiveLevel()
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
-        actors = [cls.remote(size, cache_dir, split, splits) for _ in range(n)]
+        actors = [cls.remote(size, cache_dir, split, splits, level) for _ in range(n)]
         guard.callback(_kill, actors)  # (however the job ends: in a Ray the caller started they would hold its CPUs)
         # every node's workers against its memory, before the folder is made or anything is drawn
         _check_node_memory(actors, job_bytes("capture", size), f"a capture at {size[0]}x{size[1]} holds", "size",
@@ -364,31 +433,10 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
                 for profile, plan in plans.items():
                     planning(f"{task[0]}/{profile}", len(plan), per_scene)
 
-        news = None
-        if planning is not None:
-            from ray.util.queue import Queue
-
-            # (no CPU: Ray's default of one for scheduling an actor would wait for a worker's)
-            news = Queue(actor_options={"num_cpus": 0})
-            guard.callback(_kill, [news.actor])
-
-        def heard() -> None:
-            nonlocal news
-            if news is None or planning is None:
-                return
-            try:
-                items = news.get_nowait_batch(news.qsize())
-            except Exception as err:  # noqa: BLE001 (the queue's actor lost: the plans still come, unreported)
-                log.warning("planning progress lost (%s); each scene is reported when planned", err)
-                news = None
-                return
-            for item in items:
-                planning(*item)
-
         _schedule(actors, {s: [(s,)] for s in scene_names},
                   lambda a, t: a.plan.remote(t[0], tuple(profiles), per_scene, seed, settings.get("placement", "free"),
-                                             news),
-                  planned_one, "scene", heard)
+                                             planning is not None, news.queue),
+                  planned_one, "scene", news.read)
         reader = DatasetReader(out)
         tasks: dict[str, list[Any]] = {}
         for scene_name in scene_names:
@@ -411,20 +459,22 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
             report.unseen.setdefault(profile, []).append(float(meta["unseen"]))
             progress(1)
 
-        _schedule(actors, tasks, lambda a, t: a.render.remote(t[1], t[2], t[0], t[3], t[4]), rendered, "sample")
+        _schedule(actors, tasks, lambda a, t: a.render.remote(t[1], t[2], t[0], t[3], t[4], news.queue), rendered,
+                  "sample", news.read)
     return report
 
 
 # -- targets ----------------------------------------------------------------------------------------
 
 
-class _TargetWorker:
+class _TargetWorker(_Reporting):
     """A Ray actor computing the stored targets of samples sent to it as bytes."""
 
-    def __init__(self, threads: int) -> None:
+    def __init__(self, threads: int, level: int = logging.WARNING) -> None:
         from ._targets import _set_threads
 
         _set_threads(threads)
+        self.level = level
 
     def pid(self) -> int:
         return os.getpid()
@@ -433,9 +483,11 @@ class _TargetWorker:
         return _node_memory()
 
     def compute(self, sample_id: str, data: bytes, metrics: tuple[str, ...], params: dict[str, Any],
-                base_tile: int) -> tuple[dict[str, Any], tuple[int, int]]:
+                base_tile: int, news: Any = None) -> tuple[dict[str, Any], tuple[int, int]]:
         from ._dataset import sample_from_bytes
         from ._targets import sample_targets
+
+        self._listen(news)
 
         sample = sample_from_bytes(sample_id, data)
         return sample_targets(sample, metrics, params, base_tile), sample.size
@@ -455,8 +507,10 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
     size = settings.get("size") if isinstance(settings, dict) else None
     metrics = tuple(dict.fromkeys(m for ms in todo.values() for m in ms))
     with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
+        news = _News(guard, None)
+        level = logging.getLogger().getEffectiveLevel()
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_TargetWorker)
-        actors = [cls.remote(1) for _ in range(n)]
+        actors = [cls.remote(1, level) for _ in range(n)]
         guard.callback(_kill, actors)
         if isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0 for v in size):
             _check_node_memory(actors, job_bytes("targets", (size[0], size[1]), metrics=metrics),
@@ -468,7 +522,7 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
         def submit(actor: Any, task: Any) -> Any:
             sid, metrics = task
             return actor.compute.remote(sid, sample_path(data_root, sid).read_bytes(), metrics, params,
-                                        store.base_tile)
+                                        store.base_tile, news.queue)
 
         def done(task: Any, result: Any) -> None:
             sid, _ = task
@@ -478,4 +532,4 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
             progress(1)
 
         # One queue: targets have no affinity (every worker holds the same network).
-        _schedule(actors, {"": list(todo.items())}, submit, done, "sample")
+        _schedule(actors, {"": list(todo.items())}, submit, done, "sample", news.read)

@@ -61,12 +61,21 @@ def assert_same_dataset(a: Path, b: Path, metrics: tuple[str, ...] = ()) -> None
     assert not list((b / "samples").glob(".*")) and not list((b / "targets").rglob(".*.tmp"))
 
 
-def test_ray_capture_and_targets_equal_the_local_path(cluster: None, local: Path, tmp_path: Path) -> None:
+def test_ray_capture_and_targets_equal_the_local_path(cluster: None, local: Path, tmp_path: Path,
+                                                      caplog: pytest.LogCaptureFixture) -> None:
+    import logging
+
     out = tmp_path / "ray"
     seen: list[tuple[int, int]] = []
     planned: list[tuple[str, int, int]] = []
-    report = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local",
-                     progress=lambda d, t: seen.append((d, t)), planning=lambda *a: planned.append(a))
+    with caplog.at_level(logging.INFO):
+        report = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local",
+                         progress=lambda d, t: seen.append((d, t)), planning=lambda *a: planned.append(a))
+    # the workers' log records reach this process's loggers (-v: each job's planning time)
+    timed = [r for r in caplog.records if "viewpoint pairs planned in" in r.getMessage()]
+    assert sorted(r.getMessage().partition(": ")[0] for r in timed) == sorted(
+        f"{s}/{p}" for s in SCENES for p in ("slow", "fast"))
+    assert all(r.process != os.getpid() for r in timed)
     assert (report.written, report.skipped, report.failed) == (8, 0, [])
     assert seen[-1] == (8, 8) and [d for d, _ in seen] == sorted(d for d, _ in seen)
     # each job's pairs as its worker finds them (its first at once, through the queue actor), then all
@@ -130,7 +139,7 @@ def test_a_lost_planning_queue_loses_only_the_planning_news(cluster: None, tmp_p
     report = capture(SCENES[:1], tmp_path / "ds", per_scene=1, size=SIZE, profiles=("slow",), workers=1, ray="local",
                      planning=lambda *a: planned.append(a))
     assert report.written == 1 and planned == [(f"{SCENES[0]}/slow", 1, 1)]
-    assert "planning progress lost" in caplog.text
+    assert "progress and logs are lost" in caplog.text
 
 
 def test_a_stopped_capture_does_not_announce_retries(tmp_path: Path) -> None:
