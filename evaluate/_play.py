@@ -652,8 +652,12 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     step("starting the renderer")
     with PathPlayer(scn, (w, h), exact=job["exact"]) as player:
         step("the first frame (rendered at every rate, then each method)")
+        start = time.perf_counter()
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
                                  tile, job["flip_every"], (h, w), progress, job["gif"] is not None, job["open_loop"])
+        took = time.perf_counter() - start
+        log.info("%s: %d frames of %d loops played in %.1f s (%.2f s a frame)", pname, len(path), len(loops), took,
+                 took / max(1, len(path)))
     files = []
     if job["gif"] is not None and anim:
         step(f"writing play_{pname}.gif")

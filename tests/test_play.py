@@ -4,6 +4,7 @@ the loop itself (each method's history is its own displayed frame), prediction r
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from collections.abc import Callable
@@ -459,14 +460,21 @@ def test_saved_at_reads_the_sweep() -> None:
     assert saved_at([(0.05, 0.5)], 0.01) is None
 
 
-def test_paths_in_worker_processes_give_the_same_report() -> None:
+def test_paths_in_worker_processes_give_the_same_report(caplog: pytest.LogCaptureFixture) -> None:
+    import logging
+
     kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (W, H), "sweep": False, "flip_every": 0,
                           "plots": False}
     ticks: list[int] = []
     stages: list[list[str]] = [[], []]
     one = play("procedural:0", "jnyang,yang2019", stage=stages[0].append, **kw)
-    two = play("procedural:0", "jnyang,yang2019", workers=2, progress=ticks.append, stage=stages[1].append, **kw)
+    with caplog.at_level(logging.INFO):
+        two = play("procedural:0", "jnyang,yang2019", workers=2, progress=ticks.append, stage=stages[1].append, **kw)
     assert sum(ticks) == 6
+    # -v: each path's time, logged in its worker process and handled in this one
+    timed = [r for r in caplog.records if "frames of 2 loops played in" in r.getMessage()]
+    assert sorted(r.getMessage().partition(":")[0] for r in timed) == ["fast", "slow"]
+    assert all(r.process != os.getpid() for r in timed)
     # what each path does between its frames is heard from the workers too (on the tick queue)
     assert sorted(stages[1]) == sorted(stages[0]) and len(stages[0]) == 8, stages
     def timeless(rows: list[dict[str, Any]]) -> str:  # the choosing times differ from run to run
