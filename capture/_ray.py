@@ -92,8 +92,8 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
 def _native_stderr_to_log() -> Iterator[None]:
     """Ray's C++ client writes its connection retries straight to file descriptor 2 (a line a second
     for 20 s at an address where something that is not Ray answers), above the one-line error. While
-    connecting, that descriptor goes to a temporary file, whose lines are logged at debug level (``-v``
-    shows them) afterwards."""
+    connecting, that descriptor goes to a temporary file, whose lines are logged afterwards at INFO
+    (``-v`` shows them; they were logged at DEBUG, which no option shows)."""
     import tempfile
 
     sys.stderr.flush()
@@ -107,7 +107,7 @@ def _native_stderr_to_log() -> Iterator[None]:
             os.close(saved)
             tmp.seek(0)
             for line in tmp.read().decode(errors="replace").splitlines():
-                log.debug("ray: %s", line)
+                log.info("ray: %s", line)
 
 
 @contextlib.contextmanager
@@ -124,7 +124,10 @@ def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
                                   "configure_logging": False}
         try:
             if address in (None, RAY_LOCAL):
-                ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+                # (its native start-up lines, "Token authentication is enabled for this Ray cluster ...",
+                # concern a cluster the user runs, not this private one: -v shows them)
+                with _native_stderr_to_log():
+                    ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
             else:
                 if address != "auto":
                     _check_reachable(address)
