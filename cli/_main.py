@@ -373,7 +373,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.threshold is not None:
         overrides["default_threshold"] = args.threshold
     cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
-                                  **overrides)
+                                  **({"device": args.device} if args.device is not None else {}), **overrides)
     if args.aux_weight is not None and not cfg.aux_metrics:
         raise _usage("--aux-weight weighs the auxiliary metrics' loss: give them with --aux-metrics")
     if args.quantile is not None and cfg.loss != "quantile":  # (it was taken and ignored)
@@ -598,6 +598,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--out", type=_out_file, required=True, help="checkpoint to write (resumed if it exists)")
     tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
                     help="training recipe: a YAML file, or 'shipped' (the shipped models' recipe)")
+    tr.add_argument("--device", default=None, metavar="DEVICE",
+                    help="where the network trains: auto (the first GPU torch sees, else the CPU; default), cpu, "
+                    "cuda, cuda:N or mps. The samples stay in memory here; a checkpoint resumes on any device")
     r = tr.add_argument_group("recipe values (default: the recipe's)")
     r.add_argument("--tile", type=int, default=None, choices=TILE_SIZES,
                    help=f"tile size in pixels (default: {DEFAULT_TILE_SIZE}, unless the recipe sets one)")

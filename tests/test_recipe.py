@@ -87,6 +87,8 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("stepz: 10\n", "unknown key(s) stepz"),
     ("steps: ten\n", "'steps': expected int"),
     ("steps: true\n", "'steps': expected int"),
+    ("device: cuda\n", "'device' is the machine's, not the recipe's"),
+    ("per_metric:\n  flip:\n    device: cpu\n  jnyang:\n    device: cuda\n", "'device' is the machine's"),
     ("lr: .nan\n", "'lr': expected float"),
     ("inputs: 3\n", "'inputs': expected a list"),
     ("- 1\n- 2\n", "expected a mapping"),
@@ -98,6 +100,8 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("metrics: [flip]\n", "is for flip (measured for those only), got metric 'jnyang'"),
     ("augment: 1\n", "'augment': expected bool"),
     ("steps: true\n", "'steps': expected int"),
+    ("device: cuda\n", "'device' is the machine's, not the recipe's"),
+    ("per_metric:\n  flip:\n    device: cpu\n  jnyang:\n    device: cuda\n", "'device' is the machine's"),
     ("!!python/object/apply:os.system ['echo pwned']\n", "not valid YAML"),
 ])
 def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needle: str) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -1095,6 +1096,46 @@ def test_training_frames_pack_block_planes_exactly(size: tuple[int, int]) -> Non
         Frame(x, names[:3])
 
 
+@pytest.mark.parametrize("names", [
+    ["reprojected.y", "seen", "reprojected.y.blocks", "albedo.y.blocks"],  # packed planes consecutive: one view
+    ["reprojected.y", "reprojected.y.blocks", "seen", "albedo.y.blocks"],  # apart: gathered
+    ["reprojected.y", "reprojected.y.tiles", "albedo.y.blocks", "albedo.y.tiles"],  # two cells
+])
+def test_a_batch_of_crops_is_each_frames_crop(names: list[str]) -> None:
+    """``crop_batch`` (a training step's batch) unpacks the packed planes of all its crops at once: the
+    same values as each frame's own ``crop``, for frames of several layouts in one batch (a plane not
+    zero off its value pixels stays dense in that frame alone) and crops off the cells."""
+    from rtp.train._frames import Frame, crop_batch
+
+    rng = np.random.default_rng(2)
+    h, w = 48, 64
+    frames, wants = [], []
+    for k in range(3):
+        y, a = rng.random((h, w)).astype(np.float32), rng.random((h, w)).astype(np.float32)
+        planes = {"reprojected.y": y, "seen": rng.random((h, w)), "reprojected.y.blocks": sdk.block_variances(y),
+                  "albedo.y.blocks": sdk.block_variances(a), "reprojected.y.tiles": sdk.tile_variances(y),
+                  "albedo.y.tiles": sdk.tile_variances(a)}
+        x = np.stack([planes[n] for n in names])
+        if k == 2:
+            x[-1, 3, 3] = 0.5  # off the value pixels: this frame keeps its last plane dense
+        frames.append(Frame(x, names))
+        wants.append(x.astype(np.float16))
+    assert frames[0]._layout == frames[1]._layout != frames[2]._layout
+    for picks in ([(0, 0, 0, 16), (1, 16, 32, 16), (0, 32, 48, 16), (1, 16, 0, 32)],  # one layout, on the tiles
+                  [(0, 0, 0, 16), (2, 16, 16, 16), (1, 32, 48, 16), (2, 0, 48, 16)],  # two layouts
+                  [(0, 4, 8, 16), (1, 0, 0, 16), (2, 3, 5, 16)]):  # off the cells or the tiles
+        got = crop_batch([frames[i] for i, *_ in picks], [oy for _, oy, _, _ in picks], [ox for *_, ox, _ in picks],
+                         picks[0][3]) if len({s for *_, s in picks}) == 1 else None
+        if got is None:  # (one side per batch)
+            for i, oy, ox, side in picks:
+                np.testing.assert_array_equal(crop_batch([frames[i]], [oy], [ox], side)[0],
+                                              wants[i][:, oy : oy + side, ox : ox + side])
+            continue
+        assert got.dtype == np.float16 and got.shape == (len(picks), len(names), picks[0][3], picks[0][3])
+        for row, (i, oy, ox, side) in zip(got, picks):
+            np.testing.assert_array_equal(row, wants[i][:, oy : oy + side, ox : ox + side])
+
+
 @pytest.mark.parametrize("size", [(48, 64), (40, 56)])
 def test_training_frames_pack_tile_planes_exactly(size: tuple[int, int]) -> None:
     """``.tiles`` planes hold twelve values a 16x16 tile: packed to 12/256 of a dense plane, unpacked
@@ -1292,6 +1333,7 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
     from rtp.capture import _memory
     from rtp.train import _loop
 
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)  # (device auto: this machine's CPU, on any machine)
     cfg = TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), crop=64)
     two = _loop.step_bytes(TrainConfig(data=cfg.data, metric="jnyang", out=cfg.out, crop=64, batch=2))
     crops = 4 * 64 * 64 * 6
@@ -1427,3 +1469,109 @@ def test_validation_that_holds_out_every_scene_is_refused_naming_what_held_them_
     assert e.value.name == "val_split" and not out.exists()
     with pytest.raises(sdk.ParameterError, match=r"validation scenes \['scene9'\] are not in"):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, val_scenes=("scene9",)))
+
+
+def test_the_device_is_checked_before_the_data_is_read_and_recorded(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--device``: a GPU this torch cannot use is refused, saying why, before a sample is read; ``auto``
+    trains on the CPU where torch sees no GPU; the model names the device it trained on, apart from
+    the recipe's overrides (it is the machine's). The training on a GPU itself: bench/training_device.py."""
+    from rtp.train._loop import resolve_device
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.version, "cuda", None)
+    if getattr(torch.backends, "mps", None) is not None:
+        monkeypatch.setattr(torch.backends.mps, "is_available", lambda: False)
+    assert resolve_device("auto") == torch.device("cpu") and resolve_device("cpu") == torch.device("cpu")
+    for bad in ("tpu", "cpu:1", "meta", "", "cuda:x", "CUDA"):
+        with pytest.raises(sdk.ParameterError, match=r"device: expected auto, cpu, cuda, mps or cuda:N, got"):
+            resolve_device(bad)
+    data = _dataset(tmp_path / "ds", n=6)
+    out = tmp_path / "m.pt"
+    read: list[tuple[int, int]] = []
+    with pytest.raises(sdk.ParameterError, match=re.escape(f"device 'cuda': torch {torch.__version__} is a CPU "
+                                                           f"build; train with device cpu (or auto")):
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(out), device="cuda"), loading=lambda k, n: read.append((k, n)))
+    assert read == [] and not out.exists()
+    with pytest.raises(sdk.ParameterError, match="device 'mps': torch .* cannot use Apple's Metal"):  # (as a recipe is read)
+        TrainConfig.from_recipe("shipped", data="nowhere", metric="jnyang", out=str(out), device="mps")
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--device", "cuda:1"]) == 2
+    assert "device 'cuda:1': torch" in capsys.readouterr().err and not out.exists()
+    monkeypatch.setattr(torch.version, "cuda", "13.0")  # a CUDA build on a machine without the driver
+    with pytest.raises(sdk.ParameterError, match=r"\(CUDA 13.0\) sees no CUDA device \(the driver, or CUDA_VISIBLE_DEVICES\)"):
+        resolve_device("cuda")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    assert resolve_device("cuda") == resolve_device("auto") == torch.device("cuda", 0)
+    with pytest.raises(sdk.ParameterError, match=r"device 'cuda:1': torch sees 1 CUDA device \(cuda:0\)"):
+        resolve_device("cuda:1")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "4",
+                     "--crop", "32", "--val-scenes", "scene0", "--head", "linear", "--device", "auto"]) == 0
+    prov = load_checkpoint(out).metadata.provenance
+    assert prov["device"] == "cpu" and "device" not in prov["recipe"].get("overrides", {})
+    assert prov["recipe"]["overrides"]["steps"] == 4  # (the overrides are recorded)
+
+
+def test_a_step_past_the_gpus_memory_is_refused_and_cuda_trains_deterministically(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, machine_memory: Callable[..., None]) -> None:
+    """On a GPU the step's activations live in its memory, the crops in the host's: each is checked
+    against its own, before the data is read. While a training runs on CUDA, torch's deterministic
+    algorithms are on (a resumed training ends on the same model) and the settings before come back."""
+    import types
+
+    from rtp.train import _loop
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    monkeypatch.setattr(torch.cuda, "get_device_name", lambda dev=None: "Some GPU")
+    monkeypatch.setattr(torch.cuda, "get_device_properties", lambda dev=None: types.SimpleNamespace(total_memory=2**30))
+    cfg = dict(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), crop=64, device="cuda")
+    with pytest.raises(sdk.ParameterError, match=r"^batch: 1000 crops of 64 pixels take about 1\.5 GiB in a training "
+                                                 r"step, more than the 1\.0 GiB of cuda:0 \(Some GPU\): lower batch"):
+        train(TrainConfig(**cfg, batch=1000))
+    machine_memory(MemTotal=2**30, MemAvailable=2**30)  # the host: 500 crops of 4 planes, 0.05 GiB, fit; 20,000 do not
+    monkeypatch.setattr(torch.cuda, "get_device_properties", lambda dev=None: types.SimpleNamespace(total_memory=2**50))
+    with pytest.raises(sdk.ParameterError, match=r"^batch: 20000 crops of 64 pixels take about 1\.8 GiB in a training "
+                                                 r"step \(the crops, cut here for the GPU\), more than this machine's"):
+        train(TrainConfig(**cfg, batch=20000))
+    with pytest.raises(DatasetError, match="no dataset folder"):  # (fits: on to the data)
+        train(TrainConfig(**cfg, batch=500))
+
+    before = (torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark,
+              torch.are_deterministic_algorithms_enabled())
+    monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
+    with _loop._deterministic(torch.device("cuda", 0)):
+        assert torch.backends.cudnn.deterministic and not torch.backends.cudnn.benchmark
+        assert torch.are_deterministic_algorithms_enabled() and torch.is_deterministic_algorithms_warn_only_enabled()
+        assert os.environ["CUBLAS_WORKSPACE_CONFIG"] == ":4096:8"
+    assert (torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark,
+            torch.are_deterministic_algorithms_enabled()) == before and "CUBLAS_WORKSPACE_CONFIG" not in os.environ
+    with _loop._deterministic(torch.device("cpu")):  # the CPU's kernels are deterministic already: nothing changes
+        assert not torch.are_deterministic_algorithms_enabled()
+
+
+def test_bench_training_device_times_each_device_from_the_same_seed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """bench/training_device.py trains the recipe on each device asked for and prints a row per device;
+    a device this torch cannot use is refused before any run (its GPU rows: docs/training.md)."""
+    path, mod = _bench_module("training_device", monkeypatch)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    data = _dataset(tmp_path / "ds", n=6)
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("crop: 32\nbatch: 4\nhead: linear\nsteps: 3000\n")
+    args = ["--data", str(data), "--config", str(recipe), "--steps", "30", "--warmup", "5"]
+    assert mod.main([*args, "--devices", "cpu,cpu"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith(f"| cpu, {torch.get_num_threads()} threads |")]
+    assert len(rows) == 2 and "the recipe's 3,000 steps (min)" in out, out
+    # the same seed on the same device: the same training, to the last digit of the validation score
+    assert rows[0].split("|")[6] == rows[1].split("|")[6] and " 1.0x " in rows[0]
+    monkeypatch.setattr(torch.version, "cuda", None)
+    with pytest.raises(sdk.ParameterError, match="device 'cuda': torch .* is a CPU build"):
+        mod.main([*args, "--devices", "cpu,cuda"])
+    assert "| cpu" not in capsys.readouterr().out  # (refused before the CPU's run)
+    with pytest.raises(SystemExit):
+        mod.main([*args[:4], "--steps", "5", "--warmup", "5"])
+    assert "--steps 5 leaves no step to time after --warmup 5" in capsys.readouterr().err

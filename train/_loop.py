@@ -35,7 +35,7 @@ from rtp.sdk.files import check_output, writer_lock
 from . import checkpoint as ckpt
 from . import transforms as tt
 from ._augment import SYMMETRIES, augment_batch
-from ._frames import Frame
+from ._frames import Frame, crop_batch
 from ._recipe import check_fields, load_recipe
 from ._safety import calibrate_safety
 from .model import ARCHS, HEADS, Network, build_network, keep_outputs
@@ -169,6 +169,11 @@ class TrainConfig:
     #: validation maps' samples are all kept. With a second dataset in ``data`` (another motion profile),
     #: it keeps the loader's memory where one dataset's is.
     per_scene: int | None = None
+    #: Where the network trains: ``"cpu"``, ``"cuda"`` (or ``"cuda:N"``), ``"mps"``, or ``"auto"`` (the
+    #: first GPU torch sees, else the CPU). The machine's, not the recipe's: a recipe cannot set it, a
+    #: checkpoint does not compare it (a training resumes on another device) and the model's provenance
+    #: records the device it ended on. The samples stay in host memory; each batch is copied over.
+    device: str = "auto"
     #: Where the hyper-parameters came from (``Recipe.provenance()``), recorded in the model's provenance.
     recipe: dict[str, Any] | None = None
 
@@ -203,7 +208,8 @@ class TrainConfig:
             map_names(r.val_split, scenes)  # an unknown split is refused now, not after loading the data
             values.update(val_split=r.val_split, splits=None if scenes is None else str(scenes))
         prov = r.provenance()
-        changed = {k: v for k, v in overrides.items() if k not in r.values or r.values[k] != v}
+        # (the device is the machine's, not a hyper-parameter: the provenance names it apart)
+        changed = {k: v for k, v in overrides.items() if k != "device" and (k not in r.values or r.values[k] != v)}
         if changed:  # what the command line changed: a model says how it was really trained
             prov["overrides"] = {k: list(v) if isinstance(v, tuple) else v for k, v in changed.items()}
         cfg = cls(data=data, metric=metric, out=out, recipe=prov, **values)
@@ -439,13 +445,14 @@ def _make_transform(cfg: TrainConfig, targets: Sequence[np.ndarray], what: str =
 def _predict_frames(net: Network, xs: Sequence[Frame], tile: int, n: int | None = None) -> list[np.ndarray]:
     """The network's outputs on whole frames (the first ``n`` outputs: the metric's, without auxiliary ones)."""
     out = []
+    dev = next(net.parameters()).device  # (where the network trains)
     with torch.inference_mode():
         for x in xs:
-            t = torch.from_numpy(x.full().astype(np.float32))[None]
+            t = torch.from_numpy(x.full())[None].to(dev).float()
             h, w = t.shape[-2:]
             th, tw = sdk.tile_grid(int(h), int(w), tile)
             y = net(_pad_to_tiles(t, tile))[0, :n, :th, :tw]
-            out.append(y.numpy())
+            out.append(y.cpu().numpy())
     return out
 
 
@@ -517,6 +524,75 @@ def _ema_update(avg: Network, net: Network, decay: float) -> None:
             a.mul_(decay).add_(b, alpha=1.0 - decay)
         else:
             a.copy_(b)
+
+
+#: What ``TrainConfig.device`` takes (``cuda:N`` too): ``auto`` is the first GPU torch sees, else the CPU.
+DEVICES = ("auto", "cpu", "cuda", "mps")
+
+
+def resolve_device(name: str) -> torch.device:
+    """The torch device ``TrainConfig.device`` names, once torch can train there: ``auto`` is CUDA's
+    first device where torch sees one, else Apple's ``mps``, else the CPU. A GPU this torch cannot use
+    (the CPU build, no driver, ``cuda:3`` on a machine of two) is a :class:`rtp.sdk.ParameterError`
+    that says why, before any data is read."""
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda", 0)
+        mps = getattr(torch.backends, "mps", None)
+        return torch.device("mps") if mps is not None and mps.is_available() else torch.device("cpu")
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError):
+        dev = None
+    if dev is None or dev.type not in DEVICES or (dev.type != "cuda" and dev.index not in (None, 0)):
+        raise sdk.ParameterError(f"device: expected {', '.join(DEVICES)} or cuda:N, got {name!r}", "device")
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = (f"torch {torch.__version__} is a CPU build" if torch.version.cuda is None else
+                   f"torch {torch.__version__} (CUDA {torch.version.cuda}) sees no CUDA device (the driver, or "
+                   f"CUDA_VISIBLE_DEVICES)")
+            raise sdk.ParameterError(f"device {name!r}: {why}; train with device cpu (or auto: a GPU where there "
+                                     f"is one)", "device")
+        count = torch.cuda.device_count()
+        if (dev.index or 0) >= count:
+            raise sdk.ParameterError(f"device {name!r}: torch sees {count} CUDA device{'s' if count > 1 else ''} "
+                                     f"(cuda:0{f' to cuda:{count - 1}' if count > 1 else ''})", "device")
+        return torch.device("cuda", dev.index or 0)
+    if dev.type == "mps":
+        mps = getattr(torch.backends, "mps", None)
+        if mps is None or not mps.is_available():
+            raise sdk.ParameterError(f"device {name!r}: torch {torch.__version__} cannot use Apple's Metal (mps) "
+                                     f"here; train with device cpu or auto", "device")
+    return torch.device(dev.type)
+
+
+@contextlib.contextmanager
+def _deterministic(dev: torch.device) -> Any:
+    """On CUDA, torch's deterministic algorithms while it lasts (the settings before are restored): cuDNN's
+    fastest kernels sum a convolution's gradients in an order that varies from run to run, so a training
+    resumed half-way did not end on the model an uninterrupted one did, as it does on the CPU (the
+    tests hold both to that). An operation with no deterministic kernel runs anyway, with torch's warning."""
+    if dev.type != "cuda":
+        yield
+        return
+    before = (torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark,
+              torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled())
+    workspace = os.environ.get("CUBLAS_WORKSPACE_CONFIG")
+    os.environ["CUBLAS_WORKSPACE_CONFIG"] = workspace or ":4096:8"  # (what cuBLAS needs to be deterministic)
+    torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark = True, False
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        yield
+    finally:
+        torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark = before[:2]
+        torch.use_deterministic_algorithms(before[2], warn_only=before[3])
+        if workspace is None:
+            os.environ.pop("CUBLAS_WORKSPACE_CONFIG", None)
+
+
+def device_name(dev: torch.device) -> str:
+    """``dev`` as the log and a model's provenance name it: ``cuda:0 (NVIDIA H200)``, ``cpu``."""
+    return f"{dev} ({torch.cuda.get_device_name(dev)})" if dev.type == "cuda" else str(dev)
 
 
 #: The seeds torch's generator takes (a signed or an unsigned 64-bit integer).
@@ -672,9 +748,19 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
     with torch.device("meta"):  # the network itself (its size included), before any data is read; allocates nothing
         _network(cfg)
+    dev = resolve_device(cfg.device)
     need = step_bytes(cfg)
+    if dev.type == "cuda":  # the step's activations live on the GPU; its crops are cut in host memory
+        total = torch.cuda.get_device_properties(dev).total_memory
+        if need > total:
+            raise sdk.ParameterError(f"batch: {cfg.batch} crops of {cfg.crop + 2 * cfg.context} pixels take about "
+                                     f"{need / 2**30:.1f} GiB in a training step, more than the {total / 2**30:.1f} GiB "
+                                     f"of {device_name(dev)}: lower batch or crop", "batch")
+        need = _crop_bytes(cfg)
+    kept = ("the crops, cut here for the GPU" if dev.type == "cuda" else
+            f"what autograd keeps of the {cfg.arch} network's activations, and the crops")
     check_memory(need, f"{cfg.batch} crops of {cfg.crop + 2 * cfg.context} pixels take about {need / 2**30:.1f} GiB in "
-                       f"a training step (what autograd keeps of the {cfg.arch} network's activations, and the crops)",
+                       f"a training step ({kept})",
                  "batch", "of memory: lower batch or crop", job="the training", logger=log)
 
 
@@ -693,6 +779,12 @@ def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: S
                  logger=log)
 
 
+def _crop_bytes(cfg: TrainConfig) -> int:
+    """Bytes of a step's batch of crops in host memory: cut as float16, then float32 (on the CPU)."""
+    side = cfg.crop + 2 * cfg.context
+    return cfg.batch * len(cfg.inputs) * side * side * (2 + 4)
+
+
 def step_bytes(cfg: TrainConfig) -> int:
     """Bytes a training step of ``cfg`` holds for its batch: the crops (stored as float16, then float32)
     and what autograd saves of the network's forward pass over them for the backward pass. A batch and
@@ -708,7 +800,7 @@ def step_bytes(cfg: TrainConfig) -> int:
     alone, with a warning that says so.
     """
     side = cfg.crop + 2 * cfg.context
-    crops = len(cfg.inputs) * side * side * (2 + 4)
+    crops = _crop_bytes(cfg) // cfg.batch
     n = min(cfg.batch, 2)  # (BatchNorm refuses a batch of one 1x1 map, as it would in training)
     with torch.device("meta"):
         net = _network(cfg).train()
@@ -777,7 +869,8 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
         with writer_lock(out.parent, "rtp train", lambda holder: ckpt.CheckpointError(
                 f"{out} is being written by another training ({holder}): wait for it to end, or train into another "
                 f"file"), name=f".{out.name}.rtp-writer.lock", remove=True):
-            return _train(cfg, progress, loading)
+            with _deterministic(resolve_device(cfg.device)):
+                return _train(cfg, progress, loading)
     finally:
         for d in made:  # a training that failed before its first save leaves no empty folders behind
             with contextlib.suppress(OSError):
@@ -827,7 +920,10 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     n_out = len(cfg.outputs)
-    net = _network(cfg)
+    dev = resolve_device(cfg.device)
+    if dev.type != "cpu":
+        log.info("training on %s", device_name(dev))
+    net = _network(cfg).to(dev)  # (initialised on the CPU first: a seed gives the same weights on every device)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
@@ -945,6 +1041,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
                 **({"recipe": cfg.recipe} if cfg.recipe else {}),
                 "versions": {"rtp": str(sdk.__version__), "torch": str(torch.__version__),
                              "python": platform.python_version()},
+                "device": device_name(dev),
                 **extra,
             },
         }
@@ -969,7 +1066,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         oy = (torch.randint(full_h // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
         ox = (torch.randint(full_w // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
         side = cfg.crop + 2 * cfg.context
-        xb = np.stack([tr.x[i].crop(y, x, side) for i, y, x in zip(idx, oy, ox)])
+        xb = crop_batch([tr.x[i] for i in idx], oy, ox, side)
         yb = np.stack([
             tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
             for i, y, x in zip(idx, oy, ox)
@@ -978,26 +1075,28 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             xb_raw, sym = xb, torch.randint(len(SYMMETRIES) if cfg.augment else 2, (cfg.batch,), generator=gen).tolist()
             xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs, sym)
         target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
-        target = torch.nan_to_num(target, nan=1.0)
+        target = torch.nan_to_num(target, nan=1.0).to(dev)
         if soft is not None:  # distillation: where the target is known, mix in the teachers' mean
             sb = torch.from_numpy(np.stack([
                 soft[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
                 for i, y, x in zip(idx, oy, ox)]))
             if cfg.augment or cfg.mirror:
                 sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
-            known = torch.from_numpy(np.isfinite(yb))
-            target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb, target)
-        out_all = net(torch.from_numpy(xb.astype(np.float32)))
+            known = torch.from_numpy(np.isfinite(yb)).to(dev)
+            target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb.to(dev), target)
+        # (float16 to the device, then float32 there: torch converts several times faster than numpy's astype,
+        # which took a quarter of a CPU step; half the bytes cross to a GPU)
+        out_all = net(torch.from_numpy(xb).to(dev).float())
         pred = out_all[:, :n_out]
-        scored = (torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).expand_as(pred)
-                  if margin else None)
+        scored = (torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).to(dev)
+                  .expand_as(pred) if margin else None)
         loss = loss_fn(pred[scored], target[scored]) if scored is not None else loss_fn(pred, target)
         if cfg.aux_metrics:  # multi-task: each auxiliary metric's outputs against its own transformed targets
             aux_losses = []
             for k, at in enumerate(aux_transforms):
                 ab = np.stack([tr.aux[i][k][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
                                for i, y, x in zip(idx, oy, ox)])
-                atgt = torch.nan_to_num(tt.forward(torch.from_numpy(ab.astype(np.float64)), at).float(), nan=1.0)
+                atgt = torch.nan_to_num(tt.forward(torch.from_numpy(ab.astype(np.float64)), at).float(), nan=1.0).to(dev)
                 ap = out_all[:, n_out * (k + 1) : n_out * (k + 2)]
                 aux_losses.append(aux_loss_fn(ap[scored], atgt[scored]) if scored is not None else aux_loss_fn(ap, atgt))
             loss = loss + cfg.aux_weight * torch.stack(aux_losses).mean()

@@ -32,7 +32,7 @@ __all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe", "packaged_r
 
 #: The name of the recipe rtp's shipped models were trained with.
 SHIPPED_RECIPE = "shipped"
-_SET_BY_CALLER = ("data", "metric", "out", "val_scenes", "recipe")
+_SET_BY_CALLER = ("data", "metric", "out", "val_scenes", "recipe", "device")
 
 
 class RecipeError(ParameterError):
@@ -171,6 +171,9 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     val_split = merged.pop("val_split", None)
     if val_split is not None and not isinstance(val_split, str):
         raise RecipeError(f"recipe key 'val_split': expected a split name, got {val_split!r}")
+    if "device" in merged:  # (a TrainConfig field, but the machine's: the same recipe trains anywhere)
+        raise RecipeError(f"recipe {name}: 'device' is the machine's, not the recipe's: give it to the training "
+                          f"(rtp train --device, TrainConfig.device)")
     types = _field_types()
     unknown = sorted(set(merged) - set(types))
     if unknown:

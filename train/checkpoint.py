@@ -72,6 +72,20 @@ def check_fits(net: Network, meta: ModelMetadata) -> None:
         raise MetadataError(f"tile_size: metadata says {meta.tile_size} but the network's tile is {c['tile']}", "tile_size")
 
 
+def _on_cpu(value: Any) -> Any:
+    """``value`` (a training state: mappings, lists and tensors, as optimizers and networks keep them)
+    with every tensor copied to the CPU."""
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu()
+    if isinstance(value, dict):
+        return {k: _on_cpu(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_on_cpu(v) for v in value]
+    if type(value) is tuple:
+        return tuple(_on_cpu(v) for v in value)
+    return value
+
+
 def save(
     path: str | os.PathLike[str],
     net: Network,
@@ -89,7 +103,8 @@ def save(
         "architecture": {"name": type(net).__name__, "config": dict(net.config)},
         "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()},
         "metadata": meta.to_dict(),
-        "training": dict(training) if training is not None else None,
+        # (on the CPU: a checkpoint of a training on a GPU loads on any machine, with plain torch.load too)
+        "training": _on_cpu(dict(training)) if training is not None else None,
         "versions": _versions(),
     }
     buffer = io.BytesIO()
