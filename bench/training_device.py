@@ -32,8 +32,8 @@ import torch
 from _common import cpu_description, dataset_folder, positive, run_main  # bench/ is on sys.path as a script
 
 from rtp import sdk
+from rtp.metrics import device_name, resolve_device
 from rtp.train import TrainConfig, train
-from rtp.train._loop import device_name, resolve_device
 
 #: Steps whose time is left out of the median: the first steps pay cuDNN's autotuner, the caching
 #: allocator's first allocations and the CPU's cold caches.

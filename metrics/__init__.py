@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 
 from ._deps import METRIC_DEPENDENCIES, check_dependencies
+from ._device import DEVICES, device_name, resolve_device
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
 from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width, resolve_ppd
 from ._lpips import (
@@ -39,6 +40,7 @@ logging.getLogger("rtp.metrics").addHandler(logging.NullHandler())
 
 __all__ = [
     "DEFAULT_PPD",
+    "DEVICES",
     "DEFAULT_WEBER_L",
     "FETCH_COMMAND",
     "FLIP_BACKENDS",
@@ -55,6 +57,7 @@ __all__ = [
     "check_dependencies",
     "check_weber_l",
     "default_weights_cache",
+    "device_name",
     "error_map",
     "fetch_lpips_weights",
     "flip_map",
@@ -67,6 +70,7 @@ __all__ = [
     "pool_tiles",
     "ppd_from_width",
     "psnr_tiles",
+    "resolve_device",
     "resolve_ppd",
     "squared_error_map",
     "tile_metric",

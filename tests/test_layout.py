@@ -26,7 +26,7 @@ ROOMS: dict[str, tuple[str, frozenset[str]]] = {
     "metrics": ("metrics", frozenset({"sdk"})),
     "capture": ("capture", frozenset({"sdk", "scene", "plugins.moderngl", "metrics"})),
     "evaluate": ("evaluate", frozenset({"sdk", "capture", "metrics"})),
-    "train": ("train", frozenset({"sdk", "capture", "evaluate"})),
+    "train": ("train", frozenset({"sdk", "metrics", "capture", "evaluate"})),
     "export": ("export", frozenset({"sdk", "train"})),
     "cli": ("cli", frozenset({"sdk", "scene", "plugins.moderngl", "plugins.pyrender", "metrics", "capture",
                               "evaluate", "train", "export", "models"})),

@@ -1490,7 +1490,7 @@ def test_the_device_is_checked_before_the_data_is_read_and_recorded(tmp_path: Pa
     out = tmp_path / "m.pt"
     read: list[tuple[int, int]] = []
     with pytest.raises(sdk.ParameterError, match=re.escape(f"device 'cuda': torch {torch.__version__} is a CPU "
-                                                           f"build; train with device cpu (or auto")):
+                                                           f"build; use device cpu (or auto")):
         train(TrainConfig(data=str(data), metric="jnyang", out=str(out), device="cuda"), loading=lambda k, n: read.append((k, n)))
     assert read == [] and not out.exists()
     with pytest.raises(sdk.ParameterError, match="device 'mps': torch .* cannot use Apple's Metal"):  # (as a recipe is read)

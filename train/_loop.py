@@ -30,6 +30,7 @@ from torch import nn
 from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore, check_memory
 from rtp.evaluate import scores
+from rtp.metrics import device_name, resolve_device
 from rtp.sdk.files import check_output, writer_lock
 
 from . import checkpoint as ckpt
@@ -526,46 +527,6 @@ def _ema_update(avg: Network, net: Network, decay: float) -> None:
             a.copy_(b)
 
 
-#: What ``TrainConfig.device`` takes (``cuda:N`` too): ``auto`` is the first GPU torch sees, else the CPU.
-DEVICES = ("auto", "cpu", "cuda", "mps")
-
-
-def resolve_device(name: str) -> torch.device:
-    """The torch device ``TrainConfig.device`` names, once torch can train there: ``auto`` is CUDA's
-    first device where torch sees one, else Apple's ``mps``, else the CPU. A GPU this torch cannot use
-    (the CPU build, no driver, ``cuda:3`` on a machine of two) is a :class:`rtp.sdk.ParameterError`
-    that says why, before any data is read."""
-    if name == "auto":
-        if torch.cuda.is_available():
-            return torch.device("cuda", 0)
-        mps = getattr(torch.backends, "mps", None)
-        return torch.device("mps") if mps is not None and mps.is_available() else torch.device("cpu")
-    try:
-        dev = torch.device(name)
-    except (RuntimeError, ValueError):
-        dev = None
-    if dev is None or dev.type not in DEVICES or (dev.type != "cuda" and dev.index not in (None, 0)):
-        raise sdk.ParameterError(f"device: expected {', '.join(DEVICES)} or cuda:N, got {name!r}", "device")
-    if dev.type == "cuda":
-        if not torch.cuda.is_available():
-            why = (f"torch {torch.__version__} is a CPU build" if torch.version.cuda is None else
-                   f"torch {torch.__version__} (CUDA {torch.version.cuda}) sees no CUDA device (the driver, or "
-                   f"CUDA_VISIBLE_DEVICES)")
-            raise sdk.ParameterError(f"device {name!r}: {why}; train with device cpu (or auto: a GPU where there "
-                                     f"is one)", "device")
-        count = torch.cuda.device_count()
-        if (dev.index or 0) >= count:
-            raise sdk.ParameterError(f"device {name!r}: torch sees {count} CUDA device{'s' if count > 1 else ''} "
-                                     f"(cuda:0{f' to cuda:{count - 1}' if count > 1 else ''})", "device")
-        return torch.device("cuda", dev.index or 0)
-    if dev.type == "mps":
-        mps = getattr(torch.backends, "mps", None)
-        if mps is None or not mps.is_available():
-            raise sdk.ParameterError(f"device {name!r}: torch {torch.__version__} cannot use Apple's Metal (mps) "
-                                     f"here; train with device cpu or auto", "device")
-    return torch.device(dev.type)
-
-
 @contextlib.contextmanager
 def _deterministic(dev: torch.device) -> Any:
     """On CUDA, torch's deterministic algorithms while it lasts (the settings before are restored): cuDNN's
@@ -588,11 +549,6 @@ def _deterministic(dev: torch.device) -> Any:
         torch.use_deterministic_algorithms(before[2], warn_only=before[3])
         if workspace is None:
             os.environ.pop("CUBLAS_WORKSPACE_CONFIG", None)
-
-
-def device_name(dev: torch.device) -> str:
-    """``dev`` as the log and a model's provenance name it: ``cuda:0 (NVIDIA H200)``, ``cpu``."""
-    return f"{dev} ({torch.cuda.get_device_name(dev)})" if dev.type == "cuda" else str(dev)
 
 
 #: The seeds torch's generator takes (a signed or an unsigned 64-bit integer).
