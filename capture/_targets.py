@@ -28,6 +28,7 @@ from rtp.sdk import (
     METRICS,
     PREDICTED_RATES,
     TARGET_METRICS,
+    ParameterError,
     RtpError,
     mse_from_psnr,
     psnr_from_mse,
@@ -226,7 +227,7 @@ def sample_targets(sample: Any, metrics: tuple[str, ...], params: Mapping[str, A
     ref = sample.final("1x1")
     images = {r: sample.final(r) for r in PREDICTED_RATES}
     values = M.tile_targets(ref, images, metrics, base_tile, ppd=params["ppd"], weber_l=params["weber_l"],
-                            flip_backend=params.get("flip_backend"))
+                            flip_backend=params.get("flip_backend"), device=params.get("device"))
     out = {}
     for m in metrics:
         v = values[m]
@@ -291,6 +292,7 @@ def compute_targets(
     progress: Any = None,
     flip_backend: str | None = None,
     ray: str | None = None,
+    device: str | None = "auto",
     _on_ray_actors: Any = None,
 ) -> int:
     """Compute (or complete) the per-tile targets of every sample of a dataset; returns how many
@@ -301,7 +303,14 @@ def compute_targets(
     torch threads.
 
     ``ray`` computes on Ray instead (as in :func:`rtp.capture.capture`): each worker gets a sample's
-    bytes and returns its targets, which this process writes."""
+    bytes and returns its targets, which this process writes.
+
+    ``device`` runs the torch work (FLIP's port, LPIPS) there, as :func:`rtp.metrics.tile_targets`
+    does: ``"auto"`` (default: the first GPU torch sees, else the CPU), ``"cpu"``, ``"cuda"``,
+    ``"cuda:N"``, ``"mps"``; ``None``: the CPU. Checked before
+    any work; every worker process uses it. Not a target parameter: a GPU gives the CPU's targets to
+    float32 round-off, so a dataset may be completed on another device. A GPU with ``ray`` is refused
+    (Ray gives a task no GPU unless it asks for one, and rtp's tasks do not)."""
     from concurrent.futures import as_completed
 
     from rtp import metrics as M
@@ -314,6 +323,14 @@ def compute_targets(
     if flip_backend is not None and flip_backend not in M.FLIP_BACKENDS:
         raise TargetError(f"flip_backend must be one of {', '.join(M.FLIP_BACKENDS)} or None, got {flip_backend!r}")
     M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work
+    if device is not None:
+        if ray is not None and device not in ("cpu", "auto"):
+            raise ParameterError(f"device {device!r} with ray: Ray gives a task no GPU unless it asks for one, and "
+                                 f"rtp's targets tasks do not; compute on this machine's GPU without ray, or on Ray's "
+                                 f"CPUs (device cpu or auto)", "device")
+        # (the device, and whether this torch can use it, now: a fake sample's targets check both)
+        M.tile_targets(np.zeros((32, 32, 3), np.float32), {}, metrics, 4, flip_backend=flip_backend, device=device,
+                       missing="nan")
     # The parameters too, before they are declared in the manifest: a bad one stored there would refuse
     # every later run, good values included.
     if ppd is not None:
@@ -340,6 +357,7 @@ def compute_targets(
                 p["net"] = "alex-v0.1"
             store.declare(m, p)
         params["flip_backend"] = flip_backend
+        params["device"] = device  # (like the backend, not a target parameter: not declared)
         ids = [i for i in reader.ids if not all(store.has(i, m) for m in metrics)]
         done = len(reader.ids) - len(ids)
         if progress:

@@ -345,7 +345,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
             raise _usage(f"--ppd: expected a number or 'width', got {args.ppd!r}") from None
     with Bar(args, 0, "targets", "sample") as bar:
         n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
-                            progress=lambda done, total: bar.update_to(done, total), ray=args.ray)
+                            progress=lambda done, total: bar.update_to(done, total), ray=args.ray, device=args.device)
     print(f"{args.data}: targets computed for {n} samples ({', '.join(args.metrics)})")
     return 0
 
@@ -586,6 +586,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="environment luminance l of JNFLIP/JNYang")
     tg.add_argument("--workers", type=_positive, default=None,
                     help="parallel processes (default 1; with --ray, Ray workers)")
+    tg.add_argument("--device", default="auto", metavar="DEVICE",
+                    help="where FLIP and LPIPS run (torch): auto (the first GPU torch sees, else the CPU; default), "
+                    "cpu, cuda, cuda:N or mps; the other metrics run on the CPU. A GPU gives the CPU's targets to "
+                    "float32 round-off")
     _ray_option(tg)
 
     tr = command("train", "train a metric-prediction model on a captured dataset", _cmd_train,

@@ -110,13 +110,15 @@ class FlipReference:
 
     ``FlipReference(reference, ppd).maps(tests)`` returns the ``(N, H, W)`` float32 LDR-FLIP maps of
     ``tests`` ``(N, H, W, 3)`` against ``reference`` ``(H, W, 3)``, both display-encoded sRGB floats
-    (clamped to [0, 1] like ``flip-evaluator``). Needs torch.
+    (clamped to [0, 1] like ``flip-evaluator``). Needs torch. ``device`` (a ``torch.device``; default
+    the CPU) is where the filtering runs: the arrays go there and the maps come back as numpy.
     """
 
-    def __init__(self, reference: np.ndarray, ppd: float) -> None:
+    def __init__(self, reference: np.ndarray, ppd: float, device: Any = None) -> None:
         import torch
 
         self._torch = torch
+        self.device = torch.device("cpu") if device is None else device
         self.ppd = float(ppd)
         ycx, cz = _spatial_filters(self.ppd)
         feat = _feature_filter(self.ppd)
@@ -124,7 +126,7 @@ class FlipReference:
         self._cz = torch.from_numpy(cz)
         self._feat = torch.from_numpy(feat)
         self.shape = tuple(reference.shape[:2])
-        ycxcz = self._ycxcz(torch.from_numpy(np.ascontiguousarray(reference, np.float32))[None])
+        ycxcz = self._ycxcz(torch.from_numpy(np.ascontiguousarray(reference, np.float32))[None].to(self.device))
         with torch.inference_mode():
             self._lab = self._filtered_lab(ycxcz)
             self._edge, self._point = self._features(ycxcz[0])
@@ -205,7 +207,7 @@ class FlipReference:
         cmax = _cmax()
         pccmax = _PC * cmax
         with torch.inference_mode():
-            t = self._ycxcz(torch.from_numpy(np.ascontiguousarray(tests, np.float32)))
+            t = self._ycxcz(torch.from_numpy(np.ascontiguousarray(tests, np.float32)).to(self.device))
             lab = self._filtered_lab(t)
             dl, da, db = (a - b for a, b in zip(lab, self._lab))
             color = torch.pow(dl.abs_() + torch.sqrt(da * da + db * db), _QC)
@@ -214,7 +216,7 @@ class FlipReference:
             edge, point = self._features(t[0])
             feature = torch.maximum((self._edge - edge).abs_(), (self._point - point).abs_())
             feature = torch.pow(feature.mul_(1.0 / math.sqrt(2.0)), _QF)
-            return torch.pow(color, 1.0 - feature).numpy().astype(np.float32, copy=False)
+            return torch.pow(color, 1.0 - feature).cpu().numpy().astype(np.float32, copy=False)
 
 
 def _mat3(m: np.ndarray, a: Any, b: Any, c: Any) -> list[Any]:

@@ -27,6 +27,7 @@ import numpy as np
 
 from rtp.sdk import InputShapeError
 
+from ._device import full_float32
 from ._errors import MetricDependencyError, MetricParameterError
 from ._image import ImageBatch, as_pair
 
@@ -316,6 +317,15 @@ def lpips_network(weights: str | os.PathLike[str] | None = None) -> Any:
     return _cached_network(None if weights is None else str(Path(weights).resolve()))
 
 
+@functools.lru_cache(maxsize=4)
+def _network_on(path: str | None, device: str) -> Any:
+    """The cached network's copy on ``device`` (a ``torch.device``'s name; the CPU's is the network itself)."""
+    import copy
+
+    net = _cached_network(path)
+    return net if device == "cpu" else copy.deepcopy(net).to(device)
+
+
 def _check_size(batch: ImageBatch) -> None:
     h, w = batch.shape_hw
     if h < LPIPS_MIN_SIZE or w < LPIPS_MIN_SIZE:
@@ -339,18 +349,23 @@ def lpips_against(
     *,
     paper_quirk: bool = False,
     weights: str | os.PathLike[str] | None = None,
+    device: Any = None,
 ) -> list[np.ndarray]:
     """LPIPS maps of several validated test images against one reference; the reference features are computed once.
 
     ``reference`` and each test are float32 ``(H, W, 3)`` in [0, 1]; returns ``(H, W)`` float32 maps.
+    ``device`` (a ``torch.device``; default the CPU) is where AlexNet runs.
     """
     torch = _torch()
-    net = lpips_network(weights)
+    lpips_network(weights)  # (checks ``weights``)
+    dev = torch.device("cpu") if device is None else device
+    net = _network_on(None if weights is None else str(Path(weights).resolve()), str(dev))
     h, w = reference.shape[:2]
-    with torch.inference_mode():
-        f_ref = net.features(_to_input(reference[None], paper_quirk))
+    with torch.inference_mode(), full_float32(dev):  # (the CPU's targets to float32 round-off, not TF32's)
+        f_ref = net.features(_to_input(reference[None], paper_quirk).to(dev))
         return [
-            net.distance(f_ref, net.features(_to_input(t[None], paper_quirk)), (h, w))[0, 0].numpy().astype(np.float32)
+            net.distance(f_ref, net.features(_to_input(t[None], paper_quirk).to(dev)), (h, w))[0, 0].cpu().numpy()
+            .astype(np.float32)
             for t in tests
         ]
 

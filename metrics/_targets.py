@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import time
 from collections.abc import Iterable, Mapping
 from typing import Any, Literal
@@ -21,6 +22,7 @@ from rtp.sdk import (
     tile_grid,
 )
 
+from ._device import DEVICES, resolve_device
 from ._errors import MetricParameterError
 from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, resolve_ppd
 from ._image import as_batch
@@ -105,14 +107,15 @@ def _flip_backend(backend: str | None) -> str:
     return backend
 
 
-def _flip_all(reference: np.ndarray, tests: Mapping[str, np.ndarray], ppd: float, backend: str) -> dict[str, np.ndarray]:
+def _flip_all(reference: np.ndarray, tests: Mapping[str, np.ndarray], ppd: float, backend: str,
+              device: Any = None) -> dict[str, np.ndarray]:
     """LDR-FLIP maps of every test image against one reference: the batched torch port of FLIP.h
-    (reference work once, see ``_flipbatch``) or ``flip-evaluator`` image by image."""
+    (reference work once, see ``_flipbatch``; on ``device``) or ``flip-evaluator`` image by image."""
     if backend == "flip-evaluator":
         return {rate: flip_pixels(reference, img, ppd) for rate, img in tests.items()}
     from ._flipbatch import FlipReference
 
-    maps = FlipReference(reference, ppd).maps(np.stack(list(tests.values())))
+    maps = FlipReference(reference, ppd, device).maps(np.stack(list(tests.values())))
     return dict(zip(tests, maps))
 
 
@@ -128,6 +131,7 @@ def tile_targets(
     lpips_weights: str | os.PathLike[str] | None = None,
     missing: Literal["error", "nan"] = "error",
     flip_backend: str | None = None,
+    device: str | None = None,
 ) -> dict[str, np.ndarray]:
     """Per-tile values of several metrics for every reduced rate of one frame.
 
@@ -151,6 +155,10 @@ def tile_targets(
             reference's half once (equal to it within float32 round-off, about 2e-5 per pixel, and
             three times as fast per sample); ``"flip-evaluator"``, NVIDIA's package image by image;
             ``None`` (default) picks ``"torch"`` when torch is installed.
+        device: where the torch work runs, FLIP's port and LPIPS (:func:`~rtp.metrics.resolve_device`:
+            ``"auto"``, ``"cpu"``, ``"cuda"``, ``"cuda:N"``, ``"mps"``); ``None`` (default): the CPU.
+            The other metrics are numpy's, on the CPU. A GPU gives the CPU's targets to float32
+            round-off (docs/dataset.md "Targets on a GPU").
 
     Returns:
         ``{metric: float32 array (6, ceil(H/tile), ceil(W/tile))}``, axis 0 in
@@ -165,6 +173,15 @@ def tile_targets(
     if not names:
         raise MetricParameterError("metrics is empty")
     backend = _flip_backend(flip_backend)
+    dev = None
+    if device is not None:
+        if not isinstance(device, str) or not (device in DEVICES or re.fullmatch(r"cuda:\d+", device)):
+            raise MetricParameterError(f"device: expected {', '.join(DEVICES)} or cuda:N, got {device!r}", "device")
+        if backend == "flip-evaluator" and device not in ("cpu", "auto") and {"flip", "jnflip"} & set(names):
+            raise MetricParameterError(f"device {device!r}: flip-evaluator runs FLIP on the CPU; the torch backend "
+                                       f"(flip_backend='torch') runs it on a GPU", "device")
+        if "lpips" in names or (backend == "torch" and {"flip", "jnflip"} & set(names)):
+            dev = resolve_device(device)  # (torch only where torch work is asked for)
     if missing not in ("error", "nan"):
         raise MetricParameterError(f"missing must be 'error' or 'nan', got {missing!r}")
     ref = as_batch(reference, "reference")
@@ -211,7 +228,7 @@ def tile_targets(
     flips: dict[str, np.ndarray] = {}
     if ("flip" in names or "jnflip" in names) and tests:
         t0 = time.perf_counter()
-        flips = _flip_all(gt, tests, ppd_value, backend)
+        flips = _flip_all(gt, tests, ppd_value, backend, dev)
         timings["flip" if "flip" in names else "jnflip"] += time.perf_counter() - t0
     for rate, img in tests.items():
         i = PREDICTED_RATES.index(rate)
@@ -238,7 +255,8 @@ def tile_targets(
             timings["yang" if "yang" in names else "jnyang"] += time.perf_counter() - t0
     if "lpips" in names and tests:
         t0 = time.perf_counter()
-        maps = lpips_against(gt, list(tests.values()), paper_quirk=lpips_paper_quirk, weights=lpips_weights)
+        maps = lpips_against(gt, list(tests.values()), paper_quirk=lpips_paper_quirk, weights=lpips_weights,
+                             device=dev)
         for rate, m in zip(tests, maps):
             out["lpips"][PREDICTED_RATES.index(rate)] = pool_tiles(m, tile, "max")
         timings["lpips"] += time.perf_counter() - t0

@@ -218,6 +218,34 @@ def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkey
     assert DatasetReader(tmp_path / "ds").manifest["failed"] == ["procedural:5/fast"]
 
 
+def test_targets_on_a_device_torch_cannot_use_are_refused_before_any_work(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """``rtp targets --device`` (FLIP's port and LPIPS on a GPU): a device this torch cannot use, or a
+    GPU with Ray (whose tasks get none), is refused before a target is written or declared; the CPU
+    device writes the default's targets."""
+    import torch
+
+    from rtp.capture import TargetStore, compute_targets
+    from rtp.cli import main as rtp_main
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.version, "cuda", None)
+    manifest = (out / "manifest.json").read_text()
+    with pytest.raises(sdk.ParameterError, match=r"device 'cuda': torch .* is a CPU build"):
+        compute_targets(out, ["flip", "psnr"], device="cuda")
+    with pytest.raises(sdk.ParameterError, match=r"device 'cuda:0' with ray: Ray gives a task no GPU"):
+        compute_targets(out, ["flip"], device="cuda:0", ray="local")
+    assert rtp_main(["targets", str(out), "--metrics", "lpips", "--device", "cuda"]) == 2
+    assert "rtp targets: error: device 'cuda': torch" in capsys.readouterr().err
+    store = TargetStore(out)
+    assert not store.metrics and not any(store.has("procedural_5-slow-0000", m) for m in ("flip", "psnr", "lpips"))
+    assert (out / "manifest.json").read_text() == manifest
+    assert compute_targets(out, ["flip", "psnr"], device="cpu") == 1  # (what auto picks here)
+    assert store.has("procedural_5-slow-0000", "flip")
+
+
 def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -535,6 +535,44 @@ def test_tile_targets_flip_evaluator_backend_is_exact(ref: np.ndarray, rates: di
         M.tile_targets(ref, rates, ("flip",), flip_backend="cuda")
 
 
+def test_tile_targets_device_runs_the_torch_work_there_and_refuses_what_torch_cannot_use(
+        ref: np.ndarray, rates: dict[str, np.ndarray], monkeypatch: pytest.MonkeyPatch) -> None:
+    """``device`` moves FLIP's port and LPIPS (the CPU's device gives the default's targets exactly);
+    a GPU this torch cannot use, a bad name, or FLIP through flip-evaluator on a GPU are refused; the
+    numpy metrics need no torch device. (On a GPU: docs/dataset.md "Targets on a GPU".)"""
+    import torch
+
+    names = ("flip", "jnflip", "lpips", "psnr")
+    want = M.tile_targets(ref, rates, names, 16)
+    for device in ("cpu", "auto"):  # (auto: this machine has no GPU torch can use)
+        monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+        got = M.tile_targets(ref, rates, names, 16, device=device)
+        assert all(np.array_equal(got[m], want[m]) for m in names), device
+    monkeypatch.setattr(torch.version, "cuda", None)
+    with pytest.raises(M.MetricParameterError, match=r"device 'cuda': torch .* is a CPU build; use device cpu"):
+        M.tile_targets(ref, rates, ("lpips",), 16, device="cuda")
+    for bad in ("gpu", "cuda:x", 0):
+        with pytest.raises(M.MetricParameterError, match="device: expected auto, cpu, cuda, mps or cuda:N, got"):
+            M.tile_targets(ref, rates, ("psnr",), 16, device=bad)  # type: ignore[arg-type]
+    with pytest.raises(M.MetricParameterError, match="flip-evaluator runs FLIP on the CPU; the torch backend"):
+        M.tile_targets(ref, rates, ("flip", "lpips"), 16, flip_backend="flip-evaluator", device="cuda:0")
+    np.testing.assert_array_equal(M.tile_targets(ref, rates, ("psnr",), 16, device="cuda")["psnr"], want["psnr"])
+    assert M.resolve_device("auto") == torch.device("cpu") and M.device_name(torch.device("cpu")) == "cpu"
+    # LPIPS on CUDA in full float32: cuDNN's TF32 convolutions (torch's default) moved its targets by 5e-4
+    from rtp.metrics._device import full_float32
+
+    before = torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32
+    torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 = True
+    try:
+        with full_float32(torch.device("cuda", 0)):
+            assert not torch.backends.cudnn.allow_tf32 and not torch.backends.cuda.matmul.allow_tf32
+        assert torch.backends.cudnn.allow_tf32 and torch.backends.cuda.matmul.allow_tf32
+        with full_float32(torch.device("cpu")):
+            assert torch.backends.cudnn.allow_tf32
+    finally:
+        torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = before
+
+
 def _textured(h: int, w: int, seed: int) -> np.ndarray:
     """Edges, points, saturated colours, near-black and clipped regions: every branch of FLIP's pipeline."""
     rng = np.random.default_rng(seed)
