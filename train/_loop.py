@@ -877,8 +877,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     gen = torch.Generator().manual_seed(cfg.seed)
     n_out = len(cfg.outputs)
     dev = resolve_device(cfg.device)
-    if dev.type != "cpu":
-        log.info("training on %s", device_name(dev))
+    log.info("training on %s", device_name(dev))  # (what auto chose)
     net = _network(cfg).to(dev)  # (initialised on the CPU first: a seed gives the same weights on every device)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
