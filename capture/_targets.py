@@ -328,9 +328,7 @@ def compute_targets(
             raise ParameterError(f"device {device!r} with ray: Ray gives a task no GPU unless it asks for one, and "
                                  f"rtp's targets tasks do not; compute on this machine's GPU without ray, or on Ray's "
                                  f"CPUs (device cpu or auto)", "device")
-        # (the device, and whether this torch can use it, now: a fake sample's targets check both)
-        M.tile_targets(np.zeros((32, 32, 3), np.float32), {}, metrics, 4, flip_backend=flip_backend, device=device,
-                       missing="nan")
+        M.targets_device(metrics, device, flip_backend)  # (the device, and whether this torch can use it, now)
     # The parameters too, before they are declared in the manifest: a bad one stored there would refuse
     # every later run, good values included.
     if ppd is not None:

@@ -34,7 +34,7 @@ from ._lpips import (
 )
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, squared_error_map, yang_map
 from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, check_weber_l, pool_tiles, weber_denominator
-from ._targets import FLIP_BACKENDS, error_map, tile_metric, tile_targets
+from ._targets import FLIP_BACKENDS, error_map, targets_device, tile_metric, tile_targets
 
 logging.getLogger("rtp.metrics").addHandler(logging.NullHandler())
 
@@ -73,6 +73,7 @@ __all__ = [
     "resolve_device",
     "resolve_ppd",
     "squared_error_map",
+    "targets_device",
     "tile_metric",
     "tile_targets",
     "weber_denominator",

@@ -107,6 +107,26 @@ def _flip_backend(backend: str | None) -> str:
     return backend
 
 
+def targets_device(metrics: Iterable[str], device: str | None, flip_backend: str | None = None) -> Any:
+    """The ``torch.device`` :func:`tile_targets` runs the torch work of ``metrics`` on (FLIP's port
+    with the torch ``flip_backend``, LPIPS), or None where there is none or ``device`` is None.
+    Raises :class:`MetricParameterError` as it would: a name that is no device, a device this torch
+    cannot use (checked only where torch work is asked for: the numpy metrics need no torch), FLIP
+    through ``flip-evaluator`` asked to run on a GPU. A job checks its device with it before any work."""
+    names = {_check_metric(m) for m in ([metrics] if isinstance(metrics, str) else metrics)}
+    backend = _flip_backend(flip_backend)
+    if device is None:
+        return None
+    if not isinstance(device, str) or not (device in DEVICES or re.fullmatch(r"cuda:\d+", device)):
+        raise MetricParameterError(f"device: expected {', '.join(DEVICES)} or cuda:N, got {device!r}", "device")
+    if backend == "flip-evaluator" and device not in ("cpu", "auto") and {"flip", "jnflip"} & names:
+        raise MetricParameterError(f"device {device!r}: flip-evaluator runs FLIP on the CPU; the torch backend "
+                                   f"(flip_backend='torch') runs it on a GPU", "device")
+    if "lpips" in names or (backend == "torch" and {"flip", "jnflip"} & names):
+        return resolve_device(device)
+    return None
+
+
 def _flip_all(reference: np.ndarray, tests: Mapping[str, np.ndarray], ppd: float, backend: str,
               device: Any = None) -> dict[str, np.ndarray]:
     """LDR-FLIP maps of every test image against one reference: the batched torch port of FLIP.h
@@ -173,15 +193,7 @@ def tile_targets(
     if not names:
         raise MetricParameterError("metrics is empty")
     backend = _flip_backend(flip_backend)
-    dev = None
-    if device is not None:
-        if not isinstance(device, str) or not (device in DEVICES or re.fullmatch(r"cuda:\d+", device)):
-            raise MetricParameterError(f"device: expected {', '.join(DEVICES)} or cuda:N, got {device!r}", "device")
-        if backend == "flip-evaluator" and device not in ("cpu", "auto") and {"flip", "jnflip"} & set(names):
-            raise MetricParameterError(f"device {device!r}: flip-evaluator runs FLIP on the CPU; the torch backend "
-                                       f"(flip_backend='torch') runs it on a GPU", "device")
-        if "lpips" in names or (backend == "torch" and {"flip", "jnflip"} & set(names)):
-            dev = resolve_device(device)  # (torch only where torch work is asked for)
+    dev = targets_device(names, device, backend)
     if missing not in ("error", "nan"):
         raise MetricParameterError(f"missing must be 'error' or 'nan', got {missing!r}")
     ref = as_batch(reference, "reference")
