@@ -86,7 +86,11 @@ def add_common(parser: argparse.ArgumentParser, *, top: bool) -> None:
     ``rtp capture -v`` alike): a subcommand's copies default to SUPPRESS so they never undo the top's."""
     default: Any = False if top else argparse.SUPPRESS
     g = parser.add_argument_group("output")
-    g.add_argument("-v", "--verbose", action="store_true", default=default, help="log progress; show tracebacks")
+    # (a subcommand's own dest: argparse copies a subcommand's namespace over the top's, so `rtp -v
+    # capture -v` counted one; run() adds the two)
+    g.add_argument("-v", "--verbose", action="count", default=default, dest="verbose" if top else "verbose_after",
+                   help="log progress; show tracebacks (-vv: and rtp's own details, such as each frame's render "
+                   "time and each metric's time per sample)")
     g.add_argument("-q", "--quiet", action="store_true", default=default, help="only errors; no progress bars")
     g.add_argument("--no-progress", action="store_true", default=default, help="no progress bars")
     if top:
@@ -120,13 +124,22 @@ class _Collapse(logging.Filter):
         return [f"{n} more like: {first}" for (n, first) in self.seen.values() if n]
 
 
+def _rtp_details(record: logging.LogRecord) -> bool:
+    """With ``-vv``: DEBUG records of rtp's own loggers only (numpy's, PIL's or Ray's debug chatter
+    would bury them)."""
+    return record.levelno >= logging.INFO or record.name == "rtp" or record.name.startswith("rtp.")
+
+
 @contextlib.contextmanager
 def _logging(args: argparse.Namespace) -> Iterator[None]:
-    level = logging.INFO if args.verbose else logging.ERROR if args.quiet else logging.WARNING
+    verbose = int(args.verbose or 0)  # (-v once: progress; twice: rtp's debug details too)
+    level = logging.DEBUG if verbose >= 2 else logging.INFO if verbose else logging.ERROR if args.quiet else logging.WARNING
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
     collapse = _Collapse()
     handler.addFilter(collapse)
+    if level == logging.DEBUG:
+        handler.addFilter(_rtp_details)
     root = logging.getLogger()
     old_level = root.level
     root.addHandler(handler)
@@ -244,6 +257,7 @@ _PATH_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EEXIS
 
 def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace], int]) -> int:
     """Run a command body under the one error policy (see the module docstring)."""
+    args.verbose = int(getattr(args, "verbose", 0) or 0) + int(getattr(args, "verbose_after", 0) or 0)
     with _logging(args):
         return run_guarded(prog, lambda: body(args), verbose=args.verbose)
 

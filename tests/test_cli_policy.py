@@ -116,6 +116,33 @@ def test_common_options_go_before_or_after_the_command(tmp_path: Path, capsys: p
     assert "Traceback" in capsys.readouterr().err  # -v shows it
 
 
+def test_twice_verbose_logs_rtps_own_details_and_nothing_else(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``-vv`` (or ``-v`` before and after the command) adds rtp's DEBUG records (each metric's and
+    each frame's details), never a third-party library's; ``-v`` stays progress only."""
+    import logging
+
+    from PIL import Image
+
+    from rtp.cli._run import _logging
+
+    rng = np.random.default_rng(0)
+    a = (rng.random((64, 96, 3)) * 255).astype(np.uint8)
+    Image.fromarray(a).save(tmp_path / "a.png")
+    Image.fromarray(255 - a).save(tmp_path / "b.png")
+    pair = ["flip", str(tmp_path / "a.png"), str(tmp_path / "b.png")]
+    detail = "DEBUG rtp.metrics: FLIP on 1 image(s) of 96x64"
+    for argv, shown in ((["-vv", "metric", *pair], True), (["-v", "metric", "-v", *pair], True),
+                        (["metric", "-vv", *pair], True), (["-v", "metric", *pair], False), (["metric", *pair], False)):
+        assert main(argv) == 0
+        assert (detail in capsys.readouterr().err) == shown, argv
+    with _logging(argparse.Namespace(verbose=2, quiet=False)):
+        logging.getLogger("PIL.PngImagePlugin").debug("third-party chatter")
+        logging.getLogger("rtp.capture").debug("rtp's own detail")
+        logging.getLogger("PIL.PngImagePlugin").info("third-party progress")
+    err = capsys.readouterr().err
+    assert "rtp's own detail" in err and "third-party progress" in err and "chatter" not in err
+
+
 # -- one error class, one exit code, one message, in every entry point ------------------------
 
 ERRORS = sorted(all_errors().items())
