@@ -439,17 +439,27 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
     paths = _names(args.path) or ["slow", "fast"]
     done = [0]
+    steps: dict[str, str] = {}  # path -> the step it is in, while it is not playing frames ("": the job's own)
     with Bar(args, args.frames * len(paths), f"play {args.scene}", "frame") as bar:
         def progress(n: int) -> None:
             done[0] += n
             bar.update_to(done[0])
+
+        def stage(text: str) -> None:  # (with --workers, the paths' steps side by side)
+            path, sep, step = text.partition(": ")
+            path, step = (path, step) if sep and path in paths else ("", text)
+            if step in ("playing", "done"):
+                steps.pop(path, None)
+            else:
+                steps[path] = step
+            bar.status(" · ".join(f"{p}: {s}" if p else s for p, s in steps.items()), sticky=True)
 
         rep = play(args.scene, args.methods, paths=paths, frames=args.frames, fps=args.fps, seed=args.seed,
                    size=args.size, tile_size=args.tile_size, fail_metric=args.fail_metric,
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
                    animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop, progress=progress,
-                   stage=bar.status)
+                   stage=stage)
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0

@@ -171,6 +171,7 @@ class Bar:
         self.total = total
         self._bar: Any = None
         self._status = ""
+        self._sticky = False
         self._drawn = 0.0
         self._lock = threading.Lock()  # (the status's state, shared with its timer)
         self._timer: threading.Timer | None = None
@@ -189,7 +190,7 @@ class Bar:
             return
         if total is not None and total != self._bar.total:
             self._bar.total = total
-        if self._status and n != self._bar.n:  # the count moves: what held it is over
+        if self._status and not self._sticky and n != self._bar.n:  # the count moves: what held it is over
             with self._lock:
                 self._status = ""
                 self._bar.set_postfix_str("", refresh=False)
@@ -197,16 +198,18 @@ class Bar:
         if postfix:
             self._bar.set_postfix(postfix, refresh=False)
 
-    def status(self, text: str = "") -> None:
+    def status(self, text: str = "", *, sticky: bool = False) -> None:
         """Show ``text`` after the count (empty: nothing) while the count does not move, as a long
-        first step runs (the next step clears it); drawn at most every ``STATUS_EVERY`` s and not before
-        the bar's delay: a text that comes sooner is drawn then (by a timer) if it is still the one
-        to show, so that the last step of a quick succession is on screen while it runs."""
+        first step runs (the next step clears it; ``sticky``: only the next status does, as for the
+        steps of `rtp play`'s paths in parallel, one writing its GIF while another's frames count);
+        drawn at most every ``STATUS_EVERY`` s and not before the bar's delay: a text that comes sooner
+        is drawn then (by a timer) if it is still the one to show, so that the last step of a quick
+        succession is on screen while it runs."""
         bar = self._bar
-        if bar is None or text == self._status:
+        if bar is None or (text == self._status and sticky == self._sticky):
             return
         with self._lock:
-            self._status = text
+            self._status, self._sticky = text, sticky
             bar.set_postfix_str(text, refresh=False)
         self._draw_status()
 

@@ -444,7 +444,9 @@ def play(
     reprojection holds). ``progress(n)`` is called after
     every frame; ``stage(text)`` as each step between frames begins (a path's map loaded, its cameras
     planned, its renderer started, its first frame, its GIF, then the report and plots: seconds on a
-    large map, while ``progress`` does not move), as ``"fast: planning the camera path"``."""
+    large map, while ``progress`` does not move), as ``"fast: planning the camera path"``; ``"PATH:
+    playing"`` once its frames count and ``"PATH: done"`` at its end (with ``workers``, which paths are
+    in a step)."""
     from rtp import metrics
     from rtp.capture.paths import PATH_PROFILES
 
@@ -650,11 +652,20 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     path = camera_path(scn, job["frames"], pname, job["seed"], fps=job["fps"], blockers=blockers)
     loops = _loops(specs, predictors, job["sweep"], job["fail_thr"], info.higher_is_better, tile, job["unseen_fraction"])
     step("starting the renderer")
+    ticked = [False]
+
+    def frame_done(n: int) -> None:
+        if not ticked[0]:  # its frames count from here on: no step to show
+            ticked[0] = True
+            step("playing")
+        if progress is not None:
+            progress(n)
+
     with PathPlayer(scn, (w, h), exact=job["exact"]) as player:
         step("the first frame (rendered at every rate, then each method)")
         start = time.perf_counter()
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
-                                 tile, job["flip_every"], (h, w), progress, job["gif"] is not None, job["open_loop"])
+                                 tile, job["flip_every"], (h, w), frame_done, job["gif"] is not None, job["open_loop"])
         took = time.perf_counter() - start
         log.info("%s: %d frames of %d loops played in %.1f s (%.2f s a frame)", pname, len(path), len(loops), took,
                  took / max(1, len(path)))
@@ -662,6 +673,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     if job["gif"] is not None and anim:
         step(f"writing play_{pname}.gif")
         files = _write_animation(Path(job["gif"]) / f"play_{pname}.gif", anim)
+    step("done")
     return {
         "unseen": unseen,
         "camera": {"length_m": path.length(), "eye_height_m": path.eye_height},

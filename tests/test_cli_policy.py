@@ -515,6 +515,49 @@ def test_play_says_what_it_does_between_its_frames(tmp_path: Path, capsys: pytes
     assert "3/3 [" in last and "writing" not in last, err
 
 
+def test_play_in_workers_shows_each_paths_step_while_another_counts_frames(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """With --workers the paths run side by side: the bar showed only the latest step of either, and
+    the other path's frames erased a step that lasts (one path writing its GIF while the other plays).
+    Now it shows the step of every path not playing frames, kept while the count moves."""
+    import types
+
+    import rtp.evaluate
+    from rtp.cli._run import Bar
+
+    monkeypatch.setattr(Bar, "DELAY", 0.0)
+    monkeypatch.setattr(Bar, "STATUS_EVERY", 0.0)
+
+    def fake_play(*_: Any, progress: Callable[[int], None], stage: Callable[[str], None], **__: Any) -> Any:
+        stage("slow: loading a")
+        stage("fast: loading a")
+        stage("slow: playing")
+        progress(1)
+        stage("fast: playing")
+        progress(1)
+        stage("fast: writing play_fast.gif")
+        time.sleep(0.15)  # (past tqdm's mininterval: the count's move is drawn)
+        progress(1)  # slow's frames count on while fast writes its GIF
+        stage("fast: done")
+        progress(1)
+        stage("slow: done")
+        stage("writing the report")
+        return types.SimpleNamespace(to_markdown=lambda: "report", files=["play.md"])
+
+    monkeypatch.setattr(rtp.evaluate, "play", fake_play)
+    capsys.readouterr()
+    assert main(["play", "procedural:0", "--frames", "2", "--workers", "2", "--out", str(tmp_path / "p")]) == 0
+    drawn = [d.rstrip() for d in capsys.readouterr().err.split("\r") if d.strip()]
+    want = [("0/4 [", "slow: loading a · fast: loading a]"), ("0/4 [", "| 0/4 [00:00<?, ?frame/s, fast: loading a]"),
+            ("2/4 [", "fast: writing play_fast.gif]"), ("3/4 [", "fast: writing play_fast.gif]"),
+            ("4/4 [", "writing the report]")]
+    k = 0
+    for count, end in want:  # drawn in this order
+        k = next((j for j in range(k, len(drawn)) if count in drawn[j] and drawn[j].endswith(end)), -1)
+        assert k >= 0, (count, end, drawn)
+    assert drawn[-1].endswith("frame/s]") and "writing" not in drawn[-1], drawn  # it ends on its count
+
+
 def test_verbose_progress_is_logged_whole_and_repeated_warnings_once(capsys: pytest.CaptureFixture[str]) -> None:
     """-v logs progress: every INFO line (a validation step of `rtp -v train`, each job's planning
     time), none collapsed as repeats (only the first of each template was shown); a warning repeated

@@ -476,7 +476,10 @@ def test_paths_in_worker_processes_give_the_same_report(caplog: pytest.LogCaptur
     assert sorted(r.getMessage().partition(":")[0] for r in timed) == ["fast", "slow"]
     assert all(r.process != os.getpid() for r in timed)
     # what each path does between its frames is heard from the workers too (on the tick queue)
-    assert sorted(stages[1]) == sorted(stages[0]) and len(stages[0]) == 8, stages
+    assert sorted(stages[1]) == sorted(stages[0]) and len(stages[0]) == 12, stages
+    for p in ("slow", "fast"):  # each path's steps in order: "playing" once its frames count, "done" at its end
+        mine = [s.partition(": ")[2] for s in stages[1] if s.startswith(f"{p}: ")]
+        assert mine[3:] == ["the first frame (rendered at every rate, then each method)", "playing", "done"], mine
     def timeless(rows: list[dict[str, Any]]) -> str:  # the choosing times differ from run to run
         return json.dumps([{k: v for k, v in r.items() if k != "predict_ms"} for r in rows])
 
