@@ -380,7 +380,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise _usage(f"--quantile sets the quantile loss's quantile: give --loss quantile (the loss is {cfg.loss})")
     if args.distill is not None and not cfg.teachers:
         raise _usage("--distill weighs the teachers' predictions: give them with --teachers")
-    with Bar(args, cfg.steps, f"train {cfg.metric}", "step") as bar:
+    from rtp.metrics import device_name, resolve_device
+
+    where = device_name(resolve_device(cfg.device))  # (what auto chose, on the bar)
+    with Bar(args, cfg.steps, f"train {cfg.metric} on {where}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
                        loading=lambda read, samples: bar.status(f"reading samples: {read}/{samples}"))
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting

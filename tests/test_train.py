@@ -197,6 +197,9 @@ def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str], monk
     got = capsys.readouterr()
     assert "validation R2" in got.out
     assert "reading samples: 1/6]" in got.err and "reading samples" not in got.err.rsplit("\r", 1)[-1], got.err
+    from rtp.metrics import device_name, resolve_device
+
+    assert f"train jnyang on {device_name(resolve_device('auto'))}:" in got.err  # (where auto trains, on the bar)
     assert load_checkpoint(out).metadata.provenance["val_scenes"] == ("scene0",)
 
 
