@@ -887,7 +887,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     dev = resolve_device(cfg.device)
     log.info("training on %s", device_name(dev))  # (what auto chose)
     # (initialised on the CPU first: a seed gives the same weights on every device)
-    net = _network(cfg).to(dev, memory_format=_layout(dev))
+    net = _network(cfg).to(dev)
+    net.to(memory_format=_layout(dev))  # type: ignore[call-overload]  # (torch's stub lacks the keyword Module.to takes)
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
