@@ -58,6 +58,8 @@ from rtp.sdk import (
 )
 from rtp.sdk.files import atomic_output
 
+from ._images import image_values
+
 __all__ = [
     "BUFFERS",
     "FORMAT",
@@ -507,10 +509,15 @@ def _read_png(path: Path) -> np.ndarray:
         raise DatasetError(f"missing file {path}")
     try:
         with Image.open(path) as im:
-            a = np.asarray(im.convert("RGBA"))
+            im.load()
+            try:
+                return image_values(im, alpha=True)
+            except ValueError as err:  # (what it holds, not its bytes: a float image past [0, 1], ...)
+                raise DatasetError(f"{path}: {err}") from None
+    except DatasetError:
+        raise
     except Exception as err:  # Pillow on corrupted bytes; see _unreadable
         raise _unreadable(path, "not a readable PNG", err) from err
-    return a.astype(np.float32) / 255.0
 
 
 def open_dataset(root: str | os.PathLike[str]) -> DatasetReader | PaperDatasetReader:

@@ -1,6 +1,7 @@
-"""Writing pictures: images in the format their file extension names, and matplotlib figures as images.
+"""Pictures: images read to float values, written in the format their file extension names, and
+matplotlib figures as images.
 
-Shared by the dataset preview and by :mod:`rtp.evaluate`'s figures.
+Shared by the dataset preview, the paper's dataset layout, ``rtp metric`` and :mod:`rtp.evaluate`'s figures.
 """
 
 from __future__ import annotations
@@ -15,8 +16,45 @@ from rtp.sdk.files import atomic_output, check_output
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+    from PIL import Image
 
-__all__ = ["check_image_output", "figure_image", "save_image"]
+__all__ = ["check_image_output", "figure_image", "image_values", "save_image"]
+
+#: Pillow's modes of one 16-bit integer channel (a 16-bit greyscale PNG or TIFF)
+_MODES_16 = ("I;16", "I;16L", "I;16B", "I;16N")
+
+
+def image_values(im: Image.Image, alpha: bool = False) -> np.ndarray:
+    """A Pillow image's pixels as float32 ``(H, W, 3)`` RGB in [0, 1], the values as stored
+    (display-encoded, as a PNG holds them), with alpha as a fourth channel if ``alpha`` (1 where the
+    image has none). 8-bit images of every mode Pillow converts to RGB, 16-bit greyscale ones (divided
+    by 65535) and float ones already in [0, 1] are read; a 16-bit RGB PNG arrives with 8 bits a channel
+    (Pillow's reading). Raises ``ValueError`` saying what was expected for the rest: float values outside
+    [0, 1] (an HDR image, to tone-map first), 32-bit integer pixels, a mode Pillow cannot convert
+    (``convert('RGB')`` alone would clip a 16-bit image to white and cast a float one to black)."""
+    mode = im.mode
+    if mode in _MODES_16 or mode == "F":
+        grey = np.asarray(im, np.float32)
+        if mode == "F":
+            finite = np.isfinite(grey)
+            if not finite.all():
+                raise ValueError(f"a float image with {int((~finite).sum())} NaN or infinite pixels: expected "
+                                 f"values in [0, 1]")
+            lo, hi = (float(grey.min()), float(grey.max())) if grey.size else (0.0, 0.0)
+            if lo < 0.0 or hi > 1.0:
+                raise ValueError(f"a float image with values in [{lo:.4g}, {hi:.4g}]: expected display-encoded "
+                                 f"values in [0, 1] (tone-map an HDR image first)")
+        else:
+            grey = grey / 65535.0
+        planes = [grey] * 3 + ([np.ones_like(grey)] if alpha else [])
+        return np.stack(planes, axis=-1)
+    if mode == "I":
+        raise ValueError("32-bit integer pixels: expected 8- or 16-bit integer channels, or float ones in [0, 1]")
+    try:
+        rgb = im.convert("RGBA" if alpha else "RGB")
+    except ValueError as err:  # (a mode Pillow has no conversion for)
+        raise ValueError(f"a {mode} image, which Pillow cannot convert to RGB ({err})") from None
+    return np.asarray(rgb, np.float32) / 255.0
 
 
 def save_image(path: str | os.PathLike[str], image: np.ndarray) -> None:

@@ -107,6 +107,42 @@ def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, ca
         assert "expected a path, got '\\ud800' (not encodable as a file name)" in capsys.readouterr().err
 
 
+def test_metric_reads_16_bit_and_float_images_by_their_values(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 16-bit greyscale PNG and a float TIFF in [0, 1] are read as the values they hold, the tiles of
+    the 8-bit greyscale image of the same picture (Pillow's convert('RGB') clipped the 16-bit one to
+    white and cast the float one to black); a float image past [0, 1] (HDR) and 32-bit integer pixels
+    are refused in words, not compared."""
+    from PIL import Image
+
+    a, b, _, test = _image_pair(tmp_path)
+    grey8 = np.round(test[..., 0] * 255).astype(np.uint8)
+    files = {"grey8.png": Image.fromarray(grey8), "grey16.png": Image.fromarray(grey8.astype(np.uint16) * 257),
+             "float.tif": Image.fromarray(grey8.astype(np.float32) / 255, "F"),
+             "white.png": Image.fromarray(np.full_like(grey8, 255)), "black.png": Image.fromarray(np.zeros_like(grey8))}
+    tiles = {}
+    for name, im in files.items():
+        im.save(tmp_path / name)
+        assert main(["metric", "flip", str(a), str(tmp_path / name), "--tile", "8", "--json"]) == 0
+        tiles[name] = np.array(json.loads(capsys.readouterr().out)["tiles"], float)
+    assert Image.open(tmp_path / "grey16.png").mode == "I;16"
+    for wrong in ("white.png", "black.png"):  # (what the 16-bit and the float image were read as)
+        assert np.abs(tiles[wrong] - tiles["grey8.png"]).max() > 0.05
+    np.testing.assert_allclose(tiles["grey16.png"], tiles["grey8.png"], atol=1e-6)
+    np.testing.assert_allclose(tiles["float.tif"], tiles["grey8.png"], atol=1e-6)
+    Image.fromarray(grey8.astype(np.float32) / 64, "F").save(tmp_path / "hdr.tif")
+    Image.fromarray(grey8.astype(np.int32) * 1000, "I").save(tmp_path / "int32.tif")
+    nan = grey8.astype(np.float32) / 255
+    nan[3, 4] = np.nan
+    Image.fromarray(nan, "F").save(tmp_path / "nan.tif")
+    for name, said in (("hdr.tif", "a float image with values in [0, 3.984]: expected display-encoded values in "
+                                   "[0, 1] (tone-map an HDR image first)"),
+                       ("int32.tif", "32-bit integer pixels: expected 8- or 16-bit integer channels"),
+                       ("nan.tif", "a float image with 1 NaN or infinite pixels")):
+        assert main(["metric", "flip", str(tmp_path / name), str(b)]) == 2
+        err = capsys.readouterr().err
+        assert f"{str(tmp_path / name)!r}: {said}" in err and "Traceback" not in err, err
+
+
 def test_scenes_list_shows_each_maps_split_and_cache_state(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp scenes list`: every map of scenes.yaml in split order with what the cache holds of it
     (fetched, converted or nothing), a count, and the hint to fetch when nothing is; --json the same rows."""

@@ -314,6 +314,30 @@ def test_paper_layout(tmp_path: Path) -> None:
         open_dataset(tmp_path / "Empty")
 
 
+def test_paper_layout_reads_16_bit_and_float_pngs_by_their_values(tmp_path: Path) -> None:
+    """A sample of the paper's layout written with 16-bit greyscale or float images reads the values
+    they hold (Pillow's convert('RGBA') clipped 16 bits to white); a float image past [0, 1] is a
+    DatasetError naming the file, not a black buffer."""
+    from PIL import Image
+
+    folder = tmp_path / "Bistro" / "0000"
+    rng = np.random.default_rng(2)
+    grey = rng.integers(0, 256, (16, 32), dtype=np.uint8)
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1"] + [
+        f"output_{r}" for r in sdk.ALL_RATES
+    ]:
+        write_png(folder / f"{stem}.png", np.repeat(grey[..., None], 4, -1))
+    Image.fromarray(grey.astype(np.uint16) * 257).save(folder / "diffuse_1x1.png")
+    ds = open_dataset(tmp_path / "Bistro")
+    np.testing.assert_allclose(ds["0000"].buffer("albedo"), np.repeat(grey[..., None] / 255, 3, -1), atol=1e-6)
+    np.testing.assert_allclose(ds["0000"].channel("seen"), grey / 255, atol=1e-6)
+    Image.fromarray(grey.astype(np.float32) / 255, "F").save(folder / "normals_1x1.png", format="TIFF")
+    np.testing.assert_allclose(ds["0000"].buffer("normal")[..., 2], grey / 255, atol=1e-6)
+    Image.fromarray(grey.astype(np.float32) / 100, "F").save(folder / "output_1x1.png", format="TIFF")
+    with pytest.raises(DatasetError, match=r"output_1x1\.png: a float image with values in \[0\.01, 2\.55\]"):
+        ds["0000"].final("1x1")
+
+
 def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:
     import os
 
