@@ -338,6 +338,21 @@ def test_mesh_file(tmp_path: Path, ext: str):
         assert s.materials[0].roughness == pytest.approx(0.25)
 
 
+def test_a_16_bit_texture_keeps_its_values(tmp_path: Path):
+    """A glTF's 16-bit greyscale texture is read by its values (Pillow's convert('RGBA') clipped it
+    to white)."""
+    from PIL import Image
+
+    trimesh, mesh = _textured_quad()
+    grey = np.array([[1000, 20000], [40000, 65535]], np.uint16)
+    mesh.visual.material.baseColorTexture = Image.fromarray(grey)
+    mesh.export(tmp_path / "grey16.glb")
+    tex = scenes.load_mesh_file(tmp_path / "grey16.glb").materials[0].texture
+    assert tex is not None
+    np.testing.assert_array_equal(np.unique(tex[..., 0]), np.round(np.sort(grey.ravel()) / 257))
+    assert (tex[..., 0] == tex[..., 2]).all() and (tex[..., 3] == 255).all()
+
+
 def test_mesh_file_errors(tmp_path: Path):
     with pytest.raises(SceneNotFoundError):
         scenes.load_mesh_file(tmp_path / "none.glb")

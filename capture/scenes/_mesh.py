@@ -23,6 +23,7 @@ import numpy as np
 
 from rtp.scene import Material, Mesh, Scene, SpawnPoint
 
+from .._images import image_values
 from ._errors import SceneFormatError, SceneNotFoundError
 from ._geometry import vertex_normals
 
@@ -34,8 +35,8 @@ log = logging.getLogger("rtp.capture")
 def _image_to_rgba(img) -> np.ndarray | None:
     if img is None:
         return None
-    try:
-        return np.asarray(img.convert("RGBA"), dtype=np.uint8).copy()
+    try:  # (by its values: a 16-bit texture is not clipped to white, nor a float one cast to black)
+        return np.round(image_values(img, alpha=True) * 255.0).astype(np.uint8)
     except Exception as err:  # noqa: BLE001 - a broken image becomes "untextured"
         log.warning("could not convert texture image: %s", err)
         return None
