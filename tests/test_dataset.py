@@ -338,6 +338,43 @@ def test_paper_layout_reads_16_bit_and_float_pngs_by_their_values(tmp_path: Path
         ds["0000"].final("1x1")
 
 
+_PILLOW_MODES = ("1", "L", "LA", "La", "P", "PA", "RGB", "RGBA", "RGBa", "RGBX", "CMYK", "YCbCr", "LAB", "HSV", "I",
+                 "I;16", "I;16L", "I;16B", "I;16N", "F")
+
+
+def test_image_values_of_any_mode_and_bytes_are_colours_in_0_1_or_a_value_error() -> None:
+    """Whatever Pillow mode and pixel bytes an image has, ``image_values`` gives finite float32 RGB(A)
+    in [0, 1] of the image's size, or a ValueError saying what was expected (random float bytes:
+    NaN, HDR)."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from PIL import Image
+
+    from rtp.capture import image_values
+
+    from .fuzzing import scaled
+
+    seen: set[str] = set()
+
+    @settings(max_examples=scaled(150), deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(st.sampled_from(_PILLOW_MODES), st.integers(1, 5), st.integers(1, 5), st.booleans(), st.data())
+    def check(mode: str, w: int, h: int, alpha: bool, data: st.DataObject) -> None:
+        size = len(Image.new(mode, (w, h)).tobytes())
+        im = Image.frombytes(mode, (w, h), data.draw(st.binary(min_size=size, max_size=size)))
+        try:
+            a = image_values(im, alpha=alpha)
+        except ValueError as err:
+            assert mode in ("F", "I", "LAB") and "expected" in str(err) or "cannot convert" in str(err), (mode, err)
+            seen.add(f"{mode} refused")
+            return
+        seen.add(mode)
+        assert a.dtype == np.float32 and a.shape == (h, w, 4 if alpha else 3), (mode, a.shape)
+        assert np.isfinite(a).all() and a.min() >= 0.0 and a.max() <= 1.0, mode
+
+    check()
+    assert {"I;16", "F", "RGB", "I refused"} <= seen, seen
+
+
 def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:
     import os
 
