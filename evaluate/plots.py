@@ -10,7 +10,7 @@ and its range, titles on every panel, a legend for the rate classes.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -262,6 +262,18 @@ def _method_colours(methods: Sequence[str]) -> dict[str, Any]:
     return {m: cmap(i % 10) for i, m in enumerate(methods)}
 
 
+def _method_legend(fig: Figure, axes: Any, loc: Literal["outside right upper", "outside lower center"],
+                   ncols: int = 1) -> None:
+    """One legend of the methods of every panel, outside the panels (a legend inside one hid the
+    points and lines under it: on a short path most methods meet in the same corner)."""
+    handles: dict[str, Any] = {}
+    for ax in np.ravel(axes):
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, h)
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc=loc, ncols=ncols, fontsize=8, frameon=False)
+
+
 def play_curves(report: Any) -> np.ndarray:
     """Closed-loop sweeps (:func:`rtp.evaluate.play`): per path, each method's work saved against
     its share of failing tiles over its parameter sweep, the default parameter ringed, the matched
@@ -271,7 +283,7 @@ def play_curves(report: Any) -> np.ndarray:
     paths = list(report.unseen)
     methods = list(dict.fromkeys(r["method"] for r in report.rows))
     colours = _method_colours(methods)
-    fig = _figure(520 * len(paths) + 40, 420)
+    fig = _figure(520 * len(paths) + 220, 420)  # (220: the legend at the right)
     axes = np.atleast_1d(fig.subplots(1, len(paths), sharey=True))
     s = report.settings
     for ax, path in zip(axes, paths):
@@ -294,7 +306,7 @@ def play_curves(report: Any) -> np.ndarray:
         ax.set_title(f"{s['scene']}, {path} path, {s['frames']} frames", fontsize=10)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("shading work saved, %")
-    axes[-1].legend(fontsize=8, loc="lower right")
+    _method_legend(fig, axes, "outside right upper")
     return figure_image(fig)
 
 
@@ -305,7 +317,7 @@ def play_frames(report: Any) -> np.ndarray:
     methods = list(dict.fromkeys(m for p in paths for m in report.frames[p]))
     colours = _method_colours(methods)
     s = report.settings
-    fig = _figure(1300, 300 * len(paths) + 40)
+    fig = _figure(1300, 300 * len(paths) + 40 + 20 * -(-len(methods) // 7))  # (and the legend's rows below)
     axes = np.atleast_2d(fig.subplots(len(paths), 4, squeeze=False))
     for row, path in zip(axes, paths):
         t = np.arange(len(report.unseen[path]))
@@ -318,5 +330,5 @@ def play_frames(report: Any) -> np.ndarray:
             ax.set_title(f"{path}: {title}", fontsize=9)
             ax.set_xlabel(f"frame ({s['fps']:g} Hz)", fontsize=8)
             ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7, loc="best")
+    _method_legend(fig, axes, "outside lower center", ncols=min(len(methods), 7))
     return figure_image(fig)

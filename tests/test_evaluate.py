@@ -523,6 +523,33 @@ def test_figures_carry_their_colour_scale_and_legend() -> None:
     assert [name.split(":")[0] for name, _ in plots.rate_legend()] == ["1x1 (untinted)", "fine", "medium", "coarse"]
 
 
+def test_the_closed_loop_plots_keep_their_legend_off_the_panels(monkeypatch: pytest.MonkeyPatch) -> None:
+    """play's curves and per-frame plots name the methods in one legend outside every panel: a legend
+    inside the last panel hid the points in its corner (on a short path most methods' defaults meet
+    there) and, per frame, the lines under it."""
+    from rtp.evaluate._play import PlayReport
+
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
+    methods = ["jnyang", "jnyang@4", "yang2019", "fidelityfx", "oracle"]
+    report = PlayReport({"scene": "procedural:0", "frames": 30, "fps": 60.0, "fail_metric": "jnyang",
+                         "fail_threshold": 0.25})
+    for path in ("fast", "slow"):
+        report.unseen[path] = [0.05] * 30
+        report.frames[path] = {m: {k: [0.6] * 30 for k in ("saved", "fail", "change")} for m in methods}
+        report.rows += [{"path": path, "method": m, "fail_share": 0.3 + 0.01 * i, "work_saved": 0.1 + 0.01 * i,
+                         "default": True} for i, m in enumerate(methods)]
+    plots.play_curves(report)
+    plots.play_frames(report)
+    for fig in figures:
+        fig.canvas.draw()
+        (legend,) = fig.legends
+        assert [t.get_text() for t in legend.get_texts()] == methods
+        box = legend.get_window_extent()
+        for ax in fig.axes:
+            assert ax.get_legend() is None and not box.overlaps(ax.get_window_extent()), ax.get_title()
+
+
 @pytest.mark.parametrize("ext", ["png", "jpg", "webp"])
 def test_save_image_writes_the_format_its_extension_names(tmp_path: Path, ext: str) -> None:
     from PIL import Image
