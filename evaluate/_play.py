@@ -872,7 +872,10 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             if anim_frame and lp.default and displayed is not None:
                 shown[lp.method.name] = (displayed, rates)
         if shown:
-            keep.append(_anim_frame(ref, shown, tile))
+            when = f"frame {pf.index} of {len(path)}"
+            if isinstance(getattr(path, "fps", None), (int, float)) and path.fps > 0:
+                when += f", {pf.index / path.fps:.2f} s"
+            keep.append(_anim_frame(ref, shown, tile, when))
         if progress is not None:
             progress(1)
     return unseen, keep
@@ -886,19 +889,27 @@ _ANIM_FPS = 20  # its playback rate
 _ANIM_PANEL_WIDTH = 400  # each panel at most this wide
 
 
-def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]], tile: int) -> np.ndarray:
-    """One GIF frame: the full-rate frame and each method's displayed frame with its rate overlay,
-    downscaled to panels at most ``_ANIM_PANEL_WIDTH`` wide, three per row, uint8."""
+def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]], tile: int,
+                when: str = "") -> np.ndarray:
+    """One GIF frame: the full-rate frame (labelled with ``when``, the frame's place on the path) and
+    each method's displayed frame with its rate overlay, downscaled to panels at most
+    ``_ANIM_PANEL_WIDTH`` wide, three per row, uint8. The rates' colour key fills the first empty
+    cell of the grid, legible at the panels' size; where no cell is empty, the first overlay carries
+    the overlay's own small key."""
     from PIL import Image
 
-    panels = [_label(ref, "full rate (reference)")]
-    panels += [_label(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0), name)
-               for i, (name, (img, rates)) in enumerate(shown.items())]
+    spare = -(len(shown) + 1) % 3 if len(shown) + 1 > 3 else 0
+    names = ["full rate (reference)" + (f", {when}" if when else ""), *shown]
+    panels = [_uint8(ref)] + [_uint8(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0 and not spare))
+                              for i, (img, rates) in enumerate(shown.values())]
     h, w = panels[0].shape[:2]
     if w > _ANIM_PANEL_WIDTH:
         size = (_ANIM_PANEL_WIDTH, max(1, round(h * _ANIM_PANEL_WIDTH / w)))
         panels = [np.asarray(Image.fromarray(p).resize(size, Image.Resampling.BOX)) for p in panels]
         h, w = panels[0].shape[:2]
+    panels = [_label(p, name) for p, name in zip(panels, names)]  # (after the downscale: legible at its size)
+    if spare:
+        panels.append(_rate_key(h, w))
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
     grid = np.zeros((rows * h, cols * w, 3), np.uint8)
@@ -906,6 +917,32 @@ def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]]
         r, c = divmod(i, cols)
         grid[r * h:(r + 1) * h, c * w:(c + 1) * w] = p
     return grid
+
+
+def _rate_key(h: int, w: int) -> np.ndarray:
+    """An ``h`` x ``w`` uint8 panel naming the overlay's colour classes (:func:`rtp.evaluate.plots.rate_legend`):
+    a swatch and its rates a row, white on black, as large as the panel holds (nothing where it is
+    too small for one row)."""
+    from PIL import Image, ImageDraw
+
+    from .plots import rate_legend
+
+    im = Image.new("RGB", (w, h))
+    rows = [("rates each method chose", None, False)] + [(label, colour, True) for label, colour in rate_legend()]
+    step = min(h // (len(rows) + 1), 28)
+    if step < 8:
+        return np.asarray(im)
+    d = ImageDraw.Draw(im)
+    font, left = max(6, round(step * 0.55)), step // 2
+    for i, (label, colour, swatch) in enumerate(rows):
+        top = left + i * step
+        x = left
+        if swatch:
+            fill = (128, 128, 128) if colour is None else tuple(round(255 * c) for c in colour)
+            d.rectangle((x, top, x + font, top + font), fill=fill, outline=(255, 255, 255))
+            x += font + left
+        d.text((x, top), label, fill=(255, 255, 255), font_size=font)
+    return np.asarray(im)
 
 
 def _write_animation(path: Path, frames: list[np.ndarray]) -> list[str]:
@@ -924,15 +961,23 @@ def _write_animation(path: Path, frames: list[np.ndarray]) -> list[str]:
     return [path.name, still.name]
 
 
+def _uint8(img: np.ndarray) -> np.ndarray:
+    """An RGB(A) image in [0, 1] (or uint8) as contiguous uint8 RGB."""
+    arr = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8) if img.dtype != np.uint8 else img
+    return np.ascontiguousarray(arr[..., :3])
+
+
 def _label(img: np.ndarray, text: str) -> np.ndarray:
+    """``img`` (uint8 RGB) with ``text`` white on a black box in its top-left corner, sized to the
+    text as drawn (one font pixel per 30 image columns, 12 at the least)."""
     from PIL import Image, ImageDraw
 
-    arr = (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8) if img.dtype != np.uint8 else img
-    im = Image.fromarray(np.ascontiguousarray(arr[..., :3]))
+    im = Image.fromarray(_uint8(img))
     d = ImageDraw.Draw(im)
-    scale = max(1, im.width // 400)  # legible after the panel is downscaled
-    d.rectangle((0, 0, (8 + 7 * len(text)) * scale, 16 * scale), fill=(0, 0, 0))
-    d.text((4 * scale, 2 * scale), text, fill=(255, 255, 255), font_size=11 * scale)
+    size = max(12, im.width // 30)
+    left, top, right, bottom = d.textbbox((4, 2), text, font_size=size)
+    d.rectangle((0, 0, right + 4, bottom + 3), fill=(0, 0, 0))
+    d.text((4, 2), text, fill=(255, 255, 255), font_size=size)
     return np.asarray(im)
 
 

@@ -595,3 +595,40 @@ def test_a_second_play_into_a_folder_being_played_into_is_refused(tmp_path: Path
         assert e.value.name == "out"
     play("procedural:0", "oracle", paths=("fast",), frames=3, size=(64, 48), sweep=False, plots=False, out=str(out))
     assert (out / "play.md").is_file() and not (out / LOCK_NAME).exists()
+
+
+def test_a_gif_frame_labels_its_place_and_keys_the_rate_colours_in_its_spare_cell() -> None:
+    """Each GIF frame's reference panel says which frame it is; with a cell of the three-column grid
+    to spare, the colour key fills it at the panels' size (every class's colour at full strength
+    there); without one, the first overlay carries the overlay's small key. Labels are drawn after the
+    downscale, so they are as tall at 1280x720 as at the panel's own size."""
+    from rtp.evaluate._play import _ANIM_PANEL_WIDTH, _anim_frame
+    from rtp.evaluate.plots import rate_legend
+
+    h, w = 225, _ANIM_PANEL_WIDTH
+
+    def frame(n: int, scale: float = 1) -> np.ndarray:
+        ref = np.full((round(h * scale), round(w * scale), 3), 0.5, np.float32)
+        rates = np.full((-(-ref.shape[0] // 16), -(-ref.shape[1] // 16)), sdk.RATE_CODES["2x2"], np.uint8)
+        return _anim_frame(ref, {f"m{i}": (ref, rates) for i in range(n)}, 16, "frame 7 of 30, 0.12 s")
+
+    def has(img: np.ndarray, rgb: tuple[float, float, float]) -> bool:
+        return bool((np.abs(img.astype(int) - np.round(np.array(rgb) * 255)).max(-1) <= 2).any())
+
+    spare = frame(4)  # five panels: one cell to spare
+    assert spare.shape == (2 * h, 3 * w, 3)
+    key = spare[h:, 2 * w:]
+    assert all(has(key, colour) for _, colour in rate_legend()[1:]) and not has(spare[:h], rate_legend()[3][1])
+    full = frame(5)  # six panels: none to spare, and no key cell
+    assert full.shape == (2 * h, 3 * w, 3) and not has(full[h:, 2 * w:], rate_legend()[1][1])
+    # the first overlay's own key (dark box, bottom-left) only where no cell is spare
+    assert full[h - 3:h, w:w + 10].mean() < spare[h - 3:h, w:w + 10].mean()
+    # the label's black box is as tall on a 640x360 frame, downscaled, as on the panel-sized one
+    large = frame(4, scale=1.6)
+    assert large.shape == spare.shape
+
+    def box_height(img: np.ndarray) -> int:
+        column = img[:, 1]
+        return int(np.argmax(column.max(-1) > 0))
+
+    assert box_height(spare) == box_height(large) >= 14
