@@ -16,6 +16,7 @@ directly gives.
 from __future__ import annotations
 
 import json
+import logging
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -40,6 +41,8 @@ from rtp.sdk.files import atomic_output, writer_lock
 from ._dataset import DatasetReader, _check_id, sample_path
 from ._memory import check_memory, job_bytes, meminfo
 from ._pool import cores
+
+log = logging.getLogger("rtp.capture")
 
 __all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
 
@@ -328,7 +331,10 @@ def compute_targets(
             raise ParameterError(f"device {device!r} with ray: Ray gives a task no GPU unless it asks for one, and "
                                  f"rtp's targets tasks do not; compute on this machine's GPU without ray, or on Ray's "
                                  f"CPUs (device cpu or auto)", "device")
-        M.targets_device(metrics, device, flip_backend)  # (the device, and whether this torch can use it, now)
+        # (the device, and whether this torch can use it, now)
+        if M.targets_device(metrics, device, flip_backend) is None and device not in ("cpu", "auto"):
+            log.warning("device %r: %s run%s in numpy on the CPU; nothing of them runs on the device", device,
+                        ", ".join(metrics), "s" if len(metrics) == 1 else "")
     # The parameters too, before they are declared in the manifest: a bad one stored there would refuse
     # every later run, good values included.
     if ppd is not None:

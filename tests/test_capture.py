@@ -246,6 +246,26 @@ def test_targets_on_a_device_torch_cannot_use_are_refused_before_any_work(
     assert store.has("procedural_5-slow-0000", "flip")
 
 
+def test_a_gpu_named_for_numpy_metrics_only_is_said_to_be_unused(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """``rtp targets --metrics psnr --device cuda`` has no torch work to place: it runs, saying so
+    (the user who asked for a GPU learns none was used), on a machine without one too."""
+    import logging
+
+    import torch
+
+    from rtp.capture import compute_targets
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        assert compute_targets(out, ["psnr", "jnyang"], device="cuda") == 1
+        assert compute_targets(out, ["yang"], device="cpu") == 1
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert said == ["device 'cuda': psnr, jnyang run in numpy on the CPU; nothing of them runs on the device"], said
+
+
 def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
