@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import textwrap
 import warnings
 from typing import Any
 
@@ -95,14 +96,22 @@ def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np
     finite = shown[np.isfinite(shown)]
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     vmin, vmax = (0.0, max(hi, 1e-6)) if not info.higher_is_better else (lo, max(hi, lo + 1e-6))
-    fig = Figure(figsize=(w / 100 + 1.6, h / 100 + 0.6), dpi=100, layout="constrained")
+    # (the picture at one pixel a pixel, enlarged to 3 inches on its shorter side where it is smaller:
+    # a 130x100 pair's colour bar label and title were cut off)
+    zoom = max(1.0, 300.0 / min(h, w))
+    fig = Figure(figsize=(w * zoom / 100 + 1.6, h * zoom / 100 + 0.6), dpi=100, layout="constrained")
     ax = fig.subplots()
-    cmap = "magma_r" if info.higher_is_better else "magma"  # bright = worse for every metric
-    im = ax.imshow(np.where(np.isfinite(shown), shown, vmax if info.higher_is_better else vmin), cmap=cmap,
-                   vmin=vmin, vmax=vmax, interpolation="nearest")
+    import matplotlib
+
+    # bright = worse for every metric; identical tiles (PSNR's +inf) grey, apart from the best finite one
+    cmap = matplotlib.colormaps["magma_r" if info.higher_is_better else "magma"].with_extremes(bad="#9a9a9a")
+    im = ax.imshow(np.ma.masked_invalid(shown), cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
     kind = "per pixel" if pixel_map is not None else f"per {args.tile}px tile"
     same = "" if finite.size else f" (every {'tile' if pixel_map is None else 'pixel'} identical: +inf {info.units})"
-    ax.set_title(f"{args.metric} {kind}: {args.reference} vs {args.test}{same}", fontsize=9)
+    if finite.size and finite.size < shown.size:
+        same = f" (grey: identical, +inf {info.units})"
+    title = f"{args.metric} {kind}: {args.reference} vs {args.test}{same}"
+    ax.set_title(textwrap.fill(title, max(30, round((w * zoom + 120) / 6))), fontsize=9)  # (about 6 px a character)
     ax.set_xticks([])
     ax.set_yticks([])
     fig.colorbar(im, ax=ax, label=f"{args.metric} ({info.units}); bright = worse")

@@ -93,6 +93,11 @@ def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, ca
         with Image.open(out) as im:
             picture = np.asarray(im.convert("RGB"))
         assert picture.shape[0] > 24 and picture.shape[1] > 40 and picture.std() > 10  # a figure, not a blank
+        # a small pair is drawn 3 inches high (its colour bar's label was cut off at one pixel a pixel);
+        # PSNR's identical tiles (the right half, +inf dB) grey, apart from the best finite tile's black
+        assert picture.shape[0] >= 300
+        grey = (np.abs(picture.astype(int) - 0x9A).max(-1) <= 2).mean()
+        assert (0.05 < grey < 0.5) if metric == "psnr" else grey < 0.01, (metric, grey)
     small = tmp_path / "small.png"
     Image.fromarray(np.zeros((10, 12, 3), np.uint8)).save(small)
     assert main(["metric", "flip", str(a), str(small)]) == 2
