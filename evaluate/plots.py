@@ -71,6 +71,12 @@ def upsample_tiles(values: np.ndarray, tile: int, size: tuple[int, int]) -> np.n
     return np.repeat(np.repeat(np.asarray(values), tile, axis=0), tile, axis=1)[:h, :w]
 
 
+#: The smallest a map panel is drawn, (width, height) in pixels: a smaller frame is enlarged to it, its
+#: aspect kept, so that the titles and colour-bar labels around it fit (a 160x96 demo's ran into each
+#: other and off the image).
+MIN_PANEL = (200, 160)
+
+
 def _figure(width_px: float, height_px: float) -> Figure:
     from matplotlib.figure import Figure
 
@@ -89,14 +95,17 @@ def _bare(ax: Any) -> None:
 def value_map(
     values: np.ndarray, *, label: str, vmin: float = 0.0, vmax: float = 1.0, cmap: str = "magma", title: str = ""
 ) -> np.ndarray:
-    """One per-pixel map ``(H, W)`` drawn at its own size with a colour bar naming the quantity."""
+    """One per-pixel map ``(H, W)`` drawn at its own size (enlarged to :data:`MIN_PANEL` where it is
+    smaller) with a colour bar naming the quantity."""
     v = np.asarray(values, np.float64)
     if v.ndim != 2 or v.size == 0:
         raise BaselineError(f"value_map: expected a non-empty (H, W) array, got shape {v.shape}")
     if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > vmin):
         raise BaselineError(f"colour range: expected finite vmin < vmax, got {vmin}, {vmax}")
     h, w = v.shape
-    fig = _figure(w + 130, h + (40 if title else 16))
+    # (a small map enlarged, to the height its colour bar's label takes too: its labels were cut off)
+    zoom = max(1.0, max(MIN_PANEL[1], 240) / h, MIN_PANEL[0] / w)
+    fig = _figure(w * zoom + 130, h * zoom + (40 if title else 16))
     ax = fig.subplots()
     im = ax.imshow(v, cmap=_colormap(cmap), vmin=vmin, vmax=vmax, interpolation="nearest")
     _bare(ax)
@@ -128,7 +137,8 @@ def heatmaps(
     ``truth`` and ``prediction`` are per-tile values ``(6, th, tw)`` (channel order
     :data:`~rtp.sdk.PREDICTED_RATES`); ``[vmin, vmax]`` spans the colours, ``label`` names the
     quantity on the colour bar (with its units) and ``threshold``, if given, is marked on it.
-    ``size`` is the frame ``(H, W)``; ``scale`` > 1 draws the panels that many times smaller.
+    ``size`` is the frame ``(H, W)``; ``scale`` > 1 draws the panels that many times smaller (never
+    smaller than :data:`MIN_PANEL`).
     """
     truth, prediction = np.asarray(truth), np.asarray(prediction)
     if truth.shape != prediction.shape or truth.ndim != 3 or truth.shape[0] != len(PREDICTED_RATES):
@@ -142,7 +152,9 @@ def heatmaps(
 
     h, w = size
     cols = 3 if seen is not None else 2
-    pw, ph = max(w / scale, 120), max(h / scale, 68)
+    pw, ph = w / scale, h / scale
+    zoom = max(1.0, MIN_PANEL[0] / pw, MIN_PANEL[1] / ph)  # (small frames enlarged: titles ran into each other)
+    pw, ph = pw * zoom, ph * zoom
     fig = _figure(cols * pw + 110, len(rates) * (ph + 26) + (28 if title else 8))
     axes = fig.subplots(len(rates), cols, squeeze=False)
     norm = mcolors.Normalize(vmin, vmax)
@@ -227,12 +239,16 @@ def rate_legend() -> list[tuple[str, tuple[float, float, float] | None]]:
     return out
 
 
-def _add_rate_legend(fig: Figure) -> None:
+#: The width in pixels the rate legend takes in one row (its four entries at 8 points).
+_RATE_LEGEND_ROW = 600
+
+
+def _add_rate_legend(fig: Figure, ncols: int) -> None:
     from matplotlib.patches import Patch
 
     handles = [Patch(facecolor=c if c is not None else "white", edgecolor="#404040", label=name)
                for name, c in rate_legend()]
-    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncols=ncols, fontsize=8, frameon=False)
 
 
 def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1) -> np.ndarray:
@@ -243,7 +259,10 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
         raise BaselineError("rate_overlays: no methods given")
     img = np.asarray(image)
     h, w = img.shape[:2]
-    fig = _figure(len(rates) * max(w / scale, 160) + 20, max(h / scale, 90) + 70)
+    width = len(rates) * max(w / scale, 160) + 20
+    # (the legend in as many columns as the figure holds: in one row it was cut off below a narrow figure)
+    ncols = 4 if width >= _RATE_LEGEND_ROW else 2 if width >= _RATE_LEGEND_ROW / 2 else 1
+    fig = _figure(width, max(h / scale, 90) + 70 + 18 * (4 // ncols - 1))
     axes = np.atleast_1d(fig.subplots(1, len(rates)))
     for ax, (name, codes) in zip(axes, rates.items()):
         codes = np.asarray(codes).astype(np.uint8)
@@ -251,7 +270,7 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
         ax.imshow(draw_rate_overlay(img, codes, tile), interpolation="nearest")
         ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
         _bare(ax)
-    _add_rate_legend(fig)
+    _add_rate_legend(fig, ncols)
     return figure_image(fig)
 
 

@@ -550,6 +550,39 @@ def test_the_closed_loop_plots_keep_their_legend_off_the_panels(monkeypatch: pyt
             assert ax.get_legend() is None and not box.overlaps(ax.get_window_extent()), ax.get_title()
 
 
+def test_the_figures_of_a_small_frame_keep_every_label_inside_and_apart(monkeypatch: pytest.MonkeyPatch) -> None:
+    """At 160x96 (rtp demo --size 160x96) the heatmaps' panel titles ran into each other, the FLIP
+    map's colour-bar label and the overlay's rate legend off the image: small frames are drawn larger
+    (plots.MIN_PANEL) and the legend wraps to the figure's width. Every text stays inside its figure
+    and no two panel titles overlap."""
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
+    h, w = 96, 160
+    truth = np.random.default_rng(0).random((6, h // 16, w // 16))
+    plots.heatmaps(truth, truth, 16, (h, w), seen=np.ones((h, w)), threshold=0.25, label="jnyang (luma / (luma + l))",
+                   title="jnyang per 16px tile: true (rendered at every rate) and predicted by jnyang.onnx")
+    plots.value_map(np.zeros((h, w)), label="FLIP error (0 = identical, 1 = worst)",
+                    title="FLIP of the VRS composite against full-rate shading")
+    plots.rate_overlays(np.zeros((h, w, 3), np.float32), {"jnyang": np.zeros((h // 16, w // 16), np.uint8)}, 16)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    for fig in figures:
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        renderer = canvas.get_renderer()
+        inside = fig.bbox.padded(1)
+        texts = [t for t in fig.findobj(lambda a: hasattr(a, "get_text")) if t.get_visible() and t.get_text()]
+        assert texts
+        for t in texts:
+            box = t.get_window_extent(renderer)
+            assert inside.contains(box.x0, box.y0) and inside.contains(box.x1, box.y1), t.get_text()
+        titles = [ax.title.get_window_extent(renderer) for ax in fig.axes if ax.get_title()]
+        for i, a in enumerate(titles):
+            assert not any(a.overlaps(b) for b in titles[i + 1:])
+        for ax in fig.axes:  # (a panel's title no wider than the panel: its neighbour's starts beside it)
+            assert not ax.get_title() or ax.title.get_window_extent(renderer).width <= ax.get_window_extent().width
+
+
 @pytest.mark.parametrize("ext", ["png", "jpg", "webp"])
 def test_save_image_writes_the_format_its_extension_names(tmp_path: Path, ext: str) -> None:
     from PIL import Image
