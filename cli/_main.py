@@ -289,13 +289,22 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     names = list(_names(args.scene)) if args.scene else map_names(args.split, args.splits)
     total = len(names) * len(args.profiles) * args.per_scene
     what = f"{len(names)} maps of the {args.split} split" if args.split else ", ".join(names)
-    print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
-          f"at {args.size[0]}x{args.size[1]}, cameras placed {args.placement}, into {args.out}", file=sys.stderr)
+    if not args.quiet:  # (-q: only errors)
+        print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
+              f"at {args.size[0]}x{args.size[1]}, cameras placed {args.placement}, into {args.out}", file=sys.stderr)
+    done = [0]
+    args.on_interrupt = lambda: (f"{done[0]} of {total} samples are in {args.out} (each written whole): the same "
+                                 f"command captures the rest")
+
+    def progress(n: int, _total: int) -> None:
+        done[0] = n
+        bar.update_to(n)
+
     with Bar(args, total, "capture", "sample") as bar:
         report = capture(
             names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
             workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
-            progress=lambda done, _total: bar.update_to(done), ray=args.ray, placement=args.placement,
+            progress=progress, ray=args.ray, placement=args.placement,
             planning=lambda job, found, asked: bar.status(f"planning {job}'s viewpoints: {found}/{asked}"),
         )
     if report.failed:
@@ -343,9 +352,17 @@ def _cmd_targets(args: argparse.Namespace) -> int:
             ppd = args.ppd if args.ppd == "width" else float(args.ppd)
         except ValueError:
             raise _usage(f"--ppd: expected a number or 'width', got {args.ppd!r}") from None
+    done = [0, 0]
+    args.on_interrupt = lambda: (f"the targets of {done[0]} of {done[1]} samples are kept: the same command "
+                                 f"computes the rest" if done[1] else "")
+
+    def progress(n: int, total: int) -> None:
+        done[:] = n, total
+        bar.update_to(n, total)
+
     with Bar(args, 0, "targets", "sample") as bar:
         n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
-                            progress=lambda done, total: bar.update_to(done, total), ray=args.ray, device=args.device)
+                            progress=progress, ray=args.ray, device=args.device)
     print(f"{args.data}: targets computed for {n} samples ({', '.join(args.metrics)})")
     return 0
 
@@ -383,6 +400,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from rtp.metrics import device_name, resolve_device
 
     where = device_name(resolve_device(cfg.device))  # (what auto chose, on the bar)
+    args.on_interrupt = lambda: _train_kept(cfg.out, cfg.steps, cfg.save_every)
     with Bar(args, cfg.steps, f"train {cfg.metric} on {where}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
                        loading=lambda read, samples: bar.status(f"reading samples: {read}/{samples}"))
@@ -395,6 +413,17 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"{result.checkpoint}: {result.steps} steps; validation R2 {v['r2']:.3f}, MAE {v['mae']:.4f}; "
           f"safety {result.safety:.4f} (underestimated tiles with it: {100 * result.under_share:.1f}%)")
     return 0
+
+
+def _train_kept(out: str | Path, steps: int, save_every: int) -> str:
+    """What an interrupted ``rtp train`` kept: the step its checkpoint holds, which the same command
+    resumes from, or that none was written yet."""
+    from rtp.train.checkpoint import load
+
+    if not Path(out).is_file():
+        return f"no checkpoint yet (the first at step {min(save_every, steps)}): the same command starts again"
+    step = int((load(out).training or {}).get("step", 0))
+    return f"{out} holds step {step} of {steps}: the same command resumes there"
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -443,6 +472,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
     paths = _names(args.path) or ["slow", "fast"]
     done = [0]
     steps: dict[str, str] = {}  # path -> the step it is in, while it is not playing frames ("": the job's own)
+    if args.out is not None:
+        args.on_interrupt = lambda: (f"the paths played to their end are kept in {args.out}: the same command "
+                                     f"plays the rest")
     with Bar(args, args.frames * len(paths), f"play {args.scene}", "frame") as bar:
         def progress(n: int) -> None:
             done[0] += n

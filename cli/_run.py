@@ -253,6 +253,17 @@ class Bar:
         self.close()
 
 
+def _kept(on_interrupt: Callable[[], Callable[[], str] | None] | None) -> str:
+    """``; `` and the interrupted command's account of what it kept and how to go on, or nothing (no
+    account, or one that failed: the interruption is said all the same)."""
+    try:
+        account = on_interrupt() if on_interrupt is not None else None
+        text = account() if account is not None else ""
+    except Exception:  # noqa: BLE001 - a second Ctrl-C or a broken file must not hide the first
+        return ""
+    return f"; {one_line(text)}" if text else ""
+
+
 #: The errors of a path that is wrong in itself (a usage error, exit 2), not of a job that failed.
 _PATH_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EEXIST, errno.EACCES, errno.EPERM,
                           errno.EROFS, errno.ENAMETOOLONG})
@@ -262,14 +273,18 @@ def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace]
     """Run a command body under the one error policy (see the module docstring)."""
     args.verbose = int(getattr(args, "verbose", 0) or 0) + int(getattr(args, "verbose_after", 0) or 0)
     with _logging(args):
-        return run_guarded(prog, lambda: body(args), verbose=args.verbose)
+        return run_guarded(prog, lambda: body(args), verbose=args.verbose,
+                           on_interrupt=lambda: getattr(args, "on_interrupt", None))
 
 
-def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False) -> int:
+def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False,
+                on_interrupt: Callable[[], Callable[[], str] | None] | None = None) -> int:
     """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,
     ``PROG: error: MESSAGE``, and returns its class's exit code (``verbose``: the traceback above it); an
     ``OSError`` naming a path likewise (2 for a wrong path, 1 otherwise); a ``MemoryError`` one line
-    (1); Ctrl-C 130; a closed pipe 0.
+    (1); Ctrl-C 130, saying ``PROG: interrupted`` and what of the job is kept where ``on_interrupt``
+    gives the command's own account (``args.on_interrupt``, set by a resumable command once it starts);
+    a closed pipe 0.
     Anything else propagates with its traceback. The benchmark scripts under ``bench/`` run through it."""
     from rtp.sdk import EXIT_FAILED, EXIT_USAGE, RtpError, exit_code
 
@@ -281,7 +296,7 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
         print(f"{prog}: error: {one_line(str(err))}", file=sys.stderr)
         return exit_code(err)
     except KeyboardInterrupt as err:
-        print(f"{prog}: interrupted", file=sys.stderr)
+        print(f"{prog}: interrupted{_kept(on_interrupt)}", file=sys.stderr)
         return exit_code(err)
     except MemoryError as err:  # numpy's "Unable to allocate 30.5 GiB for an array ...": the machine's limit, not a bug
         if verbose:

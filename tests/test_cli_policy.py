@@ -195,6 +195,57 @@ def test_interrupts_exit_130_and_bugs_propagate(tmp_path: Path, monkeypatch: pyt
         assert "error:" not in capsys.readouterr().err, prog
 
 
+def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C in capture, targets, train or play says, after "interrupted", what the job kept and that
+    the same command goes on from it (it said "interrupted" alone, and a user could believe the work
+    lost); each account is true: the rerun resumes from what it names."""
+    from rtp.cli._run import Bar
+
+    def interrupt_at(count: int) -> None:
+        def update_to(self: Bar, n: int, total: int | None = None, **_: str) -> None:
+            if n >= count:
+                raise KeyboardInterrupt
+
+        monkeypatch.setattr(Bar, "update_to", update_to)
+
+    data = tmp_path / "data"
+    capture = ["capture", "--scene", "procedural:1,procedural:2", "--per-scene", "2", "--size", "64x48", "--profiles",
+               "slow", "--out", str(data), "-q"]
+    interrupt_at(1)
+    assert main(capture) == 130
+    assert capsys.readouterr().err == (f"rtp capture: interrupted; 1 of 4 samples are in {data} (each written whole): "
+                                       f"the same command captures the rest\n")
+    interrupt_at(99)
+    assert main(capture) == 0 and "3 samples written, 1 already there" in capsys.readouterr().out
+    interrupt_at(2)
+    assert main(["targets", str(data), "--metrics", "jnyang", "-q"]) == 130
+    assert capsys.readouterr().err == ("rtp targets: interrupted; the targets of 2 of 4 samples are kept: the same "
+                                       "command computes the rest\n")
+    interrupt_at(99)
+    assert main(["targets", str(data), "--metrics", "jnyang", "-q"]) == 0
+    model = tmp_path / "m.pt"
+    train = ["train", "--data", str(data), "--metric", "jnyang", "--val-scenes", "procedural:2", "--steps", "600",
+             "--batch", "4", "--crop", "32", "--head", "linear", "--out", str(model), "-q"]
+    interrupt_at(5)
+    assert main(train) == 130
+    assert capsys.readouterr().err == ("rtp train: interrupted; no checkpoint yet (the first at step 250): the same "
+                                       "command starts again\n")
+    interrupt_at(260)
+    assert main(train) == 130
+    assert capsys.readouterr().err == (f"rtp train: interrupted; {model} holds step 250 of 600: the same command "
+                                       f"resumes there\n")
+    resumed: list[int] = []
+    monkeypatch.setattr(Bar, "update_to", lambda self, n, total=None, **_: resumed.append(n))
+    assert main(train) == 0 and resumed[0] == 250 and resumed[-1] == 600  # (the bar starts where it stopped)
+    play = tmp_path / "play"
+    interrupt_at(1)
+    assert main(["play", "procedural:1", "--frames", "3", "--methods", "full", "--size", "64x48", "--no-sweep",
+                 "--out", str(play), "-q"]) == 130
+    assert capsys.readouterr().err == (f"rtp play: interrupted; the paths played to their end are kept in {play}: "
+                                       f"the same command plays the rest\n")
+
+
 def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """An OSError about a path (a folder where a file was asked, a read-only place, a full disk) is the
