@@ -431,6 +431,14 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.plots and not args.out:
         raise _usage("--plots writes into --out; give an output folder")
+    if args.threshold is not None and len(args.model) > 1:  # (one number in two metrics' units was taken for both)
+        from rtp import sdk
+
+        metrics = {m: sdk.load(m, metadata=args.metadata).metadata.metric for m in args.model}
+        if len(set(metrics.values())) > 1:
+            raise _usage(f"--threshold is in the units of one metric, and the models predict "
+                         f"{', '.join(f'{m} ({metric})' for m, metric in metrics.items())}: evaluate them one metric "
+                         f"at a time, or leave each its own default threshold")
     reports = []
     for model in args.model:
         with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:

@@ -619,6 +619,15 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "a,b", "--scene", "b",
                      "--no-baselines", "--max-samples", "1"]) == 0
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--plots"]) == 2  # --plots needs --out
+    # one --threshold for models of two metrics was taken in both metrics' units; refused before any work,
+    # while models of one metric share it
+    capsys.readouterr()
+    assert rtp_main(["evaluate", str(model), "flip", "--data", str(dataset), "--threshold", "0.3", "--out",
+                     str(tmp_path / "two")]) == 2
+    assert f"the models predict {model} (jnyang), flip (flip)" in capsys.readouterr().err
+    assert not (tmp_path / "two").exists()
+    assert rtp_main(["evaluate", str(model), "jnyang", "--data", str(dataset), "--threshold", "0.3",
+                     "--no-baselines", "--max-samples", "1"]) == 0
     # the summary tables docs/results.md quotes read the same file (bench/report.py)
     report = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "report.py")]
     for flag, expect in (("--compact", "saved % at 1 / 2 / 5 / 10% fails"), ("--per-scene", "| all scenes |")):
