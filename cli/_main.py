@@ -439,6 +439,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             raise _usage(f"--threshold is in the units of one metric, and the models predict "
                          f"{', '.join(f'{m} ({metric})' for m, metric in metrics.items())}: evaluate them one metric "
                          f"at a time, or leave each its own default threshold")
+    if len(args.model) > 1:  # (each model's targets, threshold and scenes before the first model's minutes of work)
+        from rtp.evaluate import check_evaluation
+
+        for model in args.model:
+            check_evaluation(model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
+                             threshold=args.threshold, tile_size=args.tile_size)
     reports = []
     for model in args.model:
         with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:

@@ -35,8 +35,8 @@ from rtp.sdk import PREDICTED_RATES, RATE_CODES, ParameterError, select_rates, w
 from ._baselines import FidelityFX, Yang2019, as_real
 from ._scores import scores
 
-__all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "evaluate", "failing_tiles", "spearman", "tile_unseen_share",
-           "write_reports"]
+__all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "check_evaluation", "evaluate", "failing_tiles",
+           "spearman", "tile_unseen_share", "write_reports"]
 
 log = logging.getLogger("rtp.evaluate")
 
@@ -387,11 +387,7 @@ def evaluate(
             raise ParameterError(f"{key} must be True or False, got {flag!r}", key)
     if plot_sample is not None and not isinstance(plot_sample, str):
         raise ParameterError(f"plot_sample must be None or a sample id, got {plot_sample!r}", "plot_sample")
-    predictor = sdk.load(model, metadata=metadata, tile_size=tile_size)
-    # the metadata as evaluated: on the predictor's (hardware) tiles
-    meta = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
-    thr = meta.default_threshold if threshold is None else sdk.check_threshold(threshold, meta.higher_is_better)
-    store, samples = _load_samples(data, meta, scenes, max_samples)
+    predictor, meta, thr, store, samples = _prepare(model, data, scenes, metadata, threshold, max_samples, tile_size)
     selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
     yang_scored = baselines and not meta.higher_is_better and "yang2019" in selectors
     run = _Run(predictor, store, thr, unseen_fraction, selectors, yang_scored, sweep)
@@ -407,6 +403,36 @@ def evaluate(
     if plots_dir is not None and plot_data is not None:
         report.plots = run.plots(Path(plots_dir), plot_data)
     return report
+
+
+def check_evaluation(
+    model: str | os.PathLike[str],
+    data: str | os.PathLike[str],
+    *,
+    scenes: Sequence[str] | None = None,
+    metadata: Any = None,
+    threshold: float | None = None,
+    tile_size: int | None = None,
+) -> None:
+    """What :func:`evaluate` would refuse before its first sample, without evaluating: the model
+    (``sdk.load``), the threshold in its metric's units, the dataset, its targets for the model's
+    metric and tile, the ``scenes``. ``rtp evaluate`` checks every model it is given so, before the
+    first is evaluated (a dataset without the last model's targets was refused only after the others
+    had run)."""
+    _prepare(model, data, scenes, metadata, threshold, None, tile_size)
+
+
+def _prepare(model: str | os.PathLike[str], data: str | os.PathLike[str], scenes: Sequence[str] | None, metadata: Any,
+             threshold: float | None, max_samples: int | None, tile_size: int | None,
+             ) -> tuple[sdk.ShadingRatePredictor, sdk.ModelMetadata, float, TargetStore, list[Any]]:
+    """The predictor, its metadata on its (hardware) tiles, the decision threshold, the target store and
+    the samples to evaluate."""
+    predictor = sdk.load(model, metadata=metadata, tile_size=tile_size)
+    # the metadata as evaluated: on the predictor's (hardware) tiles
+    meta = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
+    thr = meta.default_threshold if threshold is None else sdk.check_threshold(threshold, meta.higher_is_better)
+    store, samples = _load_samples(data, meta, scenes, max_samples)
+    return predictor, meta, thr, store, samples
 
 
 def _load_samples(

@@ -628,6 +628,11 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
     assert not (tmp_path / "two").exists()
     assert rtp_main(["evaluate", str(model), "jnyang", "--data", str(dataset), "--threshold", "0.3",
                      "--no-baselines", "--max-samples", "1"]) == 0
+    # a dataset without the second model's targets is refused before the first model is evaluated
+    capsys.readouterr()
+    assert rtp_main(["evaluate", str(model), "flip", "--data", str(dataset)]) == 2
+    shown = capsys.readouterr()
+    assert shown.out == "" and f"{dataset} has no flip targets (it has jnyang)" in shown.err
     # the summary tables docs/results.md quotes read the same file (bench/report.py)
     report = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "report.py")]
     for flag, expect in (("--compact", "saved % at 1 / 2 / 5 / 10% fails"), ("--per-scene", "| all scenes |")):
