@@ -806,9 +806,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--plots", action="store_true", help="write heatmaps, a scatter and rate overlays into --out")
     ev.add_argument("--plot-sample", default=None, help="sample the heatmaps and overlays show (default: the first)")
     ev.add_argument("--max-samples", type=_positive, default=None, help="evaluate at most this many samples")
-    ev.add_argument("--tile-size", type=_positive, default=None, help="hardware tile size coarser than the model's "
-                    "(an 8-pixel model on 16-pixel VRS tiles: each takes the worst of its model tiles; default: the "
-                    "model's own)")
+    ev.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size when it differs "
+                    "from the model's: coarser (an 8-pixel model on NVIDIA's 16-pixel tiles: each takes the worst of "
+                    "its model tiles) or finer (a 16-pixel model on AMD's and Intel's 8-pixel tiles: each takes its "
+                    "model tile's values), scored against targets of that tile size (default: the model's own)")
 
     dm = command("demo", "render a scene, pick VRS rates with a shipped model, show the result", _cmd_demo)
     dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")

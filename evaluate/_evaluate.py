@@ -364,9 +364,10 @@ def evaluate(
     model's failure rate (``report.matched``). ``plots_dir`` writes the figures of
     :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the first sample).
     ``progress(done, total)`` is called after each sample. ``tile_size`` evaluates the model on
-    coarser hardware tiles than its own (``sdk.load(tile_size=...)``: an 8-pixel model on NVIDIA's
-    16-pixel tiles, each hardware tile taking the worst of its model tiles), against targets of that
-    tile size.
+    the hardware's tiles where they differ from its own (``sdk.load(tile_size=...)``: an 8-pixel model
+    on NVIDIA's 16-pixel tiles, each hardware tile taking the worst of its model tiles; a 16-pixel model
+    on AMD's and Intel's 8-pixel tiles, each taking its model tile's values), against targets of that
+    tile size; the baselines decide on those tiles.
 
     The steps: load the model and the samples, build the baselines, take in each sample
     (:class:`_Run`: predictions and targets, quality values, every method's rates, the sweeps),
@@ -569,6 +570,7 @@ class _Run:
         # the metadata on the predictor's tiles (coarser than the model's with load(tile_size=...))
         self.meta: sdk.ModelMetadata = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
         self.pool = predictor.tile_size // predictor.metadata.tile_size
+        self.split = predictor.metadata.tile_size // predictor.tile_size  # (finer hardware tiles, load(tile_size=))
         meta = self.meta
         self.tile, self.metric, self.hib = meta.tile_size, meta.metric, meta.higher_is_better
         self.no_safety = dataclasses.replace(meta, safety=0.0)
@@ -606,6 +608,9 @@ class _Run:
         if self.pool > 1:  # the hardware tile takes the worst model tile it covers, as predict() does
             pred = sdk.pool_tiles(pred, self.pool, higher_is_better=self.hib)
             pred0 = sdk.pool_tiles(pred0, self.pool, higher_is_better=self.hib)
+        elif self.split > 1:  # each finer hardware tile its model tile's values, as predict() does
+            grid = sdk.tile_grid(int(x.shape[-2]), int(x.shape[-1]), self.tile)
+            pred, pred0 = (sdk.split_tiles(v, self.split, grid) for v in (pred, pred0))
         gt = self.store.load(sample.id, self.metric, self.tile)
         if gt.shape != pred.shape:
             raise TargetError(f"sample {sample.id}: targets have shape {gt.shape}, the model predicts {pred.shape}")

@@ -64,7 +64,7 @@ from ._rates import (
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
 from ._reuse import MAX_CARRY_SCALE, MAX_RESCALE, REUSE_CARRIES, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
-from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, tile_extents, tile_grid
+from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, split_tiles, tile_extents, tile_grid
 from ._transforms import (
     DEFAULT_EXTRAPOLATION_K,
     DEFAULT_OUTPUTS,
@@ -167,6 +167,7 @@ __all__ = [
     "resolve_allowed",
     "select_rates",
     "shipped_models",
+    "split_tiles",
     "srgb_to_linear",
     "tile_extents",
     "tile_grid",

@@ -33,7 +33,7 @@ from ._errors import (
 )
 from ._metadata import DIGEST_RE, FEATURES_NAME, METADATA_KEY, TAIL_KEY, ModelMetadata
 from ._rates import PREDICTED_RATES, RateLike, select_rates
-from ._tiles import TILE_SIZES, padded_size, pool_tiles, tile_grid
+from ._tiles import MIN_HARDWARE_TILE, hardware_tiles, padded_size, pool_tiles, split_tiles, tile_grid
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 
@@ -256,10 +256,12 @@ def load(
     of a YAML sidecar) replaces the metadata embedded in the model, for a model that carries none.
     With ``strict=True`` a requested provider that is unavailable, or a session that does not run on
     the first requested provider, raises :class:`ProviderUnavailableError` instead of falling back.
-    ``tile_size`` is the shading-rate tile size the engine's hardware uses, when it is coarser than
-    the model's (a model with 8-pixel tiles on 16-pixel hardware tiles): ``predict`` and
-    ``shading_rates`` then give one value per hardware tile, the worst of the model tiles it covers
-    (:func:`pool_tiles`). The default is the model's own tile size. ``assume_finite=True`` skips
+    ``tile_size`` is the shading-rate tile size the engine's hardware uses, when it differs from the
+    model's: ``predict`` and ``shading_rates`` then give one value per hardware tile. Coarser (a model
+    with 8-pixel tiles on NVIDIA's 16-pixel hardware tiles), each hardware tile takes the worst of the
+    model tiles it covers (:func:`pool_tiles`); finer (a 16-pixel model on AMD's and Intel's 8-pixel
+    tiles), each takes its model tile's values (:func:`split_tiles`), down to 4-pixel tiles. The
+    default is the model's own tile size. ``assume_finite=True`` skips
     ``predict``'s check that the input holds no NaN or infinity, for an engine that builds the planes
     itself and knows them finite, as scikit-learn's ``assume_finite``; a NaN that gets through then
     gives unspecified predictions instead of :class:`NonFiniteInputError`. The check is one read of
@@ -427,12 +429,12 @@ class ShadingRatePredictor:
         model_tile = metadata.tile_size
         if tile_size is None:
             tile_size = model_tile
-        elif (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in TILE_SIZES
-              or tile_size < model_tile):
+        elif (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in hardware_tiles(model_tile)):
             raise ParameterError(
-                f"tile_size: expected one of {[t for t in TILE_SIZES if t >= model_tile]} (the hardware's "
-                f"shading-rate tile size, a multiple of the model's {model_tile}-pixel tiles), got "
-                f"{reprlib.repr(tile_size)}", "tile_size",
+                f"tile_size: expected one of {list(hardware_tiles(model_tile))} (the hardware's shading-rate tile "
+                f"size: coarser than the model's {model_tile}-pixel tiles, each takes the worst of those it covers; "
+                f"finer, down to one {MIN_HARDWARE_TILE}x{MIN_HARDWARE_TILE} coarse pixel, each takes its model tile's), "
+                f"got {reprlib.repr(tile_size)}", "tile_size",
             )
         self._tile = tile_size
         inputs, outputs = session.get_inputs(), session.get_outputs()
@@ -503,7 +505,7 @@ class ShadingRatePredictor:
     @property
     def tile_size(self) -> int:
         """Pixels per side of the tiles ``predict`` and ``shading_rates`` give: the model's
-        (``metadata.tile_size``) unless ``load(tile_size=...)`` asked for coarser hardware tiles."""
+        (``metadata.tile_size``) unless ``load(tile_size=...)`` asked for the hardware's, coarser or finer."""
         return self._tile
 
     @property
@@ -678,9 +680,13 @@ class ShadingRatePredictor:
         ``x`` is float32 ``(C, H, W)`` or ``(N, C, H, W)`` with the channels of
         ``metadata.inputs``. Returns float32 ``(6, ceil(H/w), ceil(W/w))`` (or with the batch axis),
         channels in :attr:`rates` order, in the metric's units, the safety margin included; ``w`` is
-        :attr:`tile_size` (on hardware tiles coarser than the model's, the worst model tile of each).
+        :attr:`tile_size` (on hardware tiles coarser than the model's, the worst model tile of each; on
+        finer ones, the model tile each lies in).
         """
         values = self._meta.decode(self.predict_raw(x))
+        if self._tile < self._meta.tile_size:  # (finer hardware tiles: each its model tile's values)
+            h, w = np.shape(x)[-2:]
+            return split_tiles(values, self._meta.tile_size // self._tile, tile_grid(h, w, self._tile))
         factor = self._tile // self._meta.tile_size
         return values if factor == 1 else pool_tiles(values, factor, higher_is_better=self._meta.higher_is_better)
 
@@ -712,7 +718,8 @@ class ShadingRatePredictor:
                                   f"({c}, H, W)")
         if self._tile != self._meta.tile_size:
             raise ParameterError(f"the split methods work on the model's own {self._meta.tile_size}-pixel tiles, not "
-                                 f"pooled {self._tile}-pixel ones: load the model without tile_size", "tile_size")
+                                 f"{'pooled' if self._tile > self._meta.tile_size else 'split'} {self._tile}-pixel "
+                                 f"ones: load the model without tile_size", "tile_size")
         x4 = self._check(x)
         return x4, self._padded(x4)
 

@@ -502,6 +502,11 @@ class PredictionReuse:
         if not isinstance(predictor, ShadingRatePredictor):
             raise ParameterError(f"predictor: expected an sdk.ShadingRatePredictor (sdk.load(...)), got "
                                  f"{type(predictor).__name__}", "predictor")
+        if predictor.tile_size < predictor.metadata.tile_size:  # (its crops and carries work on whole model tiles)
+            m, t = predictor.metadata.tile_size, predictor.tile_size
+            raise ParameterError(f"predictor: loaded for {t}-pixel hardware tiles, finer than the model's {m}; reuse "
+                                 f"works on the model's tiles: load it without tile_size and split the rates with "
+                                 f"sdk.split_tiles(rates, {m // t}, (rows, columns))", "predictor")
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")

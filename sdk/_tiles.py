@@ -12,12 +12,14 @@ import numpy as np
 
 from ._errors import ParameterError
 
-__all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "padded_size", "pool_tiles", "tile_extents", "tile_grid"]
+__all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "padded_size", "pool_tiles", "split_tiles", "tile_extents", "tile_grid"]
 
 #: The tile size of the paper and of NVIDIA's VRS hardware (16x16 pixels share one rate).
 DEFAULT_TILE_SIZE = 16
 #: Tile sizes a model's metadata may declare (powers of two, the network halves resolution per block).
 TILE_SIZES: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
+#: The finest hardware shading-rate tile a model's decisions are split to: one 4x4 coarse pixel.
+MIN_HARDWARE_TILE = 4
 #: The largest length in pixels (or tiles) the tile helpers take: far past any frame, inside int64 sums.
 MAX_PIXELS = 2**31 - 1
 
@@ -76,3 +78,44 @@ def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = Fals
     blocks = padded.reshape(*v.shape[:-2], ch, f, cw, f)
     pooled = blocks.min(axis=(-3, -1)) if higher_is_better else blocks.max(axis=(-3, -1))
     return pooled.astype(v.dtype, copy=False)
+
+
+def split_tiles(values: np.ndarray, factor: int, grid: tuple[int, int] | None = None) -> np.ndarray:
+    """Per-tile values (or rate codes) on a grid ``factor`` times finer: each tile's value for each of
+    the ``factor x factor`` tiles it holds, the counterpart of :func:`pool_tiles`. Use it to run a model
+    with 16-pixel tiles on hardware with 8-pixel shading-rate tiles (AMD's and Intel's).
+
+    ``values`` is ``(..., th, tw)``; the result ``(..., th * factor, tw * factor)``, or cropped to
+    ``grid`` ``(rows, columns)``, the fine tile grid of the frame (``tile_grid(H, W, fine_tile)``: a
+    frame whose last coarse tile is partial may end a fine tile row or column sooner). A rate chosen for
+    a coarse tile holds for every fine tile of it where the metric takes the worst pixel of a tile
+    (FLIP, JNFLIP, LPIPS, JNYang: a part's worst is no worse); PSNR averages a tile's squared error, so
+    one of its quarters may be worse than the tile (docs/runtime.md).
+    """
+    f = _positive("factor", factor)
+    v = np.asarray(values)
+    if v.ndim < 2 or v.shape[-2] < 1 or v.shape[-1] < 1:
+        raise ParameterError(f"values: expected an array of shape (..., tile rows, tile columns), got {v.shape}")
+    th, tw = v.shape[-2:]
+    if f > MAX_PIXELS // max(th, tw):
+        raise ParameterError(f"factor: {f} times {th}x{tw} tiles is past {MAX_PIXELS} tiles a side")
+    rows, cols = th * f, tw * f
+    if grid is not None:
+        try:
+            gr, gc = (int(_positive("grid rows", grid[0])), int(_positive("grid columns", grid[1]))) \
+                if len(grid) == 2 else (0, 0)
+        except TypeError:
+            gr = gc = 0
+        if not (rows - f < gr <= rows and cols - f < gc <= cols):
+            raise ParameterError(f"grid: expected the fine tile grid of these {th}x{tw} tiles split {f} ways "
+                                 f"(rows in ({rows - f}, {rows}], columns in ({cols - f}, {cols}]), got {grid!r}")
+        rows, cols = gr, gc
+    return np.repeat(np.repeat(v, f, axis=-2), f, axis=-1)[..., :rows, :cols]
+
+
+def hardware_tiles(model_tile: int) -> tuple[int, ...]:
+    """The hardware shading-rate tile sizes a model of ``model_tile``-pixel tiles runs on
+    (``sdk.load(tile_size=)``): its own, the coarser :data:`TILE_SIZES` (each hardware tile takes the
+    worst of the model tiles it covers) and the finer ones down to :data:`MIN_HARDWARE_TILE` (each takes
+    its model tile's values)."""
+    return tuple(t for t in TILE_SIZES if t >= min(model_tile, MIN_HARDWARE_TILE))

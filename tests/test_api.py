@@ -91,6 +91,7 @@ def test_sdk_all_is_pinned() -> None:
         "resolve_allowed",
         "select_rates",
         "shipped_models",
+        "split_tiles",
         "srgb_to_linear",
         "tile_extents",
         "tile_grid",

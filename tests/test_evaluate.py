@@ -433,6 +433,23 @@ def test_evaluation_on_coarser_hardware_tiles_scores_the_pooled_values(dataset: 
     assert rep.row("decisions", "oracle")["n"] == 3 * 2
 
 
+def test_evaluation_on_finer_hardware_tiles_scores_each_model_tiles_values(dataset: Path, model: Path) -> None:
+    """tile_size=T/2 (AMD's and Intel's 8-pixel hardware tiles under a 16-pixel model, `rtp evaluate
+    --tile-size 8`): each hardware tile takes its model tile's values, scored against the targets of
+    8-pixel tiles. Here those are each 16-pixel tile's value four times, so every score and decision
+    share is the model tiles' own, over four times the tiles; the baselines decide per 8-pixel tile."""
+    own = evaluate(model, dataset, baselines=False)
+    fine = evaluate(model, dataset, tile_size=T // 2)
+    a, b = own.row("quality", "model", "all scenes", "all"), fine.row("quality", "model", "all scenes", "all")
+    assert b["n"] == 4 * a["n"] == 4 * 3 * 2 * 2 * 4
+    for k in ("r2", "mae", "under_share"):
+        assert b[k] == pytest.approx(a[k], rel=1e-6, abs=1e-9), k
+    da, db = own.row("decisions", "model", "all scenes", "all"), fine.row("decisions", "model", "all scenes", "all")
+    assert db["n"] == 4 * da["n"]
+    assert (db["fail_share"], db["work_saved"]) == pytest.approx((da["fail_share"], da["work_saved"]))
+    assert fine.row("decisions", "fidelityfx", "all scenes", "all")["n"] == db["n"]
+
+
 def test_a_run_on_training_scenes_only_is_flagged(dataset: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     """A model whose provenance lists every evaluated scene among its training scenes: the report
     says these scores are not a test (first note, and a logged warning); one new scene clears it."""

@@ -649,6 +649,49 @@ def test_an_8_pixel_model_on_16_pixel_hardware_tiles(tiny_model: Callable[..., P
         if code != sdk.RATE_CODES["1x1"]:
             i = sdk.PREDICTED_RATES.index(sdk.RATE_NAMES[int(code)])
             assert (fine_pred[i, 2 * r:2 * r + 2, 2 * c:2 * c + 2] < 0.5).all()
-    for bad in (4, 12, 64, True, "16"):
+    for bad in (2, 12, 64, True, "16"):  # (4 is a finer hardware tile: the next test)
         with pytest.raises(sdk.ParameterError, match="tile_size"):
             sdk.load(path, tile_size=bad)  # type: ignore[arg-type]
+
+
+def test_split_tiles_gives_each_fine_tile_its_coarse_tiles_value() -> None:
+    v = np.arange(12, dtype=np.float32).reshape(1, 3, 4)
+    fine = sdk.split_tiles(v, 2)
+    assert fine.shape == (1, 6, 8) and fine.dtype == np.float32
+    assert (fine[0, 2:4, 4:6] == v[0, 1, 2]).all() and np.array_equal(sdk.pool_tiles(fine, 2), v)
+    # cropped to a frame's fine grid: 40x56 pixels are 3x4 16-pixel tiles and 5x7 8-pixel ones
+    assert np.array_equal(sdk.split_tiles(v, 2, (5, 7)), fine[..., :5, :7])
+    codes = np.full((2, 2), sdk.RATE_CODES["2x2"], np.uint8)
+    assert sdk.split_tiles(codes, 4).dtype == np.uint8 and np.array_equal(sdk.split_tiles(codes, 1), codes)
+    for grid in ((4, 7), (6, 9), (5,), "57", (5, 0)):  # rows or columns that are no fine grid of these tiles
+        with pytest.raises(sdk.ParameterError, match="grid"):
+            sdk.split_tiles(v, 2, grid)  # type: ignore[arg-type]
+    for bad in (0, 1.5, True):
+        with pytest.raises(sdk.ParameterError, match="factor"):
+            sdk.split_tiles(v, bad)  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="factor"):
+        sdk.split_tiles(v, 2**30)  # (past any frame: refused, not 8 EiB asked of numpy)
+    with pytest.raises(sdk.ParameterError, match="values"):
+        sdk.split_tiles(np.zeros(3), 2)
+
+
+def test_a_16_pixel_model_on_8_pixel_hardware_tiles(tiny_model: Callable[..., Path]) -> None:
+    """AMD's and Intel's shading-rate images have 8-pixel tiles (NVIDIA's 16): ``load(tile_size=8)`` of
+    a 16-pixel model gives each hardware tile the values, and so the rate, of the model tile it lies in,
+    on the frame's own 8-pixel grid (a partial last model tile may hold one 8-pixel row fewer)."""
+    meta = base_metadata(tile_size=16, default_threshold=0.5)
+    path = tiny_model(meta, tile=16)
+    own, fine = sdk.load(path), sdk.load(path, tile_size=8)
+    assert (fine.tile_size, fine.metadata.tile_size) == (8, 16) and "tile=8 (model 16)" in repr(fine)
+    x = np.random.default_rng(4).standard_normal((4, 40, 56)).astype(np.float32)  # 3x4 model, 5x7 hardware tiles
+    assert fine.tiles(40, 56) == (5, 7) and fine.predict(x).shape == (6, 5, 7)
+    np.testing.assert_array_equal(fine.predict(x), sdk.split_tiles(own.predict(x), 2, (5, 7)))
+    np.testing.assert_array_equal(fine.shading_rates(x), sdk.split_tiles(own.shading_rates(x), 2, (5, 7)))
+    batch = np.stack([x, -x])
+    assert fine.predict(batch).shape == (2, 6, 5, 7)
+    assert fine.predict_raw(x).shape == own.predict_raw(x).shape  # the network's own tiles
+    assert sdk.load(path, tile_size=4).predict(x).shape == (6, 10, 14)
+    with pytest.raises(sdk.ParameterError, match=r"expected one of \[4, 8, 16, 32\].*finer, down to one 4x4"):
+        sdk.load(path, tile_size=2)
+    with pytest.raises(sdk.ParameterError, match=r"finer than the model's 16.*sdk.split_tiles\(rates, 2"):
+        sdk.PredictionReuse(fine)

@@ -183,6 +183,9 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
     for bad in (8, 24, 2.0):  # finer than the model's 16-pixel tiles; not a tile size; not an int
         with pytest.raises(sdk.ParameterError, match="tile_size"):
             RateSelector(meta, gl_context, tile_size=bad)  # type: ignore[arg-type]
+    # finer hardware tiles (a predictor loaded for AMD's 8-pixel ones, say): what to do instead, said
+    with pytest.raises(sdk.ParameterError, match=r"give each of its texels to the 2x2 hardware tiles .*split_tiles"):
+        RateSelector(meta, gl_context, tile_size=8)
 
 
 def test_hardware_tiles_coarser_than_the_model_s_as_load_pools_them(tiny_model, gl_context: Any) -> None:

@@ -57,8 +57,13 @@ class RateSelector:
             tile_size = model.tile_size if isinstance(model, sdk.ShadingRatePredictor) else meta.tile_size
         if (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in sdk.TILE_SIZES
                 or tile_size < meta.tile_size):
+            finer = (f"; for finer hardware tiles select on the model's and give each of its texels to the "
+                     f"{meta.tile_size // tile_size}x{meta.tile_size // tile_size} hardware tiles it holds "
+                     f"(sdk.split_tiles on the host)"
+                     if isinstance(tile_size, int) and not isinstance(tile_size, bool) and tile_size in sdk.TILE_SIZES
+                     else "")
             raise sdk.ParameterError(f"tile_size: expected one of {sdk.TILE_SIZES} no finer than the model's tiles "
-                                     f"({meta.tile_size}), got {tile_size!r}", "tile_size")
+                                     f"({meta.tile_size}), got {tile_size!r}{finer}", "tile_size")
         self._meta = meta
         #: model tiles per hardware tile side
         self.pool = tile_size // meta.tile_size
