@@ -20,6 +20,8 @@ DEFAULT_TILE_SIZE = 16
 TILE_SIZES: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
 #: The finest hardware shading-rate tile a model's decisions are split to: one 4x4 coarse pixel.
 MIN_HARDWARE_TILE = 4
+#: The most values :func:`split_tiles` returns (a 16K frame's 4-pixel tiles for six rates are 50 million).
+MAX_SPLIT_TILES = 2**28
 #: The largest length in pixels (or tiles) the tile helpers take: far past any frame, inside int64 sums.
 MAX_PIXELS = 2**31 - 1
 
@@ -62,11 +64,7 @@ def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = Fals
     it to run a model with 8-pixel tiles on hardware with 16-pixel shading-rate tiles.
     """
     f = _positive("factor", factor)
-    v = np.asarray(values)
-    if v.ndim < 2 or v.shape[-2] < 1 or v.shape[-1] < 1:
-        raise ParameterError(f"values: expected an array of shape (..., tile rows, tile columns), got {v.shape}")
-    if v.dtype.kind not in "biuf":
-        raise ParameterError(f"values: expected numbers, got dtype {v.dtype}")
+    v = _tile_values(values)
     if f == 1:
         return v.copy()
     th, tw = v.shape[-2:]
@@ -78,6 +76,20 @@ def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = Fals
     blocks = padded.reshape(*v.shape[:-2], ch, f, cw, f)
     pooled = blocks.min(axis=(-3, -1)) if higher_is_better else blocks.max(axis=(-3, -1))
     return pooled.astype(v.dtype, copy=False)
+
+
+def _tile_values(values: object) -> np.ndarray:
+    """``values`` as a numeric array of shape ``(..., tile rows, tile columns)``, else a ParameterError."""
+    try:
+        v = np.asarray(values)
+    except (ValueError, TypeError) as err:  # (a ragged list: numpy's ValueError)
+        raise ParameterError(f"values: expected an array of per-tile numbers, got {type(values).__name__} ({err})") \
+            from None
+    if v.ndim < 2 or v.shape[-2] < 1 or v.shape[-1] < 1:
+        raise ParameterError(f"values: expected an array of shape (..., tile rows, tile columns), got {v.shape}")
+    if v.dtype.kind not in "biuf":
+        raise ParameterError(f"values: expected numbers, got dtype {v.dtype}")
+    return v
 
 
 def split_tiles(values: np.ndarray, factor: int, grid: tuple[int, int] | None = None) -> np.ndarray:
@@ -93,13 +105,12 @@ def split_tiles(values: np.ndarray, factor: int, grid: tuple[int, int] | None = 
     one of its quarters may be worse than the tile (docs/runtime.md).
     """
     f = _positive("factor", factor)
-    v = np.asarray(values)
-    if v.ndim < 2 or v.shape[-2] < 1 or v.shape[-1] < 1:
-        raise ParameterError(f"values: expected an array of shape (..., tile rows, tile columns), got {v.shape}")
+    v = _tile_values(values)
     th, tw = v.shape[-2:]
-    if f > MAX_PIXELS // max(th, tw):
-        raise ParameterError(f"factor: {f} times {th}x{tw} tiles is past {MAX_PIXELS} tiles a side")
     rows, cols = th * f, tw * f
+    if rows * cols > MAX_SPLIT_TILES or v.size * f * f > MAX_SPLIT_TILES:  # (no frame has that many tiles)
+        raise ParameterError(f"factor: {th}x{tw} tiles split {f} ways are {rows}x{cols}, past the {MAX_SPLIT_TILES} "
+                             f"values split_tiles gives")
     if grid is not None:
         try:
             gr, gc = (int(_positive("grid rows", grid[0])), int(_positive("grid columns", grid[1]))) \
@@ -110,7 +121,8 @@ def split_tiles(values: np.ndarray, factor: int, grid: tuple[int, int] | None = 
             raise ParameterError(f"grid: expected the fine tile grid of these {th}x{tw} tiles split {f} ways "
                                  f"(rows in ({rows - f}, {rows}], columns in ({cols - f}, {cols}]), got {grid!r}")
         rows, cols = gr, gc
-    return np.repeat(np.repeat(v, f, axis=-2), f, axis=-1)[..., :rows, :cols]
+    # (indexing, not np.repeat then a crop: only what is returned is allocated)
+    return v[..., (np.arange(rows) // f)[:, None], np.arange(cols) // f]
 
 
 def hardware_tiles(model_tile: int) -> tuple[int, ...]:

@@ -446,6 +446,24 @@ def _work_saved_absurd(v: tuple[ArraySpec, Any], saved: float) -> bool:
     return not 0.0 <= saved < 1.0 or a.dtype.kind not in "ui" or not set(np.unique(a).tolist()) <= known
 
 
+def _split_call(v: tuple[ArraySpec, Any, Any]) -> np.ndarray:
+    spec, factor, grid = v
+    return sdk.split_tiles(_array(spec), factor, grid)
+
+
+def _split_absurd(v: tuple[ArraySpec, Any, Any], out: np.ndarray) -> bool:
+    """Accepted: a factor that is no positive integer, a grid that is no fine grid of the tiles, or a
+    result of another shape than the tiles split (and cropped)."""
+    spec, factor, grid = v
+    a = np.asarray(_array(spec))
+    if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1 or a.ndim < 2:
+        return True
+    th, tw = a.shape[-2:]
+    want = (th * int(factor), tw * int(factor)) if grid is None else tuple(grid)
+    return out.shape != (*a.shape[:-2], *want) or (grid is not None and not (
+        th * factor - factor < want[0] <= th * factor and tw * factor - factor < want[1] <= tw * factor))
+
+
 def _extrapolate_call(v: tuple[ArraySpec, Any, Any, Any]) -> np.ndarray:
     spec, outputs, k, hib = v
     return sdk.extrapolate(_array(spec), outputs, k, higher_is_better=hib)
@@ -747,6 +765,10 @@ def targets() -> list[Target]:
         Target("work_saved", st.tuples(st.one_of(_arrays(st.integers(0, 4), 3), code_arrays),
                                        st.one_of(st.none(), st.tuples(st.integers(-2, 70), st.integers(-2, 70)),
                                                  json_values)), _work_saved_call, _work_saved_absurd),
+        Target("split_tiles", st.tuples(_arrays(st.sampled_from([0, 1, 2, 3, 5]), 4),
+                                        st.one_of(st.integers(-2, 9), hostile_numbers),
+                                        st.one_of(st.none(), st.tuples(st.integers(-1, 30), st.integers(-1, 30)),
+                                                  json_values)), _split_call, _split_absurd),
         Target("extrapolate", st.one_of(
                    st.tuples(_arrays(st.sampled_from([0, 1, 2, 4, 6]), 4),
                              st.one_of(st.sampled_from([list(s) for s in sdk.OUTPUT_SETS]), json_values),
