@@ -632,3 +632,21 @@ def test_a_gif_frame_labels_its_place_and_keys_the_rate_colours_in_its_spare_cel
         return int(np.argmax(column.max(-1) > 0))
 
     assert box_height(spare) == box_height(large) >= 14
+
+
+def test_rtp_models_play_on_finer_hardware_tiles_with_their_model_tiles_rates(tmp_path: Path) -> None:
+    """--tile-size 8 under 16-pixel models (AMD's and Intel's VRS tiles): each hardware tile takes its
+    model tile's rate, so the shading (and every frame after it) is the 16-pixel run's, to the last
+    bit, while the failing share is judged per 8-pixel tile (never more than per 16-pixel tile: a
+    quarter of a tile is never worse than the tile for JNYang) and the baselines decide per 8 pixels.
+    Coarser run tiles than a model's are refused."""
+    runs = {t: play("procedural:0", "jnyang,jnyang@2,fidelityfx", paths=("fast",), frames=4, size=(96, 64),
+                    sweep=False, flip_every=0, tile_size=t, out=tmp_path / str(t), plots=False)
+            for t in (16, 8)}
+    for method in ("jnyang", "jnyang@2"):
+        coarse, fine = (runs[t].frames["fast"][method] for t in (16, 8))
+        assert fine["saved"] == coarse["saved"], method
+        assert all(f <= c for f, c in zip(fine["fail"], coarse["fail"])), method
+    assert runs[8].frames["fast"]["fidelityfx"]["saved"] != runs[16].frames["fast"]["fidelityfx"]["saved"]
+    with pytest.raises(PlayError, match=r"the model uses 16px tiles, the run 32px"):
+        play("procedural:0", "jnyang", paths=("fast",), frames=3, size=(96, 64), sweep=False, tile_size=32)
