@@ -64,7 +64,16 @@ from ._rates import (
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
 from ._reuse import MAX_CARRY_SCALE, MAX_RESCALE, REUSE_CARRIES, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
-from ._tiles import DEFAULT_TILE_SIZE, TILE_SIZES, padded_size, pool_tiles, split_tiles, tile_extents, tile_grid
+from ._tiles import (
+    DEFAULT_TILE_SIZE,
+    TILE_SIZES,
+    hardware_tiles,
+    padded_size,
+    pool_tiles,
+    split_tiles,
+    tile_extents,
+    tile_grid,
+)
 from ._transforms import (
     DEFAULT_EXTRAPOLATION_K,
     DEFAULT_OUTPUTS,
@@ -152,6 +161,7 @@ __all__ = [
     "exit_code",
     "extrapolate",
     "files",
+    "hardware_tiles",
     "linear_to_srgb",
     "load",
     "luma",

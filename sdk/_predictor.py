@@ -508,6 +508,18 @@ class ShadingRatePredictor:
         (``metadata.tile_size``) unless ``load(tile_size=...)`` asked for the hardware's, coarser or finer."""
         return self._tile
 
+    def _on_model_tiles(self) -> ShadingRatePredictor:
+        """This predictor on the model's own tiles (itself where it already is): the same session and
+        metadata, for the work that runs on whole model tiles (``PredictionReuse`` on finer hardware
+        tiles, which splits its estimates afterwards)."""
+        if self._tile == self._meta.tile_size:
+            return self
+        import copy
+
+        view = copy.copy(self)
+        view._tile = self._meta.tile_size
+        return view
+
     @property
     def providers(self) -> list[str]:
         """Execution providers of the session, the one that runs first."""

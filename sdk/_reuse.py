@@ -27,7 +27,7 @@ import numpy as np
 from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
 from ._errors import InputDtypeError, InputShapeError, ParameterError
 from ._rates import RateLike, select_rates
-from ._tiles import padded_size, tile_grid
+from ._tiles import padded_size, split_tiles, tile_grid
 
 if TYPE_CHECKING:
     from ._predictor import ShadingRatePredictor
@@ -444,6 +444,11 @@ class PredictionReuse:
     network's work on it as a share of a whole-frame run (1, 0, or the crops' share). One instance
     per view; not thread-safe.
 
+    A predictor loaded for hardware tiles finer than the model's (``sdk.load(..., tile_size=8)`` of a
+    16-pixel model, AMD's and Intel's VRS tiles) is reused on the model's tiles (runs, crops,
+    ``margin`` and ``step`` are the model's) and each hardware tile takes its model tile's estimate:
+    the rates of the model-tile reuse, split (:func:`split_tiles`).
+
     ``refresh`` (a share of the frame's tiles, or None) shortens the interval when the camera
     uncovers much: once more than that share of the tiles is unseen since the network ran (tiles
     that would go to 1x1, or to crops), it runs on the whole frame before the interval is up. The
@@ -502,11 +507,11 @@ class PredictionReuse:
         if not isinstance(predictor, ShadingRatePredictor):
             raise ParameterError(f"predictor: expected an sdk.ShadingRatePredictor (sdk.load(...)), got "
                                  f"{type(predictor).__name__}", "predictor")
-        if predictor.tile_size < predictor.metadata.tile_size:  # (its crops and carries work on whole model tiles)
-            m, t = predictor.metadata.tile_size, predictor.tile_size
-            raise ParameterError(f"predictor: loaded for {t}-pixel hardware tiles, finer than the model's {m}; reuse "
-                                 f"works on the model's tiles: load it without tile_size and split the rates with "
-                                 f"sdk.split_tiles(rates, {m // t}, (rows, columns))", "predictor")
+        # On hardware tiles finer than the model's (load(tile_size=8) of a 16-pixel model) the network's runs,
+        # crops and carries work on whole model tiles and each hardware tile takes its model tile's estimates
+        # afterwards, as predict() gives them: the rates are the model tiles' to the bit.
+        finer = predictor.tile_size < predictor.metadata.tile_size
+        net = predictor._on_model_tiles() if finer else predictor
         if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
             raise ParameterError(f"every: expected an integer >= 1 (1: the network on every frame), got {every!r}",
                                  "every")
@@ -543,7 +548,7 @@ class PredictionReuse:
                      if not predictor.splits else
                      f"the predictor pools the model's {predictor.metadata.tile_size}-pixel tiles to "
                      f"{predictor.tile_size} (load it without tile_size)"
-                     if predictor.tile_size != predictor.metadata.tile_size else
+                     if predictor.tile_size > predictor.metadata.tile_size else
                      "rescale acts on carried estimates" if rescale else
                      "history blends carried estimates" if history else
                      f"features are carried as each tile's mean, not reduce={reduce!r}" if reduce != "mean" else "")
@@ -551,15 +556,18 @@ class PredictionReuse:
                 raise ParameterError(f"carry='features': {clash}", "carry")
         self.carry = carry
         self.carry_scale = scale
-        self.step = _check_step(step, predictor.tile_size)
-        self.rescale, self._blocks = self._check_rescale(predictor, rescale)
+        self.step = _check_step(step, net.tile_size)
+        self.rescale, self._blocks = self._check_rescale(net, rescale)
         self.predictor = predictor
+        self._net = net
+        #: hardware tiles per model tile side (1 unless the predictor was loaded for finer tiles)
+        self._split = predictor.metadata.tile_size // predictor.tile_size if finer else 1
         self.every = int(every)
         self.reduce = reduce
         self.unseen = unseen
         self.unseen_fraction = share
         if margin is None and unseen == "fresh":  # only fresh crops need it: measure the model's reach
-            margin = context_tiles(predictor)
+            margin = context_tiles(net)
         self.margin: int | None = None if margin is None else int(margin)
         self.history = weight
         self.refresh = limit
@@ -589,7 +597,7 @@ class PredictionReuse:
 
     def _levels(self, blocks: np.ndarray) -> np.ndarray:
         """Per tile and rate, the factor ``(v + eps) ** rescale`` of this frame's ``.blocks`` planes."""
-        v = tile_block_levels(blocks, self.predictor.tile_size)
+        v = tile_block_levels(blocks, self._net.tile_size)
         return np.exp(self.rescale * -math.log(BLOCK_EPS) * v.astype(np.float64))
 
     def reset(self) -> None:
@@ -614,7 +622,7 @@ class PredictionReuse:
     def _window(self, x: Inputs, ys: slice, xs: slice) -> np.ndarray:
         """Every input plane of a window of the frame."""
         if callable(x):
-            names = self.predictor.metadata.inputs
+            names = self._net.metadata.inputs
             if _takes_channels(x):
                 return self._asked(x, ys, xs, names)
             return self._checked(x(ys, xs), ys, xs, names, "the input function")
@@ -625,7 +633,7 @@ class PredictionReuse:
         function that takes ``channels`` builds those alone."""
         ys, xs = slice(0, hw[0]), slice(0, hw[1])
         if callable(x) and _takes_channels(x):
-            names = self.predictor.metadata.inputs
+            names = self._net.metadata.inputs
             return self._asked(x, ys, xs, tuple(names[i] for i in which))
         return self._window(x, ys, xs)[which]
 
@@ -634,8 +642,8 @@ class PredictionReuse:
         ``channels``, the tail's planes in a frame whose other planes (which the tail never reads) are 0."""
         if not (callable(x) and _takes_channels(x)):
             return self._window(x, slice(0, hw[0]), slice(0, hw[1]))
-        names = self.predictor.metadata.inputs
-        which = [i for i, c in enumerate(names) if c in self.predictor.tail_inputs]
+        names = self._net.metadata.inputs
+        which = [i for i, c in enumerate(names) if c in self._net.tail_inputs]
         shape = (len(names), *hw)
         if self._zeros is None or self._zeros.shape != shape:  # kept: only the tail's planes are written again
             self._zeros = np.zeros(shape, np.float32)
@@ -679,19 +687,19 @@ class PredictionReuse:
         h, w = hw
         planes = self._window(x, slice(0, h), slice(0, w))
         if self.carry == "features":  # the trunk's features are what the frames between carry
-            est, feats = self.predictor.predict_split(planes)
+            est, feats = self._net.predict_split(planes)
             self._cache = feats.reshape(len(feats), -1)
-            self._track = start_track(hw, self.predictor.tile_size, self.step) if self.every > 1 else None
+            self._track = start_track(hw, self._net.tile_size, self.step) if self.every > 1 else None
             self._shape, self._age, self.work = hw, 0, 1.0
             return est
-        est = self.predictor.predict(planes)
+        est = self._net.predict(planes)
         if carried is not None and self.history > 0:  # blend with the carried estimates where they are known
             old, missing = carried
             mix = ((1.0 - self.history) * est + self.history * np.where(missing[None], est, old)).astype(est.dtype)
             est = np.where(missing[None], est, mix)
         kept = est if not self.rescale else (est / self._levels(planes[self._blocks])).astype(np.float32)
         self._cache = kept.reshape(len(kept), -1)
-        self._track = (start_track(hw, self.predictor.tile_size, self.step) if self.every > 1 or self.history > 0
+        self._track = (start_track(hw, self._net.tile_size, self.step) if self.every > 1 or self.history > 0
                        else None)
         self._shape = hw
         self._age = 0
@@ -732,7 +740,17 @@ class PredictionReuse:
         ``channels`` parameter is called ``x(rows, cols, channels=names)`` and returns those planes
         alone, float32 ``(len(names), rows, cols)``: every plane where the network runs, the tail's
         (:attr:`ShadingRatePredictor.tail_inputs`) on a frame whose features are carried, the
-        ``.blocks`` planes for ``rescale``."""
+        ``.blocks`` planes for ``rescale``. On a predictor loaded for hardware tiles finer than the
+        model's (``load(tile_size=8)``) the estimates are on those tiles, each its model tile's."""
+        est = self._predict(x, fetch, seen, background)
+        if self._split == 1:
+            return est
+        assert self._shape is not None  # (every frame sets it)
+        return split_tiles(est, self._split, tile_grid(*self._shape, self.predictor.tile_size))
+
+    def _predict(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None,
+                 seen: np.ndarray | None, background: np.ndarray | None) -> np.ndarray:
+        """:meth:`predict` on the model's own tiles."""
         hw = self._shape_of(x, seen)
         runs = self._age + 1 >= self.every
         if self._cache is None or fetch is None or hw != self._shape or (runs and self.history == 0):
@@ -741,13 +759,13 @@ class PredictionReuse:
         if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
             raise ParameterError(f"fetch: expected (rows, cols), two integer arrays of the frame's shape, got "
                                  f"{type(fetch).__name__}", "fetch")
-        tile = self.predictor.tile_size
+        tile = self._net.tile_size
         step = _check_step(self.step, tile)
         rows = self._plane(fetch[0], "fetch rows", hw, hw[0], step)
         cols = self._plane(fetch[1], "fetch cols", hw, hw[1], step)
         seen_ = self._plane(np.ones(hw, np.float32) if seen is None else seen, "seen", hw)
         bg = None if background is None else self._plane(background, "background", hw)
-        hib = self.predictor.metadata.higher_is_better
+        hib = self._net.metadata.higher_is_better
         est, track, missing = carry_estimates(self._cache, self._track, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce, self.step)
         if self.refresh is not None and missing.mean() > self.refresh:
@@ -756,7 +774,7 @@ class PredictionReuse:
         if self.carry == "features" and not runs:  # the tail on the carried features and this frame
             feats = est
             feats[:, missing] = 0.0  # (their estimates go to 1x1 or fresh crops below)
-            est = self.predictor.predict_tail(feats, self._tail_frame(x, hw))
+            est = self._net.predict_tail(feats, self._tail_frame(x, hw))
             est[:, missing] = -np.inf if hib else np.inf
         levels = None
         if self.rescale and not (runs and self.history == 0):  # to this frame's blocks (unseen tiles stay worst)
@@ -777,10 +795,10 @@ class PredictionReuse:
                 window = self._window(x, slice(y0 * tile, min(y1 * tile, h)), slice(x0 * tile, min(x1 * tile, w)))
                 sel = missing[y0:y1, x0:x1]
                 if feats is not None:  # the crop's features join the carry too
-                    part, part_feats = self.predictor.predict_split(window)
+                    part, part_feats = self._net.predict_split(window)
                     feats[:, y0:y1, x0:x1][:, sel] = part_feats[:, sel]
                 else:
-                    part = self.predictor.predict(window)
+                    part = self._net.predict(window)
                 est[:, y0:y1, x0:x1][:, sel] = part[:, sel]
             work = area / (h * w)
             # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
@@ -804,7 +822,7 @@ class PredictionReuse:
                       threshold: float | None = None, allowed: Iterable[RateLike] | None = None) -> np.ndarray:
         """:meth:`predict`, then per tile the cheapest allowed rate whose estimate passes ``threshold``
         (default: the model's), as :meth:`ShadingRatePredictor.shading_rates` picks them."""
-        meta = self.predictor.metadata
+        meta = self._net.metadata
         thr = meta.default_threshold if threshold is None else threshold
         return select_rates(self.predict(x, fetch, seen, background), thr, higher_is_better=meta.higher_is_better,
                             allowed=allowed, factors=meta.rate_factors)

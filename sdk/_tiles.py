@@ -12,7 +12,8 @@ import numpy as np
 
 from ._errors import ParameterError
 
-__all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "padded_size", "pool_tiles", "split_tiles", "tile_extents", "tile_grid"]
+__all__ = ["DEFAULT_TILE_SIZE", "TILE_SIZES", "hardware_tiles", "padded_size", "pool_tiles", "split_tiles", "tile_extents",
+           "tile_grid"]
 
 #: The tile size of the paper and of NVIDIA's VRS hardware (16x16 pixels share one rate).
 DEFAULT_TILE_SIZE = 16
@@ -129,5 +130,9 @@ def hardware_tiles(model_tile: int) -> tuple[int, ...]:
     """The hardware shading-rate tile sizes a model of ``model_tile``-pixel tiles runs on
     (``sdk.load(tile_size=)``): its own, the coarser :data:`TILE_SIZES` (each hardware tile takes the
     worst of the model tiles it covers) and the finer ones down to :data:`MIN_HARDWARE_TILE` (each takes
-    its model tile's values)."""
-    return tuple(t for t in TILE_SIZES if t >= min(model_tile, MIN_HARDWARE_TILE))
+    its model tile's values). ``hardware_tiles(16)`` is ``(4, 8, 16, 32)``: NVIDIA's 16, AMD's and
+    Intel's 8."""
+    if isinstance(model_tile, bool) or not isinstance(model_tile, (int, np.integer)) or model_tile not in TILE_SIZES:
+        raise ParameterError(f"model_tile: expected a model's tile size, one of {list(TILE_SIZES)}, got {model_tile!r}",
+                             "model_tile")
+    return tuple(t for t in TILE_SIZES if t >= min(int(model_tile), MIN_HARDWARE_TILE))

@@ -76,6 +76,7 @@ def test_sdk_all_is_pinned() -> None:
         "exit_code",
         "extrapolate",
         "files",
+        "hardware_tiles",
         "linear_to_srgb",
         "load",
         "luma",

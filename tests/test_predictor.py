@@ -693,5 +693,9 @@ def test_a_16_pixel_model_on_8_pixel_hardware_tiles(tiny_model: Callable[..., Pa
     assert sdk.load(path, tile_size=4).predict(x).shape == (6, 10, 14)
     with pytest.raises(sdk.ParameterError, match=r"expected one of \[4, 8, 16, 32\].*finer, down to one 4x4"):
         sdk.load(path, tile_size=2)
-    with pytest.raises(sdk.ParameterError, match=r"finer than the model's 16.*sdk.split_tiles\(rates, 2"):
-        sdk.PredictionReuse(fine)
+    # the sizes a model runs on, public for an engine to ask before it loads one for its hardware
+    assert sdk.hardware_tiles(16) == (4, 8, 16, 32) and sdk.hardware_tiles(2) == (2, 4, 8, 16, 32)
+    for bad in (12, 0, True, 16.0, "16"):
+        with pytest.raises(sdk.ParameterError, match=r"model_tile: expected a model's tile size, one of \[1, 2"):
+            sdk.hardware_tiles(bad)  # type: ignore[arg-type]
+    assert sdk.PredictionReuse(fine).predictor is fine  # reused on the model's tiles, then split (test_reuse.py)

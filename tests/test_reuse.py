@@ -884,3 +884,46 @@ def test_a_channels_function_gives_what_the_whole_frame_gives_in_any_sequence(
         got = asked.predict(lambda ys, xs, channels, x=x: x[[names.index(c) for c in channels], ys, xs], fetch, seen)
         assert want.shape == (6, -(-h // TILE), -(-w // TILE)) and not np.isnan(want).any()
         assert np.array_equal(got, want) and asked.work == whole.work and asked.age == whole.age
+
+
+@settings(max_examples=10, deadline=None)
+@given(model=st.sampled_from(["jnyang", "jnyang-reuse", "psnr"]), fine=st.sampled_from([8, 4]),
+       every=st.integers(1, 4), unseen=st.sampled_from(["full", "fresh"]),
+       option=st.sampled_from(["", "features", "rescale", "refresh", "history"]),
+       sizes=st.lists(st.sampled_from([(48, 80), (56, 88), (36, 52)]), min_size=1, max_size=2),
+       seed=st.integers(0, 2**16))
+def test_reuse_on_finer_hardware_tiles_is_the_model_tiles_reuse_split(
+        model: str, fine: int, every: int, unseen: str, option: str, sizes: list[tuple[int, int]], seed: int) -> None:
+    """A predictor loaded for AMD's and Intel's 8-pixel tiles (or 4) under a 16-pixel model: the reuse runs,
+    crops and carries on the model's tiles and each hardware tile takes its model tile's estimate, so its
+    estimates and rates are the model-tile reuse's split (``sdk.split_tiles``) to the bit, on the frame's own
+    grid of hardware tiles (sides that are not whole model tiles too), with the same work and age."""
+    coarse, split = sdk.load(model), sdk.load(model, tile_size=fine)
+    names = coarse.metadata.inputs
+    kw: dict[str, Any] = {"every": every, "unseen": unseen}
+    if option == "features" and coarse.splits:
+        kw["carry"] = "features"
+    elif option == "rescale" and any(c.endswith(".blocks") for c in names) and not coarse.metadata.higher_is_better:
+        kw["rescale"] = 0.25
+    elif option in ("refresh", "history"):
+        kw[option] = 0.3
+    ours, theirs = sdk.PredictionReuse(coarse, **kw), sdk.PredictionReuse(split, **kw)
+    assert theirs.predictor is split and theirs.step == ours.step and theirs.margin == ours.margin
+    rng = np.random.default_rng(seed)
+    factor = TILE // fine
+    for f, (h, w) in enumerate(s for s in sizes for _ in range(3)):
+        x = rng.random((len(names), h, w), dtype=np.float32)
+        for i, c in enumerate(names):
+            if c.endswith((".blocks", ".tiles")):
+                x[i] = (sdk.tile_variances if c.endswith(".tiles") else sdk.block_variances)(x[0])
+        seen = (rng.random((h, w)) > 0.1).astype(np.float32)
+        rows, cols = np.indices((h, w))
+        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, h - 1),
+                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, w - 1)) if f and rng.random() < 0.9 else None
+        want = ours.shading_rates(x, fetch, seen, threshold=coarse.metadata.default_threshold)
+        got = theirs.shading_rates(x, fetch, seen)
+        grid = split.tiles(h, w)
+        assert got.shape == grid and np.array_equal(got, sdk.split_tiles(want, factor, grid))
+        assert theirs.work == ours.work and theirs.age == ours.age
+    est = theirs.predict(x, None)  # a cut: the network, then its values split as the predictor's own predict
+    np.testing.assert_array_equal(est, split.predict(x))
