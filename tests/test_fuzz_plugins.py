@@ -622,6 +622,12 @@ selector_cases = st.one_of(
         ),
         st.one_of(st.none(), st.floats(0, 1), hostile_numbers),
         allowed_values,
+        st.one_of(  # the hardware tiles' grid
+            st.none(),
+            st.tuples(st.integers(-1, 9), st.integers(-1, 9)),
+            st.tuples(hostile_numbers, hostile_numbers),
+            json_values,
+        ),
     ),
     st.tuples(
         st.just("select_buffer"),
@@ -648,7 +654,7 @@ def _selector_call(v: tuple[Any, ...]) -> Any:
     g = _gl()
     kind = v[0]
     if kind == "select":
-        return g.selector.select(_val(v[1]), v[2], v[3])
+        return g.selector.select(_val(v[1]), v[2], v[3], *v[4:])
     if kind == "select_buffer":
         tiles, threshold, raw = v[1], v[2], v[3]
         buffer = (
@@ -672,6 +678,8 @@ def _selector_absurd(v: tuple[Any, ...], out: Any) -> bool:
     codes = {sdk.RATE_CODES[r] for r in sdk.ALL_RATES}
     if v[0] == "select_buffer":
         return not all(_count(t) for t in v[1])
+    if v[0] == "select" and len(v) > 4 and v[4] is not None and isinstance(out, np.ndarray):
+        return out.shape != tuple(v[4]) or not set(np.unique(out).tolist()) <= codes  # the grid asked for
     return not isinstance(out, np.ndarray) or not set(np.unique(out).tolist()) <= codes
 
 

@@ -180,12 +180,9 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
         RateSelector(meta, object())
     with pytest.raises(sdk.ParameterError, match="ModelMetadata"):
         RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
-    for bad in (8, 24, 2.0):  # finer than the model's 16-pixel tiles; not a tile size; not an int
-        with pytest.raises(sdk.ParameterError, match="tile_size"):
+    for bad in (2, 24, 2.0):  # finer than one 4x4 coarse pixel; not a tile size; not an int
+        with pytest.raises(sdk.ParameterError, match=r"tile_size: expected one of \[4, 8, 16, 32\]"):
             RateSelector(meta, gl_context, tile_size=bad)  # type: ignore[arg-type]
-    # finer hardware tiles (a predictor loaded for AMD's 8-pixel ones, say): what to do instead, said
-    with pytest.raises(sdk.ParameterError, match=r"give each of its texels to the 2x2 hardware tiles .*split_tiles"):
-        RateSelector(meta, gl_context, tile_size=8)
 
 
 def test_hardware_tiles_coarser_than_the_model_s_as_load_pools_them(tiny_model, gl_context: Any) -> None:
@@ -202,3 +199,36 @@ def test_hardware_tiles_coarser_than_the_model_s_as_load_pools_them(tiny_model, 
             ok = _robust(values, thr, False, sdk.PREDICTED_RATES)
             np.testing.assert_array_equal(gpu[ok], pred.shading_rates(x, thr)[ok])
             np.testing.assert_allclose(selector.decoded(), values, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("fine", [8, 4])
+def test_hardware_tiles_finer_than_the_model_s_as_load_splits_them(tiny_model, gl_context: Any, fine: int) -> None:
+    """A 16-pixel model on AMD's and Intel's 8-pixel tiles (or 4): each hardware texel takes its model tile's
+    decision, on the frame's own grid (``grid=predictor.tiles(h, w)``: a partial last model tile holds fewer
+    hardware rows), as ``shading_rates`` of the predictor loaded for those tiles gives it; without ``grid``,
+    ``split`` times the model's tiles; a grid that does not fit the model's tiles is refused."""
+    pred = sdk.load(tiny_model(base_metadata(tile_size=16), tile=16), tile_size=fine)
+    x = np.random.default_rng(5).random((4, 72, 104)).astype(np.float32)  # 5 x 7 model tiles, the last partial
+    split = 16 // fine
+    with RateSelector(pred, gl_context) as selector:
+        assert (selector.split, selector.pool, selector.tile_size) == (split, 1, fine)
+        grid = pred.tiles(72, 104)
+        assert grid == (-(-72 // fine), -(-104 // fine))
+        codes: set[int] = set()
+        for thr in (0.05, 0.2, 0.4):
+            gpu = selector.select(pred.predict_raw(x), thr, grid=grid)
+            assert gpu.shape == grid
+            codes |= set(np.unique(gpu).tolist())
+            np.testing.assert_array_equal(gpu, pred.shading_rates(x, thr))
+            np.testing.assert_allclose(selector.decoded(), pred.predict(x), rtol=1e-5, atol=1e-6)
+        assert len(codes) >= 2  # decisions that differ from tile to tile
+        whole = selector.select(pred.predict_raw(x), 0.2)  # no grid: every model tile whole
+        assert whole.shape == (5 * split, 7 * split)
+        np.testing.assert_array_equal(whole[:grid[0], :grid[1]], pred.shading_rates(x, 0.2))
+        for bad in ((grid[0] - split, grid[1]), (grid[0], grid[1] + split), (0, 1), (1.5, 2), "ab", (1, 2, 3)):
+            with pytest.raises(sdk.ParameterError, match="grid"):
+                selector.select(pred.predict_raw(x), 0.2, grid=bad)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(selector.select(pred.predict_raw(x), 0.2, grid=grid), pred.shading_rates(x, 0.2))
+    with RateSelector(sdk.load(tiny_model(base_metadata(tile_size=16), tile=16)), gl_context) as own:
+        with pytest.raises(sdk.ParameterError, match=r"grid: expected 5x7 \(or None\)"):
+            own.select(pred.predict_raw(x), 0.2, grid=grid)

@@ -25,6 +25,19 @@ from ._shaders import load_source
 
 __all__ = ["RateSelector"]
 
+
+def _tile_pair(value: object, name: str) -> tuple[int, int]:
+    """``value`` as (rows, columns) of at least one tile each, or a ParameterError naming ``name``."""
+    pair: list[int] = []
+    try:
+        pair = [int(v) for v in value if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))]  # type: ignore[attr-defined]
+        n = len(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        n = 0
+    if n != 2 or len(pair) != 2 or min(pair) < 1:
+        raise sdk.ParameterError(f"{name}: expected (rows, columns) of at least one tile, got {value!r}", name)
+    return pair[0], pair[1]  # Python ints: numpy's int64 rows of 2**62 wrapped the byte count below 0
+
 _TRANSFORMS = {"clamped": 0, "logistic": 1, "linear": 2}
 _GROUP = 8  # the shader's local size, both axes
 
@@ -34,13 +47,16 @@ class RateSelector:
 
     ``model`` is an ``sdk.ShadingRatePredictor`` (its metadata and hardware tile size are taken) or an
     ``sdk.ModelMetadata``; ``ctx`` a moderngl context of OpenGL 4.3 or later (compute shaders; default: a
-    new headless one through EGL). ``tile_size`` is the hardware's shading-rate tile when coarser than
-    the model's (``sdk.load(..., tile_size=)``: each hardware tile takes the worst of the model tiles it
-    covers, ``sdk.pool_tiles``); default: the predictor's, or the model's own tiles::
+    new headless one through EGL). ``tile_size`` is the hardware's shading-rate tile when it differs
+    from the model's (``sdk.load(..., tile_size=)``): coarser, each hardware tile takes the worst of the
+    model tiles it covers (``sdk.pool_tiles``); finer (AMD's and Intel's 8-pixel tiles under a 16-pixel
+    model), each takes its model tile's values (``sdk.split_tiles``), on the frame's grid of hardware
+    tiles given as ``grid``. Default: the predictor's, or the model's own tiles::
 
         selector = RateSelector(predictor, ctx)
         rates = selector.select(predictor.predict_raw(x))          # (th, tw) uint8, as shading_rates(x)
         texture = selector.select_buffer(raw_buffer, (th, tw))     # stays on the GPU: an r8ui texture
+        rates = selector.select(raw, grid=predictor.tiles(h, w))   # finer hardware tiles: the frame's grid
 
     The shader computes in float32 where the SDK decodes in float64, so a tile whose value lies within
     float32 rounding of the threshold (or of the other rate of its cost class) can decide the other
@@ -55,18 +71,16 @@ class RateSelector:
                                      f"{type(model).__name__}", "model")
         if tile_size is None:
             tile_size = model.tile_size if isinstance(model, sdk.ShadingRatePredictor) else meta.tile_size
-        if (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in sdk.TILE_SIZES
-                or tile_size < meta.tile_size):
-            finer = (f"; for finer hardware tiles select on the model's and give each of its texels to the "
-                     f"{meta.tile_size // tile_size}x{meta.tile_size // tile_size} hardware tiles it holds "
-                     f"(sdk.split_tiles on the host)"
-                     if isinstance(tile_size, int) and not isinstance(tile_size, bool) and tile_size in sdk.TILE_SIZES
-                     else "")
-            raise sdk.ParameterError(f"tile_size: expected one of {sdk.TILE_SIZES} no finer than the model's tiles "
-                                     f"({meta.tile_size}), got {tile_size!r}{finer}", "tile_size")
+        allowed_tiles = sdk.hardware_tiles(meta.tile_size)
+        if isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in allowed_tiles:
+            raise sdk.ParameterError(f"tile_size: expected one of {list(allowed_tiles)} (the hardware's shading-rate "
+                                     f"tile for the model's {meta.tile_size}-pixel tiles), got {tile_size!r}",
+                                     "tile_size")
         self._meta = meta
-        #: model tiles per hardware tile side
-        self.pool = tile_size // meta.tile_size
+        #: model tiles per hardware tile side (coarser hardware tiles; else 1)
+        self.pool = max(1, tile_size // meta.tile_size)
+        #: hardware tiles per model tile side (finer hardware tiles; else 1)
+        self.split = max(1, meta.tile_size // tile_size)
         if ctx is not None and not callable(getattr(ctx, "compute_shader", None)):
             raise AdapterFrameError(f"ctx must be a moderngl.Context, got {type(ctx).__name__}")
         self._own_ctx = ctx is None
@@ -84,6 +98,7 @@ class RateSelector:
             "u_k": meta.extrapolation_k,
             "u_higher_is_better": meta.higher_is_better,
             "u_pool": self.pool,
+            "u_split": self.split,
             "u_rate_factors": tuple(float(f) for f in meta.rate_factors),
         }
         if t.type in ("clamped", "logistic"):
@@ -110,7 +125,7 @@ class RateSelector:
     @property
     def tile_size(self) -> int:
         """The hardware tile the rates are for (pixels per side)."""
-        return self._meta.tile_size * self.pool
+        return self._meta.tile_size * self.pool // self.split
 
     def _targets(self, tiles: tuple[int, int]) -> None:
         """The rate texture and the decoded buffer for a grid of hardware ``tiles`` (rows, columns)."""
@@ -125,21 +140,16 @@ class RateSelector:
         self._tiles = tiles
 
     def select_buffer(self, raw: Any, tiles: tuple[int, int], threshold: float | None = None,
-                      allowed: Iterable[sdk.RateLike] | None = None) -> Any:
+                      allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None) -> Any:
         """Rates from the network's output already on the GPU: ``raw`` a moderngl buffer holding the
         output planes of one frame, float32 ``(len(metadata.outputs), th, tw)`` row-major, ``tiles``
         ``(th, tw)`` on the model's tiles. Returns the ``r8ui`` texture of rate codes, one texel a hardware
-        tile (``ceil(tw / pool)`` x ``ceil(th / pool)``, texel row 0 the top tile row); it is reused by the
-        next call of the same grid."""
-        try:
-            th, tw = tiles
-            ok = all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in (th, tw))
-        except (TypeError, ValueError):
-            ok = False
-        if not ok or th < 1 or tw < 1:
-            raise sdk.ParameterError(f"tiles: expected (rows, columns) of at least one tile, got {tiles!r}", "tiles")
-        th, tw = int(th), int(tw)  # numpy integers wrap: int64 rows of 2**62 made the byte count below 0
-        grid = (-(-th // self.pool), -(-tw // self.pool))
+        tile (texel row 0 the top tile row); it is reused by the next call of the same grid. On coarser
+        hardware tiles the grid is ``ceil(th / pool) x ceil(tw / pool)``; on finer ones it is the frame's,
+        ``grid`` = ``(rows, columns)`` (``predictor.tiles(h, w)``: a partial last model tile may hold one
+        hardware row or column fewer than ``split``), by default ``split`` times the model's tiles."""
+        th, tw = _tile_pair(tiles, "tiles")
+        grid = self._grid((th, tw), grid)
         limit = max_texture_side(self.ctx)
         if max(grid) > limit:
             raise sdk.ParameterError(f"tiles: this OpenGL context's rate texture holds at most {limit} hardware tiles "
@@ -157,6 +167,7 @@ class RateSelector:
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets(grid)
         self._program["u_tiles"].value = (tw, th)
+        self._program["u_grid"].value = (grid[1], grid[0])
         self._program["u_threshold"].value = float(thr)
         self._program["u_allowed"].value = mask
         raw.bind_to_storage_buffer(0)
@@ -167,10 +178,11 @@ class RateSelector:
         return self._texture
 
     def select(self, raw: np.ndarray, threshold: float | None = None,
-               allowed: Iterable[sdk.RateLike] | None = None) -> np.ndarray:
+               allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None) -> np.ndarray:
         """Rates from the network's output in host memory (``ShadingRatePredictor.predict_raw``: float
         ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 codes, one per hardware tile,
-        as ``shading_rates`` returns them."""
+        as ``shading_rates`` returns them (on finer hardware tiles than the model's, for the frame's
+        ``grid``, as :meth:`select_buffer` says)."""
         try:
             a = np.asarray(raw)
         except (TypeError, ValueError, OverflowError) as exc:
@@ -183,6 +195,8 @@ class RateSelector:
         # the selector holding a released buffer that broke every later call.
         self._check_open()
         self._check_decision(threshold, allowed)
+        if a.ndim == 3 and a.shape[0] == n and 0 not in a.shape:
+            self._grid((int(a.shape[1]), int(a.shape[2])), grid)
         if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f" or 0 in a.shape:
             raise sdk.InputShapeError(
                 f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
@@ -195,9 +209,29 @@ class RateSelector:
             self._raw = self.ctx.buffer(data)
         else:
             self._raw.write(data)
-        texture = self.select_buffer(self._raw, (int(a.shape[1]), int(a.shape[2])), threshold, allowed)
+        texture = self.select_buffer(self._raw, (int(a.shape[1]), int(a.shape[2])), threshold, allowed, grid)
         gh, gw = self._tiles  # type: ignore[misc]
         return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(gh, gw).copy()
+
+    def _grid(self, tiles: tuple[int, int], grid: object) -> tuple[int, int]:
+        """The hardware tiles' grid for the model's ``tiles``: ``grid`` checked, or the default."""
+        th, tw = tiles
+        if grid is None:
+            if self.split > 1:
+                return th * self.split, tw * self.split
+            return -(-th // self.pool), -(-tw // self.pool)
+        gh, gw = _tile_pair(grid, "grid")
+        if self.split > 1:
+            fits = -(-gh // self.split) == th and -(-gw // self.split) == tw
+            expected = (f"{(th - 1) * self.split + 1}-{th * self.split} rows and "
+                        f"{(tw - 1) * self.split + 1}-{tw * self.split} columns (the frame's {self.tile_size}-pixel "
+                        f"tiles, predictor.tiles(h, w), for {th}x{tw} model tiles)")
+        else:
+            fits = (gh, gw) == (-(-th // self.pool), -(-tw // self.pool))
+            expected = f"{-(-th // self.pool)}x{-(-tw // self.pool)} (or None) for {th}x{tw} model tiles"
+        if not fits:
+            raise sdk.ParameterError(f"grid: expected {expected}, got {grid!r}", "grid")
+        return gh, gw
 
     def _check_open(self) -> None:
         if self._program is None:

@@ -16,7 +16,9 @@ layout(std430, binding = 1) writeonly buffer Decoded { float decoded[]; };
 layout(r8ui, binding = 0) uniform writeonly uimage2D u_rates;
 
 uniform ivec2 u_tiles;           // (tw, th): the model's tiles across and down
+uniform ivec2 u_grid;            // (columns, rows): the hardware tiles, one texel each
 uniform int u_pool;              // hardware tiles of u_pool x u_pool model tiles (1: the model's own)
+uniform int u_split;             // or model tiles of u_split x u_split hardware tiles (1: the model's own)
 uniform int u_outputs[6];        // the PREDICTED_RATES index of each output plane; -1 past the last
 uniform float u_shift;           // safety margin x its conservative direction, added in transformed space
 uniform int u_transform;         // 0 clamped, 1 logistic, 2 linear
@@ -80,16 +82,17 @@ void decode(int at, int plane, out float v[6]) {
 
 void main() {
     ivec2 t = ivec2(gl_GlobalInvocationID.xy);  // a hardware tile
-    ivec2 grid = (u_tiles + u_pool - 1) / u_pool;
+    ivec2 grid = u_grid;
     if (t.x >= grid.x || t.y >= grid.y) return;
     int plane = u_tiles.x * u_tiles.y;
 
-    // the worst of the model tiles the hardware tile covers (sdk pool_tiles; a partial one pools those it has)
+    // the worst of the model tiles the hardware tile covers (sdk pool_tiles; a partial one pools those it has),
+    // or on finer hardware tiles the one model tile it lies in (sdk split_tiles)
     float v[6];
     bool first = true;
     for (int dy = 0; dy < u_pool; ++dy) {
         for (int dx = 0; dx < u_pool; ++dx) {
-            ivec2 m = t * u_pool + ivec2(dx, dy);
+            ivec2 m = t * u_pool / u_split + ivec2(dx, dy);
             if (m.x >= u_tiles.x || m.y >= u_tiles.y) continue;
             float w[6];
             decode(m.y * u_tiles.x + m.x, plane, w);
