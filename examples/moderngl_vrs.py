@@ -2,6 +2,7 @@
 
     python examples/moderngl_vrs.py                          # a walk through a procedural level, shipped JNYang
     python examples/moderngl_vrs.py --model flip --frames 12 --gif vrs.gif --out vrs.png
+    python examples/moderngl_vrs.py --tile-size 8             # on AMD's and Intel's 8-pixel VRS tiles
 
 What an engine on the GPU does each frame, with rtp's reference pieces standing in for its own:
 
@@ -63,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=6, help="frames of the walk (default: 6)")
     ap.add_argument("--threshold", type=float, help="threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
+    ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
+                    "16 for the shipped ones, NVIDIA's; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.frames < 1:
@@ -73,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
                  + f" holds about {need / 2**30:.1f} GiB", "size",
                  "of memory: a smaller --size" + (" or fewer --frames" if args.gif else ""), job="the example")
 
-    predictor = sdk.load(args.model)
+    predictor = sdk.load(args.model, tile_size=args.tile_size)
     log.info("model %s (%s), inputs %s", predictor.path, predictor.metadata.metric, ", ".join(predictor.metadata.inputs))
     threshold = predictor.metadata.default_threshold if args.threshold is None else \
         sdk.check_threshold(args.threshold, predictor.metadata.higher_is_better)  # refused now, not at frame 1
@@ -95,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
             x = adapter.inputs(source.frame(camera(i), camera(i - 1)))      # 1-2: G-buffers -> planes
             raw = predictor.predict_raw(x)                                     # 3: the network
             t0 = time.perf_counter()
-            rates = selector.select(raw, threshold)                            # 4: the decision, on the GPU
+            # 4: the decision, on the GPU, one texel a hardware tile of the frame
+            rates = selector.select(raw, threshold, grid=predictor.tiles(height, width))
             ms = 1e3 * (time.perf_counter() - t0)
             cpu = predictor.shading_rates(x, threshold)
             final = source.renderer.shade_rates(rates, selector.tile_size)     # 5: software VRS

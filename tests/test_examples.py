@@ -63,6 +63,21 @@ def test_moderngl_example_decides_on_the_gpu_and_shades_the_rates(tmp_path: Path
     assert r.returncode == 2 and "--frames: expected at least 1" in r.stderr
 
 
+@pytest.mark.gl
+def test_moderngl_example_on_8_pixel_hardware_tiles(tmp_path: Path) -> None:
+    """`--tile-size 8` (AMD's and Intel's VRS): the GPU's rate image holds the frame's 8-pixel tiles, 13 x 20 at
+    160x100 (where the model has 7 x 10: its last row is partial), and decides as the predictor loaded for them."""
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--tile-size", "8", "--frames", "2",
+                        "--size", "160x100", "--out", str(tmp_path / "vrs.png")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    found = [tuple(map(int, m)) for m in re.findall(r"GPU decision = CPU decision on (\d+) of (\d+) tiles", r.stderr)]
+    assert len(found) == 2 and all(n == 13 * 20 and same >= n - 3 for same, n in found), r.stderr
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--tile-size", "12"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "tile_size: expected one of [4, 8, 16, 32]" in r.stderr
+
+
 @pytest.mark.parametrize("name", ["moderngl_vrs", "pyrender_vrs"])
 def test_an_example_past_the_machines_memory_is_refused_before_it_renders(
     name: str, tmp_path: Path, machine_memory: Callable[..., None]
