@@ -309,6 +309,27 @@ def test_capture_takes_your_own_gltf_and_names_scenes_clearly(tmp_path: Path) ->
             load_scene(name, None, None, None)
 
 
+def test_a_level_exported_as_glb_keeps_its_alpha_tests(tmp_path: Path) -> None:
+    """``to_trimesh_scene`` writes each material's glTF alpha mode: MASK with the cutoff where the level
+    alpha-tests (a grate), OPAQUE elsewhere. Left unset, the export wrote BLEND: a GLB of an rtp level read
+    back by ``rtp capture`` drew its grates solid, and pyrender drew them in an order that changed from run
+    to run (examples/pyrender_vrs.py)."""
+    from rtp.capture import load_scene
+    from rtp.capture.scenes import procedural
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    level = procedural(3, rooms=(2, 2), texture_size=32)
+    cutoffs = {m.name: m.alpha_cutoff for m in level.materials}
+    assert cutoffs["grate"] == 0.5 and sum(c is not None for c in cutoffs.values()) == 1
+    path = tmp_path / "level.glb"
+    to_trimesh_scene(level).export(path)
+    back, _ = load_scene(str(path), None, None, None)
+    used = {level.materials[m.material].name for m in level.meshes if len(m.indices)}
+    assert "grate" in used
+    assert sorted(m.alpha_cutoff for m in back.materials if m.alpha_cutoff is not None) == [0.5]
+    assert sum(m.alpha_cutoff is None for m in back.materials) == len(back.materials) - 1
+
+
 def test_preview_sheet_labels_every_panel(tmp_path: Path) -> None:
     from rtp.capture import open_dataset, preview_sheet, save_image
 

@@ -14,7 +14,10 @@ Semantics kept equal to the reference renderer's G-buffer:
   upload, so ``v`` becomes ``1 - v``.
 * Materials are double-sided (the reference renderer shades two-sided by default).
 * ``alpha_cutoff`` has no pyrender equivalent: pyrender does not alpha-test (glTF ``MASK`` is
-  drawn opaque), so alpha-tested surfaces draw solid in pyrender.
+  drawn opaque), so alpha-tested surfaces draw solid in pyrender. :func:`to_trimesh_scene` writes
+  each material's glTF alpha mode (``MASK`` with the cutoff, else ``OPAQUE``), which ``rtp capture``
+  reads back as ``alpha_cutoff``; pyrender's own trimesh loader ignores it and blends every material
+  (examples/pyrender_vrs.py's ``load_scene`` keeps it, docs/adapters.md).
 """
 
 from __future__ import annotations
@@ -149,6 +152,11 @@ def to_trimesh_scene(scene: Any) -> Any:
             metallicFactor=float(m.metallic),
             roughnessFactor=float(m.roughness),
             doubleSided=True,
+            # what the reference renderer draws: alpha-tested or opaque, never blended. Left unset, the
+            # export wrote BLEND, which pyrender draws in the order of a set: a grate's holes then showed
+            # the sky or the room behind by the process's hash seed
+            alphaMode="OPAQUE" if m.alpha_cutoff is None else "MASK",
+            alphaCutoff=None if m.alpha_cutoff is None else float(m.alpha_cutoff),
         )
         uv = np.asarray(mesh.uvs, np.float64).copy()
         uv[:, 1] = 1.0 - uv[:, 1]  # trimesh keeps OBJ's bottom-left uv origin and flips glTF's on export
