@@ -3,6 +3,7 @@
     python examples/pyrender_vrs.py                       # procedural level -> GLB, the shipped JNYang model
     python examples/pyrender_vrs.py --scene level.glb --model flip --out vrs.png   # your level, another model
     python examples/pyrender_vrs.py --model jnyang-reuse --frames 24 --every 4 --gif vrs.gif   # a frame loop
+    python examples/pyrender_vrs.py --tile-size 8         # AMD's and Intel's 8-pixel VRS tiles
 
 Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default here) or OSMesa.
 
@@ -80,7 +81,19 @@ def load_scene(path: Path) -> Any:
         tm = trimesh.load(str(path), force="scene", process=False)
     except Exception as err:  # trimesh refuses an unknown or broken file with many exception types
         raise sdk.ParameterError(f"--scene {path}: trimesh cannot read it ({type(err).__name__}: {err})") from err
-    scene = pyrender.Scene.from_trimesh_scene(tm, bg_color=(0.45, 0.6, 0.85, 1.0), ambient_light=(0.3, 0.3, 0.3))
+    scene = pyrender.Scene(bg_color=(0.45, 0.6, 0.85, 1.0), ambient_light=(0.3, 0.3, 0.3))
+    for node in tm.graph.nodes_geometry:  # pyrender.Scene.from_trimesh_scene, keeping each material's alpha mode
+        pose, name = tm.graph[node]
+        geometry = tm.geometry[name]
+        mesh = pyrender.Mesh.from_trimesh(geometry)
+        material = getattr(geometry.visual, "material", None)
+        if isinstance(material, trimesh.visual.material.PBRMaterial):
+            # pyrender blends every trimesh material (alphaMode BLEND) and draws a scene's meshes in the order of a
+            # set, which changes from process to process: an alpha-tested grate's holes showed the sky in one run
+            # and the room behind it in the next. glTF's OPAQUE (its default) and MASK draw opaque in pyrender.
+            for primitive in mesh.primitives:
+                primitive.material.alphaMode = material.alphaMode or "OPAQUE"
+        scene.add(mesh, pose=pose, name=str(node))
     # pyrender's shading needs a light; a sun-like directional light from above
     sun = np.eye(4)
     sun[:3, :3] = _rotation(yaw=30.0, pitch=-60.0)
@@ -156,6 +169,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="frames of the camera move (default 2: one prediction; more: a frame loop with reuse)")
     ap.add_argument("--every", type=int, default=4, help="in a frame loop, run the network every this many frames")
     ap.add_argument("--gif", type=Path, help="in a frame loop, write the rate overlays as an animated GIF")
+    ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
+                    "16 for the shipped ones, NVIDIA's; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
     if args.frames < 2 or args.every < 1:
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
@@ -179,11 +194,12 @@ def main(argv: list[str] | None = None) -> int:
             scene_path, spawn = write_procedural_glb(folder / "level.glb", args.seed)
             log.info("wrote a procedural level (seed %d) to %s", args.seed, scene_path)
         scene = load_scene(scene_path)
-        predictor = sdk.load(args.model)
+        predictor = sdk.load(args.model, tile_size=args.tile_size)
         if args.threshold is not None:  # refused now, not at the first frame
             sdk.check_threshold(args.threshold, predictor.metadata.higher_is_better)
-        log.info("model %s: inputs %s, tile %d", predictor.path, ", ".join(predictor.metadata.inputs),
-                 predictor.metadata.tile_size)
+        log.info("model %s: inputs %s, tile %d%s", predictor.path, ", ".join(predictor.metadata.inputs),
+                 predictor.tile_size, "" if predictor.tile_size == predictor.metadata.tile_size else
+                 f" (the model's {predictor.metadata.tile_size})")
 
         p0, p1 = camera_poses(scene, spawn)  # before adding a camera: a glTF camera, if any, is the start
         if scene.main_camera_node is None:
@@ -206,8 +222,8 @@ def main(argv: list[str] | None = None) -> int:
         names, counts = np.unique(rates, return_counts=True)
         log.info("rates: %s; shading work saved %.1f %%",
                  ", ".join(f"{sdk.RATE_NAMES[int(c)]} x{n}" for c, n in zip(names, counts)),
-                 100.0 * float(np.mean([sdk.work_saved(sdk.RATE_NAMES[int(c)]) for c in rates.ravel()])))
-        overlay = sdk.draw_rate_overlay(colour, rates, predictor.metadata.tile_size)
+                 100.0 * sdk.work_saved(rates, (height, width), predictor.tile_size))  # partial tiles by their pixels
+        overlay = sdk.draw_rate_overlay(colour, rates, predictor.tile_size)
         from PIL import Image
 
         img = overlay if overlay.dtype == np.uint8 else (np.clip(overlay, 0, 1) * 255 + 0.5).astype(np.uint8)
@@ -244,13 +260,13 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
             rates = reuse.shading_rates(x, fetch=fetch if i > 1 else None, seen=seen, background=depth <= 0.0,
                                         threshold=args.threshold)
             ms = 1000.0 * (time.perf_counter() - t0)
-            saved.append(sdk.work_saved(rates, (height, width), predictor.metadata.tile_size))
+            saved.append(sdk.work_saved(rates, (height, width), predictor.tile_size))
             ran.append(reuse.work)
             log.info("frame %2d: %s, %.1f ms, shading work saved %.1f %%", i,
                      "network ran" if reuse.work >= 1.0 else f"carried ({reuse.work:.0%} of a network run on crops)"
                      if reuse.work > 0 else f"{carry} carried, age {reuse.age}", ms, 100.0 * saved[-1])
             if args.gif is not None or i == len(poses) - 1:  # (without --gif only the last is written)
-                overlay = sdk.draw_rate_overlay(colour, rates, predictor.metadata.tile_size)
+                overlay = sdk.draw_rate_overlay(colour, rates, predictor.tile_size)
                 overlays.append(overlay if overlay.dtype == np.uint8 else
                                 (np.clip(overlay, 0, 1) * 255 + 0.5).astype(np.uint8))
             prev_colour = colour  # what the frame displayed (a VRS engine: its own shaded frame)
