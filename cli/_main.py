@@ -175,6 +175,8 @@ def _load(args: argparse.Namespace) -> Any:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from rtp import sdk
+
     pred = _load(args)
     m = pred.metadata
     if args.json:
@@ -193,6 +195,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
         ("transform", f"{t.type} ({params})"),
         ("safety margin", f"{m.safety:g} (transformed units)"),
         ("tile size", f"{m.tile_size}x{m.tile_size}"),
+        ("hardware tiles", ", ".join(map(str, sdk.hardware_tiles(m.tile_size)))
+         + " (sdk.load(..., tile_size=N): NVIDIA's VRS 16, AMD's and Intel's 8)"),
         ("inputs", ", ".join(m.inputs)),
         ("graph inputs", "; ".join(f"{name} ({len(planes)} planes)" for name, planes in pred.graph_inputs)),
         ("network outputs", ", ".join(m.outputs)),

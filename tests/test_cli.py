@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -21,6 +22,7 @@ def test_info_prints_the_metadata(tiny_model: Callable[..., Path], capsys: pytes
     for text in ("jnyang", "clamped (mu_y=0.25)", "16x16", "reprojected.r, seen, albedo.r, normal.z",
                  "1x2, 2x1, 2x2, 2x4, 4x2, 4x4", "CPUExecutionProvider", "provenance.scenes", "oa_dm1, kaos2"):
         assert text in out, text
+    assert re.search(r"hardware tiles +4, 8, 16, 32 \(sdk.load", out), out  # the VRS tiles it runs on
     assert main(["info", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["metadata"]["provenance"]["samples"] == 40
 
