@@ -30,6 +30,7 @@ class DemoResult:
     metric: str
     threshold: float
     tiles: int
+    tile_size: int
     work_saved: float
     rate_share: dict[str, float]
     over_threshold: float
@@ -66,9 +67,12 @@ def run_demo(
     cache_dir: str | None = None,
     seed: int = 0,
     timing_runs: int = 11,
+    tile_size: int | None = None,
 ) -> DemoResult:
     """Run the demo and write its pictures into ``out``. ``predict`` is timed as the median of
-    ``timing_runs`` runs after a warm-up."""
+    ``timing_runs`` runs after a warm-up. ``tile_size`` is the hardware's VRS tile when it differs from
+    the model's (``sdk.load(..., tile_size=)``: 8 for AMD's and Intel's); the rates, the true error and
+    the composite are then per hardware tile."""
     from rtp import metrics
     from rtp.capture import check_frame_memory, load_scene, save_image
     from rtp.capture.paths import MAX_FRAMES, composite
@@ -78,8 +82,9 @@ def run_demo(
 
     if isinstance(frames, bool) or not isinstance(frames, int) or not 1 <= frames <= MAX_FRAMES:
         raise sdk.ParameterError(f"frames: expected an integer in [1, {MAX_FRAMES}], got {frames!r}", "frames")
-    predictor = sdk.load(model)
+    predictor = sdk.load(model, tile_size=tile_size)
     meta = predictor.metadata
+    tile = predictor.tile_size  # the hardware's tiles, which the rates are for
     thr = meta.default_threshold if threshold is None else float(threshold)
     # checked before any rendering: an error metric's threshold is a positive error
     if not np.isfinite(thr) or (not meta.higher_is_better and thr <= 0):
@@ -112,11 +117,11 @@ def run_demo(
     kw: dict[str, Any] = {}
     if meta.weber_l is not None:
         kw["weber_l"] = meta.weber_l
-    true = metrics.tile_targets(ref, images, (meta.metric,), meta.tile_size, **kw)[meta.metric]
-    vrs = composite(frame.colour, rates, meta.tile_size)
+    true = metrics.tile_targets(ref, images, (meta.metric,), tile, **kw)[meta.metric]
+    vrs = composite(frame.colour, rates, tile)
     flip = metrics.flip_map(ref, vrs)
 
-    saved = sdk.work_saved(rates, (h, w), meta.tile_size)  # pixel-weighted: edge tiles may be partial
+    saved = sdk.work_saved(rates, (h, w), tile)  # pixel-weighted: edge tiles may be partial
     share = {r: float((rates == code).mean()) for r, code in sdk.RATE_CODES.items()}
     over = float(failing_tiles(rates, true, thr, meta.higher_is_better).mean())
 
@@ -127,7 +132,7 @@ def run_demo(
         files.append(name)
 
     save("frame.png", ref)
-    save("overlay.png", rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, meta.tile_size))
+    save("overlay.png", rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, tile))
     # Heatmaps in metric units, bright = worse; the colour range ends at the threshold's double.
     # (PSNR is negated so that bright means worse there too.)
     if meta.higher_is_better:
@@ -136,13 +141,15 @@ def run_demo(
         sign, vmin, vmax = 1.0, 0.0, 2.0 * thr
     units = sdk.METRICS[meta.metric].units if meta.metric in sdk.METRICS else meta.metric
     save("predicted_vs_true.png", heatmaps(
-        sign * true, sign * predicted, meta.tile_size, (h, w), seen=frame.seen, vmin=vmin, vmax=vmax, scale=2,
+        sign * true, sign * predicted, tile, (h, w), seen=frame.seen, vmin=vmin, vmax=vmax, scale=2,
         label=f"{'-' if sign < 0 else ''}{meta.metric} ({units}), bright = worse", threshold=sign * thr,
-        title=f"{meta.metric} per {meta.tile_size}px tile: true (rendered at every rate) and predicted by "
-              f"{Path(str(predictor.path)).name}",
+        title=f"{meta.metric} per {tile}px tile: true (rendered at every rate) and predicted by "
+              f"{Path(str(predictor.path)).name}"
+              + (f" ({meta.tile_size}px tiles, each split)" if tile < meta.tile_size else
+                 f" (the worst of its {meta.tile_size}px tiles)" if tile > meta.tile_size else ""),
     ))
     save("vrs_composite.png", vrs)
     save("vrs_flip.png", value_map(flip, label="FLIP error (0 = identical, 1 = worst)",
                                    title="FLIP of the VRS composite against full-rate shading"))
-    return DemoResult(out, str(predictor.path), meta.metric, thr, int(rates.size), saved, share, over, predict_ms,
+    return DemoResult(out, str(predictor.path), meta.metric, thr, int(rates.size), tile, saved, share, over, predict_ms,
                       len(times), float(flip.mean()), files)

@@ -471,10 +471,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from ._demo import run_demo
 
     r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
-                 frames=args.frames, cache_dir=args.cache_dir, seed=args.seed)
+                 frames=args.frames, cache_dir=args.cache_dir, seed=args.seed, tile_size=args.tile_size)
     shares = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r.rate_share.items() if v > 0)
     print(f"model      {r.model} ({r.metric}), threshold {r.threshold:g}")
-    print(f"rates      {shares} of {r.tiles} tiles")
+    print(f"rates      {shares} of {r.tiles} tiles of {r.tile_size}x{r.tile_size} pixels")
     print(f"work saved {100 * r.work_saved:.1f}% of the shading (pixel-weighted)")
     print(f"over       {100 * r.over_threshold:.1f}% of the tiles have a true {r.metric} at or beyond the threshold at "
           f"their chosen rate")
@@ -824,6 +824,9 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move (the last one is shown)")
     dm.add_argument("--seed", type=_non_negative, default=0, help="which viewpoint of the scene")
     dm.add_argument("--out", type=_out_folder, default="rtp-demo", help="output folder")
+    dm.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
+                    "the model's, 16 for the shipped ones, NVIDIA's; 8: AMD's and Intel's, each taking its model "
+                    "tile's rate)")
     cache_dir(dm)
 
     from rtp.capture.paths import PATH_PROFILES

@@ -36,3 +36,26 @@ def test_a_demo_of_more_frames_than_a_path_may_have_is_refused_before_loading(
     assert rtp_main(["demo", "--model", "no_such_model", "--frames", "36001", "--out", str(tmp_path / "d")]) == 2
     assert capsys.readouterr().err.strip() == "rtp demo: error: frames: expected an integer in [1, 36000], got 36001"
     assert not (tmp_path / "d").exists()
+
+
+def test_demo_on_8_pixel_hardware_tiles_shades_the_same_frame(tmp_path: Path) -> None:
+    """``--tile-size 8`` (AMD's and Intel's VRS) with the shipped 16-pixel JNYang: each 8-pixel tile takes its model
+    tile's rate, so the composite, its FLIP and the work saved are the 16-pixel run's, while the rates, the true
+    error and the failing share are per 8-pixel tile (20 x 12 of them at 160x96); a tile size the model cannot
+    run on is refused before anything renders."""
+    import numpy as np
+    from PIL import Image
+
+    from rtp import sdk
+    from rtp.cli._demo import run_demo
+
+    own = run_demo(tmp_path / "d16", size=(160, 96), frames=2, timing_runs=1)
+    fine = run_demo(tmp_path / "d8", size=(160, 96), frames=2, timing_runs=1, tile_size=8)
+    assert (own.tiles, own.tile_size, fine.tiles, fine.tile_size) == (60, 16, 240, 8)
+    assert fine.work_saved == own.work_saved and fine.composite_flip_mean == own.composite_flip_mean
+    assert fine.over_threshold != own.over_threshold
+    for name in ("vrs_composite.png", "frame.png"):
+        assert np.array_equal(np.asarray(Image.open(tmp_path / "d8" / name)), np.asarray(Image.open(tmp_path / "d16" / name)))
+    with pytest.raises(sdk.ParameterError, match="tile_size"):
+        run_demo(tmp_path / "bad", size=(160, 96), tile_size=12)
+    assert not (tmp_path / "bad").exists()
