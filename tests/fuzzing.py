@@ -702,13 +702,21 @@ reuse_cases = st.tuples(
         "unseen_fraction": st.one_of(st.floats(-1, 2), hostile_numbers), "margin": st.one_of(st.integers(-2, 4),
                                                                                               hostile_numbers),
         "history": st.one_of(st.floats(-1, 2), hostile_numbers),
-        "refresh": st.one_of(st.none(), st.floats(-1, 2), hostile_numbers)}),
+        "refresh": st.one_of(st.none(), st.floats(-1, 2), hostile_numbers),
+        # not an argument: the predictor loaded for AMD's and Intel's finer hardware tiles (reused on the model's)
+        "hardware_tile": st.sampled_from([8, 4])}),
     _reuse_planes, _reuse_planes, _reuse_planes, _reuse_planes)
+#: The predictor loaded for each finer hardware tile than the model's 16 pixels.
+_FINE = {t: sdk.load(_MODEL, tile_size=t) for t in (8, 4)}
+
+
+def _reuse_predictor(kw: dict[str, Any]) -> sdk.ShadingRatePredictor:
+    return _FINE[kw["hardware_tile"]] if "hardware_tile" in kw else _PRED
 
 
 def _reuse_call(v: tuple[dict[str, Any], Any, Any, Any, Any]) -> np.ndarray:
     kw, rows, cols, seen, bg = v
-    reuse = sdk.PredictionReuse(_PRED, **kw)
+    reuse = sdk.PredictionReuse(_reuse_predictor(kw), **{k: a for k, a in kw.items() if k != "hardware_tile"})
     reuse.predict(_X)
     fetch = None if rows is None and cols is None else (None if rows is None else _array(rows),
                                                          None if cols is None else _array(cols))
@@ -729,7 +737,7 @@ def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray)
             or (margin is not None and (isinstance(margin, bool) or not isinstance(margin, (int, np.integer))
                                         or margin < 0))):
         return True
-    if est.shape != (6, *_PRED.tiles(_RH, _RW)) or est.dtype != np.float32:
+    if est.shape != (6, *_reuse_predictor(kw).tiles(_RH, _RW)) or est.dtype != np.float32:
         return True
     if (every == 1 and history == 0) or (rows is None and cols is None):
         return False
