@@ -809,5 +809,25 @@ class ShadingRatePredictor:
         shading-rate image.
         """
         thr = self._meta.default_threshold if threshold is None else threshold
-        return select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
-                            factors=self._meta.rate_factors)
+        rates = select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
+                             factors=self._meta.rate_factors)
+        self._warn_beyond_saturation(thr)
+        return rates
+
+    def _warn_beyond_saturation(self, threshold: float) -> None:
+        """Log once per threshold when every rate's threshold (its ``rate_factors`` share of it) lies beyond the
+        worst value the model can express: every tile then passes at the coarsest allowed rate (``load`` says so
+        of a default threshold)."""
+        sat, t, hib = self._meta.saturation, float(threshold), self._meta.higher_is_better
+        factors = self._meta.rate_factors or (1.0,)
+        rates = [t - 20.0 * math.log10(f) if hib else t * f for f in factors]  # (select_rates' per-rate thresholds)
+        if not all((r < sat) if hib else (r > sat) for r in rates):
+            return
+        seen = self.__dict__.setdefault("_saturation_warned", set())
+        if t not in seen:
+            seen.add(t)
+            f = min(factors)  # the rate whose threshold is the last to pass everything
+            limit = sat + 20.0 * math.log10(f) if hib else sat / f
+            log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
+                        "it at every rate; use one %s %g", self._path.name if self._path else "model", t, sat,
+                        "above" if hib else "below", limit)

@@ -18,11 +18,12 @@ def test_the_jnyang_model_ships() -> None:
 
 def test_every_shipped_model_is_named_for_its_metric() -> None:
     # One model per metric, named for it; a variant for a use is METRIC-USE (the model for
-    # prediction reuse, jnyang-reuse: docs/runtime.md), beside its metric's every-frame model.
+    # prediction reuse, jnyang-reuse: docs/runtime.md; the model for AMD's and Intel's 8-pixel VRS
+    # tiles, jnyang-8px), beside its metric's every-frame model.
     metrics = {n.removesuffix(".onnx") for n in SHIPPED if "-" not in n}
     assert metrics == {"jnyang", "psnr", "flip", "jnflip", "lpips"}
     variants = {n.removesuffix(".onnx") for n in SHIPPED} - metrics
-    assert variants == {"jnyang-reuse"}
+    assert variants == {"jnyang-reuse", "jnyang-8px"}
     for v in variants:
         assert v.split("-")[0] in metrics
 
@@ -65,7 +66,8 @@ def test_shipped_model_loads_by_name_and_predicts(name: str) -> None:
     assert by_name.path is not None and by_name.path.name == name
     m = by_name.metadata
     assert m.metric == name.removesuffix(".onnx").split("-")[0]  # jnyang-reuse: a JNYang model
-    assert m.tile_size == 16 and {"seen", "normal.z"} <= set(m.inputs)
+    # NVIDIA's 16-pixel VRS tiles; the 8px variant AMD's and Intel's 8
+    assert m.tile_size == (8 if name.endswith("-8px.onnx") else 16) and {"seen", "normal.z"} <= set(m.inputs)
     for kind in ("reprojected", "albedo"):  # the paper's brightness planes: red, or luma ("Luma instead of red")
         assert len({f"{kind}.r", f"{kind}.y"} & set(m.inputs)) == 1, (kind, m.inputs)
     assert m.outputs == ("1x2", "2x1", "2x4", "4x2")
@@ -79,8 +81,9 @@ def test_shipped_model_loads_by_name_and_predicts(name: str) -> None:
     x = np.zeros((len(m.inputs), 72, 128), np.float32)
     x[m.inputs.index("seen")] = 1.0
     out = by_name.predict(x)
-    assert out.shape == (6, 5, 8) and np.all(np.isfinite(out))
-    assert by_name.shading_rates(x).shape == (5, 8)
+    grid = (-(-72 // m.tile_size), 128 // m.tile_size)
+    assert out.shape == (6, *grid) and np.all(np.isfinite(out))
+    assert by_name.shading_rates(x).shape == grid
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -128,3 +131,25 @@ def test_every_output_of_a_shipped_model_responds_to_the_frame(name: str, render
     ], axis=1)
     spread = raw.std(axis=1)
     assert (spread > 0.01).all(), dict(zip(p.metadata.outputs, spread.round(5)))
+
+
+def test_the_8px_model_decides_each_8_pixel_tile(caplog: pytest.LogCaptureFixture) -> None:
+    """jnyang-8px (AMD's and Intel's 8-pixel VRS tiles) predicts per 8-pixel tile itself; on NVIDIA's 16-pixel
+    tiles each takes the worst of its four. Its default decides at 0.94 of the judging threshold (the 16-pixel
+    JNYang's failing share on the validation maps), and a threshold past the worst value it can express (its
+    clamped transform ends at 0.288) is said once, not passed silently."""
+    pred = sdk.load("jnyang-8px")
+    m = pred.metadata
+    assert (pred.tile_size, m.tile_size, m.metric, m.default_threshold) == (8, 8, "jnyang", 0.25)
+    assert m.rate_factors == (0.94,) * 6 and "8x8" in m.description
+    x = np.random.default_rng(8).random((len(m.inputs), 72, 128), dtype=np.float32)
+    assert pred.predict(x).shape == (6, 9, 16)
+    nvidia = sdk.load("jnyang-8px", tile_size=16)
+    np.testing.assert_array_equal(nvidia.predict(x), sdk.pool_tiles(pred.predict(x), 2))
+    caplog.set_level("WARNING", logger="rtp")
+    pred.shading_rates(x, 0.3)  # 0.94 x 0.3 = 0.282: inside
+    assert not caplog.records
+    for _ in range(2):
+        assert (pred.shading_rates(x, 0.31) == sdk.RATE_CODES["4x4"]).all()  # 0.2914 for every rate: every tile passes
+    assert len(caplog.records) == 1
+    assert "can express (0.287897): every tile passes it at every rate; use one below 0.306" in caplog.text
