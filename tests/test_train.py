@@ -1578,3 +1578,36 @@ def test_bench_training_device_times_each_device_from_the_same_seed(tmp_path: Pa
     with pytest.raises(SystemExit):
         mod.main([*args[:4], "--steps", "5", "--warmup", "5"])
     assert "--steps 5 leaves no step to time after --warmup 5" in capsys.readouterr().err
+
+
+def test_bench_hardware_tiles_compares_models_on_one_tile_size(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench/hardware_tiles.py: a perfect estimate never fails at the judging threshold and a coarser decision
+    saves more; end to end, a 16-pixel model read on 8-pixel tiles, a row per model with savings that rise with
+    the failing share, its default's share, and the threshold that fails on a share asked for."""
+    import subprocess
+    import sys
+
+    path, mod = _bench_module("hardware_tiles", monkeypatch)
+    rng = np.random.default_rng(4)
+    truth = np.sort(rng.random((6, 500)) * 0.5, axis=0)
+    fail, saved = mod.outcome(truth, truth, 0.25, 0.25, None)
+    assert fail == 0.0 and 0.0 < saved < 0.9375
+    fail2, saved2 = mod.outcome(truth * 0.5, truth, 0.25, 0.25, None)  # underestimates: more saved, tiles fail
+    assert fail2 > 0.0 and saved2 > saved
+    data = _dataset(tmp_path / "ds", n=6)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=10, crop=32,
+                      val_scenes=("scene0",), loss="mse"))
+    model = export.export_checkpoint(tmp_path / "m.pt", tmp_path / "m.onnx")
+    out = subprocess.run([sys.executable, str(path), str(model), str(model), "--data", str(data), "--scene",
+                          "scene0,scene1", "--tile-size", "8", "--fail-share", "0.05"],
+                         capture_output=True, text=True, check=True).stdout
+    assert "jnyang on 8-pixel tiles: 4 samples" in out
+    rows = [line.split("|") for line in out.splitlines() if line.startswith(f"| {model}")]
+    assert len(rows) == 2 and rows[0] == rows[1] and rows[0][2].strip() == "16"
+    v = [float(x) if x.strip() != "-" else None for x in rows[0][3].split("/")]
+    got = [x for x in v if x is not None]
+    assert got == sorted(got) and all(0.0 <= x <= 93.75 for x in got)
+    assert float(rows[0][5]) > 0.0  # the threshold failing on 5% of the tiles
+    bad = subprocess.run([sys.executable, str(path), "psnr", "jnyang", "--data", str(data)], capture_output=True,
+                         text=True)
+    assert bad.returncode == 2 and "one error metric" in bad.stderr
