@@ -852,6 +852,39 @@ def test_reuse_refuses_what_is_not_a_predictor_and_an_input_function_s_wrong_win
     np.testing.assert_array_equal(reuse.predict(lambda ys, xs: frame[:, ys, xs], seen=seen), pred.predict(frame))
 
 
+def _reuse_options(pred: sdk.ShadingRatePredictor, every: int, unseen: str, option: str,
+                   shares: dict[str, float]) -> dict[str, Any]:
+    """``PredictionReuse`` arguments: ``every``, ``unseen`` and the ``option`` drawn where the model allows it
+    (``features`` for a model that splits, ``rescale`` for one with ``.blocks`` planes of an error metric, or
+    one of ``shares``, a share each)."""
+    kw: dict[str, Any] = {"every": every, "unseen": unseen}
+    if option == "features" and pred.splits:
+        kw["carry"] = "features"
+    elif option == "rescale" and any(c.endswith(".blocks") for c in pred.metadata.inputs) \
+            and not pred.metadata.higher_is_better:
+        kw["rescale"] = 0.25
+    elif option in shares:
+        kw[option] = shares[option]
+    return kw
+
+
+def _moving_frames(names: tuple[str, ...], sizes: list[tuple[int, int]], seed: int) -> Any:
+    """Three random frames of each size, their ``.blocks`` / ``.tiles`` planes derived from the first plane,
+    each with a seen mask (10% unseen) and, but for the first frame and one in ten, fetch positions moved by
+    up to three pixels: ``(x, fetch, seen)``."""
+    rng = np.random.default_rng(seed)
+    for f, (h, w) in enumerate(s for s in sizes for _ in range(3)):
+        x = rng.random((len(names), h, w), dtype=np.float32)
+        for i, c in enumerate(names):
+            if c.endswith((".blocks", ".tiles")):
+                x[i] = (sdk.tile_variances if c.endswith(".tiles") else sdk.block_variances)(x[0])
+        seen = (rng.random((h, w)) > 0.1).astype(np.float32)
+        rows, cols = np.indices((h, w))
+        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, h - 1),
+                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, w - 1)) if f and rng.random() < 0.9 else None
+        yield x, fetch, seen
+
+
 @settings(max_examples=12, deadline=None)
 @given(model=st.sampled_from(["jnyang", "jnyang-reuse", "psnr"]), every=st.integers(1, 4),
        unseen=st.sampled_from(["full", "fresh"]), option=st.sampled_from(["", "features", "rescale", "refresh"]),
@@ -864,24 +897,10 @@ def test_a_channels_function_gives_what_the_whole_frame_gives_in_any_sequence(
     takes ``channels`` the same as from the whole frame, to the bit."""
     pred = sdk.load(model)
     names = pred.metadata.inputs
-    kw: dict[str, Any] = {"every": every, "unseen": unseen}
-    if option == "features" and pred.splits:
-        kw["carry"] = "features"
-    elif option == "rescale" and any(c.endswith(".blocks") for c in names) and not pred.metadata.higher_is_better:
-        kw["rescale"] = 0.25
-    elif option == "refresh":
-        kw["refresh"] = 0.05
+    kw = _reuse_options(pred, every, unseen, option, {"refresh": 0.05})
     whole, asked = sdk.PredictionReuse(pred, **kw), sdk.PredictionReuse(pred, **kw)
-    rng = np.random.default_rng(seed)
-    for f, (h, w) in enumerate(s for s in sizes for _ in range(3)):
-        x = rng.random((len(names), h, w), dtype=np.float32)
-        for i, c in enumerate(names):
-            if c.endswith((".blocks", ".tiles")):
-                x[i] = (sdk.tile_variances if c.endswith(".tiles") else sdk.block_variances)(x[0])
-        seen = (rng.random((h, w)) > 0.1).astype(np.float32)
-        rows, cols = np.indices((h, w))
-        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, h - 1),
-                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, w - 1)) if f and rng.random() < 0.9 else None
+    for x, fetch, seen in _moving_frames(names, sizes, seed):
+        h, w = x.shape[1:]
         want = whole.predict(x, fetch, seen)
         got = asked.predict(lambda ys, xs, channels, x=x: x[[names.index(c) for c in channels], ys, xs], fetch, seen)
         assert want.shape == (6, -(-h // TILE), -(-w // TILE)) and not np.isnan(want).any()
@@ -902,26 +921,12 @@ def test_reuse_on_finer_hardware_tiles_is_the_model_tiles_reuse_split(
     grid of hardware tiles (sides that are not whole model tiles too), with the same work and age."""
     coarse, split = sdk.load(model), sdk.load(model, tile_size=fine)
     names = coarse.metadata.inputs
-    kw: dict[str, Any] = {"every": every, "unseen": unseen}
-    if option == "features" and coarse.splits:
-        kw["carry"] = "features"
-    elif option == "rescale" and any(c.endswith(".blocks") for c in names) and not coarse.metadata.higher_is_better:
-        kw["rescale"] = 0.25
-    elif option in ("refresh", "history"):
-        kw[option] = 0.3
+    kw = _reuse_options(coarse, every, unseen, option, {"refresh": 0.3, "history": 0.3})
     ours, theirs = sdk.PredictionReuse(coarse, **kw), sdk.PredictionReuse(split, **kw)
     assert theirs.predictor is split and theirs.step == ours.step and theirs.margin == ours.margin
-    rng = np.random.default_rng(seed)
     factor = TILE // fine
-    for f, (h, w) in enumerate(s for s in sizes for _ in range(3)):
-        x = rng.random((len(names), h, w), dtype=np.float32)
-        for i, c in enumerate(names):
-            if c.endswith((".blocks", ".tiles")):
-                x[i] = (sdk.tile_variances if c.endswith(".tiles") else sdk.block_variances)(x[0])
-        seen = (rng.random((h, w)) > 0.1).astype(np.float32)
-        rows, cols = np.indices((h, w))
-        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, h - 1),
-                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, w - 1)) if f and rng.random() < 0.9 else None
+    for x, fetch, seen in _moving_frames(names, sizes, seed):
+        h, w = x.shape[1:]
         want = ours.shading_rates(x, fetch, seen, threshold=coarse.metadata.default_threshold)
         got = theirs.shading_rates(x, fetch, seen)
         grid = split.tiles(h, w)
