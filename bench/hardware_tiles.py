@@ -3,17 +3,19 @@ and which default threshold fails as often as a reference share.
 
     python bench/hardware_tiles.py jnyang jnyang-8px --data data/val8 --tile-size 8
     python bench/hardware_tiles.py jnyang-8px --data data/train --tile-size 8 --fail-share 0.078
+    python bench/hardware_tiles.py psnr psnr-8px --data data/val8 --tile-size 8
 
 Each model is loaded for ``--tile-size`` pixels (``sdk.load(model, tile_size=)``: a 16-pixel model on
 8-pixel tiles takes its model tile's values; an 8-pixel model decides each tile itself) and predicts
 every sample of ``--data`` on the maps of ``--scene``; the targets are the dataset's at that tile size.
 A tile fails when its true error at the chosen rate is over the metric's judging threshold (the first
-model's default; ``--judge``). The decision threshold is swept over 160 log-spaced factors of it (0.05x
-to 4x), finer than ``rtp evaluate``'s sqrt(2) steps, whose linear interpolation across a wide step
-reads the saving at 1-5% failing tiles low. Prints per model the work saved at 1, 2, 5 and 10% failing
-tiles, the failing share and saving at its own default threshold, and with ``--fail-share S`` the
-decision threshold at which it fails on S of the tiles (to set a default with ``rtp-export --retune``).
-Error metrics only; the work saved is the mean over tiles of 1 - 1/(W·H) of the chosen rate.
+model's default; ``--judge``), or its PSNR under it. The decision threshold is swept over 160 log-spaced
+factors of it (0.05x to 4x; for PSNR the same factors on the error's amplitude, the judging dB minus 20
+log10 of each: +26 to -12 dB), finer than ``rtp evaluate``'s sqrt(2) steps, whose linear interpolation
+across a wide step reads the saving at 1-5% failing tiles low. Prints per model the work saved at 1, 2, 5
+and 10% failing tiles, the failing share and saving at its own default threshold, and with ``--fail-share
+S`` the decision threshold at which it fails on S of the tiles (to set a default with ``rtp-export
+--retune``). The work saved is the mean over tiles of 1 - 1/(W·H) of the chosen rate.
 """
 
 from __future__ import annotations
@@ -33,17 +35,23 @@ _SAVED = {sdk.RATE_CODES[r]: 1.0 - 1.0 / (int(r[0]) * int(r[2])) for r in sdk.AL
 
 
 def outcome(pred: np.ndarray, truth: np.ndarray, decide: float, judge: float,
-            factors: tuple[float, ...] | None) -> tuple[float, float]:
-    """(failing share, work saved) of the decision threshold ``decide``, a tile failing over ``judge``;
-    ``pred`` and ``truth`` are ``(6, tiles)``."""
-    codes = sdk.select_rates(pred[:, :, None], decide, factors=factors)[:, 0]
+            factors: tuple[float, ...] | None, higher_is_better: bool = False) -> tuple[float, float]:
+    """(failing share, work saved) of the decision threshold ``decide``, a tile failing over ``judge`` (under
+    it for PSNR, ``higher_is_better``); ``pred`` and ``truth`` are ``(6, tiles)``."""
+    codes = sdk.select_rates(pred[:, :, None], decide, factors=factors, higher_is_better=higher_is_better)[:, 0]
     saved = np.zeros(codes.shape)
     fail = np.zeros(codes.shape, bool)
     for i, r in enumerate(sdk.PREDICTED_RATES):
         m = codes == sdk.RATE_CODES[r]
         saved[m] = _SAVED[sdk.RATE_CODES[r]]
-        fail[m] = truth[i][m] > judge
+        fail[m] = truth[i][m] < judge if higher_is_better else truth[i][m] > judge
     return float(fail.mean()), float(saved.mean())
+
+
+def decision(judge: float, factor: float, higher_is_better: bool) -> float:
+    """The decision threshold ``factor`` of the sweep stands for: ``judge x factor`` for an error, for PSNR
+    ``judge - 20 log10(factor)`` dB (a factor on the error's amplitude, as ``rate_factors``)."""
+    return judge - 20.0 * float(np.log10(factor)) if higher_is_better else judge * factor
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -59,8 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     preds = [sdk.load(m, providers=["CPUExecutionProvider"]) for m in [args.model, *args.more]]
     metas = [p.metadata for p in preds]
-    if any(m.higher_is_better for m in metas) or len({m.metric for m in metas}) > 1:
-        raise UsageError("expected models of one error metric (PSNR is better when higher: not read here)")
+    if len({m.metric for m in metas}) > 1:
+        raise UsageError(f"expected models of one metric, got {', '.join(sorted({m.metric for m in metas}))}")
+    higher = metas[0].higher_is_better
     tile = args.tile_size or preds[0].tile_size
     preds = [sdk.load(m, providers=["CPUExecutionProvider"], tile_size=tile) for m in [args.model, *args.more]]
     judge = float(metas[0].default_threshold if args.judge is None else args.judge)
@@ -70,8 +79,8 @@ def main(argv: list[str] | None = None) -> int:
         raise UsageError(f"{args.data} holds no sample of {args.scene}")
     truth = np.concatenate([store.load(i, metas[0].metric, tile).reshape(6, -1) for i in ids], axis=1)
     print(f"\n{metas[0].metric} on {tile}-pixel tiles: {len(ids)} samples of {args.data} ({args.scene}), a tile failing "
-          f"over {judge:g}; work saved % at {' / '.join(f'{100 * s:g}' for s in SHARES)}% failing tiles (a sweep of "
-          f"{len(SWEEP)} thresholds)\n")
+          f"{'under' if higher else 'over'} {judge:g}; work saved % at {' / '.join(f'{100 * s:g}' for s in SHARES)}% "
+          f"failing tiles (a sweep of {len(SWEEP)} thresholds)\n")
     print("| model | model tiles | saved % at 1 / 2 / 5 / 10% failing | default threshold: failing / saved %"
           + (f" | threshold failing on {100 * args.fail_share:g}%" if args.fail_share is not None else "") + " |")
     print("|---|---:|---|---|" + ("---|" if args.fail_share is not None else ""))
@@ -79,16 +88,17 @@ def main(argv: list[str] | None = None) -> int:
         est = np.concatenate([p.predict(reader[i].inputs(m.inputs)).reshape(6, -1)
                               for i in tqdm(ids, desc=str(name), unit="sample", leave=False)], axis=1)
         factors = m.rate_factors
-        pts = sorted(outcome(est, truth, judge * f, judge, factors) for f in SWEEP)
+        pts = sorted(outcome(est, truth, decision(judge, f, higher), judge, factors, higher) for f in SWEEP)
         fails = np.array([q[0] for q in pts])
         saved = np.maximum.accumulate(np.array([q[1] for q in pts]))
         at = [float(np.interp(s, fails, saved)) if fails[0] <= s else float("nan") for s in SHARES]
-        d = outcome(est, truth, m.default_threshold, judge, factors)
+        d = outcome(est, truth, m.default_threshold, judge, factors, higher)
         row = (f"| {name} | {m.tile_size} | {' / '.join('-' if v != v else f'{100 * v:.1f}' for v in at)} | "
                f"{m.default_threshold:g}: {100 * d[0]:.1f} / {100 * d[1]:.1f}")
         if args.fail_share is not None:
-            by_thr = sorted((judge * f, outcome(est, truth, judge * f, judge, factors)[0]) for f in SWEEP)
-            thr = float(np.interp(args.fail_share, [q[1] for q in by_thr], [q[0] for q in by_thr]))
+            thrs = [decision(judge, f, higher) for f in SWEEP]  # from the strictest to the loosest
+            by_thr = [outcome(est, truth, t, judge, factors, higher)[0] for t in thrs]
+            thr = float(np.interp(args.fail_share, by_thr, thrs))
             row += f" | {thr:.4g}"
         print(row + " |")
     return 0

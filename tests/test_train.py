@@ -20,7 +20,7 @@ import torch
 import yaml
 
 from rtp import export, sdk
-from rtp.capture import BUFFERS, DatasetError, DatasetWriter, TargetStore, pool_targets
+from rtp.capture import BUFFERS, DatasetError, DatasetReader, DatasetWriter, TargetStore, pool_targets
 from rtp.cli import main as rtp_main
 from rtp.evaluate import scores
 from rtp.sdk import psnr_from_mse as mse_to_psnr
@@ -1610,4 +1610,26 @@ def test_bench_hardware_tiles_compares_models_on_one_tile_size(tmp_path: Path, m
     assert float(rows[0][5]) > 0.0  # the threshold failing on 5% of the tiles
     bad = subprocess.run([sys.executable, str(path), "psnr", "jnyang", "--data", str(data)], capture_output=True,
                          text=True)
-    assert bad.returncode == 2 and "one error metric" in bad.stderr
+    assert bad.returncode == 2 and "expected models of one metric, got jnyang, psnr" in bad.stderr
+    # PSNR (higher is better): a perfect estimate never fails, one 3 dB too hopeful saves more and fails; the
+    # sweep's factors are dB off the judging threshold (a factor on the error's amplitude)
+    db = 50.0 - 40.0 * truth
+    fail, saved = mod.outcome(db, db, 35.0, 35.0, None, True)
+    assert fail == 0.0 and 0.0 < saved < 0.9375
+    fail2, saved2 = mod.outcome(db + 3.0, db, 35.0, 35.0, None, True)
+    assert fail2 > 0.0 and saved2 > saved
+    assert mod.decision(35.0, 0.1, True) == pytest.approx(55.0) and mod.decision(0.2, 0.5, False) == 0.1
+    store = TargetStore(data)
+    store.declare("psnr", {})
+    for sid in DatasetReader(data).ids:
+        store.write(sid, "psnr", (50.0 - 40.0 * store.load(sid, "jnyang", 4)).astype(np.float32), (H, W))
+    out = subprocess.run([sys.executable, str(path), "psnr", "psnr-8px", "--data", str(data), "--scene",
+                          "scene0,scene1", "--tile-size", "8", "--fail-share", "0.05"],
+                         capture_output=True, text=True, check=True).stdout
+    assert "psnr on 8-pixel tiles: 4 samples" in out and "a tile failing under 35" in out
+    rows = {line.split("|")[1].strip(): line.split("|") for line in out.splitlines() if line.startswith("| psnr")}
+    assert set(rows) == {"psnr", "psnr-8px"} and [rows[n][2].strip() for n in ("psnr", "psnr-8px")] == ["16", "8"]
+    for row in rows.values():
+        got = [float(x) for x in row[3].split("/") if x.strip() != "-"]
+        assert got == sorted(got) and all(0.0 <= x <= 93.75 for x in got)
+        assert 35.0 - 20.0 * np.log10(4.0) <= float(row[5]) <= 35.0 - 20.0 * np.log10(0.05)  # dB inside the sweep
