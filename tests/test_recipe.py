@@ -71,6 +71,28 @@ def test_the_reuse_recipe_is_the_one_jnyang_reuse_was_trained_with() -> None:
         load_recipe("reuse", "flip")  # measured for JNYang only
 
 
+def test_the_8_pixel_recipe_is_the_shipped_one_on_8_pixel_tiles() -> None:
+    """tile8 is each metric's shipped recipe with ``tile: 8`` and nothing else, and every shipped ``-8px`` model
+    was trained with it (the one file trains jnyang-8px, flip-8px and psnr-8px)."""
+    from rtp import sdk
+
+    metrics = ("jnyang", "flip", "psnr")
+    for metric in metrics:
+        eight = load_recipe("tile8", metric)
+        assert eight.val_split == load_recipe(SHIPPED_RECIPE, metric).val_split == "validation"
+        assert eight.values == {**load_recipe(SHIPPED_RECIPE, metric).values, "tile": 8}, metric
+    for metric in set(sdk.METRICS) - set(metrics):
+        with pytest.raises(RecipeError, match=f"recipe tile8 is for jnyang, flip, psnr .*got metric '{metric}'"):
+            load_recipe("tile8", metric)
+    models = [n.removesuffix(".onnx") for n in sdk.shipped_models() if n.endswith("-8px.onnx")]
+    assert "jnyang-8px" in models
+    for name in models:
+        trained = sdk.load(name).metadata.provenance["recipe"]
+        assert trained["name"] == "tile8" and trained["val_split"] == "validation", name
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in trained["values"].items()}
+        assert values == load_recipe("tile8", name.removesuffix("-8px")).values, name
+
+
 def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out="o.pt", steps=10)
     assert cfg.steps == 10 and cfg.batch == 128 and cfg.crop == 64 and cfg.lr == 5e-4 and cfg.arch == "fast"
