@@ -417,7 +417,7 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
     with pytest.raises(sdk.ParameterError, match="does not split"):
         play("procedural:0", "jnyang@4:features", frames=3, size=(64, 48), sweep=False)
     with pytest.raises(PlayError, match=r"method 'yang2109': not one of the methods \(full, oracle, .*\), so a model, "
-                                        r"and no model file at 'yang2109'; shipped models: flip.onnx"):
+                                        r"and no model file at 'yang2109'; shipped models: flip-8px.onnx, flip.onnx"):
         play("procedural:0", "jnyang,yang2109", frames=3, size=(64, 48), sweep=False)
     with pytest.raises(PlayError, match="unknown profile"):
         play("procedural:0", "oracle", paths=("sprint",), frames=3)
