@@ -19,11 +19,11 @@ def test_the_jnyang_model_ships() -> None:
 def test_every_shipped_model_is_named_for_its_metric() -> None:
     # One model per metric, named for it; a variant for a use is METRIC-USE (the model for
     # prediction reuse, jnyang-reuse: docs/runtime.md; the models for AMD's and Intel's 8-pixel VRS
-    # tiles, jnyang-8px, flip-8px, psnr-8px), beside its metric's every-frame model.
+    # tiles, jnyang-8px, flip-8px, psnr-8px, jnflip-8px), beside its metric's every-frame model.
     metrics = {n.removesuffix(".onnx") for n in SHIPPED if "-" not in n}
     assert metrics == {"jnyang", "psnr", "flip", "jnflip", "lpips"}
     variants = {n.removesuffix(".onnx") for n in SHIPPED} - metrics
-    assert variants == {"jnyang-reuse", "jnyang-8px", "flip-8px", "psnr-8px"}
+    assert variants == {"jnyang-reuse", "jnyang-8px", "flip-8px", "psnr-8px", "jnflip-8px"}
     for v in variants:
         assert v.split("-")[0] in metrics
 
@@ -137,7 +137,8 @@ def test_every_output_of_a_shipped_model_responds_to_the_frame(name: str, render
 # threshold (the rate factors, every rate alike) chosen so that it fails on as many 8-pixel tiles of the
 # validation maps as its metric's 16-pixel model on its own tiles (docs/results.md "A model trained on
 # 8-pixel tiles", "FLIP and PSNR on 8-pixel tiles").
-EIGHT_PX = {"jnyang-8px": ("jnyang", 0.25, 0.94), "flip-8px": ("flip", 0.15, 0.92), "psnr-8px": ("psnr", 35.0, 0.986)}
+EIGHT_PX = {"jnyang-8px": ("jnyang", 0.25, 0.94), "flip-8px": ("flip", 0.15, 0.92), "psnr-8px": ("psnr", 35.0, 0.986),
+            "jnflip-8px": ("jnflip", 0.2, 0.94)}
 
 
 @pytest.mark.parametrize("name", sorted(EIGHT_PX))
