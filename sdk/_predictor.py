@@ -346,8 +346,23 @@ def load(
             model_path.name, meta.default_threshold, meta.saturation,
         )
     tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
-    return ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
-                                tail=tail)
+    predictor = ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
+                                     tail=tail)
+    if predictor.tile_size < meta.tile_size and (variant := _tile_variant(model_path, predictor.tile_size)):
+        log.info("%s on %d-pixel tiles: each takes its %d-pixel tile's rates; %s ships, trained on %d-pixel tiles, "
+                 "and saves more shading at the same failure rate (sdk.load(%r); docs/results.md)", model_path.name,
+                 predictor.tile_size, meta.tile_size, variant, predictor.tile_size, variant)
+    return predictor
+
+
+def _tile_variant(model_path: Path, tile_size: int) -> str | None:
+    """The name of the shipped model trained on ``tile_size``-pixel tiles for the same metric as the shipped model
+    at ``model_path`` (``flip`` -> ``flip-8px``), or None: none ships, or ``model_path`` is not a shipped model."""
+    d = _models_dir()
+    if d is None or model_path.resolve().parent != d.resolve():
+        return None
+    variant = d / f"{model_path.stem}-{tile_size}px.onnx"
+    return variant.stem if variant.is_file() else None
 
 
 def _tail_session(ort: Any, props: Mapping[str, str], digest: str, model_path: Path, opts: Any, session: Any) -> Any:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -167,6 +169,27 @@ def test_the_8px_model_decides_each_8_pixel_tile(name: str, caplog: pytest.LogCa
     assert len(caplog.records) == 1
     assert f"can express ({sat:g}): every tile passes it at every rate; use one {'above' if hib else 'below'}" in caplog.text
     assert {n.removesuffix(".onnx") for n in SHIPPED if n.endswith("-8px.onnx")} == set(EIGHT_PX)
+
+
+@pytest.mark.parametrize("name", sorted(EIGHT_PX))
+def test_splitting_a_model_on_8_pixel_tiles_names_the_one_trained_for_them(name: str, caplog: pytest.LogCaptureFixture,
+                                                                          tmp_path: Path) -> None:
+    # sdk.load("flip", tile_size=8) works (each 8-pixel tile takes its 16-pixel tile's rates) and says, at INFO, that
+    # flip-8px ships; not on NVIDIA's own 16-pixel tiles, and not for a copy of the model outside the package.
+    metric = EIGHT_PX[name][0]
+    caplog.set_level("INFO", logger="rtp")
+    sdk.load(metric, tile_size=8)
+    hints = [r for r in caplog.records if "ships, trained on 8-pixel tiles" in r.getMessage()]
+    assert len(hints) == 1 and hints[0].levelname == "INFO"
+    assert f"{metric}.onnx on 8-pixel tiles: each takes its 16-pixel tile's rates; {name} ships" in hints[0].getMessage()
+    assert f"sdk.load({name!r})" in hints[0].getMessage()
+    caplog.clear()
+    sdk.load(metric)
+    sdk.load(name)
+    copy = tmp_path / f"{metric}.onnx"
+    copy.write_bytes(Path(str(sdk.load(metric).path)).read_bytes())
+    sdk.load(copy, tile_size=8)
+    assert not [r for r in caplog.records if "ships, trained on" in r.getMessage()]
 
 
 def test_the_jnyang_8px_saturation_is_the_documented_one(caplog: pytest.LogCaptureFixture) -> None:
