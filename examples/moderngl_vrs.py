@@ -2,7 +2,8 @@
 
     python examples/moderngl_vrs.py                          # a walk through a procedural level, shipped JNYang
     python examples/moderngl_vrs.py --model flip --frames 12 --gif vrs.gif --out vrs.png
-    python examples/moderngl_vrs.py --tile-size 8             # on AMD's and Intel's 8-pixel VRS tiles
+    python examples/moderngl_vrs.py --model jnyang-8px        # on AMD's and Intel's 8-pixel VRS tiles, trained on them
+    python examples/moderngl_vrs.py --tile-size 8             # the same tiles, each taking its 16-pixel tile's rates
 
 What an engine on the GPU does each frame, with rtp's reference pieces standing in for its own:
 
@@ -65,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threshold", type=float, help="threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
-                    "16 for the shipped ones, NVIDIA's; 8: AMD's and Intel's)")
+                    "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.frames < 1:

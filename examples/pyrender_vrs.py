@@ -3,7 +3,8 @@
     python examples/pyrender_vrs.py                       # procedural level -> GLB, the shipped JNYang model
     python examples/pyrender_vrs.py --scene level.glb --model flip --out vrs.png   # your level, another model
     python examples/pyrender_vrs.py --model jnyang-reuse --frames 24 --every 4 --gif vrs.gif   # a frame loop
-    python examples/pyrender_vrs.py --tile-size 8         # AMD's and Intel's 8-pixel VRS tiles
+    python examples/pyrender_vrs.py --model jnyang-8px    # AMD's and Intel's 8-pixel VRS tiles, the model trained on them
+    python examples/pyrender_vrs.py --tile-size 8         # the same tiles, each taking its 16-pixel tile's rates
 
 Headless: pyrender draws through EGL (``PYOPENGL_PLATFORM=egl``, the default here) or OSMesa.
 
@@ -24,7 +25,8 @@ motion vectors say it was (docs/runtime.md). Each frame's line says whether the 
 what choosing the rates cost; ``--gif`` writes the overlays as an animation (imageio).
 
 ``--model`` is a shipped model's name (``sdk.shipped_models()``: jnyang by default, flip, jnflip,
-lpips, psnr, jnyang-reuse) or the path of any rtp ONNX model. The pyrender adapter produces every
+lpips, psnr, jnyang-reuse, and the models for 8-pixel tiles jnyang-8px, flip-8px, psnr-8px, jnflip-8px)
+or the path of any rtp ONNX model. The pyrender adapter produces every
 input plane the shipped models read (luma, RGB, material parameters, the ``.blocks`` and ``.tiles``
 planes: docs/adapters.md).
 """
@@ -170,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every", type=int, default=4, help="in a frame loop, run the network every this many frames")
     ap.add_argument("--gif", type=Path, help="in a frame loop, write the rate overlays as an animated GIF")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
-                    "16 for the shipped ones, NVIDIA's; 8: AMD's and Intel's)")
+                    "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
     if args.frames < 2 or args.every < 1:
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
