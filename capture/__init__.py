@@ -26,7 +26,7 @@ from ._dataset import (
     open_dataset,
     write_png,
 )
-from ._images import check_image_output, figure_image, image_values, save_image
+from ._images import check_image_output, figure_image, image_values, read_image_values, save_image
 from ._memory import check_frame_memory, check_memory, job_bytes
 from ._pool import tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
@@ -62,6 +62,7 @@ __all__ = [
     "check_image_output",
     "figure_image",
     "image_values",
+    "read_image_values",
     "job_bytes",
     "load_scene",
     "open_dataset",

@@ -58,7 +58,7 @@ from rtp.sdk import (
 )
 from rtp.sdk.files import atomic_output
 
-from ._images import image_values
+from ._images import read_image_values
 
 __all__ = [
     "BUFFERS",
@@ -503,17 +503,13 @@ class PaperDatasetReader:
 
 
 def _read_png(path: Path) -> np.ndarray:
-    from PIL import Image
-
     if not path.is_file():
         raise DatasetError(f"missing file {path}")
     try:
-        with Image.open(path) as im:
-            im.load()
-            try:
-                return image_values(im, alpha=True)
-            except ValueError as err:  # (what it holds, not its bytes: a float image past [0, 1], ...)
-                raise DatasetError(f"{path}: {err}") from None
+        try:
+            return read_image_values(path, alpha=True)
+        except ValueError as err:  # (what it holds, not its bytes: a float image past [0, 1], ...)
+            raise DatasetError(f"{path}: {err}") from None
     except DatasetError:
         raise
     except Exception as err:  # Pillow on corrupted bytes; see _unreadable

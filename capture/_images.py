@@ -6,8 +6,10 @@ Shared by the dataset preview, the paper's dataset layout, ``rtp metric`` and :m
 
 from __future__ import annotations
 
+import logging
 import os
-from typing import TYPE_CHECKING
+import zlib
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,10 +20,14 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from PIL import Image
 
-__all__ = ["check_image_output", "figure_image", "image_values", "save_image"]
+__all__ = ["check_image_output", "figure_image", "image_values", "read_image_values", "save_image"]
+
+log = logging.getLogger(__name__)
 
 #: Pillow's modes of one 16-bit integer channel (a 16-bit greyscale PNG or TIFF)
 _MODES_16 = ("I;16", "I;16L", "I;16B", "I;16N")
+#: Pillow's raw modes of the 16-bit PNGs it reads with 8 bits a channel (RGB, RGBA, greyscale with alpha)
+_PNG_16_TRUNCATED = ("RGB;16B", "RGBA;16B", "LA;16B")
 
 
 def image_values(im: Image.Image, alpha: bool = False) -> np.ndarray:
@@ -29,7 +35,8 @@ def image_values(im: Image.Image, alpha: bool = False) -> np.ndarray:
     (display-encoded, as a PNG holds them), with alpha as a fourth channel if ``alpha`` (1 where the
     image has none). 8-bit images of every mode Pillow converts to RGB, 16-bit greyscale ones (divided
     by 65535) and float ones already in [0, 1] are read; a 16-bit RGB PNG arrives with 8 bits a channel
-    (Pillow's reading). Raises ``ValueError`` saying what was expected for the rest: float values outside
+    (Pillow's reading: :func:`read_image_values` reads a file with all 16).
+    Raises ``ValueError`` saying what was expected for the rest: float values outside
     [0, 1] (an HDR image, to tone-map first), 32-bit integer pixels, a mode Pillow cannot convert
     (``convert('RGB')`` alone would clip a 16-bit image to white and cast a float one to black)."""
     mode = im.mode
@@ -55,6 +62,46 @@ def image_values(im: Image.Image, alpha: bool = False) -> np.ndarray:
     except ValueError as err:  # (a mode Pillow has no conversion for)
         raise ValueError(f"a {mode} image, which Pillow cannot convert to RGB ({err})") from None
     return np.asarray(rgb, np.float32) / 255.0
+
+
+def read_image_values(path: str | os.PathLike[str], alpha: bool = False) -> np.ndarray:
+    """The pixels of the image file at ``path`` as :func:`image_values` gives them, a 16-bit RGB, RGBA or
+    greyscale-with-alpha PNG with all 16 bits a channel (divided by 65535; Pillow reads such a file with the
+    top 8, so it is decoded with pypng, installed with ``rtp[capture]`` and ``rtp[train]``; without pypng it is
+    read with 8 bits a channel, with a warning). Raises what Pillow raises for a file it cannot open
+    (``OSError``, ``PIL.UnidentifiedImageError``, ``PIL.Image.DecompressionBombError``), ``OSError`` for a
+    16-bit PNG pypng cannot decode, and ``ValueError`` for pixels :func:`image_values` refuses."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        raw = im.tile[0][3] if im.format == "PNG" and len(im.tile) == 1 else None
+        if raw in _PNG_16_TRUNCATED:
+            try:
+                import png  # (pypng)
+            except ImportError:
+                log.warning("%s: a 16-bit %s PNG, read with 8 bits a channel (pip install pypng to read all 16)",
+                            os.fspath(path), im.mode)
+            else:
+                return _png16_values(png, path, alpha)
+        im.load()
+        return image_values(im, alpha)
+
+
+def _png16_values(png: Any, path: str | os.PathLike[str], alpha: bool) -> np.ndarray:
+    """A 16-bit PNG's pixels through pypng, as float32 ``(H, W, 3)`` (``(H, W, 4)`` with ``alpha``) in [0, 1]."""
+    try:
+        width, height, rows, info = png.Reader(filename=os.fspath(path)).asDirect()
+        # (asDirect expands a tRNS colour to alpha and scales by an sBIT chunk: bitdepth is what the rows hold)
+        planes, depth = int(info["planes"]), int(info["bitdepth"])
+        a = np.vstack([np.asarray(row, np.float32) for row in rows]).reshape(height, width, planes)
+    except (png.Error, ValueError, EOFError, zlib.error) as err:
+        raise OSError(f"a damaged 16-bit PNG ({type(err).__name__}: {err})") from None
+    a /= float(2**depth - 1)
+    colour = a[..., :3] if planes >= 3 else np.repeat(a[..., :1], 3, axis=-1)
+    if not alpha:
+        return np.ascontiguousarray(colour)
+    a_plane = a[..., -1:] if info["alpha"] else np.ones_like(a[..., :1])
+    return np.concatenate([colour, a_plane], axis=-1)
 
 
 def save_image(path: str | os.PathLike[str], image: np.ndarray) -> None:

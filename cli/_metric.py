@@ -16,18 +16,16 @@ __all__ = ["run_metric"]
 def _read(path: str) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
-    from rtp.capture import image_values
+    from rtp.capture import read_image_values
     from rtp.sdk import ParameterError
 
     if "\0" in path:  # (the system's ValueError, from Pillow's open)
         raise ParameterError(f"{path!r}: expected the path of an image, got a text with a NUL byte")
     try:
-        with Image.open(path) as im:
-            im.load()
-            try:
-                return image_values(im)
-            except ValueError as err:  # (a float image past [0, 1], 32-bit integers: what it holds, not its bytes)
-                raise ParameterError(f"{path!r}: {err}") from None
+        try:
+            return read_image_values(path)
+        except ValueError as err:  # (a float image past [0, 1], 32-bit integers: what it holds, not its bytes)
+            raise ParameterError(f"{path!r}: {err}") from None
     except FileNotFoundError:
         raise ParameterError(f"{path!r}: no such image") from None
     except (UnidentifiedImageError, OSError, Image.DecompressionBombError) as err:

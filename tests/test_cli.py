@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -148,6 +149,39 @@ def test_metric_reads_16_bit_and_float_images_by_their_values(tmp_path: Path, ca
         assert main(["metric", "flip", str(tmp_path / name), str(b)]) == 2
         err = capsys.readouterr().err
         assert f"{str(tmp_path / name)!r}: {said}" in err and "Traceback" not in err, err
+
+
+def test_metric_reads_16_bit_rgb_pngs_with_all_16_bits(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                      monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """A 16-bit RGB PNG (Blender's, a path tracer's) is compared with all 16 bits a channel: two renders that differ
+    below the top 8 bits are not identical (Pillow reads such a file with the top 8 only, and PSNR was infinite).
+    Without pypng the file is read as Pillow reads it, with a warning; a damaged one is refused in words."""
+    import png
+
+    rng = np.random.default_rng(16)
+    ref = rng.integers(0, 65536, (24, 40, 3), dtype=np.uint16)
+    low = ref ^ rng.integers(0, 256, ref.shape, dtype=np.uint16)  # (only the low byte changes)
+    paths = {}
+    for name, a in (("ref", ref), ("low", low)):
+        paths[name] = tmp_path / f"{name}.png"
+        with open(paths[name], "wb") as f:
+            png.Writer(40, 24, greyscale=False, bitdepth=16).write(f, a.reshape(24, -1))
+    assert main(["metric", "psnr", str(paths["ref"]), str(paths["low"]), "--tile", "8", "--json"]) == 0
+    got = np.array(json.loads(capsys.readouterr().out)["tiles"], float)
+    mse = (((ref.astype(float) - low) / 65535) ** 2).reshape(3, 8, 5, 8, 3).mean(axis=(1, 3, 4))
+    np.testing.assert_allclose(got, -10 * np.log10(mse), atol=1e-3)  # (about 60 dB: differences of 1/256 at most)
+    monkeypatch.setitem(sys.modules, "png", None)  # (pypng not installed)
+    caplog.set_level("WARNING", logger="rtp")
+    assert main(["metric", "psnr", str(paths["ref"]), str(paths["low"]), "--tile", "8", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["tiles"] == [[None] * 5] * 3  # (the same top 8 bits: identical)
+    assert "a 16-bit RGB PNG, read with 8 bits a channel (pip install pypng to read all 16)" in caplog.text
+    monkeypatch.undo()
+    data = paths["ref"].read_bytes()
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(data[: len(data) // 2])
+    assert main(["metric", "psnr", str(cut), str(paths["low"])]) == 2
+    err = capsys.readouterr().err
+    assert f"{str(cut)!r}: not an image Pillow can read (a damaged 16-bit PNG" in err and "Traceback" not in err, err
 
 
 def test_scenes_list_shows_each_maps_split_and_cache_state(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -338,6 +338,45 @@ def test_paper_layout_reads_16_bit_and_float_pngs_by_their_values(tmp_path: Path
         ds["0000"].final("1x1")
 
 
+@pytest.mark.parametrize(("planes", "options"), [
+    (3, {}), (4, {"alpha": True}), (2, {"greyscale": True, "alpha": True}), (3, {"interlace": True}),
+    (3, {"transparent": (1, 2, 3)}),
+])
+def test_16_bit_pngs_are_read_with_all_16_bits(tmp_path: Path, planes: int, options: dict) -> None:
+    """16-bit RGB, RGBA and greyscale-with-alpha PNGs (interlaced or with a transparent colour too), which Pillow
+    reads with the top 8 bits a channel, give every value over 65535 (``read_image_values``), as the paper's layout
+    reads them."""
+    import png
+    from PIL import Image
+
+    from rtp.capture import image_values, read_image_values
+
+    rng = np.random.default_rng(planes)
+    a = rng.integers(0, 65536, (6, 10, planes), dtype=np.uint16)
+    a[0, 0, : min(planes, 3)] = (1, 2, 3)[: min(planes, 3)]
+    path = tmp_path / "a.png"
+    with open(path, "wb") as f:
+        png.Writer(10, 6, bitdepth=16, **{"greyscale": False, **options}).write(f, a.reshape(6, -1))
+    colour = a[..., :3] if planes >= 3 else np.repeat(a[..., :1], 3, -1)
+    has_alpha = planes in (2, 4) or "transparent" in options
+    alpha = a[..., -1] if planes in (2, 4) else np.full(a.shape[:2], 65535)
+    if "transparent" in options:
+        alpha[0, 0] = 0
+    np.testing.assert_allclose(read_image_values(path), colour / 65535, rtol=1e-6, atol=0)
+    got = read_image_values(path, alpha=True)
+    np.testing.assert_allclose(got, np.dstack([colour, alpha]) / 65535, rtol=1e-6, atol=0)
+    assert got.dtype == np.float32 and has_alpha == (got[..., 3] < 1).any()
+    with Image.open(path) as im:  # (what Pillow alone gives: the top 8 bits)
+        assert np.abs(image_values(im) - colour / 65535).max() > 1 / 512
+    folder = tmp_path / "Bistro" / "0000"
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1"] + [
+        f"output_{r}" for r in sdk.ALL_RATES
+    ]:
+        write_png(folder / f"{stem}.png", np.zeros((6, 10, 4), np.uint8))
+    (folder / "diffuse_1x1.png").write_bytes(path.read_bytes())
+    np.testing.assert_allclose(open_dataset(tmp_path / "Bistro")["0000"].buffer("albedo"), colour / 65535, rtol=1e-6, atol=0)
+
+
 _PILLOW_MODES = ("1", "L", "LA", "La", "P", "PA", "RGB", "RGBA", "RGBa", "RGBX", "CMYK", "YCbCr", "LAB", "HSV", "I",
                  "I;16", "I;16L", "I;16B", "I;16N", "F")
 
