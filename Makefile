@@ -28,7 +28,8 @@ STEPS     ?=
 # The model's file name under models/ (METRIC by default): make train METRIC=jnyang RECIPE=reuse
 # NAME=jnyang-reuse trains the JNYang model that splits for prediction reuse (train/recipes/reuse.yaml);
 # make train METRIC=jnyang RECIPE=tile8 NAME=jnyang-8px the one for AMD's and Intel's 8-pixel VRS tiles (and
-# METRIC=flip, psnr, jnflip: flip-8px, psnr-8px, jnflip-8px).
+# METRIC=flip, psnr, jnflip: flip-8px, psnr-8px, jnflip-8px; METRIC=lpips trains one that tied the split LPIPS and
+# does not ship).
 NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
