@@ -139,8 +139,12 @@ def test_every_output_of_a_shipped_model_responds_to_the_frame(name: str, render
 # threshold (the rate factors, every rate alike) chosen so that it fails on as many 8-pixel tiles of the
 # validation maps as its metric's 16-pixel model on its own tiles (docs/results.md "A model trained on
 # 8-pixel tiles", "FLIP and PSNR on 8-pixel tiles").
-EIGHT_PX = {"jnyang-8px": ("jnyang", 0.25, 0.94), "flip-8px": ("flip", 0.15, 0.92), "psnr-8px": ("psnr", 35.0, 0.986),
-            "jnflip-8px": ("jnflip", 0.2, 0.94)}
+#: model -> (metric, default threshold, rate_factors): one factor for every rate, or (FLIP, PSNR) one per rate fitted
+#: by bench/per_rate.py and scaled to the default's failing share (docs/results.md "Factors per rate on 8-pixel tiles")
+EIGHT_PX = {"jnyang-8px": ("jnyang", 0.25, (0.94,) * 6),
+            "flip-8px": ("flip", 0.15, (1.078, 1.078, 0.8982, 0.8982, 0.8982, 0.7635)),
+            "psnr-8px": ("psnr", 35.0, (1.142, 1.142, 0.8087, 0.9514, 0.9514, 0.8087)),
+            "jnflip-8px": ("jnflip", 0.2, (0.94,) * 6)}
 
 
 @pytest.mark.parametrize("name", sorted(EIGHT_PX))
@@ -148,17 +152,18 @@ def test_the_8px_model_decides_each_8_pixel_tile(name: str, caplog: pytest.LogCa
     """An 8px model predicts per 8-pixel tile itself; on NVIDIA's 16-pixel tiles each takes the worst of its four
     (for PSNR the lowest). A threshold past the worst value it can express (its clamped transform's end) is said
     once, not passed silently."""
-    metric, judge, factor = EIGHT_PX[name]
+    metric, judge, factors = EIGHT_PX[name]
     pred = sdk.load(name)
     m = pred.metadata
     assert (pred.tile_size, m.tile_size, m.metric, m.default_threshold) == (8, 8, metric, judge)
-    assert m.rate_factors == (factor,) * 6 and "8x8" in m.description
+    assert m.rate_factors == factors and "8x8" in m.description
+    factor = min(factors)  # (the rate whose threshold is the last to pass every tile)
     x = np.random.default_rng(8).random((len(m.inputs), 72, 128), dtype=np.float32)
     assert pred.predict(x).shape == (6, 9, 16)
     nvidia = sdk.load(name, tile_size=16)
     np.testing.assert_array_equal(nvidia.predict(x), sdk.pool_tiles(pred.predict(x), 2, higher_is_better=m.higher_is_better))
     caplog.set_level("WARNING", logger="rtp")
-    # every rate's threshold is the factor's share of it (PSNR: the dB over it); the last one inside, the first past
+    # each rate's threshold is its factor's share of it (PSNR: the dB over it); the last one inside, the first past
     hib, sat = m.higher_is_better, m.saturation
     edge = sat + 20.0 * np.log10(factor) if hib else sat / factor
     inside, past = (edge + 0.01, edge - 0.01) if hib else (edge - 0.001, edge + 0.001)
