@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import logging
 import os
-import zlib
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -94,7 +93,7 @@ def _png16_values(png: Any, path: str | os.PathLike[str], alpha: bool) -> np.nda
         # (asDirect expands a tRNS colour to alpha and scales by an sBIT chunk: bitdepth is what the rows hold)
         planes, depth = int(info["planes"]), int(info["bitdepth"])
         a = np.vstack([np.asarray(row, np.float32) for row in rows]).reshape(height, width, planes)
-    except (png.Error, ValueError, EOFError, zlib.error) as err:
+    except Exception as err:  # (pypng meets damaged bytes with png.Error, zlib.error, struct.error, IndexError, ...)
         raise OSError(f"a damaged 16-bit PNG ({type(err).__name__}: {err})") from None
     a /= float(2**depth - 1)
     colour = a[..., :3] if planes >= 3 else np.repeat(a[..., :1], 3, axis=-1)

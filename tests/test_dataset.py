@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -375,6 +376,74 @@ def test_16_bit_pngs_are_read_with_all_16_bits(tmp_path: Path, planes: int, opti
         write_png(folder / f"{stem}.png", np.zeros((6, 10, 4), np.uint8))
     (folder / "diffuse_1x1.png").write_bytes(path.read_bytes())
     np.testing.assert_allclose(open_dataset(tmp_path / "Bistro")["0000"].buffer("albedo"), colour / 65535, rtol=1e-6, atol=0)
+
+
+def test_a_damaged_16_bit_png_is_read_in_range_or_refused_as_os_or_value_error(tmp_path: Path) -> None:
+    """A 16-bit PNG damaged under valid chunk checksums (its compressed or raw pixel data, its header, a stray
+    chunk) is read to finite values in [0, 1] or refused with ``OSError`` or ``ValueError`` (Pillow's
+    ``DecompressionBombError`` for a header claiming a huge image), which ``rtp metric`` and the dataset reader
+    turn into their typed errors: pypng raised ``struct.error`` and ``IndexError`` (found by fuzzing it)."""
+    import io
+    import struct
+    import zlib
+
+    import png
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from PIL import Image
+
+    from rtp.capture import read_image_values
+
+    from .fuzzing import scaled
+
+    def chunks(b: bytes) -> list[list[Any]]:
+        out, i = [], 8
+        while i < len(b):
+            n = struct.unpack(">I", b[i:i + 4])[0]
+            out.append([b[i + 4:i + 8], bytearray(b[i + 8:i + 8 + n])])
+            i += 12 + n
+        return out
+
+    def build(cs: list[list[Any]]) -> bytes:  # (every chunk with its right CRC: the damage is inside them)
+        return b"\x89PNG\r\n\x1a\n" + b"".join(struct.pack(">I", len(d)) + t + bytes(d)
+                                              + struct.pack(">I", zlib.crc32(t + bytes(d)) & 0xFFFFFFFF) for t, d in cs)
+
+    path = tmp_path / "damaged.png"
+
+    @settings(max_examples=scaled(150), deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(st.data())
+    def run(data: st.DataObject) -> None:
+        planes = data.draw(st.sampled_from([2, 3, 4]))
+        h, w = data.draw(st.integers(1, 8)), data.draw(st.integers(1, 8))
+        a = np.random.default_rng(data.draw(st.integers(0, 99))).integers(0, 65536, (h, w, planes), dtype=np.uint16)
+        buf = io.BytesIO()
+        png.Writer(w, h, bitdepth=16, greyscale=planes == 2, alpha=planes in (2, 4),
+                   interlace=data.draw(st.booleans())).write(buf, a.reshape(h, -1))
+        cs = chunks(buf.getvalue())
+        idat = next(c for c in cs if c[0] == b"IDAT")
+        where = data.draw(st.sampled_from(["compressed", "raw", "header", "chunk"]))
+        if where == "chunk":
+            cs.insert(1, [data.draw(st.sampled_from([b"sBIT", b"tRNS", b"gAMA", b"PLTE"])),
+                          bytearray(data.draw(st.binary(max_size=8)))])
+        else:
+            target = {"compressed": idat[1], "header": cs[0][1],
+                      "raw": bytearray(zlib.decompress(bytes(idat[1])))}[where]
+            for _ in range(data.draw(st.integers(1, 3))):
+                target[data.draw(st.integers(0, len(target) - 1))] = data.draw(st.integers(0, 255))
+            if where == "raw":
+                cut = data.draw(st.integers(0, len(target)))
+                idat[1] = bytearray(zlib.compress(bytes(target[:cut]) + data.draw(st.binary(max_size=40))))
+        path.write_bytes(build(cs))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+                v = read_image_values(path, alpha=data.draw(st.booleans()))
+        except (OSError, ValueError, Image.DecompressionBombError):
+            return
+        assert v.dtype == np.float32 and v.ndim == 3 and v.shape[2] in (3, 4)
+        assert np.isfinite(v).all() and v.min() >= 0 and v.max() <= 1
+
+    run()
 
 
 _PILLOW_MODES = ("1", "L", "LA", "La", "P", "PA", "RGB", "RGBA", "RGBa", "RGBX", "CMYK", "YCbCr", "LAB", "HSV", "I",
