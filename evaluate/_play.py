@@ -155,7 +155,10 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``, ``split.onnx@4:features``)."""
     if not isinstance(text, str) and (not isinstance(text, Iterable) or not all(isinstance(t, str) for t in text)):
         raise PlayError(f"methods: expected a comma-separated string or a list of method names, got {text!r}")
-    items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
+    # (a model file whose name holds a comma or an '@' is taken whole: "model@v2.onnx" is no reuse interval)
+    whole = isinstance(text, str) and _is_file(text.strip())
+    items = [t.strip() for t in (text.split(",") if isinstance(text, str) and not whole else
+                                 [text] if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise PlayError("expected at least one method, e.g. jnyang,yang2019,fidelityfx")
     out = []
@@ -163,7 +166,7 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         if item in METHOD_KINDS:
             out.append(MethodSpec(item, item))
             continue
-        model, _, k = item.rpartition("@") if "@" in item else (item, "", "1")
+        model, _, k = item.rpartition("@") if "@" in item and not _is_file(item) else (item, "", "1")
         k, *options = k.split(":")
         if not (k.isascii() and k.isdigit()) or len(k) > 6 or int(k) < 1:  # ("²".isdigit(); int() refuses 5000 digits)
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
@@ -193,6 +196,13 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
+
+
+def _is_file(text: str) -> bool:
+    try:
+        return Path(text).is_file()
+    except (OSError, ValueError):  # (a name too long for the file system; a NUL byte)
+        return False
 
 
 def _step(option: str, item: str) -> int:

@@ -412,6 +412,16 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
                        ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
+    # a model file whose name holds an '@' or a comma is taken whole, and '@k' after it still reuses
+    for name in ("model@v2.onnx", "m,1.onnx"):
+        (tmp_path / name).write_bytes(b"")
+        path = str(tmp_path / name)
+        assert [(s.kind, s.model, s.reuse) for s in parse_methods(path)] == [("model", path, 1)]
+        assert [(s.kind, s.model, s.reuse) for s in parse_methods([path, "oracle"])] == [("model", path, 1),
+                                                                                        ("oracle", "", 1)]
+    assert parse_methods(str(tmp_path / "model@v2.onnx@4"))[0].model == str(tmp_path / "model@v2.onnx")
+    with pytest.raises(PlayError, match="reuse interval"):  # (no such file: '@v2.onnx' is read as an interval)
+        parse_methods(str(tmp_path / "other@v2.onnx"))
     with pytest.raises(sdk.ParameterError, match=r"divisor of the model's 16-pixel tile \(1, 2, 4, 8, 16\), got 3"):
         play("procedural:0", "jnyang@4:s3", frames=3, size=(64, 48), sweep=False)
     with pytest.raises(sdk.ParameterError, match="does not split"):
