@@ -183,6 +183,11 @@ def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.C
     assert rtp_main(["train", "--data", f"{usual},{usual}", "--metric", "jnyang", "--out", str(tmp_path / "x.pt")]) == 2
     assert "each once" in capsys.readouterr().err
     assert not (tmp_path / "x.pt").exists()
+    # a folder whose name holds a comma is one dataset, not two
+    comma = _dataset(tmp_path / "a,b", n=6)
+    assert rtp_main(["train", "--data", str(comma), "--metric", "jnyang", "--out", str(tmp_path / "c.pt"), "--steps",
+                     "20", "--crop", "32", "--head", "linear", "--val-scenes", "scene0"]) == 0, capsys.readouterr().err
+    assert load_checkpoint(tmp_path / "c.pt").metadata.provenance["data"] == str(comma)
 
 
 def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

@@ -233,7 +233,10 @@ _RESUME_KEYS = ("data", "metric", "tile", "outputs", "inputs", "transform", "log
 
 
 def data_folders(data: str | os.PathLike[str]) -> list[str]:
-    """The dataset folders of ``TrainConfig.data`` (one, or several comma-separated), each named once."""
+    """The dataset folders of ``TrainConfig.data`` (one, or several comma-separated), each named once; a folder
+    whose name holds a comma is taken whole."""
+    if os.path.isdir(str(data)):
+        return [str(data)]
     folders = [f.strip() for f in str(data).split(",")]
     if not all(folders) or len(set(folders)) != len(folders):
         raise sdk.ParameterError(f"data: expected a dataset folder or several, comma-separated, each once, got {str(data)!r}",
