@@ -84,9 +84,16 @@ def load_scene(path: Path) -> Any:
     except Exception as err:  # trimesh refuses an unknown or broken file with many exception types
         raise sdk.ParameterError(f"--scene {path}: trimesh cannot read it ({type(err).__name__}: {err})") from err
     scene = pyrender.Scene(bg_color=(0.45, 0.6, 0.85, 1.0), ambient_light=(0.3, 0.3, 0.3))
+    skipped = []
     for node in tm.graph.nodes_geometry:  # pyrender.Scene.from_trimesh_scene, keeping each material's alpha mode
         pose, name = tm.graph[node]
         geometry = tm.geometry[name]
+        if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
+            skipped.append(f"{name} ({type(geometry).__name__})")  # points and lines shade no tile
+            continue
+        if not (np.isfinite(geometry.vertices).all() and np.isfinite(pose).all()):
+            raise sdk.ParameterError(f"--scene {path}: mesh {name!r} has vertex positions or a node transform "
+                                     "that are NaN or infinite")
         mesh = pyrender.Mesh.from_trimesh(geometry)
         material = getattr(geometry.visual, "material", None)
         if isinstance(material, trimesh.visual.material.PBRMaterial):
@@ -96,6 +103,12 @@ def load_scene(path: Path) -> Any:
             for primitive in mesh.primitives:
                 primitive.material.alphaMode = material.alphaMode or "OPAQUE"
         scene.add(mesh, pose=pose, name=str(node))
+    if not scene.mesh_nodes:
+        raise sdk.ParameterError(f"--scene {path}: no triangles to draw (expected a glTF, GLB or OBJ file with at "
+                                 "least one triangle mesh" + (f"; it holds {', '.join(skipped)}" if skipped else "")
+                                 + ")")
+    if skipped:
+        log.warning("--scene %s: skipped what is not a triangle mesh: %s", path, ", ".join(skipped))
     # pyrender's shading needs a light; a sun-like directional light from above
     sun = np.eye(4)
     sun[:3, :3] = _rotation(yaw=30.0, pitch=-60.0)

@@ -139,3 +139,21 @@ def test_pyrender_example_draws_a_glb_the_same_in_every_process(tmp_path: Path) 
     trimesh.Scene(glass).export(tmp_path / "glass.glb")
     assert [p.material.alphaMode for n in example.load_scene(tmp_path / "glass.glb").mesh_nodes
             for p in n.mesh.primitives] == ["BLEND"]
+
+
+@pytest.mark.gl
+def test_pyrender_example_refuses_a_scene_with_nothing_to_draw(tmp_path: Path) -> None:
+    # an empty or unreadable OBJ rendered the sky and reported 93.8% saved; points alone were a TypeError from
+    # pyrender; NaN vertices failed later on as a camera pose. Each is refused in words, naming the file.
+    files = {"empty.obj": "", "junk.obj": "garbage here\n", "points.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\n",
+             "nan.obj": "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n"}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+        r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--scene",
+                            str(tmp_path / name), "--size", "64x48", "--out", str(tmp_path / "o.png")],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 2 and "Traceback" not in r.stderr, (name, r.stderr)
+        want = {"nan.obj": "NaN or infinite", "points.obj": "it holds points.obj (PointCloud)"}.get(name,
+                                                                                                   "no triangles to draw")
+        assert f"pyrender_vrs.py: error: --scene {tmp_path / name}: " in r.stderr and want in r.stderr, r.stderr
+    assert not (tmp_path / "o.png").exists()
