@@ -489,13 +489,14 @@ def play(
                 raise PlayError(f"method {m.name!r}: not one of the methods ({', '.join(METHOD_KINDS)}), so a model, "
                                 f"and {err}") from err
     for m in specs:
-        # (finer run tiles than a model's are the hardware's, AMD's and Intel's 8 under a 16-pixel model: each
-        # takes its model tile's rate, as sdk.load(tile_size=) gives; coarser ones are not played)
-        if m.kind == "model" and (predictors[m.model].tile_size < tile_size
-                                  or predictors[m.model].tile_size % tile_size):
-            raise PlayError(f"method {m.name}: the model uses {predictors[m.model].tile_size}px tiles, the run "
-                            f"{tile_size}px (run at {predictors[m.model].tile_size}px tiles or finer ones that divide "
-                            f"them: tile_size=, --tile-size)", "tile_size")
+        # (run tiles other than a model's are the hardware's, as sdk.load(tile_size=) gives them: finer, AMD's and
+        # Intel's 8 under a 16-pixel model, each takes its model tile's rate; coarser, NVIDIA's 16 over an 8-pixel
+        # model, each decides on the worst of the model tiles it covers)
+        own = predictors[m.model].tile_size if m.kind == "model" else tile_size
+        if isinstance(tile_size, int) and tile_size > 0 and max(own, tile_size) % min(own, tile_size):
+            raise PlayError(f"method {m.name}: the model uses {own}px tiles, the run {tile_size}px (run at {own}px "
+                            f"tiles, or finer or coarser ones that divide them or that they divide: tile_size=, "
+                            f"--tile-size)", "tile_size")
         static = predictors[m.model].static_size if m.kind == "model" else None
         if m.unseen == "fresh" and static is not None:
             h, w = static
@@ -827,6 +828,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
     meta = pred.metadata
     hib = meta.higher_is_better
     split = meta.tile_size // tile  # (finer hardware tiles than the model's: each its model tile's rate)
+    pool = tile // meta.tile_size  # (coarser ones: each the worst estimate of the model tiles it covers)
     carry = sdk.PredictionReuse(pred, reuse, reduce=reduce, unseen=unseen, unseen_fraction=unseen_fraction,
                                 history=history, refresh=refresh, step=step, rescale=rescale, carry_scale=carry_scale,
                                 carry=carries)
@@ -841,6 +843,8 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
         fetch = (pf.rows, pf.cols) if pf.index > 0 else None
         est = carry.predict(inputs, fetch, pf.seen, pf.frame.mask <= 0.5)
         lp.ran.append(carry.work)
+        if pool > 1:
+            est = sdk.pool_tiles(est, pool, higher_is_better=hib)
         rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors)
         return rates if split <= 1 else sdk.split_tiles(rates, split, truth.shape[1:])
     return decide

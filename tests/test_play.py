@@ -644,12 +644,14 @@ def test_a_gif_frame_labels_its_place_and_keys_the_rate_colours_in_its_spare_cel
     assert box_height(spare) == box_height(large) >= 14
 
 
-def test_rtp_models_play_on_finer_hardware_tiles_with_their_model_tiles_rates(tmp_path: Path) -> None:
+def test_rtp_models_play_on_finer_and_coarser_hardware_tiles(tmp_path: Path) -> None:
     """--tile-size 8 under 16-pixel models (AMD's and Intel's VRS tiles): each hardware tile takes its
     model tile's rate, so the shading (and every frame after it) is the 16-pixel run's, to the last
     bit, while the failing share is judged per 8-pixel tile (never more than per 16-pixel tile: a
     quarter of a tile is never worse than the tile for JNYang) and the baselines decide per 8 pixels.
-    Coarser run tiles than a model's are refused."""
+    Coarser run tiles than a model's (an 8-pixel model on NVIDIA's 16) decide on the worst estimate of
+    the model tiles each covers, as ``sdk.load(tile_size=16)`` does; tiles that neither divide nor are
+    divided by the model's are refused."""
     runs = {t: play("procedural:0", "jnyang,jnyang@2,fidelityfx", paths=("fast",), frames=4, size=(96, 64),
                     sweep=False, flip_every=0, tile_size=t, out=tmp_path / str(t), plots=False)
             for t in (16, 8)}
@@ -658,5 +660,12 @@ def test_rtp_models_play_on_finer_hardware_tiles_with_their_model_tiles_rates(tm
         assert fine["saved"] == coarse["saved"], method
         assert all(f <= c for f, c in zip(fine["fail"], coarse["fail"])), method
     assert runs[8].frames["fast"]["fidelityfx"]["saved"] != runs[16].frames["fast"]["fidelityfx"]["saved"]
-    with pytest.raises(PlayError, match=r"the model uses 16px tiles, the run 32px"):
-        play("procedural:0", "jnyang", paths=("fast",), frames=3, size=(96, 64), sweep=False, tile_size=32)
+    # on the first frame (no history yet: the same inputs in both runs) a 16-pixel tile takes a rate that
+    # passes on each of its four 8-pixel tiles, each of which alone took that rate or a coarser one
+    eight = {t: play("procedural:0", "jnyang-8px", paths=("fast",), frames=3, size=(96, 64), sweep=False,
+                     flip_every=0, tile_size=t, plots=False).frames["fast"]["jnyang-8px"] for t in (8, 16)}
+    assert eight[16]["saved"][0] < eight[8]["saved"][0]
+    assert play("procedural:0", "jnyang", paths=("fast",), frames=3, size=(96, 64), sweep=False, flip_every=0,
+                tile_size=32, plots=False).frames["fast"]["jnyang"]["saved"][0] <= runs[16].frames["fast"]["jnyang"]["saved"][0]
+    with pytest.raises(PlayError, match=r"the model uses 8px tiles, the run 12px"):
+        play("procedural:0", "jnyang-8px", paths=("fast",), frames=3, size=(96, 64), sweep=False, tile_size=12)
