@@ -33,7 +33,15 @@ from ._errors import (
 )
 from ._metadata import DIGEST_RE, FEATURES_NAME, METADATA_KEY, TAIL_KEY, ModelMetadata
 from ._rates import PREDICTED_RATES, RateLike, select_rates
-from ._tiles import MIN_HARDWARE_TILE, hardware_tiles, padded_size, pool_tiles, split_tiles, tile_grid
+from ._tiles import (
+    DEFAULT_TILE_SIZE,
+    MIN_HARDWARE_TILE,
+    hardware_tiles,
+    padded_size,
+    pool_tiles,
+    split_tiles,
+    tile_grid,
+)
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 
@@ -348,20 +356,36 @@ def load(
     tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
     predictor = ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
                                      tail=tail)
-    if predictor.tile_size < meta.tile_size and (variant := _tile_variant(model_path, predictor.tile_size)):
-        log.info("%s on %d-pixel tiles: each takes its %d-pixel tile's rates; %s ships, trained on %d-pixel tiles, "
-                 "and saves more shading at the same failure rate (sdk.load(%r); docs/results.md)", model_path.name,
-                 predictor.tile_size, meta.tile_size, variant, predictor.tile_size, variant)
+    if predictor.tile_size != meta.tile_size and (variant := _tile_variant(model_path, meta.tile_size,
+                                                                           predictor.tile_size)):
+        if predictor.tile_size < meta.tile_size:
+            log.info("%s on %d-pixel tiles: each takes its %d-pixel tile's rates; %s ships, trained on %d-pixel "
+                     "tiles, and saves more shading at the same failure rate (sdk.load(%r); docs/results.md)",
+                     model_path.name, predictor.tile_size, meta.tile_size, variant, predictor.tile_size, variant)
+        else:  # (measured on the validation maps: about as much saved at the same failure rate, a default not set
+            #     for these tiles, a dearer network; docs/results.md "The 8-pixel models on 16-pixel tiles")
+            log.info("%s on %d-pixel tiles: each takes the worst of the %d-pixel tiles it covers, and its default "
+                     "threshold was set for those; %s ships, trained on %d-pixel tiles, with a default set for them "
+                     "(sdk.load(%r); docs/results.md)", model_path.name, predictor.tile_size, meta.tile_size,
+                     variant, predictor.tile_size, variant)
     return predictor
 
 
-def _tile_variant(model_path: Path, tile_size: int) -> str | None:
+def _tile_variant(model_path: Path, own: int, tile_size: int) -> str | None:
     """The name of the shipped model trained on ``tile_size``-pixel tiles for the same metric as the shipped model
-    at ``model_path`` (``flip`` -> ``flip-8px``), or None: none ships, or ``model_path`` is not a shipped model."""
+    at ``model_path``, trained on ``own``-pixel ones: ``flip`` -> ``flip-8px`` (a shipped model's name without a
+    suffix is one of :data:`DEFAULT_TILE_SIZE`-pixel tiles), ``flip-8px`` -> ``flip`` on 16-pixel tiles; or None:
+    none ships, or ``model_path`` is not a shipped model."""
     d = _models_dir()
     if d is None or model_path.resolve().parent != d.resolve():
         return None
-    variant = d / f"{model_path.stem}-{tile_size}px.onnx"
+    suffix = f"-{own}px"
+    if tile_size == DEFAULT_TILE_SIZE and model_path.stem.endswith(suffix):
+        variant = d / f"{model_path.stem.removesuffix(suffix)}.onnx"
+    elif own == DEFAULT_TILE_SIZE:
+        variant = d / f"{model_path.stem}-{tile_size}px.onnx"
+    else:
+        return None
     return variant.stem if variant.is_file() else None
 
 

@@ -180,7 +180,8 @@ def test_the_8px_model_decides_each_8_pixel_tile(name: str, caplog: pytest.LogCa
 def test_splitting_a_model_on_8_pixel_tiles_names_the_one_trained_for_them(name: str, caplog: pytest.LogCaptureFixture,
                                                                           tmp_path: Path) -> None:
     # sdk.load("flip", tile_size=8) works (each 8-pixel tile takes its 16-pixel tile's rates) and says, at INFO, that
-    # flip-8px ships; not on NVIDIA's own 16-pixel tiles, and not for a copy of the model outside the package.
+    # flip-8px ships; not on NVIDIA's own 16-pixel tiles, and not for a copy of the model outside the package; and
+    # sdk.load("flip-8px", tile_size=16) names flip.
     metric = EIGHT_PX[name][0]
     caplog.set_level("INFO", logger="rtp")
     sdk.load(metric, tile_size=8)
@@ -194,6 +195,20 @@ def test_splitting_a_model_on_8_pixel_tiles_names_the_one_trained_for_them(name:
     copy = tmp_path / f"{metric}.onnx"
     copy.write_bytes(Path(str(sdk.load(metric).path)).read_bytes())
     sdk.load(copy, tile_size=8)
+    sdk.load(name, tile_size=8)
+    sdk.load(name, tile_size=32)
+    assert not [r for r in caplog.records if "ships, trained on" in r.getMessage()]
+    # the other way: an 8-pixel model on NVIDIA's 16-pixel tiles names the 16-pixel one, whose default is set for them
+    sdk.load(name, tile_size=16)
+    hints = [r for r in caplog.records if "ships, trained on 16-pixel tiles" in r.getMessage()]
+    assert len(hints) == 1 and hints[0].levelname == "INFO"
+    assert (f"{name}.onnx on 16-pixel tiles: each takes the worst of the 8-pixel tiles it covers, and its default "
+            f"threshold was set for those; {metric} ships") in hints[0].getMessage()
+    assert f"sdk.load({metric!r})" in hints[0].getMessage()
+    caplog.clear()
+    copy = tmp_path / f"{name}.onnx"
+    copy.write_bytes(Path(str(sdk.load(name).path)).read_bytes())
+    sdk.load(copy, tile_size=16)
     assert not [r for r in caplog.records if "ships, trained on" in r.getMessage()]
 
 
