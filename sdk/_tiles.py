@@ -116,7 +116,7 @@ def split_tiles(values: np.ndarray, factor: int, grid: tuple[int, int] | None = 
         try:
             gr, gc = (int(_positive("grid rows", grid[0])), int(_positive("grid columns", grid[1]))) \
                 if len(grid) == 2 else (0, 0)
-        except TypeError:
+        except (TypeError, LookupError):  # (not a pair: a number, a set; a mapping of two keys)
             gr = gc = 0
         if not (rows - f < gr <= rows and cols - f < gc <= cols):
             raise ParameterError(f"grid: expected the fine tile grid of these {th}x{tw} tiles split {f} ways "

@@ -663,7 +663,7 @@ def test_split_tiles_gives_each_fine_tile_its_coarse_tiles_value() -> None:
     assert np.array_equal(sdk.split_tiles(v, 2, (5, 7)), fine[..., :5, :7])
     codes = np.full((2, 2), sdk.RATE_CODES["2x2"], np.uint8)
     assert sdk.split_tiles(codes, 4).dtype == np.uint8 and np.array_equal(sdk.split_tiles(codes, 1), codes)
-    for grid in ((4, 7), (6, 9), (5,), "57", (5, 0)):  # rows or columns that are no fine grid of these tiles
+    for grid in ((4, 7), (6, 9), (5,), "57", (5, 0), {"a": 5, "b": 7}, 5):  # no fine grid of these tiles (a mapping, a number)
         with pytest.raises(sdk.ParameterError, match="grid"):
             sdk.split_tiles(v, 2, grid)  # type: ignore[arg-type]
     for bad in (0, 1.5, True):
