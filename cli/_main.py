@@ -314,11 +314,15 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     if report.failed:
         print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
     unseen = ", ".join(f"{p} {100 * v:.1f}%" for p, v in report.unseen_mean().items())
-    print(f"{args.out}: {report.written} samples written"
+    print(f"{args.out}: {_samples(report.written)} written"
           + (f" ({report.recaptured} of them replace samples from other cameras)" if report.recaptured else "")
           + f", {report.skipped} already there"
           + (f"; unseen pixels of the new samples: {unseen}" if unseen else ""))
     return 0
+
+
+def _samples(n: int) -> str:
+    return f"{n} sample" + ("" if n == 1 else "s")
 
 
 def _workers(args: argparse.Namespace) -> int | None:
@@ -367,7 +371,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     with Bar(args, 0, "targets", "sample") as bar:
         n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
                             progress=progress, ray=args.ray, device=args.device)
-    print(f"{args.data}: targets computed for {n} samples ({', '.join(args.metrics)})")
+    print(f"{args.data}: targets computed for {_samples(n)} ({', '.join(args.metrics)})")
     return 0
 
 

@@ -212,12 +212,12 @@ def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monk
     data = tmp_path / "data"
     capture = ["capture", "--scene", "procedural:1,procedural:2", "--per-scene", "2", "--size", "64x48", "--profiles",
                "slow", "--out", str(data), "-q"]
-    interrupt_at(1)
+    interrupt_at(3)
     assert main(capture) == 130
-    assert capsys.readouterr().err == (f"rtp capture: interrupted; 1 of 4 samples are in {data} (each written whole): "
+    assert capsys.readouterr().err == (f"rtp capture: interrupted; 3 of 4 samples are in {data} (each written whole): "
                                        f"the same command captures the rest\n")
     interrupt_at(99)
-    assert main(capture) == 0 and "3 samples written, 1 already there" in capsys.readouterr().out
+    assert main(capture) == 0 and "1 sample written, 3 already there" in capsys.readouterr().out
     interrupt_at(2)
     assert main(["targets", str(data), "--metrics", "jnyang", "-q"]) == 130
     assert capsys.readouterr().err == ("rtp targets: interrupted; the targets of 2 of 4 samples are kept: the same "
