@@ -37,6 +37,7 @@ from typing import Any
 
 from _common import PLAY_JSON, count, run_main, save_figure  # bench/ is on sys.path when run as a script
 
+from rtp import sdk
 from rtp.evaluate import METHOD_KINDS, fail_rule
 
 LEVELS = (0.01, 0.02, 0.05)
@@ -113,7 +114,9 @@ def main() -> None:
         s = rep["settings"]
         # runs before 2026-11-26 do not record their sweep grids (six points per method then): read off the rows
         grids = _grids(rep)
-        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"])
+        # (a run on other hardware tiles is another run: runs before 2026-12-04 played 16-pixel tiles only)
+        key = (s["scene"], s["seed"], s["frames"], tuple(s["size"]), s["fail_metric"], s["fail_threshold"],
+               s.get("tile_size", sdk.DEFAULT_TILE_SIZE))
         same = next((r for r in runs if r["_key"] == key and _same_grids(r["_grids"], grids)), None)
         if same is None and any(r["_key"] == key for r in runs):
             print(f"note: {run} was swept over other grids than a run of the same map and path before it: "
@@ -127,6 +130,14 @@ def main() -> None:
         same["settings"]["methods"] += new
         same["matched"] += [m for m in rep["matched"] if m["method"] in new]
         same["rows"] = same.get("rows", []) + [r for r in rep.get("rows", []) if r["method"] in new]
+    tiles = {r["_key"][-1] for r in runs}
+
+    for rep in runs:  # the map, and its tiles where the runs played several sizes
+        rep["_label"] = rep["settings"]["scene"] + (f" ({rep['_key'][-1]}px)" if len(tiles) > 1 else "")
+
+    def label(s: dict[str, Any]) -> str:
+        return str(next(r["_label"] for r in runs if r["settings"] is s))
+
     head: list[str] = []
     for rep in runs:
         head += [m for m in rep["settings"]["methods"] if m not in head]
@@ -141,7 +152,9 @@ def main() -> None:
         s = rep["settings"]
         methods = s["methods"]
         if i == 0:
-            print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]} (seed: which path); a tile fails "
+            print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]}, "
+                  + (f"{next(iter(tiles))}-pixel tiles" if len(tiles) == 1 else "tiles as each map says")
+                  + " (seed: which path); a tile fails "
                   f"when {fail_rule(s['fail_metric'], s['fail_threshold'])}. Work saved % at "
                   + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
                   "method's sweep never failed that often; -: never that rarely).\n")
@@ -153,7 +166,7 @@ def main() -> None:
                   for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
             cells = ["" if meth not in methods else " / ".join(_cell(at.get((meth, lv))) for lv in LEVELS)
                      if meth not in ORACLES else _cell(at.get((meth, LEVELS[0]))) for meth in head]
-            rows.append(f"| {s['scene']} | {s['seed']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
+            rows.append(f"| {label(s)} | {s['seed']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
                         + " | ".join(cells) + " |")
             yang = [max((m for y in ("yang2019", "yang2019-unseen-1x1") if _readable(m := at.get((y, lv)))),
                         key=lambda m: m["work_saved"], default=None) for lv in LEVELS]
@@ -166,11 +179,11 @@ def main() -> None:
                           and r["default"] and r.get("network_frames") is not None), math.nan) for m in reuses]
             for r, rs, w in zip(reuses, reused, work):
                 if r in methods:
-                    kept[r].append((f"{s['scene']} {path}", rs, w))
+                    kept[r].append((f"{label(s)} {path}", rs, w))
             cells = [" / ".join(_fmt(r, pct) for r in rs) for rs, pct in [(vs_yang, False)] + [(o, True) for o in of_oracles]]
             cells += [" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else f" (network {100 * w:.0f}%)")
                       for rs, w in zip(reused, work)]
-            targets.append(f"| {s['scene']} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
+            targets.append(f"| {label(s)} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
     print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
     print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))
@@ -262,7 +275,7 @@ def _windows(runs: list[dict[str, Any]], n: int) -> None:
                 for i in range(0, len(saved), n):
                     w, f = saved[i:i + n], fail[i:i + n]
                     cells.append(f"{100 * sum(w) / len(w):.1f} / {100 * sum(f) / len(f):.1f}")
-                out.append(f"| {s['scene']} | {s['seed']} | {path} | {meth} | " + " | ".join(cells) + " |")
+                out.append(f"| {rep['_label']} | {s['seed']} | {path} | {meth} | " + " | ".join(cells) + " |")
     starts = range(0, longest, n)
     print("| map | seed | path | method | " + " | ".join(f"frames {1 + i}-{min(i + n, longest)}" for i in starts) + " |")
     print("|---|---:|---|---|" + "---|" * len(starts))
@@ -292,7 +305,7 @@ def _by_age(runs: list[dict[str, Any]]) -> None:
                         cells.append(f"{100 * sum(saved[i] for i in idx) / len(idx):.1f} / "
                                      f"{100 * sum(fail[i] for i in idx) / len(idx):.1f}" if idx else "")
                     label = name if name == meth else f"{name} (same frames)"
-                    out.append(f"| {s['scene']} | {s['seed']} | {path} | {label} | " + " | ".join(cells) + " |")
+                    out.append(f"| {rep['_label']} | {s['seed']} | {path} | {label} | " + " | ".join(cells) + " |")
     if not out:
         print("\n--by-age: no run played a method with prediction reuse (NAME@k, unseen tiles at 1x1)")
         return

@@ -180,6 +180,16 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
     assert ("| jnyang / Yang | jnyang / oracle | jnyang / oracle-monotone | jnyang@2 / jnyang | jnyang@2:fresh / jnyang |"
             in out)
     assert "(network 50%)" in out  # the reuse columns give the network's work per frame
+    assert "16-pixel tiles" in out
+    # a run on other hardware tiles is another run, not merged (its rows were dropped, or its new methods put
+    # in the other run's rows): each map row says its tiles
+    eight = json.loads((tmp_path / "play.json").read_text())
+    eight["settings"]["tile_size"] = 8
+    (tmp_path / "play8.json").write_text(json.dumps(eight))
+    both = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
+                           str(tmp_path / "play8.json")], capture_output=True, text=True, check=True).stdout
+    assert both.count("| procedural:0 (16px) | 0 | fast |") == 2 and both.count("| procedural:0 (8px) | 0 | fast |") == 2
+    assert "tiles as each map says" in both
     other = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
                             "--model", "psnr"], capture_output=True, text=True, check=True).stdout
     assert "(No targets: the runs did not play psnr;" in other and "Targets" not in other
