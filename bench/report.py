@@ -26,6 +26,19 @@ def pct(v: float) -> str:
     return "-" if v is None or v != v else f"{100 * v:.1f}"
 
 
+def num(v: float | None) -> str:
+    """Three decimals; "-" for a score that is not defined (a Spearman of constant values, no tiles: null)."""
+    return "-" if v is None or v != v else f"{v:.3f}"
+
+
+def model_label(d: dict) -> str:
+    """The model's path, and the hardware tiles it decided and was judged on where they are not its own
+    (`rtp evaluate --tile-size`): two runs of one model on 16- and 8-pixel tiles read apart."""
+    m = d["model"]
+    own = m.get("model_tile_size", m.get("tile_size"))
+    return str(m["path"]) + (f" [{m['tile_size']}-pixel tiles; the model's {own}]" if own != m.get("tile_size") else "")
+
+
 def table(header: list[str], rows: list[list[str]]) -> None:
     print("\n| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
@@ -36,11 +49,11 @@ def table(header: list[str], rows: list[list[str]]) -> None:
 def main(paths: list[Path]) -> None:
     for path in paths:
         for d in json.load(open(path, encoding="utf-8")):
-            print(f"\n### {d['model']['metric']} ({d['model']['path']} on {d['data']}, {d['samples']} samples)")
+            print(f"\n### {d['model']['metric']} ({model_label(d)} on {d['data']}, {d['samples']} samples)")
             pooled = [r for r in d["quality"] if r["scene"] == "all scenes"]
             table(["tiles", "method", "R² %", "MAE", "MAE under.", "σ MAE", "under %", "Spearman"], [
-                [r["split"], r["method"], pct(r["r2"]), f"{r['mae']:.3f}", f"{r['mae_under']:.3f}", f"{r['sigma']:.3f}",
-                 pct(r["under_share"]), f"{r['spearman']:.3f}"] for r in pooled])
+                [r["split"], r["method"], pct(r["r2"]), num(r["mae"]), num(r["mae_under"]), num(r["sigma"]),
+                 pct(r["under_share"]), num(r["spearman"])] for r in pooled])
             decisions = [r for r in d["decisions"] if r["scene"] == "all scenes"]
             table(["tiles", "method", "threshold", "fails %", "work saved %"], [
                 [r["split"], r["method"], f"{r['threshold']:g}", pct(r["fail_share"]), pct(r["work_saved"])]
@@ -72,7 +85,7 @@ def compact(paths: list[Path]) -> None:
         for d in json.load(open(path, encoding="utf-8")):
             q = {(r["split"], r["method"]): r["r2"] for r in d["quality"] if r["scene"] == "all scenes"}
             sweep = [(r["fail_share"], r["work_saved"]) for r in d.get("sweep", []) if r["method"] == "model"]
-            rows.append([d["model"]["metric"], d["model"]["path"], str(d["samples"]),
+            rows.append([d["model"]["metric"], model_label(d), str(d["samples"]),
                          " / ".join(pct(q.get((s, "model"))) for s in ("all", "seen", "unseen")),
                          " / ".join(pct(q.get((s, "model (no safety)"))) for s in ("all", "seen", "unseen")),
                          " / ".join(pct(saved_at(sweep, f)) if saved_at(sweep, f) is not None else "-"
@@ -90,7 +103,7 @@ def per_scene(paths: list[Path]) -> None:
             q = {(r["scene"], r["split"], r["method"]): r["r2"] for r in d["quality"]}
             scenes = dict.fromkeys(r["scene"] for r in d["quality"] if r["scene"] != "all scenes")
             for scene in [*scenes, "all scenes"]:
-                rows.append([d["model"]["path"], scene,
+                rows.append([model_label(d), scene,
                              " / ".join(pct(q.get((scene, s, "model"))) for s in ("all", "seen", "unseen")),
                              " / ".join(pct(q.get((scene, s, "model (no safety)"))) for s in ("all", "seen", "unseen"))])
     table(["model", "scene", "R² all / seen / unseen %", "same, no safety margin"], rows)

@@ -658,6 +658,16 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
         assert expect in shown and str(model) in shown
     bad = subprocess.run([*report, str(tmp_path / "nope.json")], capture_output=True, text=True)
     assert bad.returncode == 2 and "No such file or directory" in bad.stderr
+    # a run on other hardware tiles than the model's (--tile-size) says so: the two read apart
+    entries = json.loads((out / "evaluation.json").read_text())
+    own = entries[0]["model"]["tile_size"]
+    entries[0]["model"].update(tile_size=own // 2, model_tile_size=own)
+    (tmp_path / "half.json").write_text(json.dumps(entries))
+    for flag in ("--compact", "--per-scene", None):
+        shown = subprocess.run([*report, *([flag] if flag else []), str(out / "evaluation.json"),
+                                str(tmp_path / "half.json")], capture_output=True, text=True, check=True).stdout
+        assert shown.count(f"[{own // 2}-pixel tiles; the model's {own}]") >= 1 and "the model's" not in \
+            shown.split(f"[{own // 2}-pixel")[0], (flag, shown)
 
 
 
