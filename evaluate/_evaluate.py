@@ -141,9 +141,7 @@ class EvaluationReport:
     def _header(self) -> list[str]:
         m = self.model
         return [
-            f"model {m['path']}: {m['metric']}, tile {m['tile_size']}"
-            + (f" (pooled from the model's {m['model_tile_size']})" if m.get('model_tile_size', m['tile_size']) != m['tile_size']
-               else "")
+            f"model {m['path']}: {m['metric']}, tile {m['tile_size']}" + _tiles_text(m['tile_size'], m.get('model_tile_size'))
             + f", transform {_transform_text(m['transform'])}, "
             f"safety {m['safety']:g}, "
             f"outputs {','.join(m['outputs'])}",
@@ -205,6 +203,14 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
     with atomic_output(paths[1]) as tmp:
         tmp.write_text(json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False), encoding="utf-8")
     return paths
+
+
+def _tiles_text(tile: int, own: int | None) -> str:
+    """How the hardware tiles judged relate to the model's own: coarser ones pool the model's (the worst of those
+    each covers), finer ones split them (each takes its model tile's values)."""
+    if own is None or own == tile:
+        return ""
+    return f" (pooled from the model's {own})" if tile > own else f" (each its part of the model's {own})"
 
 
 def _transform_text(t: dict[str, Any]) -> str:

@@ -420,6 +420,7 @@ def test_evaluation_on_coarser_hardware_tiles_scores_the_pooled_values(dataset: 
     is predicted as the worst model tile it covers, as predict() gives an engine, and scored against
     the targets pooled to that tile."""
     rep = evaluate(model, dataset, tile_size=2 * T, baselines=False)
+    assert f"jnyang, tile {2 * T} (pooled from the model's {T})," in rep.to_markdown()
     ps, gs = [], []
     for i in range(3):
         pred = np.clip(_expected_raw(i) + 0.05, 0, 1)
@@ -448,6 +449,9 @@ def test_evaluation_on_finer_hardware_tiles_scores_each_model_tiles_values(datas
     assert db["n"] == 4 * da["n"]
     assert (db["fail_share"], db["work_saved"]) == pytest.approx((da["fail_share"], da["work_saved"]))
     assert fine.row("decisions", "fidelityfx", "all scenes", "all")["n"] == db["n"]
+    # (its report said "pooled from the model's" tiles, as for coarser ones)
+    assert f"jnyang, tile {T // 2} (each its part of the model's {T})," in fine.to_markdown()
+    assert f"jnyang, tile {T}, transform" in own.to_markdown()
 
 
 def test_a_run_on_training_scenes_only_is_flagged(dataset: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
