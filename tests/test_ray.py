@@ -255,15 +255,20 @@ def test_without_ray_installed_the_flag_says_what_to_install(tmp_path: Path, mon
     assert not (tmp_path / "ds").exists()
 
 
-def test_each_ray_nodes_workers_are_sized_against_its_memory(cluster: None, local: Path, tmp_path: Path) -> None:
+def test_each_ray_nodes_workers_are_sized_against_its_memory(cluster: None, local: Path, tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     """On a cluster the driver cannot see where the frames are drawn: each worker reports its node's
     memory and the driver adds up the workers of each node before anything is drawn or written (a
     16384x16384 capture holds about 193 GiB a worker; machines like this one have 24)."""
     import json
     import shutil
 
-    from rtp.capture import TargetError, job_bytes
+    from rtp.capture import TargetError, _capture, job_bytes
     from rtp.sdk import ParameterError
+
+    # the disk check comes first (two such samples take 2.7 GB or more): a machine with less free refused it
+    # there, and this test is about memory
+    monkeypatch.setattr(_capture.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**13, 0, 10**13))
 
     one = job_bytes("capture", (16384, 16384))
     with pytest.raises(ParameterError, match=rf"^size: a capture at 16384x16384 holds about {2 * one / 2**30:.1f} GiB "
