@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ._run import Formatter, Parser, add_common, run
+from ._run import Formatter, Parser, add_common, carries_metadata, run
 
 __all__ = ["build_export_parser", "export_main"]
 
@@ -125,7 +125,7 @@ def _body(args: argparse.Namespace) -> int:
         from rtp.export import identify
 
         if args.metadata is None and Path(args.adopt).is_file() and identify(args.adopt) is None \
-                and not _carries_metadata(args.adopt):
+                and not carries_metadata(args.adopt):
             raise sdk.MetadataError(
                 f"{args.adopt} is not one of the paper's published models rtp recognises: pass its sidecar with "
                 "--metadata SIDECAR.yaml (docs/export.md)")
@@ -137,17 +137,6 @@ def _body(args: argparse.Namespace) -> int:
     print(out)
     return 0
 
-
-def _carries_metadata(path: str) -> bool:
-    """Whether ``path`` is an ONNX model that already holds rtp metadata (adopt() then says so)."""
-    import onnx
-
-    from rtp.sdk import METADATA_KEY
-
-    try:
-        return any(p.key == METADATA_KEY for p in onnx.load(path, load_external_data=False).metadata_props)
-    except Exception:  # not readable: adopt() reports that
-        return False
 
 
 def export_main(argv: Sequence[str] | None = None) -> int:

@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._run import Bar, Formatter, Parser, add_common, run
+from ._run import Bar, Formatter, Parser, add_common, carries_metadata, run
 
 __all__ = ["build_parser", "main"]
 
@@ -161,13 +161,14 @@ def _names(values: Sequence[str] | None) -> tuple[str, ...]:
 # -- subcommands ------------------------------------------------------------------------------
 
 def _load(args: argparse.Namespace) -> Any:
-    """``sdk.load`` of ``args.model``, with the missing-metadata hint in the command line's words."""
+    """``sdk.load`` of ``args.model``, with the missing-metadata hint in the command line's words (only when
+    the file has none: metadata that is there but broken keeps the SDK's message of what is wrong)."""
     from rtp import sdk
 
     try:
         return sdk.load(args.model, metadata=args.metadata)
     except sdk.MetadataError as err:
-        if err.key == sdk.METADATA_KEY and args.metadata is None:
+        if err.key == sdk.METADATA_KEY and args.metadata is None and not carries_metadata(args.model):
             raise sdk.MetadataError(
                 f"{args.model} carries no rtp metadata: pass --metadata SIDECAR.yaml, or bake the sidecar in with "
                 "`rtp-export --adopt MODEL.onnx --metadata SIDECAR.yaml -o OUT.onnx`", err.key) from err

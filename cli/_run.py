@@ -21,7 +21,8 @@ import traceback
 from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
 
-__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "one_line", "run", "run_guarded", "states_default", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metadata", "one_line", "run", "run_guarded",
+           "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -30,6 +31,18 @@ def version() -> str:
     from rtp import sdk
 
     return str(sdk.__version__)
+
+
+def carries_metadata(path: str) -> bool:
+    """Whether ``path`` is an ONNX model that already holds rtp metadata (a file without it, or unreadable: False)."""
+    import onnx
+
+    from rtp.sdk import METADATA_KEY
+
+    try:
+        return any(p.key == METADATA_KEY for p in onnx.load(path, load_external_data=False).metadata_props)
+    except Exception:  # not readable: the caller's load reports that
+        return False
 
 
 def one_line(message: str) -> str:

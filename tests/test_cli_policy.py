@@ -369,6 +369,22 @@ def test_info_on_a_foreign_model_speaks_in_flags(tmp_path: Path, capsys: pytest.
     assert "--metadata SIDECAR.yaml" in err and "metadata=" not in err
 
 
+def test_info_on_broken_metadata_says_what_is_broken(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Metadata that is there but not JSON is not "no rtp metadata": the hint to bake a sidecar in would send
+    the user to `rtp-export --adopt`, which refuses a file that already carries the key."""
+    import onnx
+
+    from .conftest import build_onnx
+
+    path = build_onnx(tmp_path / "m.onnx", weights=np.zeros((4, 4), np.float32), metadata=None)
+    model = onnx.load(path)
+    onnx.helper.set_model_props(model, {sdk.METADATA_KEY: '{"metric": "jnyang", "tile_si'})
+    onnx.save(model, path)
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "not valid JSON" in err and "carries no rtp metadata" not in err
+
+
 def test_exit_code_of_non_rtp_errors() -> None:
     assert sdk.exit_code(KeyboardInterrupt()) == 130
     assert sdk.exit_code(RuntimeError()) == sdk.EXIT_FAILED == 1
