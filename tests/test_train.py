@@ -152,6 +152,57 @@ def test_training_learns_resumes_and_exports(tmp_path: Path) -> None:
     np.testing.assert_allclose(pred.predict_raw(x), raw, atol=1e-5)
 
 
+def test_a_diverged_training_stops_at_once_and_keeps_the_last_finite_checkpoint(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """A NaN loss (here from input planes that turn NaN after step 4) stopped nothing: the training ran every step,
+    its periodic saves replaced the last good checkpoint with NaN weights, and the final save failed on the
+    provenance's JSON. It stops at the first non-finite loss, exit 1, naming the step and what is kept."""
+    from rtp.train import TrainingDivergedError, _loop
+
+    data = _dataset(tmp_path / "ds", n=6)
+    real_crop, calls = _loop.crop_batch, [0]
+
+    def poisoned(*args: Any, **kwargs: Any) -> np.ndarray:
+        calls[0] += 1
+        batch = real_crop(*args, **kwargs)
+        return batch * np.float32("nan") if calls[0] > 4 else batch
+
+    monkeypatch.setattr(_loop, "crop_batch", poisoned)
+    out = tmp_path / "m.pt"
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(out), steps=12, crop=32, batch=2, val_every=2,
+                      save_every=2, val_scenes=("scene0",))
+    with pytest.raises(TrainingDivergedError, match=r"the loss is nan at step 5, .*m\.pt keeps step 4's weights"):
+        train(cfg)
+    kept = load_checkpoint(out)
+    assert kept.training["step"] == 4
+    assert all(bool(torch.isfinite(v).all()) for v in kept.net.state_dict().values() if v.is_floating_point())
+
+    # weights that turn NaN in an update are not saved either: the checkpoint of the save before stays
+    monkeypatch.setattr(_loop, "crop_batch", real_crop)
+    real_step, updates = torch.optim.RMSprop.step, [0]
+
+    def nan_update(self: torch.optim.Optimizer, *args: Any, **kwargs: Any) -> Any:
+        updates[0] += 1
+        result = real_step(self, *args, **kwargs)
+        if updates[0] == 4:
+            with torch.no_grad():
+                self.param_groups[0]["params"][0].fill_(float("nan"))
+        return result
+
+    monkeypatch.setattr(torch.optim.RMSprop, "step", nan_update)
+    out.unlink()
+    with pytest.raises(TrainingDivergedError, match=r"the weights \(.*\) are not finite at step 4, .*keeps step 2's"):
+        train(cfg)
+    assert load_checkpoint(out).training["step"] == 2
+    monkeypatch.setattr(torch.optim.RMSprop, "step", real_step)
+
+    calls[0] = 0  # from the command line: exit 1, the same words; diverging before any save writes nothing
+    monkeypatch.setattr(_loop, "crop_batch", lambda *a, **k: np.full_like(real_crop(*a, **k), np.inf))
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--steps", "6",
+                     "--val-scenes", "scene0", "--out", str(tmp_path / "n.pt")]) == 1
+    assert "no checkpoint was written" in capsys.readouterr().err and not (tmp_path / "n.pt").exists()
+
+
 def test_train_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=3)
     assert rtp_main(["train", "--data", str(data), "--metric", "flip", "--out", str(tmp_path / "m.pt")]) == 2

@@ -4,7 +4,7 @@ Importing this package needs torch (the ``rtp[train]`` extra). Scores and evalua
 :mod:`rtp.evaluate`'s (no torch); targets and the dataset are :mod:`rtp.capture`'s.
 """
 
-from ._loop import TrainConfig, TrainResult, step_bytes, train
+from ._loop import TrainConfig, TrainingDivergedError, TrainResult, step_bytes, train
 from ._recipe import SHIPPED_RECIPE, Recipe, RecipeError, load_recipe, packaged_recipes
 from ._safety import calibrate_safety
 
@@ -14,6 +14,7 @@ __all__ = [
     "RecipeError",
     "TrainConfig",
     "TrainResult",
+    "TrainingDivergedError",
     "calibrate_safety",
     "load_recipe",
     "packaged_recipes",

@@ -47,6 +47,14 @@ log = logging.getLogger("rtp.train")
 
 
 
+class TrainingDivergedError(sdk.RtpError):
+    """The loss or the weights became NaN or infinite: the training diverged (too high a learning rate for
+    the data, or non-finite input planes). It stops at once, before the diverged weights replace the last
+    checkpoint on disk, which stays as it was. Exit code 1 (the job ran and failed)."""
+
+    exit_code = sdk.EXIT_FAILED
+
+
 @dataclass
 class TrainConfig:
     #: A dataset folder with targets (``rtp targets``), or several, comma-separated, whose samples train and
@@ -982,6 +990,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         if progress and last_loss is not None:  # a resumed run's bar starts where it stopped
             progress(step, cfg.steps, float(last_loss))
     weber = store.metrics.get(cfg.metric, {}).get("weber_l")
+    saved_step = step  # the step the checkpoint on disk holds (0: none)
 
     def metadata(safety: float, extra: dict[str, Any]) -> dict[str, Any]:
         return {
@@ -1014,14 +1023,28 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             },
         }
 
+    def diverged(what: str) -> TrainingDivergedError:
+        kept = (f"{out} keeps step {saved_step}'s weights, where it was still finite" if saved_step
+                else f"no checkpoint was written to {out}")
+        return TrainingDivergedError(
+            f"the training diverged: {what} at step {step}, with learning rate {cfg.lr:g}; {kept}. Train again to "
+            "another --out with a lower --lr (resuming this one would diverge the same way), and check that the "
+            "dataset's input planes are finite")
+
     def save(done: bool, safety: float = 0.0, extra: dict[str, Any] | None = None) -> None:
+        nonlocal saved_step
         saved = keep_outputs(avg, n_out) if cfg.aux_metrics else avg  # type: ignore[arg-type]
+        bad = next((k for k, v in {**net.state_dict(), **avg.state_dict()}.items()
+                    if v.is_floating_point() and not bool(torch.isfinite(v).all())), None)
+        if bad is not None:  # (the last finite checkpoint stays: a diverged one would replace it)
+            raise diverged(f"the weights ({bad}) are not finite")
         ckpt.save(out, saved, metadata(safety, extra or {}), training={
             "config": config_key, "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
             "generator": gen.get_state(), "step": step, "history": json.dumps(history), "done": done,
             **({"raw_weights": net.state_dict()} if cfg.ema else {}),
             **({"full_weights": avg.state_dict()} if cfg.aux_metrics else {}),
         })
+        saved_step = step
 
     n_tiles = (cfg.crop + 2 * cfg.context) // cfg.tile  # the window read, in tiles
     margin = cfg.context // cfg.tile
@@ -1068,6 +1091,10 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
                 ap = out_all[:, n_out * (k + 1) : n_out * (k + 2)]
                 aux_losses.append(aux_loss_fn(ap[scored], atgt[scored]) if scored is not None else aux_loss_fn(ap, atgt))
             loss = loss + cfg.aux_weight * torch.stack(aux_losses).mean()
+        loss_value = loss.item()
+        if not math.isfinite(loss_value):  # (before its gradients reach the weights; every later step would be NaN)
+            step += 1
+            raise diverged(f"the loss is {loss_value}")
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -1076,11 +1103,11 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         if cfg.ema:
             _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
         if progress:
-            progress(step, cfg.steps, loss.item())
+            progress(step, cfg.steps, loss_value)
         if step % cfg.val_every == 0 or step == cfg.steps:
             s, _, _ = _validate(avg, va, transform, cfg, worse)
-            history.append({"step": step, "train_loss": loss.item(), "val": s})
-            log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss.item(), s["mae"], s["r2"])
+            history.append({"step": step, "train_loss": loss_value, "val": s})
+            log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss_value, s["mae"], s["r2"])
         if step % cfg.save_every == 0 and step < cfg.steps:
             save(done=False)
 
