@@ -106,6 +106,15 @@ def test_bad_checkpoint_files(tmp_path: Path) -> None:
     torch.save({"state_dict": {}}, other)
     with pytest.raises(checkpoint.CheckpointError, match="not an rtp checkpoint"):
         checkpoint.load(other)
+    # NaN weights (a diverged training of an rtp before it stopped on them) are named, not exported into a parity
+    # failure ("max abs difference nan") or resumed into a training on NaN
+    net = _net()
+    with torch.no_grad():
+        next(net.parameters())[0].fill_(float("nan"))
+    nan = checkpoint.save(tmp_path / "nan.pt", net, base_metadata(safety=0.04))
+    with pytest.raises(checkpoint.CheckpointError, match=r"its weights are not finite \(.*\): the training that wrote "
+                                                         r"it diverged"):
+        checkpoint.load(nan)
 
 
 def _refuse_large_layers(monkeypatch: pytest.MonkeyPatch, where: str) -> None:

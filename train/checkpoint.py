@@ -195,6 +195,12 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
         net.load_state_dict(raw["state_dict"])
     except (KeyError, TypeError, RuntimeError, ValueError) as err:
         raise CheckpointError(f"{p}: weights do not fit the architecture {arch}: {err}") from err
+    bad = [k for k, v in raw["state_dict"].items()
+           if isinstance(v, torch.Tensor) and v.is_floating_point() and not bool(torch.isfinite(v).all())]
+    if bad:  # (exported, it failed the parity check as "max abs difference nan"; resumed, it trained on NaN)
+        more = f" and {len(bad) - 1} more" if len(bad) > 1 else ""
+        raise CheckpointError(f"{p}: its weights are not finite ({bad[0]}{more}): the training that wrote it diverged; "
+                              "train again to another --out with a lower --lr")
     net.eval()
     meta = ModelMetadata.from_dict(raw.get("metadata") or {})
     check_fits(net, meta)
