@@ -3,8 +3,17 @@ so ``rtp info`` works with the runtime dependencies alone; all share one set of 
 error policy (exit codes in docs/errors.md)."""
 
 from ._export import build_export_parser, export_main
-from ._main import MAX_SIDE, build_parser, frame_size, int_at_least, main
+from ._main import (
+           ANIMATION_EXTENSIONS,
+           MAX_SIDE,
+           build_parser,
+           frame_size,
+           int_at_least,
+           main,
+           out_animation,
+           out_image,
+)
 from ._run import run_guarded
 
-__all__ = ["MAX_SIDE", "build_export_parser", "build_parser", "export_main", "frame_size", "int_at_least", "main",
-           "run_guarded"]
+__all__ = ["ANIMATION_EXTENSIONS", "MAX_SIDE", "build_export_parser", "build_parser", "export_main", "frame_size",
+           "int_at_least", "main", "out_animation", "out_image", "run_guarded"]

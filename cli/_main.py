@@ -58,8 +58,9 @@ def _out_file(text: str) -> str:
     return _checked_path(text, folder=False)
 
 
-def _out_image(text: str) -> str:
-    """An argparse type: an image file Pillow can write, in a place that can be written."""
+def out_image(text: str) -> str:
+    """An argparse type: an image file Pillow can write, in a place that can be written (public: the
+    examples check their ``--out`` the same way, before the work that makes the image)."""
     from rtp.capture import check_image_output
     from rtp.sdk import ParameterError
 
@@ -68,6 +69,19 @@ def _out_image(text: str) -> str:
     except ParameterError as err:
         raise argparse.ArgumentTypeError(str(err).removeprefix("path: ")) from None
     return text
+
+
+#: The extensions an animation is written to (imageio through Pillow, which writes every frame to these and
+#: browsers and image viewers play them); an MP4 needs imageio's ffmpeg plugin, which rtp does not install.
+ANIMATION_EXTENSIONS = (".gif", ".png", ".apng", ".webp")
+
+
+def out_animation(text: str) -> str:
+    """An argparse type: an animated image (:data:`ANIMATION_EXTENSIONS`) in a place that can be written
+    (public: the examples' ``--gif``)."""
+    if Path(text).suffix.lower() not in ANIMATION_EXTENSIONS:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an animation file ({', '.join(ANIMATION_EXTENSIONS)})")
+    return out_image(text)
 
 
 def _path_text(text: str) -> str:
@@ -639,7 +653,7 @@ def build_parser() -> argparse.ArgumentParser:
     pv = command("preview", "draw one sample of a dataset: final images at every rate, G-buffers, reprojection",
                  _cmd_preview)
     pv.add_argument("data", help="dataset folder (rtp's, or the paper's released layout)")
-    pv.add_argument("--out", type=_out_image, required=True,
+    pv.add_argument("--out", type=out_image, required=True,
                     help="image to write; its extension names the format (.png, .jpg, ...)")
     pv.add_argument("--sample", default=None, help="sample id (default: the first)")
     pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller, down to 160x90 pixels")
@@ -883,7 +897,7 @@ def build_parser() -> argparse.ArgumentParser:
     mt.add_argument("metric", choices=tuple(METRICS), help="the metric")
     mt.add_argument("reference", type=_path_text, help="the reference image (full-rate shading), any format Pillow reads")
     mt.add_argument("test", type=_path_text, help="the image to compare, same size")
-    mt.add_argument("--out", type=_out_image, default=None,
+    mt.add_argument("--out", type=out_image, default=None,
                     help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
                     "bar to this image")
     mt.add_argument("--tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE, help="tile size in pixels")

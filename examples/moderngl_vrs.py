@@ -38,7 +38,7 @@ import numpy as np
 from rtp import sdk
 from rtp.capture import check_memory
 from rtp.capture.scenes import procedural
-from rtp.cli import frame_size, run_guarded  # the WIDTHxHEIGHT of every rtp command; its error policy
+from rtp.cli import frame_size, out_animation, out_image, run_guarded  # as rtp's commands take them; its error policy
 from rtp.plugins.moderngl import Adapter, RateSelector, create_context
 from rtp.scene import Camera
 
@@ -59,8 +59,8 @@ def peak_bytes(width: int, height: int, frames: int, gif: bool) -> int:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
-    ap.add_argument("--out", type=Path, default=Path("moderngl_vrs.png"), help="overlay PNG of the last frame")
-    ap.add_argument("--gif", type=Path, help="also write every frame's overlay as an animated GIF (imageio)")
+    ap.add_argument("--out", type=out_image, default="moderngl_vrs.png", help="overlay PNG of the last frame")
+    ap.add_argument("--gif", type=out_animation, help="also write every frame's overlay as an animated GIF (imageio)")
     ap.add_argument("--size", type=frame_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
     ap.add_argument("--frames", type=int, default=6, help="frames of the walk (default: 6)")
     ap.add_argument("--threshold", type=float, help="threshold (default: the model's)")
@@ -68,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
                     "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
+    args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.frames < 1:
         ap.error(f"--frames: expected at least 1, got {args.frames}")
@@ -118,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     iio.imwrite(args.out, overlays[-1])
     log.info("wrote %s", args.out)
     if args.gif:
+        args.gif.parent.mkdir(parents=True, exist_ok=True)
         iio.imwrite(args.gif, np.stack(overlays), duration=1000 / 15, loop=0)
         log.info("wrote %s (%d frames)", args.gif, len(overlays))
     return 0

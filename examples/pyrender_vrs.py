@@ -48,7 +48,7 @@ import numpy as np
 
 from rtp import sdk
 from rtp.capture import check_memory
-from rtp.cli import frame_size, run_guarded  # the WIDTHxHEIGHT of every rtp command; its error policy
+from rtp.cli import frame_size, out_animation, out_image, run_guarded  # as rtp's commands take them; its error policy
 from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_trimesh_scene
 
 log = logging.getLogger("pyrender_vrs")
@@ -176,17 +176,18 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", type=Path, help="glTF/GLB/OBJ file (default: a procedural level written as GLB)")
     ap.add_argument("--model", default="jnyang", help="a shipped model's name or an rtp ONNX path (default: jnyang)")
-    ap.add_argument("--out", type=Path, default=Path("pyrender_vrs.png"), help="overlay PNG to write")
+    ap.add_argument("--out", type=out_image, default="pyrender_vrs.png", help="overlay PNG to write")
     ap.add_argument("--size", type=frame_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
     ap.add_argument("--threshold", type=float, help="error threshold (default: the model's)")
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
     ap.add_argument("--frames", type=int, default=2,
                     help="frames of the camera move (default 2: one prediction; more: a frame loop with reuse)")
     ap.add_argument("--every", type=int, default=4, help="in a frame loop, run the network every this many frames")
-    ap.add_argument("--gif", type=Path, help="in a frame loop, write the rate overlays as an animated GIF")
+    ap.add_argument("--gif", type=out_animation, help="in a frame loop, write the rate overlays as an animated GIF")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
                     "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
+    args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
     if args.frames < 2 or args.every < 1:
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
     if args.scene is not None and not args.scene.is_file():

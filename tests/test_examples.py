@@ -157,3 +157,18 @@ def test_pyrender_example_refuses_a_scene_with_nothing_to_draw(tmp_path: Path) -
                                                                                                    "no triangles to draw")
         assert f"pyrender_vrs.py: error: --scene {tmp_path / name}: " in r.stderr and want in r.stderr, r.stderr
     assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("name", ["moderngl_vrs", "pyrender_vrs"])
+def test_an_example_refuses_outputs_it_cannot_write_before_it_renders(name: str, tmp_path: Path) -> None:
+    """`--out x.txt` and `--gif x.mp4` were imageio tracebacks at the end, after every frame was rendered (an MP4
+    needs imageio's ffmpeg plugin, not installed); both are now argparse errors before anything loads, in the
+    words of rtp's own commands (rtp.cli.out_image, out_animation), and the moderngl example makes the GIF's folder
+    as the pyrender one does."""
+    for flag, path, words in (("--out", "x.txt", "not an image extension Pillow can write"),
+                              ("--gif", "x.mp4", "expected an animation file (.gif, .png, .apng, .webp)"),
+                              ("--gif", "x.jpg", "expected an animation file")):
+        r = subprocess.run([sys.executable, str(ROOT / "examples" / f"{name}.py"), "--frames", "3", flag,
+                            str(tmp_path / path)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
+        assert ".onnx" not in r.stderr  # (refused before the model loads: the examples log its file first)
