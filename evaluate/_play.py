@@ -310,6 +310,20 @@ class _Loop:
 # -- the run ------------------------------------------------------------------------------------------
 
 
+def _other_tiles(settings: dict[str, Any]) -> str:
+    """The sentence of play.md's header that names the models run on other tiles than their own (the
+    hardware's: finer, each takes its model tile's rate; coarser, each decides on the worst model tile it
+    covers), or nothing."""
+    tile = settings["tile_size"]
+    other = {k: t for k, t in (settings.get("model_tiles") or {}).items() if t != tile}
+    if not other:
+        return ""
+    told = [f"{k} ({t}px: each {tile}px tile "
+            + (f"decides on the worst of the {(tile // t) ** 2} model tiles it covers)" if t < tile
+               else "takes the rate of the model tile it lies in)") for k, t in other.items()]
+    return f" Models on tiles other than their own: {'; '.join(told)}."
+
+
 @dataclass
 class PlayReport:
     """What :func:`play` measured: per path and (method, parameter) the summaries (``rows``), the
@@ -351,7 +365,7 @@ class PlayReport:
                  f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when "
                  f"{fail_rule(s['fail_metric'], s['fail_threshold'])}; {flip}. Shading: {s.get('shading', 'renderer')}; "
                  f"each method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is "
-                 "left out.", ""]
+                 f"left out.{_other_tiles(s)}", ""]
         for path, unseen in self.unseen.items():
             u = np.array(unseen[1:])
             cam = s.get("cameras", {}).get(path)
@@ -523,6 +537,7 @@ def play(
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "models": {k: str(p.path) for k, p in predictors.items()},
+                "model_tiles": {k: p.tile_size for k, p in predictors.items()},  # (play.md names those on other tiles)
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
                                    "refresh": m.refresh, "step": steps[m.name], "rescale": m.rescale,
                                    "carry_scale": m.carry_scale, "carry": m.carry}

@@ -672,9 +672,15 @@ def test_rtp_models_play_on_finer_and_coarser_hardware_tiles(tmp_path: Path) -> 
     assert runs[8].frames["fast"]["fidelityfx"]["saved"] != runs[16].frames["fast"]["fidelityfx"]["saved"]
     # on the first frame (no history yet: the same inputs in both runs) a 16-pixel tile takes a rate that
     # passes on each of its four 8-pixel tiles, each of which alone took that rate or a coarser one
-    eight = {t: play("procedural:0", "jnyang-8px", paths=("fast",), frames=3, size=(96, 64), sweep=False,
-                     flip_every=0, tile_size=t, plots=False).frames["fast"]["jnyang-8px"] for t in (8, 16)}
+    reports = {t: play("procedural:0", "jnyang-8px", paths=("fast",), frames=3, size=(96, 64), sweep=False,
+                       flip_every=0, tile_size=t, plots=False) for t in (8, 16)}
+    eight = {t: r.frames["fast"]["jnyang-8px"] for t, r in reports.items()}
     assert eight[16]["saved"][0] < eight[8]["saved"][0]
+    # play.md says which models ran on tiles other than their own, and how (the header named only the run's tiles)
+    assert "Models on tiles other than their own: jnyang-8px (8px: each 16px tile decides on the worst of the 4 model " \
+           "tiles it covers)." in reports[16].to_markdown()
+    assert "other than their own" not in reports[8].to_markdown()
+    assert "jnyang (16px: each 8px tile takes the rate of the model tile it lies in)" in runs[8].to_markdown()
     assert play("procedural:0", "jnyang", paths=("fast",), frames=3, size=(96, 64), sweep=False, flip_every=0,
                 tile_size=32, plots=False).frames["fast"]["jnyang"]["saved"][0] <= runs[16].frames["fast"]["jnyang"]["saved"][0]
     with pytest.raises(PlayError, match=r"the model uses 8px tiles, the run 12px"):
