@@ -386,7 +386,9 @@ def _cmd_targets(args: argparse.Namespace) -> int:
     with Bar(args, 0, "targets", "sample") as bar:
         n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
                             progress=progress, ray=args.ray, device=args.device)
-    print(f"{args.data}: targets computed for {_samples(n)} ({', '.join(args.metrics)})")
+    kept = done[1] - n  # (progress reports the dataset's size first: the samples that already had every target)
+    print(f"{args.data}: targets computed for {_samples(n)} ({', '.join(dict.fromkeys(args.metrics))})"
+          + (f"; {_samples(kept)} already had them" if kept > 0 else ""))
     return 0
 
 
