@@ -89,6 +89,22 @@ def _same_grids(a: dict[str, list[float]] | None, b: dict[str, list[float]] | No
     return all(a[k] == b[k] and a[k] for k in a.keys() & b.keys())
 
 
+def _mean_cell(per_path: list[list[dict[str, Any] | None] | None]) -> str:
+    """The mean over the paths of a method's matched savings, level by level: ``-`` where a path has none
+    (the method did not play it, or its sweep never failed that rarely), ``>=`` where a path's is a lower
+    bound (its sweep never failed that often), as the rows' cells."""
+    if any(p is None for p in per_path):
+        return "-"
+    out = []
+    for level in zip(*per_path):  # type: ignore[misc]
+        if any(m is None or not math.isfinite(m["work_saved"]) for m in level):
+            out.append("-")
+            continue
+        mean = sum(m["work_saved"] for m in level) / len(level)
+        out.append(f"{'>= ' if any(m.get('capped') for m in level) else ''}{100 * mean:.1f}")
+    return " / ".join(out)
+
+
 def _fmt(r: float, pct: bool = False) -> str:
     return "-" if not math.isfinite(r) else (f"{100 * r:.0f}%" if pct else f"{r:.2f}x")
 
@@ -147,6 +163,8 @@ def main() -> None:
         print(f"note: the runs did not play {', '.join(unplayed)} (--reuse): no column for it\n")
     reuses = [r for r in reuses if r in head]
     rows, targets = [], []
+    # each method's matched entries over the paths, for the mean row (None: the method did not play the path)
+    matched: dict[str, list[list[dict[str, Any] | None]]] = {meth: [] for meth in head}
     kept: dict[str, list[tuple[str, list[float], float]]] = {r: [] for r in reuses}  # per path: ratios, work
     for i, rep in enumerate(runs):
         s = rep["settings"]
@@ -164,6 +182,9 @@ def main() -> None:
             eye = f"{cam['eye_height_m']:.2f}" if cam else "?"
             at = {(m["method"], m["fail_share"]): {**m, "work_saved": math.nan if m["work_saved"] is None else m["work_saved"]}
                   for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
+            for meth in head:
+                matched[meth].append(None if meth not in methods else
+                                     [at.get((meth, lv)) for lv in (LEVELS if meth not in ORACLES else LEVELS[:1])])
             cells = ["" if meth not in methods else " / ".join(_cell(at.get((meth, lv))) for lv in LEVELS)
                      if meth not in ORACLES else _cell(at.get((meth, LEVELS[0]))) for meth in head]
             rows.append(f"| {label(s)} | {s['seed']} | {path} | {eye} | {100 * sum(u) / len(u):.2f} / {100 * max(u):.2f} | "
@@ -181,20 +202,27 @@ def main() -> None:
                 if r in methods:
                     kept[r].append((f"{label(s)} {path}", rs, w))
             cells = [" / ".join(_fmt(r, pct) for r in rs) for rs, pct in [(vs_yang, False)] + [(o, True) for o in of_oracles]]
+            if not any(y in head for y in ("yang2019", "yang2019-unseen-1x1")):
+                cells = cells[1:]  # (no Yang 2019 played: no column of dashes)
             cells += [" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else f" (network {100 * w:.0f}%)")
                       for rs, w in zip(reused, work)]
             targets.append(f"| {label(s)} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
     print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
     print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))
+    if len(rows) > 1:  # the mean over the paths (a method that did not play every path has none)
+        print("| mean | | | | | " + " | ".join(_mean_cell(matched[meth]) for meth in head) + " |")
+    yang_played = any(y in head for y in ("yang2019", "yang2019-unseen-1x1"))
     if model in head:
         print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
-              "better Yang 2019 (>= 1.3x fast, >= 1.0x slow), its share of the oracle's saving (>= 90%), reuse at k = 4 "
-              "against k = 1 (>= 95%; in brackets the network's work per frame, a share of a whole-frame run)\n")
+              "better Yang 2019 (>= 1.3x fast, >= 1.0x slow)" + ("" if yang_played else ", not played") + ", its share of "
+              "the oracle's saving (>= 90%), reuse at k = 4 against k = 1 (>= 95%; in brackets the network's work per "
+              "frame, a share of a whole-frame run)\n")
         oracles = [o for o in ORACLES if o in head]
-        print(f"| map | seed | path | {model} / Yang | "
-              + " | ".join([f"{model} / {o}" for o in oracles] + [f"{r} / {model}" for r in reuses]) + " |")
-        print("|---|---:|---|---|" + "---|" * len(oracles + reuses))
+        columns = ([f"{model} / Yang"] if yang_played else []) + [f"{model} / {o}" for o in oracles] \
+            + [f"{r} / {model}" for r in reuses]
+        print("| map | seed | path | " + " | ".join(columns) + " |")
+        print("|---|---:|---|" + "---|" * len(columns))
         print("\n".join(targets))
         _reuse_summary(kept, model)
         if args.plot_reuse:

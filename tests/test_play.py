@@ -576,6 +576,18 @@ def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> 
     # a: 90 / 94 / 96%, b: 90 / 95 / 97.5%; the worst at 5% is a's, both keep >= 95% there
     assert "| jnyang@4 | 2 | 37.5% | 90.0 / 94.5 / 96.8% | 96.0% (a fast) | 2 |" in out
     assert png.stat().st_size > 10_000
+    # the mean over the paths, per method and level (results.md quoted means worked out by hand); no Yang 2019
+    # played: no column of dashes for it
+    assert "| mean | | | | | 45.0 / 45.0 / 45.0 | 40.5 / 42.5 / 43.5 |" in out
+    assert "/ Yang" not in out and "not played" in out
+    # a lower bound on one path (its sweep never failed that often) makes the mean one; none (never that rarely) none
+    capped = json.loads(Path(runs[1]).read_text())
+    capped["matched"][2]["capped"] = True
+    capped["matched"][3]["work_saved"] = None  # (play.json writes nan as null)
+    (tmp_path / "b-capped.json").write_text(json.dumps(capped))
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), runs[0], str(tmp_path / "b-capped.json")],
+                         capture_output=True, text=True, check=True).stdout
+    assert "| mean | | | | | 45.0 / 45.0 / >= 45.0 | - / 42.5 / 43.5 |" in out
     # a run of map a swept over other grids (the newer ones recorded in settings) is not merged with it
     newer = json.loads(Path(runs[0]).read_text())
     newer["settings"]["grids"] = {"model": [0.5, 1.0], "psnr_db": [0.0], "baseline": [1.0]}
