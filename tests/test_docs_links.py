@@ -126,3 +126,15 @@ def test_dotted_names_of_rtp_objects_exist() -> None:
     missing = {n: sorted(f) for n, f in found.items() if n not in NOT_OBJECTS and not _resolves(n)}
     assert not missing, f"names that are no module or object of rtp: {missing}"
     assert not _resolves("rtp.plugins.moderngl._scene") and _resolves("rtp.scene.Scene")
+
+
+def test_make_help_names_every_target() -> None:
+    """`make help` lists every phony target in a line; a target added without its line is found here."""
+    text = (ROOT / "Makefile").read_text()
+    phony = re.search(r"^\.PHONY: (.*)$", text, re.M)
+    assert phony is not None
+    helped = set(re.findall(r'^\t@echo "make ([a-z-]+)', text, re.M)) | set(re.findall(r'@echo "make [a-z-]+ \| ([a-z-]+)',
+                                                                                       text, re.M))
+    helped |= {"help"} if "help:" in text else set()
+    missing = [t for t in phony.group(1).split() if t not in helped]
+    assert not missing, f"make help names no line for: {', '.join(missing)}"
