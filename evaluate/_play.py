@@ -359,6 +359,8 @@ class PlayReport:
     def to_markdown(self) -> str:
         s = self.settings
         flip = (f"FLIP of the displayed frame against full-rate shading once every {s['flip_every']} frames"
+                + (f" (none of these {s['frames']}: the first is frame {s['flip_every']})"
+                   if s["frames"] <= s["flip_every"] else "")
                 if s["flip_every"] else "no FLIP of the displayed frames")
         lines = [f"# Closed-loop VRS: {s['scene']}", "",
                  f"Paths {', '.join(self.unseen)} ({s['frames']} frames at {s['fps']:g} Hz, seed {s['seed']}), "

@@ -171,6 +171,10 @@ def test_the_loop_is_closed(scene: Any, tmp_path: Path, monkeypatch: pytest.Monk
                                                     "carry": "estimates"}}  # what NAME@k meant
     assert abs(settings["cameras"]["fast"]["eye_height_m"] - 1.6) <= 0.125  # the procedural spawns' eye
     assert f"its eye {settings['cameras']['fast']['eye_height_m']:.2f} m over the floor" in (tmp_path / "play.md").read_text()
+    assert "once every 2 frames." in (tmp_path / "play.md").read_text()
+    # a path no longer than the FLIP interval has no FLIP'd frame: its "mean FLIP" column of dashes says why
+    rep.settings["flip_every"] = 5
+    assert "once every 5 frames (none of these 5: the first is frame 5)." in rep.to_markdown()
     # the several-map table reads the same file (bench/play_report.py, docs/results.md "Moving cameras")
     out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), str(tmp_path / "play.json"),
                           str(tmp_path / "play.json"), "--reuse", "jnyang@2,jnyang@2:fresh"],
