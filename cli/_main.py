@@ -464,12 +464,25 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             raise _usage(f"--threshold is in the units of one metric, and the models predict "
                          f"{', '.join(f'{m} ({metric})' for m, metric in metrics.items())}: evaluate them one metric "
                          f"at a time, or leave each its own default threshold")
+    names: dict[str, str | None] = dict.fromkeys(args.model)  # each model's plot name (None: its file's stem)
     if len(args.model) > 1:  # (each model's targets, threshold and scenes before the first model's minutes of work)
+        from rtp import sdk
         from rtp.evaluate import check_evaluation
 
+        files: dict[Path, str] = {}
         for model in args.model:
             check_evaluation(model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
                              threshold=args.threshold, tile_size=args.tile_size)
+            file = Path(str(sdk.load(model, metadata=args.metadata).path)).resolve()
+            if file in files:  # (it was evaluated twice, its report written twice)
+                raise _usage(f"{files[file]} and {model} are the same model file ({file}): give each model once")
+            files[file] = model
+        # two files of one stem: each its own plots (the second's overwrote the first's), named after its folder,
+        # or numbered where the folders share a name too
+        stems = [f.stem for f in files]
+        names = {m: f"{f.parent.name}_{f.stem}" if stems.count(f.stem) > 1 else f.stem for f, m in files.items()}
+        if len(set(names.values())) < len(names):
+            names = {m: f"{f.stem}_{i}" for i, (f, m) in enumerate(files.items(), 1)}
     reports = []
     for model in args.model:
         with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:
@@ -477,7 +490,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                 model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata, threshold=args.threshold,
                 unseen_fraction=args.unseen_fraction, baselines=not args.no_baselines, max_samples=args.max_samples,
                 plots_dir=args.out if args.plots else None, plot_sample=args.plot_sample,
-                progress=bar.update_to, tile_size=args.tile_size,
+                progress=bar.update_to, tile_size=args.tile_size, plot_name=names[model],
             )
         reports.append(rep)
         print(rep.table() + "\n")

@@ -359,6 +359,7 @@ def evaluate(
     progress: Callable[[int, int], None] | None = None,
     sweep: bool = True,
     tile_size: int | None = None,
+    plot_name: str | None = None,
 ) -> EvaluationReport:
     """Evaluate an ONNX model on a dataset with targets (``rtp targets``) for its metric and tile.
 
@@ -377,7 +378,8 @@ def evaluate(
 
     The steps: load the model and the samples, build the baselines, take in each sample
     (:class:`_Run`: predictions and targets, quality values, every method's rates, the sweeps),
-    then assemble the report and write the plots.
+    then assemble the report and write the plots, named ``<plot_name>_heatmaps.png`` and so on (default: the
+    model file's stem; two models whose files share a stem need names of their own in one ``plots_dir``).
     """
     if isinstance(unseen_fraction, bool) or not isinstance(unseen_fraction, (int, float, np.number)) \
             or not 0.0 <= unseen_fraction < 1.0:
@@ -394,6 +396,10 @@ def evaluate(
             raise ParameterError(f"{key} must be True or False, got {flag!r}", key)
     if plot_sample is not None and not isinstance(plot_sample, str):
         raise ParameterError(f"plot_sample must be None or a sample id, got {plot_sample!r}", "plot_sample")
+    if plot_name is not None and (not isinstance(plot_name, str) or not plot_name or plot_name in (".", "..")
+                                  or any(c in plot_name for c in "/\\\0")):
+        raise ParameterError(f"plot_name must be None (the model file's stem) or a file name without a folder, got "
+                             f"{plot_name!r}", "plot_name")
     predictor, meta, thr, store, samples = _prepare(model, data, scenes, metadata, threshold, max_samples, tile_size)
     selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
     yang_scored = baselines and not meta.higher_is_better and "yang2019" in selectors
@@ -408,7 +414,7 @@ def evaluate(
             progress(n, len(samples))
     report = run.report(data)
     if plots_dir is not None and plot_data is not None:
-        report.plots = run.plots(Path(plots_dir), plot_data)
+        report.plots = run.plots(Path(plots_dir), plot_data, plot_name)
     return report
 
 
@@ -725,11 +731,12 @@ class _Run:
                 })
         return out
 
-    def plots(self, plots_dir: Path, plot_data: dict[str, Any]) -> list[str]:
-        """Write the plot sample's figures and the scatter of every model value; returns their paths."""
+    def plots(self, plots_dir: Path, plot_data: dict[str, Any], name: str | None = None) -> list[str]:
+        """Write the plot sample's figures and the scatter of every model value, named after ``name`` (default:
+        the model file's stem); returns their paths."""
         every = [self.quality[("model", sc)].merged() for sc in sorted(self.scene_counts)]
         scatter = (np.concatenate([e[0] for e in every]), np.concatenate([e[1] for e in every]))
-        stem = Path(str(self.predictor.path)).stem
+        stem = Path(str(self.predictor.path)).stem if name is None else name
         return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem, self.thr)]
 
 

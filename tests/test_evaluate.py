@@ -675,6 +675,32 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
 
 
 
+def test_cli_evaluate_keeps_apart_models_of_one_file_name_and_refuses_one_model_twice(
+        dataset: Path, model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two models whose files share a name (a/m.onnx, b/m.onnx: a retrained model beside the old one) wrote
+    their plots to the same m_heatmaps.png, the second over the first, and evaluation.md showed the second's
+    pictures under both; each now has its own, named after its folder. The same file given twice was
+    evaluated twice; it is refused before any work."""
+    import shutil
+
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        shutil.copy(model, tmp_path / folder / "m.onnx")
+    out = tmp_path / "eval"
+    assert rtp_main(["evaluate", str(tmp_path / "a" / "m.onnx"), str(tmp_path / "b" / "m.onnx"), "--data", str(dataset),
+                     "--no-baselines", "--max-samples", "1", "--out", str(out), "--plots"]) == 0
+    md = (out / "evaluation.md").read_text()
+    for folder in ("a", "b"):
+        assert (out / f"{folder}_m_heatmaps.png").is_file() and md.count(f"({folder}_m_heatmaps.png)") == 1
+    assert not (out / "m_heatmaps.png").exists()
+    capsys.readouterr()
+    assert rtp_main(["evaluate", str(model), str(model.parent / ".." / model.parent.name / model.name), "--data",
+                     str(dataset), "--out", str(tmp_path / "twice")]) == 2
+    assert "are the same model file" in capsys.readouterr().err and not (tmp_path / "twice").exists()
+    with pytest.raises(sdk.ParameterError, match="plot_name must be None"):
+        evaluate(model, dataset, plot_name="../up", plots_dir=tmp_path)
+
+
 def test_the_library_writes_the_files_the_cli_writes(dataset: Path, model: Path, tmp_path: Path) -> None:
     """EvaluationReport.write and write_reports give what `rtp evaluate --out` gives: evaluation.json
     a list with an entry per model (report.write wrote a bare dict, which bench/report.py could not
