@@ -463,9 +463,13 @@ def get(name: str) -> type[Adapter[Any]]:
         except Exception as err:  # a broken plugin must not take the host down
             _broken[name] = f"{type(err).__name__}: {err}"
             log.warning("adapter plugin %r failed to load: %s", name, _broken[name])
+            # rtp's own plugins miss their extra when they cannot import (pip install 'rtp[moderngl]'); a third
+            # party's is its package's to fix (the rtp extra the hint named does not exist)
+            own = str(eps[name].value).startswith("rtp.plugins.")
+            hint = (f"is its extra installed? e.g. pip install 'rtp[{name}]'" if own and isinstance(err, ImportError)
+                    else f"the entry point {eps[name].value!r} is its package's to fix or reinstall")
             raise AdapterNotFoundError(
-                f"adapter {name!r} is installed but failed to load ({_broken[name]}); is its extra installed? "
-                f"e.g. pip install 'rtp[{name}]'"
+                f"adapter {name!r} is installed but failed to load ({_broken[name]}); {hint}"
             ) from err
         if not _is_adapter_class(obj):
             _broken[name] = f"{eps[name].value} is not an rtp.sdk.adapters.Adapter subclass"

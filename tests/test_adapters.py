@@ -49,16 +49,23 @@ def test_entry_point_discovery_dedupes_and_survives_a_broken_plugin(
         EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
         EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
         EntryPoint("broken", "no_such_module_for_rtp:Adapter", adapters.ENTRY_POINT_GROUP),
+        EntryPoint("typo", "tests.test_adapters:NoSuchAdapter", adapters.ENTRY_POINT_GROUP),
+        EntryPoint("ownextra", "rtp.plugins.no_such_plugin:Adapter", adapters.ENTRY_POINT_GROUP),
     ]
 
     def fake_entry_points(group: str) -> list[Any]:
         return [e for e in eps if e.group == group]
 
     monkeypatch.setattr(adapters, "entry_points", fake_entry_points)
-    assert adapters.available() == ["broken", "fake"]
+    assert adapters.available() == ["broken", "fake", "ownextra", "typo"]
     assert adapters.get("fake") is FakeAdapter
-    with pytest.raises(adapters.AdapterNotFoundError, match="failed to load"):
-        adapters.get("broken")
+    # a third party's plugin is its package's to fix: the hint named an rtp extra, 'rtp[broken]', that does not
+    # exist; only rtp's own plugins that cannot import are pointed to their extra
+    for name, hint in (("broken", "the entry point 'no_such_module_for_rtp:Adapter' is its package's to fix"),
+                       ("typo", "AttributeError"), ("ownextra", "is its extra installed? e.g. pip install 'rtp[ownextra]'")):
+        with pytest.raises(adapters.AdapterNotFoundError, match="failed to load") as info:
+            adapters.get(name)
+        assert hint in str(info.value) and ("rtp[" in str(info.value)) == (name == "ownextra"), str(info.value)
     assert adapters.get("fake") is FakeAdapter  # the broken one did not spoil the rest
 
 
