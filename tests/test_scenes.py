@@ -858,5 +858,11 @@ def test_scene_index_and_split_file_errors(tmp_path: Path):
     extra.write_text("train: [a]\nvalidation: []\ntest: []\nholdout: [b]\n")
     with pytest.raises(SceneFormatError, match=r"unknown keys \['holdout'\]"):
         load_splits(extra)
+    # a misspelt split is named as such (it read "'train' must be a list of map names, got None"), a missing one too
+    for text, message in (("trian: [a]\nvalidation: []\ntest: []\n", r"unknown keys \['trian'\]"),
+                          ("validation: []\ntest: []\n", r"no 'train' split; expected the keys")):
+        extra.write_text(text)
+        with pytest.raises(SceneFormatError, match=message):
+            load_splits(extra)
     with pytest.raises(UnlistedMapError, match="unknown split 'training'"):
         scenes.map_names("training")

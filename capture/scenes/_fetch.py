@@ -91,10 +91,15 @@ def load_splits(path: str | Path | None = None) -> dict[str, list[str]]:
         raise SceneFormatError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
     if not isinstance(data, dict):
         raise SceneFormatError(f"{p}: expected a mapping with keys {SPLIT_NAMES}, got {type(data).__name__}")
+    extra = set(data) - set(SPLIT_NAMES)
+    if extra:  # (first: a misspelt 'trian:' read as "'train' must be a list of map names, got None")
+        raise SceneFormatError(f"{p}: unknown keys {sorted(map(str, extra))}; expected {SPLIT_NAMES}")
     out: dict[str, list[str]] = {}
     seen: dict[str, str] = {}
     for split in SPLIT_NAMES:
-        names = data.get(split)
+        if split not in data:
+            raise SceneFormatError(f"{p}: no '{split}' split; expected the keys {SPLIT_NAMES} (an empty list for none)")
+        names = data[split]
         if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
             raise SceneFormatError(f"{p}: '{split}' must be a list of map names, got {names!r}")
         for n in names:
@@ -102,9 +107,6 @@ def load_splits(path: str | Path | None = None) -> dict[str, list[str]]:
                 raise SceneFormatError(f"{p}: map {n!r} is in both '{seen[n]}' and '{split}'")
             seen[n] = split
         out[split] = list(names)
-    extra = set(data) - set(SPLIT_NAMES)
-    if extra:
-        raise SceneFormatError(f"{p}: unknown keys {sorted(extra)}; expected {SPLIT_NAMES}")
     return out
 
 
