@@ -306,18 +306,7 @@ class VoxelGrid:
         pas = passable.ravel()
         visited = np.zeros(pas.size, bool)
         offs = np.array([1, -1, nz, -nz, ny * nz, -ny * nz], np.int64)
-        seeds_found: list[int] = []
-        for s in np.atleast_2d(seeds):
-            i = self.index(s)
-            # nearest passable voxel within 2 voxels of the seed
-            r = np.arange(-2, 3)
-            g = np.stack(np.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3)
-            g = g[np.argsort(np.abs(g).sum(1), kind="stable")]
-            cand = np.clip(i + g, 1, np.array(self.shape) - 2)
-            flat = np.ravel_multi_index(tuple(cand.T), self.shape)
-            ok = flat[pas[flat]]
-            if len(ok):
-                seeds_found.append(int(ok[0]))
+        seeds_found = [f for f in (self.seed(s, pas) for s in np.atleast_2d(seeds)) if f is not None]
         front = np.unique(np.array(seeds_found, np.int64))
         visited[front] = True
         while front.size:
@@ -327,6 +316,17 @@ class VoxelGrid:
             visited[nb] = True
             front = nb
         return visited.reshape(self.shape)
+
+    def seed(self, point: np.ndarray, passable_flat: np.ndarray) -> int | None:
+        """The flat index of the passable voxel nearest ``point`` within 2 voxels (where a flood from it
+        starts), or None."""
+        r = np.arange(-2, 3)
+        g = np.stack(np.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3)
+        g = g[np.argsort(np.abs(g).sum(1), kind="stable")]
+        cand = np.clip(self.index(point) + g, 1, np.array(self.shape) - 2)
+        flat = np.ravel_multi_index(tuple(cand.T), self.shape)
+        ok = flat[passable_flat[flat]]
+        return int(ok[0]) if len(ok) else None
 
     def dilate(self, mask: np.ndarray, k: int) -> np.ndarray:
         """Dilate ``mask`` by ``k`` voxels in the 26-neighbourhood (a cube of side 2k+1)."""
@@ -482,9 +482,8 @@ FOCUS_COARSENING = 2.0
 FOCUS_MARGIN = 8.0
 
 
-def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """``(passable, reachable)`` of ``grid``: free voxels (at most ``max_height`` over a solid one,
-    when set), and those of them flood-filled from the spawn points."""
+def _passable(grid: VoxelGrid, max_height: float | None) -> np.ndarray:
+    """The free voxels of ``grid`` a viewpoint may take: at most ``max_height`` over a solid one, when set."""
     passable = grid.occ == FREE
     if max_height is not None:
         solid = grid.occ != FREE
@@ -493,8 +492,65 @@ def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.
         last = np.maximum.accumulate(last, axis=1)
         height = (np.arange(ny)[None, :, None] - last) * grid.voxel
         passable &= (last >= 0) & (height <= max_height)
+    return passable
+
+
+def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(passable, reachable)`` of ``grid``: free voxels (at most ``max_height`` over a solid one,
+    when set), and those of them flood-filled from the spawn points."""
+    passable = _passable(grid, max_height)
     seeds = np.array([sp.position for sp in scene.spawn_points], np.float64)
     return passable, grid.flood(seeds, passable)
+
+
+#: The voxel budget of :func:`roomiest_spawn`'s grid: coarser than the capture's, as it runs when a mesh file
+#: loads.
+SPAWN_VOXELS = 2_000_000
+
+
+def roomiest_spawn(scene: Scene, target: Sequence[float] | np.ndarray, *, lattice: int = 5, voxel: float = 0.25,
+                   max_height: float | None = 6.0) -> tuple[np.ndarray, float, float] | None:
+    """Where the flood fill of a scene without spawn points of its own starts, near ``target`` (a mesh file's:
+    the centre of its bounds, eye height over their bottom).
+
+    Floods the free space from ``target`` and from a ``lattice`` x ``lattice`` grid of points at its height
+    over the bounds, and returns ``(point, volume, own)``: ``target`` where it lies in the largest of the
+    regions they reach, else that region's point nearest to it; the region's volume; and ``target``'s own
+    region's (0 where it reaches none), in m³. None when no point reaches free space. (A target inside a
+    closed object, a sphere at the centre of a room, flooded the object's inside, and every viewpoint looked
+    at it from within.)
+    """
+    tris = scene_triangles(scene)
+    if len(tris) == 0:
+        return None
+    lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
+    grid = VoxelGrid(tris, voxel, max_voxels=SPAWN_VOXELS)
+    passable = _passable(grid, max_height)
+    flat_passable = passable.ravel()
+    t = np.asarray(target, np.float64)
+    u = np.linspace(0.0, 1.0, lattice + 2)[1:-1]  # (inside the bounds, not on their faces)
+    points = np.concatenate([t[None], np.stack(np.meshgrid(lo[0] + u * (hi[0] - lo[0]), [t[1]],
+                                                           lo[2] + u * (hi[2] - lo[2]), indexing="ij"), -1).reshape(-1, 3)])
+    label = np.zeros(passable.size, np.int32)  # 0: not flooded yet; k: the k-th region
+    volumes: list[float] = []
+    of_point = np.zeros(len(points), np.int32)
+    for i, pt in enumerate(points):
+        start = grid.seed(pt, flat_passable)
+        if start is None:
+            continue
+        if not label[start]:
+            volumes.append(0.0)
+            region = grid.flood(pt, passable).ravel()
+            label[region] = len(volumes)
+            volumes[-1] = float(region.sum()) * grid.voxel ** 3
+        of_point[i] = label[start]
+    if not volumes:
+        return None
+    best = 1 + int(np.argmax(volumes))
+    members = np.flatnonzero(of_point == best)
+    nearest = members[int(np.argmin(np.sum((points[members] - t) ** 2, axis=1)))]
+    own = volumes[of_point[0] - 1] if of_point[0] else 0.0
+    return points[nearest], volumes[best - 1], own
 
 
 # -- standing on floors (eye-height viewpoints and the camera paths) --------------------------------

@@ -7,6 +7,7 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import logging
 import math
 import struct
 import sys
@@ -351,6 +352,30 @@ def test_a_16_bit_texture_keeps_its_values(tmp_path: Path):
     assert tex is not None
     np.testing.assert_array_equal(np.unique(tex[..., 0]), np.round(np.sort(grey.ravel()) / 257))
     assert (tex[..., 0] == tex[..., 2]).all() and (tex[..., 3] == 255).all()
+
+
+def test_a_mesh_files_spawn_point_is_not_inside_an_object(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """A mesh file has no spawn points: the loader puts one at the centre of its bounds, eye height over their
+    bottom. A room with a ball at its centre put it inside the ball, the flood fill flooded the ball's inside, and
+    every viewpoint of `rtp capture --scene room.glb` looked at the ball from within. The spawn point moves to
+    the largest free region, the nearest lattice point of it; a room whose centre is free keeps it there."""
+    import trimesh
+
+    from rtp.capture.viewpoints import free_space
+
+    room = trimesh.creation.box((4.0, 3.0, 4.0))  # centred on the origin: the bottom at y = -1.5
+    trimesh.Scene([room, trimesh.creation.icosphere(radius=1.0)]).export(tmp_path / "ball.glb")
+    trimesh.Scene([room]).export(tmp_path / "empty.glb")
+    with caplog.at_level(logging.INFO, logger="rtp.capture"):
+        ball = scenes.load_mesh_file(tmp_path / "ball.glb")
+    (sp,) = ball.spawn_points
+    assert np.linalg.norm(sp.position) > 1.2 and sp.position[1] == pytest.approx(0.1, abs=1e-6)  # out of the ball
+    assert "the centre of its bounds lies in a free region" in caplog.text
+    _, grid, reach, _ = free_space(ball)
+    inside = grid.centre(np.flatnonzero(reach))
+    assert (np.linalg.norm(inside, axis=1) > 1.0).all() and len(inside) * grid.voxel ** 3 > 20.0  # the room
+    (sp,) = scenes.load_mesh_file(tmp_path / "empty.glb").spawn_points
+    np.testing.assert_allclose(sp.position, (0.0, 0.1, 0.0), atol=1e-6)
 
 
 def test_mesh_file_errors(tmp_path: Path):

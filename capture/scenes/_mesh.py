@@ -100,7 +100,9 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
 
     One :class:`Mesh` and one :class:`Material` per geometry instance. There are no lights or
     spawn points in these formats: the scene keeps the default sun, no point lights, and one
-    spawn point at the centre of the bounds, ``eye_height`` above their bottom.
+    spawn point at the centre of the bounds, ``eye_height`` above their bottom, unless the free space there is
+    not the largest region that points at that height across the bounds reach (the centre inside a closed
+    object): then at the nearest of those points in the largest region.
 
     Raises:
         SceneNotFoundError: no such file.
@@ -158,6 +160,14 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     scene = Scene(name=name or p.stem, meshes=meshes, materials=materials)
     lo, hi = scene.bounds
     c = (lo + hi) / 2
-    scene.spawn_points = [SpawnPoint((float(c[0]), float(lo[1] + eye_height), float(c[2])), 0.0)]
+    spawn = np.array([c[0], lo[1] + eye_height, c[2]], np.float64)
+    from ..viewpoints import roomiest_spawn
+
+    found = roomiest_spawn(scene, spawn)
+    if found is not None and not np.array_equal(found[0], spawn):  # the centre is in a smaller region than another
+        log.info("%s: the centre of its bounds lies in a free region of %.1f m³ (inside an object?); its spawn point "
+                 "is at (%.2f, %.2f, %.2f) instead, in the largest one (%.1f m³)", p.name, found[2], *found[0], found[1])
+        spawn = found[0]
+    scene.spawn_points = [SpawnPoint((float(spawn[0]), float(spawn[1]), float(spawn[2])), 0.0)]
     log.info("loaded %s: %d triangles, %d materials", p.name, scene.triangle_count, len(materials))
     return scene
