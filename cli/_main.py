@@ -878,7 +878,7 @@ def build_parser() -> argparse.ArgumentParser:
                  "splits carries its trunk's features and runs its tail on every frame), or\n"
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
-    pl.add_argument("scene", help="a map name of `rtp scenes list` or procedural:<seed>")
+    pl.add_argument("scene", help="a map name of `rtp scenes list`, procedural:<seed>, or your own .glb/.gltf/.obj file")
     pl.add_argument("--methods", default=DEFAULT_METHODS,
                     help=f"comma-separated methods (see below; default: {DEFAULT_METHODS})")
     pl.add_argument("--path", action="append", default=None, type=_names_text,
