@@ -503,12 +503,12 @@ def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.
     return passable, grid.flood(seeds, passable)
 
 
-#: The voxel budget of :func:`roomiest_spawn`'s grid: coarser than the capture's, as it runs when a mesh file
+#: The voxel budget of :func:`_roomiest_spawn`'s grid: coarser than the capture's, as it runs when a mesh file
 #: loads.
-SPAWN_VOXELS = 2_000_000
+_SPAWN_VOXELS = 2_000_000
 
 
-def roomiest_spawn(scene: Scene, target: Sequence[float] | np.ndarray, *, lattice: int = 5, voxel: float = 0.25,
+def _roomiest_spawn(scene: Scene, target: Sequence[float] | np.ndarray, *, lattice: int = 5, voxel: float = 0.25,
                    max_height: float | None = 6.0) -> tuple[np.ndarray, float, float] | None:
     """Where the flood fill of a scene without spawn points of its own starts, near ``target`` (a mesh file's:
     the centre of its bounds, eye height over their bottom).
@@ -524,7 +524,7 @@ def roomiest_spawn(scene: Scene, target: Sequence[float] | np.ndarray, *, lattic
     if len(tris) == 0:
         return None
     lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
-    grid = VoxelGrid(tris, voxel, max_voxels=SPAWN_VOXELS)
+    grid = VoxelGrid(tris, voxel, max_voxels=_SPAWN_VOXELS)
     passable = _passable(grid, max_height)
     flat_passable = passable.ravel()
     t = np.asarray(target, np.float64)

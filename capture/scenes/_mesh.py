@@ -161,9 +161,9 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     lo, hi = scene.bounds
     c = (lo + hi) / 2
     spawn = np.array([c[0], lo[1] + eye_height, c[2]], np.float64)
-    from ..viewpoints import roomiest_spawn
+    from ..viewpoints import _roomiest_spawn
 
-    found = roomiest_spawn(scene, spawn)
+    found = _roomiest_spawn(scene, spawn)
     if found is not None and not np.array_equal(found[0], spawn):  # the centre is in a smaller region than another
         log.info("%s: the centre of its bounds lies in a free region of %.1f m³ (inside an object?); its spawn point "
                  "is at (%.2f, %.2f, %.2f) instead, in the largest one (%.1f m³)", p.name, found[2], *found[0], found[1])
