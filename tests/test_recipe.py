@@ -107,7 +107,9 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("text", "needle"), [
-    ("stepz: 10\n", "unknown key(s) stepz"),
+    ("stepz: 10\n", "unknown key(s) stepz (stepz: did you mean steps?); recipe keys are val_split, per_metric, "
+                     "metrics, arch,"),  # (val_split was listed twice)
+    ("zzzzz: 1\n", "unknown key(s) zzzzz; recipe keys"),  # (no guess where none is close)
     ("steps: ten\n", "'steps': expected int"),
     ("steps: true\n", "'steps': expected int"),
     ("device: cuda\n", "'device' is the machine's, not the recipe's"),

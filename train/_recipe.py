@@ -177,7 +177,11 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     types = _field_types()
     unknown = sorted(set(merged) - set(types))
     if unknown:
-        raise RecipeError(f"recipe {name}: unknown key(s) {', '.join(unknown)}; recipe keys are val_split, "
-                          f"per_metric, metrics, {', '.join(sorted(types))}")
+        import difflib
+
+        keys = ["val_split", "per_metric", "metrics", *sorted(set(types) - {"val_split"})]
+        close = {k: difflib.get_close_matches(k, keys, n=1) for k in unknown}
+        guess = "".join(f" ({k}: did you mean {m[0]}?)" for k, m in close.items() if m)
+        raise RecipeError(f"recipe {name}: unknown key(s) {', '.join(unknown)}{guess}; recipe keys are {', '.join(keys)}")
     values = {k: _coerce(k, v, types[k]) for k, v in merged.items()}
     return Recipe(name, hashlib.sha256(text.encode()).hexdigest(), values, val_split)
