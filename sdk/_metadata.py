@@ -192,8 +192,13 @@ class ModelMetadata:
             raise MetadataError(f"metadata: field names must be strings, got {odd[0]!r}")
         unknown = sorted(set(d) - set(_FIELDS))
         if unknown:
+            import difflib
+
+            # (a sidecar's 'default_treshold'; a field's start, 'tile', is read as that field before a close spelling)
+            close = [f for f in _FIELDS if f.startswith(unknown[0])][:1] or difflib.get_close_matches(unknown[0], _FIELDS, n=1)
             raise MetadataError(
-                f"{unknown[0]}: unknown metadata field; known fields are {', '.join(_FIELDS)}", unknown[0]
+                f"{unknown[0]}: unknown metadata field{f' (did you mean {close[0]}?)' if close else ''}; known fields "
+                f"are {', '.join(_FIELDS)}", unknown[0]
             )
         version = d.get("schema_version", SCHEMA_VERSION)
         if isinstance(version, bool) or not isinstance(version, int) or version < 1:

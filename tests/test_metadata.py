@@ -149,6 +149,19 @@ def test_missing_required_fields() -> None:
         assert field in str(info.value)
 
 
+@pytest.mark.parametrize(("field", "guess"), [("default_treshold", "default_threshold"), ("tile", "tile_size"),
+                                               ("zzz", None)])
+def test_an_unknown_field_is_named_with_the_nearest_known_one(field: str, guess: str | None) -> None:
+    """A sidecar's misspelt field is refused by name, with the field it most likely meant (a field's start, 'tile',
+    is that field); none is guessed where none is close."""
+    with pytest.raises(sdk.MetadataError) as info:
+        sdk.ModelMetadata.from_dict({**base_metadata(), field: 1})
+    assert info.value.key == field and str(info.value).startswith(f"{field}: unknown metadata field")
+    assert ("did you mean" in str(info.value)) == (guess is not None)
+    if guess:
+        assert f"(did you mean {guess}?)" in str(info.value)
+
+
 def test_invalid_json_is_a_metadata_error() -> None:
     with pytest.raises(sdk.MetadataError, match="not valid JSON"):
         sdk.ModelMetadata.from_json("{'metric': 'flip'}")  # a Python repr is not JSON, and is never evaluated
