@@ -400,6 +400,8 @@ def test_splits_reject_unlisted(tmp_path: Path):
         scene_by_name("hydronex", tmp_path)  # in the packages, but not in scenes.yaml
     with pytest.raises(UnlistedMapError):
         scene_by_name("oa_dm5", tmp_path, split="train")  # a test map is not a training map
+    with pytest.raises(UnlistedMapError, match=r"did you mean 20kdm2\?"):  # a typo gets its neighbours
+        scene_by_name("20kdm", tmp_path)
     with pytest.raises(UnlistedMapError):
         scenes.fetch(tmp_path, ["hydronex"])  # refused before any download
     with pytest.raises(SceneNotFoundError, match="rtp scenes fetch"):

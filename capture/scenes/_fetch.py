@@ -123,10 +123,14 @@ def map_names(split: str | None = None, splits: str | Path | None = None) -> lis
 def _check_listed(name: str, split: str | None, splits: str | Path | None) -> None:
     allowed = map_names(split, splits)
     if name not in allowed:
+        import difflib
+
         where = f"split '{split}'" if split else "any split"
+        close = difflib.get_close_matches(name, allowed, n=3)  # (a typo's neighbours before the first three maps)
+        listed = f"did you mean {', '.join(close)}?" if close else f"e.g. {', '.join(allowed[:3])}"
         raise UnlistedMapError(
             f"map {name!r} is not listed in {where} of {splits or DEFAULT_SPLITS}; only listed maps may be used "
-            f"({len(allowed)} listed, e.g. {allowed[:3]})"
+            f"({len(allowed)} listed: {listed}; `rtp scenes list` lists them)"
         )
 
 
