@@ -93,7 +93,8 @@ def draw_rate_overlay(
 ) -> np.ndarray:
     """Tint each tile of ``image`` by the class of its shading rate.
 
-    ``image`` is ``(H, W, 3)`` (uint8, or float in [0, 1]); ``rates`` is ``(ceil(H/w), ceil(W/w))``
+    ``image`` is ``(H, W, 3)`` (uint8, or float in [0, 1]: float values outside it, an HDR frame's, are clipped
+    to it before the tint, so the tint shows; tone-map such a frame first to see it); ``rates`` is ``(ceil(H/w), ceil(W/w))``
     of uint8 rate codes as returned by ``shading_rates``. Coarser rates (2x4, 4x2, 4x4) are tinted
     red, 2x2 yellow, 1x2 and 2x1 green, 1x1 is left as is. With ``grid`` a faint line marks the
     tiles. With ``legend`` a key in the bottom-left corner names the rates of each colour (full rate
@@ -130,7 +131,9 @@ def draw_rate_overlay(
         raise ParameterError(f"rates: hold codes that are no shading rate: {sorted(unknown)}; expected codes from "
                              f"{sorted(RATE_NAMES)}", "rates")
     is_uint8 = img.dtype == np.uint8
-    out = img[..., :3].astype(np.float32) / (255.0 if is_uint8 else 1.0)
+    # (an HDR frame's values over 1 are clipped before the tint, not after: a frame of 4.0 came back white everywhere,
+    # every tint and the grid clipped away with it)
+    out = np.clip(img[..., :3].astype(np.float32) / (255.0 if is_uint8 else 1.0), 0.0, 1.0)
     tint = np.zeros((th, tw, 3), np.float32)
     weight = np.zeros((th, tw, 1), np.float32)
     for code in np.unique(rates).tolist():

@@ -139,6 +139,10 @@ def test_overlay_colours_tiles_by_rate_class() -> None:
     assert np.array_equal(out[18, 20], out[18, 5])  # 2x4 and 4x4 are both coarse
     f = sdk.draw_rate_overlay(img.astype(np.float32) / 255, rates, 16)
     assert f.dtype == np.float32 and 0 <= f.min() and f.max() <= 1
+    # an HDR frame (values over 1) is clipped before the tint, so the tint and the grid show: it came back all white
+    hdr = sdk.draw_rate_overlay(np.full(img.shape, 4.0, np.float32), rates, 16)
+    assert hdr[18, 5, 0] > hdr[18, 5, 1] and hdr[5, 20, 1] > hdr[5, 20, 0] and hdr[0, 5].max() < 1.0
+    np.testing.assert_array_equal(hdr[5, 5], [1.0, 1.0, 1.0])  # full rate: the frame, clipped
 
 
 def test_overlay_legend_names_each_colour_in_the_corner() -> None:
