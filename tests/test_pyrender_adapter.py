@@ -515,3 +515,24 @@ def test_osmesa_gives_the_inputs_egl_gives(tmp_path) -> None:
     # Reprojection fetches the nearest previous texel: a position on a texel boundary may round to
     # the neighbour on one platform (a 1e-7 depth difference), so allow a few such pixels.
     assert (np.abs(osm[0] - egl[0]) > 1 / 255 + 1e-6).mean() < 0.001
+
+
+def test_opengl_imported_on_screen_first_names_fixes_that_work() -> None:
+    """`import pyrender` before any PYOPENGL_PLATFORM is PyOpenGL on an on-screen platform, which no process
+    can change: refused, naming two fixes. The second it named, "import rtp.plugins.pyrender first", did not
+    help (importing the plugin sets nothing); each fix it names now is run here and works."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "PYOPENGL_PLATFORM"}
+    pyrender_or_skip()
+    first = ("import pyrender\nfrom rtp.plugins.pyrender import import_pyrender\nimport_pyrender()\n")
+    r = subprocess.run([sys.executable, "-c", first], env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode != 0 and "PyOpenGL was imported before PYOPENGL_PLATFORM was set" in r.stderr, r.stderr
+    assert "import_pyrender() instead of `import pyrender`" in r.stderr and "os.environ.setdefault" in r.stderr
+    for fix in ('import os; os.environ.setdefault("PYOPENGL_PLATFORM", "egl")\nimport pyrender\n'
+                "from rtp.plugins.pyrender import import_pyrender\nimport_pyrender()\n",
+                "from rtp.plugins.pyrender import import_pyrender\npyrender = import_pyrender()\nimport pyrender\n"):
+        r = subprocess.run([sys.executable, "-c", fix], env=env, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr

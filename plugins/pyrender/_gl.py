@@ -83,7 +83,9 @@ def import_pyrender(platform: str | None = None) -> Any:
     if current is None and "OpenGL" in sys.modules:
         raise PyrenderUnavailableError(
             "PyOpenGL was imported before PYOPENGL_PLATFORM was set, so it chose an on-screen platform; set "
-            f"PYOPENGL_PLATFORM={wanted} before importing OpenGL or pyrender (or import rtp.plugins.pyrender first)."
+            f"PYOPENGL_PLATFORM={wanted} before importing OpenGL or pyrender (os.environ.setdefault(\"PYOPENGL_PLATFORM\", "
+            f"\"{wanted}\") first thing), or take pyrender from rtp.plugins.pyrender.import_pyrender() instead of "
+            "`import pyrender`, which sets it."
         )
     if _pyrender is not None:
         return _pyrender
