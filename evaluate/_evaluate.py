@@ -176,7 +176,9 @@ class EvaluationReport:
         if self.notes:
             lines += ["", "## Notes", ""] + [f"- {n}" for n in self.notes]
         if self.plots:
-            lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in self.plots]
+            from urllib.parse import quote  # (a space in a model's file name broke the image link)
+
+            lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({quote(Path(p).name)})" for p in self.plots]
         return "\n".join(lines) + "\n"
 
     def write(self, out_dir: str | os.PathLike[str], stem: str = "evaluation") -> list[Path]:
