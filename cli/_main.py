@@ -456,6 +456,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.plots and not args.out:
         raise _usage("--plots writes into --out; give an output folder")
+    if args.plot_sample is not None and not args.plots:  # (it was taken and nothing drawn)
+        raise _usage("--plot-sample picks the sample --plots draws: give --plots (and --out)")
     if args.threshold is not None and len(args.model) > 1:  # (one number in two metrics' units was taken for both)
         from rtp import sdk
 

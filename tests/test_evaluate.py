@@ -640,6 +640,10 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "a,b", "--scene", "b",
                      "--no-baselines", "--max-samples", "1"]) == 0
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--plots"]) == 2  # --plots needs --out
+    capsys.readouterr()  # --plot-sample without --plots was taken and nothing drawn
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--out", str(tmp_path / "ps"), "--plot-sample",
+                     "x"]) == 2
+    assert "give --plots" in capsys.readouterr().err and not (tmp_path / "ps").exists()
     # one --threshold for models of two metrics was taken in both metrics' units; refused before any work,
     # while models of one metric share it
     capsys.readouterr()
