@@ -42,6 +42,9 @@ from ._dataset import DatasetReader, _check_id, sample_path
 from ._memory import check_memory, job_bytes, meminfo
 from ._pool import cores
 
+#: The metrics that take FLIP's pixels per degree (the rest ignore ``ppd``).
+_PPD_METRICS = ("flip", "jnflip")
+
 log = logging.getLogger("rtp.capture")
 
 __all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
@@ -339,8 +342,14 @@ def compute_targets(
     # every later run, good values included.
     if ppd is not None:
         M.resolve_ppd(ppd, 1)  # type: ignore[arg-type]  # (a string other than 'width' is what it refuses)
+        if not set(_PPD_METRICS) & set(metrics):  # (it was taken and ignored)
+            raise ParameterError(f"ppd: FLIP's pixels per degree, which only {' and '.join(_PPD_METRICS)} use; the "
+                                 f"metrics asked for are {', '.join(metrics)}", "ppd")
     if weber_l is not None:
         M.check_weber_l(weber_l)
+        if not any(METRICS[m].weber for m in metrics):
+            raise ParameterError(f"weber_l: the environment luminance of {' and '.join(m for m in METRICS if METRICS[m].weber)}"
+                                 f", which the metrics asked for ({', '.join(metrics)}) do not use", "weber_l")
     reader = DatasetReader(data_root)
     _check_memory(reader, metrics, workers, ray)
     store = TargetStore(data_root)
@@ -353,7 +362,7 @@ def compute_targets(
                                   "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
         for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)
             p: dict[str, Any] = {}
-            if m in ("flip", "jnflip"):
+            if m in _PPD_METRICS:
                 p["ppd"] = params["ppd"]
             if METRICS[m].weber:
                 p["weber_l"] = params["weber_l"]

@@ -681,8 +681,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="comma-separated metric names")
     tg.add_argument("--ppd", default=None, help="FLIP pixels per degree: a number, or 'width' for the paper's "
                     f"width-based value (default: FLIP's own {DEFAULT_PPD:.2f})")
-    tg.add_argument("--weber-l", type=float, default=DEFAULT_WEBER_L,
-                    help="environment luminance l of JNFLIP/JNYang")
+    tg.add_argument("--weber-l", type=float, default=None,
+                    help=f"environment luminance l of JNFLIP/JNYang (default: {DEFAULT_WEBER_L:g})")
     tg.add_argument("--workers", type=_positive, default=None,
                     help="parallel processes (default 1; with --ray, Ray workers)")
     tg.add_argument("--device", default="auto", metavar="DEVICE",

@@ -225,6 +225,10 @@ def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monk
     interrupt_at(99)  # (the resumed run says what it did and what was there; a metric named twice is named once)
     assert main(["targets", str(data), "--metrics", "jnyang,jnyang", "-q"]) == 0
     assert capsys.readouterr().out.endswith("targets computed for 2 samples (jnyang); 2 samples already had them\n")
+    # a parameter of metrics not asked for was taken and ignored: refused, naming the metrics that use it
+    for flag, value, words in (("--ppd", "40", "only flip and jnflip use"), ("--weber-l", "0.5", "of jnflip and jnyang")):
+        assert main(["targets", str(data), "--metrics", "psnr", flag, value, "-q"]) == 2
+        assert words in capsys.readouterr().err
     model = tmp_path / "m.pt"
     train = ["train", "--data", str(data), "--metric", "jnyang", "--val-scenes", "procedural:2", "--steps", "600",
              "--batch", "4", "--crop", "32", "--head", "linear", "--out", str(model), "-q"]
@@ -432,7 +436,9 @@ def test_split_profile_and_transform_choices_are_their_rooms() -> None:
     assert tuple(_option(("capture",), "split").choices or ()) == tuple(SPLIT_NAMES)
     assert _parse("capture", "--per-scene", "1", "--out", "o").profiles == DEFAULT_PROFILES
     assert set(DEFAULT_PROFILES) < set(MOTION_PROFILES)
-    assert _option(("targets",), "weber_l").default == metrics.DEFAULT_WEBER_L
+    # (None: not given, so that a metric list without JNFLIP or JNYang can refuse one given; the default is the room's)
+    assert _option(("targets",), "weber_l").default is None
+    assert f"(default: {metrics.DEFAULT_WEBER_L:g})" in (_option(("targets",), "weber_l").help or "")
     transforms = tuple(_option(("train",), "transform").choices or ())
     assert transforms and "linear" not in transforms  # training fits mu_y; linear is for adopted models
     for t in transforms:
