@@ -861,8 +861,8 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--seed", type=_non_negative, default=0, help="which viewpoint of the scene")
     dm.add_argument("--out", type=_out_folder, default="rtp-demo", help="output folder")
     dm.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
-                    "the model's, 16 for the shipped ones, NVIDIA's; 8: AMD's and Intel's, each taking its model "
-                    "tile's rate)")
+                    "the model's: 16 for the shipped ones, NVIDIA's, 8 for the -8px ones, AMD's and Intel's; finer "
+                    "than the model's, each takes its model tile's rate; coarser, the worst of those it covers)")
     cache_dir(dm)
 
     from rtp.capture.paths import PATH_PROFILES
