@@ -564,6 +564,8 @@ def play(
             f"out: {outdir} is being written by another closed loop ({holder}): wait for it to end, or play into "
             "another folder", "out"), remove=True))
     with guard:
+        if outdir is not None:
+            _warn_of_another_report(outdir, settings)
         job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
                "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
                "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
@@ -626,6 +628,25 @@ def _resume_key(job: dict[str, Any], predictors: dict[str, sdk.ShadingRatePredic
     models = {k: hashlib.sha256(Path(str(p.path)).read_bytes()).hexdigest() for k, p in sorted(predictors.items())}
     settings = {k: v for k, v in job.items() if k not in ("gif", "threads")}
     return json.dumps({"job": settings, "models": models, "rtp": sdk.__version__}, sort_keys=True, default=str)
+
+
+def _warn_of_another_report(outdir: Path, settings: dict[str, Any]) -> None:
+    """Say, before the work, that ``outdir`` holds the report of a run with other settings, which this run's
+    replaces when it ends (a ten-minute benchmark was overwritten without a word)."""
+    import json
+
+    old = outdir / "play.json"
+    if not old.is_file():
+        return
+    try:
+        before = json.loads(old.read_text(encoding="utf-8"))["settings"]
+        differ = [k for k in ("scene", "methods", "paths", "frames", "size", "tile_size", "fail_metric", "fail_threshold",
+                              "seed", "models") if before.get(k) != json.loads(json.dumps(settings.get(k), default=str))]
+    except (OSError, ValueError, KeyError, TypeError):
+        differ = ["unreadable"]
+    if differ:
+        log.warning("%s holds the report of another run (%s differ): this run's replaces it when it ends; play into "
+                    "another --out to keep both", outdir, ", ".join(differ))
 
 
 def _save_path(outdir: Path, pname: str, key: str, res: dict[str, Any]) -> None:

@@ -510,6 +510,25 @@ def test_paths_in_worker_processes_give_the_same_report(caplog: pytest.LogCaptur
     assert len(one.rows) == 4 and timeless(one.rows) == timeless(two.rows)
 
 
+def test_a_play_into_another_runs_folder_says_it_replaces_that_report(tmp_path: Path,
+                                                                       caplog: pytest.LogCaptureFixture) -> None:
+    """A second `rtp play --out` into a folder holding another run's report (other methods, frames, map ...)
+    replaced it at the end without a word (a ten-minute benchmark lost); it warns before the work, naming what
+    differs. The same run again, or a first one, says nothing."""
+    import logging
+
+    kw: dict[str, Any] = {"paths": ("fast",), "frames": 3, "size": (W, H), "sweep": False, "flip_every": 0,
+                          "plots": False, "out": tmp_path}
+    with caplog.at_level(logging.WARNING, logger="rtp.evaluate"):
+        play("procedural:0", "jnyang", **kw)
+        play("procedural:0", "jnyang", **kw)
+        assert "another run" not in caplog.text
+        play("procedural:0", "jnyang,oracle", **{**kw, "frames": 4})
+    (warning,) = [r.getMessage() for r in caplog.records if "another run" in r.getMessage()]
+    assert warning.startswith(f"{tmp_path} holds the report of another run (methods, frames differ)")
+    assert json.loads((tmp_path / "play.json").read_text())["settings"]["frames"] == 4
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int
