@@ -485,6 +485,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         names = {m: f"{f.parent.name}_{f.stem}" if stems.count(f.stem) > 1 else f.stem for f, m in files.items()}
         if len(set(names.values())) < len(names):
             names = {m: f"{f.stem}_{i}" for i, (f, m) in enumerate(files.items(), 1)}
+    if args.out:
+        _warn_of_another_evaluation(Path(args.out), args)
     reports = []
     for model in args.model:
         with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:
@@ -501,6 +503,29 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         extra = [p for r in reports for p in r.plots]
         print(f"wrote {md}, {js}" + (f" and {len(extra)} plots" if extra else ""))
     return 0
+
+
+def _warn_of_another_evaluation(out: Path, args: argparse.Namespace) -> None:
+    """Say, before the work, that ``out`` holds the evaluation of other models or data, which this one's
+    replaces when it ends (as ``rtp play`` says of its folder)."""
+    import logging
+
+    from rtp import sdk
+
+    old = out / "evaluation.json"
+    if not old.is_file():
+        return
+    try:
+        entries = json.loads(old.read_text(encoding="utf-8"))
+        before = sorted((str(Path(e["model"]["path"]).resolve()), str(Path(e["data"]).resolve())) for e in entries)
+    except (OSError, ValueError, KeyError, TypeError):
+        before = []
+    now = sorted((str(Path(str(sdk.load(m, metadata=args.metadata).path)).resolve()), str(Path(args.data).resolve()))
+                 for m in args.model)
+    if before != now:
+        logging.getLogger("rtp.evaluate").warning(
+            "%s holds the evaluation of %s: this one's replaces it when it ends; evaluate into another --out to keep "
+            "both", out, ", ".join(f"{Path(m).name} on {Path(d).name}" for m, d in before) or "another run (unreadable)")
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:

@@ -699,6 +699,14 @@ def test_cli_evaluate_keeps_apart_models_of_one_file_name_and_refuses_one_model_
         assert (out / f"{folder}_m_heatmaps.png").is_file() and md.count(f"]({link})") == 1
     assert not (out / "m_heatmaps.png").exists()
     capsys.readouterr()
+    # a folder that holds another evaluation is replaced, and the run says so before its work (once: not when the
+    # same models on the same data run again)
+    again = ["evaluate", str(tmp_path / "a" / "m.onnx"), "--data", str(dataset), "--no-baselines", "--max-samples", "1",
+             "--out", str(out)]
+    assert rtp_main(again) == 0
+    assert f"{out} holds the evaluation of m.onnx on {dataset.name}, m.onnx on {dataset.name}: this one's replaces it" \
+        in capsys.readouterr().err
+    assert rtp_main(again) == 0 and "holds the evaluation" not in capsys.readouterr().err
     assert rtp_main(["evaluate", str(model), str(model.parent / ".." / model.parent.name / model.name), "--data",
                      str(dataset), "--out", str(tmp_path / "twice")]) == 2
     assert "are the same model file" in capsys.readouterr().err and not (tmp_path / "twice").exists()
