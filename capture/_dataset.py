@@ -285,10 +285,16 @@ class DatasetWriter:
         settings = json.loads(json.dumps(dict(settings or {})))  # JSON-clean copy
         if manifest.exists():
             current = _read_manifest(self.root)
-            if current.get("settings") != settings:
+            before = current.get("settings")
+            if before != settings:
+                # (the differing keys, not two whole dictionaries in which the user hunted for the one difference)
+                if isinstance(before, dict):
+                    differ = sorted(k for k in set(before) | set(settings) if before.get(k) != settings.get(k))
+                    what = "; ".join(f"{k}: {before.get(k)!r} there, {settings.get(k)!r} now" for k in differ)
+                else:
+                    what = f"existing: {before!r}, new: {settings!r}"
                 raise DatasetError(
-                    f"{self.root} was captured with other settings; use another folder or the same settings "
-                    f"(existing: {current.get('settings')}, new: {settings})"
+                    f"{self.root} was captured with other settings ({what}); use another folder or the same settings"
                 )
         else:
             self._write_manifest({"format": FORMAT, "format_version": FORMAT_VERSION, "settings": settings})

@@ -181,7 +181,8 @@ def test_reopening_requires_the_same_settings(tmp_path: Path) -> None:
     DatasetWriter(tmp_path / "ds", settings={"size": [40, 24]}).write("a", _buffers(), {})
     again = DatasetWriter(tmp_path / "ds", settings={"size": [40, 24]})
     assert again.has("a") and not again.has("b")
-    with pytest.raises(DatasetError, match="other settings"):
+    # (the key that differs, with both values: it printed both whole dictionaries, to be compared by eye)
+    with pytest.raises(DatasetError, match=r"other settings \(size: \[40, 24\] there, \[80, 48\] now\); use another"):
         DatasetWriter(tmp_path / "ds", settings={"size": [80, 48]})
 
 
