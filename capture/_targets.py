@@ -166,10 +166,14 @@ class TargetStore:
         except (TypeError, ValueError) as err:  # a value JSON cannot hold
             raise TargetError(f"params of {metric}: expected JSON values, got {dict(params)!r} ({err})") from err
         if metric in self.metrics and self.metrics[metric] != params:
-            raise TargetError(
-                f"targets for {metric} in {self.root} were computed with {self.metrics[metric]}, not {params}; "
-                "delete that folder to recompute"
-            )
+            folder = self.root / metric
+            if folder.is_dir() and any(folder.glob("*.npz")):
+                # (the hint was "delete that folder", the whole targets folder: every other metric's targets with it)
+                raise TargetError(
+                    f"targets for {metric} in {self.root} were computed with {self.metrics[metric]}, not {params}; "
+                    f"delete {folder} to compute {metric}'s with these (the other metrics' targets stay)"
+                )
+            self.metrics.pop(metric)  # (none stored: the metric's parameters are declared anew)
         if metric not in self.metrics:
             self.metrics[metric] = params
             self._save_manifest()

@@ -93,8 +93,15 @@ def test_target_store(tmp_path: Path) -> None:
         store.write("b", "psnr", mse[:, :2], (16, 24))
     with pytest.raises(sdk.RtpError, match="rtp targets"):
         store.load("missing", "psnr", 4)
-    with pytest.raises(sdk.RtpError, match="computed with"):
+    with pytest.raises(sdk.RtpError, match=r"computed with .*; delete .*psnr to compute psnr's with these \(the other"):
         store.declare("psnr", {"ppd": 67})
+    # the hint was to delete the whole targets folder, every other metric's targets with it; the metric's own
+    # folder is enough: with none of its targets stored, its parameters are declared anew
+    import shutil
+
+    shutil.rmtree(store.root / "psnr")
+    store.declare("psnr", {"ppd": 67})
+    assert TargetStore(tmp_path).metrics["psnr"] == {"ppd": 67}
 
 
 def test_scores_and_safety() -> None:
