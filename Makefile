@@ -57,7 +57,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q -n auto --dist worksteal
 
 # The rooms' sources, linted and type-checked (configuration in pyproject.toml).
-SOURCES := sdk scene capture metrics evaluate train export cli plugins tests bench examples
+SOURCES := sdk scene capture metrics evaluate train export conformance cli plugins tests bench examples
 lint: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)
 
@@ -66,7 +66,7 @@ lint: $(STAMP)
 TYPECHECK := build/typecheck
 typecheck: $(STAMP)
 	rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/rtp/plugins
-	for d in sdk scene capture metrics evaluate train export cli models; do ln -s $(CURDIR)/$$d $(TYPECHECK)/rtp/$$d; done
+	for d in sdk scene capture metrics evaluate train export conformance cli models; do ln -s $(CURDIR)/$$d $(TYPECHECK)/rtp/$$d; done
 	for d in moderngl pyrender; do ln -s $(CURDIR)/plugins/$$d $(TYPECHECK)/rtp/plugins/$$d; done
 	ln -s $(CURDIR)/plugins/__init__.py $(TYPECHECK)/rtp/plugins/__init__.py
 	ln -s $(CURDIR)/cli/_package/__init__.py $(TYPECHECK)/rtp/__init__.py
@@ -132,7 +132,7 @@ test-python:
 # The test suite under coverage.py (lines and branches, `rtp ...` subprocesses included; configuration
 # in pyproject.toml): a line per room, then every file with what it misses; HTML in build/coverage/html.
 # About 7 minutes on 2 cores (make test: 5).
-ROOMS := sdk scene capture metrics evaluate train export cli plugins
+ROOMS := sdk scene capture metrics evaluate train export conformance cli plugins
 coverage: $(STAMP)
 	rm -rf build/coverage && mkdir -p build/coverage
 	$(BIN)/python -m pytest -q -n auto --dist worksteal --cov --cov-report= -p no:cacheprovider

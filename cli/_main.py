@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -297,6 +298,67 @@ def _cmd_weights_list(args: argparse.Namespace) -> int:
     for r in rows:
         print(f"{r['metric']:<8} {', '.join(r['needs']) or '-':<28} {r['state']}")
     return 0
+
+
+def _cmd_adapters_list(args: argparse.Namespace) -> int:
+    from rtp.conformance import runnable_models
+    from rtp.sdk import adapters
+    from rtp.sdk.adapters import AdapterNotFoundError
+
+    rows = []
+    for name in adapters.available():
+        try:
+            cls = adapters.get(name)
+        except AdapterNotFoundError as exc:  # a broken plugin is listed as such, the others still are
+            rows.append({"adapter": name, "state": str(exc), "channels": [], "runs_models": []})
+            continue
+        rows.append({"adapter": name, "state": "ready", "channels": sorted(cls.supported_channels),
+                     "runs_models": [m.removesuffix(".onnx") for m in runnable_models(cls)]})
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'adapter':<16} {'channels':>8}  runs the shipped models")
+    for r in rows:
+        if r["state"] != "ready":
+            print(f"{r['adapter']:<16} {'-':>8}  {r['state']}")
+        else:
+            print(f"{r['adapter']:<16} {len(r['channels']):>8}  {', '.join(r['runs_models']) or 'none'}")
+    return 0
+
+
+def _cmd_adapters_check(args: argparse.Namespace) -> int:
+    from rtp.conformance import check_adapter
+
+    if ":" in args.adapter and "" not in sys.path and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())  # module:Class from the plugin's own checkout, as python -m would
+    tolerances = dict(args.tolerance or [])
+    report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model)
+    if args.json:
+        print(json.dumps(report.to_dict(), indent=1))
+    else:
+        print(report.to_text())
+    if report.not_run and not report.failures:
+        print(f"warning: checks that draw frames did not run: {report.not_run}", file=sys.stderr)
+    report.raise_for_failures()  # (ConformanceError: exit 1, naming each failed check)
+    return 0
+
+
+def _tolerance(text: str) -> tuple[str, float]:
+    """``CHANNEL=VALUE`` of ``rtp adapters check --tolerance``."""
+    from rtp.sdk import CHANNELS
+
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected CHANNEL=VALUE such as albedo.r=0.1, got {text!r}")
+    if name not in CHANNELS:
+        raise argparse.ArgumentTypeError(f"{name!r} is not a channel; channels: {', '.join(CHANNELS)}")
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name}: expected a number, got {value!r}") from None
+    if not number >= 0:
+        raise argparse.ArgumentTypeError(f"{name}: expected a number >= 0, got {value!r}")
+    return name, number
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
@@ -666,6 +728,27 @@ def build_parser() -> argparse.ArgumentParser:
     wsub.choices["fetch"].add_argument("--cache-dir", default=None, type=_out_folder, help="where to write them (default: "
                                        "$RTP_WEIGHTS_CACHE, else ~/.cache/rtp/weights; commands look there)")
     wsub.choices["list"].add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+    ad = command("adapters", "the renderer adapters installed, and the conformance checks for your own", None)
+    asub = ad.add_subparsers(dest="action", metavar="ACTION", required=True)
+    for name, help_, func in (("list", "the installed adapters, their channels and the shipped models each runs",
+                               _cmd_adapters_list),
+                              ("check", "run the conformance checks of docs/adapters.md on an adapter: drawn through "
+                               "its frame source, compared with the reference renderer (exit 1 when one fails)",
+                               _cmd_adapters_check)):
+        a = asub.add_parser(name, help=help_, description=help_[0].upper() + help_[1:] + ".", formatter_class=Formatter)
+        add_common(a, top=False)
+        a.set_defaults(func=func)
+        a.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    chk = asub.choices["check"]
+    chk.add_argument("adapter", help="an installed adapter's name (`rtp adapters list`), or package.module:Class for "
+                     "one not registered yet")
+    chk.add_argument("--size", type=frame_size, default="64x48", help="WIDTHxHEIGHT of the frames drawn")
+    chk.add_argument("--model", default=None, help="the model for_predictor feeds: an .onnx path or a shipped "
+                     "model's name (default: every shipped model the adapter can run)")
+    chk.add_argument("--tolerance", action="append", type=_tolerance, metavar="CHANNEL=VALUE",
+                     help="agreement with the reference renderer for one channel (repeatable; default: "
+                     "rtp.conformance.AGREEMENT's)")
 
     cap = command("capture", "render a dataset from scenes (resumable: rerun to finish or grow it)", _cmd_capture)
     src = cap.add_argument_group("what to capture (one of)")

@@ -14,23 +14,24 @@ for the same cameras. Nothing here knows what a frame of a given engine holds.
 
 from __future__ import annotations
 
-import inspect
+import json
+import os
+import subprocess
+import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib.metadata import EntryPoint, entry_points
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 import pytest
 
-from rtp import sdk
-from rtp.capture.scenes import procedural
+from rtp import conformance, sdk
 from rtp.scene import Camera, Scene
 from rtp.sdk import adapters
 from rtp.sdk.adapters import (
     Adapter,
-    AdapterClosedError,
-    AdapterFrameError,
     AdapterNotFoundError,
     AdapterOutputError,
     FrameSource,
@@ -38,33 +39,23 @@ from rtp.sdk.adapters import (
 )
 from tests.conftest import EGL_PACKAGES, make_current, open_gl_context
 
+ROOT = Path(__file__).resolve().parents[1]
+
 W, H = 64, 48
-SCENE = procedural(0)
-_SPAWN = SCENE.spawn_points[0]
-PREV_CAMERA = Camera(_SPAWN.position, yaw=_SPAWN.yaw, pitch=-5.0)
-CAMERA = Camera((_SPAWN.position[0] + 0.3, _SPAWN.position[1] + 0.05, _SPAWN.position[2] - 0.2),
-                yaw=_SPAWN.yaw + 6.0, pitch=-3.0)
 
 THIRD_PARTY = "numpy-gbuffers"
 REGISTERED = sdk.adapters.available()  # the rtp.adapters entry points (and anything registered)
 ADAPTERS = [*REGISTERED, THIRD_PARTY]
 
-#: Agreement with the reference renderer on the conformance scene: (tolerance, relative?) per
-#: channel, to hold on >= 99 % of the pixels. reprojected.* are not compared: the previous
-#: displayed frame is each engine's own lit image.
-AGREEMENT: dict[str, tuple[float, bool]] = {
-    "seen": (0.0, False),
-    **{f"albedo.{c}": (0.05, False) for c in "rgby"},
-    **{f"normal.{c}": (0.01, False) for c in "xyz"},
-    "depth": (1e-3, True),
-    **{f"motion.{c}": (0.05, False) for c in "xy"},
-    **{c: (0.01, False) for c in ("roughness", "metallic")},
-    "depth.edge": (0.02, False),
-}
-#: Channels that describe the engine's own shading model, compared with nothing and allowed to be
-#: constant: pyrender gives every dielectric F0 = 4 % (specular 0.5 everywhere); the moderngl
-#: adapter's specular is checked against the renderer in tests/test_moderngl_adapter.py.
-ENGINE_DEFINED = {"specular"}
+#: The kit's groups of checks.
+GROUPS = {"class", "planes", "agreement", "order", "predictor", "lifecycle"}
+
+
+def run_rtp(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """The installed ``rtp`` console script (which, unlike ``python -m``, puts no folder on sys.path)."""
+    script = Path(sys.executable).with_name("rtp")
+    return subprocess.run([str(script), *args], capture_output=True, text=True, timeout=600, cwd=cwd,
+                          env={**os.environ, "PYTHONPATH": ""})
 
 
 # ------------------------------------------------------------------------------------ a third-party adapter
@@ -153,170 +144,229 @@ def registry(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(adapters, "_discovered", None)
 
 
-def _adapter_class(name: str) -> type[Adapter[Any]]:
-    try:
-        return sdk.adapters.get(name)
-    except AdapterNotFoundError as exc:
-        pytest.fail(f"registered adapter {name!r} does not load: {exc}")
+def _report(spec: Any, **kw: Any) -> Any:
+    """The conformance kit's report on ``spec``; skips where the adapter's engine is not installed."""
+    report = conformance.check_adapter(spec, **kw)
+    if report.not_run and "not installed" in report.not_run:  # the plugin's optional engine (rtp[<name>])
+        pytest.skip(report.not_run)
+    return report
 
 
-def _all_channels(cls: type[Adapter[Any]]) -> list[str]:
-    return [c for c in sdk.CHANNELS if c in cls.supported_channels]
-
-
-@pytest.fixture(scope="module")
-def reference(gl_context: Any) -> Any:
-    """The reference renderer's current frame for CAMERA after PREV_CAMERA."""
-    from rtp.plugins.moderngl import Renderer
-
-    with Renderer(W, H, ctx=make_current(gl_context)) as r:
-        r.load_scene(SCENE)
-        return r.render(CAMERA, r.render(PREV_CAMERA))
-
-
-def drive(cls: type[Adapter[Any]], channels: Sequence[str]) -> tuple[np.ndarray, Adapter[Any], FrameSource[Any]]:
-    """The generic path: frame source -> adapter -> inputs; closes both; returns the planes."""
-    try:
-        source = cls.frame_source(SCENE, W, H)
-    except ImportError as exc:  # the plugin's optional engine (pip install 'rtp[<name>]') is missing
-        pytest.skip(f"the {cls.name} adapter's engine is not installed: {exc}")
-    with source:
-        assert isinstance(source, FrameSource) and source.adapter_class is cls
-        assert (source.width, source.height) == (W, H)
-        with source.adapter(channels) as adapter:
-            assert isinstance(adapter, cls) and adapter.channels == tuple(channels)
-            assert (adapter.width, adapter.height) == (W, H)
-            x = adapter.inputs(source.frame(CAMERA, PREV_CAMERA))
-    return x, adapter, source
-
-
-# ---------------------------------------------------------------------------------------------- the class
+# ------------------------------------------------------------------------- every adapter, through the kit
 def test_the_shipped_adapters_are_registered() -> None:
     assert {"moderngl", "pyrender"} <= set(REGISTERED), REGISTERED
 
 
-@pytest.mark.parametrize("name", ADAPTERS)
-def test_adapter_class_declares_the_contract(registry: None, name: str) -> None:
-    cls = _adapter_class(name)
-    assert inspect.isclass(cls) and issubclass(cls, Adapter)
-    assert not inspect.isabstract(cls), f"{name} leaves abstract: {sorted(cls.__abstractmethods__)}"
-    assert {"inputs", "close"} <= Adapter.__abstractmethods__  # ... so both are implemented
-    assert cls.name == name
-    assert cls.supported_channels and cls.supported_channels <= set(sdk.CHANNELS)
-    assert isinstance(cls.frame_type, type) and cls.frame_type is not object
-    assert cls.frame_source.__func__ is not Adapter.frame_source.__func__, f"{name} has no frame source"  # type: ignore[attr-defined]
-    params = list(inspect.signature(cls.__init__).parameters.values())[1:4]
-    assert [p.name for p in params] == ["channels", "width", "height"], params
-
-
-# ------------------------------------------------------------------------------------------ driven on a scene
 @pytest.mark.gl
 @pytest.mark.parametrize("name", ADAPTERS)
-def test_inputs_follow_the_channel_conventions(registry: None, reference: Any, name: str) -> None:
-    cls = _adapter_class(name)
-    channels = _all_channels(cls)
-    x, _, _ = drive(cls, channels)
-    assert isinstance(x, np.ndarray) and x.dtype == np.float32 and x.flags.c_contiguous
-    assert x.shape == (len(channels), H, W)
-    assert np.isfinite(x).all()
-    for plane, c in zip(x, channels):
-        spec = sdk.CHANNELS[c]
-        assert spec.low <= plane.min() and plane.max() <= spec.high, (c, plane.min(), plane.max())
-        # a moved camera in a furnished room: nothing is constant that the reference renderer varies
-        # (no metal is in view: metallic is 0 in both)
-        assert plane.std() > 0.0 or reference.channel(c).std() == 0.0 or c in ENGINE_DEFINED, f"{c} is constant"
-    if "seen" in channels:  # unseen pixels carry no stale colour
-        unseen = x[channels.index("seen")] == 0
-        assert 0.0 < unseen.mean() < 0.5
-        for c in ("reprojected.r", "reprojected.g", "reprojected.b", "reprojected.y"):
-            if c in channels:
-                assert not x[channels.index(c)][unseen].any(), c
-    for kind in ("reprojected", "albedo"):  # the luma planes are the luma of the adapter's own RGB planes
-        if {f"{kind}.{c}" for c in "rgby"} <= set(channels):
-            rgb = np.stack([x[channels.index(f"{kind}.{c}")] for c in "rgb"], axis=-1)
-            np.testing.assert_allclose(x[channels.index(f"{kind}.y")], sdk.luma(rgb), atol=1e-5, err_msg=kind)
-    if {"reprojected.y", "reprojected.y.dx", "reprojected.y.dy"} <= set(channels):  # of the adapter's own luma
-        for plane, want in zip(("dx", "dy"), sdk.pixel_differences(x[channels.index("reprojected.y")])):
-            np.testing.assert_allclose(x[channels.index(f"reprojected.y.{plane}")], want, atol=1e-5, err_msg=plane)
-    for plane, c in zip(x, channels):
-        if c not in AGREEMENT:
-            continue
-        tol, relative = AGREEMENT[c]
-        ref = reference.channel(c)
-        err = np.abs(plane - ref) / (np.maximum(np.abs(ref), 1e-6) if relative else 1.0)
-        assert np.mean(err <= tol) >= 0.99, f"{c} agrees with the reference renderer on {np.mean(err <= tol):.3f}"
+def test_every_adapter_passes_the_conformance_kit(registry: None, tiny_model: Callable[..., Any], name: str) -> None:
+    report = _report(name, model=tiny_model())
+    assert report.ok, str(report)
+    assert not report.skipped, str(report)
+    assert {c.group for c in report.checks} == GROUPS
+    assert report.channels == tuple(c for c in sdk.CHANNELS if c in sdk.adapters.get(name).supported_channels)
+    agreed = {c.name.split()[0] for c in report.checks if c.group == "agreement"}
+    assert agreed == set(report.channels) & set(conformance.AGREEMENT), agreed
 
 
 @pytest.mark.gl
-@pytest.mark.parametrize("name", ADAPTERS)
-def test_planes_come_in_the_requested_order(registry: None, name: str) -> None:
-    cls = _adapter_class(name)
-    channels = _all_channels(cls)
-    shuffled = [channels[i] for i in np.random.default_rng(7).permutation(len(channels))]
-    assert shuffled != channels
-    x, _, _ = drive(cls, channels)
-    y, _, _ = drive(cls, shuffled)
-    np.testing.assert_allclose(y, x[[channels.index(c) for c in shuffled]], rtol=1e-6, atol=1e-6)
-    one, _, _ = drive(cls, [shuffled[0]])
-    np.testing.assert_allclose(one[0], y[0], rtol=1e-6, atol=1e-6)
+def test_the_kit_feeds_every_shipped_model_an_adapter_can_run(registry: None) -> None:
+    report = _report(THIRD_PARTY)  # reprojected/albedo RGB, seen, normal: the shipped LPIPS's inputs, no material
+    assert report.runs_models == ("lpips.onnx",), report.runs_models
+    assert [c.name for c in report.checks if c.group == "predictor"] == ["for_predictor feeds lpips.onnx"]
+    assert report.ok, str(report)
+    assert set(conformance.runnable_models(sdk.adapters.get("moderngl"))) == set(sdk.shipped_models())
+
+
+# ----------------------------------------------------------------- the kit finds what a broken adapter does
+def _broken(cls_name: str, planes: Callable[[NumpyAdapter, CpuFrame, np.ndarray], np.ndarray] | None = None,
+            **attrs: Any) -> type[NumpyAdapter]:
+    """NumpyAdapter with one bug: ``planes`` rewrites its output, ``attrs`` replace class attributes."""
+    def inputs(self: NumpyAdapter, frame: CpuFrame) -> np.ndarray:
+        x = NumpyAdapter.inputs(self, frame)
+        return x if planes is None else np.ascontiguousarray(planes(self, frame, x), np.float32)
+
+    return type(cls_name, (NumpyAdapter,), {"inputs": inputs, "__module__": __name__, **attrs})
+
+
+def _plane(adapter: Adapter[Any], x: np.ndarray, channel: str) -> np.ndarray:
+    return x[adapter.channels.index(channel)] if channel in adapter.channels else np.zeros(x.shape[1:], np.float32)
+
+
+def _set(adapter: Adapter[Any], x: np.ndarray, **planes: np.ndarray) -> np.ndarray:
+    x = x.copy()
+    for key, value in planes.items():
+        c = key.replace("_", ".")
+        if c in adapter.channels:
+            x[adapter.channels.index(c)] = value
+    return x
+
+
+class _UntrackedSource(CpuFrameSource):
+    """A frame source that builds its adapters itself, so closing it leaves them open."""
+
+    def adapter(self, channels: Any, **options: Any) -> Any:
+        return self.adapter_class(channels, self.width, self.height, **options)
+
+
+BUGS: dict[str, tuple[Callable[[], type[NumpyAdapter]], set[str]]] = {
+    # an engine whose texture origin is bottom-left, read as is
+    "upside down": (lambda: _broken("UpsideDown", lambda a, f, x: x[:, ::-1]),
+                    {"albedo.r agrees with the reference renderer", "normal.x agrees with the reference renderer",
+                     "depth agrees with the reference renderer", "seen agrees with the reference renderer"}),
+    # normals stored as 0.5 n + 0.5 in an 8-bit target, handed over without decoding
+    "encoded normals": (lambda: _broken("EncodedNormals", lambda a, f, x: _set(
+        a, x, **{f"normal_{c}": 0.5 * _plane(a, x, f"normal.{c}") + 0.5 for c in "xyz"})),
+                        {f"normal.{c} agrees with the reference renderer" for c in "xyz"}),
+    # the previous frame's colour kept where the depth test failed
+    "stale colour": (lambda: _broken("StaleColour", lambda a, f, x: _set(
+        a, x, reprojected_g=np.where(_plane(a, x, "seen") == 0, 0.5, _plane(a, x, "reprojected.g")))),
+                     {"reprojected.* are 0 where seen is 0"}),
+    # luma as the mean of RGB instead of sdk.luma (BT.709)
+    "mean for luma": (lambda: _broken("MeanLuma", lambda a, f, x: _set(a, x, albedo_y=f.albedo.mean(axis=-1))),
+                      {"albedo.y is the luma of the adapter's own albedo.rgb",
+                       "albedo.y agrees with the reference renderer"}),
+    # planes in the adapter's own order, whatever was asked
+    "own order": (lambda: _broken("OwnOrder", lambda a, f, x: x[np.argsort(np.argsort(
+        [list(sdk.CHANNELS).index(c) for c in a.channels]))[::-1]] if len(a.channels) > 1 else x),
+                  {"planes come in the requested order"}),
+    # depth in [0, 1] NDC instead of view-space metres
+    "NDC depth": (lambda: _broken("NdcDepth", lambda a, f, x: _set(a, x, depth=np.clip(_plane(a, x, "depth") / 100, 0, 1))),
+                  {"depth agrees with the reference renderer"}),
+    # a NaN where the reprojection found no previous pixel (a division by a zero weight)
+    "NaN where unseen": (lambda: _broken("NanUnseen", lambda a, f, x: _set(
+        a, x, reprojected_r=np.where(_plane(a, x, "seen") == 0, np.nan, _plane(a, x, "reprojected.r")))),
+                         {"finite"}),
+    "misnamed": (lambda: _broken("Misnamed", name="numpy"), {"name is its registry name"}),
+    "closing the source leaves adapters open": (
+        lambda: _broken("Untracked", frame_source=classmethod(
+            lambda cls, scene, w, h, **o: _UntrackedSource(cls, scene, w, h, **o))),
+        {"closing the frame source closes the adapters it built"}),
+}
 
 
 @pytest.mark.gl
-@pytest.mark.parametrize("name", ADAPTERS)
-def test_for_predictor_feeds_the_predictor(registry: None, tiny_model: Callable[..., Any], name: str) -> None:
-    cls = _adapter_class(name)
-    predictor = sdk.load(tiny_model())
-    try:
-        source = cls.frame_source(SCENE, W, H)
-    except ImportError as exc:
-        pytest.skip(f"the {name} adapter's engine is not installed: {exc}")
-    with source, cls.for_predictor(predictor, W, H, **source.adapter_options()) as adapter:
-        assert adapter.channels == predictor.metadata.inputs
-        rates = predictor.shading_rates(adapter.inputs(source.frame(CAMERA, PREV_CAMERA)))
-    assert rates.shape == predictor.tiles(H, W)
+@pytest.mark.parametrize("bug", sorted(BUGS))
+def test_the_kit_names_what_a_broken_adapter_gets_wrong(registry: None, monkeypatch: pytest.MonkeyPatch,
+                                                        bug: str) -> None:
+    make, expected = BUGS[bug]
+    cls = make()
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, cls)
+    report = _report(THIRD_PARTY)
+    failed = {c.name for c in report.failures}
+    assert expected <= failed, str(report)
+    assert not report.ok
+    with pytest.raises(conformance.ConformanceError, match="failed") as info:
+        report.raise_for_failures()
+    assert isinstance(info.value, sdk.RtpError) and sdk.exit_code(info.value) == sdk.EXIT_FAILED
+    assert all(name in str(info.value) for name in expected)
 
 
 @pytest.mark.gl
-@pytest.mark.parametrize("name", ADAPTERS)
-def test_lifecycle_context_manager_close_and_errors(registry: None, name: str) -> None:
-    cls = _adapter_class(name)
-    channels = sorted(cls.supported_channels)[:2]
-    unsupported = [c for c in sdk.CHANNELS if c not in cls.supported_channels]
-    try:
-        source = cls.frame_source(SCENE, W, H)
-    except ImportError as exc:
-        pytest.skip(f"the {name} adapter's engine is not installed: {exc}")
-    with source as entered:
-        assert entered is source and not source.closed
-        with pytest.raises(UnsupportedChannelError, match="unknown channel"):
-            source.adapter(["albedo.q"])
-        if unsupported:
-            with pytest.raises(UnsupportedChannelError, match=f"cannot produce {unsupported[0]}"):
-                source.adapter([unsupported[0]])
-        frame = source.frame(CAMERA, PREV_CAMERA)
-        with source.adapter(channels) as adapter:
-            assert not adapter.closed
-            with pytest.raises(AdapterFrameError, match="frames, got builtins.object"):
-                adapter.inputs(object())
-            first = adapter.inputs(frame)
-        assert adapter.closed
-        with pytest.raises(AdapterClosedError, match="has been closed") as info:
-            adapter.inputs(frame)
-        assert isinstance(info.value, sdk.RtpError)
-        adapter.close()  # twice: nothing happens
-        if isinstance(adapter, NumpyAdapter):
-            assert adapter.closes == 1
-        with pytest.raises(AdapterClosedError):
-            with adapter:
-                pass
-        lent = source.adapter(channels)  # never closed by hand ...
-        np.testing.assert_array_equal(lent.inputs(source.frame(CAMERA, PREV_CAMERA)), first)
-    assert source.closed and lent.closed  # ... the source closed it first
-    source.close()
-    with pytest.raises(AdapterClosedError, match="frame source has been closed"):
-        source.frame(CAMERA, PREV_CAMERA)
-    with pytest.raises(AdapterClosedError):
-        source.adapter(channels)
+def test_an_adapter_that_raises_fails_with_its_error_and_the_rest_still_runs(registry: None,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    def boom(self: NumpyAdapter, frame: CpuFrame) -> np.ndarray:
+        raise RuntimeError("shader failed to compile")
+
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, type("Boom", (NumpyAdapter,), {"inputs": boom}))
+    report = _report(THIRD_PARTY)
+    first = next(c for c in report.checks if c.group == "planes")
+    assert first.status == "failed" and first.detail == "raised RuntimeError: shader failed to compile"
+    assert [c.status for c in report.checks if c.group in ("agreement", "order")] == ["skipped", "skipped"]
+    assert {c.group for c in report.checks if c.status == "passed"} >= {"class"}
+
+
+def test_the_kit_checks_the_class_before_drawing(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    class NoClose(Adapter[CpuFrame]):  # an abstract method left: nothing is drawn
+        name = THIRD_PARTY
+        supported_channels = frozenset({"seen"})
+        frame_type = CpuFrame
+
+        def inputs(self, frame: CpuFrame) -> np.ndarray:
+            return np.zeros((1, H, W), np.float32)
+
+    report = conformance.check_adapter(NoClose)
+    assert [c.name for c in report.failures] == ["nothing abstract is left", "has a frame_source"], str(report)
+    assert report.failures[0].detail.startswith("abstract: close") and report.not_run == "the class cannot be driven"
+    assert {c.group for c in report.checks} == {"class"}
+    assert report.source.endswith(":test_the_kit_checks_the_class_before_drawing.<locals>.NoClose")
+
+
+@pytest.mark.gl
+def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so() -> None:
+    class NoEngine(NumpyAdapter):
+        @classmethod
+        def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> Any:
+            raise ImportError("No module named 'myengine'")
+
+    report = conformance.check_adapter(NoEngine)
+    assert report.ok and report.not_run is not None and "No module named 'myengine'" in report.not_run
+    assert {c.group for c in report.skipped} == GROUPS - {"class"}
+    assert "skipped (the numpy-gbuffers adapter's engine is not installed" in report.to_text()
+
+
+def test_resolving_an_adapter_says_what_was_expected() -> None:
+    assert conformance.resolve_adapter(f"{__name__}:NumpyAdapter") == (NumpyAdapter, f"{__name__}:NumpyAdapter")
+    assert conformance.resolve_adapter(NumpyAdapter)[0] is NumpyAdapter
+    for spec, message in [("no-such-adapter", "no adapter named 'no-such-adapter'; available: "),
+                          ("no_such_module:X", "cannot import 'no_such_module'"),
+                          (f"{__name__}:Nope", f"module '{__name__}' has no 'Nope'"),
+                          (f"{__name__}:CpuFrame", "is not an rtp.sdk.adapters.Adapter subclass"),
+                          (CpuFrame, "is not an rtp.sdk.adapters.Adapter subclass"),
+                          ("", "expected an adapter name")]:
+        with pytest.raises(AdapterNotFoundError, match=message):
+            conformance.resolve_adapter(spec)  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="integers of at least 16"):
+        conformance.check_adapter(NumpyAdapter, size=(8, 8))
+    with pytest.raises(sdk.ParameterError, match="'albedo.q' is not a channel"):
+        conformance.check_adapter(NumpyAdapter, tolerances={"albedo.q": 0.1})
+    with pytest.raises(sdk.ParameterError, match=r"tolerances\['depth'\]: expected a number >= 0"):
+        conformance.check_adapter(NumpyAdapter, tolerances={"depth": float("nan")})
+
+
+@pytest.mark.gl
+def test_a_tolerance_can_be_relaxed_per_channel(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    # an engine whose albedo is filtered (here: off by 0.08) passes at the tolerance it can meet
+    class Tinted(NumpyAdapter):
+        def inputs(self, frame: CpuFrame) -> np.ndarray:
+            return super().inputs(replace(frame, albedo=np.clip(frame.albedo + [0.08, 0.0, 0.0], 0, 1).astype(np.float32)))
+
+    cls = Tinted
+    strict = conformance.check_adapter(cls, model=None)
+    assert "albedo.r agrees with the reference renderer" in {c.name for c in strict.failures}
+    relaxed = conformance.check_adapter(cls, tolerances={"albedo.r": 0.1, "depth": conformance.Tolerance(0.01, True)})
+    assert relaxed.ok, str(relaxed)
+    assert any(c.detail == "100.0% within 0.1" for c in relaxed.checks if c.name.startswith("albedo.r "))
+
+
+# ---------------------------------------------------------------------------------------------- the command
+@pytest.mark.gl
+def test_rtp_adapters_check_from_a_plugin_checkout() -> None:
+    # run in the plugin's folder with module:Class, before any entry point is declared
+    ok = run_rtp("adapters", "check", f"{__name__}:NumpyAdapter", "--size", "80x48", cwd=ROOT)
+    assert ok.returncode == 0, ok.stderr
+    assert "conformance on procedural(0) at 80x48" in ok.stdout and " 0 failed, 0 skipped" in ok.stdout
+    assert "runs the shipped models: lpips" in ok.stdout
+    bad = run_rtp("adapters", "check", f"{__name__}:NoLumaAdapter", "--json", cwd=ROOT)
+    assert bad.returncode == sdk.EXIT_FAILED, bad.stderr
+    out = json.loads(bad.stdout)
+    assert not out["ok"] and [c["name"] for c in out["checks"] if c["status"] == "failed"] == [
+        "albedo.y is the luma of the adapter's own albedo.rgb", "albedo.y agrees with the reference renderer"]
+    assert "failed 2 of" in bad.stderr and "albedo.y is the luma" in bad.stderr
+    listed = run_rtp("adapters", "list")
+    assert listed.returncode == 0 and listed.stdout.split("\n")[1].split()[:2] == ["moderngl", "23"], listed.stdout
+    usage = run_rtp("adapters", "check", "moderngl", "--tolerance", "albedo=0.1")
+    assert usage.returncode == sdk.EXIT_USAGE and "'albedo' is not a channel" in usage.stderr
+
+
+class NoLumaAdapter(NumpyAdapter):
+    """An adapter whose albedo.y is green alone (the CLI test's failing plugin)."""
+
+    def inputs(self, frame: CpuFrame) -> np.ndarray:
+        x = super().inputs(frame)
+        if "albedo.y" in self.channels:
+            x[self.channels.index("albedo.y")] = frame.albedo[..., 1] * 0.9
+        return x
 
 
 # --------------------------------------------------------------------------------- the base class, no GL

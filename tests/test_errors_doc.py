@@ -13,7 +13,7 @@ from rtp import sdk
 ROOT = Path(__file__).resolve().parents[1]
 ROOMS = ("rtp.sdk", "rtp.sdk.adapters", "rtp.scene", "rtp.capture", "rtp.capture.scenes", "rtp.capture.viewpoints",
          "rtp.metrics", "rtp.evaluate", "rtp.train", "rtp.train.checkpoint", "rtp.export", "rtp.plugins.moderngl",
-         "rtp.plugins.pyrender", "rtp.cli")
+         "rtp.plugins.pyrender", "rtp.conformance", "rtp.cli")
 DOC = ROOT / "docs" / "errors.md"
 
 

@@ -28,14 +28,16 @@ ROOMS: dict[str, tuple[str, frozenset[str]]] = {
     "evaluate": ("evaluate", frozenset({"sdk", "capture", "metrics"})),
     "train": ("train", frozenset({"sdk", "metrics", "capture", "evaluate"})),
     "export": ("export", frozenset({"sdk", "train"})),
+    "conformance": ("conformance", frozenset({"sdk", "scene", "plugins.moderngl", "capture"})),
     "cli": ("cli", frozenset({"sdk", "scene", "plugins.moderngl", "plugins.pyrender", "metrics", "capture",
-                              "evaluate", "train", "export", "models"})),
+                              "evaluate", "train", "export", "conformance", "models"})),
 }
 #: Third-party packages a room may import, where the design restricts them.
 THIRD_PARTY: dict[str, frozenset[str]] = {
     "sdk": frozenset({"numpy", "onnxruntime", "yaml"}),
     "scene": frozenset({"numpy"}),
     "evaluate": frozenset({"numpy", "PIL", "matplotlib", "tqdm", "imageio"}),
+    "conformance": frozenset({"numpy"}),
 }
 
 
@@ -111,6 +113,7 @@ def test_moderngl_adapter_does_not_import_the_renderer() -> None:
     ("rtp.metrics",),
     ("rtp.capture", "rtp.capture.scenes", "rtp.capture.viewpoints"),
     ("rtp.evaluate", "rtp.evaluate.plots"),
+    ("rtp.conformance",),
     ("rtp.cli",),
 ])
 def test_rooms_that_need_no_torch_do_not_load_it(modules: tuple[str, ...]) -> None:

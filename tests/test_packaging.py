@@ -27,6 +27,7 @@ DATA = {
 }
 ROOMS = {"sdk": "rtp/sdk", "export": "rtp/export", "train": "rtp/train", "capture": "rtp/capture",
          "metrics": "rtp/metrics", "scene": "rtp/scene", "evaluate": "rtp/evaluate",
+         "conformance": "rtp/conformance",
          "plugins/moderngl": "rtp/plugins/moderngl", "plugins/pyrender": "rtp/plugins/pyrender"}
 
 

@@ -1,0 +1,560 @@
+"""The adapter conformance kit: every check of docs/adapters.md "Testing an adapter", runnable
+against any adapter class, installed or not (see :func:`check_adapter`)."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import logging
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+
+from rtp import sdk
+from rtp.scene import Camera, Scene
+from rtp.sdk.adapters import (
+    Adapter,
+    AdapterClosedError,
+    AdapterFrameError,
+    AdapterNotFoundError,
+    FrameSource,
+    UnsupportedChannelError,
+)
+
+__all__ = [
+    "AGREEMENT",
+    "CONFORMANCE_SCENE",
+    "DEFAULT_SIZE",
+    "ENGINE_DEFINED",
+    "MIN_AGREEMENT",
+    "Check",
+    "ConformanceError",
+    "ConformanceReport",
+    "Tolerance",
+    "check_adapter",
+    "resolve_adapter",
+    "runnable_models",
+]
+
+log = logging.getLogger("rtp.conformance")
+
+
+class Tolerance(NamedTuple):
+    """How close a channel must come to the reference renderer's: within ``value`` (absolute, or
+    relative to the reference when ``relative``) on at least :data:`MIN_AGREEMENT` of the pixels."""
+
+    value: float
+    relative: bool = False
+
+
+#: Agreement with the reference renderer on the conformance scene, per channel. ``reprojected.*`` are
+#: not compared: the previous displayed frame is each engine's own lit image.
+AGREEMENT: Mapping[str, Tolerance] = {
+    "seen": Tolerance(0.0),
+    **{f"albedo.{c}": Tolerance(0.05) for c in "rgby"},
+    **{f"normal.{c}": Tolerance(0.01) for c in "xyz"},
+    "depth": Tolerance(1e-3, relative=True),
+    **{f"motion.{c}": Tolerance(0.05) for c in "xy"},
+    **{c: Tolerance(0.01) for c in ("roughness", "metallic")},
+    "depth.edge": Tolerance(0.02),
+}
+#: The share of pixels on which a channel must agree.
+MIN_AGREEMENT = 0.99
+#: Channels that describe the engine's own shading model: compared with nothing and allowed to be
+#: constant (pyrender gives every dielectric F0 = 4 %: specular 0.5 everywhere).
+ENGINE_DEFINED = frozenset({"specular"})
+#: The frame size the checks draw at (width, height).
+DEFAULT_SIZE = (64, 48)
+#: The procedural scene seed the checks draw (``rtp.capture.scenes.procedural``).
+CONFORMANCE_SCENE = 0
+
+Status = Literal["passed", "failed", "skipped"]
+
+
+class ConformanceError(sdk.RtpError, AssertionError):
+    """An adapter failed the conformance checks (:meth:`ConformanceReport.raise_for_failures`)."""
+
+
+@dataclass(frozen=True)
+class Check:
+    """One conformance check: its group (``class``, ``planes``, ``agreement``, ``order``,
+    ``predictor``, ``lifecycle``), what it checks, and how it went."""
+
+    group: str
+    name: str
+    status: Status
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class ConformanceReport:
+    """What :func:`check_adapter` found. ``str(report)`` is the table ``rtp adapters check`` prints,
+    so ``assert report.ok, report`` in a plugin's own tests shows every failure."""
+
+    adapter: str
+    source: str
+    size: tuple[int, int]
+    channels: tuple[str, ...]
+    checks: tuple[Check, ...]
+    #: The shipped models whose every input the adapter produces.
+    runs_models: tuple[str, ...] = ()
+    #: Why the checks that draw frames did not run, when they did not (the engine is not installed).
+    not_run: str | None = None
+
+    @property
+    def failures(self) -> tuple[Check, ...]:
+        return tuple(c for c in self.checks if c.status == "failed")
+
+    @property
+    def skipped(self) -> tuple[Check, ...]:
+        return tuple(c for c in self.checks if c.status == "skipped")
+
+    @property
+    def ok(self) -> bool:
+        """No check failed (skipped checks are listed in :attr:`skipped`, with why)."""
+        return not self.failures
+
+    def raise_for_failures(self) -> None:
+        """Raise :class:`ConformanceError` listing every failed check, if any failed."""
+        if self.failures:
+            raise ConformanceError(f"adapter {self.adapter!r} failed {len(self.failures)} of {len(self.checks)} "
+                                   "conformance checks:\n" + "\n".join(f"  {c.group}: {c.name}: {c.detail}"
+                                                                       for c in self.failures))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"adapter": self.adapter, "source": self.source, "size": list(self.size), "channels": list(self.channels),
+                "ok": self.ok, "runs_models": list(self.runs_models), "not_run": self.not_run,
+                "checks": [{"group": c.group, "name": c.name, "status": c.status, "detail": c.detail}
+                           for c in self.checks]}
+
+    def to_text(self) -> str:
+        w, h = self.size
+        lines = [f"adapter {self.adapter!r} ({self.source}): conformance on procedural({CONFORMANCE_SCENE}) at {w}x{h}"]
+        group_w = max((len(c.group) for c in self.checks), default=5)
+        for c in self.checks:
+            mark = {"passed": "ok  ", "failed": "FAIL", "skipped": "skip"}[c.status]
+            lines.append(f"  {mark} {c.group:<{group_w}}  {c.name}" + (f": {c.detail}" if c.detail else ""))
+        counts = {s: sum(c.status == s for c in self.checks) for s in ("passed", "failed", "skipped")}
+        lines.append(f"{counts['passed']} passed, {counts['failed']} failed, {counts['skipped']} skipped"
+                     + (f" ({self.not_run})" if self.not_run else ""))
+        lines.append("runs the shipped models: " + (", ".join(self.runs_models) if self.runs_models else "none (no shipped "
+                     "model's inputs are all among its channels)"))
+        return "\n".join(lines)
+
+    __str__ = to_text
+
+
+def resolve_adapter(spec: str | type[Adapter[Any]]) -> tuple[type[Adapter[Any]], str]:
+    """The adapter class ``spec`` names and where it came from: a registry name
+    (``sdk.adapters.available()``), ``"package.module:Class"`` (an adapter not yet registered), or
+    the class itself. Raises :class:`rtp.sdk.adapters.AdapterNotFoundError` saying what was expected."""
+    if isinstance(spec, type):
+        if not issubclass(spec, Adapter):
+            raise AdapterNotFoundError(f"{spec.__module__}.{spec.__qualname__} is not an rtp.sdk.adapters.Adapter subclass")
+        return spec, f"{spec.__module__}:{spec.__qualname__}"
+    if not isinstance(spec, str) or not spec:
+        raise AdapterNotFoundError(f"expected an adapter name, 'module:Class' or an Adapter subclass, got {spec!r}")
+    if ":" not in spec:
+        return sdk.adapters.get(spec), "the registry"  # AdapterNotFoundError names the installed ones
+    module_name, _, qualname = spec.partition(":")
+    try:
+        obj: Any = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise AdapterNotFoundError(f"{spec}: cannot import {module_name!r} ({type(exc).__name__}: {exc}); is its "
+                                   "package installed, or its folder on PYTHONPATH?") from exc
+    for part in qualname.split("."):
+        if not hasattr(obj, part):
+            raise AdapterNotFoundError(f"{spec}: module {module_name!r} has no {qualname!r}")
+        obj = getattr(obj, part)
+    if not (isinstance(obj, type) and issubclass(obj, Adapter)):
+        raise AdapterNotFoundError(f"{spec} is not an rtp.sdk.adapters.Adapter subclass (got {obj!r})")
+    return obj, spec
+
+
+def runnable_models(adapter: type[Adapter[Any]]) -> tuple[str, ...]:
+    """The shipped models (file names) whose every input ``adapter`` declares it produces."""
+    out = []
+    for name in sdk.shipped_models():
+        try:
+            inputs = sdk.load(name).metadata.inputs
+        except sdk.RtpError as exc:  # a broken install: say so, do not hide the others
+            log.warning("shipped model %s does not load: %s", name, exc)
+            continue
+        if set(inputs) <= set(adapter.supported_channels):
+            out.append(name)
+    return tuple(out)
+
+
+class _Failed(Exception):
+    """A check's expectation did not hold (the message says how)."""
+
+
+def _expect(condition: Any, detail: str) -> None:
+    if not condition:
+        raise _Failed(detail)
+
+
+@dataclass
+class _Run:
+    checks: list[Check] = field(default_factory=list)
+
+    @contextmanager
+    def check(self, group: str, name: str) -> Iterator[list[str]]:
+        """Record a check: passed unless the body raises (``_Failed``: its message; anything else:
+        the exception). The body may append a detail for a check that passed."""
+        note: list[str] = []
+        try:
+            yield note
+        except _Failed as exc:
+            self.checks.append(Check(group, name, "failed", str(exc)))
+        except Exception as exc:  # the adapter's own error is a failure of the check, with its text
+            self.checks.append(Check(group, name, "failed", f"raised {type(exc).__name__}: {exc}"))
+        else:
+            self.checks.append(Check(group, name, "passed", "; ".join(note)))
+
+    def skip(self, group: str, name: str, why: str) -> None:
+        self.checks.append(Check(group, name, "skipped", why))
+
+
+def _cameras(scene: Scene) -> tuple[Camera, Camera]:
+    """The conformance move: 0.3 m sideways, 0.2 m ahead, 6 degrees of turn (camera, prev_camera)."""
+    spawn = scene.spawn_points[0]
+    prev = Camera(spawn.position, yaw=spawn.yaw, pitch=-5.0)
+    cur = Camera((spawn.position[0] + 0.3, spawn.position[1] + 0.05, spawn.position[2] - 0.2),
+                 yaw=spawn.yaw + 6.0, pitch=-3.0)
+    return cur, prev
+
+
+def _class_checks(run: _Run, cls: type[Adapter[Any]], registry_name: str | None) -> bool:
+    """The class's declarations; False when it cannot be driven at all."""
+    with run.check("class", "nothing abstract is left"):
+        _expect(not inspect.isabstract(cls), f"abstract: {', '.join(sorted(cls.__abstractmethods__))} "
+                "(an adapter implements inputs and close)")
+    with run.check("class", "name is its registry name" if registry_name else "name is set"):
+        if registry_name:
+            _expect(cls.name == registry_name, f"name is {cls.name!r}, registered as {registry_name!r}")
+        else:
+            _expect(isinstance(cls.name, str) and cls.name, f"name is {cls.name!r}: expected the name it registers "
+                    "under (its entry point's)")
+    with run.check("class", "supported_channels are sdk.CHANNELS names"):
+        chans = cls.supported_channels
+        _expect(chans, "supported_channels is empty")
+        unknown = sorted(set(chans) - set(sdk.CHANNELS))
+        _expect(not unknown, f"not in sdk.CHANNELS: {', '.join(unknown)}")
+    with run.check("class", "declares a frame_type"):
+        _expect(isinstance(cls.frame_type, type) and cls.frame_type is not object,
+                f"frame_type is {cls.frame_type!r}: expected the class of the frames inputs() reads")
+    with run.check("class", "has a frame_source"):
+        own = getattr(cls.frame_source, "__func__", None) is not getattr(Adapter.frame_source, "__func__", None)
+        _expect(own, "frame_source is the base class's (which raises NoFrameSourceError): a registered adapter "
+                "draws rtp.scene.Scene through its engine")
+    with run.check("class", "constructor starts (channels, width, height)"):
+        params = [p.name for p in list(inspect.signature(cls.__init__).parameters.values())[1:4]]
+        _expect(params == ["channels", "width", "height"], f"it starts {tuple(params)}")
+    return not any(c.status == "failed" and c.name in ("nothing abstract is left", "has a frame_source")
+                   for c in run.checks)
+
+
+def _plane_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: Any, size: tuple[int, int]) -> None:
+    w, h = size
+    with run.check("planes", "float32, C-contiguous, (C, H, W)"):
+        _expect(isinstance(x, np.ndarray), f"inputs() returned {type(x).__name__}")
+        _expect(x.dtype == np.float32 and x.flags.c_contiguous, f"dtype {x.dtype}, contiguous {x.flags.c_contiguous}")
+        _expect(x.shape == (len(channels), h, w), f"shape {x.shape}, expected {(len(channels), h, w)}")
+    if not (isinstance(x, np.ndarray) and x.shape == (len(channels), h, w)):
+        return
+    with run.check("planes", "finite"):
+        bad = [c for plane, c in zip(x, channels) if not np.isfinite(plane).all()]
+        _expect(not bad, f"NaN or infinity in {', '.join(bad)}")
+    with run.check("planes", "within each channel's range"):
+        out = []
+        for plane, c in zip(x, channels):
+            spec = sdk.CHANNELS[c]
+            lo, hi = float(np.nanmin(plane)), float(np.nanmax(plane))
+            if not (spec.low <= lo and hi <= spec.high):
+                out.append(f"{c} spans [{lo:.4g}, {hi:.4g}], its range is [{spec.low}, {spec.high}]")
+        _expect(not out, "; ".join(out))
+    with run.check("planes", "no channel is constant that the reference renderer varies"):
+        const = [c for plane, c in zip(x, channels)
+                 if not plane.std() > 0.0 and c not in ENGINE_DEFINED and (reference is None or reference.channel(c).std() > 0)]
+        _expect(not const, f"constant: {', '.join(const)} (a moved camera in a furnished room)")
+    if "seen" in channels:
+        unseen = x[list(channels).index("seen")] == 0
+        with run.check("planes", "some pixels are unseen after the move, most are seen"):
+            _expect(0.0 < unseen.mean() < 0.5, f"{unseen.mean():.1%} of the pixels are unseen (seen == 0); the move "
+                    "uncovers some and keeps most")
+        rep = [c for c in ("reprojected.r", "reprojected.g", "reprojected.b", "reprojected.y") if c in channels]
+        if rep:
+            with run.check("planes", "reprojected.* are 0 where seen is 0"):
+                stale = [c for c in rep if x[list(channels).index(c)][unseen].any()]
+                _expect(not stale, f"stale colour on unseen pixels in {', '.join(stale)}")
+    for kind in ("reprojected", "albedo"):
+        names = [f"{kind}.{c}" for c in "rgby"]
+        if set(names) <= set(channels):
+            with run.check("planes", f"{kind}.y is the luma of the adapter's own {kind}.rgb"):
+                rgb = np.stack([x[list(channels).index(n)] for n in names[:3]], axis=-1)
+                err = float(np.max(np.abs(x[list(channels).index(names[3])] - sdk.luma(rgb))))
+                _expect(err <= 1e-5, f"differs by up to {err:.3g}")
+    if {"reprojected.y", "reprojected.y.dx", "reprojected.y.dy"} <= set(channels):
+        with run.check("planes", "reprojected.y.dx/.dy are differences of the adapter's own reprojected.y"):
+            want = sdk.pixel_differences(x[list(channels).index("reprojected.y")])
+            err = max(float(np.max(np.abs(x[list(channels).index(f"reprojected.y.{p}")] - v)))
+                      for p, v in zip(("dx", "dy"), want))
+            _expect(err <= 1e-5, f"differ by up to {err:.3g}")
+
+
+def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: Any,
+                      tolerances: Mapping[str, Tolerance]) -> None:
+    for plane, c in zip(x, channels):
+        if c not in tolerances:
+            continue
+        tol = tolerances[c]
+        with run.check("agreement", f"{c} agrees with the reference renderer") as note:
+            ref = reference.channel(c)
+            err = np.abs(plane - ref) / (np.maximum(np.abs(ref), 1e-6) if tol.relative else 1.0)
+            share = float(np.mean(err <= tol.value))
+            within = f"within {tol.value:g}{' (relative)' if tol.relative else ''}"
+            _expect(share >= MIN_AGREEMENT, f"{share:.1%} of the pixels {within}, needs {MIN_AGREEMENT:.0%}")
+            note.append(f"{share:.1%} {within}")
+
+
+def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = DEFAULT_SIZE,
+                  tolerances: Mapping[str, float | Tolerance] | None = None,
+                  model: str | Path | sdk.ShadingRatePredictor | None = None,
+                  frame_source_options: Mapping[str, Any] | None = None) -> ConformanceReport:
+    """Run every conformance check of docs/adapters.md on an adapter and report each.
+
+    The adapter is driven only through the generic path (``frame_source`` -> ``adapter`` ->
+    ``inputs``) on the procedural scene ``procedural(0)``, after a camera move of 0.3 m and 6
+    degrees, and its planes are compared with the reference renderer's
+    (:class:`rtp.plugins.moderngl.Renderer`) for the same cameras.
+
+    Args:
+        adapter: a registry name (``sdk.adapters.available()``), ``"package.module:Class"``, or
+            the class.
+        size: the frame size (width, height) drawn; at least 16 x 16.
+        tolerances: per-channel agreement tolerances replacing those of :data:`AGREEMENT` (a float
+            keeps the channel's relative flag), for an engine that filters or encodes differently.
+        model: the predictor ``for_predictor`` feeds (a path, a shipped model's name, or a loaded
+            predictor); default every shipped model the adapter can run.
+        frame_source_options: keyword arguments of the adapter's ``frame_source``.
+
+    Returns:
+        the report; nothing raises for a failed check (:meth:`ConformanceReport.raise_for_failures`
+        does). Where the adapter's engine is not installed (its ``frame_source`` raises
+        ImportError), the checks that draw are skipped and ``not_run`` says why.
+
+    Raises:
+        rtp.sdk.adapters.AdapterNotFoundError: ``adapter`` names no adapter.
+        rtp.sdk.ParameterError: a bad ``size`` or ``tolerances``.
+        rtp.plugins.moderngl.RendererError: no headless OpenGL for the reference renderer.
+    """
+    cls, source_text = resolve_adapter(adapter)
+    registry_name = adapter if isinstance(adapter, str) and ":" not in adapter else None
+    if not (isinstance(size, tuple) and len(size) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) and v >= 16 for v in size)):
+        raise sdk.ParameterError(f"size: expected (width, height), integers of at least 16, got {size!r}", "size")
+    tols = dict(AGREEMENT)
+    for c, t in (tolerances or {}).items():
+        if c not in sdk.CHANNELS:
+            raise sdk.ParameterError(f"tolerances: {c!r} is not a channel of sdk.CHANNELS", "tolerances")
+        value = t.value if isinstance(t, Tolerance) else t
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not (value >= 0):
+            raise sdk.ParameterError(f"tolerances[{c!r}]: expected a number >= 0, got {value!r}", "tolerances")
+        tols[c] = t if isinstance(t, Tolerance) else Tolerance(float(t), AGREEMENT.get(c, Tolerance(0.0)).relative)
+    name = registry_name or (cls.name if isinstance(cls.name, str) and cls.name else cls.__qualname__)
+    run = _Run()
+    channels = tuple(c for c in sdk.CHANNELS if c in (cls.supported_channels or ()))
+    runs = runnable_models(cls) if channels else ()
+    drivable = _class_checks(run, cls, registry_name)
+
+    def report(not_run: str | None = None) -> ConformanceReport:
+        return ConformanceReport(name, source_text, size, channels, tuple(run.checks), runs, not_run)
+
+    if not drivable or not channels:
+        return report("the class cannot be driven")
+    from rtp.capture.scenes import procedural  # (the scene and the reference renderer: only when driven)
+    from rtp.plugins.moderngl import Renderer
+
+    scene = procedural(CONFORMANCE_SCENE)
+    camera, prev_camera = _cameras(scene)
+    w, h = size
+    options = dict(frame_source_options or {})
+    with Renderer(w, h) as ref:
+        ref.ctx.__enter__()  # (moderngl makes a context current only through __enter__)
+        ref.load_scene(scene)
+        reference = ref.render(camera, ref.render(prev_camera))
+
+    def open_source() -> FrameSource[Any]:
+        return cls.frame_source(scene, w, h, **options)
+
+    try:
+        first = open_source()
+    except ImportError as exc:
+        why = f"the {name} adapter's engine is not installed: {exc}"
+        for group in ("planes", "agreement", "order", "predictor", "lifecycle"):
+            run.skip(group, "driven on the conformance scene", why)
+        return report(why)
+
+    def draw(chans: Sequence[str], source: FrameSource[Any] | None = None) -> np.ndarray:
+        own = source is None
+        src = open_source() if source is None else source
+        try:
+            _expect(isinstance(src, FrameSource), f"frame_source returned {type(src).__name__}, not a FrameSource")
+            _expect(src.adapter_class is cls and (src.width, src.height) == (w, h),
+                    f"frame_source's adapter_class {src.adapter_class!r} and size {src.width}x{src.height}")
+            with src.adapter(chans) as a:
+                _expect(isinstance(a, cls), f"the source built a {type(a).__name__}, not a {cls.__name__}")
+                _expect(a.channels == tuple(chans), f"channels {a.channels}, asked for {tuple(chans)}")
+                _expect((a.width, a.height) == (w, h), f"size {a.width}x{a.height}, asked for {w}x{h}")
+                return a.inputs(src.frame(camera, prev_camera))  # type: ignore[no-any-return]
+        finally:
+            if own:
+                src.close()
+
+    x: np.ndarray | None = None
+    with run.check("planes", "frame source -> adapter -> inputs, every supported channel"):
+        x = draw(channels, first)
+    first.close()
+    if x is None:
+        for group in ("agreement", "order"):
+            run.skip(group, "driven on the conformance scene", "the adapter produced no planes (above)")
+    else:
+        _plane_checks(run, x, channels, reference, size)
+        if isinstance(x, np.ndarray) and x.shape == (len(channels), h, w):
+            _agreement_checks(run, x, channels, reference, tols)
+            _order_checks(run, x, channels, draw)
+    _predictor_checks(run, cls, runs, model, open_source, camera, prev_camera, size)
+    _lifecycle_checks(run, cls, channels, open_source, camera, prev_camera)
+    return report()
+
+
+def _order_checks(run: _Run, x: np.ndarray, channels: Sequence[str], draw: Any) -> None:
+    if len(channels) < 2:
+        run.skip("order", "planes come in the requested order", "the adapter has one channel")
+        return
+    perm = np.random.default_rng(7).permutation(len(channels))
+    if (perm == np.arange(len(channels))).all():
+        perm = np.roll(perm, 1)
+    shuffled = [channels[i] for i in perm]
+    y = None
+    with run.check("order", "planes come in the requested order"):
+        y = draw(shuffled)
+        want = x[[channels.index(c) for c in shuffled]]
+        _expect(isinstance(y, np.ndarray) and y.shape == want.shape, "a shuffled channel list gave another shape")
+        bad = [c for c, a, b in zip(shuffled, y, want) if not np.allclose(a, b, rtol=1e-6, atol=1e-6)]
+        _expect(not bad, f"a shuffled channel list gave other planes for {', '.join(bad)}")
+    with run.check("order", "one channel alone is the same plane"):
+        one = draw([shuffled[0]])
+        _expect(np.allclose(one[0], x[channels.index(shuffled[0])], rtol=1e-6, atol=1e-6),
+                f"{shuffled[0]} alone differs from {shuffled[0]} among all the channels")
+
+
+def _predictor_checks(run: _Run, cls: type[Adapter[Any]], runs: Sequence[str], model: Any, open_source: Any,
+                      camera: Camera, prev_camera: Camera, size: tuple[int, int]) -> None:
+    w, h = size
+    if model is None:
+        if not runs:
+            run.skip("predictor", "for_predictor feeds a predictor", "no shipped model's inputs are all among the "
+                     "adapter's channels; pass model= (rtp adapters check --model) to check with your own")
+            return
+        predictors = [(m, sdk.load(m)) for m in runs]
+    elif isinstance(model, sdk.ShadingRatePredictor):
+        predictors = [("the given model", model)]
+    else:
+        predictors = [(Path(model).name, sdk.load(model))]
+    src = None
+    try:
+        for label, predictor in predictors:
+            with run.check("predictor", f"for_predictor feeds {label}"):
+                src = open_source() if src is None else src  # one source (one engine start) for every model
+                with cls.for_predictor(predictor, w, h, **src.adapter_options()) as a:
+                    _expect(a.channels == predictor.metadata.inputs, f"channels {a.channels}, the model's inputs are "
+                            f"{predictor.metadata.inputs}")
+                    rates = predictor.shading_rates(a.inputs(src.frame(camera, prev_camera)))
+                _expect(rates.shape == predictor.tiles(h, w), f"rates of shape {rates.shape}, the tile grid is "
+                        f"{predictor.tiles(h, w)}")
+    finally:
+        if src is not None:
+            src.close()
+
+
+def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str], open_source: Any,
+                      camera: Camera, prev_camera: Camera) -> None:
+    unsupported = [c for c in sdk.CHANNELS if c not in cls.supported_channels]
+    some = list(channels[:2])
+    source = None
+    with run.check("lifecycle", "with on a frame source returns it and it is open"):
+        source = open_source()
+        with source as entered:
+            _expect(entered is source and not source.closed, "with returned another object, or a closed one")
+        _expect(source.closed, "the source is still open after its with block")
+    with run.check("lifecycle", "an unknown channel raises UnsupportedChannelError"):
+        with open_source() as src:
+            try:
+                src.adapter(["albedo.q"]).close()
+            except UnsupportedChannelError as exc:
+                _expect("unknown channel" in str(exc), f"its message does not say 'unknown channel': {exc}")
+            else:
+                raise _Failed("the adapter took the channel 'albedo.q'")
+    if unsupported:
+        with run.check("lifecycle", "an undeclared channel raises UnsupportedChannelError"):
+            with open_source() as src:
+                try:
+                    src.adapter([unsupported[0]]).close()
+                except UnsupportedChannelError:
+                    pass
+                else:
+                    raise _Failed(f"the adapter took {unsupported[0]!r}, which it does not declare")
+    adapter = first = None
+    src = open_source()
+    try:
+        with run.check("lifecycle", "a foreign frame raises AdapterFrameError"):
+            frame = src.frame(camera, prev_camera)
+            with src.adapter(some) as adapter:
+                _expect(not adapter.closed, "a new adapter reports closed")
+                try:
+                    adapter.inputs(object())
+                except AdapterFrameError:
+                    pass
+                else:
+                    raise _Failed("inputs(object()) returned")
+                first = adapter.inputs(frame)
+        if adapter is not None:
+            with run.check("lifecycle", "with closes the adapter; inputs after close raises AdapterClosedError"):
+                _expect(adapter.closed, "the adapter is open after its with block")
+                try:
+                    adapter.inputs(src.frame(camera, prev_camera))
+                except AdapterClosedError:
+                    pass
+                else:
+                    raise _Failed("inputs() after close() returned planes")
+                adapter.close()  # twice: nothing happens
+                try:
+                    with adapter:
+                        pass
+                except AdapterClosedError:
+                    pass
+                else:
+                    raise _Failed("with on a closed adapter entered")
+        if first is not None:
+            with run.check("lifecycle", "closing the frame source closes the adapters it built"):
+                lent = src.adapter(some)
+                again = lent.inputs(src.frame(camera, prev_camera))
+                _expect(np.array_equal(again, first), "a second adapter on the same frame gave other planes")
+                src.close()
+                _expect(src.closed and lent.closed, "the adapter is still open after its source closed")
+    finally:
+        src.close()
+    with run.check("lifecycle", "a closed frame source refuses frame() and adapter()"):
+        for call, what in ((lambda: src.frame(camera, prev_camera), "frame()"), (lambda: src.adapter(some), "adapter()")):
+            try:
+                call()
+            except AdapterClosedError:
+                pass
+            else:
+                raise _Failed(f"{what} on a closed source returned")
