@@ -122,8 +122,8 @@ class ConformanceReport:
         """Raise :class:`ConformanceError` listing every failed check, if any failed."""
         if self.failures:
             raise ConformanceError(f"adapter {self.adapter!r} failed {len(self.failures)} of {len(self.checks)} "
-                                   "conformance checks:\n" + "\n".join(f"  {c.group}: {c.name}: {c.detail}"
-                                                                       for c in self.failures))
+                                   "conformance checks: " + "; ".join(f"{c.group}: {c.name} ({c.detail})"
+                                                                     for c in self.failures))
 
     def to_dict(self) -> dict[str, Any]:
         return {"adapter": self.adapter, "source": self.source, "size": list(self.size), "channels": list(self.channels),
@@ -411,7 +411,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
                 _expect(isinstance(a, cls), f"the source built a {type(a).__name__}, not a {cls.__name__}")
                 _expect(a.channels == tuple(chans), f"channels {a.channels}, asked for {tuple(chans)}")
                 _expect((a.width, a.height) == (w, h), f"size {a.width}x{a.height}, asked for {w}x{h}")
-                return a.inputs(src.frame(camera, prev_camera))  # type: ignore[no-any-return]
+                return a.inputs(src.frame(camera, prev_camera))
         finally:
             if own:
                 src.close()
@@ -488,7 +488,7 @@ def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str
     unsupported = [c for c in sdk.CHANNELS if c not in cls.supported_channels]
     some = list(channels[:2])
     source = None
-    with run.check("lifecycle", "with on a frame source returns it and it is open"):
+    with run.check("lifecycle", "with on a frame source returns it and closes it"):
         source = open_source()
         with source as entered:
             _expect(entered is source and not source.closed, "with returned another object, or a closed one")

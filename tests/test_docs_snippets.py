@@ -71,6 +71,12 @@ with MyEngineAdapter(["reprojected.y", "seen", "albedo.y", "normal.z", "reprojec
 assert x.shape == (5, 32, 48) and x.dtype == np.float32 and np.isfinite(x).all()
 """,
     ),
+    ("adapters.md", "def test_my_adapter_conforms():"): (  # a plugin's test, on the CPU adapter of tests/
+        f"import sys\nsys.path.insert(0, {str(ROOT)!r})\nfrom rtp import sdk\n"
+        "from tests.test_adapter_contract import NumpyAdapter\n"
+        "sdk.adapters.register('myengine', type('MyEngine', (NumpyAdapter,), {'name': 'myengine'}))\n",
+        "test_my_adapter_conforms()\nassert conformance.check_adapter('myengine').runs_models == ('lpips.onnx',)",
+    ),
     ("adapters.md", "scene = pyrender.Scene(ambient_light=(0.3, 0.3, 0.3))"): (
         "",
         "assert rates.shape == (1, 23, 40) and x.shape == (len(predictor.metadata.inputs), 360, 640)",
