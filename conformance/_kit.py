@@ -141,7 +141,8 @@ class ConformanceReport:
         counts = {s: sum(c.status == s for c in self.checks) for s in ("passed", "failed", "skipped")}
         lines.append(f"{counts['passed']} passed, {counts['failed']} failed, {counts['skipped']} skipped"
                      + (f" ({self.not_run})" if self.not_run else ""))
-        lines.append("runs the shipped models: " + (", ".join(self.runs_models) if self.runs_models else "none (no shipped "
+        lines.append("runs the shipped models: " + (", ".join(m.removesuffix(".onnx") for m in self.runs_models)
+                                                    if self.runs_models else "none (no shipped "
                      "model's inputs are all among its channels)"))
         return "\n".join(lines)
 

@@ -359,6 +359,27 @@ def test_rtp_adapters_check_from_a_plugin_checkout() -> None:
     assert usage.returncode == sdk.EXIT_USAGE and "'albedo' is not a channel" in usage.stderr
 
 
+def test_rtp_adapters_list_names_a_broken_plugin_and_lists_the_rest(registry: None, monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from rtp.cli import main
+
+    broken = EntryPoint("brokenengine", "no_such_package.adapter:Adapter", adapters.ENTRY_POINT_GROUP)
+    found = adapters.entry_points
+
+    monkeypatch.setattr(adapters, "entry_points", lambda group: [*found(group), broken])
+    assert main(["adapters", "list", "--json"]) == 0
+    rows = {r["adapter"]: r for r in json.loads(capsys.readouterr().out)}
+    assert set(rows) == {*REGISTERED, THIRD_PARTY, "brokenengine"}
+    assert rows[THIRD_PARTY]["state"] == "ready" and rows[THIRD_PARTY]["runs_models"] == ["lpips"]
+    assert "failed to load (ModuleNotFoundError" in rows["brokenengine"]["state"]
+    assert rows["moderngl"]["channels"] == sorted(sdk.adapters.get("moderngl").supported_channels)
+    assert main(["adapters", "list"]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[0].split() == ["adapter", "channels", "runs", "the", "shipped", "models"]
+    assert any(line.split()[:3] == [THIRD_PARTY, "13", "lpips"] for line in table), table
+    assert any(line.startswith("brokenengine") and "failed to load" in line for line in table), table
+
+
 class NoLumaAdapter(NumpyAdapter):
     """An adapter whose albedo.y is green alone (the CLI test's failing plugin)."""
 
