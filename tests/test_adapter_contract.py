@@ -237,6 +237,10 @@ BUGS: dict[str, tuple[Callable[[], type[NumpyAdapter]], set[str]]] = {
     "NaN where unseen": (lambda: _broken("NanUnseen", lambda a, f, x: _set(
         a, x, reprojected_r=np.where(_plane(a, x, "seen") == 0, np.nan, _plane(a, x, "reprojected.r")))),
                          {"finite"}),
+    # an 8-bit albedo target handed over as 0..255
+    "albedo in bytes": (lambda: _broken("AlbedoBytes", lambda a, f, x: _set(
+        a, x, **{f"albedo_{c}": _plane(a, x, f"albedo.{c}") * 255 for c in "rgb"})),
+                        {"within each channel's range", "albedo.r agrees with the reference renderer"}),
     "misnamed": (lambda: _broken("Misnamed", name="numpy"), {"name is its registry name"}),
     "closing the source leaves adapters open": (
         lambda: _broken("Untracked", frame_source=classmethod(
