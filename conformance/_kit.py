@@ -371,6 +371,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     run = _Run()
     channels = tuple(c for c in sdk.CHANNELS if c in (cls.supported_channels or ()))
     runs = runnable_models(cls) if channels else ()
+    given = None if model is None else _given_model(model, cls)
     drivable = _class_checks(run, cls, registry_name)
 
     def report(not_run: str | None = None) -> ConformanceReport:
@@ -429,7 +430,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
         if isinstance(x, np.ndarray) and x.shape == (len(channels), h, w):
             _agreement_checks(run, x, channels, reference, tols)
             _order_checks(run, x, channels, draw)
-    _predictor_checks(run, cls, runs, model, open_source, camera, prev_camera, size)
+    _predictor_checks(run, cls, runs, given, open_source, camera, prev_camera, size)
     _lifecycle_checks(run, cls, channels, open_source, camera, prev_camera)
     return report()
 
@@ -455,19 +456,34 @@ def _order_checks(run: _Run, x: np.ndarray, channels: Sequence[str], draw: Any) 
                 f"{shuffled[0]} alone differs from {shuffled[0]} among all the channels")
 
 
-def _predictor_checks(run: _Run, cls: type[Adapter[Any]], runs: Sequence[str], model: Any, open_source: Any,
-                      camera: Camera, prev_camera: Camera, size: tuple[int, int]) -> None:
+def _given_model(model: str | Path | sdk.ShadingRatePredictor, cls: type[Adapter[Any]]) -> tuple[str, Any]:
+    """``check_adapter``'s ``model=``, loaded and checked against the adapter's channels before any drawing."""
+    if isinstance(model, sdk.ShadingRatePredictor):
+        label, predictor = "the given model", model
+    elif isinstance(model, (str, Path)):
+        label, predictor = Path(model).name, sdk.load(model)  # ModelNotFoundError names the shipped ones
+    else:
+        raise sdk.ParameterError(f"model: expected a model path, a shipped model's name or a ShadingRatePredictor, "
+                                 f"got {type(model).__name__}", "model")
+    missing = [c for c in predictor.metadata.inputs if c not in cls.supported_channels]
+    if missing:
+        feeds = ", ".join(m.removesuffix(".onnx") for m in runnable_models(cls)) or "no shipped one"
+        raise sdk.ParameterError(f"model: {label} reads {', '.join(missing)}, which the adapter does not declare; "
+                                 f"give a model it can feed ({feeds}), or none", "model")
+    return label, predictor
+
+
+def _predictor_checks(run: _Run, cls: type[Adapter[Any]], runs: Sequence[str], given: tuple[str, Any] | None,
+                      open_source: Any, camera: Camera, prev_camera: Camera, size: tuple[int, int]) -> None:
     w, h = size
-    if model is None:
+    if given is None:
         if not runs:
             run.skip("predictor", "for_predictor feeds a predictor", "no shipped model's inputs are all among the "
                      "adapter's channels; pass model= (rtp adapters check --model) to check with your own")
             return
         predictors = [(m, sdk.load(m)) for m in runs]
-    elif isinstance(model, sdk.ShadingRatePredictor):
-        predictors = [("the given model", model)]
     else:
-        predictors = [(Path(model).name, sdk.load(model))]
+        predictors = [given]
     src = None
     try:
         for label, predictor in predictors:

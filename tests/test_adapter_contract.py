@@ -320,6 +320,13 @@ def test_resolving_an_adapter_says_what_was_expected() -> None:
                           ("", "expected an adapter name")]:
         with pytest.raises(AdapterNotFoundError, match=message):
             conformance.resolve_adapter(spec)  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="jnyang reads roughness, metallic, specular, reprojected.y.blocks, "
+                       r"albedo.y.blocks, which the adapter does not declare; give a model it can feed \(lpips\)"):
+        conformance.check_adapter(NumpyAdapter, model="jnyang")
+    with pytest.raises(sdk.ModelNotFoundError, match="no-such-model"):
+        conformance.check_adapter(NumpyAdapter, model="no-such-model")
+    with pytest.raises(sdk.ParameterError, match="model: expected a model path"):
+        conformance.check_adapter(NumpyAdapter, model=3)  # type: ignore[arg-type]
     with pytest.raises(sdk.ParameterError, match="integers of at least 16"):
         conformance.check_adapter(NumpyAdapter, size=(8, 8))
     with pytest.raises(sdk.ParameterError, match="'albedo.q' is not a channel"):
