@@ -30,6 +30,7 @@ a plugin that fails to import is logged and reported when asked for, without bre
 from __future__ import annotations
 
 import abc
+import difflib
 import functools
 import logging
 import numbers
@@ -479,8 +480,10 @@ def get(name: str) -> type[Adapter[Any]]:
             _registered[name] = obj
         return obj
     names = available()
+    close = difflib.get_close_matches(name, names, n=1) if isinstance(name, str) else []
     raise AdapterNotFoundError(
-        f"no adapter named {name!r}; available: {', '.join(names) if names else 'none'} "
+        f"no adapter named {name!r}{f' (did you mean {close[0]}?)' if close else ''}; "
+        f"available: {', '.join(names) if names else 'none'} "
         f"(install a plugin that declares it in the {ENTRY_POINT_GROUP!r} entry-point group, or call "
         f"sdk.adapters.register)"
     )

@@ -40,6 +40,9 @@ def test_unknown_name_lists_what_is_available(clean_registry: None) -> None:
     with pytest.raises(adapters.AdapterNotFoundError, match="available: .*fake") as info:
         adapters.get("unreal")
     assert isinstance(info.value, LookupError) and isinstance(info.value, sdk.RtpError)
+    assert "did you mean" not in str(info.value)
+    with pytest.raises(adapters.AdapterNotFoundError, match=r"no adapter named 'fak' \(did you mean fake\?\); available"):
+        adapters.get("fak")
 
 
 def test_entry_point_discovery_dedupes_and_survives_a_broken_plugin(
