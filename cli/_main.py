@@ -813,7 +813,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="where the network trains: auto (the first GPU torch sees, else the CPU; default), cpu, "
                     "cuda, cuda:N or mps. The samples stay in memory here; a checkpoint resumes on any device")
     r = tr.add_argument_group("recipe values (default: the recipe's)")
-    r.add_argument("--tile", type=int, default=None, choices=TILE_SIZES,
+    r.add_argument("--tile", "--tile-size", dest="tile", type=int, default=None, choices=TILE_SIZES,
                    help=f"tile size in pixels (default: {DEFAULT_TILE_SIZE}, unless the recipe sets one)")
     r.add_argument("--outputs", type=_one_of_sets(OUTPUT_SETS), default=None,
                    help="rates the network predicts, one of " + "; ".join(",".join(s) for s in OUTPUT_SETS)
@@ -1025,7 +1025,8 @@ def build_parser() -> argparse.ArgumentParser:
     mt.add_argument("--out", type=out_image, default=None,
                     help="write the per-pixel map (or per-tile values, for PSNR) with a colour "
                     "bar to this image")
-    mt.add_argument("--tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE, help="tile size in pixels")
+    mt.add_argument("--tile", "--tile-size", dest="tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE,
+                    help="tile size in pixels")
     mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")
     return p
 

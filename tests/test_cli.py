@@ -60,8 +60,11 @@ def test_metric_prints_the_librarys_tile_values(metric: str, tmp_path: Path, cap
 
     a, b, ref, test = _image_pair(tmp_path)
     want = metrics.tile_metric(metric, ref, test, 8)
+    assert main(["metric", metric, str(a), str(b), "--tile-size", "8", "--json"]) == 0  # (the flag of play, demo)
+    alias = capsys.readouterr().out
     assert main(["metric", metric, str(a), str(b), "--tile", "8", "--json"]) == 0
     raw = capsys.readouterr().out
+    assert alias == raw
     got = json.loads(raw, parse_constant=lambda c: pytest.fail(f"not JSON: {c}"))  # +inf is null, not Infinity
     assert (got["metric"], got["tile"]) == (metric, 8) and np.array(got["tiles"]).shape == (3, 5)
     as_float = np.array([[np.inf if v is None else v for v in row] for row in got["tiles"]])

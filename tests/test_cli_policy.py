@@ -420,6 +420,8 @@ def test_metric_tile_and_output_choices_are_the_sdks() -> None:
     for outputs in sdk.OUTPUT_SETS:
         assert _parse(*base, "--outputs", ",".join(outputs)).outputs == outputs
     assert _parse(*base, "--inputs", ",".join(sdk.DEFAULT_INPUTS)).inputs == sdk.DEFAULT_INPUTS
+    # the tile flag of play, demo and evaluate is taken where the tile is --tile
+    assert _parse(*base, "--tile-size", "8").tile == 8 and _parse("metric", "flip", "a", "b", "--tile-size", "8").tile == 8
     assert ",".join(sdk.DEFAULT_OUTPUTS) in (_option(("train",), "outputs").help or "")
     for bad in (("targets", "d", "--metrics", "nope"), (*base, "--outputs", ",".join(reversed(sdk.DEFAULT_OUTPUTS))),
                 (*base, "--inputs", "nope"), (*base, "--tile", "3"), ("metric", "flip", "a", "b", "--tile", "3")):
