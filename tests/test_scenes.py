@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rtp import sdk
 from rtp.capture import scenes
 from rtp.capture.scenes import (
     SceneFormatError,
@@ -73,6 +74,19 @@ def test_procedural_is_deterministic():
     assert [m.roughness for m in a.materials] == [m.roughness for m in b.materials]
     c = procedural(8)
     assert c.triangle_count != a.triangle_count or not np.array_equal(c.meshes[0].positions, a.meshes[0].positions)
+    assert _scene_arrays(procedural(np.int64(7)))[0].tobytes() == xa[0].tobytes()  # a numpy integer is a seed
+
+
+@pytest.mark.parametrize(("kw", "message"), [
+    ({"seed": -5}, r"seed: expected a non-negative integer, got -5"),  # was numpy's "expected non-negative integer"
+    ({"seed": 1.5}, r"seed: expected a non-negative integer, got 1.5"),
+    ({"seed": True}, r"seed: expected a non-negative integer, got True"),
+    ({"seed": 0, "rooms": (0, 2)}, r"rooms: expected \(nx, nz\), integers of at least 1, got \(0, 2\)"),
+    ({"seed": 0, "rooms": 2}, r"rooms: expected \(nx, nz\)"),
+])
+def test_procedural_refuses_bad_arguments_saying_what_it_expected(kw: dict, message: str) -> None:
+    with pytest.raises(sdk.ParameterError, match=message):
+        procedural(**kw)
 
 
 def test_procedural_sanity_and_speed():

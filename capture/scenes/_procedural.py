@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtp.scene import Material, PointLight, Scene, SpawnPoint, SunLight
+from rtp.sdk import ParameterError
 
 from ._geometry import MeshBuilder
 from ._textures import make_texture
@@ -148,9 +149,11 @@ def procedural(
         A :class:`~rtp.scene.Scene` with one mesh per used material, a sun,
         one ceiling point light per room (plus a few extras) and one spawn point per room centre.
     """
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ParameterError(f"seed: expected a non-negative integer, got {seed!r}", "seed")
+    if not (isinstance(rooms, tuple) and len(rooms) == 2 and all(isinstance(v, int) and v >= 1 for v in rooms)):
+        raise ParameterError(f"rooms: expected (nx, nz), integers of at least 1, got {rooms!r}", "rooms")
     nx, nz = rooms
-    if nx < 1 or nz < 1:
-        raise ValueError(f"rooms must be at least (1, 1), got {rooms}")
     # Every step draws from the one generator, in this order: the order is part of the output.
     rng = np.random.default_rng(seed)
     mats = _materials(rng, texture_size)
