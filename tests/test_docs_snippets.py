@@ -69,6 +69,29 @@ frame = MyFrame(rng.random((32, 48, 3)), rng.random((32, 48, 3)) * 2 - 1, 1 + rn
 with MyEngineAdapter(["reprojected.y", "seen", "albedo.y", "normal.z", "reprojected.y.blocks"], 48, 32) as a:
     x = a.inputs(frame)
 assert x.shape == (5, 32, 48) and x.dtype == np.float32 and np.isfinite(x).all()
+# ... and, given an engine (the reference renderer read back to numpy), it passes the conformance kit
+from rtp import conformance
+from rtp.plugins.moderngl import Renderer
+
+class ReferenceEngine(MyFrameSource):
+    def __init__(self, adapter_class, scene, width, height):
+        FrameSource.__init__(self, adapter_class, width, height)
+        self.engine = Renderer(width, height)
+        self.engine.load_scene(scene)
+
+    def frame(self, camera, prev_camera):
+        self.engine.ctx.__enter__()
+        prev = self.engine.render(prev_camera)
+        cur = self.engine.render(camera, prev)
+        return MyFrame(cur.albedo, cur.normal, cur.depth, camera.view(), camera.projection(self.width / self.height),
+                       prev.colour["1x1"], prev.depth, prev_camera.view_projection(self.width, self.height))
+
+    def close(self):
+        self.engine.release()
+
+MyEngineAdapter.frame_source = classmethod(lambda cls, scene, width, height: ReferenceEngine(cls, scene, width, height))
+report = conformance.check_adapter(MyEngineAdapter)
+assert report.ok and not report.skipped and report.runs_models == ("lpips.onnx",), str(report)
 """,
     ),
     ("adapters.md", "def test_my_adapter_conforms():"): (  # a plugin's test, on the CPU adapter of tests/
