@@ -707,6 +707,22 @@ class PredictionReuse:
         return est
 
     @staticmethod
+    def _check_fetch_kind(fetch: object) -> None:
+        """``fetch`` is two integer arrays, checked on every frame that gives it, the network's too: a
+        frame where the network runs reads no fetch, and a float one passed there was refused only on
+        the next frame, as if that frame's were the wrong one (the shape and range are checked where
+        the fetch is read: a resize's frame may give the old size's)."""
+        if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
+            raise ParameterError(f"fetch: expected (rows, cols), two integer arrays of the frame's shape, got "
+                                 f"{type(fetch).__name__}", "fetch")
+        for a, name in zip(fetch, ("fetch rows", "fetch cols")):
+            if not isinstance(a, np.ndarray):
+                raise ParameterError(f"{name}: expected a numpy array of integer pixel indices, got {type(a).__name__}",
+                                     "fetch")
+            if not np.issubdtype(a.dtype, np.integer):
+                raise ParameterError(f"{name}: expected integer pixel indices, got dtype {a.dtype}", "fetch")
+
+    @staticmethod
     def _plane(a: object, name: str, hw: tuple[int, int], limit: int | None = None, step: int = 1) -> np.ndarray:
         if not isinstance(a, np.ndarray):
             raise ParameterError(f"{name}: expected a numpy array of shape {hw}, got {type(a).__name__}",
@@ -753,12 +769,11 @@ class PredictionReuse:
         """:meth:`predict` on the model's own tiles."""
         hw = self._shape_of(x, seen)
         runs = self._age + 1 >= self.every
+        if fetch is not None:  # its kind every frame; its shape and range only where it is read
+            self._check_fetch_kind(fetch)
         if self._cache is None or fetch is None or hw != self._shape or (runs and self.history == 0):
             return self._run(x, hw)
         assert self._track is not None
-        if not isinstance(fetch, (tuple, list)) or len(fetch) != 2:
-            raise ParameterError(f"fetch: expected (rows, cols), two integer arrays of the frame's shape, got "
-                                 f"{type(fetch).__name__}", "fetch")
         tile = self._net.tile_size
         step = _check_step(self.step, tile)
         rows = self._plane(fetch[0], "fetch rows", hw, hw[0], step)

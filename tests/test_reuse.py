@@ -406,6 +406,14 @@ def test_bad_arguments_are_refused() -> None:
         assert err.value.name == name
     reuse = sdk.PredictionReuse(s.pred, 4)
     ones = np.ones((s.h, s.w), np.float32)
+    # the fetch's kind is checked on the network's frames too (the first here), where it is not read: a float
+    # fetch was refused only on the next frame, as if that frame's were wrong; its shape is not (a resize's frame)
+    for bad, message in (((s.rows.astype(np.float32), s.cols), "fetch rows: expected integer pixel indices"),
+                         ((s.rows, s.cols.tolist()), "fetch cols: expected a numpy array"),
+                         (s.rows, r"fetch: expected \(rows, cols\)")):
+        with pytest.raises(sdk.ParameterError, match=message):
+            sdk.PredictionReuse(s.pred, 4).predict(s.x, bad, ones)  # type: ignore[arg-type]
+    sdk.PredictionReuse(s.pred, 4).predict(s.x, (s.rows[:-1], s.cols[:, :-1]), ones)  # an old size's: not read
     with pytest.raises(sdk.InputShapeError, match=r"\(C, H, W\)"):
         reuse.predict(s.x[None])
     reuse.predict(s.x)
