@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import textwrap
 import warnings
 from typing import Any
@@ -11,6 +12,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["run_metric"]
+
+log = logging.getLogger("rtp.cli")
 
 
 def _read(path: str) -> np.ndarray:
@@ -23,7 +26,12 @@ def _read(path: str) -> np.ndarray:
         raise ParameterError(f"{path!r}: expected the path of an image, got a text with a NUL byte")
     try:
         try:
-            return read_image_values(path)
+            rgba = read_image_values(path, alpha=True)
+            if rgba.shape[-1] == 4 and (rgba[..., 3] < 1.0).any():
+                log.warning("%s: %.1f%% of its pixels are not opaque; the metric compares the colour alone (composite "
+                            "the image over its background first to compare what is shown)", path,
+                            100.0 * float((rgba[..., 3] < 1.0).mean()))
+            return np.ascontiguousarray(rgba[..., :3])
         except ValueError as err:  # (a float image past [0, 1], 32-bit integers: what it holds, not its bytes)
             raise ParameterError(f"{path!r}: {err}") from None
     except FileNotFoundError:

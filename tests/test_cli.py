@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import re
 import sys
 from collections.abc import Callable
@@ -116,6 +117,30 @@ def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, ca
             main(argv)
         assert e.value.code == 2
         assert "expected a path, got '\\ud800' (not encodable as a file name)" in capsys.readouterr().err
+
+
+def test_metric_says_when_an_image_has_transparent_pixels(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                          caplog: pytest.LogCaptureFixture) -> None:
+    """An RGBA image is compared by its colour (as it always was), and a warning says that its alpha
+    was not: an image with a cut-out compares the colour under it, not what is shown."""
+    from PIL import Image
+
+    a, b, _, test = _image_pair(tmp_path)
+    rgba = np.concatenate([np.round(test * 255), np.full(test.shape[:2] + (1,), 255.0)], -1).astype(np.uint8)
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "opaque.png")
+    rgba[:6, :10, 3] = 0  # a cut-out: 60 of 960 pixels
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "cut.png")
+    tiles = []
+    for name in ("test.png", "opaque.png", "cut.png"):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="rtp"):
+            assert main(["metric", "flip", str(a), str(tmp_path / name), "--tile", "8", "--json"]) == 0
+        tiles.append(json.loads(capsys.readouterr().out)["tiles"])
+        warned = [r.getMessage() for r in caplog.records if "opaque" in r.getMessage()]
+        assert warned == ([f"{tmp_path / name}: 6.2% of its pixels are not opaque; the metric compares the colour "
+                           "alone (composite the image over its background first to compare what is shown)"]
+                          if name == "cut.png" else []), (name, warned)
+    assert tiles[0] == tiles[1] == tiles[2]
 
 
 def test_metric_reads_16_bit_and_float_images_by_their_values(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
