@@ -22,6 +22,7 @@ EXAMPLES = """examples:
   rtp info jnyang                                 a model's metadata, inputs and outputs
   rtp metric flip ref.png test.png --out map.png  FLIP (or another metric) of an image pair
   rtp scenes list                                 the game levels, their split, and what is cached
+  rtp adapters check myengine                     the adapter contract's checks on your engine's adapter
   rtp capture --scene procedural:1 --per-scene 2 --out data/toy
   rtp targets data/toy && rtp train --data data/toy --metric jnyang --out toy.pt
 """

@@ -211,6 +211,13 @@ _METRIC = st.tuples(st.one_of(st.sampled_from(_METRICS), hostile), paths, paths)
     lambda mrt: _argv(["metric", *mrt], [], [("--out", paths), ("--tile", numbers), ("--json", None)]))
 
 
+# rtp adapters check: an adapter in a module that does not exist (nothing is drawn), whatever the options;
+# rtp adapters list takes no input to miss, so it is not here.
+_ADAPTERS_CHECK = st.one_of(st.just("no_such_module:Adapter"), st.just("no-such-adapter")).flatmap(
+    lambda spec: _argv(["adapters", "check", spec], [],
+                       [("--size", hostile), ("--model", paths), ("--tolerance", hostile), ("--json", None)]))
+
+
 # -- running one command ---------------------------------------------------------------------------
 
 class Hang(BaseException):
@@ -286,6 +293,7 @@ CASES = [
     ("metric", _METRIC),
     ("scenes fetch", _SCENES_FETCH),
     ("scenes list", _SCENES_LIST),
+    ("adapters check", _ADAPTERS_CHECK),
 ]
 
 
