@@ -338,9 +338,12 @@ def _cmd_adapters_check(args: argparse.Namespace) -> int:
         print(json.dumps(report.to_dict(), indent=1))
     else:
         print(report.to_text())
-    if report.not_run and not report.failures:
-        print(f"warning: checks that draw frames did not run: {report.not_run}", file=sys.stderr)
     report.raise_for_failures()  # (ConformanceError: exit 1, naming each failed check)
+    if report.not_run:  # a check that could not draw checked nothing: a missing install (exit 2), not a pass
+        from rtp.sdk.adapters import AdapterNotFoundError
+
+        raise AdapterNotFoundError(f"the checks that draw frames did not run ({report.not_run}): install the "
+                                   "adapter's engine and run again")
     return 0
 
 

@@ -386,21 +386,29 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     camera, prev_camera = _cameras(scene)
     w, h = size
     options = dict(frame_source_options or {})
-    with Renderer(w, h) as ref:
-        ref.ctx.__enter__()  # (moderngl makes a context current only through __enter__)
-        ref.load_scene(scene)
-        reference = ref.render(camera, ref.render(prev_camera))
 
     def open_source() -> FrameSource[Any]:
         return cls.frame_source(scene, w, h, **options)
 
+    opens = "frame_source opens on the conformance scene"
     try:
-        first = open_source()
+        open_source().close()  # (opened to learn whether the engine is there before anything is drawn)
     except ImportError as exc:
         why = f"the {name} adapter's engine is not installed: {exc}"
-        for group in ("planes", "agreement", "order", "predictor", "lifecycle"):
-            run.skip(group, "driven on the conformance scene", why)
+        for group in ("class", "planes", "agreement", "order", "predictor", "lifecycle"):
+            run.skip(group, opens if group == "class" else "driven on the conformance scene", why)
         return report(why)
+    except Exception as exc:  # the engine's own error: the adapter cannot be driven
+        run.checks.append(Check("class", opens, "failed", f"raised {type(exc).__name__}: {exc}"))
+        return report("the frame source did not open")
+    run.checks.append(Check("class", opens, "passed"))
+    # the reference renderer's frame for the same cameras, drawn while no source of the engine is open: a GL
+    # engine's sources then start as in an engine, with their own context the current one
+    with Renderer(w, h) as ref:
+        ref.ctx.__enter__()  # (moderngl makes a context current only through __enter__)
+        ref.load_scene(scene)
+        reference = ref.render(camera, ref.render(prev_camera))
+    first = open_source()
 
     def draw(chans: Sequence[str], source: FrameSource[Any] | None = None) -> np.ndarray:
         own = source is None

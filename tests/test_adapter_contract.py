@@ -305,7 +305,9 @@ def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so() ->
 
     report = conformance.check_adapter(NoEngine)
     assert report.ok and report.not_run is not None and "No module named 'myengine'" in report.not_run
-    assert {c.group for c in report.skipped} == GROUPS - {"class"}
+    assert {c.group for c in report.skipped} == GROUPS
+    assert [c.name for c in report.checks if c.group == "class" and c.status == "skipped"] == [
+        "frame_source opens on the conformance scene"]
     assert "skipped (the numpy-gbuffers adapter's engine is not installed" in report.to_text()
 
 
@@ -389,6 +391,26 @@ def test_rtp_adapters_list_names_a_broken_plugin_and_lists_the_rest(registry: No
     assert table[0].split() == ["adapter", "channels", "runs", "the", "shipped", "models"]
     assert any(line.split()[:3] == [THIRD_PARTY, "13", "lpips"] for line in table), table
     assert any(line.startswith("brokenengine") and "failed to load" in line for line in table), table
+
+
+class NoEngineAdapter(NumpyAdapter):
+    """An adapter whose engine is not installed (the CLI test's)."""
+
+    @classmethod
+    def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> Any:
+        raise ImportError("No module named 'myengine'")
+
+
+@pytest.mark.gl
+def test_rtp_adapters_check_fails_when_the_engine_is_missing(capsys: pytest.CaptureFixture[str]) -> None:
+    from rtp.cli import main
+
+    assert main(["adapters", "check", f"{__name__}:NoEngineAdapter"]) == sdk.EXIT_USAGE  # a missing install
+    out, err = capsys.readouterr()
+    assert "6 passed, 0 failed, 6 skipped" in out
+    assert err.strip().splitlines()[-1] == (
+        "rtp adapters check: error: the checks that draw frames did not run (the numpy-gbuffers adapter's engine is "
+        "not installed: No module named 'myengine'): install the adapter's engine and run again")
 
 
 class NoLumaAdapter(NumpyAdapter):

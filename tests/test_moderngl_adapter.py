@@ -325,6 +325,20 @@ def test_reference_frame_source_hands_over_the_renderer_g_buffers(frames) -> Non
     ctx.texture((2, 2), 1).release()  # a borrowed context stays open (a released one raises here)
 
 
+def test_a_frame_source_builds_its_adapters_in_its_own_context(frames) -> None:
+    """Two reference frame sources (each its own context): an adapter of the first built while the second's
+    context is current gives the first's planes (its GL objects were made in the second's context, and it
+    read garbage, before ReferenceFrameSource.adapter made its context current)."""
+    _, prev, cur = frames
+    channels = ("reprojected.y", "seen", "albedo.y", "normal.z")
+    with Adapter.frame_source(procedural(3), W, H) as a:
+        with a.adapter(channels) as first:
+            want = first.inputs(a.frame(cur.camera, prev.camera))
+        with Adapter.frame_source(procedural(3), W, H):  # its new context is the current one now
+            with a.adapter(channels) as built_meanwhile:
+                np.testing.assert_array_equal(built_meanwhile.inputs(a.frame(cur.camera, prev.camera)), want)
+
+
 def test_leaving_a_with_ctx_block_unbinds_every_context(gl_context) -> None:
     """Why the adapter runs in the current context instead of wrapping its passes in ``with ctx:``
     (docs/adapters.md "Frame sources"): on EGL, leaving the block makes no context current, not the

@@ -8,6 +8,7 @@ This is how a caller that does not know moderngl drives :class:`rtp.plugins.mode
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -99,6 +100,13 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
             prev_view_projection=prev_camera.view_projection(self.width, self.height),
             material=t["material"],
         )
+
+    def adapter(self, channels: Iterable[str], **options: Any) -> Adapter:
+        """The adapter, built in this source's context (made current first: the adapter's GL objects
+        are created in whatever context is current, and another source's may be)."""
+        self._check_open()  # (a closed source's context is gone: AdapterClosedError, as the base class says)
+        self._use()
+        return super().adapter(channels, **options)
 
     def _close_dependents(self) -> None:
         self._use()  # the adapters free their GL objects in this context
