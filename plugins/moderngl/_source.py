@@ -15,6 +15,7 @@ import numpy as np
 
 from rtp.scene import Camera
 from rtp.sdk import ParameterError
+from rtp.sdk.adapters import Adapter as SdkAdapter
 from rtp.sdk.adapters import FrameSource
 
 from ._adapter import GBufferTextures
@@ -101,7 +102,7 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
             material=t["material"],
         )
 
-    def adapter(self, channels: Iterable[str], **options: Any) -> Adapter:
+    def adapter(self, channels: Iterable[str], **options: Any) -> SdkAdapter[GBufferTextures]:
         """The adapter, built in this source's context (made current first: the adapter's GL objects
         are created in whatever context is current, and another source's may be)."""
         self._check_open()  # (a closed source's context is gone: AdapterClosedError, as the base class says)
