@@ -220,6 +220,17 @@ def test_train_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert "multiple of the tile size" in capsys.readouterr().err
 
 
+def test_a_dataset_of_one_scene_is_told_how_to_add_a_second(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # a user's one level (rtp capture --scene level.glb): validation holds out whole scenes, so say how to add one
+    one = _dataset(tmp_path / "one", n=1)
+    out = tmp_path / "m.pt"
+    assert rtp_main(["train", "--data", str(one), "--metric", "jnyang", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{one} holds one scene (scene0); validation holds out whole scenes, so it needs two: capture another " \
+           f"into it (rtp capture --scene procedural:1 --out {one} with the same --size" in err
+    assert not out.exists()
+
+
 def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     usual = _dataset(tmp_path / "usual", n=12, profile="slow")
     frame = _dataset(tmp_path / "frame", n=9, prefix="f", profile="frame")

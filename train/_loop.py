@@ -420,7 +420,10 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
         raise sdk.ParameterError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}")
     if not val:
         if len(scenes) < 2:
-            raise DatasetError(f"{cfg.data} holds one scene ({scenes}); validation is split by scene, so capture at least two")
+            raise DatasetError(
+                f"{cfg.data} holds one scene ({scenes[0] if scenes else 'none'}); validation holds out whole scenes, "
+                f"so it needs two: capture another into it (rtp capture --scene procedural:1 --out {cfg.data} with "
+                "the same --size adds the built-in generator's, or --scene another of your files)")
         val = [scenes[-1]]
     train_ids = [i for s in scenes if s not in val for i in by_scene[s]]
     if not train_ids:  # (was an IndexError once the split was loaded)
