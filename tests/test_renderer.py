@@ -426,6 +426,26 @@ def test_a_frame_within_the_side_limit_but_past_the_context_s_memory_is_a_render
 
 
 @pytest.mark.gl
+def test_two_renderers_each_draw_in_their_own_context(gl_context: Any, renderer: Renderer) -> None:
+    """A renderer makes its context current in each call: with a second renderer's (or any other)
+    context current, a draw used that context's objects of the same names (garbage, or a crash in
+    free() with another scene). The borrowed context of the module's renderer is made current too."""
+    cam = _front_camera()
+    renderer.load_scene(_flat_scene())
+    with Renderer(W, H) as a:
+        a.load_scene(_textured_scene())
+        alone = a.render(cam, a.render(_front_camera(yaw=3.0)))
+        for c in (renderer.render(cam), None):  # the module's renderer, on the shared context, draws in between
+            with Renderer(96, 64) as b:  # another size and scene; its new context is the current one
+                b.load_scene(_flat_scene())
+                b_frame = b.render(cam)
+                again = a.render(cam, a.render(_front_camera(yaw=3.0)))
+                np.testing.assert_array_equal(again.colour["1x1"], alone.colour["1x1"])
+                np.testing.assert_array_equal(again.seen, alone.seen)
+                np.testing.assert_array_equal(b.render(cam).colour["1x1"], b_frame.colour["1x1"])
+                assert c is None or renderer.render(cam).colour["1x1"].shape == (H, W, 3)
+
+
 def test_renderer_errors_and_lifetime(gl_context):
     ctx = gl_context
     with Renderer(32, 16, ctx=ctx, shadow_map_size=64) as r:

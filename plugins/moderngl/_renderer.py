@@ -453,6 +453,7 @@ class Renderer:
         self.width, self.height = int(width), int(height)
         self._owns_ctx = ctx is None
         self.ctx = create_context() if ctx is None else _check_ctx(ctx)
+        self.ctx.__enter__()  # (a borrowed context may not be the current one: its objects are made in it)
         if self.ctx.version_code < 330:
             raise RendererError(f"the renderer needs OpenGL >= 3.3, the context offers {self.ctx.version_code}")
         if shadow_map_size is None:
@@ -1154,13 +1155,18 @@ class Renderer:
 
     # ------------------------------------------------------------------ lifetime
     def _check_alive(self) -> None:
+        """At the top of every public method that draws: the renderer is not released, and its context
+        is the current one (moderngl never switches by itself: with a second renderer's context current,
+        a draw used that context's objects of the same names and could corrupt memory)."""
         if self._released:
             raise RendererError("this renderer has been released")
+        self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
 
     def release(self) -> None:
         """Free every GL resource (and the context, when the renderer created it). Idempotent."""
         if self._released:
             return
+        self.ctx.__enter__()  # (its objects are freed in its own context)
         self._release_scene()
         if self._owns_ctx:
             self.ctx.release()
