@@ -11,8 +11,8 @@ and put through the lifecycle (``with``, ``close``, the typed errors)::
     report = conformance.check_adapter("myengine")       # or "mypkg.adapter:MyAdapter", or the class
     assert report.ok, report                              # the table of checks, each failure with why
 
-or from a shell: ``rtp adapters check myengine``. Needs the reference renderer (``rtp[moderngl]``
-and a headless EGL); imports nothing of the engine beyond the adapter's own ``frame_source``.
+or from a shell: ``rtp adapters check myengine``. Needs ``rtp[capture]`` (the reference renderer, the
+procedural scene, the picture) and a headless EGL; imports nothing of the engine beyond the adapter's own ``frame_source``.
 """
 
 from __future__ import annotations

@@ -104,6 +104,8 @@ class ConformanceReport:
     runs_models: tuple[str, ...] = ()
     #: Why the checks that draw frames did not run, when they did not (the engine is not installed).
     not_run: str | None = None
+    #: The picture written (``check_adapter(image=...)``): each channel beside the reference's.
+    image: str | None = None
 
     @property
     def failures(self) -> tuple[Check, ...]:
@@ -127,7 +129,7 @@ class ConformanceReport:
 
     def to_dict(self) -> dict[str, Any]:
         return {"adapter": self.adapter, "source": self.source, "size": list(self.size), "channels": list(self.channels),
-                "ok": self.ok, "runs_models": list(self.runs_models), "not_run": self.not_run,
+                "ok": self.ok, "runs_models": list(self.runs_models), "not_run": self.not_run, "image": self.image,
                 "checks": [{"group": c.group, "name": c.name, "status": c.status, "detail": c.detail}
                            for c in self.checks]}
 
@@ -144,6 +146,9 @@ class ConformanceReport:
         lines.append("runs the shipped models: " + (", ".join(m.removesuffix(".onnx") for m in self.runs_models)
                                                     if self.runs_models else "none (no shipped "
                      "model's inputs are all among its channels)"))
+        if self.image:
+            lines.append(f"wrote {self.image}: each channel beside the reference renderer's, red where they differ "
+                         "past the tolerance")
         return "\n".join(lines)
 
     __str__ = to_text
@@ -326,7 +331,8 @@ def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], referen
 def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = DEFAULT_SIZE,
                   tolerances: Mapping[str, float | Tolerance] | None = None,
                   model: str | Path | sdk.ShadingRatePredictor | None = None,
-                  frame_source_options: Mapping[str, Any] | None = None) -> ConformanceReport:
+                  frame_source_options: Mapping[str, Any] | None = None,
+                  image: str | Path | None = None) -> ConformanceReport:
     """Run every conformance check of docs/adapters.md on an adapter and report each.
 
     The adapter is driven only through the generic path (``frame_source`` -> ``adapter`` ->
@@ -343,6 +349,10 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
         model: the predictor ``for_predictor`` feeds (a path, a shipped model's name, or a loaded
             predictor); default every shipped model the adapter can run.
         frame_source_options: keyword arguments of the adapter's ``frame_source``.
+        image: write a picture here (its extension names the format: ``.png``, ``.jpg``, ...): a
+            row per channel, the adapter's plane beside the reference renderer's and their
+            difference, red where it is past the channel's tolerance. Written whenever the adapter
+            produced planes of the right shape, failed checks or not.
 
     Returns:
         the report; nothing raises for a failed check (:meth:`ConformanceReport.raise_for_failures`
@@ -359,6 +369,10 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     if not (isinstance(size, tuple) and len(size) == 2
             and all(isinstance(v, int) and not isinstance(v, bool) and v >= 16 for v in size)):
         raise sdk.ParameterError(f"size: expected (width, height), integers of at least 16, got {size!r}", "size")
+    if image is not None:
+        from rtp.capture import check_image_output
+
+        check_image_output(image, what="image")  # (before any drawing: a bad path is a ParameterError now)
     tols = dict(AGREEMENT)
     for c, t in (tolerances or {}).items():
         if c not in sdk.CHANNELS:
@@ -374,8 +388,11 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     given = None if model is None else _given_model(model, cls)
     drivable = _class_checks(run, cls, registry_name)
 
+    written: list[str] = []
+
     def report(not_run: str | None = None) -> ConformanceReport:
-        return ConformanceReport(name, source_text, size, channels, tuple(run.checks), runs, not_run)
+        return ConformanceReport(name, source_text, size, channels, tuple(run.checks), runs, not_run,
+                                 written[0] if written else None)
 
     if not drivable or not channels:
         return report("the class cannot be driven")
@@ -437,6 +454,14 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
         _plane_checks(run, x, channels, reference, size)
         if isinstance(x, np.ndarray) and x.shape == (len(channels), h, w):
             _agreement_checks(run, x, channels, reference, tols)
+            if image is not None:
+                from rtp.capture import save_image
+
+                from ._picture import planes_picture
+
+                save_image(image, planes_picture(x, channels, reference, tols, title=f"adapter {name!r} and the "
+                                                 f"reference renderer: procedural({CONFORMANCE_SCENE}) at {w}x{h}"))
+                written.append(str(image))
             _order_checks(run, x, channels, draw)
     _predictor_checks(run, cls, runs, given, open_source, camera, prev_camera, size)
     _lifecycle_checks(run, cls, channels, open_source, camera, prev_camera)

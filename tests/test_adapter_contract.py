@@ -266,6 +266,32 @@ def test_the_kit_names_what_a_broken_adapter_gets_wrong(registry: None, monkeypa
     assert all(name in str(info.value) for name in expected)
 
 
+def _red_pixels(path: Path) -> int:
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    return int(((rgb[..., 0] > 200) & (rgb[..., 1] < 40) & (rgb[..., 2] < 40)).sum())
+
+
+@pytest.mark.gl
+def test_the_kit_draws_where_an_adapter_differs_from_the_reference(tmp_path: Path) -> None:
+    good = conformance.check_adapter(NumpyAdapter, image=tmp_path / "good.png")
+    assert good.ok and good.image == str(tmp_path / "good.png") and "wrote " + good.image in str(good)
+    flipped = conformance.check_adapter(BUGS["upside down"][0](), image=tmp_path / "flipped.jpg", model="lpips")
+    assert not flipped.ok and flipped.image == str(tmp_path / "flipped.jpg")
+    # a row a channel; red only where a plane is past its tolerance: none for the good one, rows of it flipped
+    from PIL import Image
+
+    assert Image.open(tmp_path / "good.png").size == Image.open(tmp_path / "flipped.jpg").size
+    assert Image.open(tmp_path / "good.png").size[1] > 13 * 48 * 3  # 13 channels, each at least 3x its 48 rows
+    assert _red_pixels(tmp_path / "good.png") == 0
+    assert _red_pixels(tmp_path / "flipped.jpg") > 5000
+    with pytest.raises(sdk.ParameterError, match="image"):  # a path that cannot be written: before any drawing
+        conformance.check_adapter(NumpyAdapter, image=tmp_path / "planes.txt")
+    assert conformance.check_adapter(_broken("Boom", lambda a, f, x: x[:1]), image=tmp_path / "none.png").image is None
+    assert not (tmp_path / "none.png").exists()  # no planes of the right shape: no picture
+
+
 @pytest.mark.gl
 def test_an_adapter_that_raises_fails_with_its_error_and_the_rest_still_runs(registry: None,
                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
@@ -354,18 +380,20 @@ def test_a_tolerance_can_be_relaxed_per_channel(registry: None, monkeypatch: pyt
 
 # ---------------------------------------------------------------------------------------------- the command
 @pytest.mark.gl
-def test_rtp_adapters_check_from_a_plugin_checkout() -> None:
+def test_rtp_adapters_check_from_a_plugin_checkout(tmp_path: Path) -> None:
     # run in the plugin's folder with module:Class, before any entry point is declared
     ok = run_rtp("adapters", "check", f"{__name__}:NumpyAdapter", "--size", "80x48", cwd=ROOT)
     assert ok.returncode == 0, ok.stderr
     assert "conformance on procedural(0) at 80x48" in ok.stdout and " 0 failed, 0 skipped" in ok.stdout
     assert "runs the shipped models: lpips" in ok.stdout
-    bad = run_rtp("adapters", "check", f"{__name__}:NoLumaAdapter", "--json", cwd=ROOT)
+    bad = run_rtp("adapters", "check", f"{__name__}:NoLumaAdapter", "--json", "--image", str(tmp_path / "p.png"),
+                  cwd=ROOT)
     assert bad.returncode == sdk.EXIT_FAILED, bad.stderr
     out = json.loads(bad.stdout)
     assert not out["ok"] and [c["name"] for c in out["checks"] if c["status"] == "failed"] == [
         "albedo.y is the luma of the adapter's own albedo.rgb", "albedo.y agrees with the reference renderer"]
     assert "failed 2 of" in bad.stderr and "albedo.y is the luma" in bad.stderr
+    assert out["image"] == str(tmp_path / "p.png") and _red_pixels(tmp_path / "p.png") > 0  # albedo.y's row
     listed = run_rtp("adapters", "list")
     assert listed.returncode == 0 and listed.stdout.split("\n")[1].split()[:2] == ["moderngl", "23"], listed.stdout
     usage = run_rtp("adapters", "check", "moderngl", "--tolerance", "albedo=0.1")

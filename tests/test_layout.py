@@ -37,7 +37,7 @@ THIRD_PARTY: dict[str, frozenset[str]] = {
     "sdk": frozenset({"numpy", "onnxruntime", "yaml"}),
     "scene": frozenset({"numpy"}),
     "evaluate": frozenset({"numpy", "PIL", "matplotlib", "tqdm", "imageio"}),
-    "conformance": frozenset({"numpy"}),
+    "conformance": frozenset({"numpy", "matplotlib"}),
 }
 
 
