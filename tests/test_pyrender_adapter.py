@@ -22,6 +22,7 @@ test the shared ``gl_context`` of conftest.py, which skips without one) and pyre
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -367,7 +368,7 @@ def test_zero_mesh_normals_give_the_geometric_normal() -> None:
     assert (depth > 0).mean() > 0.05 and np.allclose(nz[depth > 0], 1.0, atol=1e-3)
 
 
-def test_scene_is_restored_and_errors_are_typed() -> None:
+def test_scene_is_restored_and_errors_are_typed(caplog: pytest.LogCaptureFixture) -> None:
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
 
     pyrender = pyrender_or_skip()
@@ -392,6 +393,15 @@ def test_scene_is_restored_and_errors_are_typed() -> None:
             adapter.inputs(SceneFrame(scene, moved, np.eye(4), np.zeros((10, 10, 3))))
         with pytest.raises(PyrenderAdapterError, match="4x4"):
             adapter.inputs(SceneFrame(scene, np.eye(3), np.eye(4), prev_u8))
+        # an HDR previous frame is clipped to [0, 1], as before, and said so once (it was silent)
+        with caplog.at_level(logging.WARNING, logger="rtp.plugins.pyrender"):
+            hdr = prev_u8.astype(np.float32) / 255.0 * 4.0
+            clipped = adapter.inputs(SceneFrame(scene, moved, np.eye(4), hdr, f_prev.depth))
+            adapter.inputs(SceneFrame(scene, moved, np.eye(4), hdr, f_prev.depth))
+        np.testing.assert_array_equal(clipped, adapter.inputs(SceneFrame(scene, moved, np.eye(4), np.clip(hdr, 0, 1),
+                                                                          f_prev.depth)))
+        said = [r.getMessage() for r in caplog.records if "clipped to [0, 1]" in r.getMessage()]
+        assert len(said) == 1 and said[0].startswith("prev_colour spans [0, 3.98]: clipped"), said
         no_cam = pyrender.Scene()
         with pytest.raises(PyrenderAdapterError, match="no camera"):
             adapter.inputs(SceneFrame(no_cam, np.eye(4), np.eye(4), prev_u8))

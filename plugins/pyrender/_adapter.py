@@ -34,6 +34,8 @@ if TYPE_CHECKING:
 __all__ = ["Adapter", "SceneFrame"]
 
 log = logging.getLogger("rtp.plugins.pyrender")
+#: How far past [0, 1] a float frame may reach unremarked (a display-encoded image's rounding).
+_RANGE_SLACK = 1e-3
 
 _REPROJECTED = ("reprojected.r", "reprojected.g", "reprojected.b")
 _ALBEDO = ("albedo.r", "albedo.g", "albedo.b")
@@ -204,6 +206,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
                                      renderer=renderer)
         self.msaa, self.normal_bits = self._gbuf.msaa, self._gbuf.normal_bits
         self._last: tuple[int, int, np.ndarray, np.ndarray] | None = None  # (scene id, camera id, pose, depth)
+        self._warned: set[str] = set()  # frame fields already said to be out of [0, 1]
         log.debug("pyrender adapter %dx%d for %s (msaa=%s, normal_bits=%d)", self.width, self.height,
                   ", ".join(self.channels), self.msaa, self.normal_bits)
 
@@ -312,6 +315,11 @@ class Adapter(_BaseAdapter[SceneFrame]):
             raise PyrenderAdapterError(f"{name} must be uint8 or float in [0, 1], got {a.dtype}")
         if not np.isfinite(a).all():
             raise PyrenderAdapterError(f"{name} must be finite, got NaN or infinity")
+        lo, hi = float(a.min(initial=0.0)), float(a.max(initial=0.0))
+        if (lo < -_RANGE_SLACK or hi > 1.0 + _RANGE_SLACK) and name not in self._warned:
+            self._warned.add(name)  # (once an adapter: an engine hands the same kind of frame every frame)
+            log.warning("%s spans [%.3g, %.3g]: clipped to [0, 1]; the adapter reads display-encoded colour, so tone-map "
+                        "an HDR frame first (said once for this adapter)", name, lo, hi)
         return np.clip(a.astype(np.float32), 0.0, 1.0)
 
     def inputs(self, frame: SceneFrame) -> np.ndarray:
