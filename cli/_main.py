@@ -738,15 +738,16 @@ def build_parser() -> argparse.ArgumentParser:
     for name, help_, func in (("list", "the installed adapters, their channels and the shipped models each runs",
                                _cmd_adapters_list),
                               ("check", "run the conformance checks of docs/adapters.md on an adapter: drawn through "
-                               "its frame source, compared with the reference renderer (exit 1 when one fails)",
+                               "its frame source, compared with the reference renderer (exit 1 when one fails, 2 when "
+                               "the adapter's engine is missing)",
                                _cmd_adapters_check)):
         a = asub.add_parser(name, help=help_, description=help_[0].upper() + help_[1:] + ".", formatter_class=Formatter)
         add_common(a, top=False)
         a.set_defaults(func=func)
         a.add_argument("--json", action="store_true", help="print JSON instead of a table")
     chk = asub.choices["check"]
-    chk.add_argument("adapter", help="an installed adapter's name (`rtp adapters list`), or package.module:Class for "
-                     "one not registered yet")
+    chk.add_argument("adapter", metavar="ADAPTER", help="an installed adapter's name (`rtp adapters list`), or "
+                     "package.module:Class for one not registered yet")
     chk.add_argument("--size", type=frame_size, default="64x48", help="WIDTHxHEIGHT of the frames drawn")
     chk.add_argument("--model", default=None, help="the model for_predictor feeds: an .onnx path or a shipped "
                      "model's name (default: every shipped model the adapter can run)")
