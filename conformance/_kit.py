@@ -106,6 +106,12 @@ class ConformanceReport:
     not_run: str | None = None
     #: The picture written (``check_adapter(image=...)``): each channel beside the reference's.
     image: str | None = None
+    #: Per model fed (its name), the share of tiles where the rate chosen from the adapter's planes is the
+    #: rate chosen from the reference renderer's, the planes of the engine's own lit image (``reprojected.*``)
+    #: and shading model (:data:`ENGINE_DEFINED`) kept the adapter's: what the G-buffers' differences do to
+    #: the decisions. A measurement, not a check (an engine's own texture filtering moves decisions near a
+    #: threshold: docs/adapters.md, the pyrender adapter).
+    decisions: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def failures(self) -> tuple[Check, ...]:
@@ -130,6 +136,7 @@ class ConformanceReport:
     def to_dict(self) -> dict[str, Any]:
         return {"adapter": self.adapter, "source": self.source, "size": list(self.size), "channels": list(self.channels),
                 "ok": self.ok, "runs_models": list(self.runs_models), "not_run": self.not_run, "image": self.image,
+                "decisions": dict(self.decisions),
                 "checks": [{"group": c.group, "name": c.name, "status": c.status, "detail": c.detail}
                            for c in self.checks]}
 
@@ -146,6 +153,9 @@ class ConformanceReport:
         lines.append("runs the shipped models: " + (", ".join(m.removesuffix(".onnx") for m in self.runs_models)
                                                     if self.runs_models else "none (no shipped "
                      "model's inputs are all among its channels)"))
+        if self.decisions:
+            lines.append("the same rate as from the reference renderer's G-buffers (with the engine's own lit image): "
+                         + ", ".join(f"{m} {share:.1%}" for m, share in self.decisions.items()) + " of the tiles")
         if self.image:
             lines.append(f"wrote {self.image}: each channel beside the reference renderer's, red where they differ "
                          "past the tolerance")
@@ -389,10 +399,11 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     drivable = _class_checks(run, cls, registry_name)
 
     written: list[str] = []
+    decisions: dict[str, float] = {}
 
     def report(not_run: str | None = None) -> ConformanceReport:
         return ConformanceReport(name, source_text, size, channels, tuple(run.checks), runs, not_run,
-                                 written[0] if written else None)
+                                 written[0] if written else None, dict(decisions))
 
     if not drivable or not channels:
         return report("the class cannot be driven")
@@ -460,7 +471,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
                                                  f"reference renderer: procedural({CONFORMANCE_SCENE}) at {w}x{h}"))
                 written.append(str(image))
             _order_checks(run, x, channels, draw)
-    _predictor_checks(run, cls, runs, given, open_source, camera, prev_camera, size)
+    _predictor_checks(run, cls, runs, given, open_source, camera, prev_camera, size, reference, decisions)
     _lifecycle_checks(run, cls, channels, open_source, camera, prev_camera)
     return report()
 
@@ -503,8 +514,18 @@ def _given_model(model: str | Path | sdk.ShadingRatePredictor, cls: type[Adapter
     return label, predictor
 
 
+def _engine_image(channel: str) -> bool:
+    """A channel of the engine's own lit image (``reprojected.*`` and the planes derived from it) or of its
+    shading model (:data:`ENGINE_DEFINED`): what an adapter is not compared with the reference renderer on."""
+    return channel.startswith("reprojected.") or channel in ENGINE_DEFINED
+
+
 def _predictor_checks(run: _Run, cls: type[Adapter[Any]], runs: Sequence[str], given: tuple[str, Any] | None,
-                      open_source: Any, camera: Camera, prev_camera: Camera, size: tuple[int, int]) -> None:
+                      open_source: Any, camera: Camera, prev_camera: Camera, size: tuple[int, int],
+                      reference: Any, decisions: dict[str, float]) -> None:
+    """``for_predictor`` feeds each model; ``decisions`` gets, per model, the share of tiles whose rate from
+    the adapter's planes is the rate from the reference renderer's (the planes of the engine's own lit
+    image and shading model, :func:`_engine_image`, stay the adapter's)."""
     w, h = size
     if given is None:
         if not runs:
@@ -522,9 +543,13 @@ def _predictor_checks(run: _Run, cls: type[Adapter[Any]], runs: Sequence[str], g
                 with cls.for_predictor(predictor, w, h, **src.adapter_options()) as a:
                     _expect(a.channels == predictor.metadata.inputs, f"channels {a.channels}, the model's inputs are "
                             f"{predictor.metadata.inputs}")
-                    rates = predictor.shading_rates(a.inputs(src.frame(camera, prev_camera)))
+                    xa = a.inputs(src.frame(camera, prev_camera))
+                    rates = predictor.shading_rates(xa)
                 _expect(rates.shape == predictor.tiles(h, w), f"rates of shape {rates.shape}, the tile grid is "
                         f"{predictor.tiles(h, w)}")
+                xr = np.stack([plane if _engine_image(c) else reference.channel(c)
+                               for c, plane in zip(predictor.metadata.inputs, xa)]).astype(np.float32)
+                decisions[label.removesuffix(".onnx")] = float(np.mean(predictor.shading_rates(xr) == rates))
     finally:
         if src is not None:
             src.close()

@@ -167,6 +167,10 @@ def test_every_adapter_passes_the_conformance_kit(registry: None, tiny_model: Ca
     assert report.channels == tuple(c for c in sdk.CHANNELS if c in sdk.adapters.get(name).supported_channels)
     agreed = {c.name.split()[0] for c in report.checks if c.group == "agreement"}
     assert agreed == set(report.channels) & set(conformance.AGREEMENT), agreed
+    # the decisions from its planes and from the reference renderer's: a measurement, per model fed
+    assert list(report.decisions) == ["tiny0"] and 0.0 <= report.decisions["tiny0"] <= 1.0
+    if name in ("moderngl", THIRD_PARTY):  # the reference renderer's own G-buffers: the same rates on every tile
+        assert report.decisions == {"tiny0": 1.0}, report.decisions
 
 
 @pytest.mark.gl
@@ -175,6 +179,9 @@ def test_the_kit_feeds_every_shipped_model_an_adapter_can_run(registry: None) ->
     assert report.runs_models == ("lpips.onnx",), report.runs_models
     assert [c.name for c in report.checks if c.group == "predictor"] == ["for_predictor feeds lpips.onnx"]
     assert report.ok, str(report)
+    assert report.decisions == {"lpips": 1.0} and "lpips 100.0% of the tiles" in str(report)
+    flipped = conformance.check_adapter(BUGS["upside down"][0](), size=(160, 96))  # 60 tiles
+    assert flipped.decisions["lpips"] < 0.9, flipped.decisions
     assert set(conformance.runnable_models(sdk.adapters.get("moderngl"))) == set(sdk.shipped_models())
 
 
