@@ -333,7 +333,8 @@ def _cmd_adapters_check(args: argparse.Namespace) -> int:
     if ":" in args.adapter and "" not in sys.path and os.getcwd() not in sys.path:
         sys.path.insert(0, os.getcwd())  # module:Class from the plugin's own checkout, as python -m would
     tolerances = dict(args.tolerance or [])
-    report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model, image=args.image)
+    report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model, image=args.image,
+                           scene=args.scene)
     if args.json:
         print(json.dumps(report.to_dict(), indent=1))
     else:
@@ -749,6 +750,8 @@ def build_parser() -> argparse.ArgumentParser:
     chk.add_argument("adapter", metavar="ADAPTER", help="an installed adapter's name (`rtp adapters list`), or "
                      "package.module:Class for one not registered yet")
     chk.add_argument("--size", type=frame_size, default="64x48", help="WIDTHxHEIGHT of the frames drawn")
+    chk.add_argument("--scene", default="procedural:0", type=_path_text, help="the scene drawn: procedural:<seed>, "
+                     "your own .glb/.gltf/.obj file, or a map of `rtp scenes list` (fetched)")
     chk.add_argument("--model", default=None, help="the model for_predictor feeds: an .onnx path or a shipped "
                      "model's name (default: every shipped model the adapter can run)")
     chk.add_argument("--image", type=out_image, default=None, help="also write a picture: each channel of the "

@@ -29,7 +29,7 @@ import pytest
 
 from rtp import conformance, sdk
 from rtp.scene import Camera, Scene
-from rtp.sdk import adapters
+from rtp.sdk import RtpError, adapters
 from rtp.sdk.adapters import (
     Adapter,
     AdapterNotFoundError,
@@ -344,6 +344,26 @@ def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so() ->
     assert "skipped (the numpy-gbuffers adapter's engine is not installed" in report.to_text()
 
 
+@pytest.mark.gl
+def test_the_kit_draws_another_scene_and_skips_what_its_move_cannot_show(monkeypatch: pytest.MonkeyPatch) -> None:
+    other = conformance.check_adapter(NumpyAdapter, scene="procedural:1", model="lpips")
+    assert other.ok and other.scene == "procedural:1" and "conformance on procedural:1 at 64x48" in str(other)
+    assert other.to_dict()["scene"] == "procedural:1"
+    # a camera that does not move uncovers nothing: the unseen-share check says so instead of failing
+    from rtp.conformance import _kit
+
+    moved = _kit._cameras
+    monkeypatch.setattr(_kit, "_cameras", lambda scene: (moved(scene)[1],) * 2)
+    still = conformance.check_adapter(NumpyAdapter, model="lpips")
+    assert still.ok, str(still)
+    (skip,) = still.skipped
+    assert skip.name == "some pixels are unseen after the move, most are seen"
+    assert skip.detail == "the reference renderer's frame has 0.0% unseen pixels after this scene's move"
+    for bad, error in (("procedural:x", RtpError), ("no/such/level.glb", RtpError), ("", sdk.ParameterError)):
+        with pytest.raises(error, match="scene|mesh file"):
+            conformance.check_adapter(NumpyAdapter, scene=bad)
+
+
 def test_resolving_an_adapter_says_what_was_expected() -> None:
     assert conformance.resolve_adapter(f"{__name__}:NumpyAdapter") == (NumpyAdapter, f"{__name__}:NumpyAdapter")
     assert conformance.resolve_adapter(NumpyAdapter)[0] is NumpyAdapter
@@ -391,7 +411,7 @@ def test_rtp_adapters_check_from_a_plugin_checkout(tmp_path: Path) -> None:
     # run in the plugin's folder with module:Class, before any entry point is declared
     ok = run_rtp("adapters", "check", f"{__name__}:NumpyAdapter", "--size", "80x48", cwd=ROOT)
     assert ok.returncode == 0, ok.stderr
-    assert "conformance on procedural(0) at 80x48" in ok.stdout and " 0 failed, 0 skipped" in ok.stdout
+    assert "conformance on procedural:0 at 80x48" in ok.stdout and " 0 failed, 0 skipped" in ok.stdout
     assert "runs the shipped models: lpips" in ok.stdout
     bad = run_rtp("adapters", "check", f"{__name__}:NoLumaAdapter", "--json", "--image", str(tmp_path / "p.png"),
                   cwd=ROOT)
