@@ -165,6 +165,10 @@ class ConformanceReport:
 
     __str__ = to_text
 
+    def __repr__(self) -> str:  # (short: pytest shows it in `assert report.ok`; str() is the whole table)
+        counts = ", ".join(f"{sum(c.status == k for c in self.checks)} {k}" for k in ("passed", "failed", "skipped"))
+        return f"ConformanceReport(adapter={self.adapter!r}, scene={self.scene!r}, {counts})"
+
 
 def resolve_adapter(spec: str | type[Adapter[Any]]) -> tuple[type[Adapter[Any]], str]:
     """The adapter class ``spec`` names and where it came from: a registry name

@@ -267,6 +267,8 @@ def test_the_kit_names_what_a_broken_adapter_gets_wrong(registry: None, monkeypa
     failed = {c.name for c in report.failures}
     assert expected <= failed, str(report)
     assert not report.ok
+    assert repr(report) == (f"ConformanceReport(adapter='{THIRD_PARTY}', scene='procedural:0', "
+                            f"{len(report.checks) - len(failed)} passed, {len(failed)} failed, 0 skipped)")
     with pytest.raises(conformance.ConformanceError, match="failed") as info:
         report.raise_for_failures()
     assert isinstance(info.value, sdk.RtpError) and sdk.exit_code(info.value) == sdk.EXIT_FAILED
