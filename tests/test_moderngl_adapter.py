@@ -245,6 +245,13 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
             Adapter(("seen",), *size, ctx=ctx)  # type: ignore[arg-type]
     with pytest.raises(sdk.adapters.AdapterFrameError, match="GBufferTextures"):
         a.inputs({"albedo": no_prev.albedo})  # type: ignore[arg-type]
+    from rtp.plugins.moderngl import create_context
+
+    gone = create_context()
+    gone.release()
+    with pytest.raises(sdk.adapters.AdapterFrameError, match="ctx: this moderngl context has been released"):
+        Adapter(("seen",), W, H, ctx=gone)  # ("ctx must be the engine's moderngl.Context, got Context")
+    make_current(ctx)
     a.close()
     with pytest.raises(sdk.adapters.AdapterClosedError):
         a.inputs(no_prev)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from rtp import sdk
 from rtp.plugins.moderngl import RateSelector, RendererError
 from rtp.sdk.adapters import AdapterFrameError
-from tests.conftest import base_metadata
+from tests.conftest import base_metadata, make_current
 from tests.test_moderngl_adapter import H, W, frames  # noqa: F401  (frames: a fixture)
 
 pytestmark = pytest.mark.gl
@@ -178,6 +178,13 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
         fresh.decoded()
     with pytest.raises(AdapterFrameError, match="moderngl.Context"):
         RateSelector(meta, object())
+    from rtp.plugins.moderngl import create_context
+
+    gone = create_context()
+    gone.release()
+    with pytest.raises(AdapterFrameError, match="ctx: this moderngl context has been released"):  # an AttributeError
+        RateSelector(meta, gone)
+    make_current(gl_context)
     with pytest.raises(sdk.ParameterError, match="ModelMetadata"):
         RateSelector("jnyang", gl_context)  # type: ignore[arg-type]
     for bad in (2, 24, 2.0):  # finer than one 4x4 coarse pixel; not a tile size; not an int

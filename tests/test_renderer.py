@@ -465,6 +465,15 @@ def test_renderer_errors_and_lifetime(gl_context):
                 r2.render(Camera((0.0, 0.0, 0.0)), f)
     with pytest.raises(RendererError, match="released"):
         r.render(Camera((0.0, 0.0, 0.0)))
+    from rtp.plugins.moderngl import create_context
+
+    gone = create_context()
+    gone.release()
+    with pytest.raises(RendererError, match="ctx: this moderngl context has been released"):  # was an AttributeError
+        Renderer(16, 16, ctx=gone)
+    with pytest.raises(RendererError, match="ctx: expected a moderngl.Context, got object"):
+        Renderer(16, 16, ctx=object())
+    make_current(ctx)
     # past the context's largest texture moderngl only said "the framebuffer is not complete"
     limit = Renderer.max_frame_side(ctx)
     assert limit >= 4096

@@ -37,7 +37,7 @@ from rtp.sdk import ParameterError
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
-from ._glio import max_texture_side, read_texture
+from ._glio import is_released, max_texture_side, read_texture
 from ._shaders import load_source
 
 if TYPE_CHECKING:
@@ -184,6 +184,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
                                  "tolerance")
         if not isinstance(albedo_linear, (bool, np.bool_)):
             raise ParameterError(f"albedo_linear: expected True or False, got {albedo_linear!r}", "albedo_linear")
+        if is_released(ctx):
+            raise AdapterFrameError("ctx: this moderngl context has been released; pass the engine's live one")
         if not callable(getattr(ctx, "program", None)) or not hasattr(ctx, "info"):
             raise AdapterFrameError(f"ctx must be the engine's moderngl.Context, got {type(ctx).__name__}")
         import moderngl

@@ -13,9 +13,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["flip_rows", "max_texture_side", "read_texture", "write_texture"]
+__all__ = ["flip_rows", "is_released", "max_texture_side", "read_texture", "write_texture"]
 
 _DTYPES = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
+
+
+def is_released(obj: Any) -> bool:
+    """Whether a moderngl object (a context) has been released: moderngl swaps its native object for
+    an ``InvalidObject``, whose every attribute is then missing."""
+    return type(getattr(obj, "mglo", None)).__name__ == "InvalidObject"
 
 
 def max_texture_side(ctx: Any) -> int:

@@ -44,7 +44,7 @@ from rtp.sdk import (
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
-from ._glio import max_texture_side, read_texture, write_texture
+from ._glio import is_released, max_texture_side, read_texture, write_texture
 from ._shaders import load_source
 
 __all__ = ["Frame", "RenderResult", "Renderer", "RendererError", "create_context"]
@@ -103,6 +103,9 @@ def _check_ctx(ctx: Any) -> Any:
     if not all(callable(getattr(ctx, name, None)) for name in ("program", "texture", "framebuffer")) \
             or not isinstance(getattr(ctx, "version_code", None), int):
         raise RendererError(f"ctx: expected a moderngl.Context, got {type(ctx).__name__}")
+    if is_released(ctx):
+        raise RendererError("ctx: this moderngl context has been released; pass a live one (or none: the renderer "
+                            "then makes its own)")
     return ctx
 
 

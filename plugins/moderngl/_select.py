@@ -19,7 +19,7 @@ import numpy as np
 from rtp import sdk
 from rtp.sdk.adapters import AdapterFrameError
 
-from ._glio import max_texture_side
+from ._glio import is_released, max_texture_side
 from ._renderer import RendererError, create_context
 from ._shaders import load_source
 
@@ -81,6 +81,9 @@ class RateSelector:
         self.pool = max(1, tile_size // meta.tile_size)
         #: hardware tiles per model tile side (finer hardware tiles; else 1)
         self.split = max(1, meta.tile_size // tile_size)
+        if ctx is not None and is_released(ctx):
+            raise AdapterFrameError("ctx: this moderngl context has been released; pass a live one (or none: the "
+                                    "selector then makes its own)")
         if ctx is not None and not callable(getattr(ctx, "compute_shader", None)):
             raise AdapterFrameError(f"ctx must be a moderngl.Context, got {type(ctx).__name__}")
         self._own_ctx = ctx is None
