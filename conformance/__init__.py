@@ -46,13 +46,3 @@ __all__ = [
     "resolve_adapter",
     "runnable_models",
 ]
-
-# Public objects report their stable path, not the private module they live in.
-for _name in __all__:
-    _obj = globals()[_name]
-    if isinstance(_obj, type) or (callable(_obj) and hasattr(_obj, "__module__")):
-        try:
-            _obj.__module__ = __name__
-        except (AttributeError, TypeError):
-            pass
-del _name, _obj

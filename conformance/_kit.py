@@ -25,21 +25,6 @@ from rtp.sdk.adapters import (
     UnsupportedChannelError,
 )
 
-__all__ = [
-    "AGREEMENT",
-    "CONFORMANCE_SCENE",
-    "DEFAULT_SIZE",
-    "ENGINE_DEFINED",
-    "MIN_AGREEMENT",
-    "Check",
-    "ConformanceError",
-    "ConformanceReport",
-    "Tolerance",
-    "check_adapter",
-    "resolve_adapter",
-    "runnable_models",
-]
-
 log = logging.getLogger("rtp.conformance")
 
 
