@@ -394,6 +394,11 @@ class ModelMetadata:
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled (and deep-copied) as its dict, built again through :meth:`from_dict`: its provenance is
+        held read-only (``MappingProxyType``), which pickle cannot copy as it is."""
+        return type(self).from_dict, (self.to_dict(),)
+
     # -- decoding -----------------------------------------------------------------------------
     @property
     def pad_multiple(self) -> int:

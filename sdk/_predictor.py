@@ -157,15 +157,23 @@ def _embedded_digest(props: Mapping[str, str]) -> str | None:
     return digest if isinstance(digest, str) and DIGEST_RE.fullmatch(digest) else None
 
 
-def _check_integrity(model_path: Path, digest: str | None) -> None:
-    """Refuse a file whose graph or weights differ from the digest its metadata records."""
+def _read_model(model_path: Path) -> bytes:
+    """The model file's bytes, read once: its integrity is checked on them and a pickled predictor carries them."""
+    try:
+        return model_path.read_bytes()
+    except OSError as err:
+        raise ModelLoadError(f"{str(model_path)!r}: cannot be read ({err})") from err
+
+
+def _check_integrity(model_path: Path, digest: str | None, data: bytes) -> None:
+    """Refuse a file whose graph or weights (``data``, its bytes) differ from the digest its metadata records."""
     if digest is None:
         log.info("%s records no digest (exported before rtp wrote them, or adopted): integrity not checked",
                  model_path)
         return
     try:
-        actual = model_digest(model_path.read_bytes())
-    except (OSError, ValueError) as err:
+        actual = model_digest(data)
+    except ValueError as err:
         raise ModelLoadError(f"{str(model_path)!r}: cannot be read back to check its digest ({err})") from err
     if actual != digest:
         raise ModelIntegrityError(
@@ -208,14 +216,16 @@ def _inference_session(ort: Any, source: str | bytes, opts: Any, providers: Sequ
     return _NoFallback(source, sess_options=opts, providers=list(providers))
 
 
-def _session(ort: Any, model_path: Path, opts: Any, requested: list[ProviderSpec], strict: bool) -> Any:
+def _session(ort: Any, model_path: Path, source: str | bytes, opts: Any, requested: list[ProviderSpec],
+             strict: bool) -> Any:
     """The onnxruntime session, built with onnxruntime's own fallback off (it prints to stdout, and the
     SDK never prints). If the requested providers cannot build it, CPU is tried: when CPU can, the
     requested provider failed (``ProviderUnavailableError`` with ``strict``, else a logged warning and
-    the CPU session); when CPU cannot either, the file is not a loadable model (``ModelLoadError``)."""
+    the CPU session); when CPU cannot either, the file is not a loadable model (``ModelLoadError``).
+    ``source`` is the file's path, or its bytes (a predictor unpickled where the file may not be)."""
 
     def build(providers: list[ProviderSpec]) -> Any:
-        return _inference_session(ort, str(model_path), opts, providers)
+        return _inference_session(ort, source, opts, providers)
 
     try:
         return build(requested)
@@ -286,8 +296,26 @@ def load(
     run one model back to back. (A new session's threads spin for a while after it is built either
     way: a one-off cost of loading.)
     """
-    ort = _ort()
     model_path = _resolve_path(path)
+    return _load(model_path, None, providers=providers, threads=threads, metadata=metadata, strict=strict,
+                 tile_size=tile_size, assume_finite=assume_finite, spin_between_runs=spin_between_runs)
+
+
+def _load(
+    model_path: Path,
+    data: bytes | None,
+    *,
+    providers: Sequence[ProviderSpec] | None,
+    threads: int | None,
+    metadata: ModelMetadata | Mapping[str, Any] | str | os.PathLike[str] | None,
+    strict: bool,
+    tile_size: int | None,
+    assume_finite: bool,
+    spin_between_runs: bool,
+) -> ShadingRatePredictor:
+    """:func:`load` of the file at ``model_path``, or, with ``data``, of those bytes (a pickled predictor's
+    model, restored where ``model_path`` may not exist: it names the model in messages and in ``path``)."""
+    ort = _ort()
     if threads is not None and (
         isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= MAX_THREADS
     ):
@@ -316,7 +344,10 @@ def load(
         # The worker threads stop spinning when a run ends (the tail's session, built with the same
         # options, too): the engine's own threads get the cores back between frames.
         opts.add_session_config_entry(FORCE_SPINNING_STOP, "1")
-    session = _session(ort, model_path, opts, requested, strict)
+    source: str | bytes = str(model_path) if data is None else data
+    session = _session(ort, model_path, source, opts, requested, strict)
+    if data is None:
+        data = _read_model(model_path)
 
     actual = [p for p in session.get_providers() if p not in _NON_COMPUTE]
     first = requested[0] if isinstance(requested[0], str) else requested[0][0]
@@ -334,7 +365,7 @@ def load(
         props = {}
     if metadata is not None:
         meta = _metadata_from_arg(metadata)
-        _check_integrity(model_path, meta.digest or _embedded_digest(props))
+        _check_integrity(model_path, meta.digest or _embedded_digest(props), data)
     else:
         if METADATA_KEY not in props:
             raise MetadataError(
@@ -344,7 +375,7 @@ def load(
                 METADATA_KEY,
             )
         meta = ModelMetadata.from_json(props[METADATA_KEY])
-        _check_integrity(model_path, meta.digest)
+        _check_integrity(model_path, meta.digest, data)
     if meta.default_threshold != meta.saturation and (
         (meta.default_threshold > meta.saturation) != meta.higher_is_better
     ):
@@ -356,6 +387,11 @@ def load(
     tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
     predictor = ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
                                      tail=tail)
+    # what a pickled copy is loaded again from, in the process that unpickles it (docs/runtime.md "Pickling and other processes")
+    predictor._pickled = (data, {
+        "providers": providers, "threads": threads, "metadata": None if metadata is None else meta,
+        "strict": strict, "assume_finite": assume_finite, "spin_between_runs": spin_between_runs,
+    })
     if predictor.tile_size != meta.tile_size and (variant := _tile_variant(model_path, meta.tile_size,
                                                                            predictor.tile_size)):
         if predictor.tile_size < meta.tile_size:
@@ -463,6 +499,8 @@ class ShadingRatePredictor:
                                  "assume_finite")
         self._assume_finite = assume_finite
         self._session = session
+        #: the model's bytes and load()'s arguments, which __reduce__ pickles (load() sets them)
+        self._pickled: tuple[bytes, dict[str, Any]] | None = None
         self._meta = metadata
         self._path = path
         model_tile = metadata.tile_size
@@ -585,6 +623,30 @@ class ShadingRatePredictor:
     def static_size(self) -> tuple[int, int] | None:
         """``(H, W)`` of a model with a fixed input size (frames are padded up to it), else None."""
         return self._static_hw
+
+    def __copy__(self) -> ShadingRatePredictor:
+        """A copy shares the session: a predictor holds nothing that changes (``copy.copy`` and
+        ``copy.deepcopy``; pickling loads the model again, in the process that unpickles it)."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        return new
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> ShadingRatePredictor:
+        return self.__copy__()
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled, a predictor carries its model's bytes and the arguments it was loaded with, not its
+        onnxruntime session (which cannot be pickled): unpickling loads the model again from those bytes,
+        with the same options, in the process that unpickles it (a ``multiprocessing`` or Ray worker), where
+        the file need not exist. docs/runtime.md "Pickling and other processes"."""
+        state = self._pickled
+        if state is None:
+            raise TypeError(
+                "cannot pickle a ShadingRatePredictor built from an onnxruntime session of your own: pickling "
+                "loads the model again from its bytes, which only rtp.sdk.load() keeps; load it with sdk.load()"
+            )
+        data, args = state
+        return _unpickle, (str(self._path), data, {**args, "tile_size": self._tile})
 
     def __repr__(self) -> str:
         m = self._meta
@@ -870,3 +932,8 @@ class ShadingRatePredictor:
             log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
                         "it at every rate; use one %s %g", self._path.name if self._path else "model", t, sat,
                         "above" if hib else "below", limit)
+
+
+def _unpickle(path: str, data: bytes, args: dict[str, Any]) -> ShadingRatePredictor:
+    """A pickled :class:`ShadingRatePredictor` loaded again (its ``__reduce__``)."""
+    return _load(Path(path), data, **args)

@@ -153,6 +153,11 @@ sky = np.zeros((H, W), bool)
         "from rtp import sdk\n",
         "assert predictor.metadata.tail is not None",
     ),
+    ("runtime.md", 'predictor = sdk.load("jnyang", threads=1)'): (  # pickled to the pool's processes
+        "import numpy as np\nfrom rtp import sdk\nrng = np.random.default_rng(0)\n"
+        "frames = [rng.random((9, 64, 96), dtype=np.float32) for _ in range(3)]\n",
+        "assert len(rates) == 3 and all(np.array_equal(r, predictor.shading_rates(f)) for r, f in zip(rates, frames))",
+    ),
     ("runtime.md", 'Adapter = sdk.adapters.get("moderngl")'): (
         _SOURCE
         + """
