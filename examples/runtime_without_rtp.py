@@ -1,0 +1,221 @@
+"""The runtime contract in one file, without rtp: what an engine in C++ (or any language) ports.
+
+    python examples/runtime_without_rtp.py models/jnyang.onnx                    # a random 1280x720 frame
+    python examples/runtime_without_rtp.py MODEL.onnx --frame planes.npy --threshold 0.2 --tile-size 8
+    python examples/runtime_without_rtp.py models/flip.onnx --check              # the same rates as rtp.sdk?
+
+An engine that links onnxruntime itself (C++, C#, Rust) needs no Python: the ONNX file carries the
+network and its metadata, and the steps from the engine's input planes to a shading-rate image are
+the ones below, each a few lines. This file uses nothing but ``json``, numpy and onnxruntime (the
+same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``GetInputTypeInfo``,
+``Run``), so each step reads as what to port. ``--check`` then loads the same model with
+``rtp.sdk`` and compares the two: the shading-rate codes must be the same on every tile
+(tests/test_examples.py runs it on every shipped model).
+
+1. **Metadata** (docs/metadata.md): one JSON object under the model's ``metadata_props`` key
+   ``rtp.metadata``; the fields used here are ``inputs`` (plane names, in the order the network
+   reads them), ``outputs`` (the rates the network predicts), ``tile_size``, ``input_multiple``,
+   ``transform``, ``safety``, ``higher_is_better``, ``extrapolation_k``, ``default_threshold``,
+   ``rate_factors`` and ``finite_probe``.
+2. **Padding** (docs/runtime.md "predictor.predict(x)", step 2): the frame's bottom rows and right
+   columns repeated up to ``input_multiple`` (whole tiles when there is none; a model with a fixed
+   input size up to that size).
+3. **Inference**: the planes go to the graph's inputs in graph order, each input taking as many
+   consecutive planes as its channel dimension (rtp-export splits eight or more planes into groups of
+   at most seven: docs/export.md "Input planes in groups"). The output that is not the finite probe
+   (and not ``features``, a splitting network's trunk) holds the network's per-tile values.
+4. **Decode** (docs/metadata.md "Transforms"): the safety margin added in the direction that makes
+   the image worse, the inverse transform to metric units, then the missing rates extrapolated
+   (docs/runtime.md "Extrapolation"): six values per tile, ``1x2, 2x1, 2x2, 2x4, 4x2, 4x4``.
+5. **Hardware tiles**, where the GPU's shading-rate tile differs from the model's: coarser, each
+   hardware tile takes the worst of the model tiles it covers; finer, each takes its model tile's.
+6. **Selection** (docs/runtime.md "predictor.shading_rates(x, threshold=None, allowed=None)"): per
+   tile the cheapest allowed rate whose value passes its threshold (``threshold x rate_factors[r]``;
+   PSNR ``threshold - 20 log10 rate_factors[r]`` dB), equal-cost rates compared by value over their
+   own threshold; else 1x1. The result is D3D12/Vulkan rate codes, ready to upload as the
+   shading-rate image.
+
+What is left out: checking the frame for NaN (the finite probe makes that one scalar: step 3's
+other output), batches of frames, and reusing a prediction across frames (``sdk.PredictionReuse``,
+docs/runtime.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+
+#: The six reduced rates in the order of the decoded values, and their D3D12 / Vulkan codes
+#: ((log2 width) << 2 | log2 height; docs/runtime.md): 1x1 is 0.
+RATES = ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
+CODES = {"1x1": 0, "1x2": 1, "2x1": 4, "2x2": 5, "2x4": 6, "4x2": 9, "4x4": 10}
+#: Where the logistic transform's inverse clips its sigmoid (docs/metadata.md "Transforms").
+LOGIT_EPS = 1e-7
+
+
+def read_metadata(session: ort.InferenceSession) -> dict:
+    """Step 1: the model's rtp metadata, a JSON object."""
+    text = session.get_modelmeta().custom_metadata_map.get("rtp.metadata")
+    if text is None:
+        raise SystemExit("the model carries no rtp.metadata: export it with rtp-export, or adopt it with a sidecar")
+    return json.loads(text)
+
+
+def pad(x: np.ndarray, meta: dict, session: ort.InferenceSession) -> np.ndarray:
+    """Step 2: (C, H, W) padded at the bottom and right by repeating the last row and column."""
+    _, h, w = x.shape
+    fixed = session.get_inputs()[0].shape[2:]
+    if all(isinstance(d, int) for d in fixed):  # a model with a fixed input size
+        ph, pw = fixed
+    else:
+        m = meta.get("input_multiple") or meta["tile_size"]
+        ph, pw = -(-h // m) * m, -(-w // m) * m
+    return np.pad(x, ((0, 0), (0, ph - h), (0, pw - w)), mode="edge")
+
+
+def infer(session: ort.InferenceSession, meta: dict, x: np.ndarray) -> np.ndarray:
+    """Step 3: the network's per-tile values, (len(outputs), tiles high, tiles wide) on the padded grid."""
+    feed, first = {}, 0
+    for graph_input in session.get_inputs():
+        planes = graph_input.shape[1]
+        feed[graph_input.name] = np.ascontiguousarray(x[None, first:first + planes])
+        first += planes
+    assert first == len(meta["inputs"]), "the graph's inputs hold a different number of planes than the metadata"
+    skip = {meta.get("finite_probe"), "features"}
+    name = next(o.name for o in session.get_outputs() if o.name not in skip)
+    return session.run([name], feed)[0][0]
+
+
+def inverse_transform(p: np.ndarray, t: dict) -> np.ndarray:
+    """Transformed space back to metric units (not clamped)."""
+    if t["type"] == "clamped":
+        return p * (2.0 * t["mu_y"])
+    if t["type"] == "logistic":
+        def sigmoid(v: float) -> float:
+            return 1.0 / (1.0 + math.exp(-v))
+
+        s0, s1 = sigmoid(t["k"] * (0.0 - t["mu_y"])), sigmoid(t["k"] * (1.0 - t["mu_y"]))
+        s = np.clip(p * (s1 - s0) + s0, LOGIT_EPS, 1.0 - LOGIT_EPS)
+        return t["mu_y"] + np.log(s / (1.0 - s)) / t["k"]
+    return (p - t["offset"]) / t["factor"]  # linear
+
+
+def decode(raw: np.ndarray, meta: dict) -> np.ndarray:
+    """Step 4: network values to all six rates' values in metric units, float32 (6, th, tw)."""
+    t, better = meta["transform"], bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    increasing = not (t["type"] == "linear" and t["factor"] < 0)
+    worse = 1.0 if increasing != better else -1.0  # the direction of a worse image in transformed space
+    v = dict(zip(meta["outputs"], inverse_transform(raw.astype(np.float64) + worse * meta.get("safety", 0.0), t)))
+    k = meta.get("extrapolation_k", 2.13)
+    if better:  # a quality in dB: worse is lower, and k times the error's amplitude is 20 log10 k dB less
+        pick, scaled = np.minimum, (lambda a: a - 20.0 * math.log10(k))
+    else:
+        pick, scaled = np.maximum, (lambda a: a * k)
+    if tuple(meta["outputs"]) == ("2x2",):
+        v["1x2"] = v["2x1"] = v["2x2"]
+    v.setdefault("2x2", pick(v["1x2"], v["2x1"]))
+    v.setdefault("2x4", pick(scaled(v["1x2"]), v["2x2"]))
+    v.setdefault("4x2", pick(scaled(v["2x1"]), v["2x2"]))
+    v.setdefault("4x4", pick(v["2x4"], v["4x2"]))
+    return np.stack([v[r] for r in RATES]).astype(np.float32)
+
+
+def hardware_tiles(values: np.ndarray, meta: dict, tile_size: int, frame: tuple[int, int]) -> np.ndarray:
+    """Step 5: (6, th, tw) on the model's tiles to the hardware's ``tile_size``-pixel tiles."""
+    own, (h, w) = meta["tile_size"], frame
+    if tile_size >= own:  # coarser: the worst model tile of each hardware tile (NaN stays NaN: full rate)
+        f = tile_size // own
+        th, tw = values.shape[1:]
+        ch, cw = -(-th // f), -(-tw // f)
+        better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+        grid = np.full((6, ch * f, cw * f), np.inf if better else -np.inf, np.float32)
+        grid[:, :th, :tw] = values
+        blocks = grid.reshape(6, ch, f, cw, f)
+        return blocks.min(axis=(2, 4)) if better else blocks.max(axis=(2, 4))
+    f = own // tile_size  # finer: each takes its model tile's values, cropped to the frame's finer grid
+    return values.repeat(f, axis=1).repeat(f, axis=2)[:, :-(-h // tile_size), :-(-w // tile_size)]
+
+
+def select(values: np.ndarray, meta: dict, threshold: float, allowed: tuple[str, ...] = RATES) -> np.ndarray:
+    """Step 6: per tile the cheapest allowed rate whose value passes its threshold, else 1x1 (uint8 codes)."""
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    factors = meta.get("rate_factors") or {}
+    codes = np.zeros(values.shape[1:], np.uint8)  # 1x1
+    done = np.zeros(values.shape[1:], bool)
+    # cost classes, cheapest first: 4x4; 2x4 and 4x2; 2x2; 1x2 and 2x1
+    for group in (("4x4",), ("2x4", "4x2"), ("2x2",), ("1x2", "2x1")):
+        best = np.full(values.shape[1:], np.inf)
+        for rate in (r for r in group if r in allowed):
+            f = float(factors.get(rate, 1.0))
+            v = values[RATES.index(rate)].astype(np.float64)
+            # as "smaller is better": the value over its threshold's factor (PSNR: minus, plus the dB)
+            e = (-v - 20.0 * math.log10(f)) if better else v / f
+            ok = ~done & (e < (-threshold if better else threshold)) & (e < best)  # NaN passes nothing
+            codes[ok], best[ok] = CODES[rate], e[ok]
+        done |= best < np.inf
+    return codes
+
+
+def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float | None = None,
+                  tile_size: int | None = None, allowed: tuple[str, ...] = RATES) -> np.ndarray:
+    """Steps 1-6: a frame's planes (C, H, W), float32, to its shading-rate image."""
+    meta = read_metadata(session)
+    _, h, w = x.shape
+    raw = infer(session, meta, pad(x, meta, session))
+    t = meta["tile_size"]
+    values = decode(raw, meta)[:, :-(-h // t), :-(-w // t)]  # the tiles of the frame, not of its padding
+    if tile_size is not None and tile_size != t:
+        values = hardware_tiles(values, meta, tile_size, (h, w))
+    return select(values, meta, meta["default_threshold"] if threshold is None else threshold, allowed)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("model", type=Path, help="an rtp ONNX model file")
+    ap.add_argument("--frame", type=Path, help="the input planes, a (C, H, W) float32 .npy (default: a random frame)")
+    ap.add_argument("--size", default="1280x720", help="the random frame's WIDTHxHEIGHT (default 1280x720)")
+    ap.add_argument("--threshold", type=float, help="default: the model's default_threshold")
+    ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile size (default: the model's)")
+    ap.add_argument("--allowed", default=",".join(RATES), help="the reduced rates the hardware has (default: all six)")
+    ap.add_argument("--check", action="store_true", help="compare with rtp.sdk's shading_rates on the same frame")
+    a = ap.parse_args(argv)
+
+    if not a.model.is_file():
+        ap.error(f"no model file at {str(a.model)!r}")
+    session = ort.InferenceSession(str(a.model), providers=["CPUExecutionProvider"])
+    meta = read_metadata(session)
+    if a.frame is not None:
+        x = np.load(a.frame)
+        if x.dtype != np.float32 or x.ndim != 3 or len(x) != len(meta["inputs"]):
+            ap.error(f"--frame: expected float32 planes ({len(meta['inputs'])}, H, W) for {meta['inputs']}, got "
+                     f"{x.dtype} {x.shape}")
+    else:
+        w, h = (int(v) for v in a.size.lower().split("x"))
+        x = np.random.default_rng(0).random((len(meta["inputs"]), h, w), dtype=np.float32)
+        if "seen" in meta["inputs"]:  # a mask: 0 or 1
+            x[meta["inputs"].index("seen")] = x[meta["inputs"].index("seen")] > 0.2
+    allowed = tuple(r.strip() for r in a.allowed.split(",") if r.strip())
+    rates = shading_rates(session, x, a.threshold, a.tile_size, allowed)
+    names = {c: r for r, c in CODES.items()}
+    counts = {names[c]: int(n) for c, n in zip(*np.unique(rates, return_counts=True))}
+    print(f"{a.model.name}: {rates.shape[0]}x{rates.shape[1]} tiles; " + ", ".join(f"{r} {n}" for r, n in counts.items()))
+    if a.check:
+        from rtp import sdk
+
+        predictor = sdk.load(a.model, tile_size=a.tile_size)
+        theirs = predictor.shading_rates(x, a.threshold, allowed=allowed)
+        same = float(np.mean(theirs == rates))
+        print(f"rtp.sdk gives the same rate on {100 * same:.2f}% of the tiles")
+        return 0 if same == 1.0 else 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,117 @@
+"""examples/runtime_without_rtp.py, the runtime contract written out with numpy and onnxruntime alone,
+gives the shading-rate image rtp.sdk gives, tile for tile, for every shipped model: what docs/metadata.md
+and docs/runtime.md say is all an engine needs (a step the pages leave out would show here)."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from rtp import sdk
+
+from .test_shipped_models import rendered_inputs  # noqa: F401 (a fixture)
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "runtime_without_rtp.py"
+
+
+@pytest.fixture(scope="module")
+def port() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("runtime_without_rtp", EXAMPLE)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _planes(frame: object, names: tuple[str, ...]) -> np.ndarray:
+    return np.stack([frame.channel(c) for c in names]).astype(np.float32)  # type: ignore[attr-defined]
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("name", sdk.shipped_models())
+def test_the_port_picks_the_sdks_rates_on_rendered_frames(name: str, port: ModuleType, rendered_inputs: list) -> None:  # noqa: F811
+    import onnxruntime as ort
+
+    p = sdk.load(name)
+    session = ort.InferenceSession(str(p.path), providers=["CPUExecutionProvider"])
+    own = p.metadata.tile_size
+    tiles = [own, 32] + ([8] if own == 16 else [16])
+    uniform, combinations = [], 0
+    for frame in rendered_inputs:
+        x = _planes(frame, p.metadata.inputs)[:, :-5, 3:]  # a frame of partial tiles (219x381)
+        values = p.predict(x)
+        # thresholds where the decisions are mixed: quantiles of the model's own predictions
+        for threshold in [None, *np.quantile(values[np.isfinite(values)], [0.2, 0.5, 0.8]).tolist()]:
+            for tile in tiles:
+                for allowed in (port.RATES, ("1x2", "2x1", "2x2")):
+                    theirs = sdk.load(name, tile_size=tile).shading_rates(x, threshold, allowed=allowed)
+                    ours = port.shading_rates(session, x, threshold, tile, allowed)
+                    assert ours.dtype == np.uint8 and ours.shape == theirs.shape
+                    np.testing.assert_array_equal(ours, theirs, err_msg=f"{name} threshold {threshold} tile {tile} "
+                                                                          f"allowed {allowed}")
+                    if threshold is not None:
+                        combinations += 1
+                        if len(np.unique(theirs)) < 2:
+                            uniform.append((threshold, tile, allowed))
+    # at the quantiles the decisions are mixed, not one rate everywhere (on 32-pixel tiles, each the worst of
+    # four, a high quality threshold can leave every tile at full rate)
+    assert len(uniform) <= combinations // 8, uniform
+
+
+def test_the_port_imports_nothing_of_rtp(tmp_path: Path) -> None:
+    """Run with rtp made unimportable: the port needs only numpy and onnxruntime (and --check, rtp)."""
+    frame = tmp_path / "planes.npy"
+    p = sdk.load("flip")
+    rng = np.random.default_rng(0)
+    np.save(frame, rng.random((len(p.metadata.inputs), 90, 150), dtype=np.float32) * 0.2)
+    blocked = ("import runpy, sys; sys.modules['rtp'] = None; sys.argv = sys.argv[1:]; "
+               "runpy.run_path(sys.argv[0], run_name='__main__')")
+    r = subprocess.run([sys.executable, "-c", blocked, str(EXAMPLE), str(p.path), "--frame", str(frame),
+                        "--threshold", "0.05"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("flip.onnx: 6x10 tiles;"), r.stdout
+    r = subprocess.run([sys.executable, str(EXAMPLE), str(p.path), "--frame", str(frame), "--threshold", "0.05",
+                        "--tile-size", "8", "--check"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "the same rate on 100.00% of the tiles" in r.stdout, r.stdout + r.stderr
+
+
+TRANSFORMS = [{"type": "clamped", "mu_y": 0.12}, {"type": "logistic", "mu_y": 0.3, "k": 10.0},
+              {"type": "linear", "factor": -0.015, "offset": 1.0}, {"type": "linear", "factor": 0.7, "offset": 0.0}]
+
+
+@pytest.mark.parametrize("outputs", [["1x2", "2x1"], ["1x2", "2x1", "2x4", "4x2"], list(sdk.PREDICTED_RATES), ["2x2"]])
+@pytest.mark.parametrize("transform", TRANSFORMS, ids=lambda t: f"{t['type']}{t.get('factor', '')}")
+@pytest.mark.parametrize("metric", ["jnyang", "psnr"])
+def test_the_ports_decode_is_the_sdks_for_every_transform_and_output_set(
+    metric: str, transform: dict, outputs: list[str], port: ModuleType,
+) -> None:
+    """What no shipped model reads (two outputs, one 2x2 output, a logistic transform) decodes the same too."""
+    meta = {"metric": metric, "transform": transform, "tile_size": 16, "inputs": ["reprojected.y", "seen"],
+            "outputs": outputs, "default_threshold": 30.0 if metric == "psnr" else 0.2, "safety": 0.05,
+            "extrapolation_k": 2.5, **({"weber_l": 0.02} if metric.startswith("jn") else {})}
+    raw = np.random.default_rng(len(outputs)).random((len(outputs), 7, 9), dtype=np.float32)
+    np.testing.assert_array_equal(port.decode(raw, meta), sdk.ModelMetadata.from_dict(meta).decode(raw))
+
+
+@pytest.mark.parametrize("higher_is_better", [False, True])
+def test_the_ports_selection_is_the_sdks_on_ties_nans_and_factors(higher_is_better: bool, port: ModuleType) -> None:
+    """Values on a coarse grid of levels (equal-cost rates tie often), NaNs, and a threshold per rate."""
+    rng = np.random.default_rng(int(higher_is_better))
+    values = rng.integers(0, 6, (6, 40, 50)).astype(np.float32) * (6.0 if higher_is_better else 0.05)
+    values[rng.random(values.shape) < 0.05] = np.nan
+    factors = dict(zip(sdk.PREDICTED_RATES, [1.0, 1.0, 0.9, 1.2, 1.2, 0.8]))
+    for rate_factors in (None, factors):
+        meta = {"metric": "psnr" if higher_is_better else "flip", "higher_is_better": higher_is_better,
+                **({"rate_factors": rate_factors} if rate_factors else {})}
+        for threshold in ((12.0, 18.0, 24.0) if higher_is_better else (0.1, 0.15, 0.2)):
+            for allowed in (port.RATES, ("1x2", "2x1", "2x4", "4x2"), ("2x2",)):
+                theirs = sdk.select_rates(values, threshold, higher_is_better=higher_is_better, allowed=allowed,
+                                          factors=rate_factors)
+                np.testing.assert_array_equal(port.select(values, meta, threshold, allowed), theirs)
