@@ -265,6 +265,27 @@ def _todo(writer: DatasetWriter, reader: DatasetReader, planned: list[tuple[str,
     return [(sid, p, c) for sid, p, c in planned if not (writer.has(sid) and _same_cameras(reader, sid, p, c))]
 
 
+def _already_captured(jobs: Sequence[tuple[Any, ...]]) -> list[CaptureReport] | None:
+    """The reports of ``jobs`` (:func:`_run_job`'s arguments) when every sample they plan is on disk, rendered
+    from the cameras planned for it; else None. A capture on Ray into a finished folder then needs no cluster
+    (it reached for one, and failed where none answered). The scenes are planned here (a few milliseconds
+    a pair, no GL), and only once every sample's file is found."""
+    for scene_name, profiles, per_scene, _, out, *_, settings in jobs:
+        writer = DatasetWriter(out, settings)
+        if not all(writer.has(sid) for p in profiles for sid in _ids(scene_name, p, per_scene)):
+            return None
+    reports = []
+    for scene_name, profiles, per_scene, size, out, seed, cache_dir, split, splits, settings in jobs:
+        scene, blockers = load_scene(scene_name, cache_dir, split, splits)
+        writer, reader = DatasetWriter(out, settings), DatasetReader(out)
+        planned, failed = _plan(scene_name, scene, blockers, profiles, per_scene, size, seed,
+                                settings.get("placement", "free"))
+        if failed or any(_todo(writer, reader, plan) for plan in planned.values()):
+            return None
+        reports.append(CaptureReport(skipped=sum(len(plan) for plan in planned.values())))
+    return reports
+
+
 def _run_job(
     scene_name: str, profiles: Sequence[str], per_scene: int, size: tuple[int, int], out: str, seed: int,
     cache_dir: str | None, split: str | None, splits: str | None, settings: dict[str, Any], queue: Any = None,
@@ -416,7 +437,13 @@ def capture(
             if progress:
                 progress(done, total)
 
-        if ray is not None:
+        finished = None if ray is None or writer is None else _already_captured(args)
+        if finished is not None:
+            log.info("every sample is in %s already, from the cameras planned for it: Ray is not needed", out)
+            for r in finished:
+                merge(r)
+                tick(r.skipped)
+        elif ray is not None:
             from ._ray import ray_capture
 
             merge(ray_capture(scene_names, str(out), profiles=tuple(profiles), per_scene=per_scene, size=(w, h), seed=seed,

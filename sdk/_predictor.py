@@ -162,7 +162,8 @@ def _read_model(model_path: Path) -> bytes:
     try:
         return model_path.read_bytes()
     except OSError as err:
-        raise ModelLoadError(f"{str(model_path)!r}: cannot be read ({err})") from err
+        raise ModelLoadError(f"{str(model_path)!r}: cannot be read back to check its digest and keep its bytes "
+                             f"({err})") from err
 
 
 def _check_integrity(model_path: Path, digest: str | None, data: bytes) -> None:

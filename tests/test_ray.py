@@ -292,3 +292,38 @@ def test_each_ray_nodes_workers_are_sized_against_its_memory(cluster: None, loca
                                           r"Ray node \w+, more than its .* a node with more memory" + HINT):
         compute_targets(data, ("flip", "psnr"), workers=1, ray="auto")
     assert not list((data / "targets").rglob("*.npz"))
+
+
+def test_a_finished_folder_needs_no_cluster(local: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """capture --ray into a folder that holds every planned sample (from the cameras planned for it) plans on
+    this machine and says so, without reaching for Ray (it failed where no head answered); a folder that
+    lacks one sample, or holds one from other cameras, goes to Ray as before."""
+    import json
+    import shutil
+
+    from rtp.capture import _ray
+
+    class Reached(Exception):
+        pass
+
+    def reached(*args: Any, **kwargs: Any) -> None:
+        raise Reached
+
+    monkeypatch.setattr(_ray, "ray_capture", reached)
+    out = tmp_path / "ds"
+    shutil.copytree(local, out)
+    report = capture(SCENES, out, per_scene=2, size=SIZE, ray="127.0.0.1:1")
+    assert (report.written, report.skipped, report.failed) == (0, 8, [])
+    assert_same_dataset(local, out, METRICS)
+    ids = DatasetReader(out).ids
+    sample = next((out / "samples").glob(f"{ids[0]}*"))
+    moved = tmp_path / sample.name
+    sample.rename(moved)
+    with pytest.raises(Reached):
+        capture(SCENES, out, per_scene=2, size=SIZE, ray="127.0.0.1:1")
+    moved.rename(sample)
+    meta_file = out / "manifest.json"
+    assert json.loads(meta_file.read_text())  # (the folder is whole again)
+    monkeypatch.setattr("rtp.capture._capture._job_seed", lambda seed, scene, profile: seed + 1)  # other cameras
+    with pytest.raises(Reached):
+        capture(SCENES, out, per_scene=2, size=SIZE, ray="127.0.0.1:1")
