@@ -48,6 +48,7 @@ from ._errors import (
 from ._metadata import FEATURES_NAME, METADATA_KEY, SCHEMA_VERSION, TAIL_KEY, ModelMetadata
 from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
+from ._planes import GBUFFERS, gbuffers_needed, input_planes
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import (
     ALL_RATES,
@@ -113,6 +114,7 @@ __all__ = [
     "EXIT_FAILED",
     "EXIT_USAGE",
     "FEATURES_NAME",
+    "GBUFFERS",
     "LOGIT_EPS",
     "LUMA_WEIGHTS",
     "MAX_CARRY_SCALE",
@@ -161,7 +163,9 @@ __all__ = [
     "exit_code",
     "extrapolate",
     "files",
+    "gbuffers_needed",
     "hardware_tiles",
+    "input_planes",
     "linear_to_srgb",
     "load",
     "luma",

@@ -71,10 +71,16 @@ class CpuFrame:
     prev_colour: np.ndarray
     prev_depth: np.ndarray
     prev_view_projection: np.ndarray
+    roughness: np.ndarray | None = None  # (the material planes: the reference renderer's frames have them)
+    metallic: np.ndarray | None = None
+    specular: np.ndarray | None = None
+    shadow: np.ndarray | None = None
+    emissive: np.ndarray | None = None
 
 
 class NumpyAdapter(Adapter[CpuFrame]):
-    """The skeleton of docs/adapters.md: planes from numpy G-buffers, reprojection by sdk.reproject."""
+    """The skeleton of docs/adapters.md: planes from numpy G-buffers by sdk.input_planes (the channels of the
+    shipped LPIPS, not the material planes the others read: so the kit feeds it that one model)."""
 
     name: ClassVar[str] = THIRD_PARTY
     supported_channels: ClassVar[frozenset[str]] = frozenset(
@@ -89,16 +95,7 @@ class NumpyAdapter(Adapter[CpuFrame]):
         self.closes = 0  # not idempotent by itself: the base class makes close() run once
 
     def inputs(self, frame: CpuFrame) -> np.ndarray:
-        planes = {"depth": frame.depth}
-        planes.update({f"albedo.{c}": frame.albedo[..., i] for i, c in enumerate("rgb")})
-        planes["albedo.y"] = sdk.luma(frame.albedo)
-        planes.update({f"normal.{c}": frame.normal[..., i] for i, c in enumerate("xyz")})
-        rep, seen = sdk.reproject(frame.prev_colour, frame.prev_depth, frame.depth, frame.view, frame.projection,
-                                  frame.prev_view_projection, tolerance=self.tolerance)
-        planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
-        planes["reprojected.y"] = sdk.luma(rep)
-        planes["seen"] = seen
-        return np.ascontiguousarray(np.stack([planes[c] for c in self.channels]), np.float32)
+        return sdk.input_planes(self.channels, **vars(frame), tolerance=self.tolerance)
 
     def close(self) -> None:
         self.closes += 1
@@ -124,7 +121,8 @@ class CpuFrameSource(FrameSource[CpuFrame]):
         prev = self.renderer.render(prev_camera)
         cur = self.renderer.render(camera, prev)
         return CpuFrame(cur.albedo, cur.normal, cur.depth, camera.view(), camera.projection(self.width / self.height),
-                        prev.colour["1x1"], prev.depth, prev_camera.view_projection(self.width, self.height))
+                        prev.colour["1x1"], prev.depth, prev_camera.view_projection(self.width, self.height),
+                        cur.roughness, cur.metallic, cur.specular, cur.shadow, cur.emissive)
 
     def close(self) -> None:
         self.renderer.release()

@@ -153,6 +153,22 @@ sky = np.zeros((H, W), bool)
         "from rtp import sdk\n",
         "assert predictor.metadata.tail is not None",
     ),
+    ("runtime.md", "needed = sdk.gbuffers_needed(predictor.metadata.inputs)"): (  # the renderer's G-buffers, read back
+        _MODEL + _SCENE + """
+from rtp.plugins.moderngl import Renderer
+with Renderer(W, H) as r:
+    r.load_scene(scene)
+    prev = r.render(prev_camera)
+    cur = r.render(camera, prev)
+depth, albedo, normal = cur.depth, cur.albedo, cur.normal
+roughness, metallic, specular = cur.roughness, cur.metallic, cur.specular
+view, projection = camera.view(), camera.projection(W / H)
+prev_colour, prev_depth, prev_view_projection = prev.colour["1x1"], prev.depth, prev_camera.view_projection(W, H)
+""",
+        "assert rates.shape == sdk.tile_grid(H, W, predictor.tile_size) and needed[:4] == "
+        "('depth', 'albedo', 'normal', 'roughness')\n"
+        "assert 0.2 < x[predictor.metadata.inputs.index('seen')].mean() < 1.0",
+    ),
     ("runtime.md", 'predictor = sdk.load("jnyang", threads=1)'): (  # pickled to the pool's processes
         "import numpy as np\nfrom rtp import sdk\nrng = np.random.default_rng(0)\n"
         "frames = [rng.random((9, 64, 96), dtype=np.float32) for _ in range(3)]\n",

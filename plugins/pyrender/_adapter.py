@@ -11,17 +11,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import (
-    DEFAULT_REPROJECTION_TOLERANCE,
-    ParameterError,
-    block_variances,
-    depth_edges,
-    luma,
-    pixel_differences,
-    reproject,
-    reproject_positions,
-    tile_variances,
-)
+from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, ParameterError, input_planes
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 from rtp.sdk.adapters import AdapterFrameError
 
@@ -343,31 +333,16 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
         g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, *_ALBEDO_VARIANCES}),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
-        planes: dict[str, np.ndarray] = {"depth": g.depth}
-        if "depth.edge" in wanted:
-            planes["depth.edge"] = depth_edges(g.depth)
-        for name in MATERIAL:
-            value = getattr(g, name)
-            if value is not None:
-                planes[name] = value
+        buffers: dict[str, Any] = {"depth": g.depth, "albedo": g.albedo, "normal": g.normal,
+                                   **{name: getattr(g, name) for name in MATERIAL}}
         if "specular" in wanted:  # pyrender's fixed dielectric F0 of 4 %
-            planes["specular"] = np.where(g.depth > 0.0, np.float32(PYRENDER_SPECULAR), np.float32(0.0))
-        if g.albedo is not None:
-            planes.update({c: g.albedo[..., i] for i, c in enumerate(_ALBEDO)})
-            planes[_ALBEDO_Y] = luma(g.albedo)
-            if "albedo.y.blocks" in wanted:
-                planes["albedo.y.blocks"] = block_variances(planes[_ALBEDO_Y])
-            if "albedo.y.tiles" in wanted:
-                planes["albedo.y.tiles"] = tile_variances(planes[_ALBEDO_Y])
-        if g.normal is not None:
-            planes.update({c: g.normal[..., i] for i, c in enumerate(_NORMAL)})
+            buffers["specular"] = np.where(g.depth > 0.0, np.float32(PYRENDER_SPECULAR), np.float32(0.0))
         if temporal:
             prev_pose = _pose(prev_pose, "prev_pose")
-            view = np.linalg.inv(pose)
-            proj = self.projection(scene, cam)
-            prev_vp = self.projection(scene, prev_cam) @ np.linalg.inv(prev_pose)
+            buffers.update(view=np.linalg.inv(pose), projection=self.projection(scene, cam),
+                           prev_view_projection=self.projection(scene, prev_cam) @ np.linalg.inv(prev_pose))
             if reproj:
-                colour = self._frame(prev_colour, "prev_colour")
+                buffers["prev_colour"] = self._frame(prev_colour, "prev_colour")
                 if prev_depth is None:
                     last = self._last
                     if (last is not None and last[0] == id(scene) and last[1] == id(prev_cam)
@@ -389,34 +364,12 @@ class Adapter(_BaseAdapter[SceneFrame]):
                     pd = pd.astype(np.float32)
                 if not np.isfinite(pd).all() or (pd < 0).any():
                     raise PyrenderAdapterError("prev_depth must be finite linear depth >= 0 (0 on background)")
-                rep, seen = reproject(colour, pd, g.depth, view, proj, prev_vp, tolerance=self.reprojection_tolerance)
-                planes.update({c: rep[..., i] for i, c in enumerate(_REPROJECTED)})
-                planes[_REPROJECTED_Y] = luma(rep)
-                planes.update(zip(_DIFFERENCES[:2], pixel_differences(planes[_REPROJECTED_Y])))
-                if _DIFFERENCES[2] in wanted:
-                    planes[_DIFFERENCES[2]] = block_variances(planes[_REPROJECTED_Y])
-                if _DIFFERENCES[3] in wanted:
-                    planes[_DIFFERENCES[3]] = tile_variances(planes[_REPROJECTED_Y])
-                planes["seen"] = seen
-            if wanted & set(_MOTION):
-                planes.update(zip(_MOTION, self._motion(g.depth, view, proj, prev_vp)))
+                buffers["prev_depth"] = pd
+        # the planes from the G-buffers: what every CPU adapter does (sdk.input_planes)
+        out = input_planes(self.channels, **buffers, tolerance=self.reprojection_tolerance)
         self._last = (id(scene), id(cam), pose.copy(), g.depth)
-        out = np.stack([planes[c] for c in self.channels]).astype(np.float32, copy=False)
         log.debug("inputs %s in %.3f s", out.shape, time.perf_counter() - t0)
-        return np.ascontiguousarray(out)
-
-    def _motion(self, depth: np.ndarray, view: np.ndarray, proj: np.ndarray,
-                prev_vp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels, previous minus current position (x right, y down); 0 on background and where
-        the point is behind the previous camera."""
-        h, w = depth.shape
-        qx, qy, cw = reproject_positions(depth, view, proj, prev_vp)
-        xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
-        gl_y = h - (np.arange(h, dtype=np.float64)[:, None] + 0.5)
-        valid = (depth > 0.0) & (cw > 0.0)
-        mx = np.where(valid, qx - xs, 0.0).astype(np.float32)
-        my = np.where(valid, -(qy - gl_y), 0.0).astype(np.float32)
-        return mx, my
+        return out
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:

@@ -1,0 +1,217 @@
+"""``input_planes``: a model's input planes from G-buffers held in numpy arrays, in one call.
+
+What a CPU adapter does (the pyrender adapter calls it; docs/adapters.md's skeleton is this call): each
+channel of :data:`CHANNELS` from the G-buffer it is made of, by the same functions the reference
+renderer's GPU adapter mirrors (``reproject``, ``luma``, ``pixel_differences``, ``block_variances``,
+``tile_variances``, ``depth_edges``). An engine that reads its G-buffers back to the host needs no
+adapter code of its own. numpy only.
+"""
+
+from __future__ import annotations
+
+import reprlib
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
+from ._color import luma
+from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
+from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
+
+__all__ = ["GBUFFERS", "gbuffers_needed", "input_planes"]
+
+#: The G-buffers :func:`input_planes` takes, each with its shape and what it holds (the conventions of
+#: docs/metadata.md "Input channels"): ``(H, W)`` or ``(H, W, 3)``, and the range its values must lie in.
+GBUFFERS: Mapping[str, tuple[str, str]] = {
+    "depth": ("(H, W)", "linear view depth in scene units, >= 0; 0 on background"),
+    "albedo": ("(H, W, 3)", "base colour, display-encoded sRGB in [0, 1]; 0 on background"),
+    "normal": ("(H, W, 3)", "view-space unit normal in [-1, 1] (right-handed, the camera looks down -z); 0 on "
+                            "background"),
+    "roughness": ("(H, W)", "GGX perceptual roughness in [0, 1]"),
+    "metallic": ("(H, W)", "metalness in [0, 1]"),
+    "specular": ("(H, W)", "dielectric specular scale in [0, 1] (0.5 = F0 of 4%)"),
+    "shadow": ("(H, W)", "main-light shadow visibility in [0, 1], 1 = lit"),
+    "emissive": ("(H, W)", "emissive luminance, display-encoded, in [0, 1]"),
+    "view": ("4x4", "this frame's world-to-view matrix (column vectors)"),
+    "projection": ("4x4", "this frame's view-to-clip matrix (OpenGL clip space)"),
+    "prev_colour": ("(H, W, 3)", "the previous displayed frame, display-encoded (tone-mapped sRGB) in [0, 1]"),
+    "prev_depth": ("(H, W)", "the previous frame's linear view depth, >= 0; 0 on background"),
+    "prev_view_projection": ("4x4", "the previous frame's world-to-clip matrix"),
+}
+
+_REPROJECTION = ("depth", "view", "projection", "prev_colour", "prev_depth", "prev_view_projection")
+_MOTION = ("depth", "view", "projection", "prev_view_projection")
+_RANGES = {"albedo": (0.0, 1.0), "normal": (-1.0, 1.0), "roughness": (0.0, 1.0), "metallic": (0.0, 1.0),
+           "specular": (0.0, 1.0), "shadow": (0.0, 1.0), "emissive": (0.0, 1.0), "prev_colour": (0.0, 1.0)}
+#: How far past its range a G-buffer's value may lie (float rounding of a renderer's output, an 8-bit normal's
+#: encoding) before it is refused.
+RANGE_SLACK = 1e-3
+
+
+def _needs(channel: str) -> tuple[str, ...]:
+    if channel.startswith("reprojected.") or channel == "seen":
+        return _REPROJECTION
+    if channel.startswith("motion."):
+        return _MOTION
+    if channel.startswith("albedo."):
+        return ("albedo",)
+    if channel.startswith("normal."):
+        return ("normal",)
+    if channel.startswith("depth"):
+        return ("depth",)
+    return (channel,)
+
+
+def _channels(channels: Iterable[str]) -> tuple[str, ...]:
+    if isinstance(channels, str) or not isinstance(channels, Iterable):
+        raise ParameterError(f"channels: expected a sequence of channel names (a model's metadata.inputs), got "
+                             f"{reprlib.repr(channels)}", "channels")
+    names = tuple(channels)
+    for c in names:
+        if not isinstance(c, str) or c not in CHANNELS:
+            import difflib
+
+            close = difflib.get_close_matches(str(c), list(CHANNELS), n=1)
+            raise ParameterError(f"channels: unknown channel {reprlib.repr(c)}"
+                                 f"{f' (did you mean {close[0]}?)' if close else ''}; channels are sdk.CHANNELS: "
+                                 f"{', '.join(CHANNELS)}", "channels")
+    if not names:
+        raise ParameterError("channels: expected at least one channel name", "channels")
+    return names
+
+
+def gbuffers_needed(channels: Iterable[str]) -> tuple[str, ...]:
+    """The G-buffers (:data:`GBUFFERS` names) :func:`input_planes` needs for ``channels``, in
+    :data:`GBUFFERS` order: what an engine must read back for a model (``metadata.inputs``)."""
+    names = _channels(channels)
+    wanted = {b for c in names for b in _needs(c)} | {"depth"}
+    return tuple(b for b in GBUFFERS if b in wanted)
+
+
+def _buffer(name: str, value: Any, size: tuple[int, int] | None) -> np.ndarray:
+    """A G-buffer as a float array of its shape, finite and within its range; else a typed error naming it."""
+    shape, meaning = GBUFFERS[name]
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise InputDtypeError(f"{name}: expected an array of numbers, {shape} {meaning}; got "
+                              f"{type(value).__name__} ({err})") from err
+    if a.dtype.kind not in "biuf":
+        raise InputDtypeError(f"{name}: expected an array of numbers, {shape} {meaning}; got dtype {a.dtype}")
+    if shape == "4x4":
+        expected: tuple[int, ...] = (4, 4)
+    elif size is None:  # depth: its own (H, W) gives the frame's size
+        expected = a.shape if a.ndim == 2 and a.size else ("H", "W")
+    else:
+        expected = (*size, 3) if shape.endswith(", 3)") else size
+    if a.shape != expected:
+        hint = " (a planar (3, H, W) image: np.moveaxis(image, 0, -1))" if a.shape == (3, *(size or ())) else ""
+        raise InputShapeError(f"{name}: expected shape {expected} ({meaning}), got {a.shape}{hint}",
+                              tuple(a.shape), str(expected))
+    with np.errstate(over="ignore"):
+        a = a.astype(np.float64 if shape == "4x4" else np.float32, copy=False)
+    if not np.isfinite(a).all():
+        raise NonFiniteInputError(f"{name}: holds NaN or infinite values ({meaning})")
+    low, high = _RANGES.get(name, (0.0, np.inf) if name.endswith("depth") else (-np.inf, np.inf))
+    lo, hi = (float(a.min()), float(a.max())) if a.size else (low, high)
+    if lo < low - RANGE_SLACK or hi > high + RANGE_SLACK:
+        hint = (": tone-map it and encode it as the display does (sdk.linear_to_srgb)"
+                if name in ("prev_colour", "albedo") and hi > 1.0 else "")
+        raise ParameterError(f"{name}: expected values in [{low:g}, {high:g}] ({meaning}), got [{lo:.4g}, {hi:.4g}]"
+                             f"{hint}", name)
+    return a
+
+
+def input_planes(
+    channels: Iterable[str],
+    *,
+    depth: Any,
+    albedo: Any = None,
+    normal: Any = None,
+    roughness: Any = None,
+    metallic: Any = None,
+    specular: Any = None,
+    shadow: Any = None,
+    emissive: Any = None,
+    view: Any = None,
+    projection: Any = None,
+    prev_colour: Any = None,
+    prev_depth: Any = None,
+    prev_view_projection: Any = None,
+    tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+) -> np.ndarray:
+    """The input planes of ``channels`` (a model's ``metadata.inputs``) from G-buffers in numpy arrays:
+    float32 ``(C, H, W)``, top-left origin, in the order of ``channels``, ready for ``predict``.
+
+    Each G-buffer is one of :data:`GBUFFERS` (its shape, what it holds, its range): ``depth`` always (it
+    gives the frame's size and its background), the others only where a channel is made of them
+    (:func:`gbuffers_needed`): the ``reprojected.*`` planes and ``seen`` reproject ``prev_colour`` with
+    ``prev_depth``, ``view``, ``projection`` and ``prev_view_projection`` (:func:`reproject`, its
+    ``tolerance``); ``motion.x/y`` are each pixel's previous minus current position in pixels (x right,
+    y down), 0 on background and where the point was behind the previous camera. A channel whose
+    G-buffer is not given, a G-buffer of another shape, or values outside its range (past a slack of
+    1e-3: an HDR ``prev_colour``, normals encoded in [0, 1]) raise a typed error naming
+    it; G-buffers no channel reads are not looked at.
+    """
+    names = _channels(channels)
+    given = {"depth": depth, "albedo": albedo, "normal": normal, "roughness": roughness, "metallic": metallic,
+             "specular": specular, "shadow": shadow, "emissive": emissive, "view": view, "projection": projection,
+             "prev_colour": prev_colour, "prev_depth": prev_depth, "prev_view_projection": prev_view_projection}
+    needed = gbuffers_needed(names)
+    missing = [b for b in needed if given[b] is None]
+    if missing:
+        uses = {b: [c for c in names if b in _needs(c)] for b in missing}
+        raise ParameterError("; ".join(f"{b}= is needed for {', '.join(uses[b])} ({GBUFFERS[b][0]}, {GBUFFERS[b][1]})"
+                                       for b in missing), missing[0])
+    d = _buffer("depth", depth, None)
+    size = (int(d.shape[0]), int(d.shape[1]))
+    g = {b: _buffer(b, given[b], size) for b in needed if b != "depth"}
+    g["depth"] = d
+    wanted = set(names)
+    planes: dict[str, np.ndarray] = {"depth": d}
+    if "depth.edge" in wanted:
+        planes["depth.edge"] = depth_edges(d)
+    for name in ("roughness", "metallic", "specular", "shadow", "emissive"):
+        if name in g:
+            planes[name] = g[name]
+    if "albedo" in g:
+        planes.update({f"albedo.{c}": g["albedo"][..., i] for i, c in enumerate("rgb")})
+        planes["albedo.y"] = luma(g["albedo"])
+        if "albedo.y.blocks" in wanted:
+            planes["albedo.y.blocks"] = block_variances(planes["albedo.y"])
+        if "albedo.y.tiles" in wanted:
+            planes["albedo.y.tiles"] = tile_variances(planes["albedo.y"])
+    if "normal" in g:
+        planes.update({f"normal.{c}": g["normal"][..., i] for i, c in enumerate("xyz")})
+    if "prev_colour" in g:
+        rep, seen = reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
+                              g["prev_view_projection"], tolerance=tolerance)
+        planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
+        y = planes["reprojected.y"] = luma(rep)
+        if wanted & {"reprojected.y.dx", "reprojected.y.dy"}:
+            planes["reprojected.y.dx"], planes["reprojected.y.dy"] = pixel_differences(y)
+        if "reprojected.y.blocks" in wanted:
+            planes["reprojected.y.blocks"] = block_variances(y)
+        if "reprojected.y.tiles" in wanted:
+            planes["reprojected.y.tiles"] = tile_variances(y)
+        planes["seen"] = seen
+    if wanted & {"motion.x", "motion.y"}:
+        planes["motion.x"], planes["motion.y"] = _motion_vectors(d, g["view"], g["projection"],
+                                                                  g["prev_view_projection"])
+    return np.ascontiguousarray(np.stack([planes[c] for c in names]), np.float32)
+
+
+def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray,
+                   prev_view_projection: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``motion.x``, ``motion.y``: each pixel's previous minus current position in pixels (x right, y down),
+    float32 ``(H, W)``; 0 on background and where the point was behind the previous camera."""
+    h, w = depth.shape
+    qx, qy, cw = reproject_positions(depth, view, projection, prev_view_projection)
+    xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
+    gl_y = h - (np.arange(h, dtype=np.float64)[:, None] + 0.5)
+    valid = (depth > 0.0) & (cw > 0.0)
+    mx = np.where(valid, qx - xs, 0.0).astype(np.float32)
+    my = np.where(valid, -(qy - gl_y), 0.0).astype(np.float32)
+    return mx, my
