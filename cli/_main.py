@@ -21,6 +21,7 @@ EXAMPLES = """examples:
   rtp demo                                        render the built-in scene, pick rates with the shipped model
   rtp info jnyang                                 a model's metadata, inputs and outputs
   rtp metric flip ref.png test.png --out map.png  FLIP (or another metric) of an image pair
+  rtp predict frame.npz --out predicted           a model's rates for a frame of your engine's G-buffers
   rtp scenes list                                 the game levels, their split, and what is cached
   rtp adapters check myengine                     the adapter contract's checks on your engine's adapter
   rtp capture --scene procedural:1 --per-scene 2 --out data/toy
@@ -652,6 +653,12 @@ def _cmd_metric(args: argparse.Namespace) -> int:
     return run_metric(args)
 
 
+def _cmd_predict(args: argparse.Namespace) -> int:
+    from ._predict import run_predict
+
+    return run_predict(args)
+
+
 def _usage(message: str) -> Exception:
     """A usage error found after parsing (exit 2, like argparse's own)."""
     from rtp.sdk import ParameterError
@@ -1027,6 +1034,30 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "
                     "frame, not its own displayed one")
     cache_dir(pl)
+
+    pr = command("predict", "a model's predictions and shading rates for one frame of your engine's G-buffers "
+                 "(an .npz)", _cmd_predict,
+                 epilog="the frame: an .npz of float arrays named as sdk.input_planes' arguments (sdk.GBUFFERS): "
+                 "depth (H, W) linear view depth, 0 on background; albedo, normal, prev_colour (H, W, 3); roughness, "
+                 "metallic, specular, shadow, emissive (H, W); view, projection, prev_view_projection (4x4, OpenGL); "
+                 "and, for --out's overlay, colour (H, W, 3), the frame as displayed. A model reads only some of "
+                 "them (`rtp info MODEL` lists its inputs)\n\nexamples:\n  rtp predict frame.npz --write-example   "
+                 "a frame of the reference renderer, to see the layout\n  rtp predict frame.npz --model flip --out "
+                 "predicted")
+    pr.add_argument("frame", type=_path_text, help="the .npz of the frame's G-buffers (written with --write-example)")
+    pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
+    pr.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    pr.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
+                    "the model's)")
+    pr.add_argument("--allowed", default=None, help="comma-separated reduced rates the hardware has (default: all "
+                    "six; 1x2,2x1,2x2 without the additional rates)")
+    pr.add_argument("--out", type=_out_folder, default=None, help="write rates.npy, predictions.npy and overlay.png "
+                    "into this folder")
+    pr.add_argument("--json", action="store_true", help="print the summary as JSON")
+    pr.add_argument("--write-example", action="store_true", help="write FRAME: a frame of the built-in procedural "
+                    "scene from the reference renderer, every G-buffer in the layout read")
+    pr.add_argument("--size", type=frame_size, default="640x360", help="--write-example's WIDTHxHEIGHT")
+    pr.add_argument("--seed", type=_non_negative, default=0, help="--write-example's viewpoint")
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)
     mt.add_argument("metric", choices=tuple(METRICS), help="the metric")

@@ -1,6 +1,7 @@
 """Property-based fuzzing of the command line (hypothesis): ``rtp.cli.main`` and ``rtp.cli.export_main``
 called in-process with generated argument lists for the subcommands whose main input does not exist
-(``rtp info``, ``evaluate``, ``targets``, ``train``, ``preview``, ``metric``, ``scenes`` and ``rtp-export``), every other flag
+(``rtp info``, ``evaluate``, ``targets``, ``train``, ``preview``, ``metric``, ``predict``, ``scenes`` and
+``rtp-export``), every other flag
 given a hostile value (empty, negative, huge, NaN, unicode, NUL bytes, a folder where a file is asked,
 a file that is not what is asked). Whatever arrives, the command must fail fast the way docs/errors.md
 says: one line ``PROG: error: MESSAGE`` on stderr, exit code 2 or 1, no traceback, no exception out of
@@ -211,6 +212,14 @@ _METRIC = st.tuples(st.one_of(st.sampled_from(_METRICS), hostile), paths, paths)
     lambda mrt: _argv(["metric", *mrt], [], [("--out", paths), ("--tile", numbers), ("--json", None)]))
 
 
+# rtp predict: no fixture is an .npz of G-buffers, so the frame is missing or unreadable (--write-example, which
+# renders and writes one, is not drawn).
+_PREDICT = st.one_of(st.just("missing.npz"), paths).flatmap(
+    lambda frame: _argv(["predict", frame], [],
+                        [("--model", hostile), ("--threshold", numbers), ("--tile-size", numbers), ("--allowed", hostile),
+                         ("--out", paths), ("--json", None), ("--size", hostile), ("--seed", numbers)]))
+
+
 # rtp adapters check: an adapter in a module that does not exist (nothing is drawn), whatever the options;
 # rtp adapters list takes no input to miss, so it is not here.
 _ADAPTERS_CHECK = st.one_of(st.just("no_such_module:Adapter"), st.just("no-such-adapter")).flatmap(
@@ -291,6 +300,7 @@ CASES = [
     ("capture", _CAPTURE),
     ("demo", _DEMO),
     ("metric", _METRIC),
+    ("predict", _PREDICT),
     ("scenes fetch", _SCENES_FETCH),
     ("scenes list", _SCENES_LIST),
     ("adapters check", _ADAPTERS_CHECK),
