@@ -676,7 +676,9 @@ def build_parser() -> argparse.ArgumentParser:
         DEFAULT_INPUTS,
         DEFAULT_OUTPUTS,
         DEFAULT_TILE_SIZE,
+        DEPTH_KINDS,
         METRICS,
+        NORMAL_SPACES,
         OUTPUT_SETS,
         TARGET_METRICS,
         TILE_SIZES,
@@ -1053,6 +1055,11 @@ def build_parser() -> argparse.ArgumentParser:
                     "six; 1x2,2x1,2x2 without the additional rates)")
     pr.add_argument("--out", type=_out_folder, default=None, help="write rates.npy, predictions.npy and overlay.png "
                     "into this folder")
+    pr.add_argument("--albedo-linear", action="store_true", help="the albedo array holds linear values (default: "
+                    "display-encoded sRGB)")
+    pr.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
+    pr.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear view "
+                    "depth (0 on background) or a depth buffer's window depth in [0, 1] (1 on background)")
     pr.add_argument("--json", action="store_true", help="print the summary as JSON")
     pr.add_argument("--write-example", action="store_true", help="write FRAME: a frame of the built-in procedural "
                     "scene from the reference renderer, every G-buffer in the layout read")

@@ -68,7 +68,7 @@ def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.n
               "view": cam.view(), "projection": cam.projection(w / h), "prev_colour": prev.colour["1x1"],
               "prev_depth": prev.depth, "prev_view_projection": prev_cam.view_projection(w, h),
               COLOUR_KEY: cur.colour["1x1"]}
-    assert set(arrays) == {*sdk.GBUFFERS, COLOUR_KEY}
+    assert set(arrays) == {*sdk.GBUFFERS, COLOUR_KEY} - {"prev_projection"}  # (its projection did not change)
     payload: dict[str, Any] = {k: np.asarray(v, np.float64 if k in ("view", "projection", "prev_view_projection")
                                              else np.float32) for k, v in arrays.items()}
     with sdk.files.atomic_output(path) as tmp, open(tmp, "wb") as f:
@@ -95,7 +95,8 @@ def run_predict(args: argparse.Namespace) -> int:
             f"{args.frame!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
             f"{predictor.path.name if predictor.path else args.model} reads: "
             + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing), "frame")
-    x = sdk.input_planes(inputs, **buffers)
+    x = sdk.input_planes(inputs, **buffers, albedo_linear=args.albedo_linear, normal_space=args.normal_space,
+                         depth_kind=args.depth_kind)
     h, w = x.shape[1:]
     start = time.perf_counter()
     values = predictor.predict(x)

@@ -48,7 +48,7 @@ from ._errors import (
 from ._metadata import FEATURES_NAME, METADATA_KEY, SCHEMA_VERSION, TAIL_KEY, ModelMetadata
 from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
-from ._planes import GBUFFERS, gbuffers_needed, input_planes
+from ._planes import DEPTH_KINDS, GBUFFERS, NORMAL_SPACES, gbuffers_needed, input_planes
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import (
     ALL_RATES,
@@ -111,6 +111,7 @@ __all__ = [
     "DEFAULT_OUTPUTS",
     "DEFAULT_REPROJECTION_TOLERANCE",
     "DEFAULT_TILE_SIZE",
+    "DEPTH_KINDS",
     "EXIT_FAILED",
     "EXIT_USAGE",
     "FEATURES_NAME",
@@ -122,6 +123,7 @@ __all__ = [
     "MAX_RESCALE",
     "METADATA_KEY",
     "METRICS",
+    "NORMAL_SPACES",
     "OUTPUT_SETS",
     "OVERLAY_COLOURS",
     "PREDICTED_RATES",

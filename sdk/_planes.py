@@ -16,19 +16,25 @@ from typing import Any
 import numpy as np
 
 from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
-from ._color import luma
+from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
 
-__all__ = ["GBUFFERS", "gbuffers_needed", "input_planes"]
+__all__ = ["DEPTH_KINDS", "GBUFFERS", "NORMAL_SPACES", "gbuffers_needed", "input_planes"]
+
+#: What ``depth`` (and ``prev_depth``) hold: ``linear`` view depth in scene units (0 = background), or the
+#: ``window`` depth of a hardware depth buffer in [0, 1] (1 = background), linearised with the inverse
+#: projection, as the moderngl adapter's ``depth_kind``.
+DEPTH_KINDS = ("linear", "window")
+#: The space ``normal`` is in: ``view``, or ``world`` (rotated into view space with ``view``).
+NORMAL_SPACES = ("view", "world")
 
 #: The G-buffers :func:`input_planes` takes, each with its shape and what it holds (the conventions of
 #: docs/metadata.md "Input channels"): ``(H, W)`` or ``(H, W, 3)``, and the range its values must lie in.
 GBUFFERS: Mapping[str, tuple[str, str]] = {
     "depth": ("(H, W)", "linear view depth in scene units, >= 0; 0 on background"),
     "albedo": ("(H, W, 3)", "base colour, display-encoded sRGB in [0, 1]; 0 on background"),
-    "normal": ("(H, W, 3)", "view-space unit normal in [-1, 1] (right-handed, the camera looks down -z); 0 on "
-                            "background"),
+    "normal": ("(H, W, 3)", "view-space unit normal (right-handed, the camera looks down -z); 0 on background"),
     "roughness": ("(H, W)", "GGX perceptual roughness in [0, 1]"),
     "metallic": ("(H, W)", "metalness in [0, 1]"),
     "specular": ("(H, W)", "dielectric specular scale in [0, 1] (0.5 = F0 of 4%)"),
@@ -39,11 +45,13 @@ GBUFFERS: Mapping[str, tuple[str, str]] = {
     "prev_colour": ("(H, W, 3)", "the previous displayed frame, display-encoded (tone-mapped sRGB) in [0, 1]"),
     "prev_depth": ("(H, W)", "the previous frame's linear view depth, >= 0; 0 on background"),
     "prev_view_projection": ("4x4", "the previous frame's world-to-clip matrix"),
+    "prev_projection": ("4x4", "the previous frame's view-to-clip matrix, where it differs from projection (window "
+                               "depth only: it linearises prev_depth)"),
 }
 
 _REPROJECTION = ("depth", "view", "projection", "prev_colour", "prev_depth", "prev_view_projection")
 _MOTION = ("depth", "view", "projection", "prev_view_projection")
-_RANGES = {"albedo": (0.0, 1.0), "normal": (-1.0, 1.0), "roughness": (0.0, 1.0), "metallic": (0.0, 1.0),
+_RANGES = {"albedo": (0.0, 1.0), "roughness": (0.0, 1.0), "metallic": (0.0, 1.0),
            "specular": (0.0, 1.0), "shadow": (0.0, 1.0), "emissive": (0.0, 1.0), "prev_colour": (0.0, 1.0)}
 #: How far past its range a G-buffer's value may lie (float rounding of a renderer's output, an 8-bit normal's
 #: encoding) before it is refused.
@@ -90,7 +98,7 @@ def gbuffers_needed(channels: Iterable[str]) -> tuple[str, ...]:
     return tuple(b for b in GBUFFERS if b in wanted)
 
 
-def _buffer(name: str, value: Any, size: tuple[int, int] | None) -> np.ndarray:
+def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float = np.inf) -> np.ndarray:
     """A G-buffer as a float array of its shape, finite and within its range; else a typed error naming it."""
     shape, meaning = GBUFFERS[name]
     try:
@@ -114,7 +122,8 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None) -> np.ndarray:
         a = a.astype(np.float64 if shape == "4x4" else np.float32, copy=False)
     if not np.isfinite(a).all():
         raise NonFiniteInputError(f"{name}: holds NaN or infinite values ({meaning})")
-    low, high = _RANGES.get(name, (0.0, np.inf) if name.endswith("depth") else (-np.inf, np.inf))
+    low, high = _RANGES.get(name, (0.0, window if name.endswith("depth") else np.inf)
+                            if name.endswith("depth") else (-np.inf, np.inf))
     lo, hi = (float(a.min()), float(a.max())) if a.size else (low, high)
     if lo < low - RANGE_SLACK or hi > high + RANGE_SLACK:
         hint = (": tone-map it and encode it as the display does (sdk.linear_to_srgb)"
@@ -140,7 +149,11 @@ def input_planes(
     prev_colour: Any = None,
     prev_depth: Any = None,
     prev_view_projection: Any = None,
+    prev_projection: Any = None,
     tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+    albedo_linear: bool = False,
+    normal_space: str = "view",
+    depth_kind: str = "linear",
 ) -> np.ndarray:
     """The input planes of ``channels`` (a model's ``metadata.inputs``) from G-buffers in numpy arrays:
     float32 ``(C, H, W)``, top-left origin, in the order of ``channels``, ready for ``predict``.
@@ -152,31 +165,69 @@ def input_planes(
     ``tolerance``); ``motion.x/y`` are each pixel's previous minus current position in pixels (x right,
     y down), 0 on background and where the point was behind the previous camera. A channel whose
     G-buffer is not given, a G-buffer of another shape, or values outside its range (past a slack of
-    1e-3: an HDR ``prev_colour``, normals encoded in [0, 1]) raise a typed error naming
+    1e-3: an HDR ``prev_colour``, a window depth past 1) raise a typed error naming
     it; G-buffers no channel reads are not looked at.
+
+    As the moderngl adapter's shader does, the albedo, the normals and the material planes (roughness,
+    metallic, specular) are 0 on background (where depth is 0); unlike it, the normals are taken as they
+    are, unit length or not (a caller may give only the components a model reads). The
+    engine's conventions the same adapter takes: ``albedo_linear=True`` for a linear albedo (encoded
+    with :func:`linear_to_srgb`), ``normal_space="world"`` for world-space normals (rotated with
+    ``view``), ``depth_kind="window"`` for hardware depth in [0, 1] (:data:`DEPTH_KINDS`; the previous
+    frame's linearised with ``prev_projection`` where given, else ``projection``).
     """
+    for flag, value in (("albedo_linear", albedo_linear),):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ParameterError(f"{flag}: expected True or False, got {reprlib.repr(value)}", flag)
+    if normal_space not in NORMAL_SPACES:
+        raise ParameterError(f"normal_space: expected one of {', '.join(NORMAL_SPACES)}, got "
+                             f"{reprlib.repr(normal_space)}", "normal_space")
+    if depth_kind not in DEPTH_KINDS:
+        raise ParameterError(f"depth_kind: expected one of {', '.join(DEPTH_KINDS)} (linear view depth, 0 on "
+                             f"background; or a depth buffer's [0, 1], 1 on background), got "
+                             f"{reprlib.repr(depth_kind)}", "depth_kind")
+    window = depth_kind == "window"
     names = _channels(channels)
     given = {"depth": depth, "albedo": albedo, "normal": normal, "roughness": roughness, "metallic": metallic,
              "specular": specular, "shadow": shadow, "emissive": emissive, "view": view, "projection": projection,
-             "prev_colour": prev_colour, "prev_depth": prev_depth, "prev_view_projection": prev_view_projection}
-    needed = gbuffers_needed(names)
+             "prev_colour": prev_colour, "prev_depth": prev_depth, "prev_view_projection": prev_view_projection,
+             "prev_projection": prev_projection}
+    because = {}  # the G-buffers an option needs besides those of the channels
+    if normal_space == "world" and "normal" in gbuffers_needed(names):
+        because["view"] = "normal_space='world'"
+    if window:
+        because["projection"] = "depth_kind='window'"
+        if prev_projection is not None and "prev_depth" in gbuffers_needed(names):
+            because["prev_projection"] = "depth_kind='window'"
+    needed = list(dict.fromkeys([*gbuffers_needed(names), *because]))
     missing = [b for b in needed if given[b] is None]
     if missing:
-        uses = {b: [c for c in names if b in _needs(c)] for b in missing}
+        uses = {b: [c for c in names if b in _needs(c)] or [because[b]] for b in missing}
         raise ParameterError("; ".join(f"{b}= is needed for {', '.join(uses[b])} ({GBUFFERS[b][0]}, {GBUFFERS[b][1]})"
                                        for b in missing), missing[0])
-    d = _buffer("depth", depth, None)
+    limit = 1.0 if window else np.inf
+    d = _buffer("depth", depth, None, limit)
     size = (int(d.shape[0]), int(d.shape[1]))
-    g = {b: _buffer(b, given[b], size) for b in needed if b != "depth"}
+    g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
+    if window:  # a depth buffer's [0, 1] to linear view depth, as the shader's linear_depth
+        d = _linear_depth(d, g["projection"])
+        if "prev_depth" in g:
+            g["prev_depth"] = _linear_depth(g["prev_depth"], g.get("prev_projection", g["projection"]))
     g["depth"] = d
+    geo = d > 0.0
     wanted = set(names)
     planes: dict[str, np.ndarray] = {"depth": d}
     if "depth.edge" in wanted:
         planes["depth.edge"] = depth_edges(d)
-    for name in ("roughness", "metallic", "specular", "shadow", "emissive"):
+    for name in ("roughness", "metallic", "specular"):  # 0 on background, as the shader's material
+        if name in g:
+            planes[name] = np.where(geo, g[name], np.float32(0.0))
+    for name in ("shadow", "emissive"):
         if name in g:
             planes[name] = g[name]
     if "albedo" in g:
+        albedo = linear_to_srgb(g["albedo"]).astype(np.float32) if albedo_linear else g["albedo"]
+        g["albedo"] = np.where(geo[..., None], albedo, np.float32(0.0))
         planes.update({f"albedo.{c}": g["albedo"][..., i] for i, c in enumerate("rgb")})
         planes["albedo.y"] = luma(g["albedo"])
         if "albedo.y.blocks" in wanted:
@@ -184,7 +235,13 @@ def input_planes(
         if "albedo.y.tiles" in wanted:
             planes["albedo.y.tiles"] = tile_variances(planes["albedo.y"])
     if "normal" in g:
-        planes.update({f"normal.{c}": g["normal"][..., i] for i, c in enumerate("xyz")})
+        n = g["normal"]
+        if normal_space == "world":
+            n = (n @ g["view"][:3, :3].T.astype(np.float32)).astype(np.float32)
+        # (not made unit length, as the shader makes them: an adapter may give some components alone, the
+        # pyrender adapter the ones a model reads)
+        n = np.where(geo[..., None], n, np.float32(0.0))
+        planes.update({f"normal.{c}": n[..., i] for i, c in enumerate("xyz")})
     if "prev_colour" in g:
         rep, seen = reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
                               g["prev_view_projection"], tolerance=tolerance)
@@ -201,6 +258,18 @@ def input_planes(
         planes["motion.x"], planes["motion.y"] = _motion_vectors(d, g["view"], g["projection"],
                                                                   g["prev_view_projection"])
     return np.ascontiguousarray(np.stack([planes[c] for c in names]), np.float32)
+
+
+def _linear_depth(raw: np.ndarray, projection: np.ndarray) -> np.ndarray:
+    """Window depth in [0, 1] (1 = background) to linear view depth (0 = background) through the inverse of
+    ``projection``: the moderngl adapter's ``linear_depth``."""
+    inv = np.linalg.inv(projection)
+    z = raw.astype(np.float64) * 2.0 - 1.0
+    pz = inv[2, 2] * z + inv[2, 3]
+    pw = inv[3, 2] * z + inv[3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        linear = np.where(raw >= 1.0, 0.0, -pz / pw)
+    return linear.astype(np.float32)
 
 
 def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray,

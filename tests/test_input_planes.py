@@ -109,7 +109,6 @@ def _frame(h: int = 20, w: int = 30) -> dict[str, Any]:
      r"prev_colour= is needed for reprojected\.r, seen .*; prev_depth= is needed"),
     ({"prev_colour": np.full((20, 30, 3), 2.5)}, sdk.ParameterError,
      r"prev_colour: expected values in \[0, 1\] .* got \[2\.5, 2\.5\]: tone-map it .*linear_to_srgb"),
-    ({"normal": np.full((20, 30, 3), 0.5) * 2 + 0.5}, sdk.ParameterError, r"normal: expected values in \[-1, 1\]"),
     ({"albedo": np.zeros((3, 20, 30))}, sdk.InputShapeError, r"albedo: expected shape \(20, 30, 3\).*np\.moveaxis"),
     ({"albedo": np.zeros((20, 31, 3))}, sdk.InputShapeError, r"albedo: expected shape \(20, 30, 3\)"),
     ({"depth": np.zeros((20, 30, 1))}, sdk.InputShapeError, r"depth: expected shape \('H', 'W'\)"),
@@ -142,3 +141,58 @@ def test_gbuffers_no_channel_reads_are_not_looked_at() -> None:
     np.testing.assert_array_equal(x[1], sdk.luma(g["albedo"]))
     np.testing.assert_array_equal(x[2], sdk.depth_edges(g["depth"]))
 
+
+
+@pytest.mark.gl
+def test_an_engines_own_conventions_give_the_same_planes(rendered: list[tuple[Any, dict[str, Any]]]) -> None:
+    """A linear albedo, world-space normals, junk on the background and a hardware depth
+    buffer, with the options that say so (the moderngl adapter's): the same planes, within the precision of a
+    float32 depth buffer."""
+    channels = list(sdk.CHANNELS)
+    for _, g in rendered:
+        want = dict(zip(channels, sdk.input_planes(channels, **g)))
+        sky = g["depth"] <= 0
+        rotation = g["view"][:3, :3]
+        albedo = sdk.srgb_to_linear(g["albedo"]).astype(np.float32)
+        albedo[sky] = 0.7  # the engine's clear colour, not read
+        normal = g["normal"] @ rotation  # world space
+        normal[sky] = 0.3
+
+        def window(depth: np.ndarray, projection: np.ndarray) -> np.ndarray:
+            z = -depth.astype(np.float64)
+            clip_z, clip_w = projection[2, 2] * z + projection[2, 3], projection[3, 2] * z + projection[3, 3]
+            with np.errstate(divide="ignore", invalid="ignore"):  # (the background's w is 0)
+                return np.where(depth > 0, (clip_z / clip_w + 1.0) / 2.0, 1.0).astype(np.float32)
+
+        engine = {**g, "albedo": albedo, "normal": normal, "depth": window(g["depth"], g["projection"]),
+                  "prev_depth": window(g["prev_depth"], g["projection"])}
+        got = dict(zip(channels, sdk.input_planes(channels, **engine, albedo_linear=True, normal_space="world",
+                                                   depth_kind="window")))
+        for c in ("albedo.r", "albedo.g", "albedo.b", "albedo.y", "normal.x", "normal.y", "normal.z"):
+            np.testing.assert_allclose(got[c], want[c], atol=2e-5, err_msg=c)
+        np.testing.assert_allclose(got["depth"], want["depth"], rtol=2e-3, err_msg="depth")
+        assert (got["seen"] == want["seen"]).mean() > 0.99
+        assert (np.abs(got["depth.edge"] - want["depth.edge"]) < 0.02).mean() > 0.99
+
+
+def test_the_options_are_checked_and_named() -> None:
+    g = _frame()
+    chans = ["normal.z", "seen"]
+    with pytest.raises(sdk.ParameterError, match="normal_space: expected one of view, world"):
+        sdk.input_planes(chans, **g, normal_space="object")
+    with pytest.raises(sdk.ParameterError, match="depth_kind: expected one of linear, window"):
+        sdk.input_planes(chans, **g, depth_kind="reversed")
+    with pytest.raises(sdk.ParameterError, match="albedo_linear: expected True or False"):
+        sdk.input_planes(chans, **g, albedo_linear="yes")
+    with pytest.raises(sdk.ParameterError, match=r"depth: expected values in \[0, 1\]"):
+        sdk.input_planes(chans, **g, depth_kind="window")  # linear depth of 2-3 m given as window depth
+    with pytest.raises(sdk.ParameterError, match=r"view= is needed for normal_space='world'"):
+        sdk.input_planes(["normal.z"], **{**g, "view": None}, normal_space="world")
+    with pytest.raises(sdk.ParameterError, match=r"projection= is needed for depth_kind='window'"):
+        sdk.input_planes(["depth"], depth=np.full((4, 4), 0.5), depth_kind="window")
+    # a world-space normal seen by a camera turned 90 degrees about y: view-space x is world z
+    turn = np.array([[0.0, 0, -1, 0], [0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
+    n = np.zeros((20, 30, 3))
+    n[..., 2] = 1.0
+    x = sdk.input_planes(["normal.x", "normal.z"], **{**g, "normal": n, "view": turn}, normal_space="world")
+    np.testing.assert_allclose(x[0], -1.0) and np.testing.assert_allclose(x[1], 0.0, atol=1e-7)
