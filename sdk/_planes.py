@@ -179,10 +179,10 @@ def input_planes(
     for flag, value in (("albedo_linear", albedo_linear),):
         if not isinstance(value, (bool, np.bool_)):
             raise ParameterError(f"{flag}: expected True or False, got {reprlib.repr(value)}", flag)
-    if normal_space not in NORMAL_SPACES:
+    if not isinstance(normal_space, str) or normal_space not in NORMAL_SPACES:
         raise ParameterError(f"normal_space: expected one of {', '.join(NORMAL_SPACES)}, got "
                              f"{reprlib.repr(normal_space)}", "normal_space")
-    if depth_kind not in DEPTH_KINDS:
+    if not isinstance(depth_kind, str) or depth_kind not in DEPTH_KINDS:
         raise ParameterError(f"depth_kind: expected one of {', '.join(DEPTH_KINDS)} (linear view depth, 0 on "
                              f"background; or a depth buffer's [0, 1], 1 on background), got "
                              f"{reprlib.repr(depth_kind)}", "depth_kind")
@@ -202,7 +202,8 @@ def input_planes(
     needed = list(dict.fromkeys([*gbuffers_needed(names), *because]))
     missing = [b for b in needed if given[b] is None]
     if missing:
-        uses = {b: [c for c in names if b in _needs(c)] or [because[b]] for b in missing}
+        uses = {b: [c for c in names if b in _needs(c)] or [because.get(b, "every channel (the frame's size and its "
+                                                                        "background)")] for b in missing}
         raise ParameterError("; ".join(f"{b}= is needed for {', '.join(uses[b])} ({GBUFFERS[b][0]}, {GBUFFERS[b][1]})"
                                        for b in missing), missing[0])
     limit = 1.0 if window else np.inf

@@ -557,6 +557,50 @@ def _reproject_absurd(v: tuple[str, Any], result: tuple[np.ndarray, np.ndarray])
     )
 
 
+# -- input planes from G-buffers ------------------------------------------------------------------
+
+_PLANES_VALID: dict[str, Any] = {
+    "depth": np.full((6, 8), 2.0), "albedo": np.full((6, 8, 3), 0.5), "normal": np.dstack([np.zeros((6, 8, 2)),
+                                                                                          np.ones((6, 8))]),
+    "roughness": np.full((6, 8), 0.5), "metallic": np.zeros((6, 8)), "specular": np.full((6, 8), 0.5),
+    "shadow": np.ones((6, 8)), "emissive": np.zeros((6, 8)), "view": _VIEW, "projection": _PROJ,
+    "prev_colour": np.full((6, 8, 3), 0.5), "prev_depth": np.full((6, 8), 2.0), "prev_view_projection": _PROJ,
+    "prev_projection": None, "tolerance": 0.02, "albedo_linear": False, "normal_space": "view", "depth_kind": "linear",
+}
+_PLANE_CHANNELS = st.one_of(st.lists(st.sampled_from(list(sdk.CHANNELS)), min_size=1, max_size=6),
+                            st.just(list(sdk.CHANNELS)), json_scalars, st.lists(json_scalars, max_size=3))
+
+planes_cases = st.builds(
+    lambda channels, key, v: (channels, key, v),
+    _PLANE_CHANNELS, st.sampled_from(list(_PLANES_VALID)),
+    st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none(), json_scalars),
+)
+
+
+def _planes_kw(v: tuple[Any, str, Any]) -> dict[str, Any]:
+    _, key, value = v
+    kw = dict(_PLANES_VALID)
+    kw[key] = _reproject_value(value, kw[key])
+    return kw
+
+
+def _planes_call(v: tuple[Any, str, Any]) -> np.ndarray:
+    return sdk.input_planes(v[0], **_planes_kw(v))
+
+
+def _planes_absurd(v: tuple[Any, str, Any], x: np.ndarray) -> bool:
+    """Accepted: the planes asked for, float32 and finite, of the depth's size; and nothing the channels read
+    was past its range."""
+    kw = _planes_kw(v)
+    try:
+        names = list(v[0])
+        depth = np.asarray(kw["depth"], np.float64)
+    except (TypeError, ValueError):
+        return True
+    return bool(x.shape != (len(names), *depth.shape) or x.dtype != np.float32 or not np.isfinite(x).all()
+                or (depth < 0).any())
+
+
 # -- the dataset reader ---------------------------------------------------------------------
 
 def _dataset() -> Path:
@@ -791,6 +835,7 @@ def targets() -> list[Target]:
                    overlays),
                _overlay_call, _overlay_absurd),
         Target("reproject", reprojections, _reproject_call, _reproject_absurd),
+        Target("input_planes", planes_cases, _planes_call, _planes_absurd),
         Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),
         Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset, _same_as_original),
         Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),

@@ -105,6 +105,7 @@ def _frame(h: int = 20, w: int = 30) -> dict[str, Any]:
 
 @pytest.mark.parametrize(("change", "error", "match"), [
     ({"albedo": None}, sdk.ParameterError, r"albedo= is needed for albedo\.r \(\(H, W, 3\), base colour"),
+    ({"depth": None}, sdk.ParameterError, r"depth= is needed for .*depth \(\(H, W\), linear view depth"),
     ({"prev_colour": None, "prev_depth": None}, sdk.ParameterError,
      r"prev_colour= is needed for reprojected\.r, seen .*; prev_depth= is needed"),
     ({"prev_colour": np.full((20, 30, 3), 2.5)}, sdk.ParameterError,
@@ -182,6 +183,10 @@ def test_the_options_are_checked_and_named() -> None:
         sdk.input_planes(chans, **g, normal_space="object")
     with pytest.raises(sdk.ParameterError, match="depth_kind: expected one of linear, window"):
         sdk.input_planes(chans, **g, depth_kind="reversed")
+    with pytest.raises(sdk.ParameterError, match="normal_space: expected one of view, world"):
+        sdk.input_planes(chans, **g, normal_space=np.zeros(0))  # type: ignore[arg-type]  (numpy's ValueError before)
+    with pytest.raises(sdk.ParameterError, match=r"depth= is needed for every channel \(the frame's size"):
+        sdk.input_planes(["albedo.y"], **{**g, "depth": None})  # (a KeyError before)
     with pytest.raises(sdk.ParameterError, match="albedo_linear: expected True or False"):
         sdk.input_planes(chans, **g, albedo_linear="yes")
     with pytest.raises(sdk.ParameterError, match=r"depth: expected values in \[0, 1\]"):
