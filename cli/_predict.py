@@ -52,11 +52,13 @@ def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.n
     """A frame of the built-in procedural scene as the reference renderer draws it, its G-buffers named as
     ``sdk.input_planes`` takes them, written atomically to ``path``."""
     from rtp import sdk
-    from rtp.capture import load_scene
+    from rtp.capture import check_frame_memory, check_frame_size, load_scene
     from rtp.capture.viewpoints import sample_viewpoints
     from rtp.plugins.moderngl import Renderer
 
-    w, h = size
+    w, h = check_frame_size(size)  # (what the GL driver draws, and this machine holds, before drawing it)
+    check_frame_memory("capture", (w, h))
+    sdk.files.check_output(path, what="frame")
     scene, blockers = load_scene("procedural:0", None, None, None)
     prev_cam, cam = sample_viewpoints(scene, 1, seed=seed, profile="fast", blockers=blockers, aspect=w / h)[0]
     with Renderer(w, h) as r:
