@@ -120,11 +120,12 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
                               tuple(a.shape), str(expected))
     with np.errstate(over="ignore"):
         a = a.astype(np.float64 if shape == "4x4" else np.float32, copy=False)
-    if not np.isfinite(a).all():
-        raise NonFiniteInputError(f"{name}: holds NaN or infinite values ({meaning})")
     low, high = _RANGES.get(name, (0.0, window if name.endswith("depth") else np.inf)
                             if name.endswith("depth") else (-np.inf, np.inf))
+    # (two reductions read it once each: a NaN makes both NaN, an infinity one infinite; no isfinite pass)
     lo, hi = (float(a.min()), float(a.max())) if a.size else (low, high)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise NonFiniteInputError(f"{name}: holds NaN or infinite values ({meaning})")
     if lo < low - RANGE_SLACK or hi > high + RANGE_SLACK:
         hint = (": tone-map it and encode it as the display does (sdk.linear_to_srgb)"
                 if name in ("prev_colour", "albedo") and hi > 1.0 else "")
@@ -216,19 +217,20 @@ def input_planes(
             g["prev_depth"] = _linear_depth(g["prev_depth"], g.get("prev_projection", g["projection"]))
     g["depth"] = d
     geo = d > 0.0
+    background = not geo.all()  # (a frame of geometry alone needs no mask)
     wanted = set(names)
     planes: dict[str, np.ndarray] = {"depth": d}
     if "depth.edge" in wanted:
         planes["depth.edge"] = depth_edges(d)
     for name in ("roughness", "metallic", "specular"):  # 0 on background, as the shader's material
         if name in g:
-            planes[name] = np.where(geo, g[name], np.float32(0.0))
+            planes[name] = np.where(geo, g[name], np.float32(0.0)) if background else g[name]
     for name in ("shadow", "emissive"):
         if name in g:
             planes[name] = g[name]
     if "albedo" in g:
         albedo = linear_to_srgb(g["albedo"]).astype(np.float32) if albedo_linear else g["albedo"]
-        g["albedo"] = np.where(geo[..., None], albedo, np.float32(0.0))
+        g["albedo"] = np.where(geo[..., None], albedo, np.float32(0.0)) if background else albedo
         planes.update({f"albedo.{c}": g["albedo"][..., i] for i, c in enumerate("rgb")})
         planes["albedo.y"] = luma(g["albedo"])
         if "albedo.y.blocks" in wanted:
@@ -241,7 +243,7 @@ def input_planes(
             n = (n @ g["view"][:3, :3].T.astype(np.float32)).astype(np.float32)
         # (not made unit length, as the shader makes them: an adapter may give some components alone, the
         # pyrender adapter the ones a model reads)
-        n = np.where(geo[..., None], n, np.float32(0.0))
+        n = np.where(geo[..., None], n, np.float32(0.0)) if background else n
         planes.update({f"normal.{c}": n[..., i] for i, c in enumerate("xyz")})
     if "prev_colour" in g:
         rep, seen = reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
