@@ -118,6 +118,12 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
         hint = " (a planar (3, H, W) image: np.moveaxis(image, 0, -1))" if a.shape == (3, *(size or ())) else ""
         raise InputShapeError(f"{name}: expected shape {expected} ({meaning}), got {a.shape}{hint}",
                               tuple(a.shape), str(expected))
+    if a.dtype in (np.uint8, np.uint16) and _RANGES.get(name) == (0.0, 1.0):
+        # a texture read back as 8- or 16-bit UNORM (RGBA8, R16): its integers over their largest
+        return a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max)
+    if a.dtype.kind in "iu" and name == "normal":
+        raise InputDtypeError(f"normal: expected view-space normals in [-1, 1] as floats, got dtype {a.dtype} (an "
+                              f"encoded normal texture: decode it first, e.g. n / 255 * 2 - 1 for 8 bits)")
     with np.errstate(over="ignore"):
         a = a.astype(np.float64 if shape == "4x4" else np.float32, copy=False)
     low, high = _RANGES.get(name, (0.0, window if name.endswith("depth") else np.inf)
@@ -167,7 +173,10 @@ def input_planes(
     y down), 0 on background and where the point was behind the previous camera. A channel whose
     G-buffer is not given, a G-buffer of another shape, or values outside its range (past a slack of
     1e-3: an HDR ``prev_colour``, a window depth past 1) raise a typed error naming
-    it; G-buffers no channel reads are not looked at.
+    it; G-buffers no channel reads are not looked at. A G-buffer of values in [0, 1] (albedo, the
+    material planes, ``prev_colour``) may come as the ``uint8`` or ``uint16`` of a UNORM texture read
+    back (its integers over 255 or 65535); integer normals are refused (an encoded normal texture:
+    decode it first).
 
     As the moderngl adapter's shader does, the albedo, the normals and the material planes (roughness,
     metallic, specular) are 0 on background (where depth is 0); unlike it, the normals are taken as they

@@ -201,3 +201,19 @@ def test_the_options_are_checked_and_named() -> None:
     n[..., 2] = 1.0
     x = sdk.input_planes(["normal.x", "normal.z"], **{**g, "normal": n, "view": turn}, normal_space="world")
     np.testing.assert_allclose(x[0], -1.0) and np.testing.assert_allclose(x[1], 0.0, atol=1e-7)
+
+
+def test_unorm_textures_read_back_as_integers() -> None:
+    """An RGBA8 albedo or previous frame and an R16 roughness read back as integers are the same planes as their
+    floats; an 8-bit normal texture is refused with how to decode it."""
+    g = _frame()
+    chans = ["albedo.r", "albedo.y", "reprojected.g", "seen", "roughness"]
+    as_bytes = {"albedo": np.round(g["albedo"] * 255).astype(np.uint8),
+                "prev_colour": np.round(g["prev_colour"] * 255).astype(np.uint8),
+                "roughness": np.round(g["roughness"] * 65535).astype(np.uint16)}
+    floats = {"albedo": as_bytes["albedo"] / 255.0, "prev_colour": as_bytes["prev_colour"] / 255.0,
+              "roughness": as_bytes["roughness"] / 65535.0}
+    np.testing.assert_allclose(sdk.input_planes(chans, **{**g, **as_bytes}), sdk.input_planes(chans, **{**g, **floats}),
+                               atol=1e-6)
+    with pytest.raises(sdk.InputDtypeError, match=r"normal: .*got dtype uint8 .*n / 255 \* 2 - 1"):
+        sdk.input_planes(["normal.z"], **{**g, "normal": np.full((20, 30, 3), 128, np.uint8)})
