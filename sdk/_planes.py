@@ -18,7 +18,7 @@ import numpy as np
 from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
 from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
-from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
+from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _positions, _reproject, _tolerance
 
 __all__ = ["DEPTH_KINDS", "GBUFFERS", "NORMAL_SPACES", "gbuffers_needed", "input_planes"]
 
@@ -197,6 +197,7 @@ def input_planes(
                              f"background; or a depth buffer's [0, 1], 1 on background), got "
                              f"{reprlib.repr(depth_kind)}", "depth_kind")
     window = depth_kind == "window"
+    tolerance = _tolerance(tolerance)
     names = _channels(channels)
     given = {"depth": depth, "albedo": albedo, "normal": normal, "roughness": roughness, "metallic": metallic,
              "specular": specular, "shadow": shadow, "emissive": emissive, "view": view, "projection": projection,
@@ -255,8 +256,8 @@ def input_planes(
         n = np.where(geo[..., None], n, np.float32(0.0)) if background else n
         planes.update({f"normal.{c}": n[..., i] for i, c in enumerate("xyz")})
     if "prev_colour" in g:
-        rep, seen = reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
-                              g["prev_view_projection"], tolerance=tolerance)
+        rep, seen = _reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
+                               g["prev_view_projection"], tolerance)
         planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
         y = planes["reprojected.y"] = luma(rep)
         if wanted & {"reprojected.y.dx", "reprojected.y.dy"}:
@@ -289,7 +290,7 @@ def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray,
     """``motion.x``, ``motion.y``: each pixel's previous minus current position in pixels (x right, y down),
     float32 ``(H, W)``; 0 on background and where the point was behind the previous camera."""
     h, w = depth.shape
-    qx, qy, cw = reproject_positions(depth, view, projection, prev_view_projection)
+    qx, qy, cw = _positions(depth, view, projection, prev_view_projection)
     xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
     gl_y = h - (np.arange(h, dtype=np.float64)[:, None] + 0.5)
     valid = (depth > 0.0) & (cw > 0.0)

@@ -83,6 +83,15 @@ def _inverse(m: np.ndarray, name: str) -> np.ndarray:
     return inv
 
 
+def _tolerance(tolerance: object) -> float:
+    """The disocclusion test's relative depth tolerance, checked: a number in [0, MAX_REPROJECTION_TOLERANCE]."""
+    if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.integer, np.floating)) \
+            or not 0.0 <= tolerance <= MAX_REPROJECTION_TOLERANCE:
+        raise ParameterError(f"tolerance: expected a number in [0, {MAX_REPROJECTION_TOLERANCE:g}] (relative depth "
+                             f"tolerance, {DEFAULT_REPROJECTION_TOLERANCE} by default), got {tolerance!r}", "tolerance")
+    return float(tolerance)
+
+
 def _depth(d: object, name: str) -> np.ndarray:
     a = _real(d, name)
     if a.ndim != 2 or a.size == 0:
@@ -112,11 +121,17 @@ def reproject_positions(
         the top-left row is ``H - qy``) and the previous clip ``w`` (the expected previous linear
         depth for geometry; only its sign matters for background).
     """
-    depth = _depth(depth, "depth")
+    return _positions(_depth(depth, "depth"), _matrix(cur_view, "cur_view"), _matrix(cur_proj, "cur_proj"),
+                      _matrix(prev_view_proj, "prev_view_proj"))
+
+
+def _positions(depth: np.ndarray, cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`reproject_positions` of arrays already checked (finite, ``depth`` (H, W) >= 0, 4x4 matrices),
+    float32 or float64 alike (each float32 value is a float64 exactly, and the arithmetic is float64)."""
     h, w = depth.shape
-    inv_proj = _inverse(_matrix(cur_proj, "cur_proj"), "cur_proj")
-    inv_view = _inverse(_matrix(cur_view, "cur_view"), "cur_view")
-    prev_vp = _matrix(prev_view_proj, "prev_view_proj")
+    inv_proj = _inverse(cur_proj, "cur_proj")
+    inv_view = _inverse(cur_view, "cur_view")
 
     # The pixel centre's NDC (x, y) on the near plane (z = -1) through the inverse projection: affine in x
     # and y, so each component is a sum of a column and a row (no (H, W, 4) array and matmul: 3-4x faster).
@@ -164,10 +179,7 @@ def reproject(
         ``(reprojected, seen)``: ``reprojected`` has ``prev_colour``'s shape, float32, 0 where
         unseen; ``seen`` is ``(H, W)`` float32 in {0, 1}. See the module docstring for the rules.
     """
-    if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.integer, np.floating)) \
-            or not 0.0 <= tolerance <= MAX_REPROJECTION_TOLERANCE:
-        raise ParameterError(f"tolerance: expected a number in [0, {MAX_REPROJECTION_TOLERANCE:g}] (relative depth "
-                             f"tolerance, {DEFAULT_REPROJECTION_TOLERANCE} by default), got {tolerance!r}", "tolerance")
+    tolerance = _tolerance(tolerance)
     depth = _depth(depth, "depth")
     prev_depth = _depth(prev_depth, "prev_depth")
     if prev_depth.shape != depth.shape:
@@ -177,9 +189,15 @@ def reproject(
     if colour.ndim not in (2, 3) or colour.shape[:2] != depth.shape:
         raise InputShapeError(f"prev_colour must be (H, W[, C]) with (H, W) = {depth.shape}; got {colour.shape}",
                               tuple(colour.shape), f"({depth.shape[0]}, {depth.shape[1]}[, C])")
-    prev_colour = np.asarray(prev_colour)
+    return _reproject(np.asarray(prev_colour), prev_depth, depth, _matrix(cur_view, "cur_view"),
+                      _matrix(cur_proj, "cur_proj"), _matrix(prev_view_proj, "prev_view_proj"), tolerance)
+
+
+def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarray, cur_view: np.ndarray,
+               cur_proj: np.ndarray, prev_vp: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reproject` of arrays already checked (``input_planes`` checks its G-buffers once, not twice)."""
     h, w = depth.shape
-    qx, qy, cw = reproject_positions(depth, cur_view, cur_proj, prev_view_proj)
+    qx, qy, cw = _positions(depth, cur_view, cur_proj, prev_vp)
     on = (cw > 0.0) & (qx >= 0.0) & (qx < w) & (qy >= 0.0) & (qy < h)
     qx = np.where(on, qx, 0.5)
     qy = np.where(on, qy, 0.5)
