@@ -199,7 +199,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     m = pred.metadata
     if args.json:
         print(json.dumps({"path": str(pred.path), "provider": pred.provider, "metadata": m.to_dict(),
-                          "graph_inputs": {name: list(planes) for name, planes in pred.graph_inputs}}, indent=2))
+                          "graph_inputs": {name: list(planes) for name, planes in pred.graph_inputs},
+                          "gbuffers": list(sdk.gbuffers_needed(m.inputs))}, indent=2))
         return 0
     t = m.transform
     params = ", ".join(f"{k}={v:g}" for k, v in t.to_dict().items() if k != "type")
@@ -216,6 +217,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         ("hardware tiles", ", ".join(map(str, sdk.hardware_tiles(m.tile_size)))
          + " (sdk.load(..., tile_size=N): NVIDIA's VRS 16, AMD's and Intel's 8)"),
         ("inputs", ", ".join(m.inputs)),
+        ("G-buffers read", ", ".join(sdk.gbuffers_needed(m.inputs)) + " (sdk.input_planes; rtp predict)"),
         ("graph inputs", "; ".join(f"{name} ({len(planes)} planes)" for name, planes in pred.graph_inputs)),
         ("network outputs", ", ".join(m.outputs)),
         ("predicted rates", ", ".join(pred.rates)),

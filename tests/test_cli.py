@@ -25,8 +25,12 @@ def test_info_prints_the_metadata(tiny_model: Callable[..., Path], capsys: pytes
                  "1x2, 2x1, 2x2, 2x4, 4x2, 4x4", "CPUExecutionProvider", "provenance.scenes", "oa_dm1, kaos2"):
         assert text in out, text
     assert re.search(r"hardware tiles +4, 8, 16, 32 \(sdk.load", out), out  # the VRS tiles it runs on
+    # what an engine reads back for it (sdk.input_planes' arguments)
+    assert re.search(r"G-buffers read +depth, albedo, normal, view, projection, prev_colour, prev_depth, "
+                     r"prev_view_projection \(", out), out
     assert main(["info", str(path), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["metadata"]["provenance"]["samples"] == 40
+    got = json.loads(capsys.readouterr().out)
+    assert got["metadata"]["provenance"]["samples"] == 40 and got["gbuffers"][0] == "depth"
 
 
 def test_info_errors_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
