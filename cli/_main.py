@@ -1045,7 +1045,7 @@ def build_parser() -> argparse.ArgumentParser:
                  "depth (H, W) linear view depth, 0 on background; albedo, normal, prev_colour (H, W, 3); roughness, "
                  "metallic, specular, shadow, emissive (H, W); view, projection, prev_view_projection (4x4, OpenGL); "
                  "and, for --out's overlay, colour (H, W, 3), the frame as displayed. A model reads only some of "
-                 "them (`rtp info MODEL` lists its inputs)\n\nexamples:\n  rtp predict frame.npz --write-example   "
+                 "them (`rtp info MODEL` names them: G-buffers read)\n\nexamples:\n  rtp predict frame.npz --write-example   "
                  "a frame of the reference renderer, to see the layout\n  rtp predict frame.npz --model flip --out "
                  "predicted")
     pr.add_argument("frame", type=_path_text, help="the .npz of the frame's G-buffers (written with --write-example)")
