@@ -148,17 +148,6 @@ def camera_poses(scene: Any, spawn: Any | None) -> tuple[np.ndarray, np.ndarray]
     return p0, p1
 
 
-def fetch_from_motion(motion_x: np.ndarray, motion_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel, the top-left ``(row, col)`` of the previous frame's pixel it comes from (what
-    ``PredictionReuse`` fetches): the nearest texel of the pixel centre moved by its motion vector
-    (pixels, previous minus current position, x right and y down), kept inside the frame."""
-    h, w = motion_x.shape
-    ys, xs = np.indices((h, w), dtype=np.float32)
-    rows = np.clip(np.floor(ys + 0.5 + motion_y), 0, h - 1).astype(np.intp)
-    cols = np.clip(np.floor(xs + 0.5 + motion_x), 0, w - 1).astype(np.intp)
-    return rows, cols
-
-
 def walk(p0: np.ndarray, frames: int, turn: float = 1.0, move: float = 0.05) -> list[np.ndarray]:
     """``frames`` camera poses from ``p0``, each ``move`` metres sideways (and half that forward)
     and ``turn`` degrees to the left of the one before: at 60 frames a second, by default a walk of
@@ -270,7 +259,7 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
             colour, _ = adapter.render(scene, poses[i])
             planes = adapter.inputs(SceneFrame(scene, poses[i], poses[i - 1], prev_colour))
             x, (motion_x, motion_y, depth) = planes[:len(inputs)], planes[len(inputs):]
-            fetch = fetch_from_motion(motion_x, motion_y)
+            fetch = sdk.fetch_from_motion(motion_x, motion_y)
             seen = x[inputs.index("seen")] if "seen" in inputs else None
             t0 = time.perf_counter()
             rates = reuse.shading_rates(x, fetch=fetch if i > 1 else None, seen=seen, background=depth <= 0.0,

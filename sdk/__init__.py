@@ -64,7 +64,15 @@ from ._rates import (
     work_saved,
 )
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
-from ._reuse import MAX_CARRY_SCALE, MAX_RESCALE, REUSE_CARRIES, REUSE_REDUCTIONS, REUSE_UNSEEN, PredictionReuse
+from ._reuse import (
+    MAX_CARRY_SCALE,
+    MAX_RESCALE,
+    REUSE_CARRIES,
+    REUSE_REDUCTIONS,
+    REUSE_UNSEEN,
+    PredictionReuse,
+    fetch_from_motion,
+)
 from ._tiles import (
     DEFAULT_TILE_SIZE,
     TILE_SIZES,
@@ -164,6 +172,7 @@ __all__ = [
     "draw_rate_overlay",
     "exit_code",
     "extrapolate",
+    "fetch_from_motion",
     "files",
     "gbuffers_needed",
     "hardware_tiles",

@@ -32,7 +32,7 @@ from ._tiles import padded_size, split_tiles, tile_grid
 if TYPE_CHECKING:
     from ._predictor import ShadingRatePredictor
 
-__all__ = ["MAX_RESCALE", "REUSE_CARRIES", "REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse"]
+__all__ = ["MAX_RESCALE", "REUSE_CARRIES", "REUSE_REDUCTIONS", "REUSE_UNSEEN", "PredictionReuse", "fetch_from_motion"]
 
 #: How a tile of a frame between network runs reduces the estimates its pixels carry. ``mean`` is
 #: the default: on the validation maps it kept 92.7% / 94.7% of k = 1's saving at 2% / 5% failing
@@ -841,3 +841,39 @@ class PredictionReuse:
         thr = meta.default_threshold if threshold is None else threshold
         return select_rates(self.predict(x, fetch, seen, background), thr, higher_is_better=meta.higher_is_better,
                             allowed=allowed, factors=meta.rate_factors)
+
+
+def fetch_from_motion(motion_x: object, motion_y: object) -> tuple[np.ndarray, np.ndarray]:
+    """:class:`PredictionReuse`'s ``fetch`` from an engine's motion vectors: per pixel, the top-left ``(row,
+    col)`` of the previous frame's pixel it comes from, the nearest texel of the pixel centre moved by its
+    motion vector (``motion.x``/``motion.y`` of ``sdk.CHANNELS``: pixels, previous minus current position,
+    x right and y down), kept inside the frame. ``(H, W)`` arrays of real numbers in, two ``intp``
+    ``(H, W)`` arrays out; anything else is a typed error naming the argument."""
+    planes = []
+    for name, value in (("motion_x", motion_x), ("motion_y", motion_y)):
+        try:
+            a = np.asarray(value)
+        except (TypeError, ValueError, OverflowError) as err:
+            raise InputDtypeError(f"{name}: expected an (H, W) array of pixel offsets, got {type(value).__name__} "
+                                  f"({err})") from err
+        if a.dtype.kind not in "biuf":
+            raise InputDtypeError(f"{name}: expected real pixel offsets, got dtype {a.dtype}")
+        if a.ndim != 2 or a.size == 0:
+            raise InputShapeError(f"{name}: expected a non-empty (H, W) array, got shape {a.shape}", tuple(a.shape),
+                                  "(H, W)")
+        with np.errstate(over="ignore"):
+            a = a.astype(np.float32, copy=False)
+        if not np.isfinite(a).all():
+            from ._errors import NonFiniteInputError
+
+            raise NonFiniteInputError(f"{name}: holds NaN or infinite values (a motion vector of every pixel)")
+        planes.append(a)
+    mx, my = planes
+    if mx.shape != my.shape:
+        raise InputShapeError(f"motion_x and motion_y must have one shape, got {mx.shape} and {my.shape}",
+                              tuple(my.shape), str(mx.shape))
+    h, w = mx.shape
+    ys, xs = np.indices((h, w), dtype=np.float32)
+    rows = np.clip(np.floor(ys + 0.5 + my), 0, h - 1).astype(np.intp)
+    cols = np.clip(np.floor(xs + 0.5 + mx), 0, w - 1).astype(np.intp)
+    return rows, cols

@@ -601,6 +601,14 @@ def _planes_absurd(v: tuple[Any, str, Any], x: np.ndarray) -> bool:
                 or (depth < 0).any())
 
 
+def _fetch_absurd(v: tuple[ArraySpec, ArraySpec], out: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Accepted: two index arrays of the motion's (H, W) shape, inside the frame."""
+    rows, cols = out
+    shape = np.shape(_array(v[0]))
+    return bool(len(shape) != 2 or rows.shape != shape or cols.shape != shape or rows.min() < 0 or cols.min() < 0
+                or rows.max() >= shape[0] or cols.max() >= shape[1])
+
+
 # -- the dataset reader ---------------------------------------------------------------------
 
 def _dataset() -> Path:
@@ -836,6 +844,8 @@ def targets() -> list[Target]:
                _overlay_call, _overlay_absurd),
         Target("reproject", reprojections, _reproject_call, _reproject_absurd),
         Target("input_planes", planes_cases, _planes_call, _planes_absurd),
+        Target("fetch_from_motion", st.tuples(_arrays(st.integers(0, 6), 3), _arrays(st.integers(0, 6), 3)),
+               lambda v: sdk.fetch_from_motion(_array(v[0]), _array(v[1])), _fetch_absurd),
         Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),
         Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset, _same_as_original),
         Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),

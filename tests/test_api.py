@@ -78,6 +78,7 @@ def test_sdk_all_is_pinned() -> None:
         "draw_rate_overlay",
         "exit_code",
         "extrapolate",
+        "fetch_from_motion",
         "files",
         "gbuffers_needed",
         "hardware_tiles",

@@ -217,3 +217,35 @@ def test_unorm_textures_read_back_as_integers() -> None:
                                atol=1e-6)
     with pytest.raises(sdk.InputDtypeError, match=r"normal: .*got dtype uint8 .*n / 255 \* 2 - 1"):
         sdk.input_planes(["normal.z"], **{**g, "normal": np.full((20, 30, 3), 128, np.uint8)})
+
+
+@pytest.mark.gl
+def test_fetch_from_motion_is_the_reprojections_nearest_texel(rendered: list[tuple[Any, dict[str, Any]]]) -> None:
+    """PredictionReuse's fetch from the motion planes: where a geometry pixel was last frame, as the reprojection's
+    nearest texel (which the seen mask reads), on all but the pixels within float32 rounding of a texel edge."""
+    for _, g in rendered:
+        mx, my, seen = sdk.input_planes(["motion.x", "motion.y", "seen"], **g)
+        rows, cols = sdk.fetch_from_motion(mx, my)
+        assert rows.dtype == cols.dtype == np.intp and rows.shape == (H, W)
+        qx, qy, _ = sdk.reproject_positions(g["depth"], g["view"], g["projection"], g["prev_view_projection"])
+        on = (seen > 0) & (g["depth"] > 0)  # (the motion of the background is 0: PredictionReuse's background)
+        same = (cols == np.floor(qx)) & (rows == H - 1 - np.floor(qy))
+        assert same[on].mean() > 0.995, same[on].mean()
+
+
+def test_fetch_from_motion_by_hand() -> None:
+    still = np.zeros((3, 4))
+    rows, cols = sdk.fetch_from_motion(still, still)
+    np.testing.assert_array_equal(rows, np.indices((3, 4))[0])
+    np.testing.assert_array_equal(cols, np.indices((3, 4))[1])
+    rows, cols = sdk.fetch_from_motion(np.full((3, 4), 1.0), np.full((3, 4), -0.6))  # from the right, from above
+    np.testing.assert_array_equal(cols, [[1, 2, 3, 3]] * 3)  # (kept inside the frame)
+    np.testing.assert_array_equal(rows[:, 0], [0, 0, 1])
+    with pytest.raises(sdk.InputShapeError, match="one shape"):
+        sdk.fetch_from_motion(still, np.zeros((3, 5)))
+    with pytest.raises(sdk.NonFiniteInputError, match="motion_y"):
+        sdk.fetch_from_motion(still, np.full((3, 4), np.nan))
+    with pytest.raises(sdk.InputDtypeError, match="motion_x"):
+        sdk.fetch_from_motion(np.full((3, 4), "a"), still)
+    with pytest.raises(sdk.InputShapeError, match=r"motion_x: expected a non-empty \(H, W\)"):
+        sdk.fetch_from_motion(np.zeros((2, 3, 4)), still)
