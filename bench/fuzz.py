@@ -1,6 +1,6 @@
 """Fuzz the runtime and the dataset reader with generated malformed inputs and print a table.
 
-    python bench/fuzz.py                 # 1,000 inputs per target (18 targets: 18,000 inputs)
+    python bench/fuzz.py                 # 1,000 inputs per target (23 targets: 23,000 inputs)
     python bench/fuzz.py --per-target 200 --show 3
 
 The inputs and targets are tests/fuzzing.py's (tests/test_fuzz.py runs fewer of them in CI). Every
