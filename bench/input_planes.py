@@ -1,6 +1,7 @@
 """Benchmark ``sdk.input_planes``: what a CPU adapter pays per frame for each shipped model's planes.
 
     python bench/input_planes.py [--sizes 1280x720,1920x1080] [--repeats 5]
+    python bench/input_planes.py --against REV [--sizes 1280x720,1920x1080] [--repeats 5]
 
 An engine that reads its G-buffers back to the host makes a model's input planes with one call
 (docs/runtime.md "Input planes from G-buffers on the host"); the pyrender adapter does the same after
@@ -10,6 +11,13 @@ follows the geometry), next to ``predict`` of the same model on the planes it ma
 scale), and ``sdk.reproject`` alone, the most of the call. The moderngl adapter builds the same planes
 in a shader instead (``bench/adapter.py``).
 Prints a Markdown table of medians (ms).
+
+``--against REV`` loads ``sdk/_reproject.py`` as it was at git revision ``REV`` and compares it with this
+checkout's: ``reproject``'s time at each size, the two interleaved (medians), and its outputs on
+rendered frames (both camera profiles of three procedural scenes at three sizes, tolerances 0, 0.02 and
+0.2): the ``seen`` pixels that differ, the colours that differ where ``seen`` agrees, and the largest
+difference of ``reproject_positions``. Exits 1 if any ``seen`` pixel or colour differs: a faster
+reprojection must give the same planes.
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-from _common import cpu_description, frame_sizes, median_ms, positive, run_main  # bench/ is on sys.path as a script
+from _common import cpu_description, frame_sizes, interleaved_ms, median_ms, positive, run_main  # bench/ on sys.path
 
 from rtp import sdk
 
@@ -42,12 +50,78 @@ def gbuffers(w: int, h: int) -> dict[str, Any]:
             "prev_view_projection": prev_cam.view_projection(w, h)}
 
 
+def _then(rev: str) -> Any:
+    """``sdk/_reproject.py`` at git revision ``rev``, imported in ``rtp.sdk`` (its relative imports resolve there)."""
+    import importlib.util
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    src = subprocess.run(["git", "show", f"{rev}:sdk/_reproject.py"], cwd=root, capture_output=True, text=True)
+    if src.returncode:
+        raise SystemExit(f"input_planes.py: error: --against {rev}: git cannot show sdk/_reproject.py there "
+                         f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "_reproject_then.py"
+        path.write_text(src.stdout)
+        spec = importlib.util.spec_from_file_location("rtp.sdk._reproject_then", path)
+        assert spec is not None and spec.loader is not None
+        then = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = then
+        spec.loader.exec_module(then)
+    return then
+
+
+def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
+    from rtp.capture import load_scene
+    from rtp.capture.viewpoints import sample_viewpoints
+    from rtp.plugins.moderngl import Renderer
+
+    then = _then(rev)
+    print(f"sdk.reproject at {rev} and in this checkout; {cpu_description()}, median of {repeats}\n")
+    print(f"| frame | {rev} ms | this checkout ms |\n|---|---:|---:|")
+    for w, h in sizes:
+        g = gbuffers(w, h)
+        args = (g["prev_colour"], g["prev_depth"], g["depth"], g["view"], g["projection"], g["prev_view_projection"])
+        times = interleaved_ms({"then": partial(then.reproject, *args), "now": partial(sdk.reproject, *args)},
+                               repeats)
+        print(f"| {w}x{h} | {np.median(times['then']):.1f} | {np.median(times['now']):.1f} |")
+    pixels = seen_differ = colour_differ = 0
+    position = 0.0
+    for name, (w, h) in [("procedural:0", (320, 192)), ("procedural:3", (640, 360)), ("procedural:5", (97, 53))]:
+        scene, blockers = load_scene(name, None, None, None)
+        with Renderer(w, h) as r:
+            r.load_scene(scene)
+            for profile in ("slow", "fast"):
+                for prev_cam, cam in sample_viewpoints(scene, 6, seed=1, profile=profile, blockers=blockers,
+                                                       aspect=w / h):
+                    prev = r.render(prev_cam)
+                    cur = r.render(cam, prev)
+                    args = (prev.colour["1x1"], prev.depth, cur.depth, cam.view(), cam.projection(w / h),
+                            prev_cam.view_projection(w, h))
+                    for tolerance in (0.0, 0.02, 0.2):
+                        (c0, s0), (c1, s1) = (m.reproject(*args, tolerance=tolerance) for m in (then, sdk))
+                        pixels += s0.size
+                        seen_differ += int((s0 != s1).sum())
+                        colour_differ += int((c0 != c1)[s0 == s1].sum())
+                    p0, p1 = then.reproject_positions(*args[2:]), sdk.reproject_positions(*args[2:])
+                    position = max(position, *(float(np.abs(a - b).max()) for a, b in zip(p0, p1)))
+    print(f"\n{pixels:,} pixels of rendered frames: seen differs on {seen_differ}, the colour where seen agrees on "
+          f"{colour_differ} values; positions within {position:.3g} px")
+    return 1 if seen_differ or colour_differ else 0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=frame_sizes(16), default=[(1280, 720), (1920, 1080)],
                     help="comma-separated WIDTHxHEIGHT (default 1280x720,1920x1080)")
     ap.add_argument("--repeats", type=positive, default=5)
+    ap.add_argument("--against", metavar="REV", help="compare sdk.reproject with sdk/_reproject.py at git REV")
     args = ap.parse_args()
+    if args.against:
+        raise SystemExit(_against(args.against, args.sizes, args.repeats))
     models = {name.removesuffix(".onnx"): sdk.load(name) for name in sdk.shipped_models()}
     print(f"rtp {sdk.__version__}, numpy {np.__version__}, {cpu_description()}, median of {args.repeats}\n")
     sizes = [f"{w}x{h}" for w, h in args.sizes]
