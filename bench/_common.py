@@ -275,3 +275,28 @@ def save_figure(fig: Any, path: str | Path) -> None:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     print(f"\nwrote {path}")
+
+
+def module_at_revision(rev: str, path: str, name: str, prog: str) -> Any:
+    """The module ``path`` (``sdk/_channels.py``) as it was at git revision ``rev``, imported as ``name``
+    (``rtp.sdk._channels_then``: its relative imports resolve in that package); a usage error of ``prog``
+    (``SystemExit``, exit 1) where git cannot show it. For the benchmarks' ``--against REV``."""
+    import importlib.util
+    import subprocess
+    import sys
+    import tempfile
+
+    root = Path(__file__).resolve().parents[1]
+    src = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=root, capture_output=True, text=True)
+    if src.returncode:
+        raise SystemExit(f"{prog}: error: --against {rev}: git cannot show {path} there "
+                         f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
+    with tempfile.TemporaryDirectory() as tmp:
+        file = Path(tmp) / f"{name.rpartition('.')[2]}.py"
+        file.write_text(src.stdout)
+        spec = importlib.util.spec_from_file_location(name, file)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+    return module

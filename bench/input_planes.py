@@ -27,7 +27,15 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-from _common import cpu_description, frame_sizes, interleaved_ms, median_ms, positive, run_main  # bench/ on sys.path
+from _common import (  # bench/ is on sys.path as a script
+    cpu_description,
+    frame_sizes,
+    interleaved_ms,
+    median_ms,
+    module_at_revision,
+    positive,
+    run_main,
+)
 
 from rtp import sdk
 
@@ -50,36 +58,12 @@ def gbuffers(w: int, h: int) -> dict[str, Any]:
             "prev_view_projection": prev_cam.view_projection(w, h)}
 
 
-def _then(rev: str) -> Any:
-    """``sdk/_reproject.py`` at git revision ``rev``, imported in ``rtp.sdk`` (its relative imports resolve there)."""
-    import importlib.util
-    import subprocess
-    import sys
-    import tempfile
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[1]
-    src = subprocess.run(["git", "show", f"{rev}:sdk/_reproject.py"], cwd=root, capture_output=True, text=True)
-    if src.returncode:
-        raise SystemExit(f"input_planes.py: error: --against {rev}: git cannot show sdk/_reproject.py there "
-                         f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "_reproject_then.py"
-        path.write_text(src.stdout)
-        spec = importlib.util.spec_from_file_location("rtp.sdk._reproject_then", path)
-        assert spec is not None and spec.loader is not None
-        then = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = then
-        spec.loader.exec_module(then)
-    return then
-
-
 def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
     from rtp.capture import load_scene
     from rtp.capture.viewpoints import sample_viewpoints
     from rtp.plugins.moderngl import Renderer
 
-    then = _then(rev)
+    then = module_at_revision(rev, "sdk/_reproject.py", "rtp.sdk._reproject_then", "input_planes.py")
     print(f"sdk.reproject at {rev} and in this checkout; {cpu_description()}, median of {repeats}\n")
     print(f"| frame | {rev} ms | this checkout ms |\n|---|---:|---:|")
     for w, h in sizes:

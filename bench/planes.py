@@ -34,6 +34,7 @@ from _common import (  # bench/ is on sys.path when run as a script
     dataset_folder,
     frame_size,
     median_ms,
+    module_at_revision,
     positive,
     run_main,
 )
@@ -99,28 +100,10 @@ def _row(rng: np.random.Generator, w: int, h: int, repeats: int) -> list[float]:
 def _against(rev: str, scenes: list[str], frames: int, data: str | None) -> int:
     """Count the ``.blocks`` and ``.tiles`` values that differ from ``sdk/_channels.py`` at ``rev``, and
     for each ``.blocks`` value that differs which of the two is nearer its exact value. 1 where ``rev``'s is."""
-    import importlib.util
-    import subprocess
-    import sys
-    import tempfile
-    from pathlib import Path
-
     from rtp.capture import DatasetReader, load_scene
     from rtp.capture.paths import PathPlayer, camera_path
 
-    root = Path(__file__).resolve().parents[1]
-    src = subprocess.run(["git", "show", f"{rev}:sdk/_channels.py"], cwd=root, capture_output=True, text=True)
-    if src.returncode:
-        raise SystemExit(f"planes.py: error: --against {rev}: git cannot show sdk/_channels.py there "
-                         f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "_channels_then.py"
-        path.write_text(src.stdout)
-        spec = importlib.util.spec_from_file_location("rtp.sdk._channels_then", path)
-        assert spec is not None and spec.loader is not None
-        then = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = then  # its relative imports resolve in rtp.sdk
-        spec.loader.exec_module(then)
+    then = module_at_revision(rev, "sdk/_channels.py", "rtp.sdk._channels_then", "planes.py")
     pairs = {"block_variances": (then.block_variances, sdk.block_variances),
              "tile_variances": (then.tile_variances, sdk.tile_variances)}
     counts = {(source, name): [0, 0] for source in ("frames", "dataset", "synthetic") for name in pairs}

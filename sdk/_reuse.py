@@ -27,6 +27,7 @@ import numpy as np
 from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
 from ._errors import InputDtypeError, InputShapeError, ParameterError
 from ._rates import RateLike, select_rates
+from ._reproject import _real
 from ._tiles import padded_size, split_tiles, tile_grid
 
 if TYPE_CHECKING:
@@ -851,29 +852,17 @@ def fetch_from_motion(motion_x: object, motion_y: object) -> tuple[np.ndarray, n
     ``(H, W)`` arrays out; anything else is a typed error naming the argument."""
     planes = []
     for name, value in (("motion_x", motion_x), ("motion_y", motion_y)):
-        try:
-            a = np.asarray(value)
-        except (TypeError, ValueError, OverflowError) as err:
-            raise InputDtypeError(f"{name}: expected an (H, W) array of pixel offsets, got {type(value).__name__} "
-                                  f"({err})") from err
-        if a.dtype.kind not in "biuf":
-            raise InputDtypeError(f"{name}: expected real pixel offsets, got dtype {a.dtype}")
+        a = _real(value, name)  # (finite float64, else a typed error naming it)
         if a.ndim != 2 or a.size == 0:
             raise InputShapeError(f"{name}: expected a non-empty (H, W) array, got shape {a.shape}", tuple(a.shape),
                                   "(H, W)")
-        with np.errstate(over="ignore"):
-            a = a.astype(np.float32, copy=False)
-        if not np.isfinite(a).all():
-            from ._errors import NonFiniteInputError
-
-            raise NonFiniteInputError(f"{name}: holds NaN or infinite values (a motion vector of every pixel)")
         planes.append(a)
     mx, my = planes
     if mx.shape != my.shape:
         raise InputShapeError(f"motion_x and motion_y must have one shape, got {mx.shape} and {my.shape}",
                               tuple(my.shape), str(mx.shape))
     h, w = mx.shape
-    ys, xs = np.indices((h, w), dtype=np.float32)
+    ys, xs = np.indices((h, w), dtype=np.float64)
     rows = np.clip(np.floor(ys + 0.5 + my), 0, h - 1).astype(np.intp)
     cols = np.clip(np.floor(xs + 0.5 + mx), 0, w - 1).astype(np.intp)
     return rows, cols
