@@ -1,4 +1,5 @@
-"""bench/input_planes.py: sdk.input_planes' time for every shipped model's planes, next to its predict."""
+"""bench/input_planes.py (sdk.input_planes' time for every shipped model's planes, next to its predict) and
+bench/pyrender_adapter.py (the pyrender adapter's inputs for every shipped model, frame loop and first frame)."""
 
 from __future__ import annotations
 
@@ -11,19 +12,27 @@ import pytest
 
 from rtp import sdk
 
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "input_planes.py"
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+SHIPPED = {m.removesuffix(".onnx") for m in sdk.shipped_models()}
+
+
+def _run(script: str, *args: str, timeout: int = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(BENCH / script), *args], capture_output=True, text=True, timeout=timeout)
+
+
+def _models(stdout: str, cells: int) -> set[str]:
+    """The model names of the table rows of ``cells`` numbers after the plane count."""
+    rows = re.findall(rf"^\| ([\w-]+) \| \d+ \|(?: [\d.]+ \|){{{cells}}}$", stdout, re.M)
+    return set(rows)
 
 
 @pytest.mark.gl
-def test_a_row_per_shipped_model() -> None:
-    out = subprocess.run([sys.executable, str(BENCH), "--sizes", "64x48,80x48", "--repeats", "1"],
-                         capture_output=True, text=True, timeout=300)
+def test_input_planes_a_row_per_shipped_model() -> None:
+    out = _run("input_planes.py", "--sizes", "64x48,80x48", "--repeats", "1")
     assert out.returncode == 0, out.stderr
-    rows = [line for line in out.stdout.splitlines() if re.match(r"\| [\w-]+ \| \d+ \|( [\d.]+ \|){4}$", line)]
-    names = {row.split(" | ")[0].removeprefix("| ") for row in rows}
-    assert names == {m.removesuffix(".onnx") for m in sdk.shipped_models()}, out.stdout
+    assert _models(out.stdout, 4) == SHIPPED, out.stdout
     assert re.search(r"^\| \(sdk\.reproject alone\) \| 4 \| [\d.]+ \|  \| [\d.]+ \|  \|$", out.stdout, re.M), out.stdout
-    bad = subprocess.run([sys.executable, str(BENCH), "--sizes", "big"], capture_output=True, text=True, timeout=60)
+    bad = _run("input_planes.py", "--sizes", "big", timeout=60)
     assert bad.returncode == 2 and "--sizes" in bad.stderr
 
 
@@ -32,11 +41,18 @@ def test_a_row_per_shipped_model() -> None:
 def test_against_a_revision_compares_the_reprojections() -> None:
     """--against REV: this checkout's reproject against git REV's, timed and compared on rendered frames (against
     HEAD itself: nothing differs)."""
-    out = subprocess.run([sys.executable, str(BENCH), "--against", "HEAD", "--sizes", "32x32", "--repeats", "1"],
-                         capture_output=True, text=True, timeout=300)
+    out = _run("input_planes.py", "--against", "HEAD", "--sizes", "32x32", "--repeats", "1")
     assert out.returncode == 0, out.stdout + out.stderr
     assert re.search(r"^\| 32x32 \| [\d.]+ \| [\d.]+ \|$", out.stdout, re.M), out.stdout
     assert "seen differs on 0, the colour where seen agrees on 0 values; positions within 0 px" in out.stdout
-    bad = subprocess.run([sys.executable, str(BENCH), "--against", "no-such-revision"], capture_output=True, text=True,
-                         timeout=120)
+    bad = _run("input_planes.py", "--against", "no-such-revision", timeout=120)
     assert bad.returncode == 1 and "git cannot show sdk/_reproject.py there" in bad.stderr
+
+
+@pytest.mark.gl
+def test_pyrender_adapter_a_row_per_shipped_model() -> None:
+    out = _run("pyrender_adapter.py", "--sizes", "64x48", "--repeats", "1")
+    assert out.returncode == 0, out.stderr
+    assert _models(out.stdout, 2) == SHIPPED, out.stdout  # a frame loop and a first frame
+    bad = _run("pyrender_adapter.py", "--repeats", "0", timeout=60)
+    assert bad.returncode == 2 and "--repeats" in bad.stderr
