@@ -9,6 +9,7 @@ adapter code of its own. numpy only.
 
 from __future__ import annotations
 
+import logging
 import reprlib
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -20,12 +21,17 @@ from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
 from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _positions, _reproject, _tolerance
 
+log = logging.getLogger(__name__)
+
 __all__ = ["DEPTH_KINDS", "GBUFFERS", "NORMAL_SPACES", "gbuffers_needed", "input_planes"]
 
-#: What ``depth`` (and ``prev_depth``) hold: ``linear`` view depth in scene units (0 = background), or the
-#: ``window`` depth of a hardware depth buffer in [0, 1] (1 = background), linearised with the inverse
-#: projection, as the moderngl adapter's ``depth_kind``.
-DEPTH_KINDS = ("linear", "window")
+#: What ``depth`` (and ``prev_depth``) hold: ``linear`` view depth in scene units (0 = background); the
+#: ``window`` depth of a hardware depth buffer in [0, 1] (0 at the near plane, 1 on background), OpenGL's and
+#: Direct3D's alike; or a ``reversed``-Z depth buffer (1 at the near plane, 0 on background and at the far
+#: plane, finite or infinite: the depth of most current D3D12, Vulkan and Metal engines). Both hardware kinds
+#: are linearised with the OpenGL ``projection`` of the same near and far planes, as the moderngl adapter's
+#: ``depth_kind``.
+DEPTH_KINDS = ("linear", "window", "reversed")
 #: The space ``normal`` is in: ``view``, or ``world`` (rotated into view space with ``view``).
 NORMAL_SPACES = ("view", "world")
 
@@ -121,6 +127,8 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
     if a.dtype in (np.uint8, np.uint16) and _RANGES.get(name) == (0.0, 1.0):
         # a texture read back as 8- or 16-bit UNORM (RGBA8, R16): its integers over their largest
         return a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max)
+    if a.dtype == np.uint16 and name.endswith("depth") and window == 1.0:
+        return a.astype(np.float32) / np.float32(65535.0)  # a D16_UNORM depth buffer read back
     if a.dtype.kind in "iu" and name == "normal":
         raise InputDtypeError(f"normal: expected view-space normals in [-1, 1] as floats, got dtype {a.dtype} (an "
                               f"encoded normal texture: decode it first, e.g. n / 255 * 2 - 1 for 8 bits)")
@@ -183,7 +191,8 @@ def input_planes(
     are, unit length or not (a caller may give only the components a model reads). The
     engine's conventions the same adapter takes: ``albedo_linear=True`` for a linear albedo (encoded
     with :func:`linear_to_srgb`), ``normal_space="world"`` for world-space normals (rotated with
-    ``view``), ``depth_kind="window"`` for hardware depth in [0, 1] (:data:`DEPTH_KINDS`; the previous
+    ``view``), ``depth_kind="window"`` for a hardware depth buffer in [0, 1] or ``"reversed"`` for a
+    reversed-Z one (:data:`DEPTH_KINDS`; float, or the ``uint16`` of a D16 buffer read back; the previous
     frame's linearised with ``prev_projection`` where given, else ``projection``).
     """
     for flag, value in (("albedo_linear", albedo_linear),):
@@ -194,9 +203,9 @@ def input_planes(
                              f"{reprlib.repr(normal_space)}", "normal_space")
     if not isinstance(depth_kind, str) or depth_kind not in DEPTH_KINDS:
         raise ParameterError(f"depth_kind: expected one of {', '.join(DEPTH_KINDS)} (linear view depth, 0 on "
-                             f"background; or a depth buffer's [0, 1], 1 on background), got "
-                             f"{reprlib.repr(depth_kind)}", "depth_kind")
-    window = depth_kind == "window"
+                             f"background; a depth buffer's [0, 1], 1 on background; or a reversed-Z one, 0 on "
+                             f"background), got {reprlib.repr(depth_kind)}", "depth_kind")
+    window = depth_kind != "linear"  # a hardware depth buffer's values in [0, 1]
     tolerance = _tolerance(tolerance)
     names = _channels(channels)
     given = {"depth": depth, "albedo": albedo, "normal": normal, "roughness": roughness, "metallic": metallic,
@@ -207,9 +216,9 @@ def input_planes(
     if normal_space == "world" and "normal" in gbuffers_needed(names):
         because["view"] = "normal_space='world'"
     if window:
-        because["projection"] = "depth_kind='window'"
+        because["projection"] = f"depth_kind={depth_kind!r}"
         if prev_projection is not None and "prev_depth" in gbuffers_needed(names):
-            because["prev_projection"] = "depth_kind='window'"
+            because["prev_projection"] = f"depth_kind={depth_kind!r}"
     needed = list(dict.fromkeys([*gbuffers_needed(names), *because]))
     missing = [b for b in needed if given[b] is None]
     if missing:
@@ -222,9 +231,11 @@ def input_planes(
     size = (int(d.shape[0]), int(d.shape[1]))
     g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
     if window:  # a depth buffer's [0, 1] to linear view depth, as the shader's linear_depth
-        d = _linear_depth(d, g["projection"])
+        reversed_z = depth_kind == "reversed"
+        _check_depth_kind(d, reversed_z)
+        d = _linear_depth(d, g["projection"], reversed_z)
         if "prev_depth" in g:
-            g["prev_depth"] = _linear_depth(g["prev_depth"], g.get("prev_projection", g["projection"]))
+            g["prev_depth"] = _linear_depth(g["prev_depth"], g.get("prev_projection", g["projection"]), reversed_z)
     g["depth"] = d
     geo = d > 0.0
     background = not geo.all()  # (a frame of geometry alone needs no mask)
@@ -273,16 +284,41 @@ def input_planes(
     return np.ascontiguousarray(np.stack([planes[c] for c in names]), np.float32)
 
 
-def _linear_depth(raw: np.ndarray, projection: np.ndarray) -> np.ndarray:
-    """Window depth in [0, 1] (1 = background) to linear view depth (0 = background) through the inverse of
-    ``projection``: the moderngl adapter's ``linear_depth``."""
+def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = False) -> np.ndarray:
+    """Window depth in [0, 1] (1 = background), or reversed-Z depth (0 = background), to linear view depth
+    (0 = background) through the inverse of ``projection``: the moderngl adapter's ``linear_depth``.
+
+    A reversed-Z buffer holds 1 minus the window depth of the same near and far planes (n (f - z) / (z (f - n))
+    against f (z - n) / (z (f - n)); n / z against 1 - n / z for an infinite far plane), so both go through
+    OpenGL's NDC depth, 2 w - 1, computed in float64 where 1 - r is exact for a float32 r."""
     inv = np.linalg.inv(projection)
-    z = raw.astype(np.float64) * 2.0 - 1.0
+    r = raw.astype(np.float64)
+    z = 1.0 - 2.0 * r if reversed_z else r * 2.0 - 1.0
     pz = inv[2, 2] * z + inv[2, 3]
     pw = inv[3, 2] * z + inv[3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        linear = np.where(raw >= 1.0, 0.0, -pz / pw)
+        linear = np.where(r <= 0.0 if reversed_z else r >= 1.0, 0.0, -pz / pw)
     return linear.astype(np.float32)
+
+
+_warned_kinds: set[str] = set()
+
+
+def _check_depth_kind(raw: np.ndarray, reversed_z: bool) -> None:
+    """Warn once per kind where a depth buffer looks like the other kind: its background value (1, or 0 for
+    reversed-Z) nowhere and the near plane's value on some pixels. A reversed-Z buffer read as a window one puts
+    the background at the near plane, and every plane made of depth is wrong without an error."""
+    background, near = (0.0, 1.0) if reversed_z else (1.0, 0.0)
+    kind = "reversed" if reversed_z else "window"
+    if kind in _warned_kinds or (raw == background).any():
+        return
+    at_near = int(np.count_nonzero(raw == near))
+    if at_near:
+        _warned_kinds.add(kind)
+        other = "window" if reversed_z else "reversed"
+        log.warning("depth: depth_kind=%r, but %d pixels hold %g (the near plane) and none %g (background): a %s "
+                    "depth buffer? (depth_kind=%r); warned once", kind, at_near, near, background,
+                    "standard" if reversed_z else "reversed-Z", other)
 
 
 def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray,

@@ -571,34 +571,38 @@ _PLANE_CHANNELS = st.one_of(st.lists(st.sampled_from(list(sdk.CHANNELS)), min_si
                             st.just(list(sdk.CHANNELS)), json_scalars, st.lists(json_scalars, max_size=3))
 
 planes_cases = st.builds(
-    lambda channels, key, v: (channels, key, v),
+    lambda channels, key, v, kind: (channels, key, v, kind),
     _PLANE_CHANNELS, st.sampled_from(list(_PLANES_VALID)),
     st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none(), json_scalars),
+    st.sampled_from(sdk.DEPTH_KINDS),  # (a hardware kind's valid depths are a depth buffer's 0.4)
 )
 
 
-def _planes_kw(v: tuple[Any, str, Any]) -> dict[str, Any]:
-    _, key, value = v
+def _planes_kw(v: tuple[Any, str, Any, str]) -> dict[str, Any]:
+    _, key, value, kind = v
     kw = dict(_PLANES_VALID)
+    if kind != "linear":
+        kw.update(depth_kind=kind, depth=np.full((6, 8), 0.4), prev_depth=np.full((6, 8), 0.4))
     kw[key] = _reproject_value(value, kw[key])
     return kw
 
 
-def _planes_call(v: tuple[Any, str, Any]) -> np.ndarray:
+def _planes_call(v: tuple[Any, str, Any, str]) -> np.ndarray:
     return sdk.input_planes(v[0], **_planes_kw(v))
 
 
-def _planes_absurd(v: tuple[Any, str, Any], x: np.ndarray) -> bool:
+def _planes_absurd(v: tuple[Any, str, Any, str], x: np.ndarray) -> bool:
     """Accepted: the planes asked for, float32 and finite, of the depth's size; and nothing the channels read
-    was past its range."""
+    was past its range (a hardware depth past 1 among it)."""
     kw = _planes_kw(v)
     try:
         names = list(v[0])
         depth = np.asarray(kw["depth"], np.float64)
     except (TypeError, ValueError):
         return True
+    hardware = kw["depth_kind"] in ("window", "reversed") and np.asarray(kw["depth"]).dtype != np.uint16
     return bool(x.shape != (len(names), *depth.shape) or x.dtype != np.float32 or not np.isfinite(x).all()
-                or (depth < 0).any())
+                or (depth < 0).any() or (hardware and (depth > 1 + 1e-3).any()))
 
 
 def _fetch_absurd(v: tuple[ArraySpec, ArraySpec], out: tuple[np.ndarray, np.ndarray]) -> bool:

@@ -481,8 +481,8 @@ adapter_kwargs = _fields(
         "height": st.integers(1, 24),
         "tolerance": st.floats(0, 1),
         "albedo_linear": st.booleans(),
-        "normal_space": st.sampled_from(["view", "world"]),
-        "depth_kind": st.sampled_from(["linear", "window"]),
+        "normal_space": st.sampled_from(sdk.NORMAL_SPACES),
+        "depth_kind": st.sampled_from(sdk.DEPTH_KINDS),
     },
     {
         "channels": channel_lists,

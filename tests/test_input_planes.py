@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 from typing import Any, ClassVar
 
 import numpy as np
@@ -144,11 +145,23 @@ def test_gbuffers_no_channel_reads_are_not_looked_at() -> None:
 
 
 
+def _hardware_depth(depth: np.ndarray, projection: np.ndarray, kind: str) -> np.ndarray:
+    """What an engine's float32 depth buffer holds for linear ``depth`` drawn with ``projection`` (OpenGL's):
+    the window depth (1 on background), or, reversed-Z, 1 minus it (0 on background)."""
+    z = -depth.astype(np.float64)
+    clip_z, clip_w = projection[2, 2] * z + projection[2, 3], projection[3, 2] * z + projection[3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):  # (the background's w is 0)
+        window = np.where(depth > 0, (clip_z / clip_w + 1.0) / 2.0, 1.0)
+    return (1.0 - window if kind == "reversed" else window).astype(np.float32)
+
+
 @pytest.mark.gl
-def test_an_engines_own_conventions_give_the_same_planes(rendered: list[tuple[Any, dict[str, Any]]]) -> None:
+@pytest.mark.parametrize("kind", ["window", "reversed"])
+def test_an_engines_own_conventions_give_the_same_planes(rendered: list[tuple[Any, dict[str, Any]]],
+                                                         kind: str) -> None:
     """A linear albedo, world-space normals, junk on the background and a hardware depth
-    buffer, with the options that say so (the moderngl adapter's): the same planes, within the precision of a
-    float32 depth buffer."""
+    buffer (standard or reversed-Z), with the options that say so (the moderngl adapter's): the same planes,
+    within the precision of a float32 depth buffer."""
     channels = list(sdk.CHANNELS)
     for _, g in rendered:
         want = dict(zip(channels, sdk.input_planes(channels, **g)))
@@ -159,16 +172,10 @@ def test_an_engines_own_conventions_give_the_same_planes(rendered: list[tuple[An
         normal = g["normal"] @ rotation  # world space
         normal[sky] = 0.3
 
-        def window(depth: np.ndarray, projection: np.ndarray) -> np.ndarray:
-            z = -depth.astype(np.float64)
-            clip_z, clip_w = projection[2, 2] * z + projection[2, 3], projection[3, 2] * z + projection[3, 3]
-            with np.errstate(divide="ignore", invalid="ignore"):  # (the background's w is 0)
-                return np.where(depth > 0, (clip_z / clip_w + 1.0) / 2.0, 1.0).astype(np.float32)
-
-        engine = {**g, "albedo": albedo, "normal": normal, "depth": window(g["depth"], g["projection"]),
-                  "prev_depth": window(g["prev_depth"], g["projection"])}
+        engine = {**g, "albedo": albedo, "normal": normal, "depth": _hardware_depth(g["depth"], g["projection"], kind),
+                  "prev_depth": _hardware_depth(g["prev_depth"], g["projection"], kind)}
         got = dict(zip(channels, sdk.input_planes(channels, **engine, albedo_linear=True, normal_space="world",
-                                                   depth_kind="window")))
+                                                   depth_kind=kind)))
         for c in ("albedo.r", "albedo.g", "albedo.b", "albedo.y", "normal.x", "normal.y", "normal.z"):
             np.testing.assert_allclose(got[c], want[c], atol=2e-5, err_msg=c)
         np.testing.assert_allclose(got["depth"], want["depth"], rtol=2e-3, err_msg="depth")
@@ -181,8 +188,8 @@ def test_the_options_are_checked_and_named() -> None:
     chans = ["normal.z", "seen"]
     with pytest.raises(sdk.ParameterError, match="normal_space: expected one of view, world"):
         sdk.input_planes(chans, **g, normal_space="object")
-    with pytest.raises(sdk.ParameterError, match="depth_kind: expected one of linear, window"):
-        sdk.input_planes(chans, **g, depth_kind="reversed")
+    with pytest.raises(sdk.ParameterError, match="depth_kind: expected one of linear, window, reversed"):
+        sdk.input_planes(chans, **g, depth_kind="reverse")
     with pytest.raises(sdk.ParameterError, match="normal_space: expected one of view, world"):
         sdk.input_planes(chans, **g, normal_space=np.zeros(0))  # type: ignore[arg-type]  (numpy's ValueError before)
     with pytest.raises(sdk.ParameterError, match=r"depth= is needed for every channel \(the frame's size"):
@@ -249,3 +256,61 @@ def test_fetch_from_motion_by_hand() -> None:
         sdk.fetch_from_motion(np.full((3, 4), "a"), still)
     with pytest.raises(sdk.InputShapeError, match=r"motion_x: expected a non-empty \(H, W\)"):
         sdk.fetch_from_motion(np.zeros((2, 3, 4)), still)
+
+
+def _infinite_reversed_z(near: float) -> np.ndarray:
+    """The OpenGL projection of an infinite far plane (90 degrees, 3:2) whose reversed-Z depth is near / z."""
+    return np.array([[1.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1, -2 * near], [0, 0, -1, 0]])
+
+
+def test_reversed_z_with_an_infinite_far_plane_keeps_its_precision_to_the_horizon() -> None:
+    """A reversed-Z buffer of an infinite far plane holds near / z: linear depth comes back to float32 precision
+    from 10 cm to 100 km (its precision is why engines use it), and 0 (the far plane) is background."""
+    near = 0.1
+    z = np.geomspace(0.1, 1e5, 600).reshape(20, 30)
+    depth = (near / z).astype(np.float32)
+    depth[0, :5] = 0.0  # sky
+    x = sdk.input_planes(["depth"], depth=depth, projection=_infinite_reversed_z(near), depth_kind="reversed")[0]
+    want = np.divide(near, depth.astype(np.float64), out=np.zeros(depth.shape), where=depth > 0)
+    np.testing.assert_allclose(x, want, rtol=1e-6)
+    assert (x[0, :5] == 0).all() and (x[0, 5:] > 0).all()
+
+
+def test_a_d16_depth_buffer_read_back_as_uint16() -> None:
+    """A D16_UNORM buffer read back is its integers over 65535, for both hardware kinds; linear depth in uint16 is
+    a number of scene units, as any integer."""
+    near = 0.5
+    raw = np.array([[0, 1000, 30000, 65535]] * 4, np.uint16)
+    p = _infinite_reversed_z(near)
+    x = sdk.input_planes(["depth"], depth=raw, projection=p, depth_kind="reversed")[0]
+    np.testing.assert_allclose(x[0], [0.0, near * 65535 / 1000, near * 65535 / 30000, near], rtol=1e-6)
+    w = sdk.input_planes(["depth"], depth=65535 - raw, projection=p, depth_kind="window")[0]
+    np.testing.assert_allclose(w, x, rtol=1e-4)
+    np.testing.assert_array_equal(sdk.input_planes(["depth"], depth=raw)[0], raw.astype(np.float32))
+
+
+def test_a_depth_buffer_of_the_other_kind_is_named_in_a_warning(caplog: pytest.LogCaptureFixture,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A reversed-Z buffer given as ``window`` puts the sky at the near plane and every plane made of depth goes
+    wrong without an error: where no pixel holds the background's value and some hold the near plane's, a
+    warning says which kind it looks like, once per kind."""
+    from rtp.sdk import _planes
+
+    monkeypatch.setattr(_planes, "_warned_kinds", set())
+    p = _infinite_reversed_z(0.1)
+    reversed_z = np.full((20, 30), 0.01, np.float32)
+    reversed_z[:5] = 0.0  # sky
+    with caplog.at_level(logging.WARNING, logger="rtp.sdk"):
+        sdk.input_planes(["depth"], depth=reversed_z, projection=p, depth_kind="window")
+        sdk.input_planes(["depth"], depth=reversed_z, projection=p, depth_kind="window")
+    assert [r.getMessage() for r in caplog.records] == [
+        "depth: depth_kind='window', but 150 pixels hold 0 (the near plane) and none 1 (background): a reversed-Z "
+        "depth buffer? (depth_kind='reversed'); warned once"]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.sdk"):
+        sdk.input_planes(["depth"], depth=1.0 - reversed_z, projection=p, depth_kind="reversed")
+        sdk.input_planes(["depth"], depth=reversed_z, projection=p, depth_kind="reversed")  # right: no warning
+        sdk.input_planes(["depth"], depth=1.0 - reversed_z, projection=p, depth_kind="window")  # right: none
+    assert [r.getMessage() for r in caplog.records] == [
+        "depth: depth_kind='reversed', but 150 pixels hold 1 (the near plane) and none 0 (background): a standard "
+        "depth buffer? (depth_kind='window'); warned once"]

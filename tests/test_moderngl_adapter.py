@@ -88,7 +88,8 @@ def test_paper_inputs_feed_a_predictor(frames, tiny_model) -> None:
     assert rates.shape == pred.tiles(H, W)
 
 
-def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
+@pytest.mark.parametrize("kind", ["window", "reversed"])
+def test_window_depth_world_normals_and_linear_albedo(frames, kind: str) -> None:
     ctx, prev, cur = frames
     channels = ("depth", "normal.x", "normal.y", "normal.z", "albedo.g", "seen")
     ref = _engine_inputs(ctx, prev, cur, Adapter(channels, W, H, ctx=ctx))
@@ -97,11 +98,12 @@ def test_window_depth_world_normals_and_linear_albedo(frames) -> None:
         p = cam.projection(W / H)
         z = -depth
         ndc = (p[2, 2] * z + p[2, 3]) / -z
-        return np.where(depth > 0, ndc * 0.5 + 0.5, 1.0)
+        standard = np.where(depth > 0, ndc * 0.5 + 0.5, 1.0)
+        return 1.0 - standard if kind == "reversed" else standard  # reversed-Z: 1 at the near plane, 0 on sky
 
     world_n = cur.normal @ np.linalg.inv(cur.camera.view())[:3, :3].T
     linear_albedo = np.where(cur.albedo <= 0.04045, cur.albedo / 12.92, ((cur.albedo + 0.055) / 1.055) ** 2.4)
-    b = Adapter(channels, W, H, ctx=ctx, depth_kind="window", normal_space="world", albedo_linear=True)
+    b = Adapter(channels, W, H, ctx=ctx, depth_kind=kind, normal_space="world", albedo_linear=True)
     x = _engine_inputs(ctx, prev, cur, b, depth=_tex(ctx, window(cur.depth, cur.camera)),
                        prev_depth=_tex(ctx, window(prev.depth, prev.camera)), normal=_tex(ctx, world_n),
                        albedo=_tex(ctx, linear_albedo))

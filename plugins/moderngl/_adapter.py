@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import ParameterError
+from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -106,7 +106,8 @@ class GBufferTextures:
         albedo: base colour (RGB[A]); display-encoded unless the adapter has ``albedo_linear=True``.
         normal: unit normals (RGB[A]), view space unless the adapter has ``normal_space="world"``.
         depth: depth in component ``depth_component``: linear view depth (0 = background) or, with
-            ``depth_kind="window"``, the hardware depth buffer (1 = background).
+            ``depth_kind="window"``, the hardware depth buffer (1 = background), or with
+            ``depth_kind="reversed"`` a reversed-Z one (0 = background).
         view, projection: world-to-view and OpenGL view-to-clip of the current camera.
         prev_colour, prev_depth, prev_view_projection: the previous displayed frame, its depth
             and its camera's view-projection; needed for ``reprojected.*`` and ``seen`` (without
@@ -150,9 +151,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
         albedo_linear: the albedo texture holds linear values (they are sRGB-encoded to match
             ``sdk.CHANNELS``); default False: display-encoded.
         normal_space: ``"view"`` (default) or ``"world"`` (rotated into view space with ``view``).
-        depth_kind: ``"linear"`` (default: view depth in scene units, 0 = background) or
+        depth_kind: ``"linear"`` (default: view depth in scene units, 0 = background),
             ``"window"`` (the hardware depth buffer in [0, 1], 1 = background; linearised with the
-            inverse projection).
+            inverse projection) or ``"reversed"`` (a reversed-Z depth buffer, 1 at the near plane and
+            0 on background, as ``glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE)`` with a depth clear of
+            0 and ``GL_GREATER`` makes; linearised with the inverse of the OpenGL ``projection`` of the
+            same near and far planes): ``sdk.DEPTH_KINDS``.
     """
 
     name: ClassVar[str] = "moderngl"
@@ -174,10 +178,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
         super().__init__(channels, width, height)
         if len(self.channels) > _MAX_CHANNELS:
             raise UnsupportedChannelError(f"at most {_MAX_CHANNELS} channels, got {len(self.channels)}")
-        if normal_space not in ("view", "world"):
-            raise ParameterError(f"normal_space must be 'view' or 'world', got {normal_space!r}", "normal_space")
-        if depth_kind not in ("linear", "window"):
-            raise ParameterError(f"depth_kind must be 'linear' or 'window', got {depth_kind!r}", "depth_kind")
+        if not isinstance(normal_space, str) or normal_space not in NORMAL_SPACES:
+            raise ParameterError(f"normal_space must be one of {', '.join(NORMAL_SPACES)}, got {normal_space!r}",
+                                 "normal_space")
+        if not isinstance(depth_kind, str) or depth_kind not in DEPTH_KINDS:
+            raise ParameterError(f"depth_kind must be one of {', '.join(DEPTH_KINDS)}, got {depth_kind!r}",
+                                 "depth_kind")
         number = isinstance(tolerance, (int, float, np.integer, np.floating)) and not isinstance(tolerance, bool)
         if not number or not 0.0 <= tolerance <= sys.float_info.max:  # (an int past float's range passed `< inf`)
             raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
@@ -200,7 +206,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         wanted = set(self.channels)
         flags = {  # compiled in (adapter_fs.glsl): the shader keeps only the work these channels need
             "RTP_ALBEDO_LINEAR": albedo_linear, "RTP_NORMAL_WORLD": normal_space == "world",
-            "RTP_DEPTH_WINDOW": depth_kind == "window",
+            "RTP_DEPTH_WINDOW": depth_kind != "linear", "RTP_DEPTH_REVERSED": depth_kind == "reversed",
             "RTP_DIFFERENCES": bool({"reprojected.y.dx", "reprojected.y.dy"} & wanted),
             "RTP_BLOCKS_REPROJECTED": "reprojected.y.blocks" in wanted,
             "RTP_BLOCKS_ALBEDO": "albedo.y.blocks" in wanted,

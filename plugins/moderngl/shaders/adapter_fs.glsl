@@ -37,6 +37,7 @@ uniform float u_tolerance;
 // the flags below (true / false). The compiler then drops every value no channel reads; left to
 // uniforms, llvmpipe ran all of them (the "reproject" stage of bench/render.py, docs/performance.md).
 const bool u_depth_window = RTP_DEPTH_WINDOW;          // depth is window depth in [0, 1] (1 = background), not linear
+const bool u_depth_reversed = RTP_DEPTH_REVERSED;      // ... reversed-Z window depth (1 = near plane, 0 = background)
 const bool u_albedo_linear = RTP_ALBEDO_LINEAR;
 const bool u_normal_world = RTP_NORMAL_WORLD;
 const bool u_differences = RTP_DIFFERENCES;            // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
@@ -61,8 +62,9 @@ layout(location = 5) out vec4 o5;
 
 float linear_depth(float raw, mat4 inv_proj) {
     if (!u_depth_window) return raw;
-    if (raw >= 1.0) return 0.0;                       // cleared depth: background
-    vec4 p = inv_proj * vec4(0.0, 0.0, raw * 2.0 - 1.0, 1.0);
+    if (u_depth_reversed ? raw <= 0.0 : raw >= 1.0) return 0.0;  // cleared depth: background
+    // (reversed-Z holds 1 minus the window depth of the same near and far planes: its NDC depth is 1 - 2 raw)
+    vec4 p = inv_proj * vec4(0.0, 0.0, u_depth_reversed ? 1.0 - 2.0 * raw : raw * 2.0 - 1.0, 1.0);
     return -p.z / p.w;
 }
 
