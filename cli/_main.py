@@ -1039,16 +1039,21 @@ def build_parser() -> argparse.ArgumentParser:
                     "frame, not its own displayed one")
     cache_dir(pl)
 
-    pr = command("predict", "a model's predictions and shading rates for one frame of your engine's G-buffers "
-                 "(an .npz)", _cmd_predict,
+    pr = command("predict", "a model's predictions and shading rates for frames of your engine's G-buffers "
+                 "(.npz files)", _cmd_predict,
                  epilog="the frame: an .npz of float arrays named as sdk.input_planes' arguments (sdk.GBUFFERS): "
                  "depth (H, W) linear view depth, 0 on background; albedo, normal, prev_colour (H, W, 3); roughness, "
                  "metallic, specular, shadow, emissive (H, W); view, projection, prev_view_projection (4x4, OpenGL); "
                  "and, for --out's overlay, colour (H, W, 3), the frame as displayed. A model reads only some of "
-                 "them (`rtp info MODEL` names them: G-buffers read)\n\nexamples:\n  rtp predict frame.npz --write-example   "
+                 "them (`rtp info MODEL` names them: G-buffers read). Several frames, or a folder of them, are a sequence: "
+                 "a line a frame with the share of tiles whose rate changed from the frame before, and with --out "
+                 "rates.npy and predictions.npy stacked, frames.csv, overlay.gif and frames.png (the curves)"
+                 "\n\nexamples:\n  rtp predict frame.npz --write-example   "
                  "a frame of the reference renderer, to see the layout\n  rtp predict frame.npz --model flip --out "
-                 "predicted")
-    pr.add_argument("frame", type=_path_text, help="the .npz of the frame's G-buffers (written with --write-example)")
+                 "predicted\n  rtp predict frames --write-example --frames 30   a sequence along a camera path"
+                 "\n  rtp predict frames --out predicted   every frame_*.npz of the folder, in order")
+    pr.add_argument("frames", nargs="+", type=_path_text, metavar="frame", help="the .npz of a frame's G-buffers "
+                    "(written with --write-example), several, or a folder of them (taken in the order of their names)")
     pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
     pr.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
     pr.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
@@ -1061,12 +1066,15 @@ def build_parser() -> argparse.ArgumentParser:
                     "display-encoded sRGB)")
     pr.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
     pr.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear view "
-                    "depth (0 on background) or a depth buffer's window depth in [0, 1] (1 on background)")
+                    "depth (0 on background), a depth buffer's window depth in [0, 1] (1 on background) or a "
+                    "reversed-Z buffer's (0 on background)")
     pr.add_argument("--json", action="store_true", help="print the summary as JSON")
     pr.add_argument("--write-example", action="store_true", help="write FRAME: a frame of the built-in procedural "
                     "scene from the reference renderer, every G-buffer in the layout read")
     pr.add_argument("--size", type=frame_size, default="640x360", help="--write-example's WIDTHxHEIGHT")
-    pr.add_argument("--seed", type=_non_negative, default=0, help="--write-example's viewpoint")
+    pr.add_argument("--seed", type=_non_negative, default=0, help="--write-example's viewpoint (or camera path)")
+    pr.add_argument("--frames", dest="count", type=_positive, default=1, help="--write-example: write this many "
+                    "frames along a camera path (60 Hz, walking) into the folder FRAME, frame_0000.npz ...")
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)
     mt.add_argument("metric", choices=tuple(METRICS), help="the metric")

@@ -1,6 +1,8 @@
-"""``rtp predict``: a model's predictions and shading rates for one frame of an engine's G-buffers, saved as
-an ``.npz`` of the arrays ``sdk.input_planes`` takes; ``--write-example`` writes such a frame from the
-reference renderer, to see the layout."""
+"""``rtp predict``: a model's predictions and shading rates for frames of an engine's G-buffers, each saved as
+an ``.npz`` of the arrays ``sdk.input_planes`` takes: one frame, or a sequence (several files, or a folder of
+them) with the share of tiles whose rate changes from frame to frame and an animated overlay;
+``--write-example`` writes such a frame (or with ``--frames`` a sequence) from the reference renderer, to see
+the layout."""
 
 from __future__ import annotations
 
@@ -8,6 +10,8 @@ import argparse
 import difflib
 import json
 import logging
+import os
+import re
 import time
 import zipfile
 from pathlib import Path
@@ -48,6 +52,25 @@ def _read_frame(path: str) -> dict[str, np.ndarray]:
     return {k: v for k, v in arrays.items() if k in known}
 
 
+def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int, int]) -> dict[str, np.ndarray]:
+    """A rendered frame's G-buffers named as ``sdk.input_planes`` takes them (and ``colour``)."""
+    w, h = size
+    return {"depth": cur.depth, "albedo": cur.albedo, "normal": cur.normal, "roughness": cur.roughness,
+            "metallic": cur.metallic, "specular": cur.specular, "shadow": cur.shadow, "emissive": cur.emissive,
+            "view": cam.view(), "projection": cam.projection(w / h), "prev_colour": prev.colour["1x1"],
+            "prev_depth": prev.depth, "prev_view_projection": prev_cam.view_projection(w, h),
+            COLOUR_KEY: cur.colour["1x1"]}
+
+
+def _save_frame(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
+    from rtp import sdk
+
+    payload: dict[str, Any] = {k: np.asarray(v, np.float64 if k in ("view", "projection", "prev_view_projection")
+                                             else np.float32) for k, v in arrays.items()}
+    with sdk.files.atomic_output(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **payload)
+
+
 def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.ndarray]:
     """A frame of the built-in procedural scene as the reference renderer draws it, its G-buffers named as
     ``sdk.input_planes`` takes them, written atomically to ``path``."""
@@ -65,36 +88,73 @@ def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.n
         r.load_scene(scene)
         prev = r.render(prev_cam)
         cur = r.render(cam, prev)
-    arrays = {"depth": cur.depth, "albedo": cur.albedo, "normal": cur.normal, "roughness": cur.roughness,
-              "metallic": cur.metallic, "specular": cur.specular, "shadow": cur.shadow, "emissive": cur.emissive,
-              "view": cam.view(), "projection": cam.projection(w / h), "prev_colour": prev.colour["1x1"],
-              "prev_depth": prev.depth, "prev_view_projection": prev_cam.view_projection(w, h),
-              COLOUR_KEY: cur.colour["1x1"]}
+    arrays = _frame_arrays(prev, cur, prev_cam, cam, (w, h))
     assert set(arrays) == {*sdk.GBUFFERS, COLOUR_KEY} - {"prev_projection"}  # (its projection did not change)
-    payload: dict[str, Any] = {k: np.asarray(v, np.float64 if k in ("view", "projection", "prev_view_projection")
-                                             else np.float32) for k, v in arrays.items()}
-    with sdk.files.atomic_output(path) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, **payload)
+    _save_frame(path, arrays)
     return arrays
 
 
-def run_predict(args: argparse.Namespace) -> int:
+def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int) -> list[str]:
+    """``count`` consecutive frames at 60 Hz along a ``slow`` camera path through the procedural scene, as
+    an engine would dump them (each frame's ``prev_colour`` the one before it as displayed, at full rate),
+    written to ``folder`` as ``frame_0000.npz`` ...; the names written."""
+    from rtp import sdk
+    from rtp.capture import check_frame_memory, check_frame_size, load_scene
+    from rtp.capture.paths import camera_path
+    from rtp.plugins.moderngl import Renderer
+
+    w, h = check_frame_size(size)
+    check_frame_memory("capture", (w, h))
+    out = sdk.files.check_output(folder, folder=True, what="frame folder")
+    scene, blockers = load_scene("procedural:0", None, None, None)
+    path = camera_path(scene, count + 1, "slow", seed, blockers=blockers)
+    names = [f"frame_{i:04d}.npz" for i in range(count)]
+    with Renderer(w, h) as r:
+        r.load_scene(scene)
+        prev = r.render(path.cameras[0])
+        for name, prev_cam, cam in zip(names, path.cameras, path.cameras[1:]):
+            cur = r.render(cam, prev)
+            _save_frame(out / name, _frame_arrays(prev, cur, prev_cam, cam, (w, h)))
+            prev = cur
+    return names
+
+
+#: The widest frame of a sequence's ``overlay.gif`` (wider frames are shown at an integer fraction of
+#: their size) and its playback rate.
+GIF_WIDTH, GIF_FPS = 480, 20
+
+
+def frame_files(paths: list[str]) -> list[str]:
+    """The frame files ``paths`` name: each an ``.npz``, or a folder whose ``*.npz`` are taken in the natural
+    order of their names (``frame_9`` before ``frame_10``)."""
     from rtp import sdk
 
-    if args.write_example:
-        arrays = write_example(args.frame, args.size, args.seed)
-        w, h = args.size
-        print(f"wrote {args.frame}: a {w}x{h} frame of the procedural scene, {len(arrays)} arrays: "
-              + ", ".join(f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items()))
-        return 0
-    frame = _read_frame(args.frame)
-    predictor = sdk.load(args.model, tile_size=args.tile_size)
+    files: list[str] = []
+    for path in paths:
+        if Path(path).is_dir():
+            found = sorted(Path(path).glob("*.npz"), key=lambda f: [int(t) if t.isdigit() else t
+                                                                     for t in re.split(r"(\d+)", f.name)])
+            if not found:
+                raise sdk.ParameterError(f"{path!r}: a folder with no .npz frame in it (`rtp predict --write-example "
+                                         f"{path} --frames 8` writes a sequence of the reference renderer)", "frame")
+            files += [str(f) for f in found]
+        else:
+            files.append(path)
+    return files
+
+
+def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshold: float,
+                   allowed: list[str] | None) -> tuple[dict[str, Any], dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """One frame file's summary, arrays, predicted values and rate codes."""
+    from rtp import sdk
+
+    frame = _read_frame(path)
     inputs = predictor.metadata.inputs
     buffers: dict[str, Any] = {k: v for k, v in frame.items() if k in sdk.GBUFFERS}
     missing = [b for b in sdk.gbuffers_needed(inputs) if b not in buffers]
     if missing:
         raise sdk.ParameterError(
-            f"{args.frame!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
+            f"{path!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
             f"{predictor.path.name if predictor.path else args.model} reads: "
             + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing), "frame")
     x = sdk.input_planes(inputs, **buffers, albedo_linear=args.albedo_linear, normal_space=args.normal_space,
@@ -103,31 +163,179 @@ def run_predict(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     values = predictor.predict(x)
     ms = 1000.0 * (time.perf_counter() - start)
-    threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
-    allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
     rates = sdk.select_rates(values, threshold, higher_is_better=predictor.metadata.higher_is_better,
                              allowed=allowed, factors=predictor.metadata.rate_factors)
-    saved = sdk.work_saved(rates, (h, w), predictor.tile_size)
     counts = {r: int((rates == c).sum()) for r, c in sdk.RATE_CODES.items()}
     summary: dict[str, Any] = {
-        "frame": args.frame, "model": predictor.path.name if predictor.path else args.model,
-        "metric": predictor.metadata.metric, "size": [w, h], "tile_size": predictor.tile_size,
-        "tiles": list(rates.shape), "threshold": threshold, "rates": {r: n for r, n in counts.items() if n},
-        "work_saved": saved, "predict_ms": ms,
+        "frame": path, "size": [w, h], "tiles": list(rates.shape), "rates": {r: n for r, n in counts.items() if n},
+        "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "predict_ms": ms,
     }
+    return summary, frame, values, rates
+
+
+def run_predict(args: argparse.Namespace) -> int:
+    from rtp import sdk
+
+    if args.write_example:
+        if len(args.frames) != 1:
+            raise sdk.ParameterError(f"--write-example writes one path (a frame file, or with --frames a folder); got "
+                                     f"{len(args.frames)}", "frame")
+        path = args.frames[0]
+        w, h = args.size
+        if args.count > 1:
+            written = write_sequence(path, args.size, args.seed, args.count)
+            print(f"wrote {len(written)} frames of {w}x{h} along a camera path through the procedural scene in "
+                  f"{path}: {written[0]} ... {written[-1]}")
+            return 0
+        arrays = write_example(path, args.size, args.seed)
+        print(f"wrote {path}: a {w}x{h} frame of the procedural scene, {len(arrays)} arrays: "
+              + ", ".join(f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items()))
+        return 0
+    if args.count != 1:
+        raise sdk.ParameterError(f"--frames {args.count}: the number of frames --write-example writes; a sequence to "
+                                 "predict is every frame file given (or every .npz of a folder)", "frames")
+    files = frame_files(args.frames)
+    predictor = sdk.load(args.model, tile_size=args.tile_size)
+    threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
+    allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
+    model = predictor.path.name if predictor.path else args.model
+    if len(files) > 1 or any(Path(f).is_dir() for f in args.frames):
+        return _run_sequence(args, files, predictor, threshold, allowed, model)
+    summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
+    summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
+               "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
+               "threshold": threshold, "rates": summary["rates"], "work_saved": summary["work_saved"],
+               "predict_ms": summary["predict_ms"]}
     if args.out:
         summary["wrote"] = _write_out(args.out, frame, values, rates, predictor.tile_size)
     if args.json:
         print(json.dumps(summary))
         return 0
-    print(f"{summary['model']} ({summary['metric']}) on {args.frame}: {w}x{h}, {rates.shape[1]}x{rates.shape[0]} "
+    w, h = summary["size"]
+    print(f"{model} ({summary['metric']}) on {summary['frame']}: {w}x{h}, {rates.shape[1]}x{rates.shape[0]} "
           f"tiles of {predictor.tile_size}px, threshold {threshold:g}")
     print("rates      " + ", ".join(f"{r} {n}" for r, n in summary["rates"].items()))
-    print(f"saved      {100.0 * saved:.1f}% of the shading work")
-    print(f"predict    {ms:.1f} ms (onnxruntime, {predictor.provider})")
+    print(f"saved      {100.0 * summary['work_saved']:.1f}% of the shading work")
+    print(f"predict    {summary['predict_ms']:.1f} ms (onnxruntime, {predictor.provider})")
     if args.out:
         print(f"wrote {', '.join(summary['wrote'])} in {args.out}")
     return 0
+
+
+def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, threshold: float,
+                  allowed: list[str] | None, model: str) -> int:
+    """A model on each frame of a sequence: a line a frame (work saved, the share of tiles whose rate changed
+    from the frame before, predict time), the means, and with ``--out`` the stacked arrays, ``frames.csv``, the
+    overlays as ``overlay.gif`` and the per-frame curves as ``frames.png``."""
+    from rtp import sdk
+
+    from ._run import Bar
+
+    rows: list[dict[str, Any]] = []
+    all_rates: list[np.ndarray] = []
+    all_values: list[np.ndarray] = []
+    overlays: list[np.ndarray] = []
+    first_size: list[int] | None = None
+    base = os.path.commonpath([os.path.abspath(Path(f).parent) for f in files])
+    shown = [os.path.relpath(os.path.abspath(f), base) for f in files]  # (each frame's name under the folder)
+    width = max(5, *map(len, shown))
+    if not args.json and not args.quiet:
+        print(f"{model} ({predictor.metadata.metric}), threshold {threshold:g}, tiles of {predictor.tile_size}px, "
+              f"{len(files)} frames in {os.path.relpath(base) if base.startswith(os.getcwd()) else base}")
+        print(f"{'frame':<{width}} {'saved':>7} {'changed':>8} {'predict':>9}")
+    with Bar(args, len(files), "predict", "frame") as bar:
+        for i, path in enumerate(files):
+            row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed)
+            if first_size is None:
+                first_size = row["size"]
+                if args.out:  # the overlays kept for the GIF, refused now rather than by the OOM killer later
+                    from rtp.capture import check_memory
+
+                    w, h = first_size
+                    step = -(-w // GIF_WIDTH)
+                    need = len(files) * (-(-h // step)) * (-(-w // step)) * 3
+                    check_memory(need, f"{len(files)} frames' overlays for overlay.gif take {need / 2**30:.1f} GiB",
+                                 "frame", "of memory: fewer frames a run", job="rtp predict")
+            elif row["size"] != first_size:
+                raise sdk.ParameterError(f"{path!r} is {row['size'][0]}x{row['size'][1]}, the sequence's first frame "
+                                         f"{first_size[0]}x{first_size[1]}: a sequence's frames are of one size",
+                                         "frame")
+            row["changed"] = float((rates != all_rates[-1]).mean()) if all_rates else None
+            rows.append(row)
+            all_rates.append(rates)
+            if args.out:
+                all_values.append(values)
+                overlays.append(_overlay(frame, rates, predictor.tile_size, GIF_WIDTH))
+            if not args.json and not args.quiet:
+                changed = "" if row["changed"] is None else f"{100.0 * row['changed']:.1f}%"
+                print(f"{shown[i]:<{width}} {100.0 * row['work_saved']:>6.1f}% {changed:>8} {row['predict_ms']:>6.1f} ms")
+            bar.update_to(i + 1)
+    changes = [r["changed"] for r in rows if r["changed"] is not None]
+    summary: dict[str, Any] = {
+        "frames": rows, "model": model, "metric": predictor.metadata.metric, "size": first_size,
+        "tile_size": predictor.tile_size, "threshold": threshold,
+        "work_saved": float(np.mean([r["work_saved"] for r in rows])),
+        "changed": float(np.mean(changes)) if changes else None,
+        "predict_ms": float(np.median([r["predict_ms"] for r in rows])),
+    }
+    if args.out:
+        summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays)
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    changed = "" if summary["changed"] is None else f", {100.0 * summary['changed']:.1f}% of tiles change rate a frame"
+    print(f"mean: {100.0 * summary['work_saved']:.1f}% of the shading work saved{changed}; predict "
+          f"{summary['predict_ms']:.1f} ms (median, onnxruntime, {predictor.provider})")
+    if args.out:
+        print(f"wrote {', '.join(summary['wrote'])} in {args.out}")
+    return 0
+
+
+def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: int | None = None) -> np.ndarray:
+    """The rates over the frame's ``colour``, else its albedo or previous frame (black without any), legend
+    drawn, uint8; with ``width``, shown at the largest integer fraction of its size at most that wide."""
+    from rtp import sdk
+
+    size = (*np.shape(frame["depth"]), 3)
+    base = next((frame[k] for k in (COLOUR_KEY, "albedo", "prev_colour") if k in frame and frame[k].shape == size),
+                np.zeros(size, np.float32))
+    picture = sdk.draw_rate_overlay(np.clip(np.asarray(base, np.float32), 0.0, 1.0), rates, tile, legend=True)
+    if width is not None:
+        step = -(-picture.shape[1] // width)
+        picture = picture[::step, ::step]
+    return np.round(np.clip(picture, 0.0, 1.0) * 255.0).astype(np.uint8)  # (a quarter of float32's memory)
+
+
+def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.ndarray], values: list[np.ndarray],
+                        overlays: list[np.ndarray]) -> list[str]:
+    """``rates.npy`` (uint8 ``(N, th, tw)``), ``predictions.npy`` (float32 ``(N, 6, th, tw)``), ``frames.csv``
+    (a row a frame), ``overlay.gif`` (the overlays at :data:`GIF_FPS`) and ``frames.png`` (the curves)."""
+    import csv
+    import io
+
+    import imageio.v3 as iio
+
+    from rtp import sdk
+    from rtp.capture import save_image
+    from rtp.evaluate.plots import sequence_curves
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, array in (("rates.npy", np.stack(rates)), ("predictions.npy", np.stack(values))):
+        with sdk.files.atomic_output(out / name) as tmp, open(tmp, "wb") as f:
+            np.save(f, array)
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(["frame", "work_saved", "changed", "predict_ms", *sdk.RATE_CODES])
+    for r in rows:
+        writer.writerow([r["frame"], f"{r['work_saved']:.6f}", "" if r["changed"] is None else f"{r['changed']:.6f}",
+                         f"{r['predict_ms']:.3f}", *(r["rates"].get(k, 0) for k in sdk.RATE_CODES)])
+    with sdk.files.atomic_output(out / "frames.csv") as tmp:
+        tmp.write_text(text.getvalue())
+    with sdk.files.atomic_output(out / "overlay.gif") as tmp:
+        iio.imwrite(tmp, np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
+    save_image(out / "frames.png", sequence_curves(rows))
+    return ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"]
 
 
 def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, rates: np.ndarray,
@@ -142,9 +350,5 @@ def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, ra
     for name, array in (("rates.npy", rates), ("predictions.npy", values)):
         with sdk.files.atomic_output(out / name) as tmp, open(tmp, "wb") as f:
             np.save(f, array)
-    size = (*np.shape(frame["depth"]), 3)
-    base = next((frame[k] for k in (COLOUR_KEY, "albedo", "prev_colour") if k in frame and frame[k].shape == size),
-                np.zeros(size, np.float32))
-    picture = sdk.draw_rate_overlay(np.clip(np.asarray(base, np.float32), 0.0, 1.0), rates, tile, legend=True)
-    save_image(out / "overlay.png", picture)
+    save_image(out / "overlay.png", _overlay(frame, rates, tile))
     return ["rates.npy", "predictions.npy", "overlay.png"]

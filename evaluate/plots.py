@@ -32,6 +32,7 @@ __all__ = [
     "rate_overlays",
     "save_image",
     "scatter",
+    "sequence_curves",
     "upsample_tiles",
     "value_map",
 ]
@@ -350,4 +351,27 @@ def play_frames(report: Any) -> np.ndarray:
             ax.set_xlabel(f"frame ({s['fps']:g} Hz)", fontsize=8)
             ax.grid(alpha=0.3)
     _method_legend(fig, axes, "outside lower center", ncols=min(len(methods), 7))
+    return figure_image(fig)
+
+
+def sequence_curves(rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
+    """A model over a sequence of an engine's frames (``rtp predict`` on several frames), frame by frame: the
+    shading work its rates save, the share of tiles whose rate changed from the frame before, and its
+    predict time. ``rows``: one mapping a frame with ``work_saved``, ``changed`` (None on the first) and
+    ``predict_ms``."""
+    from matplotlib.ticker import MaxNLocator
+
+    fig = _figure(1300, 300)
+    axes = fig.subplots(1, 3)
+    t = np.arange(len(rows))
+    changed = [np.nan if r["changed"] is None else 100 * r["changed"] for r in rows]
+    for ax, y, title in zip(axes, ([100 * r["work_saved"] for r in rows], changed, [r["predict_ms"] for r in rows]),
+                            ("shading work saved, %", "tiles whose rate changed, %", "predict, ms")):
+        ax.plot(t, y, marker="o" if len(rows) <= 30 else None, markersize=3, linewidth=1.0, color="#1f77b4")
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("frame", fontsize=8)
+        ax.set_xlim(-0.5, max(len(rows) - 0.5, 0.5))
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
     return figure_image(fig)

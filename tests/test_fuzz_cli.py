@@ -212,12 +212,13 @@ _METRIC = st.tuples(st.one_of(st.sampled_from(_METRICS), hostile), paths, paths)
     lambda mrt: _argv(["metric", *mrt], [], [("--out", paths), ("--tile", numbers), ("--json", None)]))
 
 
-# rtp predict: no fixture is an .npz of G-buffers, so the frame is missing or unreadable (--write-example, which
-# renders and writes one, is not drawn).
-_PREDICT = st.one_of(st.just("missing.npz"), paths).flatmap(
-    lambda frame: _argv(["predict", frame], [],
-                        [("--model", hostile), ("--threshold", numbers), ("--tile-size", numbers), ("--allowed", hostile),
-                         ("--out", paths), ("--json", None), ("--size", hostile), ("--seed", numbers)]))
+# rtp predict: no fixture is an .npz of G-buffers, so a frame (of one, or of a sequence of several) is missing or
+# unreadable, or a folder holds none (--write-example, which renders and writes one, is not drawn).
+_PREDICT = st.lists(st.one_of(st.just("missing.npz"), paths), min_size=1, max_size=3).flatmap(
+    lambda frames: _argv(["predict", *frames], [],
+                         [("--model", hostile), ("--threshold", numbers), ("--tile-size", numbers),
+                          ("--allowed", hostile), ("--out", paths), ("--json", None), ("--size", hostile),
+                          ("--seed", numbers), ("--frames", numbers), ("--depth-kind", hostile)]))
 
 
 # rtp adapters check: an adapter in a module that does not exist (nothing is drawn), whatever the options;

@@ -90,9 +90,11 @@ def test_a_frame_that_is_not_what_it_should_be_is_named(frame: Path, tmp_path: P
     assert "--write-example" in capsys.readouterr().err
 
 
-def test_an_engines_conventions_by_flag(frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A linear albedo, world-space normals and a depth buffer's window depth, said by --albedo-linear,
-    --normal-space world and --depth-kind window: the rates of the frame in rtp's conventions."""
+@pytest.mark.parametrize("kind", ["window", "reversed"])
+def test_an_engines_conventions_by_flag(frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                        kind: str) -> None:
+    """A linear albedo, world-space normals and a depth buffer's window (or reversed-Z) depth, said by
+    --albedo-linear, --normal-space world and --depth-kind: the rates of the frame in rtp's conventions."""
     with np.load(frame) as npz:
         a = dict(npz)
     proj = a["projection"]
@@ -101,7 +103,8 @@ def test_an_engines_conventions_by_flag(frame: Path, tmp_path: Path, capsys: pyt
         z = -depth.astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             ndc = (proj[2, 2] * z + proj[2, 3]) / (proj[3, 2] * z + proj[3, 3])
-        return np.where(depth > 0, (ndc + 1.0) / 2.0, 1.0).astype(np.float32)
+        standard = np.where(depth > 0, (ndc + 1.0) / 2.0, 1.0)
+        return (1.0 - standard if kind == "reversed" else standard).astype(np.float32)
 
     engine = tmp_path / "engine.npz"
     np.savez(engine, **{**a, "albedo": sdk.srgb_to_linear(a["albedo"]).astype(np.float32),
@@ -109,7 +112,106 @@ def test_an_engines_conventions_by_flag(frame: Path, tmp_path: Path, capsys: pyt
                         "prev_depth": window(a["prev_depth"])})
     assert main(["predict", str(frame), "--out", str(tmp_path / "rtp")]) == 0
     assert main(["predict", str(engine), "--out", str(tmp_path / "engine"), "--albedo-linear", "--normal-space",
-                 "world", "--depth-kind", "window"]) == 0
+                 "world", "--depth-kind", kind]) == 0
     capsys.readouterr()
     ours, theirs = np.load(tmp_path / "rtp" / "rates.npy"), np.load(tmp_path / "engine" / "rates.npy")
     assert (ours == theirs).mean() > 0.95, (ours == theirs).mean()
+
+
+# -- a sequence of frames ------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("sequence") / "frames"
+    assert main(["predict", str(folder), "--write-example", "--frames", "4", "--size", "160x96"]) == 0
+    return folder
+
+
+def test_a_written_sequence_is_an_engines_dump_of_consecutive_frames(sequence: Path) -> None:
+    """Each frame's prev_colour and prev_depth are the frame before's colour and depth, and its previous
+    view-projection that frame's camera: what an engine dumping its frames writes."""
+    files = sorted(sequence.glob("*.npz"))
+    assert [f.name for f in files] == [f"frame_{i:04d}.npz" for i in range(4)]
+    frames = [dict(np.load(f)) for f in files]
+    for before, after in zip(frames, frames[1:]):
+        np.testing.assert_array_equal(after["prev_colour"], before["colour"])
+        np.testing.assert_array_equal(after["prev_depth"], before["depth"])
+        np.testing.assert_allclose(after["prev_view_projection"], before["projection"] @ before["view"], atol=1e-6)
+        assert not np.array_equal(after["view"], before["view"])  # the camera moves
+
+
+def test_a_sequence_gives_each_frames_rates_and_the_changes_between_them(
+        sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder of frames: each frame's rates are those of `rtp predict` on it alone, stacked; `changed` is the
+    share of tiles whose rate differs from the frame before; frames.csv, overlay.gif (a frame each) and
+    frames.png are written."""
+    out = tmp_path / "out"
+    assert main(["predict", str(sequence), "--out", str(out), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    rates, values = np.load(out / "rates.npy"), np.load(out / "predictions.npy")
+    assert rates.shape[0] == values.shape[0] == 4 and values.shape[1] == 6
+    for i, f in enumerate(sorted(sequence.glob("*.npz"))):
+        assert main(["predict", str(f), "--out", str(tmp_path / f"one{i}"), "--json"]) == 0
+        one = json.loads(capsys.readouterr().out)
+        np.testing.assert_array_equal(rates[i], np.load(tmp_path / f"one{i}" / "rates.npy"))
+        np.testing.assert_array_equal(values[i], np.load(tmp_path / f"one{i}" / "predictions.npy"))
+        row = got["frames"][i]
+        assert row["frame"] == str(f) and row["work_saved"] == pytest.approx(one["work_saved"])
+        assert row["rates"] == one["rates"]
+        assert row["changed"] == (None if i == 0 else pytest.approx(float((rates[i] != rates[i - 1]).mean())))
+    changes = [r["changed"] for r in got["frames"][1:]]
+    assert 0.0 < min(changes) and max(changes) < 1.0
+    assert got["changed"] == pytest.approx(np.mean(changes))
+    assert got["work_saved"] == pytest.approx(np.mean([r["work_saved"] for r in got["frames"]]))
+    assert got["wrote"] == ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"]
+    lines = (out / "frames.csv").read_text().splitlines()
+    assert lines[0] == "frame,work_saved,changed,predict_ms," + ",".join(sdk.RATE_CODES) and len(lines) == 5
+    assert lines[1].split(",")[2] == "" and float(lines[2].split(",")[2]) == pytest.approx(changes[0], abs=1e-6)
+    import imageio.v3 as iio
+
+    gif = iio.imread(out / "overlay.gif")
+    assert gif.shape == (4, 96, 160, 3)
+    for i, f in enumerate(sorted(sequence.glob("*.npz"))):  # each frame's own rates over its own colour
+        with np.load(f) as npz:
+            want = sdk.draw_rate_overlay(npz["colour"], rates[i], 16, legend=True) * 255.0
+            wrong = sdk.draw_rate_overlay(npz["colour"], rates[i - 1], 16, legend=True) * 255.0
+        err = np.abs(gif[i] - want).mean()
+        assert err < 3.0 and (i == 0 or err < np.abs(gif[i] - wrong).mean() / 2), (i, err)  # (a GIF's palette)
+    assert iio.imread(out / "frames.png").ndim == 3
+
+
+def test_a_sequence_in_text_a_line_a_frame(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    files = sorted(sequence.glob("*.npz"))
+    assert main(["predict", *map(str, files[:2])]) == 0  # several files are a sequence too
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"jnyang.onnx (jnyang), threshold 0.25, tiles of 16px, 2 frames in {sequence}"
+    assert lines[2].startswith("frame_0000.npz ") and lines[3].startswith("frame_0001.npz ")
+    assert lines[3].split()[2].endswith("%")  # the second frame's changed share
+    assert lines[-1].startswith("mean: ") and "of tiles change rate a frame" in lines[-1]
+
+
+def test_a_folders_frames_in_the_natural_order_of_their_names(tmp_path: Path) -> None:
+    from rtp.cli._predict import frame_files
+
+    for name in ("frame_10.npz", "frame_9.npz", "frame_1.npz", "notes.txt"):
+        (tmp_path / name).write_bytes(b"")
+    assert [Path(f).name for f in frame_files([str(tmp_path)])] == ["frame_1.npz", "frame_9.npz", "frame_10.npz"]
+
+
+def test_a_sequences_mistakes_are_named(sequence: Path, frame: Path, tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["predict", str(empty)]) == 2
+    assert "a folder with no .npz frame in it" in capsys.readouterr().err
+    other = tmp_path / "other.npz"  # a frame of another size
+    assert main(["predict", str(other), "--write-example", "--size", "96x64"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(["predict", str(sequence), str(other), "--out", str(out)]) == 2
+    assert "is 96x64, the sequence's first frame 160x96: a sequence's frames are of one size" in capsys.readouterr().err
+    assert not out.exists()  # nothing half-written
+    assert main(["predict", str(frame), str(other), "--write-example"]) == 2
+    assert "--write-example writes one path" in capsys.readouterr().err
+    assert main(["predict", str(sequence), "--frames", "2"]) == 2  # (not a limit on the frames predicted)
+    assert "--frames 2: the number of frames --write-example writes" in capsys.readouterr().err
