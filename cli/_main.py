@@ -1043,7 +1043,8 @@ def build_parser() -> argparse.ArgumentParser:
                  "(.npz files)", _cmd_predict,
                  epilog="the frame: an .npz of float arrays named as sdk.input_planes' arguments (sdk.GBUFFERS): "
                  "depth (H, W) linear view depth, 0 on background; albedo, normal, prev_colour (H, W, 3); roughness, "
-                 "metallic, specular, shadow, emissive (H, W); view, projection, prev_view_projection (4x4, OpenGL); "
+                 "metallic, specular, shadow, emissive (H, W); view, projection, prev_view_projection (4x4, OpenGL's "
+                 "conventions: docs/runtime.md \"Matrices from Direct3D, Vulkan and Metal\" converts others); "
                  "and, for --out's overlay, colour (H, W, 3), the frame as displayed. A model reads only some of "
                  "them (`rtp info MODEL` names them: G-buffers read). Several frames, or a folder of them, are a sequence: "
                  "a line a frame with the share of tiles whose rate changed from the frame before, and with --out "
@@ -1061,19 +1062,22 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--allowed", default=None, help="comma-separated reduced rates the hardware has (default: all "
                     "six; 1x2,2x1,2x2 without the additional rates)")
     pr.add_argument("--out", type=_out_folder, default=None, help="write rates.npy, predictions.npy and overlay.png "
-                    "into this folder")
+                    "into this folder (a sequence: frames.csv, overlay.gif and frames.png)")
     pr.add_argument("--albedo-linear", action="store_true", help="the albedo array holds linear values (default: "
                     "display-encoded sRGB)")
     pr.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
     pr.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear view "
                     "depth (0 on background), a depth buffer's window depth in [0, 1] (1 on background) or a "
                     "reversed-Z buffer's (0 on background)")
+    pr.add_argument("--every", type=_positive, default=None, metavar="K", help="a sequence with prediction reuse "
+                    "(sdk.PredictionReuse): the network every K-th frame, its estimates (or a splitting model's "
+                    "features) carried along each frame's motion between (from depth and the matrices)")
     pr.add_argument("--json", action="store_true", help="print the summary as JSON")
     pr.add_argument("--write-example", action="store_true", help="write FRAME: a frame of the built-in procedural "
                     "scene from the reference renderer, every G-buffer in the layout read")
     pr.add_argument("--size", type=frame_size, default="640x360", help="--write-example's WIDTHxHEIGHT")
     pr.add_argument("--seed", type=_non_negative, default=0, help="--write-example's viewpoint (or camera path)")
-    pr.add_argument("--frames", dest="count", type=_positive, default=1, help="--write-example: write this many "
+    pr.add_argument("--frames", dest="count", metavar="N", type=_positive, default=1, help="--write-example: write this many "
                     "frames along a camera path (60 Hz, walking) into the folder FRAME, frame_0000.npz ...")
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)

@@ -14,6 +14,7 @@ import os
 import re
 import time
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -94,10 +95,12 @@ def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.n
     return arrays
 
 
-def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int) -> list[str]:
+def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
+                   progress: Callable[[int], None] | None = None) -> list[str]:
     """``count`` consecutive frames at 60 Hz along a ``slow`` camera path through the procedural scene, as
     an engine would dump them (each frame's ``prev_colour`` the one before it as displayed, at full rate),
-    written to ``folder`` as ``frame_0000.npz`` ...; the names written."""
+    written to ``folder`` as ``frame_0000.npz`` ...; the names written (``progress`` is called with the count
+    written after each)."""
     from rtp import sdk
     from rtp.capture import check_frame_memory, check_frame_size, load_scene
     from rtp.capture.paths import camera_path
@@ -116,6 +119,8 @@ def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int) ->
             cur = r.render(cam, prev)
             _save_frame(out / name, _frame_arrays(prev, cur, prev_cam, cam, (w, h)))
             prev = cur
+            if progress is not None:
+                progress(names.index(name) + 1)
     return names
 
 
@@ -143,25 +148,41 @@ def frame_files(paths: list[str]) -> list[str]:
     return files
 
 
+#: The planes prediction reuse reads besides a model's: where each pixel was (its motion) and the sky.
+_REUSE_PLANES = ("motion.x", "motion.y", "depth")
+
+
 def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshold: float,
-                   allowed: list[str] | None) -> tuple[dict[str, Any], dict[str, np.ndarray], np.ndarray, np.ndarray]:
-    """One frame file's summary, arrays, predicted values and rate codes."""
+                   allowed: list[str] | None, reuse: Any = None,
+                   ) -> tuple[dict[str, Any], dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """One frame file's summary, arrays, predicted values and rate codes; with ``reuse`` (an
+    ``sdk.PredictionReuse``) its values, the network run or its estimates carried from the frame before
+    along the frame's motion."""
     from rtp import sdk
 
     frame = _read_frame(path)
     inputs = predictor.metadata.inputs
+    extra = [c for c in _REUSE_PLANES if c not in inputs] if reuse is not None else []
     buffers: dict[str, Any] = {k: v for k, v in frame.items() if k in sdk.GBUFFERS}
-    missing = [b for b in sdk.gbuffers_needed(inputs) if b not in buffers]
+    missing = [b for b in sdk.gbuffers_needed([*inputs, *extra]) if b not in buffers]
     if missing:
+        reads = (f"{predictor.path.name if predictor.path else args.model}"
+                 + (" and --every's motion" if any(b not in sdk.gbuffers_needed(inputs) for b in missing) else ""))
         raise sdk.ParameterError(
             f"{path!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
-            f"{predictor.path.name if predictor.path else args.model} reads: "
-            + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing), "frame")
-    x = sdk.input_planes(inputs, **buffers, albedo_linear=args.albedo_linear, normal_space=args.normal_space,
-                         depth_kind=args.depth_kind)
+            f"{reads} reads: " + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing),
+            "frame")
+    planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
+                              normal_space=args.normal_space, depth_kind=args.depth_kind)
+    x = planes[:len(inputs)]
     h, w = x.shape[1:]
     start = time.perf_counter()
-    values = predictor.predict(x)
+    if reuse is None:
+        values = predictor.predict(x)
+    else:
+        named = dict(zip([*inputs, *extra], planes))
+        fetch = None if reuse.age is None else sdk.fetch_from_motion(named["motion.x"], named["motion.y"])
+        values = reuse.predict(x, fetch, named.get("seen"), named["depth"] <= 0.0)
     ms = 1000.0 * (time.perf_counter() - start)
     rates = sdk.select_rates(values, threshold, higher_is_better=predictor.metadata.higher_is_better,
                              allowed=allowed, factors=predictor.metadata.rate_factors)
@@ -170,6 +191,8 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
         "frame": path, "size": [w, h], "tiles": list(rates.shape), "rates": {r: n for r, n in counts.items() if n},
         "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "predict_ms": ms,
     }
+    if reuse is not None:
+        summary["network"] = float(reuse.work)
     return summary, frame, values, rates
 
 
@@ -183,7 +206,10 @@ def run_predict(args: argparse.Namespace) -> int:
         path = args.frames[0]
         w, h = args.size
         if args.count > 1:
-            written = write_sequence(path, args.size, args.seed, args.count)
+            from ._run import Bar
+
+            with Bar(args, args.count, "write frames", "frame") as bar:
+                written = write_sequence(path, args.size, args.seed, args.count, bar.update_to)
             print(f"wrote {len(written)} frames of {w}x{h} along a camera path through the procedural scene in "
                   f"{path}: {written[0]} ... {written[-1]}")
             return 0
@@ -195,11 +221,15 @@ def run_predict(args: argparse.Namespace) -> int:
         raise sdk.ParameterError(f"--frames {args.count}: the number of frames --write-example writes; a sequence to "
                                  "predict is every frame file given (or every .npz of a folder)", "frames")
     files = frame_files(args.frames)
+    sequence = len(files) > 1 or any(Path(f).is_dir() for f in args.frames)
+    if args.every is not None and not sequence:
+        raise sdk.ParameterError(f"--every {args.every}: prediction reuse carries estimates from frame to frame; give "
+                                 "a sequence (several frame files, or a folder of them)", "every")
     predictor = sdk.load(args.model, tile_size=args.tile_size)
     threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
     allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
     model = predictor.path.name if predictor.path else args.model
-    if len(files) > 1 or any(Path(f).is_dir() for f in args.frames):
+    if sequence:
         return _run_sequence(args, files, predictor, threshold, allowed, model)
     summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
@@ -231,6 +261,9 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
 
     from ._run import Bar
 
+    reuse = None
+    if args.every is not None:
+        reuse = sdk.PredictionReuse(predictor, args.every, carry="features" if predictor.splits else "estimates")
     rows: list[dict[str, Any]] = []
     all_rates: list[np.ndarray] = []
     all_values: list[np.ndarray] = []
@@ -242,10 +275,14 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     if not args.json and not args.quiet:
         print(f"{model} ({predictor.metadata.metric}), threshold {threshold:g}, tiles of {predictor.tile_size}px, "
               f"{len(files)} frames in {os.path.relpath(base) if base.startswith(os.getcwd()) else base}")
-        print(f"{'frame':<{width}} {'saved':>7} {'changed':>8} {'predict':>9}")
-    with Bar(args, len(files), "predict", "frame") as bar:
+        if reuse is not None:
+            print(f"prediction reuse: the network every {args.every} frames, its {reuse.carry} carried between")
+        print(f"{'frame':<{width}} {'saved':>7} {'changed':>8} {'predict':>9}" + ("  network" if reuse else ""))
+    # (the lines a frame are the progress in text; a bar beside them would be drawn between them)
+    quiet_bar = argparse.Namespace(**{**vars(args), "no_progress": args.no_progress or not (args.json or args.quiet)})
+    with Bar(quiet_bar, len(files), "predict", "frame") as bar:
         for i, path in enumerate(files):
-            row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed)
+            row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed, reuse)
             if first_size is None:
                 first_size = row["size"]
                 if args.out:  # the overlays kept for the GIF, refused now rather than by the OOM killer later
@@ -268,7 +305,10 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
                 overlays.append(_overlay(frame, rates, predictor.tile_size, GIF_WIDTH))
             if not args.json and not args.quiet:
                 changed = "" if row["changed"] is None else f"{100.0 * row['changed']:.1f}%"
-                print(f"{shown[i]:<{width}} {100.0 * row['work_saved']:>6.1f}% {changed:>8} {row['predict_ms']:>6.1f} ms")
+                network = "" if reuse is None else "  ran" if row["network"] >= 1.0 else (
+                    f"  carried ({row['network']:.0%} of a run)" if row["network"] > 0 else "  carried")
+                print(f"{shown[i]:<{width}} {100.0 * row['work_saved']:>6.1f}% {changed:>8} {row['predict_ms']:>6.1f} ms"
+                      + network)
             bar.update_to(i + 1)
     changes = [r["changed"] for r in rows if r["changed"] is not None]
     summary: dict[str, Any] = {
@@ -277,15 +317,20 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
         "work_saved": float(np.mean([r["work_saved"] for r in rows])),
         "changed": float(np.mean(changes)) if changes else None,
         "predict_ms": float(np.median([r["predict_ms"] for r in rows])),
+        "predict_ms_mean": float(np.mean([r["predict_ms"] for r in rows])),
     }
+    if reuse is not None:
+        summary.update(every=args.every, network=float(np.mean([r["network"] for r in rows])))
     if args.out:
         summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays)
     if args.json:
         print(json.dumps(summary))
         return 0
     changed = "" if summary["changed"] is None else f", {100.0 * summary['changed']:.1f}% of tiles change rate a frame"
-    print(f"mean: {100.0 * summary['work_saved']:.1f}% of the shading work saved{changed}; predict "
-          f"{summary['predict_ms']:.1f} ms (median, onnxruntime, {predictor.provider})")
+    network = "" if reuse is None else f"; the network's work {100.0 * summary['network']:.0f}% of a run a frame"
+    print(f"mean: {100.0 * summary['work_saved']:.1f}% of the shading work saved{changed}{network}; predict "
+          f"{summary['predict_ms_mean']:.1f} ms a frame (median {summary['predict_ms']:.1f}; onnxruntime, "
+          f"{predictor.provider})")
     if args.out:
         print(f"wrote {', '.join(summary['wrote'])} in {args.out}")
     return 0
@@ -326,10 +371,11 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
             np.save(f, array)
     text = io.StringIO()
     writer = csv.writer(text, lineterminator="\n")
-    writer.writerow(["frame", "work_saved", "changed", "predict_ms", *sdk.RATE_CODES])
+    writer.writerow(["frame", "work_saved", "changed", "predict_ms", "network", *sdk.RATE_CODES])
     for r in rows:
         writer.writerow([r["frame"], f"{r['work_saved']:.6f}", "" if r["changed"] is None else f"{r['changed']:.6f}",
-                         f"{r['predict_ms']:.3f}", *(r["rates"].get(k, 0) for k in sdk.RATE_CODES)])
+                         f"{r['predict_ms']:.3f}", f"{r['network']:.4f}" if "network" in r else "",
+                         *(r["rates"].get(k, 0) for k in sdk.RATE_CODES)])
     with sdk.files.atomic_output(out / "frames.csv") as tmp:
         tmp.write_text(text.getvalue())
     with sdk.files.atomic_output(out / "overlay.gif") as tmp:

@@ -63,7 +63,7 @@ from ._rates import (
     select_rates,
     work_saved,
 )
-from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, reproject, reproject_positions
+from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, check_projection, reproject, reproject_positions
 from ._reuse import (
     MAX_CARRY_SCALE,
     MAX_RESCALE,
@@ -166,6 +166,7 @@ __all__ = [
     "Transform",
     "adapters",
     "block_variances",
+    "check_projection",
     "check_threshold",
     "complete_rates",
     "depth_edges",

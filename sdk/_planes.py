@@ -19,7 +19,7 @@ import numpy as np
 from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
 from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
-from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _positions, _reproject, _tolerance
+from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _positions, _reproject, _tolerance, check_projection
 
 log = logging.getLogger(__name__)
 
@@ -230,6 +230,9 @@ def input_planes(
     d = _buffer("depth", depth, None, limit)
     size = (int(d.shape[0]), int(d.shape[1]))
     g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
+    for b in ("projection", "prev_projection"):  # (another API's convention is named, with its conversion)
+        if b in g:
+            check_projection(g[b], b)
     if window:  # a depth buffer's [0, 1] to linear view depth, as the shader's linear_depth
         reversed_z = depth_kind == "reversed"
         _check_depth_kind(d, reversed_z)

@@ -38,11 +38,14 @@ from depth edges).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
 
-__all__ = ["DEFAULT_REPROJECTION_TOLERANCE", "MAX_REPROJECTION_TOLERANCE", "reproject", "reproject_positions"]
+__all__ = ["DEFAULT_REPROJECTION_TOLERANCE", "MAX_REPROJECTION_TOLERANCE", "check_projection", "reproject",
+           "reproject_positions"]
 
 #: Relative depth tolerance of the disocclusion test (2 % of the expected depth).
 DEFAULT_REPROJECTION_TOLERANCE = 0.02
@@ -70,6 +73,53 @@ def _matrix(m: np.ndarray, name: str) -> np.ndarray:
     m = _real(m, name)
     if m.shape != (4, 4):
         raise InputShapeError(f"{name} must be a 4x4 matrix, got shape {m.shape}", tuple(m.shape), "(4, 4)")
+    return m
+
+
+#: Where the conversions from other APIs' matrices are written down.
+_CONVERSIONS = 'docs/runtime.md "Matrices from Direct3D, Vulkan and Metal"'
+
+
+def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
+    """``projection`` as a float64 4x4 matrix, if it can be an OpenGL projection as rtp takes it (column
+    vectors, right-handed view space looking down -z, clip y up, clip depth in [-1, 1]); else a
+    :class:`ParameterError` naming ``name`` that says which other API's convention it looks like and how
+    to convert it (docs/runtime.md "Matrices from Direct3D, Vulkan and Metal").
+
+    What a perspective matrix shows of its convention is checked: its ``w`` row (a matrix for row
+    vectors has it as its last column: its transpose is wanted), the sign of ``w`` (``+z``: a left-handed
+    projection), the sign of its y scale (negative: Vulkan's clip y, pointing down) and its depth row
+    (OpenGL's ``m[2][2] / -m[3][2]`` is ``-(f + n) / (f - n)``, at most -1; a reversed-Z projection's is
+    at least 0). A Direct3D-style right-handed projection with clip depth in [0, 1] looks like an OpenGL
+    one of other near and far planes and passes: only its linearised window depth would be off. An
+    orthographic matrix (last row ``0, 0, 0, 1``) is taken as it is.
+    """
+    m = _matrix(projection, name)
+    scale = float(np.abs(m).max()) or 1.0
+    zero = 1e-9 * scale
+
+    def w_row(v: np.ndarray) -> bool:  # (0, 0, a, 0), a != 0: a perspective divide by the view z
+        return abs(v[0]) <= zero and abs(v[1]) <= zero and abs(v[3]) <= zero and abs(v[2]) > zero
+
+    if not w_row(m[3]):
+        return m
+    if abs(abs(m[3, 2]) - 1.0) > 1e-6 and w_row(m[:, 3]) and abs(abs(m[2, 3]) - 1.0) <= 1e-6:
+        raise ParameterError(f"{name}: its last column (0, 0, {m[2, 3]:g}, 0) is a perspective's w row and its last row "
+                             f"(0, 0, {m[3, 2]:g}, 0) the depth's offset: a matrix for row vectors (Direct3D's, "
+                             f"DirectXMath's)? rtp takes column vectors: pass its transpose ({_CONVERSIONS})", name)
+    if m[3, 2] > 0.0:
+        raise ParameterError(f"{name}: w = +z (last row 0, 0, {m[3, 2]:g}, 0): a left-handed projection, the camera "
+                             f"looking down +z (Direct3D's convention); rtp's view space is right-handed, looking down "
+                             f"-z: projection @ diag(1, 1, -1, 1), and diag(1, 1, -1, 1) @ view ({_CONVERSIONS})", name)
+    if m[1, 1] < 0.0:
+        raise ParameterError(f"{name}: its y scale m[1][1] = {m[1, 1]:g} is negative: Vulkan's clip space, y pointing "
+                             f"down? rtp takes OpenGL's, y up: negate its second row ({_CONVERSIONS})", name)
+    depth_row = m[2, 2] / -m[3, 2]
+    if depth_row > -1.0 + 1e-6:
+        raise ParameterError(f"{name}: m[2][2] / -m[3][2] = {depth_row:g}, where OpenGL's is -(f + n) / (f - n), at most "
+                             f"-1: a reversed-Z projection (or clip depth in [0, 1])? rtp takes the OpenGL projection of "
+                             f"the same near and far planes ({_CONVERSIONS}); depth_kind='reversed' says the depth "
+                             f"buffer is reversed-Z", name)
     return m
 
 
@@ -121,7 +171,7 @@ def reproject_positions(
         the top-left row is ``H - qy``) and the previous clip ``w`` (the expected previous linear
         depth for geometry; only its sign matters for background).
     """
-    return _positions(_depth(depth, "depth"), _matrix(cur_view, "cur_view"), _matrix(cur_proj, "cur_proj"),
+    return _positions(_depth(depth, "depth"), _matrix(cur_view, "cur_view"), check_projection(cur_proj, "cur_proj"),
                       _matrix(prev_view_proj, "prev_view_proj"))
 
 
@@ -190,7 +240,7 @@ def reproject(
         raise InputShapeError(f"prev_colour must be (H, W[, C]) with (H, W) = {depth.shape}; got {colour.shape}",
                               tuple(colour.shape), f"({depth.shape[0]}, {depth.shape[1]}[, C])")
     return _reproject(np.asarray(prev_colour), prev_depth, depth, _matrix(cur_view, "cur_view"),
-                      _matrix(cur_proj, "cur_proj"), _matrix(prev_view_proj, "prev_view_proj"), tolerance)
+                      check_projection(cur_proj, "cur_proj"), _matrix(prev_view_proj, "prev_view_proj"), tolerance)
 
 
 def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarray, cur_view: np.ndarray,

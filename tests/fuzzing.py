@@ -557,6 +557,32 @@ def _reproject_absurd(v: tuple[str, Any], result: tuple[np.ndarray, np.ndarray])
     )
 
 
+# -- projection matrices ---------------------------------------------------------------------------------
+
+_ENTRIES = st.sampled_from([0.0, 0.0, 0.0, 1.0, -1.0, 0.5, -0.2002, -1.002, 2.0, 1e-300, 1e300, float("nan"),
+                            float("inf")])
+projections = st.one_of(
+    _arrays(st.integers(0, 5), 3),
+    st.lists(_ENTRIES, min_size=16, max_size=16).map(lambda v: ("matrix", np.reshape(v, (4, 4)))),
+    st.sampled_from([_PROJ, _PROJ.T, _PROJ @ np.diag([1.0, 1.0, -1.0, 1.0])]).map(lambda m: ("matrix", m)),
+    json_scalars,
+)
+
+
+def _projection_value(v: Any) -> Any:
+    if isinstance(v, tuple) and len(v) == 2 and v[0] == "matrix":
+        return v[1]
+    return _array(v) if isinstance(v, tuple) else v
+
+
+def _projection_absurd(v: Any, m: np.ndarray) -> bool:
+    """Accepted: a finite float64 4x4 matrix equal to the one given, never one whose w is +z (left-handed)."""
+    given = np.asarray(_projection_value(v))
+    return bool(m.shape != (4, 4) or m.dtype != np.float64 or not np.isfinite(m).all()
+                or not np.array_equal(m, given.astype(np.float64))
+                or (m[3, 2] > 0 and not m[3, :2].any() and m[3, 3] == 0))
+
+
 # -- input planes from G-buffers ------------------------------------------------------------------
 
 _PLANES_VALID: dict[str, Any] = {
@@ -848,6 +874,8 @@ def targets() -> list[Target]:
                _overlay_call, _overlay_absurd),
         Target("reproject", reprojections, _reproject_call, _reproject_absurd),
         Target("input_planes", planes_cases, _planes_call, _planes_absurd),
+        Target("check_projection", projections, lambda v: sdk.check_projection(_projection_value(v)),
+               _projection_absurd),
         Target("fetch_from_motion", st.tuples(_arrays(st.integers(0, 6), 3), _arrays(st.integers(0, 6), 3)),
                lambda v: sdk.fetch_from_motion(_array(v[0]), _array(v[1])), _fetch_absurd),
         Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),

@@ -169,6 +169,27 @@ prev_colour, prev_depth, prev_view_projection = prev.colour["1x1"], prev.depth, 
         "('depth', 'albedo', 'normal', 'roughness')\n"
         "assert 0.2 < x[predictor.metadata.inputs.index('seen')].mean() < 1.0",
     ),
+    ("runtime.md", "S = np.diag([1.0, 1.0, -1.0, 1.0])"): (  # a reversed-Z Direct3D camera, as DirectXMath builds it
+        """
+import numpy as np
+def look_at_lh(eye, at):  # XMMatrixLookAtLH, row vectors
+    z = (at - eye) / np.linalg.norm(at - eye); x = np.cross([0.0, 1, 0], z); x /= np.linalg.norm(x); y = np.cross(z, x)
+    m = np.eye(4); m[:3, 0], m[:3, 1], m[:3, 2] = x, y, z; m[3, :3] = -x @ eye, -y @ eye, -z @ eye
+    return m
+near, far, ys = 100.0, 0.1, 1 / np.tan(0.55)  # (reversed-Z: XMMatrixPerspectiveFovLH with near and far swapped)
+engine_projection = np.array([[ys / 1.6, 0, 0, 0], [0, ys, 0, 0], [0, 0, far / (far - near), 1],
+                              [0, 0, -far * near / (far - near), 0]])
+engine_view = look_at_lh(np.array([1.0, 1.7, -3.0]), np.array([0.5, 1.2, 2.0]))
+engine_prev_view_projection = look_at_lh(np.array([1.2, 1.7, -3.1]), np.array([0.5, 1.2, 2.0])) @ engine_projection
+""",
+        """
+p = np.array([0.3, 1.1, 6.0, 1.0])
+d3d, gl = p @ engine_view @ engine_projection, projection @ view @ p
+assert np.allclose(gl[:2] / gl[3], d3d[:2] / d3d[3]) and np.isclose(1 - (gl[2] / gl[3] + 1) / 2, d3d[2] / d3d[3])
+d3d, gl = p @ engine_prev_view_projection, prev_view_projection @ p
+assert np.allclose(gl[:2] / gl[3], d3d[:2] / d3d[3]) and np.isclose(1 - (gl[2] / gl[3] + 1) / 2, d3d[2] / d3d[3])
+""",
+    ),
     ("runtime.md", 'predictor = sdk.load("jnyang", threads=1)'): (  # pickled to the pool's processes
         "import numpy as np\nfrom rtp import sdk\nrng = np.random.default_rng(0)\n"
         "frames = [rng.random((9, 64, 96), dtype=np.float32) for _ in range(3)]\n",

@@ -314,3 +314,86 @@ def test_a_depth_buffer_of_the_other_kind_is_named_in_a_warning(caplog: pytest.L
     assert [r.getMessage() for r in caplog.records] == [
         "depth: depth_kind='reversed', but 150 pixels hold 1 (the near plane) and none 0 (background): a standard "
         "depth buffer? (depth_kind='window'); warned once"]
+
+
+# -- matrices from Direct3D, Vulkan and Metal ------------------------------------------------------------------
+
+def _xm_look_at_lh(eye: np.ndarray, at: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """DirectXMath's XMMatrixLookAtLH: a left-handed view matrix (+z ahead) for row vectors."""
+    z = (at - eye) / np.linalg.norm(at - eye)
+    x = np.cross(up, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2] = x, y, z
+    m[3, :3] = -x @ eye, -y @ eye, -z @ eye
+    return m
+
+
+def _xm_perspective_fov_lh(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """DirectXMath's XMMatrixPerspectiveFovLH (clip depth in [0, 1]) for row vectors; reversed-Z with near and far
+    swapped, as engines make it."""
+    ys = 1.0 / np.tan(fov_y / 2)
+    r = far / (far - near)
+    return np.array([[ys / aspect, 0, 0, 0], [0, ys, 0, 0], [0, 0, r, 1], [0, 0, -r * near, 0]])
+
+
+def _d3d_frame(reversed_z: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A left-handed, row-vector camera pair of a Direct3D engine (reversed-Z or not): view, projection and the
+    previous view-projection, and world points in front of it."""
+    near, far = (100.0, 0.1) if reversed_z else (0.1, 100.0)
+    proj = _xm_perspective_fov_lh(1.1, 16 / 9, near, far)
+    view = _xm_look_at_lh(np.array([1.0, 1.7, -3.0]), np.array([0.5, 1.2, 2.0]), np.array([0.0, 1.0, 0.0]))
+    prev = _xm_look_at_lh(np.array([1.1, 1.7, -3.2]), np.array([0.7, 1.2, 2.0]), np.array([0.0, 1.0, 0.0]))
+    points = np.random.default_rng(3).uniform([-3, 0, 2], [3, 3, 40], (200, 3))
+    return view, proj, prev @ proj, points
+
+
+def _rtp_matrices(view: np.ndarray, proj: np.ndarray, prev_vp: np.ndarray, reversed_z: bool
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """docs/runtime.md "Matrices from Direct3D, Vulkan and Metal", for a left-handed row-vector engine."""
+    s = np.diag([1.0, 1.0, -1.0, 1.0])
+    to_gl = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, -2, 1] if reversed_z else [0, 0, 2, -1], [0, 0, 0, 1]])
+    return s @ view.T, to_gl @ proj.T @ s, to_gl @ prev_vp.T
+
+
+@pytest.mark.parametrize("reversed_z", [False, True])
+def test_direct3d_matrices_converted_as_the_docs_say_put_every_point_where_direct3d_does(reversed_z: bool) -> None:
+    """A Direct3D engine's camera (left-handed, row vectors, clip depth in [0, 1], reversed-Z or not), converted
+    by the docs' recipe: the same pixel for every point, and a window depth whose reversed-Z is the engine's
+    buffer, in this frame and through the previous view-projection."""
+    view, proj, prev_vp, points = _d3d_frame(reversed_z)
+    gl_view, gl_proj, gl_prev = _rtp_matrices(view, proj, prev_vp, reversed_z)
+    assert sdk.check_projection(gl_proj) is not None
+    h4 = np.c_[points, np.ones(len(points))]
+    for d3d, gl in ((h4 @ view @ proj, (gl_proj @ gl_view @ h4.T).T), (h4 @ prev_vp, (gl_prev @ h4.T).T)):
+        d_ndc, g_ndc = d3d[:, :3] / d3d[:, 3:], gl[:, :3] / gl[:, 3:]
+        assert (d3d[:, 3] > 0).all() and (gl[:, 3] > 0).all()  # in front of both
+        np.testing.assert_allclose(g_ndc[:, :2], d_ndc[:, :2], atol=1e-12)  # the same pixels
+        window = (g_ndc[:, 2] + 1) / 2
+        np.testing.assert_allclose(1 - window if reversed_z else window, d_ndc[:, 2], atol=1e-12)
+
+
+def test_another_apis_projection_is_named_with_its_conversion() -> None:
+    """A row-vector matrix, a left-handed one, a reversed-Z one and Vulkan's y-down one are each a typed error
+    naming the convention and pointing at the conversion, in check_projection, input_planes and reproject."""
+    view, proj, prev_vp, _ = _d3d_frame(reversed_z=True)
+    gl_view, gl_proj, gl_prev = _rtp_matrices(view, proj, prev_vp, reversed_z=True)
+    s = np.diag([1.0, 1.0, -1.0, 1.0])
+    cases = {
+        "row vectors": proj,                                      # not transposed
+        "left-handed": proj.T,                                    # transposed, not flipped
+        "reversed-Z": proj.T @ s,                                 # flipped, its depth not converted
+        "Vulkan": np.diag([1.0, -1.0, 1.0, 1.0]) @ gl_proj,       # clip y down
+    }
+    depth = np.full((20, 30), 0.5, np.float32)
+    for what, m in cases.items():
+        for call in (lambda m=m: sdk.check_projection(m),
+                     lambda m=m: sdk.input_planes(["depth"], depth=depth, projection=m, depth_kind="reversed"),
+                     lambda m=m: sdk.reproject(np.zeros((20, 30, 3)), depth, depth, gl_view, m, gl_prev)):
+            with pytest.raises(sdk.ParameterError, match=what) as err:
+                call()
+            assert 'docs/runtime.md "Matrices from Direct3D, Vulkan and Metal"' in str(err.value)
+    # OpenGL's own, perspective (finite or infinite far plane) or orthographic, pass unchanged
+    for m in (gl_proj, _infinite_reversed_z(0.1), np.diag([0.5, 0.8, -0.1, 1.0])):
+        np.testing.assert_array_equal(sdk.check_projection(m), m)

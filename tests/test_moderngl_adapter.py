@@ -238,6 +238,10 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
     # every bad setting or frame field an RtpError (a ParameterError, still a ValueError), never a bare one
     with pytest.raises(sdk.ParameterError, match="material texture"):
         Adapter(("seen", "roughness"), W, H, ctx=ctx).inputs(replace(no_prev, material=None))
+    with pytest.raises(sdk.ParameterError, match="left-handed projection"):  # Direct3D's: named, with the conversion
+        a.inputs(replace(no_prev, projection=no_prev.projection @ np.diag([1.0, 1.0, -1.0, 1.0])))
+    with pytest.raises(sdk.ParameterError, match="prev_projection: .* row vectors"):
+        a.inputs(replace(no_prev, prev_projection=no_prev.projection.T))
     for options in ({"normal_space": "bogus"}, {"depth_kind": "bogus"}, {"tolerance": float("nan")},
                     {"tolerance": -1.0}, {"tolerance": "0.02"}):
         with pytest.raises(sdk.ParameterError):

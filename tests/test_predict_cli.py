@@ -165,7 +165,7 @@ def test_a_sequence_gives_each_frames_rates_and_the_changes_between_them(
     assert got["work_saved"] == pytest.approx(np.mean([r["work_saved"] for r in got["frames"]]))
     assert got["wrote"] == ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"]
     lines = (out / "frames.csv").read_text().splitlines()
-    assert lines[0] == "frame,work_saved,changed,predict_ms," + ",".join(sdk.RATE_CODES) and len(lines) == 5
+    assert lines[0] == "frame,work_saved,changed,predict_ms,network," + ",".join(sdk.RATE_CODES) and len(lines) == 5
     assert lines[1].split(",")[2] == "" and float(lines[2].split(",")[2]) == pytest.approx(changes[0], abs=1e-6)
     import imageio.v3 as iio
 
@@ -215,3 +215,51 @@ def test_a_sequences_mistakes_are_named(sequence: Path, frame: Path, tmp_path: P
     assert "--write-example writes one path" in capsys.readouterr().err
     assert main(["predict", str(sequence), "--frames", "2"]) == 2  # (not a limit on the frames predicted)
     assert "--frames 2: the number of frames --write-example writes" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("model", ["jnyang", "jnyang-reuse"])
+def test_a_sequence_with_prediction_reuse_is_the_sdks(sequence: Path, tmp_path: Path, model: str,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """--every 2: the network on frames 0 and 2, its estimates (jnyang-reuse: its features) carried along each
+    frame's motion on 1 and 3; the values are sdk.PredictionReuse's, fed the planes, motion and sky as an engine
+    would feed them."""
+    out = tmp_path / "out"
+    assert main(["predict", str(sequence), "--model", model, "--every", "2", "--out", str(out), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert [r["network"] >= 1.0 for r in got["frames"]] == [True, False, True, False]
+    assert got["every"] == 2 and got["network"] == pytest.approx(np.mean([r["network"] for r in got["frames"]]))
+    predictor = sdk.load(model)
+    reuse = sdk.PredictionReuse(predictor, 2, carry="features" if predictor.splits else "estimates")
+    inputs = predictor.metadata.inputs
+    values = np.load(out / "predictions.npy")
+    for i, f in enumerate(sorted(sequence.glob("*.npz"))):
+        with np.load(f) as npz:
+            g = {k: npz[k] for k in npz.files if k in sdk.GBUFFERS}
+        x = sdk.input_planes(inputs, **g)
+        mx, my, depth = sdk.input_planes(["motion.x", "motion.y", "depth"], **g)
+        want = reuse.predict(x, sdk.fetch_from_motion(mx, my) if i else None,
+                             x[inputs.index("seen")] if "seen" in inputs else None, depth <= 0)
+        np.testing.assert_allclose(values[i], want, rtol=1e-6, atol=1e-6)
+    plain = tmp_path / "plain"
+    assert main(["predict", str(sequence), "--model", model, "--out", str(plain), "--json"]) == 0
+    capsys.readouterr()
+    every_frame = np.load(plain / "predictions.npy")
+    np.testing.assert_array_equal(values[[0, 2]], every_frame[[0, 2]])  # where the network ran, its own values
+    assert not np.array_equal(values[1], every_frame[1])  # carried, not run
+    lines = (out / "frames.csv").read_text().splitlines()
+    assert [float(line.split(",")[4]) >= 1.0 for line in lines[1:]] == [True, False, True, False]
+
+
+def test_reuse_needs_a_sequence_and_the_matrices(sequence: Path, frame: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", str(frame), "--every", "4"]) == 2
+    assert "--every 4: prediction reuse carries estimates from frame to frame; give a sequence" in \
+        capsys.readouterr().err
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for f in sorted(sequence.glob("*.npz"))[:2]:  # frames without the previous view-projection
+        with np.load(f) as npz:
+            np.savez(bare / f.name, **{k: npz[k] for k in npz.files if k != "prev_view_projection"})
+    assert main(["predict", str(bare), "--every", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "'prev_view_projection'" in err and "reads" in err

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError
+from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -273,11 +273,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
                 raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
             self._check_texture(tex, name, _RGB_TEXTURES.get(name, 1))
         view = _matrix(view, "view", invertible=True)
-        projection = _matrix(projection, "projection", invertible=True)
+        projection = check_projection(_matrix(projection, "projection", invertible=True), "projection")
         if prev_view_projection is not None:
             prev_view_projection = _matrix(prev_view_projection, "prev_view_projection")
         if prev_projection is not None:
-            prev_projection = _matrix(prev_projection, "prev_projection", invertible=True)
+            prev_projection = check_projection(_matrix(prev_projection, "prev_projection", invertible=True),
+                                               "prev_projection")
         for c, tex, name in ((depth_component, depth, "depth_component"),
                              (prev_depth_component, prev_depth, "prev_depth_component")):
             _component(c, name, 0, 4 if tex is None else tex.components)
