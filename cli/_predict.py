@@ -341,10 +341,17 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
     drawn, uint8; with ``width``, shown at the largest integer fraction of its size at most that wide."""
     from rtp import sdk
 
-    size = (*np.shape(frame["depth"]), 3)
-    base = next((frame[k] for k in (COLOUR_KEY, "albedo", "prev_colour") if k in frame and frame[k].shape == size),
-                np.zeros(size, np.float32))
-    picture = sdk.draw_rate_overlay(np.clip(np.asarray(base, np.float32), 0.0, 1.0), rates, tile, legend=True)
+    size = np.shape(frame["depth"])[:2]
+
+    def image(a: np.ndarray) -> np.ndarray | None:  # RGB or RGBA of the frame's size, float or UNORM integers
+        if a.ndim != 3 or a.shape[:2] != size or a.shape[2] not in (3, 4) or a.dtype.kind not in "uif":
+            return None
+        scale = np.iinfo(a.dtype).max if a.dtype in (np.uint8, np.uint16) else 1.0
+        return np.asarray(a[..., :3], np.float32) / np.float32(scale)
+
+    base = next((b for k in (COLOUR_KEY, "albedo", "prev_colour") if k in frame and (b := image(frame[k])) is not None),
+                np.zeros((*size, 3), np.float32))
+    picture = sdk.draw_rate_overlay(np.clip(np.nan_to_num(base), 0.0, 1.0), rates, tile, legend=True)
     if width is not None:
         step = -(-picture.shape[1] // width)
         picture = picture[::step, ::step]

@@ -114,14 +114,20 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
                               f"{type(value).__name__} ({err})") from err
     if a.dtype.kind not in "biuf":
         raise InputDtypeError(f"{name}: expected an array of numbers, {shape} {meaning}; got dtype {a.dtype}")
+    rgb = shape.endswith(", 3)")
+    if a.ndim == 3 and a.shape[2] == (4 if rgb else 1) and shape != "4x4":
+        # an RGBA texture read back (RGBA8, RGBA16F: the alpha is not read), or a single channel kept as (H, W, 1)
+        a = a[..., :3] if rgb else a[..., 0]
     if shape == "4x4":
         expected: tuple[int, ...] = (4, 4)
     elif size is None:  # depth: its own (H, W) gives the frame's size
         expected = a.shape if a.ndim == 2 and a.size else ("H", "W")
     else:
-        expected = (*size, 3) if shape.endswith(", 3)") else size
+        expected = (*size, 3) if rgb else size
     if a.shape != expected:
-        hint = " (a planar (3, H, W) image: np.moveaxis(image, 0, -1))" if a.shape == (3, *(size or ())) else ""
+        hint = (" (a planar (3, H, W) image: np.moveaxis(image, 0, -1))" if a.shape == (3, *(size or ())) else
+                " (16 numbers in a row: np.reshape(m, (4, 4)) if they are row by row, its .T if column by column, "
+                "as OpenGL's glGetFloatv gives them)" if shape == "4x4" and a.shape == (16,) else "")
         raise InputShapeError(f"{name}: expected shape {expected} ({meaning}), got {a.shape}{hint}",
                               tuple(a.shape), str(expected))
     if a.dtype in (np.uint8, np.uint16) and _RANGES.get(name) == (0.0, 1.0):
@@ -184,7 +190,8 @@ def input_planes(
     it; G-buffers no channel reads are not looked at. A G-buffer of values in [0, 1] (albedo, the
     material planes, ``prev_colour``) may come as the ``uint8`` or ``uint16`` of a UNORM texture read
     back (its integers over 255 or 65535); integer normals are refused (an encoded normal texture:
-    decode it first).
+    decode it first). An ``(H, W, 3)`` G-buffer may come as the ``(H, W, 4)`` of an RGBA texture (its alpha is not
+    read), an ``(H, W)`` one as ``(H, W, 1)``.
 
     As the moderngl adapter's shader does, the albedo, the normals and the material planes (roughness,
     metallic, specular) are 0 on background (where depth is 0); unlike it, the normals are taken as they

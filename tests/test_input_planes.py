@@ -113,7 +113,7 @@ def _frame(h: int = 20, w: int = 30) -> dict[str, Any]:
      r"prev_colour: expected values in \[0, 1\] .* got \[2\.5, 2\.5\]: tone-map it .*linear_to_srgb"),
     ({"albedo": np.zeros((3, 20, 30))}, sdk.InputShapeError, r"albedo: expected shape \(20, 30, 3\).*np\.moveaxis"),
     ({"albedo": np.zeros((20, 31, 3))}, sdk.InputShapeError, r"albedo: expected shape \(20, 30, 3\)"),
-    ({"depth": np.zeros((20, 30, 1))}, sdk.InputShapeError, r"depth: expected shape \('H', 'W'\)"),
+    ({"depth": np.zeros((20, 30, 2))}, sdk.InputShapeError, r"depth: expected shape \('H', 'W'\)"),  # ((H, W, 1): taken)
     ({"depth": -np.ones((20, 30))}, sdk.ParameterError, r"depth: expected values in \[0, inf\]"),
     ({"view": np.eye(3)}, sdk.InputShapeError, r"view: expected shape \(4, 4\)"),
     ({"roughness": np.full((20, 30), np.nan)}, sdk.NonFiniteInputError, "roughness: holds NaN"),
@@ -397,3 +397,24 @@ def test_another_apis_projection_is_named_with_its_conversion() -> None:
     # OpenGL's own, perspective (finite or infinite far plane) or orthographic, pass unchanged
     for m in (gl_proj, _infinite_reversed_z(0.1), np.diag([0.5, 0.8, -0.1, 1.0])):
         np.testing.assert_array_equal(sdk.check_projection(m), m)
+
+
+def test_textures_read_back_as_rgba_or_with_one_channel_kept() -> None:
+    """An engine reads RGBA textures back (RGBA8 albedo, RGBA16F normals): the alpha is not read. A single-channel
+    G-buffer kept as (H, W, 1) is its (H, W). A matrix as 16 numbers in a row is named with how to shape it."""
+    g = _frame()
+    chans = ["albedo.r", "albedo.y", "normal.z", "roughness", "depth", "seen"]
+    want = sdk.input_planes(chans, **g)
+    rng = np.random.default_rng(1)
+    albedo8 = np.round(g["albedo"] * 255).astype(np.uint8)
+    rgba = {**g, "albedo": np.dstack([albedo8, rng.integers(0, 256, albedo8.shape[:2], np.uint8)]),
+            "normal": np.dstack([g["normal"], rng.random(g["depth"].shape)]),
+            "prev_colour": np.dstack([g["prev_colour"], np.full(g["depth"].shape, 7.0)]),  # (an alpha past 1: not read)
+            "roughness": g["roughness"][..., None], "depth": g["depth"][..., None]}
+    got = sdk.input_planes(chans, **rgba)
+    np.testing.assert_allclose(got[:2], want[:2], atol=1 / 255)  # (the albedo's 8 bits)
+    np.testing.assert_array_equal(got[2:], want[2:])
+    with pytest.raises(sdk.InputShapeError, match=r"16 numbers in a row: np.reshape\(m, \(4, 4\)\)"):
+        sdk.input_planes(chans, **{**g, "view": g["view"].ravel()})
+    with pytest.raises(sdk.InputShapeError, match=r"albedo: expected shape \(20, 30, 3\)"):
+        sdk.input_planes(chans, **{**g, "albedo": np.dstack([g["albedo"]] * 2)})  # 6 channels: not a texture's

@@ -263,3 +263,28 @@ def test_reuse_needs_a_sequence_and_the_matrices(sequence: Path, frame: Path, tm
     assert main(["predict", str(bare), "--every", "2"]) == 2
     err = capsys.readouterr().err
     assert "'prev_view_projection'" in err and "reads" in err
+
+
+def test_an_engines_rgba8_readbacks(frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A frame of RGBA8 textures read back (colour, albedo, previous frame) and a depth of (H, W, 1): the rates of
+    the float frame (8 bits apart), and the overlay drawn on the colour."""
+    with np.load(frame) as npz:
+        a = dict(npz)
+    rng = np.random.default_rng(0)
+
+    def rgba8(img: np.ndarray) -> np.ndarray:
+        return np.dstack([np.round(img * 255).astype(np.uint8), rng.integers(0, 256, img.shape[:2], np.uint8)])
+
+    engine = tmp_path / "engine.npz"
+    np.savez(engine, **{**a, "colour": rgba8(a["colour"]), "albedo": rgba8(a["albedo"]),
+                        "prev_colour": rgba8(a["prev_colour"]), "depth": a["depth"][..., None]})
+    assert main(["predict", str(frame), "--out", str(tmp_path / "float")]) == 0
+    assert main(["predict", str(engine), "--out", str(tmp_path / "rgba8")]) == 0
+    capsys.readouterr()
+    ours, theirs = np.load(tmp_path / "float" / "rates.npy"), np.load(tmp_path / "rgba8" / "rates.npy")
+    assert (ours == theirs).mean() > 0.9, (ours == theirs).mean()
+    import imageio.v3 as iio
+
+    picture = iio.imread(tmp_path / "rgba8" / "overlay.png").astype(np.float64)
+    drawn = iio.imread(tmp_path / "float" / "overlay.png").astype(np.float64)
+    assert np.abs(picture - drawn).mean() < 2.0  # on the colour, not on black
