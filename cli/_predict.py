@@ -60,7 +60,7 @@ def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int,
             "metallic": cur.metallic, "specular": cur.specular, "shadow": cur.shadow, "emissive": cur.emissive,
             "view": cam.view(), "projection": cam.projection(w / h), "prev_colour": prev.colour["1x1"],
             "prev_depth": prev.depth, "prev_view_projection": prev_cam.view_projection(w, h),
-            COLOUR_KEY: cur.colour["1x1"]}
+            "motion": cur.motion, COLOUR_KEY: cur.colour["1x1"]}
 
 
 def _save_frame(path: str | Path, arrays: dict[str, np.ndarray]) -> None:

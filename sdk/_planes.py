@@ -53,6 +53,9 @@ GBUFFERS: Mapping[str, tuple[str, str]] = {
     "prev_view_projection": ("4x4", "the previous frame's world-to-clip matrix"),
     "prev_projection": ("4x4", "the previous frame's view-to-clip matrix, where it differs from projection (window "
                                "depth only: it linearises prev_depth)"),
+    "motion": ("(H, W, 2)", "the engine's motion vectors, optional: each pixel's previous minus current position in "
+                            "pixels (x right, y down), objects' own motion included; without them the camera's move "
+                            "alone places each pixel (a static scene)"),
 }
 
 _REPROJECTION = ("depth", "view", "projection", "prev_colour", "prev_depth", "prev_view_projection")
@@ -114,16 +117,17 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
                               f"{type(value).__name__} ({err})") from err
     if a.dtype.kind not in "biuf":
         raise InputDtypeError(f"{name}: expected an array of numbers, {shape} {meaning}; got dtype {a.dtype}")
-    rgb = shape.endswith(", 3)")
-    if a.ndim == 3 and a.shape[2] == (4 if rgb else 1) and shape != "4x4":
-        # an RGBA texture read back (RGBA8, RGBA16F: the alpha is not read), or a single channel kept as (H, W, 1)
-        a = a[..., :3] if rgb else a[..., 0]
+    planes = 3 if shape.endswith(", 3)") else 2 if shape.endswith(", 2)") else 0  # an image's channels (0: none)
+    if a.ndim == 3 and shape != "4x4" and (planes < a.shape[2] <= 4 if planes else a.shape[2] == 1):
+        # an RGBA texture read back (RGBA8, RGBA16F: the alpha is not read; an RG motion texture read back as RGB(A)),
+        # or a single channel kept as (H, W, 1)
+        a = a[..., :planes] if planes else a[..., 0]
     if shape == "4x4":
         expected: tuple[int, ...] = (4, 4)
     elif size is None:  # depth: its own (H, W) gives the frame's size
         expected = a.shape if a.ndim == 2 and a.size else ("H", "W")
     else:
-        expected = (*size, 3) if rgb else size
+        expected = (*size, planes) if planes else size
     if a.shape != expected:
         hint = (" (a planar (3, H, W) image: np.moveaxis(image, 0, -1))" if a.shape == (3, *(size or ())) else
                 " (16 numbers in a row: np.reshape(m, (4, 4)) if they are row by row, its .T if column by column, "
@@ -171,6 +175,7 @@ def input_planes(
     prev_depth: Any = None,
     prev_view_projection: Any = None,
     prev_projection: Any = None,
+    motion: Any = None,
     tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
     albedo_linear: bool = False,
     normal_space: str = "view",
@@ -184,7 +189,9 @@ def input_planes(
     (:func:`gbuffers_needed`): the ``reprojected.*`` planes and ``seen`` reproject ``prev_colour`` with
     ``prev_depth``, ``view``, ``projection`` and ``prev_view_projection`` (:func:`reproject`, its
     ``tolerance``); ``motion.x/y`` are each pixel's previous minus current position in pixels (x right,
-    y down), 0 on background and where the point was behind the previous camera. A channel whose
+    y down), 0 on background and where the point was behind the previous camera. The engine's own motion
+    vectors, ``motion``, where given, place each geometry pixel in the previous frame instead of the camera's
+    move alone (objects that move: :func:`reproject`'s ``motion``) and are the ``motion.x/y`` planes. A channel whose
     G-buffer is not given, a G-buffer of another shape, or values outside its range (past a slack of
     1e-3: an HDR ``prev_colour``, a window depth past 1) raise a typed error naming
     it; G-buffers no channel reads are not looked at. A G-buffer of values in [0, 1] (albedo, the
@@ -218,7 +225,7 @@ def input_planes(
     given = {"depth": depth, "albedo": albedo, "normal": normal, "roughness": roughness, "metallic": metallic,
              "specular": specular, "shadow": shadow, "emissive": emissive, "view": view, "projection": projection,
              "prev_colour": prev_colour, "prev_depth": prev_depth, "prev_view_projection": prev_view_projection,
-             "prev_projection": prev_projection}
+             "prev_projection": prev_projection, "motion": motion}
     because = {}  # the G-buffers an option needs besides those of the channels
     if normal_space == "world" and "normal" in gbuffers_needed(names):
         because["view"] = "normal_space='world'"
@@ -237,6 +244,8 @@ def input_planes(
     d = _buffer("depth", depth, None, limit)
     size = (int(d.shape[0]), int(d.shape[1]))
     g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
+    if motion is not None and any(c.startswith(("reprojected.", "motion.")) or c == "seen" for c in names):
+        g["motion"] = _buffer("motion", motion, size)  # (optional: looked at only where it is used)
     for b in ("projection", "prev_projection"):  # (another API's convention is named, with its conversion)
         if b in g:
             check_projection(g[b], b)
@@ -278,7 +287,7 @@ def input_planes(
         planes.update({f"normal.{c}": n[..., i] for i, c in enumerate("xyz")})
     if "prev_colour" in g:
         rep, seen = _reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
-                               g["prev_view_projection"], tolerance)
+                               g["prev_view_projection"], tolerance, g.get("motion"))
         planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
         y = planes["reprojected.y"] = luma(rep)
         if wanted & {"reprojected.y.dx", "reprojected.y.dy"}:
@@ -288,7 +297,10 @@ def input_planes(
         if "reprojected.y.tiles" in wanted:
             planes["reprojected.y.tiles"] = tile_variances(y)
         planes["seen"] = seen
-    if wanted & {"motion.x", "motion.y"}:
+    if wanted & {"motion.x", "motion.y"} and "motion" in g:  # the engine's, 0 on background as the channel's
+        zero = np.float32(0.0)
+        planes["motion.x"], planes["motion.y"] = (np.where(geo, g["motion"][..., i], zero) for i in (0, 1))
+    elif wanted & {"motion.x", "motion.y"}:
         planes["motion.x"], planes["motion.y"] = _motion_vectors(d, g["view"], g["projection"],
                                                                   g["prev_view_projection"])
     return np.ascontiguousarray(np.stack([planes[c] for c in names]), np.float32)

@@ -213,6 +213,7 @@ def reproject(
     prev_view_proj: np.ndarray,
     *,
     tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+    motion: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fetch the previous frame's colour where each current pixel was, with a disocclusion test.
 
@@ -224,6 +225,12 @@ def reproject(
         cur_proj: current 4x4 OpenGL projection (``Camera.projection(W / H)``).
         prev_view_proj: previous 4x4 world-to-clip matrix (``prev_camera.view_projection(W, H)``).
         tolerance: relative depth tolerance (default 0.02, i.e. 2 % of the expected depth).
+        motion: the engine's motion vectors, ``(H, W, 2)``: each pixel's previous minus current position
+            in pixels (x right, y down), objects' own motion included. Where given, a geometry pixel is
+            fetched from there instead of from where the camera's move alone puts it (the matrices: a
+            static scene), and its depth is tested against the depth the camera's move gives it (an
+            object moving in depth by more than ``tolerance`` in a frame is unseen); background pixels
+            follow the camera.
 
     Returns:
         ``(reprojected, seen)``: ``reprojected`` has ``prev_colour``'s shape, float32, 0 where
@@ -239,15 +246,27 @@ def reproject(
     if colour.ndim not in (2, 3) or colour.shape[:2] != depth.shape:
         raise InputShapeError(f"prev_colour must be (H, W[, C]) with (H, W) = {depth.shape}; got {colour.shape}",
                               tuple(colour.shape), f"({depth.shape[0]}, {depth.shape[1]}[, C])")
+    if motion is not None:
+        motion = _real(motion, "motion")
+        if motion.shape != (*depth.shape, 2):
+            raise InputShapeError(f"motion must be (H, W, 2) with (H, W) = {depth.shape} (pixels, previous minus "
+                                  f"current position, x right, y down); got {motion.shape}", tuple(motion.shape),
+                                  f"({depth.shape[0]}, {depth.shape[1]}, 2)")
     return _reproject(np.asarray(prev_colour), prev_depth, depth, _matrix(cur_view, "cur_view"),
-                      check_projection(cur_proj, "cur_proj"), _matrix(prev_view_proj, "prev_view_proj"), tolerance)
+                      check_projection(cur_proj, "cur_proj"), _matrix(prev_view_proj, "prev_view_proj"), tolerance,
+                      motion)
 
 
 def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarray, cur_view: np.ndarray,
-               cur_proj: np.ndarray, prev_vp: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+               cur_proj: np.ndarray, prev_vp: np.ndarray, tolerance: float, motion: np.ndarray | None = None,
+               ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`reproject` of arrays already checked (``input_planes`` checks its G-buffers once, not twice)."""
     h, w = depth.shape
     qx, qy, cw = _positions(depth, cur_view, cur_proj, prev_vp)
+    if motion is not None:  # the engine's motion vectors place geometry; the expected depth stays the camera's
+        geo = depth > 0.0
+        qx = np.where(geo, (np.arange(w, dtype=np.float64) + 0.5)[None, :] + motion[..., 0], qx)
+        qy = np.where(geo, (h - (np.arange(h, dtype=np.float64) + 0.5))[:, None] - motion[..., 1], qy)
     on = (cw > 0.0) & (qx >= 0.0) & (qx < w) & (qy >= 0.0) & (qy < h)
     qx = np.where(on, qx, 0.5)
     qy = np.where(on, qy, 0.5)

@@ -517,7 +517,7 @@ _VIEW = np.eye(4)
 _PROJ = np.array([[1.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]])
 _REPROJ_VALID: dict[str, Any] = {"prev_colour": np.full((6, 8, 3), 0.5), "prev_depth": np.full((6, 8), 2.0),
                                  "depth": np.full((6, 8), 2.0), "cur_view": _VIEW, "cur_proj": _PROJ,
-                                 "prev_view_proj": _PROJ, "tolerance": 0.02}
+                                 "prev_view_proj": _PROJ, "tolerance": 0.02, "motion": None}
 
 
 def _reproject_value(v: Any, base: Any) -> Any:
@@ -591,7 +591,8 @@ _PLANES_VALID: dict[str, Any] = {
     "roughness": np.full((6, 8), 0.5), "metallic": np.zeros((6, 8)), "specular": np.full((6, 8), 0.5),
     "shadow": np.ones((6, 8)), "emissive": np.zeros((6, 8)), "view": _VIEW, "projection": _PROJ,
     "prev_colour": np.full((6, 8, 3), 0.5), "prev_depth": np.full((6, 8), 2.0), "prev_view_projection": _PROJ,
-    "prev_projection": None, "tolerance": 0.02, "albedo_linear": False, "normal_space": "view", "depth_kind": "linear",
+    "prev_projection": None, "motion": np.zeros((6, 8, 2)), "tolerance": 0.02, "albedo_linear": False,
+    "normal_space": "view", "depth_kind": "linear",
 }
 _PLANE_CHANNELS = st.one_of(st.lists(st.sampled_from(list(sdk.CHANNELS)), min_size=1, max_size=6),
                             st.just(list(sdk.CHANNELS)), json_scalars, st.lists(json_scalars, max_size=3))

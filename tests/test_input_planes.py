@@ -418,3 +418,65 @@ def test_textures_read_back_as_rgba_or_with_one_channel_kept() -> None:
         sdk.input_planes(chans, **{**g, "view": g["view"].ravel()})
     with pytest.raises(sdk.InputShapeError, match=r"albedo: expected shape \(20, 30, 3\)"):
         sdk.input_planes(chans, **{**g, "albedo": np.dstack([g["albedo"]] * 2)})  # 6 channels: not a texture's
+
+
+# -- the engine's motion vectors: objects that move --------------------------------------------------------------
+
+def _moving_square(shift: int = 4) -> tuple[dict[str, Any], np.ndarray]:
+    """A red square 3 m away moving ``shift`` pixels right over a wall 5 m away, the camera still: the G-buffers
+    (current frame) and the engine's motion vectors (-shift on the square)."""
+    h, w = 24, 32
+    proj = np.array([[1.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]])
+
+    def frame(c0: int) -> tuple[np.ndarray, np.ndarray]:
+        depth = np.full((h, w), 5.0, np.float32)
+        depth[8:16, c0:c0 + 6] = 3.0
+        colour = np.full((h, w, 3), 0.2, np.float32)
+        colour[8:16, c0:c0 + 6] = (0.9, 0.1, 0.1)
+        return depth, colour
+
+    prev_depth, prev_colour = frame(10)
+    depth, colour = frame(10 + shift)
+    motion = np.zeros((h, w, 2), np.float32)
+    motion[8:16, 10 + shift:16 + shift, 0] = -shift
+    g = {"depth": depth, "view": np.eye(4), "projection": proj, "prev_colour": prev_colour, "prev_depth": prev_depth,
+         "prev_view_projection": proj, "colour": colour}
+    return g, motion
+
+
+def test_the_engines_motion_vectors_reproject_objects_that_move() -> None:
+    """The camera's move alone fetches a moving square from where it is now: the wall behind it (unseen) or its
+    own trailing half. With the engine's motion vectors every square pixel is fetched from the square, seen, and
+    the wall it uncovered is still unseen (disoccluded); motion.x/y are the engine's."""
+    g, motion = _moving_square()
+    colour = g.pop("colour")
+    chans = ["reprojected.r", "reprojected.g", "seen", "motion.x", "motion.y"]
+    static = sdk.input_planes(chans, **g)
+    moving = sdk.input_planes(chans, **g, motion=motion)
+    square, uncovered = (slice(8, 16), slice(14, 20)), (slice(8, 16), slice(10, 14))
+    assert static[2][square].mean() < 0.5  # the camera alone: most of the square unseen
+    assert (moving[2][square] == 1).all()
+    np.testing.assert_array_equal(moving[0][square], colour[square][..., 0])
+    np.testing.assert_array_equal(moving[1][square], colour[square][..., 1])
+    assert (moving[2][uncovered] == 0).all() and (static[2][uncovered] == 0).all()
+    np.testing.assert_array_equal(moving[3], motion[..., 0])
+    np.testing.assert_array_equal(moving[4], motion[..., 1])
+    rep, seen = sdk.reproject(g["prev_colour"], g["prev_depth"], g["depth"], g["view"], g["projection"],
+                              g["prev_view_projection"], motion=motion)
+    np.testing.assert_array_equal(seen, moving[2])
+    with pytest.raises(sdk.InputShapeError, match=r"motion must be \(H, W, 2\)"):
+        sdk.reproject(g["prev_colour"], g["prev_depth"], g["depth"], g["view"], g["projection"],
+                      g["prev_view_projection"], motion=motion[..., 0])
+
+
+@pytest.mark.gl
+def test_motion_vectors_of_the_camera_alone_give_the_same_planes(rendered: list[tuple[Any, dict[str, Any]]]) -> None:
+    """On the reference renderer's frames (a static scene) its own motion vectors, given as the engine's, give
+    the planes the camera's move gives, but for pixels within rounding of a texel's edge."""
+    channels = ["reprojected.r", "reprojected.y", "seen", "reprojected.y.blocks", "motion.x", "motion.y"]
+    for frame, g in rendered:
+        want = sdk.input_planes(channels, **g)
+        got = sdk.input_planes(channels, **g, motion=frame.motion)
+        assert (got[2] != want[2]).mean() < 0.001  # (measured: 0 and 0)
+        assert (np.abs(got[0] - want[0]) > 1e-6).mean() < 0.001  # (6.5e-5 and 0)
+        np.testing.assert_allclose(got[4:], want[4:], atol=5e-4)  # (float32 motion: 1e-4 at most)

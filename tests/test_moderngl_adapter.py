@@ -372,3 +372,28 @@ def test_leaving_a_with_ctx_block_unbinds_every_context(gl_context) -> None:
             make_current(ctx)
             ctx.release()
         make_current(gl_context)
+
+
+def test_the_engines_motion_vectors_move_objects_on_the_gpu_as_in_the_sdk(frames) -> None:
+    """GBufferTextures.motion: a square moving over a wall, the camera still, reprojected by the shader as by
+    sdk.input_planes with the same motion vectors (every square pixel seen and fetched from the square)."""
+    from .test_input_planes import _moving_square
+
+    ctx = frames[0]
+    g, motion = _moving_square()
+    colour = g.pop("colour")
+    h, w = g["depth"].shape
+    channels = ("reprojected.r", "reprojected.g", "seen", "reprojected.y")
+    want = sdk.input_planes(channels, **g, motion=motion)
+    zeros = np.zeros((h, w, 3), np.float32)
+    with Adapter(channels, w, h, ctx=ctx) as a:
+        frame = GBufferTextures(albedo=_tex(ctx, zeros), normal=_tex(ctx, zeros), depth=_tex(ctx, g["depth"]),
+                                view=g["view"], projection=g["projection"], prev_colour=_tex(ctx, g["prev_colour"]),
+                                prev_depth=_tex(ctx, g["prev_depth"]), prev_view_projection=g["prev_view_projection"])
+        static = a.inputs(frame)
+        got = a.inputs(replace(frame, motion=_tex(ctx, motion)))
+        with pytest.raises(sdk.ParameterError, match="motion"):
+            a.inputs(replace(frame, motion=_tex(ctx, g["depth"])))  # one component: not motion vectors
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    assert (got[2][8:16, 14:20] == 1).all() and static[2][8:16, 14:20].mean() < 0.5
+    np.testing.assert_allclose(got[0][8:16, 14:20], colour[8:16, 14:20, 0], atol=1e-6)

@@ -122,6 +122,10 @@ class GBufferTextures:
             specular, in that order (default RGB); -1 where the G-buffer has none (specular then
             reads 0.5, the glTF dielectric default, the others 0). A glTF occlusion-roughness-metallic
             texture is ``(1, 2, -1)``.
+        motion: the engine's motion vectors (RG: each pixel's previous minus current position in
+            pixels, x right, y down, objects' own motion included), optional: where given, each
+            geometry pixel is reprojected from there (``sdk.reproject``'s ``motion``), else the
+            camera's move alone places it (a static scene).
     """
 
     albedo: Any
@@ -137,6 +141,7 @@ class GBufferTextures:
     prev_depth_component: int = 0
     material: Any = None
     material_components: tuple[int, int, int] = (0, 1, 2)
+    motion: Any = None
 
 
 class Adapter(_AdapterBase[GBufferTextures]):
@@ -260,6 +265,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         prev_depth_component: int = 0,
         material: Any = None,
         material_components: tuple[int, int, int] = (0, 1, 2),
+        motion: Any = None,
     ) -> None:
         """Render the input planes into the adapter's targets without reading them back (the
         reference renderer's path; the keyword arguments are the fields of :class:`GBufferTextures`)."""
@@ -268,10 +274,10 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if has_prev and (prev_depth is None or prev_view_projection is None):
             raise ParameterError("prev_colour needs prev_depth and prev_view_projection as well", "prev_colour")
         for name, tex in (("albedo", albedo), ("normal", normal), ("depth", depth), ("prev_colour", prev_colour),
-                          ("prev_depth", prev_depth), ("material", material)):
+                          ("prev_depth", prev_depth), ("material", material), ("motion", motion)):
             if tex is None and name in ("albedo", "normal", "depth"):
                 raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
-            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 1))
+            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1))
         view = _matrix(view, "view", invertible=True)
         projection = check_projection(_matrix(projection, "projection", invertible=True), "projection")
         if prev_view_projection is not None:
@@ -299,11 +305,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
             self._luma.run(albedo=albedo, normal=normal, depth=depth, view=view, projection=projection,
                            prev_colour=prev_colour, prev_depth=prev_depth, prev_view_projection=prev_view_projection,
                            prev_projection=prev_projection, depth_component=depth_component,
-                           prev_depth_component=prev_depth_component)
+                           prev_depth_component=prev_depth_component, motion=motion)
         textures = {"u_albedo": albedo, "u_normal": normal, "u_depth": depth,
                     "u_prev_colour": prev_colour if has_prev else albedo,
                     "u_prev_depth": prev_depth if has_prev else depth,
-                    "u_material": material if material is not None else albedo}
+                    "u_material": material if material is not None else albedo,
+                    "u_motion": motion if motion is not None else albedo}
         if self._luma is not None:
             textures["u_luma"] = self._luma._targets[0]
         for loc, (name, tex) in enumerate(textures.items()):
@@ -311,6 +318,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
             self._set(name, loc)
         self._set("u_has_prev", has_prev)
         self._set("u_has_material", material is not None)
+        self._set("u_has_motion", motion is not None)
         self._set("u_material_comp", comps)
         self._set("u_depth_comp", int(depth_component))
         self._set("u_prev_depth_comp", int(prev_depth_component))

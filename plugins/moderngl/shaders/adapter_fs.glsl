@@ -25,6 +25,8 @@ uniform bool u_has_material;
 uniform int u_depth_comp;
 uniform int u_prev_depth_comp;
 uniform bool u_has_prev;
+uniform sampler2D u_motion;         // the engine's motion vectors (rg: previous - current, pixels, y down)
+uniform bool u_has_motion;
 uniform vec2 u_size;
 uniform mat4 u_view;                // current world -> view
 uniform mat4 u_inv_view;            // current view -> world
@@ -90,6 +92,10 @@ vec4 reproject_prev(vec2 frag, float d) {
     vec4 pc = u_prev_vp * world;
     if (pc.w <= 0.0) return vec4(0.0);
     vec2 q = (pc.xy / pc.w * 0.5 + 0.5) * u_size;  // previous GL pixel coordinates
+    if (u_has_motion && d > 0.0) {                 // the engine's motion places geometry (objects move); the
+        vec2 m = texelFetch(u_motion, ivec2(frag), 0).xy;  // expected depth stays the camera's, pc.w
+        q = frag + vec2(m.x, -m.y);
+    }
     if (any(lessThan(q, vec2(0.0))) || any(greaterThanEqual(q, u_size))) return vec4(0.0);
     ivec2 pi = ivec2(floor(q));
     float pd = prev_depth_at(pi);
