@@ -197,10 +197,13 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
     pred = _load(args)
     m = pred.metadata
+    needed = sdk.gbuffers_needed(m.inputs)
+    # the engine's motion vectors, where objects move: read by the planes that reproject or are motion
+    optional = ["motion"] if "prev_colour" in needed or any(c.startswith("motion.") for c in m.inputs) else []
     if args.json:
         print(json.dumps({"path": str(pred.path), "provider": pred.provider, "metadata": m.to_dict(),
                           "graph_inputs": {name: list(planes) for name, planes in pred.graph_inputs},
-                          "gbuffers": list(sdk.gbuffers_needed(m.inputs))}, indent=2))
+                          "gbuffers": list(needed), "gbuffers_optional": optional}, indent=2))
         return 0
     t = m.transform
     params = ", ".join(f"{k}={v:g}" for k, v in t.to_dict().items() if k != "type")
@@ -217,7 +220,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
         ("hardware tiles", ", ".join(map(str, sdk.hardware_tiles(m.tile_size)))
          + " (sdk.load(..., tile_size=N): NVIDIA's VRS 16, AMD's and Intel's 8)"),
         ("inputs", ", ".join(m.inputs)),
-        ("G-buffers read", ", ".join(sdk.gbuffers_needed(m.inputs)) + " (sdk.input_planes; rtp predict)"),
+        ("G-buffers read", ", ".join(needed) + (", and motion where objects move" if optional else "")
+         + " (sdk.input_planes; rtp predict)"),
         ("graph inputs", "; ".join(f"{name} ({len(planes)} planes)" for name, planes in pred.graph_inputs)),
         ("network outputs", ", ".join(m.outputs)),
         ("predicted rates", ", ".join(pred.rates)),

@@ -27,10 +27,14 @@ def test_info_prints_the_metadata(tiny_model: Callable[..., Path], capsys: pytes
     assert re.search(r"hardware tiles +4, 8, 16, 32 \(sdk.load", out), out  # the VRS tiles it runs on
     # what an engine reads back for it (sdk.input_planes' arguments)
     assert re.search(r"G-buffers read +depth, albedo, normal, view, projection, prev_colour, prev_depth, "
-                     r"prev_view_projection \(", out), out
+                     r"prev_view_projection, and motion where objects move \(", out), out
     assert main(["info", str(path), "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
     assert got["metadata"]["provenance"]["samples"] == 40 and got["gbuffers"][0] == "depth"
+    assert got["gbuffers_optional"] == ["motion"]  # (it reprojects: the engine's motion vectors move objects)
+    static = tiny_model(base_metadata(inputs=["albedo.r", "normal.z", "depth", "roughness"]))
+    assert main(["info", str(static), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["gbuffers_optional"] == []
 
 
 def test_info_errors_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
