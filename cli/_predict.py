@@ -152,12 +152,26 @@ def frame_files(paths: list[str]) -> list[str]:
 _REUSE_PLANES = ("motion.x", "motion.y", "depth")
 
 
+def _warn_of_conventions(path: str, buffers: dict[str, Any], args: argparse.Namespace,
+                         warned: dict[str, list[Any]]) -> None:
+    """``sdk.check_gbuffers``' warnings for a frame, each kind once (``warned``: per kind, the frames that had it
+    and its first text; the numbers in a warning differ from frame to frame)."""
+    from rtp import sdk
+
+    for text in sdk.check_gbuffers(**buffers, normal_space=args.normal_space, depth_kind=args.depth_kind):
+        kind = warned.setdefault(re.sub(r"-?\d[\d.]*", "#", text), [0, f"{path}: {text}"])
+        kind[0] += 1
+        if kind[0] == 1:
+            log.warning(kind[1].replace("%", "%%"))  # (its own template: kinds are not collapsed together)
+
+
 def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshold: float,
-                   allowed: list[str] | None, reuse: Any = None,
+                   allowed: list[str] | None, reuse: Any = None, warned: dict[str, list[Any]] | None = None,
                    ) -> tuple[dict[str, Any], dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """One frame file's summary, arrays, predicted values and rate codes; with ``reuse`` (an
     ``sdk.PredictionReuse``) its values, the network run or its estimates carried from the frame before
-    along the frame's motion."""
+    along the frame's motion. What in the frame looks like a convention mistake is logged
+    (``sdk.check_gbuffers``), each kind once in ``warned``."""
     from rtp import sdk
 
     frame = _read_frame(path)
@@ -174,6 +188,7 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
             "frame")
     planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
                               normal_space=args.normal_space, depth_kind=args.depth_kind)
+    _warn_of_conventions(path, buffers, args, {} if warned is None else warned)
     x = planes[:len(inputs)]
     h, w = x.shape[1:]
     start = time.perf_counter()
@@ -261,6 +276,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
 
     from ._run import Bar
 
+    warned: dict[str, list[Any]] = {}
     reuse = None
     if args.every is not None:
         reuse = sdk.PredictionReuse(predictor, args.every, carry="features" if predictor.splits else "estimates")
@@ -282,7 +298,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     quiet_bar = argparse.Namespace(**{**vars(args), "no_progress": args.no_progress or not (args.json or args.quiet)})
     with Bar(quiet_bar, len(files), "predict", "frame") as bar:
         for i, path in enumerate(files):
-            row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed, reuse)
+            row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed, reuse, warned)
             if first_size is None:
                 first_size = row["size"]
                 if args.out:  # the overlays kept for the GIF, refused now rather than by the OOM killer later
@@ -310,6 +326,9 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
                 print(f"{shown[i]:<{width}} {100.0 * row['work_saved']:>6.1f}% {changed:>8} {row['predict_ms']:>6.1f} ms"
                       + network)
             bar.update_to(i + 1)
+    for n, first in warned.values():
+        if n > 1:
+            log.warning(f"... and on {n - 1} more frame{'s' if n > 2 else ''} of the sequence: {first}".replace("%", "%%"))
     changes = [r["changed"] for r in rows if r["changed"] is not None]
     summary: dict[str, Any] = {
         "frames": rows, "model": model, "metric": predictor.metadata.metric, "size": first_size,

@@ -48,7 +48,7 @@ from ._errors import (
 from ._metadata import FEATURES_NAME, METADATA_KEY, SCHEMA_VERSION, TAIL_KEY, ModelMetadata
 from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
-from ._planes import DEPTH_KINDS, GBUFFERS, NORMAL_SPACES, gbuffers_needed, input_planes
+from ._planes import DEPTH_KINDS, GBUFFERS, NORMAL_SPACES, check_gbuffers, gbuffers_needed, input_planes
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import (
     ALL_RATES,
@@ -166,6 +166,7 @@ __all__ = [
     "Transform",
     "adapters",
     "block_variances",
+    "check_gbuffers",
     "check_projection",
     "check_threshold",
     "complete_rates",

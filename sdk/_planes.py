@@ -23,7 +23,7 @@ from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _positions, _reproject, 
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEPTH_KINDS", "GBUFFERS", "NORMAL_SPACES", "gbuffers_needed", "input_planes"]
+__all__ = ["DEPTH_KINDS", "GBUFFERS", "NORMAL_SPACES", "check_gbuffers", "gbuffers_needed", "input_planes"]
 
 #: What ``depth`` (and ``prev_depth``) hold: ``linear`` view depth in scene units (0 = background); the
 #: ``window`` depth of a hardware depth buffer in [0, 1] (0 at the near plane, 1 on background), OpenGL's and
@@ -355,3 +355,113 @@ def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray,
     mx = np.where(valid, qx - xs, 0.0).astype(np.float32)
     my = np.where(valid, -(qy - gl_y), 0.0).astype(np.float32)
     return mx, my
+
+
+#: How far off a rigid view's rotation may be from orthonormal, or a view-projection's w row from unit length.
+_RIGID_SLACK = 1e-3
+#: The share of surfaces whose normal may face away from the camera before it is named (normal maps and grazing
+#: angles turn a few away; the wrong space turns about half).
+_AWAY_SHARE = 0.25
+#: The share of surfaces that must reproject onto the previous frame before too few is named.
+_SEEN_SHARE = 0.5
+
+
+def check_gbuffers(
+    *,
+    depth: Any,
+    normal: Any = None,
+    view: Any = None,
+    projection: Any = None,
+    prev_colour: Any = None,
+    prev_depth: Any = None,
+    prev_view_projection: Any = None,
+    prev_projection: Any = None,
+    motion: Any = None,
+    tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+    normal_space: str = "view",
+    depth_kind: str = "linear",
+    **others: Any,
+) -> list[str]:
+    """What in an engine's G-buffers looks like a convention mistake: a list of warnings, each naming the
+    G-buffer, what was seen and the likely cause (empty: none seen). :func:`input_planes` takes a frame in
+    another convention without an error where its values are in range, and the planes are then wrong:
+    this looks at what they show, once, where an engine is wired up (``rtp predict`` runs it on every frame).
+
+    Checked where the G-buffers are given: ``view`` is a rigid transform for column vectors (no translation in
+    its last row, no scale, no reflection: a left-handed view); ``prev_view_projection``'s last row is a
+    camera's viewing axis (a unit vector: not transposed, no scale); ``normal`` (with ``view`` for
+    ``normal_space="world"``, ``projection`` for facing) is unit length and faces the camera on most surfaces
+    (the wrong space, or a left-handed view space, turns about half away); a ``linear`` depth is not a
+    depth buffer's [0, 1] with its clear value 1; and, with the previous frame, most surfaces reproject onto
+    it (else the matrices or depth are another frame's or another convention's). The other arguments are
+    :func:`input_planes`' (``others``: G-buffers not checked, e.g. ``albedo``); bad arrays raise its errors.
+    """
+    unknown = sorted(set(others) - set(GBUFFERS))
+    if unknown:
+        raise ParameterError(f"{unknown[0]}: not a G-buffer (expected {', '.join(GBUFFERS)})", unknown[0])
+    given = {"depth": depth, "normal": normal, "view": view, "projection": projection, "prev_colour": prev_colour,
+             "prev_depth": prev_depth, "prev_view_projection": prev_view_projection,
+             "prev_projection": prev_projection, "motion": motion}
+    options: dict[str, Any] = {"tolerance": tolerance, "normal_space": normal_space, "depth_kind": depth_kind}
+    warnings: list[str] = []
+    d = input_planes(["depth"], depth=depth, projection=projection, **options)[0]  # (the options checked too)
+    geo = d > 0.0
+    if view is not None:
+        v = _buffer("view", view, None)
+        rotation = v[:3, :3]
+        if np.abs(v[3] - (0.0, 0.0, 0.0, 1.0)).max() > _RIGID_SLACK:
+            warnings.append(f"view: its last row is {np.round(v[3], 4).tolist()}, not (0, 0, 0, 1): a matrix for row "
+                            f"vectors (transpose it)?")
+        elif np.abs(rotation @ rotation.T - np.eye(3)).max() > _RIGID_SLACK:
+            warnings.append("view: its rotation is not orthonormal (a scale?): rtp takes a rigid world-to-view "
+                            "transform")
+        elif np.linalg.det(rotation) < 0.0:
+            warnings.append('view: a reflection (determinant -1): a left-handed view space? (docs/runtime.md '
+                            '"Matrices from Direct3D, Vulkan and Metal": diag(1, 1, -1, 1) @ view)')
+    if prev_view_projection is not None:
+        w_row = _buffer("prev_view_projection", prev_view_projection, None)[3]
+        perspective = abs(float(np.linalg.norm(w_row[:3])) - 1.0) <= _RIGID_SLACK
+        orthographic = np.abs(w_row - (0.0, 0.0, 0.0, 1.0)).max() <= _RIGID_SLACK
+        if not (perspective or orthographic):
+            warnings.append(f"prev_view_projection: its last row {np.round(w_row, 4).tolist()} is not a camera's "
+                            f"viewing axis (a unit vector, as a projection's w row times a rigid view gives): a matrix "
+                            f"for row vectors (transpose it), or a scaled view?")
+    if normal is not None and geo.any() and (normal_space == "view" or view is not None):
+        n = np.stack(list(input_planes(["normal.x", "normal.y", "normal.z"], depth=depth, normal=normal, view=view,
+                                       projection=projection, **options)), -1)[geo]
+        length = np.linalg.norm(n, axis=-1)
+        drawn = length > 0.01
+        if drawn.any() and float(np.abs(length[drawn] - 1.0).mean()) > 0.05:
+            encoded = " with no component below 0: an encoded texture (n * 2 - 1)?" if n.min() >= 0.0 else ""
+            warnings.append(f"normal: mean length {float(length[drawn].mean()):.3g}, not unit vectors{encoded}")
+        if projection is not None and drawn.any():
+            h, w = d.shape
+            inv = np.linalg.inv(check_projection(projection))
+            xs = ((np.arange(w) + 0.5) / w * 2.0 - 1.0)[None, :].repeat(h, 0)[geo]
+            ys = (1.0 - (np.arange(h) + 0.5) / h * 2.0)[:, None].repeat(w, 1)[geo]
+            q = [inv[i, 0] * xs + inv[i, 1] * ys - inv[i, 2] + inv[i, 3] for i in range(4)]
+            to_camera = -np.stack([q[0] / q[3], q[1] / q[3], q[2] / q[3]], -1)  # (from the point on the near plane)
+            away = float(((n * to_camera).sum(-1)[drawn] < 0.0).mean())
+            if away > _AWAY_SHARE:
+                hint = ("world-space normals given as view-space (normal_space='world')" if normal_space == "view"
+                        else "normals already in view space given as world-space (normal_space='view'), or the "
+                             "wrong view")
+                warnings.append(f"normal: {100 * away:.0f}% of the surfaces face away from the camera: {hint}, or a "
+                                f"left-handed view space (negate z)?")
+    if depth_kind == "linear" and geo.any():
+        raw = np.asarray(d, np.float64)
+        at_one, middle = float((raw == 1.0).mean()), float(np.median(raw[geo]))
+        if raw.max() <= 1.0 and (at_one > 0.02 or middle > 0.9):
+            warnings.append(f"depth: its values are in [0, 1], half the surfaces past {middle:.3g} and {100 * at_one:.0f}% "
+                            f"at exactly 1 (a depth buffer's clear value): a depth buffer (depth_kind='window', or "
+                            f"'reversed')? linear depth is in scene units")
+    needed = ("view", "projection", "prev_colour", "prev_depth", "prev_view_projection")
+    if all(given[b] is not None for b in needed) and geo.any():
+        seen = input_planes(["seen"], **{b: given[b] for b in (*needed, "depth", "prev_projection", "motion")},
+                            **options)[0]
+        share = float(seen[geo].mean())
+        if share < _SEEN_SHARE:
+            warnings.append(f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame and pass "
+                            f"its depth test: prev_depth and prev_view_projection the previous frame's, of the same "
+                            f"conventions and depth kind? (a camera cut or a fast turn does this too)")
+    return warnings

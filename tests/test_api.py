@@ -72,6 +72,7 @@ def test_sdk_all_is_pinned() -> None:
         "Transform",
         "adapters",
         "block_variances",
+        "check_gbuffers",
         "check_projection",
         "check_threshold",
         "complete_rates",

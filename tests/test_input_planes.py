@@ -480,3 +480,33 @@ def test_motion_vectors_of_the_camera_alone_give_the_same_planes(rendered: list[
         assert (got[2] != want[2]).mean() < 0.001  # (measured: 0 and 0)
         assert (np.abs(got[0] - want[0]) > 1e-6).mean() < 0.001  # (6.5e-5 and 0)
         np.testing.assert_allclose(got[4:], want[4:], atol=5e-4)  # (float32 motion: 1e-4 at most)
+
+
+# -- check_gbuffers: convention mistakes named ---------------------------------------------------------------------
+
+@pytest.mark.gl
+def test_convention_mistakes_are_named_and_a_right_frame_has_none(rendered: list[tuple[Any, dict[str, Any]]]) -> None:
+    """Each mistake an engine makes wiring its G-buffers up gives planes without an error; check_gbuffers names
+    it (and the frames as rendered have no warning)."""
+    (_, g), (_, other) = rendered
+    for _, frame in rendered:
+        assert sdk.check_gbuffers(**frame) == []
+    view, proj = g["view"], g["projection"]
+    window, prev_window = (_hardware_depth(g[k], proj, "window") for k in ("depth", "prev_depth"))
+    mistakes = {
+        "face away from the camera: world-space normals given as view-space": {"normal": g["normal"] @ view[:3, :3]},
+        "not unit vectors with no component below 0: an encoded texture": {"normal": g["normal"] * 0.5 + 0.5},
+        "view: its last row is": {"view": view.T},
+        "view: a reflection (determinant -1): a left-handed view space": {"view": np.diag([1.0, 1, -1, 1]) @ view},
+        "prev_view_projection: its last row": {"prev_view_projection": g["prev_view_projection"].T},
+        "a depth buffer (depth_kind='window'": {"depth": window},
+        "seen: only": {k: other[k] for k in ("prev_colour", "prev_depth", "prev_view_projection")},  # another frame's
+    }
+    for text, change in mistakes.items():
+        warnings = sdk.check_gbuffers(**{**g, **change})
+        assert any(text in w for w in warnings), (text, warnings)
+    # the right options for the engine's conventions: no warning
+    assert sdk.check_gbuffers(**{**g, "normal": g["normal"] @ view[:3, :3]}, normal_space="world") == []
+    assert sdk.check_gbuffers(**{**g, "depth": window, "prev_depth": prev_window}, depth_kind="window") == []
+    with pytest.raises(sdk.ParameterError, match="normals: not a G-buffer"):
+        sdk.check_gbuffers(**g, normals=g["normal"])

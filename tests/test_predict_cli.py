@@ -288,3 +288,21 @@ def test_an_engines_rgba8_readbacks(frame: Path, tmp_path: Path, capsys: pytest.
     picture = iio.imread(tmp_path / "rgba8" / "overlay.png").astype(np.float64)
     drawn = iio.imread(tmp_path / "float" / "overlay.png").astype(np.float64)
     assert np.abs(picture - drawn).mean() < 2.0  # on the colour, not on black
+
+
+def test_a_convention_mistake_is_warned_of_once_a_sequence(sequence: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Normals dumped as an 8-bit texture's encoding (n * 0.5 + 0.5) give rates without an error: each frame is
+    checked (sdk.check_gbuffers) and the mistake is named once, with the count of the other frames."""
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for f in sorted(sequence.glob("*.npz")):
+        with np.load(f) as npz:
+            np.savez(bad / f.name, **{k: npz[k] * 0.5 + 0.5 if k == "normal" else npz[k] for k in npz.files})
+    assert main(["predict", str(sequence)]) == 0
+    assert "WARNING" not in capsys.readouterr().err  # the frames as written: nothing to warn of
+    assert main(["predict", str(bad)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("not unit vectors with no component below 0: an encoded texture (n * 2 - 1)?") == 2, err
+    assert "frame_0000.npz: normal: mean length" in err
+    assert "... and on 3 more frames of the sequence: " in err and err.count("frame_0000.npz: normal") == 2
