@@ -95,11 +95,9 @@ def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
     orthographic matrix (last row ``0, 0, 0, 1``) is taken as it is.
     """
     m = _matrix(projection, name)
-    scale = float(np.abs(m).max()) or 1.0
-    zero = 1e-9 * scale
 
-    def w_row(v: np.ndarray) -> bool:  # (0, 0, a, 0), a != 0: a perspective divide by the view z
-        return abs(v[0]) <= zero and abs(v[1]) <= zero and abs(v[3]) <= zero and abs(v[2]) > zero
+    def w_row(v: np.ndarray) -> bool:  # (0, 0, a, 0), a != 0: a perspective divide by the view z (zeros relative to a)
+        return bool(v[2] != 0.0 and max(abs(v[0]), abs(v[1]), abs(v[3])) <= 1e-9 * abs(v[2]))
 
     if not w_row(m[3]):
         return m
