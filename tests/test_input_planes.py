@@ -498,6 +498,7 @@ def test_convention_mistakes_are_named_and_a_right_frame_has_none(rendered: list
         "not unit vectors with no component below 0: an encoded texture": {"normal": g["normal"] * 0.5 + 0.5},
         "view: its last row is": {"view": view.T},
         "view: a reflection (determinant -1): a left-handed view space": {"view": np.diag([1.0, 1, -1, 1]) @ view},
+        "view: its rotation is not orthonormal (a scale?)": {"view": np.diag([0.01, 0.01, 0.01, 1]) @ view},  # cm
         "prev_view_projection: its last row": {"prev_view_projection": g["prev_view_projection"].T},
         "a depth buffer (depth_kind='window'": {"depth": window},
         "seen: only": {k: other[k] for k in ("prev_colour", "prev_depth", "prev_view_projection")},  # another frame's
