@@ -397,3 +397,21 @@ def test_the_engines_motion_vectors_move_objects_on_the_gpu_as_in_the_sdk(frames
     np.testing.assert_allclose(got, want, atol=1e-6)
     assert (got[2][8:16, 14:20] == 1).all() and static[2][8:16, 14:20].mean() < 0.5
     np.testing.assert_allclose(got[0][8:16, 14:20], colour[8:16, 14:20, 0], atol=1e-6)
+
+
+def test_check_names_convention_mistakes_in_the_engines_textures(frames) -> None:
+    """Adapter.check(frame): sdk.check_gbuffers on the textures read back with the adapter's options: nothing
+    on the renderer's own frame; normals in an 8-bit texture's encoding, named; world-space normals to an
+    adapter told so, nothing."""
+    ctx, prev, cur = frames
+    world_n = cur.normal @ np.linalg.inv(cur.camera.view())[:3, :3].T
+    with Adapter(("seen", "normal.z"), W, H, ctx=ctx) as a:
+        assert a.check(_engine_frame(ctx, prev, cur)) == []
+        warnings = a.check(_engine_frame(ctx, prev, cur, normal=_tex(ctx, cur.normal * 0.5 + 0.5)))
+        assert any("not unit vectors with no component below 0: an encoded texture" in w for w in warnings)
+        warnings = a.check(_engine_frame(ctx, prev, cur, view=np.diag([1.0, 1, -1, 1]) @ cur.camera.view()))
+        assert any("a left-handed view space" in w for w in warnings), warnings
+        with pytest.raises(sdk.adapters.AdapterFrameError, match="GBufferTextures"):
+            a.check({"normal": None})  # type: ignore[arg-type]
+    with Adapter(("seen", "normal.z"), W, H, ctx=ctx, normal_space="world") as b:
+        assert b.check(_engine_frame(ctx, prev, cur, normal=_tex(ctx, world_n))) == []

@@ -207,6 +207,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
                                  f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}", "size")
         self.ctx = ctx
         self.tolerance = float(tolerance)
+        self.normal_space, self.depth_kind = normal_space, depth_kind  # (what check() tells check_gbuffers)
         ids = [CHANNEL_IDS[c] for c in self.channels] + [-1] * (_MAX_CHANNELS - len(self.channels))
         wanted = set(self.channels)
         flags = {  # compiled in (adapter_fs.glsl): the shader keeps only the work these channels need
@@ -355,6 +356,38 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self.run(**{f.name: getattr(frame, f.name) for f in fields(frame)})
         planes = np.concatenate([read_texture(t) for t in self._targets], axis=2)
         return np.ascontiguousarray(planes[..., : len(self.channels)].transpose(2, 0, 1))
+
+    def check(self, frame: GBufferTextures) -> list[str]:
+        """``sdk.check_gbuffers`` on ``frame``'s textures read back, with this adapter's ``normal_space``,
+        ``depth_kind`` and ``tolerance``: what in the engine's G-buffers looks like a convention mistake
+        (world-space normals given as view-space, encoded normals, a row-vector or left-handed view, a
+        depth buffer given as linear depth, a previous frame that does not reproject), each a warning
+        naming the likely cause; empty where none is seen. It reads every texture back: run it once,
+        where the engine is wired up, not every frame."""
+        self._check_open()
+        if not isinstance(frame, GBufferTextures):
+            raise AdapterFrameError(f"expected a GBufferTextures frame, got {type(frame).__name__}")
+        for name in ("normal", "depth", "prev_colour", "prev_depth", "motion"):
+            tex = getattr(frame, name)
+            if tex is None and name in ("normal", "depth"):
+                raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
+            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1))
+        for c, tex, name in ((frame.depth_component, frame.depth, "depth_component"),
+                             (frame.prev_depth_component, frame.prev_depth, "prev_depth_component")):
+            _component(c, name, 0, 4 if tex is None else tex.components)
+        g: dict[str, Any] = {"depth": read_texture(frame.depth)[..., frame.depth_component],
+                             "normal": read_texture(frame.normal, 3), "view": frame.view,
+                             "projection": frame.projection}
+        if frame.prev_colour is not None and frame.prev_depth is not None:
+            g.update(prev_colour=read_texture(frame.prev_colour, 3),
+                     prev_depth=read_texture(frame.prev_depth)[..., frame.prev_depth_component],
+                     prev_view_projection=frame.prev_view_projection, prev_projection=frame.prev_projection)
+        if frame.motion is not None:
+            g["motion"] = read_texture(frame.motion, 2)
+        from rtp.sdk import check_gbuffers
+
+        return check_gbuffers(**g, tolerance=self.tolerance, normal_space=self.normal_space,
+                              depth_kind=self.depth_kind)
 
     def read(self, index: int) -> np.ndarray:
         """Plane ``index`` of the last :meth:`run`, ``(H, W)`` float32 (reads back one target)."""
