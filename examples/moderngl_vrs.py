@@ -97,7 +97,11 @@ def main(argv: list[str] | None = None) -> int:
     with Adapter.frame_source(level, width, height, ctx=ctx) as source, RateSelector(predictor, ctx) as selector:
         adapter = source.adapter(predictor.metadata.inputs)
         for i in range(1, args.frames + 1):
-            x = adapter.inputs(source.frame(camera(i), camera(i - 1)))      # 1-2: G-buffers -> planes
+            frame = source.frame(camera(i), camera(i - 1))
+            if i == 1:  # once, where an engine is wired up: its G-buffers in the conventions the adapter was told?
+                for warning in adapter.check(frame):
+                    log.warning("G-buffers: %s", warning)
+            x = adapter.inputs(frame)                                          # 1-2: G-buffers -> planes
             raw = predictor.predict_raw(x)                                     # 3: the network
             t0 = time.perf_counter()
             # 4: the decision, on the GPU, one texel a hardware tile of the frame
