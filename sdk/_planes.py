@@ -107,6 +107,17 @@ def gbuffers_needed(channels: Iterable[str]) -> tuple[str, ...]:
     return tuple(b for b in GBUFFERS if b in wanted)
 
 
+def _resolution_hint(name: str, shape: tuple[int, ...], size: tuple[int, int]) -> str:
+    """Where a G-buffer is the frame scaled by one factor (the depth's size times it): its likely cause."""
+    sy, sx = shape[0] / size[0], shape[1] / size[1]
+    if abs(sy / sx - 1.0) > 0.02 or abs(sy - 1.0) < 0.05:
+        return ""
+    if name == "prev_colour" and sy > 1.0:
+        return (f" (the frame at {sy:.3g}x the G-buffers' size: the displayed frame of an upscaler (DLSS, FSR, XeSS)? "
+                f"the planes are at the render resolution the G-buffers and the shading rates have: downsample it)")
+    return f" (at {sy:.3g}x depth's size: every G-buffer at the render resolution, the depth's)"
+
+
 def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float = np.inf) -> np.ndarray:
     """A G-buffer as a float array of its shape, finite and within its range; else a typed error naming it."""
     shape, meaning = GBUFFERS[name]
@@ -131,7 +142,8 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
     if a.shape != expected:
         hint = (" (a planar (3, H, W) image: np.moveaxis(image, 0, -1))" if a.shape == (3, *(size or ())) else
                 " (16 numbers in a row: np.reshape(m, (4, 4)) if they are row by row, its .T if column by column, "
-                "as OpenGL's glGetFloatv gives them)" if shape == "4x4" and a.shape == (16,) else "")
+                "as OpenGL's glGetFloatv gives them)" if shape == "4x4" and a.shape == (16,) else
+                _resolution_hint(name, a.shape, size) if size is not None and a.ndim >= 2 else "")
         raise InputShapeError(f"{name}: expected shape {expected} ({meaning}), got {a.shape}{hint}",
                               tuple(a.shape), str(expected))
     if a.dtype in (np.uint8, np.uint16) and _RANGES.get(name) == (0.0, 1.0):

@@ -511,3 +511,17 @@ def test_convention_mistakes_are_named_and_a_right_frame_has_none(rendered: list
     assert sdk.check_gbuffers(**{**g, "depth": window, "prev_depth": prev_window}, depth_kind="window") == []
     with pytest.raises(sdk.ParameterError, match="normals: not a G-buffer"):
         sdk.check_gbuffers(**g, normals=g["normal"])
+
+
+def test_a_gbuffer_at_another_resolution_is_named_with_its_likely_cause() -> None:
+    """An upscaler's displayed frame (1.5x the render resolution) as prev_colour: the error says to give it at the
+    G-buffers' resolution; a half-resolution albedo says every G-buffer is at the depth's."""
+    g = _frame(20, 30)
+    with pytest.raises(sdk.InputShapeError, match=r"prev_colour: .*1\.5x the G-buffers' size: the displayed frame "
+                                                  r"of an upscaler \(DLSS, FSR, XeSS\)\?"):
+        sdk.input_planes(["seen"], **{**g, "prev_colour": np.zeros((30, 45, 3))})
+    with pytest.raises(sdk.InputShapeError, match=r"albedo: .*at 0\.5x depth's size: every G-buffer at the render"):
+        sdk.input_planes(["albedo.r"], **{**g, "albedo": np.zeros((10, 15, 3))})
+    with pytest.raises(sdk.InputShapeError) as err:  # another shape, not a scale: no guess
+        sdk.input_planes(["albedo.r"], **{**g, "albedo": np.zeros((20, 40, 3))})
+    assert str(err.value).endswith("got (20, 40, 3)")
