@@ -153,16 +153,18 @@ _REUSE_PLANES = ("motion.x", "motion.y", "depth")
 
 
 def _warn_of_conventions(path: str, buffers: dict[str, Any], args: argparse.Namespace,
-                         warned: dict[str, list[Any]]) -> None:
-    """``sdk.check_gbuffers``' warnings for a frame, each kind once (``warned``: per kind, the frames that had it
-    and its first text; the numbers in a warning differ from frame to frame)."""
+                         warned: dict[str, list[Any]]) -> list[str]:
+    """``sdk.check_gbuffers``' warnings for a frame, logged each kind once (``warned``: per kind, the frames that
+    had it and its first text; the numbers in a warning differ from frame to frame); all of them returned."""
     from rtp import sdk
 
-    for text in sdk.check_gbuffers(**buffers, normal_space=args.normal_space, depth_kind=args.depth_kind):
+    texts = sdk.check_gbuffers(**buffers, normal_space=args.normal_space, depth_kind=args.depth_kind)
+    for text in texts:
         kind = warned.setdefault(re.sub(r"-?\d[\d.]*", "#", text), [0, f"{path}: {text}"])
         kind[0] += 1
         if kind[0] == 1:
             log.warning(kind[1].replace("%", "%%"))  # (its own template: kinds are not collapsed together)
+    return texts
 
 
 def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshold: float,
@@ -188,7 +190,7 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
             "frame")
     planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
                               normal_space=args.normal_space, depth_kind=args.depth_kind)
-    _warn_of_conventions(path, buffers, args, {} if warned is None else warned)
+    warnings = _warn_of_conventions(path, buffers, args, {} if warned is None else warned)
     x = planes[:len(inputs)]
     h, w = x.shape[1:]
     start = time.perf_counter()
@@ -204,7 +206,7 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     counts = {r: int((rates == c).sum()) for r, c in sdk.RATE_CODES.items()}
     summary: dict[str, Any] = {
         "frame": path, "size": [w, h], "tiles": list(rates.shape), "rates": {r: n for r, n in counts.items() if n},
-        "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "predict_ms": ms,
+        "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "predict_ms": ms, "warnings": warnings,
     }
     if reuse is not None:
         summary["network"] = float(reuse.work)
@@ -250,7 +252,7 @@ def run_predict(args: argparse.Namespace) -> int:
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
                "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
                "threshold": threshold, "rates": summary["rates"], "work_saved": summary["work_saved"],
-               "predict_ms": summary["predict_ms"]}
+               "predict_ms": summary["predict_ms"], "warnings": summary["warnings"]}
     if args.out:
         summary["wrote"] = _write_out(args.out, frame, values, rates, predictor.tile_size)
     if args.json:

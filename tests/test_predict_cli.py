@@ -306,3 +306,8 @@ def test_a_convention_mistake_is_warned_of_once_a_sequence(sequence: Path, tmp_p
     assert err.count("not unit vectors with no component below 0: an encoded texture (n * 2 - 1)?") == 2, err
     assert "frame_0000.npz: normal: mean length" in err
     assert "... and on 3 more frames of the sequence: " in err and err.count("frame_0000.npz: normal") == 2
+    assert main(["predict", str(bad), "--json"]) == 0  # each frame's own warnings, for a tool reading the JSON
+    got = json.loads(capsys.readouterr().out)
+    assert all(len(r["warnings"]) == 1 and "an encoded texture" in r["warnings"][0] for r in got["frames"])
+    assert main(["predict", str(sorted(sequence.glob("*.npz"))[0]), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == []
