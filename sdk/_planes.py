@@ -390,6 +390,7 @@ def check_gbuffers(
     prev_projection: Any = None,
     motion: Any = None,
     tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+    albedo_linear: bool = False,
     normal_space: str = "view",
     depth_kind: str = "linear",
     **others: Any,
@@ -404,10 +405,15 @@ def check_gbuffers(
     camera's viewing axis (a unit vector: not transposed, no scale); ``normal`` (with ``view`` for
     ``normal_space="world"``, ``projection`` for facing) is unit length and faces the camera on most surfaces
     (the wrong space, or a left-handed view space, turns about half away); a ``linear`` depth is not a
-    depth buffer's [0, 1] with its clear value 1; and, with the previous frame, most surfaces reproject onto
-    it (else the matrices or depth are another frame's or another convention's). The other arguments are
-    :func:`input_planes`' (``others``: G-buffers not checked, e.g. ``albedo``); bad arrays raise its errors.
+    depth buffer's [0, 1] (its clear value 1 on some pixels, or half the surfaces past 0.9); and, with the
+    previous frame, most surfaces reproject onto it (else the matrices or depth are another frame's or
+    another convention's). The other arguments are :func:`input_planes`' (the same keywords but the channels:
+    ``others`` are G-buffers not checked, e.g. ``albedo``; ``albedo_linear`` is not looked at); bad arrays
+    raise its errors.
     """
+    if not isinstance(albedo_linear, (bool, np.bool_)):
+        raise ParameterError(f"albedo_linear: expected True or False, got {reprlib.repr(albedo_linear)}",
+                             "albedo_linear")
     unknown = sorted(set(others) - set(GBUFFERS))
     if unknown:
         raise ParameterError(f"{unknown[0]}: not a G-buffer (expected {', '.join(GBUFFERS)})", unknown[0])

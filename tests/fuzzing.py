@@ -876,7 +876,7 @@ def targets() -> list[Target]:
         Target("reproject", reprojections, _reproject_call, _reproject_absurd),
         Target("input_planes", planes_cases, _planes_call, _planes_absurd),
         Target("check_gbuffers", planes_cases,
-               lambda v: sdk.check_gbuffers(**{k: x for k, x in _planes_kw(v).items() if k != "albedo_linear"}),
+               lambda v: sdk.check_gbuffers(**_planes_kw(v)),  # (input_planes' keywords, all of them)
                lambda _v, out: not (isinstance(out, list) and all(isinstance(w, str) and w for w in out))),
         Target("check_projection", projections, lambda v: sdk.check_projection(_projection_value(v)),
                _projection_absurd),

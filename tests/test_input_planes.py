@@ -491,6 +491,7 @@ def test_convention_mistakes_are_named_and_a_right_frame_has_none(rendered: list
     (_, g), (_, other) = rendered
     for _, frame in rendered:
         assert sdk.check_gbuffers(**frame) == []
+        assert sdk.check_gbuffers(**frame, albedo_linear=False, tolerance=0.02) == []  # input_planes' keywords
     view, proj = g["view"], g["projection"]
     window, prev_window = (_hardware_depth(g[k], proj, "window") for k in ("depth", "prev_depth"))
     mistakes = {
