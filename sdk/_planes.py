@@ -109,6 +109,8 @@ def gbuffers_needed(channels: Iterable[str]) -> tuple[str, ...]:
 
 def _resolution_hint(name: str, shape: tuple[int, ...], size: tuple[int, int]) -> str:
     """Where a G-buffer is the frame scaled by one factor (the depth's size times it): its likely cause."""
+    if min(*shape[:2], *size) <= 0:
+        return ""
     sy, sx = shape[0] / size[0], shape[1] / size[1]
     if abs(sy / sx - 1.0) > 0.02 or abs(sy - 1.0) < 0.05:
         return ""
