@@ -526,3 +526,6 @@ def test_a_gbuffer_at_another_resolution_is_named_with_its_likely_cause() -> Non
     with pytest.raises(sdk.InputShapeError) as err:  # another shape, not a scale: no guess
         sdk.input_planes(["albedo.r"], **{**g, "albedo": np.zeros((20, 40, 3))})
     assert str(err.value).endswith("got (20, 40, 3)")
+    for empty in (np.zeros((0, 0, 3)), np.zeros((0, 30, 3))):  # (no scale to guess: a ZeroDivisionError before)
+        with pytest.raises(sdk.InputShapeError, match=r"albedo: expected shape \(20, 30, 3\)"):
+            sdk.input_planes(["albedo.r"], **{**g, "albedo": empty})
