@@ -19,7 +19,7 @@ import numpy as np
 from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
 from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
-from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _positions, _reproject, _tolerance, check_projection
+from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _inverse, _positions, _reproject, _tolerance, check_projection
 
 log = logging.getLogger(__name__)
 
@@ -382,46 +382,38 @@ _SEEN_SHARE = 0.5
 
 def check_gbuffers(
     *,
-    depth: Any,
-    normal: Any = None,
-    view: Any = None,
-    projection: Any = None,
-    prev_colour: Any = None,
-    prev_depth: Any = None,
-    prev_view_projection: Any = None,
-    prev_projection: Any = None,
-    motion: Any = None,
     tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
     albedo_linear: bool = False,
     normal_space: str = "view",
     depth_kind: str = "linear",
-    **others: Any,
+    **gbuffers: Any,
 ) -> list[str]:
     """What in an engine's G-buffers looks like a convention mistake: a list of warnings, each naming the
     G-buffer, what was seen and the likely cause (empty: none seen). :func:`input_planes` takes a frame in
     another convention without an error where its values are in range, and the planes are then wrong:
     this looks at what they show, once, where an engine is wired up (``rtp predict`` runs it on every frame).
 
-    Checked where the G-buffers are given: ``view`` is a rigid transform for column vectors (no translation in
-    its last row, no scale, no reflection: a left-handed view); ``prev_view_projection``'s last row is a
-    camera's viewing axis (a unit vector: not transposed, no scale); ``normal`` (with ``view`` for
-    ``normal_space="world"``, ``projection`` for facing) is unit length and faces the camera on most surfaces
-    (the wrong space, or a left-handed view space, turns about half away); a ``linear`` depth is not a
-    depth buffer's [0, 1] (its clear value 1 on some pixels, or half the surfaces past 0.9); and, with the
-    previous frame, most surfaces reproject onto it (else the matrices or depth are another frame's or
-    another convention's). The other arguments are :func:`input_planes`' (the same keywords but the channels:
-    ``others`` are G-buffers not checked, e.g. ``albedo``; ``albedo_linear`` is not looked at); bad arrays
-    raise its errors.
+    ``gbuffers`` are :func:`input_planes`' G-buffer keywords (:data:`GBUFFERS`: ``depth`` always), the options
+    its own; the same call but the channels. Checked where the G-buffers are given: ``view`` is a rigid
+    transform for column vectors (no translation in its last row, no scale, no reflection: a left-handed
+    view); ``prev_view_projection``'s last row is a camera's viewing axis (a unit vector: not transposed, no
+    scale); ``normal`` (with ``view`` for ``normal_space="world"``, ``projection`` for facing) is unit length
+    and faces the camera on most surfaces (the wrong space, or a left-handed view space, turns about half
+    away); a ``linear`` depth is not a depth buffer's [0, 1] (its clear value 1 on some pixels, or half the
+    surfaces past 0.9); and, with the previous frame, most surfaces reproject onto it (else the matrices or
+    depth are another frame's or another convention's). The other G-buffers (``albedo``, the material) and
+    ``albedo_linear`` are not looked at; bad arrays raise :func:`input_planes`' errors.
     """
     if not isinstance(albedo_linear, (bool, np.bool_)):
         raise ParameterError(f"albedo_linear: expected True or False, got {reprlib.repr(albedo_linear)}",
                              "albedo_linear")
-    unknown = sorted(set(others) - set(GBUFFERS))
+    unknown = sorted(set(gbuffers) - set(GBUFFERS))
     if unknown:
         raise ParameterError(f"{unknown[0]}: not a G-buffer (expected {', '.join(GBUFFERS)})", unknown[0])
-    given = {"depth": depth, "normal": normal, "view": view, "projection": projection, "prev_colour": prev_colour,
-             "prev_depth": prev_depth, "prev_view_projection": prev_view_projection,
-             "prev_projection": prev_projection, "motion": motion}
+    given: dict[str, Any] = {b: gbuffers.get(b) for b in GBUFFERS}
+    depth, normal, view, projection = given["depth"], given["normal"], given["view"], given["projection"]
+    if depth is None:
+        raise ParameterError(f"depth= is needed ({GBUFFERS['depth'][0]}, {GBUFFERS['depth'][1]})", "depth")
     options: dict[str, Any] = {"tolerance": tolerance, "normal_space": normal_space, "depth_kind": depth_kind}
     warnings: list[str] = []
     d = input_planes(["depth"], depth=depth, projection=projection, **options)[0]  # (the options checked too)
@@ -438,8 +430,8 @@ def check_gbuffers(
         elif np.linalg.det(rotation) < 0.0:
             warnings.append('view: a reflection (determinant -1): a left-handed view space? (docs/runtime.md '
                             '"Matrices from Direct3D, Vulkan and Metal": diag(1, 1, -1, 1) @ view)')
-    if prev_view_projection is not None:
-        w_row = _buffer("prev_view_projection", prev_view_projection, None)[3]
+    if given["prev_view_projection"] is not None:
+        w_row = _buffer("prev_view_projection", given["prev_view_projection"], None)[3]
         perspective = abs(float(np.linalg.norm(w_row[:3])) - 1.0) <= _RIGID_SLACK
         orthographic = np.abs(w_row - (0.0, 0.0, 0.0, 1.0)).max() <= _RIGID_SLACK
         if not (perspective or orthographic):
@@ -456,7 +448,7 @@ def check_gbuffers(
             warnings.append(f"normal: mean length {float(length[drawn].mean()):.3g}, not unit vectors{encoded}")
         if projection is not None and drawn.any():
             h, w = d.shape
-            inv = np.linalg.inv(check_projection(projection))
+            inv = _inverse(check_projection(projection), "projection")  # (a singular one: a typed error)
             xs = ((np.arange(w) + 0.5) / w * 2.0 - 1.0)[None, :].repeat(h, 0)[geo]
             ys = (1.0 - (np.arange(h) + 0.5) / h * 2.0)[:, None].repeat(w, 1)[geo]
             q = [inv[i, 0] * xs + inv[i, 1] * ys - inv[i, 2] + inv[i, 3] for i in range(4)]
