@@ -529,3 +529,14 @@ def test_a_gbuffer_at_another_resolution_is_named_with_its_likely_cause() -> Non
     for empty in (np.zeros((0, 0, 3)), np.zeros((0, 30, 3))):  # (no scale to guess: a ZeroDivisionError before)
         with pytest.raises(sdk.InputShapeError, match=r"albedo: expected shape \(20, 30, 3\)"):
             sdk.input_planes(["albedo.r"], **{**g, "albedo": empty})
+
+
+def test_check_gbuffers_needs_depth_and_names_what_is_no_gbuffer() -> None:
+    g = _frame()
+    with pytest.raises(sdk.ParameterError, match=r"depth= is needed \(\(H, W\), linear view depth"):
+        sdk.check_gbuffers(**{**g, "depth": None})
+    with pytest.raises(sdk.ParameterError, match="normals: not a G-buffer"):
+        sdk.check_gbuffers(**g, normals=g["normal"])
+    assert sdk.check_gbuffers(depth=g["depth"]) == []  # (depth alone: only what it shows is checked)
+    with pytest.raises(sdk.ParameterError, match="projection is singular"):  # (numpy's LinAlgError before)
+        sdk.check_gbuffers(depth=g["depth"], normal=g["normal"], projection=np.full((4, 4), 255, np.uint8))

@@ -16,11 +16,16 @@ from rtp.cli import main
 pytestmark = pytest.mark.gl
 
 
+def _example(tmp_path_factory: pytest.TempPathFactory, name: str, *options: str) -> Path:
+    """`rtp predict NAME --write-example` at 160x96 with ``options``: a frame file, or with --frames a folder."""
+    path = tmp_path_factory.mktemp("predict") / name
+    assert main(["predict", str(path), "--write-example", "--size", "160x96", *options]) == 0
+    return path
+
+
 @pytest.fixture(scope="module")
 def frame(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("predict") / "frame.npz"
-    assert main(["predict", str(path), "--write-example", "--size", "160x96", "--seed", "2"]) == 0
-    return path
+    return _example(tmp_path_factory, "frame.npz", "--seed", "2")
 
 
 def test_the_example_holds_every_gbuffer_in_the_layout(frame: Path) -> None:
@@ -122,9 +127,7 @@ def test_an_engines_conventions_by_flag(frame: Path, tmp_path: Path, capsys: pyt
 
 @pytest.fixture(scope="module")
 def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("sequence") / "frames"
-    assert main(["predict", str(folder), "--write-example", "--frames", "4", "--size", "160x96"]) == 0
-    return folder
+    return _example(tmp_path_factory, "frames", "--frames", "4")
 
 
 def test_a_written_sequence_is_an_engines_dump_of_consecutive_frames(sequence: Path) -> None:
