@@ -113,7 +113,8 @@ def _count(name: str, value: Any, least: int) -> int:
 
 
 def _metric_names(metrics: Any) -> tuple[str, ...]:
-    """``metrics`` as a tuple of names of :data:`rtp.sdk.METRICS` (one name alone is one metric)."""
+    """``metrics`` as a tuple of metric names rtp knows, its own (:data:`rtp.sdk.METRICS`) or plugins'
+    (one name alone is one metric)."""
     names = (metrics,) if isinstance(metrics, str) else metrics
     try:
         names = tuple(names)
@@ -121,7 +122,14 @@ def _metric_names(metrics: Any) -> tuple[str, ...]:
         raise ParameterError(f"metrics: expected metric names, got {metrics!r}", "metrics") from None
     bad = [m for m in names if not isinstance(m, str) or m not in METRICS]
     if bad:
-        raise ParameterError(f"metrics: expected names of {', '.join(METRICS)}, got {bad[0]!r}", "metrics")
+        from rtp import metrics as M  # (a plugin's name: its map's memory is its own, not counted)
+
+        for m in bad:
+            try:
+                M.metric_info(m)
+            except M.MetricParameterError:
+                raise ParameterError(f"metrics: expected names of {', '.join(M.known_metrics())}, got {m!r}",
+                                     "metrics") from None
     return names
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,7 @@ import numpy as np
 
 from rtp.sdk import (
     EXIT_USAGE,
+    METRIC_NAME_PATTERN,
     METRICS,
     PREDICTED_RATES,
     TARGET_METRICS,
@@ -76,6 +78,31 @@ def _stores_mse(metric: str) -> bool:
     return metric in METRICS and METRICS[metric].pooling == "mse"
 
 
+def _mean_pooled(metric: str, declared: Mapping[str, Any]) -> bool:
+    """Whether coarser tiles of ``metric`` are the pixel-weighted mean of its stored tiles (PSNR's MSE, a
+    plugin metric's mean) rather than their maximum: rtp's own metrics' pooling, a plugin metric's as its
+    targets' manifest records it (``declared``: the metric's parameters there), so that stored targets read
+    without the plugin installed."""
+    if metric in METRICS:
+        return METRICS[metric].pooling in ("mse", "mean")
+    if isinstance(declared.get("pooling"), str):
+        return declared["pooling"] == "mean"
+    from rtp import metrics as M
+
+    return M.metric_info(metric).pooling == "mean"
+
+
+def _check_name(metric: Any) -> str:
+    """``metric`` if it is a metric rtp knows (its own or a plugin's), else a TargetError listing them."""
+    from rtp import metrics as M
+
+    try:
+        M.metric_info(metric)
+    except M.MetricParameterError as err:
+        raise TargetError(str(err)) from None
+    return str(metric)
+
+
 class TargetError(RtpError):
     """Targets are missing for a sample/metric, or stored with another format or base tile."""
 
@@ -85,7 +112,8 @@ class TargetError(RtpError):
 def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int, *, mse: bool) -> np.ndarray:
     """Coarsen base-tile values ``(..., th, tw)`` of a frame of ``size = (H, W)`` to ``tile``.
 
-    Max-pooling for max-pooled maps; a pixel-weighted mean for per-tile MSE. Edge tiles that the
+    Max-pooling for max-pooled maps; with ``mse``, a pixel-weighted mean (PSNR's per-tile MSE, a mean-pooled
+    plugin metric's tiles). Edge tiles that the
     frame only partly covers are pooled over the pixels they hold.
     """
     for key, value in (("tile", tile), ("base", base)):
@@ -156,8 +184,7 @@ class TargetStore:
 
     def declare(self, metric: str, params: Mapping[str, Any]) -> None:
         """Record the parameters a metric's targets are computed with; refuse a silent change."""
-        if not isinstance(metric, str) or metric not in METRICS:
-            raise TargetError(f"unknown metric {metric!r}; metrics are {', '.join(METRICS)}")
+        _check_name(metric)
         if not isinstance(params, Mapping):
             raise TargetError(f"params of {metric}: expected a mapping of parameter names to values, got "
                               f"{type(params).__name__}")
@@ -179,8 +206,8 @@ class TargetStore:
             self._save_manifest()
 
     def path(self, sample_id: str, metric: str) -> Path:
-        if not isinstance(metric, str) or metric not in METRICS:  # ("../samples" wrote over the captured sample)
-            raise TargetError(f"unknown metric {metric!r}; metrics are {', '.join(METRICS)}")
+        if not (isinstance(metric, str) and metric in self.metrics and re.fullmatch(METRIC_NAME_PATTERN, metric)):
+            _check_name(metric)  # ("../samples" wrote over the captured sample; a plugin's name is an identifier)
         _check_id(sample_id)
         return self.root / metric / f"{sample_id}.npz"
 
@@ -223,9 +250,10 @@ class TargetStore:
             raise TargetError(f"{p}: expected float values of shape (6, tile rows, tile columns) of a frame of size "
                               f"(H, W) at base tile {self.base_tile}, got {values.dtype} {values.shape}, size {size}; "
                               "delete the file and run `rtp targets` again")
-        mse = _stores_mse(metric)
-        pooled = pool_targets(values, size, self.base_tile, tile, mse=mse)
-        return psnr_from_mse(pooled) if mse else pooled
+        declared = self.metrics.get(metric)
+        pooled = pool_targets(values, size, self.base_tile, tile,
+                              mse=_mean_pooled(metric, declared if isinstance(declared, Mapping) else {}))
+        return psnr_from_mse(pooled) if _stores_mse(metric) else pooled
 
 
 def sample_targets(sample: Any, metrics: tuple[str, ...], params: Mapping[str, Any], base_tile: int = BASE_TILE,
@@ -327,12 +355,16 @@ def compute_targets(
 
     from ._pool import worker_pool
 
-    unknown = [m for m in metrics if m not in METRICS]
-    if unknown:
-        raise TargetError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(METRICS)}")
+    for m in metrics:
+        _check_name(m)
     if flip_backend is not None and flip_backend not in M.FLIP_BACKENDS:
         raise TargetError(f"flip_backend must be one of {', '.join(M.FLIP_BACKENDS)} or None, got {flip_backend!r}")
     M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work
+    if ray is not None or (workers or 1) > 1:
+        try:
+            M.check_worker_metrics(metrics)  # (a metric the workers, new processes, would not know)
+        except M.MetricParameterError as err:
+            raise TargetError(str(err)) from None
     if device is not None:
         if ray is not None and device not in ("cpu", "auto"):
             raise ParameterError(f"device {device!r} with ray: Ray gives a task no GPU unless it asks for one, and "
@@ -351,7 +383,7 @@ def compute_targets(
                                  f"metrics asked for are {', '.join(metrics)}", "ppd")
     if weber_l is not None:
         M.check_weber_l(weber_l)
-        if not any(METRICS[m].weber for m in metrics):
+        if not any(M.metric_info(m).weber for m in metrics):
             raise ParameterError(f"weber_l: the environment luminance of {' and '.join(m for m in METRICS if METRICS[m].weber)}"
                                  f", which the metrics asked for ({', '.join(metrics)}) do not use", "weber_l")
     reader = DatasetReader(data_root)
@@ -368,10 +400,13 @@ def compute_targets(
             p: dict[str, Any] = {}
             if m in _PPD_METRICS:
                 p["ppd"] = params["ppd"]
-            if METRICS[m].weber:
+            if M.metric_info(m).weber:
                 p["weber_l"] = params["weber_l"]
             if m == "lpips":
                 p["net"] = "alex-v0.1"
+            own = M.metric_plugins().get(m)
+            if own is not None:  # a plugin's definition: targets of another are refused, not mixed
+                p.update({"plugin": dict(own.params), "pooling": own.pooling})
             store.declare(m, p)
         params["flip_backend"] = flip_backend
         params["device"] = device  # (like the backend, not a target parameter: not declared)

@@ -139,7 +139,7 @@ def run_demo(
         sign, vmin, vmax = -1.0, -(thr + 20.0), -(thr - 20.0)
     else:
         sign, vmin, vmax = 1.0, 0.0, 2.0 * thr
-    units = sdk.METRICS[meta.metric].units if meta.metric in sdk.METRICS else meta.metric
+    units = metrics.metric_info(meta.metric).units  # (checked with its dependencies before rendering)
     save("predicted_vs_true.png", heatmaps(
         sign * true, sign * predicted, tile, (h, w), seen=frame.seen, vmin=vmin, vmax=vmax, scale=2,
         label=f"{'-' if sign < 0 else ''}{meta.metric} ({units}), bright = worse", threshold=sign * thr,

@@ -157,6 +157,26 @@ def _choices_csv(allowed: Sequence[str]) -> Any:
     return parse
 
 
+def _metric_name(text: str) -> str:
+    """A metric rtp knows: its own (rtp.sdk.METRICS) or a plugin's (rtp.metrics.Metric, in the ``rtp.metrics``
+    entry-point group), looked up when the command runs: the plugins load only where a name is not rtp's own."""
+    from rtp import metrics
+
+    try:
+        metrics.metric_info(text)
+    except metrics.MetricParameterError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    return text
+
+
+def _metric_names(text: str) -> tuple[str, ...]:
+    """Comma-separated :func:`_metric_name` s."""
+    items = _csv(text)
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected comma-separated metric names, got {text!r}")
+    return tuple(_metric_name(i) for i in items)
+
+
 def _one_of_sets(allowed: Sequence[Sequence[str]]) -> Any:
     """A comma-separated list that must be exactly one of ``allowed`` (order included)."""
     sets = [tuple(s) for s in allowed]
@@ -289,22 +309,28 @@ def _cmd_weights_fetch(args: argparse.Namespace) -> int:
 
 
 def _cmd_weights_list(args: argparse.Namespace) -> int:
-    from rtp.metrics import METRIC_DEPENDENCIES, MetricDependencyError, check_dependencies
+    from rtp.metrics import METRIC_DEPENDENCIES, MetricDependencyError, check_dependencies, metric_plugins
 
     rows = []
-    for metric, needs in METRIC_DEPENDENCIES.items():
+    plugins = metric_plugins()  # a user's own metrics (the rtp.metrics entry points), after rtp's
+    for metric, needs in [*METRIC_DEPENDENCIES.items(), *((m, p.requires) for m, p in plugins.items())]:
         try:
             check_dependencies((metric,))
             state = "ready"
         except MetricDependencyError as exc:
             state = str(exc).splitlines()[-1].strip()
-        rows.append({"metric": metric, "needs": list(needs), "state": state})
+        row = {"metric": metric, "needs": list(needs), "state": state}
+        if metric in plugins:
+            row["plugin"] = getattr(plugins[metric].error_map, "__module__", None) or "?"
+        rows.append(row)
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
-    print(f"{'metric':<8} {'needs':<28} state")
+    width = max(8, *(len(r["metric"]) for r in rows))
+    print(f"{'metric':<{width}} {'needs':<28} state")
     for r in rows:
-        print(f"{r['metric']:<8} {', '.join(r['needs']) or '-':<28} {r['state']}")
+        origin = f" (plugin: {r['plugin']})" if "plugin" in r else ""
+        print(f"{r['metric']:<{width}} {', '.join(r['needs']) or '-':<28} {r['state']}{origin}")
     return 0
 
 
@@ -810,8 +836,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     tg = command("targets", "compute the per-tile metric targets of a dataset (cached, resumable)", _cmd_targets)
     tg.add_argument("data", help="dataset folder written by `rtp capture`")
-    tg.add_argument("--metrics", type=_choices_csv(tuple(METRICS)), default=",".join(TARGET_METRICS),
-                    help="comma-separated metric names")
+    tg.add_argument("--metrics", type=_metric_names, default=",".join(TARGET_METRICS),
+                    help=f"comma-separated metric names: {', '.join(METRICS)}, or a plugin's (docs/metrics.md "
+                    f"\"Your own metric\")")
     tg.add_argument("--ppd", default=None, help="FLIP pixels per degree: a number, or 'width' for the paper's "
                     f"width-based value (default: FLIP's own {DEFAULT_PPD:.2f})")
     tg.add_argument("--weber-l", type=float, default=None,
@@ -829,8 +856,8 @@ def build_parser() -> argparse.ArgumentParser:
                  "train/recipes/shipped.yaml); a flag given here overrides the recipe's value.")
     tr.add_argument("--data", required=True, help="dataset folder (with targets from `rtp targets`), or several, "
                     "comma-separated, read as one (for example the usual pairs and 60 Hz ones: data/train,data/train-frame)")
-    tr.add_argument("--metric", required=True, choices=tuple(METRICS), help="the metric whose targets the network "
-                    "learns (computed by `rtp targets`)")
+    tr.add_argument("--metric", required=True, type=_metric_name, help="the metric whose targets the network "
+                    f"learns (computed by `rtp targets`): {', '.join(METRICS)}, or a plugin's")
     tr.add_argument("--out", type=_out_file, required=True, help="checkpoint to write (resumed if it exists)")
     tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
                     help="training recipe: a YAML file, or 'shipped' (the shipped models' recipe)")
@@ -1025,9 +1052,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
     pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
-    pl.add_argument("--fail-metric", default="jnyang", choices=tuple(METRICS),
-                    help="a tile fails when its true error in this metric, computed on every frame for the six rates, "
-                    "is over --fail-threshold (PSNR: under; FLIP and LPIPS add about a second a 720p frame)")
+    pl.add_argument("--fail-metric", default="jnyang", type=_metric_name, metavar="METRIC",
+                    help=f"{', '.join(METRICS)} or a plugin's: a tile fails when its true error in this metric, "
+                    "computed on every frame for the six rates, is over --fail-threshold (PSNR: under; FLIP and LPIPS add "
+                    "about a second a 720p frame)")
     pl.add_argument("--fail-threshold", type=float, default=None, help="default: the metric's starting threshold "
                     "(JNYang 0.25)")
     pl.add_argument("--no-sweep", action="store_true", help="run each method at its default parameter only")
@@ -1086,7 +1114,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "frames along a camera path (60 Hz, walking) into the folder FRAME, frame_0000.npz ...")
 
     mt = command("metric", "a metric's per-pixel map and per-tile values for an image pair", _cmd_metric)
-    mt.add_argument("metric", choices=tuple(METRICS), help="the metric")
+    mt.add_argument("metric", type=_metric_name, help=f"the metric: {', '.join(METRICS)}, or a plugin's (docs/metrics.md "
+                    f"\"Your own metric\")")
     mt.add_argument("reference", type=_path_text, help="the reference image (full-rate shading), any format Pillow reads")
     mt.add_argument("test", type=_path_text, help="the image to compare, same size")
     mt.add_argument("--out", type=out_image, default=None,

@@ -67,7 +67,7 @@ def run_metric(args: argparse.Namespace) -> int:
     if ref.shape != test.shape:
         raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "
                                  f"{test.shape[1]}x{test.shape[0]}")
-    info = sdk.METRICS[args.metric]
+    info = metrics.metric_info(args.metric)
     tiles = metrics.tile_metric(args.metric, ref, test, args.tile)
     pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test)
     finite = tiles[np.isfinite(tiles)]

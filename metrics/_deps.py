@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from rtp.sdk import METRICS
-
-from ._errors import MetricDependencyError, MetricParameterError
+from ._errors import MetricDependencyError
 from ._flip import _flip_module
 from ._lpips import _torch, lpips_weights_path
+from ._plugins import plugin
 
 #: What each metric needs beyond numpy: checked by :func:`check_dependencies`.
 METRIC_DEPENDENCIES: dict[str, tuple[str, ...]] = {
@@ -24,11 +23,10 @@ METRIC_DEPENDENCIES: dict[str, tuple[str, ...]] = {
 def check_dependencies(metrics: Iterable[str]) -> None:
     """Raise :class:`MetricDependencyError` listing every missing piece the ``metrics`` need (each with
     the command that installs or fetches it), so that a long job fails in its first second rather
-    than after hours of work. Unknown metric names raise :class:`MetricParameterError`."""
+    than after hours of work. Unknown metric names raise :class:`MetricParameterError`; a plugin metric's
+``requires`` are checked too."""
     names = list(dict.fromkeys(metrics))
-    unknown = [m for m in names if m not in METRICS]
-    if unknown:
-        raise MetricParameterError(f"unknown metric {unknown[0]!r}; metrics are {', '.join(METRICS)}")
+    plugins = [p for p in (plugin(m) for m in names) if p is not None]  # (an unknown name: MetricParameterError)
     checks = {"flip-evaluator": _flip_module, "torch": _torch, "LPIPS weights": lpips_weights_path}
     problems: list[str] = []
     for piece in dict.fromkeys(p for m in names for p in METRIC_DEPENDENCIES.get(m, ())):
@@ -37,5 +35,10 @@ def check_dependencies(metrics: Iterable[str]) -> None:
         except MetricDependencyError as exc:
             users = ", ".join(m for m in names if piece in METRIC_DEPENDENCIES.get(m, ()))
             problems.append(f"{users}: {exc}")
+    for p in plugins:  # a plugin metric's own modules (Metric.requires)
+        try:
+            p.check_requires()
+        except MetricDependencyError as exc:
+            problems.append(str(exc))
     if problems:
         raise MetricDependencyError("missing before any work starts: " + "; ".join(problems))

@@ -28,6 +28,7 @@ from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, resolve_ppd
 from ._image import as_batch
 from ._lpips import _check_size, lpips_against, lpips_map
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, yang_map
+from ._plugins import plugin
 from ._pool import DEFAULT_WEBER_L, check_weber_l, pool_tiles, weber_denominator
 
 __all__ = ["FLIP_BACKENDS", "error_map", "tile_metric", "tile_targets"]
@@ -37,8 +38,7 @@ log = logging.getLogger("rtp.metrics")
 
 
 def _check_metric(metric: str) -> str:
-    if not isinstance(metric, str) or metric not in METRICS:
-        raise MetricParameterError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}")
+    plugin(metric)  # (an unknown name: MetricParameterError listing the known ones)
     return metric
 
 
@@ -51,12 +51,19 @@ def error_map(
     weber_l: float = DEFAULT_WEBER_L,
     lpips_paper_quirk: bool = False,
 ) -> Any:
-    """Per-pixel map of ``metric`` (``flip``, ``jnflip``, ``lpips``, ``yang``, ``jnyang``).
+    """Per-pixel map of ``metric`` (``flip``, ``jnflip``, ``lpips``, ``yang``, ``jnyang``, or a plugin
+    metric's, :class:`~rtp.metrics.Metric`, of numpy frames).
 
     PSNR has no per-pixel map (it is defined per tile): use :func:`tile_metric` or
     :func:`~rtp.metrics.psnr_tiles`. Shapes and containers as in the individual map functions.
     """
-    metric = _check_metric(metric)
+    own = plugin(metric)
+    if own is not None:
+        ref, tst = _plugin_frame(reference, "reference"), _plugin_frame(test, "test")
+        if ref.shape != tst.shape:
+            raise InputShapeError(f"test has shape {tst.shape}, expected the reference's {ref.shape}",
+                                  actual=tst.shape, expected=str(ref.shape))
+        return own.map(ref, tst)
     if metric == "flip":
         return flip_map(reference, test, ppd=ppd)
     if metric == "jnflip":
@@ -80,15 +87,28 @@ def tile_metric(
     weber_l: float = DEFAULT_WEBER_L,
     lpips_paper_quirk: bool = False,
 ) -> Any:
-    """Per-tile value of ``metric``: the map max-pooled over ``tile x tile`` tiles (PSNR: from the tile MSE).
+    """Per-tile value of ``metric``: the map max-pooled over ``tile x tile`` tiles (PSNR: from the tile MSE; a
+    plugin metric: pooled as it says, of numpy frames).
 
     Returns ``(ceil(H/tile), ceil(W/tile))`` (or with a leading N) float32.
     """
-    metric = _check_metric(metric)
+    own = plugin(metric)
+    if own is not None:
+        return pool_tiles(error_map(metric, reference, test), tile, own.pooling)
     if metric == "psnr":
         return psnr_tiles(reference, test, tile)
     m = error_map(metric, reference, test, ppd=ppd, weber_l=weber_l, lpips_paper_quirk=lpips_paper_quirk)
     return pool_tiles(m, tile, "max")
+
+
+def _plugin_frame(image: Any, name: str) -> np.ndarray:
+    """One numpy ``(H, W, 3)`` frame in [0, 1] for a plugin metric's map (which takes numpy), float32."""
+    batch = as_batch(image, name)
+    if batch.batched or batch.device is not None:
+        raise InputShapeError(f"{name}: a plugin metric's map takes one numpy (H, W, 3) frame, got "
+                              f"{type(image).__name__} {tuple(getattr(image, 'shape', ()))}",
+                              actual=tuple(getattr(image, "shape", ())), expected="(H, W, 3)")
+    return np.ascontiguousarray(batch.data[0], dtype=np.float32)
 
 
 #: FLIP implementations :func:`tile_targets` can use (``flip_backend``).
@@ -164,7 +184,7 @@ def tile_targets(
         reference: the 1x1-rate frame, numpy ``(H, W, 3)`` float in [0, 1] (display-encoded sRGB).
         images_by_rate: the same frame rendered at reduced rates, keyed by rate name
             (``"1x2"``, ``"2x1"``, ``"2x2"``, ``"2x4"``, ``"4x2"``, ``"4x4"``), each like ``reference``.
-        metrics: names from :data:`rtp.sdk.METRICS`.
+        metrics: names from :data:`rtp.sdk.METRICS`, or plugin metrics' (:class:`~rtp.metrics.Metric`).
         tile: tile side in pixels; edge tiles of frames that are not a multiple pool their real pixels.
         ppd: FLIP pixels per degree, a number or ``"width"`` (see :func:`~rtp.metrics.flip_map`).
         weber_l: environment luminance l of the JN metrics.
@@ -209,7 +229,8 @@ def tile_targets(
     absent = [r for r in PREDICTED_RATES if r not in images_by_rate]
     if absent and missing == "error":
         raise MetricParameterError(f"missing images for rate(s) {absent} (pass missing='nan' to leave them NaN)")
-    jn = any(METRICS[m].weber for m in names)
+    plugins = {m: p for m in names if (p := plugin(m)) is not None}
+    jn = any(m in METRICS and METRICS[m].weber for m in names)
     if jn:
         check_weber_l(weber_l)
     h, w = ref.shape_hw
@@ -265,6 +286,10 @@ def tile_targets(
             if "jnyang" in names:
                 out["jnyang"][i] = pool_tiles(err / denom, tile, "max")
             timings["yang" if "yang" in names else "jnyang"] += time.perf_counter() - t0
+        for name, own in plugins.items():
+            t0 = time.perf_counter()
+            out[name][i] = pool_tiles(own.map(gt, img), tile, own.pooling)
+            timings[name] += time.perf_counter() - t0
     if "lpips" in names and tests:
         t0 = time.perf_counter()
         maps = lpips_against(gt, list(tests.values()), paper_quirk=lpips_paper_quirk, weights=lpips_weights,

@@ -46,7 +46,7 @@ from ._errors import (
     exit_code,
 )
 from ._metadata import FEATURES_NAME, METADATA_KEY, SCHEMA_VERSION, TAIL_KEY, ModelMetadata
-from ._metrics import METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
+from ._metrics import METRIC_NAME_PATTERN, METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
 from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
 from ._planes import DEPTH_KINDS, GBUFFERS, NORMAL_SPACES, check_gbuffers, gbuffers_needed, input_planes
 from ._predictor import ShadingRatePredictor, load, shipped_models
@@ -131,6 +131,7 @@ __all__ = [
     "MAX_RESCALE",
     "METADATA_KEY",
     "METRICS",
+    "METRIC_NAME_PATTERN",
     "NORMAL_SPACES",
     "OUTPUT_SETS",
     "OVERLAY_COLOURS",

@@ -23,7 +23,7 @@ import numpy as np
 
 from ._channels import CHANNELS
 from ._errors import MetadataError, ParameterError
-from ._metrics import METRICS
+from ._metrics import METRIC_NAME_PATTERN, METRICS
 from ._rates import MAX_THRESHOLD, PREDICTED_RATES, check_rate_factors
 from ._tiles import TILE_SIZES
 from ._transforms import DEFAULT_EXTRAPOLATION_K, MAX_EXTRAPOLATION_K, OUTPUT_SETS, Transform, as_float64, extrapolate
@@ -41,7 +41,7 @@ SCHEMA_VERSION = 5
 TAIL_KEY = "rtp.tail"
 #: The graph output of a splitting model's trunk features (``ModelMetadata.tail``).
 FEATURES_NAME = "features"
-_METRIC_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+_METRIC_RE = re.compile(METRIC_NAME_PATTERN)
 _OUTPUT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]{0,127}")
 _FIELDS = (
     "schema_version",

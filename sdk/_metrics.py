@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike
 
 from ._color import as_numbers
 
-__all__ = ["METRICS", "TARGET_METRICS", "MetricInfo", "mse_from_psnr", "psnr_from_mse"]
+__all__ = ["METRICS", "METRIC_NAME_PATTERN", "TARGET_METRICS", "MetricInfo", "mse_from_psnr", "psnr_from_mse"]
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,9 @@ _ALL = (
 #: Every metric rtp knows, by name. A model's metadata may name another metric (a user's own), but
 #: must then state ``higher_is_better`` itself.
 METRICS: Mapping[str, MetricInfo] = MappingProxyType({m.name: m for m in _ALL})
+#: A metric's name, in model metadata and for a user's own metric (``rtp.metrics.Metric``): lower-case
+#: letters, digits and underscores, starting with a letter (a regular expression, matched whole).
+METRIC_NAME_PATTERN = r"[a-z][a-z0-9_]*"
 #: The metrics rtp computes targets for and ships models of (the paper's five), in that order.
 TARGET_METRICS: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang")
 

@@ -37,6 +37,7 @@ def test_sdk_all_is_pinned() -> None:
         "MAX_RESCALE",
         "METADATA_KEY",
         "METRICS",
+        "METRIC_NAME_PATTERN",
         "NORMAL_SPACES",
         "OUTPUT_SETS",
         "OVERLAY_COLOURS",

@@ -20,6 +20,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -113,6 +114,18 @@ test, i12, i21, i22, i24, i42, i44 = (np.clip(reference + 0.05 * rng.standard_no
                                       .astype(np.float32) for _ in range(7))
 """,
         'assert emap.shape == (40, 56) and tiles.shape == psnr.shape == (3, 4) and targets["jnflip"].shape == (6, 3, 4)',
+    ),
+    ("metrics.md", "def absdiff(reference, test):"): (
+        "",
+        """
+metrics.register_metric(MINE)
+rng = np.random.default_rng(0)
+reference = rng.random((40, 56, 3), dtype=np.float32)
+test = np.clip(reference + 0.1, 0, 1).astype(np.float32)
+tiles = metrics.tile_metric("absdiff", reference, test, 16)
+assert tiles.shape == (3, 4) and metrics.metric_info("absdiff").units == "abs. difference"
+assert np.allclose(tiles, metrics.pool_tiles(np.abs(reference - test).max(axis=-1), 16))
+""",
     ),
     ("quickstart.md", 'predictor = sdk.load("jnyang.onnx")'): (
         "",
@@ -298,15 +311,33 @@ def test_the_commands_in_the_docs_name_flags_and_choices_that_exist() -> None:
     """Every documented ``rtp`` command parses as far as its flags and choices go: a renamed or
     removed flag (``--scenes``, ``--val-split``) or a choice that no longer exists fails here. Whether
     its files exist is the reader's (``data/test`` is made by a command the page gives)."""
-    import contextlib
-    import io
-    import shlex
 
     from rtp.cli._export import build_export_parser
     from rtp.cli._main import build_parser
 
     commands = _commands()
     assert len(commands) > 200
+    # docs/metrics.md's commands name the example plugin's metric, installed as its page says
+    from rtp.metrics import _plugins
+
+    from .test_metric_plugins import example_module
+
+    registered = dict(_plugins._registered)
+    _plugins.register_metric(example_module().SSIM)
+    try:
+        broken, parsed = _parse_all(commands, build_parser, build_export_parser)
+    finally:
+        _plugins._registered.clear()
+        _plugins._registered.update(registered)
+    assert parsed > 200, parsed
+    assert not broken, "documented commands the parser refuses:\n" + "\n".join(broken)
+
+
+def _parse_all(commands: list[tuple[str, str]], build_parser: Any, build_export_parser: Any) -> tuple[list[str], int]:
+    import contextlib
+    import io
+    import shlex
+
     broken, parsed = [], 0
     for page, command in commands:
         argv = shlex.split(command)
@@ -319,13 +350,12 @@ def test_the_commands_in_the_docs_name_flags_and_choices_that_exist() -> None:
                 parser.parse_args(argv[1:])
         except SystemExit as exit_:
             words = err.getvalue().strip().splitlines()[-1:] or [""]
-            if exit_.code and any(k in words[0] for k in ("unrecognized arguments", "invalid choice",
+            if exit_.code and any(k in words[0] for k in ("unrecognized arguments", "invalid choice", "unknown metric",
                                                           "expected one argument", "not allowed with")):
                 broken.append(f"docs/{page}: {command}\n    {words[0]}")
                 continue
         parsed += 1
-    assert parsed > 200, parsed
-    assert not broken, "documented commands the parser refuses:\n" + "\n".join(broken)
+    return broken, parsed
 
 
 def _bench_commands() -> list[tuple[str, bool, list[str]]]:

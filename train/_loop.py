@@ -30,7 +30,7 @@ from torch import nn
 from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore, check_memory
 from rtp.evaluate import scores
-from rtp.metrics import device_name, resolve_device
+from rtp.metrics import MetricParameterError, device_name, known_metrics, metric_info, resolve_device
 from rtp.sdk.files import check_output, writer_lock
 
 from . import checkpoint as ckpt
@@ -583,8 +583,10 @@ def check_config(cfg: TrainConfig) -> None:
     recipe's ``width: 1`` fails when the recipe is read). What needs the data (a crop larger than the
     frames) is checked once it is loaded. Raises :class:`rtp.sdk.ParameterError` naming the field."""
     check_fields(cfg)  # every field of its type, before the checks of their ranges below
-    if cfg.metric not in sdk.METRICS:
-        raise sdk.ParameterError(f"unknown metric {cfg.metric!r}; expected one of {', '.join(sdk.METRICS)}")
+    try:
+        info = metric_info(cfg.metric)  # rtp's own or a plugin's (rtp.metrics.Metric)
+    except MetricParameterError as err:
+        raise sdk.ParameterError(str(err), "metric") from None
     for name, count in (("steps", cfg.steps), ("batch", cfg.batch), ("crop", cfg.crop), ("val_every", cfg.val_every),
                         ("save_every", cfg.save_every)):
         if isinstance(count, bool) or not isinstance(count, int) or count < 1:
@@ -608,7 +610,7 @@ def check_config(cfg: TrainConfig) -> None:
             ("safety_quantile", cfg.safety_quantile,
              cfg.safety_quantile is None or 0.0 <= cfg.safety_quantile < 1.0, "None or a share in [0, 1)"),
             ("default_threshold", cfg.default_threshold,
-             cfg.default_threshold is None or sdk.METRICS[cfg.metric].higher_is_better or cfg.default_threshold >= 0,
+             cfg.default_threshold is None or info.higher_is_better or cfg.default_threshold >= 0,
              "a finite threshold in metric units, >= 0 for an error metric")):
         if value is not None and not (math.isfinite(value) and ok):
             raise sdk.ParameterError(f"{key}: expected {expected}, got {value}", key)
@@ -704,9 +706,9 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
         raise sdk.ParameterError(f"distill: expected a weight in (0, 1], got {cfg.distill}", "distill")
-    bad = [m for m in cfg.aux_metrics if m not in sdk.METRICS or m == cfg.metric]
+    bad = [m for m in cfg.aux_metrics if m not in known_metrics() or m == cfg.metric]
     if bad or len(set(cfg.aux_metrics)) != len(cfg.aux_metrics):
-        raise sdk.ParameterError(f"aux_metrics: expected distinct metrics among {', '.join(sdk.METRICS)} other than "
+        raise sdk.ParameterError(f"aux_metrics: expected distinct metrics among {', '.join(known_metrics())} other than "
                                  f"{cfg.metric}, got {', '.join(cfg.aux_metrics)}", "aux_metrics")
     if cfg.aux_metrics and cfg.arch != "fast":
         raise sdk.ParameterError(f"aux_metrics: the fast network's option, got arch {cfg.arch!r}", "aux_metrics")
@@ -888,12 +890,12 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     transform = _make_transform(cfg, tr.y)
     aux_transforms = [_make_transform(cfg, [a[k] for a in tr.aux], f"{m} (aux_metrics)")
                       for k, m in enumerate(cfg.aux_metrics)]
-    threshold = cfg.default_threshold if cfg.default_threshold is not None else sdk.METRICS[cfg.metric].default_threshold
+    threshold = cfg.default_threshold if cfg.default_threshold is not None else metric_info(cfg.metric).default_threshold
     if cfg.focus:  # the band's centre: the default threshold in transformed space
         centre = float(tt.forward(torch.tensor([float(threshold)], dtype=torch.float64), transform)[0])
         loss_fn = _focused(cfg.loss, cfg.focus, centre, cfg.quantile)
     soft = _teacher_targets(cfg, reader, tr, transform) if cfg.teachers else None
-    higher = sdk.METRICS[cfg.metric].higher_is_better
+    higher = metric_info(cfg.metric).higher_is_better
     worse = 1.0 if transform.increasing != higher else -1.0
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -998,6 +1000,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     def metadata(safety: float, extra: dict[str, Any]) -> dict[str, Any]:
         return {
             "metric": cfg.metric,
+            "higher_is_better": metric_info(cfg.metric).higher_is_better,  # (a plugin's metric: the SDK knows it not)
             "transform": transform.to_dict(),
             "safety": safety,
             "tile_size": cfg.tile,
@@ -1005,7 +1008,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             "outputs": list(cfg.outputs),
             "default_threshold": cfg.default_threshold
             if cfg.default_threshold is not None
-            else sdk.METRICS[cfg.metric].default_threshold,
+            else metric_info(cfg.metric).default_threshold,
             "weber_l": weber if cfg.metric.startswith("jn") else None,
             "provenance": {
                 "data": str(cfg.data),

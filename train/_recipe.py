@@ -25,7 +25,8 @@ from typing import Any
 
 import yaml
 
-from rtp.sdk import METRICS, ParameterError
+from rtp.metrics import MetricParameterError, metric_info
+from rtp.sdk import ParameterError
 from rtp.sdk.files import yaml_problem
 
 __all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe", "packaged_recipes"]
@@ -141,8 +142,10 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
 
     Raises :class:`RecipeError` naming the key at fault for unknown keys and wrong types.
     """
-    if not isinstance(metric, str) or metric not in METRICS:
-        raise RecipeError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}", "metric")
+    try:
+        metric_info(metric)  # rtp's own or a plugin's
+    except MetricParameterError as err:
+        raise RecipeError(str(err), "metric") from None
     name, text = _recipe_text(source)
     try:
         data = yaml.safe_load(text)

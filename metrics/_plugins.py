@@ -1,0 +1,278 @@
+"""A user's own metrics: declared as entry points (or registered in-process), then computed, trained for
+and evaluated as rtp's own five are.
+
+A metric is a per-pixel error map of a reference frame and a reduced-rate one, pooled per tile by its
+maximum or its mean; lower is better. A package declares one as an entry point::
+
+    [project.entry-points."rtp.metrics"]
+    ssim = "rtp_ssim:SSIM"                  # an rtp.metrics.Metric named "ssim"
+
+and ``rtp targets --metrics ssim``, ``rtp train --metric ssim``, ``rtp-export``, ``rtp evaluate``,
+``rtp demo``, ``rtp play --fail-metric ssim`` and ``rtp metric ssim`` take it (docs/metrics.md "Your own
+metric"). Entry points reach every process a job starts (worker pools, Ray workers);
+:func:`register_metric` reaches this process only, for notebooks and tests (a job that would start
+workers refuses such a metric: :func:`check_worker_metrics`).
+
+Discovery is lazy (the first lookup of a name rtp does not know), a plugin that fails to load is
+logged and named when asked for, and the others stay usable (as ``rtp.sdk.adapters``).
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib.util
+import logging
+import math
+import re
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from types import MappingProxyType
+from typing import Any, Literal
+
+import numpy as np
+
+from rtp.sdk import METRIC_NAME_PATTERN, METRICS, MetricInfo
+
+from ._errors import MetricDependencyError, MetricError, MetricParameterError
+
+__all__ = ["METRIC_ENTRY_POINT_GROUP", "Metric", "check_worker_metrics", "known_metrics", "metric_info", "metric_plugins",
+           "register_metric"]
+
+log = logging.getLogger("rtp.metrics")
+
+#: The entry-point group a package declares its metrics in.
+METRIC_ENTRY_POINT_GROUP = "rtp.metrics"
+#: How a plugin's per-pixel map becomes a tile's value.
+POOLINGS = ("max", "mean")
+_NAME = re.compile(METRIC_NAME_PATTERN)
+_MAX_NAME = 64
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A metric of one's own: a per-pixel error map, pooled per tile.
+
+    Attributes:
+        name: the name every command and the model's metadata use: lower-case letters, digits and
+            underscores, starting with a letter (:data:`rtp.sdk.METRIC_NAME_PATTERN`), at most 64
+            characters, not one of rtp's own (:data:`rtp.sdk.METRICS`) and not starting with ``jn``
+            (the Weber-corrected metrics' prefix).
+        error_map: ``error_map(reference, test)``: two ``(H, W, 3)`` float32 frames, display-encoded
+            sRGB in [0, 1] (the full-rate frame and the same frame at a reduced rate), to an ``(H, W)``
+            map of finite errors >= 0, 0 where the frames are equal; lower is better (a similarity
+            such as SSIM is given as its dissimilarity, ``(1 - SSIM) / 2``). Numpy in, anything
+            ``np.asarray`` reads out.
+        default_threshold: the threshold (metric units, > 0) a model trained for it records as its
+            default: the tile's largest acceptable error.
+        pooling: ``"max"`` (the paper's pooling: a tile is as bad as its worst pixel) or ``"mean"``.
+        units: what a value is, for tables and plots.
+        description: one line.
+        params: what defines the metric's values beyond its name (a version, a window size): recorded
+            with a dataset's targets, so that targets computed by another definition are refused
+            rather than mixed. JSON values.
+        requires: importable module names the map needs (``"scipy"``): checked before a job starts.
+    """
+
+    name: str
+    error_map: Callable[[np.ndarray, np.ndarray], Any]
+    default_threshold: float
+    pooling: Literal["max", "mean"] = "max"
+    units: str = "error"
+    description: str = ""
+    params: Mapping[str, Any] = field(default_factory=dict)
+    requires: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _NAME.fullmatch(self.name) or len(self.name) > _MAX_NAME:
+            raise MetricParameterError(f"Metric name: expected lower-case letters, digits and underscores starting "
+                                       f"with a letter, at most {_MAX_NAME} characters, got {self.name!r}", "name")
+        if self.name in METRICS:
+            raise MetricParameterError(f"Metric name {self.name!r} is one of rtp's own metrics "
+                                       f"({', '.join(METRICS)}): choose another", "name")
+        if self.name.startswith("jn"):  # (model metadata requires a Weber luminance of every jn* metric)
+            raise MetricParameterError(f"Metric name {self.name!r}: names starting with 'jn' are rtp's Weber-corrected "
+                                       f"metrics' (JNFLIP, JNYang): choose another", "name")
+        if not callable(self.error_map):
+            raise MetricParameterError(f"Metric {self.name!r}: error_map must be a function (reference, test) -> "
+                                       f"(H, W) map, got {type(self.error_map).__name__}", "error_map")
+        t = self.default_threshold
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not math.isfinite(t) \
+                or t <= 0:
+            raise MetricParameterError(f"Metric {self.name!r}: default_threshold must be a finite number > 0 (the "
+                                       f"largest acceptable tile error), got {t!r}", "default_threshold")
+        if self.pooling not in POOLINGS:
+            raise MetricParameterError(f"Metric {self.name!r}: pooling must be one of {', '.join(POOLINGS)}, got "
+                                       f"{self.pooling!r}", "pooling")
+        for key, value in (("units", self.units), ("description", self.description)):
+            if not isinstance(value, str):
+                raise MetricParameterError(f"Metric {self.name!r}: {key} must be a string, got {value!r}", key)
+        if not isinstance(self.params, Mapping) or not all(isinstance(k, str) for k in self.params):
+            raise MetricParameterError(f"Metric {self.name!r}: params must be a mapping of names to JSON values, got "
+                                       f"{self.params!r}", "params")
+        import json
+
+        try:
+            json.dumps(dict(self.params), allow_nan=False)
+        except (TypeError, ValueError) as err:
+            raise MetricParameterError(f"Metric {self.name!r}: params must hold JSON values ({err})", "params") from err
+        if isinstance(self.requires, str) or not all(isinstance(m, str) and m for m in self.requires):
+            raise MetricParameterError(f"Metric {self.name!r}: requires must be a tuple of module names, got "
+                                       f"{self.requires!r}", "requires")
+        object.__setattr__(self, "requires", tuple(self.requires))
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+        object.__setattr__(self, "default_threshold", float(t))
+
+    @property
+    def info(self) -> MetricInfo:
+        """The metric's facts in the form rtp's own have (:class:`rtp.sdk.MetricInfo`)."""
+        return MetricInfo(self.name, False, self.units, (0.0, math.inf), self.pooling, False,
+                          self.description or f"{self.name} (a plugin metric), {self.pooling} over the tile",
+                          self.default_threshold)
+
+    def check_requires(self) -> None:
+        """A :class:`MetricDependencyError` naming each module of ``requires`` that cannot be imported."""
+        missing = [m for m in self.requires if importlib.util.find_spec(m.split(".")[0]) is None]
+        if missing:
+            raise MetricDependencyError(f"the metric {self.name!r} needs {', '.join(missing)}: pip install "
+                                        f"{' '.join(m.split('.')[0] for m in missing)}")
+
+    def map(self, reference: np.ndarray, test: np.ndarray) -> np.ndarray:
+        """``error_map(reference, test)`` of two float32 ``(H, W, 3)`` frames (given read-only), checked:
+        float32 ``(H, W)``, finite, >= 0; else a
+        :class:`MetricError` naming the metric and what its map gave (a bug in the plugin)."""
+        frames = []
+        for image in (reference, test):  # read-only views: a map that wrote into them would change the others'
+            view = image.view()
+            view.flags.writeable = False
+            frames.append(view)
+        try:
+            out = self.error_map(*frames)
+        except MetricError:
+            raise
+        except Exception as err:
+            raise MetricError(f"the metric {self.name!r}'s error_map failed on {reference.shape[1]}x"
+                              f"{reference.shape[0]} frames: {type(err).__name__}: {err}") from err
+        try:
+            a = np.asarray(out)
+        except (TypeError, ValueError) as err:
+            raise MetricError(f"the metric {self.name!r}'s error_map returned {type(out).__name__}, not an array "
+                              f"({err})") from err
+        h, w = reference.shape[:2]
+        if a.shape != (h, w) or a.dtype.kind not in "biuf":
+            raise MetricError(f"the metric {self.name!r}'s error_map returned {a.dtype} {a.shape}; expected an "
+                              f"(H, W) = ({h}, {w}) map of numbers")
+        a = a.astype(np.float32)
+        if not np.isfinite(a).all() or (a < 0).any():
+            raise MetricError(f"the metric {self.name!r}'s error_map returned values outside [0, inf) (NaN, "
+                              f"infinite or negative); an error map is finite and >= 0")
+        return a
+
+
+_lock = threading.RLock()
+_registered: dict[str, Metric] = {}
+_broken: dict[str, str] = {}
+_explicit: set[str] = set()  # the names register_metric gave (not an entry point's)
+_discovered: dict[str, Any] | None = None
+
+
+def register_metric(metric: Metric) -> None:
+    """Make ``metric`` known to this process under its name (not to the worker processes a job starts:
+    they find metrics through entry points); it takes precedence over an entry point of the same name.
+    Registering another metric under a registered name replaces it."""
+    if not isinstance(metric, Metric):
+        raise MetricParameterError(f"register_metric takes an rtp.metrics.Metric, got {type(metric).__name__}")
+    with _lock:
+        _registered[metric.name] = metric
+        _explicit.add(metric.name)
+
+
+def check_worker_metrics(names: Any) -> None:
+    """Refuse, before a job starts worker processes (``workers > 1``, Ray), a plugin metric of ``names``
+    that only :func:`register_metric` made known: the workers are new processes, which find metrics
+    through entry points. A :class:`MetricParameterError` naming it and the ways out."""
+    names = [names] if isinstance(names, str) else list(names)
+    with _lock:
+        alone = [m for m in names if m in _explicit and m not in _entry_points()]
+    if alone:
+        raise MetricParameterError(
+            f"the metric {alone[0]!r} is registered in this process only (rtp.metrics.register_metric), and worker "
+            f"processes do not see it: declare it in the {METRIC_ENTRY_POINT_GROUP!r} entry-point group of an "
+            f"installed package, or run the job in this process (one worker, no Ray)", "metrics")
+
+
+def _entry_points() -> dict[str, Any]:
+    global _discovered
+    with _lock:
+        if _discovered is None:
+            found: dict[str, Any] = {}
+            for ep in entry_points(group=METRIC_ENTRY_POINT_GROUP):
+                found.setdefault(ep.name, ep)  # editable installs can list an entry point twice
+            _discovered = found
+        return _discovered
+
+
+def _load(name: str) -> Metric | None:
+    """The plugin metric ``name``, registered or installed; None if there is none. A plugin that
+    fails to load raises :class:`MetricParameterError` naming it (and is logged once)."""
+    with _lock:
+        if name in _registered:
+            return _registered[name]
+    ep = _entry_points().get(name)
+    if ep is None:
+        return None
+    try:
+        obj = ep.load()
+    except Exception as err:  # a broken plugin must not take the host down
+        problem = f"failed to load ({type(err).__name__}: {err})"
+    else:
+        if isinstance(obj, Metric) and obj.name == name:
+            with _lock:
+                _registered.setdefault(name, obj)
+                return _registered[name]
+        problem = (f"is {type(obj).__name__}, not an rtp.metrics.Metric" if not isinstance(obj, Metric)
+                   else f"is the Metric {obj.name!r}: an entry point's name is its metric's")
+    if name not in _broken:
+        log.warning("metric plugin %r (%s) %s", name, ep.value, problem)
+    _broken[name] = problem
+    raise MetricParameterError(f"the metric {name!r} is installed but {problem}: the entry point {ep.value!r} in "
+                               f"{METRIC_ENTRY_POINT_GROUP!r} is its package's to fix or reinstall", "metric")
+
+
+def metric_plugins() -> Mapping[str, Metric]:
+    """Every plugin metric that loads, registered or installed, by name (those that fail are logged)."""
+    for name in list(_entry_points()):
+        try:
+            _load(name)
+        except MetricParameterError:
+            pass
+    with _lock:
+        return MappingProxyType(dict(sorted(_registered.items())))
+
+
+def known_metrics() -> tuple[str, ...]:
+    """rtp's own metrics (:data:`rtp.sdk.METRICS`), then the plugins' that load, sorted."""
+    return (*METRICS, *metric_plugins())
+
+
+def plugin(name: str) -> Metric | None:
+    """The plugin metric ``name``, or None for one of rtp's own; unknown names raise as :func:`metric_info`."""
+    if isinstance(name, str) and name in METRICS:
+        return None
+    found = _load(name) if isinstance(name, str) else None
+    if found is None:
+        names = known_metrics()
+        close = difflib.get_close_matches(name, names, n=1) if isinstance(name, str) else []
+        raise MetricParameterError(
+            f"unknown metric {name!r}{f' (did you mean {close[0]}?)' if close else ''}; metrics are "
+            f"{', '.join(names)} (a metric of your own: an rtp.metrics.Metric declared in the "
+            f"{METRIC_ENTRY_POINT_GROUP!r} entry-point group, docs/metrics.md \"Your own metric\")", "metric")
+    return found
+
+
+def metric_info(name: str) -> MetricInfo:
+    """The facts of ``name``: one of rtp's own (:data:`rtp.sdk.METRICS`) or a plugin's
+    (:attr:`Metric.info`). An unknown name raises :class:`MetricParameterError` listing the known ones."""
+    found = plugin(name)
+    return METRICS[name] if found is None else found.info
