@@ -301,6 +301,15 @@ def test_a_plugin_metric_through_every_job(tmp_path: Path) -> None:
     (report,) = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
     assert report["model"]["metric"] == "ssim" and report["model"]["higher_is_better"] is False
 
+    # the demo computes its true error with the plugin, and play judges every method by it
+    demo = rtp("demo", "--model", "ssim.onnx", "--size", "160x96", "--frames", "2", "--out", "demo").stdout
+    assert "ssim" in demo and (tmp_path / "demo" / "predicted_vs_true.png").is_file()
+    rtp("play", "procedural:0", "--methods", "ssim.onnx,oracle,full", "--path", "fast", "--frames", "3", "--size",
+        "160x96", "--fail-metric", "ssim", "--no-sweep", "--flip-every", "0", "--no-plots", "--no-animation",
+        "--out", "play")
+    played = json.loads((tmp_path / "play" / "play.json").read_text())
+    assert played["settings"]["fail_metric"] == "ssim" and played["settings"]["fail_threshold"] == 0.03
+
     from PIL import Image
 
     for name, img in (("a.png", ref), ("b.png", sample.final("4x4"))):
