@@ -20,6 +20,7 @@ logged and named when asked for, and the others stay usable (as ``rtp.sdk.adapte
 from __future__ import annotations
 
 import difflib
+import functools
 import importlib.util
 import logging
 import math
@@ -174,7 +175,6 @@ _lock = threading.RLock()
 _registered: dict[str, Metric] = {}
 _broken: dict[str, str] = {}
 _explicit: set[str] = set()  # the names register_metric gave (not an entry point's)
-_discovered: dict[str, Any] | None = None
 
 
 def register_metric(metric: Metric) -> None:
@@ -202,15 +202,10 @@ def check_worker_metrics(names: Any) -> None:
             f"installed package, or run the job in this process (one worker, no Ray)", "metrics")
 
 
+@functools.cache
 def _entry_points() -> dict[str, Any]:
-    global _discovered
-    with _lock:
-        if _discovered is None:
-            found: dict[str, Any] = {}
-            for ep in entry_points(group=METRIC_ENTRY_POINT_GROUP):
-                found.setdefault(ep.name, ep)  # editable installs can list an entry point twice
-            _discovered = found
-        return _discovered
+    """The group's entry points by name, read once (an editable install can list one twice: the first)."""
+    return {ep.name: ep for ep in reversed(list(entry_points(group=METRIC_ENTRY_POINT_GROUP)))}
 
 
 def _load(name: str) -> Metric | None:

@@ -54,8 +54,10 @@ def registry(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """The plugin registry as this test leaves it is not the next test's: empty, rediscovered, restored."""
     monkeypatch.setattr(_plugins, "_registered", {})
     monkeypatch.setattr(_plugins, "_broken", {})
-    monkeypatch.setattr(_plugins, "_discovered", None)
+    monkeypatch.setattr(_plugins, "_explicit", set())
+    _plugins._entry_points.cache_clear()
     yield
+    _plugins._entry_points.cache_clear()
 
 
 def absdiff(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
@@ -347,7 +349,7 @@ def test_a_metric_registered_in_this_process_is_refused_where_workers_would_comp
                          {"rtp_absdiff_metric": "import numpy as np\nfrom rtp.metrics import Metric\n"
                                                 "M = Metric('absdiff', lambda r, t: np.abs(r - t).mean(-1), 0.05)\n"})
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
-    monkeypatch.setattr(_plugins, "_discovered", None)
+    _plugins._entry_points.cache_clear()
     metrics.check_worker_metrics(["absdiff", "flip"])
 
 
