@@ -640,6 +640,62 @@ def _fetch_absurd(v: tuple[ArraySpec, ArraySpec], out: tuple[np.ndarray, np.ndar
                 or rows.max() >= shape[0] or cols.max() >= shape[1])
 
 
+# -- a user's own metric (rtp.metrics.Metric) ----------------------------------------------
+
+_PLUGIN_REF = np.random.default_rng(7).random((19, 27, 3), dtype=np.float32)
+_PLUGIN_IMAGES = {r: np.clip(_PLUGIN_REF + 0.03 * (i + 1), 0, 1).astype(np.float32)
+                  for i, r in enumerate(sdk.PREDICTED_RATES)}
+#: A plugin's declaration (name, default threshold, pooling, params, requires) and what its map returns:
+#: an array spec, or a value that is not an array.
+_PLUGIN_OUTPUTS = st.one_of(_near(st.just((19, 27))), _near(st.just((19, 27))), arrays, json_values)
+plugin_metrics = st.one_of(
+    st.tuples(  # a good declaration, its map's output anything
+        st.sampled_from(["mine", "ssim2", "x_1"]), st.floats(1e-3, 10), st.sampled_from(["max", "mean"]),
+        st.one_of(st.just({}), st.dictionaries(st.text(max_size=4), st.integers(), max_size=2)),
+        st.sampled_from([(), ("numpy",)]), _PLUGIN_OUTPUTS),
+    st.tuples(  # anything declared
+        st.one_of(st.sampled_from(["mine", "flip", "jnx", "Mine", "1a", "a-b", "a" * 65, ""]), st.text(max_size=8),
+                  json_scalars),
+        st.one_of(hostile_numbers, st.floats(1e-3, 10)),
+        st.one_of(st.sampled_from(["max", "mean", "mse", "min", ""]), json_scalars),
+        st.one_of(st.just({}), json_values),
+        st.one_of(st.just(()), st.sampled_from([("numpy",), ("rtp_no_such_module",), "numpy", ("",)]), json_values),
+        _PLUGIN_OUTPUTS),
+)
+
+
+def _plugin_call(v: tuple[Any, ...]) -> dict[str, np.ndarray]:
+    from rtp import metrics
+
+    name, threshold, pooling, params, requires, output = v
+    result = _array(output) if isinstance(output, tuple) and len(output) == 3 and output[0] in (
+        "float32", "float64", "float16", "int32", "int8", "uint8", "bool", "complex64", "list", "ragged", "object",
+        "str") else output
+    m = metrics.Metric(name, lambda r, t: result, threshold, pooling=pooling, params=params, requires=requires)
+    metrics.register_metric(m)
+    try:
+        metrics.check_dependencies([m.name])
+        return metrics.tile_targets(_PLUGIN_REF, _PLUGIN_IMAGES, (m.name,), 8)
+    finally:
+        from rtp.metrics import _plugins
+
+        _plugins._registered.pop(m.name, None)
+        _plugins._explicit.discard(m.name)
+
+
+def _plugin_absurd(v: tuple[Any, ...], out: dict[str, np.ndarray]) -> bool:
+    """Accepted: a name of the documented pattern that is not rtp's own nor jn*, a finite threshold > 0, a
+    known pooling, and targets of the frame's tiles, finite and >= 0."""
+    import re
+
+    name, threshold = v[0], _finite_number(v[1])
+    values = out.get(name) if isinstance(out, dict) else None
+    return bool(not isinstance(name, str) or not re.fullmatch(sdk.METRIC_NAME_PATTERN, name) or len(name) > 64
+                or name in sdk.METRICS or name.startswith("jn") or threshold is None or threshold <= 0
+                or v[2] not in ("max", "mean") or values is None or values.shape != (6, 3, 4)
+                or values.dtype != np.float32 or not np.isfinite(values).all() or (values < 0).any())
+
+
 # -- the dataset reader ---------------------------------------------------------------------
 
 def _dataset() -> Path:
@@ -883,6 +939,7 @@ def targets() -> list[Target]:
         Target("fetch_from_motion", st.tuples(_arrays(st.integers(0, 6), 3), _arrays(st.integers(0, 6), 3)),
                lambda v: sdk.fetch_from_motion(_array(v[0]), _array(v[1])), _fetch_absurd),
         Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),
+        Target("a user's metric: declaration and map output", plugin_metrics, _plugin_call, _plugin_absurd),
         Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset, _same_as_original),
         Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),
         Target("dataset reader: manifests", manifests, _manifest_call, _manifest_absurd),
