@@ -355,8 +355,8 @@ def test_tiles_fail_by_the_metric_the_run_names(metric: str, monkeypatch: pytest
     assert max(series[metric]["fail"]) > 0  # the test would see a wrong metric or direction
     rule = {"lpips": "its true lpips error is over 0.1", "psnr": "its true psnr is under 35"}[metric]
     assert f"A tile fails when {rule}; no FLIP of the displayed frames." in rep.to_markdown()
-    with pytest.raises(PlayError, match="unknown metric 'ssim'; metrics are flip, jnflip, psnr, lpips"):
-        play("procedural:0", "oracle", frames=3, size=(W, H), fail_metric="ssim")
+    with pytest.raises(PlayError, match="unknown metric 'no_such_metric'; metrics are flip, jnflip, psnr, lpips"):
+        play("procedural:0", "oracle", frames=3, size=(W, H), fail_metric="no_such_metric")
 
 
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:

@@ -808,7 +808,7 @@ def test_auxiliary_metrics_train_extra_outputs_and_save_only_the_metrics(tmp_pat
         train(TrainConfig(out=str(tmp_path / "a.pt"), steps=9, **base))
     # bad settings are refused before any work, naming what was expected
     for kw, match in [(dict(aux_metrics=("jnyang",)), "other than jnyang"),
-                      (dict(aux_metrics=("ssim",)), "expected distinct metrics"),
+                      (dict(aux_metrics=("no_such_metric",)), "expected distinct metrics"),
                       (dict(aux_metrics=("flip",), aux_weight=0.0), "aux_weight: expected a weight > 0"),
                       (dict(aux_metrics=("flip",), augment=True), "cannot be combined"),
                       (dict(aux_metrics=("psnr",)), r"no psnr targets \(aux_metrics\); run `rtp targets")]:
