@@ -31,7 +31,8 @@ class MetricDependencyError(RtpError, ImportError):
 
 
 class MetricError(RtpError):
-    """A metric backend failed on input that passed validation (e.g. ``flip_evaluator`` exited)."""
+    """A metric backend failed on input that passed validation (e.g. ``flip_evaluator`` exited), or a
+    metric of one's own (:class:`~rtp.metrics.Metric`) raised or returned a map that is not one."""
 
 
 class MetricParameterError(ParameterError):
