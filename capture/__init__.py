@@ -1,5 +1,5 @@
 """Dataset capture: scene sources, viewpoint sampling, the capture driver, the dataset format and
-the per-tile target store.
+the per-tile target store, and the import of an engine's own frames (:func:`import_frames`).
 
 Importing this package needs only numpy; rendering (:func:`capture`) needs ``rtp[capture]`` and
 computing targets (:func:`compute_targets`) ``rtp[metrics]``, both imported when called.
@@ -27,6 +27,7 @@ from ._dataset import (
     write_png,
 )
 from ._images import check_image_output, figure_image, image_values, read_image_values, save_image
+from ._import import ImportReport, import_frames
 from ._memory import check_frame_memory, check_memory, job_bytes
 from ._pool import tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
@@ -46,6 +47,7 @@ __all__ = [
     "DatasetError",
     "DatasetReader",
     "DatasetWriter",
+    "ImportReport",
     "PaperDatasetReader",
     "RayExecutorError",
     "RayWorkerError",
@@ -62,6 +64,7 @@ __all__ = [
     "check_image_output",
     "figure_image",
     "image_values",
+    "import_frames",
     "read_image_values",
     "job_bytes",
     "load_scene",

@@ -182,6 +182,8 @@ class Sample:
     def __init__(self, sample_id: str, loader: Any, meta: Mapping[str, Any]) -> None:
         self.id = sample_id
         self.meta: Mapping[str, Any] = meta
+        #: Buffers the dataset does not hold (an engine's frames imported without them: stored as zeros).
+        self.absent: frozenset[str] = frozenset()
         self._loader = loader
         self._cache: dict[str, np.ndarray] = {}
         self._hw: tuple[int, int] | None = None
@@ -219,6 +221,10 @@ class Sample:
         if not isinstance(name, str) or name not in _CHANNEL_SOURCE:
             raise DatasetError(f"unknown channel {name!r}; channels are {', '.join(CHANNELS)}")
         buf, i = _CHANNEL_SOURCE[name]
+        if buf in self.absent:
+            raise DatasetError(f"channel {name!r}: this dataset has no {buf} (its frames were imported without a {buf} "
+                               f"G-buffer, manifest settings 'absent'); a model reading it cannot train or be judged on "
+                               f"it: leave {name} out of the inputs, or import frames that hold it")
         b = self.buffer(buf)
         return b if b.ndim == 2 else b[..., i]
 
@@ -412,7 +418,20 @@ class DatasetReader:
         path = sample_path(self.root, sample_id)
         if not path.is_file():
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")
-        return _open_sample(sample_id, path, path)
+        sample = _open_sample(sample_id, path, path)
+        sample.absent = self.absent
+        return sample
+
+    @property
+    def absent(self) -> frozenset[str]:
+        """The buffers this dataset does not hold (``settings["absent"]`` of a dataset imported from an
+        engine's frames without them); reading a channel of one is a :class:`DatasetError`."""
+        settings = self.manifest.get("settings")
+        names = settings.get("absent", []) if isinstance(settings, dict) else []
+        if not isinstance(names, list) or not all(isinstance(n, str) and n in BUFFERS for n in names):
+            raise DatasetError(f"{self.root / 'manifest.json'}: settings 'absent' must list buffer names of "
+                               f"{', '.join(BUFFERS)}, got {names!r}")
+        return frozenset(names)
 
     def select(self, **meta: Any) -> list[str]:
         """Ids of samples whose meta has the given values, e.g. ``select(scene="oa_dm1")``."""

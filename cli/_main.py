@@ -685,6 +685,12 @@ def _cmd_metric(args: argparse.Namespace) -> int:
     return run_metric(args)
 
 
+def _cmd_import(args: argparse.Namespace) -> int:
+    from ._import import run_import
+
+    return run_import(args)
+
+
 def _cmd_predict(args: argparse.Namespace) -> int:
     from ._predict import run_predict
 
@@ -707,6 +713,7 @@ def build_parser() -> argparse.ArgumentParser:
         CHANNELS,
         DEFAULT_INPUTS,
         DEFAULT_OUTPUTS,
+        DEFAULT_REPROJECTION_TOLERANCE,
         DEFAULT_TILE_SIZE,
         DEPTH_KINDS,
         METRICS,
@@ -1070,6 +1077,39 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "
                     "frame, not its own displayed one")
     cache_dir(pl)
+
+    im = command("import", "a dataset from your engine's frames (G-buffers and the frame shaded at every rate, .npz "
+                 "files), to train and evaluate on (resumable: rerun to finish or grow it)", _cmd_import,
+                 epilog="a frame: the .npz `rtp predict` reads (its G-buffers, in the engine's conventions), with depth, "
+                 "albedo, normal, view, projection, prev_colour, prev_depth and prev_view_projection, plus final_1x1, "
+                 "final_1x2, ... final_4x4: the same frame shaded at every rate (VRS forced to that rate for the whole "
+                 "frame), display-encoded (H, W, 3). roughness, metallic, specular, shadow, emissive and motion may be "
+                 "left out, by every frame: a model reading them is then refused. docs/dataset.md \"A dataset from your "
+                 "engine's frames\"\n\nexamples:\n  rtp import frames --write-example --frames 8   frames of the "
+                 "reference renderer, to see the layout\n  rtp import dumps/level1 dumps/level2 --out data/mine   each "
+                 "folder's frames as the level of its name\n  rtp targets data/mine && rtp train --data data/mine "
+                 "--metric jnyang --val-scenes level2 --out mine.pt")
+    im.add_argument("frames", nargs="+", type=_path_text, metavar="frames", help="frame .npz files, or folders of them "
+                    "(taken in the order of their names)")
+    im.add_argument("--out", type=_out_folder, default=None, help="the dataset folder to write or grow")
+    im.add_argument("--scene", default=None, help="the level the frames show, which rtp train --val-scenes names "
+                    "(default: each folder's name; one --scene for every frame given)")
+    im.add_argument("--profile", default="engine", help="recorded as a capture's motion profile is (default: engine)")
+    im.add_argument("--albedo-linear", action="store_true", help="the albedo array holds linear values (default: "
+                    "display-encoded sRGB)")
+    im.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
+    im.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear view "
+                    "depth (0 on background), a depth buffer's window depth in [0, 1] (1 on background) or a "
+                    "reversed-Z buffer's (0 on background)")
+    im.add_argument("--tolerance", type=float, default=DEFAULT_REPROJECTION_TOLERANCE, help="the reprojection's "
+                    "relative depth tolerance (disocclusion test)")
+    im.add_argument("--write-example", action="store_true", help="write frames of the reference renderer into the "
+                    "folder given, every array in the layout read")
+    im.add_argument("--frames", dest="count", metavar="N", type=_positive, default=8, help="--write-example's frame count")
+    im.add_argument("--size", type=frame_size, default="640x360", help="--write-example's WIDTHxHEIGHT")
+    im.add_argument("--seed", type=_non_negative, default=0, help="--write-example's camera path")
+    im.add_argument("--example-scene", default="procedural:0", help="--write-example's scene (procedural:<seed>, a map "
+                    "name, or a .glb/.gltf/.obj file)")
 
     pr = command("predict", "a model's predictions and shading rates for frames of your engine's G-buffers "
                  "(.npz files)", _cmd_predict,

@@ -7,13 +7,11 @@ the layout."""
 from __future__ import annotations
 
 import argparse
-import difflib
 import json
 import logging
 import os
 import re
 import time
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -34,23 +32,7 @@ def _read_frame(path: str) -> dict[str, np.ndarray]:
     named in a warning, with the G-buffer they may have meant."""
     from rtp import sdk
 
-    p = Path(path)
-    if not p.is_file():
-        raise sdk.ParameterError(f"{path!r}: no such file (expected an .npz of G-buffers: `rtp predict "
-                                 f"--write-example {path}` writes one from the reference renderer)", "frame")
-    if not zipfile.is_zipfile(p):
-        raise sdk.ParameterError(f"{path!r}: not an .npz (numpy.savez's zip of arrays)", "frame")
-    try:
-        with np.load(p, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise sdk.ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({err})", "frame") from None
-    known = (*sdk.GBUFFERS, COLOUR_KEY)
-    for key in sorted(set(arrays) - set(known)):
-        close = difflib.get_close_matches(key, known, n=1)
-        log.warning("%s: array %r is not a G-buffer and is not read%s; G-buffers: %s", path, key,
-                    f" (did you mean {close[0]}?)" if close else "", ", ".join(known))
-    return {k: v for k, v in arrays.items() if k in known}
+    return sdk.files.read_frame(path, extra=(COLOUR_KEY,))
 
 
 def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int, int]) -> dict[str, np.ndarray]:
@@ -66,8 +48,9 @@ def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int,
 def _save_frame(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
     from rtp import sdk
 
-    payload: dict[str, Any] = {k: np.asarray(v, np.float64 if k in ("view", "projection", "prev_view_projection")
-                                             else np.float32) for k, v in arrays.items()}
+    payload: dict[str, Any] = {k: v if np.asarray(v).dtype == np.uint8 else  # (an 8-bit read-back stays one)
+                               np.asarray(v, np.float64 if k in ("view", "projection", "prev_view_projection")
+                                          else np.float32) for k, v in arrays.items()}
     with sdk.files.atomic_output(path) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **payload)
 
@@ -96,11 +79,13 @@ def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.n
 
 
 def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
-                   progress: Callable[[int], None] | None = None) -> list[str]:
-    """``count`` consecutive frames at 60 Hz along a ``slow`` camera path through the procedural scene, as
-    an engine would dump them (each frame's ``prev_colour`` the one before it as displayed, at full rate),
-    written to ``folder`` as ``frame_0000.npz`` ...; the names written (``progress`` is called with the count
-    written after each)."""
+                   progress: Callable[[int], None] | None = None, *, rates: bool = False,
+                   scene_name: str = "procedural:0") -> list[str]:
+    """``count`` consecutive frames at 60 Hz along a ``slow`` camera path through ``scene_name`` (the procedural
+    scene by default), as an engine would dump them (each frame's ``prev_colour`` the one before it as
+    displayed, at full rate), written to ``folder`` as ``frame_0000.npz`` ...; the names written
+    (``progress`` is called with the count written after each). ``rates``: each frame also holds
+    ``final_<rate>``, the frame shaded at every rate (what ``rtp import`` trains on)."""
     from rtp import sdk
     from rtp.capture import check_frame_memory, check_frame_size, load_scene
     from rtp.capture.paths import camera_path
@@ -109,7 +94,7 @@ def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
     w, h = check_frame_size(size)
     check_frame_memory("capture", (w, h))
     out = sdk.files.check_output(folder, folder=True, what="frame folder")
-    scene, blockers = load_scene("procedural:0", None, None, None)
+    scene, blockers = load_scene(scene_name, None, None, None)
     path = camera_path(scene, count + 1, "slow", seed, blockers=blockers)
     names = [f"frame_{i:04d}.npz" for i in range(count)]
     with Renderer(w, h) as r:
@@ -117,7 +102,11 @@ def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
         prev = r.render(path.cameras[0])
         for name, prev_cam, cam in zip(names, path.cameras, path.cameras[1:]):
             cur = r.render(cam, prev)
-            _save_frame(out / name, _frame_arrays(prev, cur, prev_cam, cam, (w, h)))
+            arrays = _frame_arrays(prev, cur, prev_cam, cam, (w, h))
+            if rates:  # as an engine reads its swap chain's 8-bit frames back
+                arrays.update({f"final_{rate}": np.round(cur.colour[rate] * 255).astype(np.uint8)
+                               for rate in sdk.ALL_RATES})
+            _save_frame(out / name, arrays)
             prev = cur
             if progress is not None:
                 progress(names.index(name) + 1)
@@ -134,18 +123,7 @@ def frame_files(paths: list[str]) -> list[str]:
     order of their names (``frame_9`` before ``frame_10``)."""
     from rtp import sdk
 
-    files: list[str] = []
-    for path in paths:
-        if Path(path).is_dir():
-            found = sorted(Path(path).glob("*.npz"), key=lambda f: [int(t) if t.isdigit() else t
-                                                                     for t in re.split(r"(\d+)", f.name)])
-            if not found:
-                raise sdk.ParameterError(f"{path!r}: a folder with no .npz frame in it (`rtp predict --write-example "
-                                         f"{path} --frames 8` writes a sequence of the reference renderer)", "frame")
-            files += [str(f) for f in found]
-        else:
-            files.append(path)
-    return files
+    return sdk.files.frame_files(paths)
 
 
 #: The planes prediction reuse reads besides a model's: where each pixel was (its motion) and the sky.

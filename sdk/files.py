@@ -14,15 +14,21 @@ from writing a folder a first one is writing.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import logging
 import os
+import re
 import tempfile
-from collections.abc import Callable, Iterator
+import zipfile
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from ._errors import ParameterError
 
-__all__ = ["LOCK_NAME", "atomic_output", "check_output", "writer_lock", "yaml_problem"]
+__all__ = ["LOCK_NAME", "atomic_output", "check_output", "frame_files", "read_frame", "writer_lock", "yaml_problem"]
 
 log = logging.getLogger("rtp.sdk.files")
 
@@ -158,3 +164,54 @@ def yaml_problem(err: BaseException) -> str:
     """A YAML parser's error (problem, context, the line quoted with a caret under it) as one line,
     for the one-line messages of rtp's errors."""
     return " ".join(line.strip() for line in str(err).splitlines() if line.strip() and set(line.strip()) != {"^"})
+
+
+def _natural(name: str) -> list[Any]:
+    """The sort key of a natural order: ``frame_9`` before ``frame_10``."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name)]
+
+
+def frame_files(paths: Iterable[str | os.PathLike[str]], *, example: str = "rtp predict FOLDER --write-example "
+                "--frames 8") -> list[str]:
+    """The frame files ``paths`` name: each an ``.npz``, or a folder whose ``*.npz`` are taken in the natural
+    order of their names (``frame_9`` before ``frame_10``). A folder without one is a :class:`ParameterError`
+    whose hint is ``example`` (a command that writes frames)."""
+    files: list[str] = []
+    for path in paths:
+        if Path(path).is_dir():
+            found = sorted(Path(path).glob("*.npz"), key=lambda f: _natural(f.name))
+            if not found:
+                raise ParameterError(f"{os.fspath(path)!r}: a folder with no .npz frame in it (`{example}` writes "
+                                     f"a sequence of the reference renderer)", "frame")
+            files += [str(f) for f in found]
+        else:
+            files.append(os.fspath(path))
+    return files
+
+
+def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
+               example: str = "rtp predict FRAME.npz --write-example") -> dict[str, Any]:
+    """The arrays of a frame file, each named as a G-buffer of :data:`rtp.sdk.GBUFFERS` or in ``extra``;
+    others are named in a logged warning, with the name they may have meant, and not returned. A path that
+    is no file or no ``.npz`` numpy reads is a :class:`ParameterError` (its hint: ``example``, a command that
+    writes one)."""
+    from ._planes import GBUFFERS
+
+    p = Path(path)
+    name = os.fspath(path)
+    if not p.is_file():
+        raise ParameterError(f"{name!r}: no such file (expected an .npz of G-buffers: `{example}` writes one from "
+                             f"the reference renderer)", "frame")
+    if not zipfile.is_zipfile(p):
+        raise ParameterError(f"{name!r}: not an .npz (numpy.savez's zip of arrays)", "frame")
+    try:
+        with np.load(p, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise ParameterError(f"{name!r}: not an .npz of arrays numpy can read ({err})", "frame") from None
+    known = (*GBUFFERS, *extra)
+    for key in sorted(set(arrays) - set(known)):
+        close = difflib.get_close_matches(key, known, n=1)
+        log.warning("%s: array %r is not a G-buffer and is not read%s; G-buffers: %s", name, key,
+                    f" (did you mean {close[0]}?)" if close else "", ", ".join(known))
+    return {k: v for k, v in arrays.items() if k in known}

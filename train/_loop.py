@@ -423,7 +423,8 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
             raise DatasetError(
                 f"{cfg.data} holds one scene ({scenes[0] if scenes else 'none'}); validation holds out whole scenes, "
                 f"so it needs two: capture another into it (rtp capture --scene procedural:1 --out {cfg.data} with "
-                "the same --size adds the built-in generator's, or --scene another of your files)")
+                "the same --size adds the built-in generator's, or --scene another of your files), or, of an engine's "
+                "frames, import another level's (rtp import FRAMES --scene LEVEL --out DATA)")
         val = [scenes[-1]]
     train_ids = [i for s in scenes if s not in val for i in by_scene[s]]
     if not train_ids:  # (was an IndexError once the split was loaded)

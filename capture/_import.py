@@ -1,0 +1,267 @@
+"""A dataset from an engine's frames: G-buffers and the frame shaded at every rate, dumped by the engine,
+turned into the samples ``rtp capture`` writes, so that ``rtp targets``, ``rtp train`` and ``rtp evaluate``
+learn and judge that engine's look rather than the reference renderer's.
+
+A frame file is an ``.npz`` of the arrays ``rtp predict`` reads (:data:`rtp.sdk.GBUFFERS`, in the
+engine's conventions), plus ``final_<rate>`` for each rate of :data:`rtp.sdk.ALL_RATES`: the same frame
+shaded at 1x1, 1x2, 2x1, 2x2, 2x4, 4x2 and 4x4 (the engine's VRS forced to one rate for the whole frame),
+display-encoded as shown. The input planes are made with ``sdk.input_planes``, the SDK's single
+definition of each (the reprojection and its disocclusion test included), so a model trained on them
+reads what an engine gives it at run time. docs/dataset.md "A dataset from your engine's frames".
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from collections import Counter
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rtp.sdk import (
+    ALL_RATES,
+    DEFAULT_REPROJECTION_TOLERANCE,
+    DEPTH_KINDS,
+    GBUFFERS,
+    NORMAL_SPACES,
+    ParameterError,
+    RtpError,
+    check_gbuffers,
+    input_planes,
+)
+from rtp.sdk.files import check_output, frame_files, read_frame, writer_lock
+
+from ._dataset import _ID_RE, BUFFERS, MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
+
+__all__ = ["FINAL_KEYS", "ImportReport", "REQUIRED_GBUFFERS", "import_frames"]
+
+log = logging.getLogger("rtp.capture")
+
+#: The frame file's arrays of the frame shaded at each rate.
+FINAL_KEYS = tuple(f"final_{r}" for r in ALL_RATES)
+#: The G-buffers every imported frame must hold: the paper's inputs (the previous frame reprojected, albedo,
+#: normals) and what the reprojection needs. The material ones, shadow and emissive may be left out.
+REQUIRED_GBUFFERS = ("depth", "albedo", "normal", "view", "projection", "prev_colour", "prev_depth",
+                     "prev_view_projection")
+#: The dataset buffers a frame may lack (stored as zeros and listed under the manifest's ``absent``: a model
+#: that reads one of their channels is refused by the reader, not trained on zeros).
+OPTIONAL_BUFFERS = ("roughness", "metallic", "specular", "shadow", "emissive")
+#: The command that writes example frames (the hints of the errors).
+EXAMPLE = "rtp import FRAMES --write-example --frames 8"
+#: The manifest's ``settings["source"]`` of an imported dataset.
+SOURCE = "engine frames"
+
+
+@dataclass
+class ImportReport:
+    written: int = 0
+    skipped: int = 0  # already in the dataset (an import resumes)
+    absent: tuple[str, ...] = ()
+    unseen: list[float] = field(default_factory=list)  # per new sample, the share of its geometry not seen
+    warnings: dict[str, int] = field(default_factory=dict)  # sdk.check_gbuffers' warnings, by kind: frames with it
+
+
+def _scene_name(scene: str | None, file: str) -> str:
+    name = scene if scene is not None else Path(file).resolve().parent.name
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", name):
+        raise ParameterError(f"scene: expected a name of letters, digits, '.', '_' and '-' (at most 64; the level the "
+                             f"frames are of, which --val-scenes names), got {name!r}"
+                             + ("" if scene is not None else " (the frames' folder name: give --scene)"), "scene")
+    return name
+
+
+def _sample_id(scene: str, path: str) -> str:
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", Path(path).stem)
+    sid = f"{scene}-{stem}"
+    if not _ID_RE.match(sid) or len(sid) > MAX_ID_LENGTH:
+        raise ParameterError(f"{path!r}: its name makes the sample id {sid[:80]!r}..., longer than {MAX_ID_LENGTH} "
+                             f"characters: rename the file", "frames")
+    return sid
+
+
+def _members(path: str) -> tuple[set[str], tuple[int, ...] | None]:
+    """The array names of a frame file and the shape of its ``final_1x1`` (read without the rest)."""
+    import zipfile
+
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            names = set(npz.files)
+            shape = tuple(npz["final_1x1"].shape) if "final_1x1" in names else None
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({err}; `{EXAMPLE}` writes frames)",
+                             "frames") from None
+    return names, shape
+
+
+def _final(path: str, key: str, a: Any, hw: tuple[int, int]) -> np.ndarray:
+    """A frame shaded at one rate as float32 ``(H, W, 3)`` in [0, 1]: float display values, or UNORM integers
+    (``uint8``, ``uint16``) read back; an RGBA texture's alpha is dropped."""
+    a = np.asarray(a)
+    if a.ndim != 3 or a.shape[:2] != hw or a.shape[2] not in (3, 4):
+        raise ParameterError(f"{path!r}: {key} has shape {a.shape}, expected ({hw[0]}, {hw[1]}, 3) (or RGBA, 4): the "
+                             f"frame shaded at {key[6:]}, display-encoded, of the depth's size", key)
+    a = a[..., :3]
+    if a.dtype == np.uint8 or a.dtype == np.uint16:
+        return (a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max)).astype(np.float32)
+    if a.dtype.kind != "f":
+        raise ParameterError(f"{path!r}: {key} is {a.dtype}: expected float display values in [0, 1], or uint8 / "
+                             f"uint16 UNORM values", key)
+    v = a.astype(np.float32)
+    if not np.isfinite(v).all():
+        raise ParameterError(f"{path!r}: {key} holds NaN or infinite values", key)
+    if v.size and (v.min() < -1e-3 or v.max() > 1 + 1e-3):
+        raise ParameterError(f"{path!r}: {key} has values in [{v.min():.4g}, {v.max():.4g}]: expected display-encoded "
+                             f"values in [0, 1], the frame as shown (tone-mapped, sRGB-encoded)", key)
+    return np.clip(v, 0.0, 1.0)
+
+
+#: Dataset buffer -> the input planes it stores, in its last axis' order.
+_STORED = {name: spec.channels for name, spec in BUFFERS.items() if spec.channels}
+
+
+def _buffers(path: str, arrays: dict[str, Any], present: Sequence[str], conventions: dict[str, Any],
+             ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """A frame's dataset buffers (absent ones zero) and its ``seen`` plane."""
+    gbuffers = {k: v for k, v in arrays.items() if k in GBUFFERS}
+    hw = tuple(np.shape(gbuffers["depth"])[:2])
+    channels = [c for name, chans in _STORED.items() if name in present for c in chans]
+    try:
+        planes = input_planes(channels, **gbuffers, **conventions)
+    except RtpError as err:  # (the SDK's typed input errors, named with the file they are about)
+        raise ParameterError(f"{path!r}: {err}", "frames") from err
+    by_name = dict(zip(channels, planes))
+    out: dict[str, np.ndarray] = {}
+    for name, chans in _STORED.items():
+        if name in present:
+            stack = [by_name[c] for c in chans]
+            out[name] = stack[0] if len(stack) == 1 else np.stack(stack, axis=-1)
+        else:
+            out[name] = np.zeros((*hw, len(chans)) if len(chans) > 1 else hw, np.float32)
+    for key in FINAL_KEYS:
+        out[key] = _final(path, key, arrays[key], hw)
+    return out, by_name["seen"]
+
+
+def import_frames(
+    frames: Iterable[str | os.PathLike[str]],
+    out: str | os.PathLike[str],
+    *,
+    scene: str | None = None,
+    profile: str = "engine",
+    albedo_linear: bool = False,
+    normal_space: str = "view",
+    depth_kind: str = "linear",
+    tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+    progress: Callable[[int, int], None] | None = None,
+) -> ImportReport:
+    """Add an engine's frames to the dataset folder ``out`` (created, or grown: an import resumes, frames
+    already there are skipped). Returns what it did.
+
+    ``frames``: frame files or folders of them (natural order). Each holds :data:`REQUIRED_GBUFFERS`, the
+    final images :data:`FINAL_KEYS`, and may hold ``roughness``, ``metallic``, ``specular``, ``shadow``,
+    ``emissive``, ``motion`` and ``prev_projection``; every frame the same ones, of one size. The
+    conventions are ``sdk.input_planes``' (``albedo_linear``, ``normal_space``, ``depth_kind``, the
+    reprojection's ``tolerance``). ``scene`` names the level the frames show (``rtp train --val-scenes``
+    holds levels out by it; default: each frame's folder name); ``profile`` is recorded as the capture's
+    motion profile is.
+
+    Everything is checked before the first sample is written: the files, the arrays each holds, their
+    size, and the dataset folder's settings (a folder imported with other conventions or G-buffers, or
+    captured by the reference renderer, is refused rather than mixed). Each sample is written atomically;
+    ``sdk.check_gbuffers``' convention warnings are logged once per kind and counted in the report.
+    """
+    files = frame_files(list(frames) if not isinstance(frames, (str, os.PathLike)) else [frames], example=EXAMPLE)
+    if not files:
+        raise ParameterError("frames: expected one or more frame files or folders of them", "frames")
+    if not isinstance(profile, str) or not re.fullmatch(r"[A-Za-z0-9_.-]{1,32}", profile):
+        raise ParameterError(f"profile: expected a short name of letters, digits, '.', '_' and '-', got {profile!r}",
+                             "profile")
+    if normal_space not in NORMAL_SPACES or depth_kind not in DEPTH_KINDS or not isinstance(albedo_linear, bool):
+        raise ParameterError(f"conventions: normal_space in {NORMAL_SPACES}, depth_kind in {DEPTH_KINDS} and "
+                             f"albedo_linear a bool, got {normal_space!r}, {depth_kind!r}, {albedo_linear!r}",
+                             "conventions")
+    names = [_scene_name(scene, f) for f in files]
+    ids = [_sample_id(n, f) for n, f in zip(names, files)]
+    twice = [i for i, n in Counter(ids).items() if n > 1]
+    if twice:
+        raise ParameterError(f"frames: two files make the sample id {twice[0]!r} (the same file name in two folders?): "
+                             f"import each folder with its own --scene", "frames")
+
+    # the arrays of every frame and their size, before anything is written
+    members, sizes = {}, {}
+    for f in files:
+        if not Path(f).is_file():
+            raise ParameterError(f"{f!r}: no such file (`{EXAMPLE}` writes frames of the reference renderer)", "frames")
+        members[f], shape = _members(f)
+        lacks = [k for k in (*REQUIRED_GBUFFERS, *FINAL_KEYS) if k not in members[f]]
+        if lacks:
+            raise ParameterError(f"{f!r} lacks {', '.join(lacks)}: a frame to train on holds "
+                                 f"{', '.join(REQUIRED_GBUFFERS)} and the frame shaded at every rate "
+                                 f"({', '.join(FINAL_KEYS)}); `{EXAMPLE}` writes such frames", "frames")
+        sizes[f] = shape[:2] if shape else None
+    if len(set(sizes.values())) > 1:
+        counts = Counter(sizes.values())
+        raise ParameterError(f"frames: of {len(counts)} sizes ({', '.join(f'{s[1]}x{s[0]}: {n}' for s, n in counts.items() if s)}"
+                             f"); a dataset holds frames of one size", "frames")
+    present = [b for b in BUFFERS if b not in OPTIONAL_BUFFERS or all(b in m for m in members.values())]
+    mixed = [b for b in OPTIONAL_BUFFERS if b not in present and any(b in m for m in members.values())]
+    if mixed:
+        have = sum(mixed[0] in m for m in members.values())
+        raise ParameterError(f"frames: {have} of {len(files)} hold {mixed[0]!r}: every frame of a dataset holds the same "
+                             f"G-buffers (a model reads a channel on every sample or none)", "frames")
+    absent = tuple(b for b in OPTIONAL_BUFFERS if b not in present)
+    h, w = next(iter(sizes.values())) or (0, 0)
+    conventions = {"albedo_linear": albedo_linear, "normal_space": normal_space, "depth_kind": depth_kind,
+                   "tolerance": tolerance}
+    settings = {"size": [int(w), int(h)], "source": SOURCE, "conventions": conventions, "absent": list(absent)}
+
+    root = check_output(out, folder=True, what="dataset folder")
+    if (root / "manifest.json").is_file():
+        before = DatasetReader(root).manifest.get("settings")
+        if not isinstance(before, dict) or before.get("source") != SOURCE:
+            raise DatasetError(f"{root}: a dataset the reference renderer captured; import an engine's frames into a "
+                               f"folder of their own (rtp train --data takes several, comma-separated)")
+    report = ImportReport(absent=absent)
+    root.mkdir(parents=True, exist_ok=True)
+    with writer_lock(root, "rtp import", lambda holder: DatasetError(
+            f"{root} is being written by another job ({holder}): wait for it to end")):
+        writer = DatasetWriter(root, settings)  # (other settings there: refused, naming them)
+        writer.remove_stale()
+        todo = [(f, i, n) for f, i, n in zip(files, ids, names) if not writer.has(i)]
+        report.skipped = len(files) - len(todo)
+        if progress:
+            progress(report.skipped, len(files))
+        warned: dict[str, int] = {}
+        for f, sid, name in todo:
+            arrays = read_frame(f, extra=(*FINAL_KEYS, "colour"), example=EXAMPLE)  # (colour: rtp predict's overlay)
+            gbuffers = {k: v for k, v in arrays.items() if k in GBUFFERS}
+            try:
+                texts = check_gbuffers(**gbuffers, normal_space=normal_space, depth_kind=depth_kind,
+                                       albedo_linear=albedo_linear, tolerance=tolerance)
+            except RtpError as err:  # (named with the file it is about)
+                raise ParameterError(f"{f!r}: {err}", "frames") from err
+            for text in texts:
+                kind = re.sub(r"-?\d[\d.]*", "#", text)
+                warned[kind] = warned.get(kind, 0) + 1
+                if warned[kind] == 1:
+                    log.warning("%s: %s", f, text)
+            buffers, seen = _buffers(f, arrays, present, conventions)
+            geo = buffers["depth"] > 0
+            unseen = float(1.0 - seen[geo].mean()) if geo.any() else 0.0
+            writer.write(sid, buffers, {"scene": name, "profile": profile, "source": Path(f).name,
+                                        "unseen": unseen, "coverage": float(geo.mean())})
+            report.written += 1
+            report.unseen.append(unseen)
+            if progress:
+                progress(report.skipped + report.written, len(files))
+        report.warnings = warned
+        writer.finalize()
+    if absent:
+        log.info("%s: no %s in the frames: stored as zeros, and a model reading them is refused", root,
+                 ", ".join(absent))
+    return report

@@ -1,0 +1,57 @@
+"""``rtp import``: a dataset from an engine's frames (G-buffers and the frame shaded at every rate), for
+``rtp targets``, ``rtp train`` and ``rtp evaluate``; ``--write-example`` writes such frames from the
+reference renderer, to see the layout."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["run_import"]
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from rtp import sdk
+    from rtp.capture import import_frames
+
+    from ._predict import write_sequence
+    from ._run import Bar
+
+    if args.write_example:
+        if len(args.frames) != 1:
+            raise sdk.ParameterError(f"--write-example writes one folder; got {len(args.frames)} paths", "frames")
+        w, h = args.size
+        with Bar(args, args.count, "write frames", "frame") as bar:
+            written = write_sequence(args.frames[0], args.size, args.seed, args.count, bar.update_to, rates=True,
+                                     scene_name=args.example_scene)
+        print(f"wrote {len(written)} frames of {w}x{h} along a camera path through {args.example_scene}, each with its "
+              f"G-buffers and the frame shaded at every rate ({', '.join(sdk.ALL_RATES)}), in {args.frames[0]}: "
+              f"{written[0]} ... {written[-1]}")
+        return 0
+    if args.out is None:
+        raise sdk.ParameterError("--out DATA: the dataset folder to write (or --write-example to write example frames)",
+                                 "out")
+    files = sdk.files.frame_files(args.frames, example="rtp import FRAMES --write-example --frames 8")
+    done = [0]
+    args.on_interrupt = lambda: (f"{done[0]} of {len(files)} frames are in {args.out} (each written whole): the same "
+                                 f"command imports the rest")
+
+    def progress(n: int, _total: int) -> None:
+        done[0] = n
+        bar.update_to(n)
+
+    with Bar(args, len(files), "import", "frame") as bar:
+        report = import_frames(files, args.out, scene=args.scene, profile=args.profile, albedo_linear=args.albedo_linear,
+                               normal_space=args.normal_space, depth_kind=args.depth_kind, tolerance=args.tolerance,
+                               progress=progress)
+    unseen = sum(report.unseen) / len(report.unseen) if report.unseen else None
+    print(f"{args.out}: {report.written} frames imported, {report.skipped} already there"
+          + (f"; unseen share of the new frames' geometry {100 * unseen:.1f}%" if unseen is not None else ""))
+    if report.absent:
+        print(f"absent: {', '.join(report.absent)} (not in the frames: a model reading them is refused)")
+    if report.warnings:
+        print(f"convention warnings on {max(report.warnings.values())} of {report.written} frames (logged above): "
+              f"check --albedo-linear, --normal-space and --depth-kind", file=sys.stderr)
+    print(f"next: rtp targets {args.out}, then rtp train --data {args.out} --metric jnyang --out model.pt (validation "
+          f"holds out whole levels: import two or more, and name one with --val-scenes)")
+    return 0

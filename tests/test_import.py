@@ -1,0 +1,220 @@
+"""``rtp import``: a dataset from an engine's frames (rtp.capture.import_frames), checked against what the
+reference renderer's own capture stores for the same frames, then trained on and evaluated."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from rtp import sdk
+from rtp.capture import DatasetError, DatasetReader, TargetStore, import_frames
+from rtp.cli import main as rtp_main
+
+pytestmark = pytest.mark.gl
+
+W, H = 96, 64
+
+
+def render_frames(folder: Path, count: int = 3, scene: str = "procedural:0", seed: int = 0,
+                  drop: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+    """``count`` frames along a camera path, saved as an engine would dump them (G-buffers and every rate),
+    without the arrays ``drop`` names; returns the renderer's frames (their shader reprojection, for
+    comparison)."""
+    from rtp.capture import load_scene
+    from rtp.capture.paths import camera_path
+    from rtp.cli._predict import _frame_arrays, _save_frame
+    from rtp.plugins.moderngl import Renderer
+
+    folder.mkdir(parents=True, exist_ok=True)
+    scn, blockers = load_scene(scene, None, None, None)
+    path = camera_path(scn, count + 1, "fast", seed, blockers=blockers)
+    out = []
+    with Renderer(W, H) as r:
+        r.load_scene(scn)
+        prev = r.render(path.cameras[0])
+        for i, (prev_cam, cam) in enumerate(zip(path.cameras, path.cameras[1:])):
+            cur = r.render(cam, prev)
+            arrays = _frame_arrays(prev, cur, prev_cam, cam, (W, H))
+            arrays.update({f"final_{rate}": cur.colour[rate] for rate in sdk.ALL_RATES})
+            _save_frame(folder / f"frame_{i:04d}.npz", {k: v for k, v in arrays.items() if k not in drop})
+            out.append({"reprojected": cur.reprojected, "seen": cur.seen, "arrays": arrays})
+            prev = cur
+    return out
+
+
+@pytest.fixture(scope="module")
+def dumps(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[str, Any]], list[dict[str, Any]]]:
+    root = tmp_path_factory.mktemp("dumps")
+    a = render_frames(root / "level_a", 3, "procedural:0")
+    b = render_frames(root / "level_b", 3, "procedural:3", seed=1)
+    return root, a, b
+
+
+def test_imported_samples_are_what_the_reference_capture_stores(dumps: Any, tmp_path: Path) -> None:
+    root, a, b = dumps
+    report = import_frames([root / "level_a", root / "level_b"], tmp_path / "data")
+    assert (report.written, report.skipped, report.absent) == (6, 0, ()) and not report.warnings
+    reader = DatasetReader(tmp_path / "data")
+    assert reader.ids == [f"level_{x}-frame_{i:04d}" for x in "ab" for i in range(3)]
+    assert reader.manifest["settings"] == {"size": [W, H], "source": "engine frames", "absent": [], "conventions": {
+        "albedo_linear": False, "normal_space": "view", "depth_kind": "linear", "tolerance": 0.02}}
+    seen_pixels = differ = 0
+    for sid, frame in zip(reader.ids, a + b):
+        s = reader[sid]
+        arrays = frame["arrays"]
+        assert s.meta["scene"] == sid.split("-")[0] and s.meta["profile"] == "engine"
+        assert s.meta["source"] == sid.split("-")[1] + ".npz"
+        q = 1 / 510 + 1e-6  # (uint8 storage)
+        for name in ("albedo", "roughness", "metallic", "specular", "shadow", "emissive"):
+            np.testing.assert_allclose(s.buffer(name), arrays[name], atol=q, err_msg=name)
+        for rate in sdk.ALL_RATES:
+            np.testing.assert_allclose(s.final(rate), arrays[f"final_{rate}"], atol=q)
+        np.testing.assert_allclose(s.buffer("normal"), arrays["normal"], atol=1e-3)  # (float16)
+        np.testing.assert_allclose(s.buffer("depth"), arrays["depth"], rtol=1e-3)
+        np.testing.assert_allclose(s.buffer("motion"), arrays["motion"], atol=0.05)
+        # the SDK's reprojection against the renderer's shader: the same but for pixels within rounding of an edge
+        seen = s.channel("seen") > 0.5
+        differ += int((seen != (frame["seen"] > 0.5)).sum())
+        seen_pixels += seen.size
+        both = seen & (frame["seen"] > 0.5)
+        np.testing.assert_allclose(s.buffer("reprojected")[both], frame["reprojected"][both], atol=q)
+        geo = arrays["depth"] > 0
+        assert s.meta["unseen"] == pytest.approx(1 - seen[geo].mean(), abs=1e-6)
+    assert differ <= 0.002 * seen_pixels, differ
+
+
+def test_an_import_resumes_and_refuses_to_mix(dumps: Any, tmp_path: Path) -> None:
+    root, _, _ = dumps
+    data = tmp_path / "data"
+    assert import_frames(root / "level_a", data).written == 3
+    again = import_frames([root / "level_a", root / "level_b"], data)
+    assert (again.written, again.skipped) == (3, 3)
+    with pytest.raises(DatasetError, match="other settings.*conventions"):
+        import_frames(root / "level_a", data, normal_space="world")
+    from rtp.capture import capture
+
+    captured = tmp_path / "captured"
+    capture(["procedural:1"], captured, per_scene=1, size=(W, H))
+    with pytest.raises(DatasetError, match="a dataset the reference renderer captured"):
+        import_frames(root / "level_a", captured)
+    assert len(DatasetReader(captured).ids) == 2
+
+
+def test_bad_frames_are_named_before_anything_is_written(dumps: Any, tmp_path: Path) -> None:
+    root, _, _ = dumps
+    data = tmp_path / "data"
+    render_frames(tmp_path / "nofinal", 1, drop=("final_2x4",))
+    render_frames(tmp_path / "small", 1)
+    cases = [
+        ([tmp_path / "nofinal"], "lacks final_2x4"),
+        ([tmp_path / "none.npz"], "no such file"),
+        ([tmp_path / "empty"], "a folder with no .npz frame"),
+        ([root / "level_a", tmp_path / "small"], None),  # (the same size: fine, checked below)
+    ]
+    (tmp_path / "empty").mkdir()
+    for frames, match in cases[:3]:
+        with pytest.raises(sdk.ParameterError, match=match):
+            import_frames(frames, data)
+        assert not (data / "samples").exists() or not any((data / "samples").iterdir())
+    # another size; another file's name twice under one --scene; a scene name no id can hold
+    from rtp.cli._predict import _save_frame
+
+    big = dict(np.load(root / "level_a" / "frame_0000.npz"))
+    big = {k: (np.repeat(np.repeat(v, 2, 0), 2, 1) if v.ndim >= 2 and v.shape[:2] == (H, W) else v)
+           for k, v in big.items()}
+    (tmp_path / "big").mkdir()
+    _save_frame(tmp_path / "big" / "frame_0000.npz", big)
+    with pytest.raises(sdk.ParameterError, match=r"of 2 sizes \(96x64: 3, 192x128: 1\)"):
+        import_frames([root / "level_a", tmp_path / "big"], data)
+    with pytest.raises(sdk.ParameterError, match="two files make the sample id 'x-frame_0000'"):
+        import_frames([root / "level_a", root / "level_b"], data, scene="x")
+    with pytest.raises(sdk.ParameterError, match="scene: expected a name"):
+        import_frames(root / "level_a", data, scene="my level")
+    assert not (data / "samples").exists() or not any((data / "samples").iterdir())
+    # a final image that is not a display-encoded frame
+    hdr = dict(np.load(root / "level_a" / "frame_0000.npz"))
+    hdr["final_4x4"] = hdr["final_4x4"] * 4.0
+    (tmp_path / "hdr").mkdir()
+    _save_frame(tmp_path / "hdr" / "frame_0000.npz", hdr)
+    with pytest.raises(sdk.ParameterError, match="final_4x4 has values in .*display-encoded"):
+        import_frames(tmp_path / "hdr", tmp_path / "hdrdata")
+
+
+def test_uint8_and_rgba_finals_are_taken_as_a_read_back_gives_them(dumps: Any, tmp_path: Path) -> None:
+    root, _, _ = dumps
+    frame = dict(np.load(root / "level_a" / "frame_0000.npz"))
+    rgba = dict(frame)
+    for rate in sdk.ALL_RATES:
+        v = frame[f"final_{rate}"]
+        rgba[f"final_{rate}"] = np.concatenate([np.round(v * 255), np.full(v.shape[:2] + (1,), 255)], -1).astype(np.uint8)
+    (tmp_path / "rgba").mkdir()
+    np.savez(tmp_path / "rgba" / "frame_0000.npz", **rgba)
+    import_frames(tmp_path / "rgba", tmp_path / "d1")
+    import_frames(root / "level_a" / "frame_0000.npz", tmp_path / "d2", scene="rgba")
+    a, b = DatasetReader(tmp_path / "d1"), DatasetReader(tmp_path / "d2")
+    for rate in sdk.ALL_RATES:
+        np.testing.assert_array_equal(a[a.ids[0]].final(rate), b[b.ids[0]].final(rate))
+
+
+def test_frames_without_some_g_buffers_import_and_their_channels_are_refused(tmp_path: Path) -> None:
+    render_frames(tmp_path / "lvl", 2, drop=("shadow", "emissive", "metallic"))
+    report = import_frames(tmp_path / "lvl", tmp_path / "data")
+    assert report.absent == ("metallic", "shadow", "emissive")
+    reader = DatasetReader(tmp_path / "data")
+    assert reader.absent == {"metallic", "shadow", "emissive"}
+    s = reader[reader.ids[0]]
+    assert s.inputs(["reprojected.y", "seen", "albedo.y", "normal.z", "roughness", "specular"]).shape == (6, H, W)
+    for channel in ("shadow", "metallic", "emissive"):
+        with pytest.raises(DatasetError, match=f"channel '{channel}': this dataset has no"):
+            s.inputs(["seen", channel])
+    # every frame the same G-buffers: some with shadow, some without, is refused
+    render_frames(tmp_path / "lvl2", 1)
+    with pytest.raises(sdk.ParameterError, match="1 of 3 hold 'metallic'"):
+        import_frames([tmp_path / "lvl", tmp_path / "lvl2"], tmp_path / "data2")
+
+
+def test_convention_mistakes_are_warned_once_and_counted(dumps: Any, tmp_path: Path,
+                                                         caplog: pytest.LogCaptureFixture) -> None:
+    root, _, _ = dumps
+    from rtp.cli._predict import _save_frame
+
+    encoded = tmp_path / "encoded"  # normals still in their texture's encoding, n * 0.5 + 0.5
+    encoded.mkdir()
+    for f in sorted((root / "level_a").glob("*.npz")):
+        arrays = dict(np.load(f))
+        arrays["normal"] = arrays["normal"] * 0.5 + 0.5
+        _save_frame(encoded / f.name, arrays)
+    with caplog.at_level("WARNING", "rtp.capture"):
+        report = import_frames(encoded, tmp_path / "data")
+    assert report.written == 3 and list(report.warnings.values()) == [3]
+    (record,) = [r for r in caplog.records if r.name == "rtp.capture" and r.levelname == "WARNING"]
+    assert "frame_0000.npz: normal: " in record.getMessage() and "an encoded texture" in record.getMessage()
+    # a convention that puts values out of range is refused, naming the file
+    with pytest.raises(sdk.ParameterError, match=r"frame_0000.npz': depth: expected values in \[0, 1\]"):
+        import_frames(root / "level_a", tmp_path / "data2", depth_kind="window")  # (it is linear depth)
+
+
+@pytest.mark.slow
+def test_the_command_imports_and_the_dataset_trains_and_evaluates(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    for level, scene in (("lvl_a", "procedural:0"), ("lvl_b", "procedural:3")):
+        assert rtp_main(["import", f"dumps/{level}", "--write-example", "--frames", "4", "--size", f"{W}x{H}",
+                         "--example-scene", scene]) == 0
+    assert rtp_main(["import", "dumps/lvl_a", "dumps/lvl_b", "--out", "data"]) == 0
+    out = capsys.readouterr().out
+    assert "data: 8 frames imported, 0 already there" in out and "next: rtp targets data" in out
+    assert rtp_main(["targets", "data", "--metrics", "jnyang"]) == 0
+    assert TargetStore("data").load("lvl_a-frame_0000", "jnyang", 16).shape == (6, 4, 6)
+    assert rtp_main(["train", "--data", "data", "--metric", "jnyang", "--out", "m.pt", "--steps", "20", "--batch", "4",
+                     "--crop", "32", "--val-scenes", "lvl_b"]) == 0
+    from rtp import export
+
+    export.export_checkpoint("m.pt", "m.onnx")
+    assert rtp_main(["evaluate", "m.onnx", "--data", "data", "--out", "ev"]) == 0
+    (report,) = json.loads(Path("ev/evaluation.json").read_text())
+    assert report["scene_roles"] == {"lvl_a": "train", "lvl_b": "validation"} and report["scenes"] == {"lvl_a": 4, "lvl_b": 4}
