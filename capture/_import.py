@@ -23,17 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import (
-    ALL_RATES,
-    DEFAULT_REPROJECTION_TOLERANCE,
-    DEPTH_KINDS,
-    GBUFFERS,
-    NORMAL_SPACES,
-    ParameterError,
-    RtpError,
-    check_gbuffers,
-    input_planes,
-)
+from rtp import sdk
+from rtp.sdk import GBUFFERS, ParameterError, RtpError
 from rtp.sdk.files import check_output, frame_files, read_frame, writer_lock
 
 from ._dataset import _ID_RE, BUFFERS, MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
@@ -43,7 +34,7 @@ __all__ = ["FINAL_KEYS", "ImportReport", "REQUIRED_GBUFFERS", "import_frames"]
 log = logging.getLogger("rtp.capture")
 
 #: The frame file's arrays of the frame shaded at each rate.
-FINAL_KEYS = tuple(f"final_{r}" for r in ALL_RATES)
+FINAL_KEYS = tuple(f"final_{r}" for r in sdk.ALL_RATES)
 #: The G-buffers every imported frame must hold: the paper's inputs (the previous frame reprojected, albedo,
 #: normals) and what the reprojection needs. The material ones, shadow and emissive may be left out.
 REQUIRED_GBUFFERS = ("depth", "albedo", "normal", "view", "projection", "prev_colour", "prev_depth",
@@ -131,7 +122,7 @@ def _buffers(path: str, arrays: dict[str, Any], present: Sequence[str], conventi
     hw = tuple(np.shape(gbuffers["depth"])[:2])
     channels = [c for name, chans in _STORED.items() if name in present for c in chans]
     try:
-        planes = input_planes(channels, **gbuffers, **conventions)
+        planes = sdk.input_planes(channels, **gbuffers, **conventions)
     except RtpError as err:  # (the SDK's typed input errors, named with the file they are about)
         raise ParameterError(f"{path!r}: {err}", "frames") from err
     by_name = dict(zip(channels, planes))
@@ -156,7 +147,7 @@ def import_frames(
     albedo_linear: bool = False,
     normal_space: str = "view",
     depth_kind: str = "linear",
-    tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
+    tolerance: float = sdk.DEFAULT_REPROJECTION_TOLERANCE,
     progress: Callable[[int, int], None] | None = None,
 ) -> ImportReport:
     """Add an engine's frames to the dataset folder ``out`` (created, or grown: an import resumes, frames
@@ -181,8 +172,8 @@ def import_frames(
     if not isinstance(profile, str) or not re.fullmatch(r"[A-Za-z0-9_.-]{1,32}", profile):
         raise ParameterError(f"profile: expected a short name of letters, digits, '.', '_' and '-', got {profile!r}",
                              "profile")
-    if normal_space not in NORMAL_SPACES or depth_kind not in DEPTH_KINDS or not isinstance(albedo_linear, bool):
-        raise ParameterError(f"conventions: normal_space in {NORMAL_SPACES}, depth_kind in {DEPTH_KINDS} and "
+    if normal_space not in sdk.NORMAL_SPACES or depth_kind not in sdk.DEPTH_KINDS or not isinstance(albedo_linear, bool):
+        raise ParameterError(f"conventions: normal_space in {sdk.NORMAL_SPACES}, depth_kind in {sdk.DEPTH_KINDS} and "
                              f"albedo_linear a bool, got {normal_space!r}, {depth_kind!r}, {albedo_linear!r}",
                              "conventions")
     names = [_scene_name(scene, f) for f in files]
@@ -241,7 +232,7 @@ def import_frames(
             arrays = read_frame(f, extra=(*FINAL_KEYS, "colour"), example=EXAMPLE)  # (colour: rtp predict's overlay)
             gbuffers = {k: v for k, v in arrays.items() if k in GBUFFERS}
             try:
-                texts = check_gbuffers(**gbuffers, normal_space=normal_space, depth_kind=depth_kind,
+                texts = sdk.check_gbuffers(**gbuffers, normal_space=normal_space, depth_kind=depth_kind,
                                        albedo_linear=albedo_linear, tolerance=tolerance)
             except RtpError as err:  # (named with the file it is about)
                 raise ParameterError(f"{f!r}: {err}", "frames") from err

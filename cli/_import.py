@@ -32,18 +32,12 @@ def run_import(args: argparse.Namespace) -> int:
         raise sdk.ParameterError("--out DATA: the dataset folder to write (or --write-example to write example frames)",
                                  "out")
     files = sdk.files.frame_files(args.frames, example="rtp import FRAMES --write-example --frames 8")
-    done = [0]
-    args.on_interrupt = lambda: (f"{done[0]} of {len(files)} frames are in {args.out} (each written whole): the same "
-                                 f"command imports the rest")
-
-    def progress(n: int, _total: int) -> None:
-        done[0] = n
-        bar.update_to(n)
-
     with Bar(args, len(files), "import", "frame") as bar:
+        args.on_interrupt = lambda: (f"{bar.done} of {len(files)} frames are in {args.out} (each written whole): the "
+                                     f"same command imports the rest")
         report = import_frames(files, args.out, scene=args.scene, profile=args.profile, albedo_linear=args.albedo_linear,
                                normal_space=args.normal_space, depth_kind=args.depth_kind, tolerance=args.tolerance,
-                               progress=progress)
+                               progress=bar.update_to)
     unseen = sum(report.unseen) / len(report.unseen) if report.unseen else None
     print(f"{args.out}: {report.written} frames imported, {report.skipped} already there"
           + (f"; unseen share of the new frames' geometry {100 * unseen:.1f}%" if unseen is not None else ""))

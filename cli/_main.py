@@ -157,6 +157,19 @@ def _choices_csv(allowed: Sequence[str]) -> Any:
     return parse
 
 
+def _convention_options(parser: argparse.ArgumentParser) -> None:
+    """The engine conventions of a frame file's G-buffers (``sdk.input_planes``' keywords): rtp predict's and
+    rtp import's."""
+    from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES
+
+    parser.add_argument("--albedo-linear", action="store_true", help="the albedo array holds linear values (default: "
+                        "display-encoded sRGB)")
+    parser.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
+    parser.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear "
+                        "view depth (0 on background), a depth buffer's window depth in [0, 1] (1 on background) or "
+                        "a reversed-Z buffer's (0 on background)")
+
+
 def _metric_name(text: str) -> str:
     """A metric rtp knows: its own (rtp.sdk.METRICS) or a plugin's (rtp.metrics.Metric, in the ``rtp.metrics``
     entry-point group), looked up when the command runs: the plugins load only where a name is not rtp's own."""
@@ -715,9 +728,7 @@ def build_parser() -> argparse.ArgumentParser:
         DEFAULT_OUTPUTS,
         DEFAULT_REPROJECTION_TOLERANCE,
         DEFAULT_TILE_SIZE,
-        DEPTH_KINDS,
         METRICS,
-        NORMAL_SPACES,
         OUTPUT_SETS,
         TARGET_METRICS,
         TILE_SIZES,
@@ -1095,12 +1106,7 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("--scene", default=None, help="the level the frames show, which rtp train --val-scenes names "
                     "(default: each folder's name; one --scene for every frame given)")
     im.add_argument("--profile", default="engine", help="recorded as a capture's motion profile is (default: engine)")
-    im.add_argument("--albedo-linear", action="store_true", help="the albedo array holds linear values (default: "
-                    "display-encoded sRGB)")
-    im.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
-    im.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear view "
-                    "depth (0 on background), a depth buffer's window depth in [0, 1] (1 on background) or a "
-                    "reversed-Z buffer's (0 on background)")
+    _convention_options(im)
     im.add_argument("--tolerance", type=float, default=DEFAULT_REPROJECTION_TOLERANCE, help="the reprojection's "
                     "relative depth tolerance (disocclusion test)")
     im.add_argument("--write-example", action="store_true", help="write frames of the reference renderer into the "
@@ -1136,12 +1142,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "six; 1x2,2x1,2x2 without the additional rates)")
     pr.add_argument("--out", type=_out_folder, default=None, help="write rates.npy, predictions.npy and overlay.png "
                     "into this folder (a sequence: frames.csv, overlay.gif and frames.png)")
-    pr.add_argument("--albedo-linear", action="store_true", help="the albedo array holds linear values (default: "
-                    "display-encoded sRGB)")
-    pr.add_argument("--normal-space", choices=NORMAL_SPACES, default="view", help="the space of the normal array")
-    pr.add_argument("--depth-kind", choices=DEPTH_KINDS, default="linear", help="depth and prev_depth: linear view "
-                    "depth (0 on background), a depth buffer's window depth in [0, 1] (1 on background) or a "
-                    "reversed-Z buffer's (0 on background)")
+    _convention_options(pr)
     pr.add_argument("--every", type=_positive, default=None, metavar="K", help="a sequence with prediction reuse "
                     "(sdk.PredictionReuse): the network every K-th frame, its estimates (or a splitting model's "
                     "features) carried along each frame's motion between (from depth and the matrices)")

@@ -182,6 +182,8 @@ class Bar:
 
     def __init__(self, args: argparse.Namespace, total: int, desc: str, unit: str) -> None:
         self.total = total
+        #: The count last given to :meth:`update_to` (shown or not): what a job's interruption says is done.
+        self.done = 0
         self._bar: Any = None
         self._status = ""
         self._sticky = False
@@ -199,6 +201,7 @@ class Bar:
             self._bar = tqdm(total=total, desc=desc, unit=unit, dynamic_ncols=True, delay=self.DELAY)
 
     def update_to(self, n: int, total: int | None = None, **postfix: str) -> None:
+        self.done = n
         if self._bar is None:
             return
         if total is not None and total != self._bar.total:
