@@ -13,6 +13,7 @@ reads what an engine gives it at run time. docs/dataset.md "A dataset from your 
 from __future__ import annotations
 
 import logging
+import numbers
 import os
 import re
 from collections import Counter
@@ -194,7 +195,10 @@ def import_frames(
             raise ParameterError(f"{f!r} lacks {', '.join(lacks)}: a frame to train on holds "
                                  f"{', '.join(REQUIRED_GBUFFERS)} and the frame shaded at every rate "
                                  f"({', '.join(FINAL_KEYS)}); `{EXAMPLE}` writes such frames", "frames")
-        sizes[f] = shape[:2] if shape else None
+        if shape is None or len(shape) != 3:
+            raise ParameterError(f"{f!r}: final_1x1 has shape {shape}, expected (H, W, 3) (or RGBA, 4): the frame "
+                                 f"shaded at full rate, display-encoded", "final_1x1")
+        sizes[f] = shape[:2]
     if len(set(sizes.values())) > 1:
         counts = Counter(sizes.values())
         raise ParameterError(f"frames: of {len(counts)} sizes ({', '.join(f'{s[1]}x{s[0]}: {n}' for s, n in counts.items() if s)}"
@@ -206,9 +210,15 @@ def import_frames(
         raise ParameterError(f"frames: {have} of {len(files)} hold {mixed[0]!r}: every frame of a dataset holds the same "
                              f"G-buffers (a model reads a channel on every sample or none)", "frames")
     absent = tuple(b for b in OPTIONAL_BUFFERS if b not in present)
-    h, w = next(iter(sizes.values())) or (0, 0)
+    h, w = next(iter(sizes.values()))
+    if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, numbers.Real):
+        raise ParameterError(f"tolerance: expected a number (the reprojection's relative depth tolerance), got "
+                             f"{tolerance!r}", "tolerance")
     conventions = {"albedo_linear": albedo_linear, "normal_space": normal_space, "depth_kind": depth_kind,
-                   "tolerance": tolerance}
+                   "tolerance": float(tolerance)}
+    # the first frame made into a sample: its arrays, the conventions and the tolerance checked by the SDK
+    # before the dataset's manifest records them
+    _buffers(files[0], read_frame(files[0], extra=(*FINAL_KEYS, "colour"), example=EXAMPLE), present, conventions)
     settings = {"size": [int(w), int(h)], "source": SOURCE, "conventions": conventions, "absent": list(absent)}
 
     root = check_output(out, folder=True, what="dataset folder")

@@ -809,6 +809,66 @@ def _viewpoints_call(v: tuple[str, dict[str, Any]]) -> Any:
     return sample_viewpoints(scene, n, seed, **kw)
 
 
+# -- an engine's frames imported (rtp.capture.import_frames) ---------------------------------------
+
+_IH, _IW = 8, 12
+
+
+@cache
+def _import_template() -> dict[str, np.ndarray]:
+    """A frame an engine could dump (12x8, view = identity, OpenGL perspective): valid G-buffers and finals."""
+    rng = np.random.default_rng(3)
+    n, f, t = 0.1, 100.0, np.tan(np.radians(30))
+    proj = np.array([[1 / (t * _IW / _IH), 0, 0, 0], [0, 1 / t, 0, 0], [0, 0, -(f + n) / (f - n), -2 * f * n / (f - n)],
+                     [0, 0, -1, 0]])
+    normal = rng.normal(size=(_IH, _IW, 3))
+    normal[..., 2] = np.abs(normal[..., 2]) + 1
+    frame = {"depth": rng.uniform(1, 5, (_IH, _IW)), "albedo": rng.random((_IH, _IW, 3)),
+             "normal": normal / np.linalg.norm(normal, axis=-1, keepdims=True), "roughness": rng.random((_IH, _IW)),
+             "view": np.eye(4), "projection": proj, "prev_colour": rng.random((_IH, _IW, 3)),
+             "prev_depth": rng.uniform(1, 5, (_IH, _IW)), "prev_view_projection": proj}
+    frame.update({f"final_{r}": rng.random((_IH, _IW, 3)) for r in sdk.ALL_RATES})
+    return {k: np.asarray(v, np.float64 if v.shape == (4, 4) else np.float32) for k, v in frame.items()}
+
+
+_IMPORT_KEYS = st.sampled_from([*_import_template(), "shadow", "motion", "prev_projection", "colour", "junk"])
+import_cases = st.tuples(
+    st.lists(st.tuples(_IMPORT_KEYS, st.one_of(st.none(), _near(st.just((_IH, _IW, 3))), _near(st.just((_IH, _IW))),
+                                               _near(st.just((4, 4))), arrays)), max_size=3),
+    st.fixed_dictionaries({}, optional={
+        "scene": st.one_of(st.sampled_from(["lvl", "a b", "", "x" * 70]), json_scalars),
+        "profile": st.one_of(st.sampled_from(["engine", "", "a/b"]), json_scalars),
+        "albedo_linear": st.one_of(st.booleans(), json_scalars),
+        "normal_space": st.one_of(st.sampled_from([*sdk.NORMAL_SPACES, "clip"]), json_scalars),
+        "depth_kind": st.one_of(st.sampled_from([*sdk.DEPTH_KINDS, "log"]), json_scalars),
+        "tolerance": hostile_numbers}),
+)
+
+
+def _import_call(v: tuple[list[tuple[str, Any]], dict[str, Any]]) -> Any:
+    """A frame with arrays replaced (None: removed), imported with those keywords; what it wrote read back."""
+    from rtp.capture import import_frames
+
+    changes, kw = v
+    frame = dict(_import_template())
+    for key, spec in changes:
+        if spec is None:
+            frame.pop(key, None)
+        else:
+            frame[key] = _array(spec)
+    folder = _WORK / "import" / "lvl"
+    shutil.rmtree(_WORK / "import", ignore_errors=True)
+    folder.mkdir(parents=True)
+    try:
+        np.savez(folder / "frame_0.npz", **frame)
+    except (ValueError, TypeError):  # (numpy cannot save it: not a frame an engine could dump)
+        return None
+    report = import_frames(folder, _WORK / "import" / "data", **kw)
+    reader = DatasetReader(_WORK / "import" / "data")
+    held = [c for c in sdk.CHANNELS if not any(c in BUFFERS[b].channels for b in reader.absent)]
+    return report, [(s.inputs(held), [s.final(r) for r in sdk.ALL_RATES], dict(s.meta)) for s in reader]
+
+
 # -- the targets -----------------------------------------------------------------------------------
 
 #: (target, examples): budgets sized for about 25 s of the whole file on two cores.
@@ -847,6 +907,7 @@ CASES: list[tuple[Target, int]] = [
             lambda v: check_frame_size(_val(v[0]), v[1], renderer=False)), 100),
     (Target("capture: sample_viewpoints on procedural(0)", viewpoint_cases, _viewpoints_call), 80),
     (Target("capture: job_bytes, check_frame_memory, check_memory", job_memory_cases, _job_memory_call), 100),
+    (Target("capture: import_frames of a fuzzed engine frame", import_cases, _import_call), 80),
 ]
 
 

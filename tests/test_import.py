@@ -218,3 +218,19 @@ def test_the_command_imports_and_the_dataset_trains_and_evaluates(tmp_path: Path
     assert rtp_main(["evaluate", "m.onnx", "--data", "data", "--out", "ev"]) == 0
     (report,) = json.loads(Path("ev/evaluation.json").read_text())
     assert report["scene_roles"] == {"lvl_a": "train", "lvl_b": "validation"} and report["scenes"] == {"lvl_a": 4, "lvl_b": 4}
+
+
+def test_fuzz_found_inputs_are_typed_errors_and_leave_no_manifest(dumps: Any, tmp_path: Path) -> None:
+    """Two inputs the fuzz target of tests/test_fuzz_rooms.py found: a numpy integer tolerance reached the
+    manifest's JSON (TypeError), and a 1-D final_1x1 its size (ValueError)."""
+    root, _, _ = dumps
+    with pytest.raises(sdk.ParameterError, match="tolerance"):
+        import_frames(root / "level_a", tmp_path / "data", tolerance=np.int64(4881))
+    assert not (tmp_path / "data" / "manifest.json").exists()  # (a later good import is not refused by it)
+    assert import_frames(root / "level_a", tmp_path / "data", tolerance=np.float32(0.02)).written == 3
+    frame = dict(np.load(root / "level_a" / "frame_0000.npz"))
+    frame["final_1x1"] = np.zeros(9, np.int32)
+    (tmp_path / "flat").mkdir()
+    np.savez(tmp_path / "flat" / "frame_0000.npz", **frame)
+    with pytest.raises(sdk.ParameterError, match=r"final_1x1 has shape \(9,\), expected \(H, W, 3\)"):
+        import_frames(tmp_path / "flat", tmp_path / "data2")
