@@ -105,6 +105,35 @@ assert report.ok and not report.skipped and report.runs_models == ("lpips.onnx",
         "",
         "assert rates.shape == (1, 23, 40) and x.shape == (len(predictor.metadata.inputs), 360, 640)",
     ),
+    ("adapters.md", "before = np.array(door.matrix)"): (
+        """
+import os; os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+import numpy as np
+import pyrender
+import trimesh
+from rtp.plugins.pyrender import Adapter, SceneFrame
+
+scene = pyrender.Scene(ambient_light=(0.3, 0.3, 0.3))
+scene.add(pyrender.Mesh.from_trimesh(trimesh.creation.box((8.0, 8.0, 0.1))), pose=np.diag([1.0, 1, 1, 1]))
+door = scene.add(pyrender.Mesh.from_trimesh(trimesh.creation.box((1.0, 2.0, 0.1))))
+
+
+def door_pose(t):
+    p = np.eye(4)
+    p[:3, 3] = (t, 0.0, 1.0)
+    return p
+
+
+scene.set_pose(door, door_pose(0.0))
+scene.add(pyrender.PerspectiveCamera(yfov=1.0))
+pose = prev_pose = np.eye(4)
+pose[2, 3] = prev_pose[2, 3] = 5.0
+t = 0.25
+adapter = Adapter(["seen", "motion.x"], 64, 48)
+prev_colour, _ = adapter.render(scene, prev_pose)
+""",
+        "assert x.shape == (2, 48, 64) and x[1].min() < -0.5 and x[0][x[1] < -0.5].mean() > 0.9\nadapter.close()",
+    ),
     ("metrics.md", "emap = metrics.flip_map(reference, test)"): (
         """
 import numpy as np

@@ -832,6 +832,8 @@ scene_frames = _fields(
         "prev_depth": pyrender_depths,
         "camera": pr_cameras,
         "prev_camera": pr_cameras,
+        "prev_node_poses": st.one_of(st.none(), json_values, st.dictionaries(
+            st.sampled_from(["mesh", "camera node", "stranger"]), st.one_of(poses, json_values), max_size=2)),
     },
     required=("scene", "pose"),
 )
@@ -839,6 +841,10 @@ scene_frames = _fields(
 
 def _pr_value(key: str, v: Any) -> Any:
     p = _pr()
+    if key == "prev_node_poses" and isinstance(v, dict):  # nodes of the fuzz scene (or not), poses of any kind
+        nodes = {"mesh": next(iter(p.scene.mesh_nodes)), "camera node": p.scene.main_camera_node,
+                 "stranger": p.pyrender.Node()}
+        return {nodes.get(k, k): _pr_value("pose", m) for k, m in v.items()}
     if isinstance(v, str):
         if key == "scene" and v == "scene":
             return p.scene

@@ -546,3 +546,87 @@ def test_opengl_imported_on_screen_first_names_fixes_that_work() -> None:
                 "from rtp.plugins.pyrender import import_pyrender\npyrender = import_pyrender()\nimport pyrender\n"):
         r = subprocess.run([sys.executable, "-c", fix], env=env, capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr
+
+
+def _moving_box_scene(pyrender: Any, parent: bool = False) -> tuple[Any, Any, Any]:
+    """A grey wall 5 m in front of a fixed camera and a red box 3 m in front of it (under a parent node if
+    ``parent``): (scene, the node to move, the box's mesh node)."""
+    import trimesh
+
+    scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=(0.5, 0.5, 0.5))
+    wall = pyrender.Mesh.from_trimesh(trimesh.creation.box(extents=(30.0, 30.0, 0.1)), smooth=False,
+                                      material=pyrender.MetallicRoughnessMaterial(baseColorFactor=(0.5, 0.5, 0.5, 1)))
+    scene.add(wall, pose=np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -5.0], [0, 0, 0, 1]]))
+    box = pyrender.Mesh.from_trimesh(trimesh.creation.box(extents=(1.0, 1.0, 0.2)), smooth=False,
+                                     material=pyrender.MetallicRoughnessMaterial(baseColorFactor=(0.9, 0.1, 0.1, 1)))
+    at = np.array([[1, 0, 0, -0.4], [0, 1, 0, 0], [0, 0, 1, -3.0], [0, 0, 0, 1]], float)
+    if parent:
+        holder = pyrender.Node(matrix=at)
+        scene.add_node(holder)
+        node = scene.add(box, parent_node=holder)
+        moved = holder
+    else:
+        node = moved = scene.add(box, pose=at)
+    scene.add(pyrender.PerspectiveCamera(yfov=np.radians(60.0)), pose=np.eye(4))
+    return scene, moved, node
+
+
+@pytest.mark.parametrize("parent", [False, True])
+@pytest.mark.parametrize("given_depth", [True, False])
+def test_moving_objects_are_fetched_from_where_they_were(parent: bool, given_depth: bool) -> None:
+    """A box 1 m wide moved 0.8 m right between two frames of a fixed camera: given its previous pose, its pixels are
+    fetched from where it was (seen, its own colour, its motion vector), and the wall it uncovered stays
+    unseen; without it, most of the box is taken for something new. The previous depth, when the adapter
+    renders it, is drawn with the box where it was."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    scene, moved, _ = _moving_box_scene(pyrender, parent)
+    w, h, eye = 160, 96, np.eye(4)
+    with Adapter(["seen", "reprojected.r", "motion.x", "motion.y", "depth"], w, h) as adapter:
+        prev_colour, _ = adapter.render(scene, eye)
+        prev_depth = adapter.gbuffers(scene, eye, albedo=False, normals=()).depth
+        before = np.array(moved.matrix, copy=True)
+        after = before.copy()
+        after[0, 3] += 0.8
+        scene.set_pose(moved, after)
+        frame = SceneFrame(scene, eye, prev_pose=eye, prev_colour=prev_colour, prev_depth=prev_depth)
+        static = adapter.inputs(frame)
+        adapter._last = None  # (no cached depth: the adapter draws the previous one itself)
+        moving = adapter.inputs(replace(frame, prev_node_poses={moved: before},
+                                        prev_depth=prev_depth if given_depth else None))
+        assert np.array_equal(np.asarray(moved.matrix), after)  # (the scene is left as it was given)
+    seen, red, mx, my, depth = moving
+    focal = (h / 2) / np.tan(np.radians(30.0))  # pixels per unit at depth 1
+    box = np.abs(depth - 2.9) < 0.05  # the box's front face, 2.9 m away
+    inner = box.copy()
+    for axis in (0, 1):
+        inner &= np.roll(box, 1, axis) & np.roll(box, -1, axis)
+    assert inner.sum() > 200
+    # (without the node's move, only the fifth of the box that overlaps where it was is seen)
+    assert seen[inner].mean() > 0.97 and static[0][inner].mean() < 0.35, (seen[inner].mean(), static[0][inner].mean())
+    np.testing.assert_allclose(mx[inner], -0.8 * focal / 2.9, atol=0.05)  # previous minus current: to the left
+    np.testing.assert_allclose(my[inner], 0.0, atol=0.05)
+    assert np.abs(red[inner] - red[inner].mean()).max() < 0.02 and red[inner].mean() > 0.3  # the box's colour
+    uncovered = (np.abs(prev_depth - 2.9) < 0.05) & (np.abs(depth - 5.0) < 0.1)  # wall where the box was
+    assert uncovered.sum() > 20 and seen[uncovered].max() == 0.0
+    assert np.abs(mx[np.abs(depth - 5.0) < 0.1]).max() < 1e-4  # the wall did not move
+
+
+def test_node_poses_are_checked() -> None:
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    scene, moved, _ = _moving_box_scene(pyrender)
+    eye = np.eye(4)
+    with Adapter(["seen"], 32, 24) as adapter:
+        colour, _ = adapter.render(scene, eye)
+        frame = SceneFrame(scene, eye, prev_pose=eye, prev_colour=colour)
+        for bad, match in [([moved], "expected a mapping"), ({pyrender.Node(): eye}, "is not a node of the scene"),
+                           ({moved: np.ones((3, 3))}, "must be a finite affine 4x4"),
+                           ({moved: np.full((4, 4), np.nan)}, "must be a finite affine 4x4")]:
+            with pytest.raises(PyrenderAdapterError, match=match):
+                adapter.inputs(replace(frame, prev_node_poses=bad))
+        # nothing moved in the world: the camera's planes, exactly
+        assert np.array_equal(adapter.inputs(replace(frame, prev_node_poses={moved: np.array(moved.matrix)})),
+                              adapter.inputs(frame))

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, ParameterError, input_planes
+from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, ParameterError, input_planes, reproject_positions
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 from rtp.sdk.adapters import AdapterFrameError
 
@@ -64,6 +64,38 @@ def _pose(value: Any, name: str) -> np.ndarray:
     return m
 
 
+def _affine(value: Any, name: str) -> np.ndarray:
+    """``value`` as a finite affine 4x4 float64 matrix (a node's local pose), or a PyrenderAdapterError."""
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        m = np.empty(0)
+    if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0)):
+        raise PyrenderAdapterError(f"{name} must be a finite affine 4x4 pose (last row 0, 0, 0, 1), got "
+                                   f"{m.shape if m.size else type(value).__name__}")
+    return m
+
+
+@contextmanager
+def _nodes_at(scene: Any, poses: dict[Any, np.ndarray] | None) -> Iterator[None]:
+    """``scene`` with the nodes of ``poses`` (checked local poses; None: none) at those poses, put back
+    afterwards."""
+    poses = poses or {}
+    saved = {n: np.array(n.matrix, copy=True) for n in poses}
+    try:
+        for n, m in poses.items():
+            scene.set_pose(n, m)
+        yield
+    finally:
+        for n, m in saved.items():
+            scene.set_pose(n, m)
+
+
+def _id_colour(i: int) -> tuple[int, int, int]:
+    """The segmentation colour of mesh node number ``i`` (0: not moved), 24 bits."""
+    return i & 255, (i >> 8) & 255, (i >> 16) & 255
+
+
 def _names(value: Any, allowed: tuple[str, ...], name: str) -> tuple[str, ...]:
     """``value`` as a tuple of names from ``allowed`` (a :class:`ParameterError` naming ``name`` otherwise)."""
     items = None
@@ -98,6 +130,13 @@ class SceneFrame:
             disocclusion test on grazing surfaces (docs/adapters.md).
         camera, prev_camera: ``pyrender`` cameras (for their projections); default: the scene's
             main camera for both.
+        prev_node_poses: the nodes that moved since the previous frame, each with its previous *local*
+            pose (its ``node.matrix`` before this frame's ``scene.set_pose``): a mapping of
+            ``pyrender.Node`` to 4x4 matrix. None (default): nothing but the camera moved. With it, the
+            adapter makes the frame's motion vectors (a segmentation pass tells which mesh node each
+            pixel shows, and each moved node's pixels are followed by its own move, its children's
+            too), so that a moving object is fetched from where it was (``sdk.input_planes``'
+            ``motion``) rather than from what was behind it.
     """
 
     scene: Any
@@ -107,6 +146,7 @@ class SceneFrame:
     prev_depth: Any | None = None
     camera: Any | None = None
     prev_camera: Any | None = None
+    prev_node_poses: Any | None = None
 
 
 class Adapter(_BaseAdapter[SceneFrame]):
@@ -325,6 +365,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
         temporal = wanted & {*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen", *_MOTION}
         if temporal and prev_pose is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(temporal))} need prev_pose")
+        node_poses = self._node_poses(scene, frame.prev_node_poses)
         reproj = wanted & {*_REPROJECTED, _REPROJECTED_Y, *_DIFFERENCES, "seen"}
         if reproj and prev_colour is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(reproj))} need prev_colour (the previous displayed frame)")
@@ -350,7 +391,9 @@ class Adapter(_BaseAdapter[SceneFrame]):
                         prev_depth = last[3]
                     else:
                         log.debug("no prev_depth given: rendering it at prev_pose")
-                        prev_depth = self.gbuffers(scene, prev_pose, camera=prev_cam, albedo=False, normals=()).depth
+                        with _nodes_at(scene, node_poses):  # (objects that moved: where they were)
+                            prev_depth = self.gbuffers(scene, prev_pose, camera=prev_cam, albedo=False,
+                                                       normals=()).depth
                 try:
                     pd = np.asarray(prev_depth)
                     real = pd.dtype.kind in "iuf"
@@ -365,11 +408,70 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 if not np.isfinite(pd).all() or (pd < 0).any():
                     raise PyrenderAdapterError("prev_depth must be finite linear depth >= 0 (0 on background)")
                 buffers["prev_depth"] = pd
+        if temporal and node_poses is not None:  # objects that moved: their motion vectors
+            motion = self._object_motion(scene, camera, pose, node_poses, g.depth, buffers)
+            if motion is not None:
+                buffers["motion"] = motion
         # the planes from the G-buffers: what every CPU adapter does (sdk.input_planes)
         out = input_planes(self.channels, **buffers, tolerance=self.reprojection_tolerance)
         self._last = (id(scene), id(cam), pose.copy(), g.depth)
         log.debug("inputs %s in %.3f s", out.shape, time.perf_counter() - t0)
         return out
+
+    def _node_poses(self, scene: Any, prev_node_poses: Any) -> dict[Any, np.ndarray] | None:
+        """``prev_node_poses`` checked: nodes of ``scene`` to finite affine 4x4 matrices (None: None)."""
+        if prev_node_poses is None:
+            return None
+        if not isinstance(prev_node_poses, Mapping):
+            raise PyrenderAdapterError(f"prev_node_poses: expected a mapping of pyrender nodes to their previous local "
+                                       f"4x4 poses, got {type(prev_node_poses).__name__}")
+        moved = {}
+        for node, m in prev_node_poses.items():
+            if not isinstance(node, self._gbuf._pyrender.Node) or not scene.has_node(node):
+                raise PyrenderAdapterError(f"prev_node_poses: {node!r} is not a node of the scene")
+            moved[node] = _affine(m, f"prev_node_poses[{getattr(node, 'name', None) or 'node'}]")
+        return moved
+
+    def _object_motion(self, scene: Any, camera: Any | None, pose: np.ndarray, prev_node_poses: dict[Any, np.ndarray],
+                       depth: np.ndarray,
+                       buffers: dict[str, Any]) -> np.ndarray | None:
+        """The frame's motion vectors ``(H, W, 2)`` (previous minus current pixel position, x right, y down)
+        where some mesh node moved in the world since the previous frame, else None (the camera's move
+        alone, which ``input_planes`` computes from the matrices)."""
+        moved = prev_node_poses
+        meshes = list(scene.mesh_nodes)
+        now = {n: scene.get_pose(n) for n in meshes}
+        saved = {n: np.array(n.matrix, copy=True) for n in moved}
+        try:  # the previous world pose of every mesh node: the moved ones put back, their children with them
+            for n, m in moved.items():
+                scene.set_pose(n, m)
+            then = {n: scene.get_pose(n) for n in meshes}
+        finally:
+            for n, m in saved.items():
+                scene.set_pose(n, m)
+        deltas = {n: then[n] @ np.linalg.inv(now[n]) for n in meshes if not np.allclose(then[n], now[n], atol=1e-9)}
+        if not deltas:
+            return None
+        ids = {n: i + 1 for i, n in enumerate(deltas)}
+        with self._posed(scene, camera, pose):  # which node each pixel shows: black for those that did not move
+            seg = self._gbuf.segment(scene, {n: _id_colour(ids.get(n, 0)) for n in meshes}).astype(np.int64)
+        shown = seg[..., 0] | seg[..., 1] << 8 | seg[..., 2] << 16
+        h, w = depth.shape
+        xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
+        ys = np.arange(h, dtype=np.float64)[:, None] + 0.5
+        motion = np.zeros((h, w, 2), np.float64)
+        view, proj, prev_vp = buffers["view"], buffers["projection"], buffers["prev_view_projection"]
+        for vp, pixels in [(prev_vp, (shown == 0) | ~np.isin(shown, list(ids.values()))),
+                           *((prev_vp @ deltas[n], shown == i) for n, i in ids.items())]:
+            where = pixels & (depth > 0)
+            if not where.any():
+                continue
+            qx, qy, cw = reproject_positions(depth, view, proj, vp)  # (GL window coordinates, y up)
+            mx = np.where(cw > 0, qx - xs, -xs - 1.0)  # (behind the previous camera: off the frame, unseen)
+            my = np.where(cw > 0, (h - qy) - ys, 0.0)
+            motion[where] = np.stack([mx, my], -1)[where]
+        log.debug("motion vectors of %d moved mesh node(s)", len(deltas))
+        return motion.astype(np.float32)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:

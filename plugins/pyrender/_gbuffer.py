@@ -245,12 +245,12 @@ class GBufferRenderer:
         finally:
             scene.bg_color = old
 
-    def draw(self, scene: Any, flags: int | None = None) -> Any:
-        """pyrender's own ``render(scene, flags)`` on this renderer (no G-buffer patch), with
+    def draw(self, scene: Any, flags: int | None = None, seg_node_map: dict[Any, Any] | None = None) -> Any:
+        """pyrender's own ``render(scene, flags, seg_node_map)`` on this renderer (no G-buffer patch), with
         pyrender's errors turned into :class:`PyrenderAdapterError`."""
         renderer = self.renderer
         try:
-            return renderer.render(scene, self._pyrender.RenderFlags.NONE if flags is None else flags)
+            return renderer.render(scene, self._pyrender.RenderFlags.NONE if flags is None else flags, seg_node_map)
         except ValueError as exc:
             if "already bound to a context" in str(exc):
                 raise PyrenderAdapterError(
@@ -275,6 +275,20 @@ class GBufferRenderer:
             inner._program_cache = before
         colour, depth = out
         return np.ascontiguousarray(colour[..., :3]), np.ascontiguousarray(depth, dtype=np.float32)
+
+    def segment(self, scene: Any, colours: dict[Any, tuple[int, int, int]]) -> np.ndarray:
+        """pyrender's segmentation image (``RenderFlags.SEG``) of the mesh nodes in ``colours`` (RGB, 0-255
+        each), without multisampling, so that every pixel holds one node's colour, never a blend of two:
+        ``(H, W, 3)`` uint8, top-left origin, black on background."""
+        inner = self.renderer._renderer
+        before, inner._program_cache = inner._program_cache, self._cache
+        self._cache.defines = {}  # (a pass of ours: multisampling off; pyrender's segmentation shaders untouched)
+        try:
+            colour, _ = self.draw(scene, self._pyrender.RenderFlags.SEG, colours)
+        finally:
+            self._cache.defines = None
+            inner._program_cache = before
+        return np.ascontiguousarray(colour[..., :3])
 
     def render(self, scene: Any, *, albedo: bool = False, normals: Sequence[str] = (),
                material: Sequence[str] = ()) -> GBuffers:
