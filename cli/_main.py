@@ -26,6 +26,7 @@ EXAMPLES = """examples:
   rtp adapters check myengine                     the adapter contract's checks on your engine's adapter
   rtp capture --scene procedural:1 --per-scene 2 --out data/toy
   rtp targets data/toy && rtp train --data data/toy --metric jnyang --out toy.pt
+  rtp import dumps/level1 dumps/level2 --out data/mine   a dataset of your engine's frames, to train on
 """
 
 
