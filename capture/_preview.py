@@ -19,6 +19,7 @@ _COLS = 4
 def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
     """``(title, image, imshow options)`` in sheet order; images are (H, W, 3) in [0, 1] or (H, W)."""
     depth = sample.channel("depth")
+    absent = getattr(sample, "absent", frozenset())
     far = float(np.percentile(depth[depth > 0], 99)) if np.any(depth > 0) else 1.0
     grey = {"cmap": "gray", "vmin": 0.0, "vmax": 1.0}
     out: list[tuple[str, np.ndarray, dict[str, Any]]] = [
@@ -31,9 +32,10 @@ def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
         ("view-space normal (x, y, z as RGB)", np.clip(sample.buffer("normal") * 0.5 + 0.5, 0, 1) * (depth > 0)[..., None],
          {}),
         ("linear depth (scene units)", depth, {"cmap": "viridis", "vmin": 0.0, "vmax": far, "colorbar": True}),
-        ("shadow (1 = lit)", sample.channel("shadow"), grey),
-        ("roughness", sample.channel("roughness"), {**grey, "colorbar": True}),
-        ("metallic", sample.channel("metallic"), {**grey, "colorbar": True}),
+        *((f"{name}{label}", sample.channel(name), {**grey, **extra}) if name not in absent else
+          (f"{name}: not in this dataset", np.zeros_like(depth), grey)  # (an engine's frames imported without it)
+          for name, label, extra in (("shadow", " (1 = lit)", {}), ("roughness", "", {"colorbar": True}),
+                                     ("metallic", "", {"colorbar": True}))),
         ("reprojected previous frame", sample.buffer("reprojected"), {}),
         ("seen (white) / unseen (black)", sample.channel("seen"), grey),
     ]
