@@ -19,7 +19,7 @@ _COLS = 4
 def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
     """``(title, image, imshow options)`` in sheet order; images are (H, W, 3) in [0, 1] or (H, W)."""
     depth = sample.channel("depth")
-    absent = getattr(sample, "absent", frozenset())
+    absent: frozenset[str] = getattr(sample, "absent", frozenset())
     far = float(np.percentile(depth[depth > 0], 99)) if np.any(depth > 0) else 1.0
     grey = {"cmap": "gray", "vmin": 0.0, "vmax": 1.0}
     out: list[tuple[str, np.ndarray, dict[str, Any]]] = [
