@@ -3,6 +3,7 @@
     python examples/pyrender_vrs.py                       # procedural level -> GLB, the shipped JNYang model
     python examples/pyrender_vrs.py --scene level.glb --model flip --out vrs.png   # your level, another model
     python examples/pyrender_vrs.py --model jnyang-reuse --frames 24 --every 4 --gif vrs.gif   # a frame loop
+    python examples/pyrender_vrs.py --frames 24 --moving --gif vrs.gif   # and an object that moves
     python examples/pyrender_vrs.py --model jnyang-8px    # AMD's and Intel's 8-pixel VRS tiles, the model trained on them
     python examples/pyrender_vrs.py --tile-size 8         # the same tiles, each taking its 16-pixel tile's rates
 
@@ -22,7 +23,10 @@ an engine: ``sdk.PredictionReuse`` runs the network every ``--every``-th frame, 
 carries its per-tile estimates (or, for a model that splits such as ``jnyang-reuse``, its trunk's
 features, running only the tail) along the surfaces, fetching each pixel from where the adapter's
 motion vectors say it was (docs/runtime.md). Each frame's line says whether the network ran and
-what choosing the rates cost; ``--gif`` writes the overlays as an animation (imageio).
+what choosing the rates cost; ``--gif`` writes the overlays as an animation (imageio). ``--moving``
+slides a box across the view as the camera walks, and gives the adapter its previous pose every frame
+(``SceneFrame.prev_node_poses``): its pixels are fetched from where the box was, and carried
+estimates follow it.
 
 ``--model`` is a shipped model's name (``sdk.shipped_models()``: jnyang by default, flip, jnflip,
 lpips, psnr, jnyang-reuse, and the models for 8-pixel tiles jnyang-8px, flip-8px, psnr-8px, jnflip-8px)
@@ -173,12 +177,16 @@ def main(argv: list[str] | None = None) -> int:
                     help="frames of the camera move (default 2: one prediction; more: a frame loop with reuse)")
     ap.add_argument("--every", type=int, default=4, help="in a frame loop, run the network every this many frames")
     ap.add_argument("--gif", type=out_animation, help="in a frame loop, write the rate overlays as an animated GIF")
+    ap.add_argument("--moving", action="store_true", help="in a frame loop, a box slides across the view: the "
+                    "adapter makes its motion vectors from its previous pose (SceneFrame.prev_node_poses)")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
                     "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
     args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
     if args.frames < 2 or args.every < 1:
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
+    if args.moving and args.frames < 3:
+        ap.error("--moving slides a box through a frame loop: give --frames 3 or more")
     if args.scene is not None and not args.scene.is_file():
         ap.error(f"--scene: no file at {str(args.scene)!r} (a glTF, GLB or OBJ file)")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -238,6 +246,19 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _add_slider(scene: Any, pose: np.ndarray) -> Any:
+    """A 0.5 m orange box 2.5 m in front of the camera at ``pose`` and a little left of its axis: the node."""
+    import trimesh
+
+    pyrender = import_pyrender()
+    box = pyrender.Mesh.from_trimesh(trimesh.creation.box((0.5, 0.5, 0.5)), smooth=False,
+                                     material=pyrender.MetallicRoughnessMaterial(baseColorFactor=(1.0, 0.5, 0.1, 1.0)))
+    at = np.eye(4)
+    at[:3, 3] = (-0.4, -0.1, -2.5)
+    log.info("a box slides across the view (--moving): its motion vectors from its previous pose")
+    return scene.add(box, pose=pose @ at)
+
+
 def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredictor, poses: list[np.ndarray],
          width: int, height: int) -> int:
     """The frame loop: the adapter's inputs every frame, the network every ``args.every``-th."""
@@ -253,11 +274,18 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
     # the model's planes, then what the loop needs besides: motion vectors (where each pixel was) and depth (sky)
     channels = (*inputs, "motion.x", "motion.y", "depth")
     overlays, saved, ran = [], [], []
+    mover = _add_slider(scene, poses[0]) if args.moving else None
     with Adapter(channels, width, height) as adapter:
         prev_colour, _ = adapter.render(scene, poses[0])
         for i in range(1, len(poses)):
+            moved = None
+            if mover is not None:  # this frame's animation; the adapter is told where the box was
+                moved = {mover: np.array(mover.matrix, copy=True)}
+                step = np.eye(4)
+                step[0, 3] = 0.04  # 4 cm a frame to the first camera's right
+                scene.set_pose(mover, moved[mover] @ step)
             colour, _ = adapter.render(scene, poses[i])
-            planes = adapter.inputs(SceneFrame(scene, poses[i], poses[i - 1], prev_colour))
+            planes = adapter.inputs(SceneFrame(scene, poses[i], poses[i - 1], prev_colour, prev_node_poses=moved))
             x, (motion_x, motion_y, depth) = planes[:len(inputs)], planes[len(inputs):]
             fetch = sdk.fetch_from_motion(motion_x, motion_y)
             seen = x[inputs.index("seen")] if "seen" in inputs else None

@@ -52,6 +52,20 @@ def test_pyrender_example_loops_with_the_reuse_model(tmp_path: Path) -> None:
 
 
 @pytest.mark.gl
+def test_pyrender_example_slides_a_box_through_its_frame_loop(tmp_path: Path) -> None:
+    # --moving: a node moved every frame, its previous pose given to the adapter (SceneFrame.prev_node_poses)
+    out = tmp_path / "vrs.png"
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--frames", "4", "--moving",
+                        "--size", "160x96", "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "a box slides across the view" in r.stderr and out.is_file()
+    assert len([ln for ln in r.stderr.splitlines() if re.match(r"frame +\d+:", ln)]) == 3
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--moving"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "--moving slides a box through a frame loop" in r.stderr
+
+
+@pytest.mark.gl
 def test_moderngl_example_decides_on_the_gpu_and_shades_the_rates(tmp_path: Path) -> None:
     # G-buffers -> the adapter's planes -> onnxruntime -> RateSelector's compute shader -> software VRS
     import imageio.v3 as iio
