@@ -32,7 +32,7 @@ from ._errors import (
     ProviderUnavailableError,
 )
 from ._metadata import DIGEST_RE, FEATURES_NAME, METADATA_KEY, TAIL_KEY, ModelMetadata
-from ._rates import PREDICTED_RATES, RateLike, select_rates
+from ._rates import PREDICTED_RATES, RateLike, select_rates, select_rates_for_saving
 from ._tiles import (
     DEFAULT_TILE_SIZE,
     MIN_HARDWARE_TILE,
@@ -900,6 +900,8 @@ class ShadingRatePredictor:
         x: np.ndarray,
         threshold: float | None = None,
         allowed: Iterable[RateLike] | None = None,
+        *,
+        saving: float | None = None,
     ) -> np.ndarray:
         """Per tile the cheapest allowed rate whose predicted value passes ``threshold``, else 1x1.
 
@@ -909,7 +911,20 @@ class ShadingRatePredictor:
         each rate that factor of the threshold (``select_rates(factors=)``). Returns uint8 D3D12/Vulkan
         rate codes of shape ``(ceil(H/w), ceil(W/w))`` (or ``(N, ...)``), ready to upload as a
         shading-rate image.
+
+        ``saving`` instead of a threshold holds the shading work rather than the quality (a budget, as
+        dynamic resolution holds the frame time): each frame's rates save at least that share of it
+        (``[0, 0.9375]``) at the lowest threshold that does, so with the least visible error its
+        predictions allow (:func:`~rtp.sdk.select_rates_for_saving`, which also says the threshold reached).
         """
+        if saving is not None:
+            if threshold is not None:
+                raise ParameterError("shading_rates: give a threshold (hold the quality) or a saving (hold the "
+                                     "work), not both", "saving")
+            h, w = np.shape(x)[-2:]
+            return select_rates_for_saving(self.predict(x), saving, higher_is_better=self._meta.higher_is_better,
+                                           allowed=allowed, factors=self._meta.rate_factors, frame_size=(h, w),
+                                           tile_size=self._tile).rates
         thr = self._meta.default_threshold if threshold is None else threshold
         rates = select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
                              factors=self._meta.rate_factors)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import reprlib
 from collections.abc import Iterable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,16 +21,19 @@ from ._tiles import tile_extents, tile_grid
 __all__ = [
     "ALL_RATES",
     "MAX_RATE_FACTOR",
+    "MAX_SAVING",
     "MAX_THRESHOLD",
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",
     "RateLike",
+    "SavingSelection",
     "check_rate_factors",
     "check_threshold",
     "rate_size",
     "resolve_allowed",
     "select_rates",
+    "select_rates_for_saving",
     "work_saved",
 ]
 
@@ -225,38 +229,57 @@ def select_rates(
     log10(factor)`` dB (a factor on the error's amplitude, as ``extrapolation_k``). Rates of equal cost
     then compare their values over their own thresholds.
     """
-    try:
-        values = np.asarray(values)
-    except (TypeError, ValueError, OverflowError) as error:  # ragged nested lists and the like
-        raise InputDtypeError(f"values: expected a numeric array, got {type(values).__name__} ({error})") from error
-    if values.dtype.kind not in "biuf":
-        raise InputDtypeError(f"values: expected real numbers (predictions), got dtype {values.dtype}")
-    if values.ndim < 3 or values.shape[-3] != len(PREDICTED_RATES):
-        raise InputShapeError(
-            f"expected predictions with {len(PREDICTED_RATES)} rate channels on axis -3, got shape {values.shape}",
-            actual=tuple(values.shape),
-            expected="(..., 6, th, tw)",
-        )
+    values = _check_values(values)
     if not isinstance(higher_is_better, (bool, np.bool_)):
         raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
     rates = resolve_allowed(allowed)
     threshold = check_threshold(threshold, bool(higher_is_better))
-    scale = check_rate_factors(factors)
-    # Orient every comparison as "smaller is better" so one code path serves both kinds.
+    err = _oriented(values, bool(higher_is_better), check_rate_factors(factors))
+    return _pick(err, -threshold if higher_is_better else threshold, rates)
+
+
+def _check_values(values: object) -> np.ndarray:
+    """Predictions as an array with the six rates on axis -3, else a typed error."""
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError, OverflowError) as error:  # ragged nested lists and the like
+        raise InputDtypeError(f"values: expected a numeric array, got {type(values).__name__} ({error})") from error
+    if array.dtype.kind not in "biuf":
+        raise InputDtypeError(f"values: expected real numbers (predictions), got dtype {array.dtype}")
+    if array.ndim < 3 or array.shape[-3] != len(PREDICTED_RATES):
+        raise InputShapeError(
+            f"expected predictions with {len(PREDICTED_RATES)} rate channels on axis -3, got shape {array.shape}",
+            actual=tuple(array.shape),
+            expected="(..., 6, th, tw)",
+        )
+    return array
+
+
+def _oriented(values: np.ndarray, higher_is_better: bool, scale: tuple[float, ...]) -> np.ndarray:
+    """Every value oriented as "smaller is better" (float64), each rate's factor applied: a value passes a
+    threshold ``t`` where it is below ``t`` (``-t`` for a higher-is-better metric), so one code path serves both."""
     as_float = values.astype(np.float64, copy=False)  # bool and unsigned predictions negate correctly too
     err = -as_float if higher_is_better else as_float
     if any(f != 1.0 for f in scale):  # each rate's value against its own threshold: over the factor, or dB added
         f = np.asarray(scale, np.float64)[:, None, None]
         err = err - 20.0 * np.log10(f) if higher_is_better else err / f
-    thr = -threshold if higher_is_better else threshold
-    # The allowed rates from cheapest (largest area) to dearest, in channel order within a cost class.
+    return err
+
+
+def _classes(rates: tuple[str, ...]) -> list[str]:
+    """The allowed rates from cheapest (largest area) to dearest, in channel order within a cost class."""
+    return sorted(rates, key=lambda r: (-rate_size(r)[0] * rate_size(r)[1], PREDICTED_RATES.index(r)))
+
+
+def _pick(err: np.ndarray, thr: float, rates: tuple[str, ...]) -> np.ndarray:
+    """``select_rates`` on oriented values (:func:`_oriented`) against the oriented threshold ``thr``."""
     # A tile takes the cheapest class with a passing rate, then that class's smallest error (the first
     # in channel order on a tie); NaN never passes (comparisons with NaN are False). A handful of whole-
     # array operations, not a few per rate: each releases the GIL, and a thread waiting to take it back
     # beside Python that holds it waits a switch interval (5 ms) for each (docs/runtime.md "Threads").
-    order = sorted(rates, key=lambda r: (-rate_size(r)[0] * rate_size(r)[1], PREDICTED_RATES.index(r)))
+    order = _classes(rates)
     if not order:
-        return np.full(values.shape[:-3] + values.shape[-2:], RATE_CODES["1x1"], dtype=np.uint8)
+        return np.full(err.shape[:-3] + err.shape[-2:], RATE_CODES["1x1"], dtype=np.uint8)
     areas = [rate_size(r)[0] * rate_size(r)[1] for r in order]
     rank = np.array([sorted(set(areas), reverse=True).index(a) for a in areas], np.int8)
     e = np.take(err, [PREDICTED_RATES.index(r) for r in order], axis=-3)
@@ -265,3 +288,139 @@ def select_rates(
     pick = np.where(passing & (rank[:, None, None] == best), e, np.inf).argmin(axis=-3)
     codes = np.array([RATE_CODES[r] for r in order], np.uint8)
     return np.where(best[..., 0, :, :] < len(order), codes[pick], np.uint8(RATE_CODES["1x1"]))
+
+
+#: The most a shading-rate image can save: every tile at 4x4.
+MAX_SAVING = 1.0 - 1.0 / 16
+
+
+class SavingSelection(NamedTuple):
+    """What :func:`select_rates_for_saving` chose: the rates, the threshold they pass and the work they save.
+
+    For a batch ``(N, 6, th, tw)`` of predictions ``threshold`` and ``saved`` are arrays of ``N``, one per frame."""
+
+    #: uint8 D3D12/Vulkan codes ``(th, tw)`` (``(N, th, tw)``), as :func:`select_rates` returns them.
+    rates: np.ndarray
+    #: The lowest threshold whose rates save the work asked for (metric units; dB for PSNR, the highest):
+    #: ``select_rates(values, threshold, ...)`` gives ``rates`` again.
+    threshold: float | np.ndarray
+    #: The fraction of the shading work ``rates`` saves (:func:`work_saved`): at least the saving asked for
+    #: unless the predictions hold NaN, which never passes.
+    saved: float | np.ndarray
+
+
+def check_saving(saving: object, rates: tuple[str, ...]) -> float:
+    """``saving`` as a float if it is a share of the shading work the ``rates`` allowed can save, else
+    :class:`ParameterError`: a number in ``[0, 1 - 1/area]`` of the coarsest allowed rate (0.9375 with 4x4)."""
+    top = max((1.0 - 1.0 / (rate_size(r)[0] * rate_size(r)[1]) for r in rates), default=0.0)
+    value = math.nan
+    if not isinstance(saving, (bool, np.bool_)) and isinstance(saving, (int, float, np.integer, np.floating)):
+        try:
+            value = float(saving)
+        except OverflowError:  # an int too large for a float: out of range all the same
+            pass
+    if not 0.0 <= value <= top:  # NaN fails too
+        why = (f"the coarsest allowed rate, {_classes(rates)[0]}, saves {top:g}" if rates else
+               "only 1x1 is allowed, which saves nothing")
+        raise ParameterError(f"saving: expected the share of shading work to save, a number in [0, {top:g}] ({why}), "
+                             f"got {reprlib.repr(saving)}", "saving")
+    return value
+
+
+def select_rates_for_saving(
+    values: np.ndarray,
+    saving: float,
+    *,
+    higher_is_better: bool = False,
+    allowed: Iterable[RateLike] | None = None,
+    factors: Mapping[str, float] | Iterable[float] | None = None,
+    frame_size: tuple[int, int] | None = None,
+    tile_size: int | None = None,
+) -> SavingSelection:
+    """Rates that save at least ``saving`` of the shading work with the least visible error: a budget.
+
+    :func:`select_rates` holds the quality (a threshold) and lets the work saved follow the frame; this
+    holds the work (as dynamic resolution holds the frame time) and lets the quality follow. Per frame it
+    finds the lowest threshold (the highest, for PSNR) whose :func:`select_rates` choice saves ``saving``
+    or more, exactly, from the predictions alone: the worst predicted tile is as good as any choice of
+    that saving allows, and every tile passes that threshold. ``saving`` is a share of the full-rate work
+    in ``[0, 0.9375]`` (4x4 everywhere; less where ``allowed`` leaves out the coarse rates); 0 gives 1x1
+    everywhere. ``values``, ``higher_is_better``, ``allowed`` and ``factors`` are :func:`select_rates`'s;
+    ``frame_size = (H, W)`` and ``tile_size`` weigh partial edge tiles by their pixels, as in
+    :func:`work_saved` (without them every tile counts alike). Returns a :class:`SavingSelection`.
+    """
+    values = _check_values(values)
+    if not isinstance(higher_is_better, (bool, np.bool_)):
+        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
+    hib = bool(higher_is_better)
+    rates = resolve_allowed(allowed)
+    target = check_saving(saving, rates)
+    err = _oriented(values, hib, check_rate_factors(factors))
+    th, tw = values.shape[-2:]
+    if (frame_size is None) != (tile_size is None):
+        raise ParameterError("select_rates_for_saving: give frame_size and tile_size together (or neither)",
+                             "frame_size")
+    if frame_size is None or tile_size is None:
+        weights = np.ones((th, tw))
+    else:
+        if not isinstance(frame_size, (tuple, list)) or len(frame_size) != 2:
+            raise ParameterError(f"frame_size: expected (H, W), got {frame_size!r}", "frame_size")
+        h, w = frame_size
+        if tile_grid(h, w, tile_size) != (th, tw):
+            raise InputShapeError(f"select_rates_for_saving: {th}x{tw} tiles do not cover a {w}x{h} frame of "
+                                  f"{tile_size}-pixel tiles ({tile_grid(h, w, tile_size)} would)")
+        weights = np.outer(tile_extents(h, tile_size), tile_extents(w, tile_size)).astype(np.float64)
+    if 0 in values.shape:
+        raise InputShapeError(f"select_rates_for_saving: expected predictions of at least one tile, got shape "
+                              f"{values.shape}", actual=tuple(values.shape), expected="(..., 6, th, tw)")
+    frames = err.reshape((-1,) + err.shape[-3:])
+    picked = np.empty((len(frames), th, tw), np.uint8)
+    thresholds = np.empty(len(frames))
+    saved = np.empty(len(frames))
+    table = np.zeros(256)
+    for r in PREDICTED_RATES:
+        table[RATE_CODES[r]] = 1.0 - 1.0 / (rate_size(r)[0] * rate_size(r)[1])
+    for i, frame in enumerate(frames):
+        thr = _lowest_threshold(frame, rates, weights, target, hib)
+        picked[i] = _pick(frame, thr, rates)
+        thresholds[i] = -thr if hib else thr
+        saved[i] = float((table[picked[i]] * weights).sum() / weights.sum())
+    lead = values.shape[:-3]
+    if not lead:
+        return SavingSelection(picked[0], float(thresholds[0]), float(saved[0]))
+    return SavingSelection(picked.reshape(lead + (th, tw)), thresholds.reshape(lead), saved.reshape(lead))
+
+
+def _lowest_threshold(err: np.ndarray, rates: tuple[str, ...], weights: np.ndarray, target: float, hib: bool) -> float:
+    """The lowest oriented threshold at which :func:`_pick` saves ``target`` of the (weighted) work of one
+    frame's oriented values ``err`` ``(6, th, tw)``.
+
+    A tile's saving only grows with the threshold, one step per cost class: it saves at least class ``k``'s
+    share once the threshold passes ``T_k``, the smallest value of the allowed rates that cost no more than
+    class ``k``. So the frame's saving is a sum of steps, one per tile and class, and the lowest threshold
+    that reaches the target is just above the step where the sorted, weighted steps add up to it."""
+    lo = 0.0 if not hib else -MAX_THRESHOLD  # the oriented thresholds check_threshold allows
+    hi = MAX_THRESHOLD
+    order = _classes(rates)
+    classes = sorted({rate_size(r)[0] * rate_size(r)[1] for r in order})  # dearest (smallest area) first
+    if not classes:
+        return lo
+    smallest = np.empty((len(classes),) + err.shape[1:])
+    for k, area in enumerate(classes):  # each class's best value per tile (NaN never passes)
+        sub = err[[PREDICTED_RATES.index(r) for r in order if rate_size(r)[0] * rate_size(r)[1] == area]]
+        smallest[k] = np.where(np.isnan(sub), np.inf, sub).min(axis=0)
+    steps = np.minimum.accumulate(smallest[::-1], axis=0)[::-1]  # T_k: the best of class k and every cheaper one
+    share = np.array([1.0 - 1.0 / a for a in classes])
+    gain = np.diff(share, prepend=0.0)[:, None, None] * weights  # each step's share of the frame's work
+    at = steps.ravel()
+    sort = np.argsort(at, kind="stable")
+    total = np.cumsum(gain.ravel()[sort])
+    need = target * weights.sum()
+    reachable = at[sort] < np.inf  # (a NaN or an infinite value never passes)
+    if target <= 0.0 or not reachable.any():  # nothing needs to pass (or nothing can): the lowest threshold
+        return lo
+    # the first step at which the sum reaches the target (a rounding's worth short counts as reached);
+    # past the last finite step (NaN tiles never pass), the most the frame can save
+    j = int(np.searchsorted(total, need * (1.0 - 1e-12), side="left"))
+    j = min(j, int(np.flatnonzero(reachable)[-1]))
+    return float(np.clip(np.nextafter(at[sort][j], np.inf), lo, hi))

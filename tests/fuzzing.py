@@ -446,6 +446,28 @@ def _work_saved_absurd(v: tuple[ArraySpec, Any], saved: float) -> bool:
     return not 0.0 <= saved < 1.0 or a.dtype.kind not in "ui" or not set(np.unique(a).tolist()) <= known
 
 
+def _saving_call(v: tuple[ArraySpec, Any, Any, Any]) -> Any:
+    spec, saving, hib, size = v
+    kw = {} if size is None else {"frame_size": size, "tile_size": 16}
+    return sdk.select_rates_for_saving(_array(spec), saving, higher_is_better=hib, **kw)
+
+
+def _saving_absurd(v: tuple[ArraySpec, Any, Any, Any], sel: Any) -> bool:
+    """Accepted: a saving that is no number in [0, 0.9375], predictions that are not (..., 6, th, tw) numbers,
+    rates that are no codes, or less saved than asked of predictions without NaN."""
+    spec, saving, hib, _ = v
+    kind, shape, fill = spec
+    if kind == "list":
+        shape = shape[:3]
+    share = _finite_number(saving)
+    return (
+        share is None or not 0.0 <= share <= sdk.MAX_SAVING or not isinstance(hib, bool)
+        or kind in ("ragged", "object", "str", "complex64") or len(shape) < 3 or shape[-3] != 6 or 0 in shape
+        or sel.rates.dtype != np.uint8 or not set(np.unique(sel.rates).tolist()) <= set(sdk.RATE_CODES.values())
+        or (fill != "nan" and not np.all(np.asarray(sel.saved) >= share - 1e-9))
+    )
+
+
 def _split_call(v: tuple[ArraySpec, Any, Any]) -> np.ndarray:
     spec, factor, grid = v
     return sdk.split_tiles(_array(spec), factor, grid)
@@ -909,6 +931,11 @@ def targets() -> list[Target]:
                _select_call, _select_absurd),
         Target("select_rates: factors", rate_factor_values, lambda f: sdk.select_rates(_VALUES, 0.5, factors=f),
                _factors_absurd),
+        Target("select_rates_for_saving", st.tuples(prediction_arrays, st.one_of(st.floats(0, 1), hostile_numbers),
+                                                    st.one_of(st.booleans(), st.booleans(), json_scalars),
+                                                    st.one_of(st.none(), st.tuples(st.integers(-2, 90),
+                                                                                   st.integers(-2, 90)), json_values)),
+               _saving_call, _saving_absurd),
         Target("work_saved", st.tuples(st.one_of(_arrays(st.integers(0, 4), 3), code_arrays),
                                        st.one_of(st.none(), st.tuples(st.integers(-2, 70), st.integers(-2, 70)),
                                                  json_values)), _work_saved_call, _work_saved_absurd),

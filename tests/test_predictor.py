@@ -103,6 +103,31 @@ def test_shading_rates_uses_the_default_threshold(tiny_model: Callable[..., Path
     assert p.shading_rates(x, allowed=["1x2", "2x1", "2x2"]).tolist() == [[5, 0]]
 
 
+def test_shading_rates_for_a_saving(tiny_model: Callable[..., Path]) -> None:
+    """A budget: the work held, the threshold the frame's own; the worst tile reduced last."""
+    p = sdk.load(tiny_model(base_metadata(default_threshold=0.3)))
+    x = np.full((4, 16, 48), -10.0, np.float32)  # tiny errors ...
+    x[:, :, 16:32] = 0.0  # ... a middling tile ...
+    x[:, :, 32:] = 10.0  # ... and the worst
+    assert p.shading_rates(x, saving=0.3).tolist() == [[10, 0, 0]]  # one tile at 4x4 saves 0.3125
+    assert p.shading_rates(x, saving=0.32).tolist() == [[10, 10, 0]]  # the middling one next (its rates alike)
+    assert p.shading_rates(x, saving=0.9375).tolist() == [[10, 10, 10]]
+    assert p.shading_rates(x, saving=0).tolist() == [[0, 0, 0]]
+    assert p.shading_rates(x, saving=0.5, allowed=["1x2", "2x1", "2x2"]).tolist() == [[5, 5, 0]]
+    values = p.predict(x)
+    sel = sdk.select_rates_for_saving(values, 0.32)
+    assert p.shading_rates(x, threshold=sel.threshold).tolist() == [[10, 10, 0]]
+    both = np.stack([x, x[:, :, ::-1]])  # a batch: each frame its own threshold
+    assert p.shading_rates(both, saving=0.3).tolist() == [[[10, 0, 0]], [[0, 0, 10]]]
+    # partial edge tiles weigh their pixels: in a 40-pixel-wide frame two whole tiles at 4x4 save 0.75 of
+    # its work (counted per tile, the last one would have to be reduced too)
+    assert p.shading_rates(x[:, :, :40], saving=0.75).tolist() == [[10, 10, 0]]
+    with pytest.raises(sdk.ParameterError, match="give a threshold .* or a saving .*, not both"):
+        p.shading_rates(x, threshold=0.3, saving=0.5)
+    with pytest.raises(sdk.ParameterError, match=r"saving: expected .* \[0, 0.5\]"):
+        p.shading_rates(x, saving=0.6, allowed=["1x2"])
+
+
 def test_properties(tiny_model: Callable[..., Path]) -> None:
     p = sdk.load(tiny_model(), threads=1)
     assert p.rates == ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4")

@@ -220,3 +220,113 @@ def test_selection_agrees_with_a_rate_by_rate_walk(values: np.ndarray, allowed: 
     np.testing.assert_array_equal(got, _select_rate_by_rate(scaled, threshold, in_channel_order))
     psnr = sdk.select_rates(-values, -threshold, higher_is_better=True, allowed=allowed)
     np.testing.assert_array_equal(psnr, _select_rate_by_rate(values, threshold, in_channel_order))
+
+
+# -- a budget: rates for a share of the work saved ------------------------------------------------------------
+
+
+def _saved(rates: np.ndarray, weights: np.ndarray) -> float:
+    share = np.vectorize(lambda c: sdk.work_saved(int(c)))(rates)
+    return float((share * weights).sum() / weights.sum())
+
+
+def _lowest_by_scan(values: np.ndarray, saving: float, weights: np.ndarray, **kw: object) -> float:
+    """The lowest threshold reaching ``saving``, by trying every value (and just above it) in order."""
+    scaled = values / np.asarray(kw.get("factors") or [1.0] * 6)[:, None, None]  # each rate's own threshold
+    candidates = sorted({0.0, *(float(np.nextafter(v, np.inf)) for v in scaled.ravel() if 0 <= v < 1e6)})
+    for t in candidates:
+        if _saved(sdk.select_rates(values, t, **kw), weights) >= saving * (1 - 1e-12):
+            return t
+    return candidates[-1]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    values=hnp.arrays(np.float64, st.tuples(st.just(6), st.integers(1, 4), st.integers(1, 5)),
+                      elements=st.one_of(st.sampled_from([0.1, 0.2, 0.25, 0.3]), st.floats(0, 1))),
+    saving=st.floats(0, 1),
+    allowed=st.one_of(st.none(), st.lists(st.sampled_from(sdk.PREDICTED_RATES), unique=True, min_size=1)),
+    factors=st.one_of(st.none(), st.lists(st.sampled_from([0.5, 1.0, 2.0]), min_size=6, max_size=6)),
+    edge=st.booleans(),
+)
+def test_a_saving_is_reached_at_the_lowest_threshold(values: np.ndarray, saving: float, allowed: list[str] | None,
+                                                      factors: list[float] | None, edge: bool) -> None:
+    """The rates save what was asked, pass the threshold returned, and no lower threshold saves as much; on
+    partial edge tiles each tile weighs its pixels."""
+    top = max(sdk.work_saved(r) for r in (allowed or sdk.PREDICTED_RATES))
+    saving *= top
+    th, tw = values.shape[1:]
+    size = (th * 16 - (5 if edge else 0), tw * 16 - (9 if edge else 0))
+    weights = np.outer(sdk.tile_extents(size[0], 16), sdk.tile_extents(size[1], 16)).astype(float)
+    kw = {"allowed": allowed, "factors": factors}
+    sel = sdk.select_rates_for_saving(values, saving, frame_size=size, tile_size=16, **kw)
+    assert sel.rates.dtype == np.uint8 and sel.rates.shape == (th, tw)
+    np.testing.assert_array_equal(sel.rates, sdk.select_rates(values, sel.threshold, **kw))
+    assert sel.saved == pytest.approx(_saved(sel.rates, weights)) == pytest.approx(
+        sdk.work_saved(sel.rates, size, 16))
+    assert sel.saved >= saving * (1 - 1e-12)
+    assert sel.threshold == pytest.approx(_lowest_by_scan(values, saving, weights, **kw), rel=1e-12, abs=0)
+    # PSNR-like (higher is better): the same choice on the negated values, the threshold negated
+    hib = sdk.select_rates_for_saving(-values, saving, higher_is_better=True, frame_size=size, tile_size=16,
+                                      allowed=allowed)
+    plain = sdk.select_rates_for_saving(values, saving, frame_size=size, tile_size=16, allowed=allowed)
+    np.testing.assert_array_equal(hib.rates, plain.rates)
+    assert hib.saved == plain.saved
+    # (no saving asks for nothing to pass: each kind's lowest threshold, 0 for an error, the top dB for PSNR)
+    if saving > 0:
+        assert hib.threshold == -plain.threshold
+    else:  # (no saving asks for nothing to pass: each kind's lowest threshold, 0 for an error, the top dB for PSNR)
+        assert plain.threshold == 0 and hib.threshold > 1000 and (hib.rates == 0).all()
+
+
+def test_a_saving_per_frame_of_a_batch_and_with_nan() -> None:
+    rng = np.random.default_rng(3)
+    values = rng.random((3, 6, 4, 5))
+    sel = sdk.select_rates_for_saving(values, 0.6)
+    assert sel.rates.shape == (3, 4, 5) and np.shape(sel.threshold) == (3,) and np.shape(sel.saved) == (3,)
+    for i in range(3):
+        one = sdk.select_rates_for_saving(values[i], 0.6)
+        np.testing.assert_array_equal(sel.rates[i], one.rates)
+        assert (sel.threshold[i], sel.saved[i]) == (one.threshold, one.saved)
+        assert isinstance(one.threshold, float) and isinstance(one.saved, float)
+    # a tile whose predictions are all NaN never passes: the rest save what they can
+    values[0, :, 0, 0] = np.nan
+    full = sdk.select_rates_for_saving(values[0], sdk.MAX_SAVING)
+    assert full.rates[0, 0] == sdk.RATE_CODES["1x1"] and (full.rates.ravel()[1:] == sdk.RATE_CODES["4x4"]).all()
+    assert full.saved == pytest.approx(sdk.MAX_SAVING * 19 / 20)
+    assert full.threshold < 1.0  # (the lowest threshold saving what can be saved: not one past every number)
+    nothing = sdk.select_rates_for_saving(np.full((6, 2, 2), np.nan), 0.5)
+    assert (nothing.rates == 0).all() and nothing.saved == 0.0
+    # no saving: 1x1 everywhere, at a threshold nothing passes
+    zero = sdk.select_rates_for_saving(values[1], 0)
+    assert (zero.rates == 0).all() and zero.saved == 0.0
+    assert (sdk.select_rates(values[1], zero.threshold) == 0).all()
+
+
+@pytest.mark.parametrize(
+    ("saving", "kw", "match"),
+    [
+        (0.95, {}, r"saving: expected the share of shading work to save, a number in \[0, 0.9375\] \(the coarsest "
+                   r"allowed rate, 4x4, saves 0.9375\), got 0.95"),
+        (0.6, {"allowed": ["1x2", "2x1"]}, r"in \[0, 0.5\] \(the coarsest allowed rate, 1x2, saves 0.5\)"),
+        (0.1, {"allowed": ["1x1"]}, r"in \[0, 0\] \(only 1x1 is allowed, which saves nothing\), got 0.1"),
+        (-0.1, {}, r"got -0.1"),
+        (float("nan"), {}, r"got nan"),
+        (True, {}, r"got True"),
+        ("half", {}, r"got 'half'"),
+        (0.5, {"frame_size": (32, 32)}, r"give frame_size and tile_size together"),
+        (0.5, {"frame_size": 32, "tile_size": 16}, r"frame_size: expected \(H, W\), got 32"),
+    ],
+)
+def test_a_saving_out_of_range_is_a_clear_error(saving: object, kw: dict, match: str) -> None:
+    with pytest.raises(sdk.ParameterError, match=match):
+        sdk.select_rates_for_saving(np.zeros((6, 2, 2)), saving, **kw)  # type: ignore[arg-type]
+
+
+def test_a_saving_checks_the_tile_grid() -> None:
+    with pytest.raises(sdk.InputShapeError, match=r"2x2 tiles do not cover a 64x32 frame of 16-pixel tiles"):
+        sdk.select_rates_for_saving(np.zeros((6, 2, 2)), 0.5, frame_size=(32, 64), tile_size=16)
+    with pytest.raises(sdk.InputShapeError, match="6 rate channels on axis -3"):
+        sdk.select_rates_for_saving(np.zeros((5, 2, 2)), 0.5)
+    with pytest.raises(sdk.InputShapeError, match=r"at least one tile, got shape \(6, 0, 3\)"):
+        sdk.select_rates_for_saving(np.zeros((6, 0, 3)), 0.5)
