@@ -1056,7 +1056,8 @@ def build_parser() -> argparse.ArgumentParser:
                  "NAME@k:hW, blend its estimates with weight W on those carried from the last frame; NAME@k:sN, "
                  "carry one pixel of every N per axis, default four per tile and axis; NAME@k:vA, rescale carried "
                  "estimates by the blocks' variance; NAME@k:cF, multiply them by F; NAME@k:features, a model that "
-                 "splits carries its trunk's features and runs its tail on every frame), or\n"
+                 "splits carries its trunk's features and runs its tail on every frame; NAME@k:bS, a budget: save a share S of "
+                 "the shading work every frame, swept over S), or\n"
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
     pl.add_argument("scene", help="a map name of `rtp scenes list`, procedural:<seed>, or your own .glb/.gltf/.obj file")
@@ -1132,11 +1133,16 @@ def build_parser() -> argparse.ArgumentParser:
                  "\n\nexamples:\n  rtp predict frame.npz --write-example   "
                  "a frame of the reference renderer, to see the layout\n  rtp predict frame.npz --model flip --out "
                  "predicted\n  rtp predict frames --write-example --frames 30   a sequence along a camera path"
-                 "\n  rtp predict frames --out predicted   every frame_*.npz of the folder, in order")
+                 "\n  rtp predict frames --out predicted   every frame_*.npz of the folder, in order"
+                 "\n  rtp predict frames --saving 0.5   rates that save half the shading work every frame")
     pr.add_argument("frames", nargs="+", type=_path_text, metavar="frame", help="the .npz of a frame's G-buffers "
                     "(written with --write-example), several, or a folder of them (taken in the order of their names)")
     pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
-    pr.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    hold = pr.add_mutually_exclusive_group()
+    hold.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    hold.add_argument("--saving", type=float, default=None, metavar="SHARE", help="a budget instead of a threshold: "
+                      "each frame's rates save at least this share of the shading work (0 to 0.9375), at the lowest "
+                      "threshold that does (sdk.select_rates_for_saving), which is reported a frame")
     pr.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
                     "the model's)")
     pr.add_argument("--allowed", default=None, help="comma-separated reduced rates the hardware has (default: all "

@@ -151,7 +151,8 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     """One frame file's summary, arrays, predicted values and rate codes; with ``reuse`` (an
     ``sdk.PredictionReuse``) its values, the network run or its estimates carried from the frame before
     along the frame's motion. What in the frame looks like a convention mistake is logged
-    (``sdk.check_gbuffers``), each kind once in ``warned``."""
+    (``sdk.check_gbuffers``), each kind once in ``warned``. With ``args.saving`` the rates save that share
+    of the work at the frame's lowest threshold, which the summary holds instead of ``threshold``."""
     from rtp import sdk
 
     frame = _read_frame(path)
@@ -179,12 +180,20 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
         fetch = None if reuse.age is None else sdk.fetch_from_motion(named["motion.x"], named["motion.y"])
         values = reuse.predict(x, fetch, named.get("seen"), named["depth"] <= 0.0)
     ms = 1000.0 * (time.perf_counter() - start)
-    rates = sdk.select_rates(values, threshold, higher_is_better=predictor.metadata.higher_is_better,
-                             allowed=allowed, factors=predictor.metadata.rate_factors)
+    meta = predictor.metadata
+    if args.saving is None:
+        rates = sdk.select_rates(values, threshold, higher_is_better=meta.higher_is_better, allowed=allowed,
+                                 factors=meta.rate_factors)
+    else:
+        budget = sdk.select_rates_for_saving(values, args.saving, higher_is_better=meta.higher_is_better,
+                                             allowed=allowed, factors=meta.rate_factors, frame_size=(h, w),
+                                             tile_size=predictor.tile_size)
+        rates, threshold = budget.rates, float(budget.threshold)
     counts = {r: int((rates == c).sum()) for r, c in sdk.RATE_CODES.items()}
     summary: dict[str, Any] = {
         "frame": path, "size": [w, h], "tiles": list(rates.shape), "rates": {r: n for r, n in counts.items() if n},
-        "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "predict_ms": ms, "warnings": warnings,
+        "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "threshold": threshold, "predict_ms": ms,
+        "warnings": warnings,
     }
     if reuse is not None:
         summary["network"] = float(reuse.work)
@@ -223,14 +232,16 @@ def run_predict(args: argparse.Namespace) -> int:
     predictor = sdk.load(args.model, tile_size=args.tile_size)
     threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
     allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
+    if args.saving is not None:  # (its range, with the rates allowed, before the first frame's work)
+        sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, allowed=allowed)
     model = predictor.path.name if predictor.path else args.model
     if sequence:
         return _run_sequence(args, files, predictor, threshold, allowed, model)
     summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
                "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
-               "threshold": threshold, "rates": summary["rates"], "work_saved": summary["work_saved"],
-               "predict_ms": summary["predict_ms"], "warnings": summary["warnings"]}
+               "threshold": summary["threshold"], "saving": args.saving, "rates": summary["rates"],
+               "work_saved": summary["work_saved"], "predict_ms": summary["predict_ms"], "warnings": summary["warnings"]}
     if args.out:
         summary["wrote"] = _write_out(args.out, frame, values, rates, predictor.tile_size)
     if args.json:
@@ -238,7 +249,7 @@ def run_predict(args: argparse.Namespace) -> int:
         return 0
     w, h = summary["size"]
     print(f"{model} ({summary['metric']}) on {summary['frame']}: {w}x{h}, {rates.shape[1]}x{rates.shape[0]} "
-          f"tiles of {predictor.tile_size}px, threshold {threshold:g}")
+          f"tiles of {predictor.tile_size}px, " + _holding(args, summary["threshold"]))
     print("rates      " + ", ".join(f"{r} {n}" for r, n in summary["rates"].items()))
     print(f"saved      {100.0 * summary['work_saved']:.1f}% of the shading work")
     print(f"predict    {summary['predict_ms']:.1f} ms (onnxruntime, {predictor.provider})")
@@ -269,11 +280,13 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     shown = [os.path.relpath(os.path.abspath(f), base) for f in files]  # (each frame's name under the folder)
     width = max(5, *map(len, shown))
     if not args.json and not args.quiet:
-        print(f"{model} ({predictor.metadata.metric}), threshold {threshold:g}, tiles of {predictor.tile_size}px, "
+        held = f"a saving of {args.saving:g}" if args.saving is not None else f"threshold {threshold:g}"
+        print(f"{model} ({predictor.metadata.metric}), {held}, tiles of {predictor.tile_size}px, "
               f"{len(files)} frames in {os.path.relpath(base) if base.startswith(os.getcwd()) else base}")
         if reuse is not None:
             print(f"prediction reuse: the network every {args.every} frames, its {reuse.carry} carried between")
-        print(f"{'frame':<{width}} {'saved':>7} {'changed':>8} {'predict':>9}" + ("  network" if reuse else ""))
+        print(f"{'frame':<{width}} {'saved':>7} {'changed':>8} {'predict':>9}" + ("  network" if reuse else "")
+              + ("  threshold" if args.saving is not None else ""))
     # (the lines a frame are the progress in text; a bar beside them would be drawn between them)
     quiet_bar = argparse.Namespace(**{**vars(args), "no_progress": args.no_progress or not (args.json or args.quiet)})
     with Bar(quiet_bar, len(files), "predict", "frame") as bar:
@@ -303,8 +316,9 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
                 changed = "" if row["changed"] is None else f"{100.0 * row['changed']:.1f}%"
                 network = "" if reuse is None else "  ran" if row["network"] >= 1.0 else (
                     f"  carried ({row['network']:.0%} of a run)" if row["network"] > 0 else "  carried")
+                reached = "" if args.saving is None else f"  {row['threshold']:.4g}"
                 print(f"{shown[i]:<{width}} {100.0 * row['work_saved']:>6.1f}% {changed:>8} {row['predict_ms']:>6.1f} ms"
-                      + network)
+                      + network + reached)
             bar.update_to(i + 1)
     for n, first in warned.values():
         if n > 1:
@@ -312,7 +326,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     changes = [r["changed"] for r in rows if r["changed"] is not None]
     summary: dict[str, Any] = {
         "frames": rows, "model": model, "metric": predictor.metadata.metric, "size": first_size,
-        "tile_size": predictor.tile_size, "threshold": threshold,
+        "tile_size": predictor.tile_size, "threshold": threshold if args.saving is None else None, "saving": args.saving,
         "work_saved": float(np.mean([r["work_saved"] for r in rows])),
         "changed": float(np.mean(changes)) if changes else None,
         "predict_ms": float(np.median([r["predict_ms"] for r in rows])),
@@ -320,13 +334,21 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     }
     if reuse is not None:
         summary.update(every=args.every, network=float(np.mean([r["network"] for r in rows])))
+    if args.saving is not None:  # (the quality a budget left each frame: its threshold's spread)
+        levels = np.array([r["threshold"] for r in rows], np.float64)
+        summary["thresholds"] = {"min": float(levels.min()), "median": float(np.median(levels)),
+                                 "max": float(levels.max())}
     if args.out:
-        summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays)
+        summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays, args.saving is not None)
     if args.json:
         print(json.dumps(summary))
         return 0
     changed = "" if summary["changed"] is None else f", {100.0 * summary['changed']:.1f}% of tiles change rate a frame"
     network = "" if reuse is None else f"; the network's work {100.0 * summary['network']:.0f}% of a run a frame"
+    if args.saving is not None:
+        spread = summary["thresholds"]
+        network += (f"; thresholds reached {spread['median']:.4g} (median; {spread['min']:.4g} to "
+                    f"{spread['max']:.4g})")
     print(f"mean: {100.0 * summary['work_saved']:.1f}% of the shading work saved{changed}{network}; predict "
           f"{summary['predict_ms_mean']:.1f} ms a frame (median {summary['predict_ms']:.1f}; onnxruntime, "
           f"{predictor.provider})")
@@ -358,9 +380,10 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
 
 
 def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.ndarray], values: list[np.ndarray],
-                        overlays: list[np.ndarray]) -> list[str]:
+                        overlays: list[np.ndarray], budget: bool = False) -> list[str]:
     """``rates.npy`` (uint8 ``(N, th, tw)``), ``predictions.npy`` (float32 ``(N, 6, th, tw)``), ``frames.csv``
-    (a row a frame), ``overlay.gif`` (the overlays at :data:`GIF_FPS`) and ``frames.png`` (the curves)."""
+    (a row a frame), ``overlay.gif`` (the overlays at :data:`GIF_FPS`) and ``frames.png`` (the curves; with
+    ``budget``, the threshold each frame reached too)."""
     import csv
     import io
 
@@ -377,17 +400,24 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
             np.save(f, array)
     text = io.StringIO()
     writer = csv.writer(text, lineterminator="\n")
-    writer.writerow(["frame", "work_saved", "changed", "predict_ms", "network", *sdk.RATE_CODES])
+    writer.writerow(["frame", "work_saved", "changed", "predict_ms", "network", "threshold", *sdk.RATE_CODES])
     for r in rows:
         writer.writerow([r["frame"], f"{r['work_saved']:.6f}", "" if r["changed"] is None else f"{r['changed']:.6f}",
-                         f"{r['predict_ms']:.3f}", f"{r['network']:.4f}" if "network" in r else "",
+                         f"{r['predict_ms']:.3f}", f"{r['network']:.4f}" if "network" in r else "", f"{r['threshold']:.6g}",
                          *(r["rates"].get(k, 0) for k in sdk.RATE_CODES)])
     with sdk.files.atomic_output(out / "frames.csv") as tmp:
         tmp.write_text(text.getvalue())
     with sdk.files.atomic_output(out / "overlay.gif") as tmp:
         iio.imwrite(tmp, np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
-    save_image(out / "frames.png", sequence_curves(rows))
+    save_image(out / "frames.png", sequence_curves(rows, thresholds=budget))
     return ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"]
+
+
+def _holding(args: argparse.Namespace, threshold: float) -> str:
+    """What a single frame's rates held: the threshold, or (``--saving``) the saving and the threshold reached."""
+    if args.saving is None:
+        return f"threshold {threshold:g}"
+    return f"a saving of {args.saving:g} (a budget), reached at threshold {threshold:.4g}"
 
 
 def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, rates: np.ndarray,

@@ -354,19 +354,23 @@ def play_frames(report: Any) -> np.ndarray:
     return figure_image(fig)
 
 
-def sequence_curves(rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
+def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False) -> np.ndarray:
     """A model over a sequence of an engine's frames (``rtp predict`` on several frames), frame by frame: the
     shading work its rates save, the share of tiles whose rate changed from the frame before, and its
     predict time. ``rows``: one mapping a frame with ``work_saved``, ``changed`` (None on the first) and
-    ``predict_ms``."""
+    ``predict_ms``. ``thresholds``: a fourth panel, each frame's ``threshold`` (what a budget,
+    ``--saving``, reached)."""
     from matplotlib.ticker import MaxNLocator
 
-    fig = _figure(1300, 300)
-    axes = fig.subplots(1, 3)
+    panels = [([100 * r["work_saved"] for r in rows], "shading work saved, %"),
+              ([np.nan if r["changed"] is None else 100 * r["changed"] for r in rows], "tiles whose rate changed, %"),
+              ([r["predict_ms"] for r in rows], "predict, ms")]
+    if thresholds:
+        panels.append(([r["threshold"] for r in rows], "threshold reached (each reduced tile predicted below it)"))
+    fig = _figure(1300 if len(panels) == 3 else 1700, 300)
+    axes = fig.subplots(1, len(panels))
     t = np.arange(len(rows))
-    changed = [np.nan if r["changed"] is None else 100 * r["changed"] for r in rows]
-    for ax, y, title in zip(axes, ([100 * r["work_saved"] for r in rows], changed, [r["predict_ms"] for r in rows]),
-                            ("shading work saved, %", "tiles whose rate changed, %", "predict, ms")):
+    for ax, (y, title) in zip(axes, panels):
         ax.plot(t, y, marker="o" if len(rows) <= 30 else None, markersize=3, linewidth=1.0, color="#1f77b4")
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("frame", fontsize=8)

@@ -168,7 +168,8 @@ def test_a_sequence_gives_each_frames_rates_and_the_changes_between_them(
     assert got["work_saved"] == pytest.approx(np.mean([r["work_saved"] for r in got["frames"]]))
     assert got["wrote"] == ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"]
     lines = (out / "frames.csv").read_text().splitlines()
-    assert lines[0] == "frame,work_saved,changed,predict_ms,network," + ",".join(sdk.RATE_CODES) and len(lines) == 5
+    assert lines[0] == "frame,work_saved,changed,predict_ms,network,threshold," + ",".join(sdk.RATE_CODES)
+    assert len(lines) == 5 and {row.split(",")[5] for row in lines[1:]} == {"0.25"}  # (a threshold held)
     assert lines[1].split(",")[2] == "" and float(lines[2].split(",")[2]) == pytest.approx(changes[0], abs=1e-6)
     import imageio.v3 as iio
 
@@ -181,6 +182,48 @@ def test_a_sequence_gives_each_frames_rates_and_the_changes_between_them(
         err = np.abs(gif[i] - want).mean()
         assert err < 3.0 and (i == 0 or err < np.abs(gif[i] - wrong).mean() / 2), (i, err)  # (a GIF's palette)
     assert iio.imread(out / "frames.png").ndim == 3
+
+
+def test_a_budget_holds_the_work_saved_and_reports_each_frames_threshold(
+        sequence: Path, frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--saving S: each frame's rates are the SDK's for that budget, save at least S, and the threshold each
+    frame reached is in the summary, frames.csv and the text; --saving and --threshold exclude each other."""
+    out = tmp_path / "out"
+    assert main(["predict", str(sequence), "--saving", "0.55", "--out", str(out), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    rates = np.load(out / "rates.npy")
+    predictor = sdk.load("jnyang")
+    reached = []
+    for i, f in enumerate(sorted(sequence.glob("*.npz"))):
+        with np.load(f) as npz:
+            x = sdk.input_planes(predictor.metadata.inputs, **{k: npz[k] for k in npz.files if k in sdk.GBUFFERS})
+        want = sdk.select_rates_for_saving(predictor.predict(x), 0.55, factors=predictor.metadata.rate_factors,
+                                           frame_size=(96, 160), tile_size=16)
+        np.testing.assert_array_equal(rates[i], want.rates)
+        np.testing.assert_array_equal(rates[i], predictor.shading_rates(x, saving=0.55))
+        row = got["frames"][i]
+        assert row["threshold"] == pytest.approx(want.threshold) and row["work_saved"] == pytest.approx(want.saved)
+        assert row["work_saved"] >= 0.55
+        reached.append(want.threshold)
+    assert len(set(reached)) > 1  # the quality follows the frames
+    assert got["saving"] == 0.55 and got["threshold"] is None
+    assert got["thresholds"] == {"min": pytest.approx(min(reached)), "median": pytest.approx(np.median(reached)),
+                                 "max": pytest.approx(max(reached))}
+    lines = (out / "frames.csv").read_text().splitlines()
+    assert [float(row.split(",")[5]) for row in lines[1:]] == pytest.approx(reached, rel=1e-5)
+    assert main(["predict", *map(str, sorted(sequence.glob("*.npz"))[:2]), "--saving", "0.55"]) == 0
+    text = capsys.readouterr().out.splitlines()
+    assert text[0].startswith("jnyang.onnx (jnyang), a saving of 0.55, tiles of 16px, 2 frames")
+    assert text[1].split()[-1] == "threshold" and float(text[2].split()[-1]) == pytest.approx(reached[0], rel=1e-3)
+    assert "; thresholds reached " in text[-1]
+    assert main(["predict", str(frame), "--saving", "0.7", "--allowed", "1x2,2x1,2x2"]) == 0
+    text = capsys.readouterr().out
+    assert "a saving of 0.7 (a budget), reached at threshold " in text and "4x4" not in text
+    assert main(["predict", str(frame), "--saving", "0.8", "--allowed", "1x2,2x1,2x2"]) == 2
+    assert "saving: expected the share of shading work to save, a number in [0, 0.75]" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:
+        main(["predict", str(frame), "--saving", "0.5", "--threshold", "0.2"])
+    assert exit_.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
 
 
 def test_a_sequence_in_text_a_line_a_frame(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:
