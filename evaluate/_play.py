@@ -23,7 +23,9 @@ runs the network early once more than a share S of the tiles is unseen since it 
 carries one pixel of every N per axis; ``NAME@k:vA`` rescales carried estimates by the blocks'
 variance, ``sdk.PredictionReuse(rescale=A)``; ``NAME@k:cF`` multiplies carried estimates by F,
 ``sdk.PredictionReuse(carry_scale=F)``; ``NAME@k:features`` carries a splitting model's trunk features
-and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``), ``yang2019``
+and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``; ``NAME@k:bS`` holds a budget
+instead of a threshold: every frame's rates save a share S of the work, ``sdk.select_rates_for_saving``,
+and the sweep is over S), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -107,6 +109,8 @@ METHOD_KINDS = {
 #: 1/256-1/8 fast, 1/32-1/2 slow): the matched-quality table interpolates linearly between points,
 #: which under-reads a concave curve when they are far apart.
 MODEL_SWEEP = (0.25, 0.5, 0.7, 0.8, 0.9, 1.0, 1.25, 2.0)
+#: A budget's sweep (``NAME@k:bS``): the share of the work saved every frame.
+SAVING_SWEEP = (0.2, 0.3, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9)
 PSNR_SWEEP_DB = (12.0, 6.0, 3.0, 2.0, 1.0, 0.0, -2.0, -6.0)
 BASELINE_SWEEP = (1 / 256, 1 / 128, 1 / 64, 1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 4.0)
 #: Default parameters of the baselines: Yang's sensitivity (JNYang units), FFX's cutoff (luma).
@@ -129,7 +133,8 @@ class MethodSpec:
     how a reused tile reduces the estimates its pixels carry (:data:`REUSE_REDUCTIONS`), what it does
     with tiles the network did not see (:data:`REUSE_UNSEEN`), the ``history`` weight of the carried
     estimates on the network's frames, the ``refresh`` share of unseen tiles that runs the network
-    early and the carry's pixel ``step`` (``sdk.PredictionReuse``'s arguments of those names)."""
+    early and the carry's pixel ``step`` (``sdk.PredictionReuse``'s arguments of those names); ``budget``, the share of
+    the work its rates save every frame (``sdk.select_rates_for_saving``) instead of a threshold."""
 
     name: str
     kind: str
@@ -143,6 +148,7 @@ class MethodSpec:
     rescale: float = 0.0
     carry_scale: float = 1.0
     carry: str = "estimates"
+    budget: float | None = None
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
@@ -151,8 +157,9 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
     weight W), ``:rS`` (refresh share S), ``:sN`` (the carry keeps one pixel of N per axis), ``:vA``
     (carried estimates rescaled by the blocks' variance to the power A), ``:cF`` (carried estimates
-    multiplied by F) and ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features)
-    in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``, ``jnyang@4:s4``, ``split.onnx@4:features``)."""
+    multiplied by F), ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features) and ``:bS``
+    (a budget: save a share S of the work every frame) in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``,
+    ``jnyang@4:s4``, ``split.onnx@4:features``, ``jnyang@1:b0.6``)."""
     if not isinstance(text, str) and (not isinstance(text, Iterable) or not all(isinstance(t, str) for t in text)):
         raise PlayError(f"methods: expected a comma-separated string or a list of method names, got {text!r}")
     # (a model file whose name holds a comma or an '@' is taken whole: "model@v2.onnx" is no reuse interval)
@@ -178,21 +185,22 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         rescale = [_exponent(o, item) for o in options if o[:1] == "v"]
         carry = [o for o in options if o in REUSE_CARRIES]
         scale = [_carry_scale(o, item) for o in options if o[:1] == "c" and o not in REUSE_CARRIES]
+        budget = [_budget(o, item) for o in options if o[:1] == "b"]
         if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
-                or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1
+                or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1 or len(budget) > 1
                 or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) + len(scale)
-                + len(carry) != len(options)):
+                + len(carry) + len(budget) != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
                             f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
                             "refresh share (both in [0, 1)), one ':sN' pixel step, one ':vA' rescale exponent and "
-                            f"one ':cF' carry scale and one ':carry' ({', '.join(REUSE_CARRIES)}), e.g. "
-                            "jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, jnyang@4:v0.5, "
-                            "jnyang@4:c1.08 or split.onnx@4:features")
+                            f"one ':cF' carry scale, one ':carry' ({', '.join(REUSE_CARRIES)}) and one ':bS' budget, "
+                            "e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, jnyang@4:v0.5, "
+                            "jnyang@4:c1.08, split.onnx@4:features or jnyang@1:b0.6")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
                               refresh[0] if refresh else None, step[0] if step else None,
                               rescale[0] if rescale else 0.0, scale[0] if scale else 1.0,
-                              carry[0] if carry else MethodSpec.carry))
+                              carry[0] if carry else MethodSpec.carry, budget[0] if budget else None))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -232,6 +240,17 @@ def _carry_scale(option: str, item: str) -> float:
         raise PlayError(f"method {item!r}: ':{option}' is not a carry scale: expected ':c' and a factor in "
                         f"[{1 / sdk.MAX_CARRY_SCALE:g}, {sdk.MAX_CARRY_SCALE:g}], e.g. jnyang@4:c1.08")
     return f
+
+
+def _budget(option: str, item: str) -> float:
+    try:
+        b = float(option[1:])
+    except ValueError:
+        b = math.nan
+    if not 0.0 <= b <= sdk.MAX_SAVING:
+        raise PlayError(f"method {item!r}: ':{option}' is not a budget: expected ':b' and the share of the shading work "
+                        f"to save every frame, a number in [0, {sdk.MAX_SAVING:g}], e.g. jnyang@1:b0.6")
+    return b
 
 
 def _share(option: str, item: str, what: str) -> float:
@@ -303,6 +322,7 @@ class _Loop:
         return {
             "method": self.method.name, "parameter": self.label, "value": self.param, "default": self.default,
             "work_saved": mean(self.saved), "fail_share": mean(self.fail), "flip_mean": mean(self.flip),
+            "work_saved_p05": float(np.percentile(self.saved[1:], 5)) if len(self.saved) > 1 else float("nan"),
             "rate_change": mean(self.change, 2),
             "predict_ms": float(np.median(self.ms[1:])) if len(self.ms) > 1 else float("nan"),
             "network_frames": mean([float(r) for r in self.ran]) if self.method.kind == "model" else float("nan"),
@@ -389,14 +409,18 @@ class PlayReport:
                     "-" if not np.isfinite(c["work_saved"]) else f"{'>= ' if c.get('capped') else ''}{100 * c['work_saved']:.1f}%"
                     for c in cells) + " |")
             lines += ["", "Every run (the default parameter in bold):", "",
-                      "| method | parameter | saved | failing tiles | mean FLIP | rate changes | choose (ms) | network runs |",
-                      "|---|---|---:|---:|---:|---:|---:|---:|"]
+                      "| method | parameter | saved | saved, worst 5% of frames | failing tiles | mean FLIP | rate changes "
+                      "| choose (ms) | network runs |",
+                      "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
             for r in (r for r in self.rows if r["path"] == path):
                 p = f"**{r['parameter']}**" if r["default"] else r["parameter"]
                 net = "" if not np.isfinite(r["network_frames"]) else f"{100 * r['network_frames']:.0f}%"
                 flip = "-" if not np.isfinite(r["flip_mean"]) else f"{r['flip_mean']:.4f}"
-                lines.append(f"| {r['method']} | {p} | {100 * r['work_saved']:.1f}% | {100 * r['fail_share']:.2f}% | "
-                             f"{flip} | {100 * r['rate_change']:.1f}% | {r['predict_ms']:.2f} | {net} |")
+                low = r.get("work_saved_p05", float("nan"))  # (a path kept by an older run has none)
+                low_cell = f"{100 * low:.1f}%" if low is not None and np.isfinite(low) else "-"
+                lines.append(f"| {r['method']} | {p} | {100 * r['work_saved']:.1f}% | {low_cell} | "
+                             f"{100 * r['fail_share']:.2f}% | {flip} | {100 * r['rate_change']:.1f}% | "
+                             f"{r['predict_ms']:.2f} | {net} |")
             lines.append("")
         return "\n".join(lines)
 
@@ -538,7 +562,8 @@ def play(
                 "seed": seed, "size": list(size), "tile_size": tile_size, "fail_metric": fail_metric,
                 "fail_threshold": fail_thr, "sweep": sweep, "flip_every": flip_every,
                 # the grids, so that runs read off different grids are not mistaken for one another
-                "grids": {"model": list(MODEL_SWEEP), "psnr_db": list(PSNR_SWEEP_DB), "baseline": list(BASELINE_SWEEP)}
+                "grids": {"model": list(MODEL_SWEEP), "psnr_db": list(PSNR_SWEEP_DB), "baseline": list(BASELINE_SWEEP),
+                          "saving": list(SAVING_SWEEP)}
                 if sweep else None,
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
@@ -788,6 +813,12 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
             pred = predictors[m.model]
             meta = pred.metadata
             thr0 = meta.default_threshold
+            if m.budget is not None:  # a budget: the share saved every frame, swept in place of the threshold
+                for b in sorted({*SAVING_SWEEP, m.budget}) if sweep else (m.budget,):
+                    decide = _model(pred, thr0, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history,
+                                    m.refresh, m.step, m.rescale, m.carry_scale, m.carry, saving=b)
+                    loops.append(_Loop(m, b, f"saving {b:g}", decide, default=b == m.budget))
+                continue
             if meta.higher_is_better:
                 values = [thr0 + d for d in (PSNR_SWEEP_DB if sweep else (0.0,))]
             else:
@@ -815,6 +846,8 @@ def _loop_count(m: MethodSpec, sweep: bool, predictors: dict[str, Any]) -> int:
     """How many loops :func:`_loops` makes of ``m``: one per swept parameter."""
     if not sweep or m.kind in ("full", "oracle", "oracle-monotone"):
         return 1
+    if m.kind == "model" and m.budget is not None:
+        return len({*SAVING_SWEEP, m.budget})
     if m.kind == "model":
         return len(PSNR_SWEEP_DB if predictors[m.model].metadata.higher_is_better else MODEL_SWEEP)
     return len(BASELINE_SWEEP)
@@ -866,7 +899,8 @@ def model_inputs(pf: Any, rp: np.ndarray, channels: Sequence[str], ys: slice, xs
 def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
            refresh: float | None = None, step: int | None = None, rescale: float = 0.0,
-           carry_scale: float = 1.0, carries: str = "estimates") -> Callable[..., np.ndarray]:
+           carry_scale: float = 1.0, carries: str = "estimates", saving: float | None = None,
+           ) -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     split = meta.tile_size // tile  # (finer hardware tiles than the model's: each its model tile's rate)
@@ -887,7 +921,11 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
         lp.ran.append(carry.work)
         if pool > 1:
             est = sdk.pool_tiles(est, pool, higher_is_better=hib)
-        rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors)
+        if saving is None:
+            rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors)
+        else:  # (the budget over the frame's pixels: est's tiles are the model's, or the hardware's when coarser)
+            rates = sdk.select_rates_for_saving(est, saving, higher_is_better=hib, factors=meta.rate_factors,
+                                                frame_size=pf.seen.shape, tile_size=max(tile, meta.tile_size)).rates
         return rates if split <= 1 else sdk.split_tiles(rates, split, truth.shape[1:])
     return decide
 

@@ -362,7 +362,7 @@ def test_tiles_fail_by_the_metric_the_run_names(metric: str, monkeypatch: pytest
 def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
     rep = play("procedural:0", "jnyang,yang2019-unseen-1x1", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                plots=False)
-    from rtp.evaluate._play import BASELINE_SWEEP, MODEL_SWEEP, PSNR_SWEEP_DB
+    from rtp.evaluate._play import BASELINE_SWEEP, MODEL_SWEEP, PSNR_SWEEP_DB, SAVING_SWEEP
 
     for method, grid in (("jnyang", MODEL_SWEEP), ("yang2019-unseen-1x1", BASELINE_SWEEP)):
         rows = [r for r in rep.rows if r["method"] == method]
@@ -371,7 +371,7 @@ def test_sweeps_reach_rare_failures(tmp_path: Path) -> None:
         # and one step past the default, for maps where the default fails rarely
         assert rows[-1]["fail_share"] >= next(r for r in rows if r["default"])["fail_share"]
     assert rep.settings["grids"] == {"model": list(MODEL_SWEEP), "psnr_db": list(PSNR_SWEEP_DB),
-                                     "baseline": list(BASELINE_SWEEP)}
+                                     "baseline": list(BASELINE_SWEEP), "saving": list(SAVING_SWEEP)}
     assert "| jnyang |" in rep.to_markdown()
 
 
@@ -423,7 +423,9 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
                        ("jnyang@4:v3", "rescale exponent"), ("jnyang@4:v0.5:v1", "at most one"),
                        ("jnyang@4:c5", "carry scale"), ("jnyang@4:cx", "carry scale"), ("jnyang@²", "reuse interval"),
                        ("jnyang@4:s²", "pixel step"),
-                       ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one")):
+                       ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one"),
+                       ("jnyang@1:b0.95", r"not a budget: .* \[0, 0.9375\]"), ("jnyang@1:bx", "not a budget"),
+                       ("jnyang@1:b0.5:b0.6", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     # a model file whose name holds an '@' or a comma is taken whole, and '@k' after it still reuses
@@ -474,6 +476,32 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
     with pytest.raises(sdk.RtpError, match="frame size|render targets"):
         play("procedural:0", "full", frames=3, size=(16384, 16384), out=str(tmp_path / "out"))
     assert not (tmp_path / "out").exists()
+
+
+def test_a_budget_saves_its_share_on_every_frame(tmp_path: Path) -> None:
+    """``NAME@k:bS``: every frame's rates save at least S of the work (the tiles weighed by their pixels: the
+    96-pixel-tall frame's last row is whole, the 72-pixel one's half), a tile's step over it at most, while the
+    threshold mode's saving follows the frames; swept, the budget's grid replaces the thresholds."""
+    specs = parse_methods("jnyang@1:b0.6,jnyang@4:fresh:b0.3")
+    assert [(s.budget, s.reuse, s.unseen) for s in specs] == [(0.6, 1, "full"), (0.3, 4, "fresh")]
+    assert parse_methods("jnyang")[0].budget is None
+    for h, tile in ((H, 16), (72, 16), (72, 8)):
+        rep = play("procedural:0", "jnyang,jnyang@1:b0.6,jnyang@2:b0.4", paths=("fast",), frames=4, size=(W, h),
+                   sweep=False, flip_every=0, tile_size=tile, plots=False)
+        step = sdk.MAX_SAVING * 16 * 16 / (W * h)  # one 16-pixel model tile's whole saving
+        for name, share in (("jnyang@1:b0.6", 0.6), ("jnyang@2:b0.4", 0.4)):
+            saved = rep.frames["fast"][name]["saved"]
+            assert all(share - 1e-9 <= v <= share + step for v in saved), (h, tile, name, saved)
+        free = rep.frames["fast"]["jnyang"]["saved"]
+        assert max(free) - min(free) > step  # (a threshold holds the quality: its saving moves)
+    rows = [r for r in play("procedural:0", "jnyang@1:b0.55", paths=("slow",), frames=3, size=(W, H), flip_every=0,
+                            plots=False).rows]
+    from rtp.evaluate._play import SAVING_SWEEP
+
+    assert [r["value"] for r in rows] == sorted({*SAVING_SWEEP, 0.55})
+    assert [r["parameter"] for r in rows if r["default"]] == ["saving 0.55"]
+    assert all(r["work_saved"] >= r["value"] - 1e-9 for r in rows)
+    assert all(r["work_saved_p05"] >= r["value"] - 1e-9 for r in rows)
 
 
 def test_saved_at_reads_the_sweep() -> None:
