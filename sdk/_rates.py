@@ -412,15 +412,38 @@ def _lowest_threshold(err: np.ndarray, rates: tuple[str, ...], weights: np.ndarr
     steps = np.minimum.accumulate(smallest[::-1], axis=0)[::-1]  # T_k: the best of class k and every cheaper one
     share = np.array([1.0 - 1.0 / a for a in classes])
     gain = np.diff(share, prepend=0.0)[:, None, None] * weights  # each step's share of the frame's work
-    at = steps.ravel()
-    sort = np.argsort(at, kind="stable")
-    total = np.cumsum(gain.ravel()[sort])
-    need = target * weights.sum()
-    reachable = at[sort] < np.inf  # (a NaN or an infinite value never passes)
-    if target <= 0.0 or not reachable.any():  # nothing needs to pass (or nothing can): the lowest threshold
+    need = target * weights.sum() * (1.0 - 1e-12)  # (a rounding's worth short counts as reached)
+    if target <= 0.0:  # nothing needs to pass: the lowest threshold
         return lo
-    # the first step at which the sum reaches the target (a rounding's worth short counts as reached);
-    # past the last finite step (NaN tiles never pass), the most the frame can save
-    j = int(np.searchsorted(total, need * (1.0 - 1e-12), side="left"))
-    j = min(j, int(np.flatnonzero(reachable)[-1]))
-    return float(np.clip(np.nextafter(at[sort][j], np.inf), lo, hi))
+    at, gain = steps.ravel(), gain.ravel()
+    reachable = at < np.inf  # (a NaN or an infinite value never passes)
+    if gain[reachable].sum() < need:  # NaN tiles: the most the frame can save, just past its last finite step
+        return float(np.clip(np.nextafter(at[reachable].max(), np.inf), lo, hi)) if reachable.any() else lo
+    return float(np.clip(np.nextafter(_weighted_select(at, gain, need), np.inf), lo, hi))
+
+
+def _weighted_select(values: np.ndarray, weights: np.ndarray, need: float) -> float:
+    """The smallest of ``values`` at which the ``weights`` of the values up to it add up to ``need`` (<= their sum):
+    a weighted quantile, by partitions that each keep at most three quarters of the values (O(n), where sorting
+    the 32,400 steps of a 1080p frame on 8-pixel tiles took the most of a budget's time), then a sort of the rest.
+
+    After a partition at k the k smallest values hold weight ``left``: where ``below + left`` reaches the need,
+    the answer is among them (a value equal to the pivot on the other side only adds to a sum that already
+    reaches it); else it is among the rest, with ``left`` added to the weight below them."""
+    below = 0.0
+    while values.size > 256:
+        n = values.size
+        guess = (need - below) / float(weights.mean())  # (where the answer would be, were the weights alike)
+        k = int(min(max(guess, n / 4), 3 * n / 4))
+        part = np.argpartition(values, k)
+        low = part[:k]
+        left = float(weights[low].sum())
+        if below + left >= need:
+            values, weights = values[low], weights[low]
+        else:
+            below += left
+            values, weights = values[part[k:]], weights[part[k:]]
+    order = np.argsort(values, kind="stable")
+    total = below + np.cumsum(weights[order])
+    j = min(int(np.searchsorted(total, need, side="left")), values.size - 1)
+    return float(values[order][j])

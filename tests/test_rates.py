@@ -330,3 +330,29 @@ def test_a_saving_checks_the_tile_grid() -> None:
         sdk.select_rates_for_saving(np.zeros((5, 2, 2)), 0.5)
     with pytest.raises(sdk.InputShapeError, match=r"at least one tile, got shape \(6, 0, 3\)"):
         sdk.select_rates_for_saving(np.zeros((6, 0, 3)), 0.5)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_saving_on_frames_of_many_tiles(seed: int) -> None:
+    """Thousands of tiles (the weighted selection partitions before it sorts), ties, NaN and partial edge tiles:
+    the threshold is the lowest that saves as much, found by bisection over every candidate threshold."""
+    rng = np.random.default_rng(seed)
+    th, tw = 45 + seed, 80 + 3 * seed
+    values = np.round(rng.gamma(2.0, 0.1, (6, th, tw)), 2 + seed % 2)  # (rounded: many ties)
+    values[:, rng.random((th, tw)) < 0.01] = np.nan
+    size = (th * 16 - 7, tw * 16 - 3)
+    weights = np.outer(sdk.tile_extents(size[0], 16), sdk.tile_extents(size[1], 16)).astype(float)
+    factors = [1.16, 1.16, 0.97, 0.97, 0.97, 0.82] if seed % 2 else None
+    scaled = values / np.asarray(factors or [1.0] * 6)[:, None, None]
+    candidates = np.unique(np.nextafter(scaled[np.isfinite(scaled)], np.inf))
+    for saving in (0.05, 0.3, 0.5, 0.62, 0.8, 0.9):
+        sel = sdk.select_rates_for_saving(values, saving, factors=factors, frame_size=size, tile_size=16)
+        lo, hi = 0, len(candidates) - 1  # the first candidate that saves enough (the saving grows with it)
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if _saved(sdk.select_rates(values, candidates[mid], factors=factors), weights) >= saving * (1 - 1e-12):
+                hi = mid
+            else:
+                lo = mid + 1
+        assert sel.threshold == candidates[lo], saving
+        assert sel.saved >= saving and sel.saved == pytest.approx(_saved(sel.rates, weights))

@@ -1,0 +1,56 @@
+"""The cost of a budget: ``sdk.select_rates_for_saving`` next to ``sdk.select_rates`` on one frame's predictions.
+
+    python bench/budget.py [--model jnyang] [--repeats 50] [--saving 0.5]
+
+A budget finds, per frame, the lowest threshold whose rates save the share asked for (docs/runtime.md "A budget:
+a share of the work saved instead of a threshold"): it sorts four steps a tile. This times it and the plain
+selection at one threshold on the predictions of the model for a frame of random planes at 1280x720, 1920x1080
+and 3840x2160 (the cost depends on the number of tiles, not on the values), on the model's tiles and on 8-pixel
+hardware tiles, and prints a Markdown table of medians (ms).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from _common import cpu_description, median_ms, positive, run_main  # bench/ is on sys.path as a script
+
+from rtp import sdk
+
+FRAMES = ((1280, 720), (1920, 1080), (3840, 2160))
+
+
+def _row(pred: sdk.ShadingRatePredictor, x: np.ndarray, saving: float, repeats: int) -> str:
+    """One frame's table row: both selections timed on the predictions of ``x``."""
+    meta = pred.metadata
+    h, w = x.shape[1:]
+    values = pred.predict(x)
+    kw = {"higher_is_better": meta.higher_is_better, "factors": meta.rate_factors}
+    plain = median_ms(lambda: sdk.select_rates(values, meta.default_threshold, **kw), repeats)
+    budget = median_ms(lambda: sdk.select_rates_for_saving(values, saving, frame_size=(h, w), tile_size=pred.tile_size,
+                                                           **kw), repeats)
+    sel = sdk.select_rates_for_saving(values, saving, frame_size=(h, w), tile_size=pred.tile_size, **kw)
+    return (f"| {w}x{h} | {values.shape[1] * values.shape[2]:,} | {pred.tile_size}px | {plain:.2f} | {budget:.2f} "
+            f"| {float(sel.threshold):.4g} | {100 * float(sel.saved):.1f}% |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--model", default="jnyang", help="a shipped model's name or an .onnx path (default: jnyang)")
+    ap.add_argument("--repeats", type=positive, default=50, help="timed runs of each (default 50; the median)")
+    ap.add_argument("--saving", type=float, default=0.5, help="the share of the work saved asked for (default 0.5)")
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(0)
+    print(f"{cpu_description()}; model {args.model}, a saving of {args.saving:g}, median of {args.repeats} runs\n")
+    print("| frame | tiles | tiles of | select_rates (ms) | select_rates_for_saving (ms) | threshold reached | saved |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for tile in (None, 8):
+        pred = sdk.load(args.model, tile_size=tile)
+        for w, h in FRAMES:
+            print(_row(pred, rng.random((len(pred.metadata.inputs), h, w), dtype=np.float32), args.saving, args.repeats))
+    return 0
+
+
+if __name__ == "__main__":
+    run_main(main)
