@@ -36,6 +36,8 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
 @pytest.mark.parametrize(("args", "code", "words"), [
     (["bench/inference.py", "nosuchmodel"], 2, "inference.py: error: no model file at 'nosuchmodel'"),
     (["bench/inference.py", "--repeats", "0"], 2, "argument --repeats: expected a positive integer"),
+    (["bench/budget.py", "--model", "nosuchmodel"], 2, "budget.py: error: no model file at 'nosuchmodel'"),
+    (["bench/budget.py", "--saving", "0.99"], 2, "budget.py: error: saving: expected the share of shading work"),
     (["bench/paths.py", "--size", "12x"], 2, "argument --size: expected WIDTHxHEIGHT"),
     (["bench/paths.py", "--maps", "nosuchmap", "--frames", "3"], 2, "paths.py: error: map 'nosuchmap' is not listed"),
     (["bench/scaling.py", "--modes", "nosuch"], 2, "argument --modes: expected ray and/or pool"),
