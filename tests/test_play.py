@@ -494,14 +494,24 @@ def test_a_budget_saves_its_share_on_every_frame(tmp_path: Path) -> None:
             assert all(share - 1e-9 <= v <= share + step for v in saved), (h, tile, name, saved)
         free = rep.frames["fast"]["jnyang"]["saved"]
         assert max(free) - min(free) > step  # (a threshold holds the quality: its saving moves)
-    rows = [r for r in play("procedural:0", "jnyang@1:b0.55", paths=("slow",), frames=3, size=(W, H), flip_every=0,
-                            plots=False).rows]
+    swept = play("procedural:0", "jnyang,jnyang@1:b0.55", paths=("slow",), frames=3, size=(W, H), flip_every=0,
+                 plots=False)
+    rows = [r for r in swept.rows if r["method"] == "jnyang@1:b0.55"]
     from rtp.evaluate._play import SAVING_SWEEP
 
     assert [r["value"] for r in rows] == sorted({*SAVING_SWEEP, 0.55})
     assert [r["parameter"] for r in rows if r["default"]] == ["saving 0.55"]
     assert all(r["work_saved"] >= r["value"] - 1e-9 for r in rows)
     assert all(r["work_saved_p05"] >= r["value"] - 1e-9 for r in rows)
+    for r in (r for r in swept.rows if r["default"]):  # the worst 5% of frames' saving (frame 0 has no history)
+        series = swept.frames["slow"][r["method"]]["saved"][1:]
+        assert r["work_saved_p05"] == pytest.approx(float(np.percentile(series, 5))) and len(series) == 2
+    # the matched table reads the worst frames' saving off the same sweep, and play.md shows it
+    for m in swept.matched:
+        pts = [(r["fail_share"], r["work_saved_p05"]) for r in swept.rows if r["method"] == m["method"]]
+        want = saved_at(pts, m["fail_share"])
+        assert (m["work_saved_p05"] == pytest.approx(want)) if want is not None else np.isnan(m["work_saved_p05"])
+    assert "The worst 5% of frames' saving where the method fails those shares of tiles" in swept.to_markdown()
 
 
 def test_saved_at_reads_the_sweep() -> None:
