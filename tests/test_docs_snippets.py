@@ -172,6 +172,12 @@ assert np.allclose(tiles, metrics.pool_tiles(np.abs(reference - test).max(axis=-
         _SCENE,
         'assert frame.colour["2x2"].shape == (720, 1280, 3) and frame.seen.mean() > 0.5',
     ),
+    ("runtime.md", "budget = sdk.select_rates_for_saving(predictor.predict(x), 0.6,"): (
+        _MODEL,
+        "assert budget.saved >= 0.6 and (budget.rates == predictor.shading_rates(x, saving=0.6)).all()\n"
+        "assert (sdk.select_rates(predictor.predict(x), budget.threshold, factors=predictor.metadata.rate_factors)"
+        " == budget.rates).all()",
+    ),
     ("runtime.md", "selector = RateSelector(predictor, ctx)"): (
         _MODEL
         + """
