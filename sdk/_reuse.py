@@ -26,7 +26,7 @@ import numpy as np
 
 from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
 from ._errors import InputDtypeError, InputShapeError, ParameterError
-from ._rates import RateLike, select_rates
+from ._rates import RateLike, check_saving, resolve_allowed, select_rates, select_rates_for_saving
 from ._reproject import _real
 from ._tiles import padded_size, split_tiles, tile_grid
 
@@ -835,13 +835,27 @@ class PredictionReuse:
 
     def shading_rates(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None = None,
                       seen: np.ndarray | None = None, background: np.ndarray | None = None,
-                      threshold: float | None = None, allowed: Iterable[RateLike] | None = None) -> np.ndarray:
+                      threshold: float | None = None, allowed: Iterable[RateLike] | None = None, *,
+                      saving: float | None = None) -> np.ndarray:
         """:meth:`predict`, then per tile the cheapest allowed rate whose estimate passes ``threshold``
-        (default: the model's), as :meth:`ShadingRatePredictor.shading_rates` picks them."""
+        (default: the model's), as :meth:`ShadingRatePredictor.shading_rates` picks them; or with ``saving``, a
+        budget: the rates that save that share of the frame's work at the lowest threshold that does
+        (:func:`~rtp.sdk.select_rates_for_saving`)."""
         meta = self._net.metadata
+        if saving is not None and threshold is not None:
+            raise ParameterError("shading_rates: give a threshold (hold the quality) or a saving (hold the work), "
+                                 "not both", "saving")
+        if saving is not None:  # (refused before the frame moves the carry on)
+            check_saving(saving, resolve_allowed(allowed))
+        estimates = self.predict(x, fetch, seen, background)
+        if saving is not None:
+            assert self._shape is not None  # (predict set it)
+            return select_rates_for_saving(estimates, saving, higher_is_better=meta.higher_is_better, allowed=allowed,
+                                           factors=meta.rate_factors, frame_size=self._shape,
+                                           tile_size=self.predictor.tile_size).rates
         thr = meta.default_threshold if threshold is None else threshold
-        return select_rates(self.predict(x, fetch, seen, background), thr, higher_is_better=meta.higher_is_better,
-                            allowed=allowed, factors=meta.rate_factors)
+        return select_rates(estimates, thr, higher_is_better=meta.higher_is_better, allowed=allowed,
+                            factors=meta.rate_factors)
 
 
 def fetch_from_motion(motion_x: object, motion_y: object) -> tuple[np.ndarray, np.ndarray]:

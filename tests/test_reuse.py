@@ -287,6 +287,30 @@ def test_fresh_tiles_are_the_networks_and_are_carried_on(step: int | None) -> No
     assert np.isinf(est[:, 2:4, 11:13]).all() and full.work == 0.0
 
 
+def test_a_budget_on_carried_estimates() -> None:
+    """``shading_rates(saving=)`` on a reuse: the budget over the estimates ``predict`` gives, tiles the network
+    did not see at 1x1 and the others reduced further to make the saving; a bad saving moves nothing on."""
+    s = _Scene()
+    ours, plain = sdk.PredictionReuse(s.pred, 2), sdk.PredictionReuse(s.pred, 2)
+    everything = np.ones((s.h, s.w), np.float32)
+    seen = everything.copy()
+    seen[2 * TILE:4 * TILE, 11 * TILE:13 * TILE] = 0  # four tiles the network did not see
+    meta = s.pred.metadata
+    for frame, (x, fetch, mask) in enumerate([(s.inputs(everything), None, None),
+                                              (s.inputs(seen), (s.rows, s.cols), seen)]):
+        rates = ours.shading_rates(x, fetch, mask, saving=0.6)
+        est = plain.predict(x, fetch, mask)
+        want = sdk.select_rates_for_saving(est, 0.6, factors=meta.rate_factors, frame_size=(s.h, s.w), tile_size=TILE)
+        np.testing.assert_array_equal(rates, want.rates)
+        assert sdk.work_saved(rates, (s.h, s.w), TILE) >= 0.6 and ours.age == frame
+    assert (rates[2:4, 11:13] == 0).all()  # (unseen: their estimates never pass)
+    with pytest.raises(sdk.ParameterError, match="not both"):
+        ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, threshold=0.2, saving=0.5)
+    with pytest.raises(sdk.ParameterError, match=r"saving: expected .* \[0, 0.75\]"):
+        ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, saving=0.8, allowed=["2x2"])
+    assert ours.age == 1  # (neither call moved the carry on)
+
+
 def test_the_interval_and_the_fallbacks_run_the_whole_frame() -> None:
     s = _Scene()
     everything = np.ones((s.h, s.w), np.float32)
