@@ -3,6 +3,7 @@
     python examples/runtime_without_rtp.py models/jnyang.onnx                    # a random 1280x720 frame
     python examples/runtime_without_rtp.py MODEL.onnx --frame planes.npy --threshold 0.2 --tile-size 8
     python examples/runtime_without_rtp.py models/flip.onnx --check              # the same rates as rtp.sdk?
+    python examples/runtime_without_rtp.py models/jnyang.onnx --saving 0.6 --check   # a budget (step 7)
 
 An engine that links onnxruntime itself (C++, C#, Rust) needs no Python: the ONNX file carries the
 network and its metadata, and the steps from the engine's input planes to a shading-rate image are
@@ -34,6 +35,12 @@ same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``
    PSNR ``threshold - 20 log10 rate_factors[r]`` dB), equal-cost rates compared by value over their
    own threshold; else 1x1. The result is D3D12/Vulkan rate codes, ready to upload as the
    shading-rate image.
+7. **A budget** instead of a threshold (docs/runtime.md "A budget: a share of the work saved instead of
+   a threshold"), where the engine holds the work rather than the quality: the lowest threshold whose
+   step-6 rates save a share of the frame's shading work. A tile's saving grows with the threshold one
+   step a cost class, so the frame's saving is a sum of steps; sorted (``std::sort``, or
+   ``std::nth_element`` rounds as rtp.sdk does), the step where their weighted sum reaches the share
+   gives the threshold, and step 6 the rates.
 
 What is left out: checking the frame for NaN (the finite probe makes that one scalar: step 3's
 other output), batches of frames, and reusing a prediction across frames (``sdk.PredictionReuse``,
@@ -162,9 +169,54 @@ def select(values: np.ndarray, meta: dict, threshold: float, allowed: tuple[str,
     return codes
 
 
+def select_for_saving(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, ...] = RATES,
+                      frame: tuple[int, int] | None = None, tile_size: int | None = None) -> tuple[np.ndarray, float]:
+    """Step 7: the rates that save ``saving`` of the frame's work (each tile weighed by its pixels, given the
+    ``frame``'s (H, W) and ``tile_size``) at the lowest threshold that does, and that threshold."""
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    factors = meta.get("rate_factors") or {}
+    th, tw = values.shape[1:]
+    if frame is None or tile_size is None:
+        weights = np.ones((th, tw))
+    else:  # partial edge tiles count their pixels
+        (h, w), t = frame, tile_size
+        weights = np.outer(np.minimum(t, h - t * np.arange(th)), np.minimum(t, w - t * np.arange(tw))).astype(float)
+    lowest = -1e6 if better else 0.0  # the lowest threshold there is (as "smaller is better"), and the highest
+    if saving <= 0:
+        threshold = -lowest if better else lowest
+        return select(values, meta, threshold, allowed), threshold
+    steps, shares = [], []
+    # cost classes, dearest first: the best value (over its factor, "smaller is better") of each, NaN never passing
+    for group, share in ((("1x2", "2x1"), 0.5), (("2x2",), 0.75), (("2x4", "4x2"), 0.875), (("4x4",), 0.9375)):
+        best = np.full((th, tw), np.inf)
+        for rate in (r for r in group if r in allowed):
+            f = float(factors.get(rate, 1.0))
+            v = values[RATES.index(rate)].astype(np.float64)
+            e = (-v - 20.0 * math.log10(f)) if better else v / f
+            best = np.where(np.isnan(e), best, np.minimum(best, e))
+        if any(r in allowed for r in group):
+            steps.append(best)
+            shares.append(share)
+    # a tile saves at least a class's share once the threshold passes the best value of that class or a cheaper one
+    at = np.minimum.accumulate(np.stack(steps)[::-1], axis=0)[::-1].ravel()
+    gain = (np.diff(shares, prepend=0.0)[:, None, None] * weights).ravel()
+    order = np.argsort(at, kind="stable")
+    total = np.cumsum(gain[order])
+    need = saving * weights.sum() * (1.0 - 1e-12)
+    reachable = np.flatnonzero(at[order] < np.inf)  # (NaN tiles never pass: the most the frame can save)
+    if reachable.size == 0:
+        threshold = -lowest if better else lowest
+        return select(values, meta, threshold, allowed), threshold
+    j = min(int(np.searchsorted(total, need)), int(reachable[-1]))
+    t = float(np.clip(np.nextafter(at[order][j], np.inf), lowest, 1e6))
+    threshold = -t if better else t
+    return select(values, meta, threshold, allowed), threshold
+
+
 def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float | None = None,
-                  tile_size: int | None = None, allowed: tuple[str, ...] = RATES) -> np.ndarray:
-    """Steps 1-6: a frame's planes (C, H, W), float32, to its shading-rate image."""
+                  tile_size: int | None = None, allowed: tuple[str, ...] = RATES, saving: float | None = None,
+                  ) -> np.ndarray:
+    """Steps 1-6 (7 with a ``saving``): a frame's planes (C, H, W), float32, to its shading-rate image."""
     meta = read_metadata(session)
     _, h, w = x.shape
     raw = infer(session, meta, pad(x, meta, session))
@@ -172,6 +224,8 @@ def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float
     values = decode(raw, meta)[:, :-(-h // t), :-(-w // t)]  # the tiles of the frame, not of its padding
     if tile_size is not None and tile_size != t:
         values = hardware_tiles(values, meta, tile_size, (h, w))
+    if saving is not None:
+        return select_for_saving(values, meta, saving, allowed, (h, w), tile_size or t)[0]
     return select(values, meta, meta["default_threshold"] if threshold is None else threshold, allowed)
 
 
@@ -181,7 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("model", type=Path, help="an rtp ONNX model file")
     ap.add_argument("--frame", type=Path, help="the input planes, a (C, H, W) float32 .npy (default: a random frame)")
     ap.add_argument("--size", default="1280x720", help="the random frame's WIDTHxHEIGHT (default 1280x720)")
-    ap.add_argument("--threshold", type=float, help="default: the model's default_threshold")
+    hold = ap.add_mutually_exclusive_group()
+    hold.add_argument("--threshold", type=float, help="default: the model's default_threshold")
+    hold.add_argument("--saving", type=float, help="a budget instead (step 7): the share of the shading work to save")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile size (default: the model's)")
     ap.add_argument("--allowed", default=",".join(RATES), help="the reduced rates the hardware has (default: all six)")
     ap.add_argument("--check", action="store_true", help="compare with rtp.sdk's shading_rates on the same frame")
@@ -202,7 +258,9 @@ def main(argv: list[str] | None = None) -> int:
         if "seen" in meta["inputs"]:  # a mask: 0 or 1
             x[meta["inputs"].index("seen")] = x[meta["inputs"].index("seen")] > 0.2
     allowed = tuple(r.strip() for r in a.allowed.split(",") if r.strip())
-    rates = shading_rates(session, x, a.threshold, a.tile_size, allowed)
+    if a.saving is not None and not 0.0 <= a.saving <= 0.9375:
+        ap.error(f"--saving: expected a share of the shading work in [0, 0.9375], got {a.saving:g}")
+    rates = shading_rates(session, x, a.threshold, a.tile_size, allowed, a.saving)
     names = {c: r for r, c in CODES.items()}
     counts = {names[c]: int(n) for c, n in zip(*np.unique(rates, return_counts=True))}
     print(f"{a.model.name}: {rates.shape[0]}x{rates.shape[1]} tiles; " + ", ".join(f"{r} {n}" for r, n in counts.items()))
@@ -210,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
         from rtp import sdk
 
         predictor = sdk.load(a.model, tile_size=a.tile_size)
-        theirs = predictor.shading_rates(x, a.threshold, allowed=allowed)
+        theirs = predictor.shading_rates(x, a.threshold, allowed=allowed, saving=a.saving)
         same = float(np.mean(theirs == rates))
         print(f"rtp.sdk gives the same rate on {100 * same:.2f}% of the tiles")
         return 0 if same == 1.0 else 1

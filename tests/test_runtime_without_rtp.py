@@ -60,6 +60,11 @@ def test_the_port_picks_the_sdks_rates_on_rendered_frames(name: str, port: Modul
                         combinations += 1
                         if len(np.unique(theirs)) < 2:
                             uniform.append((threshold, tile, allowed))
+        for tile in tiles:  # a budget (step 7) on the same frames
+            for allowed in (port.RATES, ("1x2", "2x1", "2x2")):
+                theirs = sdk.load(name, tile_size=tile).shading_rates(x, allowed=allowed, saving=0.55)
+                np.testing.assert_array_equal(port.shading_rates(session, x, None, tile, allowed, 0.55), theirs,
+                                              err_msg=f"{name} saving 0.55 tile {tile} allowed {allowed}")
     # at the quantiles the decisions are mixed, not one rate everywhere (on 32-pixel tiles, each the worst of
     # four, a high quality threshold can leave every tile at full rate)
     assert len(uniform) <= combinations // 8, uniform
@@ -115,3 +120,25 @@ def test_the_ports_selection_is_the_sdks_on_ties_nans_and_factors(higher_is_bett
                 theirs = sdk.select_rates(values, threshold, higher_is_better=higher_is_better, allowed=allowed,
                                           factors=rate_factors)
                 np.testing.assert_array_equal(port.select(values, meta, threshold, allowed), theirs)
+
+
+@pytest.mark.parametrize("higher_is_better", [False, True])
+def test_the_ports_budget_is_the_sdks(higher_is_better: bool, port: ModuleType) -> None:
+    """Step 7 (a saving instead of a threshold) gives the SDK's rates and threshold: ties, NaNs, a threshold
+    per rate, allowed subsets, partial edge tiles, no saving and the most there is."""
+    rng = np.random.default_rng(2 + int(higher_is_better))
+    values = rng.integers(0, 12, (6, 40, 50)).astype(np.float32) * (3.0 if higher_is_better else 0.03)
+    values[rng.random(values.shape) < 0.03] = np.nan
+    factors = dict(zip(sdk.PREDICTED_RATES, [1.0, 1.0, 0.9, 1.2, 1.2, 0.8]))
+    frame = (40 * 16 - 5, 50 * 16 - 11)
+    for rate_factors in (None, factors):
+        meta = {"metric": "psnr" if higher_is_better else "flip", "higher_is_better": higher_is_better,
+                **({"rate_factors": rate_factors} if rate_factors else {})}
+        for allowed in (port.RATES, ("1x2", "2x1", "2x4", "4x2"), ("2x2",)):
+            top = max(sdk.work_saved(r) for r in allowed)
+            for saving in (0.0, 0.3, 0.6, top):
+                theirs = sdk.select_rates_for_saving(values, saving, higher_is_better=higher_is_better, allowed=allowed,
+                                                     factors=rate_factors, frame_size=frame, tile_size=16)
+                rates, threshold = port.select_for_saving(values, meta, saving, allowed, frame, 16)
+                np.testing.assert_array_equal(rates, theirs.rates, err_msg=f"{allowed} {saving}")
+                assert threshold == theirs.threshold, (allowed, saving)
