@@ -10,6 +10,7 @@ are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios
     python bench/play_report.py data/play-*-seed1/play.json --reuse jnyang@4:worst,jnyang@4:mean
     python bench/play_report.py data/playlong-kaos/play.json --window 150 --by-age
     python bench/play_report.py data/playr-*/play.json --reuse jnyang@4,jnyang@4:r0.05 --plot-reuse reuse.png
+    python bench/play_report.py data/play-{kaos,oa_dm3,oacmpdm4}-budget/play.json --worst-frames
 
 ``--window N`` adds, per path and method, the saving and the failing share at the method's default
 parameter in consecutive windows of N frames (the per-frame series of play.json; the first frame,
@@ -17,6 +18,9 @@ which has no history, left out): whether a long path drifts. ``--by-age`` adds, 
 method with prediction reuse (``NAME@k``, unseen tiles at 1x1: its network runs on every k-th
 frame), the same two figures grouped by frames since the network ran (0: it ran), beside the
 method without reuse on the same frames: whether reuse's loss grows with the estimates' age.
+``--worst-frames`` adds the worst 5% of frames' saving (each run's 5th percentile of its per-frame saving)
+read off each method's sweep at the same failing shares: what a frame-time budget plans for, and where a
+budget (``NAME@k:bS``, the same saving on every frame) and a threshold part.
 With several paths the report ends with each reuse method's mean over them (kept share at each
 level, worst path, network work); ``--plot-reuse PNG`` draws the kept share at 5% against the work.
 
@@ -38,7 +42,7 @@ from typing import Any
 from _common import PLAY_JSON, count, run_main, save_figure  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
-from rtp.evaluate import METHOD_KINDS, fail_rule
+from rtp.evaluate import METHOD_KINDS, fail_rule, saved_at
 
 LEVELS = (0.01, 0.02, 0.05)
 #: The methods that are not swept: the oracle, and the oracle on the monotone truth (the ceiling of a
@@ -119,6 +123,8 @@ def main() -> None:
                     "default in consecutive windows of this many frames")
     ap.add_argument("--by-age", action="store_true", help="also print each reuse method's saving and failing share at "
                     "its default by frames since its network ran, beside the method without reuse")
+    ap.add_argument("--worst-frames", action="store_true", help="also print the worst 5%% of frames' saving at the "
+                    "same failing shares, read off each method's sweep (runs since 2026-12-05)")
     ap.add_argument("--plot-reuse", type=Path, default=None, metavar="PNG", help="also plot each reuse method's kept "
                     "share of MODEL's saving at 5%% failing tiles against its network work per frame, per path")
     args = ap.parse_args()
@@ -229,10 +235,49 @@ def main() -> None:
             _plot_reuse(kept, model, args.plot_reuse)
     else:
         print(f"\n(No targets: the runs did not play {model}; --model names the rtp method to compare.)")
+    if args.worst_frames:
+        _worst_frames(runs, head, label)
     if args.window:
         _windows(runs, args.window)
     if args.by_age:
         _by_age(runs)
+
+
+def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any) -> None:
+    """Per map, path and method, the worst 5% of frames' saving (the rows' ``work_saved_p05``) read off the
+    method's sweep at each failing share as the matched saving is (``evaluate.saved_at``), and the mean."""
+    print("\nThe worst 5% of frames' saving % at " + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles "
+          "(each run's 5th percentile of its per-frame saving, read off the sweep; -: not readable, or a run from "
+          "before the figure):\n")
+    print("| map | seed | path | " + " | ".join(head) + " |")
+    print("|---|---:|---|" + "---|" * len(head))
+    per: dict[str, list[list[float] | None]] = {meth: [] for meth in head}
+    for rep in runs:
+        s = rep["settings"]
+        for path in rep["unseen"]:
+            cells = []
+            for meth in head:
+                pts = [(r["fail_share"], r.get("work_saved_p05")) for r in rep.get("rows", [])
+                       if r["path"] == path and r["method"] == meth]
+                if not pts or any(v is None or not math.isfinite(v) for _, v in pts):
+                    per[meth].append(None)
+                    cells.append("" if meth not in s["methods"] else "-")
+                    continue
+                got = [saved_at(pts, lv) for lv in (LEVELS if meth not in ORACLES else LEVELS[:1])]
+                values = [math.nan if v is None else v for v in got]
+                per[meth].append(values)
+                cells.append(" / ".join("-" if not math.isfinite(v) else f"{100 * v:.1f}" for v in values))
+            print(f"| {label(s)} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
+    if sum(1 for rep in runs for _ in rep["unseen"]) > 1:
+        means = []
+        for meth in head:
+            if any(v is None for v in per[meth]) or not per[meth]:
+                means.append("-")
+                continue
+            cols = list(zip(*[v for v in per[meth] if v is not None]))
+            means.append(" / ".join("-" if not all(math.isfinite(x) for x in c) else f"{100 * sum(c) / len(c):.1f}"
+                                    for c in cols))
+        print("| mean | | | " + " | ".join(means) + " |")
 
 
 def _reuse_summary(kept: dict[str, list[tuple[str, list[float], float]]], model: str) -> None:

@@ -615,6 +615,30 @@ def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
         assert played == ["slow"] and not list(tmp_path.glob(".play-*"))
 
 
+def test_the_report_reads_the_worst_frames_off_each_sweep(tmp_path: Path) -> None:
+    """bench/play_report.py --worst-frames: each method's worst 5% of frames' saving read off its sweep at 1 / 2 /
+    5% failing tiles, as the matched saving is, the mean over the paths; '-' for a run from before the figure."""
+    def run(name: str, with_p05: bool) -> str:
+        settings = {"scene": name, "seed": 0, "frames": 3, "fps": 60, "size": [64, 48], "fail_metric": "jnyang",
+                    "fail_threshold": 0.25, "methods": ["jnyang", "jnyang@1:b0.6", "oracle"]}
+        sweep = {"jnyang": [(0.005, 0.40), (0.03, 0.50)], "jnyang@1:b0.6": [(0.01, 0.55), (0.04, 0.65)],
+                 "oracle": [(0.0, 0.70)]}
+        rows = [{"path": "fast", "method": m, "fail_share": f, "work_saved": w, "default": False,
+                 **({"work_saved_p05": w} if with_p05 else {})} for m, pts in sweep.items() for f, w in pts]
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"settings": settings, "unseen": {"fast": [1.0, 0.01, 0.02]}, "matched": [],
+                                    "rows": rows}))
+        return str(path)
+
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), run("a", True), run("b", True),
+                          "--worst-frames"], capture_output=True, text=True, check=True).stdout
+    assert "| a | 0 | fast | 42.0 / 46.0 / 50.0 | 55.0 / 58.3 / 65.0 | 70.0 |" in out
+    assert "| mean | | | 42.0 / 46.0 / 50.0 | 55.0 / 58.3 / 65.0 | 70.0 |" in out
+    old = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), run("c", False), "--worst-frames"],
+                         capture_output=True, text=True, check=True).stdout
+    assert "| c | 0 | fast | - | - | - |" in old
+
+
 def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> None:
     """bench/play_report.py over two maps: per reuse method the mean of the per-path ratios to the
     model at 1 / 2 / 5% failing tiles, the worst path at 5%, the paths >= 95% and the mean network
