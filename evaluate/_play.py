@@ -220,48 +220,35 @@ def _step(option: str, item: str) -> int:
     return int(option[1:])
 
 
-def _exponent(option: str, item: str) -> float:
+def _number(option: str, item: str, lo: float, hi: float, what: str, expect: str, below_hi: bool = False) -> float:
+    """The number after an option's letter (``:v0.5``), else a :class:`PlayError` naming ``what`` was expected:
+    ``expect``. In ``[lo, hi]``, or ``[lo, hi)`` with ``below_hi``."""
     try:
-        a = float(option[1:])
+        v = float(option[1:])
     except ValueError:
-        a = math.nan
-    if not 0.0 <= a <= sdk.MAX_RESCALE:
-        raise PlayError(f"method {item!r}: ':{option}' is not a rescale exponent: expected ':v' and a number in "
-                        f"[0, {sdk.MAX_RESCALE:g}], e.g. jnyang@4:v0.5")
-    return a
+        v = math.nan
+    if not (lo <= v < hi if below_hi else lo <= v <= hi):  # (NaN fails both)
+        raise PlayError(f"method {item!r}: ':{option}' is not a {what}: expected ':{option[0]}' and {expect}")
+    return v
+
+
+def _exponent(option: str, item: str) -> float:
+    return _number(option, item, 0.0, sdk.MAX_RESCALE, "rescale exponent",
+                   f"a number in [0, {sdk.MAX_RESCALE:g}], e.g. jnyang@4:v0.5")
 
 
 def _carry_scale(option: str, item: str) -> float:
-    try:
-        f = float(option[1:])
-    except ValueError:
-        f = math.nan
-    if not 1.0 / sdk.MAX_CARRY_SCALE <= f <= sdk.MAX_CARRY_SCALE:
-        raise PlayError(f"method {item!r}: ':{option}' is not a carry scale: expected ':c' and a factor in "
-                        f"[{1 / sdk.MAX_CARRY_SCALE:g}, {sdk.MAX_CARRY_SCALE:g}], e.g. jnyang@4:c1.08")
-    return f
+    lo, hi = 1.0 / sdk.MAX_CARRY_SCALE, sdk.MAX_CARRY_SCALE
+    return _number(option, item, lo, hi, "carry scale", f"a factor in [{lo:g}, {hi:g}], e.g. jnyang@4:c1.08")
 
 
 def _budget(option: str, item: str) -> float:
-    try:
-        b = float(option[1:])
-    except ValueError:
-        b = math.nan
-    if not 0.0 <= b <= sdk.MAX_SAVING:
-        raise PlayError(f"method {item!r}: ':{option}' is not a budget: expected ':b' and the share of the shading work "
-                        f"to save every frame, a number in [0, {sdk.MAX_SAVING:g}], e.g. jnyang@1:b0.6")
-    return b
+    return _number(option, item, 0.0, sdk.MAX_SAVING, "budget", "the share of the shading work to save every frame, a "
+                   f"number in [0, {sdk.MAX_SAVING:g}], e.g. jnyang@1:b0.6")
 
 
 def _share(option: str, item: str, what: str) -> float:
-    try:
-        w = float(option[1:])
-    except ValueError:
-        w = math.nan
-    if not 0.0 <= w < 1.0:
-        raise PlayError(f"method {item!r}: ':{option}' is not a {what}: expected ':{option[0]}' and a number in [0, 1), "
-                        f"e.g. jnyang@1:{option[0]}0.5")
-    return w
+    return _number(option, item, 0.0, 1.0, what, f"a number in [0, 1), e.g. jnyang@1:{option[0]}0.5", below_hi=True)
 
 
 def fail_rule(metric: str, threshold: float) -> str:

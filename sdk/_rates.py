@@ -106,18 +106,25 @@ def work_saved(
     if np.isnan(saved).any():
         bad = sorted({int(c) for c in codes[np.isnan(saved)].ravel()})
         raise ParameterError(f"unknown shading-rate code(s) {bad}; expected codes from {sorted(RATE_NAMES)}", "rates")
+    pixels = _tile_pixels("work_saved", codes.shape, frame_size, tile_size)
+    return float((saved * pixels).sum() / pixels.sum())
+
+
+def _tile_pixels(who: str, tiles: tuple[int, ...], frame_size: object, tile_size: int | None) -> np.ndarray:
+    """Each tile's pixels ``(th, tw)`` (float64) in a frame of ``frame_size = (H, W)`` on ``tile_size``-pixel tiles:
+    partial edge tiles count their real pixels; without either every tile counts one. A typed error, naming
+    ``who``, for one without the other, a size that is no ``(H, W)`` or a frame the ``tiles`` do not cover."""
     if (frame_size is None) != (tile_size is None):
-        raise ParameterError("work_saved: give frame_size and tile_size together (or neither)", "frame_size")
+        raise ParameterError(f"{who}: give frame_size and tile_size together (or neither)", "frame_size")
     if frame_size is None or tile_size is None:
-        return float(saved.mean())
+        return np.ones(tiles)
     if not isinstance(frame_size, (tuple, list)) or len(frame_size) != 2:
         raise ParameterError(f"frame_size: expected (H, W), got {frame_size!r}", "frame_size")
     h, w = frame_size
-    if tile_grid(h, w, tile_size) != codes.shape:
-        raise InputShapeError(f"work_saved: {codes.shape[0]}x{codes.shape[1]} tiles do not cover a {w}x{h} frame "
-                              f"of {tile_size}-pixel tiles ({tile_grid(h, w, tile_size)} would)")
-    pixels = np.outer(tile_extents(h, tile_size), tile_extents(w, tile_size))
-    return float((saved * pixels).sum() / pixels.sum())
+    if tile_grid(h, w, tile_size) != tuple(tiles):
+        raise InputShapeError(f"{who}: {tiles[0]}x{tiles[1]} tiles do not cover a {w}x{h} frame of {tile_size}-pixel "
+                              f"tiles ({tile_grid(h, w, tile_size)} would)")
+    return np.outer(tile_extents(h, tile_size), tile_extents(w, tile_size)).astype(np.float64)
 
 
 def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
@@ -357,19 +364,7 @@ def select_rates_for_saving(
     target = check_saving(saving, rates)
     err = _oriented(values, hib, check_rate_factors(factors))
     th, tw = values.shape[-2:]
-    if (frame_size is None) != (tile_size is None):
-        raise ParameterError("select_rates_for_saving: give frame_size and tile_size together (or neither)",
-                             "frame_size")
-    if frame_size is None or tile_size is None:
-        weights = np.ones((th, tw))
-    else:
-        if not isinstance(frame_size, (tuple, list)) or len(frame_size) != 2:
-            raise ParameterError(f"frame_size: expected (H, W), got {frame_size!r}", "frame_size")
-        h, w = frame_size
-        if tile_grid(h, w, tile_size) != (th, tw):
-            raise InputShapeError(f"select_rates_for_saving: {th}x{tw} tiles do not cover a {w}x{h} frame of "
-                                  f"{tile_size}-pixel tiles ({tile_grid(h, w, tile_size)} would)")
-        weights = np.outer(tile_extents(h, tile_size), tile_extents(w, tile_size)).astype(np.float64)
+    weights = _tile_pixels("select_rates_for_saving", (th, tw), frame_size, tile_size)
     if 0 in values.shape:
         raise InputShapeError(f"select_rates_for_saving: expected predictions of at least one tile, got shape "
                               f"{values.shape}", actual=tuple(values.shape), expected="(..., 6, th, tw)")
