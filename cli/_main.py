@@ -1138,11 +1138,11 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("frames", nargs="+", type=_path_text, metavar="frame", help="the .npz of a frame's G-buffers "
                     "(written with --write-example), several, or a folder of them (taken in the order of their names)")
     pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
-    hold = pr.add_mutually_exclusive_group()
-    hold.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
-    hold.add_argument("--saving", type=float, default=None, metavar="SHARE", help="a budget instead of a threshold: "
-                      "each frame's rates save at least this share of the shading work (0 to 0.9375), at the lowest "
-                      "threshold that does (sdk.select_rates_for_saving), which is reported a frame")
+    pr.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    pr.add_argument("--saving", type=float, default=None, metavar="SHARE", help="a budget instead of a threshold: "
+                    "each frame's rates save at least this share of the shading work (0 to 0.9375), at the lowest "
+                    "threshold that does (sdk.select_rates_for_saving), which is reported a frame; with --threshold, "
+                    "a floor under the threshold's rates")
     pr.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
                     "the model's)")
     pr.add_argument("--allowed", default=None, help="comma-separated reduced rates the hardware has (default: all "

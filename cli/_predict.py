@@ -187,7 +187,7 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     else:
         budget = sdk.select_rates_for_saving(values, args.saving, higher_is_better=meta.higher_is_better,
                                              allowed=allowed, factors=meta.rate_factors, frame_size=(h, w),
-                                             tile_size=predictor.tile_size)
+                                             tile_size=predictor.tile_size, threshold=args.threshold)
         rates, threshold = budget.rates, float(budget.threshold)
     counts = {r: int((rates == c).sum()) for r, c in sdk.RATE_CODES.items()}
     summary: dict[str, Any] = {
@@ -233,7 +233,8 @@ def run_predict(args: argparse.Namespace) -> int:
     threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
     allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
     if args.saving is not None:  # (its range, with the rates allowed, before the first frame's work)
-        sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, allowed=allowed)
+        sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, allowed=allowed, threshold=args.threshold,
+                                    higher_is_better=predictor.metadata.higher_is_better)
     model = predictor.path.name if predictor.path else args.model
     if sequence:
         return _run_sequence(args, files, predictor, threshold, allowed, model)
@@ -280,7 +281,8 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     shown = [os.path.relpath(os.path.abspath(f), base) for f in files]  # (each frame's name under the folder)
     width = max(5, *map(len, shown))
     if not args.json and not args.quiet:
-        held = f"a saving of {args.saving:g}" if args.saving is not None else f"threshold {threshold:g}"
+        held = (f"threshold {threshold:g}" if args.saving is None else f"a saving of {args.saving:g}" if args.threshold
+                is None else f"threshold {threshold:g} with a floor of {args.saving:g} saved")
         print(f"{model} ({predictor.metadata.metric}), {held}, tiles of {predictor.tile_size}px, "
               f"{len(files)} frames in {os.path.relpath(base) if base.startswith(os.getcwd()) else base}")
         if reuse is not None:
@@ -417,6 +419,8 @@ def _holding(args: argparse.Namespace, threshold: float) -> str:
     """What a single frame's rates held: the threshold, or (``--saving``) the saving and the threshold reached."""
     if args.saving is None:
         return f"threshold {threshold:g}"
+    if args.threshold is not None:
+        return f"threshold {args.threshold:g} with a floor of {args.saving:g} saved, ran at threshold {threshold:.4g}"
     return f"a saving of {args.saving:g} (a budget), reached at threshold {threshold:.4g}"
 
 

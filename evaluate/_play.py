@@ -25,7 +25,8 @@ variance, ``sdk.PredictionReuse(rescale=A)``; ``NAME@k:cF`` multiplies carried e
 ``sdk.PredictionReuse(carry_scale=F)``; ``NAME@k:features`` carries a splitting model's trunk features
 and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``; ``NAME@k:bS`` holds a budget
 instead of a threshold: every frame's rates save a share S of the work, ``sdk.select_rates_for_saving``,
-and the sweep is over S), ``yang2019``
+and the sweep is over S; ``NAME@k:fS`` keeps the threshold and its sweep with a floor of S saved under it,
+``select_rates_for_saving(threshold=)``), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
@@ -134,7 +135,8 @@ class MethodSpec:
     with tiles the network did not see (:data:`REUSE_UNSEEN`), the ``history`` weight of the carried
     estimates on the network's frames, the ``refresh`` share of unseen tiles that runs the network
     early and the carry's pixel ``step`` (``sdk.PredictionReuse``'s arguments of those names); ``budget``, the share of
-    the work its rates save every frame (``sdk.select_rates_for_saving``) instead of a threshold."""
+    the work its rates save every frame (``sdk.select_rates_for_saving``) instead of a threshold; ``floor``, the
+    least share saved under its threshold (the same function with the threshold)."""
 
     name: str
     kind: str
@@ -149,6 +151,7 @@ class MethodSpec:
     carry_scale: float = 1.0
     carry: str = "estimates"
     budget: float | None = None
+    floor: float | None = None
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
@@ -157,8 +160,9 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     ``:reduction`` (:data:`REUSE_REDUCTIONS`), ``:unseen`` (:data:`REUSE_UNSEEN`), ``:hW`` (history
     weight W), ``:rS`` (refresh share S), ``:sN`` (the carry keeps one pixel of N per axis), ``:vA``
     (carried estimates rescaled by the blocks' variance to the power A), ``:cF`` (carried estimates
-    multiplied by F), ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features) and ``:bS``
-    (a budget: save a share S of the work every frame) in any order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``,
+    multiplied by F), ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features), ``:bS``
+    (a budget: save a share S of the work every frame) and ``:fS`` (a floor of S saved under the threshold) in any
+    order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``,
     ``jnyang@4:s4``, ``split.onnx@4:features``, ``jnyang@1:b0.6``)."""
     if not isinstance(text, str) and (not isinstance(text, Iterable) or not all(isinstance(t, str) for t in text)):
         raise PlayError(f"methods: expected a comma-separated string or a list of method names, got {text!r}")
@@ -185,22 +189,25 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         rescale = [_exponent(o, item) for o in options if o[:1] == "v"]
         carry = [o for o in options if o in REUSE_CARRIES]
         scale = [_carry_scale(o, item) for o in options if o[:1] == "c" and o not in REUSE_CARRIES]
-        budget = [_budget(o, item) for o in options if o[:1] == "b"]
+        budget = [_budget(o, item, "budget") for o in options if o[:1] == "b"]
+        floor = [_budget(o, item, "floor") for o in options
+                 if o[:1] == "f" and o not in REUSE_UNSEEN and o not in REUSE_CARRIES]
         if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
-                or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1 or len(budget) > 1
+                or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1 or len(budget) + len(floor) > 1
                 or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) + len(scale)
-                + len(carry) + len(budget) != len(options)):
+                + len(carry) + len(budget) + len(floor) != len(options)):
             raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
                             f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
                             "refresh share (both in [0, 1)), one ':sN' pixel step, one ':vA' rescale exponent and "
-                            f"one ':cF' carry scale, one ':carry' ({', '.join(REUSE_CARRIES)}) and one ':bS' budget, "
-                            "e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, jnyang@4:v0.5, "
-                            "jnyang@4:c1.08, split.onnx@4:features or jnyang@1:b0.6")
+                            f"one ':cF' carry scale, one ':carry' ({', '.join(REUSE_CARRIES)}) and one ':bS' budget "
+                            "or ':fS' floor, e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, "
+                            "jnyang@4:v0.5, jnyang@4:c1.08, split.onnx@4:features, jnyang@1:b0.6 or jnyang@1:f0.5")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
                               refresh[0] if refresh else None, step[0] if step else None,
                               rescale[0] if rescale else 0.0, scale[0] if scale else 1.0,
-                              carry[0] if carry else MethodSpec.carry, budget[0] if budget else None))
+                              carry[0] if carry else MethodSpec.carry, budget[0] if budget else None,
+                              floor[0] if floor else None))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -242,9 +249,9 @@ def _carry_scale(option: str, item: str) -> float:
     return _number(option, item, lo, hi, "carry scale", f"a factor in [{lo:g}, {hi:g}], e.g. jnyang@4:c1.08")
 
 
-def _budget(option: str, item: str) -> float:
-    return _number(option, item, 0.0, sdk.MAX_SAVING, "budget", "the share of the shading work to save every frame, a "
-                   f"number in [0, {sdk.MAX_SAVING:g}], e.g. jnyang@1:b0.6")
+def _budget(option: str, item: str, what: str) -> float:
+    return _number(option, item, 0.0, sdk.MAX_SAVING, what, "the share of the shading work to save every frame, a "
+                   f"number in [0, {sdk.MAX_SAVING:g}], e.g. jnyang@1:{option[0]}0.6")
 
 
 def _share(option: str, item: str, what: str) -> float:
@@ -828,8 +835,9 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
                 decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh,
-                                m.step, m.rescale, m.carry_scale, m.carry)
-                loops.append(_Loop(m, v, f"threshold {v:.4g}", decide, default=v == thr0))
+                                m.step, m.rescale, m.carry_scale, m.carry, saving=m.floor, floor=m.floor is not None)
+                label = f"threshold {v:.4g}" + ("" if m.floor is None else f", floor {m.floor:g}")
+                loops.append(_Loop(m, v, label, decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
                            unseen="full" if m.kind == "yang2019-unseen-1x1" else "as_is")
@@ -903,7 +911,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
            refresh: float | None = None, step: int | None = None, rescale: float = 0.0,
            carry_scale: float = 1.0, carries: str = "estimates", saving: float | None = None,
-           ) -> Callable[..., np.ndarray]:
+           floor: bool = False) -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     split = meta.tile_size // tile  # (finer hardware tiles than the model's: each its model tile's rate)
@@ -928,7 +936,8 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
             rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors)
         else:  # (the budget over the frame's pixels: est's tiles are the model's, or the hardware's when coarser)
             rates = sdk.select_rates_for_saving(est, saving, higher_is_better=hib, factors=meta.rate_factors,
-                                                frame_size=pf.seen.shape, tile_size=max(tile, meta.tile_size)).rates
+                                                frame_size=pf.seen.shape, tile_size=max(tile, meta.tile_size),
+                                                threshold=thr if floor else None).rates
         return rates if split <= 1 else sdk.split_tiles(rates, split, truth.shape[1:])
     return decide
 

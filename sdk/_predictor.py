@@ -916,15 +916,13 @@ class ShadingRatePredictor:
         dynamic resolution holds the frame time): each frame's rates save at least that share of it
         (``[0, 0.9375]``) at the lowest threshold that does, so with the least visible error its
         predictions allow (:func:`~rtp.sdk.select_rates_for_saving`, which also says the threshold reached).
+        Both: the threshold's rates, with the saving as a floor under them on frames where they save less.
         """
         if saving is not None:
-            if threshold is not None:
-                raise ParameterError("shading_rates: give a threshold (hold the quality) or a saving (hold the "
-                                     "work), not both", "saving")
             h, w = np.shape(x)[-2:]
             return select_rates_for_saving(self.predict(x), saving, higher_is_better=self._meta.higher_is_better,
                                            allowed=allowed, factors=self._meta.rate_factors, frame_size=(h, w),
-                                           tile_size=self._tile).rates
+                                           tile_size=self._tile, threshold=threshold).rates
         thr = self._meta.default_threshold if threshold is None else threshold
         rates = select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
                              factors=self._meta.rate_factors)

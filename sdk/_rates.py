@@ -343,6 +343,7 @@ def select_rates_for_saving(
     factors: Mapping[str, float] | Iterable[float] | None = None,
     frame_size: tuple[int, int] | None = None,
     tile_size: int | None = None,
+    threshold: float | None = None,
 ) -> SavingSelection:
     """Rates that save at least ``saving`` of the shading work with the least visible error: a budget.
 
@@ -355,6 +356,10 @@ def select_rates_for_saving(
     everywhere. ``values``, ``higher_is_better``, ``allowed`` and ``factors`` are :func:`select_rates`'s;
     ``frame_size = (H, W)`` and ``tile_size`` weigh partial edge tiles by their pixels, as in
     :func:`work_saved` (without them every tile counts alike). Returns a :class:`SavingSelection`.
+
+    With a ``threshold`` too, the saving is a floor under it: the threshold's own rates on a frame where they
+    save ``saving`` or more, else the budget's (the rates at the higher of the two thresholds; for PSNR, the
+    lower): the quality held while the frame allows it, the work saved never below the floor.
     """
     values = _check_values(values)
     if not isinstance(higher_is_better, (bool, np.bool_)):
@@ -362,6 +367,7 @@ def select_rates_for_saving(
     hib = bool(higher_is_better)
     rates = resolve_allowed(allowed)
     target = check_saving(saving, rates)
+    floor_under = None if threshold is None else check_threshold(threshold, hib)
     err = _oriented(values, hib, check_rate_factors(factors))
     th, tw = values.shape[-2:]
     weights = _tile_pixels("select_rates_for_saving", (th, tw), frame_size, tile_size)
@@ -377,6 +383,8 @@ def select_rates_for_saving(
         table[RATE_CODES[r]] = 1.0 - 1.0 / (rate_size(r)[0] * rate_size(r)[1])
     for i, frame in enumerate(frames):
         thr = _lowest_threshold(frame, rates, weights, target, hib)
+        if floor_under is not None:  # (a floor under a threshold: the threshold unless it saves less)
+            thr = max(thr, -floor_under if hib else floor_under)
         picked[i] = _pick(frame, thr, rates)
         thresholds[i] = -thr if hib else thr
         saved[i] = float((table[picked[i]] * weights).sum() / weights.sum())

@@ -26,7 +26,14 @@ import numpy as np
 
 from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
 from ._errors import InputDtypeError, InputShapeError, ParameterError
-from ._rates import RateLike, check_saving, resolve_allowed, select_rates, select_rates_for_saving
+from ._rates import (
+    RateLike,
+    check_saving,
+    check_threshold,
+    resolve_allowed,
+    select_rates,
+    select_rates_for_saving,
+)
 from ._reproject import _real
 from ._tiles import padded_size, split_tiles, tile_grid
 
@@ -840,19 +847,18 @@ class PredictionReuse:
         """:meth:`predict`, then per tile the cheapest allowed rate whose estimate passes ``threshold``
         (default: the model's), as :meth:`ShadingRatePredictor.shading_rates` picks them; or with ``saving``, a
         budget: the rates that save that share of the frame's work at the lowest threshold that does
-        (:func:`~rtp.sdk.select_rates_for_saving`)."""
+        (:func:`~rtp.sdk.select_rates_for_saving`; with a ``threshold`` too, a floor under its rates)."""
         meta = self._net.metadata
-        if saving is not None and threshold is not None:
-            raise ParameterError("shading_rates: give a threshold (hold the quality) or a saving (hold the work), "
-                                 "not both", "saving")
         if saving is not None:  # (refused before the frame moves the carry on)
             check_saving(saving, resolve_allowed(allowed))
+            if threshold is not None:
+                check_threshold(threshold, meta.higher_is_better)
         estimates = self.predict(x, fetch, seen, background)
         if saving is not None:
             assert self._shape is not None  # (predict set it)
             return select_rates_for_saving(estimates, saving, higher_is_better=meta.higher_is_better, allowed=allowed,
                                            factors=meta.rate_factors, frame_size=self._shape,
-                                           tile_size=self.predictor.tile_size).rates
+                                           tile_size=self.predictor.tile_size, threshold=threshold).rates
         thr = meta.default_threshold if threshold is None else threshold
         return select_rates(estimates, thr, higher_is_better=meta.higher_is_better, allowed=allowed,
                             factors=meta.rate_factors)

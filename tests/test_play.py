@@ -425,7 +425,8 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
                        ("jnyang@4:s²", "pixel step"),
                        ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one"),
                        ("jnyang@1:b0.95", r"not a budget: .* \[0, 0.9375\]"), ("jnyang@1:bx", "not a budget"),
-                       ("jnyang@1:b0.5:b0.6", "at most one")):
+                       ("jnyang@1:b0.5:b0.6", "at most one"), ("jnyang@1:f2", "not a floor"),
+                       ("jnyang@1:f0.5:b0.5", "at most one"), ("jnyang@1:f0.5:f0.6", "at most one")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     # a model file whose name holds an '@' or a comma is taken whole, and '@k' after it still reuses
@@ -482,18 +483,31 @@ def test_a_budget_saves_its_share_on_every_frame(tmp_path: Path) -> None:
     """``NAME@k:bS``: every frame's rates save at least S of the work (the tiles weighed by their pixels: the
     96-pixel-tall frame's last row is whole, the 72-pixel one's half), a tile's step over it at most, while the
     threshold mode's saving follows the frames; swept, the budget's grid replaces the thresholds."""
-    specs = parse_methods("jnyang@1:b0.6,jnyang@4:fresh:b0.3")
-    assert [(s.budget, s.reuse, s.unseen) for s in specs] == [(0.6, 1, "full"), (0.3, 4, "fresh")]
-    assert parse_methods("jnyang")[0].budget is None
+    specs = parse_methods("jnyang@1:b0.6,jnyang@4:fresh:b0.3,jnyang@4:f0.5:full,jnyang-reuse@4:features:f0.4")
+    assert [(s.budget, s.floor, s.reuse, s.unseen, s.carry) for s in specs] == [
+        (0.6, None, 1, "full", "estimates"), (0.3, None, 4, "fresh", "estimates"), (None, 0.5, 4, "full", "estimates"),
+        (None, 0.4, 4, "full", "features")]
+    assert (parse_methods("jnyang")[0].budget, parse_methods("jnyang")[0].floor) == (None, None)
+    raised = 0
     for h, tile in ((H, 16), (72, 16), (72, 8)):
-        rep = play("procedural:0", "jnyang,jnyang@1:b0.6,jnyang@2:b0.4", paths=("fast",), frames=4, size=(W, h),
-                   sweep=False, flip_every=0, tile_size=tile, plots=False)
+        rep = play("procedural:0", "jnyang,jnyang@1:b0.6,jnyang@2:b0.4,jnyang@1:f0.6", paths=("fast",), frames=4,
+                   size=(W, h), sweep=False, flip_every=0, tile_size=tile, plots=False)
+        # a floor: the threshold's saving where it is 0.6 or more, else the floor's, a tile's step over it at most
+        # (compared up to the first frame the floor raised: from there each loop's history is its own)
+        for own, floored in zip(rep.frames["fast"]["jnyang"]["saved"], rep.frames["fast"]["jnyang@1:f0.6"]["saved"]):
+            if own >= 0.6:
+                assert floored == own
+                continue
+            assert 0.6 - 1e-9 <= floored <= 0.6 + sdk.MAX_SAVING * 256 / (W * h)
+            raised += 1
+            break
         step = sdk.MAX_SAVING * 16 * 16 / (W * h)  # one 16-pixel model tile's whole saving
         for name, share in (("jnyang@1:b0.6", 0.6), ("jnyang@2:b0.4", 0.4)):
             saved = rep.frames["fast"][name]["saved"]
             assert all(share - 1e-9 <= v <= share + step for v in saved), (h, tile, name, saved)
         free = rep.frames["fast"]["jnyang"]["saved"]
         assert max(free) - min(free) > step  # (a threshold holds the quality: its saving moves)
+    assert raised >= 2  # (the floor raised a frame in most runs)
     swept = play("procedural:0", "jnyang,jnyang@1:b0.55", paths=("slow",), frames=3, size=(W, H), flip_every=0,
                  plots=False)
     rows = [r for r in swept.rows if r["method"] == "jnyang@1:b0.55"]

@@ -221,9 +221,14 @@ def test_a_budget_holds_the_work_saved_and_reports_each_frames_threshold(
     assert "a saving of 0.7 (a budget), reached at threshold " in text and "4x4" not in text
     assert main(["predict", str(frame), "--saving", "0.8", "--allowed", "1x2,2x1,2x2"]) == 2
     assert "saving: expected the share of shading work to save, a number in [0, 0.75]" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as exit_:
-        main(["predict", str(frame), "--saving", "0.5", "--threshold", "0.2"])
-    assert exit_.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+    # with --threshold the saving is a floor under the threshold's rates
+    assert main(["predict", str(sequence), "--saving", "0.55", "--threshold", "0.2", "--json"]) == 0
+    floor = json.loads(capsys.readouterr().out)
+    assert floor["saving"] == 0.55 and floor["threshold"] is None
+    for row, want in zip(floor["frames"], reached):
+        assert row["threshold"] == pytest.approx(max(0.2, want)) and row["work_saved"] >= 0.55
+    assert main(["predict", str(frame), "--saving", "0.1", "--threshold", "0.2"]) == 0
+    assert "threshold 0.2 with a floor of 0.1 saved, ran at threshold 0.2" in capsys.readouterr().out
 
 
 def test_a_sequence_in_text_a_line_a_frame(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:

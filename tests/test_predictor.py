@@ -122,8 +122,10 @@ def test_shading_rates_for_a_saving(tiny_model: Callable[..., Path]) -> None:
     # partial edge tiles weigh their pixels: in a 40-pixel-wide frame two whole tiles at 4x4 save 0.75 of
     # its work (counted per tile, the last one would have to be reduced too)
     assert p.shading_rates(x[:, :, :40], saving=0.75).tolist() == [[10, 10, 0]]
-    with pytest.raises(sdk.ParameterError, match="give a threshold .* or a saving .*, not both"):
-        p.shading_rates(x, threshold=0.3, saving=0.5)
+    # both: the threshold's rates, the saving a floor under them
+    assert p.shading_rates(x, threshold=0.2).tolist() == [[10, 0, 0]]
+    assert p.shading_rates(x, threshold=0.2, saving=0.3).tolist() == [[10, 0, 0]]  # (it saves 0.3125 already)
+    assert p.shading_rates(x, threshold=0.2, saving=0.32).tolist() == [[10, 10, 0]]  # the floor's
     with pytest.raises(sdk.ParameterError, match=r"saving: expected .* \[0, 0.5\]"):
         p.shading_rates(x, saving=0.6, allowed=["1x2"])
 

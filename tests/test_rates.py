@@ -279,6 +279,30 @@ def test_a_saving_is_reached_at_the_lowest_threshold(values: np.ndarray, saving:
         assert plain.threshold == 0 and hib.threshold > 1000 and (hib.rates == 0).all()
 
 
+@settings(max_examples=200, deadline=None)
+@given(
+    values=hnp.arrays(np.float64, st.tuples(st.just(6), st.integers(1, 4), st.integers(1, 5)),
+                      elements=st.one_of(st.sampled_from([0.1, 0.2, 0.25, 0.3]), st.floats(0, 1))),
+    saving=st.floats(0, sdk.MAX_SAVING),
+    threshold=st.sampled_from([0.0, 0.1, 0.2, 0.25, 0.5, 2.0]),
+    hib=st.booleans(),
+)
+def test_a_saving_as_a_floor_under_a_threshold(values: np.ndarray, saving: float, threshold: float, hib: bool) -> None:
+    """A threshold and a saving: the threshold's rates where they save the floor or more, else the budget's."""
+    if hib:
+        values, threshold = -values, -threshold
+    own = sdk.select_rates(values, threshold, higher_is_better=hib)
+    budget = sdk.select_rates_for_saving(values, saving, higher_is_better=hib)
+    floor = sdk.select_rates_for_saving(values, saving, higher_is_better=hib, threshold=threshold)
+    if sdk.work_saved(own) >= saving * (1 - 1e-12):
+        np.testing.assert_array_equal(floor.rates, own)
+        assert floor.threshold == threshold
+    else:
+        np.testing.assert_array_equal(floor.rates, budget.rates)
+        assert floor.threshold == budget.threshold
+    assert floor.saved >= saving * (1 - 1e-12)
+
+
 def test_a_saving_per_frame_of_a_batch_and_with_nan() -> None:
     rng = np.random.default_rng(3)
     values = rng.random((3, 6, 4, 5))
@@ -316,6 +340,7 @@ def test_a_saving_per_frame_of_a_batch_and_with_nan() -> None:
         ("half", {}, r"got 'half'"),
         (0.5, {"frame_size": (32, 32)}, r"give frame_size and tile_size together"),
         (0.5, {"frame_size": 32, "tile_size": 16}, r"frame_size: expected \(H, W\), got 32"),
+        (0.5, {"threshold": -1.0}, r"threshold: expected a finite number in \[0, 1e\+06\]"),
     ],
 )
 def test_a_saving_out_of_range_is_a_clear_error(saving: object, kw: dict, match: str) -> None:

@@ -304,11 +304,17 @@ def test_a_budget_on_carried_estimates() -> None:
         np.testing.assert_array_equal(rates, want.rates)
         assert sdk.work_saved(rates, (s.h, s.w), TILE) >= 0.6 and ours.age == frame
     assert (rates[2:4, 11:13] == 0).all()  # (unseen: their estimates never pass)
-    with pytest.raises(sdk.ParameterError, match="not both"):
-        ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, threshold=0.2, saving=0.5)
+    with pytest.raises(sdk.ParameterError, match="threshold: expected a finite number"):
+        ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, threshold=-0.2, saving=0.5)
     with pytest.raises(sdk.ParameterError, match=r"saving: expected .* \[0, 0.75\]"):
         ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, saving=0.8, allowed=["2x2"])
     assert ours.age == 1  # (neither call moved the carry on)
+    # a threshold and a saving: the saving a floor under the threshold's rates
+    floor = ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, threshold=0.05, saving=0.5)
+    est = plain.predict(s.inputs(everything), (s.rows, s.cols), everything)
+    want = sdk.select_rates_for_saving(est, 0.5, factors=meta.rate_factors, frame_size=(s.h, s.w), tile_size=TILE,
+                                       threshold=0.05)
+    np.testing.assert_array_equal(floor, want.rates)
 
 
 def test_the_interval_and_the_fallbacks_run_the_whole_frame() -> None:
