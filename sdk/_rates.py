@@ -406,21 +406,23 @@ def _lowest_threshold(err: np.ndarray, rates: tuple[str, ...], weights: np.ndarr
     hi = MAX_THRESHOLD
     order = _classes(rates)
     classes = sorted({rate_size(r)[0] * rate_size(r)[1] for r in order})  # dearest (smallest area) first
-    if not classes:
+    if not classes or target <= 0.0:  # nothing needs to pass (or can): the lowest threshold
         return lo
-    smallest = np.empty((len(classes),) + err.shape[1:])
-    for k, area in enumerate(classes):  # each class's best value per tile (NaN never passes)
-        sub = err[[PREDICTED_RATES.index(r) for r in order if rate_size(r)[0] * rate_size(r)[1] == area]]
-        smallest[k] = np.where(np.isnan(sub), np.inf, sub).min(axis=0)
-    steps = np.minimum.accumulate(smallest[::-1], axis=0)[::-1]  # T_k: the best of class k and every cheaper one
+    clean = np.where(np.isnan(err), np.inf, err)  # (NaN never passes)
+    steps = np.empty((len(classes),) + err.shape[1:])  # T_k: the best of class k and every cheaper one
+    for k in range(len(classes) - 1, -1, -1):  # (cheapest first, each a contiguous plane)
+        rows = [clean[PREDICTED_RATES.index(r)] for r in order if rate_size(r)[0] * rate_size(r)[1] == classes[k]]
+        best = rows[0] if len(rows) == 1 else np.minimum(rows[0], rows[1])  # (a class has one rate or two)
+        if k + 1 < len(classes):
+            np.minimum(best, steps[k + 1], out=steps[k])
+        else:
+            steps[k] = best
     share = np.array([1.0 - 1.0 / a for a in classes])
     gain = np.diff(share, prepend=0.0)[:, None, None] * weights  # each step's share of the frame's work
     need = target * weights.sum() * (1.0 - 1e-12)  # (a rounding's worth short counts as reached)
-    if target <= 0.0:  # nothing needs to pass: the lowest threshold
-        return lo
     at, gain = steps.ravel(), gain.ravel()
     reachable = at < np.inf  # (a NaN or an infinite value never passes)
-    if gain[reachable].sum() < need:  # NaN tiles: the most the frame can save, just past its last finite step
+    if float(np.dot(gain, reachable)) < need:  # NaN tiles: the most the frame can save, just past its last step
         return float(np.clip(np.nextafter(at[reachable].max(), np.inf), lo, hi)) if reachable.any() else lo
     return float(np.clip(np.nextafter(_weighted_select(at, gain, need), np.inf), lo, hi))
 

@@ -446,16 +446,18 @@ def _work_saved_absurd(v: tuple[ArraySpec, Any], saved: float) -> bool:
     return not 0.0 <= saved < 1.0 or a.dtype.kind not in "ui" or not set(np.unique(a).tolist()) <= known
 
 
-def _saving_call(v: tuple[ArraySpec, Any, Any, Any]) -> Any:
-    spec, saving, hib, size = v
+def _saving_call(v: tuple[ArraySpec, Any, Any, Any, Any]) -> Any:
+    spec, saving, hib, size, threshold = v
     kw = {} if size is None else {"frame_size": size, "tile_size": 16}
-    return sdk.select_rates_for_saving(_array(spec), saving, higher_is_better=hib, **kw)
+    return sdk.select_rates_for_saving(_array(spec), saving, higher_is_better=hib, threshold=threshold, **kw)
 
 
-def _saving_absurd(v: tuple[ArraySpec, Any, Any, Any], sel: Any) -> bool:
-    """Accepted: a saving that is no number in [0, 0.9375], predictions that are not (..., 6, th, tw) numbers,
-    rates that are no codes, or less saved than asked of predictions without NaN."""
-    spec, saving, hib, _ = v
+def _saving_absurd(v: tuple[ArraySpec, Any, Any, Any, Any], sel: Any) -> bool:
+    """Accepted: a saving that is no number in [0, 0.9375], a threshold (a floor's) out of range, predictions that
+    are not (..., 6, th, tw) numbers, rates that are no codes, or less saved than asked of predictions without NaN."""
+    spec, saving, hib, _, threshold = v
+    if isinstance(hib, bool) and _threshold_absurd(threshold, hib):
+        return True
     kind, shape, fill = spec
     if kind == "list":
         shape = shape[:3]
@@ -934,7 +936,8 @@ def targets() -> list[Target]:
         Target("select_rates_for_saving", st.tuples(prediction_arrays, st.one_of(st.floats(0, 1), hostile_numbers),
                                                     st.one_of(st.booleans(), st.booleans(), json_scalars),
                                                     st.one_of(st.none(), st.tuples(st.integers(-2, 90),
-                                                                                   st.integers(-2, 90)), json_values)),
+                                                                                   st.integers(-2, 90)), json_values),
+                                                    st.one_of(st.none(), st.none(), thresholds)),
                _saving_call, _saving_absurd),
         Target("work_saved", st.tuples(st.one_of(_arrays(st.integers(0, 4), 3), code_arrays),
                                        st.one_of(st.none(), st.tuples(st.integers(-2, 70), st.integers(-2, 70)),
