@@ -170,9 +170,21 @@ def select(values: np.ndarray, meta: dict, threshold: float, allowed: tuple[str,
 
 
 def select_for_saving(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, ...] = RATES,
-                      frame: tuple[int, int] | None = None, tile_size: int | None = None) -> tuple[np.ndarray, float]:
+                      frame: tuple[int, int] | None = None, tile_size: int | None = None,
+                      threshold: float | None = None) -> tuple[np.ndarray, float]:
     """Step 7: the rates that save ``saving`` of the frame's work (each tile weighed by its pixels, given the
-    ``frame``'s (H, W) and ``tile_size``) at the lowest threshold that does, and that threshold."""
+    ``frame``'s (H, W) and ``tile_size``) at the lowest threshold that does, and that threshold; with a
+    ``threshold`` too, the saving is a floor under it (the higher of the two thresholds; PSNR the lower)."""
+    rates, reached = _budget(values, meta, saving, allowed, frame, tile_size)
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    if threshold is not None and (threshold <= reached if better else threshold >= reached):  # it saves enough
+        return select(values, meta, threshold, allowed), threshold
+    return rates, reached
+
+
+def _budget(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, ...],
+            frame: tuple[int, int] | None, tile_size: int | None) -> tuple[np.ndarray, float]:
+    """Step 7 without a threshold: the lowest threshold that saves ``saving``, and its rates."""
     better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
     factors = meta.get("rate_factors") or {}
     th, tw = values.shape[1:]
@@ -225,7 +237,7 @@ def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float
     if tile_size is not None and tile_size != t:
         values = hardware_tiles(values, meta, tile_size, (h, w))
     if saving is not None:
-        return select_for_saving(values, meta, saving, allowed, (h, w), tile_size or t)[0]
+        return select_for_saving(values, meta, saving, allowed, (h, w), tile_size or t, threshold)[0]
     return select(values, meta, meta["default_threshold"] if threshold is None else threshold, allowed)
 
 
@@ -235,9 +247,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("model", type=Path, help="an rtp ONNX model file")
     ap.add_argument("--frame", type=Path, help="the input planes, a (C, H, W) float32 .npy (default: a random frame)")
     ap.add_argument("--size", default="1280x720", help="the random frame's WIDTHxHEIGHT (default 1280x720)")
-    hold = ap.add_mutually_exclusive_group()
-    hold.add_argument("--threshold", type=float, help="default: the model's default_threshold")
-    hold.add_argument("--saving", type=float, help="a budget instead (step 7): the share of the shading work to save")
+    ap.add_argument("--threshold", type=float, help="default: the model's default_threshold")
+    ap.add_argument("--saving", type=float, help="a budget instead (step 7): the share of the shading work to save; "
+                    "with --threshold, a floor under the threshold's rates")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile size (default: the model's)")
     ap.add_argument("--allowed", default=",".join(RATES), help="the reduced rates the hardware has (default: all six)")
     ap.add_argument("--check", action="store_true", help="compare with rtp.sdk's shading_rates on the same frame")

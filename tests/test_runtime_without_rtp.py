@@ -142,3 +142,10 @@ def test_the_ports_budget_is_the_sdks(higher_is_better: bool, port: ModuleType) 
                 rates, threshold = port.select_for_saving(values, meta, saving, allowed, frame, 16)
                 np.testing.assert_array_equal(rates, theirs.rates, err_msg=f"{allowed} {saving}")
                 assert threshold == theirs.threshold, (allowed, saving)
+                for under in ((6.0, 18.0) if higher_is_better else (0.06, 0.18)):  # the saving a floor under it
+                    floor = sdk.select_rates_for_saving(values, saving, higher_is_better=higher_is_better,
+                                                        allowed=allowed, factors=rate_factors, frame_size=frame,
+                                                        tile_size=16, threshold=under)
+                    rates, threshold = port.select_for_saving(values, meta, saving, allowed, frame, 16, under)
+                    np.testing.assert_array_equal(rates, floor.rates, err_msg=f"{allowed} {saving} under {under}")
+                    assert threshold == floor.threshold, (allowed, saving, under)
