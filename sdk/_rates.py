@@ -236,17 +236,16 @@ def select_rates(
     log10(factor)`` dB (a factor on the error's amplitude, as ``extrapolation_k``). Rates of equal cost
     then compare their values over their own thresholds.
     """
-    values = _check_values(values)
-    if not isinstance(higher_is_better, (bool, np.bool_)):
-        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
+    values, hib = _check_values(values, higher_is_better)
     rates = resolve_allowed(allowed)
-    threshold = check_threshold(threshold, bool(higher_is_better))
-    err = _oriented(values, bool(higher_is_better), check_rate_factors(factors))
-    return _pick(err, -threshold if higher_is_better else threshold, rates)
+    threshold = check_threshold(threshold, hib)
+    err = _oriented(values, hib, check_rate_factors(factors))
+    return _pick(err, -threshold if hib else threshold, rates)
 
 
-def _check_values(values: object) -> np.ndarray:
-    """Predictions as an array with the six rates on axis -3, else a typed error."""
+def _check_values(values: object, higher_is_better: object) -> tuple[np.ndarray, bool]:
+    """Predictions as an array with the six rates on axis -3 and the metric's direction as a bool, else a typed
+    error (the checks every selection starts with)."""
     try:
         array = np.asarray(values)
     except (TypeError, ValueError, OverflowError) as error:  # ragged nested lists and the like
@@ -259,7 +258,9 @@ def _check_values(values: object) -> np.ndarray:
             actual=tuple(array.shape),
             expected="(..., 6, th, tw)",
         )
-    return array
+    if not isinstance(higher_is_better, (bool, np.bool_)):
+        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
+    return array, bool(higher_is_better)
 
 
 def _oriented(values: np.ndarray, higher_is_better: bool, scale: tuple[float, ...]) -> np.ndarray:
@@ -361,10 +362,7 @@ def select_rates_for_saving(
     save ``saving`` or more, else the budget's (the rates at the higher of the two thresholds; for PSNR, the
     lower): the quality held while the frame allows it, the work saved never below the floor.
     """
-    values = _check_values(values)
-    if not isinstance(higher_is_better, (bool, np.bool_)):
-        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
-    hib = bool(higher_is_better)
+    values, hib = _check_values(values, higher_is_better)
     rates = resolve_allowed(allowed)
     target = check_saving(saving, rates)
     floor_under = None if threshold is None else check_threshold(threshold, hib)
