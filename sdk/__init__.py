@@ -52,6 +52,7 @@ from ._planes import DEPTH_KINDS, GBUFFERS, NORMAL_SPACES, check_gbuffers, gbuff
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import (
     ALL_RATES,
+    COMBINERS,
     MAX_RATE_FACTOR,
     MAX_SAVING,
     PREDICTED_RATES,
@@ -60,6 +61,7 @@ from ._rates import (
     RateLike,
     SavingSelection,
     check_threshold,
+    combine_rates,
     rate_size,
     resolve_allowed,
     select_rates,
@@ -117,6 +119,7 @@ __all__ = [
     "BLOCK_RATES",
     "BLOCK_TILE",
     "CHANNELS",
+    "COMBINERS",
     "DEFAULT_EXTRAPOLATION_K",
     "DEFAULT_INPUTS",
     "DEFAULT_OUTPUTS",
@@ -175,6 +178,7 @@ __all__ = [
     "check_gbuffers",
     "check_projection",
     "check_threshold",
+    "combine_rates",
     "complete_rates",
     "depth_edges",
     "draw_rate_overlay",

@@ -902,6 +902,8 @@ class ShadingRatePredictor:
         allowed: Iterable[RateLike] | None = None,
         *,
         saving: float | None = None,
+        engine_rates: RateLike | np.ndarray | None = None,
+        combiner: str | int = "max",
     ) -> np.ndarray:
         """Per tile the cheapest allowed rate whose predicted value passes ``threshold``, else 1x1.
 
@@ -917,15 +919,22 @@ class ShadingRatePredictor:
         (``[0, 0.9375]``) at the lowest threshold that does, so with the least visible error its
         predictions allow (:func:`~rtp.sdk.select_rates_for_saving`, which also says the threshold reached).
         Both: the threshold's rates, with the saving as a floor under them on frames where they save less.
+
+        ``engine_rates`` (one code, a ``(th, tw)`` image, or one a frame) are the engine's own rates for the same
+        tiles, which the hardware's ``combiner`` (``min``, ``max``, ``sum`` or its enum value) meets with this image:
+        each tile then takes the cheapest rate the device will shade that passes, not a rate whose combination
+        with the engine's was never judged, and a ``saving`` counts the two together
+        (:func:`~rtp.sdk.select_rates`, :func:`~rtp.sdk.combine_rates`).
         """
         if saving is not None:
             h, w = np.shape(x)[-2:]
             return select_rates_for_saving(self.predict(x), saving, higher_is_better=self._meta.higher_is_better,
                                            allowed=allowed, factors=self._meta.rate_factors, frame_size=(h, w),
-                                           tile_size=self._tile, threshold=threshold).rates
+                                           tile_size=self._tile, threshold=threshold, engine_rates=engine_rates,
+                                           combiner=combiner).rates
         thr = self._meta.default_threshold if threshold is None else threshold
         rates = select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
-                             factors=self._meta.rate_factors)
+                             factors=self._meta.rate_factors, engine_rates=engine_rates, combiner=combiner)
         self._warn_beyond_saturation(thr)
         return rates
 

@@ -20,6 +20,7 @@ from ._tiles import tile_extents, tile_grid
 
 __all__ = [
     "ALL_RATES",
+    "COMBINERS",
     "MAX_RATE_FACTOR",
     "MAX_SAVING",
     "MAX_THRESHOLD",
@@ -29,7 +30,9 @@ __all__ = [
     "RateLike",
     "SavingSelection",
     "check_rate_factors",
+    "check_engine_rates",
     "check_threshold",
+    "combine_rates",
     "rate_size",
     "resolve_allowed",
     "select_rates",
@@ -222,6 +225,8 @@ def select_rates(
     higher_is_better: bool = False,
     allowed: Iterable[RateLike] | None = None,
     factors: Mapping[str, float] | Iterable[float] | None = None,
+    engine_rates: RateLike | np.ndarray | None = None,
+    combiner: str | int = "max",
 ) -> np.ndarray:
     """Pick per tile the cheapest allowed rate whose predicted value passes ``threshold``.
 
@@ -235,12 +240,23 @@ def select_rates(
     threshold of its own: an error passes below ``threshold x factor``, a PSNR above ``threshold - 20
     log10(factor)`` dB (a factor on the error's amplitude, as ``extrapolation_k``). Rates of equal cost
     then compare their values over their own thresholds.
+
+    ``engine_rates`` are the rates the engine's own sources give the same tiles (a foveation or motion image, a
+    per-draw rate: one code, a ``(th, tw)`` image of codes, or one a frame), which the hardware's ``combiner``
+    (:data:`COMBINERS`: ``min``, ``max`` or ``sum``, or its enum value) meets with this image: then the rate judged
+    is the rate the device will shade, ``combine_rates(engine_rates, image, combiner)``, and a tile takes the
+    cheapest one reachable that passes, else what the engine's rates force. With ``max`` a ``1x2`` here and a ``2x1``
+    of the engine's shade ``2x2``, a rate neither chose; this picks ``2x2`` only where it passes. The image then
+    holds, with ``min`` and ``max``, the rate the device shades.
     """
     values, hib = _check_values(values, higher_is_better)
     rates = resolve_allowed(allowed)
     threshold = check_threshold(threshold, hib)
+    combo = _engine_rates(engine_rates, combiner, rates, values.shape[:-3] + values.shape[-2:])
     err = _oriented(values, hib, check_rate_factors(factors))
-    return _pick(err, -threshold if hib else threshold, rates)
+    if combo is None:
+        return _pick(err, -threshold if hib else threshold, rates)
+    return _pick_combined(*_combined_values(err, *combo), -threshold if hib else threshold, *combo)[0]
 
 
 def _check_values(values: object, higher_is_better: object) -> tuple[np.ndarray, bool]:
@@ -291,11 +307,232 @@ def _pick(err: np.ndarray, thr: float, rates: tuple[str, ...]) -> np.ndarray:
     areas = [rate_size(r)[0] * rate_size(r)[1] for r in order]
     rank = np.array([sorted(set(areas), reverse=True).index(a) for a in areas], np.int8)
     e = np.take(err, [PREDICTED_RATES.index(r) for r in order], axis=-3)
-    passing = e < thr
-    best = np.where(passing, rank[:, None, None], np.int8(len(order))).min(axis=-3, keepdims=True)
-    pick = np.where(passing & (rank[:, None, None] == best), e, np.inf).argmin(axis=-3)
-    codes = np.array([RATE_CODES[r] for r in order], np.uint8)
-    return np.where(best[..., 0, :, :] < len(order), codes[pick], np.uint8(RATE_CODES["1x1"]))
+    codes = np.array([RATE_CODES[r] for r in order] + [RATE_CODES["1x1"]], np.uint8)
+    return codes[_choose(e, rank[:, None, None], thr, len(order))]
+
+
+def _choose(values: np.ndarray, rank: np.ndarray, thr: float, fallback: int,
+            prefer: np.ndarray | None = None) -> np.ndarray:
+    """Per tile the index on axis -3 of the cheapest candidate whose oriented value passes ``thr``: the lowest
+    ``rank`` (int8, broadcast over ``values``), then the smallest value, then one ``prefer`` marks, then the first;
+    ``fallback`` where none passes."""
+    passing = values < thr
+    best = np.where(passing, rank, np.int8(127)).min(axis=-3, keepdims=True)
+    masked = np.where(passing & (rank == best), values, np.inf)
+    if prefer is None:
+        pick = masked.argmin(axis=-3)
+    else:
+        tied = masked == masked.min(axis=-3, keepdims=True)
+        liked = tied & prefer
+        pick = np.where(liked.any(axis=-3), liked.argmax(axis=-3), tied.argmax(axis=-3))
+    return np.where(best[..., 0, :, :] < 127, pick, fallback)
+
+
+def _pick_combined(values: np.ndarray, area: np.ndarray, thr: float, combo: _Combination,
+                   engine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The image's codes and the codes the device shades, from the candidates' oriented ``values`` and ``area``
+    (:func:`_combined_values`) against the oriented threshold ``thr``: the cheapest passing, else the 1x1 candidate
+    (the engine's rates alone); of two as cheap and as good, one the device shades as judged rather than one where
+    it may choose between a wide and a tall rate."""
+    exact = np.moveaxis(combo.channels[engine, :, 0] == combo.channels[engine, :, 1], -1, -3)
+    pick = _choose(values, (-area).astype(np.int8), thr, len(combo.candidates) - 1, prefer=exact)
+    return combo.image[engine, pick], combo.shaded[engine, pick]
+
+
+# --- The engine's own rates: the hardware's combiners --------------------------------------------------------------
+
+#: The hardware's shading-rate combiners, at their enum values (``D3D12_SHADING_RATE_COMBINER`` and Vulkan's
+#: ``VkFragmentShadingRateCombinerOpKHR`` share them): ``passthrough`` keeps the first input, ``override`` takes the
+#: second, ``min`` the finer size on each axis, ``max`` the coarser, ``sum`` the product of the sizes (D3D12 adds
+#: their log2; Vulkan's ``MUL``). Vulkan's names ``keep``, ``replace`` and ``mul`` are accepted too.
+COMBINERS: tuple[str, ...] = ("passthrough", "override", "min", "max", "sum")
+_COMBINER_ALIASES = {"keep": "passthrough", "replace": "override", "mul": "sum"}
+
+
+def _check_combiner(combiner: object, selecting: bool = False) -> str:
+    """A combiner's rtp name from a name (D3D12's or Vulkan's, any case) or its enum value, else ParameterError.
+    ``selecting``: only the combiners through which the image's rate reaches the frame (min, max, sum)."""
+    name = None
+    if isinstance(combiner, str):
+        low = combiner.strip().lower()
+        name = _COMBINER_ALIASES.get(low, low if low in COMBINERS else None)
+    elif isinstance(combiner, (int, np.integer)) and not isinstance(combiner, (bool, np.bool_)):
+        name = COMBINERS[int(combiner)] if 0 <= int(combiner) < len(COMBINERS) else None
+    choices = ("min", "max", "sum") if selecting else COMBINERS
+    if name is None or name not in choices:
+        why = (" (passthrough keeps the engine's rate and override the image's: nothing to choose with the engine's)"
+               if name in COMBINERS else "")
+        raise ParameterError(f"combiner: expected one of {', '.join(choices)} (or its D3D12/Vulkan enum value"
+                             f"{'' if selecting else ', or keep, replace, mul'}){why}, got {reprlib.repr(combiner)}",
+                             "combiner")
+    return name
+
+
+def _device_rates(w: int, h: int, supported: tuple[str, ...]) -> tuple[str, ...]:
+    """The rates a device may shade where a combiner asks for ``w x h``, the one rtp reports first: that rate where it
+    is ``supported``; else Vulkan's clamp (D3D12 leaves it to the device): of the supported rates no larger on either
+    axis, those of the largest area, then of the lowest ``W + H``, the tall one first where a wide and a tall one
+    remain; then any other rate a device may take where it also keeps rates that fit the swapped axes, as Vulkan
+    allows."""
+    if f"{w}x{h}" in supported:
+        return (f"{w}x{h}",)
+    sizes = {r: rate_size(r) for r in supported}
+
+    def largest(fits: list[str]) -> list[str]:
+        top = max(sizes[r][0] * sizes[r][1] for r in fits)
+        fits = [r for r in fits if sizes[r][0] * sizes[r][1] == top]
+        low = min(sum(sizes[r]) for r in fits)
+        return [r for r in ALL_RATES if r in fits and sum(sizes[r]) == low]
+
+    inside = largest([r for r, (rw, rh) in sizes.items() if rw <= w and rh <= h])
+    swapped = largest([r for r, (rw, rh) in sizes.items() if (rw <= w and rh <= h) or (rw <= h and rh <= w)])
+    return tuple(inside + [r for r in swapped if r not in inside])
+
+
+def _combined(combiner: str, a: str, b: str, supported: tuple[str, ...]) -> tuple[str, ...]:
+    """The rates a device may shade for rate ``a`` combined with ``b`` (both supported) by ``combiner``."""
+    (aw, ah), (bw, bh) = rate_size(a), rate_size(b)
+    w, h = {"passthrough": (aw, ah), "override": (bw, bh), "min": (min(aw, bw), min(ah, bh)),
+            "max": (max(aw, bw), max(ah, bh)), "sum": (aw * bw, ah * bh)}[combiner]
+    return _device_rates(w, h, supported)
+
+
+def _rate_index(codes: object, supported: tuple[str, ...], name: str) -> np.ndarray:
+    """Rate codes (an int, a name, or an integer array) as indices into :data:`ALL_RATES` (int8), each a rate of
+    ``supported``, else a typed error naming ``name``."""
+    if isinstance(codes, str):
+        if codes not in RATE_CODES:
+            raise ParameterError(f"{name}: unknown shading rate {codes!r}; expected a name from {', '.join(ALL_RATES)} "
+                                 "or integer codes", name)
+        codes = RATE_CODES[codes]
+    try:
+        array = np.asarray(codes)
+    except (TypeError, ValueError, OverflowError) as err:  # ragged nested lists and the like
+        raise InputDtypeError(f"{name}: expected shading-rate codes (integers), got {type(codes).__name__}") from err
+    if array.dtype.kind not in "ui":
+        raise InputDtypeError(f"{name}: expected shading-rate codes (integers, as the image holds them), got dtype "
+                              f"{array.dtype}")
+    table = np.full(257, -1, np.int8)  # (a code outside 0..255 maps onto the last, unknown, entry)
+    for i, r in enumerate(ALL_RATES):
+        table[RATE_CODES[r]] = i
+    wide = array.astype(np.int64)
+    index = table[np.where((wide >= 0) & (wide <= 255), wide, 256)]
+    if (index < 0).any():
+        bad = sorted({int(c) for c in array[index < 0].ravel()})[:8]
+        raise ParameterError(f"{name}: unknown shading-rate code(s) {bad}; expected codes from {sorted(RATE_NAMES)}", name)
+    odd = sorted({ALL_RATES[i] for i in np.unique(index)} - set(supported), key=ALL_RATES.index)
+    if odd:
+        raise ParameterError(f"{name}: {', '.join(f'{r} (code {RATE_CODES[r]})' for r in odd)} not among the rates "
+                             f"allowed ({', '.join(supported)}): a device shades a rate of its own choice for it", name)
+    return index
+
+
+def combine_rates(
+    a: RateLike | np.ndarray, b: RateLike | np.ndarray, combiner: str | int, *, allowed: Iterable[RateLike] | None = None
+) -> np.ndarray:
+    """The rates the hardware shades where rates ``a`` and ``b`` meet in a combiner: D3D12 tier 2's and Vulkan's
+    ``combine(A, B)``, per tile. ``a`` is the combiner's first input (the per-draw or per-primitive rate, or an
+    engine's own shading-rate image), ``b`` its second (rtp's image); codes (an int or a name broadcast over the
+    other) or uint8 arrays of one shape. ``combiner`` is a name of :data:`COMBINERS` (or Vulkan's) or its enum
+    value; ``min`` is the finer size per axis and ``max`` the coarser (the DirectX specification's "higher" and
+    "lower quality"; so ``max`` of ``1x2`` and ``2x1`` is ``2x2``). ``allowed`` names the reduced rates the device
+    supports (every one by default; 1x1 always): a combination outside them is clamped as Vulkan specifies (the
+    largest supported rate inside it); where a device may choose a wide or a tall rate of one area (a 4x4 asked of
+    a device without it) this returns the tall one, which saves as much. Returns uint8 codes of the broadcast shape.
+    """
+    op = _check_combiner(combiner)
+    supported = ("1x1",) + resolve_allowed(allowed)
+    ia, ib = _rate_index(a, supported, "a"), _rate_index(b, supported, "b")
+    try:
+        ia, ib = np.broadcast_arrays(ia, ib)
+    except ValueError as err:
+        raise InputShapeError(f"combine_rates: a {ia.shape} and b {ib.shape} do not broadcast to one shape of tiles",
+                              actual=tuple(ib.shape), expected=str(ia.shape)) from err
+    table = np.zeros((len(ALL_RATES), len(ALL_RATES)), np.uint8)
+    for x in supported:
+        for y in supported:
+            table[ALL_RATES.index(x), ALL_RATES.index(y)] = RATE_CODES[_combined(op, x, y, supported)[0]]
+    return table[ia, ib]
+
+
+class _Combination(NamedTuple):
+    """How rtp's image meets an engine's rates in the hardware, as tables over the engine's rate ``e`` (an index of
+    :data:`ALL_RATES`) and the image's candidate rate ``j`` (an index of ``candidates``)."""
+
+    #: The image's candidate rates: the allowed reduced rates cheapest first, then 1x1 (the fallback).
+    candidates: tuple[str, ...]
+    #: ``(7, J, 2)`` int8: the channel (:data:`PREDICTED_RATES`) of each rate the device may shade, twice where it is
+    #: one; -1 for 1x1, which costs nothing to judge.
+    channels: np.ndarray
+    #: ``(7, J)`` int8: the area of the rate shaded (1, 2, 4, 8, 16).
+    area: np.ndarray
+    #: ``(7, J)`` uint8: the code the image holds for that choice: the rate shaded itself where combining it with
+    #: the engine's gives it again (always with min and max), else the finest candidate that gives the same.
+    image: np.ndarray
+    #: ``(7, J)`` uint8: the code of the rate shaded (the tall one where a device may choose).
+    shaded: np.ndarray
+
+
+def _combination(combiner: str, rates: tuple[str, ...]) -> _Combination:
+    """The tables of :class:`_Combination` for the image's allowed reduced ``rates`` and a combiner of min, max, sum."""
+    supported = ("1x1",) + rates
+    candidates = tuple(_classes(rates)) + ("1x1",)
+    n, j = len(ALL_RATES), len(candidates)
+    channels = np.full((n, j, 2), -1, np.int8)
+    area = np.ones((n, j), np.int8)
+    image = np.zeros((n, j), np.uint8)
+    shaded = np.zeros((n, j), np.uint8)
+    for e in supported:
+        i = ALL_RATES.index(e)
+        outcome = {c: _combined(combiner, e, c, supported) for c in candidates}
+        for k, c in enumerate(candidates):
+            got = outcome[c]
+            channels[i, k] = [PREDICTED_RATES.index(r) if r != "1x1" else -1 for r in (got[0], got[-1])]
+            area[i, k] = rate_size(got[0])[0] * rate_size(got[0])[1]
+            same = [c2 for c2 in candidates if outcome[c2] == got]
+            image[i, k] = RATE_CODES[got[0] if got[0] in same else min(same, key=lambda r: (
+                rate_size(r)[0] * rate_size(r)[1], ALL_RATES.index(r)))]
+            shaded[i, k] = RATE_CODES[got[0]]
+    return _Combination(candidates, channels, area, image, shaded)
+
+
+def _combined_values(err: np.ndarray, combo: _Combination, engine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each candidate's oriented value and area per tile ``(..., J, th, tw)``: the value of the rate the device
+    shades for it beside the ``engine``'s rates (indices into :data:`ALL_RATES`, the tiles' shape), the worse of
+    two where a device may choose (NaN never passes), and -inf for 1x1."""
+    values = []
+    for k in range(len(combo.candidates)):
+        either = []
+        for s in range(2):
+            chan = combo.channels[engine, k, s].astype(np.intp)
+            got = np.take_along_axis(err, np.maximum(chan, 0)[..., None, :, :], axis=-3)[..., 0, :, :]
+            either.append(np.where(chan < 0, -np.inf, got))
+        values.append(np.maximum(*either))  # (np.maximum keeps a NaN)
+    return np.stack(values, axis=-3), np.moveaxis(combo.area[engine], -1, -3)
+
+
+def check_engine_rates(engine_rates: object, combiner: object, allowed: Iterable[RateLike] | None,
+                       tiles: tuple[int, ...]) -> None:
+    """A typed error where :func:`select_rates` would refuse ``engine_rates`` or ``combiner`` for predictions of
+    ``tiles`` ``(..., th, tw)`` (a caller that must refuse before it changes state checks first)."""
+    _engine_rates(engine_rates, combiner, resolve_allowed(allowed), tiles)
+
+
+def _engine_rates(engine_rates: object, combiner: object, rates: tuple[str, ...],
+                  tiles: tuple[int, ...]) -> tuple[_Combination, np.ndarray] | None:
+    """``engine_rates`` checked and broadcast over predictions' ``tiles`` shape ``(..., th, tw)``, with the tables
+    of ``combiner``; None without engine rates. Typed errors name the argument."""
+    if engine_rates is None:
+        return None
+    op = _check_combiner(combiner, selecting=True)
+    index = _rate_index(engine_rates, ("1x1",) + rates, "engine_rates")
+    try:
+        index = np.broadcast_to(index, tiles)
+    except ValueError as err:
+        raise InputShapeError(f"engine_rates: shape {index.shape} does not broadcast over the predictions' tiles "
+                              f"{tiles} (one code, a (th, tw) image, or one a frame)", actual=tuple(index.shape),
+                              expected=str(tiles)) from err
+    return _combination(op, rates), index
 
 
 #: The most a shading-rate image can save: every tile at 4x4.
@@ -345,6 +582,8 @@ def select_rates_for_saving(
     frame_size: tuple[int, int] | None = None,
     tile_size: int | None = None,
     threshold: float | None = None,
+    engine_rates: RateLike | np.ndarray | None = None,
+    combiner: str | int = "max",
 ) -> SavingSelection:
     """Rates that save at least ``saving`` of the shading work with the least visible error: a budget.
 
@@ -361,6 +600,11 @@ def select_rates_for_saving(
     With a ``threshold`` too, the saving is a floor under it: the threshold's own rates on a frame where they
     save ``saving`` or more, else the budget's (the rates at the higher of the two thresholds; for PSNR, the
     lower): the quality held while the frame allows it, the work saved never below the floor.
+
+    With ``engine_rates`` and a ``combiner`` (:func:`select_rates`'s), the saving is the frame's, the engine's
+    and the image's together, as the device shades it: where the engine's rates save some already, the image
+    adds only what is missing, at the lowest threshold that does; ``saved`` is the combined figure and ``rates``
+    the image to upload.
     """
     values, hib = _check_values(values, higher_is_better)
     rates = resolve_allowed(allowed)
@@ -372,6 +616,8 @@ def select_rates_for_saving(
     if 0 in values.shape:
         raise InputShapeError(f"select_rates_for_saving: expected predictions of at least one tile, got shape "
                               f"{values.shape}", actual=tuple(values.shape), expected="(..., 6, th, tw)")
+    combo = _engine_rates(engine_rates, combiner, rates, values.shape[:-3] + (th, tw))
+    engines = None if combo is None else combo[1].reshape((-1, th, tw))
     frames = err.reshape((-1,) + err.shape[-3:])
     picked = np.empty((len(frames), th, tw), np.uint8)
     thresholds = np.empty(len(frames))
@@ -380,12 +626,19 @@ def select_rates_for_saving(
     for r in PREDICTED_RATES:
         table[RATE_CODES[r]] = 1.0 - 1.0 / (rate_size(r)[0] * rate_size(r)[1])
     for i, frame in enumerate(frames):
-        thr = _lowest_threshold(frame, rates, weights, target, hib)
+        if engines is None or combo is None:
+            thr = _lowest_threshold(frame, rates, weights, target, hib)
+        else:
+            candidates, area = _combined_values(frame, combo[0], engines[i])
+            thr = _lowest_threshold_shaded(candidates, area, weights, target, hib)
         if floor_under is not None:  # (a floor under a threshold: the threshold unless it saves less)
             thr = max(thr, -floor_under if hib else floor_under)
-        picked[i] = _pick(frame, thr, rates)
+        if engines is None or combo is None:
+            picked[i] = shaded = _pick(frame, thr, rates)
+        else:
+            picked[i], shaded = _pick_combined(candidates, area, thr, combo[0], engines[i])
         thresholds[i] = -thr if hib else thr
-        saved[i] = float((table[picked[i]] * weights).sum() / weights.sum())
+        saved[i] = float((table[shaded] * weights).sum() / weights.sum())
     lead = values.shape[:-3]
     if not lead:
         return SavingSelection(picked[0], float(thresholds[0]), float(saved[0]))
@@ -415,13 +668,49 @@ def _lowest_threshold(err: np.ndarray, rates: tuple[str, ...], weights: np.ndarr
             np.minimum(best, steps[k + 1], out=steps[k])
         else:
             steps[k] = best
+    return _threshold_reaching(steps, classes, weights, target, lo, hi)
+
+
+def _lowest_threshold_shaded(values: np.ndarray, area: np.ndarray, weights: np.ndarray, target: float,
+                             hib: bool) -> float:
+    """:func:`_lowest_threshold` where the image meets an engine's rates: from each candidate's oriented value and
+    the area of the rate the device shades for it (:func:`_combined_values`, one frame ``(J, th, tw)``; the last
+    candidate, 1x1, gives the engine's rates alone). A tile saves what the engine's rates force at any threshold,
+    and more from class ``k`` on once the threshold passes the smallest value of the candidates shading that class
+    or a cheaper one."""
+    lo = 0.0 if not hib else -MAX_THRESHOLD
+    classes = sorted(int(a) for a in np.unique(area) if a > 1)  # dearest first
+    if not classes or target <= 0.0:
+        return lo
+    clean = np.where(np.isnan(values), np.inf, values)
+    steps = np.empty((len(classes),) + values.shape[1:])
+    for k in range(len(classes) - 1, -1, -1):  # (cheapest first)
+        best = np.where(area == classes[k], clean, np.inf).min(axis=0)
+        steps[k] = best if k + 1 == len(classes) else np.minimum(best, steps[k + 1])
+    forced = 1.0 - 1.0 / area[-1].astype(np.float64)  # (the 1x1 candidate: what the engine's rates save alone)
+    return _threshold_reaching(steps, classes, weights, target, lo, MAX_THRESHOLD, forced)
+
+
+def _threshold_reaching(steps: np.ndarray, classes: list[int], weights: np.ndarray, target: float, lo: float,
+                        hi: float, forced: np.ndarray | None = None) -> float:
+    """The lowest oriented threshold in ``[lo, hi]`` past which the tiles' steps ``(K, th, tw)`` (class ``k``'s share
+    from ``steps[k]`` on; ``classes`` their areas, dearest first) save ``target`` of the ``weights``' work, on top of
+    what each tile saves at any threshold (``forced``, none by default); the most the frame can save where less."""
     share = np.array([1.0 - 1.0 / a for a in classes])
-    gain = np.diff(share, prepend=0.0)[:, None, None] * weights  # each step's share of the frame's work
     need = target * weights.sum() * (1.0 - 1e-12)  # (a rounding's worth short counts as reached)
+    if forced is None:
+        gain = np.diff(share, prepend=0.0)[:, None, None] * weights  # each step's share of the frame's work
+    else:  # (a step adds only what the tile does not save already)
+        lifted = np.maximum(share[:, None, None], forced)
+        gain = np.diff(lifted, axis=0, prepend=forced[None]) * weights
+        need -= float((forced * weights).sum())
+        if need <= 0.0:
+            return lo
     at, gain = steps.ravel(), gain.ravel()
-    reachable = at < np.inf  # (a NaN or an infinite value never passes)
-    if float(np.dot(gain, reachable)) < need:  # NaN tiles: the most the frame can save, just past its last step
-        return float(np.clip(np.nextafter(at[reachable].max(), np.inf), lo, hi)) if reachable.any() else lo
+    useful = (at < np.inf) & (gain > 0.0)  # (a NaN or an infinite value never passes)
+    at, gain = at[useful], gain[useful]
+    if float(gain.sum()) < need:  # NaN tiles: the most the frame can save, just past its last step
+        return float(np.clip(np.nextafter(at.max(), np.inf), lo, hi)) if at.size else lo
     return float(np.clip(np.nextafter(_weighted_select(at, gain, need), np.inf), lo, hi))
 
 

@@ -28,6 +28,7 @@ from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
 from ._errors import InputDtypeError, InputShapeError, ParameterError
 from ._rates import (
     RateLike,
+    check_engine_rates,
     check_saving,
     check_threshold,
     resolve_allowed,
@@ -843,25 +844,32 @@ class PredictionReuse:
     def shading_rates(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None = None,
                       seen: np.ndarray | None = None, background: np.ndarray | None = None,
                       threshold: float | None = None, allowed: Iterable[RateLike] | None = None, *,
-                      saving: float | None = None) -> np.ndarray:
+                      saving: float | None = None, engine_rates: RateLike | np.ndarray | None = None,
+                      combiner: str | int = "max") -> np.ndarray:
         """:meth:`predict`, then per tile the cheapest allowed rate whose estimate passes ``threshold``
         (default: the model's), as :meth:`ShadingRatePredictor.shading_rates` picks them; or with ``saving``, a
         budget: the rates that save that share of the frame's work at the lowest threshold that does
-        (:func:`~rtp.sdk.select_rates_for_saving`; with a ``threshold`` too, a floor under its rates)."""
+        (:func:`~rtp.sdk.select_rates_for_saving`; with a ``threshold`` too, a floor under its rates). With
+        ``engine_rates`` and a ``combiner``, the rates the device shades where the engine's meet them are judged
+        (:meth:`ShadingRatePredictor.shading_rates`)."""
         meta = self._net.metadata
         if saving is not None:  # (refused before the frame moves the carry on)
             check_saving(saving, resolve_allowed(allowed))
             if threshold is not None:
                 check_threshold(threshold, meta.higher_is_better)
+        if engine_rates is not None:
+            check_engine_rates(engine_rates, combiner, allowed,
+                               tile_grid(*self._shape_of(x, seen), self.predictor.tile_size))
         estimates = self.predict(x, fetch, seen, background)
         if saving is not None:
             assert self._shape is not None  # (predict set it)
             return select_rates_for_saving(estimates, saving, higher_is_better=meta.higher_is_better, allowed=allowed,
                                            factors=meta.rate_factors, frame_size=self._shape,
-                                           tile_size=self.predictor.tile_size, threshold=threshold).rates
+                                           tile_size=self.predictor.tile_size, threshold=threshold,
+                                           engine_rates=engine_rates, combiner=combiner).rates
         thr = meta.default_threshold if threshold is None else threshold
         return select_rates(estimates, thr, higher_is_better=meta.higher_is_better, allowed=allowed,
-                            factors=meta.rate_factors)
+                            factors=meta.rate_factors, engine_rates=engine_rates, combiner=combiner)
 
 
 def fetch_from_motion(motion_x: object, motion_y: object) -> tuple[np.ndarray, np.ndarray]:

@@ -317,6 +317,29 @@ def test_a_budget_on_carried_estimates() -> None:
     np.testing.assert_array_equal(floor, want.rates)
 
 
+def test_engine_rates_on_carried_estimates() -> None:
+    """``shading_rates(engine_rates=)`` on a reuse: the selection judges the rates the device shades beside the
+    engine's, as ``select_rates`` does on the estimates; engine rates it would refuse move nothing on."""
+    s = _Scene()
+    ours, plain = sdk.PredictionReuse(s.pred, 2), sdk.PredictionReuse(s.pred, 2)
+    everything = np.ones((s.h, s.w), np.float32)
+    th, tw = s.h // TILE, s.w // TILE
+    engine = np.where(np.arange(tw)[None, :] < tw // 2, sdk.RATE_CODES["2x1"], sdk.RATE_CODES["1x1"]).astype(np.uint8)
+    engine = np.broadcast_to(engine, (th, tw))
+    meta = s.pred.metadata
+    for x, fetch, mask in [(s.inputs(everything), None, None), (s.inputs(everything), (s.rows, s.cols), everything)]:
+        rates = ours.shading_rates(x, fetch, mask, engine_rates=engine, combiner="max")
+        want = sdk.select_rates(plain.predict(x, fetch, mask), meta.default_threshold, factors=meta.rate_factors,
+                                engine_rates=engine, combiner="max")
+        np.testing.assert_array_equal(rates, want)
+    assert ours.age == 1
+    with pytest.raises(sdk.InputShapeError, match="engine_rates: shape"):
+        ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, engine_rates=engine[:, :2].T)
+    with pytest.raises(sdk.ParameterError, match="combiner"):
+        ours.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, engine_rates=engine, combiner="avg")
+    assert ours.age == 1  # (neither call moved the carry on)
+
+
 def test_the_interval_and_the_fallbacks_run_the_whole_frame() -> None:
     s = _Scene()
     everything = np.ones((s.h, s.w), np.float32)
