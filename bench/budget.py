@@ -6,7 +6,8 @@ A budget finds, per frame, the lowest threshold whose rates save the share asked
 a share of the work saved instead of a threshold"): it sorts four steps a tile. This times it and the plain
 selection at one threshold on the predictions of the model for a frame of random planes at 1280x720, 1920x1080
 and 3840x2160 (the cost depends on the number of tiles, not on the values), on the model's tiles and on 8-pixel
-hardware tiles, and prints a Markdown table of medians (ms).
+hardware tiles, and both again beside an engine's own rates combined by ``max`` (``engine_rates=``, which judges
+the rate the device shades: random engine rates), and prints a Markdown table of medians (ms).
 """
 
 from __future__ import annotations
@@ -31,8 +32,14 @@ def _row(pred: sdk.ShadingRatePredictor, x: np.ndarray, saving: float, repeats: 
     budget = median_ms(lambda: sdk.select_rates_for_saving(values, saving, frame_size=(h, w), tile_size=pred.tile_size,
                                                            **kw), repeats)
     sel = sdk.select_rates_for_saving(values, saving, frame_size=(h, w), tile_size=pred.tile_size, **kw)
+    # beside an engine's own rates (docs/runtime.md "The engine's own rates"): random ones, the cost is the tiles'
+    engine = np.random.default_rng(1).choice(list(sdk.RATE_CODES.values()), values.shape[1:]).astype(np.uint8)
+    kw_engine = {**kw, "engine_rates": engine, "combiner": "max"}
+    plain_engine = median_ms(lambda: sdk.select_rates(values, meta.default_threshold, **kw_engine), repeats)
+    budget_engine = median_ms(lambda: sdk.select_rates_for_saving(values, saving, frame_size=(h, w),
+                                                                  tile_size=pred.tile_size, **kw_engine), repeats)
     return (f"| {w}x{h} | {values.shape[1] * values.shape[2]:,} | {pred.tile_size}px | {plain:.2f} | {budget:.2f} "
-            f"| {float(sel.threshold):.4g} | {100 * float(sel.saved):.1f}% |")
+            f"| {float(sel.threshold):.4g} | {100 * float(sel.saved):.1f}% | {plain_engine:.2f} | {budget_engine:.2f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,8 +50,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
     print(f"{cpu_description()}; model {args.model}, a saving of {args.saving:g}, median of {args.repeats} runs\n")
-    print("| frame | tiles | tiles of | select_rates (ms) | select_rates_for_saving (ms) | threshold reached | saved |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    print("| frame | tiles | tiles of | select_rates (ms) | select_rates_for_saving (ms) | threshold reached | saved "
+          "| select_rates beside engine rates (ms) | select_rates_for_saving beside engine rates (ms) |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for tile in (None, 8):
         pred = sdk.load(args.model, tile_size=tile)
         for w, h in FRAMES:

@@ -1143,6 +1143,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "each frame's rates save at least this share of the shading work (0 to 0.9375), at the lowest "
                     "threshold that does (sdk.select_rates_for_saving), which is reported a frame; with --threshold, "
                     "a floor under the threshold's rates")
+    pr.add_argument("--combiner", choices=("min", "max", "sum"), default=None, help="each frame file holds the "
+                    "engine's own shading rates, an engine_rates array of uint8 codes a tile, which the device combines "
+                    "with rtp's by this combiner: the rates judged are the rates the device shades, and the counts and "
+                    "work saved are theirs (sdk.select_rates(engine_rates=))")
     pr.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
                     "the model's)")
     pr.add_argument("--allowed", default=None, help="comma-separated reduced rates the hardware has (default: all "

@@ -25,6 +25,8 @@ log = logging.getLogger("rtp.cli")
 #: The optional array of a frame file that ``--out``'s overlay is drawn on (the frame as displayed); without
 #: it the overlay is drawn on ``albedo``, or on ``prev_colour``.
 COLOUR_KEY = "colour"
+#: A frame file's array of the engine's own shading rates (uint8 codes, a tile each) that ``--combiner`` combines.
+ENGINE_RATES_KEY = "engine_rates"
 
 
 def _read_frame(path: str) -> dict[str, np.ndarray]:
@@ -32,7 +34,7 @@ def _read_frame(path: str) -> dict[str, np.ndarray]:
     named in a warning, with the G-buffer they may have meant."""
     from rtp import sdk
 
-    return sdk.files.read_frame(path, extra=(COLOUR_KEY,))
+    return sdk.files.read_frame(path, extra=(COLOUR_KEY, ENGINE_RATES_KEY))
 
 
 def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int, int]) -> dict[str, np.ndarray]:
@@ -181,20 +183,32 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
         values = reuse.predict(x, fetch, named.get("seen"), named["depth"] <= 0.0)
     ms = 1000.0 * (time.perf_counter() - start)
     meta = predictor.metadata
+    engine = None
+    if args.combiner is not None:
+        if ENGINE_RATES_KEY not in frame:
+            raise sdk.ParameterError(f"{path!r} has no {ENGINE_RATES_KEY!r} array: with --combiner each frame holds the "
+                                     f"engine's own shading rates, uint8 codes a tile ({len(values[0])}x"
+                                     f"{len(values[0][0])} here), which the device combines with rtp's", "frame")
+        engine = frame[ENGINE_RATES_KEY]
+    combine: dict[str, Any] = {"engine_rates": engine, "combiner": args.combiner or "max"}
     if args.saving is None:
         rates = sdk.select_rates(values, threshold, higher_is_better=meta.higher_is_better, allowed=allowed,
-                                 factors=meta.rate_factors)
+                                 factors=meta.rate_factors, **combine)
     else:
         budget = sdk.select_rates_for_saving(values, args.saving, higher_is_better=meta.higher_is_better,
                                              allowed=allowed, factors=meta.rate_factors, frame_size=(h, w),
-                                             tile_size=predictor.tile_size, threshold=args.threshold)
+                                             tile_size=predictor.tile_size, threshold=args.threshold, **combine)
         rates, threshold = budget.rates, float(budget.threshold)
-    counts = {r: int((rates == c).sum()) for r, c in sdk.RATE_CODES.items()}
+    shaded = rates if engine is None else sdk.combine_rates(engine, rates, args.combiner, allowed=allowed)
+    counts = {r: int((shaded == c).sum()) for r, c in sdk.RATE_CODES.items()}
     summary: dict[str, Any] = {
         "frame": path, "size": [w, h], "tiles": list(rates.shape), "rates": {r: n for r, n in counts.items() if n},
-        "work_saved": sdk.work_saved(rates, (h, w), predictor.tile_size), "threshold": threshold, "predict_ms": ms,
+        "work_saved": sdk.work_saved(shaded, (h, w), predictor.tile_size), "threshold": threshold, "predict_ms": ms,
         "warnings": warnings,
     }
+    if engine is not None:  # (the device's rates above; the engine's alone here)
+        summary["engine_work_saved"] = sdk.work_saved(np.broadcast_to(engine, rates.shape), (h, w),
+                                                      predictor.tile_size)
     if reuse is not None:
         summary["network"] = float(reuse.work)
     return summary, frame, values, rates
@@ -242,7 +256,9 @@ def run_predict(args: argparse.Namespace) -> int:
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
                "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
                "threshold": summary["threshold"], "saving": args.saving, "rates": summary["rates"],
-               "work_saved": summary["work_saved"], "predict_ms": summary["predict_ms"], "warnings": summary["warnings"]}
+               "work_saved": summary["work_saved"], "predict_ms": summary["predict_ms"], "warnings": summary["warnings"],
+               **({} if args.combiner is None else {"combiner": args.combiner,
+                                                    "engine_work_saved": summary["engine_work_saved"]})}
     if args.out:
         summary["wrote"] = _write_out(args.out, frame, values, rates, predictor.tile_size)
     if args.json:
@@ -252,7 +268,9 @@ def run_predict(args: argparse.Namespace) -> int:
     print(f"{model} ({summary['metric']}) on {summary['frame']}: {w}x{h}, {rates.shape[1]}x{rates.shape[0]} "
           f"tiles of {predictor.tile_size}px, " + _holding(args, summary["threshold"]))
     print("rates      " + ", ".join(f"{r} {n}" for r, n in summary["rates"].items()))
-    print(f"saved      {100.0 * summary['work_saved']:.1f}% of the shading work")
+    print(f"saved      {100.0 * summary['work_saved']:.1f}% of the shading work"
+          + ("" if args.combiner is None else f", the engine's rates and rtp's combined by {args.combiner} (the "
+                                              f"engine's alone: {100.0 * summary['engine_work_saved']:.1f}%)"))
     print(f"predict    {summary['predict_ms']:.1f} ms (onnxruntime, {predictor.provider})")
     if args.out:
         print(f"wrote {', '.join(summary['wrote'])} in {args.out}")
@@ -336,6 +354,9 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     }
     if reuse is not None:
         summary.update(every=args.every, network=float(np.mean([r["network"] for r in rows])))
+    if args.combiner is not None:  # (work_saved: the device's, the engine's rates and rtp's combined)
+        summary.update(combiner=args.combiner,
+                       engine_work_saved=float(np.mean([r["engine_work_saved"] for r in rows])))
     if args.saving is not None:  # (the quality a budget left each frame: its threshold's spread)
         levels = np.array([r["threshold"] for r in rows], np.float64)
         summary["thresholds"] = {"min": float(levels.min()), "median": float(np.median(levels)),
@@ -351,6 +372,9 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
         spread = summary["thresholds"]
         network += (f"; thresholds reached {spread['median']:.4g} (median; {spread['min']:.4g} to "
                     f"{spread['max']:.4g})")
+    if args.combiner is not None:
+        network += (f"; with the engine's rates by {args.combiner} (the engine's alone "
+                    f"{100.0 * summary['engine_work_saved']:.1f}%)")
     print(f"mean: {100.0 * summary['work_saved']:.1f}% of the shading work saved{changed}{network}; predict "
           f"{summary['predict_ms_mean']:.1f} ms a frame (median {summary['predict_ms']:.1f}; onnxruntime, "
           f"{predictor.provider})")

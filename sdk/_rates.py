@@ -334,7 +334,7 @@ def _pick_combined(values: np.ndarray, area: np.ndarray, thr: float, combo: _Com
     (:func:`_combined_values`) against the oriented threshold ``thr``: the cheapest passing, else the 1x1 candidate
     (the engine's rates alone); of two as cheap and as good, one the device shades as judged rather than one where
     it may choose between a wide and a tall rate."""
-    exact = np.moveaxis(combo.channels[engine, :, 0] == combo.channels[engine, :, 1], -1, -3)
+    exact = np.moveaxis((combo.channels[..., 0] == combo.channels[..., 1]).T[:, engine], 0, -3)
     pick = _choose(values, (-area).astype(np.int8), thr, len(combo.candidates) - 1, prefer=exact)
     return combo.image[engine, pick], combo.shaded[engine, pick]
 
@@ -500,15 +500,20 @@ def _combined_values(err: np.ndarray, combo: _Combination, engine: np.ndarray) -
     """Each candidate's oriented value and area per tile ``(..., J, th, tw)``: the value of the rate the device
     shades for it beside the ``engine``'s rates (indices into :data:`ALL_RATES`, the tiles' shape), the worse of
     two where a device may choose (NaN never passes), and -inf for 1x1."""
-    values = []
-    for k in range(len(combo.candidates)):
-        either = []
-        for s in range(2):
-            chan = combo.channels[engine, k, s].astype(np.intp)
-            got = np.take_along_axis(err, np.maximum(chan, 0)[..., None, :, :], axis=-3)[..., 0, :, :]
-            either.append(np.where(chan < 0, -np.inf, got))
-        values.append(np.maximum(*either))  # (np.maximum keeps a NaN)
-    return np.stack(values, axis=-3), np.moveaxis(combo.area[engine], -1, -3)
+    # A candidate's value is that of a pair of channels (the worse of the two, -inf for 1x1), and the table holds few
+    # pairs: a plane a pair, then one gather of each tile's candidates from the planes.
+    pairs = sorted({(int(a), int(b)) for a, b in combo.channels.reshape(-1, 2)})
+    which = np.zeros((len(ALL_RATES), len(combo.candidates)), np.intp)
+    for i, row in enumerate(combo.channels):
+        which[i] = [pairs.index((int(a), int(b))) for a, b in row]
+    lead, (th, tw) = err.shape[:-3], err.shape[-2:]
+    flat = err.reshape((-1,) + err.shape[-3:])
+    planes = np.stack([np.full(flat[:, 0].shape, -np.inf) if a < 0 else flat[:, a] if a == b else
+                       np.maximum(flat[:, a], flat[:, b]) for a, b in pairs])  # (pairs, N, th, tw)
+    spots = np.arange(planes[0].size).reshape(planes[0].shape)  # (each tile's place in a plane)
+    at = which.T[:, engine.reshape(spots.shape)] * spots.size + spots  # (J, N, th, tw)
+    values = np.moveaxis(planes.reshape(-1)[at], 0, -3).reshape(lead + (len(combo.candidates), th, tw))
+    return values, np.moveaxis(combo.area.T[:, engine], 0, -3)
 
 
 def check_engine_rates(engine_rates: object, combiner: object, allowed: Iterable[RateLike] | None,

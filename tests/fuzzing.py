@@ -470,6 +470,60 @@ def _saving_absurd(v: tuple[ArraySpec, Any, Any, Any, Any], sel: Any) -> bool:
     )
 
 
+def _rates_input(v: tuple[str, Any]) -> Any:
+    """A tagged rate input: ``("spec", ArraySpec)`` an array made from it, ``("raw", value)`` the value itself."""
+    tag, value = v
+    return _array(value) if tag == "spec" else value
+
+
+def _combine_call(v: tuple[Any, Any, Any, Any]) -> np.ndarray:
+    a, b, combiner, allowed = v
+    return sdk.combine_rates(_rates_input(a), _rates_input(b), combiner, allowed=allowed)
+
+
+def _combine_absurd(v: tuple[Any, Any, Any, Any], out: np.ndarray) -> bool:
+    """Accepted: rates that are no codes of the allowed rates, a combiner that is none, or a result that is not
+    uint8 codes of the allowed rates in the inputs' broadcast shape."""
+    a, b, _, allowed = v
+    try:
+        known = {sdk.RATE_CODES[r] for r in ("1x1", *sdk.resolve_allowed(allowed))}
+    except sdk.RtpError:
+        return True
+    inputs = [np.asarray(sdk.RATE_CODES.get(x, -1) if isinstance(x, str) else x) for x in map(_rates_input, (a, b))]
+    return (any(x.dtype.kind not in "ui" or not set(np.unique(x).tolist()) <= known for x in inputs)
+            or out.dtype != np.uint8 or not set(np.unique(out).tolist()) <= known
+            or out.shape != np.broadcast_shapes(*(x.shape for x in inputs)))
+
+
+def _engine_call(v: tuple[Any, Any, Any]) -> np.ndarray:
+    engine, combiner, saving = v
+    if saving is None:
+        return sdk.select_rates(_VALUES, 0.5, engine_rates=_rates_input(engine), combiner=combiner)
+    return sdk.select_rates_for_saving(_VALUES, saving, engine_rates=_rates_input(engine), combiner=combiner).rates
+
+
+def _engine_absurd(v: tuple[Any, Any, Any], out: np.ndarray) -> bool:
+    """Accepted: engine rates that are no codes broadcasting over the 4x5 tiles, a combiner other than min, max or
+    sum, a saving out of range, or rates that are not uint8 codes of the tiles' shape."""
+    engine, combiner, saving = v
+    e = _rates_input(engine)
+    share = None if saving is None else _finite_number(saving)
+    if e is None:  # (no engine rates: the combiner is not read)
+        return (saving is not None and (share is None or not 0.0 <= share <= sdk.MAX_SAVING)) or out.shape != (4, 5)
+    e = np.asarray(sdk.RATE_CODES.get(e, -1) if isinstance(e, str) else e)
+    try:
+        np.broadcast_shapes(e.shape, (4, 5))
+    except ValueError:
+        return True
+    named = combiner.strip().lower() if isinstance(combiner, str) else None
+    known_combiner = named in ("min", "max", "sum", "mul") or (
+        isinstance(combiner, int) and not isinstance(combiner, bool) and 2 <= combiner <= 4)
+    return (e.dtype.kind not in "ui" or not set(np.unique(e).tolist()) <= set(sdk.RATE_CODES.values())
+            or not known_combiner or (saving is not None and (share is None or not 0.0 <= share <= sdk.MAX_SAVING))
+            or out.dtype != np.uint8 or out.shape != (4, 5)
+            or not set(np.unique(out).tolist()) <= set(sdk.RATE_CODES.values()))
+
+
 def _split_call(v: tuple[ArraySpec, Any, Any]) -> np.ndarray:
     spec, factor, grid = v
     return sdk.split_tiles(_array(spec), factor, grid)
@@ -522,6 +576,10 @@ overlays = st.builds(_overlay_case, st.sampled_from([1, 2, 4, 8, 16]), st.intege
 #: (th, tw) arrays of codes: the seven rates' codes and some that are none.
 code_arrays = st.tuples(st.sampled_from(["uint8", "int8", "int64"]), st.tuples(st.integers(1, 4), st.integers(1, 4)),
                         st.sampled_from(["random", "negative", "zero"]))
+#: A rate input of combine_rates or engine_rates: an array of codes, one code, a rate name, or anything at all.
+rate_inputs = st.one_of(st.tuples(st.just("spec"), st.one_of(_arrays(st.integers(0, 4), 3), code_arrays)),
+                        st.tuples(st.just("raw"), st.one_of(st.sampled_from(list(sdk.RATE_CODES.values())),
+                                                            st.sampled_from(sdk.ALL_RATES), json_values)))
 
 
 def _overlay_call(v: tuple[ArraySpec, ArraySpec, Any, Any]) -> np.ndarray:
@@ -939,6 +997,14 @@ def targets() -> list[Target]:
                                                                                    st.integers(-2, 90)), json_values),
                                                     st.one_of(st.none(), st.none(), thresholds)),
                _saving_call, _saving_absurd),
+        Target("combine_rates", st.tuples(rate_inputs, rate_inputs,
+                                          st.one_of(st.sampled_from([*sdk.COMBINERS, "keep", "replace", "mul", "MAX"]),
+                                                    st.integers(-2, 7), json_values),
+                                          st.one_of(st.none(), st.lists(st.sampled_from(sdk.PREDICTED_RATES)),
+                                                    json_values)), _combine_call, _combine_absurd),
+        Target("select_rates: engine_rates", st.tuples(rate_inputs, st.one_of(
+                   st.sampled_from(["min", "max", "sum", "mul", "passthrough", "Max"]), st.integers(-2, 7), json_values),
+                   st.one_of(st.none(), st.none(), st.floats(0, 1), hostile_numbers)), _engine_call, _engine_absurd),
         Target("work_saved", st.tuples(st.one_of(_arrays(st.integers(0, 4), 3), code_arrays),
                                        st.one_of(st.none(), st.tuples(st.integers(-2, 70), st.integers(-2, 70)),
                                                  json_values)), _work_saved_call, _work_saved_absurd),

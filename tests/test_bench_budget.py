@@ -16,4 +16,4 @@ def test_the_budget_bench_prints_a_row_a_frame_and_tile_size() -> None:
     assert [(r[0].strip(), r[2].strip()) for r in rows] == [
         (f, t) for t in ("16px", "8px") for f in ("1280x720", "1920x1080", "3840x2160")]
     assert all(float(r[6].strip().rstrip("%")) >= 60.0 for r in rows)
-    assert all(float(r[3]) > 0 and float(r[4]) > 0 for r in rows)
+    assert all(float(r[3]) > 0 and float(r[4]) > 0 and float(r[7]) > 0 and float(r[8]) > 0 for r in rows)

@@ -362,3 +362,32 @@ def test_a_convention_mistake_is_warned_of_once_a_sequence(sequence: Path, tmp_p
     assert all(len(r["warnings"]) == 1 and "an encoded texture" in r["warnings"][0] for r in got["frames"])
     assert main(["predict", str(sorted(sequence.glob("*.npz"))[0]), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["warnings"] == []
+
+
+def test_the_engines_own_rates_in_each_frame_file(frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--combiner OP: each frame file's engine_rates meet rtp's in that combiner; the rates written are the SDK's
+    for them (the image to upload), the counts and work saved the device's; a frame without them is refused."""
+    with np.load(frame) as npz:
+        arrays = dict(npz)
+    engine = np.full((6, 10), sdk.RATE_CODES["2x1"], np.uint8)
+    engine[:, :5] = sdk.RATE_CODES["1x1"]  # the engine coarsens the right half horizontally
+    with_engine = tmp_path / "with_engine.npz"
+    np.savez(with_engine, **arrays, engine_rates=engine)
+    out = tmp_path / "out"
+    assert main(["predict", str(with_engine), "--combiner", "max", "--out", str(out), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    predictor = sdk.load("jnyang")
+    x = sdk.input_planes(predictor.metadata.inputs, **{k: v for k, v in arrays.items() if k in sdk.GBUFFERS})
+    want = predictor.shading_rates(x, engine_rates=engine, combiner="max")
+    np.testing.assert_array_equal(np.load(out / "rates.npy"), want)
+    shaded = sdk.combine_rates(engine, want, "max")
+    assert got["combiner"] == "max" and got["work_saved"] == pytest.approx(sdk.work_saved(shaded, (96, 160), 16))
+    assert got["engine_work_saved"] == pytest.approx(0.25)  # (half the tiles at 2x1)
+    assert got["rates"] == {r: int((shaded == c).sum()) for r, c in sdk.RATE_CODES.items() if (shaded == c).any()}
+    assert main(["predict", str(with_engine), "--combiner", "sum"]) == 0
+    assert "the engine's rates and rtp's combined by sum (the engine's alone: 25.0%)" in capsys.readouterr().out
+    assert main(["predict", str(frame), "--combiner", "max"]) == 2
+    assert "has no 'engine_rates' array: with --combiner each frame holds" in capsys.readouterr().err
+    np.savez(with_engine, **arrays, engine_rates=engine[:, :4])
+    assert main(["predict", str(with_engine), "--combiner", "max"]) == 2
+    assert "engine_rates: shape (6, 4) does not broadcast" in capsys.readouterr().err
