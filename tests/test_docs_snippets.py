@@ -178,6 +178,13 @@ assert np.allclose(tiles, metrics.pool_tiles(np.abs(reference - test).max(axis=-
         "assert (sdk.select_rates(predictor.predict(x), budget.threshold, factors=predictor.metadata.rate_factors)"
         " == budget.rates).all()",
     ),
+    ("runtime.md", "engine_rates = np.full(rates.shape, sdk.RATE_CODES[\"2x1\"], np.uint8)"): (
+        _MODEL + "rates = predictor.shading_rates(x)\n",
+        "values = predictor.predict(x)\n"
+        "assert (image == sdk.select_rates(values, predictor.metadata.default_threshold, engine_rates=engine_rates,"
+        " factors=predictor.metadata.rate_factors)).all()\n"
+        "assert (shaded == image).all() and (shaded != sdk.RATE_CODES['1x2']).all()  # (max: the image is the rate shaded)",
+    ),
     ("runtime.md", "selector = RateSelector(predictor, ctx)"): (
         _MODEL
         + """
