@@ -4,6 +4,7 @@
     python examples/runtime_without_rtp.py MODEL.onnx --frame planes.npy --threshold 0.2 --tile-size 8
     python examples/runtime_without_rtp.py models/flip.onnx --check              # the same rates as rtp.sdk?
     python examples/runtime_without_rtp.py models/jnyang.onnx --saving 0.6 --check   # a budget (step 7)
+    python examples/runtime_without_rtp.py models/jnyang.onnx --engine-rate 2x1 --check   # beside it (step 8)
 
 An engine that links onnxruntime itself (C++, C#, Rust) needs no Python: the ONNX file carries the
 network and its metadata, and the steps from the engine's input planes to a shading-rate image are
@@ -42,9 +43,16 @@ same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``
    ``std::nth_element`` rounds as rtp.sdk does), the step where their weighted sum reaches the share
    gives the threshold, and step 6 the rates.
 
+8. **Beside the engine's own rates** (docs/runtime.md "The engine's own rates: the hardware's
+   combiners"), where the engine writes rates too (foveation, motion blur, a per-draw rate) and the
+   hardware's combiner (``min``, ``max``: per axis; ``sum``: the sizes multiplied) meets them with the
+   image: per tile each candidate rate's combination with the engine's, clamped to a rate the device has
+   (Vulkan's rule), judged by its value (the worse of two where a device may choose), the cheapest
+   passing kept, else the engine's rate alone.
+
 What is left out: checking the frame for NaN (the finite probe makes that one scalar: step 3's
-other output), batches of frames, and reusing a prediction across frames (``sdk.PredictionReuse``,
-docs/runtime.md).
+other output), batches of frames, reusing a prediction across frames (``sdk.PredictionReuse``,
+docs/runtime.md), and a budget beside the engine's rates (step 7 with step 8's candidates).
 """
 
 from __future__ import annotations
@@ -225,10 +233,83 @@ def _budget(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, .
     return select(values, meta, threshold, allowed), threshold
 
 
+SIZES = {"1x1": (1, 1), "1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2), "2x4": (2, 4), "4x2": (4, 2), "4x4": (4, 4)}
+
+
+def device_rates(w: int, h: int, supported: tuple[str, ...]) -> tuple[str, ...]:
+    """Step 8's clamp: the rates a device may shade where a combiner asks for ``w x h``, the first the one it
+    reports: that rate where supported; else, of the supported rates inside it, the largest, then the squarest
+    (the tall one first of a wide and a tall one); then any other a device that also tries the swapped axes
+    may take (Vulkan allows it)."""
+    if (w, h) in [SIZES[r] for r in supported]:
+        return (next(r for r in supported if SIZES[r] == (w, h)),)
+
+    def largest(swapped: bool) -> list[str]:
+        fits = [r for r in SIZES if r in supported and ((SIZES[r][0] <= w and SIZES[r][1] <= h)
+                                                       or (swapped and SIZES[r][0] <= h and SIZES[r][1] <= w))]
+        top = max(SIZES[r][0] * SIZES[r][1] for r in fits)
+        fits = [r for r in fits if SIZES[r][0] * SIZES[r][1] == top]
+        return [r for r in fits if sum(SIZES[r]) == min(sum(SIZES[q]) for q in fits)]
+
+    inside = largest(False)
+    return tuple(inside + [r for r in largest(True) if r not in inside])
+
+
+def select_beside(values: np.ndarray, meta: dict, threshold: float, engine: np.ndarray, combiner: str,
+                  allowed: tuple[str, ...] = RATES) -> np.ndarray:
+    """Step 8: the image's rates (uint8 codes) where the engine's own rates ``engine`` (codes, a tile each) meet it
+    in the hardware's ``combiner`` ("min", "max" or "sum"): per tile the cheapest rate the device shades whose
+    value passes, then the better value, then one the device shades as judged; else the engine's rate alone.
+    The image holds the rate shaded where combining it with the engine's gives it back (min, max), else the
+    finest rate that gives the same."""
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    factors = meta.get("rate_factors") or {}
+    supported = ("1x1",) + tuple(r for r in RATES if r in allowed)
+    # the candidates: the allowed rates by cost class, cheapest first, then 1x1 (what the engine's rate gives alone)
+    order = [r for r in ("4x4", "2x4", "4x2", "2x2", "1x2", "2x1") if r in supported] + ["1x1"]
+    oriented = {"1x1": np.full(values.shape[1:], -np.inf)}  # as "smaller passes", against each rate's threshold
+    for r in RATES:
+        f, v = float(factors.get(r, 1.0)), values[RATES.index(r)].astype(np.float64)
+        oriented[r] = (-v - 20.0 * math.log10(f)) if better else v / f
+    thr = -threshold if better else threshold
+    names = {c: r for r, c in CODES.items()}
+    out = np.zeros(values.shape[1:], np.uint8)
+    for code in np.unique(engine):
+        e = names[int(code)]
+        tiles = engine == code
+        outcome = {}
+        for c in order:
+            (ew, eh), (cw, ch) = SIZES[e], SIZES[c]
+            ask = {"min": (min(ew, cw), min(eh, ch)), "max": (max(ew, cw), max(eh, ch)), "sum": (ew * cw, eh * ch)}
+            outcome[c] = device_rates(*ask[combiner], supported)
+        best = np.full(values.shape[1:], -1)
+        best_area = np.zeros(values.shape[1:])
+        best_value = np.full(values.shape[1:], np.inf)
+        best_exact = np.zeros(values.shape[1:], bool)
+        for k, c in enumerate(order):
+            got = outcome[c]
+            value = np.maximum(oriented[got[0]], oriented[got[-1]])  # (np.maximum keeps a NaN: it never passes)
+            area, exact = SIZES[got[0]][0] * SIZES[got[0]][1], len(got) == 1
+            wins = (value < thr) & ((best < 0) | (area > best_area) | ((area == best_area) & (
+                (value < best_value) | ((value == best_value) & exact & ~best_exact))))
+            best = np.where(wins, k, best)
+            best_area = np.where(wins, area, best_area)
+            best_value = np.where(wins, value, best_value)
+            best_exact = np.where(wins, exact, best_exact)
+        best = np.where(best < 0, len(order) - 1, best)  # nothing passes: the engine's rate alone
+        for k, c in enumerate(order):
+            got = outcome[c]
+            same = [q for q in order if outcome[q] == got]
+            image = got[0] if got[0] in same else min(same, key=lambda q: (SIZES[q][0] * SIZES[q][1], list(SIZES).index(q)))
+            out[tiles & (best == k)] = CODES[image]
+    return out
+
+
 def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float | None = None,
                   tile_size: int | None = None, allowed: tuple[str, ...] = RATES, saving: float | None = None,
-                  ) -> np.ndarray:
-    """Steps 1-6 (7 with a ``saving``): a frame's planes (C, H, W), float32, to its shading-rate image."""
+                  engine: np.ndarray | None = None, combiner: str = "max") -> np.ndarray:
+    """Steps 1-6 (7 with a ``saving``, 8 with the ``engine``'s rates): a frame's planes (C, H, W), float32, to its
+    shading-rate image."""
     meta = read_metadata(session)
     _, h, w = x.shape
     raw = infer(session, meta, pad(x, meta, session))
@@ -238,6 +319,9 @@ def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float
         values = hardware_tiles(values, meta, tile_size, (h, w))
     if saving is not None:
         return select_for_saving(values, meta, saving, allowed, (h, w), tile_size or t, threshold)[0]
+    if engine is not None:
+        threshold = meta["default_threshold"] if threshold is None else threshold
+        return select_beside(values, meta, threshold, np.broadcast_to(engine, values.shape[1:]), combiner, allowed)
     return select(values, meta, meta["default_threshold"] if threshold is None else threshold, allowed)
 
 
@@ -250,6 +334,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threshold", type=float, help="default: the model's default_threshold")
     ap.add_argument("--saving", type=float, help="a budget instead (step 7): the share of the shading work to save; "
                     "with --threshold, a floor under the threshold's rates")
+    ap.add_argument("--engine-rate", choices=tuple(CODES), help="step 8: the engine's own rate over the whole frame "
+                    "(a per-draw rate), which --combiner meets with the image")
+    ap.add_argument("--combiner", choices=("min", "max", "sum"), default="max", help="step 8's combiner (default max)")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile size (default: the model's)")
     ap.add_argument("--allowed", default=",".join(RATES), help="the reduced rates the hardware has (default: all six)")
     ap.add_argument("--check", action="store_true", help="compare with rtp.sdk's shading_rates on the same frame")
@@ -272,7 +359,10 @@ def main(argv: list[str] | None = None) -> int:
     allowed = tuple(r.strip() for r in a.allowed.split(",") if r.strip())
     if a.saving is not None and not 0.0 <= a.saving <= 0.9375:
         ap.error(f"--saving: expected a share of the shading work in [0, 0.9375], got {a.saving:g}")
-    rates = shading_rates(session, x, a.threshold, a.tile_size, allowed, a.saving)
+    if a.engine_rate is not None and a.saving is not None:
+        ap.error("--engine-rate with --saving: a budget beside the engine's rates is not in this port (rtp.sdk has it)")
+    engine = None if a.engine_rate is None else np.uint8(CODES[a.engine_rate])
+    rates = shading_rates(session, x, a.threshold, a.tile_size, allowed, a.saving, engine, a.combiner)
     names = {c: r for r, c in CODES.items()}
     counts = {names[c]: int(n) for c, n in zip(*np.unique(rates, return_counts=True))}
     print(f"{a.model.name}: {rates.shape[0]}x{rates.shape[1]} tiles; " + ", ".join(f"{r} {n}" for r, n in counts.items()))
@@ -280,7 +370,8 @@ def main(argv: list[str] | None = None) -> int:
         from rtp import sdk
 
         predictor = sdk.load(a.model, tile_size=a.tile_size)
-        theirs = predictor.shading_rates(x, a.threshold, allowed=allowed, saving=a.saving)
+        theirs = predictor.shading_rates(x, a.threshold, allowed=allowed, saving=a.saving, engine_rates=engine,
+                                         combiner=a.combiner)
         same = float(np.mean(theirs == rates))
         print(f"rtp.sdk gives the same rate on {100 * same:.2f}% of the tiles")
         return 0 if same == 1.0 else 1

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -239,3 +240,61 @@ def test_hardware_tiles_finer_than_the_model_s_as_load_splits_them(tiny_model, g
     with RateSelector(sdk.load(tiny_model(base_metadata(tile_size=16), tile=16)), gl_context) as own:
         with pytest.raises(sdk.ParameterError, match=r"grid: expected 5x7 \(or None\)"):
             own.select(pred.predict_raw(x), 0.2, grid=grid)
+
+
+def test_beside_the_engines_rates_the_shader_decides_as_the_sdk(frames, gl_context: Any) -> None:  # noqa: F811
+    """``engine_rates`` and ``combiner``: the shader judges the rate the device shades, as ``select_rates`` does,
+    for each combiner, on allowed sets where the device clamps, for an error metric and for PSNR; an engine's r8ui
+    texture reads as its array; bad engine rates are the SDK's errors."""
+    ctx, _, cur = frames
+    rng = np.random.default_rng(4)
+    mixed = 0  # tiles where judging the rate shaded decides otherwise than combining rtp's own choice
+    for name in ("jnyang", "psnr"):
+        pred = sdk.load(name)
+        x = np.stack([cur.channel(c) for c in pred.metadata.inputs])
+        raw, values = pred.predict_raw(x), pred.predict(x)
+        hib = pred.metadata.higher_is_better
+        with RateSelector(pred, ctx) as selector:
+            for allowed in (sdk.PREDICTED_RATES, ("1x2", "2x1", "2x2"), ("1x2", "2x1", "4x4"), ("2x2", "2x4", "4x2")):
+                supported = [sdk.RATE_CODES[r] for r in ("1x1", *allowed)]
+                engine = rng.choice(supported, size=values.shape[1:]).astype(np.uint8)
+                for combiner, scale in itertools.product(("min", "max", "sum"), (0.25, 1.0)):
+                    t = pred.metadata.default_threshold  # (a low threshold: fewer tiles pass at 4x4)
+                    thr = t + 6.0 * (1.0 - scale) if hib else t * scale
+                    gpu = selector.select(raw, thr, allowed, engine_rates=engine, combiner=combiner)
+                    cpu = pred.shading_rates(x, thr, allowed, engine_rates=engine, combiner=combiner)
+                    ok = _robust(values, thr, hib, sdk.PREDICTED_RATES)
+                    assert ok.mean() >= 0.9
+                    np.testing.assert_array_equal(gpu[ok], cpu[ok], err_msg=f"{name} {allowed} {combiner}")
+                    assert not np.array_equal(cpu, pred.shading_rates(x, thr, allowed)) or combiner == "min"
+                    mixed += int((gpu != sdk.combine_rates(engine, pred.shading_rates(x, thr, allowed), combiner,
+                                                           allowed=allowed)).sum())
+        with RateSelector(pred, ctx) as selector:  # random outputs on a larger grid: every case of the clamp
+            noise = rng.random((len(pred.metadata.outputs), 30, 40), dtype=np.float32)
+            for allowed in (sdk.PREDICTED_RATES, ("1x2", "2x1", "4x4"), ("1x2", "2x1", "2x4", "4x2"), ("1x2", "2x2")):
+                supported = [sdk.RATE_CODES[r] for r in ("1x1", *allowed)]
+                engine = rng.choice(supported, size=(30, 40)).astype(np.uint8)
+                for combiner in ("min", "max", "sum"):
+                    thr = pred.metadata.default_threshold
+                    gpu = selector.select(noise, thr, allowed, engine_rates=engine, combiner=combiner)
+                    decoded = selector.decoded()
+                    cpu = sdk.select_rates(decoded, thr, higher_is_better=hib, allowed=allowed,
+                                           factors=pred.metadata.rate_factors, engine_rates=engine, combiner=combiner)
+                    ok = _robust(decoded, thr, hib, sdk.PREDICTED_RATES)
+                    np.testing.assert_array_equal(gpu[ok], cpu[ok], err_msg=f"{name} {allowed} {combiner} (random)")
+                    mixed += int((gpu != sdk.combine_rates(engine, sdk.select_rates(
+                        decoded, thr, higher_is_better=hib, allowed=allowed, factors=pred.metadata.rate_factors),
+                        combiner, allowed=allowed)).sum())
+        with RateSelector(pred, ctx) as selector:  # an engine's texture, read where it lies
+            engine = np.full(values.shape[1:], sdk.RATE_CODES["2x1"], np.uint8)
+            texture = ctx.texture((engine.shape[1], engine.shape[0]), 1, engine.tobytes(), dtype="u1")
+            np.testing.assert_array_equal(selector.select(raw, engine_rates=texture),
+                                          selector.select(raw, engine_rates=engine))
+            with pytest.raises(sdk.InputShapeError, match="engine_rates: expected an r8ui texture of"):
+                selector.select(raw, engine_rates=ctx.texture((3, 2), 1, dtype="u1"))
+            with pytest.raises(sdk.ParameterError, match=r"engine_rates: 4x4 \(code 10\) not among the rates allowed"):
+                selector.select(raw, allowed=["1x2", "2x1", "2x2"], engine_rates=10)
+            with pytest.raises(sdk.ParameterError, match="combiner"):
+                selector.select(raw, engine_rates=engine, combiner="average")
+            texture.release()
+    assert mixed > 100

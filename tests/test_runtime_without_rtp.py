@@ -149,3 +149,24 @@ def test_the_ports_budget_is_the_sdks(higher_is_better: bool, port: ModuleType) 
                     rates, threshold = port.select_for_saving(values, meta, saving, allowed, frame, 16, under)
                     np.testing.assert_array_equal(rates, floor.rates, err_msg=f"{allowed} {saving} under {under}")
                     assert threshold == floor.threshold, (allowed, saving, under)
+
+
+@pytest.mark.parametrize("higher_is_better", [False, True])
+def test_the_ports_selection_beside_engine_rates_is_the_sdks(higher_is_better: bool, port: ModuleType) -> None:
+    """Step 8: the port's rates beside an engine's, for each combiner, allowed sets where the device clamps (and
+    may choose between two), ties, NaNs and a threshold per rate, are the SDK's."""
+    rng = np.random.default_rng(5 + int(higher_is_better))
+    values = rng.integers(0, 6, (6, 30, 40)).astype(np.float32) * (6.0 if higher_is_better else 0.05)
+    values[rng.random(values.shape) < 0.05] = np.nan
+    factors = dict(zip(sdk.PREDICTED_RATES, [1.0, 1.0, 0.9, 1.2, 1.2, 0.8]))
+    meta = {"metric": "psnr" if higher_is_better else "flip", "higher_is_better": higher_is_better,
+            "rate_factors": factors}
+    threshold = 18.0 if higher_is_better else 0.15
+    for allowed in (port.RATES, ("1x2", "2x1", "4x4"), ("1x2", "2x1", "2x4", "4x2"), ("2x2",), ("1x2",)):
+        supported = [sdk.RATE_CODES[r] for r in ("1x1", *allowed)]
+        engine = rng.choice(supported, size=(30, 40)).astype(np.uint8)
+        for combiner in ("min", "max", "sum"):
+            theirs = sdk.select_rates(values, threshold, higher_is_better=higher_is_better, allowed=allowed,
+                                      factors=factors, engine_rates=engine, combiner=combiner)
+            np.testing.assert_array_equal(port.select_beside(values, meta, threshold, engine, combiner, allowed), theirs,
+                                          err_msg=f"{allowed} {combiner}")

@@ -39,6 +39,9 @@ def _tile_pair(value: object, name: str) -> tuple[int, int]:
     return pair[0], pair[1]  # Python ints: numpy's int64 rows of 2**62 wrapped the byte count below 0
 
 _TRANSFORMS = {"clamped": 0, "logistic": 1, "linear": 2}
+#: The combiners through which the image's rate reaches the frame, at the enum values of D3D12 and Vulkan (the SDK
+#: checks a name or value before it is looked up here).
+_COMBINER_VALUES: dict[str | int, int] = {"min": 2, "max": 3, "sum": 4, "mul": 4, 2: 2, 3: 3, 4: 4}
 _GROUP = 8  # the shader's local size, both axes
 
 
@@ -120,6 +123,7 @@ class RateSelector:
         self._texture: Any = None
         self._decoded: Any = None
         self._raw: Any = None
+        self._engine: Any = None
 
     @property
     def metadata(self) -> sdk.ModelMetadata:
@@ -143,14 +147,21 @@ class RateSelector:
         self._tiles = tiles
 
     def select_buffer(self, raw: Any, tiles: tuple[int, int], threshold: float | None = None,
-                      allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None) -> Any:
+                      allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None, *,
+                      engine_rates: Any = None, combiner: str | int = "max") -> Any:
         """Rates from the network's output already on the GPU: ``raw`` a moderngl buffer holding the
         output planes of one frame, float32 ``(len(metadata.outputs), th, tw)`` row-major, ``tiles``
         ``(th, tw)`` on the model's tiles. Returns the ``r8ui`` texture of rate codes, one texel a hardware
         tile (texel row 0 the top tile row); it is reused by the next call of the same grid. On coarser
         hardware tiles the grid is ``ceil(th / pool) x ceil(tw / pool)``; on finer ones it is the frame's,
         ``grid`` = ``(rows, columns)`` (``predictor.tiles(h, w)``: a partial last model tile may hold one
-        hardware row or column fewer than ``split``), by default ``split`` times the model's tiles."""
+        hardware row or column fewer than ``split``), by default ``split`` times the model's tiles.
+
+        ``engine_rates`` (one code, a ``(rows, columns)`` array of codes on the hardware tiles, or an ``r8ui``
+        moderngl texture of them already on the GPU, which is read as it is) and ``combiner`` (``min``,
+        ``max``, ``sum`` or its enum value): the engine's own rates, which the hardware's combiner meets with
+        this image; the shader then judges the rate the device will shade, as ``sdk.select_rates(engine_rates=,
+        combiner=)`` does (docs/runtime.md "The engine's own rates: the hardware's combiners")."""
         th, tw = _tile_pair(tiles, "tiles")
         grid = self._grid((th, tw), grid)
         limit = max_texture_side(self.ctx)
@@ -167,8 +178,20 @@ class RateSelector:
                 f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
         self._check_open()
         thr = self._check_decision(threshold, allowed)
+        engine = self._engine_rates(engine_rates, combiner, allowed, grid, thr)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets(grid)
+        self._program["u_combiner"].value = 0 if engine is None else _COMBINER_VALUES[
+            combiner.strip().lower() if isinstance(combiner, str) else int(combiner)]
+        if engine is not None:
+            if isinstance(engine, np.ndarray):  # (checked by the SDK: codes of the allowed rates, the grid's shape)
+                if self._engine is None or self._engine.size != (grid[1], grid[0]):
+                    if self._engine is not None:
+                        self._engine.release()
+                    self._engine = self.ctx.texture((grid[1], grid[0]), 1, dtype="u1")
+                self._engine.write(np.ascontiguousarray(engine, np.uint8).tobytes())
+                engine = self._engine
+            engine.bind_to_image(1, read=True, write=False)
         self._program["u_tiles"].value = (tw, th)
         self._program["u_grid"].value = (grid[1], grid[0])
         self._program["u_threshold"].value = float(thr)
@@ -181,11 +204,12 @@ class RateSelector:
         return self._texture
 
     def select(self, raw: np.ndarray, threshold: float | None = None,
-               allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None) -> np.ndarray:
+               allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None, *,
+               engine_rates: Any = None, combiner: str | int = "max") -> np.ndarray:
         """Rates from the network's output in host memory (``ShadingRatePredictor.predict_raw``: float
         ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 codes, one per hardware tile,
         as ``shading_rates`` returns them (on finer hardware tiles than the model's, for the frame's
-        ``grid``, as :meth:`select_buffer` says)."""
+        ``grid``, as :meth:`select_buffer` says; ``engine_rates`` and ``combiner`` too)."""
         try:
             a = np.asarray(raw)
         except (TypeError, ValueError, OverflowError) as exc:
@@ -197,9 +221,10 @@ class RateSelector:
         # Every check before the GPU is touched: moderngl refuses an empty buffer, and a failed upload left
         # the selector holding a released buffer that broke every later call.
         self._check_open()
-        self._check_decision(threshold, allowed)
+        thr = self._check_decision(threshold, allowed)
         if a.ndim == 3 and a.shape[0] == n and 0 not in a.shape:
-            self._grid((int(a.shape[1]), int(a.shape[2])), grid)
+            self._engine_rates(engine_rates, combiner, allowed, self._grid((int(a.shape[1]), int(a.shape[2])), grid),
+                               thr)
         if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f" or 0 in a.shape:
             raise sdk.InputShapeError(
                 f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
@@ -212,7 +237,8 @@ class RateSelector:
             self._raw = self.ctx.buffer(data)
         else:
             self._raw.write(data)
-        texture = self.select_buffer(self._raw, (int(a.shape[1]), int(a.shape[2])), threshold, allowed, grid)
+        texture = self.select_buffer(self._raw, (int(a.shape[1]), int(a.shape[2])), threshold, allowed, grid,
+                                     engine_rates=engine_rates, combiner=combiner)
         gh, gw = self._tiles  # type: ignore[misc]
         return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(gh, gw).copy()
 
@@ -248,6 +274,24 @@ class RateSelector:
                          allowed=allowed)
         return float(thr)
 
+    def _engine_rates(self, engine_rates: Any, combiner: str | int, allowed: Iterable[sdk.RateLike] | None,
+                      grid: tuple[int, int], thr: float) -> Any:
+        """None, an engine's texture as it is, or its rates as a ``grid`` array after the SDK's own checks and messages
+        for them and the combiner (``select_rates`` beside them on a grid of zeros)."""
+        if engine_rates is None:
+            return None
+        if callable(getattr(engine_rates, "bind_to_image", None)):
+            if tuple(engine_rates.size) != (grid[1], grid[0]) or engine_rates.dtype != "u1" or engine_rates.components != 1:
+                raise sdk.InputShapeError(f"engine_rates: expected an r8ui texture of {grid[1]}x{grid[0]} (one texel a "
+                                          f"hardware tile), got {engine_rates.size} {engine_rates.dtype} x "
+                                          f"{engine_rates.components}", tuple(engine_rates.size), f"({grid[1]}, {grid[0]})")
+            sdk.select_rates(np.zeros((6, 1, 1), np.float32), thr, higher_is_better=self._meta.higher_is_better,
+                             allowed=allowed, engine_rates=0, combiner=combiner)  # (the combiner's checks)
+            return engine_rates
+        sdk.select_rates(np.zeros((6, *grid), np.float32), thr, higher_is_better=self._meta.higher_is_better,
+                         allowed=allowed, engine_rates=engine_rates, combiner=combiner)
+        return np.broadcast_to(np.asarray(engine_rates), grid)
+
     def decoded(self) -> np.ndarray:
         """The six rates' decoded values of the last call, float32 ``(6, rows, columns)`` on the hardware
         tiles (``predict``'s)."""
@@ -259,10 +303,10 @@ class RateSelector:
 
     def close(self) -> None:
         """Release the GPU objects (and the context when the selector made it)."""
-        for obj in (self._texture, self._decoded, self._raw, self._program):
+        for obj in (self._texture, self._decoded, self._raw, self._engine, self._program):
             if obj is not None:
                 obj.release()
-        self._texture = self._decoded = self._raw = self._program = None
+        self._texture = self._decoded = self._raw = self._engine = self._program = None
         self._tiles = None
         if self._own_ctx:
             self.ctx.release()

@@ -32,6 +32,10 @@ uniform bool u_higher_is_better; // PSNR: values pass above the threshold
 uniform float u_threshold;       // in metric units
 uniform float u_rate_factors[6]; // metadata rate_factors (PREDICTED_RATES order): each rate's threshold factor
 uniform uint u_allowed;          // bit i: PREDICTED_RATES[i] may be chosen (1x2, 2x1, 2x2, 2x4, 4x2, 4x4)
+// the engine's own rates, one texel a hardware tile, which the hardware's combiner meets with this image (sdk
+// select_rates(engine_rates=, combiner=)): 0 none, else the enum value of min (2), max (3) or sum (4)
+layout(r8ui, binding = 1) uniform readonly uimage2D u_engine;
+uniform int u_combiner;
 
 const float LOGIT_EPS = 1e-7;
 // PREDICTED_RATES order
@@ -80,6 +84,92 @@ void decode(int at, int plane, out float v[6]) {
     if (!have[R44]) v[R44] = worse(v[R24], v[R42]);
 }
 
+// --- beside the engine's rates (sdk combine_rates, select_rates(engine_rates=)) ---------------------------------
+// every rate, finest first (sdk ALL_RATES): sizes and codes
+const ivec2 SIZE[7] = ivec2[7](ivec2(1, 1), ivec2(1, 2), ivec2(2, 1), ivec2(2, 2), ivec2(2, 4), ivec2(4, 2), ivec2(4, 4));
+const uint ALL_CODES[7] = uint[7](0u, 1u, 4u, 5u, 6u, 9u, 10u);
+
+bool supported(int i) { return i == 0 || (u_allowed & (1u << uint(i - 1))) != 0u; }
+
+int rate_of(uint code) {  // an ALL_RATES index (an unknown code: 1x1, as the checks on the CPU refuse them)
+    for (int i = 0; i < 7; ++i) if (ALL_CODES[i] == code) return i;
+    return 0;
+}
+
+// among the supported rates that fit inside `want` (or, `swapped`, inside it either way round), those of the
+// largest area and then the lowest W + H: the first and the last of them in ALL_RATES order
+void largest(ivec2 want, bool swapped, out int first, out int last) {
+    int area = 0, sum = 0;
+    first = 0; last = 0;
+    for (int i = 0; i < 7; ++i) {
+        ivec2 s = SIZE[i];
+        if (!supported(i) || !((s.x <= want.x && s.y <= want.y) || (swapped && s.x <= want.y && s.y <= want.x))) continue;
+        if (s.x * s.y > area || (s.x * s.y == area && s.x + s.y < sum)) { area = s.x * s.y; sum = s.x + s.y; first = i; last = i; }
+        else if (s.x * s.y == area && s.x + s.y == sum) last = i;
+    }
+}
+
+// the rates a device may shade where a combiner asks for `want` (sdk _device_rates): the rate where supported,
+// else Vulkan's clamp, the tall one first; `last` another a device may take (first where there is none)
+void device_rates(ivec2 want, out int first, out int last) {
+    for (int i = 0; i < 7; ++i) if (supported(i) && SIZE[i] == want) { first = i; last = i; return; }
+    int a0, a1, b0, b1;
+    largest(want, false, a0, a1);
+    largest(want, true, b0, b1);
+    first = a0; last = a1;
+    if (b0 != a0 && b0 != a1) last = b0;
+    if (b1 != a0 && b1 != a1) last = b1;
+}
+
+ivec2 combined(int e, int r) {
+    ivec2 a = SIZE[e], b = SIZE[r];
+    return u_combiner == 2 ? min(a, b) : u_combiner == 3 ? max(a, b) : a * b;
+}
+
+// a rate's value oriented as "smaller passes", against its own threshold; 1x1 costs nothing to judge
+float oriented(float v[6], int i) {
+    if (i == 0) return uintBitsToFloat(0xff800000u);  // -inf
+    float f = u_rate_factors[i - 1];
+    return u_higher_is_better ? -(v[i - 1] + 20.0 * log(f) / log(10.0)) : v[i - 1] / f;
+}
+
+// the image's code beside engine rate `e`: per candidate (the allowed rates cheapest first, then 1x1) the rate the
+// device shades and the worse value of the two it may shade; the cheapest passing, then the better value, then
+// one shaded as judged, then the first; else the 1x1 candidate. The image holds the rate shaded where combining it
+// with the engine's gives it back, else the finest candidate that gives the same.
+uint select_beside(float v[6], int e) {
+    const int ORDER[7] = int[7](6, 4, 5, 3, 1, 2, 0);  // ALL_RATES indices: cost classes cheapest first, then 1x1
+    float thr = u_higher_is_better ? -u_threshold : u_threshold;
+    int pick = -1, pick_first = 0, pick_last = 0, pick_area = 0;
+    float pick_value = 0.0;
+    bool pick_exact = false;
+    for (int j = 0; j < 7; ++j) {
+        int c = ORDER[j];
+        if (!supported(c)) continue;
+        int first, last;
+        device_rates(combined(e, c), first, last);
+        float value = max(oriented(v, first), oriented(v, last));
+        if (isnan(oriented(v, first)) || isnan(oriented(v, last))) value = uintBitsToFloat(0x7fc00000u);  // NaN
+        int area = SIZE[first].x * SIZE[first].y;
+        bool exact = first == last;
+        if (!(value < thr)) continue;  // NaN never passes
+        if (pick < 0 || area > pick_area || (area == pick_area && (value < pick_value
+                || (value == pick_value && exact && !pick_exact)))) {
+            pick = c; pick_first = first; pick_last = last; pick_area = area; pick_value = value; pick_exact = exact;
+        }
+    }
+    if (pick < 0) { pick = 0; device_rates(combined(e, 0), pick_first, pick_last); }
+    int f0, f1;
+    device_rates(combined(e, pick_first), f0, f1);
+    if (f0 == pick_first && f1 == pick_last) return ALL_CODES[pick_first];
+    for (int k = 0; k < 7; ++k) {  // ALL_RATES order: by area, then the tall one first
+        if (!supported(k)) continue;
+        device_rates(combined(e, k), f0, f1);
+        if (f0 == pick_first && f1 == pick_last) return ALL_CODES[k];
+    }
+    return ALL_CODES[pick];
+}
+
 void main() {
     ivec2 t = ivec2(gl_GlobalInvocationID.xy);  // a hardware tile
     ivec2 grid = u_grid;
@@ -103,6 +193,10 @@ void main() {
     int out_plane = grid.x * grid.y;
     for (int r = 0; r < 6; ++r) decoded[r * out_plane + t.y * grid.x + t.x] = v[r];
 
+    if (u_combiner != 0) {
+        imageStore(u_rates, t, uvec4(select_beside(v, rate_of(imageLoad(u_engine, t).r)), 0u, 0u, 0u));
+        return;
+    }
     // the cheapest cost class with a passing rate; within a class the better value (the first on a tie);
     // NaN never passes (every comparison with it is false)
     uint code = 0u;  // 1x1
