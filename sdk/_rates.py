@@ -334,7 +334,9 @@ def _pick_combined(values: np.ndarray, area: np.ndarray, thr: float, combo: _Com
     (:func:`_combined_values`) against the oriented threshold ``thr``: the cheapest passing, else the 1x1 candidate
     (the engine's rates alone); of two as cheap and as good, one the device shades as judged rather than one where
     it may choose between a wide and a tall rate."""
-    exact = np.moveaxis((combo.channels[..., 0] == combo.channels[..., 1]).T[:, engine], 0, -3)
+    table = combo.channels[..., 0] == combo.channels[..., 1]
+    # (where no candidate of the engine's rates present may shade either of two rates, nothing to prefer)
+    exact = None if table[np.unique(engine)].all() else np.moveaxis(table.T[:, engine], 0, -3)
     pick = _choose(values, (-area).astype(np.int8), thr, len(combo.candidates) - 1, prefer=exact)
     return combo.image[engine, pick], combo.shaded[engine, pick]
 
@@ -500,19 +502,18 @@ def _combined_values(err: np.ndarray, combo: _Combination, engine: np.ndarray) -
     """Each candidate's oriented value and area per tile ``(..., J, th, tw)``: the value of the rate the device
     shades for it beside the ``engine``'s rates (indices into :data:`ALL_RATES`, the tiles' shape), the worse of
     two where a device may choose (NaN never passes), and -inf for 1x1."""
-    # A candidate's value is that of a pair of channels (the worse of the two, -inf for 1x1), and the table holds few
-    # pairs: a plane a pair, then one gather of each tile's candidates from the planes.
-    pairs = sorted({(int(a), int(b)) for a, b in combo.channels.reshape(-1, 2)})
-    which = np.zeros((len(ALL_RATES), len(combo.candidates)), np.intp)
-    for i, row in enumerate(combo.channels):
-        which[i] = [pairs.index((int(a), int(b))) for a, b in row]
-    lead, (th, tw) = err.shape[:-3], err.shape[-2:]
-    flat = err.reshape((-1,) + err.shape[-3:])
-    planes = np.stack([np.full(flat[:, 0].shape, -np.inf) if a < 0 else flat[:, a] if a == b else
-                       np.maximum(flat[:, a], flat[:, b]) for a, b in pairs])  # (pairs, N, th, tw)
-    spots = np.arange(planes[0].size).reshape(planes[0].shape)  # (each tile's place in a plane)
-    at = which.T[:, engine.reshape(spots.shape)] * spots.size + spots  # (J, N, th, tw)
-    values = np.moveaxis(planes.reshape(-1)[at], 0, -3).reshape(lead + (len(combo.candidates), th, tw))
+    # The engine's rates take a few values, and for each the candidates' channels are fixed: per value, its tiles'
+    # six values gathered once, each candidate's value from their rows, and written back where those tiles lie.
+    n, lead, (th, tw) = len(combo.candidates), err.shape[:-3], err.shape[-2:]
+    flat = np.moveaxis(err.reshape((-1,) + err.shape[-3:]), 1, 0).reshape(err.shape[-3], -1)  # (6, N * th * tw)
+    where = engine.reshape(-1)
+    gathered = np.empty((n, where.size))
+    for e in np.unique(where):
+        spots = np.flatnonzero(where == e)
+        sub = flat[:, spots] if spots.size < where.size else flat
+        for k, (a, b) in enumerate(combo.channels[e]):
+            gathered[k, spots] = (-np.inf if a < 0 else sub[a] if a == b else np.maximum(sub[a], sub[b]))
+    values = np.moveaxis(gathered.reshape((n, -1, th, tw)), 0, 1).reshape(lead + (n, th, tw))
     return values, np.moveaxis(combo.area.T[:, engine], 0, -3)
 
 
