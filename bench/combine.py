@@ -34,35 +34,10 @@ from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
+from rtp.evaluate import foveation_rates, motion_rates
 
 C = sdk.RATE_CODES
-IMAGES = ("foveation", "motion")
-
-
-def foveation(th: int, tw: int) -> np.ndarray:
-    """Fixed foveated rings over a ``th x tw`` tile grid: 1x1, then 2x2, then 4x4 by the tile centre's distance from
-    the frame's centre over the half-diagonal (< 0.4, < 0.7, beyond)."""
-    y, x = np.mgrid[0:th, 0:tw]
-    r = np.hypot((x + 0.5) / tw - 0.5, (y + 0.5) / th - 0.5) / np.hypot(0.5, 0.5)
-    return np.select([r < 0.4, r < 0.7], [C["1x1"], C["2x2"]], C["4x4"]).astype(np.uint8)
-
-
-def motion_rates(mx: np.ndarray, my: np.ndarray, tile: int) -> np.ndarray:
-    """Motion-blur rates: per tile and axis 2 where the mean screen motion along it is >= 2 pixels a frame, 4 from
-    8; a 4 beside a 1 becomes 2 (no device shades 4x1 or 1x4)."""
-    th, tw = sdk.tile_grid(*mx.shape, tile)
-
-    def size(m: np.ndarray) -> np.ndarray:
-        h, w = m.shape
-        pad = np.pad(np.abs(m), ((0, th * tile - h), (0, tw * tile - w)), mode="edge")
-        mean = pad.reshape(th, tile, tw, tile).mean(axis=(1, 3))
-        return np.select([mean >= 8.0, mean >= 2.0], [4, 2], 1)
-
-    w, h = size(mx), size(my)
-    w = np.where((w == 4) & (h == 1), 2, w)
-    h = np.where((h == 4) & (w == 1), 2, h)
-    code = (np.log2(w).astype(np.uint8) << 2) | np.log2(h).astype(np.uint8)
-    return code.astype(np.uint8)
+IMAGES = ("foveation", "motion")  # (rtp.evaluate's examples of an engine's own rates)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
 
         alone = sdk.select_rates(est, thr, **fit)
         full = np.zeros_like(alone)
-        images = {"foveation": foveation(th, tw),
+        images = {"foveation": foveation_rates(th, tw),
                   "motion": motion_rates(s.channel("motion.x"), s.channel("motion.y"), pred.tile_size)}
         for img, engine in images.items():
             aware = sdk.select_rates(est, thr, engine_rates=engine, **fit)

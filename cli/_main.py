@@ -686,8 +686,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    size=args.size, tile_size=args.tile_size, fail_metric=args.fail_metric,
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
-                   animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop, progress=progress,
-                   stage=stage)
+                   animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop,
+                   engine_rates=args.engine_rates, combiner=args.combiner, progress=progress, stage=stage)
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0
@@ -1045,7 +1045,7 @@ def build_parser() -> argparse.ArgumentParser:
     cache_dir(dm)
 
     from rtp.capture.paths import PATH_PROFILES
-    from rtp.evaluate import DEFAULT_METHODS, METHOD_KINDS
+    from rtp.evaluate import DEFAULT_METHODS, ENGINE_IMAGES, METHOD_KINDS
 
     pl = command("play", "closed-loop VRS on a moving camera: every method picks rates from its own last displayed "
                  "frame, frame after frame, against full-rate shading", _cmd_play,
@@ -1089,6 +1089,12 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once")
     pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "
                     "frame, not its own displayed one")
+    pl.add_argument("--engine-rates", choices=ENGINE_IMAGES, default=None, help="an engine's own shading rates each "
+                    "frame (fixed foveation rings, or rates from motion blur), which --combiner meets with every "
+                    "method's: the rates shaded and judged are the combination's, full's row the engine's alone, a tile "
+                    "fails only beyond the engine's own rate; rtp's models choose beside them (NAME@k:alone: without)")
+    pl.add_argument("--combiner", choices=("min", "max", "sum"), default="max", help="the hardware's combiner of "
+                    "--engine-rates and each method's rates (default max: the coarser per axis)")
     cache_dir(pl)
 
     im = command("import", "a dataset from your engine's frames (G-buffers and the frame shaded at every rate, .npz "

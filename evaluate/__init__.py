@@ -28,6 +28,7 @@ from ._baselines import (
     motion_factor_quarter,
     restrict_rates,
 )
+from ._engine import ENGINE_IMAGES, engine_rates, foveation_rates, motion_rates
 from ._evaluate import (
     CONTAINED_RATES,
     DEFAULT_UNSEEN_FRACTION,
@@ -60,6 +61,7 @@ __all__ = [
     "CONTAINED_RATES",
     "DEFAULT_METHODS",
     "DEFAULT_UNSEEN_FRACTION",
+    "ENGINE_IMAGES",
     "METHOD_KINDS",
     "FFX_LUMA",
     "SPLITS",
@@ -79,12 +81,15 @@ __all__ = [
     "Yang2019",
     "as_frame",
     "check_evaluation",
+    "engine_rates",
     "evaluate",
     "fail_rule",
     "failing_tiles",
+    "foveation_rates",
     "monotone_over_rates",
     "motion_factor_half",
     "motion_factor_quarter",
+    "motion_rates",
     "parse_methods",
     "play",
     "plots",

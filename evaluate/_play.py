@@ -48,6 +48,7 @@ from rtp import sdk
 from rtp.sdk.files import atomic_output, writer_lock
 
 from ._baselines import FidelityFX, Frame, Yang2019
+from ._engine import ENGINE_IMAGES, engine_rates
 from ._evaluate import failing_tiles, monotone_over_rates
 
 __all__ = [
@@ -136,7 +137,9 @@ class MethodSpec:
     estimates on the network's frames, the ``refresh`` share of unseen tiles that runs the network
     early and the carry's pixel ``step`` (``sdk.PredictionReuse``'s arguments of those names); ``budget``, the share of
     the work its rates save every frame (``sdk.select_rates_for_saving``) instead of a threshold; ``floor``, the
-    least share saved under its threshold (the same function with the threshold)."""
+    least share saved under its threshold (the same function with the threshold); ``alone``, with an engine's own
+    rates (``play(engine_rates=)``), the model chooses its rates without them and the combiner meets them after
+    (by default it judges the rate the device shades: ``select_rates(engine_rates=)``)."""
 
     name: str
     kind: str
@@ -152,6 +155,7 @@ class MethodSpec:
     carry: str = "estimates"
     budget: float | None = None
     floor: float | None = None
+    alone: bool = False
 
 
 def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
@@ -179,6 +183,8 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
             continue
         model, _, k = item.rpartition("@") if "@" in item and not _is_file(item) else (item, "", "1")
         k, *options = k.split(":")
+        alone = [o for o in options if o == "alone"]
+        options = [o for o in options if o != "alone"]
         if not (k.isascii() and k.isdigit()) or len(k) > 6 or int(k) < 1:  # ("²".isdigit(); int() refuses 5000 digits)
             raise PlayError(f"method {item!r}: the reuse interval after '@' must be an integer >= 1 (e.g. jnyang@4)")
         reduce = [o for o in options if o in REUSE_REDUCTIONS]
@@ -189,10 +195,11 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
         rescale = [_exponent(o, item) for o in options if o[:1] == "v"]
         carry = [o for o in options if o in REUSE_CARRIES]
         scale = [_carry_scale(o, item) for o in options if o[:1] == "c" and o not in REUSE_CARRIES]
+
         budget = [_budget(o, item, "budget") for o in options if o[:1] == "b"]
         floor = [_budget(o, item, "floor") for o in options
                  if o[:1] == "f" and o not in REUSE_UNSEEN and o not in REUSE_CARRIES]
-        if (len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
+        if (len(alone) > 1 or len(reduce) > 1 or len(unseen) > 1 or len(history) > 1 or len(refresh) > 1 or len(step) > 1
                 or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1 or len(budget) + len(floor) > 1
                 or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) + len(scale)
                 + len(carry) + len(budget) + len(floor) != len(options)):
@@ -200,14 +207,15 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
                             f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
                             "refresh share (both in [0, 1)), one ':sN' pixel step, one ':vA' rescale exponent and "
                             f"one ':cF' carry scale, one ':carry' ({', '.join(REUSE_CARRIES)}) and one ':bS' budget "
-                            "or ':fS' floor, e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, "
-                            "jnyang@4:v0.5, jnyang@4:c1.08, split.onnx@4:features, jnyang@1:b0.6 or jnyang@1:f0.5")
+                            "or ':fS' floor, and ':alone', e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, "
+                            "jnyang@4:s4, jnyang@4:v0.5, jnyang@4:c1.08, split.onnx@4:features, jnyang@1:b0.6, "
+                            "jnyang@1:f0.5 or jnyang@1:alone")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
                               refresh[0] if refresh else None, step[0] if step else None,
                               rescale[0] if rescale else 0.0, scale[0] if scale else 1.0,
                               carry[0] if carry else MethodSpec.carry, budget[0] if budget else None,
-                              floor[0] if floor else None))
+                              floor[0] if floor else None, bool(alone)))
     if len({m.name for m in out}) != len(out):
         raise PlayError(f"methods: each method once, got {', '.join(items)}")
     return out
@@ -306,6 +314,7 @@ class _Loop:
     flip: list[float] = field(default_factory=list)
     ms: list[float] = field(default_factory=list)
     ran: list[float] = field(default_factory=list)  # models: the network's work per frame (1: the whole frame)
+    engine: np.ndarray | None = None  # the engine's own rates of the current frame (play(engine_rates=))
 
     def summary(self) -> dict[str, Any]:
         def mean(v: list[float], skip: int = 1) -> float:
@@ -324,6 +333,17 @@ class _Loop:
 
 
 # -- the run ------------------------------------------------------------------------------------------
+
+
+def _engine_sentence(settings: dict[str, Any]) -> str:
+    """The sentence of play.md's header on the engine's own rates, where the run had them (else empty)."""
+    engine = settings.get("engine_rates")
+    if not engine:
+        return ""
+    return (f" The engine's own rates ({engine['image']}, rtp.evaluate.engine_rates) meet every method's in a "
+            f"{engine['combiner']} combiner: the rates shaded, saved and judged are the combination's, full's row is "
+            "the engine's rates alone, a tile fails only where the rate shaded is not the engine's own, and rtp's "
+            "models and the oracle choose beside the engine's rates (a model's :alone without them).")
 
 
 def _other_tiles(settings: dict[str, Any]) -> str:
@@ -383,7 +403,7 @@ class PlayReport:
                  f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when "
                  f"{fail_rule(s['fail_metric'], s['fail_threshold'])}; {flip}. Shading: {s.get('shading', 'renderer')}; "
                  f"each method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is "
-                 f"left out.{_other_tiles(s)}", ""]
+                 f"left out.{_other_tiles(s)}{_engine_sentence(s)}", ""]
         for path, unseen in self.unseen.items():
             u = np.array(unseen[1:])
             cam = s.get("cameras", {}).get(path)
@@ -487,6 +507,8 @@ def play(
     animation: bool = True,
     workers: int = 1,
     open_loop: bool = False,
+    engine_rates: str | None = None,
+    combiner: str = "max",
     progress: Callable[[int], None] | None = None,
     stage: Callable[[str], None] | None = None,
 ) -> PlayReport:
@@ -498,7 +520,11 @@ def play(
     ``plots`` the curves, the per-frame plot and (``animation``) a GIF per path into ``out``.
     ``workers`` > 1 plays the paths in that many processes at once. ``open_loop=True`` is the
     ablation: every method's history is the full-rate frame instead of its own (what the dataset's
-    reprojection holds). ``progress(n)`` is called after
+    reprojection holds). ``engine_rates`` (:data:`~rtp.evaluate.ENGINE_IMAGES`) gives the engine rates of its own
+    each frame, which the hardware's ``combiner`` (``min``, ``max``, ``sum``) meets with every method's: the rates
+    shaded, saved and judged are the combination's (``full``'s row is the engine's rates alone), a tile fails only
+    where the rate shaded is not the engine's own, and rtp's models and the oracle choose beside the engine's rates
+    (``select_rates(engine_rates=)``; a model's ``:alone`` chooses without them). ``progress(n)`` is called after
     every frame; ``stage(text)`` as each step between frames begins (a path's map loaded, its cameras
     planned, its renderer started, its first frame, its GIF, then the report and plots: seconds on a
     large map, while ``progress`` does not move), as ``"fast: planning the camera path"``; ``"PATH:
@@ -509,6 +535,13 @@ def play(
 
     specs = parse_methods(methods)
     _check(frames, fps, flip_every, size, (m.reuse for m in specs))
+    if engine_rates is not None and engine_rates not in ENGINE_IMAGES:
+        raise PlayError(f"engine_rates: expected one of {', '.join(ENGINE_IMAGES)} (or None), got {engine_rates!r}",
+                        "engine_rates")
+    if combiner not in _SELECTING_COMBINERS:  # (those through which a method's rate reaches the frame)
+        raise PlayError(f"combiner: expected one of {', '.join(_SELECTING_COMBINERS)}, got {combiner!r}", "combiner")
+    if any(m.alone for m in specs) and engine_rates is None:
+        raise PlayError("methods: ':alone' chooses without the engine's own rates: give engine_rates (--engine-rates)")
     _check_options(seed, workers, unseen_fraction, {"sweep": sweep, "exact": exact, "plots": plots,
                                                      "animation": animation, "open_loop": open_loop})
     paths = [paths] if isinstance(paths, str) else paths  # (one name, not its letters)
@@ -572,6 +605,7 @@ def play(
                 if sweep else None,
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
+                "engine_rates": None if engine_rates is None else {"image": engine_rates, "combiner": combiner},
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "model_tiles": {k: p.tile_size for k, p in predictors.items()},  # (play.md names those on other tiles)
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
@@ -603,7 +637,8 @@ def play(
         job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
                "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
                "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
-               "open_loop": open_loop, "gif": str(outdir) if outdir is not None and plots and animation else None}
+               "open_loop": open_loop, "gif": str(outdir) if outdir is not None and plots and animation else None,
+               "engine_rates": engine_rates, "combiner": combiner}
         # A path finished by an interrupted run of the same job into the same folder is read back, not
         # played again; each path is kept as it finishes, until the report is written.
         key = _resume_key(job, predictors) if outdir is not None else ""
@@ -653,6 +688,10 @@ def play(
                 (outdir / _PARTIAL.format(pname)).unlink(missing_ok=True)
     return report
 
+
+#: The hardware's combiners through which a method's rates reach the frame beside the engine's (``sdk.COMBINERS``' min,
+#: max and sum).
+_SELECTING_COMBINERS = ("min", "max", "sum")
 
 #: A path's results, kept in the output folder while the job runs (:func:`play` resumes from them).
 _PARTIAL = ".play-{}.partial.json"
@@ -741,7 +780,10 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     tile = job["tile_size"]
     step("planning the camera path")
     path = camera_path(scn, job["frames"], pname, job["seed"], fps=job["fps"], blockers=blockers)
-    loops = _loops(specs, predictors, job["sweep"], job["fail_thr"], info.higher_is_better, tile, job["unseen_fraction"])
+    engine = job.get("engine_rates")
+    combiner = job.get("combiner", "max")
+    loops = _loops(specs, predictors, job["sweep"], job["fail_thr"], info.higher_is_better, tile, job["unseen_fraction"],
+                   combiner)
     step("starting the renderer")
     ticked = [False]
 
@@ -756,7 +798,8 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
         step("the first frame (rendered at every rate, then each method)")
         start = time.perf_counter()
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
-                                 tile, job["flip_every"], (h, w), frame_done, job["gif"] is not None, job["open_loop"])
+                                 tile, job["flip_every"], (h, w), frame_done, job["gif"] is not None, job["open_loop"],
+                                 engine, combiner)
         took = time.perf_counter() - start
         log.info("%s: %d frames of %d loops played in %.1f s (%.2f s a frame)", pname, len(path), len(loops), took,
                  took / max(1, len(path)))
@@ -810,7 +853,7 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int, progress: C
 
 
 def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fail_thr: float, fail_hib: bool,
-           tile: int, unseen_fraction: float) -> list[_Loop]:
+           tile: int, unseen_fraction: float, combiner: str = "max") -> list[_Loop]:
     loops: list[_Loop] = []
     for m in specs:
         if m.kind == "full":
@@ -818,7 +861,7 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                                default=True))
         elif m.kind in ("oracle", "oracle-monotone"):
             loops.append(_Loop(m, fail_thr, f"threshold {fail_thr:g}",
-                               _oracle(fail_thr, fail_hib, m.kind == "oracle-monotone"), default=True))
+                               _oracle(fail_thr, fail_hib, m.kind == "oracle-monotone", combiner), default=True))
         elif m.kind == "model":
             pred = predictors[m.model]
             meta = pred.metadata
@@ -826,7 +869,8 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
             if m.budget is not None:  # a budget: the share saved every frame, swept in place of the threshold
                 for b in sorted({*SAVING_SWEEP, m.budget}) if sweep else (m.budget,):
                     decide = _model(pred, thr0, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history,
-                                    m.refresh, m.step, m.rescale, m.carry_scale, m.carry, saving=b)
+                                    m.refresh, m.step, m.rescale, m.carry_scale, m.carry, saving=b,
+                                    combiner=None if m.alone else combiner)
                     loops.append(_Loop(m, b, f"saving {b:g}", decide, default=b == m.budget))
                 continue
             if meta.higher_is_better:
@@ -835,7 +879,8 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
                 values = [thr0 * f for f in (MODEL_SWEEP if sweep else (1.0,))]
             for v in values:
                 decide = _model(pred, v, m.reuse, tile, unseen_fraction, m.reduce, m.unseen, m.history, m.refresh,
-                                m.step, m.rescale, m.carry_scale, m.carry, saving=m.floor, floor=m.floor is not None)
+                                m.step, m.rescale, m.carry_scale, m.carry, saving=m.floor, floor=m.floor is not None,
+                                combiner=None if m.alone else combiner)
                 label = f"threshold {v:.4g}" + ("" if m.floor is None else f", floor {m.floor:g}")
                 loops.append(_Loop(m, v, label, decide, default=v == thr0))
         elif m.kind.startswith("yang2019"):
@@ -864,9 +909,10 @@ def _loop_count(m: MethodSpec, sweep: bool, predictors: dict[str, Any]) -> int:
     return len(BASELINE_SWEEP)
 
 
-def _oracle(thr: float, hib: bool, monotone: bool = False) -> Callable[..., np.ndarray]:
+def _oracle(thr: float, hib: bool, monotone: bool = False, combiner: str = "max") -> Callable[..., np.ndarray]:
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
-        return sdk.select_rates(monotone_over_rates(truth, hib) if monotone else truth, thr, higher_is_better=hib)
+        return sdk.select_rates(monotone_over_rates(truth, hib) if monotone else truth, thr, higher_is_better=hib,
+                                engine_rates=lp.engine, combiner=combiner)  # (beside the engine's rates, if any)
     return decide
 
 
@@ -911,7 +957,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
            reduce: str = "mean", unseen: str = "full", history: float = 0.0,
            refresh: float | None = None, step: int | None = None, rescale: float = 0.0,
            carry_scale: float = 1.0, carries: str = "estimates", saving: float | None = None,
-           floor: bool = False) -> Callable[..., np.ndarray]:
+           floor: bool = False, combiner: str | None = "max") -> Callable[..., np.ndarray]:
     meta = pred.metadata
     hib = meta.higher_is_better
     split = meta.tile_size // tile  # (finer hardware tiles than the model's: each its model tile's rate)
@@ -932,19 +978,25 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
         lp.ran.append(carry.work)
         if pool > 1:
             est = sdk.pool_tiles(est, pool, higher_is_better=hib)
+        beside: dict[str, Any] = ({} if lp.engine is None or combiner is None else
+                                  {"engine_rates": lp.engine, "combiner": combiner})
+        parts, tiles_of = split, max(tile, meta.tile_size)  # (est's tiles: the model's, or the hardware's coarser ones)
+        if beside and parts > 1:  # (the engine's rates are on the hardware's tiles: each its model tile's estimates)
+            est, parts, tiles_of = sdk.split_tiles(est, parts, truth.shape[1:]), 1, tile
         if saving is None:
-            rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors)
-        else:  # (the budget over the frame's pixels: est's tiles are the model's, or the hardware's when coarser)
+            rates = sdk.select_rates(est, thr, higher_is_better=hib, factors=meta.rate_factors, **beside)
+        else:  # (the budget over the frame's pixels)
             rates = sdk.select_rates_for_saving(est, saving, higher_is_better=hib, factors=meta.rate_factors,
-                                                frame_size=pf.seen.shape, tile_size=max(tile, meta.tile_size),
-                                                threshold=thr if floor else None).rates
-        return rates if split <= 1 else sdk.split_tiles(rates, split, truth.shape[1:])
+                                                frame_size=pf.seen.shape, tile_size=tiles_of,
+                                                threshold=thr if floor else None, **beside).rates
+        return rates if parts <= 1 else sdk.split_tiles(rates, parts, truth.shape[1:])
     return decide
 
 
 def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
               tile: int, flip_every: int, hw: tuple[int, int], progress: Callable[[int], None] | None,
-              animate: bool, open_loop: bool = False) -> tuple[list[float], list[np.ndarray]]:
+              animate: bool, open_loop: bool = False, engine_image: str | None = None,
+              combiner: str = "max") -> tuple[list[float], list[np.ndarray]]:
     from rtp.capture.paths import frame_unseen_share
 
     unseen: list[float] = []
@@ -958,7 +1010,10 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
         flip_frame = flip_every > 0 and pf.index > 0 and pf.index % flip_every == 0
         anim_frame = animate and pf.index % anim_every == 0
         shown: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        engine = None if engine_image is None else engine_rates(engine_image, pf.plane("motion.x"),
+                                                                pf.plane("motion.y"), tile)
         for lp in loops:
+            lp.engine = engine
             measure_flip = flip_frame and lp.default
             needs_history = lp.method.kind not in _NO_HISTORY
             rp = None
@@ -967,16 +1022,21 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             t0 = time.perf_counter()
             rates = lp.decide(pf, rp, truth, lp)
             lp.ms.append((time.perf_counter() - t0) * 1000)
-            if lp.method.kind == "full":
+            if engine is not None:  # the rates the device shades: the engine's and the method's combined
+                rates = sdk.combine_rates(engine, rates, combiner)
+            if lp.method.kind == "full" and engine is None:
                 displayed = ref
             elif needs_history or measure_flip or (anim_frame and lp.default):
                 displayed = player.shade(rates, tile)
             else:
                 displayed = None
             lp.saved.append(sdk.work_saved(rates, hw, tile))
-            lp.fail.append(float(failing_tiles(rates, truth, fail_thr, fail_hib).mean()))
+            failing = failing_tiles(rates, truth, fail_thr, fail_hib)
+            if engine is not None:  # (the engine's own rate is its choice: a tile fails beyond it only)
+                failing &= rates != engine
+            lp.fail.append(float(failing.mean()))
             lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None else float("nan"))
-            lp.flip.append(0.0 if lp.method.kind == "full" else
+            lp.flip.append(0.0 if lp.method.kind == "full" and engine is None else
                            float(metrics.flip_map(ref, displayed).mean()) if measure_flip and displayed is not None
                            else float("nan"))
             lp.history, lp.rates = (ref if open_loop else displayed) if needs_history else None, rates

@@ -796,3 +796,36 @@ def test_rtp_models_play_on_finer_and_coarser_hardware_tiles(tmp_path: Path) -> 
                 tile_size=32, plots=False).frames["fast"]["jnyang"]["saved"][0] <= runs[16].frames["fast"]["jnyang"]["saved"][0]
     with pytest.raises(PlayError, match=r"the model uses 8px tiles, the run 12px"):
         play("procedural:0", "jnyang-8px", paths=("fast",), frames=3, size=(96, 64), sweep=False, tile_size=12)
+
+
+def test_beside_an_engines_own_rates(tmp_path: Path) -> None:
+    """``engine_rates=``: every method's rates meet the engine's in the combiner; full's row is the engine's rates
+    alone (it saves, and fails nowhere beyond them), the aware oracle never fails beyond the engine's rate, a budget
+    counts the engine's saving, and ``:alone`` chooses without them. Bad engine images, combiners and ``:alone``
+    without an engine are refused before anything runs."""
+    from rtp.evaluate import foveation_rates
+
+    assert parse_methods("jnyang@1:alone")[0].alone and not parse_methods("jnyang")[0].alone
+    rep = play("procedural:0", "full,oracle,jnyang,jnyang@1:alone,jnyang@1:b0.8", paths=("fast",), frames=5,
+               size=(W, H), sweep=False, flip_every=0, plots=False, engine_rates="foveation", combiner="max")
+    assert rep.settings["engine_rates"] == {"image": "foveation", "combiner": "max"}
+    rows = {r["method"]: r for r in rep.rows}
+    fovea = sdk.work_saved(foveation_rates(*sdk.tile_grid(H, W, 16)), (H, W), 16)
+    assert rows["full"]["work_saved"] == pytest.approx(fovea) and rows["full"]["fail_share"] == 0.0
+    assert rows["oracle"]["fail_share"] == 0.0 and rows["oracle"]["work_saved"] > fovea
+    step = sdk.MAX_SAVING * 16 * 16 / (W * H)  # (one tile's whole saving: the budget overshoots by less)
+    assert all(0.8 - 1e-9 <= s <= 0.8 + step for s in rep.frames["fast"]["jnyang@1:b0.8"]["saved"][1:])
+    assert all(rows[m]["work_saved"] >= fovea - 1e-9 for m in ("jnyang", "jnyang@1:alone"))
+    assert "The engine's own rates (foveation, rtp.evaluate.engine_rates) meet every method's" in rep.to_markdown()
+    # motion-blur rates are anisotropic: combined by max, a rate of the oracle's own and one of the engine's can
+    # make one neither judged; the oracle beside them never fails beyond the engine's rate
+    moving = play("procedural:0", "oracle", paths=("fast",), frames=6, size=(W, H), sweep=False, flip_every=0,
+                  plots=False, engine_rates="motion")
+    assert moving.rows[0]["fail_share"] == 0.0 and moving.rows[0]["work_saved"] > 0.5
+    for kw, words in (({"engine_rates": "vr"}, "engine_rates: expected one of foveation, motion"),
+                      ({"engine_rates": "motion", "combiner": "avg"}, "combiner: expected one of min, max, sum"),
+                      ({}, "':alone' chooses without the engine's own rates")):
+        with pytest.raises(PlayError, match=words):
+            play("procedural:0", "jnyang@1:alone", paths=("fast",), frames=3, size=(W, H), sweep=False,
+                 flip_every=0, plots=False, out=tmp_path / "never", **kw)
+    assert not (tmp_path / "never").exists()
