@@ -26,7 +26,8 @@ variance, ``sdk.PredictionReuse(rescale=A)``; ``NAME@k:cF`` multiplies carried e
 and runs its tail on every frame, ``sdk.PredictionReuse(carry="features")``; ``NAME@k:bS`` holds a budget
 instead of a threshold: every frame's rates save a share S of the work, ``sdk.select_rates_for_saving``,
 and the sweep is over S; ``NAME@k:fS`` keeps the threshold and its sweep with a floor of S saved under it,
-``select_rates_for_saving(threshold=)``), ``yang2019``
+``select_rates_for_saving(threshold=)``; ``NAME@k:alone`` beside an engine's own rates, ``play(engine_rates=)``,
+chooses without them), ``yang2019``
 (NVIDIA Adaptive Shading with its motion terms), ``yang2019-unseen-1x1`` (the same, unseen tiles at full rate), ``fidelityfx`` and
 ``fidelityfx-additional`` (with FFX's motion factor).
 """
