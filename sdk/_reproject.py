@@ -38,6 +38,10 @@ from depth edges).
 
 from __future__ import annotations
 
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -173,29 +177,112 @@ def reproject_positions(
                       _matrix(prev_view_proj, "prev_view_proj"))
 
 
+#: Pixels a band of rows holds at most: the reprojection runs band by band, so that its float64 temporaries (a
+#: few dozen of them) stay in the cache instead of streaming a whole frame through memory each, and the bands run
+#: on :data:`_BAND_THREADS` threads (numpy lets go of the GIL inside its loops). Every pixel's arithmetic is its
+#: own, so the values are those of one pass over the frame.
+_BAND_PIXELS = 65536
+
+#: Threads the reprojection's bands run on at most (the CPU's cores, up to 4: past that the gathers from the
+#: previous frame are bound by memory).
+_BAND_THREADS = max(1, min(4, os.cpu_count() or 1))
+
+_pool: ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+
+def _forget_pool() -> None:  # a forked child has the pool's object but not its threads
+    global _pool
+    _pool = None
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
+def _band_rows(h: int, w: int) -> int:
+    """Rows a band of an ``(h, w)`` frame holds (:data:`_BAND_PIXELS` at most, one row at least)."""
+    return max(1, _BAND_PIXELS // max(w, 1))
+
+
+def _in_bands(h: int, w: int, band: Callable[[int, int], None]) -> None:
+    """``band(r0, r1)`` for each band of rows of an ``(h, w)`` frame, on up to :data:`_BAND_THREADS` threads
+    (in this thread where there is one band or one thread); an exception of a band is raised here."""
+    global _pool
+    step = _band_rows(h, w)
+    starts = range(0, h, step)
+    if len(starts) == 1 or _BAND_THREADS == 1:
+        for r0 in starts:
+            band(r0, min(h, r0 + step))
+        return
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(_BAND_THREADS, thread_name_prefix="rtp-reproject")
+        pool = _pool
+    for future in [pool.submit(band, r0, min(h, r0 + step)) for r0 in starts]:
+        future.result()
+
+
+def _affine(a0: float, xs: np.ndarray, a1: float, ys: np.ndarray, c: float) -> Any:
+    """``a0 * xs + a1 * ys + c``, leaving out a term whose coefficient is 0: a row ``(1, W)`` or a column ``(H, 1)``
+    where the other is 0 (a perspective or orthographic projection, off-centre or jittered: each of the inverse
+    projection's first two rows reads one of x and y, its last two neither), else the full ``(H, W)``."""
+    out: Any = np.float64(c)
+    for a, v in ((a0, xs), (a1, ys)):
+        if a != 0.0:
+            out = a * v + out
+    return out
+
+
 def _positions(depth: np.ndarray, cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`reproject_positions` of arrays already checked (finite, ``depth`` (H, W) >= 0, 4x4 matrices),
     float32 or float64 alike (each float32 value is a float64 exactly, and the arithmetic is float64)."""
     h, w = depth.shape
+    inv_proj, m = _transforms(cur_view, cur_proj, prev_vp)
+    qx, qy, cw = np.empty((h, w)), np.empty((h, w)), np.empty((h, w))
+
+    def band(r0: int, r1: int) -> None:
+        qx[r0:r1], qy[r0:r1], cw[r0:r1] = _band_positions(depth[r0:r1], r0, h, w, inv_proj, m)
+
+    _in_bands(h, w, band)
+    return qx, qy, cw
+
+
+def _transforms(cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The current projection's inverse and the matrix from the current view space to the previous clip space."""
     inv_proj = _inverse(cur_proj, "cur_proj")
     inv_view = _inverse(cur_view, "cur_view")
+    return inv_proj, prev_vp @ inv_view
 
+
+def _band_positions(depth: np.ndarray, r0: int, h: int, w: int, inv_proj: np.ndarray, m: np.ndarray,
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_positions` of the rows ``r0 : r0 + len(depth)`` of an ``(h, w)`` frame (``depth``: those rows),
+    ``m`` the current view space to the previous clip space."""
     # The pixel centre's NDC (x, y) on the near plane (z = -1) through the inverse projection: affine in x
-    # and y, so each component is a sum of a column and a row (no (H, W, 4) array and matmul: 3-4x faster).
+    # and y, so each component is a sum of a column and a row (a row or a column alone for the usual projections).
     xs = ((np.arange(w, dtype=np.float64) + 0.5) / w * 2.0 - 1.0)[None, :]
-    ys = (1.0 - (np.arange(h, dtype=np.float64) + 0.5) / h * 2.0)[:, None]  # top-left rows -> NDC y up
-    q = [inv_proj[i, 0] * xs + inv_proj[i, 1] * ys + (inv_proj[i, 3] - inv_proj[i, 2]) for i in range(4)]
+    ys = (1.0 - (np.arange(r0, r0 + depth.shape[0], dtype=np.float64) + 0.5) / h * 2.0)[:, None]  # top-left rows
+    q = [_affine(inv_proj[i, 0], xs, inv_proj[i, 1], ys, inv_proj[i, 3] - inv_proj[i, 2]) for i in range(4)]
     # the view-space point on the ray with z = -1: (q / q_w) / -(q_z / q_w)
     rx, ry = (q[0] / q[3]) / -(q[2] / q[3]), (q[1] / q[3]) / -(q[2] / q[3])
 
     geometry = depth > 0.0
-    # geometry: the point at its depth; background: the ray's unit direction at infinity (w = 0)
-    scale = np.where(geometry, depth, 1.0 / np.sqrt(rx * rx + ry * ry + 1.0))
-    px, py, pz = rx * scale, ry * scale, -scale
-    pw = geometry.astype(np.float64)
-    m = prev_vp @ inv_view  # view -> previous clip in one matrix
-    cx, cy, cw = (m[j, 0] * px + m[j, 1] * py + m[j, 2] * pz + m[j, 3] * pw for j in (0, 1, 3))
+    # geometry: the point (rx, ry, -1) * depth, w = 1; background: the ray's unit direction at infinity (w = 0).
+    # Its previous clip coordinates are then scale * (m[j, 0] rx + m[j, 1] ry - m[j, 2]), plus m[j, 3] on geometry.
+    scale = depth.astype(np.float64)
+    sky = np.flatnonzero(~geometry)
+    if sky.size:  # (the unit length only where it is used: most frames are mostly geometry)
+        at = np.divmod(sky, depth.shape[1])
+        sx, sy = np.broadcast_to(rx, depth.shape)[at], np.broadcast_to(ry, depth.shape)[at]
+        scale.ravel()[sky] = 1.0 / np.sqrt(sx * sx + sy * sy + 1.0)
+    clip = []
+    for j in (0, 1, 3):
+        c = scale * (m[j, 0] * rx + m[j, 1] * ry - m[j, 2])
+        if m[j, 3] != 0.0:
+            np.add(c, m[j, 3], out=c, where=geometry)
+        clip.append(c)
+    cx, cy, cw = clip
     safe = np.where(cw > 0.0, cw, 1.0)
     qx = (cx / safe * 0.5 + 0.5) * w
     qy = (cy / safe * 0.5 + 0.5) * h
@@ -260,11 +347,31 @@ def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarra
                ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`reproject` of arrays already checked (``input_planes`` checks its G-buffers once, not twice)."""
     h, w = depth.shape
-    qx, qy, cw = _positions(depth, cur_view, cur_proj, prev_vp)
+    inv_proj, m = _transforms(cur_view, cur_proj, prev_vp)
+    colours = prev_colour.reshape(h * w, -1)
+    out = np.empty(colours.shape, np.float32)
+    seen = np.empty((h, w), np.float32)
+    flat_depth = prev_depth.ravel()
+
+    def band(r0: int, r1: int) -> None:
+        seen[r0:r1] = _band_reproject(colours, flat_depth, depth[r0:r1], r0, h, w, inv_proj, m, tolerance,
+                                      None if motion is None else motion[r0:r1], out[r0 * w:r1 * w])
+
+    _in_bands(h, w, band)
+    return out.reshape(prev_colour.shape), seen
+
+
+def _band_reproject(colours: np.ndarray, flat_depth: np.ndarray, depth: np.ndarray, r0: int, h: int, w: int,
+                    inv_proj: np.ndarray, m: np.ndarray, tolerance: float, motion: np.ndarray | None,
+                    out: np.ndarray) -> np.ndarray:
+    """:func:`_reproject` of the rows ``r0 : r0 + len(depth)``: their colours into ``out`` (``(rows * w, C)``), and
+    their ``seen`` (bool). ``colours`` and ``flat_depth`` are the whole previous frame's, raveled."""
+    qx, qy, cw = _band_positions(depth, r0, h, w, inv_proj, m)
+    geometry = depth > 0.0
     if motion is not None:  # the engine's motion vectors place geometry; the expected depth stays the camera's
-        geo = depth > 0.0
-        qx = np.where(geo, (np.arange(w, dtype=np.float64) + 0.5)[None, :] + motion[..., 0], qx)
-        qy = np.where(geo, (h - (np.arange(h, dtype=np.float64) + 0.5))[:, None] - motion[..., 1], qy)
+        qx = np.where(geometry, (np.arange(w, dtype=np.float64) + 0.5)[None, :] + motion[..., 0], qx)
+        qy = np.where(geometry, (h - (np.arange(r0, r0 + depth.shape[0], dtype=np.float64) + 0.5))[:, None]
+                      - motion[..., 1], qy)
     on = (cw > 0.0) & (qx >= 0.0) & (qx < w) & (qy >= 0.0) & (qy < h)
     qx = np.where(on, qx, 0.5)
     qy = np.where(on, qy, 0.5)
@@ -273,12 +380,10 @@ def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarra
         return h - 1 - gl_y
 
     # gathers through flat indices into the raveled frames (2-3x faster than 2-D fancy indexing)
-    flat_depth = prev_depth.ravel()
     ix = np.floor(qx).astype(np.intp)
     iy = np.floor(qy).astype(np.intp)
     nearest = rows(iy) * w + ix
     pd = flat_depth.take(nearest)
-    geometry = depth > 0.0
     exp_d = cw
     near_ok = (pd > 0.0) & (np.abs(pd - exp_d) <= tolerance * exp_d)
 
@@ -302,8 +407,6 @@ def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarra
         bil_ok.ravel()[grazing] = full & (np.abs(bil - expected) <= tolerance * expected)
 
     seen = on & np.where(geometry, (pd > 0.0) & (near_ok | bil_ok), pd <= 0.0)
-    channels = prev_colour.reshape(h * w, -1)
-    out = channels.take(nearest.ravel(), axis=0).astype(np.float32)  # (a copy: zeroed where unseen below)
+    out[...] = colours.take(nearest.ravel(), axis=0)
     out[~seen.ravel()] = 0.0
-    out = out.reshape(prev_colour.shape)
-    return out, seen.astype(np.float32)
+    return seen
