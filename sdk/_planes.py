@@ -156,8 +156,9 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
     if a.dtype.kind in "iu" and name == "normal":
         raise InputDtypeError(f"normal: expected view-space normals in [-1, 1] as floats, got dtype {a.dtype} (an "
                               f"encoded normal texture: decode it first, e.g. n / 255 * 2 - 1 for 8 bits)")
-    with np.errstate(over="ignore"):
-        a = a.astype(np.float64 if shape == "4x4" else np.float32, copy=False)
+    with np.errstate(over="ignore"):  # (a texture's channels read back are strided: numpy's reductions and
+        # gathers on them are 2-8x slower than the copy that lays them out one after another)
+        a = np.ascontiguousarray(a, np.float64 if shape == "4x4" else np.float32)
     low, high = _RANGES.get(name, (0.0, window if name.endswith("depth") else np.inf)
                             if name.endswith("depth") else (-np.inf, np.inf))
     # (two reductions read it once each: a NaN makes both NaN, an infinity one infinite; no isfinite pass)
@@ -300,10 +301,14 @@ def input_planes(
         n = np.where(geo[..., None], n, np.float32(0.0)) if background else n
         planes.update({f"normal.{c}": n[..., i] for i, c in enumerate("xyz")})
     if "prev_colour" in g:
-        rep, seen = _reproject(g["prev_colour"], g["prev_depth"], d, g["view"], g["projection"],
-                               g["prev_view_projection"], tolerance, g.get("motion"))
-        planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
-        y = planes["reprojected.y"] = luma(rep)
+        colour = wanted & {"reprojected.r", "reprojected.g", "reprojected.b"}
+        # Luma is per pixel and 0 is black's, so the luma of the reprojected frame is the reprojected luma of the
+        # previous frame, value for value: a model that reads no colour plane gathers one plane instead of three.
+        rep, seen = _reproject(g["prev_colour"] if colour else luma(g["prev_colour"]), g["prev_depth"], d,
+                               g["view"], g["projection"], g["prev_view_projection"], tolerance, g.get("motion"))
+        if colour:
+            planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
+        y = planes["reprojected.y"] = luma(rep) if colour else rep
         if wanted & {"reprojected.y.dx", "reprojected.y.dy"}:
             planes["reprojected.y.dx"], planes["reprojected.y.dy"] = pixel_differences(y)
         if "reprojected.y.blocks" in wanted:
