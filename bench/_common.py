@@ -277,10 +277,12 @@ def save_figure(fig: Any, path: str | Path) -> None:
     print(f"\nwrote {path}")
 
 
-def module_at_revision(rev: str, path: str, name: str, prog: str) -> Any:
+def module_at_revision(rev: str, path: str, name: str, prog: str, replace: dict[str, str] | None = None) -> Any:
     """The module ``path`` (``sdk/_channels.py``) as it was at git revision ``rev``, imported as ``name``
     (``rtp.sdk._channels_then``: its relative imports resolve in that package); a usage error of ``prog``
-    (``SystemExit``, exit 1) where git cannot show it. For the benchmarks' ``--against REV``."""
+    (``SystemExit``, exit 1) where git cannot show it. For the benchmarks' ``--against REV``. ``replace``: texts
+    of the source replaced first (``{"from ._reproject import": "from ._reproject_then import"}``: a module
+    of that revision importing another module of the same revision, loaded before it)."""
     import importlib.util
     import subprocess
     import sys
@@ -293,7 +295,12 @@ def module_at_revision(rev: str, path: str, name: str, prog: str) -> Any:
                          f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
     with tempfile.TemporaryDirectory() as tmp:
         file = Path(tmp) / f"{name.rpartition('.')[2]}.py"
-        file.write_text(src.stdout)
+        text = src.stdout
+        for old, new in (replace or {}).items():
+            if old not in text:
+                raise SystemExit(f"{prog}: error: --against {rev}: {path} there has no {old!r}")
+            text = text.replace(old, new)
+        file.write_text(text)
         spec = importlib.util.spec_from_file_location(name, file)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)

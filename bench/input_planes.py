@@ -16,8 +16,10 @@ Prints a Markdown table of medians (ms).
 checkout's: ``reproject``'s time at each size, the two interleaved (medians), and its outputs on
 rendered frames (both camera profiles of three procedural scenes at three sizes, tolerances 0, 0.02 and
 0.2): the ``seen`` pixels that differ, the colours that differ where ``seen`` agrees, and the largest
-difference of ``reproject_positions``. Exits 1 if any ``seen`` pixel or colour differs: a faster
-reprojection must give the same planes.
+difference of ``reproject_positions``; then ``sdk.input_planes`` as a whole (``sdk/_planes.py`` of ``REV`` over
+its ``sdk/_reproject.py``) for every shipped model's channels at each size, timed the same way, and the
+planes that differ. Exits 1 if any ``seen`` pixel, colour or plane value differs: a faster reprojection must
+give the same planes.
 """
 
 from __future__ import annotations
@@ -94,7 +96,28 @@ def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
                     position = max(position, *(float(np.abs(a - b).max()) for a, b in zip(p0, p1)))
     print(f"\n{pixels:,} pixels of rendered frames: seen differs on {seen_differ}, the colour where seen agrees on "
           f"{colour_differ} values; positions within {position:.3g} px")
-    return 1 if seen_differ or colour_differ else 0
+    planes_then = module_at_revision(rev, "sdk/_planes.py", "rtp.sdk._planes_then", "input_planes.py",
+                                     replace={"from ._reproject import": "from ._reproject_then import"})
+    models = {name.removesuffix(".onnx"): sdk.load(name).metadata.inputs for name in sdk.shipped_models()}
+    labels = [f"{w}x{h}" for w, h in sizes]
+    print(f"\nsdk.input_planes at {rev} and in this checkout, the renderer's G-buffers as read back (RGBA textures' "
+          f"channels), median of {repeats}\n")
+    print("| model | planes | " + " | ".join(f"{rev} {s} | this checkout {s}" for s in labels) + " |")
+    print("|---|---:|" + "---:|---:|" * len(labels))
+    frames = [gbuffers(w, h) for w, h in sizes]
+    values = planes_differ = 0
+    for name, inputs in models.items():
+        cells = []
+        for g in frames:
+            times = interleaved_ms({"then": partial(planes_then.input_planes, inputs, **g),
+                                    "now": partial(sdk.input_planes, inputs, **g)}, repeats)
+            cells += [np.median(times["then"]), np.median(times["now"])]
+            a, b = planes_then.input_planes(inputs, **g), sdk.input_planes(inputs, **g)
+            values += a.size
+            planes_differ += int((a.view(np.uint32) != b.view(np.uint32)).sum())
+        print(f"| {name} | {len(inputs)} | " + " | ".join(f"{v:.1f}" for v in cells) + " |")
+    print(f"\n{values:,} plane values: {planes_differ} differ (to the bit)")
+    return 1 if seen_differ or colour_differ or planes_differ else 0
 
 
 def main() -> None:

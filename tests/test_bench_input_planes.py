@@ -45,6 +45,8 @@ def test_against_a_revision_compares_the_reprojections() -> None:
     assert out.returncode == 0, out.stdout + out.stderr
     assert re.search(r"^\| 32x32 \| [\d.]+ \| [\d.]+ \|$", out.stdout, re.M), out.stdout
     assert "seen differs on 0, the colour where seen agrees on 0 values; positions within 0 px" in out.stdout
+    assert _models(out.stdout, 2) == SHIPPED, out.stdout  # input_planes as a whole, REV's and this checkout's
+    assert re.search(r"^[\d,]+ plane values: 0 differ \(to the bit\)$", out.stdout, re.M), out.stdout
     bad = _run("input_planes.py", "--against", "no-such-revision", timeout=120)
     assert bad.returncode == 1 and "git cannot show sdk/_reproject.py there" in bad.stderr
 
