@@ -94,6 +94,7 @@ NOT_OBJECTS = {
     "rtp.x._y": "architecture.md's example of a private module",
     "rtp.sdk._channels_then": "bench/planes.py's name for an old revision's module",
     "rtp.sdk._reproject_then": "bench/input_planes.py's name for an old revision's module",
+    "rtp.sdk._planes_then": "bench/input_planes.py's name for an old revision's module",
     "rtp.plugins.no_such_plugin": "tests/test_adapters.py's entry point of an rtp plugin that cannot import",
 }
 _DOTTED = re.compile(r"(?<![\w./-])rtp(?:\.[A-Za-z_]\w*)+")

@@ -1,5 +1,5 @@
 """sdk.reproject's bands and threads: the reprojection runs band by band of rows on a few threads
-(docs/performance.md "The host-side reprojection"); these check that no band, thread, projection
+(docs/performance.md "The host-side reprojection and input planes"); these check that no band, thread, projection
 shape or forked process changes a value, against the whole frame at once and against a plain
 per-pixel reference."""
 
