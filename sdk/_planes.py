@@ -19,7 +19,15 @@ import numpy as np
 from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
 from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
-from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, _inverse, _positions, _reproject, _tolerance, check_projection
+from ._reproject import (
+    DEFAULT_REPROJECTION_TOLERANCE,
+    _inverse,
+    _positions,
+    _reproject,
+    _tolerance,
+    check_previous,
+    check_projection,
+)
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +105,11 @@ def _channels(channels: Iterable[str]) -> tuple[str, ...]:
     if not names:
         raise ParameterError("channels: expected at least one channel name", "channels")
     return names
+
+
+def _reprojects(channels: Iterable[str]) -> bool:
+    """Whether a plane of ``channels`` follows the pixels into the previous frame (which takes a perspective)."""
+    return any(c.startswith(("reprojected.", "motion.")) or c == "seen" for c in channels)
 
 
 def gbuffers_needed(channels: Iterable[str]) -> tuple[str, ...]:
@@ -259,11 +272,13 @@ def input_planes(
     d = _buffer("depth", depth, None, limit)
     size = (int(d.shape[0]), int(d.shape[1]))
     g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
-    if motion is not None and any(c.startswith(("reprojected.", "motion.")) or c == "seen" for c in names):
+    if motion is not None and _reprojects(names):
         g["motion"] = _buffer("motion", motion, size)  # (optional: looked at only where it is used)
     for b in ("projection", "prev_projection"):  # (another API's convention is named, with its conversion)
         if b in g:
-            check_projection(g[b], b)
+            check_projection(g[b], b, perspective=b == "projection" and _reprojects(names))
+    if "prev_view_projection" in g:  # (only read by the planes that reproject)
+        check_previous(g["prev_view_projection"], "prev_view_projection")
     if window:  # a depth buffer's [0, 1] to linear view depth, as the shader's linear_depth
         reversed_z = depth_kind == "reversed"
         _check_depth_kind(d, reversed_z)

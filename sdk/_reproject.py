@@ -80,11 +80,16 @@ def _matrix(m: np.ndarray, name: str) -> np.ndarray:
     return m
 
 
+#: Why the reprojection refuses an orthographic camera (docs/runtime.md "Input planes from G-buffers on the host").
+_NOT_PERSPECTIVE = ("an orthographic camera? The reprojection (reprojected.*, seen, motion.x/y) takes perspective "
+                    "cameras: each pixel a ray from the camera's centre, the previous frame's linear depth its clip w. "
+                    "A model that reads no such plane takes an orthographic camera")
+
 #: Where the conversions from other APIs' matrices are written down.
 _CONVERSIONS = 'docs/runtime.md "Matrices from Direct3D, Vulkan and Metal"'
 
 
-def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
+def check_projection(projection: Any, name: str = "projection", *, perspective: bool = False) -> np.ndarray:
     """``projection`` as a float64 4x4 matrix, if it can be an OpenGL projection as rtp takes it (column
     vectors, right-handed view space looking down -z, clip y up, clip depth in [-1, 1]); else a
     :class:`ParameterError` naming ``name`` that says which other API's convention it looks like and how
@@ -96,7 +101,9 @@ def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
     (OpenGL's ``m[2][2] / -m[3][2]`` is ``-(f + n) / (f - n)``, at most -1; a reversed-Z projection's is
     at least 0). A Direct3D-style right-handed projection with clip depth in [0, 1] looks like an OpenGL
     one of other near and far planes and passes: only its linearised window depth would be off. An
-    orthographic matrix (last row ``0, 0, 0, 1``) is taken as it is.
+    orthographic matrix (last row ``0, 0, 0, 1``) is taken as it is, unless ``perspective`` (the reprojection's
+    check): the reprojection follows each pixel's ray from the camera's centre and takes the previous clip ``w``
+    for the previous linear depth, which an orthographic camera has neither of, so there it is refused.
     """
     m = _matrix(projection, name)
 
@@ -104,6 +111,9 @@ def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
         return bool(v[2] != 0.0 and max(abs(v[0]), abs(v[1]), abs(v[3])) <= 1e-9 * abs(v[2]))
 
     if not w_row(m[3]):
+        if perspective:
+            raise ParameterError(f"{name}: its last row {np.round(m[3], 4).tolist()} is no perspective's w row (0, 0, "
+                                 f"-1, 0): {_NOT_PERSPECTIVE}", name)
         return m
     if abs(abs(m[3, 2]) - 1.0) > 1e-6 and w_row(m[:, 3]) and abs(abs(m[2, 3]) - 1.0) <= 1e-6:
         raise ParameterError(f"{name}: its last column (0, 0, {m[2, 3]:g}, 0) is a perspective's w row and its last row "
@@ -123,6 +133,16 @@ def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
                              f"the same near and far planes ({_CONVERSIONS}); depth_kind='reversed' says the depth "
                              f"buffer is reversed-Z", name)
     return m
+
+
+def check_previous(prev_view_projection: np.ndarray, name: str) -> np.ndarray:
+    """A previous view-projection (float64 4x4) the reprojection can take: one whose clip ``w`` reads the view's
+    depth (a perspective's), else a :class:`ParameterError` naming ``name``."""
+    w = prev_view_projection[3]
+    if np.abs(w[:3]).max() <= 1e-9 * abs(w[3]):  # (0, 0, 0, a): no divide by the depth
+        raise ParameterError(f"{name}: its last row {np.round(w, 4).tolist()} does not read the view's depth: "
+                             f"{_NOT_PERSPECTIVE}", name)
+    return prev_view_projection
 
 
 def _inverse(m: np.ndarray, name: str) -> np.ndarray:
@@ -173,8 +193,9 @@ def reproject_positions(
         the top-left row is ``H - qy``) and the previous clip ``w`` (the expected previous linear
         depth for geometry; only its sign matters for background).
     """
-    return _positions(_depth(depth, "depth"), _matrix(cur_view, "cur_view"), check_projection(cur_proj, "cur_proj"),
-                      _matrix(prev_view_proj, "prev_view_proj"))
+    return _positions(_depth(depth, "depth"), _matrix(cur_view, "cur_view"),
+                      check_projection(cur_proj, "cur_proj", perspective=True),
+                      check_previous(_matrix(prev_view_proj, "prev_view_proj"), "prev_view_proj"))
 
 
 #: Pixels a band of rows holds at most: the reprojection runs band by band, so that its float64 temporaries (a
@@ -338,8 +359,8 @@ def reproject(
                                   f"current position, x right, y down); got {motion.shape}", tuple(motion.shape),
                                   f"({depth.shape[0]}, {depth.shape[1]}, 2)")
     return _reproject(np.asarray(prev_colour), prev_depth, depth, _matrix(cur_view, "cur_view"),
-                      check_projection(cur_proj, "cur_proj"), _matrix(prev_view_proj, "prev_view_proj"), tolerance,
-                      motion)
+                      check_projection(cur_proj, "cur_proj", perspective=True),
+                      check_previous(_matrix(prev_view_proj, "prev_view_proj"), "prev_view_proj"), tolerance, motion)
 
 
 def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarray, cur_view: np.ndarray,

@@ -242,6 +242,10 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         a.inputs(replace(no_prev, projection=no_prev.projection @ np.diag([1.0, 1.0, -1.0, 1.0])))
     with pytest.raises(sdk.ParameterError, match="prev_projection: .* row vectors"):
         a.inputs(replace(no_prev, prev_projection=no_prev.projection.T))
+    ortho = np.diag([0.5, 0.8, -0.1, 1.0])  # an orthographic camera: refused where a plane reprojects, else taken
+    with pytest.raises(sdk.ParameterError, match="projection: .* orthographic camera"):
+        a.inputs(replace(no_prev, projection=ortho))
+    assert Adapter(("albedo.b", "depth"), W, H, ctx=ctx).inputs(replace(no_prev, projection=ortho)).shape == (2, H, W)
     for options in ({"normal_space": "bogus"}, {"depth_kind": "bogus"}, {"tolerance": float("nan")},
                     {"tolerance": -1.0}, {"tolerance": "0.02"}):
         with pytest.raises(sdk.ParameterError):

@@ -61,8 +61,7 @@ def _orthographic() -> np.ndarray:
     return m
 
 
-PROJECTIONS = {"perspective": lambda p: p, "jittered": _jittered, "sheared": _sheared,
-               "orthographic": lambda p: _orthographic()}
+PROJECTIONS = {"perspective": lambda p: p, "jittered": _jittered, "sheared": _sheared}
 
 
 def _reference_positions(depth: np.ndarray, view: np.ndarray, proj: np.ndarray, prev_vp: np.ndarray,
@@ -111,9 +110,8 @@ def test_bands_and_threads_change_no_value(name: str, motion: bool, monkeypatch:
         for a, b in zip([*whole[0], *whole[1]], [*banded[0], *banded[1]]):
             np.testing.assert_array_equal(a, b)
     seen = whole[0][1]
-    if name != "orthographic":  # (whose depth test expects w = 1: the reprojection assumes a perspective)
-        assert 0.2 < seen.mean() < 0.99  # some seen, some not: the comparison says something
-        assert (seen[f["depth"] == 0] == 1).any()  # sky reprojected by rotation
+    assert 0.2 < seen.mean() < 0.99  # some seen, some not: the comparison says something
+    assert (seen[f["depth"] == 0] == 1).any()  # sky reprojected by rotation
 
 
 def test_an_error_in_a_band_reaches_the_caller(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -163,3 +161,38 @@ def test_input_planes_gathers_the_luma_where_no_colour_plane_is_read() -> None:
         np.testing.assert_array_equal(x[2], sdk.block_variances(y))
     np.testing.assert_array_equal(with_colour[3], colour[..., 1])
     assert (y[seen == 0] == 0).all() and (y[seen == 1] > 0).mean() > 0.9
+
+
+def test_an_orthographic_camera_is_refused_where_pixels_are_reprojected() -> None:
+    """The reprojection follows rays from the camera's centre and reads the previous depth from the clip w: an
+    orthographic camera has neither, and its planes were all unseen. It is named where a plane reprojects, and
+    taken where none does."""
+    f = _frames(7)
+    ortho = _orthographic()
+    prev_ortho = ortho @ f["prev_view"]
+    g = {k: v for k, v in f.items() if k != "prev_view"}
+    calls = {
+        "reproject": lambda: sdk.reproject(f["prev_colour"], f["prev_depth"], f["depth"], f["view"], ortho, prev_ortho),
+        "positions": lambda: sdk.reproject_positions(f["depth"], f["view"], ortho, prev_ortho),
+        "seen": lambda: sdk.input_planes(["seen"], **{**g, "projection": ortho, "prev_view_projection": prev_ortho}),
+        "motion": lambda: sdk.input_planes(["motion.x"], **{**g, "projection": ortho,
+                                                           "prev_view_projection": prev_ortho}),
+        # a perspective now and an orthographic before (a camera switch): the previous one is named
+        "previous": lambda: sdk.input_planes(["reprojected.y"], **{**g, "prev_view_projection": prev_ortho}),
+        "reproject previous": lambda: sdk.reproject(f["prev_colour"], f["prev_depth"], f["depth"], f["view"],
+                                                    f["projection"], prev_ortho),
+    }
+    names = {"reproject": "cur_proj", "positions": "cur_proj", "seen": "projection", "motion": "projection",
+             "previous": "prev_view_projection", "reproject previous": "prev_view_proj"}
+    for what, call in calls.items():
+        with pytest.raises(sdk.ParameterError, match="orthographic camera") as err:
+            call()
+        assert err.value.name == names[what], what
+    planes = sdk.input_planes(["depth", "albedo.r"], depth=f["depth"], albedo=f["prev_colour"], projection=ortho)
+    assert planes.shape == (2, H, W)
+    window = np.full((H, W), 0.5, np.float32)  # (a depth buffer linearised through the orthographic projection)
+    depth = sdk.input_planes(["depth"], depth=window, projection=ortho, depth_kind="window")[0]
+    np.testing.assert_allclose(depth, 26.0, rtol=1e-6)  # -(z_ndc - c) / a: the middle of near 1 and far 51
+    np.testing.assert_array_equal(sdk.check_projection(ortho), ortho)
+    with pytest.raises(sdk.ParameterError, match="no perspective's w row"):
+        sdk.check_projection(ortho, perspective=True)

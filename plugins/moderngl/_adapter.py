@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection
+from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection, gbuffers_needed
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -280,7 +280,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
                 raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
             self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1))
         view = _matrix(view, "view", invertible=True)
-        projection = check_projection(_matrix(projection, "projection", invertible=True), "projection")
+        projection = check_projection(_matrix(projection, "projection", invertible=True), "projection",
+                                      perspective="prev_view_projection" in gbuffers_needed(self.channels))
         if prev_view_projection is not None:
             prev_view_projection = _matrix(prev_view_projection, "prev_view_projection")
         if prev_projection is not None:
