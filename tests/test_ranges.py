@@ -15,11 +15,13 @@ import numpy as np
 import pytest
 
 from rtp import sdk
+from rtp.scene import Camera
 
 from .conftest import base_metadata, build_onnx
 
 _X = np.zeros((len(sdk.load("jnyang").metadata.inputs), 32, 48), np.float32)  # the shipped model's planes
 _I = np.eye(4)
+_P = Camera((0.0, 0.0, 0.0)).projection(1.0)  # (the reprojection takes perspective projections)
 
 
 @functools.cache
@@ -142,8 +144,8 @@ CASES: list[tuple[str, Callable[[], Any], type[Exception], str]] = [
     ("reproject string depth", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), "x", _I, _I, _I),
      sdk.InputDtypeError, "depth"),
     ("reproject singular view", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)),
-                                                      np.zeros((4, 4)), _I, _I), sdk.ParameterError, "singular"),
-    ("reproject NaN matrix", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)), _I, _I,
+                                                      np.zeros((4, 4)), _P, _P), sdk.ParameterError, "singular"),
+    ("reproject NaN matrix", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)), _I, _P,
                                                    np.full((4, 4), np.nan)), sdk.NonFiniteInputError, "prev_view_proj"),
     ("reproject 3x3 matrix", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)), np.eye(3),
                                                    _I, _I), sdk.InputShapeError, "4x4"),
@@ -196,7 +198,7 @@ def test_the_bounds_themselves_are_accepted() -> None:
     # bool and unsigned predictions are compared as numbers, not wrapped around when negated
     codes = sdk.select_rates(np.full((6, 1, 1), 200, np.uint8), 100, higher_is_better=True)
     assert codes[0, 0] == sdk.RATE_CODES["4x4"]
-    out, seen = sdk.reproject(np.ones((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)), _I, _I, _I, tolerance=1.0)
+    out, seen = sdk.reproject(np.ones((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)), _I, _P, _P, tolerance=1.0)
     assert out.shape == (4, 4, 3) and seen.shape == (4, 4)
 
 
