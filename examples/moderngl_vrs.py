@@ -4,6 +4,7 @@
     python examples/moderngl_vrs.py --model flip --frames 12 --gif vrs.gif --out vrs.png
     python examples/moderngl_vrs.py --model jnyang-8px        # on AMD's and Intel's 8-pixel VRS tiles, trained on them
     python examples/moderngl_vrs.py --tile-size 8             # the same tiles, each taking its 16-pixel tile's rates
+    python examples/moderngl_vrs.py --saving 0.6              # a budget: 60% of the work saved, the threshold on the GPU
 
 What an engine on the GPU does each frame, with rtp's reference pieces standing in for its own:
 
@@ -15,7 +16,8 @@ What an engine on the GPU does each frame, with rtp's reference pieces standing 
 3. onnxruntime runs the network (``predictor.predict_raw``: here on the CPU; an engine binds its GPU
    provider's output buffer instead).
 4. ``RateSelector`` decodes the prediction and picks each tile's rate in a compute shader
-   (docs/runtime.md, "The decision on the GPU"): the shading-rate image, an ``r8ui`` texture.
+   (docs/runtime.md, "The decision on the GPU"): the shading-rate image, an ``r8ui`` texture. With
+   ``--saving`` a second compute dispatch first finds the lowest threshold that saves that share of the work.
 5. The renderer shades each tile at its rate (software VRS, then tone mapping and FXAA) and the
    overlay of the last frame is written to ``--out``; ``--gif`` writes every frame's overlay.
 
@@ -67,6 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
     ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile in pixels (default: the model's, "
                     "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
+    ap.add_argument("--saving", type=float, help="a budget instead of a threshold: the share of the shading work to "
+                    "save each frame (0-0.9375), the threshold found on the GPU; with --threshold, a floor under it")
     args = ap.parse_args(argv)
     args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -82,6 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     log.info("model %s (%s), inputs %s", predictor.path, predictor.metadata.metric, ", ".join(predictor.metadata.inputs))
     threshold = predictor.metadata.default_threshold if args.threshold is None else \
         sdk.check_threshold(args.threshold, predictor.metadata.higher_is_better)  # refused now, not at frame 1
+    floor = None if args.threshold is None else threshold  # (under a budget: the threshold given, if one was)
+    if args.saving is not None:  # refused now too, with the SDK's message
+        sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, higher_is_better=predictor.metadata.higher_is_better)
     level = procedural(args.seed)
     spawn = level.spawn_points[0]
 
@@ -105,9 +112,17 @@ def main(argv: list[str] | None = None) -> int:
             raw = predictor.predict_raw(x)                                     # 3: the network
             t0 = time.perf_counter()
             # 4: the decision, on the GPU, one texel a hardware tile of the frame
-            rates = selector.select(raw, threshold, grid=predictor.tiles(height, width))
+            if args.saving is None:
+                rates = selector.select(raw, threshold, grid=predictor.tiles(height, width))
+            else:  # a budget: the threshold found on the GPU too
+                rates = selector.select(raw, floor, grid=predictor.tiles(height, width), saving=args.saving,
+                                        frame_size=(height, width))
             ms = 1e3 * (time.perf_counter() - t0)
-            cpu = predictor.shading_rates(x, threshold)
+            if args.saving is None:
+                cpu = predictor.shading_rates(x, threshold)
+            else:
+                cpu = predictor.shading_rates(x, floor, saving=args.saving)
+                log.info("frame %2d: the budget's threshold %.4g", i, selector.budget()[0])
             final = source.renderer.shade_rates(rates, selector.tile_size)     # 5: software VRS
             overlay = sdk.draw_rate_overlay(final, rates, selector.tile_size)  # float in [0, 1], as the frame
             if args.gif or i == args.frames:  # (without --gif only the last is written)

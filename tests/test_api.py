@@ -37,6 +37,7 @@ def test_sdk_all_is_pinned() -> None:
         "MAX_RATE_FACTOR",
         "MAX_RESCALE",
         "MAX_SAVING",
+        "MAX_THRESHOLD",
         "METADATA_KEY",
         "METRICS",
         "METRIC_NAME_PATTERN",

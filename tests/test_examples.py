@@ -100,6 +100,25 @@ def test_moderngl_example_on_8_pixel_hardware_tiles(tmp_path: Path) -> None:
     assert r.returncode == 2 and "tile_size: expected one of [4, 8, 16, 32]" in r.stderr
 
 
+@pytest.mark.gl
+def test_moderngl_example_with_a_budget_on_the_gpu(tmp_path: Path) -> None:
+    """`--saving 0.6`: each frame's rates save at least 60% of the work, the threshold found on the GPU, the rates as
+    predictor.shading_rates(x, saving=0.6) chooses them but for ties within float32 rounding; a saving no rate can
+    reach is refused before the first frame."""
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--saving", "0.6", "--frames", "2",
+                        "--size", "160x100", "--out", str(tmp_path / "vrs.png")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    saved = [float(m) for m in re.findall(r"work saved ([\d.]+)%", r.stderr)]
+    assert len(saved) == 2 and all(s >= 60.0 for s in saved), r.stderr
+    assert len(re.findall(r"the budget's threshold [\d.e-]+", r.stderr)) == 2, r.stderr
+    found = [tuple(map(int, m)) for m in re.findall(r"GPU decision = CPU decision on (\d+) of (\d+) tiles", r.stderr)]
+    assert len(found) == 2 and all(n == 7 * 10 and same >= n - 3 for same, n in found), r.stderr
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "moderngl_vrs.py"), "--saving", "0.97"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "saving: expected" in r.stderr and "frame  1" not in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize("name", ["moderngl_vrs", "pyrender_vrs"])
 def test_an_example_past_the_machines_memory_is_refused_before_it_renders(
     name: str, tmp_path: Path, machine_memory: Callable[..., None]

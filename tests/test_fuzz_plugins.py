@@ -640,6 +640,18 @@ selector_cases = st.one_of(
         st.one_of(st.none(), st.floats(0, 1), hostile_numbers),
         st.sampled_from(["buffer", "small", "junk"]),
     ),
+    st.tuples(  # a budget: the saving and the frame's size
+        st.just("budget"),
+        st.tuples(
+            st.just("float32"),
+            st.tuples(st.just(_NOUT), st.integers(1, 4), st.integers(1, 4)),
+            st.sampled_from(["random", "random", "zero", "nan", "inf"]),
+        ),
+        st.one_of(st.floats(0, 1), hostile_numbers, json_scalars),
+        st.one_of(st.none(), st.tuples(st.integers(-1, 80), st.integers(-1, 80)),
+                  st.tuples(hostile_numbers, hostile_numbers), json_values),
+        st.one_of(st.none(), st.floats(0, 1), hostile_numbers),
+    ),
     st.tuples(
         st.just("new"),
         st.one_of(st.sampled_from(["metadata", "predictor"]), json_scalars),
@@ -655,6 +667,8 @@ def _selector_call(v: tuple[Any, ...]) -> Any:
     kind = v[0]
     if kind == "select":
         return g.selector.select(_val(v[1]), v[2], v[3], *v[4:])
+    if kind == "budget":
+        return g.selector.select(_val(v[1]), v[4], saving=v[2], frame_size=v[3])
     if kind == "select_buffer":
         tiles, threshold, raw = v[1], v[2], v[3]
         buffer = (
@@ -678,6 +692,16 @@ def _selector_absurd(v: tuple[Any, ...], out: Any) -> bool:
     codes = {sdk.RATE_CODES[r] for r in sdk.ALL_RATES}
     if v[0] == "select_buffer":
         return not all(_count(t) for t in v[1])
+    if v[0] == "budget" and isinstance(out, np.ndarray):  # the model's tiles, and at least the saving asked for
+        if out.shape != tuple(v[1][1][1:]) or not set(np.unique(out).tolist()) <= codes:
+            return True
+        if v[2] is None:  # (no budget: a threshold's rates)
+            return False
+        number = isinstance(v[2], (int, float, np.integer, np.floating)) and not isinstance(v[2], (bool, np.bool_))
+        if not number or not 0.0 <= float(v[2]) <= sdk.MAX_SAVING:
+            return True  # (a saving that is no share of the work was accepted)
+        saved = sdk.work_saved(out, tuple(v[3]), 16) if v[3] is not None else sdk.work_saved(out)
+        return v[1][2] not in ("nan", "inf") and saved < float(v[2]) - 1e-9
     if v[0] == "select" and len(v) > 4 and v[4] is not None and isinstance(out, np.ndarray):
         return out.shape != tuple(v[4]) or not set(np.unique(out).tolist()) <= codes  # the grid asked for
     return not isinstance(out, np.ndarray) or not set(np.unique(out).tolist()) <= codes

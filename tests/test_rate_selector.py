@@ -298,3 +298,131 @@ def test_beside_the_engines_rates_the_shader_decides_as_the_sdk(frames, gl_conte
                 selector.select(raw, engine_rates=engine, combiner="average")
             texture.release()
     assert mixed > 100
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(transform=_TRANSFORMS,
+       outputs=st.sampled_from([["1x2", "2x1"], ["1x2", "2x1", "2x4", "4x2"], list(sdk.PREDICTED_RATES), ["2x2"]]),
+       psnr=st.booleans(), k=st.floats(1.0, 8.0), safety=st.floats(0.0, 0.2),
+       allowed=st.sets(st.sampled_from(sdk.PREDICTED_RATES)).map(lambda s: tuple(r for r in sdk.PREDICTED_RATES if r in s)),
+       tiles=st.tuples(st.integers(1, 24), st.integers(1, 24)), pool=st.sampled_from([1, 1, 2, 4]),
+       seed=st.integers(0, 2**16), share=st.floats(0.0, 1.0), frame=st.booleans(),
+       floor=st.one_of(st.none(), st.floats(0.05, 0.95)), nans=st.integers(0, 3),
+       factors=st.one_of(st.none(), st.lists(st.floats(0.25, 4.0), min_size=6, max_size=6)))
+@example(transform={"type": "clamped", "mu_y": 0.5}, outputs=list(sdk.PREDICTED_RATES), psnr=False, k=2.0,
+         safety=0.0, allowed=tuple(sdk.PREDICTED_RATES), tiles=(24, 24), pool=1, seed=1, share=1.0, frame=True,
+         floor=None, nans=3, factors=None)  # the most the frame can save, NaN tiles short of it
+def test_a_budget_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any], outputs: list[str], psnr: bool,
+                                     k: float, safety: float, allowed: tuple[str, ...], tiles: tuple[int, int],
+                                     pool: int, seed: int, share: float, frame: bool, floor: float | None, nans: int,
+                                     factors: list[float] | None) -> None:
+    """select(raw, saving=) on the GPU against sdk.select_rates_for_saving on the values the shader decoded: every
+    transform, output set, direction, allowed set, hardware tile, partial edge tiles (frame_size), a floor under the
+    budget, NaN tiles. With the rates' own thresholds (rate_factors) the shader's float32 oriented values can order
+    two steps within a rounding of each other differently: there the rates are checked against select_rates at the
+    threshold found, and the saving against the SDK's within a tile."""
+    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety,
+                           tile_size=8 if pool > 1 else 16)
+    if factors is not None:
+        meta_d["rate_factors"] = dict(zip(sdk.PREDICTED_RATES, factors))
+    if psnr:
+        meta_d.update(metric="psnr", default_threshold=35.0)
+        del meta_d["weber_l"]
+    try:
+        meta = sdk.ModelMetadata.from_dict(meta_d)
+    except sdk.MetadataError:
+        assume(False)
+    rng = np.random.default_rng(seed)
+    raw = rng.random((len(outputs), *tiles)).astype(np.float32)
+    raw.flat[rng.integers(raw.size, size=nans)] = np.nan
+    hib = meta.higher_is_better
+    values = sdk.pool_tiles(meta.decode(raw), pool, higher_is_better=hib)
+    finite = values[np.isfinite(values)]
+    assume(finite.size > 0)
+    rates = list(allowed) or ["1x1"]
+    top = max((sdk.work_saved(r) for r in rates), default=0.0)
+    saving = share * top
+    threshold = None
+    if floor is not None:
+        threshold = float(np.quantile(finite, floor))
+        threshold = threshold if psnr else max(threshold, 0.0)
+        assume(abs(threshold) <= sdk.MAX_THRESHOLD)
+    ts = meta.tile_size * pool
+    grid = values.shape[1:]
+    frame_size = (grid[0] * ts - int(rng.integers(ts)), grid[1] * ts - int(rng.integers(ts))) if frame else None
+    weigh = {"frame_size": frame_size, "tile_size": ts} if frame else {}
+    with RateSelector(meta, gl_context, tile_size=ts) as selector:
+        gpu = selector.select(raw, threshold, allowed=rates, saving=saving, frame_size=frame_size)
+        found, saved = selector.budget()
+        decoded = selector.decoded().astype(np.float64)
+    cpu = sdk.select_rates_for_saving(decoded, saving, higher_is_better=hib, allowed=rates, factors=meta.rate_factors,
+                                      threshold=threshold, **weigh)
+    assert saved == pytest.approx(sdk.work_saved(gpu, **weigh), abs=1e-9)  # what the budget says is what it chose
+    if factors is None:  # the same float32 values on both sides: the same steps, the same choice
+        np.testing.assert_array_equal(gpu, cpu.rates)
+        assert saved == pytest.approx(float(cpu.saved), abs=1e-9)
+        assert found == pytest.approx(float(cpu.threshold), rel=1e-6, abs=1e-37)
+        o = -float(cpu.threshold) if hib else float(cpu.threshold)  # oriented: just above a float32 step
+        bounds = (0.0, -sdk.MAX_THRESHOLD, sdk.MAX_THRESHOLD, None if threshold is None else (
+            -threshold if hib else threshold))
+        if o not in bounds:  # the GPU's is the next float32 above the same step: the least that passes it
+            step = np.nextafter(o, -np.inf)
+            assert np.float32(step) == step
+            above = float(np.nextafter(np.float32(step), np.float32(np.inf)))
+            assert found == (-above if hib else above)
+    else:
+        f = np.asarray(meta.rate_factors)[:, None, None]
+        with np.errstate(invalid="ignore"):
+            own = decoded + 20.0 * np.log10(f) if hib else decoded / f
+        ok = _robust(own, found, hib, tuple(r for r in rates if r != "1x1"))
+        at_found = sdk.select_rates(decoded, found, higher_is_better=hib, allowed=rates, factors=meta.rate_factors)
+        np.testing.assert_array_equal(gpu[ok], at_found[ok])
+        assert abs(saved - float(cpu.saved)) <= 1.0 / gpu.size + 1e-9
+    if saving > 0 and np.isfinite(decoded).all() and threshold is None:
+        assert saved >= saving - 1e-9  # the work asked for (NaN tiles can keep a frame short of it)
+
+
+def test_a_budget_on_a_rendered_frame_and_its_refusals(frames, gl_context: Any) -> None:  # noqa: F811
+    """Every shipped model's budget on a rendered frame, as predictor.shading_rates(x, saving=) chooses it; the
+    threshold and the saving read back; what a budget on the GPU refuses, named."""
+    ctx, _, cur = frames
+    for name in sdk.shipped_models():
+        pred = sdk.load(name)
+        x = np.stack([cur.channel(c) for c in pred.metadata.inputs])
+        raw = pred.predict_raw(x)
+        with RateSelector(pred, ctx) as selector:
+            for saving in (0.25, 0.5, 0.8):
+                gpu = selector.select(raw, saving=saving, frame_size=(H, W))
+                found, saved = selector.budget()
+                cpu = pred.shading_rates(x, saving=saving)
+                assert saved >= saving and saved == pytest.approx(sdk.work_saved(gpu, (H, W), pred.tile_size))
+                values = pred.predict(x)
+                ok = _robust(values, found, pred.metadata.higher_is_better, sdk.PREDICTED_RATES)
+                assert ok.mean() >= 0.8, name
+                np.testing.assert_array_equal(gpu[ok], cpu[ok], err_msg=f"{name} saving {saving}")
+                assert abs(saved - sdk.work_saved(cpu, (H, W), pred.tile_size)) < 0.02, name
+            # the texture path: the budget stays on the GPU, the rates the same
+            buffer = ctx.buffer(np.ascontiguousarray(raw[0] if raw.ndim == 4 else raw, np.float32).tobytes())
+            texture = selector.select_buffer(buffer, pred.tiles(H, W), saving=0.5, frame_size=(H, W))
+            codes = np.frombuffer(texture.read(alignment=1), np.uint8).reshape(pred.tiles(H, W))
+            np.testing.assert_array_equal(codes, selector.select(raw, saving=0.5, frame_size=(H, W)))
+            buffer.release()
+    meta = sdk.load("jnyang").metadata
+    raw = np.random.default_rng(2).random((len(meta.outputs), 3, 5)).astype(np.float32)
+    with RateSelector(meta, gl_context) as selector:
+        with pytest.raises(RendererError, match="no budget selected yet"):
+            selector.budget()
+        with pytest.raises(sdk.ParameterError, match="saving"):
+            selector.select(raw, saving=0.95)  # more than 4x4 everywhere saves
+        with pytest.raises(sdk.ParameterError, match="saving"):
+            selector.select(raw, saving=0.6, allowed=["1x2"])  # more than 1x2 everywhere saves
+        with pytest.raises(sdk.InputShapeError, match="do not cover"):
+            selector.select(raw, saving=0.5, frame_size=(100, 80))
+        with pytest.raises(sdk.ParameterError, match="beside engine_rates is not on the GPU"):
+            selector.select(raw, saving=0.5, engine_rates=sdk.RATE_CODES["2x2"])
+        with pytest.raises(sdk.ParameterError, match="threshold"):
+            selector.select(raw, -1.0, saving=0.5)  # a floor is a threshold like any other
+        with pytest.raises(sdk.ParameterError, match="frame_size: it weighs a budget's tiles"):
+            selector.select(raw, frame_size=(48, 80))  # (without a budget it would weigh nothing)
+        selector.select(raw, saving=0.5)
+        assert selector.budget()[1] >= 0.5

@@ -5,7 +5,9 @@
 never travels back: :class:`RateSelector` runs the same rules (``ModelMetadata.decode``, then
 ``select_rates``) in one compute dispatch, from the network's raw output in a GPU buffer to the
 shading-rate image, an ``r8ui`` texture of D3D12 / Vulkan rate codes. It is also the reference to port:
-the shader is 100 lines of GLSL 4.30 and its results are tested against the SDK's.
+the shader is 100 lines of GLSL 4.30 and its results are tested against the SDK's. A budget
+(``saving=``, ``sdk.select_rates_for_saving``) adds a dispatch between the decode and the selection
+(``shaders/select_budget_cs.glsl``) that finds the threshold on the GPU.
 """
 
 from __future__ import annotations
@@ -37,6 +39,13 @@ def _tile_pair(value: object, name: str) -> tuple[int, int]:
     if n != 2 or len(pair) != 2 or min(pair) < 1:
         raise sdk.ParameterError(f"{name}: expected (rows, columns) of at least one tile, got {value!r}", name)
     return pair[0], pair[1]  # Python ints: numpy's int64 rows of 2**62 wrapped the byte count below 0
+
+def _frame_with_budget(saving: object, frame_size: object) -> None:
+    """A ``frame_size`` weighs a budget's tiles: given without a ``saving``, it would weigh nothing."""
+    if saving is None and frame_size is not None:
+        raise sdk.ParameterError("frame_size: it weighs a budget's tiles by their pixels; give it with saving=",
+                                 "frame_size")
+
 
 _TRANSFORMS = {"clamped": 0, "logistic": 1, "linear": 2}
 #: The combiners through which the image's rate reaches the frame, at the enum values of D3D12 and Vulkan (the SDK
@@ -124,6 +133,9 @@ class RateSelector:
         self._decoded: Any = None
         self._raw: Any = None
         self._engine: Any = None
+        self._budget_program: Any = None  # (compiled on the first budget)
+        self._budget = self.ctx.buffer(reserve=8)  # the budget's threshold and the work it saves
+        self._budget_work: float | None = None  # the frame's work, in pixels (tiles), of the last budget
 
     @property
     def metadata(self) -> sdk.ModelMetadata:
@@ -148,7 +160,8 @@ class RateSelector:
 
     def select_buffer(self, raw: Any, tiles: tuple[int, int], threshold: float | None = None,
                       allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None, *,
-                      engine_rates: Any = None, combiner: str | int = "max") -> Any:
+                      engine_rates: Any = None, combiner: str | int = "max", saving: float | None = None,
+                      frame_size: tuple[int, int] | None = None) -> Any:
         """Rates from the network's output already on the GPU: ``raw`` a moderngl buffer holding the
         output planes of one frame, float32 ``(len(metadata.outputs), th, tw)`` row-major, ``tiles``
         ``(th, tw)`` on the model's tiles. Returns the ``r8ui`` texture of rate codes, one texel a hardware
@@ -161,7 +174,14 @@ class RateSelector:
         moderngl texture of them already on the GPU, which is read as it is) and ``combiner`` (``min``,
         ``max``, ``sum`` or its enum value): the engine's own rates, which the hardware's combiner meets with
         this image; the shader then judges the rate the device will shade, as ``sdk.select_rates(engine_rates=,
-        combiner=)`` does (docs/runtime.md "The engine's own rates: the hardware's combiners")."""
+        combiner=)`` does (docs/runtime.md "The engine's own rates: the hardware's combiners").
+
+        ``saving``: a budget instead of a threshold, as ``sdk.select_rates_for_saving`` and ``shading_rates(x,
+        saving=)``: the rates of the lowest threshold that saves at least that share of the shading work, found on
+        the GPU (a second dispatch, one workgroup, no read-back; :meth:`budget` reads the threshold and the saving
+        back where wanted). ``frame_size = (H, W)`` weighs partial edge tiles by their pixels (without it every
+        hardware tile counts alike); a ``threshold`` with it is a floor under the budget, as in the SDK. Not beside
+        ``engine_rates`` (the SDK's budget counts the engine's saving; the shader does not)."""
         th, tw = _tile_pair(tiles, "tiles")
         grid = self._grid((th, tw), grid)
         limit = max_texture_side(self.ctx)
@@ -177,7 +197,10 @@ class RateSelector:
                 f"raw buffer holds {raw.size} bytes, expected at least {need} for {len(self._meta.outputs)} float32 "
                 f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
         self._check_open()
-        thr = self._check_decision(threshold, allowed)
+        _frame_with_budget(saving, frame_size)
+        thr = self._check_decision(None if saving is not None else threshold, allowed)
+        work = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size,
+                                                             engine_rates)
         engine = self._engine_rates(engine_rates, combiner, allowed, grid, thr)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets(grid)
@@ -196,20 +219,88 @@ class RateSelector:
         self._program["u_grid"].value = (grid[1], grid[0])
         self._program["u_threshold"].value = float(thr)
         self._program["u_allowed"].value = mask
+        self._program["u_budget"].value = False
         raw.bind_to_storage_buffer(0)
         self._decoded.bind_to_storage_buffer(1)
+        self._budget.bind_to_storage_buffer(2)
         self._texture.bind_to_image(0, read=False, write=True)
         gh, gw = self._tiles  # type: ignore[misc]
         self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
+        if work is not None:  # the decoded values -> the budget's threshold -> the rates again at it
+            self.ctx.memory_barrier()
+            self._run_budget(work, mask, threshold, grid, frame_size)
+            self.ctx.memory_barrier()
+            self._program["u_budget"].value = True
+            self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
         return self._texture
+
+    def _check_budget(self, saving: float, threshold: float | None, allowed: Iterable[sdk.RateLike] | None,
+                      grid: tuple[int, int], frame_size: tuple[int, int] | None, engine_rates: Any) -> int:
+        """The work a budget must save, in sixteenths of a pixel's shading (a tile's without ``frame_size``), after
+        the SDK's own checks and messages for the saving, the floor, the allowed rates and the frame's size."""
+        if engine_rates is not None:
+            raise sdk.ParameterError("saving: a budget beside engine_rates is not on the GPU (the SDK's counts the "
+                                     "engine's saving: predictor.shading_rates(x, saving=, engine_rates=, combiner=))",
+                                     "saving")
+        sdk.select_rates_for_saving(np.zeros((6, *grid), np.float32), saving,
+                                    higher_is_better=self._meta.higher_is_better, allowed=allowed,
+                                    frame_size=frame_size, tile_size=None if frame_size is None else self.tile_size,
+                                    threshold=threshold)
+        work = float(grid[0] * grid[1]) if frame_size is None else float(frame_size[0]) * float(frame_size[1])
+        # the SDK's need (a rounding's worth short counts as reached), in the shader's integers: the steps' gains
+        # are sixteenths, so a sum of them reaches the need exactly where it reaches its ceiling in sixteenths
+        need = math.ceil(float(saving) * work * (1.0 - 1e-12) * 16.0)
+        if need > 0xFFFFFFFE:
+            raise sdk.ParameterError(f"frame_size: a budget on the GPU counts up to 268 million pixels, got {work:.0f}",
+                                     "frame_size")
+        self._budget_work = work
+        return need
+
+    def _run_budget(self, need: int, mask: int, threshold: float | None, grid: tuple[int, int],
+                    frame_size: tuple[int, int] | None) -> None:
+        if self._budget_program is None:
+            self._budget_program = self.ctx.compute_shader(load_source("select_budget_cs.glsl"))
+        program = self._budget_program
+        hib = self._meta.higher_is_better
+        values: dict[str, Any] = {
+            "u_grid": (grid[1], grid[0]),
+            "u_frame": (0, 0) if frame_size is None else (int(frame_size[1]), int(frame_size[0])),
+            "u_tile": self.tile_size,
+            "u_higher_is_better": hib,
+            "u_rate_factors": tuple(float(f) for f in self._meta.rate_factors),
+            "u_allowed": mask,
+            "u_need": need,
+            "u_lo": -sdk.MAX_THRESHOLD if hib else 0.0,
+            "u_hi": sdk.MAX_THRESHOLD,
+            "u_has_floor": threshold is not None,
+            "u_floor": 0.0 if threshold is None else float(threshold),
+        }
+        for name, value in values.items():
+            if name in program:
+                program[name].value = value
+        self._decoded.bind_to_storage_buffer(1)
+        self._budget.bind_to_storage_buffer(2)
+        program.run(1)
+
+    def budget(self) -> tuple[float, float]:
+        """The last budget's threshold (metric units; dB for PSNR) and the share of the shading work its rates save:
+        ``sdk.SavingSelection``'s ``threshold`` and ``saved``, read back from the GPU (8 bytes)."""
+        self._check_open()
+        if self._budget_work is None:
+            raise RendererError("RateSelector.budget: no budget selected yet (select(..., saving=))")
+        data = self._budget.read()
+        threshold, saved = np.frombuffer(data, np.float32, 1)[0], np.frombuffer(data, np.uint32, 1, 4)[0]
+        return float(threshold), float(saved) / (16.0 * self._budget_work)
 
     def select(self, raw: np.ndarray, threshold: float | None = None,
                allowed: Iterable[sdk.RateLike] | None = None, grid: tuple[int, int] | None = None, *,
-               engine_rates: Any = None, combiner: str | int = "max") -> np.ndarray:
+               engine_rates: Any = None, combiner: str | int = "max", saving: float | None = None,
+               frame_size: tuple[int, int] | None = None) -> np.ndarray:
         """Rates from the network's output in host memory (``ShadingRatePredictor.predict_raw``: float
         ``(C, th, tw)`` or ``(1, C, th, tw)``), computed on the GPU: uint8 codes, one per hardware tile,
         as ``shading_rates`` returns them (on finer hardware tiles than the model's, for the frame's
-        ``grid``, as :meth:`select_buffer` says; ``engine_rates`` and ``combiner`` too)."""
+        ``grid``, as :meth:`select_buffer` says; ``engine_rates`` and ``combiner``, ``saving`` and ``frame_size``
+        too)."""
         try:
             a = np.asarray(raw)
         except (TypeError, ValueError, OverflowError) as exc:
@@ -221,10 +312,13 @@ class RateSelector:
         # Every check before the GPU is touched: moderngl refuses an empty buffer, and a failed upload left
         # the selector holding a released buffer that broke every later call.
         self._check_open()
-        thr = self._check_decision(threshold, allowed)
+        _frame_with_budget(saving, frame_size)
+        thr = self._check_decision(None if saving is not None else threshold, allowed)
         if a.ndim == 3 and a.shape[0] == n and 0 not in a.shape:
-            self._engine_rates(engine_rates, combiner, allowed, self._grid((int(a.shape[1]), int(a.shape[2])), grid),
-                               thr)
+            g = self._grid((int(a.shape[1]), int(a.shape[2])), grid)
+            if saving is not None:
+                self._check_budget(saving, threshold, allowed, g, frame_size, engine_rates)
+            self._engine_rates(engine_rates, combiner, allowed, g, thr)
         if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f" or 0 in a.shape:
             raise sdk.InputShapeError(
                 f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
@@ -238,7 +332,8 @@ class RateSelector:
         else:
             self._raw.write(data)
         texture = self.select_buffer(self._raw, (int(a.shape[1]), int(a.shape[2])), threshold, allowed, grid,
-                                     engine_rates=engine_rates, combiner=combiner)
+                                     engine_rates=engine_rates, combiner=combiner, saving=saving,
+                                     frame_size=frame_size)
         gh, gw = self._tiles  # type: ignore[misc]
         return np.frombuffer(texture.read(alignment=1), np.uint8).reshape(gh, gw).copy()
 
@@ -303,10 +398,12 @@ class RateSelector:
 
     def close(self) -> None:
         """Release the GPU objects (and the context when the selector made it)."""
-        for obj in (self._texture, self._decoded, self._raw, self._engine, self._program):
+        for obj in (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
+                    self._budget):
             if obj is not None:
                 obj.release()
         self._texture = self._decoded = self._raw = self._engine = self._program = None
+        self._budget_program = self._budget = None
         self._tiles = None
         if self._own_ctx:
             self.ctx.release()

@@ -30,12 +30,17 @@ uniform float u_offset;          // linear
 uniform float u_k;               // extrapolation_k
 uniform bool u_higher_is_better; // PSNR: values pass above the threshold
 uniform float u_threshold;       // in metric units
+// a budget's threshold (select_budget_cs.glsl wrote it), read instead of u_threshold where u_budget is set
+layout(std430, binding = 2) readonly buffer Budget { float b_threshold; };
+uniform bool u_budget;
 uniform float u_rate_factors[6]; // metadata rate_factors (PREDICTED_RATES order): each rate's threshold factor
 uniform uint u_allowed;          // bit i: PREDICTED_RATES[i] may be chosen (1x2, 2x1, 2x2, 2x4, 4x2, 4x4)
 // the engine's own rates, one texel a hardware tile, which the hardware's combiner meets with this image (sdk
 // select_rates(engine_rates=, combiner=)): 0 none, else the enum value of min (2), max (3) or sum (4)
 layout(r8ui, binding = 1) uniform readonly uimage2D u_engine;
 uniform int u_combiner;
+
+float threshold() { return u_budget ? b_threshold : u_threshold; }
 
 const float LOGIT_EPS = 1e-7;
 // PREDICTED_RATES order
@@ -139,7 +144,7 @@ float oriented(float v[6], int i) {
 // with the engine's gives it back, else the finest candidate that gives the same.
 uint select_beside(float v[6], int e) {
     const int ORDER[7] = int[7](6, 4, 5, 3, 1, 2, 0);  // ALL_RATES indices: cost classes cheapest first, then 1x1
-    float thr = u_higher_is_better ? -u_threshold : u_threshold;
+    float thr = u_higher_is_better ? -threshold() : threshold();
     int pick = -1, pick_first = 0, pick_last = 0, pick_area = 0;
     float pick_value = 0.0;
     bool pick_exact = false;
@@ -211,7 +216,7 @@ void main() {
             // plus 20 log10 of it
             float f = u_rate_factors[r];
             float e = u_higher_is_better ? -(v[r] + 20.0 * log(f) / log(10.0)) : v[r] / f;
-            float thr = u_higher_is_better ? -u_threshold : u_threshold;
+            float thr = u_higher_is_better ? -threshold() : threshold();
             if (e < thr && (code == 0u || e < best)) { code = CODES[r]; best = e; }
         }
     }

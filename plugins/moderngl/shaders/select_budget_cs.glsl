@@ -1,0 +1,131 @@
+#version 430
+// A budget on the GPU: the lowest threshold whose rates save at least a share of the shading work (sdk
+// select_rates_for_saving), from the decoded values select_rates_cs.glsl wrote for the hardware tiles. One
+// workgroup; no read-back: the threshold is written to a buffer the selection pass reads.
+//
+// A tile's saving only grows with the threshold, one step per cost class of the allowed rates: it saves class
+// k's share once the threshold passes T_k, the smallest (oriented) value of the allowed rates that cost no more
+// than class k. The frame's saving is a sum of those steps; the lowest threshold that reaches the need is just
+// above the step where the sorted, weighted steps add up to it. Here that step is found by a binary search over
+// the 2^32 float32 values in their order (an order-preserving key of their bits): 32 rounds, each a sum over
+// every tile's steps at or below the middle key, reduced in shared memory. Exact in integers: a step's gain is
+// the tile's pixels times the share it adds, in sixteenths (8, 4, 2, 1 for 2, 4, 8, 16 pixels a sample).
+layout(local_size_x = 256) in;
+
+// the decoded metric of the six rates, planar (6, rows, columns) on the hardware tiles (select_rates_cs.glsl)
+layout(std430, binding = 1) readonly buffer Decoded { float decoded[]; };
+// out: the threshold found (metric units; the selection pass reads it) and the work its rates save, in
+// sixteenths of a pixel's shading (of a tile's where u_frame is 0)
+layout(std430, binding = 2) writeonly buffer Budget { float b_threshold; uint b_saved; };
+
+uniform ivec2 u_grid;            // (columns, rows): the hardware tiles
+uniform ivec2 u_frame;           // (width, height) in pixels; (0, 0): every tile counts alike
+uniform int u_tile;              // the hardware tile's side in pixels
+uniform bool u_higher_is_better; // PSNR: values pass above the threshold
+uniform float u_rate_factors[6]; // metadata rate_factors (PREDICTED_RATES order)
+uniform uint u_allowed;          // bit i: PREDICTED_RATES[i] may be chosen
+uniform uint u_need;             // the work to save, in sixteenths of a pixel (of a tile where u_frame is 0)
+uniform float u_lo;              // the lowest oriented threshold allowed (0; -MAX_THRESHOLD for PSNR)
+uniform float u_hi;              // the highest (MAX_THRESHOLD)
+uniform bool u_has_floor;        // a threshold under the budget: the higher (PSNR: lower) of the two
+uniform float u_floor;           // in metric units
+
+const int AREA[6] = int[6](2, 2, 4, 8, 8, 16);  // PREDICTED_RATES: 1x2 2x1 2x2 2x4 4x2 4x4
+const uint NAN_KEY = 0xffffffffu;              // NaN or +inf: never passes (-inf passes at any threshold)
+
+shared uint s_sum[256];
+
+// float32 values in their order as unsigned integers (negative values' bits reversed, positive ones' sign set)
+uint key_of(float v) {
+    if (isnan(v) || (isinf(v) && v > 0.0)) return NAN_KEY;
+    uint b = floatBitsToUint(v);
+    return (b & 0x80000000u) != 0u ? ~b : b | 0x80000000u;
+}
+float value_of(uint k) { return uintBitsToFloat((k & 0x80000000u) != 0u ? k & 0x7fffffffu : ~k); }
+
+// the oriented value ("smaller passes") of PREDICTED_RATES[r] at tile `at`, against its own threshold
+float oriented(int r, int at, int plane) {
+    float v = decoded[r * plane + at];
+    float f = u_rate_factors[r];
+    return u_higher_is_better ? -(v + 20.0 * log(f) / log(10.0)) : v / f;
+}
+
+uint weight(int at) {
+    if (u_frame.x == 0) return 1u;
+    ivec2 t = ivec2(at % u_grid.x, at / u_grid.x);
+    ivec2 size = min(ivec2(u_tile), u_frame - t * u_tile);
+    return uint(size.x * size.y);
+}
+
+// the steps of tile `at`: per cost class present (dearest first) its key and its gain; `n` of them
+void steps(int at, int plane, out uint keys[4], out uint gains[4], out int n) {
+    const int AREAS[4] = int[4](2, 4, 8, 16);
+    uint w = weight(at);
+    n = 0;
+    int below = 1;  // the area of the class before (1x1)
+    uint best = NAN_KEY;
+    // cheapest first: T_k is the best of class k and every cheaper one
+    uint k_of[4] = uint[4](NAN_KEY, NAN_KEY, NAN_KEY, NAN_KEY);
+    bool present[4] = bool[4](false, false, false, false);
+    for (int c = 3; c >= 0; --c) {
+        for (int r = 0; r < 6; ++r) {
+            if (AREA[r] != AREAS[c] || (u_allowed & (1u << uint(r))) == 0u) continue;
+            present[c] = true;
+            best = min(best, key_of(oriented(r, at, plane)));
+        }
+        k_of[c] = best;
+    }
+    for (int c = 0; c < 4; ++c) {
+        if (!present[c]) continue;
+        keys[n] = k_of[c];
+        gains[n] = w * uint(16 / below - 16 / AREAS[c]);
+        below = AREAS[c];
+        ++n;
+    }
+}
+
+// the gains of every step at or below key `k` (below NAN_KEY: finite steps only), summed over the workgroup
+uint gained(uint k, int tiles, int plane) {
+    uint sum = 0u;
+    for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
+        uint keys[4], gains[4];
+        int n;
+        steps(at, plane, keys, gains, n);
+        for (int i = 0; i < n; ++i) if (keys[i] <= k && keys[i] != NAN_KEY) sum += gains[i];
+    }
+    s_sum[gl_LocalInvocationIndex] = sum;
+    barrier();
+    for (uint half_ = 128u; half_ > 0u; half_ >>= 1) {
+        if (gl_LocalInvocationIndex < half_) s_sum[gl_LocalInvocationIndex] += s_sum[gl_LocalInvocationIndex + half_];
+        barrier();
+    }
+    uint total = s_sum[0];
+    barrier();  // (every invocation has read it before the next round writes)
+    return total;
+}
+
+void main() {
+    int tiles = u_grid.x * u_grid.y;
+    int plane = tiles;
+    uint total = gained(NAN_KEY - 1u, tiles, plane);  // every finite step: the most the frame can save
+    float thr = u_lo;
+    if (u_need > 0u && total > 0u) {
+        uint need = min(u_need, total);  // (NaN tiles: the most the frame can save, just past its last step)
+        uint lo = 0u, hi = NAN_KEY - 1u;  // the smallest key whose steps at or below it reach the need: a step's
+        while (lo < hi) {
+            uint mid = lo + (hi - lo) / 2u;
+            if (gained(mid, tiles, plane) >= need) hi = mid; else lo = mid + 1u;
+        }
+        // just above that step (the selection passes values below the threshold), within [u_lo, u_hi]
+        thr = clamp(value_of(lo + 1u), u_lo, u_hi);
+    }
+    float metric = u_higher_is_better ? -thr : thr;
+    if (u_has_floor) metric = u_higher_is_better ? min(metric, u_floor) : max(metric, u_floor);
+    float oriented_thr = u_higher_is_better ? -metric : metric;
+    // what the rates of that threshold save: the steps below it
+    uint saved = key_of(oriented_thr) == 0u ? 0u : gained(key_of(oriented_thr) - 1u, tiles, plane);
+    if (gl_LocalInvocationIndex == 0u) {
+        b_threshold = metric;
+        b_saved = saved;
+    }
+}
