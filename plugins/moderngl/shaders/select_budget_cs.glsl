@@ -6,10 +6,12 @@
 // A tile's saving only grows with the threshold, one step per cost class of the allowed rates: it saves class
 // k's share once the threshold passes T_k, the smallest (oriented) value of the allowed rates that cost no more
 // than class k. The frame's saving is a sum of those steps; the lowest threshold that reaches the need is just
-// above the step where the sorted, weighted steps add up to it. Here that step is found by a binary search over
-// the 2^32 float32 values in their order (an order-preserving key of their bits): 32 rounds, each a sum over
-// every tile's steps at or below the middle key, reduced in shared memory. Exact in integers: a step's gain is
-// the tile's pixels times the share it adds, in sixteenths (8, 4, 2, 1 for 2, 4, 8, 16 pixels a sample).
+// above the step where the sorted, weighted steps add up to it. Here that step is found by a radix select over
+// the float32 values in their order (an order-preserving 32-bit key of their bits): four rounds, each a
+// histogram of the next 8 bits of the keys that share the digits found so far, in shared memory; the first bin
+// whose sum, added to everything below it, reaches the need gives the next digit. Exact in integers: a step's
+// gain is the tile's pixels times the share it adds, in sixteenths (8, 4, 2, 1 for 2, 4, 8, 16 pixels a sample),
+// and integer sums do not depend on the order the invocations add them in.
 layout(local_size_x = 256) in;
 
 // the decoded metric of the six rates, planar (6, rows, columns) on the hardware tiles (select_rates_cs.glsl)
@@ -34,6 +36,8 @@ const int AREA[6] = int[6](2, 2, 4, 8, 8, 16);  // PREDICTED_RATES: 1x2 2x1 2x2 
 const uint NAN_KEY = 0xffffffffu;              // NaN or +inf: never passes (-inf passes at any threshold)
 
 shared uint s_sum[256];
+shared uint s_hist[256];
+shared uint s_digit, s_below, s_need;
 
 // float32 values in their order as unsigned integers (negative values' bits reversed, positive ones' sign set)
 uint key_of(float v) {
@@ -104,20 +108,52 @@ uint gained(uint k, int tiles, int plane) {
     return total;
 }
 
+// the steps' gains by the 8 bits of their keys at `shift`, among the keys whose higher bits are `prefix`'s
+void histogram(uint prefix, int shift, int tiles, int plane) {
+    s_hist[gl_LocalInvocationIndex] = 0u;
+    barrier();
+    for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
+        uint keys[4], gains[4];
+        int n;
+        steps(at, plane, keys, gains, n);
+        for (int i = 0; i < n; ++i) {
+            if (keys[i] == NAN_KEY || (shift < 24 && (keys[i] >> uint(shift + 8)) != (prefix >> uint(shift + 8))))
+                continue;
+            atomicAdd(s_hist[(keys[i] >> uint(shift)) & 255u], gains[i]);
+        }
+    }
+    barrier();
+}
+
 void main() {
     int tiles = u_grid.x * u_grid.y;
     int plane = tiles;
-    uint total = gained(NAN_KEY - 1u, tiles, plane);  // every finite step: the most the frame can save
     float thr = u_lo;
-    if (u_need > 0u && total > 0u) {
-        uint need = min(u_need, total);  // (NaN tiles: the most the frame can save, just past its last step)
-        uint lo = 0u, hi = NAN_KEY - 1u;  // the smallest key whose steps at or below it reach the need: a step's
-        while (lo < hi) {
-            uint mid = lo + (hi - lo) / 2u;
-            if (gained(mid, tiles, plane) >= need) hi = mid; else lo = mid + 1u;
+    if (u_need > 0u) {
+        uint prefix = 0u, below = 0u;  // the key's digits found so far; the gains of the keys below them
+        for (int shift = 24; shift >= 0; shift -= 8) {
+            histogram(prefix, shift, tiles, plane);
+            if (gl_LocalInvocationIndex == 0u) {
+                if (shift == 24) {  // every finite step: the most the frame can save (NaN tiles: just past its last)
+                    uint total = 0u;
+                    for (int d = 0; d < 256; ++d) total += s_hist[d];
+                    s_need = min(u_need, total);
+                }
+                uint acc = below;
+                s_digit = 0u;
+                for (int d = 0; d < 256; ++d) {
+                    if (acc + s_hist[d] >= s_need && s_hist[d] > 0u) { s_digit = uint(d); break; }
+                    acc += s_hist[d];
+                }
+                s_below = acc;
+            }
+            barrier();
+            prefix |= s_digit << uint(shift);
+            below = s_below;
+            barrier();  // (every invocation has read them before the next round writes)
         }
         // just above that step (the selection passes values below the threshold), within [u_lo, u_hi]
-        thr = clamp(value_of(lo + 1u), u_lo, u_hi);
+        if (s_need > 0u) thr = clamp(value_of(prefix + 1u), u_lo, u_hi);
     }
     float metric = u_higher_is_better ? -thr : thr;
     if (u_has_floor) metric = u_higher_is_better ? min(metric, u_floor) : max(metric, u_floor);
