@@ -62,6 +62,24 @@ def test_every_shipped_model_decides_as_the_sdk_on_a_rendered_frame(frames, gl_c
             assert len(seen) >= 3, (name, seen)  # the frame and thresholds exercise several rates
 
 
+def _generated_metadata(transform: dict[str, Any], outputs: list[str], k: float, safety: float, pool: int,
+                        factors: list[float] | None, psnr: bool) -> sdk.ModelMetadata:
+    """A model's metadata from the generated settings (8-pixel tiles where they are pooled); an example whose
+    settings no metadata takes is rejected (``assume``)."""
+    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety,
+                           tile_size=8 if pool > 1 else 16)
+    if factors is not None:
+        meta_d["rate_factors"] = dict(zip(sdk.PREDICTED_RATES, factors))
+    if psnr:
+        meta_d.update(metric="psnr", default_threshold=35.0)
+        del meta_d["weber_l"]
+    try:
+        return sdk.ModelMetadata.from_dict(meta_d)
+    except sdk.MetadataError:
+        assume(False)
+        raise
+
+
 _TRANSFORMS = st.one_of(
     st.builds(lambda mu: {"type": "clamped", "mu_y": mu}, st.floats(0.02, 2.0)),
     st.builds(lambda mu, k: {"type": "logistic", "mu_y": mu, "k": k}, st.floats(0.02, 0.9), st.floats(2.0, 30.0)),
@@ -92,17 +110,7 @@ def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, A
     (odd sizes: the shader's 8x8 groups overhang the edge), hardware tile (8-pixel model tiles pooled
     into 16 and 32) and threshold factors per rate: the codes of select_rates(pool_tiles(decode(raw))),
     and the values."""
-    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety,
-                           tile_size=8 if pool > 1 else 16)
-    if factors is not None:
-        meta_d["rate_factors"] = dict(zip(sdk.PREDICTED_RATES, factors))
-    if psnr:
-        meta_d.update(metric="psnr", default_threshold=35.0)
-        del meta_d["weber_l"]
-    try:
-        meta = sdk.ModelMetadata.from_dict(meta_d)
-    except sdk.MetadataError:
-        assume(False)
+    meta = _generated_metadata(transform, outputs, k, safety, pool, factors, psnr)
     rng = np.random.default_rng(seed)
     raw = rng.random((len(outputs), *tiles)).astype(np.float32)
     raw.flat[rng.integers(raw.size)] = np.nan  # NaN never passes: its tile takes another rate or 1x1
@@ -321,17 +329,7 @@ def test_a_budget_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any],
     budget, NaN tiles. With the rates' own thresholds (rate_factors) the shader's float32 oriented values can order
     two steps within a rounding of each other differently: there the rates are checked against select_rates at the
     threshold found, and the saving against the SDK's within a tile."""
-    meta_d = base_metadata(transform=transform, outputs=outputs, extrapolation_k=k, safety=safety,
-                           tile_size=8 if pool > 1 else 16)
-    if factors is not None:
-        meta_d["rate_factors"] = dict(zip(sdk.PREDICTED_RATES, factors))
-    if psnr:
-        meta_d.update(metric="psnr", default_threshold=35.0)
-        del meta_d["weber_l"]
-    try:
-        meta = sdk.ModelMetadata.from_dict(meta_d)
-    except sdk.MetadataError:
-        assume(False)
+    meta = _generated_metadata(transform, outputs, k, safety, pool, factors, psnr)
     rng = np.random.default_rng(seed)
     raw = rng.random((len(outputs), *tiles)).astype(np.float32)
     raw.flat[rng.integers(raw.size, size=nans)] = np.nan
