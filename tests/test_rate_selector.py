@@ -416,11 +416,63 @@ def test_a_budget_on_a_rendered_frame_and_its_refusals(frames, gl_context: Any) 
             selector.select(raw, saving=0.6, allowed=["1x2"])  # more than 1x2 everywhere saves
         with pytest.raises(sdk.InputShapeError, match="do not cover"):
             selector.select(raw, saving=0.5, frame_size=(100, 80))
-        with pytest.raises(sdk.ParameterError, match="beside engine_rates is not on the GPU"):
-            selector.select(raw, saving=0.5, engine_rates=sdk.RATE_CODES["2x2"])
+        with pytest.raises(sdk.ParameterError, match="combiner"):
+            selector.select(raw, saving=0.5, engine_rates=sdk.RATE_CODES["2x2"], combiner="override")
         with pytest.raises(sdk.ParameterError, match="threshold"):
             selector.select(raw, -1.0, saving=0.5)  # a floor is a threshold like any other
         with pytest.raises(sdk.ParameterError, match="frame_size: it weighs a budget's tiles"):
             selector.select(raw, frame_size=(48, 80))  # (without a budget it would weigh nothing)
         selector.select(raw, saving=0.5)
         assert selector.budget()[1] >= 0.5
+
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(psnr=st.booleans(),
+       allowed=st.sets(st.sampled_from(sdk.PREDICTED_RATES)).map(lambda s: tuple(r for r in sdk.PREDICTED_RATES if r in s)),
+       tiles=st.tuples(st.integers(1, 20), st.integers(1, 20)), seed=st.integers(0, 2**16), share=st.floats(0.0, 1.0),
+       frame=st.booleans(), combiner=st.sampled_from(["min", "max", "sum"]), texture=st.booleans(),
+       floor=st.one_of(st.none(), st.floats(0.05, 0.95)), nans=st.integers(0, 2))
+def test_a_budget_beside_the_engines_rates_decides_as_the_sdk(gl_context: Any, psnr: bool, allowed: tuple[str, ...],
+                                                              tiles: tuple[int, int], seed: int, share: float,
+                                                              frame: bool, combiner: str, texture: bool,
+                                                              floor: float | None, nans: int) -> None:
+    """select(raw, saving=, engine_rates=, combiner=) against sdk.select_rates_for_saving(engine_rates=) on the values
+    the shader decoded: the engine's saving counted, the image adding only what is missing, every combiner and
+    allowed set (the clamps), the engine's rates as an array or a texture, partial edge tiles, a floor, NaN tiles."""
+    meta = _generated_metadata({"type": "clamped", "mu_y": 0.5}, list(sdk.PREDICTED_RATES), 2.0, 0.0, 1, None, psnr)
+    rng = np.random.default_rng(seed)
+    raw = rng.random((6, *tiles)).astype(np.float32)
+    raw.flat[rng.integers(raw.size, size=nans)] = np.nan
+    hib = meta.higher_is_better
+    rates = list(allowed) or ["1x1"]
+    codes = [sdk.RATE_CODES[r] for r in ("1x1", *allowed)]
+    engine = rng.choice(codes, tiles).astype(np.uint8)
+    saving = share * max(sdk.work_saved(r) for r in rates)
+    values = meta.decode(raw)
+    finite = values[np.isfinite(values)]
+    assume(finite.size > 0)
+    threshold = None
+    if floor is not None:
+        threshold = float(np.quantile(finite, floor))
+        threshold = threshold if psnr else max(threshold, 0.0)
+    ts = meta.tile_size
+    frame_size = (tiles[0] * ts - int(rng.integers(ts)), tiles[1] * ts - int(rng.integers(ts))) if frame else None
+    weigh = {"frame_size": frame_size, "tile_size": ts} if frame else {}
+    with RateSelector(meta, gl_context) as selector:
+        given_rates: Any = engine
+        if texture:
+            given_rates = gl_context.texture((tiles[1], tiles[0]), 1, engine.tobytes(), dtype="u1")
+        gpu = selector.select(raw, threshold, allowed=rates, saving=saving, frame_size=frame_size,
+                              engine_rates=given_rates, combiner=combiner)
+        found, saved = selector.budget()
+        decoded = selector.decoded().astype(np.float64)
+        if texture:
+            given_rates.release()
+    cpu = sdk.select_rates_for_saving(decoded, saving, higher_is_better=hib, allowed=rates, threshold=threshold,
+                                      engine_rates=engine, combiner=combiner, **weigh)
+    np.testing.assert_array_equal(gpu, cpu.rates)
+    assert saved == pytest.approx(float(cpu.saved), abs=1e-9)
+    assert found == pytest.approx(float(cpu.threshold), rel=1e-6, abs=1e-37)
+    shaded = sdk.combine_rates(gpu, engine, combiner, allowed=rates)
+    assert saved == pytest.approx(sdk.work_saved(shaded, **weigh), abs=1e-9)  # the device's saving, as it shades

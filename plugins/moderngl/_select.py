@@ -180,8 +180,8 @@ class RateSelector:
         saving=)``: the rates of the lowest threshold that saves at least that share of the shading work, found on
         the GPU (a second dispatch, one workgroup, no read-back; :meth:`budget` reads the threshold and the saving
         back where wanted). ``frame_size = (H, W)`` weighs partial edge tiles by their pixels (without it every
-        hardware tile counts alike); a ``threshold`` with it is a floor under the budget, as in the SDK. Not beside
-        ``engine_rates`` (the SDK's budget counts the engine's saving; the shader does not)."""
+        hardware tile counts alike); a ``threshold`` with it is a floor under the budget, as in the SDK. Beside
+        ``engine_rates`` the saving is the device's, the engine's and the image's together, as the SDK counts it."""
         th, tw = _tile_pair(tiles, "tiles")
         grid = self._grid((th, tw), grid)
         limit = max_texture_side(self.ctx)
@@ -199,8 +199,7 @@ class RateSelector:
         self._check_open()
         _frame_with_budget(saving, frame_size)
         thr = self._check_decision(None if saving is not None else threshold, allowed)
-        work = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size,
-                                                             engine_rates)
+        work = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size)
         engine = self._engine_rates(engine_rates, combiner, allowed, grid, thr)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets(grid)
@@ -228,20 +227,16 @@ class RateSelector:
         self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
         if work is not None:  # the decoded values -> the budget's threshold -> the rates again at it
             self.ctx.memory_barrier()
-            self._run_budget(work, mask, threshold, grid, frame_size)
+            self._run_budget(work, mask, threshold, grid, frame_size, self._program["u_combiner"].value)
             self.ctx.memory_barrier()
             self._program["u_budget"].value = True
             self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
         return self._texture
 
     def _check_budget(self, saving: float, threshold: float | None, allowed: Iterable[sdk.RateLike] | None,
-                      grid: tuple[int, int], frame_size: tuple[int, int] | None, engine_rates: Any) -> int:
+                      grid: tuple[int, int], frame_size: tuple[int, int] | None) -> int:
         """The work a budget must save, in sixteenths of a pixel's shading (a tile's without ``frame_size``), after
         the SDK's own checks and messages for the saving, the floor, the allowed rates and the frame's size."""
-        if engine_rates is not None:
-            raise sdk.ParameterError("saving: a budget beside engine_rates is not on the GPU (the SDK's counts the "
-                                     "engine's saving: predictor.shading_rates(x, saving=, engine_rates=, combiner=))",
-                                     "saving")
         sdk.select_rates_for_saving(np.zeros((6, *grid), np.float32), saving,
                                     higher_is_better=self._meta.higher_is_better, allowed=allowed,
                                     frame_size=frame_size, tile_size=None if frame_size is None else self.tile_size,
@@ -257,7 +252,7 @@ class RateSelector:
         return need
 
     def _run_budget(self, need: int, mask: int, threshold: float | None, grid: tuple[int, int],
-                    frame_size: tuple[int, int] | None) -> None:
+                    frame_size: tuple[int, int] | None, combiner: int) -> None:
         if self._budget_program is None:
             self._budget_program = self.ctx.compute_shader(load_source("select_budget_cs.glsl"))
         program = self._budget_program
@@ -274,6 +269,7 @@ class RateSelector:
             "u_hi": sdk.MAX_THRESHOLD,
             "u_has_floor": threshold is not None,
             "u_floor": 0.0 if threshold is None else float(threshold),
+            "u_combiner": combiner,  # (the engine's texture stays bound to image unit 1 from the decode)
         }
         for name, value in values.items():
             if name in program:
@@ -317,7 +313,7 @@ class RateSelector:
         if a.ndim == 3 and a.shape[0] == n and 0 not in a.shape:
             g = self._grid((int(a.shape[1]), int(a.shape[2])), grid)
             if saving is not None:
-                self._check_budget(saving, threshold, allowed, g, frame_size, engine_rates)
+                self._check_budget(saving, threshold, allowed, g, frame_size)
             self._engine_rates(engine_rates, combiner, allowed, g, thr)
         if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f" or 0 in a.shape:
             raise sdk.InputShapeError(

@@ -31,6 +31,12 @@ uniform float u_lo;              // the lowest oriented threshold allowed (0; -M
 uniform float u_hi;              // the highest (MAX_THRESHOLD)
 uniform bool u_has_floor;        // a threshold under the budget: the higher (PSNR: lower) of the two
 uniform float u_floor;           // in metric units
+// the engine's own rates, one texel a hardware tile, which the hardware's combiner meets with the image (sdk
+// select_rates_for_saving(engine_rates=, combiner=)): 0 none, else the enum value of min (2), max (3) or sum (4)
+layout(r8ui, binding = 1) uniform readonly uimage2D u_engine;
+uniform int u_combiner;
+
+#include "combine.glsl"
 
 const int AREA[6] = int[6](2, 2, 4, 8, 8, 16);  // PREDICTED_RATES: 1x2 2x1 2x2 2x4 4x2 4x4
 const uint NAN_KEY = 0xffffffffu;              // NaN or +inf: never passes (-inf passes at any threshold)
@@ -47,13 +53,6 @@ uint key_of(float v) {
 }
 float value_of(uint k) { return uintBitsToFloat((k & 0x80000000u) != 0u ? k & 0x7fffffffu : ~k); }
 
-// the oriented value ("smaller passes") of PREDICTED_RATES[r] at tile `at`, against its own threshold
-float oriented(int r, int at, int plane) {
-    float v = decoded[r * plane + at];
-    float f = u_rate_factors[r];
-    return u_higher_is_better ? -(v + 20.0 * log(f) / log(10.0)) : v / f;
-}
-
 uint weight(int at) {
     if (u_frame.x == 0) return 1u;
     ivec2 t = ivec2(at % u_grid.x, at / u_grid.x);
@@ -61,51 +60,101 @@ uint weight(int at) {
     return uint(size.x * size.y);
 }
 
-// the steps of tile `at`: per cost class present (dearest first) its key and its gain; `n` of them
-void steps(int at, int plane, out uint keys[4], out uint gains[4], out int n) {
+uint share16(int area) { return uint(16 - 16 / area); }  // the work a rate saves, in sixteenths
+
+// the steps of tile `at`: per cost class (dearest first) its key and its gain, `n` of them; `forced`, what the tile
+// saves at any threshold (the engine's rates alone; 0 without them)
+void steps(int at, int plane, out uint keys[4], out uint gains[4], out int n, out uint forced) {
     const int AREAS[4] = int[4](2, 4, 8, 16);
     uint w = weight(at);
+    float v[6];
+    for (int r = 0; r < 6; ++r) v[r] = decoded[r * plane + at];
     n = 0;
-    int below = 1;  // the area of the class before (1x1)
-    uint best = NAN_KEY;
-    // cheapest first: T_k is the best of class k and every cheaper one
-    uint k_of[4] = uint[4](NAN_KEY, NAN_KEY, NAN_KEY, NAN_KEY);
-    bool present[4] = bool[4](false, false, false, false);
-    for (int c = 3; c >= 0; --c) {
+    forced = 0u;
+    uint best[4] = uint[4](NAN_KEY, NAN_KEY, NAN_KEY, NAN_KEY);
+    if (u_combiner == 0) {
+        bool present[4] = bool[4](false, false, false, false);
         for (int r = 0; r < 6; ++r) {
-            if (AREA[r] != AREAS[c] || (u_allowed & (1u << uint(r))) == 0u) continue;
+            if ((u_allowed & (1u << uint(r))) == 0u) continue;
+            int c = findLSB(uint(AREA[r])) - 1;  // 2, 4, 8, 16 -> 0 .. 3
             present[c] = true;
-            best = min(best, key_of(oriented(r, at, plane)));
+            best[c] = min(best[c], key_of(oriented(v, r + 1)));
         }
-        k_of[c] = best;
+        for (int c = 2; c >= 0; --c) best[c] = min(best[c], best[c + 1]);  // T_k: class k or a cheaper one
+        uint before = 0u;  // the share of the class before (1x1)
+        for (int c = 0; c < 4; ++c) {
+            if (!present[c]) continue;
+            keys[n] = best[c];
+            gains[n] = w * (share16(AREAS[c]) - before);
+            before = share16(AREAS[c]);
+            ++n;
+        }
+        return;
     }
+    // beside the engine's rate: each candidate (the allowed rates and 1x1) by the rate the device shades for it
+    // (sdk _combined_values); a class's share counts only past what the engine's rates save alone (the 1x1
+    // candidate's), which the tile saves at any threshold (sdk _lowest_threshold_shaded)
+    int e = rate_of(imageLoad(u_engine, ivec2(at % u_grid.x, at / u_grid.x)).r);
+    int alone = 1;
+    for (int c = 0; c < 7; ++c) {
+        if (!supported(c)) continue;
+        int first, last;
+        device_rates(combined(e, c), first, last);
+        int area = SIZE[first].x * SIZE[first].y;
+        if (c == 0) alone = area;
+        if (area < 2) continue;
+        int k = findLSB(uint(area)) - 1;
+        best[k] = min(best[k], key_of(shaded_value(v, first, last)));
+    }
+    for (int c = 2; c >= 0; --c) best[c] = min(best[c], best[c + 1]);
+    uint before = share16(alone);
+    forced = w * before;
     for (int c = 0; c < 4; ++c) {
-        if (!present[c]) continue;
-        keys[n] = k_of[c];
-        gains[n] = w * uint(16 / below - 16 / AREAS[c]);
-        below = AREAS[c];
+        uint lifted = max(share16(AREAS[c]), share16(alone));
+        keys[n] = best[c];
+        gains[n] = w * (lifted - before);
+        before = lifted;
         ++n;
     }
 }
 
-// the gains of every step at or below key `k` (below NAN_KEY: finite steps only), summed over the workgroup
-uint gained(uint k, int tiles, int plane) {
-    uint sum = 0u;
-    for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
-        uint keys[4], gains[4];
-        int n;
-        steps(at, plane, keys, gains, n);
-        for (int i = 0; i < n; ++i) if (keys[i] <= k && keys[i] != NAN_KEY) sum += gains[i];
-    }
-    s_sum[gl_LocalInvocationIndex] = sum;
+// `x` summed over the workgroup (every invocation calls it, and gets the sum)
+uint workgroup_sum(uint x) {
+    s_sum[gl_LocalInvocationIndex] = x;
     barrier();
     for (uint half_ = 128u; half_ > 0u; half_ >>= 1) {
         if (gl_LocalInvocationIndex < half_) s_sum[gl_LocalInvocationIndex] += s_sum[gl_LocalInvocationIndex + half_];
         barrier();
     }
     uint total = s_sum[0];
-    barrier();  // (every invocation has read it before the next round writes)
+    barrier();  // (every invocation has read it before the next sum writes)
     return total;
+}
+
+// the gains of every step at or below key `k` (below NAN_KEY: finite steps only), and what the tiles save at any
+// threshold, summed over the workgroup
+uint gained(uint k, int tiles, int plane) {
+    uint sum = 0u;
+    for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
+        uint keys[4], gains[4], forced;
+        int n;
+        steps(at, plane, keys, gains, n, forced);
+        sum += forced;
+        for (int i = 0; i < n; ++i) if (keys[i] <= k && keys[i] != NAN_KEY) sum += gains[i];
+    }
+    return workgroup_sum(sum);
+}
+
+// what every tile saves at any threshold (the engine's rates alone), summed over the workgroup
+uint forced_sum(int tiles, int plane) {
+    uint sum = 0u;
+    for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
+        uint keys[4], gains[4], forced;
+        int n;
+        steps(at, plane, keys, gains, n, forced);
+        sum += forced;
+    }
+    return workgroup_sum(sum);
 }
 
 // the steps' gains by the 8 bits of their keys at `shift`, among the keys whose higher bits are `prefix`'s
@@ -113,9 +162,9 @@ void histogram(uint prefix, int shift, int tiles, int plane) {
     s_hist[gl_LocalInvocationIndex] = 0u;
     barrier();
     for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
-        uint keys[4], gains[4];
+        uint keys[4], gains[4], forced;
         int n;
-        steps(at, plane, keys, gains, n);
+        steps(at, plane, keys, gains, n, forced);
         for (int i = 0; i < n; ++i) {
             if (keys[i] == NAN_KEY || (shift < 24 && (keys[i] >> uint(shift + 8)) != (prefix >> uint(shift + 8))))
                 continue;
@@ -129,7 +178,8 @@ void main() {
     int tiles = u_grid.x * u_grid.y;
     int plane = tiles;
     float thr = u_lo;
-    if (u_need > 0u) {
+    uint forced = forced_sum(tiles, plane);  // what the engine's rates save alone (0 without them)
+    if (u_need > forced) {
         uint prefix = 0u, below = 0u;  // the key's digits found so far; the gains of the keys below them
         for (int shift = 24; shift >= 0; shift -= 8) {
             histogram(prefix, shift, tiles, plane);
@@ -137,7 +187,7 @@ void main() {
                 if (shift == 24) {  // every finite step: the most the frame can save (NaN tiles: just past its last)
                     uint total = 0u;
                     for (int d = 0; d < 256; ++d) total += s_hist[d];
-                    s_need = min(u_need, total);
+                    s_need = min(u_need - forced, total);
                 }
                 uint acc = below;
                 s_digit = 0u;
@@ -158,8 +208,8 @@ void main() {
     float metric = u_higher_is_better ? -thr : thr;
     if (u_has_floor) metric = u_higher_is_better ? min(metric, u_floor) : max(metric, u_floor);
     float oriented_thr = u_higher_is_better ? -metric : metric;
-    // what the rates of that threshold save: the steps below it
-    uint saved = key_of(oriented_thr) == 0u ? 0u : gained(key_of(oriented_thr) - 1u, tiles, plane);
+    // what the rates of that threshold save: the steps below it, and the engine's rates alone
+    uint saved = key_of(oriented_thr) == 0u ? forced : gained(key_of(oriented_thr) - 1u, tiles, plane);
     if (gl_LocalInvocationIndex == 0u) {
         b_threshold = metric;
         b_saved = saved;

@@ -89,54 +89,7 @@ void decode(int at, int plane, out float v[6]) {
     if (!have[R44]) v[R44] = worse(v[R24], v[R42]);
 }
 
-// --- beside the engine's rates (sdk combine_rates, select_rates(engine_rates=)) ---------------------------------
-// every rate, finest first (sdk ALL_RATES): sizes and codes
-const ivec2 SIZE[7] = ivec2[7](ivec2(1, 1), ivec2(1, 2), ivec2(2, 1), ivec2(2, 2), ivec2(2, 4), ivec2(4, 2), ivec2(4, 4));
-const uint ALL_CODES[7] = uint[7](0u, 1u, 4u, 5u, 6u, 9u, 10u);
-
-bool supported(int i) { return i == 0 || (u_allowed & (1u << uint(i - 1))) != 0u; }
-
-int rate_of(uint code) {  // an ALL_RATES index (an unknown code: 1x1, as the checks on the CPU refuse them)
-    for (int i = 0; i < 7; ++i) if (ALL_CODES[i] == code) return i;
-    return 0;
-}
-
-// among the supported rates that fit inside `want` (or, `swapped`, inside it either way round), those of the
-// largest area and then the lowest W + H: the first and the last of them in ALL_RATES order
-void largest(ivec2 want, bool swapped, out int first, out int last) {
-    int area = 0, sum = 0;
-    first = 0; last = 0;
-    for (int i = 0; i < 7; ++i) {
-        ivec2 s = SIZE[i];
-        if (!supported(i) || !((s.x <= want.x && s.y <= want.y) || (swapped && s.x <= want.y && s.y <= want.x))) continue;
-        if (s.x * s.y > area || (s.x * s.y == area && s.x + s.y < sum)) { area = s.x * s.y; sum = s.x + s.y; first = i; last = i; }
-        else if (s.x * s.y == area && s.x + s.y == sum) last = i;
-    }
-}
-
-// the rates a device may shade where a combiner asks for `want` (sdk _device_rates): the rate where supported,
-// else Vulkan's clamp, the tall one first; `last` another a device may take (first where there is none)
-void device_rates(ivec2 want, out int first, out int last) {
-    for (int i = 0; i < 7; ++i) if (supported(i) && SIZE[i] == want) { first = i; last = i; return; }
-    int a0, a1, b0, b1;
-    largest(want, false, a0, a1);
-    largest(want, true, b0, b1);
-    first = a0; last = a1;
-    if (b0 != a0 && b0 != a1) last = b0;
-    if (b1 != a0 && b1 != a1) last = b1;
-}
-
-ivec2 combined(int e, int r) {
-    ivec2 a = SIZE[e], b = SIZE[r];
-    return u_combiner == 2 ? min(a, b) : u_combiner == 3 ? max(a, b) : a * b;
-}
-
-// a rate's value oriented as "smaller passes", against its own threshold; 1x1 costs nothing to judge
-float oriented(float v[6], int i) {
-    if (i == 0) return uintBitsToFloat(0xff800000u);  // -inf
-    float f = u_rate_factors[i - 1];
-    return u_higher_is_better ? -(v[i - 1] + 20.0 * log(f) / log(10.0)) : v[i - 1] / f;
-}
+#include "combine.glsl"
 
 // the image's code beside engine rate `e`: per candidate (the allowed rates cheapest first, then 1x1) the rate the
 // device shades and the worse value of the two it may shade; the cheapest passing, then the better value, then
@@ -153,8 +106,7 @@ uint select_beside(float v[6], int e) {
         if (!supported(c)) continue;
         int first, last;
         device_rates(combined(e, c), first, last);
-        float value = max(oriented(v, first), oriented(v, last));
-        if (isnan(oriented(v, first)) || isnan(oriented(v, last))) value = uintBitsToFloat(0x7fc00000u);  // NaN
+        float value = shaded_value(v, first, last);
         int area = SIZE[first].x * SIZE[first].y;
         bool exact = first == last;
         if (!(value < thr)) continue;  // NaN never passes
