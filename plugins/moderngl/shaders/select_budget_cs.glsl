@@ -178,7 +178,7 @@ void main() {
     int tiles = u_grid.x * u_grid.y;
     int plane = tiles;
     float thr = u_lo;
-    uint forced = forced_sum(tiles, plane);  // what the engine's rates save alone (0 without them)
+    uint forced = u_combiner == 0 ? 0u : forced_sum(tiles, plane);  // what the engine's rates save alone
     if (u_need > forced) {
         uint prefix = 0u, below = 0u;  // the key's digits found so far; the gains of the keys below them
         for (int shift = 24; shift >= 0; shift -= 8) {
