@@ -5,6 +5,7 @@
     python examples/runtime_without_rtp.py models/flip.onnx --check              # the same rates as rtp.sdk?
     python examples/runtime_without_rtp.py models/jnyang.onnx --saving 0.6 --check   # a budget (step 7)
     python examples/runtime_without_rtp.py models/jnyang.onnx --engine-rate 2x1 --check   # beside it (step 8)
+    python examples/runtime_without_rtp.py models/jnyang.onnx --engine-rate 2x2 --saving 0.8 --check   # both
 
 An engine that links onnxruntime itself (C++, C#, Rust) needs no Python: the ONNX file carries the
 network and its metadata, and the steps from the engine's input planes to a shading-rate image are
@@ -50,9 +51,13 @@ same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``
    (Vulkan's rule), judged by its value (the worse of two where a device may choose), the cheapest
    passing kept, else the engine's rate alone.
 
+   With a budget too (step 7 beside step 8): what the engine's rates save alone is counted first, and each
+   candidate's step is that of the rate the device shades for it, adding only what the engine's rates do not
+   save already.
+
 What is left out: checking the frame for NaN (the finite probe makes that one scalar: step 3's
-other output), batches of frames, reusing a prediction across frames (``sdk.PredictionReuse``,
-docs/runtime.md), and a budget beside the engine's rates (step 7 with step 8's candidates).
+other output), batches of frames, and reusing a prediction across frames (``sdk.PredictionReuse``,
+docs/runtime.md).
 """
 
 from __future__ import annotations
@@ -179,32 +184,55 @@ def select(values: np.ndarray, meta: dict, threshold: float, allowed: tuple[str,
 
 def select_for_saving(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, ...] = RATES,
                       frame: tuple[int, int] | None = None, tile_size: int | None = None,
-                      threshold: float | None = None) -> tuple[np.ndarray, float]:
+                      threshold: float | None = None, engine: np.ndarray | None = None,
+                      combiner: str = "max") -> tuple[np.ndarray, float]:
     """Step 7: the rates that save ``saving`` of the frame's work (each tile weighed by its pixels, given the
     ``frame``'s (H, W) and ``tile_size``) at the lowest threshold that does, and that threshold; with a
-    ``threshold`` too, the saving is a floor under it (the higher of the two thresholds; PSNR the lower)."""
-    rates, reached = _budget(values, meta, saving, allowed, frame, tile_size)
+    ``threshold`` too, the saving is a floor under it (the higher of the two thresholds; PSNR the lower). Beside
+    the ``engine``'s rates (step 8) the saving is the device's: the engine's and the image's together."""
+    if engine is None:
+        reached = _budget(values, meta, saving, allowed, frame, tile_size)
+    else:
+        reached = _budget_beside(values, meta, saving, allowed, frame, tile_size, engine, combiner)
     better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
     if threshold is not None and (threshold <= reached if better else threshold >= reached):  # it saves enough
-        return select(values, meta, threshold, allowed), threshold
-    return rates, reached
+        reached = threshold
+    if engine is None:
+        return select(values, meta, reached, allowed), reached
+    return select_beside(values, meta, reached, engine, combiner, allowed), reached
+
+
+def _weights(th: int, tw: int, frame: tuple[int, int] | None, tile_size: int | None) -> np.ndarray:
+    """Each tile's pixels (partial edge tiles count theirs), or 1 each without the frame's size."""
+    if frame is None or tile_size is None:
+        return np.ones((th, tw))
+    (h, w), t = frame, tile_size
+    return np.outer(np.minimum(t, h - t * np.arange(th)), np.minimum(t, w - t * np.arange(tw))).astype(float)
+
+
+def _reaching(steps: np.ndarray, gain: np.ndarray, need: float, better: bool) -> float:
+    """The lowest threshold past which the steps' gains add up to ``need`` (the most the frame can save where
+    they do not: NaN tiles never pass), as "smaller passes" turned back to the metric's direction."""
+    lowest = -1e6 if better else 0.0  # the lowest threshold there is (as "smaller is better"), and the highest
+    at, gain = steps.ravel(), gain.ravel()
+    useful = (at < np.inf) & (gain > 0)  # (NaN tiles never pass; a step that adds nothing is no step)
+    at, gain = at[useful], gain[useful]
+    if need <= 0 or at.size == 0:
+        return -lowest if better else lowest
+    order = np.argsort(at, kind="stable")
+    total = np.cumsum(gain[order])
+    j = min(int(np.searchsorted(total, need)), at.size - 1)
+    t = float(np.clip(np.nextafter(at[order][j], np.inf), lowest, 1e6))
+    return -t if better else t
 
 
 def _budget(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, ...],
-            frame: tuple[int, int] | None, tile_size: int | None) -> tuple[np.ndarray, float]:
-    """Step 7 without a threshold: the lowest threshold that saves ``saving``, and its rates."""
+            frame: tuple[int, int] | None, tile_size: int | None) -> float:
+    """Step 7 without a threshold: the lowest threshold that saves ``saving``."""
     better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
     factors = meta.get("rate_factors") or {}
     th, tw = values.shape[1:]
-    if frame is None or tile_size is None:
-        weights = np.ones((th, tw))
-    else:  # partial edge tiles count their pixels
-        (h, w), t = frame, tile_size
-        weights = np.outer(np.minimum(t, h - t * np.arange(th)), np.minimum(t, w - t * np.arange(tw))).astype(float)
-    lowest = -1e6 if better else 0.0  # the lowest threshold there is (as "smaller is better"), and the highest
-    if saving <= 0:
-        threshold = -lowest if better else lowest
-        return select(values, meta, threshold, allowed), threshold
+    weights = _weights(th, tw, frame, tile_size)
     steps, shares = [], []
     # cost classes, dearest first: the best value (over its factor, "smaller is better") of each, NaN never passing
     for group, share in ((("1x2", "2x1"), 0.5), (("2x2",), 0.75), (("2x4", "4x2"), 0.875), (("4x4",), 0.9375)):
@@ -217,20 +245,44 @@ def _budget(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, .
         if any(r in allowed for r in group):
             steps.append(best)
             shares.append(share)
+    if not steps:
+        return _reaching(np.zeros(0), np.zeros(0), 0.0, better)
     # a tile saves at least a class's share once the threshold passes the best value of that class or a cheaper one
-    at = np.minimum.accumulate(np.stack(steps)[::-1], axis=0)[::-1].ravel()
-    gain = (np.diff(shares, prepend=0.0)[:, None, None] * weights).ravel()
-    order = np.argsort(at, kind="stable")
-    total = np.cumsum(gain[order])
-    need = saving * weights.sum() * (1.0 - 1e-12)
-    reachable = np.flatnonzero(at[order] < np.inf)  # (NaN tiles never pass: the most the frame can save)
-    if reachable.size == 0:
-        threshold = -lowest if better else lowest
-        return select(values, meta, threshold, allowed), threshold
-    j = min(int(np.searchsorted(total, need)), int(reachable[-1]))
-    t = float(np.clip(np.nextafter(at[order][j], np.inf), lowest, 1e6))
-    threshold = -t if better else t
-    return select(values, meta, threshold, allowed), threshold
+    at = np.minimum.accumulate(np.stack(steps)[::-1], axis=0)[::-1]
+    gain = np.diff(shares, prepend=0.0)[:, None, None] * weights
+    return _reaching(at, gain, saving * weights.sum() * (1.0 - 1e-12), better)
+
+
+def _budget_beside(values: np.ndarray, meta: dict, saving: float, allowed: tuple[str, ...],
+                   frame: tuple[int, int] | None, tile_size: int | None, engine: np.ndarray, combiner: str) -> float:
+    """Step 7 beside step 8: per tile, what the engine's rate saves alone is saved at any threshold, and each cost
+    class adds its share past that once the threshold passes the best value of the candidates the device shades
+    at that class or a cheaper one."""
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    th, tw = values.shape[1:]
+    weights = _weights(th, tw, frame, tile_size)
+    supported, oriented = _candidates(values, meta, allowed)
+    classes = (2, 4, 8, 16)
+    steps = np.full((len(classes), th, tw), np.inf)
+    alone = np.ones((th, tw))  # the area of the rate the engine's gives alone (the 1x1 candidate's)
+    names = {c: r for r, c in CODES.items()}
+    for code in np.unique(engine):
+        tiles = engine == code
+        for c in supported:
+            got = _shaded(names[int(code)], c, combiner, supported)
+            area = SIZES[got[0]][0] * SIZES[got[0]][1]
+            if c == "1x1":
+                alone[tiles] = area
+            if area > 1:
+                value = np.maximum(oriented[got[0]], oriented[got[-1]])  # the worse of two (a NaN never passes)
+                k = classes.index(area)
+                steps[k] = np.where(tiles & ~np.isnan(value), np.minimum(steps[k], value), steps[k])
+    steps = np.minimum.accumulate(steps[::-1], axis=0)[::-1]  # a class or a cheaper one
+    forced = 1.0 - 1.0 / alone
+    lifted = np.maximum(np.array([1.0 - 1.0 / a for a in classes])[:, None, None], forced)
+    gain = np.diff(lifted, axis=0, prepend=forced[None]) * weights
+    need = saving * weights.sum() * (1.0 - 1e-12) - float((forced * weights).sum())
+    return _reaching(steps, gain, need, better)
 
 
 SIZES = {"1x1": (1, 1), "1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2), "2x4": (2, 4), "4x2": (4, 2), "4x4": (4, 4)}
@@ -255,6 +307,25 @@ def device_rates(w: int, h: int, supported: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(inside + [r for r in largest(True) if r not in inside])
 
 
+def _candidates(values: np.ndarray, meta: dict, allowed: tuple[str, ...]) -> tuple[tuple[str, ...], dict]:
+    """The rates a device has (1x1 and the allowed ones) and every rate's value per tile as "smaller passes",
+    against its own threshold (1x1: -inf, it always passes)."""
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    factors = meta.get("rate_factors") or {}
+    oriented = {"1x1": np.full(values.shape[1:], -np.inf)}
+    for r in RATES:
+        f, v = float(factors.get(r, 1.0)), values[RATES.index(r)].astype(np.float64)
+        oriented[r] = (-v - 20.0 * math.log10(f)) if better else v / f
+    return ("1x1",) + tuple(r for r in RATES if r in allowed), oriented
+
+
+def _shaded(engine: str, candidate: str, combiner: str, supported: tuple[str, ...]) -> tuple[str, ...]:
+    """The rates a device may shade where ``combiner`` meets the engine's rate and a candidate of the image."""
+    (ew, eh), (cw, ch) = SIZES[engine], SIZES[candidate]
+    ask = {"min": (min(ew, cw), min(eh, ch)), "max": (max(ew, cw), max(eh, ch)), "sum": (ew * cw, eh * ch)}
+    return device_rates(*ask[combiner], supported)
+
+
 def select_beside(values: np.ndarray, meta: dict, threshold: float, engine: np.ndarray, combiner: str,
                   allowed: tuple[str, ...] = RATES) -> np.ndarray:
     """Step 8: the image's rates (uint8 codes) where the engine's own rates ``engine`` (codes, a tile each) meet it
@@ -263,25 +334,16 @@ def select_beside(values: np.ndarray, meta: dict, threshold: float, engine: np.n
     The image holds the rate shaded where combining it with the engine's gives it back (min, max), else the
     finest rate that gives the same."""
     better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
-    factors = meta.get("rate_factors") or {}
-    supported = ("1x1",) + tuple(r for r in RATES if r in allowed)
+    supported, oriented = _candidates(values, meta, allowed)
     # the candidates: the allowed rates by cost class, cheapest first, then 1x1 (what the engine's rate gives alone)
     order = [r for r in ("4x4", "2x4", "4x2", "2x2", "1x2", "2x1") if r in supported] + ["1x1"]
-    oriented = {"1x1": np.full(values.shape[1:], -np.inf)}  # as "smaller passes", against each rate's threshold
-    for r in RATES:
-        f, v = float(factors.get(r, 1.0)), values[RATES.index(r)].astype(np.float64)
-        oriented[r] = (-v - 20.0 * math.log10(f)) if better else v / f
     thr = -threshold if better else threshold
     names = {c: r for r, c in CODES.items()}
     out = np.zeros(values.shape[1:], np.uint8)
     for code in np.unique(engine):
         e = names[int(code)]
         tiles = engine == code
-        outcome = {}
-        for c in order:
-            (ew, eh), (cw, ch) = SIZES[e], SIZES[c]
-            ask = {"min": (min(ew, cw), min(eh, ch)), "max": (max(ew, cw), max(eh, ch)), "sum": (ew * cw, eh * ch)}
-            outcome[c] = device_rates(*ask[combiner], supported)
+        outcome = {c: _shaded(e, c, combiner, supported) for c in order}
         best = np.full(values.shape[1:], -1)
         best_area = np.zeros(values.shape[1:])
         best_value = np.full(values.shape[1:], np.inf)
@@ -318,7 +380,9 @@ def shading_rates(session: ort.InferenceSession, x: np.ndarray, threshold: float
     if tile_size is not None and tile_size != t:
         values = hardware_tiles(values, meta, tile_size, (h, w))
     if saving is not None:
-        return select_for_saving(values, meta, saving, allowed, (h, w), tile_size or t, threshold)[0]
+        beside = None if engine is None else np.broadcast_to(engine, values.shape[1:])
+        return select_for_saving(values, meta, saving, allowed, (h, w), tile_size or t, threshold, beside,
+                                 combiner)[0]
     if engine is not None:
         threshold = meta["default_threshold"] if threshold is None else threshold
         return select_beside(values, meta, threshold, np.broadcast_to(engine, values.shape[1:]), combiner, allowed)
@@ -359,8 +423,6 @@ def main(argv: list[str] | None = None) -> int:
     allowed = tuple(r.strip() for r in a.allowed.split(",") if r.strip())
     if a.saving is not None and not 0.0 <= a.saving <= 0.9375:
         ap.error(f"--saving: expected a share of the shading work in [0, 0.9375], got {a.saving:g}")
-    if a.engine_rate is not None and a.saving is not None:
-        ap.error("--engine-rate with --saving: a budget beside the engine's rates is not in this port (rtp.sdk has it)")
     engine = None if a.engine_rate is None else np.uint8(CODES[a.engine_rate])
     rates = shading_rates(session, x, a.threshold, a.tile_size, allowed, a.saving, engine, a.combiner)
     names = {c: r for r, c in CODES.items()}

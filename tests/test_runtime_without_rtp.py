@@ -170,3 +170,32 @@ def test_the_ports_selection_beside_engine_rates_is_the_sdks(higher_is_better: b
                                       factors=factors, engine_rates=engine, combiner=combiner)
             np.testing.assert_array_equal(port.select_beside(values, meta, threshold, engine, combiner, allowed), theirs,
                                           err_msg=f"{allowed} {combiner}")
+
+
+@pytest.mark.parametrize("higher_is_better", [False, True])
+def test_the_ports_budget_beside_engine_rates_is_the_sdks(higher_is_better: bool, port: ModuleType) -> None:
+    """Steps 7 and 8 together: the port's rates and threshold for a saving beside an engine's rates (each combiner,
+    allowed sets where the device clamps, ties, NaNs, a threshold per rate, partial edge tiles, a floor, a saving
+    the engine's rates already make) are the SDK's."""
+    rng = np.random.default_rng(7 + int(higher_is_better))
+    values = rng.integers(0, 12, (6, 30, 40)).astype(np.float32) * (3.0 if higher_is_better else 0.03)
+    values[:, 15:] = rng.random((6, 15, 40)) * (36.0 if higher_is_better else 0.36)  # (ties above, none below)
+    values[rng.random(values.shape) < 0.03] = np.nan
+    factors = dict(zip(sdk.PREDICTED_RATES, [1.0, 1.0, 0.9, 1.2, 1.2, 0.8]))
+    frame = (30 * 16 - 5, 40 * 16 - 11)
+    meta = {"metric": "psnr" if higher_is_better else "flip", "higher_is_better": higher_is_better,
+            "rate_factors": factors}
+    for allowed in (port.RATES, ("1x2", "2x1", "4x4"), ("1x2", "2x1", "2x4", "4x2"), ("2x2",)):
+        supported = [sdk.RATE_CODES[r] for r in ("1x1", *allowed)]
+        engine = rng.choice(supported, size=(30, 40)).astype(np.uint8)
+        top = max(sdk.work_saved(r) for r in allowed)
+        for combiner in ("min", "max", "sum"):
+            for saving, under in ((0.05, None), (0.2, None), (0.3, None), (0.4, None), (0.45, None), (0.7 * top, None),
+                                  (top, None), (0.4, 12.0 if higher_is_better else 0.12)):
+                theirs = sdk.select_rates_for_saving(values, saving, higher_is_better=higher_is_better,
+                                                     allowed=allowed, factors=factors, frame_size=frame, tile_size=16,
+                                                     threshold=under, engine_rates=engine, combiner=combiner)
+                rates, threshold = port.select_for_saving(values, meta, saving, allowed, frame, 16, under, engine,
+                                                          combiner)
+                np.testing.assert_array_equal(rates, theirs.rates, err_msg=f"{allowed} {combiner} {saving} {under}")
+                assert threshold == theirs.threshold, (allowed, combiner, saving, under)
