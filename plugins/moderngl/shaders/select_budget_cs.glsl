@@ -145,18 +145,6 @@ uint gained(uint k, int tiles, int plane) {
     return workgroup_sum(sum);
 }
 
-// what every tile saves at any threshold (the engine's rates alone), summed over the workgroup
-uint forced_sum(int tiles, int plane) {
-    uint sum = 0u;
-    for (int at = int(gl_LocalInvocationIndex); at < tiles; at += 256) {
-        uint keys[4], gains[4], forced;
-        int n;
-        steps(at, plane, keys, gains, n, forced);
-        sum += forced;
-    }
-    return workgroup_sum(sum);
-}
-
 // the steps' gains by the 8 bits of their keys at `shift`, among the keys whose higher bits are `prefix`'s
 void histogram(uint prefix, int shift, int tiles, int plane) {
     s_hist[gl_LocalInvocationIndex] = 0u;
@@ -178,7 +166,8 @@ void main() {
     int tiles = u_grid.x * u_grid.y;
     int plane = tiles;
     float thr = u_lo;
-    uint forced = u_combiner == 0 ? 0u : forced_sum(tiles, plane);  // what the engine's rates save alone
+    // what the engine's rates save alone: the sum of no step (no key is 0: -inf's is 0x007fffff) and the forced share
+    uint forced = u_combiner == 0 ? 0u : gained(0u, tiles, plane);
     if (u_need > forced) {
         uint prefix = 0u, below = 0u;  // the key's digits found so far; the gains of the keys below them
         for (int shift = 24; shift >= 0; shift -= 8) {
