@@ -196,3 +196,20 @@ def test_an_orthographic_camera_is_refused_where_pixels_are_reprojected() -> Non
     np.testing.assert_array_equal(sdk.check_projection(ortho), ortho)
     with pytest.raises(sdk.ParameterError, match="no perspective's w row"):
         sdk.check_projection(ortho, perspective=True)
+
+
+def test_callers_on_several_threads_share_the_pool(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An engine that makes planes on two threads at once (two views, or a worker per frame): the calls share the
+    pool of bands (its workers never wait on one another, so none can deadlock) and each gets its own frame's
+    values."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setattr(_reproject, "_BAND_PIXELS", 700)
+    frames = [_args(_frames(10 + i)) for i in range(6)]
+    alone = [sdk.reproject(*a) for a in frames]
+    with ThreadPoolExecutor(3) as callers:
+        together = list(callers.map(lambda a: sdk.reproject(*a), frames * 3))
+    for i, (colour, seen) in enumerate(together):
+        np.testing.assert_array_equal(colour, alone[i % 6][0])
+        np.testing.assert_array_equal(seen, alone[i % 6][1])
+    assert len({a[1].tobytes() for a in alone}) == 6  # (six different frames: a mix-up would show)
