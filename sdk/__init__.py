@@ -69,7 +69,14 @@ from ._rates import (
     select_rates_for_saving,
     work_saved,
 )
-from ._reproject import DEFAULT_REPROJECTION_TOLERANCE, check_projection, reproject, reproject_positions
+from ._reproject import (
+    CAMERA_KINDS,
+    DEFAULT_REPROJECTION_TOLERANCE,
+    check_projection,
+    check_reprojection,
+    reproject,
+    reproject_positions,
+)
 from ._reuse import (
     MAX_CARRY_SCALE,
     MAX_RESCALE,
@@ -119,6 +126,7 @@ __all__ = [
     "BLOCK_EPS",
     "BLOCK_RATES",
     "BLOCK_TILE",
+    "CAMERA_KINDS",
     "CHANNELS",
     "COMBINERS",
     "DEFAULT_EXTRAPOLATION_K",
@@ -179,6 +187,7 @@ __all__ = [
     "block_variances",
     "check_gbuffers",
     "check_projection",
+    "check_reprojection",
     "check_threshold",
     "combine_rates",
     "complete_rates",

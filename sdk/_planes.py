@@ -21,11 +21,12 @@ from ._color import linear_to_srgb, luma
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
 from ._reproject import (
     DEFAULT_REPROJECTION_TOLERANCE,
+    _affine_row,
+    _cameras,
     _inverse,
     _positions,
     _reproject,
     _tolerance,
-    check_previous,
     check_projection,
 )
 
@@ -59,8 +60,8 @@ GBUFFERS: Mapping[str, tuple[str, str]] = {
     "prev_colour": ("(H, W, 3)", "the previous displayed frame, display-encoded (tone-mapped sRGB) in [0, 1]"),
     "prev_depth": ("(H, W)", "the previous frame's linear view depth, >= 0; 0 on background"),
     "prev_view_projection": ("4x4", "the previous frame's world-to-clip matrix"),
-    "prev_projection": ("4x4", "the previous frame's view-to-clip matrix, where it differs from projection (window "
-                               "depth only: it linearises prev_depth)"),
+    "prev_projection": ("4x4", "the previous frame's view-to-clip matrix, where it differs from projection: it "
+                               "linearises a window prev_depth, and gives an orthographic previous camera's depth"),
     "motion": ("(H, W, 2)", "the engine's motion vectors, optional: each pixel's previous minus current position in "
                             "pixels (x right, y down), objects' own motion included; without them the camera's move "
                             "alone places each pixel (a static scene)"),
@@ -272,13 +273,16 @@ def input_planes(
     d = _buffer("depth", depth, None, limit)
     size = (int(d.shape[0]), int(d.shape[1]))
     g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
-    if motion is not None and _reprojects(names):
-        g["motion"] = _buffer("motion", motion, size)  # (optional: looked at only where it is used)
+    for b in ("motion", "prev_projection"):  # (optional: looked at only where they are used)
+        if given[b] is not None and _reprojects(names) and b not in g:
+            g[b] = _buffer(b, given[b], size if b == "motion" else None)
     for b in ("projection", "prev_projection"):  # (another API's convention is named, with its conversion)
         if b in g:
-            check_projection(g[b], b, perspective=b == "projection" and _reprojects(names))
+            check_projection(g[b], b)
+    prev_depth_proj = None
     if "prev_view_projection" in g:  # (only read by the planes that reproject)
-        check_previous(g["prev_view_projection"], "prev_view_projection")
+        prev_depth_proj = _cameras(g["projection"], g["prev_view_projection"], g.get("prev_projection"),
+                                   ("projection", "prev_view_projection", "prev_projection"))
     if window:  # a depth buffer's [0, 1] to linear view depth, as the shader's linear_depth
         reversed_z = depth_kind == "reversed"
         _check_depth_kind(d, reversed_z)
@@ -320,7 +324,8 @@ def input_planes(
         # Luma is per pixel and 0 is black's, so the luma of the reprojected frame is the reprojected luma of the
         # previous frame, value for value: a model that reads no colour plane gathers one plane instead of three.
         rep, seen = _reproject(g["prev_colour"] if colour else luma(g["prev_colour"]), g["prev_depth"], d,
-                               g["view"], g["projection"], g["prev_view_projection"], tolerance, g.get("motion"))
+                               g["view"], g["projection"], g["prev_view_projection"], prev_depth_proj, tolerance,
+                               g.get("motion"))
         if colour:
             planes.update({f"reprojected.{c}": rep[..., i] for i, c in enumerate("rgb")})
         y = planes["reprojected.y"] = luma(rep) if colour else rep
@@ -336,7 +341,7 @@ def input_planes(
         planes["motion.x"], planes["motion.y"] = (np.where(geo, g["motion"][..., i], zero) for i in (0, 1))
     elif wanted & {"motion.x", "motion.y"}:
         planes["motion.x"], planes["motion.y"] = _motion_vectors(d, g["view"], g["projection"],
-                                                                  g["prev_view_projection"])
+                                                                  g["prev_view_projection"], prev_depth_proj)
     return np.ascontiguousarray(np.stack([planes[c] for c in names]), np.float32)
 
 
@@ -377,12 +382,12 @@ def _check_depth_kind(raw: np.ndarray, reversed_z: bool) -> None:
                     "standard" if reversed_z else "reversed-Z", other)
 
 
-def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray,
-                   prev_view_projection: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _motion_vectors(depth: np.ndarray, view: np.ndarray, projection: np.ndarray, prev_view_projection: np.ndarray,
+                   prev_depth_proj: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """``motion.x``, ``motion.y``: each pixel's previous minus current position in pixels (x right, y down),
     float32 ``(H, W)``; 0 on background and where the point was behind the previous camera."""
     h, w = depth.shape
-    qx, qy, cw = _positions(depth, view, projection, prev_view_projection)
+    qx, qy, cw = _positions(depth, view, projection, prev_view_projection, prev_depth_proj)
     xs = np.arange(w, dtype=np.float64)[None, :] + 0.5
     gl_y = h - (np.arange(h, dtype=np.float64)[:, None] + 0.5)
     valid = (depth > 0.0) & (cw > 0.0)
@@ -468,11 +473,15 @@ def check_gbuffers(
             warnings.append(f"normal: mean length {float(length[drawn].mean()):.3g}, not unit vectors{encoded}")
         if projection is not None and drawn.any():
             h, w = d.shape
-            inv = _inverse(check_projection(projection), "projection")  # (a singular one: a typed error)
+            proj = check_projection(projection)
+            inv = _inverse(proj, "projection")  # (a singular one: a typed error)
             xs = ((np.arange(w) + 0.5) / w * 2.0 - 1.0)[None, :].repeat(h, 0)[geo]
             ys = (1.0 - (np.arange(h) + 0.5) / h * 2.0)[:, None].repeat(w, 1)[geo]
-            q = [inv[i, 0] * xs + inv[i, 1] * ys - inv[i, 2] + inv[i, 3] for i in range(4)]
-            to_camera = -np.stack([q[0] / q[3], q[1] / q[3], q[2] / q[3]], -1)  # (from the point on the near plane)
+            if _affine_row(proj[3]):  # an orthographic camera: back along its lines (NDC z falling)
+                to_camera = np.broadcast_to(-inv[:3, 2] / inv[3, 3], (xs.size, 3))
+            else:  # a perspective: to the camera's centre from the point on the near plane
+                q = [inv[i, 0] * xs + inv[i, 1] * ys - inv[i, 2] + inv[i, 3] for i in range(4)]
+                to_camera = -np.stack([q[0] / q[3], q[1] / q[3], q[2] / q[3]], -1)
             away = float(((n * to_camera).sum(-1)[drawn] < 0.0).mean())
             if away > _AWAY_SHARE:
                 hint = ("world-space normals given as view-space (normal_space='world')" if normal_space == "view"

@@ -15,18 +15,24 @@ Conventions (docs/architecture.md):
 
 Algorithm, per current pixel:
 
-1. Unproject the pixel centre with its depth through the current camera to a world position.
-   A background pixel becomes a direction at infinity (``w = 0``), so the sky reprojects by camera
-   rotation only.
-2. Project it with the previous view-projection. If it lands behind the previous camera
-   (clip ``w <= 0``) or outside ``[0, W) x [0, H)``, the pixel is unseen.
+1. Unproject the pixel centre with its depth through the current camera to a world position: the
+   point of the pixel's line (a ray from the camera's centre for a perspective camera, parallel to the
+   view axis for an orthographic one) at that linear depth. A background pixel of a perspective camera
+   becomes a direction at infinity (``w = 0``), so the sky reprojects by camera rotation only; an
+   orthographic camera has no point at infinity in view, and its background is the far plane's point.
+2. Project it with the previous view-projection. If it lands behind the previous camera (an expected
+   previous depth ``<= 0``: a perspective's clip ``w``) or outside ``[0, W) x [0, H)``, the pixel is
+   unseen.
 3. Fetch the **nearest** previous texel (no filtering: colours are never blended across an edge,
    and the result is exactly the previous colour under a static camera).
-4. Depth test. The expected previous depth is the previous clip ``w`` (= previous linear depth).
+4. Depth test. The expected previous depth is the previous linear depth of the point: a perspective
+   camera's clip ``w``; for an orthographic previous camera, its view-space depth through the inverse of
+   its projection (``prev_proj``: its near and far planes map the clip z back to the view's).
    A geometry pixel is seen when the nearest previous texel is geometry and the expected depth is
-   within ``tolerance * expected`` of either that texel's depth, or the perspective-correct
-   bilinear depth (interpolating 1/depth, which is affine in screen space on a plane) of the 2x2
-   texel footprint around the position, when all four texels are geometry. The second test keeps
+   within ``tolerance * expected`` of either that texel's depth, or the bilinear depth of the 2x2 texel
+   footprint around the position, when all four texels are geometry: perspective-correct for a
+   perspective previous camera (interpolating 1/depth, which is affine in screen space on a plane), plain
+   for an orthographic one (whose depth is affine in screen space on a plane). The second test keeps
    grazing surfaces seen, whose depth changes by more than the tolerance from one pixel to the
    next. A background pixel is seen when the nearest previous texel is background too.
 5. Seen pixels take the previous colour, unseen pixels are 0 in colour and in ``seen``.
@@ -42,14 +48,14 @@ import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
 
-__all__ = ["DEFAULT_REPROJECTION_TOLERANCE", "MAX_REPROJECTION_TOLERANCE", "check_projection", "reproject",
-           "reproject_positions"]
+__all__ = ["CAMERA_KINDS", "DEFAULT_REPROJECTION_TOLERANCE", "MAX_REPROJECTION_TOLERANCE", "check_projection",
+           "check_reprojection", "reproject", "reproject_positions"]
 
 #: Relative depth tolerance of the disocclusion test (2 % of the expected depth).
 DEFAULT_REPROJECTION_TOLERANCE = 0.02
@@ -80,16 +86,21 @@ def _matrix(m: np.ndarray, name: str) -> np.ndarray:
     return m
 
 
-#: Why the reprojection refuses an orthographic camera (docs/runtime.md "Input planes from G-buffers on the host").
-_NOT_PERSPECTIVE = ("an orthographic camera? The reprojection (reprojected.*, seen, motion.x/y) takes perspective "
-                    "cameras: each pixel a ray from the camera's centre, the previous frame's linear depth its clip w. "
-                    "A model that reads no such plane takes an orthographic camera")
-
 #: Where the conversions from other APIs' matrices are written down.
 _CONVERSIONS = 'docs/runtime.md "Matrices from Direct3D, Vulkan and Metal"'
 
 
-def check_projection(projection: Any, name: str = "projection", *, perspective: bool = False) -> np.ndarray:
+def _w_row(v: np.ndarray) -> bool:
+    """``v`` is ``(0, 0, a, 0)``, ``a != 0``: a perspective's divide by the view z (zeros relative to ``a``)."""
+    return bool(v[2] != 0.0 and max(abs(v[0]), abs(v[1]), abs(v[3])) <= 1e-9 * abs(v[2]))
+
+
+def _affine_row(v: np.ndarray) -> bool:
+    """``v`` is ``(0, 0, 0, a)``, ``a != 0``: no divide by the depth (an orthographic camera's last row)."""
+    return bool(v[3] != 0.0 and np.abs(v[:3]).max() <= 1e-9 * abs(v[3]))
+
+
+def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
     """``projection`` as a float64 4x4 matrix, if it can be an OpenGL projection as rtp takes it (column
     vectors, right-handed view space looking down -z, clip y up, clip depth in [-1, 1]); else a
     :class:`ParameterError` naming ``name`` that says which other API's convention it looks like and how
@@ -100,22 +111,14 @@ def check_projection(projection: Any, name: str = "projection", *, perspective: 
     projection), the sign of its y scale (negative: Vulkan's clip y, pointing down) and its depth row
     (OpenGL's ``m[2][2] / -m[3][2]`` is ``-(f + n) / (f - n)``, at most -1; a reversed-Z projection's is
     at least 0). A Direct3D-style right-handed projection with clip depth in [0, 1] looks like an OpenGL
-    one of other near and far planes and passes: only its linearised window depth would be off. An
-    orthographic matrix (last row ``0, 0, 0, 1``) is taken as it is, unless ``perspective`` (the reprojection's
-    check): the reprojection follows each pixel's ray from the camera's centre and takes the previous clip ``w``
-    for the previous linear depth, which an orthographic camera has neither of, so there it is refused.
+    one of other near and far planes and passes: only its linearised window depth would be off. Any other
+    matrix (an orthographic one, last row ``0, 0, 0, 1``) is taken as it is: :func:`check_reprojection`
+    checks what the reprojection needs of an orthographic camera.
     """
     m = _matrix(projection, name)
-
-    def w_row(v: np.ndarray) -> bool:  # (0, 0, a, 0), a != 0: a perspective divide by the view z (zeros relative to a)
-        return bool(v[2] != 0.0 and max(abs(v[0]), abs(v[1]), abs(v[3])) <= 1e-9 * abs(v[2]))
-
-    if not w_row(m[3]):
-        if perspective:
-            raise ParameterError(f"{name}: its last row {np.round(m[3], 4).tolist()} is no perspective's w row (0, 0, "
-                                 f"-1, 0): {_NOT_PERSPECTIVE}", name)
+    if not _w_row(m[3]):
         return m
-    if abs(abs(m[3, 2]) - 1.0) > 1e-6 and w_row(m[:, 3]) and abs(abs(m[2, 3]) - 1.0) <= 1e-6:
+    if abs(abs(m[3, 2]) - 1.0) > 1e-6 and _w_row(m[:, 3]) and abs(abs(m[2, 3]) - 1.0) <= 1e-6:
         raise ParameterError(f"{name}: its last column (0, 0, {m[2, 3]:g}, 0) is a perspective's w row and its last row "
                              f"(0, 0, {m[3, 2]:g}, 0) the depth's offset: a matrix for row vectors (Direct3D's, "
                              f"DirectXMath's)? rtp takes column vectors: pass its transpose ({_CONVERSIONS})", name)
@@ -123,9 +126,7 @@ def check_projection(projection: Any, name: str = "projection", *, perspective: 
         raise ParameterError(f"{name}: w = +z (last row 0, 0, {m[3, 2]:g}, 0): a left-handed projection, the camera "
                              f"looking down +z (Direct3D's convention); rtp's view space is right-handed, looking down "
                              f"-z: projection @ diag(1, 1, -1, 1), and diag(1, 1, -1, 1) @ view ({_CONVERSIONS})", name)
-    if m[1, 1] < 0.0:
-        raise ParameterError(f"{name}: its y scale m[1][1] = {m[1, 1]:g} is negative: Vulkan's clip space, y pointing "
-                             f"down? rtp takes OpenGL's, y up: negate its second row ({_CONVERSIONS})", name)
+    _y_up(m, name)
     depth_row = m[2, 2] / -m[3, 2]
     if depth_row > -1.0 + 1e-6:
         raise ParameterError(f"{name}: m[2][2] / -m[3][2] = {depth_row:g}, where OpenGL's is -(f + n) / (f - n), at most "
@@ -135,14 +136,71 @@ def check_projection(projection: Any, name: str = "projection", *, perspective: 
     return m
 
 
-def check_previous(prev_view_projection: np.ndarray, name: str) -> np.ndarray:
-    """A previous view-projection (float64 4x4) the reprojection can take: one whose clip ``w`` reads the view's
-    depth (a perspective's), else a :class:`ParameterError` naming ``name``."""
+def _y_up(m: np.ndarray, name: str) -> None:
+    if m[1, 1] < 0.0:
+        raise ParameterError(f"{name}: its y scale m[1][1] = {m[1, 1]:g} is negative: Vulkan's clip space, y pointing "
+                             f"down? rtp takes OpenGL's, y up: negate its second row ({_CONVERSIONS})", name)
+
+
+def _orthographic(m: np.ndarray, name: str) -> None:
+    """What the reprojection needs of an orthographic projection ``m`` (last row ``0, 0, 0, a``): clip y up, and
+    the view depth rising with the clip depth (OpenGL's ``m[2][2] = -2 / (f - n)``), else a typed error."""
+    _y_up(m, name)
+    dz = np.linalg.inv(m)[2, 2] * m[3, 3]  # d(view z) / d(NDC z) along the pixel's line: negative in OpenGL's
+    if not dz < 0.0:
+        raise ParameterError(f"{name}: an orthographic projection whose clip depth does not rise away from the camera "
+                             f"(m[2][2] = {m[2, 2]:g}, OpenGL's is -2 / (f - n)): a left-handed or reversed-Z one? rtp "
+                             f"takes the OpenGL projection of the same near and far planes ({_CONVERSIONS})", name)
+
+
+def _cameras(projection: np.ndarray, prev_view_projection: np.ndarray, prev_projection: np.ndarray | None,
+             names: tuple[str, str, str]) -> np.ndarray | None:
+    """:func:`check_reprojection` of float64 4x4 matrices (``projection`` already through :func:`check_projection`),
+    its three arguments named ``names``: the projection whose inverse gives an orthographic previous camera's
+    depth (``prev_projection``, else ``projection``), or None where the previous camera is a perspective."""
+    if not _w_row(projection[3]):
+        if not _affine_row(projection[3]):
+            raise ParameterError(f"{names[0]}: its last row {np.round(projection[3], 4).tolist()} is neither a "
+                                 f"perspective's (0, 0, -1, 0) nor an orthographic camera's (0, 0, 0, 1), the two "
+                                 f"cameras the reprojection (reprojected.*, seen, motion.x/y) follows pixels through",
+                                 names[0])
+        _orthographic(projection, names[0])
     w = prev_view_projection[3]
-    if np.abs(w[:3]).max() <= 1e-9 * abs(w[3]):  # (0, 0, 0, a): no divide by the depth
-        raise ParameterError(f"{name}: its last row {np.round(w, 4).tolist()} does not read the view's depth: "
-                             f"{_NOT_PERSPECTIVE}", name)
-    return prev_view_projection
+    if np.abs(w[:3]).max() > 1e-9 * abs(w[3]):  # its clip w reads the view's depth: a perspective's
+        return None
+    # An orthographic previous camera: its clip w is 1 everywhere, and its depth the clip z through its projection.
+    depth = prev_projection if prev_projection is not None else projection
+    named = names[2] if prev_projection is not None else names[0]
+    if not _affine_row(depth[3]):
+        raise ParameterError(f"{named}: {names[1]} is an orthographic camera's (its last row "
+                             f"{np.round(w, 4).tolist()}), whose expected depth comes from its projection's depth row, "
+                             f"and {named} is not orthographic: pass the previous camera's projection as {names[2]} (a "
+                             f"switch of cameras: no previous frame reprojects across a cut)", named)
+    _orthographic(depth, named)
+    return depth
+
+
+#: The kinds of camera the reprojection follows pixels through (:func:`check_reprojection`).
+CAMERA_KINDS = ("perspective", "orthographic")
+
+
+def check_reprojection(projection: Any, prev_view_projection: Any, prev_projection: Any = None) -> tuple[str, str]:
+    """Whether the reprojection (:func:`reproject`; the ``reprojected.*``, ``seen`` and ``motion.x/y`` planes)
+    can follow pixels from the camera of ``projection`` into the previous one of ``prev_view_projection``:
+    the two cameras' kinds (each one of :data:`CAMERA_KINDS`, the current camera's first), or a
+    :class:`ParameterError` naming the matrix where it cannot.
+
+    Each camera is a perspective (last row ``0, 0, -1, 0``, checked as by :func:`check_projection`) or an
+    orthographic one (``0, 0, 0, 1``: clip y up and OpenGL's depth row, ``-2 / (f - n)``, checked). A
+    perspective's previous depth is its clip ``w``; an orthographic previous camera's is read through the
+    inverse of its projection, ``prev_projection``, or ``projection`` where that is None (the same near and far
+    planes: a camera that pans, turns or zooms), which must then be orthographic too.
+    """
+    proj = check_projection(_matrix(projection, "projection"), "projection")
+    prev = _matrix(prev_view_projection, "prev_view_projection")
+    prev_proj = None if prev_projection is None else check_projection(prev_projection, "prev_projection")
+    previous = _cameras(proj, prev, prev_proj, ("projection", "prev_view_projection", "prev_projection"))
+    return CAMERA_KINDS[not _w_row(proj[3])], CAMERA_KINDS[previous is not None]
 
 
 def _inverse(m: np.ndarray, name: str) -> np.ndarray:
@@ -178,24 +236,39 @@ def reproject_positions(
     cur_view: np.ndarray,
     cur_proj: np.ndarray,
     prev_view_proj: np.ndarray,
+    *,
+    prev_proj: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where every current pixel was in the previous frame.
 
     Args:
         depth: ``(H, W)`` current linear depth, 0 on background.
         cur_view: current world-to-view matrix.
-        cur_proj: current view-to-clip (OpenGL) matrix.
+        cur_proj: current view-to-clip (OpenGL) matrix, perspective or orthographic.
         prev_view_proj: previous world-to-clip matrix.
+        prev_proj: the previous view-to-clip matrix, read only where the previous camera is orthographic
+            (its depth comes from its clip z through this); ``cur_proj`` where None.
 
     Returns:
-        ``(qx, qy, w)``, each ``(H, W)`` float64: the previous position in OpenGL window
+        ``(qx, qy, d)``, each ``(H, W)`` float64: the previous position in OpenGL window
         coordinates (pixels, origin at the BOTTOM-left corner of the frame, as the shader sees it;
-        the top-left row is ``H - qy``) and the previous clip ``w`` (the expected previous linear
-        depth for geometry; only its sign matters for background).
+        the top-left row is ``H - qy``) and the expected previous linear depth (a perspective previous
+        camera's clip ``w``); ``d <= 0`` where the point was behind the previous camera (only its sign
+        matters for background).
     """
-    return _positions(_depth(depth, "depth"), _matrix(cur_view, "cur_view"),
-                      check_projection(cur_proj, "cur_proj", perspective=True),
-                      check_previous(_matrix(prev_view_proj, "prev_view_proj"), "prev_view_proj"))
+    cameras = _checked(cur_view, cur_proj, prev_view_proj, prev_proj)
+    return _positions(_depth(depth, "depth"), *cameras)
+
+
+def _checked(cur_view: Any, cur_proj: Any, prev_view_proj: Any, prev_proj: Any,
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """:func:`reproject`'s matrices checked (:func:`check_reprojection`), with the previous depth's projection
+    (None: a perspective previous camera)."""
+    proj = check_projection(cur_proj, "cur_proj")
+    prev_vp = _matrix(prev_view_proj, "prev_view_proj")
+    prev_p = None if prev_proj is None else check_projection(prev_proj, "prev_proj")
+    return (_matrix(cur_view, "cur_view"), proj, prev_vp,
+            _cameras(proj, prev_vp, prev_p, ("cur_proj", "prev_view_proj", "prev_proj")))
 
 
 #: Pixels a band of rows holds at most: the reprojection runs band by band, so that its float64 temporaries (a
@@ -255,59 +328,109 @@ def _affine(a0: float, xs: np.ndarray, a1: float, ys: np.ndarray, c: float) -> A
 
 
 def _positions(depth: np.ndarray, cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`reproject_positions` of arrays already checked (finite, ``depth`` (H, W) >= 0, 4x4 matrices),
-    float32 or float64 alike (each float32 value is a float64 exactly, and the arithmetic is float64)."""
+               prev_depth_proj: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`reproject_positions` of arrays already checked (finite, ``depth`` (H, W) >= 0, 4x4 matrices through
+    :func:`_cameras`, whose result ``prev_depth_proj`` is), float32 or float64 alike (each float32 value is a
+    float64 exactly, and the arithmetic is float64)."""
     h, w = depth.shape
-    inv_proj, m = _transforms(cur_view, cur_proj, prev_vp)
+    cams = _transforms(cur_view, cur_proj, prev_vp, prev_depth_proj)
     qx, qy, cw = np.empty((h, w)), np.empty((h, w)), np.empty((h, w))
 
     def band(r0: int, r1: int) -> None:
-        qx[r0:r1], qy[r0:r1], cw[r0:r1] = _band_positions(depth[r0:r1], r0, h, w, inv_proj, m)
+        qx[r0:r1], qy[r0:r1], cw[r0:r1] = _band_positions(depth[r0:r1], r0, h, w, cams)
 
     _in_bands(h, w, band)
     return qx, qy, cw
 
 
-def _transforms(cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The current projection's inverse and the matrix from the current view space to the previous clip space."""
+class _Transforms(NamedTuple):
+    inv_proj: np.ndarray  # the current projection's inverse
+    m: np.ndarray  # the current view space to the previous clip space
+    orthographic: bool  # the current camera's kind: pixels on parallel lines, not rays from a centre
+    depth_rows: np.ndarray | None  # an orthographic previous camera: (numerator, denominator) of its depth
+
+
+def _transforms(cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
+                prev_depth_proj: np.ndarray | None) -> _Transforms:
+    """The current projection's inverse, the matrix from the current view space to the previous clip space and,
+    for an orthographic previous camera (``prev_depth_proj`` its projection), the two rows over current view
+    points whose quotient is the previous view depth (the previous view point's ``-z`` over its ``w``)."""
     inv_proj = _inverse(cur_proj, "cur_proj")
-    inv_view = _inverse(cur_view, "cur_view")
-    return inv_proj, prev_vp @ inv_view
+    m = prev_vp @ _inverse(cur_view, "cur_view")
+    rows = None
+    if prev_depth_proj is not None:
+        inv_prev = _inverse(prev_depth_proj, "prev_proj")
+        rows = np.stack([-(inv_prev[2] @ m), inv_prev[3] @ m])
+    return _Transforms(inv_proj, m, not _w_row(cur_proj[3]), rows)
 
 
-def _band_positions(depth: np.ndarray, r0: int, h: int, w: int, inv_proj: np.ndarray, m: np.ndarray,
+def _band_positions(depth: np.ndarray, r0: int, h: int, w: int, cams: _Transforms,
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_positions` of the rows ``r0 : r0 + len(depth)`` of an ``(h, w)`` frame (``depth``: those rows),
-    ``m`` the current view space to the previous clip space."""
-    # The pixel centre's NDC (x, y) on the near plane (z = -1) through the inverse projection: affine in x
-    # and y, so each component is a sum of a column and a row (a row or a column alone for the usual projections).
+    """:func:`_positions` of the rows ``r0 : r0 + len(depth)`` of an ``(h, w)`` frame (``depth``: those rows)."""
+    inv_proj = cams.inv_proj
     xs = ((np.arange(w, dtype=np.float64) + 0.5) / w * 2.0 - 1.0)[None, :]
     ys = (1.0 - (np.arange(r0, r0 + depth.shape[0], dtype=np.float64) + 0.5) / h * 2.0)[:, None]  # top-left rows
+    geometry = depth > 0.0
+    dot = (_orthographic_points if cams.orthographic else _perspective_points)(depth, geometry, xs, ys, inv_proj)
+    m = cams.m
+    cx, cy, cw = dot(m[0]), dot(m[1]), dot(m[3])
+    safe = np.where(cw > 0.0, cw, 1.0)
+    qx = (cx / safe * 0.5 + 0.5) * w
+    qy = (cy / safe * 0.5 + 0.5) * h
+    if cams.depth_rows is None:
+        return qx, qy, cw  # a perspective's clip w is the previous linear depth
+    num, den = dot(cams.depth_rows[0]), dot(cams.depth_rows[1])
+    ahead = den > 0.0  # (0 for the sky's directions, which an orthographic camera does not see)
+    return qx, qy, np.where(ahead, num / np.where(ahead, den, 1.0), 0.0)
+
+
+def _perspective_points(depth: np.ndarray, geometry: np.ndarray, xs: np.ndarray, ys: np.ndarray,
+                        inv_proj: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """``row -> row . p`` over the band's view-space points ``p`` of a perspective camera: the pixel's ray at its
+    depth (``w = 1``), or the ray's unit direction at infinity on background (``w = 0``)."""
+    # The pixel centre's NDC (x, y) on the near plane (z = -1) through the inverse projection: affine in x
+    # and y, so each component is a sum of a column and a row (a row or a column alone for the usual projections).
     q = [_affine(inv_proj[i, 0], xs, inv_proj[i, 1], ys, inv_proj[i, 3] - inv_proj[i, 2]) for i in range(4)]
     # the view-space point on the ray with z = -1: (q / q_w) / -(q_z / q_w)
     rx, ry = (q[0] / q[3]) / -(q[2] / q[3]), (q[1] / q[3]) / -(q[2] / q[3])
-
-    geometry = depth > 0.0
     # geometry: the point (rx, ry, -1) * depth, w = 1; background: the ray's unit direction at infinity (w = 0).
-    # Its previous clip coordinates are then scale * (m[j, 0] rx + m[j, 1] ry - m[j, 2]), plus m[j, 3] on geometry.
+    # A row's product is then scale * (r[0] rx + r[1] ry - r[2]), plus r[3] on geometry.
     scale = depth.astype(np.float64)
     sky = np.flatnonzero(~geometry)
     if sky.size:  # (the unit length only where it is used: most frames are mostly geometry)
         at = np.divmod(sky, depth.shape[1])
         sx, sy = np.broadcast_to(rx, depth.shape)[at], np.broadcast_to(ry, depth.shape)[at]
         scale.ravel()[sky] = 1.0 / np.sqrt(sx * sx + sy * sy + 1.0)
-    clip = []
-    for j in (0, 1, 3):
-        c = scale * (m[j, 0] * rx + m[j, 1] * ry - m[j, 2])
-        if m[j, 3] != 0.0:
-            np.add(c, m[j, 3], out=c, where=geometry)
-        clip.append(c)
-    cx, cy, cw = clip
-    safe = np.where(cw > 0.0, cw, 1.0)
-    qx = (cx / safe * 0.5 + 0.5) * w
-    qy = (cy / safe * 0.5 + 0.5) * h
-    return qx, qy, cw
+
+    def dot(r: np.ndarray) -> np.ndarray:
+        c = scale * (r[0] * rx + r[1] * ry - r[2])
+        if r[3] != 0.0:
+            np.add(c, r[3], out=c, where=geometry)
+        return c
+
+    return dot
+
+
+def _orthographic_points(depth: np.ndarray, geometry: np.ndarray, xs: np.ndarray, ys: np.ndarray,
+                         inv_proj: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """``row -> row . p`` over the band's view-space points ``p`` (``w = 1``) of an orthographic camera: the point
+    of the pixel's line (parallel to the view axis, or sheared) at its depth, the far plane's on background."""
+    ip = inv_proj / inv_proj[3, 3]  # (its last row 0, 0, 0, 1: view points without a divide)
+    # The view point at NDC (x, y, z) is c + ip[:3, 2] z, c the one at z = 0 (affine in x and y); its depth -vz
+    # is the pixel's where z = (-depth - c_z) / ip[2][2], and the far plane's at z = 1.
+    c = [_affine(ip[i, 0], xs, ip[i, 1], ys, ip[i, 3]) for i in range(3)]
+    z = np.where(geometry, (-depth - c[2]) / ip[2, 2], 1.0)
+    vx, vy = (c[i] + ip[i, 2] * z if ip[i, 2] != 0.0 else c[i] for i in (0, 1))
+    vz = np.where(geometry, -depth.astype(np.float64), c[2] + ip[2, 2])
+
+    def dot(r: np.ndarray) -> np.ndarray:
+        out = np.full(depth.shape, r[3])
+        for a, v in ((r[0], vx), (r[1], vy), (r[2], vz)):
+            if a != 0.0:
+                out += a * v
+        return out
+
+    return dot
 
 
 def reproject(
@@ -320,6 +443,7 @@ def reproject(
     *,
     tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
     motion: np.ndarray | None = None,
+    prev_proj: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fetch the previous frame's colour where each current pixel was, with a disocclusion test.
 
@@ -328,7 +452,8 @@ def reproject(
         prev_depth: ``(H, W)`` previous linear depth (0 = background).
         depth: ``(H, W)`` current linear depth (0 = background).
         cur_view: current 4x4 world-to-view matrix (``Camera.view()``).
-        cur_proj: current 4x4 OpenGL projection (``Camera.projection(W / H)``).
+        cur_proj: current 4x4 OpenGL projection (``Camera.projection(W / H)``), perspective or orthographic
+            (:func:`check_reprojection`).
         prev_view_proj: previous 4x4 world-to-clip matrix (``prev_camera.view_projection(W, H)``).
         tolerance: relative depth tolerance (default 0.02, i.e. 2 % of the expected depth).
         motion: the engine's motion vectors, ``(H, W, 2)``: each pixel's previous minus current position
@@ -337,6 +462,8 @@ def reproject(
             static scene), and its depth is tested against the depth the camera's move gives it (an
             object moving in depth by more than ``tolerance`` in a frame is unseen); background pixels
             follow the camera.
+        prev_proj: the previous 4x4 projection, read only where the previous camera is orthographic (its
+            clip z to its linear depth); ``cur_proj`` where None (the same near and far planes).
 
     Returns:
         ``(reprojected, seen)``: ``reprojected`` has ``prev_colour``'s shape, float32, 0 where
@@ -358,24 +485,24 @@ def reproject(
             raise InputShapeError(f"motion must be (H, W, 2) with (H, W) = {depth.shape} (pixels, previous minus "
                                   f"current position, x right, y down); got {motion.shape}", tuple(motion.shape),
                                   f"({depth.shape[0]}, {depth.shape[1]}, 2)")
-    return _reproject(np.asarray(prev_colour), prev_depth, depth, _matrix(cur_view, "cur_view"),
-                      check_projection(cur_proj, "cur_proj", perspective=True),
-                      check_previous(_matrix(prev_view_proj, "prev_view_proj"), "prev_view_proj"), tolerance, motion)
+    cameras = _checked(cur_view, cur_proj, prev_view_proj, prev_proj)
+    return _reproject(np.asarray(prev_colour), prev_depth, depth, *cameras, tolerance, motion)
 
 
 def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarray, cur_view: np.ndarray,
-               cur_proj: np.ndarray, prev_vp: np.ndarray, tolerance: float, motion: np.ndarray | None = None,
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`reproject` of arrays already checked (``input_planes`` checks its G-buffers once, not twice)."""
+               cur_proj: np.ndarray, prev_vp: np.ndarray, prev_depth_proj: np.ndarray | None, tolerance: float,
+               motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reproject` of arrays already checked (``input_planes`` checks its G-buffers once, not twice; the
+    matrices through :func:`_cameras`, whose result ``prev_depth_proj`` is)."""
     h, w = depth.shape
-    inv_proj, m = _transforms(cur_view, cur_proj, prev_vp)
+    cams = _transforms(cur_view, cur_proj, prev_vp, prev_depth_proj)
     colours = prev_colour.reshape(h * w, -1)
     out = np.empty(colours.shape, np.float32)
     seen = np.empty((h, w), np.float32)
     flat_depth = prev_depth.ravel()
 
     def band(r0: int, r1: int) -> None:
-        seen[r0:r1] = _band_reproject(colours, flat_depth, depth[r0:r1], r0, h, w, inv_proj, m, tolerance,
+        seen[r0:r1] = _band_reproject(colours, flat_depth, depth[r0:r1], r0, h, w, cams, tolerance,
                                       None if motion is None else motion[r0:r1], out[r0 * w:r1 * w])
 
     _in_bands(h, w, band)
@@ -383,11 +510,10 @@ def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarra
 
 
 def _band_reproject(colours: np.ndarray, flat_depth: np.ndarray, depth: np.ndarray, r0: int, h: int, w: int,
-                    inv_proj: np.ndarray, m: np.ndarray, tolerance: float, motion: np.ndarray | None,
-                    out: np.ndarray) -> np.ndarray:
+                    cams: _Transforms, tolerance: float, motion: np.ndarray | None, out: np.ndarray) -> np.ndarray:
     """:func:`_reproject` of the rows ``r0 : r0 + len(depth)``: their colours into ``out`` (``(rows * w, C)``), and
     their ``seen`` (bool). ``colours`` and ``flat_depth`` are the whole previous frame's, raveled."""
-    qx, qy, cw = _band_positions(depth, r0, h, w, inv_proj, m)
+    qx, qy, cw = _band_positions(depth, r0, h, w, cams)
     geometry = depth > 0.0
     if motion is not None:  # the engine's motion vectors place geometry; the expected depth stays the camera's
         qx = np.where(geometry, (np.arange(w, dtype=np.float64) + 0.5)[None, :] + motion[..., 0], qx)
@@ -421,9 +547,11 @@ def _band_reproject(colours: np.ndarray, flat_depth: np.ndarray, depth: np.ndarr
         d00, d10 = flat_depth.take(y0 + x0), flat_depth.take(y0 + x1)
         d01, d11 = flat_depth.take(y1 + x0), flat_depth.take(y1 + x1)
         full = np.minimum(np.minimum(d00, d10), np.minimum(d01, d11)) > 0.0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = ((1 - tx) / d00 + tx / d10) * (1 - ty) + ((1 - tx) / d01 + tx / d11) * ty
-            bil = 1.0 / inv
+        if cams.depth_rows is not None:  # an orthographic previous camera: depth is affine on a plane
+            bil = ((1 - tx) * d00 + tx * d10) * (1 - ty) + ((1 - tx) * d01 + tx * d11) * ty
+        else:  # a perspective's: 1 / depth is
+            with np.errstate(divide="ignore", invalid="ignore"):
+                bil = 1.0 / (((1 - tx) / d00 + tx / d10) * (1 - ty) + ((1 - tx) / d01 + tx / d11) * ty)
         expected = exp_d.ravel()[grazing]
         bil_ok.ravel()[grazing] = full & (np.abs(bil - expected) <= tolerance * expected)
 

@@ -67,7 +67,7 @@ SETUP: dict[tuple[str, str], tuple[str, str]] = {
 from rtp.scene import Camera
 
 rng = np.random.default_rng(0)
-P = Camera((0.0, 0.0, 0.0)).projection(48 / 32)  # (a perspective: the reprojection refuses an orthographic one)
+P = Camera((0.0, 0.0, 0.0)).projection(48 / 32)  # (a perspective; an orthographic one reprojects too)
 frame = MyFrame(rng.random((32, 48, 3)), rng.random((32, 48, 3)) * 2 - 1, 1 + rng.random((32, 48)), np.eye(4),
                 P, rng.random((32, 48, 3)), 1 + rng.random((32, 48)), P)
 with MyEngineAdapter(["reprojected.y", "seen", "albedo.y", "normal.z", "reprojected.y.blocks"], 48, 32) as a:

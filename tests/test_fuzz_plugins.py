@@ -1334,7 +1334,7 @@ PINNED: list[tuple[str, Any, type[Exception]]] = [
         type(None),
     ),
     (  # a list holding the identity is a projection like any other (a CI run drew it and the predicate refused it);
-        # since 2026-12-06 an orthographic one (the identity is) is refused where the adapter's planes reproject
+        # since 2026-12-06 it is refused where the adapter's planes reproject: an orthographic camera whose depth rises toward it
         "moderngl: Adapter.inputs with hostile GBufferTextures",
         {"projection": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]], "view": "view",
          "depth_component": 0, "prev_view_projection": "prev_vp"},

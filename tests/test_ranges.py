@@ -21,7 +21,7 @@ from .conftest import base_metadata, build_onnx
 
 _X = np.zeros((len(sdk.load("jnyang").metadata.inputs), 32, 48), np.float32)  # the shipped model's planes
 _I = np.eye(4)
-_P = Camera((0.0, 0.0, 0.0)).projection(1.0)  # (the reprojection takes perspective projections)
+_P = Camera((0.0, 0.0, 0.0)).projection(1.0)  # (the identity is no projection the reprojection takes)
 
 
 @functools.cache

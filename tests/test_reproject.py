@@ -6,6 +6,8 @@ per-pixel reference."""
 from __future__ import annotations
 
 import multiprocessing
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -34,9 +36,15 @@ def _frames(seed: int, sky: bool = True) -> dict[str, Any]:
 
 
 def _args(f: dict[str, Any], shape: str = "perspective") -> tuple[Any, ...]:
-    """``reproject``'s arguments, both frames' projections of the ``shape`` of :data:`PROJECTIONS`."""
-    proj = PROJECTIONS[shape](f["projection"])
-    return f["prev_colour"], f["prev_depth"], f["depth"], f["view"], proj, proj @ f["prev_view"]
+    """``reproject``'s arguments, both frames' cameras of the ``shape`` of :data:`CAMERAS`."""
+    proj, prev_proj = CAMERAS[shape](f["projection"])
+    return f["prev_colour"], f["prev_depth"], f["depth"], f["view"], proj, prev_proj @ f["prev_view"]
+
+
+def _previous(shape: str, f: dict[str, Any]) -> dict[str, Any]:
+    """The ``prev_proj`` keyword of a ``shape`` whose previous camera is orthographic and not the current one's."""
+    proj, prev_proj = CAMERAS[shape](f["projection"])
+    return {} if prev_proj is proj else {"prev_proj": prev_proj}
 
 
 def _jittered(p: np.ndarray) -> np.ndarray:
@@ -55,53 +63,95 @@ def _sheared(p: np.ndarray) -> np.ndarray:
     return q
 
 
-def _orthographic() -> np.ndarray:
+def _orthographic(half_width: float = 4.0, half_height: float = 3.0, near: float = 1.0, far: float = 51.0,
+                  ) -> np.ndarray:
+    """OpenGL's glOrtho of a centred box."""
     m = np.eye(4)
-    m[0, 0], m[1, 1], m[2, 2], m[2, 3] = 1 / 4.0, 1 / 3.0, -2 / 50.0, -52 / 50.0
+    m[0, 0], m[1, 1] = 1 / half_width, 1 / half_height
+    m[2, 2], m[2, 3] = -2 / (far - near), -(far + near) / (far - near)
     return m
 
 
-PROJECTIONS = {"perspective": lambda p: p, "jittered": _jittered, "sheared": _sheared}
+def _off_centre(p: np.ndarray) -> np.ndarray:
+    """An orthographic projection off-centre (jittered) and oblique (its clip x reads the view z: lines not
+    parallel to the view axis, a cabinet projection)."""
+    q = p.copy()
+    q[0, 3], q[1, 3], q[0, 2] = 0.013, -0.021, 0.06
+    return q
+
+
+#: Each case's (current projection, previous projection) from the frames' perspective.
+CAMERAS: dict[str, Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]] = {
+    "perspective": lambda p: (p, p),
+    "jittered": lambda p: (_jittered(p), _jittered(p)),
+    "sheared": lambda p: (_sheared(p), _sheared(p)),
+    "orthographic": lambda p: (_orthographic(),) * 2,
+    "orthographic off-centre": lambda p: (_off_centre(_orthographic()),) * 2,
+    # a switch of cameras (the previous projection given where it is orthographic)
+    "perspective now, orthographic before": lambda p: (p, _orthographic(5.0, 3.5, 0.5, 40.0)),
+    "orthographic now, perspective before": lambda p: (_orthographic(), p),
+}
+PROJECTIONS = ["perspective", "jittered", "sheared"]
 
 
 def _reference_positions(depth: np.ndarray, view: np.ndarray, proj: np.ndarray, prev_vp: np.ndarray,
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The module docstring's step 1-2, pixel by pixel through the matrices, with no shortcut."""
+                         prev_proj: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The module docstring's step 1-2 and the expected depth of step 4, pixel by pixel through the matrices, with
+    no shortcut: the pixel's line through its points at NDC depth -1 and 1, the point at its depth on it; the sky a
+    perspective's unit direction, an orthographic camera's far plane; the previous depth a perspective's clip w,
+    an orthographic camera's view depth through the inverse of ``prev_proj`` (the current one where None)."""
     h, w = depth.shape
-    inv = np.linalg.inv(view) @ np.linalg.inv(proj)  # clip -> world
+    inv_proj, inv_view = np.linalg.inv(proj), np.linalg.inv(view)
+    perspective = proj[3, 3] == 0.0
+    previous_perspective = prev_vp[3, :3].any()
+    inv_prev = np.linalg.inv(proj if prev_proj is None else prev_proj)
     qx, qy, cw = np.empty((h, w)), np.empty((h, w)), np.empty((h, w))
     for y in range(h):
         for x in range(w):
-            ndc = np.array([(x + 0.5) / w * 2 - 1, 1 - (y + 0.5) / h * 2, -1.0, 1.0])
-            v = np.linalg.inv(proj) @ ndc
-            ray = v[:3] / v[3] / -(v[2] / v[3])  # view space, z = -1
+            ndc = [(x + 0.5) / w * 2 - 1, 1 - (y + 0.5) / h * 2]
+            a, b = (inv_proj @ [*ndc, z, 1.0] for z in (-1.0, 1.0))
+            a, b = a[:3] / a[3], b[:3] / b[3]
             d = float(depth[y, x])
-            p = np.append(ray * d, 1.0) if d > 0 else np.append(ray / np.linalg.norm(ray), 0.0)
-            c = prev_vp @ (np.linalg.inv(view) @ p)
+            if d > 0:
+                p = np.append(a + (b - a) * (d + a[2]) / (a[2] - b[2]), 1.0)  # -z = d on the line
+            else:
+                p = np.append(a / np.linalg.norm(a), 0.0) if perspective else np.append(b, 1.0)
+            c = prev_vp @ (inv_view @ p)
             safe = c[3] if c[3] > 0 else 1.0
-            qx[y, x], qy[y, x], cw[y, x] = (c[0] / safe * 0.5 + 0.5) * w, (c[1] / safe * 0.5 + 0.5) * h, c[3]
-    del inv
+            qx[y, x], qy[y, x] = (c[0] / safe * 0.5 + 0.5) * w, (c[1] / safe * 0.5 + 0.5) * h
+            if previous_perspective:
+                cw[y, x] = c[3]
+            else:
+                v = inv_prev @ c
+                cw[y, x] = -v[2] / v[3] if v[3] > 0 else 0.0
     return qx, qy, cw
 
 
-@pytest.mark.parametrize("name", list(PROJECTIONS))
+@pytest.mark.parametrize("name", list(CAMERAS))
 def test_positions_are_the_matrices_pixel_by_pixel(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Every projection shape (each inverse row a row, a column or the full frame), in many bands on threads."""
+    """Every projection shape (each inverse row a row, a column or the full frame), perspective or orthographic
+    now and before, in many bands on threads."""
     monkeypatch.setattr(_reproject, "_BAND_PIXELS", 700)
-    *_, depth, view, proj, prev_vp = _args(_frames(1), name)
-    got = sdk.reproject_positions(depth, view, proj, prev_vp)
-    want = _reference_positions(depth, view, proj, prev_vp)
+    f = _frames(1)
+    *_, depth, view, proj, prev_vp = _args(f, name)
+    got = sdk.reproject_positions(depth, view, proj, prev_vp, **_previous(name, f))
+    want = _reference_positions(depth, view, proj, prev_vp, _previous(name, f).get("prev_proj"))
+    assert (want[2] > 0).mean() > 0.5  # (most of the points in front of the previous camera)
     for g, r in zip(got, want):
         np.testing.assert_allclose(g, r, rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.parametrize("name", list(PROJECTIONS))
+@pytest.mark.parametrize("name", [*PROJECTIONS, "orthographic off-centre"])
 @pytest.mark.parametrize("motion", [False, True])
 def test_bands_and_threads_change_no_value(name: str, motion: bool, monkeypatch: pytest.MonkeyPatch) -> None:
     """Many bands of rows (the last one short) on the pool's threads give the whole frame's values, bit for bit."""
     f = _frames(2)
     args = _args(f, name)
     kw = {"motion": np.random.default_rng(3).uniform(-2, 2, (H, W, 2))} if motion else {}
+    if name.startswith("orthographic"):  # (the wall at the depths the orthographic camera expects: some seen)
+        _, _, prev_d = sdk.reproject_positions(*args[2:])
+        noise = np.random.default_rng(4).uniform(0.99, 1.01, (H, W))
+        args = (args[0], np.where(args[1] > 0, np.maximum(prev_d, 0.0) * noise, 0.0), *args[2:])
     monkeypatch.setattr(_reproject, "_BAND_PIXELS", 10**9)  # one band, in the caller's thread
     whole = sdk.reproject(*args, **kw), sdk.reproject_positions(*args[2:])
     for pixels in (700, W, 1):  # bands of 11 rows, of one row, of one row again (fewer pixels than a row)
@@ -111,7 +161,8 @@ def test_bands_and_threads_change_no_value(name: str, motion: bool, monkeypatch:
             np.testing.assert_array_equal(a, b)
     seen = whole[0][1]
     assert 0.2 < seen.mean() < 0.99  # some seen, some not: the comparison says something
-    assert (seen[f["depth"] == 0] == 1).any()  # sky reprojected by rotation
+    if name in PROJECTIONS:
+        assert (seen[f["depth"] == 0] == 1).any()  # sky reprojected by rotation
 
 
 def test_an_error_in_a_band_reaches_the_caller(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -163,39 +214,135 @@ def test_input_planes_gathers_the_luma_where_no_colour_plane_is_read() -> None:
     assert (y[seen == 0] == 0).all() and (y[seen == 1] > 0).mean() > 0.9
 
 
-def test_an_orthographic_camera_is_refused_where_pixels_are_reprojected() -> None:
-    """The reprojection follows rays from the camera's centre and reads the previous depth from the clip w: an
-    orthographic camera has neither, and its planes were all unseen. It is named where a plane reprojects, and
-    taken where none does."""
-    f = _frames(7)
-    ortho = _orthographic()
-    prev_ortho = ortho @ f["prev_view"]
-    g = {k: v for k, v in f.items() if k != "prev_view"}
-    calls = {
-        "reproject": lambda: sdk.reproject(f["prev_colour"], f["prev_depth"], f["depth"], f["view"], ortho, prev_ortho),
-        "positions": lambda: sdk.reproject_positions(f["depth"], f["view"], ortho, prev_ortho),
-        "seen": lambda: sdk.input_planes(["seen"], **{**g, "projection": ortho, "prev_view_projection": prev_ortho}),
-        "motion": lambda: sdk.input_planes(["motion.x"], **{**g, "projection": ortho,
-                                                           "prev_view_projection": prev_ortho}),
-        # a perspective now and an orthographic before (a camera switch): the previous one is named
-        "previous": lambda: sdk.input_planes(["reprojected.y"], **{**g, "prev_view_projection": prev_ortho}),
-        "reproject previous": lambda: sdk.reproject(f["prev_colour"], f["prev_depth"], f["depth"], f["view"],
-                                                    f["projection"], prev_ortho),
-    }
-    names = {"reproject": "cur_proj", "positions": "cur_proj", "seen": "projection", "motion": "projection",
-             "previous": "prev_view_projection", "reproject previous": "prev_view_proj"}
-    for what, call in calls.items():
-        with pytest.raises(sdk.ParameterError, match="orthographic camera") as err:
-            call()
-        assert err.value.name == names[what], what
-    planes = sdk.input_planes(["depth", "albedo.r"], depth=f["depth"], albedo=f["prev_colour"], projection=ortho)
-    assert planes.shape == (2, H, W)
+def _isometric_pan(shift: float, depth_of: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+                   turn: float = 0.0) -> dict[str, Any]:
+    """Two frames of an isometric camera (orthographic, 35 degrees down, 45 degrees round) panning ``shift``
+    pixels right along its own x axis: what the previous frame showed at column ``x + shift`` the current one shows
+    at ``x``, at the same depth. ``depth_of(x, y)`` gives the depth at a previous frame's pixel centre (columns may
+    be fractional); by default a staircase of three heights with some background (0). ``turn`` (degrees) turns the
+    current camera about its vertical axis too (its depths are then not those of the scene the matrices say)."""
+    rng = np.random.default_rng(17)
+    proj = _orthographic(6.0, 6.0 * H / W, 0.5, 80.0)
+    pixel = 12.0 / W  # view-space units a pixel covers
+    c, s_ = np.cos(np.radians(-35.0)), np.sin(np.radians(-35.0))
+    tilt = np.array([[1, 0, 0, 0], [0, c, -s_, 0], [0, s_, c, 0], [0, 0, 0, 1.0]])
+    c, s_ = np.cos(np.radians(45.0)), np.sin(np.radians(45.0))
+    round_ = np.array([[c, 0, s_, 0], [0, 1, 0, 0], [-s_, 0, c, 0], [0, 0, 0, 1.0]])
+    prev_view = tilt @ round_
+    prev_view[:3, 3] = (0.4, -0.2, -30.0)
+    view = prev_view.copy()
+    view[0, 3] -= shift * pixel  # the camera moves right along its own x
+    c, s_ = np.cos(np.radians(turn)), np.sin(np.radians(turn))
+    view = np.array([[c, 0, s_, 0], [0, 1, 0, 0], [-s_, 0, c, 0], [0, 0, 0, 1.0]]) @ view
+
+    def staircase(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        d = 30.0 + 0.05 * y + 3.0 * (x // 17 % 3)
+        return np.where((x // 9 + y // 11) % 7 == 3, 0.0, d)  # some background
+
+    depth_of = depth_of or staircase
+    ys, xs = np.mgrid[0:H, 0:W] + 0.5
+    prev_depth, depth = depth_of(xs - 0.5, ys - 0.5), depth_of(xs - 0.5 + shift, ys - 0.5)
+    return {"prev_colour": rng.uniform(0.05, 1, (H, W, 3)).astype(np.float32), "prev_depth": prev_depth,
+            "depth": depth, "view": view, "projection": proj, "prev_view_projection": proj @ prev_view}
+
+
+def test_an_orthographic_camera_that_pans_reprojects_each_pixel_from_where_it_was() -> None:
+    """Isometric views, top-down games, CAD: an orthographic camera's pixels lie on parallel lines, its previous
+    depth is its clip z through its projection. Panning k pixels, every pixel shows what the previous frame showed
+    k columns on, background included, and the k columns that came into view are unseen; what a new object now
+    covers is unseen (its depth is not the previous frame's there)."""
+    k = 5
+    f = _isometric_pan(k)
+    args = [f[n] for n in ("prev_colour", "prev_depth", "depth", "view", "projection", "prev_view_projection")]
+    colour, seen = sdk.reproject(*args)
+    assert (seen[:, :W - k] == 1).all() and (seen[:, W - k:] == 0).all()
+    np.testing.assert_array_equal(colour[:, :W - k], f["prev_colour"][:, k:])
+    assert (f["depth"][:, :W - k] == 0).any()  # (background among them: the far plane's points)
+    qx, qy, prev_d = sdk.reproject_positions(*args[2:])
+    np.testing.assert_allclose(qx - (np.arange(W) + 0.5), k, atol=1e-9)
+    np.testing.assert_allclose(prev_d[f["depth"] > 0], f["depth"][f["depth"] > 0], rtol=1e-12)
+    # motion.x/y: k pixels to the right in the previous frame, 0 on background
+    planes = sdk.input_planes(["seen", "motion.x", "motion.y", "reprojected.g"], **f)
+    np.testing.assert_array_equal(planes[0], seen)
+    np.testing.assert_allclose(planes[1], np.where(f["depth"] > 0, k, 0), atol=1e-5)
+    np.testing.assert_allclose(planes[2], 0, atol=1e-5)
+    np.testing.assert_array_equal(planes[3], colour[..., 1])
+    # a box that came in front of the wall (a third nearer): unseen where it covers what the wall showed
+    near = f["depth"].copy()
+    near[20:30, 10:20] *= 0.66
+    seen_box = sdk.reproject(args[0], args[1], near, *args[3:])[1]
+    assert (seen_box[20:30, 10:20][near[20:30, 10:20] > 0] == 0).all()
+    np.testing.assert_array_equal(np.delete(seen_box, np.s_[20:30], 0), np.delete(seen, np.s_[20:30], 0))
+
+
+def test_a_grazing_plane_under_an_orthographic_camera_is_seen_through_plain_bilinear_depth() -> None:
+    """An orthographic camera's depth is affine in screen space on a plane (a perspective's inverse depth is): a
+    steep plane panned a quarter of a pixel is seen by the plain bilinear depth of its 2x2 texels, exactly, where
+    the nearest texel's depth is a quarter of a pixel's rise off and the perspective's harmonic mean is off by more
+    than the tolerance (on its nearer half)."""
+    f = _isometric_pan(0.25, lambda x, y: 5.0 + 0.5 * x + 0.0 * y)
+    args = [f[n] for n in ("prev_colour", "prev_depth", "depth", "view", "projection", "prev_view_projection")]
+    _, seen = sdk.reproject(*args, tolerance=0.001)
+    assert (seen[:, :W - 1] == 1).all()
+
+
+def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
+    """A projection neither perspective nor orthographic, an orthographic one in another API's convention, and an
+    orthographic previous camera whose projection is not at hand (a switch from a perspective): each a
+    ParameterError naming the matrix, from sdk.check_reprojection as from the functions that reproject."""
+    f = _isometric_pan(3)
+    proj, prev_vp = f["projection"], f["prev_view_projection"]
+    prev_view = np.linalg.inv(proj) @ prev_vp
+    persp = Camera((0.0, 1.0, 0.0)).projection(W / H)
+    neither = proj.copy()
+    neither[3] = (0.0, 0.0, 0.5, 0.5)
+    flipped, left_handed = np.diag([1.0, -1.0, 1.0, 1.0]) @ proj, proj @ np.diag([1.0, 1.0, -1.0, 1.0])
+    cases = [  # (projection, prev_view_projection, prev_projection, the matrix named, what is said)
+        (neither, prev_vp, None, "projection", "neither a perspective's"),
+        (flipped, flipped @ prev_view, None, "projection", "Vulkan"),
+        (left_handed, left_handed @ prev_view, None, "projection", "left-handed or reversed-Z"),
+        (persp, prev_vp, None, "projection", "orthographic camera's .* pass the previous camera's projection"),
+        (persp, prev_vp, persp, "prev_projection", "orthographic camera's"),
+        (proj, prev_vp, left_handed, "prev_projection", "left-handed or reversed-Z"),
+    ]
+    g = {k: v for k, v in f.items() if k not in ("projection", "prev_view_projection")}
+    sdk_names = {"projection": "cur_proj", "prev_projection": "prev_proj"}
+    for projection, previous, prev_projection, name, said in cases:
+        calls = [
+            (partial(sdk.check_reprojection, projection, previous, prev_projection), name),
+            (partial(sdk.input_planes, ["seen", "motion.x"], **g, projection=projection, prev_view_projection=previous,
+                     prev_projection=prev_projection), name),
+            (partial(sdk.reproject, f["prev_colour"], f["prev_depth"], f["depth"], f["view"], projection, previous,
+                     prev_proj=prev_projection), sdk_names[name]),
+            (partial(sdk.reproject_positions, f["depth"], f["view"], projection, previous, prev_proj=prev_projection),
+             sdk_names[name]),
+        ]
+        for call, named in calls:
+            with pytest.raises(sdk.ParameterError, match=said) as err:
+                call()
+            assert err.value.name == named, (call.func.__name__, said)
+    # those that can: orthographic now and before, its projection given or the current one; either to a
+    # perspective; and a model that reprojects nothing takes any projection
+    sdk.check_reprojection(proj, prev_vp)
+    sdk.check_reprojection(persp, prev_vp, proj)
+    sdk.check_reprojection(proj, persp @ prev_view)
+    assert sdk.input_planes(["depth", "albedo.r"], depth=f["depth"], albedo=f["prev_colour"],
+                            projection=neither).shape == (2, H, W)
     window = np.full((H, W), 0.5, np.float32)  # (a depth buffer linearised through the orthographic projection)
-    depth = sdk.input_planes(["depth"], depth=window, projection=ortho, depth_kind="window")[0]
+    depth = sdk.input_planes(["depth"], depth=window, projection=_orthographic(), depth_kind="window")[0]
     np.testing.assert_allclose(depth, 26.0, rtol=1e-6)  # -(z_ndc - c) / a: the middle of near 1 and far 51
-    np.testing.assert_array_equal(sdk.check_projection(ortho), ortho)
-    with pytest.raises(sdk.ParameterError, match="no perspective's w row"):
-        sdk.check_projection(ortho, perspective=True)
+
+
+def test_check_gbuffers_takes_an_orthographic_frame_and_names_its_mistakes() -> None:
+    """The engine's frame checked once: an orthographic frame whose normals face the camera (+z in view space, on
+    every pixel alike) and which reprojects draws no warning; normals that face away do."""
+    f = _isometric_pan(3)
+    toward = np.zeros((H, W, 3), np.float32)
+    toward[..., 1], toward[..., 2] = 0.6, 0.8
+    g = {k: v for k, v in f.items()}
+    assert sdk.check_gbuffers(normal=toward, **g) == []
+    away = toward * np.array([1.0, 1.0, -1.0], np.float32)
+    assert any("face away" in w for w in sdk.check_gbuffers(normal=away, **g))
 
 
 def test_callers_on_several_threads_share_the_pool(monkeypatch: pytest.MonkeyPatch) -> None:
