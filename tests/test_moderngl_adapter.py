@@ -242,10 +242,13 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         a.inputs(replace(no_prev, projection=no_prev.projection @ np.diag([1.0, 1.0, -1.0, 1.0])))
     with pytest.raises(sdk.ParameterError, match="prev_projection: .* row vectors"):
         a.inputs(replace(no_prev, prev_projection=no_prev.projection.T))
-    ortho = np.diag([0.5, 0.8, -0.1, 1.0])  # an orthographic camera: refused where a plane reprojects, else taken
-    with pytest.raises(sdk.ParameterError, match="projection: .* orthographic camera"):
-        a.inputs(replace(no_prev, projection=ortho))
-    assert Adapter(("albedo.b", "depth"), W, H, ctx=ctx).inputs(replace(no_prev, projection=ortho)).shape == (2, H, W)
+    neither = np.diag([0.5, 0.8, -0.1, 1.0])
+    neither[3, 2] = 0.5  # neither a perspective nor an orthographic camera: named where a plane reprojects
+    with pytest.raises(sdk.ParameterError, match="projection: .* neither a perspective's"):
+        a.inputs(replace(no_prev, projection=neither, prev_colour=_tex(ctx, prev.colour["1x1"]),
+                         prev_depth=_tex(ctx, prev.depth), prev_view_projection=prev.camera.view_projection(W, H)))
+    assert a.inputs(replace(no_prev, projection=neither)).shape == (3, H, W)  # (without a previous frame: not read)
+    assert Adapter(("albedo.b", "depth"), W, H, ctx=ctx).inputs(replace(no_prev, projection=neither)).shape == (2, H, W)
     for options in ({"normal_space": "bogus"}, {"depth_kind": "bogus"}, {"tolerance": float("nan")},
                     {"tolerance": -1.0}, {"tolerance": "0.02"}):
         with pytest.raises(sdk.ParameterError):
@@ -401,6 +404,35 @@ def test_the_engines_motion_vectors_move_objects_on_the_gpu_as_in_the_sdk(frames
     np.testing.assert_allclose(got, want, atol=1e-6)
     assert (got[2][8:16, 14:20] == 1).all() and static[2][8:16, 14:20].mean() < 0.5
     np.testing.assert_allclose(got[0][8:16, 14:20], colour[8:16, 14:20, 0], atol=1e-6)
+
+
+@pytest.mark.parametrize(("shift", "turn"), [(5, 0.0), (0.25, 0.0), (2, 0.5)])
+def test_an_orthographic_camera_reprojects_on_the_gpu_as_in_the_sdk(frames, shift: float, turn: float) -> None:
+    """An isometric camera panning (tests/test_reproject.py): the shader follows its parallel lines and reads its
+    previous depth through the previous projection as sdk.input_planes does; a quarter pixel over a steep plane is
+    seen through the plain bilinear depth; turning, its background (the far plane's points) moves as the SDK's."""
+    from .test_reproject import _isometric_pan
+
+    ctx = frames[0]
+    steep = (lambda x, y: 5.0 + 0.5 * x + 0.0 * y) if shift < 1 else None
+    g = _isometric_pan(shift, steep, turn)
+    h, w = g["depth"].shape
+    channels = ("reprojected.r", "seen", "reprojected.y", "reprojected.b")
+    tolerance = 0.001 if steep else sdk.DEFAULT_REPROJECTION_TOLERANCE
+    want = sdk.input_planes(channels, **g, tolerance=tolerance)
+    zeros = np.zeros((h, w, 3), np.float32)
+    with Adapter(channels, w, h, ctx=ctx, tolerance=tolerance) as a:
+        got = a.inputs(GBufferTextures(albedo=_tex(ctx, zeros), normal=_tex(ctx, zeros), depth=_tex(ctx, g["depth"]),
+                                       view=g["view"], projection=g["projection"],
+                                       prev_colour=_tex(ctx, g["prev_colour"]), prev_depth=_tex(ctx, g["prev_depth"]),
+                                       prev_view_projection=g["prev_view_projection"]))
+    np.testing.assert_array_equal(got[1], want[1])
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    if turn:
+        assert 0.05 < got[1].mean() < 0.95 and (got[1][g["depth"] == 0] == 1).any()
+    else:
+        k = int(np.ceil(shift))
+        assert (got[1][:, :w - k] == 1).all() and got[1].mean() < 1.0
 
 
 def test_check_names_convention_mistakes_in_the_engines_textures(frames) -> None:

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection, gbuffers_needed
+from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection, check_reprojection, gbuffers_needed
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -112,7 +112,8 @@ class GBufferTextures:
         prev_colour, prev_depth, prev_view_projection: the previous displayed frame, its depth
             and its camera's view-projection; needed for ``reprojected.*`` and ``seen`` (without
             them those planes are 0).
-        prev_projection: the previous projection when it differs (window depth only).
+        prev_projection: the previous projection when it differs: it linearises a window depth and gives an
+            orthographic previous camera's depth (else `projection` does).
         depth_component, prev_depth_component: the component holding depth (e.g. 3 for a
             normal+depth texture).
         material: the material parameters (``roughness``, ``metallic``, ``specular`` channels,
@@ -280,13 +281,15 @@ class Adapter(_AdapterBase[GBufferTextures]):
                 raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
             self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1))
         view = _matrix(view, "view", invertible=True)
-        projection = check_projection(_matrix(projection, "projection", invertible=True), "projection",
-                                      perspective="prev_view_projection" in gbuffers_needed(self.channels))
+        projection = check_projection(_matrix(projection, "projection", invertible=True), "projection")
         if prev_view_projection is not None:
             prev_view_projection = _matrix(prev_view_projection, "prev_view_projection")
         if prev_projection is not None:
             prev_projection = check_projection(_matrix(prev_projection, "prev_projection", invertible=True),
                                                "prev_projection")
+        kinds = ("perspective", "perspective")  # (the shader's reprojection reads them only with a previous frame)
+        if has_prev and "prev_view_projection" in gbuffers_needed(self.channels):
+            kinds = check_reprojection(projection, prev_view_projection, prev_projection)
         for c, tex, name in ((depth_component, depth, "depth_component"),
                              (prev_depth_component, prev_depth, "prev_depth_component")):
             _component(c, name, 0, 4 if tex is None else tex.components)
@@ -330,6 +333,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._set("u_inv_proj", np.linalg.inv(projection))
         self._set("u_prev_inv_proj", np.linalg.inv(projection if prev_projection is None else prev_projection))
         self._set("u_prev_vp", np.eye(4) if prev_view_projection is None else np.asarray(prev_view_projection))
+        self._set("u_ortho", kinds[0] == "orthographic")
+        self._set("u_prev_ortho", kinds[1] == "orthographic")
         self._fbo.use()
         self._vao.render(vertices=3)
 

@@ -5,12 +5,15 @@
 // this same shader, so captured training inputs and run-time inputs come from one code path.
 //
 // Reprojection (static scene) must agree with rtp.sdk._reproject.reproject (the numpy reference):
-//  * the current pixel centre is unprojected with its linear depth (background: a direction at
-//    infinity) and projected with the previous view-projection;
+//  * the current pixel centre is unprojected with its linear depth onto the pixel's line (a ray from
+//    the camera's centre, or parallel lines for an orthographic camera; background: a direction at
+//    infinity, or an orthographic camera's far plane) and projected with the previous view-projection;
 //  * colour and depth are fetched from the NEAREST previous texel (no filtering);
 //  * geometry is seen when the nearest previous texel is geometry and the expected previous depth
-//    (previous clip w) is within u_tolerance (relative) of that texel's depth, or of the
-//    perspective-correct (1/z) bilinear depth of the 2x2 footprint when all four are geometry;
+//    (previous clip w; an orthographic previous camera's view depth through u_prev_inv_proj) is
+//    within u_tolerance (relative) of that texel's depth, or of the bilinear depth of the 2x2
+//    footprint when all four are geometry (perspective-correct, 1/z, for a perspective previous
+//    camera; plain for an orthographic one);
 //  * background is seen when the nearest previous texel is background too;
 //  * outside the previous frame or behind the previous camera: unseen; unseen pixels are 0.
 
@@ -31,8 +34,10 @@ uniform vec2 u_size;
 uniform mat4 u_view;                // current world -> view
 uniform mat4 u_inv_view;            // current view -> world
 uniform mat4 u_inv_proj;            // current projection, inverted
-uniform mat4 u_prev_inv_proj;       // previous projection, inverted (window depth only)
+uniform mat4 u_prev_inv_proj;       // previous projection, inverted (window depth; an orthographic previous camera's depth)
 uniform mat4 u_prev_vp;             // world -> previous clip
+uniform bool u_ortho;               // the current camera is orthographic (sdk.check_reprojection's kinds)
+uniform bool u_prev_ortho;          // the previous camera is orthographic
 uniform float u_tolerance;
 // What the adapter was built for is fixed when it is constructed, so it is compiled in: the adapter
 // (_adapter.py) #defines RTP_CHANNELS (24 channel ids, see CHANNEL_IDS; -1 = unused), RTP_COUNT and
@@ -85,15 +90,32 @@ float edge_axis(ivec2 g, ivec2 step, float zc) {
 
 float prev_depth_at(ivec2 g) { return linear_depth(texelFetch(u_prev_depth, g, 0)[u_prev_depth_comp], u_prev_inv_proj); }
 
+// The view-space point of GL pixel coordinate `frag` at linear depth d (w = 1), or on background a
+// perspective's direction at infinity (w = 0) and an orthographic camera's far-plane point.
+vec4 view_point(vec2 frag, float d) {
+    if (!u_ortho) {
+        vec3 ray = view_ray(frag, u_size, u_inv_proj);
+        return d > 0.0 ? vec4(ray * d, 1.0) : vec4(normalize(ray), 0.0);
+    }
+    mat4 ip = u_inv_proj / u_inv_proj[3][3];      // (last row 0, 0, 0, 1: no divide)
+    vec3 c = (ip * vec4(frag / u_size * 2.0 - 1.0, 0.0, 1.0)).xyz;  // the line's point at NDC z = 0
+    float z = d > 0.0 ? (-d - c.z) / ip[2][2] : 1.0;  // the NDC z of depth d; the far plane's
+    return vec4(c + ip[2].xyz * z, 1.0);
+}
+
 vec4 reproject_prev(vec2 frag, float d) {
     ivec2 size = ivec2(u_size);
-    vec3 ray = view_ray(frag, u_size, u_inv_proj);
-    vec4 world = d > 0.0 ? u_inv_view * vec4(ray * d, 1.0) : u_inv_view * vec4(normalize(ray), 0.0);
-    vec4 pc = u_prev_vp * world;
+    vec4 pc = u_prev_vp * (u_inv_view * view_point(frag, d));
     if (pc.w <= 0.0) return vec4(0.0);
+    float e = pc.w;                                // the expected previous linear depth
+    if (u_prev_ortho) {
+        vec4 v = u_prev_inv_proj * pc;
+        e = v.w > 0.0 ? -v.z / v.w : 0.0;
+        if (e <= 0.0) return vec4(0.0);            // behind the previous camera
+    }
     vec2 q = (pc.xy / pc.w * 0.5 + 0.5) * u_size;  // previous GL pixel coordinates
     if (u_has_motion && d > 0.0) {                 // the engine's motion places geometry (objects move); the
-        vec2 m = texelFetch(u_motion, ivec2(frag), 0).xy;  // expected depth stays the camera's, pc.w
+        vec2 m = texelFetch(u_motion, ivec2(frag), 0).xy;  // expected depth stays the camera's, e
         q = frag + vec2(m.x, -m.y);
     }
     if (any(lessThan(q, vec2(0.0))) || any(greaterThanEqual(q, u_size))) return vec4(0.0);
@@ -101,7 +123,6 @@ vec4 reproject_prev(vec2 frag, float d) {
     float pd = prev_depth_at(pi);
     bool seen;
     if (d > 0.0) {
-        float e = pc.w;
         seen = pd > 0.0 && abs(pd - e) <= u_tolerance * e;
         if (!seen && pd > 0.0) {
             vec2 f = q - 0.5;
@@ -114,8 +135,9 @@ vec4 reproject_prev(vec2 frag, float d) {
             float d01 = prev_depth_at(ivec2(o0.x, o1.y));
             float d11 = prev_depth_at(ivec2(o1.x, o1.y));
             if (min(min(d00, d10), min(d01, d11)) > 0.0) {
-                float inv = mix(mix(1.0 / d00, 1.0 / d10, t.x), mix(1.0 / d01, 1.0 / d11, t.x), t.y);
-                seen = abs(1.0 / inv - e) <= u_tolerance * e;
+                float bil = u_prev_ortho ? mix(mix(d00, d10, t.x), mix(d01, d11, t.x), t.y)
+                                         : 1.0 / mix(mix(1.0 / d00, 1.0 / d10, t.x), mix(1.0 / d01, 1.0 / d11, t.x), t.y);
+                seen = abs(bil - e) <= u_tolerance * e;
             }
         }
     } else {
