@@ -613,6 +613,34 @@ def test_moving_objects_are_fetched_from_where_they_were(parent: bool, given_dep
     assert np.abs(mx[np.abs(depth - 5.0) < 0.1]).max() < 1e-4  # the wall did not move
 
 
+def test_an_orthographic_camera_pans_over_a_scene() -> None:
+    """pyrender's OrthographicCamera: its depth is linear depth (pyrender's read-back linearises every camera's as a
+    perspective's), and panning it k pixels reprojects every pixel from k columns on (seen, the previous colour,
+    motion.x = k), the k columns that came into view unseen; the box in front of the wall keeps its depth."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    scene, _, _ = _moving_box_scene(pyrender)
+    scene.remove_node(scene.main_camera_node)
+    w, h, k = 160, 96, 6
+    camera = pyrender.OrthographicCamera(xmag=4.0, ymag=4.0 * h / w, znear=0.5, zfar=20.0)
+    scene.add(camera, pose=np.eye(4))
+    eye, panned = np.eye(4), np.eye(4)
+    panned[0, 3] = k * 8.0 / w  # k pixels of the 8 m the frame spans
+    with Adapter(["seen", "reprojected.r", "motion.x", "motion.y", "depth"], w, h) as adapter:
+        prev_colour, prev_depth = adapter.render(scene, eye)
+        seen, red, mx, my, depth = adapter.inputs(SceneFrame(scene, panned, prev_pose=eye, prev_colour=prev_colour))
+    box = np.abs(depth - 2.9) < 1e-3  # its front face, 2.9 m away, as the wall is 4.95 m: linear depths
+    assert box.sum() > 200 and (np.abs(depth[~box] - 4.95) < 1e-3).all()
+    np.testing.assert_allclose(prev_depth, np.roll(depth, k, axis=1), atol=1e-3)  # (where both are in the frame)
+    inner = box & np.roll(box, 1, 1) & np.roll(box, -1, 1)  # (away from the box's sides, where 8-bit colour blends)
+    assert (seen[:, :w - k] == 1).mean() > 0.995 and (seen[:, w - k:] == 0).all()
+    np.testing.assert_allclose(red[:, :w - k][inner[:, :w - k]], prev_colour[:, k:, 0][inner[:, :w - k]] / 255.0,
+                               atol=1e-6)
+    np.testing.assert_allclose(mx, k, atol=1e-3)
+    np.testing.assert_allclose(my, 0.0, atol=1e-3)
+
+
 def test_node_poses_are_checked() -> None:
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
 

@@ -380,8 +380,10 @@ class Adapter(_BaseAdapter[SceneFrame]):
             buffers["specular"] = np.where(g.depth > 0.0, np.float32(PYRENDER_SPECULAR), np.float32(0.0))
         if temporal:
             prev_pose = _pose(prev_pose, "prev_pose")
+            prev_projection = self.projection(scene, prev_cam)  # (an orthographic one's depth comes from it)
             buffers.update(view=np.linalg.inv(pose), projection=self.projection(scene, cam),
-                           prev_view_projection=self.projection(scene, prev_cam) @ np.linalg.inv(prev_pose))
+                           prev_view_projection=prev_projection @ np.linalg.inv(prev_pose),
+                           prev_projection=prev_projection)
             if reproj:
                 buffers["prev_colour"] = self._frame(prev_colour, "prev_colour")
                 if prev_depth is None:
@@ -466,7 +468,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
             where = pixels & (depth > 0)
             if not where.any():
                 continue
-            qx, qy, cw = reproject_positions(depth, view, proj, vp)  # (GL window coordinates, y up)
+            # (GL window coordinates, y up)
+            qx, qy, cw = reproject_positions(depth, view, proj, vp, prev_proj=buffers["prev_projection"])
             mx = np.where(cw > 0, qx - xs, -xs - 1.0)  # (behind the previous camera: off the frame, unseen)
             my = np.where(cw > 0, (h - qy) - ys, 0.0)
             motion[where] = np.stack([mx, my], -1)[where]

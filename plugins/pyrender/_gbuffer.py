@@ -51,13 +51,25 @@ _SLOTS = {"normal.x": 1, "normal.y": 2, "normal.z": 3, "roughness": 4, "metallic
 MATERIAL = ("roughness", "metallic")
 
 
+def orthographic_depth(depth: np.ndarray, camera: Any) -> np.ndarray:
+    """An orthographic camera's linear depth from what pyrender's read-back gives for it. pyrender linearises its
+    depth buffer as a perspective camera's whatever the camera (``Renderer._read_main_framebuffer``: ``d = 2 n f /
+    (f + n - z (f - n))`` of the NDC depth ``z``); an orthographic camera's depth is ``((f - n) z + f + n) / 2``,
+    that is ``n + f - n f / d``. Background (0) stays 0."""
+    near, far = float(camera.znear), float(camera.zfar)
+    geometry = depth > 0.0
+    out = np.zeros(depth.shape, np.float32)
+    out[geometry] = near + far - near * far / depth[geometry].astype(np.float64)
+    return out
+
+
 @dataclass
 class GBuffers:
     """One view's G-buffers. Arrays are float32, row-major ``(H, W[, C])``, top-left origin; 0 on
     background.
 
     * ``depth`` ``(H, W)``: linear view depth in scene units (distance along -Z), from pyrender's
-      24-bit depth buffer.
+      24-bit depth buffer (an orthographic camera's as such: :func:`orthographic_depth`).
     * ``albedo`` ``(H, W, 3)`` or None: base colour, display-encoded sRGB in [0, 1].
     * ``normal`` ``(H, W, 3)`` or None: unit view-space normal (components not asked for are 0).
     * ``roughness``, ``metallic`` ``(H, W)`` or None: the material's perceptual roughness and
@@ -249,8 +261,9 @@ class GBufferRenderer:
         """pyrender's own ``render(scene, flags, seg_node_map)`` on this renderer (no G-buffer patch), with
         pyrender's errors turned into :class:`PyrenderAdapterError`."""
         renderer = self.renderer
+        flags = self._pyrender.RenderFlags.NONE if flags is None else flags
         try:
-            return renderer.render(scene, self._pyrender.RenderFlags.NONE if flags is None else flags, seg_node_map)
+            out = renderer.render(scene, flags, seg_node_map)
         except ValueError as exc:
             if "already bound to a context" in str(exc):
                 raise PyrenderAdapterError(
@@ -261,6 +274,12 @@ class GBufferRenderer:
             raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
         except Exception as exc:
             raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
+        camera = scene.main_camera_node.camera
+        if not isinstance(camera, self._pyrender.OrthographicCamera) or flags & self._pyrender.RenderFlags.SEG:
+            return out
+        if flags & self._pyrender.RenderFlags.DEPTH_ONLY:
+            return orthographic_depth(out, camera)
+        return out[0], orthographic_depth(out[1], camera)
 
     def _render(self, scene: Any, defines: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
         inner = self.renderer._renderer
