@@ -597,12 +597,16 @@ def _overlay_absurd(v: tuple[ArraySpec, ArraySpec, Any, Any], out: np.ndarray) -
 
 _VIEW = np.eye(4)
 _PROJ = np.array([[1.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]])
+#: glOrtho of a box 8 x 6 wide, near 1, far 51: the reprojection takes it as it takes _PROJ.
+_ORTHO = np.array([[0.25, 0, 0, 0], [0, 1 / 3, 0, 0], [0, 0, -0.04, -1.04], [0, 0, 0, 1.0]])
 _REPROJ_VALID: dict[str, Any] = {"prev_colour": np.full((6, 8, 3), 0.5), "prev_depth": np.full((6, 8), 2.0),
                                  "depth": np.full((6, 8), 2.0), "cur_view": _VIEW, "cur_proj": _PROJ,
-                                 "prev_view_proj": _PROJ, "tolerance": 0.02, "motion": None}
+                                 "prev_view_proj": _PROJ, "tolerance": 0.02, "motion": None, "prev_proj": None}
 
 
 def _reproject_value(v: Any, base: Any) -> Any:
+    if isinstance(v, tuple) and len(v) == 2 and v[0] == "matrix":
+        return v[1]
     if isinstance(v, tuple) and len(v) == 3 and isinstance(v[1], tuple):
         return _array(v)
     if v == "scaled":
@@ -613,7 +617,8 @@ def _reproject_value(v: Any, base: Any) -> Any:
 reprojections = st.builds(
     lambda key, v: (key, v),
     st.sampled_from(list(_REPROJ_VALID)),
-    st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none()),
+    st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none(),
+              st.deferred(lambda: projections)),
 )
 
 
@@ -646,7 +651,9 @@ _ENTRIES = st.sampled_from([0.0, 0.0, 0.0, 1.0, -1.0, 0.5, -0.2002, -1.002, 2.0,
 projections = st.one_of(
     _arrays(st.integers(0, 5), 3),
     st.lists(_ENTRIES, min_size=16, max_size=16).map(lambda v: ("matrix", np.reshape(v, (4, 4)))),
-    st.sampled_from([_PROJ, _PROJ.T, _PROJ @ np.diag([1.0, 1.0, -1.0, 1.0])]).map(lambda m: ("matrix", m)),
+    st.sampled_from([_PROJ, _PROJ.T, _PROJ @ np.diag([1.0, 1.0, -1.0, 1.0]), _ORTHO, _ORTHO.T,
+                     np.diag([1.0, -1.0, 1.0, 1.0]) @ _ORTHO, _ORTHO @ np.diag([1.0, 1.0, -1.0, 1.0])],
+                    ).map(lambda m: ("matrix", m)),
     json_scalars,
 )
 
@@ -1032,6 +1039,10 @@ def targets() -> list[Target]:
                lambda _v, out: not (isinstance(out, list) and all(isinstance(w, str) and w for w in out))),
         Target("check_projection", projections, lambda v: sdk.check_projection(_projection_value(v)),
                _projection_absurd),
+        Target("check_reprojection", st.tuples(projections, projections, st.one_of(st.none(), projections)),
+               lambda v: sdk.check_reprojection(*(None if p is None else _projection_value(p) for p in v)),
+               lambda _v, kinds: not (isinstance(kinds, tuple) and len(kinds) == 2
+                                      and all(k in sdk.CAMERA_KINDS for k in kinds))),
         Target("fetch_from_motion", st.tuples(_arrays(st.integers(0, 6), 3), _arrays(st.integers(0, 6), 3)),
                lambda v: sdk.fetch_from_motion(_array(v[0]), _array(v[1])), _fetch_absurd),
         Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),
