@@ -57,8 +57,10 @@ GBUFFERS: Mapping[str, tuple[str, str]] = {
     "emissive": ("(H, W)", "emissive luminance, display-encoded, in [0, 1]"),
     "view": ("4x4", "this frame's world-to-view matrix (column vectors)"),
     "projection": ("4x4", "this frame's view-to-clip matrix (OpenGL clip space)"),
-    "prev_colour": ("(H, W, 3)", "the previous displayed frame, display-encoded (tone-mapped sRGB) in [0, 1]"),
-    "prev_depth": ("(H, W)", "the previous frame's linear view depth, >= 0; 0 on background"),
+    "prev_colour": ("(H', W', 3)", "the previous displayed frame, display-encoded (tone-mapped sRGB) in [0, 1], at "
+                                   "prev_depth's size"),
+    "prev_depth": ("(H', W')", "the previous frame's linear view depth, >= 0; 0 on background; at the previous "
+                               "frame's render resolution (H, W, or another where dynamic resolution changed it)"),
     "prev_view_projection": ("4x4", "the previous frame's world-to-clip matrix"),
     "prev_projection": ("4x4", "the previous frame's view-to-clip matrix, where it differs from projection: it "
                                "linearises a window prev_depth, and gives an orthographic previous camera's depth"),
@@ -129,8 +131,8 @@ def _resolution_hint(name: str, shape: tuple[int, ...], size: tuple[int, int]) -
     if abs(sy / sx - 1.0) > 0.02 or abs(sy - 1.0) < 0.05:
         return ""
     if name == "prev_colour" and sy > 1.0:
-        return (f" (the frame at {sy:.3g}x the G-buffers' size: the displayed frame of an upscaler (DLSS, FSR, XeSS)? "
-                f"the planes are at the render resolution the G-buffers and the shading rates have: downsample it)")
+        return (f" (the frame at {sy:.3g}x prev_depth's size: the displayed frame of an upscaler (DLSS, FSR, XeSS)? "
+                f"the previous frame is taken at its render resolution, its depth's: downsample it)")
     return f" (at {sy:.3g}x depth's size: every G-buffer at the render resolution, the depth's)"
 
 
@@ -272,7 +274,11 @@ def input_planes(
     limit = 1.0 if window else np.inf
     d = _buffer("depth", depth, None, limit)
     size = (int(d.shape[0]), int(d.shape[1]))
-    g = {b: _buffer(b, given[b], size, limit) for b in needed if b != "depth"}
+    # The previous frame is at its own render resolution (dynamic resolution may have changed it): prev_depth's
+    # size is the previous frame's, prev_colour's must be the same.
+    g = {"prev_depth": _buffer("prev_depth", given["prev_depth"], None, limit)} if "prev_depth" in needed else {}
+    sizes = {"prev_colour": g["prev_depth"].shape if g else size}
+    g.update({b: _buffer(b, given[b], sizes.get(b, size), limit) for b in needed if b not in ("depth", *g)})
     for b in ("motion", "prev_projection"):  # (optional: looked at only where they are used)
         if given[b] is not None and _reprojects(names) and b not in g:
             g[b] = _buffer(b, given[b], size if b == "motion" else None)

@@ -21,8 +21,9 @@ Algorithm, per current pixel:
    becomes a direction at infinity (``w = 0``), so the sky reprojects by camera rotation only; an
    orthographic camera has no point at infinity in view, and its background is the far plane's point.
 2. Project it with the previous view-projection. If it lands behind the previous camera (an expected
-   previous depth ``<= 0``: a perspective's clip ``w``) or outside ``[0, W) x [0, H)``, the pixel is
-   unseen.
+   previous depth ``<= 0``: a perspective's clip ``w``) or outside ``[0, W') x [0, H')``, the pixel is
+   unseen. ``(H', W')`` is the previous frame's size, its render resolution: the current one's, or
+   another where the engine's dynamic resolution changed it (the same NDC position, other pixels).
 3. Fetch the **nearest** previous texel (no filtering: colours are never blended across an edge,
    and the result is exactly the previous colour under a static camera).
 4. Depth test. The expected previous depth is the previous linear depth of the point: a perspective
@@ -238,6 +239,7 @@ def reproject_positions(
     prev_view_proj: np.ndarray,
     *,
     prev_proj: np.ndarray | None = None,
+    prev_shape: tuple[int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where every current pixel was in the previous frame.
 
@@ -248,16 +250,28 @@ def reproject_positions(
         prev_view_proj: previous world-to-clip matrix.
         prev_proj: the previous view-to-clip matrix, read only where the previous camera is orthographic
             (its depth comes from its clip z through this); ``cur_proj`` where None.
+        prev_shape: the previous frame's ``(H', W')`` where its render resolution differs (dynamic
+            resolution); ``depth``'s where None.
 
     Returns:
         ``(qx, qy, d)``, each ``(H, W)`` float64: the previous position in OpenGL window
-        coordinates (pixels, origin at the BOTTOM-left corner of the frame, as the shader sees it;
-        the top-left row is ``H - qy``) and the expected previous linear depth (a perspective previous
+        coordinates of the previous frame (its pixels, origin at the BOTTOM-left corner of the frame, as
+        the shader sees it; the top-left row is ``H' - qy``) and the expected previous linear depth (a perspective previous
         camera's clip ``w``); ``d <= 0`` where the point was behind the previous camera (only its sign
         matters for background).
     """
     cameras = _checked(cur_view, cur_proj, prev_view_proj, prev_proj)
-    return _positions(_depth(depth, "depth"), *cameras)
+    return _positions(_depth(depth, "depth"), *cameras, None if prev_shape is None else _shape(prev_shape))
+
+
+def _shape(shape: object) -> tuple[int, int]:
+    """A frame's ``(H, W)``, two positive integers, or a typed error."""
+    ok = (isinstance(shape, (tuple, list)) and len(shape) == 2
+          and all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_)) and n > 0 for n in shape))
+    if not ok:
+        raise ParameterError(f"prev_shape: expected the previous frame's (H, W), two positive integers, got "
+                             f"{shape!r}", "prev_shape")
+    return int(shape[0]), int(shape[1])  # type: ignore[index]
 
 
 def _checked(cur_view: Any, cur_proj: Any, prev_view_proj: Any, prev_proj: Any,
@@ -328,12 +342,13 @@ def _affine(a0: float, xs: np.ndarray, a1: float, ys: np.ndarray, c: float) -> A
 
 
 def _positions(depth: np.ndarray, cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
-               prev_depth_proj: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               prev_depth_proj: np.ndarray | None = None, prev_shape: tuple[int, int] | None = None,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`reproject_positions` of arrays already checked (finite, ``depth`` (H, W) >= 0, 4x4 matrices through
     :func:`_cameras`, whose result ``prev_depth_proj`` is), float32 or float64 alike (each float32 value is a
     float64 exactly, and the arithmetic is float64)."""
     h, w = depth.shape
-    cams = _transforms(cur_view, cur_proj, prev_vp, prev_depth_proj)
+    cams = _transforms(cur_view, cur_proj, prev_vp, prev_depth_proj, prev_shape or (h, w))
     qx, qy, cw = np.empty((h, w)), np.empty((h, w)), np.empty((h, w))
 
     def band(r0: int, r1: int) -> None:
@@ -348,10 +363,11 @@ class _Transforms(NamedTuple):
     m: np.ndarray  # the current view space to the previous clip space
     orthographic: bool  # the current camera's kind: pixels on parallel lines, not rays from a centre
     depth_rows: np.ndarray | None  # an orthographic previous camera: (numerator, denominator) of its depth
+    prev_shape: tuple[int, int]  # the previous frame's (H, W): its render resolution, the positions' pixels
 
 
 def _transforms(cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
-                prev_depth_proj: np.ndarray | None) -> _Transforms:
+                prev_depth_proj: np.ndarray | None, prev_shape: tuple[int, int]) -> _Transforms:
     """The current projection's inverse, the matrix from the current view space to the previous clip space and,
     for an orthographic previous camera (``prev_depth_proj`` its projection), the two rows over current view
     points whose quotient is the previous view depth (the previous view point's ``-z`` over its ``w``)."""
@@ -361,7 +377,7 @@ def _transforms(cur_view: np.ndarray, cur_proj: np.ndarray, prev_vp: np.ndarray,
     if prev_depth_proj is not None:
         inv_prev = _inverse(prev_depth_proj, "prev_proj")
         rows = np.stack([-(inv_prev[2] @ m), inv_prev[3] @ m])
-    return _Transforms(inv_proj, m, not _w_row(cur_proj[3]), rows)
+    return _Transforms(inv_proj, m, not _w_row(cur_proj[3]), rows, prev_shape)
 
 
 def _band_positions(depth: np.ndarray, r0: int, h: int, w: int, cams: _Transforms,
@@ -375,8 +391,9 @@ def _band_positions(depth: np.ndarray, r0: int, h: int, w: int, cams: _Transform
     m = cams.m
     cx, cy, cw = dot(m[0]), dot(m[1]), dot(m[3])
     safe = np.where(cw > 0.0, cw, 1.0)
-    qx = (cx / safe * 0.5 + 0.5) * w
-    qy = (cy / safe * 0.5 + 0.5) * h
+    ph, pw = cams.prev_shape  # (the previous frame's pixels: its render resolution may differ)
+    qx = (cx / safe * 0.5 + 0.5) * pw
+    qy = (cy / safe * 0.5 + 0.5) * ph
     if cams.depth_rows is None:
         return qx, qy, cw  # a perspective's clip w is the previous linear depth
     num, den = dot(cams.depth_rows[0]), dot(cams.depth_rows[1])
@@ -448,8 +465,9 @@ def reproject(
     """Fetch the previous frame's colour where each current pixel was, with a disocclusion test.
 
     Args:
-        prev_colour: ``(H, W, C)`` (or ``(H, W)``) previous final colour, display-encoded, top-left.
-        prev_depth: ``(H, W)`` previous linear depth (0 = background).
+        prev_colour: ``(H', W', C)`` (or ``(H', W')``) previous final colour, display-encoded, top-left.
+        prev_depth: ``(H', W')`` previous linear depth (0 = background). ``(H', W')`` is the previous
+            frame's render resolution: ``(H, W)``, or another where the engine's dynamic resolution changed it.
         depth: ``(H, W)`` current linear depth (0 = background).
         cur_view: current 4x4 world-to-view matrix (``Camera.view()``).
         cur_proj: current 4x4 OpenGL projection (``Camera.projection(W / H)``), perspective or orthographic
@@ -457,7 +475,8 @@ def reproject(
         prev_view_proj: previous 4x4 world-to-clip matrix (``prev_camera.view_projection(W, H)``).
         tolerance: relative depth tolerance (default 0.02, i.e. 2 % of the expected depth).
         motion: the engine's motion vectors, ``(H, W, 2)``: each pixel's previous minus current position
-            in pixels (x right, y down), objects' own motion included. Where given, a geometry pixel is
+            in this frame's pixels (x right, y down; a UV motion times ``(W, H)``), objects' own motion
+            included. Where given, a geometry pixel is
             fetched from there instead of from where the camera's move alone puts it (the matrices: a
             static scene), and its depth is tested against the depth the camera's move gives it (an
             object moving in depth by more than ``tolerance`` in a frame is unseen); background pixels
@@ -466,19 +485,18 @@ def reproject(
             clip z to its linear depth); ``cur_proj`` where None (the same near and far planes).
 
     Returns:
-        ``(reprojected, seen)``: ``reprojected`` has ``prev_colour``'s shape, float32, 0 where
-        unseen; ``seen`` is ``(H, W)`` float32 in {0, 1}. See the module docstring for the rules.
+        ``(reprojected, seen)``: ``reprojected`` is ``(H, W[, C])`` (``depth``'s size, ``prev_colour``'s
+        channels), float32, 0 where unseen; ``seen`` is ``(H, W)`` float32 in {0, 1}. See the module
+        docstring for the rules.
     """
     tolerance = _tolerance(tolerance)
     depth = _depth(depth, "depth")
-    prev_depth = _depth(prev_depth, "prev_depth")
-    if prev_depth.shape != depth.shape:
-        raise InputShapeError(f"depth and prev_depth must both be (H, W); got {depth.shape} and {prev_depth.shape}",
-                              tuple(prev_depth.shape), str(depth.shape))
+    prev_depth = _depth(prev_depth, "prev_depth")  # (its own size: the previous frame's render resolution)
     colour = _real(prev_colour, "prev_colour")
-    if colour.ndim not in (2, 3) or colour.shape[:2] != depth.shape:
-        raise InputShapeError(f"prev_colour must be (H, W[, C]) with (H, W) = {depth.shape}; got {colour.shape}",
-                              tuple(colour.shape), f"({depth.shape[0]}, {depth.shape[1]}[, C])")
+    if colour.ndim not in (2, 3) or colour.shape[:2] != prev_depth.shape:
+        raise InputShapeError(f"prev_colour must be (H', W'[, C]) with (H', W') = {prev_depth.shape}, prev_depth's "
+                              f"(the previous frame's render resolution); got {colour.shape}", tuple(colour.shape),
+                              f"({prev_depth.shape[0]}, {prev_depth.shape[1]}[, C])")
     if motion is not None:
         motion = _real(motion, "motion")
         if motion.shape != (*depth.shape, 2):
@@ -495,9 +513,9 @@ def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarra
     """:func:`reproject` of arrays already checked (``input_planes`` checks its G-buffers once, not twice; the
     matrices through :func:`_cameras`, whose result ``prev_depth_proj`` is)."""
     h, w = depth.shape
-    cams = _transforms(cur_view, cur_proj, prev_vp, prev_depth_proj)
-    colours = prev_colour.reshape(h * w, -1)
-    out = np.empty(colours.shape, np.float32)
+    cams = _transforms(cur_view, cur_proj, prev_vp, prev_depth_proj, prev_depth.shape)
+    colours = prev_colour.reshape(prev_depth.size, -1)
+    out = np.empty((h * w, colours.shape[1]), np.float32)
     seen = np.empty((h, w), np.float32)
     flat_depth = prev_depth.ravel()
 
@@ -506,7 +524,7 @@ def _reproject(prev_colour: np.ndarray, prev_depth: np.ndarray, depth: np.ndarra
                                       None if motion is None else motion[r0:r1], out[r0 * w:r1 * w])
 
     _in_bands(h, w, band)
-    return out.reshape(prev_colour.shape), seen
+    return out.reshape(depth.shape + prev_colour.shape[2:]), seen
 
 
 def _band_reproject(colours: np.ndarray, flat_depth: np.ndarray, depth: np.ndarray, r0: int, h: int, w: int,
@@ -515,21 +533,23 @@ def _band_reproject(colours: np.ndarray, flat_depth: np.ndarray, depth: np.ndarr
     their ``seen`` (bool). ``colours`` and ``flat_depth`` are the whole previous frame's, raveled."""
     qx, qy, cw = _band_positions(depth, r0, h, w, cams)
     geometry = depth > 0.0
+    ph, pw = cams.prev_shape
     if motion is not None:  # the engine's motion vectors place geometry; the expected depth stays the camera's
-        qx = np.where(geometry, (np.arange(w, dtype=np.float64) + 0.5)[None, :] + motion[..., 0], qx)
-        qy = np.where(geometry, (h - (np.arange(r0, r0 + depth.shape[0], dtype=np.float64) + 0.5))[:, None]
-                      - motion[..., 1], qy)
-    on = (cw > 0.0) & (qx >= 0.0) & (qx < w) & (qy >= 0.0) & (qy < h)
+        # (in this frame's pixels, as its UV times its size: the previous frame's are pw / w of them)
+        qx = np.where(geometry, ((np.arange(w, dtype=np.float64) + 0.5)[None, :] + motion[..., 0]) * (pw / w), qx)
+        qy = np.where(geometry, ((h - (np.arange(r0, r0 + depth.shape[0], dtype=np.float64) + 0.5))[:, None]
+                                 - motion[..., 1]) * (ph / h), qy)
+    on = (cw > 0.0) & (qx >= 0.0) & (qx < pw) & (qy >= 0.0) & (qy < ph)
     qx = np.where(on, qx, 0.5)
     qy = np.where(on, qy, 0.5)
 
     def rows(gl_y: np.ndarray) -> np.ndarray:  # GL row index -> top-left row index
-        return h - 1 - gl_y
+        return ph - 1 - gl_y
 
     # gathers through flat indices into the raveled frames (2-3x faster than 2-D fancy indexing)
     ix = np.floor(qx).astype(np.intp)
     iy = np.floor(qy).astype(np.intp)
-    nearest = rows(iy) * w + ix
+    nearest = rows(iy) * pw + ix
     pd = flat_depth.take(nearest)
     exp_d = cw
     near_ok = (pd > 0.0) & (np.abs(pd - exp_d) <= tolerance * exp_d)
@@ -542,8 +562,8 @@ def _band_reproject(colours: np.ndarray, flat_depth: np.ndarray, depth: np.ndarr
         fx, fy = qx.ravel()[grazing] - 0.5, qy.ravel()[grazing] - 0.5
         ox, oy = np.floor(fx).astype(np.intp), np.floor(fy).astype(np.intp)
         tx, ty = fx - ox, fy - oy
-        x0, x1 = np.clip(ox, 0, w - 1), np.clip(ox + 1, 0, w - 1)
-        y0, y1 = rows(np.clip(oy, 0, h - 1)) * w, rows(np.clip(oy + 1, 0, h - 1)) * w
+        x0, x1 = np.clip(ox, 0, pw - 1), np.clip(ox + 1, 0, pw - 1)
+        y0, y1 = rows(np.clip(oy, 0, ph - 1)) * pw, rows(np.clip(oy + 1, 0, ph - 1)) * pw
         d00, d10 = flat_depth.take(y0 + x0), flat_depth.take(y0 + x1)
         d01, d11 = flat_depth.take(y1 + x0), flat_depth.take(y1 + x1)
         full = np.minimum(np.minimum(d00, d10), np.minimum(d01, d11)) > 0.0

@@ -640,7 +640,8 @@ def _reproject_absurd(v: tuple[str, Any], result: tuple[np.ndarray, np.ndarray])
     return bool(
         tol is None or not 0.0 <= tol <= 1.0 or not depths_ok
         or not np.isfinite(out).all() or not set(np.unique(seen).tolist()) <= {0.0, 1.0}
-        or out.shape != np.asarray(kw["prev_colour"]).shape
+        or out.shape != (*np.shape(kw["depth"]), *np.shape(kw["prev_colour"])[2:])  # (this frame's size)
+        or seen.shape != np.shape(kw["depth"])
     )
 
 

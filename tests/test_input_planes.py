@@ -518,7 +518,7 @@ def test_a_gbuffer_at_another_resolution_is_named_with_its_likely_cause() -> Non
     """An upscaler's displayed frame (1.5x the render resolution) as prev_colour: the error says to give it at the
     G-buffers' resolution; a half-resolution albedo says every G-buffer is at the depth's."""
     g = _frame(20, 30)
-    with pytest.raises(sdk.InputShapeError, match=r"prev_colour: .*1\.5x the G-buffers' size: the displayed frame "
+    with pytest.raises(sdk.InputShapeError, match=r"prev_colour: .*1\.5x prev_depth's size: the displayed frame "
                                                   r"of an upscaler \(DLSS, FSR, XeSS\)\?"):
         sdk.input_planes(["seen"], **{**g, "prev_colour": np.zeros((30, 45, 3))})
     with pytest.raises(sdk.InputShapeError, match=r"albedo: .*at 0\.5x depth's size: every G-buffer at the render"):

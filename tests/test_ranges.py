@@ -153,8 +153,9 @@ CASES: list[tuple[str, Callable[[], Any], type[Exception], str]] = [
                                                            _I, _I, tolerance="a"), sdk.ParameterError, "[0, 1]"),  # type: ignore[arg-type]
     ("reproject tolerance inf", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.ones((4, 4)), _I, _I,
                                                       _I, tolerance=math.inf), sdk.ParameterError, "[0, 1]"),
-    ("reproject shapes differ", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.ones((4, 5)), _I, _I,
-                                                      _I), sdk.InputShapeError, "(H, W)"),
+    # (the previous frame may be of another size than this one, dynamic resolution's; its colour and depth not)
+    ("reproject shapes differ", lambda: sdk.reproject(np.zeros((4, 5, 3)), np.ones((4, 4)), np.ones((4, 5)), _I, _I,
+                                                      _I), sdk.InputShapeError, "prev_depth's"),
     ("reproject NaN depth", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), np.full((4, 4), np.nan), _I,
                                                   _I, _I), sdk.NonFiniteInputError, "depth"),
     ("reproject negative depth", lambda: sdk.reproject(np.zeros((4, 4, 3)), np.ones((4, 4)), -np.ones((4, 4)), _I, _I,

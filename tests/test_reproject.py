@@ -360,3 +360,73 @@ def test_callers_on_several_threads_share_the_pool(monkeypatch: pytest.MonkeyPat
         np.testing.assert_array_equal(colour, alone[i % 6][0])
         np.testing.assert_array_equal(seen, alone[i % 6][1])
     assert len({a[1].tobytes() for a in alone}) == 6  # (six different frames: a mix-up would show)
+
+
+def _resized_frames(scale: int, up: bool) -> dict[str, Any]:
+    """A still camera over a bumpy wall with holes of sky, the previous frame ``scale`` times as large (``up``) or as
+    small as this one in each axis, as dynamic resolution leaves it: each of its texels shows the point of the wall
+    the pixel of the other frame it falls in shows."""
+    rng = np.random.default_rng(31)
+    cam = Camera((0.0, 1.0, 0.0), yaw=5.0, pitch=-3.0)
+    small = (6.0 + rng.uniform(-0.05, 0.05, (H, W)) + np.linspace(0, 3, W)[None, :]).astype(np.float32)
+    small[rng.random((H, W)) < 0.05] = 0.0
+    large = np.repeat(np.repeat(small, scale, 0), scale, 1)
+    depth, prev_depth = (small, large) if up else (large, small)
+    ph, pw = prev_depth.shape
+    return {"prev_colour": rng.uniform(0.05, 1, (ph, pw, 3)).astype(np.float32), "prev_depth": prev_depth,
+            "depth": depth, "view": cam.view(), "projection": cam.projection(W / H),
+            "prev_view_projection": cam.view_projection(W, H)}
+
+
+@pytest.mark.parametrize("up", [True, False])
+def test_a_previous_frame_at_another_render_resolution_reprojects(up: bool) -> None:
+    """Dynamic resolution: the previous frame at its own render resolution, three times this one's or a third of it.
+    A still camera fetches each pixel from the texel of the previous frame its centre falls in (the middle one of its
+    3x3, or the one it is a ninth of), seen; with the engine's motion vectors (in this frame's pixels) one pixel
+    right, from three previous texels right (or one, every third pixel). The planes are this frame's size."""
+    f = _resized_frames(3, up)
+    args = [f[n] for n in ("prev_colour", "prev_depth", "depth", "view", "projection", "prev_view_projection")]
+    colour, seen = sdk.reproject(*args)
+    h, w = f["depth"].shape
+    want = f["prev_colour"][1::3, 1::3] if up else np.repeat(np.repeat(f["prev_colour"], 3, 0), 3, 1)
+    assert colour.shape == (h, w, 3) and seen.shape == (h, w)
+    assert (seen == 1).all()
+    np.testing.assert_array_equal(colour, want)
+    qx, qy, _ = sdk.reproject_positions(*args[2:], prev_shape=f["prev_depth"].shape)
+    ratio = f["prev_depth"].shape[1] / w
+    np.testing.assert_allclose(qx, (np.arange(w) + 0.5)[None, :] * ratio + 0 * qy, rtol=1e-9)
+    motion = np.zeros((h, w, 2), np.float32)
+    motion[..., 0] = 1.0
+    moved, seen_moved = sdk.reproject(*args, motion=motion)
+    wall = (seen_moved == 1) & (f["depth"] > 0)  # (the motion vectors move geometry; the sky follows the camera)
+    if up:  # the texel three on, where the frame holds it and the wall is there
+        inside = wall[:, :-1]
+        assert inside.mean() > 0.8
+        np.testing.assert_array_equal(moved[:, :-1][inside], f["prev_colour"][1::3, 4::3][inside])
+    else:  # the previous texel of the pixel one on
+        inside = wall[:, :-1]
+        assert inside.mean() > 0.8
+        np.testing.assert_array_equal(moved[:, :-1][inside], want[:, 1:][inside])
+    planes = sdk.input_planes(["seen", "reprojected.g", "reprojected.y.blocks"], **f)
+    assert planes.shape == (3, h, w)
+    np.testing.assert_array_equal(planes[1], colour[..., 1])
+    with pytest.raises(sdk.InputShapeError, match=r"prev_colour: expected shape .* at prev_depth's size"):
+        sdk.input_planes(["seen"], **{**f, "prev_colour": np.zeros((h, w, 3), np.float32) if not up
+                                      else np.zeros((h + 1, w, 3), np.float32)})
+    with pytest.raises(sdk.InputShapeError, match=r"prev_colour must be \(H', W'\[, C\]\)"):
+        sdk.reproject(np.zeros((h + 1, w, 3)), *args[1:])
+    for bad in ((0, 5), (2.5, 3), "12x8", (True, 3), (4,)):
+        with pytest.raises(sdk.ParameterError, match="prev_shape"):
+            sdk.reproject_positions(*args[2:], prev_shape=bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["perspective", "orthographic off-centre"])
+def test_positions_in_a_previous_frame_of_another_size_are_the_same_places(name: str) -> None:
+    """The previous frame's pixels at another size are the same places in it: positions scaled by the sizes' ratio."""
+    f = _frames(8)
+    *_, depth, view, proj, prev_vp = _args(f, name)
+    same = sdk.reproject_positions(depth, view, proj, prev_vp)
+    other = sdk.reproject_positions(depth, view, proj, prev_vp, prev_shape=(2 * H + 1, 3 * W))
+    np.testing.assert_allclose(other[0], same[0] * 3, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(other[1], same[1] * (2 * H + 1) / H, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(other[2], same[2])
