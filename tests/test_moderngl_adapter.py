@@ -435,6 +435,37 @@ def test_an_orthographic_camera_reprojects_on_the_gpu_as_in_the_sdk(frames, shif
         assert (got[1][:, :w - k] == 1).all() and got[1].mean() < 1.0
 
 
+@pytest.mark.parametrize("up", [True, False])
+def test_a_previous_frame_at_another_render_resolution_on_the_gpu(frames, up: bool) -> None:
+    """Dynamic resolution: prev_colour and prev_depth textures at the previous frame's size (three times this one's,
+    or a third), reprojected by the shader as by sdk.input_planes, with and without the engine's motion vectors;
+    a prev_colour of another size than prev_depth is named."""
+    from .test_reproject import _resized_frames
+
+    ctx = frames[0]
+    g = _resized_frames(3, up)
+    h, w = g["depth"].shape
+    motion = np.zeros((h, w, 2), np.float32)
+    motion[..., 0] = 1.0
+    channels = ("reprojected.r", "seen", "reprojected.y", "reprojected.b")
+    zeros = np.zeros((h, w, 3), np.float32)
+    frame = GBufferTextures(albedo=_tex(ctx, zeros), normal=_tex(ctx, zeros), depth=_tex(ctx, g["depth"]),
+                            view=g["view"], projection=g["projection"], prev_colour=_tex(ctx, g["prev_colour"]),
+                            prev_depth=_tex(ctx, g["prev_depth"]), prev_view_projection=g["prev_view_projection"])
+    with Adapter(channels, w, h, ctx=ctx) as a:
+        got = a.inputs(frame)
+        moved = a.inputs(replace(frame, motion=_tex(ctx, motion)))
+        with pytest.raises(sdk.ParameterError, match="prev_colour: expected a texture of prev_depth's size"):
+            a.inputs(replace(frame, prev_colour=_tex(ctx, zeros[:-1])))
+    still = sdk.input_planes(channels, **g)
+    np.testing.assert_array_equal(got[1], still[1])
+    np.testing.assert_allclose(got, still, atol=1e-6)  # (the shader's luma in float32)
+    assert (got[1] == 1).all()
+    want = sdk.input_planes(channels, **g, motion=motion)
+    np.testing.assert_array_equal(moved[1], want[1])
+    np.testing.assert_allclose(moved, want, atol=1e-6)
+
+
 def test_check_names_convention_mistakes_in_the_engines_textures(frames) -> None:
     """Adapter.check(frame): sdk.check_gbuffers on the textures read back with the adapter's options: nothing
     on the renderer's own frame; normals in an 8-bit texture's encoding, named; world-space normals to an

@@ -111,7 +111,8 @@ class GBufferTextures:
         view, projection: world-to-view and OpenGL view-to-clip of the current camera.
         prev_colour, prev_depth, prev_view_projection: the previous displayed frame, its depth
             and its camera's view-projection; needed for ``reprojected.*`` and ``seen`` (without
-            them those planes are 0).
+            them those planes are 0). The two textures are the previous frame's size, its render
+            resolution: the adapter's, or another where dynamic resolution changed it.
         prev_projection: the previous projection when it differs: it linearises a window depth and gives an
             orthographic previous camera's depth (else `projection` does).
         depth_component, prev_depth_component: the component holding depth (e.g. 3 for a
@@ -124,7 +125,7 @@ class GBufferTextures:
             reads 0.5, the glTF dielectric default, the others 0). A glTF occlusion-roughness-metallic
             texture is ``(1, 2, -1)``.
         motion: the engine's motion vectors (RG: each pixel's previous minus current position in
-            pixels, x right, y down, objects' own motion included), optional: where given, each
+            this frame's pixels, x right, y down, objects' own motion included), optional: where given, each
             geometry pixel is reprojected from there (``sdk.reproject``'s ``motion``), else the
             camera's move alone places it (a static scene).
     """
@@ -275,11 +276,16 @@ class Adapter(_AdapterBase[GBufferTextures]):
         has_prev = prev_colour is not None
         if has_prev and (prev_depth is None or prev_view_projection is None):
             raise ParameterError("prev_colour needs prev_depth and prev_view_projection as well", "prev_colour")
+        # (the previous frame at its own render resolution, as dynamic resolution leaves it: prev_depth's size)
+        import moderngl
+
+        prev_size = tuple(prev_depth.size) if has_prev and isinstance(prev_depth, moderngl.Texture) else None
         for name, tex in (("albedo", albedo), ("normal", normal), ("depth", depth), ("prev_colour", prev_colour),
                           ("prev_depth", prev_depth), ("material", material), ("motion", motion)):
             if tex is None and name in ("albedo", "normal", "depth"):
                 raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
-            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1))
+            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1),
+                                prev_size if name in ("prev_colour", "prev_depth") else None)
         view = _matrix(view, "view", invertible=True)
         projection = check_projection(_matrix(projection, "projection", invertible=True), "projection")
         if prev_view_projection is not None:
@@ -333,14 +339,16 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._set("u_inv_proj", np.linalg.inv(projection))
         self._set("u_prev_inv_proj", np.linalg.inv(projection if prev_projection is None else prev_projection))
         self._set("u_prev_vp", np.eye(4) if prev_view_projection is None else np.asarray(prev_view_projection))
+        self._set("u_prev_size", (float(self.width), float(self.height)) if prev_size is None
+                  else (float(prev_size[0]), float(prev_size[1])))
         self._set("u_ortho", kinds[0] == "orthographic")
         self._set("u_prev_ortho", kinds[1] == "orthographic")
         self._fbo.use()
         self._vao.render(vertices=3)
 
-    def _check_texture(self, tex: Any, name: str, components: int = 1) -> None:
-        """``tex``, unless None, is a moderngl texture of the adapter's size (one frame of its G-buffers)
-        with at least ``components`` components."""
+    def _check_texture(self, tex: Any, name: str, components: int = 1, size: tuple[int, int] | None = None) -> None:
+        """``tex``, unless None, is a moderngl texture of the adapter's size (one frame of its G-buffers), or of
+        ``size`` (``(width, height)``: the previous frame's), with at least ``components`` components."""
         if tex is None:
             return
         import moderngl
@@ -348,7 +356,10 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if not isinstance(tex, moderngl.Texture):
             raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got "
                                  f"{type(tex).__name__}", name)
-        if tuple(tex.size) != (self.width, self.height):
+        if size is not None and tuple(tex.size) != size:
+            raise ParameterError(f"{name}: expected a texture of prev_depth's size {size[0]}x{size[1]} (the previous "
+                                 f"frame's render resolution), got {tex.size[0]}x{tex.size[1]}", name)
+        if size is None and tuple(tex.size) != (self.width, self.height):
             raise ParameterError(f"{name}: expected a texture of the adapter's size {self.width}x{self.height}, got "
                                  f"{tex.size[0]}x{tex.size[1]}", name)
         if tex.components < components:

@@ -31,6 +31,7 @@ uniform bool u_has_prev;
 uniform sampler2D u_motion;         // the engine's motion vectors (rg: previous - current, pixels, y down)
 uniform bool u_has_motion;
 uniform vec2 u_size;
+uniform vec2 u_prev_size;           // the previous frame's size (its render resolution: dynamic resolution may change it)
 uniform mat4 u_view;                // current world -> view
 uniform mat4 u_inv_view;            // current view -> world
 uniform mat4 u_inv_proj;            // current projection, inverted
@@ -104,7 +105,7 @@ vec4 view_point(vec2 frag, float d) {
 }
 
 vec4 reproject_prev(vec2 frag, float d) {
-    ivec2 size = ivec2(u_size);
+    ivec2 size = ivec2(u_prev_size);
     vec4 pc = u_prev_vp * (u_inv_view * view_point(frag, d));
     if (pc.w <= 0.0) return vec4(0.0);
     float e = pc.w;                                // the expected previous linear depth
@@ -113,12 +114,12 @@ vec4 reproject_prev(vec2 frag, float d) {
         e = v.w > 0.0 ? -v.z / v.w : 0.0;
         if (e <= 0.0) return vec4(0.0);            // behind the previous camera
     }
-    vec2 q = (pc.xy / pc.w * 0.5 + 0.5) * u_size;  // previous GL pixel coordinates
+    vec2 q = (pc.xy / pc.w * 0.5 + 0.5) * u_prev_size;  // previous GL pixel coordinates (the previous frame's)
     if (u_has_motion && d > 0.0) {                 // the engine's motion places geometry (objects move); the
         vec2 m = texelFetch(u_motion, ivec2(frag), 0).xy;  // expected depth stays the camera's, e
-        q = frag + vec2(m.x, -m.y);
+        q = (frag + vec2(m.x, -m.y)) * (u_prev_size / u_size);  // (this frame's pixels to the previous frame's)
     }
-    if (any(lessThan(q, vec2(0.0))) || any(greaterThanEqual(q, u_size))) return vec4(0.0);
+    if (any(lessThan(q, vec2(0.0))) || any(greaterThanEqual(q, u_prev_size))) return vec4(0.0);
     ivec2 pi = ivec2(floor(q));
     float pd = prev_depth_at(pi);
     bool seen;
