@@ -213,7 +213,8 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
 
     The base class supplies the rest, for every adapter alike: channel validation
     (:class:`UnsupportedChannelError` rather than zeros in place of a missing buffer), the
-    :attr:`channels`, :attr:`width` and :attr:`height` properties, :meth:`for_predictor`, the
+    :attr:`channels`, :attr:`width` and :attr:`height` properties, :meth:`frame_size` (the size of
+    the planes of a frame: the adapter's, unless a subclass says a smaller one), :meth:`for_predictor`, the
     context manager, an idempotent :meth:`close`, :class:`AdapterClosedError` when :meth:`inputs`
     is called after close, :class:`AdapterFrameError` for a frame of the wrong type and
     :class:`AdapterOutputError` when an adapter returns something else than its contract says.
@@ -289,11 +290,18 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
     def height(self) -> int:
         return self._height
 
+    def frame_size(self, frame: FrameT) -> tuple[int, int]:
+        """``(width, height)`` of the planes :meth:`inputs` returns for ``frame``: the adapter's size. An
+        adapter whose frames may say a smaller render resolution (dynamic resolution drawn into a corner of
+        the engine's largest targets) overrides it to return that one."""
+        return self._width, self._height
+
     @abc.abstractmethod
     def inputs(self, frame: FrameT) -> np.ndarray:
         """The model's input planes for ``frame``: float32 ``(C, H, W)``, C-contiguous, top-left
         origin, one plane per entry of :attr:`channels`, in that order, with the value conventions
-        of :data:`rtp.sdk.CHANNELS`. Raises :class:`AdapterClosedError` after :meth:`close`."""
+        of :data:`rtp.sdk.CHANNELS`; ``(W, H)`` is :meth:`frame_size` (the adapter's size unless the
+        frame says a smaller one). Raises :class:`AdapterClosedError` after :meth:`close`."""
 
     @abc.abstractmethod
     def close(self) -> None:
@@ -313,7 +321,7 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
                     f"frames, got {type(frame).__module__}.{type(frame).__qualname__}"
                 )
             x = fn(self, frame, *args, **kwargs)
-            self._check_output(x)
+            self._check_output(x, self.frame_size(frame))
             return x
 
         inputs._rtp_guarded = True  # type: ignore[attr-defined]
@@ -321,8 +329,8 @@ class Adapter(_Closable, abc.ABC, Generic[FrameT]):
 
     _open_only: ClassVar[tuple[str, ...]] = ("inputs",)
 
-    def _check_output(self, x: Any) -> None:
-        expected = (len(self._channels), self._height, self._width)
+    def _check_output(self, x: Any, size: tuple[int, int]) -> None:
+        expected = (len(self._channels), size[1], size[0])
         if not isinstance(x, np.ndarray):
             problem = f"a {type(x).__name__}"
         elif x.dtype != np.float32:

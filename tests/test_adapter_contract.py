@@ -515,6 +515,28 @@ def test_an_adapter_breaking_the_output_contract_is_caught(result: Callable[[], 
     assert isinstance(info.value, sdk.RtpError) and "(1, 48, 64)" in str(info.value)
 
 
+def test_the_output_is_checked_against_the_frames_size() -> None:
+    """Adapter.frame_size(frame) is the adapter's size unless an adapter says a frame's (dynamic resolution in a
+    corner of larger targets): the planes are checked against it, so an adapter that reads the whole target where
+    the frame is smaller is caught, and one returning the frame's size passes."""
+    class Corner(NumpyAdapter):
+        def frame_size(self, frame: CpuFrame) -> tuple[int, int]:
+            return W // 2, H // 2
+
+    class Whole(Corner):
+        def inputs(self, frame: CpuFrame) -> np.ndarray:
+            return np.zeros((1, H, W), np.float32)
+
+    class Cropped(Corner):
+        def inputs(self, frame: CpuFrame) -> np.ndarray:
+            return np.zeros((1, H // 2, W // 2), np.float32)
+
+    assert NumpyAdapter(["seen"], W, H).frame_size(_cpu_frame()) == (W, H)
+    with pytest.raises(AdapterOutputError, match=rf"shape \(1, {H}, {W}\).*\(1, {H // 2}, {W // 2}\)"):
+        Whole(["seen"], W, H).inputs(_cpu_frame())
+    assert Cropped(["seen"], W, H).inputs(_cpu_frame()).shape == (1, H // 2, W // 2)
+
+
 def test_abstract_methods_are_enforced() -> None:
     class NoClose(Adapter[CpuFrame]):
         supported_channels = frozenset({"seen"})

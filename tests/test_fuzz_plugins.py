@@ -522,6 +522,10 @@ def _adapter_absurd(kw: dict[str, Any], a: Any) -> bool:
 _TEX = st.sampled_from(["albedo", "normal", "depth", "prev_colour", "prev_depth", "material", "small"])
 textures = st.one_of(_TEX, _TEX, json_scalars, st.sampled_from([object(), np.zeros((H, W, 3), np.float32)]))
 components = st.one_of(st.integers(-2, 5), hostile_numbers.filter(small_or_absurd), json_values)
+_REGION = st.one_of(st.none(), st.tuples(st.integers(1, W), st.integers(1, H)))  # a frame in the textures' corner
+_HOSTILE_REGION = st.one_of(st.tuples(st.integers(-1, 2 * W), st.integers(-1, 2 * H)),
+                            st.tuples(hostile_numbers, hostile_numbers), json_values,
+                            st.sampled_from([(2**40, 1), (4.0, 4), (True, 4), (4, 4, 4), [4, 4]]))
 gbuffer_fields = _fields(
     {
         "view": st.just("view"),
@@ -529,8 +533,12 @@ gbuffer_fields = _fields(
         "prev_view_projection": st.just("prev_vp"),
         "depth_component": st.just(0),
         "material_components": st.sampled_from([(0, 1, 2), (0, -1, 2)]),
+        "size": _REGION,
+        "prev_size": _REGION,
     },
     {
+        "size": _HOSTILE_REGION,
+        "prev_size": _HOSTILE_REGION,
         "albedo": textures,
         "normal": textures,
         "depth": textures,
@@ -594,12 +602,30 @@ def _invertible_44(value: Any) -> bool:
         return False
 
 
+def _region_of(value: Any) -> tuple[int, int] | None:
+    """A drawn ``size`` / ``prev_size`` the adapter may accept: a pair of positive integers (else None)."""
+    ok = isinstance(value, (tuple, list)) and len(value) == 2 and all(_count(v) and v >= 1 for v in value)
+    return (int(value[0]), int(value[1])) if ok else None
+
+
 def _gbuffer_absurd(kw: dict[str, Any], x: np.ndarray) -> bool:
-    """Accepted: finite planes, textures of the adapter's size ("small" is 4x4), finite invertible 4x4
-    matrices (a list holding the identity is one: it failed a run of CI that drew it)."""
+    """Accepted: finite planes of the frame's size (``size``, else the adapter's), textures of the adapter's size or
+    with ``size`` at least that large ("small" is 4x4; a previous frame's at ``prev_size``, else the two of one size),
+    finite invertible 4x4 matrices (a list holding the identity is one: it failed a run of CI that drew it)."""
+    size, prev_size = _region_of(kw.get("size")), _region_of(kw.get("prev_size"))
+    region = size or (W, H)
+    both_small = all(isinstance(kw.get(k), str) and kw[k] == "small" for k in ("prev_colour", "prev_depth"))
+
+    def fits(name: str) -> bool:  # a "small" texture in this field was rightly accepted
+        if name in ("prev_colour", "prev_depth"):  # (a corner of prev_size, else the two of one size)
+            return max(prev_size) <= 4 if prev_size is not None else both_small
+        return size is not None and max(size) <= 4
+
     return bool(
         not _finite_arrays(x)
-        or any(isinstance(v, str) and v == "small" for v in kw.values())
+        or x.shape[1:] != (region[1], region[0])
+        or (kw.get("size") is not None and size is None) or (kw.get("prev_size") is not None and prev_size is None)
+        or any(isinstance(v, str) and v == "small" and not fits(k) for k, v in kw.items())
         or any(k in kw and not isinstance(kw[k], str) and kw[k] is not None and not _invertible_44(_matrix(kw[k]))
                for k in ("view", "projection"))
     )

@@ -466,6 +466,94 @@ def test_a_previous_frame_at_another_render_resolution_on_the_gpu(frames, up: bo
     np.testing.assert_allclose(moved, want, atol=1e-6)
 
 
+def _corner(ctx: Any, image: np.ndarray, width: int, height: int, fill: float) -> Any:
+    """A ``width`` x ``height`` texture holding ``image`` (top-left origin) in its bottom-left GL corner, as a frame
+    of a lower render resolution drawn with a viewport at the origin leaves it; ``fill`` elsewhere."""
+    img = image if image.ndim == 3 else image[..., None]
+    big = np.full((height, width, img.shape[2]), fill, np.float32)
+    big[height - img.shape[0]:, : img.shape[1]] = img  # (the image's last rows are GL's first)
+    return _tex(ctx, big)
+
+
+_REGION_CHANNELS = ("reprojected.r", "seen", "reprojected.y.dx", "reprojected.y.dy", "reprojected.y.blocks",
+                    "albedo.y.tiles", "depth.edge", "normal.z", "albedo.g", "depth", "reprojected.y.tiles")
+
+
+@pytest.mark.parametrize("case", ["rendered", "prev-larger", "prev-smaller"])
+def test_a_frame_in_the_corner_of_larger_textures_gives_the_planes_of_its_size(frames, case: str) -> None:
+    """Dynamic resolution drawn into the bottom-left corner of the engine's largest targets: GBufferTextures.size
+    (and prev_size, the previous frame's corner, of another size) give, from an adapter built at the largest size,
+    the planes an adapter of the frame's size gives from textures of that size, bit for bit, whatever the rest of
+    the textures holds, neighbours' lumas (.dx, .blocks, .tiles, depth.edge) included; the same adapter then runs
+    a frame of its full size and the corner again. check() reads the corners alone."""
+    ctx, prev, cur = frames
+    if case == "rendered":
+        g = {"albedo": cur.albedo, "normal": cur.normal, "depth": cur.depth, "prev_colour": prev.colour["1x1"],
+             "prev_depth": prev.depth, "view": cur.camera.view(), "projection": cur.camera.projection(W / H),
+             "prev_view_projection": prev.camera.view_projection(W, H)}
+    else:
+        from .test_reproject import _resized_frames
+
+        g = _resized_frames(2, case == "prev-larger")
+        rng = np.random.default_rng(5)
+        shape = g["depth"].shape
+        g["albedo"] = rng.uniform(0, 1, (*shape, 3)).astype(np.float32)
+        n = rng.normal(size=(*shape, 3)) + [0.0, 0.0, 3.0]
+        g["normal"] = (n / np.linalg.norm(n, axis=-1, keepdims=True)).astype(np.float32)
+    h, w = g["depth"].shape
+    ph, pw = g["prev_depth"].shape
+    big_w, big_h = w + 37, h + 21
+    textures = {k: _tex(ctx, g[k]) for k in ("albedo", "normal", "depth", "prev_colour", "prev_depth")}
+    mats = {k: g[k] for k in ("view", "projection", "prev_view_projection")}
+    exact = GBufferTextures(**textures, **mats)
+    corners = {k: _corner(ctx, g[k], big_w, big_h, fill) for k, fill in (("albedo", 0.9), ("normal", 0.3),
+                                                                          ("depth", 0.7))}
+    corners.update({k: _corner(ctx, g[k], pw + 11, ph + 3, fill) for k, fill in (("prev_colour", 5.0),
+                                                                                ("prev_depth", 0.4))})
+    framed = GBufferTextures(**corners, **mats, size=(w, h), prev_size=(pw, ph))
+    with Adapter(_REGION_CHANNELS, w, h, ctx=ctx) as small, Adapter(_REGION_CHANNELS, big_w, big_h, ctx=ctx) as a:
+        want = small.inputs(exact)
+        got = a.inputs(framed)
+        assert a.frame_size(framed) == (w, h) and got.shape == want.shape == (len(_REGION_CHANNELS), h, w)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(a.read(5), want[5])
+        assert 0.1 < got[1].mean() and got[0].max() <= 1.0  # (seen, and no texel of the fill)
+        whole = a.inputs(replace(framed, size=None, prev_size=None, prev_colour=corners["albedo"],
+                                 prev_depth=corners["depth"]))
+        assert whole.shape == (len(_REGION_CHANNELS), big_h, big_w) and a.read(0).shape == (big_h, big_w)
+        np.testing.assert_array_equal(a.inputs(framed), want)
+        assert a.check(framed) == small.check(exact)
+
+
+def test_a_frames_size_is_checked_against_the_adapter_and_its_textures(frames) -> None:
+    """GBufferTextures.size larger than the adapter's, not a pair of positive integers, or larger than a texture of
+    the frame; prev_size larger than prev_colour or prev_depth: each a ParameterError naming the field and what was
+    expected; without size a texture of another size than the adapter's points to size."""
+    ctx, prev, cur = frames
+    frame = _engine_frame(ctx, prev, cur)
+    with Adapter(("seen", "albedo.y"), W, H, ctx=ctx) as a:
+        with pytest.raises(sdk.ParameterError, match=f"size: this frame's render resolution {W + 1}x{H} is larger "
+                                                     f"than the adapter's {W}x{H}"):
+            a.inputs(replace(frame, size=(W + 1, H)))
+        for bad in ((0, 4), (4.0, 4), (True, 4), (4, 4, 4), "ab", 7):
+            with pytest.raises(sdk.ParameterError, match=r"size: expected \(width, height\) in pixels"):
+                a.inputs(replace(frame, size=bad))
+            with pytest.raises(sdk.ParameterError, match=r"prev_size: expected \(width, height\) in pixels"):
+                a.inputs(replace(frame, prev_size=bad))
+        small = _tex(ctx, cur.albedo[: H // 2, : W // 2])
+        with pytest.raises(sdk.ParameterError, match=f"normal: expected a texture at least size {W // 2 + 1}x{H // 2} "
+                                                     r"\(the frame in its bottom-left corner\), got "
+                                                     f"{W // 2}x{H // 2}"):
+            a.inputs(replace(frame, normal=small, size=(W // 2 + 1, H // 2)))
+        with pytest.raises(sdk.ParameterError, match=f"prev_depth: expected a texture at least prev_size {W}x{H + 1}"):
+            a.inputs(replace(frame, prev_colour=_tex(ctx, np.zeros((H + 1, W, 3), np.float32)), prev_size=(W, H + 1)))
+        with pytest.raises(sdk.ParameterError, match=r"albedo: .* got 64x40 \(a frame of a lower render resolution in "
+                                                     r"the corner of larger textures: GBufferTextures.size\)"):
+            a.inputs(replace(frame, albedo=small))
+        assert a.inputs(replace(frame, albedo=small, normal=small, depth=small, prev_size=(W // 2, H // 2),
+                                size=(W // 2, H // 2))).shape == (2, H // 2, W // 2)
+
+
 def test_check_names_convention_mistakes_in_the_engines_textures(frames) -> None:
     """Adapter.check(frame): sdk.check_gbuffers on the textures read back with the adapter's options: nothing
     on the renderer's own frame; normals in an 8-bit texture's encoding, named; world-space normals to an

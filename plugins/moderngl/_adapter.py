@@ -128,6 +128,12 @@ class GBufferTextures:
             this frame's pixels, x right, y down, objects' own motion included), optional: where given, each
             geometry pixel is reprojected from there (``sdk.reproject``'s ``motion``), else the
             camera's move alone places it (a static scene).
+        size: ``(width, height)`` of this frame's render resolution where dynamic resolution draws it into
+            the bottom-left corner (a viewport at the origin) of larger textures: the current frame's
+            textures are then at least that large, the adapter's size at most, and the planes are
+            ``(C, height, width)``. None (default): the textures are the adapter's size, and so are the planes.
+        prev_size: ``(width, height)`` of the previous frame in the bottom-left corner of ``prev_colour`` and
+            ``prev_depth``, at least that large; None (default): their whole size (the two the same).
     """
 
     albedo: Any
@@ -144,6 +150,22 @@ class GBufferTextures:
     material: Any = None
     material_components: tuple[int, int, int] = (0, 1, 2)
     motion: Any = None
+    size: tuple[int, int] | None = None
+    prev_size: tuple[int, int] | None = None
+
+
+def _size(value: Any, name: str) -> tuple[int, int] | None:
+    """``value`` (None, or a pair of positive integers) as ``(width, height)``, else a :class:`ParameterError`."""
+    if value is None:
+        return None
+    try:
+        ok = len(value) == 2 and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1
+                                     for v in value)
+    except TypeError:
+        ok = False
+    if not ok:
+        raise ParameterError(f"{name}: expected (width, height) in pixels, two positive integers, got {value!r}", name)
+    return int(value[0]), int(value[1])
 
 
 class Adapter(_AdapterBase[GBufferTextures]):
@@ -239,7 +261,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         for t in self._targets:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._fbo = ctx.framebuffer(color_attachments=self._targets)
-        self._set("u_size", (float(self.width), float(self.height)))
+        self._region_drawn = (self.width, self.height)  # (the size of the last run's planes)
 
     def _set(self, name: str, value: Any) -> None:
         u = self._prog.get(name, None)  # the GLSL compiler drops uniforms a program does not use
@@ -269,6 +291,8 @@ class Adapter(_AdapterBase[GBufferTextures]):
         material: Any = None,
         material_components: tuple[int, int, int] = (0, 1, 2),
         motion: Any = None,
+        size: tuple[int, int] | None = None,
+        prev_size: tuple[int, int] | None = None,
     ) -> None:
         """Render the input planes into the adapter's targets without reading them back (the
         reference renderer's path; the keyword arguments are the fields of :class:`GBufferTextures`)."""
@@ -276,16 +300,9 @@ class Adapter(_AdapterBase[GBufferTextures]):
         has_prev = prev_colour is not None
         if has_prev and (prev_depth is None or prev_view_projection is None):
             raise ParameterError("prev_colour needs prev_depth and prev_view_projection as well", "prev_colour")
-        # (the previous frame at its own render resolution, as dynamic resolution leaves it: prev_depth's size)
-        import moderngl
-
-        prev_size = tuple(prev_depth.size) if has_prev and isinstance(prev_depth, moderngl.Texture) else None
-        for name, tex in (("albedo", albedo), ("normal", normal), ("depth", depth), ("prev_colour", prev_colour),
-                          ("prev_depth", prev_depth), ("material", material), ("motion", motion)):
-            if tex is None and name in ("albedo", "normal", "depth"):
-                raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
-            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1),
-                                prev_size if name in ("prev_colour", "prev_depth") else None)
+        region, prev_region = self._check_textures(
+            {"albedo": albedo, "normal": normal, "depth": depth, "prev_colour": prev_colour, "prev_depth": prev_depth,
+             "material": material, "motion": motion}, size, prev_size)
         view = _matrix(view, "view", invertible=True)
         projection = check_projection(_matrix(projection, "projection", invertible=True), "projection")
         if prev_view_projection is not None:
@@ -316,7 +333,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
             self._luma.run(albedo=albedo, normal=normal, depth=depth, view=view, projection=projection,
                            prev_colour=prev_colour, prev_depth=prev_depth, prev_view_projection=prev_view_projection,
                            prev_projection=prev_projection, depth_component=depth_component,
-                           prev_depth_component=prev_depth_component, motion=motion)
+                           prev_depth_component=prev_depth_component, motion=motion, size=size, prev_size=prev_size)
         textures = {"u_albedo": albedo, "u_normal": normal, "u_depth": depth,
                     "u_prev_colour": prev_colour if has_prev else albedo,
                     "u_prev_depth": prev_depth if has_prev else depth,
@@ -339,16 +356,59 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._set("u_inv_proj", np.linalg.inv(projection))
         self._set("u_prev_inv_proj", np.linalg.inv(projection if prev_projection is None else prev_projection))
         self._set("u_prev_vp", np.eye(4) if prev_view_projection is None else np.asarray(prev_view_projection))
-        self._set("u_prev_size", (float(self.width), float(self.height)) if prev_size is None
-                  else (float(prev_size[0]), float(prev_size[1])))
+        self._set("u_size", (float(region[0]), float(region[1])))
+        self._set("u_prev_size", (float(region[0]), float(region[1])) if prev_region is None
+                  else (float(prev_region[0]), float(prev_region[1])))
         self._set("u_ortho", kinds[0] == "orthographic")
         self._set("u_prev_ortho", kinds[1] == "orthographic")
+        self._fbo.viewport = (0, 0, *region)  # (the planes in the targets' bottom-left corner, as the G-buffers)
+        self._region_drawn = region
         self._fbo.use()
         self._vao.render(vertices=3)
 
-    def _check_texture(self, tex: Any, name: str, components: int = 1, size: tuple[int, int] | None = None) -> None:
+    def _region(self, size: Any) -> tuple[int, int]:
+        """``(width, height)`` of a frame whose :class:`GBufferTextures` ``size`` is ``size``: the adapter's size where
+        None, else that one, at most the adapter's (its targets)."""
+        region = _size(size, "size")
+        if region is None:
+            return self.width, self.height
+        if region[0] > self.width or region[1] > self.height:
+            raise ParameterError(f"size: this frame's render resolution {region[0]}x{region[1]} is larger than the "
+                                 f"adapter's {self.width}x{self.height}: build the adapter at the largest one", "size")
+        return region
+
+    def frame_size(self, frame: GBufferTextures) -> tuple[int, int]:
+        """``(width, height)`` of the planes :meth:`inputs` returns for ``frame``: its ``size``, else the
+        adapter's."""
+        return self._region(getattr(frame, "size", None))
+
+    def _check_textures(self, textures: dict[str, Any], size: Any,
+                        prev_size: Any) -> tuple[tuple[int, int], tuple[int, int] | None]:
+        """Check a frame's ``textures`` (the :class:`GBufferTextures` fields by name; ``albedo``, ``normal`` and
+        ``depth`` required where given) and return its region and its previous frame's (None without one):
+        ``size``, else the adapter's size; ``prev_size``, else ``prev_depth``'s (as dynamic resolution leaves
+        it)."""
+        import moderngl
+
+        region = self._region(size)
+        prev_region = _size(prev_size, "prev_size")
+        prev_depth = textures.get("prev_depth")
+        if prev_region is None and textures.get("prev_colour") is not None and isinstance(prev_depth, moderngl.Texture):
+            prev_region = tuple(prev_depth.size)
+        for name, tex in textures.items():
+            if tex is None and name in ("albedo", "normal", "depth"):
+                raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
+            prev = name in ("prev_colour", "prev_depth")
+            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1),
+                                prev_region if prev else (None if size is None else region),
+                                corner=(prev_size if prev else size) is not None)
+        return region, prev_region
+
+    def _check_texture(self, tex: Any, name: str, components: int = 1, size: tuple[int, int] | None = None, *,
+                       corner: bool = False) -> None:
         """``tex``, unless None, is a moderngl texture of the adapter's size (one frame of its G-buffers), or of
-        ``size`` (``(width, height)``: the previous frame's), with at least ``components`` components."""
+        ``size`` (``(width, height)``: the previous frame's), or with ``corner`` at least ``size`` (a frame of that
+        size in its bottom-left corner), with at least ``components`` components."""
         if tex is None:
             return
         import moderngl
@@ -356,12 +416,18 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if not isinstance(tex, moderngl.Texture):
             raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got "
                                  f"{type(tex).__name__}", name)
-        if size is not None and tuple(tex.size) != size:
+        field = "prev_size" if name.startswith("prev_") else "size"
+        if corner and size is not None and (tex.size[0] < size[0] or tex.size[1] < size[1]):
+            raise ParameterError(f"{name}: expected a texture at least {field} {size[0]}x{size[1]} (the frame in its "
+                                 f"bottom-left corner), got {tex.size[0]}x{tex.size[1]}", name)
+        if not corner and size is not None and tuple(tex.size) != size:
             raise ParameterError(f"{name}: expected a texture of prev_depth's size {size[0]}x{size[1]} (the previous "
-                                 f"frame's render resolution), got {tex.size[0]}x{tex.size[1]}", name)
+                                 f"frame's render resolution; prev_size for a frame in their corner), got "
+                                 f"{tex.size[0]}x{tex.size[1]}", name)
         if size is None and tuple(tex.size) != (self.width, self.height):
             raise ParameterError(f"{name}: expected a texture of the adapter's size {self.width}x{self.height}, got "
-                                 f"{tex.size[0]}x{tex.size[1]}", name)
+                                 f"{tex.size[0]}x{tex.size[1]} (a frame of a lower render resolution in the corner of "
+                                 "larger textures: GBufferTextures.size)", name)
         if tex.components < components:
             raise ParameterError(f"{name}: expected a texture of at least {components} components (RGB[A]), got "
                                  f"{tex.components} (the shader reads .rgb: a depth or two-component texture here "
@@ -371,7 +437,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         """The model's input planes for ``frame``: float32 ``(C, H, W)``, top-left origin, channels
         in order. Without a previous frame in ``frame`` the reprojected channels and ``seen`` are 0."""
         self.run(**{f.name: getattr(frame, f.name) for f in fields(frame)})
-        planes = np.concatenate([read_texture(t) for t in self._targets], axis=2)
+        planes = np.concatenate([read_texture(t, size=self._region_drawn) for t in self._targets], axis=2)
         return np.ascontiguousarray(planes[..., : len(self.channels)].transpose(2, 0, 1))
 
     def check(self, frame: GBufferTextures) -> list[str]:
@@ -384,33 +450,32 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._check_open()
         if not isinstance(frame, GBufferTextures):
             raise AdapterFrameError(f"expected a GBufferTextures frame, got {type(frame).__name__}")
-        for name in ("normal", "depth", "prev_colour", "prev_depth", "motion"):
-            tex = getattr(frame, name)
-            if tex is None and name in ("normal", "depth"):
-                raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got None", name)
-            self._check_texture(tex, name, _RGB_TEXTURES.get(name, 2 if name == "motion" else 1))
+        region, prev_region = self._check_textures(
+            {name: getattr(frame, name) for name in ("normal", "depth", "prev_colour", "prev_depth", "motion")},
+            frame.size, frame.prev_size)
         for c, tex, name in ((frame.depth_component, frame.depth, "depth_component"),
                              (frame.prev_depth_component, frame.prev_depth, "prev_depth_component")):
             _component(c, name, 0, 4 if tex is None else tex.components)
-        g: dict[str, Any] = {"depth": read_texture(frame.depth)[..., frame.depth_component],
-                             "normal": read_texture(frame.normal, 3), "view": frame.view,
+        g: dict[str, Any] = {"depth": read_texture(frame.depth, size=region)[..., frame.depth_component],
+                             "normal": read_texture(frame.normal, 3, region), "view": frame.view,
                              "projection": frame.projection}
         if frame.prev_colour is not None and frame.prev_depth is not None:
-            g.update(prev_colour=read_texture(frame.prev_colour, 3),
-                     prev_depth=read_texture(frame.prev_depth)[..., frame.prev_depth_component],
+            g.update(prev_colour=read_texture(frame.prev_colour, 3, prev_region),
+                     prev_depth=read_texture(frame.prev_depth, size=prev_region)[..., frame.prev_depth_component],
                      prev_view_projection=frame.prev_view_projection, prev_projection=frame.prev_projection)
         if frame.motion is not None:
-            g["motion"] = read_texture(frame.motion, 2)
+            g["motion"] = read_texture(frame.motion, 2, region)
         from rtp.sdk import check_gbuffers
 
         return check_gbuffers(**g, tolerance=self.tolerance, normal_space=self.normal_space,
                               depth_kind=self.depth_kind)
 
     def read(self, index: int) -> np.ndarray:
-        """Plane ``index`` of the last :meth:`run`, ``(H, W)`` float32 (reads back one target)."""
+        """Plane ``index`` of the last :meth:`run`, ``(H, W)`` float32 (reads back one target; the last frame's
+        ``size``)."""
         self._check_open()
         index = _component(index, "index", 0, len(self.channels))
-        return read_texture(self._targets[index // 4])[..., index % 4]
+        return read_texture(self._targets[index // 4], size=self._region_drawn)[..., index % 4]
 
     def close(self) -> None:
         """Free the adapter's program, targets and framebuffer (not the engine's context)."""

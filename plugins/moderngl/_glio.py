@@ -37,14 +37,18 @@ def flip_rows(image: np.ndarray, dtype: Any = None) -> np.ndarray:
     return np.array(image[::-1], dtype=dtype, order="C")
 
 
-def read_texture(texture: Any, components: int | None = None) -> np.ndarray:
+def read_texture(texture: Any, components: int | None = None, size: tuple[int, int] | None = None) -> np.ndarray:
     """Read a moderngl texture to a float32 ``(H, W, C)`` array with a top-left origin.
 
-    ``components`` keeps the first C channels (default: all). ``f1`` textures are scaled to [0, 1].
+    ``components`` keeps the first C channels (default: all); ``size = (W, H)`` only the texture's bottom-left
+    ``W`` x ``H`` corner (a frame drawn with a viewport at the origin; default: all). ``f1`` textures are scaled
+    to [0, 1].
     """
     w, h = texture.size
     raw = np.frombuffer(texture.read(alignment=1), dtype=_DTYPES[texture.dtype])
     arr = raw.reshape(h, w, texture.components)
+    if size is not None:
+        arr = arr[: size[1], : size[0]]  # (GL rows: the first are the bottom ones)
     if components is not None:
         arr = arr[..., :components]
     out = flip_rows(arr, np.float32)  # one pass: the flip and float16's widening (read back on every frame)
