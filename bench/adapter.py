@@ -8,14 +8,17 @@ float32) for the channel list of every ``*.onnx`` in ``--models``, and for the r
 reprojection (``reprojected.rgb`` + ``seen``). Each adapter compiles its shader for its channels
 (``adapter_fs.glsl``), so the cost follows what the channels need: the ``.blocks`` planes read a
 4x4 cell's lumas per value pixel, the ``.tiles`` planes a 16x16 tile's, and cost the most. On Mesa's
-llvmpipe this is CPU time; a GPU runs the same shader in well under a millisecond. Prints a markdown
-table (median ms of ``--repeats`` runs).
+llvmpipe this is CPU time; a GPU runs the same shader in well under a millisecond. The render
+(``Adapter.run`` until the GL finishes) is timed apart: the rest of ``inputs`` is the read-back, GL
+handing the targets over and their copy into ``(C, H, W)``, which costs a CPU the same on any GPU.
+Prints a markdown table (median ms of ``--repeats`` runs).
 """
 
 from __future__ import annotations
 
 import argparse
 import platform
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +27,7 @@ from render import build_scene
 
 from rtp import sdk
 from rtp.plugins.moderngl import Adapter, GBufferTextures, Renderer
-from rtp.plugins.moderngl._glio import write_texture
+from rtp.plugins.moderngl._glio import read_planes, read_texture, write_texture
 from rtp.scene import Camera
 
 REPROJECTION = ("reprojected.r", "reprojected.g", "reprojected.b", "seen")
@@ -56,18 +59,39 @@ def engine_frame(r: Renderer) -> GBufferTextures:
         prev_view_projection=prev.camera.view_projection(width, height), material=r._t_material)
 
 
-def time_size(width: int, height: int, lists: dict[str, tuple[str, ...]], repeats: int) -> dict[str, float]:
-    """Median ms of ``Adapter.inputs`` per channel list at one frame size."""
-    out: dict[str, float] = {}
+def joined_read_back(adapter: Adapter) -> np.ndarray:
+    """The read-back before 2026-12-06: each target read as an image (flipped), the targets joined, then
+    transposed to ``(C, H, W)``: four passes over the planes where ``read_planes`` makes one."""
+    planes = np.concatenate([read_texture(t) for t in adapter._targets], axis=2)
+    return np.ascontiguousarray(planes[..., : len(adapter.channels)].transpose(2, 0, 1))
+
+
+def time_size(width: int, height: int, lists: dict[str, tuple[str, ...]],
+              repeats: int) -> dict[str, tuple[float, float, float, float]]:
+    """Median ms of ``Adapter.inputs``, of its render alone (``run`` until the GL finishes), of its read-back
+    alone and of the read-back before 2026-12-06, per channel list at one frame size."""
+    out: dict[str, tuple[float, float, float, float]] = {}
     with Renderer(width, height) as r:
         frame = engine_frame(r)
+        textures = {f.name: getattr(frame, f.name) for f in fields(frame)}
         for name, channels in lists.items():
             with Adapter(channels, width, height, ctx=r.ctx) as adapter:
                 x = adapter.inputs(frame)
                 if x.shape != (len(channels), height, width) or not np.isfinite(x).all():
                     raise SystemExit(f"{name}: the adapter gave {x.shape} with non-finite values; expected "
                                      f"{(len(channels), height, width)} finite planes")
-                out[name] = median_ms(lambda a=adapter: a.inputs(frame), repeats)
+                if not np.array_equal(joined_read_back(adapter), x):
+                    raise SystemExit(f"{name}: the two read-backs differ")
+
+                def render(a: Adapter = adapter) -> None:
+                    a.run(**textures)
+                    r.ctx.finish()
+
+                # (the adapter's private targets: a benchmark of its read-back, not an API)
+                out[name] = (median_ms(lambda a=adapter: a.inputs(frame), repeats), median_ms(render, repeats),
+                             median_ms(lambda a=adapter: read_planes(a._fbo, len(a.channels), (width, height)),
+                                       repeats),
+                             median_ms(lambda a=adapter: joined_read_back(a), repeats))
     return out
 
 
@@ -87,10 +111,11 @@ def main() -> None:
     print(f"moderngl adapter, Adapter.inputs (render + read back), median of {args.repeats}; {gl}; "
           f"{platform.processor() or platform.machine()}\n")
     rows = {f"{w}x{h}": time_size(w, h, lists, args.repeats) for w, h in sizes}
-    print("| channels | planes | " + " | ".join(f"{s} ms" for s in rows) + " |")
+    print("| channels | planes | " + " | ".join(f"{s} ms: inputs (render, read back; before)" for s in rows) + " |")
     print("|---|---|" + "---|" * len(rows))
     for name, channels in lists.items():
-        print(f"| {name} | {len(channels)} | " + " | ".join(f"{t[name]:.1f}" for t in rows.values()) + " |")
+        cells = (f"{t[name][0]:.1f} ({t[name][1]:.1f}, {t[name][2]:.1f}; {t[name][3]:.1f})" for t in rows.values())
+        print(f"| {name} | {len(channels)} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

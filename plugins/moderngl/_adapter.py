@@ -37,7 +37,7 @@ from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
-from ._glio import is_released, max_texture_side, read_texture
+from ._glio import is_released, max_texture_side, read_planes, read_texture
 from ._shaders import load_source
 
 if TYPE_CHECKING:
@@ -437,8 +437,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         """The model's input planes for ``frame``: float32 ``(C, H, W)``, top-left origin, channels
         in order. Without a previous frame in ``frame`` the reprojected channels and ``seen`` are 0."""
         self.run(**{f.name: getattr(frame, f.name) for f in fields(frame)})
-        planes = np.concatenate([read_texture(t, size=self._region_drawn) for t in self._targets], axis=2)
-        return np.ascontiguousarray(planes[..., : len(self.channels)].transpose(2, 0, 1))
+        return read_planes(self._fbo, len(self.channels), self._region_drawn)
 
     def check(self, frame: GBufferTextures) -> list[str]:
         """``sdk.check_gbuffers`` on ``frame``'s textures read back, with this adapter's ``normal_space``,
