@@ -124,7 +124,11 @@ def test_scores_and_safety() -> None:
 @pytest.mark.slow
 def test_training_learns_resumes_and_exports(tmp_path: Path) -> None:
     data = _dataset(tmp_path / "ds")
-    cfg = dict(data=str(data), metric="jnyang", steps=240, crop=32, batch=8, val_every=40, save_every=40, lr=1e-3)
+    # (400 steps with a weight average: at 240 steps of the raw weights the last validation swung with the CPU's
+    # float order, an R2 of -1.1 to 0.6 over seeds and thread counts on an AVX2 EPYC, the paper head's ReLU dying
+    # on some; now 0.43 to 0.68 and the error 40% down or more on every one of ten)
+    cfg = dict(data=str(data), metric="jnyang", steps=400, crop=32, batch=8, val_every=40, save_every=40, lr=1e-3,
+               ema=0.9)
     result = train(TrainConfig(out=str(tmp_path / "a.pt"), **cfg))
     ck = load_checkpoint(result.checkpoint)
     state = ck.training
@@ -138,13 +142,13 @@ def test_training_learns_resumes_and_exports(tmp_path: Path) -> None:
     assert meta.provenance["train_samples"] == 8
 
     # Resuming from a checkpoint half-way gives exactly the same model as one uninterrupted run.
-    half = train(TrainConfig(out=str(tmp_path / "b.pt"), **{**cfg, "steps": 120}))
-    assert half.steps == 120
+    half = train(TrainConfig(out=str(tmp_path / "b.pt"), **{**cfg, "steps": 200}))
+    assert half.steps == 200
     seen: list[int] = []
     read: list[tuple[int, int]] = []
     full = train(TrainConfig(out=str(tmp_path / "b.pt"), **cfg), progress=lambda step, total, loss: seen.append(step),
                  loading=lambda k, n: read.append((k, n)))
-    assert seen[0] == 120 and seen[1] == 121 and seen[-1] == 240  # the progress bar starts where the run stopped
+    assert seen[0] == 200 and seen[1] == 201 and seen[-1] == 400  # the progress bar starts where the run stopped
     assert read == [(k, 12) for k in range(1, 13)]  # (the samples are read first, each reported: 8 trained on, 4 validated)
     a, b = load_checkpoint(result.checkpoint).net.state_dict(), load_checkpoint(full.checkpoint).net.state_dict()
     for k in a:
