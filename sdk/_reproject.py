@@ -265,12 +265,14 @@ def reproject_positions(
 
 
 def _shape(shape: object) -> tuple[int, int]:
-    """A frame's ``(H, W)``, two positive integers, or a typed error."""
+    """A frame's ``(H, W)``, two positive integers below 2**31 (past any GPU's textures; pixel indices stay
+    in int32 and int64 arithmetic), or a typed error."""
     ok = (isinstance(shape, (tuple, list)) and len(shape) == 2
-          and all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_)) and n > 0 for n in shape))
+          and all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_)) and 0 < n < 2**31
+                  for n in shape))
     if not ok:
-        raise ParameterError(f"prev_shape: expected the previous frame's (H, W), two positive integers, got "
-                             f"{shape!r}", "prev_shape")
+        raise ParameterError(f"prev_shape: expected the previous frame's (H, W), two positive integers below 2**31, "
+                             f"got {shape!r}", "prev_shape")
     return int(shape[0]), int(shape[1])  # type: ignore[index]
 
 

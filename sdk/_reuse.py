@@ -35,7 +35,7 @@ from ._rates import (
     select_rates,
     select_rates_for_saving,
 )
-from ._reproject import _real
+from ._reproject import _real, _shape
 from ._tiles import padded_size, split_tiles, tile_grid
 
 if TYPE_CHECKING:
@@ -139,12 +139,15 @@ class Track:
     ``place``, where that surface was (``row << PLACE_BITS | column``) on frame ``gen`` of the frames
     the entries were predicted on (0: the network's whole-frame run; g: the g-th frame of fresh crops
     since); both -1 where unknown. ``lut`` is ``(generations, tiles)``: the entry of each tile of each
-    of those frames (-1: none there)."""
+    of those frames (-1: none there). ``shape`` is ``(H, W)`` of those frames, whose pixels the places
+    are in and whose tiles ``lut`` lists: one size for all (:class:`PredictionReuse` starts a track
+    anew on a frame of another size)."""
 
     index: np.ndarray
     place: np.ndarray
     gen: np.ndarray
     lut: np.ndarray
+    shape: tuple[int, int]
 
 
 @functools.lru_cache(maxsize=8)
@@ -158,6 +161,20 @@ def _start_places(shape: tuple[int, int], tile: int, s: int) -> np.ndarray:
     return out
 
 
+def _scaled_places(shape: tuple[int, int], prev: tuple[int, int], tile: int, s: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each kept pixel of a frame of ``shape`` at the same place on the screen in a frame of ``prev``'s size
+    (the pixel its centre falls in): that frame's tile there and the place, packed as a track's."""
+    (h, w), (ph, pw) = shape, prev
+    gh, gw = _tile_index_map(shape, tile, s).shape
+    ys = np.minimum(np.arange(gh) * s, h - 1)
+    xs = np.minimum(np.arange(gw) * s, w - 1)
+    py = np.minimum(((2 * ys + 1) * ph) // (2 * h), ph - 1).astype(np.int32)  # (exact: integers)
+    px = np.minimum(((2 * xs + 1) * pw) // (2 * w), pw - 1).astype(np.int32)
+    ptw = tile_grid(ph, pw, tile)[1]
+    at = (py // tile)[:, None] * ptw + (px // tile)[None, :]
+    return at.astype(np.int32), (py[:, None] << PLACE_BITS) | px[None, :]
+
+
 def start_track(shape: tuple[int, int], tile: int, step: int | None = None) -> Track:
     """The track of the frame the network ran on: each kept pixel in its own tile, at its own place."""
     h, w = int(shape[0]), int(shape[1])
@@ -168,7 +185,7 @@ def start_track(shape: tuple[int, int], tile: int, step: int | None = None) -> T
     index = tile_index_map((h, w), tile, s)
     th, tw = tile_grid(h, w, tile)
     return Track(index, _start_places((h, w), int(tile), s), np.zeros(index.shape, np.int32),
-                 np.arange(th * tw, dtype=np.int32)[None])
+                 np.arange(th * tw, dtype=np.int32)[None], (h, w))
 
 
 def _kept(a: np.ndarray, s: int, gh: int, gw: int, dtype: type | None = None) -> np.ndarray:
@@ -195,21 +212,28 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
 
     ``est`` is ``(outputs, entries)``: the tiles of the frame the network last ran on in row-major
     order, then any tiles predicted afresh since. ``track`` is what each kept pixel of the previous
-    frame carries (:class:`Track`). Every kept pixel of this frame fetches the pixel it was at in
-    the previous one (``rows``, ``cols``: top-left pixel indices, inside the frame); its surface was
-    where the kept pixel at or above-left of that one (one of every ``step`` per axis) was, moved by
-    the fetched pixel's offset from it, so it takes the entry of the tile there (the kept pixel's own
-    entry where that tile has none). Unseen pixels (``seen`` 0) get -1, background pixels the tile
-    at their own position. Each tile then takes the worst, the mean or the upper quartile (towards
-    the worse side) of the estimates over its known pixels, and tiles with more than
-    ``unseen_fraction`` unknown the worst value there is (1x1). Returns the ``(outputs, tile rows,
-    tile cols)`` estimates, this frame's track and the tiles given the worst value for want of known
-    pixels. ``step``: a divisor of ``tile`` (None: :func:`default_step`), as ``track`` was built."""
+    frame carries (:class:`Track`), that frame of the size of the track's (its ``shape``). This frame may
+    be of another size (dynamic resolution): its tiles are its own. Every kept pixel of this frame fetches
+    the pixel it was at in the previous one (``rows``, ``cols``: top-left pixel indices of the previous
+    frame, inside it); its surface was where the kept pixel at or above-left of that one (one of every
+    ``step`` per axis) was, moved by the fetched pixel's offset from it, so it takes the entry of the tile
+    there (the kept pixel's own entry where that tile has none). Unseen pixels (``seen`` 0) get -1,
+    background pixels the tile at their own position (the same place on the screen, in the previous
+    frame's pixels). Each tile then takes the worst, the mean or the upper quartile (towards the worse
+    side) of the estimates over its known pixels, and tiles with more than ``unseen_fraction`` unknown the
+    worst value there is (1x1). Returns the ``(outputs, tile rows, tile cols)`` estimates, this frame's
+    track and the tiles given the worst value for want of known pixels, all on this frame's tiles (on a
+    frame of another size the track's places stay in the previous frame's pixels: start a new track on
+    it, as :class:`PredictionReuse` does). ``step``: a divisor of ``tile`` (None: :func:`default_step`), as
+    ``track`` was built."""
     h, w = seen.shape
     th, tw = tile_grid(h, w, tile)
     s = _check_step(step, tile)
     own = tile_index_map((h, w), tile, s)
     gh, gw = own.shape
+    ph, pw = track.shape  # the previous frame's, whose kept pixels and tiles the track holds (this one's but
+    pth, ptw = tile_grid(ph, pw, tile)  # where dynamic resolution changed the size)
+    pgw = track.index.shape[1]
     r, c = _kept(rows, s, gh, gw, np.int32), _kept(cols, s, gh, gw, np.int32)
     # the previous frame's kept pixel at or above-left of the fetched one, as a flat index (a 1-D take is 3x a
     # 2-D gather; rows and cols lie in the frame, so r // s < gh; a shift is a fifth of a division's time)
@@ -218,7 +242,7 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
         ky, kx = r >> shift, c >> shift
     else:
         ky, kx = r // s, c // s
-    k = ky * gw + kx
+    k = ky * pgw + kx
     # where the fetched pixel's surface was: the kept pixel's place plus the offset (0 .. s - 1 each way)
     # from it, so that the rounding to kept pixels does not add up frame after frame
     place = np.take(track.place, k)
@@ -230,20 +254,22 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
         ty, tx = place >> (PLACE_BITS + bits), (place & ((1 << PLACE_BITS) - 1)) >> bits
     else:
         ty, tx = (place >> PLACE_BITS) // tile, (place & ((1 << PLACE_BITS) - 1)) // tile
-    cell = np.minimum(ty, th - 1) * tw + np.minimum(tx, tw - 1)
+    cell = np.minimum(ty, pth - 1) * ptw + np.minimum(tx, ptw - 1)
     if len(track.lut) == 1:  # only the whole-frame run's tiles: the tile is the entry
         gen = track.gen
         new = np.where(known, cell, -1)
     else:  # and the tiles predicted afresh since, each frame of them a generation; none there: the kept pixel's
         gen = np.take(track.gen, k)
-        moved = np.take(track.lut, gen * (th * tw) + np.where(known, cell, 0))
+        moved = np.take(track.lut, gen * (pth * ptw) + np.where(known, cell, 0))
         new = np.where(known, np.where(moved >= 0, moved, np.take(track.index, k)), -1)
     place = np.where(known, place, -1)
     if background is not None:  # the estimate at its own screen position, on the whole-frame run's grid
         sky = _kept(background, s, gh, gw) > 0.5
         if sky.any():
-            new = np.where(sky, own, new)
-            place = np.where(sky, _start_places((h, w), tile, s), place)
+            at, there = (own, _start_places((h, w), tile, s)) if (h, w) == (ph, pw) else \
+                _scaled_places((h, w), (ph, pw), tile, s)
+            new = np.where(sky, at, new)
+            place = np.where(sky, there, place)
             gen = np.where(sky, 0, gen)
     known = new >= 0
     k = tile // s
@@ -280,7 +306,7 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
             out = pick.reduce(pick.reduce(src.reshape(len(est), th, k, gw), axis=2).reshape(len(est), th, tw, k), axis=-1)
     missing = (1.0 - count / (k * k) > unseen_fraction) | ~np.isfinite(out).all(axis=0)
     out[:, missing] = -np.inf if higher_is_better else np.inf
-    return np.ascontiguousarray(out, dtype=np.float32), Track(new, place, gen, track.lut), missing
+    return np.ascontiguousarray(out, dtype=np.float32), Track(new, place, gen, track.lut, track.shape), missing
 
 
 def context_tiles(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
@@ -443,7 +469,10 @@ class PredictionReuse:
     pixel it reprojects from (the nearest texel of :func:`reproject_positions`, or the pixel minus
     its motion vector), ``seen`` 1 where that pixel passed the disocclusion test (as
     :func:`reproject` returns it) and ``background`` 1 on sky, which keeps the estimate at its own
-    screen position. A frame without ``fetch`` (the first, a camera cut) runs the network.
+    screen position. A frame without ``fetch`` (the first, a camera cut) runs the network. A frame of
+    another size than the last (dynamic resolution) is carried too, its ``fetch`` indexing the previous
+    frame's pixels (:func:`fetch_from_motion` with ``prev_shape``); the carry then starts anew on its
+    tiles, their estimates its entries (tiles left unknown stay so).
 
     ``reduce`` (:data:`REUSE_REDUCTIONS`) is how a tile reduces the estimates its pixels carry,
     ``unseen`` (:data:`REUSE_UNSEEN`) what becomes of tiles more than ``unseen_fraction`` unseen
@@ -780,18 +809,21 @@ class PredictionReuse:
         runs = self._age + 1 >= self.every
         if fetch is not None:  # its kind every frame; its shape and range only where it is read
             self._check_fetch_kind(fetch)
-        if self._cache is None or fetch is None or hw != self._shape or (runs and self.history == 0):
+        if self._cache is None or fetch is None or (runs and self.history == 0):
             return self._run(x, hw)
-        assert self._track is not None
+        assert self._track is not None and self._shape is not None
         tile = self._net.tile_size
         step = _check_step(self.step, tile)
-        rows = self._plane(fetch[0], "fetch rows", hw, hw[0], step)
-        cols = self._plane(fetch[1], "fetch cols", hw, hw[1], step)
+        # (the fetch indexes the previous frame's pixels: another size where dynamic resolution changed it)
+        rows = self._plane(fetch[0], "fetch rows", hw, self._shape[0], step)
+        cols = self._plane(fetch[1], "fetch cols", hw, self._shape[1], step)
         seen_ = self._plane(np.ones(hw, np.float32) if seen is None else seen, "seen", hw)
         bg = None if background is None else self._plane(background, "background", hw)
         hib = self._net.metadata.higher_is_better
         est, track, missing = carry_estimates(self._cache, self._track, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce, self.step)
+        resized = hw != self._shape
+        carried = est.copy() if resized and self.carry != "features" else None  # (the carry's own values)
         if self.refresh is not None and missing.mean() > self.refresh:
             runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
         feats = None
@@ -825,17 +857,31 @@ class PredictionReuse:
                     part = self._net.predict(window)
                 est[:, y0:y1, x0:x1][:, sel] = part[:, sel]
             work = area / (h * w)
-            # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
-            # carry them on from here, from where they are now
-            slot = np.full(missing.size, -1, np.int32)
-            slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
             kept = feats if feats is not None else est if levels is None else (est / levels).astype(np.float32)
-            self._cache = np.concatenate([self._cache, kept.reshape(len(kept), -1)[:, missing.ravel()]], axis=1)
-            here = start_track(hw, tile, self.step)
-            mine = slot[here.index]
-            fresh = mine >= 0
-            track = Track(np.where(fresh, mine, track.index), np.where(fresh, here.place, track.place),
-                          np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, slot[None]]))
+            if carried is not None:
+                carried[:, missing] = kept[:, missing]
+            if not resized:
+                # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
+                # carry them on from here, from where they are now
+                slot = np.full(missing.size, -1, np.int32)
+                slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
+                self._cache = np.concatenate([self._cache, kept.reshape(len(kept), -1)[:, missing.ravel()]], axis=1)
+                here = start_track(hw, tile, self.step)
+                mine = slot[here.index]
+                fresh = mine >= 0
+                track = Track(np.where(fresh, mine, track.index), np.where(fresh, here.place, track.place),
+                              np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, slot[None]]),
+                              track.shape)
+            missing = np.zeros_like(missing)  # (every tile the network's now)
+        if resized:  # dynamic resolution: this frame's tiles become the carry's entries, its pixels the track
+            values = feats if feats is not None else carried
+            assert values is not None
+            self._cache = np.ascontiguousarray(values.reshape(len(values), -1))
+            track = start_track(hw, tile, self.step)
+            lost = missing.ravel()[track.index]  # (pixels of tiles left unknown: unknown still, not a worst value)
+            track = Track(np.where(lost, -1, track.index), np.where(lost, -1, track.place), track.gen, track.lut,
+                          track.shape)
+            self._shape = hw
         self._track = track
         self._age += 1
         self.work = work
@@ -872,12 +918,15 @@ class PredictionReuse:
                             factors=meta.rate_factors, engine_rates=engine_rates, combiner=combiner)
 
 
-def fetch_from_motion(motion_x: object, motion_y: object) -> tuple[np.ndarray, np.ndarray]:
+def fetch_from_motion(motion_x: object, motion_y: object,
+                      prev_shape: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:class:`PredictionReuse`'s ``fetch`` from an engine's motion vectors: per pixel, the top-left ``(row,
     col)`` of the previous frame's pixel it comes from, the nearest texel of the pixel centre moved by its
     motion vector (``motion.x``/``motion.y`` of ``sdk.CHANNELS``: pixels, previous minus current position,
-    x right and y down), kept inside the frame. ``(H, W)`` arrays of real numbers in, two ``intp``
-    ``(H, W)`` arrays out; anything else is a typed error naming the argument."""
+    x right and y down), kept inside the frame. ``prev_shape = (H', W')``: the previous frame's size where
+    dynamic resolution changed it (the motion stays in this frame's pixels; the place is scaled to the
+    previous frame's). ``(H, W)`` arrays of real numbers in, two ``intp`` ``(H, W)`` arrays out; anything
+    else is a typed error naming the argument."""
     planes = []
     for name, value in (("motion_x", motion_x), ("motion_y", motion_y)):
         a = _real(value, name)  # (finite float64, else a typed error naming it)
@@ -890,7 +939,13 @@ def fetch_from_motion(motion_x: object, motion_y: object) -> tuple[np.ndarray, n
         raise InputShapeError(f"motion_x and motion_y must have one shape, got {mx.shape} and {my.shape}",
                               tuple(my.shape), str(mx.shape))
     h, w = mx.shape
+    ph, pw = (h, w) if prev_shape is None else _shape(prev_shape)
     ys, xs = np.indices((h, w), dtype=np.float64)
-    rows = np.clip(np.floor(ys + 0.5 + my), 0, h - 1).astype(np.intp)
-    cols = np.clip(np.floor(xs + 0.5 + mx), 0, w - 1).astype(np.intp)
+    if (ph, pw) == (h, w):
+        rows = np.clip(np.floor(ys + 0.5 + my), 0, h - 1).astype(np.intp)
+        cols = np.clip(np.floor(xs + 0.5 + mx), 0, w - 1).astype(np.intp)
+    else:
+        rows = np.clip(np.floor((ys + 0.5 + my) * (ph / h)), 0, ph - 1).astype(np.intp)
+        cols = np.clip(np.floor((xs + 0.5 + mx) * (pw / w)), 0, pw - 1).astype(np.intp)
     return rows, cols
+

@@ -722,12 +722,16 @@ def _planes_absurd(v: tuple[Any, str, Any, str], x: np.ndarray) -> bool:
                 or (depth < 0).any() or (hardware and (depth > 1 + 1e-3).any()))
 
 
-def _fetch_absurd(v: tuple[ArraySpec, ArraySpec], out: tuple[np.ndarray, np.ndarray]) -> bool:
-    """Accepted: two index arrays of the motion's (H, W) shape, inside the frame."""
+def _fetch_absurd(v: tuple[ArraySpec, ArraySpec, Any], out: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Accepted: two index arrays of the motion's (H, W) shape, inside the previous frame (``prev_shape``, two
+    positive integers, else the motion's)."""
     rows, cols = out
     shape = np.shape(_array(v[0]))
-    return bool(len(shape) != 2 or rows.shape != shape or cols.shape != shape or rows.min() < 0 or cols.min() < 0
-                or rows.max() >= shape[0] or cols.max() >= shape[1])
+    prev = v[2] if v[2] is not None else shape
+    valid = (isinstance(prev, (tuple, list)) and len(prev) == 2
+             and all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and 0 < n < 2**31 for n in prev))
+    return bool(not valid or len(shape) != 2 or rows.shape != shape or cols.shape != shape or rows.min() < 0
+                or cols.min() < 0 or rows.max() >= prev[0] or cols.max() >= prev[1])
 
 
 # -- a user's own metric (rtp.metrics.Metric) ----------------------------------------------
@@ -981,6 +985,44 @@ def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray)
     return False
 
 
+#: (previous frame's (H, W), this frame's, how far past the previous frame the fetch may reach, every, unseen, seed):
+#: a frame of another size than the last, as dynamic resolution gives it.
+resize_cases = st.tuples(st.tuples(st.integers(1, 60), st.integers(1, 60)), st.tuples(st.integers(1, 60), st.integers(1, 60)),
+                         st.integers(-2, 2), st.integers(1, 4), st.sampled_from(list(sdk.REUSE_UNSEEN)),
+                         st.integers(0, 2**16))
+
+
+def _resize_fetch(v: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    (ph, pw), (h, w), over, _, _, seed = v
+    rng = np.random.default_rng(seed)
+    return (rng.integers(min(over, 0), ph + max(over, 0), (h, w)), rng.integers(min(over, 0), pw + max(over, 0), (h, w)),
+            (rng.random((h, w)) > 0.2).astype(np.float32))
+
+
+def _resize_call(v: tuple[Any, ...]) -> np.ndarray:
+    (ph, pw), (h, w), _, every, unseen, seed = v
+    rng = np.random.default_rng(seed)
+    reuse = sdk.PredictionReuse(_PRED, every, unseen=unseen)
+    reuse.predict(rng.random((len(_PRED.metadata.inputs), ph, pw), dtype=np.float32))
+    rows, cols, seen = _resize_fetch(v)
+    return reuse.predict(rng.random((len(_PRED.metadata.inputs), h, w), dtype=np.float32), (rows, cols), seen)
+
+
+def _resize_absurd(v: tuple[Any, ...], est: np.ndarray) -> bool:
+    """Accepted: estimates of this frame's tiles, none NaN, and where they were carried (every > 1) a fetch inside
+    the previous frame at the pixels the carry reads (one of every ``step`` per axis, and the last row and column;
+    the others are not read)."""
+    (ph, pw), (h, w), _, every, _, _ = v
+    rows, cols, _ = _resize_fetch(v)
+    s = sdk.PredictionReuse(_PRED).step
+
+    def read(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([a[::s, ::s].ravel(), a[::s, -1].ravel(), a[-1, ::s].ravel()])
+
+    outside = read(rows).min() < 0 or read(cols).min() < 0 or read(rows).max() >= ph or read(cols).max() >= pw
+    return bool(est.shape != (6, *_PRED.tiles(h, w)) or np.isnan(est).any() or (every > 1 and outside))
+
+
 def targets() -> list[Target]:
     return [
         Target("load: corrupted model files", model_mutations, lambda m: _load_bytes(_mutate_model(m)),
@@ -1044,9 +1086,14 @@ def targets() -> list[Target]:
                lambda v: sdk.check_reprojection(*(None if p is None else _projection_value(p) for p in v)),
                lambda _v, kinds: not (isinstance(kinds, tuple) and len(kinds) == 2
                                       and all(k in sdk.CAMERA_KINDS for k in kinds))),
-        Target("fetch_from_motion", st.tuples(_arrays(st.integers(0, 6), 3), _arrays(st.integers(0, 6), 3)),
-               lambda v: sdk.fetch_from_motion(_array(v[0]), _array(v[1])), _fetch_absurd),
+        Target("fetch_from_motion", st.tuples(_arrays(st.integers(0, 6), 3), _arrays(st.integers(0, 6), 3),
+                                              st.one_of(st.none(), st.tuples(st.integers(-1, 12), st.integers(-1, 12)),
+                                                        st.tuples(hostile_numbers, hostile_numbers), json_values,
+                                                        # (indices past int64 were accepted as garbage)
+                                                        st.sampled_from([(2**31, 3), (2**70, 3), (2**31 - 1, 2)]))),
+               lambda v: sdk.fetch_from_motion(_array(v[0]), _array(v[1]), v[2]), _fetch_absurd),
         Target("PredictionReuse: arguments, fetch, seen, background", reuse_cases, _reuse_call, _reuse_absurd),
+        Target("PredictionReuse: a frame of another size", resize_cases, _resize_call, _resize_absurd),
         Target("a user's metric: declaration and map output", plugin_metrics, _plugin_call, _plugin_absurd),
         Target("dataset reader: corrupted files", dataset_mutations, _read_mutated_dataset, _same_as_original),
         Target("dataset reader: malformed members", member_replacements, _replace_member, _member_absurd),

@@ -113,9 +113,12 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
                     sky: np.ndarray, tile: int, hib: bool, fraction: float, reduce: str,
                     s: int) -> tuple[np.ndarray, np.ndarray]:
     """carry_estimates written out pixel by pixel and tile by tile (one pixel of every ``s`` per axis):
-    the reference for the vectorised one. Returns the estimates and each kept pixel's entry."""
+    the reference for the vectorised one. Returns the estimates and each kept pixel's entry. The previous frame
+    (the track's) may be of another size: its pixels, tiles and sky places are its own."""
     h, w = seen.shape
     th, tw = -(-h // tile), -(-w // tile)
+    ph, pw = track.shape
+    pth, ptw = -(-ph // tile), -(-pw // tile)
     k = tile // s
     out = np.empty((len(est), th, tw))
     entry = np.full((th * k, tw * k), -1)
@@ -127,16 +130,17 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
                 for j in range(tx * k, tx * k + k):
                     y, x = min(i * s, h - 1), min(j * s, w - 1)
                     src = -1
-                    if sky[y, x] > 0.5:
-                        src = ty * tw + tx
+                    if sky[y, x] > 0.5:  # the previous frame's tile at the same place on the screen
+                        sy, sx = min(int((y + 0.5) * ph / h), ph - 1), min(int((x + 0.5) * pw / w), pw - 1)
+                        src = (sy // tile) * ptw + sx // tile
                     elif seen[y, x] > 0:
                         r, c = int(rows[y, x]), int(cols[y, x])
                         ki, kj = r // s, c // s  # the kept pixel at or above-left of the fetched one
                         if track.index[ki, kj] >= 0:  # its surface's place, moved by the offset: that tile's entry
                             py = (int(track.place[ki, kj]) >> PLACE_BITS) + r - ki * s
                             px = (int(track.place[ki, kj]) & ((1 << PLACE_BITS) - 1)) + c - kj * s
-                            there = track.lut[track.gen[ki, kj], min(max(py // tile, 0), th - 1) * tw
-                                              + min(max(px // tile, 0), tw - 1)]
+                            there = track.lut[track.gen[ki, kj], min(max(py // tile, 0), pth - 1) * ptw
+                                              + min(max(px // tile, 0), ptw - 1)]
                             src = int(there) if there >= 0 else int(track.index[ki, kj])
                     entry[i, j] = src
                     if src >= 0:
@@ -160,23 +164,27 @@ def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
     """Random motion, disocclusion and sky on frames that are not whole tiles (the kept pixels' padding
     repeats the last row and column), odd tiles (every pixel kept by default), both error directions,
     the default pixel step and others (a step that is not a power of two divides), tracks whose
-    surfaces lie anywhere on the frames of several generations, some of whose tiles are no entry."""
+    surfaces lie anywhere on the frames of several generations, some of whose tiles are no entry; and a
+    previous frame of another size than this one, larger or smaller (dynamic resolution)."""
     rng = np.random.default_rng(7)
-    for h, w, tile, step in ((37, 53, 8, None), (48, 64, 16, None), (30, 21, 5, None), (50, 70, 16, None),
-                             (50, 70, 16, 4), (37, 53, 8, 8), (40, 29, 12, 3), (30, 21, 5, 5), (48, 64, 16, 1)):
+    for h, w, tile, step, ph, pw in (
+            (37, 53, 8, None, 37, 53), (48, 64, 16, None, 48, 64), (30, 21, 5, None, 30, 21),
+            (50, 70, 16, None, 50, 70), (50, 70, 16, 4, 50, 70), (37, 53, 8, 8, 37, 53), (40, 29, 12, 3, 40, 29),
+            (30, 21, 5, 5, 30, 21), (48, 64, 16, 1, 48, 64), (48, 64, 16, None, 72, 96), (50, 70, 16, 2, 37, 61),
+            (37, 53, 8, None, 40, 41), (30, 21, 5, 5, 52, 33)):
         s = default_step(tile) if step is None else step
-        shape = tile_index_map((h, w), tile, step).shape
-        assert shape == (-(-h // tile) * tile // s, -(-w // tile) * tile // s)
-        tiles = -(-h // tile) * -(-w // tile)
+        shape = tile_index_map((ph, pw), tile, step).shape
+        assert shape == (-(-ph // tile) * tile // s, -(-pw // tile) * tile // s)
+        tiles = -(-ph // tile) * -(-pw // tile)
         entries = tiles + int(rng.integers(0, 9))  # the frame's tiles, then fresh ones
         lut = np.where(rng.random((3, tiles)) < 0.3, -1, rng.integers(0, entries, (3, tiles))).astype(np.int32)
         lut[0] = np.arange(tiles)
         index = np.where(rng.random(shape) < 0.15, -1, rng.integers(0, entries, shape)).astype(np.int32)
-        place = (rng.integers(0, h, shape) << PLACE_BITS) | rng.integers(0, w, shape)
+        place = (rng.integers(0, ph, shape) << PLACE_BITS) | rng.integers(0, pw, shape)
         track = Track(index, np.where(index >= 0, place, -1).astype(np.int32), rng.integers(0, 3, shape).astype(np.int32),
-                      lut)
+                      lut, (ph, pw))
         est = rng.random((6, entries)).astype(np.float32)
-        rows, cols = rng.integers(0, h, (h, w)), rng.integers(0, w, (h, w))
+        rows, cols = rng.integers(0, ph, (h, w)), rng.integers(0, pw, (h, w))
         seen = (rng.random((h, w)) > 0.25).astype(np.float32)
         sky = (rng.random((h, w)) > 0.9).astype(np.float32)
         for hib in (False, True):
@@ -285,6 +293,79 @@ def test_fresh_tiles_are_the_networks_and_are_carried_on(step: int | None) -> No
     full.predict(s.inputs(everything))
     est = full.predict(s.inputs(seen), (s.rows, s.cols), seen)
     assert np.isinf(est[:, 2:4, 11:13]).all() and full.work == 0.0
+
+
+@pytest.mark.parametrize("unseen", ["full", "fresh"])
+def test_a_frame_of_another_render_resolution_is_carried(unseen: str) -> None:
+    """Dynamic resolution: a frame at half the last one's size whose fetch indexes the previous frame's pixels
+    (``fetch_from_motion(..., prev_shape=)``) carries the estimates onto its own tiles without the network, as
+    carry_estimates does; unseen tiles go to 1x1 (or the network's crop) and, carried on at the new size, stay
+    unknown rather than spreading a worst value; the network runs when the interval is up, and a frame of the
+    first size is carried back. The features of a split network are carried the same way."""
+    s = _Scene()
+    reuse = sdk.PredictionReuse(s.pred, 5, unseen=unseen)
+    everything = np.ones((s.h, s.w), np.float32)
+    first = reuse.predict(s.inputs(everything))
+    h, w = s.h // 2, s.w // 2
+    zero = np.zeros((h, w))
+    fetch = sdk.fetch_from_motion(zero, zero, prev_shape=(s.h, s.w))
+    assert fetch[0].max() == s.h - 1 and (fetch[1][:, 1] == 3).all()  # (the pixel its centre falls in)
+    small = s.inputs(everything)[:, ::2, ::2].copy()
+    seen = np.ones((h, w), np.float32)
+    seen[:TILE, 3 * TILE:4 * TILE] = 0  # one tile unseen
+    est = reuse.predict(small, fetch, seen)
+    assert est.shape == (6, 5, w // TILE) and reuse.age == 1  # (72 rows: four tiles and a half)
+    want, _, missing = carry_estimates(first.reshape(6, -1), start_track((s.h, s.w), TILE), *fetch, seen, None,
+                                       TILE, False, 0.5)
+    assert missing.sum() == 1 and missing[0, 3]
+    keep = ~missing
+    np.testing.assert_array_equal(est[:, keep], want[:, keep])
+    # each whole tile the mean of the four it covers (its pixels' centres fall in them alike)
+    quads = first[:, :8].reshape(6, 4, 2, w // TILE, 2).mean(axis=(2, 4))
+    np.testing.assert_allclose(est[:, :4][:, keep[:4]], quads[:, keep[:4]], rtol=1e-6)
+    if unseen == "full":
+        assert np.isinf(est[:, 0, 3]).all() and reuse.work == 0.0
+    else:
+        np.testing.assert_array_equal(est[:, 0, 3], s.pred.predict(small)[:, 0, 3])
+        assert 0.0 < reuse.work < 1.0
+    # still, at the new size: the same estimates; the unseen tile, seen now, is unknown (1x1) or the crop's, and
+    # its neighbours keep their own
+    still = np.indices((h, w))
+    again = reuse.predict(small, (still[0], still[1]), np.ones((h, w), np.float32))
+    np.testing.assert_array_equal(again, est)
+    assert reuse.work == 0.0 and reuse.age == 2
+    # half a tile left: each tile takes half its right neighbour; the one left of the unseen tile keeps its own
+    # estimate (half unknown is not more than unseen_fraction) where a worst value carried would have spread
+    shifted = reuse.predict(small, (still[0], np.minimum(still[1] + TILE // 2, w - 1)), np.ones((h, w), np.float32))
+    mixed = (est[:, :, :-1] + est[:, :, 1:]) / 2
+    if unseen == "full":
+        np.testing.assert_allclose(shifted[:, 0, 2], est[:, 0, 2], rtol=1e-6)
+        mixed[:, 0, 2] = est[:, 0, 2]
+    np.testing.assert_allclose(shifted[:, 1:, :-1], mixed[:, 1:], rtol=1e-6)
+    assert np.isfinite(shifted[:, 0, :3]).all()
+    # back to the first size, then the network when the interval is up
+    big = sdk.fetch_from_motion(np.zeros((s.h, s.w)), np.zeros((s.h, s.w)), prev_shape=(h, w))
+    back = reuse.predict(s.inputs(everything), big, everything)
+    assert back.shape == first.shape and reuse.age == 4 and reuse.work == 0.0
+    # each big tile's pixels come from half a small tile, whose surfaces were half a tile right: the surfaces are
+    # followed to the pixel across the sizes, not the small frame's tiles upsampled
+    cols = np.minimum((np.arange(s.w // TILE) + 1) // 2, w // TILE - 1)
+    np.testing.assert_allclose(back[:, 2:], est[:, np.arange(2, 9) // 2][:, :, cols], rtol=1e-6)
+    reuse.predict(s.inputs(everything), (s.rows, s.cols), everything)
+    assert reuse.age == 0 and reuse.work == 1.0
+    split = sdk.load("jnyang-reuse")
+    features = sdk.PredictionReuse(split, 4, carry="features")
+    x = np.random.default_rng(1).random((len(split.metadata.inputs), s.h, s.w), dtype=np.float32)
+    features.predict(x)
+    half = np.ascontiguousarray(x[:, ::2, ::2])
+    carried = features.predict(half, fetch, np.ones((h, w), np.float32))
+    assert carried.shape == (6, 5, w // TILE) and np.isfinite(carried).all() and features.work == 0.0
+    np.testing.assert_array_equal(features.predict(half, (still[0], still[1]), np.ones((h, w), np.float32)), carried)
+    with pytest.raises(sdk.ParameterError, match=r"fetch rows: expected indices in \[0, 72\)"):
+        features.predict(x, (s.rows, s.cols), everything)  # (a fetch of this frame's pixels, not the previous one's)
+    for bad in ((0, 4), (2**70, 3), (3, 2.0)):  # (2**70: indices past int64, accepted as garbage once)
+        with pytest.raises(sdk.ParameterError, match=r"prev_shape: expected the previous frame's \(H, W\)"):
+            sdk.fetch_from_motion(zero, zero, prev_shape=bad)
 
 
 def test_a_budget_on_carried_estimates() -> None:
@@ -934,15 +1015,18 @@ def _moving_frames(names: tuple[str, ...], sizes: list[tuple[int, int]], seed: i
     each with a seen mask (10% unseen) and, but for the first frame and one in ten, fetch positions moved by
     up to three pixels: ``(x, fetch, seen)``."""
     rng = np.random.default_rng(seed)
+    ph, pw = sizes[0]
     for f, (h, w) in enumerate(s for s in sizes for _ in range(3)):
         x = rng.random((len(names), h, w), dtype=np.float32)
         for i, c in enumerate(names):
             if c.endswith((".blocks", ".tiles")):
                 x[i] = (sdk.tile_variances if c.endswith(".tiles") else sdk.block_variances)(x[0])
         seen = (rng.random((h, w)) > 0.1).astype(np.float32)
-        rows, cols = np.indices((h, w))
-        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, h - 1),
-                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, w - 1)) if f and rng.random() < 0.9 else None
+        rows, cols = np.indices((h, w))  # (in the previous frame's pixels: dynamic resolution changes the size)
+        rows, cols = ((2 * rows + 1) * ph) // (2 * h), ((2 * cols + 1) * pw) // (2 * w)
+        fetch = (np.clip(rows + rng.integers(-3, 4, (h, w)), 0, ph - 1),
+                 np.clip(cols + rng.integers(-3, 4, (h, w)), 0, pw - 1)) if f and rng.random() < 0.9 else None
+        ph, pw = h, w
         yield x, fetch, seen
 
 
