@@ -463,7 +463,12 @@ def _check(frames: int, fps: float, flip_every: int, size: tuple[int, int], reus
     if _integer("frames", frames, 3, " (the first has no history)") > MAX_FRAMES:
         raise PlayError(f"frames: expected at most {MAX_FRAMES} a path (ten minutes at 60 frames a second), got {frames}",
                         "frames")
-    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or not (math.isfinite(fps) and fps > 0):
+    number = not isinstance(fps, bool) and isinstance(fps, (int, float, np.number))
+    try:
+        rate = float(fps) if number else math.nan
+    except OverflowError:  # (an int past float's range: math.isfinite raised it, untyped)
+        rate = math.inf
+    if not (math.isfinite(rate) and rate > 0):
         raise PlayError(f"fps: expected a finite number > 0, got {fps!r}", "fps")
     if (frames - 1) / fps > MAX_SECONDS:  # (a long walk: its planning took seconds to hours, then failed)
         raise PlayError(f"fps: {frames} frames at {fps:g} frames a second last {(frames - 1) / fps:,.0f} s; expected a path "

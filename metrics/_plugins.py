@@ -99,8 +99,12 @@ class Metric:
             raise MetricParameterError(f"Metric {self.name!r}: error_map must be a function (reference, test) -> "
                                        f"(H, W) map, got {type(self.error_map).__name__}", "error_map")
         t = self.default_threshold
-        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not math.isfinite(t) \
-                or t <= 0:
+        number = not isinstance(t, bool) and isinstance(t, (int, float, np.integer, np.floating))
+        try:
+            threshold = float(t) if number else math.nan
+        except OverflowError:  # (an int past float's range: math.isfinite raised it, untyped)
+            threshold = math.inf
+        if not math.isfinite(threshold) or threshold <= 0:
             raise MetricParameterError(f"Metric {self.name!r}: default_threshold must be a finite number > 0 (the "
                                        f"largest acceptable tile error), got {t!r}", "default_threshold")
         if self.pooling not in POOLINGS:
@@ -123,7 +127,7 @@ class Metric:
                                        f"{self.requires!r}", "requires")
         object.__setattr__(self, "requires", tuple(self.requires))
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
-        object.__setattr__(self, "default_threshold", float(t))
+        object.__setattr__(self, "default_threshold", threshold)
 
     @property
     def info(self) -> MetricInfo:

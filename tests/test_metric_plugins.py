@@ -77,7 +77,8 @@ def frames(seed: int = 0, h: int = 37, w: int = 53) -> tuple[np.ndarray, dict[st
 @pytest.mark.parametrize("kw", [
     {"name": "SSIM"}, {"name": "1x"}, {"name": "a-b"}, {"name": "x" * 65}, {"name": "flip"}, {"name": "jnssim"},
     {"name": 3}, {"error_map": "absdiff"}, {"default_threshold": 0}, {"default_threshold": float("nan")},
-    {"default_threshold": True}, {"default_threshold": "0.1"}, {"pooling": "min"}, {"pooling": "mse"},
+    {"default_threshold": True}, {"default_threshold": "0.1"}, {"default_threshold": 10**400},  # (was OverflowError)
+    {"pooling": "min"}, {"pooling": "mse"},
     {"units": 1}, {"description": None}, {"params": {"a": object()}}, {"params": {"a": float("inf")}},
     {"params": {1: 2}}, {"params": [1]}, {"requires": "scipy"}, {"requires": ("",)},
 ])

@@ -461,6 +461,7 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
                           ({"fps": 0.001}, r"^fps: 3 frames at 0.001 frames a second last 2,000 s; expected a path of at "
                                            r"most 600 s \(ten minutes\): more frames a second, or fewer frames"),
                           ({"fps": float("nan")}, "fps"), ({"flip_every": 2.5}, "flip_every"),
+                          ({"fps": 10**400}, "fps: expected a finite"),  # (an OverflowError, untyped)
                           ({"size": (64.0, 48)}, "size"), ({"size": "64x48"}, "size"), ({"seed": -1}, "seed"),
                           ({"workers": 0}, "workers"), ({"unseen_fraction": "0.5"}, "unseen_fraction"),
                           ({"sweep": "no"}, "sweep: expected True or False"), ({"open_loop": 1}, "open_loop"),
