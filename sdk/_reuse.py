@@ -255,8 +255,8 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     else:
         ty, tx = (place >> PLACE_BITS) // tile, (place & ((1 << PLACE_BITS) - 1)) // tile
     cell = np.minimum(ty, pth - 1) * ptw + np.minimum(tx, ptw - 1)
-    if len(track.lut) == 1:  # only the whole-frame run's tiles: the tile is the entry
-        gen = track.gen
+    if len(track.lut) == 1:  # only the whole-frame run's tiles: the tile is the entry (every generation 0)
+        gen = track.gen if track.gen.shape == (gh, gw) else np.zeros((gh, gw), track.gen.dtype)
         new = np.where(known, cell, -1)
     else:  # and the tiles predicted afresh since, each frame of them a generation; none there: the kept pixel's
         gen = np.take(track.gen, k)

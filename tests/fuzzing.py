@@ -986,7 +986,7 @@ def _reuse_absurd(v: tuple[dict[str, Any], Any, Any, Any, Any], est: np.ndarray)
 
 
 #: (previous frame's (H, W), this frame's, how far past the previous frame the fetch may reach, every, unseen, seed):
-#: a frame of another size than the last, as dynamic resolution gives it.
+#: a frame of another size than the last, as dynamic resolution gives it, a fifth of it sky.
 resize_cases = st.tuples(st.tuples(st.integers(1, 60), st.integers(1, 60)), st.tuples(st.integers(1, 60), st.integers(1, 60)),
                          st.integers(-2, 2), st.integers(1, 4), st.sampled_from(list(sdk.REUSE_UNSEEN)),
                          st.integers(0, 2**16))
@@ -1005,7 +1005,8 @@ def _resize_call(v: tuple[Any, ...]) -> np.ndarray:
     reuse = sdk.PredictionReuse(_PRED, every, unseen=unseen)
     reuse.predict(rng.random((len(_PRED.metadata.inputs), ph, pw), dtype=np.float32))
     rows, cols, seen = _resize_fetch(v)
-    return reuse.predict(rng.random((len(_PRED.metadata.inputs), h, w), dtype=np.float32), (rows, cols), seen)
+    sky = rng.random((h, w)) > 0.8  # (background: its estimate from its own place on the screen)
+    return reuse.predict(rng.random((len(_PRED.metadata.inputs), h, w), dtype=np.float32), (rows, cols), seen, sky)
 
 
 def _resize_absurd(v: tuple[Any, ...], est: np.ndarray) -> bool:

@@ -183,13 +183,16 @@ def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
         place = (rng.integers(0, ph, shape) << PLACE_BITS) | rng.integers(0, pw, shape)
         track = Track(index, np.where(index >= 0, place, -1).astype(np.int32), rng.integers(0, 3, shape).astype(np.int32),
                       lut, (ph, pw))
+        # and the track of a frame the network ran on whole, no tile predicted afresh since: one generation
+        whole = Track(np.where(index >= 0, index % tiles, -1).astype(np.int32), track.place,
+                      np.zeros(shape, np.int32), lut[:1], (ph, pw))
         est = rng.random((6, entries)).astype(np.float32)
         rows, cols = rng.integers(0, ph, (h, w)), rng.integers(0, pw, (h, w))
         seen = (rng.random((h, w)) > 0.25).astype(np.float32)
         sky = (rng.random((h, w)) > 0.9).astype(np.float32)
-        for hib in (False, True):
-            got, carried, missing = carry_estimates(est, track, rows, cols, seen, sky, tile, hib, 0.5, reduce, step)
-            want, entry = _carry_by_loops(est, track, rows, cols, seen, sky, tile, hib, 0.5, reduce, s)
+        for hib, tr in ((False, track), (True, track), (False, whole)):
+            got, carried, missing = carry_estimates(est, tr, rows, cols, seen, sky, tile, hib, 0.5, reduce, step)
+            want, entry = _carry_by_loops(est, tr, rows, cols, seen, sky, tile, hib, 0.5, reduce, s)
             assert np.allclose(got, want, rtol=1e-6), (h, w, tile, step, hib)
             assert np.array_equal(missing, np.isinf(want).all(axis=0)), (h, w, tile, step, hib)
             assert np.array_equal(carried.index, entry), (h, w, tile, step)
