@@ -37,8 +37,8 @@ from .viewpoints import (
     free_space,
 )
 
-__all__ = ["MAX_FRAMES", "MAX_SECONDS", "PATH_PROFILES", "CameraPath", "PathFrame", "PathPlayer", "PathProfile", "camera_path",
-           "composite", "frame_unseen_share", "unseen_shares"]
+__all__ = ["MAX_FRAMES", "MAX_SECONDS", "PATH_PROFILES", "CameraPath", "DynamicResolution", "PathFrame", "PathPlayer",
+           "PathProfile", "camera_path", "composite", "frame_unseen_share", "unseen_shares"]
 
 log = logging.getLogger("rtp.capture")
 
@@ -306,7 +306,8 @@ class PathFrame:
     terms: dict[Any, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def reproject(self, image: np.ndarray) -> np.ndarray:
-        """``image`` (the previous frame's, ``(H, W, 3)``) reprojected into this frame; 0 where unseen."""
+        """``image`` (the previous frame's, ``(H', W', 3)`` at its own size) reprojected into this frame
+        (``(H, W, 3)``); 0 where unseen."""
         image = np.asarray(image, np.float32)
         key = image.shape[:2]
         cached = self._gather.get(key)
@@ -320,7 +321,7 @@ class PathFrame:
         # finite and >= 0).
         out = np.take(image.reshape(-1, image.shape[-1]), index, axis=0, mode="clip")
         out[unseen] = 0.0
-        return out.reshape(image.shape)
+        return out.reshape(self.seen.shape + image.shape[2:])  # (this frame's size: dynamic resolution)
 
     def plane(self, name: str) -> np.ndarray:
         """The frame's channel ``name`` (``Frame.channel``) as float32, computed once per frame: the
@@ -376,6 +377,77 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
     return out
 
 
+@dataclass(frozen=True)
+class DynamicResolution:
+    """An engine's dynamic resolution as a schedule for :class:`PathPlayer`: the frames' render resolution
+    cycles through ``scales`` of the full size (each in (0, 1]: of the width and of the height), each held
+    ``every`` frames. ``DynamicResolution((1.0, 0.75), 30)`` draws frames 0-29 at the full size, 30-59 at
+    three quarters of it, 60-89 at the full size again, and so on; ``DynamicResolution.parse("1,0.75@30")``
+    is the same (``rtp play --dynamic-resolution``). A frame's size is the full size times its scale,
+    rounded, at least 16 pixels a side (:meth:`size`). Bad values are a ``ParameterError``."""
+
+    scales: tuple[float, ...]
+    every: int
+
+    def __post_init__(self) -> None:
+        from rtp.sdk import ParameterError
+
+        scales = self.scales
+        ok = isinstance(scales, (tuple, list)) and len(scales) > 0 and all(
+            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+            and math.isfinite(float(v)) and 0.0 < float(v) <= 1.0 for v in scales)
+        if not ok:
+            raise ParameterError(f"dynamic resolution: expected scales of the full size, numbers in (0, 1], got "
+                                 f"{scales!r}", "scales")
+        if isinstance(self.every, (bool, np.bool_)) or not isinstance(self.every, (int, np.integer)) or self.every < 1:
+            raise ParameterError(f"dynamic resolution: expected every, the frames each scale is held, an integer >= 1, "
+                                 f"got {self.every!r}", "every")
+        object.__setattr__(self, "scales", tuple(float(v) for v in scales))
+        object.__setattr__(self, "every", int(self.every))
+
+    @classmethod
+    def parse(cls, text: str) -> DynamicResolution:
+        """``"SCALES@FRAMES"``: comma-separated scales, each held FRAMES frames (``"1,0.75@30"``)."""
+        from rtp.sdk import ParameterError
+
+        scales, at, every = str(text).partition("@")
+        try:
+            values = tuple(float(v) for v in scales.split(","))
+            frames = int(every)
+        except ValueError:
+            values, frames = (), 0
+        if not at or not values:
+            raise ParameterError(f"dynamic resolution: expected SCALES@FRAMES, scales of the full size in (0, 1] "
+                                 f"held FRAMES frames each, as 1,0.75@30; got {text!r}", "dynamic_resolution")
+        return cls(values, frames)
+
+    def size(self, index: int, full: tuple[int, int]) -> tuple[int, int]:
+        """``(width, height)`` of frame ``index`` on a path drawn at ``full`` = ``(width, height)``."""
+        scale = self.scales[(index // self.every) % len(self.scales)]
+        return max(16, round(full[0] * scale)), max(16, round(full[1] * scale))
+
+    def sizes(self, full: tuple[int, int]) -> list[tuple[int, int]]:
+        """Every size the schedule draws at ``full``, in the schedule's order, once each."""
+        return list(dict.fromkeys(self.size(i * self.every, full) for i in range(len(self.scales))))
+
+
+def _source_across_sizes(frame: Any, prev: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rows, cols, seen)`` of :class:`PathFrame` for a ``frame`` rendered at another size than ``prev``,
+    the frame before it (dynamic resolution): where each of its pixels was in ``prev``'s pixels, through
+    ``rtp.sdk.reproject`` (the runtime's reprojection, with its disocclusion test and tolerance) of an image
+    of ``prev``'s own pixel indices; 0 where unseen. The renderer's own GL reprojection
+    (``Renderer.reprojection_source``) takes frames of its one size."""
+    from rtp import sdk
+
+    ph, pw = prev.depth.shape
+    h, w = frame.depth.shape
+    rows, cols = np.indices((ph, pw), dtype=np.float32)
+    index = np.stack([rows, cols], -1)  # (float32 holds each side's indices exactly: below 2**24)
+    fetched, seen = sdk.reproject(index, prev.depth, frame.depth, frame.camera.view(), frame.camera.projection(w / h),
+                                  prev.camera.view_projection(pw, ph))
+    return fetched[..., 0].astype(np.intp), fetched[..., 1].astype(np.intp), seen
+
+
 class PathPlayer:
     """Plays a :class:`CameraPath` through the reference renderer for closed-loop VRS runs
     (``rtp play``, :func:`rtp.evaluate.play`): :meth:`frames` renders each camera once (the
@@ -383,47 +455,77 @@ class PathPlayer:
     per-tile rate image, as an engine with VRS would display it. Any number of methods share one
     render per frame, each keeping its own displayed frames as history (``PathFrame.reproject``).
     ``exact=False`` shades by :func:`composite` instead (several times faster on a CPU; differs from
-    the renderer's VRS only by FXAA next to tiles of another rate)."""
+    the renderer's VRS only by FXAA next to tiles of another rate). ``dynamic`` (a
+    :class:`DynamicResolution`) draws each frame at its schedule's size of ``size`` (the largest), with a
+    renderer of its own per size; a frame of another size than the one before reprojects from the earlier
+    frame's pixels (``sdk.reproject`` of its pixel indices), so each method's history is the frame it displayed, at the
+    size it was drawn."""
 
     def __init__(self, scene: Scene, size: tuple[int, int] = (1280, 720), *, renderer: Any = None,
-                 exact: bool = True) -> None:
+                 exact: bool = True, dynamic: DynamicResolution | None = None) -> None:
         from rtp.plugins.moderngl import Renderer
+        from rtp.sdk import ParameterError
 
+        if dynamic is not None and not isinstance(dynamic, DynamicResolution):
+            raise ParameterError(f"dynamic: expected a DynamicResolution (or None), got {type(dynamic).__name__}",
+                                 "dynamic")
+        if dynamic is not None and renderer is not None:
+            raise ParameterError("dynamic: dynamic resolution draws with renderers of its own, one per size: give "
+                                 "the scene and no renderer", "dynamic")
         self.exact = bool(exact)
+        self.dynamic = dynamic
+        self._scene = scene
         self._current: Any = None
         self._own = renderer is None
         self.renderer = Renderer(*size) if self._own else renderer
         if self._own:
             self.renderer.load_scene(scene)
         self.size = (self.renderer.width, self.renderer.height)
+        self._renderers = {self.size: self.renderer}  # one per size drawn (dynamic resolution)
+        self._drawing = self.renderer  # the current frame's
+
+    def _renderer(self, size: tuple[int, int]) -> Any:
+        got = self._renderers.get(size)
+        if got is None:
+            from rtp.plugins.moderngl import Renderer
+
+            got = Renderer(*size, ctx=self.renderer.ctx)  # (in the first one's GL context)
+            self._renderers[size] = got  # (released with the rest, even if the scene fails to load)
+            got.load_scene(self._scene)
+        return got
 
     def frames(self, path: CameraPath) -> Any:
         """Yield a :class:`PathFrame` per camera of ``path``."""
         prev = None
-        h, w = self.size[1], self.size[0]
         for i, cam in enumerate(path.cameras):
+            size = self.size if self.dynamic is None else self.dynamic.size(i, self.size)
+            self._drawing = self._renderer(size)
             # the previous camera for the motion vectors, not the previous frame: every method reprojects
             # its own history through reprojection_source, so the renderer's reprojection of the
             # full-rate frame (Frame.reprojected and .seen, left 0 here) would be read by none
-            frame = self.renderer.render(cam, prev_camera=prev.camera if prev is not None else None)
+            frame = self._drawing.render(cam, prev_camera=prev.camera if prev is not None else None)
             self._current = frame
+            h, w = size[1], size[0]
             if prev is None:
                 zeros = np.zeros((h, w), np.intp)
                 yield PathFrame(i, frame, zeros, zeros, np.zeros((h, w), np.float32))
-            else:
-                rows, cols, seen = self.renderer.reprojection_source(prev.depth, prev.camera)
+            elif prev.depth.shape == (h, w):
+                rows, cols, seen = self._drawing.reprojection_source(prev.depth, prev.camera)
                 yield PathFrame(i, frame, rows, cols, seen)
+            else:  # (dynamic resolution: the previous frame at its own size)
+                yield PathFrame(i, frame, *_source_across_sizes(frame, prev))
             prev = frame
 
     def shade(self, rates: np.ndarray, tile_size: int) -> np.ndarray:
         """The current frame shaded per tile at ``rates`` (uint8 codes), tone-mapped and post-processed."""
         if not self.exact:
             return composite(self._current.colour, rates, tile_size)
-        return np.asarray(self.renderer.shade_rates(rates, tile_size))
+        return np.asarray(self._drawing.shade_rates(rates, tile_size))
 
     def close(self) -> None:
         if self._own:
-            self.renderer.release()
+            for r in reversed(self._renderers.values()):  # (the first, which owns the context, last)
+                r.release()
 
     def __enter__(self) -> PathPlayer:
         return self

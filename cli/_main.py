@@ -134,6 +134,17 @@ _positive = int_at_least(1)
 _non_negative = int_at_least(0)
 
 
+def _dynamic_resolution(text: str) -> Any:
+    """An argparse type: ``SCALES@FRAMES`` (``rtp.capture.paths.DynamicResolution.parse``)."""
+    from rtp.capture.paths import DynamicResolution
+    from rtp.sdk import ParameterError
+
+    try:
+        return DynamicResolution.parse(text)
+    except ParameterError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix("dynamic resolution: ")) from None
+
+
 def _csv(text: str) -> tuple[str, ...]:
     return tuple(t.strip() for t in text.split(",") if t.strip())
 
@@ -687,7 +698,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
                    animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop,
-                   engine_rates=args.engine_rates, combiner=args.combiner, progress=progress, stage=stage)
+                   engine_rates=args.engine_rates, combiner=args.combiner,
+                   dynamic_resolution=args.dynamic_resolution, progress=progress, stage=stage)
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0
@@ -1095,6 +1107,11 @@ def build_parser() -> argparse.ArgumentParser:
                     "fails only beyond the engine's own rate; rtp's models choose beside them (NAME@k:alone: without)")
     pl.add_argument("--combiner", choices=("min", "max", "sum"), default="max", help="the hardware's combiner of "
                     "--engine-rates and each method's rates (default max: the coarser per axis)")
+    pl.add_argument("--dynamic-resolution", type=_dynamic_resolution, default=None, metavar="SCALES@FRAMES",
+                    help="an engine's dynamic resolution: the frames' render resolution cycles through these scales of "
+                    "--size, each held FRAMES frames (1,0.75@30: 30 frames at --size, 30 at three quarters of it, ...); "
+                    "every method chooses, shades and is judged at each frame's own size, its history the frame it "
+                    "displayed at the size it was drawn")
     cache_dir(pl)
 
     im = command("import", "a dataset from your engine's frames (G-buffers and the frame shaded at every rate, .npz "

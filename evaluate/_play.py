@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,6 +51,9 @@ from rtp.sdk.files import atomic_output, writer_lock
 from ._baselines import FidelityFX, Frame, Yang2019
 from ._engine import ENGINE_IMAGES, engine_rates
 from ._evaluate import failing_tiles, monotone_over_rates
+
+if TYPE_CHECKING:
+    from rtp.capture.paths import DynamicResolution
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -347,6 +350,18 @@ def _engine_sentence(settings: dict[str, Any]) -> str:
             "models and the oracle choose beside the engine's rates (a model's :alone without them).")
 
 
+def _dynamic_sentence(settings: dict[str, Any]) -> str:
+    """The sentence of play.md's header on dynamic resolution, where the run had it (else empty)."""
+    dyn = settings.get("dynamic_resolution")
+    if not dyn:
+        return ""
+    sizes = ", ".join(f"{w}x{h}" for w, h in dyn["sizes"])
+    return (f" Dynamic resolution: the frames are drawn at {sizes} in turn, each size held {dyn['every']} frames "
+            f"(scales {', '.join(f'{v:g}' for v in dyn['scales'])} of the size); every method chooses, shades and is "
+            "judged at each frame's own size, its history the frame it displayed at the size it was drawn, and its "
+            "saving is a share of each frame's own pixels.")
+
+
 def _other_tiles(settings: dict[str, Any]) -> str:
     """The sentence of play.md's header that names the models run on other tiles than their own (the
     hardware's: finer, each takes its model tile's rate; coarser, each decides on the worst model tile it
@@ -404,7 +419,7 @@ class PlayReport:
                  f"{s['size'][0]}x{s['size'][1]}, {s['tile_size']}px tiles. A tile fails when "
                  f"{fail_rule(s['fail_metric'], s['fail_threshold'])}; {flip}. Shading: {s.get('shading', 'renderer')}; "
                  f"each method's history: {s.get('history', 'own displayed frame')}. The first frame (no history) is "
-                 f"left out.{_other_tiles(s)}{_engine_sentence(s)}", ""]
+                 f"left out.{_other_tiles(s)}{_engine_sentence(s)}{_dynamic_sentence(s)}", ""]
         for path, unseen in self.unseen.items():
             u = np.array(unseen[1:])
             cam = s.get("cameras", {}).get(path)
@@ -515,6 +530,7 @@ def play(
     open_loop: bool = False,
     engine_rates: str | None = None,
     combiner: str = "max",
+    dynamic_resolution: DynamicResolution | None = None,
     progress: Callable[[int], None] | None = None,
     stage: Callable[[str], None] | None = None,
 ) -> PlayReport:
@@ -530,17 +546,24 @@ def play(
     each frame, which the hardware's ``combiner`` (``min``, ``max``, ``sum``) meets with every method's: the rates
     shaded, saved and judged are the combination's (``full``'s row is the engine's rates alone), a tile fails only
     where the rate shaded is not the engine's own, and rtp's models and the oracle choose beside the engine's rates
-    (``select_rates(engine_rates=)``; a model's ``:alone`` chooses without them). ``progress(n)`` is called after
+    (``select_rates(engine_rates=)``; a model's ``:alone`` chooses without them). ``dynamic_resolution`` (a
+    :class:`rtp.capture.paths.DynamicResolution`, such as ``DynamicResolution((1.0, 0.75), 30)``) draws the
+    frames at its schedule's sizes of ``size`` (the largest), as an engine's dynamic resolution does: each
+    method chooses, shades and is judged at the frame's own size, its history the frame it displayed at the
+    size it was drawn; the saving is a share of each frame's own pixels. ``progress(n)`` is called after
     every frame; ``stage(text)`` as each step between frames begins (a path's map loaded, its cameras
     planned, its renderer started, its first frame, its GIF, then the report and plots: seconds on a
     large map, while ``progress`` does not move), as ``"fast: planning the camera path"``; ``"PATH:
     playing"`` once its frames count and ``"PATH: done"`` at its end (with ``workers``, which paths are
     in a step)."""
     from rtp import metrics
-    from rtp.capture.paths import PATH_PROFILES
+    from rtp.capture.paths import PATH_PROFILES, DynamicResolution
 
     specs = parse_methods(methods)
     _check(frames, fps, flip_every, size, (m.reuse for m in specs))
+    if dynamic_resolution is not None and not isinstance(dynamic_resolution, DynamicResolution):
+        raise PlayError(f"dynamic_resolution: expected an rtp.capture.paths.DynamicResolution (or None), got "
+                        f"{type(dynamic_resolution).__name__}", "dynamic_resolution")
     if engine_rates is not None and engine_rates not in ENGINE_IMAGES:
         raise PlayError(f"engine_rates: expected one of {', '.join(ENGINE_IMAGES)} (or None), got {engine_rates!r}",
                         "engine_rates")
@@ -612,6 +635,9 @@ def play(
                 "unseen_fraction": unseen_fraction, "shading": "renderer" if exact else "composite",
                 "history": "full-rate frame (open loop)" if open_loop else "own displayed frame",
                 "engine_rates": None if engine_rates is None else {"image": engine_rates, "combiner": combiner},
+                "dynamic_resolution": None if dynamic_resolution is None else {
+                    "scales": list(dynamic_resolution.scales), "every": dynamic_resolution.every,
+                    "sizes": [list(z) for z in dynamic_resolution.sizes((size[0], size[1]))]},
                 "models": {k: str(p.path) for k, p in predictors.items()},
                 "model_tiles": {k: p.tile_size for k, p in predictors.items()},  # (play.md names those on other tiles)
                 "reuse": {m.name: {"k": m.reuse, "reduce": m.reduce, "unseen": m.unseen, "history": m.history,
@@ -644,7 +670,9 @@ def play(
                "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
                "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
                "open_loop": open_loop, "gif": str(outdir) if outdir is not None and plots and animation else None,
-               "engine_rates": engine_rates, "combiner": combiner}
+               "engine_rates": engine_rates, "combiner": combiner,
+               "dynamic": None if dynamic_resolution is None else [list(dynamic_resolution.scales),
+                                                                   dynamic_resolution.every]}
         # A path finished by an interrupted run of the same job into the same folder is read back, not
         # played again; each path is kept as it finishes, until the report is written.
         key = _resume_key(job, predictors) if outdir is not None else ""
@@ -725,7 +753,8 @@ def _warn_of_another_report(outdir: Path, settings: dict[str, Any]) -> None:
     try:
         before = json.loads(old.read_text(encoding="utf-8"))["settings"]
         differ = [k for k in ("scene", "methods", "paths", "frames", "size", "tile_size", "fail_metric", "fail_threshold",
-                              "seed", "models") if before.get(k) != json.loads(json.dumps(settings.get(k), default=str))]
+                              "seed", "models", "dynamic_resolution")
+                  if before.get(k) != json.loads(json.dumps(settings.get(k), default=str))]
     except (OSError, ValueError, KeyError, TypeError):
         differ = ["unreadable"]
     if differ:
@@ -768,7 +797,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     shares and GIF; ``stage`` hears of each step before the frames and after them."""
     from rtp import metrics
     from rtp.capture import load_scene
-    from rtp.capture.paths import PathPlayer, camera_path
+    from rtp.capture.paths import DynamicResolution, PathPlayer, camera_path
 
     pname = job["path"]
 
@@ -800,11 +829,13 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
         if progress is not None:
             progress(n)
 
-    with PathPlayer(scn, (w, h), exact=job["exact"]) as player:
+    dynamic = job.get("dynamic")
+    with PathPlayer(scn, (w, h), exact=job["exact"],
+                    dynamic=None if dynamic is None else DynamicResolution(tuple(dynamic[0]), dynamic[1])) as player:
         step("the first frame (rendered at every rate, then each method)")
         start = time.perf_counter()
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
-                                 tile, job["flip_every"], (h, w), frame_done, job["gif"] is not None, job["open_loop"],
+                                 tile, job["flip_every"], frame_done, job["gif"] is not None, job["open_loop"],
                                  engine, combiner)
         took = time.perf_counter() - start
         log.info("%s: %d frames of %d loops played in %.1f s (%.2f s a frame)", pname, len(path), len(loops), took,
@@ -1000,7 +1031,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
 
 
 def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
-              tile: int, flip_every: int, hw: tuple[int, int], progress: Callable[[int], None] | None,
+              tile: int, flip_every: int, progress: Callable[[int], None] | None,
               animate: bool, open_loop: bool = False, engine_image: str | None = None,
               combiner: str = "max") -> tuple[list[float], list[np.ndarray]]:
     from rtp.capture.paths import frame_unseen_share
@@ -1011,6 +1042,7 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
     for pf in player.frames(path):
         frame = pf.frame
         ref = frame.colour["1x1"]
+        hw = ref.shape[:2]  # (the frame's own size: dynamic resolution changes it)
         truth = metrics.tile_targets(ref, {r: frame.colour[r] for r in sdk.PREDICTED_RATES}, (fail_metric,), tile)[fail_metric]
         unseen.append(frame_unseen_share(pf.seen) if pf.index > 0 else 1.0)
         flip_frame = flip_every > 0 and pf.index > 0 and pf.index % flip_every == 0
@@ -1041,7 +1073,8 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             if engine is not None:  # (the engine's own rate is its choice: a tile fails beyond it only)
                 failing &= rates != engine
             lp.fail.append(float(failing.mean()))
-            lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None else float("nan"))
+            lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None and lp.rates.shape == rates.shape
+                             else float("nan"))  # (none on the first frame, nor across a change of size)
             lp.flip.append(0.0 if lp.method.kind == "full" and engine is None else
                            float(metrics.flip_map(ref, displayed).mean()) if measure_flip and displayed is not None
                            else float("nan"))
@@ -1052,7 +1085,9 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             when = f"frame {pf.index} of {len(path)}"
             if isinstance(getattr(path, "fps", None), (int, float)) and path.fps > 0:
                 when += f", {pf.index / path.fps:.2f} s"
-            keep.append(_anim_frame(ref, shown, tile, when))
+            if getattr(player, "dynamic", None) is not None:
+                when += f", {ref.shape[1]}x{ref.shape[0]}"
+            keep.append(_anim_frame(ref, shown, tile, when, getattr(player, "size", None)))
         if progress is not None:
             progress(1)
     return unseen, keep
@@ -1067,12 +1102,13 @@ _ANIM_PANEL_WIDTH = 400  # each panel at most this wide
 
 
 def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]], tile: int,
-                when: str = "") -> np.ndarray:
+                when: str = "", full: tuple[int, int] | None = None) -> np.ndarray:
     """One GIF frame: the full-rate frame (labelled with ``when``, the frame's place on the path) and
     each method's displayed frame with its rate overlay, downscaled to panels at most
-    ``_ANIM_PANEL_WIDTH`` wide, three per row, uint8. The rates' colour key fills the first empty
-    cell of the grid, legible at the panels' size; where no cell is empty, the first overlay carries
-    the overlay's own small key."""
+    ``_ANIM_PANEL_WIDTH`` wide, three per row, uint8; with ``full`` (the path's largest ``(width,
+    height)``: dynamic resolution) each panel is the size a frame of that size gets, every GIF frame
+    alike. The rates' colour key fills the first empty cell of the grid, legible at the panels' size;
+    where no cell is empty, the first overlay carries the overlay's own small key."""
     from PIL import Image
 
     spare = -(len(shown) + 1) % 3 if len(shown) + 1 > 3 else 0
@@ -1080,9 +1116,11 @@ def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]]
     panels = [_uint8(ref)] + [_uint8(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0 and not spare))
                               for i, (img, rates) in enumerate(shown.values())]
     h, w = panels[0].shape[:2]
-    if w > _ANIM_PANEL_WIDTH:
-        size = (_ANIM_PANEL_WIDTH, max(1, round(h * _ANIM_PANEL_WIDTH / w)))
-        panels = [np.asarray(Image.fromarray(p).resize(size, Image.Resampling.BOX)) for p in panels]
+    fw, fh = full if full is not None else (w, h)
+    size = (_ANIM_PANEL_WIDTH, max(1, round(fh * _ANIM_PANEL_WIDTH / fw))) if fw > _ANIM_PANEL_WIDTH else (fw, fh)
+    if size != (w, h):  # (a smaller frame than the path's largest is scaled up to its panel)
+        kind = Image.Resampling.BOX if size[0] < w else Image.Resampling.NEAREST
+        panels = [np.asarray(Image.fromarray(p).resize(size, kind)) for p in panels]
         h, w = panels[0].shape[:2]
     panels = [_label(p, name) for p, name in zip(panels, names)]  # (after the downscale: legible at its size)
     if spare:

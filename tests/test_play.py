@@ -16,7 +16,7 @@ import pytest
 
 from rtp import sdk
 from rtp.capture import load_scene
-from rtp.capture.paths import PathFrame, PathPlayer, camera_path, composite
+from rtp.capture.paths import DynamicResolution, PathFrame, PathPlayer, _source_across_sizes, camera_path, composite
 from rtp.evaluate import PlayError, parse_methods, play, saved_at
 from tests.conftest import make_current
 
@@ -236,6 +236,123 @@ def _spy_inputs(monkeypatch: pytest.MonkeyPatch) -> list[tuple[Any, np.ndarray |
     monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
     monkeypatch.setattr(sdk.PredictionReuse, "predict", spy_predict)
     return fed
+
+
+def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture[str]) -> None:
+    dyn = DynamicResolution.parse("1,0.75@30")
+    assert dyn == DynamicResolution((1.0, 0.75), 30)
+    assert [dyn.size(i, (1280, 720)) for i in (0, 29, 30, 59, 60)] == [(1280, 720), (1280, 720), (960, 540), (960, 540),
+                                                                      (1280, 720)]
+    assert DynamicResolution((0.5, 1, 0.5), 1).sizes((100, 60)) == [(50, 30), (100, 60)]  # once each, in order
+    assert DynamicResolution((0.01,), 1).size(0, (100, 60)) == (16, 16)  # at least 16 pixels a side
+    for bad, match in (("0.75", "SCALES@FRAMES"), ("@3", "SCALES@FRAMES"), ("1,x@3", "SCALES@FRAMES"),
+                       ("1@x", "SCALES@FRAMES"), ("1.5@3", r"in \(0, 1\]"), ("0@3", r"in \(0, 1\]"),
+                       ("nan@3", r"in \(0, 1\]"), ("1@0", "integer >= 1")):
+        with pytest.raises(sdk.ParameterError, match=match):
+            DynamicResolution.parse(bad)
+    for scales, every in (((), 3), ((True,), 3), (("1",), 3), ((1.0,), 2.5), ((1.0,), True)):
+        with pytest.raises(sdk.ParameterError, match="dynamic resolution"):
+            DynamicResolution(scales, every)  # type: ignore[arg-type]
+    with pytest.raises(PlayError, match="dynamic_resolution: expected an rtp.capture.paths.DynamicResolution"):
+        play("procedural:0", "full", frames=3, dynamic_resolution=((1.0, 0.5), 2))  # type: ignore[arg-type]
+    with pytest.raises(sdk.ParameterError, match="renderers of its own"):
+        PathPlayer(None, renderer=object(), dynamic=dyn)  # type: ignore[arg-type]
+    # rtp play --dynamic-resolution: a usage error (exit 2) in the same words
+    from rtp.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["play", "procedural:0", "--dynamic-resolution", "1.5@3"])
+    assert exc.value.code == 2 and "--dynamic-resolution: expected scales of the full size, numbers in (0, 1], got " \
+        "(1.5,)" in capsys.readouterr().err
+
+
+def test_a_frame_of_another_size_reprojects_as_the_renderer_does(scene: Any) -> None:
+    """Dynamic resolution: each frame at its schedule's size; a frame after one of another size fetches from
+    that frame's pixels (sdk.reproject of its pixel indices), which on frames of one size is the renderer's
+    own GL reprojection to the pixel, seen and unseen alike; any history reprojects to this frame's size."""
+    sc, blockers = scene
+    path = camera_path(sc, 8, "fast", seed=1, blockers=blockers)
+    sizes, prev = [], None
+    with PathPlayer(sc, (W, H), dynamic=DynamicResolution((1.0, 0.5), 3)) as player:
+        for pf in player.frames(path):
+            h, w = pf.frame.depth.shape
+            sizes.append((w, h))
+            assert pf.rows.shape == pf.cols.shape == pf.seen.shape == (h, w)
+            if prev is not None:
+                ph, pw = prev.depth.shape
+                assert 0 <= pf.rows.min() and pf.rows.max() < ph and 0 <= pf.cols.min() and pf.cols.max() < pw
+                history = np.random.default_rng(pf.index).random((ph, pw, 3), dtype=np.float32)
+                got = pf.reproject(history)
+                assert got.shape == (h, w, 3)
+                np.testing.assert_array_equal(got, np.where(pf.seen[..., None] > 0, history[pf.rows, pf.cols], 0))
+                if (ph, pw) == (h, w):  # the SDK's reprojection against the renderer's, on frames of one size
+                    rows, cols, seen = _source_across_sizes(pf.frame, prev)
+                    assert np.array_equal(seen, pf.seen) and 0.2 < seen.mean()
+                    assert np.mean((rows == pf.rows) & (cols == pf.cols)) > 0.999
+                else:
+                    assert 0.5 < pf.seen.mean() < 1.0  # (a camera that moves: most seen, not all)
+            shaded = player.shade(np.zeros(sdk.tile_grid(h, w, TILE), np.uint8), TILE)
+            np.testing.assert_array_equal(shaded, pf.frame.colour["1x1"])
+            prev = pf.frame
+    assert sizes == [(W, H)] * 3 + [(W // 2, H // 2)] * 3 + [(W, H)] * 2
+
+
+def test_dynamic_resolution_closes_the_loop_at_each_frames_size(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every history is the image the method displayed on the frame before, at that frame's size; prediction
+    reuse carries across a change of size (the network still runs every k-th frame); the report says so."""
+    shaded: dict[int, tuple[int, tuple[int, ...]]] = {}  # id of each displayed image -> (frame, its shape)
+    used: list[tuple[int, int, tuple[int, ...]]] = []  # (frame, id of the history, this frame's shape)
+    alive: list[Any] = []
+    shade, frames_of, reproject = PathPlayer.shade, PathPlayer.frames, PathFrame.reproject
+    current = [0]
+
+    def spy_frames(self: PathPlayer, path: Any) -> Any:
+        for pf in frames_of(self, path):
+            current[0] = pf.index
+            yield pf
+
+    def spy_shade(self: PathPlayer, rates: np.ndarray, tile: int) -> np.ndarray:
+        img = shade(self, rates, tile)
+        shaded[id(img)] = (current[0], img.shape)
+        alive.append(img)
+        return img
+
+    def spy_reproject(self: PathFrame, image: np.ndarray) -> np.ndarray:
+        used.append((self.index, id(image), self.seen.shape))
+        return reproject(self, image)
+
+    monkeypatch.setattr(PathPlayer, "frames", spy_frames)
+    monkeypatch.setattr(PathPlayer, "shade", spy_shade)
+    monkeypatch.setattr(PathFrame, "reproject", spy_reproject)
+    rep = play("procedural:0", "jnyang,jnyang@2,yang2019,fidelityfx,oracle", paths=("fast",), frames=7, size=(W, H),
+               sweep=False, flip_every=2, out=tmp_path, dynamic_resolution=DynamicResolution((1.0, 0.5), 3))
+    size_of = {i: (H, W) if i // 3 % 2 == 0 else (H // 2, W // 2) for i in range(7)}
+    assert len(used) == 4 * 6  # four methods with history, frames 1..6
+    for frame, image, shape in used:
+        shown_on, shown_shape = shaded[image]
+        assert shown_on == frame - 1 and shown_shape[:2] == size_of[frame - 1] and shape == size_of[frame]
+    rows = {r["method"]: r for r in rep.rows}
+    assert rows["jnyang@2"]["network_frames"] == 0.5  # frames 2, 4, 6 of 1..6: frame 3, a new size, carried
+    assert rows["oracle"]["fail_share"] == 0 and 0 < rows["jnyang"]["work_saved"] < 1
+    # no rate change is counted across a change of size (the tiles are others), every other frame's is
+    change = rep.frames["fast"]["jnyang"]["change"]
+    assert [np.isnan(c) for c in change] == [True, False, False, True, False, False, True]
+    dyn = json.loads((tmp_path / "play.json").read_text())["settings"]["dynamic_resolution"]
+    assert dyn == {"scales": [1.0, 0.5], "every": 3, "sizes": [[W, H], [W // 2, H // 2]]}
+    assert f"drawn at {W}x{H}, {W // 2}x{H // 2} in turn, each size held 3 frames" in (tmp_path / "play.md").read_text()
+    import imageio.v3 as iio
+
+    gif = iio.imread(tmp_path / "play_fast.gif", index=None)
+    assert gif.ndim == 4 and len(gif) == 7
+    # every GIF frame's panels the size of the full size's: a half-size frame's scaled up to them
+    from rtp.evaluate._play import _ANIM_PANEL_WIDTH, _anim_frame
+
+    for w, h in ((W, H), (1280, 720)):
+        rng = np.random.default_rng(0)
+        panels = [_anim_frame(img, {"m": (img, np.zeros(sdk.tile_grid(*img.shape[:2], TILE), np.uint8))}, TILE, "", (w, h))
+                  for img in (rng.random((h, w, 3)), rng.random((h // 2, w // 2, 3)))]
+        assert panels[0].shape == panels[1].shape == (round(h * min(w, _ANIM_PANEL_WIDTH) / w),
+                                                      2 * min(w, _ANIM_PANEL_WIDTH), 3)  # (two panels in a row)
 
 
 def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
