@@ -724,6 +724,29 @@ frame_size_cases = st.tuples(
     st.one_of(st.just("size"), st.text(max_size=5), json_scalars),
 )
 
+#: rtp.capture.paths.DynamicResolution: (scales, every, a full size for size(), a text for parse()).
+dynamic_cases = st.tuples(
+    st.one_of(st.lists(st.one_of(st.floats(0.01, 1.0), st.integers(-1, 2), hostile_numbers), max_size=4).map(tuple),
+              json_values, arrays),
+    st.one_of(st.integers(-2, 40), hostile_numbers, json_scalars),
+    st.tuples(st.integers(16, 4000), st.integers(16, 4000)),
+    st.one_of(st.text(alphabet="0123456789.,@-enaix ", max_size=12), json_scalars),
+)
+
+
+def _dynamic_call(v: tuple[Any, ...]) -> Any:
+    from rtp.capture.paths import DynamicResolution
+
+    scales, every, full, text = v
+    with contextlib.suppress(sdk.RtpError):  # (a refused text is typed; the constructor's call still runs)
+        DynamicResolution.parse(text)
+    dyn = DynamicResolution(_val(scales), every)
+    sizes = [dyn.size(i, full) for i in range(3 * len(dyn.scales) * min(dyn.every, 5))]
+    if not all(16 <= w <= full[0] and 16 <= h <= full[1] for w, h in sizes) or not dyn.sizes(full):
+        raise AssertionError(f"{dyn}: sizes {sizes} outside 16 .. {full}")  # (accepted and absurd: untyped, a bug)
+    return dyn
+
+
 job_memory_cases = st.tuples(
     st.one_of(st.sampled_from(["capture", "targets", "demo", "play", "metric"]), json_scalars),
     frame_size_cases.map(lambda case: case[0]),
@@ -905,6 +928,7 @@ CASES: list[tuple[Target, int]] = [
     (Target("capture: DatasetReader and Sample lookups", lookup_cases, _lookup_call), 80),
     (Target("capture: check_frame_size(renderer=False)", frame_size_cases,
             lambda v: check_frame_size(_val(v[0]), v[1], renderer=False)), 100),
+    (Target("capture: DynamicResolution (scales, every, parse, sizes)", dynamic_cases, _dynamic_call), 100),
     (Target("capture: sample_viewpoints on procedural(0)", viewpoint_cases, _viewpoints_call), 80),
     (Target("capture: job_bytes, check_frame_memory, check_memory", job_memory_cases, _job_memory_call), 100),
     (Target("capture: import_frames of a fuzzed engine frame", import_cases, _import_call), 80),
