@@ -392,10 +392,16 @@ class DynamicResolution:
     def __post_init__(self) -> None:
         from rtp.sdk import ParameterError
 
+        def scale(v: Any) -> bool:
+            if not isinstance(v, (int, float, np.integer, np.floating)) or isinstance(v, (bool, np.bool_)):
+                return False
+            try:
+                return math.isfinite(float(v)) and 0.0 < float(v) <= 1.0
+            except OverflowError:  # (an int past float's range)
+                return False
+
         scales = self.scales
-        ok = isinstance(scales, (tuple, list)) and len(scales) > 0 and all(
-            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-            and math.isfinite(float(v)) and 0.0 < float(v) <= 1.0 for v in scales)
+        ok = isinstance(scales, (tuple, list)) and len(scales) > 0 and all(scale(v) for v in scales)
         if not ok:
             raise ParameterError(f"dynamic resolution: expected scales of the full size, numbers in (0, 1], got "
                                  f"{scales!r}", "scales")

@@ -238,7 +238,8 @@ def _spy_inputs(monkeypatch: pytest.MonkeyPatch) -> list[tuple[Any, np.ndarray |
     return fed
 
 
-def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture[str]) -> None:
+def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                                   machine_memory: Callable[..., None]) -> None:
     dyn = DynamicResolution.parse("1,0.75@30")
     assert dyn == DynamicResolution((1.0, 0.75), 30)
     assert [dyn.size(i, (1280, 720)) for i in (0, 29, 30, 59, 60)] == [(1280, 720), (1280, 720), (960, 540), (960, 540),
@@ -250,13 +251,23 @@ def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture
                        ("nan@3", r"in \(0, 1\]"), ("1@0", "integer >= 1")):
         with pytest.raises(sdk.ParameterError, match=match):
             DynamicResolution.parse(bad)
-    for scales, every in (((), 3), ((True,), 3), (("1",), 3), ((1.0,), 2.5), ((1.0,), True)):
+    for scales, every in (((), 3), ((True,), 3), (("1",), 3), ((10**400,), 3), ((1.0,), 2.5), ((1.0,), True)):
         with pytest.raises(sdk.ParameterError, match="dynamic resolution"):
             DynamicResolution(scales, every)  # type: ignore[arg-type]
     with pytest.raises(PlayError, match="dynamic_resolution: expected an rtp.capture.paths.DynamicResolution"):
         play("procedural:0", "full", frames=3, dynamic_resolution=((1.0, 0.5), 2))  # type: ignore[arg-type]
     with pytest.raises(sdk.ParameterError, match="renderers of its own"):
         PathPlayer(None, renderer=object(), dynamic=dyn)  # type: ignore[arg-type]
+    # each further size is a renderer of its own: counted in the memory the run is refused by
+    from rtp.capture import job_bytes
+
+    fixed = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1)
+    more = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1, renderer_pixels=3072**2 + 2048**2)
+    machine_memory(MemTotal=(fixed + more) // 2, MemAvailable=(fixed + more) // 2)
+    with pytest.raises(PlayError, match=rf"^size: the closed loop at 4096x4096 holds about {more / 2**30:.1f} GiB"):
+        play("procedural:0", "oracle", frames=3, size=(4096, 4096), sweep=False, out=str(tmp_path / "out"),
+             dynamic_resolution=DynamicResolution((1.0, 0.75, 0.5), 5))
+    assert not (tmp_path / "out").exists()
     # rtp play --dynamic-resolution: a usage error (exit 2) in the same words
     from rtp.cli import main
 
