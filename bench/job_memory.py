@@ -14,7 +14,7 @@ of the estimated to the measured peak. The configurations:
 - demo: ``rtp demo --model M``, for each shipped model
 - play: ``rtp play procedural:0 --path fast --frames N --no-plots`` with the oracle alone, JNYang
   alone, the default methods (each without and with the sweep), the oracle with dynamic resolution
-  (``--dynamic-resolution 1,0.75,0.5@1``: two further renderers), and the oracle failing by FLIP,
+  (``--dynamic-resolution 0.5,0.75,1@1``: two further renderers), and the oracle failing by FLIP,
   JNFLIP and LPIPS
 - metric: ``rtp metric M REF TEST --out MAP.png`` of two noise images of the size, for each metric
 - examples: ``examples/moderngl_vrs.py`` and ``examples/pyrender_vrs.py``, each alone and with a GIF
@@ -100,15 +100,16 @@ def configs(frames: int) -> Iterator[Config]:
                       "--methods", methods, *([] if sweep else ["--no-sweep"])],
                      metrics=("jnyang",), loops=sum(_loop_count(m, sweep, predictors) for m in specs),
                      models=len({m.model for m in specs if m.kind == "model"}))
-    dyn = DynamicResolution((1.0, 0.75, 0.5), 1)  # a renderer for each further size
+    # a renderer for each further size, the largest drawn last: every renderer is held at its frame
+    dyn = DynamicResolution((0.5, 0.75, 1.0), 1)
 
-    def further(size: tuple[int, int]) -> int:
-        return sum(w * h for w, h in dyn.sizes(size) if (w, h) != tuple(size))
+    def further(size: tuple[int, int]) -> list[tuple[int, int]]:
+        return [z for z in dyn.sizes(size) if z != tuple(size)]
 
-    yield Config("play", "oracle, dynamic resolution 1,0.75,0.5@1",
+    yield Config("play", "oracle, dynamic resolution 0.5,0.75,1@1",
                  ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",
-                  "--methods", "oracle", "--no-sweep", "--dynamic-resolution", "1,0.75,0.5@1"],
-                 estimate=lambda size: job_bytes("play", size, metrics=("jnyang",), loops=1, renderer_pixels=further(size)))
+                  "--methods", "oracle", "--no-sweep", "--dynamic-resolution", "0.5,0.75,1@1"],
+                 estimate=lambda size: job_bytes("play", size, metrics=("jnyang",), loops=1, renderers=further(size)))
     for metric in ("flip", "jnflip", "lpips"):
         yield Config("play", f"oracle, failing by {metric}",
                      ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",

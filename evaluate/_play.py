@@ -653,7 +653,7 @@ def play(
     further = [] if dynamic_resolution is None else [z for z in dynamic_resolution.sizes((w, h)) if z != (w, h)]
     check_frame_memory("play", (w, h), processes=min(workers, len(dict.fromkeys(paths))), metrics=(fail_metric,),
                        loops=sum(_loop_count(m, sweep, predictors) for m in specs), models=len(predictors),
-                       renderer_pixels=sum(a * b for a, b in further), error=PlayError)
+                       renderers=further, error=PlayError)
     check_frame_size((w, h))
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None

@@ -262,7 +262,7 @@ def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture
     from rtp.capture import job_bytes
 
     fixed = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1)
-    more = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1, renderer_pixels=3072**2 + 2048**2)
+    more = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1, renderers=[(3072, 3072), (2048, 2048)])
     machine_memory(MemTotal=(fixed + more) // 2, MemAvailable=(fixed + more) // 2)
     with pytest.raises(PlayError, match=rf"^size: the closed loop at 4096x4096 holds about {more / 2**30:.1f} GiB"):
         play("procedural:0", "oracle", frames=3, size=(4096, 4096), sweep=False, out=str(tmp_path / "out"),
