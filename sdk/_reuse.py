@@ -140,14 +140,19 @@ class Track:
     the entries were predicted on (0: the network's whole-frame run; g: the g-th frame of fresh crops
     since); both -1 where unknown. ``lut`` is ``(generations, tiles)``: the entry of each tile of each
     of those frames (-1: none there). ``shape`` is ``(H, W)`` of those frames, whose pixels the places
-    are in and whose tiles ``lut`` lists: one size for all (:class:`PredictionReuse` starts a track
-    anew on a frame of another size)."""
+    are in and whose tiles ``lut`` lists: one size for all. ``origin`` is the size of the frame the
+    network ran on whole, whose tiles are the first entries in row-major order (sky takes the entry of
+    its tile at the same place on the screen); None: ``shape``. On a frame of another size
+    (dynamic resolution) :class:`PredictionReuse` moves the track onto that frame: each kept pixel keeps
+    the entry its surface carries, its place where it is now, and ``lut``'s one row lists no tile (-1),
+    so that every pixel carries its own entry from there on."""
 
     index: np.ndarray
     place: np.ndarray
     gen: np.ndarray
     lut: np.ndarray
     shape: tuple[int, int]
+    origin: tuple[int, int] | None = None
 
 
 @functools.lru_cache(maxsize=8)
@@ -218,14 +223,15 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     frame, inside it); its surface was where the kept pixel at or above-left of that one (one of every
     ``step`` per axis) was, moved by the fetched pixel's offset from it, so it takes the entry of the tile
     there (the kept pixel's own entry where that tile has none). Unseen pixels (``seen`` 0) get -1,
-    background pixels the tile at their own position (the same place on the screen, in the previous
-    frame's pixels). Each tile then takes the worst, the mean or the upper quartile (towards the worse
-    side) of the estimates over its known pixels, and tiles with more than ``unseen_fraction`` unknown the
-    worst value there is (1x1). Returns the ``(outputs, tile rows, tile cols)`` estimates, this frame's
-    track and the tiles given the worst value for want of known pixels, all on this frame's tiles (on a
-    frame of another size the track's places stay in the previous frame's pixels: start a new track on
-    it, as :class:`PredictionReuse` does). ``step``: a divisor of ``tile`` (None: :func:`default_step`), as
-    ``track`` was built."""
+    background pixels the tile at their own position (the same place on the screen, on the grid of the
+    frame the network ran on whole: ``track.origin``). Each tile then takes the worst, the mean or the
+    upper quartile (towards the worse side) of the estimates over its known pixels, and tiles with more
+    than ``unseen_fraction`` unknown the worst value there is (1x1). Returns the ``(outputs, tile rows,
+    tile cols)`` estimates, this frame's track and the tiles given the worst value for want of known
+    pixels, all on this frame's tiles (on a frame of another size the track's places stay in the
+    previous frame's pixels: move the track onto this frame, as :class:`PredictionReuse` does,
+    :class:`Track`). ``step``: a divisor of ``tile`` (None: :func:`default_step`), as ``track`` was
+    built."""
     h, w = seen.shape
     th, tw = tile_grid(h, w, tile)
     s = _check_step(step, tile)
@@ -255,7 +261,7 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     else:
         ty, tx = (place >> PLACE_BITS) // tile, (place & ((1 << PLACE_BITS) - 1)) // tile
     cell = np.minimum(ty, pth - 1) * ptw + np.minimum(tx, ptw - 1)
-    if len(track.lut) == 1:  # only the whole-frame run's tiles: the tile is the entry (every generation 0)
+    if len(track.lut) == 1 and track.lut[0, 0] >= 0:  # only the whole-frame run's tiles: the tile is the entry
         gen = track.gen if track.gen.shape == (gh, gw) else np.zeros((gh, gw), track.gen.dtype)
         new = np.where(known, cell, -1)
     else:  # and the tiles predicted afresh since, each frame of them a generation; none there: the kept pixel's
@@ -266,8 +272,9 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     if background is not None:  # the estimate at its own screen position, on the whole-frame run's grid
         sky = _kept(background, s, gh, gw) > 0.5
         if sky.any():
-            at, there = (own, _start_places((h, w), tile, s)) if (h, w) == (ph, pw) else \
-                _scaled_places((h, w), (ph, pw), tile, s)
+            origin = track.origin or track.shape
+            at = own if (h, w) == origin else _scaled_places((h, w), origin, tile, s)[0]
+            there = _start_places((h, w), tile, s) if (h, w) == (ph, pw) else _scaled_places((h, w), (ph, pw), tile, s)[1]
             new = np.where(sky, at, new)
             place = np.where(sky, there, place)
             gen = np.where(sky, 0, gen)
@@ -306,7 +313,8 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
             out = pick.reduce(pick.reduce(src.reshape(len(est), th, k, gw), axis=2).reshape(len(est), th, tw, k), axis=-1)
     missing = (1.0 - count / (k * k) > unseen_fraction) | ~np.isfinite(out).all(axis=0)
     out[:, missing] = -np.inf if higher_is_better else np.inf
-    return np.ascontiguousarray(out, dtype=np.float32), Track(new, place, gen, track.lut, track.shape), missing
+    return (np.ascontiguousarray(out, dtype=np.float32), Track(new, place, gen, track.lut, track.shape, track.origin),
+            missing)
 
 
 def context_tiles(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
@@ -823,7 +831,13 @@ class PredictionReuse:
         est, track, missing = carry_estimates(self._cache, self._track, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce, self.step)
         resized = hw != self._shape
-        carried = est.copy() if resized and self.carry != "features" else None  # (the carry's own values)
+        if resized:  # dynamic resolution: the track moves onto this frame (Track): each kept pixel keeps the entry its
+            # surface carries (no tile's mean of them), its place where it is now, and no tile of lut's one row is an
+            # entry, so every pixel carries its own; the first entries stay the whole-frame run's tiles (sky's)
+            here = start_track(hw, tile, self.step)
+            track = Track(track.index, np.where(track.index >= 0, here.place, -1), np.zeros_like(track.gen),
+                          np.full((1, here.lut.shape[1]), -1, np.int32), hw, self._track.origin or self._track.shape)
+            self._shape = hw
         if self.refresh is not None and missing.mean() > self.refresh:
             runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
         feats = None
@@ -858,30 +872,18 @@ class PredictionReuse:
                 est[:, y0:y1, x0:x1][:, sel] = part[:, sel]
             work = area / (h * w)
             kept = feats if feats is not None else est if levels is None else (est / levels).astype(np.float32)
-            if carried is not None:
-                carried[:, missing] = kept[:, missing]
-            if not resized:
-                # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
-                # carry them on from here, from where they are now
-                slot = np.full(missing.size, -1, np.int32)
-                slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
-                self._cache = np.concatenate([self._cache, kept.reshape(len(kept), -1)[:, missing.ravel()]], axis=1)
-                here = start_track(hw, tile, self.step)
-                mine = slot[here.index]
-                fresh = mine >= 0
-                track = Track(np.where(fresh, mine, track.index), np.where(fresh, here.place, track.place),
-                              np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, slot[None]]),
-                              track.shape)
+            # the fresh tiles become entries of the cache, this frame a generation of the track: their pixels
+            # carry them on from here, from where they are now
+            slot = np.full(missing.size, -1, np.int32)
+            slot[missing.ravel()] = self._cache.shape[1] + np.arange(int(missing.sum()), dtype=np.int32)
+            self._cache = np.concatenate([self._cache, kept.reshape(len(kept), -1)[:, missing.ravel()]], axis=1)
+            here = start_track(hw, tile, self.step)
+            mine = slot[here.index]
+            fresh = mine >= 0
+            track = Track(np.where(fresh, mine, track.index), np.where(fresh, here.place, track.place),
+                          np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, slot[None]]),
+                          track.shape, track.origin)
             missing = np.zeros_like(missing)  # (every tile the network's now)
-        if resized:  # dynamic resolution: this frame's tiles become the carry's entries, its pixels the track
-            values = feats if feats is not None else carried
-            assert values is not None
-            self._cache = np.ascontiguousarray(values.reshape(len(values), -1))
-            track = start_track(hw, tile, self.step)
-            lost = missing.ravel()[track.index]  # (pixels of tiles left unknown: unknown still, not a worst value)
-            track = Track(np.where(lost, -1, track.index), np.where(lost, -1, track.place), track.gen, track.lut,
-                          track.shape)
-            self._shape = hw
         self._track = track
         self._age += 1
         self.work = work

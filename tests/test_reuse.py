@@ -114,11 +114,14 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
                     s: int) -> tuple[np.ndarray, np.ndarray]:
     """carry_estimates written out pixel by pixel and tile by tile (one pixel of every ``s`` per axis):
     the reference for the vectorised one. Returns the estimates and each kept pixel's entry. The previous frame
-    (the track's) may be of another size: its pixels, tiles and sky places are its own."""
+    (the track's) may be of another size: its pixels and tiles are its own; sky's tiles the whole-frame run's
+    (``track.origin``), which may be of a third size."""
     h, w = seen.shape
     th, tw = -(-h // tile), -(-w // tile)
     ph, pw = track.shape
     pth, ptw = -(-ph // tile), -(-pw // tile)
+    oh, ow = track.origin or track.shape
+    otw = -(-ow // tile)
     k = tile // s
     out = np.empty((len(est), th, tw))
     entry = np.full((th * k, tw * k), -1)
@@ -130,9 +133,9 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
                 for j in range(tx * k, tx * k + k):
                     y, x = min(i * s, h - 1), min(j * s, w - 1)
                     src = -1
-                    if sky[y, x] > 0.5:  # the previous frame's tile at the same place on the screen
-                        sy, sx = min(int((y + 0.5) * ph / h), ph - 1), min(int((x + 0.5) * pw / w), pw - 1)
-                        src = (sy // tile) * ptw + sx // tile
+                    if sky[y, x] > 0.5:  # the whole-frame run's tile at the same place on the screen
+                        sy, sx = min(int((y + 0.5) * oh / h), oh - 1), min(int((x + 0.5) * ow / w), ow - 1)
+                        src = (sy // tile) * otw + sx // tile
                     elif seen[y, x] > 0:
                         r, c = int(rows[y, x]), int(cols[y, x])
                         ki, kj = r // s, c // s  # the kept pixel at or above-left of the fetched one
@@ -176,7 +179,8 @@ def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
         shape = tile_index_map((ph, pw), tile, step).shape
         assert shape == (-(-ph // tile) * tile // s, -(-pw // tile) * tile // s)
         tiles = -(-ph // tile) * -(-pw // tile)
-        entries = tiles + int(rng.integers(0, 9))  # the frame's tiles, then fresh ones
+        origin = (ph + 2 * tile + 3, max(1, pw - tile))  # (a third size: where the network ran before a resize)
+        entries = max(tiles, -(-origin[0] // tile) * -(-origin[1] // tile)) + int(rng.integers(0, 9))
         lut = np.where(rng.random((3, tiles)) < 0.3, -1, rng.integers(0, entries, (3, tiles))).astype(np.int32)
         lut[0] = np.arange(tiles)
         index = np.where(rng.random(shape) < 0.15, -1, rng.integers(0, entries, shape)).astype(np.int32)
@@ -186,11 +190,15 @@ def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
         # and the track of a frame the network ran on whole, no tile predicted afresh since: one generation
         whole = Track(np.where(index >= 0, index % tiles, -1).astype(np.int32), track.place,
                       np.zeros(shape, np.int32), lut[:1], (ph, pw))
+        # and a track moved onto the previous frame from one of another size: every pixel its own entry, sky the
+        # whole-frame run's tiles on its grid
+        moved = Track(index, track.place, np.zeros(shape, np.int32), np.full((1, tiles), -1, np.int32), (ph, pw),
+                      origin)
         est = rng.random((6, entries)).astype(np.float32)
         rows, cols = rng.integers(0, ph, (h, w)), rng.integers(0, pw, (h, w))
         seen = (rng.random((h, w)) > 0.25).astype(np.float32)
         sky = (rng.random((h, w)) > 0.9).astype(np.float32)
-        for hib, tr in ((False, track), (True, track), (False, whole)):
+        for hib, tr in ((False, track), (True, track), (False, whole), (True, moved)):
             got, carried, missing = carry_estimates(est, tr, rows, cols, seen, sky, tile, hib, 0.5, reduce, step)
             want, entry = _carry_by_loops(est, tr, rows, cols, seen, sky, tile, hib, 0.5, reduce, s)
             assert np.allclose(got, want, rtol=1e-6), (h, w, tile, step, hib)
@@ -331,29 +339,56 @@ def test_a_frame_of_another_render_resolution_is_carried(unseen: str) -> None:
     else:
         np.testing.assert_array_equal(est[:, 0, 3], s.pred.predict(small)[:, 0, 3])
         assert 0.0 < reuse.work < 1.0
-    # still, at the new size: the same estimates; the unseen tile, seen now, is unknown (1x1) or the crop's, and
-    # its neighbours keep their own
+    # from here on each kept pixel carries the entry its own surface had (the first frame's tile it lies in, or
+    # the crop's), not its half-size tile's mean: what the surfaces carry, pixel by pixel, independently of the SDK
+    k = TILE // 4  # (kept pixels per tile and axis: every fourth)
+    ky = np.minimum(np.arange(-(-h // TILE) * k) * 4, h - 1)  # (the padding repeats the last row)
+    kx = np.arange(w // TILE * k) * 4
+    entry = (np.minimum(2 * ky + 1, s.h - 1) // TILE)[:, None] * (s.w // TILE) + ((2 * kx + 1) // TILE)[None, :]
+    gone = (ky < TILE)[:, None] & ((kx >= 3 * TILE) & (kx < 4 * TILE))[None, :]
+    values = np.concatenate([first.reshape(6, -1), est[:, 0, 3][:, None]], axis=1)  # (the crop's: the last entry)
+    entry = np.where(gone, -1 if unseen == "full" else values.shape[1] - 1, entry)
+
+    def tiles(entries: np.ndarray, th: int, tw: int) -> np.ndarray:
+        """Each tile the mean of its kept pixels' entries' values, 1x1 (inf) where more than half unknown."""
+        out = np.full((6, th, tw), np.inf)
+        for ty in range(th):
+            for tx in range(tw):
+                e = entries[ty * k:(ty + 1) * k, tx * k:(tx + 1) * k].ravel()
+                if (e >= 0).sum() * 2 >= e.size:
+                    out[:, ty, tx] = values[:, e[e >= 0]].mean(axis=1)
+        return out
+
+    # still, at the new size: the same estimates; the unseen tile, seen now, is unknown (1x1) or the crop's
     still = np.indices((h, w))
     again = reuse.predict(small, (still[0], still[1]), np.ones((h, w), np.float32))
     np.testing.assert_array_equal(again, est)
     assert reuse.work == 0.0 and reuse.age == 2
-    # half a tile left: each tile takes half its right neighbour; the one left of the unseen tile keeps its own
-    # estimate (half unknown is not more than unseen_fraction) where a worst value carried would have spread
+    # half a tile left: each kept pixel takes the entry of the one half a tile right; the tile left of the unseen one
+    # keeps the estimate of the first frame's tile its own right half shows (half unknown is not more than
+    # unseen_fraction) where a worst value carried would have spread, and no tile takes its half-size tile's mean
     shifted = reuse.predict(small, (still[0], np.minimum(still[1] + TILE // 2, w - 1)), np.ones((h, w), np.float32))
-    mixed = (est[:, :, :-1] + est[:, :, 1:]) / 2
+    entry = entry[:, np.minimum(kx + TILE // 2, w - 1) // 4]
+    want = tiles(entry, *shifted.shape[1:])
+    np.testing.assert_allclose(shifted, want, rtol=1e-6)
     if unseen == "full":
-        np.testing.assert_allclose(shifted[:, 0, 2], est[:, 0, 2], rtol=1e-6)
-        mixed[:, 0, 2] = est[:, 0, 2]
-    np.testing.assert_allclose(shifted[:, 1:, :-1], mixed[:, 1:], rtol=1e-6)
+        np.testing.assert_allclose(shifted[:, 0, 2], first[:, :2, 5].mean(axis=1), rtol=1e-6)
+    mixed = (est[:, :, :-1] + est[:, :, 1:]) / 2  # (the half-size tiles' means mixed: what the carry gave before)
+    assert not np.allclose(shifted[:, 1:, :-1], mixed[:, 1:], rtol=1e-6)
     assert np.isfinite(shifted[:, 0, :3]).all()
-    # back to the first size, then the network when the interval is up
+    # back to the first size, then the network when the interval is up: each big tile's pixels come from half a
+    # small tile, whose surfaces were half a tile right, each with its own entry: the surfaces are followed to the
+    # pixel across the sizes, not the small frame's tiles upsampled
     big = sdk.fetch_from_motion(np.zeros((s.h, s.w)), np.zeros((s.h, s.w)), prev_shape=(h, w))
     back = reuse.predict(s.inputs(everything), big, everything)
     assert back.shape == first.shape and reuse.age == 4 and reuse.work == 0.0
-    # each big tile's pixels come from half a small tile, whose surfaces were half a tile right: the surfaces are
-    # followed to the pixel across the sizes, not the small frame's tiles upsampled
-    cols = np.minimum((np.arange(s.w // TILE) + 1) // 2, w // TILE - 1)
-    np.testing.assert_allclose(back[:, 2:], est[:, np.arange(2, 9) // 2][:, :, cols], rtol=1e-6)
+    by, bx = np.arange(s.h // TILE * k) * 4, np.arange(s.w // TILE * k) * 4
+    entry = entry[(by // 2 // 4)[:, None], (bx // 2 // 4)[None, :]]
+    np.testing.assert_allclose(back, tiles(entry, *first.shape[1:]), rtol=1e-6)
+    # where the first frame's own tile is under every pixel of a big tile again, its estimate comes back exactly
+    exact = [(ty, tx) for ty in range(2, 9) for tx in range(16)
+             if (entry[ty * k:(ty + 1) * k, tx * k:(tx + 1) * k] == entry[ty * k, tx * k]).all()]
+    assert exact and all(np.allclose(back[:, ty, tx], values[:, entry[ty * k, tx * k]], rtol=1e-6) for ty, tx in exact)
     reuse.predict(s.inputs(everything), (s.rows, s.cols), everything)
     assert reuse.age == 0 and reuse.work == 1.0
     split = sdk.load("jnyang-reuse")
