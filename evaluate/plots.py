@@ -339,8 +339,12 @@ def play_frames(report: Any) -> np.ndarray:
     s = report.settings
     fig = _figure(1300, 300 * len(paths) + 40 + 20 * -(-len(methods) // 7))  # (and the legend's rows below)
     axes = np.atleast_2d(fig.subplots(len(paths), 4, squeeze=False))
+    smaller = _smaller_frames(s, max((len(u) for u in report.unseen.values()), default=0))
     for row, path in zip(axes, paths):
         t = np.arange(len(report.unseen[path]))
+        for a, b in smaller:  # (dynamic resolution: the frames drawn below the largest size, shaded)
+            for ax in row:
+                ax.axvspan(a - 0.5, b - 0.5, color="#000000", alpha=0.07, linewidth=0)
         for m, series in report.frames[path].items():
             for ax, key in zip(row[:3], ("saved", "fail", "change")):
                 ax.plot(t[1:], 100 * np.asarray(series[key][1:], np.float64), linewidth=0.9, color=colours[m], label=m)
@@ -348,10 +352,30 @@ def play_frames(report: Any) -> np.ndarray:
         for ax, title in zip(row, ("work saved, %", f"tiles failing ({s['fail_metric']}), %",
                                    "tiles whose rate changed, %", "unseen share of the frame, %")):
             ax.set_title(f"{path}: {title}", fontsize=9)
-            ax.set_xlabel(f"frame ({s['fps']:g} Hz)", fontsize=8)
+            ax.set_xlabel(f"frame ({s['fps']:g} Hz" + ("; grey: drawn at a smaller size)" if smaller else ")"),
+                          fontsize=8)
             ax.grid(alpha=0.3)
     _method_legend(fig, axes, "outside lower center", ncols=min(len(methods), 7))
     return figure_image(fig)
+
+
+def _smaller_frames(settings: Mapping[str, Any], frames: int) -> list[tuple[int, int]]:
+    """The runs of frames ``[a, b)`` a run with dynamic resolution drew below its largest size (none without)."""
+    dyn = settings.get("dynamic_resolution")
+    if not dyn:
+        return []
+    from rtp.capture.paths import DynamicResolution
+
+    schedule, full = DynamicResolution(tuple(dyn["scales"]), dyn["every"]), tuple(settings["size"])
+    runs: list[tuple[int, int]] = []
+    for i in range(frames):
+        if schedule.size(i, (full[0], full[1])) == full:
+            continue
+        if runs and runs[-1][1] == i:
+            runs[-1] = (runs[-1][0], i + 1)
+        else:
+            runs.append((i, i + 1))
+    return runs
 
 
 def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False) -> np.ndarray:

@@ -350,6 +350,10 @@ def test_dynamic_resolution_closes_the_loop_at_each_frames_size(tmp_path: Path, 
     assert [np.isnan(c) for c in change] == [True, False, False, True, False, False, True]
     dyn = json.loads((tmp_path / "play.json").read_text())["settings"]["dynamic_resolution"]
     assert dyn == {"scales": [1.0, 0.5], "every": 3, "sizes": [[W, H], [W // 2, H // 2]]}
+    from rtp.evaluate.plots import _smaller_frames  # (play_frames.png shades them)
+
+    assert _smaller_frames(rep.settings, 7) == [(3, 6)] and (tmp_path / "play_frames.png").stat().st_size > 0
+    assert _smaller_frames({**rep.settings, "dynamic_resolution": None}, 7) == []
     assert f"drawn at {W}x{H}, {W // 2}x{H // 2} in turn, each size held 3 frames" in (tmp_path / "play.md").read_text()
     import imageio.v3 as iio
 
