@@ -1071,7 +1071,9 @@ def build_parser() -> argparse.ArgumentParser:
                  "splits carries its trunk's features and runs its tail on every frame; NAME@k:bS, a budget: save a share S of "
                  "the shading work every frame, swept over S), or\n"
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
-                 "\n\nexample:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play")
+                 "\n\nexamples:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play\n"
+                 "  rtp play kaos --dynamic-resolution 1,0.75@10 --methods jnyang,jnyang-reuse@4:features,oracle   "
+                 "the render resolution changing every ten frames")
     pl.add_argument("scene", help="a map name of `rtp scenes list`, procedural:<seed>, or your own .glb/.gltf/.obj file")
     pl.add_argument("--methods", default=DEFAULT_METHODS,
                     help=f"comma-separated methods (see below; default: {DEFAULT_METHODS})")
