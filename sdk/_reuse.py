@@ -479,8 +479,9 @@ class PredictionReuse:
     :func:`reproject` returns it) and ``background`` 1 on sky, which keeps the estimate at its own
     screen position. A frame without ``fetch`` (the first, a camera cut) runs the network. A frame of
     another size than the last (dynamic resolution) is carried too, its ``fetch`` indexing the previous
-    frame's pixels (:func:`fetch_from_motion` with ``prev_shape``); the carry then starts anew on its
-    tiles, their estimates its entries (tiles left unknown stay so).
+    frame's pixels (:func:`fetch_from_motion` with ``prev_shape``): its tiles reduce the estimates
+    their pixels' surfaces carry, and each pixel carries its surface's own entry on from there, as at
+    one size.
 
     ``reduce`` (:data:`REUSE_REDUCTIONS`) is how a tile reduces the estimates its pixels carry,
     ``unseen`` (:data:`REUSE_UNSEEN`) what becomes of tiles more than ``unseen_fraction`` unseen
