@@ -171,7 +171,8 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     multiplied by F), ``:features`` (:data:`REUSE_CARRIES`: carry a splitting model's trunk features), ``:bS``
     (a budget: save a share S of the work every frame) and ``:fS`` (a floor of S saved under the threshold) in any
     order (``jnyang@4:mean:fresh``, ``jnyang@4:r0.05``,
-    ``jnyang@4:s4``, ``split.onnx@4:features``, ``jnyang@1:b0.6``)."""
+    ``jnyang@4:s4``, ``split.onnx@4:features``, ``jnyang@1:b0.6``). Yang 2019 takes a budget too
+    (``yang2019:b0.6``, ``yang2019-unseen-1x1:b0.6``: its estimates through the same selection)."""
     if not isinstance(text, str) and (not isinstance(text, Iterable) or not all(isinstance(t, str) for t in text)):
         raise PlayError(f"methods: expected a comma-separated string or a list of method names, got {text!r}")
     # (a model file whose name holds a comma or an '@' is taken whole: "model@v2.onnx" is no reuse interval)
@@ -184,6 +185,13 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     for item in items:
         if item in METHOD_KINDS:
             out.append(MethodSpec(item, item))
+            continue
+        kind, colon, option = item.partition(":")
+        if colon and kind in METHOD_KINDS:  # (a baseline's option: Yang's budget alone)
+            if not kind.startswith("yang2019") or option[:1] != "b":
+                raise PlayError(f"method {item!r}: of the baselines only Yang 2019 takes an option, a budget ':bS' "
+                                "(e.g. yang2019:b0.6; FidelityFX decides by its own rule, not a threshold per rate)")
+            out.append(MethodSpec(item, kind, budget=_budget(option, item, "budget")))
             continue
         model, _, k = item.rpartition("@") if "@" in item and not _is_file(item) else (item, "", "1")
         k, *options = k.split(":")
@@ -924,6 +932,10 @@ def _loops(specs: list[MethodSpec], predictors: dict[str, Any], sweep: bool, fai
         elif m.kind.startswith("yang2019"):
             yang = Yang2019(tile, threshold=YANG_THRESHOLD, motion=True, unseen_fraction=unseen_fraction,
                            unseen="full" if m.kind == "yang2019-unseen-1x1" else "as_is")
+            if m.budget is not None:  # a budget: its estimates through the model's selection, swept over the saving
+                for b in sorted({*SAVING_SWEEP, m.budget}) if sweep else (m.budget,):
+                    loops.append(_Loop(m, b, f"saving {b:g}", _baseline_budget(yang, b, tile), default=b == m.budget))
+                continue
             for f in BASELINE_SWEEP if sweep else (1.0,):
                 loops.append(_Loop(m, YANG_THRESHOLD * f, f"t {YANG_THRESHOLD * f:.4g}", _baseline(yang, YANG_THRESHOLD * f),
                                    default=f == 1.0))
@@ -940,7 +952,7 @@ def _loop_count(m: MethodSpec, sweep: bool, predictors: dict[str, Any]) -> int:
     """How many loops :func:`_loops` makes of ``m``: one per swept parameter."""
     if not sweep or m.kind in ("full", "oracle", "oracle-monotone"):
         return 1
-    if m.kind == "model" and m.budget is not None:
+    if m.budget is not None:  # (a model's or Yang's budget)
         return len({*SAVING_SWEEP, m.budget})
     if m.kind == "model":
         return len(PSNR_SWEEP_DB if predictors[m.model].metadata.higher_is_better else MODEL_SWEEP)
@@ -958,6 +970,20 @@ def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None
         return np.asarray(sel.shading_rates(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms), value))
+    return decide
+
+
+def _baseline_budget(yang: Yang2019, saving: float, tile: int) -> Callable[..., np.ndarray]:
+    """Yang 2019 with a budget: its per-rate estimates (``Yang2019.predict``, lower is better) through
+    ``sdk.select_rates_for_saving``, the lowest sensitivity whose rates save ``saving`` of the frame's work
+    (its own rate rule at that sensitivity: the cheapest rate under it; NAS's allowed rates kept)."""
+    allowed = None if yang.allow_4x4 else tuple(r for r in sdk.ALL_RATES if r != "4x4")
+
+    def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
+        assert rp is not None
+        est = yang.predict(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms))
+        return sdk.select_rates_for_saving(est, saving, higher_is_better=False, allowed=allowed,
+                                           frame_size=pf.seen.shape, tile_size=tile).rates
     return decide
 
 

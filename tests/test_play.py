@@ -621,10 +621,19 @@ def test_a_budget_saves_its_share_on_every_frame(tmp_path: Path) -> None:
         (0.6, None, 1, "full", "estimates"), (0.3, None, 4, "fresh", "estimates"), (None, 0.5, 4, "full", "estimates"),
         (None, 0.4, 4, "full", "features")]
     assert (parse_methods("jnyang")[0].budget, parse_methods("jnyang")[0].floor) == (None, None)
+    # Yang 2019 takes a budget too (its estimates through the same selection); the other baselines no option
+    yang = parse_methods("yang2019:b0.5,yang2019-unseen-1x1:b0.7")
+    assert [(s.name, s.kind, s.budget) for s in yang] == [("yang2019:b0.5", "yang2019", 0.5),
+                                                          ("yang2019-unseen-1x1:b0.7", "yang2019-unseen-1x1", 0.7)]
+    for bad, words in (("fidelityfx:b0.5", "only Yang 2019 takes an option"), ("yang2019:x", "only Yang 2019"),
+                       ("yang2019:b1.5", "the share of the shading work to save every frame"),
+                       ("oracle:b0.5", "only Yang 2019 takes an option")):
+        with pytest.raises(PlayError, match=words):
+            parse_methods(bad)
     raised = 0
     for h, tile in ((H, 16), (72, 16), (72, 8)):
-        rep = play("procedural:0", "jnyang,jnyang@1:b0.6,jnyang@2:b0.4,jnyang@1:f0.6", paths=("fast",), frames=4,
-                   size=(W, h), sweep=False, flip_every=0, tile_size=tile, plots=False)
+        rep = play("procedural:0", "jnyang,jnyang@1:b0.6,jnyang@2:b0.4,jnyang@1:f0.6,yang2019:b0.5", paths=("fast",),
+                   frames=4, size=(W, h), sweep=False, flip_every=0, tile_size=tile, plots=False)
         # a floor: the threshold's saving where it is 0.6 or more, else the floor's, a tile's step over it at most
         # (compared up to the first frame the floor raised: from there each loop's history is its own)
         for own, floored in zip(rep.frames["fast"]["jnyang"]["saved"], rep.frames["fast"]["jnyang@1:f0.6"]["saved"]):
@@ -635,19 +644,20 @@ def test_a_budget_saves_its_share_on_every_frame(tmp_path: Path) -> None:
             raised += 1
             break
         step = sdk.MAX_SAVING * 16 * 16 / (W * h)  # one 16-pixel model tile's whole saving
-        for name, share in (("jnyang@1:b0.6", 0.6), ("jnyang@2:b0.4", 0.4)):
-            saved = rep.frames["fast"][name]["saved"]
+        for name, share in (("jnyang@1:b0.6", 0.6), ("jnyang@2:b0.4", 0.4), ("yang2019:b0.5", 0.5)):
+            saved = rep.frames["fast"][name]["saved"][1:]  # (Yang's first frame has no history: all at 1x1 or not)
             assert all(share - 1e-9 <= v <= share + step for v in saved), (h, tile, name, saved)
         free = rep.frames["fast"]["jnyang"]["saved"]
         assert max(free) - min(free) > step  # (a threshold holds the quality: its saving moves)
     assert raised >= 2  # (the floor raised a frame in most runs)
-    swept = play("procedural:0", "jnyang,jnyang@1:b0.55", paths=("slow",), frames=3, size=(W, H), flip_every=0,
-                 plots=False)
-    rows = [r for r in swept.rows if r["method"] == "jnyang@1:b0.55"]
+    swept = play("procedural:0", "jnyang,jnyang@1:b0.55,yang2019:b0.55", paths=("slow",), frames=3, size=(W, H),
+                 flip_every=0, plots=False)
     from rtp.evaluate._play import SAVING_SWEEP
 
-    assert [r["value"] for r in rows] == sorted({*SAVING_SWEEP, 0.55})
-    assert [r["parameter"] for r in rows if r["default"]] == ["saving 0.55"]
+    for name in ("jnyang@1:b0.55", "yang2019:b0.55"):
+        assert [r["value"] for r in swept.rows if r["method"] == name] == sorted({*SAVING_SWEEP, 0.55})
+        assert [r["parameter"] for r in swept.rows if r["method"] == name and r["default"]] == ["saving 0.55"]
+    rows = [r for r in swept.rows if r["method"] in ("jnyang@1:b0.55", "yang2019:b0.55")]
     assert all(r["work_saved"] >= r["value"] - 1e-9 for r in rows)
     assert all(r["work_saved_p05"] >= r["value"] - 1e-9 for r in rows)
     for r in (r for r in swept.rows if r["default"]):  # the worst 5% of frames' saving (frame 0 has no history)
