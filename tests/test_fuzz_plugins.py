@@ -206,6 +206,8 @@ def gl(gl_context: Any) -> Iterator[_GL]:
     for t in state.textures.values():
         t.release()
     state.renderer.release()
+    if "resizable" in _STATE:
+        _STATE.pop("resizable").release()
     _STATE.pop("gl", None)
 
 
@@ -248,6 +250,31 @@ def _renderer_call(kw: dict[str, Any]) -> Any:
         return settings
     finally:
         g.use()
+
+
+resize_cases = st.tuples(sides, sides)
+
+
+def _resize_call(v: tuple[Any, Any]) -> Any:
+    """A renderer of its own, resized and drawing (the module's renderer keeps its frame for the targets below)."""
+    g = _gl()
+    if "resizable" not in _STATE:
+        from rtp.plugins.moderngl import Renderer
+
+        r = Renderer(W, H, ctx=g.ctx, shadow_map_size=64, ao_samples=4)
+        _STATE["resizable"] = r
+        r.load_scene(_scene())
+    r = _STATE["resizable"]
+    try:
+        r.resize(*v)
+        return r.render(CAM).colour["1x1"]
+    finally:
+        g.use()
+
+
+def _resize_absurd(v: tuple[Any, Any], out: np.ndarray) -> bool:
+    """Accepted: integer sides >= 1, and a frame of that size drawn."""
+    return bool(not all(_count(s) and s >= 1 for s in v) or out.shape != (v[1], v[0], 3) or not _finite_arrays(out))
 
 
 _RENDERER_FLOATS = {
@@ -1103,6 +1130,7 @@ CASES: list[tuple[Target, int, bool]] = [
         False,
     ),
     (Target("moderngl: Renderer settings", renderer_kwargs, _renderer_call, _renderer_absurd), 40, False),
+    (Target("moderngl: Renderer.resize", resize_cases, _resize_call, _resize_absurd), 30, False),
     (
         Target("moderngl: Renderer.render arguments and previous frames", render_kwargs, _render_call, _render_absurd),
         40,

@@ -490,3 +490,62 @@ def test_renderer_errors_and_lifetime(gl_context):
             Renderer(16, 16, ctx=ctx, **options)
     make_current(ctx)
     ctx.texture((2, 2), 1).release()  # a borrowed context stays open after a refused size
+
+
+@pytest.mark.gl
+def test_resize_draws_as_a_renderer_made_at_that_size(gl_context: Any) -> None:
+    """Dynamic resolution with one renderer: after ``resize`` a frame, its VRS image and its reprojection
+    are those of a renderer made at the new size with the same shadow map (every plane bit for bit), the
+    scene stays loaded, the old frame's targets are freed, and a bad size is a typed error that keeps the
+    renderer drawing at its size."""
+    ctx = make_current(gl_context)
+    scene = _textured_scene()
+    cams = (_front_camera(), _front_camera(yaw=4.0))
+    rates = {}
+    with Renderer(W, H, ctx=ctx, shadow_map_size=512) as r, \
+            Renderer(96, 58, ctx=ctx, shadow_map_size=512) as fresh:
+        r.load_scene(scene)
+        fresh.load_scene(scene)
+        r.render(cams[0])
+        r.shade_rates(np.zeros((7, 11), np.uint8), 16)  # (the VRS targets of the old size, made and then freed)
+        gl_objects = [o for o in vars(r).values() if hasattr(o, "mglo")]
+        gl_objects += [o for d in vars(r).values() if isinstance(d, dict) for o in d.values() if hasattr(o, "mglo")]
+        kept = {id(o) for o in (r._white, r._p_gbuffer, r._p_coarse)}  # (not of the frame's size)
+        old_targets = [o for o in gl_objects + list(r._vrs or ()) if id(o) not in kept and type(o).__name__ in
+                       ("Texture", "Framebuffer", "Renderbuffer", "Texture2D")]
+        r.resize(96, 58)
+        assert (r.width, r.height) == (96, 58) and r.settings["size"] == [96, 58] and r.shadow_map_size == 512
+        with pytest.raises(RendererError, match="call render"):
+            r.shade_rates(np.zeros((4, 6), np.uint8), 16)  # the frame before the resize is not the current one
+        for renderer in (r, fresh):
+            first = renderer.render(cams[0])
+            second = renderer.render(cams[1], first)
+            rng = np.random.default_rng(1)
+            codes = rng.choice([0, 1, 4, 5, 6, 9, 10], size=(4, 6)).astype(np.uint8)
+            rates[id(renderer)] = (second, renderer.shade_rates(codes, 16))
+        (a, vrs_a), (b, vrs_b) = rates[id(r)], rates[id(fresh)]
+        for name in ("depth", "normal", "albedo", "motion", "seen", "reprojected"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+        for rate in RATES:
+            np.testing.assert_array_equal(a.colour[rate], b.colour[rate], err_msg=rate)
+        np.testing.assert_array_equal(vrs_a, vrs_b)
+        from rtp.plugins.moderngl._glio import is_released
+
+        # nothing of the old size is left behind: its textures and framebuffers (the VRS ones too) are freed,
+        # the scene's and the programs' are not
+        assert len(old_targets) > 20 and all(is_released(o) for o in old_targets)
+        assert not any(is_released(o) for o in (r._white, r._p_gbuffer, *(m.texture for m in r._materials if m.texture)))
+        limit = Renderer.max_frame_side(ctx)
+        for bad, word in (((0, 16), "positive integers"), ((2.5, 16), "positive integers"),
+                          ((True, 16), "positive integers"), ((limit + 1, 16), f"at most {limit} pixels a side")):
+            with pytest.raises(RendererError, match=f"resize: .*{word}"):
+                r.resize(*bad)  # type: ignore[arg-type]
+        assert (r.width, r.height) == (96, 58)
+        np.testing.assert_array_equal(r.render(cams[0]).colour["1x1"], fresh.render(cams[0]).colour["1x1"])
+        with pytest.raises(RendererError, match="could not allocate the render targets of a 16384x16384 frame"
+                                                ".*kept 96x58"):
+            r.resize(16384, 16384)
+        assert (r.width, r.height) == (96, 58)
+        np.testing.assert_array_equal(r.render(cams[0]).colour["1x1"], fresh.render(cams[0]).colour["1x1"])
+    with pytest.raises(RendererError, match="released"):
+        r.resize(32, 32)

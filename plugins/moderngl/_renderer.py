@@ -584,7 +584,64 @@ class Renderer:
         self._ao_kernel = (k * (rng.uniform(0.3, 1.0, self.ao_samples) * scale)[:, None]).astype(np.float32)
         self._white = self.ctx.texture((1, 1), 4, b"\xff\xff\xff\xff")
 
+    def resize(self, width: int, height: int) -> None:
+        """Draw frames of ``width`` x ``height`` from now on (an engine's dynamic resolution): the frame's
+        render targets are made anew at that size; the programs, the loaded scene and every setting stay,
+        the shadow map's size too (an engine scales its view, not its shadow maps). A frame renders at the
+        new size exactly as a renderer made at that size with the same ``shadow_map_size`` draws it.
+        :meth:`shade_rates`, :meth:`reproject` and :meth:`reprojection_source` then need a frame rendered
+        at the new size; the previous frame's planes, at the old size, reproject into it through
+        :func:`rtp.sdk.reproject`. The same size is a no-op. Raises :class:`RendererError` on a size that
+        is not positive integers or that the context cannot draw, keeping the current size."""
+        self._check_alive()
+        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in (width, height)) \
+                or int(width) < 1 or int(height) < 1:
+            raise RendererError(f"resize: expected positive integers (pixels), got {width!r}x{height!r}")
+        width, height = int(width), int(height)
+        if (width, height) == (self.width, self.height):
+            return
+        limit = self.max_frame_side(self.ctx)
+        if max(width, height) > limit:
+            raise RendererError(f"resize: this OpenGL context draws at most {limit} pixels a side "
+                                f"(GL_MAX_TEXTURE_SIZE), got {width}x{height}")
+        self.ctx.__enter__()  # (its objects are freed and made in its own context)
+        old = (self.width, self.height)
+        self._release_targets()
+        self._last = None
+        self.width, self.height = width, height
+        try:
+            self._allocate_targets()
+        except Exception as exc:  # (out of room at the new size: back to the old one, which fitted)
+            self._release_targets()
+            self.width, self.height = old
+            self._allocate_targets()
+            raise RendererError(f"resize: could not allocate the render targets of a {width}x{height} frame on "
+                                f"this OpenGL context ({type(exc).__name__}: {exc}); kept {old[0]}x{old[1]}") from exc
+        logger.debug("renderer resized %dx%d -> %dx%d", old[0], old[1], width, height)
+
+    def _release_targets(self) -> None:
+        """Free what :meth:`_allocate_targets` and :meth:`shade_rates` made at the frame's size."""
+        for obj in self._vrs or ():
+            obj.release()
+        self._vrs = None
+        for name in getattr(self, "_target_names", ()):
+            obj = vars(self).pop(name, None)
+            if isinstance(obj, dict):
+                for o in obj.values():
+                    o.release()
+            elif isinstance(obj, Adapter):
+                obj.close()
+            elif obj is not None:
+                obj.release()
+
     def _allocate_targets(self) -> None:
+        before = set(vars(self))
+        try:
+            self._make_targets()
+        finally:  # (what a failed allocation made is released with the rest)
+            self._target_names = tuple(sorted(set(vars(self)) - before))
+
+    def _make_targets(self) -> None:
         ctx, size, mgl = self.ctx, (self.width, self.height), self._mgl
         nearest = (mgl.NEAREST, mgl.NEAREST)
 
