@@ -14,7 +14,7 @@ of the estimated to the measured peak. The configurations:
 - demo: ``rtp demo --model M``, for each shipped model
 - play: ``rtp play procedural:0 --path fast --frames N --no-plots`` with the oracle alone, JNYang
   alone, the default methods (each without and with the sweep), the oracle with dynamic resolution
-  (``--dynamic-resolution 0.5,0.75,1@1``: two further renderers), and the oracle failing by FLIP,
+  (``--dynamic-resolution 0.5,0.75,1@1``: its renderer resized twice a path), and the oracle failing by FLIP,
   JNFLIP and LPIPS
 - metric: ``rtp metric M REF TEST --out MAP.png`` of two noise images of the size, for each metric
 - examples: ``examples/moderngl_vrs.py`` and ``examples/pyrender_vrs.py``, each alone and with a GIF
@@ -80,7 +80,6 @@ def example(name: str) -> object:
 
 
 def configs(frames: int) -> Iterator[Config]:
-    from rtp.capture.paths import DynamicResolution
     from rtp.evaluate import DEFAULT_METHODS, parse_methods
     from rtp.evaluate._play import _loop_count
 
@@ -100,16 +99,11 @@ def configs(frames: int) -> Iterator[Config]:
                       "--methods", methods, *([] if sweep else ["--no-sweep"])],
                      metrics=("jnyang",), loops=sum(_loop_count(m, sweep, predictors) for m in specs),
                      models=len({m.model for m in specs if m.kind == "model"}))
-    # a renderer for each further size, the largest drawn last: every renderer is held at its frame
-    dyn = DynamicResolution((0.5, 0.75, 1.0), 1)
-
-    def further(size: tuple[int, int]) -> list[tuple[int, int]]:
-        return [z for z in dyn.sizes(size) if z != tuple(size)]
-
+    # one renderer resized to each size, the largest last (what a smaller size's targets held is freed)
     yield Config("play", "oracle, dynamic resolution 0.5,0.75,1@1",
                  ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",
                   "--methods", "oracle", "--no-sweep", "--dynamic-resolution", "0.5,0.75,1@1"],
-                 estimate=lambda size: job_bytes("play", size, metrics=("jnyang",), loops=1, renderers=further(size)))
+                 metrics=("jnyang",), loops=1)
     for metric in ("flip", "jnflip", "lpips"):
         yield Config("play", f"oracle, failing by {metric}",
                      ["play", "procedural:0", "--path", "fast", "--frames", str(frames), "--no-plots", "--out", "{out}",

@@ -46,9 +46,8 @@ CHECK_MODES = ("refuse", "warn", "off")
 #: resident set between 640x384 and 1280x768 (``python bench/job_memory.py``, 2026-12-03).
 #: ``play.loop`` is added for each of a closed-loop run's method loops (one per swept parameter:
 #: its displayed frame, its reprojection); ``play.model`` for each distinct model it loads (its
-#: input planes, onnxruntime's buffers); ``play.renderer`` for each pixel of the further renderers a
-#: run with dynamic resolution keeps (one per size beyond the largest: its render targets; measured with
-#: the largest size drawn last, every renderer held), each also holding :data:`RENDERER_BASE`.
+#: input planes, onnxruntime's buffers). A run with dynamic resolution holds no more than one at its
+#: largest size (its one renderer resizes: ``Renderer.resize``).
 PER_PIXEL: dict[str, float] = {
     "capture": 770.0,  # a sample: two frames' G-buffers, the seven rates' colour, the reprojection, its files
     "targets": 120.0,  # a sample read back, and JNYang's or PSNR's targets
@@ -56,7 +55,6 @@ PER_PIXEL: dict[str, float] = {
     "play": 650.0,  # a path's frame at every rate, the failing metric's truth (JNYang's; others add theirs)
     "play.loop": 14.0,
     "play.model": 90.0,
-    "play.renderer": 70.0,
     "metric": 160.0,  # ``rtp metric``: the pair decoded, the per-pixel map, the figure of --out
 }
 
@@ -68,10 +66,6 @@ METRIC_PER_PIXEL: dict[str, dict[str, float]] = {
     "play": {"flip": 1090.0, "jnflip": 930.0, "lpips": 160.0},
     "metric": {"lpips": 30.0},
 }
-
-#: Bytes each further renderer of ``rtp play``'s dynamic resolution holds at any size (its programs, the
-#: procedural scene's meshes and textures in its GL objects; a map's are larger: kaos's about 35 MB).
-RENDERER_BASE = 20 * 2**20
 
 #: Bytes a job's process holds at any frame size (Python, numpy, the GL context, onnxruntime, torch).
 BASE: dict[str, float] = {
@@ -93,32 +87,22 @@ _NOUNS = {"capture": "a capture", "targets": "the targets", "demo": "the demo", 
 
 
 def job_bytes(job: str, size: tuple[int, int], *, processes: int = 1, metrics: Iterable[str] = (), loops: int = 0,
-              models: int = 0, renderers: Iterable[tuple[int, int]] = ()) -> int:
+              models: int = 0) -> int:
     """The peak bytes of ``job`` (a key of :data:`BASE`) on frames of ``size`` (width, height), in
     each of ``processes`` processes at once, computing ``metrics``' targets (the largest counts: they
-    run one after another), with ``loops`` closed-loop method loops, ``models`` distinct models and
-    further ``renderers`` of these sizes (``rtp play``'s dynamic resolution: one per size beyond
-    ``size``)."""
+    run one after another), with ``loops`` closed-loop method loops and ``models`` distinct models."""
     if not isinstance(job, str) or job not in BASE:
         raise ParameterError(f"job: expected one of {', '.join(BASE)}, got {job!r}", "job")
     if not isinstance(size, (tuple, list)) or len(size) != 2:
         raise ParameterError(f"size: expected (width, height), got {size!r}", "size")
     w, h = (_count("size", v, 1) for v in size)
     processes, loops, models = _count("processes", processes, 1), _count("loops", loops, 0), _count("models", models, 0)
-    try:
-        further = [tuple(_count("renderers", v, 1) for v in z) for z in renderers]
-    except TypeError:
-        further = [()]
-    if any(len(z) != 2 for z in further):
-        raise ParameterError(f"renderers: expected (width, height) sizes, got {renderers!r}", "renderers")
     metrics = _metric_names(metrics)
     extras = METRIC_PER_PIXEL.get(job, {})
     per_pixel = PER_PIXEL[job] + max((extras.get(m, 0.0) for m in metrics), default=0.0)
     if job == "play":
         per_pixel += loops * PER_PIXEL["play.loop"] + models * PER_PIXEL["play.model"]
     base = BASE[job] + max((METRIC_BASE.get(job, {}).get(m, 0.0) for m in metrics), default=0.0)
-    if job == "play":
-        base += sum(RENDERER_BASE + PER_PIXEL["play.renderer"] * a * b for a, b in further)
     return int(processes * (base + per_pixel * w * h))
 
 
@@ -212,12 +196,12 @@ def check_memory(need: int, said: str, name: str, advice: str, *, job: str = "th
 
 
 def check_frame_memory(job: str, size: tuple[int, int], *, processes: int = 1, metrics: Iterable[str] = (),
-                       loops: int = 0, models: int = 0, renderers: Iterable[tuple[int, int]] = (),
+                       loops: int = 0, models: int = 0,
                        error: Callable[[str, str], Exception] = ParameterError) -> None:
     """:func:`check_memory` of :func:`job_bytes` for a job whose frame size the user chose: "size: the
     demo at WxH holds about N GiB [(M GiB in each of P processes)], more than this machine's T GiB of
     memory: a smaller size [or fewer workers, where one process would fit]"."""
-    one = job_bytes(job, size, metrics=metrics, loops=loops, models=models, renderers=renderers)
+    one = job_bytes(job, size, metrics=metrics, loops=loops, models=models)
     n = _count("processes", processes, 1)
     w, h = (int(v) for v in size)
     each = f" ({one / 2**30:.1f} GiB in each of {n} processes)" if n > 1 else ""

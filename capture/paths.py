@@ -462,10 +462,11 @@ class PathPlayer:
     render per frame, each keeping its own displayed frames as history (``PathFrame.reproject``).
     ``exact=False`` shades by :func:`composite` instead (several times faster on a CPU; differs from
     the renderer's VRS only by FXAA next to tiles of another rate). ``dynamic`` (a
-    :class:`DynamicResolution`) draws each frame at its schedule's size of ``size`` (the largest), with a
-    renderer of its own per size; a frame of another size than the one before reprojects from the earlier
-    frame's pixels (``sdk.reproject`` of its pixel indices), so each method's history is the frame it displayed, at the
-    size it was drawn."""
+    :class:`DynamicResolution`) draws each frame at its schedule's size of ``size`` (the largest), the one
+    renderer resized (``Renderer.resize``: its scene and shadow map kept, as an engine's dynamic resolution
+    keeps them; a renderer given is resized back to its own size by :meth:`close`); a frame of another
+    size than the one before reprojects from the earlier frame's pixels (``sdk.reproject`` of its pixel
+    indices), so each method's history is the frame it displayed, at the size it was drawn."""
 
     def __init__(self, scene: Scene, size: tuple[int, int] = (1280, 720), *, renderer: Any = None,
                  exact: bool = True, dynamic: DynamicResolution | None = None) -> None:
@@ -475,48 +476,32 @@ class PathPlayer:
         if dynamic is not None and not isinstance(dynamic, DynamicResolution):
             raise ParameterError(f"dynamic: expected a DynamicResolution (or None), got {type(dynamic).__name__}",
                                  "dynamic")
-        if dynamic is not None and renderer is not None:
-            raise ParameterError("dynamic: dynamic resolution draws with renderers of its own, one per size: give "
-                                 "the scene and no renderer", "dynamic")
         self.exact = bool(exact)
         self.dynamic = dynamic
-        self._scene = scene
         self._current: Any = None
         self._own = renderer is None
         self.renderer = Renderer(*size) if self._own else renderer
         if self._own:
             self.renderer.load_scene(scene)
         self.size = (self.renderer.width, self.renderer.height)
-        self._renderers = {self.size: self.renderer}  # one per size drawn (dynamic resolution)
-        self._drawing = self.renderer  # the current frame's
-
-    def _renderer(self, size: tuple[int, int]) -> Any:
-        got = self._renderers.get(size)
-        if got is None:
-            from rtp.plugins.moderngl import Renderer
-
-            got = Renderer(*size, ctx=self.renderer.ctx)  # (in the first one's GL context)
-            self._renderers[size] = got  # (released with the rest, even if the scene fails to load)
-            got.load_scene(self._scene)
-        return got
 
     def frames(self, path: CameraPath) -> Any:
         """Yield a :class:`PathFrame` per camera of ``path``."""
         prev = None
         for i, cam in enumerate(path.cameras):
             size = self.size if self.dynamic is None else self.dynamic.size(i, self.size)
-            self._drawing = self._renderer(size)
+            self.renderer.resize(*size)  # (dynamic resolution; the same size is a no-op)
             # the previous camera for the motion vectors, not the previous frame: every method reprojects
             # its own history through reprojection_source, so the renderer's reprojection of the
             # full-rate frame (Frame.reprojected and .seen, left 0 here) would be read by none
-            frame = self._drawing.render(cam, prev_camera=prev.camera if prev is not None else None)
+            frame = self.renderer.render(cam, prev_camera=prev.camera if prev is not None else None)
             self._current = frame
             h, w = size[1], size[0]
             if prev is None:
                 zeros = np.zeros((h, w), np.intp)
                 yield PathFrame(i, frame, zeros, zeros, np.zeros((h, w), np.float32))
             elif prev.depth.shape == (h, w):
-                rows, cols, seen = self._drawing.reprojection_source(prev.depth, prev.camera)
+                rows, cols, seen = self.renderer.reprojection_source(prev.depth, prev.camera)
                 yield PathFrame(i, frame, rows, cols, seen)
             else:  # (dynamic resolution: the previous frame at its own size)
                 yield PathFrame(i, frame, *_source_across_sizes(frame, prev))
@@ -526,12 +511,13 @@ class PathPlayer:
         """The current frame shaded per tile at ``rates`` (uint8 codes), tone-mapped and post-processed."""
         if not self.exact:
             return composite(self._current.colour, rates, tile_size)
-        return np.asarray(self._drawing.shade_rates(rates, tile_size))
+        return np.asarray(self.renderer.shade_rates(rates, tile_size))
 
     def close(self) -> None:
         if self._own:
-            for r in reversed(self._renderers.values()):  # (the first, which owns the context, last)
-                r.release()
+            self.renderer.release()
+        elif self.dynamic is not None and (self.renderer.width, self.renderer.height) != self.size:
+            self.renderer.resize(*self.size)  # (the caller's renderer back at its size)
 
     def __enter__(self) -> PathPlayer:
         return self

@@ -658,10 +658,9 @@ def play(
     # before the output folder is made
     check_scene(scene, cache_dir, None, None)
     w, h = check_frame_size(size, renderer=False)
-    further = [] if dynamic_resolution is None else [z for z in dynamic_resolution.sizes((w, h)) if z != (w, h)]
     check_frame_memory("play", (w, h), processes=min(workers, len(dict.fromkeys(paths))), metrics=(fail_metric,),
                        loops=sum(_loop_count(m, sweep, predictors) for m in specs), models=len(predictors),
-                       renderers=further, error=PlayError)
+                       error=PlayError)
     check_frame_size((w, h))
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None

@@ -755,16 +755,14 @@ job_memory_cases = st.tuples(
                                                            max_size=3), json_values),
     st.one_of(st.integers(-2, 100), hostile_numbers),  # loops
     st.one_of(st.integers(-2, 10), hostile_numbers),  # models
-    st.one_of(st.lists(st.tuples(st.integers(-2, 2**17), st.integers(-2, 2**17)), max_size=3), json_values,
-              hostile_numbers),  # renderers
     st.one_of(st.integers(0, 2**45), hostile_numbers),  # bytes needed
     st.one_of(st.text(max_size=5), json_scalars),  # what is said of them
 )
 
 
 def _job_memory_call(v: tuple[Any, ...]) -> None:
-    job, size, processes, metrics, loops, models, pixels, need, said = v
-    kw = {"processes": processes, "metrics": metrics, "loops": loops, "models": models, "renderers": pixels}
+    job, size, processes, metrics, loops, models, need, said = v
+    kw = {"processes": processes, "metrics": metrics, "loops": loops, "models": models}
     with contextlib.suppress(sdk.ParameterError):  # (each call on its own: the second runs after the first's refusal)
         job_bytes(job, _val(size), **kw)
     with contextlib.suppress(sdk.ParameterError):

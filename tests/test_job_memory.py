@@ -13,7 +13,7 @@ import pytest
 
 from rtp import sdk
 from rtp.capture import TargetError, capture, check_memory, compute_targets, job_bytes
-from rtp.capture._memory import BASE, METRIC_BASE, METRIC_PER_PIXEL, PER_PIXEL, RENDERER_BASE, meminfo
+from rtp.capture._memory import BASE, METRIC_BASE, METRIC_PER_PIXEL, PER_PIXEL, meminfo
 from rtp.cli import main as rtp_main
 from rtp.evaluate import DEFAULT_METHODS, PlayError, parse_methods, play
 from rtp.evaluate._play import _loop_count, _loops
@@ -35,10 +35,6 @@ def test_job_bytes_add_the_metrics_loops_models_and_processes() -> None:
     loops = job_bytes("play", (100, 10), loops=55, models=2) - job_bytes("play", (100, 10))
     assert loops == int(1000 * (55 * PER_PIXEL["play.loop"] + 2 * PER_PIXEL["play.model"]))
     assert job_bytes("demo", (100, 10), loops=55) == job_bytes("demo", (100, 10))  # (a closed loop's only)
-    # dynamic resolution: a renderer for each further size, its pixels' render targets
-    further = job_bytes("play", (100, 10), renderers=[(50, 5), (75, 10)]) - job_bytes("play", (100, 10))
-    assert further == int(2 * RENDERER_BASE + 1000 * PER_PIXEL["play.renderer"])
-    assert job_bytes("capture", (100, 10), renderers=[(50, 5)]) == job_bytes("capture", (100, 10))
     lpips = job_bytes("metric", (100, 10), metrics=("psnr", "lpips"))  # torch and AlexNet: a base of their own
     assert lpips == int(BASE["metric"] + METRIC_BASE["metric"]["lpips"]
                         + (PER_PIXEL["metric"] + METRIC_PER_PIXEL["metric"]["lpips"]) * 1000)
@@ -50,9 +46,6 @@ def test_job_bytes_add_the_metrics_loops_models_and_processes() -> None:
                       ({"size": (2**40, 10)}, r"^size: expected an integer in"),  # (float products would overflow)
                       ({"processes": 0}, "^processes: expected an integer in"),
                       ({"loops": -1}, r"^loops: expected an integer in \[0,"),
-                      ({"renderers": [(1.5, 2)]}, r"^renderers: expected an integer in \[1,"),
-                      ({"renderers": [(1, 2, 3)]}, r"^renderers: expected \(width, height\) sizes"),
-                      ({"renderers": 3}, r"^renderers: expected \(width, height\) sizes"),
                       ({"metrics": ("flip", "flipp")}, "^metrics: expected names of flip, .*, got 'flipp'")):
         with pytest.raises(sdk.ParameterError, match=words):
             job_bytes("demo", **{"size": (100, 10), **kw})

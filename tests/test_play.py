@@ -256,15 +256,12 @@ def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture
             DynamicResolution(scales, every)  # type: ignore[arg-type]
     with pytest.raises(PlayError, match="dynamic_resolution: expected an rtp.capture.paths.DynamicResolution"):
         play("procedural:0", "full", frames=3, dynamic_resolution=((1.0, 0.5), 2))  # type: ignore[arg-type]
-    with pytest.raises(sdk.ParameterError, match="renderers of its own"):
-        PathPlayer(None, renderer=object(), dynamic=dyn)  # type: ignore[arg-type]
-    # each further size is a renderer of its own: counted in the memory the run is refused by
+    # one renderer resized: the memory the run is refused by is the largest size's, before anything is written
     from rtp.capture import job_bytes
 
-    fixed = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1)
-    more = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1, renderers=[(3072, 3072), (2048, 2048)])
-    machine_memory(MemTotal=(fixed + more) // 2, MemAvailable=(fixed + more) // 2)
-    with pytest.raises(PlayError, match=rf"^size: the closed loop at 4096x4096 holds about {more / 2**30:.1f} GiB"):
+    need = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1)
+    machine_memory(MemTotal=need - 2**20, MemAvailable=need - 2**20)
+    with pytest.raises(PlayError, match=rf"^size: the closed loop at 4096x4096 holds about {need / 2**30:.1f} GiB"):
         play("procedural:0", "oracle", frames=3, size=(4096, 4096), sweep=False, out=str(tmp_path / "out"),
              dynamic_resolution=DynamicResolution((1.0, 0.75, 0.5), 5))
     assert not (tmp_path / "out").exists()
@@ -283,7 +280,7 @@ def test_a_frame_of_another_size_reprojects_as_the_renderer_does(scene: Any) -> 
     own GL reprojection to the pixel, seen and unseen alike; any history reprojects to this frame's size."""
     sc, blockers = scene
     path = camera_path(sc, 8, "fast", seed=1, blockers=blockers)
-    sizes, prev = [], None
+    sizes, prev, images = [], None, []
     with PathPlayer(sc, (W, H), dynamic=DynamicResolution((1.0, 0.5), 3)) as player:
         for pf in player.frames(path):
             h, w = pf.frame.depth.shape
@@ -304,8 +301,22 @@ def test_a_frame_of_another_size_reprojects_as_the_renderer_does(scene: Any) -> 
                     assert 0.5 < pf.seen.mean() < 1.0  # (a camera that moves: most seen, not all)
             shaded = player.shade(np.zeros(sdk.tile_grid(h, w, TILE), np.uint8), TILE)
             np.testing.assert_array_equal(shaded, pf.frame.colour["1x1"])
+            assert (player.renderer.width, player.renderer.height) == (w, h)  # (one renderer, resized)
+            images.append(shaded)
             prev = pf.frame
     assert sizes == [(W, H)] * 3 + [(W // 2, H // 2)] * 3 + [(W, H)] * 2
+    # a renderer of the caller's draws the same frames, and is given back at its own size
+    from rtp.plugins.moderngl import Renderer
+
+    with Renderer(W, H) as mine:
+        mine.load_scene(sc)
+        with PathPlayer(sc, renderer=mine, dynamic=DynamicResolution((1.0, 0.5), 3)) as player:
+            for pf, image in zip(player.frames(path), images, strict=True):
+                np.testing.assert_array_equal(pf.frame.colour["1x1"], image)
+                if pf.index == 4:
+                    break  # (closed at the smaller size)
+        assert (mine.width, mine.height) == (W, H)
+        mine.render(path.cameras[0])  # (and draws at it)
 
 
 def test_dynamic_resolution_closes_the_loop_at_each_frames_size(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
