@@ -122,10 +122,11 @@ class Metric:
             json.dumps(dict(self.params), allow_nan=False)
         except (TypeError, ValueError) as err:
             raise MetricParameterError(f"Metric {self.name!r}: params must hold JSON values ({err})", "params") from err
-        if isinstance(self.requires, str) or not all(isinstance(m, str) and m for m in self.requires):
+        requires = tuple(self.requires) if isinstance(self.requires, (tuple, list)) else None
+        if requires is None or not all(isinstance(m, str) and m for m in requires):
             raise MetricParameterError(f"Metric {self.name!r}: requires must be a tuple of module names, got "
                                        f"{self.requires!r}", "requires")
-        object.__setattr__(self, "requires", tuple(self.requires))
+        object.__setattr__(self, "requires", requires)
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
         object.__setattr__(self, "default_threshold", threshold)
 

@@ -81,6 +81,7 @@ def frames(seed: int = 0, h: int = 37, w: int = 53) -> tuple[np.ndarray, dict[st
     {"pooling": "min"}, {"pooling": "mse"},
     {"units": 1}, {"description": None}, {"params": {"a": object()}}, {"params": {"a": float("inf")}},
     {"params": {1: 2}}, {"params": [1]}, {"requires": "scipy"}, {"requires": ("",)},
+    {"requires": None}, {"requires": 3}, {"requires": {"scipy": 1}},  # (None and 3 were TypeErrors: the fuzzer's)
 ])
 def test_a_metric_that_cannot_work_is_refused_when_declared(kw: dict[str, Any]) -> None:
     args = {"name": "mine", "error_map": absdiff, "default_threshold": 0.1, **kw}
