@@ -294,7 +294,8 @@ def input_planes(
         _check_depth_kind(d, reversed_z)
         d = _linear_depth(d, g["projection"], reversed_z)
         if "prev_depth" in g:
-            g["prev_depth"] = _linear_depth(g["prev_depth"], g.get("prev_projection", g["projection"]), reversed_z)
+            prev_name = "prev_projection" if "prev_projection" in g else "projection"
+            g["prev_depth"] = _linear_depth(g["prev_depth"], g[prev_name], reversed_z, prev_name)
     g["depth"] = d
     geo = d > 0.0
     background = not geo.all()  # (a frame of geometry alone needs no mask)
@@ -351,14 +352,16 @@ def input_planes(
     return np.ascontiguousarray(np.stack([planes[c] for c in names]), np.float32)
 
 
-def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = False) -> np.ndarray:
+def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = False,
+                  name: str = "projection") -> np.ndarray:
     """Window depth in [0, 1] (1 = background), or reversed-Z depth (0 = background), to linear view depth
     (0 = background) through the inverse of ``projection``: the moderngl adapter's ``linear_depth``.
 
     A reversed-Z buffer holds 1 minus the window depth of the same near and far planes (n (f - z) / (z (f - n))
     against f (z - n) / (z (f - n)); n / z against 1 - n / z for an infinite far plane), so both go through
-    OpenGL's NDC depth, 2 w - 1, computed in float64 where 1 - r is exact for a float32 r."""
-    inv = np.linalg.inv(projection)
+    OpenGL's NDC depth, 2 w - 1, computed in float64 where 1 - r is exact for a float32 r. A ``projection``
+    (named ``name``) with no inverse is a :class:`ParameterError`."""
+    inv = _inverse(projection, name)
     r = raw.astype(np.float64)
     z = 1.0 - 2.0 * r if reversed_z else r * 2.0 - 1.0
     pz = inv[2, 2] * z + inv[2, 3]

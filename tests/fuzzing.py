@@ -690,7 +690,8 @@ _PLANE_CHANNELS = st.one_of(st.lists(st.sampled_from(list(sdk.CHANNELS)), min_si
 planes_cases = st.builds(
     lambda channels, key, v, kind: (channels, key, v, kind),
     _PLANE_CHANNELS, st.sampled_from(list(_PLANES_VALID)),
-    st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none(), json_scalars),
+    st.one_of(_arrays(st.integers(0, 9), 3), hostile_numbers, st.just("scaled"), st.none(), json_scalars,
+              st.deferred(lambda: projections)),  # (any key: a matrix where an image goes, and singular projections)
     st.sampled_from(sdk.DEPTH_KINDS),  # (a hardware kind's valid depths are a depth buffer's 0.4)
 )
 

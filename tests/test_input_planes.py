@@ -540,3 +540,9 @@ def test_check_gbuffers_needs_depth_and_names_what_is_no_gbuffer() -> None:
     assert sdk.check_gbuffers(depth=g["depth"]) == []  # (depth alone: only what it shows is checked)
     with pytest.raises(sdk.ParameterError, match="projection is singular"):  # (numpy's LinAlgError before)
         sdk.check_gbuffers(depth=g["depth"], normal=g["normal"], projection=np.full((4, 4), 255, np.uint8))
+    # a perspective's rows with no x scale: no inverse to linearise a window depth through (a LinAlgError before)
+    singular = np.array([[0.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1.002, -0.2002], [0, 0, -1, 0]])
+    window = np.full(g["depth"].shape, 0.5, np.float32)
+    with pytest.raises(sdk.ParameterError, match="projection is singular") as err:
+        sdk.input_planes(["depth"], depth=window, projection=singular, depth_kind="window")
+    assert err.value.name == "projection"

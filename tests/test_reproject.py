@@ -287,8 +287,8 @@ def test_a_grazing_plane_under_an_orthographic_camera_is_seen_through_plain_bili
 
 
 def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
-    """A projection neither perspective nor orthographic, an orthographic one in another API's convention, and an
-    orthographic previous camera whose projection is not at hand (a switch from a perspective): each a
+    """A projection neither perspective nor orthographic, an orthographic one in another API's convention or with
+    no inverse, and an orthographic previous camera whose projection is not at hand (a switch from a perspective): each a
     ParameterError naming the matrix, from sdk.check_reprojection as from the functions that reproject."""
     f = _isometric_pan(3)
     proj, prev_vp = f["projection"], f["prev_view_projection"]
@@ -297,6 +297,8 @@ def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
     neither = proj.copy()
     neither[3] = (0.0, 0.0, 0.5, 0.5)
     flipped, left_handed = np.diag([1.0, -1.0, 1.0, 1.0]) @ proj, proj @ np.diag([1.0, 1.0, -1.0, 1.0])
+    singular = proj.copy()  # an orthographic last row over a matrix with no inverse (numpy's LinAlgError before)
+    singular[2] = 0.0
     cases = [  # (projection, prev_view_projection, prev_projection, the matrix named, what is said)
         (neither, prev_vp, None, "projection", "neither a perspective's"),
         (flipped, flipped @ prev_view, None, "projection", "Vulkan"),
@@ -304,6 +306,8 @@ def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
         (persp, prev_vp, None, "projection", "orthographic camera's .* pass the previous camera's projection"),
         (persp, prev_vp, persp, "prev_projection", "orthographic camera's"),
         (proj, prev_vp, left_handed, "prev_projection", "left-handed or reversed-Z"),
+        (singular, prev_vp, None, "projection", "singular"),
+        (proj, prev_vp, singular, "prev_projection", "singular"),
     ]
     g = {k: v for k, v in f.items() if k not in ("projection", "prev_view_projection")}
     sdk_names = {"projection": "cur_proj", "prev_projection": "prev_proj"}
