@@ -225,7 +225,8 @@ def paper_model(folder: Path, arch: str = "paper", inputs: int | Sequence[str] =
     ``rtp.train.model.build_network``) with random weights (cost does not depend on them) and the
     paper's outputs, on ``inputs`` channels (4: the paper's; 6, 7 or 10: :data:`TIMING_INPUTS`; or
     the channel names themselves, such as a shipped model's ``metadata.inputs``), exported with
-    rtp-export into ``folder``: returns ``(torch network, onnx path)``."""
+    rtp-export into ``folder``: returns ``(torch network, onnx path)``. ``tile`` in ``config`` sets the
+    tile size (default 16): the `-8px` models' blocks at 1/8 resolution cost what 16-pixel ones do not."""
     import torch
 
     from rtp.export import export_checkpoint
@@ -239,15 +240,17 @@ def paper_model(folder: Path, arch: str = "paper", inputs: int | Sequence[str] =
         names = list(TIMING_INPUTS[inputs])
     else:
         names = list(inputs)
+    tile = config.pop("tile", PAPER_METADATA["tile_size"])
     torch.manual_seed(0)
-    net = build_network(arch, len(names), 4, 16, **config).eval()
+    net = build_network(arch, len(names), 4, tile, **config).eval()
     # trained BatchNorm statistics are not the identity: random ones keep folding honest
     for m in net.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.1, 0.1)
             m.running_var.uniform_(0.5, 1.5)
-    stem = f"{arch}-i{len(names)}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
-    ck = checkpoint.save(folder / f"{stem}.pt", net, {**PAPER_METADATA, "inputs": names})
+    stem = f"{arch}-i{len(names)}-t{tile}-{'-'.join(f'{k}{v}' for k, v in config.items())}"
+    meta = {**PAPER_METADATA, "inputs": names, "tile_size": tile, "provenance": {"arch": arch, **config}}
+    ck = checkpoint.save(folder / f"{stem}.pt", net, meta)
     return net, export_checkpoint(ck, folder / f"{stem}.onnx")
 
 

@@ -6,8 +6,8 @@
 MODEL is a shipped model's name (``lpips``) or an ``.onnx`` path; default: every shipped model (none when
 ``--fast`` is given). ``--fast OPTIONS`` (repeatable) adds rtp's fast network with those options of
 ``rtp train`` (``rtp.train.model.build_network``'s keywords: width, depth, stem, grow, tail_width,
-separable, ...) and random weights, on the input planes of ``--like`` (a shipped model or ``.onnx``;
-default the paper's four), exported with rtp-export: what a configuration would cost before a
+separable, ...; and ``tile``, 16 unless given) and random weights, on the input planes of ``--like``
+(a shipped model or ``.onnx``; default the paper's four), exported with rtp-export: what a configuration would cost before a
 30-minute training run says whether it is any good (the weights do not change the cost). Each is
 run through an onnxruntime session built as ``rtp.sdk.load`` builds it (same threads, same graph
 optimisations, so BatchNorm folded and convolutions fused with their ReLU in onnxruntime's blocked
@@ -108,8 +108,8 @@ def _fast_options(text: str) -> dict[str, Any]:
     of ints and booleans."""
     from rtp.train.model import build_network
 
-    allowed = [k for k, v in inspect.signature(build_network).parameters.items()
-               if v.kind is inspect.Parameter.KEYWORD_ONLY and k != "head"]
+    allowed = ["tile"] + [k for k, v in inspect.signature(build_network).parameters.items()
+                          if v.kind is inspect.Parameter.KEYWORD_ONLY and k != "head"]
     out: dict[str, Any] = {}
     for item in filter(None, (t.strip() for t in text.split(","))):
         key, sep, value = item.partition("=")

@@ -78,3 +78,17 @@ def test_profile_cli_rejects_a_bad_fast_option(flag: str, message: str) -> None:
     bad = subprocess.run([sys.executable, str(BENCH), "--fast", flag, "--size", "64x64", "--repeats", "1"],
                          capture_output=True, text=True)
     assert bad.returncode != 0 and message in bad.stderr
+
+
+def test_a_random_fast_network_takes_the_tile_size_of_the_8px_models(tmp_path: Path) -> None:
+    """``--fast tile=8`` costs a network whose blocks end at 8-pixel tiles (the `-8px` models), not at 16."""
+    opts = _module()._fast_options("tile=8,stem=8,tail_width=24")  # type: ignore[attr-defined]
+    assert opts == {"tile": 8, "stem": 8, "tail_width": 24}
+    ((label, path),) = _module()._random_fast(tmp_path, [opts], "jnyang-8px")  # type: ignore[attr-defined]
+    pred = sdk.load(path)
+    assert pred.metadata.provenance["arch"] == "fast"  # (bench/inference.py's architecture column reads it)
+    assert pred.metadata.tile_size == 8 and list(pred.metadata.inputs) == list(sdk.load("jnyang-8px").metadata.inputs)
+    rows = _module().profile(path, len(pred.metadata.inputs), (128, 64), 1, 1)  # type: ignore[attr-defined]
+    convs = [r for r in rows if r["macs"]]
+    assert all(r["shape"][2:] == [64 // 8, 128 // 8] for r in convs)  # stem 8: every layer at the tile's resolution
+    assert "tile=8" in label
