@@ -360,7 +360,8 @@ def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = Fa
     A reversed-Z buffer holds 1 minus the window depth of the same near and far planes (n (f - z) / (z (f - n))
     against f (z - n) / (z (f - n)); n / z against 1 - n / z for an infinite far plane), so both go through
     OpenGL's NDC depth, 2 w - 1, computed in float64 where 1 - r is exact for a float32 r. A ``projection``
-    (named ``name``) with no inverse is a :class:`ParameterError`."""
+    (named ``name``) with no inverse, or one through which a pixel's depth is no finite float32 view depth,
+    is a :class:`ParameterError`."""
     inv = _inverse(projection, name)
     r = raw.astype(np.float64)
     z = 1.0 - 2.0 * r if reversed_z else r * 2.0 - 1.0
@@ -368,6 +369,11 @@ def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = Fa
     pw = inv[3, 2] * z + inv[3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
         linear = np.where(r <= 0.0 if reversed_z else r >= 1.0, 0.0, -pz / pw)
+    bad = ~(np.abs(linear) <= np.finfo(np.float32).max)  # (NaN, infinite, or past float32)
+    if bad.any():
+        raise ParameterError(f"{name}: the depth buffer through its inverse gives no finite view depth at "
+                             f"{int(bad.sum())} of {bad.size} pixels (its largest entry {np.abs(projection).max():g}): "
+                             f"pass the projection the depth buffer was rendered with", name)
     return linear.astype(np.float32)
 
 

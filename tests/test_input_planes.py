@@ -546,3 +546,10 @@ def test_check_gbuffers_needs_depth_and_names_what_is_no_gbuffer() -> None:
     with pytest.raises(sdk.ParameterError, match="projection is singular") as err:
         sdk.input_planes(["depth"], depth=window, projection=singular, depth_kind="window")
     assert err.value.name == "projection"
+    # one through which the depth buffer is no finite view depth (-inf planes, accepted, before)
+    huge = np.array([[1.0, 0, 0, 0], [0, 1.5, 0, 0], [0, 0, -1.002, 1e300], [0, 0, -1, 0]])
+    for call in (sdk.input_planes, sdk.check_gbuffers):
+        args = (["depth"],) if call is sdk.input_planes else ()
+        with pytest.raises(sdk.ParameterError, match="no finite view depth at 600 of 600 pixels") as err:
+            call(*args, depth=window, projection=huge, depth_kind="window")
+        assert err.value.name == "projection"
