@@ -132,18 +132,28 @@ def frame_files(paths: list[str]) -> list[str]:
 _REUSE_PLANES = ("motion.x", "motion.y", "depth")
 
 
+# the SDK's options as its messages name them (normal_space='world'), and the flags that set them here
+_OPTION = re.compile(r"\b(normal_space|depth_kind)='(\w+)'")
+
+
+def _in_flags(text: str) -> str:
+    """An SDK message in this command's words: ``depth_kind='linear'`` is ``--depth-kind linear`` here."""
+    return _OPTION.sub(lambda m: f"--{m[1].replace('_', '-')} {m[2]}", text)
+
+
 def _warn_of_conventions(path: str, buffers: dict[str, Any], args: argparse.Namespace,
                          warned: dict[str, list[Any]]) -> list[str]:
     """``sdk.check_gbuffers``' warnings for a frame, logged each kind once (``warned``: per kind, the frames that
     had it and its first text; the numbers in a warning differ from frame to frame); all of them returned."""
     from rtp import sdk
 
-    texts = sdk.check_gbuffers(**buffers, normal_space=args.normal_space, depth_kind=args.depth_kind)
+    texts = [_in_flags(t) for t in sdk.check_gbuffers(**buffers, normal_space=args.normal_space,
+                                                      depth_kind=args.depth_kind)]
     for text in texts:
         kind = warned.setdefault(re.sub(r"-?\d[\d.]*", "#", text), [0, f"{path}: {text}"])
         kind[0] += 1
         if kind[0] == 1:
-            log.warning(kind[1].replace("%", "%%"))  # (its own template: kinds are not collapsed together)
+            log.warning("%s", kind[1])  # (its own message: kinds are not collapsed together)
     return texts
 
 
@@ -169,8 +179,12 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
             f"{path!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
             f"{reads} reads: " + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing),
             "frame")
-    planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
-                              normal_space=args.normal_space, depth_kind=args.depth_kind)
+    try:
+        planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
+                                  normal_space=args.normal_space, depth_kind=args.depth_kind)
+    except sdk.RtpError as err:  # the same error, in flags
+        err.args = (_in_flags(str(err)), *err.args[1:])
+        raise
     warnings = _warn_of_conventions(path, buffers, args, {} if warned is None else warned)
     x = planes[:len(inputs)]
     h, w = x.shape[1:]
@@ -342,7 +356,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
             bar.update_to(i + 1)
     for n, first in warned.values():
         if n > 1:
-            log.warning(f"... and on {n - 1} more frame{'s' if n > 2 else ''} of the sequence: {first}".replace("%", "%%"))
+            log.warning("... and on %d more frame%s of the sequence: %s", n - 1, "s" if n > 2 else "", first)
     changes = [r["changed"] for r in rows if r["changed"] is not None]
     summary: dict[str, Any] = {
         "frames": rows, "model": model, "metric": predictor.metadata.metric, "size": first_size,

@@ -139,6 +139,9 @@ def _resolution_hint(name: str, shape: tuple[int, ...], size: tuple[int, int]) -
 def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float = np.inf) -> np.ndarray:
     """A G-buffer as a float array of its shape, finite and within its range; else a typed error naming it."""
     shape, meaning = GBUFFERS[name]
+    if name.endswith("depth") and window == 1.0:  # depth_kind "window" or "reversed": not linear depth
+        meaning = ("a hardware depth buffer's values as depth_kind 'window' or 'reversed' reads them; "
+                   "depth_kind='linear' for linear view depth in scene units")
     try:
         a = np.asarray(value)
     except (TypeError, ValueError, OverflowError) as err:

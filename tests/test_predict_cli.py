@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,10 @@ def test_a_frame_that_is_not_what_it_should_be_is_named(frame: Path, tmp_path: P
     np.savez(hdr, **{**arrays, "prev_colour": arrays["prev_colour"] * 4.0})
     assert main(["predict", str(hdr)]) == 2
     assert "prev_colour: expected values in [0, 1]" in capsys.readouterr().err
+    assert main(["predict", str(frame), "--depth-kind", "window"]) == 2  # linear depth read as a depth buffer's
+    err = capsys.readouterr().err
+    assert "depth: expected values in [0, 1] (a hardware depth buffer's values" in err, err
+    assert "--depth-kind linear for linear view depth" in err and "depth_kind=" not in err, err
     text = tmp_path / "frame.txt"
     text.write_text("depth 1 2 3")
     assert main(["predict", str(text)]) == 2
@@ -357,6 +362,9 @@ def test_a_convention_mistake_is_warned_of_once_a_sequence(sequence: Path, tmp_p
     assert err.count("not unit vectors with no component below 0: an encoded texture (n * 2 - 1)?") == 2, err
     assert "frame_0000.npz: normal: mean length" in err
     assert "... and on 3 more frames of the sequence: " in err and err.count("frame_0000.npz: normal") == 2
+    assert main(["predict", str(sequence), "--normal-space", "world"]) == 0  # view-space normals read as world
+    err = capsys.readouterr().err
+    assert re.search(r"normal: \d+% of the surfaces face away", err) and "%%" not in err, err
     assert main(["predict", str(bad), "--json"]) == 0  # each frame's own warnings, for a tool reading the JSON
     got = json.loads(capsys.readouterr().out)
     assert all(len(r["warnings"]) == 1 and "an encoded texture" in r["warnings"][0] for r in got["frames"])
