@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ._run import Formatter, Parser, add_common, carries_metadata, run
+from ._run import Formatter, Parser, add_common, carries_metadata, option_flags, run
 
 __all__ = ["build_export_parser", "export_main"]
 
@@ -143,4 +143,4 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     parser = build_export_parser()
     args = parser.parse_args(argv)
     _check(parser, args)
-    return run("rtp-export", args, _body)
+    return run("rtp-export", args, _body, option_flags(parser))

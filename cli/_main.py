@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._run import Bar, Formatter, Parser, add_common, carries_metadata, run
+from ._run import Bar, Formatter, Parser, add_common, carries_metadata, option_flags, run
 
 __all__ = ["build_parser", "main"]
 
@@ -1242,6 +1242,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         (sub or parser).print_help(sys.stderr)
         parser.exit(EXIT_USAGE)  # SystemExit(2), as argparse's own usage errors
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    sub = _subparser(parser, args.command) or parser
+    sub = _subparser(sub, getattr(args, "action", None) or "") or sub
+    if extra:  # named by the command they were given to (argparse's own error names only `rtp`)
+        sub.error(f"unrecognized arguments: {' '.join(extra)}")
     prog = "rtp " + args.command + (f" {args.action}" if getattr(args, "action", None) else "")
-    return run(prog, args, args.func)
+    return run(prog, args, args.func, option_flags(sub))

@@ -14,6 +14,7 @@ import contextlib
 import errno
 import logging
 import os
+import re
 import sys
 import threading
 import time
@@ -21,8 +22,8 @@ import traceback
 from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
 
-__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metadata", "one_line", "run", "run_guarded",
-           "states_default", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metadata", "one_line", "option_flags", "run",
+           "run_guarded", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -285,11 +286,49 @@ _PATH_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EEXIS
                           errno.EROFS, errno.ENAMETOOLONG})
 
 
-def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace], int]) -> int:
-    """Run a command body under the one error policy (see the module docstring)."""
+def option_flags(parser: argparse.ArgumentParser) -> dict[str, str]:
+    """Each option's flag by the name the code gives its value (``fail_threshold``: ``--fail-threshold``); an
+    option given once per value (``--path``) also by its plural, the library's argument (``paths``)."""
+    flags: dict[str, str] = {}
+    for action in parser._actions:
+        long = [o for o in action.option_strings if o.startswith("--")]
+        if long and action.dest not in ("help", "version"):
+            flags[action.dest] = long[-1]
+            if isinstance(action, argparse._AppendAction) and not action.dest.endswith("s"):
+                flags.setdefault(action.dest + "s", long[-1])
+    return flags
+
+
+# a message that begins with the argument it is about: "flip_every: expected ...", "ppd must be ...", "weber_l (...)"
+_ABOUT = re.compile(r"(\w+)(?=: | must | \()")
+
+
+def _in_flags(err: BaseException, flags: dict[str, str]) -> None:
+    """A parameter error that names a library argument, said with the command's flag for it (docs/errors.md:
+    messages in the caller's words)."""
+    from rtp.sdk import ParameterError
+
+    text = str(err)
+    about = _ABOUT.match(text)
+    if isinstance(err, ParameterError) and about and about[1] in flags and err.args == (text,):
+        err.args = (flags[about[1]] + text[about.end():],)
+
+
+def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace], int],
+        flags: dict[str, str] | None = None) -> int:
+    """Run a command body under the one error policy (see the module docstring). ``flags`` (:func:`option_flags`
+    of the command's parser): a parameter error that names an argument by its Python name names its flag."""
     args.verbose = int(getattr(args, "verbose", 0) or 0) + int(getattr(args, "verbose_after", 0) or 0)
+
+    def body_in_flags() -> int:
+        try:
+            return body(args)
+        except Exception as err:
+            _in_flags(err, flags or {})
+            raise
+
     with _logging(args):
-        return run_guarded(prog, lambda: body(args), verbose=args.verbose,
+        return run_guarded(prog, body_in_flags, verbose=args.verbose,
                            on_interrupt=lambda: getattr(args, "on_interrupt", None))
 
 

@@ -18,6 +18,7 @@ import pytest
 
 from rtp import sdk
 from rtp.cli import build_export_parser, build_parser, export_main, main
+from rtp.cli._run import option_flags
 
 from .test_errors_doc import all_errors
 
@@ -82,6 +83,32 @@ def test_rtp_alone_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> Non
         err = capsys.readouterr().err
         assert exc.value.code == 2
         assert ("fetch" in err and "list" in err) if argv[0] != "info" else "required: model" in err, err
+
+
+def test_unknown_arguments_are_named_by_the_command_given_them(capsys: pytest.CaptureFixture[str]) -> None:
+    """`PROG: error: ...` names the command, as every other error does (argparse's own said `rtp: error:`)."""
+    for argv, prog in ((["info", "jnyang", "extra"], "rtp info"), (["scenes", "fetch", "nosuch"], "rtp scenes fetch"),
+                       (["-v", "predict", "x.npz", "--bogus"], "rtp predict")):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and f"{prog}: error: unrecognized arguments: {argv[-1]}" in err, err
+
+
+def test_a_bad_value_is_named_by_its_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The library's checks name their Python arguments (flip_every, paths, ppd); on the command line the message
+    names the flag that set it (docs/errors.md), and one about something else keeps its words."""
+    for argv, said in ((["play", "procedural", "--flip-every", "-1"], "rtp play: error: --flip-every: expected"),
+                       (["play", "procedural", "--path", "foo"], "rtp play: error: --path: unknown profile 'foo'"),
+                       (["targets", str(tmp_path), "--ppd", "-3"], "rtp targets: error: --ppd must be"),
+                       (["targets", str(tmp_path), "--weber-l", "-1"], "rtp targets: error: --weber-l (environment"),
+                       (["play", "procedural", "--methods", "nosuch"], "rtp play: error: method 'nosuch': not one")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert said in err, err
+    flags = option_flags(_subparser(build_parser(), ("play",)))
+    assert flags["paths"] == flags["path"] == "--path" and flags["tile_size"] == "--tile-size"
+    assert "methodss" not in flags and "help" not in flags
 
 
 @pytest.mark.parametrize("argv", [["-m", "rtp", "--help"], ["-m", "rtp.cli", "scenes", "--help"],
