@@ -665,6 +665,7 @@ class ShadingRatePredictor:
     def _check(self, x: Any) -> np.ndarray:
         if not isinstance(x, np.ndarray):
             raise InputDtypeError(f"expected a numpy.ndarray of float32, got {type(x).__name__}")
+        x = np.asarray(x)  # a subclass as the plain array the model reads (a masked array's mask hid its NaNs)
         if x.dtype != np.float32:
             raise InputDtypeError(f"expected dtype float32, got {x.dtype}; convert with x.astype(np.float32)")
         c = len(self._meta.inputs)

@@ -189,6 +189,9 @@ def test_non_finite_inputs_are_rejected(tiny_model: Callable[..., Path], bad: fl
     x[2, 3, 4] = bad
     with pytest.raises(sdk.NonFiniteInputError, match="albedo.r"):
         p.predict(x)
+    # a masked array's mask hides the value from numpy's reductions, not from the model, which reads its data
+    with pytest.raises(sdk.NonFiniteInputError, match="albedo.r"):
+        p.predict(np.ma.masked_invalid(x))
 
 
 def test_assume_finite_skips_the_check_and_nothing_else(tiny_model: Callable[..., Path]) -> None:
