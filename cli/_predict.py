@@ -260,6 +260,9 @@ def run_predict(args: argparse.Namespace) -> int:
     predictor = sdk.load(args.model, tile_size=args.tile_size)
     threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
     allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
+    if allowed == []:  # (an unset shell variable, likely: VRS off is said as --allowed 1x1)
+        raise sdk.ParameterError(f"--allowed: expected comma-separated rate names, got {args.allowed!r} (for no "
+                                 "reduced rate, every tile at full rate: --allowed 1x1)", "allowed")
     if args.saving is not None:  # (its range, with the rates allowed, before the first frame's work)
         sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, allowed=allowed, threshold=args.threshold,
                                     higher_is_better=predictor.metadata.higher_is_better)

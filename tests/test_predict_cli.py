@@ -225,7 +225,11 @@ def test_a_budget_holds_the_work_saved_and_reports_each_frames_threshold(
     text = capsys.readouterr().out
     assert "a saving of 0.7 (a budget), reached at threshold " in text and "4x4" not in text
     assert main(["predict", str(frame), "--saving", "0.8", "--allowed", "1x2,2x1,2x2"]) == 2
-    assert "saving: expected the share of shading work to save, a number in [0, 0.75]" in capsys.readouterr().err
+    assert "--saving: expected the share of shading work to save, a number in [0, 0.75]" in capsys.readouterr().err
+    assert main(["predict", str(frame), "--allowed", ""]) == 2  # an unset variable, not VRS off
+    assert "--allowed: expected comma-separated rate names, got '' (for no reduced rate" in capsys.readouterr().err
+    assert main(["predict", str(frame), "--allowed", "1x1", "--json"]) == 0  # VRS off, said so
+    assert json.loads(capsys.readouterr().out)["work_saved"] == 0.0
     # with --threshold the saving is a floor under the threshold's rates
     assert main(["predict", str(sequence), "--saving", "0.55", "--threshold", "0.2", "--json"]) == 0
     floor = json.loads(capsys.readouterr().out)
