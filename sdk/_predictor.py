@@ -81,6 +81,10 @@ def _resolve_path(path: str | os.PathLike[str]) -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise ParameterError(f"path: expected a model file path or a shipped model's name, got {type(path).__name__} "
                              f"{reprlib.repr(path)}", "path")
+    if isinstance(path, str) and not path:  # (Path("") is ".", the working folder: "exists but is not a file")
+        names = ", ".join(shipped_models()) or "none with this installation"
+        raise ModelNotFoundError(f"expected a model file path or a shipped model's name, got an empty path; shipped "
+                                 f"models: {names}")
     try:
         p = Path(path)
         is_file, exists = p.is_file(), p.exists()

@@ -254,6 +254,8 @@ def test_missing_file(tmp_path: Path) -> None:
         sdk.load("definitely_not_shipped")
     with pytest.raises(sdk.ModelNotFoundError, match="not a file"):
         sdk.load(tmp_path)
+    with pytest.raises(sdk.ModelNotFoundError, match="got an empty path; shipped models: .*jnyang.onnx"):
+        sdk.load("")  # not "'.' exists but is not a file"
 
 
 @pytest.mark.parametrize("content", [b"", b"not an onnx model at all", b"\x08\x07\x12\x04junk" * 10])
