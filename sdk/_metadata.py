@@ -366,7 +366,13 @@ class ModelMetadata:
             from .files import yaml_problem
 
             raise MetadataError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
-        return cls.from_dict(d if d is not None else {})
+        if d is not None and not isinstance(d, dict):
+            raise MetadataError(f"{p}: expected a YAML sidecar, a mapping of metadata fields (docs/metadata.md), got "
+                                f"a {type(d).__name__}")
+        try:
+            return cls.from_dict(d if d is not None else {})
+        except MetadataError as err:  # the field's error, and the file it is in
+            raise MetadataError(f"{p}: {err}", err.key) from err
 
     def to_dict(self) -> dict[str, Any]:
         return {

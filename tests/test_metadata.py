@@ -181,6 +181,14 @@ def test_yaml_sidecar(tmp_path: Path) -> None:
     bad.write_text("metric: [unclosed\n")
     with pytest.raises(sdk.MetadataError, match="not valid YAML"):
         sdk.ModelMetadata.from_yaml(bad)
+    # the file is named: a model given for its sidecar (YAML reads its text as a string), a field that is wrong
+    bad.write_text("hello\n")
+    with pytest.raises(sdk.MetadataError, match=r"bad.yaml: expected a YAML sidecar, a mapping of .* got a str"):
+        sdk.ModelMetadata.from_yaml(bad)
+    bad.write_text(p.read_text().replace("tile_size: 8", "tile_size: 12"))
+    with pytest.raises(sdk.MetadataError, match=r"bad.yaml: tile_size: expected one of") as info:
+        sdk.ModelMetadata.from_yaml(bad)
+    assert info.value.key == "tile_size"
 
 
 def test_decode_applies_safety_inverse_and_extrapolation() -> None:
