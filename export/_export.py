@@ -1046,7 +1046,10 @@ def restamp(model_path: str | os.PathLike[str]) -> Path:
 
     path = _path(model_path, "model_path")
     if not path.is_file():
-        raise ModelNotFoundError(f"no model at {str(path)!r}")
+        shipped = f"{path.name}.onnx" if path.suffix != ".onnx" else path.name
+        hint = (" (a shipped model's name: the models that ship are this rtp's format already; restamp rewrites a "
+                "file of your own in place)" if shipped in sdk.shipped_models() and path.parent == Path(".") else "")
+        raise ModelNotFoundError(f"no model file at {str(path)!r}{hint}")
     before = sdk.load(path, providers=["CPUExecutionProvider"])
     try:
         model = onnx.load(str(path))

@@ -479,6 +479,11 @@ def test_rtp_export_restamp_records_the_digest_in_place(tmp_path: Path, capsys: 
     assert export_main(["--restamp", str(path)]) == 0
     assert capsys.readouterr().out.strip() == str(path)
     assert sdk.load(path).metadata.digest == sdk.model_digest(path.read_bytes())
+    assert export_main(["--restamp", "jnyang"]) == 2  # a shipped model's name: said why it is not restamped
+    assert "no model file at 'jnyang' (a shipped model's name: the models that ship are" in capsys.readouterr().err
+    assert export_main(["--restamp", str(tmp_path / "nope.onnx")]) == 2
+    assert "shipped" not in capsys.readouterr().err
+
 
 def test_retune_changes_the_decision_and_nothing_the_model_predicts(fast_onnx: Path, tmp_path: Path) -> None:
     """rtp-export --retune: the decision fields (threshold factors per rate, default threshold) from a
