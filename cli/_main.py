@@ -1069,7 +1069,9 @@ def build_parser() -> argparse.ArgumentParser:
                  "carry one pixel of every N per axis, default four per tile and axis; NAME@k:vA, rescale carried "
                  "estimates by the blocks' variance; NAME@k:cF, multiply them by F; NAME@k:features, a model that "
                  "splits carries its trunk's features and runs its tail on every frame; NAME@k:bS (and yang2019:bS), "
-                 "a budget: save a share S of the shading work every frame, swept over S), or\n"
+                 "a budget: save a share S of the shading work every frame, swept over S; NAME@k:fS, a floor: the threshold "
+                 "swept, a share S saved at least; NAME@k:alone, with --engine-rates: choose without the engine's rates, "
+                 "the combiner meets them after), or\n"
                  + "\n".join(f"  {k}: {v}" for k, v in METHOD_KINDS.items()) +
                  "\n\nexamples:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play\n"
                  "  rtp play kaos --dynamic-resolution 1,0.75@10 --methods jnyang,jnyang-reuse@4:features,oracle   "

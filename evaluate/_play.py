@@ -80,6 +80,14 @@ REUSE_UNSEEN = sdk.REUSE_UNSEEN
 #: What a reused frame carries (``NAME@k:features``): the SDK's.
 REUSE_CARRIES = sdk.REUSE_CARRIES
 
+# what may follow a model's '@k', each option once (the error of a method that gives something else)
+_OPTIONS = (f"at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), one ':unseen' fallback "
+            f"({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' refresh share (both in [0, 1)), one "
+            f"':sN' pixel step, one ':vA' rescale exponent and one ':cF' carry scale, one ':carry' "
+            f"({', '.join(REUSE_CARRIES)}) and one ':bS' budget or ':fS' floor, and ':alone', e.g. jnyang@4:mean:fresh, "
+            "jnyang@1:h0.5, jnyang@8:r0.02, jnyang@4:s4, jnyang@4:v0.5, jnyang@4:c1.08, split.onnx@4:features, "
+            "jnyang@1:b0.6, jnyang@1:f0.5 or jnyang@1:alone")
+
 #: What ``rtp play`` and :func:`play` run by default: the shipped JNYang on every frame and every
 #: fourth frame (its estimates carried), the shipped model for reuse with its features carried
 #: (``jnyang-reuse``, docs/runtime.md), the baselines and the oracle.
@@ -215,13 +223,7 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
                 or len(rescale) > 1 or len(scale) > 1 or len(carry) > 1 or len(budget) + len(floor) > 1
                 or len(reduce) + len(unseen) + len(history) + len(refresh) + len(step) + len(rescale) + len(scale)
                 + len(carry) + len(budget) + len(floor) != len(options)):
-            raise PlayError(f"method {item!r}: after '@k' expected at most one ':reduction' ({', '.join(REUSE_REDUCTIONS)}), "
-                            f"one ':unseen' fallback ({', '.join(REUSE_UNSEEN)}), one ':hW' history weight, one ':rS' "
-                            "refresh share (both in [0, 1)), one ':sN' pixel step, one ':vA' rescale exponent and "
-                            f"one ':cF' carry scale, one ':carry' ({', '.join(REUSE_CARRIES)}) and one ':bS' budget "
-                            "or ':fS' floor, and ':alone', e.g. jnyang@4:mean:fresh, jnyang@1:h0.5, jnyang@8:r0.02, "
-                            "jnyang@4:s4, jnyang@4:v0.5, jnyang@4:c1.08, split.onnx@4:features, jnyang@1:b0.6, "
-                            "jnyang@1:f0.5 or jnyang@1:alone")
+            raise PlayError(f"method {item!r}: after '@k' expected {_OPTIONS}")
         out.append(MethodSpec(item, "model", model, int(k), reduce[0] if reduce else MethodSpec.reduce,
                               unseen[0] if unseen else MethodSpec.unseen, history[0] if history else 0.0,
                               refresh[0] if refresh else None, step[0] if step else None,
@@ -233,6 +235,17 @@ def parse_methods(text: str | Iterable[str]) -> list[MethodSpec]:
     return out
 
 
+def _a_word(option: str) -> bool:
+    """Whether an option that starts with a numbered one's letter is a word rather than a mistyped number: ':foo'
+    is no floor, ':fx' or ':f2' a floor mistyped."""
+    return len(option) > 2 and not any(c.isdigit() for c in option[1:])
+
+
+def _unknown(option: str, item: str) -> PlayError:
+    """An option that is a word (:func:`_a_word`) but none of the words: named as unknown, with the options."""
+    return PlayError(f"method {item!r}: unknown option ':{option}'; after '@k' expected {_OPTIONS}")
+
+
 def _is_file(text: str) -> bool:
     try:
         return Path(text).is_file()
@@ -241,6 +254,8 @@ def _is_file(text: str) -> bool:
 
 
 def _step(option: str, item: str) -> int:
+    if _a_word(option):
+        raise _unknown(option, item)
     if not (option[1:].isascii() and option[1:].isdigit()) or len(option) > 7 or int(option[1:]) < 1:
         raise PlayError(f"method {item!r}: ':{option}' is not a pixel step: expected ':s' and an integer >= 1 that "
                         "divides the model's tile size, e.g. jnyang@4:s4")
@@ -250,6 +265,8 @@ def _step(option: str, item: str) -> int:
 def _number(option: str, item: str, lo: float, hi: float, what: str, expect: str, below_hi: bool = False) -> float:
     """The number after an option's letter (``:v0.5``), else a :class:`PlayError` naming ``what`` was expected:
     ``expect``. In ``[lo, hi]``, or ``[lo, hi)`` with ``below_hi``."""
+    if _a_word(option):
+        raise _unknown(option, item)
     try:
         v = float(option[1:])
     except ValueError:

@@ -569,7 +569,9 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
                        ("jnyang@4:c1.1:c1.2", "at most one"), ("jnyang@4:features:estimates", "at most one"),
                        ("jnyang@1:b0.95", r"not a budget: .* \[0, 0.9375\]"), ("jnyang@1:bx", "not a budget"),
                        ("jnyang@1:b0.5:b0.6", "at most one"), ("jnyang@1:f2", "not a floor"),
-                       ("jnyang@1:f0.5:b0.5", "at most one"), ("jnyang@1:f0.5:f0.6", "at most one")):
+                       ("jnyang@1:f0.5:b0.5", "at most one"), ("jnyang@1:f0.5:f0.6", "at most one"),
+                       ("jnyang@4:foo", "unknown option ':foo'; after '@k' expected at most one ':reduction'"),
+                       ("jnyang@4:hist", "unknown option ':hist'")):
         with pytest.raises(PlayError, match=match):
             parse_methods(bad)
     # a model file whose name holds an '@' or a comma is taken whole, and '@k' after it still reuses
