@@ -403,8 +403,10 @@ class DynamicResolution:
         scales = self.scales
         ok = isinstance(scales, (tuple, list)) and len(scales) > 0 and all(scale(v) for v in scales)
         if not ok:
+            given = (",".join(f"{v:g}" if isinstance(v, float) else repr(v) for v in scales)
+                     if isinstance(scales, (tuple, list)) else repr(scales))  # (2@10: "2", not "(2.0,)")
             raise ParameterError(f"dynamic resolution: expected scales of the full size, numbers in (0, 1], got "
-                                 f"{scales!r}", "scales")
+                                 f"{given}", "scales")
         if isinstance(self.every, (bool, np.bool_)) or not isinstance(self.every, (int, np.integer)) or self.every < 1:
             raise ParameterError(f"dynamic resolution: expected every, the frames each scale is held, an integer >= 1, "
                                  f"got {self.every!r}", "every")
