@@ -198,6 +198,13 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     ms = 1000.0 * (time.perf_counter() - start)
     meta = predictor.metadata
     engine = None
+    if args.combiner is None and ENGINE_RATES_KEY in frame:  # (read_frame takes it as known: say it is not read)
+        kind = ({} if warned is None else warned).setdefault(ENGINE_RATES_KEY, [0, (
+            f"{path}: the {ENGINE_RATES_KEY!r} array is not read without --combiner (min, max or sum: how the device "
+            "combines the engine's rates with rtp's)")])
+        kind[0] += 1
+        if kind[0] == 1:
+            log.warning("%s", kind[1])
     if args.combiner is not None:
         if ENGINE_RATES_KEY not in frame:
             raise sdk.ParameterError(f"{path!r} has no {ENGINE_RATES_KEY!r} array: with --combiner each frame holds the "

@@ -403,3 +403,7 @@ def test_the_engines_own_rates_in_each_frame_file(frame: Path, tmp_path: Path, c
     np.savez(with_engine, **arrays, engine_rates=engine[:, :4])
     assert main(["predict", str(with_engine), "--combiner", "max"]) == 2
     assert "engine_rates: shape (6, 4) does not broadcast" in capsys.readouterr().err
+    assert main(["predict", str(with_engine)]) == 0  # without --combiner the array is named as not read
+    assert "with_engine.npz: the 'engine_rates' array is not read without --combiner" in capsys.readouterr().err
+    assert main(["predict", str(frame)]) == 0
+    assert "engine_rates" not in capsys.readouterr().err
