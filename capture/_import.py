@@ -76,18 +76,25 @@ def _sample_id(scene: str, path: str) -> str:
     return sid
 
 
-def _members(path: str) -> tuple[set[str], tuple[int, ...] | None]:
-    """The array names of a frame file and the shape of its ``final_1x1`` (read without the rest)."""
+def _members(path: str) -> dict[str, tuple[int, ...]]:
+    """The arrays of a frame file and their shapes, read from each array's header (not its data)."""
     import zipfile
 
+    shapes: dict[str, tuple[int, ...]] = {}
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            names = set(npz.files)
-            shape = tuple(npz["final_1x1"].shape) if "final_1x1" in names else None
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with z.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                              else np.lib.format.read_array_header_2_0)
+                    shapes[info.filename[:-4]] = tuple(header(fh)[0])
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
         raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({err}; `{EXAMPLE}` writes frames)",
                              "frames") from None
-    return names, shape
+    return shapes
 
 
 def _final(path: str, key: str, a: Any, hw: tuple[int, int]) -> np.ndarray:
@@ -189,15 +196,21 @@ def import_frames(
     for f in files:
         if not Path(f).is_file():
             raise ParameterError(f"{f!r}: no such file (`{EXAMPLE}` writes frames of the reference renderer)", "frames")
-        members[f], shape = _members(f)
+        members[f] = _members(f)
         lacks = [k for k in (*REQUIRED_GBUFFERS, *FINAL_KEYS) if k not in members[f]]
         if lacks:
             raise ParameterError(f"{f!r} lacks {', '.join(lacks)}: a frame to train on holds "
                                  f"{', '.join(REQUIRED_GBUFFERS)} and the frame shaded at every rate "
                                  f"({', '.join(FINAL_KEYS)}); `{EXAMPLE}` writes such frames", "frames")
-        if shape is None or len(shape) != 3:
+        shape = members[f]["final_1x1"]
+        if len(shape) != 3:
             raise ParameterError(f"{f!r}: final_1x1 has shape {shape}, expected (H, W, 3) (or RGBA, 4): the frame "
                                  f"shaded at full rate, display-encoded", "final_1x1")
+        for key in (*FINAL_KEYS[1:], "depth"):  # (every frame of the file at the depth's size, as _final asks)
+            want = f"({shape[0]}, {shape[1]})" if key == "depth" else f"({shape[0]}, {shape[1]}, 3) (or RGBA, 4)"
+            got = members[f][key]
+            if got[:2] != shape[:2] or (key != "depth" and (len(got) != 3 or got[2] not in (3, 4))):
+                raise ParameterError(f"{f!r}: {key} has shape {got}, expected {want}: final_1x1's size", key)
         sizes[f] = shape[:2]
     if len(set(sizes.values())) > 1:
         counts = Counter(sizes.values())

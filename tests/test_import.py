@@ -135,6 +135,14 @@ def test_bad_frames_are_named_before_anything_is_written(dumps: Any, tmp_path: P
     with pytest.raises(sdk.ParameterError, match="scene: expected a name"):
         import_frames(root / "level_a", data, scene="my level")
     assert not (data / "samples").exists() or not any((data / "samples").iterdir())
+    # a later frame's final image of another size: refused from its header before the first sample is written
+    (tmp_path / "half").mkdir()
+    half = dict(np.load(root / "level_a" / "frame_0001.npz"))
+    _save_frame(tmp_path / "half" / "frame_0001.npz", {**half, "final_2x2": half["final_2x2"][::2, ::2]})
+    with pytest.raises(sdk.ParameterError, match=r"frame_0001.npz': final_2x2 has shape \(32, 48, 3\), expected "
+                                                 r"\(64, 96, 3\) \(or RGBA, 4\): final_1x1's size"):
+        import_frames([root / "level_a" / "frame_0000.npz", tmp_path / "half"], data)
+    assert not (data / "samples").exists() or not any((data / "samples").iterdir())
     # a final image that is not a display-encoded frame
     hdr = dict(np.load(root / "level_a" / "frame_0000.npz"))
     hdr["final_4x4"] = hdr["final_4x4"] * 4.0
