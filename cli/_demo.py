@@ -85,12 +85,8 @@ def run_demo(
     predictor = sdk.load(model, tile_size=tile_size)
     meta = predictor.metadata
     tile = predictor.tile_size  # the hardware's tiles, which the rates are for
-    thr = meta.default_threshold if threshold is None else float(threshold)
-    # checked before any rendering: an error metric's threshold is a positive error
-    if not np.isfinite(thr) or (not meta.higher_is_better and thr <= 0):
-        raise sdk.ParameterError(
-            f"threshold: expected a finite {meta.metric} value" + ("" if meta.higher_is_better else " > 0")
-            + f" (the model's default is {meta.default_threshold:g}), got {thr:g}", "threshold")
+    # checked before any rendering, as every command checks a threshold (the SDK's range)
+    thr = meta.default_threshold if threshold is None else sdk.check_threshold(threshold, meta.higher_is_better)
     metrics.check_dependencies((meta.metric, "flip"))  # the true error map and the FLIP picture, before rendering
     check_frame_memory("demo", size, metrics=(meta.metric,))  # (not the system's OOM killer, minutes in)
     out = Path(out)

@@ -352,6 +352,10 @@ def test_jobs_check_their_values_before_they_write(tmp_path: Path, capsys: pytes
         for command in (["demo", "--scene", scene], ["play", scene, "--frames", "3", "--methods", "full"]):
             assert main([*command, "--size", "64x48", "--out", str(out), "-q"]) == 2, (command, scene)
             assert not out.exists(), (command, scene)  # (an empty output folder was left before)
+    for value in ("-1", "nan"):  # the SDK's range, as rtp predict, evaluate and play take it
+        assert main(["demo", "--threshold", value, "--out", str(tmp_path / "d"), "-q"]) == 2
+        assert "--threshold: expected a finite number in [0, 1e+06] for an error metric" in capsys.readouterr().err
+        assert not (tmp_path / "d").exists()
     for flag, value in (("--lr", "-1"), ("--lr", "nan"), ("--threshold", "-1"), ("--threshold", "nan"),
                         ("--weight-decay", "-0.5"), ("--k", "0"), ("--safety-quantile", "2"),
                         ("--safety-quantile", "nan")):
