@@ -389,10 +389,7 @@ def evaluate(
     if max_samples is not None and (isinstance(max_samples, bool) or not isinstance(max_samples, (int, np.integer))
                                     or max_samples < 1):
         raise ParameterError(f"max_samples must be None (all) or an integer >= 1, got {max_samples!r}", "max_samples")
-    scenes = [scenes] if isinstance(scenes, str) else scenes  # (one name, not its letters)
-    if scenes is not None and (not isinstance(scenes, (list, tuple, set, frozenset))
-                               or not all(isinstance(x, str) for x in scenes)):
-        raise ParameterError(f"scenes must be None (all), a scene name or a list of them, got {scenes!r}", "scenes")
+    scenes = _scene_names(scenes)
     for key, flag in (("baselines", baselines), ("sweep", sweep)):
         if not isinstance(flag, bool):  # ("no" is a true string)
             raise ParameterError(f"{key} must be True or False, got {flag!r}", key)
@@ -437,11 +434,22 @@ def check_evaluation(
     _prepare(model, data, scenes, metadata, threshold, None, tile_size)
 
 
+def _scene_names(scenes: object) -> list[str] | None:
+    """``scenes`` as :func:`evaluate` and :func:`check_evaluation` take it: None (all), one name (not its letters)
+    or a list of names; else a :class:`ParameterError`."""
+    scenes = [scenes] if isinstance(scenes, str) else scenes
+    if scenes is not None and (not isinstance(scenes, (list, tuple, set, frozenset))
+                               or not all(isinstance(x, str) for x in scenes)):
+        raise ParameterError(f"scenes must be None (all), a scene name or a list of them, got {scenes!r}", "scenes")
+    return None if scenes is None else list(scenes)
+
+
 def _prepare(model: str | os.PathLike[str], data: str | os.PathLike[str], scenes: Sequence[str] | None, metadata: Any,
              threshold: float | None, max_samples: int | None, tile_size: int | None,
              ) -> tuple[sdk.ShadingRatePredictor, sdk.ModelMetadata, float, TargetStore, list[Any]]:
     """The predictor, its metadata on its (hardware) tiles, the decision threshold, the target store and
     the samples to evaluate."""
+    scenes = _scene_names(scenes)
     predictor = sdk.load(model, metadata=metadata, tile_size=tile_size)
     # the metadata as evaluated: on the predictor's (hardware) tiles
     meta = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)

@@ -478,6 +478,11 @@ def test_evaluate_options_and_errors(dataset: Path, model: Path, tmp_path: Path)
     with pytest.raises(sdk.RtpError, match="not in"):
         evaluate(model, dataset, scenes=["nowhere"])
     assert evaluate(model, dataset, scenes="b", baselines=False).samples == 1  # one name, not "b"'s letters
+    from rtp.evaluate import check_evaluation
+
+    check_evaluation(model, dataset, scenes="b")  # likewise ("scenes ['b'] ..." of a longer name's letters before)
+    with pytest.raises(sdk.ParameterError, match=r"scenes \['bb'\] are not in"):
+        check_evaluation(model, dataset, scenes="bb")
     for kwargs, words in (({"threshold": "0.3"}, "threshold: expected a number"), ({"threshold": -1.0}, "threshold"),
                           ({"unseen_fraction": "0.5"}, "unseen_fraction"), ({"max_samples": 0}, "max_samples"),
                           ({"max_samples": 1.5}, "max_samples"), ({"scenes": [1]}, "scenes"),
