@@ -23,9 +23,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import UsageError, dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 
-from rtp.capture import Sample
+from rtp.capture import Sample, open_dataset
 from rtp.capture.scenes import map_names
 from rtp.cli import main as rtp_main
 from rtp.sdk import METRICS
@@ -56,6 +56,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", default=",".join(map_names("validation")),
                     help="maps scored (default: the validation maps of scenes.yaml, which training holds out)")
     args = ap.parse_args(argv)
+    # the maps scored, checked before the hours of training they come after
+    reader = open_dataset(args.data)
+    have = {str(reader[i].meta.get("scene")) for i in reader.ids}
+    names = {n.strip() for n in args.scene.split(",") if n.strip()}
+    if not names:
+        raise UsageError(f"--scene: expected comma-separated map names, got {args.scene!r}")
+    if names - have:
+        raise UsageError(f"--scene: {', '.join(sorted(names - have))} not in {args.data}; it holds "
+                         f"{', '.join(sorted(have))}")
     out = Path(args.out or f"data/study/{args.metric}-current-frame.pt")
     out.parent.mkdir(parents=True, exist_ok=True)
     use_current_frame()

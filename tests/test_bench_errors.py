@@ -60,3 +60,15 @@ def test_a_json_of_another_kind_and_a_folder_that_is_not_a_dataset(tmp_path: Pat
     (tmp_path / "fake" / "manifest.json").write_text(json.dumps({"format": "mine"}))
     run = _run([str(BENCH / "outputs.py"), "jnyang", "--data", str(tmp_path / "fake")], tmp_path)
     assert run.returncode == 2 and "Traceback" not in run.stderr and "argument --data" in run.stderr, run.stderr
+
+
+def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_path: Path) -> None:
+    """--scene is read after hours of training: a map the dataset does not hold is refused first."""
+    from rtp.capture import capture
+
+    capture(["procedural:3"], tmp_path / "d", per_scene=1, size=(64, 48))
+    for scene, words in (("nosuchmap", "--scene: nosuchmap not in"), (",", "--scene: expected comma-separated map")):
+        run = _run([str(BENCH / "input_ceiling.py"), "--metric", "flip", "--data", str(tmp_path / "d"),
+                    "--scene", scene, "--out", str(tmp_path / "m.pt")], tmp_path)
+        assert run.returncode == 2 and words in run.stderr and "Traceback" not in run.stderr, run.stderr
+        assert not list(tmp_path.glob("*m.pt*")), scene  # no training began
