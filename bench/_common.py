@@ -4,7 +4,7 @@ Every script ends in ``run_main(main)``: an rtp error (a model, map or dataset t
 bad value found by the library) prints one line, ``NAME.py: error: ...``, with rtp's exit code
 (docs/errors.md), as the ``rtp`` commands do; ``RTP_TRACEBACK=1`` shows the traceback above it. The
 argparse types below (:func:`positive`, :func:`count`, :func:`frame_size`, :func:`frame_sizes`,
-:func:`dataset_folder`, :func:`json_file`) refuse bad arguments before any work.
+:func:`dataset_folder`, :func:`json_file`, :func:`number`) refuse bad arguments before any work.
 """
 
 from __future__ import annotations
@@ -167,6 +167,30 @@ def frame_sizes(minimum: int = 1) -> Callable[[str], list[tuple[int, int]]]:
     return parse
 
 
+def number(low: float, high: float, *, above_low: bool = False, below_high: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in ``[low, high]`` (``above_low``: ``(low, ...``; ``below_high``:
+    ``..., high)``); NaN, infinities and what lies outside are usage errors, as the rtp commands' own."""
+    import argparse
+    import math
+
+    interval = f"{'(' if above_low else '['}{low:g}, {high:g}{')' if below_high else ']'}"
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not ((low < v if above_low else low <= v) and (v < high if below_high else v <= high)):  # (NaN fails)
+            raise argparse.ArgumentTypeError(f"expected a finite number in {interval}, got {text!r}")
+        return v
+
+    return parse
+
+
+#: An argparse type: a share strictly between 0 and 1 (a failing share to fit or read at).
+share = number(0, 1, above_low=True, below_high=True)
+
+
 def median_ms(fn: Callable[[], object], repeats: int) -> float:
     """Median wall time of ``fn`` in milliseconds over ``repeats`` runs, after one warm-up run
     (first-call allocations, lazy construction, thread-pool start)."""
@@ -280,10 +304,10 @@ def save_figure(fig: Any, path: str | Path) -> None:
     print(f"\nwrote {path}")
 
 
-def module_at_revision(rev: str, path: str, name: str, prog: str, replace: dict[str, str] | None = None) -> Any:
+def module_at_revision(rev: str, path: str, name: str, replace: dict[str, str] | None = None) -> Any:
     """The module ``path`` (``sdk/_channels.py``) as it was at git revision ``rev``, imported as ``name``
-    (``rtp.sdk._channels_then``: its relative imports resolve in that package); a usage error of ``prog``
-    (``SystemExit``, exit 1) where git cannot show it. For the benchmarks' ``--against REV``. ``replace``: texts
+    (``rtp.sdk._channels_then``: its relative imports resolve in that package); a :class:`UsageError` (exit 2)
+    where git cannot show it. For the benchmarks' ``--against REV``. ``replace``: texts
     of the source replaced first (``{"from ._reproject import": "from ._reproject_then import"}``: a module
     of that revision importing another module of the same revision, loaded before it)."""
     import importlib.util
@@ -294,14 +318,14 @@ def module_at_revision(rev: str, path: str, name: str, prog: str, replace: dict[
     root = Path(__file__).resolve().parents[1]
     src = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=root, capture_output=True, text=True)
     if src.returncode:
-        raise SystemExit(f"{prog}: error: --against {rev}: git cannot show {path} there "
+        raise UsageError(f"--against {rev}: git cannot show {path} there "
                          f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
     with tempfile.TemporaryDirectory() as tmp:
         file = Path(tmp) / f"{name.rpartition('.')[2]}.py"
         text = src.stdout
         for old, new in (replace or {}).items():
             if old not in text:
-                raise SystemExit(f"{prog}: error: --against {rev}: {path} there has no {old!r}")
+                raise UsageError(f"--against {rev}: {path} there has no {old!r}")
             text = text.replace(old, new)
         file.write_text(text)
         spec = importlib.util.spec_from_file_location(name, file)

@@ -23,7 +23,15 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from _common import UsageError, add_model_args, positive, run_main, scene_ids  # bench/ is on sys.path as a script
+from _common import (  # bench/ is on sys.path as a script
+    UsageError,
+    add_model_args,
+    number,
+    positive,
+    run_main,
+    scene_ids,
+    share,
+)
 from tqdm import tqdm
 
 from rtp import sdk
@@ -60,9 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("more", nargs="*", help="more models, on the same tiles and samples")
     ap.add_argument("--tile-size", type=positive, default=None, help="the hardware tile size (default: the first "
                     "model's own)")
-    ap.add_argument("--judge", type=float, default=None, help="the metric threshold a tile fails over (default: the "
+    ap.add_argument("--judge", type=number(-1e6, 1e6), default=None, help="the metric threshold a tile fails over (default: the "
                     "first model's default_threshold)")
-    ap.add_argument("--fail-share", type=float, default=None, help="also print each model's decision threshold "
+    ap.add_argument("--fail-share", type=share, default=None, help="also print each model's decision threshold "
                     "that fails on this share of the tiles")
     args = ap.parse_args(argv)
     preds = [sdk.load(m, providers=["CPUExecutionProvider"]) for m in [args.model, *args.more]]
@@ -72,7 +80,10 @@ def main(argv: list[str] | None = None) -> int:
     higher = metas[0].higher_is_better
     tile = args.tile_size or preds[0].tile_size
     preds = [sdk.load(m, providers=["CPUExecutionProvider"], tile_size=tile) for m in [args.model, *args.more]]
-    judge = float(metas[0].default_threshold if args.judge is None else args.judge)
+    try:  # (in the metric's units: checked before the predictions, which take minutes)
+        judge = float(metas[0].default_threshold if args.judge is None else sdk.check_threshold(args.judge, higher))
+    except sdk.ParameterError as err:
+        raise UsageError(f"--judge: {str(err).removeprefix('threshold: ')}") from None
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     ids = scene_ids(reader, args.scene)
     if not ids:

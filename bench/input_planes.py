@@ -65,7 +65,7 @@ def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
     from rtp.capture.viewpoints import sample_viewpoints
     from rtp.plugins.moderngl import Renderer
 
-    then = module_at_revision(rev, "sdk/_reproject.py", "rtp.sdk._reproject_then", "input_planes.py")
+    then = module_at_revision(rev, "sdk/_reproject.py", "rtp.sdk._reproject_then")
     print(f"sdk.reproject at {rev} and in this checkout; {cpu_description()}, median of {repeats}\n")
     print(f"| frame | {rev} ms | this checkout ms |\n|---|---:|---:|")
     for w, h in sizes:
@@ -96,7 +96,7 @@ def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
                     position = max(position, *(float(np.abs(a - b).max()) for a, b in zip(p0, p1)))
     print(f"\n{pixels:,} pixels of rendered frames: seen differs on {seen_differ}, the colour where seen agrees on "
           f"{colour_differ} values; positions within {position:.3g} px")
-    planes_then = module_at_revision(rev, "sdk/_planes.py", "rtp.sdk._planes_then", "input_planes.py",
+    planes_then = module_at_revision(rev, "sdk/_planes.py", "rtp.sdk._planes_then",
                                      replace={"from ._reproject import": "from ._reproject_then import"})
     models = {name.removesuffix(".onnx"): sdk.load(name).metadata.inputs for name in sdk.shipped_models()}
     labels = [f"{w}x{h}" for w, h in sizes]

@@ -84,13 +84,16 @@ def main() -> None:
         print(json.dumps(measure(args.one, sizes, args.threads, args.warm_up)))
         return
     models = [n.removesuffix(".onnx") for n in sdk.shipped_models()] + list(args.models)
+    for m in args.models:  # (a path that is no model: refused here, in one line, before the first process)
+        sdk.load(m)
     rows = {}
     for m in models:
         run = subprocess.run([sys.executable, __file__, "--one", m, "--sizes", args.sizes, "--threads", str(args.threads),
                               "--warm-up", str(args.warm_up)],
                              capture_output=True, text=True, check=False)
-        if run.returncode != 0:
-            raise SystemExit(f"{m}: {run.stderr.strip().splitlines()[-1] if run.stderr.strip() else run.returncode}")
+        if run.returncode != 0:  # (its one line names its program: said once, by this one)
+            said = run.stderr.strip().splitlines()[-1] if run.stderr.strip() else f"exit code {run.returncode}"
+            raise sdk.RtpError(f"{m}: {said.removeprefix(Path(__file__).name + ': error: ')}")
         rows[m] = json.loads(run.stdout.strip().splitlines()[-1])
     labels = [f"{w}x{h}" for w, h in sizes]
     print(f"rtp {sdk.__version__}, {args.threads} threads, resident memory added (MB), each model in a process of "

@@ -44,6 +44,7 @@ from _common import (  # bench/ is on sys.path when run as a script
     UsageError,
     add_model_args,
     run_main,
+    share,
     write_factors_sidecar,
 )
 from tqdm import tqdm
@@ -127,7 +128,7 @@ def falls(values: np.ndarray, hib: bool) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_model_args(ap, "an exported model (.onnx) or a shipped model's name", ", at least two")
-    ap.add_argument("--fit", type=float, default=0.05, help="failing share the factors are fitted at (default 0.05)")
+    ap.add_argument("--fit", type=share, default=0.05, help="failing share the factors are fitted at (default 0.05)")
     ap.add_argument("--sidecar", metavar="OUT.yaml", help="fit the factors on every map given and write them as a "
                     "metadata sidecar for `rtp-export --retune` (rate_factors)")
     ap.add_argument("--held-out", metavar="PREFIX", help="also write each held-out map's factors, fitted on the "

@@ -103,7 +103,7 @@ def _against(rev: str, scenes: list[str], frames: int, data: str | None) -> int:
     from rtp.capture import DatasetReader, load_scene
     from rtp.capture.paths import PathPlayer, camera_path
 
-    then = module_at_revision(rev, "sdk/_channels.py", "rtp.sdk._channels_then", "planes.py")
+    then = module_at_revision(rev, "sdk/_channels.py", "rtp.sdk._channels_then")
     pairs = {"block_variances": (then.block_variances, sdk.block_variances),
              "tile_variances": (then.tile_variances, sdk.tile_variances)}
     counts = {(source, name): [0, 0] for source in ("frames", "dataset", "synthetic") for name in pairs}

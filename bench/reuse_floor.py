@@ -47,7 +47,7 @@ import argparse
 from typing import Any
 
 import numpy as np
-from _common import count, frame_size, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import count, frame_size, number, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
 from rtp.capture import load_scene
@@ -113,7 +113,7 @@ def main() -> None:
     ap.add_argument("--model", default="jnyang", help="shipped model, .onnx, or a checkpoint .pt run in torch "
                     "(default: jnyang)")
     ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
-    ap.add_argument("--rescale", type=float, default=0.25, help="exponent of the rescaled row (default: 0.25)")
+    ap.add_argument("--rescale", type=number(-1e3, 1e3), default=0.25, help="exponent of the rescaled row (default: 0.25)")
     ap.add_argument("--sweep", action="store_true", help="also sweep the threshold and compare one threshold for "
                     "network and carried frames with one of each's own (error metrics)")
     ap.add_argument("--every", type=positive, default=4, help="with --sweep: the interval k of the reuse mixed (default: 4)")

@@ -23,7 +23,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import dataset_folder, median_ms, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    UsageError,
+    dataset_folder,
+    median_ms,
+    positive,
+    run_main,
+)
 
 from rtp import sdk
 from rtp.capture.scenes import load_splits
@@ -81,7 +87,7 @@ INPUT_SETS: dict[str, tuple[str, ...]] = {
 def _config(name: str) -> dict[str, Any]:
     base, _, inputs = name.partition("+")
     if base not in CONFIGS or (inputs and inputs not in INPUT_SETS):
-        sys.exit(f"unknown configuration {name!r}; known: {', '.join(CONFIGS)}, optionally +{'/+'.join(INPUT_SETS)}")
+        raise UsageError(f"unknown configuration {name!r}; known: {', '.join(CONFIGS)}, optionally +{'/+'.join(INPUT_SETS)}")
     return {**CONFIGS[base], **({"inputs": INPUT_SETS[inputs]} if inputs else {})}
 
 

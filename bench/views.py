@@ -43,6 +43,7 @@ from _common import (  # bench/ is on sys.path when run as a script
     frame_size,
     interleaved_ms,
     median_ms,
+    number,
     positive,
     run_main,
 )
@@ -198,11 +199,13 @@ def gil_waits(model: str, size: tuple[int, int], switch: float = 0.05, repeats: 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("models", nargs="*", help="shipped model names or .onnx paths (default: every shipped model)")
-    ap.add_argument("--size", type=frame_size, default=(1920, 1080), help="WIDTHxHEIGHT of each view (default 1920x1080)")
+    ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1920, 1080),
+                    help="WIDTHxHEIGHT of each view (default 1920x1080)")
     ap.add_argument("--views", type=positive, default=2, help="views a frame (default 2: stereo)")
     ap.add_argument("--threads", type=positive, default=2, help="onnxruntime intra-op threads of the predictor (default 2)")
     ap.add_argument("--rounds", type=positive, default=7, help="timed rounds (default 7)")
-    ap.add_argument("--seconds", type=float, default=2.0, help="length of each Python-loop reading (default 2)")
+    ap.add_argument("--seconds", type=number(0, 600, above_low=True), default=2.0,
+                    help="length of each Python-loop reading (default 2)")
     ap.add_argument("--switch", default="0.005,0.0005",
                     help="comma-separated sys.setswitchinterval values in seconds for the second table (default "
                          "0.005, Python's own, and 0.0005)")

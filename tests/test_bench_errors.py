@@ -45,6 +45,19 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     # input_ceiling.py runs ``rtp train`` in-process: its own parser refuses what that one would
     (["bench/input_ceiling.py", "--metric", "nosuch"], 2, "input_ceiling.py: error: argument --metric"),
     (["examples/moderngl_vrs.py", "--model", "nosuch"], 2, "moderngl_vrs.py: error: no model file at 'nosuch'"),
+    # numbers a run would choke on (NaN into time.sleep, a share of 5) are usage errors, and what a later table
+    # reads is checked before the first table's minutes
+    (["bench/spinning.py", "--long-ms", "nan"], 2, "argument --long-ms: expected a finite number in [0, 60000]"),
+    (["bench/spinning.py", "--model", "nosuch"], 2, "spinning.py: error: no model file at 'nosuch'"),
+    (["bench/views.py", "--seconds", "inf"], 2, "argument --seconds: expected a finite number in (0, 600]"),
+    (["bench/views.py", "--size", "1x1"], 2, "argument --size: expected WIDTHxHEIGHT of at least 16x16"),
+    (["bench/hardware_tiles.py", "jnyang", "--fail-share", "5"], 2, "argument --fail-share: expected a finite number "
+                                                                   "in (0, 1)"),
+    (["bench/per_rate.py", "jnyang", "--fit", "nan"], 2, "argument --fit: expected a finite number in (0, 1)"),
+    # a child's error and git's are one line of this script's, exit 2 (exit 1 and a line naming two programs before)
+    (["bench/memory.py", "/nope.onnx"], 2, "memory.py: error: no model file at '/nope.onnx'"),
+    (["bench/input_planes.py", "--against", "nosuchrev"], 2, "input_planes.py: error: --against nosuchrev: git "
+                                                             "cannot show"),
 ])
 def test_bad_input_is_one_line(args: list[str], code: int, words: str) -> None:
     run = _run(args, ROOT)
