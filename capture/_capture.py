@@ -374,6 +374,8 @@ def capture(
         raise ParameterError(f"seed must be an integer, got {seed!r}", "seed")
     if not scene_names:
         raise ParameterError("no scenes to capture")
+    if not profiles:  # (a folder's settings would record none, refusing every later capture into it)
+        raise ParameterError("profiles: expected one or more motion profiles, got none", "profiles")
     from rtp import sdk
     from rtp.capture.viewpoints import MOTION_PROFILES, PLACEMENTS
 

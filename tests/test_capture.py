@@ -237,6 +237,9 @@ def test_targets_on_a_device_torch_cannot_use_are_refused_before_any_work(
         compute_targets(out, ["flip", "psnr"], device="cuda")
     with pytest.raises(sdk.ParameterError, match=r"device 'cuda:0' with ray: Ray gives a task no GPU"):
         compute_targets(out, ["flip"], device="cuda:0", ray="local")
+    for workers in (0, -1, "2", 1.5):  # (0 ran as 1; -1 reached the memory check as a negative size)
+        with pytest.raises(sdk.ParameterError, match="workers must be None or an integer >= 1"):
+            compute_targets(out, ["psnr"], workers=workers)  # type: ignore[arg-type]
     assert rtp_main(["targets", str(out), "--metrics", "lpips", "--device", "cuda"]) == 2
     assert "rtp targets: error: device 'cuda': torch" in capsys.readouterr().err
     store = TargetStore(out)
@@ -374,7 +377,8 @@ def test_capture_checks_its_arguments_before_writing(tmp_path: Path) -> None:
     for kwargs, words in (({"per_scene": "2"}, "per_scene must be an integer"), ({"workers": 0}, "workers"),
                           ({"seed": 1.5}, "seed"), ({"size": (96.0, 64)}, "size: expected"), ({"size": (8, 64)}, "size"),
                           ({"profiles": "slow,fast"}, "unknown motion profile 'slow,fast'"),
-                          ({"scene_names": [0]}, "scene_names")):
+                          ({"scene_names": [0]}, "scene_names"),
+                          ({"profiles": []}, "profiles: expected one or more")):  # (recorded, it refused every later)
         args = {"scene_names": ["procedural:5"], "out": out, "per_scene": 1, "size": (96, 64), **kwargs}
         with pytest.raises(sdk.ParameterError, match=words):
             capture(**args)  # type: ignore[arg-type]
