@@ -1391,6 +1391,17 @@ def test_a_network_too_large_to_build_is_refused_before_reading_data(fields: dic
     assert not (tmp_path / "m.pt").exists()
 
 
+@pytest.mark.parametrize(("fields", "words"), [({"transform": "nosuch"}, "transform: expected clamped or logistic"),
+                                               ({"teachers": ("nope.onnx",)}, "teachers: nope.onnx is not a model")])
+def test_a_transform_or_teacher_it_cannot_use_is_refused_before_reading_data(fields: dict[str, Any], words: str,
+                                                                            tmp_path: Path) -> None:
+    """Both were refused only once every training sample was loaded (the transform is fitted to their mean,
+    the teachers predict on them); here the data does not exist, so only check_config can have refused them."""
+    with pytest.raises(sdk.ParameterError, match=words) as info:
+        train(TrainConfig(data=str(tmp_path / "nowhere"), metric="jnyang", out=str(tmp_path / "m.pt"), **fields))
+    assert info.value.name == next(iter(fields)) and not (tmp_path / "m.pt").exists()
+
+
 @pytest.mark.parametrize("seed", [-2**63 - 1, 2**64, 2**70])
 def test_a_seed_torch_cannot_take_is_refused_before_reading_data(seed: int, tmp_path: Path) -> None:
     """A seed past 64 bits was torch.manual_seed's ValueError once the data had been loaded; now a

@@ -455,7 +455,7 @@ def _make_transform(cfg: TrainConfig, targets: Sequence[np.ndarray], what: str =
         return sdk.Transform.clamped(mu)
     if cfg.transform == "logistic":
         return sdk.Transform.logistic(mu, cfg.logistic_k)
-    raise sdk.ParameterError(f"transform must be clamped or logistic, got {cfg.transform!r}")
+    raise sdk.ParameterError(f"transform: expected clamped or logistic, got {cfg.transform!r}", "transform")
 
 
 def _predict_frames(net: Network, xs: Sequence[Frame], tile: int, n: int | None = None) -> list[np.ndarray]:
@@ -707,6 +707,12 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError(f"energy_norm: the fast network's option, got arch {cfg.arch!r}", "energy_norm")
     if not 0.0 < cfg.distill <= 1.0:
         raise sdk.ParameterError(f"distill: expected a weight in (0, 1], got {cfg.distill}", "distill")
+    _make_transform(cfg, [np.ones(1, np.float32)])  # (a transform it cannot fit, refused now, on a stand-in target)
+    for path in cfg.teachers:  # (each loaded only once the training data is; a file that is no model refused now)
+        try:
+            sdk.load(path, providers=["CPUExecutionProvider"])
+        except sdk.RtpError as e:
+            raise sdk.ParameterError(f"teachers: {path} is not a model rtp can load: {e}", "teachers") from e
     bad = [m for m in cfg.aux_metrics if m not in known_metrics() or m == cfg.metric]
     if bad or len(set(cfg.aux_metrics)) != len(cfg.aux_metrics):
         raise sdk.ParameterError(f"aux_metrics: expected distinct metrics among {', '.join(known_metrics())} other than "
