@@ -469,6 +469,42 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
         _delete_renderer(user)  # not user.delete(): pyrender's terminates the EGL display every context shares
 
 
+_DROPPED_UNCLOSED = """
+import gc
+import numpy as np
+from rtp import sdk
+from rtp.capture import load_scene
+from rtp.scene import Camera
+Adapter = sdk.adapters.get("pyrender")
+scene, _ = load_scene("procedural:0", None, None, None)
+sp = scene.spawn_points[0]
+cam = Camera(sp.position, yaw=sp.yaw)
+with Adapter.frame_source(scene, 64, 48) as source:
+    with source.adapter(["albedo.y", "seen"]) as adapter:
+        before = adapter.inputs(source.frame(cam, cam))
+        own = Adapter(["albedo.y"], 64, 48)  # an adapter with a renderer of its own, never closed
+        del own
+        gc.collect()
+        Adapter(["seen"], 64, 48).renderer.delete()  # pyrender's own delete() called on a renderer rtp made
+        gc.collect()
+        np.testing.assert_array_equal(adapter.inputs(source.frame(cam, cam)), before)
+print("ok")
+"""
+
+
+def test_a_renderer_rtp_made_never_ends_the_display_the_others_share() -> None:
+    """pyrender's OffscreenRenderer.delete() (also run when one is dropped) terminates the EGL display every
+    renderer of the process shares: an adapter built with a renderer of its own and dropped unclosed inside a
+    frame source broke the source (EGL_BAD_DISPLAY on its next draw and on close). The renderers rtp makes delete
+    only their own context, however they go. In a process of its own: a regression would break every context."""
+    import subprocess
+    import sys
+
+    pyrender_or_skip()
+    run = subprocess.run([sys.executable, "-c", _DROPPED_UNCLOSED], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and run.stdout.strip().endswith("ok"), run.stderr[-2000:]
+
+
 def test_adapters_sharing_one_renderer_each_draw_their_own_passes() -> None:
     """Two adapters may borrow one renderer (a light one every frame, a full one where the network runs:
     examples/pyrender_vrs.py); each gives what it gives alone, in whichever order they were built and run

@@ -118,6 +118,18 @@ def import_pyrender(platform: str | None = None) -> Any:
     return pyrender
 
 
+_SHARED: dict[type, type] = {}
+
+
+def _shared_display_class(base: type, delete: Any) -> type:
+    """``base`` (pyrender's ``OffscreenRenderer``) whose ``delete`` is ``delete``: one subclass per base."""
+    if base not in _SHARED:
+        _SHARED[base] = type(base.__name__, (base,), {
+            "delete": lambda self: delete(self), "__module__": __name__,
+            "__doc__": f"{base.__doc__ or ''}\n\n(rtp: delete() frees this renderer's context only.)"})
+    return _SHARED[base]
+
+
 def offscreen_renderer(pyrender: Any, width: int, height: int) -> Any:
     """A ``pyrender.OffscreenRenderer`` of ``width`` x ``height``, or a :class:`PyrenderUnavailableError`
     naming the platform and the Debian packages when its GL context cannot be created.
@@ -136,11 +148,14 @@ def offscreen_renderer(pyrender: Any, width: int, height: int) -> Any:
         ) from exc
     from OpenGL import GL
 
+    from ._gbuffer import _delete_renderer
+
+    # deleted (by close, by pyrender's own delete() or when dropped unclosed) without pyrender's eglTerminate, which
+    # ends the EGL display every renderer of the process shares (the others then fail with EGL_BAD_DISPLAY)
+    renderer.__class__ = _shared_display_class(type(renderer), _delete_renderer)
     renderer._platform.make_current()
     limit = min(int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE)), int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)))
     if max(int(width), int(height)) > limit:
-        from ._gbuffer import _delete_renderer
-
         _delete_renderer(renderer)
         raise ParameterError(f"frame size: this OpenGL context draws at most {limit} pixels a side "
                              f"(GL_MAX_TEXTURE_SIZE), got {width}x{height}", "size")
