@@ -31,6 +31,7 @@ from rtp.sdk import (
     PREDICTED_RATES,
     RATE_CODES,
     InputDtypeError,
+    InputError,
     InputShapeError,
     NonFiniteInputError,
     ParameterError,
@@ -151,13 +152,17 @@ def as_frame(source: Any) -> Frame:
         )
     raw = as_real(frame.reprojected, "reprojected", None) if not isinstance(frame.reprojected, np.ndarray) \
         else frame.reprojected
-    if not isinstance(source, Frame):  # (a Frame passed on is the one checked here before)
+    if not (isinstance(source, Frame) and source.__dict__.get("_checked")):  # (one checked here before: passed on)
         if raw.dtype.kind != "f":  # uint8 0-255 read as colours in [0, 1]: FidelityFX chose 1x1 everywhere
             raise InputDtypeError(f"reprojected: expected float colours in [0, 1], got dtype {raw.dtype} "
                                   "(an 8-bit image: image / 255)")
-        with np.errstate(over="ignore", invalid="ignore"):
-            if not np.isfinite(raw.sum(dtype=np.float64)):  # one pass; NaN made Yang 2019 choose 4x4 everywhere
+        if raw.size:  # (two reductions: NaN makes both NaN; NaN made Yang 2019 choose 4x4 everywhere)
+            lo, hi = float(raw.min()), float(raw.max())
+            if not (np.isfinite(lo) and np.isfinite(hi)):
                 raise NonFiniteInputError("reprojected: holds NaN or infinite values; expected colours in [0, 1]")
+            if lo < -1e-3 or hi > 1 + 1e-3:  # (HDR values were read as colours: 4x4 everywhere)
+                raise InputError(f"reprojected: values in [{lo:.4g}, {hi:.4g}], expected display-encoded colours "
+                                      "in [0, 1] (tone-mapped, sRGB-encoded: the frame as shown)")
     rep = as_real(raw, "reprojected", np.float32)
     if rep.ndim != 3 or rep.shape[2] < 3 or rep.shape[0] == 0 or rep.shape[1] == 0:
         raise InputShapeError(f"reprojected: expected (H, W, 3), got {rep.shape}", tuple(rep.shape), "(H, W, 3)")
@@ -168,7 +173,14 @@ def as_frame(source: Any) -> Frame:
     seen = None if frame.seen is None else as_real(frame.seen, "seen", np.float32)
     if seen is not None and seen.shape != (h, w):
         raise InputShapeError(f"seen: expected {(h, w)}, got {seen.shape}", tuple(seen.shape), f"({h}, {w})")
-    return Frame(rep[..., :3], motion, seen, terms=frame.terms)
+    return _checked(Frame(rep[..., :3], motion, seen, terms=frame.terms))
+
+
+def _checked(frame: Frame) -> Frame:
+    """``frame``, marked as one whose reprojected image holds display colours (:func:`as_frame` checked it, or
+    the caller made it of such: ``rtp play``'s closed loop, from each method's own displayed frame)."""
+    object.__setattr__(frame, "_checked", True)
+    return frame
 
 
 # -- tile helpers -------------------------------------------------------------------------------

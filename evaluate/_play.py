@@ -48,7 +48,7 @@ import numpy as np
 from rtp import sdk
 from rtp.sdk.files import atomic_output, writer_lock
 
-from ._baselines import FidelityFX, Frame, Yang2019
+from ._baselines import FidelityFX, Frame, Yang2019, _checked
 from ._engine import ENGINE_IMAGES, engine_rates
 from ._evaluate import failing_tiles, monotone_over_rates
 
@@ -985,7 +985,7 @@ def _oracle(thr: float, hib: bool, monotone: bool = False, combiner: str = "max"
 def _baseline(sel: Any, value: float) -> Callable[..., np.ndarray]:
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None
-        return np.asarray(sel.shading_rates(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms), value))
+        return np.asarray(sel.shading_rates(_checked(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms)), value))
     return decide
 
 
@@ -997,7 +997,7 @@ def _baseline_budget(yang: Yang2019, saving: float, tile: int) -> Callable[..., 
 
     def decide(pf: Any, rp: np.ndarray | None, truth: np.ndarray, lp: _Loop) -> np.ndarray:
         assert rp is not None
-        est = yang.predict(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms))
+        est = yang.predict(_checked(Frame(rp, pf.frame.motion, pf.seen, terms=pf.terms)))  # (its own frame)
         return sdk.select_rates_for_saving(est, saving, higher_is_better=False, allowed=allowed,
                                            frame_size=pf.seen.shape, tile_size=tile).rates
     return decide

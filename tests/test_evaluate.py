@@ -766,6 +766,10 @@ def test_the_baselines_refuse_frames_they_would_misread() -> None:
     for method in (Yang2019(16), FidelityFX(16)):
         with pytest.raises(sdk.NonFiniteInputError, match="reprojected"):
             method.shading_rates(nan)
+        with pytest.raises(sdk.NonFiniteInputError, match="reprojected"):  # a Frame made by the caller too
+            method.shading_rates(Frame(nan))
+        with pytest.raises(sdk.InputError, match=r"values in \[5, 5\], expected display-encoded"):  # HDR: 4x4
+            method.shading_rates(Frame(np.full((48, 64, 3), 5.0, np.float32)))
         with pytest.raises(sdk.InputDtypeError, match="255"):
             method.shading_rates(eight_bit)
         assert method.shading_rates(eight_bit / np.float32(255)).shape == (3, 4)
