@@ -129,7 +129,7 @@ def test_a_capture_whose_samples_cannot_fit_on_the_disk_is_refused_before_anythi
     out = tmp_path / "data"
     assert rtp_main(["capture", "--scene", "procedural:1", "--per-scene", "1000", "--size", "160x96", "--out", str(out)]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
-        "rtp capture: error: per_scene: 2,000 samples at 160x96 take at least 0.2 GB on disk (typically 0.6 GB), more "
+        "rtp capture: error: --per-scene: 2,000 samples at 160x96 take at least 0.2 GB on disk (typically 0.6 GB), more "
         f"than the 0.1 GB free in {str(tmp_path)!r}: fewer samples, or --out on a larger disk")
     assert not out.exists()
 

@@ -168,7 +168,7 @@ def test_rtp_demo_refuses_a_size_past_memory_in_one_line(
     out = tmp_path / "demo"
     machine_memory(MemTotal=8 * GiB, MemAvailable=8 * GiB)
     assert rtp_main(["demo", "--size", "4096x3072", "--out", str(out)]) == 2
-    assert capsys.readouterr().err.strip() == ("rtp demo: error: size: the demo at 4096x3072 holds about 8.2 GiB, more "
+    assert capsys.readouterr().err.strip() == ("rtp demo: error: --size: the demo at 4096x3072 holds about 8.2 GiB, more "
                                                "than this machine's 8.0 GiB of memory: a smaller size" + SAID_HINT)
     assert not out.exists()
     assert rtp_main(["demo", "--model", "flip", "--size", "3072x2048", "--out", str(out)]) == 2  # FLIP's targets

@@ -1461,7 +1461,7 @@ def test_a_batch_past_the_machines_memory_is_refused_before_reading_data(
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"),
                      "--batch", "100000000"]) == 2  # on the real machine's memory
     err = capsys.readouterr().err
-    assert "rtp train: error: batch: 100000000 crops of 64 pixels take about" in err and "lower batch" in err
+    assert "rtp train: error: --batch: 100000000 crops of 64 pixels take about" in err and "lower batch" in err
     assert not (tmp_path / "m.pt").exists()
 
 
