@@ -19,6 +19,8 @@ _C = sdk.RATE_CODES
 def foveation_rates(th: int, tw: int) -> np.ndarray:
     """Fixed foveated rings over a ``th x tw`` tile grid, uint8 codes: 1x1, then 2x2, then 4x4 by the tile centre's
     distance from the frame's centre over the half-diagonal (< 0.4, < 0.7, beyond)."""
+    if not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1 for n in (th, tw)):
+        raise sdk.ParameterError(f"th, tw: expected a tile grid of positive integers, got {th!r} x {tw!r}", "th")
     y, x = np.mgrid[0:th, 0:tw]
     r = np.hypot((x + 0.5) / tw - 0.5, (y + 0.5) / th - 0.5) / np.hypot(0.5, 0.5)
     return np.select([r < 0.4, r < 0.7], [_C["1x1"], _C["2x2"]], _C["4x4"]).astype(np.uint8)
@@ -28,6 +30,9 @@ def motion_rates(motion_x: np.ndarray, motion_y: np.ndarray, tile: int) -> np.nd
     """Motion-blur rates from a frame's motion vectors (pixels a frame, ``sdk.CHANNELS``' ``motion.x``/``.y``), uint8
     codes on ``tile``-pixel tiles: per tile and axis 2 where the mean screen motion along it is >= 2 pixels a frame,
     4 from 8; a 4 beside a 1 becomes 2 (no device shades 4x1 or 1x4)."""
+    if np.ndim(motion_x) != 2 or np.shape(motion_x) != np.shape(motion_y):
+        raise sdk.InputShapeError(f"motion_x and motion_y: expected two (H, W) planes of one size, got "
+                                  f"{np.shape(motion_x)} and {np.shape(motion_y)}", np.shape(motion_y), "(H, W)")
     h0, w0 = np.shape(motion_x)[:2]
     th, tw = sdk.tile_grid(h0, w0, tile)
 

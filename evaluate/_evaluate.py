@@ -33,7 +33,7 @@ from rtp.capture import DatasetError, TargetError, TargetStore
 from rtp.sdk import PREDICTED_RATES, RATE_CODES, ParameterError, select_rates, work_saved
 
 from ._baselines import FidelityFX, Yang2019, as_real
-from ._scores import scores
+from ._scores import real_values, scores
 
 __all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "check_evaluation", "evaluate", "failing_tiles",
            "spearman", "tile_unseen_share", "write_reports"]
@@ -70,7 +70,9 @@ def _ranks(a: np.ndarray) -> np.ndarray:
 def spearman(x: np.ndarray, y: np.ndarray) -> float:
     """Spearman's rank correlation of two equally long arrays (finite pairs only; ties get mean
     ranks); NaN when either side is constant or fewer than two pairs remain."""
-    a, b = np.asarray(x, np.float64).ravel(), np.asarray(y, np.float64).ravel()
+    a, b = real_values(x, "x"), real_values(y, "y")
+    if a.shape != b.shape:
+        raise sdk.InputShapeError(f"x and y differ in size: {a.size} vs {b.size}", a.shape, str(b.shape))
     ok = np.isfinite(a) & np.isfinite(b)
     a, b = a[ok], b[ok]
     if a.size < 2:
@@ -299,7 +301,15 @@ for _r in sdk.ALL_RATES:
 
 
 def failing_tiles(codes: np.ndarray, truth: np.ndarray, threshold: float, higher_is_better: bool) -> np.ndarray:
-    """Whether each tile's chosen rate fails the threshold by the true error (1x1 never fails)."""
+    """Whether each tile's chosen rate fails the threshold by the true error (1x1 never fails). ``codes``: uint8
+    rate codes, a tile each; ``truth``: ``(6, *codes.shape)``, each predicted rate's true value."""
+    codes, truth = np.asarray(codes), np.asarray(truth)
+    if truth.shape != (len(PREDICTED_RATES), *codes.shape):
+        raise sdk.InputShapeError(f"truth: expected shape {(len(PREDICTED_RATES), *codes.shape)} (each predicted rate's "
+                                  f"value on the codes' tiles), got {truth.shape}", truth.shape, "(6, th, tw)")
+    if codes.size and not np.isin(codes, list(RATE_CODES.values())).all():
+        raise sdk.ParameterError(f"codes: expected rate codes ({', '.join(map(str, sorted(RATE_CODES.values())))}), "
+                                 f"got {sorted(set(np.unique(codes).tolist()) - set(RATE_CODES.values()))[:4]}", "codes")
     out = np.zeros(codes.shape, bool)
     for i, r in enumerate(PREDICTED_RATES):
         m = codes == RATE_CODES[r]

@@ -10,6 +10,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from rtp.sdk import InputDtypeError, InputShapeError, ParameterError
+
 __all__ = ["Scores", "scores"]
 
 
@@ -30,13 +32,23 @@ class Scores:
         return asdict(self)
 
 
+def real_values(value: object, name: str) -> np.ndarray:
+    """``value`` as a flat float64 array of its numbers, or an :class:`~rtp.sdk.InputDtypeError` naming ``name``
+    (``None`` was one NaN, and a list of strings numpy's ValueError)."""
+    a = np.asarray(value)
+    if a.dtype.kind not in "biuf":
+        raise InputDtypeError(f"{name}: expected an array of numbers, got {type(value).__name__} of dtype {a.dtype}")
+    return a.astype(np.float64).ravel()
+
+
 def scores(pred: np.ndarray, gt: np.ndarray, *, worse: float = 1.0) -> Scores:
     """Scores of ``pred`` against ``gt``. ``worse`` is +1 when larger values mean a worse image
     (errors) and -1 otherwise; "underestimation" is a prediction on the optimistic side."""
-    p = np.asarray(pred, dtype=np.float64).ravel()
-    g = np.asarray(gt, dtype=np.float64).ravel()
+    p, g = real_values(pred, "pred"), real_values(gt, "gt")
     if p.shape != g.shape:
-        raise ValueError(f"pred and gt differ in size: {p.shape} vs {g.shape}")
+        raise InputShapeError(f"pred and gt differ in size: {p.shape} vs {g.shape}", p.shape, str(g.shape))
+    if worse not in (1, -1) or isinstance(worse, bool):
+        raise ParameterError(f"worse: expected +1 (larger values are worse: errors) or -1, got {worse!r}", "worse")
     ok = np.isfinite(p) & np.isfinite(g)
     p, g = p[ok], g[ok]
     if p.size == 0:
