@@ -776,3 +776,24 @@ def test_the_baselines_refuse_frames_they_would_misread() -> None:
         for bad in (float("nan"), -1.0, "0.05"):  # (FidelityFX read nan as 1x1 everywhere and -1 the same)
             with pytest.raises(sdk.ParameterError, match="threshold"):
                 method.shading_rates(eight_bit / np.float32(255), bad)  # type: ignore[arg-type]
+
+
+def test_the_scoring_helpers_refuse_what_they_would_misread() -> None:
+    """Each took mismatched or meaningless input silently (scores(None, None) was n=0, failing_tiles on another
+    grid said that no tile fails) or failed with numpy's bare ValueError."""
+    from rtp.evaluate import failing_tiles, foveation_rates, motion_rates, scores
+
+    codes, truth = np.zeros((3, 4), np.uint8), np.zeros((6, 3, 4))
+    for call, error, words in (
+            (lambda: scores(None, None), sdk.InputDtypeError, "pred: expected an array of numbers"),  # type: ignore
+            (lambda: scores([1.0, 2.0], [1.0, 2.0, 3.0]), sdk.InputShapeError, "differ in size"),
+            (lambda: scores([1.0, 2.0], [1.0, 3.0], worse=float("nan")), sdk.ParameterError, "worse: expected"),
+            (lambda: spearman(np.arange(2.0), np.arange(3.0)), sdk.InputShapeError, "x and y differ in size"),
+            (lambda: failing_tiles(codes, truth[:, :, :2], 0.1, False), sdk.InputShapeError, r"\(6, 3, 4\)"),
+            (lambda: failing_tiles(codes + 99, truth, 0.1, False), sdk.ParameterError, r"codes: .* got \[99\]"),
+            (lambda: motion_rates(np.zeros((48, 64)), np.zeros((5, 64)), 16), sdk.InputShapeError, "one size"),
+            (lambda: foveation_rates(-1, 5), sdk.ParameterError, "positive integers")):
+        with pytest.raises(error, match=words):
+            call()
+    assert scores([1.0, 2.0, 3.0], [1.0, 2.0, 4.0], worse=-1.0).n == 3 and spearman([1, 2, 3], [3, 2, 1]) == -1.0
+    assert failing_tiles(codes + C["2x2"], truth + 1.0, 0.5, False).all() and foveation_rates(3, 4).shape == (3, 4)
