@@ -9,6 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from rtp.sdk import ParameterError
+
+from ._checks import real, vector
 from ._model import Mesh
 
 __all__ = ["box_mesh", "checker_texture", "quad_mesh", "sphere_mesh"]
@@ -34,8 +37,12 @@ def quad_mesh(
     """A parallelogram ``centre +- u_axis +- v_axis`` (half extents). The front face (normal
     ``u x v``) is counter-clockwise; uv (0, 0) is at ``centre - u_axis + v_axis`` (top-left when
     seen from the front with v pointing up)."""
+    for name, value in (("centre", centre), ("u_axis", u_axis), ("v_axis", v_axis)):
+        vector("quad_mesh", name, value, 3)
     c, u, v = (np.asarray(a, np.float64) for a in (centre, u_axis, v_axis))
     n = np.cross(u, v)
+    if not np.linalg.norm(n) > 0:
+        raise ParameterError(f"quad_mesh: u_axis and v_axis must span a plane, got {u_axis!r} and {v_axis!r}", "v_axis")
     n = n / np.linalg.norm(n)
     pos = [c - u + v, c - u - v, c + u - v, c + u + v]
     su, sv = uv_scale
@@ -44,8 +51,13 @@ def quad_mesh(
 
 
 def box_mesh(lo: Sequence[float], hi: Sequence[float], material: int = 0, uv_per_metre: float = 1.0) -> Mesh:
-    """An axis-aligned box with flat outward normals (24 vertices, 12 triangles)."""
+    """An axis-aligned box with flat outward normals (24 vertices, 12 triangles): ``hi`` above ``lo`` on every axis."""
+    vector("box_mesh", "lo", lo, 3)
+    vector("box_mesh", "hi", hi, 3)
+    real("box_mesh", "uv_per_metre", uv_per_metre, 0.0, lo_open=True)
     lo_, hi_ = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    if not (hi_ > lo_).all():  # (a negative extent turned every face inwards; a zero one is no box)
+        raise ParameterError(f"box_mesh: expected hi above lo on every axis, got lo {tuple(lo)} and hi {tuple(hi)}", "hi")
     c, e = (lo_ + hi_) / 2, (hi_ - lo_) / 2
     x, y, z = np.eye(3)
     faces = [  # (normal, u axis, v axis) with u x v = normal
@@ -68,7 +80,12 @@ def box_mesh(lo: Sequence[float], hi: Sequence[float], material: int = 0, uv_per
 
 
 def sphere_mesh(centre: Sequence[float], radius: float, material: int = 0, segments: int = 32, rings: int = 16) -> Mesh:
-    """A UV sphere with smooth normals."""
+    """A UV sphere with smooth outward normals: ``radius`` > 0, at least 3 ``segments`` around and 2 ``rings``."""
+    vector("sphere_mesh", "centre", centre, 3)
+    real("sphere_mesh", "radius", radius, 0.0, lo_open=True)  # (a negative one turned the normals inwards)
+    for name, count, least in (("segments", segments, 3), ("rings", rings, 2)):
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < least:
+            raise ParameterError(f"sphere_mesh.{name}: expected an integer >= {least}, got {count!r}", name)
     th = np.linspace(0.0, np.pi, rings + 1)
     ph = np.linspace(0.0, 2 * np.pi, segments + 1)
     t, p = np.meshgrid(th, ph, indexing="ij")
@@ -91,7 +108,12 @@ def checker_texture(
     alpha_holes: bool = False,
 ) -> np.ndarray:
     """An ``(size, size, 4)`` uint8 sRGB checkerboard; with ``alpha_holes`` every other dark cell
-    has alpha 0 (for alpha-test tests)."""
+    has alpha 0 (for alpha-test tests). ``a``, ``b``: the two cells' RGB, integers in [0, 255]."""
+    for name, count in (("size", size), ("cells", cells)):
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+            raise ParameterError(f"checker_texture.{name}: expected an integer >= 1, got {count!r}", name)
+    vector("checker_texture", "a", a, 3, 0, 255)
+    vector("checker_texture", "b", b, 3, 0, 255)
     y, x = np.mgrid[0:size, 0:size] * cells // size
     odd = (x + y) % 2 == 1
     img = np.empty((size, size, 4), np.uint8)

@@ -11,7 +11,19 @@ import numpy as np
 import pytest
 
 from rtp import sdk
-from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SpawnPoint, SunLight, box_mesh
+from rtp.scene import (
+    Camera,
+    Material,
+    Mesh,
+    PointLight,
+    Scene,
+    SpawnPoint,
+    SunLight,
+    box_mesh,
+    checker_texture,
+    quad_mesh,
+    sphere_mesh,
+)
 
 
 def _mesh(**changes: Any) -> Mesh:
@@ -58,6 +70,14 @@ BAD: list[tuple[str, Any, str]] = [
     ("scene a dict as material", lambda: Scene("s", [], [{"name": "m"}]), "Scene.materials"),  # type: ignore[list-item]
     ("scene ambient -1", lambda: Scene("s", [], [], ambient=-1.0), "Scene.ambient"),
     ("scene sun None", lambda: Scene("s", [], [], sun=None), "Scene.sun"),  # type: ignore[arg-type]
+    # the builders: numpy's ValueError or OverflowError, an inside-out box or sphere, a sphere of no triangles
+    ("box of two numbers", lambda: box_mesh((0, 0), (1, 1)), "box_mesh.lo: expected 3 finite numbers"),
+    ("box inside out", lambda: box_mesh((1, 1, 1), (0, 0, 0)), "box_mesh: expected hi above lo on every axis"),
+    ("sphere radius -1", lambda: sphere_mesh((0, 0, 0), -1), "sphere_mesh.radius"),
+    ("sphere of 0 segments", lambda: sphere_mesh((0, 0, 0), 1, segments=0), "sphere_mesh.segments"),
+    ("quad of parallel axes", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (2, 0, 0)), "span a plane"),
+    ("checker size -1", lambda: checker_texture(-1), "checker_texture.size"),
+    ("checker colour 300", lambda: checker_texture(8, 2, a=(300, 0, 0)), r"checker_texture.a: .* \[0, 255\]"),
 ]
 
 
