@@ -48,7 +48,7 @@ def test_against_a_revision_compares_the_reprojections() -> None:
     assert _models(out.stdout, 2) == SHIPPED, out.stdout  # input_planes as a whole, REV's and this checkout's
     assert re.search(r"^[\d,]+ plane values: 0 differ \(to the bit\)$", out.stdout, re.M), out.stdout
     bad = _run("input_planes.py", "--against", "no-such-revision", timeout=120)
-    assert bad.returncode == 1 and "git cannot show sdk/_reproject.py there" in bad.stderr
+    assert bad.returncode == 2 and "git cannot show sdk/_reproject.py there" in bad.stderr  # a usage error
 
 
 @pytest.mark.gl
