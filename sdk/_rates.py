@@ -175,7 +175,7 @@ def check_threshold(threshold: object, higher_is_better: bool) -> float:
     if not lo <= value <= MAX_THRESHOLD:  # NaN fails too
         kind = "dB (higher is better)" if higher_is_better else "for an error metric (lower is better)"
         raise ParameterError(f"threshold: expected a finite number in [{lo:g}, {MAX_THRESHOLD:g}] {kind}, got "
-                             f"{reprlib.repr(threshold)}", "threshold")
+                             f"{value:.6g}", "threshold")  # (numpy's repr was np.float64(-0...0000000000001))
     return value
 
 

@@ -117,7 +117,7 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("steps: true\n", "'steps': expected int"),
     ("device: cuda\n", "'device' is the machine's, not the recipe's"),
     ("per_metric:\n  flip:\n    device: cpu\n  jnyang:\n    device: cuda\n", "'device' is the machine's"),
-    ("lr: .nan\n", "'lr': expected float"),
+    ("lr: .nan\n", "'lr': expected a finite number, got nan"),
     ("inputs: 3\n", "'inputs': expected a list"),
     ("- 1\n- 2\n", "expected a mapping"),
     ("steps: [unclosed\n", "not valid YAML"),

@@ -441,7 +441,7 @@ def test_focus_weights_the_tiles_near_the_threshold(tmp_path: Path) -> None:
                                       val_scenes=("scene0",), loss="mse"))
     for bad in (-1.0, float("nan"), float("inf")):
         # (-1 is out of range; nan and inf are no finite float, refused with the other fields' types)
-        with pytest.raises(sdk.ParameterError, match="focus: expected a weight >= 0|field 'focus': expected float"):
+        with pytest.raises(sdk.ParameterError, match="focus: expected a weight >= 0|field 'focus': expected a finite number"):
             train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), focus=bad, crop=32))
 
 

@@ -57,6 +57,10 @@ class TrainingDivergedError(sdk.RtpError):
 
 @dataclass
 class TrainConfig:
+    """Everything :func:`train` needs: the data, the metric and the checkpoint path, then the recipe (a shipped
+    one by :meth:`from_recipe`, ``rtp train --config``; docs/training.md lists the fields). Each field's comment
+    says what it sets; :func:`check_config` refuses a configuration before any work."""
+
     #: A dataset folder with targets (``rtp targets``), or several, comma-separated, whose samples train and
     #: validate together (each with the metric's targets computed with the same parameters; no sample id twice).
     data: str

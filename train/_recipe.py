@@ -103,7 +103,9 @@ def _coerce(name: str, value: Any, kind: Any, what: str = "recipe key") -> Any:
         raise RecipeError(f"{what} {name!r}: expected {kind.__name__}, got {value!r}", name)
     if kind is int and isinstance(value, numbers.Integral):
         return int(value)
-    if kind is float and isinstance(value, (numbers.Integral, numbers.Real)) and _finite(value):
+    if kind is float and isinstance(value, (numbers.Integral, numbers.Real)):
+        if not _finite(value):  # (the number is of the type: its value is what is wrong)
+            raise RecipeError(f"{what} {name!r}: expected a finite number, got {value!r}", name)
         return float(value)
     if kind is str and isinstance(value, str):
         return value
