@@ -376,9 +376,9 @@ def evaluate(
     """Evaluate an ONNX model on a dataset with targets (``rtp targets``) for its metric and tile.
 
     ``scenes`` restricts the samples (``meta["scene"]``; one name or a list; None or an empty list: all);
-    ``threshold`` (metric units) replaces the model's ``default_threshold`` for the decision table; ``unseen_fraction`` is the seen/unseen
-    rule. ``yang`` / ``fidelityfx`` replace the default baselines (built at the model's tile size;
-    Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25).
+    ``threshold`` (metric units) replaces the model's ``default_threshold`` for the decision table;
+    ``unseen_fraction`` is the seen/unseen rule. ``yang`` / ``fidelityfx`` replace the default baselines (built
+    at the model's tile size; Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25).
     ``sweep`` also sweeps every method's threshold (cutoff) to compare the work saved at the
     model's failure rate (``report.matched``). ``plots_dir`` writes the figures of
     :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the first sample).
