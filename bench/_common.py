@@ -112,16 +112,22 @@ def json_file(text: str) -> Any:
         raise argparse.ArgumentTypeError(f"{text!r} is not JSON ({err})") from None
 
 
-def report_file(kind: str, keys: set[str], made_by: str, *, many: bool = False) -> Callable[[str], Path]:
-    """An argparse type: the path of a JSON report holding ``keys`` (a list of such objects with ``many``),
-    checked when parsed: a missing file, bad JSON or another JSON is a usage error, not a traceback (or,
-    for another JSON, an empty table) once the script runs."""
+def report_file(kind: str, keys: dict[str, type], made_by: str, *, many: bool = False) -> Callable[[str], Path]:
+    """An argparse type: the path of a JSON report holding ``keys``, each of its type (a list: of objects; a list
+    of such reports with ``many``), checked when parsed: a missing file, bad JSON or another JSON (its keys, or
+    their kinds of value) is a usage error, not a traceback (or, for another JSON, an empty table) once the
+    script runs."""
     import argparse
+
+    def fits(d: Any) -> bool:
+        return isinstance(d, dict) and all(
+            isinstance(d.get(k), t) and (t is not list or all(isinstance(v, dict) for v in d[k]))
+            for k, t in keys.items())
 
     def parse(text: str) -> Path:
         data = json_file(text)
         items = data if many and isinstance(data, list) else [data]
-        if not items or not all(isinstance(d, dict) and keys <= set(d) for d in items):
+        if not items or not all(fits(d) for d in items):
             raise argparse.ArgumentTypeError(f"{text!r} is not {kind} (the file {made_by} writes)")
         return Path(text)
 
@@ -129,10 +135,10 @@ def report_file(kind: str, keys: set[str], made_by: str, *, many: bool = False) 
 
 
 #: The ``play.json`` of ``rtp play --out DIR``.
-PLAY_JSON = report_file("a play.json", {"settings", "rows"}, "`rtp play --out DIR`")
+PLAY_JSON = report_file("a play.json", {"settings": dict, "rows": list}, "`rtp play --out DIR`")
 #: The ``evaluation.json`` of ``rtp evaluate --out DIR`` (a list of reports, one per model).
-EVALUATION_JSON = report_file("an evaluation.json", {"model", "quality", "decisions"}, "`rtp evaluate --out DIR`",
-                              many=True)
+EVALUATION_JSON = report_file("an evaluation.json", {"model": dict, "quality": list, "decisions": list},
+                              "`rtp evaluate --out DIR`", many=True)
 
 
 def add_model_args(ap: Any, model_help: str, scene_help: str = "") -> None:

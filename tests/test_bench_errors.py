@@ -69,6 +69,13 @@ def test_a_json_of_another_kind_and_a_folder_that_is_not_a_dataset(tmp_path: Pat
     (tmp_path / "other.json").write_text(json.dumps({"settings": {}, "matched": []}))
     run = _run([str(BENCH / "play_report.py"), str(tmp_path / "other.json")], tmp_path)
     assert run.returncode == 2 and "is not a play.json (the file `rtp play --out DIR` writes)" in run.stderr
+    # the right keys with other kinds of value: a usage error too, not a TypeError once the tables are made
+    (tmp_path / "odd.json").write_text(json.dumps({"settings": {"scene": 1}, "rows": 5, "matched": 3}))
+    run = _run([str(BENCH / "play_report.py"), str(tmp_path / "odd.json")], tmp_path)
+    assert run.returncode == 2 and "is not a play.json" in run.stderr and "Traceback" not in run.stderr, run.stderr
+    (tmp_path / "odd.json").write_text(json.dumps({"model": 5, "quality": [1], "decisions": "x"}))
+    run = _run([str(BENCH / "report.py"), str(tmp_path / "odd.json")], tmp_path)
+    assert run.returncode == 2 and "is not an evaluation.json" in run.stderr and "Traceback" not in run.stderr, run.stderr
     (tmp_path / "fake").mkdir()
     (tmp_path / "fake" / "manifest.json").write_text(json.dumps({"format": "mine"}))
     run = _run([str(BENCH / "outputs.py"), "jnyang", "--data", str(tmp_path / "fake")], tmp_path)
