@@ -92,7 +92,8 @@ def test_paper_inputs_feed_a_predictor(frames, tiny_model) -> None:
 def test_window_depth_world_normals_and_linear_albedo(frames, kind: str) -> None:
     ctx, prev, cur = frames
     channels = ("depth", "normal.x", "normal.y", "normal.z", "albedo.g", "seen")
-    ref = _engine_inputs(ctx, prev, cur, Adapter(channels, W, H, ctx=ctx))
+    with Adapter(channels, W, H, ctx=ctx) as a:
+        ref = _engine_inputs(ctx, prev, cur, a)
 
     def window(depth: np.ndarray, cam: Camera) -> np.ndarray:  # what a hardware depth buffer holds
         p = cam.projection(W / H)
@@ -107,6 +108,7 @@ def test_window_depth_world_normals_and_linear_albedo(frames, kind: str) -> None
     x = _engine_inputs(ctx, prev, cur, b, depth=_tex(ctx, window(cur.depth, cur.camera)),
                        prev_depth=_tex(ctx, window(prev.depth, prev.camera)), normal=_tex(ctx, world_n),
                        albedo=_tex(ctx, linear_albedo))
+    b.close()
     np.testing.assert_allclose(x[0], ref[0], rtol=2e-3, atol=1e-4)
     np.testing.assert_allclose(x[1:4], ref[1:4], atol=1e-4)
     np.testing.assert_allclose(x[4], ref[4], atol=1e-4)
@@ -237,7 +239,8 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         a.inputs(replace(no_prev, prev_colour=_tex(ctx, prev.colour["1x1"])))
     # every bad setting or frame field an RtpError (a ParameterError, still a ValueError), never a bare one
     with pytest.raises(sdk.ParameterError, match="material texture"):
-        Adapter(("seen", "roughness"), W, H, ctx=ctx).inputs(replace(no_prev, material=None))
+        with Adapter(("seen", "roughness"), W, H, ctx=ctx) as m:
+            m.inputs(replace(no_prev, material=None))
     with pytest.raises(sdk.ParameterError, match="left-handed projection"):  # Direct3D's: named, with the conversion
         a.inputs(replace(no_prev, projection=no_prev.projection @ np.diag([1.0, 1.0, -1.0, 1.0])))
     with pytest.raises(sdk.ParameterError, match="prev_projection: .* row vectors"):
@@ -248,7 +251,8 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
         a.inputs(replace(no_prev, projection=neither, prev_colour=_tex(ctx, prev.colour["1x1"]),
                          prev_depth=_tex(ctx, prev.depth), prev_view_projection=prev.camera.view_projection(W, H)))
     assert a.inputs(replace(no_prev, projection=neither)).shape == (3, H, W)  # (without a previous frame: not read)
-    assert Adapter(("albedo.b", "depth"), W, H, ctx=ctx).inputs(replace(no_prev, projection=neither)).shape == (2, H, W)
+    with Adapter(("albedo.b", "depth"), W, H, ctx=ctx) as d:
+        assert d.inputs(replace(no_prev, projection=neither)).shape == (2, H, W)
     for options in ({"normal_space": "bogus"}, {"depth_kind": "bogus"}, {"tolerance": float("nan")},
                     {"tolerance": -1.0}, {"tolerance": "0.02"}):
         with pytest.raises(sdk.ParameterError):
@@ -570,3 +574,87 @@ def test_check_names_convention_mistakes_in_the_engines_textures(frames) -> None
             a.check({"normal": None})  # type: ignore[arg-type]
     with Adapter(("seen", "normal.z"), W, H, ctx=ctx, normal_space="world") as b:
         assert b.check(_engine_frame(ctx, prev, cur, normal=_tex(ctx, world_n))) == []
+
+
+def test_a_draw_leaves_the_engines_framebuffer_and_viewport_and_reads_a_comparing_depth_texture(frames) -> None:
+    """After inputs() the engine's framebuffer is bound again with its viewport (its next clear lands in its own
+    texture), closing leaves GL a framebuffer to draw into, and a moderngl depth texture, which compares by
+    default, is read as the depth it holds (comparison off during the draw, then put back)."""
+    ctx, prev, cur = frames
+    _ = ctx.error  # (read: cleared; GL keeps an error until it is read)
+    target = ctx.texture((W, H), 4, dtype="f4")
+    engine = ctx.framebuffer(color_attachments=[target])
+    engine.use()
+    ctx.viewport = (1, 2, W - 3, H - 5)
+    a = Adapter(("depth", "albedo.y.blocks", "seen"), W, H, ctx=ctx, depth_kind="window")
+    p = cur.camera.projection(W / H)
+    window = np.where(cur.depth > 0, (p[2, 2] * -cur.depth + p[2, 3]) / cur.depth * 0.5 + 0.5, 1.0)
+    depth = ctx.depth_texture((W, H))
+    assert depth.compare_func  # (moderngl's default: a shadow-map sampler)
+    write_texture(depth, window.astype(np.float32))
+    x = _engine_inputs(ctx, prev, cur, a, depth=depth)
+    assert ctx.error == "GL_NO_ERROR"
+    assert ctx.fbo is engine and ctx.viewport == (1, 2, W - 3, H - 5)
+    ctx.clear(0.25, 0.5, 0.75, 1.0)
+    assert np.allclose(np.frombuffer(target.read(), np.float32).reshape(H, W, 4)[H // 2, W // 2], (0.25, 0.5, 0.75, 1))
+    np.testing.assert_allclose(x[0], cur.depth, rtol=2e-3, atol=1e-4)  # (as the same window depth in a float texture)
+    assert depth.compare_func == "<="
+    a.close()
+    assert ctx.fbo is engine
+    ctx.framebuffer(color_attachments=[ctx.texture((4, 4), 4)]).release()
+    assert ctx.error == "GL_NO_ERROR"
+    b = Adapter(("albedo.r",), W, H, ctx=ctx)
+    b.inputs(_engine_frame(ctx, prev, cur))  # (nothing of the engine's bound: GL's framebuffer 0 after the draw)
+    b.close()
+    ctx.framebuffer(color_attachments=[ctx.texture((4, 4), 4)]).release()
+    assert ctx.error == "GL_NO_ERROR"
+
+
+def test_textures_an_adapter_cannot_read_are_refused_and_colours_are_clamped(frames) -> None:
+    """Integer, multisample, released and other contexts' textures are refused by name (they read as garbage);
+    albedo, material and the previous frame outside [0, 1] read clamped, as sdk.CHANNELS' ranges; a context
+    released under an adapter is named; an adapter dropped unclosed says so (ResourceWarning)."""
+    import gc
+    import warnings
+
+    from rtp.plugins.moderngl import create_context
+
+    ctx, prev, cur = frames
+    a = Adapter(("albedo.r", "reprojected.g", "roughness", "seen"), W, H, ctx=ctx)
+    x = _engine_inputs(ctx, prev, cur, a, albedo=_tex(ctx, cur.albedo * 4.0),
+                       prev_colour=_tex(ctx, prev.colour["1x1"] * 4.0), material=_tex(ctx, np.full((H, W, 3), 7.0)))
+    geo = cur.depth > 0
+    assert x[0].max() == 1.0 and x[1].max() == 1.0 and (x[2][geo] == 1.0).all()
+    released = _tex(ctx, cur.albedo)
+    released.release()
+    refused = {"an integer dtype": ctx.texture((W, H), 4, dtype="u1"), "multisample": ctx.texture((W, H), 4, samples=4),
+               "released": released}
+    for why, tex in refused.items():
+        with pytest.raises(sdk.ParameterError, match=r"albedo: .*(integer dtype|multisample|released)") as info:
+            _engine_inputs(ctx, prev, cur, a, albedo=tex)
+        assert why.split()[-1] in str(info.value) or why in str(info.value)
+    other = create_context()
+    try:
+        foreign = other.texture((W, H), 4, dtype="f4")
+        make_current(ctx)
+        with pytest.raises(sdk.ParameterError, match="albedo: expected a texture of the adapter's context, got one of "
+                                                     "another moderngl.Context"):
+            _engine_inputs(ctx, prev, cur, a, albedo=foreign)
+    finally:
+        make_current(other)
+        other.release()
+        make_current(ctx)
+    a.close()
+    lost = create_context()
+    c = Adapter(("albedo.r",), 8, 8, ctx=lost)
+    lost.release()
+    make_current(ctx)
+    with pytest.raises(sdk.adapters.AdapterFrameError, match="context was released under this adapter"):
+        c.inputs(GBufferTextures(albedo=None, normal=None, depth=None, view=np.eye(4), projection=np.eye(4)))
+    c.close()  # (its objects went with the context)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        d = Adapter(("albedo.r", "albedo.y.blocks"), W, H, ctx=ctx)
+        del d
+        gc.collect()
+    assert [w.category for w in caught] == [ResourceWarning]  # (one: its first pass is closed with it)

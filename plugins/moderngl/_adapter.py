@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import sys
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -99,8 +100,10 @@ def _component(value: Any, name: str, lo: int, hi: int) -> int:
 class GBufferTextures:
     """One frame of an engine's moderngl G-buffers: the frame :meth:`Adapter.inputs` reads.
 
-    Textures are ``moderngl.Texture`` objects of the adapter's context, at the adapter's size, with
-    the engine's bottom-left GL origin. Matrices are 4x4 numpy arrays.
+    Textures are live, single-sample ``moderngl.Texture`` objects of the adapter's context (float or
+    normalised, not integer), at the adapter's size, with the engine's bottom-left GL origin. Colours,
+    albedo and material values are read clamped to [0, 1] (tonemap an HDR frame first; ``Adapter.check``
+    reports one). Matrices are 4x4 numpy arrays.
 
     Attributes:
         albedo: base colour (RGB[A]); display-encoded unless the adapter has ``albedo_linear=True``.
@@ -186,6 +189,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
             0 on background, as ``glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE)`` with a depth clear of
             0 and ``GL_GREATER`` makes; linearised with the inverse of the OpenGL ``projection`` of the
             same near and far planes): ``sdk.DEPTH_KINDS``.
+
+    The adapter draws in the current GL context, which must be ``ctx`` (it is in an engine of one
+    context; with several, make ``ctx`` current first). A draw binds the frame's textures to units
+    0-7 and leaves the engine's framebuffer binding and viewport as they were. Close it (or use it in
+    a ``with`` block): an adapter dropped unclosed keeps its GL objects and says so with a
+    ``ResourceWarning``.
     """
 
     name: ClassVar[str] = "moderngl"
@@ -250,6 +259,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
                                   "RTP_TILES_REPROJECTED", "RTP_TILES_ALBEDO")):
             self._luma = Adapter(_LUMA_PASS, width, height, ctx=ctx, tolerance=tolerance, albedo_linear=albedo_linear,
                                  normal_space=normal_space, depth_kind=depth_kind)
+            self._luma.__dict__["_first_pass"] = True  # (closed with this one: its own unclosed warning would say it twice)
         flags["RTP_LUMA_PASS"] = self._luma is not None
         defines: dict[str, Any] = {k: str(bool(v)).lower() for k, v in flags.items()}
         defines.update(RTP_CHANNELS=", ".join(map(str, ids)), RTP_COUNT=len(self.channels))
@@ -262,6 +272,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._fbo = ctx.framebuffer(color_attachments=self._targets)
         self._region_drawn = (self.width, self.height)  # (the size of the last run's planes)
+        self._framebuffer_zero: Any = None
 
     def _set(self, name: str, value: Any) -> None:
         u = self._prog.get(name, None)  # the GLSL compiler drops uniforms a program does not use
@@ -296,7 +307,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
     ) -> None:
         """Render the input planes into the adapter's targets without reading them back (the
         reference renderer's path; the keyword arguments are the fields of :class:`GBufferTextures`)."""
-        self._check_open()
+        self._check_live()
         has_prev = prev_colour is not None
         if has_prev and (prev_depth is None or prev_view_projection is None):
             raise ParameterError("prev_colour needs prev_depth and prev_view_projection as well", "prev_colour")
@@ -363,8 +374,35 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._set("u_prev_ortho", kinds[1] == "orthographic")
         self._fbo.viewport = (0, 0, *region)  # (the planes in the targets' bottom-left corner, as the G-buffers)
         self._region_drawn = region
-        self._fbo.use()
-        self._vao.render(vertices=3)
+        # The engine's framebuffer binding and viewport are put back after the draw (its next clear or draw goes
+        # where it went before), and a depth texture's comparison mode is off while the shader reads its depth
+        # (texelFetch on a comparing sampler2D is undefined in GLSL; moderngl's depth textures compare by default).
+        bound, viewport = self.ctx.fbo, self.ctx.viewport
+        comparing = [(t, t.compare_func) for t in {id(t): t for t in textures.values()}.values()
+                     if getattr(t, "depth", False) and t.compare_func]
+        for t, _ in comparing:
+            t.compare_func = ""
+        try:
+            self._fbo.use()
+            self._vao.render(vertices=3)
+        finally:
+            for t, func in comparing:
+                t.compare_func = func
+            (bound if bound is not None and not is_released(bound) else self._default_framebuffer()).use()
+            self.ctx.viewport = viewport
+
+    def _default_framebuffer(self) -> Any:
+        """The context's framebuffer 0 (what a standalone context has bound before anything is used)."""
+        if self._framebuffer_zero is None:
+            self._framebuffer_zero = self.ctx.detect_framebuffer(0)
+        return self._framebuffer_zero
+
+    def _check_live(self) -> None:
+        """:meth:`_check_open`, and the engine's context not released under the adapter."""
+        self._check_open()
+        if is_released(self.ctx):
+            raise AdapterFrameError("ctx: the engine's moderngl context was released under this adapter; build a new "
+                                    "adapter in the live context")
 
     def _region(self, size: Any) -> tuple[int, int]:
         """``(width, height)`` of a frame whose :class:`GBufferTextures` ``size`` is ``size``: the adapter's size where
@@ -416,6 +454,17 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if not isinstance(tex, moderngl.Texture):
             raise ParameterError(f"{name}: expected a moderngl.Texture of the adapter's context, got "
                                  f"{type(tex).__name__}", name)
+        if is_released(tex):
+            raise ParameterError(f"{name}: this texture has been released; pass the frame's live texture", name)
+        if getattr(tex, "ctx", self.ctx) is not self.ctx:
+            raise ParameterError(f"{name}: expected a texture of the adapter's context, got one of another "
+                                 "moderngl.Context (an adapter reads only textures of the ctx it was built with)", name)
+        if tex.samples:
+            raise ParameterError(f"{name}: expected a single-sample texture, got a multisample one ({tex.samples} "
+                                 "samples): resolve it first (ctx.copy_framebuffer into a single-sample texture)", name)
+        if tex.dtype[0] in "ui":
+            raise ParameterError(f"{name}: expected a float or normalised texture (dtype f1, f2, f4, nu1, nu2, ni1, "
+                                 f"ni2), got the integer dtype {tex.dtype!r} (its bits would be read as floats)", name)
         field = "prev_size" if name.startswith("prev_") else "size"
         if corner and size is not None and (tex.size[0] < size[0] or tex.size[1] < size[1]):
             raise ParameterError(f"{name}: expected a texture at least {field} {size[0]}x{size[1]} (the frame in its "
@@ -445,8 +494,9 @@ class Adapter(_AdapterBase[GBufferTextures]):
         (world-space normals given as view-space, encoded normals, a row-vector or left-handed view, a
         depth buffer given as linear depth, a previous frame that does not reproject), each a warning
         naming the likely cause; empty where none is seen. It reads every texture back: run it once,
-        where the engine is wired up, not every frame."""
-        self._check_open()
+        where the engine is wired up, not every frame. Values no G-buffer can hold (NaN depth, a colour
+        outside [0, 1]) are errors, not warnings: :class:`rtp.sdk.ParameterError`, as ``sdk.check_gbuffers``."""
+        self._check_live()
         if not isinstance(frame, GBufferTextures):
             raise AdapterFrameError(f"expected a GBufferTextures frame, got {type(frame).__name__}")
         region, prev_region = self._check_textures(
@@ -472,16 +522,29 @@ class Adapter(_AdapterBase[GBufferTextures]):
     def read(self, index: int) -> np.ndarray:
         """Plane ``index`` of the last :meth:`run`, ``(H, W)`` float32 (reads back one target; the last frame's
         ``size``)."""
-        self._check_open()
+        self._check_live()
         index = _component(index, "index", 0, len(self.channels))
         return read_texture(self._targets[index // 4], size=self._region_drawn)[..., index % 4]
 
     def close(self) -> None:
-        """Free the adapter's program, targets and framebuffer (not the engine's context)."""
-        for obj in (self._fbo, *self._targets, self._vao, self._prog):
-            obj.release()
+        """Free the adapter's program, targets and framebuffer (not the engine's context; where the engine
+        released its context first, they went with it)."""
+        if not is_released(self.ctx):
+            if self.ctx.fbo is self._fbo:  # (a framebuffer deleted while bound leaves GL none to draw into)
+                self._default_framebuffer().use()
+            for obj in (self._fbo, *self._targets, self._vao, self._prog):
+                obj.release()
         if self._luma is not None:
             self._luma.close()
+
+    def __del__(self) -> None:
+        # moderngl frees nothing a Python object held (its objects live until released, in the engine's context, which
+        # need not be current when Python collects this one): an adapter dropped unclosed keeps its program and
+        # targets, so it says so, as an unclosed file does
+        if "_prog" in self.__dict__ and not self.closed and not self.__dict__.get("_first_pass"):
+            warnings.warn(f"an unclosed rtp moderngl Adapter ({self.width}x{self.height}, {len(self.channels)} "
+                          "channels) keeps its GL program and targets in the engine's context until the context "
+                          "goes: close() it, or use it in a with block", ResourceWarning, stacklevel=2)
 
     @classmethod
     def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> ReferenceFrameSource:

@@ -1229,6 +1229,9 @@ class Renderer:
         self.ctx.__enter__()  # (its objects are freed in its own context)
         self._release_scene()
         if self._owns_ctx:
+            for obj in vars(self).values():  # (closed, not left to warn unclosed: their objects go with the context)
+                if isinstance(obj, Adapter):
+                    obj.close()
             self.ctx.release()
         else:
             if hasattr(self, "_reprojector"):  # (a constructor that failed part-way releases what it made)
@@ -1243,6 +1246,9 @@ class Renderer:
                             o.release()
                 elif hasattr(obj, "release") and hasattr(obj, "glo") and obj is not self.ctx:
                     obj.release()
+            bound = self.ctx.fbo
+            if bound is not None and is_released(bound):  # (GL then has none to draw into: the context's own 0)
+                self.ctx.detect_framebuffer(0).use()
         self._released = True
 
     def __enter__(self) -> Renderer:

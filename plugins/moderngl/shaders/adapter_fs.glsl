@@ -144,7 +144,8 @@ vec4 reproject_prev(vec2 frag, float d) {
     } else {
         seen = pd <= 0.0;
     }
-    return seen ? vec4(texelFetch(u_prev_colour, pi, 0).rgb, 1.0) : vec4(0.0);
+    // a colour outside [0, 1] (an HDR frame not yet tonemapped) is clamped to the display range sdk.CHANNELS gives
+    return seen ? vec4(clamp(texelFetch(u_prev_colour, pi, 0).rgb, 0.0, 1.0), 1.0) : vec4(0.0);
 }
 
 // *.y.blocks, as rtp.sdk.block_variances: per 4x4 cell (top-left origin, edge repeated past the frame)
@@ -179,7 +180,7 @@ float albedo_luma_at(ivec2 t) {
     if (u_luma_pass) return texelFetch(u_luma, t, 0).y;
     if (depth_at(t) <= 0.0) return 0.0;
     vec3 a = texelFetch(u_albedo, t, 0).rgb;
-    return display_luma(u_albedo_linear ? linear_to_srgb(a) : a);
+    return display_luma(clamp(u_albedo_linear ? linear_to_srgb(a) : a, 0.0, 1.0));
 }
 
 float reprojected_luma_at(ivec2 t) {
@@ -230,6 +231,7 @@ void main() {
     }
     vec3 albedo = texelFetch(u_albedo, g, 0).rgb;
     if (u_albedo_linear) albedo = linear_to_srgb(albedo);
+    albedo = clamp(albedo, 0.0, 1.0);  // (as the previous frame's colour, and the material below)
     vec3 n = texelFetch(u_normal, g, 0).xyz;
     if (u_normal_world) n = mat3(u_view) * n;
     float n_length = length(n);  // a zero normal on geometry (a degenerate mesh's) reads 0 like the background, not NaN
@@ -240,7 +242,7 @@ void main() {
         vec4 m = texelFetch(u_material, g, 0);
         for (int i = 0; i < 3; ++i) if (u_material_comp[i] >= 0) mat[i] = m[u_material_comp[i]];
     }
-    if (!geo) mat = vec3(0.0);
+    mat = geo ? clamp(mat, 0.0, 1.0) : vec3(0.0);
     float rblocks = 0.0, ablocks = 0.0;
     int row = int(u_size.y) - 1 - g.y;  // top-left origin
     int k = (row % 4) * 4 + g.x % 4;
