@@ -49,6 +49,17 @@ AGREEMENT: Mapping[str, Tolerance] = {
 }
 #: The share of pixels on which a channel must agree.
 MIN_AGREEMENT = 0.99
+#: How far past its range a plane's values may go (float32 rounding: a GPU's normalize() gives 1 + 1 ulp).
+RANGE_SLACK = 1e-6
+#: How closely the edges of the adapter's previous frame, reprojected, must line up with the reference
+#: renderer's: the correlation of their gradient magnitudes on the pixels both see (with their left and upper
+#: neighbours). Engines shade differently (pyrender's lit image: 0.53-0.85 on procedural levels 0-4 at 64x48
+#: and 320x192), while a previous frame handed over upside down reaches at most 0.26.
+MIN_EDGE_CORRELATION = 0.4
+#: The share of the pixels the previous frame hid (seen == 0 in the reference renderer's frame although the
+#: point reprojects inside the previous frame) that must be unseen in the adapter's too: an adapter without
+#: the depth test reaches at most 0.27 on procedural levels 0-4; pyrender's, at least 0.78.
+MIN_OCCLUDED_UNSEEN = 0.5
 #: Channels that describe the engine's own shading model: compared with nothing and allowed to be
 #: constant (pyrender gives every dielectric F0 = 4 %: specular 0.5 everywhere).
 ENGINE_DEFINED = frozenset({"specular"})
@@ -282,8 +293,8 @@ def _plane_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: 
         for plane, c in zip(x, channels):
             spec = sdk.CHANNELS[c]
             lo, hi = float(np.nanmin(plane)), float(np.nanmax(plane))
-            if not (spec.low <= lo and hi <= spec.high):
-                out.append(f"{c} spans [{lo:.4g}, {hi:.4g}], its range is [{spec.low}, {spec.high}]")
+            if not (spec.low - RANGE_SLACK <= lo and hi <= spec.high + RANGE_SLACK):
+                out.append(f"{c} spans [{lo:.7g}, {hi:.7g}], its range is [{spec.low}, {spec.high}]")
         _expect(not out, "; ".join(out))
     with run.check("planes", "no channel is constant that the reference renderer varies"):
         const = [c for plane, c in zip(x, channels)
@@ -311,6 +322,15 @@ def _plane_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: 
                 rgb = np.stack([x[list(channels).index(n)] for n in names[:3]], axis=-1)
                 err = float(np.max(np.abs(x[list(channels).index(names[3])] - sdk.luma(rgb))))
                 _expect(err <= 1e-5, f"differs by up to {err:.3g}")
+    derived = {"blocks": sdk.block_variances, "tiles": sdk.tile_variances}
+    for c in channels:
+        base, _, kind = c.rpartition(".")
+        if kind in derived and base in channels:
+            fn = derived[kind]
+            with run.check("planes", f"{c} is sdk.{fn.__name__} of the adapter's own {base}"):
+                err = float(np.max(np.abs(x[list(channels).index(c)] - fn(x[list(channels).index(base)]))))
+                _expect(err <= 2e-3, f"differs by up to {err:.3g} (cells anchored at the top-left pixel, "
+                        "docs/adapters.md)")
     if {"reprojected.y", "reprojected.y.dx", "reprojected.y.dy"} <= set(channels):
         with run.check("planes", "reprojected.y.dx/.dy are differences of the adapter's own reprojected.y"):
             want = sdk.pixel_differences(x[list(channels).index("reprojected.y")])
@@ -332,6 +352,61 @@ def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], referen
             within = f"within {tol.value:g}{' (relative)' if tol.relative else ''}"
             _expect(share >= MIN_AGREEMENT, f"{share:.1%} of the pixels {within}, needs {MIN_AGREEMENT:.0%}")
             note.append(f"{share:.1%} {within}")
+
+
+def _gradient(plane: np.ndarray) -> np.ndarray:
+    """Each pixel's larger absolute difference to its left and upper neighbour (0 on the first row and column)."""
+    g = np.zeros(plane.shape, np.float64)
+    g[:, 1:] = np.abs(np.diff(plane, axis=1))
+    g[1:] = np.maximum(g[1:], np.abs(np.diff(plane, axis=0)))
+    return g
+
+
+def _previous_frame_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: Any) -> None:
+    """What can be checked of the previous frame, although each engine lights its own: its edges, reprojected,
+    line up with the reference renderer's (an upside-down or shifted previous frame does not), and the pixels the
+    previous frame hid are unseen (the depth test)."""
+    index = {c: i for i, c in enumerate(channels)}
+    seen = x[index["seen"]] > 0 if "seen" in index else np.ones(x.shape[1:], bool)
+    both = seen & (reference.channel("seen") > 0)
+    both[1:] &= both[:-1].copy()  # (a gradient of seen pixels only: the edges of the unseen regions are both
+    both[:, 1:] &= both[:, :-1].copy()  # frames', whatever the colour)
+    both[0] = both[:, 0] = False
+    if "reprojected.y" in index:
+        luma = x[index["reprojected.y"]]
+    elif {"reprojected.r", "reprojected.g", "reprojected.b"} <= set(index):
+        luma = sdk.luma(np.stack([x[index[f"reprojected.{c}"]] for c in "rgb"], axis=-1))
+    else:
+        luma = None
+    name = "the previous frame's edges line up with the reference renderer's"
+    if luma is not None:
+        mine, ref = _gradient(luma)[both], _gradient(reference.channel("reprojected.y"))[both]
+        if both.sum() < 64 or not (mine.std() > 0 and ref.std() > 0):
+            run.skip("previous frame", name, f"{int(both.sum())} pixels seen in both frames, or no edges among them")
+        else:
+            with run.check("previous frame", name) as note:
+                r = float(np.corrcoef(mine, ref)[0, 1])
+                _expect(r >= MIN_EDGE_CORRELATION, f"the gradient magnitudes of its reprojected luma correlate "
+                        f"{r:.2f} with the reference's, needs {MIN_EDGE_CORRELATION}: the previous frame handed over "
+                        "upside down (a GL texture's rows), mirrored or shifted?")
+                note.append(f"correlation {r:.2f}")
+    name = "pixels the previous frame hid are unseen (the depth test)"
+    if "seen" in index:
+        h, w = int(x.shape[1]), int(x.shape[2])
+        rows, cols = np.indices((h, w))
+        px, py = cols + reference.channel("motion.x"), rows + reference.channel("motion.y")
+        hidden = ((reference.channel("seen") == 0) & (reference.channel("depth") > 0)
+                  & (px >= 0) & (px < w) & (py >= 0) & (py < h))
+        if hidden.sum() < 5:
+            run.skip("previous frame", name, f"the move hides {int(hidden.sum())} of the drawn pixels in the "
+                     "previous frame (a larger --size shows more)")
+        else:
+            with run.check("previous frame", name) as note:
+                share = float((~seen[hidden]).mean())
+                _expect(share >= MIN_OCCLUDED_UNSEEN, f"{share:.0%} of the {int(hidden.sum())} pixels the previous "
+                        f"frame hid are unseen, needs {MIN_OCCLUDED_UNSEEN:.0%}: a disocclusion test that never "
+                        "fails (no depth comparison, or a tolerance too wide)?")
+                note.append(f"{share:.0%} of {int(hidden.sum())}")
 
 
 def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = DEFAULT_SIZE,
@@ -374,9 +449,11 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     """
     cls, source_text = resolve_adapter(adapter)
     registry_name = adapter if isinstance(adapter, str) and ":" not in adapter else None
-    if not (isinstance(size, tuple) and len(size) == 2
-            and all(isinstance(v, int) and not isinstance(v, bool) and v >= 16 for v in size)):
+    if not (isinstance(size, (tuple, list)) and len(size) == 2
+            and all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) and v >= 16
+                    for v in size)):
         raise sdk.ParameterError(f"size: expected (width, height), integers of at least 16, got {size!r}", "size")
+    size = (int(size[0]), int(size[1]))
     if image is not None:
         from rtp.capture import check_image_output
 
@@ -428,7 +505,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
         open_source().close()  # (opened to learn whether the engine is there before anything is drawn)
     except ImportError as exc:
         why = f"the {name} adapter's engine is not installed: {exc}"
-        for group in ("class", "planes", "agreement", "order", "predictor", "lifecycle"):
+        for group in ("class", "planes", "agreement", "previous frame", "order", "predictor", "lifecycle"):
             run.skip(group, opens if group == "class" else "driven on the conformance scene", why)
         return report(why)
     except Exception as exc:  # the engine's own error: the adapter cannot be driven
@@ -461,12 +538,13 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     with run.check("planes", "frame source -> adapter -> inputs, every supported channel"):
         x = draw(channels)
     if x is None:
-        for group in ("agreement", "order"):
+        for group in ("agreement", "previous frame", "order"):
             run.skip(group, "driven on the conformance scene", "the adapter produced no planes (above)")
     else:
         _plane_checks(run, x, channels, reference, size)
         if isinstance(x, np.ndarray) and x.shape == (len(channels), h, w):
             _agreement_checks(run, x, channels, reference, tols)
+            _previous_frame_checks(run, x, channels, reference)
             if image is not None:
                 from rtp.capture import save_image
 

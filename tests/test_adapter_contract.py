@@ -48,7 +48,7 @@ REGISTERED = sdk.adapters.available()  # the rtp.adapters entry points (and anyt
 ADAPTERS = [*REGISTERED, THIRD_PARTY]
 
 #: The kit's groups of checks.
-GROUPS = {"class", "planes", "agreement", "order", "predictor", "lifecycle"}
+GROUPS = {"class", "planes", "agreement", "previous frame", "order", "predictor", "lifecycle"}
 
 
 def run_rtp(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
@@ -191,7 +191,8 @@ def _broken(cls_name: str, planes: Callable[[NumpyAdapter, CpuFrame, np.ndarray]
         x = NumpyAdapter.inputs(self, frame)
         return x if planes is None else np.ascontiguousarray(planes(self, frame, x), np.float32)
 
-    return type(cls_name, (NumpyAdapter,), {"inputs": inputs, "__module__": __name__, **attrs})
+    return type(cls_name, (NumpyAdapter,), {"inputs": inputs, "__module__": __name__, **attrs})  # (attrs may
+    # replace inputs itself: a bug in what the adapter reads rather than in what it hands over)
 
 
 def _plane(adapter: Adapter[Any], x: np.ndarray, channel: str) -> np.ndarray:
@@ -246,6 +247,18 @@ BUGS: dict[str, tuple[Callable[[], type[NumpyAdapter]], set[str]]] = {
     "albedo in bytes": (lambda: _broken("AlbedoBytes", lambda a, f, x: _set(
         a, x, **{f"albedo_{c}": _plane(a, x, f"albedo.{c}") * 255 for c in "rgb"})),
                         {"within each channel's range", "albedo.r agrees with the reference renderer"}),
+    # a GL engine's previous frame read back as is (bottom row first), its depth the right way up
+    "previous frame upside down": (lambda: _broken("PrevUpsideDown", inputs=lambda a, f: sdk.input_planes(
+        a.channels, **{**vars(f), "prev_colour": np.ascontiguousarray(f.prev_colour[::-1])}, tolerance=a.tolerance)),
+                                   {"the previous frame's edges line up with the reference renderer's"}),
+    # a disocclusion test that never fails: every pixel reprojecting inside the previous frame is seen
+    "no depth test": (lambda: _broken("NoDepthTest", inputs=lambda a, f: sdk.input_planes(
+        a.channels, **vars(f), tolerance=1.0)), {"pixels the previous frame hid are unseen (the depth test)"}),
+    # the 4x4 cells of a .blocks plane anchored at the bottom-left pixel (computed on GL rows)
+    "blocks from the bottom": (lambda: _broken("BlocksFromTheBottom", lambda a, f, x: _set(
+        a, x, albedo_y_blocks=sdk.block_variances(np.ascontiguousarray(_plane(a, x, "albedo.y")[::-1]))[::-1]),
+        supported_channels=NumpyAdapter.supported_channels | {"albedo.y.blocks"}),
+                               {"albedo.y.blocks is sdk.block_variances of the adapter's own albedo.y"}),
     "misnamed": (lambda: _broken("Misnamed", name="numpy"), {"name is its registry name"}),
     "closing the source leaves adapters open": (
         lambda: _broken("Untracked", frame_source=classmethod(
@@ -309,7 +322,7 @@ def test_an_adapter_that_raises_fails_with_its_error_and_the_rest_still_runs(reg
     report = _report(THIRD_PARTY)
     first = next(c for c in report.checks if c.group == "planes")
     assert first.status == "failed" and first.detail == "raised RuntimeError: shader failed to compile"
-    assert [c.status for c in report.checks if c.group in ("agreement", "order")] == ["skipped", "skipped"]
+    assert [c.status for c in report.checks if c.group in ("agreement", "previous frame", "order")] == ["skipped"] * 3
     assert {c.group for c in report.checks if c.status == "passed"} >= {"class"}
 
 
@@ -356,9 +369,11 @@ def test_the_kit_draws_another_scene_and_skips_what_its_move_cannot_show(monkeyp
     monkeypatch.setattr(_kit, "_cameras", lambda scene: (moved(scene)[1],) * 2)
     still = conformance.check_adapter(NumpyAdapter, model="lpips")
     assert still.ok, str(still)
-    (skip,) = still.skipped
+    skip, hidden = still.skipped
     assert skip.name == "some pixels are unseen after the move, most are seen"
     assert skip.detail == "the reference renderer's frame has 0.0% unseen pixels after this scene's move"
+    assert hidden.name == "pixels the previous frame hid are unseen (the depth test)"
+    assert hidden.detail.startswith("the move hides 0 of the drawn pixels in the previous frame")
     for bad, error in (("procedural:x", RtpError), ("no/such/level.glb", RtpError), ("", sdk.ParameterError)):
         with pytest.raises(error, match="scene|mesh file"):
             conformance.check_adapter(NumpyAdapter, scene=bad)
@@ -462,7 +477,7 @@ def test_rtp_adapters_check_fails_when_the_engine_is_missing(capsys: pytest.Capt
 
     assert main(["adapters", "check", f"{__name__}:NoEngineAdapter"]) == sdk.EXIT_USAGE  # a missing install
     out, err = capsys.readouterr()
-    assert "6 passed, 0 failed, 6 skipped" in out
+    assert "6 passed, 0 failed, 7 skipped" in out
     assert err.strip().splitlines()[-1] == (
         "rtp adapters check: error: the checks that draw frames did not run (the numpy-gbuffers adapter's engine is "
         "not installed: No module named 'myengine'): install the adapter's engine and run again")
