@@ -77,7 +77,29 @@ def _output(source: str | os.PathLike[str], output: str | os.PathLike[str], *, i
     if not in_place and out.exists() and Path(source).exists() and os.path.samefile(out, source):
         raise ParameterError(f"output {str(out)!r} is the input itself; write the result to another path", "output")
     check_output(out, what="output")
+    if out.is_file() and out.stat().st_size > 0 and not _is_onnx(out):  # (an empty file holds nothing to lose)
+        kind = "a training checkpoint (a zip)" if _is_zip(out) else "no ONNX model"
+        raise ParameterError(f"output {str(out)!r} exists and is {kind}: an export replaces only an ONNX model; "
+                             "remove the file or write to another path", "output")
     return out
+
+
+def _is_zip(path: Path) -> bool:
+    with open(path, "rb") as f:
+        return f.read(4) == b"PK\x03\x04"
+
+
+def _is_onnx(path: Path) -> bool:
+    """Whether ``path`` parses as an ONNX model (its weights' external files, if any, not read)."""
+    if _is_zip(path):
+        return False
+    import onnx
+
+    try:
+        onnx.load(str(path), load_external_data=False)
+    except Exception:  # (protobuf's DecodeError and its kin: anything that is no model)
+        return False
+    return True
 
 
 def _path(value: Any, what: str) -> Path:

@@ -611,6 +611,21 @@ def test_no_export_writes_over_its_checkpoint_or_where_it_cannot_write(fast_onnx
     cli = _cli(str(ck), "-o", str(ck))
     assert cli.returncode == 2 and "is the input itself" in cli.stderr and "Traceback" not in cli.stderr
     assert ck.read_bytes() == before
+    # another training's checkpoint, or any file that is no ONNX model, is not replaced either (it was, exit 0)
+    other = checkpoint.save(tmp_path / "other.pt", _trained_like_net(), base_metadata())
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    kept = {other: other.read_bytes(), notes: notes.read_bytes()}
+    for out, kind in ((other, r"a training checkpoint \(a zip\)"), (notes, "no ONNX model")):
+        with pytest.raises(sdk.ParameterError, match=f"exists and is {kind}: an export replaces only an ONNX model"):
+            export.export_checkpoint(ck, out)
+    cli = _cli(str(ck), "-o", str(other))
+    assert cli.returncode == 2 and "a training checkpoint" in cli.stderr
+    assert all(path.read_bytes() == data for path, data in kept.items())
+    (tmp_path / "empty.onnx").touch()  # (an empty file, and a model, are replaced)
+    export.export_checkpoint(ck, tmp_path / "empty.onnx")
+    export.export_checkpoint(ck, copy)
+    assert sdk.load(copy).metadata == sdk.load(tmp_path / "empty.onnx").metadata
 
 
 def test_a_sidecar_that_is_not_text_or_not_yaml_is_a_metadata_error(fast_onnx: Path, tmp_path: Path) -> None:
