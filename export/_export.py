@@ -755,6 +755,10 @@ def export_checkpoint(
         raise ParameterError(f"split_planes: expected True or False, got {split_planes!r}", "split_planes")
     ckpt = ckpt_mod.load(checkpoint)
     out = _output(checkpoint, output if output is not None else Path(checkpoint).with_suffix(".onnx"), in_place=False)
+    if ckpt.training is not None and ckpt.training.get("done") is False:
+        log.warning("%s holds a training that has not finished (step %s; its safety margin, calibrated at the end, is "
+                    "%g): the model is exported as it stands; the same rtp train command finishes it",
+                    checkpoint, ckpt.training.get("step", "?"), ckpt.metadata.safety)
     meta_dict = ckpt.metadata.to_dict()
     if extra_metadata is not None:
         extra = _fields(extra_metadata, "extra_metadata")

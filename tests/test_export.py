@@ -637,3 +637,18 @@ def test_a_sidecar_that_is_not_text_or_not_yaml_is_a_metadata_error(fast_onnx: P
             export.retune(fast_onnx, sidecar, tmp_path / "out.onnx")
         assert "\n" not in str(err.value)  # one line, YAML's caret and context folded in
     assert not (tmp_path / "out.onnx").exists()
+
+
+def test_an_unfinished_training_exports_with_a_warning(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A checkpoint of an interrupted training (no safety calibration yet) exported silently; it says so now,
+    and a finished one says nothing."""
+    net, meta = _trained_like_net(), base_metadata()
+    for done in (False, True):
+        ck = checkpoint.save(tmp_path / f"m{done}.pt", net, meta, {"done": done, "step": 250})
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp.export"):
+            export.export_checkpoint(ck, tmp_path / f"m{done}.onnx")
+        said = [r.getMessage() for r in caplog.records if "has not finished" in r.getMessage()]
+        assert said == ([] if done else [f"{ck} holds a training that has not finished (step 250; its safety margin, "
+                                         "calibrated at the end, is 0): the model is exported as it stands; the same "
+                                         "rtp train command finishes it"])

@@ -1722,3 +1722,33 @@ def test_bench_hardware_tiles_compares_models_on_one_tile_size(tmp_path: Path, m
         got = [float(x) for x in row[3].split("/") if x.strip() != "-"]
         assert got == sorted(got) and all(0.0 <= x <= 93.75 for x in got)
         assert 35.0 - 20.0 * np.log10(4.0) <= float(row[5]) <= 35.0 - 20.0 * np.log10(0.05)  # dB inside the sweep
+
+
+def test_a_damaged_training_state_is_a_checkpoint_error_naming_the_file(tmp_path: Path) -> None:
+    """Resuming from a checkpoint whose training state was damaged or edited raised KeyError, RuntimeError,
+    JSONDecodeError or TypeError from inside torch; a checkpoint with no training state said it was trained with
+    another configuration, and one past this run's steps was taken as done. Each is named now."""
+    from rtp.train import checkpoint
+
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_every=5, save_every=5, head="linear")
+    out = tmp_path / "m.pt"
+    train(TrainConfig(out=str(out), steps=5, **cfg))
+    good = load_checkpoint(out)
+    assert good.training is not None
+    damaged = {"no generator": {k: v for k, v in good.training.items() if k != "generator"},
+               "a wrong generator": {**good.training, "generator": torch.zeros(3, dtype=torch.uint8)},
+               "history not JSON": {**good.training, "history": "not json"},
+               "no optimizer state": {**good.training, "optimizer": {}},
+               "a step that is no number": {**good.training, "step": "abc"},
+               "a negative step": {**good.training, "step": -5}}
+    for why, state in damaged.items():
+        path = checkpoint.save(tmp_path / "bad.pt", good.net, good.metadata, state)
+        with pytest.raises(checkpoint.CheckpointError, match=r"bad\.pt: its training state cannot be resumed") as info:
+            train(TrainConfig(out=str(path), steps=10, **cfg))
+        assert sdk.exit_code(info.value) == sdk.EXIT_USAGE, why
+    path = checkpoint.save(tmp_path / "bare.pt", good.net, good.metadata)
+    with pytest.raises(checkpoint.CheckpointError, match="bare.pt exists and holds a model without its training state"):
+        train(TrainConfig(out=str(path), steps=10, **cfg))
+    with pytest.raises(sdk.ParameterError, match=r"steps: .*m\.pt holds step 5, past this run's 3: give --steps 5"):
+        train(TrainConfig(out=str(out), steps=3, **cfg))

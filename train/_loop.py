@@ -987,19 +987,33 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     config_key = json.loads(json.dumps(config_key))
     if out.is_file():
         prev = ckpt.load(out)
-        state = prev.training or {}
+        if not prev.training:
+            raise ckpt.CheckpointError(f"{out} exists and holds a model without its training state (saved from Python "
+                                       "without one, or exported from elsewhere): nothing to resume; choose another "
+                                       "output path or delete it")
+        state = prev.training
         before = state.get("config") or {}
         if before != config_key:
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
             raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
                                "choose another output path or delete it")
-        avg.load_state_dict(state["full_weights"] if cfg.aux_metrics else prev.net.state_dict())
-        if cfg.ema:
-            net.load_state_dict(state["raw_weights"])
-        opt.load_state_dict(state["optimizer"])
-        sched.load_state_dict(state["scheduler"])
-        gen.set_state(state["generator"])
-        step, history = int(state["step"]), list(json.loads(state["history"]))
+        try:
+            avg.load_state_dict(state["full_weights"] if cfg.aux_metrics else prev.net.state_dict())
+            if cfg.ema:
+                net.load_state_dict(state["raw_weights"])
+            opt.load_state_dict(state["optimizer"])
+            sched.load_state_dict(state["scheduler"])
+            gen.set_state(state["generator"])
+            step, history = int(state["step"]), list(json.loads(state["history"]))
+            if step < 0:
+                raise ValueError(f"step {step}")
+        except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
+            raise ckpt.CheckpointError(f"{out}: its training state cannot be resumed ({type(exc).__name__}: {exc}); "
+                                       "the file was damaged or edited: delete it to train afresh, or export the model it "
+                                       "holds (rtp-export)") from exc
+        if step > cfg.steps:
+            raise sdk.ParameterError(f"steps: {out} holds step {step}, past this run's {cfg.steps}: give --steps {step} "
+                                     "or more to go on training it, or another output path", "steps")
         log.info("resuming %s at step %d", out, step)
         last = history[-1] if history else {}
         last_loss = last.get("train_loss", last.get("train_l1"))  # train_l1: checkpoints from before --loss
