@@ -238,16 +238,30 @@ def _session(ort: Any, model_path: Path, source: str | bytes, opts: Any, request
         first = err
     names = [_provider_name(p) for p in requested]
     if names == [_CPU] or _CPU not in ort.get_available_providers():
-        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}: {first}") from first
+        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}{_not_a_model(model_path)}: {first}") from first
     try:
         session = build([_CPU])
     except Exception as err:  # the model itself does not load
-        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}: {err}") from err
+        raise ModelLoadError(f"onnxruntime cannot load {str(model_path)!r}{_not_a_model(model_path)}: {err}") from err
     msg = f"the session could not be built on {', '.join(names)} ({first}); it runs on {_CPU}"
     if strict:
         raise ProviderUnavailableError(msg) from first
     log.warning(msg)
     return session
+
+
+def _not_a_model(path: Any) -> str:
+    """What a file onnxruntime cannot parse looks like instead, for the message (empty where nothing is known)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except (OSError, TypeError):
+        return ""
+    if head == b"PK\x03\x04":
+        return f" (a zip, as a training checkpoint is: export it first, rtp-export {path})"
+    if str(path).lower().endswith((".yaml", ".yml")):
+        return " (a metadata sidecar: load the .onnx model it describes)"
+    return ""
 
 
 def _usable_cores() -> int:

@@ -456,6 +456,26 @@ def test_a_corrupted_graph_is_refused_without_printing(
     _refused_quietly(capfd, bad, "onnxruntime cannot load")
 
 
+def test_a_checkpoint_or_a_sidecar_given_as_a_model_is_named(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """`rtp info model.pt` and `sdk.load('model.yaml')` gave protobuf's parsing error alone; what the file looks
+    like instead is named, with the step that makes a model of it."""
+    import zipfile
+
+    ck = tmp_path / "m.pt"
+    with zipfile.ZipFile(ck, "w") as z:  # (a torch checkpoint is a zip)
+        z.writestr("m/data.pkl", b"x")
+    _refused_quietly(capfd, ck, rf"cannot load '.*m\.pt' \(a zip, as a training checkpoint is: export it first, "
+                                rf"rtp-export .*m\.pt\)")
+    sidecar = tmp_path / "m.yaml"
+    sidecar.write_text("default_threshold: 0.2\n")
+    _refused_quietly(capfd, sidecar, r"\(a metadata sidecar: load the \.onnx model it describes\)")
+    other = tmp_path / "x.onnx"
+    other.write_bytes(b"\x08garbage")
+    with pytest.raises(sdk.ModelLoadError) as info:
+        sdk.load(other)
+    assert "(a " not in str(info.value)
+
+
 def test_onnxruntime_releases_are_read_as_numbers() -> None:
     from rtp.sdk import _predictor
 
