@@ -464,8 +464,8 @@ def test_a_checkpoint_or_a_sidecar_given_as_a_model_is_named(tmp_path: Path, cap
     ck = tmp_path / "m.pt"
     with zipfile.ZipFile(ck, "w") as z:  # (a torch checkpoint is a zip)
         z.writestr("m/data.pkl", b"x")
-    _refused_quietly(capfd, ck, rf"cannot load '.*m\.pt' \(a zip, as a training checkpoint is: export it first, "
-                                rf"rtp-export .*m\.pt\)")
+    _refused_quietly(capfd, ck, r"cannot load '.*m\.pt' \(a zip, as a training checkpoint is: export it first, "
+                                r"rtp-export .*m\.pt\)")
     sidecar = tmp_path / "m.yaml"
     sidecar.write_text("default_threshold: 0.2\n")
     _refused_quietly(capfd, sidecar, r"\(a metadata sidecar: load the \.onnx model it describes\)")
