@@ -425,7 +425,7 @@ def _tolerance(text: str) -> tuple[str, float]:
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
-    from rtp.capture import capture
+    from rtp.capture import capture, scene_id
     from rtp.capture.scenes import map_names
 
     if bool(args.scene) == bool(args.split):
@@ -436,12 +436,14 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     if not args.quiet:  # (-q: only errors)
         print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
               f"at {args.size[0]}x{args.size[1]}, cameras placed {args.placement}, into {args.out}", file=sys.stderr)
-    done = [0]
-    args.on_interrupt = lambda: (f"{done[0]} of {total} samples are in {args.out} (each written whole): the same "
+    def kept() -> int:  # (on disk: a worker's sample can land after the last progress report the account saw)
+        return sum((Path(args.out) / "samples" / f"{scene_id(n)}-{p}-{i:04d}.npz").is_file()
+                   for n in names for p in args.profiles for i in range(args.per_scene))
+
+    args.on_interrupt = lambda: (f"{kept()} of {total} samples are in {args.out} (each written whole): the same "
                                  f"command captures the rest")
 
     def progress(n: int, _total: int) -> None:
-        done[0] = n
         bar.update_to(n)
 
     with Bar(args, total, "capture", "sample") as bar:

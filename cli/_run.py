@@ -15,6 +15,7 @@ import errno
 import logging
 import os
 import re
+import signal
 import sys
 import threading
 import time
@@ -332,6 +333,28 @@ def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace]
                            on_interrupt=lambda: getattr(args, "on_interrupt", None))
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, ``docker stop``, a job scheduler) while a command runs: it unwinds as Ctrl-C
+    does (workers stopped, what is written kept, the account of it printed), and exits 143."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises :class:`Terminated` in the main thread while the block runs (elsewhere: nothing changes)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminated(signum: int, frame: Any) -> None:
+        raise Terminated()
+
+    before = signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
 def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False,
                 on_interrupt: Callable[[], Callable[[], str] | None] | None = None) -> int:
     """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,
@@ -344,15 +367,17 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     from rtp.sdk import EXIT_FAILED, EXIT_USAGE, RtpError, exit_code
 
     try:
-        return int(body() or 0)
+        with _terminate_as_interrupt():
+            return int(body() or 0)
     except RtpError as err:
         if verbose:
             traceback.print_exc()
         print(f"{prog}: error: {one_line(str(err))}", file=sys.stderr)
         return exit_code(err)
     except KeyboardInterrupt as err:
-        print(f"{prog}: interrupted{_kept(on_interrupt)}", file=sys.stderr)
-        return exit_code(err)
+        print(f"{prog}: {'terminated' if isinstance(err, Terminated) else 'interrupted'}{_kept(on_interrupt)}",
+              file=sys.stderr)
+        return 128 + signal.SIGTERM if isinstance(err, Terminated) else exit_code(err)
     except MemoryError as err:  # numpy's "Unable to allocate 30.5 GiB for an array ...": the machine's limit, not a bug
         if verbose:
             traceback.print_exc()
