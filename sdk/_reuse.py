@@ -504,9 +504,9 @@ class PredictionReuse:
     interval that adapts to the camera").
 
     ``step`` is how densely the carry follows the surfaces: one pixel of every ``step`` per axis
-    carries its surface's place (a divisor of the tile size; None: every second). A larger step
-    costs less per carried frame (docs/performance.md "Prediction reuse on a CPU") and samples each
-    tile's surfaces more coarsely.
+    carries its surface's place (a divisor of the tile size; None: :func:`default_step`, every fourth
+    pixel of a 16-pixel tile). A larger step costs less per carried frame (docs/performance.md
+    "Prediction reuse on a CPU") and samples each tile's surfaces more coarsely.
 
     ``rescale`` > 0 (models with ``.blocks`` inputs, error metrics) rescales carried estimates by how
     the content now falls on each rate's blocks: the carry holds each tile's estimate divided by
