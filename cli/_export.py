@@ -41,8 +41,9 @@ def build_export_parser() -> argparse.ArgumentParser:
     p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")
     p.add_argument("--replace", action="store_true", help="with --adopt: overwrite metadata the model already has")
     p.add_argument("--restamp", metavar="MODEL.onnx", help="bring an rtp model exported by an older rtp up to "
-                   "this one's format: the digest of graph and weights, and the finite probe where its first "
-                   "layer allows one (in place; predictions unchanged)")
+                   "this one's format: the digest of graph and weights, the finite probe where its first "
+                   "layer allows one, and the input planes in today's groups (in place; predictions checked "
+                   "unchanged)")
     p.add_argument("--no-finite-probe", action="store_true", help="export a checkpoint without the finite probe "
                    "output (docs/export.md): for an engine that runs the file with its own onnxruntime session")
     p.add_argument("--one-input", action="store_true", help="export a checkpoint with every input plane in the one "
