@@ -185,6 +185,8 @@ def main(argv: list[str] | None = None) -> int:
     args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
     if args.frames < 2 or args.every < 1:
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
+    if args.gif is not None and args.frames < 3:
+        ap.error("--gif animates a frame loop: give --frames 3 or more")
     if args.moving and args.frames < 3:
         ap.error("--moving slides a box through a frame loop: give --frames 3 or more")
     if args.scene is not None and not args.scene.is_file():

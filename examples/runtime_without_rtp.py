@@ -401,7 +401,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--engine-rate", choices=tuple(CODES), help="step 8: the engine's own rate over the whole frame "
                     "(a per-draw rate), which --combiner meets with the image")
     ap.add_argument("--combiner", choices=("min", "max", "sum"), default="max", help="step 8's combiner (default max)")
-    ap.add_argument("--tile-size", type=int, help="the hardware's shading-rate tile size (default: the model's)")
+    ap.add_argument("--tile-size", type=int, choices=(4, 8, 16, 32),
+                    help="the hardware's shading-rate tile size (default: the model's)")
     ap.add_argument("--allowed", default=",".join(RATES), help="the reduced rates the hardware has (default: all six)")
     ap.add_argument("--check", action="store_true", help="compare with rtp.sdk's shading_rates on the same frame")
     a = ap.parse_args(argv)
@@ -416,11 +417,21 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"--frame: expected float32 planes ({len(meta['inputs'])}, H, W) for {meta['inputs']}, got "
                      f"{x.dtype} {x.shape}")
     else:
-        w, h = (int(v) for v in a.size.lower().split("x"))
+        try:
+            w, h = (int(v) for v in a.size.lower().split("x"))
+        except ValueError:
+            w = h = 0
+        if min(w, h) < 1:
+            ap.error(f"--size: expected WIDTHxHEIGHT such as 1280x720, got {a.size!r}")
         x = np.random.default_rng(0).random((len(meta["inputs"]), h, w), dtype=np.float32)
         if "seen" in meta["inputs"]:  # a mask: 0 or 1
             x[meta["inputs"].index("seen")] = x[meta["inputs"].index("seen")] > 0.2
     allowed = tuple(r.strip() for r in a.allowed.split(",") if r.strip())
+    unknown = [r for r in allowed if r not in RATES]
+    if unknown:
+        ap.error(f"--allowed: {', '.join(unknown)} is no reduced rate; the rates are {', '.join(RATES)}")
+    if a.threshold is not None and not np.isfinite(a.threshold):
+        ap.error(f"--threshold: expected a finite number, got {a.threshold:g}")
     if a.saving is not None and not 0.0 <= a.saving <= 0.9375:
         ap.error(f"--saving: expected a share of the shading work in [0, 0.9375], got {a.saving:g}")
     engine = None if a.engine_rate is None else np.uint8(CODES[a.engine_rate])

@@ -49,6 +49,9 @@ def test_pyrender_example_loops_with_the_reuse_model(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--frames", "1"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "expected --frames >= 2" in r.stderr
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--gif", str(tmp_path / "g.gif")],
+                       capture_output=True, text=True, timeout=300)  # (the default two frames wrote no GIF, silently)
+    assert r.returncode == 2 and "--gif animates a frame loop: give --frames 3 or more" in r.stderr
 
 
 @pytest.mark.gl

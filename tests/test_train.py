@@ -33,9 +33,10 @@ H, W = 64, 96
 
 
 def _dataset(root: Path, n: int = 12, flip: bool = False, prefix: str = "s", profile: str | None = None,
-             weber_l: float = 0.02) -> Path:
+             weber_l: float = 0.02, scenes: tuple[str, ...] = ("scene0", "scene1", "scene2")) -> Path:
     """``n`` samples over three scenes with JNYang targets (and, with ``flip``, FLIP targets: another function of
-    the same texture contrast); ids ``{prefix}000`` on, each of motion ``profile`` where one is given."""
+    the same texture contrast); ids ``{prefix}000`` on, each of motion ``profile`` where one is given, of
+    ``scenes`` in turn."""
     w = DatasetWriter(root)
     store = TargetStore(root)
     store.declare("jnyang", {"weber_l": weber_l})
@@ -50,7 +51,7 @@ def _dataset(root: Path, n: int = 12, flip: bool = False, prefix: str = "s", pro
         amp = rng.random((H // 4, W // 4)).repeat(4, 0).repeat(4, 1)
         bufs["albedo"][..., 0] = 0.5 + amp * (rng.random((H, W)) - 0.5)
         sid = f"{prefix}{i:03d}"
-        w.write(sid, bufs, {"scene": f"scene{i % 3}", **({"profile": profile} if profile else {})})
+        w.write(sid, bufs, {"scene": scenes[i % len(scenes)], **({"profile": profile} if profile else {})})
         edge = np.abs(np.diff(bufs["albedo"][..., 0], axis=1, append=0.5))
         tiles = edge.reshape(H // 4, 4, W // 4, 4).max(axis=(1, 3))
         store.write(sid, "jnyang", np.stack([tiles * k for k in (1, 1.1, 1.2, 1.5, 1.6, 2)]).astype(np.float32), (H, W))
@@ -233,6 +234,9 @@ def test_a_dataset_of_one_scene_is_told_how_to_add_a_second(tmp_path: Path, caps
     assert f"{one} holds one scene (scene0); validation holds out whole scenes, so it needs two: capture another " \
            f"into it (rtp capture --scene procedural:1 --out {one} with the same --size" in err
     assert not out.exists()
+    level = _dataset(tmp_path / "level", n=1, scenes=("procedural_1",))  # (its one scene is the one it suggested)
+    assert rtp_main(["train", "--data", str(level), "--metric", "jnyang", "--out", str(out)]) == 2
+    assert f"(rtp capture --scene procedural:2 --out {level} with" in capsys.readouterr().err
 
 
 def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

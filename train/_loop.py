@@ -424,9 +424,10 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
         raise sdk.ParameterError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}")
     if not val:
         if len(scenes) < 2:
+            seed = next(k for k in range(1, 100) if f"procedural_{k}" not in scenes)  # (not the one it holds)
             raise DatasetError(
                 f"{cfg.data} holds one scene ({scenes[0] if scenes else 'none'}); validation holds out whole scenes, "
-                f"so it needs two: capture another into it (rtp capture --scene procedural:1 --out {cfg.data} with "
+                f"so it needs two: capture another into it (rtp capture --scene procedural:{seed} --out {cfg.data} with "
                 "the same --size adds the built-in generator's, or --scene another of your files), or, of an engine's "
                 "frames, import another level's (rtp import FRAMES --scene LEVEL --out DATA)")
         val = [scenes[-1]]
