@@ -685,7 +685,9 @@ class ShadingRatePredictor:
             raise InputDtypeError(f"expected a numpy.ndarray of float32, got {type(x).__name__}")
         x = np.asarray(x)  # a subclass as the plain array the model reads (a masked array's mask hid its NaNs)
         if x.dtype != np.float32:
-            raise InputDtypeError(f"expected dtype float32, got {x.dtype}; convert with x.astype(np.float32)")
+            swapped = x.dtype.kind == "f" and x.dtype.itemsize == 4  # (big-endian '>f4': float32, other byte order)
+            raise InputDtypeError(f"expected dtype float32{' in native byte order' if swapped else ''}, got "
+                                  f"{x.dtype.str if swapped else x.dtype}; convert with x.astype(np.float32)")
         c = len(self._meta.inputs)
         if x.ndim not in (3, 4):
             raise InputShapeError(

@@ -528,9 +528,9 @@ def _engine_rates(engine_rates: object, combiner: object, rates: tuple[str, ...]
                   tiles: tuple[int, ...]) -> tuple[_Combination, np.ndarray] | None:
     """``engine_rates`` checked and broadcast over predictions' ``tiles`` shape ``(..., th, tw)``, with the tables
     of ``combiner``; None without engine rates. Typed errors name the argument."""
+    op = _check_combiner(combiner, selecting=True)  # (checked without engine rates too: a typo is named at once)
     if engine_rates is None:
         return None
-    op = _check_combiner(combiner, selecting=True)
     index = _rate_index(engine_rates, ("1x1",) + rates, "engine_rates")
     try:
         index = np.broadcast_to(index, tiles)

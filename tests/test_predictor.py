@@ -751,3 +751,17 @@ def test_a_16_pixel_model_on_8_pixel_hardware_tiles(tiny_model: Callable[..., Pa
         with pytest.raises(sdk.ParameterError, match=r"model_tile: expected a model's tile size, one of \[1, 2"):
             sdk.hardware_tiles(bad)  # type: ignore[arg-type]
     assert sdk.PredictionReuse(fine).predictor is fine  # reused on the model's tiles, then split (test_reuse.py)
+
+
+def test_big_endian_planes_and_a_combiner_without_engine_rates_are_named() -> None:
+    """'>f4' planes were refused as "expected dtype float32, got >f4" (float32, by the look of it), and a
+    misspelt combiner passed unnoticed until engine rates came along."""
+    predictor = sdk.load("jnyang")
+    x = np.zeros((len(predictor.metadata.inputs), 32, 32), np.float32)
+    with pytest.raises(sdk.InputDtypeError, match="expected dtype float32 in native byte order, got >f4"):
+        predictor.predict(x.astype(">f4"))
+    with pytest.raises(sdk.InputDtypeError, match="expected dtype float32, got float64"):
+        predictor.predict(x.astype(np.float64))
+    with pytest.raises(sdk.ParameterError, match="combiner: expected one of min, max, sum"):
+        predictor.shading_rates(x, combiner="avg")
+    assert predictor.shading_rates(x, combiner="min").shape == (2, 2)

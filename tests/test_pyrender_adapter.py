@@ -465,8 +465,16 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
             np.testing.assert_array_equal(colour, before)  # display draws are pyrender's own, MSAA included
         after, _ = user.render(scene)  # the borrowed renderer got its own program cache back
         np.testing.assert_array_equal(after, before)
+        # a camera is placed, not scaled or sheared: such a pose read depth and normals in a distorted view space
+        for bad in (np.diag([2.0, 2.0, 2.0, 1.0]), np.array([[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])):
+            with Adapter(["seen"], 64, 48, renderer=user) as adapter, \
+                    pytest.raises(PyrenderAdapterError, match="pose must be a rigid camera-to-world matrix"):
+                adapter.inputs(SceneFrame(scene, bad, np.eye(4), before))
     finally:
         _delete_renderer(user)  # not user.delete(): pyrender's terminates the EGL display every context shares
+    # a deleted renderer was taken, and the first inputs() failed with an AttributeError from inside pyrender
+    with pytest.raises(PyrenderAdapterError, match="this pyrender.OffscreenRenderer has been deleted"):
+        Adapter(["seen"], 64, 48, renderer=user)
 
 
 _DROPPED_UNCLOSED = """

@@ -61,6 +61,12 @@ def _pose(value: Any, name: str) -> np.ndarray:
         invertible = False
     if not invertible:
         raise PyrenderAdapterError(f"{name} must be an invertible camera-to-world matrix, got a singular one")
+    rotation = m[:3, :3]
+    if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-4):  # (a camera is placed, never scaled or sheared)
+        scales = np.linalg.norm(rotation, axis=0)
+        raise PyrenderAdapterError(f"{name} must be a rigid camera-to-world matrix (a rotation and a translation), "
+                                   f"got one that scales or shears (its axes' lengths {np.round(scales, 4).tolist()}): "
+                                   "depth, normals and motion would be read in a distorted view space")
     return m
 
 

@@ -195,6 +195,9 @@ class GBufferRenderer:
         self._owns = renderer is None
         if renderer is None:
             renderer = offscreen_renderer(self._pyrender, self.width, self.height)
+        elif getattr(renderer, "_renderer", True) is None or getattr(renderer, "_platform", True) is None:
+            raise PyrenderAdapterError("renderer: this pyrender.OffscreenRenderer has been deleted (delete() frees its "
+                                       "context); borrow the renderer the engine draws with, while it lives")
         elif (renderer.viewport_width, renderer.viewport_height) != (self.width, self.height):
             raise PyrenderAdapterError(
                 f"the renderer draws {renderer.viewport_width}x{renderer.viewport_height}, the adapter "
@@ -226,7 +229,10 @@ class GBufferRenderer:
         except Exception as exc:  # pragma: no cover - a context already gone
             log.debug("could not free the G-buffer programs: %s", exc)
         if self._owns:
-            _delete_renderer(r)
+            try:
+                _delete_renderer(r)
+            except Exception as exc:  # (the shared EGL display terminated under it, by a renderer rtp did not make)
+                log.debug("could not delete the adapter's renderer: %s", exc)
 
     @property
     def closed(self) -> bool:
