@@ -261,8 +261,19 @@ def _render(renderer: Any, scene_name: str, profile: str, prev_cam: Any, cam: An
 
 
 def _todo(writer: DatasetWriter, reader: DatasetReader, planned: list[tuple[str, Any, Any]]) -> list[tuple[str, Any, Any]]:
-    """The planned samples that are not on disk yet, or were rendered from other cameras."""
-    return [(sid, p, c) for sid, p, c in planned if not (writer.has(sid) and _same_cameras(reader, sid, p, c))]
+    """The planned samples that are not on disk yet, were rendered from other cameras, or cannot be read (a file
+    damaged since: captured again, with a warning, rather than stopping the resume)."""
+    def kept(sid: str, prev_cam: Any, cam: Any) -> bool:
+        if not writer.has(sid):
+            return False
+        try:
+            return _same_cameras(reader, sid, prev_cam, cam)
+        except DatasetError as err:  # (removed: nothing of it can be read, and it is no sample of other cameras)
+            log.warning("%s; captured again", err)
+            (writer.samples_dir / f"{sid}.npz").unlink(missing_ok=True)
+            return False
+
+    return [(sid, p, c) for sid, p, c in planned if not kept(sid, p, c)]
 
 
 def _already_captured(jobs: Sequence[tuple[Any, ...]]) -> list[CaptureReport] | None:

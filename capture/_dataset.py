@@ -390,6 +390,9 @@ def _folder(root: object) -> Path:
     return p
 
 
+_MISSING_SAID: set[tuple[str, int]] = set()
+
+
 class DatasetReader:
     """Reads an rtp dataset folder. Iterating yields :class:`Sample` objects in id order.
 
@@ -400,10 +403,22 @@ class DatasetReader:
     def __init__(self, root: str | os.PathLike[str]) -> None:
         self.root = _folder(root)
         self.manifest = _read_manifest(self.root)
+        folder = self.root / "samples"
+        if folder.exists() and not folder.is_dir():
+            raise DatasetError(f"{folder}: expected the folder of the samples, found a file")
         try:
-            self.ids = sorted(p.stem for p in (self.root / "samples").glob("*.npz") if _ID_RE.match(p.stem))
+            self.ids = sorted(p.stem for p in folder.glob("*.npz") if _ID_RE.match(p.stem) and p.is_file())
         except OSError as err:
-            raise DatasetError(f"{self.root / 'samples'}: cannot be listed ({err})") from err
+            raise DatasetError(f"{folder}: cannot be listed ({err})") from err
+        listed = self.manifest.get("samples")
+        if isinstance(listed, list):
+            missing = sorted(set(map(str, listed)) - set(self.ids))
+            if missing and (str(self.root), len(missing)) not in _MISSING_SAID:
+                _MISSING_SAID.add((str(self.root), len(missing)))  # (once a process: readers are opened often)
+                log.warning("%s: %d of the %d samples its manifest lists are not in samples/ (%s%s): deleted or moved "
+                            "since the last capture? they are left out; the same rtp capture command captures them "
+                            "again", self.root, len(missing), len(listed), ", ".join(missing[:3]),
+                            ", ..." if len(missing) > 3 else "")
 
     def __len__(self) -> int:
         return len(self.ids)

@@ -408,3 +408,19 @@ def test_sigterm_unwinds_a_capture_as_ctrl_c_does(tmp_path: Path) -> None:
     assert not _children(proc.pid)
     again = capture(["procedural:7"], out, per_scene=40, size=(96, 64), profiles=("slow",))
     assert (again.written, again.skipped) == (40 - kept, kept)
+
+
+def test_a_resumed_capture_captures_a_damaged_sample_again(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A sample file damaged since it was written (truncated by a full disk or a copy) stopped the resume with
+    "unreadable sample" and no way on but deleting it by hand; it is captured again, saying so."""
+    out = tmp_path / "ds"
+    first = capture(["procedural:7"], out, per_scene=2, size=(96, 64), profiles=("slow",))
+    assert first.written == 2
+    damaged = out / "samples" / "procedural_7-slow-0000.npz"
+    damaged.write_bytes(damaged.read_bytes()[:5000])
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        again = capture(["procedural:7"], out, per_scene=2, size=(96, 64), profiles=("slow",))
+    assert (again.written, again.skipped, again.recaptured) == (1, 1, 0)
+    assert any(f"{damaged}: unreadable sample" in r.getMessage() and r.getMessage().endswith("captured again")
+               for r in caplog.records)
+    assert DatasetReader(out)["procedural_7-slow-0000"].buffer("depth").shape == (64, 96)
