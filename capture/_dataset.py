@@ -311,7 +311,7 @@ class DatasetWriter:
 
     def remove_stale(self) -> int:
         """Delete temporary files a killed writer left behind; call only while no writer is active."""
-        stale = list(self.samples_dir.glob(".*.tmp"))
+        stale = [*self.samples_dir.glob(".*.tmp"), *self.root.glob(".manifest.json.*.tmp")]
         for p in stale:
             p.unlink(missing_ok=True)
         return len(stale)

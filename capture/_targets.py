@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import re
+import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -219,8 +220,10 @@ class TargetStore:
         return sample.is_file() and sample.stat().st_mtime > stored.stat().st_mtime
 
     def has(self, sample_id: str, metric: str) -> bool:
-        """Whether up-to-date targets exist (missing or stale ones are computed by ``rtp targets``)."""
-        return self.path(sample_id, metric).is_file() and not self.stale(sample_id, metric)
+        """Whether up-to-date targets exist (missing, stale or truncated ones are computed by ``rtp targets``: a file
+        cut short by a full disk or a copy is no zip archive)."""
+        path = self.path(sample_id, metric)
+        return path.is_file() and zipfile.is_zipfile(path) and not self.stale(sample_id, metric)
 
     def write(self, sample_id: str, metric: str, values: np.ndarray, size: tuple[int, int]) -> None:
         """Store base-tile values (for PSNR: per-tile MSE) atomically."""
@@ -396,6 +399,8 @@ def compute_targets(
     # write the manifest over this one's.
     with writer_lock(store.root, "rtp targets", lambda holder: TargetError(
             f"{store.root} is being written by another targets job ({holder}): wait for it to end")):
+        for tmp in store.root.glob("*/.*.tmp"):  # (a killed job's: no other writer runs now)
+            tmp.unlink(missing_ok=True)
         params: dict[str, Any] = {"ppd": M.DEFAULT_PPD if ppd is None else ppd,
                                   "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
         for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)

@@ -123,6 +123,29 @@ def test_the_target_store_keeps_to_its_folder(tmp_path: Path) -> None:
     assert (tmp_path / "ds" / "samples" / "a.npz").read_bytes() == before
 
 
+def test_truncated_targets_are_computed_again_and_killed_jobs_leave_no_temporary_files(tmp_path: Path) -> None:
+    """`rtp targets` counted a truncated target file as done (training then failed on it), and the temporary
+    files of a killed targets job or manifest write stayed behind for good."""
+    from rtp.capture import TargetStore, compute_targets
+
+    w = DatasetWriter(tmp_path / "ds")
+    for i in range(2):
+        w.write(f"s{i}", _buffers(seed=i), {"scene": "a"})
+    w.finalize()
+    assert compute_targets(tmp_path / "ds", ["psnr"]) == 2
+    store = TargetStore(tmp_path / "ds")
+    cut = store.path("s1", "psnr")
+    cut.write_bytes(cut.read_bytes()[:100])
+    left = [cut.parent / ".s0.npz.a8a6pmk6.tmp", tmp_path / "ds" / ".manifest.json.xyz.tmp"]
+    for tmp in left:
+        tmp.write_bytes(b"half")
+    assert not store.has("s1", "psnr") and store.has("s0", "psnr")
+    assert compute_targets(tmp_path / "ds", ["psnr"]) == 1
+    assert store.load("s1", "psnr", 16).shape == (6, 2, 3)
+    DatasetWriter(tmp_path / "ds").remove_stale()  # (what a capture's start runs)
+    assert not any(tmp.exists() for tmp in left)
+
+
 @pytest.mark.parametrize("corrupt", ["manifest", "manifest-json", "manifest-base", "npz", "npz-shape"])
 def test_corrupt_targets_are_target_errors(tmp_path: Path, corrupt: str) -> None:
     """A damaged targets manifest or file leaked JSONDecodeError / BadZipFile out of evaluate()."""
