@@ -985,6 +985,9 @@ def adopt(
         d, source = dict(known.metadata), "rtp's sidecar for this published model (rtp/export/published.yaml)"
     elif isinstance(metadata, (str, os.PathLike)):
         d, source = _read_yaml(metadata), str(metadata)
+        if not d:
+            raise MetadataError(f"{metadata}: the sidecar is empty; it gives the model's metadata (metric, transform, "
+                                "inputs, outputs, tile_size, ...: docs/metadata.md)")
     else:
         d, source = _fields(metadata, "metadata"), "given as a mapping"
     adopted: dict[str, Any] = {"file": src.name, "sha256": file_sha256(src), "metadata": source,
@@ -995,7 +998,10 @@ def adopt(
         log.info("%s is the paper's published %s model (%s, %s)", src.name, known.name, known.repository, known.path)
     d["provenance"] = _merge(dict(d.get("provenance") or {}) if isinstance(d.get("provenance"), Mapping) else {},
                              {"adopted": adopted})
-    meta = ModelMetadata.from_dict(d)
+    try:
+        meta = ModelMetadata.from_dict(d)
+    except MetadataError as err:
+        raise MetadataError(f"{source}: {err}") from err
     if carries and not replace:
         raise MetadataError(
             f"{src} already carries {METADATA_KEY}; pass --replace to overwrite it", METADATA_KEY

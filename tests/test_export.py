@@ -652,3 +652,25 @@ def test_an_unfinished_training_exports_with_a_warning(tmp_path: Path, caplog: p
         assert said == ([] if done else [f"{ck} holds a training that has not finished (step 250; its safety margin, "
                                          "calibrated at the end, is 0): the model is exported as it stands; the same "
                                          "rtp train command finishes it"])
+
+
+def test_metadata_errors_name_the_file_they_come_from(tmp_path: Path) -> None:
+    """`rtp-export bad.pt` said `metric: expected a lower-case name ..., got None` and an empty sidecar
+    `metric: ... got None` or `transform: required, missing`, naming no file; each names it now, the empty
+    sidecar as empty."""
+    import torch
+
+    src = _foreign(tmp_path)
+    empty, partial = tmp_path / "empty.yaml", tmp_path / "partial.yaml"
+    empty.write_text("")
+    partial.write_text("metric: jnyang\n")
+    with pytest.raises(sdk.MetadataError, match=r"empty\.yaml: the sidecar is empty"):
+        export.adopt(src, empty, tmp_path / "a.onnx")
+    with pytest.raises(sdk.MetadataError, match=r"partial\.yaml: transform: required, missing"):
+        export.adopt(src, partial, tmp_path / "a.onnx")
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    raw = torch.load(ck, weights_only=False)
+    raw["metadata"]["metric"] = None
+    torch.save(raw, tmp_path / "bad.pt")
+    with pytest.raises(sdk.MetadataError, match=r"bad\.pt: its metadata: metric: expected a lower-case name"):
+        export.export_checkpoint(tmp_path / "bad.pt", tmp_path / "bad.onnx")

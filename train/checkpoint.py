@@ -202,6 +202,9 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
         raise CheckpointError(f"{p}: its weights are not finite ({bad[0]}{more}): the training that wrote it diverged; "
                               "train again to another --out with a lower --lr")
     net.eval()
-    meta = ModelMetadata.from_dict(raw.get("metadata") or {})
+    try:
+        meta = ModelMetadata.from_dict(raw.get("metadata") or {})
+    except MetadataError as err:  # (the field's message alone did not say which file)
+        raise MetadataError(f"{p}: its metadata: {err}") from err
     check_fits(net, meta)
     return Checkpoint(net=net, metadata=meta, training=raw.get("training"), versions=dict(raw.get("versions") or {}))
