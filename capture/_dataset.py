@@ -469,9 +469,10 @@ _PAPER_BUFFERS: dict[str, tuple[str, int | slice]] = {
 }
 
 
-def sample_from_bytes(sample_id: str, data: bytes) -> Sample:
-    """A :class:`Sample` read from the bytes of its ``.npz`` file (what :func:`encode_sample` makes)."""
-    return _open_sample(sample_id, io.BytesIO(data), f"sample {sample_id} (in memory)")
+def sample_from_bytes(sample_id: str, data: bytes, where: str | None = None) -> Sample:
+    """A :class:`Sample` read from the bytes of its ``.npz`` file (what :func:`encode_sample` makes); ``where`` names
+    the file they were read from in its errors (default: the sample, in memory)."""
+    return _open_sample(sample_id, io.BytesIO(data), where or f"sample {sample_id} (in memory)")
 
 
 def _open_sample(sample_id: str, source: Any, path: Any) -> Sample:

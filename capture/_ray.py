@@ -486,13 +486,13 @@ class _TargetWorker(_Reporting):
         return _node_memory()
 
     def compute(self, sample_id: str, data: bytes, metrics: tuple[str, ...], params: dict[str, Any],
-                base_tile: int, news: Any = None) -> tuple[dict[str, Any], tuple[int, int]]:
+                base_tile: int, news: Any = None, where: str | None = None) -> tuple[dict[str, Any], tuple[int, int]]:
         from ._dataset import sample_from_bytes
         from ._targets import sample_targets
 
         self._listen(news)
 
-        sample = sample_from_bytes(sample_id, data)
+        sample = sample_from_bytes(sample_id, data, where)  # (errors name the driver's file, not "in memory")
         return sample_targets(sample, metrics, params, base_tile), sample.size
 
 
@@ -524,8 +524,8 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
 
         def submit(actor: Any, task: Any) -> Any:
             sid, metrics = task
-            return actor.compute.remote(sid, sample_path(data_root, sid).read_bytes(), metrics, params,
-                                        store.base_tile, news.queue)
+            path = sample_path(data_root, sid)
+            return actor.compute.remote(sid, path.read_bytes(), metrics, params, store.base_tile, news.queue, str(path))
 
         def done(task: Any, result: Any) -> None:
             sid, _ = task

@@ -209,6 +209,21 @@ def test_ray_errors_are_typed(cluster: None, tmp_path: Path) -> None:
         ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
 
 
+def test_a_damaged_sample_on_ray_is_named_by_its_file(cluster: None, local: Path, tmp_path: Path) -> None:
+    """A worker reads the bytes the driver sent: its error said "sample X (in memory)", not which file to fix."""
+    import shutil
+
+    from rtp.capture import DatasetError
+
+    data = tmp_path / "ds"
+    shutil.copytree(local, data)
+    shutil.rmtree(data / "targets")
+    damaged = sorted((data / "samples").glob("*.npz"))[0]
+    damaged.write_bytes(damaged.read_bytes()[:5000])
+    with pytest.raises(DatasetError, match=f"^{damaged}: unreadable sample"):
+        compute_targets(data, ["psnr"], ray="local")
+
+
 def test_cli_ray_flag(cluster: None, local: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from rtp.cli import main
 
