@@ -136,12 +136,13 @@ def test_extra_metadata_is_merged(tmp_path: Path) -> None:
 def test_parity_failure_is_loud_and_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
     target = tmp_path / "m.onnx"
-    target.write_bytes(b"previous export")
+    previous = Path(sdk.load("jnyang").path or "").read_bytes()  # (a previous export: a model, which it may replace)
+    target.write_bytes(previous)
     real = sdk.ShadingRatePredictor.predict_raw
     monkeypatch.setattr(sdk.ShadingRatePredictor, "predict_raw", lambda self, x: real(self, x) + 1e-3)
     with pytest.raises(export.ExportError, match="disagree"):
         export.export_checkpoint(ck, target)
-    assert target.read_bytes() == b"previous export"
+    assert target.read_bytes() == previous
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.onnx", "m.pt"]
 
 

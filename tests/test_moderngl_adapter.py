@@ -625,6 +625,10 @@ def test_textures_an_adapter_cannot_read_are_refused_and_colours_are_clamped(fra
                        prev_colour=_tex(ctx, prev.colour["1x1"] * 4.0), material=_tex(ctx, np.full((H, W, 3), 7.0)))
     geo = cur.depth > 0
     assert x[0].max() == 1.0 and x[1].max() == 1.0 and (x[2][geo] == 1.0).all()
+    with Adapter(("reprojected.g",), W, H, ctx=ctx, clamp_colour=False) as through:  # (pixel coordinates, say)
+        assert _engine_inputs(ctx, prev, cur, through, prev_colour=_tex(ctx, prev.colour["1x1"] * 4.0)).max() > 1.0
+    with pytest.raises(sdk.ParameterError, match="clamp_colour: expected True or False"):
+        Adapter(("seen",), W, H, ctx=ctx, clamp_colour="no")
     released = _tex(ctx, cur.albedo)
     released.release()
     refused = {"an integer dtype": ctx.texture((W, H), 4, dtype="u1"), "multisample": ctx.texture((W, H), 4, samples=4),

@@ -189,6 +189,9 @@ class Adapter(_AdapterBase[GBufferTextures]):
             0 on background, as ``glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE)`` with a depth clear of
             0 and ``GL_GREATER`` makes; linearised with the inverse of the OpenGL ``projection`` of the
             same near and far planes): ``sdk.DEPTH_KINDS``.
+        clamp_colour: read the previous frame's colour clamped to [0, 1] (default True: display-encoded
+            colour, an HDR frame not yet tonemapped kept in range); False passes any value through (the
+            reference renderer reprojects pixel coordinates this way: ``Renderer.reprojection_source``).
 
     The adapter draws in the current GL context, which must be ``ctx`` (it is in an engine of one
     context; with several, make ``ctx`` current first). A draw binds the frame's textures to units
@@ -212,6 +215,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         albedo_linear: bool = False,
         normal_space: str = "view",
         depth_kind: str = "linear",
+        clamp_colour: bool = True,
     ) -> None:
         super().__init__(channels, width, height)
         if len(self.channels) > _MAX_CHANNELS:
@@ -226,8 +230,9 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if not number or not 0.0 <= tolerance <= sys.float_info.max:  # (an int past float's range passed `< inf`)
             raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
                                  "tolerance")
-        if not isinstance(albedo_linear, (bool, np.bool_)):
-            raise ParameterError(f"albedo_linear: expected True or False, got {albedo_linear!r}", "albedo_linear")
+        for flag, value in (("albedo_linear", albedo_linear), ("clamp_colour", clamp_colour)):
+            if not isinstance(value, (bool, np.bool_)):
+                raise ParameterError(f"{flag}: expected True or False, got {value!r}", flag)
         if is_released(ctx):
             raise AdapterFrameError("ctx: this moderngl context has been released; pass the engine's live one")
         if not callable(getattr(ctx, "program", None)) or not hasattr(ctx, "info"):
@@ -244,7 +249,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         ids = [CHANNEL_IDS[c] for c in self.channels] + [-1] * (_MAX_CHANNELS - len(self.channels))
         wanted = set(self.channels)
         flags = {  # compiled in (adapter_fs.glsl): the shader keeps only the work these channels need
-            "RTP_ALBEDO_LINEAR": albedo_linear, "RTP_NORMAL_WORLD": normal_space == "world",
+            "RTP_ALBEDO_LINEAR": albedo_linear, "RTP_CLAMP_COLOUR": clamp_colour, "RTP_NORMAL_WORLD": normal_space == "world",
             "RTP_DEPTH_WINDOW": depth_kind != "linear", "RTP_DEPTH_REVERSED": depth_kind == "reversed",
             "RTP_DIFFERENCES": bool({"reprojected.y.dx", "reprojected.y.dy"} & wanted),
             "RTP_BLOCKS_REPROJECTED": "reprojected.y.blocks" in wanted,
@@ -258,7 +263,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         if any(flags[f] for f in ("RTP_DIFFERENCES", "RTP_BLOCKS_REPROJECTED", "RTP_BLOCKS_ALBEDO",
                                   "RTP_TILES_REPROJECTED", "RTP_TILES_ALBEDO")):
             self._luma = Adapter(_LUMA_PASS, width, height, ctx=ctx, tolerance=tolerance, albedo_linear=albedo_linear,
-                                 normal_space=normal_space, depth_kind=depth_kind)
+                                 normal_space=normal_space, depth_kind=depth_kind, clamp_colour=clamp_colour)
             self._luma.__dict__["_first_pass"] = True  # (closed with this one: its own unclosed warning would say it twice)
         flags["RTP_LUMA_PASS"] = self._luma is not None
         defines: dict[str, Any] = {k: str(bool(v)).lower() for k, v in flags.items()}

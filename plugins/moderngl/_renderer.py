@@ -687,7 +687,8 @@ class Renderer:
         self._t_prev_colour = tex(3, "f4")
         self._t_prev_depth = tex(1, "f4")
         self._reprojector = Adapter(("reprojected.r", "reprojected.g", "reprojected.b", "seen"), self.width,
-                                    self.height, ctx=ctx, tolerance=self.reprojection_tolerance)
+                                    self.height, ctx=ctx, tolerance=self.reprojection_tolerance,
+                                    clamp_colour=False)  # (reprojection_source carries pixel coordinates through it)
 
     def _debug_fbo(self, rate: str) -> Any:
         if rate not in self._fbo_ldr_debug:

@@ -47,6 +47,7 @@ uniform float u_tolerance;
 const bool u_depth_window = RTP_DEPTH_WINDOW;          // depth is window depth in [0, 1] (1 = background), not linear
 const bool u_depth_reversed = RTP_DEPTH_REVERSED;      // ... reversed-Z window depth (1 = near plane, 0 = background)
 const bool u_albedo_linear = RTP_ALBEDO_LINEAR;
+const bool u_clamp_colour = RTP_CLAMP_COLOUR;
 const bool u_normal_world = RTP_NORMAL_WORLD;
 const bool u_differences = RTP_DIFFERENCES;            // reprojected.y.dx / .dy wanted: reproject the right and lower neighbours too
 const bool u_blocks_reprojected = RTP_BLOCKS_REPROJECTED;  // reprojected.y.blocks wanted: reproject the pixel's 4x4 cell
@@ -145,7 +146,8 @@ vec4 reproject_prev(vec2 frag, float d) {
         seen = pd <= 0.0;
     }
     // a colour outside [0, 1] (an HDR frame not yet tonemapped) is clamped to the display range sdk.CHANNELS gives
-    return seen ? vec4(clamp(texelFetch(u_prev_colour, pi, 0).rgb, 0.0, 1.0), 1.0) : vec4(0.0);
+    vec3 colour = texelFetch(u_prev_colour, pi, 0).rgb;
+    return seen ? vec4(u_clamp_colour ? clamp(colour, 0.0, 1.0) : colour, 1.0) : vec4(0.0);
 }
 
 // *.y.blocks, as rtp.sdk.block_variances: per 4x4 cell (top-left origin, edge repeated past the frame)
