@@ -286,10 +286,9 @@ class DatasetWriter:
     def __init__(self, root: str | os.PathLike[str], settings: Mapping[str, Any] | None = None) -> None:
         self.root = Path(root)
         self.samples_dir = self.root / "samples"
-        self.samples_dir.mkdir(parents=True, exist_ok=True)
         manifest = self.root / "manifest.json"
         settings = json.loads(json.dumps(dict(settings or {})))  # JSON-clean copy
-        if manifest.exists():
+        if manifest.exists():  # (checked before anything is made: a refused folder is left as it was)
             current = _read_manifest(self.root)
             before = current.get("settings")
             if before != settings:
@@ -302,7 +301,8 @@ class DatasetWriter:
                 raise DatasetError(
                     f"{self.root} was captured with other settings ({what}); use another folder or the same settings"
                 )
-        else:
+        self.samples_dir.mkdir(parents=True, exist_ok=True)
+        if not manifest.exists():
             self._write_manifest({"format": FORMAT, "format_version": FORMAT_VERSION, "settings": settings})
 
     def _write_manifest(self, data: Mapping[str, Any]) -> None:
@@ -518,7 +518,10 @@ class PaperDatasetReader:
         except OSError as err:
             raise DatasetError(f"{self.root}: cannot be listed ({err})") from err
         if not self.ids:
-            raise DatasetError(f"{self.root}: no sample folders with output_1x1.png (the paper's layout)")
+            rtp = (self.root / "samples").is_dir()  # (an rtp dataset that lost its manifest: said as such)
+            raise DatasetError(f"{self.root}: no manifest.json (an rtp dataset's; its samples/ folder is here)" if rtp
+                               else f"{self.root}: neither an rtp dataset (no manifest.json) nor the paper's layout "
+                               "(no sample folders with output_1x1.png)")
 
     def __len__(self) -> int:
         return len(self.ids)

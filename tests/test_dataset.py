@@ -207,6 +207,12 @@ def test_reopening_requires_the_same_settings(tmp_path: Path) -> None:
     # (the key that differs, with both values: it printed both whole dictionaries, to be compared by eye)
     with pytest.raises(DatasetError, match=r"other settings \(size: \[40, 24\] there, \[80, 48\] now\); use another"):
         DatasetWriter(tmp_path / "ds", settings={"size": [80, 48]})
+    # a folder of another program's manifest is refused as it was: no samples/ made in it
+    (tmp_path / "theirs").mkdir()
+    (tmp_path / "theirs" / "manifest.json").write_text('{"format": "something-else"}')
+    with pytest.raises(DatasetError, match="not an rtp dataset manifest"):
+        DatasetWriter(tmp_path / "theirs")
+    assert sorted(p.name for p in (tmp_path / "theirs").iterdir()) == ["manifest.json"]
 
 
 def test_reader_errors(tmp_path: Path) -> None:
@@ -363,6 +369,9 @@ def test_paper_layout(tmp_path: Path) -> None:
     (tmp_path / "Empty" / "0000").mkdir(parents=True)  # folders, but none holds output_1x1.png
     with pytest.raises(DatasetError, match="no sample folders with output_1x1.png"):
         open_dataset(tmp_path / "Empty")
+    (tmp_path / "Lost" / "samples").mkdir(parents=True)  # an rtp dataset whose manifest went: said as such
+    with pytest.raises(DatasetError, match=r"Lost: no manifest\.json \(an rtp dataset's; its samples/ folder is here\)"):
+        open_dataset(tmp_path / "Lost")
 
 
 def test_paper_layout_reads_16_bit_and_float_pngs_by_their_values(tmp_path: Path) -> None:

@@ -157,6 +157,9 @@ def test_cli_exit_codes(tmp_path: Path) -> None:
     assert ok.stdout.strip() == str(tmp_path / "cli.onnx")
     missing = _cli(str(tmp_path / "nope.pt"))
     assert missing.returncode == 2 and "no checkpoint" in missing.stderr and "Traceback" not in missing.stderr
+    (tmp_path / "dir.pt").mkdir()
+    folder = _cli(str(tmp_path / "dir.pt"))
+    assert folder.returncode == 2 and "dir.pt' is a folder, not a file" in folder.stderr
     usage = _cli("--adopt", "x.onnx")
     assert usage.returncode == 2 and "-o OUTPUT.onnx" in usage.stderr
     assert _cli().returncode == 2

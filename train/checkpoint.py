@@ -154,7 +154,8 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
         raise CheckpointError(f"expected the path of a checkpoint, got {type(path).__name__}")
     p = Path(path)
     if not p.is_file():
-        raise ModelNotFoundError(f"no checkpoint at {str(p)!r}")
+        raise ModelNotFoundError(f"checkpoint {str(p)!r} is a folder, not a file" if p.is_dir()
+                                 else f"no checkpoint at {str(p)!r}")
     try:
         raw = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as err:  # torch raises UnpicklingError, RuntimeError, EOFError, ... with pages of advice
