@@ -552,7 +552,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from rtp.metrics import device_name, resolve_device
 
     where = device_name(resolve_device(cfg.device))  # (what auto chose, on the bar)
-    args.on_interrupt = lambda: _train_kept(cfg.out, cfg.steps, cfg.save_every)
+    args.on_interrupt = lambda: _train_kept(cfg.out, cfg.steps)
     with Bar(args, cfg.steps, f"train {cfg.metric} on {where}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
                        loading=lambda read, samples: bar.status(f"reading samples: {read}/{samples}"))
@@ -567,13 +567,14 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _train_kept(out: str | Path, steps: int, save_every: int) -> str:
-    """What an interrupted ``rtp train`` kept: the step its checkpoint holds, which the same command
-    resumes from, or that none was written yet."""
+def _train_kept(out: str | Path, steps: int) -> str:
+    """What an interrupted ``rtp train`` kept: the step its checkpoint holds (the last one done, or the last
+    periodic checkpoint's where the interrupt caught a step updating the weights), which the same command resumes
+    from, or that none was written yet."""
     from rtp.train.checkpoint import load
 
     if not Path(out).is_file():
-        return f"no checkpoint yet (the first at step {min(save_every, steps)}): the same command starts again"
+        return "no checkpoint yet (no step was done): the same command starts again"
     step = int((load(out).training or {}).get("step", 0))
     return f"{out} holds step {step} of {steps}: the same command resumes there"
 

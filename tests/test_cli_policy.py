@@ -259,17 +259,25 @@ def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monk
     model = tmp_path / "m.pt"
     train = ["train", "--data", str(data), "--metric", "jnyang", "--val-scenes", "procedural:2", "--steps", "600",
              "--batch", "4", "--crop", "32", "--head", "linear", "--out", str(model), "-q"]
-    interrupt_at(5)
+    from rtp.train import _loop
+
+    real_validate = _loop._validate
+
+    def interrupted_validation(*args: object, **kwargs: object) -> object:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_loop, "_validate", interrupted_validation)  # (before the first step)
     assert main(train) == 130
-    assert capsys.readouterr().err == ("rtp train: interrupted; no checkpoint yet (the first at step 250): the same "
+    assert capsys.readouterr().err == ("rtp train: interrupted; no checkpoint yet (no step was done): the same "
                                        "command starts again\n")
-    interrupt_at(260)
+    monkeypatch.setattr(_loop, "_validate", real_validate)
+    interrupt_at(260)  # (the steps since the last periodic checkpoint, at 250, are kept too)
     assert main(train) == 130
-    assert capsys.readouterr().err == (f"rtp train: interrupted; {model} holds step 250 of 600: the same command "
+    assert capsys.readouterr().err == (f"rtp train: interrupted; {model} holds step 260 of 600: the same command "
                                        f"resumes there\n")
     resumed: list[int] = []
     monkeypatch.setattr(Bar, "update_to", lambda self, n, total=None, **_: resumed.append(n))
-    assert main(train) == 0 and resumed[0] == 250 and resumed[-1] == 600  # (the bar starts where it stopped)
+    assert main(train) == 0 and resumed[0] == 260 and resumed[-1] == 600  # (the bar starts where it stopped)
     play = tmp_path / "play"
     interrupt_at(1)
     assert main(["play", "procedural:1", "--frames", "3", "--methods", "full", "--size", "64x48", "--no-sweep",

@@ -699,7 +699,42 @@ def test_adamw_with_a_cosine_schedule_trains_resumes_exactly_and_is_recorded(tmp
 
     with pytest.raises(KeyboardInterrupt):
         train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **kw), progress=stop_at_13)
-    assert load_checkpoint(tmp_path / "b.pt").training["step"] == 8
+    assert load_checkpoint(tmp_path / "b.pt").training["step"] == 13  # (the steps since the last save, 8, are kept)
+    # and again inside step 18, its crops drawn, its weights not yet updated: step 17 is kept with the crop
+    # sampler as it was before step 18 drew (resuming from what the sampler had become would draw other crops)
+    real_crop, calls = _loop.crop_batch, [0]
+
+    def crop_until_18(*args: Any, **kwargs: Any) -> Any:
+        calls[0] += 1
+        if calls[0] == 18 - 13:
+            raise KeyboardInterrupt
+        return real_crop(*args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(_loop, "crop_batch", crop_until_18)
+        with pytest.raises(KeyboardInterrupt):
+            train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **kw))
+    assert load_checkpoint(tmp_path / "b.pt").training["step"] == 17
+    # and inside step 20's schedule update, its weights already stepped: no consistent state, the last save (17) stays
+    real_optimizer = _loop._optimizer
+
+    def schedule_stopping_at_20(*args: Any, **kwargs: Any) -> Any:
+        opt, sched = real_optimizer(*args, **kwargs)
+        real_step = sched.step
+
+        def step_or_stop(*a: Any, **k: Any) -> Any:
+            if sched.last_epoch + 1 == 20:
+                raise KeyboardInterrupt
+            return real_step(*a, **k)
+
+        sched.step = step_or_stop
+        return opt, sched
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(_loop, "_optimizer", schedule_stopping_at_20)
+        with pytest.raises(KeyboardInterrupt):
+            train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **kw))
+    assert load_checkpoint(tmp_path / "b.pt").training["step"] == 17
     train(TrainConfig.from_recipe("shipped", out=str(tmp_path / "b.pt"), **kw))
     b = load_checkpoint(tmp_path / "b.pt")
     for k, v in a.net.state_dict().items():

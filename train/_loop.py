@@ -1063,7 +1063,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             "another --out with a lower --lr (resuming this one would diverge the same way), and check that the "
             "dataset's input planes are finite")
 
-    def save(done: bool, safety: float = 0.0, extra: dict[str, Any] | None = None) -> None:
+    def save(done: bool, safety: float = 0.0, extra: dict[str, Any] | None = None,
+             generator: torch.Tensor | None = None) -> None:
         nonlocal saved_step
         saved = keep_outputs(avg, n_out) if cfg.aux_metrics else avg  # type: ignore[arg-type]
         bad = next((k for k, v in {**net.state_dict(), **avg.state_dict()}.items()
@@ -1072,7 +1073,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             raise diverged(f"the weights ({bad}) are not finite")
         ckpt.save(out, saved, metadata(safety, extra or {}), training={
             "config": config_key, "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
-            "generator": gen.get_state(), "step": step, "history": json.dumps(history), "done": done,
+            "generator": gen.get_state() if generator is None else generator, "step": step,
+            "history": json.dumps(history), "done": done,
             **({"raw_weights": net.state_dict()} if cfg.ema else {}),
             **({"full_weights": avg.state_dict()} if cfg.aux_metrics else {}),
         })
@@ -1084,64 +1086,79 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         s0, _, _ = _validate(avg, va, transform, cfg, worse)
         history.append({"step": 0, "val": s0})
     net.train()
-    while step < cfg.steps:
-        idx = torch.randint(len(tr.x), (cfg.batch,), generator=gen).tolist()
-        oy = (torch.randint(full_h // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
-        ox = (torch.randint(full_w // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
-        side = cfg.crop + 2 * cfg.context
-        xb = crop_batch([tr.x[i] for i in idx], oy, ox, side)
-        yb = np.stack([
-            tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
-            for i, y, x in zip(idx, oy, ox)
-        ])
-        if cfg.augment or cfg.mirror:  # SYMMETRIES[1] is the left-right mirror; with context the window mirrors whole
-            xb_raw, sym = xb, torch.randint(len(SYMMETRIES) if cfg.augment else 2, (cfg.batch,), generator=gen).tolist()
-            xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs, sym)
-        target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
-        target = torch.nan_to_num(target, nan=1.0).to(dev)
-        if soft is not None:  # distillation: where the target is known, mix in the teachers' mean
-            sb = torch.from_numpy(np.stack([
-                soft[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
-                for i, y, x in zip(idx, oy, ox)]))
-            if cfg.augment or cfg.mirror:
-                sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
-            known = torch.from_numpy(np.isfinite(yb)).to(dev)
-            target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb.to(dev), target)
-        # (float16 to the device, then float32 there, in the layout the network is in, in one pass: torch converts
-        # several times faster than numpy's astype, which took a quarter of a CPU step; half the bytes cross to a GPU)
-        out_all = net(torch.from_numpy(xb).to(dev).to(dtype=torch.float32, memory_format=_layout(dev)))
-        pred = out_all[:, :n_out]
-        scored = (torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).to(dev)
-                  .expand_as(pred) if margin else None)
-        loss = loss_fn(pred[scored], target[scored]) if scored is not None else loss_fn(pred, target)
-        if cfg.aux_metrics:  # multi-task: each auxiliary metric's outputs against its own transformed targets
-            aux_losses = []
-            for k, at in enumerate(aux_transforms):
-                ab = np.stack([tr.aux[i][k][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
-                               for i, y, x in zip(idx, oy, ox)])
-                atgt = torch.nan_to_num(tt.forward(torch.from_numpy(ab.astype(np.float64)), at).float(), nan=1.0).to(dev)
-                ap = out_all[:, n_out * (k + 1) : n_out * (k + 2)]
-                aux_losses.append(aux_loss_fn(ap[scored], atgt[scored]) if scored is not None else aux_loss_fn(ap, atgt))
-            loss = loss + cfg.aux_weight * torch.stack(aux_losses).mean()
-        loss_value = loss.item()
-        if not math.isfinite(loss_value):  # (before its gradients reach the weights; every later step would be NaN)
+    # Ctrl-C (or SIGTERM) between two saves keeps the steps done: the state at the last step boundary is saved
+    # (the crop sampler as it was when the interrupted step began), unless the interrupt landed while the
+    # optimizer, the schedule and the average were being updated, where no consistent state exists until the step
+    # ends (the last periodic checkpoint stays). A resumed run still reproduces an uninterrupted one exactly.
+    boundary_gen, updating = gen.get_state(), False
+    try:
+        while step < cfg.steps:
+            idx = torch.randint(len(tr.x), (cfg.batch,), generator=gen).tolist()
+            oy = (torch.randint(full_h // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
+            ox = (torch.randint(full_w // cfg.tile - n_tiles + 1, (cfg.batch,), generator=gen) * cfg.tile).tolist()
+            side = cfg.crop + 2 * cfg.context
+            xb = crop_batch([tr.x[i] for i in idx], oy, ox, side)
+            yb = np.stack([
+                tr.y[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
+                for i, y, x in zip(idx, oy, ox)
+            ])
+            if cfg.augment or cfg.mirror:  # SYMMETRIES[1] is the left-right mirror; with context the window mirrors whole
+                xb_raw, sym = xb, torch.randint(len(SYMMETRIES) if cfg.augment else 2, (cfg.batch,), generator=gen).tolist()
+                xb, yb = augment_batch(xb, yb, cfg.inputs, cfg.outputs, sym)
+            target = tt.forward(torch.from_numpy(yb.astype(np.float64)), transform).float()
+            target = torch.nan_to_num(target, nan=1.0).to(dev)
+            if soft is not None:  # distillation: where the target is known, mix in the teachers' mean
+                sb = torch.from_numpy(np.stack([
+                    soft[i][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
+                    for i, y, x in zip(idx, oy, ox)]))
+                if cfg.augment or cfg.mirror:
+                    sb = torch.from_numpy(augment_batch(xb_raw, sb.numpy(), cfg.inputs, cfg.outputs, sym)[1].copy())
+                known = torch.from_numpy(np.isfinite(yb)).to(dev)
+                target = torch.where(known, (1.0 - cfg.distill) * target + cfg.distill * sb.to(dev), target)
+            # (float16 to the device, then float32 there, in the layout the network is in, in one pass: torch converts
+            # several times faster than numpy's astype, which took a quarter of a CPU step; half the bytes cross to a GPU)
+            out_all = net(torch.from_numpy(xb).to(dev).to(dtype=torch.float32, memory_format=_layout(dev)))
+            pred = out_all[:, :n_out]
+            scored = (torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).to(dev)
+                      .expand_as(pred) if margin else None)
+            loss = loss_fn(pred[scored], target[scored]) if scored is not None else loss_fn(pred, target)
+            if cfg.aux_metrics:  # multi-task: each auxiliary metric's outputs against its own transformed targets
+                aux_losses = []
+                for k, at in enumerate(aux_transforms):
+                    ab = np.stack([
+                        tr.aux[i][k][:, y // cfg.tile : y // cfg.tile + n_tiles, x // cfg.tile : x // cfg.tile + n_tiles]
+                        for i, y, x in zip(idx, oy, ox)])
+                    atgt = torch.nan_to_num(tt.forward(torch.from_numpy(ab.astype(np.float64)), at).float(), nan=1.0).to(dev)
+                    ap = out_all[:, n_out * (k + 1) : n_out * (k + 2)]
+                    aux_losses.append(aux_loss_fn(ap[scored], atgt[scored]) if scored is not None else aux_loss_fn(ap, atgt))
+                loss = loss + cfg.aux_weight * torch.stack(aux_losses).mean()
+            loss_value = loss.item()
+            if not math.isfinite(loss_value):  # (before its gradients reach the weights; every later step would be NaN)
+                step += 1
+                raise diverged(f"the loss is {loss_value}")
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            updating = True  # (from here to the average's update the state is between two steps)
+            opt.step()
+            sched.step()
             step += 1
-            raise diverged(f"the loss is {loss_value}")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        step += 1
-        if cfg.ema:
-            _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
-        if progress:
-            progress(step, cfg.steps, loss_value)
-        if step % cfg.val_every == 0 or step == cfg.steps:
-            s, _, _ = _validate(avg, va, transform, cfg, worse)
-            history.append({"step": step, "train_loss": loss_value, "val": s})
-            log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss_value, s["mae"], s["r2"])
-        if step % cfg.save_every == 0 and step < cfg.steps:
-            save(done=False)
+            if cfg.ema:
+                _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
+            boundary_gen, updating = gen.get_state(), False
+            if progress:
+                progress(step, cfg.steps, loss_value)
+            if step % cfg.val_every == 0 or step == cfg.steps:
+                s, _, _ = _validate(avg, va, transform, cfg, worse)
+                history.append({"step": step, "train_loss": loss_value, "val": s})
+                log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss_value, s["mae"], s["r2"])
+            if step % cfg.save_every == 0 and step < cfg.steps:
+                save(done=False)
+    except KeyboardInterrupt:
+        if not updating and step > saved_step:
+            save(done=False, generator=boundary_gen)
+            log.info("interrupted: %s holds step %d", out, step)
+        raise
+
 
     val_scores, p, g = _validate(avg, va, transform, cfg, worse)
     dead = _dead_outputs(p, cfg.outputs)
