@@ -406,6 +406,7 @@ def _load(
     tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
     predictor = ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
                                      tail=tail)
+    _check_tile_grid(predictor, model_path)
     # what a pickled copy is loaded again from, in the process that unpickles it (docs/runtime.md "Pickling and other processes")
     predictor._pickled = (data, {
         "providers": providers, "threads": threads, "metadata": None if metadata is None else meta,
@@ -424,6 +425,37 @@ def _load(
                      "(sdk.load(%r); docs/results.md)", model_path.name, predictor.tile_size, meta.tile_size,
                      variant, predictor.tile_size, variant)
     return predictor
+
+
+def _check_tile_grid(predictor: ShadingRatePredictor, model_path: Path) -> None:
+    """Refuse, at load, a model whose graph maps pixels to tiles of another size than its metadata's
+    ``tile_size`` (a sidecar of the 8-pixel model given to the 16-pixel one): a model of fixed size is
+    checked from its shapes when the predictor is built; any other runs once on a blank frame of eight
+    tiles a side (microseconds for rtp's networks; a model that fails on it is left to ``predict`` to
+    name, as it would have been)."""
+    if predictor._static_hw is not None:
+        return
+    meta = predictor.metadata
+    t = meta.tile_size
+    side, _ = padded_size(8 * t, 8 * t, meta.pad_multiple)
+    try:
+        (raw,), _ = predictor._run(np.zeros((1, len(meta.inputs), side, side), np.float32))
+    except InferenceError as err:
+        log.debug("%s: the tile-grid check could not run (%s)", model_path.name, err)
+        return
+    if raw.ndim == 4 and tuple(raw.shape[2:]) != (side // t, side // t):
+        raise MetadataError(
+            f"tile_size: {str(model_path)!r}'s metadata says {t}, but the model maps {side}x{side} pixels to "
+            f"{raw.shape[3]}x{raw.shape[2]} tiles (tiles of {side // max(raw.shape[3], 1)} pixels): the metadata "
+            "is another model's, or was edited",
+            "tile_size",
+        )
+    if raw.ndim == 4 and raw.shape[1] != len(meta.outputs):
+        raise MetadataError(
+            f"outputs: {str(model_path)!r}'s metadata declares {len(meta.outputs)} rates {list(meta.outputs)} but "
+            f"the model outputs {raw.shape[1]} channels",
+            "outputs",
+        )
 
 
 def _tile_variant(model_path: Path, own: int, tile_size: int) -> str | None:

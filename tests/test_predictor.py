@@ -91,6 +91,18 @@ def test_input_multiple_on_a_model_that_needs_whole_tiles_is_a_clear_error(tiny_
         p.predict(np.zeros((4, 20, 36), np.float32))
 
 
+def test_metadata_of_another_tile_size_is_refused_at_load(tiny_model: Callable[..., Path]) -> None:
+    """A sidecar of the 8-pixel model given to a 16-pixel one loaded, and the first frame failed with an
+    InferenceError in the engine's frame loop: the graph's tile grid is checked when the model loads."""
+    for meta_tile, graph_tile in ((8, 16), (16, 8), (32, 16)):
+        path = tiny_model(base_metadata(tile_size=meta_tile), tile=graph_tile)
+        with pytest.raises(sdk.MetadataError, match=rf"tile_size: .*metadata says {meta_tile}, but the model maps "
+                                                    rf".* \(tiles of {graph_tile} pixels\)") as info:
+            sdk.load(path)
+        assert info.value.key == "tile_size"
+    assert sdk.load(tiny_model(base_metadata(tile_size=8), tile=8)).tile_size == 8
+
+
 def test_shading_rates_uses_the_default_threshold(tiny_model: Callable[..., Path]) -> None:
     meta = base_metadata(default_threshold=0.3)
     p = sdk.load(tiny_model(meta))
