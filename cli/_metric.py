@@ -63,6 +63,7 @@ def run_metric(args: argparse.Namespace) -> int:
     from rtp import metrics, sdk
 
     _check_memory(args)
+    metrics.check_dependencies([args.metric])  # (a plugin's missing module was blamed on its error_map)
     ref, test = _read(args.reference), _read(args.test)
     if ref.shape != test.shape:
         raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "

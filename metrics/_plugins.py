@@ -157,7 +157,7 @@ class Metric:
             out = self.error_map(*frames)
         except MetricError:
             raise
-        except Exception as err:
+        except (Exception, SystemExit) as err:  # (a plugin's sys.exit ended rtp silently with its code)
             raise MetricError(f"the metric {self.name!r}'s error_map failed on {reference.shape[1]}x"
                               f"{reference.shape[0]} frames: {type(err).__name__}: {err}") from err
         try:

@@ -143,6 +143,7 @@ def test_plugin_targets_pool_its_map_and_leave_rtps_own_alone(registry: None, po
     (lambda r, t: "map", "dtype|returned"),
     (lambda r, t: 1 / 0, "error_map failed on 53x37 frames: ZeroDivisionError"),
     (lambda r, t: r.__setitem__(0, 0.0), "failed.*read-only"),  # (writing into the shared reference)
+    (lambda r, t: sys.exit(3), "failed on 53x37 frames: SystemExit: 3"),  # (it ended rtp silently, exit 3)
 ])
 def test_a_broken_map_is_the_plugins_error_not_wrong_targets(registry: None, result: Any, match: str) -> None:
     metrics.register_metric(metrics.Metric("bad", result, 0.1))
@@ -164,13 +165,25 @@ def test_plugin_maps_take_one_numpy_frame_of_the_tests_size(registry: None) -> N
         metrics.error_map("absdiff", ref * 2, ref)
 
 
-def test_dependencies_of_a_plugin_are_checked_before_a_job(registry: None) -> None:
+def test_dependencies_of_a_plugin_are_checked_before_a_job(registry: None, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
     metrics.register_metric(metrics.Metric("needy", absdiff, 0.1, requires=("rtp_no_such_module_xyz",)))
     metrics.register_metric(metrics.Metric("ready", absdiff, 0.1, requires=("numpy",)))
     metrics.check_dependencies(["ready", "psnr"])
     with pytest.raises(metrics.MetricDependencyError, match="'needy' needs rtp_no_such_module_xyz: pip install "
                                                             "rtp_no_such_module_xyz"):
         metrics.check_dependencies(["psnr", "needy"])
+    # rtp metric too (it blamed the plugin's error_map: "error_map failed on 64x48 frames: ModuleNotFoundError")
+    from rtp.capture import save_image
+    from rtp.cli import main
+
+    ref, images = frames()
+    save_image(tmp_path / "a.png", ref)
+    save_image(tmp_path / "b.png", images["2x2"])
+    assert main(["metric", "needy", str(tmp_path / "a.png"), str(tmp_path / "b.png")]) == 2
+    assert capsys.readouterr().err == ("rtp metric: error: missing before any work starts: the metric 'needy' needs "
+                                       "rtp_no_such_module_xyz: pip install "
+                                       "rtp_no_such_module_xyz\n")
 
 
 # -- entry points -----------------------------------------------------------------------------------
@@ -358,6 +371,24 @@ def test_a_metric_registered_in_this_process_is_refused_where_workers_would_comp
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
     _plugins._entry_points.cache_clear()
     metrics.check_worker_metrics(["absdiff", "flip"])
+
+
+@pytest.mark.gl
+def test_a_play_failing_on_its_metric_leaves_no_empty_folder(registry: None, tmp_path: Path) -> None:
+    """A fail metric whose map raises stopped rtp play with an error and an empty --out folder it had made;
+    a folder that was there before stays."""
+    from rtp.evaluate import play
+
+    def broken(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
+        raise RuntimeError("out of licences")
+
+    metrics.register_metric(metrics.Metric("broken", broken, 0.05))
+    for out, kept in ((tmp_path / "new" / "play", False), (tmp_path, True)):
+        with pytest.raises(metrics.MetricError, match="'broken'.*out of licences"):
+            play("procedural:0", "full", paths=["fast"], frames=3, size=(64, 48), fail_metric="broken", out=out,
+                 sweep=False)
+        assert out.is_dir() == kept
+    assert (tmp_path / "new").is_dir()  # (the parents it made, which it cannot tell from a user's, stay)
 
 
 @pytest.mark.gl
