@@ -683,7 +683,18 @@ def play(
     outdir = Path(out) if out is not None else None
     guard = contextlib.ExitStack()
     if outdir is not None:
+        created, made = not outdir.exists(), outdir
         outdir.mkdir(parents=True, exist_ok=True)
+
+        def drop_if_empty(exc_type: object, *_: object) -> bool:
+            # a play that failed before writing anything (a map whose conversion fails, a metric plugin's error)
+            # leaves no empty folder it made (after the lock's file is gone: the exit stack unwinds last in first)
+            if exc_type is not None and created:
+                with contextlib.suppress(OSError):
+                    made.rmdir()  # (only when empty)
+            return False
+
+        guard.push(drop_if_empty)
         # a second play into the folder would read this one's kept paths and write its files among them
         guard.enter_context(writer_lock(outdir, "rtp play", lambda holder: PlayError(
             f"out: {outdir} is being written by another closed loop ({holder}): wait for it to end, or play into "
