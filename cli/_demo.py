@@ -80,8 +80,10 @@ def run_demo(
     from rtp.evaluate.plots import heatmaps, rate_overlays, value_map
     from rtp.plugins.moderngl import Renderer
 
-    if isinstance(frames, bool) or not isinstance(frames, int) or not 1 <= frames <= MAX_FRAMES:
-        raise sdk.ParameterError(f"frames: expected an integer in [1, {MAX_FRAMES}], got {frames!r}", "frames")
+    if isinstance(frames, bool) or not isinstance(frames, int) or not 2 <= frames <= MAX_FRAMES:
+        # (1 was taken and run as 2: the last frame needs the one before as its reprojected history)
+        raise sdk.ParameterError(f"frames: expected an integer in [2, {MAX_FRAMES}] (the frame shown and at least "
+                                 f"the one before it, its history), got {frames!r}", "frames")
     predictor = sdk.load(model, tile_size=tile_size)
     meta = predictor.metadata
     tile = predictor.tile_size  # the hardware's tiles, which the rates are for
@@ -96,7 +98,7 @@ def run_demo(
     with Renderer(w, h) as renderer:
         renderer.load_scene(scn)
         prev = None
-        for cam in _camera_path(scn, max(2, frames), blockers, w / h, seed):
+        for cam in _camera_path(scn, frames, blockers, w / h, seed):
             frame = renderer.render(cam, prev)
             prev = frame
     x = np.stack([frame.channel(c) for c in meta.inputs]).astype(np.float32)

@@ -34,7 +34,12 @@ def test_a_demo_of_more_frames_than_a_path_may_have_is_refused_before_loading(
 ) -> None:
     """`--frames 1000000000` rendered the camera move frame by frame, for days, without a word."""
     assert rtp_main(["demo", "--model", "no_such_model", "--frames", "36001", "--out", str(tmp_path / "d")]) == 2
-    assert capsys.readouterr().err.strip() == "rtp demo: error: --frames: expected an integer in [1, 36000], got 36001"
+    assert capsys.readouterr().err.strip() == ("rtp demo: error: --frames: expected an integer in [2, 36000] (the frame "
+                                               "shown and at least the one before it, its history), got 36001")
+    assert not (tmp_path / "d").exists()
+    # one frame was taken and run as two (the same pictures, byte for byte): refused
+    assert rtp_main(["demo", "--frames", "1", "--out", str(tmp_path / "d")]) == 2
+    assert "--frames: expected an integer in [2, 36000]" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
 
 
