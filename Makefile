@@ -176,16 +176,17 @@ evaluate: $(STAMP)
 # make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
 # slow and fast paths at 1280x720 (the models' training size), every method swept, both paths at
 # once (2 processes), the frames composited from the uniform-rate images (--composite: several times
-# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP). The maps are fetched
-# first (`rtp scenes fetch`: once, then a no-op), as `make dataset` does.
+# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP). The map is fetched
+# first (`rtp scenes fetch --map MAP`: its packages once, then a no-op; a name no split lists is refused
+# before any download), not for procedural:N or a mesh file.
 MAP    ?= 20kdm2
 FRAMES ?= 150
 play: $(STAMP)
-	$(RTP) scenes fetch
+	$(if $(filter procedural:% %.glb %.gltf %.obj,$(MAP)),,$(RTP) scenes fetch --map $(MAP))
 	$(RTP) play $(MAP) --frames $(FRAMES) --composite --workers 2 --out $(DATA)/play-$(MAP)
 
 clean:
-	rm -rf $(VENV) .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(FLOOR_VENV) $(PY_VENV) .pytest_cache build *.egg-info
 
 # What each target does, in a line (the comments above each say more).
 help:
@@ -203,4 +204,4 @@ help:
 	@echo "make train METRIC=m [RECIPE=r NAME=n]   train and export models/NAME.onnx (train/recipes/RECIPE.yaml)"
 	@echo "make evaluate METRIC=m        the shipped model on the test split beside the baselines, with pictures"
 	@echo "make play MAP=20kdm2          the closed-loop camera-path benchmark on a map (about 10 minutes)"
-	@echo "make clean                    remove .venv, build/ and caches"
+	@echo "make clean                    remove the virtualenvs (.venv, .venv-floor, .venv-py), build/ and caches"
