@@ -90,11 +90,13 @@ def out_animation(text: str) -> str:
 
 def _path_text(text: str) -> str:
     """An argparse type: a path that may be read or written later (a cache, perhaps read-only): only
-    text the system cannot take as a path (a NUL byte) is refused now."""
+    text the system cannot take as a path (empty, a NUL byte) is refused now."""
     import os
 
     if "\0" in text:
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (a NUL byte)")
+    if not text:  # (--cache-dir "" made the current folder the scene cache: a fetch unpacked 400 MB there)
+        raise argparse.ArgumentTypeError("expected a path, got '' (empty; '.' is the current folder)")
     try:
         os.fsencode(text)
     except UnicodeEncodeError:  # a lone surrogate no file system name decodes to (an in-process caller's)
@@ -1051,7 +1053,8 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--scene", default="procedural:0",
                     help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
     dm.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT")
-    dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move (the last one is shown)")
+    dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move, 2 or more (the last one is "
+                    "shown, with the one before as its history)")
     dm.add_argument("--seed", type=_non_negative, default=0, help="which viewpoint of the scene")
     dm.add_argument("--out", type=_out_folder, default="rtp-demo", help="output folder")
     dm.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "

@@ -77,8 +77,10 @@ FETCH_COMMAND = "rtp weights fetch"
 
 
 def default_weights_cache() -> Path:
-    """Where ``rtp weights fetch`` keeps weights: ``$RTP_WEIGHTS_CACHE``, else ``~/.cache/rtp/weights``."""
-    return Path(os.environ.get("RTP_WEIGHTS_CACHE", str(Path.home() / ".cache" / "rtp" / "weights")))
+    """Where ``rtp weights fetch`` keeps weights: ``$RTP_WEIGHTS_CACHE``, else (unset or empty)
+    ``~/.cache/rtp/weights``."""
+    # (an empty variable, `RTP_WEIGHTS_CACHE= rtp ...`, made the current folder the cache)
+    return Path(os.environ.get("RTP_WEIGHTS_CACHE") or Path.home() / ".cache" / "rtp" / "weights")
 
 
 def _installed_weights() -> Path | None:

@@ -39,6 +39,19 @@ def test_missing_weights_are_named_with_the_command_that_fetches_them(no_weights
 
 
 @pytest.mark.gl
+def test_an_empty_cache_variable_is_the_default_cache_not_the_current_folder(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`RTP_WEIGHTS_CACHE= rtp ...` and `--cache-dir ""` made the current folder the cache."""
+    from rtp.cli import main
+
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", "")
+    assert _lpips.default_weights_cache() == Path.home() / ".cache" / "rtp" / "weights"
+    with pytest.raises(SystemExit) as info:  # (argparse's usage error)
+        main(["scenes", "list", "--cache-dir", ""])
+    assert info.value.code == 2
+    assert "--cache-dir: expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
+
+
 def test_targets_check_every_dependency_before_any_work(no_weights: Path, tmp_path: Path) -> None:
     from rtp.capture import TargetStore, compute_targets
     from rtp.capture._capture import capture
