@@ -162,26 +162,28 @@ def check_frame_size(size: Sequence[int], what: str = "size", *, renderer: bool 
 
 
 def _procedural_seed(name: str) -> int | None:
-    """The seed of a ``procedural:<seed>`` name, None for any other name."""
+    """The seed of a ``procedural:<seed>`` name, None for any other name. The seed is written one way only,
+    in decimal digits without a sign, leading zeros or underscores (``int`` also reads ``1_0``, ``01``,
+    ``+1``, `` 1``): one scene, one name, one sample id."""
     from rtp.capture import scenes
 
     if not (name == PROCEDURAL_PREFIX.rstrip(":") or name.startswith(PROCEDURAL_PREFIX)):
         return None
-    try:
-        seed = int(name[len(PROCEDURAL_PREFIX):])
-    except ValueError as err:
+    text = name[len(PROCEDURAL_PREFIX):]
+    if not text:
+        raise scenes.SceneNotFoundError(f"scene {name!r}: the procedural scene needs a seed, e.g. {PROCEDURAL_PREFIX}0")
+    if not re.fullmatch(r"0|[1-9][0-9]*", text):  # (also a negative seed, which numpy refuses deep in the builder)
         raise scenes.SceneNotFoundError(
-            f"scene {name!r}: the procedural scene needs a seed, e.g. {PROCEDURAL_PREFIX}0"
-        ) from err
-    if seed < 0:  # numpy's generator refuses it in its own words, deep in the scene builder
-        raise scenes.SceneNotFoundError(
-            f"scene {name!r}: the procedural scene's seed is a non-negative integer, e.g. {PROCEDURAL_PREFIX}0")
-    return seed
+            f"scene {name!r}: the procedural scene's seed is a non-negative integer in decimal digits, without a "
+            f"sign, leading zeros, underscores or spaces, e.g. {PROCEDURAL_PREFIX}0 or {PROCEDURAL_PREFIX}12, got {text!r}")
+    return int(text)
 
 
 def scene_id(name: str) -> str:
     """The part of sample ids that names the scene: ``procedural:3`` -> ``procedural_3``; a file path
-    -> its stem (``levels/arena.glb`` -> ``arena``); a map name as it is."""
+    -> its stem (``levels/arena.glb`` -> ``arena``); a map name as it is. A procedural name whose seed is
+    not written in plain decimal digits (``procedural:01``) is refused, as :func:`load_scene` refuses it."""
+    _procedural_seed(name)
     if Path(name).suffix.lower() in MESH_EXTENSIONS:
         name = Path(name).stem
     return re.sub(r"[^A-Za-z0-9_.]", "_", name)

@@ -690,6 +690,9 @@ def sample_viewpoints(
     if not isinstance(coverages, Sequence) or not coverages:
         raise ViewpointError(f"min_coverage: expected a number or a non-empty sequence of numbers, got {min_coverage!r}")
     levels = [_real("min_coverage", c, 0.0) for c in coverages]  # (above 1: never met)
+    if any(b >= a for a, b in zip(levels, levels[1:])):  # (a level not below the one before is never a fallback)
+        raise ViewpointError(f"min_coverage: expected a number or a decreasing sequence of numbers (each level a "
+                             f"lower fallback, e.g. (0.85, 0.5, 0.15)), got {min_coverage!r}")
     _check_space(voxel, clearance, max_height)
     tris, grid, reach, cand_mask = free_space(scene, blockers=blockers, voxel=voxel, clearance=clearance,
                                               max_height=max_height)

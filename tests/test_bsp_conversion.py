@@ -488,3 +488,67 @@ def test_damaged_pk3_members(tmp_path: Path, caplog: pytest.LogCaptureFixture) -
         damage_zip_member(path, member)
         with pytest.raises(SceneFormatError, match=rf"{member} in .* is damaged \(Bad CRC-32.*\): replace the archive"):
             convert_bsp(path)
+
+
+def _set_vertices(data: bytes, **fields: object) -> bytes:
+    """``data`` with fields of every vertex changed."""
+    off, ln = struct.unpack_from("<ii", data, 8 + 8 * 10)
+    verts = np.frombuffer(data, VERTEX_DT, count=ln // VERTEX_DT.itemsize, offset=off).copy()
+    for k, v in fields.items():
+        verts[k] = v
+    return data[:off] + verts.tobytes() + data[off + ln:]
+
+
+def test_a_map_whose_values_make_no_scene_names_its_file(tmp_path: Path) -> None:
+    """NaN vertices raised the scene model's ``Mesh.positions: expected finite values`` (an
+    sdk.ParameterError naming neither the map nor the file): now a SceneFormatError naming the file (the
+    map inside its pk3), with the model's words."""
+    path = tmp_path / "nan.bsp"
+    path.write_bytes(_set_vertices(_map(TWO_WALLS, SPAWN), pos=np.nan))
+    with pytest.raises(SceneFormatError, match=r"nan\.bsp: its data makes no valid scene \(Mesh\.positions: "
+                                               r"expected finite values"):
+        convert_bsp(path)
+    pk3 = tmp_path / "nan.pk3"
+    with zipfile.ZipFile(pk3, "w") as z:
+        z.writestr("maps/m.bsp", path.read_bytes())
+    with pytest.raises(SceneFormatError, match=r"maps/m\.bsp in .*nan\.pk3: its data makes no valid scene"):
+        convert_bsp(pk3)
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    # 0 and -1 silently dropped every curved surface, -3 was numpy's ValueError, 2.5 a TypeError, 10**6 a MemoryError
+    ({"patch_level": 0}, r"patch_level: expected an integer from 1 to 64, got 0"),
+    ({"patch_level": -1}, r"patch_level: expected an integer from 1 to 64, got -1"),
+    ({"patch_level": -3}, r"patch_level: expected an integer from 1 to 64, got -3"),
+    ({"patch_level": 2.5}, r"patch_level: expected an integer from 1 to 64, got 2\.5"),
+    ({"patch_level": 10**6}, r"patch_level: expected an integer from 1 to 64, got 1000000"),
+    ({"patch_level": True}, r"patch_level: expected an integer"),
+    # -1 kept all lights but the weakest (the slice [:-1])
+    ({"max_point_lights": -1}, r"max_point_lights: expected an integer from 0 to 256, got -1"),
+    ({"max_point_lights": 1.5}, r"max_point_lights: expected an integer from 0 to 256, got 1\.5"),
+    ({"max_point_lights": 10**6}, r"max_point_lights: expected an integer from 0 to 256, got 1000000"),
+    ({"eye_height_units": float("nan")}, r"eye_height_units: expected a finite number of Q3 units from -65536"),
+    ({"eye_height_units": 10**400}, r"eye_height_units: expected a finite number"),
+])
+def test_conversion_options_out_of_range_are_parameter_errors(tmp_path: Path, kwargs: dict, message: str) -> None:
+    from rtp.capture.scenes import load_bsp
+    from rtp.sdk import ParameterError
+
+    path = tmp_path / "m.bsp"
+    path.write_bytes(_map(TWO_WALLS, SPAWN))
+    with pytest.raises(ParameterError, match=message) as e:
+        convert_bsp(path, **kwargs)
+    assert e.value.name == next(iter(kwargs))
+    with pytest.raises(ParameterError, match=message):
+        load_bsp(path, **kwargs)
+
+
+def test_conversion_options_at_their_bounds(tmp_path: Path) -> None:
+    """patch_level 1 tessellates a 3x3 block into 2 triangles; max_point_lights 0 keeps no light."""
+    c = (0.0, 0.0, 1.0)
+    patch = [((x, y, 0.0), (x / 64, y / 64), c) for y in (0, 32, 64) for x in (0, 32, 64)]
+    path = tmp_path / "p.bsp"
+    path.write_bytes(_faces_map([("textures/test/wall", 0, 1)], [(2, 0, patch, [], (3, 3))], SPAWN))
+    assert convert_bsp(path, patch_level=1).scene.triangle_count == 2
+    assert convert_bsp(path, patch_level=64).scene.triangle_count == 2 * 64 * 64
+    assert convert_bsp(path, max_point_lights=0).scene.point_lights == []

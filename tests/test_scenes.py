@@ -9,6 +9,8 @@ import io
 import json
 import logging
 import math
+import re
+import shutil
 import struct
 import sys
 import time
@@ -83,10 +85,45 @@ def test_procedural_is_deterministic():
     ({"seed": True}, r"seed: expected a non-negative integer, got True"),
     ({"seed": 0, "rooms": (0, 2)}, r"rooms: expected \(nx, nz\), integers of at least 1, got \(0, 2\)"),
     ({"seed": 0, "rooms": 2}, r"rooms: expected \(nx, nz\)"),
+    # (these were numpy's "high - low < 0" or "low > high", or accepted: a NaN height made NaN walls)
+    ({"seed": 0, "room_size": (10.0, 6.0)},
+     r"room_size: expected \(low, high\) in metres, numbers with 3.5 <= low <= high <= 1000, got \(10.0, 6.0\)"),
+    ({"seed": 0, "room_size": (2.0, 3.0)}, r"room_size: expected .* 3.5 <= low"),
+    ({"seed": 0, "room_size": 8.0}, r"room_size: expected \(low, high\)"),
+    ({"seed": 0, "height": (math.nan, 4.0)}, r"height: expected \(low, high\) in metres, numbers with 2.5 <= low"),
+    ({"seed": 0, "height": (3.0, math.inf)}, r"height: expected"),
+    ({"seed": 0, "height": (4.0, 3.0)}, r"height: expected"),
+    ({"seed": 0, "objects_per_room": (-1, 3)},
+     r"objects_per_room: expected \(low, high\) props a room, integers with 0 <= low <= high <= 100, got \(-1, 3\)"),
+    ({"seed": 0, "objects_per_room": (2.5, 3)}, r"objects_per_room: expected"),
+    ({"seed": 0, "objects_per_room": (5, 2)}, r"objects_per_room: expected"),
+    ({"seed": 0, "texture_size": 100}, r"texture_size: expected a power of two from 16 to 4096, got 100"),
+    ({"seed": 0, "texture_size": 8}, r"texture_size: expected a power of two"),
+    ({"seed": 0, "name": 3}, r"name: expected a string or None, got 3"),
 ])
 def test_procedural_refuses_bad_arguments_saying_what_it_expected(kw: dict, message: str) -> None:
-    with pytest.raises(sdk.ParameterError, match=message):
+    with pytest.raises(sdk.ParameterError, match=message) as e:
         procedural(**kw)
+    assert e.value.name == list(kw)[-1]
+
+
+def test_a_procedural_scene_has_one_name():
+    """``procedural:1_0`` loaded seed 10, ``procedural:01`` and ``procedural:+1`` seed 1 (Python's int reads
+    them): one scene under several names and sample ids. Only plain decimal digits are a seed, in
+    load_scene, check_scene and scene_id alike."""
+    from rtp.capture import check_scene, load_scene, scene_id
+
+    for name in ("procedural:1_0", "procedural:01", "procedural:+1", "procedural: 1", "procedural:1 ",
+                 "procedural:-1", "procedural:\u0661", "procedural:00"):
+        for call, args in ((load_scene, (name, None, None, None)), (check_scene, (name, None, None, None)),
+                           (scene_id, (name,))):
+            with pytest.raises(SceneNotFoundError, match=r"seed is a non-negative integer in decimal digits, without "
+                                                         r"a sign, leading zeros, underscores or spaces, e\.g\. "
+                                                         r"procedural:0"):
+                call(*args)
+    assert scene_id("procedural:0") == "procedural_0" and scene_id("procedural:10") == "procedural_10"
+    check_scene("procedural:10", None, None, None)
+    assert load_scene("procedural:0", None, None, None)[0].name == "procedural-0"
 
 
 def test_procedural_sanity_and_speed():
@@ -686,6 +723,35 @@ def test_mesh_file_format_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         scenes.load_mesh_file(tmp_path / "junk.glb")
 
 
+def test_an_obj_texture_or_material_library_that_cannot_be_read_is_dropped_with_a_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+):
+    """An MTL's ``map_Kd`` naming a missing image left the material untextured without a word (trimesh logs
+    it at DEBUG), and a missing ``.mtl`` gave trimesh's grey 2x2 placeholder texture, silently: both are
+    dropped with a warning naming the file, the material untextured (the MTL's Kd kept)."""
+    pytest.importorskip("trimesh")
+    obj = "mtllib {}\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl red\nf 1/1 2/2 3/3\n"
+    (tmp_path / "lost.obj").write_text(obj.format("lost.mtl"))
+    (tmp_path / "lost.mtl").write_text("newmtl red\nKd 1 0 0\nmap_Kd missing.png\n")
+    with caplog.at_level("WARNING", logger="rtp"):
+        (mat,) = scenes.load_mesh_file(tmp_path / "lost.obj").materials
+    assert mat.texture is None and mat.base_color == pytest.approx((1.0, 0.0, 0.0, 1.0))
+    assert any("lost.mtl: texture missing.png of material 'red' cannot be read" in r.getMessage() for r in caplog.records)
+    caplog.clear()
+    (tmp_path / "nolib.obj").write_text(obj.format("absent.mtl"))
+    with caplog.at_level("WARNING", logger="rtp"):
+        (mat,) = scenes.load_mesh_file(tmp_path / "nolib.obj").materials
+    assert mat.texture is None and mat.base_color == pytest.approx((0.8, 0.8, 0.8, 1.0))  # not the placeholder
+    assert any("nolib.obj: its material library" in r.getMessage() and "absent.mtl cannot be read" in r.getMessage()
+               for r in caplog.records)
+    caplog.clear()
+    PIL.new("RGBA", (4, 4), (0, 0, 255, 255)).save(tmp_path / "blue.png")
+    (tmp_path / "lost.mtl").write_text("newmtl red\nKd 1 0 0\nmap_Kd blue.png\n")
+    with caplog.at_level("WARNING", logger="rtp"):
+        (mat,) = scenes.load_mesh_file(tmp_path / "lost.obj").materials
+    assert mat.texture is not None and tuple(mat.texture[0, 0]) == (0, 0, 255, 255) and not caplog.records
+
+
 # -- fetching: apt-get and dpkg-deb replaced by a local fake ------------------------------------------
 
 SPLITS = "train: [m1, m2]\nvalidation: []\ntest: [m3]\n"
@@ -848,6 +914,84 @@ def test_run_turns_command_failures_into_fetch_errors(tmp_path: Path):
     _run([sys.executable, "-c", "pass"], tmp_path)  # success: no error
 
 
+def test_an_empty_scene_cache_variable_is_unset(monkeypatch: pytest.MonkeyPatch):
+    """``RTP_SCENE_CACHE=`` (set, but empty) made the current folder the scene cache."""
+    monkeypatch.setenv("RTP_SCENE_CACHE", "")
+    assert scenes.default_cache_dir() == str(Path.home() / ".cache" / "rtp" / "scenes")
+    monkeypatch.delenv("RTP_SCENE_CACHE")
+    assert scenes.default_cache_dir() == str(Path.home() / ".cache" / "rtp" / "scenes")
+    monkeypatch.setenv("RTP_SCENE_CACHE", "/somewhere/scenes")
+    assert scenes.default_cache_dir() == "/somewhere/scenes"
+
+
+def test_fetch_takes_one_map_name_and_names_the_split_file_used(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """``fetch(cache, maps="m1")`` iterated over the letters of the name (UnlistedMapError 'm'); a listed map
+    missing from the packages was said to be "listed in scenes.yaml" whatever split file was used."""
+    splits = tmp_path / "s1.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    _fake_apt(monkeypatch, _packages())
+    assert scenes.fetch(cache, "m1", splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
+    with pytest.raises(scenes.FetchError, match=rf"maps listed in {re.escape(str(splits))} but not found in the "
+                                                r"packages .*: \['m3'\]"):
+        scenes.fetch(cache, "m3", splits=splits, progress=False)
+    with pytest.raises(sdk.ParameterError, match=r"maps: expected a map name or a list of map names, got \[3\]"):
+        scenes.fetch(cache, [3], splits=splits, progress=False)  # type: ignore[list-item]
+
+
+def test_the_texture_group_does_not_depend_on_the_folders_above_the_cache(tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch):
+    """The OpenArena group was decided from the absolute path: a cache under a folder named ``openarena``
+    (``--cache-dir /tmp/x/openarena/c``) put every archive in it, and 20kdm2 converted with the OpenArena
+    textures. It is decided from the path inside the unpacked packages."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "openarena" / "baseoa" / "cache"
+    _fake_apt(monkeypatch, _packages())
+    scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    m1, tex, m2 = f"root/{OA}/map-m1.pk3", f"root/{OA}/pak-tex.pk3", "pk3/map-m2.pk3"
+    assert json.loads((cache / "index.json").read_text())["groups"] == {"openarena": [m1, tex], "map-m2": [m2]}
+    assert scene_by_name("m2", cache, splits=splits).materials[0].texture is None  # its own archive only
+    assert scene_by_name("m1", cache, splits=splits).materials[0].texture is not None
+
+
+def test_a_damaged_archive_of_the_cache_is_made_again_or_named_with_what_to_delete(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    """A ``.pk3`` gunzipped into ``<cache>/pk3`` and cut short (a full disk) was never made again: every later
+    fetch failed on it. It is gunzipped again where it is not a zip archive. An archive unpacked into
+    ``root/`` that is damaged is not unpacked again (the record of unpacked packages says it was): the
+    error says exactly what to delete (it said "`rtp scenes fetch --cache-dir` an empty folder"), and doing
+    so mends it."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    _fake_apt(monkeypatch, _packages())
+    scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    cut = cache / "pk3" / "map-m2.pk3"
+    whole = cut.read_bytes()
+    cut.write_bytes(whole[: len(whole) // 2])
+    assert scenes.fetch(cache, ["m2"], splits=splits, progress=False) == {"m2": cut}
+    assert cut.read_bytes() == whole and scene_by_name("m2", cache, splits=splits).triangle_count == 79
+    advice = re.escape(f"delete {cache / 'root' / '.unpacked'} and the folder {cache / 'pk3'}, then run "
+                       f"`rtp scenes fetch --cache-dir {cache}` again")
+    m1 = cache / "root" / OA / "map-m1.pk3"
+    good = m1.read_bytes()
+    m1.write_bytes(b"not a zip")
+    with pytest.raises(scenes.FetchError, match=rf"map-m1.pk3 is not a pk3 \(zip\) archive .*: {advice}"):
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    m1.write_bytes(good)
+    damage_zip_member(m1, "maps/m1.bsp")
+    (cache / "converted" / f"m1.v{CACHE_VERSION}.npz").unlink(missing_ok=True)
+    with pytest.raises(SceneFormatError, match=rf"maps/m1.bsp in .*map-m1.pk3 is damaged .*: replace the archive "
+                                               rf"\(in the fetched cache: {advice}"):
+        scene_by_name("m1", cache, splits=splits)
+    (cache / "root" / ".unpacked").unlink()  # what the message says
+    shutil.rmtree(cache / "pk3")
+    scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    assert scene_by_name("m1", cache, splits=splits).triangle_count == 79
+
+
 def _fake_cache(tmp_path: Path) -> Path:
     """A fetched cache whose one archive holds the tiny map as the listed map oa_dm1."""
     cache = tmp_path / "cache"
@@ -875,21 +1019,79 @@ def test_unreadable_converted_cache_is_rebuilt(tmp_path: Path, caplog: pytest.Lo
         assert load_scene_npz(path)[0].triangle_count == good.triangle_count
 
 
-def test_scene_index_and_split_file_errors(tmp_path: Path):
-    """A scene index that is not JSON, not an object or lacks its tables is SceneFormatError (one of
-    another version SceneNotFoundError), each saying to fetch again, and scene_list still lists the maps
-    as not fetched; a listed map missing from the cache is SceneNotFoundError; a split file with unknown
-    keys is SceneFormatError; an unknown split name is UnlistedMapError."""
+def _with_meta(path: Path, change) -> None:
+    """Rewrite the converted-scene file ``path`` with its JSON header changed by ``change(meta)``, which returns
+    the new header."""
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["meta"] = np.array(json.dumps(change(json.loads(str(arrays["meta"])))))
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+def _unknown_material_key(meta: dict) -> dict:
+    meta["materials"][0]["shininess"] = 3
+    return meta
+
+
+@pytest.mark.parametrize("change", [
+    _unknown_material_key,  # Material(**d): a TypeError
+    lambda meta: meta | {"sun": None},  # None["direction"]: a TypeError
+    lambda meta: [meta],  # a list: an AttributeError (list.get)
+    lambda meta: meta | {"materials": {"0": {}}},  # a dict for the list: an AttributeError (str.pop)
+    lambda meta: meta | {"point_lights": [{"position": [0, 0, 0]}]},  # a KeyError
+    lambda meta: meta | {"ambient": -1.0},  # out of its range: the scene model's ParameterError
+    lambda meta: meta | {"meshes": [0, 0, 0, 0, 0, 0, 0, 0, 0]},  # arrays it does not hold: a KeyError
+    lambda meta: meta | {"stats": []},
+], ids=["material-key", "sun-null", "list", "materials-dict", "light-fields", "ambient", "meshes", "stats"])
+def test_a_converted_scene_with_a_header_of_another_shape_is_converted_again(tmp_path: Path, change,
+                                                                           caplog: pytest.LogCaptureFixture):
+    """docs/scenes.md: "a converted .npz that cannot be read is converted again, with a warning". A header of
+    another shape (an unknown material field, "sun": null, a list for the object, ...) raised TypeError or
+    AttributeError tracebacks: load_scene_npz now says SceneFormatError naming the file, and the map is
+    converted again."""
+    cache = _fake_cache(tmp_path)
+    good = scene_by_name("oa_dm1", cache)
+    path = cache / "converted" / f"oa_dm1.v{CACHE_VERSION}.npz"
+    _with_meta(path, change)
+    with pytest.raises(SceneFormatError, match=rf"{path.name}: "):
+        load_scene_npz(path)
+    with caplog.at_level("WARNING", logger="rtp"):
+        assert scene_by_name("oa_dm1", cache).triangle_count == good.triangle_count
+    assert any("ignoring unreadable cache" in r.getMessage() for r in caplog.records)
+    assert load_scene_npz(path)[0].triangle_count == good.triangle_count  # written again
+
+
+def test_scene_index_and_split_file_errors(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """A scene index that is not JSON (nor UTF-8), not an object, lacks its tables or is of another version
+    (that one was a SceneNotFoundError whose advice lacked the cache folder) is SceneFormatError, each saying
+    to fetch again into the cache folder used, and scene_list still lists the maps as not fetched, with a
+    warning saying why (it said nothing: `rtp scenes list` read "0 fetched: run `rtp scenes fetch`"); a listed
+    map missing from the cache is SceneNotFoundError; a split file with unknown keys is SceneFormatError; an
+    unknown split name is an sdk.ParameterError naming ``split`` (it was UnlistedMapError)."""
+    import re
+
     cache = _fake_cache(tmp_path)
     index = cache / "index.json"
-    for text, err, message in [("{trunc", SceneFormatError, "is not a scene index .*Expecting"),
-                               ("[]", SceneFormatError, "is not a scene index \\(a JSON list"),
-                               ('{"version": 1}', SceneFormatError, "lacks the 'maps' or 'groups' table"),
-                               ('{"version": 0, "maps": {}, "groups": {}}', SceneNotFoundError, "another rtp version")]:
-        index.write_text(text)
-        with pytest.raises(err, match=f"{message}.*run `rtp scenes fetch"):
+    again = re.escape(f"run `rtp scenes fetch --cache-dir {cache}` again")
+    for text, message in [("{trunc", "is not a scene index .*Expecting"),
+                          (b"\xff\xfe{", "is not a scene index .*can't decode"),
+                          ("[]", "is not a scene index \\(a JSON list"),
+                          ('{"version": 1}', "lacks the 'maps' or 'groups' table"),
+                          ('{"version": 0, "maps": {}, "groups": {}}',
+                           "was written by another rtp version \\(index version 0, this rtp reads 1\\)")]:
+        index.write_bytes(text if isinstance(text, bytes) else text.encode())
+        with pytest.raises(SceneFormatError, match=f"{message}.*: {again}"):
             scene_by_name("oa_dm1", cache)
-        assert not any(m["fetched"] for m in scenes.scene_list(cache))
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp"):
+            assert not any(m["fetched"] for m in scenes.scene_list(cache))
+        assert [r.getMessage() for r in caplog.records if "the scene index is damaged or out of date" in r.getMessage()
+                and re.search(f"{message}.*: {again}", r.getMessage())], caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="rtp"):  # nothing fetched yet: nothing to warn about
+        assert not any(m["fetched"] for m in scenes.scene_list(tmp_path / "empty"))
+    assert not caplog.records
     index.write_text(json.dumps({"version": 1, "maps": {"oa_dm1": "pk3/x.pk3"}, "groups": {}}))
     with pytest.raises(SceneNotFoundError, match="'oa_dm2' is not in the scene cache"):
         scenes.check_map("oa_dm2", cache)
@@ -905,5 +1107,12 @@ def test_scene_index_and_split_file_errors(tmp_path: Path):
         extra.write_text(text)
         with pytest.raises(SceneFormatError, match=message):
             load_splits(extra)
-    with pytest.raises(UnlistedMapError, match="unknown split 'training'"):
-        scenes.map_names("training")
+    for bad in ("training", "Train"):
+        with pytest.raises(sdk.ParameterError, match=rf"split: expected one of train, validation, test \(or None for "
+                                                     rf"every split\), got '{bad}'") as e:
+            scenes.map_names(bad)
+        assert e.value.name == "split"
+    with pytest.raises(sdk.ParameterError, match="split: expected one of") as e:
+        scene_by_name("oa_dm1", cache, split="bogus")
+    assert e.value.name == "split"
+    assert scene_by_name("oa_dm1", cache, split="train").triangle_count > 0

@@ -117,6 +117,9 @@ def test_viewpoint_errors(scene):
     for kwargs, words in (({"seed": -1}, "seed: expected an integer >= 0"), ({"n": 2.5}, "n: expected an integer"),
                           ({"clearance": float("nan")}, "clearance"), ({"min_coverage": -0.1}, "min_coverage"),
                           ({"min_coverage": []}, "min_coverage"), ({"rays": (0, 3)}, "rays"), ({"fov_y": 0}, "fov_y"),
+                          # (an increasing sequence was taken, though each level is a lower fallback)
+                          ({"min_coverage": (0.2, 0.5)}, r"min_coverage: expected a number or a decreasing sequence"),
+                          ({"min_coverage": (0.5, 0.5)}, r"min_coverage: expected a number or a decreasing sequence"),
                           ({"pitch_limit": 91}, "pitch_limit"), ({"max_attempts": -1}, "max_attempts"),
                           ({"aspect": -1}, "aspect"), ({"voxel": float("inf")}, "voxel"),
                           # (rays overflowing to nan were an IndexError of the faster march: RTP_FUZZ_SCALE=20)

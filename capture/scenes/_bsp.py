@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
-from rtp.sdk import srgb_to_linear
+from rtp.sdk import ParameterError, srgb_to_linear
 
 from ._errors import SceneFormatError, SceneNotFoundError
 from ._geometry import vertex_normals
@@ -69,6 +69,14 @@ SPAWN_CLASSES = (
 LIGHT_WORDS = ("light", "lamp", "flame", "torch", "fire", "lava")
 IMAGE_EXTS = (".jpg", ".tga", ".png", ".jpeg")
 MAX_TEXTURE = 1024  # larger textures are downsampled (by powers of two) to this edge
+#: The largest ``patch_level``: 64 segments a side are 8192 triangles per 3x3 bezier block, far past any
+#: visible curvature (the default is 6); more only fills memory (10**6 asked for terabytes).
+MAX_PATCH_LEVEL = 64
+#: The largest ``max_point_lights``: the most point lights the reference renderer draws (its own
+#: ``max_point_lights`` is at most 256; the default here keeps 16).
+MAX_POINT_LIGHTS = 256
+#: Half the extent of a Q3 world (``MAX_WORLD_COORD``), the bound of ``eye_height_units``.
+MAX_WORLD_UNITS = 65536
 
 TEXTURE_DT = np.dtype([("name", "S64"), ("flags", "<i4"), ("contents", "<i4")])
 VERTEX_DT = np.dtype([("pos", "<f4", 3), ("uv", "<f4", 2), ("lm", "<f4", 2), ("normal", "<f4", 3), ("color", "u1", 4)])
@@ -327,20 +335,40 @@ def convert_bsp(
         source: a ``.bsp`` file, or a ``.pk3`` archive holding ``maps/<map_name>.bsp``.
         map_name: map inside the pk3 (optional when the archive holds exactly one map).
         pk3s: further archives searched for textures and ``scripts/*.shader`` (after ``source``).
-        patch_level: segments per side of each tessellated 3x3 bezier block.
-        eye_height_units: camera height above a spawn entity's origin, in Q3 units.
-        max_point_lights: cap on the number of point lights.
+        patch_level: segments per side of each tessellated 3x3 bezier block, an integer from 1 to
+            :data:`MAX_PATCH_LEVEL` (64).
+        eye_height_units: camera height above a spawn entity's origin, in Q3 units (within
+            +-:data:`MAX_WORLD_UNITS`).
+        max_point_lights: cap on the number of point lights, an integer from 0 to
+            :data:`MAX_POINT_LIGHTS` (256).
         name: scene name (default: the map name).
 
     Raises:
         SceneNotFoundError: the file, an archive or the map inside it is missing.
-        SceneFormatError: not an IBSP v46 file, or a lump is inconsistent.
+        SceneFormatError: not an IBSP v46 file, a lump is inconsistent, or the map's values make no
+            valid scene (vertices that are NaN, ...), naming the file.
+        ParameterError: ``patch_level``, ``max_point_lights`` or ``eye_height_units`` is out of its range.
     """
+    _check_int("patch_level", patch_level, 1, MAX_PATCH_LEVEL)
+    _check_int("max_point_lights", max_point_lights, 0, MAX_POINT_LIGHTS)
+    if (isinstance(eye_height_units, bool) or not isinstance(eye_height_units, (int, float, np.integer, np.floating))
+            or not abs(eye_height_units) <= MAX_WORLD_UNITS):  # (NaN fails the comparison)
+        raise ParameterError(f"eye_height_units: expected a finite number of Q3 units from {-MAX_WORLD_UNITS} to "
+                             f"{MAX_WORLD_UNITS}, got {eye_height_units!r}", "eye_height_units")
     data, pk3, map_name = _open_source(source, map_name, pk3s)
     try:
         return _convert(data, pk3, map_name, patch_level, eye_height_units, max_point_lights, name or map_name)
+    except ParameterError as err:  # the scene model refused a value the map holds (NaN vertices, ...)
+        where = source if Path(source).suffix.lower() == ".bsp" else f"maps/{map_name}.bsp in {source}"
+        raise SceneFormatError(f"{where}: its data makes no valid scene ({err})") from err
     finally:
         pk3.close()
+
+
+def _check_int(field: str, value: Any, lo: int, hi: int) -> None:
+    """``value`` an integer in ``[lo, hi]``, else a ParameterError naming ``field`` and the range."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+        raise ParameterError(f"{field}: expected an integer from {lo} to {hi}, got {value!r}", field)
 
 
 def load_bsp(source: str | Path, map_name: str | None = None, **kwargs) -> Scene:

@@ -8,6 +8,7 @@ triangles). Bump :data:`CACHE_VERSION` whenever the conversion changes.
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -60,9 +61,28 @@ def save_scene_npz(path: str | Path, scene: Scene, sky: np.ndarray | None = None
 
 
 def load_scene_npz(path: str | Path) -> tuple[Scene, np.ndarray, dict]:
-    """Read a cache file written by :func:`save_scene_npz`: ``(scene, sky_triangles, stats)``."""
+    """Read a cache file written by :func:`save_scene_npz`: ``(scene, sky_triangles, stats)``.
+
+    Raises:
+        SceneFormatError: the file is not such a cache file: not an npz, cut short, of another
+            cache version, or its header or arrays not of the shape this rtp writes (an unknown
+            material field, ``"sun": null``, a list for an object, a value out of its range, ...).
+        OSError: the file cannot be opened.
+    """
+    try:
+        return _load_scene_npz(path)
+    except SceneFormatError:
+        raise
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError, EOFError, zipfile.BadZipFile) as err:
+        # (an sdk.ParameterError of the scene model is a ValueError: a value out of its range)
+        raise SceneFormatError(f"{path}: not a converted scene of this rtp ({type(err).__name__}: {err})") from err
+
+
+def _load_scene_npz(path: str | Path) -> tuple[Scene, np.ndarray, dict]:
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"]))
+        if not isinstance(meta, dict):
+            raise SceneFormatError(f"{path}: its header is a JSON {type(meta).__name__}, not an object")
         if meta.get("version") != CACHE_VERSION:
             raise SceneFormatError(f"{path}: cache version {meta.get('version')}, expected {CACHE_VERSION}")
         materials = []
@@ -88,4 +108,7 @@ def load_scene_npz(path: str | Path) -> tuple[Scene, np.ndarray, dict]:
         ambient=meta["ambient"],
         spawn_points=[SpawnPoint(tuple(s["position"]), s["yaw"]) for s in meta["spawn_points"]],
     )
-    return scene, sky, meta.get("stats", {})
+    stats = meta.get("stats", {})
+    if not isinstance(stats, dict):
+        raise SceneFormatError(f"{path}: its header's stats are a JSON {type(stats).__name__}, not an object")
+    return scene, sky, stats

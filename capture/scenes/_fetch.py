@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Scene
+from rtp.sdk import ParameterError
 
 from ._bsp import BspConversion, convert_bsp
 from ._cache import CACHE_VERSION, load_scene_npz, save_scene_npz
@@ -111,12 +112,17 @@ def load_splits(path: str | Path | None = None) -> dict[str, list[str]]:
 
 
 def map_names(split: str | None = None, splits: str | Path | None = None) -> list[str]:
-    """Maps of one split (``"train"``, ``"validation"``, ``"test"``) or of all splits."""
+    """Maps of one split (``"train"``, ``"validation"``, ``"test"``) or of all splits.
+
+    Raises:
+        ParameterError: ``split`` is not one of :data:`SPLIT_NAMES` (nor None).
+    """
+    if split is not None and split not in SPLIT_NAMES:  # (checked before the file: a bad argument, not a bad map)
+        raise ParameterError(f"split: expected one of {', '.join(SPLIT_NAMES)} (or None for every split), "
+                             f"got {split!r}", "split")
     s = load_splits(splits)
     if split is None:
         return [n for k in SPLIT_NAMES for n in s[k]]
-    if split not in s:
-        raise UnlistedMapError(f"unknown split {split!r}; expected one of {SPLIT_NAMES}")
     return list(s[split])
 
 
@@ -166,12 +172,31 @@ def _run(cmd: Sequence[str], cwd: Path, debs: Path | None = None) -> None:
         raise FetchError(f"{' '.join(cmd)} failed with exit code {res.returncode}: " + " | ".join(tail))
 
 
+def _unpack_again(cache: Path) -> str:
+    """What to do about a damaged archive of the fetched cache ``cache``: unpack the packages again."""
+    return (f"delete {cache / 'root' / '.unpacked'} and the folder {cache / 'pk3'}, then run `rtp scenes fetch "
+            f"--cache-dir {cache}` again: it unpacks the packages again (if the archive is still damaged, delete the "
+            f"packages in {cache / 'debs'} as well, to download them again)")
+
+
+def _path_in_packages(archive: Path, root: Path, pk3_dir: Path) -> tuple[str, ...]:
+    """The folders and name of ``archive`` (resolved) inside the unpacked packages ``root``, which decide its
+    texture group: not the folders above the cache (a cache folder under one named ``openarena`` put every
+    archive in the OpenArena group); none for the archives gunzipped into ``pk3_dir``; the whole path for one
+    that a link leads out of the cache."""
+    for base, inside in ((root.resolve(), True), (pk3_dir.resolve(), False)):
+        if archive.is_relative_to(base):
+            return archive.relative_to(base).parts if inside else ()
+    return archive.parts
+
+
 def _scan_archives(root: Path, pk3_dir: Path) -> dict:
-    """Find pk3 archives (gunzipping ``*.pk3.gz``) and the maps inside them."""
+    """Find pk3 archives (gunzipping ``*.pk3.gz``, again where the ``.pk3`` is not a zip archive: cut short by
+    a full disk, say) and the maps inside them."""
     pk3_dir.mkdir(parents=True, exist_ok=True)
     for gz in sorted(root.rglob("*.pk3.gz")):
         out = pk3_dir / gz.name[:-3]
-        if not out.exists():
+        if not out.is_file() or not zipfile.is_zipfile(out):
             tmp = out.with_suffix(".tmp")
             try:
                 with gzip.open(gz, "rb") as src, open(tmp, "wb") as dst:
@@ -185,13 +210,14 @@ def _scan_archives(root: Path, pk3_dir: Path) -> dict:
     groups: dict[str, list[str]] = {}
     for a in sorted(archives):
         # OpenArena archives share textures and shader scripts; others stand alone
-        group = "openarena" if "openarena" in a.parts or "baseoa" in a.parts else a.stem
+        inside = _path_in_packages(a, root, pk3_dir)
+        group = "openarena" if "openarena" in inside or "baseoa" in inside else a.stem
         groups.setdefault(group, []).append(str(a))
         try:
             with zipfile.ZipFile(a) as z:
                 names = z.namelist()
         except zipfile.BadZipFile as err:
-            raise FetchError(f"{a} is not a pk3 (zip) archive: {err}") from err
+            raise FetchError(f"{a} is not a pk3 (zip) archive ({err}): {_unpack_again(root.parent)}") from err
         for n in names:
             low = n.lower()
             if low.startswith("maps/") and low.endswith(".bsp"):
@@ -215,8 +241,8 @@ def fetch(
 
     Args:
         cache_dir: cache folder (created); packages already there are not downloaded again.
-        maps: maps that must be present (default: every map of ``scenes.yaml``); each must be
-            listed there.
+        maps: maps that must be present, a name or a list of names (default: every map of
+            ``scenes.yaml``); each must be listed there.
         splits: path of ``scenes.yaml`` (default: the copy shipped with rtp).
         convert: also convert the maps now (otherwise on first :func:`scene_by_name`).
         progress: show tqdm progress bars when tqdm is installed.
@@ -227,9 +253,12 @@ def fetch(
     Raises:
         FetchError: apt-get/dpkg-deb failed, or a requested map is not in the packages.
         UnlistedMapError: a requested map is not listed in ``scenes.yaml``.
+        ParameterError: ``maps`` is not a name or a list of names.
     """
     cache = Path(cache_dir).resolve()
-    wanted = list(maps) if maps is not None else map_names(None, splits)
+    wanted = [maps] if isinstance(maps, str) else list(maps) if maps is not None else map_names(None, splits)
+    if not all(isinstance(m, str) for m in wanted):
+        raise ParameterError(f"maps: expected a map name or a list of map names, got {maps!r}", "maps")
     for m in wanted:
         _check_listed(m, None, splits)
     debs, root = cache / "debs", cache / "root"
@@ -254,7 +283,8 @@ def fetch(
     _write_text(cache / "index.json", json.dumps(index, indent=1, sort_keys=True))
     absent = [m for m in wanted if m not in index["maps"]]
     if absent:
-        raise FetchError(f"maps listed in scenes.yaml but not found in the packages {list(PACKAGES)}: {absent}")
+        raise FetchError(f"maps listed in {splits or DEFAULT_SPLITS} but not found in the packages {list(PACKAGES)}: "
+                         f"{absent}")
     log.info("%d maps available in %s (%d requested)", len(index["maps"]), cache, len(wanted))
     if convert:
         for m in _progress(wanted, desc="convert", unit="map", disable=not progress):
@@ -297,7 +327,8 @@ def _read_index(cache: Path) -> dict:
     if not isinstance(index, dict):
         raise SceneFormatError(f"{p} is not a scene index (a JSON {type(index).__name__}, not an object): {again}")
     if index.get("version") != INDEX_VERSION:
-        raise SceneNotFoundError(f"{p} was written by another rtp version: run `rtp scenes fetch` again")
+        raise SceneFormatError(f"{p} was written by another rtp version (index version {index.get('version')!r}, "
+                               f"this rtp reads {INDEX_VERSION}): {again}")
     if not isinstance(index.get("maps"), dict) or not isinstance(index.get("groups"), dict):
         raise SceneFormatError(f"{p} lacks the 'maps' or 'groups' table of a scene index: {again}")
     return index
@@ -330,7 +361,13 @@ def convert_from_cache(name: str, cache_dir: str | Path, index: dict | None = No
     group = next((g for g in index["groups"].values() if archive in g), [archive])
     archive, group = str(cache / archive), [str(cache / a) for a in group]
     t0 = time.perf_counter()
-    conv = convert_bsp(archive, name, pk3s=[a for a in group if a != archive])
+    try:
+        conv = convert_bsp(archive, name, pk3s=[a for a in group if a != archive])
+    except SceneFormatError as err:
+        if not isinstance(err.__cause__, (zipfile.BadZipFile, zlib.error, EOFError)):
+            raise
+        # a damaged archive (a member failing its CRC, no zip at all): say what to delete
+        raise SceneFormatError(f"{err} (in the fetched cache: {_unpack_again(cache)})") from err
     log.info("converted %s in %.2f s", name, time.perf_counter() - t0)
     return conv
 
@@ -343,7 +380,9 @@ def scene_by_name(name: str, cache_dir: str | Path, *, split: str | None = None,
 
     Raises:
         UnlistedMapError: the map is not listed (in that split).
+        ParameterError: ``split`` is not one of :data:`SPLIT_NAMES` (nor None).
         SceneNotFoundError: the cache has not been fetched, or the map is missing from it.
+        SceneFormatError: the cache's ``index.json`` or an archive of the map is damaged, naming what to do.
     """
     _check_listed(name, split, splits)
     cache = Path(cache_dir)
@@ -360,11 +399,18 @@ def scene_blockers(name: str, cache_dir: str | Path, *, splits: str | Path | Non
 
 def scene_list(cache_dir: str | Path | None = None, splits: str | Path | None = None) -> list[dict[str, Any]]:
     """Every map of ``scenes.yaml``: its name, split, and whether the cache holds it fetched and
-    converted (``[{"name", "split", "fetched", "converted"}]`` in split order)."""
+    converted (``[{"name", "split", "fetched", "converted"}]`` in split order). A cache whose ``index.json``
+    cannot be read lists no map as fetched, with a warning saying so and what to do."""
     cache = Path(default_cache_dir() if cache_dir is None else cache_dir)
     try:
         fetched = set(_read_index(cache)["maps"])
-    except (SceneNotFoundError, OSError, ValueError, KeyError):
+    except SceneNotFoundError:  # nothing fetched yet
+        fetched = set()
+    except SceneFormatError as err:  # a damaged index: said, not taken for an empty cache
+        log.warning("the scene index is damaged or out of date, so no map counts as fetched: %s", err)
+        fetched = set()
+    except OSError as err:
+        log.warning("the scene index cannot be read, so no map counts as fetched: %s", err)
         fetched = set()
     s = load_splits(splits)
     return [{"name": m, "split": split, "fetched": m in fetched, "converted": _cache_path(m, cache).is_file()}
@@ -372,7 +418,6 @@ def scene_list(cache_dir: str | Path | None = None, splits: str | Path | None = 
 
 
 def default_cache_dir() -> str:
-    """Where fetched and converted scenes live: ``$RTP_SCENE_CACHE``, else ``~/.cache/rtp/scenes``."""
-    import os
-
-    return os.environ.get("RTP_SCENE_CACHE", str(Path.home() / ".cache" / "rtp" / "scenes"))
+    """Where fetched and converted scenes live: ``$RTP_SCENE_CACHE`` when set and not empty, else
+    ``~/.cache/rtp/scenes`` (an empty ``RTP_SCENE_CACHE=`` counts as unset, not as the current folder)."""
+    return os.environ.get("RTP_SCENE_CACHE") or str(Path.home() / ".cache" / "rtp" / "scenes")

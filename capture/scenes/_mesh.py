@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -58,13 +59,48 @@ def _rgb(value: Any) -> tuple[float, float, float]:
     return r, g, b
 
 
-def _material_of(geom: Any, name: str) -> tuple[Material, bool]:
-    """Material of a trimesh geometry and whether it carries texture coordinates."""
+def _obj_library(p: Path) -> tuple[Path | None, dict[str, str] | None]:
+    """The material library an OBJ file names (its first ``mtllib``, the one trimesh reads) and the texture
+    (``map_Kd``) each of its materials names; ``{}`` without a library, None for a library that cannot be read
+    (logged as a warning naming it: trimesh only logs it at DEBUG and gives a grey placeholder)."""
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None, {}
+    m = re.search(r"^[ \t]*mtllib[ \t]+(\S.*?)[ \t]*\r?$", text, re.MULTILINE)
+    if m is None:
+        return None, {}
+    lib = p.parent / m.group(1)
+    try:
+        mtl = lib.read_text(encoding="utf-8", errors="replace")
+    except OSError as err:
+        log.warning("%s: its material library %s cannot be read (%s): its materials are dropped (the meshes "
+                    "untextured, in the default material)", p, lib, err.strerror or err)
+        return lib, None
+    textures: dict[str, str] = {}
+    current = ""
+    for line in mtl.splitlines():
+        words = line.split()
+        if len(words) < 2:
+            continue
+        key = words[0].lower()
+        if key == "newmtl":
+            current = " ".join(words[1:])
+        elif key == "map_kd":
+            textures[current] = line[line.lower().index("map_kd") + 6:].strip()
+    return lib, textures
+
+
+def _material_of(geom: Any, name: str, library_lost: bool = False) -> tuple[Material, bool]:
+    """Material of a trimesh geometry and whether it carries texture coordinates (``library_lost``: the
+    OBJ's material library could not be read, so trimesh's placeholder material is dropped)."""
     vis: Any = getattr(geom, "visual", None)
     kind = getattr(vis, "kind", None)
     if kind == "texture" and getattr(vis, "material", None) is not None:
         m = vis.material
         has_uv = getattr(vis, "uv", None) is not None and len(vis.uv) == len(geom.vertices)
+        if library_lost and not (hasattr(m, "baseColorFactor") or hasattr(m, "roughnessFactor")):
+            return Material(name=name), has_uv  # (not trimesh's grey placeholder texture)
         if hasattr(m, "baseColorFactor") or hasattr(m, "roughnessFactor"):  # PBRMaterial
             tex = _image_to_rgba(getattr(m, "baseColorTexture", None)) if has_uv else None
             cutoff = None
@@ -121,6 +157,8 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     except Exception as err:  # noqa: BLE001 - trimesh raises many types
         raise SceneFormatError(f"trimesh could not read {p}: {err}") from err
 
+    lib, textures = _obj_library(p) if p.suffix.lower() == ".obj" else (None, {})
+    unread: set[str] = set()
     meshes: list[Mesh] = []
     materials: list[Material] = []
     for node in sorted(loaded.graph.nodes_geometry):
@@ -132,7 +170,13 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         v = np.asarray(geom.vertices, np.float64)
         f = np.asarray(geom.faces, np.int64)
         pos = v @ T[:3, :3].T + T[:3, 3]
-        mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}")
+        mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=textures is None)
+        obj_mat = getattr(getattr(geom, "visual", None), "material", None)
+        obj_name = str(getattr(obj_mat, "name", None))
+        if textures and obj_name in textures and getattr(obj_mat, "image", None) is None and obj_name not in unread:
+            unread.add(obj_name)  # (trimesh drops a map_Kd it cannot read, logging it at DEBUG only)
+            log.warning("%s: texture %s of material %r cannot be read (no such file, or not an image): the "
+                        "material is untextured", lib, textures[obj_name], obj_name)
         if has_uv:
             uv = np.asarray(geom.visual.uv, np.float64)[:, :2].copy()
             uv[:, 1] = 1.0 - uv[:, 1]  # trimesh bottom-left → top-left

@@ -69,8 +69,7 @@ class Pk3Set:
         try:
             return self._zips[k].read(real)
         except (zipfile.BadZipFile, zlib.error, EOFError) as err:  # a damaged member: bad CRC, broken deflate stream
-            raise SceneFormatError(f"{real} in {self.paths[k]} is damaged ({err}): replace the archive (for the fetched "
-                                   "maps: `rtp scenes fetch --cache-dir` an empty folder)") from err
+            raise SceneFormatError(f"{real} in {self.paths[k]} is damaged ({err}): replace the archive") from err
 
     def archive_of(self, path: str) -> Path:
         return self.paths[self._index[path.lower()][0]]

@@ -28,6 +28,12 @@ log = logging.getLogger("rtp.capture")
 WALL = 0.2  # wall and slab thickness, metres
 EYE = 1.6  # spawn eye height above the floor, metres
 DOOR_W, DOOR_H = 1.6, 2.4
+#: The ranges :func:`procedural` accepts: a room at least 3.5 m wide (a window keeps 1.5 m from both ends of
+#: its wall), ceilings above the 2.4 m doorways, at most 100 props a room, textures of 16 to 4096 texels.
+ROOM_SIZE_RANGE = (3.5, 1000.0)
+HEIGHT_RANGE = (2.5, 100.0)
+OBJECTS_RANGE = (0, 100)
+TEXTURE_SIZE_RANGE = (16, 4096)
 
 _Rect = tuple[float, float, float, float]  # (x0, x1, z0, z1) on the floor plan
 _Opening = tuple[float, float, float, float]  # (c0, c1, y0, y1) along a wall
@@ -139,20 +145,34 @@ def procedural(
     Args:
         seed: seed of the single random generator; the same arguments give identical arrays.
         rooms: grid of rooms ``(nx, nz)``; neighbouring rooms share a wall with a doorway.
-        room_size: range of room widths/depths in metres.
-        height: range of the (common) ceiling height in metres.
-        objects_per_room: range of the number of props per room (boxes, columns, spheres, ...).
-        texture_size: edge of the square procedural textures (a power of two).
+        room_size: range ``(low, high)`` of room widths/depths in metres, 3.5 <= low <= high <= 1000.
+        height: range ``(low, high)`` of the (common) ceiling height in metres, 2.5 <= low <= high <= 100.
+        objects_per_room: range ``(low, high)`` of the number of props per room (boxes, columns,
+            spheres, ...), integers, 0 <= low <= high <= 100.
+        texture_size: edge of the square procedural textures, a power of two from 16 to 4096.
         name: scene name, default ``"procedural-<seed>"``.
 
     Returns:
         A :class:`~rtp.scene.Scene` with one mesh per used material, a sun,
         one ceiling point light per room (plus a few extras) and one spawn point per room centre.
+
+    Raises:
+        ParameterError: an argument is of the wrong type or out of its range, naming it.
     """
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ParameterError(f"seed: expected a non-negative integer, got {seed!r}", "seed")
     if not (isinstance(rooms, tuple) and len(rooms) == 2 and all(isinstance(v, int) and v >= 1 for v in rooms)):
         raise ParameterError(f"rooms: expected (nx, nz), integers of at least 1, got {rooms!r}", "rooms")
+    _check_range("room_size", room_size, ROOM_SIZE_RANGE, "in metres")
+    _check_range("height", height, HEIGHT_RANGE, "in metres")
+    _check_range("objects_per_room", objects_per_room, OBJECTS_RANGE, "props a room", integers=True)
+    lo, hi = TEXTURE_SIZE_RANGE
+    if (isinstance(texture_size, bool) or not isinstance(texture_size, (int, np.integer)) or not lo <= texture_size <= hi
+            or texture_size & (texture_size - 1)):
+        raise ParameterError(f"texture_size: expected a power of two from {lo} to {hi}, got {texture_size!r}",
+                             "texture_size")
+    if name is not None and not isinstance(name, str):
+        raise ParameterError(f"name: expected a string or None, got {name!r}", "name")
     nx, nz = rooms
     # Every step draws from the one generator, in this order: the order is part of the output.
     rng = np.random.default_rng(seed)
@@ -165,6 +185,20 @@ def procedural(
     lights += _accent_lights(rng, plan)
     sun = _sun(rng)
     return _assemble(name or f"procedural-{seed}", b, mats, sun, lights, spawns)
+
+
+def _check_range(field: str, value: object, bounds: tuple[float, float], unit: str, integers: bool = False) -> None:
+    """``value`` a pair ``(low, high)`` of finite numbers (integers with ``integers``), ``bounds[0] <= low <= high
+    <= bounds[1]``, else a ParameterError naming ``field``, what it expected and what it got."""
+    kind = "integers" if integers else "numbers"
+    number = (int, np.integer) if integers else (int, float, np.integer, np.floating)
+    ok = (isinstance(value, (tuple, list)) and len(value) == 2
+          and all(isinstance(v, number) and not isinstance(v, bool)
+                  and (isinstance(v, (int, np.integer)) or math.isfinite(v)) for v in value)
+          and bounds[0] <= value[0] <= value[1] <= bounds[1])
+    if not ok:
+        raise ParameterError(f"{field}: expected (low, high) {unit}, {kind} with {bounds[0]:g} <= low <= high <= "
+                             f"{bounds[1]:g}, got {value!r}", field)
 
 
 @dataclass(frozen=True)
