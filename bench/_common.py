@@ -4,7 +4,8 @@ Every script ends in ``run_main(main)``: an rtp error (a model, map or dataset t
 bad value found by the library) prints one line, ``NAME.py: error: ...``, with rtp's exit code
 (docs/errors.md), as the ``rtp`` commands do; ``RTP_TRACEBACK=1`` shows the traceback above it. The
 argparse types below (:func:`positive`, :func:`count`, :func:`frame_size`, :func:`frame_sizes`,
-:func:`dataset_folder`, :func:`json_file`, :func:`number`) refuse bad arguments before any work.
+:func:`dataset_folder`, :func:`json_file`, :func:`number`) refuse bad arguments before any work, as
+:func:`check_targets` refuses a dataset without the targets a script reads.
 """
 
 from __future__ import annotations
@@ -44,6 +45,25 @@ def scene_ids(reader: Any, scenes: str | None) -> list[str]:
     ids = list(reader.ids)
     wanted = {n.strip() for n in (scenes or "").split(",") if n.strip()}
     return [i for i in ids if reader[i].meta.get("scene") in wanted] if wanted else ids
+
+
+def check_targets(store: Any, ids: Sequence[str], metric: str, tile: int, model: str = "") -> None:
+    """Refuse, before a script prints or reads a sample, a dataset (``store``: its ``rtp.capture.TargetStore``)
+    without ``metric``'s targets for every one of ``ids`` at a tile size they pool to (``tile``): a
+    :class:`UsageError` that names the command computing them, instead of a table header and then the
+    first missing file."""
+    data = store.root.parent
+    reads = f" for {model}" if model else ""
+    if metric not in store.metrics:
+        raise UsageError(f"{data} has no {metric} targets{reads} (it has {', '.join(store.metrics) or 'none'}): "
+                         f"run `rtp targets {data} --metrics {metric}`")
+    if tile % store.base_tile:
+        raise UsageError(f"{data}: {model or 'the model'}'s {tile}-pixel tiles are not a multiple of its targets' "
+                         f"base tile {store.base_tile}")
+    missing = [i for i in ids if not store.path(i, metric).is_file()]
+    if missing:
+        raise UsageError(f"{data} has {metric} targets{reads} on {len(ids) - len(missing)} of the {len(ids)} samples "
+                         f"read (none on {missing[0]}): run `rtp targets {data} --metrics {metric}`")
 
 
 def dataset_folder(text: str) -> str:

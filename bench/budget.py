@@ -21,7 +21,7 @@ import argparse
 from functools import partial
 
 import numpy as np
-from _common import cpu_description, median_ms, positive, run_main  # bench/ is on sys.path as a script
+from _common import cpu_description, median_ms, number, positive, run_main  # bench/ is on sys.path as a script
 
 from rtp import sdk
 
@@ -52,9 +52,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--model", default="jnyang", help="a shipped model's name or an .onnx path (default: jnyang)")
     ap.add_argument("--repeats", type=positive, default=50, help="timed runs of each (default 50; the median)")
-    ap.add_argument("--saving", type=float, default=0.5, help="the share of the work saved asked for (default 0.5)")
+    ap.add_argument("--saving", type=number(0, sdk.MAX_SAVING), default=0.5, help="the share of the work saved asked "
+                    f"for, in [0, {sdk.MAX_SAVING:g}] (4x4 saves {sdk.MAX_SAVING:g}; default 0.5)")
     ap.add_argument("--gpu", action="store_true", help="also time RateSelector's decision and budget on OpenGL")
     args = ap.parse_args(argv)
+    sdk.load(args.model)  # (a model that is not there: refused before the table)
     rng = np.random.default_rng(0)
     print(f"{cpu_description()}; model {args.model}, a saving of {args.saving:g}, median of {args.repeats} runs\n")
     print("| frame | tiles | tiles of | select_rates (ms) | select_rates_for_saving (ms) | threshold reached | saved "

@@ -29,7 +29,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from _common import UsageError, add_model_args, run_main, scene_ids  # bench/ is on sys.path as a script
+from _common import UsageError, add_model_args, check_targets, run_main, scene_ids  # bench/ is on sys.path as a script
 from tqdm import tqdm
 
 from rtp import sdk
@@ -50,6 +50,9 @@ def main(argv: list[str] | None = None) -> int:
         savings = [float(s) for s in args.savings.split(",")]
     except ValueError as err:
         raise UsageError(f"--savings: expected numbers, comma-separated, got {args.savings!r}") from err
+    if not all(0.0 <= s <= sdk.MAX_SAVING for s in savings):  # (NaN fails too; before the samples are read)
+        raise UsageError(f"--savings: expected shares of the shading work to save, each in [0, {sdk.MAX_SAVING:g}] (4x4 "
+                         f"saves {sdk.MAX_SAVING:g}), got {args.savings!r}")
     pred = sdk.load(args.model)
     meta = pred.metadata
     if meta.higher_is_better:
@@ -59,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     ids = scene_ids(reader, args.scene)
     if not ids:
         raise UsageError(f"{args.data} holds no sample of {args.scene}")
+    check_targets(store, ids, meta.metric, pred.tile_size, args.model)
     kinds = ("engine alone", "rtp alone", "unaware", "aware")
     tally = {(img, k): np.zeros(5) for img in IMAGES for k in kinds}  # pixels saved, pixels, fail, beyond, neither
     budget: dict[tuple[float, str], list[float]] = {(s, k): [] for s in savings for k in ("unaware", "aware")}

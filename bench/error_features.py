@@ -28,6 +28,7 @@ import numpy as np
 from _common import (  # bench/ is on sys.path when run as a script
     UsageError,
     add_model_args,
+    check_targets,
     count,
     positive,
     run_main,
@@ -137,6 +138,10 @@ def main(argv: list[str] | None = None) -> int:
     ids = scene_ids(reader, args.scene)
     if not ids:
         raise UsageError(f"{args.data} holds no sample of {args.scene}")
+    scenes = sorted({str(reader[i].meta.get("scene", "?")) for i in ids})  # (before the samples are read)
+    if len(scenes) < 2:
+        raise UsageError(f"leave-one-map-out needs samples of at least two maps, got {scenes}: --scene names them")
+    check_targets(store, ids, meta.metric, meta.tile_size, args.model)
     rows = [sdk.PREDICTED_RATES.index(r) for r in meta.outputs]
     t = meta.tile_size
     feats: list[list[np.ndarray]] = [[] for _ in rows]
@@ -157,8 +162,6 @@ def main(argv: list[str] | None = None) -> int:
             model[j].append(raw[j, :th, :tw].reshape(-1))
         maps.append(np.full(th * tw, str(s.meta.get("scene", "?")), dtype=object))
     groups = np.concatenate(maps)
-    if len(np.unique(groups)) < 2:
-        raise UsageError(f"leave-one-map-out needs samples of at least two maps, got {sorted(set(groups))}")
     nc = len(CONTENT)
     print(f"\n{meta.metric}, {args.model} on {len(ids)} samples of {args.data} ({args.scene or 'every map'}): "
           f"R² % of each output, transformed space, no safety margin; the fits leave one map out\n")

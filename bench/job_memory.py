@@ -22,7 +22,8 @@ of the estimated to the measured peak. The configurations:
 
 The slopes are what ``rtp.capture``'s tables (``PER_PIXEL``, ``METRIC_PER_PIXEL``) and the examples'
 ``PEAK_*`` constants hold: rerun this after a change that holds more or fewer full-frame images.
-Linux only (``os.wait4``). Prints a Markdown table.
+Linux only (``os.wait4``). Prints a Markdown table once every command has run (minutes: a progress bar on
+stderr names the command running); a command that fails stops it with that command's error line.
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from _common import frame_sizes, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import frame_sizes, run_main  # bench/ is on sys.path when run as a script
+from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import job_bytes
@@ -134,14 +136,29 @@ def image_pair(folder: Path, size: tuple[int, int]) -> tuple[Path, Path]:
     return paths
 
 
+def play_frames(text: str) -> int:
+    """An argparse type: frames of the closed-loop runs, as ``rtp play --frames`` takes them (3 or more: the first
+    has no history; at most ``rtp.capture.paths.MAX_FRAMES``), refused here rather than by the first ``rtp play``
+    after the jobs before it ran."""
+    from rtp.capture.paths import MAX_FRAMES
+    from rtp.cli import int_at_least
+
+    n = int_at_least(3)(text)
+    if n > MAX_FRAMES:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_FRAMES} (ten minutes at 60 frames a second), got {n}")
+    return n
+
+
 def peak(argv: list[str]) -> int:
-    """Run ``argv``; its peak resident set in bytes (its children's included), or exit with its error."""
+    """Run ``argv``; its peak resident set in bytes (its children's included), or an error that gives the command,
+    its exit code and the last line it wrote to stderr."""
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if proc.returncode != 0:
-        raise SystemExit(f"{' '.join(argv[1:])}: exit {proc.returncode}: {err.strip().splitlines()[-1:] or ''}")
+        lines = err.strip().splitlines()
+        raise sdk.RtpError(f"{' '.join(argv[1:])}: exit {proc.returncode}" + (f": {lines[-1]}" if lines else ""))
     return int(usage.ru_maxrss) * 1024  # (KiB on Linux)
 
 
@@ -150,7 +167,7 @@ def main() -> None:
     ap.add_argument("--sizes", type=frame_sizes(16), default="640x384,1280x768",
                     help="two comma-separated WIDTHxHEIGHT, the smaller first")
     ap.add_argument("--jobs", default=",".join(JOBS), help=f"comma-separated, of {', '.join(JOBS)}")
-    ap.add_argument("--frames", type=positive, default=3, help="frames of each closed-loop run")
+    ap.add_argument("--frames", type=play_frames, default=3, help="frames of each closed-loop run, 3 or more (default 3)")
     args = ap.parse_args()
     jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]
     if not jobs or any(j not in JOBS for j in jobs):
@@ -160,14 +177,17 @@ def main() -> None:
     if "targets" in jobs and "capture" not in jobs:
         ap.error("--jobs: targets are computed on the capture's samples: add capture")
     chosen = [c for c in configs(args.frames) if c.job in jobs]
-    with tempfile.TemporaryDirectory(prefix="rtp-job-memory-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="rtp-job-memory-") as tmp, \
+            tqdm(total=len(chosen) * len(args.sizes), desc="commands", unit="cmd", file=sys.stderr) as bar:
         for w, h in args.sizes:
             data, out = Path(tmp) / f"data-{w}x{h}", Path(tmp) / "out"
             ref, test = image_pair(Path(tmp), (w, h)) if "metric" in jobs else ("", "")
             for c in chosen:
+                bar.set_postfix_str(f"{c.job}: {c.label} at {w}x{h}")
                 # (targets: the capture's size; metric: its images')
                 size = [] if c.job in ("targets", "metric") else ["--size", f"{w}x{h}"]
                 c.peaks.append(peak([*c.command, *(a.format(out=out, data=data, ref=ref, test=test) for a in c.args), *size]))
+                bar.update()
                 shutil.rmtree(out, ignore_errors=True)
                 for suffix in (".png", ".gif"):
                     Path(f"{out}{suffix}").unlink(missing_ok=True)

@@ -31,6 +31,7 @@ import numpy as np
 from _common import PLAY_JSON, UsageError, run_main, write_factors_sidecar  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
+from rtp.evaluate import METHOD_KINDS
 
 
 def _sweep(runs: list[dict[str, Any]], method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
@@ -73,14 +74,29 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=PLAY_JSON, help="play.json files of `rtp play` (the validation maps)")
     ap.add_argument("--method", required=True, help="the model with its factors, as the runs name it")
-    ap.add_argument("--one", required=True, help="the same model with one threshold, as the runs name it")
+    ap.add_argument("--one", required=True, help="the same model with one threshold (`rate_factors: null`), as the runs "
+                    "name it: another model file than --method, not a baseline")
     ap.add_argument("--sidecar", metavar="OUT.yaml", help="write the scaled factors for `rtp-export --retune`")
     args = ap.parse_args(argv)
     runs = [json.loads(Path(p).read_text()) for p in args.runs]
     models = {k: v for rep in runs for k, v in rep["settings"].get("models", {}).items()}
-    if args.method not in models:
-        raise UsageError(f"the runs hold no model {args.method!r}; they hold {', '.join(models) or 'none'}")
+    for flag, name in (("--method", args.method), ("--one", args.one)):  # (a baseline such as yang2019: no model)
+        if name not in models:
+            what = (f"{name!r} is a baseline, not a model with thresholds" if name in METHOD_KINDS
+                    else f"the runs hold no model {name!r}")
+            raise UsageError(f"{flag}: {what}; the runs hold the models {', '.join(models) or 'none'}")
+    if args.one == args.method or Path(models[args.one]).resolve() == Path(models[args.method]).resolve():
+        raise UsageError(f"--one: expected the model with one threshold, another file than --method, got {args.one!r} "
+                         "for both: its scale would be 1 by construction")
     meta = sdk.load(models[args.method], providers=["CPUExecutionProvider"]).metadata
+    one = sdk.load(models[args.one], providers=["CPUExecutionProvider"]).metadata
+    if one.metric != meta.metric:
+        raise UsageError(f"--one: expected the same model with one threshold; {args.one} predicts {one.metric}, "
+                         f"{args.method} {meta.metric}")
+    if one.rate_factors is not None and len(set(one.rate_factors)) > 1:
+        raise UsageError(f"--one: expected the model with one threshold (`rate_factors: null`), got {args.one} with "
+                         f"factors per rate {', '.join(f'{v:g}' for v in one.rate_factors)}: `rtp-export --retune "
+                         "MODEL --metadata` a sidecar of `rate_factors: null` makes it")
     hib, thr = bool(meta.higher_is_better), float(meta.default_threshold)
     factors = np.array(meta.rate_factors if meta.rate_factors is not None else [1.0] * 6, np.float64)
     try:

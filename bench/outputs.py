@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import check_targets, dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
@@ -27,11 +27,13 @@ def main() -> None:
     args = ap.parse_args()
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     ids = reader.ids[:: args.every]
+    predictors = [(path, sdk.load(path)) for path in args.models]  # (a model or its targets missing: before the table)
+    for path, p in predictors:
+        check_targets(store, ids, p.metadata.metric, p.metadata.tile_size, path)
     print(f"{len(ids)} samples of {args.data}\n")
     print("| model | rate | network output | correlation with the truth | prediction spread (std) | true mean | predicted mean |")
     print("|---|---|---|---|---|---|---|")
-    for path in args.models:
-        p = sdk.load(path)
+    for path, p in predictors:
         m = p.metadata
         pred = np.stack([p.predict(reader[i].inputs(m.inputs)) for i in ids])
         true = np.stack([store.load(i, m.metric, m.tile_size) for i in ids])

@@ -22,7 +22,14 @@ method without reuse on the same frames: whether reuse's loss grows with the est
 read off each method's sweep at the same failing shares: what a frame-time budget plans for, and where a
 budget (``NAME@k:bS``, the same saving on every frame) and a threshold part.
 With several paths the report ends with each reuse method's mean over them (kept share at each
-level, worst path, network work); ``--plot-reuse PNG`` draws the kept share at 5% against the work.
+level, worst path, network work); ``--plot-reuse PNG`` draws the kept share at 5% against the work (refused,
+before any table, where the runs give it nothing to draw: no --model, no reuse method, or no path with both).
+
+Every run must share the settings the header states (frames, frame rate, size, the failure metric and
+threshold): runs that differ in one are refused, naming the setting and the files, before any table (their
+rows would sit under another run's header, their savings averaged in one mean, their windows under another
+run's columns); report them one setting at a time. Runs on other hardware tiles (``--tile-size``) share the
+tables, each row labelled with its tiles, and each tile size has its own mean rows.
 
 Runs with different methods share one table: its columns are every method of any run, blank where
 a run did not play it. Runs of the same map, seed, frames, size, failure threshold and sweep grids
@@ -39,7 +46,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from _common import PLAY_JSON, count, run_main, save_figure  # bench/ is on sys.path when run as a script
+from _common import PLAY_JSON, UsageError, count, run_main, save_figure  # bench/ is on sys.path when run as a script
 
 from rtp import sdk
 from rtp.evaluate import METHOD_KINDS, fail_rule, saved_at
@@ -110,7 +117,36 @@ def _mean_cell(per_path: list[list[dict[str, Any] | None] | None]) -> str:
 
 
 def _fmt(r: float, pct: bool = False) -> str:
-    return "-" if not math.isfinite(r) else (f"{100 * r:.0f}%" if pct else f"{r:.2f}x")
+    """A share of the oracle's saving to a tenth of a percent, a ratio to two decimals, three within 1% of a tie:
+    the targets are 90% and 1.0x / 1.3x, and a rounded "90%" or "1.00x" hid 89.85% and 0.994x."""
+    if not math.isfinite(r):
+        return "-"
+    if pct:
+        return f"{100 * r:.1f}%"
+    return f"{r:.3f}x" if abs(r - 1.0) < 0.01 else f"{r:.2f}x"
+
+
+#: The settings the tables' header states, which every run must share: (name, how a run's is read).
+SHARED: tuple[tuple[str, Any], ...] = (
+    ("frames", lambda s: str(s["frames"])),
+    ("frame rate", lambda s: f"{s['fps']:g} Hz"),
+    ("size", lambda s: "x".join(str(v) for v in s["size"])),
+    ("fail metric", lambda s: str(s["fail_metric"])),
+    ("fail threshold", lambda s: f"{s['fail_threshold']:g}"),
+)
+
+
+def _check_shared(reports: list[tuple[Path, dict[str, Any]]]) -> None:
+    """Refuse runs whose header settings (:data:`SHARED`) differ, naming the first such setting and the files."""
+    for name, read in SHARED:
+        files: dict[str, list[str]] = {}
+        for path, rep in reports:
+            files.setdefault(read(rep["settings"]), []).append(str(path))
+        if len(files) > 1:
+            said = " against ".join(f"{value} ({', '.join(ps[:3])}{f' and {len(ps) - 3} more' if len(ps) > 3 else ''})"
+                                    for value, ps in files.items())
+            raise UsageError(f"the runs differ in {name}: {said}; one table reads runs of one setting: report them "
+                             "apart")
 
 
 def main() -> None:
@@ -130,9 +166,11 @@ def main() -> None:
     args = ap.parse_args()
     model = args.model
     reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
+    reports = [(run, json.loads(run.read_text())) for run in args.runs]
+    _check_shared(reports)  # (before any table: one header, one mean, one set of windows)
+    notes: list[str] = []  # (printed once the runs are known to make the tables asked for)
     runs: list[dict[str, Any]] = []
-    for run in args.runs:
-        rep = json.loads(run.read_text())
+    for run, rep in reports:
         s = rep["settings"]
         # runs before 2026-11-26 do not record their sweep grids (six points per method then): read off the rows
         grids = _grids(rep)
@@ -141,8 +179,8 @@ def main() -> None:
                s.get("tile_size", sdk.DEFAULT_TILE_SIZE))
         same = next((r for r in runs if r["_key"] == key and _same_grids(r["_grids"], grids)), None)
         if same is None and any(r["_key"] == key for r in runs):
-            print(f"note: {run} was swept over other grids than a run of the same map and path before it: "
-                  "its rows are not merged\n")
+            notes.append(f"note: {run} was swept over other grids than a run of the same map and path before it: "
+                         "its rows are not merged\n")
         if same is None:
             runs.append({**rep, "_key": key, "_grids": grids, "settings": {**s, "methods": list(s["methods"])},
                          "matched": list(rep["matched"])})
@@ -152,7 +190,7 @@ def main() -> None:
         same["settings"]["methods"] += new
         same["matched"] += [m for m in rep["matched"] if m["method"] in new]
         same["rows"] = same.get("rows", []) + [r for r in rep.get("rows", []) if r["method"] in new]
-    tiles = {r["_key"][-1] for r in runs}
+    tiles = sorted({r["_key"][-1] for r in runs})
 
     for rep in runs:  # the map, and its tiles where the runs played several sizes
         rep["_label"] = rep["settings"]["scene"] + (f" ({rep['_key'][-1]}px)" if len(tiles) > 1 else "")
@@ -160,34 +198,40 @@ def main() -> None:
     def label(s: dict[str, Any]) -> str:
         return str(next(r["_label"] for r in runs if r["settings"] is s))
 
+    def grouped(name: str, tile: int) -> str:
+        """A name in a table of several tile sizes: its tile size said (their figures are not averaged together)."""
+        return name if len(tiles) == 1 else f"{name} ({tile}px)"
+
     head: list[str] = []
     for rep in runs:
         head += [m for m in rep["settings"]["methods"] if m not in head]
     # reuse columns only for methods the runs played (by default MODEL@4 where it was)
     unplayed = [r for r in reuses if r not in head]
     if unplayed and args.reuse:
-        print(f"note: the runs did not play {', '.join(unplayed)} (--reuse): no column for it\n")
+        notes.append(f"note: the runs did not play {', '.join(unplayed)} (--reuse): no column for it\n")
     reuses = [r for r in reuses if r in head]
+    if args.plot_reuse and model not in head:
+        raise UsageError(f"--plot-reuse: the runs did not play {model} (--model), whose saving the reuse methods keep a "
+                         "share of: nothing to plot")
+    if args.plot_reuse and not reuses:
+        raise UsageError(f"--plot-reuse: the runs played no reuse method of {', '.join(unplayed)} (--reuse names them): "
+                         "nothing to plot")
     rows, targets = [], []
+    path_tiles: list[int] = []  # each row's tile size (its mean row's)
     # each method's matched entries over the paths, for the mean row (None: the method did not play the path)
     matched: dict[str, list[list[dict[str, Any] | None]]] = {meth: [] for meth in head}
-    kept: dict[str, list[tuple[str, list[float], float]]] = {r: [] for r in reuses}  # per path: ratios, work
-    for i, rep in enumerate(runs):
+    # per reuse method (and tile size) and path: ratios, work
+    kept: dict[str, list[tuple[str, list[float], float]]] = {grouped(r, t): [] for r in reuses for t in tiles}
+    for rep in runs:
         s = rep["settings"]
         methods = s["methods"]
-        if i == 0:
-            print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]}, "
-                  + (f"{next(iter(tiles))}-pixel tiles" if len(tiles) == 1 else "tiles as each map says")
-                  + " (seed: which path); a tile fails "
-                  f"when {fail_rule(s['fail_metric'], s['fail_threshold'])}. Work saved % at "
-                  + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
-                  "method's sweep never failed that often; -: never that rarely).\n")
         for path, unseen in rep["unseen"].items():
             u = unseen[1:]
             cam = s.get("cameras", {}).get(path, {})
             eye = f"{cam['eye_height_m']:.2f}" if cam else "?"
             at = {(m["method"], m["fail_share"]): {**m, "work_saved": math.nan if m["work_saved"] is None else m["work_saved"]}
                   for m in rep["matched"] if m["path"] == path}  # play.json writes nan as null
+            path_tiles.append(rep["_key"][-1])
             for meth in head:
                 matched[meth].append(None if meth not in methods else
                                      [at.get((meth, lv)) for lv in (LEVELS if meth not in ORACLES else LEVELS[:1])])
@@ -206,18 +250,34 @@ def main() -> None:
                           and r["default"] and r.get("network_frames") is not None), math.nan) for m in reuses]
             for r, rs, w in zip(reuses, reused, work):
                 if r in methods:
-                    kept[r].append((f"{label(s)} {path}", rs, w))
+                    kept[grouped(r, rep["_key"][-1])].append((f"{label(s)} {path}", rs, w))
             cells = [" / ".join(_fmt(r, pct) for r in rs) for rs, pct in [(vs_yang, False)] + [(o, True) for o in of_oracles]]
             if not any(y in head for y in ("yang2019", "yang2019-unseen-1x1")):
                 cells = cells[1:]  # (no Yang 2019 played: no column of dashes)
             cells += [" / ".join(_fmt(r, True) for r in rs) + ("" if not math.isfinite(w) else f" (network {100 * w:.0f}%)")
                       for rs, w in zip(reused, work)]
             targets.append(f"| {label(s)} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
+    if args.plot_reuse and not any(math.isfinite(w) and math.isfinite(rs[-1]) for per in kept.values() for _, rs, w in per):
+        raise UsageError(f"--plot-reuse: no path of {', '.join(reuses)} has both a readable share of {model}'s saving at "
+                         f"{100 * LEVELS[-1]:g}% failing tiles and the network's work per frame (runs before it was "
+                         "recorded, or sweeps capped there): nothing to plot")
+    s = runs[0]["settings"]  # (every run shares these: _check_shared)
+    for note in notes:
+        print(note)
+    print(f"{s['frames']} frames at {s['fps']:g} Hz, {s['size'][0]}x{s['size'][1]}, "
+          + (f"{tiles[0]}-pixel tiles" if len(tiles) == 1 else "tiles as each map says, each size its own mean")
+          + " (seed: which path); a tile fails "
+          f"when {fail_rule(s['fail_metric'], s['fail_threshold'])}. Work saved % at "
+          + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles (>=: a lower bound, the "
+          "method's sweep never failed that often; -: never that rarely).\n")
     print("| map | seed | path | eye (m) | unseen % mean / max | " + " | ".join(head) + " |")
     print("|---|---:|---|---:|---|" + "---|" * len(head))
     print("\n".join(rows))
-    if len(rows) > 1:  # the mean over the paths (a method that did not play every path has none)
-        print("| mean | | | | | " + " | ".join(_mean_cell(matched[meth]) for meth in head) + " |")
+    for tile in tiles:  # the mean over each tile size's paths (a method that did not play every path has none)
+        mine = [i for i, t in enumerate(path_tiles) if t == tile]
+        if len(mine) > 1:
+            print(f"| {grouped('mean', tile)} | | | | | "
+                  + " | ".join(_mean_cell([matched[meth][i] for i in mine]) for meth in head) + " |")
     yang_played = any(y in head for y in ("yang2019", "yang2019-unseen-1x1"))
     if model in head:
         print(f"\nTargets (at 1 / 2 / 5% failing tiles; -: not readable, a sweep capped or never that rare): {model} over the "
@@ -236,25 +296,28 @@ def main() -> None:
     else:
         print(f"\n(No targets: the runs did not play {model}; --model names the rtp method to compare.)")
     if args.worst_frames:
-        _worst_frames(runs, head, label)
+        _worst_frames(runs, head, label, grouped)
     if args.window:
         _windows(runs, args.window)
     if args.by_age:
         _by_age(runs)
 
 
-def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any) -> None:
+def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any, grouped: Any) -> None:
     """Per map, path and method, the worst 5% of frames' saving (the rows' ``work_saved_p05``) read off the
-    method's sweep at each failing share as the matched saving is (``evaluate.saved_at``), and the mean."""
+    method's sweep at each failing share as the matched saving is (``evaluate.saved_at``), and the mean
+    (one per tile size: ``grouped('mean', tile)`` names it)."""
     print("\nThe worst 5% of frames' saving % at " + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles "
           "(each run's 5th percentile of its per-frame saving, read off the sweep; -: not readable, or a run from "
           "before the figure):\n")
     print("| map | seed | path | " + " | ".join(head) + " |")
     print("|---|---:|---|" + "---|" * len(head))
     per: dict[str, list[list[float] | None]] = {meth: [] for meth in head}
+    path_tiles: list[int] = []
     for rep in runs:
         s = rep["settings"]
         for path in rep["unseen"]:
+            path_tiles.append(rep["_key"][-1])
             cells = []
             for meth in head:
                 pts = [(r["fail_share"], r.get("work_saved_p05")) for r in rep.get("rows", [])
@@ -268,22 +331,27 @@ def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any) -> No
                 per[meth].append(values)
                 cells.append(" / ".join("-" if not math.isfinite(v) else f"{100 * v:.1f}" for v in values))
             print(f"| {label(s)} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
-    if sum(1 for rep in runs for _ in rep["unseen"]) > 1:
+    for tile in sorted(set(path_tiles)):
+        mine = [i for i, t in enumerate(path_tiles) if t == tile]
+        if len(mine) < 2:
+            continue
         means = []
         for meth in head:
-            if any(v is None for v in per[meth]) or not per[meth]:
+            values = [per[meth][i] for i in mine]
+            if any(v is None for v in values):
                 means.append("-")
                 continue
-            cols = list(zip(*[v for v in per[meth] if v is not None]))
+            cols = list(zip(*[v for v in values if v is not None]))
             means.append(" / ".join("-" if not all(math.isfinite(x) for x in c) else f"{100 * sum(c) / len(c):.1f}"
                                     for c in cols))
-        print("| mean | | | " + " | ".join(means) + " |")
+        print(f"| {grouped('mean', tile)} | | | " + " | ".join(means) + " |")
 
 
 def _reuse_summary(kept: dict[str, list[tuple[str, list[float], float]]], model: str) -> None:
-    """Per reuse method over every path it ran: the mean kept share (unrounded ratios) at each level,
-    the worst path at 5%, how many paths keep >= 95% there, and the mean network work per frame."""
-    if len(next(iter(kept.values()), [])) < 2:
+    """Per reuse method (and tile size, where the runs played several) over every path it ran: the mean kept share
+    (unrounded ratios) at each level, the worst path at 5%, how many paths keep >= 95% there, and the mean network
+    work per frame."""
+    if max((len(per) for per in kept.values()), default=0) < 2:
         return
     print(f"\nOver the paths (mean of the unrounded ratios to {model}; paths whose ratio is not readable left out):\n")
     print("| method | paths | network work per frame | kept at " + " / ".join(f"{100 * v:g}" for v in LEVELS)
@@ -299,8 +367,9 @@ def _reuse_summary(kept: dict[str, list[tuple[str, list[float], float]]], model:
         at5 = [(rs[-1], name) for name, rs, _ in per if math.isfinite(rs[-1])]
         works = [w for _, _, w in per if math.isfinite(w)]
         worst = min(at5) if at5 else (math.nan, "-")
-        print(f"| {r} | {len(per)} | {'-' if not works else f'{100 * sum(works) / len(works):.1f}%'} | "
-              + " / ".join("-" if not math.isfinite(m) else f"{100 * m:.1f}" for m in means) + "% | "
+        shares = ("-" if not any(math.isfinite(m) for m in means)  # (one dash, not "- / - / -%")
+                  else " / ".join("-" if not math.isfinite(m) else f"{100 * m:.1f}" for m in means) + "%")
+        print(f"| {r} | {len(per)} | {'-' if not works else f'{100 * sum(works) / len(works):.1f}%'} | {shares} | "
               + ("-" if not at5 else f"{100 * worst[0]:.1f}% ({worst[1]})") + f" | {sum(v >= 0.95 for v, _ in at5)} |")
 
 

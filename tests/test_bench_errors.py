@@ -37,7 +37,8 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     (["bench/inference.py", "nosuchmodel"], 2, "inference.py: error: no model file at 'nosuchmodel'"),
     (["bench/inference.py", "--repeats", "0"], 2, "argument --repeats: expected a positive integer"),
     (["bench/budget.py", "--model", "nosuchmodel"], 2, "budget.py: error: no model file at 'nosuchmodel'"),
-    (["bench/budget.py", "--saving", "0.99"], 2, "budget.py: error: saving: expected the share of shading work"),
+    (["bench/budget.py", "--saving", "0.99"], 2, "budget.py: error: argument --saving: expected a finite number in "
+                                                 "[0, 0.9375], got '0.99'"),
     (["bench/paths.py", "--size", "12x"], 2, "argument --size: expected WIDTHxHEIGHT"),
     (["bench/paths.py", "--maps", "nosuchmap", "--frames", "3"], 2, "paths.py: error: map 'nosuchmap' is not listed"),
     (["bench/scaling.py", "--modes", "nosuch"], 2, "argument --modes: expected ray and/or pool"),
@@ -92,3 +93,82 @@ def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_p
                     "--scene", scene, "--out", str(tmp_path / "m.pt")], tmp_path)
         assert run.returncode == 2 and words in run.stderr and "Traceback" not in run.stderr, run.stderr
         assert not list(tmp_path.glob("*m.pt*")), scene  # no training began
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["bench/budget.py", "--saving", "1.5"], "budget.py: error: argument --saving: expected a finite number in "
+                                             "[0, 0.9375], got '1.5'"),
+    (["bench/budget.py", "--model", "nosuchmodel"], "budget.py: error: no model file at 'nosuchmodel'"),
+    (["bench/paths.py", "--maps", "nosuchmap", "--frames", "3"], "paths.py: error: map 'nosuchmap' is not listed"),
+    # one frame has no second to be unseen in: "Mean of empty slice", then an IndexError, after the header
+    (["bench/paths.py", "--maps", "procedural:0", "--frames", "1", "--size", "160x96"],
+     "paths.py: error: argument --frames: expected an integer >= 2, got 1"),
+    (["bench/paths.py", "--maps", ",", "--frames", "3"], "paths.py: error: --maps: expected comma-separated map names"),
+    # rtp play's first frame has no history: its "--frames: expected ... at least 3" came after the jobs before it
+    (["bench/job_memory.py", "--frames", "2"], "job_memory.py: error: argument --frames: expected an integer >= 3, got 2"),
+])
+def test_bad_input_is_refused_before_any_table(args: list[str], words: str) -> None:
+    """What a script cannot do is said before its table's header (the header, then the error, read as a
+    table of no rows) and before its long work."""
+    run = _run(args, ROOT)
+    assert run.returncode == 2 and run.stdout == "", (run.stdout, run.stderr)
+    assert "Traceback" not in run.stderr and words in run.stderr.strip().splitlines()[-1], run.stderr
+
+
+def test_a_dataset_without_what_a_script_reads_is_refused_before_its_table(tmp_path: Path) -> None:
+    """outputs.py printed its header, then failed on the first missing targets; error_features.py read every
+    sample of one map before saying it needs two; combine.py read them all before refusing a saving of 2."""
+    from rtp.capture import capture, compute_targets
+
+    capture(["procedural:0"], tmp_path / "d", per_scene=1, size=(64, 48))
+    data = str(tmp_path / "d")
+    for args, words in (
+            (["outputs.py", "lpips", "--data", data], f"outputs.py: error: {data} has no lpips targets for lpips (it has "
+                                                      f"none): run `rtp targets {data} --metrics lpips`"),
+            (["combine.py", "jnyang", "--data", data, "--scene", "procedural:0"],
+             f"combine.py: error: {data} has no jnyang targets for jnyang (it has none)"),
+            ("targets", ""),  # (the rest read a dataset with them)
+            (["combine.py", "jnyang", "--data", data, "--scene", "procedural:0", "--savings", "0.5,2"],
+             "combine.py: error: --savings: expected shares of the shading work to save, each in [0, 0.9375]"),
+            (["error_features.py", "jnyang", "--data", data, "--scene", "procedural:0"],
+             "error_features.py: error: leave-one-map-out needs samples of at least two maps, got ['procedural:0']")):
+        if args == "targets":
+            compute_targets(data, ("jnyang",))
+            continue
+        run = _run([str(BENCH / args[0]), *args[1:]], tmp_path)
+        assert run.returncode == 2 and run.stdout == "" and "Traceback" not in run.stderr, (args, run.stdout, run.stderr)
+        # one line: no progress bar of samples read before it
+        assert len(run.stderr.strip().splitlines()) == 1 and run.stderr.startswith(words), run.stderr
+
+
+def test_loop_scale_refuses_a_one_threshold_model_that_is_not_one(tmp_path: Path) -> None:
+    """--one is the same model with one threshold: a baseline (yang2019), --method itself, another metric's model
+    or a model with factors per rate gave scale factors that mean nothing; each is refused in one line."""
+    run_json = tmp_path / "play.json"
+    run_json.write_text(json.dumps({"settings": {"scene": "a", "methods": ["jnyang", "flip", "jnyang-8px", "yang2019"],
+                                                 "models": {"jnyang": "jnyang", "flip": "flip", "jnyang-8px": "jnyang-8px"}},
+                                    "unseen": {"fast": [1.0, 0.1]}, "rows": []}))
+    for method, one, words in (
+            ("jnyang-8px", "yang2019", "--one: 'yang2019' is a baseline, not a model with thresholds"),
+            ("yang2019", "jnyang-8px", "--method: 'yang2019' is a baseline, not a model with thresholds"),
+            ("jnyang-8px", "nosuch", "--one: the runs hold no model 'nosuch'; the runs hold the models jnyang, flip, "
+                                     "jnyang-8px"),
+            ("jnyang-8px", "jnyang-8px", "--one: expected the model with one threshold, another file than --method"),
+            ("jnyang-8px", "flip", "--one: expected the same model with one threshold; flip predicts flip, jnyang-8px "
+                                   "jnyang"),
+            ("jnyang-8px", "jnyang", "--one: expected the model with one threshold (`rate_factors: null`), got jnyang "
+                                     "with factors per rate")):
+        run = _run([str(BENCH / "loop_scale.py"), str(run_json), "--method", method, "--one", one], tmp_path)
+        assert run.returncode == 2 and run.stdout == "" and "Traceback" not in run.stderr, run.stderr
+        assert run.stderr.strip().startswith(f"loop_scale.py: error: {words}"), run.stderr
+
+
+def test_play_report_shows_how_near_a_target_a_figure_is() -> None:
+    """The report rounded 89.85% of the oracle's saving to "90%" and 0.9945x Yang's to "1.00x": both read as
+    targets met (>= 90%, >= 1.0x) that were missed."""
+    from .conftest import bench_module
+
+    fmt = bench_module("play_report")._fmt
+    assert fmt(0.8985, pct=True) == "89.8%" and fmt(1.024, pct=True) == "102.4%"
+    assert fmt(0.9945) == "0.995x" and fmt(1.0049) == "1.005x" and fmt(1.52) == "1.52x" and fmt(0.97) == "0.97x"
+    assert fmt(float("nan")) == "-" and fmt(float("inf"), pct=True) == "-"

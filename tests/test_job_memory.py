@@ -184,6 +184,7 @@ def test_bench_job_memory_prints_the_measured_peak_beside_the_estimate() -> None
     out = subprocess.run([sys.executable, str(bench), "--jobs", "capture", "--sizes", "64x48,128x96"],
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
+    assert "2/2" in out.stderr and "capture: procedural:1, 2 samples at 128x96" in out.stderr  # its progress, on stderr
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in out.stdout.splitlines()
             if line.startswith("| capture")]
     assert len(rows) == 1
@@ -197,6 +198,23 @@ def test_bench_job_memory_prints_the_measured_peak_beside_the_estimate() -> None
                         (["--sizes", "128x96,64x48"], "--sizes: expected two sizes, the smaller first")):
         bad = subprocess.run([sys.executable, str(bench), *args], capture_output=True, text=True, timeout=120)
         assert bad.returncode == 2 and words in bad.stderr, (args, bad.stderr)
+
+
+def test_bench_job_memory_says_a_failed_command_as_text() -> None:
+    """A command that fails stops the benchmark with its exit code and its last line of stderr as text (it was a
+    Python list, ``exit 2: ['rtp play: error: ...']``, in a line of its own without the script's name)."""
+    import sys
+
+    from .conftest import bench_module
+
+    peak = bench_module("job_memory").peak
+    child = "import sys; sys.stderr.write('warming up\\nrtp play: error: --frames: too few\\n'); sys.exit(2)"
+    with pytest.raises(sdk.RtpError) as info:
+        peak([sys.executable, "-c", child])
+    assert str(info.value) == f"-c {child}: exit 2: rtp play: error: --frames: too few"
+    with pytest.raises(sdk.RtpError, match=r": exit 3$"):  # (nothing on stderr: the exit code alone)
+        peak([sys.executable, "-c", "raise SystemExit(3)"])
+    assert peak([sys.executable, "-c", "pass"]) > 0
 
 
 def test_rtp_metric_refuses_an_image_pair_past_memory_before_decoding_it(

@@ -48,6 +48,22 @@ def test_fast_paths_uncover_more_of_each_frame(scene) -> None:  # noqa: ANN001
     assert 0 <= slow[1:].mean() < fast[1:].mean() < 0.5
 
 
+@pytest.mark.gl
+def test_bench_paths_prints_a_row_a_path_and_counts_the_frames_on_stderr() -> None:
+    """bench/paths.py: a row per map and path, the unseen shares of unseen_shares; a progress bar of the frames
+    rendered on stderr (a 300-frame run of the test maps was minutes of silence)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    run = subprocess.run([sys.executable, str(root / "bench" / "paths.py"), "--maps", "procedural:0", "--frames", "3",
+                          "--size", "64x48"], cwd=root, capture_output=True, text=True, timeout=300, check=True)
+    rows = [line for line in run.stdout.splitlines() if line.startswith("| procedural:0 |")]
+    assert [r.split("|")[2].strip() for r in rows] == list(PATH_PROFILES)
+    assert "rendering" in run.stderr and "6/6" in run.stderr  # 3 frames of 2 paths
+
+
 def test_the_unseen_share_counts_every_pixel_sky_included() -> None:
     """A frame looking over a level's edge is mostly sky that the previous frame showed too (sky is
     seen when it was sky before): a few new pixels of geometry are a few pixels, not 100%."""

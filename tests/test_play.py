@@ -369,7 +369,7 @@ def test_dynamic_resolution_closes_the_loop_at_each_frames_size(tmp_path: Path, 
     import imageio.v3 as iio
 
     gif = iio.imread(tmp_path / "play_fast.gif", index=None)
-    assert gif.ndim == 4 and len(gif) == 7
+    assert gif.ndim == 4 and len(gif) == 6  # (frame 0, without history, left out)
     # every GIF frame's panels the size of the full size's: a half-size frame's scaled up to them
     from rtp.evaluate._play import _ANIM_PANEL_WIDTH, _anim_frame
 
@@ -864,6 +864,86 @@ def test_the_report_summarises_reuse_over_paths_and_plots_it(tmp_path: Path) -> 
                               str(tmp_path / "a-old.json")], capture_output=True, text=True, check=True).stdout
         assert ("swept over other grids" not in out) == merged
         assert out.count("| a | 0 | fast |") == (2 if merged else 4)
+
+
+def _report_run(folder: Path, scene: str, *, reuse_work: float | None = 0.25, reused: bool = True,
+                **settings: Any) -> str:
+    """A play.json of one path for bench/play_report.py: jnyang (and jnyang@4, its network's work ``reuse_work``
+    where ``reused``), ``settings`` over the defaults (3 frames at 60 Hz, 64x48, jnyang over 0.25, 16-pixel tiles)."""
+    methods = ["jnyang", "jnyang@4"] if reused else ["jnyang"]
+    s = {"scene": scene, "seed": 0, "frames": 3, "fps": 60, "size": [64, 48], "fail_metric": "jnyang",
+         "fail_threshold": 0.25, "methods": methods, **settings}
+    matched = [{"path": "fast", "method": m, "fail_share": lv, "work_saved": 0.5 if m == "jnyang" else 0.45}
+               for m in methods for lv in (0.01, 0.02, 0.05)]
+    rows = [{"path": "fast", "method": "jnyang@4", "default": True, "fail_share": 0.02, "work_saved": 0.45,
+             "network_frames": reuse_work}] if reused else []
+    path = folder / f"{scene}-{len(list(folder.glob('*.json')))}.json"
+    path.write_text(json.dumps({"settings": s, "unseen": {"fast": [1.0] + [0.01] * (s["frames"] - 1)},
+                                "matched": matched, "rows": rows,
+                                "frames": {"fast": {m: {"saved": [0.5] * s["frames"], "fail": [0.01] * s["frames"]}
+                                                    for m in methods}}}))
+    return str(path)
+
+
+def _play_report(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_the_report_refuses_runs_of_other_settings_before_any_table(tmp_path: Path) -> None:
+    """Runs of other frames, size, frame rate or failure rule were printed under the first run's header and
+    averaged in its mean rows (an 8- and a 6-frame run: a --window row shorter than its header): refused in one
+    line naming the setting and the files, nothing printed. Other tile sizes share the tables, a mean each."""
+    for key, value, said in (("frames", 6, "frames: 8 ({a}) against 6 ({b})"),
+                             ("size", [160, 96], "size: 64x48 ({a}) against 160x96 ({b})"),
+                             ("fps", 30, "frame rate: 60 Hz ({a}) against 30 Hz ({b})"),
+                             ("fail_metric", "flip", "fail metric: jnyang ({a}) against flip ({b})"),
+                             ("fail_threshold", 0.5, "fail threshold: 0.25 ({a}) against 0.5 ({b})")):
+        folder = tmp_path / key
+        folder.mkdir()
+        a = _report_run(folder, "a", frames=8)
+        b = _report_run(folder, "b", **{"frames": 8, key: value})
+        run = _play_report(a, b, "--window", "3")
+        assert run.returncode == 2 and run.stdout == "", (key, run.stdout)
+        assert run.stderr.strip() == ("play_report.py: error: the runs differ in " + said.format(a=a, b=b)
+                                      + "; one table reads runs of one setting: report them apart"), run.stderr
+    # two tile sizes, two maps each: every row says its tiles, and each size has its own mean (not one of both)
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    runs = [_report_run(folder, m, tile_size=t) for t in (16, 8) for m in ("a", "b")]
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / "play_report.py"), *runs, "--worst-frames"],
+                         capture_output=True, text=True, check=True, timeout=120).stdout
+    assert "| a (8px) | 0 | fast |" in out and "| b (16px) | 0 | fast |" in out
+    assert out.count("| mean (16px) |") == out.count("| mean (8px) |") == 2 and "| mean |" not in out
+    assert "| jnyang@4 (16px) | 2 |" in out and "| jnyang@4 (8px) | 2 |" in out
+
+
+def test_plot_reuse_is_refused_where_there_is_nothing_to_plot(tmp_path: Path) -> None:
+    """--plot-reuse wrote an empty plot (matplotlib's "No artists with labels") where no reuse method could be
+    drawn: refused in one line before any table; the reuse summary says "-" once, not "- / - / -%"."""
+    png = tmp_path / "reuse.png"
+    plain = [_report_run(tmp_path, m, reused=False) for m in ("a", "b")]
+    unrecorded = [_report_run(tmp_path, m, reuse_work=None) for m in ("c", "d")]
+    for runs, extra, words in (
+            (plain, [], "--plot-reuse: the runs played no reuse method of jnyang@4 (--reuse names them): nothing to plot"),
+            (plain, ["--model", "psnr"], "--plot-reuse: the runs did not play psnr (--model)"),
+            (unrecorded, [], "--plot-reuse: no path of jnyang@4 has both a readable share of jnyang's saving at 5% "
+                             "failing tiles and the network's work per frame")):
+        run = _play_report(*runs, *extra, "--plot-reuse", str(png))
+        assert run.returncode == 2 and run.stdout == "" and "Traceback" not in run.stderr, run.stderr
+        assert run.stderr.strip().startswith(f"play_report.py: error: {words}"), run.stderr
+        assert not png.exists()
+    # no readable kept share on any path: one dash in the summary
+    capped = json.loads(Path(unrecorded[0]).read_text())
+    for m in capped["matched"]:
+        m["capped"] = True
+    Path(unrecorded[0]).write_text(json.dumps(capped))
+    for path in unrecorded[1:]:
+        other = json.loads(Path(path).read_text())
+        other["matched"] = [{**m, "work_saved": None} if m["method"] == "jnyang@4" else m for m in other["matched"]]
+        Path(path).write_text(json.dumps(other))
+    out = _play_report(*unrecorded).stdout
+    assert "| jnyang@4 | 2 | - | - | - | 0 |" in out, out
 
 
 def test_a_second_play_into_a_folder_being_played_into_is_refused(tmp_path: Path) -> None:
