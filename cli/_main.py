@@ -681,9 +681,18 @@ def _cmd_play(args: argparse.Namespace) -> int:
     paths = _names(args.path) or ["slow", "fast"]
     done = [0]
     steps: dict[str, str] = {}  # path -> the step it is in, while it is not playing frames ("": the job's own)
+    kept: list[str] = []  # the paths whose results are kept in --out for the same command to resume from
     if args.out is not None:
-        args.on_interrupt = lambda: (f"the paths played to their end are kept in {args.out}: the same command "
-                                     f"plays the rest")
+        def account() -> str:  # (it said paths were kept when Ctrl-C came on the first)
+            if not kept:
+                return (f"no path was played to its end, so none is kept in {args.out} (each is kept as it ends): the "
+                        "same command plays them all")
+            rest = [p for p in dict.fromkeys(paths) if p not in kept]
+            return (f"the {'path' if len(kept) == 1 else 'paths'} played to {'its' if len(kept) == 1 else 'their'} end "
+                    f"({', '.join(kept)}) {'is' if len(kept) == 1 else 'are'} kept in {args.out}: the same command "
+                    + (f"plays the rest ({', '.join(rest)})" if rest else "writes the report from them"))
+
+        args.on_interrupt = account
     with Bar(args, args.frames * len(paths), f"play {args.scene}", "frame") as bar:
         def progress(n: int) -> None:
             done[0] += n
@@ -704,7 +713,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
                    animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop,
                    engine_rates=args.engine_rates, combiner=args.combiner,
-                   dynamic_resolution=args.dynamic_resolution, progress=progress, stage=stage)
+                   dynamic_resolution=args.dynamic_resolution, progress=progress, stage=stage, kept=kept.append)
+    if args.out is not None:  # (the kept paths are gone with the report written)
+        args.on_interrupt = lambda: f"the report is written in {args.out}"
     print(rep.to_markdown())
     print(f"wrote {', '.join(rep.files)} in {args.out}")
     return 0
@@ -1107,7 +1118,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "(faster) instead of the renderer's per-tile VRS pass")
     pl.add_argument("--out", type=_out_folder, default="rtp-play", help="output folder")
     pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
-    pl.add_argument("--no-animation", action="store_true", help="no GIF")
+    pl.add_argument("--no-animation", action="store_true", help="no GIF per path, nor its middle frame "
+                    "(play_PATH.gif and play_PATH.png; the curves and per-frame PNGs are still drawn)")
     pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once")
     pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "
                     "frame, not its own displayed one")

@@ -28,6 +28,7 @@ from rtp.sdk import (
     DEFAULT_TILE_SIZE,
     EXIT_USAGE,
     LUMA_WEIGHTS,
+    MAX_THRESHOLD,
     PREDICTED_RATES,
     RATE_CODES,
     InputDtypeError,
@@ -407,7 +408,9 @@ class Yang2019:
                 ("threshold", threshold), ("env_luminance", env_luminance), ("k", k), ("motion_scale", motion_scale),
                 ("unseen_fraction", unseen_fraction)))
         for name, value, ok, expected in (
-                ("threshold", threshold, threshold > 0, "> 0 (its JNYang threshold)"),
+                # (0 as the models take it, and as its shading_rates(threshold=0) did: nothing is below it, all 1x1)
+                ("threshold", threshold, 0 <= threshold <= MAX_THRESHOLD,
+                 f"in [0, {MAX_THRESHOLD:g}] (its JNYang threshold)"),
                 ("env_luminance", env_luminance, env_luminance >= 0, ">= 0"), ("k", k, k >= 1, ">= 1"),
                 ("motion_scale", motion_scale, motion_scale >= 0, ">= 0"),
                 ("unseen_fraction", unseen_fraction, 0 <= unseen_fraction < 1, "in [0, 1)")):

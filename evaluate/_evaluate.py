@@ -21,7 +21,7 @@ import logging
 import math
 import os
 import reprlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -167,8 +167,9 @@ class EvaluationReport:
         lines += ["", "## VRS decisions", ""] + self._decision_table(True)
         if self.matched:
             lines += ["", "## At matched quality", "",
-                      "Each method's parameter swept over all tiles of all scenes; the work it saves where it fails "
-                      "as often as the model at its default threshold (linear interpolation along its sweep).", "",
+                      "Each method's parameter swept over all tiles of all scenes; the most work it saves failing at "
+                      "most as often as the model at its default threshold (each sweep point interpolated linearly "
+                      "towards the next one that fails more, as `evaluate.saved_at` reads a sweep).", "",
                       "| method | fails % | work saved % | parameter |", "|---|---|---|---|"]
             lines += [f"| {m['method']} | {_pct(m['fail_share'])} | {_pct(m['work_saved'])} | {m['parameter']} |"
                       for m in self.matched]
@@ -193,7 +194,9 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
                   stem: str = "evaluation") -> list[Path]:
     """Write ``<stem>.md`` (each report's markdown in turn) and ``<stem>.json`` (a list of their
     ``to_dict()``: what ``rtp evaluate --out`` writes and ``bench/report.py`` reads) into ``out_dir``,
-    each atomically (an interrupted write leaves the previous file); returns their paths."""
+    each atomically (an interrupted write leaves the previous file); returns their paths. The plots the
+    ``<stem>.json`` they replace listed in ``out_dir`` and these reports do not are removed (another
+    evaluation's, which no report shows any more); no other file."""
     from rtp.sdk.files import atomic_output
 
     reports = list(reports)
@@ -202,11 +205,33 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{stem}.md", out / f"{stem}.json"]
+    before = _listed_plots(paths[1])
     with atomic_output(paths[0]) as tmp:
         tmp.write_text("\n".join(r.to_markdown() for r in reports), encoding="utf-8")
     with atomic_output(paths[1]) as tmp:
         tmp.write_text(json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False), encoding="utf-8")
+    # (`rtp evaluate psnr --out F` into jnyang's folder left jnyang_*.png beside psnr's report)
+    gone = sorted(before - {Path(p).name for r in reports for p in r.plots})
+    for name in gone:
+        (out / name).unlink(missing_ok=True)
+    if gone:
+        log.info("%s: removed %s, the plots of the evaluation this one replaced", out, ", ".join(gone))
     return paths
+
+
+#: The endings of the plot files :func:`evaluate` writes (``<name>_heatmaps.png``, ...).
+_PLOT_ENDINGS = ("_heatmaps.png", "_scatter.png", "_rates.png")
+
+
+def _listed_plots(report: Path) -> set[str]:
+    """The names of the plots an evaluation.json lists that lie beside it, of the names evaluate gives them:
+    those rtp wrote there (none where it is missing or unreadable)."""
+    try:
+        entries = json.loads(report.read_text(encoding="utf-8"))
+        listed = {Path(str(p)).name for e in entries for p in e.get("plots") or ()}
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError, TypeError, AttributeError):
+        return set()
+    return {n for n in listed if n.endswith(_PLOT_ENDINGS) and (report.parent / n).is_file()}
 
 
 def _tiles_text(tile: int, own: int | None) -> str:
@@ -554,11 +579,19 @@ class _Sweep:
                  factors: tuple[float, ...] | None = None) -> None:
         self.thr, self.hib, self.selectors, self.factors = thr, hib, selectors, factors
         steps = [2.0 ** (k / 2) for k in range(-8, 9)]
-        self.model_grid = [thr + 2.0 * k for k in range(-8, 9)] if hib else [thr * f for f in steps]
+        # Each grid is clipped to the thresholds a selection takes (sdk.check_threshold), once each: a valid
+        # threshold near the range's end (--threshold 1e6) swept past it, refused as if the user had given
+        # 1.41421e+06, and at 0 every multiple of it was the same point.
+        lo = -sdk.MAX_THRESHOLD if hib else 0.0
+
+        def grid(values: Iterable[float], low: float = lo) -> list[float]:
+            return list(dict.fromkeys(min(sdk.MAX_THRESHOLD, max(low, v)) for v in values))
+
+        self.model_grid = grid([thr + 2.0 * k for k in range(-8, 9)] if hib else [thr * f for f in steps])
         # The baselines' grids reach 1/256 of their defaults, so that every method that can fail as
         # rarely as 1% of the tiles shows it (a black, unseen reprojection looks flat at any value).
         low = [2.0 ** (k / 2) for k in range(-16, 9)]
-        self.yang_grids = {name: [sel.threshold * f for f in low] for name, sel in selectors.items()
+        self.yang_grids = {name: grid((sel.threshold * f for f in low), 0.0) for name, sel in selectors.items()
                            if isinstance(sel, Yang2019)}
         ffx_grid = [0.05 * 2.0 ** (k / 2) for k in range(-16, 9, 2)]
         self.ffx_sweepers = {name: [FidelityFX(sel.tile_size, cutoff=c, motion_factor=sel.motion_factor,
@@ -678,7 +711,9 @@ class _Run:
         meta, scene_counts = self.meta, self.scene_counts
         report = EvaluationReport(
             model=self._model_summary(),
-            data=str(data),
+            # resolved, so that the report names the data from any working folder (`rtp evaluate --out` compares
+            # it with the next run's: a relative one was read against that run's folder)
+            data=str(Path(data).resolve()),
             samples=sum(scene_counts.values()),
             scenes=dict(sorted(scene_counts.items())),
             unseen_fraction=self.unseen_fraction,
@@ -695,7 +730,8 @@ class _Run:
             report.sweep = self.sweep.rows()
             target = next(r["fail_share"] for r in report.decisions
                           if r["method"] == "model" and r["split"] == "all" and r["scene"] == scene_names[-1])
-            report.matched = _matched(report.sweep, target)
+            report.matched = _matched(report.sweep, target, {
+                r["method"]: r["threshold"] for r in report.decisions if r["scene"] == scene_names[-1]})
         report.notes = _notes(self.metric, self.hib, self.thr, self.selectors, self.unseen_fraction, meta.outputs)
         if report.scene_roles and all(r == "train" for r in report.scene_roles.values()):
             report.notes.insert(0, "every evaluated scene was a training scene of this model: these scores are not a test")
@@ -706,7 +742,8 @@ class _Run:
         """What the report says about the model."""
         meta = self.meta
         return {
-            "path": str(self.predictor.path), "metric": self.metric, "higher_is_better": self.hib, "tile_size": self.tile,
+            "path": None if self.predictor.path is None else str(Path(self.predictor.path).resolve()),
+            "metric": self.metric, "higher_is_better": self.hib, "tile_size": self.tile,
             "transform": meta.transform.to_dict(), "safety": meta.safety, "inputs": list(meta.inputs),
             "outputs": list(meta.outputs), "default_threshold": meta.default_threshold,
             "model_tile_size": self.predictor.metadata.tile_size,
@@ -760,24 +797,59 @@ class _Run:
         return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem, self.thr)]
 
 
-def _matched(sweep: list[dict[str, Any]], target: float) -> list[dict[str, Any]]:
-    """Per method, the work saved at fail share ``target``, interpolated along its sweep."""
+def _parameter_value(label: str) -> float:
+    """The number a sweep point's parameter ends in (``threshold 0.25``, ``t 8``, ``cutoff 0.05``), NaN for none."""
+    try:
+        return float(str(label).rsplit(" ", 1)[-1])
+    except ValueError:
+        return math.nan
+
+
+def _tie_key(label: str, default: float) -> tuple[float, float]:
+    """How :func:`_matched` orders sweep points that save as much: nearest ``default`` (NaN: none), then the
+    numerically smallest; a label without a number last."""
+    v = _parameter_value(label)
+    near = abs(v - default) if math.isfinite(default) else 0.0
+    return (near if math.isfinite(near) else math.inf, v if math.isfinite(v) else math.inf)
+
+
+def _matched(sweep: list[dict[str, Any]], target: float,
+             defaults: dict[str, float] | None = None) -> list[dict[str, Any]]:
+    """Per method, the work saved at fail share ``target`` read off its sweep as :func:`rtp.evaluate.saved_at`
+    reads it (``rtp play``'s matched table and ``bench/report.py`` too): the most any point failing at most
+    ``target`` saves, each interpolated linearly towards the next point that fails more; NaN where the sweep
+    never fails that rarely or never that often. The parameter is that point's (``between A and B`` where
+    interpolated); among points that save as much, the one nearest the method's parameter in ``defaults`` (the
+    decision table's), else the numerically smallest. (The first point at the target's failing share in text
+    order was taken: among ties in failures the one that saved the least, "t 11.31" before "t 8".)"""
+    defaults = defaults or {}
     out = []
     for method in dict.fromkeys(r["method"] for r in sweep):
-        pts = sorted((r["fail_share"], r["work_saved"], r["parameter"]) for r in sweep if r["method"] == method)
-        fails = np.array([p[0] for p in pts])
-        if not fails.size or not fails[0] <= target <= fails[-1]:
+        pts = sorted(((float(r["fail_share"]), float(r["work_saved"]), str(r["parameter"])) for r in sweep
+                      if r["method"] == method), key=lambda p: (p[0], p[1]))  # (saved_at's order)
+        fails = [p[0] for p in pts]
+        if not pts or not fails[0] <= target <= fails[-1]:
             out.append({"method": method, "fail_share": target, "work_saved": float("nan"),
-                        "parameter": f"fails {100 * fails.min():.1f}..{100 * fails.max():.1f}% over the sweep"})
+                        "parameter": f"fails {100 * min(fails):.1f}..{100 * max(fails):.1f}% over the sweep"
+                        if pts else "no sweep"})
             continue
-        i = int(np.searchsorted(fails, target))
-        j = max(i - 1, 0)
-        if i == j or fails[i] == fails[j] or fails[i] == target:
-            saved, param = pts[i][1], pts[i][2]
-        else:
-            w = (target - fails[j]) / (fails[i] - fails[j])
-            saved, param = pts[j][1] + w * (pts[i][1] - pts[j][1]), f"between {pts[j][2]} and {pts[i][2]}"
-        out.append({"method": method, "fail_share": target, "work_saved": float(saved), "parameter": param})
+        default = float(defaults.get(method, math.nan))
+        best: tuple[float, str, tuple[float, float]] | None = None
+        for k, (f0, w0, p0) in enumerate(pts):
+            if f0 > target:
+                break
+            nxt = pts[k + 1] if k + 1 < len(pts) else None
+            if nxt is None or nxt[0] <= f0 or f0 == target:
+                saved, param = w0, p0
+            else:
+                frac = min(1.0, (target - f0) / (nxt[0] - f0))
+                saved = w0 + (nxt[1] - w0) * frac
+                param = nxt[2] if frac == 1.0 else f"between {p0} and {nxt[2]}"
+            key = _tie_key(p0 if param.startswith("between ") else param, default)
+            if best is None or saved > best[0] or (saved == best[0] and key < best[2]):
+                best = (saved, param, key)
+        assert best is not None  # (fails[0] <= target)
+        out.append({"method": method, "fail_share": target, "work_saved": float(best[0]), "parameter": best[1]})
     return out
 
 
@@ -837,8 +909,10 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
         t = fwd(v)
         return 1.0 - t if meta.worse_direction < 0 else t
 
-    # Transformed space (as the paper plots it): 0..1, oriented so that bright is worse for every metric.
+    # Transformed space (as the paper plots it): 0..1; the heatmaps oriented so that bright is worse for every
+    # metric, the scatter in the transform's own direction (PSNR's: 1 is the best).
     label = f"{meta.metric} ({meta.transform.type} transform, 1 = worst)"
+    scatter_label = f"{meta.metric} ({meta.transform.type} transform, {'1' if meta.worse_direction > 0 else '0'} = worst)"
     paths = [out / f"{stem}_heatmaps.png", out / f"{stem}_scatter.png", out / f"{stem}_rates.png"]
     P.save_image(paths[0], P.heatmaps(
         bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w), seen=sample.channel("seen"),
@@ -846,7 +920,7 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
         title=f"sample {sample.id}: true and predicted error per tile",
     ))
     p_all, g_all = d["scatter"]
-    P.save_image(paths[1], P.scatter(p_all, g_all, label=label,
+    P.save_image(paths[1], P.scatter(p_all, g_all, label=scatter_label,
                                      title=f"{meta.metric}: predicted vs true, {p_all.size} tile values"))
     P.save_image(paths[2], P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale))
     return paths

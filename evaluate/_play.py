@@ -10,7 +10,7 @@ saved, the share of tiles whose true error (``fail_metric``, rendered at every r
 ``fail_threshold``, the FLIP of the displayed frame against full-rate shading (every
 ``flip_every``-th frame, default parameters only: FLIP costs about 0.4 s per 640x360 frame here),
 the share of tiles whose rate changed since the previous frame, and the time the method took to
-choose. The first frame has no history and is left out of every summary.
+choose. The first frame has no history and is left out of every summary and figure.
 
 Methods (:func:`parse_methods`): ``full`` (always 1x1), ``oracle`` (the true ``fail_metric`` of the
 frame at ``fail_threshold``), ``oracle-monotone`` (the same on the truth made monotone over the rates:
@@ -463,7 +463,8 @@ class PlayReport:
                 lines.append(f"| {method} | " + " | ".join(
                     "-" if not np.isfinite(c["work_saved"]) else f"{'>= ' if c.get('capped') else ''}{100 * c['work_saved']:.1f}%"
                     for c in cells) + " |")
-            lows = [m for m in self.matched if m["path"] == path and np.isfinite(m.get("work_saved_p05") or np.nan)]
+            # (a saving of 0 is one: `or np.nan` read it as none and left the method out)
+            lows = [m for m in self.matched if m["path"] == path and _finite(m.get("work_saved_p05"))]
             if lows:
                 lines += ["", "The worst 5% of frames' saving where the method fails those shares of tiles (what a "
                           "frame-time budget plans for; a budget, `NAME@k:bS`, saves the same on every frame):", "",
@@ -489,6 +490,11 @@ class PlayReport:
                              f"{r['predict_ms']:.2f} | {net} |")
             lines.append("")
         return "\n".join(lines)
+
+
+def _finite(value: Any) -> bool:
+    """Whether a report's number is one (play.json writes NaN as null; a path kept by an older run has none)."""
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
 def _integer(key: str, value: Any, lo: int, what: str = "") -> int:
@@ -558,13 +564,15 @@ def play(
     dynamic_resolution: DynamicResolution | None = None,
     progress: Callable[[int], None] | None = None,
     stage: Callable[[str], None] | None = None,
+    kept: Callable[[str], None] | None = None,
 ) -> PlayReport:
     """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
     each of ``paths`` (profiles of :data:`~rtp.capture.paths.PATH_PROFILES`: one name or a list), every method swept over
     its parameter (``sweep=False``: defaults only). ``exact=False`` shades each method's frame by
     compositing the uniform-rate images (:func:`rtp.capture.paths.composite`) instead of the
     renderer's per-tile VRS pass. Writes ``play.md``, ``play.json``, and with
-    ``plots`` the curves, the per-frame plot and (``animation``) a GIF per path into ``out``.
+    ``plots`` the curves, the per-frame plot and (``animation``) a GIF per path into ``out``, then removes the
+    pictures of rtp play's own names there that its report does not list (another run's).
     ``workers`` > 1 plays the paths in that many processes at once. ``open_loop=True`` is the
     ablation: every method's history is the full-rate frame instead of its own (what the dataset's
     reprojection holds). ``engine_rates`` (:data:`~rtp.evaluate.ENGINE_IMAGES`) gives the engine rates of its own
@@ -580,7 +588,9 @@ def play(
     planned, its renderer started, its first frame, its GIF, then the report and plots: seconds on a
     large map, while ``progress`` does not move), as ``"fast: planning the camera path"``; ``"PATH:
     playing"`` once its frames count and ``"PATH: done"`` at its end (with ``workers``, which paths are
-    in a step)."""
+    in a step). ``kept(path)`` is called once a path's results are kept in ``out`` for the same call to resume
+    from (as the path ends, or at the start for a path read back from an interrupted run): what an interrupted
+    run leaves."""
     from rtp import metrics
     from rtp.capture.paths import PATH_PROFILES, DynamicResolution
 
@@ -716,6 +726,11 @@ def play(
                    if outdir is not None and (r := _load_path(outdir, p, key)) is not None}
         if results:
             log.info("%s: %s played by an interrupted run of this job; playing the rest", outdir, ", ".join(results))
+            assert outdir is not None
+            for pname, res in results.items():
+                res["files"] = _kept_pictures(outdir, pname, res, job["gif"] is not None)
+                if kept is not None:
+                    kept(pname)
             if progress is not None:
                 progress(frames * len(results))
         todo = [p for p in dict.fromkeys(paths) if p not in results]
@@ -724,6 +739,8 @@ def play(
             results[pname] = res
             if outdir is not None:
                 _save_path(outdir, pname, key, res)
+                if kept is not None:
+                    kept(pname)
 
         if workers > 1 and len(todo) > 1:
             _in_workers(job, todo, min(workers, len(todo)), progress, finished, stage)
@@ -754,9 +771,45 @@ def play(
             if stage is not None:
                 stage("writing the report" + (" and its plots" if plots else ""))
             report.files += _write(report, outdir, plots)
+            _remove_other_pictures(outdir, report.files)
             for pname in paths:
                 (outdir / _PARTIAL.format(pname)).unlink(missing_ok=True)
     return report
+
+
+def _kept_pictures(outdir: Path, pname: str, res: dict[str, Any], animation: bool) -> list[str]:
+    """The pictures of path ``pname`` kept by an interrupted run (its GIF and middle frame) that this run reports:
+    with ``animation``, those in ``outdir`` (and a warning naming the ones that are not: the kept results hold
+    no frames to draw them from, and a kept path is not played again); without, none (they are removed with the
+    other runs' pictures when the report is written)."""
+    if not animation:
+        return []
+    names = [f"play_{pname}.gif", f"play_{pname}.png"]
+    files = res.get("files")
+    listed: list[Any] = files if isinstance(files, list) else []
+    have = [n for n in names if n in listed and (outdir / n).is_file()]
+    missing = [n for n in names if n not in have]
+    if missing:
+        log.warning("%s: path %s is read back from an interrupted run that left no %s (it played with --no-animation "
+                    "or --no-plots, animation=False or plots=False, or the files were removed since), and its frames "
+                    "are not kept: this run writes none; delete %s to play the path again with them", outdir, pname,
+                    " or ".join(missing), outdir / _PARTIAL.format(pname))
+    return have
+
+
+def _remove_other_pictures(outdir: Path, files: Sequence[str]) -> None:
+    """Remove the pictures of rtp play's own names (``play_curves.png``, ``play_frames.png``, ``play_PATH.gif`` and
+    ``.png`` of every path profile) that this run's report does not list: another run's, which the report in
+    ``outdir`` replaced (a folder holds one run's report; a slow run into a slow-and-fast run's folder kept
+    play_fast.gif beside it). No other file is touched."""
+    from rtp.capture.paths import PATH_PROFILES
+
+    ours = {"play_curves.png", "play_frames.png"} | {f"play_{p}.{ext}" for p in PATH_PROFILES for ext in ("gif", "png")}
+    gone = sorted(n for n in ours - set(files) if (outdir / n).is_file())
+    for name in gone:
+        (outdir / name).unlink(missing_ok=True)
+    if gone:
+        log.info("%s: removed %s, another run's pictures, which this run's report replaces", outdir, ", ".join(gone))
 
 
 #: The hardware's combiners through which a method's rates reach the frame beside the engine's (``sdk.COMBINERS``' min,
@@ -1100,7 +1153,8 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
         truth = metrics.tile_targets(ref, {r: frame.colour[r] for r in sdk.PREDICTED_RATES}, (fail_metric,), tile)[fail_metric]
         unseen.append(frame_unseen_share(pf.seen) if pf.index > 0 else 1.0)
         flip_frame = flip_every > 0 and pf.index > 0 and pf.index % flip_every == 0
-        anim_frame = animate and pf.index % anim_every == 0
+        # (frame 0 has no history, every method's reprojection black: left out of the GIF as of every figure)
+        anim_frame = animate and pf.index > 0 and pf.index % anim_every == 0
         shown: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         engine = None if engine_image is None else engine_rates(engine_image, pf.plane("motion.x"),
                                                                 pf.plane("motion.y"), tile)
@@ -1129,9 +1183,10 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             lp.fail.append(float(failing.mean()))
             lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None and lp.rates.shape == rates.shape
                              else float("nan"))  # (none on the first frame, nor across a change of size)
-            lp.flip.append(0.0 if lp.method.kind == "full" and engine is None else
-                           float(metrics.flip_map(ref, displayed).mean()) if measure_flip and displayed is not None
-                           else float("nan"))
+            # (full's displayed frame is the reference: FLIP 0, on the frames FLIP is measured only, so that a run
+            # without any shows "-" for it as for every method, not 0.0000)
+            lp.flip.append(float("nan") if not measure_flip else 0.0 if lp.method.kind == "full" and engine is None else
+                           float(metrics.flip_map(ref, displayed).mean()) if displayed is not None else float("nan"))
             lp.history, lp.rates = (ref if open_loop else displayed) if needs_history else None, rates
             if anim_frame and lp.default and displayed is not None:
                 shown[lp.method.name] = (displayed, rates)

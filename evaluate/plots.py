@@ -322,12 +322,36 @@ def play_curves(report: Any) -> np.ndarray:
             ax.axvline(100 * f, color="#999999", linewidth=0.8, linestyle="--")
         ax.set_xscale("symlog", linthresh=1.0)
         ax.set_xlim(0, 100)
-        ax.set_xlabel(f"tiles failing ({s['fail_metric']} > {s['fail_threshold']:g}), % (symlog)")
+        ax.set_xlabel(f"tiles failing ({_failing(s['fail_metric'], s['fail_threshold'])}), % (symlog)")
         ax.set_title(f"{s['scene']}, {path} path, {s['frames']} frames", fontsize=10)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("shading work saved, %")
     _method_legend(fig, axes, "outside right upper")
     return figure_image(fig)
+
+
+def _failing(metric: str, threshold: float) -> str:
+    """When a tile fails, as a formula: ``jnyang ≥ 0.25``; a higher-is-better metric's ``psnr ≤ 35`` (``>`` was
+    written for PSNR too, whose tiles fail under the threshold); ``metric at threshold`` for a metric this
+    installation does not know (a plugin's report read elsewhere)."""
+    from rtp import metrics
+    from rtp.sdk import RtpError
+
+    try:
+        hib = metrics.metric_info(metric).higher_is_better
+    except RtpError:
+        return f"{metric} at {threshold:g}"
+    return f"{metric} {'≤' if hib else '≥'} {threshold:g}"  # (failing_tiles: not better than the threshold)
+
+
+def _series(ax: Any, t: np.ndarray, y: np.ndarray, colour: Any, label: str) -> None:
+    """One method's per-frame series as a line, and each value with no finite neighbour as a dot: a line drew
+    nothing of it (rate changes under dynamic resolution with short holds: one value between NaNs)."""
+    ax.plot(t, y, linewidth=0.9, color=colour, label=label)
+    ok = np.isfinite(y)
+    alone = ok & ~np.concatenate([[False], ok[:-1]]) & ~np.concatenate([ok[1:], [False]])
+    if alone.any():
+        ax.plot(t[alone], y[alone], linestyle="none", marker="o", markersize=2.5, color=colour)
 
 
 def play_frames(report: Any) -> np.ndarray:
@@ -347,7 +371,10 @@ def play_frames(report: Any) -> np.ndarray:
                 ax.axvspan(a - 0.5, b - 0.5, color="#000000", alpha=0.07, linewidth=0)
         for m, series in report.frames[path].items():
             for ax, key in zip(row[:3], ("saved", "fail", "change")):
-                ax.plot(t[1:], 100 * np.asarray(series[key][1:], np.float64), linewidth=0.9, color=colours[m], label=m)
+                # (frame 0 has no history; frame 1's rate change is from frame 0's rates: both left out, as the
+                # summaries leave them out)
+                first = 2 if key == "change" else 1
+                _series(ax, t[first:], 100 * np.asarray(series[key][first:], np.float64), colours[m], m)
         row[3].plot(t[1:], 100 * np.asarray(report.unseen[path][1:]), color="#333333", linewidth=0.9)
         for ax, title in zip(row, ("work saved, %", f"tiles failing ({s['fail_metric']}), %",
                                    "tiles whose rate changed, %", "unseen share of the frame, %")):

@@ -279,11 +279,17 @@ def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monk
     monkeypatch.setattr(Bar, "update_to", lambda self, n, total=None, **_: resumed.append(n))
     assert main(train) == 0 and resumed[0] == 260 and resumed[-1] == 600  # (the bar starts where it stopped)
     play = tmp_path / "play"
-    interrupt_at(1)
-    assert main(["play", "procedural:1", "--frames", "3", "--methods", "full", "--size", "64x48", "--no-sweep",
-                 "--out", str(play), "-q"]) == 130
-    assert capsys.readouterr().err == (f"rtp play: interrupted; the paths played to their end are kept in {play}: "
-                                       f"the same command plays the rest\n")
+    interrupt_at(1)  # (on the first path: it said "the paths played to their end are kept" of none)
+    run = ["play", "procedural:1", "--frames", "3", "--methods", "full", "--size", "64x48", "--no-sweep", "--out",
+           str(play), "-q"]
+    assert main(run) == 130
+    assert capsys.readouterr().err == (f"rtp play: interrupted; no path was played to its end, so none is kept in "
+                                       f"{play} (each is kept as it ends): the same command plays them all\n")
+    interrupt_at(4)  # on the second: the first is kept, and is still once the rerun has read it back
+    for _ in range(2):
+        assert main(run) == 130
+        assert capsys.readouterr().err == (f"rtp play: interrupted; the path played to its end (slow) is kept in "
+                                           f"{play}: the same command plays the rest (fast)\n")
 
 
 def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(

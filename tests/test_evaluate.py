@@ -797,3 +797,144 @@ def test_the_scoring_helpers_refuse_what_they_would_misread() -> None:
             call()
     assert scores([1.0, 2.0, 3.0], [1.0, 2.0, 4.0], worse=-1.0).n == 3 and spearman([1, 2, 3], [3, 2, 1]) == -1.0
     assert failing_tiles(codes + C["2x2"], truth + 1.0, 0.5, False).all() and foveation_rates(3, 4).shape == (3, 4)
+
+
+def test_matched_quality_takes_the_most_saved_among_the_points_failing_at_most_the_target(
+        dataset: Path, model: Path) -> None:
+    """The table took, among the points failing exactly the target's share, the first in text order: the one
+    that saved the least ("t 8": 93.06% where "t 11.31" saved 93.72% at the same failures), and with
+    `--threshold 2` the model's row read "threshold 0.7071". It now reads the sweep as saved_at does (rtp
+    play, bench/report.py): the most saved at most the target's failures, ties to the parameter nearest the
+    method's own (else the smallest number, not the first text)."""
+    from rtp.evaluate import saved_at
+    from rtp.evaluate._evaluate import _matched
+
+    sweep = [{"method": "yang2019", "parameter": p, "fail_share": f, "work_saved": w}
+             for p, f, w in (("t 2", 0.0, 0.5), ("t 8", 0.01, 0.9306), ("t 11.31", 0.01, 0.9372), ("t 16", 0.03, 0.95))]
+    sweep += [{"method": "model", "parameter": f"threshold {t}", "fail_share": 0.0, "work_saved": 0.9}
+              for t in ("0.7071", "11.31", "2", "8")]
+    got = {m["method"]: m for m in _matched(sweep, 0.01, {"yang2019": 0.25})}
+    assert (got["yang2019"]["work_saved"], got["yang2019"]["parameter"]) == (0.9372, "t 11.31")
+    (own,) = _matched(sweep[4:], 0.0, {"model": 2.0})
+    assert (own["work_saved"], own["parameter"]) == (0.9, "threshold 2")  # (ties: the method's own)
+    (smallest,) = _matched(sweep[4:], 0.0)
+    assert smallest["parameter"] == "threshold 0.7071"  # (no default: the smallest number, not the first text)
+    assert _matched(sweep[5:], 0.0)[0]["parameter"] == "threshold 2"
+    # any sweep reads as saved_at reads it, inside the failures it reaches
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        pts = [(float(f), float(w)) for f, w in zip(rng.choice([0.0, 0.01, 0.02, 0.05], 6), rng.random(6))]
+        target = float(rng.choice([0.0, 0.01, 0.015, 0.02, 0.03]))
+        (row,) = _matched([{"method": "m", "parameter": f"t {i}", "fail_share": f, "work_saved": w}
+                           for i, (f, w) in enumerate(pts)], target)
+        if min(f for f, _ in pts) <= target <= max(f for f, _ in pts):
+            assert row["work_saved"] == pytest.approx(saved_at(pts, target)), (pts, target)
+        else:
+            assert np.isnan(row["work_saved"])
+    rep = evaluate(model, dataset, threshold=2.0)
+    matched = {m["method"]: m for m in rep.matched}
+    assert matched["model"]["parameter"] == "threshold 2"
+    for method, m in matched.items():
+        pts = [(r["fail_share"], r["work_saved"]) for r in rep.sweep if r["method"] == method]
+        assert m["work_saved"] == pytest.approx(saved_at(pts, m["fail_share"])), method
+
+
+def test_a_threshold_at_either_end_of_its_range_is_evaluated(dataset: Path, model: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """`--threshold 1e6` was refused as "--threshold: ... got 1.41421e+06" (the sweep around it, past the range,
+    under the user's flag) and `--threshold 0` as "Yang 2019's threshold: expected a number > 0", the baseline
+    that takes a JNYang model's threshold: both are evaluated, the sweep kept inside the range, once each value."""
+    from rtp.evaluate._evaluate import _parameter_value
+
+    for t in ("1e6", "0"):
+        assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--threshold", t]) == 0, capsys.readouterr().err
+    top = evaluate(model, dataset, threshold=1e6)
+    grid = [_parameter_value(r["parameter"]) for r in top.sweep if r["method"] == "model"]
+    assert max(grid) == 1e6 and len(set(grid)) == len(grid) == 9
+    assert max(_parameter_value(r["parameter"]) for r in top.sweep if r["method"] == "yang2019") == 1e6
+    zero = evaluate(model, dataset, threshold=0.0)
+    assert [r["parameter"] for r in zero.sweep if r["method"] in ("model", "yang2019")] == ["threshold 0", "t 0"]
+    assert zero.row("decisions", "yang2019")["work_saved"] == 0  # (nothing is below 0: all 1x1, as the model)
+    assert Yang2019(16, threshold=0.0).threshold == 0.0
+    with pytest.raises(BaselineError, match=r"Yang 2019's threshold: expected a number in \[0, 1e\+06\]"):
+        Yang2019(16, threshold=2e6)
+    capsys.readouterr()
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--threshold", "1e7"]) == 2
+    assert "--threshold: expected a finite number in [0, 1e+06] for an error metric (lower is better), got 1e+07" \
+        in capsys.readouterr().err
+
+
+def test_a_psnr_models_scatter_says_which_end_is_worst(dataset: Path, model: Path, tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scatter plots the transformed values as they are, where PSNR's 1 is the best; its label said
+    "1 = worst" for every metric. The heatmaps, turned so that bright is worse, keep theirs."""
+    store = TargetStore(dataset)
+    store.declare("psnr", {})
+    for i in range(3):
+        psnr = (20.0 + 30.0 * np.random.default_rng(i).random((6, H // T, W // T))).astype(np.float32)
+        store.write(f"s{i}", "psnr", psnr.repeat(T // 4, 1).repeat(T // 4, 2), (H, W))
+    meta = base_metadata(metric="psnr", weber_l=None, transform={"type": "clamped", "mu_y": 38.0},
+                         default_threshold=35.0, outputs=["1x2", "2x1"])
+    psnr_model = build_onnx(tmp_path / "p.onnx", weights=np.eye(2, 4, dtype=np.float32), tile=T, metadata=meta)
+    labels: dict[str, str] = {}
+    real_scatter, real_heatmaps = plots.scatter, plots.heatmaps
+
+    def scatter(*args: Any, **kwargs: Any) -> np.ndarray:
+        labels["scatter"] = kwargs["label"]
+        return real_scatter(*args, **kwargs)
+
+    def heatmaps(*args: Any, **kwargs: Any) -> np.ndarray:
+        labels["heatmaps"] = kwargs["label"]
+        return real_heatmaps(*args, **kwargs)
+
+    monkeypatch.setattr(plots, "scatter", scatter)
+    monkeypatch.setattr(plots, "heatmaps", heatmaps)
+    assert sdk.load(psnr_model).metadata.worse_direction < 0
+    evaluate(psnr_model, dataset, baselines=False, plots_dir=tmp_path / "psnr")
+    assert labels == {"scatter": "psnr (clamped transform, 0 = worst)", "heatmaps": "psnr (clamped transform, 1 = worst)"}
+    evaluate(model, dataset, baselines=False, plots_dir=tmp_path / "jnyang")
+    assert labels["scatter"] == "jnyang (clamped transform, 1 = worst)"
+
+
+def test_an_evaluation_folder_is_recognised_from_another_working_folder(
+        dataset: Path, model: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """evaluation.json kept the data's path as typed ("data") and the next run read it against its own working
+    folder: the same model on the same data, run from elsewhere, was "another evaluation". The report keeps the
+    paths resolved; an older report's relative ones are still read (against the working folder, as before)."""
+    out = tmp_path / "eval"
+    run = ["--no-baselines", "--max-samples", "1", "--out", str(out)]
+    monkeypatch.chdir(dataset.parent)
+    assert rtp_main(["evaluate", model.name, "--data", dataset.name, *run]) == 0
+    (entry,) = json.loads((out / "evaluation.json").read_text())
+    assert (entry["data"], entry["model"]["path"]) == (str(dataset.resolve()), str(model.resolve()))
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    capsys.readouterr()
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), *run]) == 0
+    assert "holds the evaluation" not in capsys.readouterr().err
+    entry.update(data=dataset.name)  # (a report written before: the path as typed)
+    (out / "evaluation.json").write_text(json.dumps([entry]))
+    monkeypatch.chdir(dataset.parent)
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), *run]) == 0
+    assert "holds the evaluation" not in capsys.readouterr().err
+
+
+def test_an_evaluation_into_another_ones_folder_removes_that_ones_plots(
+        dataset: Path, model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp evaluate psnr --out F` into a folder of jnyang's evaluation left jnyang_*.png beside psnr's report.
+    The plots the replaced evaluation.json listed and the new one does not are removed; no other file."""
+    import shutil
+
+    out = tmp_path / "eval"
+    other = shutil.copy(model, tmp_path / "other.onnx")
+    run = ["--data", str(dataset), "--no-baselines", "--max-samples", "1", "--out", str(out)]
+    assert rtp_main(["evaluate", str(model), *run, "--plots"]) == 0
+    (out / "notes.png").write_bytes(b"mine")
+    (out / "mine_rates.png").write_bytes(b"mine too")  # (of the plots' naming, but no report listed it)
+    assert rtp_main(["evaluate", str(other), *run, "--plots"]) == 0
+    left = sorted(p.name for p in out.iterdir())
+    assert left == ["evaluation.json", "evaluation.md", "mine_rates.png", "notes.png", "other_heatmaps.png",
+                    "other_rates.png", "other_scatter.png"], left
+    assert rtp_main(["evaluate", str(other), *run]) == 0  # the same model without --plots: its old plots go too
+    assert sorted(p.name for p in out.iterdir()) == ["evaluation.json", "evaluation.md", "mine_rates.png", "notes.png"]
