@@ -1010,8 +1010,11 @@ def test_bench_loop_scale_finds_where_the_swept_model_fails_as_often_as_one_thre
     import sys
 
     path, _ = _bench_module("loop_scale", monkeypatch)
-    meta = sdk.load(metric).metadata
+    shipped = sdk.load(metric)
+    meta = shipped.metadata
     thr, hib = meta.default_threshold, meta.higher_is_better
+    (tmp_path / "one.yaml").write_text("rate_factors: null\n")  # the same network with one threshold (--one)
+    one = export.retune(shipped.path, tmp_path / "one.yaml", tmp_path / "one.onnx")
     values = [thr + 6.0, thr, thr - 6.0] if hib else [thr * 0.5, thr, thr * 2.0]
     runs = []
     for i, (scene, shift) in enumerate((("a", -0.01), ("b", 0.01))):  # the paths' mean is what counts
@@ -1019,7 +1022,8 @@ def test_bench_loop_scale_finds_where_the_swept_model_fails_as_often_as_one_thre
                  "work_saved": 0.3 + 0.1 * k} for k, (v, f) in enumerate(zip(values, (0.02, 0.06, 0.10)))]
         rows.append({"path": "slow", "method": "one.onnx", "value": thr, "default": True, "fail_share": 0.08 + shift,
                      "work_saved": 0.35})
-        run = {"settings": {"scene": scene, "methods": [metric, "one.onnx"], "models": {metric: metric}},
+        run = {"settings": {"scene": scene, "methods": [metric, "one.onnx"],
+                            "models": {metric: str(shipped.path), "one.onnx": str(one)}},
                "unseen": {"slow": [1.0, 0.0]}, "rows": rows}
         runs.append(tmp_path / f"run{i}.json")
         runs[-1].write_text(json.dumps(run))
