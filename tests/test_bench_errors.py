@@ -172,3 +172,21 @@ def test_play_report_shows_how_near_a_target_a_figure_is() -> None:
     assert fmt(0.8985, pct=True) == "89.8%" and fmt(1.024, pct=True) == "102.4%"
     assert fmt(0.9945) == "0.995x" and fmt(1.0049) == "1.005x" and fmt(1.52) == "1.52x" and fmt(0.97) == "0.97x"
     assert fmt(float("nan")) == "-" and fmt(float("inf"), pct=True) == "-"
+
+
+def test_the_inference_bench_checks_its_models_before_timing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`bench/inference.py nosuchmodel` timed the paper's network and every shipped model, a minute or more, before
+    saying the file was not there: it is loaded first."""
+    from rtp import sdk
+
+    from .conftest import bench_module
+
+    mod = bench_module("inference", monkeypatch)
+
+    def timed(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the bench timed a network before loading the models it was given")
+
+    monkeypatch.setattr(mod, "paper_model", timed)
+    monkeypatch.setattr(sys, "argv", ["inference.py", "nosuchmodel"])
+    with pytest.raises(sdk.ModelNotFoundError, match="nosuchmodel"):
+        mod.main()
