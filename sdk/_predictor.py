@@ -431,8 +431,8 @@ def _check_tile_grid(predictor: ShadingRatePredictor, model_path: Path) -> None:
     """Refuse, at load, a model whose graph maps pixels to tiles of another size than its metadata's
     ``tile_size`` (a sidecar of the 8-pixel model given to the 16-pixel one): a model of fixed size is
     checked from its shapes when the predictor is built; any other runs once on a blank frame of eight
-    tiles a side (microseconds for rtp's networks; a model that fails on it is left to ``predict`` to
-    name, as it would have been)."""
+    tiles a side (under a millisecond for the shipped models; a model that fails on it is left to ``predict``
+    to name, as it would have been)."""
     if predictor._static_hw is not None:
         return
     meta = predictor.metadata
