@@ -263,7 +263,7 @@ def import_frames(
                 kind = re.sub(r"-?\d[\d.]*", "#", text)
                 warned[kind] = warned.get(kind, 0) + 1
                 if warned[kind] == 1:
-                    log.warning("%s: %s", f, text)
+                    log.warning(f"{f}: {text}")  # (its own message: one template hid every kind after the first)
             buffers, seen = _buffers(f, arrays, present, conventions)
             geo = buffers["depth"] > 0
             unseen = float(1.0 - seen[geo].mean()) if geo.any() else 0.0

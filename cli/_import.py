@@ -9,14 +9,23 @@ import sys
 
 __all__ = ["run_import"]
 
+#: ``--write-example``'s options and their values when not given (refused without it).
+EXAMPLE_OPTIONS = {"count": 8, "size": (640, 360), "seed": 0, "example_scene": "procedural:0"}
+#: The options of an import, with the value each has when not given (refused with ``--write-example``, which writes
+#: frames in the default conventions and imports nothing; ``--tolerance``'s: sdk.DEFAULT_REPROJECTION_TOLERANCE).
+IMPORT_OPTIONS = {"out": None, "scene": None, "profile": "engine", "albedo_linear": False, "normal_space": "view",
+                  "depth_kind": "linear"}
+
 
 def run_import(args: argparse.Namespace) -> int:
     from rtp import sdk
     from rtp.capture import import_frames
 
-    from ._predict import write_sequence
+    from ._predict import example_options, write_sequence
     from ._run import Bar
 
+    example_options(args, "import", EXAMPLE_OPTIONS,
+                    {**IMPORT_OPTIONS, "tolerance": sdk.DEFAULT_REPROJECTION_TOLERANCE})
     if args.write_example:
         if len(args.frames) != 1:
             raise sdk.ParameterError(f"--write-example writes one folder; got {len(args.frames)} paths", "frames")

@@ -907,7 +907,8 @@ def build_parser() -> argparse.ArgumentParser:
                     f"learns (computed by `rtp targets`): {', '.join(METRICS)}, or a plugin's")
     tr.add_argument("--out", type=_out_file, required=True, help="checkpoint to write (resumed if it exists)")
     tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
-                    help="training recipe: a YAML file, or 'shipped' (the shipped models' recipe)")
+                    help="training recipe: a YAML file, or a packaged one: shipped (the shipped models' recipe), "
+                         "reuse, tile8, paper-net (train/recipes)")
     tr.add_argument("--device", default=None, metavar="DEVICE",
                     help="where the network trains: auto (the first GPU torch sees, else the CPU; default), cpu, "
                     "cuda, cuda:N or mps. The samples stay in memory here; a checkpoint resumes on any device")
@@ -1158,11 +1159,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "relative depth tolerance (disocclusion test)")
     im.add_argument("--write-example", action="store_true", help="write frames of the reference renderer into the "
                     "folder given, every array in the layout read")
-    im.add_argument("--frames", dest="count", metavar="N", type=_positive, default=8, help="--write-example's frame count")
-    im.add_argument("--size", type=frame_size, default="640x360", help="--write-example's WIDTHxHEIGHT")
-    im.add_argument("--seed", type=_non_negative, default=0, help="--write-example's camera path")
-    im.add_argument("--example-scene", default="procedural:0", help="--write-example's scene (procedural:<seed>, a map "
-                    "name, or a .glb/.gltf/.obj file)")
+    # (--write-example's options default to None: given without it, they are refused rather than ignored)
+    im.add_argument("--frames", dest="count", metavar="N", type=_positive, default=None, help="--write-example's frame "
+                    "count (default: 8)")
+    im.add_argument("--size", type=frame_size, default=None, help="--write-example's WIDTHxHEIGHT (default: 640x360)")
+    im.add_argument("--seed", type=_non_negative, default=None, help="--write-example's camera path (default: 0)")
+    im.add_argument("--example-scene", default=None, help="--write-example's scene (procedural:<seed>, a map "
+                    "name, or a .glb/.gltf/.obj file) (default: procedural:0)")
 
     pr = command("predict", "a model's predictions and shading rates for frames of your engine's G-buffers "
                  "(.npz files)", _cmd_predict,
@@ -1205,8 +1208,10 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--json", action="store_true", help="print the summary as JSON")
     pr.add_argument("--write-example", action="store_true", help="write FRAME: a frame of the built-in procedural "
                     "scene from the reference renderer, every G-buffer in the layout read")
-    pr.add_argument("--size", type=frame_size, default="640x360", help="--write-example's WIDTHxHEIGHT")
-    pr.add_argument("--seed", type=_non_negative, default=0, help="--write-example's viewpoint (or camera path)")
+    # (--write-example's options default to None: given without it, they are refused rather than ignored)
+    pr.add_argument("--size", type=frame_size, default=None, help="--write-example's WIDTHxHEIGHT (default: 640x360)")
+    pr.add_argument("--seed", type=_non_negative, default=None, help="--write-example's viewpoint (or camera path) "
+                    "(default: 0)")
     pr.add_argument("--frames", dest="count", metavar="N", type=_positive, default=1, help="--write-example: write this many "
                     "frames along a camera path (60 Hz, walking) into the folder FRAME, frame_0000.npz ...")
 

@@ -152,8 +152,8 @@ def _warn_of_conventions(path: str, buffers: dict[str, Any], args: argparse.Name
     for text in texts:
         kind = warned.setdefault(re.sub(r"-?\d[\d.]*", "#", text), [0, f"{path}: {text}"])
         kind[0] += 1
-        if kind[0] == 1:
-            log.warning("%s", kind[1])  # (its own message: kinds are not collapsed together)
+        if kind[0] == 1:  # (the text as the record's message: the command's log collapses records of one message,
+            log.warning(kind[1])  # and a "%s" of them all hid every kind after the first)
     return texts
 
 
@@ -204,7 +204,7 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
             "combines the engine's rates with rtp's)")])
         kind[0] += 1
         if kind[0] == 1:
-            log.warning("%s", kind[1])
+            log.warning(kind[1])
     if args.combiner is not None:
         if ENGINE_RATES_KEY not in frame:
             raise sdk.ParameterError(f"{path!r} has no {ENGINE_RATES_KEY!r} array: with --combiner each frame holds the "
@@ -235,9 +235,49 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     return summary, frame, values, rates
 
 
+#: The options of a prediction, with the value each has when not given (``--write-example`` refuses them: it writes a
+#: frame in the default conventions, and predicts nothing).
+_PREDICT_OPTIONS = {"model": "jnyang", "threshold": None, "saving": None, "combiner": None, "tile_size": None,
+                    "allowed": None, "out": None, "albedo_linear": False, "normal_space": "view", "depth_kind": "linear",
+                    "every": None, "json": False}
+#: ``--write-example``'s options and their values when not given (refused without it).
+_EXAMPLE_OPTIONS = {"size": (640, 360), "seed": 0}
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def example_options(args: argparse.Namespace, command: str, defaults: dict[str, Any],
+                    others: dict[str, Any]) -> None:
+    """Refuse the options that the run does not read, rather than ignore them: with ``--write-example`` those of
+    ``others`` given (other than their value when not given); without it, those of ``defaults`` given. Then fill
+    in the defaults of ``--write-example``'s options (which the parser leaves at None, to tell them given)."""
+    from rtp import sdk
+
+    if args.write_example:
+        given = [_flag(k) for k, v in others.items() if getattr(args, k, v) != v]
+        if given:
+            raise sdk.ParameterError(f"{', '.join(given)}: not read with --write-example, which only writes "
+                                     f"{'frames' if command == 'import' else 'a frame'} of the reference renderer (in "
+                                     f"the default conventions); give {'them' if len(given) > 1 else 'it'} to `rtp "
+                                     f"{command} {' '.join(args.frames)}` without --write-example, once written",
+                                     given[0][2:].replace("-", "_"))
+        for k, v in defaults.items():
+            if getattr(args, k, None) is None:
+                setattr(args, k, v)
+        return
+    given = [_flag("frames" if k == "count" else k) for k in defaults if getattr(args, k, None) is not None]
+    if given:
+        raise sdk.ParameterError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} of "
+                                 f"--write-example (which writes example frames), not read without it",
+                                 given[0][2:].replace("-", "_"))
+
+
 def run_predict(args: argparse.Namespace) -> int:
     from rtp import sdk
 
+    example_options(args, "predict", _EXAMPLE_OPTIONS, _PREDICT_OPTIONS)
     if args.write_example:
         if len(args.frames) != 1:
             raise sdk.ParameterError(f"--write-example writes one path (a frame file, or with --frames a folder); got "
@@ -366,7 +406,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
             bar.update_to(i + 1)
     for n, first in warned.values():
         if n > 1:
-            log.warning("... and on %d more frame%s of the sequence: %s", n - 1, "s" if n > 2 else "", first)
+            log.warning(f"... and on {n - 1} more frame{'s' if n > 2 else ''} of the sequence: {first}")
     changes = [r["changed"] for r in rows if r["changed"] is not None]
     summary: dict[str, Any] = {
         "frames": rows, "model": model, "metric": predictor.metadata.metric, "size": first_size,

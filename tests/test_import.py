@@ -245,3 +245,35 @@ def test_fuzz_found_inputs_are_typed_errors_and_leave_no_manifest(dumps: Any, tm
     np.savez(tmp_path / "flat" / "frame_0000.npz", **frame)
     with pytest.raises(sdk.ParameterError, match=r"final_1x1 has shape \(9,\), expected \(H, W, 3\)"):
         import_frames(tmp_path / "flat", tmp_path / "data2")
+
+
+def test_options_not_read_are_refused_not_ignored(dumps: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--frames N without --write-example imported every frame (not N), --out beside --write-example wrote no
+    dataset: options taken and ignored are refused, naming them, before anything is written."""
+    root, _, _ = dumps
+    assert rtp_main(["import", str(root / "level_a"), "--out", str(tmp_path / "data"), "--frames", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "--frames: an option of --write-example" in err and "Traceback" not in err, err
+    assert not (tmp_path / "data").exists()
+    assert rtp_main(["import", str(tmp_path / "ex"), "--write-example", "--frames", "1", "--size", f"{W}x{H}",
+                     "--out", str(tmp_path / "data")]) == 2
+    assert "--out: not read with --write-example" in capsys.readouterr().err
+    assert not (tmp_path / "ex").exists() and not (tmp_path / "data").exists()
+
+
+def test_each_kind_of_convention_warning_is_shown_by_the_command(dumps: Any, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """Frames with two kinds of mistake (view matrices for row vectors, and so nothing reprojects) name both: every
+    kind was logged with one template, "%s: %s", which the command's log collapsed into the first."""
+    root, _, _ = dumps
+    from rtp.cli._predict import _save_frame
+
+    bad = tmp_path / "transposed"
+    bad.mkdir()
+    for f in sorted((root / "level_a").glob("*.npz")):
+        arrays = dict(np.load(f))
+        arrays["view"] = arrays["view"].T
+        _save_frame(bad / f.name, arrays)
+    assert rtp_main(["import", str(bad), "--out", str(tmp_path / "data")]) == 0
+    err = capsys.readouterr().err
+    assert "view: its last row is" in err and "seen: only" in err and "more like" not in err, err

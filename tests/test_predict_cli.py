@@ -407,3 +407,35 @@ def test_the_engines_own_rates_in_each_frame_file(frame: Path, tmp_path: Path, c
     assert "with_engine.npz: the 'engine_rates' array is not read without --combiner" in capsys.readouterr().err
     assert main(["predict", str(frame)]) == 0
     assert "engine_rates" not in capsys.readouterr().err
+
+
+def test_options_not_read_are_refused_not_ignored(frame: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """--write-example writes a frame and predicts nothing: a prediction's options (--out, --model, a convention)
+    beside it were taken and ignored, and --size or --seed without it ignored too; each is refused, naming it."""
+    example = tmp_path / "example.npz"
+    out = tmp_path / "out"
+    assert main(["predict", str(example), "--write-example", "--size", "160x96", "--out", str(out),
+                 "--depth-kind", "reversed"]) == 2
+    err = capsys.readouterr().err
+    assert "--out, --depth-kind: not read with --write-example" in err and "Traceback" not in err, err
+    assert not example.exists() and not out.exists()
+    assert main(["predict", str(frame), "--size", "320x192", "--out", str(out)]) == 2
+    assert "--size: an option of --write-example" in capsys.readouterr().err and not out.exists()
+    assert main(["predict", str(frame), "--seed", "3", "--json"]) == 2
+    assert "--seed: an option of --write-example" in capsys.readouterr().err
+    assert main(["predict", str(frame), "--model", "jnyang", "--json"]) == 0  # (the defaults, given, are read)
+
+
+def test_each_kind_of_convention_warning_is_shown(frame: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Two kinds of mistake in one frame (a view matrix for row vectors, and so nothing reprojects) are both
+    named: the command's log collapsed records of one message template, and every warning was logged as "%s",
+    so the second was hidden behind a "1 more like" of the first."""
+    bad = tmp_path / "transposed.npz"
+    with np.load(frame) as npz:
+        np.savez(bad, **{k: npz[k].T if k == "view" else npz[k] for k in npz.files})
+    assert main(["predict", str(bad)]) == 0
+    err = capsys.readouterr().err
+    assert "view: its last row is" in err and "seen: only" in err, err
+    assert "more like" not in err, err
