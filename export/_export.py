@@ -40,9 +40,9 @@ from rtp.sdk.files import atomic_output, check_output, yaml_problem
 
 from ._published import file_sha256, identify
 
-__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "ExportError", "add_finite_probe",
-           "adopt", "export_checkpoint", "join_input_planes", "merge_slices", "restamp", "retune", "split_input_planes",
-           "strip_finite_probe", "write_metadata"]
+__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS", "ExportError",
+           "add_finite_probe", "adopt", "export_checkpoint", "join_input_planes", "merge_slices", "restamp", "retune",
+           "split_input_planes", "strip_finite_probe", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -769,6 +769,7 @@ def export_checkpoint(
     meta_dict["input_multiple"] = getattr(net, "input_multiple", None)
     meta = ModelMetadata.from_dict(meta_dict)
     ckpt_mod.check_fits(net, meta)
+    _check_trained_fields(ckpt.metadata, meta)
 
     c, t = net.config["in_channels"], net.config["tile"]
     h, w = _parity_sizes(t)[0]
@@ -801,6 +802,30 @@ def export_checkpoint(
         _torch_parity(tmp, net, meta)
     log.info("exported %s -> %s in %.1f s", checkpoint, out, time.perf_counter() - t0)
     return out
+
+
+#: The metadata fields a checkpoint's network was trained for: the metric and its target parameters, the
+#: input planes in order, the predicted rates in order, the tile and the target transform. Extra metadata
+#: that changes one would describe another network (a model trained on luma told to read red, its 1x2
+#: output labelled 2x1): ``export_checkpoint`` refuses it (a sidecar may restate them).
+TRAINED_FIELDS = ("metric", "inputs", "outputs", "tile_size", "transform", "weber_l")
+
+
+def _check_trained_fields(trained: ModelMetadata, meta: ModelMetadata) -> None:
+    """Refuse extra metadata that changes what the checkpoint's network was trained for (:data:`TRAINED_FIELDS`)."""
+    for key in TRAINED_FIELDS:
+        was, now = getattr(trained, key), getattr(meta, key)
+        if key == "transform":
+            was, now = was.to_dict(), now.to_dict()
+        if was != now:
+            raise MetadataError(f"{key}: the checkpoint's network was trained for {_shown(was)}, the extra metadata says "
+                                f"{_shown(now)}; extra metadata sets descriptive and decision fields (description, "
+                                f"default_threshold, rate_factors, provenance, ...), not what the network was trained "
+                                f"on: train another model", key)
+
+
+def _shown(value: Any) -> Any:
+    return ", ".join(value) if isinstance(value, tuple) else value
 
 
 def _with_features(net: Any) -> Any:

@@ -376,7 +376,7 @@ def test_jobs_check_their_values_before_they_write(tmp_path: Path, capsys: pytes
         assert main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"), flag, value,
                      "-q"]) == 2, flag
         assert "expected" in capsys.readouterr().err
-    for argv, words in ((["--quantile", "0.5"], "--loss quantile"), (["--distill", "0.5"], "--teachers")):
+    for argv, words in ((["--quantile", "0.5"], "with loss quantile"), (["--distill", "0.5"], "teachers")):
         assert main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"), *argv,
                      "-q"]) == 2  # (taken and ignored before)
         assert words in capsys.readouterr().err

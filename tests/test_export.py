@@ -133,6 +133,24 @@ def test_extra_metadata_is_merged(tmp_path: Path) -> None:
     assert pred.metadata.provenance["scenes"] == ("oa_dm1",) and "export" in pred.metadata.provenance
 
 
+@pytest.mark.parametrize("extra, key", [
+    ("inputs: [reprojected.g, seen, albedo.g, normal.z]\n", "inputs"),  # as many planes, others
+    ("metric: flip\nweber_l: null\n", "metric"),
+    ("weber_l: 0.05\n", "weber_l"),
+    ("transform: {type: clamped, mu_y: 0.5}\n", "transform"),
+])
+def test_extra_metadata_cannot_change_what_the_network_was_trained_for(tmp_path: Path, extra: str, key: str) -> None:
+    # (only their number was checked: a network trained on red exported as one reading green, or a JNYang
+    # network as a FLIP model, with the checkpoint's safety and mu_y)
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    (tmp_path / "extra.yaml").write_text(extra)
+    with pytest.raises(sdk.MetadataError, match=f"^{key}: the checkpoint's network was trained for") as err:
+        export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=tmp_path / "extra.yaml")
+    assert err.value.key == key and not (tmp_path / "x.onnx").exists()
+    restated = {k: base_metadata()[k] for k in ("metric", "inputs", "outputs", "tile_size", "transform")}
+    assert sdk.load(export.export_checkpoint(ck, tmp_path / "y.onnx", extra_metadata=restated)).metadata.metric == "jnyang"
+
+
 def test_parity_failure_is_loud_and_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
     target = tmp_path / "m.onnx"

@@ -131,6 +131,10 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("device: cuda\n", "'device' is the machine's, not the recipe's"),
     ("per_metric:\n  flip:\n    device: cpu\n  jnyang:\n    device: cuda\n", "'device' is the machine's"),
     ("!!python/object/apply:os.system ['echo pwned']\n", "not valid YAML"),
+    # per_metric: a typo'd metric, or a bad key of another metric's section, was never read (silently)
+    ("per_metric:\n  jnyng:\n    batch: 4\n", "per_metric names unknown metric(s) jnyng (jnyng: did you mean jnyang?)"),
+    ("per_metric:\n  psnr:\n    btach: 4\n", "r.yaml: unknown key(s) btach (btach: did you mean batch?)"),
+    ("per_metric:\n  flip:\n    steps: '4'\n", "per_metric flip: recipe key 'steps': expected int, got '4'"),
 ])
 def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needle: str) -> None:
     path = tmp_path / "r.yaml"
@@ -146,6 +150,14 @@ def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needl
     ("crop: 40\n", "multiple of the tile size"),
     ("lr: -1.0\n", "lr: expected a finite learning rate > 0"),
     ("arch: paper\nseparable: true\n", "separable: the fast network's option"),
+    # values the configuration never reads: recorded in the provenance and ignored, silently
+    ("arch: paper\ndepth: 5\n", "sets depth: 5, which does not fit: depth: the fast network's option"),
+    ("arch: paper\ngrow: 2\n", "sets grow: 2, which does not fit: grow: the fast network's option"),
+    ("quantile: 0.9\n", "sets quantile: 0.9, read only with loss quantile"),
+    ("logistic_k: 4\n", "sets logistic_k: 4.0, read only with transform logistic"),
+    ("distill: 0.3\n", "sets distill: 0.3, read only with teachers"),
+    ("aux_weight: 2\n", "sets aux_weight: 2.0, read only with aux_metrics"),
+    ("schedule: cosine\nlr_decay: 0.001\n", "sets lr_decay: 0.001, read only with schedule exponential"),
 ])
 def test_a_recipe_out_of_range_is_refused_when_read(tmp_path: Path, text: str, field: str) -> None:
     """Types are checked by load_recipe, ranges and combinations by TrainConfig.from_recipe: a recipe
@@ -155,6 +167,28 @@ def test_a_recipe_out_of_range_is_refused_when_read(tmp_path: Path, text: str, f
     load_recipe(path, "jnyang")  # of the right types
     with pytest.raises(ParameterError, match=field):
         TrainConfig.from_recipe(path, data="d", metric="jnyang", out=str(tmp_path / "m.pt"))
+
+
+def test_a_conflict_names_the_field_and_whether_the_recipe_or_the_caller_set_it(tmp_path: Path) -> None:
+    out = str(tmp_path / "m.pt")
+    # the paper's network ignored the fast network's depth, grow and stem_layers (and the provenance
+    # recorded them as overrides); a value the caller gave is named as its own
+    for key, value in (("depth", 9), ("grow", 2), ("stem_layers", 2), ("stem", 2)):
+        with pytest.raises(ParameterError, match=f"^{key}: the fast network's option") as err:
+            TrainConfig.from_recipe("paper-net", data="d", metric="psnr", out=out, **{key: value})
+        assert err.value.name == key
+    with pytest.raises(ParameterError, match="^quantile: read only with loss quantile") as err:
+        TrainConfig.from_recipe("shipped", data="d", metric="psnr", out=out, quantile=0.9)
+    assert err.value.name == "quantile"
+    # a conflict with what the recipe set (not the caller) says so: rtp train --arch paper said
+    # "--head-width: the fast network's option" of a --head-width never given
+    with pytest.raises(ParameterError, match="^recipe shipped sets head_width: 64, which does not fit") as err:
+        TrainConfig.from_recipe("shipped", data="d", metric="jnyang", out=out, arch="paper")
+    assert err.value.name == "head_width"
+    assert TrainConfig.from_recipe("shipped", data="d", metric="jnyang", out=out, arch="paper", head_width=0).depth == 3
+    with pytest.raises(ParameterError, match="multiple of the tile size") as err:
+        TrainConfig.from_recipe("shipped", data="d", metric="jnyang", out=out, crop=40)
+    assert err.value.name == "crop"
 
 
 def test_a_missing_recipe_names_the_packaged_ones(tmp_path: Path) -> None:

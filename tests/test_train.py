@@ -1411,6 +1411,8 @@ def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path
     ({"per_scene": 0}, "per_scene", "at least 1 sample per map"),
     ({"arch": "paper", "separable": True}, "separable", "the fast network's option"),
     ({"arch": "paper", "energy_norm": True}, "energy_norm", "the fast network's option"),
+    ({"arch": "paper", "depth": 5}, "depth", "the fast network's option"),  # (ignored, and recorded)
+    ({"arch": "paper", "stem_layers": 2}, "stem_layers", "the fast network's option"),
     ({"distill": 0.0}, "distill", r"a weight in \(0, 1\]"),
     ({"ema": 1.0}, "ema", r"a decay in \[0, 1\)"),
     ({"aux_metrics": ("jnyang",)}, "aux_metrics", "other than jnyang"),

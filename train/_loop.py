@@ -17,7 +17,7 @@ import math
 import os
 import platform
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -226,8 +226,46 @@ class TrainConfig:
         if changed:  # what the command line changed: a model says how it was really trained
             prov["overrides"] = {k: list(v) if isinstance(v, tuple) else v for k, v in changed.items()}
         cfg = cls(data=data, metric=metric, out=out, recipe=prov, **values)
-        check_config(cfg)  # a recipe's ranges and combinations too, when it is read (train() checks again)
+        try:
+            check_config(cfg)  # a recipe's ranges and combinations too, when it is read (train() checks again)
+        except sdk.ParameterError as err:
+            key = err.name
+            if key is None or key not in r.values or key in overrides:
+                raise
+            # (a conflict with a value the caller did not give: "--head-width: the fast network's option" for
+            # --arch paper, where the recipe had set head_width)
+            raise type(err)(f"recipe {r.name} sets {key}: {_shown(r.values[key])}, which does not fit: {err}; override "
+                            f"it or train with another recipe", key) from None
+        _check_used(cfg, values, r.name, overrides)
         return cfg
+
+
+#: Fields read only in some configurations (field, whether ``cfg`` reads it, what it is read with): set by a
+#: recipe or the caller where it is not read, it trained nothing while the provenance recorded it.
+_READ_ONLY_WITH: tuple[tuple[str, Callable[[TrainConfig], bool], str], ...] = (
+    ("quantile", lambda c: c.loss == "quantile", "loss quantile"),
+    ("logistic_k", lambda c: c.transform == "logistic", "transform logistic"),
+    ("distill", lambda c: bool(c.teachers), "teachers"),
+    ("aux_weight", lambda c: bool(c.aux_metrics), "aux_metrics"),
+    ("coarse_width", lambda c: c.coarse > 0, "coarse"),
+    ("lr_decay", lambda c: c.schedule == "exponential", "schedule exponential"),
+)
+
+
+def _check_used(cfg: TrainConfig, given: Mapping[str, Any], recipe: str, overrides: Mapping[str, Any]) -> None:
+    """Refuse a field ``given`` (by the recipe ``recipe`` or the caller's ``overrides``) that ``cfg`` never reads."""
+    for key, read, needs in _READ_ONLY_WITH:
+        if key in given and not read(cfg):
+            if key in overrides:
+                raise sdk.ParameterError(f"{key}: read only with {needs}, got {key} {_shown(given[key])} without it "
+                                         f"(it would be recorded and ignored)", key)
+            raise sdk.ParameterError(f"recipe {recipe} sets {key}: {_shown(given[key])}, read only with {needs}, which "
+                                     f"it does not train with (it would be recorded and ignored): remove it from the "
+                                     f"recipe or train with {needs}", key)
+
+
+def _shown(value: Any) -> str:
+    return ",".join(value) if isinstance(value, (tuple, list)) else str(value)
 
 
 @dataclass
@@ -621,7 +659,7 @@ def check_config(cfg: TrainConfig) -> None:
         if value is not None and not (math.isfinite(value) and ok):
             raise sdk.ParameterError(f"{key}: expected {expected}, got {value}", key)
     if cfg.crop % cfg.tile:
-        raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})")
+        raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})", "crop")
     if cfg.arch not in ARCHS:
         raise sdk.ParameterError(f"arch: expected one of {', '.join(ARCHS)}, got {cfg.arch!r}", "arch")
     pairs = [("normal.x", "normal.y"), ("motion.x", "motion.y")]
@@ -645,8 +683,15 @@ def check_config(cfg: TrainConfig) -> None:
     if cfg.schedule not in SCHEDULES:
         raise sdk.ParameterError(f"schedule: expected one of {', '.join(SCHEDULES)}, got {cfg.schedule!r}", "schedule")
     if cfg.width < 2 or cfg.depth < 0 or cfg.stem not in (1, 2, 4, 8) or cfg.grow not in (1, 2):
+        wrong = next(k for k, ok in (("width", cfg.width >= 2), ("depth", cfg.depth >= 0),
+                                     ("stem", cfg.stem in (1, 2, 4, 8)), ("grow", cfg.grow in (1, 2))) if not ok)
         raise sdk.ParameterError(f"expected width >= 2, depth >= 0, stem 1, 2, 4 or 8 and grow 1 or 2, got {cfg.width}, "
-                                 f"{cfg.depth}, {cfg.stem} and {cfg.grow}")
+                                 f"{cfg.depth}, {cfg.stem} and {cfg.grow}", wrong)
+    if cfg.arch != "fast":  # (the paper's network has none of these: they were taken and ignored, and recorded)
+        for key, default in (("depth", 3), ("stem", 4), ("grow", 1), ("stem_layers", 1)):
+            if getattr(cfg, key) != default:
+                raise sdk.ParameterError(f"{key}: the fast network's option (the paper's network has its own fixed "
+                                         f"layers), got {key} {getattr(cfg, key)} with arch {cfg.arch!r}", key)
     if cfg.max_width and (cfg.grow == 1 or cfg.max_width < cfg.width):
         raise sdk.ParameterError(f"max_width caps grow 2's channels: expected 0 (none), or at least width ({cfg.width}) "
                                  f"with grow 2, got {cfg.max_width} with grow {cfg.grow}", "max_width")
@@ -735,9 +780,11 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError(f"per_scene: expected at least 1 sample per map and motion profile, got {cfg.per_scene}",
                                  "per_scene")
     if cfg.context < 0 or cfg.context % cfg.tile:
-        raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}")
+        raise sdk.ParameterError(f"context must be a multiple of the tile size ({cfg.tile}) and >= 0, got {cfg.context}",
+                                 "context")
     if cfg.context and cfg.augment:
-        raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)")
+        raise sdk.ParameterError("context and augment cannot be combined (the scored region would need transforming too)",
+                                 "context")
     with torch.device("meta"):  # the network itself (its size included), before any data is read; allocates nothing
         _network(cfg)
     dev = resolve_device(cfg.device)

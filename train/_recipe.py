@@ -25,7 +25,7 @@ from typing import Any
 
 import yaml
 
-from rtp.metrics import MetricParameterError, metric_info
+from rtp.metrics import MetricParameterError, known_metrics, metric_info
 from rtp.sdk import ParameterError
 from rtp.sdk.files import yaml_problem
 
@@ -172,13 +172,38 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
         if metric not in metrics:
             raise RecipeError(f"recipe {name} is for {', '.join(metrics)} (measured for those only), got metric "
                               f"{metric!r}; the shipped recipe, {SHIPPED_RECIPE!r}, trains every metric")
-    merged = {**data, **per_metric.get(metric, {})}
+    import difflib
+
+    known = known_metrics()
+    strange = [m for m in per_metric if m not in known]
+    if strange:  # (a typo'd metric's section was never read: its values trained nothing, silently)
+        close = {m: difflib.get_close_matches(str(m), known, n=1) for m in strange}
+        guess = "".join(f" ({m}: did you mean {c[0]}?)" for m, c in close.items() if c)
+        raise RecipeError(f"recipe {name}: per_metric names unknown metric(s) {', '.join(map(str, strange))}{guess}; "
+                          f"expected among {', '.join(known)}", "per_metric")
+    # every metric's section is checked, not only the one trained now (a typo there surfaced only when that
+    # metric was trained, the recipe's digest by then in other models' provenance)
+    sections = [(m, {**data, **values}) for m, values in per_metric.items() if m != metric]
+    resolved = _checked(name, {**data, **per_metric.get(metric, {})})
+    for other, section in sections:
+        try:
+            _checked(name, section)
+        except RecipeError as err:
+            raise RecipeError(f"per_metric {other}: {err}", err.name) from None
+    values, val_split = resolved
+    return Recipe(name, hashlib.sha256(text.encode()).hexdigest(), values, val_split)
+
+
+def _checked(name: str, merged: dict[str, Any]) -> tuple[dict[str, Any], str | None]:
+    """The recipe's values for one metric (its keys and its section of ``per_metric`` merged), each of its
+    field's type, and its ``val_split``; an unknown key or a wrong type is a :class:`RecipeError`."""
+    merged = dict(merged)
     val_split = merged.pop("val_split", None)
     if val_split is not None and not isinstance(val_split, str):
-        raise RecipeError(f"recipe key 'val_split': expected a split name, got {val_split!r}")
+        raise RecipeError(f"recipe key 'val_split': expected a split name, got {val_split!r}", "val_split")
     if "device" in merged:  # (a TrainConfig field, but the machine's: the same recipe trains anywhere)
         raise RecipeError(f"recipe {name}: 'device' is the machine's, not the recipe's: give it to the training "
-                          f"(rtp train --device, TrainConfig.device)")
+                          f"(rtp train --device, TrainConfig.device)", "device")
     types = _field_types()
     unknown = sorted(set(merged) - set(types))
     if unknown:
@@ -187,6 +212,6 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
         keys = ["val_split", "per_metric", "metrics", *sorted(set(types) - {"val_split"})]
         close = {k: difflib.get_close_matches(k, keys, n=1) for k in unknown}
         guess = "".join(f" ({k}: did you mean {m[0]}?)" for k, m in close.items() if m)
-        raise RecipeError(f"recipe {name}: unknown key(s) {', '.join(unknown)}{guess}; recipe keys are {', '.join(keys)}")
-    values = {k: _coerce(k, v, types[k]) for k, v in merged.items()}
-    return Recipe(name, hashlib.sha256(text.encode()).hexdigest(), values, val_split)
+        raise RecipeError(f"recipe {name}: unknown key(s) {', '.join(unknown)}{guess}; recipe keys are {', '.join(keys)}",
+                          unknown[0])
+    return {k: _coerce(k, v, types[k]) for k, v in merged.items()}, val_split
