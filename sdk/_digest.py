@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import hashlib
 
-__all__ = ["DIGEST_ALGORITHM", "model_digest"]
+__all__ = ["DIGEST_ALGORITHM", "external_tensors", "model_digest"]
 
 #: The prefix of the digest string: ``"sha256:<64 hex digits>"``.
 DIGEST_ALGORITHM = "sha256"
 _METADATA_PROPS = 14  # ModelProto.metadata_props
 
 
-def _varint(data: bytes, i: int) -> tuple[int, int]:
+def _varint(data: bytes | memoryview, i: int) -> tuple[int, int]:
     value = shift = 0
     while True:
         if i >= len(data) or shift > 63:
@@ -56,6 +56,80 @@ def _without_field(data: bytes, field: int) -> bytes:
         if number != field:
             out += data[start:i]
     return bytes(out)
+
+
+#: The messages of a serialized ModelProto that hold tensors, each with its fields that are (or lead to) them:
+#: field number -> the message it holds (onnx.proto).
+_TENSOR_PATHS: dict[str, dict[int, str]] = {
+    "model": {7: "graph", 25: "function"},  # ModelProto.graph, .functions
+    "graph": {1: "node", 5: "tensor", 15: "sparse"},  # GraphProto.node, .initializer, .sparse_initializer
+    "function": {7: "node"},  # FunctionProto.node
+    "node": {5: "attribute"},  # NodeProto.attribute
+    "attribute": {5: "tensor", 6: "graph", 10: "tensor", 11: "graph", 22: "sparse", 23: "sparse"},  # t, g, ...
+    "sparse": {1: "tensor", 2: "tensor"},  # SparseTensorProto.values, .indices
+}
+_TENSOR_NAME, _EXTERNAL_DATA, _DATA_LOCATION = 8, 13, 14  # TensorProto.name, .external_data, .data_location
+_EXTERNAL = 1  # TensorProto.DataLocation.EXTERNAL
+
+
+def _fields(data: memoryview) -> tuple[list[tuple[int, int]], list[tuple[int, memoryview]]]:
+    """The top-level protobuf fields of ``data``: its varint fields as (number, value) and its length-delimited
+    ones as (number, bytes); a ValueError where it is no protobuf message."""
+    varints: list[tuple[int, int]] = []
+    nested: list[tuple[int, memoryview]] = []
+    i, n = 0, len(data)
+    while i < n:
+        key, i = _varint(data, i)
+        number, wire = key >> 3, key & 7
+        if number == 0:
+            raise ValueError("field number 0")
+        if wire == 0:
+            value, i = _varint(data, i)
+            varints.append((number, value))
+        elif wire == 1 or wire == 5:
+            i += 8 if wire == 1 else 4
+        elif wire == 2:
+            length, i = _varint(data, i)
+            nested.append((number, data[i:i + length]))
+            i += length
+        else:
+            raise ValueError(f"unsupported wire type {wire}")
+        if i > n:
+            raise ValueError("truncated field")
+    return varints, nested
+
+
+def _text(data: memoryview) -> str:
+    return bytes(data).decode("utf-8", "replace")
+
+
+def external_tensors(data: bytes) -> tuple[list[str], list[str]]:
+    """The tensors of a serialized ONNX model whose data is stored outside it (``onnx.save_model(...,
+    save_as_external_data=True)``: ``data_location`` EXTERNAL) and the files their ``external_data`` names
+    (its ``location`` entries), each list in the order met; empty lists for a model that holds every tensor,
+    or for bytes that are no ONNX model. Standard library only, as :func:`model_digest`."""
+    names: list[str] = []
+    locations: list[str] = []
+    todo: list[tuple[memoryview, str]] = [(memoryview(bytes(data)), "model")]
+    try:
+        while todo:  # (a stack, not recursion: nesting is bounded by the file's size alone)
+            message, kind = todo.pop()
+            varints, nested = _fields(message)
+            if kind == "tensor":
+                entries = [v for number, v in nested if number == _EXTERNAL_DATA]
+                if entries or (_DATA_LOCATION, _EXTERNAL) in varints:
+                    name = [_text(v) for number, v in nested if number == _TENSOR_NAME]
+                    names.append(name[-1] if name else "?")
+                    for entry in entries:  # StringStringEntryProto: key = 1, value = 2
+                        kv = {number: _text(v) for number, v in _fields(entry)[1]}
+                        if kv.get(1) == "location" and 2 in kv and kv[2] not in locations:
+                            locations.append(kv[2])
+                continue
+            paths = _TENSOR_PATHS[kind]
+            todo.extend((v, paths[number]) for number, v in reversed(nested) if number in paths)
+    except ValueError:
+        return [], []
+    return names, locations
 
 
 def model_digest(data: bytes) -> str:

@@ -76,7 +76,8 @@ class ModelLoadError(RtpError):
 
 class ModelIntegrityError(ModelLoadError):
     """The model's graph or weights differ from what was exported: the digest its metadata records
-    does not match the file (corrupted, or modified after export)."""
+    does not match the file (corrupted, or modified after export; or its weights re-saved outside the
+    file as ONNX external data, which the message names with how to re-save them inside)."""
 
 
 class MetadataError(RtpError, ValueError):

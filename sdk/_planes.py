@@ -18,8 +18,9 @@ import numpy as np
 
 from ._channels import CHANNELS, block_variances, depth_edges, pixel_differences, tile_variances
 from ._color import linear_to_srgb, luma
-from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError
+from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, ParameterError, RtpError
 from ._reproject import (
+    _CONVERSIONS,
     DEFAULT_REPROJECTION_TOLERANCE,
     _affine_row,
     _cameras,
@@ -27,6 +28,7 @@ from ._reproject import (
     _positions,
     _reproject,
     _tolerance,
+    _w_row,
     check_projection,
 )
 
@@ -444,8 +446,10 @@ def check_gbuffers(
     and faces the camera on most surfaces (the wrong space, or a left-handed view space, turns about half
     away); a ``linear`` depth is not a depth buffer's [0, 1] (its clear value 1 on some pixels, or half the
     surfaces past 0.9); and, with the previous frame, most surfaces reproject onto it (else the matrices or
-    depth are another frame's or another convention's). The other G-buffers (``albedo``, the material) and
-    ``albedo_linear`` are not looked at; bad arrays raise :func:`input_planes`' errors.
+    depth are another frame's or another convention's; with a hardware depth, where they do once the matrices
+    are taken as clip depth in [0, 1], the warning names a Direct3D-style projection and its conversion). The
+    other G-buffers (``albedo``, the material) and ``albedo_linear`` are not looked at; bad arrays raise
+    :func:`input_planes`' errors.
     """
     if not isinstance(albedo_linear, (bool, np.bool_)):
         raise ParameterError(f"albedo_linear: expected True or False, got {reprlib.repr(albedo_linear)}",
@@ -520,7 +524,47 @@ def check_gbuffers(
                             **options)[0]
         share = float(seen[geo].mean())
         if share < _SEEN_SHARE:
-            warnings.append(f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame and pass "
-                            f"its depth test: prev_depth and prev_view_projection the previous frame's, of the same "
-                            f"conventions and depth kind? (a camera cut or a fast turn does this too)")
+            converted = _zero_to_one_share(given, needed, options, geo) if depth_kind != "linear" else None
+            if converted is not None and converted >= _SEEN_SHARE and converted > share:
+                also = " and D @ prev_projection" if given["prev_projection"] is not None else ""
+                warnings.append(
+                    f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame and pass its "
+                    f"depth test, and {100 * converted:.0f}% with the matrices' clip depth taken as [0, 1]: projection "
+                    f"looks like a [0, 1]-depth matrix (Direct3D's, Vulkan's, Metal's), which depth_kind="
+                    f"{depth_kind!r} linearises as OpenGL's [-1, 1] (too near: about half as far, away from the far "
+                    f"plane). No option converts it: "
+                    f"pass D @ projection and D @ prev_view_projection{also}, "
+                    f"D = {_ZERO_TO_ONE_TEXT} (depth row 2 z - w; {_CONVERSIONS}); the depth buffer itself needs "
+                    f"no conversion")
+            else:
+                warnings.append(f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame and "
+                                f"pass its depth test: prev_depth and prev_view_projection the previous frame's, of the "
+                                f"same conventions and depth kind? (a camera cut or a fast turn does this too)")
     return warnings
+
+
+#: The constant that turns a clip depth in [0, 1] (Direct3D's, Vulkan's, Metal's) into OpenGL's [-1, 1]
+#: (docs/runtime.md "Matrices from Direct3D, Vulkan and Metal": ``D @ projection``, ``D @ prev_view_projection``).
+_ZERO_TO_ONE = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 0.0, 1.0]])
+_ZERO_TO_ONE_TEXT = "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 2, -1], [0, 0, 0, 1]]"
+
+
+def _zero_to_one_share(given: Mapping[str, Any], needed: tuple[str, ...], options: Mapping[str, Any],
+                       geo: np.ndarray) -> float | None:
+    """The share of the surfaces ``geo`` (a hardware depth's background, the same in any convention) ``seen`` with
+    the matrices (``projection``, ``prev_view_projection``, ``prev_projection``) taken as clip depth in [0, 1] and
+    converted to OpenGL's, or None where ``projection`` is no perspective or the converted ones are refused: a
+    window depth linearised through a Direct3D-style projection as if it were OpenGL's comes out too near (about
+    half as far), and fails the reprojection's depth test."""
+    projection = np.asarray(given["projection"], np.float64)
+    if projection.shape != (4, 4) or not _w_row(projection[3]):  # (an orthographic camera's depth row: not guessed)
+        return None
+    converted = {b: given[b] for b in (*needed, "depth", "prev_projection", "motion")}
+    for b in ("projection", "prev_view_projection", "prev_projection"):
+        if converted[b] is not None:
+            converted[b] = _ZERO_TO_ONE @ np.asarray(converted[b], np.float64)
+    try:
+        seen = input_planes(["seen"], **converted, **options)[0]
+    except RtpError:  # (not a matrix the conversion makes right)
+        return None
+    return float(seen[geo].mean())

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ._channels import BLOCK_TILE
-from ._digest import model_digest
+from ._digest import external_tensors, model_digest
 from ._errors import (
     InferenceError,
     InputChannelError,
@@ -181,6 +181,21 @@ def _check_integrity(model_path: Path, digest: str | None, data: bytes) -> None:
     except ValueError as err:
         raise ModelLoadError(f"{str(model_path)!r}: cannot be read back to check its digest ({err})") from err
     if actual != digest:
+        names, locations = external_tensors(data)
+        if names:  # (re-saved with its weights beside it: the bytes the digest is of are not all in the file)
+            where = f" ({', '.join(repr(loc) for loc in locations[:3])}{', ...' if len(locations) > 3 else ''})"
+            raise ModelIntegrityError(
+                f"{str(model_path)!r}: its weights are stored outside the .onnx file (ONNX external data: "
+                f"{len(names)} tensor{'s' if len(names) != 1 else ''}, {', '.join(repr(n) for n in names[:3])}"
+                f"{', ...' if len(names) > 3 else ''}, in the file{'s' if len(locations) > 1 else ''} beside it"
+                f"{where if locations else ''}), as onnx.save_model(..., save_as_external_data=True) writes them; "
+                f"rtp checks the digest its metadata records ({digest}) on the file alone, and loads a model whose "
+                f"tensors are all inside it. Re-save it with every tensor inside: m = onnx.load({str(model_path)!r}) "
+                f"(which reads the external data back), then `for t in m.graph.initializer: "
+                f"t.ClearField('data_location')` (onnx.load marks each one read back; the mark is not in the exported "
+                f"file), then onnx.save_model(m, {str(model_path)!r}) "
+                f"(save_as_external_data=False, the default); or export it again"
+            )
         raise ModelIntegrityError(
             f"{str(model_path)!r}: the graph or weights differ from what was exported (digest {actual}, the "
             f"metadata records {digest}); the file is corrupted or was modified after export: export it again"

@@ -514,6 +514,37 @@ def test_convention_mistakes_are_named_and_a_right_frame_has_none(rendered: list
         sdk.check_gbuffers(**g, normals=g["normal"])
 
 
+@pytest.mark.gl
+@pytest.mark.parametrize("prev_projection", [False, True])
+def test_a_zero_to_one_depth_projection_with_a_window_depth_is_named_with_its_conversion(
+        rendered: list[tuple[Any, dict[str, Any]]], prev_projection: bool) -> None:
+    """A Direct3D-style projection (clip depth in [0, 1]) with depth_kind='window' passes check_projection (it is
+    an OpenGL one of other planes) and linearises the depth buffer wrong: the warning names it and its conversion
+    rather than only a share of surfaces seen; another frame's buffers are not taken for it."""
+    (_, g), (_, other) = rendered
+    window, prev_window = (_hardware_depth(g[k], g["projection"], "window") for k in ("depth", "prev_depth"))
+    to_d3d = np.linalg.inv(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 2, -1], [0, 0, 0, 1]]))
+    d3d = {**g, "depth": window, "prev_depth": prev_window, "projection": to_d3d @ g["projection"],
+           "prev_view_projection": to_d3d @ g["prev_view_projection"]}
+    if prev_projection:
+        d3d["prev_projection"] = to_d3d @ g["projection"]
+    (warning,) = sdk.check_gbuffers(**d3d, depth_kind="window")
+    assert warning.startswith("seen: only ") and "projection looks like a [0, 1]-depth matrix (Direct3D's, Vulkan's, " \
+        "Metal's), which depth_kind='window' linearises as OpenGL's [-1, 1]" in warning, warning
+    assert "pass D @ projection and D @ prev_view_projection" in warning
+    assert ("and D @ prev_projection" in warning) == prev_projection
+    assert 'D = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 2, -1], [0, 0, 0, 1]]' in warning
+    assert 'docs/runtime.md "Matrices from Direct3D, Vulkan and Metal"' in warning
+    # converted as it says: no warning; another frame's previous buffers: the plain warning, no [0, 1] guess
+    d = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 2, -1], [0, 0, 0, 1]])
+    fixed = {k: d @ v if k in ("projection", "prev_view_projection", "prev_projection") else v for k, v in d3d.items()}
+    assert sdk.check_gbuffers(**fixed, depth_kind="window") == []
+    cut = {**g, "depth": window, **{k: other[k] for k in ("prev_colour", "prev_view_projection")},
+           "prev_depth": _hardware_depth(other["prev_depth"], g["projection"], "window")}
+    (warning,) = sdk.check_gbuffers(**cut, depth_kind="window")
+    assert warning.startswith("seen: only ") and "[0, 1]-depth" not in warning, warning
+
+
 def test_a_gbuffer_at_another_resolution_is_named_with_its_likely_cause() -> None:
     """An upscaler's displayed frame (1.5x the render resolution) as prev_colour: the error says to give it at the
     G-buffers' resolution; a half-resolution albedo says every G-buffer is at the depth's."""

@@ -119,3 +119,32 @@ def test_the_digest_skips_exactly_the_metadata_entries_of_any_wire_type() -> Non
             sdk.model_digest(bad)
     with pytest.raises(sdk.ParameterError, match="expected the bytes of an ONNX model, got str"):
         sdk.model_digest("model.onnx")  # type: ignore[arg-type]
+
+
+def test_a_model_resaved_with_external_data_is_named_with_how_to_resave_it(tmp_path: Path) -> None:
+    """onnx.save_model(..., save_as_external_data=True) moves the weights into a file beside the model: its digest
+    cannot match, and the error said "modified after export". It says where the weights went and how to re-save
+    the model with them inside; done as it says, the model loads with its exported digest again."""
+    original = Path(sdk.load("jnyang").path)
+    path = tmp_path / "ext.onnx"
+    onnx.save_model(onnx.load(str(original)), str(path), save_as_external_data=True, location="ext.onnx.data")
+    assert (tmp_path / "ext.onnx.data").is_file()
+    with pytest.raises(sdk.ModelIntegrityError) as err:
+        sdk.load(path)
+    text = str(err.value)
+    assert "its weights are stored outside the .onnx file (ONNX external data:" in text, text
+    assert "'ext.onnx.data'" in text and "save_as_external_data=True" in text
+    assert f"m = onnx.load({str(path)!r})" in text and f"onnx.save_model(m, {str(path)!r})" in text
+    assert "t.ClearField('data_location')" in text
+    assert "modified after export" not in text
+    # the recipe of the message: every tensor inside, the exported bytes' digest again
+    model = onnx.load(str(path))
+    for t in model.graph.initializer:
+        t.ClearField("data_location")
+    onnx.save_model(model, str(path))
+    (tmp_path / "ext.onnx.data").unlink()
+    assert sdk.load(path).metadata.digest == sdk.model_digest(path.read_bytes()) == sdk.load("jnyang").metadata.digest
+    # a model holding its tensors has none outside, nor do bytes of no model
+    from rtp.sdk._digest import external_tensors
+
+    assert external_tensors(original.read_bytes()) == ([], []) and external_tensors(b"\xff\xff junk") == ([], [])
