@@ -338,6 +338,39 @@ def _run_job(
     return report
 
 
+def _stored_size(path: Path) -> tuple[int, int] | None:
+    """``(width, height)`` of a sample file's ``final_1x1``, read from its array header (not its data); None
+    where the file cannot be read so (a damaged sample: the resume captures it again)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z, z.open("final_1x1.npy") as fh:
+            version = np.lib.format.read_magic(fh)
+            header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape = tuple(header(fh)[0])
+    except Exception:  # noqa: BLE001 - numpy's and zipfile's readers on damaged bytes (see _dataset._unreadable)
+        return None
+    return (int(shape[1]), int(shape[0])) if len(shape) >= 2 else None
+
+
+def _check_unlisted_samples(out: str | os.PathLike[str], size: tuple[int, int]) -> None:
+    """Refuse a capture of ``size`` into a folder that holds samples but no manifest (deleted, or lost) where a
+    sample there is of another size: without the manifest's settings to refuse them by, they were adopted (the
+    ones planned from the same cameras skipped, the others kept), and ``rtp train`` refused the mix much later.
+    Each sample's size is read from its header; nothing is deleted."""
+    root = Path(out)
+    if (root / "manifest.json").exists() or not (root / "samples").is_dir():
+        return
+    w, h = size
+    for path in sorted((root / "samples").glob("*.npz")):
+        found = _stored_size(path)
+        if found is not None and found != (w, h):
+            raise DatasetError(
+                f"{root}: no manifest.json, and the samples there are not of the size asked for: {path} is "
+                f"{found[0]}x{found[1]}, --size (size=) {w}x{h}; a dataset holds samples of one size: capture into "
+                f"another folder, or resume this one with --size {found[0]}x{found[1]} (nothing was deleted)")
+
+
 def _writer_lock(out: str | os.PathLike[str]) -> Any:
     """The dataset folder's writer lock for a capture (:func:`rtp.sdk.files.writer_lock`)."""
     return writer_lock(out, "rtp capture", lambda holder: DatasetError(
@@ -418,6 +451,7 @@ def capture(
     # The folder's writer lock is held to the end: a second capture into it would delete this one's
     # files in flight as stale and render the same samples again. (A new folder on Ray: ray_capture
     # holds it from when it makes the folder until the samples are written.)
+    _check_unlisted_samples(out, (w, h))  # (before a manifest is written that would adopt them)
     writer: DatasetWriter | None = None
     guard = contextlib.ExitStack()
     if ray is None or (Path(out) / "manifest.json").exists():

@@ -43,6 +43,9 @@ REQUIRED_GBUFFERS = ("depth", "albedo", "normal", "view", "projection", "prev_co
 #: The dataset buffers a frame may lack (stored as zeros and listed under the manifest's ``absent``: a model
 #: that reads one of their channels is refused by the reader, not trained on zeros).
 OPTIONAL_BUFFERS = ("roughness", "metallic", "specular", "shadow", "emissive")
+#: The optional arrays of a frame file (:data:`OPTIONAL_BUFFERS`, the engine's motion vectors and the previous
+#: frame's projection): every frame of an import holds the same ones.
+OPTIONAL_ARRAYS = (*OPTIONAL_BUFFERS, "motion", "prev_projection")
 #: The command that writes example frames (the hints of the errors).
 EXAMPLE = "rtp import FRAMES --write-example --frames 8"
 #: The manifest's ``settings["source"]`` of an imported dataset.
@@ -216,12 +219,25 @@ def import_frames(
         counts = Counter(sizes.values())
         raise ParameterError(f"frames: of {len(counts)} sizes ({', '.join(f'{s[1]}x{s[0]}: {n}' for s, n in counts.items() if s)}"
                              f"); a dataset holds frames of one size", "frames")
-    present = [b for b in BUFFERS if b not in OPTIONAL_BUFFERS or all(b in m for m in members.values())]
-    mixed = [b for b in OPTIONAL_BUFFERS if b not in present and any(b in m for m in members.values())]
-    if mixed:
-        have = sum(mixed[0] in m for m in members.values())
-        raise ParameterError(f"frames: {have} of {len(files)} hold {mixed[0]!r}: every frame of a dataset holds the same "
-                             f"G-buffers (a model reads a channel on every sample or none)", "frames")
+    # every frame the same optional arrays as the first (motion vectors on some frames only would store the
+    # engine's motion on those and the camera's on the rest): the first that differs is named
+    first = {k for k in OPTIONAL_ARRAYS if k in members[files[0]]}
+    for f in files[1:]:
+        held = {k for k in OPTIONAL_ARRAYS if k in members[f]}
+        if held != first:
+            lacks = [k for k in OPTIONAL_ARRAYS if k in first - held]
+            extra = [k for k in OPTIONAL_ARRAYS if k in held - first]
+            key = (lacks or extra)[0]
+            have = sum(key in m for m in members.values())
+            raise ParameterError(
+                f"{f!r} " + " and ".join(
+                    ([f"lacks {', '.join(lacks)}"] if lacks else [])
+                    + ([f"holds {', '.join(extra)} besides"] if extra else []))
+                + f", unlike the first frame {files[0]!r} ({have} of {len(files)} hold {key!r}): every frame "
+                f"of a dataset holds the same optional arrays ({', '.join(OPTIONAL_ARRAYS)}; a model reads a channel "
+                f"on every sample or none): import those frames into a folder of their own, or drop the array from "
+                f"every frame", "frames")
+    present = [b for b in BUFFERS if b not in OPTIONAL_BUFFERS or b in first]
     absent = tuple(b for b in OPTIONAL_BUFFERS if b not in present)
     h, w = next(iter(sizes.values()))
     if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, numbers.Real):

@@ -352,6 +352,53 @@ def test_preview_sheet_labels_every_panel(tmp_path: Path) -> None:
             preview_sheet(ds[ds.ids[0]], scale=scale)  # type: ignore[arg-type]
 
 
+def test_preview_says_whose_shadow_its_panel_shows_and_takes_no_empty_sample_id(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The shadow plane is the main light's (the reference renderer's sun) alone: indoors, under a ceiling, it is
+    black where lamps light the room (the procedural levels' mean about 0.02). Its panel said '(1 = lit)', as
+    if it were the lighting; it says whose shadow it is, and its mean. ``--sample ""`` drew the first sample."""
+    from rtp.capture import open_dataset
+    from rtp.capture._preview import _panels
+    from rtp.cli import main as rtp_main
+
+    capture(["procedural:0"], tmp_path / "ds", per_scene=1, size=(64, 48), profiles=("slow",))
+    sample = open_dataset(tmp_path / "ds")[open_dataset(tmp_path / "ds").ids[0]]
+    titles = [t for t, _, _ in _panels(sample)]
+    shadow = [t for t in titles if "shadow" in t]
+    geometry = sample.channel("depth") > 0
+    assert shadow == [f"main-light (sun) shadow, 1 = lit\nmean {sample.channel('shadow')[geometry].mean():.2f}; "
+                      "other lights are not in it"], titles
+    assert rtp_main(["preview", str(tmp_path / "ds"), "--sample", "", "--out", str(tmp_path / "p.png")]) == 2
+    assert "no sample '' in" in capsys.readouterr().err and not (tmp_path / "p.png").exists()
+
+
+def test_preview_draws_the_papers_layout_saying_what_it_lacks(tmp_path: Path) -> None:
+    """`rtp preview`'s help names the paper's released layout, which has no depth or metallic: the command
+    failed on it ("the paper's layout has no 'depth' buffer"); those panels say so instead, and the title
+    leaves out the motion profile that layout does not record ('? motion')."""
+    from rtp.capture import open_dataset
+    from rtp.capture._dataset import write_png
+    from rtp.capture._preview import _panels
+    from rtp.cli import main as rtp_main
+
+    folder = tmp_path / "Bistro" / "0000"
+    rng = np.random.default_rng(0)
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1",
+                 *(f"output_{r}" for r in sdk.ALL_RATES)]:
+        write_png(folder / f"{stem}.png", rng.integers(0, 256, (48, 64, 4), dtype=np.uint8))
+    titles = [t for t, _, _ in _panels(open_dataset(tmp_path / "Bistro")["0000"])]
+    assert "depth: not in this dataset" in titles and "metallic: not in this dataset" in titles, titles
+    assert "roughness" in titles and any(t.startswith("main-light (sun) shadow") for t in titles), titles
+    from matplotlib.figure import Figure
+
+    said: list[str] = []
+    suptitle = Figure.suptitle
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Figure, "suptitle", lambda fig, text, **kw: said.append(text) or suptitle(fig, text, **kw))
+        assert rtp_main(["preview", str(tmp_path / "Bistro"), "--out", str(tmp_path / "paper.png")]) == 0
+    assert said == ["sample 0000: scene Bistro, 64x48"] and (tmp_path / "paper.png").stat().st_size > 0
+
+
 def test_capture_at_eye_height_records_its_placement(tmp_path: Path) -> None:
     """--placement eye: the manifest says where the cameras stood, the cameras differ from the free
     placement's, and a folder is resumed only with the placement it was captured with."""
@@ -424,3 +471,24 @@ def test_a_resumed_capture_captures_a_damaged_sample_again(tmp_path: Path, caplo
     assert any(f"{damaged}: unreadable sample" in r.getMessage() and r.getMessage().endswith("captured again")
                for r in caplog.records)
     assert DatasetReader(out)["procedural_7-slow-0000"].buffer("depth").shape == (64, 96)
+
+
+def test_a_folder_without_its_manifest_refuses_samples_of_another_size(tmp_path: Path) -> None:
+    """A capture into a folder whose manifest was deleted adopted the samples there whatever their size (those
+    planned from the same cameras skipped as done), and `rtp train` refused the mix much later: a sample of
+    another size than the one asked for is named, with both sizes, before anything is written or deleted."""
+    from rtp.capture import DatasetError
+
+    out = tmp_path / "ds"
+    assert capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",)).written == 1
+    (out / "manifest.json").unlink()
+    before = {p.name: p.read_bytes() for p in (out / "samples").iterdir()}
+    sample = out / "samples" / "procedural_5-slow-0000.npz"
+    # (192x128: the same aspect, so the same cameras: the sample was skipped as already captured)
+    with pytest.raises(DatasetError, match=rf"no manifest.json, .*{sample} is 96x64, --size \(size=\) 192x128"):
+        capture(["procedural:5"], out, per_scene=1, size=(192, 128), profiles=("slow",))
+    assert {p.name: p.read_bytes() for p in (out / "samples").iterdir()} == before  # (nothing deleted or added)
+    assert not (out / "manifest.json").exists()
+    # the samples' own size resumes it (the manifest written again)
+    again = capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
+    assert (again.written, again.skipped) == (0, 1) and DatasetReader(out).manifest["settings"]["size"] == [96, 64]

@@ -188,6 +188,35 @@ def test_frames_without_some_g_buffers_import_and_their_channels_are_refused(tmp
         import_frames([tmp_path / "lvl", tmp_path / "lvl2"], tmp_path / "data2")
 
 
+def test_frames_of_which_only_some_hold_motion_are_refused_naming_the_first_that_differs(dumps: Any,
+                                                                                         tmp_path: Path) -> None:
+    root, _, _ = dumps
+    from rtp.cli._predict import _save_frame
+
+    data = tmp_path / "data"
+    assert import_frames(root / "level_a", data).written == 3
+    before = sorted(p.name for p in (data / "samples").iterdir())
+    nomotion = tmp_path / "nomotion"  # the engine's motion vectors dumped on some frames only
+    nomotion.mkdir()
+    for f in sorted((root / "level_b").glob("*.npz"))[:2]:
+        arrays = dict(np.load(f))
+        if f.name == "frame_0001.npz":
+            del arrays["motion"]
+        _save_frame(nomotion / f.name, arrays)
+    with pytest.raises(sdk.ParameterError, match=r"nomotion/frame_0001.npz' lacks motion, unlike the first frame "
+                                                 r".*level_a/frame_0000.npz' \(4 of 5 hold 'motion'\): every frame "
+                                                 r"of a dataset holds the same optional arrays") as err:
+        import_frames([root / "level_a", nomotion], data)
+    assert err.value.name == "frames"
+    assert sorted(p.name for p in (data / "samples").iterdir()) == before  # (nothing written, nothing lost)
+    assert len(DatasetReader(data).ids) == 3
+    # the other way round: the first frame lacks it, a later one holds it besides
+    with pytest.raises(sdk.ParameterError, match=r"nomotion/frame_0000.npz' holds motion besides, unlike the first "
+                                                 r"frame .*nomotion/frame_0001.npz'"):
+        import_frames([nomotion / "frame_0001.npz", nomotion / "frame_0000.npz"], tmp_path / "data2", scene="x")
+    assert not (tmp_path / "data2" / "samples").exists()
+
+
 def test_convention_mistakes_are_warned_once_and_counted(dumps: Any, tmp_path: Path,
                                                          caplog: pytest.LogCaptureFixture) -> None:
     root, _, _ = dumps

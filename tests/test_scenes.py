@@ -752,6 +752,57 @@ def test_an_obj_texture_or_material_library_that_cannot_be_read_is_dropped_with_
     assert mat.texture is not None and tuple(mat.texture[0, 0]) == (0, 0, 255, 255) and not caplog.records
 
 
+#: A unit quad in the z = 0 plane facing +z, with texture coordinates and a material named, and no ``mtllib``.
+QUAD_OBJ = ("{}v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n{}"
+            "f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
+
+
+def test_an_obj_without_a_material_library_is_untextured_as_one_whose_library_cannot_be_read(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+):
+    """An OBJ with texture coordinates and no ``mtllib`` line got trimesh's grey 2x2 placeholder texture (values
+    100 of 255, a white base colour: an albedo of 0.39 rather than the default 0.8) and its placeholder's
+    roughness, unlike one whose library cannot be read: both are the untextured default material now (no
+    warning for the OBJ without one: it names no library to lose)."""
+    pytest.importorskip("trimesh")
+    import dataclasses
+
+    from rtp.scene import Material
+
+    (tmp_path / "lost.obj").write_text(QUAD_OBJ.format("mtllib absent.mtl\n", "usemtl red\n"))
+    with caplog.at_level("WARNING", logger="rtp"):
+        (lost,) = scenes.load_mesh_file(tmp_path / "lost.obj").materials
+    assert any("absent.mtl cannot be read" in r.getMessage() for r in caplog.records)
+    for head, use in (("", "usemtl red\n"), ("", ""), ("# no library\n", "")):
+        (tmp_path / "nolib.obj").write_text(QUAD_OBJ.format(head, use))
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp"):
+            (mat,) = scenes.load_mesh_file(tmp_path / "nolib.obj").materials
+        assert mat.texture is None, "trimesh's placeholder texture"
+        assert dataclasses.replace(mat, name="") == dataclasses.replace(lost, name="") == Material(name="")
+        assert not caplog.records
+
+
+@pytest.mark.gl
+def test_an_obj_without_a_material_library_renders_the_default_albedo(tmp_path: Path) -> None:
+    """The untextured default material of an OBJ without ``mtllib`` is a plain albedo of its base colour (0.8,
+    sRGB-encoded), as an OBJ whose library cannot be read gives (trimesh's placeholder gave 100 / 255)."""
+    pytest.importorskip("trimesh")
+    from rtp.plugins.moderngl import Renderer
+    from rtp.scene import Camera
+
+    albedo = {}
+    for name, head in (("nolib", ""), ("lost", "mtllib absent.mtl\n")):
+        (tmp_path / f"{name}.obj").write_text(QUAD_OBJ.format(head, ""))
+        scene = scenes.load_mesh_file(tmp_path / f"{name}.obj")
+        with Renderer(32, 32) as r:
+            r.load_scene(scene)
+            frame = r.render(Camera((0.5, 0.5, 1.5)))
+        albedo[name] = frame.albedo[8:24, 8:24]
+        np.testing.assert_allclose(albedo[name], 0.8, atol=1 / 255)
+    np.testing.assert_array_equal(albedo["nolib"], albedo["lost"])
+
+
 # -- fetching: apt-get and dpkg-deb replaced by a local fake ------------------------------------------
 
 SPLITS = "train: [m1, m2]\nvalidation: []\ntest: [m3]\n"

@@ -61,8 +61,8 @@ def _rgb(value: Any) -> tuple[float, float, float]:
 
 def _obj_library(p: Path) -> tuple[Path | None, dict[str, str] | None]:
     """The material library an OBJ file names (its first ``mtllib``, the one trimesh reads) and the texture
-    (``map_Kd``) each of its materials names; ``{}`` without a library, None for a library that cannot be read
-    (logged as a warning naming it: trimesh only logs it at DEBUG and gives a grey placeholder)."""
+    (``map_Kd``) each of its materials names; ``(None, {})`` without a library, None for a library that cannot be
+    read (logged as a warning naming it: trimesh only logs it at DEBUG and gives a grey placeholder)."""
     try:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError:
@@ -93,7 +93,8 @@ def _obj_library(p: Path) -> tuple[Path | None, dict[str, str] | None]:
 
 def _material_of(geom: Any, name: str, library_lost: bool = False) -> tuple[Material, bool]:
     """Material of a trimesh geometry and whether it carries texture coordinates (``library_lost``: the
-    OBJ's material library could not be read, so trimesh's placeholder material is dropped)."""
+    OBJ names no material library, or one that could not be read, so trimesh's placeholder material, a grey
+    2x2 texture, is dropped for the untextured default: a constant albedo of ``Material.base_color``)."""
     vis: Any = getattr(geom, "visual", None)
     kind = getattr(vis, "kind", None)
     if kind == "texture" and getattr(vis, "material", None) is not None:
@@ -158,6 +159,9 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         raise SceneFormatError(f"trimesh could not read {p}: {err}") from err
 
     lib, textures = _obj_library(p) if p.suffix.lower() == ".obj" else (None, {})
+    # an OBJ without a material library: trimesh gives it (where it has texture coordinates) the same grey
+    # placeholder texture as an unreadable one; both become the untextured default material
+    no_library = p.suffix.lower() == ".obj" and lib is None
     unread: set[str] = set()
     meshes: list[Mesh] = []
     materials: list[Material] = []
@@ -170,7 +174,7 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         v = np.asarray(geom.vertices, np.float64)
         f = np.asarray(geom.faces, np.int64)
         pos = v @ T[:3, :3].T + T[:3, 3]
-        mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=textures is None)
+        mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=no_library or textures is None)
         obj_mat = getattr(getattr(geom, "visual", None), "material", None)
         obj_name = str(getattr(obj_mat, "name", None))
         if textures and obj_name in textures and getattr(obj_mat, "image", None) is None and obj_name not in unread:
