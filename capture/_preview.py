@@ -9,6 +9,7 @@ import numpy as np
 
 from rtp.sdk import ALL_RATES, ParameterError, work_saved
 
+from ._dataset import _PAPER_BUFFERS, BUFFERS
 from ._images import figure_image
 
 __all__ = ["preview_sheet"]
@@ -16,26 +17,49 @@ __all__ = ["preview_sheet"]
 _COLS = 4
 
 
+def _missing(sample: Any) -> frozenset[str]:
+    """The buffers ``sample``'s dataset does not hold: an engine's frames imported without them
+    (``sample.absent``), and what the paper's released layout has no file for (depth, metallic, motion)."""
+    absent: frozenset[str] = getattr(sample, "absent", frozenset())
+    meta = getattr(sample, "meta", {}) or {}
+    if meta.get("source") == "paper":  # (PaperDatasetReader's samples say so)
+        absent |= frozenset(b for b in BUFFERS if b not in _PAPER_BUFFERS)
+    return absent
+
+
 def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
     """``(title, image, imshow options)`` in sheet order; images are (H, W, 3) in [0, 1] or (H, W)."""
-    depth = sample.channel("depth")
-    absent: frozenset[str] = getattr(sample, "absent", frozenset())
-    far = float(np.percentile(depth[depth > 0], 99)) if np.any(depth > 0) else 1.0
+    absent = _missing(sample)
+    final = sample.final("1x1")
+    depth = sample.channel("depth") if "depth" not in absent else None
+    geometry = depth > 0 if depth is not None else np.ones(final.shape[:2], bool)
+    far = float(np.percentile(depth[geometry], 99)) if depth is not None and geometry.any() else 1.0
     grey = {"cmap": "gray", "vmin": 0.0, "vmax": 1.0}
+    nothing = np.zeros(final.shape[:2], np.float32)
+
+    def held(name: str, label: str, options: dict[str, Any]) -> tuple[str, np.ndarray, dict[str, Any]]:
+        """The panel of channel ``name``, or one saying the dataset has no such buffer."""
+        if name in absent:
+            return f"{name}: not in this dataset", nothing, grey
+        plane = sample.channel(name)
+        if name == "shadow":  # the main light's visibility alone: the reference renderer's sun (its point lights cast
+            # no shadow), so that indoors, under a ceiling, the panel is black where lamps light the room; said so
+            label += f"\nmean {float(plane[geometry].mean()):.2f}; other lights are not in it" if geometry.any() else ""
+        return label, plane, options
+
     out: list[tuple[str, np.ndarray, dict[str, Any]]] = [
         (f"final {r}" + ("" if r == "1x1" else f" (saves {100 * work_saved(r):.0f}%)"), sample.final(r), {})
         for r in ALL_RATES
     ]
-    out.append(("|final 1x1 - final 4x4| x 4", np.clip(np.abs(sample.final("1x1") - sample.final("4x4")) * 4, 0, 1), {}))
+    out.append(("|final 1x1 - final 4x4| x 4", np.clip(np.abs(final - sample.final("4x4")) * 4, 0, 1), {}))
     out += [
         ("albedo (sRGB)", sample.buffer("albedo"), {}),
-        ("view-space normal (x, y, z as RGB)", np.clip(sample.buffer("normal") * 0.5 + 0.5, 0, 1) * (depth > 0)[..., None],
+        ("view-space normal (x, y, z as RGB)", np.clip(sample.buffer("normal") * 0.5 + 0.5, 0, 1) * geometry[..., None],
          {}),
-        ("linear depth (scene units)", depth, {"cmap": "viridis", "vmin": 0.0, "vmax": far, "colorbar": True}),
-        *((f"{name}{label}", sample.channel(name), {**grey, **extra}) if name not in absent else
-          (f"{name}: not in this dataset", np.zeros_like(depth), grey)  # (an engine's frames imported without it)
-          for name, label, extra in (("shadow", " (1 = lit)", {}), ("roughness", "", {"colorbar": True}),
-                                     ("metallic", "", {"colorbar": True}))),
+        held("depth", "linear depth (scene units)", {"cmap": "viridis", "vmin": 0.0, "vmax": far, "colorbar": True}),
+        held("shadow", "main-light (sun) shadow, 1 = lit", grey),
+        held("roughness", "roughness", {**grey, "colorbar": True}),
+        held("metallic", "metallic", {**grey, "colorbar": True}),
         ("reprojected previous frame", sample.buffer("reprojected"), {}),
         ("seen (white) / unseen (black)", sample.channel("seen"), grey),
     ]
@@ -71,6 +95,7 @@ def preview_sheet(sample: Any, *, scale: int = 1, title: str | None = None) -> n
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     meta = getattr(sample, "meta", {}) or {}
-    fig.suptitle(title or f"sample {getattr(sample, 'id', '?')}: scene {meta.get('scene', '?')}, "
-                 f"{meta.get('profile', '?')} motion, {w}x{h}", fontsize=10)
+    what = [f"scene {meta['scene']}" if "scene" in meta else "", f"{meta['profile']} motion" if "profile" in meta else "",
+            f"{w}x{h}"]  # (the paper's layout records no motion profile: left out, not '? motion')
+    fig.suptitle(title or f"sample {getattr(sample, 'id', '?')}: " + ", ".join(p for p in what if p), fontsize=10)
     return figure_image(fig)

@@ -489,7 +489,7 @@ def _cmd_preview(args: argparse.Namespace) -> int:
     ds = open_dataset(args.data)
     if not ds.ids:
         raise _usage(f"{args.data} holds no samples")
-    sample_id = args.sample or ds.ids[0]
+    sample_id = ds.ids[0] if args.sample is None else args.sample  # (--sample "" is no sample, not the first)
     save_image(args.out, preview_sheet(ds[sample_id], scale=args.scale))
     print(f"{args.out}: sample {sample_id} of {args.data}")
     return 0

@@ -179,6 +179,10 @@ def resolve_adapter(spec: str | type[Adapter[Any]]) -> tuple[type[Adapter[Any]],
     if ":" not in spec:
         return sdk.adapters.get(spec), "the registry"  # AdapterNotFoundError names the installed ones
     module_name, _, qualname = spec.partition(":")
+    if not all(part.isidentifier() for text in (module_name, qualname) for part in text.split(".")):
+        # (":X" was importlib's ValueError 'Empty module name', ".mod:X" its TypeError on a relative import)
+        raise AdapterNotFoundError(f"{spec!r}: expected package.module:Class, dotted names of Python identifiers on "
+                                   "both sides of the colon (an absolute module path), or an installed adapter's name")
     try:
         obj: Any = importlib.import_module(module_name)
     except ImportError as exc:
@@ -444,7 +448,8 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
 
     Raises:
         rtp.sdk.adapters.AdapterNotFoundError: ``adapter`` names no adapter.
-        rtp.sdk.ParameterError: a bad ``size`` or ``tolerances``.
+        rtp.sdk.ParameterError: a bad ``size`` or ``tolerances`` (one for a channel the adapter does
+            not produce, which no check would use, included).
         rtp.plugins.moderngl.RendererError: no headless OpenGL for the reference renderer.
     """
     cls, source_text = resolve_adapter(adapter)
@@ -458,6 +463,21 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
         from rtp.capture import check_image_output
 
         check_image_output(image, what="image")  # (before any drawing: a bad path is a ParameterError now)
+    tols = dict(AGREEMENT)
+    if tolerances is not None and not isinstance(tolerances, Mapping):
+        raise sdk.ParameterError(f"tolerances: expected a mapping of channel names to tolerances, got "
+                                 f"{type(tolerances).__name__}", "tolerances")
+    for c, t in (tolerances or {}).items():
+        if c not in sdk.CHANNELS:
+            raise sdk.ParameterError(f"tolerances: {c!r} is not a channel of sdk.CHANNELS", "tolerances")
+        if c not in (cls.supported_channels or ()):  # (else nothing compares it: a tolerance silently unused)
+            raise sdk.ParameterError(f"tolerances: the {c} channel is not among the adapter's, so no check uses its "
+                                     f"tolerance; it produces {', '.join(sorted(cls.supported_channels or ())) or 'none'}",
+                                     "tolerances")
+        value = t.value if isinstance(t, Tolerance) else t
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not (value >= 0):
+            raise sdk.ParameterError(f"tolerances[{c!r}]: expected a number >= 0, got {value!r}", "tolerances")
+        tols[c] = t if isinstance(t, Tolerance) else Tolerance(float(t), AGREEMENT.get(c, Tolerance(0.0)).relative)
     if not isinstance(scene, str) or not scene:
         raise sdk.ParameterError(f"scene: expected a scene name such as {CONFORMANCE_SCENE!r} or a mesh file, got "
                                  f"{scene!r}", "scene")
@@ -467,14 +487,6 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     if not drawn.spawn_points:
         raise sdk.ParameterError(f"scene: {scene} has no spawn point to move the camera from", "scene")
     scene_name = scene
-    tols = dict(AGREEMENT)
-    for c, t in (tolerances or {}).items():
-        if c not in sdk.CHANNELS:
-            raise sdk.ParameterError(f"tolerances: {c!r} is not a channel of sdk.CHANNELS", "tolerances")
-        value = t.value if isinstance(t, Tolerance) else t
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not (value >= 0):
-            raise sdk.ParameterError(f"tolerances[{c!r}]: expected a number >= 0, got {value!r}", "tolerances")
-        tols[c] = t if isinstance(t, Tolerance) else Tolerance(float(t), AGREEMENT.get(c, Tolerance(0.0)).relative)
     name = registry_name or (cls.name if isinstance(cls.name, str) and cls.name else cls.__qualname__)
     run = _Run()
     channels = tuple(c for c in sdk.CHANNELS if c in (cls.supported_channels or ()))

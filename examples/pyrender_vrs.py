@@ -51,9 +51,10 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports PyO
 import numpy as np
 
 from rtp import sdk
-from rtp.capture import check_memory
+from rtp.capture import check_memory, save_image
 from rtp.cli import frame_size, out_animation, out_image, run_guarded  # as rtp's commands take them; its error policy
 from rtp.plugins.pyrender import Adapter, SceneFrame, import_pyrender, to_trimesh_scene
+from rtp.sdk.files import atomic_output
 
 log = logging.getLogger("pyrender_vrs")
 
@@ -172,10 +173,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=out_image, default="pyrender_vrs.png", help="overlay PNG to write")
     ap.add_argument("--size", type=frame_size, default="640x360", help="WIDTHxHEIGHT, as rtp's commands take it")
     ap.add_argument("--threshold", type=float, help="error threshold (default: the model's)")
-    ap.add_argument("--seed", type=int, default=3, help="procedural level seed")
+    ap.add_argument("--seed", type=int, default=None, help="procedural level seed (default 3; without --scene)")
     ap.add_argument("--frames", type=int, default=2,
                     help="frames of the camera move (default 2: one prediction; more: a frame loop with reuse)")
-    ap.add_argument("--every", type=int, default=4, help="in a frame loop, run the network every this many frames")
+    ap.add_argument("--every", type=int, default=None,
+                    help="in a frame loop, run the network every this many frames (default 4)")
     ap.add_argument("--gif", type=out_animation, help="in a frame loop, write the rate overlays as an animated GIF")
     ap.add_argument("--moving", action="store_true", help="in a frame loop, a box slides across the view: the "
                     "adapter makes its motion vectors from its previous pose (SceneFrame.prev_node_poses)")
@@ -183,8 +185,14 @@ def main(argv: list[str] | None = None) -> int:
                     "16 for the shipped ones, NVIDIA's, 8 for the -8px ones; 8: AMD's and Intel's)")
     args = ap.parse_args(argv)
     args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
-    if args.frames < 2 or args.every < 1:
+    if args.frames < 2 or (args.every is not None and args.every < 1):
         ap.error(f"expected --frames >= 2 and --every >= 1, got {args.frames} and {args.every}")
+    if args.every is not None and args.frames < 3:  # (two frames decide once: it was ignored)
+        ap.error("--every paces the network through a frame loop: give --frames 3 or more")
+    if args.seed is not None and args.scene is not None:  # (it seeds the procedural level only: it was ignored)
+        ap.error("--seed seeds the procedural level drawn without --scene; leave one out")
+    args.every = 4 if args.every is None else args.every
+    args.seed = 3 if args.seed is None else args.seed
     if args.gif is not None and args.frames < 3:
         ap.error("--gif animates a frame loop: give --frames 3 or more")
     if args.moving and args.frames < 3:
@@ -239,11 +247,8 @@ def main(argv: list[str] | None = None) -> int:
                  ", ".join(f"{sdk.RATE_NAMES[int(c)]} x{n}" for c, n in zip(names, counts)),
                  100.0 * sdk.work_saved(rates, (height, width), predictor.tile_size))  # partial tiles by their pixels
         overlay = sdk.draw_rate_overlay(colour, rates, predictor.tile_size)
-        from PIL import Image
-
         img = overlay if overlay.dtype == np.uint8 else (np.clip(overlay, 0, 1) * 255 + 0.5).astype(np.uint8)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(img).save(args.out)
+        save_image(args.out, img)  # atomic: an interrupted write leaves the file there before, not half of one
         log.info("saved the rate overlay to %s", args.out)
     return 0
 
@@ -265,8 +270,6 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
          width: int, height: int) -> int:
     """The frame loop: the adapter's inputs every frame, the network every ``args.every``-th."""
     import time
-
-    from PIL import Image
 
     inputs = predictor.metadata.inputs
     carry = "features" if predictor.splits else "estimates"
@@ -307,14 +310,13 @@ def loop(args: argparse.Namespace, scene: Any, predictor: sdk.ShadingRatePredict
             prev_colour = colour  # what the frame displayed (a VRS engine: its own shaded frame)
     log.info("%d frames: the network on %.0f %% of them, %.1f %% of the shading work saved on average",
              len(saved), 100.0 * float(np.mean(ran)), 100.0 * float(np.mean(saved)))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(overlays[-1]).save(args.out)
+    save_image(args.out, overlays[-1])
     log.info("saved the last frame's rate overlay to %s", args.out)
     if args.gif is not None:
         import imageio.v3 as iio
 
-        args.gif.parent.mkdir(parents=True, exist_ok=True)
-        iio.imwrite(args.gif, np.stack(overlays), duration=1000 / 15, loop=0)
+        with atomic_output(args.gif) as tmp:  # (renamed over --gif once whole; the extension names the format)
+            iio.imwrite(tmp, np.stack(overlays), extension=args.gif.suffix.lower(), duration=1000 / 15, loop=0)
         log.info("saved the overlays of every frame to %s", args.gif)
     return 0
 

@@ -405,6 +405,25 @@ def test_resolving_an_adapter_says_what_was_expected() -> None:
         conformance.check_adapter(NumpyAdapter, tolerances={"depth": float("nan")})
 
 
+def test_a_malformed_module_class_spec_is_refused_saying_what_was_expected() -> None:
+    # an empty or relative module name reached importlib: its ValueError ('Empty module name') and TypeError (a
+    # relative import without a package) came out of `rtp adapters check` as tracebacks
+    for spec in (":NumpyAdapter", ".test_adapter_contract:NumpyAdapter", f"{__name__}:", "a..b:X", f"{__name__}:.X"):
+        with pytest.raises(AdapterNotFoundError, match=r"expected package\.module:Class, dotted names of Python "
+                           "identifiers"):
+            conformance.resolve_adapter(spec)
+
+
+def test_a_tolerance_no_check_would_use_is_refused() -> None:
+    # a tolerance for a channel the adapter does not produce compared nothing, silently (--tolerance shadow=0.1 on
+    # the pyrender adapter: the report as without it, exit 0); refused before the scene is loaded or drawn
+    with pytest.raises(sdk.ParameterError, match=r"tolerances: the roughness channel is not among the adapter's, so "
+                       r"no check uses its tolerance; it produces albedo\.b, albedo\.g"):
+        conformance.check_adapter(NumpyAdapter, tolerances={"roughness": 0.1}, scene="no-such-map")
+    with pytest.raises(sdk.ParameterError, match="tolerances: expected a mapping of channel names to tolerances, got list"):
+        conformance.check_adapter(NumpyAdapter, tolerances=[("albedo.r", 0.1)])  # type: ignore[arg-type]
+
+
 @pytest.mark.gl
 def test_a_tolerance_can_be_relaxed_per_channel(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
     # an engine whose albedo is filtered (here: off by 0.08) passes at the tolerance it can meet

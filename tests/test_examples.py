@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -176,6 +178,65 @@ def test_pyrender_example_draws_a_glb_the_same_in_every_process(tmp_path: Path) 
     trimesh.Scene(glass).export(tmp_path / "glass.glb")
     assert [p.material.alphaMode for n in example.load_scene(tmp_path / "glass.glb").mesh_nodes
             for p in n.mesh.primitives] == ["BLEND"]
+
+
+def _pyrender_example() -> object:
+    """examples/pyrender_vrs.py as a module (its main() run in this process)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("pyrender_vrs", ROOT / "examples" / "pyrender_vrs.py")
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    return example
+
+
+def test_pyrender_example_refuses_options_it_would_ignore(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--every paces the network through a frame loop and --seed seeds the procedural level: with the default two
+    frames, or with --scene, each was ignored without a word (the run as without it, exit 0)."""
+    example: Any = _pyrender_example()
+    (tmp_path / "level.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    for argv, words in ((["--every", "2"], "--every paces the network through a frame loop: give --frames 3 or more"),
+                        (["--scene", str(tmp_path / "level.obj"), "--seed", "5"],
+                         "--seed seeds the procedural level drawn without --scene")):
+        with pytest.raises(SystemExit) as exc:
+            example.main([*argv, "--size", "64x48", "--out", str(tmp_path / "o.png")])
+        assert exc.value.code == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.gl
+def test_pyrender_example_writes_its_overlay_and_gif_atomically(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The overlay (PIL's save) and the GIF (imageio) were written in place: a write that failed half-way (a full
+    disk, Ctrl-C while a long GIF encodes) left half a file where the previous run's was."""
+    import errno
+
+    import imageio.v3 as iio
+    from PIL import Image
+
+    example: Any = _pyrender_example()
+
+    def half(path: Any, *args: Any, **kwargs: Any) -> None:
+        Path(path).write_bytes(b"half a file")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    out, gif = tmp_path / "vrs.png", tmp_path / "vrs.gif"
+    out.write_bytes(b"the previous overlay")
+    gif.write_bytes(b"the previous animation")
+    with monkeypatch.context() as mp:
+        save = Image.Image.save  # (trimesh saves the GLB's textures into memory: those go through)
+        mp.setattr(Image.Image, "save", lambda self, fp, *a, **k: half(fp) if isinstance(fp, (str, os.PathLike))
+                   else save(self, fp, *a, **k))
+        with pytest.raises(OSError, match="No space left on device"):
+            example.main(["--size", "64x48", "--out", str(out)])
+    assert out.read_bytes() == b"the previous overlay"
+    with monkeypatch.context() as mp:
+        mp.setattr(iio, "imwrite", half)
+        with pytest.raises(OSError, match="No space left on device"):
+            example.main(["--size", "64x48", "--frames", "3", "--out", str(out), "--gif", str(gif)])
+    assert gif.read_bytes() == b"the previous animation"
+    assert Image.open(out).size == (64, 48)  # (the overlay of that run, written whole before the GIF failed)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["vrs.gif", "vrs.png"]  # (no temporary file left)
 
 
 @pytest.mark.gl
