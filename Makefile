@@ -20,9 +20,9 @@ RAY       ?=
 RAYFLAG   := $(if $(RAY),--ray $(if $(filter 1,$(RAY)),,$(RAY)))
 METRIC    ?= jnyang
 # The recipe the shipped models were trained with: train/recipes/shipped.yaml (steps, batch, crop,
-# learning rate, the validation split); LPIPS trains with the linear head (a ReLU head left one of
-# its outputs dead, docs/results.md). RECIPE=my.yaml trains with another;
-# STEPS=N overrides its steps.
+# learning rate, the validation split); its fast network's head has no ReLU before the sigmoid, so no
+# output can die as one of LPIPS's did with the paper network's head (docs/results.md).
+# RECIPE=my.yaml trains with another; STEPS=N overrides its steps.
 RECIPE    ?= shipped
 STEPS     ?=
 # The model's file name under models/ (METRIC by default): make train METRIC=jnyang RECIPE=reuse

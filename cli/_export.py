@@ -34,8 +34,9 @@ def build_export_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="output .onnx path (default: the checkpoint path with .onnx)")
     p.add_argument("--opset", type=int, default=None, help=f"ONNX opset of a checkpoint's export (default: {DEFAULT_OPSET})")
     p.add_argument("--metadata", metavar="SIDECAR.yaml",
-                   help="metadata fields: merged over the checkpoint's, or the whole sidecar with --adopt "
-                   "(default with --adopt: rtp's sidecar for a recognised published model)")
+                   help="metadata fields: merged over the checkpoint's (not what the network was trained for, nor "
+                   "what the export computes: input_multiple, finite_probe, tail, schema_version, digest), or the "
+                   "whole sidecar with --adopt (default with --adopt: rtp's sidecar for a recognised published model)")
     p.add_argument("--adopt", metavar="FOREIGN.onnx", help="bake --metadata into this ONNX model instead; the "
                    "paper's six published models are recognised by their SHA-256 and need no --metadata")
     p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")

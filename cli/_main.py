@@ -559,9 +559,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
                        loading=lambda read, samples: bar.status(f"reading samples: {read}/{samples}"))
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
+        again = "--head linear or another --seed" if cfg.arch == "paper" else "another --seed"  # (fast: no --head)
         print(f"rtp train: error: dead output(s) {', '.join(result.dead_outputs)} (see the warning above); "
-              f"{result.checkpoint} is kept, not fit to export: train again with --head linear or another --seed",
-              file=sys.stderr)
+              f"{result.checkpoint} is kept, not fit to export: train again with {again}", file=sys.stderr)
         return 1
     v = result.val["transformed"]
     print(f"{result.checkpoint}: {result.steps} steps; validation R2 {v['r2']:.3f}, MAE {v['mae']:.4f}; "
@@ -912,7 +912,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default=None, metavar="DEVICE",
                     help="where the network trains: auto (the first GPU torch sees, else the CPU; default), cpu, "
                     "cuda, cuda:N or mps. The samples stay in memory here; a checkpoint resumes on any device")
-    r = tr.add_argument_group("recipe values (default: the recipe's)")
+    r = tr.add_argument_group("recipe values (default: the recipe's)", "A flag given here wins over the recipe's "
+                              "value; a switch's --no- form turns off\nwhat the recipe turns on (--config reuse "
+                              "--no-contrast-max).")
     r.add_argument("--tile", "--tile-size", dest="tile", type=int, default=None, choices=TILE_SIZES,
                    help=f"tile size in pixels (default: {DEFAULT_TILE_SIZE}, unless the recipe sets one)")
     r.add_argument("--outputs", type=_one_of_sets(OUTPUT_SETS), default=None,
@@ -934,15 +936,15 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--stem-layers", dest="stem_layers", type=int, default=None, choices=(1, 2),
                    help="2: the fast network's stem as two convolutions with a ReLU between (stem 4: two 2x2 "
                    "stride-2 reads) (default: 1)")
-    r.add_argument("--energy-norm", dest="energy_norm", action="store_true", default=None,
+    r.add_argument("--energy-norm", dest="energy_norm", action=argparse.BooleanOptionalAction, default=None,
                    help="divide the fast network's features after its first block and pool by their energy at each "
                    "position and append its log as a channel (LPIPS's normalisation) (default: off)")
     r.add_argument("--grow", type=int, default=None, choices=(1, 2),
                    help="2: each block of the fast network after a pool doubles its channels (default: 1)")
-    r.add_argument("--separable", action="store_true", default=None,
+    r.add_argument("--separable", action=argparse.BooleanOptionalAction, default=None,
                    help="the fast network's 3x3 blocks depthwise-separable (a 3x3 per channel, then a 1x1 across "
                    "them: about a ninth of the work, room for more width) (default: off)")
-    r.add_argument("--separable-tail", dest="separable_tail", action="store_true", default=None,
+    r.add_argument("--separable-tail", dest="separable_tail", action=argparse.BooleanOptionalAction, default=None,
                    help="only the fast network's blocks at tile resolution depthwise-separable (with --grow 2: a "
                    "64-channel end at about a seventh of its cost) (default: off)")
     r.add_argument("--tail-width", dest="tail_width", type=_positive, default=None,
@@ -971,18 +973,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --block-contrast: the cell in pixels it is measured over and joins the network at: the "
                    "stem's (4, the default), 8, after the first pool (a quarter of the positions, cheaper at 1080p), "
                    "up to the tile (16: the contrast joins at tile resolution, before the last block and the head)")
-    r.add_argument("--contrast-max", dest="contrast_max", action="store_true", default=None,
+    r.add_argument("--contrast-max", dest="contrast_max", action=argparse.BooleanOptionalAction, default=None,
                    help="with --contrast-cell over 4: also the worst 4x4 cell's contrast in each cell, beside the "
                    "mean (default: off)")
     r.add_argument("--max-width", dest="max_width", type=_positive, default=None,
                    help="with --grow 2: the most channels a block doubles to (for example 32: 16, 32, 32, ...) "
                    "(default: no cap)")
-    r.add_argument("--augment", action="store_true", default=None,
+    r.add_argument("--augment", action=argparse.BooleanOptionalAction, default=None,
                    help="random flips and transposes of each crop, targets swapped to match (default: off)")
-    r.add_argument("--mirror", action="store_true", default=None,
+    r.add_argument("--mirror", action=argparse.BooleanOptionalAction, default=None,
                    help="random left-right mirrors of each crop only, up kept up (default: off)")
     r.add_argument("--head", default=None, choices=("paper", "linear"),
-                   help="last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the ReLU (no output can die)")
+                   help="the paper's network's last block: the paper's conv-ReLU-BatchNorm-sigmoid, or without the "
+                   "ReLU (no output can die); the fast network's head has no ReLU there (--head-width sets it), and "
+                   "--head linear with --arch fast is refused (default: paper)")
     r.add_argument("--loss", default=None, choices=("l1", "mse", "huber", "bce", "quantile"),
                    help="training loss in transformed space: the paper's l1, mse (what R² scores), huber, bce "
                    "(cross-entropy with soft targets) or quantile (the pinball loss of --quantile) (default: l1, "

@@ -293,6 +293,8 @@ def option_flags(parser: argparse.ArgumentParser) -> dict[str, str]:
     flags: dict[str, str] = {}
     for action in parser._actions:
         long = [o for o in action.option_strings if o.startswith("--")]
+        if isinstance(action, argparse.BooleanOptionalAction):
+            long = long[:1]  # (--augment, not its --no-augment)
         if long and action.dest not in ("help", "version"):
             flags[action.dest] = long[-1]
             if isinstance(action, argparse._AppendAction) and not action.dest.endswith("s"):

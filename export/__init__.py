@@ -2,6 +2,7 @@
 :func:`rtp.cli.export_main`)."""
 
 from ._export import (
+    COMPUTED_FIELDS,
     DEFAULT_OPSET,
     PLANES_PER_INPUT,
     PROBE_NODES,
@@ -22,7 +23,7 @@ from ._export import (
 from ._published import PublishedModel, identify, published_models
 
 __all__ = [
-    "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS", "ExportError", "PublishedModel",
-    "add_finite_probe", "adopt", "export_checkpoint", "identify", "join_input_planes", "merge_slices", "published_models",
-    "restamp", "retune", "split_input_planes", "strip_finite_probe", "write_metadata"
+    "COMPUTED_FIELDS", "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS", "ExportError",
+    "PublishedModel", "add_finite_probe", "adopt", "export_checkpoint", "identify", "join_input_planes", "merge_slices",
+    "published_models", "restamp", "retune", "split_input_planes", "strip_finite_probe", "write_metadata"
 ]

@@ -19,6 +19,7 @@ import dataclasses
 import datetime as _dt
 import logging
 import os
+import reprlib
 import time
 import warnings
 from collections.abc import Mapping
@@ -40,9 +41,9 @@ from rtp.sdk.files import atomic_output, check_output, yaml_problem
 
 from ._published import file_sha256, identify
 
-__all__ = ["DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS", "ExportError",
-           "add_finite_probe", "adopt", "export_checkpoint", "join_input_planes", "merge_slices", "restamp", "retune",
-           "split_input_planes", "strip_finite_probe", "write_metadata"]
+__all__ = ["COMPUTED_FIELDS", "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS",
+           "ExportError", "add_finite_probe", "adopt", "export_checkpoint", "join_input_planes", "merge_slices", "restamp",
+           "retune", "split_input_planes", "strip_finite_probe", "write_metadata"]
 
 log = logging.getLogger("rtp.export")
 
@@ -762,6 +763,7 @@ def export_checkpoint(
     meta_dict = ckpt.metadata.to_dict()
     if extra_metadata is not None:
         extra = _fields(extra_metadata, "extra_metadata")
+        _check_not_computed(extra)
         meta_dict = _merge(meta_dict, extra)
     meta_dict = _merge(meta_dict, {"provenance": {"export": _export_provenance(opset)}})
     net = ckpt.net.eval()
@@ -826,6 +828,28 @@ def _check_trained_fields(trained: ModelMetadata, meta: ModelMetadata) -> None:
 
 def _shown(value: Any) -> Any:
     return ", ".join(value) if isinstance(value, tuple) else value
+
+
+#: The metadata fields the export computes from the network and the file it writes, with what each is: extra
+#: metadata that set one was overwritten without a word (or, for ``finite_probe`` with ``finite_probe=False``
+#: and ``tail`` on a network that does not split, kept, and the export failed once done, loading its own file).
+#: ``export_checkpoint`` refuses them in extra metadata.
+_COMPUTED = {
+    "input_multiple": "the multiple of the frame sizes the network takes, from the network",
+    "finite_probe": "the name of the finite probe's output the export adds, or null",
+    "tail": "the digest of a splitting network's tail graph",
+    "schema_version": "the lowest metadata schema that holds the fields",
+    "digest": "the SHA-256 of the exported graph and weights",
+}
+COMPUTED_FIELDS = tuple(_COMPUTED)
+
+
+def _check_not_computed(extra: Mapping[Any, Any]) -> None:
+    """Refuse extra metadata that sets a field the export computes (:data:`COMPUTED_FIELDS`)."""
+    for key, what in _COMPUTED.items():
+        if key in extra:
+            raise MetadataError(f"{key}: computed by the export ({what}), expected no {key} in the extra metadata, "
+                                f"got {reprlib.repr(extra[key])}: leave it out", key)
 
 
 def _with_features(net: Any) -> Any:

@@ -258,7 +258,7 @@ def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monk
         assert words in capsys.readouterr().err
     model = tmp_path / "m.pt"
     train = ["train", "--data", str(data), "--metric", "jnyang", "--val-scenes", "procedural:2", "--steps", "600",
-             "--batch", "4", "--crop", "32", "--head", "linear", "--out", str(model), "-q"]
+             "--batch", "4", "--crop", "32", "--out", str(model), "-q"]
     from rtp.train import _loop
 
     real_validate = _loop._validate

@@ -151,6 +151,30 @@ def test_extra_metadata_cannot_change_what_the_network_was_trained_for(tmp_path:
     assert sdk.load(export.export_checkpoint(ck, tmp_path / "y.onnx", extra_metadata=restated)).metadata.metric == "jnyang"
 
 
+@pytest.mark.parametrize("extra, key", [
+    ("input_multiple: 8\n", "input_multiple"),  # (the network's is 4: replaced without a word)
+    ("finite_probe: finite_probe\n", "finite_probe"),  # (finite_probe=False kept it: failed once exported)
+    (f"tail: sha256:{'0' * 64}\n", "tail"),  # (kept on a network that does not split: failed once exported)
+    ("schema_version: 2\n", "schema_version"),
+    (f"digest: sha256:{'0' * 64}\n", "digest"),
+])
+def test_extra_metadata_cannot_set_what_the_export_computes(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                            extra: str, key: str) -> None:
+    from rtp.cli import export_main
+
+    ck = checkpoint.save(tmp_path / "m.pt", trained_like_fast_net(4, seed=0), base_metadata())
+    (tmp_path / "extra.yaml").write_text(extra)
+    for probe in (True, False):
+        with pytest.raises(sdk.MetadataError, match=f"^{key}: computed by the export .*, expected no {key} in the "
+                                                    f"extra metadata, got .*: leave it out$") as err:
+            export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=tmp_path / "extra.yaml", finite_probe=probe)
+        assert err.value.key == key and not (tmp_path / "x.onnx").exists()
+    assert key in export.COMPUTED_FIELDS
+    assert export_main([str(ck), "--metadata", str(tmp_path / "extra.yaml"), "-o", str(tmp_path / "x.onnx")]) == 2
+    assert f"rtp-export: error: {key}: computed by the export" in capsys.readouterr().err
+    assert not (tmp_path / "x.onnx").exists()
+
+
 def test_parity_failure_is_loud_and_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
     target = tmp_path / "m.onnx"

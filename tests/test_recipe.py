@@ -35,11 +35,11 @@ def test_the_shipped_recipe_is_the_fast_network_for_every_metric() -> None:
     # and the luma's variance inside each rate's blocks: PSNR on the validation maps, then once on the test maps
     assert load_recipe(SHIPPED_RECIPE, "psnr").values == {**base, **old_crops, "loss": "l1",
                                                            "inputs": (*red, "reprojected.y.blocks", "albedo.y.blocks")}
-    lp = load_recipe(SHIPPED_RECIPE, "lpips")  # the material inputs did not help LPIPS; its linear head; depth 5 did;
-    # 64-pixel crops lost, 64 crops of 128 pixels a step won
+    lp = load_recipe(SHIPPED_RECIPE, "lpips")  # the material inputs did not help LPIPS; depth 5 did;
+    # 64-pixel crops lost, 64 crops of 128 pixels a step won (its `head: linear` was never read by the fast network)
     assert lp.values == {**base, "crop": 128, "batch": 64,
                          "inputs": ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "albedo.r", "albedo.g",
-                                          "albedo.b", "normal.z"), "head": "linear", "depth": 5}
+                                          "albedo.b", "normal.z"), "depth": 5}
     assert jn.val_split == "validation" and len(jn.sha256) == 64
 
 
@@ -209,7 +209,7 @@ def test_the_recipe_is_recorded_in_the_model(tmp_path: Path) -> None:
 def test_the_recipe_split_falls_back_to_the_last_scene(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     data = _dataset(tmp_path / "d")  # scenes scene0..scene2: none of them a validation map
     cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"),
-                                  steps=2, batch=2, crop=32, head="linear")
+                                  steps=2, batch=2, crop=32)
     with caplog.at_level("WARNING", logger="rtp"):
         train(cfg)
     assert "holds none of the validation maps" in caplog.text

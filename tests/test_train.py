@@ -245,7 +245,7 @@ def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.C
     out = tmp_path / "m.pt"
     # scene2 validates (all 4 + 3 of its samples); of the training maps' 8 + 6, the first 2 of each map and profile
     assert rtp_main(["train", "--data", f"{usual},{frame}", "--metric", "jnyang", "--out", str(out), "--steps", "20",
-                     "--crop", "32", "--head", "linear", "--val-scenes", "scene2",
+                     "--crop", "32", "--val-scenes", "scene2",
                      "--per-scene", "2"]) == 0
     prov = load_checkpoint(out).metadata.provenance
     assert prov["train_samples"] == 8 and prov["val_samples"] == 7 and prov["per_scene"] == 2
@@ -263,7 +263,7 @@ def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.C
     # a folder whose name holds a comma is one dataset, not two
     comma = _dataset(tmp_path / "a,b", n=6)
     assert rtp_main(["train", "--data", str(comma), "--metric", "jnyang", "--out", str(tmp_path / "c.pt"), "--steps",
-                     "20", "--crop", "32", "--head", "linear", "--val-scenes", "scene0"]) == 0, capsys.readouterr().err
+                     "20", "--crop", "32", "--val-scenes", "scene0"]) == 0, capsys.readouterr().err
     assert load_checkpoint(tmp_path / "c.pt").metadata.provenance["data"] == str(comma)
 
 
@@ -275,7 +275,7 @@ def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str], monk
     data = _dataset(tmp_path / "ds", n=6)
     out = tmp_path / "m.pt"
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "20",
-                     "--crop", "32", "--val-scenes", "scene0", "--head", "linear"]) == 0
+                     "--crop", "32", "--val-scenes", "scene0"]) == 0
     got = capsys.readouterr()
     assert "validation R2" in got.out
     assert "reading samples: 1/6]" in got.err and "reading samples" not in got.err.rsplit("\r", 1)[-1], got.err
@@ -283,6 +283,104 @@ def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str], monk
 
     assert f"train jnyang on {device_name(resolve_device('auto'))}:" in got.err  # (where auto trains, on the bar)
     assert load_checkpoint(out).metadata.provenance["val_scenes"] == ("scene0",)
+
+
+def test_head_with_the_fast_network_is_refused_saying_who_set_it(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The fast network reads no ``head``: a recipe's or the caller's was taken and ignored while the provenance
+    recorded a head (the shipped recipe's ``head: linear`` for LPIPS). Refused, saying whether the recipe or the
+    caller set it; the shipped recipes set none now."""
+    out = str(tmp_path / "m.pt")
+    with pytest.raises(sdk.ParameterError, match="^head: the paper network's option .*, got head linear with arch "
+                                                 "'fast'$") as err:
+        TrainConfig.from_recipe("shipped", data="d", metric="jnyang", out=out, head="linear")
+    assert err.value.name == "head"
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("arch: fast\nhead: linear\n")
+    with pytest.raises(sdk.ParameterError, match="^recipe .*r.yaml sets head: linear, which does not fit: head: the "
+                                                 "paper network's option") as err:
+        TrainConfig.from_recipe(recipe, data="d", metric="jnyang", out=out)
+    assert err.value.name == "head"
+    # the paper network's recipe on the fast network: its LPIPS section's head is the recipe's
+    with pytest.raises(sdk.ParameterError, match="^recipe paper-net sets head: linear, which does not fit") as err:
+        TrainConfig.from_recipe("paper-net", data="d", metric="lpips", out=out, arch="fast")
+    assert TrainConfig.from_recipe("paper-net", data="d", metric="lpips", out=out).head == "linear"  # (read there)
+    for name in ("shipped", "tile8"):  # LPIPS's unread head: linear is gone from the shipped recipes
+        assert "head" not in TrainConfig.from_recipe(name, data="d", metric="lpips", out=out).recipe["values"]
+    assert rtp_main(["train", "--data", str(tmp_path), "--metric", "jnyang", "--out", out, "--head", "linear"]) == 2
+    assert "rtp train: error: --head: the paper network's option" in capsys.readouterr().err
+    assert not (tmp_path / "m.pt").exists()
+
+
+def test_a_fast_training_begun_with_an_unread_head_resumes(tmp_path: Path) -> None:
+    """A fast network's training begun before ``head`` was refused with it (the shipped LPIPS recipe's ``head:
+    linear``) recorded the head it never read: it resumes without it."""
+    from rtp.train import checkpoint
+
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_every=2, save_every=2, arch="fast",
+               val_scenes=("scene0",))
+    out = tmp_path / "m.pt"
+    train(TrainConfig(out=str(out), steps=2, **cfg))
+    ck = load_checkpoint(out)
+    checkpoint.save(out, ck.net, ck.metadata, {**ck.training, "done": False,
+                                                "config": {**ck.training["config"], "head": "linear"}})
+    assert train(TrainConfig(out=str(out), steps=4, **cfg)).steps == 4
+    with pytest.raises(sdk.ParameterError, match="differs in: width"):  # (another configuration still is)
+        train(TrainConfig(out=str(out), steps=6, **{**cfg, "width": 8}))
+
+
+def test_a_recipe_float_without_a_dot_is_a_number(tmp_path: Path) -> None:
+    """PyYAML (YAML 1.1) reads ``lr: 5e-4`` as the string '5e-4': it was refused ("expected float, got '5e-4'").
+    A string float() reads to a finite number is that number; others are refused, naming the key."""
+    from rtp.train import RecipeError, load_recipe
+
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("lr: 5e-4\nsafety_quantile: '5e-1'\nper_metric:\n  flip:\n    lr: 1E-3\n")
+    assert load_recipe(recipe, "jnyang").values == {"lr": 5e-4, "safety_quantile": 0.5}
+    assert load_recipe(recipe, "flip").values["lr"] == 1e-3
+    cfg = TrainConfig.from_recipe(recipe, data="d", metric="jnyang", out=str(tmp_path / "m.pt"))
+    assert cfg.lr == 5e-4 and isinstance(cfg.lr, float) and cfg.recipe["values"]["lr"] == 5e-4
+    for text, words in (("lr: 5e-4x\n", "recipe key 'lr': expected float, got '5e-4x'"),
+                        ("lr: 1e999\n", "recipe key 'lr': expected a finite number, got '1e999'"),
+                        ("lr: nan\n", "recipe key 'lr': expected a finite number, got 'nan'"),
+                        ("per_metric:\n  psnr:\n    focus: inf\n", "per_metric psnr: recipe key 'focus': expected a "
+                                                                     "finite number, got 'inf'"),
+                        ("steps: 1e3\n", "recipe key 'steps': expected int, got '1e3'")):  # (an int is written as one)
+        recipe.write_text(text)
+        with pytest.raises(RecipeError, match=re.escape(words)):
+            load_recipe(recipe, "jnyang")
+    with pytest.raises(sdk.ParameterError, match="field 'lr': expected float, got '5e-4'"):  # (Python: a number)
+        train(TrainConfig(data="d", metric="jnyang", out=str(tmp_path / "m.pt"), lr="5e-4"))  # type: ignore[arg-type]
+
+
+def test_a_switch_the_recipe_turns_on_is_turned_off_by_its_no_flag(tmp_path: Path) -> None:
+    """``rtp train --no-mirror`` where the recipe says ``mirror: true``: the caller wins, as a valued flag does
+    (before, a switch had only its on form, so a recipe's could not be turned off from the command line)."""
+    from rtp.cli._main import build_parser
+    from rtp.cli._run import option_flags
+
+    data = _dataset(tmp_path / "ds", n=6)
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("mirror: true\ncrop: 32\nbatch: 4\nhead: linear\n")
+    out = tmp_path / "m.pt"
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--config", str(recipe), "--out", str(out),
+                     "--steps", "2", "--val-scenes", "scene0", "--no-mirror", "-q"]) == 0
+    ck = load_checkpoint(out)
+    assert "mirror" not in ck.metadata.provenance  # (recorded only when on)
+    assert ck.metadata.provenance["recipe"]["values"]["mirror"] is True
+    assert ck.metadata.provenance["recipe"]["overrides"]["mirror"] is False
+    train_parser = next(a for a in build_parser()._actions if a.dest == "command").choices["train"]
+    switches = ("augment", "mirror", "separable", "separable_tail", "energy_norm", "contrast_max")
+    for dest in switches:
+        flag = "--" + dest.replace("_", "-")
+        base = ["--data", "d", "--metric", "jnyang", "--out", "m.pt"]
+        assert getattr(train_parser.parse_args(base), dest) is None  # (the recipe's)
+        assert getattr(train_parser.parse_args([*base, flag]), dest) is True
+        assert getattr(train_parser.parse_args([*base, flag.replace("--", "--no-", 1)]), dest) is False
+        assert option_flags(train_parser)[dest] == flag  # (an error about it names --mirror, not --no-mirror)
+    cfg = TrainConfig.from_recipe("reuse", data="d", metric="jnyang", out=str(out), contrast_max=False)
+    assert cfg.contrast_max is False and cfg.recipe["overrides"] == {"contrast_max": False}
 
 
 def test_resuming_on_grown_data_is_refused(tmp_path: Path) -> None:
@@ -331,6 +429,7 @@ def test_heads_and_the_dead_output_check(tmp_path: Path, capsys: pytest.CaptureF
     assert rtp_main([*args[:-4], "--out", str(tmp_path / "l.pt"), "--steps", "20", "--crop", "32", "--head", "linear"]) == 0
     ck = load_checkpoint(tmp_path / "l.pt")
     assert ck.net.config["head"] == "linear" and not ck.metadata.provenance["dead_outputs"]
+    assert ck.metadata.provenance["head"] == "linear"  # (the paper's network reads it: recorded)
 
 
 def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -345,6 +444,7 @@ def test_the_fast_architecture_trains_exports_and_runs_in_the_sdk(tmp_path: Path
     ck = load_checkpoint(out)
     assert type(ck.net).__name__ == "FastNet" and ck.net.config["depth"] == 4 and ck.net.config["width"] == 8
     assert ck.metadata.provenance["arch"] == "fast" and ck.metadata.provenance["augment"] is True
+    assert "head" not in ck.metadata.provenance  # (it said head: paper, an option the fast network never reads)
     # rtp-export needs nothing special for it, and the SDK nothing new
     onnx_path = export.export_checkpoint(out, tmp_path / "fast.onnx")
     pred = sdk.load(onnx_path)
@@ -1413,6 +1513,7 @@ def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path
     ({"arch": "paper", "energy_norm": True}, "energy_norm", "the fast network's option"),
     ({"arch": "paper", "depth": 5}, "depth", "the fast network's option"),  # (ignored, and recorded)
     ({"arch": "paper", "stem_layers": 2}, "stem_layers", "the fast network's option"),
+    ({"arch": "fast", "head": "linear"}, "head", "the paper network's option"),  # (ignored, and recorded)
     ({"distill": 0.0}, "distill", r"a weight in \(0, 1\]"),
     ({"ema": 1.0}, "ema", r"a decay in \[0, 1\)"),
     ({"aux_metrics": ("jnyang",)}, "aux_metrics", "other than jnyang"),
@@ -1645,7 +1746,7 @@ def test_the_device_is_checked_before_the_data_is_read_and_recorded(tmp_path: Pa
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
 
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "4",
-                     "--crop", "32", "--val-scenes", "scene0", "--head", "linear", "--device", "auto"]) == 0
+                     "--crop", "32", "--val-scenes", "scene0", "--device", "auto"]) == 0
     prov = load_checkpoint(out).metadata.provenance
     assert prov["device"] == "cpu" and "device" not in prov["recipe"].get("overrides", {})
     assert prov["recipe"]["overrides"]["steps"] == 4  # (the overrides are recorded)

@@ -692,6 +692,9 @@ def check_config(cfg: TrainConfig) -> None:
             if getattr(cfg, key) != default:
                 raise sdk.ParameterError(f"{key}: the fast network's option (the paper's network has its own fixed "
                                          f"layers), got {key} {getattr(cfg, key)} with arch {cfg.arch!r}", key)
+    if cfg.arch != "paper" and cfg.head != "paper":  # (the fast network's head was taken and ignored, and recorded)
+        raise sdk.ParameterError(f"head: the paper network's option (the fast network's head has no ReLU before its "
+                                 f"sigmoid; head_width sets it), got head {cfg.head} with arch {cfg.arch!r}", "head")
     if cfg.max_width and (cfg.grow == 1 or cfg.max_width < cfg.width):
         raise sdk.ParameterError(f"max_width caps grow 2's channels: expected 0 (none), or at least width ({cfg.width}) "
                                  f"with grow 2, got {cfg.max_width} with grow {cfg.grow}", "max_width")
@@ -1041,6 +1044,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
                                        "output path or delete it")
         state = prev.training
         before = state.get("config") or {}
+        if cfg.arch != "paper" and isinstance(before, dict):  # (a fast training begun with a head, which it never
+            before = {k: v for k, v in before.items() if k != "head"}  # read, is this run: it resumes)
         if before != config_key:
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
             raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
@@ -1216,7 +1221,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         "safety_rule": "mean underestimation" if cfg.safety_quantile is None else f"quantile {cfg.safety_quantile}",
         "underestimated_share_with_safety": under,
         "history": history[-20:],
-        "head": cfg.head,
+        **({"head": cfg.head} if cfg.arch == "paper" else {}),  # (the fast network reads no head: none recorded)
         "arch": cfg.arch,
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
         **({"max_width": cfg.max_width} if cfg.max_width else {}),
@@ -1244,8 +1249,9 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     }
     save(done=True, safety=safety, extra=extra)
     if dead:
-        log.warning("%s: output(s) %s predict the same value on every validation tile (a ReLU in the %r head that "
-                    "stopped firing): such a model picks rates blindly", out, ", ".join(dead), cfg.head)
+        why = f" (a ReLU in the {cfg.head!r} head that stopped firing)" if cfg.arch == "paper" else ""
+        log.warning("%s: output(s) %s predict the same value on every validation tile%s: such a model picks rates "
+                    "blindly", out, ", ".join(dead), why)
     log.info("done: val R2 %.3f MAE %.4f; safety %.4f leaves %.1f%% underestimated", val_scores["r2"],
              val_scores["mae"], safety, 100 * under)
     return TrainResult(out, step, {"transformed": val_scores, "with_safety": safe_scores}, safety, under, dead)

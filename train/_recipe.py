@@ -107,6 +107,16 @@ def _coerce(name: str, value: Any, kind: Any, what: str = "recipe key") -> Any:
         if not _finite(value):  # (the number is of the type: its value is what is wrong)
             raise RecipeError(f"{what} {name!r}: expected a finite number, got {value!r}", name)
         return float(value)
+    if kind is float and isinstance(value, str) and what == "recipe key":
+        # (YAML 1.1, which PyYAML reads, takes 5e-4 for a string: its floats need a dot, 5.0e-4; a number
+        # float() reads is taken as that number)
+        try:
+            number = float(value)
+        except ValueError:
+            raise RecipeError(f"{what} {name!r}: expected float, got {reprlib.repr(value)}", name) from None
+        if not math.isfinite(number):
+            raise RecipeError(f"{what} {name!r}: expected a finite number, got {reprlib.repr(value)}", name)
+        return number
     if kind is str and isinstance(value, str):
         return value
     raise RecipeError(f"{what} {name!r}: expected {getattr(kind, '__name__', kind)}, got {reprlib.repr(value)}", name)
