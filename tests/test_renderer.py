@@ -549,3 +549,14 @@ def test_resize_draws_as_a_renderer_made_at_that_size(gl_context: Any) -> None:
         np.testing.assert_array_equal(r.render(cams[0]).colour["1x1"], fresh.render(cams[0]).colour["1x1"])
     with pytest.raises(RendererError, match="released"):
         r.resize(32, 32)
+
+
+def test_the_default_shadow_map_follows_the_frame_size(gl_context):
+    """At least 4 shadow texels a pixel of a small frame's longer side (256 up to 64 px, 512 up to 128), 1024
+    up to 1024 px, 2048 above; a size given is kept."""
+    for (w, h), side in (((64, 48), 256), ((16, 64), 256), ((96, 64), 512), ((65, 8), 512), ((128, 128), 512),
+                         ((129, 16), 1024), ((320, 192), 1024), ((1024, 1024), 1024), ((1025, 8), 2048)):
+        with Renderer(w, h, ctx=gl_context) as r:
+            assert r.shadow_map_size == side, (w, h)
+    with Renderer(64, 48, ctx=gl_context, shadow_map_size=1024) as r:
+        assert r.shadow_map_size == 1024
