@@ -38,11 +38,12 @@ from pathlib import Path
 import numpy as np
 
 from rtp import sdk
-from rtp.capture import check_memory
+from rtp.capture import check_memory, save_image
 from rtp.capture.scenes import procedural
 from rtp.cli import frame_size, out_animation, out_image, run_guarded  # as rtp's commands take them; its error policy
 from rtp.plugins.moderngl import Adapter, RateSelector, create_context
 from rtp.scene import Camera
+from rtp.sdk.files import atomic_output
 
 log = logging.getLogger("moderngl_vrs")
 
@@ -134,12 +135,11 @@ def main(argv: list[str] | None = None) -> int:
 
     import imageio.v3 as iio
 
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(args.out, overlays[-1])
+    save_image(args.out, overlays[-1])  # atomic: an interrupted write leaves the file there before, not half of one
     log.info("wrote %s", args.out)
     if args.gif:
-        args.gif.parent.mkdir(parents=True, exist_ok=True)
-        iio.imwrite(args.gif, np.stack(overlays), duration=1000 / 15, loop=0)
+        with atomic_output(args.gif) as tmp:  # (renamed over --gif once whole; the extension names the format)
+            iio.imwrite(tmp, np.stack(overlays), extension=args.gif.suffix.lower(), duration=1000 / 15, loop=0)
         log.info("wrote %s (%d frames)", args.gif, len(overlays))
     return 0
 

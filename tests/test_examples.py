@@ -206,15 +206,21 @@ def test_pyrender_example_refuses_options_it_would_ignore(tmp_path: Path, capsys
 
 
 @pytest.mark.gl
-def test_pyrender_example_writes_its_overlay_and_gif_atomically(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The overlay (PIL's save) and the GIF (imageio) were written in place: a write that failed half-way (a full
-    disk, Ctrl-C while a long GIF encodes) left half a file where the previous run's was."""
+@pytest.mark.parametrize("name", ["moderngl_vrs", "pyrender_vrs"])
+def test_an_example_writes_its_overlay_and_gif_atomically(name: str, tmp_path: Path,
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """The overlay and the GIF were written in place (PIL's save, imageio's imwrite): a write that failed half-way
+    (a full disk, Ctrl-C while a long GIF encodes) left half a file where the previous run's was."""
     import errno
+    import importlib.util
 
     import imageio.v3 as iio
     from PIL import Image
 
-    example: Any = _pyrender_example()
+    spec = importlib.util.spec_from_file_location(name, ROOT / "examples" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    example: Any = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
 
     def half(path: Any, *args: Any, **kwargs: Any) -> None:
         Path(path).write_bytes(b"half a file")
