@@ -110,6 +110,8 @@ class ConformanceReport:
     #: the decisions. A measurement, not a check (an engine's own texture filtering moves decisions near a
     #: threshold: docs/adapters.md, the pyrender adapter).
     decisions: Mapping[str, float] = field(default_factory=dict)
+    #: Why the picture asked for (``check_adapter(image=...)``) was not written; None when it was, or none was asked.
+    no_image: str | None = None
 
     @property
     def failures(self) -> tuple[Check, ...]:
@@ -134,7 +136,7 @@ class ConformanceReport:
     def to_dict(self) -> dict[str, Any]:
         return {"adapter": self.adapter, "source": self.source, "size": list(self.size), "channels": list(self.channels),
                 "ok": self.ok, "runs_models": list(self.runs_models), "not_run": self.not_run, "image": self.image,
-                "decisions": dict(self.decisions), "scene": self.scene,
+                "no_image": self.no_image, "decisions": dict(self.decisions), "scene": self.scene,
                 "checks": [{"group": c.group, "name": c.name, "status": c.status, "detail": c.detail}
                            for c in self.checks]}
 
@@ -157,6 +159,8 @@ class ConformanceReport:
         if self.image:
             lines.append(f"wrote {self.image}: each channel beside the reference renderer's, red where they differ "
                          "past the tolerance")
+        elif self.no_image:
+            lines.append(f"no picture written: {self.no_image}")
         return "\n".join(lines)
 
     __str__ = to_text
@@ -498,8 +502,12 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     decisions: dict[str, float] = {}
 
     def report(not_run: str | None = None) -> ConformanceReport:
+        no_image = None
+        if image is not None and not written:  # (asked for: say why there is none rather than nothing)
+            no_image = (f"{not_run}, so there are no planes to draw" if not_run else "the adapter produced no "
+                        f"planes of the shape (channels, {size[1]}, {size[0]}) to draw beside the reference renderer's")
         return ConformanceReport(name, source_text, size, channels, tuple(run.checks), runs, not_run,
-                                 written[0] if written else None, scene_name, dict(decisions))
+                                 written[0] if written else None, scene_name, dict(decisions), no_image)
 
     if not drivable or not channels:
         return report("the class cannot be driven")

@@ -308,8 +308,12 @@ def test_the_kit_draws_where_an_adapter_differs_from_the_reference(tmp_path: Pat
     assert _red_pixels(tmp_path / "flipped.jpg") > 5000
     with pytest.raises(sdk.ParameterError, match="image"):  # a path that cannot be written: before any drawing
         conformance.check_adapter(NumpyAdapter, image=tmp_path / "planes.txt")
-    assert conformance.check_adapter(_broken("Boom", lambda a, f, x: x[:1]), image=tmp_path / "none.png").image is None
-    assert not (tmp_path / "none.png").exists()  # no planes of the right shape: no picture
+    none = conformance.check_adapter(_broken("Boom", lambda a, f, x: x[:1]), image=tmp_path / "none.png")
+    assert none.image is None and not (tmp_path / "none.png").exists()  # no planes of the right shape: no picture
+    assert none.no_image == "the adapter produced no planes of the shape (channels, 48, 64) to draw beside the " \
+                            "reference renderer's" and none.to_dict()["no_image"] == none.no_image
+    assert f"no picture written: {none.no_image}" in str(none)  # (it said nothing: the picture was just not there)
+    assert good.no_image is None and "no picture" not in str(good)
 
 
 @pytest.mark.gl
@@ -343,7 +347,7 @@ def test_the_kit_checks_the_class_before_drawing(registry: None, monkeypatch: py
 
 
 @pytest.mark.gl
-def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so() -> None:
+def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so(tmp_path: Path) -> None:
     class NoEngine(NumpyAdapter):
         @classmethod
         def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> Any:
@@ -355,6 +359,11 @@ def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so() ->
     assert [c.name for c in report.checks if c.group == "class" and c.status == "skipped"] == [
         "frame_source opens on the conformance scene"]
     assert "skipped (the numpy-gbuffers adapter's engine is not installed" in report.to_text()
+    assert report.no_image is None  # (no picture asked for)
+    pictured = conformance.check_adapter(NoEngine, image=tmp_path / "planes.png")
+    assert pictured.no_image is not None and pictured.no_image.startswith("the numpy-gbuffers adapter's engine is not "
+                                                                          "installed") and "no planes to draw" in \
+        pictured.no_image and "no picture written: the numpy" in str(pictured)
 
 
 @pytest.mark.gl
