@@ -1,7 +1,7 @@
 """Benchmark ``sdk.input_planes``: what a CPU adapter pays per frame for each shipped model's planes.
 
     python bench/input_planes.py [--sizes 1280x720,1920x1080] [--repeats 5]
-    python bench/input_planes.py --against REV [--sizes 1280x720,1920x1080] [--repeats 5]
+    python bench/input_planes.py --against REV [--sizes 1280x720,1920x1080] [--repeats 5] [--pairs 6]
 
 An engine that reads its G-buffers back to the host makes a model's input planes with one call
 (docs/runtime.md "Input planes from G-buffers on the host"); the pyrender adapter does the same after
@@ -13,13 +13,13 @@ in a shader instead (``bench/adapter.py``).
 Prints a Markdown table of medians (ms).
 
 ``--against REV`` loads ``sdk/_reproject.py`` as it was at git revision ``REV`` and compares it with this
-checkout's: ``reproject``'s time at each size, the two interleaved (medians), and its outputs on
-rendered frames (both camera profiles of three procedural scenes at three sizes, tolerances 0, 0.02 and
-0.2): the ``seen`` pixels that differ, the colours that differ where ``seen`` agrees, and the largest
-difference of ``reproject_positions``; then ``sdk.input_planes`` as a whole (``sdk/_planes.py`` of ``REV`` over
-its ``sdk/_reproject.py``) for every shipped model's channels at each size, timed the same way, and the
-planes that differ. Exits 1 if any ``seen`` pixel, colour or plane value differs: a faster reprojection must
-give the same planes.
+checkout's: ``reproject``'s time at each size, the two interleaved (medians), and its outputs on rendered
+frames (``--pairs`` viewpoint pairs, 6 by default, of both camera profiles of three procedural scenes at three
+sizes, tolerances 0, 0.02 and 0.2): the ``seen`` pixels that differ, the colours that differ where ``seen``
+agrees, and the largest difference of ``reproject_positions``; then ``sdk.input_planes`` as a whole
+(``sdk/_planes.py`` of ``REV`` over its ``sdk/_reproject.py``) for every shipped model's channels at each
+size, timed the same way, and the planes that differ. Exits 1 if any ``seen`` pixel, colour or plane value
+differs: a faster reprojection must give the same planes.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def gbuffers(w: int, h: int) -> dict[str, Any]:
             "prev_view_projection": prev_cam.view_projection(w, h)}
 
 
-def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
+def _against(rev: str, sizes: list[tuple[int, int]], repeats: int, pairs: int) -> int:
     from rtp.capture import load_scene
     from rtp.capture.viewpoints import sample_viewpoints
     from rtp.plugins.moderngl import Renderer
@@ -81,7 +81,7 @@ def _against(rev: str, sizes: list[tuple[int, int]], repeats: int) -> int:
         with Renderer(w, h) as r:
             r.load_scene(scene)
             for profile in ("slow", "fast"):
-                for prev_cam, cam in sample_viewpoints(scene, 6, seed=1, profile=profile, blockers=blockers,
+                for prev_cam, cam in sample_viewpoints(scene, pairs, seed=1, profile=profile, blockers=blockers,
                                                        aspect=w / h):
                     prev = r.render(prev_cam)
                     cur = r.render(cam, prev)
@@ -126,9 +126,13 @@ def main() -> None:
                     help="comma-separated WIDTHxHEIGHT (default 1280x720,1920x1080)")
     ap.add_argument("--repeats", type=positive, default=5)
     ap.add_argument("--against", metavar="REV", help="compare sdk.reproject with sdk/_reproject.py at git REV")
+    ap.add_argument("--pairs", type=positive, default=None,
+                    help="with --against: viewpoint pairs per scene and camera profile compared (default 6)")
     args = ap.parse_args()
+    if args.pairs is not None and not args.against:
+        ap.error("--pairs sets the frames --against compares: give --against REV")
     if args.against:
-        raise SystemExit(_against(args.against, args.sizes, args.repeats))
+        raise SystemExit(_against(args.against, args.sizes, args.repeats, 6 if args.pairs is None else args.pairs))
     models = {name.removesuffix(".onnx"): sdk.load(name) for name in sdk.shipped_models()}
     print(f"rtp {sdk.__version__}, numpy {np.__version__}, {cpu_description()}, median of {args.repeats}\n")
     sizes = [f"{w}x{h}" for w, h in args.sizes]

@@ -41,14 +41,19 @@ def test_input_planes_a_row_per_shipped_model() -> None:
 def test_against_a_revision_compares_the_reprojections() -> None:
     """--against REV: this checkout's reproject against git REV's, timed and compared on rendered frames (against
     HEAD itself: nothing differs)."""
-    out = _run("input_planes.py", "--against", "HEAD", "--sizes", "32x32", "--repeats", "1")
+    out = _run("input_planes.py", "--against", "HEAD", "--sizes", "32x32", "--repeats", "1", "--pairs", "1")
     assert out.returncode == 0, out.stdout + out.stderr
     assert re.search(r"^\| 32x32 \| [\d.]+ \| [\d.]+ \|$", out.stdout, re.M), out.stdout
-    assert "seen differs on 0, the colour where seen agrees on 0 values; positions within 0 px" in out.stdout
+    # one pair of each profile on each of the three scenes (320x192, 640x360, 97x53), at three tolerances
+    pixels = 3 * 2 * (320 * 192 + 640 * 360 + 97 * 53)
+    assert (f"{pixels:,} pixels of rendered frames: seen differs on 0, the colour where seen agrees on 0 values; "
+            "positions within 0 px") in out.stdout, out.stdout
     assert _models(out.stdout, 2) == SHIPPED, out.stdout  # input_planes as a whole, REV's and this checkout's
     assert re.search(r"^[\d,]+ plane values: 0 differ \(to the bit\)$", out.stdout, re.M), out.stdout
     bad = _run("input_planes.py", "--against", "no-such-revision", timeout=120)
     assert bad.returncode == 2 and "git cannot show sdk/_reproject.py there" in bad.stderr  # a usage error
+    alone = _run("input_planes.py", "--pairs", "2", timeout=120)
+    assert alone.returncode == 2 and "--pairs sets the frames --against compares" in alone.stderr
 
 
 @pytest.mark.gl
