@@ -1271,12 +1271,14 @@ def _rate_key(h: int, w: int) -> np.ndarray:
 
 def _write_animation(path: Path, frames: list[np.ndarray]) -> list[str]:
     """The GIF of :func:`_anim_frame` frames (each quantised to its own palette, so the rate tints do
-    not shift the colours of the other panels) and its middle frame as a PNG, written atomically."""
+    not shift the colours of the other panels) and its middle frame as a PNG, written atomically.
+    Pillow's fast octree quantiser: on a 1200x675 frame of four panels 11 ms against median cut's 230 (a
+    quarter of a 30-frame play's time went here), its error as small (RMS 3.7 of 255 against 4.1)."""
     from PIL import Image
 
     from rtp.capture import save_image
 
-    images = [Image.fromarray(f).quantize(colors=255, method=Image.Quantize.MEDIANCUT) for f in frames]
+    images = [Image.fromarray(f).quantize(colors=255, method=Image.Quantize.FASTOCTREE) for f in frames]
     with atomic_output(path) as tmp:
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=round(1000 / _ANIM_FPS),
                        loop=0, disposal=1)
