@@ -328,10 +328,16 @@ def _cmd_scenes_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_weights_fetch(args: argparse.Namespace) -> int:
-    from rtp.metrics import fetch_lpips_weights
+    import shlex
+
+    from rtp.metrics import default_weights_cache, fetch_lpips_weights
 
     path = fetch_lpips_weights(args.cache_dir, quiet=args.quiet)
-    print(f"LPIPS weights: {path}")
+    read = default_weights_cache()
+    # (weights fetched into another folder were said fetched, and every command still missed them)
+    elsewhere = args.cache_dir is not None and Path(args.cache_dir).resolve() != read.resolve()
+    print(f"LPIPS weights: {path}" + (f" (rtp reads its weights from {read}: set RTP_WEIGHTS_CACHE="
+                                      f"{shlex.quote(args.cache_dir)} for its commands to use these)" if elsewhere else ""))
     return 0
 
 
@@ -588,6 +594,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise _usage("--plots writes into --out; give an output folder")
     if args.plot_sample is not None and not args.plots:  # (it was taken and nothing drawn)
         raise _usage("--plot-sample picks the sample --plots draws: give --plots (and --out)")
+    if args.metadata is not None and len(args.model) > 1:  # (every model was read with it, in place of its own)
+        raise _usage(f"--metadata is one model's sidecar, and {len(args.model)} models were given: evaluate the "
+                     "model that carries no metadata alone with it")
     if args.threshold is not None and len(args.model) > 1:  # (one number in two metrics' units was taken for both)
         from rtp import sdk
 
@@ -678,6 +687,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_play(args: argparse.Namespace) -> int:
     from rtp.evaluate import play
 
+    if args.combiner is not None and args.engine_rates is None:  # (it was taken and nothing combined)
+        raise _usage(f"--combiner {args.combiner}: the hardware's combiner of --engine-rates' rates and each method's; "
+                     "give --engine-rates (foveation or motion), or leave --combiner out")
     paths = _names(args.path) or ["slow", "fast"]
     done = [0]
     steps: dict[str, str] = {}  # path -> the step it is in, while it is not playing frames ("": the job's own)
@@ -712,7 +724,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    fail_threshold=args.fail_threshold, sweep=not args.no_sweep, flip_every=args.flip_every,
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
                    animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop,
-                   engine_rates=args.engine_rates, combiner=args.combiner,
+                   engine_rates=args.engine_rates, combiner=args.combiner or "max",
                    dynamic_resolution=args.dynamic_resolution, progress=progress, stage=stage, kept=kept.append)
     if args.out is not None:  # (the kept paths are gone with the report written)
         args.on_interrupt = lambda: f"the report is written in {args.out}"
@@ -1132,8 +1144,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "frame (fixed foveation rings, or rates from motion blur), which --combiner meets with every "
                     "method's: the rates shaded and judged are the combination's, full's row the engine's alone, a tile "
                     "fails only beyond the engine's own rate; rtp's models choose beside them (NAME@k:alone: without)")
-    pl.add_argument("--combiner", choices=("min", "max", "sum"), default="max", help="the hardware's combiner of "
-                    "--engine-rates and each method's rates (default max: the coarser per axis)")
+    # (default None: given without --engine-rates, it is refused rather than ignored)
+    pl.add_argument("--combiner", choices=("min", "max", "sum"), default=None, help="the hardware's combiner of "
+                    "--engine-rates and each method's rates (default: max, the coarser per axis)")
     pl.add_argument("--dynamic-resolution", type=_dynamic_resolution, default=None, metavar="SCALES@FRAMES",
                     help="an engine's dynamic resolution: the frames' render resolution cycles through these scales of "
                     "--size, each held FRAMES frames (1,0.75@30: 30 frames at --size, 30 at three quarters of it, ...); "

@@ -73,22 +73,24 @@ def run_metric(args: argparse.Namespace) -> int:
     pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test)
     finite = tiles[np.isfinite(tiles)]
     worst = (finite.min() if info.higher_is_better else finite.max()) if finite.size else float("nan")
-    if args.json:
-        print(json.dumps({"metric": args.metric, "units": info.units, "tile": args.tile,
-                          "tiles": [[None if not np.isfinite(v) else float(v) for v in row] for row in tiles]}))
-    else:
-        h, w = ref.shape[:2]
-        print(f"{args.metric} ({info.units}), {w}x{h}, {tiles.shape[1]}x{tiles.shape[0]} tiles of {args.tile}px")
-        if pixel_map is not None:
-            print(f"per pixel  mean {float(pixel_map.mean()):.4g}, max {float(pixel_map.max()):.4g}")
-        if not finite.size:  # (identical images: no finite tile to average, "mean nan, worst (min) nan")
-            print(f"per tile   all {tiles.size} tiles identical (+inf dB)")
-        else:
-            print(f"per tile   mean {float(finite.mean()):.4g}, "
-                  f"{'worst (min)' if info.higher_is_better else 'worst (max)'} {float(worst):.4g}"
-                  + (f", {tiles.size - finite.size} identical tiles (+inf dB)" if finite.size < tiles.size else ""))
     if args.out:
         _figure(args, ref, pixel_map, tiles, info)
+    if args.json:  # (stdout is the JSON alone: the picture written is named in it, not on a line after it)
+        print(json.dumps({"metric": args.metric, "units": info.units, "tile": args.tile,
+                          "tiles": [[None if not np.isfinite(v) else float(v) for v in row] for row in tiles],
+                          **({"wrote": args.out} if args.out else {})}))
+        return 0
+    h, w = ref.shape[:2]
+    print(f"{args.metric} ({info.units}), {w}x{h}, {tiles.shape[1]}x{tiles.shape[0]} tiles of {args.tile}px")
+    if pixel_map is not None:
+        print(f"per pixel  mean {float(pixel_map.mean()):.4g}, max {float(pixel_map.max()):.4g}")
+    if not finite.size:  # (identical images: no finite tile to average, "mean nan, worst (min) nan")
+        print(f"per tile   all {tiles.size} tiles identical (+inf dB)")
+    else:
+        print(f"per tile   mean {float(finite.mean()):.4g}, "
+              f"{'worst (min)' if info.higher_is_better else 'worst (max)'} {float(worst):.4g}"
+              + (f", {tiles.size - finite.size} identical tiles (+inf dB)" if finite.size < tiles.size else ""))
+    if args.out:
         print(f"wrote {args.out}")
     return 0
 

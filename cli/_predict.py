@@ -300,6 +300,13 @@ def run_predict(args: argparse.Namespace) -> int:
         raise sdk.ParameterError(f"--frames {args.count}: the number of frames --write-example writes; a sequence to "
                                  "predict is every frame file given (or every .npz of a folder)", "frames")
     files = frame_files(args.frames)
+    first: dict[str, int] = {}  # (a frame given twice, or a folder and one of its files, was predicted twice, the
+    for i, f in enumerate(files):  # sequence going back to it: its rate changes and --every's carry across the jump)
+        j = first.setdefault(os.path.realpath(f), i)
+        if j != i:
+            raise sdk.ParameterError(f"{f!r}: a frame given twice" + (f" (as {files[j]!r} too)" if files[j] != f else "")
+                                     + ": a sequence takes each frame once, in order (a folder, or its files, not both)",
+                                     "frame")
     sequence = len(files) > 1 or any(Path(f).is_dir() for f in args.frames)
     if args.every is not None and not sequence:
         raise sdk.ParameterError(f"--every {args.every}: prediction reuse carries estimates from frame to frame; give "
@@ -500,7 +507,7 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
     with sdk.files.atomic_output(out / "overlay.gif") as tmp:
         iio.imwrite(tmp, np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
     save_image(out / "frames.png", sequence_curves(rows, thresholds=budget))
-    return ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"]
+    return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"])
 
 
 def _holding(args: argparse.Namespace, threshold: float) -> str:
@@ -525,4 +532,20 @@ def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, ra
         with sdk.files.atomic_output(out / name) as tmp, open(tmp, "wb") as f:
             np.save(f, array)
     save_image(out / "overlay.png", _overlay(frame, rates, tile))
-    return ["rates.npy", "predictions.npy", "overlay.png"]
+    return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "overlay.png"])
+
+
+#: Every file ``--out`` writes, for a frame or a sequence.
+_OUT_FILES = ("rates.npy", "predictions.npy", "overlay.png", "frames.csv", "overlay.gif", "frames.png")
+
+
+def _drop_other_outputs(out: Path, written: list[str]) -> list[str]:
+    """Remove from ``out`` the files of :data:`_OUT_FILES` this run did not write (a frame's overlay.png after a
+    sequence, a sequence's frames.csv, overlay.gif and frames.png after a frame: they described another run beside
+    this one's rates.npy), no other file; returns ``written``."""
+    gone = [name for name in _OUT_FILES if name not in written and (out / name).is_file()]
+    for name in gone:
+        (out / name).unlink(missing_ok=True)
+    if gone:
+        log.info("%s: removed %s, of the run this one replaced", out, ", ".join(gone))
+    return written

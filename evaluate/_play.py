@@ -599,11 +599,25 @@ def play(
     if dynamic_resolution is not None and not isinstance(dynamic_resolution, DynamicResolution):
         raise PlayError(f"dynamic_resolution: expected an rtp.capture.paths.DynamicResolution (or None), got "
                         f"{type(dynamic_resolution).__name__}", "dynamic_resolution")
+    if dynamic_resolution is not None:  # (a schedule the path ends before: play.md named sizes never drawn)
+        first: dict[tuple[int, int], int] = {}
+        for i in range(len(dynamic_resolution.scales)):
+            first.setdefault(dynamic_resolution.size(i * dynamic_resolution.every, (size[0], size[1])),
+                             i * dynamic_resolution.every)
+        if max(first.values()) >= frames:
+            never = [f"{w}x{h}" for (w, h), i in first.items() if i >= frames]
+            raise PlayError(f"dynamic_resolution: each scale is held {dynamic_resolution.every} frames, so a path of "
+                            f"{frames} frames never draws {', '.join(never)}: give at least "
+                            f"{max(first.values()) + 1} frames (frames=, --frames) or hold each scale fewer frames",
+                            "dynamic_resolution")
     if engine_rates is not None and engine_rates not in ENGINE_IMAGES:
         raise PlayError(f"engine_rates: expected one of {', '.join(ENGINE_IMAGES)} (or None), got {engine_rates!r}",
                         "engine_rates")
     if combiner not in _SELECTING_COMBINERS:  # (those through which a method's rate reaches the frame)
         raise PlayError(f"combiner: expected one of {', '.join(_SELECTING_COMBINERS)}, got {combiner!r}", "combiner")
+    if engine_rates is None and combiner != "max":  # (it was taken and nothing combined)
+        raise PlayError(f"combiner: the hardware's combiner of engine_rates' rates and each method's; without "
+                        f"engine_rates (--engine-rates) there is nothing for {combiner!r} to combine", "combiner")
     if any(m.alone for m in specs) and engine_rates is None:
         raise PlayError("methods: ':alone' chooses without the engine's own rates: give engine_rates (--engine-rates)")
     _check_options(seed, workers, unseen_fraction, {"sweep": sweep, "exact": exact, "plots": plots,
@@ -614,6 +628,8 @@ def play(
     for p in paths:
         if p not in PATH_PROFILES:
             raise PlayError(f"paths: unknown profile {p!r}; known: {', '.join(PATH_PROFILES)}", "paths")
+    if len(set(paths)) < len(paths):  # (a path given twice was reported twice, its frames counted twice)
+        raise PlayError(f"paths: each profile once, got {', '.join(paths)}", "paths")
     try:
         info = metrics.metric_info(fail_metric)  # rtp's own or a plugin's
         if workers > 1 and len(dict.fromkeys(paths)) > 1:  # (the paths in worker processes: entry points only)

@@ -127,6 +127,18 @@ def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, ca
         assert "expected a path, got '\\ud800' (not encodable as a file name)" in capsys.readouterr().err
 
 
+def test_metric_json_with_out_prints_json_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--json with --out: stdout is one JSON document naming the picture written (a 'wrote PATH' line after it made
+    `rtp metric psnr a.png b.png --json --out m.png | python -c 'json.load(...)'` fail on 'Extra data')."""
+    a, b, _, _ = _image_pair(tmp_path)
+    out = tmp_path / "map.png"
+    assert main(["metric", "psnr", str(a), str(b), "--tile", "8", "--json", "--out", str(out)]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["wrote"] == str(out) and out.is_file() and np.array(got["tiles"]).shape == (3, 5)
+    assert main(["metric", "psnr", str(a), str(b), "--json"]) == 0
+    assert "wrote" not in json.loads(capsys.readouterr().out)
+
+
 def test_metric_says_when_an_image_has_transparent_pixels(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                           caplog: pytest.LogCaptureFixture) -> None:
     """An RGBA image is compared by its colour (as it always was), and a warning says that its alpha

@@ -135,6 +135,28 @@ def test_a_cache_that_cannot_hold_the_weights_fails_before_the_download(
         metrics.fetch_lpips_weights()
 
 
+def test_weights_fetched_where_rtp_does_not_read_them_are_said_so(
+    no_weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`rtp weights fetch --cache-dir DIR` into a folder other than the one rtp reads said only where the weights
+    went, and every command then missed them ('LPIPS needs the AlexNet weights ...: run rtp weights fetch'): the line
+    says where rtp reads them and the variable that makes it read DIR; into the folder rtp reads, nothing more."""
+    from rtp.cli import main as rtp_main
+
+    def fetched(cache_dir: Path | None = None, *, quiet: bool = False) -> Path:  # (no download)
+        return Path(cache_dir if cache_dir is not None else metrics.default_weights_cache()) / _lpips.LPIPS_WEIGHTS_FILE
+
+    monkeypatch.setattr(metrics, "fetch_lpips_weights", fetched)
+    other = tmp_path / "my weights"
+    assert rtp_main(["weights", "fetch", "--cache-dir", str(other)]) == 0
+    out = capsys.readouterr().out
+    assert out == (f"LPIPS weights: {other / _lpips.LPIPS_WEIGHTS_FILE} (rtp reads its weights from {no_weights}: set "
+                   f"RTP_WEIGHTS_CACHE='{other}' for its commands to use these)\n"), out
+    for argv in ([], ["--cache-dir", str(no_weights)]):
+        assert rtp_main(["weights", "fetch", *argv]) == 0
+        assert capsys.readouterr().out == f"LPIPS weights: {no_weights / _lpips.LPIPS_WEIGHTS_FILE}\n"
+
+
 def test_rtp_weights_fetch_downloads_checks_and_caches(no_weights: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from rtp.cli import main as rtp_main
 

@@ -684,6 +684,32 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
 
 
 
+def test_cli_evaluate_refuses_one_sidecar_for_several_models(dataset: Path, model: Path, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """--metadata is one model's sidecar: given with several models it was read as each one's metadata, in place of
+    the metadata a model carries (two models evaluated at the sidecar's threshold, 0.1, not their own 0.2: exit 0).
+    Refused before any work; with one model it is read as before."""
+    import shutil
+
+    import yaml
+
+    sidecar = tmp_path / "side.yaml"
+    sidecar.write_text(yaml.safe_dump({**META, "default_threshold": 0.1}))
+    other = tmp_path / "other" / "m.onnx"
+    other.parent.mkdir()
+    shutil.copy(model, other)
+    out = tmp_path / "two"
+    assert rtp_main(["evaluate", str(model), str(other), "--metadata", str(sidecar), "--data", str(dataset),
+                     "--no-baselines", "--max-samples", "1", "--out", str(out)]) == 2
+    shown = capsys.readouterr()
+    assert shown.out == "" and "rtp evaluate: error: --metadata is one model's sidecar, and 2 models were given: " \
+        "evaluate the model that carries no metadata alone with it" in shown.err, shown.err
+    assert not out.exists()
+    assert rtp_main(["evaluate", str(model), "--metadata", str(sidecar), "--data", str(dataset), "--no-baselines",
+                     "--max-samples", "1", "--out", str(out)]) == 0
+    assert json.loads((out / "evaluation.json").read_text())[0]["model"]["default_threshold"] == pytest.approx(0.1)
+
+
 def test_cli_evaluate_keeps_apart_models_of_one_file_name_and_refuses_one_model_twice(
         dataset: Path, model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Two models whose files share a name (a/m.onnx, b/m.onnx: a retrained model beside the old one) wrote

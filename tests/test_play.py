@@ -262,7 +262,7 @@ def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture
     need = job_bytes("play", (4096, 4096), metrics=("jnyang",), loops=1)
     machine_memory(MemTotal=need - 2**20, MemAvailable=need - 2**20)
     with pytest.raises(PlayError, match=rf"^size: the closed loop at 4096x4096 holds about {need / 2**30:.1f} GiB"):
-        play("procedural:0", "oracle", frames=3, size=(4096, 4096), sweep=False, out=str(tmp_path / "out"),
+        play("procedural:0", "oracle", frames=11, size=(4096, 4096), sweep=False, out=str(tmp_path / "out"),
              dynamic_resolution=DynamicResolution((1.0, 0.75, 0.5), 5))
     assert not (tmp_path / "out").exists()
     # rtp play --dynamic-resolution: a usage error (exit 2) in the same words
@@ -272,6 +272,30 @@ def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture
         main(["play", "procedural:0", "--dynamic-resolution", "1.5@3"])
     assert exc.value.code == 2 and "--dynamic-resolution: expected scales of the full size, numbers in (0, 1], got " \
         "1.5" in capsys.readouterr().err  # as given, not a tuple's repr
+
+
+def test_a_schedule_the_path_ends_before_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A dynamic-resolution schedule whose later sizes a path of ``frames`` never reaches is refused before any work
+    (``rtp play --frames 3 --dynamic-resolution 1,0.5@30`` played 3 frames at the full size, and play.md said they
+    were drawn at 64x48 and 32x24 in turn); a schedule the path reaches is played."""
+    from rtp.cli import main
+
+    for frames, dyn, never, need in ((3, DynamicResolution((1.0, 0.5), 30), "32x24", 31),
+                                     (10, DynamicResolution((1.0, 0.75, 0.5), 5), "32x24", 11)):
+        with pytest.raises(PlayError, match=rf"^dynamic_resolution: each scale is held {dyn.every} frames, so a path "
+                                            rf"of {frames} frames never draws {never}: give at least {need} frames"):
+            play("procedural:0", "full", frames=frames, size=(64, 48), sweep=False, flip_every=0, plots=False,
+                 out=tmp_path / "never", dynamic_resolution=dyn)
+    assert main(["play", "procedural:0", "--frames", "3", "--size", "64x48", "--methods", "full", "--no-sweep",
+                 "--dynamic-resolution", "1,0.5@30", "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert "rtp play: error: --dynamic-resolution: each scale is held 30 frames, so a path of 3 frames never draws " \
+           "32x24: give at least 31 frames" in err, err
+    assert not (tmp_path / "never").exists()
+    # a schedule the path reaches: frames 0-1 at 64x48, frame 2 at 32x24
+    rep = play("procedural:0", "full", paths=("slow",), frames=3, size=(64, 48), sweep=False, flip_every=0,
+               plots=False, dynamic_resolution=DynamicResolution((1.0, 0.5), 2))
+    assert rep.settings["dynamic_resolution"]["sizes"] == [[64, 48], [32, 24]]
 
 
 def test_a_frame_of_another_size_reprojects_as_the_renderer_does(scene: Any) -> None:
@@ -623,6 +647,42 @@ def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable
     with pytest.raises(sdk.RtpError, match="frame size|render targets"):
         play("procedural:0", "full", frames=3, size=(16384, 16384), out=str(tmp_path / "out"))
     assert not (tmp_path / "out").exists()
+
+
+def test_a_path_given_twice_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A profile given twice is refused before any work (``rtp play --path slow,slow`` played it once and reported
+    it twice: each row of its table twice, its pictures listed twice, the progress bar left at half its count)."""
+    from rtp.cli import main
+
+    for paths in (("slow", "slow"), ["fast", "slow", "fast"]):
+        with pytest.raises(PlayError, match=rf"^paths: each profile once, got {', '.join(paths)}$"):
+            play("procedural:0", "full", paths=paths, frames=3, size=(64, 48), sweep=False, flip_every=0,
+                 plots=False, out=tmp_path / "never")
+    for argv in (["--path", "slow,slow"], ["--path", "slow", "--path", "fast,slow"]):
+        assert main(["play", "procedural:0", "--frames", "3", "--size", "64x48", "--methods", "full", "--no-sweep",
+                     "--out", str(tmp_path / "never"), *argv]) == 2
+        err = capsys.readouterr().err
+        assert "rtp play: error: --path: each profile once, got slow, " in err, err
+    assert not (tmp_path / "never").exists()
+
+
+def test_a_combiner_without_engine_rates_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--combiner meets --engine-rates' rates with each method's: given without them it is refused, not ignored
+    (``rtp play --combiner sum`` ran and reported a run without engine rates, exit 0)."""
+    from rtp.cli import main
+
+    for combiner in ("min", "max", "sum"):
+        assert main(["play", "procedural:0", "--frames", "3", "--size", "64x48", "--methods", "full", "--no-sweep",
+                     "--out", str(tmp_path / "never"), "--combiner", combiner]) == 2
+        err = capsys.readouterr().err
+        assert f"rtp play: error: --combiner {combiner}: the hardware's combiner of --engine-rates' rates and each " \
+               "method's; give --engine-rates" in err, err
+    for combiner in ("min", "sum"):  # (the library's default, max, is what a call without engine_rates leaves)
+        with pytest.raises(PlayError, match=rf"^combiner: .* without engine_rates \(--engine-rates\) there is nothing "
+                                            rf"for '{combiner}' to combine"):
+            play("procedural:0", "full", frames=3, size=(64, 48), sweep=False, flip_every=0, plots=False,
+                 combiner=combiner, out=tmp_path / "never")
+    assert not (tmp_path / "never").exists()
 
 
 def test_a_budget_saves_its_share_on_every_frame(tmp_path: Path) -> None:

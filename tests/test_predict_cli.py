@@ -277,6 +277,39 @@ def test_a_sequences_mistakes_are_named(sequence: Path, frame: Path, tmp_path: P
     assert "--frames 2: the number of frames --write-example writes" in capsys.readouterr().err
 
 
+def test_a_frame_given_twice_is_refused(sequence: Path, frame: Path, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A frame file taken twice (given twice, or a folder and one of its files) is refused before any prediction: it
+    was predicted twice, the sequence going back to it (its 'changed' share measured across the jump, --every's
+    estimates carried across it)."""
+    files = sorted(sequence.glob("*.npz"))
+    monkeypatch.chdir(frame.parent)
+    out = tmp_path / "out"
+    for argv, named in (([str(frame), str(frame)], f"'{frame}': a frame given twice: "),
+                        ([frame.name, f"./{frame.name}"], f"'./{frame.name}': a frame given twice (as '{frame.name}' "
+                                                          "too): "),
+                        ([str(sequence), str(files[1])], f"'{files[1]}': a frame given twice: "),
+                        ([str(sequence), str(sequence), "--every", "2"], f"'{files[0]}': a frame given twice: ")):
+        assert main(["predict", *argv, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert named + "a sequence takes each frame once, in order" in err, err
+    assert not out.exists()
+
+
+def test_out_holds_one_runs_files(sequence: Path, frame: Path, tmp_path: Path) -> None:
+    """--out into a folder of the other kind of run: a frame's run after a sequence's left the sequence's frames.csv,
+    overlay.gif and frames.png beside the frame's rates.npy, a sequence's after a frame's the frame's overlay.png; each
+    run removes those (only rtp predict's own names), so the folder describes one run."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    kinds = {"sequence": {"rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"},
+             "frame": {"rates.npy", "predictions.npy", "overlay.png"}}
+    for kind, given in (("sequence", sequence), ("frame", frame), ("sequence", sequence)):
+        assert main(["predict", str(given), "--out", str(out), "--json"]) == 0
+        assert {f.name for f in out.iterdir()} == kinds[kind] | {"notes.txt"}, kind
+
+
 @pytest.mark.parametrize("model", ["jnyang", "jnyang-reuse"])
 def test_a_sequence_with_prediction_reuse_is_the_sdks(sequence: Path, tmp_path: Path, model: str,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
