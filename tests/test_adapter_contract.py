@@ -465,7 +465,7 @@ def test_rtp_adapters_check_from_a_plugin_checkout(tmp_path: Path) -> None:
     assert "failed 2 of" in bad.stderr and "albedo.y is the luma" in bad.stderr
     assert out["image"] == str(tmp_path / "p.png") and _red_pixels(tmp_path / "p.png") > 0  # albedo.y's row
     listed = run_rtp("adapters", "list")
-    assert listed.returncode == 0 and listed.stdout.split("\n")[1].split()[:2] == ["moderngl", "23"], listed.stdout
+    assert listed.returncode == 0 and listed.stdout.split("\n")[1].split()[:2] == ["moderngl", "25"], listed.stdout
     usage = run_rtp("adapters", "check", "moderngl", "--tolerance", "albedo=0.1")
     assert usage.returncode == sdk.EXIT_USAGE and "'albedo' is not a channel" in usage.stderr
 

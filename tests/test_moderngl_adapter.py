@@ -77,6 +77,14 @@ def test_inputs_in_the_declared_order_match_the_renderer_and_the_numpy_reference
     assert 0.0 < x[1].mean() < 1.0  # the camera moved: some pixels are disoccluded or off-screen
     assert np.all(x[3][x[1] == 0] == 0)  # unseen pixels carry no stale colour
     a.close()
+    # motion.x / .y: the camera's move, as the numpy reference and the renderer's own G-buffer pass give it
+    with Adapter(("motion.x", "motion.y"), W, H, ctx=ctx) as m:
+        motion = _engine_inputs(ctx, prev, cur, m)
+    want = sdk.input_planes(("motion.x", "motion.y"), depth=cur.depth, view=cur.camera.view(),
+                            projection=cur.camera.projection(W / H), prev_view_projection=prev.camera.view_projection(W, H))
+    np.testing.assert_allclose(motion, want, atol=1e-3)
+    np.testing.assert_allclose(motion, np.stack([cur.channel("motion.x"), cur.channel("motion.y")]), atol=0.05)
+    assert np.abs(motion).max() > 1.0  # (the camera moved)
 
 
 def test_paper_inputs_feed_a_predictor(frames, tiny_model) -> None:
@@ -231,8 +239,10 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
     no_prev = _engine_frame(ctx, prev, cur, prev_colour=None, prev_depth=None, prev_view_projection=None)
     x = a.inputs(no_prev)
     assert not x[:2].any() and x[2].any()
-    with pytest.raises(sdk.adapters.UnsupportedChannelError, match="cannot produce motion.x"):
-        Adapter(("seen", "motion.x"), W, H, ctx=ctx)
+    with pytest.raises(sdk.adapters.UnsupportedChannelError, match="cannot produce shadow"):
+        Adapter(("seen", "shadow"), W, H, ctx=ctx)
+    with Adapter(("motion.x", "motion.y"), W, H, ctx=ctx) as m:  # (no previous camera: no move to measure)
+        assert not m.inputs(no_prev).any()
     with pytest.raises(TypeError, match="moderngl.Context"):
         Adapter(("seen",), W, H, ctx=None)
     with pytest.raises(sdk.ParameterError, match="prev_depth"):
@@ -303,7 +313,7 @@ def test_read_gives_one_plane_of_the_last_run_and_frame_fields_are_checked(frame
         with pytest.raises(sdk.ParameterError, match="material_components: expected three component indices"):
             _engine_inputs(ctx, prev, cur, m, material=_tex(ctx, cur.albedo), material_components=comps)
     with pytest.raises(sdk.adapters.UnsupportedChannelError, match=f"at most {_MAX_CHANNELS} channels"):
-        Adapter(("seen",) * (_MAX_CHANNELS + 1), W, H, ctx=ctx)  # (the adapter makes 23 channels; repeats count)
+        Adapter(("seen",) * (_MAX_CHANNELS + 1), W, H, ctx=ctx)  # (the adapter makes 25 channels; repeats count)
     a.close()
     m.close()
 
@@ -385,6 +395,18 @@ def test_leaving_a_with_ctx_block_unbinds_every_context(gl_context) -> None:
         make_current(gl_context)
 
 
+def _motion_as_in_the_sdk(ctx: Any, frame: GBufferTextures, g: dict[str, Any], **given: Any) -> np.ndarray:
+    """The adapter's motion.x / motion.y planes of ``frame``, checked against sdk.input_planes of the same G-buffers
+    ``g`` (and ``given``: the engine's motion) to a thousandth of a pixel (the shader's float32 projection)."""
+    h, w = g["depth"].shape
+    with Adapter(("motion.y", "motion.x"), w, h, ctx=ctx) as a:
+        got = a.inputs(frame)
+    want = sdk.input_planes(("motion.y", "motion.x"), **g, **given)
+    np.testing.assert_allclose(got, want, atol=1e-3)
+    assert (got[:, g["depth"] == 0] == 0).all()  # (background: no motion)
+    return got
+
+
 def test_the_engines_motion_vectors_move_objects_on_the_gpu_as_in_the_sdk(frames) -> None:
     """GBufferTextures.motion: a square moving over a wall, the camera still, reprojected by the shader as by
     sdk.input_planes with the same motion vectors (every square pixel seen and fetched from the square)."""
@@ -407,6 +429,11 @@ def test_the_engines_motion_vectors_move_objects_on_the_gpu_as_in_the_sdk(frames
             a.inputs(replace(frame, motion=_tex(ctx, g["depth"])))  # one component: not motion vectors
     np.testing.assert_allclose(got, want, atol=1e-6)
     assert (got[2][8:16, 14:20] == 1).all() and static[2][8:16, 14:20].mean() < 0.5
+    # motion.x / .y: the engine's on geometry, the camera's (still: none) without them
+    moved = _motion_as_in_the_sdk(ctx, replace(frame, motion=_tex(ctx, motion)), g, motion=motion)
+    geo = g["depth"] > 0
+    np.testing.assert_array_equal(moved[1][geo], motion[..., 0][geo])
+    assert np.abs(_motion_as_in_the_sdk(ctx, frame, g)).max() < 1e-3
     np.testing.assert_allclose(got[0][8:16, 14:20], colour[8:16, 14:20, 0], atol=1e-6)
 
 
@@ -432,6 +459,12 @@ def test_an_orthographic_camera_reprojects_on_the_gpu_as_in_the_sdk(frames, shif
                                        prev_view_projection=g["prev_view_projection"]))
     np.testing.assert_array_equal(got[1], want[1])
     np.testing.assert_allclose(got, want, atol=1e-6)
+    frame = GBufferTextures(albedo=_tex(ctx, zeros), normal=_tex(ctx, zeros), depth=_tex(ctx, g["depth"]),
+                            view=g["view"], projection=g["projection"], prev_colour=_tex(ctx, g["prev_colour"]),
+                            prev_depth=_tex(ctx, g["prev_depth"]), prev_view_projection=g["prev_view_projection"])
+    motion = _motion_as_in_the_sdk(ctx, frame, g)
+    mx = motion[1][g["depth"] > 0]  # the pan: every surface point was `shift` pixels to the right (turning: more)
+    assert np.abs(mx - shift).max() < 1e-3 if not turn else (mx > shift).all()
     if turn:
         assert 0.05 < got[1].mean() < 0.95 and (got[1][g["depth"] == 0] == 1).any()
     else:
@@ -468,6 +501,8 @@ def test_a_previous_frame_at_another_render_resolution_on_the_gpu(frames, up: bo
     want = sdk.input_planes(channels, **g, motion=motion)
     np.testing.assert_array_equal(moved[1], want[1])
     np.testing.assert_allclose(moved, want, atol=1e-6)
+    _motion_as_in_the_sdk(ctx, frame, g)  # (in this frame's pixels, whatever the previous frame's size)
+    _motion_as_in_the_sdk(ctx, replace(frame, motion=_tex(ctx, motion)), g, motion=motion)
 
 
 def _corner(ctx: Any, image: np.ndarray, width: int, height: int, fill: float) -> Any:

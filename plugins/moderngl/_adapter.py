@@ -14,7 +14,7 @@ For an engine that owns its moderngl context::
         rates = predictor.shading_rates(x)
 
 One fragment shader (``shaders/adapter_fs.glsl``) reprojects the previous frame with a depth test
-and packs the requested channels, in the order given, into up to six RGBA32F targets; only those
+and packs the requested channels, in the order given, into up to seven RGBA32F targets; only those
 are read back (a single flip to the top-left origin, in ``_glio``). Each adapter compiles the shader
 for its channel list, so it runs only the work those channels need; when a plane reads other
 pixels' lumas (``reprojected.y.dx`` / ``.dy``, the ``.blocks`` and ``.tiles`` planes), a first run of the same
@@ -55,11 +55,11 @@ CHANNEL_IDS: dict[str, int] = {
     "normal.x": 7, "normal.y": 8, "normal.z": 9, "depth": 10,
     "roughness": 11, "metallic": 12, "specular": 13, "depth.edge": 14, "reprojected.y": 15, "albedo.y": 16,
     "reprojected.y.dx": 17, "reprojected.y.dy": 18, "reprojected.y.blocks": 19, "albedo.y.blocks": 20,
-    "reprojected.y.tiles": 21, "albedo.y.tiles": 22,
+    "reprojected.y.tiles": 21, "albedo.y.tiles": 22, "motion.x": 23, "motion.y": 24,
 }
 _MATERIAL = ("roughness", "metallic", "specular")
 _LUMA_PASS = ("reprojected.y", "albedo.y")  # the first pass of adapters whose planes read neighbours' lumas
-_MAX_CHANNELS = 24  # six RGBA float targets (adapter_fs.glsl)
+_MAX_CHANNELS = 28  # seven RGBA float targets (adapter_fs.glsl)
 _RGB_TEXTURES = {"albedo": 3, "normal": 3, "prev_colour": 3}  # GBufferTextures fields the shader reads as .rgb
 
 

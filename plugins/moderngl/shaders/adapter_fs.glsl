@@ -41,7 +41,7 @@ uniform bool u_ortho;               // the current camera is orthographic (sdk.c
 uniform bool u_prev_ortho;          // the previous camera is orthographic
 uniform float u_tolerance;
 // What the adapter was built for is fixed when it is constructed, so it is compiled in: the adapter
-// (_adapter.py) #defines RTP_CHANNELS (24 channel ids, see CHANNEL_IDS; -1 = unused), RTP_COUNT and
+// (_adapter.py) #defines RTP_CHANNELS (28 channel ids, see CHANNEL_IDS; -1 = unused), RTP_COUNT and
 // the flags below (true / false). The compiler then drops every value no channel reads; left to
 // uniforms, llvmpipe ran all of them (the "reproject" stage of bench/render.py, docs/performance.md).
 const bool u_depth_window = RTP_DEPTH_WINDOW;          // depth is window depth in [0, 1] (1 = background), not linear
@@ -54,7 +54,7 @@ const bool u_blocks_reprojected = RTP_BLOCKS_REPROJECTED;  // reprojected.y.bloc
 const bool u_blocks_albedo = RTP_BLOCKS_ALBEDO;        // albedo.y.blocks wanted
 const bool u_tiles_reprojected = RTP_TILES_REPROJECTED;  // reprojected.y.tiles wanted: the block variances of the pixel's 16x16 tile
 const bool u_tiles_albedo = RTP_TILES_ALBEDO;          // albedo.y.tiles wanted
-const int u_channels[24] = int[24](RTP_CHANNELS);
+const int u_channels[28] = int[28](RTP_CHANNELS);
 const int u_count = RTP_COUNT;
 // RTP_LUMA_PASS: the lumas of other pixels (the .dx / .dy neighbours, the 16 texels of a .blocks cell, the 256 of a .tiles tile)
 // are fetched from u_luma, which a first run of this shader for ("reprojected.y", "albedo.y") filled,
@@ -68,6 +68,7 @@ layout(location = 2) out vec4 o2;
 layout(location = 3) out vec4 o3;
 layout(location = 4) out vec4 o4;
 layout(location = 5) out vec4 o5;
+layout(location = 6) out vec4 o6;
 
 float linear_depth(float raw, mat4 inv_proj) {
     if (!u_depth_window) return raw;
@@ -216,6 +217,19 @@ float tile_value(bool reprojected, int j, int c0, int r0) {
     return j < 6 ? log(acc / float(cells)) / s + 1.0 : top;
 }
 
+// motion.x / motion.y, as rtp.sdk.input_planes: each geometry pixel's previous minus current position in this
+// frame's pixels (x right, y down): the engine's motion vectors where given, else the camera's move (its point
+// projected with the previous view-projection); 0 on background, where the point was behind the previous
+// camera, and without a previous frame.
+vec2 motion_at(vec2 frag, float d) {
+    if (d <= 0.0 || !u_has_prev) return vec2(0.0);
+    if (u_has_motion) return texelFetch(u_motion, ivec2(frag), 0).xy;
+    vec4 pc = u_prev_vp * (u_inv_view * view_point(frag, d));
+    if (pc.w <= 0.0) return vec2(0.0);
+    vec2 q = (pc.xy / pc.w * 0.5 + 0.5) * u_size;  // (GL pixel coordinates: y up)
+    return vec2(q.x - frag.x, frag.y - q.y);
+}
+
 void main() {
     ivec2 g = ivec2(gl_FragCoord.xy);
     float d = depth_at(g);
@@ -268,15 +282,17 @@ void main() {
     }
     float zc = inv_depth(d);
     float edge = clamp(max(edge_axis(g, ivec2(1, 0), zc), edge_axis(g, ivec2(0, 1), zc)), 0.0, 1.0);
-    float v[23] = float[23](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
+    vec2 motion = motion_at(gl_FragCoord.xy, d);
+    float v[25] = float[25](rp.r, rp.g, rp.b, rp.a, albedo.r, albedo.g, albedo.b, n.x, n.y, n.z, d,
                             mat.x, mat.y, mat.z, edge, ry, display_luma(albedo), rdx, rdy, rblocks, ablocks,
-                            rtiles, atiles);
-    float outv[24];
-    for (int i = 0; i < 24; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
+                            rtiles, atiles, motion.x, motion.y);
+    float outv[28];
+    for (int i = 0; i < 28; ++i) outv[i] = (i < u_count && u_channels[i] >= 0) ? v[u_channels[i]] : 0.0;
     o0 = vec4(outv[0], outv[1], outv[2], outv[3]);
     o1 = vec4(outv[4], outv[5], outv[6], outv[7]);
     o2 = vec4(outv[8], outv[9], outv[10], outv[11]);
     o3 = vec4(outv[12], outv[13], outv[14], outv[15]);
     o4 = vec4(outv[16], outv[17], outv[18], outv[19]);
     o5 = vec4(outv[20], outv[21], outv[22], outv[23]);
+    o6 = vec4(outv[24], outv[25], outv[26], outv[27]);
 }
