@@ -150,14 +150,16 @@ def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
     for item in items:
         if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
             if int(item) not in RATE_NAMES:
-                raise ParameterError(f"unknown shading-rate code {int(item)}; expected one of {sorted(RATE_NAMES)}")
+                raise ParameterError(f"allowed: unknown shading-rate code {int(item)}; expected one of "
+                                     f"{sorted(RATE_NAMES)}", "allowed")
             names.add(RATE_NAMES[int(item)])
         elif isinstance(item, str):
             if item not in RATE_CODES:
-                raise ParameterError(f"unknown shading rate {item!r} in allowed; expected names from {', '.join(ALL_RATES)}")
+                raise ParameterError(f"allowed: unknown shading rate {item!r}; expected names from {', '.join(ALL_RATES)}",
+                                     "allowed")
             names.add(item)
         else:
-            raise ParameterError(f"allowed rates must be names like '2x2' or integer codes, got {item!r}")
+            raise ParameterError(f"allowed: expected rate names like '2x2' or integer codes, got {item!r}", "allowed")
     return tuple(r for r in PREDICTED_RATES if r in names)
 
 

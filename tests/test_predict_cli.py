@@ -228,6 +228,8 @@ def test_a_budget_holds_the_work_saved_and_reports_each_frames_threshold(
     assert "--saving: expected the share of shading work to save, a number in [0, 0.75]" in capsys.readouterr().err
     assert main(["predict", str(frame), "--allowed", ""]) == 2  # an unset variable, not VRS off
     assert "--allowed: expected comma-separated rate names, got '' (for no reduced rate" in capsys.readouterr().err
+    assert main(["predict", str(frame), "--allowed", "2x2,bogus"]) == 2  # (it said "... 'bogus' in allowed")
+    assert "rtp predict: error: --allowed: unknown shading rate 'bogus'; expected names from 1x1" in capsys.readouterr().err
     assert main(["predict", str(frame), "--allowed", "1x1", "--json"]) == 0  # VRS off, said so
     assert json.loads(capsys.readouterr().out)["work_saved"] == 0.0
     # with --threshold the saving is a floor under the threshold's rates

@@ -80,10 +80,11 @@ def test_allowed_rates(allowed: list | None, expected: str) -> None:
 
 
 def test_allowed_rejects_unknown_rates() -> None:
-    with pytest.raises(sdk.RtpError, match="unknown shading rate"):
-        sdk.select_rates(_tile(*[0.1] * 6), 0.2, allowed=["3x3"])
-    with pytest.raises(sdk.RtpError, match="code 7"):
-        sdk.select_rates(_tile(*[0.1] * 6), 0.2, allowed=[7])
+    for allowed, words in ((["3x3"], "unknown shading rate '3x3'"), ([7], "unknown shading-rate code 7"),
+                           ([2.0], "expected rate names like '2x2' or integer codes, got 2.0")):
+        with pytest.raises(sdk.ParameterError, match=f"^allowed: {words}") as info:
+            sdk.select_rates(_tile(*[0.1] * 6), 0.2, allowed=allowed)
+        assert info.value.name == "allowed"
 
 
 def test_selection_is_per_tile_and_batched() -> None:
