@@ -522,7 +522,8 @@ def _select_samples(
         have = {str(s.meta.get("scene", "?")) for s in samples}
         missing = sorted(wanted - have)
         if missing:
-            raise ParameterError(f"scenes {missing} are not in {data}; it holds {', '.join(sorted(have))}")
+            raise ParameterError(f"scenes: {', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not in {data}; it "
+                                 f"holds {', '.join(sorted(have))}", "scenes")
         samples = [s for s in samples if str(s.meta.get("scene", "?")) in wanted]
     if max_samples:
         samples = samples[:max_samples]
@@ -567,7 +568,9 @@ def _plot_sample_id(samples: list[Any], plot_sample: str | None) -> str:
     """The id of the sample the plots show: ``plot_sample``, by default the first sample."""
     plot_id = plot_sample or samples[0].id
     if plot_sample and plot_sample not in {s.id for s in samples}:
-        raise ParameterError(f"plot sample {plot_sample!r} is not among the evaluated samples")
+        ids = [s.id for s in samples]
+        raise ParameterError(f"plot_sample: {plot_sample!r} is not among the evaluated samples ({', '.join(ids[:3])}"
+                             f"{f', ... {len(ids)} in all' if len(ids) > 3 else ''})", "plot_sample")
     return plot_id
 
 

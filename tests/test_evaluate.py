@@ -641,7 +641,12 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
             assert im.mode == "RGB" and im.size[0] > 0
     with Image.open(out / "m_rates.png") as im:  # model, oracle and four baselines side by side
         assert im.size[0] > 6 * W and im.size[1] > H
+    capsys.readouterr()
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "zzz"]) == 2
+    assert f"rtp evaluate: error: --scene: zzz is not in {dataset}; it holds a, b" in capsys.readouterr().err
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--out", str(tmp_path / "px"), "--plots",
+                     "--plot-sample", "nosuch", "--no-baselines"]) == 2
+    assert "rtp evaluate: error: --plot-sample: 'nosuch' is not among the evaluated samples (" in capsys.readouterr().err
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--scene", "a,b", "--scene", "b",
                      "--no-baselines", "--max-samples", "1"]) == 0
     assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--plots"]) == 2  # --plots needs --out
