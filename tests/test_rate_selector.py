@@ -201,6 +201,52 @@ def test_the_rates_stay_on_the_gpu_and_bad_input_is_refused(gl_context: Any) -> 
             RateSelector(meta, gl_context, tile_size=bad)  # type: ignore[arg-type]
 
 
+def test_each_selector_runs_in_its_own_context_whichever_is_current(gl_context: Any) -> None:
+    """moderngl never switches contexts: a selector that ran while a second selector's context was current ran that
+    context's objects of the same names and returned wrong codes without an error (as renderers did before
+    2026-12-05); each call now makes its own context current."""
+    meta = sdk.load("jnyang").metadata
+    rng = np.random.default_rng(3)
+    raw_a, raw_b = rng.random((4, 3, 5)).astype(np.float32), rng.random((4, 3, 5)).astype(np.float32)
+
+    def cpu(raw: np.ndarray) -> np.ndarray:
+        return sdk.select_rates(meta.decode(raw), meta.default_threshold, factors=meta.rate_factors)
+
+    assert (cpu(raw_a) != cpu(raw_b)).any()
+    try:
+        own_a = RateSelector(meta)  # each makes its own headless context
+        np.testing.assert_array_equal(own_a.select(raw_a), cpu(raw_a))  # (its buffers and texture made in its context)
+        own_b = RateSelector(meta)  # (current now)
+        np.testing.assert_array_equal(own_a.select(raw_a), cpu(raw_a))
+        np.testing.assert_array_equal(own_b.select(raw_b), cpu(raw_b))
+        np.testing.assert_array_equal(own_a.select(raw_a), cpu(raw_a))
+        np.testing.assert_allclose(own_a.decoded(), meta.decode(raw_a), rtol=1e-5, atol=1e-6)
+        make_current(own_b.ctx)
+        borrowed = RateSelector(meta, gl_context)  # its programs are made in gl_context, not in the current one
+        make_current(own_b.ctx)
+        np.testing.assert_array_equal(borrowed.select(raw_b), cpu(raw_b))
+        own_b.close()  # frees its objects in its own context
+        np.testing.assert_array_equal(own_a.select(raw_a), cpu(raw_a))
+        np.testing.assert_array_equal(borrowed.select(raw_b), cpu(raw_b))
+        borrowed.close()
+        own_a.close()
+    finally:
+        make_current(gl_context)
+
+
+def test_a_numpy_integer_is_a_tile_size(gl_context: Any) -> None:
+    """``tile_size=np.int64(8)`` (what a frame's grid arithmetic hands over) was refused as "expected one of [4, 8,
+    16, 32], got np.int64(8)"."""
+    meta = sdk.load("jnyang").metadata
+    raw = np.random.default_rng(4).random((4, 3, 5)).astype(np.float32)
+    with RateSelector(meta, gl_context, tile_size=8) as plain, \
+            RateSelector(meta, gl_context, tile_size=np.int64(8)) as numpy_int:  # type: ignore[arg-type]
+        assert numpy_int.tile_size == 8 and type(numpy_int.split) is int
+        np.testing.assert_array_equal(numpy_int.select(raw), plain.select(raw))
+    with pytest.raises(sdk.ParameterError, match="tile_size"):
+        RateSelector(meta, gl_context, tile_size=np.bool_(True))  # type: ignore[arg-type]
+
+
 def test_hardware_tiles_coarser_than_the_model_s_as_load_pools_them(tiny_model, gl_context: Any) -> None:
     """A model of 8-pixel tiles loaded for 16-pixel hardware tiles: the selector takes the predictor's
     tile size and returns what its shading_rates returns, one code per hardware tile."""

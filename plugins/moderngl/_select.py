@@ -84,10 +84,12 @@ class RateSelector:
         if tile_size is None:
             tile_size = model.tile_size if isinstance(model, sdk.ShadingRatePredictor) else meta.tile_size
         allowed_tiles = sdk.hardware_tiles(meta.tile_size)
-        if isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in allowed_tiles:
+        if isinstance(tile_size, (bool, np.bool_)) or not isinstance(tile_size, (int, np.integer)) \
+                or int(tile_size) not in allowed_tiles:
             raise sdk.ParameterError(f"tile_size: expected one of {list(allowed_tiles)} (the hardware's shading-rate "
                                      f"tile for the model's {meta.tile_size}-pixel tiles), got {tile_size!r}",
                                      "tile_size")
+        tile_size = int(tile_size)  # (numpy's integers, as a grid computation hands them, are tile sizes too)
         self._meta = meta
         #: model tiles per hardware tile side (coarser hardware tiles; else 1)
         self.pool = max(1, tile_size // meta.tile_size)
@@ -100,6 +102,7 @@ class RateSelector:
             raise AdapterFrameError(f"ctx must be a moderngl.Context, got {type(ctx).__name__}")
         self._own_ctx = ctx is None
         self.ctx = create_context(430) if ctx is None else ctx
+        self.ctx.__enter__()  # (a borrowed context may not be the current one: the programs are made in it)
         if self.ctx.version_code < 430:
             raise RendererError(f"RateSelector needs compute shaders (OpenGL 4.3), got a context of version "
                                 f"{self.ctx.version_code // 100}.{self.ctx.version_code % 100 // 10}")
@@ -182,6 +185,7 @@ class RateSelector:
         back where wanted). ``frame_size = (H, W)`` weighs partial edge tiles by their pixels (without it every
         hardware tile counts alike); a ``threshold`` with it is a floor under the budget, as in the SDK. Beside
         ``engine_rates`` the saving is the device's, the engine's and the image's together, as the SDK counts it."""
+        self._check_open()
         th, tw = _tile_pair(tiles, "tiles")
         grid = self._grid((th, tw), grid)
         limit = max_texture_side(self.ctx)
@@ -196,7 +200,6 @@ class RateSelector:
             raise sdk.InputShapeError(
                 f"raw buffer holds {raw.size} bytes, expected at least {need} for {len(self._meta.outputs)} float32 "
                 f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
-        self._check_open()
         _frame_with_budget(saving, frame_size)
         thr = self._check_decision(None if saving is not None else threshold, allowed)
         work = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size)
@@ -354,8 +357,12 @@ class RateSelector:
         return gh, gw
 
     def _check_open(self) -> None:
+        """Raise when closed; else make the selector's context the current one and leave it current. moderngl never
+        switches contexts by itself: a selector that ran while another context was current (a second selector's
+        own, a renderer's) ran that context's objects of the same names, wrong codes or a GL error."""
         if self._program is None:
             raise RendererError("RateSelector: closed")
+        self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
 
     def _check_decision(self, threshold: float | None, allowed: Iterable[sdk.RateLike] | None) -> float:
         """The threshold to use, after the SDK's own checks and messages for it and for the allowed rates
@@ -394,6 +401,8 @@ class RateSelector:
 
     def close(self) -> None:
         """Release the GPU objects (and the context when the selector made it)."""
+        if self._program is not None:
+            self.ctx.__enter__()  # (its objects are freed in its own context)
         for obj in (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
                     self._budget):
             if obj is not None:
