@@ -143,6 +143,25 @@ def _names(key: str, value: str | Sequence[str]) -> list[str]:
     return list(items)
 
 
+def _check_scene_ids(scene_names: Sequence[str]) -> None:
+    """Refuse a scene given twice (its viewpoints were planned and rendered twice, in two worker processes at
+    once with ``workers``, and its samples counted twice) and two scenes whose samples would share ids
+    (``a/arena.glb`` and ``b/arena.glb``, ``arena.obj`` and ``arena.glb``: each run captured one over the other,
+    as samples "from other cameras"): a :class:`ParameterError` about ``scene_names``."""
+    twice = [name for name in dict.fromkeys(scene_names) if scene_names.count(name) > 1]
+    if twice:
+        raise ParameterError(f"scene_names: each scene once, got {twice[0]!r} {scene_names.count(twice[0])} times",
+                             "scene_names")
+    by_id: dict[str, str] = {}
+    for name in scene_names:
+        sid = scene_id(name)
+        other = by_id.setdefault(sid, name)
+        if other != name:
+            raise ParameterError(
+                f"scene_names: {other!r} and {name!r} both make the sample ids {sid}-<profile>-<index>, so one "
+                "would be captured over the other; capture them into two folders, or rename one file", "scene_names")
+
+
 def check_frame_size(size: Sequence[int], what: str = "size", *, renderer: bool = True) -> tuple[int, int]:
     """``size`` as ``(width, height)`` after checking it: two integers of at least 16 pixels, and with
     ``renderer`` a frame the reference renderer can draw here (one is made and released: a size past
@@ -396,12 +415,13 @@ def capture(
     _on_ray_actors: Callable[[list[Any]], None] | None = None,
 ) -> CaptureReport:
     """Capture ``per_scene`` samples per scene and motion profile into the dataset folder ``out``.
-``scene_names`` and ``profiles`` are one name or a list of them.
+``scene_names`` and ``profiles`` are one name or a list of them, each name once (two scene files of one name,
+    whose samples would share ids, are refused too); ``out`` is not empty.
 
     ``size`` is ``(width, height)``. ``placement`` is where the cameras stand
     (:data:`rtp.capture.viewpoints.PLACEMENTS`: ``"free"`` anywhere in the viewpoint domain, ``"eye"``
     at the player's eye height over a floor); the dataset's manifest records it. With
-    ``workers > 1`` scenes render in parallel processes (one EGL context each). ``progress(done,
+    ``workers > 1`` scenes render in parallel processes (one EGL context each; a process a scene at most). ``progress(done,
     total)`` is called as samples complete (skipped ones count). Before a scene renders, its
     viewpoints are planned (a few milliseconds a pair: minutes for a hundred thousand):
     ``planning(job, found, asked)`` is called as each pair is found, ``job`` being
@@ -428,6 +448,12 @@ def capture(
     bad = [p for p in profiles if p not in MOTION_PROFILES]
     if bad:
         raise ParameterError(f"unknown motion profile {bad[0]!r}; profiles are {', '.join(MOTION_PROFILES)}")
+    if len(set(profiles)) < len(profiles):  # (one was planned and rendered twice, its samples counted twice)
+        raise ParameterError(f"profiles: each motion profile once, got {', '.join(profiles)}", "profiles")
+    _check_scene_ids(scene_names)
+    if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):  # (Path('') is the current folder)
+        raise ParameterError(f"out: expected a dataset folder path, got {out!r}"
+                             + (" (empty; '.' is the current folder)" if out == "" else ""), "out")
     if placement not in PLACEMENTS:
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
     w, h = check_frame_size(size, renderer=False)
@@ -512,7 +538,9 @@ def capture(
                 while not queue.empty():
                     tick(queue.get())
 
-            with worker_pool(workers or 1, ticks=queue) as pool:
+            # (a process a scene at most: one more was an idle process that took its share of the cores' threads
+            # from the workers that render, and said there were more processes than cores)
+            with worker_pool(min(workers or 1, len(args)), ticks=queue) as pool:
                 pending = {pool.submit(with_ticks, _run_job, *a) for a in args}
                 while pending:
                     finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)

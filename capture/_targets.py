@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import logging
+import numbers
 import os
 import re
 import zipfile
@@ -358,6 +359,11 @@ def compute_targets(
 
     from ._pool import worker_pool
 
+    if isinstance(metrics, str):  # (one name, not its letters: 'psnr' was the unknown metric 'p')
+        metrics = (metrics,)
+    if not isinstance(metrics, (list, tuple)) or not metrics:  # (none: nothing was computed, and 0 returned)
+        raise ParameterError(f"metrics: expected a metric name or a non-empty list of them, got {metrics!r}", "metrics")
+    metrics = tuple(dict.fromkeys(metrics))  # (a name given twice: its targets computed and written twice)
     for m in metrics:
         _check_name(m)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
@@ -383,16 +389,23 @@ def compute_targets(
     # every later run, good values included.
     if ppd is not None:
         M.resolve_ppd(ppd, 1)  # type: ignore[arg-type]  # (a string other than 'width' is what it refuses)
+        ppd = ppd if isinstance(ppd, str) else float(ppd)  # (as weber_l: a float32 is no JSON value to declare)
         if not set(_PPD_METRICS) & set(metrics):  # (it was taken and ignored)
             raise ParameterError(f"ppd: FLIP's pixels per degree, which only {' and '.join(_PPD_METRICS)} use; the "
                                  f"metrics asked for are {', '.join(metrics)}", "ppd")
     if weber_l is not None:
-        M.check_weber_l(weber_l)
+        if isinstance(weber_l, bool) or not isinstance(weber_l, numbers.Real):  # ('0.5' was declared as a string:
+            # every later run, the command line's 0.5 included, was refused as other parameters)
+            raise ParameterError(f"weber_l: expected a number, got {weber_l!r}", "weber_l")
+        weber_l = M.check_weber_l(weber_l)  # (a float: numpy's float32 is no JSON value to declare)
         if not any(M.metric_info(m).weber for m in metrics):
             raise ParameterError(f"weber_l: the environment luminance of {' and '.join(m for m in METRICS if METRICS[m].weber)}"
                                  f", which the metrics asked for ({', '.join(metrics)}) do not use", "weber_l")
     reader = DatasetReader(data_root)
-    _check_memory(reader, metrics, workers, ray)
+    # (locally a process a sample at most: --workers 8 on 2 samples was refused for 8 processes' memory; Ray
+    # starts every worker it is given)
+    _check_memory(reader, metrics, workers if workers is None or ray is not None else
+                  min(workers, max(1, len(reader.ids))), ray)
     store = TargetStore(data_root)
     store.root.mkdir(exist_ok=True)
     # Held to the end: a second job on the same targets would compute them again, and its declare could
@@ -440,7 +453,7 @@ def compute_targets(
                 if progress:
                     progress(done, len(reader.ids))
         else:
-            n = workers or 1
+            n = min(workers or 1, len(ids))  # (a process a sample at most: an idle one took the cores' threads too)
             with worker_pool(n) as pool:  # each worker's torch on its share of the cores (worker_threads)
                 futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
                 for f in as_completed(futures):

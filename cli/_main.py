@@ -108,6 +108,8 @@ def _checked_path(text: str, *, folder: bool) -> str:
     from rtp.sdk import ParameterError
     from rtp.sdk.files import check_output
 
+    if not text:  # (--out "", an unset shell variable, wrote the dataset, the demo, a play's report into the current folder)
+        raise argparse.ArgumentTypeError("expected a path, got '' (empty; '.' is the current folder)")
     try:
         check_output(text, folder=folder, what="path")
     except ParameterError as err:
@@ -435,6 +437,7 @@ def _tolerance(text: str) -> tuple[str, float]:
 def _cmd_capture(args: argparse.Namespace) -> int:
     from rtp.capture import capture, scene_id
     from rtp.capture.scenes import map_names
+    from rtp.sdk import ParameterError
 
     if bool(args.scene) == bool(args.split):
         raise _usage("give either --split NAME (every map of that split) or --scene NAME (repeatable)")
@@ -454,13 +457,18 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     def progress(n: int, _total: int) -> None:
         bar.update_to(n)
 
-    with Bar(args, total, "capture", "sample") as bar:
-        report = capture(
-            names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
-            workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
-            progress=progress, ray=args.ray, placement=args.placement,
-            planning=lambda job, found, asked: bar.status(f"planning {job}'s viewpoints: {found}/{asked}"),
-        )
+    try:
+        with Bar(args, total, "capture", "sample") as bar:
+            report = capture(
+                names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
+                workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
+                progress=progress, ray=args.ray, placement=args.placement,
+                planning=lambda job, found, asked: bar.status(f"planning {job}'s viewpoints: {found}/{asked}"),
+            )
+    except ParameterError as err:  # (the scenes' argument is named by the flag that gave them)
+        if err.name == "scene_names" and str(err).startswith("scene_names: ") and len(err.args) == 1:
+            err.args = (("--scene" if args.scene else "--split") + str(err).removeprefix("scene_names"),)
+        raise
     if report.failed:
         print(f"rtp capture: no valid viewpoints, skipped: {', '.join(report.failed)}", file=sys.stderr)
     unseen = ", ".join(f"{p} {100 * v:.1f}%" for p, v in report.unseen_mean().items())

@@ -492,3 +492,86 @@ def test_a_folder_without_its_manifest_refuses_samples_of_another_size(tmp_path:
     # the samples' own size resumes it (the manifest written again)
     again = capture(["procedural:5"], out, per_scene=1, size=(96, 64), profiles=("slow",))
     assert (again.written, again.skipped) == (0, 1) and DatasetReader(out).manifest["settings"]["size"] == [96, 64]
+
+
+def test_a_scene_or_profile_given_twice_and_scenes_sharing_sample_ids_are_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--scene procedural:3,procedural:3` planned and rendered the scene twice (with --workers 2 in two
+    processes at once: '4 samples written (1 of them replace samples from other cameras)'), `--profiles
+    slow,slow` said 2 samples and wrote 1, and two files of one name (a/x.glb, b/x.obj) captured their
+    samples over each other's: each is refused before anything is written, by its flag on the command line."""
+    from rtp.cli import main as rtp_main
+
+    out = tmp_path / "ds"
+    for kwargs, words in (({"scene_names": ["procedural:3", "procedural:3"]}, "scene_names: each scene once"),
+                          ({"profiles": ["slow", "slow"]}, "profiles: each motion profile once"),
+                          ({"scene_names": ["a/x.glb", "b/x.obj"]}, "scene_names: 'a/x.glb' and 'b/x.obj' both make")):
+        args = {"scene_names": ["procedural:3"], "out": out, "per_scene": 1, "size": (64, 48), **kwargs}
+        with pytest.raises(sdk.ParameterError, match=words):
+            capture(**args)  # type: ignore[arg-type]
+    for argv, said in ((["--scene", "procedural:3", "--scene", "procedural:3"], "--scene: each scene once"),
+                       (["--scene", "procedural:3", "--profiles", "slow,slow"], "--profiles: each motion profile once")):
+        assert rtp_main(["capture", *argv, "--per-scene", "1", "--size", "64x48", "--out", str(out)]) == 2
+        assert f"rtp capture: error: {said}" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_an_empty_out_is_refused_not_the_current_folder(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp capture --out ""` (an unset shell variable) wrote the dataset into the current folder, as
+    capture(out="") did: Path('') is '.'. Every --out of a folder or file is refused so."""
+    from rtp.cli import main as rtp_main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(sdk.ParameterError, match="out: expected a dataset folder path, got ''"):
+        capture(["procedural:3"], "", per_scene=1, size=(64, 48))
+    with pytest.raises(SystemExit) as exit_info:
+        rtp_main(["capture", "--scene", "procedural:3", "--per-scene", "1", "--size", "64x48", "--out", ""])
+    assert exit_info.value.code == 2
+    assert "argument --out: expected a path, got ''" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_targets_take_one_metric_name_and_refuse_none_and_a_weber_l_that_is_no_number(tmp_path: Path) -> None:
+    """compute_targets(data, 'psnr') read the name's letters ('unknown metric p'), an empty list computed nothing
+    and returned 0, and weber_l='0.5' was declared as a string, so that every later run, the command line's 0.5
+    included, was refused as targets of other parameters."""
+    from rtp.capture import TargetStore, compute_targets
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=1, size=(64, 48), profiles=("slow",))
+    for kwargs, words in (({"metrics": ()}, "metrics: expected a metric name or a non-empty list"),
+                          ({"metrics": ("jnyang",), "weber_l": "0.5"}, "weber_l: expected a number, got '0.5'"),
+                          ({"metrics": ("jnyang",), "weber_l": True}, "weber_l: expected a number")):
+        with pytest.raises(sdk.ParameterError, match=words):
+            compute_targets(out, **kwargs)  # type: ignore[arg-type]
+    assert not TargetStore(out).metrics
+    assert compute_targets(out, "psnr") == 1  # (one name, not its letters)
+    assert compute_targets(out, ("jnyang", "jnyang"), weber_l=np.float32(0.5)) == 1  # (a float32 declared as a float)
+    assert TargetStore(out).metrics == {"psnr": {}, "jnyang": {"weber_l": 0.5}}
+
+
+def test_worker_pools_start_a_process_a_job_at_most(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--workers 4` on one scene (capture) or one sample (targets) started four processes, three idle, each
+    of the working one's threads a quarter of the cores (and a warning of more processes than cores)."""
+    import contextlib
+
+    from rtp.capture import _capture, _pool, compute_targets
+
+    asked: list[int] = []
+
+    @contextlib.contextmanager
+    def pool(workers: int, ticks: object = None) -> object:
+        asked.append(workers)
+        raise KeyboardInterrupt  # (nothing to run: the size asked for is what is checked)
+        yield
+
+    out = tmp_path / "ds"
+    capture(["procedural:5", "procedural:6"], out, per_scene=1, size=(64, 48), profiles=("slow",))
+    monkeypatch.setattr(_capture, "worker_pool", pool)
+    monkeypatch.setattr(_pool, "worker_pool", pool)
+    with pytest.raises(KeyboardInterrupt):
+        capture(["procedural:5"], out, per_scene=2, size=(64, 48), profiles=("slow",), workers=4)
+    with pytest.raises(KeyboardInterrupt):
+        compute_targets(out, ("psnr",), workers=4)
+    assert asked == [1, 2]  # (one scene; two samples)
