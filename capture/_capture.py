@@ -63,6 +63,25 @@ class CaptureReport:
         return {p: float(np.mean(v)) for p, v in self.unseen.items() if v}
 
 
+#: The renderer settings that change what a sample's images are (Renderer.settings less the GL implementation's).
+_IMAGE_SETTINGS = ("shadow_map_size", "shadow_distance", "ao_samples", "ao_radius", "ao_strength", "anisotropy", "fxaa",
+                   "max_point_lights", "exposure_key", "reprojection_tolerance", "cull_back_faces")
+
+
+def _warn_other_renderer(out: Path, previous: Any, report: CaptureReport) -> None:
+    """A resumed capture whose new samples were drawn with other renderer settings than the folder's (another rtp
+    version's defaults: the default shadow map of frames up to 128 pixels changed on 2026-12-07) is said so: the
+    dataset mixes two renderers' images."""
+    if not (isinstance(previous, dict) and report.renderer and report.written):
+        return
+    changed = [f"{k} {previous.get(k)!r} before, {report.renderer.get(k)!r} now" for k in _IMAGE_SETTINGS
+               if k in previous and previous.get(k) != report.renderer.get(k)]
+    if changed:
+        log.warning("%s: the %d samples written now were drawn with other renderer settings than the samples there "
+                    "(%s; another rtp version's defaults): the dataset mixes both; capture into a new folder to keep "
+                    "one renderer's", out, report.written, "; ".join(changed))
+
+
 def load_scene(
     name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None
 ) -> tuple[Any, Any]:
@@ -552,6 +571,7 @@ def capture(
         for sample in DatasetReader(out):
             unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))
         previous = DatasetReader(out).manifest.get("renderer_settings")
+        _warn_other_renderer(out, previous, report)
         if writer is None:  # (a new folder on Ray: made by ray_capture once Ray answered)
             writer = DatasetWriter(out, settings)
         writer.finalize({

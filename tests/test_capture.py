@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -575,3 +576,26 @@ def test_worker_pools_start_a_process_a_job_at_most(tmp_path: Path, monkeypatch:
     with pytest.raises(KeyboardInterrupt):
         compute_targets(out, ("psnr",), workers=4)
     assert asked == [1, 2]  # (one scene; two samples)
+
+
+def test_a_resumed_capture_drawn_with_other_renderer_settings_says_so(tmp_path: Path,
+                                                                      caplog: pytest.LogCaptureFixture) -> None:
+    """The samples a resumed capture adds drawn with other renderer settings than the folder's (another rtp
+    version's defaults: frames up to 128 px drew a 1024-texel shadow map before 2026-12-07) are said to mix."""
+    import json
+
+    out = tmp_path / "ds"
+    capture(["procedural:1"], out, per_scene=1, size=(64, 48), profiles=("slow",))
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        capture(["procedural:1"], out, per_scene=2, size=(64, 48), profiles=("slow",))
+    assert "other renderer settings" not in caplog.text  # (the same renderer)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["renderer_settings"]["shadow_map_size"] == 256
+    manifest["renderer_settings"]["shadow_map_size"] = 1024  # (as rtp before 2026-12-07 drew them)
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        report = capture(["procedural:1"], out, per_scene=3, size=(64, 48), profiles=("slow",))
+    assert report.written == 1 and report.skipped == 2
+    assert ("the 1 samples written now were drawn with other renderer settings than the samples there "
+            "(shadow_map_size 1024 before, 256 now; another rtp version's defaults)") in caplog.text
