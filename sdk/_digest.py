@@ -9,6 +9,7 @@ alone (a small protobuf wire-format walk): the runtime needs no ``onnx`` package
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterator
 
 __all__ = ["DIGEST_ALGORITHM", "external_tensors", "model_digest"]
 
@@ -30,9 +31,10 @@ def _varint(data: bytes | memoryview, i: int) -> tuple[int, int]:
         shift += 7
 
 
-def _without_field(data: bytes, field: int) -> bytes:
-    """The top-level protobuf fields of ``data`` in order, minus every entry of ``field``."""
-    out = bytearray()
+def _walk(data: bytes | memoryview) -> Iterator[tuple[int, int, int, int, int]]:
+    """The top-level protobuf fields of ``data`` in order, each as ``(number, wire type, start, payload start,
+    end)`` (a varint's value is read again from its payload start; a length-delimited field's bytes are
+    ``data[payload start:end]``); a ValueError where it is no protobuf message."""
     i, n = 0, len(data)
     while i < n:
         start = i
@@ -40,21 +42,29 @@ def _without_field(data: bytes, field: int) -> bytes:
         number, wire = key >> 3, key & 7
         if number == 0:
             raise ValueError("field number 0")
+        payload = i
         if wire == 0:
             _, i = _varint(data, i)
         elif wire == 1:
             i += 8
         elif wire == 2:
-            length, i = _varint(data, i)
-            i += length
+            length, payload = _varint(data, i)
+            i = payload + length
         elif wire == 5:
             i += 4
         else:
             raise ValueError(f"unsupported wire type {wire}")
         if i > n:
             raise ValueError("truncated field")
+        yield number, wire, start, payload, i
+
+
+def _without_field(data: bytes, field: int) -> bytes:
+    """The top-level protobuf fields of ``data`` in order, minus every entry of ``field``."""
+    out = bytearray()
+    for number, _, start, _, end in _walk(data):
         if number != field:
-            out += data[start:i]
+            out += data[start:end]
     return bytes(out)
 
 
@@ -77,25 +87,11 @@ def _fields(data: memoryview) -> tuple[list[tuple[int, int]], list[tuple[int, me
     ones as (number, bytes); a ValueError where it is no protobuf message."""
     varints: list[tuple[int, int]] = []
     nested: list[tuple[int, memoryview]] = []
-    i, n = 0, len(data)
-    while i < n:
-        key, i = _varint(data, i)
-        number, wire = key >> 3, key & 7
-        if number == 0:
-            raise ValueError("field number 0")
+    for number, wire, _, payload, end in _walk(data):
         if wire == 0:
-            value, i = _varint(data, i)
-            varints.append((number, value))
-        elif wire == 1 or wire == 5:
-            i += 8 if wire == 1 else 4
+            varints.append((number, _varint(data, payload)[0]))
         elif wire == 2:
-            length, i = _varint(data, i)
-            nested.append((number, data[i:i + length]))
-            i += length
-        else:
-            raise ValueError(f"unsupported wire type {wire}")
-        if i > n:
-            raise ValueError("truncated field")
+            nested.append((number, data[payload:end]))
     return varints, nested
 
 

@@ -62,7 +62,8 @@ def _rgb(value: Any) -> tuple[float, float, float]:
 def _obj_library(p: Path) -> tuple[Path | None, dict[str, str] | None]:
     """The material library an OBJ file names (its first ``mtllib``, the one trimesh reads) and the texture
     (``map_Kd``) each of its materials names; ``(None, {})`` without a library, None for a library that cannot be
-    read (logged as a warning naming it: trimesh only logs it at DEBUG and gives a grey placeholder)."""
+    read (logged as a warning naming it: trimesh only logs it at DEBUG; its grey stand-in material is replaced
+    by the untextured default in :func:`_material_of`)."""
     try:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError:
