@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._channels import BLOCK_CELL, BLOCK_EPS, BLOCK_RATES
-from ._errors import InputDtypeError, InputShapeError, ParameterError
+from ._errors import InputChannelError, InputDtypeError, InputShapeError, ParameterError
 from ._rates import (
     RateLike,
     check_engine_rates,
@@ -455,13 +455,18 @@ def tile_block_levels(planes: np.ndarray, tile: int) -> np.ndarray:
     return out
 
 
+#: What the numeric options refuse although ``float()`` takes it: a flag (numpy's too: ``rescale=np.True_`` was
+#: taken for an exponent of 1, ``unseen_fraction=np.False_`` for 0) or text.
+_NOT_NUMBERS = (bool, np.bool_, str, bytes)
+
+
 def _in_unit_interval(value: object, name: str, expected: str) -> float:
     """``value`` as a float in [0, 1), or a ParameterError naming ``name`` and what was ``expected``."""
     try:
         x = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError, OverflowError):
         x = math.nan
-    if isinstance(value, (bool, str, bytes)) or not 0.0 <= x < 1.0:
+    if isinstance(value, _NOT_NUMBERS) or not 0.0 <= x < 1.0:
         raise ParameterError(f"{name}: expected {expected}, got {value!r}", name)
     return x
 
@@ -582,7 +587,7 @@ class PredictionReuse:
             scale = float(carry_scale)
         except (TypeError, ValueError, OverflowError):
             scale = math.nan
-        if isinstance(carry_scale, (bool, str, bytes)) or not 1.0 / MAX_CARRY_SCALE <= scale <= MAX_CARRY_SCALE:
+        if isinstance(carry_scale, _NOT_NUMBERS) or not 1.0 / MAX_CARRY_SCALE <= scale <= MAX_CARRY_SCALE:
             raise ParameterError(f"carry_scale: expected a factor in [{1 / MAX_CARRY_SCALE:g}, {MAX_CARRY_SCALE:g}] "
                                  f"(1: carried estimates as they are), got {carry_scale!r}", "carry_scale")
         if scale != 1.0 and predictor.metadata.higher_is_better:
@@ -627,7 +632,7 @@ class PredictionReuse:
             a = float(rescale)  # type: ignore[arg-type]
         except (TypeError, ValueError, OverflowError):
             a = math.nan
-        if isinstance(rescale, (bool, str, bytes)) or not 0.0 <= a <= MAX_RESCALE:
+        if isinstance(rescale, _NOT_NUMBERS) or not 0.0 <= a <= MAX_RESCALE:
             raise ParameterError(f"rescale: expected an exponent in [0, {MAX_RESCALE:g}] (0: carry the estimates as they "
                                  f"are), got {rescale!r}", "rescale")
         if a == 0.0:
@@ -720,6 +725,15 @@ class PredictionReuse:
             if x.ndim != 3:
                 raise InputShapeError(f"expected one frame's inputs (C, H, W), got shape {x.shape}", tuple(x.shape),
                                       "(C, H, W)")
+            # its dtype and planes on every frame, as the network's frames check them (cheap: not its values), not
+            # refused only every ``every``-th frame as if that frame's inputs were the wrong ones
+            if x.dtype != np.float32:
+                raise InputDtypeError(f"expected the inputs as float32, got dtype {x.dtype}; convert with "
+                                      "x.astype(np.float32)")
+            names = self._net.metadata.inputs
+            if x.shape[0] != len(names):
+                raise InputChannelError(f"expected {len(names)} channels {list(names)} on axis 0, got shape {x.shape}",
+                                        tuple(x.shape), f"({len(names)}, H, W)")
             return int(x.shape[1]), int(x.shape[2])
         if not callable(x):
             raise InputDtypeError(f"expected the inputs as a float32 numpy array (C, H, W) or a function of a window, "
@@ -818,6 +832,10 @@ class PredictionReuse:
         runs = self._age + 1 >= self.every
         if fetch is not None:  # its kind every frame; its shape and range only where it is read
             self._check_fetch_kind(fetch)
+        # seen and background are of this frame's shape on every frame: checked on the network's too, where they are
+        # not read (refused only on the next frame, as if that frame's were the wrong ones)
+        seen_ = None if seen is None else self._plane(seen, "seen", hw)
+        bg = None if background is None else self._plane(background, "background", hw)
         if self._cache is None or fetch is None or (runs and self.history == 0):
             return self._run(x, hw)
         assert self._track is not None and self._shape is not None
@@ -826,8 +844,7 @@ class PredictionReuse:
         # (the fetch indexes the previous frame's pixels: another size where dynamic resolution changed it)
         rows = self._plane(fetch[0], "fetch rows", hw, self._shape[0], step)
         cols = self._plane(fetch[1], "fetch cols", hw, self._shape[1], step)
-        seen_ = self._plane(np.ones(hw, np.float32) if seen is None else seen, "seen", hw)
-        bg = None if background is None else self._plane(background, "background", hw)
+        seen_ = np.ones(hw, np.float32) if seen_ is None else seen_
         hib = self._net.metadata.higher_is_better
         est, track, missing = carry_estimates(self._cache, self._track, rows, cols, seen_, bg, tile, hib,
                                               self.unseen_fraction, self.reduce, self.step)
@@ -902,13 +919,16 @@ class PredictionReuse:
         ``engine_rates`` and a ``combiner``, the rates the device shades where the engine's meet them are judged
         (:meth:`ShadingRatePredictor.shading_rates`)."""
         meta = self._net.metadata
-        if saving is not None:  # (refused before the frame moves the carry on)
-            check_saving(saving, resolve_allowed(allowed))
-            if threshold is not None:
-                check_threshold(threshold, meta.higher_is_better)
-        if engine_rates is not None:
-            check_engine_rates(engine_rates, combiner, allowed,
-                               tile_grid(*self._shape_of(x, seen), self.predictor.tile_size))
+        # Every argument of the choice is refused before the frame moves the carry on (a bad threshold, rate or
+        # combiner refused after predict() had aged the carry by a frame), and ``allowed`` is read once: an
+        # iterator read here was empty where the choice read it again (only 1x1 allowed, a valid budget refused).
+        allowed = resolve_allowed(allowed)
+        if saving is not None:
+            check_saving(saving, allowed)
+        if threshold is not None:
+            check_threshold(threshold, meta.higher_is_better)
+        check_engine_rates(engine_rates, combiner, allowed,  # (the combiner too, without engine rates)
+                           tile_grid(*self._shape_of(x, seen), self.predictor.tile_size))
         estimates = self.predict(x, fetch, seen, background)
         if saving is not None:
             assert self._shape is not None  # (predict set it)

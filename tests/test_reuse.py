@@ -1117,3 +1117,66 @@ def test_reuse_on_finer_hardware_tiles_is_the_model_tiles_reuse_split(
         assert theirs.work == ours.work and theirs.age == ours.age
     est = theirs.predict(x, None)  # a cut: the network, then its values split as the predictor's own predict
     np.testing.assert_array_equal(est, split.predict(x))
+
+
+def test_shading_rates_refuses_every_choice_argument_before_the_carry_moves_on() -> None:
+    """A bad ``threshold``, ``allowed`` or ``combiner`` (no budget, no engine rates) was refused only after
+    ``predict`` had moved the carry on by a frame: the frame retried with the right argument was then another
+    frame of the interval (the network ran a frame early or late)."""
+    s = _Scene(3, 4)
+    ones = np.ones((s.h, s.w), np.float32)
+    reuse = sdk.PredictionReuse(s.pred, 4)
+    reuse.shading_rates(s.x)
+    for kw, name in (({"threshold": "0.2"}, "threshold"), ({"threshold": float("nan")}, "threshold"),
+                     ({"allowed": ["3x3"]}, "allowed"), ({"combiner": "avg"}, "combiner")):
+        with pytest.raises(sdk.ParameterError, match=name):
+            reuse.shading_rates(s.x, (s.rows, s.cols), ones, **kw)  # type: ignore[arg-type]
+        assert reuse.age == 0, kw
+
+
+def test_shading_rates_reads_an_allowed_iterator_once() -> None:
+    """``allowed`` given as an iterator was read by the early checks and found empty by the choice: a budget or
+    engine rates on a reuse were refused ("only 1x1 is allowed") after the carry had moved on."""
+    s = _Scene(3, 4)
+    for kw in ({"saving": 0.5}, {"engine_rates": "2x2"}):
+        want = sdk.PredictionReuse(s.pred, 4).shading_rates(s.x, allowed=["2x2"], **kw)  # type: ignore[arg-type]
+        got = sdk.PredictionReuse(s.pred, 4).shading_rates(s.x, allowed=iter(["2x2"]), **kw)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(got, want)
+
+
+def test_numpy_flags_are_refused_as_numeric_options() -> None:
+    """``True`` is refused for a number; numpy's ``np.True_`` was taken for one (``rescale=np.True_`` an
+    exponent of 1, ``carry_scale=np.True_`` a factor of 1, ``unseen_fraction=np.False_`` a share of 0)."""
+    s = _Scene(3, 4)
+    for kw, name in (({"rescale": np.True_}, "rescale"), ({"carry_scale": np.True_}, "carry_scale"),
+                     ({"unseen_fraction": np.False_}, "unseen_fraction"), ({"refresh": np.False_}, "refresh"),
+                     ({"history": np.False_}, "history")):
+        with pytest.raises(sdk.ParameterError, match=name) as err:
+            sdk.PredictionReuse(s.pred, **kw)  # type: ignore[arg-type]
+        assert err.value.name == name
+    assert sdk.PredictionReuse(s.pred, unseen_fraction=np.float32(0.25)).unseen_fraction == 0.25
+
+
+def test_inputs_seen_and_background_are_checked_on_every_frame() -> None:
+    """Inputs of the wrong dtype or planes, and a ``seen`` or ``background`` of the wrong shape or kind, were
+    taken on the frames that do not read them (the inputs on carried frames, the masks on the network's) and
+    refused only every few frames, as if that frame's were the wrong ones."""
+    s = _Scene(3, 4)
+    ones = np.ones((s.h, s.w), np.float32)
+    fetch = (s.rows, s.cols)
+    carried = sdk.PredictionReuse(s.pred, 4)
+    carried.predict(s.x)  # the next frames are carried: the inputs are not read there
+    with pytest.raises(sdk.InputDtypeError, match="float32, got dtype float64"):
+        carried.predict(s.x.astype(np.float64), fetch, ones)
+    with pytest.raises(sdk.InputChannelError, match=r"expected 9 channels .* got shape \(8, 48, 64\)") as err:
+        carried.predict(s.x[:-1], fetch, ones)
+    assert err.value.expected == "(9, H, W)"
+    assert carried.age == 0  # (refused before the carry moved on)
+    network = sdk.PredictionReuse(s.pred, 1)  # the network runs on every frame: seen and background are not read
+    network.predict(s.x)
+    for seen, background, message in ((ones[:, :-1], None, "seen: expected shape"),
+                                      (ones.astype(object), None, "seen: expected a numeric array"),
+                                      (ones, ones[:-1], "background: expected shape"),
+                                      (ones, ones.tolist(), "background: expected a numpy array")):
+        with pytest.raises((sdk.InputShapeError, sdk.ParameterError), match=message):
+            network.predict(s.x, fetch, seen, background)  # type: ignore[arg-type]

@@ -1167,3 +1167,36 @@ def test_scene_index_and_split_file_errors(tmp_path: Path, caplog: pytest.LogCap
         scene_by_name("oa_dm1", cache, split="bogus")
     assert e.value.name == "split"
     assert scene_by_name("oa_dm1", cache, split="train").triangle_count > 0
+
+
+def test_fetch_refuses_an_empty_or_non_iterable_maps_before_any_download(tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch):
+    """``fetch(cache, [])`` downloaded and unpacked every package (~177 MB of .debs, ~400 MB on disk) and
+    returned ``{}``; ``fetch(cache, 5)`` was a bare TypeError where the docstring promises a ParameterError."""
+    calls = _fake_apt(monkeypatch, _packages())
+    splits = tmp_path / "s.yaml"
+    splits.write_text(SPLITS)
+    for maps, shown in (([], "an empty list"), ((), "an empty tuple"), (iter(()), "an empty tuple_iterator"), (5, "5")):
+        with pytest.raises(sdk.ParameterError, match=rf"maps: expected .*got {shown}") as err:
+            scenes.fetch(tmp_path / "cache", maps, splits=splits, progress=False)  # type: ignore[arg-type]
+        assert err.value.name == "maps"
+    assert calls == [] and not (tmp_path / "cache").exists()
+
+
+def test_a_map_name_that_is_not_text_is_a_parameter_error(tmp_path: Path):
+    """``scene_by_name(5, cache)`` (or None, or a list of names) raised a bare ``TypeError: 'int' object is not
+    iterable`` from the suggestions of close names; the scene functions' errors are typed."""
+    for call in (lambda n: scene_by_name(n, tmp_path), lambda n: scenes.scene_blockers(n, tmp_path),
+                 lambda n: scenes.check_map(n, tmp_path)):
+        for name in (5, None, ["oa_dm1"]):
+            with pytest.raises(sdk.ParameterError, match=r"name: expected a map name .*got") as err:
+                call(name)
+            assert err.value.name == "name"
+
+
+def test_a_map_listed_twice_in_one_split_is_named_so(tmp_path: Path):
+    """A map listed twice in one split was said to be "in both 'train' and 'train'"."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("train: [a, b, a]\nvalidation: []\ntest: []\n")
+    with pytest.raises(SceneFormatError, match=r"map 'a' is listed twice in 'train'$"):
+        load_splits(bad)

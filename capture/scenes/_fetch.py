@@ -105,7 +105,8 @@ def load_splits(path: str | Path | None = None) -> dict[str, list[str]]:
             raise SceneFormatError(f"{p}: '{split}' must be a list of map names, got {names!r}")
         for n in names:
             if n in seen:
-                raise SceneFormatError(f"{p}: map {n!r} is in both '{seen[n]}' and '{split}'")
+                where = f"listed twice in '{split}'" if seen[n] == split else f"in both '{seen[n]}' and '{split}'"
+                raise SceneFormatError(f"{p}: map {n!r} is {where}")
             seen[n] = split
         out[split] = list(names)
     return out
@@ -127,6 +128,9 @@ def map_names(split: str | None = None, splits: str | Path | None = None) -> lis
 
 
 def _check_listed(name: str, split: str | None, splits: str | Path | None) -> None:
+    if not isinstance(name, str):  # (a bare TypeError from the suggestions below: 'int' object is not iterable)
+        raise ParameterError(f"name: expected a map name (a string of `rtp scenes list`), got "
+                             f"{type(name).__name__} {name!r}", "name")
     allowed = map_names(split, splits)
     if name not in allowed:
         import difflib
@@ -253,12 +257,18 @@ def fetch(
     Raises:
         FetchError: apt-get/dpkg-deb failed, or a requested map is not in the packages.
         UnlistedMapError: a requested map is not listed in ``scenes.yaml``.
-        ParameterError: ``maps`` is not a name or a list of names.
+        ParameterError: ``maps`` is not a name or a non-empty list of names.
     """
     cache = Path(cache_dir).resolve()
-    wanted = [maps] if isinstance(maps, str) else list(maps) if maps is not None else map_names(None, splits)
+    try:
+        wanted = [maps] if isinstance(maps, str) else list(maps) if maps is not None else map_names(None, splits)
+    except TypeError:  # not iterable (maps=5): the ParameterError promised, not a bare TypeError
+        wanted = [maps]
     if not all(isinstance(m, str) for m in wanted):
         raise ParameterError(f"maps: expected a map name or a list of map names, got {maps!r}", "maps")
+    if maps is not None and not wanted:  # (an empty list downloaded and unpacked every package, ~400 MB, for no map)
+        raise ParameterError(f"maps: expected one or more map names (None: every listed map), got an empty "
+                             f"{type(maps).__name__}", "maps")
     for m in wanted:
         _check_listed(m, None, splits)
     debs, root = cache / "debs", cache / "root"
@@ -380,7 +390,7 @@ def scene_by_name(name: str, cache_dir: str | Path, *, split: str | None = None,
 
     Raises:
         UnlistedMapError: the map is not listed (in that split).
-        ParameterError: ``split`` is not one of :data:`SPLIT_NAMES` (nor None).
+        ParameterError: ``split`` is not one of :data:`SPLIT_NAMES` (nor None), or ``name`` is not a string.
         SceneNotFoundError: the cache has not been fetched, or the map is missing from it.
         SceneFormatError: the cache's ``index.json`` or an archive of the map is damaged, naming what to do.
     """
