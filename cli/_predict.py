@@ -313,10 +313,14 @@ def run_predict(args: argparse.Namespace) -> int:
                                  "a sequence (several frame files, or a folder of them)", "every")
     predictor = sdk.load(args.model, tile_size=args.tile_size)
     threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
-    allowed = None if args.allowed is None else [r for r in args.allowed.split(",") if r.strip()]
+    allowed = None if args.allowed is None else [r.strip() for r in args.allowed.split(",") if r.strip()]
     if allowed == []:  # (an unset shell variable, likely: VRS off is said as --allowed 1x1)
         raise sdk.ParameterError(f"--allowed: expected comma-separated rate names, got {args.allowed!r} (for no "
                                  "reduced rate, every tile at full rate: --allowed 1x1)", "allowed")
+    twice = [r for r in dict.fromkeys(allowed or []) if (allowed or []).count(r) > 1]
+    if twice:  # (2x2,2x2 ran as 2x2 alone: a typo of another rate, likely, taken in silence)
+        raise sdk.ParameterError(f"--allowed: each rate once, got {', '.join(twice)} more than once in "
+                                 f"{args.allowed!r}", "allowed")
     if args.saving is not None:  # (its range, with the rates allowed, before the first frame's work)
         sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, allowed=allowed, threshold=args.threshold,
                                     higher_is_better=predictor.metadata.higher_is_better)

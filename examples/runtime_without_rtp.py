@@ -430,6 +430,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [r for r in allowed if r not in RATES]
     if unknown:
         ap.error(f"--allowed: {', '.join(unknown)} is no reduced rate; the rates are {', '.join(RATES)}")
+    twice = [r for r in dict.fromkeys(allowed) if allowed.count(r) > 1]
+    if twice:
+        ap.error(f"--allowed: each rate once, got {', '.join(twice)} more than once in {a.allowed!r}")
     if a.threshold is not None and not np.isfinite(a.threshold):
         ap.error(f"--threshold: expected a finite number, got {a.threshold:g}")
     if a.saving is not None and not 0.0 <= a.saving <= 0.9375:

@@ -72,6 +72,18 @@ def test_options_reach_the_decision(frame: Path, capsys: pytest.CaptureFixture[s
     assert "jnyang.onnx (jnyang) on" in text and "10x6 tiles of 16px" in text and "% of the shading work" in text
 
 
+def test_a_rate_allowed_twice_is_refused(frame: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--allowed 2x2,2x2` ran as `--allowed 2x2` in silence (a typo of another rate, likely); each rate is
+    taken once, and a space after a comma is no part of a name."""
+    for allowed in ("2x2,2x2", "1x2,2x2, 2x2", "4x4,1x2,4x4,1x2"):
+        assert main(["predict", str(frame), "--allowed", allowed, "--json"]) == 2, allowed
+        err = capsys.readouterr().err
+        assert "rtp predict: error: --allowed: each rate once, got " in err and repr(allowed) in err, err
+    assert "got 4x4, 1x2 more than once in" in err
+    assert main(["predict", str(frame), "--allowed", "1x2, 2x2", "--json"]) == 0
+    assert set(json.loads(capsys.readouterr().out)["rates"]) <= {"1x1", "1x2", "2x2"}
+
+
 def test_a_frame_that_is_not_what_it_should_be_is_named(frame: Path, tmp_path: Path,
                                                        capsys: pytest.CaptureFixture[str],
                                                        caplog: pytest.LogCaptureFixture) -> None:

@@ -204,6 +204,7 @@ def test_the_ports_budget_beside_engine_rates_is_the_sdks(higher_is_better: bool
 @pytest.mark.parametrize(("args", "words"), [
     (["--tile-size", "7"], "invalid choice: 7"),
     (["--allowed", "3x3"], "--allowed: 3x3 is no reduced rate"),
+    (["--allowed", "2x2,2x2"], "--allowed: each rate once, got 2x2 more than once in '2x2,2x2'"),
     (["--threshold", "nan"], "--threshold: expected a finite number"),
     (["--size", "abc"], "--size: expected WIDTHxHEIGHT"),
     (["--size", "0x0"], "--size: expected WIDTHxHEIGHT"),
@@ -211,7 +212,8 @@ def test_the_ports_budget_beside_engine_rates_is_the_sdks(higher_is_better: bool
 def test_the_ports_command_line_refuses_what_it_cannot_run(port: ModuleType, args: list[str], words: str,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     """The file engines port ran a 7-pixel tile on the 8-pixel grid, an unknown rate and a NaN threshold in
-    silence, and ended --size abc and 0x0 in tracebacks (a ZeroDivisionError for --tile-size 0)."""
+    silence, and ended --size abc and 0x0 in tracebacks (a ZeroDivisionError for --tile-size 0); a rate
+    allowed twice (--allowed 2x2,2x2) ran as that rate alone, as rtp predict's did."""
     with pytest.raises(SystemExit) as info:
         port.main([str(sdk.load("jnyang").path), *args])
     assert info.value.code == 2 and words in capsys.readouterr().err
