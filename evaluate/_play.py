@@ -381,8 +381,15 @@ def _dynamic_sentence(settings: dict[str, Any]) -> str:
     if not dyn:
         return ""
     sizes = ", ".join(f"{w}x{h}" for w, h in dyn["sizes"])
-    return (f" Dynamic resolution: the frames are drawn at {sizes} in turn, each size held {dyn['every']} frames "
-            f"(scales {', '.join(f'{v:g}' for v in dyn['scales'])} of the size); every method chooses, shades and is "
+    scales = ", ".join(f"{v:g}" for v in dyn["scales"])
+    if len(dyn["sizes"]) == 1:  # (one scale, or scales that round to one size: it said "drawn at 80x48 in turn")
+        several = len(dyn["scales"]) > 1
+        drawn = (f"every frame is drawn at {sizes} (scale{'s' if several else ''} {scales} of the size"
+                 f"{', all of them that size' if several else ''})")
+    else:
+        drawn = (f"the frames are drawn at {sizes} in turn, each size held {dyn['every']} frames (scales {scales} of "
+                 "the size)")
+    return (f" Dynamic resolution: {drawn}; every method chooses, shades and is "
             "judged at each frame's own size, its history the frame it displayed at the size it was drawn, and its "
             "saving is a share of each frame's own pixels.")
 
@@ -705,6 +712,11 @@ def play(
                        loops=sum(_loop_count(m, sweep, predictors) for m in specs), models=len(predictors),
                        error=PlayError)
     check_frame_size((w, h))
+    if workers > len(paths):  # (as capture and targets: a process a work item at most; --workers 4 on one path
+        # played it in this process without a word)
+        log.warning("workers %d for %d path%s (%s): a process a path at most, so %s", workers, len(paths),
+                    "" if len(paths) == 1 else "s", ", ".join(paths),
+                    "it is played in this process" if len(paths) == 1 else f"{len(paths)} processes play them")
     report = PlayReport(settings)
     outdir = Path(out) if out is not None else None
     guard = contextlib.ExitStack()

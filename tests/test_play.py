@@ -298,6 +298,25 @@ def test_a_schedule_the_path_ends_before_is_refused(tmp_path: Path, capsys: pyte
     assert rep.settings["dynamic_resolution"]["sizes"] == [[64, 48], [32, 24]]
 
 
+def test_a_one_size_schedule_says_every_frame_is_drawn_at_that_size() -> None:
+    """`--dynamic-resolution 0.5@3` (one scale, or scales that round to one size) drew every frame at one size,
+    and play.md said they were "drawn at 32x24 in turn, each size held 3 frames"; it says every frame is."""
+    from rtp.evaluate._play import _dynamic_sentence
+
+    kw: dict[str, Any] = {"paths": ("slow",), "frames": 3, "size": (64, 48), "sweep": False, "flip_every": 0,
+                          "plots": False}
+    text = play("procedural:0", "full", dynamic_resolution=DynamicResolution((0.5,), 3), **kw).to_markdown()
+    assert " Dynamic resolution: every frame is drawn at 32x24 (scale 0.5 of the size); every method " in text, text
+    assert "in turn" not in text and "each size held" not in text
+    # scales that round to one size (at least 16 pixels a side) say so; two sizes are drawn in turn
+    one = {"dynamic_resolution": {"scales": [0.1, 0.05], "every": 3, "sizes": [[16, 16]]}}
+    assert _dynamic_sentence(one).startswith(
+        " Dynamic resolution: every frame is drawn at 16x16 (scales 0.1, 0.05 of the size, all of them that size); ")
+    assert _dynamic_sentence({"dynamic_resolution": {"scales": [1, 0.5], "every": 3, "sizes": [[64, 48], [32, 24]]}}
+                             ).startswith(" Dynamic resolution: the frames are drawn at 64x48, 32x24 in turn, each size "
+                                          "held 3 frames (scales 1, 0.5 of the size); ")
+
+
 def test_a_frame_of_another_size_reprojects_as_the_renderer_does(scene: Any) -> None:
     """Dynamic resolution: each frame at its schedule's size; a frame after one of another size fetches from
     that frame's pixels (sdk.reproject of its pixel indices), which on frames of one size is the renderer's
@@ -776,6 +795,33 @@ def test_paths_in_worker_processes_give_the_same_report(caplog: pytest.LogCaptur
         return json.dumps([{k: v for k, v in r.items() if k != "predict_ms"} for r in rows])
 
     assert len(one.rows) == 4 and timeless(one.rows) == timeless(two.rows)
+
+
+def test_more_workers_than_paths_say_how_many_processes_play(monkeypatch: pytest.MonkeyPatch,
+                                                              caplog: pytest.LogCaptureFixture) -> None:
+    """`rtp play --workers 4` with one path played it in this process without a word (as capture and targets,
+    a process a path at most); it says so before the work, and how many processes play where there are more
+    paths. As many workers as paths, or one, say nothing."""
+    import logging
+
+    from rtp.evaluate import _play
+
+    class Started(Exception):
+        pass
+
+    def started(settings: Any) -> Any:  # (the work begins: nothing is played)
+        raise Started
+
+    monkeypatch.setattr(_play, "PlayReport", started)
+    kw: dict[str, Any] = {"frames": 3, "size": (W, H), "sweep": False, "flip_every": 0, "plots": False}
+    said: list[list[str]] = []
+    for paths, workers in ((("fast",), 4), (("slow", "fast"), 3), (("slow", "fast"), 2), (("fast",), 1)):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="rtp.evaluate"), pytest.raises(Started):
+            play("procedural:0", "jnyang", paths=paths, workers=workers, **kw)
+        said.append([r.getMessage() for r in caplog.records if "workers" in r.getMessage()])
+    assert said == [["workers 4 for 1 path (fast): a process a path at most, so it is played in this process"],
+                    ["workers 3 for 2 paths (slow, fast): a process a path at most, so 2 processes play them"], [], []]
 
 
 def test_a_play_into_another_runs_folder_says_it_replaces_that_report(tmp_path: Path,
