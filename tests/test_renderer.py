@@ -384,6 +384,27 @@ def test_reprojection_static_camera(renderer):
 
 
 @pytest.mark.gl
+def test_a_prev_camera_that_is_not_prevs_own_is_refused(renderer):
+    """`render(cam, prev, prev_camera=X)` took X for prev's camera in silence: motion vectors and the reprojection
+    of prev's pixels from a camera that did not draw them. X that differs from prev.camera is refused naming both;
+    X that repeats it (as an equal Camera, its position an array) draws what prev alone draws."""
+    from rtp.sdk import ParameterError
+
+    renderer.load_scene(_textured_scene())
+    prev_cam = Camera((-0.6, 1.0, 2.0), yaw=-4.0, pitch=-8.0)
+    cur_cam = Camera((0.3, 1.1, 1.8), yaw=3.0, pitch=-8.0)
+    prev = renderer.render(prev_cam)
+    with pytest.raises(ParameterError, match=r"^prev_camera and prev\.camera: two different previous cameras") as info:
+        renderer.render(cur_cam, prev, prev_camera=cur_cam)
+    assert isinstance(info.value, ValueError) and info.value.name == "prev_camera"
+    assert repr(cur_cam) in str(info.value) and repr(prev_cam) in str(info.value)
+    alone = renderer.render(cur_cam, prev)
+    same = renderer.render(cur_cam, prev, prev_camera=Camera(np.array([-0.6, 1.0, 2.0]), yaw=-4.0, pitch=-8.0))
+    np.testing.assert_array_equal(same.reprojected, alone.reprojected)
+    np.testing.assert_array_equal(same.motion, alone.motion)
+
+
+@pytest.mark.gl
 def test_reprojection_moving_camera_matches_reference(renderer):
     renderer.load_scene(_textured_scene())
     prev_cam = Camera((-0.6, 1.0, 2.0), yaw=-4.0, pitch=-8.0)

@@ -146,6 +146,12 @@ def _check_camera(camera: Any, what: str) -> Camera:
     return camera
 
 
+def _same_view(a: Camera, b: Camera, width: int, height: int) -> bool:
+    """Whether cameras ``a`` and ``b`` draw the same frame (the same view and projection; compared by their
+    matrices: a position given as an array makes the dataclass's ``==`` ambiguous)."""
+    return a is b or bool(np.array_equal(a.view_projection(width, height), b.view_projection(width, height)))
+
+
 def _check_flag(value: Any, what: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise RendererError(f"{what}: expected True or False, got {value!r}")
@@ -852,8 +858,10 @@ class Renderer:
             prev: the previous frame (from this renderer or any frame of the same size); its final
                 1x1 colour and depth are reprojected, and its camera drives motion vectors.
                 Without it, ``reprojected`` and ``seen`` are 0.
-            prev_camera: previous camera for motion vectors when ``prev`` is None (default:
-                ``prev.camera``).
+            prev_camera: the previous camera, for motion vectors without a previous frame (``prev``
+                None). With ``prev`` it defaults to ``prev.camera`` and may only repeat it (or stand in
+                for a ``prev`` whose ``camera`` is None): a camera that differs from ``prev.camera`` is
+                a :class:`rtp.sdk.ParameterError` (a ``ValueError``) naming both.
             exposure: a fixed exposure multiplier instead of auto-exposure.
             debug: also read back the pre-post-processing lighting of every rate (``Frame.lighting``).
 
@@ -870,6 +878,13 @@ class Renderer:
         scene = self._check_can_render(prev)
         if prev_camera is None and prev is not None:
             prev_camera = prev.camera
+        elif prev is not None and isinstance(prev.camera, Camera) and not _same_view(
+                _check_camera(prev_camera, "prev_camera"), prev.camera, self.width, self.height):
+            # (it took prev_camera's in silence: motion vectors and the reprojection of prev's pixels from a camera
+            # that did not draw them)
+            raise ParameterError(f"prev_camera and prev.camera: two different previous cameras ({prev_camera!r} and "
+                                 f"{prev.camera!r}); prev's own camera drew the pixels reprojected: give prev alone, or "
+                                 "prev_camera alone (motion vectors without a previous frame)", "prev_camera")
         if prev_camera is not None or prev is not None:  # a previous frame needs its camera (a Frame with camera=None)
             _check_camera(prev_camera, "prev_camera" if prev is None else "prev_camera (or prev.camera)")
         timer = _StageTimer(self.ctx, self.profile)
