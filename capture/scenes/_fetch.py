@@ -260,8 +260,9 @@ def fetch(
         ParameterError: ``maps`` is not a name or a non-empty list of names.
     """
     cache = Path(cache_dir).resolve()
+    wanted: list[object]
     try:
-        wanted = [maps] if isinstance(maps, str) else list(maps) if maps is not None else map_names(None, splits)
+        wanted = [maps] if isinstance(maps, str) else list(maps) if maps is not None else list(map_names(None, splits))
     except TypeError:  # not iterable (maps=5): the ParameterError promised, not a bare TypeError
         wanted = [maps]
     if not all(isinstance(m, str) for m in wanted):
@@ -269,7 +270,8 @@ def fetch(
     if maps is not None and not wanted:  # (an empty list downloaded and unpacked every package, ~400 MB, for no map)
         raise ParameterError(f"maps: expected one or more map names (None: every listed map), got an empty "
                              f"{type(maps).__name__}", "maps")
-    for m in wanted:
+    names = [m for m in wanted if isinstance(m, str)]
+    for m in names:
         _check_listed(m, None, splits)
     debs, root = cache / "debs", cache / "root"
     debs.mkdir(parents=True, exist_ok=True)
@@ -291,15 +293,15 @@ def fetch(
         _write_text(stamp, "\n".join(have))
     index = _scan_archives(root, cache / "pk3")
     _write_text(cache / "index.json", json.dumps(index, indent=1, sort_keys=True))
-    absent = [m for m in wanted if m not in index["maps"]]
+    absent = [m for m in names if m not in index["maps"]]
     if absent:
         raise FetchError(f"maps listed in {splits or DEFAULT_SPLITS} but not found in the packages {list(PACKAGES)}: "
                          f"{absent}")
-    log.info("%d maps available in %s (%d requested)", len(index["maps"]), cache, len(wanted))
+    log.info("%d maps available in %s (%d requested)", len(index["maps"]), cache, len(names))
     if convert:
-        for m in _progress(wanted, desc="convert", unit="map", disable=not progress):
+        for m in _progress(names, desc="convert", unit="map", disable=not progress):
             _load_cached(m, cache, index)
-    return {m: cache / index["maps"][m] for m in wanted}
+    return {m: cache / index["maps"][m] for m in names}
 
 
 def _download(packages: Sequence[str], debs: Path) -> None:
