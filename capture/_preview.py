@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from rtp.sdk import ALL_RATES, ParameterError, work_saved
+from rtp.sdk import ALL_RATES, ParameterError, srgb_to_linear, work_saved
 
 from ._dataset import _PAPER_BUFFERS, BUFFERS
 from ._images import figure_image
@@ -17,14 +17,33 @@ __all__ = ["preview_sheet"]
 _COLS = 4
 
 
+def _paper(sample: Any) -> bool:
+    """Whether ``sample`` is of the paper's released layout (PaperDatasetReader's samples say so)."""
+    meta = getattr(sample, "meta", {}) or {}
+    return meta.get("source") == "paper"
+
+
 def _missing(sample: Any) -> frozenset[str]:
     """The buffers ``sample``'s dataset does not hold: an engine's frames imported without them
     (``sample.absent``), and what the paper's released layout has no file for (depth, metallic, motion)."""
     absent: frozenset[str] = getattr(sample, "absent", frozenset())
-    meta = getattr(sample, "meta", {}) or {}
-    if meta.get("source") == "paper":  # (PaperDatasetReader's samples say so)
+    if _paper(sample):
         absent |= frozenset(b for b in BUFFERS if b not in _PAPER_BUFFERS)
     return absent
+
+
+def _normal(sample: Any) -> tuple[str, np.ndarray]:
+    """The normal panel's title and image: the view-space normal's x, y, z in [-1, 1] as RGB in [0, 1]
+    (``n * 0.5 + 0.5``; 0.5 grey is a zero component). rtp's layout holds the linear normal; the paper's
+    holds it as written through an sRGB target, its negative components clamped to 0 (PaperDatasetReader),
+    so it is decoded to the linear normal first (it took the stored sRGB values for the normal, which drew
+    a component of 0.5 as 0.87 rather than 0.75), its negatives shown as 0."""
+    label = "view-space normal (x, y, z as RGB)"
+    normal = sample.buffer("normal")
+    if _paper(sample):
+        normal = srgb_to_linear(normal).astype(np.float32)
+        label += "\nthis layout stores < 0 as 0"
+    return label, np.clip(normal * 0.5 + 0.5, 0, 1)
 
 
 def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
@@ -36,6 +55,7 @@ def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
     far = float(np.percentile(depth[geometry], 99)) if depth is not None and geometry.any() else 1.0
     grey = {"cmap": "gray", "vmin": 0.0, "vmax": 1.0}
     nothing = np.zeros(final.shape[:2], np.float32)
+    normal_label, normal = _normal(sample)
 
     def held(name: str, label: str, options: dict[str, Any]) -> tuple[str, np.ndarray, dict[str, Any]]:
         """The panel of channel ``name``, or one saying the dataset has no such buffer."""
@@ -54,8 +74,7 @@ def _panels(sample: Any) -> list[tuple[str, np.ndarray, dict[str, Any]]]:
     out.append(("|final 1x1 - final 4x4| x 4", np.clip(np.abs(final - sample.final("4x4")) * 4, 0, 1), {}))
     out += [
         ("albedo (sRGB)", sample.buffer("albedo"), {}),
-        ("view-space normal (x, y, z as RGB)", np.clip(sample.buffer("normal") * 0.5 + 0.5, 0, 1) * geometry[..., None],
-         {}),
+        (normal_label, normal * geometry[..., None], {}),
         held("depth", "linear depth (scene units)", {"cmap": "viridis", "vmin": 0.0, "vmax": far, "colorbar": True}),
         held("shadow", "main-light (sun) shadow, 1 = lit", grey),
         held("roughness", "roughness", {**grey, "colorbar": True}),

@@ -400,6 +400,29 @@ def test_preview_draws_the_papers_layout_saying_what_it_lacks(tmp_path: Path) ->
     assert said == ["sample 0000: scene Bistro, 64x48"] and (tmp_path / "paper.png").stat().st_size > 0
 
 
+def test_preview_shows_the_papers_normals_as_rtps_linear_ones(tmp_path: Path) -> None:
+    """The paper's layout stores the view-space normal through an sRGB target, negatives clamped to 0; the
+    preview took those stored values for the normal and applied x * 0.5 + 0.5 to them (a component of 0.5
+    drawn as 0.87). It decodes them first: the panel is the linear normal's n * 0.5 + 0.5, as rtp's layout's."""
+    from rtp.capture import open_dataset
+    from rtp.capture._dataset import write_png
+    from rtp.capture._preview import _panels
+
+    folder = tmp_path / "Bistro" / "0000"
+    rng = np.random.default_rng(0)
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "extra_1x1",
+                 *(f"output_{r}" for r in sdk.ALL_RATES)]:
+        write_png(folder / f"{stem}.png", rng.integers(0, 256, (48, 64, 4), dtype=np.uint8))
+    linear = np.zeros((48, 64, 3), np.float32)
+    linear[:, :32] = (0.5, 0.0, 1.0)  # (negative x and y, stored as 0)
+    linear[:, 32:] = (0.2, 0.6, 0.77)
+    write_png(folder / "normals_1x1.png", np.concatenate([sdk.linear_to_srgb(linear), np.ones((48, 64, 1))], -1))
+    ((title, panel, _),) = [p for p in _panels(open_dataset(tmp_path / "Bistro")["0000"]) if "normal" in p[0]]
+    assert title == "view-space normal (x, y, z as RGB)\nthis layout stores < 0 as 0", title
+    np.testing.assert_allclose(panel, linear * 0.5 + 0.5, atol=0.004)  # (8-bit sRGB, decoded: up to 0.0045 off, halved)
+    assert panel[0, 0] == pytest.approx((0.75, 0.5, 1.0), abs=0.002)
+
+
 def test_capture_at_eye_height_records_its_placement(tmp_path: Path) -> None:
     """--placement eye: the manifest says where the cameras stood, the cameras differ from the free
     placement's, and a folder is resumed only with the placement it was captured with."""
