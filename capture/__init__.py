@@ -32,7 +32,7 @@ from ._memory import check_frame_memory, check_memory, job_bytes
 from ._pool import tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
 from ._ray import RayExecutorError, RayWorkerError
-from ._targets import BASE_TILE, TargetError, TargetStore, compute_targets, pool_targets
+from ._targets import BASE_TILE, MAX_WEBER_L, TargetError, TargetStore, compute_targets, pool_targets
 
 __all__ = [
     "tick_queue",
@@ -41,6 +41,7 @@ __all__ = [
     "worker_threads",
     "BASE_TILE",
     "BUFFERS",
+    "MAX_WEBER_L",
     "MESH_EXTENSIONS",
     "PROCEDURAL_PREFIX",
     "CaptureReport",

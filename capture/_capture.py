@@ -15,6 +15,7 @@ import numbers
 import os
 import platform
 import re
+import reprlib
 import shutil
 import time
 import zlib
@@ -29,7 +30,7 @@ import numpy as np
 from rtp.sdk import ALL_RATES, ParameterError
 from rtp.sdk.files import writer_lock
 
-from ._dataset import DatasetError, DatasetReader, DatasetWriter
+from ._dataset import MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
 from ._memory import check_frame_memory
 from ._pool import cores, tick_queue, with_ticks, worker_pool
 
@@ -179,6 +180,22 @@ def _check_scene_ids(scene_names: Sequence[str]) -> None:
             raise ParameterError(
                 f"scene_names: {other!r} and {name!r} both make the sample ids {sid}-<profile>-<index>, so one "
                 "would be captured over the other; capture them into two folders, or rename one file", "scene_names")
+
+
+def _check_id_length(scene_names: Sequence[str], profiles: Sequence[str], per_scene: int) -> None:
+    """Refuse a scene whose sample ids would be longer than a sample id may be (``MAX_ID_LENGTH``: a scene file of
+    a name of about 190 characters failed at its first sample's write, "File name too long", after its planning
+    and rendering): a :class:`ParameterError` about ``scene_names`` that names the limit."""
+    tail = max(len(f"-{p}-{per_scene - 1:04d}") for p in profiles)  # (the longest profile, the last index)
+    for name in scene_names:
+        sid = scene_id(name)
+        if len(sid) + tail > MAX_ID_LENGTH:
+            part = "its file name without the extension" if Path(name).suffix.lower() in MESH_EXTENSIONS else "its name"
+            raise ParameterError(
+                f"scene_names: {reprlib.repr(name)} makes sample ids of up to {len(sid) + tail} characters "
+                f"(<scene>-<profile>-<index>), more than the {MAX_ID_LENGTH} a sample id may have (its file name stays "
+                f"within the 255 bytes a file system allows); shorten {part} to at most {MAX_ID_LENGTH - tail} "
+                "characters", "scene_names")
 
 
 def check_frame_size(size: Sequence[int], what: str = "size", *, renderer: bool = True) -> tuple[int, int]:
@@ -431,6 +448,7 @@ def capture(
     ray: str | None = None,
     placement: str = "free",
     planning: Callable[[str, int, int], None] | None = None,
+    starting: Callable[[int], None] | None = None,
     _on_ray_actors: Callable[[list[Any]], None] | None = None,
 ) -> CaptureReport:
     """Capture ``per_scene`` samples per scene and motion profile into the dataset folder ``out``.
@@ -445,6 +463,9 @@ def capture(
     viewpoints are planned (a few milliseconds a pair: minutes for a hundred thousand):
     ``planning(job, found, asked)`` is called as each pair is found, ``job`` being
     ``"<scene>/<profile>"`` (on Ray at most every ``PLAN_NEWS_S`` a job, and when it is planned).
+    ``starting(total)`` is called once, with the number of samples asked for, when every argument, scene
+    and the folder have been checked and before any scene is planned: a caller that announces the job
+    does it there, so that a refusal is never preceded by the announcement of a job that does not run.
 
     ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
     instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:
@@ -470,6 +491,7 @@ def capture(
     if len(set(profiles)) < len(profiles):  # (one was planned and rendered twice, its samples counted twice)
         raise ParameterError(f"profiles: each motion profile once, got {', '.join(profiles)}", "profiles")
     _check_scene_ids(scene_names)
+    _check_id_length(scene_names, profiles, int(per_scene))
     if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):  # (Path('') is the current folder)
         raise ParameterError(f"out: expected a dataset folder path, got {out!r}"
                              + (" (empty; '.' is the current folder)" if out == "" else ""), "out")
@@ -506,6 +528,8 @@ def capture(
         if writer is not None and writer.remove_stale():
             log.info("removed temporary files of an interrupted capture in %s", out)
         total = len(scene_names) * len(profiles) * per_scene
+        if starting:
+            starting(total)
         done = 0
         report = CaptureReport()
         args = [(s, tuple(profiles), per_scene, (w, h), str(out), seed, None if cache_dir is None else str(cache_dir),

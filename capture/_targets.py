@@ -48,10 +48,15 @@ from ._pool import cores
 
 #: The metrics that take FLIP's pixels per degree (the rest ignore ``ppd``).
 _PPD_METRICS = ("flip", "jnflip")
+#: The largest environment luminance ``weber_l`` the targets take. A JN target is the Yang or FLIP error (at most
+#: 1) over ``L + l``, so at most ``1 / l``: past ``1 / MIN_PARAMETER`` of ``rtp.sdk``'s transforms (1e-6, the
+#: smallest ``mu_y`` a model's metadata takes) every target is below the smallest mean training target a
+#: transform can be fitted to (and far past it they are float32's zero), so no model can be trained on them.
+MAX_WEBER_L = 1e6
 
 log = logging.getLogger("rtp.capture")
 
-__all__ = ["BASE_TILE", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
+__all__ = ["BASE_TILE", "MAX_WEBER_L", "TargetError", "TargetStore", "compute_targets", "pool_targets"]
 
 FORMAT = "rtp-targets"
 FORMAT_VERSION = 1
@@ -359,6 +364,9 @@ def compute_targets(
 
     from ._pool import worker_pool
 
+    if not isinstance(data_root, (str, os.PathLike)) or not os.fspath(data_root):  # (Path('') is the current folder)
+        raise ParameterError(f"data_root: expected a dataset folder path, got {data_root!r}"
+                             + (" (empty; '.' is the current folder)" if data_root == "" else ""), "data_root")
     if isinstance(metrics, str):  # (one name, not its letters: 'psnr' was the unknown metric 'p')
         metrics = (metrics,)
     if not isinstance(metrics, (list, tuple)) or not metrics:  # (none: nothing was computed, and 0 returned)
@@ -398,6 +406,10 @@ def compute_targets(
             # every later run, the command line's 0.5 included, was refused as other parameters)
             raise ParameterError(f"weber_l: expected a number, got {weber_l!r}", "weber_l")
         weber_l = M.check_weber_l(weber_l)  # (a float: numpy's float32 is no JSON value to declare)
+        if weber_l > MAX_WEBER_L:  # (1e308 was declared and gave all-zero targets)
+            raise ParameterError(f"weber_l: expected at most {MAX_WEBER_L:g}, got {weber_l:g}: a JN target is at most "
+                                 f"1 / weber_l, and below {1 / MAX_WEBER_L:g} (the smallest mean target a model's "
+                                 f"transform takes) no model can be trained on the targets", "weber_l")
         if not any(M.metric_info(m).weber for m in metrics):
             raise ParameterError(f"weber_l: the environment luminance of {' and '.join(m for m in METRICS if METRICS[m].weber)}"
                                  f", which the metrics asked for ({', '.join(metrics)}) do not use", "weber_l")

@@ -6,10 +6,11 @@ the runtime dependencies alone."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -444,9 +445,18 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     names = list(_names(args.scene)) if args.scene else map_names(args.split, args.splits)
     total = len(names) * len(args.profiles) * args.per_scene
     what = f"{len(names)} maps of the {args.split} split" if args.split else ", ".join(names)
-    if not args.quiet:  # (-q: only errors)
-        print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
-              f"at {args.size[0]}x{args.size[1]}, cameras placed {args.placement}, into {args.out}", file=sys.stderr)
+    bars = contextlib.ExitStack()
+    bar: Bar | None = None
+
+    def starting(_total: int) -> None:
+        """The job announced, and its bar started, once the library has checked everything (a scene or
+        profile given twice was refused after the line that said how many samples would be captured)."""
+        nonlocal bar
+        if not args.quiet:  # (-q: only errors)
+            print(f"capture: {what} x {len(args.profiles)} motion profiles x {args.per_scene} pairs = {total} samples "
+                  f"at {args.size[0]}x{args.size[1]}, cameras placed {args.placement}, into {args.out}", file=sys.stderr)
+        bar = bars.enter_context(Bar(args, total, "capture", "sample"))
+
     def kept() -> int:  # (on disk: a worker's sample can land after the last progress report the account saw)
         return sum((Path(args.out) / "samples" / f"{scene_id(n)}-{p}-{i:04d}.npz").is_file()
                    for n in names for p in args.profiles for i in range(args.per_scene))
@@ -455,15 +465,19 @@ def _cmd_capture(args: argparse.Namespace) -> int:
                                  f"command captures the rest")
 
     def progress(n: int, _total: int) -> None:
-        bar.update_to(n)
+        if bar is not None:
+            bar.update_to(n)
+
+    def planning(job: str, found: int, asked: int) -> None:
+        if bar is not None:
+            bar.status(f"planning {job}'s viewpoints: {found}/{asked}")
 
     try:
-        with Bar(args, total, "capture", "sample") as bar:
+        with bars:
             report = capture(
                 names, args.out, per_scene=args.per_scene, size=args.size, profiles=args.profiles, seed=args.seed,
                 workers=_workers(args), cache_dir=args.cache_dir, split=args.split, splits=args.splits,
-                progress=progress, ray=args.ray, placement=args.placement,
-                planning=lambda job, found, asked: bar.status(f"planning {job}'s viewpoints: {found}/{asked}"),
+                progress=progress, ray=args.ray, placement=args.placement, planning=planning, starting=starting,
             )
     except ParameterError as err:  # (the scenes' argument is named by the flag that gave them)
         if err.name == "scene_names" and str(err).startswith("scene_names: ") and len(err.args) == 1:
@@ -488,6 +502,22 @@ def _workers(args: argparse.Namespace) -> int | None:
     if args.workers is not None:
         return int(args.workers)
     return 1 if args.ray is None else None
+
+
+@contextlib.contextmanager
+def _device_flag() -> Iterator[None]:
+    """A device the library refuses in the block ("device 'cuda': torch ... is a CPU build") said with the flag
+    that gave it, ``--device``, as every other flag's error names its flag (the run's mapping of a library
+    argument to its flag takes "device: ...", not "device 'cuda': ...")."""
+    from rtp.sdk import ParameterError
+
+    try:
+        yield
+    except ParameterError as err:
+        text = str(err)
+        if err.name == "device" and len(err.args) == 1 and text.startswith("device "):
+            err.args = ("--device" + text.removeprefix("device"),)
+        raise
 
 
 def _ray_option(parser: argparse.ArgumentParser) -> None:
@@ -526,7 +556,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
         done[:] = n, total
         bar.update_to(n, total)
 
-    with Bar(args, 0, "targets", "sample") as bar:
+    with _device_flag(), Bar(args, 0, "targets", "sample") as bar:
         n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
                             progress=progress, ray=args.ray, device=args.device)
     kept = done[1] - n  # (progress reports the dataset's size first: the samples that already had every target)
@@ -557,8 +587,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
         overrides["aux_metrics"] = _names(args.aux_metrics)
     if args.threshold is not None:
         overrides["default_threshold"] = args.threshold
-    cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
-                                  **({"device": args.device} if args.device is not None else {}), **overrides)
+    with _device_flag():  # (the recipe's read checks the device too)
+        cfg = TrainConfig.from_recipe(args.config, data=args.data, metric=args.metric, out=args.out, scenes=args.splits,
+                                      **({"device": args.device} if args.device is not None else {}), **overrides)
     if args.aux_weight is not None and not cfg.aux_metrics:
         raise _usage("--aux-weight weighs the auxiliary metrics' loss: give them with --aux-metrics")
     if args.quantile is not None and cfg.loss != "quantile":  # (it was taken and ignored)
@@ -567,7 +598,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise _usage("--distill weighs the teachers' predictions: give them with --teachers")
     from rtp.metrics import device_name, resolve_device
 
-    where = device_name(resolve_device(cfg.device))  # (what auto chose, on the bar)
+    with _device_flag():
+        where = device_name(resolve_device(cfg.device))  # (what auto chose, on the bar)
     args.on_interrupt = lambda: _train_kept(cfg.out, cfg.steps)
     with Bar(args, cfg.steps, f"train {cfg.metric} on {where}", "step") as bar:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
@@ -769,6 +801,7 @@ def _usage(message: str) -> Exception:
 # -- the parser -------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
+    from rtp.capture import MAX_WEBER_L
     from rtp.capture.viewpoints import DEFAULT_PROFILES, MOTION_PROFILES, PLACEMENTS
     from rtp.metrics import DEFAULT_PPD, DEFAULT_WEBER_L
     from rtp.sdk import (
@@ -902,14 +935,15 @@ def build_parser() -> argparse.ArgumentParser:
     pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller, down to 160x90 pixels")
 
     tg = command("targets", "compute the per-tile metric targets of a dataset (cached, resumable)", _cmd_targets)
-    tg.add_argument("data", help="dataset folder written by `rtp capture`")
+    tg.add_argument("data", type=_path_text, help="dataset folder written by `rtp capture`")
     tg.add_argument("--metrics", type=_metric_names, default=",".join(TARGET_METRICS),
                     help=f"comma-separated metric names: {', '.join(METRICS)}, or a plugin's (docs/metrics.md "
                     f"\"Your own metric\")")
     tg.add_argument("--ppd", default=None, help="FLIP pixels per degree: a number, or 'width' for the paper's "
                     f"width-based value (default: FLIP's own {DEFAULT_PPD:.2f})")
     tg.add_argument("--weber-l", type=float, default=None,
-                    help=f"environment luminance l of JNFLIP/JNYang (default: {DEFAULT_WEBER_L:g})")
+                    help=f"environment luminance l of JNFLIP/JNYang, > 0 and at most {MAX_WEBER_L:g} (default: "
+                    f"{DEFAULT_WEBER_L:g})")
     tg.add_argument("--workers", type=_positive, default=None,
                     help="parallel processes (default 1; with --ray, Ray workers)")
     tg.add_argument("--device", default="auto", metavar="DEVICE",
@@ -1145,7 +1179,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
     pl.add_argument("--no-animation", action="store_true", help="no GIF per path, nor its middle frame "
                     "(play_PATH.gif and play_PATH.png; the curves and per-frame PNGs are still drawn)")
-    pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once")
+    pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once "
+                    "(a process a path at most: more say so)")
     pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "
                     "frame, not its own displayed one")
     pl.add_argument("--engine-rates", choices=ENGINE_IMAGES, default=None, help="an engine's own shading rates each "

@@ -242,7 +242,7 @@ def test_targets_on_a_device_torch_cannot_use_are_refused_before_any_work(
         with pytest.raises(sdk.ParameterError, match="workers must be None or an integer >= 1"):
             compute_targets(out, ["psnr"], workers=workers)  # type: ignore[arg-type]
     assert rtp_main(["targets", str(out), "--metrics", "lpips", "--device", "cuda"]) == 2
-    assert "rtp targets: error: device 'cuda': torch" in capsys.readouterr().err
+    assert "rtp targets: error: --device 'cuda': torch" in capsys.readouterr().err
     store = TargetStore(out)
     assert not store.metrics and not any(store.has("procedural_5-slow-0000", m) for m in ("flip", "psnr", "lpips"))
     assert (out / "manifest.json").read_text() == manifest
@@ -540,6 +540,55 @@ def test_a_scene_or_profile_given_twice_and_scenes_sharing_sample_ids_are_refuse
     assert not out.exists()
 
 
+def test_a_capture_refused_is_not_announced_first(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp capture --scene procedural:3,procedural:3` printed "capture: ... = 4 samples at 64x48 ..." and then
+    the library's refusal: a job that never ran was announced. The line comes once the library has checked
+    everything (capture's ``starting``), and a job that runs still says it, first."""
+    from rtp.cli import main as rtp_main
+
+    out = tmp_path / "ds"
+    for argv in (["--scene", "procedural:3,procedural:3"], ["--scene", "procedural:3", "--profiles", "slow,slow"],
+                 ["--scene", str(tmp_path / "missing.glb")]):
+        assert rtp_main(["capture", *argv, "--per-scene", "1", "--size", "64x48", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "rtp capture: error: " in err and "samples at" not in err and "capture:" not in err.split("rtp capture")[0]
+    assert not out.exists()
+    said: list[int] = []
+    report = capture(["procedural:3"], out, per_scene=1, size=(64, 48), profiles=("slow",), starting=said.append,
+                     progress=lambda done, total: said.append(-done))
+    assert report.written == 1 and said == [1, -1]  # (once, with the samples asked for, before the first progress)
+    assert rtp_main(["capture", "--scene", "procedural:3", "--profiles", "slow", "--per-scene", "1", "--size", "64x48",
+                     "--out", str(out)]) == 0
+    assert ("capture: procedural:3 x 1 motion profiles x 1 pairs = 1 samples at 64x48"
+            in capsys.readouterr().err)
+
+
+def test_a_scene_file_whose_sample_ids_would_be_too_long_is_refused_up_front(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A scene file of a name of about 190 characters was planned and rendered, and failed at its first sample's
+    write (the sample id past the 200 characters a sample file's name may have). Refused before anything is
+    written, naming the limit and how long the name may be."""
+    from rtp.capture._capture import _check_id_length
+    from rtp.capture._dataset import MAX_ID_LENGTH
+    from rtp.cli import main as rtp_main
+
+    stem = "s" * (MAX_ID_LENGTH - len("-slow-0000"))  # (190: the longest for the default profiles, one sample each)
+    _check_id_length([f"levels/{stem}.obj"], ("slow", "fast"), 1)
+    for profiles, per_scene in ((("frame",), 1), (("slow",), 10001)):  # (a longer profile, a fifth digit)
+        with pytest.raises(sdk.ParameterError, match=f"more than the {MAX_ID_LENGTH} a sample id may have"):
+            _check_id_length([f"levels/{stem}.obj"], profiles, per_scene)
+    scene = tmp_path / f"{stem}x.obj"
+    scene.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    out = tmp_path / "ds"
+    with pytest.raises(sdk.ParameterError, match=r"makes sample ids of up to 201 characters .*more than the 200 a "
+                                                 r"sample id may have .*at most 190 characters"):
+        capture([str(scene)], out, per_scene=1, size=(64, 48))
+    assert rtp_main(["capture", "--scene", str(scene), "--per-scene", "1", "--size", "64x48", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "rtp capture: error: --scene: " in err and "shorten its file name without the extension" in err
+    assert not out.exists()
+
+
 def test_an_empty_out_is_refused_not_the_current_folder(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp capture --out ""` (an unset shell variable) wrote the dataset into the current folder, as
@@ -573,6 +622,39 @@ def test_targets_take_one_metric_name_and_refuse_none_and_a_weber_l_that_is_no_n
     assert compute_targets(out, "psnr") == 1  # (one name, not its letters)
     assert compute_targets(out, ("jnyang", "jnyang"), weber_l=np.float32(0.5)) == 1  # (a float32 declared as a float)
     assert TargetStore(out).metrics == {"psnr": {}, "jnyang": {"weber_l": 0.5}}
+
+
+def test_a_weber_l_so_large_that_no_model_could_learn_the_targets_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp targets --weber-l 1e308` was taken: it was declared and wrote all-zero JNYang targets (a JN target is at
+    most 1 / weber_l). A weber_l past MAX_WEBER_L, whose targets are all below the smallest mu_y a model's transform
+    takes, is refused before anything is declared, as one that is not finite or not > 0; the paper's 1e-10, the
+    default 0.02 and MAX_WEBER_L itself are taken."""
+    import shutil
+
+    from rtp.capture import MAX_WEBER_L, TargetStore, compute_targets
+    from rtp.cli import main as rtp_main
+
+    # (the bound is the transforms': a mean target of 1 / MAX_WEBER_L is a mu_y a model takes, one below it is not)
+    sdk.Transform.clamped(1 / MAX_WEBER_L)
+    with pytest.raises(sdk.MetadataError, match="mu_y"):
+        sdk.Transform.clamped(0.5 / MAX_WEBER_L)
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=1, size=(64, 48), profiles=("slow",))
+    for bad, words in ((1e308, r"weber_l: expected at most 1e\+06, got 1e\+308"),
+                       (MAX_WEBER_L * 1.01, r"weber_l: expected at most 1e\+06"),
+                       (float("inf"), "must be finite and > 0"), (float("nan"), "must be finite and > 0"),
+                       (0.0, "must be finite and > 0"), (-0.02, "must be finite and > 0")):
+        with pytest.raises(sdk.ParameterError, match=words):
+            compute_targets(out, ("jnyang",), weber_l=bad)
+    assert rtp_main(["targets", str(out), "--metrics", "jnyang", "--weber-l", "1e308"]) == 2
+    assert "rtp targets: error: --weber-l: expected at most 1e+06, got 1e+308" in capsys.readouterr().err
+    assert not TargetStore(out).metrics
+    for good in (1e-10, 0.02, MAX_WEBER_L):
+        assert compute_targets(out, ("jnyang",), weber_l=good) == 1
+        values = TargetStore(out).load("procedural_5-slow-0000", "jnyang", 4)
+        assert np.isfinite(values).all() and values.max() > 0
+        shutil.rmtree(out / "targets")
 
 
 def test_worker_pools_start_a_process_a_job_at_most(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -269,3 +269,38 @@ def test_a_literal_double_dash_after_the_options_end_is_a_value(tmp_path: Path, 
     assert "'--': no such image" in err and "Traceback" not in err
     assert main(["metric", "flip", "--", str(a), "--json"]) == 2  # ("--json" is a path here too)
     assert "'--json': no such image" in capsys.readouterr().err
+
+
+def test_a_device_torch_cannot_use_is_said_with_its_flag(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp targets --device cuda` and `rtp train --device cuda` on a CPU build of torch said "error: device
+    'cuda': ...", naming no flag, where every other flag's error names it ("--scene: ...", "--allowed: ...")."""
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.version, "cuda", None)
+    out = tmp_path / "m.pt"
+    for argv in (["targets", str(tmp_path / "ds"), "--metrics", "flip", "--device", "cuda"],
+                 ["train", "--data", str(tmp_path / "ds"), "--metric", "jnyang", "--out", str(out), "--device", "cuda"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert f"rtp {argv[0]}: error: --device 'cuda': torch {torch.__version__} is a CPU build" in err, err
+    assert not out.exists() and not (tmp_path / "ds").exists()
+
+
+def test_targets_of_an_empty_dataset_path_are_refused_not_the_current_folder(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp targets ""` (an unset shell variable) read the current folder as the dataset (". is not an rtp
+    dataset"; in a dataset's own folder it computed its targets), as compute_targets("") did: refused, as an
+    empty --out is."""
+    from rtp import sdk
+    from rtp.capture import compute_targets
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        main(["targets", "", "--metrics", "psnr"])
+    assert info.value.code == 2
+    assert "argument data: expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
+    with pytest.raises(sdk.ParameterError, match=r"data_root: expected a dataset folder path, got '' \(empty"):
+        compute_targets("", ("psnr",))
+    assert list(tmp_path.iterdir()) == []
