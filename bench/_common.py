@@ -3,7 +3,7 @@
 Every script ends in ``run_main(main)``: an rtp error (a model, map or dataset that is not there, a
 bad value found by the library) prints one line, ``NAME.py: error: ...``, with rtp's exit code
 (docs/errors.md), as the ``rtp`` commands do; ``RTP_TRACEBACK=1`` shows the traceback above it. The
-argparse types below (:func:`positive`, :func:`count`, :func:`frame_size`, :func:`frame_sizes`,
+argparse types below (:func:`positive`, :func:`positives`, :func:`count`, :func:`frame_size`, :func:`frame_sizes`,
 :func:`dataset_folder`, :func:`json_file`, :func:`number`) refuse bad arguments before any work, as
 :func:`check_targets` refuses a dataset without the targets a script reads.
 """
@@ -109,6 +109,11 @@ def positive(text: str) -> int:
     from rtp.cli import int_at_least
 
     return int_at_least(1)(text)
+
+
+def positives(text: str) -> list[int]:
+    """An argparse type: comma-separated integers >= 1 (worker counts), each :func:`positive`."""
+    return [positive(v.strip()) for v in text.split(",")]
 
 
 def count(text: str) -> int:
@@ -319,14 +324,19 @@ def write_factors_sidecar(path: str, factors: Sequence[float], command: str) -> 
 
 
 def save_figure(fig: Any, path: str | Path) -> None:
-    """Write a benchmark's matplotlib figure (laid out, 110 dpi, its folder made), close it and say where."""
+    """Write a benchmark's matplotlib figure (laid out, 110 dpi, its folder made), close it and say where. Written
+    atomically: a run stopped while it writes leaves the figure there before (docs/ embeds some), not half a PNG."""
     import matplotlib.pyplot as plt
+
+    from rtp.sdk.files import atomic_output
 
     path = Path(path)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic_output(path) as tmp:  # (its temporary name ends in .tmp: the format is the path's)
+            fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".").lower() or "png")
+    finally:
+        plt.close(fig)
     print(f"\nwrote {path}")
 
 

@@ -17,7 +17,13 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from _common import UsageError, dataset_folder, run_main, scene_ids  # bench/ is on sys.path when run as a script
+from _common import (  # bench/ is on sys.path when run as a script
+    UsageError,
+    check_targets,
+    dataset_folder,
+    run_main,
+    scene_ids,
+)
 from tqdm import tqdm
 
 from rtp import sdk
@@ -55,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     ids = scene_ids(reader, args.scene)
     if not ids:
         raise UsageError(f"{args.data} holds no sample of {args.scene}")
+    check_targets(store, ids, m0.metric, m0.tile_size, args.models[0])  # (before the progress bar, not at its first sample)
     for i in tqdm(ids, desc="predicting", unit="sample"):
         s = reader[i]
         y = store.load(i, m0.metric, m0.tile_size)[rows]

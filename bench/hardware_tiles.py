@@ -26,6 +26,7 @@ import numpy as np
 from _common import (  # bench/ is on sys.path as a script
     UsageError,
     add_model_args,
+    check_targets,
     number,
     positive,
     run_main,
@@ -88,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     ids = scene_ids(reader, args.scene)
     if not ids:
         raise UsageError(f"{args.data} holds no sample of {args.scene}")
+    check_targets(store, ids, metas[0].metric, tile, args.model)
     truth = np.concatenate([store.load(i, metas[0].metric, tile).reshape(6, -1) for i in ids], axis=1)
     print(f"\n{metas[0].metric} on {tile}-pixel tiles: {len(ids)} samples of {args.data} ({args.scene}), a tile failing "
           f"{'under' if higher else 'over'} {judge:g}; work saved % at {' / '.join(f'{100 * s:g}' for s in SHARES)}% "

@@ -43,6 +43,7 @@ import numpy as np
 from _common import (  # bench/ is on sys.path when run as a script
     UsageError,
     add_model_args,
+    check_targets,
     run_main,
     share,
     write_factors_sidecar,
@@ -138,18 +139,23 @@ def main(argv: list[str] | None = None) -> int:
     meta = pred.metadata
     thr, hib = float(meta.default_threshold), bool(meta.higher_is_better)
     scenes = [s.strip() for s in args.scene.split(",") if s.strip()]
+    if len(set(scenes)) != len(scenes):  # (a map twice: no other map to fit on when it is held out)
+        raise UsageError(f"--scene: expected distinct maps, got {args.scene!r}")
     if len(scenes) < 2:
         raise UsageError("--scene needs at least two maps (one is held out while the others fit)")
     reader, store = DatasetReader(args.data), TargetStore(args.data)
     by_map: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {s: ([], []) for s in scenes}
-    for i in tqdm([i for i in reader.ids if reader[i].meta.get("scene") in by_map], desc="predicting", unit="sample"):
+    ids = [i for i in reader.ids if reader[i].meta.get("scene") in by_map]
+    # (a map without samples, or samples without targets: refused before the predictions, which take minutes)
+    missing = [s for s in scenes if not any(reader[i].meta.get("scene") == s for i in ids)]
+    if missing:
+        raise UsageError(f"{args.data} holds no sample of {', '.join(missing)}")
+    check_targets(store, ids, meta.metric, meta.tile_size, args.model)
+    for i in tqdm(ids, desc="predicting", unit="sample"):
         s = reader[i]
         p, t = by_map[s.meta["scene"]]
         p.append(pred.predict(s.inputs(meta.inputs)))
         t.append(store.load(i, meta.metric, meta.tile_size))
-    missing = [s for s, (p, _) in by_map.items() if not p]
-    if missing:
-        raise UsageError(f"{args.data} holds no sample of {', '.join(missing)}")
     data = {s: (np.stack(p), np.stack(t)) for s, (p, t) in by_map.items()}
     print(f"\n{meta.metric}, {args.model}: work saved % at {' / '.join(f'{100 * x:g}' for x in SHARES)}% failing "
           f"tiles (threshold {thr:g}); per-rate factors fitted at {100 * args.fit:g}% on the other maps\n")

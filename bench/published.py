@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _common import dataset_folder, run_main  # bench/ is on sys.path when run as a script
+from _common import UsageError, check_targets, dataset_folder, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import export, sdk
 from rtp.capture import DatasetReader, TargetStore
@@ -59,7 +59,14 @@ def main() -> None:
     validation = set(load_splits()["validation"])
     ids = [i for i in reader.ids if str(reader[i].meta.get("scene")) in validation]
     if not ids:
-        raise SystemExit(f"{args.data} holds no samples of the validation maps")
+        raise UsageError(f"{args.data} holds no samples of the validation maps ({', '.join(sorted(validation))})")
+    # (what a row reads, checked before the first: a published file or targets missing came after the rows before)
+    absent = [name for name in FILES.values() if not (Path(args.models) / name).is_file()]
+    if absent:
+        raise UsageError(f"--models: {args.models} has no {', '.join(absent)} (the published models)")
+    for metric in FILES:
+        check_targets(TargetStore(args.data), ids, metric, 16, metric)
+    check_targets(TargetStore(args.data_l0), ids, "jnyang", 16, "the published JNYang (--data-l0)")
     scenes = sorted({str(reader[i].meta.get("scene")) for i in ids})
     print(f"{len(ids)} samples of the validation maps ({', '.join(scenes)}) in {args.data}; 16-pixel tiles\n")
     print("| metric | threshold | rtp model: failing / saved | published model's 2x2 range (1st-99th pct) "

@@ -33,9 +33,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=positive, default=None, help="the first N samples only")
     args = ap.parse_args(argv)
     a, b = sdk.load(args.old), sdk.load(args.new)
-    if a.metadata.inputs != b.metadata.inputs or a.metadata.metric != b.metadata.metric:
-        raise UsageError(f"the two files are not one model: {a.metadata.metric} on {list(a.metadata.inputs)} against "
-              f"{b.metadata.metric} on {list(b.metadata.inputs)}")
+    def model(m: sdk.ModelMetadata) -> tuple[object, ...]:
+        return m.metric, tuple(m.inputs), tuple(m.outputs), m.tile_size
+
+    def said(m: sdk.ModelMetadata) -> str:
+        return f"{m.metric} {list(m.outputs)} of {m.tile_size}-pixel tiles on {list(m.inputs)}"
+
+    # (outputs or tiles of another shape: their difference was a numpy broadcast error after the progress bar)
+    if model(a.metadata) != model(b.metadata):
+        raise UsageError(f"the two files are not one model: {said(a.metadata)} against {said(b.metadata)}")
     meta = a.metadata
     t = meta.default_threshold
     thresholds = (t - 3.0, t, t + 3.0) if meta.higher_is_better else (0.5 * t, t, 2.0 * t)

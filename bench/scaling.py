@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 import ray
-from _common import frame_size, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import frame_size, positive, positives, run_main  # bench/ is on sys.path when run as a script
 
-from rtp.capture import capture, compute_targets
+from rtp.capture import capture, check_scene, compute_targets
 
 METRICS = ("flip", "psnr", "lpips", "jnflip", "jnyang")
 
@@ -52,14 +52,18 @@ def main() -> None:
     ap.add_argument("--scenes", default="procedural:0,procedural:1")
     ap.add_argument("--per-scene", type=positive, default=3)
     ap.add_argument("--size", type=lambda s: frame_size(s, 16), default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
-    ap.add_argument("--workers", type=lambda s: [positive(v) for v in s.split(",")], default="1,2",
+    ap.add_argument("--workers", type=positives, default="1,2",
                     help="comma-separated worker counts (default: 1,2)")
     ap.add_argument("--modes", type=_modes, default="ray,pool",
                     help="ray (a private local Ray instance) and/or pool (local processes), comma-separated (default: both)")
     ap.add_argument("--cache", default=None, help="scene cache for fetched maps")
     args = ap.parse_args()
     w, h = args.size
-    scenes = args.scenes.split(",")
+    scenes = [n.strip() for n in args.scenes.split(",") if n.strip()]
+    if not scenes:
+        ap.error(f"--scenes: expected comma-separated scene names, got {args.scenes!r}")
+    for name in scenes:  # (a map not listed or not fetched: refused before the table and Ray's start, not after)
+        check_scene(name, args.cache, None, None)
     print(f"{len(scenes)} scenes x 2 profiles x {args.per_scene} pairs at {w}x{h}; {platform.machine()}, "
           f"{os.cpu_count()} CPUs, ray {ray.__version__}\n")
     print("| executor | workers | capture s/sample | targets s/sample | capture speed-up | targets speed-up | Ray start s |")

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
+from _common import dataset_folder, positive, positives, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
 from rtp.capture import DatasetReader, compute_targets
@@ -113,7 +113,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=dataset_folder, default="data/val", help="a captured dataset (rtp capture)")
     ap.add_argument("--samples", type=positive, default=6)
-    ap.add_argument("--workers", default="1,2", help="worker counts for the end-to-end part")
+    ap.add_argument("--workers", type=positives, default="1,2",
+                    help="comma-separated worker counts for the end-to-end part (default: 1,2)")
     ap.add_argument("--device", default="cpu", help="where the batched port and LPIPS run: cpu (default), cuda, "
                     "cuda:N, mps, auto")
     args = ap.parse_args()
@@ -135,7 +136,7 @@ def main() -> None:
             print(f"| {name} | {before:.0f} | {after:.0f} | {before / after:.2f}x |")
     print("\n| `compute_targets`, all five metrics | workers | s per sample |")
     print("|---|---:|---:|")
-    for n in (int(x) for x in args.workers.split(",")):
+    for n in args.workers:
         print(f"| read, compute, write | {n} | {end_to_end(Path(args.data), ids, n, args.device):.2f} |", flush=True)
     if dev != "cpu":  # (auto on a machine without a GPU: the CPU, nothing to compare)
         print(f"\n| metric | largest \\|CPU - {dev}\\| of a tile target | the targets' spread (std) |")

@@ -71,6 +71,10 @@ def _one_run(pred: sdk.ShadingRatePredictor, threads: int) -> Callable[[np.ndarr
     return run
 
 
+#: A switch interval of ``--switch``: seconds in (0, 1] (Python's own is 0.005).
+SWITCH = number(0, 1, above_low=True)
+
+
 def views_table(model: str, size: tuple[int, int], views: int, threads: int, rounds: int) -> dict[str, object]:
     """Median ms of each way to predict ``views`` frames of ``size``, and whether each gave the first's
     predictions (the bare run: its raw output against ``predict_raw``)."""
@@ -210,13 +214,13 @@ def main() -> None:
                     help="comma-separated sys.setswitchinterval values in seconds for the second table (default "
                          "0.005, Python's own, and 0.0005)")
     args = ap.parse_args()
-    try:
-        switches = [float(v) for v in args.switch.split(",")]
-    except ValueError:
-        ap.error(f"--switch: expected comma-separated seconds such as 0.005,0.0005, got {args.switch!r}")
-    if args.views < 1 or args.rounds < 1 or args.threads < 1 or args.seconds <= 0 or not all(v > 0 for v in switches):
-        ap.error("--views, --rounds and --threads take positive integers, --seconds and --switch positive numbers")
+    try:  # (inf passed as a switch interval of 0, NaN and what sys.setswitchinterval refuses failed after the first table)
+        switches = [SWITCH(v) for v in args.switch.split(",")]
+    except argparse.ArgumentTypeError:
+        ap.error(f"--switch: expected comma-separated seconds in (0, 1] such as 0.005,0.0005, got {args.switch!r}")
     models = args.models or [m.removesuffix(".onnx") for m in sdk.shipped_models()]
+    for m in args.models:  # (a name that is no model: refused before the header, not after it)
+        sdk.load(m, providers=["CPUExecutionProvider"])
     w, h = args.size
     print(f"CPU: {cpu_description()}; onnxruntime {ort.__version__}; {args.views} views of {w}x{h}, {args.threads} "
           f"threads, median of {args.rounds} rounds (ms for all the views)\n")

@@ -59,6 +59,10 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     (["bench/memory.py", "/nope.onnx"], 2, "memory.py: error: no model file at '/nope.onnx'"),
     (["bench/input_planes.py", "--against", "nosuchrev"], 2, "input_planes.py: error: --against nosuchrev: git "
                                                              "cannot show"),
+    # worker counts were read after part 1's timings: a ValueError traceback for "x", compute_targets' refusal for 0
+    (["bench/targets.py", "--workers", "1,x"], 2, "targets.py: error: argument --workers: expected a positive integer, "
+                                                  "got 'x'"),
+    (["bench/scaling.py", "--workers", "0"], 2, "scaling.py: error: argument --workers: expected a positive integer"),
 ])
 def test_bad_input_is_one_line(args: list[str], code: int, words: str) -> None:
     run = _run(args, ROOT)
@@ -106,6 +110,14 @@ def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_p
     (["bench/paths.py", "--maps", ",", "--frames", "3"], "paths.py: error: --maps: expected comma-separated map names"),
     # rtp play's first frame has no history: its "--frames: expected ... at least 3" came after the jobs before it
     (["bench/job_memory.py", "--frames", "2"], "job_memory.py: error: argument --frames: expected an integer >= 3, got 2"),
+    # sys.setswitchinterval(inf) sets an interval of 0 (the table then said "inf"); NaN failed after the first table
+    (["bench/views.py", "--switch", "0.005,inf"], "views.py: error: --switch: expected comma-separated seconds in (0, 1]"),
+    (["bench/views.py", "--switch", "nan"], "views.py: error: --switch: expected comma-separated seconds in (0, 1]"),
+    (["bench/views.py", "nosuchmodel"], "views.py: error: no model file at 'nosuchmodel'"),
+    # a map not listed (or not fetched) came after the table's header, and after Ray's start
+    (["bench/scaling.py", "--scenes", "procedural:0,nosuchmap", "--modes", "pool"],
+     "scaling.py: error: map 'nosuchmap' is not listed"),
+    (["bench/scaling.py", "--scenes", ","], "scaling.py: error: --scenes: expected comma-separated scene names"),
 ])
 def test_bad_input_is_refused_before_any_table(args: list[str], words: str) -> None:
     """What a script cannot do is said before its table's header (the header, then the error, read as a
@@ -120,18 +132,34 @@ def test_a_dataset_without_what_a_script_reads_is_refused_before_its_table(tmp_p
     sample of one map before saying it needs two; combine.py read them all before refusing a saving of 2."""
     from rtp.capture import capture, compute_targets
 
-    capture(["procedural:0"], tmp_path / "d", per_scene=1, size=(64, 48))
+    capture(["procedural:0", "procedural:1"], tmp_path / "d", per_scene=1, size=(64, 48))
     data = str(tmp_path / "d")
     for args, words in (
             (["outputs.py", "lpips", "--data", data], f"outputs.py: error: {data} has no lpips targets for lpips (it has "
                                                       f"none): run `rtp targets {data} --metrics lpips`"),
             (["combine.py", "jnyang", "--data", data, "--scene", "procedural:0"],
              f"combine.py: error: {data} has no jnyang targets for jnyang (it has none)"),
+            # ensemble.py, hardware_tiles.py and per_rate.py read the targets sample by sample: the error came under a
+            # progress bar (per_rate.py's after predicting every sample)
+            (["ensemble.py", "jnyang", "--data", data], f"ensemble.py: error: {data} has no jnyang targets"),
+            (["hardware_tiles.py", "jnyang", "--data", data, "--scene", "procedural:0"],
+             f"hardware_tiles.py: error: {data} has no jnyang targets"),
+            (["per_rate.py", "jnyang", "--data", data, "--scene", "procedural:0,procedural:1"],
+             f"per_rate.py: error: {data} has no jnyang targets"),
             ("targets", ""),  # (the rest read a dataset with them)
             (["combine.py", "jnyang", "--data", data, "--scene", "procedural:0", "--savings", "0.5,2"],
              "combine.py: error: --savings: expected shares of the shading work to save, each in [0, 0.9375]"),
             (["error_features.py", "jnyang", "--data", data, "--scene", "procedural:0"],
-             "error_features.py: error: leave-one-map-out needs samples of at least two maps, got ['procedural:0']")):
+             "error_features.py: error: leave-one-map-out needs samples of at least two maps, got ['procedural:0']"),
+            # per_rate.py: a map twice had no other map to fit on (a numpy traceback); a map without samples was
+            # found once every sample of the others was predicted
+            (["per_rate.py", "jnyang", "--data", data, "--scene", "procedural:0,procedural:0"],
+             "per_rate.py: error: --scene: expected distinct maps, got 'procedural:0,procedural:0'"),
+            (["per_rate.py", "jnyang", "--data", data, "--scene", "procedural:0,nosuchmap"],
+             f"per_rate.py: error: {data} holds no sample of nosuchmap"),
+            # two files of other tiles: a numpy broadcast traceback under the progress bar
+            (["same_decisions.py", "jnyang", "jnyang-8px", "--data", data],
+             "same_decisions.py: error: the two files are not one model")):
         if args == "targets":
             compute_targets(data, ("jnyang",))
             continue
@@ -190,3 +218,28 @@ def test_the_inference_bench_checks_its_models_before_timing(monkeypatch: pytest
     monkeypatch.setattr(sys, "argv", ["inference.py", "nosuchmodel"])
     with pytest.raises(sdk.ModelNotFoundError, match="nosuchmodel"):
         mod.main()
+
+
+def test_published_checks_what_its_rows_read_before_the_first(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """published.py said "holds no samples of the validation maps" as a bare SystemExit (exit 1, no program name),
+    and a metric's targets or a published file missing came after the table's header and the rows before it."""
+    from rtp.capture import capture, compute_targets
+
+    from .conftest import bench_module
+
+    capture(["procedural:0"], tmp_path / "d", per_scene=1, size=(64, 48))
+    compute_targets(tmp_path / "d", ("jnyang",))
+    data = str(tmp_path / "d")
+    mod = bench_module("published", monkeypatch)
+    monkeypatch.setattr(sys, "argv", ["published.py", "--data", data, "--data-l0", data])
+    with pytest.raises(mod.UsageError, match="holds no samples of the validation maps"):
+        mod.main()
+    monkeypatch.setattr(mod, "load_splits", lambda: {"validation": ["procedural:0"]})
+    with pytest.raises(mod.UsageError, match=f"{data} has no flip targets for flip"):
+        mod.main()
+    (tmp_path / "models").mkdir()
+    monkeypatch.setattr(sys, "argv", [*sys.argv, "--models", str(tmp_path / "models")])
+    with pytest.raises(mod.UsageError, match="--models: .* has no FLIP.onnx, JNYang.onnx, LPIPS.onnx, PSNR.onnx"):
+        mod.main()
+    assert capsys.readouterr().out == ""
