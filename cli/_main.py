@@ -299,6 +299,8 @@ def _flatten(d: object, prefix: str) -> list[tuple[str, str]]:
             out += _flatten(v, f"{prefix}.{k}")
         return out
     if isinstance(d, (list, tuple)):
+        if not d:  # (an empty list printed its name alone: provenance.dead_outputs with nothing after it)
+            return [(prefix, "none")]
         if any(isinstance(x, (Mapping, list, tuple)) for x in d):
             return [(prefix, f"{len(d)} records (rtp info --json shows them)")]
         return [(prefix, ", ".join(str(x) for x in d))]
@@ -310,7 +312,7 @@ def _cmd_scenes_fetch(args: argparse.Namespace) -> int:
 
     found = fetch(args.cache_dir, _names(args.map) or None, splits=args.splits, convert=args.convert,
                   progress=not (args.quiet or args.no_progress))
-    print(f"{len(found)} maps ready in {args.cache_dir}")
+    print(f"{len(found)} map{'' if len(found) == 1 else 's'} ready in {args.cache_dir}")
     return 0
 
 
@@ -928,7 +930,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     pv = command("preview", "draw one sample of a dataset: final images at every rate, G-buffers, reprojection",
                  _cmd_preview)
-    pv.add_argument("data", help="dataset folder (rtp's, or the paper's released layout)")
+    pv.add_argument("data", type=_path_text, help="dataset folder (rtp's, or the paper's released layout)")
     pv.add_argument("--out", type=out_image, required=True,
                     help="image to write; its extension names the format (.png, .jpg, ...)")
     pv.add_argument("--sample", default=None, help="sample id (default: the first)")
@@ -1098,7 +1100,7 @@ def build_parser() -> argparse.ArgumentParser:
                  "and FidelityFX baselines", _cmd_evaluate)
     ev.add_argument("model", nargs="+", help="one or more .onnx paths or shipped model names; each is scored on "
                     "the targets of its own metric and tile size")
-    ev.add_argument("--data", required=True, help="dataset folder with targets from `rtp targets`")
+    ev.add_argument("--data", required=True, type=_path_text, help="dataset folder with targets from `rtp targets`")
     ev.add_argument("--out", type=_out_folder, default=None,
                     help="folder for evaluation.md, evaluation.json (and --plots)")
     ev.add_argument("--scene", action="append", default=None, type=_names_text,

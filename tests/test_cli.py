@@ -18,9 +18,10 @@ from .conftest import base_metadata
 
 
 def test_info_prints_the_metadata(tiny_model: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
-    path = tiny_model(base_metadata(provenance={"scenes": ["oa_dm1", "kaos2"], "samples": 40}))
+    path = tiny_model(base_metadata(provenance={"scenes": ["oa_dm1", "kaos2"], "samples": 40, "dead_outputs": []}))
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
+    assert re.search(r"provenance.dead_outputs +none\n", out), out  # (an empty list printed its name alone)
     for text in ("jnyang", "clamped (mu_y=0.25)", "16x16", "reprojected.r, seen, albedo.r, normal.z",
                  "1x2, 2x1, 2x2, 2x4, 4x2, 4x4", "CPUExecutionProvider", "provenance.scenes", "oa_dm1, kaos2"):
         assert text in out, text
@@ -303,4 +304,17 @@ def test_targets_of_an_empty_dataset_path_are_refused_not_the_current_folder(
     assert "argument data: expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
     with pytest.raises(sdk.ParameterError, match=r"data_root: expected a dataset folder path, got '' \(empty"):
         compute_targets("", ("psnr",))
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["preview", "", "--out", "sheet.png"], ["evaluate", "jnyang", "--data", ""]])
+def test_an_empty_dataset_path_is_refused_not_read_as_the_current_folder(
+        argv: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp preview ""` and `rtp evaluate M --data ""` (an unset shell variable) read the current folder ("." is
+    not an rtp dataset; in a dataset's own folder, that dataset), as `rtp targets ""` did."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    assert "expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []

@@ -1200,3 +1200,24 @@ def test_a_map_listed_twice_in_one_split_is_named_so(tmp_path: Path):
     bad.write_text("train: [a, b, a]\nvalidation: []\ntest: []\n")
     with pytest.raises(SceneFormatError, match=r"map 'a' is listed twice in 'train'$"):
         load_splits(bad)
+
+
+def test_a_scene_cache_that_is_a_file_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]):
+    """`rtp scenes list --cache-dir FILE` said "59 maps, 0 fetched: run `rtp scenes fetch`", and the fetch it
+    pointed at failed with the system's "Not a directory: 'FILE/debs'": both say the cache is a file."""
+    from rtp.cli import main
+
+    calls = _fake_apt(monkeypatch, _packages())
+    splits = tmp_path / "s.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    cache.write_text("not a folder")
+    for call in (lambda: scenes.scene_list(cache, splits), lambda: scenes.fetch(cache, splits=splits, progress=False)):
+        with pytest.raises(sdk.ParameterError, match=r"cache_dir: expected the scene cache's folder .*which is a file") as err:
+            call()
+        assert err.value.name == "cache_dir"
+    assert calls == [] and cache.read_text() == "not a folder"
+    for command in ("list", "fetch"):
+        assert main(["scenes", command, "--cache-dir", str(cache), "--splits", str(splits)]) == 2
+        assert "--cache-dir: expected the scene cache's folder" in capsys.readouterr().err

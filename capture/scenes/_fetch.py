@@ -257,9 +257,10 @@ def fetch(
     Raises:
         FetchError: apt-get/dpkg-deb failed, or a requested map is not in the packages.
         UnlistedMapError: a requested map is not listed in ``scenes.yaml``.
-        ParameterError: ``maps`` is not a name or a non-empty list of names.
+        ParameterError: ``maps`` is not a name or a non-empty list of names, or ``cache_dir`` is a file.
     """
     cache = Path(cache_dir).resolve()
+    _check_cache_folder(cache)
     wanted: list[object]
     try:
         wanted = [maps] if isinstance(maps, str) else list(maps) if maps is not None else list(map_names(None, splits))
@@ -409,11 +410,21 @@ def scene_blockers(name: str, cache_dir: str | Path, *, splits: str | Path | Non
     return _load_cached(name, cache, _read_index(cache))[1]
 
 
+def _check_cache_folder(cache: Path) -> None:
+    """A ``cache_dir`` that is a file is a :class:`ParameterError` (``scene_list`` called it a cache with nothing
+    fetched; ``fetch`` failed with the system's "Not a directory: '.../debs'")."""
+    if cache.exists() and not cache.is_dir():
+        raise ParameterError(f"cache_dir: expected the scene cache's folder (`rtp scenes fetch` makes it), got {cache}, "
+                             "which is a file", "cache_dir")
+
+
 def scene_list(cache_dir: str | Path | None = None, splits: str | Path | None = None) -> list[dict[str, Any]]:
     """Every map of ``scenes.yaml``: its name, split, and whether the cache holds it fetched and
     converted (``[{"name", "split", "fetched", "converted"}]`` in split order). A cache whose ``index.json``
-    cannot be read lists no map as fetched, with a warning saying so and what to do."""
+    cannot be read lists no map as fetched, with a warning saying so and what to do; a ``cache_dir`` that is a
+    file is a :class:`ParameterError`."""
     cache = Path(default_cache_dir() if cache_dir is None else cache_dir)
+    _check_cache_folder(cache)
     try:
         fetched = set(_read_index(cache)["maps"])
     except SceneNotFoundError:  # nothing fetched yet
