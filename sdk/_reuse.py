@@ -937,8 +937,12 @@ class PredictionReuse:
                                            tile_size=self.predictor.tile_size, threshold=threshold,
                                            engine_rates=engine_rates, combiner=combiner).rates
         thr = meta.default_threshold if threshold is None else threshold
-        return select_rates(estimates, thr, higher_is_better=meta.higher_is_better, allowed=allowed,
-                            factors=meta.rate_factors, engine_rates=engine_rates, combiner=combiner)
+        rates = select_rates(estimates, thr, higher_is_better=meta.higher_is_better, allowed=allowed,
+                             factors=meta.rate_factors, engine_rates=engine_rates, combiner=combiner)
+        # (the predictor's own shading_rates says once when every tile passes at every rate; through a reuse it
+        # was silent)
+        self.predictor._warn_beyond_saturation(thr)
+        return rates
 
 
 def fetch_from_motion(motion_x: object, motion_y: object,

@@ -436,6 +436,22 @@ def test_a_budget_on_carried_estimates() -> None:
     np.testing.assert_array_equal(floor, want.rates)
 
 
+def test_a_threshold_past_saturation_is_said_through_a_reuse_too(caplog: pytest.LogCaptureFixture) -> None:
+    """The predictor's ``shading_rates`` says once that a threshold beyond what the model can express passes every
+    tile at every rate; the same call through a ``PredictionReuse`` said nothing."""
+    s = _Scene()
+    reuse, meta = sdk.PredictionReuse(s.pred, 2), s.pred.metadata
+    factor = min(meta.rate_factors or (1.0,))
+    past = meta.saturation + 20.0 * np.log10(factor) - 0.01 if meta.higher_is_better else meta.saturation / factor * 1.01
+    everything = np.ones((s.h, s.w), np.float32)
+    caplog.set_level("WARNING", logger="rtp")
+    reuse.shading_rates(s.inputs(everything), None, None)
+    assert not caplog.records
+    for _ in range(2):
+        reuse.shading_rates(s.inputs(everything), (s.rows, s.cols), everything, threshold=past)
+    assert len(caplog.records) == 1 and "beyond the worst value the model can express" in caplog.text
+
+
 def test_engine_rates_on_carried_estimates() -> None:
     """``shading_rates(engine_rates=)`` on a reuse: the selection judges the rates the device shades beside the
     engine's, as ``select_rates`` does on the estimates; engine rates it would refuse move nothing on."""
