@@ -1,6 +1,6 @@
 """Peak memory of rtp's frame jobs, measured, beside the estimate they are refused by.
 
-    python bench/job_memory.py [--sizes 640x384,1280x768] [--jobs capture,targets,demo,play] [--frames 3]
+    python bench/job_memory.py [--sizes 640x384,1280x768] [--jobs capture,targets,demo,play,metric,examples] [--frames 3]
 
 Each configuration below runs as an ``rtp`` command in a process of its own at each size; its peak
 resident set (the process and every child it waited for: ``os.wait4``) is read. The table gives

@@ -83,7 +83,7 @@ def main() -> None:
     if args.one:
         print(json.dumps(measure(args.one, sizes, args.threads, args.warm_up)))
         return
-    models = [n.removesuffix(".onnx") for n in sdk.shipped_models()] + list(args.models)
+    models = list(dict.fromkeys([n.removesuffix(".onnx") for n in sdk.shipped_models()] + list(args.models)))  # (once each)
     for m in args.models:  # (a path that is no model: refused here, in one line, before the first process)
         sdk.load(m)
     rows = {}

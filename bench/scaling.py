@@ -62,6 +62,9 @@ def main() -> None:
     scenes = [n.strip() for n in args.scenes.split(",") if n.strip()]
     if not scenes:
         ap.error(f"--scenes: expected comma-separated scene names, got {args.scenes!r}")
+    twice = [n for n in dict.fromkeys(scenes) if scenes.count(n) > 1]
+    if twice:  # (refused by capture after the table's header)
+        ap.error(f"--scenes: each scene once, got {', '.join(twice)} more than once")
     for name in scenes:  # (a map not listed or not fetched: refused before the table and Ray's start, not after)
         check_scene(name, args.cache, None, None)
     print(f"{len(scenes)} scenes x 2 profiles x {args.per_scene} pairs at {w}x{h}; {platform.machine()}, "

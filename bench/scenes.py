@@ -41,6 +41,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     maps = [m.strip() for m in args.maps.split(",") if m.strip()]
+    if not maps:
+        ap.error(f"--maps: expected comma-separated map names, got {args.maps!r}")
+    for name in maps:  # (an unlisted map was refused after converting the maps named before it: minutes)
+        _check_listed(name, None, None)
     if args.fetch:
         fetch(args.cache_dir, maps, progress=False)
 

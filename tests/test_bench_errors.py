@@ -118,6 +118,11 @@ def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_p
     (["bench/scaling.py", "--scenes", "procedural:0,nosuchmap", "--modes", "pool"],
      "scaling.py: error: map 'nosuchmap' is not listed"),
     (["bench/scaling.py", "--scenes", ","], "scaling.py: error: --scenes: expected comma-separated scene names"),
+    (["bench/scaling.py", "--scenes", "procedural:0,procedural:0", "--modes", "pool"],
+     "scaling.py: error: --scenes: each scene once, got procedural:0 more than once"),
+    # a map not listed came after the maps named before it were converted (minutes each)
+    (["bench/scenes.py", "--maps", "oa_dm5,nosuchmap"], "scenes.py: error: map 'nosuchmap' is not listed"),
+    (["bench/scenes.py", "--maps", ","], "scenes.py: error: --maps: expected comma-separated map names"),
 ])
 def test_bad_input_is_refused_before_any_table(args: list[str], words: str) -> None:
     """What a script cannot do is said before its table's header (the header, then the error, read as a
