@@ -1209,6 +1209,20 @@ def test_context_scores_only_tiles_that_see_what_a_whole_frame_shows() -> None:
     torch.testing.assert_close(window[0][:, rows, cols], whole[0][:, rows + 2, cols + 3])
     rows1, cols1 = np.nonzero(_loop._scored_tiles([16], [48], 8, 1, 16, 160, 224)[0, 0])
     assert not torch.allclose(short[0][:, rows1, cols1], whole[0][:, rows1 + 1, cols1 + 3], atol=1e-4)
+    # docs/training.md's count: a 128-pixel crop without context (8x8 tiles) predicts 48 of its tiles otherwise
+    # than the whole frame does there, all but the middle 4x4 (the receptive field: 72 pixels, 28 past the tile)
+    big = torch.rand(1, 7, 384, 384)
+    with torch.inference_mode():
+        whole = net(big)
+        for top, left in ((128, 128), (144, 176)):
+            crop = net(big[:, :, top:top + 128, left:left + 128])
+            here = whole[:, :, top // 16:top // 16 + 8, left // 16:left // 16 + 8]
+            differs = ((crop - here).abs().amax(1)[0] > 1e-5).numpy()
+            assert differs.sum() == 48 and not differs[2:6, 2:6].any()
+    x = torch.rand(1, 7, 256, 256, requires_grad=True)
+    net(x)[0, 0, 8, 8].backward()
+    rows = np.nonzero(x.grad[0].abs().sum((0, 2)).numpy())[0]  # type: ignore[union-attr]
+    assert (rows.min(), rows.max()) == (128 - 28, 143 + 28)
 
 
 def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path: Path) -> None:
