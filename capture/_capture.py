@@ -530,6 +530,11 @@ def capture(
         total = len(scene_names) * len(profiles) * per_scene
         if starting:
             starting(total)
+        if ray is None and (workers or 1) > len(scene_names):  # (as rtp play says of its paths: 4 workers on one
+            # scene rendered it in one process without a word)
+            log.warning("workers %d for %d scene%s: a process a scene at most, so %s", workers, len(scene_names),
+                        "" if len(scene_names) == 1 else "s",
+                        "one process renders it" if len(scene_names) == 1 else f"{len(scene_names)} processes render them")
         done = 0
         report = CaptureReport()
         args = [(s, tuple(profiles), per_scene, (w, h), str(out), seed, None if cache_dir is None else str(cache_dir),

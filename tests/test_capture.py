@@ -563,6 +563,32 @@ def test_a_capture_refused_is_not_announced_first(tmp_path: Path, capsys: pytest
             in capsys.readouterr().err)
 
 
+def test_more_workers_than_scenes_say_how_many_processes_render(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                               caplog: pytest.LogCaptureFixture) -> None:
+    """`rtp capture --scene procedural:3 --workers 4` rendered in one process without a word (rtp play says so
+    of its paths): the warning comes after the announcement, before any work (stopped there)."""
+    from rtp.capture import _capture
+
+    class Stop(Exception):
+        pass
+
+    def stop(*args: object, **kwargs: object) -> None:
+        raise Stop
+
+    monkeypatch.setattr(_capture, "worker_pool", stop)
+    caplog.set_level("WARNING", logger="rtp.capture")
+    said: list[str] = []
+    with pytest.raises(Stop):
+        capture(["procedural:3"], tmp_path / "ds", per_scene=1, size=(64, 48), profiles=("slow",), workers=4,
+                starting=lambda n: said.append(caplog.text))
+    assert said == [""] and "workers 4 for 1 scene: a process a scene at most, so one process renders it" in caplog.text
+    caplog.clear()
+    with pytest.raises(Stop):
+        capture(["procedural:3", "procedural:4"], tmp_path / "ds", per_scene=1, size=(64, 48), profiles=("slow",),
+                workers=2)
+    assert "a process a scene at most" not in caplog.text  # (as many workers as scenes: nothing to say)
+
+
 def test_a_scene_file_whose_sample_ids_would_be_too_long_is_refused_up_front(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A scene file of a name of about 190 characters was planned and rendered, and failed at its first sample's
