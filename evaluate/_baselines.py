@@ -537,7 +537,10 @@ class FidelityFX:
     sub-block once), minus ``|mv| * motion_factor``, tested against ``c`` in the order 4x4, 4x2,
     2x4, 2x2, 2x1, 1x2; then each block takes, per axis, the finest rate of itself and its 4
     neighbours, and each tile the finest of its blocks. (FFX's own code computes "dy" like "dx" in
-    this path; that quirk is not reproduced.)
+    this path, takes the minimum of the rate codes instead of the finest rate per axis, and starts
+    the quarter-rate sub-blocks' min/max at ``(cutoff, 0)``; none of this is reproduced, nor its
+    tile bookkeeping or its motion read at one pixel: docs/evaluation.md "Where it departs from FFX's
+    shader".)
 
     ``predict`` returns the per-tile luma deltas in channel order (``[dy, dx, dz, inf, inf, inf]``
     on the base path; the six sub-block ranges on the other), absolute display-luma units: they are

@@ -149,6 +149,24 @@ def test_fidelityfx_anti_burn_in_and_parameters() -> None:
         FidelityFX(16).predict(np.zeros((8, 8), np.float32))
 
 
+def test_fidelityfx_additional_rates_combine_blocks_per_axis() -> None:
+    """Blocks and their neighbours meet per axis (docs/evaluation.md "Where it departs from FFX's
+    shader"): a 1x2 block beside a 2x1 one gives 1x1 (FFX's minimum of the codes: 1x2, which halves
+    the axis the 2x1 block needs whole), a 4x2 beside a 2x4 gives 2x2 (the minimum of the codes: 2x4)."""
+    ffx = FidelityFX(8, additional_rates=True, motion_factor=0.0)
+    img = np.full((8, 8), 0.5)
+    img[:4, :4] = 0.1 + 0.8 * (np.arange(4)[None, :] % 2)  # varies along x: 1x2 alone
+    img[:4, 4:] = 0.1 + 0.8 * (np.arange(4)[:, None] % 2)  # varies along y: 2x1 alone
+    assert ffx.shading_rates(grey(np.tile(img[:4, :4], (2, 2))))[0, 0] == C["1x2"]
+    assert ffx.shading_rates(grey(np.tile(img[:4, 4:], (2, 2))))[0, 0] == C["2x1"]
+    assert ffx.shading_rates(grey(img))[0, 0] == C["1x1"]
+    img[:4, :4] = np.where(np.arange(4)[:, None] < 2, 0.2, 0.8)  # flat 4-wide, 2-tall halves: 4x2 alone
+    img[:4, 4:] = np.where(np.arange(4)[None, :] < 2, 0.2, 0.8)  # flat 2-wide, 4-tall halves: 2x4 alone
+    assert ffx.shading_rates(grey(np.tile(img[:4, :4], (2, 2))))[0, 0] == C["4x2"]
+    assert ffx.shading_rates(grey(np.tile(img[:4, 4:], (2, 2))))[0, 0] == C["2x4"]
+    assert ffx.shading_rates(grey(img))[0, 0] == C["2x2"]
+
+
 @given(h=st.integers(8, 40), w=st.integers(8, 40), tile=st.sampled_from([8, 16]), seed=st.integers(0, 2**31 - 1))
 @settings(max_examples=40, deadline=None)
 def test_baseline_tile_quantities_follow_their_definitions(h: int, w: int, tile: int, seed: int) -> None:
