@@ -54,11 +54,13 @@ RANGE_SLACK = 1e-6
 #: How closely the edges of the adapter's previous frame, reprojected, must line up with the reference
 #: renderer's: the correlation of their gradient magnitudes on the pixels both see (with their left and upper
 #: neighbours). Engines shade differently (pyrender's lit image: 0.53-0.85 on procedural levels 0-4 at 64x48
-#: and 320x192), while a previous frame handed over upside down reaches at most 0.26.
+#: and 320x192), while its previous frame handed over upside down reaches at most 0.25
+#: (``python bench/conformance_margins.py``).
 MIN_EDGE_CORRELATION = 0.4
 #: The share of the pixels the previous frame hid (seen == 0 in the reference renderer's frame although the
 #: point reprojects inside the previous frame) that must be unseen in the adapter's too: an adapter without
-#: the depth test reaches at most 0.27 on procedural levels 0-4; pyrender's, at least 0.78.
+#: the depth test (pyrender's with a tolerance of 1) reaches at most 0.27 on procedural levels 0-4 at 64x48 and
+#: 320x192; pyrender's, at least 0.78 (``python bench/conformance_margins.py``).
 MIN_OCCLUDED_UNSEEN = 0.5
 #: Channels that describe the engine's own shading model: compared with nothing and allowed to be
 #: constant (pyrender gives every dielectric F0 = 4 %: specular 0.5 everywhere).

@@ -123,6 +123,13 @@ def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_p
     # a map not listed came after the maps named before it were converted (minutes each)
     (["bench/scenes.py", "--maps", "oa_dm5,nosuchmap"], "scenes.py: error: map 'nosuchmap' is not listed"),
     (["bench/scenes.py", "--maps", ","], "scenes.py: error: --maps: expected comma-separated map names"),
+    # levels and sizes the kit cannot draw, refused before the first of its checks (seconds each)
+    (["bench/conformance_margins.py", "--levels", "4-2"], "conformance_margins.py: error: argument --levels: "
+                                                          "expected comma-separated seeds >= 0 or ranges A-B"),
+    (["bench/conformance_margins.py", "--levels", "0,1,0-2"], "conformance_margins.py: error: argument --levels: "
+                                                              "each level once, got 0, 1 more than once"),
+    (["bench/conformance_margins.py", "--sizes", "64x48,8x8"], "conformance_margins.py: error: argument --sizes: "
+                                                               "expected WIDTHxHEIGHT of at least 16x16"),
 ])
 def test_bad_input_is_refused_before_any_table(args: list[str], words: str) -> None:
     """What a script cannot do is said before its table's header (the header, then the error, read as a
