@@ -18,7 +18,8 @@ __all__ = ["Camera"]
 
 @dataclass(frozen=True)
 class Camera:
-    """A camera at ``position`` (metres) turned by ``yaw`` and ``pitch`` (degrees).
+    """A camera at ``position`` (metres) turned by ``yaw`` and ``pitch`` (degrees). Any real numbers are taken
+    (numpy's included) and stored as Python floats, the position as a tuple.
 
     ``yaw = 0`` looks down world -Z; positive yaw turns left (counter-clockwise seen from above);
     positive pitch looks up. ``fov_y`` is the vertical field of view in degrees.
@@ -42,6 +43,16 @@ class Camera:
                                  "degrees", "fov_y")
         real("Camera", "near", self.near, 0.0, lo_open=True)
         real("Camera", "far", self.far, float(self.near), lo_open=True)
+        # stored as Python floats, a tuple position: a frozen value (a list position could be changed in place), equal
+        # and hashable (an ndarray position made == a ValueError and hash() a TypeError) and JSON-writable (numpy's
+        # float32 is not)
+        object.__setattr__(self, "position", tuple(float(x) for x in self.position))
+        for key in ("yaw", "pitch", "fov_y", "near", "far"):
+            object.__setattr__(self, key, float(getattr(self, key)))
+        n, fa = self.near, self.far
+        if not (math.isfinite(fa + n) and math.isfinite(2.0 * fa * n)):  # (near 1, far 1.7e308: a -inf projection)
+            raise ParameterError(f"Camera.far: expected clip planes whose projection is finite, got near {self.near!r} "
+                                 f"and far {self.far!r}", "far")
 
     @property
     def forward(self) -> np.ndarray:
@@ -51,9 +62,12 @@ class Camera:
     def rotation(self) -> np.ndarray:
         """3x3 camera-to-world rotation: columns are the camera's right, up and back (+Z) axes."""
         f = self.forward
-        right = np.cross(f, [0.0, 1.0, 0.0])
-        n = np.linalg.norm(right)
-        right = right / n if n > 1e-9 else np.array([1.0, 0.0, 0.0])
+        # forward x world up, normalised: the yaw's horizontal right axis, mirrored when the pitch is past vertical
+        # (|pitch| > 90 wraps over). From the yaw, not the cross product, which vanishes looking straight up or down:
+        # a fixed world +X there lost the yaw (pitch -90 drew the same image whatever the yaw)
+        y = math.radians(self.yaw)
+        side = 1.0 if math.cos(math.radians(self.pitch)) >= 0.0 else -1.0
+        right = side * np.array([math.cos(y), 0.0, -math.sin(y)])
         up = np.cross(right, f)
         return np.stack([right, up, -f], axis=1)
 

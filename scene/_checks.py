@@ -50,8 +50,10 @@ def vector(owner: str, name: str, v: Any, n: int, lo: float | None = None, hi: f
         raise ParameterError(f"{owner}.{name}: expected {n} finite numbers{bounds}, got {v!r}", name)
 
 
-def array(owner: str, name: str, v: Any, columns: int, kinds: str, *, finite: bool = True) -> np.ndarray:
-    """``v`` as an ndarray ``(N, columns)`` whose dtype kind is one of ``kinds``, finite when asked."""
+def array(owner: str, name: str, v: Any, columns: int, kinds: str, *, finite: bool = True,
+          dtype: Any = None) -> np.ndarray:
+    """``v`` as an ndarray ``(N, columns)`` whose dtype kind is one of ``kinds``, finite when asked; converted to
+    ``dtype`` when given (a float past float32's range is then an infinity, and refused as one)."""
     try:
         a = np.asarray(v) if not isinstance(v, np.ndarray) else v
     except (TypeError, ValueError, OverflowError) as err:  # a ragged list
@@ -61,6 +63,14 @@ def array(owner: str, name: str, v: Any, columns: int, kinds: str, *, finite: bo
         what = {"f": "floats", "iu": "integers", "u": "unsigned integers"}.get(kinds, kinds)
         raise ParameterError(f"{owner}.{name}: expected an array of shape (N, {columns}) of {what}, got "
                              f"{a.dtype} {a.shape}", name)
+    if dtype is not None and a.dtype != dtype:
+        if finite and a.dtype.kind == "f" and a.size and not np.isfinite(a).all():
+            raise ParameterError(f"{owner}.{name}: expected finite values, got NaN or infinity", name)
+        with np.errstate(over="ignore"):
+            a = a.astype(dtype)
+        if finite and a.dtype.kind == "f" and a.size and not np.isfinite(a).all():
+            raise ParameterError(f"{owner}.{name}: expected finite values within {np.dtype(dtype).name}'s range "
+                                 f"(what the renderers draw with), got one past it", name)
     if finite and a.dtype.kind == "f" and a.size and not np.isfinite(a).all():
         raise ParameterError(f"{owner}.{name}: expected finite values, got NaN or infinity", name)
     return a

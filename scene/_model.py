@@ -6,6 +6,7 @@ reference renderer draws them. World space is right-handed, Y up, in metres.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,6 +16,9 @@ from rtp.sdk import ParameterError
 from ._checks import array, real, vector
 
 __all__ = ["Material", "Mesh", "PointLight", "Scene", "SpawnPoint", "SunLight"]
+
+#: The shortest sun direction taken: shorter ones are no direction to normalise (a denormal's is NaN).
+_MIN_DIRECTION = 1e-6
 
 
 @dataclass
@@ -56,17 +60,18 @@ class Mesh:
     """Triangles of one material. ``uvs`` use a top-left texture origin (v grows downwards);
     ``indices`` are counter-clockwise front faces."""
 
-    positions: np.ndarray  # (N, 3) float32, world metres
+    positions: np.ndarray  # (N, 3) float32 (other floats are converted), world metres
     normals: np.ndarray  # (N, 3) float32, unit; a zero row is drawn with the geometric normal
     uvs: np.ndarray  # (N, 2) float32
     indices: np.ndarray  # (M, 3) uint32
     material: int  # index into Scene.materials
 
     def __post_init__(self) -> None:
-        self.positions = array("Mesh", "positions", self.positions, 3, "f")
+        # (float32, what every renderer uploads: float64 positions past its range were taken and drawn as infinities)
+        self.positions = array("Mesh", "positions", self.positions, 3, "f", dtype=np.float32)
         n = len(self.positions)
-        self.normals = array("Mesh", "normals", self.normals, 3, "f")
-        self.uvs = array("Mesh", "uvs", self.uvs, 2, "f")
+        self.normals = array("Mesh", "normals", self.normals, 3, "f", dtype=np.float32)
+        self.uvs = array("Mesh", "uvs", self.uvs, 2, "f", dtype=np.float32)
         self.indices = array("Mesh", "indices", self.indices, 3, "iu")
         for key, a in (("normals", self.normals), ("uvs", self.uvs)):
             if len(a) != n:
@@ -82,7 +87,8 @@ class Mesh:
 
 @dataclass
 class SunLight:
-    """A directional light. ``direction`` points from the light into the scene (unit vector)."""
+    """A directional light. ``direction`` points from the light into the scene: a vector of any finite length
+    from 1e-6 up (it is normalised where used)."""
 
     direction: tuple[float, float, float] = (-0.4, -1.0, -0.3)
     colour: tuple[float, float, float] = (1.0, 0.95, 0.85)
@@ -90,8 +96,13 @@ class SunLight:
 
     def __post_init__(self) -> None:
         vector("SunLight", "direction", self.direction, 3)
-        if not any(float(x) for x in self.direction):
-            raise ParameterError("SunLight.direction: expected a non-zero vector, got (0, 0, 0)", "direction")
+        with np.errstate(all="ignore"):
+            length = float(np.linalg.norm(np.asarray([float(x) for x in self.direction], np.float64)))
+        # (a denormal one has no direction, 1e308s an infinite length: NaN light poses, a LinAlgError in
+        # to_pyrender_scene; the reference renderer normalises by at least 1e-12, so a shorter one drew a dimmed sun)
+        if not _MIN_DIRECTION <= length < math.inf:
+            raise ParameterError(f"SunLight.direction: expected a vector of finite length >= {_MIN_DIRECTION:g}, got "
+                                 f"{tuple(self.direction)!r}", "direction")
         vector("SunLight", "colour", self.colour, 3, 0.0)
         real("SunLight", "intensity", self.intensity, 0.0)
 
@@ -157,11 +168,12 @@ class Scene:
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned bounds ``(min, max)`` of all vertices."""
-        if not self.meshes:
+        meshes = [m for m in self.meshes if len(m.positions)]  # (a mesh of no vertices was a ValueError of numpy's)
+        if not meshes:
             z = np.zeros(3, np.float32)
             return z, z
-        lo = np.min([m.positions.min(axis=0) for m in self.meshes], axis=0)
-        hi = np.max([m.positions.max(axis=0) for m in self.meshes], axis=0)
+        lo = np.min([m.positions.min(axis=0) for m in meshes], axis=0)
+        hi = np.max([m.positions.max(axis=0) for m in meshes], axis=0)
         return lo.astype(np.float32), hi.astype(np.float32)
 
     @property

@@ -39,6 +39,7 @@ def quad_mesh(
     seen from the front with v pointing up)."""
     for name, value in (("centre", centre), ("u_axis", u_axis), ("v_axis", v_axis)):
         vector("quad_mesh", name, value, 3)
+    vector("quad_mesh", "uv_scale", uv_scale, 2)  # (a string or 3 numbers were numpy's ValueError)
     c, u, v = (np.asarray(a, np.float64) for a in (centre, u_axis, v_axis))
     n = np.cross(u, v)
     if not np.linalg.norm(n) > 0:

@@ -45,8 +45,14 @@ BAD: list[tuple[str, Any, str]] = [
     ("camera aspect 5e-324", lambda: Camera((0.0, 0.0, 0.0)).projection(5e-324), "Camera.projection.aspect"),
     ("camera near 0", lambda: Camera((0.0, 0.0, 0.0), near=0.0), "Camera.near"),
     ("camera far before near", lambda: Camera((0.0, 0.0, 0.0), near=1.0, far=0.5), "Camera.far"),
+    # clip planes whose projection overflows: 2 far near was infinite, a -inf projection matrix
+    ("camera far 1.7e308", lambda: Camera((0.0, 0.0, 0.0), near=1.0, far=1.7e308), "Camera.far: .*projection is finite"),
+    ("camera near and far 1e308", lambda: Camera((0.0, 0.0, 0.0), near=1e308, far=1.5e308), "Camera.far"),
     ("camera string pitch", lambda: Camera((0.0, 0.0, 0.0), pitch="5"), "Camera.pitch"),  # type: ignore[arg-type]
     ("mesh nan positions", lambda: _mesh(positions=np.full((3, 3), np.nan, np.float32)), "Mesh.positions"),
+    # float64 past float32's range: taken, then drawn as infinities by every renderer (they upload float32)
+    ("mesh float64 positions past float32", lambda: _mesh(positions=np.full((3, 3), 1e39)), "Mesh.positions: .*float32"),
+    ("mesh float64 uvs past float32", lambda: _mesh(uvs=np.full((3, 2), -1e300)), "Mesh.uvs: .*float32"),
     ("mesh flat positions", lambda: _mesh(positions=np.zeros(9, np.float32)), "Mesh.positions"),
     ("mesh normals short", lambda: _mesh(normals=np.zeros((2, 3), np.float32)), "Mesh.normals"),
     ("mesh uvs 3 columns", lambda: _mesh(uvs=np.zeros((3, 3), np.float32)), "Mesh.uvs"),
@@ -62,6 +68,10 @@ BAD: list[tuple[str, Any, str]] = [
     ("material rgb texture", lambda: Material("m", texture=np.zeros((4, 4, 3), np.uint8)), "Material.texture"),
     ("material float texture", lambda: Material("m", texture=np.zeros((4, 4, 4), np.float32)), "Material.texture"),
     ("sun zero direction", lambda: SunLight(direction=(0.0, 0.0, 0.0)), "SunLight.direction"),
+    # a length but no direction (denormal), or an infinite length: NaN light poses, a LinAlgError in to_pyrender_scene
+    ("sun denormal direction", lambda: SunLight(direction=(1e-320, 0.0, 0.0)), "SunLight.direction"),
+    ("sun direction of 1e-30", lambda: SunLight(direction=(0.0, -1e-30, 0.0)), "SunLight.direction: .*>= 1e-06"),
+    ("sun direction of infinite length", lambda: SunLight(direction=(1e308, 1e308, 0.0)), "SunLight.direction"),
     ("sun negative intensity", lambda: SunLight(intensity=-1.0), "SunLight.intensity"),
     ("point light radius 0", lambda: PointLight((0.0, 0.0, 0.0), radius=0.0), "PointLight.radius"),
     ("spawn nan", lambda: SpawnPoint((0.0, math.nan, 0.0)), "SpawnPoint.position"),
@@ -76,6 +86,10 @@ BAD: list[tuple[str, Any, str]] = [
     ("sphere radius -1", lambda: sphere_mesh((0, 0, 0), -1), "sphere_mesh.radius"),
     ("sphere of 0 segments", lambda: sphere_mesh((0, 0, 0), 1, segments=0), "sphere_mesh.segments"),
     ("quad of parallel axes", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (2, 0, 0)), "span a plane"),
+    # uv_scale was not checked: numpy's ValueError, or an error naming Mesh.uvs
+    ("quad uv_scale a string", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (0, 1, 0), uv_scale="ab"), "quad_mesh.uv_scale"),
+    ("quad uv_scale of 3", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (0, 1, 0), uv_scale=(1, 2, 3)), "quad_mesh.uv_scale"),
+    ("quad uv_scale nan", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (0, 1, 0), uv_scale=(math.nan, 1)), "quad_mesh.uv_scale"),
     ("checker size -1", lambda: checker_texture(-1), "checker_texture.size"),
     ("checker colour 300", lambda: checker_texture(8, 2, a=(300, 0, 0)), r"checker_texture.a: .* \[0, 255\]"),
 ]
@@ -94,3 +108,44 @@ def test_good_scenes_are_taken_as_given() -> None:
     assert scene.meshes[0] is mesh and mesh.positions.dtype == np.float32
     cam = Camera((np.float32(1.0), 2, 3.0), yaw=np.float64(10.0), pitch=-95.0)  # numpy numbers; pitch past 90 wraps
     assert np.isfinite(cam.view_projection(64, 32)).all()
+
+
+def test_mesh_floats_are_stored_as_float32() -> None:
+    """The fields are documented float32: float64 and float16 ones are converted (and checked as float32)."""
+    m = _mesh(positions=np.ones((3, 3)), normals=np.tile([0, 1, 0], (3, 1)).astype(np.float16), uvs=np.zeros((3, 2)))
+    assert m.positions.dtype == m.normals.dtype == m.uvs.dtype == np.float32
+    assert SunLight(direction=(0.0, -1e-6, 0.0)).direction == (0.0, -1e-6, 0.0)  # a length from 1e-6 up
+
+
+def test_bounds_skip_meshes_without_vertices() -> None:
+    """An empty mesh is a valid one (a source's level part with nothing left); bounds were numpy's ValueError."""
+    empty = _mesh(positions=np.zeros((0, 3), np.float32), normals=np.zeros((0, 3), np.float32),
+                  uvs=np.zeros((0, 2), np.float32), indices=np.zeros((0, 3), np.uint32))
+    lo, hi = Scene("s", [empty, box_mesh((0, 1, 2), (1, 2, 3))], [Material("m")]).bounds
+    assert lo.tolist() == [0, 1, 2] and hi.tolist() == [1, 2, 3]
+    lo, hi = Scene("s", [empty], [Material("m")]).bounds
+    assert lo.tolist() == hi.tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize("pitch", [-90.0, 90.0])
+def test_a_camera_looking_straight_down_or_up_keeps_its_yaw(pitch: float) -> None:
+    """At pitch +-90 the view direction is parallel to world up: the right axis fell back to world +X, so the
+    yaw was lost (a top-down camera drew the same image at every yaw) and the view jumped next to the pole."""
+    for yaw in (0.0, 90.0, -135.0):
+        at, near = Camera((0.0, 0.0, 0.0), yaw=yaw, pitch=pitch), Camera((0.0, 0.0, 0.0), yaw=yaw, pitch=pitch * (1 - 1e-8))
+        np.testing.assert_allclose(at.rotation(), near.rotation(), atol=1e-5)
+        r = at.rotation()
+        np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(r[:, 0], [math.cos(math.radians(yaw)), 0.0, -math.sin(math.radians(yaw))], atol=1e-12)
+
+
+def test_cameras_are_frozen_values_of_floats() -> None:
+    """A numpy or list position made a 'frozen' camera that == raised on (ValueError), hash() refused and an
+    in-place edit moved; numpy scalars stayed numpy ones (json.dumps of a capture's camera fields failed)."""
+    import json
+
+    a = Camera(np.array([0.0, 1.0, 2.0]), yaw=np.float32(10.0), pitch=np.int64(-5), fov_y=np.float64(60.0))
+    b = Camera([0, 1, 2], yaw=10, pitch=-5, fov_y=60)
+    assert a == b and hash(a) == hash(b) and a.position == (0.0, 1.0, 2.0)
+    assert all(type(v) is float for v in (*a.position, a.yaw, a.pitch, a.fov_y, a.near, a.far))
+    json.dumps({"yaw": a.yaw, "pitch": a.pitch, "position": a.position})
