@@ -439,6 +439,27 @@ def test_no_gl_context_is_a_typed_error(monkeypatch: pytest.MonkeyPatch) -> None
         assert isinstance(info.value.__cause__, RuntimeError)
 
 
+def test_a_frame_source_gives_a_users_scene_back() -> None:
+    """A ``pyrender.Scene`` of the caller's: the source's camera node is its main camera while the source is
+    open; close() removes the node and gives back the scene's own main camera (it stayed, a second camera and
+    the main one, so the caller's next render drew from the source's last pose)."""
+    from rtp.plugins.pyrender import Adapter, to_pyrender_scene
+    from rtp.scene import Camera, Material, Scene, box_mesh
+
+    pyrender = pyrender_or_skip()
+    for own_camera in (True, False):
+        scene = to_pyrender_scene(Scene("box", [box_mesh((-1, -1, -5), (1, 1, -3))], [Material("m")]))
+        own = scene.add(pyrender.PerspectiveCamera(yfov=1.0), pose=np.eye(4)) if own_camera else None
+        nodes = set(scene.nodes)
+        with Adapter.frame_source(scene, 32, 24) as source:
+            assert source.scene is scene and scene.main_camera_node not in nodes
+            source.frame(Camera((0.0, 0.0, 0.0), yaw=5.0, fov_y=50.0), Camera((0.0, 0.0, 0.1), near=0.1))
+        assert set(scene.nodes) == nodes and scene.main_camera_node is own
+    # numpy's True is a flag like True (msaa= refused it; albedo= and to_pyrender_scene's flags took it)
+    with Adapter(["depth"], 8, 8, msaa=np.True_, normal_bits=8) as adapter:
+        assert adapter.msaa is True
+
+
 def test_borrowed_renderer_and_bound_scene_error() -> None:
     """pyrender binds a scene to one renderer's context: borrow the user's, or say so clearly."""
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame

@@ -184,7 +184,7 @@ class GBufferRenderer:
                  platform: str | None = None, renderer: Any | None = None) -> None:
         if isinstance(normal_bits, bool) or normal_bits not in (8, 12):
             raise ParameterError(f"normal_bits: expected 8 or 12, got {normal_bits!r}", "normal_bits")
-        if not isinstance(msaa, bool):
+        if not isinstance(msaa, (bool, np.bool_)):  # (numpy's True was refused; albedo= and the flags take it)
             raise ParameterError(f"msaa: expected True or False, got {msaa!r}", "msaa")
         if msaa and normal_bits != 8:
             raise ParameterError("msaa=True averages samples, which breaks 12-bit packed normals; use normal_bits=8",

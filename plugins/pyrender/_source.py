@@ -38,7 +38,8 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         adapter_class: the adapter class :meth:`adapter` builds (``Adapter`` or a subclass).
         scene: an :class:`rtp.scene.Scene` (converted with :func:`to_pyrender_scene`) or a
             ``pyrender.Scene`` (used as it is; the source adds a camera node and makes it the
-            main camera).
+            main camera while it is open: :meth:`close` removes that node and gives the scene back
+            its own main camera).
         width, height: frame size in pixels.
         platform: ``"egl"`` (default) or ``"osmesa"``, see :func:`import_pyrender`.
 
@@ -53,7 +54,9 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         self.scene = scene if isinstance(scene, pyrender.Scene) else to_pyrender_scene(scene)
         self.renderer = offscreen_renderer(pyrender, self.width, self.height)
         self._cameras: dict[tuple[float, float, float], Any] = {}
-        self._node = self.scene.add(self._camera_for(None), pose=np.eye(4))
+        self._own_main = self.scene.main_camera_node  # (a user's scene gets it back on close)
+        self._camera0 = self._camera_for(None)  # (pyrender files the node under this camera: removed with it)
+        self._node = self.scene.add(self._camera0, pose=np.eye(4))
         self.scene.main_camera_node = self._node
 
     def _camera_for(self, camera: Camera | None) -> Any:
@@ -82,5 +85,16 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
                           camera=cam, prev_camera=prev_cam)
 
     def close(self) -> None:
-        """Free the renderer's GL context (only its own: other renderers keep working)."""
-        _delete_renderer(self.renderer)
+        """Free the renderer's GL context (only its own: other renderers keep working), and take the camera node
+        this source added out of the scene, whose main camera is again the one it had (a ``pyrender.Scene`` of
+        the caller's was left with a second camera, the source's, as its main one)."""
+        try:
+            _delete_renderer(self.renderer)
+        finally:
+            scene, node = self.scene, self._node
+            if scene.has_node(node):
+                node.camera = self._camera0  # (frame() swaps it; pyrender looks the node up by the one it was added with)
+                scene.remove_node(node)
+            own = self._own_main
+            if own is not None and scene.has_node(own):
+                scene.main_camera_node = own
