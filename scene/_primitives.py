@@ -113,8 +113,13 @@ def checker_texture(
     for name, count in (("size", size), ("cells", cells)):
         if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
             raise ParameterError(f"checker_texture.{name}: expected an integer >= 1, got {count!r}", name)
-    vector("checker_texture", "a", a, 3, 0, 255)
-    vector("checker_texture", "b", b, 3, 0, 255)
+    for name, colour in (("a", a), ("b", b)):
+        vector("checker_texture", name, colour, 3, 0, 255)
+        if any(float(c) != int(c) for c in colour):  # (0.5 was drawn as 0: a colour in [0, 1] read as bytes)
+            raise ParameterError(f"checker_texture.{name}: expected integers in [0, 255] (8-bit sRGB), got "
+                                 f"{tuple(colour)!r}", name)
+    if not isinstance(alpha_holes, (bool, np.bool_)):  # ("no" was taken for True)
+        raise ParameterError(f"checker_texture.alpha_holes: expected True or False, got {alpha_holes!r}", "alpha_holes")
     y, x = np.mgrid[0:size, 0:size] * cells // size
     odd = (x + y) % 2 == 1
     img = np.empty((size, size, 4), np.uint8)

@@ -92,6 +92,10 @@ BAD: list[tuple[str, Any, str]] = [
     ("quad uv_scale nan", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (0, 1, 0), uv_scale=(math.nan, 1)), "quad_mesh.uv_scale"),
     ("checker size -1", lambda: checker_texture(-1), "checker_texture.size"),
     ("checker colour 300", lambda: checker_texture(8, 2, a=(300, 0, 0)), r"checker_texture.a: .* \[0, 255\]"),
+    # a colour in [0, 1] read as bytes: 0.5 was drawn as 0; "no" was taken for True
+    ("checker colour 0.5", lambda: checker_texture(8, 2, b=(0.5, 0.5, 0.5)), r"checker_texture.b: expected integers"),
+    ("checker alpha_holes 'no'", lambda: checker_texture(8, 2, alpha_holes="no"),  # type: ignore[arg-type]
+     "checker_texture.alpha_holes: expected True or False"),
 ]
 
 
