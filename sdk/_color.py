@@ -42,13 +42,29 @@ def as_numbers(value: ArrayLike, what: str, dtype: type[np.floating]) -> np.ndar
         raise InputDtypeError(f"{what}: expected numbers, got {type(value).__name__} ({err})") from err
 
 
+def _unit_values(c: ArrayLike, what: str) -> np.ndarray:
+    """``c`` as float64 for the sRGB curves, which take values in [0, 1]: the ``uint8``/``uint16`` of a texture read
+    back (its 0-255 or 0-65535) is an :class:`~rtp.sdk.InputDtypeError` naming the division (255 came out as
+    524947 from ``srgb_to_linear``, without a word)."""
+    dtype = getattr(c, "dtype", None)
+    if dtype is not None and np.dtype(dtype) in (np.uint8, np.uint16):
+        from ._errors import InputDtypeError
+
+        top = np.iinfo(np.dtype(dtype)).max
+        raise InputDtypeError(f"{what}: expected values in [0, 1], got dtype {np.dtype(dtype)} (a texture's integers: "
+                              f"{what}(c / {top}))")
+    return as_numbers(c, what, np.float64)
+
+
 def srgb_to_linear(c: ArrayLike) -> np.ndarray:
-    """The sRGB decoding curve (IEC 61966-2-1) of values in [0, 1], elementwise, float32 or float64 in."""
-    a = as_numbers(c, "srgb_to_linear", np.float64)
+    """The sRGB decoding curve (IEC 61966-2-1) of values in [0, 1], elementwise, float32 or float64 in, float64 out
+    (``uint8`` and ``uint16`` arrays, a texture's integers, are refused: divide them by 255 or 65535 first)."""
+    a = _unit_values(c, "srgb_to_linear")
     return np.where(a <= 0.04045, a / 12.92, ((np.maximum(a, 0.04045) + 0.055) / 1.055) ** 2.4)
 
 
 def linear_to_srgb(c: ArrayLike) -> np.ndarray:
-    """The sRGB encoding curve (IEC 61966-2-1) of linear values in [0, 1], elementwise."""
-    a = as_numbers(c, "linear_to_srgb", np.float64)
+    """The sRGB encoding curve (IEC 61966-2-1) of linear values in [0, 1], elementwise, float64 out (``uint8`` and
+    ``uint16`` arrays are refused, as by :func:`srgb_to_linear`)."""
+    a = _unit_values(c, "linear_to_srgb")
     return np.where(a <= 0.0031308, a * 12.92, 1.055 * np.maximum(a, 0.0031308) ** (1.0 / 2.4) - 0.055)

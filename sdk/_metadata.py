@@ -74,8 +74,8 @@ def _number(
         if default is ...:
             raise MetadataError(f"{key}: required, missing", key)
         return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v):
+    v = d[key]  # (numpy's numbers too, as a threshold or margin computed with numpy is)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) or not _finite(v):
         raise MetadataError(f"{key}: expected a finite number, got {reprlib.repr(v)}", key)
     if (minimum is not None and v < minimum) or (maximum is not None and v > maximum):
         lo = "" if minimum is None else f">= {minimum:g}"
@@ -84,7 +84,12 @@ def _number(
     return float(v)
 
 
-def _finite(v: float) -> bool:
+def _integer(v: Any) -> Any:
+    """A numpy integer as Python's (``np.int64(16)`` was "expected one of (1, ..., 16, 32)"); anything else as it is."""
+    return int(v) if isinstance(v, np.integer) else v
+
+
+def _finite(v: float | np.integer | np.floating) -> bool:
     try:
         return math.isfinite(v)
     except OverflowError:  # an int too large for a float
@@ -200,7 +205,7 @@ class ModelMetadata:
                 f"{unknown[0]}: unknown metadata field{f' (did you mean {close[0]}?)' if close else ''}; known fields "
                 f"are {', '.join(_FIELDS)}", unknown[0]
             )
-        version = d.get("schema_version", SCHEMA_VERSION)
+        version = _integer(d.get("schema_version", SCHEMA_VERSION))
         if isinstance(version, bool) or not isinstance(version, int) or version < 1:
             raise MetadataError(f"schema_version: expected a positive integer, got {version!r}", "schema_version")
         if version > SCHEMA_VERSION:
@@ -220,8 +225,9 @@ class ModelMetadata:
                     f"higher_is_better: required for the metric {metric!r}, which rtp does not know", "higher_is_better"
                 )
             hib = METRICS[metric].higher_is_better
-        if not isinstance(hib, bool):
+        if not isinstance(hib, (bool, np.bool_)):
             raise MetadataError(f"higher_is_better: expected true or false, got {hib!r}", "higher_is_better")
+        hib = bool(hib)
         if metric in METRICS and hib != METRICS[metric].higher_is_better:
             raise MetadataError(
                 f"higher_is_better: {metric} is {'higher' if METRICS[metric].higher_is_better else 'lower'}-is-better, "
@@ -233,11 +239,11 @@ class ModelMetadata:
             raise MetadataError("transform: required, missing", "transform")
         transform = Transform.from_dict(d["transform"])
 
-        tile = d.get("tile_size")
+        tile = _integer(d.get("tile_size"))
         if isinstance(tile, bool) or not isinstance(tile, int) or tile not in TILE_SIZES:
             raise MetadataError(f"tile_size: expected one of {TILE_SIZES}, got {tile!r}", "tile_size")
 
-        multiple = d.get("input_multiple")
+        multiple = _integer(d.get("input_multiple"))
         if multiple is not None and (
             isinstance(multiple, bool) or not isinstance(multiple, int) or multiple not in TILE_SIZES or multiple > tile
         ):

@@ -142,7 +142,15 @@ def _normalise_providers(providers: Sequence[ProviderSpec] | None, strict: bool)
 
 def _metadata_from_arg(metadata: ModelMetadata | Mapping[str, Any] | str | os.PathLike[str]) -> ModelMetadata:
     if isinstance(metadata, ModelMetadata):
-        return metadata
+        # validated again, as a dict or a sidecar is: one made with dataclasses.replace (or the constructor) is
+        # never checked, and a NaN safety gave every tile 1x1, a flipped higher_is_better inverted every decision
+        try:
+            return ModelMetadata.from_dict(metadata.to_dict())
+        except MetadataError as err:
+            raise MetadataError(f"metadata=: {err}", err.key) from err
+        except (AttributeError, TypeError, ValueError) as err:  # (a field of the wrong kind: to_dict fails on it)
+            raise MetadataError(f"metadata=: a ModelMetadata whose fields are not valid ({type(err).__name__}: {err}); "
+                                "build it with ModelMetadata.from_dict") from err
     if isinstance(metadata, Mapping):
         return ModelMetadata.from_dict(metadata)
     if isinstance(metadata, (str, os.PathLike)):
@@ -350,6 +358,14 @@ def _load(
     """:func:`load` of the file at ``model_path``, or, with ``data``, of those bytes (a pickled predictor's
     model, restored where ``model_path`` may not exist: it names the model in messages and in ``path``)."""
     ort = _ort()
+    # numpy's integers and flags as Python's (a count or a tile size read from an array; np.True_): checked as
+    # those, kept as those in what a pickled copy is loaded with
+    if isinstance(threads, np.integer):
+        threads = int(threads)
+    if isinstance(tile_size, np.integer):
+        tile_size = int(tile_size)
+    strict, assume_finite, spin_between_runs = (bool(f) if isinstance(f, np.bool_) else f
+                                                for f in (strict, assume_finite, spin_between_runs))
     if threads is not None and (
         isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= MAX_THREADS
     ):
@@ -560,10 +576,10 @@ class ShadingRatePredictor:
         self, session: Any, metadata: ModelMetadata, path: Path | None = None, *, tile_size: int | None = None,
         assume_finite: bool = False, tail: Any = None,
     ) -> None:
-        if not isinstance(assume_finite, bool):
+        if not isinstance(assume_finite, (bool, np.bool_)):
             raise ParameterError(f"assume_finite: expected True or False, got {reprlib.repr(assume_finite)}",
                                  "assume_finite")
-        self._assume_finite = assume_finite
+        self._assume_finite = bool(assume_finite)
         self._session = session
         #: the model's bytes and load()'s arguments, which __reduce__ pickles (load() sets them)
         self._pickled: tuple[bytes, dict[str, Any]] | None = None
@@ -572,14 +588,15 @@ class ShadingRatePredictor:
         model_tile = metadata.tile_size
         if tile_size is None:
             tile_size = model_tile
-        elif (isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size not in hardware_tiles(model_tile)):
+        elif (isinstance(tile_size, bool) or not isinstance(tile_size, (int, np.integer))
+              or tile_size not in hardware_tiles(model_tile)):
             raise ParameterError(
                 f"tile_size: expected one of {list(hardware_tiles(model_tile))} (the hardware's shading-rate tile "
                 f"size: coarser than the model's {model_tile}-pixel tiles, each takes the worst of those it covers; "
                 f"finer, down to one {MIN_HARDWARE_TILE}x{MIN_HARDWARE_TILE} coarse pixel, each takes its model tile's), "
                 f"got {reprlib.repr(tile_size)}", "tile_size",
             )
-        self._tile = tile_size
+        self._tile = int(tile_size)
         inputs, outputs = session.get_inputs(), session.get_outputs()
         probe = metadata.finite_probe
         if probe is not None and probe not in [o.name for o in outputs]:
@@ -995,8 +1012,9 @@ class ShadingRatePredictor:
         (:func:`~rtp.sdk.select_rates`, :func:`~rtp.sdk.combine_rates`).
         """
         if saving is not None:
+            values = self.predict(x)  # (first: it refuses what is no frame, whose shape has no H and W)
             h, w = np.shape(x)[-2:]
-            return select_rates_for_saving(self.predict(x), saving, higher_is_better=self._meta.higher_is_better,
+            return select_rates_for_saving(values, saving, higher_is_better=self._meta.higher_is_better,
                                            allowed=allowed, factors=self._meta.rate_factors, frame_size=(h, w),
                                            tile_size=self._tile, threshold=threshold, engine_rates=engine_rates,
                                            combiner=combiner).rates

@@ -166,6 +166,10 @@ def resolve_allowed(allowed: Iterable[RateLike] | None) -> tuple[str, ...]:
 def check_threshold(threshold: object, higher_is_better: bool) -> float:
     """``threshold`` as a float if it makes sense, else :class:`ParameterError` with the range: a finite
     number of magnitude <= :data:`MAX_THRESHOLD`, and >= 0 for an error metric (lower is better)."""
+    if not isinstance(higher_is_better, (bool, np.bool_)):  # ('no' was taken for True: a PSNR's range, negatives in)
+        raise ParameterError(f"higher_is_better: expected True or False, got {reprlib.repr(higher_is_better)}",
+                             "higher_is_better")
+    higher_is_better = bool(higher_is_better)
     if isinstance(threshold, (bool, np.bool_)) or not isinstance(threshold, (int, float, np.integer, np.floating)):
         raise ParameterError(f"threshold: expected a number, got {type(threshold).__name__} {reprlib.repr(threshold)}",
                              "threshold")

@@ -65,18 +65,23 @@ def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = Fals
     it to run a model with 8-pixel tiles on hardware with 16-pixel shading-rate tiles.
     """
     f = _positive("factor", factor)
+    if not isinstance(higher_is_better, (bool, np.bool_)):  # ('no' was taken for True: the minimum of errors)
+        raise ParameterError(f"higher_is_better: expected True or False, got {higher_is_better!r}", "higher_is_better")
     v = _tile_values(values)
     if f == 1:
         return v.copy()
     th, tw = v.shape[-2:]
     f = min(f, max(th, tw))  # any larger factor pools the same one coarse tile (and would pad to its size)
     ch, cw = -(-th // f), -(-tw // f)
-    fill = np.inf if higher_is_better else -np.inf
-    padded = np.full((*v.shape[:-2], ch * f, cw * f), fill, dtype=np.result_type(v.dtype, np.float32))
+    # the padding never wins: +-inf, or the integer type's own extreme (in floats, int64 values past 2**53 were rounded)
+    if v.dtype.kind in "iu":
+        fill: object = np.iinfo(v.dtype).max if higher_is_better else np.iinfo(v.dtype).min
+    else:
+        fill = bool(higher_is_better) if v.dtype.kind == "b" else np.inf if higher_is_better else -np.inf
+    padded = np.full((*v.shape[:-2], ch * f, cw * f), fill, dtype=v.dtype)
     padded[..., :th, :tw] = v
     blocks = padded.reshape(*v.shape[:-2], ch, f, cw, f)
-    pooled = blocks.min(axis=(-3, -1)) if higher_is_better else blocks.max(axis=(-3, -1))
-    return pooled.astype(v.dtype, copy=False)
+    return blocks.min(axis=(-3, -1)) if higher_is_better else blocks.max(axis=(-3, -1))
 
 
 def _tile_values(values: object) -> np.ndarray:

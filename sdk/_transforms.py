@@ -155,8 +155,9 @@ class Transform:
         for name in need[kind]:
             if name not in d:
                 raise MetadataError(f"{key}.{name}: required for a {kind} transform, missing", f"{key}.{name}")
-            v = d[name]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v) or abs(v) > MAX_PARAMETER:
+            v = d[name]  # (numpy's numbers too: a mu_y measured as np.float32 was "not a finite number")
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not _finite(v) or abs(v) > MAX_PARAMETER:
                 raise MetadataError(f"{key}.{name}: expected a finite number of magnitude <= {MAX_PARAMETER:g}, got "
                                     f"{reprlib.repr(v)}",
                                     f"{key}.{name}")

@@ -33,6 +33,17 @@ def test_srgb_curves_invert_each_other_and_hit_the_standard_points() -> None:
     assert sdk.srgb_to_linear(1.0) == pytest.approx(1.0)
 
 
+def test_srgb_curves_refuse_a_textures_integers() -> None:
+    """An 8- or 16-bit texture read back went through the curves as its 0-255 values: srgb_to_linear(255) was
+    524947, without a word. Python's numbers (0, 1) and float arrays are taken as before."""
+    for fn in (sdk.srgb_to_linear, sdk.linear_to_srgb):
+        for dtype, top in ((np.uint8, 255), (np.uint16, 65535)):
+            with pytest.raises(sdk.InputDtypeError, match=rf"dtype {np.dtype(dtype)} .*c / {top}\)"):
+                fn(np.full((2, 2, 3), top, dtype))
+        assert fn(1) == pytest.approx(1.0) and fn(np.array([0, 1])).tolist() == pytest.approx([0.0, 1.0])
+    assert sdk.srgb_to_linear(np.full(3, 255, np.uint8) / 255.0) == pytest.approx(1.0)
+
+
 def _glsl_function(source: str, name: str) -> str:
     m = re.search(r"vec3 " + name + r"\(vec3 c\) \{.*?\n\}", source, re.S)
     assert m, f"{name} not found"

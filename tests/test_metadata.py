@@ -22,6 +22,26 @@ def test_round_trip_through_json() -> None:
     assert json.loads(m.to_json())["schema_version"] == 1  # the lowest schema that holds its fields
 
 
+def test_numpy_numbers_are_numbers() -> None:
+    """A mu_y or threshold computed with numpy (np.float32) was "expected a finite number, got np.float32(0.08)", a
+    tile size np.int64(16) "expected one of (1, ..., 16, 32)": taken now, stored as Python's (the JSON needs them)."""
+    t = sdk.Transform.clamped(np.float32(0.25))
+    assert type(t.mu_y) is float and t.mu_y == pytest.approx(0.25)
+    assert sdk.Transform.linear(np.int64(2), np.float64(0.5)).factor == 2.0
+    m = sdk.ModelMetadata.from_dict(base_metadata(
+        transform={"type": "logistic", "mu_y": np.float32(0.25), "k": np.int32(10)}, tile_size=np.int64(16),
+        input_multiple=np.int8(4), default_threshold=np.float32(0.5), safety=np.float64(0.01),
+        higher_is_better=np.False_, schema_version=np.int64(2)))
+    assert (m.tile_size, m.input_multiple, m.default_threshold, m.higher_is_better) == (16, 4, 0.5, False)
+    assert sdk.ModelMetadata.from_json(m.to_json()) == m
+    for change, key in (({"safety": np.True_}, "safety"), ({"tile_size": np.float64(16)}, "tile_size"),
+                        ({"transform": {"type": "clamped", "mu_y": np.bool_(True)}}, "transform.mu_y"),
+                        ({"default_threshold": np.float32("nan")}, "default_threshold")):
+        with pytest.raises(sdk.MetadataError) as err:
+            sdk.ModelMetadata.from_dict(base_metadata(**change))
+        assert err.value.key == key
+
+
 def test_input_multiple_is_optional_validated_and_raises_the_schema() -> None:
     m = sdk.ModelMetadata.from_dict(base_metadata())
     assert m.input_multiple is None and m.pad_multiple == 16 and "input_multiple" not in m.to_dict()

@@ -592,13 +592,59 @@ def test_providers_that_name_nothing_available(tiny_model: Callable[..., Path], 
 
 
 def test_metadata_given_as_an_object_or_nothing_usable(tmp_path: Path) -> None:
-    """load(metadata=) takes a ModelMetadata as it is (the engine's own, edited), and names what it
-    takes when given something else."""
+    """load(metadata=) takes a ModelMetadata (the engine's own, edited; validated as a dict is), and names what
+    it takes when given something else."""
     path = build_onnx(tmp_path / "bare.onnx", weights=np.eye(4, dtype=np.float32))
     meta = sdk.ModelMetadata.from_dict(base_metadata(default_threshold=0.125))
     assert sdk.load(path, metadata=meta).metadata == meta
     with pytest.raises(sdk.MetadataError, match="metadata=: expected a dict, a ModelMetadata or a YAML path, got int"):
         sdk.load(path, metadata=42)  # type: ignore[arg-type]
+
+
+def test_a_model_metadata_object_is_validated_as_a_dict_is(tmp_path: Path) -> None:
+    """load(metadata=ModelMetadata) checked nothing: one edited with dataclasses.replace was taken as it was (a
+    NaN safety gave every tile 1x1 without a word, a PSNR direction on JNYang inverted every decision, a text
+    threshold was a bare TypeError at the first shading_rates)."""
+    import dataclasses
+
+    path = build_onnx(tmp_path / "bare.onnx", weights=np.eye(4, dtype=np.float32))
+    meta = sdk.ModelMetadata.from_dict(base_metadata())
+    assert sdk.load(path, metadata=dataclasses.replace(meta, default_threshold=0.3)).metadata.default_threshold == 0.3
+    for change, key in (({"safety": float("nan")}, "safety"), ({"higher_is_better": True}, "higher_is_better"),
+                        ({"default_threshold": "0.3"}, "default_threshold"), ({"tile_size": 7}, "tile_size"),
+                        ({"inputs": ("albedo.r", "nope", "seen", "normal.z")}, "inputs")):
+        with pytest.raises(sdk.MetadataError, match=f"metadata=: {key}") as err:
+            sdk.load(path, metadata=dataclasses.replace(meta, **change))
+        assert err.value.key == key
+    with pytest.raises(sdk.MetadataError, match="metadata=: a ModelMetadata whose fields are not valid"):
+        sdk.load(path, metadata=dataclasses.replace(meta, transform={"type": "clamped"}))  # type: ignore[arg-type]
+
+
+def test_load_takes_numpy_integers_and_flags(tiny_model: Callable[..., Path]) -> None:
+    """load(tile_size=np.int64(8)) was refused with "expected one of [4, 8, 16, 32] ..., got np.int64(8)" (a
+    tile size read from an array or a device query), threads=np.int64(1) and strict=np.False_ likewise; they are
+    kept as Python's, which a pickled copy is loaded again with."""
+    import pickle
+
+    path = tiny_model(base_metadata())
+    p = sdk.load(path, tile_size=np.int64(8), threads=np.int64(1), strict=np.False_, assume_finite=np.False_,
+                 spin_between_runs=np.False_)
+    assert p.tile_size == 8 and type(p.tile_size) is int and p.tiles(40, 40) == (5, 5)
+    assert p._pickled is not None and all(type(v) in (int, bool) for k, v in p._pickled[1].items()
+                                          if k in ("threads", "strict", "assume_finite", "spin_between_runs"))
+    assert pickle.loads(pickle.dumps(p)).tile_size == 8
+    for bad in (np.float64(8.0), np.True_, 12):
+        with pytest.raises(sdk.ParameterError, match="tile_size"):
+            sdk.load(path, tile_size=bad)  # type: ignore[arg-type]
+
+
+def test_a_budget_refuses_what_is_no_frame_with_the_typed_error(tiny_model: Callable[..., Path]) -> None:
+    """shading_rates(x, saving=) read the frame's H and W before predict checked it: a scalar or None was a bare
+    ValueError ("not enough values to unpack") instead of predict's InputDtypeError."""
+    p = sdk.load(tiny_model(base_metadata()))
+    for bad in (None, 3.0, np.float32(1.0), "frame"):
+        with pytest.raises(sdk.InputDtypeError, match="numpy.ndarray of float32"):
+            p.shading_rates(bad, saving=0.5)  # type: ignore[arg-type]
 
 
 def test_a_fixed_batch_model_takes_exactly_its_batch(tmp_path: Path) -> None:
@@ -669,6 +715,16 @@ def test_pool_tiles_takes_the_worst_fine_tile() -> None:
     assert np.array_equal(sdk.pool_tiles(v, 100000), v.max(axis=(-2, -1), keepdims=True))
     with pytest.raises(sdk.ParameterError, match="numbers"):
         sdk.pool_tiles(np.array([["a", "b"], ["c", "d"]]), 2)
+    # a direction that is no flag ('no' was taken for True: errors pooled to their best tile, not their worst)
+    for flag in ("no", None, 0):
+        with pytest.raises(sdk.ParameterError, match="higher_is_better"):
+            sdk.pool_tiles(v, 2, higher_is_better=flag)  # type: ignore[arg-type]
+    assert np.array_equal(sdk.pool_tiles(v, 2, higher_is_better=np.True_), q)
+    # integers pool exactly, in their own type (through float64 2**60 + 1 came back as 2**60)
+    big = np.array([[2**60 + 1, 1, 5], [2, 3, 7]], np.int64)
+    assert sdk.pool_tiles(big, 2).tolist() == [[2**60 + 1, 7]]
+    assert sdk.pool_tiles(big, 2, higher_is_better=True).tolist() == [[1, 5]]
+    assert sdk.pool_tiles(np.array([[True, False, False]]), 2).tolist() == [[True, False]]
 
 
 def test_the_small_helpers_refuse_what_they_cannot_read() -> None:

@@ -27,6 +27,15 @@ def test_work_saved() -> None:
             sdk.work_saved(code)
 
 
+def test_check_threshold_takes_the_direction_as_a_flag() -> None:
+    """check_threshold read higher_is_better by truthiness: 'no' was True, so an error metric's negative threshold
+    passed as a PSNR's dB."""
+    assert sdk.check_threshold(-3, True) == -3.0 and sdk.check_threshold(-3, np.True_) == -3.0
+    for flag in ("no", None, 1, "False"):
+        with pytest.raises(sdk.ParameterError, match="higher_is_better: expected True or False"):
+            sdk.check_threshold(-3, flag)  # type: ignore[arg-type]
+
+
 def _tile(*values: float) -> np.ndarray:
     return np.array(values, dtype=np.float32).reshape(6, 1, 1)
 
