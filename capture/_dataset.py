@@ -58,7 +58,7 @@ from rtp.sdk import (
 )
 from rtp.sdk.files import atomic_output
 
-from ._images import read_image_values
+from ._images import _image_bytes, read_image_values
 
 __all__ = [
     "BUFFERS",
@@ -128,6 +128,14 @@ _DERIVED: dict[str, Any] = {"depth.edge": lambda s: depth_edges(s.buffer("depth"
                             "albedo.y.tiles": lambda s: tile_variances(luma(s.buffer("albedo")))}
 
 
+#: How far past [0, 1] a float value of an 8-bit buffer may be before it is refused rather than clipped: an
+#: engine's overshoot (a sharpened or slightly HDR final colour, rounding) is clipped as an 8-bit write would; past
+#: it, values are of another encoding (0-255 floats, signed data)
+_U8_SLACK = 0.5
+#: What the float16 buffers hold (the errors' hint).
+_F16_WHAT = {"normal": "unit normals in [-1, 1]", "depth": "metres along -z", "motion": "pixels"}
+
+
 def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.ndarray:
     spec = BUFFERS[name]
     a = np.asarray(arr)
@@ -140,11 +148,18 @@ def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.nda
     if a.ndim not in (2, 3) or tuple(a.shape[2:]) != expected or (shape is not None and a.shape[:2] != shape):
         want = f"(H, W{', ' + str(n) if n > 1 else ''})"
         raise InputShapeError(f"buffer {name!r}: expected shape {want} matching the sample, got {a.shape}", tuple(a.shape), want)
+    if a.dtype == np.uint8 and spec.dtype != "u8":  # (uint8 normals were stored as 0-255 float16 "normals")
+        raise InputDtypeError(f"buffer {name!r}: uint8 values, but {name} is stored as float16 (its values as they "
+                              f"are: {_F16_WHAT.get(name, 'float values')}); give float values")
     if not np.all(np.isfinite(a)):
         raise DatasetError(f"buffer {name!r} holds NaN or infinite values")
     if spec.dtype == "u8":
         if a.dtype == np.uint8:
             return a
+        lo, hi = float(a.min()), float(a.max())
+        if lo < -_U8_SLACK or hi > 1.0 + _U8_SLACK:  # (an albedo of 0-255 floats was stored as all 1.0)
+            raise DatasetError(f"buffer {name!r}: values in [{lo:.4g}, {hi:.4g}], expected [0, 1] (stored as "
+                               f"round(255 v)); give 8-bit values as uint8, or divide them by 255")
         return np.round(np.clip(a, 0.0, 1.0) * 255.0).astype(np.uint8)
     # Saturate rather than overflow to inf: the motion of a point that was behind the previous
     # camera can exceed float16's range (65504 pixels).
@@ -251,6 +266,19 @@ def sample_path(root: str | os.PathLike[str], sample_id: str) -> Path:
     return Path(root) / "samples" / f"{sample_id}.npz"
 
 
+def _json_object(value: Any, what: str, *, allow_nan: bool = True) -> dict[str, Any]:
+    """A JSON-clean copy of the mapping ``value`` (what the manifest or a sample's meta stores), or a DatasetError
+    naming ``what``: a numpy number, a NaN or a set was the json module's raw TypeError or ValueError."""
+    if not isinstance(value, Mapping):
+        raise DatasetError(f"{what}: expected a mapping of names to JSON values, got {type(value).__name__}")
+    try:
+        return dict(json.loads(json.dumps(dict(value), allow_nan=allow_nan)))
+    except (TypeError, ValueError, RecursionError) as err:
+        finite = "" if allow_nan else ", no NaN or infinity"
+        raise DatasetError(f"{what}: expected JSON values (str, int, float, bool, None, lists and mappings of them; "
+                           f"float(x) for a numpy number{finite}), got {reprlib.repr(dict(value))} ({err})") from err
+
+
 def _check_id(sample_id: str) -> None:
     if not isinstance(sample_id, str) or not _ID_RE.match(sample_id) or len(sample_id) > MAX_ID_LENGTH:
         raise DatasetError(f"sample id {reprlib.repr(sample_id)}: use letters, digits, '.', '_' and '-', at most "
@@ -270,7 +298,7 @@ def encode_sample(sample_id: str, buffers: Mapping[str, np.ndarray], meta: Mappi
         raise DatasetError(f"sample {sample_id}: missing buffers {missing}, unknown buffers {extra}")
     shape = tuple(np.asarray(buffers["final_1x1"]).shape[:2])
     encoded = {name: _encode(name, buffers[name], shape) for name in BUFFERS}
-    meta_json = json.dumps(dict(meta), sort_keys=True, allow_nan=False)
+    meta_json = json.dumps(_json_object(meta, f"sample {sample_id}: meta", allow_nan=False), sort_keys=True)
     out = io.BytesIO()
     np.savez_compressed(out, meta=np.frombuffer(meta_json.encode(), dtype=np.uint8), **encoded)  # type: ignore[arg-type]
     return out.getvalue()
@@ -287,7 +315,11 @@ class DatasetWriter:
         self.root = Path(root)
         self.samples_dir = self.root / "samples"
         manifest = self.root / "manifest.json"
-        settings = json.loads(json.dumps(dict(settings or {})))  # JSON-clean copy
+        settings = _json_object(settings or {}, "settings")  # JSON-clean copy
+        for folder in (self.root, self.samples_dir):  # (the system's NotADirectoryError or FileExistsError, untyped)
+            if folder.exists() and not folder.is_dir():
+                raise DatasetError(f"{folder}: expected a folder{' of samples' if folder == self.samples_dir else ''}, "
+                                   f"found a file: write the dataset into another folder")
         if manifest.exists():  # (checked before anything is made: a refused folder is left as it was)
             current = _read_manifest(self.root)
             before = current.get("settings")
@@ -353,7 +385,7 @@ class DatasetWriter:
             reserved = sorted(set(extra) & {"format", "format_version", "settings", "samples", "bytes_per_sample"})
             if reserved:  # (format "mine" left a folder no reader opens)
                 raise DatasetError(f"finalize: {reserved} are the manifest's own keys, not extra ones")
-            data.update(json.loads(json.dumps(dict(extra))))
+            data.update(_json_object(extra, "finalize"))
         self._write_manifest(data)
 
 
@@ -572,9 +604,7 @@ def write_png(path: str | os.PathLike[str], image: np.ndarray) -> None:
     """Write a float [0, 1] or uint8 image as PNG, atomically (for figures and the paper layout)."""
     from PIL import Image
 
-    a = np.asarray(image)
-    if a.dtype != np.uint8:
-        a = np.round(np.clip(a, 0.0, 1.0) * 255.0).astype(np.uint8)
+    a = _image_bytes(np.asarray(image), "write_png")
     buf = io.BytesIO()
     Image.fromarray(a).save(buf, format="PNG")
     with atomic_output(path) as tmp:

@@ -108,17 +108,30 @@ def save_image(path: str | os.PathLike[str], image: np.ndarray) -> None:
     atomically, in the format the file extension names (``.png``, ``.jpg``, ``.webp``, ...)."""
     from PIL import Image
 
-    a = np.asarray(image)
-    if a.dtype != np.uint8:
-        a = np.round(np.clip(np.nan_to_num(a.astype(np.float64)), 0.0, 1.0) * 255.0).astype(np.uint8)
-    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (3, 4)):
-        raise ParameterError(f"save_image: expected (H, W), (H, W, 3) or (H, W, 4), got shape {a.shape}")
+    a = _image_bytes(np.asarray(image), "save_image")
     fmt = _format(path)
     im = Image.fromarray(a)
     if fmt == "JPEG" and im.mode == "RGBA":
         im = im.convert("RGB")
     with atomic_output(path) as tmp:
         im.save(tmp, format=fmt)
+
+
+def _image_bytes(a: np.ndarray, what: str) -> np.ndarray:
+    """An image to write as uint8: uint8 as it is, bool and float values in [0, 1] (NaN as 0) scaled by 255;
+    other integers, which held 0-255 or 0-65535 and were clipped to white, and empty or oddly shaped arrays are a
+    :class:`ParameterError`."""
+    if a.dtype.kind in "iu" and a.dtype != np.uint8:
+        raise ParameterError(f"{what}: {a.dtype} pixels; expected uint8 (0-255) or float values in [0, 1] (other "
+                             f"integers were clipped to white): convert with .astype(np.uint8) for 0-255, or divide "
+                             f"by the largest value")
+    if a.dtype != np.uint8 and a.dtype.kind not in "bf":
+        raise ParameterError(f"{what}: {a.dtype} pixels; expected uint8 or float values in [0, 1]")
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (3, 4)) or 0 in a.shape:
+        raise ParameterError(f"{what}: expected a non-empty (H, W), (H, W, 3) or (H, W, 4), got shape {a.shape}")
+    if a.dtype != np.uint8:
+        a = np.round(np.clip(np.nan_to_num(a.astype(np.float64)), 0.0, 1.0) * 255.0).astype(np.uint8)
+    return a
 
 
 def check_image_output(path: str | os.PathLike[str], what: str = "output") -> None:

@@ -28,7 +28,16 @@ from rtp import sdk
 from rtp.sdk import GBUFFERS, ParameterError, RtpError
 from rtp.sdk.files import check_output, frame_files, read_frame, writer_lock
 
-from ._dataset import _ID_RE, BUFFERS, MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
+from ._dataset import (
+    _ID_RE,
+    BUFFERS,
+    MAX_ID_LENGTH,
+    DatasetError,
+    DatasetReader,
+    DatasetWriter,
+    _open_sample,
+    sample_path,
+)
 
 __all__ = ["FINAL_KEYS", "ImportReport", "REQUIRED_GBUFFERS", "import_frames"]
 
@@ -62,7 +71,8 @@ class ImportReport:
 
 
 def _scene_name(scene: str | None, file: str) -> str:
-    name = scene if scene is not None else Path(file).resolve().parent.name
+    # (abspath, not resolve: a folder linked to the engine's dump folder is the level of the link's name, as given)
+    name = scene if scene is not None else Path(os.path.abspath(file)).parent.name
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", name):
         raise ParameterError(f"scene: expected a name of letters, digits, '.', '_' and '-' (at most 64; the level the "
                              f"frames are of, which --val-scenes names), got {name!r}"
@@ -94,10 +104,38 @@ def _members(path: str) -> dict[str, tuple[int, ...]]:
                     header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
                               else np.lib.format.read_array_header_2_0)
                     shapes[info.filename[:-4]] = tuple(header(fh)[0])
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({err}; `{EXAMPLE}` writes frames)",
-                             "frames") from None
+    except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
+        raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({type(err).__name__}: {err}; "
+                             f"`{EXAMPLE}` writes frames)", "frames") from None
     return shapes
+
+
+def _read(path: str) -> dict[str, Any]:
+    """The arrays of a frame file (``read_frame``), a damaged one a ParameterError naming it (a deflate stream
+    damaged past the arrays' headers was zlib's raw error, midway through an import)."""
+    try:
+        return read_frame(path, extra=(*FINAL_KEYS, "colour"), example=EXAMPLE)  # (colour: rtp predict's overlay)
+    except RtpError:
+        raise
+    except Exception as err:  # (zipfile and numpy on damaged bytes)
+        raise ParameterError(f"{path!r}: a damaged .npz, numpy cannot read its arrays ({type(err).__name__}: {err}); "
+                             f"the frames before it are in the dataset: dump this one again, and the same command "
+                             f"imports the rest", "frames") from None
+
+
+def _kept(writer: DatasetWriter, sample_id: str) -> bool:
+    """Whether the sample ``sample_id`` is in the dataset and readable; one damaged since (cut short by a copy,
+    a disk) is deleted, with a warning, and imported again rather than kept for ``rtp targets`` to fail on."""
+    path = sample_path(writer.root, sample_id)
+    if not path.is_file():
+        return False
+    try:
+        _open_sample(sample_id, path, path)
+    except DatasetError as err:
+        log.warning("%s; imported again", err)
+        path.unlink(missing_ok=True)
+        return False
+    return True
 
 
 def _final(path: str, key: str, a: Any, hw: tuple[int, int]) -> np.ndarray:
@@ -247,7 +285,7 @@ def import_frames(
                    "tolerance": float(tolerance)}
     # the first frame made into a sample: its arrays, the conventions and the tolerance checked by the SDK
     # before the dataset's manifest records them
-    _buffers(files[0], read_frame(files[0], extra=(*FINAL_KEYS, "colour"), example=EXAMPLE), present, conventions)
+    _buffers(files[0], _read(files[0]), present, conventions)
     settings = {"size": [int(w), int(h)], "source": SOURCE, "conventions": conventions, "absent": list(absent)}
 
     root = check_output(out, folder=True, what="dataset folder")
@@ -262,13 +300,13 @@ def import_frames(
             f"{root} is being written by another job ({holder}): wait for it to end")):
         writer = DatasetWriter(root, settings)  # (other settings there: refused, naming them)
         writer.remove_stale()
-        todo = [(f, i, n) for f, i, n in zip(files, ids, names) if not writer.has(i)]
+        todo = [(f, i, n) for f, i, n in zip(files, ids, names) if not _kept(writer, i)]
         report.skipped = len(files) - len(todo)
         if progress:
             progress(report.skipped, len(files))
         warned: dict[str, int] = {}
         for f, sid, name in todo:
-            arrays = read_frame(f, extra=(*FINAL_KEYS, "colour"), example=EXAMPLE)  # (colour: rtp predict's overlay)
+            arrays = _read(f)
             gbuffers = {k: v for k, v in arrays.items() if k in GBUFFERS}
             try:
                 texts = sdk.check_gbuffers(**gbuffers, normal_space=normal_space, depth_kind=depth_kind,

@@ -424,7 +424,8 @@ def compute_targets(
     # write the manifest over this one's.
     with writer_lock(store.root, "rtp targets", lambda holder: TargetError(
             f"{store.root} is being written by another targets job ({holder}): wait for it to end")):
-        for tmp in store.root.glob("*/.*.tmp"):  # (a killed job's: no other writer runs now)
+        # (a killed job's, its targets' and its manifest's: no other writer runs now)
+        for tmp in (*store.root.glob("*/.*.tmp"), *store.root.glob(".manifest.json.*.tmp")):
             tmp.unlink(missing_ok=True)
         params: dict[str, Any] = {"ppd": M.DEFAULT_PPD if ppd is None else ppd,
                                   "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}

@@ -140,8 +140,11 @@ def test_truncated_targets_are_computed_again_and_killed_jobs_leave_no_temporary
     for tmp in left:
         tmp.write_bytes(b"half")
     assert not store.has("s1", "psnr") and store.has("s0", "psnr")
+    targets_manifest_tmp = store.root / ".manifest.json.k1ll3d.tmp"  # (a targets job killed in its manifest's write)
+    targets_manifest_tmp.write_bytes(b"half")
     assert compute_targets(tmp_path / "ds", ["psnr"]) == 1
     assert store.load("s1", "psnr", 16).shape == (6, 2, 3)
+    assert not targets_manifest_tmp.exists()  # (left for good before: only the metrics' folders were cleared)
     DatasetWriter(tmp_path / "ds").remove_stale()  # (what a capture's start runs)
     assert not any(tmp.exists() for tmp in left)
 
@@ -636,3 +639,65 @@ def test_half_float_buffers_saturate_instead_of_overflowing(tmp_path: Path) -> N
     w.write("s1", bufs, {})
     m = DatasetReader(tmp_path / "ds")["s1"].buffer("motion")
     assert np.isfinite(m).all() and m[0, 0, 0] == 65504.0 and m[0, 0, 1] == -65504.0
+
+
+def test_values_the_storage_would_misrepresent_are_refused_not_stored(tmp_path: Path) -> None:
+    # uint8 normals were stored as float16 normals of 0-255; an albedo of 0-255 floats as all 1.0 (clipped)
+    w = DatasetWriter(tmp_path / "ds")
+    bufs = _buffers()
+    with pytest.raises(sdk.InputDtypeError, match="'normal': uint8 values, but normal is stored as float16"):
+        w.write("a", {**bufs, "normal": np.full((24, 40, 3), 128, np.uint8)}, {})
+    with pytest.raises(DatasetError, match=r"'albedo': values in \[0, 255\], expected \[0, 1\].*divide them by 255"):
+        w.write("a", {**bufs, "albedo": bufs["albedo"] * 0 + np.linspace(0, 255, 40, dtype=np.float32)[:, None]}, {})
+    with pytest.raises(DatasetError, match="'seen': values in"):
+        w.write("a", {**bufs, "seen": bufs["seen"] - 1.0}, {})
+    assert not list((tmp_path / "ds" / "samples").iterdir())
+    # an overshoot past [0, 1] (rounding, a sharpened final colour) is clipped as before; uint8 is taken for the
+    # 8-bit buffers
+    w.write("a", {**bufs, "albedo": bufs["albedo"] * 0 + 1.2, "final_1x1": (bufs["final_1x1"] * 255).astype(np.uint8)},
+            {})
+    assert DatasetReader(tmp_path / "ds")["a"].buffer("albedo").max() == 1.0
+
+
+def test_meta_and_settings_json_cannot_hold_are_dataset_errors(tmp_path: Path) -> None:
+    # (the json module's raw TypeError / ValueError before)
+    w = DatasetWriter(tmp_path / "ds")
+    bufs = _buffers()
+    for meta, words in (({"unseen": np.float32(0.5)}, "float32"), ({"unseen": float("nan")}, "no NaN"),
+                        ([("scene", "a")], "expected a mapping")):
+        with pytest.raises(DatasetError, match=f"sample a: meta: .*{words}"):
+            w.write("a", bufs, meta)  # type: ignore[arg-type]
+    assert not list((tmp_path / "ds" / "samples").iterdir())
+    with pytest.raises(DatasetError, match="settings: expected JSON values.*int64"):
+        DatasetWriter(tmp_path / "other", {"seed": np.int64(3)})
+    assert not (tmp_path / "other").exists()
+    with pytest.raises(DatasetError, match="finalize: expected JSON values.*set"):
+        w.finalize({"note": {1, 2}})
+    # a file where the folder (or its samples/) is expected: the system's NotADirectoryError / FileExistsError before
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(DatasetError, match="file: expected a folder, found a file"):
+        DatasetWriter(tmp_path / "file")
+    (tmp_path / "s").mkdir()
+    (tmp_path / "s" / "samples").write_text("x")
+    with pytest.raises(DatasetError, match="expected a folder of samples, found a file"):
+        DatasetWriter(tmp_path / "s")
+
+
+def test_images_of_other_integer_pixels_are_refused_not_saved_white(tmp_path: Path) -> None:
+    from rtp.capture import save_image
+
+    grey = np.full((4, 6, 3), 100, np.int64)  # (0-255 in int64: saved as white before)
+    for write in (save_image, write_png):
+        with pytest.raises(sdk.ParameterError, match="int64 pixels; expected uint8"):
+            write(tmp_path / "a.png", grey)
+        with pytest.raises(sdk.ParameterError, match="uint16 pixels"):
+            write(tmp_path / "a.png", grey.astype(np.uint16))
+        with pytest.raises(sdk.ParameterError, match=r"non-empty .* got shape \(0, 6, 3\)"):
+            write(tmp_path / "a.png", np.zeros((0, 6, 3), np.float32))
+        assert not (tmp_path / "a.png").exists()
+        write(tmp_path / "b.png", grey.astype(np.uint8))
+        write(tmp_path / "c.png", np.ones((4, 6), bool))
+    from PIL import Image
+
+    assert np.asarray(Image.open(tmp_path / "b.png"))[0, 0, 0] == 100
+    assert np.asarray(Image.open(tmp_path / "c.png"))[0, 0] == 255

@@ -306,3 +306,57 @@ def test_each_kind_of_convention_warning_is_shown_by_the_command(dumps: Any, tmp
     assert rtp_main(["import", str(bad), "--out", str(tmp_path / "data")]) == 0
     err = capsys.readouterr().err
     assert "view: its last row is" in err and "seen: only" in err and "more like" not in err, err
+
+
+def _damage(path: Path, member: str, at: float) -> None:
+    """Flip 64 bytes of ``member``'s deflate stream in the frame file ``path``, ``at`` (0-1) of the way into it."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        info = z.getinfo(member)
+    data = bytearray(path.read_bytes())
+    start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+    off = start + 16 + int(at * (info.compress_size - 100))
+    data[off:off + 64] = bytes(b ^ 0xFF for b in data[off:off + 64])
+    path.write_bytes(bytes(data))
+
+
+def test_a_damaged_frame_is_a_parameter_error_naming_it(dumps: Any, tmp_path: Path) -> None:
+    # (zlib's raw "Error -3 while decompressing data" before: from the arrays' headers before anything was written,
+    # or from a later frame's data midway through the import)
+    import shutil
+
+    root, _, _ = dumps
+    level = tmp_path / "lvl"
+    shutil.copytree(root / "level_a", level)
+    good = (level / "frame_0001.npz").read_bytes()
+    _damage(level / "frame_0001.npz", "depth.npy", 0.0)
+    with pytest.raises(sdk.ParameterError, match=r"frame_0001.npz': not an .npz of arrays numpy can read \(error: "):
+        import_frames(level, tmp_path / "data")
+    assert not (tmp_path / "data" / "samples").exists() or not any((tmp_path / "data" / "samples").iterdir())
+    (level / "frame_0001.npz").write_bytes(good)
+    _damage(level / "frame_0001.npz", "final_1x1.npy", 0.2)  # (past what reading the headers decompresses)
+    with pytest.raises(sdk.ParameterError, match=r"frame_0001.npz': a damaged .npz.*the same command imports the rest"):
+        import_frames(level, tmp_path / "data")
+    assert DatasetReader(tmp_path / "data").ids == ["lvl-frame_0000"]
+    (level / "frame_0001.npz").write_bytes(good)
+    assert (import_frames(level, tmp_path / "data").written, len(DatasetReader(tmp_path / "data"))) == (2, 3)
+
+
+def test_a_linked_folder_is_the_level_of_its_name_and_a_damaged_sample_is_imported_again(
+        dumps: Any, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    root, _, _ = dumps
+    (tmp_path / "arena").symlink_to(root / "level_a")  # (the level "level_a" before: the link's target's name)
+    data = tmp_path / "data"
+    assert import_frames(tmp_path / "arena", data).written == 3
+    assert DatasetReader(data).ids == [f"arena-frame_{i:04d}" for i in range(3)]
+    assert {DatasetReader(data)[i].meta["scene"] for i in DatasetReader(data).ids} == {"arena"}
+    # a sample cut short since (a copy, a disk): imported again with a warning, not skipped for rtp targets to fail on
+    sample = data / "samples" / "arena-frame_0001.npz"
+    sample.write_bytes(sample.read_bytes()[:1000])
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        report = import_frames(tmp_path / "arena", data)
+    assert (report.written, report.skipped) == (1, 2)
+    assert any("arena-frame_0001.npz: unreadable sample" in r.getMessage() and "imported again" in r.getMessage()
+               for r in caplog.records)
+    assert DatasetReader(data)["arena-frame_0001"].final("1x1").shape == (H, W, 3)
