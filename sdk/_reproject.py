@@ -147,7 +147,11 @@ def _orthographic(m: np.ndarray, name: str) -> None:
     """What the reprojection needs of an orthographic projection ``m`` (last row ``0, 0, 0, a``): clip y up, and
     the view depth rising with the clip depth (OpenGL's ``m[2][2] = -2 / (f - n)``), else a typed error."""
     _y_up(m, name)
-    dz = _inverse(m, name)[2, 2] * m[3, 3]  # d(view z) / d(NDC z) along the pixel's line: negative in OpenGL's
+    with np.errstate(over="ignore", invalid="ignore"):  # (extreme entries: an infinite or NaN product, judged below)
+        dz = _inverse(m, name)[2, 2] * m[3, 3]  # d(view z) / d(NDC z) along the pixel's line: negative in OpenGL's
+    if not np.isfinite(dz):
+        raise ParameterError(f"{name}: an orthographic projection whose depth scale is out of range (m[2][2] = "
+                             f"{m[2, 2]:g}, m[3][3] = {m[3, 3]:g}: the view depth of a clip depth overflows)", name)
     if not dz < 0.0:
         raise ParameterError(f"{name}: an orthographic projection whose clip depth does not rise away from the camera "
                              f"(m[2][2] = {m[2, 2]:g}, OpenGL's is -2 / (f - n)): a left-handed or reversed-Z one? rtp "

@@ -299,6 +299,8 @@ def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
     flipped, left_handed = np.diag([1.0, -1.0, 1.0, 1.0]) @ proj, proj @ np.diag([1.0, 1.0, -1.0, 1.0])
     singular = proj.copy()  # an orthographic last row over a matrix with no inverse (numpy's LinAlgError before)
     singular[2] = 0.0
+    overflow = proj.copy()  # a depth scale whose view depth overflows: -inf taken for "rising" (and a RuntimeWarning)
+    overflow[2, 2], overflow[3, 3] = -1e-300, 1e300
     cases = [  # (projection, prev_view_projection, prev_projection, the matrix named, what is said)
         (neither, prev_vp, None, "projection", "neither a perspective's"),
         (flipped, flipped @ prev_view, None, "projection", "Vulkan"),
@@ -308,6 +310,7 @@ def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
         (proj, prev_vp, left_handed, "prev_projection", "left-handed or reversed-Z"),
         (singular, prev_vp, None, "projection", "singular"),
         (proj, prev_vp, singular, "prev_projection", "singular"),
+        (overflow, prev_vp, None, "projection", "depth scale is out of range"),
     ]
     g = {k: v for k, v in f.items() if k not in ("projection", "prev_view_projection")}
     sdk_names = {"projection": "cur_proj", "prev_projection": "prev_proj"}
