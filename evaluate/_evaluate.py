@@ -306,18 +306,23 @@ class _Quality:
 
 
 class _Decisions:
+    """Per-tile rate codes of one method in one scene, whether each fails, whether it is unseen and the pixels it
+    holds (a partial tile at the frame's edge its real ones: the work saved is a share of the frame's pixels)."""
+
     def __init__(self) -> None:
         self.codes: list[np.ndarray] = []
         self.fail: list[np.ndarray] = []
         self.unseen: list[np.ndarray] = []
+        self.pixels: list[np.ndarray] = []
 
-    def add(self, codes: np.ndarray, fail: np.ndarray, unseen: np.ndarray) -> None:
+    def add(self, codes: np.ndarray, fail: np.ndarray, unseen: np.ndarray, pixels: np.ndarray) -> None:
         self.codes.append(codes.ravel())
         self.fail.append(fail.ravel())
         self.unseen.append(unseen.ravel())
+        self.pixels.append(np.broadcast_to(pixels, codes.shape).ravel())
 
     def merged(self) -> tuple[np.ndarray, ...]:
-        return tuple(np.concatenate(x) if x else np.zeros(0) for x in (self.codes, self.fail, self.unseen))
+        return tuple(np.concatenate(x) if x else np.zeros(0) for x in (self.codes, self.fail, self.unseen, self.pixels))
 
 
 _SAVED = np.zeros(16)
@@ -370,6 +375,13 @@ def monotone_over_rates(values: np.ndarray, higher_is_better: bool = False) -> n
         for j in below:
             worst(out[..., i, :, :], out[..., j, :, :], out=out[..., i, :, :])
     return out
+
+
+def tile_pixels(size: tuple[int, int], tile: int) -> np.ndarray:
+    """The pixels each tile of a frame of ``size = (H, W)`` holds, ``(th, tw)`` float64: partial tiles at the
+    frame's right and bottom edges their real ones (as ``sdk.work_saved(codes, size, tile)`` weighs them)."""
+    h, w = size
+    return np.outer(sdk.tile_extents(h, tile), sdk.tile_extents(w, tile)).astype(np.float64)
 
 
 def _split_masks(unseen: np.ndarray) -> dict[str, np.ndarray]:
@@ -600,31 +612,37 @@ class _Sweep:
         self.ffx_sweepers = {name: [FidelityFX(sel.tile_size, cutoff=c, motion_factor=sel.motion_factor,
                                                additional_rates=sel.additional_rates) for c in ffx_grid]
                              for name, sel in selectors.items() if isinstance(sel, FidelityFX)}
-        self.acc: dict[tuple[str, str], list[float]] = {}  # (method, parameter) -> [fails, saved, tiles]
+        # (method, parameter) -> [failing tiles, pixels saved, tiles, pixels]
+        self.acc: dict[tuple[str, str], list[float]] = {}
 
-    def add(self, sample: Any, pred: np.ndarray, gt: np.ndarray) -> None:
-        """Tally one sample at every grid point of every method."""
+    def add(self, sample: Any, pred: np.ndarray, gt: np.ndarray, pixels: np.ndarray) -> None:
+        """Tally one sample at every grid point of every method (``pixels``: each tile's, :func:`tile_pixels`)."""
         hib = self.hib
         for t in self.model_grid:
             self._tally("model", f"threshold {t:.4g}", select_rates(pred, t, higher_is_better=hib, factors=self.factors),
-                        gt)
+                        gt, pixels)
         for name, grid in self.yang_grids.items():
-            est_y = self.selectors[name].predict(sample)
+            sel = self.selectors[name]
+            est_y = sel.predict(sample)
+            # the rates its shading_rates allows (NAS's allow_4x4=False: no 4x4), so that the sweep's point at its
+            # own threshold is the decision table's row (it chose 4x4 there where the decision took 2x4 or 4x2)
+            allowed = None if sel.allow_4x4 else [r for r in PREDICTED_RATES if r != "4x4"]
             for t in grid:
-                self._tally(name, f"t {t:.4g}", select_rates(est_y, t), gt)
+                self._tally(name, f"t {t:.4g}", select_rates(est_y, t, allowed=allowed), gt, pixels)
         for name, sels in self.ffx_sweepers.items():
             for sel in sels:
-                self._tally(name, f"cutoff {sel.cutoff:.4g}", sel.shading_rates(sample), gt)
+                self._tally(name, f"cutoff {sel.cutoff:.4g}", sel.shading_rates(sample), gt, pixels)
 
-    def _tally(self, method: str, param: str, codes: np.ndarray, gt: np.ndarray) -> None:
-        acc = self.acc.setdefault((method, param), [0.0, 0.0, 0.0])
+    def _tally(self, method: str, param: str, codes: np.ndarray, gt: np.ndarray, pixels: np.ndarray) -> None:
+        acc = self.acc.setdefault((method, param), [0.0, 0.0, 0.0, 0.0])
         acc[0] += float(failing_tiles(codes, gt, self.thr, self.hib).sum())
-        acc[1] += float(_SAVED[codes.astype(np.int64)].sum())
+        acc[1] += float((_SAVED[codes.astype(np.int64)] * pixels).sum())
         acc[2] += codes.size
+        acc[3] += float(pixels.sum())
 
     def rows(self) -> list[dict[str, Any]]:
-        """The report's sweep rows: fail share and work saved per (method, parameter)."""
-        return [{"method": m, "parameter": prm, "fail_share": a[0] / a[2], "work_saved": a[1] / a[2]}
+        """The report's sweep rows: fail share (of the tiles) and work saved (of the pixels) per (method, parameter)."""
+        return [{"method": m, "parameter": prm, "fail_share": a[0] / a[2], "work_saved": a[1] / a[3]}
                 for (m, prm), a in self.acc.items()]
 
 
@@ -658,11 +676,13 @@ class _Run:
         scene = str(sample.meta.get("scene", "?"))
         self.scene_counts[scene] = self.scene_counts.get(scene, 0) + 1
         pred, pred0, gt = self._predict(sample)
-        unseen = tile_unseen_share(sample.channel("seen"), self.tile) > self.unseen_fraction
+        seen = sample.channel("seen")
+        unseen = tile_unseen_share(seen, self.tile) > self.unseen_fraction
+        pixels = tile_pixels(seen.shape, self.tile)
         self._add_quality(sample, scene, pred, pred0, gt, unseen)
-        codes = self._add_decisions(sample, scene, pred, gt, unseen)
+        codes = self._add_decisions(sample, scene, pred, gt, unseen, pixels)
         if self.sweep is not None:
-            self.sweep.add(sample, pred, gt)
+            self.sweep.add(sample, pred, gt, pixels)
         return {"sample": sample, "pred": pred, "gt": gt, "codes": codes}
 
     def _predict(self, sample: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -696,7 +716,7 @@ class _Run:
             self.quality.setdefault(("yang2019", scene), _Quality()).add(fwd(est[rows]), g_t, est[rows], gt[rows], unseen)
 
     def _add_decisions(self, sample: Any, scene: str, pred: np.ndarray, gt: np.ndarray,
-                       unseen: np.ndarray) -> dict[str, np.ndarray]:
+                       unseen: np.ndarray, pixels: np.ndarray) -> dict[str, np.ndarray]:
         """Every method's rates (model, oracle, baselines) and whether each tile's rate fails."""
         thr, hib = self.thr, self.hib
         codes = {"model": select_rates(pred, thr, higher_is_better=hib, factors=self.meta.rate_factors),
@@ -704,7 +724,7 @@ class _Run:
         for name, sel in self.selectors.items():
             codes[name] = sel.shading_rates(sample)
         for name, c in codes.items():
-            self.decisions.setdefault((name, scene), _Decisions()).add(c, failing_tiles(c, gt, thr, hib), unseen)
+            self.decisions.setdefault((name, scene), _Decisions()).add(c, failing_tiles(c, gt, thr, hib), unseen, pixels)
         return codes
 
     # -- the report ------------------------------------------------------------------------------
@@ -777,16 +797,18 @@ class _Run:
         """Decision rows of one scene: per method and split, the fail share, work saved and rate shares."""
         out = []
         for method in ["model", "oracle", *self.selectors]:
-            c, f, un = self._merged(self.decisions, method, scene)
+            c, f, un, px = self._merged(self.decisions, method, scene)
             for split, mask in _split_masks(un.astype(bool)).items():
                 cm = c[mask].astype(np.int64)
                 n_t = int(cm.size)
+                # (a share of the pixels, as sdk.work_saved(codes, size, tile) and `rtp play`: the mean over tiles
+                # counted a frame's partial edge tiles, the bottom row at 1920x1080 on 16-pixel tiles, as whole)
                 shares = {r: float(np.mean(cm == RATE_CODES[r])) if n_t else float("nan") for r in sdk.ALL_RATES}
                 out.append({
                     "method": method, "scene": scene, "split": split,
                     "threshold": _method_threshold(method, self.thr, self.selectors), "n": n_t,
                     "fail_share": float(f[mask].mean()) if n_t else float("nan"),
-                    "work_saved": float(_SAVED[cm].mean()) if n_t else float("nan"),
+                    "work_saved": float((_SAVED[cm] * px[mask]).sum() / px[mask].sum()) if n_t else float("nan"),
                     "rate_shares": shares,
                 })
         return out
@@ -876,7 +898,8 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
         f"MAE [{metric}] is in metric units. 'model' includes the safety margin (what an engine gets).",
         f"Scored rates: the network's own outputs ({', '.join(outputs)}); extrapolated rates enter the decisions only.",
         f"'fails %': tiles whose chosen rate's true {metric} {'falls below' if hib else 'reaches'} {thr:g}; "
-        "1x1 never fails. 'work saved %': mean over tiles of 1 - 1/(W·H) of the chosen rate.",
+        "1x1 never fails. 'work saved %': 1 - 1/(W·H) of the chosen rate, averaged over the tiles weighted by the "
+        "pixels each holds (a partial tile at the frame's edge its real ones).",
     ]
     if "yang2019" in selectors:
         if metric != "jnyang":

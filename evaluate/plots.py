@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from rtp.capture import figure_image, save_image
-from rtp.sdk import OVERLAY_COLOURS, PREDICTED_RATES, RATE_NAMES, draw_rate_overlay, rate_size, work_saved
+from rtp.sdk import OVERLAY_COLOURS, PREDICTED_RATES, RATE_NAMES, draw_rate_overlay, rate_size, tile_grid, work_saved
 
 from ._baselines import BaselineError
 
@@ -254,8 +254,8 @@ def _add_rate_legend(fig: Figure, ncols: int) -> None:
 
 def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1) -> np.ndarray:
     """:func:`rtp.sdk.draw_rate_overlay` of each method's rate codes ``(th, tw)`` on the same
-    ``(H, W, 3)`` image, side by side, titled with the method and the shading work it saves (tile
-    average), with the legend of the rate colours below."""
+    ``(H, W, 3)`` image, side by side, titled with the method and the shading work it saves (of the image's
+    pixels, a partial edge tile counting its real ones), with the legend of the rate colours below."""
     if not rates:
         raise BaselineError("rate_overlays: no methods given")
     img = np.asarray(image)
@@ -267,7 +267,9 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
     axes = np.atleast_1d(fig.subplots(1, len(rates)))
     for ax, (name, codes) in zip(axes, rates.items()):
         codes = np.asarray(codes).astype(np.uint8)
-        saved = float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])) if codes.size else 0.0
+        # a share of the frame's pixels (a partial edge tile its real ones), as the decision table counts it
+        saved = (0.0 if not codes.size else work_saved(codes, (h, w), tile) if codes.shape == tile_grid(h, w, tile)
+                 else float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])))
         ax.imshow(draw_rate_overlay(img, codes, tile), interpolation="nearest")
         ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
         _bare(ax)

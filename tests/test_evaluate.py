@@ -987,3 +987,65 @@ def test_an_evaluation_into_another_ones_folder_removes_that_ones_plots(
                     "other_rates.png", "other_scatter.png"], left
     assert rtp_main(["evaluate", str(other), *run]) == 0  # the same model without --plots: its old plots go too
     assert sorted(p.name for p in out.iterdir()) == ["evaluation.json", "evaluation.md", "mine_rates.png", "notes.png"]
+
+
+def _sweep_point(rep: Any, method: str, label: str) -> dict[str, Any]:
+    (row,) = [r for r in rep.sweep if r["method"] == method and r["parameter"] == label]
+    return row
+
+
+def test_each_sweep_at_the_methods_own_parameter_is_its_decision_row(dataset: Path, model: Path) -> None:
+    """The matched table reads the sweeps; each sweep's point at the parameter of the decision table must be that
+    row. Yang 2019's sweep chose among all rates where NAS's setting (allow_4x4=False) keeps 4x4 out: on the black,
+    unseen tile it swept 4x4 (93.75% saved) where the decision shaded 2x4 (87.5%)."""
+    nas = Yang2019(T, threshold=0.25, motion=False, allow_4x4=False)
+    rep = evaluate(model, dataset, yang=nas)
+    labels = {"model": "threshold 0.2", "yang2019": "t 0.25", "yang2019-unseen-1x1": "t 0.25"}
+    for method, label in labels.items():
+        row, point = rep.row("decisions", method), _sweep_point(rep, method, label)
+        assert (point["fail_share"], point["work_saved"]) == pytest.approx((row["fail_share"], row["work_saved"])), method
+    assert rep.row("decisions", "yang2019")["rate_shares"]["4x4"] == 0.0
+    ffx = evaluate(model, dataset)  # the default baselines (Yang at a JNYang model's threshold; FidelityFX's 0.05)
+    for method, label in {"model": "threshold 0.2", "yang2019": "t 0.2", "yang2019-unseen-1x1": "t 0.2",
+                          "fidelityfx": "cutoff 0.05", "fidelityfx-additional": "cutoff 0.05"}.items():
+        row, point = ffx.row("decisions", method), _sweep_point(ffx, method, label)
+        assert (point["fail_share"], point["work_saved"]) == pytest.approx((row["fail_share"], row["work_saved"])), method
+
+
+def test_the_work_saved_counts_a_partial_edge_tile_by_its_pixels(tmp_path: Path, model: Path) -> None:
+    """A frame whose height is no whole number of tiles (1920x1080 on 16-pixel tiles: the bottom row 8 pixels
+    high) saves on its partial tiles the work of their real pixels, as sdk.work_saved(codes, size, tile) and `rtp
+    play` count it; the mean over tiles counted each as a whole tile. Here the bottom row (half-height tiles)
+    passes at 4x4 and the rest only at 1x1: the oracle saves 0.9375 x 128 x 4 / 2560 = 18.75% of the pixels'
+    work (the tiles' mean read 31.25%), in the decision table and in the sweep alike."""
+    h, w = 40, 64  # 3 x 4 tiles of 16 px, the last row 8 px high
+    root = tmp_path / "ragged"
+    writer, store = DatasetWriter(root), TargetStore(root)
+    store.declare("jnyang", {"weber_l": 0.02})
+    rng = np.random.default_rng(1)
+    truth = np.full((6, h // 4, w // 4), 0.9, np.float32)  # at the 4-pixel base tile: every rate fails 0.2 ...
+    truth[:, 8:, :] = 0.01  # ... but on the bottom row, where every rate passes
+    for i in range(2):
+        bufs = {}
+        for name, spec in BUFFERS.items():
+            c = len(spec.channels) or 3
+            bufs[name] = rng.random((h, w, c) if c > 1 else (h, w), dtype=np.float32)
+        bufs["seen"] = np.ones((h, w), np.float32)
+        bufs["motion"] = np.zeros((h, w, 2), np.float32)
+        writer.write(f"r{i}", bufs, {"scene": "r"})
+        store.write(f"r{i}", "jnyang", truth, (h, w))
+    writer.finalize()
+    rep = evaluate(model, root, baselines=False)
+    codes = sdk.select_rates(store.load("r0", "jnyang", T), 0.2)
+    assert (codes[2] == C["4x4"]).all() and (codes[:2] == C["1x1"]).all()
+    oracle = rep.row("decisions", "oracle")
+    assert oracle["n"] == 2 * 12 and oracle["fail_share"] == 0.0
+    assert oracle["work_saved"] == pytest.approx(0.1875) == sdk.work_saved(codes, (h, w), T)
+    from rtp.capture import DatasetReader
+
+    predictor, reader = sdk.load(model), DatasetReader(root)
+    frames = [predictor.shading_rates(reader[f"r{i}"].inputs(predictor.metadata.inputs), 0.2) for i in range(2)]
+    model_row = rep.row("decisions", "model")
+    assert model_row["work_saved"] == pytest.approx(np.mean([sdk.work_saved(c, (h, w), T) for c in frames]))
+    point = _sweep_point(rep, "model", "threshold 0.2")
+    assert point["work_saved"] == pytest.approx(model_row["work_saved"])
