@@ -392,6 +392,13 @@ class DatasetWriter:
 def _read_manifest(root: Path) -> dict[str, Any]:
     path = root / "manifest.json"
     if not path.is_file():
+        if path.is_symlink() and not path.exists():
+            raise DatasetError(f"{path}: a link to {os.readlink(path)!r}, which does not exist: the dataset's manifest "
+                               f"was moved or deleted")
+        if path.exists():  # (a folder, a pipe: was "no manifest.json", of a folder that plainly holds one)
+            kind = "a folder" if path.is_dir() else "not a regular file"
+            raise DatasetError(f"{path} is {kind}, not the dataset's manifest file (JSON, written by rtp capture or "
+                               f"rtp import): move it aside and restore the manifest, or capture into a new folder")
         raise DatasetError(f"{root} is not an rtp dataset: no manifest.json")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -423,6 +430,7 @@ def _folder(root: object) -> Path:
 
 
 _MISSING_SAID: set[tuple[str, int]] = set()
+_LONG_SAID: set[tuple[str, int]] = set()
 
 
 class DatasetReader:
@@ -439,12 +447,24 @@ class DatasetReader:
         if folder.exists() and not folder.is_dir():
             raise DatasetError(f"{folder}: expected the folder of the samples, found a file")
         try:
-            self.ids = sorted(p.stem for p in folder.glob("*.npz") if _ID_RE.match(p.stem) and p.is_file())
+            found = sorted(p.stem for p in folder.glob("*.npz") if _ID_RE.match(p.stem) and p.is_file())
         except OSError as err:
             raise DatasetError(f"{folder}: cannot be listed ({err})") from err
+        # (a sample file renamed, or an older rtp's, with an id longer than a sample's: listed, then refused by
+        # __getitem__, so iterating the dataset failed on it; left out, named in a warning)
+        self.ids = [i for i in found if len(i) <= MAX_ID_LENGTH]
+        long = [i for i in found if len(i) > MAX_ID_LENGTH]
+        if long and (str(self.root), len(long)) not in _LONG_SAID:
+            _LONG_SAID.add((str(self.root), len(long)))  # (once a process, as the missing ones below)
+            log.warning("%s: %d sample file%s in samples/ %s an id longer than %d characters (%s%s), which no sample "
+                        "has: renamed, or an older rtp's? left out; rename %s to at most %d characters (letters, "
+                        "digits, '.', '_' and '-') to read %s", self.root, len(long), "s" if len(long) > 1 else "",
+                        "have" if len(long) > 1 else "has", MAX_ID_LENGTH,
+                        ", ".join(f"{i[:40]}...{i[-20:]}.npz" for i in long[:3]), ", ..." if len(long) > 3 else "",
+                        "them" if len(long) > 1 else "it", MAX_ID_LENGTH, "them" if len(long) > 1 else "it")
         listed = self.manifest.get("samples")
         if isinstance(listed, list):
-            missing = sorted(set(map(str, listed)) - set(self.ids))
+            missing = sorted(set(map(str, listed)) - set(found))
             if missing and (str(self.root), len(missing)) not in _MISSING_SAID:
                 _MISSING_SAID.add((str(self.root), len(missing)))  # (once a process: readers are opened often)
                 log.warning("%s: %d of the %d samples its manifest lists are not in samples/ (%s%s): deleted or moved "
@@ -595,7 +615,8 @@ def _read_png(path: Path) -> np.ndarray:
 def open_dataset(root: str | os.PathLike[str]) -> DatasetReader | PaperDatasetReader:
     """Open an rtp dataset, or the paper's released layout, whichever the folder holds."""
     p = _folder(root)
-    if (p / "manifest.json").is_file():
+    manifest = p / "manifest.json"
+    if manifest.exists() or manifest.is_symlink():  # (one that is no file: DatasetReader says what is wrong with it)
         return DatasetReader(p)
     return PaperDatasetReader(p)
 

@@ -57,6 +57,8 @@ OPTIONAL_BUFFERS = ("roughness", "metallic", "specular", "shadow", "emissive")
 OPTIONAL_ARRAYS = (*OPTIONAL_BUFFERS, "motion", "prev_projection")
 #: The command that writes example frames (the hints of the errors).
 EXAMPLE = "rtp import FRAMES --write-example --frames 8"
+#: ``profile``'s default (recorded in the manifest's settings only when another is given).
+DEFAULT_PROFILE = "engine"
 #: The manifest's ``settings["source"]`` of an imported dataset.
 SOURCE = "engine frames"
 
@@ -111,16 +113,25 @@ def _members(path: str) -> dict[str, tuple[int, ...]]:
 
 
 def _read(path: str) -> dict[str, Any]:
-    """The arrays of a frame file (``read_frame``), a damaged one a ParameterError naming it (a deflate stream
-    damaged past the arrays' headers was zlib's raw error, midway through an import)."""
+    """The arrays of a frame file (``read_frame``: a damaged one, its deflate stream damaged past the arrays'
+    headers, is a ParameterError naming it), with how an import goes on after it."""
     try:
         return read_frame(path, extra=(*FINAL_KEYS, "colour"), example=EXAMPLE)  # (colour: rtp predict's overlay)
-    except RtpError:
-        raise
-    except Exception as err:  # (zipfile and numpy on damaged bytes)
-        raise ParameterError(f"{path!r}: a damaged .npz, numpy cannot read its arrays ({type(err).__name__}: {err}); "
-                             f"the frames before it are in the dataset: dump this one again, and the same command "
-                             f"imports the rest", "frames") from None
+    except ParameterError as err:
+        raise ParameterError(f"{err}; the frames before it are in the dataset: dump this one again, and the same "
+                             f"command imports the rest", "frames") from None
+
+
+def _samples_profile(reader: DatasetReader) -> str | None:
+    """The ``profile`` the samples of a folder imported before its manifest recorded one carry (the first readable
+    sample's; None: no sample, or none readable)."""
+    for sid in reader.ids[:3]:
+        try:
+            value = reader[sid].meta.get("profile")
+        except DatasetError:  # (a damaged sample: _kept imports it again)
+            continue
+        return value if isinstance(value, str) else None
+    return None
 
 
 def _kept(writer: DatasetWriter, sample_id: str) -> bool:
@@ -192,7 +203,7 @@ def import_frames(
     out: str | os.PathLike[str],
     *,
     scene: str | None = None,
-    profile: str = "engine",
+    profile: str = DEFAULT_PROFILE,
     albedo_linear: bool = False,
     normal_space: str = "view",
     depth_kind: str = "linear",
@@ -208,7 +219,8 @@ def import_frames(
     conventions are ``sdk.input_planes``' (``albedo_linear``, ``normal_space``, ``depth_kind``, the
     reprojection's ``tolerance``). ``scene`` names the level the frames show (``rtp train --val-scenes``
     holds levels out by it; default: each frame's folder name); ``profile`` is recorded as the capture's
-    motion profile is.
+    motion profile is, in each sample's meta and, when not ``"engine"``, in the manifest's settings (a folder
+    grown with another profile is refused).
 
     Everything is checked before the first sample is written: the files, the arrays each holds, their
     size, and the dataset folder's settings (a folder imported with other conventions or G-buffers, or
@@ -287,13 +299,25 @@ def import_frames(
     # before the dataset's manifest records them
     _buffers(files[0], _read(files[0]), present, conventions)
     settings = {"size": [int(w), int(h)], "source": SOURCE, "conventions": conventions, "absent": list(absent)}
+    if profile != DEFAULT_PROFILE:  # (recorded only when not the default, so folders imported before it resume)
+        settings["profile"] = profile
 
     root = check_output(out, folder=True, what="dataset folder")
     if (root / "manifest.json").is_file():
-        before = DatasetReader(root).manifest.get("settings")
+        reader = DatasetReader(root)
+        before = reader.manifest.get("settings")
         if not isinstance(before, dict) or before.get("source") != SOURCE:
             raise DatasetError(f"{root}: a dataset the reference renderer captured; import an engine's frames into a "
                                f"folder of their own (rtp train --data takes several, comma-separated)")
+        there = before.get("profile", DEFAULT_PROFILE)
+        if "profile" not in before and (legacy := _samples_profile(reader)) is not None:
+            there = legacy  # (imported before the profile was recorded: its samples say it)
+            if legacy == profile:
+                settings.pop("profile", None)  # (resumed as that folder's manifest records it: not at all)
+        if there != profile:  # (a resumed import with another --profile mixed the two across its samples)
+            raise DatasetError(f"{root} was imported with --profile {there}, not {profile}: a dataset's frames are of "
+                               f"one profile; give --profile {there} to grow it, or import these into a folder of "
+                               f"their own (rtp train --data takes several, comma-separated)")
     report = ImportReport(absent=absent)
     root.mkdir(parents=True, exist_ok=True)
     with writer_lock(root, "rtp import", lambda holder: DatasetError(

@@ -199,8 +199,17 @@ class TargetStore:
             params = json.loads(json.dumps(dict(params)))
         except (TypeError, ValueError) as err:  # a value JSON cannot hold
             raise TargetError(f"params of {metric}: expected JSON values, got {dict(params)!r} ({err})") from err
+        folder = self.root / metric
+        if metric not in self.metrics and folder.is_dir() and any(folder.glob("*.npz")):
+            # (targets/manifest.json lost, or written over without this metric: the stored files were kept and
+            # the new parameters recorded, so one metric's targets mixed two parameter sets)
+            manifest = self.root / "manifest.json"
+            lost = "is missing" if not manifest.is_file() else f"does not record {metric}"
+            raise TargetError(
+                f"{folder} holds {metric} targets, but {manifest} {lost}: the parameters they were computed with are "
+                f"unknown, and may not be {params}; restore the manifest, or delete {folder} to compute {metric}'s "
+                f"with these (the other metrics' targets stay)")
         if metric in self.metrics and self.metrics[metric] != params:
-            folder = self.root / metric
             if folder.is_dir() and any(folder.glob("*.npz")):
                 # (the hint was "delete that folder", the whole targets folder: every other metric's targets with it)
                 raise TargetError(
@@ -238,6 +247,11 @@ class TargetStore:
         if not isinstance(values, np.ndarray) or values.dtype.kind not in "biuf" or values.shape != expected:
             got = f"{values.dtype} {values.shape}" if isinstance(values, np.ndarray) else type(values).__name__
             raise TargetError(f"{metric} targets of {sample_id}: expected numbers of shape {expected}, got {got}")
+        bad = int(values.size - np.count_nonzero(np.isfinite(values)))
+        if bad:  # (a NaN target trained in silence: the loss of every batch holding it NaN, or a tile never judged)
+            raise TargetError(f"{metric} targets of sample {sample_id!r}: {bad} of {values.size} values are NaN or "
+                              f"infinite (the metric's map of this sample: check its final images, or the metric's "
+                              f"code if it is your own); nothing is written")
         with atomic_output(self.path(sample_id, metric)) as tmp:
             with open(tmp, "wb") as f:
                 np.savez(f, values=values.astype(np.float32), size=np.array([h, w], np.int64))
@@ -259,6 +273,10 @@ class TargetStore:
             raise TargetError(f"{p}: expected float values of shape (6, tile rows, tile columns) of a frame of size "
                               f"(H, W) at base tile {self.base_tile}, got {values.dtype} {values.shape}, size {size}; "
                               "delete the file and run `rtp targets` again")
+        bad = int(values.size - np.count_nonzero(np.isfinite(values)))
+        if bad:  # (written by an rtp before the write refused them, or damaged: not trained on in silence)
+            raise TargetError(f"{p}: {bad} of {values.size} targets are NaN or infinite; delete the file and run "
+                              f"`rtp targets {self.root.parent}` again, which computes it anew")
         declared = self.metrics.get(metric)
         pooled = pool_targets(values, size, self.base_tile, tile,
                               mse=_mean_pooled(metric, declared if isinstance(declared, Mapping) else {}))

@@ -194,7 +194,8 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
     """The arrays of a frame file, each named as a G-buffer of :data:`rtp.sdk.GBUFFERS` or in ``extra``;
     others are named in a logged warning, with the name they may have meant, and not returned. A path that
     is no file or no ``.npz`` numpy reads is a :class:`ParameterError` (its hint: ``example``, a command that
-    writes one)."""
+    writes one), and so is a damaged ``.npz`` (a deflate stream, a CRC or an array header numpy cannot
+    read), naming the file and what numpy said."""
     from ._planes import GBUFFERS
 
     p = Path(path)
@@ -207,8 +208,10 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
     try:
         with np.load(p, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise ParameterError(f"{name!r}: not an .npz of arrays numpy can read ({err})", "frame") from None
+    except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError,
+        # KeyError, a mangled header's SyntaxError, MemoryError from one claiming a huge shape, OSError, ...)
+        raise ParameterError(f"{name!r}: a damaged .npz, numpy cannot read its arrays ({type(err).__name__}: {err})",
+                             "frame") from None
     known = (*GBUFFERS, *extra)
     for key in sorted(set(arrays) - set(known)):
         close = difflib.get_close_matches(key, known, n=1)

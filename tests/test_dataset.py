@@ -149,6 +149,37 @@ def test_truncated_targets_are_computed_again_and_killed_jobs_leave_no_temporary
     assert not any(tmp.exists() for tmp in left)
 
 
+def test_targets_whose_manifest_is_lost_are_not_mixed_with_new_parameters(tmp_path: Path) -> None:
+    """With targets/manifest.json lost, a targets run with another --weber-l recorded it and kept the old files:
+    one metric's targets of two parameter sets, trained on as one."""
+    from rtp.capture import TargetError, TargetStore, compute_targets
+
+    w = DatasetWriter(tmp_path / "ds")
+    for i in range(2):
+        w.write(f"s{i}", _buffers(seed=i), {"scene": "a"})
+    w.finalize()
+    assert compute_targets(tmp_path / "ds", ["jnyang", "psnr"]) == 2
+    manifest = tmp_path / "ds" / "targets" / "manifest.json"
+    kept = manifest.read_text()
+    manifest.unlink()
+    folder = tmp_path / "ds" / "targets" / "jnyang"
+    with pytest.raises(TargetError, match=re.escape(f"{folder} holds jnyang targets, but {manifest} is missing: the "
+                                                    f"parameters they were computed with are unknown")):
+        compute_targets(tmp_path / "ds", ["jnyang"], weber_l=0.5)
+    manifest.write_text(kept.replace('"jnyang"', '"other"'))  # (written over without jnyang: the same)
+    with pytest.raises(TargetError, match=f"but {re.escape(str(manifest))} does not record jnyang: .*restore the "
+                                          f"manifest, or delete {re.escape(str(folder))} to compute jnyang's"):
+        TargetStore(tmp_path / "ds").declare("jnyang", {"weber_l": 0.5})
+    manifest.write_text(kept)  # restored: the same parameters resume, other ones are refused as before
+    assert compute_targets(tmp_path / "ds", ["jnyang"]) == 0
+    import shutil
+
+    shutil.rmtree(folder)  # (the hint: the metric's own folder; psnr's targets stay)
+    manifest.unlink()
+    assert compute_targets(tmp_path / "ds", ["jnyang"], weber_l=0.5) == 2
+    assert TargetStore(tmp_path / "ds").metrics == {"jnyang": {"weber_l": 0.5}}
+
+
 @pytest.mark.parametrize("corrupt", ["manifest", "manifest-json", "manifest-base", "npz", "npz-shape"])
 def test_corrupt_targets_are_target_errors(tmp_path: Path, corrupt: str) -> None:
     """A damaged targets manifest or file leaked JSONDecodeError / BadZipFile out of evaluate()."""
@@ -173,6 +204,29 @@ def test_corrupt_targets_are_target_errors(tmp_path: Path, corrupt: str) -> None
             np.savez(f, values=np.ones((6, 3, 3), np.float32), size=np.array([24, 40]))
     with pytest.raises(TargetError, match=r"manifest\.json|a\.npz"):
         TargetStore(tmp_path / "ds").load("a", "jnyang", 16)
+
+
+def test_targets_that_are_not_finite_are_refused_on_write_and_on_load(tmp_path: Path) -> None:
+    """A NaN target was written and loaded in silence, and trained on."""
+    from rtp.capture import TargetError, TargetStore
+
+    DatasetWriter(tmp_path / "ds").write("a", _buffers(), {})
+    store = TargetStore(tmp_path / "ds")
+    store.declare("jnyang", {"weber_l": 0.02})
+    values = np.ones((6, 6, 10), np.float32)
+    for bad in (np.nan, np.inf):
+        v = values.copy()
+        v[2, 3, 4] = bad
+        with pytest.raises(TargetError, match=r"jnyang targets of sample 'a': 1 of 360 values are NaN or infinite"):
+            store.write("a", "jnyang", v, (24, 40))
+        assert not store.path("a", "jnyang").exists()
+    path = store.path("a", "jnyang")  # (one an older rtp wrote, or damaged since)
+    path.parent.mkdir(parents=True)
+    with open(path, "wb") as f:
+        np.savez(f, values=v, size=np.array([24, 40]))
+    with pytest.raises(TargetError, match=re.escape(f"{path}: 1 of 360 targets are NaN or infinite; delete the file "
+                                                    f"and run `rtp targets {tmp_path / 'ds'}` again")):
+        store.load("a", "jnyang", 16)
 
 
 def test_targets_at_a_tile_past_the_frame_pool_without_padding(tmp_path: Path) -> None:
@@ -254,6 +308,44 @@ def test_samples_the_manifest_lists_and_the_disk_lacks_are_said_once(tmp_path: P
     (tmp_path / "flat" / "samples").write_text("")
     with pytest.raises(DatasetError, match="samples: expected the folder of the samples, found a file"):
         DatasetReader(tmp_path / "flat")
+
+
+def test_a_sample_file_with_an_id_too_long_is_left_out_with_a_warning(tmp_path: Path,
+                                                                        caplog: pytest.LogCaptureFixture) -> None:
+    """A sample file renamed (or an older rtp's) to an id longer than MAX_ID_LENGTH was listed, then refused by
+    __getitem__: iterating the dataset (rtp targets, train, evaluate) failed on it."""
+    from rtp.capture import _dataset
+
+    w = DatasetWriter(tmp_path / "ds")
+    for i in range(3):
+        w.write(f"s{i}", _buffers(seed=i), {"scene": "a"})
+    w.finalize()
+    long = "level-" + "x" * (_dataset.MAX_ID_LENGTH - 5)
+    (w.samples_dir / "s1.npz").rename(w.samples_dir / f"{long}.npz")
+    w.finalize()  # (the manifest lists it: not said to be missing besides)
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        reader = DatasetReader(tmp_path / "ds")
+        assert reader.ids == ["s0", "s2"] and [s.id for s in reader] == ["s0", "s2"]
+        DatasetReader(tmp_path / "ds")  # (said once)
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and said[0].startswith(f"{tmp_path / 'ds'}: 1 sample file in samples/ has an id longer "
+                                                 f"than 200 characters (level-xxx"), said
+    assert f"{long[-20:]}.npz), which no sample has" in said[0] and "rename it to at most 200" in said[0], said
+
+
+def test_a_manifest_that_is_a_folder_is_said_to_be_one(tmp_path: Path) -> None:
+    """open_dataset and DatasetReader said "no manifest.json" of a folder that holds one (a folder)."""
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {"scene": "a"})
+    (tmp_path / "ds" / "manifest.json").unlink()
+    (tmp_path / "ds" / "manifest.json").mkdir()
+    for call in (open_dataset, DatasetReader, DatasetWriter):
+        with pytest.raises(DatasetError, match=r"manifest.json is a folder, not the dataset's manifest file"):
+            call(tmp_path / "ds")
+    (tmp_path / "ds" / "manifest.json").rmdir()
+    (tmp_path / "ds" / "manifest.json").symlink_to(tmp_path / "gone.json")
+    with pytest.raises(DatasetError, match=r"manifest.json: a link to .*gone.json', which does not exist"):
+        open_dataset(tmp_path / "ds")
 
 
 def _rewrite(path: Path, **changes: np.ndarray | None) -> None:
@@ -550,6 +642,33 @@ def test_image_values_of_any_mode_and_bytes_are_colours_in_0_1_or_a_value_error(
         assert a.dtype == np.float32 and a.shape == (2, 2, 3) and np.isclose(a.max(), want), (mode, a)
     with pytest.raises(ValueError, match="32-bit integer pixels: expected"):
         image_values(Image.frombytes("I", (2, 2), np.full(4, 7, np.int32).tobytes()))
+
+
+def test_a_damaged_frame_file_is_a_parameter_error_naming_it(tmp_path: Path) -> None:
+    """read_frame let zlib's raw error out of a deflate stream damaged past the arrays' headers (the CRC is only
+    checked at the end of a member): `rtp predict damaged.npz` was a traceback; every damage is a ParameterError."""
+    import zipfile
+
+    from rtp.sdk.files import read_frame
+
+    rng = np.random.default_rng(0)
+    good = tmp_path / "good.npz"
+    np.savez_compressed(good, depth=rng.random((96, 160), dtype=np.float32),
+                        albedo=(rng.random((96, 160, 3)) > 0.5).astype(np.float32))
+    with zipfile.ZipFile(good) as z:
+        info = z.getinfo("albedo.npy")
+    start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+    kinds = set()
+    for at in np.linspace(0.0, 1.0, 11):
+        data = bytearray(good.read_bytes())
+        off = start + 16 + int(at * (info.compress_size - 100))
+        data[off:off + 64] = bytes(b ^ 0xFF for b in data[off:off + 64])
+        bad = tmp_path / "damaged.npz"
+        bad.write_bytes(bytes(data))
+        with pytest.raises(sdk.ParameterError, match=r"damaged.npz': a damaged .npz, numpy cannot read its arrays \(") as e:
+            read_frame(bad)
+        kinds.add(str(e.value).split("(")[1].split(":")[0])
+    assert "error" in kinds, kinds  # (zlib.error among them: the raw one before)
 
 
 def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:

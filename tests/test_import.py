@@ -104,6 +104,34 @@ def test_an_import_resumes_and_refuses_to_mix(dumps: Any, tmp_path: Path) -> Non
     assert len(DatasetReader(captured).ids) == 2
 
 
+def test_a_resumed_import_with_another_profile_is_refused(dumps: Any, tmp_path: Path) -> None:
+    """--profile was not in the manifest's settings: a resumed import with another one mixed both across the
+    samples of one folder."""
+    import json
+
+    root, _, _ = dumps
+    data, other = tmp_path / "data", tmp_path / "other"
+    assert import_frames(root / "level_a", data).written == 3  # (the default, engine: recorded as before, not at all)
+    assert "profile" not in DatasetReader(data).manifest["settings"]
+    with pytest.raises(DatasetError, match=r"data was imported with --profile engine, not handheld: .*give --profile "
+                                           r"engine to grow it"):
+        import_frames(root / "level_b", data, profile="handheld")
+    assert len(DatasetReader(data).ids) == 3
+    assert import_frames(root / "level_a", other, profile="handheld").written == 3
+    assert DatasetReader(other).manifest["settings"]["profile"] == "handheld"
+    with pytest.raises(DatasetError, match="other was imported with --profile handheld, not engine"):
+        import_frames(root / "level_b", other)
+    assert import_frames(root / "level_b", other, profile="handheld").written == 3
+    assert {s.meta["profile"] for s in DatasetReader(other)} == {"handheld"}
+    # a folder imported before the profile was recorded: its samples' profile is the folder's
+    manifest = json.loads((other / "manifest.json").read_text())
+    del manifest["settings"]["profile"]
+    (other / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="other was imported with --profile handheld, not engine"):
+        import_frames(root / "level_a", other)
+    assert import_frames(root / "level_a", other, profile="handheld").skipped == 3
+
+
 def test_bad_frames_are_named_before_anything_is_written(dumps: Any, tmp_path: Path) -> None:
     root, _, _ = dumps
     data = tmp_path / "data"

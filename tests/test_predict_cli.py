@@ -110,6 +110,18 @@ def test_a_frame_that_is_not_what_it_should_be_is_named(frame: Path, tmp_path: P
     assert "not an .npz" in capsys.readouterr().err
     assert main(["predict", str(tmp_path / "none.npz")]) == 2
     assert "--write-example" in capsys.readouterr().err
+    # a deflate stream damaged past the arrays' headers: zlib's raw error and a traceback (exit 1) before
+    import zipfile
+
+    with zipfile.ZipFile(frame) as z:
+        info = z.getinfo("albedo.npy")
+    data = bytearray(frame.read_bytes())
+    off = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + 16
+    data[off:off + 64] = bytes(b ^ 0xFF for b in data[off:off + 64])
+    damaged = tmp_path / "damaged.npz"
+    damaged.write_bytes(bytes(data))
+    assert main(["predict", str(damaged)]) == 2
+    assert f"{str(damaged)!r}: a damaged .npz, numpy cannot read its arrays" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("kind", ["window", "reversed"])
