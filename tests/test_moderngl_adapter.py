@@ -359,6 +359,22 @@ def test_reference_frame_source_hands_over_the_renderer_g_buffers(frames) -> Non
     ctx.texture((2, 2), 1).release()  # a borrowed context stays open (a released one raises here)
 
 
+def test_a_frame_source_on_a_context_its_engine_released_first_closes(frames) -> None:
+    """ReferenceFrameSource(ctx=) whose borrowed context the engine released first: close() raised an AttributeError
+    (making the released context current); now it closes, and its adapter, whose objects went with the context."""
+    from rtp.plugins.moderngl import create_context
+
+    ctx = create_context()
+    try:
+        source = Adapter.frame_source(procedural(3), 64, 48, ctx=ctx)
+        adapter = source.adapter(("seen", "depth"))
+        ctx.release()
+        source.close()
+        assert source.closed and adapter.closed
+    finally:
+        make_current(frames[0])
+
+
 def test_a_frame_source_builds_its_adapters_in_its_own_context(frames) -> None:
     """Two reference frame sources (each its own context): an adapter of the first built while the second's
     context is current gives the first's planes (its GL objects were made in the second's context, and it
@@ -609,6 +625,27 @@ def test_check_names_convention_mistakes_in_the_engines_textures(frames) -> None
             a.check({"normal": None})  # type: ignore[arg-type]
     with Adapter(("seen", "normal.z"), W, H, ctx=ctx, normal_space="world") as b:
         assert b.check(_engine_frame(ctx, prev, cur, normal=_tex(ctx, world_n))) == []
+
+
+def test_check_reads_normalised_textures_as_inputs_does(frames) -> None:
+    """An engine's 8- and 16-bit UNORM / SNORM textures (moderngl's nu1, nu2, ni1, ni2), which inputs() reads: check()
+    read them back through a table of f1, f2 and f4 alone and failed with a KeyError; read_texture now scales them
+    as GL's samplers do."""
+    from rtp.plugins.moderngl._glio import read_texture
+
+    ctx, prev, cur = frames
+    for dtype, values in (("nu1", [0, 51, 255]), ("nu2", [0, 13107, 65535]), ("ni1", [0, 127, 127]),
+                          ("ni2", [0, 16384, 32767])):
+        kind = {"nu1": np.uint8, "nu2": np.uint16, "ni1": np.int8, "ni2": np.int16}[dtype]
+        t = ctx.texture((3, 1), 1, np.array(values, kind).tobytes(), dtype=dtype)
+        np.testing.assert_allclose(read_texture(t)[0, :, 0], np.array(values) / np.iinfo(kind).max, rtol=1e-6)
+        t.release()
+    with Adapter(("seen", "reprojected.g"), W, H, ctx=ctx) as a:
+        unorm = ctx.texture((W, H), 3, dtype="nu1")
+        write_texture(unorm, np.round(prev.colour["1x1"] * 255).astype(np.uint8))
+        frame = _engine_frame(ctx, prev, cur, prev_colour=unorm)
+        assert a.check(frame) == a.check(_engine_frame(ctx, prev, cur)) == []
+        np.testing.assert_allclose(a.inputs(frame)[1], cur.reprojected[..., 1], atol=0.5 / 255 + 1e-6)
 
 
 def test_a_draw_leaves_the_engines_framebuffer_and_viewport_and_reads_a_comparing_depth_texture(frames) -> None:

@@ -247,6 +247,57 @@ def test_a_numpy_integer_is_a_tile_size(gl_context: Any) -> None:
         RateSelector(meta, gl_context, tile_size=np.bool_(True))  # type: ignore[arg-type]
 
 
+def test_a_buffer_or_engine_texture_of_another_context_or_released_is_refused(gl_context: Any) -> None:
+    """select_buffer's ``raw`` and an ``engine_rates`` texture are bound by their GL names: one of another context
+    was read as whatever object of that name the selector's context holds (wrong codes, no error), a released one
+    failed as an AttributeError. Both are ParameterErrors naming the argument, and the selector works on after them."""
+    from rtp.plugins.moderngl import create_context
+
+    meta = sdk.load("jnyang").metadata
+    raw = np.random.default_rng(6).random((4, 3, 5)).astype(np.float32)
+    engine = np.full((3, 5), sdk.RATE_CODES["2x1"], np.uint8)
+    other = create_context(430)
+    try:
+        foreign = (other.buffer(raw.tobytes()), other.texture((5, 3), 1, engine.tobytes(), dtype="u1"))
+        with RateSelector(meta, gl_context) as selector:
+            want = selector.select(raw, engine_rates=engine)
+            gone = (gl_context.buffer(raw.tobytes()), gl_context.texture((5, 3), 1, engine.tobytes(), dtype="u1"))
+            for obj in gone:
+                obj.release()
+            for (buffer, texture), word in ((foreign, "of the selector's context"), (gone, "has been released")):
+                with pytest.raises(sdk.ParameterError, match=f"raw: .*{word}"):
+                    selector.select_buffer(buffer, (3, 5))
+                with pytest.raises(sdk.ParameterError, match=f"engine_rates: .*{word}"):
+                    selector.select(raw, engine_rates=texture)
+            np.testing.assert_array_equal(selector.select(raw, engine_rates=engine), want)
+    finally:
+        other.release()
+        make_current(gl_context)
+
+
+def test_a_context_released_under_a_selector_is_named_and_close_still_works(gl_context: Any) -> None:
+    """The engine released the context a selector borrowed: select() and decoded() raised an AttributeError (making
+    the released context current), and so did close(), the with block's exit included. Now the calls are an
+    AdapterFrameError naming the context, and close() lets the objects go with it."""
+    from rtp.plugins.moderngl import create_context
+
+    meta = sdk.load("jnyang").metadata
+    raw = np.random.default_rng(7).random((4, 3, 5)).astype(np.float32)
+    ctx = create_context(430)
+    try:
+        with RateSelector(meta, ctx) as selector:
+            selector.select(raw)
+            ctx.release()
+            for call in (lambda: selector.select(raw), selector.decoded):
+                with pytest.raises(AdapterFrameError, match="ctx: the moderngl context was released under this"):
+                    call()
+        selector.close()
+        with pytest.raises(RendererError, match="closed"):
+            selector.select(raw)
+    finally:
+        make_current(gl_context)
+
+
 def test_hardware_tiles_coarser_than_the_model_s_as_load_pools_them(tiny_model, gl_context: Any) -> None:
     """A model of 8-pixel tiles loaded for 16-pixel hardware tiles: the selector takes the predictor's
     tile size and returns what its shading_rates returns, one code per hardware tile."""

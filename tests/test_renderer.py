@@ -514,6 +514,53 @@ def test_renderer_errors_and_lifetime(gl_context):
 
 
 @pytest.mark.gl
+def test_a_renderer_whose_borrowed_context_went_first_releases_quietly(gl_context: Any) -> None:
+    """An engine that released its context before the renderer borrowing it: release() (and the with block's
+    exit) raised an AttributeError from the released context; now the objects went with it, release marks the
+    renderer released, closes its adapter without a ResourceWarning, and a second release does nothing."""
+    import warnings
+
+    from rtp.plugins.moderngl import create_context
+
+    ctx = create_context()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", ResourceWarning)
+            with Renderer(64, 48, ctx=ctx) as r:
+                r.load_scene(_flat_scene())
+                r.render(_front_camera())
+                ctx.release()
+            r.release()
+        assert r._reprojector.closed
+        with pytest.raises(RendererError, match="released"):
+            r.render(_front_camera())
+    finally:
+        make_current(gl_context)
+
+
+@pytest.mark.gl
+def test_a_float_rate_image_and_a_texture_past_the_context_s_limit_are_refused(gl_context: Any) -> None:
+    """shade_rates took a float image of codes ("expected integer D3D12 rate codes" said its own error; the SDK's
+    engine_rates refuses one too); load_scene took a material texture past GL_MAX_TEXTURE_SIZE, a GL error moderngl
+    does not check (the texture was never filled: black), and now refuses it with the scene loaded kept."""
+    ctx = make_current(gl_context)
+    with Renderer(64, 48, ctx=ctx) as r:
+        r.load_scene(_flat_scene())
+        r.render(_front_camera())
+        th, tw = 3, 4
+        assert r.shade_rates(np.full((th, tw), 5, np.int64), 16).shape == (48, 64, 3)  # (any integer dtype)
+        with pytest.raises(RendererError, match=r"rates: expected integer D3D12 rate codes \(uint8\), got float64"):
+            r.shade_rates(np.full((th, tw), 5.0), 16)
+        limit = Renderer.max_frame_side(ctx)
+        wide = Scene("wide", [quad_mesh((0, 0, -3), (1, 0, 0), (0, 1, 0), 0)],
+                     [Material("strip", texture=np.full((1, limit + 1, 4), 255, np.uint8))])
+        with pytest.raises(RendererError, match=f"material 0 \\('strip'\\): .* at most {limit} texels a side"):
+            r.load_scene(wide)
+        assert r.scene is not None and r.scene.name == _flat_scene().name  # (still drawing the scene it had)
+        r.render(_front_camera())
+
+
+@pytest.mark.gl
 def test_resize_draws_as_a_renderer_made_at_that_size(gl_context: Any) -> None:
     """Dynamic resolution with one renderer: after ``resize`` a frame, its VRS image and its reprojection
     are those of a renderer made at the new size with the same shadow map (every plane bit for bit), the

@@ -16,7 +16,14 @@ import numpy as np
 
 __all__ = ["flip_rows", "is_released", "max_texture_side", "read_planes", "read_texture", "write_texture"]
 
-_DTYPES = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
+#: What a texture's bytes hold, by moderngl dtype: floats, integers, and the normalised (UNORM / SNORM) formats, which
+#: an engine's G-buffers use (an RGBA8 frame, RGBA16 SNORM normals) and the adapter reads.
+_DTYPES = {"f1": np.uint8, "f2": np.float16, "f4": np.float32, "nu1": np.uint8, "nu2": np.uint16, "ni1": np.int8,
+           "ni2": np.int16, "u1": np.uint8, "u2": np.uint16, "u4": np.uint32, "i1": np.int8, "i2": np.int16,
+           "i4": np.int32}
+#: The normalised dtypes: GL maps their integers to floats by dividing by the largest (a SNORM's most negative
+#: integer is -1 as well).
+_NORMALISED = {"f1": 255.0, "nu1": 255.0, "nu2": 65535.0, "ni1": 127.0, "ni2": 32767.0}  # (the largest integer)
 
 
 def is_released(obj: Any) -> bool:
@@ -42,19 +49,23 @@ def read_texture(texture: Any, components: int | None = None, size: tuple[int, i
     """Read a moderngl texture to a float32 ``(H, W, C)`` array with a top-left origin.
 
     ``components`` keeps the first C channels (default: all); ``size = (W, H)`` only the texture's bottom-left
-    ``W`` x ``H`` corner (a frame drawn with a viewport at the origin; default: all). ``f1`` textures are scaled
-    to [0, 1].
+    ``W`` x ``H`` corner (a frame drawn with a viewport at the origin; default: all). Normalised textures (``f1``,
+    ``nu1``, ``nu2``; ``ni1``, ``ni2``) are scaled to [0, 1] (signed: [-1, 1]) as GL's samplers read them; an
+    integer texture's values are given as they are.
     """
     w, h = texture.size
-    raw = np.frombuffer(texture.read(alignment=1), dtype=_DTYPES[texture.dtype])
+    dtype = _DTYPES[texture.dtype]
+    raw = np.frombuffer(texture.read(alignment=1), dtype=dtype)
     arr = raw.reshape(h, w, texture.components)
     if size is not None:
         arr = arr[: size[1], : size[0]]  # (GL rows: the first are the bottom ones)
     if components is not None:
         arr = arr[..., :components]
     out = flip_rows(arr, np.float32)  # one pass: the flip and float16's widening (read back on every frame)
-    if texture.dtype == "f1":
-        out = out / np.float32(255.0)
+    if texture.dtype in _NORMALISED:
+        out /= np.float32(_NORMALISED[texture.dtype])
+        if texture.dtype.startswith("ni"):
+            np.maximum(out, np.float32(-1.0), out=out)
     return out
 
 
@@ -75,7 +86,8 @@ def read_planes(framebuffer: Any, count: int, size: tuple[int, int]) -> np.ndarr
 
 
 def write_texture(texture: Any, image: np.ndarray) -> None:
-    """Upload a top-left-origin ``(H, W[, C])`` image into a texture of the same size and dtype."""
+    """Upload a top-left-origin ``(H, W[, C])`` image into a texture of the same size, its values converted to the
+    texture's storage (the integers of a normalised texture: ``uint8`` for ``f1`` and ``nu1``, and so on)."""
     w, h = texture.size
     arr = np.asarray(image)
     if arr.ndim == 2:

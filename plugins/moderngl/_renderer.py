@@ -738,22 +738,32 @@ class Renderer:
         """Upload a scene's meshes and textures (replacing the previous scene's GPU resources).
 
         Textures are uploaded as sRGB (filtered in linear space), mip-mapped, with anisotropic
-        filtering where the driver offers it. Raises :class:`RendererError` on malformed meshes.
+        filtering where the driver offers it. Raises :class:`RendererError` on malformed meshes and on a
+        texture larger than the context holds (``GL_MAX_TEXTURE_SIZE``; checked before the loaded scene is let go).
         """
         self._check_alive()
         if not isinstance(scene, Scene):
             raise RendererError(f"load_scene: expected an rtp.scene.Scene, got {type(scene).__name__}")
+        limit = max_texture_side(self.ctx)
+        for i, m in enumerate(scene.materials):  # (before the scene loaded is let go)
+            if m.texture is None:
+                continue
+            img = np.asarray(m.texture)
+            if img.ndim != 3 or img.shape[2] != 4 or img.dtype != np.uint8:
+                raise RendererError(
+                    f"material {i} ({m.name!r}): texture must be (H, W, 4) uint8, got {img.shape} {img.dtype}"
+                )
+            if max(img.shape[:2]) > limit:  # (past it moderngl made a texture GL never filled: sampled as black)
+                raise RendererError(f"material {i} ({m.name!r}): this OpenGL context holds textures of at most {limit} "
+                                    f"texels a side (GL_MAX_TEXTURE_SIZE), got {img.shape[1]}x{img.shape[0]}: scale it "
+                                    "down")
         self._release_scene()
         mgl = self._mgl
         t0 = time.perf_counter()
-        for i, m in enumerate(scene.materials):
+        for m in scene.materials:
             tex = None
             if m.texture is not None:
                 img = np.asarray(m.texture)
-                if img.ndim != 3 or img.shape[2] != 4 or img.dtype != np.uint8:
-                    raise RendererError(
-                        f"material {i} ({m.name!r}): texture must be (H, W, 4) uint8, got {img.shape} {img.dtype}"
-                    )
                 tex = self.ctx.texture((img.shape[1], img.shape[0]), 4, np.ascontiguousarray(img).tobytes(),
                                        internal_format=_GL_SRGB8_ALPHA8)
                 tex.build_mipmaps()
@@ -941,7 +951,7 @@ class Renderer:
         if codes.shape != (th, tw):
             raise RendererError(f"rates: expected a {tw}x{th} tile grid ({th}, {tw}) for {tile_size}px tiles of a "
                                 f"{self.width}x{self.height} frame, got shape {codes.shape}")
-        if codes.dtype.kind not in "iuf":
+        if codes.dtype.kind not in "iu":  # (as sdk.select_rates' engine_rates: a float image is no rate image)
             raise RendererError(f"rates: expected integer D3D12 rate codes (uint8), got {codes.dtype}")
         valid = np.isin(codes, [RATE_CODES[r] for r in ALL_RATES])
         if not valid.all():
@@ -1255,8 +1265,16 @@ class Renderer:
         self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
 
     def release(self) -> None:
-        """Free every GL resource (and the context, when the renderer created it). Idempotent."""
+        """Free every GL resource (and the context, when the renderer created it). Idempotent; after the engine
+        released a borrowed context first (its objects went with it) it only marks the renderer released."""
         if self._released:
+            return
+        if is_released(self.ctx):  # (a borrowed context its engine released first: every object went with it)
+            for obj in vars(self).values():  # (closed, not left to warn unclosed)
+                if isinstance(obj, Adapter):
+                    obj.close()
+            self._meshes, self._materials, self.scene, self._vrs = [], [], None, None
+            self._released = True
             return
         self.ctx.__enter__()  # (its objects are freed in its own context)
         self._release_scene()

@@ -192,9 +192,10 @@ class RateSelector:
         if max(grid) > limit:
             raise sdk.ParameterError(f"tiles: this OpenGL context's rate texture holds at most {limit} hardware tiles "
                                      f"a side (GL_MAX_TEXTURE_SIZE), got {grid[0]}x{grid[1]} for {tiles!r}", "tiles")
-        if not callable(getattr(raw, "bind_to_storage_buffer", None)):
+        if not callable(getattr(raw, "bind_to_storage_buffer", None)) and not is_released(raw):
             raise sdk.InputDtypeError(f"raw: expected a moderngl.Buffer of the network's output, got "
                                       f"{type(raw).__name__} (select() takes an array)")
+        self._check_gl_object(raw, "raw", "buffer")
         need = len(self._meta.outputs) * th * tw * 4
         if raw.size < need:
             raise sdk.InputShapeError(
@@ -362,7 +363,20 @@ class RateSelector:
         own, a renderer's) ran that context's objects of the same names, wrong codes or a GL error."""
         if self._program is None:
             raise RendererError("RateSelector: closed")
+        if is_released(self.ctx):  # (an AttributeError from the released context, before)
+            raise AdapterFrameError("ctx: the moderngl context was released under this RateSelector; build a new "
+                                    "selector in a live context")
         self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
+
+    def _check_gl_object(self, obj: Any, name: str, what: str) -> None:
+        """``obj`` (an engine's buffer or texture) is live and of the selector's context, else a
+        :class:`rtp.sdk.ParameterError` naming ``name``: a released one failed as an ``AttributeError``, and one of
+        another context was bound by its name in this one (another object's data, or none), wrong codes in silence."""
+        if is_released(obj):
+            raise sdk.ParameterError(f"{name}: this moderngl {what} has been released; pass a live one", name)
+        if getattr(obj, "ctx", self.ctx) is not self.ctx:
+            raise sdk.ParameterError(f"{name}: expected a moderngl {what} of the selector's context, got one of another "
+                                     "moderngl.Context (a compute shader reads only its own context's objects)", name)
 
     def _check_decision(self, threshold: float | None, allowed: Iterable[sdk.RateLike] | None) -> float:
         """The threshold to use, after the SDK's own checks and messages for it and for the allowed rates
@@ -378,7 +392,8 @@ class RateSelector:
         for them and the combiner (``select_rates`` beside them on a grid of zeros)."""
         if engine_rates is None:
             return None
-        if callable(getattr(engine_rates, "bind_to_image", None)):
+        if callable(getattr(engine_rates, "bind_to_image", None)) or is_released(engine_rates):
+            self._check_gl_object(engine_rates, "engine_rates", "texture")
             if tuple(engine_rates.size) != (grid[1], grid[0]) or engine_rates.dtype != "u1" or engine_rates.components != 1:
                 raise sdk.InputShapeError(f"engine_rates: expected an r8ui texture of {grid[1]}x{grid[0]} (one texel a "
                                           f"hardware tile), got {engine_rates.size} {engine_rates.dtype} x "
@@ -400,17 +415,19 @@ class RateSelector:
         return np.frombuffer(self._decoded.read(), np.float32).reshape(6, th, tw).copy()
 
     def close(self) -> None:
-        """Release the GPU objects (and the context when the selector made it)."""
-        if self._program is not None:
+        """Release the GPU objects (and the context when the selector made it; a borrowed context released first
+        took them with it)."""
+        live = not is_released(self.ctx)
+        if self._program is not None and live:
             self.ctx.__enter__()  # (its objects are freed in its own context)
         for obj in (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
                     self._budget):
-            if obj is not None:
+            if obj is not None and live:
                 obj.release()
         self._texture = self._decoded = self._raw = self._engine = self._program = None
         self._budget_program = self._budget = None
         self._tiles = None
-        if self._own_ctx:
+        if self._own_ctx and live:
             self.ctx.release()
             self._own_ctx = False  # closing twice releases nothing twice
 

@@ -19,7 +19,7 @@ from rtp.sdk.adapters import Adapter as SdkAdapter
 from rtp.sdk.adapters import FrameSource
 
 from ._adapter import GBufferTextures
-from ._glio import write_texture
+from ._glio import is_released, write_texture
 from ._renderer import Frame, Renderer
 
 if TYPE_CHECKING:
@@ -110,12 +110,15 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
         return super().adapter(channels, **options)
 
     def _close_dependents(self) -> None:
-        self._use()  # the adapters free their GL objects in this context
+        if not is_released(self.renderer.ctx):
+            self._use()  # the adapters free their GL objects in this context
         super()._close_dependents()
 
     def close(self) -> None:
-        """Free the textures and the renderer (and its context, unless it was borrowed)."""
-        self._use()
-        for t in self._textures.values():
-            t.release()
+        """Free the textures and the renderer (and its context, unless it was borrowed; a borrowed context the
+        engine released first took them with it)."""
+        if not is_released(self.renderer.ctx):
+            self._use()
+            for t in self._textures.values():
+                t.release()
         self.renderer.release()
