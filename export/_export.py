@@ -748,12 +748,16 @@ def export_checkpoint(
     from rtp import sdk
     from rtp.train import checkpoint as ckpt_mod
 
-    if isinstance(opset, bool) or not isinstance(opset, int) or not 9 <= opset <= 20:
-        raise ParameterError(f"opset: expected 9 to 20 (default {DEFAULT_OPSET}), got {opset!r}", "opset")
-    if not isinstance(finite_probe, bool):
+    # (numpy's integers and flags as Python's, as rtp.sdk takes them: np.int64(17) was "expected 9 to 20")
+    if isinstance(opset, (bool, np.bool_)) or not isinstance(opset, (int, np.integer)) or not 9 <= opset <= 20:
+        raise ParameterError(f"opset: expected an integer from 9 to 20 (default {DEFAULT_OPSET}), got {opset!r}",
+                             "opset")
+    opset = int(opset)
+    if not isinstance(finite_probe, (bool, np.bool_)):
         raise ParameterError(f"finite_probe: expected True or False, got {finite_probe!r}", "finite_probe")
-    if not isinstance(split_planes, bool):
+    if not isinstance(split_planes, (bool, np.bool_)):
         raise ParameterError(f"split_planes: expected True or False, got {split_planes!r}", "split_planes")
+    finite_probe, split_planes = bool(finite_probe), bool(split_planes)
     ckpt = ckpt_mod.load(checkpoint)
     out = _output(checkpoint, output if output is not None else Path(checkpoint).with_suffix(".onnx"), in_place=False)
     if ckpt.training is not None and ckpt.training.get("done") is False:

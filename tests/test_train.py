@@ -549,6 +549,68 @@ def test_focus_weights_the_tiles_near_the_threshold(tmp_path: Path) -> None:
             train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "z.pt"), focus=bad, crop=32))
 
 
+def test_resuming_a_focused_training_with_another_threshold_is_refused(tmp_path: Path) -> None:
+    """The focus band is centred on the default threshold: a resume with another one trained another loss, silently
+    (the threshold was not in the configuration a resume compares)."""
+    from rtp.metrics import metric_info
+
+    data = _dataset(tmp_path / "ds", n=6)
+    base = dict(data=str(data), metric="jnyang", out=str(tmp_path / "f.pt"), crop=32, batch=2, val_scenes=("scene0",),
+                val_every=2, save_every=2, focus=3.0)
+    train(TrainConfig(steps=2, **base))
+    with pytest.raises(sdk.ParameterError, match="another configuration .differs in: default_threshold."):
+        train(TrainConfig(steps=4, default_threshold=0.5, **base))
+    # the metric's own default, given by value, is the same band: it resumes
+    assert train(TrainConfig(steps=4, default_threshold=metric_info("jnyang").default_threshold, **base)).steps == 4
+    # without focus the threshold trains nothing: another one is the model's new default, not another run
+    plain = {**base, "focus": 0.0, "out": str(tmp_path / "p.pt")}
+    train(TrainConfig(steps=2, **plain))
+    assert train(TrainConfig(steps=4, default_threshold=0.5, **plain)).steps == 4
+
+
+def test_an_output_that_cannot_be_resumed_is_refused_before_the_samples_are_read(tmp_path: Path) -> None:
+    """A file at --out that is no checkpoint, or a model without its training state, was refused only once every
+    sample had been read (minutes for the shipped recipe's 1,224)."""
+    from rtp.train import checkpoint
+    from rtp.train.model import MetricNet
+
+    from .conftest import base_metadata
+
+    data = _dataset(tmp_path / "ds", n=6)
+    bare = checkpoint.save(tmp_path / "bare.pt", MetricNet(), base_metadata())
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    read: list[tuple[Path, int]] = []
+    for path, words in ((bare, "without its training state"), (junk, "not a checkpoint")):
+        with pytest.raises(checkpoint.CheckpointError, match=words):
+            train(TrainConfig(data=str(data), metric="jnyang", out=str(path), steps=2, crop=32, batch=2),
+                  loading=lambda k, n, path=path: read.append((path, k)))
+    assert read == []
+
+
+def test_numpy_numbers_and_flags_train_and_export_as_pythons(tmp_path: Path) -> None:
+    """numpy's scalars passed the field checks and then failed once the data was loaded (seed=np.int64: a TypeError
+    from torch; lr=np.float32: the checkpoint's JSON) or were refused as what they are (batch=np.int64(2): 'expected an
+    integer >= 1'); a string for a list was read letter by letter (val_scenes="scene0": scenes s, c, e, ...)."""
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "n.pt"), steps=np.int64(2),
+                      batch=np.int64(2), crop=np.int32(32), seed=np.int64(3), lr=np.float32(1e-3),
+                      augment=np.bool_(False), val_scenes="scene0", val_every=np.int64(2))
+    result = train(cfg)
+    ck = load_checkpoint(result.checkpoint)
+    prov = ck.metadata.provenance
+    assert result.steps == 2 and prov["seed"] == 3 and type(prov["seed"]) is int and prov["val_scenes"] == ("scene0",)
+    assert type(ck.training["config"]["lr"]) is float
+    # from a recipe: the overrides its provenance records are Python's too
+    r = TrainConfig.from_recipe("shipped", data=str(data), metric="jnyang", out=str(tmp_path / "r.pt"),
+                                steps=np.int64(5), lr=np.float64(2e-3), mirror=np.bool_(True))
+    assert (type(r.steps), type(r.mirror)) == (int, bool) and r.recipe is not None
+    assert {k: type(v) for k, v in r.recipe["overrides"].items()} == {"steps": int, "lr": float, "mirror": bool}
+    out = export.export_checkpoint(result.checkpoint, tmp_path / "n.onnx", opset=np.int64(17),
+                                   finite_probe=np.bool_(False))
+    assert sdk.load(out).metadata.finite_probe is None
+
+
 def test_the_mlp_head_trains_from_the_command_line_and_is_recorded(tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     data = _dataset(tmp_path / "ds", n=4)
@@ -1523,11 +1585,19 @@ def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path
     ({"arch": "fast", "head_width": -1}, "head_width", "expected 0 .a linear head."),
     ({"arch": "fast", "contrast_max": True}, "contrast_max", "only with block_contrast"),
     ({"per_scene": 0}, "per_scene", "at least 1 sample per map"),
+    ({"max_samples": 0}, "max_samples", "at least 1 training sample"),  # (it trained on every sample)
+    ({"max_samples": -1}, "max_samples", "at least 1 training sample"),  # (it left out the last sample)
     ({"arch": "paper", "separable": True}, "separable", "the fast network's option"),
     ({"arch": "paper", "energy_norm": True}, "energy_norm", "the fast network's option"),
     ({"arch": "paper", "depth": 5}, "depth", "the fast network's option"),  # (ignored, and recorded)
     ({"arch": "paper", "stem_layers": 2}, "stem_layers", "the fast network's option"),
     ({"arch": "fast", "head": "linear"}, "head", "the paper network's option"),  # (ignored, and recorded)
+    # options of blocks the network has none of: it was built as without them, and they were recorded
+    ({"arch": "fast", "grow": 2, "depth": 1}, "grow", "has none to double"),
+    ({"arch": "fast", "grow": 2, "stem": 8, "tile": 8, "crop": 32}, "grow", "has none to double"),
+    ({"arch": "fast", "grow": 2, "max_width": 16}, "grow", "has none to double"),
+    ({"arch": "fast", "separable_tail": True, "depth": 2}, "separable_tail", "no block at tile resolution"),
+    ({"arch": "fast", "separable_tail": True, "separable": True}, "separable_tail", "separable makes every block"),
     ({"distill": 0.0}, "distill", r"a weight in \(0, 1\]"),
     ({"ema": 1.0}, "ema", r"a decay in \[0, 1\)"),
     ({"aux_metrics": ("jnyang",)}, "aux_metrics", "other than jnyang"),

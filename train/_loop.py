@@ -18,7 +18,7 @@ import os
 import platform
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +37,7 @@ from . import checkpoint as ckpt
 from . import transforms as tt
 from ._augment import SYMMETRIES, augment_batch
 from ._frames import Frame, crop_batch
-from ._recipe import check_fields, load_recipe
+from ._recipe import check_fields, load_recipe, normal_fields
 from ._safety import calibrate_safety
 from .model import ARCHS, HEADS, Network, build_network, keep_outputs
 
@@ -215,6 +215,7 @@ class TrainConfig:
         unknown = sorted(set(overrides) - {f.name for f in dataclasses.fields(cls)})
         if unknown:  # (a TypeError from the constructor's keywords)
             raise sdk.ParameterError(f"unknown TrainConfig field(s) {', '.join(unknown)}", unknown[0])
+        overrides = normal_fields(overrides)  # (numpy's numbers as Python's, in the provenance too)
         r = load_recipe(recipe, metric)
         values = {**r.values, **overrides}
         if "val_scenes" not in overrides and r.val_split is not None:
@@ -227,7 +228,7 @@ class TrainConfig:
             prov["overrides"] = {k: list(v) if isinstance(v, tuple) else v for k, v in changed.items()}
         cfg = cls(data=data, metric=metric, out=out, recipe=prov, **values)
         try:
-            check_config(cfg)  # a recipe's ranges and combinations too, when it is read (train() checks again)
+            cfg = check_config(cfg)  # a recipe's ranges and combinations too, when it is read (train() checks again)
         except sdk.ParameterError as err:
             key = err.name
             if key is None or key not in r.values or key in overrides:
@@ -621,12 +622,14 @@ def _deterministic(dev: torch.device) -> Any:
 SEED_RANGE = (-2**63, 2**64 - 1)
 
 
-def check_config(cfg: TrainConfig) -> None:
+def check_config(cfg: TrainConfig) -> TrainConfig:
     """Refuse a configuration :func:`train` cannot run, before any work: every field of its type, then
     the ranges and combinations of the fields (``TrainConfig.from_recipe`` runs this too, so that a
     recipe's ``width: 1`` fails when the recipe is read). What needs the data (a crop larger than the
-    frames) is checked once it is loaded. Raises :class:`rtp.sdk.ParameterError` naming the field."""
-    check_fields(cfg)  # every field of its type, before the checks of their ranges below
+    frames) is checked once it is loaded. Raises :class:`rtp.sdk.ParameterError` naming the field.
+    Returns a copy of ``cfg`` with each field of its type (numpy's numbers as Python's: ``_recipe.normal_fields``),
+    the configuration :func:`train` runs."""
+    cfg = replace(cfg, **check_fields(cfg))  # every field of its type, before the checks of their ranges below
     try:
         info = metric_info(cfg.metric)  # rtp's own or a plugin's (rtp.metrics.Metric)
     except MetricParameterError as err:
@@ -711,6 +714,24 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError(f"tail_width sets the channels of the blocks at tile resolution: expected 0 (none), "
                                  f"or >= 2 with blocks at tile resolution (depth {cfg.depth} with stem {cfg.stem} and "
                                  f"tile {cfg.tile} has none), got {cfg.tail_width}", "tail_width")
+    if cfg.arch == "fast":  # (options of blocks this network has none of built it unchanged, and were recorded)
+        pools = int(math.log2(cfg.tile // min(cfg.stem, cfg.tile)))
+
+        def widths(grow: int) -> list[int]:  # the channels of the 3x3 blocks, as FastNet gives them
+            return [cfg.tail_width if cfg.tail_width and i >= pools
+                    else min(cfg.width * grow ** min(i, pools), cfg.max_width or cfg.width * grow ** pools)
+                    for i in range(cfg.depth)]
+
+        if cfg.grow == 2 and widths(2) == widths(1):
+            raise sdk.ParameterError(f"grow: 2 doubles the channels of the blocks after a pool below tile resolution, and "
+                                     f"this network has none to double (depth {cfg.depth}, stem {cfg.stem}, tile "
+                                     f"{cfg.tile}, tail_width {cfg.tail_width}, max_width {cfg.max_width}): expected "
+                                     f"grow 1, or more blocks", "grow")
+        if cfg.separable_tail and (cfg.separable or cfg.depth <= pools):
+            why = ("separable makes every block so already" if cfg.separable else
+                   f"depth {cfg.depth} with stem {cfg.stem} and tile {cfg.tile} has no block at tile resolution")
+            raise sdk.ParameterError(f"separable_tail: makes the blocks at tile resolution depthwise-separable, and {why}: "
+                                     "it would change nothing", "separable_tail")
     if cfg.head_width and cfg.arch != "fast":
         raise sdk.ParameterError(f"head_width: the fast network's option, got arch {cfg.arch!r}", "head_width")
     if cfg.head_width < 0:
@@ -779,6 +800,9 @@ def check_config(cfg: TrainConfig) -> None:
         raise sdk.ParameterError(f"aux_weight: expected a weight > 0, got {cfg.aux_weight}", "aux_weight")
     if not 0.0 <= cfg.ema < 1.0:
         raise sdk.ParameterError(f"ema: expected a decay in [0, 1) (0: off), got {cfg.ema}", "ema")
+    if cfg.max_samples is not None and cfg.max_samples < 1:  # (-1 left out the last sample, 0 kept them all)
+        raise sdk.ParameterError(f"max_samples: expected None (every sample) or at least 1 training sample, got "
+                                 f"{cfg.max_samples}", "max_samples")
     if cfg.per_scene is not None and cfg.per_scene < 1:
         raise sdk.ParameterError(f"per_scene: expected at least 1 sample per map and motion profile, got {cfg.per_scene}",
                                  "per_scene")
@@ -804,6 +828,7 @@ def check_config(cfg: TrainConfig) -> None:
     check_memory(need, f"{cfg.batch} crops of {cfg.crop + 2 * cfg.context} pixels take about {need / 2**30:.1f} GiB in "
                        f"a training step ({kept})",
                  "batch", "of memory: lower batch or crop", job="the training", logger=log)
+    return cfg
 
 
 def _check_fits_in_memory(reader: _Sources, train_ids: Sequence[str], val_ids: Sequence[str], cfg: TrainConfig) -> None:
@@ -902,7 +927,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     """
     if not isinstance(cfg, TrainConfig):
         raise sdk.ParameterError(f"train: expected a TrainConfig, got {type(cfg).__name__}")
-    check_config(cfg)
+    cfg = check_config(cfg)  # (its fields as the types they are read as)
     # What the first save or the optimizer would refuse, now rather than 250 steps of training later.
     out = check_output(cfg.out, what="out")
     made = [d for d in (out.parent, *out.parent.parents) if not d.exists()]  # (the folders the lock needs made)
@@ -919,8 +944,22 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
                 d.rmdir()
 
 
+def _resumable(out: Path) -> ckpt.Checkpoint:
+    """The checkpoint at ``out``, which a training into ``out`` resumes: refused if it is none or holds no training
+    state (its configuration and steps are compared once the samples, part of it, are known)."""
+    prev = ckpt.load(out)
+    if not prev.training:
+        raise ckpt.CheckpointError(f"{out} exists and holds a model without its training state (saved from Python "
+                                   "without one, or exported from elsewhere): nothing to resume; choose another "
+                                   "output path or delete it")
+    return prev
+
+
 def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
            loading: Callable[[int, int], None] | None = None) -> TrainResult:
+    out = Path(cfg.out)
+    # a file there that cannot be resumed, refused before the samples are read (minutes, for the shipped recipe)
+    prev = _resumable(out) if out.is_file() else None
     loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
     aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
@@ -970,7 +1009,6 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     # with ema: `net` trains, `avg` (its moving average) is validated and saved
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
-    out = Path(cfg.out)
     step, history = 0, []
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
     if cfg.per_scene:  # checkpoints from before the option hold no "per_scene"
@@ -1019,6 +1057,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         config_key["quantile"] = cfg.quantile
     if cfg.focus:
         config_key["focus"] = cfg.focus
+        if threshold != metric_info(cfg.metric).default_threshold:  # the focus band's centre (a resume with another
+            config_key["default_threshold"] = float(threshold)       # --threshold trained another loss, silently)
     if cfg.ema:
         config_key["ema"] = cfg.ema
     if cfg.optimizer != "rmsprop":  # likewise: checkpoints from before the options used the paper's
@@ -1036,12 +1076,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     config_key["samples"] = {"train": len(train_ids), "val": len(val_ids), "sha256": hashlib.sha256(
         json.dumps([train_ids, val_ids]).encode()).hexdigest()}
     config_key = json.loads(json.dumps(config_key))
-    if out.is_file():
-        prev = ckpt.load(out)
-        if not prev.training:
-            raise ckpt.CheckpointError(f"{out} exists and holds a model without its training state (saved from Python "
-                                       "without one, or exported from elsewhere): nothing to resume; choose another "
-                                       "output path or delete it")
+    if prev is not None and prev.training:
         state = prev.training
         before = state.get("config") or {}
         if cfg.arch != "paper" and isinstance(before, dict):  # (a fast training begun with a head, which it never

@@ -23,6 +23,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from rtp.metrics import MetricParameterError, known_metrics, metric_info
@@ -97,8 +98,8 @@ def _coerce(name: str, value: Any, kind: Any, what: str = "recipe key") -> Any:
         if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
             raise RecipeError(f"{what} {name!r}: expected a list of names, got {value!r}", name)
         return tuple(value)
-    if kind is bool and isinstance(value, bool):
-        return value
+    if kind is bool and isinstance(value, (bool, np.bool_)):  # (numpy's flags as Python's, as the SDK takes them)
+        return bool(value)
     if kind is bool or isinstance(value, bool):  # YAML's true is no number, nor 1 a switch
         raise RecipeError(f"{what} {name!r}: expected {kind.__name__}, got {value!r}", name)
     if kind is int and isinstance(value, numbers.Integral):
@@ -129,23 +130,37 @@ def _finite(value: Any) -> bool:
         return False
 
 
-def check_fields(cfg: Any) -> None:
+def check_fields(cfg: Any) -> dict[str, Any]:
     """Every field of a ``TrainConfig`` of its annotated type (``train`` calls this before any work: a
     list for the metric, a string for a rate or a float for the outputs failed deep in the checks as a
-    TypeError). ``data`` and ``out`` may be paths."""
+    TypeError). ``data`` and ``out`` may be paths. Returns the fields as the types they are read as
+    (:func:`normal_fields`)."""
+    from ._loop import TrainConfig
+
+    return normal_fields({f.name: getattr(cfg, f.name) for f in dataclasses.fields(TrainConfig)})
+
+
+def normal_fields(values: dict[str, Any]) -> dict[str, Any]:
+    """``values`` (TrainConfig fields) each as its field's type: numpy's integers, floats and flags as
+    Python's (``seed=np.int64(3)`` reached torch's generator as a TypeError, ``lr=np.float32(1e-3)`` the
+    checkpoint's JSON, both once the data was loaded), a list as a tuple and a comma-separated string as
+    its names (``val_scenes="scene0"`` was read letter by letter). A value of another type is a
+    :class:`RecipeError` naming the field."""
     from ._loop import TrainConfig
 
     hints = typing.get_type_hints(TrainConfig)
-    for f in dataclasses.fields(TrainConfig):
-        value = getattr(cfg, f.name)
-        if f.name in ("data", "out") and isinstance(value, os.PathLike):
-            continue
-        if f.name == "recipe":
+    out: dict[str, Any] = {}
+    for name, value in values.items():
+        if name in ("data", "out") and isinstance(value, os.PathLike):
+            out[name] = value
+        elif name == "recipe":
             if value is not None and not isinstance(value, dict):
                 raise RecipeError(f"field 'recipe': expected None or the recipe's provenance mapping, got "
                                   f"{type(value).__name__}", "recipe")
-            continue
-        _coerce(f.name, value, hints[f.name], what="field")
+            out[name] = value
+        else:
+            out[name] = _coerce(name, value, hints[name], what="field")
+    return out
 
 
 def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
