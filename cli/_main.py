@@ -410,12 +410,12 @@ def _cmd_adapters_check(args: argparse.Namespace) -> int:
         print(json.dumps(report.to_dict(), indent=1))
     else:
         print(report.to_text())
-    report.raise_for_failures()  # (ConformanceError: exit 1, naming each failed check)
-    if report.not_run:  # a check that could not draw checked nothing: a missing install (exit 2), not a pass
-        from rtp.sdk.adapters import AdapterNotFoundError
+    if report.not_run and not report.failures:  # a check that could not draw checked nothing: a missing install
+        from rtp.sdk.adapters import AdapterNotFoundError  # (exit 2), not a pass
 
         raise AdapterNotFoundError(f"the checks that draw frames did not run ({report.not_run}): install the "
                                    "adapter's engine and run again")
+    report.raise_for_failures()  # (ConformanceError: exit 1, naming each failed check)
     return 0
 
 

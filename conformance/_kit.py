@@ -125,15 +125,21 @@ class ConformanceReport:
 
     @property
     def ok(self) -> bool:
-        """No check failed (skipped checks are listed in :attr:`skipped`, with why)."""
-        return not self.failures
+        """No check failed, and the checks that draw frames ran (skipped checks are listed in :attr:`skipped`,
+        with why; where the engine is not installed none drew, :attr:`not_run` says why, and a check that drew
+        nothing passed nothing: not ok, as ``rtp adapters check`` exits 2)."""
+        return not self.failures and self.not_run is None
 
     def raise_for_failures(self) -> None:
-        """Raise :class:`ConformanceError` listing every failed check, if any failed."""
+        """Raise :class:`ConformanceError` listing every failed check, if any failed, or saying why the checks
+        that draw did not run (:attr:`not_run`): whenever the report is not :attr:`ok`."""
         if self.failures:
             raise ConformanceError(f"adapter {self.adapter!r} failed {len(self.failures)} of {len(self.checks)} "
                                    "conformance checks: " + "; ".join(f"{c.group}: {c.name} ({c.detail})"
                                                                      for c in self.failures))
+        if self.not_run is not None:
+            raise ConformanceError(f"adapter {self.adapter!r}: the checks that draw frames did not run "
+                                   f"({self.not_run}), so nothing was checked of its planes")
 
     def to_dict(self) -> dict[str, Any]:
         return {"adapter": self.adapter, "source": self.source, "size": list(self.size), "channels": list(self.channels),
@@ -203,8 +209,11 @@ def resolve_adapter(spec: str | type[Adapter[Any]]) -> tuple[type[Adapter[Any]],
     return obj, spec
 
 
-def runnable_models(adapter: type[Adapter[Any]]) -> tuple[str, ...]:
-    """The shipped models (file names) whose every input ``adapter`` declares it produces."""
+def runnable_models(adapter: str | type[Adapter[Any]]) -> tuple[str, ...]:
+    """The shipped models (file names) whose every input ``adapter`` declares it produces: the class, or
+    what :func:`resolve_adapter` takes (a registry name, ``"package.module:Class"``)."""
+    if not isinstance(adapter, type) or not issubclass(adapter, Adapter):
+        adapter = resolve_adapter(adapter)[0]  # (AdapterNotFoundError saying what was expected)
     out = []
     for name in sdk.shipped_models():
         try:

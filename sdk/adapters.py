@@ -104,7 +104,8 @@ class NoFrameSourceError(RtpError, NotImplementedError):
 
 class AdapterOutputError(RtpError, RuntimeError):
     """An adapter broke the contract: its ``inputs`` returned something other than a C-contiguous
-    float32 ``(C, H, W)`` array with one plane per requested channel (a bug in the adapter)."""
+    float32 ``(C, H, W)`` array with one plane per requested channel, or its constructor (or its frame
+    source's) did not call ``super().__init__`` (a bug in the adapter)."""
 
 
 # --------------------------------------------------------------------------------------------- lifecycle
@@ -126,13 +127,35 @@ def _guard_close(fn: Callable[[Any], None]) -> Callable[[Any], None]:
             return
         self.__dict__["_rtp_state"] = _CLOSING
         try:
-            self._close_dependents()
-            fn(self)
+            try:
+                self._close_dependents()
+            finally:  # (an adapter whose close raised must not leave the engine itself unfreed)
+                fn(self)
         finally:
             self.__dict__["_rtp_state"] = _CLOSED
 
     close._rtp_guarded = True  # type: ignore[attr-defined]
     return close
+
+
+def _guard_init(fn: Callable[..., None]) -> Callable[..., None]:
+    """Run a subclass's ``__init__``, then refuse an object whose ``__init__`` never reached the base's
+    (``super().__init__(...)`` forgotten): it would fail later, at first use, with an ``AttributeError``
+    naming a private attribute."""
+
+    @functools.wraps(fn)
+    def __init__(self: _Closable, *args: Any, **kwargs: Any) -> None:
+        fn(self, *args, **kwargs)
+        if "_rtp_state" not in self.__dict__:
+            base = "Adapter" if isinstance(self, Adapter) else "FrameSource"
+            params = "channels, width, height" if base == "Adapter" else "adapter_class, width, height"
+            raise AdapterOutputError(
+                f"{type(self).__qualname__}.__init__ did not call super().__init__({params}): every "
+                f"rtp.sdk.adapters.{base} subclass calls it first (docs/adapters.md)"
+            )
+
+    __init__._rtp_guarded = True  # type: ignore[attr-defined]
+    return __init__
 
 
 def _guard_open(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -160,6 +183,9 @@ class _Closable:
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
+        init = cls.__dict__.get("__init__")
+        if callable(init) and not getattr(init, "_rtp_guarded", False):
+            setattr(cls, "__init__", _guard_init(init))  # noqa: B010 (mypy refuses assigning to a method)
         for name in ("close", *cls._open_only):
             fn = cls.__dict__.get(name)
             if not callable(fn) or getattr(fn, "__isabstractmethod__", False) or getattr(fn, "_rtp_guarded", False):
@@ -414,11 +440,17 @@ class FrameSource(_Closable, abc.ABC, Generic[FrameT]):
         return adapter
 
     def _close_dependents(self) -> None:
-        for ref in self._adapters:
+        errors: list[Exception] = []
+        for ref in self._adapters:  # every one, even after one whose close raised (then that error)
             adapter = ref()
             if adapter is not None:
-                adapter.close()
+                try:
+                    adapter.close()
+                except Exception as exc:
+                    errors.append(exc)
         self._adapters = []
+        if errors:
+            raise errors[0]
 
     def _describe(self) -> str:
         return f"{self._adapter_class.name or self._adapter_class.__name__} frame source"
@@ -427,7 +459,9 @@ class FrameSource(_Closable, abc.ABC, Generic[FrameT]):
 # --------------------------------------------------------------------------------------------- registry
 _lock = threading.Lock()
 _registered: dict[str, type[Adapter[Any]]] = {}
-_discovered: dict[str, Any] | None = None
+#: The entry points by name, each name's distinct targets in the order found (more than one: two installed
+#: packages declare the same name, and neither is chosen in silence).
+_discovered: dict[str, list[Any]] | None = None
 _broken: dict[str, str] = {}
 
 
@@ -436,7 +470,9 @@ def _is_adapter_class(obj: Any) -> bool:
 
 
 def register(name: str, adapter: type[Adapter[Any]]) -> None:
-    """Register an adapter class under ``name``; it takes precedence over entry points."""
+    """Register an adapter class under ``name``; it takes precedence over entry points (and chooses
+    between two installed packages that declare the same name). Registering another class under a
+    registered name replaces it."""
     if not isinstance(name, str) or not name:
         raise ParameterError(f"adapter name must be a non-empty string, got {name!r}")
     if not _is_adapter_class(adapter):
@@ -445,13 +481,15 @@ def register(name: str, adapter: type[Adapter[Any]]) -> None:
         _registered[name] = adapter
 
 
-def _discover() -> dict[str, Any]:
+def _discover() -> dict[str, list[Any]]:
     global _discovered
     with _lock:
         if _discovered is None:
-            found: dict[str, Any] = {}
+            found: dict[str, list[Any]] = {}
             for ep in entry_points(group=ENTRY_POINT_GROUP):
-                found.setdefault(ep.name, ep)  # editable installs can list an entry point twice
+                same = found.setdefault(ep.name, [])
+                if all(other.value != ep.value for other in same):  # editable installs can list one twice
+                    same.append(ep)
             _discovered = found
         return _discovered
 
@@ -463,25 +501,36 @@ def available() -> list[str]:
 
 def get(name: str) -> type[Adapter[Any]]:
     """The adapter class registered or installed under ``name``."""
+    if not isinstance(name, str):
+        raise AdapterNotFoundError(f"expected an adapter's name (a string such as 'moderngl'), got "
+                                   f"{type(name).__name__} {name!r}; available: {', '.join(available()) or 'none'}")
     if name in _registered:
         return _registered[name]
     eps = _discover()
+    if name in eps and len(eps[name]) > 1:  # two packages claim the name: which one loads depended on sys.path
+        _broken[name] = f"declared by {len(eps[name])} installed entry points: " + ", ".join(
+            repr(ep.value) for ep in eps[name])
+        raise AdapterNotFoundError(
+            f"adapter {name!r} is {_broken[name]}; uninstall all but one package, or choose one with "
+            f"sdk.adapters.register({name!r}, ...)"
+        )
     if name in eps:
+        ep = eps[name][0]
         try:
-            obj = eps[name].load()
+            obj = ep.load()
         except Exception as err:  # a broken plugin must not take the host down
             _broken[name] = f"{type(err).__name__}: {err}"
             log.warning("adapter plugin %r failed to load: %s", name, _broken[name])
             # rtp's own plugins miss their extra when they cannot import (pip install 'rtp[moderngl]'); a third
             # party's is its package's to fix (the rtp extra the hint named does not exist)
-            own = str(eps[name].value).startswith("rtp.plugins.")
+            own = str(ep.value).startswith("rtp.plugins.")
             hint = (f"is its extra installed? e.g. pip install 'rtp[{name}]'" if own and isinstance(err, ImportError)
-                    else f"the entry point {eps[name].value!r} is its package's to fix or reinstall")
+                    else f"the entry point {ep.value!r} is its package's to fix or reinstall")
             raise AdapterNotFoundError(
                 f"adapter {name!r} is installed but failed to load ({_broken[name]}); {hint}"
             ) from err
         if not _is_adapter_class(obj):
-            _broken[name] = f"{eps[name].value} is not an rtp.sdk.adapters.Adapter subclass"
+            _broken[name] = f"{ep.value} is not an rtp.sdk.adapters.Adapter subclass"
             log.warning("adapter plugin %r: %s", name, _broken[name])
             raise AdapterNotFoundError(f"adapter {name!r}: {_broken[name]}")
         with _lock:

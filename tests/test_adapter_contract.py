@@ -354,7 +354,7 @@ def test_an_engine_that_is_not_installed_skips_the_drawing_checks_saying_so(tmp_
             raise ImportError("No module named 'myengine'")
 
     report = conformance.check_adapter(NoEngine)
-    assert report.ok and report.not_run is not None and "No module named 'myengine'" in report.not_run
+    assert not report.ok and not report.failures and report.not_run is not None and "No module named 'myengine'" in report.not_run
     assert {c.group for c in report.skipped} == GROUPS
     assert [c.name for c in report.checks if c.group == "class" and c.status == "skipped"] == [
         "frame_source opens on the conformance scene"]
@@ -646,3 +646,84 @@ def test_gl_tests_set_up_the_shared_context_before_their_own_fixtures(request: p
     # conftest puts gl_context first, so that without EGL a gl test skips before a module fixture renders
     assert request.fixturenames[0] == "gl_context"
     assert request.getfixturevalue("gl_context").version_code >= 330
+
+
+# ----------------------------------------------------------------------- lifecycle and report edges, no GL
+def test_closing_a_source_frees_the_engine_and_every_adapter_when_one_close_raises() -> None:
+    # one adapter whose close raised left the source's own close (the engine) unrun and the adapters after it
+    # open, while the source said it was closed: the engine leaked, and an adapter kept borrowing it
+    freed: list[str] = []
+
+    class Failing(NumpyAdapter):
+        def close(self) -> None:
+            raise RuntimeError("driver gone")
+
+    class Source(FrameSource[CpuFrame]):
+        def frame(self, camera: Any, prev_camera: Any) -> CpuFrame:
+            return _cpu_frame()
+
+        def close(self) -> None:
+            freed.append("engine")
+
+    source = Source(Failing, W, H)
+    first, second = source.adapter(["seen"]), source.adapter(["seen"])
+    with pytest.raises(RuntimeError, match="driver gone"):
+        source.close()
+    assert freed == ["engine"] and first.closed and second.closed and source.closed
+    source.close()  # once
+    assert freed == ["engine"]
+
+
+def test_a_subclass_that_does_not_call_super_init_is_refused_at_construction() -> None:
+    # it was built, then failed at first use with "'NoSuper' object has no attribute '_channels'" (repr too)
+    class NoSuper(NumpyAdapter):
+        def __init__(self, channels: Sequence[str], width: int, height: int) -> None:
+            self.tolerance = sdk.DEFAULT_REPROJECTION_TOLERANCE
+
+    class NoSuperSource(CpuFrameSource):
+        def __init__(self, adapter_class: type[NumpyAdapter], width: int, height: int) -> None:
+            self.engine = None
+
+    with pytest.raises(AdapterOutputError, match=r"NoSuper.__init__ did not call super\(\).__init__\(channels, width, "
+                       r"height\): every rtp.sdk.adapters.Adapter subclass calls it first"):
+        NoSuper(["seen"], W, H)
+    with pytest.raises(AdapterOutputError, match=r"NoSuperSource.__init__ did not call super\(\).__init__\("
+                       r"adapter_class, width, height\)"):
+        NoSuperSource(NumpyAdapter, W, H)
+
+    class Child(NumpyAdapter):  # an override that does call it, with the signature the kit reads
+        def __init__(self, channels: Sequence[str], width: int, height: int, *, extra: int = 0) -> None:
+            super().__init__(channels, width, height)
+            self.extra = extra
+
+    assert Child(["seen"], W, H, extra=1).extra == 1
+    import inspect
+
+    assert list(inspect.signature(Child.__init__).parameters)[1:4] == ["channels", "width", "height"]
+
+
+def test_runnable_models_takes_what_check_adapter_takes() -> None:
+    # runnable_models("moderngl") was AttributeError: 'str' object has no attribute 'supported_channels'
+    assert conformance.runnable_models(f"{__name__}:NumpyAdapter") == conformance.runnable_models(NumpyAdapter) == (
+        "lpips.onnx",)
+    assert conformance.runnable_models("moderngl") == conformance.runnable_models(sdk.adapters.get("moderngl"))
+    with pytest.raises(AdapterNotFoundError, match="expected an adapter name, 'module:Class' or an Adapter subclass"):
+        conformance.runnable_models(3)  # type: ignore[arg-type]
+
+
+def test_a_report_that_drew_nothing_is_not_ok(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the engine not installed: report.ok was True, --json said "ok": true while the command exited 2, and the
+    # plugin test of docs/adapters.md (assert report.ok) passed in a CI whose engine failed to import
+    monkeypatch.setitem(adapters._registered, "myengine", type("MyEngine", (NoEngineAdapter,), {"name": "myengine"}))
+    report = conformance.check_adapter("myengine")
+    assert report.not_run is not None and not report.failures and not report.ok
+    assert report.to_dict()["ok"] is False
+    with pytest.raises(conformance.ConformanceError, match="the checks that draw frames did not run .*No module named "
+                       "'myengine'.*nothing was checked"):
+        report.raise_for_failures()
+    text = (ROOT / "docs" / "adapters.md").read_text()
+    snippet = text[text.index("from rtp import conformance\n\ndef test_my_adapter_conforms"):]
+    namespace: dict[str, Any] = {}
+    exec(snippet[:snippet.index("```")], namespace)  # the plugin's test, as the docs write it
+    with pytest.raises(AssertionError, match="skipped"):
+        namespace["test_my_adapter_conforms"]()

@@ -85,3 +85,37 @@ def test_an_adapter_without_a_frame_source_says_so() -> None:
     with pytest.raises(adapters.NoFrameSourceError, match="fake adapter provides no frame source") as err:
         FakeAdapter.frame_source(None, 8, 8)
     assert isinstance(err.value, NotImplementedError) and isinstance(err.value, sdk.RtpError)
+
+
+class OtherFakeAdapter(FakeAdapter):
+    pass
+
+
+def test_two_packages_declaring_one_name_are_not_chosen_between_in_silence(
+    clean_registry: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # two installed packages declaring "fake" (a fork beside the original): get() loaded whichever entry point came
+    # first on sys.path, in silence; the same target listed twice (an editable install) is still one
+    eps = [
+        EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
+        EntryPoint("fake", "tests.test_adapters:OtherFakeAdapter", adapters.ENTRY_POINT_GROUP),
+        EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
+        EntryPoint("solo", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
+    ]
+    monkeypatch.setattr(adapters, "entry_points", lambda group: [e for e in eps if e.group == group])
+    assert adapters.available() == ["fake", "solo"]
+    with pytest.raises(adapters.AdapterNotFoundError, match=r"adapter 'fake' is declared by 2 installed entry points: "
+                       r"'tests.test_adapters:FakeAdapter', 'tests.test_adapters:OtherFakeAdapter'; uninstall all but "
+                       r"one package, or choose one with sdk.adapters.register\('fake', ...\)"):
+        adapters.get("fake")
+    assert adapters.get("solo") is FakeAdapter
+    adapters.register("fake", OtherFakeAdapter)  # the explicit choice
+    assert adapters.get("fake") is OtherFakeAdapter
+
+
+def test_a_name_that_is_not_a_string_says_what_was_expected(clean_registry: None) -> None:
+    adapters.register("fake", FakeAdapter)
+    for bad in (None, ["fake"], FakeAdapter):  # (a list was a bare TypeError: unhashable type)
+        with pytest.raises(adapters.AdapterNotFoundError, match=r"expected an adapter's name \(a string such as "
+                           r"'moderngl'\), got .*; available: fake"):
+            adapters.get(bad)  # type: ignore[arg-type]
