@@ -69,8 +69,10 @@ def run_metric(args: argparse.Namespace) -> int:
         raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "
                                  f"{test.shape[1]}x{test.shape[0]}")
     info = metrics.metric_info(args.metric)
-    tiles = metrics.tile_metric(args.metric, ref, test, args.tile)
+    # the map once, pooled as tile_metric pools it (tile_metric and error_map both computed it: FLIP and LPIPS twice)
     pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test)
+    tiles = (metrics.tile_metric(args.metric, ref, test, args.tile) if pixel_map is None
+             else metrics.pool_tiles(pixel_map, args.tile, "mean" if info.pooling == "mean" else "max"))
     finite = tiles[np.isfinite(tiles)]
     worst = (finite.min() if info.higher_is_better else finite.max()) if finite.size else float("nan")
     if args.out:

@@ -20,12 +20,13 @@ METRIC_DEPENDENCIES: dict[str, tuple[str, ...]] = {
 }
 
 
-def check_dependencies(metrics: Iterable[str]) -> None:
+def check_dependencies(metrics: str | Iterable[str]) -> None:
     """Raise :class:`MetricDependencyError` listing every missing piece the ``metrics`` need (each with
     the command that installs or fetches it), so that a long job fails in its first second rather
-    than after hours of work. Unknown metric names raise :class:`MetricParameterError`; a plugin metric's
-``requires`` are checked too."""
-    names = list(dict.fromkeys(metrics))
+    than after hours of work. ``metrics`` is a list of names or one name. Unknown metric names raise
+    :class:`MetricParameterError`; a plugin metric's ``requires`` are checked too."""
+    # (a name alone, check_dependencies("flip"), was read as the metrics "f", "l", "i", "p": unknown metric 'f')
+    names = list(dict.fromkeys([metrics] if isinstance(metrics, str) else metrics))
     plugins = [p for p in (plugin(m) for m in names) if p is not None]  # (an unknown name: MetricParameterError)
     checks = {"flip-evaluator": _flip_module, "torch": _torch, "LPIPS weights": lpips_weights_path}
     problems: list[str] = []

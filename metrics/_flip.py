@@ -39,7 +39,9 @@ def ppd_from_width(width_px: int, monitor_width_m: float = 0.7, distance_m: floa
     For crops pass the width of the full frame, not of the crop.
     """
     numbers = (width_px, monitor_width_m, distance_m)
-    if not all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) for v in numbers) \
+    # (NaN passed `<= 0` and gave a NaN ppd; an infinity gave inf or 0)
+    if not all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+               and (isinstance(v, (int, np.integer)) or math.isfinite(v)) for v in numbers) \
             or width_px <= 0 or monitor_width_m <= 0 or distance_m <= 0:
         raise MetricParameterError(
             f"ppd_from_width needs positive arguments, got width_px={width_px}, "
@@ -62,7 +64,7 @@ def resolve_ppd(ppd: Ppd, width_px: int) -> float:
         if ppd != "width":
             raise MetricParameterError(f"ppd must be a positive number or 'width', got {ppd!r}")
         return ppd_from_width(width_px)
-    if isinstance(ppd, bool):
+    if isinstance(ppd, (bool, np.bool_)):
         raise MetricParameterError(f"ppd must be a positive number or 'width', got {ppd!r}")
     try:
         value = float(ppd)
@@ -72,6 +74,18 @@ def resolve_ppd(ppd: Ppd, width_px: int) -> float:
         # (1e10 made the filters' kernels grow until the process was killed; 1e-10 gave NaN maps)
         raise MetricParameterError(f"ppd must be a number of pixels per degree in [{MIN_PPD:g}, {MAX_PPD:g}] (FLIP's "
                                    f"default {DEFAULT_PPD:.2f}), got {ppd!r}")
+    return value
+
+
+def image_ppd(ppd: Ppd, width_px: int) -> float:
+    """:func:`resolve_ppd` for an image ``width_px`` wide that FLIP will score: ``"width"`` must give a
+    value in FLIP's range too (an image under 58 pixels wide is under 1 ppd: the torch port's targets
+    were NaN). (``resolve_ppd(ppd, 1)`` stays the check of the argument alone, as ``rtp targets`` uses it.)"""
+    value = resolve_ppd(ppd, width_px)
+    if isinstance(ppd, str) and not MIN_PPD <= value <= MAX_PPD:
+        raise MetricParameterError(
+            f"ppd='width' of a {width_px}-pixel-wide image is {value:.3g} pixels per degree, outside FLIP's "
+            f"[{MIN_PPD:g}, {MAX_PPD:g}]: for a crop pass ppd=ppd_from_width(the full frame's width), or a number")
     return value
 
 
@@ -119,7 +133,7 @@ def flip_map(reference: Any, test: Any, *, ppd: Ppd = DEFAULT_PPD) -> Any:
         like the input.
     """
     ref, tst = as_pair(reference, test)
-    value = resolve_ppd(ppd, ref.shape_hw[1])
+    value = image_ppd(ppd, ref.shape_hw[1])
     log.debug("FLIP on %d image(s) of %dx%d at %.3f ppd", ref.data.shape[0], ref.shape_hw[1], ref.shape_hw[0], value)
     maps = np.stack([flip_pixels(r, t, value) for r, t in zip(ref.data, tst.data)])
     return ref.wrap(maps)

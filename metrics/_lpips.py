@@ -338,6 +338,13 @@ def _check_size(batch: ImageBatch) -> None:
         )
 
 
+def _check_quirk(paper_quirk: Any, name: str = "paper_quirk") -> bool:
+    """``paper_quirk`` as a bool; anything else (``"no"``, ``"false"``, 0.0) is refused: "no" switched it on."""
+    if not isinstance(paper_quirk, (bool, np.bool_)):
+        raise MetricParameterError(f"{name}: expected True or False, got {paper_quirk!r}")
+    return bool(paper_quirk)
+
+
 def _to_input(images: np.ndarray, paper_quirk: bool) -> Any:
     """``(N, H, W, 3)`` in [0, 1] -> NCHW tensor in LPIPS' range ([-1, 1]; [0, 1] with the paper quirk)."""
     torch = _torch()
@@ -390,6 +397,7 @@ def lpips_map(
         ``(H, W)`` (or ``(N, H, W)``) float32 >= 0 (0 for identical images; typically < 1),
         numpy or torch like the input.
     """
+    paper_quirk = _check_quirk(paper_quirk)
     ref, tst = as_pair(reference, test)
     _check_size(ref)
     torch = _torch()

@@ -13,9 +13,9 @@ import numpy as np
 
 from rtp.sdk import DEFAULT_TILE_SIZE, luma, psnr_from_mse
 
-from ._flip import DEFAULT_PPD, Ppd, flip_pixels, resolve_ppd
+from ._flip import DEFAULT_PPD, Ppd, flip_pixels, image_ppd
 from ._image import as_pair
-from ._pool import DEFAULT_WEBER_L, pool_tiles, weber_denominator
+from ._pool import DEFAULT_WEBER_L, _denominator, check_weber_l, pool_tiles
 
 __all__ = ["jnflip_map", "jnyang_map", "psnr_tiles", "squared_error_map", "yang_map"]
 
@@ -54,7 +54,7 @@ def jnyang_map(reference: Any, test: Any, *, weber_l: float = DEFAULT_WEBER_L) -
     """
     ref, tst = as_pair(reference, test)
     err = np.abs(luma(ref.data) - luma(tst.data))
-    return ref.wrap(err / weber_denominator(ref.data, weber_l))
+    return ref.wrap(err / _denominator(ref.data, check_weber_l(weber_l)))
 
 
 def jnflip_map(reference: Any, test: Any, *, ppd: Ppd = DEFAULT_PPD, weber_l: float = DEFAULT_WEBER_L) -> Any:
@@ -63,6 +63,7 @@ def jnflip_map(reference: Any, test: Any, *, ppd: Ppd = DEFAULT_PPD, weber_l: fl
     ``ppd`` as in :func:`~rtp.metrics.flip_map`. Returns ``(H, W)`` float32 >= 0.
     """
     ref, tst = as_pair(reference, test)
-    value = resolve_ppd(ppd, ref.shape_hw[1])
+    value = image_ppd(ppd, ref.shape_hw[1])
+    env = check_weber_l(weber_l)  # (before FLIP runs, not after seconds of it)
     flip = np.stack([flip_pixels(r, t, value) for r, t in zip(ref.data, tst.data)])
-    return ref.wrap(flip / weber_denominator(ref.data, weber_l))
+    return ref.wrap(flip / _denominator(ref.data, env))

@@ -13,10 +13,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import InputDtypeError, InputShapeError, luma, tile_extents, tile_grid
+from rtp.sdk import InputDtypeError, InputShapeError, NonFiniteInputError, luma, tile_extents, tile_grid
 
-from ._errors import MetricParameterError
-from ._image import _is_torch
+from ._errors import InputRangeError, MetricParameterError
+from ._image import RANGE_TOLERANCE, _is_torch
 
 __all__ = [
     "DEFAULT_WEBER_L",
@@ -107,6 +107,8 @@ def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:
 
 def check_weber_l(weber_l: float) -> float:
     """Validate the environment luminance ``l``: a finite number > 0."""
+    if isinstance(weber_l, (bool, np.bool_)):  # (True was taken for l = 1)
+        raise MetricParameterError(f"weber_l must be a number, got {weber_l!r}")
     try:
         value = float(weber_l)
     except (TypeError, ValueError, OverflowError):  # (OverflowError: an int past float's range)
@@ -124,13 +126,37 @@ def weber_denominator(reference: np.ndarray, weber_l: float = DEFAULT_WEBER_L) -
     the last block row/column is averaged over its real pixels only.
 
     Args:
-        reference: display-encoded RGB ``(..., H, W, 3)`` float in [0, 1] (already validated).
+        reference: display-encoded RGB ``(..., H, W, 3)`` float in [0, 1] (numpy; a torch tensor is
+            copied to numpy). Integer images (8-bit: divide by 255), NaN/inf and values outside [0, 1]
+            are refused as by the map functions.
         weber_l: environment luminance ``l`` > 0 in display-luma units.
 
     Returns:
         ``(..., H, W)`` float32, strictly positive.
     """
     weber_l = check_weber_l(weber_l)
+    if _is_torch(reference):
+        reference = reference.detach().to("cpu").numpy()  # type: ignore[attr-defined]
+    try:
+        arr = np.asarray(reference)
+    except (TypeError, ValueError) as err:  # a ragged list
+        raise InputDtypeError(f"reference: expected an image of floats in [0, 1], got {type(reference).__name__} "
+                              f"({err})") from err
+    if arr.dtype.kind != "f":  # (uint8 gave L in 0..255: a denominator 255 times too large, no error)
+        raise InputDtypeError(f"reference: expected a floating-point image with values in [0, 1], got dtype {arr.dtype}"
+                              + (" (divide 8-bit images by 255)" if arr.dtype == np.uint8 else ""))
+    if arr.size:
+        if not np.isfinite(arr).all():
+            raise NonFiniteInputError("reference: contains NaN or infinite values")
+        lo, hi = float(arr.min()), float(arr.max())
+        if lo < -RANGE_TOLERANCE or hi > 1.0 + RANGE_TOLERANCE:
+            raise InputRangeError(f"reference: expected display-encoded values in [0, 1], got [{lo:g}, {hi:g}]",
+                                  low=lo, high=hi)
+    return _denominator(arr, weber_l)
+
+
+def _denominator(reference: np.ndarray, weber_l: float) -> np.ndarray:
+    """:func:`weber_denominator` of a validated reference and ``l``."""
     y = luma(reference)
     if y.ndim < 2:
         raise InputShapeError(f"reference: expected an image (..., H, W, 3), got shape {np.shape(reference)}",

@@ -24,12 +24,12 @@ from rtp.sdk import (
 
 from ._device import DEVICES, resolve_device
 from ._errors import MetricParameterError
-from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, resolve_ppd
+from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, image_ppd
 from ._image import as_batch
-from ._lpips import _check_size, lpips_against, lpips_map
+from ._lpips import _check_quirk, _check_size, lpips_against, lpips_map, lpips_network
 from ._maps import jnflip_map, jnyang_map, psnr_tiles, yang_map
 from ._plugins import plugin
-from ._pool import DEFAULT_WEBER_L, check_weber_l, pool_tiles, weber_denominator
+from ._pool import DEFAULT_WEBER_L, _check_tile, _denominator, check_weber_l, pool_tiles
 
 __all__ = ["FLIP_BACKENDS", "error_map", "tile_metric", "tile_targets"]
 
@@ -69,6 +69,7 @@ def error_map(
     if metric == "jnflip":
         return jnflip_map(reference, test, ppd=ppd, weber_l=weber_l)
     if metric == "lpips":
+        _check_quirk(lpips_paper_quirk, "lpips_paper_quirk")
         return lpips_map(reference, test, paper_quirk=lpips_paper_quirk)
     if metric == "yang":
         return yang_map(reference, test)
@@ -93,6 +94,7 @@ def tile_metric(
     Returns ``(ceil(H/tile), ceil(W/tile))`` (or with a leading N) float32.
     """
     own = plugin(metric)
+    _check_tile(tile)  # (before the map is computed, not after seconds of FLIP or LPIPS)
     if own is not None:
         return pool_tiles(error_map(metric, reference, test), tile, own.pooling)
     if metric == "psnr":
@@ -216,6 +218,7 @@ def tile_targets(
     dev = targets_device(names, device, backend)
     if missing not in ("error", "nan"):
         raise MetricParameterError(f"missing must be 'error' or 'nan', got {missing!r}")
+    tile = _check_tile(tile)  # (sdk.tile_grid's ParameterError named "tile_size", not this function's argument)
     ref = as_batch(reference, "reference")
     if ref.batched or ref.device is not None:
         raise InputShapeError(
@@ -235,9 +238,11 @@ def tile_targets(
         check_weber_l(weber_l)
     h, w = ref.shape_hw
     th, tw = tile_grid(h, w, tile)
-    ppd_value = resolve_ppd(ppd, w) if {"flip", "jnflip"} & set(names) else DEFAULT_PPD
+    ppd_value = image_ppd(ppd, w) if {"flip", "jnflip"} & set(names) else DEFAULT_PPD
     if "lpips" in names:
+        _check_quirk(lpips_paper_quirk, "lpips_paper_quirk")
         _check_size(ref)
+        lpips_network(lpips_weights)  # (a bad weights path failed after the six rates' FLIP; the network is cached)
 
     gt = ref.data[0]
     tests: dict[str, np.ndarray] = {}
@@ -257,7 +262,7 @@ def tile_targets(
     timings: dict[str, float] = dict.fromkeys(names, 0.0)
     # Shared per frame; empty arrays (never read) when no metric needs them.
     y_ref = luma(gt) if {"yang", "jnyang"} & set(names) else np.zeros(0, np.float32)
-    denom = weber_denominator(gt, weber_l) if jn else np.zeros(0, np.float32)
+    denom = _denominator(gt, check_weber_l(weber_l)) if jn else np.zeros(0, np.float32)
     flips: dict[str, np.ndarray] = {}
     if ("flip" in names or "jnflip" in names) and tests:
         t0 = time.perf_counter()

@@ -623,3 +623,102 @@ def test_ppd_outside_what_flip_can_filter_is_refused(ref: np.ndarray, rates: dic
         with pytest.raises(M.MetricParameterError, match=r"pixels per degree in \[1, 1000\]"):
             M.flip_map(ref, rates["2x2"], ppd=bad)
     assert M.resolve_ppd(1000.0, 1920) == 1000.0 and M.resolve_ppd(1.0, 1920) == 1.0
+
+
+# --- contracts a direct caller meets (review of 2026-12) -----------------------------------------
+
+
+def _counting_flip(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Count the FLIP backend's runs (flip-evaluator image by image, and the torch port's batches)."""
+    import rtp.metrics._flip as F
+    import rtp.metrics._maps as maps
+    import rtp.metrics._targets as targets
+
+    calls: list[int] = []
+
+    def count(fn):  # type: ignore[no-untyped-def]
+        return lambda *a, **k: (calls.append(1), fn(*a, **k))[1]
+
+    for mod in (F, maps, targets):
+        monkeypatch.setattr(mod, "flip_pixels", count(F.flip_pixels))
+    monkeypatch.setattr(targets, "_flip_all", count(targets._flip_all))
+    return calls
+
+
+def test_parameters_are_refused_before_the_backend_runs(
+    monkeypatch: pytest.MonkeyPatch, ref: np.ndarray, rates: dict[str, np.ndarray]
+) -> None:
+    """A bad weber_l, tile or LPIPS weights path was refused only after FLIP had run (seconds a 1080p
+    frame, the six rates' of a sample in tile_targets), against "validation happens before any backend
+    runs"; tile_targets' bad tile was sdk.ParameterError (named tile_size), not MetricParameterError."""
+    calls = _counting_flip(monkeypatch)
+    test = rates["2x2"]
+    with pytest.raises(M.MetricParameterError, match="weber_l"):
+        M.jnflip_map(ref, test, weber_l=-1.0)
+    with pytest.raises(M.MetricParameterError, match="weber_l"):
+        M.tile_metric("jnflip", ref, test, weber_l=0.0)
+    for metric in ("flip", "jnflip"):
+        with pytest.raises(M.MetricParameterError, match="tile size"):
+            M.tile_metric(metric, ref, test, 0)
+    with pytest.raises(M.MetricParameterError, match="tile size"):
+        M.tile_targets(ref, rates, ("flip", "psnr"), 0)
+    with pytest.raises(M.MetricParameterError, match="weights"):
+        M.tile_targets(ref, rates, ("flip", "lpips"), lpips_weights=3)  # type: ignore[arg-type]
+    with pytest.raises(M.MetricDependencyError, match="cannot be read"):
+        M.tile_targets(ref, rates, ("flip", "lpips"), lpips_weights="/nonexistent/alex.ckpt")
+    assert calls == []
+
+
+def test_ppd_width_of_a_narrow_image_is_refused_not_nan() -> None:
+    """ppd="width" of an image under 58 pixels wide is under 1 ppd, the range an explicit ppd is refused
+    outside of: it went through, and tile_targets' torch FLIP gave NaN targets for every tile."""
+    rng = np.random.default_rng(3)
+    a = rng.random((8, 40, 3), dtype=np.float32)
+    b = rng.random((8, 40, 3), dtype=np.float32)
+    with pytest.raises(M.MetricParameterError, match="40-pixel-wide"):
+        M.tile_targets(a, dict.fromkeys(sdk.PREDICTED_RATES, b), ("flip",), ppd="width")
+    with pytest.raises(M.MetricParameterError, match="ppd_from_width"):
+        M.flip_map(a, b, ppd="width")
+    assert M.resolve_ppd("width", 1920) == pytest.approx(M.ppd_from_width(1920))
+    assert M.resolve_ppd("width", 1) > 0  # (the argument's check alone: `rtp targets --ppd width` calls it so)
+    for bad in (math.nan, math.inf):  # (NaN passed `<= 0`: a NaN ppd)
+        with pytest.raises(M.MetricParameterError):
+            M.ppd_from_width(bad)
+        with pytest.raises(M.MetricParameterError):
+            M.ppd_from_width(1920, bad)
+
+
+def test_check_dependencies_takes_a_name_alone() -> None:
+    """check_dependencies("psnr") read the string as the metrics "p", "s", "n", "r": unknown metric 'p'."""
+    M.check_dependencies("psnr")
+    M.check_dependencies("yang")
+    with pytest.raises(M.MetricParameterError, match="'nope'"):
+        M.check_dependencies("nope")
+
+
+def test_weber_denominator_validates_its_reference(ref: np.ndarray) -> None:
+    """weber_denominator, public, took an 8-bit image as display values: L in 0..255, no error."""
+    np.testing.assert_array_equal(M.weber_denominator(ref.astype(np.float64), 0.02), M.weber_denominator(ref, 0.02))
+    with pytest.raises(sdk.InputDtypeError, match="255"):
+        M.weber_denominator((ref * 255).astype(np.uint8))
+    with pytest.raises(M.InputRangeError):
+        M.weber_denominator(ref * 255)
+    bad = ref.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(sdk.NonFiniteInputError):
+        M.weber_denominator(bad)
+
+
+def test_boolean_parameters_are_not_numbers_nor_strings(ref: np.ndarray, rates: dict[str, np.ndarray]) -> None:
+    """weber_l=True was l = 1; paper_quirk="no" (a config file's text) switched the paper's quirk on."""
+    test = rates["2x2"]
+    for value in (True, np.bool_(True)):
+        with pytest.raises(M.MetricParameterError, match="weber_l"):
+            M.jnyang_map(ref, test, weber_l=value)  # type: ignore[arg-type]
+    for quirk in ("no", "false", 0):
+        with pytest.raises(M.MetricParameterError, match="paper_quirk"):
+            M.lpips_map(ref, test, paper_quirk=quirk)  # type: ignore[arg-type]
+        with pytest.raises(M.MetricParameterError, match="lpips_paper_quirk"):
+            M.error_map("lpips", ref, test, lpips_paper_quirk=quirk)  # type: ignore[arg-type]
+        with pytest.raises(M.MetricParameterError, match="lpips_paper_quirk"):
+            M.tile_targets(ref, rates, ("lpips",), lpips_paper_quirk=quirk)  # type: ignore[arg-type]
