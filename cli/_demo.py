@@ -42,16 +42,21 @@ class DemoResult:
 
 def _camera_path(scene: Any, frames: int, blockers: Any, aspect: float, seed: int) -> list[Any]:
     """A short camera move: a valid viewpoint pair of the scene (the capture's sampler, fast profile),
-    interpolated over ``frames`` frames."""
+    interpolated over ``frames`` frames. The yaw turns the short way round: the sampler wraps yaws to
+    [-180, 180), so a pair across the wrap (179 and -178 degrees: about one seed in forty) turned 357
+    degrees the long way, the shown frame's history looking the other way and every pixel unseen."""
     from rtp.capture.viewpoints import sample_viewpoints
     from rtp.scene import Camera
 
     prev, cur = sample_viewpoints(scene, 1, seed, "fast", blockers=blockers, aspect=aspect)[0]
+    turn = (cur.yaw - prev.yaw + 180.0) % 360.0 - 180.0  # the signed turn, within half a circle
+    if abs(cur.yaw - prev.yaw) <= 180.0:
+        turn = cur.yaw - prev.yaw  # (as it was: the same cameras, bit for bit, where the pair does not wrap)
     cams = []
     for i in range(frames):
         t = i / max(frames - 1, 1)
         x, y, z = (float(a + t * (b - a)) for a, b in zip(prev.position, cur.position))
-        cams.append(Camera((x, y, z), yaw=prev.yaw + t * (cur.yaw - prev.yaw), pitch=prev.pitch + t * (cur.pitch - prev.pitch),
+        cams.append(Camera((x, y, z), yaw=prev.yaw + t * turn, pitch=prev.pitch + t * (cur.pitch - prev.pitch),
                            fov_y=cur.fov_y))
     return cams
 
@@ -123,14 +128,11 @@ def run_demo(
     share = {r: float((rates == code).mean()) for r, code in sdk.RATE_CODES.items()}
     over = float(failing_tiles(rates, true, thr, meta.higher_is_better).mean())
 
-    files = []
-
-    def save(name: str, img: np.ndarray) -> None:
-        save_image(out / name, img)
-        files.append(name)
-
-    save("frame.png", ref)
-    save("overlay.png", rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, tile))
+    # Every picture is drawn before any is written: drawn between the writes (the figures take seconds at 1280x720),
+    # a failure or Ctrl-C in one left this run's first pictures beside the last run's others, of another model or
+    # scene, in the same folder. (Each file is written atomically.)
+    pictures: dict[str, np.ndarray] = {"frame.png": ref}
+    pictures["overlay.png"] = rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, tile)
     # Heatmaps in metric units, bright = worse; the colour range ends at the threshold's double.
     # (PSNR is negated so that bright means worse there too.)
     if meta.higher_is_better:
@@ -138,16 +140,19 @@ def run_demo(
     else:
         sign, vmin, vmax = 1.0, 0.0, 2.0 * thr
     units = metrics.metric_info(meta.metric).units  # (checked with its dependencies before rendering)
-    save("predicted_vs_true.png", heatmaps(
+    pictures["predicted_vs_true.png"] = heatmaps(
         sign * true, sign * predicted, tile, (h, w), seen=frame.seen, vmin=vmin, vmax=vmax, scale=2,
         label=f"{'-' if sign < 0 else ''}{meta.metric} ({units}), bright = worse", threshold=sign * thr,
         title=f"{meta.metric} per {tile}px tile: true (rendered at every rate) and predicted by "
               f"{Path(str(predictor.path)).name}"
               + (f" ({meta.tile_size}px tiles, each split)" if tile < meta.tile_size else
                  f" (the worst of its {meta.tile_size}px tiles)" if tile > meta.tile_size else ""),
-    ))
-    save("vrs_composite.png", vrs)
-    save("vrs_flip.png", value_map(flip, label="FLIP error (0 = identical, 1 = worst)",
-                                   title="FLIP of the VRS composite against full-rate shading"))
+    )
+    pictures["vrs_composite.png"] = vrs
+    pictures["vrs_flip.png"] = value_map(flip, label="FLIP error (0 = identical, 1 = worst)",
+                                         title="FLIP of the VRS composite against full-rate shading")
+    for name, img in pictures.items():
+        save_image(out / name, img)
+    files = list(pictures)
     return DemoResult(out, str(predictor.path), meta.metric, thr, int(rates.size), tile, saved, share, over, predict_ms,
                       len(times), float(flip.mean()), files)

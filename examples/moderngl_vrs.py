@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import sys
 import time
 from pathlib import Path
@@ -57,6 +56,16 @@ PEAK_BASE, PEAK_PER_PIXEL, PEAK_PER_GIF_PIXEL = 190 * 2**20, 1000.0, 8.0
 def peak_bytes(width: int, height: int, frames: int, gif: bool) -> int:
     """The peak bytes of a run at ``width`` x ``height`` with ``frames`` frames (``gif``: written as a GIF)."""
     return int(PEAK_BASE + width * height * (PEAK_PER_PIXEL + (frames * PEAK_PER_GIF_PIXEL if gif else 0.0)))
+
+
+def walk_camera(position: tuple[float, float, float], yaw: float, i: int) -> Camera:
+    """Frame ``i`` of a walk at 60 Hz from ``position``, looking ``yaw`` degrees at frame 0: 3 m/s forward along
+    that first heading (``Camera.forward``: yaw 0 looks down -Z, positive yaw turns left), the view turning
+    30 degrees a second to the left."""
+    heading = Camera(position, yaw=yaw).forward
+    step = 0.05 * i
+    x, z = position[0] + step * heading[0], position[2] + step * heading[2]
+    return Camera((x, position[1], z), yaw=yaw + 0.5 * i, pitch=-3.0)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -93,12 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     level = procedural(args.seed)
     spawn = level.spawn_points[0]
 
-    def camera(i: int) -> Camera:  # a walk at 60 Hz: 3 m/s forward, turning 30 degrees a second
-        yaw = spawn.yaw + 0.5 * i
-        step = 0.05 * i
-        x = spawn.position[0] + step * math.sin(math.radians(spawn.yaw))
-        z = spawn.position[2] - step * math.cos(math.radians(spawn.yaw))
-        return Camera((x, spawn.position[1], z), yaw=yaw, pitch=-3.0)
+    def camera(i: int) -> Camera:
+        return walk_camera(spawn.position, spawn.yaw, i)
 
     ctx = create_context(430)  # compute shaders
     overlays = []

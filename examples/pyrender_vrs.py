@@ -114,6 +114,12 @@ def load_scene(path: Path) -> Any:
                                  + ")")
     if skipped:
         log.warning("--scene %s: skipped what is not a triangle mesh: %s", path, ", ".join(skipped))
+    if tm.has_camera:  # the file's (first) camera is the start of the move, its pose and field of view
+        cam = tm.camera
+        scene.add(pyrender.PerspectiveCamera(yfov=math.radians(float(cam.fov[1])), znear=float(cam.z_near),
+                                             zfar=float(cam.z_far)), pose=np.asarray(tm.camera_transform), name=cam.name)
+        log.info("--scene %s: the camera starts at the file's camera %r (%.0f degrees high)", path, cam.name,
+                 float(cam.fov[1]))
     # pyrender's shading needs a light; a sun-like directional light from above
     sun = np.eye(4)
     sun[:3, :3] = _rotation(yaw=30.0, pitch=-60.0)

@@ -276,3 +276,57 @@ def test_an_example_refuses_outputs_it_cannot_write_before_it_renders(name: str,
                             str(tmp_path / path)], capture_output=True, text=True, timeout=300)
         assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
         assert ".onnx" not in r.stderr  # (refused before the model loads: the examples log its file first)
+
+
+@pytest.mark.gl
+def test_pyrender_example_starts_at_the_cameras_of_the_scene_file(tmp_path: Path) -> None:
+    """The example's docs say the move starts at the scene's first camera if it has one, but ``load_scene`` copied the
+    meshes only: a glTF's camera was dropped and the view placed at the bounds' centre (a 2 m box seen from 1 m away
+    filled the frame where the file's camera stood 6 m back). The file's camera, pose and vertical field of view, is
+    now the start."""
+    import math
+
+    import numpy as np
+    import trimesh
+
+    example: Any = _pyrender_example()
+    level = trimesh.Scene(trimesh.creation.box((2.0, 2.0, 2.0)))
+    pose = np.eye(4)
+    pose[:3, 3] = (0.5, 0.3, 6.0)
+    level.camera_transform = pose
+    level.camera.fov = (60.0, 30.0)
+    level.export(tmp_path / "level.glb")
+    scene = example.load_scene(tmp_path / "level.glb")
+    assert scene.main_camera_node is not None
+    assert math.isclose(scene.main_camera_node.camera.yfov, math.radians(30.0))
+    p0, _ = example.camera_poses(scene, None)
+    assert np.allclose(p0, pose)
+    # a file without a camera: the view at the bounds' centre, as before
+    trimesh.Scene(trimesh.creation.box((2.0, 2.0, 2.0))).export(tmp_path / "bare.glb")
+    assert example.load_scene(tmp_path / "bare.glb").main_camera_node is None
+
+
+def test_moderngl_examples_walk_goes_forward() -> None:
+    """The walk was documented as 3 m/s forward but stepped along (+sin yaw, -cos yaw), the heading mirrored left to
+    right (``Camera.forward`` is (-sin yaw, 0, -cos yaw)): from seed 3's spawn point, looking 49 degrees left of -Z,
+    it walked 98 degrees off the view, sideways and a little backwards; facing +-90 degrees, straight backwards."""
+    import importlib.util
+
+    import numpy as np
+
+    from rtp.capture.scenes import procedural
+    from rtp.scene import Camera
+
+    spec = importlib.util.spec_from_file_location("moderngl_vrs", ROOT / "examples" / "moderngl_vrs.py")
+    assert spec is not None and spec.loader is not None
+    example: Any = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    spawn = procedural(3).spawn_points[0]
+    for position, yaw in ((spawn.position, spawn.yaw), ((1.0, 1.6, 2.0), 90.0), ((0.0, 1.6, 0.0), -135.0)):
+        start = example.walk_camera(position, yaw, 0)
+        assert start.position == tuple(map(float, position)) and start.yaw == yaw
+        later = example.walk_camera(position, yaw, 60)  # a second on
+        moved = np.subtract(later.position, start.position)
+        heading = Camera(position, yaw=yaw).forward  # (level: the view's own pitches 3 degrees down)
+        assert np.allclose(moved, 3.0 * heading), (yaw, moved, heading)
+        assert later.yaw == yaw + 30.0
