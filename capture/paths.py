@@ -45,9 +45,12 @@ log = logging.getLogger("rtp.capture")
 
 @dataclass(frozen=True)
 class PathProfile:
-    """How a path moves: ``speed`` (m/s), peak yaw rate ``turn_rate`` (degrees/s), how sharply the
-    walker changes course (``wander``, degrees of heading noise per metre), and a look-around sway of
-    ``sway`` degrees with period ``sway_period`` seconds on top of the heading."""
+    """How a path moves: ``speed`` (m/s), the peak rate ``turn_rate`` (degrees/s) at which the view turns
+    after the direction of travel, how sharply the walker changes course (``wander``, degrees of heading
+    noise per metre), and a look-around sway of ``sway`` degrees with period ``sway_period``
+    seconds on top of the heading (and 0.3 ``sway`` in pitch, 1.7 times slower). The sway turns the view by
+    up to ``2 pi sway / sway_period`` degrees/s more: the view's peak yaw rate is 55 degrees/s on ``slow``
+    and 338 on ``fast``."""
 
     name: str
     speed: float
@@ -95,6 +98,22 @@ class CameraPath:
         return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
 
 
+# The fastest path profile, m/s: far past a player's run (Quake 3's 320 units/s, about 8 m/s), short of a
+# walk that plans for hours (a profile's speed of inf walked for ever, 0 and a sway period of 0 made nan yaws).
+_MAX_SPEED = 100.0
+
+
+def _check_profile(prof: PathProfile) -> None:
+    """A :class:`PathProfile` of usable numbers, or a ViewpointError saying what was expected."""
+    if not isinstance(prof.name, str):
+        raise ViewpointError(f"path profile name: expected a string, got {prof.name!r}")
+    _real(f"path profile {prof.name!r}: speed (m/s)", prof.speed, 0.0, _MAX_SPEED, lo_open=True)
+    _real(f"path profile {prof.name!r}: turn_rate (degrees/s)", prof.turn_rate, 0.0)
+    _real(f"path profile {prof.name!r}: wander (degrees per metre)", prof.wander, 0.0)
+    _real(f"path profile {prof.name!r}: sway (degrees)", prof.sway, 0.0, 180.0)
+    _real(f"path profile {prof.name!r}: sway_period (s)", prof.sway_period, 0.0, lo_open=True)
+
+
 def _smooth(a: np.ndarray, window: int) -> np.ndarray:
     """Moving average along axis 0 with edge replication (``window`` odd, >= 1)."""
     if window <= 1:
@@ -125,12 +144,15 @@ def camera_path(
     is inside the flood-filled free space, at least ``clearance`` from the geometry (exact test),
     ``eye_height`` (default: the spawn points' own, :attr:`CameraPath.eye_height`) over a floor
     before smoothing, with nothing drawn between it and that floor, and the segment between
-    consecutive cameras crosses no triangle. Raises :class:`ViewpointError` when the scene has no
-    free space for a path.
+    consecutive cameras crosses no triangle, and each frame moves on at the profile's speed (the walk
+    goes on where smoothing shortened it). Raises :class:`ViewpointError` when the scene has no free
+    space for a path, or none the walker can cross for ``frames`` at the profile's speed.
     """
     prof = PATH_PROFILES.get(profile) if isinstance(profile, str) else profile
     if not isinstance(prof, PathProfile):
-        raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)}")
+        raise ViewpointError(f"unknown path profile {profile!r}; expected one of {sorted(PATH_PROFILES)} or a "
+                             "PathProfile")
+    _check_profile(prof)
     frames, seed = _count("frames", frames, 1), _count("seed", seed)
     if frames > MAX_FRAMES:
         raise ViewpointError(f"frames: expected at most {MAX_FRAMES} (ten minutes at 60 frames a second), got {frames}")
@@ -178,7 +200,10 @@ def camera_path(
             p, floor = nxt
         return _LOOK
 
+    t = np.arange(frames) * prof.speed / fps  # arc length of each frame, metres
     need = (frames - 1) * prof.speed / fps + 2 * _LOOK
+    covered = 0.0  # the longest smoothed walk that fell short of t[-1], metres
+    done = False
     for _attempt in range(20):  # another start point when a walker gets stuck at once
         for _draw in range(200):  # a free voxel, dropped onto the floor below it
             c = grid.centre(np.array([free[rng.integers(len(free))]]))[0]
@@ -191,52 +216,75 @@ def camera_path(
         heading = float(rng.uniform(-math.pi, math.pi))
         pts, fl = [got[0]], [got[1]]
         stuck = 0
-        while (len(pts) - 1) * _STEP < need and stuck < 50:
-            heading += math.radians(float(rng.normal(0.0, prof.wander * math.sqrt(_STEP))))
-            best = None
-            for k in range(0, 37):  # 0, +10, -10, +20, ... degrees: the first with room ahead
-                off = math.radians(10.0 * ((k + 1) // 2) * (1 if k % 2 else -1))
-                h = heading + off
-                room = ahead(pts[-1], fl[-1], h)
-                if room >= _LOOK * 0.5:
-                    best = h
+        goal = need  # metres of walking (steps), raised when smoothing leaves the path short
+        while True:
+            while (len(pts) - 1) * _STEP < goal and stuck < 50:
+                heading += math.radians(float(rng.normal(0.0, prof.wander * math.sqrt(_STEP))))
+                best = None
+                for k in range(0, 37):  # 0, +10, -10, +20, ... degrees: the first with room ahead
+                    off = math.radians(10.0 * ((k + 1) // 2) * (1 if k % 2 else -1))
+                    h = heading + off
+                    room = ahead(pts[-1], fl[-1], h)
+                    if room >= _LOOK * 0.5:
+                        best = h
+                        break
+                    if room > 0 and best is None:
+                        best = h
+                if best is None:
+                    stuck += 1
+                    heading += math.pi
+                    continue
+                got = step(pts[-1], fl[-1], best, _STEP)
+                if got is None or not val.segment_clear(pts[-1], got[0]):
+                    stuck += 1
+                    heading += math.pi / 2
+                    continue
+                heading = best
+                pts.append(got[0])
+                fl.append(got[1])
+                stuck = 0
+            if (len(pts) - 1) * _STEP < goal:
+                log.debug("%s: camera path walker stuck after %.1f m; starting elsewhere", scene.name,
+                          (len(pts) - 1) * _STEP)
+                break
+            raw = np.array(pts)
+            for window in (9, 5, 3, 1):  # the smoothest path whose every camera is valid
+                path = _smooth(raw, window)
+                seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+                s = np.concatenate([[0.0], np.cumsum(seg)])
+                pos = np.stack([np.interp(t, s, path[:, i]) for i in range(3)], -1)
+                ok = all(val.clearance(p, clearance * 0.9) for p in pos) and all(
+                    val.segment_clear(a, b) for a, b in zip(pos[:-1], pos[1:]))
+                if ok:
                     break
-                if room > 0 and best is None:
-                    best = h
-            if best is None:
-                stuck += 1
-                heading += math.pi
-                continue
-            got = step(pts[-1], fl[-1], best, _STEP)
-            if got is None or not val.segment_clear(pts[-1], got[0]):
-                stuck += 1
-                heading += math.pi / 2
-                continue
-            heading = best
-            pts.append(got[0])
-            fl.append(got[1])
-            stuck = 0
-        if (len(pts) - 1) * _STEP >= need:
-            break
-        log.debug("%s: camera path walker stuck after %.1f m; starting elsewhere", scene.name, (len(pts) - 1) * _STEP)
-    else:
-        raise ViewpointError(f"no camera path of {need:.1f} m found in {scene.name!r} (profile {prof.name})")
-
-    raw = np.array(pts)
-    for window in (9, 5, 3, 1):  # the smoothest path whose every camera is valid
-        path = _smooth(raw, window)
-        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        s = np.concatenate([[0.0], np.cumsum(seg)])
-        t = np.arange(frames) * prof.speed / fps  # arc length of each frame, metres
-        pos = np.stack([np.interp(t, s, path[:, i]) for i in range(3)], -1)
-        ok = all(val.clearance(p, clearance * 0.9) for p in pos) and all(
-            val.segment_clear(a, b) for a, b in zip(pos[:-1], pos[1:]))
-        if ok:
+            else:
+                if goal > need:  # (a walk made longer below: another start)
+                    break
+                raise ViewpointError(f"the camera path in {scene.name!r} could not be smoothed into valid cameras "
+                                     f"({prof.speed / fps:.2g} m between frames at {fps:g} frames a second: at a "
+                                     "higher rate they are closer)")
+            # The smoothing shortens a walk that bends, most of all one pacing to and fro in a pocket of the
+            # domain: a path shorter than its frames' t[-1] stood the camera still for its last frames (a slow
+            # path of 300 frames in a 2.5 m room walked 1.3 m and stood for 239 frames). Walk on, up to twice
+            # the metres asked for; a walk that smoothing halves is pacing: start elsewhere.
+            if s[-1] >= t[-1]:
+                done = True
+                break
+            covered = max(covered, float(s[-1]))
+            if goal >= 2 * need or s[-1] < 0.5 * (len(pts) - 1) * _STEP:
+                log.debug("%s: camera path walker paced %.1f m in %.1f m of walking; starting elsewhere", scene.name,
+                          s[-1], (len(pts) - 1) * _STEP)
+                break
+            goal = min(2 * need, goal + 2 * (t[-1] - s[-1]) + _LOOK)
+        if done:
             break
     else:
-        raise ViewpointError(f"the camera path in {scene.name!r} could not be smoothed into valid cameras "
-                             f"({prof.speed / fps:.2g} m between frames at {fps:g} frames a second: at a higher rate "
-                             "they are closer)")
+        raise ViewpointError(
+            f"no camera path of {t[-1]:.1f} m ({frames} frames at {prof.speed:g} m/s and {fps:g} frames a second) "
+            f"found in {scene.name!r} (profile {prof.name}) in 20 tries"
+            + (f": the longest smoothed walk covered {covered:.1f} m, pacing to and fro" if covered else
+               ": the walker found no start or got stuck each time")
+            + "; expected a viewpoint domain the walker can cross (fewer frames or a slower profile walk less)")
     # heading towards the point 1 m further along the path, turned at most turn_rate degrees per
     # second, plus the sway (t / speed is each frame's time in seconds)
     look = np.stack([np.interp(t + 1.0, s, path[:, i]) for i in (0, 2)], -1) - pos[:, [0, 2]]
@@ -269,6 +317,10 @@ def unseen_shares(path: CameraPath, scene: Scene, size: tuple[int, int] = (1280,
     counts as 1)."""
     from rtp.plugins.moderngl import Renderer
 
+    if not isinstance(path, CameraPath):
+        raise ViewpointError(f"path: expected a CameraPath (camera_path makes one), got {type(path).__name__}")
+    if renderer is None and (not isinstance(size, (tuple, list)) or len(size) != 2):
+        raise ViewpointError(f"size: expected (width, height) in pixels, got {size!r}")
     own = renderer is None
     r = Renderer(*size) if own else renderer
     try:

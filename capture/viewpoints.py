@@ -70,10 +70,11 @@ class MotionProfile:
 
 # Tuned so the reference renderer's seen mask leaves about the paper's 14 % (slow) and 31 % (fast)
 # of the pixels unseen, averaged over procedural and Quake-3 scenes (docs/scenes.md has the sweep).
-# ``frame``: the motion of one frame at 60 Hz on `rtp play`'s fast path (6 m/s, a 240 deg/s peak yaw
-# rate: 0.1 m and 4 deg), the distribution a 60 fps engine and the closed loop see (0.1-3.7 % of the
-# tiles unseen per frame on the test maps' paths, against 11-32 % for slow and fast). Not captured
-# unless asked for (:data:`DEFAULT_PROFILES`).
+# ``frame``: the motion of one frame at 60 Hz on `rtp play`'s fast path (6 m/s and its 240 deg/s turn
+# after the direction of travel: 0.1 m and 4 deg; the path's sway adds up to 98 deg/s, 5.6 deg a frame in
+# all), the distribution a 60 fps engine and the closed loop see (0.07-3.7 % of a frame's pixels unseen
+# per frame, each test map path's mean, against 11-32 % for slow and fast). Not captured unless asked for
+# (:data:`DEFAULT_PROFILES`).
 MOTION_PROFILES: dict[str, MotionProfile] = {
     "slow": MotionProfile("slow", max_translation=0.35, max_rotation=4.5),
     "fast": MotionProfile("fast", max_translation=1.3, max_rotation=15.0),

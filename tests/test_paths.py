@@ -134,3 +134,81 @@ def test_a_far_backdrop_does_not_coarsen_the_paths_floors(scene) -> None:  # noq
     assert reach[tuple(fine.index(centres).T)].mean() > 0.98
     path = camera_path(big, 60, "slow", seed=0, blockers=blockers)
     assert abs(path.eye_height - 1.6) <= 0.125
+
+
+def _room(side: float):  # noqa: ANN202
+    """A closed ``side`` x 3 x ``side`` m room with one spawn point at its centre."""
+    from rtp.capture.scenes._geometry import MeshBuilder
+    from rtp.scene import Material, Scene, SpawnPoint
+
+    b = MeshBuilder()
+    b.box(0, (-side / 2, 0, -side / 2), (side / 2, 3, side / 2))
+    return Scene(f"room-{side:g}", b.meshes(), [Material("m")], spawn_points=[SpawnPoint((0.0, 1.6, 0.0))])
+
+
+def test_paths_keep_moving_to_their_last_frame() -> None:
+    """The walker's metres are counted before smoothing; a walk that bends, or paces to and fro in a pocket of
+    the domain, smooths into a shorter path, and the camera stood still for the frames past its end (a slow
+    path of 150 frames on procedural:3, seed 10, stood for its last 91 frames; a fast one of 300 frames in a
+    4 m room for 19). Every frame now moves at the profile's speed, and a domain too small for the path is a
+    ViewpointError that says so, not a camera standing still."""
+    sc, blockers = load_scene("procedural:3", None, None, None)
+    for where, path in (("procedural:3", camera_path(sc, 150, "slow", seed=10, blockers=blockers)),
+                        ("room", camera_path(_room(4.0), 300, "fast", seed=0))):
+        prof = PATH_PROFILES[path.profile]
+        steps = np.linalg.norm(np.diff([c.position for c in path.cameras], axis=0), axis=1)
+        assert steps.min() > 0.25 * prof.speed / 60, where  # (a chord of a sharp bend is shorter than the arc)
+        assert path.length() > 0.95 * prof.speed * (len(path) - 1) / 60, where
+    with pytest.raises(ViewpointError, match=r"^no camera path of 7.5 m \(300 frames at 1.5 m/s and 60 frames a second\) "
+                                             r"found in 'room-2.5' \(profile slow\) in 20 tries: the longest smoothed "
+                                             r"walk covered \d+\.\d m, pacing to and fro; expected a viewpoint domain"):
+        camera_path(_room(2.5), 300, "slow", seed=0)
+
+
+def test_custom_path_profiles_are_checked(scene) -> None:  # noqa: ANN001
+    """A PathProfile's numbers are checked as a MotionProfile's are: speed 0 or a sway period of 0 made nan yaws
+    (Camera's error, naming no profile), a negative speed stood the camera still at its start, a negative turn
+    rate turned it the wrong way, and an infinite speed walked for ever."""
+    from rtp.capture.paths import PathProfile
+
+    sc, blockers = scene
+    good = dict(name="mine", speed=2.0, turn_rate=90.0, wander=10.0, sway=5.0, sway_period=3.0)
+    path = camera_path(sc, 30, PathProfile(**good), seed=0, blockers=blockers)  # type: ignore[arg-type]
+    assert path.profile == "mine" and len(path) == 30
+    for field, value, words in (("speed", 0.0, r"speed \(m/s\): expected a finite number > 0 and <= 100, got 0.0"),
+                                ("speed", -1.0, "speed"), ("speed", float("inf"), "speed"), ("speed", "2", "speed"),
+                                ("turn_rate", -45.0, r"turn_rate \(degrees/s\): expected a finite number >= 0"),
+                                ("turn_rate", float("nan"), "turn_rate"), ("wander", -1.0, "wander"),
+                                ("sway", 500.0, r"sway \(degrees\): expected a finite number >= 0 and <= 180"),
+                                ("sway_period", 0.0, r"sway_period \(s\): expected a finite number > 0, got 0.0"),
+                                ("name", 3, "path profile name: expected a string, got 3")):
+        with pytest.raises(ViewpointError, match=words):
+            camera_path(sc, 10, PathProfile(**{**good, field: value}), seed=0,  # type: ignore[arg-type]
+                        blockers=blockers)
+
+
+def test_the_docs_give_the_views_peak_turn_rate(scene) -> None:  # noqa: ANN001
+    """The view turns after the direction of travel at up to turn_rate and sways on top of it: its yaw turns at
+    up to turn_rate + 2 pi sway / sway_period, 55 and 338 degrees/s, as measured; the docs said 45 and 240."""
+    from pathlib import Path
+
+    sc, blockers = scene
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "evaluation.md").read_text()
+    said = []
+    for name in ("slow", "fast"):
+        prof = PATH_PROFILES[name]
+        peak = prof.turn_rate + 2 * math.pi * prof.sway / prof.sway_period
+        yaw = np.array([c.yaw for c in camera_path(sc, 300, name, seed=0, blockers=blockers).cameras])
+        measured = np.abs((np.diff(yaw) + 180) % 360 - 180).max() * 60
+        assert 0.97 * peak <= measured <= peak + 1e-6, name
+        said.append(f"{peak:.0f}")
+    assert f"the view's yaw turns at up to {said[0]} and {said[1]}\ndegrees/s" in docs
+
+
+def test_unseen_shares_names_a_bad_path_or_size(scene) -> None:  # noqa: ANN001
+    """Before any renderer: a path that is no CameraPath was an AttributeError, a size of one number a TypeError."""
+    sc, blockers = scene
+    with pytest.raises(ViewpointError, match="path: expected a CameraPath .*, got str"):
+        unseen_shares("path", sc, (64, 48))  # type: ignore[arg-type]
+    with pytest.raises(ViewpointError, match=r"size: expected \(width, height\) in pixels, got \(64,\)"):
+        unseen_shares(camera_path(sc, 2, blockers=blockers), sc, (64,))  # type: ignore[arg-type]

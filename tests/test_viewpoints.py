@@ -250,3 +250,16 @@ def test_sample_viewpoints_reports_each_pair_as_it_is_found(scene):
     assert found == [1, 2, 3, 4] and pairs == sample_viewpoints(scene, 4, 2)
     with pytest.raises(ViewpointError, match="progress: expected None or a function"):
         sample_viewpoints(scene, 1, 0, progress=3)  # type: ignore[arg-type]
+
+
+def test_profiles_share_only_the_first_current_camera(scene):
+    """docs/scenes.md said that slow and fast with one seed share the current cameras and differ only in the
+    previous ones; each previous viewpoint takes as many draws as its tries, so the streams part after the first
+    pair, as the docs now say."""
+    from pathlib import Path
+
+    slow, fast = (sample_viewpoints(scene, 6, seed=5, profile=p) for p in ("slow", "fast"))
+    assert slow[0][1] == fast[0][1] and [c for _, c in slow[1:]] != [c for _, c in fast[1:]]
+    docs = " ".join((Path(__file__).resolve().parents[1] / "docs" / "scenes.md").read_text().split())
+    assert "share the current cameras and differ only in the previous ones" not in docs
+    assert "the same seed share the first current camera only" in docs
