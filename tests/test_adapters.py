@@ -45,21 +45,22 @@ def test_unknown_name_lists_what_is_available(clean_registry: None) -> None:
         adapters.get("fak")
 
 
-def test_entry_point_discovery_dedupes_and_survives_a_broken_plugin(
-    clean_registry: None, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    eps = [
-        EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("broken", "no_such_module_for_rtp:Adapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("typo", "tests.test_adapters:NoSuchAdapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("ownextra", "rtp.plugins.no_such_plugin:Adapter", adapters.ENTRY_POINT_GROUP),
-    ]
+def _installed(monkeypatch: pytest.MonkeyPatch, *declared: tuple[str, str]) -> None:
+    """Installed packages' adapter entry points, as ``(name, "module:Class")`` in the order found."""
+    eps = [EntryPoint(name, target, adapters.ENTRY_POINT_GROUP) for name, target in declared]
 
     def fake_entry_points(group: str) -> list[Any]:
         return [e for e in eps if e.group == group]
 
     monkeypatch.setattr(adapters, "entry_points", fake_entry_points)
+
+
+def test_entry_point_discovery_dedupes_and_survives_a_broken_plugin(
+    clean_registry: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _installed(monkeypatch, ("fake", "tests.test_adapters:FakeAdapter"), ("fake", "tests.test_adapters:FakeAdapter"),
+               ("broken", "no_such_module_for_rtp:Adapter"), ("typo", "tests.test_adapters:NoSuchAdapter"),
+               ("ownextra", "rtp.plugins.no_such_plugin:Adapter"))
     assert adapters.available() == ["broken", "fake", "ownextra", "typo"]
     assert adapters.get("fake") is FakeAdapter
     # a third party's plugin is its package's to fix: the hint named an rtp extra, 'rtp[broken]', that does not
@@ -96,13 +97,8 @@ def test_two_packages_declaring_one_name_are_not_chosen_between_in_silence(
 ) -> None:
     # two installed packages declaring "fake" (a fork beside the original): get() loaded whichever entry point came
     # first on sys.path, in silence; the same target listed twice (an editable install) is still one
-    eps = [
-        EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("fake", "tests.test_adapters:OtherFakeAdapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("fake", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
-        EntryPoint("solo", "tests.test_adapters:FakeAdapter", adapters.ENTRY_POINT_GROUP),
-    ]
-    monkeypatch.setattr(adapters, "entry_points", lambda group: [e for e in eps if e.group == group])
+    _installed(monkeypatch, ("fake", "tests.test_adapters:FakeAdapter"), ("fake", "tests.test_adapters:OtherFakeAdapter"),
+               ("fake", "tests.test_adapters:FakeAdapter"), ("solo", "tests.test_adapters:FakeAdapter"))
     assert adapters.available() == ["fake", "solo"]
     with pytest.raises(adapters.AdapterNotFoundError, match=r"adapter 'fake' is declared by 2 installed entry points: "
                        r"'tests.test_adapters:FakeAdapter', 'tests.test_adapters:OtherFakeAdapter'; uninstall all but "
