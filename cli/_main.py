@@ -544,12 +544,7 @@ def _cmd_preview(args: argparse.Namespace) -> int:
 def _cmd_targets(args: argparse.Namespace) -> int:
     from rtp.capture import compute_targets
 
-    ppd: float | str | None = None
-    if args.ppd is not None:
-        try:
-            ppd = args.ppd if args.ppd == "width" else float(args.ppd)
-        except ValueError:
-            raise _usage(f"--ppd: expected a number or 'width', got {args.ppd!r}") from None
+    ppd = _ppd(args.ppd)
     done = [0, 0]
     args.on_interrupt = lambda: (f"the targets of {done[0]} of {done[1]} samples are kept: the same command "
                                  f"computes the rest" if done[1] else "")
@@ -791,6 +786,16 @@ def _cmd_predict(args: argparse.Namespace) -> int:
     from ._predict import run_predict
 
     return run_predict(args)
+
+
+def _ppd(text: str | None) -> float | str | None:
+    """``--ppd``'s value: None where not given, ``'width'``, or a number (its range is the metrics' to check)."""
+    if text is None or text == "width":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise _usage(f"--ppd: expected a number or 'width', got {text!r}") from None
 
 
 def _usage(message: str) -> Exception:
@@ -1287,6 +1292,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "bar to this image")
     mt.add_argument("--tile", "--tile-size", dest="tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE,
                     help="tile size in pixels")
+    mt.add_argument("--ppd", default=None, help="flip and jnflip: FLIP's pixels per degree, a number, or 'width' for "
+                    f"the paper's width-based value (default: FLIP's own {DEFAULT_PPD:.2f}, as `rtp targets`)")
+    mt.add_argument("--weber-l", type=float, default=None, help="jnflip and jnyang: the environment luminance l, "
+                    f"> 0 (default: {DEFAULT_WEBER_L:g}, as `rtp targets`)")
     mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")
     return p
 

@@ -62,15 +62,18 @@ def _check_memory(args: argparse.Namespace) -> None:
 def run_metric(args: argparse.Namespace) -> int:
     from rtp import metrics, sdk
 
+    params = _parameters(args)
     _check_memory(args)
     metrics.check_dependencies([args.metric])  # (a plugin's missing module was blamed on its error_map)
     ref, test = _read(args.reference), _read(args.test)
     if ref.shape != test.shape:
         raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "
                                  f"{test.shape[1]}x{test.shape[0]}")
+    if "ppd" in params:  # ('width' as its number, printed; of an image too narrow for it refused before FLIP runs)
+        params["ppd"] = metrics.resolve_ppd(params["ppd"], ref.shape[1])
     info = metrics.metric_info(args.metric)
     # the map once, pooled as tile_metric pools it (tile_metric and error_map both computed it: FLIP and LPIPS twice)
-    pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test)
+    pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test, **params)
     tiles = (metrics.tile_metric(args.metric, ref, test, args.tile) if pixel_map is None
              else metrics.pool_tiles(pixel_map, args.tile, "mean" if info.pooling == "mean" else "max"))
     finite = tiles[np.isfinite(tiles)]
@@ -78,12 +81,13 @@ def run_metric(args: argparse.Namespace) -> int:
     if args.out:
         _figure(args, ref, pixel_map, tiles, info)
     if args.json:  # (stdout is the JSON alone: the picture written is named in it, not on a line after it)
-        print(json.dumps({"metric": args.metric, "units": info.units, "tile": args.tile,
+        print(json.dumps({"metric": args.metric, "units": info.units, "tile": args.tile, **params,
                           "tiles": [[None if not np.isfinite(v) else float(v) for v in row] for row in tiles],
                           **({"wrote": args.out} if args.out else {})}))
         return 0
     h, w = ref.shape[:2]
-    print(f"{args.metric} ({info.units}), {w}x{h}, {tiles.shape[1]}x{tiles.shape[0]} tiles of {args.tile}px")
+    used = "".join(f", {k} {v:.4g}" for k, v in params.items())
+    print(f"{args.metric} ({info.units}), {w}x{h}, {tiles.shape[1]}x{tiles.shape[0]} tiles of {args.tile}px{used}")
     if pixel_map is not None:
         print(f"per pixel  mean {float(pixel_map.mean()):.4g}, max {float(pixel_map.max()):.4g}")
     if not finite.size:  # (identical images: no finite tile to average, "mean nan, worst (min) nan")
@@ -95,6 +99,32 @@ def run_metric(args: argparse.Namespace) -> int:
     if args.out:
         print(f"wrote {args.out}")
     return 0
+
+
+def _parameters(args: argparse.Namespace) -> dict[str, Any]:
+    """The metric's parameters, each where the metric takes it: FLIP's pixels per degree (flip, jnflip) and the
+    environment luminance (jnflip, jnyang), the defaults where not given. One given to a metric that does not use it
+    is refused (it would be ignored)."""
+    from rtp import metrics, sdk
+
+    from ._main import _ppd
+
+    takes_ppd = args.metric in ("flip", "jnflip")  # (rtp's own: a plugin's map takes neither parameter)
+    takes_l = args.metric in sdk.METRICS and sdk.METRICS[args.metric].weber
+    ppd, weber_l = _ppd(args.ppd), args.weber_l
+    if ppd is not None and not takes_ppd:
+        raise sdk.ParameterError(f"--ppd: FLIP's pixels per degree, which only flip and jnflip use, not {args.metric}")
+    if weber_l is not None and not takes_l:
+        raise sdk.ParameterError(f"--weber-l: the environment luminance of the just-noticeable metrics (jnflip, "
+                                 f"jnyang), which {args.metric} does not use")
+    params: dict[str, Any] = {}
+    if takes_ppd:
+        params["ppd"] = metrics.DEFAULT_PPD if ppd is None else ppd
+    if takes_l:
+        params["weber_l"] = metrics.check_weber_l(metrics.DEFAULT_WEBER_L if weber_l is None else weber_l)
+    if takes_ppd and not isinstance(params["ppd"], str):
+        params["ppd"] = metrics.resolve_ppd(params["ppd"], 1)  # (its range, before any image is read)
+    return params
 
 
 def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np.ndarray, info: Any) -> None:

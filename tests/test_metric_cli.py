@@ -44,3 +44,56 @@ def test_metric_computes_the_map_once(tmp_path: Path, monkeypatch: pytest.Monkey
         assert len(calls) == 1, metric
         want = M.tile_metric(metric, ref.astype(np.float32) / 255, test.astype(np.float32) / 255, 8)
         np.testing.assert_array_equal(np.array(got["tiles"], np.float32), want)
+
+
+def _pair(tmp_path: Path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    from PIL import Image
+
+    rng = np.random.default_rng(2)
+    ref = (rng.random((40, 70, 3)) * 255).astype(np.uint8)
+    test = np.clip(ref.astype(int) + rng.integers(-30, 31, ref.shape), 0, 255).astype(np.uint8)
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    Image.fromarray(ref).save(a)
+    Image.fromarray(test).save(b)
+    return a, b, ref.astype(np.float32) / 255, test.astype(np.float32) / 255
+
+
+@pytest.mark.parametrize(("metric", "flags", "params"), [
+    ("flip", ["--ppd", "30"], {"ppd": 30.0}),
+    ("flip", ["--ppd", "width"], {"ppd": M.ppd_from_width(70)}),
+    ("jnflip", ["--ppd", "40", "--weber-l", "0.5"], {"ppd": 40.0, "weber_l": 0.5}),
+    ("jnyang", ["--weber-l", "0.1"], {"weber_l": 0.1}),
+])
+def test_metric_takes_the_targets_parameters(tmp_path: Path, capsys: pytest.CaptureFixture[str], metric: str,
+                                             flags: list[str], params: dict[str, float]) -> None:
+    """`rtp metric` computed FLIP at 67.02 ppd and the JN metrics at l = 0.02 whatever the targets were computed
+    with (`rtp targets --ppd/--weber-l`): a pair could not be checked against a dataset's targets. The values used
+    are printed and in the JSON."""
+    a, b, ref, test = _pair(tmp_path)
+    assert main(["metric", metric, str(a), str(b), "--tile", "8", "--json", *flags]) == 0
+    got = json.loads(capsys.readouterr().out)
+    want = M.tile_metric(metric, ref, test, 8, **params)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(np.array(got["tiles"], np.float32), want)
+    assert not np.array_equal(want, M.tile_metric(metric, ref, test, 8))  # (the parameters change the values)
+    for key, value in params.items():
+        assert got[key] == pytest.approx(value)
+    assert main(["metric", metric, str(a), str(b), "--tile", "8", *flags]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{key} {value:.4g}" in out for key, value in params.items())
+
+
+@pytest.mark.parametrize(("metric", "flags", "says"), [
+    ("jnyang", ["--ppd", "30"], "only flip and jnflip"),
+    ("psnr", ["--weber-l", "0.5"], "psnr does not use"),
+    ("flip", ["--weber-l", "0.5"], "flip does not use"),
+    ("flip", ["--ppd", "x"], "expected a number or 'width'"),
+    ("flip", ["--ppd", "-3"], "--ppd"),
+    ("jnyang", ["--weber-l", "0"], "--weber-l"),
+])
+def test_metric_parameters_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], metric: str,
+                                   flags: list[str], says: str) -> None:
+    """A parameter the metric does not take is refused, not ignored; a bad value is named."""
+    a, b, _, _ = _pair(tmp_path)
+    assert main(["metric", metric, str(a), str(b), *flags]) == 2
+    captured = capsys.readouterr()
+    assert says in captured.err and not captured.out
