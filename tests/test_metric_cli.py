@@ -97,3 +97,13 @@ def test_metric_parameters_refused(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main(["metric", metric, str(a), str(b), *flags]) == 2
     captured = capsys.readouterr()
     assert says in captured.err and not captured.out
+
+
+def test_metric_ppd_width_of_a_narrow_image_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--ppd width` of an image under 58 pixels wide (under 1 ppd) is refused as such, not as a number out of range."""
+    from PIL import Image
+
+    for name in ("a.png", "b.png"):
+        Image.fromarray(np.full((40, 40, 3), 100 if name == "a.png" else 120, np.uint8)).save(tmp_path / name)
+    assert main(["metric", "flip", str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--ppd", "width"]) == 2
+    assert "ppd='width' of a 40-pixel-wide image" in capsys.readouterr().err
