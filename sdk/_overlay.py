@@ -98,14 +98,15 @@ def draw_rate_overlay(
     of uint8 rate codes as returned by ``shading_rates``. Coarser rates (2x4, 4x2, 4x4) are tinted
     red, 2x2 yellow, 1x2 and 2x1 green, 1x1 is left as is. With ``grid`` a faint line marks the
     tiles. With ``legend`` a key in the bottom-left corner names the rates of each colour (full rate
-    1x1 untinted; it is left out of images too small to hold it, under 52x35 pixels). Returns a new
-    image of the same dtype and shape.
+    1x1 untinted; it is left out of images too small to hold it: narrower than 54 pixels or shorter than 33).
+    Returns a new image of the same dtype and shape (an ``(H, W, 4)`` image keeps its alpha as it is).
     """
     img = _array(image, "image")
     if img.dtype != np.uint8 and img.dtype.kind != "f":  # (a uint16 image read as floats came back white)
         raise InputDtypeError(f"image: expected uint8 or float values in [0, 1], got dtype {img.dtype}")
     if img.ndim != 3 or img.shape[2] not in (3, 4):
-        raise InputShapeError(f"expected an (H, W, 3) image, got shape {img.shape}", tuple(img.shape), "(H, W, 3)")
+        raise InputShapeError(f"image: expected an (H, W, 3) or (H, W, 4) image, got shape {img.shape}",
+                              tuple(img.shape), "(H, W, 3)")
     if img.dtype.kind == "f" and not np.isfinite(img).all():
         raise NonFiniteInputError("image: holds NaN or infinite values; expected colours in [0, 1]")
     for name, flag in (("grid", grid), ("legend", legend)):

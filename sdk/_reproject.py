@@ -11,7 +11,8 @@ Conventions (docs/architecture.md):
 * Matrices are 4x4, column vectors (``p' = M @ p``), OpenGL clip space (NDC x right, y up,
   z in [-1, 1]); view space is right-handed, looking down -Z.
 * ``depth`` is linear view depth in scene units (distance along -Z); 0 marks background (sky).
-* The scene is static: only the camera moves between the frames.
+* The scene is static, only the camera moving between the frames, unless the engine's motion vectors are
+  given (:func:`reproject`'s ``motion``): they then place each geometry pixel in the previous frame.
 
 Algorithm, per current pixel:
 
@@ -418,7 +419,9 @@ def _perspective_points(depth: np.ndarray, geometry: np.ndarray, xs: np.ndarray,
     rx, ry = (q[0] / q[3]) / -(q[2] / q[3]), (q[1] / q[3]) / -(q[2] / q[3])
     # geometry: the point (rx, ry, -1) * depth, w = 1; background: the ray's unit direction at infinity (w = 0).
     # A row's product is then scale * (r[0] rx + r[1] ry - r[2]), plus r[3] on geometry.
-    scale = depth.astype(np.float64)
+    # (a C-ordered copy always: the sky's scales are written through its ravel, which for a depth in Fortran
+    # order, or a band of rows of one, is a copy: the writes were lost and every sky pixel came back unseen)
+    scale = np.array(depth, np.float64, order="C")
     sky = np.flatnonzero(~geometry)
     if sky.size:  # (the unit length only where it is used: most frames are mostly geometry)
         at = np.divmod(sky, depth.shape[1])

@@ -174,6 +174,27 @@ def test_overlay_legend_names_each_colour_in_the_corner() -> None:
                           sdk.draw_rate_overlay(small, np.zeros((2, 3), np.uint8), 16))
 
 
+def test_overlay_legend_is_left_out_exactly_where_the_docstring_says() -> None:
+    """The docstring's smallest image that holds the key (it said 52x35, where the key is 54 wide and 33 tall:
+    a 52-pixel-wide image had no key, a 33-pixel-tall one had)."""
+    import re
+
+    doc = " ".join((sdk.draw_rate_overlay.__doc__ or "").split())
+    found = re.search(r"narrower than (\d+) pixels or shorter than (\d+)", doc)
+    assert found, doc
+    min_w, min_h = int(found[1]), int(found[2])
+    for h, w, drawn in ((min_h, min_w, True), (min_h - 1, min_w, False), (min_h, min_w - 1, False)):
+        img = np.full((h, w, 3), 0.5, np.float32)
+        rates = np.zeros((-(-h // 16), -(-w // 16)), np.uint8)
+        keyed = sdk.draw_rate_overlay(img, rates, 16, grid=False, legend=True)
+        assert (keyed != img).any() == drawn, (h, w)
+    # an RGBA image is taken (its alpha kept), and the shape error says so
+    rgba = np.full((40, 60, 4), 0.25, np.float32)
+    np.testing.assert_array_equal(sdk.draw_rate_overlay(rgba, np.zeros((3, 4), np.uint8), 16)[..., 3], rgba[..., 3])
+    with pytest.raises(sdk.InputShapeError, match=r"image: expected an \(H, W, 3\) or \(H, W, 4\) image"):
+        sdk.draw_rate_overlay(np.zeros((40, 60, 2), np.float32), np.zeros((3, 4), np.uint8), 16)
+
+
 def test_overlay_checks_the_tile_grid() -> None:
     with pytest.raises(sdk.InputShapeError, match=r"\(2, 3\)"):
         sdk.draw_rate_overlay(np.zeros((20, 40, 3), np.uint8), np.zeros((1, 3), np.uint8), 16)
