@@ -30,6 +30,7 @@ import contextlib
 import logging
 import logging.handlers
 import multiprocessing as mp
+import numbers
 import os
 import signal
 import sys
@@ -117,16 +118,22 @@ def with_ticks(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
 def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor]:
     """A ``spawn`` process pool of ``workers`` processes that die with the job, each on
     :func:`worker_threads` threads (module docstring); ``ticks``, a :func:`tick_queue`, is handed to
-    every worker for :func:`with_ticks`."""
+    every worker for :func:`with_ticks`. ``workers`` is an integer >= 1 (else a
+    :class:`~rtp.sdk.ParameterError`)."""
+    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 1:
+        from rtp.sdk import ParameterError
+
+        raise ParameterError(f"workers: expected an integer >= 1, got {workers!r}", "workers")
     if workers > (n := cores()):
         log.warning("%d worker processes on the %d core%s this process may run on: each is a whole renderer or "
                     "metric process (hundreds of MB, torch's for targets), and more processes than cores add "
                     "memory, not speed", workers, n, "" if n == 1 else "s")
     logs = mp.get_context("spawn").Queue()
-    forward = _LogForwarder(logs)
+    workers = int(workers)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker,
                                initargs=(os.getpid(), worker_threads(workers), ticks, logs,
                                          logging.getLogger().getEffectiveLevel()))
+    forward = _LogForwarder(logs)  # (once the pool exists: a pool that failed to start left its thread running)
     try:
         yield pool
     except BaseException:

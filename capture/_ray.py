@@ -38,6 +38,7 @@ from typing import Any
 from rtp.sdk import EXIT_USAGE, ParameterError, RtpError
 
 from ._memory import job_bytes
+from ._pool import cores
 
 __all__ = ["MAX_RETRIES", "RAY_LOCAL", "RayExecutorError", "RayWorkerError", "ray_cluster"]
 
@@ -114,9 +115,11 @@ def _native_stderr_to_log() -> Iterator[None]:
 def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
     """Connect to Ray (or start a private local instance); yields how many workers to start.
 
-    ``workers`` None means one per CPU of the cluster. A Ray already initialised in this process
-    (a notebook, a test) is used as it is and left running; one this function started is shut
-    down on exit."""
+    ``workers`` None means one per CPU of the cluster (a private instance: one per core this process
+    may run on, :func:`rtp.capture._pool.cores`, not every core of a machine that a container or a
+    batch job shares). A Ray already initialised in this process (a notebook, a test) is used as it
+    is and left running; one this function started is shut down on exit, and on a start that failed
+    or was interrupted."""
     ray = _ray()
     started = False
     if not ray.is_initialized():
@@ -127,15 +130,23 @@ def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
                 # (its native start-up lines, "Token authentication is enabled for this Ray cluster ...",
                 # concern a cluster the user runs, not this private one: -v shows them)
                 with _native_stderr_to_log():
-                    ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+                    ray.init(num_cpus=workers or cores(), **kwargs)
             else:
                 if address != "auto":
                     _check_reachable(address)
                 with _native_stderr_to_log():
                     ray.init(address=address, **kwargs)
-        except RayExecutorError:
+        except RayExecutorError:  # (_check_reachable's, before ray.init)
             raise
-        except Exception as exc:  # ConnectionError, RuntimeError, ValueError from ray.init
+        except BaseException as exc:
+            # (a start that failed or was interrupted half-way, Ctrl-C included, left the private instance's
+            # processes, its GCS server and raylet, running until this process ended, and the next ray.init
+            # started another beside them)
+            with contextlib.suppress(Exception):
+                ray.shutdown()
+            if not isinstance(exc, Exception):
+                raise
+            # (ConnectionError, RuntimeError, ValueError from ray.init)
             raise RayExecutorError(f"cannot start or reach Ray at {address or RAY_LOCAL!r}: {exc}") from exc
         started = True
     try:
@@ -216,6 +227,9 @@ def _drive(ray: Any, actors: Sequence[Any], running: dict[Any, tuple[int, str, A
             if isinstance(cause, RtpError):
                 raise cause from exc
             raise RayWorkerError(f"{what} {task[0]!r} failed on a Ray worker: {exc}") from exc
+        except ray.exceptions.RayError as exc:  # (Ray's own: a worker killed for memory, a node or object lost, ...)
+            raise RayWorkerError(f"{what} {task[0]!r} failed on Ray ({type(exc).__name__}); everything finished "
+                                 f"before is saved, rerun to resume: {exc}") from exc
         done(task, result)
         feed(i)
 

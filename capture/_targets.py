@@ -477,7 +477,8 @@ def compute_targets(
             todo = {i: tuple(m for m in metrics if not store.has(i, m)) for i in ids}
             ray_targets(str(data_root), todo, params, address=ray, workers=workers, progress=advance,
                         on_actors=_on_ray_actors)
-        elif ray is not None or (workers or 1) <= 1:  # (Ray with nothing to do starts no cluster)
+        elif ray is not None or (workers or 1) <= 1 or not ids:  # (Ray with nothing to do starts no cluster; a
+            # pool with nothing to do no process: --workers 2 on targets all there was a ValueError, "max_workers")
             for i in ids:
                 _compute_one(str(data_root), i, tuple(metrics), params)
                 done += 1

@@ -730,3 +730,23 @@ def test_a_resumed_capture_drawn_with_other_renderer_settings_says_so(tmp_path: 
     assert report.written == 1 and report.skipped == 2
     assert ("the 1 samples written now were drawn with other renderer settings than the samples there "
             "(shadow_map_size 1024 before, 256 now; another rtp version's defaults)") in caplog.text
+
+
+def test_targets_all_there_with_workers_start_no_pool(tmp_path: Path) -> None:
+    """`rtp targets DATA --workers 2` rerun on a dataset whose targets are all there asked for a pool of no
+    process (a process a sample at most, and no sample to do): ProcessPoolExecutor's ValueError "max_workers
+    must be greater than 0" and its traceback. It now does nothing and says so; a pool of no worker is a
+    typed error naming ``workers``."""
+    from rtp.capture import compute_targets
+    from rtp.capture._pool import worker_pool
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=1, size=(64, 48), profiles=("slow",))
+    seen: list[tuple[int, int]] = []
+    assert compute_targets(out, ("psnr",)) == 1
+    assert compute_targets(out, ("psnr",), workers=2, progress=lambda d, t: seen.append((d, t))) == 0
+    assert seen == [(1, 1)]
+    for bad in (0, -1, True, 1.5):
+        with pytest.raises(sdk.ParameterError, match=r"^workers: expected an integer >= 1"):
+            with worker_pool(bad):  # type: ignore[arg-type]
+                pass

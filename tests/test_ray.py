@@ -342,3 +342,69 @@ def test_a_finished_folder_needs_no_cluster(local: Path, tmp_path: Path, monkeyp
     monkeypatch.setattr("rtp.capture._capture._job_seed", lambda seed, scene, profile: seed + 1)  # other cameras
     with pytest.raises(Reached):
         capture(SCENES, out, per_scene=2, size=SIZE, ray="127.0.0.1:1")
+
+
+def test_a_ray_start_that_fails_or_is_interrupted_shuts_down_what_it_started(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A private instance whose ray.init failed or was interrupted half-way (its GCS server and raylet started)
+    is shut down: those processes ran on until the process ended, and the next ray.init started another
+    beside them. Its workers are the cores this process may run on (a container's, a batch job's), not
+    every core of the machine (os.cpu_count)."""
+    from rtp.capture import _ray
+
+    calls: list[Any] = []
+
+    class FakeRay:
+        raises: BaseException = RuntimeError("the raylet did not start in time")
+
+        @staticmethod
+        def is_initialized() -> bool:
+            return False
+
+        @staticmethod
+        def init(**kwargs: Any) -> None:
+            calls.append(kwargs.get("num_cpus"))
+            raise FakeRay.raises
+
+        @staticmethod
+        def shutdown() -> None:
+            calls.append("shutdown")
+
+    monkeypatch.setattr(_ray, "_ray", lambda: FakeRay)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2}, raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    with pytest.raises(RayExecutorError, match="cannot start or reach Ray at 'local': the raylet did not start"):
+        with ray_cluster("local", None):
+            pass
+    assert calls == [3, "shutdown"]
+    calls.clear()
+    FakeRay.raises = KeyboardInterrupt()
+    with pytest.raises(KeyboardInterrupt):
+        with ray_cluster(None, 2):
+            pass
+    assert calls == [2, "shutdown"]
+
+
+def test_rays_own_failures_name_the_sample_and_are_typed() -> None:
+    """A task that fails with Ray's own error (a worker killed by Ray's memory monitor, an object store full,
+    a node lost) stops the job with a RayWorkerError naming the sample, as a worker that died does; it was
+    Ray's exception itself, a traceback naming no sample."""
+    from rtp.capture import _ray
+
+    class FakeRay:
+        exceptions = ray.exceptions
+
+        @staticmethod
+        def wait(refs: list[Any], num_returns: int, timeout: float | None) -> tuple[list[Any], list[Any]]:
+            return refs[:1], refs[1:]
+
+        @staticmethod
+        def get(ref: Any) -> Any:
+            raise ray.exceptions.OutOfMemoryError("Task was killed due to the node running low on memory.")
+
+    done: list[Any] = []
+    with pytest.raises(_ray.RayWorkerError, match=r"^sample 'procedural_3-slow-0001' failed on Ray "
+                                                  r"\(OutOfMemoryError\).*rerun to resume: Task was killed") as err:
+        _ray._drive(FakeRay, ["actor"], {"ref": (0, "procedural:3", ("procedural_3-slow-0001",))},
+                    {"procedural:3": 1}, lambda i: False, lambda t, r: done.append(t), "sample", None)
+    assert err.value.exit_code == 1 and done == []
