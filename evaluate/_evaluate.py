@@ -842,11 +842,12 @@ def _matched(sweep: list[dict[str, Any]], target: float,
              defaults: dict[str, float] | None = None) -> list[dict[str, Any]]:
     """Per method, the work saved at fail share ``target`` read off its sweep as :func:`rtp.evaluate.saved_at`
     reads it (``rtp play``'s matched table and ``bench/report.py`` too): the most any point failing at most
-    ``target`` saves, each interpolated linearly towards the next point that fails more; NaN where the sweep
-    never fails that rarely or never that often. The parameter is that point's (``between A and B`` where
-    interpolated); among points that save as much, the one nearest the method's parameter in ``defaults`` (the
-    decision table's), else the numerically smallest. (The first point at the target's failing share in text
-    order was taken: among ties in failures the one that saved the least, "t 11.31" before "t 8".)"""
+    ``target`` saves, each interpolated linearly towards the next point that fails more where that one saves
+    more; NaN where the sweep never fails that rarely or never that often. The parameter is that point's
+    (``between A and B`` where interpolated); among points that save as much, the one nearest the method's
+    parameter in ``defaults`` (the decision table's), else the numerically smallest. (The first point at the
+    target's failing share in text order was taken: among ties in failures the one that saved the least,
+    "t 11.31" before "t 8".)"""
     defaults = defaults or {}
     out = []
     for method in dict.fromkeys(r["method"] for r in sweep):
@@ -864,7 +865,7 @@ def _matched(sweep: list[dict[str, Any]], target: float,
             if f0 > target:
                 break
             nxt = pts[k + 1] if k + 1 < len(pts) else None
-            if nxt is None or nxt[0] <= f0 or f0 == target:
+            if nxt is None or nxt[0] <= f0 or f0 == target or nxt[1] < w0:  # (towards one saving less: this one)
                 saved, param = w0, p0
             else:
                 frac = min(1.0, (target - f0) / (nxt[0] - f0))

@@ -308,7 +308,8 @@ def fail_rule(metric: str, threshold: float) -> str:
 def saved_at(points: Sequence[tuple[float, float]], fail: float) -> float | None:
     """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points: the
     best saving among points failing at most ``fail``, interpolated linearly towards the next point
-    that fails more. None when every point fails more than ``fail``."""
+    that fails more (never below the point's own saving: a next point that fails more and saves less leaves it
+    as it is). None when every point fails more than ``fail``."""
     try:
         pts = sorted((float(f), float(w)) for f, w in points)
         fail = float(fail)
@@ -320,7 +321,8 @@ def saved_at(points: Sequence[tuple[float, float]], fail: float) -> float | None
     best = None
     for (f0, w0), (f1, w1) in zip(pts, pts[1:] + [(math.inf, pts[-1][1])]):
         if f0 <= fail:
-            w = w0 if f1 == math.inf or f1 <= f0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
+            # (towards a point that saves less the line falls below this one's saving, which runs at f0 <= fail)
+            w = w0 if f1 == math.inf or f1 <= f0 or w1 <= w0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
             best = w if best is None else max(best, w)
     return best
 
@@ -428,7 +430,18 @@ class PlayReport:
 
     def ratios(self, method: str, against: str, level: float = 0.05) -> dict[str, float]:
         """Per path, ``method``'s saving over ``against``'s at the ``level`` failing share (nan where
-        either cannot reach it: its sweep never fails that rarely, or never that often)."""
+        either cannot reach it: its sweep never fails that rarely, or never that often). A method the report does
+        not hold, or a ``level`` not among :data:`FAIL_LEVELS` (the only shares it is read at), is a
+        :class:`PlayError` (either read NaN on every path, as if the method could not reach it)."""
+        methods = list(dict.fromkeys(m["method"] for m in self.matched))
+        for name, key in ((method, "method"), (against, "against")):
+            if name not in methods:
+                raise PlayError(f"ratios: {key}: expected one of the report's methods ({', '.join(map(str, methods))}), "
+                                f"got {name!r}", key)
+        if not any(_finite(level) and level == f for f in FAIL_LEVELS):
+            raise PlayError(f"ratios: level: expected one of the matched table's failing shares "
+                            f"{', '.join(f'{f:g}' for f in FAIL_LEVELS)}, got {level!r}", "level")
+
         def at(name: str, path: str) -> float:
             m = next((m for m in self.matched if m["path"] == path and m["method"] == name and m["fail_share"] == level),
                      None)
@@ -492,8 +505,10 @@ class PlayReport:
                 flip = "-" if not np.isfinite(r["flip_mean"]) else f"{r['flip_mean']:.4f}"
                 low = r.get("work_saved_p05", float("nan"))  # (a path kept by an older run has none)
                 low_cell = f"{100 * low:.1f}%" if low is not None and np.isfinite(low) else "-"
+                # (none measured where every frame after the second changed size: dynamic resolution's SCALES@1)
+                change = f"{100 * r['rate_change']:.1f}%" if _finite(r["rate_change"]) else "-"
                 lines.append(f"| {r['method']} | {p} | {100 * r['work_saved']:.1f}% | {low_cell} | "
-                             f"{100 * r['fail_share']:.2f}% | {flip} | {100 * r['rate_change']:.1f}% | "
+                             f"{100 * r['fail_share']:.2f}% | {flip} | {change} | "
                              f"{r['predict_ms']:.2f} | {net} |")
             lines.append("")
         return "\n".join(lines)
@@ -996,7 +1011,9 @@ def _in_workers(job: dict[str, Any], paths: list[str], workers: int, progress: C
     with worker_pool(workers, ticks=ticks) as pool:
         futures = {pool.submit(with_ticks, _worker_path, {**job, "path": p, "threads": threads}): p for p in paths}
         while futures:
-            for f in [f for f in futures if f.done()]:
+            # (the paths that ended are kept before the error of one that failed is raised: a path ending in the
+            # same poll as another's error was lost, its minutes of work played again by the rerun)
+            for f in sorted((f for f in futures if f.done()), key=lambda f: f.exception() is not None):
                 finished(futures.pop(f), f.result())
             try:
                 news(ticks.get(timeout=0.5))

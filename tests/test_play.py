@@ -579,6 +579,17 @@ def test_a_sweep_that_never_fails_as_often_is_a_lower_bound() -> None:
     assert rep.ratios("jnyang", "yang2019", 0.01)["slow"] == pytest.approx(0.826 / 0.865)
     rep.matched[2]["capped"] = False
     assert rep.ratios("jnyang", "yang2019", 0.05)["slow"] == pytest.approx(0.826 / 0.865)
+    # a method the report does not hold (a typo) or a share it is not read at read NaN on every path, as if the
+    # method could not reach it: both are refused, naming what there is
+    with pytest.raises(PlayError, match=r"ratios: against: expected one of the report's methods \(jnyang, yang2019\), "
+                                        r"got 'yang'"):
+        rep.ratios("jnyang", "yang")
+    with pytest.raises(PlayError, match="ratios: method: expected one of"):
+        rep.ratios("JNYang", "yang2019")
+    for level in (0.03, float("nan"), "0.05", None):
+        with pytest.raises(PlayError, match=r"ratios: level: expected one of the matched table's failing shares "
+                                            r"0.01, 0.02, 0.05, got"):
+            rep.ratios("jnyang", "yang2019", level)  # type: ignore[arg-type]
 
 
 def test_methods_are_parsed_and_checked(tmp_path: Path, machine_memory: Callable[..., None]) -> None:
@@ -769,6 +780,12 @@ def test_saved_at_reads_the_sweep() -> None:
     assert saved_at(pts, 0.02) == pytest.approx(0.3)
     assert saved_at(pts, 0.5) == pytest.approx(0.6)
     assert saved_at([(0.05, 0.5)], 0.01) is None
+    # a point that fails more and saves less (a noisy closed-loop sweep) does not pull the reading below a point
+    # that fails at most the share: at 1% the parameter failing 0% and saving 60% is there to run (it read 20%)
+    assert saved_at([(0.0, 0.6), (0.005, 0.2)], 0.01) == pytest.approx(0.6)
+    assert saved_at([(0.0, 0.6), (0.03, 0.2)], 0.01) == pytest.approx(0.6)  # (it read 46.7%)
+    assert saved_at([(0.0, 0.5), (0.02, 0.4), (0.04, 0.9)], 0.01) == pytest.approx(0.5)
+    assert saved_at([(0.0, 0.5), (0.02, 0.4), (0.04, 0.9)], 0.03) == pytest.approx(0.65)  # (upwards, as before)
 
 
 def test_paths_in_worker_processes_give_the_same_report(caplog: pytest.LogCaptureFixture) -> None:
@@ -889,6 +906,43 @@ def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
         played.clear()
         play("procedural:0", "jnyang,yang2019", out=tmp_path, **{**kw, "workers": 1, "paths": ("slow",)})
         assert played == ["slow"] and not list(tmp_path.glob(".play-*"))
+
+
+def test_a_path_ending_as_another_fails_in_its_worker_is_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With --workers the paths end in worker processes, polled together: where one path failed (a GIF it could
+    not write, a metric's error) in the same poll as the other ended, the error was raised first and the finished
+    path's results were never kept, so the rerun played it again. The finished path is kept, then the error
+    raised."""
+    import concurrent.futures
+    import contextlib
+    import queue
+
+    import rtp.capture
+    from rtp.evaluate import _play
+
+    class AtOnce:  # a pool that plays each path when it is submitted, in this process: both end before the poll
+        def submit(self, fn: Any, work: Any, job: dict[str, Any]) -> concurrent.futures.Future[Any]:
+            done: concurrent.futures.Future[Any] = concurrent.futures.Future()
+            try:
+                done.set_result(work(job, queue.Queue()))
+            except Exception as err:  # (as a worker's error reaches the job)
+                done.set_exception(err)
+            return done
+
+    monkeypatch.setattr(rtp.capture, "worker_pool", lambda workers, ticks=None: contextlib.nullcontext(AtOnce()))
+    monkeypatch.setattr(rtp.capture, "tick_queue", queue.Queue)
+    real = _play._play_path
+
+    def slow_fails(job: dict[str, Any], *rest: Any) -> dict[str, Any]:
+        if job["path"] == "slow":
+            raise OSError("No space left on device")
+        return real(job, *rest)
+
+    monkeypatch.setattr(_play, "_play_path", slow_fails)
+    with pytest.raises(OSError, match="No space left"):
+        play("procedural:0", "jnyang", paths=("slow", "fast"), frames=3, size=(W, H), sweep=False, flip_every=0,
+             plots=False, workers=2, out=tmp_path)
+    assert [f.name for f in tmp_path.iterdir()] == [".play-fast.partial.json"]
 
 
 def test_the_report_reads_the_worst_frames_off_each_sweep(tmp_path: Path) -> None:

@@ -98,6 +98,24 @@ def test_the_rate_change_panel_draws_lone_values_and_leaves_frame_1_out(monkeypa
     assert [t.get_text() for t in legend.get_texts()] == ["jnyang"]
 
 
+def test_a_rate_change_never_measured_reads_as_a_dash() -> None:
+    """Under --dynamic-resolution 1,0.5@1 every frame is drawn at another size than the one before, so no rate
+    change is measured (the tiles are others): play.md's column read "nan%" where the FLIP column reads "-"."""
+    rep = _report(dynamic_resolution={"scales": [1.0, 0.5], "every": 1, "sizes": [[W, H], [W // 2, H // 2]]})
+    rep.unseen["fast"] = [1.0] + [0.01] * 7
+    row = {"path": "fast", "method": "jnyang", "parameter": "threshold 0.25", "value": 0.25, "default": True,
+           "work_saved": 0.5, "fail_share": 0.01, "flip_mean": float("nan"), "work_saved_p05": 0.4,
+           "predict_ms": 1.0, "network_frames": 1.0}
+    rep.rows += [{**row, "rate_change": float("nan")}, {**row, "parameter": "threshold 0.5", "default": False,
+                                                          "rate_change": None}]  # (play.json writes NaN as null)
+    md = rep.to_markdown()
+    assert "nan" not in md
+    assert "| jnyang | **threshold 0.25** | 50.0% | 40.0% | 1.00% | - | - | 1.00 | 100% |" in md
+    assert "| jnyang | threshold 0.5 | 50.0% | 40.0% | 1.00% | - | - | 1.00 | 100% |" in md
+    rep.rows[0]["rate_change"] = 0.25
+    assert "| jnyang | **threshold 0.25** | 50.0% | 40.0% | 1.00% | - | 25.0% | 1.00 | 100% |" in rep.to_markdown()
+
+
 def test_the_animation_leaves_out_the_first_frame(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Frame 0 has no history (every reprojection black: Yang 2019 coarse everywhere); the docs say it is left
     out of every figure, and the GIF showed it."""
