@@ -46,8 +46,6 @@ from ._dataset import DatasetReader, _check_id, sample_path
 from ._memory import check_memory, job_bytes, meminfo
 from ._pool import cores
 
-#: The metrics that take FLIP's pixels per degree (the rest ignore ``ppd``).
-_PPD_METRICS = ("flip", "jnflip")
 #: The largest environment luminance ``weber_l`` the targets take. A JN target is the Yang or FLIP error (at most
 #: 1) over ``L + l``, so at most ``1 / l``: past ``1 / MIN_PARAMETER`` of ``rtp.sdk``'s transforms (1e-6, the
 #: smallest ``mu_y`` a model's metadata takes) every target is below the smallest mean training target a
@@ -416,8 +414,8 @@ def compute_targets(
     if ppd is not None:
         M.resolve_ppd(ppd, 1)  # type: ignore[arg-type]  # (a string other than 'width' is what it refuses)
         ppd = ppd if isinstance(ppd, str) else float(ppd)  # (as weber_l: a float32 is no JSON value to declare)
-        if not set(_PPD_METRICS) & set(metrics):  # (it was taken and ignored)
-            raise ParameterError(f"ppd: FLIP's pixels per degree, which only {' and '.join(_PPD_METRICS)} use; the "
+        if not set(M.PPD_METRICS) & set(metrics):  # (it was taken and ignored)
+            raise ParameterError(f"ppd: FLIP's pixels per degree, which only {' and '.join(M.PPD_METRICS)} use; the "
                                  f"metrics asked for are {', '.join(metrics)}", "ppd")
     if weber_l is not None:
         if isinstance(weber_l, bool) or not isinstance(weber_l, numbers.Real):  # ('0.5' was declared as a string:
@@ -449,7 +447,7 @@ def compute_targets(
                                   "weber_l": M.DEFAULT_WEBER_L if weber_l is None else weber_l}
         for m in metrics:  # the backend is not a parameter: both give the same targets (to float round-off)
             p: dict[str, Any] = {}
-            if m in _PPD_METRICS:
+            if m in M.PPD_METRICS:
                 p["ppd"] = params["ppd"]
             if M.metric_info(m).weber:
                 p["weber_l"] = params["weber_l"]

@@ -810,7 +810,7 @@ def _usage(message: str) -> Exception:
 def build_parser() -> argparse.ArgumentParser:
     from rtp.capture import MAX_WEBER_L
     from rtp.capture.viewpoints import DEFAULT_PROFILES, MOTION_PROFILES, PLACEMENTS
-    from rtp.metrics import DEFAULT_PPD, DEFAULT_WEBER_L
+    from rtp.metrics import DEFAULT_PPD, DEFAULT_WEBER_L, PPD_METRICS
     from rtp.sdk import (
         CHANNELS,
         DEFAULT_INPUTS,
@@ -1292,10 +1292,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "bar to this image")
     mt.add_argument("--tile", "--tile-size", dest="tile", type=int, choices=TILE_SIZES, default=DEFAULT_TILE_SIZE,
                     help="tile size in pixels")
-    mt.add_argument("--ppd", default=None, help="flip and jnflip: FLIP's pixels per degree, a number, or 'width' for "
-                    f"the paper's width-based value (default: FLIP's own {DEFAULT_PPD:.2f}, as `rtp targets`)")
-    mt.add_argument("--weber-l", type=float, default=None, help="jnflip and jnyang: the environment luminance l, "
-                    f"> 0 (default: {DEFAULT_WEBER_L:g}, as `rtp targets`)")
+    mt.add_argument("--ppd", default=None, help=f"{' and '.join(PPD_METRICS)}: FLIP's pixels per degree, a number, or "
+                    f"'width' for the paper's width-based value (default: FLIP's own {DEFAULT_PPD:.2f}, as `rtp targets`)")
+    mt.add_argument("--weber-l", type=float, default=None, help=f"{' and '.join(m for m in METRICS if METRICS[m].weber)}: "
+                    f"the environment luminance l, > 0 (default: {DEFAULT_WEBER_L:g}, as `rtp targets`)")
     mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")
     return p
 

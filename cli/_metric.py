@@ -111,14 +111,16 @@ def _parameters(args: argparse.Namespace) -> dict[str, Any]:
 
     from ._main import _ppd
 
-    takes_ppd = args.metric in ("flip", "jnflip")  # (rtp's own: a plugin's map takes neither parameter)
+    takes_ppd = args.metric in metrics.PPD_METRICS  # (rtp's own: a plugin's map takes neither parameter)
     takes_l = args.metric in sdk.METRICS and sdk.METRICS[args.metric].weber
     ppd, weber_l = _ppd(args.ppd), args.weber_l
     if ppd is not None and not takes_ppd:
-        raise sdk.ParameterError(f"--ppd: FLIP's pixels per degree, which only flip and jnflip use, not {args.metric}")
+        raise sdk.ParameterError(f"--ppd: FLIP's pixels per degree, which only {' and '.join(metrics.PPD_METRICS)} use, "
+                                 f"not {args.metric}")
     if weber_l is not None and not takes_l:
-        raise sdk.ParameterError(f"--weber-l: the environment luminance of the just-noticeable metrics (jnflip, "
-                                 f"jnyang), which {args.metric} does not use")
+        raise sdk.ParameterError(f"--weber-l: the environment luminance of the just-noticeable metrics ("
+                                 f"{', '.join(m for m in sdk.METRICS if sdk.METRICS[m].weber)}), which {args.metric} "
+                                 f"does not use")
     params: dict[str, Any] = {}
     if takes_ppd:
         params["ppd"] = metrics.DEFAULT_PPD if ppd is None else ppd

@@ -24,7 +24,7 @@ import logging
 from ._deps import METRIC_DEPENDENCIES, check_dependencies
 from ._device import DEVICES, device_name, resolve_device
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
-from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, flip_map, ppd_from_width, resolve_ppd
+from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, PPD_METRICS, flip_map, ppd_from_width, resolve_ppd
 from ._lpips import (
     FETCH_COMMAND,
     LPIPS_MIN_SIZE,
@@ -63,6 +63,7 @@ __all__ = [
     "METRIC_DEPENDENCIES",
     "METRIC_ENTRY_POINT_GROUP",
     "PAPER_WEBER_L",
+    "PPD_METRICS",
     "WEBER_BLOCK",
     "InputRangeError",
     "Metric",

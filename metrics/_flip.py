@@ -16,7 +16,7 @@ import numpy as np
 from ._errors import MetricDependencyError, MetricError, MetricParameterError
 from ._image import as_pair
 
-__all__ = ["DEFAULT_PPD", "FLIP_DEFAULT_PPD", "Ppd", "flip_map", "ppd_from_width", "resolve_ppd"]
+__all__ = ["DEFAULT_PPD", "FLIP_DEFAULT_PPD", "PPD_METRICS", "Ppd", "flip_map", "ppd_from_width", "resolve_ppd"]
 
 log = logging.getLogger("rtp.metrics")
 
@@ -27,6 +27,9 @@ FLIP_DEFAULT_PPD = 67.02064514160156
 #: image size, so crops and different capture resolutions are scored alike. Pass ``ppd="width"``
 #: for the RT-Percept paper's width-based value (33.5 at 1920 pixels wide).
 DEFAULT_PPD = FLIP_DEFAULT_PPD
+
+#: The metrics that take FLIP's pixels per degree, ``ppd`` (the rest ignore it).
+PPD_METRICS = ("flip", "jnflip")
 
 Ppd = float | Literal["width"]
 
