@@ -10,14 +10,18 @@ STAMP  := $(VENV)/.rtp-installed
 # train map and profile (51 maps: 1,224 samples), 12 per validation map (72; they live beside the
 # training samples, train/recipes hold them out), 8 per test map (80). About 17 MB per sample.
 # RAY=1 runs capture and targets on a private Ray instance, RAY=HOST:PORT on a cluster (docs/scaling.md).
+# WORKERS: the processes on this machine (2); with RAY, Ray's workers: one per CPU of the instance or the
+# cluster unless WORKERS=N is given (a fixed 2 ran a cluster's capture on two of its CPUs).
+# (Paths are quoted in the commands: DATA, RECIPE, NAME and MAP may hold spaces.)
 DATA      ?= data
 SIZE      ?= 1280x720
 PER_SCENE ?= 12
 VAL_PER_SCENE ?= 12
 TEST_PER_SCENE ?= 8
-WORKERS   ?= 2
 RAY       ?=
-RAYFLAG   := $(if $(RAY),--ray $(if $(filter 1,$(RAY)),,$(RAY)))
+WORKERS   ?= $(if $(RAY),,2)
+RAYFLAG    = $(if $(RAY),--ray $(if $(filter 1,$(RAY)),,"$(RAY)"))
+JOBFLAGS   = $(if $(WORKERS),--workers $(WORKERS)) $(RAYFLAG)
 METRIC    ?= jnyang
 # The recipe the shipped models were trained with: train/recipes/shipped.yaml (steps, batch, crop,
 # learning rate, the validation split); its fast network's head has no ReLU before the sigmoid, so no
@@ -169,33 +173,35 @@ demo: $(STAMP)
 # Resumable: rerun after an interruption, or with a larger PER_SCENE to add samples.
 dataset: $(STAMP)
 	$(RTP) scenes fetch
-	$(RTP) capture --split train --per-scene $(PER_SCENE) --size $(SIZE) --workers $(WORKERS) $(RAYFLAG) --out $(DATA)/train
-	$(RTP) capture --split validation --per-scene $(VAL_PER_SCENE) --size $(SIZE) --workers $(WORKERS) $(RAYFLAG) --out $(DATA)/train
-	$(RTP) capture --split test --per-scene $(TEST_PER_SCENE) --size $(SIZE) --workers $(WORKERS) $(RAYFLAG) --out $(DATA)/test
-	$(RTP) targets $(DATA)/train --workers $(WORKERS) $(RAYFLAG)
-	$(RTP) targets $(DATA)/test --workers $(WORKERS) $(RAYFLAG)
+	$(RTP) capture --split train --per-scene $(PER_SCENE) --size $(SIZE) $(JOBFLAGS) --out "$(DATA)/train"
+	$(RTP) capture --split validation --per-scene $(VAL_PER_SCENE) --size $(SIZE) $(JOBFLAGS) --out "$(DATA)/train"
+	$(RTP) capture --split test --per-scene $(TEST_PER_SCENE) --size $(SIZE) $(JOBFLAGS) --out "$(DATA)/test"
+	$(RTP) targets "$(DATA)/train" $(JOBFLAGS)
+	$(RTP) targets "$(DATA)/test" $(JOBFLAGS)
 
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
-	$(RTP) train --data $(DATA)/train --metric $(METRIC) --config $(RECIPE) $(if $(STEPS),--steps $(STEPS)) --out $(DATA)/$(NAME).pt
-	$(BIN)/rtp-export $(DATA)/$(NAME).pt -o models/$(NAME).onnx
+	$(RTP) train --data "$(DATA)/train" --metric $(METRIC) --config "$(RECIPE)" $(if $(STEPS),--steps $(STEPS)) --out "$(DATA)/$(NAME).pt"
+	$(BIN)/rtp-export "$(DATA)/$(NAME).pt" -o "models/$(NAME).onnx"
 
 # make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines
 # (NAME=jnyang-reuse: that model).
 evaluate: $(STAMP)
-	$(RTP) evaluate models/$(NAME).onnx --data $(DATA)/test --out $(DATA)/eval-$(NAME) --plots
+	$(RTP) evaluate "models/$(NAME).onnx" --data "$(DATA)/test" --out "$(DATA)/eval-$(NAME)" --plots
 
 # make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
 # slow and fast paths at 1280x720 (the models' training size), every method swept, both paths at
 # once (2 processes), the frames composited from the uniform-rate images (--composite: several times
-# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP). The map is fetched
+# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP) (a mesh file's: play-
+# and its name without folder and extension, not a folder per folder of its path). The map is fetched
 # first (`rtp scenes fetch --map MAP`: its packages once, then a no-op; a name no split lists is refused
 # before any download), not for procedural:N or a mesh file.
 MAP    ?= 20kdm2
 FRAMES ?= 150
+MESH    = $(filter %.glb %.gltf %.obj,$(MAP))
 play: $(STAMP)
-	$(if $(filter procedural:% %.glb %.gltf %.obj,$(MAP)),,$(RTP) scenes fetch --map $(MAP))
-	$(RTP) play $(MAP) --frames $(FRAMES) --composite --workers 2 --out $(DATA)/play-$(MAP)
+	$(if $(MESH)$(filter procedural:%,$(MAP)),,$(RTP) scenes fetch --map "$(MAP)")
+	$(RTP) play "$(MAP)" --frames $(FRAMES) --composite --workers 2 --out "$(DATA)/play-$(if $(MESH),$(basename $(notdir $(MAP))),$(MAP))"
 
 clean:
 	rm -rf $(VENV) $(FLOOR_VENV) $(PY_VENV) .pytest_cache build *.egg-info

@@ -84,7 +84,8 @@ class Formatter(argparse.RawDescriptionHelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
-        if (states_default(text) or action.required or action.default in (None, False, argparse.SUPPRESS)
+        # (by identity: `in` compares with ==, and a default of 0, `--seed`'s, equals False and was not shown)
+        if (states_default(text) or action.required or any(action.default is d for d in (None, False, argparse.SUPPRESS))
                 or not action.option_strings):
             return text
         return text + " (default: %(default)s)"
@@ -145,30 +146,61 @@ def _rtp_details(record: logging.LogRecord) -> bool:
     return record.levelno >= logging.INFO or record.name == "rtp" or record.name.startswith("rtp.")
 
 
+class _Handler(logging.StreamHandler):
+    """stderr, written through ``tqdm.write`` where tqdm is installed, so that a log line never tears a
+    progress bar. (tqdm's own ``logging_redirect_tqdm`` swapped this handler for one of its own, which
+    at pyproject's floor, tqdm 4.60, wrote to stdout, into the JSON of `rtp info --json`, and before
+    tqdm#1775 kept none of its filters: repeated warnings were not collapsed and `-vv` logged every
+    library's debug chatter.)"""
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+        self._write: Callable[..., None] | None = None
+        with contextlib.suppress(ImportError):
+            from tqdm import tqdm
+
+            self._write = tqdm.write
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self._write is None:
+            super().emit(record)
+            return
+        try:
+            self._write(self.format(record), file=self.stream)
+            self.flush()
+        except RecursionError:
+            raise
+        except Exception:  # noqa: BLE001 - logging's own policy for a handler that fails
+            self.handleError(record)
+
+
+def _console(handler: logging.Handler) -> bool:
+    return isinstance(handler, logging.StreamHandler) and handler.stream in (sys.stdout, sys.stderr)
+
+
 @contextlib.contextmanager
 def _logging(args: argparse.Namespace) -> Iterator[None]:
     verbose = int(args.verbose or 0)  # (-v once: progress; twice: rtp's debug details too)
     level = logging.DEBUG if verbose >= 2 else logging.INFO if verbose else logging.ERROR if args.quiet else logging.WARNING
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _Handler()
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    # (the handler's level too: a library logger with a level of its own, below the root's, passes its
+    # records to the root's handlers whatever the root's level, and -q showed its warnings)
+    handler.setLevel(level)
     collapse = _Collapse()
     handler.addFilter(collapse)
     if level == logging.DEBUG:
         handler.addFilter(_rtp_details)
     root = logging.getLogger()
-    old_level = root.level
-    root.addHandler(handler)
+    old_level, old_handlers = root.level, root.handlers
+    # the console handlers already there (a script's basicConfig) are set aside while the command runs,
+    # as tqdm's redirection did, so that no line is written twice
+    root.handlers = [h for h in old_handlers if not _console(h)] + [handler]
     root.setLevel(level)
     try:
-        redirect: Any = contextlib.nullcontext()
-        with contextlib.suppress(ImportError):
-            from tqdm.contrib.logging import logging_redirect_tqdm
-
-            redirect = logging_redirect_tqdm(loggers=[root])
-        with redirect:
-            yield
+        yield
     finally:
-        root.removeHandler(handler)
+        root.handlers = old_handlers
         root.setLevel(old_level)
         for line in collapse.summary():
             print(f"WARNING (repeated): {line}", file=sys.stderr)
@@ -277,7 +309,7 @@ def _kept(on_interrupt: Callable[[], Callable[[], str] | None] | None) -> str:
     try:
         account = on_interrupt() if on_interrupt is not None else None
         text = account() if account is not None else ""
-    except Exception:  # noqa: BLE001 - a second Ctrl-C or a broken file must not hide the first
+    except (Exception, KeyboardInterrupt):  # noqa: BLE001 - a second Ctrl-C or a broken file must not hide the first
         return ""
     return f"; {one_line(text)}" if text else ""
 

@@ -318,3 +318,51 @@ def test_an_empty_dataset_path_is_refused_not_read_as_the_current_folder(
     assert info.value.code == 2
     assert "expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+# -- the Makefile's commands: what `make X VAR=...` runs, read with `make -n` (nothing is run) ---------------
+
+def _make_runs(*args: str) -> list[list[str]]:
+    """The rtp and rtp-export commands ``make -n ARGS`` would run, each split as the shell splits it."""
+    import shlex
+    import shutil
+    import subprocess
+
+    make = shutil.which("make")
+    if make is None:
+        pytest.skip("no make on this machine")
+    done = subprocess.run([make, "-n", "--no-print-directory", *args], cwd=Path(__file__).resolve().parents[1],
+                          capture_output=True, text=True, check=True)
+    return [argv for argv in map(shlex.split, done.stdout.splitlines())
+            if argv and Path(argv[0]).name in ("rtp", "rtp-export")]
+
+
+def _after(argv: list[str], flag: str) -> str:
+    return argv[argv.index(flag) + 1]
+
+
+def test_make_passes_its_variables_to_the_commands_whole() -> None:
+    """`make dataset RAY=HOST:PORT` gave a cluster's capture and targets a fixed --workers 2 (two of its
+    CPUs; Ray's own default is one worker per CPU); a DATA, RECIPE or NAME holding a space was split into two
+    arguments; `make play MAP=scenes/room.glb` wrote its pictures to data/play-scenes/room.glb/."""
+    local = _make_runs("dataset", "DATA=my data")
+    assert len(local) == 6 and all(_after(a, "--workers") == "2" and "--ray" not in a for a in local[1:])
+    assert [_after(a, "--out") for a in local if a[1] == "capture"] == ["my data/train", "my data/train", "my data/test"]
+    assert [a[2] for a in local if a[1] == "targets"] == ["my data/train", "my data/test"]
+    for ray, address in (("RAY=1", "--out"), ("RAY=head:6379", "head:6379")):  # (RAY=1: --ray alone)
+        jobs = _make_runs("dataset", ray)[1:]
+        assert len(jobs) == 5 and all("--workers" not in a for a in jobs), jobs
+        assert all(_after([*a, "--out"], "--ray") == address for a in jobs), jobs
+    assert all(_after(a, "--workers") == "8" for a in _make_runs("dataset", "RAY=1", "WORKERS=8")[1:])
+    train, export = _make_runs("train", "METRIC=jnyang", "RECIPE=my recipe.yaml", "NAME=my model", "STEPS=5",
+                               "DATA=my data")
+    assert (_after(train, "--config"), _after(train, "--steps"), _after(train, "--out")) == (
+        "my recipe.yaml", "5", "my data/my model.pt")
+    assert export[1:] == ["my data/my model.pt", "-o", "models/my model.onnx"]
+    [evaluate] = _make_runs("evaluate", "NAME=my model", "DATA=my data")
+    assert evaluate[2] == "models/my model.onnx" and _after(evaluate, "--out") == "my data/eval-my model"
+    for scene, fetched, out in (("20kdm2", True, "d/play-20kdm2"), ("procedural:3", False, "d/play-procedural:3"),
+                                ("scenes/room.glb", False, "d/play-room"), ("/abs/hall.gltf", False, "d/play-hall")):
+        runs = _make_runs("play", f"MAP={scene}", "DATA=d")
+        assert (runs[0][1:] == ["scenes", "fetch", "--map", scene]) == fetched, runs
+        assert runs[-1][2] == scene and _after(runs[-1], "--out") == out, runs

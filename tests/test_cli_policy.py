@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import subprocess
 import sys
 import time
@@ -65,7 +66,9 @@ def test_help_exits_0_and_shows_defaults(prog: str, command: tuple[str, ...], ca
     text = " ".join(capsys.readouterr().out.split())
     assert text.startswith(f"usage: {' '.join((prog, *command))}")
     for action in _subparser(build(), command)._actions:
-        if action.default in (None, False, argparse.SUPPRESS) or not action.option_strings or action.required:
+        # (by identity: a default of 0, `--seed`'s, equals False, and its help did not show it)
+        if (any(action.default is d for d in (None, False, argparse.SUPPRESS)) or not action.option_strings
+                or action.required):
             continue
         assert action.help, (command, action.dest)
         # the help states the default itself, or the formatter appends it
@@ -290,6 +293,25 @@ def test_an_interrupted_resumable_command_says_what_it_kept(tmp_path: Path, monk
         assert main(run) == 130
         assert capsys.readouterr().err == (f"rtp play: interrupted; the path played to its end (slow) is kept in "
                                            f"{play}: the same command plays the rest (fast)\n")
+
+
+def test_a_second_interrupt_while_the_account_is_made_still_says_interrupted(capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C pressed again while the interrupted command makes its account of what it kept (it reads
+    its folder) is not a traceback in place of the first's line: it says "interrupted" and exits 130."""
+    from rtp.cli._run import run_guarded
+
+    def body() -> int:
+        raise KeyboardInterrupt
+
+    def account() -> str:
+        raise KeyboardInterrupt  # the second Ctrl-C
+
+    try:
+        code = run_guarded("rtp capture", body, on_interrupt=lambda: account)
+    except KeyboardInterrupt:
+        pytest.fail("the second Ctrl-C escaped as a traceback")
+    assert code == 130
+    assert capsys.readouterr().err == "rtp capture: interrupted\n"
 
 
 def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
@@ -707,6 +729,55 @@ def test_verbose_progress_is_logged_whole_and_repeated_warnings_once(capsys: pyt
         assert all((line in err) == verbose for line in steps), err
         assert err.count("has no targets") == 2 and "WARNING rtp.train: sample a has no targets" in err
         assert "WARNING (repeated): 2 more like: sample a has no targets" in err
+
+
+def test_logging_keeps_its_filters_and_stderr_whatever_tqdms_redirection(monkeypatch: pytest.MonkeyPatch,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """The log is on stderr, collapsed, at the level the options ask, with any tqdm pyproject allows: tqdm
+    4.60's logging_redirect_tqdm (reproduced here) swapped rtp's handler for one that wrote to stdout,
+    into `rtp info --json`'s JSON, and kept none of its filters (repeats not collapsed). A library logger
+    with a level of its own (INFO) passed its warnings through -q."""
+    import logging
+    import sys as _sys
+
+    import tqdm.contrib.logging
+
+    from rtp.cli._run import run
+
+    @contextlib.contextmanager
+    def redirect_of_tqdm_4_60(loggers: list[logging.Logger] | None = None, **_: Any) -> Any:
+        def emit(self: logging.Handler, record: logging.LogRecord) -> None:
+            print(self.format(record), file=_sys.stdout)  # (tqdm.write's default file)
+
+        for logger in loggers or [logging.root]:
+            old = logger.handlers
+            console = [h for h in old if isinstance(h, logging.StreamHandler) and h.stream in (_sys.stdout, _sys.stderr)]
+            handler = type("_TqdmLoggingHandler", (logging.StreamHandler,), {"emit": emit})()
+            handler.setFormatter(console[0].formatter if console else None)
+            logger.handlers = [h for h in old if h not in console] + [handler]
+            try:
+                yield
+            finally:
+                logger.handlers = old
+
+    monkeypatch.setattr(tqdm.contrib.logging, "logging_redirect_tqdm", redirect_of_tqdm_4_60)
+    chatty = logging.getLogger("some.library")
+    monkeypatch.setattr(chatty, "level", logging.INFO)
+
+    def body(args: argparse.Namespace) -> int:
+        for sid in ("a", "b", "c"):
+            logging.getLogger("rtp.capture").warning("sample %s has no targets", sid)
+        chatty.warning("a library's warning")
+        return 0
+
+    assert run("rtp info", argparse.Namespace(verbose=0, quiet=False, no_progress=True), body) == 0
+    out, err = capsys.readouterr()
+    assert out == "", out
+    assert err.count("has no targets") == 2 and "2 more like: sample a has no targets" in err, err
+    assert "a library's warning" in err
+    assert run("rtp info", argparse.Namespace(verbose=0, quiet=True, no_progress=True), body) == 0
+    out, err = capsys.readouterr()
+    assert out == "" and "a library's warning" not in err and "WARNING rtp" not in err, (out, err)
 
 
 def test_a_job_that_fails_at_once_leaves_only_its_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

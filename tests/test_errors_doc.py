@@ -108,3 +108,19 @@ def test_every_error_class_says_what_it_means() -> None:
     for name, cls in all_errors().items():
         assert (cls.__doc__ or "").strip(), f"{name} has no docstring"
         assert cls.exit_code in (sdk.EXIT_FAILED, sdk.EXIT_USAGE), name
+
+
+def test_the_path_errors_that_exit_2_are_the_ones_the_doc_lists() -> None:
+    """docs/errors.md names each OSError of a wrong path that exits 2 (the runner's list): a name too long
+    (ENAMETOOLONG) exited 2 and the page did not say so."""
+    import errno
+
+    from rtp.cli._run import _PATH_ERRNOS
+
+    words = {errno.ENOENT: "missing", errno.ENOTDIR: "not a folder", errno.EISDIR: "a folder", errno.EEXIST: "exists",
+             errno.EACCES: "no permission", errno.EPERM: "no permission", errno.EROFS: "read-only",
+             errno.ENAMETOOLONG: "a name too long"}
+    assert set(words) == _PATH_ERRNOS
+    listed = re.search(r"with 2 where the path itself is wrong\s+\(([^)]*)\)", DOC.read_text(encoding="utf-8"))
+    assert listed is not None
+    assert set(re.split(r",\s+", " ".join(listed[1].split()))) == set(words.values()), listed[1]
