@@ -64,12 +64,13 @@ def build_export_parser() -> argparse.ArgumentParser:
 def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Every combination is checked before any work starts."""
     if args.restamp:
-        if (args.checkpoint or args.adopt or args.metadata or args.output or args.opset or args.dynamic or args.replace
-                or args.no_finite_probe or args.one_input or args.strip_probe or args.join_planes or args.retune):
+        if (args.checkpoint or args.adopt or args.metadata or args.output or args.opset is not None or args.dynamic
+                or args.replace or args.no_finite_probe or args.one_input or args.strip_probe or args.join_planes
+                or args.retune):
             parser.error("--restamp MODEL.onnx takes no other options")
         return
     if args.retune:
-        if (args.checkpoint or args.adopt or args.opset or args.dynamic or args.replace or args.no_finite_probe
+        if (args.checkpoint or args.adopt or args.opset is not None or args.dynamic or args.replace or args.no_finite_probe
                 or args.one_input or args.strip_probe or args.join_planes):
             parser.error("--retune MODEL takes only --metadata SIDECAR.yaml and -o OUTPUT.onnx")
         if not args.metadata or not args.output:
@@ -78,7 +79,7 @@ def _check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     for flag, given in (("--strip-probe", args.strip_probe), ("--join-planes", args.join_planes)):
         if not given:
             continue
-        if (args.checkpoint or args.adopt or args.metadata or args.opset or args.dynamic or args.replace
+        if (args.checkpoint or args.adopt or args.metadata or args.opset is not None or args.dynamic or args.replace
                 or args.no_finite_probe or args.one_input or (args.strip_probe and args.join_planes)):
             parser.error(f"{flag} MODEL takes only -o OUTPUT.onnx")
         if not args.output:

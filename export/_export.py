@@ -636,7 +636,11 @@ def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str
         "fields": sorted(str(k) for k in d), "from": src.name, "rtp": str(sdk.__version__),
         "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()}})
     fields.pop("schema_version", None)  # written as the lowest version that holds the fields
-    meta = ModelMetadata.from_dict(fields)
+    try:
+        meta = ModelMetadata.from_dict(fields)
+    except MetadataError as err:  # (the model's own fields were valid as it loaded: the sidecar's, named)
+        source = f"{metadata}: " if isinstance(metadata, (str, os.PathLike)) else ""
+        raise MetadataError(f"{source}{err}", err.key) from err
     model = onnx.load(str(src))
     write_metadata(model, meta)
     _save_unchanged(model, before, out, f"retuning {src} changed its predictions; nothing written")
@@ -765,15 +769,24 @@ def export_checkpoint(
                     "%g): the model is exported as it stands; the same rtp train command finishes it",
                     checkpoint, ckpt.training.get("step", "?"), ckpt.metadata.safety)
     meta_dict = ckpt.metadata.to_dict()
+    # (a sidecar's fields named no file: "default_threshold: expected a finite number, got nan")
+    source = f"{extra_metadata}: " if isinstance(extra_metadata, (str, os.PathLike)) else ""
     if extra_metadata is not None:
         extra = _fields(extra_metadata, "extra_metadata")
         _check_not_computed(extra)
+        if "provenance" in extra and not isinstance(extra["provenance"], Mapping):
+            # (merged below, the export's own entry replaced it: the checkpoint's provenance was lost, without a word)
+            raise MetadataError(f"{source}provenance: expected a mapping (merged into the checkpoint's provenance), got "
+                                f"{reprlib.repr(extra['provenance'])}", "provenance")
         meta_dict = _merge(meta_dict, extra)
     meta_dict = _merge(meta_dict, {"provenance": {"export": _export_provenance(opset)}})
     net = ckpt.net.eval()
     # the network decides which frame sizes it takes (FastNet: multiples of its stem)
     meta_dict["input_multiple"] = getattr(net, "input_multiple", None)
-    meta = ModelMetadata.from_dict(meta_dict)
+    try:
+        meta = ModelMetadata.from_dict(meta_dict)
+    except MetadataError as err:  # (the checkpoint's own metadata was validated as it loaded: the sidecar's)
+        raise MetadataError(f"{source}{err}", err.key) from err
     ckpt_mod.check_fits(net, meta)
     _check_trained_fields(ckpt.metadata, meta)
 
@@ -788,7 +801,7 @@ def export_checkpoint(
         except OSError:  # the file system's (a full disk): atomic_output names the file
             raise
         except Exception as err:
-            raise ExportError(f"torch.onnx.export failed: {err}") from err
+            raise _exporter_failure(err, opset) from err
         model = onnx.load(str(tmp))
         merge_slices(model)
         model.producer_name = "rtp-export"
@@ -896,7 +909,7 @@ def _tail_model(net: Any, dummy: Any, path: Path, opset: int) -> bytes:
     except OSError:  # the file system's (a full disk): the caller's atomic_output names the file
         raise
     except Exception as err:
-        raise ExportError(f"torch.onnx.export failed on the tail: {err}") from err
+        raise _exporter_failure(err, opset, " on the tail") from err
     finally:
         path.unlink(missing_ok=True)
     merge_slices(model)
@@ -910,10 +923,43 @@ def _tail_model(net: Any, dummy: Any, path: Path, opset: int) -> bytes:
     return bytes(model.SerializeToString())
 
 
+def _exporter_failure(err: BaseException, opset: int, what: str = "") -> ExportError:
+    """The TorchScript exporter's error as one short line: its first, without the IR graph it appends
+    (``[Caused by the value ...``, kilobytes) or its request for a pull request; for an opset below the
+    default, which one to try (opset 9 cannot express the fast network's ceil-mode max-pool)."""
+    lines = str(err).split("[Caused by", 1)[0].strip().splitlines()
+    first = (lines[0] if lines else "").split(" Please feel free to request support", 1)[0].strip().rstrip(".")
+    if len(first) > 300:
+        first = first[:297] + "..."
+    hint = (f"; opset {opset} may not express this network: try the default, --opset {DEFAULT_OPSET}"
+            if opset < DEFAULT_OPSET else "")
+    return ExportError(f"torch.onnx.export failed{what} at opset {opset}: {first or type(err).__name__}{hint} "
+                       "(-v shows the exporter's whole error)")
+
+
 def _torch_export(net: Any, args: tuple[Any, ...], path: Path, opset: int, *, split: bool = False,
                   tail: bool = False) -> None:
     """torch.onnx.export with rtp's names: ``input`` -> ``metric`` (``split``: and ``features``; ``tail``:
-    ``features``, ``input`` -> ``metric``)."""
+    ``features``, ``input`` -> ``metric``). The exporter's own log (the whole TorchScript graph when it
+    fails, which torch 2.x writes to stdout, where ``rtp-export`` prints only the output's path) goes to
+    this module's logger at DEBUG instead."""
+    import torch
+
+    def to_log(*parts: Any) -> None:
+        log.debug("torch.onnx: %s", " ".join(str(p) for p in parts))
+
+    hook = "_jit_onnx_log"  # (torch's setup_onnx_logging turns the log on for every export: a bug of torch 2.x)
+    torch_log = getattr(torch._C, hook, None)
+    if torch_log is not None:
+        setattr(torch._C, hook, to_log)
+    try:
+        _export_quietly(net, args, path, opset, split=split, tail=tail)
+    finally:
+        if torch_log is not None:
+            setattr(torch._C, hook, torch_log)
+
+
+def _export_quietly(net: Any, args: tuple[Any, ...], path: Path, opset: int, *, split: bool, tail: bool) -> None:
     import torch
 
     from rtp import sdk

@@ -133,6 +133,27 @@ def test_extra_metadata_is_merged(tmp_path: Path) -> None:
     assert pred.metadata.provenance["scenes"] == ("oa_dm1",) and "export" in pred.metadata.provenance
 
 
+def test_extra_metadata_errors_name_the_sidecar_and_keep_the_checkpoints_provenance(tmp_path: Path) -> None:
+    """A sidecar's `provenance: 5` (or null, or a list) was replaced by the export's own entry: exit 0, the
+    checkpoint's provenance lost without a word; a sidecar's invalid field named no file."""
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata(provenance={"train": {"steps": 3}}))
+    extra = tmp_path / "extra.yaml"
+    for text in ("provenance: 5\n", "provenance: null\n", "provenance: [a]\n"):
+        extra.write_text(text)
+        with pytest.raises(sdk.MetadataError, match=r"^.*extra\.yaml: provenance: expected a mapping") as err:
+            export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=extra)
+        assert err.value.key == "provenance" and not (tmp_path / "x.onnx").exists()
+    with pytest.raises(sdk.MetadataError, match="^provenance: expected a mapping"):
+        export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata={"provenance": 5})
+    extra.write_text("default_threshold: .nan\n")
+    with pytest.raises(sdk.MetadataError, match=r"^.*extra\.yaml: default_threshold: expected a finite number") as err:
+        export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=extra)
+    assert err.value.key == "default_threshold"
+    extra.write_text("provenance: {scenes: [a]}\n")
+    kept = sdk.load(export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=extra)).metadata.provenance
+    assert kept["train"] == {"steps": 3} and kept["scenes"] == ("a",) and "export" in kept
+
+
 @pytest.mark.parametrize("extra, key", [
     ("inputs: [reprojected.g, seen, albedo.g, normal.z]\n", "inputs"),  # as many planes, others
     ("metric: flip\nweber_l: null\n", "metric"),
@@ -186,6 +207,23 @@ def test_parity_failure_is_loud_and_writes_nothing(tmp_path: Path, monkeypatch: 
         export.export_checkpoint(ck, target)
     assert target.read_bytes() == previous
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.onnx", "m.pt"]
+
+
+def test_an_exporter_failure_is_one_short_line_and_nothing_on_stdout(tmp_path: Path,
+                                                                    capfd: pytest.CaptureFixture[str]) -> None:
+    """Opset 9 cannot express the fast network's ceil-mode max-pool: the ExportError held torch's whole IR graph
+    (4 kB, one "line" of escaped newlines) and torch wrote the graph once more, 9 kB, to stdout, where
+    rtp-export prints only the output's path. Now one short line that says which opset to try, stdout empty."""
+    ck = checkpoint.save(tmp_path / "f.pt", trained_like_fast_net(4, seed=0), base_metadata())
+    capfd.readouterr()
+    with pytest.raises(export.ExportError) as err:
+        export.export_checkpoint(ck, tmp_path / "f.onnx", opset=9)
+    message = str(err.value)
+    assert message.startswith("torch.onnx.export failed at opset 9: ") and "try the default, --opset 17" in message
+    assert len(message) < 400 and "\\n" not in message and "\n" not in message and "Caused by" not in message
+    assert "Caused by" in str(err.value.__cause__)  # (-v shows it whole)
+    assert capfd.readouterr().out == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.pt"]
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -502,6 +540,10 @@ def test_the_cli_exports_without_the_probe_and_strips_it(fast_onnx: Path, tmp_pa
     (["--retune", "jnyang", "--metadata", "s.yaml", "-o", "x.onnx", "--dynamic"], "--retune MODEL takes only"),
     (["--join-planes", "m.onnx"], "--join-planes needs -o OUTPUT.onnx"),
     (["--join-planes", "m.onnx", "--strip-probe", "m.onnx", "-o", "x.onnx"], "--strip-probe MODEL takes only -o"),
+    # (--opset 0 is falsy: it passed these three checks and was ignored without a word)
+    (["--restamp", "m.onnx", "--opset", "0"], "--restamp MODEL.onnx takes no other options"),
+    (["--retune", "jnyang", "--metadata", "s.yaml", "-o", "x.onnx", "--opset", "0"], "--retune MODEL takes only"),
+    (["--strip-probe", "m.onnx", "-o", "x.onnx", "--opset", "0"], "--strip-probe MODEL takes only -o"),
 ])
 def test_rtp_export_refuses_flags_that_do_not_go_together(argv: list[str], words: str,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
@@ -675,6 +717,18 @@ def test_no_export_writes_over_its_checkpoint_or_where_it_cannot_write(fast_onnx
     for d in (a, b):  # (the two exports' dates differ when a second turns between them)
         d["provenance"]["export"].pop("date")
     assert a == b
+
+
+def test_a_retune_sidecars_invalid_field_names_the_sidecar(fast_onnx: Path, tmp_path: Path) -> None:
+    """`rtp-export --retune M --metadata r.yaml` said `description: expected a string, got 5`, naming no file."""
+    side = tmp_path / "r.yaml"
+    for text, key in (("description: 5\n", "description"), ("default_threshold: .nan\n", "default_threshold")):
+        side.write_text(text)
+        with pytest.raises(sdk.MetadataError, match=rf"^.*r\.yaml: {key}: expected") as err:
+            export.retune(fast_onnx, side, tmp_path / "out.onnx")
+        assert err.value.key == key and not (tmp_path / "out.onnx").exists()
+    with pytest.raises(sdk.MetadataError, match="^description: expected a string"):
+        export.retune(fast_onnx, {"description": 5}, tmp_path / "out.onnx")
 
 
 def test_a_sidecar_that_is_not_text_or_not_yaml_is_a_metadata_error(fast_onnx: Path, tmp_path: Path) -> None:
