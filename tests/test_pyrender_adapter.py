@@ -723,3 +723,85 @@ def test_node_poses_are_checked() -> None:
         # nothing moved in the world: the camera's planes, exactly
         assert np.array_equal(adapter.inputs(replace(frame, prev_node_poses={moved: np.array(moved.matrix)})),
                               adapter.inputs(frame))
+
+
+def test_a_camera_under_a_parent_node_is_drawn_from_the_world_pose() -> None:
+    """A main camera under a parent node (a rig 2 m up): the pose given is where it is in the world. The adapter
+    set it as the node's *local* pose, so every pass drew from the rig's pose times it (depth, motion, seen all
+    off) and, putting back the world pose as the local one, left the camera 2 m higher than it was."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    flat = _asymmetric_scene(pyrender)
+    rigged = _asymmetric_scene(pyrender)
+    rigged.remove_node(rigged.main_camera_node)
+    rig = pyrender.Node(name="rig", translation=(0.0, 2.0, 0.0))
+    rigged.add_node(rig)
+    node = rigged.add(pyrender.PerspectiveCamera(yfov=np.radians(60.0)), pose=np.eye(4), parent_node=rig)
+    before_local, before_world = np.array(node.matrix), rigged.get_pose(node)
+    moved = np.eye(4)
+    moved[:3, 3] = (0.3, 0.1, 0.0)
+    channels = ["seen", "reprojected.r", "albedo.r", "normal.y", "depth", "motion.x", "motion.y"]
+    out = []
+    with Adapter(channels, 64, 48) as adapter:
+        for scene in (flat, rigged):
+            prev_colour, _ = adapter.render(scene, np.eye(4))
+            out.append(adapter.inputs(SceneFrame(scene, moved, np.eye(4), prev_colour)))
+            out.append(adapter.gbuffers(scene, moved).depth)
+    np.testing.assert_array_equal(out[2], out[0])
+    np.testing.assert_array_equal(out[3], out[1])
+    np.testing.assert_array_equal(node.matrix, before_local)
+    np.testing.assert_array_equal(rigged.get_pose(node), before_world)
+
+
+def test_a_camera_with_znear_0_is_refused() -> None:
+    """pyrender takes znear=0 for a PerspectiveCamera or an IntrinsicsCamera; its depth buffer then reads as
+    background everywhere, and the adapter returned all-0 G-buffers in silence (pyrender's lit image showing the
+    scene). Now a PyrenderAdapterError naming the camera and the fix."""
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    good = pyrender.PerspectiveCamera(yfov=np.radians(60.0))
+    with Adapter(["albedo.r", "depth"], 32, 24) as adapter:
+        for camera in (pyrender.PerspectiveCamera(yfov=np.radians(60.0), znear=0.0),
+                       pyrender.IntrinsicsCamera(fx=30.0, fy=30.0, cx=16.0, cy=12.0, znear=0.0)):
+            scene = _asymmetric_scene(pyrender)
+            with pytest.raises(PyrenderAdapterError, match=f"{type(camera).__name__} has znear=0.0.*znear > 0"):
+                adapter.gbuffers(scene, np.eye(4), camera=camera)
+            with pytest.raises(PyrenderAdapterError, match="znear > 0"):
+                adapter.inputs(SceneFrame(scene, np.eye(4), camera=camera))
+            with pytest.raises(PyrenderAdapterError, match="znear > 0"):
+                adapter.inputs(SceneFrame(scene, np.eye(4), camera=good, prev_camera=camera))
+            scene.main_camera_node.camera = camera  # (pyrender's own: the main camera)
+            with pytest.raises(PyrenderAdapterError, match="znear > 0"):
+                adapter.inputs(SceneFrame(scene, np.eye(4)))
+        assert adapter.gbuffers(_asymmetric_scene(pyrender), np.eye(4)).depth.max() > 0  # (znear 0.05)
+
+
+def test_a_missing_gl_library_names_the_packages(monkeypatch: pytest.MonkeyPatch) -> None:
+    """PyOpenGL reports a missing libEGL / libOSMesa as ``ImportError("Unable to load EGL library", ...)`` (no
+    module name) while pyrender imports: that was "pyrender failed to import" without the packages to install,
+    which the other ways the platform fails to load name. pyrender itself missing names the extra."""
+    import importlib.abc
+    import sys
+
+    from rtp.plugins.pyrender import PyrenderUnavailableError, _gl, import_pyrender
+
+    pyrender_or_skip()
+
+    class NoEGL(importlib.abc.MetaPathFinder):
+        def find_spec(self, name: str, path: Any = None, target: Any = None) -> None:
+            if name == "pyrender":
+                raise ImportError("Unable to load EGL library", "EGL: cannot open shared object file")
+            return None
+
+    monkeypatch.setattr(_gl, "_pyrender", None)
+    monkeypatch.delitem(sys.modules, "pyrender")
+    monkeypatch.setattr(sys, "meta_path", [NoEGL(), *sys.meta_path])
+    with pytest.raises(PyrenderUnavailableError, match="could not load its egl platform .*Unable to load EGL library"
+                                                       ".*apt-get install libegl1 libgl1 libegl-mesa0") as info:
+        import_pyrender("egl")
+    assert isinstance(info.value.__cause__, ImportError)
+    monkeypatch.setitem(sys.modules, "pyrender", None)  # (not installed)
+    with pytest.raises(ImportError, match=r"needs pyrender 0\.1\.45; install the extra: pip install 'rtp\[pyrender\]'"):
+        import_pyrender("egl")

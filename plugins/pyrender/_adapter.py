@@ -257,13 +257,18 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 raise PyrenderAdapterError(f"{name}: expected a pyrender camera (or None), got {type(cam).__name__}")
 
     def _camera(self, scene: Any, camera: Any | None) -> Any:
+        """``camera``, else the scene's main camera, checked to give a depth buffer."""
         self._check_scene(scene, camera)
-        if camera is not None:
-            return camera
-        node = scene.main_camera_node
-        if node is None:
-            raise PyrenderAdapterError("the scene has no camera; add one (scene.add(camera)) or pass camera=...")
-        return node.camera
+        if camera is None:
+            node = scene.main_camera_node
+            if node is None:
+                raise PyrenderAdapterError("the scene has no camera; add one (scene.add(camera)) or pass camera=...")
+            camera = node.camera
+        if not float(camera.znear) > 0.0:  # (pyrender's PerspectiveCamera and IntrinsicsCamera take znear=0)
+            raise PyrenderAdapterError(
+                f"{type(camera).__name__} has znear={camera.znear}: its projection is singular and every pixel of its "
+                "depth buffer reads as background, so the G-buffers would be all 0; give the camera a znear > 0")
+        return camera
 
     def projection(self, scene: Any, camera: Any | None = None) -> np.ndarray:
         """The 4x4 OpenGL projection (view to clip) pyrender uses for ``camera`` (default: the
@@ -275,9 +280,18 @@ class Adapter(_BaseAdapter[SceneFrame]):
         """Temporarily make ``camera`` at ``pose`` the scene's main camera; restored afterwards."""
         node = scene.main_camera_node
         if node is not None and (camera is None or node.camera is camera):
-            old = np.array(scene.get_pose(node), copy=True)
-            scene.set_pose(node, pose)
+            # scene.set_pose sets the node's *local* pose and get_pose gives the world one: a camera under a
+            # parent node (a rig) gets the local pose that puts it at ``pose`` in the world, and its own back
+            old = np.array(node.matrix, copy=True)
             try:
+                scene.set_pose(node, np.eye(4))
+                parent = scene.get_pose(node)
+                try:
+                    local = pose if np.array_equal(parent, np.eye(4)) else np.linalg.solve(parent, pose)
+                except np.linalg.LinAlgError:
+                    raise PyrenderAdapterError("the main camera's parent node has a singular world pose (a zero "
+                                               "scale): the camera cannot be placed at the pose asked for") from None
+                scene.set_pose(node, local)
                 yield
             finally:
                 scene.set_pose(node, old)
@@ -331,6 +345,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
         if not isinstance(albedo, (bool, np.bool_)):
             raise ParameterError(f"albedo: expected True or False, got {albedo!r}", "albedo")
         normals, material = _names(normals, _NORMAL, "normals"), _names(material, MATERIAL, "material")
+        self._camera(scene, camera)  # (one whose depth the passes can read)
         with self._posed(scene, camera, pose):
             return self._gbuf.render(scene, albedo=bool(albedo), normals=normals, material=material)
 
@@ -376,7 +391,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
         if reproj and prev_colour is None:
             raise PyrenderAdapterError(f"{', '.join(sorted(reproj))} need prev_colour (the previous displayed frame)")
         cam = self._camera(scene, camera)
-        prev_cam = cam if prev_camera is None else prev_camera
+        prev_cam = cam if prev_camera is None else self._camera(scene, prev_camera)
 
         g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, *_ALBEDO_VARIANCES}),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])

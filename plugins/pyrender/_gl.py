@@ -102,14 +102,17 @@ def import_pyrender(platform: str | None = None) -> Any:
             )
     os.environ["PYOPENGL_PLATFORM"] = wanted
     _shim_numpy()
+    fix = "apt-get install libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri" if wanted == "egl" else "apt-get install libosmesa6"
     try:
         import pyrender
     except ImportError as exc:
         if exc.name in ("pyrender", "OpenGL"):
             raise ImportError(f"the pyrender adapter needs pyrender 0.1.45; install the extra: {_EXTRA}") from exc
+        if exc.name is None:  # PyOpenGL's "Unable to load EGL library" / "Unable to load OpenGL library" (OSMesa)
+            raise PyrenderUnavailableError(f"pyrender could not load its {wanted} platform ({type(exc).__name__}: "
+                                           f"{exc}); on Debian/Ubuntu: {fix}") from exc
         raise PyrenderUnavailableError(f"pyrender failed to import ({type(exc).__name__}: {exc})") from exc
     except Exception as exc:  # PyOpenGL raises plain errors when libEGL / libOSMesa are missing
-        fix = "apt-get install libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri" if wanted == "egl" else "apt-get install libosmesa6"
         raise PyrenderUnavailableError(
             f"pyrender could not load its {wanted} platform ({type(exc).__name__}: {exc}); on Debian/Ubuntu: {fix}"
         ) from exc
