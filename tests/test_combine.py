@@ -264,6 +264,22 @@ def test_the_predictor_takes_the_engine_rates(tiny_model: Callable[..., Path]) -
     assert sel.saved >= 0.4
 
 
+def test_engine_rates_are_on_the_hardware_tiles_of_a_predictor_loaded_for_them(tiny_model: Callable[..., Path]) -> None:
+    """docs/runtime.md: ``engine_rates`` is an image of the rate image's tiles, ``predictor.tiles(h, w)``: with
+    ``load(tile_size=8)`` the hardware's 8-pixel grid, not the model's 16-pixel one."""
+    path = tiny_model(base_metadata(default_threshold=0.3))
+    fine = sdk.load(path, tile_size=8)
+    x = np.full((4, 24, 40), -10.0, np.float32)
+    grid = fine.tiles(24, 40)
+    assert grid == (3, 5)
+    engine = np.full(grid, C["2x1"], np.uint8)
+    got = fine.shading_rates(x, engine_rates=engine)
+    assert got.shape == grid
+    assert (got == sdk.select_rates(fine.predict(x), 0.3, engine_rates=engine)).all()
+    with pytest.raises(sdk.InputShapeError, match="engine_rates"):  # the model's 2x3 tiles are not the image's
+        fine.shading_rates(x, engine_rates=np.full(sdk.tile_grid(24, 40, 16), C["2x1"], np.uint8))
+
+
 def test_a_device_chooses_between_two_rates_at_most() -> None:
     """The selection judges the worse of two rates where a device may choose; over every allowed set, combiner
     and pair of rates there are never more than two, and they save alike where their areas match."""
