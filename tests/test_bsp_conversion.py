@@ -200,6 +200,20 @@ def test_dropped_surfaces_alpha_tests_and_emission(tmp_path: Path) -> None:
     assert mats["wall"].emissive == (0.0, 0.0, 0.0)
 
 
+def test_alpha_func_lt128_keeps_the_texels_below_128(tmp_path: Path) -> None:
+    """alphaFunc LT128 keeps the texels whose alpha is below 128; it got the GE128 cutoff over the image's
+    own alpha, so the renderer (which discards alpha below the cutoff) drew the holes and cut the rest. The
+    alpha channel is now inverted for it: the fence's one transparent texel is the only one drawn."""
+    shaders = SHADERS + "textures/test/lt\n{\n    {\n        map textures/test/fence.png\n        alphaFunc LT128\n    }\n}\n"
+    conv = convert_bsp(_pk3(tmp_path / "lt.pk3", [("textures/test/lt", 0, 1), ("textures/test/fence", 0, 1)],
+                            shaders=shaders))
+    lt, fence = conv.scene.materials
+    assert lt.alpha_cutoff == fence.alpha_cutoff == 0.5
+    kept_lt, kept_fence = lt.texture[..., 3] / 255.0 >= 0.5, fence.texture[..., 3] / 255.0 >= 0.5
+    assert kept_lt.sum() == 1 and kept_lt[0, 0]  # (the image: opaque but for its corner texel)
+    assert (kept_lt == ~kept_fence).all()
+
+
 def test_surface_lights_sun_and_sky_colour(tmp_path: Path) -> None:
     scene = convert_bsp(_pk3(tmp_path / "rich.pk3", RICH)).scene
     # no light entities: one light at the glow square (texture 1, 64 units at x = 100..164, z = 128,
@@ -293,6 +307,19 @@ def test_patches_face_their_normals_and_malformed_patches_are_skipped(tmp_path: 
     np.testing.assert_allclose(_facing(up), [[0.0, 1.0, 0.0]] * len(up.indices), atol=1e-6)
     np.testing.assert_allclose(down.normals, [[0.0, -1.0, 0.0]] * len(down.normals), atol=1e-6)
     np.testing.assert_allclose(_facing(down), [[0.0, -1.0, 0.0]] * len(down.indices), atol=1e-6)
+
+
+def test_a_patch_size_whose_product_overflows_int32_is_skipped(tmp_path: Path) -> None:
+    """A patch of size 3 x 1431655769 needs 4294967307 control points, which int32 arithmetic on the face
+    lump's fields wrapped to 11: with 11 control points it passed the size check and numpy's reshape failed
+    (a bare ValueError out of convert_bsp). It is now skipped like any patch with fewer control points than
+    its size needs, and the rest of the map converts."""
+    textures = [("textures/test/up", 0, 1), ("textures/test/huge", 0, 1)]
+    faces: list[Face] = [(2, 0, _grid(0.0, 0.0, up=True), [], (3, 3)),
+                         (2, 1, _grid(200.0, 0.0, up=True, h=5)[:11], [], (3, 1431655769))]
+    conv = convert_bsp(_pk3(tmp_path / "huge.pk3", textures, faces=faces), patch_level=2)
+    assert conv.stats["patches"] == 1
+    assert [m.name for m in conv.scene.materials] == ["textures/test/up"]
 
 
 def test_sky_patches_seal_the_level(tmp_path: Path) -> None:

@@ -1113,6 +1113,39 @@ def test_a_converted_scene_with_a_header_of_another_shape_is_converted_again(tmp
     assert load_scene_npz(path)[0].triangle_count == good.triangle_count  # written again
 
 
+@pytest.mark.parametrize("sky", [
+    np.zeros(4, np.float32),  # not triangles
+    np.zeros((2, 3, 2), np.float32),  # 2-D vertices
+    np.full((2, 3, 3), np.nan, np.float32),  # not finite
+    np.array(["a"]),  # not numbers
+], ids=["flat", "2d", "nan", "text"])
+def test_a_converted_scene_with_damaged_sky_triangles_is_converted_again(tmp_path: Path, sky: np.ndarray,
+                                                                         caplog: pytest.LogCaptureFixture):
+    """The sky triangles of a converted .npz were returned whatever their shape: scene_blockers gave the
+    capture a (4,) or NaN array and sample_viewpoints failed on it ("blockers: expected finite triangles"),
+    where any other damage of the file converts the map again. Now load_scene_npz says SceneFormatError
+    naming the file, the map is converted again (with a warning), and save_scene_npz refuses to write such
+    triangles (a ParameterError naming ``sky``)."""
+    cache = _fake_cache(tmp_path)
+    good = scenes.scene_blockers("oa_dm1", cache)
+    assert good.shape[1:] == (3, 3) and len(good)
+    path = cache / "converted" / f"oa_dm1.v{CACHE_VERSION}.npz"
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["sky"] = sky
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+    with pytest.raises(SceneFormatError, match=rf"{path.name}: its sky triangles are .* not finite floats"):
+        load_scene_npz(path)
+    with caplog.at_level("WARNING", logger="rtp"):
+        np.testing.assert_array_equal(scenes.scene_blockers("oa_dm1", cache), good)
+    assert any("ignoring unreadable cache" in r.getMessage() for r in caplog.records)
+    np.testing.assert_array_equal(load_scene_npz(path)[1], good)  # written again
+    with pytest.raises(sdk.ParameterError, match=r"sky: expected finite triangles of shape \(K, 3, 3\)"):
+        save_scene_npz(tmp_path / "x.npz", scenes.procedural(0), sky)
+    assert not (tmp_path / "x.npz").exists()
+
+
 def test_scene_index_and_split_file_errors(tmp_path: Path, caplog: pytest.LogCaptureFixture):
     """A scene index that is not JSON (nor UTF-8), not an object, lacks its tables or is of another version
     (that one was a SceneNotFoundError whose advice lacked the cache folder) is SceneFormatError, each saying

@@ -21,7 +21,8 @@ Conversion rules (also in docs/scenes.md):
   of the shader script of that name (``map``/``clampMap``/``animMap``), else ``qer_editorimage``;
   a missing image gives a neutral grey material (logged).
 * Materials: :func:`~._materials.pbr_for_path`; ``alphaFunc`` or an alpha-blend stage sets
-  ``alpha_cutoff`` (0.5; 0.05 for GT0), other textures are made opaque (alpha 255).
+  ``alpha_cutoff`` (0.5; 0.05 for GT0; LT128 inverts the alpha channel first, since the renderer
+  keeps the texels at or above the cutoff), other textures are made opaque (alpha 255).
 * Spawn points: ``info_player_deathmatch``, ``info_player_start``, ``team_CTF_*spawn`` and
   ``team_CTF_*player``; eye = origin + ``eye_height_units`` (9 units of spawn lift + 26 of view
   height); Camera yaw = Q3 angle - 90 degrees.
@@ -152,7 +153,9 @@ def _bezier_weights(level: int) -> np.ndarray:
 
 def _tessellate_patch(verts: np.ndarray, w: int, h: int, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Tessellate a ``w`` x ``h`` control grid (row-major, ``verts`` structured) into positions,
-    normals, uvs (Q3 space) and triangles, oriented to agree with the normals."""
+    normals, uvs (Q3 space) and triangles, oriented to agree with the normals; an even, too small or
+    too large size (more control points than ``verts`` holds) gives no triangles."""
+    w, h = int(w), int(h)  # (the face lump's int32: w * h wrapped, 3 x 1431655769 read as 11 control points)
     if w < 3 or h < 3 or w % 2 == 0 or h % 2 == 0 or len(verts) < w * h:
         return (np.zeros((0, 3)),) * 2 + (np.zeros((0, 2)), np.zeros((0, 3), np.int64))
     attrs = np.concatenate([verts["pos"], verts["normal"], verts["uv"]], axis=1).astype(np.float64)[: w * h]
@@ -243,6 +246,10 @@ class _MaterialFactory:
             log.debug("no image for %s: neutral grey material", name)
             mat.base_color = (0.5, 0.5, 0.5, 1.0)
             return mat
+        if shader is not None and shader.alpha_func == "lt128":
+            # LT128 keeps the texels of alpha below 128, the renderer's alpha test those at or above its
+            # cutoff: inverted, alpha a is kept iff 255 - a >= 128, iff a < 128 (it drew the holes instead)
+            tex[..., 3] = 255 - tex[..., 3]
         cutoff = _alpha_cutoff(shader, tex)
         if cutoff is None:
             tex[..., 3] = 255

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from rtp.scene import Material, Mesh, PointLight, Scene, SpawnPoint, SunLight
+from rtp.sdk import ParameterError
 from rtp.sdk.files import atomic_output
 
 from ._errors import SceneFormatError
@@ -25,7 +26,11 @@ CACHE_VERSION = 1
 
 
 def save_scene_npz(path: str | Path, scene: Scene, sky: np.ndarray | None = None, stats: dict | None = None) -> None:
-    """Write ``scene`` (and blocker triangles) atomically to ``path``."""
+    """Write ``scene`` (and blocker triangles ``sky``, ``(K, 3, 3)``) atomically to ``path``.
+
+    Raises:
+        ParameterError: ``sky`` is not finite triangles of shape ``(K, 3, 3)``.
+    """
     arrays: dict[str, np.ndarray] = {}
     mats = []
     for j, m in enumerate(scene.materials):
@@ -55,7 +60,14 @@ def save_scene_npz(path: str | Path, scene: Scene, sky: np.ndarray | None = None
         "stats": stats or {},
     }
     arrays["meta"] = np.array(json.dumps(meta))
-    arrays["sky"] = np.zeros((0, 3, 3), np.float32) if sky is None else np.asarray(sky, np.float32)
+    sky_arr = np.zeros((0, 3, 3), np.float32) if sky is None else np.asarray(sky)
+    ok = sky_arr.ndim == 3 and sky_arr.shape[1:] == (3, 3) and sky_arr.dtype.kind in "iuf"
+    if ok:
+        sky_arr = sky_arr.astype(np.float32)  # (finite after the cast: past float32's range is an infinity)
+    if not ok or not np.isfinite(sky_arr).all():  # (a cache that no load would take, as it did)
+        raise ParameterError(f"sky: expected finite triangles of shape (K, 3, 3), got {sky_arr.dtype} {sky_arr.shape}",
+                             "sky")
+    arrays["sky"] = sky_arr
     with atomic_output(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, **arrays)  # type: ignore[arg-type]
 
@@ -96,6 +108,10 @@ def _load_scene_npz(path: str | Path) -> tuple[Scene, np.ndarray, dict]:
             for i, mat in enumerate(meta["meshes"])
         ]
         sky = z["sky"]
+    if sky.ndim != 3 or sky.shape[1:] != (3, 3) or sky.dtype.kind != "f" or not np.isfinite(sky).all():
+        # (it was returned as it was: the capture failed later, in sample_viewpoints, instead of converting again)
+        raise SceneFormatError(f"{path}: its sky triangles are {sky.dtype} {sky.shape}, not finite floats of "
+                               "shape (K, 3, 3)")
     sun = meta["sun"]
     scene = Scene(
         name=meta["name"],
