@@ -70,9 +70,7 @@ def run_metric(args: argparse.Namespace) -> int:
         raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "
                                  f"{test.shape[1]}x{test.shape[0]}")
     if "ppd" in params:  # ('width' as its number, printed; of an image too narrow for it refused before FLIP runs)
-        from rtp.metrics._flip import image_ppd
-
-        params["ppd"] = image_ppd(params["ppd"], ref.shape[1])
+        params["ppd"] = metrics.image_ppd(params["ppd"], ref.shape[1])
     info = metrics.metric_info(args.metric)
     # the map once, pooled as tile_metric pools it (tile_metric and error_map both computed it: FLIP and LPIPS twice)
     pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test, **params)

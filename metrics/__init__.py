@@ -24,7 +24,7 @@ import logging
 from ._deps import METRIC_DEPENDENCIES, check_dependencies
 from ._device import DEVICES, device_name, resolve_device
 from ._errors import InputRangeError, MetricDependencyError, MetricError, MetricParameterError
-from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, PPD_METRICS, flip_map, ppd_from_width, resolve_ppd
+from ._flip import DEFAULT_PPD, FLIP_DEFAULT_PPD, PPD_METRICS, flip_map, image_ppd, ppd_from_width, resolve_ppd
 from ._lpips import (
     FETCH_COMMAND,
     LPIPS_MIN_SIZE,
@@ -78,6 +78,7 @@ __all__ = [
     "error_map",
     "fetch_lpips_weights",
     "flip_map",
+    "image_ppd",
     "jnflip_map",
     "known_metrics",
     "jnyang_map",
