@@ -86,3 +86,28 @@ def test_packed_planes_flip_by_whole_cells_and_stay_true() -> None:
         augment_sample(x, y, ins, OUTPUTS, 4)
     with pytest.raises(ValueError, match="flip on whole cells"):
         augment_sample(x[:, :, :40], y, ins, OUTPUTS, 1)  # 40 columns: not whole 16-pixel tiles
+
+
+def test_pixel_differences_turn_and_stay_on_the_first_pixel_of_their_pair() -> None:
+    # A .dx plane holds each pixel's difference to its right neighbour, .dy to its lower one: a transpose swapped
+    # nothing (the crop's 1x2 differences read as 2x1 ones) and a flip left each value on the second pixel of its
+    # pair (the even columns, a 2-pixel block's own difference, then held the differences between blocks). Every
+    # symmetry now gives the planes of the moved luma, but for the last column (row): its neighbour is outside
+    # the crop, and it reads 0, as a frame's last one does.
+    from rtp.sdk import pixel_differences
+
+    rng = np.random.default_rng(5)
+    luma = rng.random((32, 48)).astype(np.float32)
+    ins = ("reprojected.y", "reprojected.y.dx", "reprojected.y.dy")
+    x = np.stack([luma, *pixel_differences(luma)])
+    y = rng.random((len(OUTPUTS), 2, 3)).astype(np.float32)
+    for sym, (_, flip_rows, flip_cols) in enumerate(SYMMETRIES):
+        xa, _ = augment_sample(x, y, ins, OUTPUTS, sym)
+        dx, dy = pixel_differences(xa[0])
+        assert np.allclose(xa[1][:, :-1], dx[:, :-1]) and np.allclose(xa[2][:-1], dy[:-1]), SYMMETRIES[sym]
+        if flip_cols:
+            assert not xa[1][:, -1].any()
+        if flip_rows:
+            assert not xa[2][-1].any()
+    with pytest.raises(ValueError, match="reprojected.y.dy"):
+        augment_sample(x[:2], y, ins[:2], OUTPUTS, 4)

@@ -120,6 +120,17 @@ def test_scores_and_safety() -> None:
     p2 = g2 + rng.normal(0, 0.1, 1000)
     safety, left = calibrate_safety(p2, g2, quantile=0.05)
     assert left <= 0.05 and safety > 0
+    # the smallest margin that leaves at most a share q underestimated (it was up to one value larger: 4 for
+    # q = 0.25, which left none of these four, and 3 for q = 0.5, which left one where two may stay)
+    short = np.array([1.0, 2.0, 3.0, 4.0])
+    assert calibrate_safety(np.zeros(4), short, quantile=0.25) == (3.0, 0.25)
+    assert calibrate_safety(np.zeros(4), short, quantile=0.5) == (2.0, 0.5)
+    assert calibrate_safety(np.zeros(4), short, quantile=0.0) == (4.0, 0.0)
+    assert calibrate_safety(np.zeros(4), -short, quantile=0.5) == (0.0, 0.0)  # (never a negative margin)
+    for q in (0.01, 0.05, 0.3):  # and with many values: at most q left, one value less would leave more
+        s, left = calibrate_safety(p2, g2, quantile=q)
+        short2 = g2 - p2
+        assert left <= q < np.mean(short2 > np.max(short2[short2 < s]))
 
 
 @pytest.mark.slow
@@ -704,8 +715,8 @@ def test_the_mirror_trains_with_context_and_is_recorded(tmp_path: Path, capsys: 
     data = _dataset(tmp_path / "ds", n=4)
     base = ["train", "--data", str(data), "--metric", "jnyang", "--crop", "32", "--context", "16", "--val-scenes",
             "scene0", "--arch", "fast", "--head-width", "0", "--inputs",
-            "reprojected.y,seen,albedo.y,normal.x,reprojected.y.blocks,albedo.y.blocks", "--batch", "16", "--mirror",
-            "--steps", "6"]
+            "reprojected.y,seen,albedo.y,normal.x,reprojected.y.blocks,albedo.y.blocks", "--batch", "16", "--seed", "1",
+            "--mirror", "--steps", "6"]  # (seed 0's six steps leave the 1x2 output flat: a dead output, exit 1)
     assert rtp_main([*base, "--out", str(tmp_path / "m.pt")]) == 0
     assert set(drawn) == {0, 1} and len(drawn) == 6 * 16  # each crop mirrored or not
     ck = load_checkpoint(tmp_path / "m.pt")
@@ -1243,6 +1254,63 @@ def test_bench_residuals_risk_table_is_monotone_towards_the_worse_side(monkeypat
         assert tab[:, 0].mean() > 0.8 if hib else tab[:, -1].mean() > 0.8  # the bad end fails
 
 
+def test_validation_targets_of_one_value_leave_r2_null_and_the_model_saved(tmp_path: Path) -> None:
+    # R² is undefined (NaN) where every validation target is one value (a held-out map with no error at all): the
+    # provenance holds only JSON values, so the final save failed with a MetadataError after every step was trained
+    data = _dataset(tmp_path / "ds", n=6)
+    store = TargetStore(data)
+    for sid in ("s000", "s003"):  # scene0's samples
+        store.write(sid, "jnyang", np.zeros((6, H // 4, W // 4), np.float32), (H, W))
+    result = train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), crop=32, batch=4, steps=2,
+                               val_scenes=("scene0",)))
+    assert np.isnan(result.val["transformed"]["r2"]) and result.val["transformed"]["n"] == 2 * 4 * (H // 16) * (W // 16)
+    prov = load_checkpoint(result.checkpoint).metadata.provenance
+    assert prov["validation"]["transformed"]["r2"] is None and prov["validation"]["transformed"]["mae"] >= 0
+    assert all(h["val"]["r2"] is None for h in prov["history"])
+
+
+def test_a_mirrored_window_scores_the_tiles_it_scored_unmirrored(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # With --context, a window at the frame's left border scores its border column and not its right margin; a
+    # mirrored window has them the other way round. The mask was not mirrored with it: such a window scored the
+    # mirrored margin (tiles that read the crop's zero padding) and left out the border tiles.
+    import rtp.train._loop as loop
+
+    batches: list[tuple[np.ndarray, list[int]]] = []
+    masks: list[np.ndarray] = []
+    losses: list[torch.Tensor] = []
+
+    def spy_augment(xb, yb, inputs, outputs, symmetries):  # type: ignore[no-untyped-def]
+        out = augment_batch(xb, yb, inputs, outputs, symmetries)
+        batches.append((out[1], list(symmetries)))
+        return out
+
+    def spy_scored(*args):  # type: ignore[no-untyped-def]
+        masks.append(scored_tiles(*args))
+        return masks[-1]
+
+    def spy_loss(p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        losses.append(t.detach().clone())
+        return torch.nn.functional.l1_loss(p, t)
+
+    augment_batch, scored_tiles = loop.augment_batch, loop._scored_tiles
+    monkeypatch.setattr(loop, "augment_batch", spy_augment)
+    monkeypatch.setattr(loop, "_scored_tiles", spy_scored)
+    monkeypatch.setitem(loop._LOSSES, "l1", spy_loss)
+    data = _dataset(tmp_path / "ds", n=4)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), arch="fast", crop=32, context=16,
+                      mirror=True, batch=16, steps=3, val_scenes=("scene0",)))
+    t = load_checkpoint(tmp_path / "m.pt").metadata.transform
+    asymmetric = 0
+    for (yb, sym), mask, got in zip(batches, masks, losses, strict=True):
+        want = []
+        for y, m, s in zip(yb, mask, sym):  # the mask in the window's original layout, mirrored where it was
+            m = m[0, :, ::-1] if s else m[0]
+            asymmetric += bool(s and not np.array_equal(m, m[:, ::-1]))
+            want.append(t.forward(y.astype(np.float64))[:, m].ravel())
+        np.testing.assert_allclose(got.numpy(), np.concatenate(want), rtol=1e-6)
+    assert asymmetric  # (windows at a border, mirrored: where the old mask was wrong)
+
+
 def test_context_scores_only_tiles_that_see_what_a_whole_frame_shows() -> None:
     from rtp.train import _loop
     from rtp.train.model import FastNet
@@ -1601,6 +1669,11 @@ def test_training_values_out_of_range_are_refused_before_any_work(tmp_path: Path
     ({"distill": 0.0}, "distill", r"a weight in \(0, 1\]"),
     ({"ema": 1.0}, "ema", r"a decay in \[0, 1\)"),
     ({"aux_metrics": ("jnyang",)}, "aux_metrics", "other than jnyang"),
+    # a lone .dx plane cannot be transposed (it turns into the .dy one); a .tiles plane's 16-pixel cells cannot be
+    # mirrored in crops that start on 8-pixel tiles (between two cells: the mirror garbled them in silence)
+    ({"augment": True, "inputs": ("reprojected.y", "seen", "reprojected.y.dx")}, "augment", "a .dx plane's .dy"),
+    ({"mirror": True, "tile": 8, "inputs": ("reprojected.y", "seen", "reprojected.y.tiles")}, "mirror",
+     "expected tile >= 16"),
 ])
 def test_train_refuses_a_combination_naming_its_field_before_reading_data(fields: dict[str, Any], key: str, words: str,
                                                                            tmp_path: Path) -> None:

@@ -4,7 +4,11 @@ A horizontal or vertical flip of a tile-aligned crop maps every VRS block onto a
 shape, so each rate's target moves with its tile. A transpose (rows <-> columns) turns a W x H block
 into an H x W one: the targets of 1x2 and 2x1, and of 2x4 and 4x2, swap. Channels that hold a
 direction change with the image: view-space normal x points right and y up, screen motion x right
-and y down (rtp.sdk.CHANNELS).
+and y down (rtp.sdk.CHANNELS). A ``.dx`` / ``.dy`` plane (rtp.sdk.pixel_differences) holds each pixel's
+difference to its right / lower neighbour: a transpose swaps the two, and a flip moves each value
+to the pixel its pair now begins at (one over), so that a 2-pixel block's difference stays on its
+first pixel. The pixel past the crop that the new last column (row) would need is not in it: that
+column (row) reads 0, as a frame's last one does.
 
 The packed planes (``.blocks``: six values on the first pixels of each 4x4 cell; ``.tiles``: twelve on
 the first pixels of each 16x16 tile) flip by cells: the cells (tiles) change places and each keeps
@@ -21,7 +25,7 @@ import numpy as np
 
 from rtp.sdk import BLOCK_CELL, BLOCK_TILE
 
-__all__ = ["SYMMETRIES", "augment_batch", "augment_sample"]
+__all__ = ["SYMMETRIES", "augment_batch", "augment_sample", "move_tiles"]
 
 #: (transpose, flip rows, flip columns), applied in that order; index 0 is the identity, index 1 the
 #: left-right mirror (``TrainConfig.mirror`` draws from the first two).
@@ -47,7 +51,37 @@ def _transpose_channels(x: np.ndarray, inputs: Sequence[str]) -> np.ndarray:
             out[i] = src["motion.x"]
         elif name in ("normal.x", "normal.y", "motion.x", "motion.y"):
             raise ValueError(f"augment: transposing needs both {name[:-1]}x and {name[:-1]}y among the inputs")
+        elif name.endswith((".dx", ".dy")):  # the difference to the right neighbour is the old one to the lower
+            other = name[:-1] + ("y" if name.endswith("x") else "x")
+            if other not in src:
+                raise ValueError(f"augment: transposing needs both {name[:-1]}x and {name[:-1]}y among the inputs")
+            out[i] = src[other]
     return out
+
+
+def _shift_differences(plane: np.ndarray, axis: int) -> np.ndarray:
+    """A flipped ``.dx`` (``axis`` 1) or ``.dy`` (``axis`` 0) plane, each pixel's difference to its next
+    neighbour: the plain flip left each value on the second pixel of its pair; moved one back, the last
+    column (row), whose neighbour lies outside the crop, reads 0 (as a frame's last one does)."""
+    out = np.zeros_like(plane)
+    if axis == 0:
+        out[:-1] = plane[1:]
+    else:
+        out[:, :-1] = plane[:, 1:]
+    return out
+
+
+def move_tiles(t: np.ndarray, symmetry: int) -> np.ndarray:
+    """A per-tile array ``(..., th, tw)`` (targets of one rate, a mask of the scored tiles) moved with its crop
+    under ``SYMMETRIES[symmetry]`` (no rate renamed: :func:`augment_sample` swaps the transposed rates)."""
+    transpose, flip_rows, flip_cols = SYMMETRIES[symmetry]
+    if transpose:
+        t = t.swapaxes(-1, -2)
+    if flip_rows:
+        t = t[..., ::-1, :]
+    if flip_cols:
+        t = t[..., ::-1]
+    return t
 
 
 def packed_cell(name: str) -> int:
@@ -86,6 +120,12 @@ def augment_sample(x: np.ndarray, y: np.ndarray, inputs: Sequence[str], outputs:
         sign[[i for i, n in enumerate(inputs) if n in ("normal.x", "motion.x")]] *= -1
     if (sign != 1).any():
         x = x * sign[:, None, None]
+    differences = [(i, 1 if n.endswith(".dx") else 0) for i, n in enumerate(inputs) if n.endswith((".dx", ".dy"))]
+    if differences and (flip_rows or flip_cols):
+        x = np.array(x)  # a copy: the flipped differences move one pixel back along their axis
+        for i, axis in differences:
+            if flip_cols if axis else flip_rows:
+                x[i] = _shift_differences(x[i], axis)
     if packed and (flip_rows or flip_cols):
         x = np.array(x)  # a copy: the packed planes are rebuilt from the crop's own
         for i, c in packed:

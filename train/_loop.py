@@ -35,7 +35,7 @@ from rtp.sdk.files import check_output, writer_lock
 
 from . import checkpoint as ckpt
 from . import transforms as tt
-from ._augment import SYMMETRIES, augment_batch
+from ._augment import SYMMETRIES, augment_batch, move_tiles, packed_cell
 from ._frames import Frame, crop_batch
 from ._recipe import check_fields, load_recipe, normal_fields
 from ._safety import calibrate_safety
@@ -445,6 +445,15 @@ def _scored_tiles(oy: Sequence[int], ox: Sequence[int], n: int, margin: int, til
     return out
 
 
+def _json_numbers(value: Any) -> Any:
+    """``value`` (dicts and lists of scores) with each NaN or infinite float as ``None``: JSON's null."""
+    if isinstance(value, dict):
+        return {k: _json_numbers(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_json_numbers(v) for v in value]
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
 def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str], list[str], list[str]]:
     """Training and validation sample ids, and the scenes of each side."""
     by_scene: dict[str, list[str]] = {}
@@ -665,14 +674,21 @@ def check_config(cfg: TrainConfig) -> TrainConfig:
         raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})", "crop")
     if cfg.arch not in ARCHS:
         raise sdk.ParameterError(f"arch: expected one of {', '.join(ARCHS)}, got {cfg.arch!r}", "arch")
-    pairs = [("normal.x", "normal.y"), ("motion.x", "motion.y")]
+    pairs = [("normal.x", "normal.y"), ("motion.x", "motion.y"),
+             *((c[:-1] + "x", c[:-1] + "y") for c in cfg.inputs if c.endswith((".dx", ".dy")))]
     if cfg.augment and any((a in cfg.inputs) != (b in cfg.inputs) for a, b in pairs):
         raise sdk.ParameterError("augment: transposing a crop needs both normal.x and normal.y (and both motion.x and "
-                                 f"motion.y) among the inputs, or neither; got {', '.join(cfg.inputs)}", "augment")
+                                 "motion.y, and a .dx plane's .dy) among the inputs, or neither; got "
+                                 f"{', '.join(cfg.inputs)}", "augment")
     packed = [c for c in cfg.inputs if c.endswith((".blocks", ".tiles"))]
     if cfg.augment and packed:
         raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
                                  "flipped or transposed crop would read the wrong rates", "augment")
+    coarse_cells = [c for c in packed if packed_cell(c) > cfg.tile]
+    if cfg.mirror and coarse_cells:  # (crops start on the tile grid: one between two cells mirrored them garbled)
+        raise sdk.ParameterError(f"mirror: {', '.join(coarse_cells)} mirror by whole {packed_cell(coarse_cells[0])}-"
+                                 f"pixel cells, and crops on {cfg.tile}-pixel tiles start between them: expected tile "
+                                 f">= {max(packed_cell(c) for c in coarse_cells)} with them, got {cfg.tile}", "mirror")
     if cfg.mirror and cfg.augment:
         raise sdk.ParameterError("mirror: augment's eight symmetries include the mirror; give one of the two", "mirror")
     if cfg.loss not in LOSSES:
@@ -1206,8 +1222,12 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             # several times faster than numpy's astype, which took a quarter of a CPU step; half the bytes cross to a GPU)
             out_all = net(torch.from_numpy(xb).to(dev).to(dtype=torch.float32, memory_format=_layout(dev)))
             pred = out_all[:, :n_out]
-            scored = (torch.from_numpy(_scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)).to(dev)
-                      .expand_as(pred) if margin else None)
+            scored = None
+            if margin:  # (the tiles scored in each window, moved with it when it was mirrored)
+                mask = _scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)
+                if cfg.augment or cfg.mirror:
+                    mask = np.stack([move_tiles(m, s) for m, s in zip(mask, sym)])
+                scored = torch.from_numpy(np.ascontiguousarray(mask)).to(dev).expand_as(pred)
             loss = loss_fn(pred[scored], target[scored]) if scored is not None else loss_fn(pred, target)
             if cfg.aux_metrics:  # multi-task: each auxiliary metric's outputs against its own transformed targets
                 aux_losses = []
@@ -1252,10 +1272,12 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     safety, under = calibrate_safety(p, g, worse=worse, quantile=cfg.safety_quantile)
     safe_scores = scores(p + worse * safety, g, worse=worse).as_dict()
     extra = {
-        "validation": {"transformed": val_scores, "with_safety": safe_scores},
+        # (R² is NaN, undefined, on validation targets all of one value: null in the provenance, which holds only JSON
+        # values; it failed the final save, after every step)
+        "validation": _json_numbers({"transformed": val_scores, "with_safety": safe_scores}),
         "safety_rule": "mean underestimation" if cfg.safety_quantile is None else f"quantile {cfg.safety_quantile}",
         "underestimated_share_with_safety": under,
-        "history": history[-20:],
+        "history": _json_numbers(history[-20:]),
         **({"head": cfg.head} if cfg.arch == "paper" else {}),  # (the fast network reads no head: none recorded)
         "arch": cfg.arch,
         **({"grow": cfg.grow} if cfg.grow != 1 else {}),
