@@ -168,8 +168,9 @@ class EvaluationReport:
         if self.matched:
             lines += ["", "## At matched quality", "",
                       "Each method's parameter swept over all tiles of all scenes; the most work it saves failing at "
-                      "most as often as the model at its default threshold (each sweep point interpolated linearly "
-                      "towards the next one that fails more, as `evaluate.saved_at` reads a sweep).", "",
+                      f"most as often as the model at its threshold {self.threshold:g}, the decision table's (each sweep "
+                      "point interpolated linearly towards the next one that fails more, as `evaluate.saved_at` reads a "
+                      "sweep).", "",
                       "| method | fails % | work saved % | parameter |", "|---|---|---|---|"]
             lines += [f"| {m['method']} | {_pct(m['fail_share'])} | {_pct(m['work_saved'])} | {m['parameter']} |"
                       for m in self.matched]
@@ -898,7 +899,7 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
         "R² %, MAE, MAE under., σ MAE and under % are in the model's transformed space (as the paper reports them); "
         f"MAE [{metric}] is in metric units. 'model' includes the safety margin (what an engine gets).",
         f"Scored rates: the network's own outputs ({', '.join(outputs)}); extrapolated rates enter the decisions only.",
-        f"'fails %': tiles whose chosen rate's true {metric} {'falls below' if hib else 'reaches'} {thr:g}; "
+        f"'fails %': tiles whose chosen rate's true {metric} {'is not above' if hib else 'reaches'} {thr:g}; "
         "1x1 never fails. 'work saved %': 1 - 1/(W·H) of the chosen rate, averaged over the tiles weighted by the "
         "pixels each holds (a partial tile at the frame's edge its real ones).",
     ]

@@ -13,10 +13,18 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rtp.sdk import InputDtypeError, InputShapeError, NonFiniteInputError, luma, tile_extents, tile_grid
+from rtp.sdk import (
+    InputChannelError,
+    InputDtypeError,
+    InputShapeError,
+    NonFiniteInputError,
+    luma,
+    tile_extents,
+    tile_grid,
+)
 
 from ._errors import InputRangeError, MetricParameterError
-from ._image import RANGE_TOLERANCE, _is_torch
+from ._image import RANGE_TOLERANCE, _is_torch, as_batch
 
 __all__ = [
     "DEFAULT_WEBER_L",
@@ -118,7 +126,7 @@ def check_weber_l(weber_l: float) -> float:
     return value
 
 
-def weber_denominator(reference: np.ndarray, weber_l: float = DEFAULT_WEBER_L) -> np.ndarray:
+def weber_denominator(reference: Any, weber_l: float = DEFAULT_WEBER_L) -> Any:
     """Per-pixel Weber denominator ``L + l`` of reference images.
 
     ``L`` is the mean Rec.601 luma of the reference over the 4x4 block containing the pixel
@@ -126,17 +134,20 @@ def weber_denominator(reference: np.ndarray, weber_l: float = DEFAULT_WEBER_L) -
     the last block row/column is averaged over its real pixels only.
 
     Args:
-        reference: display-encoded RGB ``(..., H, W, 3)`` float in [0, 1] (numpy; a torch tensor is
-            copied to numpy). Integer images (8-bit: divide by 255), NaN/inf and values outside [0, 1]
-            are refused as by the map functions.
+        reference: display-encoded RGB in [0, 1], numpy ``(..., H, W, 3)`` float, or a torch tensor
+            ``(3, H, W)`` / ``(N, 3, H, W)`` as the map functions take it. Integer images (8-bit: divide
+            by 255), another channel count, empty images, NaN/inf and values outside [0, 1] are refused
+            as by the map functions.
         weber_l: environment luminance ``l`` > 0 in display-luma units.
 
     Returns:
-        ``(..., H, W)`` float32, strictly positive.
+        ``(..., H, W)`` float32, strictly positive; for a torch tensor a tensor ``(H, W)`` /
+        ``(N, H, W)`` on its device, as the map functions return.
     """
     weber_l = check_weber_l(weber_l)
-    if _is_torch(reference):
-        reference = reference.detach().to("cpu").numpy()  # type: ignore[attr-defined]
+    if _is_torch(reference):  # (its planar (3, H, W) was read as an (H, W, 3) image: refused, or misread)
+        batch = as_batch(reference, "reference")
+        return batch.wrap(_denominator(batch.data, weber_l))
     try:
         arr = np.asarray(reference)
     except (TypeError, ValueError) as err:  # a ragged list
@@ -145,6 +156,12 @@ def weber_denominator(reference: np.ndarray, weber_l: float = DEFAULT_WEBER_L) -
     if arr.dtype.kind != "f":  # (uint8 gave L in 0..255: a denominator 255 times too large, no error)
         raise InputDtypeError(f"reference: expected a floating-point image with values in [0, 1], got dtype {arr.dtype}"
                               + (" (divide 8-bit images by 255)" if arr.dtype == np.uint8 else ""))
+    if arr.ndim < 3 or 0 in arr.shape[-3:-1]:  # (an empty frame was tile_grid's ParameterError "height")
+        raise InputShapeError(f"reference: expected an image (..., H, W, 3) with H, W >= 1, got shape {arr.shape}",
+                              tuple(arr.shape), "(..., H, W, 3)")
+    if arr.shape[-1] != 3:  # (RGBA was luma's InputShapeError; the map functions' is InputChannelError)
+        raise InputChannelError(f"reference: expected 3 channels (RGB) on the last axis, got shape {arr.shape}",
+                                tuple(arr.shape), "(..., H, W, 3)")
     if arr.size:
         if not np.isfinite(arr).all():
             raise NonFiniteInputError("reference: contains NaN or infinite values")

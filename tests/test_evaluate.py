@@ -24,6 +24,7 @@ from rtp.evaluate import (
     Oracle,
     Yang2019,
     evaluate,
+    failing_tiles,
     motion_factor_half,
     motion_factor_quarter,
     plots,
@@ -1049,3 +1050,26 @@ def test_the_work_saved_counts_a_partial_edge_tile_by_its_pixels(tmp_path: Path,
     assert model_row["work_saved"] == pytest.approx(np.mean([sdk.work_saved(c, (h, w), T) for c in frames]))
     point = _sweep_point(rep, "model", "threshold 0.2")
     assert point["work_saved"] == pytest.approx(model_row["work_saved"])
+
+
+def test_the_reports_words_give_the_failing_rule_and_the_threshold_matched(dataset: Path, model: Path,
+                                                                         tmp_path: Path) -> None:
+    """A PSNR tile fails where its true PSNR is not above the threshold (failing_tiles: equal fails), and the note
+    said it "falls below"; the matched table said "at its default threshold" of a run at --threshold 0.3."""
+    codes = np.full((1, 2), sdk.RATE_CODES["2x2"], np.uint8)
+    truth = np.full((6, 1, 2), 35.0, np.float32)
+    truth[:, 0, 1] = 35.5
+    assert failing_tiles(codes, truth, 35.0, True).tolist() == [[True, False]]
+    store = TargetStore(dataset)
+    store.declare("psnr", {})
+    for i in range(3):
+        store.write(f"s{i}", "psnr", np.full((6, H // 4, W // 4), 35.0, np.float32), (H, W))
+    meta = base_metadata(metric="psnr", weber_l=None, transform={"type": "clamped", "mu_y": 38.0},
+                         default_threshold=35.0, outputs=["1x2", "2x1"])
+    psnr_model = build_onnx(tmp_path / "p.onnx", weights=np.eye(2, 4, dtype=np.float32), tile=T, metadata=meta)
+    rep = evaluate(psnr_model, dataset, baselines=False, sweep=False)
+    assert any("true psnr is not above 35" in n for n in rep.notes), rep.notes
+    assert rep.row("decisions", "model")["fail_share"] == 1.0 - rep.row("decisions", "model")["rate_shares"]["1x1"]
+    text = evaluate(model, dataset, threshold=0.3).to_markdown()
+    assert "as often as the model at its threshold 0.3, the decision table's" in text
+    assert "default threshold" not in text

@@ -709,6 +709,27 @@ def test_weber_denominator_validates_its_reference(ref: np.ndarray) -> None:
         M.weber_denominator(bad)
 
 
+def test_weber_denominator_takes_images_as_the_map_functions_do(ref: np.ndarray) -> None:
+    """A torch (3, H, W) tensor, the map functions' layout, was read as an (H, W, 3) image (refused, or with
+    three columns misread); RGBA was luma's InputShapeError, an empty frame tile_grid's ParameterError."""
+    torch = pytest.importorskip("torch")
+    planar = torch.from_numpy(np.ascontiguousarray(ref.transpose(2, 0, 1)))
+    got = M.weber_denominator(planar, 0.02)
+    assert isinstance(got, torch.Tensor)
+    np.testing.assert_array_equal(got.numpy(), M.weber_denominator(ref, 0.02))
+    batch = M.weber_denominator(planar[None], 0.02)
+    assert tuple(batch.shape) == (1, *ref.shape[:2])
+    np.testing.assert_allclose(M.jnyang_map(ref, ref[::-1].copy()),
+                               M.yang_map(ref, ref[::-1].copy()) / M.weber_denominator(ref), rtol=1e-6)
+    with pytest.raises(sdk.InputChannelError):
+        M.weber_denominator(planar.permute(1, 2, 0))  # (H, W, 3) is no torch image here, as for the maps
+    with pytest.raises(sdk.InputChannelError):
+        M.weber_denominator(np.dstack([ref, ref[..., :1]]))
+    for empty in (ref[:0], ref[:, :0], ref[..., 0]):
+        with pytest.raises(sdk.InputShapeError):
+            M.weber_denominator(empty)
+
+
 def test_boolean_parameters_are_not_numbers_nor_strings(ref: np.ndarray, rates: dict[str, np.ndarray]) -> None:
     """weber_l=True was l = 1; paper_quirk="no" (a config file's text) switched the paper's quirk on."""
     test = rates["2x2"]
