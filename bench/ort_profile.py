@@ -12,7 +12,7 @@ separable, ...; and ``tile``, 16 unless given) and random weights, on the input 
 run through an onnxruntime session built as ``rtp.sdk.load`` builds it (same threads, same graph
 optimisations, so BatchNorm folded and convolutions fused with their ReLU in onnxruntime's blocked
 NCHWc layout) with profiling on; the first run is a warm-up and not counted. Prints, per model, a
-Markdown table of its nodes in graph order: operator, output shape, multiply-adds (convolutions:
+Markdown table of its nodes in the order they run: operator, output shape, multiply-adds (convolutions:
 output positions x output channels x input channels per group x kernel area), median kernel time
 over the runs, share of the summed kernel time, and the rate (G multiply-adds per second, where a
 node has them). onnxruntime's blocked layout pads a layer's channels to its block (8 or 16), so a
@@ -68,7 +68,8 @@ def _macs(args: dict[str, Any]) -> int:
 
 
 def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, threads: int) -> list[dict[str, Any]]:
-    """Per node, in graph order: name, operator, output shape, multiply-adds and the median kernel ms."""
+    """Per node, in the order the nodes run (a topological order of onnxruntime's optimised graph): name,
+    operator, output shape, multiply-adds and the median kernel ms."""
     w, h = size
     with tempfile.TemporaryDirectory() as d:
         so = ort.SessionOptions()
@@ -89,6 +90,8 @@ def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, thre
     warm_end = runs[0][1]
     times: dict[str, list[float]] = defaultdict(list)
     info: dict[str, dict[str, Any]] = {}
+    # when each node first ran: its place in the run (onnxruntime's node_index numbers the nodes its optimiser
+    # adds after the others: a group's Sum and the probe's ReduceSum were listed before the convolutions they read)
     order: dict[str, int] = {}
     for e in events:
         if e.get("cat") != "Node" or not e["name"].endswith("_kernel_time") or e["ts"] <= warm_end:
@@ -96,7 +99,7 @@ def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, thre
         name = e["name"].removesuffix("_kernel_time")
         args = e.get("args", {})
         times[name].append(e["dur"] / 1000.0)
-        order.setdefault(name, int(args.get("node_index", len(order))))
+        order[name] = min(order.get(name, e["ts"]), e["ts"])
         out = args.get("output_type_shape", [])
         info[name] = {"op": args.get("op_name", "?"), "shape": next(iter(out[0].values())) if out else [],
                       "macs": _macs(args)}

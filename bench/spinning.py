@@ -51,8 +51,9 @@ LONG_REPEATS = 3
 WARM_UP = 3
 #: Seconds to wait after ``sdk.load`` (table 1 gives the CPU time used meanwhile): a new session's
 #: worker threads spin before its first run whatever the setting (``jnyang-reuse``'s tail session,
-#: which ``predict`` never runs, too), a one-off cost of loading that would otherwise land in the
-#: first frames measured.
+#: which ``predict`` never runs, too; with ``sdk.load``'s default, only that one: ``load`` runs a
+#: free-size model once itself), a one-off cost of loading that would otherwise land in the first
+#: frames measured.
 SETTLE_S = 0.2
 SETTINGS = ((False, "stop after a run (`sdk.load` default)"), (True, "spin between runs (onnxruntime default)"))
 

@@ -619,14 +619,18 @@ def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str
     d = _read_yaml(metadata) if isinstance(metadata, (str, os.PathLike)) else metadata
     if not isinstance(d, Mapping):
         raise MetadataError(f"retune: expected a mapping of metadata fields, got {type(d).__name__}")
+    # (a sidecar's refusals name it, as its invalid values' do below)
+    source = f"{metadata}: " if isinstance(metadata, (str, os.PathLike)) else ""
     other = sorted(str(k) for k in d if k not in RETUNE_FIELDS)
     if other:
-        raise MetadataError(f"{other[0]}: retune changes only the decision fields {', '.join(RETUNE_FIELDS)}; "
+        raise MetadataError(f"{source}{other[0]}: retune changes only the decision fields {', '.join(RETUNE_FIELDS)}; "
                             f"{other[0]} changes what the model predicts (set it in training or at export)", other[0])
     if not d:
-        raise MetadataError(f"retune: the sidecar sets none of {', '.join(RETUNE_FIELDS)}: nothing to change")
+        raise MetadataError(f"{source or 'retune: '}the sidecar sets none of {', '.join(RETUNE_FIELDS)}: nothing to "
+                            "change")
     if d.get("default_threshold", 0.0) is None:
-        raise MetadataError("default_threshold: retune replaces it, it cannot be removed (null)", "default_threshold")
+        raise MetadataError(f"{source}default_threshold: retune replaces it, it cannot be removed (null)",
+                            "default_threshold")
     fields = before.metadata.to_dict()
     for k, v in d.items():  # null: rate_factors back to one threshold, description empty
         fields.pop(k, None)
@@ -639,7 +643,6 @@ def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str
     try:
         meta = ModelMetadata.from_dict(fields)
     except MetadataError as err:  # (the model's own fields were valid as it loaded: the sidecar's, named)
-        source = f"{metadata}: " if isinstance(metadata, (str, os.PathLike)) else ""
         raise MetadataError(f"{source}{err}", err.key) from err
     model = onnx.load(str(src))
     write_metadata(model, meta)
@@ -773,7 +776,7 @@ def export_checkpoint(
     source = f"{extra_metadata}: " if isinstance(extra_metadata, (str, os.PathLike)) else ""
     if extra_metadata is not None:
         extra = _fields(extra_metadata, "extra_metadata")
-        _check_not_computed(extra)
+        _check_not_computed(extra, source)
         if "provenance" in extra and not isinstance(extra["provenance"], Mapping):
             # (merged below, the export's own entry replaced it: the checkpoint's provenance was lost, without a word)
             raise MetadataError(f"{source}provenance: expected a mapping (merged into the checkpoint's provenance), got "
@@ -788,7 +791,7 @@ def export_checkpoint(
     except MetadataError as err:  # (the checkpoint's own metadata was validated as it loaded: the sidecar's)
         raise MetadataError(f"{source}{err}", err.key) from err
     ckpt_mod.check_fits(net, meta)
-    _check_trained_fields(ckpt.metadata, meta)
+    _check_trained_fields(ckpt.metadata, meta, source)
 
     c, t = net.config["in_channels"], net.config["tile"]
     h, w = _parity_sizes(t)[0]
@@ -830,14 +833,15 @@ def export_checkpoint(
 TRAINED_FIELDS = ("metric", "inputs", "outputs", "tile_size", "transform", "weber_l")
 
 
-def _check_trained_fields(trained: ModelMetadata, meta: ModelMetadata) -> None:
-    """Refuse extra metadata that changes what the checkpoint's network was trained for (:data:`TRAINED_FIELDS`)."""
+def _check_trained_fields(trained: ModelMetadata, meta: ModelMetadata, source: str = "") -> None:
+    """Refuse extra metadata that changes what the checkpoint's network was trained for (:data:`TRAINED_FIELDS`);
+    ``source`` ("SIDECAR.yaml: ") starts the message where the extra metadata came from a file."""
     for key in TRAINED_FIELDS:
         was, now = getattr(trained, key), getattr(meta, key)
         if key == "transform":
             was, now = was.to_dict(), now.to_dict()
         if was != now:
-            raise MetadataError(f"{key}: the checkpoint's network was trained for {_shown(was)}, the extra metadata says "
+            raise MetadataError(f"{source}{key}: the checkpoint's network was trained for {_shown(was)}, the extra metadata says "
                                 f"{_shown(now)}; extra metadata sets descriptive and decision fields (description, "
                                 f"default_threshold, rate_factors, provenance, ...), not what the network was trained "
                                 f"on: train another model", key)
@@ -861,11 +865,12 @@ _COMPUTED = {
 COMPUTED_FIELDS = tuple(_COMPUTED)
 
 
-def _check_not_computed(extra: Mapping[Any, Any]) -> None:
-    """Refuse extra metadata that sets a field the export computes (:data:`COMPUTED_FIELDS`)."""
+def _check_not_computed(extra: Mapping[Any, Any], source: str = "") -> None:
+    """Refuse extra metadata that sets a field the export computes (:data:`COMPUTED_FIELDS`); ``source``
+    ("SIDECAR.yaml: ") starts the message where the extra metadata came from a file."""
     for key, what in _COMPUTED.items():
         if key in extra:
-            raise MetadataError(f"{key}: computed by the export ({what}), expected no {key} in the extra metadata, "
+            raise MetadataError(f"{source}{key}: computed by the export ({what}), expected no {key} in the extra metadata, "
                                 f"got {reprlib.repr(extra[key])}: leave it out", key)
 
 

@@ -335,8 +335,10 @@ def load(
     CPU: ``python bench/spinning.py``). The SDK stops them when a run returns (onnxruntime's
     ``session.force_spinning_stop``); within a run they spin as before, so ``predict`` costs the
     same. ``spin_between_runs=True`` keeps onnxruntime's default, for a process that does nothing but
-    run one model back to back. (A new session's threads spin for a while after it is built either
-    way: a one-off cost of loading.)
+    run one model back to back. (A new session's threads spin for a while after it is built, until its
+    first run, either way: a one-off cost of loading. ``load`` runs a model of free frame size once
+    itself, to check its tile grid, so with the default only a fixed-size model's threads and a splitting
+    model's tail session spin after it returns.)
     """
     model_path = _resolve_path(path)
     return _load(model_path, None, providers=providers, threads=threads, metadata=metadata, strict=strict,

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -165,9 +166,12 @@ def test_extra_metadata_cannot_change_what_the_network_was_trained_for(tmp_path:
     # network as a FLIP model, with the checkpoint's safety and mu_y)
     ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
     (tmp_path / "extra.yaml").write_text(extra)
-    with pytest.raises(sdk.MetadataError, match=f"^{key}: the checkpoint's network was trained for") as err:
+    # a sidecar's refusal names the sidecar (it named none: which of a script's exports said so?)
+    with pytest.raises(sdk.MetadataError, match=rf"^.*extra\.yaml: {key}: the checkpoint's network was trained for") as err:
         export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=tmp_path / "extra.yaml")
     assert err.value.key == key and not (tmp_path / "x.onnx").exists()
+    with pytest.raises(sdk.MetadataError, match=f"^{key}: the checkpoint's network was trained for"):
+        export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=yaml.safe_load(extra))
     restated = {k: base_metadata()[k] for k in ("metric", "inputs", "outputs", "tile_size", "transform")}
     assert sdk.load(export.export_checkpoint(ck, tmp_path / "y.onnx", extra_metadata=restated)).metadata.metric == "jnyang"
 
@@ -185,14 +189,16 @@ def test_extra_metadata_cannot_set_what_the_export_computes(tmp_path: Path, caps
 
     ck = checkpoint.save(tmp_path / "m.pt", trained_like_fast_net(4, seed=0), base_metadata())
     (tmp_path / "extra.yaml").write_text(extra)
-    for probe in (True, False):
-        with pytest.raises(sdk.MetadataError, match=f"^{key}: computed by the export .*, expected no {key} in the "
-                                                    f"extra metadata, got .*: leave it out$") as err:
+    for probe in (True, False):  # (the sidecar named: it named none)
+        with pytest.raises(sdk.MetadataError, match=rf"^.*extra\.yaml: {key}: computed by the export .*, expected no "
+                                                    f"{key} in the extra metadata, got .*: leave it out$") as err:
             export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=tmp_path / "extra.yaml", finite_probe=probe)
         assert err.value.key == key and not (tmp_path / "x.onnx").exists()
+    with pytest.raises(sdk.MetadataError, match=f"^{key}: computed by the export"):
+        export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=yaml.safe_load(extra))
     assert key in export.COMPUTED_FIELDS
     assert export_main([str(ck), "--metadata", str(tmp_path / "extra.yaml"), "-o", str(tmp_path / "x.onnx")]) == 2
-    assert f"rtp-export: error: {key}: computed by the export" in capsys.readouterr().err
+    assert f"rtp-export: error: {tmp_path / 'extra.yaml'}: {key}: computed by the export" in capsys.readouterr().err
     assert not (tmp_path / "x.onnx").exists()
 
 
@@ -729,6 +735,13 @@ def test_a_retune_sidecars_invalid_field_names_the_sidecar(fast_onnx: Path, tmp_
         assert err.value.key == key and not (tmp_path / "out.onnx").exists()
     with pytest.raises(sdk.MetadataError, match="^description: expected a string"):
         export.retune(fast_onnx, {"description": 5}, tmp_path / "out.onnx")
+    # its refusals too (they named no file)
+    for text, words in (("safety: 0.1\n", "safety: retune changes only"), ("", "the sidecar sets none of"),
+                        ("default_threshold: null\n", "default_threshold: retune replaces it")):
+        side.write_text(text)
+        with pytest.raises(sdk.MetadataError, match=rf"^.*r\.yaml: {words}"):
+            export.retune(fast_onnx, side, tmp_path / "out.onnx")
+        assert not (tmp_path / "out.onnx").exists()
 
 
 def test_a_sidecar_that_is_not_text_or_not_yaml_is_a_metadata_error(fast_onnx: Path, tmp_path: Path) -> None:

@@ -41,6 +41,20 @@ def test_profile_lists_every_convolution_with_its_multiply_adds() -> None:
     assert probe["ReduceSum"]["shape"] == [] and probe["GlobalAveragePool"]["shape"] == [1, convs[0]["shape"][1], 1, 1]
 
 
+def test_profile_lists_the_nodes_in_the_order_they_run() -> None:
+    """The table read as the network runs: onnxruntime's node_index, which it went by, numbers the nodes its
+    optimiser adds after the others, so the groups' Sum came before the stem's convolutions it adds and the
+    probe's ReduceSum before the GlobalAveragePool it reads."""
+    pred = sdk.load("lpips")
+    rows = _module().profile(Path(str(pred.path)), len(pred.metadata.inputs), (256, 128), 2, 1)  # type: ignore[attr-defined]
+    ops = [r["op"] for r in rows]
+    first = {op: ops.index(op) for op in ("Conv", "Sum", "Relu", "GlobalAveragePool", "ReduceSum", "MaxPool")}
+    stems = [i for i, r in enumerate(rows) if r["op"] == "Conv" and r["shape"][2:] == [128 // 4, 256 // 4]][:2]
+    assert len(stems) == 2 and max(stems) < first["Sum"] < first["Relu"] < first["MaxPool"]  # two groups, summed
+    assert first["GlobalAveragePool"] < first["ReduceSum"]  # the probe: the stem's means, then their sum
+    assert ops[0] in ("Conv", "Reshape")  # the run starts with the stem (or a layout reorder it reads)
+
+
 def test_profile_cli_prints_a_table_and_rejects_a_bad_size() -> None:
     out = subprocess.run([sys.executable, str(BENCH), "jnyang", "--size", "128x64", "--repeats", "1"],
                          capture_output=True, text=True, check=True)
