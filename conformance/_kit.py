@@ -358,6 +358,17 @@ def _plane_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: 
             _expect(err <= 1e-5, f"differ by up to {err:.3g}")
 
 
+def _why_not_compared(channel: str) -> str:
+    """Why ``channel`` (one not in :data:`AGREEMENT`) has no agreement check, in a few words."""
+    base, _, kind = channel.rpartition(".")
+    derived = {"blocks": "block_variances", "tiles": "tile_variances", "dx": "pixel_differences", "dy": "pixel_differences"}
+    if kind in derived:
+        return f"it is checked against sdk.{derived[kind]} of the adapter's own {base}"
+    if channel.startswith("reprojected."):
+        return "the previous frame is each engine's own lit image; its edges and depth test are checked"
+    return "each engine's own shading model"
+
+
 def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: Any,
                       tolerances: Mapping[str, Tolerance]) -> None:
     for plane, c in zip(x, channels):
@@ -445,7 +456,8 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
             the class.
         size: the frame size (width, height) drawn; at least 16 x 16.
         tolerances: per-channel agreement tolerances replacing those of :data:`AGREEMENT` (a float
-            keeps the channel's relative flag), for an engine that filters or encodes differently.
+            keeps the channel's relative flag), for an engine that filters or encodes differently; only
+            the channels :data:`AGREEMENT` compares take one.
         model: the predictor ``for_predictor`` feeds (a path, a shipped model's name, or a loaded
             predictor); default every shipped model the adapter can run.
         frame_source_options: keyword arguments of the adapter's ``frame_source``.
@@ -464,7 +476,8 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     Raises:
         rtp.sdk.adapters.AdapterNotFoundError: ``adapter`` names no adapter.
         rtp.sdk.ParameterError: a bad ``size`` or ``tolerances`` (one for a channel the adapter does
-            not produce, which no check would use, included).
+            not produce, or one the kit does not compare with the reference renderer, which no check would
+            use, included).
         rtp.plugins.moderngl.RendererError: no headless OpenGL for the reference renderer.
     """
     cls, source_text = resolve_adapter(adapter)
@@ -489,6 +502,10 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
             raise sdk.ParameterError(f"tolerances: the {c} channel is not among the adapter's, so no check uses its "
                                      f"tolerance; it produces {', '.join(sorted(cls.supported_channels or ())) or 'none'}",
                                      "tolerances")
+        if c not in AGREEMENT:  # (it added a comparison the kit never makes: reprojected.* against another lit image)
+            raise sdk.ParameterError(f"tolerances: the {c} channel is not compared with the reference renderer "
+                                     f"({_why_not_compared(c)}), so no check uses its tolerance; the compared "
+                                     f"channels are {', '.join(AGREEMENT)}", "tolerances")
         value = t.value if isinstance(t, Tolerance) else t
         if not isinstance(value, (int, float)) or isinstance(value, bool) or not (value >= 0):
             raise sdk.ParameterError(f"tolerances[{c!r}]: expected a number >= 0, got {value!r}", "tolerances")

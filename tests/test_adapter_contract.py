@@ -433,6 +433,24 @@ def test_a_tolerance_no_check_would_use_is_refused() -> None:
         conformance.check_adapter(NumpyAdapter, tolerances=[("albedo.r", 0.1)])  # type: ignore[arg-type]
 
 
+def test_a_tolerance_for_a_channel_the_kit_does_not_compare_is_refused() -> None:
+    # a tolerance for a produced channel outside AGREEMENT (reprojected.*, specular, the derived planes) added an
+    # agreement check the kit never makes: `--tolerance reprojected.r=0.1` on the pyrender adapter compared its own
+    # lit image with the reference renderer's and failed (12% of the pixels within 1e-4), `--tolerance specular=0`
+    # failed pyrender's F0 of 4 %, where docs/adapters.md says both are not compared and --tolerance loosens
+    class Derived(NumpyAdapter):
+        supported_channels: ClassVar[frozenset[str]] = NumpyAdapter.supported_channels | {"specular",
+                                                                                           "albedo.y.blocks"}
+
+    for channel, why in (("reprojected.r", "the previous frame is each engine's own lit image"),
+                         ("specular", "each engine's own shading model"),
+                         ("albedo.y.blocks", r"it is checked against sdk\.block_variances of the adapter's own albedo\.y")):
+        with pytest.raises(sdk.ParameterError, match=rf"tolerances: the {channel} channel is not compared with the "
+                           rf"reference renderer \({why}.*\), so no check uses its tolerance; the compared channels "
+                           r"are seen, albedo\.r"):
+            conformance.check_adapter(Derived, tolerances={channel: 0.1}, scene="no-such-map")
+
+
 @pytest.mark.gl
 def test_a_tolerance_can_be_relaxed_per_channel(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
     # an engine whose albedo is filtered (here: off by 0.08) passes at the tolerance it can meet

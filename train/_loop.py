@@ -156,8 +156,9 @@ class TrainConfig:
     crop: int = 128
     #: Pixels of input read around each crop (a multiple of the tile) whose tiles are not scored, unless
     #: they lie on the frame's border: the scored tiles then see what they see in a whole frame, not
-    #: the zero padding at the crop's edge (with 128-pixel crops and no context, 28 of a crop's 64
-    #: tiles are within reach of its edge, against about 5% of a 1280x720 frame's tiles). 0: off.
+    #: the zero padding at the crop's edge (with 128-pixel crops and no context, 48 of a crop's 64
+    #: tiles are within reach of its edge for rtp's fast network, 28 pixels past a tile, against 13% of a
+    #: 1280x720 frame's tiles; 28 of 64 for the paper's, 16 pixels past a tile, against 7%). 0: off.
     context: int = 0
     lr: float = 1e-4
     lr_decay: float = 1e-4
