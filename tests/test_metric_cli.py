@@ -12,22 +12,28 @@ from rtp import metrics as M
 from rtp.cli import main
 
 
-def test_metric_computes_the_map_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                      capsys: pytest.CaptureFixture[str]) -> None:
-    """`rtp metric flip` computed FLIP twice (tile_metric, then error_map for the per-pixel line): twice the
-    seconds of a 1080p pair, LPIPS likewise. Its tiles are still tile_metric's."""
+def _pair(tmp_path: Path, seed: int = 2, width: int = 70) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    """Two 8-bit PNGs 40 pixels high, a random image and a noisy copy, and their values in [0, 1]."""
     from PIL import Image
 
-    import rtp.metrics._flip as F
-    import rtp.metrics._maps as maps
-    import rtp.metrics._targets as targets
-
-    rng = np.random.default_rng(1)
-    ref = (rng.random((40, 50, 3)) * 255).astype(np.uint8)
+    rng = np.random.default_rng(seed)
+    ref = (rng.random((40, width, 3)) * 255).astype(np.uint8)
     test = np.clip(ref.astype(int) + rng.integers(-30, 31, ref.shape), 0, 255).astype(np.uint8)
     a, b = tmp_path / "a.png", tmp_path / "b.png"
     Image.fromarray(ref).save(a)
     Image.fromarray(test).save(b)
+    return a, b, ref.astype(np.float32) / 255, test.astype(np.float32) / 255
+
+
+def test_metric_computes_the_map_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp metric flip` computed FLIP twice (tile_metric, then error_map for the per-pixel line): twice the
+    seconds of a 1080p pair, LPIPS likewise. Its tiles are still tile_metric's."""
+    import rtp.metrics._flip as F
+    import rtp.metrics._maps as maps
+    import rtp.metrics._targets as targets
+
+    a, b, ref, test = _pair(tmp_path, seed=1, width=50)
     calls: list[int] = []
     real = F.flip_pixels
 
@@ -42,20 +48,8 @@ def test_metric_computes_the_map_once(tmp_path: Path, monkeypatch: pytest.Monkey
         assert main(["metric", metric, str(a), str(b), "--tile", "8", "--json"]) == 0
         got = json.loads(capsys.readouterr().out)
         assert len(calls) == 1, metric
-        want = M.tile_metric(metric, ref.astype(np.float32) / 255, test.astype(np.float32) / 255, 8)
+        want = M.tile_metric(metric, ref, test, 8)
         np.testing.assert_array_equal(np.array(got["tiles"], np.float32), want)
-
-
-def _pair(tmp_path: Path) -> tuple[Path, Path, np.ndarray, np.ndarray]:
-    from PIL import Image
-
-    rng = np.random.default_rng(2)
-    ref = (rng.random((40, 70, 3)) * 255).astype(np.uint8)
-    test = np.clip(ref.astype(int) + rng.integers(-30, 31, ref.shape), 0, 255).astype(np.uint8)
-    a, b = tmp_path / "a.png", tmp_path / "b.png"
-    Image.fromarray(ref).save(a)
-    Image.fromarray(test).save(b)
-    return a, b, ref.astype(np.float32) / 255, test.astype(np.float32) / 255
 
 
 @pytest.mark.parametrize(("metric", "flags", "params"), [
