@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import reprlib
+import threading
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -383,6 +384,7 @@ def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = Fa
 
 
 _warned_kinds: set[str] = set()
+_warned_lock = threading.Lock()
 
 
 def _check_depth_kind(raw: np.ndarray, reversed_z: bool) -> None:
@@ -395,7 +397,10 @@ def _check_depth_kind(raw: np.ndarray, reversed_z: bool) -> None:
         return
     at_near = int(np.count_nonzero(raw == near))
     if at_near:
-        _warned_kinds.add(kind)
+        with _warned_lock:  # (the test and the add as one: threads making planes at once each logged it)
+            if kind in _warned_kinds:
+                return
+            _warned_kinds.add(kind)
         other = "window" if reversed_z else "reversed"
         log.warning("depth: depth_kind=%r, but %d pixels hold %g (the near plane) and none %g (background): a %s "
                     "depth buffer? (depth_kind=%r); warned once", kind, at_near, near, background,

@@ -10,6 +10,7 @@ import logging
 import math
 import os
 import reprlib
+import threading
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,9 @@ FORCE_SPINNING_STOP = "session.force_spinning_stop"
 # Providers that onnxruntime lists as available but that run no local kernels (the Azure EP forwards
 # requests to a remote endpoint); never picked by default, never reported as the one that runs.
 _NON_COMPUTE = frozenset({"AzureExecutionProvider"})
+#: Guards the thresholds a predictor has warned of (``_warn_beyond_saturation``), so that threads sharing it
+#: (and its copies) log each once; taken only where a threshold is past saturation, never on the way to a frame.
+_WARNED_LOCK = threading.Lock()
 
 
 def _ort() -> Any:
@@ -1035,14 +1039,16 @@ class ShadingRatePredictor:
         rates = [t - 20.0 * math.log10(f) if hib else t * f for f in factors]  # (select_rates' per-rate thresholds)
         if not all((r < sat) if hib else (r > sat) for r in rates):
             return
-        seen = self.__dict__.setdefault("_saturation_warned", set())
-        if t not in seen:
+        with _WARNED_LOCK:  # (the test and the add as one: two threads between them both logged it)
+            seen = self.__dict__.setdefault("_saturation_warned", set())
+            if t in seen:
+                return
             seen.add(t)
-            f = min(factors)  # the rate whose threshold is the last to pass everything
-            limit = sat + 20.0 * math.log10(f) if hib else sat / f
-            log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
-                        "it at every rate; use one %s %g", self._path.name if self._path else "model", t, sat,
-                        "above" if hib else "below", limit)
+        f = min(factors)  # the rate whose threshold is the last to pass everything
+        limit = sat + 20.0 * math.log10(f) if hib else sat / f
+        log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
+                    "it at every rate; use one %s %g", self._path.name if self._path else "model", t, sat,
+                    "above" if hib else "below", limit)
 
 
 def _unpickle(path: str, data: bytes, args: dict[str, Any]) -> ShadingRatePredictor:

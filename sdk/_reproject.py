@@ -306,9 +306,12 @@ _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
 
 
-def _forget_pool() -> None:  # a forked child has the pool's object but not its threads
-    global _pool
+def _forget_pool() -> None:
+    """In a forked child: the parent's pool (its object, not its threads) and lock forgotten. A lock that a thread of
+    the parent held at the fork (building the pool) is held for ever in the child, where that thread does not run."""
+    global _pool, _pool_lock
     _pool = None
+    _pool_lock = threading.Lock()
 
 
 os.register_at_fork(after_in_child=_forget_pool)

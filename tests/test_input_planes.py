@@ -316,6 +316,30 @@ def test_a_depth_buffer_of_the_other_kind_is_named_in_a_warning(caplog: pytest.L
         "depth buffer? (depth_kind='window'); warned once"]
 
 
+def test_threads_making_planes_warn_of_a_depth_kind_once(caplog: pytest.LogCaptureFixture,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two views' threads making planes of the same wrong-kind depth buffer at once: one warning, not one from each
+    thread that tested the kinds warned of before the other added it (forced interleaving)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from rtp.sdk import _planes
+
+    from .test_predictor import Meeting
+
+    meeting = Meeting()
+    monkeypatch.setattr(_planes, "_warned_kinds", meeting.add_blocks())
+    monkeypatch.setattr(_planes, "_warned_lock", meeting.gate(), raising=False)
+    p = _infinite_reversed_z(0.1)
+    reversed_z = np.full((20, 30), 0.01, np.float32)
+    reversed_z[:5] = 0.0  # sky
+    caplog.set_level(logging.WARNING, logger="rtp.sdk")
+    with ThreadPoolExecutor(2) as pool:
+        for done in [pool.submit(sdk.input_planes, ["depth"], depth=reversed_z, projection=p, depth_kind="window")
+                     for _ in range(2)]:
+            done.result(timeout=30)
+    assert len(caplog.records) == 1 and "a reversed-Z depth buffer?" in caplog.text
+
+
 # -- matrices from Direct3D, Vulkan and Metal ------------------------------------------------------------------
 
 def _xm_look_at_lh(eye: np.ndarray, at: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -48,6 +50,99 @@ def test_one_predictor_serves_several_threads_at_once(tiny_model: Callable[..., 
             for (values, rates), (v0, r0) in zip(got, serial, strict=True):
                 np.testing.assert_array_equal(values, v0)
                 np.testing.assert_array_equal(rates, r0)
+
+
+def test_threads_share_a_splitting_predictor_and_load_at_once() -> None:
+    """docs/runtime.md "Threads": predict_split and predict_tail keep nothing between calls either (frames of
+    several sizes, padded), and threads loading at once each get a predictor of their own that predicts alike."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(4) as pool:
+        loaded = list(pool.map(lambda n: sdk.load(n, threads=1), ["jnyang-reuse", "jnflip"] * 2))
+    p = loaded[0]
+    c = len(p.metadata.inputs)
+    frames = [np.random.default_rng(i).random((c, *((72, 128), (50, 70))[i % 2]), dtype=np.float32) for i in range(8)]
+
+    def split(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        values, feats = p.predict_split(f)
+        return values, feats, p.predict_tail(feats, f)
+
+    serial = [split(f) for f in frames]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(3):
+            for got, want in zip(pool.map(split, frames), serial, strict=True):
+                for a, b in zip(got, want, strict=True):
+                    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(loaded[2].predict(frames[0]), p.predict(frames[0]))
+    f = np.ascontiguousarray(frames[0][:7])
+    np.testing.assert_array_equal(loaded[1].predict(f), loaded[3].predict(f))
+
+
+class Meeting:
+    """Forces two threads through a warn-once test-and-add together: ``add_blocks()``, a set whose ``add`` holds each
+    thread until two threads have arrived (at the ``add`` or at the ``gate()``, the code's lock around the test and
+    the add). Without that lock both threads pass the test before either adds, and both log; with it the second waits
+    at the gate, arriving, and finds the first one's entry."""
+
+    def __init__(self) -> None:
+        self._arrived: set[int] = set()
+        self._mutex = threading.Lock()
+        self._both = threading.Event()
+
+    def arrive(self) -> None:
+        with self._mutex:
+            self._arrived.add(threading.get_ident())
+            if len(self._arrived) >= 2:
+                self._both.set()
+
+    def add_blocks(self) -> set[Any]:
+        meeting = self
+
+        class _Set(set):  # type: ignore[type-arg]
+            def add(self, item: Any) -> None:
+                meeting.arrive()
+                assert meeting._both.wait(20), "the second thread never came"
+                super().add(item)
+
+        return _Set()
+
+    def gate(self) -> Any:
+        meeting, lock = self, threading.Lock()
+
+        class _Gate:
+            def __enter__(self) -> None:
+                meeting.arrive()
+                lock.acquire()
+
+            def __exit__(self, *exc: object) -> None:
+                lock.release()
+
+        return _Gate()
+
+
+def test_threads_sharing_a_predictor_warn_of_a_threshold_once(tiny_model: Callable[..., Path],
+                                                              caplog: pytest.LogCaptureFixture,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two viewports' threads calling ``shading_rates`` with a threshold past saturation: the warning is logged once,
+    not by each thread that tested the thresholds warned of before the other added it (forced interleaving)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from rtp.sdk import _predictor
+
+    p = sdk.load(tiny_model(base_metadata()), threads=1)
+    meta = p.metadata
+    factor = min(meta.rate_factors or (1.0,))
+    past = meta.saturation + 20.0 * np.log10(factor) - 0.01 if meta.higher_is_better else meta.saturation / factor * 1.01
+    meeting = Meeting()
+    p.__dict__["_saturation_warned"] = meeting.add_blocks()
+    monkeypatch.setattr(_predictor, "_WARNED_LOCK", meeting.gate(), raising=False)
+    frame = np.random.default_rng(0).random((4, 32, 48), dtype=np.float32)
+    caplog.set_level(logging.WARNING, logger="rtp.sdk")
+    with ThreadPoolExecutor(2) as pool:
+        for done in [pool.submit(p.shading_rates, frame, past) for _ in range(2)]:
+            done.result(timeout=30)
+    warned = [r.getMessage() for r in caplog.records]
+    assert len(warned) == 1 and f"threshold {past:g} is beyond the worst value the model can express" in warned[0]
 
 
 def test_batched_and_single_frames_agree(tiny_model: Callable[..., Path]) -> None:

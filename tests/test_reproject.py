@@ -198,6 +198,22 @@ def test_a_forked_process_reprojects_after_its_parent_did(monkeypatch: pytest.Mo
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_process_forked_while_the_pools_lock_is_held_reprojects(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A fork while another thread of the parent holds the pool's lock (building the pool on its first frame in
+    bands): that thread does not run in the child, so the child's copy of the lock stayed held and its first
+    reprojection in bands waited on it for ever. The child gets a lock of its own."""
+    monkeypatch.setattr(_reproject, "_BAND_PIXELS", 700)
+    monkeypatch.setattr(_reproject, "_BAND_THREADS", 2)  # (bands on the pool, on a machine of one core too)
+    args = _args(_frames(5))
+    here = sdk.reproject(*args)
+    with _reproject._pool_lock:  # (as a thread of the parent holds it: the child is forked meanwhile)
+        pool = multiprocessing.get_context("fork").Pool(1)
+    with pool:
+        there = pool.apply_async(_reproject_in_child, (args,)).get(timeout=30)
+    for a, b in zip(here, there):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_input_planes_gathers_the_luma_where_no_colour_plane_is_read() -> None:
     """A model that reads reprojected.y but no colour plane gets the luma of the reprojected colours, bit for bit."""
     f = _frames(6)
