@@ -12,6 +12,7 @@ import logging
 import os
 import re
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -96,9 +97,18 @@ def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
     w, h = check_frame_size(size)
     check_frame_memory("capture", (w, h))
     out = sdk.files.check_output(folder, folder=True, what="frame folder")
+    names = [f"frame_{i:04d}.npz" for i in range(count)]
+    # (frames of an earlier run, or an engine's dump, left beside these: `rtp predict` / `rtp import` of the folder
+    # read them all as one sequence, two camera paths in one, without a word)
+    others = sorted((f.name for f in out.glob("*.npz") if f.name not in names), key=sdk.files._natural) \
+        if out.is_dir() else []
+    if others:
+        raise sdk.ParameterError(
+            f"frame folder: {str(out)!r} holds {len(others)} other .npz frame{'s' if len(others) > 1 else ''} ("
+            f"{', '.join(others[:3])}{', ...' if len(others) > 3 else ''}), which a run on the folder would take as "
+            f"frames of these {count}: give an empty folder, or remove them", "frames")
     scene, blockers = load_scene(scene_name, None, None, None)
     path = camera_path(scene, count + 1, "slow", seed, blockers=blockers)
-    names = [f"frame_{i:04d}.npz" for i in range(count)]
     with Renderer(w, h) as r:
         r.load_scene(scene)
         prev = r.render(path.cameras[0])
@@ -126,6 +136,39 @@ def frame_files(paths: list[str]) -> list[str]:
     from rtp import sdk
 
     return sdk.files.frame_files(paths)
+
+
+def _warn_of_order(files: list[str]) -> None:
+    """Log where a sequence's files, as given, are likely not the frames the engine drew one after another (the
+    frame-to-frame changes, and ``--every``'s carry along each frame's motion, then span two frames apart): two
+    files of one folder out of the natural order of their names (a shell's ``*`` sorts ``frame_10`` before
+    ``frame_2``), and a number missing from a folder's numbered names (a frame the engine did not dump)."""
+    from rtp import sdk
+
+    numbered = re.compile(r"(.*?)(\d+)(\D*)")
+    steps: list[tuple[str, str, int]] = []
+    for a, b in zip(files, files[1:]):
+        pa, pb = Path(a), Path(b)
+        if pa.parent != pb.parent:
+            continue
+        if sdk.files._natural(pb.name) < sdk.files._natural(pa.name):
+            log.warning("%s comes before %s as given, out of the natural order of their names (a shell's * sorts "
+                        "names as text): the sequence is taken in the order given; give the folder, %s, to take "
+                        "its frames in that order", a, b, pa.parent)
+            return
+        ma, mb = numbered.fullmatch(pa.stem), numbered.fullmatch(pb.stem)
+        if ma and mb and (ma[1], ma[3]) == (mb[1], mb[3]):
+            steps.append((a, b, int(mb[2]) - int(ma[2])))
+    if not steps:
+        return
+    counts = Counter(s for *_, s in steps)  # the usual step (an engine may dump every k-th frame); a tie, the least
+    usual = min(counts, key=lambda s: (-counts[s], s))
+    gaps = [(a, b) for a, b, s in steps if s > usual]
+    if gaps:
+        more = f" (and {len(gaps) - 1} more such gap{'s' if len(gaps) > 2 else ''})" if len(gaps) > 1 else ""
+        log.warning("%s then %s: a frame missing between, its numbers %d apart elsewhere%s: the share of tiles "
+                    "that change rate, and --every's carry, span the gap", gaps[0][0], Path(gaps[0][1]).name, usual,
+                    more)
 
 
 #: The planes prediction reuse reads besides a model's: where each pixel was (its motion) and the sky.
@@ -308,6 +351,7 @@ def run_predict(args: argparse.Namespace) -> int:
                                      + ": a sequence takes each frame once, in order (a folder, or its files, not both)",
                                      "frame")
     sequence = len(files) > 1 or any(Path(f).is_dir() for f in args.frames)
+    _warn_of_order(files)
     if args.every is not None and not sequence:
         raise sdk.ParameterError(f"--every {args.every}: prediction reuse carries estimates from frame to frame; give "
                                  "a sequence (several frame files, or a folder of them)", "every")

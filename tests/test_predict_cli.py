@@ -284,6 +284,53 @@ def test_a_folders_frames_in_the_natural_order_of_their_names(tmp_path: Path) ->
     assert [Path(f).name for f in frame_files([str(tmp_path)])] == ["frame_1.npz", "frame_9.npz", "frame_10.npz"]
 
 
+def test_files_out_of_order_or_a_missing_frame_are_named(sequence: Path, tmp_path: Path,
+                                                         caplog: pytest.LogCaptureFixture) -> None:
+    """Files given as a shell's * sorts them (frame_10 before frame_2), and a folder with a frame missing from its
+    numbered names, ran in silence: the changed share (and --every's carry) measured between frames that are not one
+    after the other. Each is named in a warning, and the sequence still runs in the order given."""
+    files = sorted(sequence.glob("*.npz"))
+    unpadded = tmp_path / "unpadded"
+    unpadded.mkdir()
+    for i in (0, 1, 2, 3):  # frame_0, frame_1, frame_10, frame_2 (as text sorts them)
+        (unpadded / f"frame_{[0, 1, 10, 2][i]}.npz").write_bytes(files[i].read_bytes())
+    given = sorted(str(f) for f in unpadded.glob("*.npz"))
+    with caplog.at_level(logging.WARNING, logger="rtp.cli"):
+        assert main(["predict", *given, "--json"]) == 0
+    assert f"{unpadded / 'frame_10.npz'} comes before {unpadded / 'frame_2.npz'} as given" in caplog.text
+    caplog.clear()
+    gap = tmp_path / "gap"
+    gap.mkdir()
+    for f in (files[0], files[1], files[3]):  # frame_0002 missing
+        (gap / f.name).write_bytes(f.read_bytes())
+    with caplog.at_level(logging.WARNING, logger="rtp.cli"):
+        assert main(["predict", str(gap), "--json"]) == 0
+    assert f"{gap / 'frame_0001.npz'} then frame_0003.npz: a frame missing between" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.cli"):  # the folder itself, every frame there: no word
+        assert main(["predict", str(sequence), "--json"]) == 0
+        assert main(["predict", str(gap / "frame_0000.npz"), str(gap / "frame_0003.npz"), "--json"]) == 0
+    assert "comes before" not in caplog.text and "missing" not in caplog.text, caplog.text
+
+
+def test_example_frames_are_not_written_beside_others(sequence: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """--write-example --frames N into a folder of more frames (an earlier run's, an engine's dump) left those beside
+    the N new ones, and a run on the folder read both camera paths as one sequence; refused, before a frame is
+    written. The same names again (the same command twice) are written over."""
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for f in sorted(sequence.glob("*.npz")):
+        (folder / f.name).write_bytes(f.read_bytes())
+    before = {f.name: f.read_bytes() for f in folder.iterdir()}
+    assert main(["predict", str(folder), "--write-example", "--frames", "2", "--size", "160x96", "--seed", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "holds 2 other .npz frames (frame_0002.npz, frame_0003.npz)" in err and "Traceback" not in err, err
+    assert {f.name: f.read_bytes() for f in folder.iterdir()} == before
+    assert main(["predict", str(folder), "--write-example", "--frames", "4", "--size", "160x96", "--seed", "5"]) == 0
+    assert sorted(f.name for f in folder.iterdir()) == sorted(before)
+
+
 def test_a_sequences_mistakes_are_named(sequence: Path, frame: Path, tmp_path: Path,
                                         capsys: pytest.CaptureFixture[str]) -> None:
     empty = tmp_path / "empty"
