@@ -389,12 +389,19 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
     """A VRS image put together from a frame's uniform-rate images (``Frame.colour``): every tile
     taken from the final image of the rate chosen for it. Before post-processing this is exactly
     what per-tile VRS shades (rate blocks never cross a tile); after it, pixels next to a tile of
-    another rate differ slightly from FXAA run over the VRS image (``Renderer.shade_rates``)."""
+    another rate differ slightly from FXAA run over the VRS image (``Renderer.shade_rates``).
+    ``rates`` must be the frame's grid of ``tile``-pixel tiles (``sdk.tile_grid``, partial edge tiles
+    included), as ``Renderer.shade_rates`` wants it: another grid is a ``ParameterError``."""
     from rtp import sdk
 
     ref = colour["1x1"]
     h, w = ref.shape[:2]
+    grid = sdk.tile_grid(h, w, tile)  # (a tile that is no positive integer: its ParameterError)
+    tile = int(tile)
     rates = np.asarray(rates)
+    if rates.shape != grid:  # (a grid of other tiles: a larger one was cropped to its top-left corner in silence)
+        raise sdk.ParameterError(f"rates: expected the {grid[1]}x{grid[0]} tile grid {grid} of {tile}-pixel tiles "
+                                 f"over a {w}x{h} frame, got shape {rates.shape}", "rates")
     known = sorted(sdk.RATE_CODES.values())
     ok = rates.dtype.kind in "iu" and (rates.size == 0 or int(rates.min()) >= 0)
     counts = np.bincount(rates.ravel(), minlength=known[-1] + 1) if ok else np.zeros(0, np.intp)
@@ -404,7 +411,7 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
                                  "rates")
     out = np.empty(ref.shape, ref.dtype)
     th, tw = h // tile, w // tile
-    if h % tile or w % tile or rates.shape[0] < th or rates.shape[1] < tw:  # ragged edge tiles: per pixel
+    if h % tile or w % tile:  # ragged edge tiles: per pixel
         per_pixel = np.repeat(np.repeat(rates, tile, 0), tile, 1)[:h, :w]
         for rate, code in sdk.RATE_CODES.items():
             m = per_pixel == code
@@ -413,9 +420,6 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
         return out
     # whole tiles: the commonest rate's image copied whole (one contiguous copy), then every other tile's
     # block from its rate's image (a gather and a scatter per tile: about twice a plain copy's time a byte)
-    if rates.shape != (th, tw):
-        rates = rates[:th, :tw]
-        counts = np.bincount(rates.ravel(), minlength=len(counts))
     common = int(np.argmax(counts))
     np.copyto(out, colour[sdk.RATE_NAMES[common]])
     blocks = out.reshape(th, tile, tw, tile, -1)

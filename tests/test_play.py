@@ -79,6 +79,22 @@ def test_composite_takes_each_tile_from_its_rate(hw: tuple[int, int]) -> None:
             composite(colour, bad, TILE)
 
 
+@pytest.mark.parametrize("hw", [(96, 160), (100, 170)])
+def test_composite_refuses_a_rate_image_of_another_tile_grid(hw: tuple[int, int]) -> None:
+    """A rate image on other tiles (8-pixel ones given as 16-pixel ones) is refused, as Renderer.shade_rates refuses
+    it: a larger grid was cropped to its top-left corner in silence, a smaller one an IndexError."""
+    h, w = hw
+    colour = {rate: np.full((h, w, 3), i, np.float32) for i, rate in enumerate(sdk.RATE_CODES)}
+    th, tw = sdk.tile_grid(h, w, TILE)
+    for shape in (sdk.tile_grid(h, w, TILE // 2), (th + 1, tw), (th, tw - 1), (th - 1, tw)):
+        with pytest.raises(sdk.ParameterError, match=f"tile grid \\({th}, {tw}\\).*got shape"):
+            composite(colour, np.full(shape, sdk.RATE_CODES["4x4"], np.uint8), TILE)
+    for tile in (0, 16.0, True):
+        with pytest.raises(sdk.ParameterError, match="tile_size: expected a positive integer"):
+            composite(colour, np.zeros((th, tw), np.uint8), tile)  # type: ignore[arg-type]
+    assert np.array_equal(composite(colour, np.full((th, tw), 10, np.uint8), TILE), colour["4x4"])
+
+
 def test_any_history_reprojects_like_the_renderer(rendered: Any) -> None:
     r, frames = rendered
     prev, cur = frames[-2], frames[-1]

@@ -17,6 +17,7 @@ import pytest
 from rtp.plugins.moderngl import Renderer, RendererError
 from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SunLight, box_mesh, checker_texture, quad_mesh
 from rtp.sdk import ALL_RATES as RATES
+from rtp.sdk import RATE_CODES
 from rtp.sdk._reproject import reproject, reproject_positions
 from rtp.sdk.adapters import UnsupportedChannelError
 from tests.conftest import make_current
@@ -291,6 +292,29 @@ def test_vrs_lighting_is_block_constant_before_post(renderer):
                     assert np.all(block == block[0]), (rate, y0, x0)
     # the 1x1 lighting is itself the lighting of every pixel
     assert np.all(l1[geo].sum(axis=1) > 0)
+
+
+@pytest.mark.gl
+def test_per_tile_vrs_takes_each_tile_from_its_rate_on_ragged_frames(gl_context: Any) -> None:
+    """``shade_rates`` on a frame whose sides are no whole number of tiles nor of 4 pixels (98 rows: the GL
+    rows run bottom-up, so a tile row flipped by the frame's height instead of the grid's is off by rows
+    there): every pixel is its tile's uniform-rate image (FXAA off, so exactly); all-1x1 is full rate."""
+    rng = np.random.default_rng(3)
+    with Renderer(W, H, ctx=make_current(gl_context), shadow_map_size=512, fxaa=False) as r:
+        r.load_scene(_textured_scene())
+        f = r.render(_front_camera(pitch=-8.0, yaw=4.0))
+        for tile in (4, 12, 16):
+            th, tw = -(-H // tile), -(-W // tile)
+            assert np.array_equal(r.shade_rates(np.zeros((th, tw), np.uint8), tile), f.colour["1x1"])
+            codes = rng.choice([RATE_CODES[rate] for rate in RATES], (th, tw)).astype(np.uint8)
+            per_pixel = np.repeat(np.repeat(codes, tile, 0), tile, 1)[:H, :W]
+            want = np.zeros((H, W, 3), np.float32)
+            for rate in RATES:
+                m = per_pixel == RATE_CODES[rate]
+                want[m] = f.colour[rate][m]
+            got = r.shade_rates(codes, tile)
+            bad = np.argwhere((got != want).any(-1))
+            assert bad.size == 0, (tile, len(bad), bad[:4].tolist())
 
 
 @pytest.mark.gl

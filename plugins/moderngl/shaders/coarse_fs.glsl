@@ -3,9 +3,11 @@
 // Software VRS + tone mapping for one shading rate W x H (u_rate).
 // Every pixel of the aligned block (blocks aligned at the image's TOP-LEFT corner) takes the
 // lighting of the G-buffer sample at (x0 + W/2, y0 + H/2) in top-left image coordinates, clamped
-// to the frame for partial edge blocks. Where that sample is background the block shows the sky,
-// evaluated per pixel (the paper discards coarse invocations on background, leaving the
-// full-rate sky). Then exposure (shared by all rates), ACES and sRGB encoding, at full rate.
+// to the frame for partial edge blocks (docs/renderer.md "Software VRS": the pixel a point-sampled
+// read at a D3D12 coarse pixel's SV_Position, its block's centre, fetches). Where that sample is
+// background the block shows the sky, evaluated per pixel (as a coarse pass that discards background
+// invocations leaves the full-rate sky). Then exposure (shared by all rates), ACES and sRGB encoding,
+// at full rate.
 // With u_tile > 0 the rate comes per tile from u_rate_map instead (a VRS rate image: one texel per
 // u_tile x u_tile tile, the rate's D3D12 code (log2 W << 2) | log2 H, rows uploaded top-left first
 // by write_texture, i.e. stored bottom-up like every texture here).
