@@ -481,7 +481,8 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
         summary["thresholds"] = {"min": float(levels.min()), "median": float(np.median(levels)),
                                  "max": float(levels.max())}
     if args.out:
-        summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays, args.saving is not None)
+        summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays, args.saving is not None,
+                                               predictor.metadata.higher_is_better)
     if args.json:
         print(json.dumps(summary))
         return 0
@@ -525,7 +526,7 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
 
 
 def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.ndarray], values: list[np.ndarray],
-                        overlays: list[np.ndarray], budget: bool = False) -> list[str]:
+                        overlays: list[np.ndarray], budget: bool = False, higher_is_better: bool = False) -> list[str]:
     """``rates.npy`` (uint8 ``(N, th, tw)``), ``predictions.npy`` (float32 ``(N, 6, th, tw)``), ``frames.csv``
     (a row a frame), ``overlay.gif`` (the overlays at :data:`GIF_FPS`) and ``frames.png`` (the curves; with
     ``budget``, the threshold each frame reached too)."""
@@ -554,7 +555,7 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
         tmp.write_text(text.getvalue())
     with sdk.files.atomic_output(out / "overlay.gif") as tmp:
         iio.imwrite(tmp, np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
-    save_image(out / "frames.png", sequence_curves(rows, thresholds=budget))
+    save_image(out / "frames.png", sequence_curves(rows, thresholds=budget, higher_is_better=higher_is_better))
     return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"])
 
 

@@ -52,6 +52,28 @@ def _colormap(cmap: str) -> Any:
         raise BaselineError(f"unknown colour map {cmap!r}; any of matplotlib's, e.g. magma, viridis, inferno") from None
 
 
+#: The colour of a value that is NaN (no value) in a map panel, as :func:`colorize` draws it.
+NAN_GREY = "#808080"
+
+
+def _in_range(values: Any, vmin: float, vmax: float) -> tuple[np.ndarray, str, bool]:
+    """Values to draw with colours spanning ``[vmin, vmax]``: clipped to it, so that an infinite value takes the end
+    colour (matplotlib masks infinities as invalid and drew them blank, white: a PSNR of identical tiles, +inf, negated
+    for bright = worse, showed the best tiles in the page's white, as bright as the worst); the colour bar's ``extend``
+    (an arrow at each end some value lies beyond) and whether any value is NaN (drawn :data:`NAN_GREY`)."""
+    v = np.asarray(values, np.float64)
+    nan = np.isnan(v)
+    finite_or_inf = v[~nan]
+    over = bool(finite_or_inf.size and finite_or_inf.max() > vmax)
+    under = bool(finite_or_inf.size and finite_or_inf.min() < vmin)
+    extend = "both" if over and under else "max" if over else "min" if under else "neither"
+    return np.clip(v, vmin, vmax), extend, bool(nan.any())
+
+
+def _with_nan_grey(cmap: str) -> Any:
+    return _colormap(cmap).with_extremes(bad=NAN_GREY)
+
+
 def colorize(values: np.ndarray, vmin: float = 0.0, vmax: float = 1.0, cmap: str = "magma") -> np.ndarray:
     """Map values ``(...)`` to uint8 colours ``(..., 3)`` through a matplotlib colour map; values are
     clipped to ``[vmin, vmax]``; NaN is drawn mid grey."""
@@ -97,22 +119,24 @@ def value_map(
     values: np.ndarray, *, label: str, vmin: float = 0.0, vmax: float = 1.0, cmap: str = "magma", title: str = ""
 ) -> np.ndarray:
     """One per-pixel map ``(H, W)`` drawn at its own size (enlarged to :data:`MIN_PANEL` where it is
-    smaller) with a colour bar naming the quantity."""
+    smaller) with a colour bar naming the quantity; values beyond ``[vmin, vmax]`` and NaN as
+    :func:`heatmaps` draws them."""
     v = np.asarray(values, np.float64)
     if v.ndim != 2 or v.size == 0:
         raise BaselineError(f"value_map: expected a non-empty (H, W) array, got shape {v.shape}")
     if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > vmin):
         raise BaselineError(f"colour range: expected finite vmin < vmax, got {vmin}, {vmax}")
     h, w = v.shape
+    v, extend, nan = _in_range(v, vmin, vmax)
     # (a small map enlarged, to the height its colour bar's label takes too: its labels were cut off)
     zoom = max(1.0, max(MIN_PANEL[1], 240) / h, MIN_PANEL[0] / w)
     fig = _figure(w * zoom + 130, h * zoom + (40 if title else 16))
     ax = fig.subplots()
-    im = ax.imshow(v, cmap=_colormap(cmap), vmin=vmin, vmax=vmax, interpolation="nearest")
+    im = ax.imshow(v, cmap=_with_nan_grey(cmap), vmin=vmin, vmax=vmax, interpolation="nearest")
     _bare(ax)
     if title:
         ax.set_title(title, fontsize=9)
-    fig.colorbar(im, ax=ax, label=label, extend="max" if np.nanmax(v) > vmax else "neither", shrink=0.9)
+    fig.colorbar(im, ax=ax, label=label + ("\n(grey: no value)" if nan else ""), extend=extend, shrink=0.9)
     return figure_image(fig)
 
 
@@ -139,7 +163,8 @@ def heatmaps(
     :data:`~rtp.sdk.PREDICTED_RATES`); ``[vmin, vmax]`` spans the colours, ``label`` names the
     quantity on the colour bar (with its units) and ``threshold``, if given, is marked on it.
     ``size`` is the frame ``(H, W)``; ``scale`` > 1 draws the panels that many times smaller (never
-    smaller than :data:`MIN_PANEL`).
+    smaller than :data:`MIN_PANEL`). A value beyond ``[vmin, vmax]`` (an infinite one too) takes the colour at
+    that end, the colour bar an arrow there; NaN is drawn :data:`NAN_GREY`, the colour bar saying so.
     """
     truth, prediction = np.asarray(truth), np.asarray(prediction)
     if truth.shape != prediction.shape or truth.ndim != 3 or truth.shape[0] != len(PREDICTED_RATES):
@@ -149,6 +174,8 @@ def heatmaps(
     unknown = [r for r in rates if r not in PREDICTED_RATES]
     if unknown or not rates:
         raise BaselineError(f"heatmaps: expected rates among {', '.join(PREDICTED_RATES)}, got {list(rates)}")
+    if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > vmin):
+        raise BaselineError(f"colour range: expected finite vmin < vmax, got {vmin}, {vmax}")
     import matplotlib.colors as mcolors
 
     h, w = size
@@ -159,27 +186,30 @@ def heatmaps(
     fig = _figure(cols * pw + 110, len(rates) * (ph + 26) + (28 if title else 8))
     axes = fig.subplots(len(rates), cols, squeeze=False)
     norm = mcolors.Normalize(vmin, vmax)
-    for row, r in zip(axes, rates):
-        c = PREDICTED_RATES.index(r)
-        panels = [(truth[c], f"{r}: true")]
+    # (the rates drawn only: the colour bar's arrows and its note of NaN are about what the panels show)
+    shown, extend, nan = _in_range(np.stack([truth, prediction])[:, [PREDICTED_RATES.index(r) for r in rates]],
+                                   vmin, vmax)
+    for c, (row, r) in enumerate(zip(axes, rates)):
+        panels = [(shown[0, c], f"{r}: true")]
         if seen is not None:
             panels.append((None, "seen (grey) / unseen (black)"))
-        panels.append((prediction[c], f"{r}: predicted"))
+        panels.append((shown[1, c], f"{r}: predicted"))
         for ax, (values, name) in zip(row, panels):
             if values is None:
                 ax.imshow(np.clip(np.asarray(seen, np.float32), 0, 1),
                           cmap=mcolors.ListedColormap(["black", SEEN_GREY]), vmin=0, vmax=1, interpolation="nearest")
             else:
-                ax.imshow(upsample_tiles(values, tile, size), cmap=_colormap(cmap), norm=norm, interpolation="nearest")
+                ax.imshow(upsample_tiles(values, tile, size), cmap=_with_nan_grey(cmap), norm=norm,
+                          interpolation="nearest")
             ax.set_title(name, fontsize=9)
             _bare(ax)
-    over = bool(np.nanmax([np.nanmax(truth), np.nanmax(prediction)]) > vmax) if truth.size else False
     import matplotlib.cm as mcm
 
     marked = threshold is not None and vmin <= threshold <= vmax
     mappable = mcm.ScalarMappable(norm=norm, cmap=_colormap(cmap))
-    bar = fig.colorbar(mappable, ax=axes.ravel().tolist(), extend="max" if over else "neither", shrink=0.9,
-                       label=label + ("\n(cyan line: the threshold)" if marked else ""))
+    bar = fig.colorbar(mappable, ax=axes.ravel().tolist(), extend=extend, shrink=0.9,
+                       label=label + ("\n(cyan line: the threshold)" if marked else "")
+                       + ("\n(grey: no value)" if nan else ""))
     if marked and threshold is not None:
         bar.ax.axhline(threshold, color="#00e5ff", linewidth=2.5)
     if title:
@@ -200,7 +230,9 @@ def scatter(
 ) -> np.ndarray:
     """Predicted against true per-tile values as a 2D histogram with a logarithmic colour bar (tiles
     per bin), the diagonal ``prediction = truth`` dashed, labelled axes and the title above the plot.
-    ``size`` is the plot's side in pixels (the image adds the axes, colour bar and title)."""
+    Values outside ``[lo, hi]`` are drawn in the edge bins; pairs with a NaN or infinite value are left out,
+    the title saying how many. ``size`` is the plot's side in pixels (the image adds the axes, colour bar and
+    title)."""
     p = np.asarray(prediction, np.float64).ravel()
     g = np.asarray(truth, np.float64).ravel()
     if p.shape != g.shape:
@@ -224,7 +256,10 @@ def scatter(
     ax.set_xlabel(f"true {label}")
     ax.set_ylabel(f"predicted {label}")
     ax.legend(loc="upper left", fontsize=8, frameon=False)
-    ax.set_title(title or f"{p.size} tiles", fontsize=10)
+    # (pairs with a NaN or infinite value have no place on the axes: said, not dropped silently under a title
+    # that counts every value)
+    dropped = int(ok.size - p.size)
+    ax.set_title((title or f"{p.size} tiles") + (f"\n({dropped} not finite, not drawn)" if dropped else ""), fontsize=10)
     fig.colorbar(mesh, ax=ax, label="tiles per bin (log)", shrink=0.85)
     return figure_image(fig)
 
@@ -407,19 +442,22 @@ def _smaller_frames(settings: Mapping[str, Any], frames: int) -> list[tuple[int,
     return runs
 
 
-def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False) -> np.ndarray:
+def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False, *,
+                    higher_is_better: bool = False) -> np.ndarray:
     """A model over a sequence of an engine's frames (``rtp predict`` on several frames), frame by frame: the
     shading work its rates save, the share of tiles whose rate changed from the frame before, and its
     predict time. ``rows``: one mapping a frame with ``work_saved``, ``changed`` (None on the first) and
     ``predict_ms``. ``thresholds``: a fourth panel, each frame's ``threshold`` (what a budget,
-    ``--saving``, reached)."""
+    ``--saving``, reached); ``higher_is_better``: the model's metric is (PSNR), its reduced tiles predicted above
+    the threshold (the panel's title said "below" for every metric)."""
     from matplotlib.ticker import MaxNLocator
 
     panels = [([100 * r["work_saved"] for r in rows], "shading work saved, %"),
               ([np.nan if r["changed"] is None else 100 * r["changed"] for r in rows], "tiles whose rate changed, %"),
               ([r["predict_ms"] for r in rows], "predict, ms")]
     if thresholds:
-        panels.append(([r["threshold"] for r in rows], "threshold reached (each reduced tile predicted below it)"))
+        panels.append(([r["threshold"] for r in rows], "threshold reached (each reduced tile predicted "
+                       f"{'above' if higher_is_better else 'below'} it)"))
     fig = _figure(1300 if len(panels) == 3 else 1700, 300)
     axes = fig.subplots(1, len(panels))
     t = np.arange(len(rows))

@@ -568,6 +568,44 @@ def test_figures_carry_their_colour_scale_and_legend() -> None:
     assert [name.split(":")[0] for name, _ in plots.rate_legend()] == ["1x1 (untinted)", "fine", "medium", "coarse"]
 
 
+def test_heatmaps_draw_infinite_values_at_the_colour_ends_and_nan_grey(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An infinite value (a PSNR of identical tiles, +inf, negated by `rtp demo` so that bright is worse) was masked by
+    matplotlib and drawn blank, the page's white: the best tiles as bright as the worst. It takes the colour at its end
+    of the range now, with the colour bar's arrow there; a NaN is mid grey, as colorize draws it, the bar saying so.
+    The scatter leaves non-finite pairs out and its title says how many."""
+    import matplotlib
+
+    from rtp.capture import figure_image
+
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or figure_image(fig))
+    truth = np.full((6, 3, 4), -np.inf)  # -PSNR of identical tiles
+    prediction = np.full((6, 3, 4), -40.0)
+    prediction[sdk.PREDICTED_RATES.index("4x4")] = np.nan
+    img = plots.heatmaps(truth, prediction, 16, (40, 60), vmin=-55.0, vmax=-15.0, label="-psnr (dB)")
+
+    def centre(ax: Any) -> np.ndarray:
+        box = ax.get_window_extent()
+        return img[int(img.shape[0] - (box.y0 + box.y1) / 2), int((box.x0 + box.x1) / 2)].astype(int)
+
+    fig = figures[-1]
+    panels = {ax.get_title(): ax for ax in fig.axes if ax.get_title()}
+    darkest = np.round(np.array(matplotlib.colormaps["magma"](0.0)[:3]) * 255)
+    np.testing.assert_allclose(centre(panels["2x2: true"]), darkest, atol=2)
+    np.testing.assert_allclose(centre(panels["4x4: predicted"]), [128, 128, 128], atol=2)
+    bar = fig.axes[-1]
+    assert "grey: no value" in bar.get_ylabel()
+    for vmin, vmax in ((1.0, 0.0), (0.5, 0.5)):  # (matplotlib's untyped error at drawing, or a bar of no range)
+        with pytest.raises(BaselineError, match="expected finite vmin < vmax"):
+            plots.heatmaps(truth, prediction, 16, (40, 60), vmin=vmin, vmax=vmax)
+    figures.clear()
+    plots.value_map(np.array([[np.inf, 0.5], [np.nan, 0.0]]), label="x")
+    assert "grey: no value" in figures[-1].axes[-1].get_ylabel()
+    figures.clear()
+    plots.scatter(np.array([0.1, np.nan, np.inf, 0.5]), np.array([0.2, 0.3, 0.4, 0.6]), size=128)
+    assert figures[-1].axes[0].get_title() == "2 tiles\n(2 not finite, not drawn)"
+
+
 def test_the_closed_loop_plots_keep_their_legend_off_the_panels(monkeypatch: pytest.MonkeyPatch) -> None:
     """play's curves and per-frame plots name the methods in one legend outside every panel: a legend
     inside the last panel hid the points in its corner (on a short path most methods' defaults meet
@@ -706,6 +744,29 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
         assert shown.count(f"[{own // 2}-pixel tiles; the model's {own}]") >= 1 and "the model's" not in \
             shown.split(f"[{own // 2}-pixel")[0], (flag, shown)
 
+
+
+def test_bench_report_marks_a_saving_past_the_sweep_as_a_lower_bound(tmp_path: Path) -> None:
+    """bench/report.py reads each sweep at 1 / 2 / 5 / 10 / 15% failing tiles with evaluate.saved_at, which gives the best
+    saving where every point fails less: printed plain, a sweep that never fails 10% read as saving that much at 10%.
+    It is marked ">=" now, as bench/play_report.py marks it; "-" where the sweep never fails that rarely."""
+    sweep = [{"method": m, "parameter": f"t {i}", "fail_share": f, "work_saved": w}
+             for m, pts in (("model", [(0.0, 0.1), (0.5, 0.9)]), ("fidelityfx", [(0.02, 0.2), (0.08, 0.3)]))
+             for i, (f, w) in enumerate(pts)]
+    entry = {"model": {"path": "m.onnx", "metric": "jnyang", "tile_size": 16}, "data": "d", "samples": 1,
+             "quality": [], "decisions": [], "matched": [], "sweep": sweep}
+    (tmp_path / "evaluation.json").write_text(json.dumps([entry]))
+    report = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "report.py")]
+    shown = subprocess.run([*report, str(tmp_path / "evaluation.json")], capture_output=True, text=True,
+                           check=True).stdout
+    assert "| fidelityfx | - | 20.0 | 25.0 | >= 30.0 | >= 30.0 |" in shown, shown
+    assert "| model | 11.6 | 13.2 | 18.0 | 26.0 | 34.0 |" in shown, shown
+    entry["sweep"] = [r for r in sweep if r["method"] == "fidelityfx"]
+    entry["sweep"] += [{**r, "method": "model"} for r in entry["sweep"]]
+    (tmp_path / "evaluation.json").write_text(json.dumps([entry]))
+    shown = subprocess.run([*report, "--compact", str(tmp_path / "evaluation.json")], capture_output=True, text=True,
+                           check=True).stdout
+    assert "| - / 20.0 / 25.0 / >= 30.0 |" in shown, shown
 
 
 def test_cli_evaluate_refuses_one_sidecar_for_several_models(dataset: Path, model: Path, tmp_path: Path,

@@ -266,6 +266,22 @@ def test_a_budget_holds_the_work_saved_and_reports_each_frames_threshold(
     assert "threshold 0.2 with a floor of 0.1 saved, ran at threshold 0.2" in capsys.readouterr().out
 
 
+def test_the_curves_of_a_budget_say_which_side_of_the_threshold_a_reduced_tile_is(
+        sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """frames.png's threshold panel said "each reduced tile predicted below it" for every model: a PSNR model's reduced
+    tiles are predicted above its threshold (higher is better), and the panel says so."""
+    from rtp.evaluate import plots
+
+    titles: list[str] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: titles.extend(ax.get_title() for ax in fig.axes)
+                        or np.zeros((1, 1, 3), np.uint8))
+    for model, side in (("psnr", "above"), ("jnyang", "below")):
+        titles.clear()
+        assert main(["predict", str(sequence), "--model", model, "--saving", "0.3", "--out", str(tmp_path / model),
+                     "--json"]) == 0
+        assert titles[-1] == f"threshold reached (each reduced tile predicted {side} it)", (model, titles)
+
+
 def test_a_sequence_in_text_a_line_a_frame(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:
     files = sorted(sequence.glob("*.npz"))
     assert main(["predict", *map(str, files[:2])]) == 0  # several files are a sequence too
