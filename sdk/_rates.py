@@ -84,7 +84,9 @@ def work_saved(
     A rate name or code: ``1 - 1/(W*H)`` of that rate. A shading-rate image (uint8 codes ``(th, tw)``,
     as :meth:`ShadingRatePredictor.shading_rates` returns): the frame-level figure, each tile weighted
     by the pixels it covers; give the frame's ``frame_size = (H, W)`` and ``tile_size`` so partial
-    edge tiles count their real pixels (without them every tile counts alike).
+    edge tiles count their real pixels (without them every tile counts alike). Each pixel counts its rate's
+    ``1 - 1/(W*H)``: where a frame side is not a multiple of a rate's block, its last blocks are partial and
+    shade one sample for fewer pixels, which this overstates slightly (docs/renderer.md "Software VRS").
     """
     if isinstance(rates, (str, int, np.integer)) and not isinstance(rates, bool):
         name = rates if isinstance(rates, str) else RATE_NAMES.get(int(rates))
