@@ -10,6 +10,7 @@ stopped: existing samples are skipped and never half-written.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import numbers
 import os
@@ -426,6 +427,45 @@ def _check_unlisted_samples(out: str | os.PathLike[str], size: tuple[int, int]) 
                 f"another folder, or resume this one with --size {found[0]}x{found[1]} (nothing was deleted)")
 
 
+def _stored_scene(path: Path) -> str | None:
+    """The ``scene`` a sample file's meta names; None where the file or its meta cannot be read (a damaged
+    sample: the resume captures it again) or names none."""
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            meta = json.loads(bytes(npz["meta"]).decode())
+    except Exception:  # noqa: BLE001 - numpy's and zipfile's readers on damaged bytes (see _dataset._unreadable)
+        return None
+    scene = meta.get("scene") if isinstance(meta, dict) else None
+    return scene if isinstance(scene, str) else None
+
+
+def _check_folder_scenes(out: str | os.PathLike[str], scene_names: Sequence[str]) -> None:
+    """Refuse a scene whose sample ids ``<scene>-<profile>-<index>`` the folder holds already from another scene
+    (``b/arena.glb`` into a folder captured from ``a/arena.glb``, ``procedural_5.glb`` after ``procedural:5``, or
+    one file named by another path: its viewpoints are seeded by the name as given): the resume captured the new
+    scene's samples over the old one's, one by one, saying they came "from other cameras than this rtp plans". A
+    :class:`DatasetError` naming both; the first readable sample of each scene's ids is looked at."""
+    samples = Path(out) / "samples"
+    if not samples.is_dir():
+        return
+    by_scene: dict[str, list[Path]] = {}
+    for path in sorted(samples.glob("*.npz")):  # (one listing of the folder, not one a scene)
+        by_scene.setdefault(path.stem.partition("-")[0], []).append(path)  # (a scene id holds no '-')
+    for name in scene_names:
+        sid = scene_id(name)
+        for path in by_scene.get(sid, []):
+            before = _stored_scene(path)
+            if before is None:
+                continue
+            if before != name:
+                raise DatasetError(
+                    f"{out}: its samples {sid}-<profile>-<index> ({path.name}, ...) were captured from the scene "
+                    f"{before!r}, not {name!r}; capturing {name!r} here would write over them. Capture it into another "
+                    f"folder, or, if it is the same scene, name it as it was named then ({before!r}: the viewpoints are "
+                    "drawn from the name as given)")
+            break
+
+
 def _writer_lock(out: str | os.PathLike[str]) -> Any:
     """The dataset folder's writer lock for a capture (:func:`rtp.sdk.files.writer_lock`)."""
     return writer_lock(out, "rtp capture", lambda holder: DatasetError(
@@ -478,6 +518,8 @@ def capture(
             raise ParameterError(f"{key} must be an integer >= 1, got {value!r}", key)
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
         raise ParameterError(f"seed must be an integer, got {seed!r}", "seed")
+    # (a numpy integer, taken here, reached the manifest's settings as a DatasetError about JSON values)
+    per_scene, seed = int(per_scene), int(seed)
     if not scene_names:
         raise ParameterError("no scenes to capture")
     if not profiles:  # (a folder's settings would record none, refusing every later capture into it)
@@ -519,6 +561,7 @@ def capture(
     # files in flight as stale and render the same samples again. (A new folder on Ray: ray_capture
     # holds it from when it makes the folder until the samples are written.)
     _check_unlisted_samples(out, (w, h))  # (before a manifest is written that would adopt them)
+    _check_folder_scenes(out, scene_names)
     writer: DatasetWriter | None = None
     guard = contextlib.ExitStack()
     if ray is None or (Path(out) / "manifest.json").exists():
@@ -599,13 +642,19 @@ def capture(
         unseen: dict[str, list[float]] = {}
         for sample in DatasetReader(out):
             unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))
-        previous = DatasetReader(out).manifest.get("renderer_settings")
+        manifest = DatasetReader(out).manifest
+        previous = manifest.get("renderer_settings")
         _warn_other_renderer(out, previous, report)
+        # The jobs without viewpoints of the scenes not captured now stay (a folder filled a scene a run lost
+        # them from the manifest, all but the last run's); this run's scenes say anew. Sorted: the workers' order.
+        before = manifest.get("failed")
+        kept = [job for job in before if isinstance(job, str) and job.rpartition("/")[0] not in scene_names] \
+            if isinstance(before, list) else []
         if writer is None:  # (a new folder on Ray: made by ray_capture once Ray answered)
             writer = DatasetWriter(out, settings)
         writer.finalize({
             "renderer_settings": report.renderer or previous,
-            "failed": report.failed,
+            "failed": sorted(set(kept) | set(report.failed)),
             "versions": {"rtp": str(sdk.__version__), "numpy": np.__version__, "python": platform.python_version()},
             "unseen_share": {p: float(np.mean(v)) for p, v in sorted(unseen.items())},
         })

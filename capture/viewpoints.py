@@ -318,9 +318,17 @@ class VoxelGrid:
             front = nb
         return visited.reshape(self.shape)
 
+    def near(self, point: np.ndarray | Sequence[float]) -> bool:
+        """Whether ``point`` lies within 2 voxels of the grid's inside (the bounds), where :meth:`seed` looks."""
+        raw = np.floor((np.asarray(point, np.float64) - self.origin) / self.voxel)
+        return bool(np.all(raw >= -1) and np.all(raw <= np.array(self.shape)))
+
     def seed(self, point: np.ndarray, passable_flat: np.ndarray) -> int | None:
         """The flat index of the passable voxel nearest ``point`` within 2 voxels (where a flood from it
-        starts), or None."""
+        starts), or None. None too for a point further outside the grid (:meth:`near`): clipped onto the
+        grid's side, a spawn point 100 m over a closed room flooded the room."""
+        if not self.near(point):
+            return None
         r = np.arange(-2, 3)
         g = np.stack(np.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3)
         g = g[np.argsort(np.abs(g).sum(1), kind="stable")]
@@ -431,7 +439,8 @@ def free_space(
     ``max_height`` above a solid voxel below, when set); ``candidates`` is the part of it at least
     ``clearance`` (rounded up to whole voxels) from any geometry. :func:`sample_viewpoints` and the
     camera paths of :mod:`rtp.capture.paths` draw from it. Raises :class:`ViewpointError` for a
-    scene without spawn points or triangles.
+    scene without spawn points or triangles, or whose spawn points all lie outside it (more than two voxels
+    past its bounds; one such among others is logged as a warning and starts no flood).
 
     A map whose geometry spans too much for ``voxel`` (more than :class:`VoxelGrid`'s voxel budget)
     gets a coarser grid. ``focus=True`` (the camera paths, whose walker needs floors and steps)
@@ -501,6 +510,17 @@ def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.
     when set), and those of them flood-filled from the spawn points."""
     passable = _passable(grid, max_height)
     seeds = np.array([sp.position for sp in scene.spawn_points], np.float64)
+    away = [p for p in seeds if not grid.near(p)]
+    if away:
+        lo, hi = grid.origin + grid.voxel, grid.origin + (np.array(grid.shape) - 1) * grid.voxel
+        where = (f"its voxel grid spans ({', '.join(f'{v:.2f}' for v in lo)}) to "
+                 f"({', '.join(f'{v:.2f}' for v in hi)}) m, the first spawn point outside it is at "
+                 f"({', '.join(f'{v:.2f}' for v in away[0])})")
+        if len(away) == len(seeds):
+            raise ViewpointError(f"scene {scene.name!r}: none of its {len(seeds)} spawn points lies within the level "
+                                 f"({where}; spawn points in other units or axes than the level's?)")
+        log.warning("%s: %d of its %d spawn points lie outside the level, where no flood starts (%s)", scene.name,
+                    len(away), len(seeds), where)
     return passable, grid.flood(seeds, passable)
 
 

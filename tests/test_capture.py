@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -217,6 +218,13 @@ def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkey
     assert r.written == 1 and r.failed == ["procedural:5/fast"]
     assert sorted(set(tried)) == sorted(set(VIEW_COVERAGE))  # every fallback was tried before giving up
     assert DatasetReader(tmp_path / "ds").manifest["failed"] == ["procedural:5/fast"]
+    # Another scene captured into the folder keeps the record (the manifest said only the last run's failures);
+    # the scene captured again says anew.
+    monkeypatch.setattr(viewpoints, "sample_viewpoints", real)
+    assert capture(["procedural:6"], tmp_path / "ds", per_scene=1, size=(96, 64)).failed == []
+    assert DatasetReader(tmp_path / "ds").manifest["failed"] == ["procedural:5/fast"]
+    assert capture(["procedural:5"], tmp_path / "ds", per_scene=1, size=(96, 64)).written == 1
+    assert DatasetReader(tmp_path / "ds").manifest["failed"] == []
 
 
 def test_targets_on_a_device_torch_cannot_use_are_refused_before_any_work(
@@ -456,6 +464,9 @@ def test_capture_checks_its_arguments_before_writing(tmp_path: Path) -> None:
     assert not out.exists()
     r = capture("procedural:5", out, per_scene=1, size=(96, 64), profiles="slow")  # one name each, not letters
     assert r.written == 1 and DatasetReader(out).ids == ["procedural_5-slow-0000"]
+    # numpy integers are integers (the seed reached the manifest's settings as a DatasetError about JSON values)
+    r = capture("procedural:5", out, per_scene=np.int64(1), size=(96, 64), profiles="slow", seed=np.int64(0))
+    assert (r.written, r.skipped) == (0, 1) and DatasetReader(out).manifest["settings"]["seed"] == 0
 
 
 def test_sigterm_unwinds_a_capture_as_ctrl_c_does(tmp_path: Path) -> None:
@@ -495,6 +506,30 @@ def test_a_resumed_capture_captures_a_damaged_sample_again(tmp_path: Path, caplo
     assert any(f"{damaged}: unreadable sample" in r.getMessage() and r.getMessage().endswith("captured again")
                for r in caplog.records)
     assert DatasetReader(out)["procedural_7-slow-0000"].buffer("depth").shape == (64, 96)
+
+
+def test_a_scene_whose_sample_ids_the_folder_holds_from_another_scene_is_refused(tmp_path: Path) -> None:
+    """`_check_scene_ids` refused two files of one name in one run; across runs into one folder (`b/x.glb` after
+    `a/x.glb`, `procedural_5.glb` after `procedural:5`) the second captured its samples over the first's, each
+    said to come "from other cameras than this rtp plans". Now it is refused before anything is written, naming
+    both scenes; the scene's own name resumes as before."""
+    from rtp.capture import DatasetError
+    from rtp.capture.scenes import procedural
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    for sub, seed in (("a", 2), ("b", 3)):
+        (tmp_path / sub).mkdir()
+        to_trimesh_scene(procedural(seed, rooms=(2, 2), texture_size=32)).export(tmp_path / sub / "x.glb")
+    out = tmp_path / "ds"
+    first, other = str(tmp_path / "a" / "x.glb"), str(tmp_path / "b" / "x.glb")
+    assert capture([first], out, per_scene=1, size=(64, 48), profiles=("slow",)).written == 1
+    before = (out / "samples" / "x-slow-0000.npz").read_bytes()
+    announced: list[int] = []
+    with pytest.raises(DatasetError, match=re.escape(f"captured from the scene '{first}', not '{other}'")):
+        capture([other], out, per_scene=1, size=(64, 48), profiles=("slow",), starting=announced.append)
+    assert (out / "samples" / "x-slow-0000.npz").read_bytes() == before and not announced
+    again = capture([first], out, per_scene=1, size=(64, 48), profiles=("slow",))
+    assert (again.written, again.skipped, again.recaptured) == (0, 1, 0)
 
 
 def test_a_folder_without_its_manifest_refuses_samples_of_another_size(tmp_path: Path) -> None:

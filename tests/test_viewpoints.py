@@ -66,6 +66,28 @@ def test_flood_fill_stays_inside_a_closed_room():
     assert (np.abs(c[:, 0]) < 2).all() and (np.abs(c[:, 2]) < 2).all() and (c[:, 1] > 0).all() and (c[:, 1] < 3).all()
 
 
+def test_a_spawn_point_outside_the_level_starts_no_flood(caplog):
+    """A spawn point far outside the level (in centimetres where the level is in metres, say) was clipped onto
+    the voxel grid's side and the flood started there: one 100 m over a closed room flooded the room. Now it
+    starts none, with a warning, and a scene whose spawn points all lie outside is a ViewpointError."""
+    b = MeshBuilder()
+    b.box(0, (-2, 0, -2), (2, 3, 2))
+
+    def room(*spawns):
+        return Scene("room", b.meshes(), [Material("m")], spawn_points=[SpawnPoint(p) for p in spawns])
+
+    inside = free_space(room((0.0, 1.5, 0.0)), max_height=None)[2]
+    for far in ((0.0, 100.0, 0.0), (50.0, 1.5, 0.0), (0.0, -50.0, 0.0)):
+        with pytest.raises(ViewpointError, match=r"none of its 1 spawn points lies within the level .* at \("):
+            free_space(room(far), max_height=None)
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        both = free_space(room((0.0, 100.0, 0.0), (0.0, 1.5, 0.0)), max_height=None)[2]
+    assert np.array_equal(both, inside)
+    assert any("1 of its 2 spawn points lie outside the level" in r.getMessage() for r in caplog.records)
+    # (one on the bounds, a wall's voxel, still finds the free voxel beside it, as before)
+    assert np.array_equal(free_space(room((2.0, 1.5, 0.0)), max_height=None)[2], inside)
+
+
 def test_viewpoints_are_valid(scene, views):
     tris = scene_triangles(scene)
     lo, hi = scene.bounds
