@@ -659,6 +659,32 @@ def test_the_gl_fixture_skips_naming_the_packages(monkeypatch: pytest.MonkeyPatc
     assert EGL_PACKAGES in str(info.value) and "eglGetDisplay failed" in str(info.value)
 
 
+def test_ci_fails_a_run_in_which_a_test_skipped(tmp_path: Path) -> None:
+    """Every skip of the suite names a package or library to install, and CI installs them all: a run there that
+    skipped a test (lost EGL, a dropped extra) was green with "N skipped". With $RTP_TESTS_NO_SKIPS set, as
+    .ci/run sets it, the run fails naming the test; an xfail, and a run without it, pass as before."""
+    from tests.conftest import NO_SKIPS_ENV
+
+    assert f"export {NO_SKIPS_ENV}=1" in (ROOT / ".ci" / "run").read_text()
+    (tmp_path / "test_one.py").write_text("import pytest\n\ndef test_ok():\n    pass\n\n"
+                                          "def test_gone():\n    pytest.skip('libfoo is not installed')\n\n"
+                                          "@pytest.mark.xfail(reason='known')\ndef test_known():\n    assert False\n")
+    env = {k: v for k, v in os.environ.items() if k not in (NO_SKIPS_ENV, "PYTEST_XDIST_WORKER")}
+    for workers in ([], ["-n", "2"]):
+        runs = {}
+        for value in ("", "1"):
+            runs[value] = subprocess.run(
+                [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "tests.conftest", *workers,
+                 str(tmp_path / "test_one.py")], cwd=ROOT, env={**env, NO_SKIPS_ENV: value}, capture_output=True,
+                text=True, timeout=300)
+        assert runs[""].returncode == 0 and "1 skipped" in runs[""].stdout, runs[""].stdout[-2000:]
+        failed = runs["1"]
+        assert failed.returncode == pytest.ExitCode.TESTS_FAILED, (workers, failed.stdout[-2000:])
+        assert "1 skipped with $RTP_TESTS_NO_SKIPS set: each is a missing install step" in failed.stdout
+        assert "test_one.py::test_gone: Skipped: libfoo is not installed" in failed.stdout, failed.stdout[-2000:]
+        assert "test_known" not in failed.stdout.split("missing install step")[1]
+
+
 @pytest.mark.gl
 def test_gl_tests_set_up_the_shared_context_before_their_own_fixtures(request: pytest.FixtureRequest) -> None:
     # conftest puts gl_context first, so that without EGL a gl test skips before a module fixture renders

@@ -519,7 +519,6 @@ def test_split_profile_and_transform_choices_are_their_rooms() -> None:
 
 
 def test_head_choices_are_the_networks() -> None:
-    pytest.importorskip("torch")
     from rtp.train.model import ARCHS, HEADS
 
     assert tuple(_option(("train",), "head").choices or ()) == HEADS

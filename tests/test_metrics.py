@@ -712,7 +712,6 @@ def test_weber_denominator_validates_its_reference(ref: np.ndarray) -> None:
 def test_weber_denominator_takes_images_as_the_map_functions_do(ref: np.ndarray) -> None:
     """A torch (3, H, W) tensor, the map functions' layout, was read as an (H, W, 3) image (refused, or with
     three columns misread); RGBA was luma's InputShapeError, an empty frame tile_grid's ParameterError."""
-    torch = pytest.importorskip("torch")
     planar = torch.from_numpy(np.ascontiguousarray(ref.transpose(2, 0, 1)))
     got = M.weber_denominator(planar, 0.02)
     assert isinstance(got, torch.Tensor)

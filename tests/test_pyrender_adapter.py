@@ -242,7 +242,8 @@ def test_depth_and_motion(textured: _Setup, textured_inputs: list[np.ndarray]) -
 
 
 def test_rates_agree_on_most_tiles(tmp_path: Path, textured: _Setup, textured_inputs: list[np.ndarray]) -> None:
-    torch = pytest.importorskip("torch")
+    import torch
+
     from rtp import export
     from rtp.train import checkpoint
     from rtp.train.model import MetricNet

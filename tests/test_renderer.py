@@ -17,7 +17,7 @@ import pytest
 from rtp.plugins.moderngl import Renderer, RendererError
 from rtp.scene import Camera, Material, Mesh, PointLight, Scene, SunLight, box_mesh, checker_texture, quad_mesh
 from rtp.sdk import ALL_RATES as RATES
-from rtp.sdk import RATE_CODES
+from rtp.sdk import RATE_CODES, InputShapeError
 from rtp.sdk._reproject import reproject, reproject_positions
 from rtp.sdk.adapters import UnsupportedChannelError
 from tests.conftest import make_current
@@ -113,7 +113,8 @@ def test_reference_reprojection_rejects_offscreen_occluded_and_sky_mismatch():
     _, s1 = reproject(colour, np.zeros((h, w), np.float32), depth, cur.view(), cur.projection(w / h), cur.view_projection(w, h))
     _, s2 = reproject(colour, depth, np.zeros((h, w), np.float32), cur.view(), cur.projection(w / h), cur.view_projection(w, h))
     assert not s1.any() and not s2.any()
-    with pytest.raises(ValueError):
+    # a previous depth of another size than the previous colour: the typed error, not numpy's reshape ValueError
+    with pytest.raises(InputShapeError, match=r"prev_colour must be \(H', W'\[, C\]\) with \(H', W'\) = \(20, 39\)"):
         reproject(colour, depth[:, :-1], depth, cur.view(), cur.projection(2.0), cur.view_projection(w, h))
 
 

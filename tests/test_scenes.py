@@ -18,6 +18,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import PIL.Image as PIL
 import pytest
 
 from rtp import sdk
@@ -39,8 +40,6 @@ from rtp.capture.scenes._pk3 import Pk3Set, parse_shaders
 from rtp.sdk import RtpError
 
 from .conftest import damage_zip_member
-
-PIL = pytest.importorskip("PIL.Image")
 
 
 def _scene_arrays(s):
@@ -345,7 +344,7 @@ def test_conversion_helpers():
 # -- glTF / OBJ through trimesh -------------------------------------------------------------------
 
 def _textured_quad():
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
     img = PIL.new("RGBA", (4, 4), (0, 0, 255, 255))
     for x in range(4):
         img.putpixel((x, 0), (255, 0, 0, 255))  # top row red
@@ -643,7 +642,7 @@ def test_mesh_file_materials(tmp_path: Path):
     """Materials from the file: glTF emission and alpha MASK (its cutoff, 0.5 by default), an OBJ
     diffuse colour and Phong exponent (roughness sqrt(2 / (n + 2))), vertex and face colours as their
     mean; a geometry without texture coordinates gets zero uvs."""
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
     PBR = trimesh.visual.material.PBRMaterial
 
     def textured(material):
@@ -709,7 +708,7 @@ def test_mesh_file_geometry_fallbacks(tmp_path: Path, caplog: pytest.LogCaptureF
 def test_mesh_file_format_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     """A file without triangles or one trimesh cannot read is SceneFormatError; without trimesh,
     loading says what to install."""
-    trimesh = pytest.importorskip("trimesh")
+    import trimesh
     trimesh.PointCloud(QUAD_V).export(tmp_path / "points.ply")
     (tmp_path / "lines.obj").write_text("v 0 0 0\nv 1 0 0\nl 1 2\n")
     for name in ("points.ply", "lines.obj"):
@@ -729,7 +728,6 @@ def test_an_obj_texture_or_material_library_that_cannot_be_read_is_dropped_with_
     """An MTL's ``map_Kd`` naming a missing image left the material untextured without a word (trimesh logs
     it at DEBUG), and a missing ``.mtl`` gave trimesh's grey 2x2 placeholder texture, silently: both are
     dropped with a warning naming the file, the material untextured (the MTL's Kd kept)."""
-    pytest.importorskip("trimesh")
     obj = "mtllib {}\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl red\nf 1/1 2/2 3/3\n"
     (tmp_path / "lost.obj").write_text(obj.format("lost.mtl"))
     (tmp_path / "lost.mtl").write_text("newmtl red\nKd 1 0 0\nmap_Kd missing.png\n")
@@ -764,7 +762,6 @@ def test_an_obj_without_a_material_library_is_untextured_as_one_whose_library_ca
     100 of 255, a white base colour: an albedo of 0.39 rather than the default 0.8) and its placeholder's
     roughness, unlike one whose library cannot be read: both are the untextured default material now (no
     warning for the OBJ without one: it names no library to lose)."""
-    pytest.importorskip("trimesh")
     import dataclasses
 
     from rtp.scene import Material
@@ -787,7 +784,6 @@ def test_an_obj_without_a_material_library_is_untextured_as_one_whose_library_ca
 def test_an_obj_without_a_material_library_renders_the_default_albedo(tmp_path: Path) -> None:
     """The untextured default material of an OBJ without ``mtllib`` is a plain albedo of its base colour (0.8,
     sRGB-encoded), as an OBJ whose library cannot be read gives (trimesh's placeholder gave 100 / 255)."""
-    pytest.importorskip("trimesh")
     from rtp.plugins.moderngl import Renderer
     from rtp.scene import Camera
 
