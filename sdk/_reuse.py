@@ -493,7 +493,8 @@ class PredictionReuse:
     since the network ran; ``margin`` the tiles of context around a fresh crop (None: the model's
     own reach, measured by :func:`context_tiles` when ``unseen="fresh"``: two tiles for the
     three-block shipped models, four for LPIPS's five blocks). After each frame :attr:`work` is the
-    network's work on it as a share of a whole-frame run (1, 0, or the crops' share). One instance
+    network's work on it as a share of a whole-frame run (1, 0, or the crops' share; not counting the tail that
+    ``carry="features"`` runs on a carried frame). One instance
     per view; not thread-safe.
 
     A predictor loaded for hardware tiles finer than the model's (``sdk.load(..., tile_size=8)`` of a
@@ -799,10 +800,12 @@ class PredictionReuse:
             if not np.issubdtype(arr.dtype, np.integer):
                 raise ParameterError(f"{name}: expected integer pixel indices, got dtype {arr.dtype}", "fetch")
             # one pass: read as unsigned, a negative index is larger than any limit (half the time of min and max);
-            # only the pixels the carry reads (one of every `step` per axis, and the last row and column: _kept's),
-            # a sixteenth of the map at the default step
+            # only the pixels the carry reads (one of every `step` per axis, and the last row and column: _kept's,
+            # whose padding's corner is the last pixel: unchecked, it was read past the frame on frames not of whole
+            # tiles), a sixteenth of the map at the default step
             unsigned = arr.view(np.dtype(f"u{arr.itemsize}")) if arr.dtype.kind == "i" else arr
-            read = unsigned if step == 1 else (unsigned[::step, ::step], unsigned[::step, -1:], unsigned[-1:, ::step])
+            read = unsigned if step == 1 else (unsigned[::step, ::step], unsigned[::step, -1:], unsigned[-1:, ::step],
+                                               unsigned[-1:, -1:])
             if arr.size and max(int(r.max()) for r in (read if isinstance(read, tuple) else (read,))) >= limit:
                 raise ParameterError(f"{name}: expected indices in [0, {limit}) (the previous frame's pixels), got "
                                      f"{arr.min()}..{arr.max()}", "fetch")
@@ -855,7 +858,9 @@ class PredictionReuse:
             here = start_track(hw, tile, self.step)
             track = Track(track.index, np.where(track.index >= 0, here.place, -1), np.zeros_like(track.gen),
                           np.full((1, here.lut.shape[1]), -1, np.int32), hw, self._track.origin or self._track.shape)
-            self._shape = hw
+            # (the size is kept with the track below, once the frame is through: set here, a frame refused further
+            # on, an input function's or a crop's NaN, left the old size's track under the new size, and the same
+            # frame given again had its fetch refused as out of the previous frame, or was carried unmoved)
         if self.refresh is not None and missing.mean() > self.refresh:
             runs = True  # too much of the frame unseen since the network ran: run it before the interval is up
         feats = None
@@ -870,6 +875,7 @@ class PredictionReuse:
             est = np.where(missing[None], est, est * levels).astype(np.float32)
         if runs:  # the network's frame, blended with what was carried here (history > 0)
             return self._run(x, hw, (est, missing))
+        carried = est  # (a whole-frame run below blends these, not carry_scale's: that is for carried frames alone)
         if self.carry_scale != 1.0:  # a stricter threshold for carried estimates (unseen tiles stay worst)
             est = np.where(missing[None], est, est * self.carry_scale).astype(np.float32)
         work = 0.0
@@ -878,7 +884,7 @@ class PredictionReuse:
             boxes = cover(missing, self.margin or 0)
             area = sum((min(y1 * tile, h) - y0 * tile) * (min(x1 * tile, w) - x0 * tile) for y0, y1, x0, x1 in boxes)
             if area > FRESH_FULL * h * w:  # cheaper to run the whole frame, and it restarts the interval
-                return self._run(x, hw, (est, missing))
+                return self._run(x, hw, (carried, missing))
             for y0, y1, x0, x1 in boxes:
                 window = self._window(x, slice(y0 * tile, min(y1 * tile, h)), slice(x0 * tile, min(x1 * tile, w)))
                 sel = missing[y0:y1, x0:x1]
@@ -903,6 +909,7 @@ class PredictionReuse:
                           track.shape, track.origin)
             missing = np.zeros_like(missing)  # (every tile the network's now)
         self._track = track
+        self._shape = hw  # (with the track: another size's where dynamic resolution changed it)
         self._age += 1
         self.work = work
         return est

@@ -1196,3 +1196,72 @@ def test_inputs_seen_and_background_are_checked_on_every_frame() -> None:
                                       (ones, ones.tolist(), "background: expected a numpy array")):
         with pytest.raises((sdk.InputShapeError, sdk.ParameterError), match=message):
             network.predict(s.x, fetch, seen, background)  # type: ignore[arg-type]
+
+
+def test_a_resized_frame_refused_midway_leaves_the_reuse_as_it_was() -> None:
+    """Dynamic resolution: a frame of another size refused after its carry (a NaN where a fresh crop reads) leaves
+    the reuse as before it, as a refused frame of the same size does: the same frame given again with its fetch (of
+    the previous frame's pixels) gives what it gives without the refusal, and so does the next. Before, the new size
+    was kept and the old size's track not moved: the fetch given again was refused as out of the previous frame."""
+    s = _Scene(6, 10)
+    h, w = s.h // 2, s.w // 2
+    zero = np.zeros((h, w))
+    fetch = sdk.fetch_from_motion(zero, zero, prev_shape=(s.h, s.w))
+    seen = np.ones((h, w), np.float32)
+    seen[:, -TILE:] = 0  # the last tile column unseen: a fresh crop there
+    small = s.inputs(np.ones((s.h, s.w), np.float32))[:, ::2, ::2].copy()
+    bad = small.copy()
+    bad[:, :, -2:] = np.nan
+    still = np.indices((h, w))
+
+    def frames(refused: bool) -> list[np.ndarray]:
+        reuse = sdk.PredictionReuse(s.pred, 4, unseen="fresh", margin=1)
+        reuse.predict(s.inputs(np.ones((s.h, s.w), np.float32)))
+        if refused:
+            with pytest.raises(sdk.NonFiniteInputError):
+                reuse.predict(bad, fetch, seen)
+            assert reuse.age == 0
+        out = [reuse.predict(small, fetch, seen)]
+        assert reuse.age == 1 and 0.0 < reuse.work < 1.0
+        out.append(reuse.predict(small, (still[0], np.minimum(still[1] + 3, w - 1)), np.ones((h, w), np.float32)))
+        return out
+
+    for a, b in zip(frames(False), frames(True)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_carry_scale_leaves_a_whole_frame_run_blended_with_history_alone() -> None:
+    """``carry_scale`` is for carried frames: a frame whose fresh crops would cover most of it runs the network on
+    the whole frame, and with ``history`` blends in the estimates carried there as they are, as a run when the
+    interval is up does (before, times carry_scale: the network's frame changed with it)."""
+    s = _Scene(6, 10)
+    everything = np.ones((s.h, s.w), np.float32)
+    seen = everything.copy()
+    seen[:, :6 * TILE] = 0  # most of the frame unseen: crops over half of it, the whole frame runs
+    x = s.inputs(everything)
+
+    def run_frame(scale: float) -> np.ndarray:
+        reuse = sdk.PredictionReuse(s.pred, 4, unseen="fresh", margin=1, history=0.5, carry_scale=scale)
+        reuse.predict(x)
+        est = reuse.predict(x, (s.rows, s.cols), seen)
+        assert reuse.work == 1.0 and reuse.age == 0
+        return est
+
+    np.testing.assert_array_equal(run_frame(1.5), run_frame(1.0))
+
+
+@pytest.mark.parametrize("bad", [-1, 150, 10**6])
+def test_a_fetch_out_of_the_frame_at_its_last_pixel_is_refused(bad: int) -> None:
+    """On a frame not of whole tiles the carry reads the last pixel's fetch (the padding's corner): out of the
+    previous frame there it is refused as anywhere else. Before, it went unchecked: one past the last column was
+    read as the next row's first pixel and -1 as the last row's, silently, and further an IndexError."""
+    pred = sdk.load("jnyang")
+    h, w = 90, 150
+    x = np.random.default_rng(0).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
+    rows, cols = np.indices((h, w))
+    cols[-1, -1] = bad
+    reuse = sdk.PredictionReuse(pred, 4)
+    reuse.predict(x)
+    with pytest.raises(sdk.ParameterError, match=r"fetch cols: expected indices in \[0, 150\)"):
+        reuse.predict(x, (rows, cols))
+    assert reuse.age == 0
