@@ -665,7 +665,7 @@ def test_ci_fails_a_run_in_which_a_test_skipped(tmp_path: Path) -> None:
     .ci/run sets it, the run fails naming the test; an xfail, and a run without it, pass as before."""
     from tests.conftest import NO_SKIPS_ENV
 
-    assert f"export {NO_SKIPS_ENV}=1" in (ROOT / ".ci" / "run").read_text()
+    assert f"{NO_SKIPS_ENV}=1 make test\n" in (ROOT / ".ci" / "run").read_text()
     (tmp_path / "test_one.py").write_text("import pytest\n\ndef test_ok():\n    pass\n\n"
                                           "def test_gone():\n    pytest.skip('libfoo is not installed')\n\n"
                                           "@pytest.mark.xfail(reason='known')\ndef test_known():\n    assert False\n")
