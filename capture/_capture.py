@@ -33,7 +33,7 @@ from rtp.sdk.files import writer_lock
 
 from ._dataset import MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
 from ._memory import check_frame_memory
-from ._pool import cores, tick_queue, with_ticks, worker_pool
+from ._pool import cores, name_task, tick_queue, with_ticks, worker_pool
 
 __all__ = [
     "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "check_scene", "load_scene",
@@ -621,7 +621,12 @@ def capture(
                 put = staticmethod(tick)
 
             for a in args:
-                merge(_run_job(*a, queue=_Q()))
+                try:
+                    result = _run_job(*a, queue=_Q())
+                except Exception as exc:
+                    name_task(exc, f"scene {a[0]!r}")
+                    raise
+                merge(result)
         else:
             queue = tick_queue()
 
@@ -632,12 +637,18 @@ def capture(
             # (a process a scene at most: one more was an idle process that took its share of the cores' threads
             # from the workers that render, and said there were more processes than cores)
             with worker_pool(min(workers or 1, len(args)), ticks=queue) as pool:
-                pending = {pool.submit(with_ticks, _run_job, *a) for a in args}
+                scene_of = {pool.submit(with_ticks, _run_job, *a): a[0] for a in args}
+                pending = set(scene_of)
                 while pending:
                     finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
                     drain()
                     for f in finished:
-                        merge(f.result())
+                        try:
+                            result = f.result()
+                        except Exception as exc:  # (a worker's: its traceback said nothing of the scene)
+                            name_task(exc, f"scene {scene_of[f]!r}")
+                            raise
+                        merge(result)
             drain()  # (after the workers exited: their last ticks are flushed)
         unseen: dict[str, list[float]] = {}
         for sample in DatasetReader(out):

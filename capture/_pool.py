@@ -114,6 +114,21 @@ def with_ticks(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     return fn(*args, queue=_TICKS, **kwargs)
 
 
+def name_task(exc: BaseException, task: str) -> None:
+    """Say which ``task`` (``"scene 'sponza'"``, ``"sample 'a1b2'"``) a job's worker was on when ``exc``
+    was raised, as a note under its traceback (Python 3.11+), the exception's type kept so that whatever
+    catches it still does. Not on an rtp error, whose message names what it is about (and is printed
+    alone, one line), nor on Ctrl-C, nor on a broken pool (a worker killed: every task still pending
+    gets it, the one that was hit or not). The Ray path wraps the others in a RayWorkerError naming the task."""
+    from concurrent.futures import BrokenExecutor
+
+    from rtp.sdk import RtpError
+
+    add_note = getattr(exc, "add_note", None)
+    if isinstance(exc, Exception) and not isinstance(exc, (RtpError, BrokenExecutor)) and add_note is not None:
+        add_note(f"(rtp: raised while working on {task})")
+
+
 @contextlib.contextmanager
 def worker_pool(workers: int, ticks: Any = None) -> Iterator[ProcessPoolExecutor]:
     """A ``spawn`` process pool of ``workers`` processes that die with the job, each on

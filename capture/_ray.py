@@ -18,7 +18,8 @@ The local process pool stays the default on one machine; Ray spreads the same wo
   nothing half-written appears. A run that is interrupted resumes like the local one.
 
 ``ADDRESS`` is ``local`` (start a private Ray instance on this machine with ``workers`` CPUs), ``auto``
-(the cluster this machine belongs to) or a head node's ``host:port`` / ``ray://host:10001``.
+(the cluster this machine belongs to) or a head node's ``host:port`` / ``ray://host:10001`` (an IPv6
+address in brackets, as Ray takes it: ``[::1]:6379``).
 """
 
 from __future__ import annotations
@@ -79,9 +80,19 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
     import socket
 
     hostport = address.split("://", 1)[-1]
-    host, sep, port = hostport.rpartition(":")
-    if not sep or not port.isdigit():
-        raise RayExecutorError(f"Ray address {address!r}: expected 'local', 'auto', HOST:PORT or ray://HOST:PORT")
+    if hostport.startswith("["):  # an IPv6 address, as Ray takes it: [::1]:6379 (the brackets were looked up as a name)
+        host, close, rest = hostport[1:].partition("]")
+        sep, port = rest[:1], rest[1:]
+        if not close or not host or sep != ":":
+            sep = ""
+    else:
+        host, sep, port = hostport.rpartition(":")
+        if ":" in host:  # ("::1" was host ":" port 1: "nothing answers there")
+            raise RayExecutorError(f"Ray address {address!r}: an IPv6 address goes in brackets, before its port: "
+                                   "[ADDRESS]:PORT (such as [::1]:6379)")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:  # (99999 was taken as port 34463)
+        raise RayExecutorError(f"Ray address {address!r}: expected 'local', 'auto', HOST:PORT, [IPV6]:PORT or "
+                               "ray://HOST:PORT, a port in 1-65535")
     try:
         socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout).close()
     except OSError as exc:

@@ -378,7 +378,7 @@ def compute_targets(
 
     from rtp import metrics as M
 
-    from ._pool import worker_pool
+    from ._pool import name_task, worker_pool
 
     if not isinstance(data_root, (str, os.PathLike)) or not os.fspath(data_root):  # (Path('') is the current folder)
         raise ParameterError(f"data_root: expected a dataset folder path, got {data_root!r}"
@@ -478,16 +478,24 @@ def compute_targets(
         elif ray is not None or (workers or 1) <= 1 or not ids:  # (Ray with nothing to do starts no cluster; a
             # pool with nothing to do no process: --workers 2 on targets all there was a ValueError, "max_workers")
             for i in ids:
-                _compute_one(str(data_root), i, tuple(metrics), params)
+                try:
+                    _compute_one(str(data_root), i, tuple(metrics), params)
+                except Exception as exc:
+                    name_task(exc, f"sample {i!r}")
+                    raise
                 done += 1
                 if progress:
                     progress(done, len(reader.ids))
         else:
             n = min(workers or 1, len(ids))  # (a process a sample at most: an idle one took the cores' threads too)
             with worker_pool(n) as pool:  # each worker's torch on its share of the cores (worker_threads)
-                futures = [pool.submit(_compute_one, str(data_root), i, tuple(metrics), params) for i in ids]
-                for f in as_completed(futures):
-                    f.result()
+                sample_of = {pool.submit(_compute_one, str(data_root), i, tuple(metrics), params): i for i in ids}
+                for f in as_completed(sample_of):
+                    try:
+                        f.result()
+                    except Exception as exc:  # (a worker's: its traceback said nothing of the sample)
+                        name_task(exc, f"sample {sample_of[f]!r}")
+                        raise
                     done += 1
                     if progress:
                         progress(done, len(reader.ids))

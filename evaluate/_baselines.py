@@ -707,12 +707,14 @@ class Oracle:
     def __init__(
         self, store: TargetStore, metric: str, tile_size: int, *, threshold: float, higher_is_better: bool = False
     ) -> None:
-        self.store, self.metric, self.tile_size = store, metric, tile_size
-        self.threshold, self.higher_is_better = float(threshold), higher_is_better
+        self.store, self.metric, self.tile_size = store, metric, _check_tile(tile_size)
+        # (checked here, as the other selectors' are: "x" was a bare ValueError, -1 refused only at the first frame)
+        self.threshold = check_threshold(threshold, higher_is_better)
+        self.higher_is_better = bool(higher_is_better)
 
     def predict(self, source: Any) -> np.ndarray:
         return self.store.load(source.id, self.metric, self.tile_size)
 
     def shading_rates(self, source: Any, threshold: float | None = None, allowed: Iterable[RateLike] | None = None) -> np.ndarray:
-        thr = self.threshold if threshold is None else float(threshold)
+        thr = self.threshold if threshold is None else check_threshold(threshold, self.higher_is_better)
         return select_rates(self.predict(source), thr, higher_is_better=self.higher_is_better, allowed=allowed)

@@ -744,6 +744,65 @@ def test_worker_pools_start_a_process_a_job_at_most(tmp_path: Path, monkeypatch:
     assert asked == [1, 2]  # (one scene; two samples)
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_workers_failure_names_the_scene_or_sample_it_was_on(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                               workers: int) -> None:
+    """A bug's exception in a capture or targets job (not an rtp error) came back from a local worker as a
+    bare traceback of the worker's code, without the scene or sample it was on (the Ray path names it). It
+    keeps its type, whatever catches it still does, and a note under its traceback names the scene or
+    sample; an rtp error, whose one line names what it is about, and a broken pool are left as they were.
+    The pool is a pool of threads here, so that the job's function can be replaced (what comes back from a
+    process is the same)."""
+    import contextlib
+    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from rtp.capture import _capture, _pool, _targets, compute_targets
+
+    @contextlib.contextmanager
+    def pool(n: int, ticks: object = None) -> object:
+        with ThreadPoolExecutor(n) as ex:
+            yield ex
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=2, size=(64, 48), profiles=("slow",))
+    monkeypatch.setattr(_capture, "worker_pool", pool)
+    monkeypatch.setattr(_pool, "worker_pool", pool)
+
+    def run_job(scene: str, *args: object, queue: object = None) -> object:
+        if scene == "procedural:6":
+            raise ZeroDivisionError("a bug")
+        return _capture.CaptureReport()
+
+    monkeypatch.setattr(_capture, "_run_job", run_job)
+    with pytest.raises(ZeroDivisionError, match="a bug") as err:
+        capture(["procedural:5", "procedural:6"], tmp_path / "two", per_scene=1, size=(64, 48), profiles=("slow",),
+                workers=workers)
+    assert getattr(err.value, "__notes__", None) == ["(rtp: raised while working on scene 'procedural:6')"]
+
+    failing = sorted(DatasetReader(out).ids)[1]
+
+    def compute_one(data_root: str, sample_id: str, *args: object) -> str:
+        if sample_id == failing:
+            raise KeyError("a bug")
+        return sample_id
+
+    monkeypatch.setattr(_targets, "_compute_one", compute_one)
+    with pytest.raises(KeyError, match="a bug") as err:
+        compute_targets(out, ("psnr",), workers=workers)
+    assert getattr(err.value, "__notes__", None) == [f"(rtp: raised while working on sample {failing!r})"]
+
+    for error in (_targets.TargetError("cannot be read"), BrokenProcessPool("a worker was killed")):
+        # (a broken pool's error reaches every task still pending, not only the one whose worker was killed)
+        def compute_none(data_root: str, sample_id: str, *args: object, error: Exception = error) -> str:
+            raise error
+
+        monkeypatch.setattr(_targets, "_compute_one", compute_none)
+        with pytest.raises(type(error)) as other:
+            compute_targets(out, ("psnr",), workers=workers)
+        assert not hasattr(other.value, "__notes__")
+
+
 def test_a_resumed_capture_drawn_with_other_renderer_settings_says_so(tmp_path: Path,
                                                                       caplog: pytest.LogCaptureFixture) -> None:
     """The samples a resumed capture adds drawn with other renderer settings than the folder's (another rtp

@@ -433,6 +433,22 @@ def test_evaluation_matches_the_engine_path(dataset: Path, model: Path) -> None:
     assert oracle.shading_rates(s).shape == (2, 4)
 
 
+@pytest.mark.parametrize(("kwargs", "name"), [
+    ({"threshold": "x"}, "threshold"), ({"threshold": -0.1}, "threshold"), ({"threshold": float("nan")}, "threshold"),
+    ({"threshold": 0.2, "higher_is_better": "no"}, "higher_is_better"),
+])
+def test_the_oracle_refuses_a_bad_threshold_when_made(dataset: Path, kwargs: dict[str, Any], name: str) -> None:
+    # ("x" was a bare ValueError from float(); -0.1 was taken and refused only by the first shading_rates)
+    with pytest.raises(sdk.ParameterError, match=f"^{name}: ") as err:
+        Oracle(TargetStore(dataset), "jnyang", T, **kwargs)
+    assert err.value.name == name
+    with pytest.raises(BaselineError, match="tile_size"):
+        Oracle(TargetStore(dataset), "jnyang", "16", threshold=0.2)  # type: ignore[arg-type]
+    oracle = Oracle(TargetStore(dataset), "jnyang", T, threshold=0.2)
+    with pytest.raises(sdk.ParameterError, match="^threshold: "):
+        oracle.shading_rates(None, threshold="x")  # type: ignore[arg-type]
+
+
 
 def test_evaluation_on_coarser_hardware_tiles_scores_the_pooled_values(dataset: Path, model: Path) -> None:
     """tile_size=2T (hardware tiles twice the model's, `rtp evaluate --tile-size`): each hardware tile

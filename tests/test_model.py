@@ -208,6 +208,23 @@ def test_the_fast_network_layout() -> None:
     assert "grow" not in net.config  # configs of checkpoints from before the option stay as they were
 
 
+@pytest.mark.parametrize(("arch", "option"), [
+    ("fast", {"head": "linear"}), ("fast", {"head": "bogus"}),
+    ("paper", {"depth": 5}), ("paper", {"head_width": 8}), ("paper", {"separable": True}),
+    ("paper", {"block_contrast": (0,)}),
+])
+def test_one_networks_option_with_the_other_arch_is_refused_not_ignored(arch: str, option: dict[str, Any]) -> None:
+    # (rtp train refuses these; the Python builder took them and built the network without them)
+    from rtp.train.model import FastNet
+
+    (name,) = option
+    with pytest.raises(sdk.ParameterError, match=f"^{name}: ") as err:
+        build_network(arch, 4, 4, 16, **option)
+    assert err.value.name == name
+    assert isinstance(build_network("fast", 4, 4, 16, head="paper"), FastNet)  # each default is taken by both
+    assert isinstance(build_network("paper", 4, 4, 16, head="linear", coarse_width=32), MetricNet)
+
+
 def _round_trip(net: torch.nn.Module, key: str, meta: dict[str, Any] | None = None, seed: int = 0) -> None:
     """``net`` (BatchNorm statistics made non-trivial) saved, reloaded with its config's ``key``, exported,
     and the SDK's raw prediction equal to torch's."""

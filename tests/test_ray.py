@@ -209,6 +209,39 @@ def test_ray_errors_are_typed(cluster: None, tmp_path: Path) -> None:
         ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
 
 
+def test_a_head_address_is_parsed_as_ray_parses_it_ipv6_in_brackets() -> None:
+    """`--ray [::1]:6379` (Ray's form of an IPv6 address) was looked up with its brackets and said "nothing
+    answers there"; a bare `::1` was host ':' port 1, and said the same; port 99999 was connected to as
+    port 34463. Each is now parsed as Ray does, or refused saying what is expected."""
+    import socket
+
+    from rtp.capture._ray import _check_reachable
+
+    # (the address the check connects to, whatever IPv6 this machine has: a skip for a missing loopback would fail
+    # CI, which allows none)
+    asked: list[tuple[str, int]] = []
+
+    class Answered:
+        def close(self) -> None:
+            pass
+
+    def connect(address: tuple[str, int], timeout: float) -> Answered:
+        asked.append(address)
+        return Answered()
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(socket, "create_connection", connect)
+        _check_reachable("[::1]:6379", timeout=2)  # (something answers: no error)
+        _check_reachable("ray://[fe80::1]:10001", timeout=2)
+    assert asked == [("::1", 6379), ("fe80::1", 10001)]
+    for bare in ("::1", "fe80::1", "::1:6379"):
+        with pytest.raises(RayExecutorError, match=r"IPv6 address goes in brackets.*\[::1\]:6379"):
+            _check_reachable(bare, timeout=2)
+    for odd in ("[::1]", "[::1]6379", "[]:6379", "[::1:6379", "127.0.0.1:99999", "127.0.0.1:0"):
+        with pytest.raises(RayExecutorError, match=r"expected 'local', 'auto', HOST:PORT, \[IPV6\]:PORT"):
+            _check_reachable(odd, timeout=2)
+
+
 def test_a_damaged_sample_on_ray_is_named_by_its_file(cluster: None, local: Path, tmp_path: Path) -> None:
     """A worker reads the bytes the driver sent: its error said "sample X (in memory)", not which file to fix."""
     import shutil

@@ -697,7 +697,9 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
     """The network ``arch`` (one of :data:`ARCHS`) for the given channels and tile size. ``head``
     applies to the paper's network, ``depth``, ``stem``, ``grow``, ``max_width``, ``stem_layers``, ``energy_norm``,
     ``separable``, ``separable_tail``, ``tail_width``, ``head_width``, ``context_pool``, ``block_contrast``, ``contrast_cell``
-    ``contrast_max``, ``contrast_stored``, ``contrast_tiles``, ``coarse`` and ``coarse_width`` to the fast one."""
+    ``contrast_max``, ``contrast_stored``, ``contrast_tiles``, ``coarse`` and ``coarse_width`` to the fast one. As in
+    ``rtp train``, one network's option given with the other ``arch`` (``head="linear"`` with ``"fast"``, ``depth=5``
+    with ``"paper"``) is refused with a :class:`ParameterError` naming it, not ignored."""
     counts = {"in_channels": in_channels, "out_channels": out_channels, "tile": tile, "width": width, "depth": depth,
               "stem": stem, "grow": grow, "stem_layers": stem_layers, "max_width": max_width, "head_width": head_width,
               "context_pool": context_pool, "contrast_cell": contrast_cell, "tail_width": tail_width, "coarse": coarse,
@@ -715,6 +717,20 @@ def build_network(arch: str, in_channels: int, out_channels: int, tile: int, *, 
         raise ParameterError(f"block_contrast: expected input channel indices, got {block_contrast!r}")
     if not isinstance(arch, str) or arch not in ARCHS:
         raise ParameterError(f"arch must be one of {tuple(ARCHS)}, got {arch!r}")
+    if arch != "paper" and head != "paper":  # (rtp train refuses it too: the fast network reads no head)
+        raise ParameterError(f"head: the paper network's option (the fast network's head has no ReLU before its "
+                             f"sigmoid; head_width sets it), got head {head!r} with arch {arch!r}", "head")
+    if arch == "paper":  # the fast network's options, each away from its default, would be taken and ignored
+        # (not coarse_width: the width of coarse blocks, of which there are none without coarse, as in rtp train)
+        fast_defaults = {"depth": 3, "stem": 4, "grow": 1, "stem_layers": 1, "max_width": 0, "head_width": 0,
+                         "context_pool": 0, "contrast_cell": 0, "tail_width": 0, "coarse": 0,
+                         "energy_norm": False, "separable": False, "separable_tail": False, "contrast_max": False,
+                         "contrast_stored": False, "contrast_tiles": False, "block_contrast": ()}
+        given = {**counts, **flags, "block_contrast": tuple(block_contrast)}
+        wrong = next((k for k, v in fast_defaults.items() if given[k] != v), None)
+        if wrong is not None:
+            raise ParameterError(f"{wrong}: the fast network's option (the paper's network has its own fixed layers), "
+                                 f"got {wrong} {given[wrong]!r} with arch 'paper'", wrong)
 
     def build() -> Network:
         if arch == "paper":
