@@ -734,3 +734,26 @@ def test_textures_an_adapter_cannot_read_are_refused_and_colours_are_clamped(fra
         del d
         gc.collect()
     assert [w.category for w in caught] == [ResourceWarning]  # (one: its first pass is closed with it)
+
+
+def test_block_and_tile_variances_on_the_gpu_at_a_ragged_size(gl_context: Any) -> None:
+    # 70x50: partial 4x4 cells (edge repeated) and partial 16x16 tiles on the right and at the bottom
+    ctx = make_current(gl_context)
+    w, h = 70, 50
+    rng = np.random.default_rng(5)
+    albedo = rng.random((h, w, 3)).astype(np.float32)
+    depth = np.full((h, w), 2.0, np.float32)
+    cam = Camera((0.0, 1.0, 0.0))
+    frame = GBufferTextures(albedo=_tex(ctx, albedo), normal=_tex(ctx, np.zeros((h, w, 3), np.float32)),
+                            depth=_tex(ctx, depth), prev_colour=_tex(ctx, rng.random((h, w, 3)).astype(np.float32)),
+                            prev_depth=_tex(ctx, depth), view=cam.view(), projection=cam.projection(w / h),
+                            prev_view_projection=cam.view_projection(w, h))
+    channels = ("albedo.y", "albedo.y.blocks", "albedo.y.tiles", "reprojected.y", "reprojected.y.blocks",
+                "reprojected.y.tiles")
+    with Adapter(channels, w, h, ctx=ctx) as a:
+        x = a.inputs(frame)
+    np.testing.assert_allclose(x[0], sdk.luma(albedo), atol=1e-6)
+    for i in (0, 3):
+        np.testing.assert_allclose(x[i + 1], sdk.block_variances(x[i]), atol=2e-4)
+        np.testing.assert_allclose(x[i + 2], sdk.tile_variances(x[i]), atol=2e-4)
+    assert x[1][48:, 68:].any() and x[2][48:, 64:].any()  # the partial edge cell and tile hold values
