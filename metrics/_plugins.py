@@ -146,7 +146,7 @@ class Metric:
 
     def map(self, reference: np.ndarray, test: np.ndarray) -> np.ndarray:
         """``error_map(reference, test)`` of two float32 ``(H, W, 3)`` frames (given read-only), checked:
-        float32 ``(H, W)``, finite, >= 0; else a
+        float32 ``(H, W)``, finite (in float32 too), >= 0; else a
         :class:`MetricError` naming the metric and what its map gave (a bug in the plugin)."""
         frames = []
         for image in (reference, test):  # read-only views: a map that wrote into them would change the others'
@@ -169,11 +169,14 @@ class Metric:
         if a.shape != (h, w) or a.dtype.kind not in "biuf":
             raise MetricError(f"the metric {self.name!r}'s error_map returned {a.dtype} {a.shape}; expected an "
                               f"(H, W) = ({h}, {w}) map of numbers")
-        a = a.astype(np.float32)
         if not np.isfinite(a).all() or (a < 0).any():
             raise MetricError(f"the metric {self.name!r}'s error_map returned values outside [0, inf) (NaN, "
                               f"infinite or negative); an error map is finite and >= 0")
-        return a
+        if a.dtype.kind == "f" and a.dtype.itemsize > 4 and a.max(initial=0.0) > np.finfo(np.float32).max:
+            # (the cast made them infinite, with numpy's overflow warning, and the error said "NaN, infinite")
+            raise MetricError(f"the metric {self.name!r}'s error_map returned values up to {a.max():.3g}, beyond "
+                              f"float32's range ({np.finfo(np.float32).max:.3g}), in which rtp stores errors")
+        return a.astype(np.float32)
 
 
 _lock = threading.RLock()
@@ -222,19 +225,26 @@ def _load(name: str) -> Metric | None:
     ep = _entry_points().get(name)
     if ep is None:
         return None
+    reserved = name in METRICS or name.startswith("jn")
     try:
-        obj = ep.load()
+        # (one of rtp's own names is never a plugin's: not imported. It was, and said "is the Metric 'mse': an
+        # entry point's name is its metric's" of an entry point `psnr = pkg:MSE`, not that psnr is rtp's own)
+        obj = None if reserved else ep.load()
     except Exception as err:  # a broken plugin must not take the host down
         problem = f"failed to load ({type(err).__name__}: {err})"
     else:
-        if isinstance(obj, Metric) and obj.name == name:
+        if reserved:
+            problem = "is ignored: rtp's own metrics (and names starting with 'jn') are not a plugin's to take"
+        elif isinstance(obj, Metric) and obj.name == name:
             with _lock:
                 _registered.setdefault(name, obj)
                 return _registered[name]
-        problem = (f"is {type(obj).__name__}, not an rtp.metrics.Metric" if not isinstance(obj, Metric)
-                   else f"is the Metric {obj.name!r}: an entry point's name is its metric's")
-    if name not in _broken:
-        log.warning("metric plugin %r (%s) %s", name, ep.value, problem)
+        else:
+            problem = (f"is {type(obj).__name__}, not an rtp.metrics.Metric" if not isinstance(obj, Metric)
+                       else f"is the Metric {obj.name!r}: an entry point's name is its metric's")
+    if name not in _broken:  # (formatted: the command's log shows one record of each template, which hid the
+        # second broken plugin behind a "1 more like" of the first)
+        log.warning(f"metric plugin {name!r} ({ep.value}) {problem}")
     _broken[name] = problem
     raise MetricParameterError(f"the metric {name!r} is installed but {problem}: the entry point {ep.value!r} in "
                                f"{METRIC_ENTRY_POINT_GROUP!r} is its package's to fix or reinstall", "metric")

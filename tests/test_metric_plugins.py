@@ -140,6 +140,7 @@ def test_plugin_targets_pool_its_map_and_leave_rtps_own_alone(registry: None, po
     (lambda r, t: np.zeros(5), r"returned float64 \(5,\)"),
     (lambda r, t: np.full(r.shape[:2], np.nan), "outside"),
     (lambda r, t: -np.ones(r.shape[:2]), "outside"),
+    (lambda r, t: np.full(r.shape[:2], 1e300), "up to 1e\\+300, beyond float32's range"),  # (was "NaN, infinite")
     (lambda r, t: "map", "dtype|returned"),
     (lambda r, t: 1 / 0, "error_map failed on 53x37 frames: ZeroDivisionError"),
     (lambda r, t: r.__setitem__(0, 0.0), "failed.*read-only"),  # (writing into the shared reference)
@@ -215,6 +216,28 @@ def test_entry_points_declare_metrics_and_a_broken_one_spares_the_others(
     assert "good" in known and not {"broken", "notmetric", "renamed"} & set(known)
     ref, images = frames()
     assert metrics.tile_targets(ref, images, ("good",), 16)["good"].shape == (6, 3, 4)
+
+
+def test_entry_points_of_rtps_own_names_are_ignored_and_each_broken_one_is_named(
+        registry: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """An entry point `psnr = pkg:MSE` was imported and reported as "is the Metric 'mse': an entry point's name is
+    its metric's"; and the command's log showed the first broken plugin's warning only ("1 more like")."""
+    from rtp.cli import main
+
+    install_entry_points(tmp_path, {"psnr": "rtp_own_name_metric:X", "jnssim": "rtp_own_name_metric:X",
+                                    "broken_a": "rtp_broken_a:X", "broken_b": "rtp_broken_b:X"},
+                         {"rtp_own_name_metric": "raise RuntimeError('imported')\n",
+                          "rtp_broken_a": "raise ImportError('needs torchmetrics')\n",
+                          "rtp_broken_b": "raise ImportError('needs kornia')\n"})
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main(["weights", "list"]) == 0
+    err = capsys.readouterr().err
+    assert "'broken_a' (rtp_broken_a:X) failed to load (ImportError: needs torchmetrics)" in err, err
+    assert "'broken_b' (rtp_broken_b:X) failed to load (ImportError: needs kornia)" in err, err
+    for name in ("psnr", "jnssim"):
+        assert f"metric plugin {name!r} (rtp_own_name_metric:X) is ignored: rtp's own metrics" in err, err
+    assert "imported" not in err and "more like" not in err, err
+    assert metrics.metric_info("psnr") is sdk.METRICS["psnr"]
 
 
 def test_a_registered_metric_wins_over_an_entry_point(registry: None, tmp_path: Path,
