@@ -389,6 +389,14 @@ def _terminate_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, before)
 
 
+def _notes(err: BaseException) -> str:
+    """The notes a worker pool adds to a failure it passes on ("(rtp: raised while working on scene 'x')"),
+    on the same line: the one-line messages of a MemoryError or an OSError would otherwise lose which scene or
+    sample failed."""
+    notes = getattr(err, "__notes__", None) or []
+    return "".join(" " + one_line(str(note)) for note in notes)
+
+
 def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False,
                 on_interrupt: Callable[[], Callable[[], str] | None] | None = None) -> int:
     """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,
@@ -415,7 +423,8 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     except MemoryError as err:  # numpy's "Unable to allocate 30.5 GiB for an array ...": the machine's limit, not a bug
         if verbose:
             traceback.print_exc()
-        print(f"{prog}: error: out of memory: {one_line(str(err)) or 'an allocation failed'}", file=sys.stderr)
+        print(f"{prog}: error: out of memory: {one_line(str(err)) or 'an allocation failed'}{_notes(err)}",
+              file=sys.stderr)
         return EXIT_FAILED
     except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -428,5 +437,5 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
         if verbose:
             traceback.print_exc()
         where = f"{err.filename!r}" + (f" -> {err.filename2!r}" if err.filename2 else "")
-        print(f"{prog}: error: {err.strerror or type(err).__name__}: {where}", file=sys.stderr)
+        print(f"{prog}: error: {err.strerror or type(err).__name__}: {where}{_notes(err)}", file=sys.stderr)
         return EXIT_USAGE if err.errno in _PATH_ERRNOS else EXIT_FAILED

@@ -331,6 +331,12 @@ def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
     for _, entry, argv in _entry_points(monkeypatch, tmp_path, OSError("a bug")):
         with pytest.raises(OSError, match="a bug"):
             entry(argv)
+    noted = OSError(errno.ENOSPC, "No space left on device", "a/b.npz")
+    noted.add_note("(rtp: raised while working on sample 'a/b')")
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, noted):
+        assert entry(argv) == 1, prog
+        assert capsys.readouterr().err == (f"{prog}: error: No space left on device: 'a/b.npz' "
+                                           "(rtp: raised while working on sample 'a/b')\n"), prog
 
 
 def test_running_out_of_memory_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -342,6 +348,13 @@ def test_running_out_of_memory_is_one_line(tmp_path: Path, monkeypatch: pytest.M
         assert capsys.readouterr().err == f"{prog}: error: out of memory: {message}\n", prog
     for prog, entry, argv in _entry_points(monkeypatch, tmp_path, MemoryError()):
         assert entry(argv) == 1 and capsys.readouterr().err == f"{prog}: error: out of memory: an allocation failed\n"
+    # a capture or targets worker's failure carries a note naming its scene or sample: kept on the one line
+    noted = MemoryError(message)
+    noted.add_note("(rtp: raised while working on scene 'procedural:6')")
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, noted):
+        assert entry(argv) == 1, prog
+        assert capsys.readouterr().err == (f"{prog}: error: out of memory: {message} "
+                                           "(rtp: raised while working on scene 'procedural:6')\n"), prog
 
 
 def test_arguments_that_would_fail_later_fail_while_parsing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
