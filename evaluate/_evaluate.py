@@ -942,13 +942,18 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
     label = f"{meta.metric} ({meta.transform.type} transform, 1 = worst)"
     scatter_label = f"{meta.metric} ({meta.transform.type} transform, {'1' if meta.worse_direction > 0 else '0'} = worst)"
     paths = [out / f"{stem}_heatmaps.png", out / f"{stem}_scatter.png", out / f"{stem}_rates.png"]
-    P.save_image(paths[0], P.heatmaps(
-        bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w), seen=sample.channel("seen"),
-        scale=scale, label=label, threshold=float(bright_is_worse(np.float64(threshold))),
-        title=f"sample {sample.id}: true and predicted error per tile",
-    ))
     p_all, g_all = d["scatter"]
-    P.save_image(paths[1], P.scatter(p_all, g_all, label=scatter_label,
-                                     title=f"{meta.metric}: predicted vs true, {p_all.size} tile values"))
-    P.save_image(paths[2], P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale))
+    # every figure drawn before the first is written: a failure while drawing leaves the folder as it was, not
+    # this evaluation's heatmaps beside the previous one's scatter
+    images = [
+        P.heatmaps(bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w),
+                   seen=sample.channel("seen"), scale=scale, label=label,
+                   threshold=float(bright_is_worse(np.float64(threshold))),
+                   title=f"sample {sample.id}: true and predicted error per tile"),
+        P.scatter(p_all, g_all, label=scatter_label,
+                  title=f"{meta.metric}: predicted vs true, {p_all.size} tile values"),
+        P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale),
+    ]
+    for path, image in zip(paths, images, strict=True):
+        P.save_image(path, image)
     return paths

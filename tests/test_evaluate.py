@@ -1067,6 +1067,29 @@ def test_an_evaluation_into_another_ones_folder_removes_that_ones_plots(
     assert sorted(p.name for p in out.iterdir()) == ["evaluation.json", "evaluation.md", "mine_rates.png", "notes.png"]
 
 
+def test_a_failure_while_drawing_the_plots_leaves_the_previous_ones_whole(
+        dataset: Path, model: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The three figures were drawn and written one at a time: a failure drawing the last left this evaluation's
+    heatmaps and scatter beside the previous evaluation's rate overlay. All are drawn before the first is written."""
+    from rtp.evaluate import plots
+
+    out = tmp_path / "eval"
+    run = ["--data", str(dataset), "--no-baselines", "--max-samples", "1", "--out", str(out), "--plots"]
+    assert rtp_main(["evaluate", str(model), *run]) == 0
+    for png in out.glob("*.png"):
+        png.write_bytes(b"the previous evaluation's " + png.name.encode())  # (this run would draw the same)
+    before = {p.name: p.read_bytes() for p in out.glob("*.png")}
+    assert len(before) == 3
+
+    def broken(*args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError("drawing failed")
+
+    monkeypatch.setattr(plots, "rate_overlays", broken)
+    with pytest.raises(RuntimeError, match="drawing failed"):
+        rtp_main(["evaluate", str(model), *run])
+    assert {p.name: p.read_bytes() for p in out.glob("*.png")} == before
+
+
 def _sweep_point(rep: Any, method: str, label: str) -> dict[str, Any]:
     (row,) = [r for r in rep.sweep if r["method"] == method and r["parameter"] == label]
     return row
