@@ -12,6 +12,7 @@ reads what an engine gives it at run time. docs/dataset.md "A dataset from your 
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import numbers
 import os
@@ -67,6 +68,7 @@ SOURCE = "engine frames"
 class ImportReport:
     written: int = 0
     skipped: int = 0  # already in the dataset (an import resumes)
+    replaced: int = 0  # of ``written``: samples of frame files that changed since they were imported (dumped again)
     absent: tuple[str, ...] = ()
     unseen: list[float] = field(default_factory=list)  # per new sample, the share of its geometry not seen
     warnings: dict[str, int] = field(default_factory=dict)  # sdk.check_gbuffers' warnings, by kind: frames with it
@@ -134,19 +136,51 @@ def _samples_profile(reader: DatasetReader) -> str | None:
     return None
 
 
-def _kept(writer: DatasetWriter, sample_id: str) -> bool:
-    """Whether the sample ``sample_id`` is in the dataset and readable; one damaged since (cut short by a copy,
-    a disk) is deleted, with a warning, and imported again rather than kept for ``rtp targets`` to fail on."""
+def _source(path: str) -> dict[str, Any]:
+    """What a sample records of the frame file it was imported from: its size and time (a cheap check) and its
+    bytes' SHA-256 (the check when the cheap one differs: a copy changes the time, not the frame)."""
+    st = os.stat(path)
+    return {"bytes": int(st.st_size), "mtime_ns": int(st.st_mtime_ns), "sha256": _sha256(path)}
+
+
+def _sha256(path: str) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):  # (hashlib.file_digest is Python 3.11's)
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _same_source(recorded: Any, path: str) -> bool:
+    """Whether the frame file ``path`` is the one a sample recorded (``recorded``: its meta's ``source_file``;
+    a sample imported before it was recorded is taken as the same)."""
+    if not isinstance(recorded, dict):
+        return True
+    st = os.stat(path)
+    if recorded.get("bytes") == st.st_size and recorded.get("mtime_ns") == st.st_mtime_ns:
+        return True
+    return recorded.get("bytes") == st.st_size and recorded.get("sha256") == _sha256(path)
+
+
+def _state(writer: DatasetWriter, sample_id: str, frame: str) -> str:
+    """``"kept"`` where the sample ``sample_id`` is in the dataset, readable, and of the frame file ``frame`` as it
+    is now; ``"changed"`` where it is of the frame file as it was; ``"missing"`` otherwise. One damaged since (cut
+    short by a copy, a disk) is deleted, with a warning, and imported again rather than kept for ``rtp targets`` to
+    fail on; one of a frame dumped again since (other bytes) is imported again, with a warning, replacing it (its
+    targets are then older than it, and ``rtp targets`` computes them again)."""
     path = sample_path(writer.root, sample_id)
     if not path.is_file():
-        return False
+        return "missing"
     try:
-        _open_sample(sample_id, path, path)
+        sample = _open_sample(sample_id, path, path)
     except DatasetError as err:
         log.warning("%s; imported again", err)
         path.unlink(missing_ok=True)
-        return False
-    return True
+        return "missing"
+    if not _same_source(sample.meta.get("source_file"), frame):
+        log.warning("%s changed since it was imported as sample %s (dumped again?): imported again", frame, sample_id)
+        return "changed"
+    return "kept"
 
 
 def _final(path: str, key: str, a: Any, hw: tuple[int, int]) -> np.ndarray:
@@ -324,12 +358,15 @@ def import_frames(
             f"{root} is being written by another job ({holder}): wait for it to end")):
         writer = DatasetWriter(root, settings)  # (other settings there: refused, naming them)
         writer.remove_stale()
-        todo = [(f, i, n) for f, i, n in zip(files, ids, names) if not _kept(writer, i)]
+        states = [_state(writer, i, f) for f, i in zip(files, ids)]
+        todo = [(f, i, n) for f, i, n, st in zip(files, ids, names, states) if st != "kept"]
+        report.replaced = states.count("changed")
         report.skipped = len(files) - len(todo)
         if progress:
             progress(report.skipped, len(files))
         warned: dict[str, int] = {}
         for f, sid, name in todo:
+            source = _source(f)  # (before reading: a frame dumped again while it is read is imported again)
             arrays = _read(f)
             gbuffers = {k: v for k, v in arrays.items() if k in GBUFFERS}
             try:
@@ -346,7 +383,7 @@ def import_frames(
             geo = buffers["depth"] > 0
             unseen = float(1.0 - seen[geo].mean()) if geo.any() else 0.0
             writer.write(sid, buffers, {"scene": name, "profile": profile, "source": Path(f).name,
-                                        "unseen": unseen, "coverage": float(geo.mean())})
+                                        "source_file": source, "unseen": unseen, "coverage": float(geo.mean())})
             report.written += 1
             report.unseen.append(unseen)
             if progress:

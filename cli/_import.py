@@ -48,7 +48,9 @@ def run_import(args: argparse.Namespace) -> int:
                                normal_space=args.normal_space, depth_kind=args.depth_kind, tolerance=args.tolerance,
                                progress=bar.update_to)
     unseen = sum(report.unseen) / len(report.unseen) if report.unseen else None
-    print(f"{args.out}: {report.written} frames imported, {report.skipped} already there"
+    print(f"{args.out}: {report.written} frames imported"
+          + (f" ({report.replaced} of them dumped again since their import: their samples replaced)"
+             if report.replaced else "") + f", {report.skipped} already there"
           + (f"; unseen share of the new frames' geometry {100 * unseen:.1f}%" if unseen is not None else ""))
     if report.absent:
         print(f"absent: {', '.join(report.absent)} (not in the frames: a model reading them is refused)")

@@ -388,3 +388,42 @@ def test_a_linked_folder_is_the_level_of_its_name_and_a_damaged_sample_is_import
     assert any("arena-frame_0001.npz: unreadable sample" in r.getMessage() and "imported again" in r.getMessage()
                for r in caplog.records)
     assert DatasetReader(data)["arena-frame_0001"].final("1x1").shape == (H, W, 3)
+
+
+def test_a_frame_dumped_again_is_imported_again_and_an_unchanged_copy_is_not(
+        dumps: Any, tmp_path: Path, caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]) -> None:
+    """An import resumed by sample id alone kept the samples of frames the engine had dumped again since (a fix to
+    its G-buffers: `rtp import` said "0 frames imported, 3 already there" and trained on the old ones). Each sample
+    records its frame file; a frame with other bytes is imported again, replacing its sample (whose targets are then
+    stale), and a copy of the same bytes (another time) is still skipped."""
+    import os
+    import shutil
+
+    root, _, _ = dumps
+    level = tmp_path / "level_a"
+    shutil.copytree(root / "level_a", level)
+    data = tmp_path / "data"
+    assert import_frames(level, data).written == 3
+    from rtp.capture import compute_targets
+
+    compute_targets(data, ["psnr"])
+    store = TargetStore(data)
+    assert all(store.has(i, "psnr") for i in DatasetReader(data).ids)
+    # frame 1 dumped again (another frame's bytes); frame 2 copied anew, the same bytes at another time
+    shutil.copyfile(root / "level_b" / "frame_0001.npz", level / "frame_0001.npz")
+    os.utime(level / "frame_0002.npz", ns=(1_000_000_000, 1_000_000_000))
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        report = import_frames(level, data)
+    assert (report.written, report.replaced, report.skipped) == (1, 1, 2)
+    assert any("frame_0001.npz changed since it was imported as sample level_a-frame_0001" in r.getMessage()
+               for r in caplog.records)
+    fresh = import_frames(root / "level_b" / "frame_0001.npz", tmp_path / "fresh", scene="level_a")
+    assert fresh.written == 1
+    got, want = DatasetReader(data)["level_a-frame_0001"], DatasetReader(tmp_path / "fresh")["level_a-frame_0001"]
+    np.testing.assert_array_equal(got.final("1x1"), want.final("1x1"))
+    assert not store.has("level_a-frame_0001", "psnr") and store.has("level_a-frame_0000", "psnr")
+    # the command says so
+    shutil.copyfile(root / "level_a" / "frame_0001.npz", level / "frame_0001.npz")
+    assert rtp_main(["import", str(level), "--out", str(data)]) == 0
+    assert "1 frames imported (1 of them dumped again since their import: their samples replaced), 2 already there" \
+        in capsys.readouterr().out
