@@ -8,6 +8,7 @@ field is documented in ``docs/metadata.md``.
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import math
 import os
@@ -426,11 +427,24 @@ class ModelMetadata:
         """
         return 1.0 if self.transform.increasing != self.higher_is_better else -1.0
 
+    @functools.cached_property  # (computed once: shading_rates asks on every call; the fields never change)
+    def rate_saturations(self) -> tuple[float, ...]:
+        """The worst value the model can express for each reduced rate (:data:`PREDICTED_RATES` order): the
+        network's worst output (1, or 0 where a smaller transformed value is worse) plus the margin, decoded and
+        extrapolated as :meth:`decode` does. A rate the network outputs, and 2x2 and 4x4 extrapolated from four,
+        saturate at the decoded worst output; 2x4, 4x2 and 4x4 extrapolated from ``[1x2, 2x1]`` or ``[2x2]`` reach
+        ``extrapolation_k`` times it (PSNR: ``20 log10 k`` dB lower)."""
+        p = 1.0 if self.worse_direction > 0 else 0.0
+        worst = self.transform.inverse(np.full((len(self.outputs), 1, 1), p + self.worse_direction * self.safety))
+        full = extrapolate(worst, self.outputs, self.extrapolation_k, higher_is_better=self.higher_is_better)
+        return tuple(float(v) for v in full[:, 0, 0])
+
     @property
     def saturation(self) -> float:
-        """The worst metric value the model can express (network output 1 plus the margin)."""
-        p = 1.0 if self.worse_direction > 0 else 0.0
-        return float(self.transform.inverse(p + self.worse_direction * self.safety))
+        """The worst metric value the model can express at any rate (the worst of :attr:`rate_saturations`):
+        a threshold beyond it passes every tile at every rate."""
+        sat = self.rate_saturations
+        return min(sat) if self.higher_is_better else max(sat)
 
     def decode(self, raw: np.ndarray) -> np.ndarray:
         """Network output (channels = :attr:`outputs`, axis -3) to metric units for all six rates.

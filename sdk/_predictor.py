@@ -432,13 +432,11 @@ def _load(
             )
         meta = ModelMetadata.from_json(props[METADATA_KEY])
         _check_integrity(model_path, meta.digest, data)
-    if meta.default_threshold != meta.saturation and (
-        (meta.default_threshold > meta.saturation) != meta.higher_is_better
-    ):
+    if _passes_everything(meta, meta.default_threshold):
         log.warning(
             "%s: default_threshold %g is beyond the worst value the model can express (%g): every tile will "
-            "pass it; lower the threshold or retrain with a larger transform range",
-            model_path.name, meta.default_threshold, meta.saturation,
+            "pass it; %s the threshold or retrain with a larger transform range",
+            model_path.name, meta.default_threshold, meta.saturation, "raise" if meta.higher_is_better else "lower",
         )
     tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
     predictor = ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
@@ -651,10 +649,15 @@ class ShadingRatePredictor:
             self._static_hw = (hw_in[0], hw_in[1])
             hw_out = (_dim(o.shape[2]), _dim(o.shape[3]))
             w = metadata.tile_size
-            if hw_out[0] is not None and hw_out != (hw_in[0] // w, hw_in[1] // w):
+            # what predict_raw expects of the output: every tile of the input, a partial last one included
+            grid = tile_grid(hw_in[0], hw_in[1], w)
+            if (hw_out[0] is not None and hw_out[0] != grid[0]) or (hw_out[1] is not None and hw_out[1] != grid[1]):
+                partial = hw_in[0] % w or hw_in[1] % w
                 raise MetadataError(
                     f"tile_size: metadata says {w} but the model maps {hw_in[1]}x{hw_in[0]} to "
-                    f"{o.shape[3]}x{o.shape[2]} tiles",
+                    f"{o.shape[3]}x{o.shape[2]} tiles, expected {grid[1]}x{grid[0]}"
+                    + (f" (a fixed input that is no multiple of the tile size must give its partial last "
+                       f"{w}-pixel tiles too, or no frame's last tiles would be predicted)" if partial else ""),
                     "tile_size",
                 )
 
@@ -1034,21 +1037,30 @@ class ShadingRatePredictor:
         """Log once per threshold when every rate's threshold (its ``rate_factors`` share of it) lies beyond the
         worst value the model can express: every tile then passes at the coarsest allowed rate (``load`` says so
         of a default threshold)."""
-        sat, t, hib = self._meta.saturation, float(threshold), self._meta.higher_is_better
-        factors = self._meta.rate_factors or (1.0,)
-        rates = [t - 20.0 * math.log10(f) if hib else t * f for f in factors]  # (select_rates' per-rate thresholds)
-        if not all((r < sat) if hib else (r > sat) for r in rates):
+        meta, t = self._meta, float(threshold)
+        if not _passes_everything(meta, t):
             return
         with _WARNED_LOCK:  # (the test and the add as one: two threads between them both logged it)
             seen = self.__dict__.setdefault("_saturation_warned", set())
             if t in seen:
                 return
             seen.add(t)
-        f = min(factors)  # the rate whose threshold is the last to pass everything
-        limit = sat + 20.0 * math.log10(f) if hib else sat / f
+        hib = meta.higher_is_better
+        # past each rate's limit that rate passes every tile: the last rate to do so sets the limit
+        limits = [sat + 20.0 * math.log10(f) if hib else sat / f for sat, f in zip(meta.rate_saturations,
+                                                                                    meta.rate_factors)]
         log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
-                    "it at every rate; use one %s %g", self._path.name if self._path else "model", t, sat,
-                    "above" if hib else "below", limit)
+                    "it at every rate; use one %s %g", self._path.name if self._path else "model", t,
+                    meta.saturation, "above" if hib else "below", min(limits) if hib else max(limits))
+
+
+def _passes_everything(meta: ModelMetadata, threshold: float) -> bool:
+    """Whether ``threshold``, with each rate's ``rate_factors`` share of it (as ``select_rates`` applies them), lies
+    beyond the worst value the model can express at every rate (``metadata.rate_saturations``): every tile then
+    passes at every rate, whatever the frame."""
+    hib, t = meta.higher_is_better, float(threshold)
+    return all((t - 20.0 * math.log10(f) < sat) if hib else (t * f > sat)
+               for sat, f in zip(meta.rate_saturations, meta.rate_factors))
 
 
 def _unpickle(path: str, data: bytes, args: dict[str, Any]) -> ShadingRatePredictor:

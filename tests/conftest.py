@@ -124,7 +124,8 @@ def build_onnx(
         out_shape: list[Any] = ["batch", r, "tiles_y", "tiles_x"]
     else:
         n, h, w = static
-        in_shape, out_shape = [n, c, h, w], [n, r, h // tile, w // tile]
+        grid = (-(-h // tile), -(-w // tile)) if ceil_mode else (h // tile, w // tile)  # (what the pooling gives)
+        in_shape, out_shape = [n, c, h, w], [n, r, *grid]
     nodes = [
         helper.make_node("Conv", [input_name, "W", "B"], ["conv"], kernel_shape=[1, 1]),
         helper.make_node("MaxPool", ["conv"], ["pool"], kernel_shape=[tile, tile], strides=[tile, tile],

@@ -221,6 +221,24 @@ def test_decode_applies_safety_inverse_and_extrapolation() -> None:
     assert got.dtype == np.float32
 
 
+@pytest.mark.parametrize("outputs", [list(s) for s in sdk.OUTPUT_SETS])
+@pytest.mark.parametrize("metric", ["jnyang", "psnr"])
+def test_saturation_is_the_worst_value_decode_can_give_at_any_rate(outputs: list[str], metric: str) -> None:
+    """From two outputs (or 2x2 alone) the extrapolated 2x4, 4x2 and 4x4 reach k times the decoded worst output: the
+    saturation was that worst output, and a threshold between the two was said to pass every tile at every rate."""
+    hib = metric == "psnr"
+    m = sdk.ModelMetadata.from_dict(base_metadata(
+        metric=metric, outputs=outputs, safety=0.05, weber_l=None if hib else 0.02,
+        transform={"type": "clamped", "mu_y": 40.0 if hib else 0.25}, default_threshold=30 if hib else 0.2))
+    worst = np.full((len(outputs), 1, 1), 0.0 if hib else 1.0)  # (PSNR's worst is the smallest output)
+    decoded = m.decode(worst)[:, 0, 0]
+    np.testing.assert_allclose(m.rate_saturations, decoded, rtol=1e-6)
+    assert m.saturation == pytest.approx(float(decoded.min() if hib else decoded.max()), rel=1e-6)
+    if len(outputs) <= 2:  # (the extrapolated coarse rates: k times the amplitude, 20 log10 k dB lower)
+        own = m.transform.inverse(-0.05 if hib else 1.05)
+        assert m.saturation == pytest.approx(own - 20 * np.log10(2.13) if hib else 2.13 * own)
+
+
 def test_safety_is_conservative_for_every_direction() -> None:
     # PSNR with a linear transform trained on 1 - 0.015 PSNR (the paper's published model): the
     # margin must lower the predicted PSNR.

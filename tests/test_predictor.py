@@ -432,6 +432,28 @@ def test_fixed_size_model_pads_smaller_frames(tmp_path: Path) -> None:
         p.predict(np.zeros((4, 64, 64), np.float32))
 
 
+def test_a_fixed_size_model_that_takes_partial_tiles_loads(tmp_path: Path) -> None:
+    """A fixed input that is no multiple of the tile size, on a network that takes partial tiles (input_multiple):
+    its 40x40 input gives 3x3 16-pixel tiles, as predict expects, but load compared them with 40 // 16 = 2 and
+    refused the model ("metadata says 16 but the model maps 40x40 to 3x3 tiles")."""
+    path = build_onnx(tmp_path / "m.onnx", weights=np.eye(4, dtype=np.float32), static=(1, 40, 40), ceil_mode=True)
+    p = sdk.load(path, metadata=base_metadata(input_multiple=4))
+    x = np.zeros((4, 40, 40), np.float32)
+    x[0, 39, 39] = 5.0  # in the last, partial tile
+    raw = p.predict_raw(x)
+    assert raw.shape == (4, 3, 3)
+    assert raw[0, 2, 2] == pytest.approx(1 / (1 + np.exp(-5.0)), rel=1e-6) and raw[0, 1, 1] == 0.5
+
+
+def test_a_fixed_size_model_that_drops_its_partial_tiles_is_refused_at_load(tmp_path: Path) -> None:
+    """A fixed 40x40 input pooled to 2x2 16-pixel tiles loses the frame's last tiles: load took it and every
+    predict failed with InferenceError (output (1, 4, 2, 2), expected (1, 4, 3, 3)); now load names it."""
+    path = build_onnx(tmp_path / "m.onnx", weights=np.eye(4, dtype=np.float32), static=(1, 40, 40))
+    with pytest.raises(sdk.MetadataError, match="maps 40x40 to 2x2 tiles, expected 3x3 .*partial") as info:
+        sdk.load(path, metadata=base_metadata())
+    assert info.value.key == "tile_size"
+
+
 def test_unavailable_provider(tiny_model: Callable[..., Path], caplog: pytest.LogCaptureFixture) -> None:
     path = tiny_model()
     with pytest.raises(sdk.ProviderUnavailableError, match="not available"):
@@ -449,6 +471,26 @@ def test_threshold_beyond_saturation_warns(tiny_model: Callable[..., Path], capl
     with caplog.at_level(logging.WARNING, logger="rtp"):
         sdk.load(tiny_model(base_metadata(default_threshold=0.9)))  # clamped, mu 0.25: saturates at 0.5
     assert "every tile will pass" in caplog.text
+
+
+def test_saturation_warnings_count_the_extrapolated_rates(tiny_model: Callable[..., Path],
+                                                          caplog: pytest.LogCaptureFixture) -> None:
+    """A model of outputs [1x2, 2x1] saturates at 0.5 there (clamped, mu 0.25), but its extrapolated 2x4, 4x2 and
+    4x4 reach 2.13 times that: a threshold of 0.6 was said to pass every tile at every rate (at load and per call)
+    while a saturated tile got 2x2, not 4x4."""
+    w = np.zeros((2, 4), np.float32)
+    w[:, 0] = 40.0  # sigmoid(40 x): the worst output where plane 0 is 1
+    with caplog.at_level(logging.WARNING, logger="rtp"):
+        p = sdk.load(tiny_model(base_metadata(outputs=["1x2", "2x1"], default_threshold=0.6), weights=w))
+        x = np.zeros((4, 16, 16), np.float32)
+        x[0] = 1.0
+        assert p.shading_rates(x).tolist() == [[sdk.RATE_CODES["2x2"]]]  # (4x4's 1.065 fails 0.6)
+    assert "beyond the worst value" not in caplog.text
+    assert p.metadata.saturation == pytest.approx(2.13 * 0.5)
+    with caplog.at_level(logging.WARNING, logger="rtp"):
+        assert p.shading_rates(x, threshold=1.1).tolist() == [[sdk.RATE_CODES["4x4"]]]
+    assert "threshold 1.1 is beyond the worst value the model can express (1.065)" in caplog.text
+    assert "use one below 1.065" in caplog.text
 
 
 def _with_probe(path: Path, meta: dict | None = None, name: str = "probe") -> Path:
