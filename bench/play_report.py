@@ -15,8 +15,8 @@ are lower bounds (">=") and are left out of the ratios, as in `PlayReport.ratios
 ``--window N`` adds, per path and method, the saving and the failing share at the method's default
 parameter in consecutive windows of N frames (the per-frame series of play.json; the first frame,
 which has no history, left out): whether a long path drifts. ``--by-age`` adds, per path and
-method with prediction reuse (``NAME@k``, unseen tiles at 1x1: its network runs on every k-th
-frame), the same two figures grouped by frames since the network ran (0: it ran), beside the
+method with prediction reuse (``NAME@k``, unseen tiles at 1x1 and no ``:rS`` refresh: its network runs
+on every k-th frame), the same two figures grouped by frames since the network ran (0: it ran), beside the
 method without reuse on the same frames: whether reuse's loss grows with the estimates' age.
 ``--worst-frames`` adds the worst 5% of frames' saving (each run's 5th percentile of its per-frame saving)
 read off each method's sweep at the same failing shares: what a frame-time budget plans for, and where a
@@ -35,7 +35,9 @@ Runs with different methods share one table: its columns are every method of any
 a run did not play it. Runs of the same map, seed, frames, size, failure threshold and sweep grids
 (as recorded, or read off the thresholds in the rows of runs from before the grids were recorded)
 are merged into one row per path (every method has its own history, so a method's numbers do not depend on
-which others ran beside it): `jnyang,jnyang@4` in one run and `jnyang@2` in another compare.
+which others ran beside it): `jnyang,jnyang@4` in one run and `jnyang@2` in another compare, and a run of
+the slow path beside one of the fast path gives both rows (until 2026-12-07 the second run's path was dropped).
+A method played on one path and not the other is blank on the other, as a method a run did not play.
 """
 
 from __future__ import annotations
@@ -182,14 +184,33 @@ def main() -> None:
             notes.append(f"note: {run} was swept over other grids than a run of the same map and path before it: "
                          "its rows are not merged\n")
         if same is None:
-            runs.append({**rep, "_key": key, "_grids": grids, "settings": {**s, "methods": list(s["methods"])},
-                         "matched": list(rep["matched"])})
+            runs.append({**rep, "_key": key, "_grids": grids,
+                         "settings": {**s, "methods": list(s["methods"]), "cameras": dict(s.get("cameras") or {}),
+                                      "reuse": dict(s.get("reuse") or {})},
+                         "matched": list(rep["matched"]), "rows": list(rep.get("rows", [])),
+                         "unseen": dict(rep["unseen"]), "frames": dict(rep.get("frames") or {}),
+                         # which methods each path holds (a merged run may add a path, or methods on one path only)
+                         "_played": {path: set(s["methods"]) for path in rep["unseen"]}})
             continue
         same["_grids"] = {**(grids or {}), **(same["_grids"] or {})} or None
-        new = [m for m in s["methods"] if m not in same["settings"]["methods"]]
-        same["settings"]["methods"] += new
-        same["matched"] += [m for m in rep["matched"] if m["method"] in new]
-        same["rows"] = same.get("rows", []) + [r for r in rep.get("rows", []) if r["method"] in new]
+        # per path, the methods this run adds there: a path the first run did not play is added whole (it was
+        # dropped, and with it every method of a run of the other path), a path both played gains the new methods
+        for path, unseen in rep["unseen"].items():
+            played = same["_played"].setdefault(path, set())
+            new = [m for m in s["methods"] if m not in played]
+            if not new:
+                continue
+            played.update(new)
+            if path not in same["unseen"]:
+                same["unseen"][path] = unseen
+                if path in (s.get("cameras") or {}):
+                    same["settings"]["cameras"][path] = s["cameras"][path]
+            same["matched"] += [m for m in rep["matched"] if m["path"] == path and m["method"] in new]
+            same["rows"] += [r for r in rep.get("rows", []) if r["path"] == path and r["method"] in new]
+            series = (rep.get("frames") or {}).get(path, {})  # (--window and --by-age read them)
+            same["frames"][path] = {**same["frames"].get(path, {}), **{m: series[m] for m in new if m in series}}
+            same["settings"]["methods"] += [m for m in new if m not in same["settings"]["methods"]]
+            same["settings"]["reuse"].update({m: v for m, v in (s.get("reuse") or {}).items() if m in new})
     tiles = sorted({r["_key"][-1] for r in runs})
 
     for rep in runs:  # the map, and its tiles where the runs played several sizes
@@ -224,8 +245,8 @@ def main() -> None:
     kept: dict[str, list[tuple[str, list[float], float]]] = {grouped(r, t): [] for r in reuses for t in tiles}
     for rep in runs:
         s = rep["settings"]
-        methods = s["methods"]
         for path, unseen in rep["unseen"].items():
+            methods = rep["_played"][path]  # (the methods this path holds, of the runs merged into this one)
             u = unseen[1:]
             cam = s.get("cameras", {}).get(path, {})
             eye = f"{cam['eye_height_m']:.2f}" if cam else "?"
@@ -324,7 +345,7 @@ def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any, group
                        if r["path"] == path and r["method"] == meth]
                 if not pts or any(v is None or not math.isfinite(v) for _, v in pts):
                     per[meth].append(None)
-                    cells.append("" if meth not in s["methods"] else "-")
+                    cells.append("" if meth not in rep["_played"][path] else "-")
                     continue
                 got = [saved_at(pts, lv) for lv in (LEVELS if meth not in ORACLES else LEVELS[:1])]
                 values = [math.nan if v is None else v for v in got]
@@ -425,7 +446,8 @@ def _windows(runs: list[dict[str, Any]], n: int) -> None:
 
 
 def _by_age(runs: list[dict[str, Any]]) -> None:
-    """Per map, path and reuse method (unseen tiles at 1x1, so the network runs on frames 0, k, 2k, ...):
+    """Per map, path and reuse method (unseen tiles at 1x1 and no refresh share, so the network runs on frames 0, k,
+    2k, ...):
     work saved / failing tiles % at the default by frames since the network ran, and the same frames
     of the method without reuse (the model it names)."""
     out = []
@@ -435,7 +457,9 @@ def _by_age(runs: list[dict[str, Any]]) -> None:
         for path, methods in rep.get("frames", {}).items():
             for meth, spec in s.get("reuse", {}).items():
                 base = meth.split("@", 1)[0]
-                if meth not in methods or spec.get("unseen", "full") != "full":
+                # (a refresh share, :rS, runs the network early and restarts the interval: its frames' ages are not
+                # their index modulo k, and were reported as if they were)
+                if meth not in methods or spec.get("unseen", "full") != "full" or spec.get("refresh") is not None:
                     continue
                 k = int(spec["k"])
                 longest = max(longest, k)
@@ -449,7 +473,8 @@ def _by_age(runs: list[dict[str, Any]]) -> None:
                     label = name if name == meth else f"{name} (same frames)"
                     out.append(f"| {rep['_label']} | {s['seed']} | {path} | {label} | " + " | ".join(cells) + " |")
     if not out:
-        print("\n--by-age: no run played a method with prediction reuse (NAME@k, unseen tiles at 1x1)")
+        print("\n--by-age: no run played a method with prediction reuse (NAME@k, unseen tiles at 1x1, no "
+              ":rS refresh)")
         return
     print("\nAt each method's default, work saved / failing tiles % by frames since the reuse method's network ran "
           "(0: it ran; the first frame, with no history, left out)\n")

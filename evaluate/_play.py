@@ -339,6 +339,7 @@ class _Loop:
     default: bool = False
     history: np.ndarray | None = None  # the frame it displayed last
     rates: np.ndarray | None = None  # the rates it chose last
+    rates_hw: tuple[int, int] | None = None  # the size of the frame it chose them for (dynamic resolution)
     saved: list[float] = field(default_factory=list)
     fail: list[float] = field(default_factory=list)
     change: list[float] = field(default_factory=list)
@@ -1226,13 +1227,15 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
             if engine is not None:  # (the engine's own rate is its choice: a tile fails beyond it only)
                 failing &= rates != engine
             lp.fail.append(float(failing.mean()))
-            lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None and lp.rates.shape == rates.shape
-                             else float("nan"))  # (none on the first frame, nor across a change of size)
+            # (none on the first frame, nor across a change of size: the tiles are others even where both sizes have
+            # the same tile grid, 160x96 and 158x95 on 16-pixel tiles, whose rates were compared tile by tile)
+            lp.change.append(float((rates != lp.rates).mean()) if lp.rates is not None and lp.rates_hw == hw
+                             else float("nan"))
             # (full's displayed frame is the reference: FLIP 0, on the frames FLIP is measured only, so that a run
             # without any shows "-" for it as for every method, not 0.0000)
             lp.flip.append(float("nan") if not measure_flip else 0.0 if lp.method.kind == "full" and engine is None else
                            float(metrics.flip_map(ref, displayed).mean()) if displayed is not None else float("nan"))
-            lp.history, lp.rates = (ref if open_loop else displayed) if needs_history else None, rates
+            lp.history, lp.rates, lp.rates_hw = (ref if open_loop else displayed) if needs_history else None, rates, hw
             if anim_frame and lp.default and displayed is not None:
                 shown[lp.method.name] = (displayed, rates)
         if shown:

@@ -440,6 +440,18 @@ def test_dynamic_resolution_closes_the_loop_at_each_frames_size(tmp_path: Path, 
                                                       2 * min(w, _ANIM_PANEL_WIDTH), 3)  # (two panels in a row)
 
 
+def test_no_rate_change_is_counted_across_sizes_of_one_tile_grid(tmp_path: Path) -> None:
+    """Sizes whose tile grids are alike (160x96 and 158x95: 10x6 tiles of 16 pixels) are still other tiles: the rate
+    change across them was counted, tile by tile, as if the frame had not changed size."""
+    assert sdk.tile_grid(95, 158, TILE) == sdk.tile_grid(H, W, TILE)
+    rep = play("procedural:0", "yang2019,oracle", paths=("slow",), frames=4, size=(W, H), sweep=False, flip_every=0,
+               dynamic_resolution=DynamicResolution((1.0, 0.99), 2))
+    assert rep.settings["dynamic_resolution"]["sizes"] == [[W, H], [158, 95]]
+    for method in ("yang2019", "oracle"):
+        change = rep.frames["slow"][method]["change"]
+        assert [np.isnan(c) for c in change] == [True, False, True, False], (method, change)
+
+
 def test_a_model_reading_luma_gets_the_luma_of_its_own_history(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A shipped model that reads reprojected.y (JNFLIP) is fed the luma of the method's own
     reprojected displayed frame, plane for plane what the dataset and the adapters give it."""
@@ -1092,6 +1104,51 @@ def test_the_report_refuses_runs_of_other_settings_before_any_table(tmp_path: Pa
     assert "| a (8px) | 0 | fast |" in out and "| b (16px) | 0 | fast |" in out
     assert out.count("| mean (16px) |") == out.count("| mean (8px) |") == 2 and "| mean |" not in out
     assert "| jnyang@4 (16px) | 2 |" in out and "| jnyang@4 (8px) | 2 |" in out
+
+
+def _paths_run(folder: Path, name: str, paths: dict[str, list[str]], reuse: dict[str, Any] | None = None) -> str:
+    """A play.json of map ``a`` (4 frames) with ``paths``: path -> its methods, each method's saving a number of its
+    own (``0.1 * (index of the path + 1) + 0.01 * index of the method``), so that a table cell says where it is from."""
+    methods = list(dict.fromkeys(m for ms in paths.values() for m in ms))
+    saving = {(p, m): round(0.1 * (i + 1) + 0.01 * methods.index(m), 4) for i, p in enumerate(paths) for m in paths[p]}
+    s = {"scene": "a", "seed": 0, "frames": 4, "fps": 60, "size": [64, 48], "fail_metric": "jnyang",
+         "fail_threshold": 0.25, "methods": methods, "paths": list(paths), "reuse": reuse or {},
+         "cameras": {p: {"length_m": 1.0, "eye_height_m": 1.5 + i / 10} for i, p in enumerate(paths)}}
+    matched = [{"path": p, "method": m, "fail_share": lv, "work_saved": saving[p, m]}
+               for p, ms in paths.items() for m in ms for lv in (0.01, 0.02, 0.05)]
+    frames = {p: {m: {"saved": [saving[p, m]] * 4, "fail": [0.01 * (k % 2) for k in range(4)]} for m in ms}
+              for p, ms in paths.items()}
+    out = folder / f"{name}.json"
+    out.write_text(json.dumps({"settings": s, "unseen": {p: [1.0, 0.01, 0.02, 0.03] for p in paths},
+                               "matched": matched, "rows": [], "frames": frames}))
+    return str(out)
+
+
+def test_the_report_merges_runs_of_other_paths(tmp_path: Path) -> None:
+    """Runs of one map merge into one row per path: a run of the fast path beside one of the slow path was dropped
+    whole (its path, its methods, its windows), and a method a second run added on one path only showed "-" on the
+    other where it had not played (blank, as a method a run did not play). --by-age leaves out a reuse method with a
+    refresh share (:rS), whose network runs early and restarts the interval: ages by frame index were wrong."""
+    slow = _paths_run(tmp_path, "slow", {"slow": ["jnyang"]})
+    fast = _paths_run(tmp_path, "fast", {"fast": ["jnyang", "jnyang@2", "jnyang@2:r0.05"]},
+                      {"jnyang@2": {"k": 2, "unseen": "full", "refresh": None},
+                       "jnyang@2:r0.05": {"k": 2, "unseen": "full", "refresh": 0.05}})
+    out = _play_report(slow, fast, "--window", "2", "--by-age", "--reuse", "jnyang@2")
+    assert out.returncode == 0, out.stderr
+    text = out.stdout
+    assert "| map | seed | path | eye (m) | unseen % mean / max | jnyang | jnyang@2 | jnyang@2:r0.05 |" in text
+    assert "| a | 0 | slow | 1.50 | 2.00 / 3.00 | 10.0 / 10.0 / 10.0 |  |  |" in text, text
+    assert "| a | 0 | fast | 1.50 | 2.00 / 3.00 | 10.0 / 10.0 / 10.0 | 11.0 / 11.0 / 11.0 | 12.0 / 12.0 / 12.0 |" in text
+    assert "| a | 0 | fast | jnyang@2 | 11.0 / 0.5 | 11.0 / 1.0 |" in text  # (its windows: frames 1-2, 3)
+    age = text[text.index("by frames since"):]
+    assert "| a | 0 | fast | jnyang@2 | 11.0 / 0.0 | 11.0 / 1.0 |" in age  # age 0: frame 2; age 1: frames 1, 3
+    assert "jnyang@2:r0.05" not in age
+    # a second run adding a method on one of the first run's paths: the other path's cell blank, not "-"
+    both = _paths_run(tmp_path, "both", {"slow": ["jnyang"], "fast": ["jnyang"]})
+    more = _paths_run(tmp_path, "more", {"fast": ["jnyang", "jnyang@2"]})
+    text = _play_report(both, more).stdout
+    assert "| a | 0 | slow | 1.50 | 2.00 / 3.00 | 10.0 / 10.0 / 10.0 |  |" in text, text
+    assert "| a | 0 | fast | 1.60 | 2.00 / 3.00 | 20.0 / 20.0 / 20.0 | 11.0 / 11.0 / 11.0 |" in text, text
 
 
 def test_plot_reuse_is_refused_where_there_is_nothing_to_plot(tmp_path: Path) -> None:
