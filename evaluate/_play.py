@@ -1360,15 +1360,19 @@ def _write(report: PlayReport, out: Path, plots: bool) -> list[str]:
 
     from ._evaluate import _json_clean
 
+    # the figures drawn before anything is written: a failure drawing them left this run's play.json beside the
+    # previous run's figures
+    images: list[tuple[str, np.ndarray]] = []
+    if plots:
+        from .plots import play_curves, play_frames, save_image
+
+        images = [("play_curves.png", play_curves(report)), ("play_frames.png", play_frames(report))]
     files = []
     for name, text in (("play.md", report.to_markdown()), ("play.json", json.dumps(_json_clean(report.to_dict()), indent=1))):
         with atomic_output(out / name) as tmp:
             tmp.write_text(text, encoding="utf-8")
         files.append(name)
-    if plots:
-        from .plots import play_curves, play_frames, save_image
-
-        for name, img in (("play_curves.png", play_curves(report)), ("play_frames.png", play_frames(report))):
-            save_image(out / name, img)
-            files.append(name)
+    for name, img in images:
+        save_image(out / name, img)
+        files.append(name)
     return files

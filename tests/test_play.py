@@ -74,7 +74,9 @@ def test_composite_takes_each_tile_from_its_rate(hw: tuple[int, int]) -> None:
             want[y, x] = colour[rate][y, x]
     assert np.array_equal(composite(colour, codes, TILE), want)
     assert np.array_equal(composite(colour, codes.astype(np.int64), TILE), want)
-    for bad in (np.full_like(codes, 3), np.full(codes.shape, -1), codes.astype(np.float32)):  # 3: no rate's code
+    # 3: no rate's code; 10**12: past every code (it asked np.bincount for 7 TiB: a MemoryError)
+    for bad in (np.full_like(codes, 3), np.full(codes.shape, -1), codes.astype(np.float32),
+                np.where(codes == codes.flat[0], 10**12, codes.astype(np.int64))):
         with pytest.raises(sdk.ParameterError, match="rate codes"):
             composite(colour, bad, TILE)
 
@@ -1298,3 +1300,26 @@ def test_beside_an_engines_own_rates(tmp_path: Path) -> None:
             play("procedural:0", "jnyang@1:alone", paths=("fast",), frames=3, size=(W, H), sweep=False,
                  flip_every=0, plots=False, out=tmp_path / "never", **kw)
     assert not (tmp_path / "never").exists()
+
+
+def test_a_failure_drawing_the_figures_leaves_the_previous_report_whole(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """play.md and play.json were written before the figures were drawn: a failure drawing them left this run's
+    report beside the previous run's figures. Everything is drawn before the first file is written."""
+    from rtp.evaluate import _play, plots
+
+    rep = play("procedural:0", "full", paths=("slow",), frames=3, size=(64, 48), sweep=False, flip_every=0,
+               plots=False)
+    names = ("play.md", "play.json", "play_curves.png", "play_frames.png")
+    for name in names:
+        (tmp_path / name).write_bytes(b"the previous run's " + name.encode())
+
+    def broken(report: Any) -> Any:
+        raise RuntimeError("drawing failed")
+
+    monkeypatch.setattr(plots, "play_frames", broken)
+    with pytest.raises(RuntimeError, match="drawing failed"):
+        _play._write(rep, tmp_path, True)
+    assert all((tmp_path / n).read_bytes() == b"the previous run's " + n.encode() for n in names)
+    monkeypatch.undo()
+    assert _play._write(rep, tmp_path, True) == list(names)
