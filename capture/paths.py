@@ -403,7 +403,8 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
         raise sdk.ParameterError(f"rates: expected the {grid[1]}x{grid[0]} tile grid {grid} of {tile}-pixel tiles "
                                  f"over a {w}x{h} frame, got shape {rates.shape}", "rates")
     known = sorted(sdk.RATE_CODES.values())
-    ok = rates.dtype.kind in "iu" and (rates.size == 0 or int(rates.min()) >= 0)
+    # (in range before bincount: a stray code of 10**12 asked it for 7 TiB, a MemoryError, not this error)
+    ok = rates.dtype.kind in "iu" and (rates.size == 0 or 0 <= int(rates.min()) <= int(rates.max()) <= known[-1])
     counts = np.bincount(rates.ravel(), minlength=known[-1] + 1) if ok else np.zeros(0, np.intp)
     if not ok or np.any(np.delete(counts, known)):
         got = sorted({int(c) for c in np.unique(rates)} - set(known)) if rates.dtype.kind in "iu" else rates.dtype

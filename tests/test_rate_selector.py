@@ -521,6 +521,17 @@ def test_a_budget_on_a_rendered_frame_and_its_refusals(frames, gl_context: Any) 
             selector.select(raw, frame_size=(48, 80))  # (without a budget it would weigh nothing)
         selector.select(raw, saving=0.5)
         assert selector.budget()[1] >= 0.5
+        # a call refused after the budget's checks (here its engine_rates of another grid) leaves budget() on the
+        # last budget drawn: it divided that budget's saving by the refused frame's work (52.5 % read as 94 %)
+        selector.select(raw, saving=0.5, frame_size=(48, 80))
+        before = selector.budget()
+        buffer = gl_context.buffer(np.ascontiguousarray(raw, np.float32).tobytes())
+        refused = {"saving": 0.5, "frame_size": (33, 65), "engine_rates": np.zeros((2, 2), np.uint8)}
+        for call in (lambda: selector.select(raw, **refused), lambda: selector.select_buffer(buffer, (3, 5), **refused)):
+            with pytest.raises(sdk.InputShapeError):
+                call()
+            assert selector.budget() == before
+        buffer.release()
 
 
 

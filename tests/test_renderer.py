@@ -539,6 +539,27 @@ def test_renderer_errors_and_lifetime(gl_context):
 
 
 @pytest.mark.gl
+def test_a_refused_scene_leaves_the_loaded_one(gl_context: Any) -> None:
+    """A scene whose second mesh is malformed (appended after the scene was made, with a material index past its
+    list) is refused before the loaded scene is let go: the renderer went on with no scene and the new scene's first
+    mesh uploaded; now it draws the scene loaded before exactly as before."""
+    with Renderer(40, 24, ctx=make_current(gl_context), shadow_map_size=64) as r:
+        scene = _flat_scene()
+        r.load_scene(scene)
+        cam = _front_camera()
+        before = r.render(cam)
+        bad = Scene("bad", [quad_mesh((0, 0, -5), (1, 0, 0), (0, 1, 0), 0)], [Material("m")])
+        bad.meshes.append(quad_mesh((0, 1, -5), (1, 0, 0), (0, 1, 0), 3))  # (Scene's own check ran before it)
+        with pytest.raises(RendererError, match="mesh 1: material 3 not in 0..0"):
+            r.load_scene(bad)
+        assert r.scene is scene
+        after = r.render(cam)
+        for rate in RATES:
+            np.testing.assert_array_equal(after.colour[rate], before.colour[rate], err_msg=rate)
+        np.testing.assert_array_equal(after.albedo, before.albedo)
+
+
+@pytest.mark.gl
 def test_a_renderer_whose_borrowed_context_went_first_releases_quietly(gl_context: Any) -> None:
     """An engine that released its context before the renderer borrowing it: release() (and the with block's
     exit) raised an AttributeError from the released context; now the objects went with it, release marks the

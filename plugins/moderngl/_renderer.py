@@ -738,8 +738,9 @@ class Renderer:
         """Upload a scene's meshes and textures (replacing the previous scene's GPU resources).
 
         Textures are uploaded as sRGB (filtered in linear space), mip-mapped, with anisotropic
-        filtering where the driver offers it. Raises :class:`RendererError` on malformed meshes and on a
-        texture larger than the context holds (``GL_MAX_TEXTURE_SIZE``; checked before the loaded scene is let go).
+        filtering where the driver offers it. Raises :class:`RendererError` on malformed meshes or materials
+        and on a texture larger than the context holds (``GL_MAX_TEXTURE_SIZE``), all checked before the loaded
+        scene is let go: after a refusal the scene loaded before stays loaded.
         """
         self._check_alive()
         if not isinstance(scene, Scene):
@@ -757,24 +758,11 @@ class Renderer:
                 raise RendererError(f"material {i} ({m.name!r}): this OpenGL context holds textures of at most {limit} "
                                     f"texels a side (GL_MAX_TEXTURE_SIZE), got {img.shape[1]}x{img.shape[0]}: scale it "
                                     "down")
-        self._release_scene()
-        mgl = self._mgl
-        t0 = time.perf_counter()
-        for m in scene.materials:
-            tex = None
-            if m.texture is not None:
-                img = np.asarray(m.texture)
-                tex = self.ctx.texture((img.shape[1], img.shape[0]), 4, np.ascontiguousarray(img).tobytes(),
-                                       internal_format=_GL_SRGB8_ALPHA8)
-                tex.build_mipmaps()
-                tex.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
-                if self.anisotropy > 1.0:
-                    tex.anisotropy = min(self.anisotropy, float(self.ctx.max_anisotropy or 1.0))
-            cutoff = -1.0 if m.alpha_cutoff is None else float(m.alpha_cutoff)
-            self._materials.append(
-                _GpuMaterial(tex, _floats(m.base_color, 4), (m.roughness, m.metallic, m.specular),
-                             _floats(m.emissive, 3), cutoff)
-            )
+        # Every mesh and material checked before the loaded scene is let go: a scene whose list was changed after it
+        # was made (a mesh appended with a material index past the list) left the renderer with no scene and half of
+        # the new one's meshes uploaded.
+        factors = [(_floats(m.base_color, 4), _floats(m.emissive, 3)) for m in scene.materials]
+        arrays = []
         for i, mesh in enumerate(scene.meshes):
             pos = np.asarray(mesh.positions, np.float32)
             nrm = np.asarray(mesh.normals, np.float32)
@@ -790,8 +778,25 @@ class Renderer:
                 raise RendererError(f"mesh {i}: indices must be (M, 3), got {idx.shape}")
             if len(idx) and (idx.min() < 0 or idx.max() >= n):
                 raise RendererError(f"mesh {i}: an index is outside 0..{n - 1}")
-            if not 0 <= mesh.material < len(self._materials):
-                raise RendererError(f"mesh {i}: material {mesh.material} not in 0..{len(self._materials) - 1}")
+            if not 0 <= mesh.material < len(scene.materials):
+                raise RendererError(f"mesh {i}: material {mesh.material} not in 0..{len(scene.materials) - 1}")
+            arrays.append((pos, nrm, uv, idx, mesh.material))
+        self._release_scene()
+        mgl = self._mgl
+        t0 = time.perf_counter()
+        for m, (base_color, emissive) in zip(scene.materials, factors):
+            tex = None
+            if m.texture is not None:
+                img = np.asarray(m.texture)
+                tex = self.ctx.texture((img.shape[1], img.shape[0]), 4, np.ascontiguousarray(img).tobytes(),
+                                       internal_format=_GL_SRGB8_ALPHA8)
+                tex.build_mipmaps()
+                tex.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
+                if self.anisotropy > 1.0:
+                    tex.anisotropy = min(self.anisotropy, float(self.ctx.max_anisotropy or 1.0))
+            cutoff = -1.0 if m.alpha_cutoff is None else float(m.alpha_cutoff)
+            self._materials.append(_GpuMaterial(tex, base_color, (m.roughness, m.metallic, m.specular), emissive, cutoff))
+        for pos, nrm, uv, idx, material in arrays:
             if len(idx) == 0:
                 continue
             vbo = self.ctx.buffer(np.concatenate([pos, nrm, uv], axis=1).astype(np.float32).tobytes())
@@ -802,7 +807,7 @@ class Renderer:
             vao_s = self.ctx.vertex_array(
                 self._p_shadow, [(vbo, "3f 12x 2f", "in_position", "in_uv")], ibo, index_element_size=4
             )
-            self._meshes.append(_GpuMesh(vao, vao_s, vbo, ibo, mesh.material))
+            self._meshes.append(_GpuMesh(vao, vao_s, vbo, ibo, material))
         self.scene = scene
         logger.info(
             "loaded scene %r: %d meshes, %d triangles, %d materials in %.2f s",

@@ -203,7 +203,7 @@ class RateSelector:
                 f"planes of {th}x{tw} tiles", (raw.size,), f"({len(self._meta.outputs)}, {th}, {tw}) float32")
         _frame_with_budget(saving, frame_size)
         thr = self._check_decision(None if saving is not None else threshold, allowed)
-        work = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size)
+        budget = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size)
         engine = self._engine_rates(engine_rates, combiner, allowed, grid, thr)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets(grid)
@@ -229,18 +229,22 @@ class RateSelector:
         self._texture.bind_to_image(0, read=False, write=True)
         gh, gw = self._tiles  # type: ignore[misc]
         self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
-        if work is not None:  # the decoded values -> the budget's threshold -> the rates again at it
+        if budget is not None:  # the decoded values -> the budget's threshold -> the rates again at it
             self.ctx.memory_barrier()
-            self._run_budget(work, mask, threshold, grid, frame_size, self._program["u_combiner"].value)
+            self._run_budget(budget[0], mask, threshold, grid, frame_size, self._program["u_combiner"].value)
+            # (set with the dispatch, not by the checks: a call refused after them, an engine_rates of the wrong
+            # grid, left budget() dividing the last budget's saving by the refused frame's work)
+            self._budget_work = budget[1]
             self.ctx.memory_barrier()
             self._program["u_budget"].value = True
             self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
         return self._texture
 
     def _check_budget(self, saving: float, threshold: float | None, allowed: Iterable[sdk.RateLike] | None,
-                      grid: tuple[int, int], frame_size: tuple[int, int] | None) -> int:
-        """The work a budget must save, in sixteenths of a pixel's shading (a tile's without ``frame_size``), after
-        the SDK's own checks and messages for the saving, the floor, the allowed rates and the frame's size."""
+                      grid: tuple[int, int], frame_size: tuple[int, int] | None) -> tuple[int, float]:
+        """The work a budget must save, in sixteenths of a pixel's shading (a tile's without ``frame_size``), and the
+        frame's work, in pixels (tiles), after the SDK's own checks and messages for the saving, the floor, the allowed
+        rates and the frame's size."""
         sdk.select_rates_for_saving(np.zeros((6, *grid), np.float32), saving,
                                     higher_is_better=self._meta.higher_is_better, allowed=allowed,
                                     frame_size=frame_size, tile_size=None if frame_size is None else self.tile_size,
@@ -252,8 +256,7 @@ class RateSelector:
         if need > 0xFFFFFFFE:
             raise sdk.ParameterError(f"frame_size: a budget on the GPU counts up to 268 million pixels, got {work:.0f}",
                                      "frame_size")
-        self._budget_work = work
-        return need
+        return need, work
 
     def _run_budget(self, need: int, mask: int, threshold: float | None, grid: tuple[int, int],
                     frame_size: tuple[int, int] | None, combiner: int) -> None:
