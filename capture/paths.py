@@ -541,7 +541,11 @@ class PathPlayer:
         self._own = renderer is None
         self.renderer = Renderer(*size) if self._own else renderer
         if self._own:
-            self.renderer.load_scene(scene)
+            try:
+                self.renderer.load_scene(scene)
+            except BaseException:  # (the renderer made here is released: the caller never gets it to close)
+                self.renderer.release()
+                raise
         self.size = (self.renderer.width, self.renderer.height)
 
     def frames(self, path: CameraPath) -> Any:

@@ -1323,3 +1323,22 @@ def test_a_failure_drawing_the_figures_leaves_the_previous_report_whole(
     assert all((tmp_path / n).read_bytes() == b"the previous run's " + n.encode() for n in names)
     monkeypatch.undo()
     assert _play._write(rep, tmp_path, True) == list(names)
+
+
+def test_a_path_player_whose_scene_fails_to_load_releases_its_renderer(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A PathPlayer that made its own renderer and then failed to load the scene kept the renderer (its GL context
+    and render targets) for the garbage collector: the caller never got the player to close."""
+    from rtp.plugins.moderngl import Renderer, RendererError
+
+    released = []
+
+    def refuse(self: Any, scene: Any) -> None:
+        raise RendererError("mesh 0: material 3 not in 0..0")
+
+    release = Renderer.release
+    monkeypatch.setattr(Renderer, "load_scene", refuse)
+    monkeypatch.setattr(Renderer, "release", lambda self: (released.append(self), release(self))[-1])
+    sc, _ = load_scene("procedural:0", None, None, None)
+    with pytest.raises(RendererError, match="material 3"):
+        PathPlayer(sc, (32, 24))
+    assert len(released) == 1
