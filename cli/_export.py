@@ -127,8 +127,10 @@ def _body(args: argparse.Namespace) -> int:
         from rtp import sdk
         from rtp.export import identify
 
-        if args.metadata is None and Path(args.adopt).is_file() and identify(args.adopt) is None \
-                and not carries_metadata(args.adopt):
+        # (in the command line's words, for an ONNX model only: a checkpoint or a damaged file was told to bring a
+        # sidecar, and with one it was no ONNX model after all; adopt says that first)
+        if args.metadata is None and Path(args.adopt).is_file() and _reads_as_onnx(args.adopt) \
+                and identify(args.adopt) is None and not carries_metadata(args.adopt):
             raise sdk.MetadataError(
                 f"{args.adopt} is not one of the paper's published models rtp recognises: pass its sidecar with "
                 "--metadata SIDECAR.yaml (docs/export.md)")
@@ -140,6 +142,17 @@ def _body(args: argparse.Namespace) -> int:
     print(out)
     return 0
 
+
+
+def _reads_as_onnx(path: str) -> bool:
+    """Whether onnx reads ``path`` as a model (what :func:`rtp.export.adopt` refuses first where it does not)."""
+    import onnx
+
+    try:
+        onnx.load(path, load_external_data=False)
+    except Exception:  # onnx raises DecodeError and friends
+        return False
+    return True
 
 
 def export_main(argv: Sequence[str] | None = None) -> int:

@@ -236,6 +236,18 @@ def _load(args: argparse.Namespace) -> Any:
         return sdk.load(args.model, metadata=args.metadata)
     except sdk.MetadataError as err:
         if err.key == sdk.METADATA_KEY and args.metadata is None and not carries_metadata(args.model):
+            from rtp.export import identify
+
+            # (one of the paper's published files was told to bring a sidecar: rtp ships one for each, docs/export.md)
+            try:
+                known = identify(args.model)
+            except (sdk.RtpError, OSError):  # (a name sdk.load resolved, not a path: no published file)
+                known = None
+            if known is not None:
+                raise sdk.MetadataError(
+                    f"{args.model} carries no rtp metadata; it is the paper's published {known.name} model, whose "
+                    f"sidecar ships with rtp: `rtp-export --adopt {args.model} -o OUT.onnx` bakes it in (no sidecar "
+                    "to write)", err.key) from err
             raise sdk.MetadataError(
                 f"{args.model} carries no rtp metadata: pass --metadata SIDECAR.yaml, or bake the sidecar in with "
                 "`rtp-export --adopt MODEL.onnx --metadata SIDECAR.yaml -o OUT.onnx`", err.key) from err

@@ -781,6 +781,9 @@ def export_checkpoint(
             # (merged below, the export's own entry replaced it: the checkpoint's provenance was lost, without a word)
             raise MetadataError(f"{source}provenance: expected a mapping (merged into the checkpoint's provenance), got "
                                 f"{reprlib.repr(extra['provenance'])}", "provenance")
+        # (before the merged metadata is validated: `metric: psnr` was refused as "higher_is_better: psnr is
+        # higher-is-better", `tile_size: 8` and `outputs: [1x2, 2x1]` by the network check without the sidecar's name)
+        _check_trained_extra(ckpt.metadata, extra, source)
         meta_dict = _merge(meta_dict, extra)
     meta_dict = _merge(meta_dict, {"provenance": {"export": _export_provenance(opset)}})
     net = ckpt.net.eval()
@@ -841,14 +844,41 @@ def _check_trained_fields(trained: ModelMetadata, meta: ModelMetadata, source: s
         if key == "transform":
             was, now = was.to_dict(), now.to_dict()
         if was != now:
-            raise MetadataError(f"{source}{key}: the checkpoint's network was trained for {_shown(was)}, the extra metadata says "
-                                f"{_shown(now)}; extra metadata sets descriptive and decision fields (description, "
-                                f"default_threshold, rate_factors, provenance, ...), not what the network was trained "
-                                f"on: train another model", key)
+            raise _trained_field_error(key, was, now, source)
+
+
+def _check_trained_extra(trained: ModelMetadata, extra: Mapping[Any, Any], source: str = "") -> None:
+    """:func:`_check_trained_fields` on the extra metadata as given, before it is merged and validated: a change of a
+    trained field (the transform's aside, compared once validated) is named as such, where the validation of the
+    merged metadata or the network check refused it by a consequence (``metric: psnr``: "higher_is_better: psnr is
+    higher-is-better") or without the sidecar's name (``tile_size: 8``). A value that restates the field in
+    another spelling (a list for a tuple, ``16.0`` for 16) passes here and is checked once validated."""
+    for key in TRAINED_FIELDS:
+        if key == "transform" or key not in extra:
+            continue
+        was, now = getattr(trained, key), extra[key]
+        if isinstance(was, tuple):
+            same = isinstance(now, (list, tuple)) and list(now) == list(was)
+        elif was is None or isinstance(was, str) or isinstance(now, (bool, np.bool_)):
+            same = now == was
+        else:
+            try:
+                same = float(now) == float(was)
+            except (TypeError, ValueError):
+                same = False
+        if not same:
+            raise _trained_field_error(key, was, now, source)
+
+
+def _trained_field_error(key: str, was: Any, now: Any, source: str) -> MetadataError:
+    return MetadataError(f"{source}{key}: the checkpoint's network was trained for {_shown(was)}, the extra metadata says "
+                         f"{_shown(now)}; extra metadata sets descriptive and decision fields (description, "
+                         f"default_threshold, rate_factors, provenance, ...), not what the network was trained "
+                         f"on: train another model", key)
 
 
 def _shown(value: Any) -> Any:
-    return ", ".join(value) if isinstance(value, tuple) else value
+    return ", ".join(map(str, value)) if isinstance(value, (tuple, list)) else value
 
 
 #: The metadata fields the export computes from the network and the file it writes, with what each is: extra

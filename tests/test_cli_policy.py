@@ -454,6 +454,16 @@ def test_info_on_a_foreign_model_speaks_in_flags(tmp_path: Path, capsys: pytest.
     assert "--metadata SIDECAR.yaml" in err and "metadata=" not in err
 
 
+def test_info_on_a_published_model_says_it_adopts_without_a_sidecar(capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp info JNYang.onnx`, the paper's published file, told the user to write a sidecar; rtp ships one for each
+    published model (docs/export.md "Published models"), and `rtp-export --adopt` bakes it in."""
+    published = Path(__file__).parent / "data" / "published" / "JNYang.onnx"
+    assert main(["info", str(published)]) == 2
+    err = capsys.readouterr().err
+    assert "published jnyang model" in err and f"rtp-export --adopt {published} -o OUT.onnx" in err, err
+    assert "--metadata SIDECAR.yaml" not in err
+
+
 def test_info_on_broken_metadata_says_what_is_broken(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Metadata that is there but not JSON is not "no rtp metadata": the hint to bake a sidecar in would send
     the user to `rtp-export --adopt`, which refuses a file that already carries the key."""

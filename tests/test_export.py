@@ -160,6 +160,12 @@ def test_extra_metadata_errors_name_the_sidecar_and_keep_the_checkpoints_provena
     ("metric: flip\nweber_l: null\n", "metric"),
     ("weber_l: 0.05\n", "weber_l"),
     ("transform: {type: clamped, mu_y: 0.5}\n", "transform"),
+    # (refused by a consequence: "higher_is_better: psnr is higher-is-better"; by the network check, naming no
+    # sidecar: "tile_size: metadata says 8 but the network's tile is 16", "outputs: metadata lists 2 rates ...")
+    ("metric: psnr\n", "metric"),
+    ("tile_size: 8\n", "tile_size"),
+    ("outputs: [1x2, 2x1]\n", "outputs"),
+    ("inputs: [reprojected.r, seen]\n", "inputs"),
 ])
 def test_extra_metadata_cannot_change_what_the_network_was_trained_for(tmp_path: Path, extra: str, key: str) -> None:
     # (only their number was checked: a network trained on red exported as one reading green, or a JNYang
@@ -174,6 +180,9 @@ def test_extra_metadata_cannot_change_what_the_network_was_trained_for(tmp_path:
         export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=yaml.safe_load(extra))
     restated = {k: base_metadata()[k] for k in ("metric", "inputs", "outputs", "tile_size", "transform")}
     assert sdk.load(export.export_checkpoint(ck, tmp_path / "y.onnx", extra_metadata=restated)).metadata.metric == "jnyang"
+    # restated from a sidecar (YAML lists for the tuples): passes
+    (tmp_path / "same.yaml").write_text("tile_size: 16\nweber_l: 0.02\noutputs: [1x2, 2x1, 2x4, 4x2]\n")
+    assert sdk.load(export.export_checkpoint(ck, tmp_path / "z.onnx", extra_metadata=tmp_path / "same.yaml")).tile_size == 16
 
 
 @pytest.mark.parametrize("extra, key", [
@@ -334,6 +343,23 @@ def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
     corrupt.write_bytes(b"junk")
     r = _cli("--adopt", str(corrupt), "--metadata", str(side), "-o", str(tmp_path / "x.onnx"))
     assert r.returncode == 2 and "not a readable ONNX model" in r.stderr
+
+
+def test_adopt_cli_without_a_sidecar_names_a_file_that_is_no_onnx_model(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A checkpoint (or a damaged file) given to --adopt without a sidecar was told to bring one ("is not one of the
+    paper's published models rtp recognises: pass its sidecar"), and with one it was no ONNX model after all."""
+    from rtp.cli import export_main
+
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    assert export_main(["--adopt", str(ck), "-o", str(tmp_path / "x.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert "not a readable ONNX model" in err and "sidecar" not in err, err
+    # an ONNX model rtp does not recognise still needs its sidecar, and says so
+    assert export_main(["--adopt", str(_foreign(tmp_path, 64, 96)), "-o", str(tmp_path / "x.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert "pass its sidecar with --metadata SIDECAR.yaml" in err and "not a readable" not in err, err
+    assert not (tmp_path / "x.onnx").exists()
 
 
 
