@@ -1165,9 +1165,14 @@ def adopt(
         )
     t = meta.tile_size
     if all(isinstance(v, int) and v > 0 for v in (di[2], di[3], do[2], do[3])):
-        if (do[2], do[3]) != (di[2] // t, di[3] // t):  # type: ignore[operator]
+        # (as the SDK reads the output: every tile, a partial last one included; the floor refused a model that
+        # predicts its partial tiles and passed one that drops them, which every predict then failed on)
+        grid = sdk.tile_grid(int(di[2]), int(di[3]), t)
+        if (do[2], do[3]) != grid:
             raise MetadataError(
-                f"tile_size: the sidecar says {t}, but the model maps {di[3]}x{di[2]} to {do[3]}x{do[2]} tiles",
+                f"tile_size: the sidecar says {t}, but the model maps {di[3]}x{di[2]} to {do[3]}x{do[2]} tiles, "
+                f"expected {grid[1]}x{grid[0]}" + (" (its partial last tiles included)" if di[2] % t or di[3] % t
+                                                   else ""),
                 "tile_size",
             )
     static_hw = (di[2], di[3]) if isinstance(di[2], int) and isinstance(di[3], int) and di[2] > 0 else None

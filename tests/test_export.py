@@ -330,6 +330,23 @@ def test_adopt_checks_the_model_against_the_sidecar(tmp_path: Path) -> None:
     assert r.returncode == 2 and "already carries rtp metadata" in r.stderr, r.stderr
 
 
+def test_adopt_reads_a_fixed_models_tile_grid_as_the_sdk_does(tmp_path: Path) -> None:
+    """A fixed input that is no multiple of the tile size: adopt compared the output with 40 // 16 = 2 tiles a side,
+    refusing a model that predicts its partial last tiles (3x3, which sdk.load and predict take) and passing one
+    that drops them (whose every predict then failed)."""
+    from .conftest import build_onnx
+
+    sidecar = {**PAPER_SIDECAR, "outputs": ["1x2", "2x1", "2x4", "4x2"], "input_multiple": 4}
+    takes = build_onnx(tmp_path / "takes.onnx", weights=np.eye(4, dtype=np.float32), static=(1, 40, 40),
+                       ceil_mode=True)
+    pred = sdk.load(export.adopt(takes, sidecar, tmp_path / "a.onnx"))
+    assert pred.predict(np.zeros((4, 40, 40), np.float32)).shape == (6, 3, 3)
+    drops = build_onnx(tmp_path / "drops.onnx", weights=np.eye(4, dtype=np.float32), static=(1, 40, 40))
+    with pytest.raises(sdk.MetadataError, match="maps 40x40 to 2x2 tiles, expected 3x3 .*partial") as info:
+        export.adopt(drops, sidecar, tmp_path / "b.onnx")
+    assert info.value.key == "tile_size" and not (tmp_path / "b.onnx").exists()
+
+
 def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
     import yaml
 
