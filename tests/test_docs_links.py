@@ -141,3 +141,15 @@ def test_make_help_names_every_target() -> None:
     helped |= {"help"} if "help:" in text else set()
     missing = [t for t in phony.group(1).split() if t not in helped]
     assert not missing, f"make help names no line for: {', '.join(missing)}"
+
+
+def test_the_training_pages_dataset_is_make_datasets() -> None:
+    """docs/training.md's capture commands are `make dataset`'s, the shipped models' data (it said --per-scene 20
+    where the Makefile and the shipped models' 1,224 + 72 samples are 12 a map and profile: 1.7 times the data and
+    the memory its training holds)."""
+    make = dict(re.findall(r"^([A-Z_]+)\s*\?=\s*(\S+)", (ROOT / "Makefile").read_text(), re.M))
+    page = (ROOT / "docs" / "training.md").read_text()
+    for split, key in (("train", "PER_SCENE"), ("validation", "VAL_PER_SCENE")):
+        m = re.search(rf"^rtp capture --split {split} --per-scene (\d+) --size (\S+) ", page, re.M)
+        assert m is not None, split
+        assert m.groups() == (make[key], make["SIZE"]), (split, m.groups())

@@ -841,6 +841,55 @@ def test_the_weight_average_is_what_is_saved_and_resumes_exactly(tmp_path: Path)
     np.testing.assert_allclose(pred.predict_raw(x), want, atol=1e-5)
 
 
+def test_a_run_interrupted_at_a_validation_resumes_with_the_history_of_an_uninterrupted_one(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Ctrl-C at a validation step (in the progress bar's update, before the validation, or during it) saved that
+    # step without its validation; the resumed run went on from it and its history, in the checkpoint and the
+    # model's provenance, lacked that step's scores. The weights were exact; the record was not. And Ctrl-C during
+    # the final validation and calibration lost every step since the last periodic save (here 8 of them).
+    from rtp.train import _loop
+
+    data = _dataset(tmp_path / "ds", n=6)
+    kw = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_scenes=("scene0",), steps=16, val_every=4,
+              save_every=8)
+    whole = load_checkpoint(train(TrainConfig(out=str(tmp_path / "a.pt"), **kw)).checkpoint)
+
+    def stop_at(at: int) -> Callable[[int, int, float], None]:
+        def progress(step: int, total: int, loss: float) -> None:
+            if step == at:
+                raise KeyboardInterrupt
+        return progress
+
+    out = tmp_path / "b.pt"
+    with pytest.raises(KeyboardInterrupt):  # before step 4's validation
+        train(TrainConfig(out=str(out), **kw), progress=stop_at(4))
+    assert load_checkpoint(out).training["step"] == 4
+    real_validate, calls = _loop._validate, [0]
+
+    def validate_stopping_at_12(net: Any, val: Any, *args: Any) -> Any:  # inside step 12's validation
+        calls[0] += 1
+        if calls[0] == 3:  # (step 4's owed one, step 8's, then 12's)
+            raise KeyboardInterrupt
+        return real_validate(net, val, *args)
+
+    monkeypatch.setattr(_loop, "_validate", validate_stopping_at_12)
+    with pytest.raises(KeyboardInterrupt):
+        train(TrainConfig(out=str(out), **kw))
+    assert load_checkpoint(out).training["step"] == 12
+    calls[0] = 0  # the final validation after step 16 (step 12's owed one, step 16's, then the final one)
+    with pytest.raises(KeyboardInterrupt):
+        train(TrainConfig(out=str(out), **kw))
+    assert load_checkpoint(out).training["step"] == 16  # (the last periodic save held step 8)
+    monkeypatch.setattr(_loop, "_validate", real_validate)
+    resumed = load_checkpoint(train(TrainConfig(out=str(out), **kw)).checkpoint)
+    assert [h["step"] for h in json.loads(resumed.training["history"])] == [0, 4, 8, 12, 16]
+    assert resumed.training["history"] == whole.training["history"]
+    assert resumed.metadata.provenance["history"] == whole.metadata.provenance["history"]
+    assert resumed.metadata.provenance["validation"] == whole.metadata.provenance["validation"]
+    for k, v in whole.net.state_dict().items():
+        assert torch.equal(v, resumed.net.state_dict()[k]), k
+
+
 def test_adamw_with_a_cosine_schedule_trains_resumes_exactly_and_is_recorded(tmp_path: Path) -> None:
     from rtp.train import _loop
 
@@ -1269,6 +1318,39 @@ def test_validation_targets_of_one_value_leave_r2_null_and_the_model_saved(tmp_p
     assert all(h["val"]["r2"] is None for h in prov["history"])
 
 
+def test_validation_predicts_a_partial_tile_row_as_the_exported_model_does(tmp_path: Path,
+                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    # Validation padded every frame to whole tiles; the SDK pads the exported fast network's input only to its
+    # input_multiple (4). On frames with a partial row of tiles (72 = 4.5 x 16 here; a 1920x1080 import's at
+    # 16-pixel tiles) the last rows of tiles read repeated rows the exported model never sees, so the validation
+    # scores and the safety margin were calibrated on predictions the model does not make.
+    from rtp.train import _loop
+    from rtp.train._frames import Frame
+
+    monkeypatch.setitem(globals(), "H", 72)
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), arch="fast", crop=32, batch=4,
+                      steps=2, lr=1e-2, val_scenes=("scene0",))
+    result = train(cfg)
+    ck = load_checkpoint(result.checkpoint)
+    model = sdk.load(export.export_checkpoint(result.checkpoint, tmp_path / "m.onnx"))
+    assert ck.net.input_multiple == 4 and model.metadata.pad_multiple == 4
+    reader, rng = DatasetReader(data), np.random.default_rng(5)
+    frames = [Frame(reader[i].inputs(cfg.inputs), cfg.inputs) for i in ("s000", "s003")]  # scene0: validation
+    frames.append(Frame(rng.random((len(cfg.inputs), 74, 90)).astype(np.float16), cfg.inputs))  # padded to 76 x 92
+    got = _loop._predict_frames(ck.net, frames, 16)
+    want = [model.predict_raw(f.full().astype(np.float32)) for f in frames]
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape == (len(cfg.outputs), 5, 6)
+        np.testing.assert_allclose(g, w, atol=2e-5)
+    # and the validation scores the checkpoint records are the exported model's on the validation frames
+    t = ck.metadata.transform
+    rows = [sdk.PREDICTED_RATES.index(r) for r in cfg.outputs]
+    truth = [t.forward(TargetStore(data).load(i, "jnyang", 16)[rows].astype(np.float64)) for i in ("s000", "s003")]
+    mine = scores(np.concatenate([w.ravel() for w in want[:2]]), np.concatenate([y.ravel() for y in truth]))
+    assert ck.metadata.provenance["validation"]["transformed"]["mae"] == pytest.approx(mine.mae, rel=1e-4)
+
+
 def test_a_mirrored_window_scores_the_tiles_it_scored_unmirrored(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # With --context, a window at the frame's left border scores its border column and not its right margin; a
     # mirrored window has them the other way round. The mask was not mirrored with it: such a window scored the
@@ -1353,6 +1435,37 @@ def test_context_scores_only_tiles_that_see_what_a_whole_frame_shows() -> None:
     net(x)[0, 0, 8, 8].backward()
     rows = np.nonzero(x.grad[0].abs().sum((0, 2)).numpy())[0]  # type: ignore[union-attr]
     assert (rows.min(), rows.max()) == (128 - 28, 143 + 28)
+
+
+def test_context_scores_no_margin_of_a_window_that_ends_before_a_partial_tile(tmp_path: Path,
+                                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    # A window ending at the last whole tile of a frame with a partial row of tiles below it (72 rows at 16-pixel
+    # tiles) was taken to meet the frame's border and scored its bottom ring, whose tiles read the crop's zero
+    # padding where the whole frame shows them the partial tile's pixels.
+    from rtp.train import _loop
+    from rtp.train.model import FastNet
+
+    masks: list[np.ndarray] = []
+    real = _loop._scored_tiles
+    monkeypatch.setattr(_loop, "_scored_tiles", lambda *a: masks.append(real(*a)) or masks[-1])
+    monkeypatch.setitem(globals(), "H", 72)
+    data = _dataset(tmp_path / "ds", n=4)
+    train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), arch="fast", crop=32, context=16,
+                      batch=8, steps=3, val_scenes=("scene0",)))
+    windows = np.concatenate(masks)[:, 0]  # 4x4 tiles: every window spans rows 0-63, above the partial row
+    assert len(windows) == 24 and windows[:, 0].any() and not windows[:, 3].any()
+    assert windows[:, :, 3].any() and windows[:, :, 0].any()  # (columns: 96 is 6 whole tiles, its border scored)
+    # what that ring predicts in a window is not what the whole frame predicts there
+    torch.manual_seed(0)
+    net = FastNet(7, 4, 16).eval()
+    frame = torch.rand(1, 7, 168, 224)
+    with torch.inference_mode():
+        whole, window = net(frame), net(frame[:, :, 32:160, 48:176])
+    scored = _loop._scored_tiles([32], [48], 8, 2, 16, 168, 224)[0, 0]
+    rows, cols = np.nonzero(scored)
+    assert scored.sum() == 4 * 4 and rows.max() == 5
+    torch.testing.assert_close(window[0][:, rows, cols], whole[0][:, rows + 2, cols + 3])
+    assert not torch.allclose(window[0][:, 7, 2:6], whole[0][:, 9, 5:9], atol=1e-4)
 
 
 def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path: Path) -> None:

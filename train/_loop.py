@@ -427,21 +427,25 @@ def _optimizer(net: nn.Module, cfg: TrainConfig) -> tuple[torch.optim.Optimizer,
 
 
 def _pad_to_tiles(x: torch.Tensor, tile: int) -> torch.Tensor:
+    """``x`` padded up to a multiple of ``tile`` (whole tiles, or a network's ``input_multiple``) by repeating its
+    last row and column, as the SDK pads a frame (``ModelMetadata.pad_multiple``)."""
     h, w = x.shape[-2:]
     return F.pad(x, (0, -w % tile, 0, -h % tile), mode="replicate")
 
 
-def _scored_tiles(oy: Sequence[int], ox: Sequence[int], n: int, margin: int, tile: int, full_h: int,
-                  full_w: int) -> np.ndarray:
+def _scored_tiles(oy: Sequence[int], ox: Sequence[int], n: int, margin: int, tile: int, frame_h: int,
+                  frame_w: int) -> np.ndarray:
     """``(B, 1, n, n)`` bool: the tiles of each ``n x n``-tile window (origins ``oy``, ``ox`` in pixels)
     that are scored with ``margin`` tiles of context: all but the outer ``margin`` rings, except on a side
-    where the window meets the frame's border (those tiles are border tiles in a whole frame too)."""
+    where the window meets the border of the ``frame_h x frame_w`` frame (those tiles are border tiles in a
+    whole frame too). A window that ends at a frame's last whole tile, a partial one beyond it, does not meet
+    its border: in the whole frame those tiles see the partial tile's pixels, not padding."""
     out = np.zeros((len(oy), 1, n, n), dtype=bool)
     for b, (y, x) in enumerate(zip(oy, ox)):
         top = 0 if y == 0 else margin
-        bottom = n if y + n * tile >= full_h else n - margin
+        bottom = n if y + n * tile >= frame_h else n - margin
         left = 0 if x == 0 else margin
-        right = n if x + n * tile >= full_w else n - margin
+        right = n if x + n * tile >= frame_w else n - margin
         out[b, 0, top:bottom, left:right] = True
     return out
 
@@ -513,15 +517,20 @@ def _make_transform(cfg: TrainConfig, targets: Sequence[np.ndarray], what: str =
 
 
 def _predict_frames(net: Network, xs: Sequence[Frame], tile: int, n: int | None = None) -> list[np.ndarray]:
-    """The network's outputs on whole frames (the first ``n`` outputs: the metric's, without auxiliary ones)."""
+    """The network's outputs on whole frames (the first ``n`` outputs: the metric's, without auxiliary ones), each
+    frame padded as the SDK pads it for the exported model: up to the network's ``input_multiple`` (whole tiles
+    for the paper's network). Padded to whole tiles, the fast network's last row or column of partial tiles (a
+    1920x1080 frame's, at 16-pixel tiles) and the tiles above it read eight repeated rows the exported model never
+    sees: the validation scores and the safety margin were of predictions the model does not make."""
     out = []
     dev = next(net.parameters()).device  # (where the network trains)
+    multiple = net.input_multiple or tile
     with torch.inference_mode():
         for x in xs:
             t = torch.from_numpy(x.full())[None].to(dev).to(dtype=torch.float32, memory_format=_layout(dev))
             h, w = t.shape[-2:]
             th, tw = sdk.tile_grid(int(h), int(w), tile)
-            y = net(_pad_to_tiles(t, tile))[0, :n, :th, :tw]
+            y = net(_pad_to_tiles(t, multiple))[0, :n, :th, :tw]
             out.append(y.cpu().numpy())
     return out
 
@@ -1027,6 +1036,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     avg = copy.deepcopy(net) if cfg.ema else net
     opt, sched = _optimizer(net, cfg)
     step, history = 0, []
+    owed_loss: float | None = None  # the loss of a resumed step whose validation an interrupt kept from the history
     config_key = {k: getattr(cfg, k) for k in _RESUME_KEYS}
     if cfg.per_scene:  # checkpoints from before the option hold no "per_scene"
         config_key["per_scene"] = cfg.per_scene
@@ -1112,6 +1122,9 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             step, history = int(state["step"]), list(json.loads(state["history"]))
             if step < 0:
                 raise ValueError(f"step {step}")
+            owed = state.get("pending_validation")  # (an interrupt kept step's validation from the history)
+            if owed is not None:
+                owed_loss = float(owed["train_loss"])
         except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
             raise ckpt.CheckpointError(f"{out}: its training state cannot be resumed ({type(exc).__name__}: {exc}); "
                                        "the file was damaged or edited: delete it to train afresh, or export the model it "
@@ -1122,6 +1135,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         log.info("resuming %s at step %d", out, step)
         last = history[-1] if history else {}
         last_loss = last.get("train_loss", last.get("train_l1"))  # train_l1: checkpoints from before --loss
+        if owed_loss is not None:  # (the step's own loss, its validation not yet in the history)
+            last_loss = owed_loss
         if progress and last_loss is not None:  # a resumed run's bar starts where it stopped
             progress(step, cfg.steps, float(last_loss))
     weber = store.metrics.get(cfg.metric, {}).get("weber_l")
@@ -1168,7 +1183,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             "dataset's input planes are finite")
 
     def save(done: bool, safety: float = 0.0, extra: dict[str, Any] | None = None,
-             generator: torch.Tensor | None = None) -> None:
+             generator: torch.Tensor | None = None, pending: float | None = None) -> None:
         nonlocal saved_step
         saved = keep_outputs(avg, n_out) if cfg.aux_metrics else avg  # type: ignore[arg-type]
         bad = next((k for k, v in {**net.state_dict(), **avg.state_dict()}.items()
@@ -1181,6 +1196,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             "history": json.dumps(history), "done": done,
             **({"raw_weights": net.state_dict()} if cfg.ema else {}),
             **({"full_weights": avg.state_dict()} if cfg.aux_metrics else {}),
+            **({"pending_validation": {"train_loss": pending}} if pending is not None else {}),
         })
         saved_step = step
 
@@ -1189,12 +1205,18 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     if step == 0:  # the untrained network's score, the reference every later validation improves on
         s0, _, _ = _validate(avg, va, transform, cfg, worse)
         history.append({"step": 0, "val": s0})
+    elif owed_loss is not None:  # the validation an interrupt kept from the history: what the uninterrupted run made
+        s, _, _ = _validate(avg, va, transform, cfg, worse)
+        history.append({"step": step, "train_loss": owed_loss, "val": s})
+        log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, owed_loss, s["mae"], s["r2"])
     net.train()
     # Ctrl-C (or SIGTERM) between two saves keeps the steps done: the state at the last step boundary is saved
     # (the crop sampler as it was when the interrupted step began), unless the interrupt landed while the
     # optimizer, the schedule and the average were being updated, where no consistent state exists until the step
-    # ends (the last periodic checkpoint stays). A resumed run still reproduces an uninterrupted one exactly.
-    boundary_gen, updating = gen.get_state(), False
+    # ends (the last periodic checkpoint stays). A resumed run still reproduces an uninterrupted one exactly: its
+    # weights, and its history too (a validation the interrupt cut short is made when it resumes). The final
+    # validation and calibration are covered too: an interrupt there keeps the last step.
+    boundary_gen, boundary_loss, updating = gen.get_state(), owed_loss, False
     try:
         while step < cfg.steps:
             idx = torch.randint(len(tr.x), (cfg.batch,), generator=gen).tolist()
@@ -1225,7 +1247,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             pred = out_all[:, :n_out]
             scored = None
             if margin:  # (the tiles scored in each window, moved with it when it was mirrored)
-                mask = _scored_tiles(oy, ox, n_tiles, margin, cfg.tile, full_h, full_w)
+                mask = _scored_tiles(oy, ox, n_tiles, margin, cfg.tile, int(h), int(w))  # (the frame's own border)
                 if cfg.augment or cfg.mirror:
                     mask = np.stack([move_tiles(m, s) for m, s in zip(mask, sym)])
                 scored = torch.from_numpy(np.ascontiguousarray(mask)).to(dev).expand_as(pred)
@@ -1252,7 +1274,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             step += 1
             if cfg.ema:
                 _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
-            boundary_gen, updating = gen.get_state(), False
+            boundary_gen, boundary_loss, updating = gen.get_state(), loss_value, False
             if progress:
                 progress(step, cfg.steps, loss_value)
             if step % cfg.val_every == 0 or step == cfg.steps:
@@ -1261,51 +1283,52 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
                 log.info("step %d: train %s %.4f, val MAE %.4f, R2 %.3f", step, cfg.loss, loss_value, s["mae"], s["r2"])
             if step % cfg.save_every == 0 and step < cfg.steps:
                 save(done=False)
+        # the final validation and the safety margin (an interrupt here keeps the steps done too)
+        val_scores, p, g = _validate(avg, va, transform, cfg, worse)
+        dead = _dead_outputs(p, cfg.outputs)
+        safety, under = calibrate_safety(p, g, worse=worse, quantile=cfg.safety_quantile)
+        safe_scores = scores(p + worse * safety, g, worse=worse).as_dict()
+        extra = {
+            # (R² is NaN, undefined, on validation targets all of one value: null in the provenance, which holds only JSON
+            # values; it failed the final save, after every step)
+            "validation": _json_numbers({"transformed": val_scores, "with_safety": safe_scores}),
+            "safety_rule": "mean underestimation" if cfg.safety_quantile is None else f"quantile {cfg.safety_quantile}",
+            "underestimated_share_with_safety": under,
+            "history": _json_numbers(history[-20:]),
+            **({"head": cfg.head} if cfg.arch == "paper" else {}),  # (the fast network reads no head: none recorded)
+            "arch": cfg.arch,
+            **({"grow": cfg.grow} if cfg.grow != 1 else {}),
+            **({"max_width": cfg.max_width} if cfg.max_width else {}),
+            **({"separable": True} if cfg.separable else {}),
+            **({"separable_tail": True} if cfg.separable_tail else {}),
+            **({"tail_width": cfg.tail_width} if cfg.tail_width else {}),
+            **({"head_width": cfg.head_width} if cfg.head_width else {}),
+            **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
+            **({"coarse": cfg.coarse, "coarse_width": cfg.coarse_width} if cfg.coarse else {}),
+            **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),
+            **({"contrast_cell": cfg.contrast_cell} if cfg.contrast_cell else {}),
+            **({"contrast_max": True} if cfg.contrast_max else {}),
+            **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
+            **({"energy_norm": True} if cfg.energy_norm else {}),
+            "augment": cfg.augment,
+            **({"mirror": True} if cfg.mirror else {}),
+            **({"context": cfg.context} if cfg.context else {}),
+            "loss": cfg.loss,
+            **({"quantile": cfg.quantile} if cfg.loss == "quantile" else {}),
+            **({"focus": cfg.focus} if cfg.focus else {}),
+            **({"ema": cfg.ema} if cfg.ema else {}),
+            **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
+            **({"aux_metrics": list(cfg.aux_metrics), "aux_weight": cfg.aux_weight} if cfg.aux_metrics else {}),
+            "dead_outputs": dead,
+        }
+        save(done=True, safety=safety, extra=extra)
     except KeyboardInterrupt:
         if not updating and step > saved_step:
-            save(done=False, generator=boundary_gen)
+            # (a validation the interrupt kept from the history, owed at this step: a resumed run makes it first)
+            owed = (step % cfg.val_every == 0 or step == cfg.steps) and (not history or history[-1]["step"] != step)
+            save(done=False, generator=boundary_gen, pending=boundary_loss if owed else None)
             log.info("interrupted: %s holds step %d", out, step)
         raise
-
-
-    val_scores, p, g = _validate(avg, va, transform, cfg, worse)
-    dead = _dead_outputs(p, cfg.outputs)
-    safety, under = calibrate_safety(p, g, worse=worse, quantile=cfg.safety_quantile)
-    safe_scores = scores(p + worse * safety, g, worse=worse).as_dict()
-    extra = {
-        # (R² is NaN, undefined, on validation targets all of one value: null in the provenance, which holds only JSON
-        # values; it failed the final save, after every step)
-        "validation": _json_numbers({"transformed": val_scores, "with_safety": safe_scores}),
-        "safety_rule": "mean underestimation" if cfg.safety_quantile is None else f"quantile {cfg.safety_quantile}",
-        "underestimated_share_with_safety": under,
-        "history": _json_numbers(history[-20:]),
-        **({"head": cfg.head} if cfg.arch == "paper" else {}),  # (the fast network reads no head: none recorded)
-        "arch": cfg.arch,
-        **({"grow": cfg.grow} if cfg.grow != 1 else {}),
-        **({"max_width": cfg.max_width} if cfg.max_width else {}),
-        **({"separable": True} if cfg.separable else {}),
-        **({"separable_tail": True} if cfg.separable_tail else {}),
-        **({"tail_width": cfg.tail_width} if cfg.tail_width else {}),
-        **({"head_width": cfg.head_width} if cfg.head_width else {}),
-        **({"context_pool": cfg.context_pool} if cfg.context_pool else {}),
-        **({"coarse": cfg.coarse, "coarse_width": cfg.coarse_width} if cfg.coarse else {}),
-        **({"block_contrast": list(cfg.block_contrast)} if cfg.block_contrast else {}),
-        **({"contrast_cell": cfg.contrast_cell} if cfg.contrast_cell else {}),
-        **({"contrast_max": True} if cfg.contrast_max else {}),
-        **({"stem_layers": cfg.stem_layers} if cfg.stem_layers != 1 else {}),
-        **({"energy_norm": True} if cfg.energy_norm else {}),
-        "augment": cfg.augment,
-        **({"mirror": True} if cfg.mirror else {}),
-        **({"context": cfg.context} if cfg.context else {}),
-        "loss": cfg.loss,
-        **({"quantile": cfg.quantile} if cfg.loss == "quantile" else {}),
-        **({"focus": cfg.focus} if cfg.focus else {}),
-        **({"ema": cfg.ema} if cfg.ema else {}),
-        **({"teachers": [Path(t).name for t in cfg.teachers], "distill": cfg.distill} if cfg.teachers else {}),
-        **({"aux_metrics": list(cfg.aux_metrics), "aux_weight": cfg.aux_weight} if cfg.aux_metrics else {}),
-        "dead_outputs": dead,
-    }
-    save(done=True, safety=safety, extra=extra)
     if dead:
         why = f" (a ReLU in the {cfg.head!r} head that stopped firing)" if cfg.arch == "paper" else ""
         log.warning("%s: output(s) %s predict the same value on every validation tile%s: such a model picks rates "
