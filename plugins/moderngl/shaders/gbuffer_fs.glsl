@@ -47,8 +47,10 @@ void main() {
     o_emissive = vec4(u_emissive, 0.0);
 
     vec2 motion = vec2(0.0);
-    if (u_has_prev) {
-        vec2 prev_px = (v_prev_clip.xy / max(v_prev_clip.w, 1e-6) * 0.5 + 0.5) * u_size;
+    // 0 where the point was behind the previous camera (w <= 0), as rtp.sdk.input_planes' motion planes: the
+    // division by max(w, 1e-6) gave 1e7-1e8 pixels there (until 2026-12-07)
+    if (u_has_prev && v_prev_clip.w > 0.0) {
+        vec2 prev_px = (v_prev_clip.xy / v_prev_clip.w * 0.5 + 0.5) * u_size;
         vec2 d = prev_px - gl_FragCoord.xy;
         motion = vec2(d.x, -d.y);  // GL y grows upwards; images grow downwards
     }
