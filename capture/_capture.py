@@ -651,9 +651,19 @@ def capture(
                         merge(result)
             drain()  # (after the workers exited: their last ticks are flushed)
         unseen: dict[str, list[float]] = {}
-        for sample in DatasetReader(out):
-            unseen.setdefault(str(sample.meta.get("profile")), []).append(float(sample.meta.get("unseen", 0.0)))
-        manifest = DatasetReader(out).manifest
+        reader = DatasetReader(out)
+        for sid in reader.ids:
+            try:
+                meta = reader[sid].meta
+            except DatasetError as err:  # (a sample of a scene not captured now, damaged since: this run's samples
+                # were written and the capture then failed on it, the manifest not written, and so every later run)
+                log.warning("%s; left out of the manifest's unseen_share (a capture of its scene captures it again)",
+                            err)
+                continue
+            value = meta.get("unseen", 0.0)
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                unseen.setdefault(str(meta.get("profile")), []).append(float(value))
+        manifest = reader.manifest
         previous = manifest.get("renderer_settings")
         _warn_other_renderer(out, previous, report)
         # The jobs without viewpoints of the scenes not captured now stay (a folder filled a scene a run lost

@@ -15,7 +15,7 @@ Buffers of a sample, with the precision they are stored at:
 buffer                 stored as         channels (``sdk.CHANNELS`` names)
 =====================  ================  ===================================================
 ``reprojected``        uint8 (H, W, 3)   reprojected.r/g/b (display-encoded)
-``seen``               uint8 (H, W)      seen (0 or 1)
+``seen``               uint8 (H, W)      seen (0 or 1, stored as 0 or 255)
 ``albedo``             uint8 (H, W, 3)   albedo.r/g/b (display-encoded)
 ``normal``             float16 (H,W,3)   normal.x/y/z (view space)
 ``roughness`` ...      uint8 (H, W)      roughness, metallic, specular, shadow, emissive
@@ -155,6 +155,10 @@ def _encode(name: str, arr: np.ndarray, shape: tuple[int, int] | None) -> np.nda
         raise DatasetError(f"buffer {name!r} holds NaN or infinite values")
     if spec.dtype == "u8":
         if a.dtype == np.uint8:
+            if name == "seen" and a.max() == 1:  # (a 0/1 mask, stored as is, read back as 1/255: "seen" nowhere)
+                raise DatasetError(f"buffer {name!r}: uint8 values 0 and 1, but a uint8 buffer holds round(255 v), "
+                                   f"so a seen pixel is 255; give the mask as float (or bool .astype(np.float32)) "
+                                   f"values 0 and 1, or multiply it by 255")
             return a
         lo, hi = float(a.min()), float(a.max())
         if lo < -_U8_SLACK or hi > 1.0 + _U8_SLACK:  # (an albedo of 0-255 floats was stored as all 1.0)
@@ -378,15 +382,27 @@ class DatasetWriter:
     def finalize(self, extra: Mapping[str, Any] | None = None) -> None:
         """Record the sample index and sizes in the manifest (safe to call after every run)."""
         data = _read_manifest(self.root)
-        files = sorted(self.samples_dir.glob("*.npz"))
-        data["samples"] = [p.stem for p in files]
-        data["bytes_per_sample"] = int(sum(p.stat().st_size for p in files) / max(len(files), 1))
+        # (the samples a reader reads: a copy "x (1).npz" or a folder "x.npz" was listed, and every reader then
+        # warned that the manifest's sample was missing and that a capture would capture it again)
+        ids = [i for i in _listed_ids(self.samples_dir) if len(i) <= MAX_ID_LENGTH]
+        data["samples"] = ids
+        data["bytes_per_sample"] = int(sum(sample_path(self.root, i).stat().st_size for i in ids) / max(len(ids), 1))
         if extra:
             reserved = sorted(set(extra) & {"format", "format_version", "settings", "samples", "bytes_per_sample"})
             if reserved:  # (format "mine" left a folder no reader opens)
                 raise DatasetError(f"finalize: {reserved} are the manifest's own keys, not extra ones")
             data.update(_json_object(extra, "finalize"))
         self._write_manifest(data)
+
+
+def _listed_ids(folder: Path) -> list[str]:
+    """The ids of the sample files in the samples folder ``folder``, sorted: files ``<id>.npz`` whose id is of a
+    sample's letters (of any length: a reader leaves out, with a warning, those longer than a sample id may be).
+    What a reader reads and what the manifest lists."""
+    try:
+        return sorted(p.stem for p in folder.glob("*.npz") if _ID_RE.match(p.stem) and p.is_file())
+    except OSError as err:
+        raise DatasetError(f"{folder}: cannot be listed ({err})") from err
 
 
 def _read_manifest(root: Path) -> dict[str, Any]:
@@ -411,7 +427,8 @@ def _read_manifest(root: Path) -> dict[str, Any]:
     if isinstance(version, bool) or not isinstance(version, int) or version < 0:
         raise DatasetError(f"{path}: format_version must be a non-negative integer, got {version!r}")
     if version > FORMAT_VERSION:
-        raise DatasetError(f"{path}: dataset format {version} is newer than this rtp reads ({FORMAT_VERSION})")
+        raise DatasetError(f"{path}: dataset format {version} is newer than this rtp reads ({FORMAT_VERSION}): "
+                           f"upgrade rtp (pip install -U rtp) to read it")
     return data
 
 
@@ -446,10 +463,7 @@ class DatasetReader:
         folder = self.root / "samples"
         if folder.exists() and not folder.is_dir():
             raise DatasetError(f"{folder}: expected the folder of the samples, found a file")
-        try:
-            found = sorted(p.stem for p in folder.glob("*.npz") if _ID_RE.match(p.stem) and p.is_file())
-        except OSError as err:
-            raise DatasetError(f"{folder}: cannot be listed ({err})") from err
+        found = _listed_ids(folder)
         # (a sample file renamed, or an older rtp's, with an id longer than a sample's: listed, then refused by
         # __getitem__, so iterating the dataset failed on it; left out, named in a warning)
         self.ids = [i for i in found if len(i) <= MAX_ID_LENGTH]
@@ -527,6 +541,11 @@ def sample_from_bytes(sample_id: str, data: bytes, where: str | None = None) -> 
     return _open_sample(sample_id, io.BytesIO(data), where or f"sample {sample_id} (in memory)")
 
 
+#: What to do about a sample file that cannot be read (the errors' hint).
+_REWRITE = ("a damaged or foreign sample file: delete it, and the command that wrote the dataset (the same rtp capture "
+            "or rtp import) writes it again")
+
+
 def _open_sample(sample_id: str, source: Any, path: Any) -> Sample:
     try:
         npz = np.load(source, allow_pickle=False)
@@ -540,15 +559,18 @@ def _open_sample(sample_id: str, source: Any, path: Any) -> Sample:
     if not isinstance(meta, dict):
         raise DatasetError(f"{path}: the sample's meta is not a JSON object")
 
+    # (what to do about a damaged or foreign file of a dataset folder; nothing for a sample in memory)
+    fix = f"; {_REWRITE}" if isinstance(path, Path) else ""
+
     def load(name: str) -> np.ndarray:
         if name not in npz.files:
-            raise DatasetError(f"{path}: buffer {name!r} missing")
+            raise DatasetError(f"{path}: buffer {name!r} missing{fix}")
         try:
             return _decode(name, npz[name])
         except RtpError as err:
-            raise DatasetError(f"{path}: {err}") from err
+            raise DatasetError(f"{path}: {err}{fix}") from err
         except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
-            raise _unreadable(path, f"buffer {name!r} is unreadable", err) from err
+            raise DatasetError(f"{_unreadable(path, f'buffer {name!r} is unreadable', err)}{fix}") from err
 
     return Sample(sample_id, load, meta)
 

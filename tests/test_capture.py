@@ -508,6 +508,30 @@ def test_a_resumed_capture_captures_a_damaged_sample_again(tmp_path: Path, caplo
     assert DatasetReader(out)["procedural_7-slow-0000"].buffer("depth").shape == (64, 96)
 
 
+def test_a_damaged_sample_of_another_scene_does_not_fail_the_capture_after_its_work(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A sample of a scene not captured now, damaged since (truncated by a full disk or a copy), failed the capture
+    of another scene into the folder at its very end, "unreadable sample", after its samples were written: the
+    manifest was not written, and every later capture of any other scene failed the same way. It is named in a
+    warning and left out of the manifest's unseen_share; a capture of its own scene captures it again."""
+    out = tmp_path / "ds"
+    kw: dict = {"per_scene": 1, "size": (64, 48), "profiles": ("slow",)}
+    assert capture(["procedural:5"], out, **kw).written == 1
+    damaged = out / "samples" / "procedural_5-slow-0000.npz"
+    damaged.write_bytes(damaged.read_bytes()[:5000])
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        assert capture(["procedural:6"], out, **kw).written == 1
+    assert any(r.getMessage().startswith(f"{damaged}: unreadable sample") and "left out of the manifest's "
+               "unseen_share" in r.getMessage() for r in caplog.records), [r.getMessage() for r in caplog.records]
+    manifest = DatasetReader(out).manifest
+    assert "procedural_6-slow-0000" in manifest["samples"]
+    only = DatasetReader(out)["procedural_6-slow-0000"].meta["unseen"]
+    assert manifest["unseen_share"] == {"slow": pytest.approx(only)}
+    again = capture(["procedural:5"], out, **kw)
+    assert (again.written, again.skipped) == (1, 0)
+    assert DatasetReader(out)["procedural_5-slow-0000"].buffer("depth").shape == (48, 64)
+
+
 def test_a_scene_whose_sample_ids_the_folder_holds_from_another_scene_is_refused(tmp_path: Path) -> None:
     """`_check_scene_ids` refused two files of one name in one run; across runs into one folder (`b/x.glb` after
     `a/x.glb`, `procedural_5.glb` after `procedural:5`) the second captured its samples over the first's, each

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import warnings
@@ -310,6 +311,29 @@ def test_samples_the_manifest_lists_and_the_disk_lacks_are_said_once(tmp_path: P
         DatasetReader(tmp_path / "flat")
 
 
+def test_the_manifest_lists_the_samples_a_reader_reads(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """finalize listed every ``*.npz`` in samples/: a file manager's copy ``s0 (1).npz`` or a folder ``x.npz``,
+    which no reader reads, went into the manifest's ``samples``, and every reader then warned that the manifest's
+    sample was missing and that a capture would capture it again (it would not)."""
+    import shutil
+
+    from rtp.capture import _dataset
+
+    w = DatasetWriter(tmp_path / "ds")
+    for i in range(2):
+        w.write(f"s{i}", _buffers(seed=i), {"scene": "a"})
+    shutil.copy(w.samples_dir / "s0.npz", w.samples_dir / "s0 (1).npz")
+    (w.samples_dir / "x.npz").mkdir()
+    w.finalize()
+    manifest = json.loads((tmp_path / "ds" / "manifest.json").read_text())
+    assert manifest["samples"] == ["s0", "s1"]
+    assert manifest["bytes_per_sample"] == (sum((w.samples_dir / f"s{i}.npz").stat().st_size for i in range(2)) // 2)
+    _dataset._MISSING_SAID.clear()
+    with caplog.at_level("WARNING", logger="rtp.capture"):
+        assert DatasetReader(tmp_path / "ds").ids == ["s0", "s1"]
+    assert not caplog.records, [r.getMessage() for r in caplog.records]
+
+
 def test_a_sample_file_with_an_id_too_long_is_left_out_with_a_warning(tmp_path: Path,
                                                                         caplog: pytest.LogCaptureFixture) -> None:
     """A sample file renamed (or an older rtp's) to an id longer than MAX_ID_LENGTH was listed, then refused by
@@ -393,6 +417,32 @@ def test_malformed_samples_are_dataset_errors(tmp_path: Path, corrupt: Any, word
         for r in sdk.ALL_RATES:
             s.final(r)
     assert words in str(err.value)
+
+
+def test_a_sample_file_damaged_inside_or_a_newer_format_says_what_to_do(tmp_path: Path) -> None:
+    """A buffer damaged inside its file (the archive's index intact: a resumed capture keeps the file), missing or
+    of another dtype, and a dataset of a newer format, were refused naming what was wrong and not what to do."""
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {"scene": "a"})
+    path = w.samples_dir / "s0.npz"
+    data = bytearray(path.read_bytes())
+    data[len(data) // 3] ^= 0xFF  # (inside a member's compressed bytes: its CRC fails when it is read)
+    path.write_bytes(bytes(data))
+    sample = DatasetReader(tmp_path / "ds")["s0"]
+    with pytest.raises(DatasetError, match=r"is unreadable .*; a damaged or foreign sample file: delete it, and the "
+                       r"command that wrote the dataset \(the same rtp capture or rtp import\) writes it again"):
+        for name in BUFFERS:
+            sample.buffer(name)
+    for change, said in (({"seen": None}, "buffer 'seen' missing"),
+                         ({"seen": np.zeros((24, 40), np.float64)}, "stored as float64, expected uint8")):
+        w.write("s0", _buffers(), {"scene": "a"})
+        _rewrite(path, **change)
+        with pytest.raises(DatasetError, match=re.escape(said) + "; a damaged or foreign sample file: delete it"):
+            DatasetReader(tmp_path / "ds")["s0"].channel("seen")
+    manifest = json.loads((tmp_path / "ds" / "manifest.json").read_text())
+    (tmp_path / "ds" / "manifest.json").write_text(json.dumps({**manifest, "format_version": 2}))
+    with pytest.raises(DatasetError, match=r"dataset format 2 is newer than this rtp reads \(1\): upgrade rtp"):
+        DatasetReader(tmp_path / "ds")
 
 
 def test_a_mangled_npy_header_is_a_dataset_error(tmp_path: Path) -> None:
@@ -758,6 +808,24 @@ def test_half_float_buffers_saturate_instead_of_overflowing(tmp_path: Path) -> N
     w.write("s1", bufs, {})
     m = DatasetReader(tmp_path / "ds")["s1"].buffer("motion")
     assert np.isfinite(m).all() and m[0, 0, 0] == 65504.0 and m[0, 0, 1] == -65504.0
+
+
+def test_a_uint8_seen_mask_of_0_and_1_is_refused_not_read_as_1_255(tmp_path: Path) -> None:
+    """A uint8 buffer holds round(255 v), and the docs' table said seen is "uint8 (0 or 1)": a mask given as uint8
+    0/1 (a bool mask's .astype(np.uint8)) was stored as it was and read back as 0 and 1/255, every pixel unseen."""
+    w = DatasetWriter(tmp_path / "ds")
+    bufs = _buffers()
+    mask = bufs["seen"] > 0.5
+    with pytest.raises(DatasetError, match=r"'seen': uint8 values 0 and 1, .*a seen pixel is 255"):
+        w.write("a", {**bufs, "seen": mask.astype(np.uint8)}, {})
+    assert not list((tmp_path / "ds" / "samples").iterdir())
+    w.write("a", {**bufs, "seen": mask.astype(np.uint8) * 255}, {})  # (0/255 and float 0/1 are the mask)
+    w.write("b", {**bufs, "seen": mask.astype(np.float32)}, {})
+    w.write("c", {**bufs, "seen": np.zeros(mask.shape, np.uint8)}, {})  # (nothing seen: 0 either way)
+    ds = DatasetReader(tmp_path / "ds")
+    for sid in ("a", "b"):
+        np.testing.assert_array_equal(ds[sid].channel("seen"), mask.astype(np.float32))
+    assert not ds["c"].channel("seen").any()
 
 
 def test_values_the_storage_would_misrepresent_are_refused_not_stored(tmp_path: Path) -> None:
