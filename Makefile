@@ -196,12 +196,17 @@ evaluate: $(STAMP)
 # and its name without folder and extension, not a folder per folder of its path). The map is fetched
 # first (`rtp scenes fetch --map MAP`: its packages once, then a no-op; a name no split lists is refused
 # before any download), not for procedural:N or a mesh file.
+# (make's notdir and basename split on spaces: MAP's spaces are swapped for a mark while they run, else a
+# folder with a space, MAP="my scenes/room.glb", gave play-my room.)
 MAP    ?= 20kdm2
 FRAMES ?= 150
-MESH    = $(filter %.glb %.gltf %.obj,$(MAP))
+empty  :=
+space  := $(empty) $(empty)
+MAPWORD = $(subst $(space),^_^,$(MAP))
+MESH    = $(filter %.glb %.gltf %.obj,$(MAPWORD))
 play: $(STAMP)
 	$(if $(MESH)$(filter procedural:%,$(MAP)),,$(RTP) scenes fetch --map "$(MAP)")
-	$(RTP) play "$(MAP)" --frames $(FRAMES) --composite --workers 2 --out "$(DATA)/play-$(if $(MESH),$(basename $(notdir $(MAP))),$(MAP))"
+	$(RTP) play "$(MAP)" --frames $(FRAMES) --composite --workers 2 --out "$(DATA)/play-$(if $(MESH),$(subst ^_^,$(space),$(basename $(notdir $(MAPWORD)))),$(MAP))"
 
 clean:
 	rm -rf $(VENV) $(FLOOR_VENV) $(PY_VENV) .pytest_cache build *.egg-info

@@ -6,7 +6,8 @@ paper's network through rtp.sdk, the bare onnxruntime session and torch.
 The paper's configuration (4 inputs, outputs 1x2/2x1/2x4/4x2, 16x16 tiles, width 16) and the fast
 architectures (``rtp train --arch fast``) are built with random weights (cost does not depend on the
 weights) and exported with rtp-export; the shipped models are loaded from ``rtp.models``, and any
-``MODEL.onnx`` given (for example the study's, ``data/study/*.onnx``) is added. Each is
+``MODEL.onnx`` given (for example the study's, ``data/study/*.onnx``) is added, named by its file name
+(by its path as given where two given share one). Each is
 timed in the same run at 1920x1080 and 1280x720, in rounds (each model once a round, ``--repeats``
 rounds). Prints Markdown tables of medians (ms) and each model's speed-up over the paper's network:
 the median over the rounds of the two times' ratio within a round, and its range; and the machine's
@@ -65,9 +66,12 @@ def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk
         pred = sdk.load(name)
         arch = str(pred.metadata.provenance.get("arch", "paper"))
         add(f"shipped {name}", Path(str(pred.path)), arch)
-    for path in extra:
+    names = [Path(p).name for p in dict.fromkeys(extra)]
+    for path in dict.fromkeys(extra):  # (a file given twice: one row)
         arch = str(sdk.load(path).metadata.provenance.get("arch", "paper"))
-        add(Path(path).name, Path(path), arch)
+        # by its file name, or its path as given where two share a name (data/old/jnyang.onnx beside
+        # data/joined/jnyang.onnx: the one row of the last before)
+        add(Path(path).name if names.count(Path(path).name) == 1 else path, Path(path), arch)
     return out
 
 

@@ -51,7 +51,16 @@ import onnxruntime as ort
 from rtp import sdk
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import TIMING_INPUTS, cpu_description, frame_size, median_ms, paper_model, positive, run_main  # noqa: E402  (also when loaded by path, as the tests do)
+from _common import (  # noqa: E402  (also when loaded by path, as the tests do)
+    TIMING_INPUTS,
+    UsageError,
+    cpu_description,
+    frame_size,
+    median_ms,
+    paper_model,
+    positive,
+    run_main,
+)
 
 
 def _macs(args: dict[str, Any]) -> int:
@@ -145,8 +154,8 @@ def _random_fast(folder: Path, options: list[dict[str, Any]], like: str | None) 
         label = "fast " + (",".join(f"{k}={v}" for k, v in opts.items()) or "defaults") + " (random weights)"
         try:
             path = paper_model(folder / str(i), "fast", inputs, **opts)[1]
-        except ValueError as err:
-            raise SystemExit(f"ort_profile.py: --fast {','.join(f'{k}={v}' for k, v in opts.items())}: {err}") from err
+        except ValueError as err:  # (a usage error, exit 2: a SystemExit said it with exit 1, after the header)
+            raise UsageError(f"--fast {','.join(f'{k}={v}' for k, v in opts.items())}: {err}") from err
         out.append((label, path))
     return out
 
@@ -163,11 +172,13 @@ def main() -> None:
     args = ap.parse_args()
     if args.like and not args.fast:
         ap.error("--like sets the inputs of the --fast networks: give at least one --fast")
-    print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {cpu_description()}, {args.threads} threads, "
-          f"{args.size[0]}x{args.size[1]}, median of {args.repeats} runs per node\n")
     with tempfile.TemporaryDirectory() as tmp:
         models = [(m, m) for m in (args.models or ([] if args.fast else list(sdk.shipped_models())))]
+        for _, m in models:  # (a name that is no model: refused before the header, not after the models before it)
+            sdk.load(m, providers=["CPUExecutionProvider"])
         models += [(label, str(path)) for label, path in _random_fast(Path(tmp), args.fast, args.like)]
+        print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {cpu_description()}, {args.threads} threads, "
+              f"{args.size[0]}x{args.size[1]}, median of {args.repeats} runs per node\n")
         totals = [(label, *_report(label, model, args)) for label, model in models]
     print("| model | ms of kernels | x the first | sdk predict ms | same, `assume_finite=True` | "
           "the finite-input check ms |\n|---|---:|---:|---:|---:|---|")

@@ -6,7 +6,8 @@
 Each configuration captures ``len(scenes) x 2 profiles x per-scene`` samples into a fresh folder,
 then computes the targets of all five metrics. A private Ray instance is started per worker count
 (its start-up is reported apart, not in the per-sample times). Prints a Markdown table of seconds
-per sample and the speed-up over one worker; docs/scaling.md quotes it.
+per sample and the speed-up over the first worker count of ``--workers`` (one by default); docs/scaling.md
+quotes it. ``--modes pool`` needs no Ray; ``--modes ray`` needs ``rtp[ray]``.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ import platform
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
-import ray
-from _common import frame_size, positive, positives, run_main  # bench/ is on sys.path when run as a script
+from _common import UsageError, frame_size, positive, positives, run_main  # bench/ is on sys.path as a script
 
 from rtp.capture import capture, check_scene, compute_targets
 
@@ -31,6 +32,16 @@ def _modes(text: str) -> list[str]:
     if not modes or any(m not in ("ray", "pool") for m in modes):
         raise argparse.ArgumentTypeError(f"expected ray and/or pool, comma-separated, got {text!r}")
     return modes
+
+
+def _ray() -> Any:
+    """Ray, for ``--modes ray`` only (``--modes pool`` runs without the extra), or a usage error naming the extra."""
+    try:
+        import ray
+    except ImportError:
+        raise UsageError("--modes ray needs Ray: pip install 'rtp[ray]' (or --modes pool, the local processes "
+                         "alone)") from None
+    return ray
 
 
 def run(scenes: list[str], per_scene: int, size: tuple[int, int], workers: int, mode: str, cache: str | None,
@@ -67,22 +78,23 @@ def main() -> None:
         ap.error(f"--scenes: each scene once, got {', '.join(twice)} more than once")
     for name in scenes:  # (a map not listed or not fetched: refused before the table and Ray's start, not after)
         check_scene(name, args.cache, None, None)
+    ray = _ray() if "ray" in args.modes else None  # (imported at the top, it failed `--modes pool` without the extra)
     print(f"{len(scenes)} scenes x 2 profiles x {args.per_scene} pairs at {w}x{h}; {platform.machine()}, "
-          f"{os.cpu_count()} CPUs, ray {ray.__version__}\n")
+          f"{os.cpu_count()} CPUs" + (f", ray {ray.__version__}" if ray else "") + "\n")
     print("| executor | workers | capture s/sample | targets s/sample | capture speed-up | targets speed-up | Ray start s |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for mode in args.modes:
         base: tuple[float, float] | None = None
         for n in args.workers:
             start = 0.0
-            if mode == "ray":
+            if ray is not None and mode == "ray":
                 t0 = time.perf_counter()
                 ray.init(num_cpus=n, include_dashboard=False, configure_logging=False)
                 start = time.perf_counter() - t0
             try:
                 cap, tg, _ = run(scenes, args.per_scene, (w, h), n, mode, args.cache)
             finally:
-                if mode == "ray":
+                if ray is not None and mode == "ray":
                     ray.shutdown()
             base = base or (cap, tg)
             print(f"| {'Ray (local)' if mode == 'ray' else 'process pool'} | {n} | {cap:.2f} | {tg:.2f} | "

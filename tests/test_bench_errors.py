@@ -130,6 +130,12 @@ def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_p
                                                               "each level once, got 0, 1 more than once"),
     (["bench/conformance_margins.py", "--sizes", "64x48,8x8"], "conformance_margins.py: error: argument --sizes: "
                                                                "expected WIDTHxHEIGHT of at least 16x16"),
+    # a fast network build_network refuses was a bare SystemExit (exit 1) after the header; a model name that is
+    # none came after the header and the models profiled before it
+    (["bench/ort_profile.py", "--fast", "width=0", "--size", "64x64"], "ort_profile.py: error: --fast width=0: "
+                                                                        "expected width >= 2"),
+    (["bench/ort_profile.py", "jnyang", "nosuchmodel", "--size", "64x64"], "ort_profile.py: error: no model file at "
+                                                                           "'nosuchmodel'"),
 ])
 def test_bad_input_is_refused_before_any_table(args: list[str], words: str) -> None:
     """What a script cannot do is said before its table's header (the header, then the error, read as a
@@ -255,3 +261,46 @@ def test_published_checks_what_its_rows_read_before_the_first(tmp_path: Path, mo
     with pytest.raises(mod.UsageError, match="--models: .* has no FLIP.onnx, JNYang.onnx, LPIPS.onnx, PSNR.onnx"):
         mod.main()
     assert capsys.readouterr().out == ""
+
+
+def test_scaling_runs_the_pool_without_ray_and_names_the_extra_for_ray(monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """scaling.py imported Ray at its top: `--modes pool` (docs/scaling.md) failed without the ray extra, and
+    `--modes ray` with a ModuleNotFoundError traceback instead of naming `pip install 'rtp[ray]'`."""
+    from .conftest import bench_module
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # (`import ray` raises ImportError)
+    mod = bench_module("scaling", monkeypatch)
+    monkeypatch.setattr(sys, "argv", ["scaling.py", "--scenes", "procedural:0", "--modes", "ray"])
+    with pytest.raises(mod.UsageError, match=r"--modes ray needs Ray: pip install 'rtp\[ray\]'"):
+        mod.main()
+    assert capsys.readouterr().out == ""  # (before the table)
+    monkeypatch.setattr(mod, "run", lambda *args: (2.0, 4.0, 6))
+    monkeypatch.setattr(sys, "argv", ["scaling.py", "--scenes", "procedural:0", "--modes", "pool", "--workers", "1,2"])
+    mod.main()
+    out = capsys.readouterr().out
+    assert "| process pool | 1 | 2.00 | 4.00 | 1.00x | 1.00x | 0.0 |" in out and "ray" not in out.split("\n")[0], out
+
+
+def test_the_inference_bench_keeps_two_models_of_one_file_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`bench/inference.py data/old/jnyang.onnx data/joined/jnyang.onnx` keyed both by "jnyang.onnx": the second
+    replaced the first and the table had one row, with no word of the other."""
+    import shutil
+
+    from rtp import sdk
+
+    from .conftest import bench_module
+
+    mod = bench_module("inference", monkeypatch)
+    shipped = Path(str(sdk.load("jnyang").path))
+    monkeypatch.setattr(mod, "paper_model", lambda *args, **kwargs: (None, shipped))
+    monkeypatch.setattr(mod, "FAST", ())
+    monkeypatch.setattr(mod.sdk, "shipped_models", lambda: [])
+    given = []
+    for folder in ("old", "joined"):
+        (tmp_path / folder).mkdir()
+        given.append(str(shutil.copy(shipped, tmp_path / folder / "jnyang.onnx")))
+    other = str(shutil.copy(shipped, tmp_path / "other.onnx"))
+    models = mod._models(tmp_path, 1, [*given, other, other])
+    assert list(models) == ["paper's network (random weights)", *given, "other.onnx"], list(models)
+    assert [str(p.path) for p, _ in list(models.values())[1:3]] == given

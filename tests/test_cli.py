@@ -344,7 +344,8 @@ def _after(argv: list[str], flag: str) -> str:
 def test_make_passes_its_variables_to_the_commands_whole() -> None:
     """`make dataset RAY=HOST:PORT` gave a cluster's capture and targets a fixed --workers 2 (two of its
     CPUs; Ray's own default is one worker per CPU); a DATA, RECIPE or NAME holding a space was split into two
-    arguments; `make play MAP=scenes/room.glb` wrote its pictures to data/play-scenes/room.glb/."""
+    arguments; `make play MAP=scenes/room.glb` wrote its pictures to data/play-scenes/room.glb/, and
+    `MAP="my scenes/room.glb"` to data/play-my room/."""
     local = _make_runs("dataset", "DATA=my data")
     assert len(local) == 6 and all(_after(a, "--workers") == "2" and "--ray" not in a for a in local[1:])
     assert [_after(a, "--out") for a in local if a[1] == "capture"] == ["my data/train", "my data/train", "my data/test"]
@@ -362,7 +363,10 @@ def test_make_passes_its_variables_to_the_commands_whole() -> None:
     [evaluate] = _make_runs("evaluate", "NAME=my model", "DATA=my data")
     assert evaluate[2] == "models/my model.onnx" and _after(evaluate, "--out") == "my data/eval-my model"
     for scene, fetched, out in (("20kdm2", True, "d/play-20kdm2"), ("procedural:3", False, "d/play-procedural:3"),
-                                ("scenes/room.glb", False, "d/play-room"), ("/abs/hall.gltf", False, "d/play-hall")):
+                                ("scenes/room.glb", False, "d/play-room"), ("/abs/hall.gltf", False, "d/play-hall"),
+                                # make's notdir and basename split on spaces: a folder with one gave "play-my room"
+                                ("my scenes/room.glb", False, "d/play-room"),
+                                ("my scenes/big hall.v2.obj", False, "d/play-big hall.v2")):
         runs = _make_runs("play", f"MAP={scene}", "DATA=d")
         assert (runs[0][1:] == ["scenes", "fetch", "--map", scene]) == fetched, runs
         assert runs[-1][2] == scene and _after(runs[-1], "--out") == out, runs
