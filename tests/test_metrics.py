@@ -288,6 +288,8 @@ _MAP_FUNCS = {
 def _bad_inputs(ref: np.ndarray) -> list[tuple[str, object, type[Exception]]]:
     nan = ref.copy()
     nan[3, 3, 1] = np.nan
+    huge = ref.astype(np.float64)
+    huge[3, 3, 1] = 1e300  # (finite, but infinite as float32: was "contains NaN or infinite values")
     return [
         ("uint8", (ref * 255).astype(np.uint8), sdk.InputDtypeError),
         ("int", np.zeros(ref.shape, np.int32), sdk.InputDtypeError),
@@ -298,6 +300,7 @@ def _bad_inputs(ref: np.ndarray) -> list[tuple[str, object, type[Exception]]]:
         ("rgba", np.concatenate([ref, ref[..., :1]], -1), sdk.InputChannelError),
         ("other size", ref[:-1], sdk.InputShapeError),
         ("nan", nan, sdk.NonFiniteInputError),
+        ("past float32", huge, M.InputRangeError),
         ("list", ref.tolist(), sdk.InputDtypeError),
     ]
 
@@ -584,7 +587,8 @@ def _textured(h: int, w: int, seed: int) -> np.ndarray:
     return np.clip(img, 0, 1).astype(np.float32)
 
 
-@pytest.mark.parametrize(("h", "w", "ppd"), [(64, 96, M.DEFAULT_PPD), (97, 130, 33.5), (31, 45, 12.0), (120, 200, 90.0)])
+@pytest.mark.parametrize(("h", "w", "ppd"), [(64, 96, M.DEFAULT_PPD), (97, 130, 33.5), (31, 45, 12.0), (120, 200, 90.0),
+                                             (40, 64, 1.0), (40, 64, 1.6)])
 def test_flip_port_matches_flip_evaluator(h: int, w: int, ppd: float) -> None:
     from rtp.metrics._flipbatch import FlipReference
 
@@ -623,6 +627,19 @@ def test_ppd_outside_what_flip_can_filter_is_refused(ref: np.ndarray, rates: dic
         with pytest.raises(M.MetricParameterError, match=r"pixels per degree in \[1, 1000\]"):
             M.flip_map(ref, rates["2x2"], ppd=bad)
     assert M.resolve_ppd(1000.0, 1920) == 1000.0 and M.resolve_ppd(1.0, 1920) == 1.0
+
+
+def test_low_ppd_targets_are_flip_evaluators_not_nan() -> None:
+    """Below 1.7 ppd FLIP's edge filter is 0/0 (its Gaussian's taps underflow): FLIP.h's Max() drops that
+    NaN edge difference, the torch port's torch.maximum kept it and every flip/jnflip target was NaN
+    (ppd='width' of a 58- to 97-pixel-wide frame; ppd=1.0 to 1.69)."""
+    refimg = _textured(40, 80, 0)
+    imgs = {r: coarse(refimg, *_rate_wh(r)) for r in sdk.PREDICTED_RATES}
+    assert 1.0 < M.ppd_from_width(80) < 1.7
+    out = M.tile_targets(refimg, imgs, ("flip", "jnflip"), 16, ppd="width", flip_backend="torch")
+    assert np.isfinite(out["flip"]).all() and np.isfinite(out["jnflip"]).all()
+    for i, rate in enumerate(sdk.PREDICTED_RATES):
+        np.testing.assert_allclose(out["flip"][i], M.tile_metric("flip", refimg, imgs[rate], 16, ppd="width"), atol=1e-4)
 
 
 # --- contracts a direct caller meets (review of 2026-12) -----------------------------------------
@@ -727,6 +744,25 @@ def test_weber_denominator_takes_images_as_the_map_functions_do(ref: np.ndarray)
     for empty in (ref[:0], ref[:, :0], ref[..., 0]):
         with pytest.raises(sdk.InputShapeError):
             M.weber_denominator(empty)
+
+
+def test_weber_l_below_float32s_range_is_refused() -> None:
+    """weber_l=1e-300 ("no environment term") passed `> 0` and became 0 in the float32 denominator: the JN
+    maps were NaN where black pixels agree and inf where they differ, and weber_denominator returned 0."""
+    black = np.zeros((8, 8, 3), np.float32)
+    test = black.copy()
+    test[0, 0] = 0.5
+    for tiny in (1e-300, 1e-46, 1e-39):
+        with pytest.raises(M.MetricParameterError, match="weber_l .* at least 1.175e-38"):
+            M.jnyang_map(black, test, weber_l=tiny)
+        with pytest.raises(M.MetricParameterError, match="weber_l"):
+            M.weber_denominator(black, tiny)
+        with pytest.raises(M.MetricParameterError, match="weber_l"):
+            M.tile_targets(black, {"2x2": test}, ("jnyang",), 4, weber_l=tiny, missing="nan")
+    smallest = float(np.finfo(np.float32).tiny)
+    jn = M.jnyang_map(black, test, weber_l=smallest)
+    assert np.isfinite(jn).all() and jn[1, 1] == 0.0 and jn[0, 0] > 1e37
+    assert (M.weber_denominator(black, smallest) > 0).all()
 
 
 def test_boolean_parameters_are_not_numbers_nor_strings(ref: np.ndarray, rates: dict[str, np.ndarray]) -> None:
