@@ -135,7 +135,7 @@ class EvaluationReport:
         head = ["scene", "split", "method", "threshold", "n", "fails %", "work saved %", "rates (1x1/1x2/2x1/2x2/2x4/4x2/4x4 %)"]
         rows = [
             [r["scene"], r["split"], r["method"], f"{r['threshold']:g}", str(r["n"]), _pct(r["fail_share"]),
-             _pct(r["work_saved"]), "/".join(f"{100 * r['rate_shares'][k]:.0f}" for k in sdk.ALL_RATES)]
+             _pct(r["work_saved"]), _shares(r["rate_shares"])]
             for r in self.decisions
         ]
         return _table(head, rows, markdown)
@@ -270,6 +270,15 @@ def _f(v: float) -> str:
 
 def _pct(v: float) -> str:
     return "-" if v is None or not math.isfinite(v) else f"{100 * v:.1f}"
+
+
+def _shares(shares: dict[str, float | None]) -> str:
+    """The rates column: each rate's share of the tiles in percent, ``1x1/1x2/...``; "-" where there are no tiles
+    (an empty split, such as the unseen tiles of frames seen whole: it read "nan/nan/nan/nan/nan/nan/nan")."""
+    values = [shares.get(k) for k in sdk.ALL_RATES]
+    if any(v is None or not math.isfinite(v) for v in values):
+        return "-"
+    return "/".join(f"{100 * v:.0f}" for v in values if v is not None)
 
 
 def _table(head: list[str], rows: list[list[str]], markdown: bool) -> list[str]:
@@ -434,9 +443,7 @@ def evaluate(
     if isinstance(unseen_fraction, bool) or not isinstance(unseen_fraction, (int, float, np.number)) \
             or not 0.0 <= unseen_fraction < 1.0:
         raise ParameterError(f"unseen_fraction must be a share in [0, 1), got {unseen_fraction!r}", "unseen_fraction")
-    if max_samples is not None and (isinstance(max_samples, bool) or not isinstance(max_samples, (int, np.integer))
-                                    or max_samples < 1):
-        raise ParameterError(f"max_samples must be None (all) or an integer >= 1, got {max_samples!r}", "max_samples")
+    _check_max_samples(max_samples)
     scenes = _scene_names(scenes)
     for key, flag in (("baselines", baselines), ("sweep", sweep)):
         if not isinstance(flag, bool):  # ("no" is a true string)
@@ -448,6 +455,9 @@ def evaluate(
         raise ParameterError(f"plot_name must be None (the model file's stem) or a file name without a folder, got "
                              f"{plot_name!r}", "plot_name")
     predictor, meta, thr, store, samples = _prepare(model, data, scenes, metadata, threshold, max_samples, tile_size)
+    mismatch = _targets_mismatch(meta, store)
+    if mismatch:
+        log.warning("%s: %s", predictor.path, mismatch)
     selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
     yang_scored = baselines and not meta.higher_is_better and "yang2019" in selectors
     run = _Run(predictor, store, thr, unseen_fraction, selectors, yang_scored, sweep)
@@ -473,13 +483,37 @@ def check_evaluation(
     metadata: Any = None,
     threshold: float | None = None,
     tile_size: int | None = None,
+    max_samples: int | None = None,
 ) -> None:
     """What :func:`evaluate` would refuse before its first sample, without evaluating: the model
     (``sdk.load``), the threshold in its metric's units, the dataset, its targets for the model's
-    metric and tile, the ``scenes``. ``rtp evaluate`` checks every model it is given so, before the
-    first is evaluated (a dataset without the last model's targets was refused only after the others
-    had run)."""
-    _prepare(model, data, scenes, metadata, threshold, None, tile_size)
+    metric and tile (on every sample to evaluate: the ``scenes``, the first ``max_samples`` of them), the
+    ``scenes``. ``rtp evaluate`` checks every model it is given so, before the first is evaluated (a dataset
+    without the last model's targets was refused only after the others had run)."""
+    _check_max_samples(max_samples)
+    _prepare(model, data, scenes, metadata, threshold, max_samples, tile_size)
+
+
+def _check_max_samples(max_samples: object) -> None:
+    if max_samples is not None and (isinstance(max_samples, bool) or not isinstance(max_samples, (int, np.integer))
+                                    or max_samples < 1):
+        raise ParameterError(f"max_samples must be None (all) or an integer >= 1, got {max_samples!r}", "max_samples")
+
+
+def _targets_mismatch(meta: sdk.ModelMetadata, store: TargetStore) -> str:
+    """What makes the dataset's targets another quantity than the one the model predicts: the environment luminance
+    l of a Weber-corrected metric (JNYang, JNFLIP) the model was trained with (``metadata.weber_l``) against the one
+    its targets were computed with (``rtp targets --weber-l``); "" where they agree or either is not recorded."""
+    declared = store.metrics.get(meta.metric)
+    targets_l = declared.get("weber_l") if isinstance(declared, dict) else None
+    if meta.weber_l is None or isinstance(targets_l, bool) or not isinstance(targets_l, (int, float)):
+        return ""
+    if math.isclose(float(meta.weber_l), float(targets_l), rel_tol=1e-6):
+        return ""
+    return (f"the model predicts {meta.metric} at environment luminance l = {meta.weber_l:g}, and the targets it is "
+            f"judged against were computed at l = {targets_l:g}: another quantity, so its scores and failing tiles "
+            f"are not its own (compute targets at l = {meta.weber_l:g} in a copy of the dataset: `rtp targets COPY "
+            f"--metrics {meta.metric} --weber-l {meta.weber_l:g}`)")
 
 
 def _scene_names(scenes: object) -> list[str] | None:
@@ -523,7 +557,23 @@ def _load_samples(
     if meta.tile_size % store.base_tile:
         raise TargetError(f"the model's tile {meta.tile_size} is not a multiple of the targets' base tile {store.base_tile}")
     samples = _select_samples([reader[i] for i in list(reader.ids)], data, scenes, max_samples)
+    _check_targets(store, samples, meta.metric, data)
     return store, samples
+
+
+def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: str | os.PathLike[str]) -> None:
+    """Refuse, before the first sample is evaluated, samples without up-to-date ``metric`` targets (a sample captured
+    after ``rtp targets`` ran, or captured again since): the run stopped at the first such sample, after the work on
+    the ones before it (in ``rtp evaluate`` with several models, after the models before)."""
+    missing = [s.id for s in samples if not store.path(s.id, metric).is_file()]
+    stale = [] if missing else [s.id for s in samples if store.stale(s.id, metric)]
+    bad = missing or stale
+    if bad:
+        what = "no" if missing else "outdated (older than the sample, captured again since)"
+        raise TargetError(
+            f"{data}: {len(bad)} of the {len(samples)} samples to evaluate have {what} {metric} targets "
+            f"({', '.join(map(repr, bad[:3]))}{', ...' if len(bad) > 3 else ''}); "
+            f"run `rtp targets {data} --metrics {metric}`")
 
 
 def _select_samples(
@@ -757,6 +807,9 @@ class _Run:
             report.matched = _matched(report.sweep, target, {
                 r["method"]: r["threshold"] for r in report.decisions if r["scene"] == scene_names[-1]})
         report.notes = _notes(self.metric, self.hib, self.thr, self.selectors, self.unseen_fraction, meta.outputs)
+        mismatch = _targets_mismatch(meta, self.store)
+        if mismatch:
+            report.notes.insert(0, mismatch)
         if report.scene_roles and all(r == "train" for r in report.scene_roles.values()):
             report.notes.insert(0, "every evaluated scene was a training scene of this model: these scores are not a test")
             log.warning("every evaluated scene was a training scene of %s", self.predictor.path)

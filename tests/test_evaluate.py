@@ -1173,3 +1173,98 @@ def test_the_reports_words_give_the_failing_rule_and_the_threshold_matched(datas
     text = evaluate(model, dataset, threshold=0.3).to_markdown()
     assert "as often as the model at its threshold 0.3, the decision table's" in text
     assert "default threshold" not in text
+
+
+def test_samples_without_up_to_date_targets_are_refused_before_the_first_is_evaluated(
+        dataset: Path, model: Path) -> None:
+    """A sample captured after `rtp targets` ran (no target file), or captured again since (stale targets): the
+    evaluation stopped at that sample after the work on those before it, and check_evaluation (what `rtp evaluate`
+    runs on every model before the first) let it through; now both refuse it first, saying what to run, and
+    --max-samples that leaves it out evaluates."""
+    import os
+
+    from rtp.capture import TargetError
+    from rtp.evaluate import check_evaluation
+
+    store = TargetStore(dataset)
+    store.path("s2", "jnyang").unlink()
+    calls: list[int] = []
+    for run in (lambda: check_evaluation(model, dataset),
+                lambda: evaluate(model, dataset, baselines=False, progress=lambda n, total: calls.append(n))):
+        with pytest.raises(TargetError, match=r"1 of the 3 samples to evaluate have no jnyang targets \('s2'\); "
+                                              r"run `rtp targets .* --metrics jnyang`"):
+            run()
+    assert calls == []  # (refused before the first sample, not after two)
+    check_evaluation(model, dataset, max_samples=2)
+    assert evaluate(model, dataset, baselines=False, max_samples=2).samples == 2
+    check_evaluation(model, dataset, scenes="a")
+    # `rtp evaluate` checks each of several models on the samples it evaluates, those --max-samples leaves
+    import shutil
+
+    other = dataset.parent / "other" / "m.onnx"
+    other.parent.mkdir()
+    shutil.copy(model, other)
+    two = ["evaluate", str(model), str(other), "--data", str(dataset), "--no-baselines"]
+    assert rtp_main([*two, "--max-samples", "2"]) == 0
+    assert rtp_main(two) != 0
+    with pytest.raises(sdk.ParameterError, match="max_samples"):
+        check_evaluation(model, dataset, max_samples=0)
+    # targets older than their sample
+    store.write("s2", "jnyang", _truth(2).repeat(T // 4, 1).repeat(T // 4, 2), (H, W))
+    sample = dataset / "samples" / "s1.npz"
+    later = store.path("s1", "jnyang").stat().st_mtime + 10
+    os.utime(sample, (later, later))
+    with pytest.raises(TargetError, match=r"have outdated \(older than the sample, captured again since\) jnyang "
+                                          r"targets \('s1'\)"):
+        check_evaluation(model, dataset)
+
+
+def test_an_empty_split_reads_as_no_value_in_every_column(tmp_path: Path, model: Path) -> None:
+    """Frames seen whole have no unseen tiles: the unseen rows' columns read "-", but the decision table's rates
+    column read "nan/nan/nan/nan/nan/nan/nan", on the terminal and in evaluation.md."""
+    h, w = 32, 64
+    root = tmp_path / "whole"
+    writer, store = DatasetWriter(root), TargetStore(root)
+    store.declare("jnyang", {"weber_l": 0.02})
+    rng = np.random.default_rng(2)
+    for i in range(2):
+        bufs = {}
+        for name, spec in BUFFERS.items():
+            c = len(spec.channels) or 3
+            bufs[name] = rng.random((h, w, c) if c > 1 else (h, w), dtype=np.float32)
+        bufs["seen"] = np.ones((h, w), np.float32)
+        bufs["motion"] = np.zeros((h, w, 2), np.float32)
+        writer.write(f"w{i}", bufs, {"scene": "w"})
+        store.write(f"w{i}", "jnyang", rng.uniform(0.01, 0.5, (6, h // 4, w // 4)).astype(np.float32), (h, w))
+    writer.finalize()
+    rep = evaluate(model, root, sweep=False)
+    assert rep.row("decisions", "oracle", split="unseen")["n"] == 0
+    seen = rep.row("decisions", "oracle", split="seen")
+    assert seen["n"] == 16 and "/".join(f"{100 * seen['rate_shares'][k]:.0f}" for k in sdk.ALL_RATES) in rep.table()
+    md, table = rep.to_markdown(), rep.table()
+    import re
+
+    assert not re.search(r"\bnan\b", md + table, re.IGNORECASE)
+    assert "| w | unseen | oracle | 0.2 | 0 | - | - | - |" in md
+    unseen_line = next(line for line in table.splitlines() if " unseen " in line and " oracle " in line)
+    assert unseen_line.split()[-4:] == ["0", "-", "-", "-"]
+    assert json.loads(json.dumps(rep.to_dict(), allow_nan=False))["decisions"][2]["rate_shares"]["1x1"] is None
+
+
+def test_targets_of_another_weber_l_than_the_models_are_said(dataset: Path, model: Path, tmp_path: Path,
+                                                             caplog: pytest.LogCaptureFixture) -> None:
+    """A JNYang model trained at l = 1e-10 judged against the dataset's l = 0.02 targets (another quantity: the
+    published models' against `rtp targets`' default) was scored in silence; the run now warns, and the report's
+    first note says so and what to run. Targets at the model's own l say nothing."""
+    low = build_onnx(tmp_path / "low.onnx", weights=np.eye(2, 4, dtype=np.float32), tile=T,
+                     metadata={**META, "weber_l": 1e-10})
+    with caplog.at_level("WARNING", logger="rtp.evaluate"):
+        rep = evaluate(low, dataset, baselines=False, sweep=False)
+    words = "the model predicts jnyang at environment luminance l = 1e-10, and the targets it is judged against " \
+            "were computed at l = 0.02"
+    assert rep.notes[0].startswith(words) and "--metrics jnyang --weber-l 1e-10`" in rep.notes[0]
+    assert words in caplog.text and words in rep.to_markdown()
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="rtp.evaluate"):
+        rep = evaluate(model, dataset, baselines=False, sweep=False)
+    assert "environment luminance" not in caplog.text and not any("environment luminance" in n for n in rep.notes)
