@@ -73,11 +73,12 @@ def run_demo(
     seed: int = 0,
     timing_runs: int = 11,
     tile_size: int | None = None,
+    metadata: Any = None,
 ) -> DemoResult:
     """Run the demo and write its pictures into ``out``. ``predict`` is timed as the median of
     ``timing_runs`` runs after a warm-up. ``tile_size`` is the hardware's VRS tile when it differs from
     the model's (``sdk.load(..., tile_size=)``: 8 for AMD's and Intel's); the rates, the true error and
-    the composite are then per hardware tile."""
+    the composite are then per hardware tile. ``metadata``: ``sdk.load``'s, for a model that carries none."""
     from rtp import metrics
     from rtp.capture import check_frame_memory, load_scene, save_image
     from rtp.capture.paths import MAX_FRAMES, composite
@@ -89,7 +90,7 @@ def run_demo(
         # (1 was taken and run as 2: the last frame needs the one before as its reprojected history)
         raise sdk.ParameterError(f"frames: expected an integer in [2, {MAX_FRAMES}] (the frame shown and at least "
                                  f"the one before it, its history), got {frames!r}", "frames")
-    predictor = sdk.load(model, tile_size=tile_size)
+    predictor = sdk.load(model, tile_size=tile_size, metadata=metadata)
     meta = predictor.metadata
     tile = predictor.tile_size  # the hardware's tiles, which the rates are for
     # checked before any rendering, as every command checks a threshold (the SDK's range)

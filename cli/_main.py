@@ -227,13 +227,23 @@ def _names(values: Sequence[str] | None) -> tuple[str, ...]:
 
 # -- subcommands ------------------------------------------------------------------------------
 
-def _load(args: argparse.Namespace) -> Any:
-    """``sdk.load`` of ``args.model``, with the missing-metadata hint in the command line's words (only when
-    the file has none: metadata that is there but broken keeps the SDK's message of what is wrong)."""
+def _load(args: argparse.Namespace, tile_size: int | None = None) -> Any:
+    """``sdk.load`` of ``args.model`` (with ``args.metadata``, and the hardware's ``tile_size``), with the
+    missing-metadata hint in the command line's words (:func:`_metadata_hint`)."""
+    from rtp import sdk
+
+    with _metadata_hint(args):
+        return sdk.load(args.model, metadata=args.metadata, tile_size=tile_size)
+
+
+@contextlib.contextmanager
+def _metadata_hint(args: argparse.Namespace) -> Iterator[None]:
+    """The block's load of ``args.model`` refused for carrying no rtp metadata, said in the command line's words
+    (only when the file has none: metadata that is there but broken keeps the SDK's message of what is wrong)."""
     from rtp import sdk
 
     try:
-        return sdk.load(args.model, metadata=args.metadata)
+        yield
     except sdk.MetadataError as err:
         if err.key == sdk.METADATA_KEY and args.metadata is None and not carries_metadata(args.model):
             from rtp.export import identify
@@ -662,7 +672,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         files: dict[Path, str] = {}
         for model in args.model:
             check_evaluation(model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
-                             threshold=args.threshold, tile_size=args.tile_size)
+                             threshold=args.threshold, tile_size=args.tile_size, max_samples=args.max_samples)
             file = Path(str(sdk.load(model, metadata=args.metadata).path)).resolve()
             if file in files:  # (it was evaluated twice, its report written twice)
                 raise _usage(f"{files[file]} and {model} are the same model file ({file}): give each model once")
@@ -719,8 +729,10 @@ def _warn_of_another_evaluation(out: Path, args: argparse.Namespace) -> None:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from ._demo import run_demo
 
-    r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
-                 frames=args.frames, cache_dir=args.cache_dir, seed=args.seed, tile_size=args.tile_size)
+    with _metadata_hint(args):  # (a foreign model's sidecar: --metadata)
+        r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
+                     frames=args.frames, cache_dir=args.cache_dir, seed=args.seed, tile_size=args.tile_size,
+                     metadata=args.metadata)
     shares = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r.rate_share.items() if v > 0)
     print(f"model      {r.model} ({r.metric}), threshold {r.threshold:g}")
     print(f"rates      {shares} of {r.tiles} tiles of {r.tile_size}x{r.tile_size} pixels")
@@ -1138,6 +1150,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     dm = command("demo", "render a scene, pick VRS rates with a shipped model, show the result", _cmd_demo)
     dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
+    model_metadata(dm)
     dm.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
     dm.add_argument("--scene", default="procedural:0",
                     help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
@@ -1265,6 +1278,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("frames", nargs="+", type=_path_text, metavar="frame", help="the .npz of a frame's G-buffers "
                     "(written with --write-example), several, or a folder of them (taken in the order of their names)")
     pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
+    model_metadata(pr)
     pr.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
     pr.add_argument("--saving", type=float, default=None, metavar="SHARE", help="a budget instead of a threshold: "
                     "each frame's rates save at least this share of the shading work (0 to 0.9375), at the lowest "

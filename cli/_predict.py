@@ -7,13 +7,14 @@ the layout."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import os
 import re
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -200,6 +201,20 @@ def _warn_of_conventions(path: str, buffers: dict[str, Any], args: argparse.Name
     return texts
 
 
+@contextlib.contextmanager
+def _naming(path: str) -> Iterator[None]:
+    """An rtp error of the block, on the frame file ``path``, named by the file (an array's error named the array
+    alone: on a sequence of hundreds of frames, not which frame held it) and said in this command's flags."""
+    from rtp import sdk
+
+    try:
+        yield
+    except sdk.RtpError as err:
+        text = _in_flags(str(err))
+        err.args = (text if text.startswith(repr(path)) else f"{path!r}: {text}", *err.args[1:])
+        raise
+
+
 def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshold: float,
                    allowed: list[str] | None, reuse: Any = None, warned: dict[str, list[Any]] | None = None,
                    ) -> tuple[dict[str, Any], dict[str, np.ndarray], np.ndarray, np.ndarray]:
@@ -222,12 +237,8 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
             f"{path!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
             f"{reads} reads: " + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing),
             "frame")
-    try:
-        planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
-                                  normal_space=args.normal_space, depth_kind=args.depth_kind)
-    except sdk.RtpError as err:  # the same error, in flags
-        err.args = (_in_flags(str(err)), *err.args[1:])
-        raise
+    planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
+                              normal_space=args.normal_space, depth_kind=args.depth_kind)
     warnings = _warn_of_conventions(path, buffers, args, {} if warned is None else warned)
     x = planes[:len(inputs)]
     h, w = x.shape[1:]
@@ -280,9 +291,9 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
 
 #: The options of a prediction, with the value each has when not given (``--write-example`` refuses them: it writes a
 #: frame in the default conventions, and predicts nothing).
-_PREDICT_OPTIONS = {"model": "jnyang", "threshold": None, "saving": None, "combiner": None, "tile_size": None,
-                    "allowed": None, "out": None, "albedo_linear": False, "normal_space": "view", "depth_kind": "linear",
-                    "every": None, "json": False}
+_PREDICT_OPTIONS = {"model": "jnyang", "metadata": None, "threshold": None, "saving": None, "combiner": None,
+                    "tile_size": None, "allowed": None, "out": None, "albedo_linear": False, "normal_space": "view",
+                    "depth_kind": "linear", "every": None, "json": False}
 #: ``--write-example``'s options and their values when not given (refused without it).
 _EXAMPLE_OPTIONS = {"size": (640, 360), "seed": 0}
 
@@ -355,7 +366,9 @@ def run_predict(args: argparse.Namespace) -> int:
     if args.every is not None and not sequence:
         raise sdk.ParameterError(f"--every {args.every}: prediction reuse carries estimates from frame to frame; give "
                                  "a sequence (several frame files, or a folder of them)", "every")
-    predictor = sdk.load(args.model, tile_size=args.tile_size)
+    from ._main import _load
+
+    predictor = _load(args, tile_size=args.tile_size)  # (a foreign model's sidecar: --metadata)
     threshold = predictor.metadata.default_threshold if args.threshold is None else args.threshold
     allowed = None if args.allowed is None else [r.strip() for r in args.allowed.split(",") if r.strip()]
     if allowed == []:  # (an unset shell variable, likely: VRS off is said as --allowed 1x1)
@@ -368,10 +381,15 @@ def run_predict(args: argparse.Namespace) -> int:
     if args.saving is not None:  # (its range, with the rates allowed, before the first frame's work)
         sdk.select_rates_for_saving(np.zeros((6, 1, 1)), args.saving, allowed=allowed, threshold=args.threshold,
                                     higher_is_better=predictor.metadata.higher_is_better)
+    else:  # (the threshold's range and the rates allowed too: a sequence printed its header, read and predicted its
+        # first frame, and only then refused --threshold nan or --allowed 3x3)
+        sdk.select_rates(np.zeros((6, 1, 1)), threshold, allowed=allowed, factors=predictor.metadata.rate_factors,
+                         higher_is_better=predictor.metadata.higher_is_better)
     model = predictor.path.name if predictor.path else args.model
     if sequence:
         return _run_sequence(args, files, predictor, threshold, allowed, model)
-    summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
+    with _naming(files[0]):
+        summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
                "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
                "threshold": summary["threshold"], "saving": args.saving, "rates": summary["rates"],
@@ -430,7 +448,8 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     quiet_bar = argparse.Namespace(**{**vars(args), "no_progress": args.no_progress or not (args.json or args.quiet)})
     with Bar(quiet_bar, len(files), "predict", "frame") as bar:
         for i, path in enumerate(files):
-            row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed, reuse, warned)
+            with _naming(path):
+                row, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed, reuse, warned)
             if first_size is None:
                 first_size = row["size"]
                 if args.out:  # the overlays kept for the GIF, refused now rather than by the OOM killer later
@@ -539,6 +558,10 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
     from rtp.capture import save_image
     from rtp.evaluate.plots import sequence_curves
 
+    # Everything is made before anything is written: the GIF's encoding or the curves' drawing failing (or a
+    # Ctrl-C in them) after the arrays were written left this run's rates.npy beside the last run's pictures.
+    gif = iio.imwrite("<bytes>", np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
+    curves = sequence_curves(rows, thresholds=budget, higher_is_better=higher_is_better)
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     for name, array in (("rates.npy", np.stack(rates)), ("predictions.npy", np.stack(values))):
@@ -554,8 +577,8 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
     with sdk.files.atomic_output(out / "frames.csv") as tmp:
         tmp.write_text(text.getvalue())
     with sdk.files.atomic_output(out / "overlay.gif") as tmp:
-        iio.imwrite(tmp, np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
-    save_image(out / "frames.png", sequence_curves(rows, thresholds=budget, higher_is_better=higher_is_better))
+        tmp.write_bytes(gif)
+    save_image(out / "frames.png", curves)
     return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"])
 
 
@@ -575,12 +598,13 @@ def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, ra
     from rtp import sdk
     from rtp.capture import save_image
 
+    picture = _overlay(frame, rates, tile)  # (drawn before the arrays are written, as a sequence's pictures are)
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     for name, array in (("rates.npy", rates), ("predictions.npy", values)):
         with sdk.files.atomic_output(out / name) as tmp, open(tmp, "wb") as f:
             np.save(f, array)
-    save_image(out / "overlay.png", _overlay(frame, rates, tile))
+    save_image(out / "overlay.png", picture)
     return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "overlay.png"])
 
 

@@ -24,6 +24,27 @@ def test_demo_writes_its_pictures_and_reports(tiny_model: Callable[..., Path], t
         assert (out / name).stat().st_size > 0
 
 
+def test_demo_of_a_foreign_model_with_its_sidecar(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A model that carries no rtp metadata was refused with a hint to pass "the commands' --metadata SIDECAR.yaml",
+    which rtp demo did not take: it takes the sidecar, and the hint is in its flags; nothing is written without."""
+    import numpy as np
+    import yaml
+
+    from .conftest import base_metadata, build_onnx
+
+    model = build_onnx(tmp_path / "foreign.onnx", weights=np.eye(4, dtype=np.float32), metadata=None)
+    sidecar = tmp_path / "foreign.yaml"
+    sidecar.write_text(yaml.safe_dump(base_metadata()))
+    out = tmp_path / "demo"
+    assert rtp_main(["demo", "--model", str(model), "--size", "160x96", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "carries no rtp metadata: pass --metadata SIDECAR.yaml" in err and "metadata=" not in err, err
+    assert not out.exists()
+    assert rtp_main(["demo", "--model", str(model), "--metadata", str(sidecar), "--size", "160x96", "--out",
+                     str(out)]) == 0
+    assert "foreign.onnx (jnyang), threshold 0.2" in capsys.readouterr().out and (out / "overlay.png").is_file()
+
+
 def test_demo_without_a_model_says_what_ships(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert rtp_main(["demo", "--model", "no_such_model", "--out", str(tmp_path / "d")]) == 2
     assert "no model file" in capsys.readouterr().err

@@ -366,6 +366,47 @@ def test_a_sequences_mistakes_are_named(sequence: Path, frame: Path, tmp_path: P
     assert "--frames 2: the number of frames --write-example writes" in capsys.readouterr().err
 
 
+def test_an_arrays_error_names_the_frame_file(sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A frame's array out of its range or shape was named alone ("prev_colour: expected values in [0, 1]"): on a
+    sequence, not which of its frames held it. Each such error names the file, once."""
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for f in sorted(sequence.glob("*.npz")):
+        (frames / f.name).write_bytes(f.read_bytes())
+    bad = frames / "frame_0002.npz"
+    with np.load(bad) as npz:
+        arrays = dict(npz)
+    np.savez(bad, **{**arrays, "prev_colour": arrays["prev_colour"] * 4.0})
+    assert main(["predict", str(frames), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert f"rtp predict: error: {str(bad)!r}: prev_colour: expected values in [0, 1]" in err, err
+    np.savez(bad, **arrays, engine_rates=np.zeros((6, 4), np.uint8))  # (the engine's rates of another tiling)
+    assert main(["predict", str(bad), "--combiner", "max", "--json"]) == 2
+    err = capsys.readouterr().err
+    assert f"rtp predict: error: {str(bad)!r}: engine_rates: shape (6, 4) does not broadcast" in err, err
+    assert main(["predict", str(frames / "missing.npz")]) == 2  # (an error that names the file already: once)
+    assert capsys.readouterr().err.count("missing.npz") == 1
+
+
+def test_a_threshold_or_rates_refused_before_the_first_frame(sequence: Path, capsys: pytest.CaptureFixture[str],
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """--threshold nan or --allowed 3x3 on a sequence: its header was printed, its first frame read and predicted,
+    and only then the option refused; now refused before any frame is read, nothing on stdout."""
+    from rtp.cli import _predict
+
+    read: list[str] = []
+    real = _predict._read_frame
+    monkeypatch.setattr(_predict, "_read_frame", lambda path: (read.append(path), real(path))[1])
+    for option, err in ((["--threshold", "nan"], "--threshold: expected a finite number"),
+                        (["--allowed", "1x2,3x3"], "--allowed: unknown shading rate '3x3'"),
+                        (["--threshold", "-1"], "--threshold: expected a finite number in [0, ")):
+        assert main(["predict", str(sequence), *option]) == 2, option
+        got = capsys.readouterr()
+        assert err in got.err and got.out == "" and read == [], (option, got, read)
+    assert main(["predict", str(sequence), "--threshold", "0.3", "--allowed", "1x2,2x2", "--json"]) == 0
+    assert len(read) == 4 and json.loads(capsys.readouterr().out)["threshold"] == 0.3
+
+
 def test_a_frame_given_twice_is_refused(sequence: Path, frame: Path, tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """A frame file taken twice (given twice, or a folder and one of its files) is refused before any prediction: it
@@ -397,6 +438,29 @@ def test_out_holds_one_runs_files(sequence: Path, frame: Path, tmp_path: Path) -
     for kind, given in (("sequence", sequence), ("frame", frame), ("sequence", sequence)):
         assert main(["predict", str(given), "--out", str(out), "--json"]) == 0
         assert {f.name for f in out.iterdir()} == kinds[kind] | {"notes.txt"}, kind
+
+
+def test_a_run_that_fails_drawing_leaves_the_last_runs_files_whole(sequence: Path, frame: Path, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A sequence's curves (or a frame's overlay) failing to draw, or a Ctrl-C there, came after rates.npy and
+    predictions.npy were written: the folder held this run's rates beside the last run's pictures. Everything is
+    drawn first; a failure leaves every file of the last run as it was."""
+    import rtp.evaluate.plots
+    from rtp.cli import _predict
+
+    def fail(*args: object, **kw: object) -> None:
+        raise KeyboardInterrupt
+
+    for given, target, place in ((sequence, rtp.evaluate.plots, "sequence_curves"), (frame, _predict, "_overlay")):
+        out = tmp_path / given.name
+        assert main(["predict", str(given), "--threshold", "0.05", "--out", str(out), "--json"]) == 0
+        before = {f.name: f.read_bytes() for f in out.iterdir()}
+        with monkeypatch.context() as m:
+            m.setattr(target, place, fail)
+            assert main(["predict", str(given), "--threshold", "0.5", "--out", str(out), "--json"]) == 130
+        assert {f.name: f.read_bytes() for f in out.iterdir()} == before, given
+        assert main(["predict", str(given), "--threshold", "0.5", "--out", str(out), "--json"]) == 0
+        assert np.load(out / "rates.npy").tolist() != np.frombuffer(before["rates.npy"], np.uint8).tolist()
 
 
 @pytest.mark.parametrize("model", ["jnyang", "jnyang-reuse"])
@@ -561,3 +625,31 @@ def test_each_kind_of_convention_warning_is_shown(frame: Path, tmp_path: Path,
     err = capsys.readouterr().err
     assert "view: its last row is" in err and "seen: only" in err, err
     assert "more like" not in err, err
+
+
+def test_a_foreign_model_runs_with_its_sidecar(frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A model that carries no rtp metadata (an adopted network's ONNX) was refused with a hint to pass "the
+    commands' --metadata SIDECAR.yaml", which rtp predict did not take (exit 2, "unrecognized arguments"): it takes
+    the sidecar as rtp info does, and its hint is in this command's flags."""
+    import yaml
+
+    from .conftest import base_metadata, build_onnx
+
+    weights = np.eye(4, dtype=np.float32)
+    model = build_onnx(tmp_path / "foreign.onnx", weights=weights, metadata=None)
+    sidecar = tmp_path / "foreign.yaml"
+    sidecar.write_text(yaml.safe_dump(base_metadata()))
+    assert main(["predict", str(frame), "--model", str(model), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert "carries no rtp metadata: pass --metadata SIDECAR.yaml" in err and "metadata=" not in err, err
+    out = tmp_path / "out"
+    assert main(["predict", str(frame), "--model", str(model), "--metadata", str(sidecar), "--tile-size", "8",
+                 "--out", str(out), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    predictor = sdk.load(str(model), metadata=str(sidecar), tile_size=8)
+    with np.load(frame) as npz:
+        x = sdk.input_planes(predictor.metadata.inputs, **{k: npz[k] for k in npz.files if k in sdk.GBUFFERS})
+    np.testing.assert_array_equal(np.load(out / "rates.npy"), predictor.shading_rates(x))
+    assert got["model"] == "foreign.onnx" and got["tile_size"] == 8 and got["tiles"] == [12, 20]
+    assert main(["predict", str(tmp_path / "example.npz"), "--write-example", "--metadata", str(sidecar)]) == 2
+    assert "--metadata: not read with --write-example" in capsys.readouterr().err
