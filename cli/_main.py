@@ -973,7 +973,8 @@ def build_parser() -> argparse.ArgumentParser:
     tg.add_argument("--ppd", default=None, help="FLIP pixels per degree: a number, or 'width' for the paper's "
                     f"width-based value (default: FLIP's own {DEFAULT_PPD:.2f})")
     tg.add_argument("--weber-l", type=float, default=None,
-                    help=f"environment luminance l of JNFLIP/JNYang, > 0 and at most {MAX_WEBER_L:g} (default: "
+                    help=f"environment luminance l of JNFLIP/JNYang, > 0 (a float32 normal number) and at most "
+                    f"{MAX_WEBER_L:g} (default: "
                     f"{DEFAULT_WEBER_L:g})")
     tg.add_argument("--workers", type=_positive, default=None,
                     help="parallel processes (default 1; with --ray, Ray workers)")
@@ -1321,7 +1322,7 @@ def build_parser() -> argparse.ArgumentParser:
     mt.add_argument("--ppd", default=None, help=f"{' and '.join(PPD_METRICS)}: FLIP's pixels per degree, a number, or "
                     f"'width' for the paper's width-based value (default: FLIP's own {DEFAULT_PPD:.2f}, as `rtp targets`)")
     mt.add_argument("--weber-l", type=float, default=None, help=f"{' and '.join(m for m in METRICS if METRICS[m].weber)}: "
-                    f"the environment luminance l, > 0 (default: {DEFAULT_WEBER_L:g}, as `rtp targets`)")
+                    f"the environment luminance l, > 0 (a float32 normal number; default: {DEFAULT_WEBER_L:g}, as `rtp targets`)")
     mt.add_argument("--json", action="store_true", help="print the per-tile values as JSON")
     return p
 
