@@ -369,6 +369,72 @@ def _why_not_compared(channel: str) -> str:
     return "each engine's own shading model"
 
 
+def _within(plane: np.ndarray, ref: np.ndarray, tol: Tolerance, where: np.ndarray | None = None) -> float:
+    """The share of the pixels (of ``where``) on which ``plane`` is within ``tol`` of ``ref``."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        err = np.abs(plane - ref) / (np.maximum(np.abs(ref), 1e-6) if tol.relative else 1.0)
+        ok = err <= tol.value
+    return float(np.mean(ok if where is None else ok[where])) if (where is None or where.any()) else 0.0
+
+
+#: How well a plane must match one of :func:`_likely_cause`'s mistakes, on the geometry, for the kit to name it.
+_CAUSE_AGREEMENT = 0.9
+
+
+def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Tolerance, share: float) -> str:
+    """What a plane that disagrees with the reference renderer's looks like, and the fix: the first of the usual
+    convention mistakes (rows upside down, linear albedo, encoded or world-space normals, a depth buffer's values
+    or the distance to the camera, motion the wrong way) that, applied to the reference's plane, agrees with the
+    adapter's far better (empty: none does)."""
+    ref = np.asarray(reference.channel(channel), np.float64)
+    geo = np.asarray(reference.channel("depth")) > 0
+    h, w = ref.shape
+    kind = channel.partition(".")[0]
+    candidates: list[tuple[str, np.ndarray, np.ndarray | None]] = [
+        ("the rows are upside down (a GL read-back hands the bottom row first): flip them once, where the adapter "
+         "reads back, to a top-left origin", ref[::-1], None),
+        ("it is mirrored left to right", ref[:, ::-1], None)]
+    if kind == "albedo":
+        rgb = np.stack([reference.channel(f"albedo.{c}") for c in "rgb"], -1).astype(np.float64)
+        lin, twice = sdk.srgb_to_linear(np.clip(rgb, 0, 1)), sdk.linear_to_srgb(np.clip(rgb, 0, 1))
+        pick = (lambda a: sdk.luma(a)) if channel == "albedo.y" else (lambda a: a[..., "rgb".index(channel[-1])])
+        candidates += [("albedo in linear light: the contract's is display-encoded sRGB (encode it with "
+                        "sdk.linear_to_srgb, or input_planes(albedo_linear=True))", pick(lin), geo),
+                       ("albedo encoded to sRGB twice: the texture was display-encoded already", pick(twice), geo)]
+    elif kind == "normal":
+        n = np.stack([reference.channel(f"normal.{c}") for c in "xyz"], -1).astype(np.float64)
+        rotation = np.asarray(reference.camera.view(), np.float64)[:3, :3]
+        k = "xyz".index(channel[-1])
+        candidates += [("normals encoded to [0, 1] (n * 0.5 + 0.5), as an 8-bit target stores them: decode them "
+                        "(n * 2 - 1)", 0.5 * ref + 0.5, geo),
+                       ("normals in world space: rotate them into view space with the view matrix "
+                        "(input_planes(normal_space='world', view=...))", (n @ rotation)[..., k], geo),
+                       ("normals with the opposite sign: the contract's view space is right-handed, the camera "
+                        "looking down -Z, z > 0 facing it (a left-handed view space negates z)", -ref, geo)]
+    elif channel == "depth":
+        proj = np.asarray(reference.camera.projection(w / h), np.float64)
+        xs = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) / proj[0, 0]
+        ys = (1.0 - (np.arange(h) + 0.5) / h * 2.0) / proj[1, 1]
+        radial = ref * np.sqrt(1.0 + xs[None, :] ** 2 + ys[:, None] ** 2)
+        candidates.append(("the distance to the camera, not the view depth along -Z: divide by the length of "
+                           "each pixel's ray at depth 1", radial, geo))
+        if geo.any() and float(ref[geo].max()) > 1.0 and float(np.abs(plane[geo]).max()) <= 1.0:
+            return (f"a depth buffer's values (in [0, 1], where the reference's reach {float(ref[geo].max()):.3g}), "
+                    "not linear view depth in scene units: linearise it, or input_planes(depth_kind='window' or "
+                    "'reversed')")
+    elif kind == "motion":
+        candidates.append(("motion the wrong way: the contract's is the previous minus the current position, x right "
+                           "and y down", -ref, geo))
+    elif channel == "seen" and float(np.mean(plane > 0)) < 0.02 < float(np.mean(ref > 0)):
+        return ("almost no pixel reprojects onto the previous frame: view, projection, prev_view_projection or the "
+                "depths in another convention (a transposed matrix, for row vectors; a depth buffer's values)? "
+                "sdk.check_gbuffers on one frame names such a mistake")
+    for cause, expected, where in candidates:
+        if _within(plane, expected, tol, where) >= max(_CAUSE_AGREEMENT, share + 0.05):
+            return cause
+    return ""
+
+
 def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: Any,
                       tolerances: Mapping[str, Tolerance]) -> None:
     for plane, c in zip(x, channels):
@@ -376,11 +442,12 @@ def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], referen
             continue
         tol = tolerances[c]
         with run.check("agreement", f"{c} agrees with the reference renderer") as note:
-            ref = reference.channel(c)
-            err = np.abs(plane - ref) / (np.maximum(np.abs(ref), 1e-6) if tol.relative else 1.0)
-            share = float(np.mean(err <= tol.value))
+            share = _within(plane, reference.channel(c), tol)
             within = f"within {tol.value:g}{' (relative)' if tol.relative else ''}"
-            _expect(share >= MIN_AGREEMENT, f"{share:.1%} of the pixels {within}, needs {MIN_AGREEMENT:.0%}")
+            if share < MIN_AGREEMENT:  # (the usual mistakes named, with their fix)
+                cause = _likely_cause(c, plane, reference, tol, share)
+                raise _Failed(f"{share:.1%} of the pixels {within}, needs {MIN_AGREEMENT:.0%}"
+                              + (f"; it looks like {cause}" if cause else ""))
             note.append(f"{share:.1%} {within}")
 
 
@@ -603,7 +670,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
                 written.append(str(image))
             _order_checks(run, x, channels, draw)
     _predictor_checks(run, cls, runs, given, open_source, camera, prev_camera, size, reference, decisions)
-    _lifecycle_checks(run, cls, channels, open_source, camera, prev_camera)
+    _lifecycle_checks(run, cls, channels, open_source, camera, prev_camera, drew=x is not None)
     return report()
 
 
@@ -687,7 +754,10 @@ def _predictor_checks(run: _Run, cls: type[Adapter[Any]], runs: Sequence[str], g
 
 
 def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str], open_source: Any,
-                      camera: Camera, prev_camera: Camera) -> None:
+                      camera: Camera, prev_camera: Camera, drew: bool = True) -> None:
+    """The lifecycle, each check failing for what it names: an error of ``inputs`` on a real frame, which the
+    planes checks report (``drew`` False), fails none of them; where every channel drew (``drew``) but the
+    two drawn here raise, the check of the source's adapters says so."""
     unsupported = [c for c in sdk.CHANNELS if c not in cls.supported_channels]
     some = list(channels[:2])
     source = None
@@ -714,10 +784,10 @@ def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str
                 else:
                     raise _Failed(f"the adapter took {unsupported[0]!r}, which it does not declare")
     adapter = first = None
+    first_error: Exception | None = None
     src = open_source()
     try:
         with run.check("lifecycle", "a foreign frame raises AdapterFrameError"):
-            frame = src.frame(camera, prev_camera)
             with src.adapter(some) as adapter:
                 _expect(not adapter.closed, "a new adapter reports closed")
                 try:
@@ -726,7 +796,10 @@ def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str
                     pass
                 else:
                     raise _Failed("inputs(object()) returned")
-                first = adapter.inputs(frame)
+                try:  # the planes of a real frame, for the second adapter below: its error is not this check's
+                    first = adapter.inputs(src.frame(camera, prev_camera))  # (before 2026-12-08 a wrong shape or a
+                except Exception as exc:  # NaN G-buffer failed this check, as if a foreign frame were taken)
+                    first_error = exc
         if adapter is not None:
             with run.check("lifecycle", "with closes the adapter; inputs after close raises AdapterClosedError"):
                 _expect(adapter.closed, "the adapter is open after its with block")
@@ -744,13 +817,16 @@ def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str
                     pass
                 else:
                     raise _Failed("with on a closed adapter entered")
-        if first is not None:
             with run.check("lifecycle", "closing the frame source closes the adapters it built"):
                 lent = src.adapter(some)
-                again = lent.inputs(src.frame(camera, prev_camera))
-                _expect(np.array_equal(again, first), "a second adapter on the same frame gave other planes")
+                if first is not None:
+                    again = lent.inputs(src.frame(camera, prev_camera))
+                    _expect(np.array_equal(again, first), "a second adapter on the same frame gave other planes")
                 src.close()
                 _expect(src.closed and lent.closed, "the adapter is still open after its source closed")
+                if first_error is not None and drew:  # (where every channel drew: an error of these alone)
+                    raise _Failed(f"the source's adapters closed, but inputs() of {', '.join(some)} alone raised "
+                                  f"{type(first_error).__name__}: {first_error}")
     finally:
         src.close()
     with run.check("lifecycle", "a closed frame source refuses frame() and adapter()"):

@@ -330,6 +330,106 @@ def test_an_adapter_that_raises_fails_with_its_error_and_the_rest_still_runs(reg
     assert {c.group for c in report.checks if c.status == "passed"} >= {"class"}
 
 
+
+@pytest.mark.gl
+def test_an_error_of_inputs_fails_no_lifecycle_check_it_does_not_name(registry: None,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    # a frame one row short: the planes and the predictor fail with the adapter's AdapterOutputError, and the
+    # lifecycle passes (until 2026-12-08 "a foreign frame raises AdapterFrameError" failed with it too)
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, _broken("ShortRows", lambda a, f, x: x[:, :-1]))
+    report = _report(THIRD_PARTY)
+    assert {(c.group, c.name) for c in report.failures} == {
+        ("planes", "frame source -> adapter -> inputs, every supported channel"),
+        ("predictor", "for_predictor feeds lpips.onnx")}, str(report)
+    assert all("AdapterOutputError" in c.detail and "(C, H, W)" in c.detail for c in report.failures)
+    lifecycle = [c for c in report.checks if c.group == "lifecycle"]
+    assert len(lifecycle) == 7 and all(c.status == "passed" for c in lifecycle), str(report)
+
+    # inputs that fail for the lifecycle's two channels alone (every channel at once drew): the check that drew
+    # them says so, and the foreign frame's still passes
+    def two_fail(self: NumpyAdapter, frame: CpuFrame) -> np.ndarray:
+        if len(self.channels) == 2:
+            raise RuntimeError("two planes are one texture too few")
+        return NumpyAdapter.inputs(self, frame)
+
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, _broken("TwoFail", inputs=two_fail))
+    report = _report(THIRD_PARTY)
+    assert [(c.group, c.name) for c in report.failures] == [
+        ("lifecycle", "closing the frame source closes the adapters it built")], str(report)
+    assert report.failures[0].detail == ("the source's adapters closed, but inputs() of reprojected.r, reprojected.g "
+                                         "alone raised RuntimeError: two planes are one texture too few")
+
+
+def _view_rotation(f: CpuFrame) -> np.ndarray:
+    return np.asarray(f.view, np.float64)[:3, :3]
+
+
+def _window_depth(f: CpuFrame, d: np.ndarray) -> np.ndarray:
+    """A depth buffer's [0, 1] values of linear depth ``d`` (0 on background)."""
+    p = np.asarray(f.projection, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ndc = (p[2, 2] * -d + p[2, 3]) / np.where(d > 0, d, 1.0)
+    return np.where(d > 0, ndc * 0.5 + 0.5, 0.0).astype(np.float32)
+
+
+def _radial_depth(f: CpuFrame, d: np.ndarray) -> np.ndarray:
+    """The distance to the camera of each pixel of linear depth ``d``."""
+    p, (h, w) = np.asarray(f.projection, np.float64), d.shape
+    xs = ((np.arange(w) + 0.5) / w * 2 - 1) / p[0, 0]
+    ys = (1 - (np.arange(h) + 0.5) / h * 2) / p[1, 1]
+    return (d * np.sqrt(1 + xs[None] ** 2 + ys[:, None] ** 2)).astype(np.float32)
+
+
+def _with(**changed: Callable[[CpuFrame], Any]) -> Callable[[NumpyAdapter, CpuFrame], np.ndarray]:
+    """An adapter's inputs from its frame with the G-buffers of ``changed`` (each made from the frame) replaced."""
+    def inputs(a: NumpyAdapter, f: CpuFrame) -> np.ndarray:
+        return sdk.input_planes(a.channels, **{**vars(f), **{k: fn(f) for k, fn in changed.items()}},
+                                tolerance=a.tolerance)
+    return inputs
+
+
+#: An engine's usual convention mistakes: the adapter, and per channel what the kit's failure says it looks like
+#: (None: it fails naming no cause).
+CAUSES: dict[str, tuple[Callable[[], type[NumpyAdapter]], dict[str, str | None]]] = {
+    "green for luma": (lambda: NoLumaAdapter, {"albedo.y": None}),
+    "upside down": (BUGS["upside down"][0], {c: "the rows are upside down" for c in ("albedo.r", "normal.x", "depth")}),
+    "linear albedo": (lambda: _broken("LinearAlbedo", inputs=_with(albedo=lambda f: sdk.srgb_to_linear(f.albedo))),
+                      {f"albedo.{c}": "albedo in linear light" for c in "rgby"}),
+    "world-space normals": (lambda: _broken("WorldNormals", inputs=_with(normal=lambda f: (
+        f.normal.astype(np.float64) @ _view_rotation(f)).astype(np.float32))),
+                            {f"normal.{c}": "normals in world space" for c in "xyz"}),
+    "encoded normals": (BUGS["encoded normals"][0], {f"normal.{c}": "normals encoded to [0, 1]" for c in "xyz"}),
+    "left-handed normals": (lambda: _broken("NegatedNormals", inputs=_with(normal=lambda f: -f.normal)),
+                            {f"normal.{c}": "normals with the opposite sign" for c in "yz"}),
+    "a depth buffer's values": (lambda: _broken("WindowDepth", inputs=_with(
+        depth=lambda f: _window_depth(f, f.depth), prev_depth=lambda f: _window_depth(f, f.prev_depth))),
+                                {"depth": "a depth buffer's values", "seen": "almost no pixel reprojects"}),
+    "distance to the camera": (lambda: _broken("RadialDepth", inputs=_with(depth=lambda f: _radial_depth(f, f.depth))),
+                               {"depth": "the distance to the camera"}),
+    "a transposed view": (lambda: _broken("TransposedView", inputs=_with(view=lambda f: np.ascontiguousarray(f.view.T))),
+                          {"seen": "almost no pixel reprojects"}),
+    "motion the wrong way": (lambda: _broken("MotionTheWrongWay", lambda a, f, x: _set(
+        a, x, motion_x=-_plane(a, x, "motion.x"), motion_y=-_plane(a, x, "motion.y")),
+        supported_channels=NumpyAdapter.supported_channels | {"motion.x", "motion.y"}),
+                             {"motion.x": "motion the wrong way"}),
+}
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("mistake", sorted(CAUSES))
+def test_the_kit_names_the_likely_convention_mistake_and_its_fix(registry: None, monkeypatch: pytest.MonkeyPatch,
+                                                                mistake: str) -> None:
+    make, causes = CAUSES[mistake]
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, make())
+    report = _report(THIRD_PARTY)
+    failed = {c.name.split()[0]: c.detail for c in report.failures if c.group == "agreement"}
+    for channel, cause in causes.items():
+        assert channel in failed, (channel, str(report))
+        if cause is None:  # a mistake that is none of the usual ones: none is named
+            assert "it looks like" not in failed[channel], failed[channel]
+        else:
+            assert f"; it looks like {cause}" in failed[channel], (channel, str(report))
+
 def test_the_kit_checks_the_class_before_drawing(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
     class NoClose(Adapter[CpuFrame]):  # an abstract method left: nothing is drawn
         name = THIRD_PARTY
