@@ -750,6 +750,121 @@ def test_an_obj_texture_or_material_library_that_cannot_be_read_is_dropped_with_
     assert mat.texture is not None and tuple(mat.texture[0, 0]) == (0, 0, 255, 255) and not caplog.records
 
 
+def _gltf_quad(uri: str) -> dict:
+    """A glTF of one textured unit quad whose base colour image is the file ``uri`` (its buffer embedded)."""
+    import base64
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    buf = pos.tobytes() + np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32).tobytes() \
+        + np.array([0, 1, 2, 0, 2, 3], np.uint16).tobytes()
+    return {"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "scene": 0, "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]}],
+            "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+            "textures": [{"source": 0}], "images": [{"uri": uri}],
+            "buffers": [{"byteLength": len(buf),
+                         "uri": "data:application/octet-stream;base64," + base64.b64encode(buf).decode()}],
+            "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                            {"buffer": 0, "byteOffset": 48, "byteLength": 32},
+                            {"buffer": 0, "byteOffset": 80, "byteLength": 12}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0],
+                           "max": [1, 1, 0]},
+                          {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                          {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}]}
+
+
+def test_a_gltfs_external_texture_is_found_where_it_names_it_or_named_in_a_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+):
+    """trimesh reads nothing outside the file's folder: a glTF's texture in ``../textures/`` (a common layout)
+    was dropped without a word, as were a percent-encoded URI (``my%20wall.png``, how exporters write a name
+    with a space) and a missing image (trimesh logs them at DEBUG). The first two are read now; a file that
+    is not there is a warning naming it, the material untextured."""
+    (tmp_path / "models").mkdir()
+    (tmp_path / "textures").mkdir()
+    PIL.new("RGBA", (4, 4), (255, 0, 0, 255)).save(tmp_path / "textures" / "red.png")
+    PIL.new("RGBA", (4, 4), (0, 0, 255, 255)).save(tmp_path / "models" / "my wall.png")
+    cases = {"up": ("../textures/red.png", (255, 0, 0, 255)), "space": ("my%20wall.png", (0, 0, 255, 255)),
+             "missing": ("missing.png", None)}
+    for name, (uri, texel) in cases.items():
+        (tmp_path / "models" / f"{name}.gltf").write_text(json.dumps(_gltf_quad(uri)))
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp"):
+            (mat,) = scenes.load_mesh_file(tmp_path / "models" / f"{name}.gltf").materials
+        if texel is None:
+            assert mat.texture is None
+            assert [r.getMessage() for r in caplog.records] == [
+                f"{tmp_path / 'models' / 'missing.gltf'}: the file missing.png it names cannot be read (no such "
+                "file): what uses it is dropped (a texture: the material untextured)"]
+        else:
+            assert mat.texture is not None and tuple(mat.texture[0, 0]) == texel, name
+            assert not caplog.records
+
+
+def test_an_objs_material_library_is_found_where_trimesh_finds_it(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """The loader read an OBJ's ``mtllib`` itself, trimesh by its own rules: a library in ``../materials/``
+    (outside the OBJ's folder, which trimesh refuses) gave trimesh's grey placeholder texture, without a
+    warning; one named by a path of another machine (``C:\\art\\room.mtl``) that trimesh found by its name
+    beside the OBJ was said to be unreadable and its materials replaced by the default. Both read the same
+    library now, and a ``map_Kd`` relative to a library in another folder is found there."""
+    obj = "mtllib {}\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl red\nf 1/1 2/2 3/3\n"
+    (tmp_path / "models").mkdir()
+    (tmp_path / "materials").mkdir()
+    PIL.new("RGBA", (4, 4), (0, 0, 255, 255)).save(tmp_path / "materials" / "blue.png")
+    (tmp_path / "materials" / "up.mtl").write_text("newmtl red\nKd 1 0 0\nmap_Kd blue.png\n")
+    (tmp_path / "models" / "up.obj").write_text(obj.format("../materials/up.mtl"))
+    (tmp_path / "models" / "room.mtl").write_text("newmtl red\nKd 0 1 0\n")
+    (tmp_path / "models" / "abs.obj").write_text(obj.format("C:\\art\\room.mtl"))
+    with caplog.at_level("WARNING", logger="rtp"):
+        (up,) = scenes.load_mesh_file(tmp_path / "models" / "up.obj").materials
+        (absolute,) = scenes.load_mesh_file(tmp_path / "models" / "abs.obj").materials
+    assert not caplog.records
+    assert up.name == "red" and up.texture is not None and tuple(up.texture[0, 0]) == (0, 0, 255, 255)
+    assert absolute.name == "red" and absolute.texture is None
+    assert absolute.base_color == pytest.approx((0.0, 1.0, 0.0, 1.0))
+
+
+def test_a_mesh_file_with_values_a_scene_cannot_hold_is_a_format_error_naming_it(tmp_path: Path):
+    """A glTF triangle indexing a vertex the file does not have was a bare IndexError from numpy (trimesh does
+    not check indices with process=False); a NaN vertex or a roughness of 1.5 was the scene model's
+    ParameterError ("Material.roughness: ..."), naming neither the file nor the geometry. Each is a
+    SceneFormatError naming both now."""
+    import base64
+
+    gltf = _gltf_quad("none.png")
+    del gltf["images"], gltf["textures"], gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
+    raw = base64.b64decode(gltf["buffers"][0]["uri"].split(",", 1)[1])
+    bad = raw[:80] + np.array([0, 1, 2, 0, 2, 7], np.uint16).tobytes()
+    gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bad).decode()
+    (tmp_path / "index.gltf").write_text(json.dumps(gltf))
+    gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(raw).decode()
+    gltf["materials"][0]["pbrMetallicRoughness"]["roughnessFactor"] = 1.5
+    (tmp_path / "rough.gltf").write_text(json.dumps(gltf))
+    (tmp_path / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n")
+    for name, message in (("index.gltf", r"its triangles index vertices in \[0, 7\], expected \[0, 4\)"),
+                          ("rough.gltf", r"its material: Material.roughness: expected a finite number"),
+                          ("nan.obj", r"Mesh.positions: expected finite values")):
+        with pytest.raises(SceneFormatError, match=rf"{re.escape(str(tmp_path / name))}: geometry '[^']+': {message}"):
+            scenes.load_mesh_file(tmp_path / name)
+
+
+def test_a_mesh_file_far_from_the_origin_loads_with_a_warning(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """float32, what the renderers draw with, resolves 6 cm at 1e6 m: a room there captured with 66 % unseen
+    pixels (10 % at the origin), without a word. It loads with a warning naming the distance and the
+    resolution; a room 1e5 m away (8 mm steps) loads without one."""
+    for offset, warned in ((1e6, True), (1e5, False)):
+        (tmp_path / "far.obj").write_text("".join(f"v {x + offset} 0 {z}\n" for x, z in ((0, 0), (1, 0), (1, 1)))
+                                          + "f 1 3 2\n")
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp"):
+            scenes.load_mesh_file(tmp_path / "far.obj")
+        said = [r.getMessage() for r in caplog.records]
+        if warned:
+            assert len(said) == 1 and "far.obj: its geometry lies up to 1000001 m from the origin" in said[0]
+            assert "resolves only 0.062 m" in said[0]
+        else:
+            assert not said
+
+
 #: A unit quad in the z = 0 plane facing +z, with texture coordinates and a material named, and no ``mtllib``.
 QUAD_OBJ = ("{}v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n{}"
             "f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")

@@ -9,7 +9,9 @@
 * Materials: glTF PBR (base colour factor and texture, roughness, metallic, alpha mode MASK →
   ``alpha_cutoff``) and OBJ/MTL (Kd, map_Kd; roughness from the Phong exponent); vertex
   colours become a constant base colour (their mean).
-* Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same.
+* Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same. Geometry more than
+  131072 m from the origin (where float32 steps reach 1.6 cm) loads with a warning: it draws with
+  coarse depth and reprojection.
 """
 
 from __future__ import annotations
@@ -17,12 +19,14 @@ from __future__ import annotations
 import logging
 import math
 import re
-from pathlib import Path
+import urllib.parse
+from pathlib import Path, PureWindowsPath
 from typing import Any
 
 import numpy as np
 
 from rtp.scene import Material, Mesh, Scene, SpawnPoint
+from rtp.sdk import ParameterError
 
 from .._images import image_values
 from ._errors import SceneFormatError, SceneNotFoundError
@@ -31,6 +35,10 @@ from ._geometry import vertex_normals
 __all__ = ["load_mesh_file"]
 
 log = logging.getLogger("rtp.capture")
+
+#: The coarsest float32 resolution (metres) at the geometry's farthest coordinate that loads without a warning:
+#: beyond 131072 m from the origin, float32 steps are 1.6 cm or more and reprojection degrades.
+FAR_RESOLUTION = 0.01
 
 
 def _image_to_rgba(img) -> np.ndarray | None:
@@ -59,11 +67,53 @@ def _rgb(value: Any) -> tuple[float, float, float]:
     return r, g, b
 
 
-def _obj_library(p: Path) -> tuple[Path | None, dict[str, str] | None]:
+def _resolver(p: Path) -> Any:
+    """The resolver through which trimesh reads the files that ``p`` names (an OBJ's material library and
+    textures, a glTF's buffers and images), and :func:`_obj_library` the library. A name is looked for relative
+    to ``p``'s folder as the formats intend, ``../textures/wall.png`` included (trimesh's default refuses
+    anything outside that folder: a glTF's texture there was dropped without a word, an OBJ's library there
+    gave trimesh's grey placeholder texture); then by its last part there (an absolute path from another
+    machine, ``C:\\art\\room.mtl`` or ``/home/me/room.mtl``); then in the folders of ``also`` (an OBJ's material
+    library's, whose ``map_Kd`` names are relative to it); a percent-encoded glTF URI (``my%20wall.png``, as
+    exporters write a name with a space) also by its decoded name. The names it cannot read are kept in
+    ``missing``."""
+    from trimesh.resolvers import FilePathResolver
+
+    class _Resolver(FilePathResolver):
+        def __init__(self) -> None:
+            super().__init__(str(p), allow_anywhere=True)
+            self.missing: list[str] = []
+            self.also: list[Path] = []
+
+        def where(self, name: str) -> Path | None:
+            for text in dict.fromkeys((name.strip(), urllib.parse.unquote(name.strip()))):
+                if not text:
+                    continue
+                parts = (text, text.lstrip("/"), PureWindowsPath(text).name)
+                for base in (Path(self.parent), *self.also):
+                    for part in dict.fromkeys(parts):
+                        path = base / part
+                        if path.is_file():
+                            return path
+            return None
+
+        def get(self, name: str) -> bytes:
+            path = self.where(name)
+            if path is None:
+                self.missing.append(name)
+                raise FileNotFoundError(f"{name}: no such file (looked for in {self.parent})")
+            return path.read_bytes()
+
+    return _Resolver()
+
+
+def _obj_library(p: Path, resolver: Any) -> tuple[Path | None, dict[str, str] | None]:
     """The material library an OBJ file names (its first ``mtllib``, the one trimesh reads) and the texture
     (``map_Kd``) each of its materials names; ``(None, {})`` without a library, None for a library that cannot be
     read (logged as a warning naming it: trimesh only logs it at DEBUG; its grey stand-in material is replaced
-    by the untextured default in :func:`_material_of`)."""
+    by the untextured default in :func:`_material_of`). The library is read through ``resolver``, trimesh's
+    (:func:`_resolver`), so both find the same file (an absolute path from another machine, ``C:/art/room.mtl``
+    or ``/home/me/room.mtl``, is looked for by its name beside the OBJ, as trimesh does)."""
     try:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError:
@@ -71,13 +121,16 @@ def _obj_library(p: Path) -> tuple[Path | None, dict[str, str] | None]:
     m = re.search(r"^[ \t]*mtllib[ \t]+(\S.*?)[ \t]*\r?$", text, re.MULTILINE)
     if m is None:
         return None, {}
-    lib = p.parent / m.group(1)
+    found = resolver.where(m.group(1))
+    lib = p.parent / m.group(1) if found is None else found
     try:
         mtl = lib.read_text(encoding="utf-8", errors="replace")
     except OSError as err:
         log.warning("%s: its material library %s cannot be read (%s): its materials are dropped (the meshes "
                     "untextured, in the default material)", p, lib, err.strerror or err)
         return lib, None
+    if lib.parent.resolve() != Path(resolver.parent).resolve():
+        resolver.also.append(lib.parent)  # (its map_Kd names are relative to it)
     textures: dict[str, str] = {}
     current = ""
     for line in mtl.splitlines():
@@ -144,7 +197,9 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
 
     Raises:
         SceneNotFoundError: no such file.
-        SceneFormatError: trimesh cannot read it, or it has no triangles.
+        SceneFormatError: trimesh cannot read it, it has no triangles, or a value in it is not one a scene may
+            hold (a triangle indexing a vertex it does not have, a NaN or float32-overflowing vertex, a material
+            factor outside [0, 1]), named with the file and geometry.
         ImportError: trimesh is not installed (``pip install 'rtp[scenes]'``).
     """
     try:
@@ -154,12 +209,18 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     p = Path(path)
     if not p.is_file():
         raise SceneNotFoundError(f"mesh file not found: {p}")
+    resolver = _resolver(p)
+    obj = p.suffix.lower() == ".obj"
+    lib, textures = _obj_library(p, resolver) if obj else (None, {})
     try:
-        loaded: Any = trimesh.load(str(p), force="scene", process=False)
+        loaded: Any = trimesh.load(str(p), force="scene", process=False, resolver=resolver)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types
         raise SceneFormatError(f"trimesh could not read {p}: {err}") from err
 
-    lib, textures = _obj_library(p) if p.suffix.lower() == ".obj" else (None, {})
+    if not obj:  # (an OBJ's lost library and textures are said below, by material)
+        for missing in dict.fromkeys(resolver.missing):
+            log.warning("%s: the file %s it names cannot be read (no such file): what uses it is dropped (a texture: "
+                        "the material untextured)", p, missing)
     # an OBJ without a material library: trimesh gives it (where it has texture coordinates) the same grey
     # placeholder texture as an unreadable one; both become the untextured default material
     no_library = p.suffix.lower() == ".obj" and lib is None
@@ -174,8 +235,15 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         T = np.asarray(transform, np.float64)
         v = np.asarray(geom.vertices, np.float64)
         f = np.asarray(geom.faces, np.int64)
-        pos = v @ T[:3, :3].T + T[:3, 3]
-        mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=no_library or textures is None)
+        if int(f.min()) < 0 or int(f.max()) >= len(v):  # (trimesh does not check them with process=False)
+            raise SceneFormatError(f"{p}: geometry {geom_name!r}: its triangles index vertices in "
+                                   f"[{int(f.min())}, {int(f.max())}], expected [0, {len(v)})")
+        with np.errstate(all="ignore"):  # (a NaN or infinite vertex or transform is refused by Mesh below)
+            pos = v @ T[:3, :3].T + T[:3, 3]
+        try:
+            mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=no_library or textures is None)
+        except ParameterError as err:  # (a factor outside [0, 1]: "Material.roughness: ...", naming no file)
+            raise SceneFormatError(f"{p}: geometry {geom_name!r}: its material: {err}") from err
         obj_mat = getattr(getattr(geom, "visual", None), "material", None)
         obj_name = str(getattr(obj_mat, "name", None))
         if textures and obj_name in textures and getattr(obj_mat, "image", None) is None and obj_name not in unread:
@@ -199,15 +267,25 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
             nrm = np.where(ln > 1e-12, nrm / np.maximum(ln, 1e-12), np.nan)
             if np.isnan(nrm).any():
                 nrm = None
-        if nrm is None:
-            nrm = vertex_normals(pos, f)
-        meshes.append(Mesh(pos.astype(np.float32), nrm.astype(np.float32), uv.astype(np.float32),
-                           f.astype(np.uint32), material=len(materials)))
+        try:
+            if nrm is None:
+                with np.errstate(all="ignore"):
+                    nrm = vertex_normals(pos, f)
+            meshes.append(Mesh(pos, nrm.astype(np.float32), uv.astype(np.float32), f.astype(np.uint32),
+                               material=len(materials)))
+        except ParameterError as err:  # (a NaN vertex: "Mesh.positions: ...", naming no file)
+            raise SceneFormatError(f"{p}: geometry {geom_name!r}: {err}") from err
         materials.append(mat)
     if not meshes:
         raise SceneFormatError(f"{p} contains no triangles")
     scene = Scene(name=name or p.stem, meshes=meshes, materials=materials)
     lo, hi = scene.bounds
+    far = float(np.max(np.abs(np.concatenate([lo, hi]))))
+    if float(np.spacing(np.float32(far))) > FAR_RESOLUTION:
+        log.warning("%s: its geometry lies up to %.0f m from the origin, where float32 (what the renderers draw "
+                    "with) resolves only %.3f m: depth, motion and reprojection are that coarse (a capture's unseen "
+                    "share grows: 10%% at the origin, 20%% at 2e5 m, 66%% at 1e6 m for one room); move the model "
+                    "near the origin", p.name, far, float(np.spacing(np.float32(far))))
     c = (lo + hi) / 2
     spawn = np.array([c[0], lo[1] + eye_height, c[2]], np.float64)
     from ..viewpoints import _roomiest_spawn
