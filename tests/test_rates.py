@@ -412,3 +412,67 @@ def test_a_saving_on_frames_of_many_tiles(seed: int) -> None:
                 lo = mid + 1
         assert sel.threshold == candidates[lo], saving
         assert sel.saved >= saving and sel.saved == pytest.approx(_saved(sel.rates, weights))
+
+
+# -- invariants over plausible but unusual predictions (property-based) ---------------------------------------------
+
+_AREA = {code: sdk.rate_size(name)[0] * sdk.rate_size(name)[1] for name, code in sdk.RATE_CODES.items()}
+_predictions = st.tuples(st.integers(1, 3), st.integers(1, 4)).flatmap(  # (each value drawn: no array fill)
+    lambda tiles: st.lists(st.one_of(st.sampled_from([0.0, 0.1, 0.11, 0.2, 0.25, 0.3, 0.6, 1.0, np.nan]), st.floats(0, 2)),
+                           min_size=6 * tiles[0] * tiles[1], max_size=6 * tiles[0] * tiles[1])
+    .map(lambda v: np.array(v, np.float64).reshape(6, *tiles)))
+_thresholds = st.one_of(st.sampled_from([0.15, 0.25, 0.4]), st.floats(0, 3))
+
+
+def _areas(codes: np.ndarray) -> np.ndarray:
+    return np.vectorize(lambda c: _AREA[int(c)])(codes)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, database=None)
+@given(values=_predictions, a=_thresholds, b=_thresholds,
+       allowed=st.one_of(st.none(), st.lists(st.sampled_from(sdk.ALL_RATES), unique=True)),
+       factors=st.one_of(st.none(), st.lists(st.floats(0.25, 4), min_size=6, max_size=6)), hib=st.booleans(),
+       engine=st.one_of(st.none(), st.sampled_from(sorted(sdk.RATE_NAMES))), combiner=st.sampled_from(["min", "max", "sum"]))
+def test_a_looser_threshold_never_shades_a_finer_rate(values: np.ndarray, a: float, b: float, allowed: list[str] | None,
+                                                      factors: list[float] | None, hib: bool, engine: int | None,
+                                                      combiner: str) -> None:
+    """Threshold monotonicity, with any allowed subset, per-rate factors, PSNR's direction and an engine's rates: the
+    rate the device shades under a looser threshold covers at least the area it covers under a stricter one; the
+    image holds allowed rates only; factors of 1 are no factors."""
+    strict, loose = sorted([a, b])
+    if hib:  # (PSNR: values in dB, a lower threshold is the looser)
+        values, strict, loose = 40.0 - 10.0 * values, 40.0 - 10.0 * strict, 40.0 - 10.0 * loose
+    supported = ("1x1", *sdk.resolve_allowed(allowed))
+    if engine is not None and sdk.RATE_NAMES[engine] not in supported:
+        engine = None
+    kw: dict = dict(higher_is_better=hib, allowed=allowed, factors=factors, engine_rates=engine, combiner=combiner)
+    tight, free = sdk.select_rates(values, strict, **kw), sdk.select_rates(values, loose, **kw)
+    if engine is not None:
+        tight, free = (sdk.combine_rates(engine, r, combiner, allowed=allowed) for r in (tight, free))
+    assert (_areas(free) >= _areas(tight)).all(), (tight, free)
+    assert {sdk.RATE_NAMES[int(c)] for c in np.unique(tight)} <= set(supported)
+    if factors is None:
+        np.testing.assert_array_equal(sdk.select_rates(values, strict, **{**kw, "factors": [1.0] * 6}),
+                                      sdk.select_rates(values, strict, **kw))
+
+
+_MIRROR = {"1x2": "2x1", "2x1": "1x2", "2x4": "4x2", "4x2": "2x4"}
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, database=None)
+@given(values=_predictions, threshold=_thresholds,
+       allowed=st.one_of(st.none(), st.lists(st.sampled_from(sdk.ALL_RATES), unique=True)),
+       factors=st.one_of(st.none(), st.lists(st.floats(0.25, 4), min_size=6, max_size=6)))
+def test_transposed_tiles_with_wide_and_tall_swapped_pick_the_transposed_rates(
+        values: np.ndarray, threshold: float, allowed: list[str] | None, factors: list[float] | None) -> None:
+    """Selection favours neither axis: transposing the tile grid and swapping each wide rate's predictions (and
+    allowance, and factor) with the tall one's gives the transposed image, wide and tall codes swapped (exact ties
+    between a wide and a tall rate aside, which go to the first in channel order)."""
+    values = values + np.arange(values.size).reshape(values.shape) * 1e-9  # (no exact ties)
+    swap = [sdk.PREDICTED_RATES.index(_MIRROR.get(r, r)) for r in sdk.PREDICTED_RATES]
+    got = sdk.select_rates(values, threshold, allowed=allowed, factors=factors)
+    mirrored = sdk.select_rates(np.swapaxes(values[swap], -1, -2), threshold,
+                                allowed=None if allowed is None else [_MIRROR.get(r, r) for r in allowed],
+                                factors=None if factors is None else [factors[i] for i in swap])
+    back = np.vectorize(lambda c: sdk.RATE_CODES[_MIRROR.get(sdk.RATE_NAMES[int(c)], sdk.RATE_NAMES[int(c)])])(got)
+    np.testing.assert_array_equal(mirrored, back.T)

@@ -3,6 +3,7 @@ to 1x1 or are predicted afresh on crops that give the whole frame's estimates, b
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -1265,3 +1266,29 @@ def test_a_fetch_out_of_the_frame_at_its_last_pixel_is_refused(bad: int) -> None
     with pytest.raises(sdk.ParameterError, match=r"fetch cols: expected indices in \[0, 150\)"):
         reuse.predict(x, (rows, cols))
     assert reuse.age == 0
+
+
+@functools.cache
+def _jnyang(tile: int) -> sdk.ShadingRatePredictor:
+    return sdk.load("jnyang", tile_size=tile)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
+@given(height=st.integers(1, 50), width=st.integers(1, 50), seed=st.integers(0, 99), tile=st.sampled_from([8, 16, 32]),
+       every=st.integers(1, 4), step=st.sampled_from([None, 1, 2, 4, 8, 16]),
+       reduce=st.sampled_from(sorted(sdk.REUSE_REDUCTIONS)), history=st.sampled_from([0.0, 0.5]))
+def test_a_frame_that_does_not_move_carries_the_network_s_estimates(height: int, width: int, seed: int, tile: int,
+                                                                    every: int, step: int | None, reduce: str,
+                                                                    history: float) -> None:
+    """Frames of any size (partial tiles, one pixel wide), hardware tiles finer or coarser than the model's, any step,
+    reduction and history: where nothing moves (fetch each pixel from itself, all seen) every carried frame's
+    estimates and rates are the network's."""
+    pred = _jnyang(tile)  # (each step divides the tiles reused on: the model's 16, or 32)
+    reuse = sdk.PredictionReuse(pred, every=every, step=step, reduce=reduce, history=history)
+    x = np.random.default_rng(seed).random((len(pred.metadata.inputs), height, width), dtype=np.float32)
+    want = pred.predict(x)
+    np.testing.assert_array_equal(reuse.predict(x), want)
+    fetch = tuple(np.indices((height, width)))
+    for _ in range(3):
+        np.testing.assert_allclose(reuse.predict(x, fetch=fetch), want, rtol=1e-5, atol=1e-6)
+        assert reuse.shading_rates(x, fetch=fetch).shape == want.shape[1:]
