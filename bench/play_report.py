@@ -38,6 +38,9 @@ are merged into one row per path (every method has its own history, so a method'
 which others ran beside it): `jnyang,jnyang@4` in one run and `jnyang@2` in another compare, and a run of
 the slow path beside one of the fast path gives both rows (until 2026-12-07 the second run's path was dropped).
 A method played on one path and not the other is blank on the other, as a method a run did not play.
+Runs merged across the loop's settings (history, shading, engine_rates, dynamic_resolution: the open
+loop, the composite, ...), which the key leaves out so that runs recorded before them still merge, are
+named in a note with both values.
 """
 
 from __future__ import annotations
@@ -57,6 +60,11 @@ LEVELS = (0.01, 0.02, 0.05)
 #: The methods that are not swept: the oracle, and the oracle on the monotone truth (the ceiling of a
 #: predictor that orders the rates; its column in the targets appears when a run played it).
 ORACLES = ("oracle", "oracle-monotone")
+
+
+#: The settings of the closed loop a run records besides its key (map, seed, frames, size, failing rule, tiles): runs
+#: that differ in one are merged, with a note.
+_LOOP_SETTINGS = ("history", "shading", "engine_rates", "dynamic_resolution")
 
 
 def _cell(m: dict[str, Any] | None) -> str:
@@ -193,6 +201,13 @@ def main() -> None:
                          "_played": {path: set(s["methods"]) for path in rep["unseen"]}})
             continue
         same["_grids"] = {**(grids or {}), **(same["_grids"] or {})} or None
+        # the loop's settings, which the key leaves out (runs before some of them were recorded still merge): a run
+        # of the open loop, of the composite, with engine rates or dynamic resolution is another experiment
+        differ = [k for k in _LOOP_SETTINGS if k in s and k in same["settings"] and s[k] != same["settings"][k]]
+        if differ:
+            both = "; ".join(f"{k}: {same['settings'][k]!r} and {s[k]!r}" for k in differ)
+            notes.append(f"note: {run} was played with another {', '.join(differ)} than a run of the same map before "
+                         f"it ({both}): its rows are merged with that run's, as the key names neither\n")
         # per path, the methods this run adds there: a path the first run did not play is added whole (it was
         # dropped, and with it every method of a run of the other path), a path both played gains the new methods
         for path, unseen in rep["unseen"].items():

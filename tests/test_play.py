@@ -1342,3 +1342,21 @@ def test_a_path_player_whose_scene_fails_to_load_releases_its_renderer(monkeypat
     with pytest.raises(RendererError, match="material 3"):
         PathPlayer(sc, (32, 24))
     assert len(released) == 1
+
+
+def test_the_report_notes_runs_merged_across_loop_settings(tmp_path: Path) -> None:
+    """The merge key names the map, seed, frames, size, failing rule and tiles, not the loop's settings: an open-loop
+    run (history: the full-rate frame) merged with a closed one in silence. Still merged (runs before a setting was
+    recorded must), now with a note naming the setting and both values; runs that agree get none."""
+    closed = _paths_run(tmp_path, "closed", {"slow": ["jnyang"]})
+    opened = _paths_run(tmp_path, "open", {"slow": ["jnyang", "jnyang@2"]})
+    for path, history in ((closed, "own displayed frame"), (opened, "full-rate frame (open loop)")):
+        rep = json.loads(Path(path).read_text())
+        rep["settings"]["history"] = history
+        Path(path).write_text(json.dumps(rep))
+    out = _play_report(closed, opened)
+    assert out.returncode == 0, out.stderr
+    assert (f"note: {opened} was played with another history than a run of the same map before it (history: "
+            "'own displayed frame' and 'full-rate frame (open loop)')") in out.stdout + out.stderr
+    agree = _paths_run(tmp_path, "agree", {"slow": ["jnyang", "jnyang@2"]})
+    assert "was played with another" not in _play_report(closed, agree).stdout
