@@ -161,7 +161,9 @@ class EvaluationReport:
         lines += [""] + [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
-    def to_markdown(self) -> str:
+    def to_markdown(self, where: str | os.PathLike[str] | None = None) -> str:
+        """The report as markdown; ``where``: the folder the file goes in, which its plot links are relative to
+        (default: beside the plots, as ``rtp evaluate --out`` writes them)."""
         lines = [f"# Evaluation of {Path(self.model['path']).name}", ""] + [f"- {h}" for h in self._header()]
         lines += ["", "## Prediction quality", ""] + self._quality_table(True)
         lines += ["", "## VRS decisions", ""] + self._decision_table(True)
@@ -182,7 +184,7 @@ class EvaluationReport:
         if self.plots:
             from urllib.parse import quote  # (a space in a model's file name broke the image link)
 
-            lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({quote(Path(p).name)})" for p in self.plots]
+            lines += ["", "## Plots", ""] + [f"![{Path(p).stem}]({quote(_link(p, where))})" for p in self.plots]
         return "\n".join(lines) + "\n"
 
     def write(self, out_dir: str | os.PathLike[str], stem: str = "evaluation") -> list[Path]:
@@ -208,7 +210,7 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
     paths = [out / f"{stem}.md", out / f"{stem}.json"]
     before = _listed_plots(paths[1])
     with atomic_output(paths[0]) as tmp:
-        tmp.write_text("\n".join(r.to_markdown() for r in reports), encoding="utf-8")
+        tmp.write_text("\n".join(r.to_markdown(out) for r in reports), encoding="utf-8")
     with atomic_output(paths[1]) as tmp:
         tmp.write_text(json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False), encoding="utf-8")
     # (`rtp evaluate psnr --out F` into jnyang's folder left jnyang_*.png beside psnr's report)
@@ -218,6 +220,18 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
     if gone:
         log.info("%s: removed %s, the plots of the evaluation this one replaced", out, ", ".join(gone))
     return paths
+
+
+def _link(plot: str, where: str | os.PathLike[str] | None) -> str:
+    """A plot's link in a report written into ``where``: its name where it lies there (or ``where`` is not known),
+    else its path relative to ``where`` (plots drawn into another ``plots_dir`` were linked by name: broken links)."""
+    path = Path(plot)
+    if where is None or path.parent.resolve() == Path(where).resolve():
+        return path.name
+    try:
+        return Path(os.path.relpath(path.resolve(), Path(where).resolve())).as_posix()
+    except ValueError:  # (another drive, on Windows)
+        return path.resolve().as_posix()
 
 
 #: The endings of the plot files :func:`evaluate` writes (``<name>_heatmaps.png``, ...).

@@ -1090,6 +1090,21 @@ def test_a_failure_while_drawing_the_plots_leaves_the_previous_ones_whole(
     assert {p.name: p.read_bytes() for p in out.glob("*.png")} == before
 
 
+def test_a_reports_plot_links_reach_plots_drawn_into_another_folder(dataset: Path, model: Path, tmp_path: Path) -> None:
+    """A library call drawing its plots into a plots_dir other than the folder the report is written into linked them
+    by file name: every image of evaluation.md was broken. Linked relative to the report now; beside it, by name."""
+    import re
+
+    rep = evaluate(model, dataset, baselines=False, max_samples=1, plots_dir=tmp_path / "figures")
+    rep.write(tmp_path / "report")
+    links = re.findall(r"!\[[^]]*\]\(([^)]+)\)", (tmp_path / "report" / "evaluation.md").read_text())
+    assert len(links) == 3 and all(link.startswith("../figures/") for link in links), links
+    assert all((tmp_path / "report" / link).is_file() for link in links)
+    rep.write(tmp_path / "figures")  # (beside its plots, as rtp evaluate --out writes them: by name)
+    links = re.findall(r"!\[[^]]*\]\(([^)]+)\)", (tmp_path / "figures" / "evaluation.md").read_text())
+    assert links and all("/" not in link for link in links), links
+
+
 def _sweep_point(rep: Any, method: str, label: str) -> dict[str, Any]:
     (row,) = [r for r in rep.sweep if r["method"] == method and r["parameter"] == label]
     return row
