@@ -198,9 +198,12 @@ def _decode(name: str, raw: Any) -> np.ndarray:
 class Sample:
     """One captured sample. Buffers are decoded to float32 on access (and cached)."""
 
-    def __init__(self, sample_id: str, loader: Any, meta: Mapping[str, Any]) -> None:
+    def __init__(self, sample_id: str, loader: Any, meta: Mapping[str, Any], where: Any = None) -> None:
         self.id = sample_id
         self.meta: Mapping[str, Any] = meta
+        # what its errors name: the file it was read from where there is one (an id alone did not say which folder
+        # of several, rtp train --data a,b), else the id
+        self._where = f"{where}" if where is not None else f"sample {sample_id!r}"
         #: Buffers the dataset does not hold (an engine's frames imported without them: stored as zeros).
         self.absent: frozenset[str] = frozenset()
         self._loader = loader
@@ -223,13 +226,13 @@ class Sample:
         n = len(BUFFERS[name].channels) or 3
         want = f"(H, W, {n})" if n > 1 else "(H, W)"
         if a.ndim != (3 if n > 1 else 2) or (n > 1 and a.shape[2] != n) or 0 in a.shape:
-            raise DatasetError(f"sample {self.id!r}: buffer {name!r} has shape {a.shape}, expected {want}")
+            raise DatasetError(f"{self._where}: buffer {name!r} has shape {a.shape}, expected {want}")
         hw = (int(a.shape[0]), int(a.shape[1]))
         if self._hw is not None and hw != self._hw:
-            raise DatasetError(f"sample {self.id!r}: buffer {name!r} is {hw[1]}x{hw[0]}, the sample's other buffers "
+            raise DatasetError(f"{self._where}: buffer {name!r} is {hw[1]}x{hw[0]}, the sample's other buffers "
                                f"are {self._hw[1]}x{self._hw[0]}")
         if not np.isfinite(a).all():
-            raise DatasetError(f"sample {self.id!r}: buffer {name!r} holds NaN or infinite values")
+            raise DatasetError(f"{self._where}: buffer {name!r} holds NaN or infinite values")
         self._hw = hw
         return a
 
@@ -572,7 +575,7 @@ def _open_sample(sample_id: str, source: Any, path: Any) -> Sample:
         except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
             raise DatasetError(f"{_unreadable(path, f'buffer {name!r} is unreadable', err)}{fix}") from err
 
-    return Sample(sample_id, load, meta)
+    return Sample(sample_id, load, meta, path if isinstance(path, Path) else None)
 
 
 class PaperDatasetReader:

@@ -417,6 +417,8 @@ def test_malformed_samples_are_dataset_errors(tmp_path: Path, corrupt: Any, word
         for r in sdk.ALL_RATES:
             s.final(r)
     assert words in str(err.value)
+    # the file is named (an id alone did not say which folder of several: rtp train --data a,b)
+    assert str(w.samples_dir / "s0.npz") in str(err.value) or words in ("unreadable sample",), str(err.value)
 
 
 def test_a_sample_file_damaged_inside_or_a_newer_format_says_what_to_do(tmp_path: Path) -> None:
