@@ -293,6 +293,8 @@ def merge_slices(model: Any) -> int:
     outputs = {o.name for o in graph.output}
 
     def params(node: Any) -> list[np.ndarray] | None:
+        if len(node.input) < 3:  # opset 9's Slice: starts, ends and axes as attributes (a KeyError here): left as is
+            return None
         names = list(node.input[1:]) + [""] * (5 - len(node.input))
         if any(name and name not in consts for name in names[:2]) or (names[2] and names[2] not in consts) \
                 or (names[3] and names[3] not in consts):
@@ -366,6 +368,8 @@ def split_input_planes(model: Any, most: int = PLANES_PER_INPUT) -> int:
     import onnx
     from onnx import helper, numpy_helper
 
+    if isinstance(most, bool) or not isinstance(most, (int, np.integer)) or most < 1:  # (0 was a ZeroDivisionError)
+        raise ParameterError(f"most: expected the most planes one input holds, an integer >= 1, got {most!r}", "most")
     graph = _model(model).graph
     init = {i.name: i for i in graph.initializer}
     inputs = _plane_inputs(graph)
@@ -799,7 +803,9 @@ def export_checkpoint(
     c, t = net.config["in_channels"], net.config["tile"]
     h, w = _parity_sizes(t)[0]
     dummy = torch.rand(1, c, h, w, generator=torch.Generator().manual_seed(0))
-    split = bool(net.config.get("contrast_stored"))  # a trunk to carry across frames and a tail: two graphs
+    # a trunk to carry across frames and a tail: two graphs (a stored contrast that joins at tile resolution; one
+    # that joins at a finer cell has no per-tile features to carry, and exported as two failed the tail's check)
+    split = bool(getattr(net, "splits", False))
     t0 = time.perf_counter()
     with atomic_output(out) as tmp:
         try:
@@ -905,7 +911,7 @@ def _check_not_computed(extra: Mapping[Any, Any], source: str = "") -> None:
 
 
 def _with_features(net: Any) -> Any:
-    """A splitting network (``FastNet`` with ``contrast_stored``) as a module whose graph also outputs the
+    """A splitting network (``FastNet.splits``: a stored contrast at tile resolution) as a module whose graph also outputs the
     trunk's features (``sdk.FEATURES_NAME``)."""
     import torch
 
@@ -1187,15 +1193,25 @@ def adopt(
     with atomic_output(out) as tmp:
         _check_and_save(model, tmp)
         pred = sdk.load(tmp, providers=["CPUExecutionProvider"])
-        sizes = [static_hw] if (static_hw and not dynamic) else [(t * 8, t * 12), (t * 5, t * 9)]
+        fixed = static_hw is not None and not dynamic  # (frames padded up to its one size)
+        sizes = [static_hw] if static_hw is not None and fixed else [(t * 8, t * 12), (t * 5, t * 9)]
         if dynamic and static_hw:
             sizes.append(static_hw)
+        m = meta.input_multiple
+        partial = None if fixed or m is None or m >= t else (t * 5 + m, t * 9 + t - m)
+        if partial is not None:  # the frames of partial tiles the sidecar says it takes (run as they are, not padded)
+            sizes.append(partial)
         rng = np.random.default_rng(0)
         for h, w in sizes:
             x = rng.random((1, len(meta.inputs), h, w), dtype=np.float32)
             try:
                 y = pred.predict(x)
             except RtpError as err:
+                if (h, w) == partial:  # (adopted, it failed every predict of such a frame: 1920x1080 with tile 16)
+                    raise MetadataError(
+                        f"input_multiple: the metadata ({source}) says the model takes frames of multiples of {m} "
+                        f"pixels, partial {t}-pixel tiles included, but it does not run at {w}x{h}: {err}; leave "
+                        "input_multiple out (frames padded to whole tiles)", "input_multiple") from err
                 raise ExportError(f"the adopted model does not run at {w}x{h}: {err}") from err
             if not np.all(np.isfinite(y)):
                 raise ExportError(f"the adopted model produced non-finite predictions at {w}x{h}")

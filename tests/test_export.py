@@ -347,6 +347,26 @@ def test_adopt_reads_a_fixed_models_tile_grid_as_the_sdk_does(tmp_path: Path) ->
     assert info.value.key == "tile_size" and not (tmp_path / "b.onnx").exists()
 
 
+def test_adopt_checks_that_a_dynamic_model_takes_the_partial_tiles_its_sidecar_says(tmp_path: Path) -> None:
+    """A sidecar's ``input_multiple`` below the tile on a model of symbolic size: adopt ran only frames of whole
+    tiles, so a model that floors partial tiles (a floor-mode pool) was adopted with ``input_multiple: 8`` and then
+    failed every predict of a frame of partial tiles (InferenceError at 120x72). Now that is refused, naming the
+    field, nothing written; a model that takes them (ceil mode) adopts and predicts them."""
+    from .conftest import build_onnx
+
+    sidecar = base_metadata(input_multiple=8)
+    floors = build_onnx(tmp_path / "floors.onnx", weights=np.eye(4, dtype=np.float32))
+    with pytest.raises(sdk.MetadataError, match="input_multiple: .*multiples of 8 pixels.*does not run") as info:
+        export.adopt(floors, sidecar, tmp_path / "a.onnx")
+    assert info.value.key == "input_multiple" and not (tmp_path / "a.onnx").exists()
+    pred = sdk.load(export.adopt(floors, base_metadata(), tmp_path / "a.onnx"))  # whole tiles: padded to them
+    assert pred.predict(np.zeros((4, 72, 120), np.float32)).shape == (6, 5, 8)
+    takes = build_onnx(tmp_path / "takes.onnx", weights=np.eye(4, dtype=np.float32), ceil_mode=True)
+    pred = sdk.load(export.adopt(takes, sidecar, tmp_path / "b.onnx"))
+    assert pred.metadata.input_multiple == 8
+    assert pred.predict(np.zeros((4, 72, 120), np.float32)).shape == (6, 5, 8)
+
+
 def test_adopt_cli_with_a_yaml_sidecar(tmp_path: Path) -> None:
     import yaml
 
@@ -579,6 +599,29 @@ def test_the_cli_exports_without_the_probe_and_strips_it(fast_onnx: Path, tmp_pa
 
 
 
+@pytest.mark.parametrize("cell", [4, 8])
+def test_a_stored_contrast_finer_than_the_tile_exports_as_one_graph(tmp_path: Path, cell: int) -> None:
+    """``--block-contrast`` on .blocks planes at the stem's cell or after the first pool (what ``rtp train``
+    takes): its trunk's features are not per tile, so the export is one graph that does not split (it was
+    exported as a split network and failed its own tail check: "features: expected (channels, 4, 6) for this
+    frame's tiles, got (16, 16, 24)"), predicting as torch on frames of partial tiles."""
+    from rtp.train.model import FastNet
+
+    torch.manual_seed(0)
+    net = FastNet(6, block_contrast=(4, 5), contrast_cell=cell, contrast_stored=True)
+    with torch.no_grad():
+        net.train()(torch.rand(2, 6, 64, 64))
+    net.eval()
+    assert not net.splits and FastNet(6, block_contrast=(4, 5), contrast_cell=16, contrast_stored=True).splits
+    inputs = [*sdk.DEFAULT_INPUTS, "reprojected.y.blocks", "albedo.y.blocks"]
+    out = export.export_checkpoint(checkpoint.save(tmp_path / "b.pt", net, base_metadata(inputs=inputs)),
+                                   tmp_path / "b.onnx")
+    pred = sdk.load(out)
+    assert not pred.splits and pred.metadata.tail is None and pred.metadata.input_multiple == 4
+    x = np.random.default_rng(1).random((6, 52, 84), dtype=np.float32)
+    np.testing.assert_allclose(pred.predict(x), _torch_pipeline_to(net, pred.metadata, x, 4), rtol=1e-5, atol=1e-5)
+
+
 @pytest.mark.parametrize("argv, words", [
     (["--one-input", "--adopt", "f.onnx", "-o", "x.onnx"], "--one-input applies to exporting a checkpoint"),
     (["m.pt", "--adopt", "f.onnx", "-o", "x.onnx"], "give either a checkpoint or --adopt FOREIGN.onnx, not both"),
@@ -721,6 +764,31 @@ def test_merge_slices_merges_chains_and_keeps_the_outputs(tmp_path: Path) -> Non
     for o, n in zip(old, new):
         np.testing.assert_array_equal(o, n)
     np.testing.assert_array_equal(new[0], x[:, 1:3, 0::4, 1::4] * 2.0)
+
+
+def test_graph_passes_leave_opset_9_slices_and_refuse_a_group_of_no_planes() -> None:
+    """Opset 9's Slice holds starts, ends and axes as attributes (the paper's published models are opset 9):
+    merge_slices read them as inputs and raised a KeyError; now it leaves such a chain as it is.
+    split_input_planes with ``most=0`` raised a ZeroDivisionError; now a ParameterError that names it."""
+    import onnx
+    import onnxruntime as ort
+    from onnx import TensorProto, helper
+
+    nodes = [helper.make_node("Slice", ["input"], ["a"], starts=[1], ends=[3], axes=[1]),
+             helper.make_node("Slice", ["a"], ["metric"], starts=[0], ends=[4], axes=[2])]
+    graph = helper.make_graph(nodes, "s", [helper.make_tensor_value_info("input", TensorProto.FLOAT, [1, 4, 8, 8])],
+                              [helper.make_tensor_value_info("metric", TensorProto.FLOAT, [1, 2, 4, 8])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 9)])
+    model.ir_version = 4
+    assert export.merge_slices(model) == 0
+    onnx.checker.check_model(model, full_check=True)
+    x = np.random.default_rng(0).random((1, 4, 8, 8), dtype=np.float32)
+    got = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"input": x})
+    np.testing.assert_array_equal(got[0], x[:, 1:3, :4])
+    for most in (0, -1, 2.5, True):
+        with pytest.raises(sdk.ParameterError, match="most: expected .* integer >= 1") as info:
+            export.split_input_planes(model, most)
+        assert info.value.name == "most"
 
 
 def test_no_export_writes_over_its_checkpoint_or_where_it_cannot_write(fast_onnx: Path, tmp_path: Path) -> None:

@@ -225,6 +225,15 @@ def test_one_networks_option_with_the_other_arch_is_refused_not_ignored(arch: st
     assert isinstance(build_network("paper", 4, 4, 16, head="linear", coarse_width=32), MetricNet)
 
 
+def test_a_contrast_cell_without_block_contrast_is_refused_not_ignored() -> None:
+    """``contrast_cell`` without ``block_contrast`` built a network without any contrast and recorded no cell
+    (``rtp train`` refuses it; the Python builder took it without a word)."""
+    with pytest.raises(sdk.ParameterError, match="^contrast_cell: .*only with block_contrast") as err:
+        build_network("fast", 4, 4, 16, contrast_cell=8)
+    assert err.value.name == "contrast_cell"
+    assert build_network("fast", 4, 4, 16, block_contrast=(0,), contrast_cell=8).config["contrast_cell"] == 8
+
+
 def _round_trip(net: torch.nn.Module, key: str, meta: dict[str, Any] | None = None, seed: int = 0) -> None:
     """``net`` (BatchNorm statistics made non-trivial) saved, reloaded with its config's ``key``, exported,
     and the SDK's raw prediction equal to torch's."""

@@ -571,6 +571,9 @@ class FastNet(nn.Module):
             raise ParameterError(f"contrast_tiles reads the block contrast from .tiles planes of {BLOCK_TILE}-pixel tiles: "
                              f"expected contrast_stored, tile {BLOCK_TILE} and contrast_cell {BLOCK_TILE}, got "
                              f"contrast_stored={contrast_stored}, tile {tile}, contrast_cell {cell}")
+        if contrast_cell and not block_contrast:  # (built without a contrast, the cell taken and ignored, as rtp train refuses)
+            raise ParameterError(f"contrast_cell: the cell of the block contrast, read only with block_contrast (the planes "
+                                 f"to measure): expected 0 without it, got {contrast_cell}", "contrast_cell")
         self.contrast: BlockContrast | StoredBlockContrast | TileContrast | None = None
         if block_contrast and contrast_tiles:
             self.contrast = TileContrast(tuple(block_contrast), in_channels, cell, tile_max=contrast_max)
@@ -661,6 +664,15 @@ class FastNet(nn.Module):
         cell = 0 if self.contrast is None else BLOCK_CELL if isinstance(self.contrast, (StoredBlockContrast, TileContrast)) \
             else self.contrast.cell
         return max(min(int(self.config["stem"]), self.tile), cell)
+
+    @property
+    def splits(self) -> bool:
+        """Whether ``rtp-export`` splits the network into a trunk whose per-tile features a runtime carries
+        across frames and a tail (metadata ``tail``): its block contrast is read from stored planes
+        (``contrast_stored``) and joins at tile resolution. A stored contrast that joins at a finer cell (the
+        stem's, or after a pool short of the tile) is exported as one graph: its trunk's features are not
+        per tile."""
+        return self.contrast is not None and bool(self.config.get("contrast_stored")) and self.contrast.cell == self.tile
 
     def trunk(self, x: torch.Tensor) -> torch.Tensor:
         """The features before the block contrast joins (the whole network's output without one); with
