@@ -797,7 +797,7 @@ def _lifecycle_checks(run: _Run, cls: type[Adapter[Any]], channels: Sequence[str
                 else:
                     raise _Failed("inputs(object()) returned")
                 try:  # the planes of a real frame, for the second adapter below: its error is not this check's
-                    first = adapter.inputs(src.frame(camera, prev_camera))  # (before 2026-12-08 a wrong shape or a
+                    first = adapter.inputs(src.frame(camera, prev_camera))  # (before 2026-12-07 a wrong shape or a
                 except Exception as exc:  # NaN G-buffer failed this check, as if a foreign frame were taken)
                     first_error = exc
         if adapter is not None:

@@ -919,7 +919,9 @@ class ShadingRatePredictor:
         """One frame's checked and padded input ``(x4, xp)`` for the split methods."""
         if self._tail is None:
             raise ParameterError("this model does not split (metadata.tail is null): it has no trunk features to carry; "
-                                 "export a network trained with --block-contrast on .blocks or .tiles planes", "carry")
+                                 "export a network trained with --block-contrast on .blocks or .tiles planes and "
+                                 "--contrast-cell 16 (the tile's: a finer cell joins inside the stem, no per-tile "
+                                 "features)", "carry")
         if isinstance(x, np.ndarray) and x.ndim != 3:
             c = len(self._meta.inputs)
             raise InputShapeError(f"expected one frame's inputs ({c}, H, W), got shape {x.shape}", tuple(x.shape),

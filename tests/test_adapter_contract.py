@@ -335,7 +335,7 @@ def test_an_adapter_that_raises_fails_with_its_error_and_the_rest_still_runs(reg
 def test_an_error_of_inputs_fails_no_lifecycle_check_it_does_not_name(registry: None,
                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     # a frame one row short: the planes and the predictor fail with the adapter's AdapterOutputError, and the
-    # lifecycle passes (until 2026-12-08 "a foreign frame raises AdapterFrameError" failed with it too)
+    # lifecycle passes (until 2026-12-07 "a foreign frame raises AdapterFrameError" failed with it too)
     monkeypatch.setitem(adapters._registered, THIRD_PARTY, _broken("ShortRows", lambda a, f, x: x[:, :-1]))
     report = _report(THIRD_PARTY)
     assert {(c.group, c.name) for c in report.failures} == {
