@@ -62,10 +62,11 @@ def _run(args: list[str], limit: int, cwd: Path) -> subprocess.CompletedProcess[
                           env=env, preexec_fn=lambda: _limited(limit))
 
 
-def _said(run: subprocess.CompletedProcess[str], prog: str, path: Path) -> None:
-    """One line naming the file, exit 1, and no temporary file left beside it."""
+def _said(run: subprocess.CompletedProcess[str], prog: str, path: Path, note: str = "") -> None:
+    """One line naming the file (and ``note``, a worker's note of its scene), exit 1, and no temporary file left
+    beside it."""
     assert run.returncode == 1, run.stderr
-    assert run.stderr.strip().splitlines()[-1] == f"{prog}: error: File too large: {str(path)!r}", run.stderr
+    assert run.stderr.strip().splitlines()[-1] == f"{prog}: error: File too large: {str(path)!r}{note}", run.stderr
     assert "Traceback" not in run.stderr
     assert not list(path.parent.glob(".*.tmp")) and not list(path.parent.glob("*.tmp"))
 
@@ -75,7 +76,8 @@ def test_a_capture_that_cannot_write_its_sample_names_it_and_leaves_nothing(tmp_
     out = tmp_path / "data"
     run = _run(["rtp", "-q", "capture", "--scene", "procedural:1", "--per-scene", "1", "--profiles", "slow",
                 "--size", "160x96", "--out", str(out)], 20_000, tmp_path)
-    _said(run, "rtp capture", out / "samples" / "procedural_1-slow-0000.npz")
+    _said(run, "rtp capture", out / "samples" / "procedural_1-slow-0000.npz",
+          " (rtp: raised while working on scene 'procedural:1')")
 
 
 def test_training_and_export_that_cannot_write_their_files_name_them(tmp_path: Path) -> None:
