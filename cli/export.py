@@ -4,5 +4,7 @@ import sys
 
 from ._export import export_main
 
+__all__ = ["export_main"]
+
 if __name__ == "__main__":
     sys.exit(export_main())

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 
 from rtp.sdk import (
+    DEFAULT_EXTRAPOLATION_K,
     DEFAULT_TILE_SIZE,
     EXIT_USAGE,
     LUMA_WEIGHTS,
@@ -341,7 +342,7 @@ def motion_factor_half(v: np.ndarray | float) -> np.ndarray:
     return np.power(1.0 + np.power(1.05 * v, 3.10), -0.35)
 
 
-def motion_factor_quarter(v: np.ndarray | float, k: float = 2.13) -> np.ndarray:
+def motion_factor_quarter(v: np.ndarray | float, k: float = DEFAULT_EXTRAPOLATION_K) -> np.ndarray:
     """Yang 2019 Eq. 21: ``b_Q(v) = k (1 + (0.55 v)^2.41)^-0.49`` with ``k = 2.13`` (the
     quarter-rate error ratio at rest; about 0.163 at 16 px)."""
     v = np.abs(np.asarray(v, dtype=np.float64))
@@ -388,7 +389,7 @@ class Yang2019:
         threshold: float = 0.25,
         env_luminance: float = 0.02,
         norm: Norm = "max",
-        k: float = 2.13,
+        k: float = DEFAULT_EXTRAPOLATION_K,
         motion: bool = True,
         motion_scale: float = 1.0,
         motion_reduce: Literal["min", "mean", "max"] = "min",

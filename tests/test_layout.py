@@ -36,7 +36,7 @@ ROOMS: dict[str, tuple[str, frozenset[str]]] = {
 THIRD_PARTY: dict[str, frozenset[str]] = {
     "sdk": frozenset({"numpy", "onnxruntime", "yaml"}),
     "scene": frozenset({"numpy"}),
-    "evaluate": frozenset({"numpy", "PIL", "matplotlib", "tqdm", "imageio"}),
+    "evaluate": frozenset({"numpy", "PIL", "matplotlib"}),
     "conformance": frozenset({"numpy", "matplotlib"}),
 }
 
@@ -64,9 +64,10 @@ def _imports(path: Path, package: str) -> list[tuple[str, int]]:
             else:
                 mod = node.module or ""
             out.append((mod, node.lineno))
-            # `from rtp import sdk` names rooms in the imported names
-            if mod == "rtp":
-                out += [(f"rtp.{a.name}", node.lineno) for a in node.names]
+            # `from rtp import sdk` and `from rtp.plugins import pyrender` name rooms in the imported
+            # names, and `from rtp.sdk import _planes` a private module or name of the room
+            if mod == "rtp" or mod.startswith("rtp."):
+                out += [(f"{mod}.{a.name}", node.lineno) for a in node.names if a.name != "*"]
     return out
 
 
@@ -133,3 +134,121 @@ def test_no_script_folder_shadows_a_standard_library_module() -> None:
         names = {p.stem for p in (ROOT / folder).glob("*.py")}
         clash = sorted(names & set(sys.stdlib_module_names))
         assert not clash, f"{folder}/ holds scripts named like standard-library modules: {clash}"
+
+
+def _library_sources() -> list[Path]:
+    """Every source file of the rooms but the command line's (``cli/``, which may print)."""
+    return [path for room in sorted(ROOMS) if room != "cli" for path, _ in _sources(room)]
+
+
+def _prints(path: Path) -> list[str]:
+    """``print(...)`` calls and writes to ``sys.stdout`` / ``sys.stderr`` in ``path``."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(node, ast.Call):
+            continue
+        f = node.func
+        if isinstance(f, ast.Name) and f.id == "print" or (
+                isinstance(f, ast.Attribute) and f.attr in ("write", "writelines") and isinstance(f.value, ast.Attribute)
+                and f.value.attr in ("stdout", "stderr", "__stdout__", "__stderr__")):
+            out.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    return out
+
+
+def test_library_code_logs_and_never_prints() -> None:
+    # docs/runtime.md: logging goes to the `rtp` logger; the command line (cli/) is the only room that
+    # prints, and a library printing would write into an engine's or a notebook's output
+    bad = [hit for path in _library_sources() for hit in _prints(path)]
+    assert not bad, "library code prints (log through logging.getLogger(__name__) instead):\n" + "\n".join(bad)
+
+
+def _top_level_names(tree: ast.Module) -> set[str]:
+    """Names a module binds at its top level (also inside top-level ``if`` / ``try`` blocks)."""
+    names: set[str] = set()
+    body = list(tree.body)
+    while body:
+        node = body.pop()
+        if isinstance(node, (ast.If, ast.Try)):
+            body += node.body + node.orelse + getattr(node, "finalbody", [])
+            body += [n for h in getattr(node, "handlers", []) for n in h.body]
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names |= {(a.asname or a.name).split(".")[0] for a in node.names}
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            for target in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                names |= {n.id for n in ast.walk(target) if isinstance(n, ast.Name)}
+    return names
+
+
+def _all_problems(path: Path) -> list[str]:
+    """What is wrong with a public module's ``__all__``: missing, not a literal list of strings, naming a
+    private name, or naming something the module does not define."""
+    where = str(path.relative_to(ROOT))
+    tree = ast.parse(path.read_text(), str(path))
+    values = [n.value for n in tree.body if isinstance(n, (ast.Assign, ast.AnnAssign)) and n.value is not None
+              and any(isinstance(t, ast.Name) and t.id == "__all__"
+                      for t in (n.targets if isinstance(n, ast.Assign) else [n.target]))]
+    if not values:
+        return [f"{where}: a public module without __all__"]
+    try:
+        names = ast.literal_eval(values[-1])
+    except ValueError:
+        return [f"{where}: __all__ is not a literal list of names"]
+    bound = _top_level_names(tree)
+    lazy = "__getattr__" in bound  # a module __getattr__ serves names it does not bind
+    out = [f"{where}: __all__ names the private {n!r}" for n in names if n.startswith("_") and not n.startswith("__")]
+    out += [f"{where}: __all__ names {n!r}, which it does not define" for n in names if n not in bound and not lazy]
+    return out
+
+
+def test_every_public_module_declares_its_public_names() -> None:
+    # a public module (no `_` in its path) says what it exports, and exports nothing private by accident
+    bad = []
+    for room in sorted(ROOMS):
+        for path, _ in _sources(room):
+            rel = path.relative_to(ROOT / ROOMS[room][0]).parts
+            if path.name == "__main__.py" or any(p.startswith("_") and p != "__init__.py" for p in rel):
+                continue
+            bad += _all_problems(path)
+    bad += _all_problems(ROOT / "cli" / "_package" / "__init__.py")  # the `rtp` package itself
+    assert not bad, "\n".join(bad)
+
+
+def test_every_package_is_typed() -> None:
+    # PEP 561: a user's type checker reads rtp's annotations only where a py.typed marker ships. Every
+    # room, and `rtp` itself (`rtp.__version__`), carries one in the checkout and in the package data
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    package_data = config["package-data"]
+    missing = []
+    for package, folder in config["package-dir"].items():
+        if not (ROOT / folder / "__init__.py").is_file() or package == "rtp.plugins" or package == "rtp.models":
+            continue  # rtp.plugins holds only the adapters' rooms, rtp.models only data
+        if not (ROOT / folder / "py.typed").is_file():
+            missing.append(f"{folder}/py.typed (for {package})")
+        if "py.typed" not in package_data.get(package, []):
+            missing.append(f'pyproject.toml [tool.setuptools.package-data] "{package}" lacks "py.typed"')
+    assert not missing, "\n".join(missing)
+
+
+#: Facts ``rtp.sdk`` holds, by a value no other room has a reason to write: value -> the name to use.
+SDK_FACTS = {2.13: "rtp.sdk.DEFAULT_EXTRAPOLATION_K", 0.299: "rtp.sdk.LUMA_WEIGHTS", 0.587: "rtp.sdk.LUMA_WEIGHTS",
+             0.114: "rtp.sdk.LUMA_WEIGHTS"}
+
+
+def test_no_room_restates_the_sdks_facts() -> None:
+    # design.md: facts every room needs live once, public, in sdk; no room re-states them. (The torch port
+    # of flip-evaluator in metrics/_flipbatch.py keeps FLIP's own sRGB curve, tested against FLIP.)
+    from rtp import sdk
+
+    assert sdk.DEFAULT_EXTRAPOLATION_K == 2.13 and tuple(sdk.LUMA_WEIGHTS) == (0.299, 0.587, 0.114)
+    bad = []
+    for path in _library_sources():
+        if path.is_relative_to(ROOT / "sdk"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Constant) and type(node.value) is float and node.value in SDK_FACTS:
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno} writes {node.value} (use {SDK_FACTS[node.value]})")
+    assert not bad, "\n".join(bad)

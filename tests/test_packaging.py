@@ -27,7 +27,7 @@ DATA = {
 }
 ROOMS = {"sdk": "rtp/sdk", "export": "rtp/export", "train": "rtp/train", "capture": "rtp/capture",
          "metrics": "rtp/metrics", "scene": "rtp/scene", "evaluate": "rtp/evaluate",
-         "conformance": "rtp/conformance",
+         "conformance": "rtp/conformance", "cli": "rtp/cli", "cli/_package": "rtp",
          "plugins/moderngl": "rtp/plugins/moderngl", "plugins/pyrender": "rtp/plugins/pyrender"}
 
 

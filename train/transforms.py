@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import torch
 
-from rtp.sdk import LOGIT_EPS, OUTPUT_SETS, ModelMetadata, Transform, complete_rates
+from rtp.sdk import DEFAULT_EXTRAPOLATION_K, LOGIT_EPS, OUTPUT_SETS, ModelMetadata, Transform, complete_rates
 
 __all__ = ["decode", "extrapolate", "forward", "inverse"]
 
@@ -44,7 +44,7 @@ def inverse(p: torch.Tensor, t: Transform) -> torch.Tensor:
 
 
 def extrapolate(
-    values: torch.Tensor, outputs: Sequence[str], k: float = 2.13, *, higher_is_better: bool = False
+    values: torch.Tensor, outputs: Sequence[str], k: float = DEFAULT_EXTRAPOLATION_K, *, higher_is_better: bool = False
 ) -> torch.Tensor:
     """Complete per-rate values (axis -3) to the six reduced rates; see ``rtp.sdk.extrapolate``."""
     outputs = tuple(outputs)

@@ -7,12 +7,10 @@ the runtime engines use (``from rtp import sdk; sdk.load("jnyang")``), ``rtp.plu
 command. Importing ``rtp`` itself imports none of them.
 """
 
-from typing import Any
-
 __all__ = ["__version__"]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> str:
     # one source of truth: the installed distribution's version, which rtp.sdk reads
     if name == "__version__":
         from rtp import sdk
