@@ -65,6 +65,13 @@ __all__ = [
     "restrict_rates",
 ]
 
+#: The baselines' default parameters, one home for the library, rtp evaluate and rtp play: Yang 2019's
+#: sensitivity (JNYang units, RT-Percept's 0.25), FidelityFX's cutoff (luma) and its motion factor (per pixel of
+#: motion per frame).
+YANG_THRESHOLD = 0.25
+FFX_CUTOFF = 0.05
+FFX_MOTION_FACTOR = 0.05
+
 log = logging.getLogger("rtp.evaluate")
 
 #: FidelityFX VRS's own luma weights (Yang 2019 uses Rec.601, :data:`rtp.sdk.LUMA_WEIGHTS`).
@@ -386,7 +393,7 @@ class Yang2019:
         self,
         tile_size: int = DEFAULT_TILE_SIZE,
         *,
-        threshold: float = 0.25,
+        threshold: float = YANG_THRESHOLD,
         env_luminance: float = 0.02,
         norm: Norm = "max",
         k: float = DEFAULT_EXTRAPOLATION_K,
@@ -555,8 +562,8 @@ class FidelityFX:
         self,
         tile_size: int = DEFAULT_TILE_SIZE,
         *,
-        cutoff: float = 0.05,
-        motion_factor: float = 0.05,
+        cutoff: float = FFX_CUTOFF,
+        motion_factor: float = FFX_MOTION_FACTOR,
         additional_rates: bool = False,
     ) -> None:
         self.tile_size = _check_tile(tile_size, FFX_TILE_SIZES)

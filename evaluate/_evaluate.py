@@ -32,7 +32,7 @@ from rtp import sdk
 from rtp.capture import DatasetError, TargetError, TargetStore
 from rtp.sdk import PREDICTED_RATES, RATE_CODES, ParameterError, select_rates, work_saved
 
-from ._baselines import FidelityFX, Yang2019, as_real
+from ._baselines import FFX_CUTOFF, YANG_THRESHOLD, FidelityFX, Yang2019, as_real
 from ._scores import real_values, scores
 
 __all__ = ["DEFAULT_UNSEEN_FRACTION", "SPLITS", "EvaluationReport", "check_evaluation", "evaluate", "failing_tiles",
@@ -615,7 +615,7 @@ def _baselines(
     """The baseline selectors by name, at the model's tile size: Yang 2019 (and its variant that
     shades unseen tiles fully) and FidelityFX (base and additional rates), or the ones given."""
     tile = meta.tile_size
-    y_thr = thr if meta.metric == "jnyang" else 0.25
+    y_thr = thr if meta.metric == "jnyang" else YANG_THRESHOLD
     # Motion off: the targets are errors of still frames, and a viewpoint pair is a jump, not one
     # frame of motion at 60 Hz, so the baselines' motion terms (which model motion blur hiding
     # error) would only make them look worse than they are.
@@ -673,7 +673,7 @@ class _Sweep:
         low = [2.0 ** (k / 2) for k in range(-16, 9)]
         self.yang_grids = {name: grid((sel.threshold * f for f in low), 0.0) for name, sel in selectors.items()
                            if isinstance(sel, Yang2019)}
-        ffx_grid = [0.05 * 2.0 ** (k / 2) for k in range(-16, 9, 2)]
+        ffx_grid = [FFX_CUTOFF * 2.0 ** (k / 2) for k in range(-16, 9, 2)]
         self.ffx_sweepers = {name: [FidelityFX(sel.tile_size, cutoff=c, motion_factor=sel.motion_factor,
                                                additional_rates=sel.additional_rates) for c in ffx_grid]
                              for name, sel in selectors.items() if isinstance(sel, FidelityFX)}

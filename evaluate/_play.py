@@ -48,7 +48,7 @@ import numpy as np
 from rtp import sdk
 from rtp.sdk.files import atomic_output, writer_lock
 
-from ._baselines import FidelityFX, Frame, Yang2019, _checked
+from ._baselines import FFX_CUTOFF, FFX_MOTION_FACTOR, YANG_THRESHOLD, FidelityFX, Frame, Yang2019, _checked
 from ._engine import ENGINE_IMAGES, engine_rates
 from ._evaluate import failing_tiles, monotone_over_rates
 
@@ -127,10 +127,6 @@ MODEL_SWEEP = (0.25, 0.5, 0.7, 0.8, 0.9, 1.0, 1.25, 2.0)
 SAVING_SWEEP = (0.2, 0.3, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9)
 PSNR_SWEEP_DB = (12.0, 6.0, 3.0, 2.0, 1.0, 0.0, -2.0, -6.0)
 BASELINE_SWEEP = (1 / 256, 1 / 128, 1 / 64, 1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 4.0)
-#: Default parameters of the baselines: Yang's sensitivity (JNYang units), FFX's cutoff (luma).
-YANG_THRESHOLD = 0.25
-FFX_CUTOFF = 0.05
-FFX_MOTION_FACTOR = 0.05
 
 
 class PlayError(sdk.ParameterError):
