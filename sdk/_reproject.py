@@ -261,9 +261,10 @@ def reproject_positions(
     Returns:
         ``(qx, qy, d)``, each ``(H, W)`` float64: the previous position in OpenGL window
         coordinates of the previous frame (its pixels, origin at the BOTTOM-left corner of the frame, as
-        the shader sees it; the top-left row is ``H' - qy``) and the expected previous linear depth (a perspective previous
-        camera's clip ``w``); ``d <= 0`` where the point was behind the previous camera (only its sign
-        matters for background).
+        the shader sees it; the top-left y is ``H' - qy``, and the texel :func:`reproject` fetches, in
+        top-left rows and columns, ``(H' - 1 - floor(qy), floor(qx))``: on a texel's edge the one above)
+        and the expected previous linear depth (a perspective previous camera's clip ``w``); ``d <= 0``
+        where the point was behind the previous camera (only its sign matters for background).
     """
     cameras = _checked(cur_view, cur_proj, prev_view_proj, prev_proj)
     return _positions(_depth(depth, "depth"), *cameras, None if prev_shape is None else _shape(prev_shape))

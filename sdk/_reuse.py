@@ -52,14 +52,14 @@ REUSE_REDUCTIONS = {
     "upper": "the upper quartile over the tile's pixels (PSNR: the lower; between the mean and the worst)",
 }
 
-#: What prediction reuse does with a tile whose surface the network did not see (more than
-#: ``unseen_fraction`` of its pixels unknown).
 #: What a reused frame carries from the frame the network ran on (``PredictionReuse(carry=...)``).
 REUSE_CARRIES = {
     "estimates": "the network's per-tile estimates (any model)",
     "features": "the trunk's per-tile features, and the tail runs on each frame (a model that splits: "
                 "ShadingRatePredictor.splits)",
 }
+#: What prediction reuse does with a tile whose surface the network did not see (more than
+#: ``unseen_fraction`` of its pixels unknown).
 REUSE_UNSEEN = {
     "full": "shade it at 1x1 (costs nothing, saves nothing there)",
     "fresh": "run the network on crops around those tiles only (margin tiles of context each side); "
@@ -957,7 +957,9 @@ def fetch_from_motion(motion_x: object, motion_y: object,
     """:class:`PredictionReuse`'s ``fetch`` from an engine's motion vectors: per pixel, the top-left ``(row,
     col)`` of the previous frame's pixel it comes from, the nearest texel of the pixel centre moved by its
     motion vector (``motion.x``/``motion.y`` of ``sdk.CHANNELS``: pixels, previous minus current position,
-    x right and y down), kept inside the frame. ``prev_shape = (H', W')``: the previous frame's size where
+    x right and y down), kept inside the frame: the texel :func:`reproject` fetches and tests for the same
+    ``motion``, a position on a texel's edge taking the texel right of it and above it (OpenGL's window
+    coordinates, y up, as the shader's). ``prev_shape = (H', W')``: the previous frame's size where
     dynamic resolution changed it (the motion stays in this frame's pixels; the place is scaled to the
     previous frame's). ``(H, W)`` arrays of real numbers in, two ``intp`` ``(H, W)`` arrays out; anything
     else is a typed error naming the argument."""
@@ -975,11 +977,13 @@ def fetch_from_motion(motion_x: object, motion_y: object,
     h, w = mx.shape
     ph, pw = (h, w) if prev_shape is None else _shape(prev_shape)
     ys, xs = np.indices((h, w), dtype=np.float64)
-    if (ph, pw) == (h, w):
-        rows = np.clip(np.floor(ys + 0.5 + my), 0, h - 1).astype(np.intp)
-        cols = np.clip(np.floor(xs + 0.5 + mx), 0, w - 1).astype(np.intp)
-    else:
-        rows = np.clip(np.floor((ys + 0.5 + my) * (ph / h)), 0, ph - 1).astype(np.intp)
-        cols = np.clip(np.floor((xs + 0.5 + mx) * (pw / w)), 0, pw - 1).astype(np.intp)
+    # The texel :func:`reproject` (and the shader) fetches and tests for the same motion, to the bit: its position in
+    # the previous frame's GL window coordinates (y up), floored there. A position on a texel's edge is the texel
+    # above it on the screen (rows counted from the top: ``ph - 1 - floor(gl_y)``); rounding the top-left y down,
+    # as before 2026-12-07, took the one below on every vertical motion of a whole number and a half of pixels,
+    # another texel than the one whose disocclusion test gave ``seen``.
+    gl_y = ((h - (ys + 0.5)) - my) * (ph / h)
+    rows = np.clip(ph - 1 - np.floor(gl_y), 0, ph - 1).astype(np.intp)
+    cols = np.clip(np.floor((xs + 0.5 + mx) * (pw / w)), 0, pw - 1).astype(np.intp)
     return rows, cols
 

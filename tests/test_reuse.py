@@ -321,7 +321,8 @@ def test_a_frame_of_another_render_resolution_is_carried(unseen: str) -> None:
     h, w = s.h // 2, s.w // 2
     zero = np.zeros((h, w))
     fetch = sdk.fetch_from_motion(zero, zero, prev_shape=(s.h, s.w))
-    assert fetch[0].max() == s.h - 1 and (fetch[1][:, 1] == 3).all()  # (the pixel its centre falls in)
+    # (each centre on a corner of four texels: the one right of it and above, as reproject(motion=) fetches)
+    assert fetch[0].max() == s.h - 2 and (fetch[0][1] == 2).all() and (fetch[1][:, 1] == 3).all()
     small = s.inputs(everything)[:, ::2, ::2].copy()
     seen = np.ones((h, w), np.float32)
     seen[:TILE, 3 * TILE:4 * TILE] = 0  # one tile unseen
@@ -1292,3 +1293,24 @@ def test_a_frame_that_does_not_move_carries_the_network_s_estimates(height: int,
     for _ in range(3):
         np.testing.assert_allclose(reuse.predict(x, fetch=fetch), want, rtol=1e-5, atol=1e-6)
         assert reuse.shading_rates(x, fetch=fetch).shape == want.shape[1:]
+
+
+@pytest.mark.parametrize("prev_shape", [(6, 5), (9, 10), (4, 5)])
+def test_fetch_from_motion_is_the_texel_reproject_tests_on_a_texel_edge(prev_shape: tuple[int, int]) -> None:
+    """Half-pixel motions put the moved centre on a texel's edge: fetch_from_motion gives the texel reproject
+    fetches and tests (its seen), at this size and another (dynamic resolution). It rounded the top-left y down,
+    the texel below on every vertical motion of a whole number and a half of pixels (0.5: each row fetched the
+    next one, its seen the test of another texel)."""
+    h, w = 6, 5
+    ph, pw = prev_shape
+    index = np.arange(ph * pw, dtype=np.float64).reshape(ph, pw)  # each previous texel's own number
+    depth, prev_depth = np.ones((h, w)), np.ones((ph, pw))
+    proj = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1.02, -0.202], [0, 0, -1, 0]], float)
+    for mx, my in [(0.0, 0.5), (0.0, -0.5), (0.5, 1.5), (-0.5, -2.5), (0.25, 0.5), (1.5, 0.0)]:
+        motion = np.zeros((h, w, 2))
+        motion[..., 0], motion[..., 1] = mx, my
+        rep, seen = sdk.reproject(index[..., None], prev_depth, depth, np.eye(4), proj, proj, motion=motion)
+        rows, cols = sdk.fetch_from_motion(motion[..., 0], motion[..., 1], prev_shape=prev_shape)
+        on = seen > 0
+        assert on.sum() >= h * w // 2
+        np.testing.assert_array_equal(index[rows, cols][on], rep[..., 0][on], err_msg=f"motion ({mx}, {my})")
