@@ -29,7 +29,7 @@ from ._dataset import (
 from ._images import check_image_output, figure_image, image_values, read_image_values, save_image
 from ._import import ImportReport, import_frames
 from ._memory import check_frame_memory, check_memory, job_bytes
-from ._pool import tick_queue, with_ticks, worker_pool, worker_threads
+from ._pool import WorkerDiedError, tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
 from ._ray import RayExecutorError, RayWorkerError
 from ._targets import BASE_TILE, MAX_WEBER_L, TargetError, TargetStore, compute_targets, pool_targets
@@ -55,6 +55,7 @@ __all__ = [
     "Sample",
     "TargetError",
     "TargetStore",
+    "WorkerDiedError",
     "capture",
     "check_disk",
     "check_frame_memory",

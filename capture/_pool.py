@@ -38,7 +38,10 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
+
+from rtp.sdk import EXIT_FAILED, RtpError
 
 log = logging.getLogger("rtp.capture")
 
@@ -48,6 +51,14 @@ PARENT_POLL_S = 0.5
 #: The thread-pool sizes a worker sets to its share of the cores (OpenMP: torch; the BLAS numpy
 #: links; Mesa's llvmpipe rasteriser), unless already set.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "LP_NUM_THREADS")
+
+
+class WorkerDiedError(RtpError, BrokenProcessPool):
+    """A job's local worker process (``--workers N``) died: killed by the system (out of memory), by a
+    signal, or by a crash of native code. Names the samples it may have been on; what finished is kept,
+    and the same command resumes. Still a ``BrokenProcessPool``, as the pool raised it."""
+
+    exit_code = EXIT_FAILED
 
 
 def cores() -> int:

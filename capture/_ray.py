@@ -547,16 +547,19 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
         if on_actors is not None:
             on_actors(actors)
 
+        read_at: dict[str, int] = {}  # (each sample's time when its bytes were read: see TargetStore.write)
+
         def submit(actor: Any, task: Any) -> Any:
             sid, metrics = task
             path = sample_path(data_root, sid)
+            read_at[sid] = path.stat().st_mtime_ns
             return actor.compute.remote(sid, path.read_bytes(), metrics, params, store.base_tile, news.queue, str(path))
 
         def done(task: Any, result: Any) -> None:
             sid, _ = task
             values, size = result
             for m, v in values.items():
-                store.write(sid, m, v, size)
+                store.write(sid, m, v, size, sample_mtime_ns=read_at.get(sid))
             progress(1)
 
         # One queue: targets have no affinity (every worker holds the same network).

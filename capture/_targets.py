@@ -9,8 +9,9 @@ Layout (docs/dataset.md)::
 ``values`` hold, per base tile and reduced rate (``sdk.PREDICTED_RATES`` order), the max of the
 per-pixel map, except PSNR, which stores the tile's mean squared error so that a coarser tile's MSE
 is the pixel-weighted mean of its base tiles' and its PSNR ``-10 log10(MSE)``. Deriving a tile size
-``t`` (a multiple of the base tile) therefore reproduces exactly what computing the metric at ``t``
-directly gives.
+``t`` (a multiple of the base tile) therefore reproduces what computing the metric at ``t`` directly
+gives: to the bit for max-pooled maps, to float32 round-off (the stored base tiles' rounding) for PSNR
+and a mean-pooled plugin metric.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numbers
 import os
 import re
 import zipfile
+from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -238,8 +240,14 @@ class TargetStore:
         path = self.path(sample_id, metric)
         return path.is_file() and zipfile.is_zipfile(path) and not self.stale(sample_id, metric)
 
-    def write(self, sample_id: str, metric: str, values: np.ndarray, size: tuple[int, int]) -> None:
-        """Store base-tile values (for PSNR: per-tile MSE) atomically."""
+    def write(self, sample_id: str, metric: str, values: np.ndarray, size: tuple[int, int], *,
+              sample_mtime_ns: int | None = None) -> None:
+        """Store base-tile values (for PSNR: per-tile MSE) atomically. ``sample_mtime_ns``: the sample file's
+        modification time (``st_mtime_ns``) as it was when read for these values, which the file takes as its
+        own, so that a sample written again while they were computed leaves them stale (:meth:`stale`); by
+        default the file has the time of its write."""
+        if sample_mtime_ns is not None and (isinstance(sample_mtime_ns, bool) or not isinstance(sample_mtime_ns, int)):
+            raise TargetError(f"sample_mtime_ns: expected an integer (st_mtime_ns) or None, got {sample_mtime_ns!r}")
         h, w = _frame_size(size)
         expected = (6, *tile_grid(h, w, self.base_tile))
         if not isinstance(values, np.ndarray) or values.dtype.kind not in "biuf" or values.shape != expected:
@@ -253,6 +261,8 @@ class TargetStore:
         with atomic_output(self.path(sample_id, metric)) as tmp:
             with open(tmp, "wb") as f:
                 np.savez(f, values=values.astype(np.float32), size=np.array([h, w], np.int64))
+            if sample_mtime_ns is not None:
+                os.utime(tmp, ns=(sample_mtime_ns, sample_mtime_ns))
 
     def load(self, sample_id: str, metric: str, tile: int) -> np.ndarray:
         """Targets in metric units (PSNR in dB) at ``tile``: float32 ``(6, ceil(H/tile), ceil(W/tile))``."""
@@ -319,10 +329,13 @@ def _compute_one(data_root: str, sample_id: str, metrics: tuple[str, ...], param
     todo = tuple(m for m in metrics if not store.has(sample_id, m))
     if not todo:
         return sample_id
+    # (the sample's time before it is read: one captured again while its targets are computed leaves them stale;
+    # they had the later time of their own write, and were kept as up to date)
+    as_of = sample_path(data_root, sample_id).stat().st_mtime_ns
     s = DatasetReader(data_root)[sample_id]
     h, w = s.size
     for m, v in sample_targets(s, todo, params, store.base_tile).items():
-        store.write(sample_id, m, v, (h, w))
+        store.write(sample_id, m, v, (h, w), sample_mtime_ns=as_of)
     return sample_id
 
 
@@ -374,11 +387,11 @@ def compute_targets(
     any work; every worker process uses it. Not a target parameter: a GPU gives the CPU's targets to
     float32 round-off, so a dataset may be completed on another device. A GPU with ``ray`` is refused
     (Ray gives a task no GPU unless it asks for one, and rtp's tasks do not)."""
-    from concurrent.futures import as_completed
+    from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
 
     from rtp import metrics as M
 
-    from ._pool import name_task, worker_pool
+    from ._pool import WorkerDiedError, name_task, worker_pool
 
     if not isinstance(data_root, (str, os.PathLike)) or not os.fspath(data_root):  # (Path('') is the current folder)
         raise ParameterError(f"data_root: expected a dataset folder path, got {data_root!r}"
@@ -440,6 +453,10 @@ def compute_targets(
     # write the manifest over this one's.
     with writer_lock(store.root, "rtp targets", lambda holder: TargetError(
             f"{store.root} is being written by another targets job ({holder}): wait for it to end")):
+        # Read again under the lock: a job that held it until now may have declared metrics since the read above,
+        # and this job's declare wrote its own older copy over them (their targets then refused as of parameters
+        # the manifest does not record).
+        store = TargetStore(data_root)
         # (a killed job's, its targets' and its manifest's: no other writer runs now)
         for tmp in (*store.root.glob("*/.*.tmp"), *store.root.glob(".manifest.json.*.tmp")):
             tmp.unlink(missing_ok=True)
@@ -488,15 +505,32 @@ def compute_targets(
                     progress(done, len(reader.ids))
         else:
             n = min(workers or 1, len(ids))  # (a process a sample at most: an idle one took the cores' threads too)
+            queued = deque(ids)
+            # A sample each worker at a time, so that the samples in flight are known: a worker killed (by the
+            # system for memory, by a signal) broke the pool, and every pending sample got "A process in the
+            # process pool was terminated abruptly" with its traceback, naming none of them.
+            running: dict[Future[str], str] = {}
             with worker_pool(n) as pool:  # each worker's torch on its share of the cores (worker_threads)
-                sample_of = {pool.submit(_compute_one, str(data_root), i, tuple(metrics), params): i for i in ids}
-                for f in as_completed(sample_of):
-                    try:
-                        f.result()
-                    except Exception as exc:  # (a worker's: its traceback said nothing of the sample)
-                        name_task(exc, f"sample {sample_of[f]!r}")
-                        raise
-                    done += 1
-                    if progress:
-                        progress(done, len(reader.ids))
+                while queued or running:
+                    while queued and len(running) < n:
+                        i = queued.popleft()
+                        running[pool.submit(_compute_one, str(data_root), i, tuple(metrics), params)] = i
+                    finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                    for f in sorted(finished, key=lambda f: f.exception() is not None):  # (those done first)
+                        try:
+                            f.result()
+                        except BrokenExecutor as exc:
+                            lost = sorted(i for g, i in running.items() if not g.done() or g.exception() is not None)
+                            raise WorkerDiedError(
+                                f"a targets worker process died (killed by the system, out of memory?, or by a "
+                                f"signal) while computing {'sample' if len(lost) == 1 else 'one of samples'} "
+                                f"{', '.join(map(repr, lost))}; the targets of {done} of {len(reader.ids)} samples "
+                                f"are kept: the same command computes the rest") from exc
+                        except Exception as exc:  # (a worker's: its traceback said nothing of the sample)
+                            name_task(exc, f"sample {running[f]!r}")
+                            raise
+                        del running[f]
+                        done += 1
+                        if progress:
+                            progress(done, len(reader.ids))
         return len(ids)

@@ -827,6 +827,43 @@ def test_a_workers_failure_names_the_scene_or_sample_it_was_on(tmp_path: Path, m
         assert not hasattr(other.value, "__notes__")
 
 
+def test_a_targets_worker_killed_names_the_samples_in_flight(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A local targets worker killed outright (the system's out-of-memory killer, a signal) broke the pool, and
+    `rtp targets --workers 2` ended on BrokenProcessPool's traceback, "A process in the process pool was
+    terminated abruptly", naming no sample and not saying what was kept. It is now a one-line rtp error (exit 1)
+    naming the samples then in flight (a sample a worker at a time: the third was never started), still a
+    BrokenProcessPool. The pool is a pool of threads whose every task fails as a broken pool's do."""
+    import contextlib
+    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from rtp.capture import WorkerDiedError, _pool, _targets, compute_targets
+
+    @contextlib.contextmanager
+    def pool(n: int, ticks: object = None) -> object:
+        with ThreadPoolExecutor(n) as ex:
+            yield ex
+
+    out = tmp_path / "ds"
+    capture(["procedural:5"], out, per_scene=3, size=(64, 48), profiles=("slow",))
+    ids = sorted(DatasetReader(out).ids)
+    started: list[str] = []
+
+    def compute_one(data_root: str, sample_id: str, *args: object) -> str:
+        started.append(sample_id)
+        raise BrokenProcessPool("A process in the process pool was terminated abruptly")
+
+    monkeypatch.setattr(_pool, "worker_pool", pool)
+    monkeypatch.setattr(_targets, "_compute_one", compute_one)
+    with pytest.raises(WorkerDiedError) as err:
+        compute_targets(out, ("psnr",), workers=2)
+    assert isinstance(err.value, BrokenProcessPool) and err.value.exit_code == 1
+    assert str(err.value) == (f"a targets worker process died (killed by the system, out of memory?, or by a signal) "
+                              f"while computing one of samples {ids[0]!r}, {ids[1]!r}; the targets of 0 of 3 samples "
+                              f"are kept: the same command computes the rest")
+    assert sorted(started) == ids[:2]
+
+
 def test_a_resumed_capture_drawn_with_other_renderer_settings_says_so(tmp_path: Path,
                                                                       caplog: pytest.LogCaptureFixture) -> None:
     """The samples a resumed capture adds drawn with other renderer settings than the folder's (another rtp

@@ -181,6 +181,67 @@ def test_targets_whose_manifest_is_lost_are_not_mixed_with_new_parameters(tmp_pa
     assert TargetStore(tmp_path / "ds").metrics == {"jnyang": {"weber_l": 0.5}}
 
 
+def test_a_targets_job_keeps_the_metrics_a_job_that_ended_as_it_started_declared(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The targets manifest was read before the job took its writer lock: a job that held the lock until then
+    and declared a metric meanwhile (yang) had it written over by this one's declare of its own (psnr), yang's
+    files kept and its parameters lost, so every later `rtp targets --metrics yang` refused them."""
+    import contextlib
+
+    from rtp.capture import TargetStore, _targets, compute_targets
+
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {"scene": "a"})
+    w.finalize()
+    lock = _targets.writer_lock
+
+    @contextlib.contextmanager
+    def after_another_job(*args: Any, **kwargs: Any) -> Any:
+        # (the other job, which held the lock while this one read the manifest, ends now)
+        other = TargetStore(tmp_path / "ds")
+        other.declare("yang", {})
+        other.write("s0", "yang", np.ones((6, 6, 10), np.float32), (24, 40))
+        with lock(*args, **kwargs):
+            yield
+
+    monkeypatch.setattr(_targets, "writer_lock", after_another_job)
+    assert compute_targets(tmp_path / "ds", ["psnr"]) == 1
+    monkeypatch.setattr(_targets, "writer_lock", lock)
+    assert TargetStore(tmp_path / "ds").metrics == {"psnr": {}, "yang": {}}
+    assert compute_targets(tmp_path / "ds", ["yang", "psnr"]) == 0  # (refused before: yang not in the manifest)
+
+
+def test_a_sample_captured_again_while_its_targets_are_computed_leaves_them_stale(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Staleness is the sample file being newer than its targets' file. A sample written again (a capture or an
+    import into the folder, which another lock guards) after `rtp targets` read it and before it wrote its
+    targets left targets of the old sample newer than the new one: kept as up to date, and trained on."""
+    from rtp.capture import TargetError, TargetStore, _targets, compute_targets
+
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(seed=0), {"scene": "a"})
+    w.finalize()
+    sample = tmp_path / "ds" / "samples" / "s0.npz"
+    past = sample.stat().st_mtime_ns - 10**10
+    os.utime(sample, ns=(past, past))  # (captured a while ago)
+    real = _targets.sample_targets
+
+    def recaptured_meanwhile(*args: Any, **kwargs: Any) -> Any:
+        out = real(*args, **kwargs)
+        DatasetWriter(tmp_path / "ds").write("s0", _buffers(seed=1), {"scene": "a"})  # (the new sample)
+        return out
+
+    monkeypatch.setattr(_targets, "sample_targets", recaptured_meanwhile)
+    assert compute_targets(tmp_path / "ds", ["psnr"]) == 1
+    store = TargetStore(tmp_path / "ds")
+    assert store.stale("s0", "psnr") and not store.has("s0", "psnr")
+    monkeypatch.setattr(_targets, "sample_targets", real)
+    assert compute_targets(tmp_path / "ds", ["psnr"]) == 1  # (computed again, of the sample there now)
+    assert store.has("s0", "psnr") and compute_targets(tmp_path / "ds", ["psnr"]) == 0
+    with pytest.raises(TargetError, match="sample_mtime_ns: expected an integer"):
+        store.write("s0", "psnr", np.ones((6, 6, 10), np.float32), (24, 40), sample_mtime_ns=1.5)  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("corrupt", ["manifest", "manifest-json", "manifest-base", "npz", "npz-shape"])
 def test_corrupt_targets_are_target_errors(tmp_path: Path, corrupt: str) -> None:
     """A damaged targets manifest or file leaked JSONDecodeError / BadZipFile out of evaluate()."""
