@@ -137,11 +137,13 @@ def json_file(text: str) -> Any:
         raise argparse.ArgumentTypeError(f"{text!r} is not JSON ({err})") from None
 
 
-def report_file(kind: str, keys: dict[str, type], made_by: str, *, many: bool = False) -> Callable[[str], Path]:
+def report_file(kind: str, keys: dict[str, type], made_by: str, *, many: bool = False,
+                name: str | None = None) -> Callable[[str], Path]:
     """An argparse type: the path of a JSON report holding ``keys``, each of its type (a list: of objects; a list
     of such reports with ``many``), checked when parsed: a missing file, bad JSON or another JSON (its keys, or
     their kinds of value) is a usage error, not a traceback (or, for another JSON, an empty table) once the
-    script runs."""
+    script runs. A folder holding the report as ``name`` (the ``--out`` folder of the command that wrote it) is
+    read as that file."""
     import argparse
 
     def fits(d: Any) -> bool:
@@ -150,6 +152,11 @@ def report_file(kind: str, keys: dict[str, type], made_by: str, *, many: bool = 
             for k, t in keys.items())
 
     def parse(text: str) -> Path:
+        if name is not None and Path(text).is_dir():  # (the --out folder given: "'play': Is a directory" before)
+            if not (Path(text) / name).is_file():
+                raise argparse.ArgumentTypeError(f"{text!r} is a folder without {name} in it (expected {kind}, the file "
+                                                 f"{made_by} writes, or a folder holding it)")
+            text = str(Path(text) / name)
         data = json_file(text)
         items = data if many and isinstance(data, list) else [data]
         if not items or not all(fits(d) for d in items):
@@ -160,10 +167,10 @@ def report_file(kind: str, keys: dict[str, type], made_by: str, *, many: bool = 
 
 
 #: The ``play.json`` of ``rtp play --out DIR``.
-PLAY_JSON = report_file("a play.json", {"settings": dict, "rows": list}, "`rtp play --out DIR`")
+PLAY_JSON = report_file("a play.json", {"settings": dict, "rows": list}, "`rtp play --out DIR`", name="play.json")
 #: The ``evaluation.json`` of ``rtp evaluate --out DIR`` (a list of reports, one per model).
 EVALUATION_JSON = report_file("an evaluation.json", {"model": dict, "quality": list, "decisions": list},
-                              "`rtp evaluate --out DIR`", many=True)
+                              "`rtp evaluate --out DIR`", many=True, name="evaluation.json")
 
 
 def add_model_args(ap: Any, model_help: str, scene_help: str = "") -> None:

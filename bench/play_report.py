@@ -161,7 +161,7 @@ def _check_shared(reports: list[tuple[Path, dict[str, Any]]]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("runs", nargs="+", type=PLAY_JSON, help="play.json files of `rtp play --out`")
+    ap.add_argument("runs", nargs="+", type=PLAY_JSON, help="play.json files of `rtp play --out DIR` (or the DIRs)")
     ap.add_argument("--model", default="jnyang", help="the rtp method to compare (default jnyang)")
     ap.add_argument("--reuse", default=None, help="comma-separated methods with prediction reuse to compare with "
                     "--model (default MODEL@4)")

@@ -1,4 +1,5 @@
-"""Summary tables of `rtp evaluate` results (all scenes pooled), as quoted in docs/results.md.
+"""Summary tables of `rtp evaluate` results (all scenes pooled; an evaluation of one scene, `--scene NAME`, its own
+rows), as quoted in docs/results.md.
 
     python bench/report.py data/eval-jnyang/evaluation.json [more evaluation.json ...]
     python bench/report.py --compact data/eval-*/evaluation.json    # one row per model
@@ -40,6 +41,14 @@ def model_label(d: dict) -> str:
     return str(m["path"]) + (f" [{m['tile_size']}-pixel tiles; the model's {own}]" if own != m.get("tile_size") else "")
 
 
+def pooled_scene(d: dict) -> str:
+    """The scene name of ``d``'s pooled rows: "all scenes" where it evaluated several, its one scene's name where it
+    evaluated one (`rtp evaluate --scene NAME`, as docs/evaluation.md's run does: evaluate writes no "all scenes"
+    rows then, and the tables read as empty, the compact row as "-")."""
+    scenes = dict.fromkeys(r["scene"] for r in (*d["quality"], *d["decisions"]))
+    return next(iter(scenes)) if len(scenes) == 1 else "all scenes"
+
+
 def table(header: list[str], rows: list[list[str]]) -> None:
     print("\n| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
@@ -50,12 +59,14 @@ def table(header: list[str], rows: list[list[str]]) -> None:
 def main(paths: list[Path]) -> None:
     for path in paths:
         for d in json.load(open(path, encoding="utf-8")):
-            print(f"\n### {d['model']['metric']} ({model_label(d)} on {d['data']}, {d['samples']} samples)")
-            pooled = [r for r in d["quality"] if r["scene"] == "all scenes"]
+            scene = pooled_scene(d)
+            print(f"\n### {d['model']['metric']} ({model_label(d)} on {d['data']}, {d['samples']} samples"
+                  + ("" if scene == "all scenes" else f" of {scene}") + ")")
+            pooled = [r for r in d["quality"] if r["scene"] == scene]
             table(["tiles", "method", "R² %", "MAE", "MAE under.", "σ MAE", "under %", "Spearman"], [
                 [r["split"], r["method"], pct(r["r2"]), num(r["mae"]), num(r["mae_under"]), num(r["sigma"]),
                  pct(r["under_share"]), num(r["spearman"])] for r in pooled])
-            decisions = [r for r in d["decisions"] if r["scene"] == "all scenes"]
+            decisions = [r for r in d["decisions"] if r["scene"] == scene]
             table(["tiles", "method", "threshold", "fails %", "work saved %"], [
                 [r["split"], r["method"], f"{r['threshold']:g}", pct(r["fail_share"]), pct(r["work_saved"])]
                 for r in decisions])
@@ -94,7 +105,7 @@ def compact(paths: list[Path]) -> None:
     rows = []
     for path in paths:
         for d in json.load(open(path, encoding="utf-8")):
-            q = {(r["split"], r["method"]): r["r2"] for r in d["quality"] if r["scene"] == "all scenes"}
+            q = {(r["split"], r["method"]): r["r2"] for r in d["quality"] if r["scene"] == pooled_scene(d)}
             sweep = [(r["fail_share"], r["work_saved"]) for r in d.get("sweep", []) if r["method"] == "model"]
             rows.append([d["model"]["metric"], model_label(d), str(d["samples"]),
                          " / ".join(pct(q.get((s, "model"))) for s in ("all", "seen", "unseen")),
@@ -112,7 +123,7 @@ def per_scene(paths: list[Path]) -> None:
         for d in json.load(open(path, encoding="utf-8")):
             q = {(r["scene"], r["split"], r["method"]): r["r2"] for r in d["quality"]}
             scenes = dict.fromkeys(r["scene"] for r in d["quality"] if r["scene"] != "all scenes")
-            for scene in [*scenes, "all scenes"]:
+            for scene in [*scenes, *(["all scenes"] if len(scenes) > 1 else [])]:  # (one scene: no pooled rows)
                 rows.append([model_label(d), scene,
                              " / ".join(pct(q.get((scene, s, "model"))) for s in ("all", "seen", "unseen")),
                              " / ".join(pct(q.get((scene, s, "model (no safety)"))) for s in ("all", "seen", "unseen"))])
@@ -122,7 +133,7 @@ def per_scene(paths: list[Path]) -> None:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description="Summary tables of `rtp evaluate` results (evaluation.json files).")
     ap.add_argument("paths", nargs="+", type=EVALUATION_JSON, metavar="evaluation.json",
-                    help="files written by `rtp evaluate --out DIR`")
+                    help="files written by `rtp evaluate --out DIR` (or the DIRs)")
     form = ap.add_mutually_exclusive_group()
     form.add_argument("--compact", action="store_true", help="one row per model: R² and work saved at 1-10%% failing")
     form.add_argument("--per-scene", action="store_true", help="one row per model and scene: R² with and without the margin")

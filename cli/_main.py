@@ -554,7 +554,7 @@ def _ray_option(parser: argparse.ArgumentParser) -> None:
 def _cmd_preview(args: argparse.Namespace) -> int:
     from rtp.capture import open_dataset, preview_sheet, save_image
 
-    ds = open_dataset(args.data)
+    ds = open_dataset(_dataset_folder(args))
     if not ds.ids:
         raise _usage(f"{args.data} holds no samples")
     sample_id = ds.ids[0] if args.sample is None else args.sample  # (--sample "" is no sample, not the first)
@@ -566,6 +566,7 @@ def _cmd_preview(args: argparse.Namespace) -> int:
 def _cmd_targets(args: argparse.Namespace) -> int:
     from rtp.capture import compute_targets
 
+    _dataset_folder(args)
     ppd = _ppd(args.ppd)
     done = [0, 0]
     args.on_interrupt = lambda: (f"the targets of {done[0]} of {done[1]} samples are kept: the same command "
@@ -629,8 +630,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
               f"{result.checkpoint} is kept, not fit to export: train again with {again}", file=sys.stderr)
         return 1
     v = result.val["transformed"]
-    print(f"{result.checkpoint}: {result.steps} steps; validation R2 {v['r2']:.3f}, MAE {v['mae']:.4f}; "
-          f"safety {result.safety:.4f} (underestimated tiles with it: {100 * result.under_share:.1f}%)")
+    # (R² in %, as `rtp evaluate` prints it: its 'model (no safety)' row on the validation scenes is this number)
+    print(f"{result.checkpoint}: {result.steps} steps; validation R² {100 * v['r2']:.1f}%, MAE {v['mae']:.4f} "
+          f"(transformed, without the safety margin); safety {result.safety:.4f} (underestimated tiles with it: "
+          f"{100 * result.under_share:.1f}%)")
     return 0
 
 
@@ -822,6 +825,18 @@ def _ppd(text: str | None) -> float | str | None:
         raise _usage(f"--ppd: expected a number or 'width', got {text!r}") from None
 
 
+def _dataset_folder(args: argparse.Namespace) -> str:
+    """The dataset folder of a command that takes it as DATA or as --data (as `rtp train` and `rtp evaluate` do),
+    set as ``args.data``: one of the two, or both naming the same folder."""
+    given = [d for d in (args.data, args.data_flag) if d is not None]
+    if not given:
+        raise _usage("the dataset folder is required: DATA (or --data DATA)")
+    if len(given) == 2 and Path(given[0]).resolve() != Path(given[1]).resolve():
+        raise _usage(f"two dataset folders given, {given[0]} (DATA) and {given[1]} (--data): give one")
+    args.data = given[0]
+    return args.data
+
+
 def _usage(message: str) -> Exception:
     """A usage error found after parsing (exit 2, like argparse's own)."""
     from rtp.sdk import ParameterError
@@ -868,6 +883,14 @@ def build_parser() -> argparse.ArgumentParser:
     def splits(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--splits", default=None, metavar="SCENES.yaml",
                         help="the train/validation/test lists (default: the copy shipped with rtp)")
+
+    def dataset_folder(sp: argparse.ArgumentParser, help: str) -> None:
+        # (`rtp train` and `rtp evaluate` name the dataset with --data: `rtp targets --data data`, pasted beside them,
+        # was "unrecognized arguments: --data"; both spellings are taken, _dataset_folder reconciles them)
+        sp.add_argument("data", nargs="?", type=_path_text, default=None, metavar="DATA",
+                        help=f"{help} (or --data DATA, as rtp train and rtp evaluate name it)")
+        sp.add_argument("--data", dest="data_flag", type=_path_text, default=None, metavar="DATA",
+                        help="the dataset folder, as DATA")
 
     def model_metadata(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--metadata", default=None, metavar="SIDECAR.yaml",
@@ -959,14 +982,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     pv = command("preview", "draw one sample of a dataset: final images at every rate, G-buffers, reprojection",
                  _cmd_preview)
-    pv.add_argument("data", type=_path_text, help="dataset folder (rtp's, or the paper's released layout)")
+    dataset_folder(pv, "dataset folder (rtp's, or the paper's released layout)")
     pv.add_argument("--out", type=out_image, required=True,
                     help="image to write; its extension names the format (.png, .jpg, ...)")
     pv.add_argument("--sample", default=None, help="sample id (default: the first)")
     pv.add_argument("--scale", type=_positive, default=1, help="draw the panels this many times smaller, down to 160x90 pixels")
 
     tg = command("targets", "compute the per-tile metric targets of a dataset (cached, resumable)", _cmd_targets)
-    tg.add_argument("data", type=_path_text, help="dataset folder written by `rtp capture`")
+    dataset_folder(tg, "dataset folder written by `rtp capture` or `rtp import`")
     tg.add_argument("--metrics", type=_metric_names, default=",".join(TARGET_METRICS),
                     help=f"comma-separated metric names: {', '.join(METRICS)}, or a plugin's (docs/metrics.md "
                     f"\"Your own metric\")")

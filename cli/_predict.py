@@ -33,10 +33,13 @@ ENGINE_RATES_KEY = "engine_rates"
 
 def _read_frame(path: str) -> dict[str, np.ndarray]:
     """The arrays of a frame file, each named as a G-buffer of ``sdk.GBUFFERS`` (or ``colour``); others are
-    named in a warning, with the G-buffer they may have meant."""
+    named in a warning, with the G-buffer they may have meant. ``final_<rate>``, the frame shaded at every rate that
+    a frame of ``rtp import`` holds (``rtp import --write-example`` writes them), are known and left out unread."""
     from rtp import sdk
 
-    return sdk.files.read_frame(path, extra=(COLOUR_KEY, ENGINE_RATES_KEY))
+    finals = tuple(f"final_{rate}" for rate in sdk.ALL_RATES)  # (rtp.capture's import FINAL_KEYS)
+    frame = sdk.files.read_frame(path, extra=(COLOUR_KEY, ENGINE_RATES_KEY, *finals))
+    return {k: v for k, v in frame.items() if k not in finals}
 
 
 def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int, int]) -> dict[str, np.ndarray]:

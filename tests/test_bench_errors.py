@@ -87,6 +87,27 @@ def test_a_json_of_another_kind_and_a_folder_that_is_not_a_dataset(tmp_path: Pat
     assert run.returncode == 2 and "Traceback" not in run.stderr and "argument --data" in run.stderr, run.stderr
 
 
+def test_the_out_folder_of_play_and_evaluate_is_read_as_its_report(tmp_path: Path) -> None:
+    """`rtp play --out play` then `bench/play_report.py play` (and `rtp evaluate --out eval`, `bench/report.py eval`)
+    was refused, "'play': Is a directory"; the folder's play.json / evaluation.json is read now, and a folder without
+    one is named as such."""
+    import argparse
+
+    from .conftest import bench_module
+
+    common = bench_module("_common")
+    (tmp_path / "play").mkdir()
+    (tmp_path / "play" / "play.json").write_text(json.dumps({"settings": {}, "rows": []}))
+    assert common.PLAY_JSON(str(tmp_path / "play")) == tmp_path / "play" / "play.json"
+    (tmp_path / "eval").mkdir()
+    (tmp_path / "eval" / "evaluation.json").write_text(json.dumps([{"model": {}, "quality": [], "decisions": []}]))
+    assert common.EVALUATION_JSON(str(tmp_path / "eval")) == tmp_path / "eval" / "evaluation.json"
+    with pytest.raises(argparse.ArgumentTypeError, match="is a folder without evaluation.json in it"):
+        common.EVALUATION_JSON(str(tmp_path / "play"))
+    with pytest.raises(argparse.ArgumentTypeError, match="is not a play.json"):  # (the folder's file is checked too)
+        common.PLAY_JSON(str(tmp_path / "eval" / "evaluation.json"))
+
+
 def test_input_ceiling_checks_its_maps_before_the_training_they_come_after(tmp_path: Path) -> None:
     """--scene is read after hours of training: a map the dataset does not hold is refused first."""
     from rtp.capture import capture

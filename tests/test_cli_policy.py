@@ -98,6 +98,27 @@ def test_unknown_arguments_are_named_by_the_command_given_them(capsys: pytest.Ca
         assert exc.value.code == 2 and f"{prog}: error: unrecognized arguments: {argv[-1]}" in err, err
 
 
+def test_the_dataset_folder_is_data_or_dash_dash_data_in_every_command(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp train` and `rtp evaluate` take the dataset as --data; `rtp targets` and `rtp preview` took it only as a
+    positional DATA, so `rtp targets --data data` pasted between them was "unrecognized arguments: --data". Both
+    spellings are taken now; none, or two different folders, are named."""
+    import rtp.capture
+
+    seen: list[str] = []
+    monkeypatch.setattr(rtp.capture, "compute_targets", lambda data, *a, **k: seen.append(str(data)) or 0)
+    for argv in (["targets", str(tmp_path)], ["targets", "--data", str(tmp_path)],
+                 ["targets", str(tmp_path), "--data", f"{tmp_path}/"]):
+        assert main([*argv, "--metrics", "psnr", "-q"]) == 0, capsys.readouterr().err
+    assert seen == [str(tmp_path)] * 3
+    assert main(["preview", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "p.png")]) == 2
+    assert f"rtp preview: error: no dataset folder at {str(tmp_path / 'none')!r}" in capsys.readouterr().err
+    assert main(["targets", "--metrics", "psnr"]) == 2
+    assert "rtp targets: error: the dataset folder is required: DATA (or --data DATA)" in capsys.readouterr().err
+    assert main(["targets", str(tmp_path), "--data", str(tmp_path / "other")]) == 2
+    assert "two dataset folders given" in capsys.readouterr().err and seen == [str(tmp_path)] * 3
+
+
 def test_a_bad_value_is_named_by_its_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The library's checks name their Python arguments (flip_every, paths, ppd); on the command line the message
     names the flag that set it (docs/errors.md), and one about something else keeps its words."""

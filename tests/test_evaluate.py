@@ -785,6 +785,29 @@ def test_bench_report_marks_a_saving_past_the_sweep_as_a_lower_bound(tmp_path: P
     assert "| - / 20.0 / 25.0 / >= 30.0 |" in shown, shown
 
 
+def test_bench_report_reads_an_evaluation_of_one_scene(tmp_path: Path) -> None:
+    """`rtp evaluate --scene NAME` (docs/evaluation.md's run on the validation scene) writes that scene's rows and no
+    "all scenes" rows, which bench/report.py alone read: its quality and decision tables were empty, --compact's R²
+    "- / - / -", --per-scene added an "all scenes" row of dashes. The one scene's rows are the pooled ones now."""
+    quality = [{"scene": "procedural:3", "split": s, "method": m, "n": 10, "r2": r2, "mae": 0.1, "mae_under": 0.1,
+                "sigma": 0.1, "under_share": 0.2, "spearman": 0.5}
+               for m, r2 in (("model", 0.42), ("model (no safety)", 0.5)) for s in ("all", "seen", "unseen")]
+    decisions = [{"scene": "procedural:3", "split": "all", "method": "model", "threshold": 0.25, "fail_share": 0.03,
+                  "work_saved": 0.61}]
+    entry = {"model": {"path": "m.onnx", "metric": "jnyang", "tile_size": 16}, "data": "d", "samples": 4,
+             "quality": quality, "decisions": decisions, "matched": [], "sweep": []}
+    (tmp_path / "evaluation.json").write_text(json.dumps([entry]))
+    report = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench" / "report.py")]
+    run = [*report, str(tmp_path / "evaluation.json")]
+    shown = subprocess.run(run, capture_output=True, text=True, check=True).stdout
+    assert "4 samples of procedural:3)" in shown and "| all | model | 42.0 |" in shown, shown
+    assert "| all | model | 0.25 | 3.0 | 61.0 |" in shown, shown
+    shown = subprocess.run([*report, "--compact", run[-1]], capture_output=True, text=True, check=True).stdout
+    assert "| 42.0 / 42.0 / 42.0 | 50.0 / 50.0 / 50.0 |" in shown, shown
+    shown = subprocess.run([*report, "--per-scene", run[-1]], capture_output=True, text=True, check=True).stdout
+    assert "| procedural:3 | 42.0 / 42.0 / 42.0 |" in shown and "all scenes" not in shown, shown
+
+
 def test_cli_evaluate_refuses_one_sidecar_for_several_models(dataset: Path, model: Path, tmp_path: Path,
                                                              capsys: pytest.CaptureFixture[str]) -> None:
     """--metadata is one model's sidecar: given with several models it was read as each one's metadata, in place of

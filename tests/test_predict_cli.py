@@ -124,6 +124,30 @@ def test_a_frame_that_is_not_what_it_should_be_is_named(frame: Path, tmp_path: P
     assert f"{str(damaged)!r}: a damaged .npz, numpy cannot read its arrays" in capsys.readouterr().err
 
 
+def test_a_frame_of_rtp_import_is_read_without_a_warning(frame: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str],
+                                                         caplog: pytest.LogCaptureFixture) -> None:
+    """A frame of `rtp import` (what `rtp import --write-example` writes, "the .npz `rtp predict` reads" plus the frame
+    shaded at every rate) gave `rtp predict` a warning for each final_<rate>, "is not a G-buffer and is not read",
+    seven a frame. They are known and left out now; the rates are those of the frame without them, and an array of
+    another name is still named."""
+    with np.load(frame) as npz:
+        arrays = dict(npz)
+    imported = tmp_path / "imported.npz"
+    finals = {f"final_{r}": np.zeros((96, 160, 3), np.uint8) for r in sdk.ALL_RATES}
+    np.savez(imported, **arrays, **finals)
+    assert main(["predict", str(frame), "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    with caplog.at_level(logging.WARNING):
+        assert main(["predict", str(imported), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rates"] == plain["rates"]
+    assert "is not a G-buffer" not in caplog.text, caplog.text
+    np.savez(imported, **arrays, final_3x3=finals["final_1x1"])
+    with caplog.at_level(logging.WARNING):
+        assert main(["predict", str(imported), "--json"]) == 0
+    assert "'final_3x3' is not a G-buffer and is not read" in caplog.text
+
+
 @pytest.mark.parametrize("kind", ["window", "reversed"])
 def test_an_engines_conventions_by_flag(frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                         kind: str) -> None:

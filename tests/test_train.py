@@ -288,7 +288,10 @@ def test_train_cli_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str], monk
     assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--out", str(out), "--steps", "20",
                      "--crop", "32", "--val-scenes", "scene0"]) == 0
     got = capsys.readouterr()
-    assert "validation R2" in got.out
+    # R² in % as `rtp evaluate` prints it (its 'model (no safety)' row), not a fraction beside evaluate's percent
+    val = load_checkpoint(out).metadata.provenance["validation"]["transformed"]
+    assert f"validation R² {100 * val['r2']:.1f}%, MAE {val['mae']:.4f} (transformed, without the safety margin)" \
+        in got.out, got.out
     assert "reading samples: 1/6]" in got.err and "reading samples" not in got.err.rsplit("\r", 1)[-1], got.err
     from rtp.metrics import device_name, resolve_device
 
