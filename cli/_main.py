@@ -1219,7 +1219,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--seed", type=_non_negative, default=0, help="which path through the map")
     pl.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
-    pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE, help="VRS tile size in pixels")
+    pl.add_argument("--tile-size", type=_positive, default=DEFAULT_TILE_SIZE,
+                    help="the hardware's VRS tile size in pixels, one for every method of the run (not a model's own, "
+                         "as rtp evaluate and rtp predict default to: a -8px model's estimates are pooled onto these "
+                         "tiles unless it is 8)")
     pl.add_argument("--fail-metric", default="jnyang", type=_metric_name, metavar="METRIC",
                     help=f"{', '.join(METRICS)} or a plugin's: a tile fails when its true error in this metric, "
                     "computed on every frame for the six rates, is over --fail-threshold (PSNR: under; FLIP and LPIPS add "

@@ -301,7 +301,11 @@ def test_targets_of_an_empty_dataset_path_are_refused_not_the_current_folder(
     with pytest.raises(SystemExit) as info:
         main(["targets", "", "--metrics", "psnr"])
     assert info.value.code == 2
-    assert "argument data: expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
+    assert "argument DATA: expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:  # (--data, as rtp train and rtp evaluate name it, likewise)
+        main(["targets", "--data", "", "--metrics", "psnr"])
+    assert info.value.code == 2
+    assert "argument --data: expected a path, got '' (empty; '.' is the current folder)" in capsys.readouterr().err
     with pytest.raises(sdk.ParameterError, match=r"data_root: expected a dataset folder path, got '' \(empty"):
         compute_targets("", ("psnr",))
     assert list(tmp_path.iterdir()) == []
