@@ -153,3 +153,120 @@ def test_the_training_pages_dataset_is_make_datasets() -> None:
         m = re.search(rf"^rtp capture --split {split} --per-scene (\d+) --size (\S+) ", page, re.M)
         assert m is not None, split
         assert m.groups() == (make[key], make["SIZE"]), (split, m.groups())
+
+
+# docs/results.md's claims about the shipped models' test figures agree with the tables they summarise (its
+# own, and the published `rtp evaluate` files under docs/results/). Each of these held a stale or wrong claim:
+# "All five lie inside the paper's overall 70-94%" with PSNR at 95.4%, savings ranges and baseline comparisons
+# left at the one-threshold files after the thresholds per rate shipped.
+RESULTS = DOCS / "results.md"
+SHIPPED = ("jnyang", "psnr", "flip", "jnflip", "lpips", "jnyang-reuse")
+_NUM = re.compile(r"-?\d+(?:\.\d+)?")
+
+
+def _table_after(text: str, marker: str) -> list[list[str]]:
+    """The cells of each body row of the first Markdown table at or after ``marker``."""
+    start = text.index(marker)
+    lines = text[start:].splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    rows = []
+    for line in lines[first + 2:]:  # past the header and its |---| line
+        if not line.startswith("|"):
+            break
+        rows.append([c.strip().strip("*").strip() for c in line.strip("|").split("|")])
+    return rows
+
+
+def _floats(cell: str) -> list[float]:
+    return [float(x) for x in _NUM.findall(cell)]
+
+
+def _span(values: list[float]) -> tuple[str, str]:
+    return f"{min(values):.1f}", f"{max(values):.1f}"
+
+
+def _headline() -> dict[str, list[str]]:
+    rows = _table_after(RESULTS.read_text(encoding="utf-8"), "| model | R² all tiles | R² unseen tiles |")
+    return {r[0]: r for r in rows}
+
+
+def test_results_headline_says_which_models_lie_outside_the_papers_ranges() -> None:
+    text = RESULTS.read_text(encoding="utf-8")
+    rows = _headline()
+    assert set(SHIPPED) <= set(rows)
+    five = SHIPPED[:5]
+    r2 = {m: (_floats(rows[m][1])[0], _floats(rows[m][3])[0]) for m in five}  # with the margin; the paper's R²
+    outside = [m for m in five if not all(70 <= v <= 94 for v in r2[m])]
+    claim = re.search(r"(\w+) of the five lie inside the paper's overall 70-94%", text)
+    assert claim is not None
+    words = {"None": 0, "One": 1, "Two": 2, "Three": 3, "Four": 4, "All": 5}
+    assert words[claim.group(1)] == 5 - len(outside), (claim.group(0), outside)
+    after = text[claim.end():claim.end() + 200].upper()
+    assert all(name.upper() in after for name in outside), (outside, after)
+    # and each metric's own range (the column before the last): the paper's R² above it, named
+    top = {m: float(rows[m][4].rstrip("%").split("-")[1]) for m in five}  # "78-94%": 94
+    above = [m for m in five if r2[m][1] > top[m]]
+    own = re.search(r"By the paper's R², ([^.]*?) (?:is|are) also above their own metric's range", text)
+    assert own is not None
+    assert sorted(n.upper() for n in re.split(r",\s*|\s+and\s+", own.group(1))) == sorted(n.upper() for n in above)
+
+
+def test_results_which_r2_gains_over_the_issues_start_are_its_tables() -> None:
+    text = RESULTS.read_text(encoding="utf-8")
+    rows = {r[0]: r for r in _table_after(text, "| test split, 80 samples | R² all / seen / unseen %")}
+    with_margin, without, saved = [], [], {}
+    for m in SHIPPED[:5]:
+        start, now = rows[f"{m}, at the issue's start"], rows[f"{m}, shipped"]
+        with_margin += [b - a for a, b in zip(_floats(start[1]), _floats(now[1]))]
+        without += [b - a for a, b in zip(_floats(start[2]), _floats(now[2]))]
+        saved[m] = [b - a for a, b in zip(_floats(start[3])[:3], _floats(now[3])[:3])]  # at 1, 2 and 5%
+    claim = re.search(r"by (\d+\.\d)-(\d+\.\d) points with the margin and (\d+\.\d)-(\d+\.\d) without it", text)
+    assert claim is not None and claim.groups() == _span(with_margin) + _span(without), claim
+    claim = re.search(r"JNYang (\d+\.\d)-(\d+\.\d) points at 1-5%, LPIPS (\d+\.\d)-(\d+\.\d)", text)
+    assert claim is not None and claim.groups() == _span(saved["jnyang"]) + _span(saved["lpips"]), claim
+
+
+def _matched(model: str) -> dict[str, list[str]]:
+    """The "At matched quality" rows of the published `make evaluate` file of ``model``."""
+    text = (DOCS / "results" / f"evaluation-{model}.md").read_text(encoding="utf-8")
+    return {r[0]: r for r in _table_after(text, "## At matched quality")}
+
+
+def test_results_baselines_at_the_shipped_models_defaults_are_the_published_files() -> None:
+    text = RESULTS.read_text(encoding="utf-8")
+    headline = _headline()
+    files = {m: _matched(m) for m in SHIPPED}
+    fails = [_floats(headline[m][5])[0] for m in SHIPPED]
+    assert [float(files[m]["model"][1]) for m in SHIPPED] == fails  # the headline's default = the files'
+    claim = re.search(r"six fail (\d+\.\d)-(\d+\.\d)%", text)
+    assert claim is not None and claim.groups() == _span(fails), claim
+    model = [float(files[m]["model"][2]) for m in SHIPPED]
+    yang_unseen = [float(files[m]["yang2019-unseen-1x1"][2]) for m in SHIPPED]
+    claim = re.search(r"saving (\d+\.\d)-(\d+\.\d)% where the models save (\d+\.\d)-(\d+\.\d)%", text)
+    assert claim is not None and claim.groups() == _span(yang_unseen) + _span(model), claim
+    # "more rarely than Yang 2019 can at any setting, and every one but JNYang more rarely than FidelityFX"
+    assert all(files[m]["yang2019"][2] == "-" for m in SHIPPED)
+    assert [m for m in SHIPPED if files[m]["fidelityfx"][2] != "-"] == ["jnyang"]
+    assert "every one but JNYang more rarely than FidelityFX" in text.replace("\n", " ")
+
+
+def test_tables_made_from_evaltest_shipped_quote_its_current_savings() -> None:
+    """A table whose command reads data/evaltest-shipped quotes the shipped files' work saved as "Which R²" does,
+    or says that its row is of the one-threshold file (LPIPS's grow-2 table kept the one-threshold savings under
+    "shipped" after the file changed)."""
+    text = RESULTS.read_text(encoding="utf-8")
+    which = _table_after(text, "| test split, 80 samples | R² all / seen / unseen %")
+    current = {r[1]: _floats(r[3])[:4] for r in which if r[0].endswith(", shipped")}
+    assert len(current) == len(SHIPPED)
+    checked = 0
+    for block in re.finditer(r"```bash\n(.*?)```", text, re.S):
+        if "data/evaltest-shipped/evaluation.json" not in block.group(1):
+            continue
+        for row in _table_after(text[block.end():], "|"):
+            if "shipped" not in row[0] or "one threshold" in row[0]:
+                continue
+            for cell in row[:-1]:
+                if cell in current and len(_floats(row[-1])) >= 4:
+                    checked += 1
+                    assert _floats(row[-1])[:4] == current[cell], row
+    assert checked >= len(SHIPPED), checked
