@@ -21,7 +21,7 @@ import shutil
 import time
 import zlib
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, wait
+from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,7 +33,7 @@ from rtp.sdk.files import writer_lock
 
 from ._dataset import MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
 from ._memory import check_frame_memory
-from ._pool import cores, name_task, tick_queue, with_ticks, worker_pool
+from ._pool import WorkerDiedError, cores, name_task, tick_queue, with_ticks, worker_pool
 
 __all__ = [
     "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "check_scene", "load_scene",
@@ -642,9 +642,16 @@ def capture(
                 while pending:
                     finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
                     drain()
-                    for f in finished:
+                    for f in sorted(finished, key=lambda f: f.exception() is not None):  # (those done first)
                         try:
                             result = f.result()
+                        except BrokenExecutor as exc:  # (a worker killed: every unfinished scene's future fails)
+                            left = [scene_of[g] for g in scene_of if not g.done() or g.exception() is not None]
+                            raise WorkerDiedError(
+                                f"a capture worker process died (killed by the system, out of memory?, or by a "
+                                f"signal) before {'scene' if len(left) == 1 else 'scenes'} "
+                                f"{', '.join(map(repr, left))} {'was' if len(left) == 1 else 'were'} captured; the "
+                                f"samples written are kept: the same command captures the rest") from exc
                         except Exception as exc:  # (a worker's: its traceback said nothing of the scene)
                             name_task(exc, f"scene {scene_of[f]!r}")
                             raise

@@ -864,6 +864,41 @@ def test_a_targets_worker_killed_names_the_samples_in_flight(tmp_path: Path, mon
     assert sorted(started) == ids[:2]
 
 
+def test_a_capture_worker_killed_names_the_scenes_not_captured(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A local capture worker killed outright broke the pool, and `rtp capture --workers 2` ended on
+    BrokenProcessPool's traceback, naming no scene (name_task leaves broken pools alone: every pending task gets
+    one). It is now a one-line rtp error naming the scenes not captured, still a BrokenProcessPool, and the scene a
+    worker finished is kept. The pool is a pool of threads whose killed task fails as a broken pool's do."""
+    import contextlib
+    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from rtp.capture import WorkerDiedError, _capture
+
+    @contextlib.contextmanager
+    def pool(n: int, ticks: object = None) -> object:
+        with ThreadPoolExecutor(1) as ex:  # (one at a time: the first scene is done before the second dies)
+            yield ex
+
+    run_job = _capture._run_job
+
+    def killed(scene: str, *args: object, **kwargs: object) -> object:
+        if scene == "procedural:6":
+            raise BrokenProcessPool("A process in the process pool was terminated abruptly")
+        return run_job(scene, *args, **kwargs)
+
+    monkeypatch.setattr(_capture, "worker_pool", pool)
+    monkeypatch.setattr(_capture, "_run_job", killed)
+    out = tmp_path / "ds"
+    with pytest.raises(WorkerDiedError) as err:
+        capture(["procedural:5", "procedural:6"], out, per_scene=1, size=(64, 48), profiles=("slow",), workers=2)
+    assert isinstance(err.value, BrokenProcessPool) and err.value.exit_code == 1
+    assert str(err.value) == ("a capture worker process died (killed by the system, out of memory?, or by a signal) "
+                              "before scene 'procedural:6' was captured; the samples written are kept: the same "
+                              "command captures the rest")
+    assert [i for i in DatasetReader(out).ids if i.startswith("procedural_5")]
+
+
 def test_a_resumed_capture_drawn_with_other_renderer_settings_says_so(tmp_path: Path,
                                                                       caplog: pytest.LogCaptureFixture) -> None:
     """The samples a resumed capture adds drawn with other renderer settings than the folder's (another rtp
