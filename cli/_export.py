@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ._run import Formatter, Parser, add_common, carries_metadata, option_flags, run
+from ._run import Formatter, Parser, add_common, carries_metadata, interruptible_start, option_flags, run
 
 __all__ = ["build_export_parser", "export_main"]
 
@@ -156,6 +156,10 @@ def _reads_as_onnx(path: str) -> bool:
 
 
 def export_main(argv: Sequence[str] | None = None) -> int:
+    return interruptible_start("rtp-export", lambda: _export_main(argv))
+
+
+def _export_main(argv: Sequence[str] | None) -> int:
     parser = build_export_parser()
     args = parser.parse_args(argv)
     _check(parser, args)

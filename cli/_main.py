@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._run import Bar, Formatter, Parser, add_common, carries_metadata, option_flags, run
+from ._run import Bar, Formatter, Parser, add_common, carries_metadata, interruptible_start, option_flags, run
 
 __all__ = ["build_parser", "main"]
 
@@ -1381,6 +1381,12 @@ def _subparser(parser: argparse.ArgumentParser, name: str | None) -> argparse.Ar
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # (Ctrl-C while rtp's modules load and the arguments are read, before the command's policy: a traceback of the
+    # import it landed in, for the first half-second of every command, instead of "rtp: interrupted")
+    return interruptible_start("rtp", lambda: _main(argv))
+
+
+def _main(argv: Sequence[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     # `rtp` alone, `rtp scenes` alone: the commands or actions, as -h lists them (argparse's error said only

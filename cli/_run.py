@@ -397,6 +397,19 @@ def _notes(err: BaseException) -> str:
     return "".join(" " + one_line(str(note)) for note in notes)
 
 
+def interruptible_start(prog: str, start: Callable[[], int]) -> int:
+    """``start()``: an entry point that loads rtp's modules, reads its arguments and then runs its command under
+    :func:`run_guarded`. Ctrl-C before that (the imports and argparse take about half a second) says ``PROG:
+    interrupted`` and returns 130, as it does once the command runs, instead of a traceback of the import it
+    landed in; so does one that escapes the command's own policy (a second Ctrl-C while it says the first)."""
+    try:
+        return start()
+    except KeyboardInterrupt:  # (nothing imported here: the interrupt may have cut rtp.sdk's own import short)
+        with contextlib.suppress(KeyboardInterrupt, OSError):
+            print(f"{prog}: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT  # (the sdk's EXIT_INTERRUPTED)
+
+
 def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False,
                 on_interrupt: Callable[[], Callable[[], str] | None] | None = None) -> int:
     """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,

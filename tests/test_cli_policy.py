@@ -335,6 +335,25 @@ def test_a_second_interrupt_while_the_account_is_made_still_says_interrupted(cap
     assert capsys.readouterr().err == "rtp capture: interrupted\n"
 
 
+def test_an_interrupt_while_the_command_starts_says_interrupted(monkeypatch: pytest.MonkeyPatch,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C in the first half-second of a command, while rtp's modules load and its parser is built (before the
+    command's own policy runs), was a KeyboardInterrupt traceback of the import it landed in: it says
+    "interrupted" and exits 130, as later."""
+    import rtp.cli._export
+    import rtp.cli._main
+
+    monkeypatch.setattr(rtp.cli._main, "build_parser", _raiser(KeyboardInterrupt()))
+    monkeypatch.setattr(rtp.cli._export, "build_export_parser", _raiser(KeyboardInterrupt()))
+    for prog, entry in (("rtp", main), ("rtp-export", export_main)):
+        try:
+            code = entry(["info", "model.onnx"] if entry is main else ["model.pt"])
+        except KeyboardInterrupt:
+            pytest.fail(f"{prog}: the interrupt escaped as a traceback")
+        assert code == 130
+        assert capsys.readouterr().err == f"{prog}: interrupted\n"
+
+
 def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """An OSError about a path (a folder where a file was asked, a read-only place, a full disk) is the
