@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
+import yaml
 
 from rtp.capture.scenes import map_names
 from rtp.sdk import ParameterError
@@ -135,6 +137,14 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("per_metric:\n  jnyng:\n    batch: 4\n", "per_metric names unknown metric(s) jnyng (jnyng: did you mean jnyang?)"),
     ("per_metric:\n  psnr:\n    btach: 4\n", "r.yaml: unknown key(s) btach (btach: did you mean batch?)"),
     ("per_metric:\n  flip:\n    steps: '4'\n", "per_metric flip: recipe key 'steps': expected int, got '4'"),
+    # the training's own fields: "unknown key(s) out (out: did you mean outputs?)", "val_scenes (... val_every?)"
+    ("out: m.pt\n", "r.yaml: 'out' is the training's, not the recipe's: give it to the training (rtp train --out"),
+    ("val_scenes: [scene0]\n", "(rtp train --val-scenes, TrainConfig.val_scenes); a recipe holds out the maps of a "
+                               "split of scenes.yaml with val_split"),
+    ("per_metric:\n  flip:\n    data: d\n", "'data' is the training's, not the recipe's: give it to the training "
+                                            "(rtp train --data"),
+    # a typo'd metric in `metrics` said "is for jnyng (measured for those only), got metric 'jnyang'"
+    ("metrics: [jnyng, flip]\n", "metrics names unknown metric(s) jnyng (jnyng: did you mean jnyang?)"),
 ])
 def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needle: str) -> None:
     path = tmp_path / "r.yaml"
@@ -189,6 +199,81 @@ def test_a_conflict_names_the_field_and_whether_the_recipe_or_the_caller_set_it(
     with pytest.raises(ParameterError, match="multiple of the tile size") as err:
         TrainConfig.from_recipe("shipped", data="d", metric="jnyang", out=out, crop=40)
     assert err.value.name == "crop"
+
+
+@pytest.mark.parametrize(("text", "key"), [
+    ("out: m.pt\n", "out"), ("val_scenes: [a]\n", "val_scenes"), ("per_metric:\n  flip:\n    data: d\n", "data"),
+    ("metric: flip\n", "metric"), ("metrics: [jnyng]\n", "metrics"), ("metrics: [flip]\n", "metrics"),
+    ("metrics: flip\n", "metrics"), ("per_metric: 3\n", "per_metric"),
+])
+def test_a_bad_recipe_names_the_key_at_fault(tmp_path: Path, text: str, key: str) -> None:
+    path = tmp_path / "r.yaml"
+    path.write_text(text)
+    with pytest.raises(RecipeError) as err:
+        load_recipe(path, "jnyang")
+    assert err.value.name == key
+
+
+@pytest.mark.parametrize(("inputs", "got"), [
+    ("[foo, seen]", "got unknown channel(s) 'foo'"), ("[seen, albedo.y, seen]", "got seen more than once"),
+    ("[]", "got none"),
+])
+def test_recipe_inputs_are_channels_checked_when_read(tmp_path: Path, inputs: str, got: str) -> None:
+    """An unknown channel failed as a DatasetError once the data was being read, a repeated one as a MetadataError
+    at the first checkpoint save (steps into the training), none as torch's Conv2d's error naming no field."""
+    path = tmp_path / "r.yaml"
+    path.write_text(f"inputs: {inputs}\n")
+    with pytest.raises(ParameterError, match=rf"^recipe .*r\.yaml sets inputs: .*expected one or more distinct "
+                                             rf"channels among .*{re.escape(got)}") as err:
+        TrainConfig.from_recipe(path, data="d", metric="jnyang", out=str(tmp_path / "m.pt"))
+    assert err.value.name == "inputs"
+    with pytest.raises(ParameterError, match=re.escape(got)) as err:  # train() itself, before any data ("d" is none)
+        train(TrainConfig(data="d", metric="jnyang", out=str(tmp_path / "m.pt"), inputs=tuple(yaml.safe_load(inputs))))
+    assert err.value.name == "inputs"
+
+
+def test_the_callers_val_split_and_splits_win_over_the_recipes(tmp_path: Path) -> None:
+    """Overrides win over the recipe, val_split and splits too: the recipe's val_split replaced the caller's, and the
+    packaged split list (scenes=None) the splits file the caller or the recipe gave."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text("train: [scene0]\nvalidation: [scene1]\ntest: [scene2]\n")
+    out = str(tmp_path / "m.pt")
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out=out, val_split="test")
+    assert cfg.val_split == "test" and cfg.recipe is not None and cfg.recipe["overrides"] == {"val_split": "test"}
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out=out, val_split=None)
+    assert cfg.val_split is None
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out=out, val_split="validation")
+    assert cfg.recipe is not None and "overrides" not in cfg.recipe  # (the recipe's own split is no override)
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out=out, splits=str(splits))
+    assert (cfg.val_split, cfg.splits) == ("validation", str(splits))
+    cfg = TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out=out, scenes=splits)
+    assert (cfg.val_split, cfg.splits) == ("validation", str(splits))
+    # a recipe's own val_split that is no split is the recipe's fault, named so; the caller's is the caller's
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("val_split: validaton\n")
+    with pytest.raises(RecipeError, match=r"^recipe .*bad\.yaml sets val_split: validaton, which does not fit") as err:
+        TrainConfig.from_recipe(bad, data="d", metric="jnyang", out=out)
+    assert err.value.name == "val_split"
+    with pytest.raises(ParameterError, match="^val_split: split: expected one of train, validation, test") as err:
+        TrainConfig.from_recipe(SHIPPED_RECIPE, data="d", metric="jnyang", out=out, val_split="validaton")
+    assert err.value.name == "val_split"
+
+
+def test_a_recipes_splits_file_holds_out_its_maps(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A recipe's ``splits`` was replaced by the packaged split list when it also set ``val_split``: the data's last
+    scene was held out (with a warning that none of the validation maps was there) while the provenance recorded the
+    recipe's splits file."""
+    data = _dataset(tmp_path / "d")  # scenes scene0..scene2
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text("train: [scene0, scene2]\nvalidation: [scene1]\ntest: []\n")
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(f"val_split: validation\nsplits: {splits}\nsteps: 2\nbatch: 2\ncrop: 32\n")
+    cfg = TrainConfig.from_recipe(recipe, data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"))
+    with caplog.at_level("WARNING", logger="rtp"):
+        train(cfg)
+    assert "holds none of the validation maps" not in caplog.text
+    prov = load_checkpoint(tmp_path / "m.pt").metadata.provenance
+    assert list(prov["val_scenes"]) == ["scene1"] and prov["recipe"]["values"]["splits"] == str(splits)
 
 
 def test_a_missing_recipe_names_the_packaged_ones(tmp_path: Path) -> None:

@@ -893,6 +893,40 @@ def test_a_run_interrupted_at_a_validation_resumes_with_the_history_of_an_uninte
         assert torch.equal(v, resumed.net.state_dict()[k]), k
 
 
+def test_an_interrupt_after_a_steps_forward_pass_keeps_the_batchnorm_statistics_of_the_step_before(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Ctrl-C between a step's forward pass and its weight update saved the step before with the BatchNorm running
+    # statistics (and num_batches_tracked) that the cut-short forward pass had already moved: the resumed run made
+    # that step again, so its batch entered the statistics twice and the model ended unlike the uninterrupted run's
+    # (num_batches_tracked one over; running means and variances, and the validations, off).
+    from rtp.train import _loop
+
+    data = _dataset(tmp_path / "ds", n=6)
+    kw = dict(data=str(data), metric="jnyang", crop=32, batch=4, val_scenes=("scene0",), steps=8, val_every=4,
+              save_every=100)
+    whole = load_checkpoint(train(TrainConfig(out=str(tmp_path / "a.pt"), **kw)).checkpoint)
+    real_loss, calls = _loop._LOSSES["l1"], [0]
+
+    def loss_stopping_in_step_6(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        calls[0] += 1
+        if calls[0] == 6:  # (step 6's forward pass has run; its weights are not yet updated)
+            raise KeyboardInterrupt
+        return real_loss(pred, target)
+
+    out = tmp_path / "b.pt"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(_loop._LOSSES, "l1", loss_stopping_in_step_6)
+        with pytest.raises(KeyboardInterrupt):
+            train(TrainConfig(out=str(out), **kw))
+    kept = load_checkpoint(out)
+    assert kept.training["step"] == 5
+    assert all(int(v) == 5 for k, v in kept.net.state_dict().items() if k.endswith("num_batches_tracked"))
+    resumed = load_checkpoint(train(TrainConfig(out=str(out), **kw)).checkpoint)
+    for k, v in whole.net.state_dict().items():
+        assert torch.equal(v, resumed.net.state_dict()[k]), k
+    assert resumed.training["history"] == whole.training["history"]
+
+
 def test_adamw_with_a_cosine_schedule_trains_resumes_exactly_and_is_recorded(tmp_path: Path) -> None:
     from rtp.train import _loop
 

@@ -37,7 +37,7 @@ from . import checkpoint as ckpt
 from . import transforms as tt
 from ._augment import SYMMETRIES, augment_batch, move_tiles, packed_cell
 from ._frames import Frame, crop_batch
-from ._recipe import check_fields, load_recipe, normal_fields
+from ._recipe import RecipeError, check_fields, load_recipe, normal_fields
 from ._safety import calibrate_safety
 from .model import ARCHS, HEADS, Network, build_network, keep_outputs
 
@@ -204,8 +204,9 @@ class TrainConfig:
     ) -> TrainConfig:
         """A configuration from a recipe (a YAML path, or ``"shipped"``: the shipped models' recipe),
         resolved for ``metric``; keyword ``overrides`` (TrainConfig fields) win over the recipe.
-        The recipe's ``val_split`` holds out that split's maps of ``scenes`` (default: the split list
-        shipped with rtp) unless ``val_scenes`` is overridden."""
+        The recipe's ``val_split`` holds out that split's maps of ``scenes`` (default: the recipe's ``splits``,
+        else the split list shipped with rtp) unless ``val_scenes`` is overridden; a ``val_split`` or ``splits``
+        override wins over the recipe's as any other does."""
         import dataclasses
 
         from rtp.capture.scenes import map_names
@@ -219,12 +220,27 @@ class TrainConfig:
         overrides = normal_fields(overrides)  # (numpy's numbers as Python's, in the provenance too)
         r = load_recipe(recipe, metric)
         values = {**r.values, **overrides}
-        if "val_scenes" not in overrides and r.val_split is not None:
-            map_names(r.val_split, scenes)  # an unknown split is refused now, not after loading the data
-            values.update(val_split=r.val_split, splits=None if scenes is None else str(scenes))
+        # The caller's val_split and splits (or scenes) win over the recipe's, as every override does (the
+        # recipe's val_split replaced the caller's, and scenes=None the splits the caller or the recipe gave:
+        # another split's maps were held out than the provenance recorded)
+        val_split = overrides["val_split"] if "val_split" in overrides else r.val_split
+        splits = scenes if scenes is not None else values.get("splits")
+        if "val_scenes" not in overrides and val_split is not None:
+            try:
+                map_names(val_split, splits)  # an unknown split is refused now, not after loading the data
+            except sdk.ParameterError as err:
+                if err.name != "split":  # (the splits file's own problem, named as it is)
+                    raise
+                if "val_split" in overrides or r.val_split is None:
+                    raise sdk.ParameterError(f"val_split: {err}", "val_split") from None
+                raise RecipeError(f"recipe {r.name} sets val_split: {val_split}, which does not fit: {err}",
+                                  "val_split") from None
+            values.update(val_split=val_split, splits=None if splits is None else str(splits))
         prov = r.provenance()
         # (the device is the machine's, not a hyper-parameter: the provenance names it apart)
-        changed = {k: v for k, v in overrides.items() if k != "device" and (k not in r.values or r.values[k] != v)}
+        recipe_values = {**r.values, "val_split": r.val_split}
+        changed = {k: v for k, v in overrides.items()
+                   if k != "device" and (k not in recipe_values or recipe_values[k] != v)}
         if changed:  # what the command line changed: a model says how it was really trained
             prov["overrides"] = {k: list(v) if isinstance(v, tuple) else v for k, v in changed.items()}
         cfg = cls(data=data, metric=metric, out=out, recipe=prov, **values)
@@ -666,6 +682,15 @@ def check_config(cfg: TrainConfig) -> TrainConfig:
     if tuple(cfg.outputs) not in {tuple(o) for o in sdk.OUTPUT_SETS}:
         raise sdk.ParameterError(f"outputs: expected one of {[list(o) for o in sdk.OUTPUT_SETS]}, got {cfg.outputs!r}",
                                  "outputs")
+    # (an unknown channel failed as a DatasetError once the data was being read; a repeated one as a
+    # MetadataError at the first checkpoint save, steps into the training; none in torch's Conv2d)
+    unknown = [c for c in cfg.inputs if c not in sdk.CHANNELS]
+    repeated = sorted({c for c in cfg.inputs if cfg.inputs.count(c) > 1}, key=cfg.inputs.index)
+    if not cfg.inputs or unknown or repeated:
+        got = (f"unknown channel(s) {', '.join(map(repr, unknown))}" if unknown else
+               f"{', '.join(repeated)} more than once" if repeated else "none")
+        raise sdk.ParameterError(f"inputs: expected one or more distinct channels among {', '.join(sdk.CHANNELS)}, "
+                                 f"got {got}", "inputs")
     if cfg.head not in HEADS:
         raise sdk.ParameterError(f"head: expected one of {', '.join(HEADS)}, got {cfg.head!r}", "head")
     for key, value, ok, expected in (
@@ -1215,8 +1240,14 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     # optimizer, the schedule and the average were being updated, where no consistent state exists until the step
     # ends (the last periodic checkpoint stays). A resumed run still reproduces an uninterrupted one exactly: its
     # weights, and its history too (a validation the interrupt cut short is made when it resumes). The final
-    # validation and calibration are covered too: an interrupt there keeps the last step.
-    boundary_gen, boundary_loss, updating = gen.get_state(), owed_loss, False
+    # validation and calibration are covered too: an interrupt there keeps the last step. A step's forward pass moves
+    # the BatchNorm running statistics before its weights are updated: those of the step boundary are kept with it
+    # (saved as the forward pass had left them, the resumed run's redo of that step counted its batch twice).
+
+    def buffers_now() -> dict[str, torch.Tensor]:
+        return {k: b.detach().clone() for k, b in net.named_buffers()}
+
+    boundary_gen, boundary_loss, boundary_buffers, updating = gen.get_state(), owed_loss, buffers_now(), False
     try:
         while step < cfg.steps:
             idx = torch.randint(len(tr.x), (cfg.batch,), generator=gen).tolist()
@@ -1274,7 +1305,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             step += 1
             if cfg.ema:
                 _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
-            boundary_gen, boundary_loss, updating = gen.get_state(), loss_value, False
+            boundary_gen, boundary_loss, boundary_buffers, updating = gen.get_state(), loss_value, buffers_now(), False
             if progress:
                 progress(step, cfg.steps, loss_value)
             if step % cfg.val_every == 0 or step == cfg.steps:
@@ -1324,6 +1355,9 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
         save(done=True, safety=safety, extra=extra)
     except KeyboardInterrupt:
         if not updating and step > saved_step:
+            with torch.no_grad():  # (the statistics of the step boundary, not those of a forward pass cut short)
+                for buffer_name, buffer in net.named_buffers():
+                    buffer.copy_(boundary_buffers[buffer_name])
             # (a validation the interrupt kept from the history, owed at this step: a resumed run makes it first)
             owed = (step % cfg.val_every == 0 or step == cfg.steps) and (not history or history[-1]["step"] != step)
             save(done=False, generator=boundary_gen, pending=boundary_loss if owed else None)

@@ -35,6 +35,8 @@ __all__ = ["SHIPPED_RECIPE", "Recipe", "RecipeError", "load_recipe", "packaged_r
 #: The name of the recipe rtp's shipped models were trained with.
 SHIPPED_RECIPE = "shipped"
 _SET_BY_CALLER = ("data", "metric", "out", "val_scenes", "recipe", "device")
+#: The fields of :data:`_SET_BY_CALLER` a recipe may not set, but the training (the flag of ``rtp train`` that does).
+_CALLER_FLAGS = {"data": "--data", "metric": "--metric", "out": "--out", "val_scenes": "--val-scenes", "recipe": "--config"}
 
 
 class RecipeError(ParameterError):
@@ -189,17 +191,23 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     per_metric = data.pop("per_metric", None) or {}
     if not isinstance(per_metric, dict) or not all(isinstance(v, dict) and all(isinstance(k, str) for k in v)
                                                    for v in per_metric.values()):
-        raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields")
-    metrics = data.pop("metrics", None)
-    if metrics is not None:  # a recipe measured for some metrics only (``reuse``: JNYang)
-        if not isinstance(metrics, list) or not metrics or not all(isinstance(m, str) for m in metrics):
-            raise RecipeError(f"recipe key 'metrics': expected a list of metric names, got {metrics!r}")
-        if metric not in metrics:
-            raise RecipeError(f"recipe {name} is for {', '.join(metrics)} (measured for those only), got metric "
-                              f"{metric!r}; the shipped recipe, {SHIPPED_RECIPE!r}, trains every metric")
+        raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields", "per_metric")
     import difflib
 
     known = known_metrics()
+    metrics = data.pop("metrics", None)
+    if metrics is not None:  # a recipe measured for some metrics only (``reuse``: JNYang)
+        if not isinstance(metrics, list) or not metrics or not all(isinstance(m, str) for m in metrics):
+            raise RecipeError(f"recipe key 'metrics': expected a list of metric names, got {metrics!r}", "metrics")
+        strange = [m for m in metrics if m not in known]
+        if strange:  # ("is for jnyng (measured for those only), got metric 'jnyang'" for a typo)
+            close = {m: difflib.get_close_matches(m, known, n=1) for m in strange}
+            guess = "".join(f" ({m}: did you mean {c[0]}?)" for m, c in close.items() if c)
+            raise RecipeError(f"recipe {name}: metrics names unknown metric(s) {', '.join(strange)}{guess}; expected "
+                              f"among {', '.join(known)}", "metrics")
+        if metric not in metrics:
+            raise RecipeError(f"recipe {name} is for {', '.join(metrics)} (measured for those only), got metric "
+                              f"{metric!r}; the shipped recipe, {SHIPPED_RECIPE!r}, trains every metric", "metrics")
     strange = [m for m in per_metric if m not in known]
     if strange:  # (a typo'd metric's section was never read: its values trained nothing, silently)
         close = {m: difflib.get_close_matches(str(m), known, n=1) for m in strange}
@@ -229,6 +237,14 @@ def _checked(name: str, merged: dict[str, Any]) -> tuple[dict[str, Any], str | N
     if "device" in merged:  # (a TrainConfig field, but the machine's: the same recipe trains anywhere)
         raise RecipeError(f"recipe {name}: 'device' is the machine's, not the recipe's: give it to the training "
                           f"(rtp train --device, TrainConfig.device)", "device")
+    given = [k for k in merged if k in _CALLER_FLAGS]
+    if given:  # (the training's own fields: "unknown key out (did you mean outputs?)", "val_scenes (... val_every?)")
+        key = given[0]
+        split = {"val_scenes": "; a recipe holds out the maps of a split of scenes.yaml with val_split",
+                 "metric": "; a recipe lists the metrics it is for with metrics"}.get(key, "")
+        raise RecipeError(f"recipe {name}: {key!r} is the training's, not the recipe's: give it to the training "
+                          f"(rtp train {_CALLER_FLAGS[key]}, {'TrainConfig.from_recipe' if key == 'recipe' else 'TrainConfig'}"
+                          f"{'' if key == 'recipe' else '.' + key}){split}", key)
     types = _field_types()
     unknown = sorted(set(merged) - set(types))
     if unknown:
