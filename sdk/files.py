@@ -51,14 +51,19 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     If the body raises, the temporary file is removed and ``path`` keeps its previous content, so a
     reader never sees a half-written file. A system error that names no file (a full disk, a quota,
     an I/O error: what a write into an open file raises) is raised again naming ``path``, the file
-    that could not be written, as an ``OSError`` of the same ``errno``.
+    that could not be written, as an ``OSError`` of the same ``errno``. The temporary file of an earlier
+    write of ``path`` whose process was killed (``kill -9``: no cleanup ran) is removed, once no process
+    holds it and it is a minute old (where the system has ``flock``).
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    os.close(fd)
+    if not _hold(fd):  # (held while this write lives: a later write of the target can tell it is not orphaned)
+        os.close(fd)  # (not held: closed at once, as before; Windows cannot replace a file left open)
+        fd = -1
     tmp_path = Path(tmp)
     try:
+        _remove_orphans(target, tmp_path)
         yield tmp_path
         with open(tmp_path, "rb+") as f:
             os.fsync(f.fileno())
@@ -71,6 +76,61 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
             # ("[Errno 28] No space left on device" alone: which file, and so which disk, is the user's to know)
             raise OSError(err.errno, err.strerror or os.strerror(err.errno), str(target)) from err
         raise
+    finally:
+        if fd >= 0:
+            os.close(fd)
+
+
+#: How old (by modification time) an unlocked temporary file of :func:`atomic_output` must be before a later write
+#: of the same file removes it: a writer takes its lock just after creating the file, so a young one may be alive.
+ORPHAN_AGE_S = 60.0
+
+
+def _hold(fd: int) -> bool:
+    """Take an exclusive ``flock`` on a temporary file of :func:`atomic_output`, for as long as ``fd`` is open (the
+    system drops it when the process ends, ``kill -9`` included); False where there is no ``flock``."""
+    try:
+        import fcntl
+
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except (ImportError, OSError):  # (not POSIX, or a file system that refuses locks: no cleanup of its orphans)
+        return False
+    return True
+
+
+def _remove_orphans(target: Path, mine: Path) -> None:
+    """Remove the temporary files of earlier writes of ``target`` whose process died without cleaning up (a
+    ``kill -9``, a power cut: ``.model.onnx.k2j4x9ab.tmp`` stayed beside the file for good): those no live process
+    holds the lock of (:func:`_hold`) and older than :data:`ORPHAN_AGE_S`. Only the names this function gives."""
+    try:
+        import fcntl
+    except ImportError:
+        return
+    import time
+
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.[A-Za-z0-9_]{{8}}\.tmp")
+    now = time.time()
+    try:
+        candidates = [p for p in target.parent.iterdir() if p != mine and pattern.fullmatch(p.name)]
+    except OSError:
+        return
+    for p in candidates:
+        try:
+            fd = os.open(p, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        except OSError:
+            continue
+        try:
+            if not os.path.isfile(p) or now - os.fstat(fd).st_mtime < ORPHAN_AGE_S:
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # (held: a live write)
+                continue
+            with contextlib.suppress(OSError):
+                p.unlink()
+                log.info("%s: removed %s, the temporary file of a write that was killed", target, p.name)
+        finally:
+            os.close(fd)
 
 
 @contextlib.contextmanager

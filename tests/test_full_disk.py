@@ -161,3 +161,42 @@ def test_the_disk_check_counts_the_samples_already_written_and_warns_past_their_
     _free(monkeypatch, 2 * 10**10)
     check_disk(tmp_path / "new" / "deeper", (1280, 720), 1000)  # a folder not made yet: its first existing parent's disk
     assert not caplog.text
+
+
+def test_a_killed_writes_temporary_file_is_removed_by_the_next_write(tmp_path: Path) -> None:
+    """A write killed outright (kill -9: no cleanup ran) left `.model.onnx.XXXXXXXX.tmp` beside the file for good,
+    every rerun adding another. The next write of the same file removes it once no live process holds it (each
+    write holds an flock on its own) and it is a minute old; a live write's, a young one's and other files stay."""
+    import fcntl
+    import signal
+    import time
+
+    target = tmp_path / "model.onnx"
+    code = ("import sys, time; from rtp.sdk.files import atomic_output\n"
+            f"with atomic_output({str(target)!r}) as tmp:\n"
+            "    tmp.write_bytes(b'half'); print(tmp, flush=True); time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    killed = Path(proc.stdout.readline().strip())
+    # while it lives, its file is held: not removed even when old
+    os.utime(killed, (time.time() - 3600, time.time() - 3600))
+    with atomic_output(target) as tmp:
+        tmp.write_bytes(b"one")
+    assert killed.exists()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    young = tmp_path / ".model.onnx.youngabc.tmp"
+    held = tmp_path / ".model.onnx.heldabcd.tmp"
+    other = tmp_path / ".other.onnx.abcdefgh.tmp"
+    for p in (young, held, other):
+        p.write_bytes(b"x")
+    for p in (held, other):
+        os.utime(p, (time.time() - 3600, time.time() - 3600))
+    with open(held, "rb") as f:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX)  # (a live writer's)
+        with atomic_output(target) as tmp:
+            tmp.write_bytes(b"two")
+    assert target.read_bytes() == b"two"
+    assert not killed.exists() and young.exists() and held.exists() and other.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["model.onnx", young.name, held.name, other.name])
