@@ -942,20 +942,40 @@ def _packages() -> dict[str, dict[str, bytes]]:
     }
 
 
+def _deb_bytes(files: dict[str, bytes]) -> bytes:
+    """A Debian package as ``ar`` lays it out (``debian-binary``, ``control.tar.xz``, ``data.tar.xz``), its data
+    member a zip of ``files`` here (what the fake ``dpkg-deb -x`` of :func:`_fake_apt` unpacks)."""
+    out = b"!<arch>\n"
+    for name, data in (("debian-binary", b"2.0\n"), ("control.tar.xz", b"control"), ("data.tar.xz", _pk3_bytes(files))):
+        out += f"{name:<16}{0:<12}{0:<6}{0:<6}{100644:<8}{len(data):<10}`\n".encode() + data + b"\n" * (len(data) % 2)
+    return out
+
+
+def _deb_data(path: str | Path) -> bytes:
+    """The ``data.tar.xz`` member of a package of :func:`_deb_bytes`."""
+    raw, pos = Path(path).read_bytes(), 8
+    while pos < len(raw):
+        head, n = raw[pos:pos + 60], int(raw[pos + 48:pos + 58])
+        if head[:16].strip() == b"data.tar.xz":
+            return raw[pos + 60:pos + 60 + n]
+        pos += 60 + n + n % 2
+    raise zipfile.BadZipFile(f"{path}: no data member")
+
+
 def _fake_apt(monkeypatch: pytest.MonkeyPatch, packages: dict[str, dict[str, bytes]]) -> list[list[str]]:
     """Replace ``_fetch._run``, the one function that runs ``apt-get download`` (the network) and
-    ``dpkg-deb -x``: the fake writes ``<package>_1.0_all.deb`` (a zip of the package's files here) and
-    unpacks it. Returns the commands run."""
+    ``dpkg-deb -x``: the fake writes ``<package>_1.0_all.deb`` (an ``ar`` archive as a real one, its data a zip of
+    the package's files here) and unpacks it. Returns the commands run."""
     calls: list[list[str]] = []
 
     def run(cmd, cwd: Path, debs: Path | None = None) -> None:
         calls.append(list(cmd))
         if list(cmd[:2]) == ["apt-get", "download"]:
             for pkg in cmd[2:]:
-                (cwd / f"{pkg}_1.0_all.deb").write_bytes(_pk3_bytes(packages[pkg]))
+                (cwd / f"{pkg}_1.0_all.deb").write_bytes(_deb_bytes(packages[pkg]))
         else:
             assert list(cmd[:2]) == ["dpkg-deb", "-x"], cmd
-            with zipfile.ZipFile(cmd[2]) as z:
+            with zipfile.ZipFile(io.BytesIO(_deb_data(cmd[2]))) as z:
                 z.extractall(cmd[3])
 
     monkeypatch.setattr(scenes._fetch, "_run", run)
@@ -1074,6 +1094,109 @@ def test_run_turns_command_failures_into_fetch_errors(tmp_path: Path):
     with pytest.raises(scenes.FetchError, match=r"failed with exit code 3: line 2 \| line 3 \| line 4 \| line 5 \| line 6$"):
         _run([sys.executable, "-c", script], tmp_path)
     _run([sys.executable, "-c", "pass"], tmp_path)  # success: no error
+
+
+def test_a_full_disk_while_unpacking_keeps_the_whole_package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """dpkg-deb failing on a whole package (the disk full while unpacking) removed the package as if it were
+    damaged: the next fetch downloaded the 94 MB again (or could not, offline). A whole package is kept, the error
+    says to free space and fetch again, and that fetch unpacks it without downloading; one cut short is still
+    removed (test above)."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    calls = _fake_apt(monkeypatch, _packages())
+    working = scenes._fetch._run
+
+    def full_disk(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
+        if list(cmd[:2]) == ["dpkg-deb", "-x"] and "textures" in cmd[2]:
+            working(cmd, cwd)  # (part of it written)
+            raise scenes.FetchError(f"dpkg-deb -x {cmd[2]} {cmd[3]} failed with exit code 2: tar: ./usr/share/games/"
+                                    "openarena/baseoa/pak-tex.pk3: Cannot write: No space left on device")
+        working(cmd, cwd)
+
+    monkeypatch.setattr(scenes._fetch, "_run", full_disk)
+    deb = cache / "debs" / "openarena-081-textures_1.0_all.deb"
+    with pytest.raises(scenes.FetchError, match=rf"No space left on device \(kept {re.escape(str(deb))}, a whole "
+                                                r"package: .*free some space and run `rtp scenes fetch` again"):
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert deb.is_file() and not (cache / "index.json").exists()
+    assert "openarena-081-textures_1.0_all.deb" not in (cache / "root" / ".unpacked").read_text()
+    monkeypatch.setattr(scenes._fetch, "_run", working)
+    calls.clear()
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
+    assert calls == [["dpkg-deb", "-x", str(d), str(cache / "root")] for d in  # unpacked again, nothing downloaded
+                     (deb, cache / "debs" / "openarena-oacmp1_1.0_all.deb")]  # (and the one after it, not yet)
+    assert scene_by_name("m1", cache, splits=splits).materials[0].texture is not None
+
+
+def _fake_apt_get(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stderr: str) -> None:
+    """An ``apt-get`` first on PATH that prints ``stderr`` and fails as apt does (exit code 100)."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    tool = bin_dir / "apt-get"
+    tool.write_text(f"#!{sys.executable}\nimport sys\nsys.stdout.write('Err:1 http://deb.debian.org/debian x\\n')\n"
+                    f"sys.stderr.write({stderr!r})\nsys.exit(100)\n")
+    tool.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}:{__import__('os').environ['PATH']}")
+
+
+@pytest.mark.parametrize(("stderr", "why"), [
+    ("W: Download is performed unsandboxed as root as file '/c/libirrlicht-doc_1.8.5_all.deb' couldn't be accessed "
+     "by user '_apt'. - pkgAcquire::Run (13: Permission denied)\n"
+     "E: Failed to fetch http://deb.debian.org/debian/pool/main/o/x.deb  Could not resolve 'deb.debian.org'\n"
+     "W: Some index files failed to download.\n",
+     r"E: Failed to fetch http://deb\.debian\.org/\S+  Could not resolve 'deb\.debian\.org' \(no network, or no mirror "
+     r"reachable\? check the connection"),
+    ("E: Unable to locate package openarena-081-maps\n",
+     r"E: Unable to locate package openarena-081-maps \(the system's package lists do not know them: run `sudo "
+     r"apt-get update`"),
+], ids=["offline", "no-lists"])
+def test_a_download_that_fails_offline_says_why_in_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            stderr: str, why: str):
+    """apt-get download with no network (or no package lists) failed with its last lines, apt's warnings among them
+    ("W: Download is performed unsandboxed as root ..." hid the cause) and no word of what to do. The error is one
+    line of apt's errors, the likely cause and where to put the packages by hand; nothing is left in ``debs/``."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    _fake_apt_get(tmp_path, monkeypatch, stderr)
+    with pytest.raises(scenes.FetchError) as err:
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    text = str(err.value)
+    assert "\n" not in text and "W: " not in text, text
+    assert re.search(rf"^apt-get download {' '.join(scenes.PACKAGES)} failed with exit code 100: {why}", text), text
+    assert text.endswith(f"into {cache / 'debs'} and run `rtp scenes fetch` again)")
+    assert list((cache / "debs").iterdir()) == []
+
+
+def test_a_command_output_that_is_not_text_is_still_its_failure(tmp_path: Path):
+    """Bytes the command's output cannot decode (a file name of another encoding in dpkg-deb's error) raised
+    UnicodeDecodeError from _run, not the FetchError of the command's failure."""
+    from rtp.capture.scenes._fetch import _run
+
+    script = "import sys; sys.stderr.buffer.write(b'tar: caf\\xe9.pk3: Cannot open\\n'); sys.exit(2)"
+    with pytest.raises(scenes.FetchError, match=r"failed with exit code 2: tar: caf.\.pk3: Cannot open$"):
+        _run([sys.executable, "-c", script], tmp_path)
+
+
+def test_a_second_fetch_into_the_same_cache_is_refused_while_one_runs(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch):
+    """Two fetches into one cache at once both downloaded and unpacked into the same folders (and gunzipped into the
+    same temporary file, renamed away under the other). A second fetch is refused at once, naming the one running,
+    before it downloads or writes anything; once that one ends a fetch runs."""
+    from rtp.sdk.files import writer_lock
+
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    calls = _fake_apt(monkeypatch, _packages())
+    with writer_lock(cache, "rtp scenes fetch", RuntimeError):  # (another process's, as far as flock goes)
+        with pytest.raises(scenes.FetchError, match=rf"another fetch into {re.escape(str(cache.resolve()))} is running "
+                                                    rf"\(rtp scenes fetch, pid \d+\): wait for it to end"):
+            scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert calls == [] and not (cache / "debs").exists()
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
 
 
 def test_an_empty_scene_cache_variable_is_unset(monkeypatch: pytest.MonkeyPatch):

@@ -167,12 +167,14 @@ def _run(cmd: Sequence[str], cwd: Path, debs: Path | None = None) -> None:
             f"{cmd[0]} not found: fetching needs a Debian/Ubuntu system (or put the packages' .deb files "
             f"{list(PACKAGES)} into {debs or cwd} yourself)"
         )
-    try:
-        res = subprocess.run([exe, *cmd[1:]], cwd=cwd, capture_output=True, text=True, check=False)
+    try:  # (errors="replace": a byte its output cannot decode was a UnicodeDecodeError, not the command's failure)
+        res = subprocess.run([exe, *cmd[1:]], cwd=cwd, capture_output=True, text=True, errors="replace", check=False)
     except OSError as err:
         raise FetchError(f"could not run {' '.join(cmd)}: {err}") from err
     if res.returncode != 0:
-        tail = (res.stderr or res.stdout).strip().splitlines()[-5:]
+        lines = [ln.strip() for ln in (res.stderr or res.stdout).strip().splitlines() if ln.strip()]
+        errors = [ln for ln in lines if ln.startswith("E: ")]  # (apt's errors, not its warnings: "W: Download is
+        tail = (errors or lines)[-5:]                           # performed unsandboxed as root" hid the cause)
         raise FetchError(f"{' '.join(cmd)} failed with exit code {res.returncode}: " + " | ".join(tail))
 
 
@@ -255,7 +257,8 @@ def fetch(
         ``{map name: pk3 archive}`` for the requested maps.
 
     Raises:
-        FetchError: apt-get/dpkg-deb failed, or a requested map is not in the packages.
+        FetchError: apt-get/dpkg-deb failed, a requested map is not in the packages, or another fetch
+            into ``cache_dir`` is running (one at a time: the second is refused at once).
         UnlistedMapError: a requested map is not listed in ``scenes.yaml``.
         ParameterError: ``maps`` is not a name or a non-empty list of names, or ``cache_dir`` is a file.
     """
@@ -274,6 +277,21 @@ def fetch(
     names = [m for m in wanted if isinstance(m, str)]
     for m in names:
         _check_listed(m, None, splits)
+    cache.mkdir(parents=True, exist_ok=True)
+    from rtp.sdk.files import writer_lock
+
+    # (two fetches into one cache unpacked into the same folder at once, and the second one's gunzip of 20kdm2 found
+    # its temporary file renamed away by the first: a FileNotFoundError)
+    busy = lambda holder: FetchError(  # noqa: E731
+        f"another fetch into {cache} is running ({holder}): wait for it to end, then run `rtp scenes fetch` again "
+        "(it finds the packages that one fetched)")
+    with writer_lock(cache, "rtp scenes fetch", busy):
+        return _fetch_locked(cache, names, splits, convert, progress)
+
+
+def _fetch_locked(cache: Path, names: list[str], splits: str | Path | None, convert: bool,
+                  progress: bool) -> dict[str, Path]:
+    """:func:`fetch`'s work, once its arguments are checked and it holds the cache's lock."""
     debs, root = cache / "debs", cache / "root"
     debs.mkdir(parents=True, exist_ok=True)
     missing = [p for p in PACKAGES if not list(debs.glob(f"{p}_*.deb"))]
@@ -287,7 +305,12 @@ def fetch(
     for d in _progress(todo, desc="unpack", unit="deb", disable=not progress or not todo):
         try:
             _run(["dpkg-deb", "-x", str(d), str(root)], cache)
-        except FetchError as err:  # a damaged package (cut short by an older rtp's failed download): fetched again next time
+        except FetchError as err:
+            if _deb_is_whole(d):  # (a full disk while unpacking removed the good package: 177 MB to download again)
+                raise FetchError(f"{err} (kept {d}, a whole package: the unpacking failed, so if the disk is full free "
+                                 f"some space and run `rtp scenes fetch` again; should it fail the same way again, "
+                                 f"delete {d.name} for the next fetch to download it again)") from err
+            # a damaged package (cut short by an older rtp's failed download): fetched again next time
             d.unlink(missing_ok=True)
             raise FetchError(f"{err} (removed {d.name}: the next `rtp scenes fetch` downloads it again)") from err
         have.append(d.name)
@@ -305,13 +328,48 @@ def fetch(
     return {m: cache / index["maps"][m] for m in names}
 
 
+def _deb_is_whole(path: Path) -> bool:
+    """Whether ``path`` is a whole Debian package by its ``ar`` structure: the magic line, then member headers whose
+    sizes lead exactly to the end of the file, with ``debian-binary`` and ``data.tar*`` among them. A package cut
+    short (a download or copy that stopped) or not a package at all is not; damage inside a member is not seen."""
+    try:
+        size = path.stat().st_size
+        names: list[bytes] = []
+        with open(path, "rb") as f:
+            if f.read(8) != b"!<arch>\n":
+                return False
+            pos = 8
+            while pos < size:
+                f.seek(pos)
+                head = f.read(60)
+                if len(head) != 60 or head[58:60] != b"`\n":
+                    return False
+                n = int(head[48:58])
+                names.append(head[:16].rstrip(b" /"))
+                pos += 60 + n + (n & 1)
+    except (OSError, ValueError):
+        return False
+    return pos in (size, size + 1) and b"debian-binary" in names and any(n.startswith(b"data.tar") for n in names)
+
+
 def _download(packages: Sequence[str], debs: Path) -> None:
     """``apt-get download`` of ``packages`` into a folder of its own inside ``debs``, each ``.deb`` moved
     into ``debs`` once all are downloaded: a download that fails (a full disk, the network) leaves no
     file cut short for the next fetch to take for a package."""
     part = Path(tempfile.mkdtemp(prefix=".download-", dir=debs))
     try:
-        _run(["apt-get", "download", *packages], part, debs)
+        try:
+            _run(["apt-get", "download", *packages], part, debs)
+        except FetchError as err:
+            if "not found: fetching needs" in str(err):  # (no apt-get: its message says what to do already)
+                raise
+            if "Unable to locate package" in str(err):
+                why = ("the system's package lists do not know them: run `sudo apt-get update` (on Ubuntu with the "
+                       "'universe' component enabled)")
+            else:
+                why = "no network, or no mirror reachable? check the connection (and apt's proxy settings)"
+            raise FetchError(f"{err} ({why}; or put the packages' .deb files, from any machine's `apt-get download "
+                             f"{' '.join(packages)}`, into {debs} and run `rtp scenes fetch` again)") from err
         for f in sorted(part.glob("*.deb")):
             os.replace(f, debs / f.name)
     finally:
