@@ -137,7 +137,15 @@ class _Collapse(logging.Filter):
         return True
 
     def summary(self) -> list[str]:
-        return [f"{n} more like: {first}" for (n, first) in self.seen.values() if n]
+        """The counts of the repeats held back since the last summary (each is said once)."""
+        lines = [f"{n} more like: {first}" for (n, first) in self.seen.values() if n]
+        for counted in self.seen.values():
+            counted[0] = 0
+        return lines
+
+    def say(self) -> None:
+        for line in self.summary():
+            print(f"WARNING (repeated): {line}", file=sys.stderr)
 
 
 def _rtp_details(record: logging.LogRecord) -> bool:
@@ -147,7 +155,7 @@ def _rtp_details(record: logging.LogRecord) -> bool:
 
 
 class _Handler(logging.StreamHandler):
-    """stderr, written through ``tqdm.write`` where tqdm is installed, so that a log line never tears a
+    """stderr, written as ``tqdm.write`` writes (see :meth:`_write`) where tqdm is installed, so that a log line never tears a
     progress bar. (tqdm's own ``logging_redirect_tqdm`` swapped this handler for one of its own, which
     at pyproject's floor, tqdm 4.60, wrote to stdout, into the JSON of `rtp info --json`, and before
     tqdm#1775 kept none of its filters: repeated warnings were not collapsed and `-vv` logged every
@@ -155,23 +163,48 @@ class _Handler(logging.StreamHandler):
 
     def __init__(self) -> None:
         super().__init__(sys.stderr)
-        self._write: Callable[..., None] | None = None
+        self._tqdm: Any = None
         with contextlib.suppress(ImportError):
             from tqdm import tqdm
 
-            self._write = tqdm.write
+            self._tqdm = tqdm
 
     def emit(self, record: logging.LogRecord) -> None:
-        if self._write is None:
+        if self._tqdm is None:
             super().emit(record)
             return
         try:
-            self._write(self.format(record), file=self.stream)
-            self.flush()
+            self._write(self.format(record))
         except RecursionError:
             raise
         except Exception:  # noqa: BLE001 - logging's own policy for a handler that fails
             self.handleError(record)
+
+    def _write(self, line: str) -> None:
+        """``line`` with the bars on screen cleared before it and drawn again after it, as ``tqdm.write`` does,
+        but only the bars that are on screen: ``tqdm.write`` also drew a bar still within its delay (its
+        "refresh"), which tqdm then took for never shown, so its close did not end its line: a warning in a job's
+        first half second drew the bar at once, put ``\r\r`` before the line in a log, and left the bar's text
+        in front of the next line (`rtp train`'s "3/3 [00:00, loss=0.0814]rtp train: error: dead output(s)")."""
+        tqdm = self._tqdm
+        with tqdm.get_lock():
+            shown = [bar for bar in list(getattr(tqdm, "_instances", ())) if _on_screen(bar, self.stream)]
+            for bar in shown:
+                bar.clear(nolock=True)
+            self.stream.write(line + self.terminator)
+            for bar in shown:
+                bar.refresh(nolock=True)
+            self.flush()
+
+
+def _on_screen(bar: Any, stream: Any) -> bool:
+    """Whether tqdm ``bar`` is drawn where ``stream`` shows (the same file, or both on the terminal's stdout and
+    stderr) and is past its delay: drawn, by tqdm's own account (its ``close`` ends or erases only such a bar)."""
+    if getattr(bar, "disable", True) or not hasattr(bar, "start_t"):
+        return False
+    if not (bar.fp == stream or all(f in (sys.stdout, sys.stderr) for f in (bar.fp, stream))):  # (fp: tqdm's wrapper)
+        return False
+    return bool(bar.last_print_t >= bar.start_t + getattr(bar, "delay", 0.0))
 
 
 def _console(handler: logging.Handler) -> bool:
@@ -179,7 +212,7 @@ def _console(handler: logging.Handler) -> bool:
 
 
 @contextlib.contextmanager
-def _logging(args: argparse.Namespace) -> Iterator[None]:
+def _logging(args: argparse.Namespace) -> Iterator[_Collapse]:
     verbose = int(args.verbose or 0)  # (-v once: progress; twice: rtp's debug details too)
     level = logging.DEBUG if verbose >= 2 else logging.INFO if verbose else logging.ERROR if args.quiet else logging.WARNING
     handler = _Handler()
@@ -198,12 +231,11 @@ def _logging(args: argparse.Namespace) -> Iterator[None]:
     root.handlers = [h for h in old_handlers if not _console(h)] + [handler]
     root.setLevel(level)
     try:
-        yield
+        yield collapse
     finally:
         root.handlers = old_handlers
         root.setLevel(old_level)
-        for line in collapse.summary():
-            print(f"WARNING (repeated): {line}", file=sys.stderr)
+        collapse.say()
 
 
 class Bar:
@@ -355,14 +387,18 @@ def run(prog: str, args: argparse.Namespace, body: Callable[[argparse.Namespace]
     of the command's parser): a parameter error that names an argument by its Python name names its flag."""
     args.verbose = int(getattr(args, "verbose", 0) or 0) + int(getattr(args, "verbose_after", 0) or 0)
 
-    def body_in_flags() -> int:
-        try:
-            return body(args)
-        except Exception as err:
-            _in_flags(err, flags or {})
-            raise
+    with _logging(args) as repeats:
+        def body_in_flags() -> int:
+            try:
+                return body(args)
+            except Exception as err:
+                _in_flags(err, flags or {})
+                raise
+            finally:
+                # the repeats' counts before the error's line (or the interruption's), not after it: the error
+                # is the last line, as docs/errors.md has it, and `tail -1` of a log finds it
+                repeats.say()
 
-    with _logging(args):
         return run_guarded(prog, body_in_flags, verbose=args.verbose,
                            on_interrupt=lambda: getattr(args, "on_interrupt", None))
 

@@ -848,3 +848,68 @@ def test_a_job_that_fails_at_once_leaves_only_its_error(tmp_path: Path, capsys: 
     assert main(["evaluate", str(tmp_path / "nomodel.onnx"), "--data", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("rtp evaluate: error:") and err.count("\n") == 1, err
+
+
+def test_a_log_line_before_the_bar_shows_neither_draws_it_nor_leaves_it(capsys: pytest.CaptureFixture[str],
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp train` on a dataset without its validation maps warned in its first half second: tqdm.write drew the
+    bar at once (within its delay), put "\\r\\r" before the warning in a log, and the bar, taken by tqdm for never
+    shown, was not ended on close, so the error came after its text: "3/3 [00:00, loss=0.0814]rtp train: error:
+    dead output(s) ...". A log line clears and redraws only a bar that is on screen."""
+    import logging
+
+    from rtp.cli._run import Bar, run
+
+    log = logging.getLogger("rtp.train")
+    args = argparse.Namespace(verbose=0, quiet=False, no_progress=False)
+
+    def body(a: argparse.Namespace) -> int:
+        with Bar(a, 3, "train", "step") as bar:
+            log.warning("d1 holds none of the validation maps")
+            bar.update_to(3)
+        raise sdk.ParameterError("dead output(s) 1x2", "outputs")
+
+    capsys.readouterr()
+    assert run("rtp train", args, body) == 2
+    err = capsys.readouterr().err
+    assert err == ("WARNING rtp.train: d1 holds none of the validation maps\n"
+                   "rtp train: error: dead output(s) 1x2\n"), err
+    # a bar on screen is cleared before the line and drawn again after it, and ends its own line on close
+    monkeypatch.setattr(Bar, "DELAY", 0.0)
+
+    def shown(a: argparse.Namespace) -> int:
+        with Bar(a, 3, "train", "step") as bar:
+            bar.update_to(1)
+            log.warning("a warning while it counts")
+            bar.update_to(3)
+        return 0
+
+    assert run("rtp train", args, shown) == 0
+    err = capsys.readouterr().err
+    before, after = err.split("WARNING rtp.train: a warning while it counts\n")
+    assert before.startswith("\rtrain:") and before.endswith("\r"), err
+    assert after.startswith("\rtrain:") and after.endswith("]\n") and "3/3" in after.rsplit("\r", 1)[-1], err
+
+
+def test_the_error_is_the_last_line_after_the_repeats_count(capsys: pytest.CaptureFixture[str]) -> None:
+    """A job that warned of many samples and then failed printed its error, then "WARNING (repeated): 2 more
+    like: ...": the error (or the interruption) was not the last line of its stderr. The count comes first."""
+    import logging
+
+    from rtp.cli._run import run
+
+    def body(error: BaseException) -> Callable[[argparse.Namespace], int]:
+        def warn_then_fail(args: argparse.Namespace) -> int:
+            for sid in ("a", "b", "c"):
+                logging.getLogger("rtp.capture").warning("sample %s has no targets", sid)
+            raise error
+        return warn_then_fail
+
+    args = argparse.Namespace(verbose=0, quiet=False, no_progress=True)
+    for error, code, last in ((sdk.ParameterError("--ppd must be a number", "ppd"), 2, "rtp targets: error: --ppd"),
+                              (KeyboardInterrupt(), 130, "rtp targets: interrupted")):
+        capsys.readouterr()
+        assert run("rtp targets", args, body(error)) == code
+        lines = capsys.readouterr().err.splitlines()
+        assert lines[-2:-1] == ["WARNING (repeated): 2 more like: sample a has no targets"], lines
+        assert lines[-1].startswith(last) and len(lines) == 3, lines
