@@ -248,6 +248,10 @@ def test_a_dataset_of_one_scene_is_told_how_to_add_a_second(tmp_path: Path, caps
     level = _dataset(tmp_path / "level", n=1, scenes=("procedural_1",))  # (its one scene is the one it suggested)
     assert rtp_main(["train", "--data", str(level), "--metric", "jnyang", "--out", str(out)]) == 2
     assert f"(rtp capture --scene procedural:2 --out {level} with" in capsys.readouterr().err
+    # as rtp capture names it (procedural:1): it suggested the scene the dataset holds
+    captured = _dataset(tmp_path / "captured", n=1, scenes=("procedural:1",))
+    assert rtp_main(["train", "--data", str(captured), "--metric", "jnyang", "--out", str(out)]) == 2
+    assert f"(rtp capture --scene procedural:2 --out {captured} with" in capsys.readouterr().err
 
 
 def test_training_reads_several_datasets_as_one(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

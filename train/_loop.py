@@ -493,7 +493,8 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
         raise sdk.ParameterError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}")
     if not val:
         if len(scenes) < 2:
-            seed = next(k for k in range(1, 100) if f"procedural_{k}" not in scenes)  # (not the one it holds)
+            # (not the one it holds: a capture names it procedural:N, which the check read as procedural_N only)
+            seed = next(k for k in range(1, 100) if f"procedural_{k}" not in scenes and f"procedural:{k}" not in scenes)
             raise DatasetError(
                 f"{cfg.data} holds one scene ({scenes[0] if scenes else 'none'}); validation holds out whole scenes, "
                 f"so it needs two: capture another into it (rtp capture --scene procedural:{seed} --out {cfg.data} with "
