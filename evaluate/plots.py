@@ -98,6 +98,16 @@ def upsample_tiles(values: np.ndarray, tile: int, size: tuple[int, int]) -> np.n
 #: aspect kept, so that the titles and colour-bar labels around it fit (a 160x96 demo's ran into each
 #: other and off the image).
 MIN_PANEL = (200, 160)
+#: The longest side a small panel is enlarged to (a panel already longer is not enlarged): a strip of a frame, 1600x16,
+#: was enlarged until its short side reached :data:`MIN_PANEL`, its long side with it (a 48110-pixel-wide heatmaps
+#: image; a (1, 3000) map's 720130 pixels wide, 550 MB). Its figure is :data:`MIN_PANEL` high still, the panel inside.
+MAX_ZOOMED = 1000
+
+
+def _zoom(w: float, h: float, min_w: float, min_h: float) -> float:
+    """How much a ``w`` x ``h`` panel is enlarged, its aspect kept: to ``min_w`` x ``min_h`` at the least, but no side
+    past :data:`MAX_ZOOMED` by it."""
+    return max(1.0, min(max(min_w / w, min_h / h), MAX_ZOOMED / max(w, h)))
 
 
 def _figure(width_px: float, height_px: float) -> Figure:
@@ -119,8 +129,8 @@ def value_map(
     values: np.ndarray, *, label: str, vmin: float = 0.0, vmax: float = 1.0, cmap: str = "magma", title: str = ""
 ) -> np.ndarray:
     """One per-pixel map ``(H, W)`` drawn at its own size (enlarged to :data:`MIN_PANEL` where it is
-    smaller) with a colour bar naming the quantity; values beyond ``[vmin, vmax]`` and NaN as
-    :func:`heatmaps` draws them."""
+    smaller, no side past :data:`MAX_ZOOMED` by it) with a colour bar naming the quantity; values beyond
+    ``[vmin, vmax]`` and NaN as :func:`heatmaps` draws them."""
     v = np.asarray(values, np.float64)
     if v.ndim != 2 or v.size == 0:
         raise BaselineError(f"value_map: expected a non-empty (H, W) array, got shape {v.shape}")
@@ -129,14 +139,20 @@ def value_map(
     h, w = v.shape
     v, extend, nan = _in_range(v, vmin, vmax)
     # (a small map enlarged, to the height its colour bar's label takes too: its labels were cut off)
-    zoom = max(1.0, max(MIN_PANEL[1], 240) / h, MIN_PANEL[0] / w)
-    fig = _figure(w * zoom + 130, h * zoom + (40 if title else 16))
-    ax = fig.subplots()
+    min_h = max(MIN_PANEL[1], 240)
+    zoom = _zoom(w, h, MIN_PANEL[0], min_h)
+    # (the panel's cell as wide as its title at the least, about 7 pixels a character at 9 points: over a narrow map
+    # it ran off the image; the colour bar in a column of its own, not over the title beside the narrow panel)
+    pw, ph = max(w * zoom, MIN_PANEL[0], 7 * len(title)), max(h * zoom, min_h)
+    fig = _figure(pw + 130, ph + (40 if title else 16))
+    grid = fig.add_gridspec(1, 2, width_ratios=[pw, 0.06 * min(pw, 300)])
+    ax = fig.add_subplot(grid[0, 0])
     im = ax.imshow(v, cmap=_with_nan_grey(cmap), vmin=vmin, vmax=vmax, interpolation="nearest")
     _bare(ax)
     if title:
         ax.set_title(title, fontsize=9)
-    fig.colorbar(im, ax=ax, label=label + ("\n(grey: no value)" if nan else ""), extend=extend, shrink=0.9)
+    fig.colorbar(im, cax=fig.add_subplot(grid[0, 1]), label=label + ("\n(grey: no value)" if nan else ""),
+                 extend=extend)
     return figure_image(fig)
 
 
@@ -181,10 +197,13 @@ def heatmaps(
     h, w = size
     cols = 3 if seen is not None else 2
     pw, ph = w / scale, h / scale
-    zoom = max(1.0, MIN_PANEL[0] / pw, MIN_PANEL[1] / ph)  # (small frames enlarged: titles ran into each other)
-    pw, ph = pw * zoom, ph * zoom
+    zoom = _zoom(pw, ph, *MIN_PANEL)  # (small frames enlarged: titles ran into each other)
+    pw, ph = max(pw * zoom, MIN_PANEL[0]), max(ph * zoom, MIN_PANEL[1])
     fig = _figure(cols * pw + 110, len(rates) * (ph + 26) + (28 if title else 8))
-    axes = fig.subplots(len(rates), cols, squeeze=False)
+    # (the colour bar in a column of its own: beside panels narrower than their cells, a tall strip's, matplotlib put it
+    # beside the panels, over the last column's cells and titles)
+    grid = fig.add_gridspec(len(rates), cols + 1, width_ratios=[pw] * cols + [0.06 * min(pw, 300)])
+    axes = np.array([[fig.add_subplot(grid[i, j]) for j in range(cols)] for i in range(len(rates))])
     norm = mcolors.Normalize(vmin, vmax)
     # (the rates drawn only: the colour bar's arrows and its note of NaN are about what the panels show)
     shown, extend, nan = _in_range(np.stack([truth, prediction])[:, [PREDICTED_RATES.index(r) for r in rates]],
@@ -207,7 +226,7 @@ def heatmaps(
 
     marked = threshold is not None and vmin <= threshold <= vmax
     mappable = mcm.ScalarMappable(norm=norm, cmap=_colormap(cmap))
-    bar = fig.colorbar(mappable, ax=axes.ravel().tolist(), extend=extend, shrink=0.9,
+    bar = fig.colorbar(mappable, cax=fig.add_subplot(grid[:, cols]), extend=extend,
                        label=label + ("\n(cyan line: the threshold)" if marked else "")
                        + ("\n(grey: no value)" if nan else ""))
     if marked and threshold is not None:
@@ -231,8 +250,8 @@ def scatter(
     """Predicted against true per-tile values as a 2D histogram with a logarithmic colour bar (tiles
     per bin), the diagonal ``prediction = truth`` dashed, labelled axes and the title above the plot.
     Values outside ``[lo, hi]`` are drawn in the edge bins; pairs with a NaN or infinite value are left out,
-    the title saying how many. ``size`` is the plot's side in pixels (the image adds the axes, colour bar and
-    title)."""
+    the title saying how many. ``size`` is the plot's side in pixels (the image adds the axes, colour bar,
+    title and the diagonal's key below the plot, off the data)."""
     p = np.asarray(prediction, np.float64).ravel()
     g = np.asarray(truth, np.float64).ravel()
     if p.shape != g.shape:
@@ -244,7 +263,7 @@ def scatter(
     ok = np.isfinite(p) & np.isfinite(g)
     p, g = np.clip(p[ok], lo, hi), np.clip(g[ok], lo, hi)
     bins = int(np.clip(2 * np.sqrt(max(p.size, 1)), 16, 128))  # fewer, larger bins for few values
-    fig = _figure(size + 150, size + 90)
+    fig = _figure(size + 150, size + 106)
     ax = fig.subplots()
     hist, xe, ye = np.histogram2d(g, p, bins=bins, range=[[lo, hi], [lo, hi]])
     mesh = ax.pcolormesh(xe, ye, np.ma.masked_equal(hist.T, 0), cmap=_colormap(cmap),
@@ -255,7 +274,9 @@ def scatter(
     ax.set_aspect("equal")
     ax.set_xlabel(f"true {label}")
     ax.set_ylabel(f"predicted {label}")
-    ax.legend(loc="upper left", fontsize=8, frameon=False)
+    # (the diagonal's key below the plot: in its upper-left corner it lay over the over-predicted tiles, true low and
+    # predicted high, where a model that over-predicts puts them)
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower left", fontsize=8, frameon=False)
     # (pairs with a NaN or infinite value have no place on the axes: said, not dropped silently under a title
     # that counts every value)
     dropped = int(ok.size - p.size)

@@ -682,6 +682,53 @@ def test_the_figures_of_a_small_frame_keep_every_label_inside_and_apart(monkeypa
             assert not ax.get_title() or ax.title.get_window_extent(renderer).width <= ax.get_window_extent().width
 
 
+def test_the_maps_of_a_strip_of_a_frame_stay_its_size_and_keep_their_labels_apart(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A very wide or very tall frame (1600x16, 16x1200) was enlarged until its short side reached plots.MIN_PANEL, its
+    long side with it: the heatmaps of a 1600x16 frame 48110 pixels wide, a (1, 3000) map's 720130 (550 MB). No side is
+    enlarged past plots.MAX_ZOOMED now; the figure keeps MIN_PANEL around the panel, the colour bar in a column of its
+    own (beside a narrow panel it lay over the last column's titles) and a narrow map's title inside the image."""
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
+    rng = np.random.default_rng(0)
+    for h, w in ((16, 1600), (1200, 16)):
+        values = rng.random((6, *sdk.tile_grid(h, w, 16)))
+        plots.heatmaps(values, values, 16, (h, w), seen=np.ones((h, w)), threshold=0.25, label="jnyang")
+    plots.value_map(rng.random((1, 3000)), label="x", title="t")
+    plots.value_map(rng.random((1000, 4)), label="FLIP error (0 = identical, 1 = worst)",
+                    title="FLIP of the VRS composite against full-rate shading")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    for fig in figures:
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        assert max(fig.bbox.width, fig.bbox.height) <= 3 * 1600 + 200
+        renderer = canvas.get_renderer()
+        inside = fig.bbox.padded(1)
+        boxes = [ax.get_window_extent() for ax in fig.axes]  # (the colour bar the last)
+        boxes += [ax.title.get_window_extent(renderer) for ax in fig.axes if ax.get_title()]
+        for t in (t for t in fig.findobj(lambda a: hasattr(a, "get_text")) if t.get_visible() and t.get_text()):
+            box = t.get_window_extent(renderer)
+            assert inside.contains(box.x0, box.y0) and inside.contains(box.x1, box.y1), t.get_text()
+        assert not any(boxes[len(fig.axes) - 1].overlaps(b) for i, b in enumerate(boxes) if i != len(fig.axes) - 1)
+
+
+def test_the_scatters_key_lies_off_the_data(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The diagonal's key ("prediction = truth") lay in the plot's upper-left corner, over the over-predicted tiles
+    (true low, predicted high): it is below the plot now, the image `size + 106` high and `size + 150` wide (the docs'
+    510x466 at the default)."""
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
+    plots.scatter(np.full(50, 0.95), np.full(50, 0.02))
+    (fig,) = figures
+    fig.canvas.draw()
+    (ax, _bar) = fig.axes
+    assert ax.get_legend() is None
+    (legend,) = fig.legends
+    assert [t.get_text() for t in legend.get_texts()] == ["prediction = truth"]
+    assert not legend.get_window_extent().overlaps(ax.get_window_extent())
+    assert (round(fig.bbox.width), round(fig.bbox.height)) == (510, 466)
+
+
 @pytest.mark.parametrize("ext", ["png", "jpg", "webp"])
 def test_save_image_writes_the_format_its_extension_names(tmp_path: Path, ext: str) -> None:
     from PIL import Image

@@ -1236,6 +1236,26 @@ def test_a_gif_frame_labels_its_place_and_keys_the_rate_colours_in_its_spare_cel
     assert box_height(spare) == box_height(large) >= 14
 
 
+def test_a_gif_label_wider_than_its_panel_wraps_inside_it() -> None:
+    """On a panel under 300 pixels wide (rtp play --size 160x96) the reference's label ran off it: "full rate
+    (reference), frame 75 of 150, 1.25 s" read "full rate (reference), frame 7". It wraps after its commas now, and a
+    single word too wide (a long method name) is drawn smaller, every line inside the panel."""
+    from rtp.evaluate._play import _label
+
+    grey = np.full((96, 160, 3), 128, np.uint8)
+    one = _label(np.full((96, 400, 3), 128, np.uint8), "full rate (reference), frame 75 of 150, 1.25 s")
+    wrapped = _label(grey, "full rate (reference), frame 75 of 150, 1.25 s")
+
+    def box(img: np.ndarray) -> tuple[int, int]:  # (the black box's height and width, from its top-left corner)
+        black = (img == 0).all(-1)
+        return int(np.argmin(black[:, 0])), int(np.argmin(black[0])) if not black[0].all() else img.shape[1]
+
+    (h1, w1), (h2, w2) = box(one), box(wrapped)
+    assert w1 < 400 and w2 < 160 - 2 and h2 > h1 + 10  # (two lines, inside the panel)
+    long = _label(grey, "m" * 60)
+    assert box(long)[1] < 160 - 2
+
+
 def test_rtp_models_play_on_finer_and_coarser_hardware_tiles(tmp_path: Path) -> None:
     """--tile-size 8 under 16-pixel models (AMD's and Intel's VRS tiles): each hardware tile takes its
     model tile's rate, so the shading (and every frame after it) is the 16-pixel run's, to the last
