@@ -33,7 +33,7 @@ from rtp.sdk.files import writer_lock
 
 from ._dataset import MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
 from ._memory import check_frame_memory
-from ._pool import WorkerDiedError, cores, name_task, tick_queue, with_ticks, worker_pool
+from ._pool import WorkerDiedError, cores, name_task, tick_queue, unfinished, with_ticks, worker_died, worker_pool
 
 __all__ = [
     "MESH_EXTENSIONS", "PROCEDURAL_PREFIX", "VIEW_COVERAGE", "CaptureReport", "capture", "check_scene", "load_scene",
@@ -646,10 +646,9 @@ def capture(
                         try:
                             result = f.result()
                         except BrokenExecutor as exc:  # (a worker killed: every unfinished scene's future fails)
-                            left = [scene_of[g] for g in scene_of if not g.done() or g.exception() is not None]
+                            left = unfinished(scene_of)
                             raise WorkerDiedError(
-                                f"a capture worker process died (killed by the system, out of memory?, or by a "
-                                f"signal) before {'scene' if len(left) == 1 else 'scenes'} "
+                                f"{worker_died('capture')} before {'scene' if len(left) == 1 else 'scenes'} "
                                 f"{', '.join(map(repr, left))} {'was' if len(left) == 1 else 'were'} captured; the "
                                 f"samples written are kept: the same command captures the rest") from exc
                         except Exception as exc:  # (a worker's: its traceback said nothing of the scene)

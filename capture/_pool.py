@@ -36,8 +36,8 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
@@ -59,6 +59,17 @@ class WorkerDiedError(RtpError, BrokenProcessPool):
     and the same command resumes. Still a ``BrokenProcessPool``, as the pool raised it."""
 
     exit_code = EXIT_FAILED
+
+
+def unfinished(tasks: Mapping[Future[Any], str]) -> list[str]:
+    """The names of ``tasks`` (future -> what it works on) not finished well: when a worker dies, each of them
+    fails with the broken pool, the one it was on among them."""
+    return [name for f, name in tasks.items() if not f.done() or f.exception() is not None]
+
+
+def worker_died(job: str) -> str:
+    """The start of a :class:`WorkerDiedError`'s message for a ``job`` ("capture", "targets")."""
+    return f"a {job} worker process died (killed by the system, out of memory?, or by a signal)"
 
 
 def cores() -> int:

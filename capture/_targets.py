@@ -391,7 +391,7 @@ def compute_targets(
 
     from rtp import metrics as M
 
-    from ._pool import WorkerDiedError, name_task, worker_pool
+    from ._pool import WorkerDiedError, name_task, unfinished, worker_died, worker_pool
 
     if not isinstance(data_root, (str, os.PathLike)) or not os.fspath(data_root):  # (Path('') is the current folder)
         raise ParameterError(f"data_root: expected a dataset folder path, got {data_root!r}"
@@ -520,10 +520,9 @@ def compute_targets(
                         try:
                             f.result()
                         except BrokenExecutor as exc:
-                            lost = sorted(i for g, i in running.items() if not g.done() or g.exception() is not None)
+                            lost = sorted(unfinished(running))
                             raise WorkerDiedError(
-                                f"a targets worker process died (killed by the system, out of memory?, or by a "
-                                f"signal) while computing {'sample' if len(lost) == 1 else 'one of samples'} "
+                                f"{worker_died('targets')} while computing {'sample' if len(lost) == 1 else 'one of samples'} "
                                 f"{', '.join(map(repr, lost))}; the targets of {done} of {len(reader.ids)} samples "
                                 f"are kept: the same command computes the rest") from exc
                         except Exception as exc:  # (a worker's: its traceback said nothing of the sample)

@@ -1198,6 +1198,17 @@ def test_each_sweep_at_the_methods_own_parameter_is_its_decision_row(dataset: Pa
         assert (point["fail_share"], point["work_saved"]) == pytest.approx((row["fail_share"], row["work_saved"])), method
 
 
+def _seen_whole(rng: np.random.Generator, h: int, w: int) -> dict[str, np.ndarray]:
+    """A sample's buffers of random values, every pixel seen, no motion."""
+    bufs = {}
+    for name, spec in BUFFERS.items():
+        c = len(spec.channels) or 3
+        bufs[name] = rng.random((h, w, c) if c > 1 else (h, w), dtype=np.float32)
+    bufs["seen"] = np.ones((h, w), np.float32)
+    bufs["motion"] = np.zeros((h, w, 2), np.float32)
+    return bufs
+
+
 def test_the_work_saved_counts_a_partial_edge_tile_by_its_pixels(tmp_path: Path, model: Path) -> None:
     """A frame whose height is no whole number of tiles (1920x1080 on 16-pixel tiles: the bottom row 8 pixels
     high) saves on its partial tiles the work of their real pixels, as sdk.work_saved(codes, size, tile) and `rtp
@@ -1212,12 +1223,7 @@ def test_the_work_saved_counts_a_partial_edge_tile_by_its_pixels(tmp_path: Path,
     truth = np.full((6, h // 4, w // 4), 0.9, np.float32)  # at the 4-pixel base tile: every rate fails 0.2 ...
     truth[:, 8:, :] = 0.01  # ... but on the bottom row, where every rate passes
     for i in range(2):
-        bufs = {}
-        for name, spec in BUFFERS.items():
-            c = len(spec.channels) or 3
-            bufs[name] = rng.random((h, w, c) if c > 1 else (h, w), dtype=np.float32)
-        bufs["seen"] = np.ones((h, w), np.float32)
-        bufs["motion"] = np.zeros((h, w, 2), np.float32)
+        bufs = _seen_whole(rng, h, w)
         writer.write(f"r{i}", bufs, {"scene": "r"})
         store.write(f"r{i}", "jnyang", truth, (h, w))
     writer.finalize()
@@ -1313,12 +1319,7 @@ def test_an_empty_split_reads_as_no_value_in_every_column(tmp_path: Path, model:
     store.declare("jnyang", {"weber_l": 0.02})
     rng = np.random.default_rng(2)
     for i in range(2):
-        bufs = {}
-        for name, spec in BUFFERS.items():
-            c = len(spec.channels) or 3
-            bufs[name] = rng.random((h, w, c) if c > 1 else (h, w), dtype=np.float32)
-        bufs["seen"] = np.ones((h, w), np.float32)
-        bufs["motion"] = np.zeros((h, w, 2), np.float32)
+        bufs = _seen_whole(rng, h, w)
         writer.write(f"w{i}", bufs, {"scene": "w"})
         store.write(f"w{i}", "jnyang", rng.uniform(0.01, 0.5, (6, h // 4, w // 4)).astype(np.float32), (h, w))
     writer.finalize()
