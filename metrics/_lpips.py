@@ -80,7 +80,8 @@ def default_weights_cache() -> Path:
     """Where ``rtp weights fetch`` keeps weights: ``$RTP_WEIGHTS_CACHE``, else (unset or empty)
     ``~/.cache/rtp/weights``."""
     # (an empty variable, `RTP_WEIGHTS_CACHE= rtp ...`, made the current folder the cache)
-    return Path(os.environ.get("RTP_WEIGHTS_CACHE") or Path.home() / ".cache" / "rtp" / "weights")
+    # (a ``~`` in it is the home folder, as a shell expands it unquoted: quoted, it made a folder named ``~`` here)
+    return Path(os.environ.get("RTP_WEIGHTS_CACHE") or Path.home() / ".cache" / "rtp" / "weights").expanduser()
 
 
 def _installed_weights() -> Path | None:

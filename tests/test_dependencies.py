@@ -46,6 +46,9 @@ def test_an_empty_cache_variable_is_the_default_cache_not_the_current_folder(
 
     monkeypatch.setenv("RTP_WEIGHTS_CACHE", "")
     assert _lpips.default_weights_cache() == Path.home() / ".cache" / "rtp" / "weights"
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", "~/weights")  # (quoted: the home folder, not a folder named ~ here)
+    assert _lpips.default_weights_cache() == Path.home() / "weights"
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", "")
     with pytest.raises(SystemExit) as info:  # (argparse's usage error)
         main(["scenes", "list", "--cache-dir", ""])
     assert info.value.code == 2

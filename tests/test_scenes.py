@@ -1207,6 +1207,9 @@ def test_an_empty_scene_cache_variable_is_unset(monkeypatch: pytest.MonkeyPatch)
     assert scenes.default_cache_dir() == str(Path.home() / ".cache" / "rtp" / "scenes")
     monkeypatch.setenv("RTP_SCENE_CACHE", "/somewhere/scenes")
     assert scenes.default_cache_dir() == "/somewhere/scenes"
+    # a quoted ~ (RTP_SCENE_CACHE="~/scenes"): the home folder, not a folder named ~ in the current one
+    monkeypatch.setenv("RTP_SCENE_CACHE", "~/scenes")
+    assert scenes.default_cache_dir() == str(Path.home() / "scenes")
 
 
 def test_fetch_takes_one_map_name_and_names_the_split_file_used(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):

@@ -500,5 +500,6 @@ def scene_list(cache_dir: str | Path | None = None, splits: str | Path | None = 
 
 def default_cache_dir() -> str:
     """Where fetched and converted scenes live: ``$RTP_SCENE_CACHE`` when set and not empty, else
-    ``~/.cache/rtp/scenes`` (an empty ``RTP_SCENE_CACHE=`` counts as unset, not as the current folder)."""
-    return os.environ.get("RTP_SCENE_CACHE") or str(Path.home() / ".cache" / "rtp" / "scenes")
+    ``~/.cache/rtp/scenes`` (an empty ``RTP_SCENE_CACHE=`` counts as unset, not as the current folder; a ``~``
+    in it is the home folder, as a shell expands it unquoted: quoted, it made a folder named ``~`` here)."""
+    return os.path.expanduser(os.environ.get("RTP_SCENE_CACHE") or str(Path.home() / ".cache" / "rtp" / "scenes"))
