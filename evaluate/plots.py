@@ -322,11 +322,12 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
     fig = _figure(width, max(h / scale, 90) + 70 + 18 * (4 // ncols - 1))
     axes = np.atleast_1d(fig.subplots(1, len(rates)))
     for ax, (name, codes) in zip(axes, rates.items()):
-        codes = np.asarray(codes).astype(np.uint8)
+        codes = np.asarray(codes)  # (checked by draw_rate_overlay: a uint8 cast made a code of 256 draw as 1x1)
         # a share of the frame's pixels (a partial edge tile its real ones), as the decision table counts it
+        drawn = draw_rate_overlay(img, codes, tile)
         saved = (0.0 if not codes.size else work_saved(codes, (h, w), tile) if codes.shape == tile_grid(h, w, tile)
                  else float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])))
-        ax.imshow(draw_rate_overlay(img, codes, tile), interpolation="nearest")
+        ax.imshow(drawn, interpolation="nearest")
         ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
         _bare(ax)
     _add_rate_legend(fig, ncols)

@@ -582,6 +582,9 @@ def test_figures_carry_their_colour_scale_and_legend() -> None:
     for _, colour in plots.rate_legend()[1:]:  # every class of the legend is drawn at full colour
         assert colour is not None and _has_colour(ov, colour)
     assert [name.split(":")[0] for name, _ in plots.rate_legend()] == ["1x1 (untinted)", "fine", "medium", "coarse"]
+    # a code past uint8 is refused as draw_rate_overlay refuses it (a uint8 cast drew 256 as 1x1: untinted, "saves 0%")
+    with pytest.raises(sdk.ParameterError, match=r"no shading rate: \[256\]"):
+        plots.rate_overlays(np.zeros((40, 60, 3), np.float32), {"a": np.full((3, 4), 256, np.int64)}, 16)
 
 
 def test_heatmaps_draw_infinite_values_at_the_colour_ends_and_nan_grey(monkeypatch: pytest.MonkeyPatch) -> None:
