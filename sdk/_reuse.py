@@ -226,7 +226,8 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     background pixels the tile at their own position (the same place on the screen, on the grid of the
     frame the network ran on whole: ``track.origin``). Each tile then takes the worst, the mean or the
     upper quartile (towards the worse side) of the estimates over its known pixels, and tiles with more
-    than ``unseen_fraction`` unknown the worst value there is (1x1). Returns the ``(outputs, tile rows,
+    than ``unseen_fraction`` unknown the worst value there is (1x1): of its kept pixels inside the frame,
+    a partial edge tile's padding being none of its pixels. Returns the ``(outputs, tile rows,
     tile cols)`` estimates, this frame's track and the tiles given the worst value for want of known
     pixels, all on this frame's tiles (on a frame of another size the track's places stay in the
     previous frame's pixels: move the track onto this frame, as :class:`PredictionReuse` does,
@@ -278,15 +279,25 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
             new = np.where(sky, at, new)
             place = np.where(sky, there, place)
             gen = np.where(sky, 0, gen)
-    known = new >= 0
     k = tile // s
+    # A partial edge tile's kept pixels past the frame's last row or column are the padding (_kept repeats the last
+    # row and column there): no pixels of the tile. They are left out of its reduction and of its unseen share, as a
+    # partial tile covers only its real pixels (tile_extents); counted, they repeated the last row's and column's
+    # estimates and unseen pixels in the tile's mean and unseen share (a 40x24 frame's last tiles: half their kept
+    # pixels padding, all of them copies of the edge).
+    inside_y, inside_x = np.arange(gh) * s < h, np.arange(gw) * s < w
+    counted = new
+    if not (inside_y.all() and inside_x.all()):
+        counted = np.where(inside_y[:, None] & inside_x[None, :], new, -1)
+    real = np.outer(inside_y.reshape(th, k).sum(axis=1), inside_x.reshape(tw, k).sum(axis=1))  # kept pixels per tile
+    known = counted >= 0
     # known pixels per tile (rows first: a column of a tile sums to at most k, 16 bits hold it)
     count = known.reshape(th, k, gw).sum(axis=1, dtype=np.int16).reshape(th, tw, k).sum(axis=-1, dtype=np.int64)
     flat = est.reshape(len(est), -1)
     if reduce == "mean":  # per tile, the sums over its known pixels; float64 sums of a tile's float32 values are exact
         # entries as rows (unknown, -1: the zero row appended), so one gather fetches all of a pixel's values
         # together (1.6x faster than a gather per output for the 16 features of a split network's trunk)
-        vals = np.take(np.pad(flat.T, ((0, 1), (0, 0))), new, axis=0).reshape(th, k, gw, len(est))
+        vals = np.take(np.pad(flat.T, ((0, 1), (0, 0))), counted, axis=0).reshape(th, k, gw, len(est))
         # a tile's k rows first (whole rows add as vectors), then its k columns, each an in-place add in float64
         # (the same exact sums as numpy's sum with dtype float64, in 0.6 of its time)
         rows = vals[:, 0].astype(np.float64)
@@ -300,7 +311,7 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
             out = np.moveaxis(total, -1, 0) / count
     else:
         fill = np.inf if higher_is_better else -np.inf  # neutral for the reduction below
-        src = np.take(np.pad(flat, ((0, 0), (0, 1)), constant_values=fill), new, axis=1)  # unknown (-1): fill
+        src = np.take(np.pad(flat, ((0, 0), (0, 1)), constant_values=fill), counted, axis=1)  # unknown (-1): fill
         if reduce == "upper":  # sorted worst first, unknown pixels last; the quartile of the known ones
             vals = src.reshape(len(est), th, k, tw, k).transpose(0, 1, 3, 2, 4).reshape(len(est), th, tw, k * k)
             vals = np.sort(vals if higher_is_better else -vals, axis=-1)
@@ -311,7 +322,7 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
         else:  # rows first, then columns, as for the mean
             pick = np.minimum if higher_is_better else np.maximum
             out = pick.reduce(pick.reduce(src.reshape(len(est), th, k, gw), axis=2).reshape(len(est), th, tw, k), axis=-1)
-    missing = (1.0 - count / (k * k) > unseen_fraction) | ~np.isfinite(out).all(axis=0)
+    missing = (1.0 - count / real > unseen_fraction) | ~np.isfinite(out).all(axis=0)
     out[:, missing] = -np.inf if higher_is_better else np.inf
     return (np.ascontiguousarray(out, dtype=np.float32), Track(new, place, gen, track.lut, track.shape, track.origin),
             missing)

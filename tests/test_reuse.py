@@ -129,10 +129,12 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     worst = -np.inf if hib else np.inf
     for ty in range(th):
         for tx in range(tw):
-            known = []
+            known, real = [], 0
             for i in range(ty * k, ty * k + k):
                 for j in range(tx * k, tx * k + k):
                     y, x = min(i * s, h - 1), min(j * s, w - 1)
+                    inside = i * s < h and j * s < w  # (past the frame: the padding, no pixel of a partial tile)
+                    real += inside
                     src = -1
                     if sky[y, x] > 0.5:  # the whole-frame run's tile at the same place on the screen
                         sy, sx = min(int((y + 0.5) * oh / h), oh - 1), min(int((x + 0.5) * ow / w), ow - 1)
@@ -147,9 +149,9 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
                                               + min(max(px // tile, 0), ptw - 1)]
                             src = int(there) if there >= 0 else int(track.index[ki, kj])
                     entry[i, j] = src
-                    if src >= 0:
+                    if src >= 0 and inside:
                         known.append(est[:, src])
-            if not known or 1 - len(known) / (k * k) > fraction:
+            if not known or 1 - len(known) / real > fraction:
                 out[:, ty, tx] = worst
                 continue
             v = np.array(known, np.float64)  # (pixels, outputs)
@@ -166,10 +168,11 @@ def _carry_by_loops(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
 @pytest.mark.parametrize("reduce", sorted(sdk.REUSE_REDUCTIONS))
 def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
     """Random motion, disocclusion and sky on frames that are not whole tiles (the kept pixels' padding
-    repeats the last row and column), odd tiles (every pixel kept by default), both error directions,
-    the default pixel step and others (a step that is not a power of two divides), tracks whose
-    surfaces lie anywhere on the frames of several generations, some of whose tiles are no entry; and a
-    previous frame of another size than this one, larger or smaller (dynamic resolution)."""
+    repeats the last row and column in the track, and is no pixel of a partial tile's reduction), odd
+    tiles (every pixel kept by default), both error directions, the default pixel step and others (a
+    step that is not a power of two divides), tracks whose surfaces lie anywhere on the frames of
+    several generations, some of whose tiles are no entry; and a previous frame of another size than
+    this one, larger or smaller (dynamic resolution)."""
     rng = np.random.default_rng(7)
     for h, w, tile, step, ph, pw in (
             (37, 53, 8, None, 37, 53), (48, 64, 16, None, 48, 64), (30, 21, 5, None, 30, 21),
@@ -205,6 +208,52 @@ def test_carried_estimates_match_a_tile_by_tile_reference(reduce: str) -> None:
             assert np.allclose(got, want, rtol=1e-6), (h, w, tile, step, hib)
             assert np.array_equal(missing, np.isinf(want).all(axis=0)), (h, w, tile, step, hib)
             assert np.array_equal(carried.index, entry), (h, w, tile, step)
+
+
+@pytest.mark.parametrize("step", [None, 1, 2])
+def test_a_partial_edge_tile_reduces_and_counts_its_real_pixels_only(step: int | None) -> None:
+    """A 40x24 frame of 16-pixel tiles: its last tile column is 8 pixels wide, its last row 8 tall. Their
+    unseen share and mean are over the tile's pixels inside the frame, as a partial tile covers only
+    those (tile_extents): the kept pixels' padding past the edge repeats the last column and row, and
+    counted, it weighed the edge's pixels over the rest (half seen read as three quarters unseen, 1x1; a
+    tile half from its left neighbour took a quarter of its own estimate)."""
+    h, w = 24, 40
+    est = np.arange(6 * 6, dtype=np.float32).reshape(6, 6)
+    rows, cols = np.indices((h, w))
+    ones = np.ones((h, w), np.float32)
+    grid = est.reshape(6, 2, 3)
+    # the right half of the partial column (36..39) fetched from column 0: half the tile's pixels from tile column 0
+    left = np.where(cols >= 36, 0, cols)
+    out, _, missing = carry_estimates(est, start_track((h, w), TILE, step), rows, left, ones, None, TILE, False, 0.5,
+                                      "mean", step)
+    assert not missing.any()
+    np.testing.assert_array_equal(out[:, :, :2], grid[:, :, :2])
+    np.testing.assert_array_equal(out[:, :, 2], (grid[:, :, 2] + grid[:, :, 0]) / 2)
+    # the same half unseen: half the tile's pixels, not more than half (0.5: carried), more than 0.4 (1x1)
+    seen = ones.copy()
+    seen[:, 36:] = 0
+    for reduce in sorted(sdk.REUSE_REDUCTIONS):
+        out, _, missing = carry_estimates(est, start_track((h, w), TILE, step), rows, cols, seen, None, TILE, False,
+                                          0.5, reduce, step)
+        assert not missing.any(), reduce
+        np.testing.assert_array_equal(out, grid)
+        missing = carry_estimates(est, start_track((h, w), TILE, step), rows, cols, seen, None, TILE, False, 0.4,
+                                  reduce, step)[2]
+        assert np.array_equal(missing, np.array([[False, False, True], [False, False, True]])), reduce
+    # the bottom row the same way: rows 20..23 (half of the 8-row partial tiles) unseen
+    seen = ones.copy()
+    seen[20:] = 0
+    missing = carry_estimates(est, start_track((h, w), TILE, step), rows, cols, seen, None, TILE, False, 0.5,
+                              "mean", step)[2]
+    assert not missing.any()
+    # and through PredictionReuse: a still frame, its last column half unseen, keeps the network's estimates there
+    pred = _jnyang(16)
+    reuse = sdk.PredictionReuse(pred, every=4, step=step)
+    x = np.random.default_rng(3).random((len(pred.metadata.inputs), h, w), dtype=np.float32)
+    want = reuse.predict(x)
+    seen = ones.copy()
+    seen[:, 36:] = 0
+    np.testing.assert_allclose(reuse.predict(x, fetch=(rows, cols), seen=seen), want, rtol=1e-6)
 
 
 @pytest.mark.parametrize("name", sdk.shipped_models())
