@@ -85,7 +85,8 @@ def _warn_other_renderer(out: Path, previous: Any, report: CaptureReport) -> Non
 
 
 def load_scene(
-    name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None
+    name: str, cache_dir: str | os.PathLike[str] | None, split: str | None, splits: str | None, *,
+    checked: bool = False,
 ) -> tuple[Any, Any]:
     """A scene and its invisible blockers (a BSP map's sky), from one of three kinds of name:
 
@@ -93,14 +94,20 @@ def load_scene(
     * a path to your own glTF / GLB / OBJ file (anything with a mesh extension, or an existing file);
     * a game level listed in ``scenes.yaml`` (``split`` restricts to one split), from the cache of
       ``rtp scenes fetch`` (``cache_dir``, default :func:`rtp.capture.scenes.default_cache_dir`).
+
+    ``checked``: :func:`check_scene` read this file in the same run and logged its warnings (a texture it cannot
+    read, ...); they are then logged at DEBUG here, not said a second time.
     """
     from rtp.capture import scenes
+
+    from .scenes._mesh import said_before
 
     seed = _procedural_seed(name)
     if seed is not None:
         return scenes.procedural(seed), None
     if Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file():
-        return scenes.load_mesh_file(name), None
+        with said_before() if checked else contextlib.nullcontext():
+            return scenes.load_mesh_file(name), None
     cache = Path(scenes.default_cache_dir() if cache_dir is None else cache_dir)
     scene = scenes.scene_by_name(name, cache, split=split, splits=splits)
     return scene, scenes.scene_blockers(name, cache, splits=splits)
@@ -150,7 +157,9 @@ def check_scene(name: str, cache_dir: str | os.PathLike[str] | None, split: str 
     if Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file():
         if not Path(name).is_file():
             raise scenes.SceneNotFoundError(f"scene {name!r}: no such file")
-        scenes.load_mesh_file(name)  # read once more by the worker: a file it cannot read fails here, first
+        # read once more by the worker (load_scene(..., checked=True), its warnings not said again): a file it
+        # cannot read fails here, first
+        scenes.load_mesh_file(name)
         return
     scenes.check_map(name, Path(scenes.default_cache_dir() if cache_dir is None else cache_dir), split=split,
                      splits=splits)
@@ -345,7 +354,7 @@ def _already_captured(jobs: Sequence[tuple[Any, ...]]) -> list[CaptureReport] | 
             return None
     reports = []
     for scene_name, profiles, per_scene, size, out, seed, cache_dir, split, splits, settings in jobs:
-        scene, blockers = load_scene(scene_name, cache_dir, split, splits)
+        scene, blockers = load_scene(scene_name, cache_dir, split, splits, checked=True)  # (capture() checked it)
         writer, reader = DatasetWriter(out, settings), DatasetReader(out)
         planned, failed = _plan(scene_name, scene, blockers, profiles, per_scene, size, seed,
                                 settings.get("placement", "free"))
@@ -358,12 +367,14 @@ def _already_captured(jobs: Sequence[tuple[Any, ...]]) -> list[CaptureReport] | 
 def _run_job(
     scene_name: str, profiles: Sequence[str], per_scene: int, size: tuple[int, int], out: str, seed: int,
     cache_dir: str | None, split: str | None, splits: str | None, settings: dict[str, Any], queue: Any = None,
+    checked: bool = False,
 ) -> CaptureReport:
+    """One scene's capture (``checked``: :func:`check_scene` ran on it in this run, as :func:`load_scene` says)."""
     from rtp.plugins.moderngl import Renderer
 
     writer = DatasetWriter(out, settings)
     report = CaptureReport()
-    scene, blockers = load_scene(scene_name, cache_dir, split, splits)
+    scene, blockers = load_scene(scene_name, cache_dir, split, splits, checked=checked)
     w, h = size
     reader = DatasetReader(out)
     planning = None if queue is None else (lambda job, found, total: queue.put((job, found, total)))
@@ -622,7 +633,7 @@ def capture(
 
             for a in args:
                 try:
-                    result = _run_job(*a, queue=_Q())
+                    result = _run_job(*a, queue=_Q(), checked=True)
                 except Exception as exc:
                     name_task(exc, f"scene {a[0]!r}")
                     raise
@@ -637,7 +648,7 @@ def capture(
             # (a process a scene at most: one more was an idle process that took its share of the cores' threads
             # from the workers that render, and said there were more processes than cores)
             with worker_pool(min(workers or 1, len(args)), ticks=queue) as pool:
-                scene_of = {pool.submit(with_ticks, _run_job, *a): a[0] for a in args}
+                scene_of = {pool.submit(with_ticks, _run_job, *a, checked=True): a[0] for a in args}
                 pending = set(scene_of)
                 while pending:
                     finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)

@@ -373,7 +373,8 @@ class _CaptureWorker(_Reporting):
         from ._capture import load_scene
 
         if self._scene is None or self._scene[0] != scene_name:
-            scene, blockers = load_scene(scene_name, self.cache_dir, self.split, self.splits)
+            # (capture() ran check_scene on every name before Ray started: a mesh file's warnings were said there)
+            scene, blockers = load_scene(scene_name, self.cache_dir, self.split, self.splits, checked=True)
             self._scene = (scene_name, scene, blockers)
         return self._scene[1], self._scene[2]
 

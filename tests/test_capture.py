@@ -793,7 +793,7 @@ def test_a_workers_failure_names_the_scene_or_sample_it_was_on(tmp_path: Path, m
     monkeypatch.setattr(_capture, "worker_pool", pool)
     monkeypatch.setattr(_pool, "worker_pool", pool)
 
-    def run_job(scene: str, *args: object, queue: object = None) -> object:
+    def run_job(scene: str, *args: object, queue: object = None, checked: bool = False) -> object:
         if scene == "procedural:6":
             raise ZeroDivisionError("a bug")
         return _capture.CaptureReport()
@@ -940,3 +940,28 @@ def test_targets_all_there_with_workers_start_no_pool(tmp_path: Path) -> None:
         with pytest.raises(sdk.ParameterError, match=r"^workers: expected an integer >= 1"):
             with worker_pool(bad):  # type: ignore[arg-type]
                 pass
+
+
+def test_a_scene_files_warnings_are_said_once_by_a_capture(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``rtp capture`` reads a mesh file in its check before any work and again in the worker that renders it: each of
+    the file's warnings (a texture it cannot read) was said twice, the second time minutes later, as if of another
+    file. The worker now logs them at DEBUG; a load with no check before it still warns."""
+    from rtp.capture import load_scene
+    from rtp.capture.scenes import procedural
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    level = tmp_path / "level.obj"
+    to_trimesh_scene(procedural(2, rooms=(1, 1), texture_size=16)).export(level)
+    (tmp_path / "crate.png").unlink()
+
+    def said() -> list[str]:
+        return [r.getMessage() for r in caplog.records
+                if r.levelno == logging.WARNING and "crate.png" in r.getMessage()]
+
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        capture([str(level)], tmp_path / "ds", per_scene=1, size=(64, 48), profiles=("slow",))
+    assert len(said()) == 1, said()
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        load_scene(str(level), None, None, None)  # (no check ran: the warning is said)
+    assert len(said()) == 1, said()

@@ -12,7 +12,7 @@ import pytest
 from rtp import sdk
 from rtp.capture.scenes import procedural
 from rtp.plugins.moderngl import Adapter, Frame, GBufferTextures, Renderer
-from rtp.plugins.moderngl._glio import write_texture
+from rtp.plugins.moderngl._glio import is_released, write_texture
 from rtp.scene import Camera
 from tests.conftest import make_current
 
@@ -757,3 +757,62 @@ def test_block_and_tile_variances_on_the_gpu_at_a_ragged_size(gl_context: Any) -
         np.testing.assert_allclose(x[i + 1], sdk.block_variances(x[i]), atol=2e-4)
         np.testing.assert_allclose(x[i + 2], sdk.tile_variances(x[i]), atol=2e-4)
     assert x[1][48:, 68:].any() and x[2][48:, 64:].any()  # the partial edge cell and tile hold values
+
+
+def test_an_adapter_whose_construction_fails_releases_what_it_made(gl_context: Any,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shader that did not compile, or targets the context had no room for, left the program, the targets made so
+    far and the first pass's adapter held in the engine's context (the adapter was never returned: nothing could close
+    it), and said so as an unclosed adapter's ResourceWarning when Python collected it. Now the constructor frees them
+    before the error goes on, and the context stays the engine's."""
+    import gc
+    import warnings
+
+    from rtp.plugins.moderngl import _adapter, create_context
+
+    ctx = create_context()
+    try:
+        made: list[Any] = []
+
+        def recording(name: str) -> None:
+            make = getattr(ctx, name)
+
+            def wrapped(*args: Any, **kwargs: Any) -> Any:
+                made.append(make(*args, **kwargs))
+                return made[-1]
+            setattr(ctx, name, wrapped)
+
+        for name in ("program", "vertex_array", "texture", "framebuffer"):
+            recording(name)
+        channels = ("reprojected.y.blocks", "seen", "albedo.r", "depth", "normal.z")  # a first pass, two targets
+        source = _adapter.load_source
+
+        def broken(name: str, defines: Any = None) -> str:  # the second pass's shader does not compile
+            text = source(name, defines)
+            return text + "\nthis is no GLSL;\n" if defines and defines.get("RTP_LUMA_PASS") == "true" else text
+
+        monkeypatch.setattr(_adapter, "load_source", broken)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with pytest.raises(Exception, match="(?i)compil|error"):
+                Adapter(channels, 32, 16, ctx=ctx)
+            gc.collect()
+        assert len(made) == 4 and all(is_released(o) for o in made), [type(o).__name__ for o in made]  # the first pass
+        assert not [w for w in caught if w.category is ResourceWarning]
+        monkeypatch.undo()
+        made.clear()
+
+        def no_room(*args: Any, **kwargs: Any) -> Any:  # the framebuffer, after the program and both targets
+            raise MemoryError("no room for the framebuffer")
+
+        framebuffer = ctx.framebuffer
+        ctx.framebuffer = no_room
+        with pytest.raises(MemoryError):
+            Adapter(channels, 32, 16, ctx=ctx)
+        assert made and all(is_released(o) for o in made if o is not None), [type(o).__name__ for o in made]
+        ctx.framebuffer = framebuffer
+        assert not is_released(ctx)
+        Adapter(channels, 32, 16, ctx=ctx).close()  # (the context still builds one)
+    finally:
+        ctx.release()
+        make_current(gl_context)

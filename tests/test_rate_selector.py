@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from rtp import sdk
 from rtp.plugins.moderngl import RateSelector, RendererError
+from rtp.plugins.moderngl._glio import is_released
 from rtp.sdk.adapters import AdapterFrameError
 from tests.conftest import base_metadata, make_current
 from tests.test_moderngl_adapter import H, W, frames  # noqa: F401  (frames: a fixture)
@@ -584,3 +585,78 @@ def test_a_budget_beside_the_engines_rates_decides_as_the_sdk(gl_context: Any, p
     assert found == pytest.approx(float(cpu.threshold), rel=1e-6, abs=1e-37)
     shaded = sdk.combine_rates(gpu, engine, combiner, allowed=rates)
     assert saved == pytest.approx(sdk.work_saved(shaded, **weigh), abs=1e-9)  # the device's saving, as it shades
+
+
+def test_a_selector_whose_construction_fails_releases_what_it_made(gl_context: Any,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shader that did not compile (or any later step of the constructor that raised) left the selector's own
+    context and the objects made so far held: the selector was never returned, so nothing could close them. Now the
+    constructor frees them before the error goes on: its own context released, a borrowed one's objects too."""
+    from rtp.plugins.moderngl import _select, create_context
+
+    meta = sdk.load("jnyang").metadata
+    made: list[Any] = []
+
+    def recorded(require: int = 330) -> Any:
+        made.append(create_context(require))
+        return made[-1]
+
+    try:
+        monkeypatch.setattr(_select, "create_context", recorded)
+        monkeypatch.setattr(_select, "load_source", lambda name: "#version 430\nthis is no GLSL;\n")
+        with pytest.raises(Exception, match="(?i)compil|error"):
+            RateSelector(meta)
+        assert len(made) == 1 and is_released(made[0])  # (held until the process ended, before)
+        monkeypatch.undo()
+        # a borrowed context: a step after the program (the budget's buffer) fails; the program is released, the
+        # context stays the engine's
+        ctx = create_context(430)
+        programs: list[Any] = []
+        compile_shader = ctx.compute_shader
+
+        def compiled(source: str) -> Any:
+            programs.append(compile_shader(source))
+            return programs[-1]
+
+        def no_room(*args: Any, **kwargs: Any) -> Any:
+            raise MemoryError("no room for the budget's buffer")
+
+        ctx.compute_shader, ctx.buffer = compiled, no_room
+        with pytest.raises(MemoryError):
+            RateSelector(meta, ctx)
+        assert len(programs) == 1 and is_released(programs[0]) and not is_released(ctx)
+        ctx.release()
+    finally:
+        make_current(gl_context)
+
+
+def test_a_selector_whose_buffer_could_not_be_made_works_on(gl_context: Any) -> None:
+    """A buffer the context had no room for (a new grid's decoded values, a new size of the network's output) left
+    the selector holding the old one released: every later call failed with an AttributeError, the same grid's (it
+    reused the released objects) and another's (it released them again). Now the call fails alone."""
+    from rtp.plugins.moderngl import create_context
+
+    pred = sdk.load("jnyang")
+    rng = np.random.default_rng(3)
+    small, large = rng.random((4, 3, 5)).astype(np.float32), rng.random((4, 4, 6)).astype(np.float32)
+    ctx = create_context(430)
+    make = ctx.buffer
+    try:
+        with RateSelector(pred.metadata, ctx) as selector:
+            want = {a.shape: selector.select(a) for a in (small, large)}
+            selector.select(small)
+            for fails in ("reserve", "data"):  # the decoded values' buffer, the output's upload
+                def no_room(data: Any = None, *args: Any, fails: str = fails, **kwargs: Any) -> Any:
+                    if (fails == "reserve") == ("reserve" in kwargs):
+                        raise MemoryError("no room")
+                    return make(data, *args, **kwargs)
+
+                ctx.buffer = no_room
+                with pytest.raises(MemoryError):
+                    selector.select(large)
+                ctx.buffer = make
+                for a in (small, large, small):
+                    np.testing.assert_array_equal(selector.select(a), want[a.shape])
+    finally:
+        ctx.release()
+        make_current(gl_context)

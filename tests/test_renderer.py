@@ -695,3 +695,69 @@ def test_the_default_shadow_map_follows_the_frame_size(gl_context):
             assert r.shadow_map_size == side, (w, h)
     with Renderer(64, 48, ctx=gl_context, shadow_map_size=1024) as r:
         assert r.shadow_map_size == 1024
+
+
+@pytest.mark.gl
+def test_a_renderer_refusing_its_own_context_releases_it(gl_context: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A context of too old an OpenGL (the renderer's own, made through EGL) was refused with the context left
+    held: the renderer was never returned, so nothing released it (the frame-size and settings refusals did). Now
+    every refusal after the context is made releases the one it made, and leaves a borrowed one alone."""
+    from rtp.plugins.moderngl import _renderer, create_context
+    from rtp.plugins.moderngl._glio import is_released
+
+    made: list[Any] = []
+
+    def recorded(require: int = 330) -> Any:  # an OpenGL 3.2 context
+        made.append(create_context(require))
+        made[-1].version_code = 320
+        return made[-1]
+
+    try:
+        monkeypatch.setattr(_renderer, "create_context", recorded)
+        with pytest.raises(RendererError, match="needs OpenGL >= 3.3"):
+            Renderer(32, 16)
+        assert len(made) == 1 and is_released(made[0])
+        borrowed = create_context()
+        borrowed.version_code = 320
+        with pytest.raises(RendererError, match="needs OpenGL >= 3.3"):
+            Renderer(32, 16, ctx=borrowed)
+        assert not is_released(borrowed)
+        borrowed.release()
+    finally:
+        monkeypatch.undo()
+        make_current(gl_context)
+
+
+@pytest.mark.gl
+def test_shade_rates_whose_targets_could_not_be_made_works_on(gl_context: Any) -> None:
+    """A rate image of a new grid (another tile size) whose targets the context had no room for left the renderer
+    holding the old ones released: every later shade_rates failed with an AttributeError. Now the call fails alone,
+    and what it made before the failure is released (a borrowed context keeps what is not)."""
+    from rtp.plugins.moderngl import create_context
+    from rtp.plugins.moderngl._glio import is_released
+
+    ctx = create_context()
+    texture = ctx.texture
+    try:
+        with Renderer(64, 48, ctx=ctx) as r:
+            r.load_scene(_flat_scene())
+            r.render(_front_camera())
+            want = r.shade_rates(np.full((3, 4), 5, np.uint8), 16)
+            made: list[Any] = []
+
+            def one_then_none(*args: Any, **kwargs: Any) -> Any:  # room for the rate map, not the images
+                if made:
+                    raise MemoryError("no room")
+                made.append(texture(*args, **kwargs))
+                return made[-1]
+
+            ctx.texture = one_then_none
+            with pytest.raises(MemoryError):
+                r.shade_rates(np.full((6, 8), 5, np.uint8), 8)
+            ctx.texture = texture
+            assert len(made) == 1 and is_released(made[0])
+            np.testing.assert_array_equal(r.shade_rates(np.full((3, 4), 5, np.uint8), 16), want)
+            np.testing.assert_array_equal(r.shade_rates(np.full((6, 8), 5, np.uint8), 8), want)  # (2x2 either way)
+    finally:
+        ctx.release()
+        make_current(gl_context)

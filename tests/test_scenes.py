@@ -16,6 +16,7 @@ import sys
 import time
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import PIL.Image as PIL
@@ -539,6 +540,42 @@ def test_pk3_archives(tmp_path: Path):
             pk3.read("scripts/a.shader")
 
 
+
+def test_archives_opened_before_a_refused_one_are_closed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Pk3Set refused a missing or broken archive with the archives it had opened before it left open (their files
+    held until the process ended or Python collected them); convert_bsp refused a damaged map member the same way
+    once its set was made. Now every refusal closes what was opened."""
+    from rtp.capture.scenes import _pk3
+
+    opened: list[zipfile.ZipFile] = []
+
+    class Recorded(zipfile.ZipFile):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            opened.append(self)
+
+    monkeypatch.setattr(_pk3.zipfile, "ZipFile", Recorded)
+    good = tmp_path / "good.pk3"
+    with zipfile.ZipFile(good, "w") as z:
+        z.writestr("maps/a.bsp", write_test_bsp())
+        z.writestr("maps/b.bsp", write_test_bsp())
+    junk = tmp_path / "junk.pk3"
+    junk.write_bytes(b"PK\x03\x04 cut short")
+    for second, error in ((tmp_path / "absent.pk3", SceneNotFoundError), (junk, SceneFormatError)):
+        with pytest.raises(error):
+            Pk3Set([good, second])
+        assert opened and all(z.fp is None for z in opened), second  # closed
+        opened.clear()
+    with pytest.raises(SceneFormatError, match="holds 2 maps"):
+        convert_bsp(good)
+    assert len(opened) == 1 and opened[0].fp is None
+    damage_zip_member(good, "maps/a.bsp")
+    opened.clear()
+    with pytest.raises(SceneFormatError, match=r"maps/a.bsp in .*good.pk3 is damaged"):
+        convert_bsp(good, "a")
+    assert len(opened) == 1 and opened[0].fp is None
+
+
 SHADER_DETAILS = """
 textures/test/chrome
 {
@@ -674,6 +711,26 @@ def test_mesh_file_materials(tmp_path: Path):
     assert mats["vertex.ply"].base_color == pytest.approx((0.5, 0.0, 0.5, 1.0))
     assert mats["face.ply"].base_color == pytest.approx((0.5, 0.5, 0.0, 1.0))
 
+
+def test_an_mtl_diffuse_colour_multiplies_its_texture(tmp_path: Path) -> None:
+    """An MTL material with a ``map_Kd`` loaded with a white base colour, its ``Kd`` dropped: a red-tinted texture
+    drew untinted, where Blender and trimesh's own viewer multiply the two. Now the base colour is the ``Kd`` (the
+    renderer multiplies it with the texture); a material with a texture and no ``Kd`` keeps the texture alone, not
+    trimesh's 0.4 grey default diffuse; one with a ``Kd`` and no texture is as before."""
+    PIL.fromarray(np.full((4, 4, 3), 200, np.uint8)).save(tmp_path / "t.png")
+    obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nusemtl {}\nf 1/1/1 2/2/1 3/3/1\n"
+    (tmp_path / "m.mtl").write_text("newmtl tinted\nKd 1.0 0.6 0.2\nmap_Kd t.png\n"
+                                    "newmtl plain\nmap_Kd t.png\n"
+                                    "newmtl flat\nKd 0.2 0.4 0.6\n")
+    got = {}
+    for name in ("tinted", "plain", "flat"):
+        (tmp_path / f"{name}.obj").write_text(obj.format(name))
+        got[name] = scenes.load_mesh_file(tmp_path / f"{name}.obj").materials[0]
+    assert got["tinted"].texture is not None and got["plain"].texture is not None and got["flat"].texture is None
+    assert got["tinted"].base_color == pytest.approx((1.0, 0.6, 0.2, 1.0), abs=1 / 255)
+    assert got["plain"].base_color == (1.0, 1.0, 1.0, 1.0)
+    assert got["flat"].base_color == pytest.approx((0.2, 0.4, 0.6, 1.0), abs=1 / 255)
+    np.testing.assert_array_equal(got["tinted"].texture, got["plain"].texture)
 
 def test_mesh_file_geometry_fallbacks(tmp_path: Path, caplog: pytest.LogCaptureFixture):
     """A mirroring node transform flips the winding so triangles still face their normals; normals

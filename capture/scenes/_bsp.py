@@ -307,23 +307,25 @@ def _open_source(source: str | Path, map_name: str | None, pk3s: Sequence[str | 
     src = Path(source)
     if not src.is_file():
         raise SceneNotFoundError(f"BSP source not found: {src}")
-    if src.suffix.lower() == ".bsp":
-        pk3 = Pk3Set(pk3s)
-        return src.read_bytes(), pk3, map_name or src.stem
-    if src.suffix.lower() != ".pk3":
+    if src.suffix.lower() not in (".bsp", ".pk3"):
         raise SceneFormatError(f"expected a .bsp or .pk3 file, got {src}")
-    pk3 = Pk3Set([src, *[p for p in pk3s if Path(p) != src]])
-    if map_name is None:
-        maps = [n for n in pk3.names("maps/", ".bsp") if Path(pk3.archive_of(n)) == src]
-        if len(maps) != 1:
-            pk3.close()
-            raise SceneFormatError(f"{src} holds {len(maps)} maps ({maps}); pass map_name")
-        map_name = Path(maps[0]).stem
-    bsp_path = f"maps/{map_name}.bsp"
-    if bsp_path not in pk3:
+    bsp = src.suffix.lower() == ".bsp"
+    pk3 = Pk3Set(pk3s if bsp else [src, *[p for p in pk3s if Path(p) != src]])
+    try:  # (the archives are closed on any refusal: only a map read whole leaves them open, for its textures)
+        if bsp:
+            return src.read_bytes(), pk3, map_name or src.stem
+        if map_name is None:
+            maps = [n for n in pk3.names("maps/", ".bsp") if Path(pk3.archive_of(n)) == src]
+            if len(maps) != 1:
+                raise SceneFormatError(f"{src} holds {len(maps)} maps ({maps}); pass map_name")
+            map_name = Path(maps[0]).stem
+        bsp_path = f"maps/{map_name}.bsp"
+        if bsp_path not in pk3:
+            raise SceneNotFoundError(f"maps/{map_name}.bsp is not in {src} or the other archives given")
+        return pk3.read(bsp_path), pk3, map_name  # (a damaged map member: SceneFormatError)
+    except BaseException:
         pk3.close()
-        raise SceneNotFoundError(f"maps/{map_name}.bsp is not in {src} or the other archives given")
-    return pk3.read(bsp_path), pk3, map_name
+        raise
 
 
 def convert_bsp(

@@ -7,8 +7,8 @@
   loader writes ``v' = 1 - v`` for the renderer's top-left convention.
 * Normals: taken from the file when present, otherwise computed (area weighted).
 * Materials: glTF PBR (base colour factor and texture, roughness, metallic, alpha mode MASK →
-  ``alpha_cutoff``) and OBJ/MTL (Kd, map_Kd; roughness from the Phong exponent); vertex
-  colours become a constant base colour (their mean).
+  ``alpha_cutoff``) and OBJ/MTL (Kd, map_Kd: the texture multiplied by Kd where the MTL states one;
+  roughness from the Phong exponent); vertex colours become a constant base colour (their mean).
 * Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same. Geometry more than
   131072 m from the origin (where float32 steps reach 1.6 cm) loads with a warning: it draws with
   coarse depth and reprojection.
@@ -16,10 +16,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import logging
 import math
 import re
 import urllib.parse
+from collections.abc import Iterator
 from pathlib import Path, PureWindowsPath
 from typing import Any
 
@@ -40,6 +43,26 @@ log = logging.getLogger("rtp.capture")
 #: beyond 131072 m from the origin, float32 steps are 1.6 cm or more and reprojection degrades.
 FAR_RESOLUTION = 0.01
 
+#: The level of the file's warnings (a texture it cannot read, geometry far from the origin): DEBUG inside
+#: :func:`said_before`.
+_WARNING_LEVEL: contextvars.ContextVar[int] = contextvars.ContextVar("rtp_mesh_warning_level", default=logging.WARNING)
+
+
+@contextlib.contextmanager
+def said_before() -> Iterator[None]:
+    """Load files whose warnings were logged already (``rtp capture`` reads each file in its check before any work,
+    then again in the worker that renders it): inside it they are logged at DEBUG, not said twice."""
+    token = _WARNING_LEVEL.set(logging.DEBUG)
+    try:
+        yield
+    finally:
+        _WARNING_LEVEL.reset(token)
+
+
+def _warn(msg: str, *args: Any) -> None:
+    """A warning about the file being loaded (at DEBUG inside :func:`said_before`)."""
+    log.log(_WARNING_LEVEL.get(), msg, *args)
+
 
 def _image_to_rgba(img) -> np.ndarray | None:
     if img is None:
@@ -47,7 +70,7 @@ def _image_to_rgba(img) -> np.ndarray | None:
     try:  # (by its values: a 16-bit texture is not clipped to white, nor a float one cast to black)
         return np.round(image_values(img, alpha=True) * 255.0).astype(np.uint8)
     except Exception as err:  # noqa: BLE001 - a broken image becomes "untextured"
-        log.warning("could not convert texture image: %s", err)
+        _warn("could not convert texture image: %s", err)
         return None
 
 
@@ -126,7 +149,7 @@ def _obj_library(p: Path, resolver: Any) -> tuple[Path | None, dict[str, str] | 
     try:
         mtl = lib.read_text(encoding="utf-8", errors="replace")
     except OSError as err:
-        log.warning("%s: its material library %s cannot be read (%s): its materials are dropped (the meshes "
+        _warn("%s: its material library %s cannot be read (%s): its materials are dropped (the meshes "
                     "untextured, in the default material)", p, lib, err.strerror or err)
         return lib, None
     if lib.parent.resolve() != Path(resolver.parent).resolve():
@@ -177,7 +200,10 @@ def _material_of(geom: Any, name: str, library_lost: bool = False) -> tuple[Mate
         tex = _image_to_rgba(getattr(m, "image", None)) if has_uv else None
         gloss = float(getattr(m, "glossiness", None) or 0.0)
         rough = math.sqrt(2.0 / (gloss + 2.0)) if gloss > 0 else 0.8  # Blinn-Phong exponent → roughness
-        base = (1.0, 1.0, 1.0, 1.0) if tex is not None else _colour01(getattr(m, "diffuse", None))
+        # Kd multiplies map_Kd, as in the MTL convention (Blender, trimesh's own viewer); an MTL without a Kd leaves the
+        # texture as it is (trimesh's diffuse is then its 0.4 grey default, not the file's)
+        stated = "kd" in (getattr(m, "kwargs", None) or {})
+        base = (1.0, 1.0, 1.0, 1.0) if tex is not None and not stated else _colour01(getattr(m, "diffuse", None))
         return Material(name=str(getattr(m, "name", None) or name), base_color=base, texture=tex,
                         roughness=float(np.clip(rough, 0.05, 1.0))), has_uv
     if kind == "vertex" or kind == "face":
@@ -219,7 +245,7 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
 
     if not obj:  # (an OBJ's lost library and textures are said below, by material)
         for missing in dict.fromkeys(resolver.missing):
-            log.warning("%s: the file %s it names cannot be read (no such file): what uses it is dropped (a texture: "
+            _warn("%s: the file %s it names cannot be read (no such file): what uses it is dropped (a texture: "
                         "the material untextured)", p, missing)
     # an OBJ without a material library: trimesh gives it (where it has texture coordinates) the same grey
     # placeholder texture as an unreadable one; both become the untextured default material
@@ -248,7 +274,7 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         obj_name = str(getattr(obj_mat, "name", None))
         if textures and obj_name in textures and getattr(obj_mat, "image", None) is None and obj_name not in unread:
             unread.add(obj_name)  # (trimesh drops a map_Kd it cannot read, logging it at DEBUG only)
-            log.warning("%s: texture %s of material %r cannot be read (no such file, or not an image): the "
+            _warn("%s: texture %s of material %r cannot be read (no such file, or not an image): the "
                         "material is untextured", lib, textures[obj_name], obj_name)
         if has_uv:
             uv = np.asarray(geom.visual.uv, np.float64)[:, :2].copy()
@@ -282,7 +308,7 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     lo, hi = scene.bounds
     far = float(np.max(np.abs(np.concatenate([lo, hi]))))
     if float(np.spacing(np.float32(far))) > FAR_RESOLUTION:
-        log.warning("%s: its geometry lies up to %.0f m from the origin, where float32 (what the renderers draw "
+        _warn("%s: its geometry lies up to %.0f m from the origin, where float32 (what the renderers draw "
                     "with) resolves only %.3f m: depth, motion and reprojection are that coarse (a capture's unseen "
                     "share grows: 10%% at the origin, 20%% at 2e5 m, 66%% at 1e6 m for one room); move the model "
                     "near the origin", p.name, far, float(np.spacing(np.float32(far))))

@@ -29,21 +29,26 @@ class Pk3Set:
         self.paths = [Path(p) for p in paths]
         self._zips: list[zipfile.ZipFile] = []
         self._index: dict[str, tuple[int, str]] = {}
-        for p in self.paths:
-            if not p.is_file():
-                raise SceneNotFoundError(f"pk3 archive not found: {p}")
-            try:
-                z = zipfile.ZipFile(p)
-            except zipfile.BadZipFile as err:
-                raise SceneFormatError(f"{p} is not a pk3 (zip) archive: {err}") from err
-            k = len(self._zips)
-            self._zips.append(z)
-            for info in z.infolist():
-                if info.is_dir():
-                    continue
-                self._index.setdefault(info.filename.lower().replace("\\", "/"), (k, info.filename))
+        try:
+            for p in self.paths:
+                if not p.is_file():
+                    raise SceneNotFoundError(f"pk3 archive not found: {p}")
+                try:
+                    z = zipfile.ZipFile(p)
+                except zipfile.BadZipFile as err:
+                    raise SceneFormatError(f"{p} is not a pk3 (zip) archive: {err}") from err
+                k = len(self._zips)
+                self._zips.append(z)
+                for info in z.infolist():
+                    if info.is_dir():
+                        continue
+                    self._index.setdefault(info.filename.lower().replace("\\", "/"), (k, info.filename))
+        except BaseException:  # (the archives opened before the one refused: the caller never gets the set)
+            self.close()
+            raise
 
     def close(self) -> None:
+        """Close every archive (twice is harmless; a read after it is refused)."""
         for z in self._zips:
             z.close()
 

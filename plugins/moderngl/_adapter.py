@@ -260,6 +260,17 @@ class Adapter(_AdapterBase[GBufferTextures]):
         # Planes that read other pixels' lumas (.dx / .dy, .blocks, .tiles) take them from a first pass that
         # writes every pixel's reprojected and albedo luma, instead of reprojecting each neighbour again.
         self._luma: Adapter | None = None
+        self._framebuffer_zero: Any = None
+        try:
+            self._build(ids, flags, tolerance, albedo_linear, normal_space, depth_kind, clamp_colour, moderngl)
+        except BaseException:  # (a shader that did not compile, no room for the targets: the caller never gets the
+            self.close()       # adapter, so what it made so far is freed here; close() marks it closed, unwarned)
+            raise
+
+    def _build(self, ids: list[int], flags: dict[str, bool], tolerance: float, albedo_linear: bool, normal_space: str,
+               depth_kind: str, clamp_colour: bool, moderngl: Any) -> None:
+        """The constructor's GL part: the first pass (where wanted), the program for the channels, the targets."""
+        ctx, width, height = self.ctx, self.width, self.height
         if any(flags[f] for f in ("RTP_DIFFERENCES", "RTP_BLOCKS_REPROJECTED", "RTP_BLOCKS_ALBEDO",
                                   "RTP_TILES_REPROJECTED", "RTP_TILES_ALBEDO")):
             self._luma = Adapter(_LUMA_PASS, width, height, ctx=ctx, tolerance=tolerance, albedo_linear=albedo_linear,
@@ -272,12 +283,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
                                  fragment_shader=load_source("adapter_fs.glsl", defines))
         self._vao = ctx.vertex_array(self._prog, [])
         n_targets = -(-len(self.channels) // 4)
-        self._targets = [ctx.texture((self.width, self.height), 4, dtype="f4") for _ in range(n_targets)]
-        for t in self._targets:
-            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._targets: list[Any] = []
+        for _ in range(n_targets):  # (one by one: a failure part-way frees the ones made)
+            self._targets.append(ctx.texture((self.width, self.height), 4, dtype="f4"))
+            self._targets[-1].filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._fbo = ctx.framebuffer(color_attachments=self._targets)
         self._region_drawn = (self.width, self.height)  # (the size of the last run's planes)
-        self._framebuffer_zero: Any = None
 
     def _set(self, name: str, value: Any) -> None:
         u = self._prog.get(name, None)  # the GLSL compiler drops uniforms a program does not use
@@ -534,11 +545,14 @@ class Adapter(_AdapterBase[GBufferTextures]):
     def close(self) -> None:
         """Free the adapter's program, targets and framebuffer (not the engine's context; where the engine
         released its context first, they went with it)."""
+        made = self.__dict__  # (a constructor that failed part-way closes what it made so far)
         if not is_released(self.ctx):
-            if self.ctx.fbo is self._fbo:  # (a framebuffer deleted while bound leaves GL none to draw into)
+            fbo = made.get("_fbo")
+            if fbo is not None and self.ctx.fbo is fbo:  # (a framebuffer deleted while bound leaves GL none to draw into)
                 self._default_framebuffer().use()
-            for obj in (self._fbo, *self._targets, self._vao, self._prog):
-                obj.release()
+            for obj in (fbo, *made.get("_targets", ()), made.get("_vao"), made.get("_prog")):
+                if obj is not None:
+                    obj.release()
         if self._luma is not None:
             self._luma.close()
 

@@ -478,26 +478,25 @@ class Renderer:
         self.width, self.height = int(width), int(height)
         self._owns_ctx = ctx is None
         self.ctx = create_context() if ctx is None else _check_ctx(ctx)
-        self.ctx.__enter__()  # (a borrowed context may not be the current one: its objects are made in it)
-        if self.ctx.version_code < 330:
-            raise RendererError(f"the renderer needs OpenGL >= 3.3, the context offers {self.ctx.version_code}")
-        if shadow_map_size is None:
-            shadow_map_size = _default_shadow_map_size(self.width, self.height)
-        self.shadow_map_size = int(shadow_map_size)
-        # The context's own limit, before any texture: past it moderngl only says "the framebuffer is not complete".
-        limit = self.max_frame_side(self.ctx)
-        for what, side in (("frame size", max(self.width, self.height)), ("shadow_map_size", self.shadow_map_size)):
-            if side > limit:
-                if self._owns_ctx:
-                    self.ctx.release()
-                raise RendererError(f"{what}: this OpenGL context draws at most {limit} pixels a side "
-                                    f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}, shadow map "
-                                    f"{self.shadow_map_size}")
-        try:
+        try:  # (a refusal here releases the context the renderer made: the caller never gets the renderer)
+            self.ctx.__enter__()  # (a borrowed context may not be the current one: its objects are made in it)
+            if self.ctx.version_code < 330:
+                raise RendererError(f"the renderer needs OpenGL >= 3.3, the context offers {self.ctx.version_code}")
+            if shadow_map_size is None:
+                shadow_map_size = _default_shadow_map_size(self.width, self.height)
+            self.shadow_map_size = int(shadow_map_size)
+            # The context's own limit, before any texture: past it moderngl only says "the framebuffer is not
+            # complete".
+            limit = self.max_frame_side(self.ctx)
+            for what, side in (("frame size", max(self.width, self.height)), ("shadow_map_size", self.shadow_map_size)):
+                if side > limit:
+                    raise RendererError(f"{what}: this OpenGL context draws at most {limit} pixels a side "
+                                        f"(GL_MAX_TEXTURE_SIZE), got {self.width}x{self.height}, shadow map "
+                                        f"{self.shadow_map_size}")
             self._check_settings(ao_samples=ao_samples, max_point_lights=max_point_lights, ao_radius=ao_radius,
                                  ao_strength=ao_strength, anisotropy=anisotropy, exposure_key=exposure_key,
                                  reprojection_tolerance=reprojection_tolerance, shadow_distance=shadow_distance)
-        except RendererError:
+        except BaseException:
             if self._owns_ctx:
                 self.ctx.release()
             raise
@@ -967,14 +966,23 @@ class Renderer:
             if self._vrs is not None:
                 for obj in self._vrs:
                     obj.release()
-            rate_map = self.ctx.texture((tw, th), 1, dtype="f4")
-            rate_map.filter = (mgl.NEAREST, mgl.NEAREST)
-            ldr = self.ctx.texture((self.width, self.height), 4, dtype="f2")
-            ldr.filter = (mgl.LINEAR, mgl.LINEAR)
-            ldr.repeat_x = ldr.repeat_y = False
-            final = self.ctx.texture((self.width, self.height), 4, dtype="f2")
-            self._vrs = (rate_map, ldr, final, self.ctx.framebuffer(color_attachments=[ldr]),
-                         self.ctx.framebuffer(color_attachments=[final]))
+                # (not held released: where the new ones could not be made, every later call used or released them)
+                self._vrs = None
+            made: list[Any] = []
+            try:
+                made.append(self.ctx.texture((tw, th), 1, dtype="f4"))
+                made[0].filter = (mgl.NEAREST, mgl.NEAREST)
+                made.append(self.ctx.texture((self.width, self.height), 4, dtype="f2"))
+                made[1].filter = (mgl.LINEAR, mgl.LINEAR)
+                made[1].repeat_x = made[1].repeat_y = False
+                made.append(self.ctx.texture((self.width, self.height), 4, dtype="f2"))
+                made.append(self.ctx.framebuffer(color_attachments=[made[1]]))
+                made.append(self.ctx.framebuffer(color_attachments=[made[2]]))
+            except BaseException:  # (a borrowed context keeps what is not released)
+                for obj in made:
+                    obj.release()
+                raise
+            self._vrs = tuple(made)
         rate_map, ldr, final, fbo_ldr, fbo_final = self._vrs
         write_texture(rate_map, codes.astype(np.float32))
         p = self._p_coarse

@@ -100,8 +100,27 @@ class RateSelector:
                                     "selector then makes its own)")
         if ctx is not None and not callable(getattr(ctx, "compute_shader", None)):
             raise AdapterFrameError(f"ctx must be a moderngl.Context, got {type(ctx).__name__}")
-        self._own_ctx = ctx is None
+        # Every GL object's slot before any is made: close() frees what a constructor that failed part-way made.
+        self._program: Any = None
+        self._tiles: tuple[int, int] | None = None
+        self._texture: Any = None
+        self._decoded: Any = None
+        self._raw: Any = None
+        self._engine: Any = None
+        self._budget_program: Any = None  # (compiled on the first budget)
+        self._budget: Any = None
+        self._budget_work: float | None = None  # the frame's work, in pixels (tiles), of the last budget
+        self._own_ctx = False
         self.ctx = create_context(430) if ctx is None else ctx
+        self._own_ctx = ctx is None
+        try:
+            self._build(meta)
+        except BaseException:  # (the context it made and the objects so far: the caller never gets the selector)
+            self.close()
+            raise
+
+    def _build(self, meta: sdk.ModelMetadata) -> None:
+        """The constructor's GL part: the decision's program and its uniforms, in the selector's context."""
         self.ctx.__enter__()  # (a borrowed context may not be the current one: the programs are made in it)
         if self.ctx.version_code < 430:
             raise RendererError(f"RateSelector needs compute shaders (OpenGL 4.3), got a context of version "
@@ -131,14 +150,7 @@ class RateSelector:
         for name, value in uniforms.items():
             if name in self._program:
                 self._program[name].value = value
-        self._tiles: tuple[int, int] | None = None
-        self._texture: Any = None
-        self._decoded: Any = None
-        self._raw: Any = None
-        self._engine: Any = None
-        self._budget_program: Any = None  # (compiled on the first budget)
         self._budget = self.ctx.buffer(reserve=8)  # the budget's threshold and the work it saves
-        self._budget_work: float | None = None  # the frame's work, in pixels (tiles), of the last budget
 
     @property
     def metadata(self) -> sdk.ModelMetadata:
@@ -156,6 +168,9 @@ class RateSelector:
         for obj in (self._texture, self._decoded):
             if obj is not None:
                 obj.release()
+        # (forgotten before the new ones are made: a failed allocation left them released but held, and the next
+        # call of the same grid used them, of another grid released them again: an AttributeError either way)
+        self._texture = self._decoded = self._tiles = None
         th, tw = tiles
         self._texture = self.ctx.texture((tw, th), 1, dtype="u1")
         self._decoded = self.ctx.buffer(reserve=6 * th * tw * 4)
@@ -214,6 +229,7 @@ class RateSelector:
                 if self._engine is None or self._engine.size != (grid[1], grid[0]):
                     if self._engine is not None:
                         self._engine.release()
+                        self._engine = None  # (not held released where the new one cannot be made)
                     self._engine = self.ctx.texture((grid[1], grid[0]), 1, dtype="u1")
                 self._engine.write(np.ascontiguousarray(engine, np.uint8).tobytes())
                 engine = self._engine
@@ -331,6 +347,7 @@ class RateSelector:
         if self._raw is None or self._raw.size != len(data):
             if self._raw is not None:
                 self._raw.release()
+                self._raw = None  # (not held released where the new one cannot be made)
             self._raw = self.ctx.buffer(data)
         else:
             self._raw.write(data)
