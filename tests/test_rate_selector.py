@@ -103,6 +103,11 @@ _TRANSFORMS = st.one_of(
 # the SDK's value by 4e-4 of it (1 - S is a few ulps there)
 @example(transform={"type": "logistic", "mu_y": 0.046875, "k": 9.125}, outputs=list(sdk.PREDICTED_RATES), psnr=False,
          k=1.0, safety=0.1478266100275777, quantile=0.5, allowed=(), tiles=(13, 14), pool=1, seed=5510, factors=None)
+# a margin that pushes a logistic output below 0 (PSNR: the margin lowers it): S a few ulps of the terms it was
+# made of, and the float32 margin alone missed the SDK's value by 1.8e-3 of it
+@example(transform={"type": "logistic", "mu_y": 0.17422626279644354, "k": 25.94921875},
+         outputs=list(sdk.PREDICTED_RATES), psnr=True, k=1.0, safety=0.15518617964278758, quantile=0.5, allowed=(),
+         tiles=(14, 16), pool=1, seed=16, factors=None)
 def test_any_metadata_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any], outputs: list[str], psnr: bool,
                                           k: float, safety: float, quantile: float, allowed: tuple[str, ...],
                                           tiles: tuple[int, int], pool: int, seed: int,

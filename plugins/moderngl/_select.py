@@ -54,6 +54,13 @@ _COMBINER_VALUES: dict[str | int, int] = {"min": 2, "max": 3, "sum": 4, "mul": 4
 _GROUP = 8  # the shader's local size, both axes
 
 
+def _split_float32(value: float) -> tuple[float, float]:
+    """``value`` as float32 high and low parts whose sum is ``value`` to float64's precision: a shader adds
+    them in turn where one float32 would lose what a cancellation leaves."""
+    high = float(np.float32(value))
+    return high, float(np.float32(value - high))
+
+
 class RateSelector:
     """The decision of ``ShadingRatePredictor.shading_rates`` on the GPU, for one model's metadata.
 
@@ -143,8 +150,13 @@ class RateSelector:
         if t.type == "logistic":
             k, mu = float(t.k), float(t.mu_y)  # type: ignore[arg-type]
             uniforms["u_logistic_k"] = k
-            uniforms["u_s_bounds"] = (1.0 / (1.0 + math.exp(k * mu)), 1.0 / (1.0 + math.exp(-k * (1.0 - mu))),
-                                      1.0 / (1.0 + math.exp(k * (1.0 - mu))))  # S(0), S(1), 1 - S(1)
+            shift = meta.worse_direction * meta.safety
+            s0, s1 = 1.0 / (1.0 + math.exp(k * mu)), 1.0 / (1.0 + math.exp(-k * (1.0 - mu)))
+            span = s1 - s0
+            s1c = 1.0 / (1.0 + math.exp(k * (1.0 - mu)))  # 1 - S(1), not 1 - s1: that cancels where S(1) is near 1
+            uniforms["u_logistic_span"] = span
+            uniforms["u_logistic_a"] = _split_float32(shift + s0 / span)  # S = span (x + a)
+            uniforms["u_logistic_b"] = _split_float32(s1c / span - shift)  # 1 - S = span ((1 - x) + b)
         if t.type == "linear":
             uniforms.update(u_factor=float(t.factor), u_offset=float(t.offset))  # type: ignore[arg-type]
         for name, value in uniforms.items():

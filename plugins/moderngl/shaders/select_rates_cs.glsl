@@ -24,7 +24,9 @@ uniform float u_shift;           // safety margin x its conservative direction, 
 uniform int u_transform;         // 0 clamped, 1 logistic, 2 linear
 uniform float u_mu_y;            // clamped, logistic
 uniform float u_logistic_k;      // logistic
-uniform vec3 u_s_bounds;         // logistic: S(0), S(1), 1 - S(1)
+uniform float u_logistic_span;   // logistic: S(1) - S(0)
+uniform vec2 u_logistic_a;      // logistic: shift + S(0) / span, as float32 high + low parts
+uniform vec2 u_logistic_b;      // logistic: (1 - S(1)) / span - shift, as float32 high + low parts
 uniform float u_factor;          // linear
 uniform float u_offset;          // linear
 uniform float u_k;               // extrapolation_k
@@ -53,13 +55,15 @@ float inverse_transform(float x, float shift) {
     if (isnan(p)) return p;  // GLSL's clamp would turn a NaN into a number; numpy's clip keeps it
     if (u_transform == 0) return p * (2.0 * u_mu_y);
     if (u_transform == 1) {
-        // S and 1 - S each from p (1 - S from 1 - S(1), computed on the CPU), not 1 - S in float32: near
-        // the clamp 1 - S would cancel to a few ulps and the logit would miss the SDK's by a percent.
-        // 1 - p as (1 - x) - shift: x + shift rounded to float32 past 1 loses the ulps that 1 - S is
-        // made of when the margin pushes p over 1 (the SDK adds them in float64)
-        float span = u_s_bounds.y - u_s_bounds.x;
-        float s = clamp(p * span + u_s_bounds.x, LOGIT_EPS, 1.0 - LOGIT_EPS);
-        float r = clamp(u_s_bounds.z + ((1.0 - x) - shift) * span, LOGIT_EPS, 1.0 - LOGIT_EPS);
+        // S = S(0) + p span = span (x + a) and 1 - S = span ((1 - x) + b), a and b summed in float64 on the CPU
+        // and given as high + low float32 parts: where the margin carries p past 0 or 1, S or 1 - S is a few
+        // ulps of the terms it is made of, and float32 rounding of the margin, of x + margin or of p span + S(0)
+        // missed the SDK's float64 logit by up to 2e-3 of the value. x + a.x and (1 - x) + b.x are exact where
+        // they cancel (Sterbenz), the low part then adds what float32 lost; `precise`: not reassociated.
+        precise float q = (x + u_logistic_a.x) + u_logistic_a.y;
+        precise float q1 = ((1.0 - x) + u_logistic_b.x) + u_logistic_b.y;
+        float s = clamp(u_logistic_span * q, LOGIT_EPS, 1.0 - LOGIT_EPS);
+        float r = clamp(u_logistic_span * q1, LOGIT_EPS, 1.0 - LOGIT_EPS);
         return u_mu_y + (log(s) - log(r)) / u_logistic_k;
     }
     return (p - u_offset) / u_factor;
