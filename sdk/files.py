@@ -228,7 +228,8 @@ def yaml_problem(err: BaseException) -> str:
 
 def _natural(name: str) -> list[Any]:
     """The sort key of a natural order: ``frame_9`` before ``frame_10``."""
-    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name)]
+    # (the odd parts are the digit runs: str.isdigit() holds for '²' too, whose int() raised a ValueError)
+    return [int(t) if i % 2 else t for i, t in enumerate(re.split(r"(\d+)", name))]
 
 
 def frame_files(paths: Iterable[str | os.PathLike[str]], *, example: str = "rtp predict FOLDER --write-example "

@@ -322,6 +322,10 @@ def test_a_folders_frames_in_the_natural_order_of_their_names(tmp_path: Path) ->
     for name in ("frame_10.npz", "frame_9.npz", "frame_1.npz", "notes.txt"):
         (tmp_path / name).write_bytes(b"")
     assert [Path(f).name for f in frame_files([str(tmp_path)])] == ["frame_1.npz", "frame_9.npz", "frame_10.npz"]
+    # a superscript two is no digit run: it sorted as one (str.isdigit) and int() raised a ValueError
+    (tmp_path / "frame_1\u00b25.npz").write_bytes(b"")
+    assert [Path(f).name for f in frame_files([str(tmp_path)])] == ["frame_1.npz", "frame_1\u00b25.npz", "frame_9.npz",
+                                                                    "frame_10.npz"]
 
 
 def test_files_out_of_order_or_a_missing_frame_are_named(sequence: Path, tmp_path: Path,
