@@ -625,10 +625,13 @@ def _cmd_train(args: argparse.Namespace) -> int:
         result = train(cfg, progress=lambda step, total, loss: bar.update_to(step, loss=f"{loss:.4f}"),
                        loading=lambda read, samples: bar.status(f"reading samples: {read}/{samples}"))
     if result.dead_outputs:  # the job ran and failed (exit 1), so `make train` stops before exporting
+        from rtp.sdk import RtpError
+
         again = "--head linear or another --seed" if cfg.arch == "paper" else "another --seed"  # (fast: no --head)
-        print(f"rtp train: error: dead output(s) {', '.join(result.dead_outputs)} (see the warning above); "
-              f"{result.checkpoint} is kept, not fit to export: train again with {again}", file=sys.stderr)
-        return 1
+        # (raised, not printed: the one error policy says it last, after the counts of the warnings held back as
+        # repeats, which a printed line came before, so `tail -1` of a log found "WARNING (repeated): ...")
+        raise RtpError(f"dead output(s) {', '.join(result.dead_outputs)} (see the warning above); {result.checkpoint} "
+                       f"is kept, not fit to export: train again with {again}")
     v = result.val["transformed"]
     # (R² in %, as `rtp evaluate` prints it: its 'model (no safety)' row on the validation scenes is this number)
     print(f"{result.checkpoint}: {result.steps} steps; validation R² {100 * v['r2']:.1f}%, MAE {v['mae']:.4f} "
@@ -1015,9 +1018,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--metric", required=True, type=_metric_name, help="the metric whose targets the network "
                     f"learns (computed by `rtp targets`): {', '.join(METRICS)}, or a plugin's")
     tr.add_argument("--out", type=_out_file, required=True, help="checkpoint to write (resumed if it exists)")
-    tr.add_argument("--config", default="shipped", metavar="RECIPE.yaml",
+    tr.add_argument("--config", "--recipe", dest="config", default="shipped", metavar="RECIPE.yaml",
                     help="training recipe: a YAML file, or a packaged one: shipped (the shipped models' recipe), "
-                         "reuse, tile8, paper-net (train/recipes)")
+                         "reuse, tile8, paper-net (train/recipes); --recipe is the same flag")
     tr.add_argument("--device", default=None, metavar="DEVICE",
                     help="where the network trains: auto (the first GPU torch sees, else the CPU; default), cpu, "
                     "cuda, cuda:N or mps. The samples stay in memory here; a checkpoint resumes on any device")
@@ -1144,7 +1147,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "(validation keeps all; default: all)")
     tr.add_argument("--val-scenes", action="append", default=None, type=_names_text,
                     help="hold out these scenes for validation (repeatable, or comma-separated; default: the "
-                    "recipe's split, or the last scene)")
+                    "recipe's split, or the last scene by name, procedural:10 after procedural:9)")
     tr.add_argument("--threshold", type=float, default=None, help="default threshold written into the model "
                     "(default: the metric's starting threshold)")
     splits(tr)

@@ -600,6 +600,11 @@ def join_input_planes(model_path: str | os.PathLike[str], output: str | os.PathL
     return out
 
 
+def _doc_string(meta: ModelMetadata) -> str:
+    """The ONNX model's ``doc_string`` of an rtp model with metadata ``meta``: its description, else what it is."""
+    return meta.description or f"rtp {meta.metric} predictor, {meta.tile_size}x{meta.tile_size} tiles"
+
+
 #: The metadata fields :func:`retune` may change: how the runtime decides, never what the network predicts.
 RETUNE_FIELDS = ("default_threshold", "rate_factors", "description")
 
@@ -609,7 +614,8 @@ def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str
     """Write a copy of an rtp model (a path, or a shipped model's name) whose decision fields
     (:data:`RETUNE_FIELDS`: the default threshold, the threshold factors per rate, the description) are
     replaced by those of ``metadata`` (a YAML sidecar or a mapping; ``rate_factors: null`` returns to one
-    threshold for every rate). Graph, weights, tail and every other field stay; the copy records what changed in
+    threshold for every rate). Graph, weights, tail and every other field stay (the ONNX doc string follows the
+    description, as export writes it); the copy records what changed in
     ``provenance.retuned`` and is checked to predict exactly as the model before it is written
     (atomically; ``output`` may be the model itself). Other fields are refused: a safety margin or a
     transform changes the predictions, and belongs to training (``rtp train``) or export."""
@@ -649,6 +655,10 @@ def retune(model_path: str | os.PathLike[str], metadata: Mapping[str, Any] | str
     except MetadataError as err:  # (the model's own fields were valid as it loaded: the sidecar's, named)
         raise MetadataError(f"{source}{err}", err.key) from err
     model = onnx.load(str(src))
+    if "description" in d:  # the doc string states the description, as export wrote it (a retuned description
+        # left the old one there, which Netron and onnx's tools show); the digest covers it: a new description, a new
+        # digest. (Only then: an adopted model's own doc string stays through a retune of its thresholds.)
+        model.doc_string = _doc_string(meta)
     write_metadata(model, meta)
     _save_unchanged(model, before, out, f"retuning {src} changed its predictions; nothing written")
     log.info("retuned %s -> %s (%s)", src, out, ", ".join(sorted(str(k) for k in d)))
@@ -818,7 +828,7 @@ def export_checkpoint(
         merge_slices(model)
         model.producer_name = "rtp-export"
         model.producer_version = str(sdk.__version__)
-        model.doc_string = meta.description or f"rtp {meta.metric} predictor, {t}x{t} tiles"
+        model.doc_string = _doc_string(meta)
         if finite_probe:
             meta = dataclasses.replace(meta, finite_probe=add_finite_probe(model, meta.pad_multiple))
         if split_planes:  # after the probe, which reads the stem's output: the groups' sum keeps its name

@@ -703,6 +703,22 @@ def test_retune_changes_the_decision_and_nothing_the_model_predicts(fast_onnx: P
         assert r.returncode == 2 and words in r.stderr, r.stderr
 
 
+def test_retune_rewrites_the_doc_string_from_the_new_description(fast_onnx: Path, tmp_path: Path) -> None:
+    """Export writes the description into the ONNX doc string (what Netron and onnx's tools show); a retuned
+    description left the old doc string there. It is rebuilt as export builds it, and the model still loads (the
+    doc string is part of the digest, written again with it)."""
+    import onnx
+
+    assert onnx.load(str(fast_onnx)).doc_string == "rtp lpips predictor, 16x16 tiles"  # no description at export
+    out = export.retune(fast_onnx, {"description": "LPIPS, thresholds per rate"}, tmp_path / "d.onnx")
+    assert onnx.load(str(out)).doc_string == "LPIPS, thresholds per rate"
+    assert sdk.load(out).metadata.description == "LPIPS, thresholds per rate"
+    export.retune(out, {"description": None, "default_threshold": 0.2}, out)  # no description: export's default
+    assert onnx.load(str(out)).doc_string == "rtp lpips predictor, 16x16 tiles"
+    tuned = sdk.load(out)
+    assert tuned.metadata.description == "" and tuned.metadata.digest == sdk.load(fast_onnx).metadata.digest
+
+
 @pytest.mark.parametrize(
     ("conv", "multiple"),
     [

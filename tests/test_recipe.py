@@ -276,6 +276,36 @@ def test_a_recipes_splits_file_holds_out_its_maps(tmp_path: Path, caplog: pytest
     assert list(prov["val_scenes"]) == ["scene1"] and prov["recipe"]["values"]["splits"] == str(splits)
 
 
+def test_splits_without_a_val_split_is_refused_not_ignored(tmp_path: Path) -> None:
+    """``splits`` is read only to hold out ``val_split``'s maps: a recipe's ``splits`` without ``val_split`` (or
+    ``rtp train --splits`` with such a recipe) was recorded in the checkpoint and ignored, the data's last scene held
+    out instead of the file's validation maps. It is refused, naming what reads it; with val_split or val_scenes it
+    is taken."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text("train: [scene0, scene2]\nvalidation: [scene1]\ntest: []\n")
+    out = str(tmp_path / "m.pt")
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(f"splits: {splits}\nsteps: 2\n")
+    with pytest.raises(RecipeError, match=r"^recipe .*r\.yaml sets splits: .*read only with val_split.*add val_split "
+                                          r"to the recipe") as err:
+        TrainConfig.from_recipe(recipe, data="d", metric="jnyang", out=out)
+    assert err.value.name == "splits"
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("steps: 2\n")
+    for given in ({"scenes": splits}, {"splits": str(splits)}):  # the caller's (rtp train --splits), likewise
+        with pytest.raises(ParameterError, match="^splits: read only with val_split") as err:
+            TrainConfig.from_recipe(plain, data="d", metric="jnyang", out=out, **given)  # type: ignore[arg-type]
+        assert err.value.name == "splits"
+    with pytest.raises(ParameterError, match="^splits: read only with val_split") as err:  # train() itself, no data read
+        train(TrainConfig(data="d", metric="jnyang", out=out, splits=str(splits)))
+    assert err.value.name == "splits"
+    # with a split to hold out, or the caller's own validation scenes (which win), it is taken
+    cfg = TrainConfig.from_recipe(recipe, data="d", metric="jnyang", out=out, val_split="validation")
+    assert (cfg.val_split, cfg.splits) == ("validation", str(splits))
+    assert TrainConfig.from_recipe(recipe, data="d", metric="jnyang", out=out, val_scenes=("scene1",)).val_scenes == (
+        "scene1",)
+
+
 def test_a_missing_recipe_names_the_packaged_ones(tmp_path: Path) -> None:
     with pytest.raises(RecipeError, match="shipped, paper-net"):
         load_recipe(tmp_path / "nope.yaml", "jnyang")

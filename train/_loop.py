@@ -206,7 +206,8 @@ class TrainConfig:
         resolved for ``metric``; keyword ``overrides`` (TrainConfig fields) win over the recipe.
         The recipe's ``val_split`` holds out that split's maps of ``scenes`` (default: the recipe's ``splits``,
         else the split list shipped with rtp) unless ``val_scenes`` is overridden; a ``val_split`` or ``splits``
-        override wins over the recipe's as any other does."""
+        override wins over the recipe's as any other does. ``splits`` (or ``scenes``) with no ``val_split`` to read
+        it and no ``val_scenes`` is refused (:class:`RecipeError` where the recipe set it)."""
         import dataclasses
 
         from rtp.capture.scenes import map_names
@@ -236,6 +237,16 @@ class TrainConfig:
                 raise RecipeError(f"recipe {r.name} sets val_split: {val_split}, which does not fit: {err}",
                                   "val_split") from None
             values.update(val_split=val_split, splits=None if splits is None else str(splits))
+        elif "val_scenes" not in overrides and splits is not None:
+            # (splits is read only to hold out val_split's maps: without one it was recorded in the checkpoint and
+            # ignored, and the last scene held out, not a split of it)
+            why = (f"read only with val_split (the split of it whose maps are held out), and neither recipe {r.name} "
+                   f"nor the training sets one: the last scene would be held out and {splits} ignored")
+            if scenes is not None or "splits" in overrides:
+                raise sdk.ParameterError(f"splits: {why}; give val_split (or val_scenes) with it, or leave it out",
+                                         "splits")
+            raise RecipeError(f"recipe {r.name} sets splits: {splits}, {why}; add val_split to the recipe (val_split: "
+                              f"validation), or remove splits", "splits")
         prov = r.provenance()
         # (the device is the machine's, not a hyper-parameter: the provenance names it apart)
         recipe_values = {**r.values, "val_split": r.val_split}
@@ -500,7 +511,8 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
                 f"so it needs two: capture another into it (rtp capture --scene procedural:{seed} --out {cfg.data} with "
                 "the same --size adds the built-in generator's, or --scene another of your files), or, of an engine's "
                 "frames, import another level's (rtp import FRAMES --scene LEVEL --out DATA)")
-        val = [scenes[-1]]
+        # the last in the natural order of the names (procedural:10 after procedural:9, not before procedural:2)
+        val = [max(scenes, key=sdk.files._natural)]
     train_ids = [i for s in scenes if s not in val for i in by_scene[s]]
     if not train_ids:  # (was an IndexError once the split was loaded)
         key = "val_scenes" if cfg.val_scenes else "val_split"
@@ -708,6 +720,10 @@ def check_config(cfg: TrainConfig) -> TrainConfig:
             raise sdk.ParameterError(f"{key}: expected {expected}, got {value}", key)
     if cfg.crop % cfg.tile:
         raise sdk.ParameterError(f"crop ({cfg.crop}) must be a multiple of the tile size ({cfg.tile})", "crop")
+    if cfg.splits is not None and cfg.val_split is None and not cfg.val_scenes:  # (recorded and ignored)
+        raise sdk.ParameterError(f"splits: read only with val_split (the split of it whose maps are held out), got "
+                                 f"splits {cfg.splits} without it: the last scene would be held out and the file "
+                                 "ignored; give val_split too, or leave splits out", "splits")
     if cfg.arch not in ARCHS:
         raise sdk.ParameterError(f"arch: expected one of {', '.join(ARCHS)}, got {cfg.arch!r}", "arch")
     pairs = [("normal.x", "normal.y"), ("motion.x", "motion.y"),
