@@ -14,7 +14,7 @@ import statistics
 import time
 from collections.abc import Callable, Hashable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 from rtp.sdk import EXIT_USAGE, RtpError
 
@@ -91,6 +91,26 @@ class UsageError(RtpError):
     method named): :func:`run_main` prints it in one line and exits 2."""
 
     exit_code = EXIT_USAGE
+
+
+#: What installs each optional module a script imports when it starts (pyproject.toml's extras): torch and onnx with
+#: training and export, tqdm (the progress bars) with the capture and evaluation tools.
+EXTRAS = {"torch": "rtp[train]", "onnx": "rtp[export]", "tqdm": "rtp[capture]"}
+
+
+def missing_extra(err: ImportError) -> NoReturn:
+    """For a script's imports of optional modules (``try: import torch`` ... ``except ImportError as err:
+    missing_extra(err)``): one line, ``NAME.py: error: ...`` naming the install command, and exit 2 (a missing
+    install, docs/errors.md), where ``python bench/NAME.py --help`` without the extra was a traceback. An import
+    that fails for another reason is raised again."""
+    import sys
+
+    name = (err.name or "").partition(".")[0]
+    if name not in EXTRAS:
+        raise err
+    print(f"{Path(sys.argv[0]).name}: error: this script needs {name}, which is not installed: "
+          f"pip install '{EXTRAS[name]}'", file=sys.stderr)
+    raise SystemExit(EXIT_USAGE)
 
 
 def run_main(main: Callable[[], int | None]) -> None:

@@ -17,11 +17,17 @@ from collections import defaultdict
 
 import numpy as np
 from _common import dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader
 from rtp.capture.scenes import load_splits
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 
 def main() -> None:

@@ -30,11 +30,17 @@ import argparse
 
 import numpy as np
 from _common import UsageError, add_model_args, check_targets, run_main, scene_ids  # bench/ is on sys.path as a script
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
 from rtp.evaluate import foveation_rates, motion_rates
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 C = sdk.RATE_CODES
 IMAGES = ("foveation", "motion")  # (rtp.evaluate's examples of an engine's own rates)

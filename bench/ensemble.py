@@ -24,11 +24,17 @@ from _common import (  # bench/ is on sys.path when run as a script
     run_main,
     scene_ids,
 )
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
 from rtp.evaluate import DEFAULT_UNSEEN_FRACTION, tile_unseen_share
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 
 def _r2(p: np.ndarray, g: np.ndarray) -> float:

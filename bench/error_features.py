@@ -34,10 +34,16 @@ from _common import (  # bench/ is on sys.path when run as a script
     run_main,
     scene_ids,
 )
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 #: Windows (in tiles) the true error is averaged over: the tile, then its neighbourhood.
 ERROR_WINDOWS = (1, 3, 5, 9)

@@ -33,10 +33,16 @@ from _common import (  # bench/ is on sys.path as a script
     scene_ids,
     share,
 )
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 SWEEP = np.exp(np.linspace(np.log(0.05), np.log(4.0), 160))
 SHARES = (0.01, 0.02, 0.05, 0.10)

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
-import torch
 from _common import (
     cpu_description,
     interleaved_ms,
@@ -35,6 +34,13 @@ from _common import (
 )
 
 from rtp import sdk
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    import torch
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 FRAMES = ((1920, 1080), (1280, 720))
 #: rtp's fast networks timed next to the paper's (train/model.py FastNet): (width, depth, stem, inputs,

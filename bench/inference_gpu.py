@@ -33,14 +33,20 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-import onnx
 import onnxruntime as ort
-import torch
 from _common import frame_sizes, paper_model, positive, run_main  # bench/ is on sys.path when run as a script
-from onnx import numpy_helper
-from torch import nn
 
 from rtp import sdk
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    import onnx
+    import torch
+    from onnx import numpy_helper
+    from torch import nn
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 DEFAULT_FRAMES = "1920x1080,2560x1440,3840x2160"
 

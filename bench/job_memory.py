@@ -40,10 +40,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from _common import frame_sizes, run_main  # bench/ is on sys.path when run as a script
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import job_bytes
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 JOBS = ("capture", "targets", "demo", "play", "metric", "examples")
 RTP = [sys.executable, "-m", "rtp", "-q"]

@@ -77,9 +77,12 @@ def main() -> None:
     ap.add_argument("models", nargs="*", help="more .onnx models")
     args = ap.parse_args()
     try:
-        sizes = [frame_size(s, 16) for s in args.sizes.split(",")]
+        # once each, in the order given (a size given twice was measured twice in one process, its second, warm runs
+        # reported as its first, and its column printed twice)
+        sizes = list(dict.fromkeys(frame_size(s, 16) for s in args.sizes.split(",")))
     except argparse.ArgumentTypeError as err:
         ap.error(f"--sizes: {err}")
+    args.sizes = ",".join(f"{w}x{h}" for w, h in sizes)  # (what each model's process is given)
     if args.one:
         print(json.dumps(measure(args.one, sizes, args.threads, args.warm_up)))
         return

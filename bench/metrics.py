@@ -20,10 +20,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import torch
 from _common import median_ms, paper_model, positive, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    import torch
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 TILE = 16
 

@@ -20,11 +20,17 @@ from typing import Any
 
 import numpy as np
 from _common import count, frame_size, run_main  # bench/ is on sys.path when run as a script
-from tqdm import tqdm
 
 from rtp.capture import check_scene, load_scene
 from rtp.capture.paths import MAX_FRAMES, PATH_PROFILES, camera_path, unseen_shares
 from rtp.capture.scenes import load_splits
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 
 def path_frames(text: str) -> int:

@@ -48,11 +48,17 @@ from _common import (  # bench/ is on sys.path when run as a script
     share,
     write_factors_sidecar,
 )
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
 from rtp.evaluate import CONTAINED_RATES, monotone_over_rates
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 MULTIPLIERS = (0.5, 0.7, 0.85, 1.0, 1.2, 1.4, 2.0)
 #: The global threshold's sweep, as a factor of the model's default (log-spaced; PSNR: an offset in dB).

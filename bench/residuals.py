@@ -48,11 +48,17 @@ from _common import (  # bench/ is on sys.path when run as a script
     save_figure,
     scene_ids,
 )
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
 from rtp.evaluate import DEFAULT_UNSEEN_FRACTION, tile_unseen_share
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 #: Work saved by each predicted rate, in ``sdk.PREDICTED_RATES`` order.
 _SAVE = np.array([1.0 - 1.0 / (int(r[0]) * int(r[2])) for r in sdk.PREDICTED_RATES])

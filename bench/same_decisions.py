@@ -19,10 +19,16 @@ import argparse
 
 import numpy as np
 from _common import UsageError, dataset_folder, positive, run_main  # bench/ is on sys.path when run as a script
-from tqdm import tqdm
 
 from rtp import sdk
 from rtp.capture import DatasetReader
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -34,8 +34,14 @@ from _common import (  # bench/ is on sys.path when run as a script
 from rtp import sdk
 from rtp.capture.scenes import load_splits
 from rtp.evaluate import evaluate
-from rtp.export import export_checkpoint
-from rtp.train import TrainConfig, train
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from rtp.export import export_checkpoint
+    from rtp.train import TrainConfig, train
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 #: name -> TrainConfig fields over the shipped recipe.
 CONFIGS: dict[str, dict[str, Any]] = {

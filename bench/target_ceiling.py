@@ -29,11 +29,17 @@ from pathlib import Path
 
 import numpy as np
 from _common import UsageError, add_model_args, count, run_main, scene_ids  # bench/ is on sys.path when run as a script
-from tqdm import tqdm
 
 from rtp import metrics as M
 from rtp import sdk
 from rtp.capture import DatasetReader, TargetStore
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    from tqdm import tqdm
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 #: Default phases (rows, columns in pixels): whole and part strides of AlexNet's 4, 8 and 16.
 DEFAULT_SHIFTS = "0,0 0,4 4,0 4,4 0,8 8,0 8,8 2,6 12,12 1,3"

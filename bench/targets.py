@@ -26,12 +26,18 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 from _common import dataset_folder, positive, positives, run_main  # bench/ is on sys.path when run as a script
 
 from rtp import metrics, sdk
 from rtp.capture import DatasetReader, compute_targets
 from rtp.capture._dataset import sample_path
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    import torch
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 METRICS = ("flip", "jnflip", "lpips", "psnr", "jnyang")
 

@@ -28,12 +28,19 @@ import time
 from pathlib import Path
 from typing import Any
 
-import torch
 from _common import cpu_description, dataset_folder, positive, run_main  # bench/ is on sys.path as a script
 
 from rtp import sdk
 from rtp.metrics import device_name, resolve_device
-from rtp.train import TrainConfig, train
+
+try:  # (without the extra, `python bench/NAME.py --help` too says in one line what to install)
+    import torch
+
+    from rtp.train import TrainConfig, train
+except ImportError as err:
+    from _common import missing_extra
+
+    missing_extra(err)
 
 #: Steps whose time is left out of the median: the first steps pay cuDNN's autotuner, the caching
 #: allocator's first allocations and the CPU's cold caches.

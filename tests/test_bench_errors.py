@@ -70,6 +70,54 @@ def test_bad_input_is_one_line(args: list[str], code: int, words: str) -> None:
     assert "Traceback" not in run.stderr and words in run.stderr.strip().splitlines()[-1], run.stderr
 
 
+#: Runs each bench script given with ``--help`` where the optional modules of rtp's extras cannot be imported, each
+#: in this one process (its ``SystemExit`` caught, its output kept), and prints what each said as JSON.
+_WITHOUT_EXTRAS = """
+import contextlib, io, json, runpy, sys
+for m in ("torch", "tqdm", "onnx", "matplotlib", "flip_evaluator", "moderngl", "pyrender", "ray", "PIL", "png",
+          "trimesh", "imageio", "scipy"):
+    sys.modules[m] = None  # (an import of it raises ImportError, as where it is not installed)
+sys.path.insert(0, "bench")
+said = {}
+for script in sys.argv[1:]:
+    sys.argv = [script, "--help"]
+    out, err, code = io.StringIO(), io.StringIO(), None
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            runpy.run_path(script, run_name="__main__")
+        except SystemExit as exc:
+            code = exc.code
+        except BaseException as exc:
+            code, err = "raised", io.StringIO(f"{type(exc).__name__}: {exc}")
+    said[script] = [code, out.getvalue(), err.getvalue()]
+print(json.dumps(said))
+"""
+
+
+def test_help_without_the_extras_is_the_help_or_one_line_naming_the_install() -> None:
+    """`python bench/X.py --help` without torch, tqdm or onnx (the train, capture and export extras) was a
+    ModuleNotFoundError traceback in 17 scripts that import them when they start; each now prints its help or
+    says in one line what to install (exit 2, a missing install: docs/errors.md)."""
+    scripts = sorted(f"bench/{p.name}" for p in BENCH.glob("*.py") if not p.name.startswith("_"))
+    run = subprocess.run([sys.executable, "-c", _WITHOUT_EXTRAS, *scripts], cwd=ROOT, capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    said = json.loads(run.stdout.strip().splitlines()[-1])
+    needs = {}
+    for script, (code, out, err) in said.items():
+        name = Path(script).name
+        if code == 0:
+            assert out.startswith("usage: "), (script, out, err)
+            continue
+        assert code == 2 and not out and err.count("\n") == 1, (script, code, err)
+        assert err.startswith(f"{name}: error: this script needs "), (script, err)
+        needs[name] = err.split()[5].rstrip(",")
+    # (one of each: tqdm's bars, torch itself, torch through rtp.train, onnx)
+    assert {needs.get(s) for s in ("per_rate.py", "inference.py", "study.py", "inference_gpu.py")} == {
+        "tqdm", "torch", "onnx"}, needs
+    assert "pip install 'rtp[train]'" in said["bench/inference.py"][2]
+
+
 def test_a_json_of_another_kind_and_a_folder_that_is_not_a_dataset(tmp_path: Path) -> None:
     (tmp_path / "other.json").write_text(json.dumps({"settings": {}, "matched": []}))
     run = _run([str(BENCH / "play_report.py"), str(tmp_path / "other.json")], tmp_path)

@@ -3,9 +3,12 @@ the time of the load and the first runs)."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from rtp import sdk
 
@@ -40,3 +43,38 @@ def test_a_warm_up_runs_before_the_timed_runs() -> None:
     assert "first 3 timed `predict` calls at each size in turn, after 1 on a zero frame" in out.stdout
     bad = subprocess.run([sys.executable, str(BENCH), "--warm-up", "-1"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "argument --warm-up: expected an integer >= 0" in bad.stderr
+
+
+def test_a_size_given_twice_is_measured_once(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--sizes 64x64,64x64` measured the size twice in each model's process (the second, warm runs reported as the
+    first runs, the memory they added ~0) and printed its column twice; a size is measured once, in the order given."""
+    from .conftest import bench_module
+
+    mod = bench_module("memory", monkeypatch)
+    seen: list[list[tuple[int, int]]] = []
+
+    def measure(model: str, sizes: list[tuple[int, int]], threads: int, warm_up: int = 0) -> dict[str, float]:
+        seen.append(list(sizes))
+        out = {"library": 1.0, "load": 2.0, "load ms": 3.0}
+        for w, h in sizes:
+            out.update({f"{w}x{h}": 4.0, f"{w}x{h} input": 5.0, **{f"{w}x{h} run {i + 1} ms": 6.0 for i in range(3)}})
+        return out
+
+    monkeypatch.setattr(mod, "measure", measure)
+    monkeypatch.setattr(sys, "argv", ["memory.py", "--one", "jnyang", "--sizes", "64x64,32x32,64x64"])
+    mod.main()
+    assert seen == [[(64, 64), (32, 32)]]
+    children: list[list[str]] = []
+
+    def child(argv: list[str], **_: object) -> subprocess.CompletedProcess[str]:
+        children.append(argv)
+        sizes = [tuple(int(v) for v in s.split("x")) for s in argv[argv.index("--sizes") + 1].split(",")]
+        return subprocess.CompletedProcess(argv, 0, json.dumps(measure(argv[3], sizes, 2)), "")  # type: ignore[arg-type]
+
+    monkeypatch.setattr(mod.subprocess, "run", child)
+    monkeypatch.setattr(sys, "argv", ["memory.py", "--sizes", "64x64,32x32,64x64"])
+    capsys.readouterr()
+    mod.main()
+    assert children and all(a[a.index("--sizes") + 1] == "64x64,32x32" for a in children)
+    header = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| model | onnxruntime"))
+    assert header.count("first runs at 64x64") == 1 and header.count("first runs at 32x32") == 1
