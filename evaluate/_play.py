@@ -752,7 +752,8 @@ def play(
     with guard:
         if outdir is not None:
             _warn_of_another_report(outdir, settings)
-        job = {"scene": scene, "cache_dir": cache_dir, "methods": [m.name for m in specs], "frames": frames, "fps": fps,
+        job = {"scene": scene, "cache_dir": cache_dir, "checked": True, "methods": [m.name for m in specs], "frames": frames,
+               "fps": fps,
                "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
                "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
                "open_loop": open_loop, "gif": str(outdir) if outdir is not None and plots and animation else None,
@@ -939,7 +940,8 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
     # in a worker process, its share of the cores (capture.worker_threads); alone, onnxruntime's default
     predictors = {m.model: sdk.load(m.model, threads=job.get("threads", 0)) for m in specs if m.kind == "model"}
     info = metrics.metric_info(job["fail_metric"])
-    scn, blockers = load_scene(job["scene"], job["cache_dir"], None, None)
+    # (check_scene read a mesh file before the job and logged its warnings: not said again by each path's worker)
+    scn, blockers = load_scene(job["scene"], job["cache_dir"], None, None, checked=job.get("checked", False))
     w, h = job["size"]
     tile = job["tile_size"]
     step("planning the camera path")

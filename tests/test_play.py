@@ -1380,3 +1380,20 @@ def test_the_report_notes_runs_merged_across_loop_settings(tmp_path: Path) -> No
             "'own displayed frame' and 'full-rate frame (open loop)')") in out.stdout + out.stderr
     agree = _paths_run(tmp_path, "agree", {"slow": ["jnyang", "jnyang@2"]})
     assert "was played with another" not in _play_report(closed, agree).stdout
+
+
+def test_a_mesh_files_warnings_are_said_once_by_a_closed_loop(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``rtp play`` reads a mesh file in its check before the run and again for the path it plays: each of the
+    file's warnings (a texture it cannot read) was said twice, as ``rtp capture``'s were."""
+    import logging
+
+    from rtp.capture.scenes import procedural
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    level = tmp_path / "level.obj"
+    to_trimesh_scene(procedural(2, rooms=(1, 1), texture_size=16)).export(level)
+    (tmp_path / "crate.png").unlink()
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        play(str(level), "full", paths=("slow",), frames=3, size=(64, 48), sweep=False, flip_every=0, plots=False)
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING and "crate.png" in r.getMessage()]
+    assert len(said) == 1, said
