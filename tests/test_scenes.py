@@ -528,6 +528,9 @@ def test_pk3_archives(tmp_path: Path):
         assert pk3.names() == ["textures/only.jpg", "textures/wall.jpg"] and "textures/" not in pk3
         assert pk3.read("TEXTURES/WALL.jpg") == b"first" and pk3.archive_of("textures/wall.jpg") == first
         assert pk3.read("textures/only.jpg") == b"only"
+        # a Windows tool's backslashes, as the index reads an entry's (they were not found)
+        assert "textures\\only.jpg" in pk3 and pk3.read("Textures\\Only.jpg") == b"only"
+        assert pk3.archive_of("textures\\wall.jpg") == first and pk3.names("textures\\o") == ["textures/only.jpg"]
         with pytest.raises(SceneNotFoundError, match="textures/gone.jpg is not in any of"):
             pk3.read("textures/gone.jpg")
     assert all(z.fp is None for z in pk3._zips)  # closed

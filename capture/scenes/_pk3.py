@@ -42,7 +42,7 @@ class Pk3Set:
                 for info in z.infolist():
                     if info.is_dir():
                         continue
-                    self._index.setdefault(info.filename.lower().replace("\\", "/"), (k, info.filename))
+                    self._index.setdefault(_key(info.filename), (k, info.filename))
         except BaseException:  # (the archives opened before the one refused: the caller never gets the set)
             self.close()
             raise
@@ -59,16 +59,16 @@ class Pk3Set:
         self.close()
 
     def __contains__(self, path: str) -> bool:
-        return path.lower() in self._index
+        return _key(path) in self._index
 
     def names(self, prefix: str = "", suffix: str = "") -> list[str]:
         """Lower-cased paths starting with ``prefix`` and ending with ``suffix``."""
-        p, s = prefix.lower(), suffix.lower()
+        p, s = _key(prefix), _key(suffix)
         return sorted(n for n in self._index if n.startswith(p) and n.endswith(s))
 
     def read(self, path: str) -> bytes:
         try:
-            k, real = self._index[path.lower()]
+            k, real = self._index[_key(path)]
         except KeyError:
             raise SceneNotFoundError(f"{path} is not in any of {[str(p) for p in self.paths]}") from None
         try:
@@ -77,7 +77,13 @@ class Pk3Set:
             raise SceneFormatError(f"{real} in {self.paths[k]} is damaged ({err}): replace the archive") from err
 
     def archive_of(self, path: str) -> Path:
-        return self.paths[self._index[path.lower()][0]]
+        return self.paths[self._index[_key(path)][0]]
+
+
+def _key(path: str) -> str:
+    """An archive path as the index holds it: lower case, ``/`` for a Windows tool's ``\\`` (the index turned an
+    entry's backslashes into slashes, but a path asked for with one, as a shader script may write it, was not found)."""
+    return path.lower().replace("\\", "/")
 
 
 # -- shader scripts ------------------------------------------------------------------------------
