@@ -13,7 +13,7 @@ the ones below, each a few lines. This file uses nothing but ``json``, numpy and
 same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``GetInputTypeInfo``,
 ``Run``), so each step reads as what to port. ``--check`` then loads the same model with
 ``rtp.sdk`` and compares the two: the shading-rate codes must be the same on every tile
-(tests/test_examples.py runs it on every shipped model).
+(tests/test_runtime_without_rtp.py compares the two on every shipped model).
 
 1. **Metadata** (docs/metadata.md): one JSON object under the model's ``metadata_props`` key
    ``rtp.metadata``; the fields used here are ``inputs`` (plane names, in the order the network
@@ -87,12 +87,21 @@ def read_metadata(session: ort.InferenceSession) -> dict:
     return json.loads(text)
 
 
+def fixed_size(session: ort.InferenceSession) -> tuple[int, int] | None:
+    """(H, W) of a model with a fixed input size, else None (its height or width free)."""
+    fixed = session.get_inputs()[0].shape[2:]
+    return (fixed[0], fixed[1]) if all(isinstance(d, int) and d > 0 for d in fixed) else None
+
+
 def pad(x: np.ndarray, meta: dict, session: ort.InferenceSession) -> np.ndarray:
     """Step 2: (C, H, W) padded at the bottom and right by repeating the last row and column."""
     _, h, w = x.shape
-    fixed = session.get_inputs()[0].shape[2:]
-    if all(isinstance(d, int) for d in fixed):  # a model with a fixed input size
+    fixed = fixed_size(session)
+    if fixed is not None:  # a model with a fixed input size: a larger frame does not fit
         ph, pw = fixed
+        if h > ph or w > pw:
+            raise ValueError(f"the model has a fixed input of {pw}x{ph}; a {w}x{h} frame does not fit (smaller "
+                             f"frames are padded up to it)")
     else:
         m = meta.get("input_multiple") or meta["tile_size"]
         ph, pw = -(-h // m) * m, -(-w // m) * m
@@ -101,9 +110,10 @@ def pad(x: np.ndarray, meta: dict, session: ort.InferenceSession) -> np.ndarray:
 
 def infer(session: ort.InferenceSession, meta: dict, x: np.ndarray) -> np.ndarray:
     """Step 3: the network's per-tile values, (len(outputs), tiles high, tiles wide) on the padded grid."""
-    feed, first = {}, 0
-    for graph_input in session.get_inputs():
-        planes = graph_input.shape[1]
+    feed, first, graph_inputs = {}, 0, session.get_inputs()
+    for graph_input in graph_inputs:
+        # one input takes every plane (its plane count may be free); several each their fixed count
+        planes = len(meta["inputs"]) if len(graph_inputs) == 1 else graph_input.shape[1]
         feed[graph_input.name] = np.ascontiguousarray(x[None, first:first + planes])
         first += planes
     assert first == len(meta["inputs"]), "the graph's inputs hold a different number of planes than the metadata"
@@ -117,8 +127,8 @@ def inverse_transform(p: np.ndarray, t: dict) -> np.ndarray:
     if t["type"] == "clamped":
         return p * (2.0 * t["mu_y"])
     if t["type"] == "logistic":
-        def sigmoid(v: float) -> float:
-            return 1.0 / (1.0 + math.exp(-v))
+        def sigmoid(v: float) -> float:  # (as tanh: 1 / (1 + exp(-v)) overflows for a steep k, k mu_y past 709)
+            return 0.5 * (1.0 + float(np.tanh(0.5 * v)))  # (the SDK's form, to the bit)
 
         s0, s1 = sigmoid(t["k"] * (0.0 - t["mu_y"])), sigmoid(t["k"] * (1.0 - t["mu_y"]))
         s = np.clip(p * (s1 - s0) + s0, LOGIT_EPS, 1.0 - LOGIT_EPS)
@@ -426,6 +436,10 @@ def main(argv: list[str] | None = None) -> int:
         x = np.random.default_rng(0).random((len(meta["inputs"]), h, w), dtype=np.float32)
         if "seen" in meta["inputs"]:  # a mask: 0 or 1
             x[meta["inputs"].index("seen")] = x[meta["inputs"].index("seen")] > 0.2
+    fixed = fixed_size(session)
+    if fixed is not None and (x.shape[1] > fixed[0] or x.shape[2] > fixed[1]):
+        ap.error(f"{'--frame' if a.frame is not None else '--size'}: the model has a fixed input of {fixed[1]}x"
+                 f"{fixed[0]}, a {x.shape[2]}x{x.shape[1]} frame does not fit (smaller ones are padded up to it)")
     allowed = tuple(r.strip() for r in a.allowed.split(",") if r.strip())
     unknown = [r for r in allowed if r not in RATES]
     if unknown:

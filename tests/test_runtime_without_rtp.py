@@ -7,6 +7,7 @@ from __future__ import annotations
 import importlib.util
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
@@ -87,12 +88,14 @@ def test_the_port_imports_nothing_of_rtp(tmp_path: Path) -> None:
     assert r.returncode == 0 and "the same rate on 100.00% of the tiles" in r.stdout, r.stdout + r.stderr
 
 
+# (a steep logistic, k mu_y past 709, overflowed the port's 1 / (1 + exp(-v)) where the SDK's tanh form does not)
 TRANSFORMS = [{"type": "clamped", "mu_y": 0.12}, {"type": "logistic", "mu_y": 0.3, "k": 10.0},
+              {"type": "logistic", "mu_y": 0.5, "k": 2000.0},
               {"type": "linear", "factor": -0.015, "offset": 1.0}, {"type": "linear", "factor": 0.7, "offset": 0.0}]
 
 
 @pytest.mark.parametrize("outputs", [["1x2", "2x1"], ["1x2", "2x1", "2x4", "4x2"], list(sdk.PREDICTED_RATES), ["2x2"]])
-@pytest.mark.parametrize("transform", TRANSFORMS, ids=lambda t: f"{t['type']}{t.get('factor', '')}")
+@pytest.mark.parametrize("transform", TRANSFORMS, ids=lambda t: f"{t['type']}{t.get('factor', '')}{t.get('k', '')}")
 @pytest.mark.parametrize("metric", ["jnyang", "psnr"])
 def test_the_ports_decode_is_the_sdks_for_every_transform_and_output_set(
     metric: str, transform: dict, outputs: list[str], port: ModuleType,
@@ -217,3 +220,74 @@ def test_the_ports_command_line_refuses_what_it_cannot_run(port: ModuleType, arg
     with pytest.raises(SystemExit) as info:
         port.main([str(sdk.load("jnyang").path), *args])
     assert info.value.code == 2 and words in capsys.readouterr().err
+
+
+def _free_plane_count(path: Path) -> Path:
+    """The model at ``path`` with its one input's plane count made symbolic, as an exporter with every axis
+    dynamic writes it (sdk.load takes it: one input takes every plane)."""
+    import onnx
+
+    model = onnx.load(str(path))
+    dim = model.graph.input[0].type.tensor_type.shape.dim[1]
+    dim.ClearField("dim_value")
+    dim.dim_param = "planes"
+    onnx.save(model, str(path))
+    return path
+
+
+@pytest.mark.parametrize(("case", "overrides", "build", "tiles"), [
+    ("free plane count", {}, {}, (None, 8, 32)),
+    ("fixed size", {}, {"static": (1, 64, 80)}, (None, 8, 32)),
+    ("fixed size of partial tiles", {}, {"static": (1, 40, 56), "ceil_mode": True}, (None, 8)),
+    ("2x2 alone", {"outputs": ["2x2"]}, {}, (None, 8, 32)),
+    ("8-pixel tiles", {"tile_size": 8}, {}, (None, 4, 16, 32)),
+    ("psnr, 2x2 alone", {"metric": "psnr", "outputs": ["2x2"], "default_threshold": 30.0, "weber_l": None,
+                         "transform": {"type": "linear", "factor": -0.015, "offset": 1.0}}, {}, (None, 16)),
+])
+def test_the_port_picks_the_sdks_rates_on_models_none_ships(case: str, overrides: dict, build: dict, tiles: tuple,
+                                                            port: ModuleType, tiny_model: Callable[..., Path]) -> None:
+    """What no shipped model is (a graph input whose plane count is free, a fixed input size, one 2x2 output,
+    8-pixel tiles pooled to 16 and 32), on a frame of partial tiles: the port's rates are the SDK's. The port
+    read a free plane count as a number (a TypeError) where the SDK gives that one input every plane."""
+    import onnxruntime as ort
+
+    from .conftest import base_metadata
+
+    meta = base_metadata(**overrides)
+    path = tiny_model(meta, np.random.default_rng(1).normal(size=(len(meta["outputs"]), 4)).astype(np.float32),
+                      tile=meta["tile_size"], **build)
+    if case == "free plane count":
+        _free_plane_count(path)
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    x = np.random.default_rng(2).random((4, 37, 53), dtype=np.float32)
+    for tile in tiles:
+        p = sdk.load(path, tile_size=tile)
+        values = p.predict(x)
+        for threshold in np.quantile(values, [0.2, 0.5, 0.8]).tolist():
+            theirs = p.shading_rates(x, threshold)
+            ours = port.shading_rates(session, x, threshold, tile)
+            assert ours.shape == theirs.shape, (case, tile)
+            np.testing.assert_array_equal(ours, theirs, err_msg=f"{case} tile {tile} threshold {threshold}")
+
+
+def test_the_port_refuses_a_frame_larger_than_a_fixed_size_model(port: ModuleType, tiny_model: Callable[..., Path],
+                                                                 tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A frame past a fixed-size model's input is refused saying so (the SDK's InputShapeError), not with numpy's
+    "index can't contain negative values" from the padding, nor as a traceback on the command line."""
+    import onnxruntime as ort
+
+    path = tiny_model(static=(1, 32, 48))
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    x = np.zeros((4, 40, 48), np.float32)
+    with pytest.raises(sdk.InputShapeError):
+        sdk.load(path).predict(x)
+    with pytest.raises(ValueError, match="fixed input of 48x32; a 48x40 frame does not fit"):
+        port.shading_rates(session, x, 0.2)
+    assert port.shading_rates(session, x[:, :30, :40], 0.2).shape == (2, 3)  # (smaller: padded up to it)
+    frame = tmp_path / "planes.npy"
+    np.save(frame, x)
+    for args in (["--frame", str(frame)], ["--size", "64x16"]):
+        with pytest.raises(SystemExit) as info:
+            port.main([str(path), *args])
+        assert info.value.code == 2 and "the model has a fixed input of 48x32" in capsys.readouterr().err
