@@ -182,12 +182,26 @@ def as_frame(source: Any) -> Frame:
     seen = None if frame.seen is None else as_real(frame.seen, "seen", np.float32)
     if seen is not None and seen.shape != (h, w):
         raise InputShapeError(f"seen: expected {(h, w)}, got {seen.shape}", tuple(seen.shape), f"({h}, {w})")
+    if not (isinstance(source, Frame) and source.__dict__.get("_checked")):
+        # (an infinite speed made Yang 2019's tile 4x4 and FidelityFX's 1x1, NaN both 1x1; a 0/255 seen mask read
+        # every tile as seen, so Yang2019(unseen="full") shaded none at full rate: all silently)
+        if motion is not None and motion.size and not np.isfinite(motion).all():
+            raise NonFiniteInputError("motion: holds NaN or infinite values; expected finite screen motion in pixels "
+                                      "(0 where there is none)")
+        if seen is not None and seen.size:
+            lo, hi = float(seen.min()), float(seen.max())
+            if not (np.isfinite(lo) and np.isfinite(hi)):
+                raise NonFiniteInputError("seen: holds NaN or infinite values; expected a mask in [0, 1]")
+            if lo < -1e-3 or hi > 1 + 1e-3:
+                raise InputError(f"seen: values in [{lo:.4g}, {hi:.4g}], expected a mask in [0, 1] (1 seen, 0 unseen; "
+                                 "an 8-bit mask: mask / 255)")
     return _checked(Frame(rep[..., :3], motion, seen, terms=frame.terms))
 
 
 def _checked(frame: Frame) -> Frame:
-    """``frame``, marked as one whose reprojected image holds display colours (:func:`as_frame` checked it, or
-    the caller made it of such: ``rtp play``'s closed loop, from each method's own displayed frame)."""
+    """``frame``, marked as one whose reprojected image holds display colours and whose motion and seen mask are
+    finite (the mask in [0, 1]): :func:`as_frame` checked them, or the caller made them so (``rtp play``'s closed
+    loop, from each method's own displayed frame and the renderer's buffers)."""
     object.__setattr__(frame, "_checked", True)
     return frame
 
@@ -270,6 +284,14 @@ def _check_tile(tile: int, allowed: Iterable[int] | None = None) -> int:
     if allowed is not None and int(tile) not in tuple(allowed):
         raise BaselineError(f"tile_size must be one of {tuple(allowed)}, got {tile}")
     return int(tile)
+
+
+def _flag(owner: str, name: str, value: Any) -> bool:
+    """A baseline's on/off parameter as a bool, or a BaselineError: any other value was read by its truth, so
+    ``motion="false"`` (a text from a settings file) switched the motion terms on."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise BaselineError(f"{owner} {name}: expected True or False, got {value!r}")
+    return bool(value)
 
 
 def _real_param(owner: str, name: str, value: Any) -> float:
@@ -424,6 +446,7 @@ class Yang2019:
                 ("unseen_fraction", unseen_fraction, 0 <= unseen_fraction < 1, "in [0, 1)")):
             if not ok:  # (NaN fails every comparison)
                 raise BaselineError(f"Yang 2019's {name}: expected a number {expected}, got {value!r}")
+        motion, allow_4x4 = _flag("Yang 2019's", "motion", motion), _flag("Yang 2019's", "allow_4x4", allow_4x4)
         self.threshold, self.env_luminance, self.norm, self.k = float(threshold), float(env_luminance), norm, float(k)
         self.motion, self.motion_scale, self.motion_reduce = motion, float(motion_scale), motion_reduce
         self.allow_4x4, self.unseen, self.unseen_fraction = allow_4x4, unseen, float(unseen_fraction)
@@ -571,6 +594,7 @@ class FidelityFX:
                                                                                  ("motion_factor", motion_factor)))
         if not (cutoff >= 0 and motion_factor >= 0):
             raise BaselineError(f"cutoff and motion_factor must be >= 0, got {cutoff}, {motion_factor}")
+        additional_rates = _flag("FidelityFX's", "additional_rates", additional_rates)
         self.cutoff, self.motion_factor, self.additional_rates = float(cutoff), float(motion_factor), additional_rates
         if additional_rates:
             self.name = "fidelityfx-additional"

@@ -978,6 +978,43 @@ def test_the_baselines_refuse_frames_they_would_misread() -> None:
                 method.shading_rates(eight_bit / np.float32(255), bad)  # type: ignore[arg-type]
 
 
+def test_the_baselines_refuse_motion_and_seen_masks_they_would_misread() -> None:
+    """An infinite speed made Yang 2019's tile 4x4 and FidelityFX's 1x1 (NaN: both 1x1), and a 0/255 seen
+    mask read every tile as seen (Yang2019(unseen="full") shaded none at full rate): silent, now typed."""
+    img = stripes(32, 48)
+    seen = np.zeros((32, 48), np.float32)
+    seen[:, 16:] = 1.0
+    for bad in (np.inf, np.nan):
+        motion = np.zeros((32, 48, 2), np.float32)
+        motion[3, 5, 0] = bad
+        for method in (Yang2019(16, motion_reduce="max"), FidelityFX(16)):
+            with pytest.raises(sdk.NonFiniteInputError, match="motion"):
+                method.shading_rates(Frame(img, motion))
+            with pytest.raises(sdk.NonFiniteInputError, match="motion"):
+                method.shading_rates({"reprojected": img, "motion": motion})
+        nan_seen = seen.copy()
+        nan_seen[0, 0] = bad
+        with pytest.raises(sdk.NonFiniteInputError, match="seen"):
+            Yang2019(16, unseen="full").shading_rates(Frame(img, None, nan_seen))
+    full = Yang2019(16, unseen="full")
+    with pytest.raises(sdk.InputError, match=r"seen: values in \[0, 255\], expected a mask in \[0, 1\]"):
+        full.shading_rates(Frame(img, None, seen * 255))
+    rates = full.shading_rates(Frame(img, None, seen))  # the same mask in [0, 1]: the unseen column at 1x1
+    assert (rates[:, 0] == C["1x1"]).all() and (rates[:, 1:] != C["1x1"]).all()
+
+
+@pytest.mark.parametrize("make, name", [
+    (lambda v: Yang2019(16, motion=v), "motion"), (lambda v: Yang2019(16, allow_4x4=v), "allow_4x4"),
+    (lambda v: FidelityFX(16, additional_rates=v), "additional_rates")])
+def test_the_baselines_on_off_parameters_take_only_booleans(make: Any, name: str) -> None:
+    """``motion="false"``, ``allow_4x4="no"`` or ``additional_rates="false"`` (texts from a settings file) were
+    read by their truth and switched the option on; now a BaselineError naming the parameter."""
+    for bad in ("false", "no", 0, 1, None):
+        with pytest.raises(BaselineError, match=f"{name}: expected True or False"):
+            make(bad)
+    assert getattr(make(np.bool_(False)), name) is False and getattr(make(True), name) is True
+
+
 def test_the_scoring_helpers_refuse_what_they_would_misread() -> None:
     """Each took mismatched or meaningless input silently (scores(None, None) was n=0, failing_tiles on another
     grid said that no tile fails) or failed with numpy's bare ValueError."""
