@@ -365,6 +365,8 @@ def run_predict(args: argparse.Namespace) -> int:
                                      + ": a sequence takes each frame once, in order (a folder, or its files, not both)",
                                      "frame")
     sequence = len(files) > 1 or any(Path(f).is_dir() for f in args.frames)
+    if args.out:
+        _picture_modules(sequence)
     _warn_of_order(files)
     if args.every is not None and not sequence:
         raise sdk.ParameterError(f"--every {args.every}: prediction reuse carries estimates from frame to frame; give "
@@ -545,6 +547,18 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
         step = -(-picture.shape[1] // width)
         picture = picture[::step, ::step]
     return np.round(np.clip(picture, 0.0, 1.0) * 255.0).astype(np.uint8)  # (a quarter of float32's memory)
+
+
+def _picture_modules(sequence: bool) -> None:
+    """Import what ``--out`` draws and encodes its pictures with: Pillow, and for a sequence's GIF and curves imageio
+    and matplotlib (``rtp[capture]``). On the runtime install (numpy, onnxruntime, pyyaml: an engine's) a run without
+    them predicted every frame, wrote a frame's rates.npy and predictions.npy (beside an earlier run's overlay.png)
+    and then ended in a traceback; it is now refused before any work, in one line naming the extra (rtp.cli's
+    policy for a missing install, exit 2). Without ``--out`` nothing of them is needed."""
+    import importlib
+
+    for name in ("PIL.Image", *(("imageio.v3", "matplotlib") if sequence else ())):
+        importlib.import_module(name)
 
 
 def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.ndarray], values: list[np.ndarray],

@@ -3,8 +3,8 @@ warnings collapsed, progress bars, and the one error policy.
 
 Exit codes (``docs/errors.md``): 0 success; each :class:`~rtp.sdk.RtpError` its class's
 ``exit_code`` (2 bad usage or inputs, 1 the job failed); 130 interrupted; argparse's 2 for usage
-errors it finds itself. An exception outside the rtp tree is a bug: it propagates with its
-traceback (exit 1).
+errors it finds itself; 2 for an optional module that is not installed (:data:`OPTIONAL_MODULES`). An
+exception outside the rtp tree is a bug: it propagates with its traceback (exit 1).
 """
 
 from __future__ import annotations
@@ -346,6 +346,32 @@ def _kept(on_interrupt: Callable[[], Callable[[], str] | None] | None) -> str:
     return f"; {one_line(text)}" if text else ""
 
 
+#: The optional modules rtp's commands import as they run, and the extra of pyproject.toml that installs each: a
+#: command run without one (`rtp predict --out` on the runtime install, without Pillow; `rtp-export` without onnx) says
+#: so in one line and exits 2, a missing install (docs/errors.md), where it was a traceback and 1.
+OPTIONAL_MODULES = {"torch": "rtp[train]", "onnx": "rtp[export]", "moderngl": "rtp[moderngl]", "glcontext": "rtp[moderngl]",
+                    "PIL": "rtp[capture]", "imageio": "rtp[capture]", "matplotlib": "rtp[capture]",
+                    "trimesh": "rtp[capture]", "tqdm": "rtp[capture]", "png": "rtp[capture]",
+                    "flip_evaluator": "rtp[metrics]", "pyrender": "rtp[pyrender]", "OpenGL": "rtp[pyrender]",
+                    "ray": "rtp[ray]"}
+
+
+def _missing_install(prog: str, err: ImportError) -> str | None:
+    """The one-line message for ``err`` where it (or the error it was raised from) is an optional module of
+    :data:`OPTIONAL_MODULES` that is not installed; None for any other import error (rtp's own: a bug, or a module
+    installed but broken, which keeps its traceback)."""
+    cause: BaseException | None = err
+    while cause is not None and not (isinstance(cause, ModuleNotFoundError) and cause.name in OPTIONAL_MODULES):
+        cause = cause.__cause__
+    if cause is None:
+        return None
+    if cause is not err:  # an rtp module's own words around it ("the rtp reference renderer needs moderngl; ...")
+        return str(err)
+    name = str(cause.name)
+    extra = "rtp[export]" if prog == "rtp-export" and name in ("torch", "onnx") else OPTIONAL_MODULES[name]
+    return f"this needs {name}, which is not installed: pip install '{extra}'"
+
+
 #: The errors of a path that is wrong in itself (a usage error, exit 2), not of a job that failed.
 _PATH_ERRNOS = frozenset({errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EEXIST, errno.EACCES, errno.EPERM,
                           errno.EROFS, errno.ENAMETOOLONG})
@@ -451,7 +477,8 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     """``body()`` under the one error policy, without rtp's logging set-up: an rtp error prints one line,
     ``PROG: error: MESSAGE``, and returns its class's exit code (``verbose``: the traceback above it); an
     ``OSError`` naming a path likewise (2 for a wrong path, 1 otherwise); a ``MemoryError`` one line
-    (1); Ctrl-C 130, saying ``PROG: interrupted`` and what of the job is kept where ``on_interrupt``
+    (1); an optional module that is not installed (:data:`OPTIONAL_MODULES`) one line naming its extra (2);
+    Ctrl-C 130, saying ``PROG: interrupted`` and what of the job is kept where ``on_interrupt``
     gives the command's own account (``args.on_interrupt``, set by a resumable command once it starts);
     a closed pipe 0.
     Anything else propagates with its traceback. The benchmark scripts under ``bench/`` run through it."""
@@ -475,6 +502,14 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
         print(f"{prog}: error: out of memory: {one_line(str(err)) or 'an allocation failed'}{_notes(err)}",
               file=sys.stderr)
         return EXIT_FAILED
+    except ImportError as err:
+        missing = _missing_install(prog, err)
+        if missing is None:  # (rtp's own import failing: a bug, with its traceback)
+            raise
+        if verbose:
+            traceback.print_exc()
+        print(f"{prog}: error: {one_line(missing)}", file=sys.stderr)
+        return EXIT_USAGE
     except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

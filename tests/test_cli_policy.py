@@ -379,6 +379,38 @@ def test_a_path_the_system_refuses_is_one_line_and_other_os_errors_are_bugs(
                                            "(rtp: raised while working on sample 'a/b')\n"), prog
 
 
+def test_an_optional_module_not_installed_is_one_line_naming_its_extra(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """A command run without the extra it needs (`rtp-export` without onnx, `rtp predict --out` on the runtime
+    install without Pillow) was a ModuleNotFoundError's traceback and exit 1; it is a missing install: one line
+    naming the extra, exit 2. An rtp module's own words around it are kept; any other module missing (rtp's own, a
+    plugin's) and a module installed but broken (`cannot import name`) are bugs and keep their traceback."""
+    installs = {"rtp info": "rtp[export]", "rtp scenes fetch": "rtp[export]", "rtp-export": "rtp[export]"}
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, ModuleNotFoundError("No module named 'onnx'",
+                                                                                         name="onnx")):
+        assert entry(argv) == 2, prog
+        assert capsys.readouterr().err == (f"{prog}: error: this needs onnx, which is not installed: "
+                                           f"pip install '{installs[prog]}'\n"), prog
+        assert entry([*argv, "--verbose"]) == 2 and capsys.readouterr().err.startswith("Traceback"), prog
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, ModuleNotFoundError("No module named 'torch'",
+                                                                                         name="torch")):
+        assert entry(argv) == 2, prog  # (rtp-export's torch is its extra's; the others' training's)
+        assert capsys.readouterr().err.endswith("pip install 'rtp[export]'\n" if prog == "rtp-export"
+                                                else "pip install 'rtp[train]'\n"), prog
+    try:
+        raise ImportError("the rtp reference renderer needs moderngl; install the extra: pip install 'rtp[moderngl]'") \
+            from ModuleNotFoundError("No module named 'moderngl'", name="moderngl")
+    except ImportError as err:
+        wrapped = err
+    for prog, entry, argv in _entry_points(monkeypatch, tmp_path, wrapped):
+        assert entry(argv) == 2 and capsys.readouterr().err == f"{prog}: error: {wrapped}\n", prog
+    for bug in (ModuleNotFoundError("No module named 'nothing_rtp_lists'", name="nothing_rtp_lists"),
+                ImportError("cannot import name 'nothing' from 'torch'", name="torch")):
+        for _, entry, argv in _entry_points(monkeypatch, tmp_path, bug):
+            with pytest.raises(ImportError, match="nothing"):
+                entry(argv)
+
+
 def test_running_out_of_memory_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     """numpy's MemoryError ("Unable to allocate ...") is the machine's limit, not a bug: one line, exit 1."""

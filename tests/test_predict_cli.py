@@ -237,6 +237,40 @@ def test_a_sequence_gives_each_frames_rates_and_the_changes_between_them(
     assert iio.imread(out / "frames.png").ndim == 3
 
 
+def test_out_without_the_picture_packages_is_refused_before_any_work(
+        frame: Path, sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """On the runtime install (numpy, onnxruntime, pyyaml: what an engine installs, README) `--out` has no Pillow
+    to write overlay.png with: the run predicted, wrote rates.npy and predictions.npy, then ended in a
+    ModuleNotFoundError's traceback (a sequence after predicting every frame, on imageio). It is refused before
+    any work, in one line naming the extra, exit 2, and writes nothing; without --out nothing of them is needed."""
+    import importlib.abc
+    import sys
+
+    class NotInstalled(importlib.abc.MetaPathFinder):  # (an import of the package, or of any module of it, fails on it)
+        def __init__(self, package: str) -> None:
+            self.package = package
+
+        def find_spec(self, name: str, path: object, target: object = None) -> None:
+            if name.partition(".")[0] == self.package:
+                raise ModuleNotFoundError(f"No module named {self.package!r}", name=self.package)
+
+    for missing, target, name in (("PIL", frame, "PIL"), ("PIL", sequence, "PIL"), ("imageio", sequence, "imageio"),
+                                  ("matplotlib", sequence, "matplotlib")):
+        with monkeypatch.context() as m:
+            for module in [k for k in sys.modules if k.partition(".")[0] == missing]:
+                m.delitem(sys.modules, module)
+            m.setattr(sys, "meta_path", [NotInstalled(missing), *sys.meta_path])
+            out = tmp_path / f"out-{missing}-{target.name}"
+            assert main(["predict", str(target), "--out", str(out)]) == 2, missing
+            got = capsys.readouterr()
+            assert got.err == f"rtp predict: error: this needs {name}, which is not installed: pip install " \
+                              "'rtp[capture]'\n", got.err
+            assert got.out == "" and not out.exists(), missing  # (no frame predicted, nothing written)
+            if missing == "PIL":
+                assert main(["predict", str(target)]) == 0 and "% of the shading work" in capsys.readouterr().out
+
+
 def test_a_budget_holds_the_work_saved_and_reports_each_frames_threshold(
         sequence: Path, frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--saving S: each frame's rates are the SDK's for that budget, save at least S, and the threshold each
