@@ -7,7 +7,8 @@ own spawn points), climbing steps of at most ``_STEP_UP`` and stepping down
 ledges of at most ``_DROP`` (higher ones are walls), inside the capture's viewpoint domain
 (:func:`rtp.capture.viewpoints.free_space`: flood-filled free space at least ``clearance`` from any
 geometry), steering away from walls it sees coming, smoothed, resampled at ``fps`` at the profile's
-speed; the view follows the direction of travel with a limited turn rate plus a look-around sway.
+speed; the view follows the direction of travel (the short way round) with a limited turn rate plus a
+look-around sway.
 Two profiles (:data:`PATH_PROFILES`): ``slow`` walks and turns gently, ``fast`` runs and turns
 quickly. :func:`unseen_shares` renders a path and gives each frame's unseen share, the part of the
 frame the previous one did not show.
@@ -141,7 +142,8 @@ def camera_path(
     """A ``frames``-long camera path through ``scene`` at ``fps`` (module docstring).
 
     Deterministic: the same scene, profile, seed and arguments give the same cameras. Every camera
-    is inside the flood-filled free space, at least ``clearance`` from the geometry (exact test),
+    is inside the flood-filled free space, at least ``clearance`` from the geometry before smoothing and 0.9
+    ``clearance`` after it (exact test),
     ``eye_height`` (default: the spawn points' own, :attr:`CameraPath.eye_height`) over a floor
     before smoothing, with nothing drawn between it and that floor, and the segment between
     consecutive cameras crosses no triangle, and each frame moves on at the profile's speed (the walk
@@ -293,7 +295,11 @@ def camera_path(
     yaw[0] = target[0]
     limit = prof.turn_rate / fps
     for i in range(1, frames):
-        yaw[i] = yaw[i - 1] + float(np.clip(target[i] - yaw[i - 1], -limit, limit))
+        turn = target[i] - yaw[i - 1]
+        if abs(turn) > 180.0:  # (the unwrapped target a half turn or more ahead, after a loop or a U-turn the view
+            # lagged: the short way round; it turned the long way, a whole extra turn past the direction of travel)
+            turn = (turn + 180.0) % 360.0 - 180.0
+        yaw[i] = yaw[i - 1] + float(np.clip(turn, -limit, limit))
     phase = float(rng.uniform(0, 2 * math.pi))
     sway = prof.sway * np.sin(2 * math.pi * t / (prof.speed * prof.sway_period) + phase)
     pitch = 0.3 * prof.sway * np.sin(2 * math.pi * t / (prof.speed * prof.sway_period * 1.7) + 2 * phase)

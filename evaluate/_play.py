@@ -882,7 +882,7 @@ def _warn_of_another_report(outdir: Path, settings: dict[str, Any]) -> None:
         return
     try:
         before = json.loads(old.read_text(encoding="utf-8"))["settings"]
-        differ = [k for k in ("scene", "methods", "paths", "frames", "size", "tile_size", "fail_metric", "fail_threshold",
+        differ = [k for k in ("scene", "methods", "paths", "frames", "fps", "size", "tile_size", "fail_metric", "fail_threshold",
                               "seed", "models", "dynamic_resolution")
                   if before.get(k) != json.loads(json.dumps(settings.get(k), default=str))]
     except (OSError, ValueError, KeyError, TypeError):

@@ -212,3 +212,27 @@ def test_unseen_shares_names_a_bad_path_or_size(scene) -> None:  # noqa: ANN001
         unseen_shares("path", sc, (64, 48))  # type: ignore[arg-type]
     with pytest.raises(ViewpointError, match=r"size: expected \(width, height\) in pixels, got \(64,\)"):
         unseen_shares(camera_path(sc, 2, blockers=blockers), sc, (64,))  # type: ignore[arg-type]
+
+
+def test_the_view_turns_the_short_way_to_the_direction_of_travel() -> None:
+    """The view turns after the direction of the path 1 m ahead, the short way round. It followed that
+    direction unwrapped: where the path looped or turned back faster than the view could turn (the fast path
+    of procedural:0, seed 0, 300 frames), the view lagged more than a half turn and then turned the long way,
+    a whole extra turn on past the direction of travel (frames 108-258 facing away from it). Now it turns at
+    the turn rate towards that direction, never away from it."""
+    from rtp.capture.paths import PathProfile
+
+    sc, blockers = load_scene("procedural:0", None, None, None)
+    fast = PATH_PROFILES["fast"]
+    still = PathProfile("fast", fast.speed, fast.turn_rate, fast.wander, sway=0.0, sway_period=fast.sway_period)
+    path = camera_path(sc, 300, still, seed=0, blockers=blockers)  # (the fast path without its sway)
+    pos = np.array([c.position for c in path.cameras])[:, [0, 2]]
+    yaw = np.array([c.yaw for c in path.cameras])
+    ahead = round(path.fps / fast.speed)  # the camera 1 m further along the path
+    look = pos[ahead:] - pos[:-ahead]
+    aim = np.degrees(np.arctan2(-look[:, 0], -look[:, 1]))
+    off = (aim[1:] - yaw[:len(aim) - 1] + 180) % 360 - 180  # where the view should turn, from the frame before
+    turn = (np.diff(yaw)[:len(off)] + 180) % 360 - 180  # where it turned
+    clear = (np.abs(off) > 20) & (np.abs(off) < 160)  # (not the direction's own noise, nor a reversal)
+    assert clear.sum() > 10 and np.all(np.sign(turn[clear]) == np.sign(off[clear]))
+    assert np.all(np.abs(turn) <= fast.turn_rate / path.fps + 1e-6)

@@ -890,6 +890,29 @@ def test_a_play_into_another_runs_folder_says_it_replaces_that_report(tmp_path: 
     assert json.loads((tmp_path / "play.json").read_text())["settings"]["frames"] == 4
 
 
+
+def test_a_play_at_another_frame_rate_says_it_replaces_that_report(tmp_path: Path,
+                                                                    caplog: pytest.LogCaptureFixture) -> None:
+    """The frame rate makes the camera path (its cameras speed / fps apart, its view turning turn_rate / fps a frame)
+    as the seed and the frame count do: a run at --fps 30 into the folder of one at 60 replaced its report at the
+    end without the warning that names what differs."""
+    import logging
+
+    from rtp.evaluate._play import _warn_of_another_report
+
+    settings = {"scene": "procedural:0", "methods": ["jnyang"], "paths": ["fast"], "frames": 3, "fps": 60.0,
+                "seed": 0, "size": [W, H], "tile_size": 16, "fail_metric": "jnyang", "fail_threshold": 0.25,
+                "models": {}, "dynamic_resolution": None}
+    (tmp_path / "play.json").write_text(json.dumps({"settings": settings}))
+    with caplog.at_level(logging.WARNING, logger="rtp.evaluate"):
+        _warn_of_another_report(tmp_path, settings)
+        _warn_of_another_report(tmp_path, {**settings, "fps": 60})  # (the same rate, an int)
+        assert "another run" not in caplog.text
+        _warn_of_another_report(tmp_path, {**settings, "fps": 30.0})
+    (warning,) = [r.getMessage() for r in caplog.records if "another run" in r.getMessage()]
+    assert warning.startswith(f"{tmp_path} holds the report of another run (fps differ)")
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int
