@@ -328,19 +328,46 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
             missing)
 
 
-def context_tiles(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
+def crop_alignment(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
+    """The tiles a crop's first row and column must be a multiple of for the network to see it as the
+    whole frame does: 1 for a network whose pooling ends at its tile (any tile-aligned crop), 2 for one
+    that pools the tile grid once more (rtp's fast network with a coarse context, ``coarse``: its 2x2
+    cells of tiles start at the frame's first tile, and a crop that starts at an odd tile pairs other
+    tiles, so none of its estimates is the whole frame's however wide its margin). Measured on a random
+    frame, as :func:`context_tiles` measures the reach: the smallest shift of 1, 2, 4 or 8 tiles whose
+    crop gives the whole frame's estimates ``limit`` tiles past its edge; 1 where none does (a reach
+    past ``limit``)."""
+    t = predictor.tile_size
+    n = limit + 9
+    x = np.random.default_rng(1).random((len(predictor.metadata.inputs), n * t, n * t), dtype=np.float32)
+    whole = predictor.predict(x)
+    for a in (1, 2, 4, 8):
+        part = predictor.predict(np.ascontiguousarray(x[:, a * t:, a * t:]))
+        if np.allclose(part[:, limit:, limit:], whole[:, a + limit:, a + limit:], rtol=1e-5, atol=1e-6):
+            return a
+    return 1
+
+
+def context_tiles(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN, align: int = 1) -> int:
     """The tiles of context a crop needs around a tile for the network's estimate there to be the
     whole frame's: the model's reach (a deeper network reaches further), measured once on a random
-    frame of ``2 * limit + 1`` tiles square by cropping it ever wider around its middle tile (a few
-    small predictions). ``limit`` if even that many tiles do not give the whole frame's estimate."""
+    frame of ``2 * limit + 2 * align - 1`` tiles square by cropping it ever wider around a tile near
+    its middle (a few small predictions). ``align`` (:func:`crop_alignment`) > 1: each crop starts at
+    a multiple of ``align`` tiles, at least the margin before the tile (as :class:`PredictionReuse`
+    places its crops), for the tile at each position within such a cell. ``limit`` if even that many
+    tiles do not give the whole frame's estimate."""
     t = predictor.tile_size
-    n = 2 * limit + 1
+    n = 2 * limit + 2 * align - 1
     x = np.random.default_rng(0).random((len(predictor.metadata.inputs), n * t, n * t), dtype=np.float32)
-    whole = predictor.predict(x)[:, limit, limit]
+    whole = predictor.predict(x)
     for m in range(limit):
-        part = predictor.predict(np.ascontiguousarray(x[:, (limit - m) * t:(limit + 1 + m) * t,
-                                                        (limit - m) * t:(limit + 1 + m) * t]))
-        if np.allclose(part[:, m, m], whole, rtol=1e-5, atol=1e-6):
+        for p in range(align):  # the tile at each position of a cell of align tiles
+            c = limit + align - 1 + p
+            o = (c - m) // align * align  # (>= align: the crop never starts at the frame's edge; ends before its end)
+            part = predictor.predict(np.ascontiguousarray(x[:, o * t:(c + m + 1) * t, o * t:(c + m + 1) * t]))
+            if not np.allclose(part[:, c - o, c - o], whole[:, c, c], rtol=1e-5, atol=1e-6):
+                break
+        else:
             return m
     return limit
 
@@ -503,7 +530,8 @@ class PredictionReuse:
     ``unseen`` (:data:`REUSE_UNSEEN`) what becomes of tiles more than ``unseen_fraction`` unseen
     since the network ran; ``margin`` the tiles of context around a fresh crop (None: the model's
     own reach, measured by :func:`context_tiles` when ``unseen="fresh"``: two tiles for the
-    three-block shipped models, four for LPIPS's five blocks). After each frame :attr:`work` is the
+    three-block shipped models, four for LPIPS's five blocks; each crop starts at a multiple of
+    :attr:`align` tiles, :func:`crop_alignment`'s measure: 2 for a coarse context). After each frame :attr:`work` is the
     network's work on it as a share of a whole-frame run (1, 0, or the crops' share; not counting the tail that
     ``carry="features"`` runs on a carried frame). One instance
     per view; not thread-safe.
@@ -630,8 +658,10 @@ class PredictionReuse:
         self.reduce = reduce
         self.unseen = unseen
         self.unseen_fraction = share
+        #: the tiles a fresh crop's first row and column are a multiple of (:func:`crop_alignment`)
+        self.align = crop_alignment(net) if unseen == "fresh" else 1
         if margin is None and unseen == "fresh":  # only fresh crops need it: measure the model's reach
-            margin = context_tiles(net)
+            margin = context_tiles(net, align=self.align)
         self.margin: int | None = None if margin is None else int(margin)
         self.history = weight
         self.refresh = limit
@@ -892,7 +922,9 @@ class PredictionReuse:
         work = 0.0
         if self.unseen == "fresh" and missing.any():
             h, w = hw
-            boxes = cover(missing, self.margin or 0)
+            # (each crop starting at a multiple of the alignment: a coarse context's 2x2 cells of tiles as the whole frame's)
+            boxes = [(y0 // self.align * self.align, y1, x0 // self.align * self.align, x1)
+                     for y0, y1, x0, x1 in cover(missing, self.margin or 0)]
             area = sum((min(y1 * tile, h) - y0 * tile) * (min(x1 * tile, w) - x0 * tile) for y0, y1, x0, x1 in boxes)
             if area > FRESH_FULL * h * w:  # cheaper to run the whole frame, and it restarts the interval
                 return self._run(x, hw, (carried, missing))

@@ -303,6 +303,54 @@ def test_the_cover_holds_every_tile_with_its_margin() -> None:
     assert sorted(cover(two, 1)) == [(4, 7, 1, 4), (4, 7, 14, 17)]
 
 
+def _coarse_model(folder: Path) -> sdk.ShadingRatePredictor:
+    """A fast network with a coarse context (``coarse``: 2x2 cells of tiles pooled once more), random weights
+    and BatchNorm statistics, exported."""
+    import torch
+
+    from rtp.export import export_checkpoint
+    from rtp.train import checkpoint
+    from rtp.train.model import FastNet
+
+    from .conftest import base_metadata
+
+    torch.manual_seed(0)
+    net = FastNet(width=4, depth=3, coarse=1, coarse_width=4)
+    with torch.no_grad():  # BatchNorm statistics of the features (random ones leave most ReLUs dead)
+        for m in net.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.momentum = None
+        net.train()(torch.rand(2, 4, 128, 128))
+    return sdk.load(export_checkpoint(checkpoint.save(folder / "coarse.pt", net.eval(), base_metadata()),
+                                      folder / "coarse.onnx"))
+
+
+def test_fresh_crops_of_a_coarse_context_start_where_its_cells_do(tmp_path: Path) -> None:
+    """A coarse context pairs the tiles of the whole frame from its first: a crop that started at an odd tile
+    paired others, and its estimates were not the whole frame's whatever the margin. The crops start at even
+    tiles, the reach is measured so, and the fresh tiles get the whole frame's estimates at every position."""
+    pred = _coarse_model(tmp_path)
+    reuse = sdk.PredictionReuse(pred, 4, unseen="fresh")
+    assert reuse.align == 2 and sdk.PredictionReuse(sdk.load("jnyang"), unseen="fresh").align == 1
+    m = reuse.margin
+    assert m is not None and 0 < m < 8
+    th, tw = 2 * m + 6, 2 * m + 12
+    h, w = th * TILE, tw * TILE
+    x = np.random.default_rng(2).random((4, h, w), dtype=np.float32)
+    rows, cols = np.indices((h, w))
+    everything = np.ones((h, w), np.float32)
+    for y0 in (m + 1, m + 2):  # a 1x2-tile hole at an odd and at an even row, an odd column
+        reuse.reset()
+        reuse.predict(x, seen=everything)
+        seen = everything.copy()
+        seen[y0 * TILE:(y0 + 1) * TILE, (m + 3) * TILE:(m + 5) * TILE] = 0
+        frame = x.copy()
+        frame[1] = seen  # (the "seen" plane)
+        est = reuse.predict(frame, (rows, cols), seen)
+        assert 0.0 < reuse.work < 0.5  # a crop, not the whole frame
+        np.testing.assert_array_equal(est[:, y0, m + 3:m + 5], pred.predict(frame)[:, y0, m + 3:m + 5])
+
+
 class _Scene:
     """Random inputs of one frame for the shipped JNYang model and what the network says on them."""
 
