@@ -53,15 +53,18 @@ def _text_mask(text: str) -> np.ndarray:
 def _draw_legend(out: np.ndarray, alpha: float) -> None:
     """Draw the rate legend into the bottom-left corner of ``out`` ((H, W, 3) float in [0, 1]), in place:
     a dark box with one row per class, its swatch (tinted as the tiles are) and its rates. The legend
-    scales with the image (one font pixel per 270 image rows) and is left out where it does not fit."""
+    scales with the image (one font pixel per 270 image rows, fewer where the image is too narrow for that
+    scale: a 540x100 frame had no key at all) and is left out where it does not fit at one font pixel."""
     h, w = out.shape[:2]
-    s = max(1, h // 270)
     masks = [_text_mask(label) for _, label in LEGEND_ROWS]
-    pad, row_h, swatch = 2 * s, 8 * s, 5 * s
-    box_w = pad + swatch + 2 * s + max(m.shape[1] for m in masks) * s + pad
-    box_h = pad + row_h * len(LEGEND_ROWS) - 3 * s + pad
-    if box_w > w or box_h > h:
+    # the box at one font pixel (54 x 33); every part of it scales with s
+    unit_w = 2 + 5 + 2 + max(m.shape[1] for m in masks) + 2
+    unit_h = 2 + 8 * len(LEGEND_ROWS) - 3 + 2
+    if unit_w > w or unit_h > h:
         return
+    s = max(1, min(h // 270, w // unit_w))
+    pad, row_h, swatch = 2 * s, 8 * s, 5 * s
+    box_w, box_h = unit_w * s, unit_h * s
     y0, x0 = h - box_h, 0
     out[y0:, :box_w] *= 0.25
     grey = np.array([0.5, 0.5, 0.5], np.float32)

@@ -18,6 +18,7 @@ import difflib
 import logging
 import os
 import re
+import stat
 import tempfile
 import zipfile
 from collections.abc import Callable, Iterable, Iterator
@@ -36,17 +37,41 @@ log = logging.getLogger("rtp.sdk.files")
 LOCK_NAME = ".rtp-writer.lock"
 
 
-def _default_mode() -> int:
-    # mkstemp creates files readable by their owner only; give the result the permissions an
-    # ordinary open() would (0o666 minus the umask), so exported models stay shareable.
+def _umask() -> int:
+    """The process's umask, read where the system shows it (Linux's ``/proc/self/status``): setting it to 0 and back
+    to read it, the fallback, leaves a moment in which a file another thread creates is writable by everyone."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
     mask = os.umask(0)
     os.umask(mask)
-    return 0o666 & ~mask
+    return mask
+
+
+def _default_mode(target: Path | None = None) -> int:
+    # mkstemp creates files readable by their owner only; give the result the permissions an
+    # ordinary open() would: an existing file's own (a write through open() keeps them: a model made
+    # private with chmod 600 came back 0o644, readable by everyone, once written again), else 0o666
+    # minus the umask, so exported models stay shareable.
+    if target is not None:
+        try:
+            st = os.stat(target)
+        except (OSError, ValueError):
+            pass
+        else:
+            if stat.S_ISREG(st.st_mode):
+                return stat.S_IMODE(st.st_mode) & 0o777
+    return 0o666 & ~_umask()
 
 
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success it is fsynced and renamed over ``path``.
+    """Yield a temporary path beside ``path``; on success it is fsynced and renamed over ``path``, with the
+    permissions ``open(path, "w")`` would leave: those of the file it replaces, else ``0o666`` less the umask.
 
     If the body raises, the temporary file is removed and ``path`` keeps its previous content, so a
     reader never sees a half-written file. A system error that names no file (a full disk, a quota,
@@ -67,7 +92,7 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         yield tmp_path
         with open(tmp_path, "rb+") as f:
             os.fsync(f.fileno())
-        os.chmod(tmp_path, _default_mode())
+        os.chmod(tmp_path, _default_mode(target))
         os.replace(tmp_path, target)
     except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
@@ -232,15 +257,19 @@ def _natural(name: str) -> list[Any]:
     return [int(t) if i % 2 else t for i, t in enumerate(re.split(r"(\d+)", name))]
 
 
-def frame_files(paths: Iterable[str | os.PathLike[str]], *, example: str = "rtp predict FOLDER --write-example "
-                "--frames 8") -> list[str]:
+def frame_files(paths: Iterable[str | os.PathLike[str]] | str | os.PathLike[str], *,
+                example: str = "rtp predict FOLDER --write-example --frames 8") -> list[str]:
     """The frame files ``paths`` name: each an ``.npz``, or a folder whose ``*.npz`` are taken in the natural
-    order of their names (``frame_9`` before ``frame_10``). A folder without one is a :class:`ParameterError`
-    whose hint is ``example`` (a command that writes frames)."""
+    order of their names (``frame_9`` before ``frame_10``; names of the same numbers, ``frame_01`` and ``frame_1``,
+    in the order of their characters). One path (a ``str`` or ``os.PathLike``) is taken as a list of one. A folder
+    without one is a :class:`ParameterError` whose hint is ``example`` (a command that writes frames)."""
+    if isinstance(paths, (str, os.PathLike)):  # (not its letters: "frames" was read as the paths 'f', 'r', ...)
+        paths = [paths]
     files: list[str] = []
     for path in paths:
         if Path(path).is_dir():
-            found = sorted(Path(path).glob("*.npz"), key=lambda f: _natural(f.name))
+            # (the name breaks a tie of the natural order: else the file system's listing order decided it)
+            found = sorted(Path(path).glob("*.npz"), key=lambda f: (_natural(f.name), f.name))
             if not found:
                 raise ParameterError(f"{os.fspath(path)!r}: a folder with no .npz frame in it (`{example}` writes "
                                      f"a sequence of the reference renderer)", "frame")

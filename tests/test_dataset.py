@@ -796,6 +796,45 @@ def test_atomic_files_get_ordinary_permissions(tmp_path: Path) -> None:
     assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o666 & ~mask
 
 
+def test_atomic_output_keeps_the_permissions_of_the_file_it_replaces(tmp_path: Path) -> None:
+    """An ordinary open() and write keeps a file's permissions; atomic_output gave every rewrite 0o666 less the
+    umask, so a model made private (chmod 600) came back readable by everyone, and a shared one (664) lost its
+    group's write."""
+    from rtp.sdk.files import atomic_output
+
+    for mode in (0o600, 0o664, 0o640):
+        target = tmp_path / f"m{mode:o}.onnx"
+        target.write_bytes(b"old")
+        os.chmod(target, mode)
+        with atomic_output(target) as tmp:
+            tmp.write_bytes(b"new")
+        assert target.read_bytes() == b"new" and target.stat().st_mode & 0o777 == mode, oct(target.stat().st_mode)
+
+
+def test_atomic_output_reads_the_umask_without_changing_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Reading the umask by setting it to 0 and back left a moment in which a file any other thread of the process
+    created was writable by everyone; where the system shows the umask (Linux), it is read, not set."""
+    from rtp.sdk.files import atomic_output
+
+    try:
+        shown = any(line.startswith("Umask:") for line in Path("/proc/self/status").read_text().splitlines())
+    except OSError:
+        shown = False
+    if not shown:
+        pytest.skip("the system does not show the umask in /proc/self/status")
+    mask = os.umask(0o022)
+    try:
+        calls: list[int] = []
+        real = os.umask
+        monkeypatch.setattr(os, "umask", lambda m: calls.append(m) or real(m))
+        with atomic_output(tmp_path / "f.bin") as tmp:
+            tmp.write_bytes(b"x")
+        monkeypatch.undo()
+        assert calls == [] and (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o644
+    finally:
+        os.umask(mask)
+
+
 def test_a_writer_lock_refuses_a_second_holder_names_the_first_and_is_freed_with_it(tmp_path: Path) -> None:
     import subprocess
     import sys

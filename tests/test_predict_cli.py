@@ -362,6 +362,23 @@ def test_a_folders_frames_in_the_natural_order_of_their_names(tmp_path: Path) ->
                                                                     "frame_10.npz"]
 
 
+def test_sdk_frame_files_takes_one_path_and_breaks_ties_by_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                ) -> None:
+    """sdk.files.frame_files("frames") read the string's letters as paths ('/' a folder with no .npz: a wrong
+    error), a Path was a TypeError; and frame_01 and frame_1, equal in the natural order, came in the order the
+    file system listed them."""
+    from rtp.sdk.files import frame_files
+
+    for name in ("frame_1.npz", "frame_01.npz", "frame_2.npz"):
+        (tmp_path / name).write_bytes(b"")
+    want = [str(tmp_path / n) for n in ("frame_01.npz", "frame_1.npz", "frame_2.npz")]
+    assert frame_files(str(tmp_path)) == frame_files(tmp_path) == frame_files([tmp_path]) == want
+    real = Path.glob
+    for order in (sorted, lambda names: sorted(names, reverse=True)):  # whatever order the folder lists them in
+        monkeypatch.setattr(Path, "glob", lambda self, pattern, order=order: iter(order(real(self, pattern))))
+        assert frame_files([tmp_path]) == want
+
+
 def test_files_out_of_order_or_a_missing_frame_are_named(sequence: Path, tmp_path: Path,
                                                          caplog: pytest.LogCaptureFixture) -> None:
     """Files given as a shell's * sorts them (frame_10 before frame_2), and a folder with a frame missing from its

@@ -188,6 +188,15 @@ def test_overlay_legend_is_left_out_exactly_where_the_docstring_says() -> None:
         rates = np.zeros((-(-h // 16), -(-w // 16)), np.uint8)
         keyed = sdk.draw_rate_overlay(img, rates, 16, grid=False, legend=True)
         assert (keyed != img).any() == drawn, (h, w)
+    # a tall image as narrow as that gets the key too, at a scale that fits: from 540 rows on, the key was drawn two
+    # font pixels a pixel (108 wide) or not at all, so a 540x100 or 1080x60 frame had none
+    for h, w in ((540, 100), (1080, min_w), (1080, 120)):
+        img = np.full((h, w, 3), 0.5, np.float32)
+        rates = np.zeros((-(-h // 16), -(-w // 16)), np.uint8)
+        keyed = sdk.draw_rate_overlay(img, rates, 16, grid=False, legend=True)
+        changed = np.argwhere((keyed != img).any(axis=2))
+        assert len(changed), (h, w)
+        assert changed[:, 1].max() < w and changed[:, 0].min() >= h - min_h * (w // min_w), (h, w)
     # an RGBA image is taken (its alpha kept), and the shape error says so
     rgba = np.full((40, 60, 4), 0.25, np.float32)
     np.testing.assert_array_equal(sdk.draw_rate_overlay(rgba, np.zeros((3, 4), np.uint8), 16)[..., 3], rgba[..., 3])
