@@ -111,3 +111,80 @@ def test_pixel_differences_turn_and_stay_on_the_first_pixel_of_their_pair() -> N
             assert not xa[2][-1].any()
     with pytest.raises(ValueError, match="reprojected.y.dy"):
         augment_sample(x[:2], y, ins[:2], OUTPUTS, 4)
+
+
+def _gbuffers(symmetry: int, n: int = 64) -> dict[str, np.ndarray]:
+    """One frame's G-buffers (a camera at the world's origin, a square frame, a symmetric frustum), moved as an image by
+    ``SYMMETRIES[symmetry]``: the frame of the mirrored (transposed) world, with the previous camera mirrored too. A
+    flip of the columns mirrors view x (x -> -x), of the rows view y; a transpose (the new right the old down, the new
+    down the old right; view y points up) maps (x, y) to (-y, -x). The normal turns with the world."""
+    rng = np.random.default_rng(6)
+    yy, xx = np.mgrid[0:n, 0:n] / n
+    depth = (3 + 1.5 * xx + 0.7 * yy + 0.3 * np.sin(7 * xx * yy)).astype(np.float32)
+    depth[20:40, 10:30] -= 1.0  # a step: depth edges
+    depth[:5, 50:] = 0.0  # background
+    normal = rng.normal(size=(n, n, 3))
+    normal = (normal / np.linalg.norm(normal, axis=-1, keepdims=True)).astype(np.float32)
+    albedo = rng.random((n, n, 3), dtype=np.float32)
+    prev_colour = np.clip(0.5 * rng.random((n, n, 3)) + 0.5 * xx[..., None], 0.0, 1.0).astype(np.float32)
+    roughness = rng.random((n, n), dtype=np.float32)
+    c, s = np.cos(0.05), np.sin(0.05)
+    prev_view = np.array([[c, 0, s, 0.1], [0, 1, 0, -0.07], [-s, 0, c, 0.05], [0, 0, 0, 1]])  # turned and moved
+    near, far = 0.1, 100.0
+    projection = np.array([[1.2, 0, 0, 0], [0, 1.2, 0, 0], [0, 0, (far + near) / (near - far), 2 * far * near / (near - far)],
+                           [0, 0, -1, 0]])
+    transpose, flip_rows, flip_cols = SYMMETRIES[symmetry]
+    world = np.diag([-1.0 if flip_cols else 1.0, -1.0 if flip_rows else 1.0, 1.0, 1.0])
+    if transpose:  # applied first, as augment_sample does
+        world = world @ np.array([[0, -1.0, 0, 0], [-1.0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+
+    def image(a: np.ndarray) -> np.ndarray:
+        a = a.swapaxes(0, 1) if transpose else a
+        a = a[::-1] if flip_rows else a
+        return np.ascontiguousarray(a[:, ::-1] if flip_cols else a)
+
+    turned = (normal @ world[:3, :3].T).astype(np.float32)
+    return {"depth": image(depth), "normal": image(turned), "albedo": image(albedo), "roughness": image(roughness),
+            "prev_colour": image(prev_colour), "prev_depth": image(depth), "view": np.eye(4), "projection": projection,
+            "prev_view_projection": projection @ world @ prev_view @ np.linalg.inv(world)}
+
+
+def test_every_channel_of_a_moved_crop_is_the_channel_of_the_moved_frame() -> None:
+    # The property behind --augment and --mirror: a crop cut from a frame (Frame, crop_batch: the training pipeline's
+    # own code) and moved by each symmetry reads, channel by channel, what sdk.input_planes makes of the G-buffers of
+    # the moved world (normals turned, the previous camera mirrored) at the moved crop's place. Crops at the frame's
+    # corners and inside it; the packed planes under the flips (a transpose refuses them); a .dx (.dy) plane but for
+    # the last column (row) of a crop flipped along it, whose neighbour lies outside the crop.
+    from rtp import sdk
+    from rtp.train._frames import Frame, crop_batch
+
+    n = 64
+    plain = ("reprojected.r", "reprojected.y", "seen", "albedo.y", "normal.x", "normal.y", "normal.z", "depth",
+             "depth.edge", "motion.x", "motion.y", "reprojected.y.dx", "reprojected.y.dy", "roughness")
+    packed = ("reprojected.y.blocks", "albedo.y.blocks", "reprojected.y.tiles", "albedo.y.tiles")
+    six = ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
+    frame = sdk.input_planes(plain + packed, tolerance=0.3, **_gbuffers(0, n))
+    assert 0.2 < frame[2].mean() < 0.95 and np.abs(frame[9]).max() > 1  # (seen and unseen pixels, motion)
+    for sym, (transpose, flip_rows, flip_cols) in enumerate(SYMMETRIES):
+        ins = plain if transpose else plain + packed
+        moved = Frame(sdk.input_planes(ins, tolerance=0.3, **_gbuffers(sym, n)), ins)
+        source = Frame(frame[: len(ins)], ins)
+        for oy, ox, side in ((0, 0, n), (16, 16, 32), (0, 32, 32), (32, 16, 32)):
+            x = crop_batch([source], [oy], [ox], side)[0]
+            tiles = side // 16
+            y = np.arange(6 * tiles * tiles, dtype=np.float32).reshape(6, tiles, tiles)
+            xa, ya = augment_sample(x, y, ins, six, sym)
+            my, mx = (ox, oy) if transpose else (oy, ox)  # where the crop lies in the moved frame
+            my, mx = (n - my - side if flip_rows else my), (n - mx - side if flip_cols else mx)
+            want = moved.crop(my, mx, side).astype(np.float32)
+            for i, name in enumerate(ins):
+                got, exp = xa[i].astype(np.float32), want[i]
+                if name.endswith(".dx") and flip_cols:
+                    got, exp = got[:, :-1], exp[:, :-1]
+                if name.endswith(".dy") and flip_rows:
+                    got, exp = got[:-1], exp[:-1]
+                assert np.allclose(got, exp, atol=2e-3), (SYMMETRIES[sym], (oy, ox, side), name)
+            # the targets: each tile's values moved with it, 1x2 <-> 2x1 and 2x4 <-> 4x2 swapped by a transpose
+            t = y.swapaxes(1, 2)[[1, 0, 2, 4, 3, 5]] if transpose else y
+            t = t[:, ::-1] if flip_rows else t
+            assert np.array_equal(ya, t[:, :, ::-1] if flip_cols else t), SYMMETRIES[sym]

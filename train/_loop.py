@@ -735,7 +735,8 @@ def check_config(cfg: TrainConfig) -> TrainConfig:
     packed = [c for c in cfg.inputs if c.endswith((".blocks", ".tiles"))]
     if cfg.augment and packed:
         raise sdk.ParameterError(f"augment: {', '.join(packed)} pack one value per pixel of each cell or tile; a "
-                                 "flipped or transposed crop would read the wrong rates", "augment")
+                                 "transposed crop would put each value on another rate's pixel (a flip keeps them: "
+                                 "mirror takes them)", "augment")
     coarse_cells = [c for c in packed if packed_cell(c) > cfg.tile]
     if cfg.mirror and coarse_cells:  # (crops start on the tile grid: one between two cells mirrored them garbled)
         raise sdk.ParameterError(f"mirror: {', '.join(coarse_cells)} mirror by whole {packed_cell(coarse_cells[0])}-"
