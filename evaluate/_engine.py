@@ -8,6 +8,8 @@ import numpy as np
 
 from rtp import sdk
 
+from ._baselines import _tile_mean
+
 __all__ = ["ENGINE_IMAGES", "engine_rates", "foveation_rates", "motion_rates"]
 
 #: The engine images :func:`engine_rates` makes.
@@ -38,8 +40,16 @@ def motion_rates(motion_x: np.ndarray, motion_y: np.ndarray, tile: int) -> np.nd
 
     def size(m: np.ndarray) -> np.ndarray:
         h, w = m.shape
-        pad = np.pad(np.abs(m), ((0, th * tile - h), (0, tw * tile - w)), mode="edge")
+        a = np.abs(m)
+        pad = np.pad(a, ((0, th * tile - h), (0, tw * tile - w)), mode="edge")
         mean = pad.reshape(th, tile, tw, tile).mean(axis=(1, 3))
+        if h % tile or w % tile:  # a partial edge tile: the mean of its own pixels (the edge copies weighed
+            # its last row or column up to tile times over)
+            real = _tile_mean(a, tile)
+            if h % tile:
+                mean[-1, :] = real[-1, :]
+            if w % tile:
+                mean[:, -1] = real[:, -1]
         return np.select([mean >= 8.0, mean >= 2.0], [4, 2], 1)
 
     w, h = size(np.asarray(motion_x)), size(np.asarray(motion_y))

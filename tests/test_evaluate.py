@@ -1036,6 +1036,49 @@ def test_the_scoring_helpers_refuse_what_they_would_misread() -> None:
     assert failing_tiles(codes + C["2x2"], truth + 1.0, 0.5, False).all() and foveation_rates(3, 4).shape == (3, 4)
 
 
+def test_motion_rates_of_a_partial_edge_tile_are_of_its_own_pixels() -> None:
+    """A partial edge tile's mean motion was of the frame padded by edge copies: 18 rows on 16-pixel tiles
+    averaged (r16 + 15 r17) / 16 for the last tile row, not (r16 + r17) / 2, and chose another rate."""
+    from rtp.evaluate import motion_rates
+
+    mx = np.zeros((18, 20), np.float32)
+    mx[16, :] = 4.0  # the last tile row's two real rows: a mean of 2 pixels a frame along x -> 2 wide
+    # the last column of tiles (4 real columns): 16 and 0 on alternate rows, a mean of 8 -> 4 wide, made 2 beside 1 tall
+    mx[:, 16:] = np.where(np.arange(18)[:, None] % 2 == 0, 16.0, 0.0)
+    codes = motion_rates(mx, np.zeros_like(mx), 16)
+    assert codes.shape == (2, 2)
+    assert codes[1, 0] == C["2x1"], codes  # (edge copies: (4 + 15 x 0) / 16 = 0.25, full rate)
+    assert codes[0, 1] == C["2x1"] and codes[1, 1] == C["2x1"], codes  # 4 wide beside 1 tall becomes 2
+    assert codes[0, 0] == C["1x1"]
+    # whole tiles as before
+    whole = np.zeros((32, 32), np.float32)
+    whole[:16, :16] = 2.0
+    assert motion_rates(whole, whole * 0, 16).tolist() == [[C["2x1"], C["1x1"]], [C["1x1"], C["1x1"]]]
+
+
+def test_failing_tiles_and_tile_unseen_share_refuse_what_they_misread() -> None:
+    """failing_tiles took any threshold and direction: at NaN every reduced rate failed, and higher_is_better="False"
+    (a true string) judged an error metric's tiles as PSNR's, silently; tile_unseen_share of a (1, H, W) plane was
+    numpy's "too many values to unpack"."""
+    from rtp.evaluate import failing_tiles
+
+    codes, truth = np.full((1, 2), C["2x2"], np.uint8), np.full((6, 1, 2), 0.1)
+    truth[:, 0, 1] = 40.0
+    for threshold, hib, words in ((float("nan"), False, "threshold: expected a finite number"),
+                                  (35.0, "False", "higher_is_better: expected True or False"),
+                                  (35.0, np.float64(0.0), "higher_is_better: expected True or False"),
+                                  ("0.2", False, "threshold: expected a number"),
+                                  (-1.0, False, "threshold: expected a finite number in \\[0")):
+        with pytest.raises(sdk.ParameterError, match=words):
+            failing_tiles(codes, truth, threshold, hib)  # type: ignore[arg-type]
+    assert failing_tiles(codes, truth, 35.0, np.bool_(True)).tolist() == [[True, False]]
+    assert failing_tiles(codes, truth, 0.25, False).tolist() == [[False, True]]
+    for seen in (np.ones((1, 32, 32)), np.ones((32, 32, 1)), np.ones(5)):
+        with pytest.raises(sdk.InputShapeError, match=r"seen: expected an \(H, W\) mask"):
+            tile_unseen_share(seen, 16)
+    assert tile_unseen_share(np.array([[True, False], [False, False]]), 16).tolist() == [[0.75]]
+
+
 def test_matched_quality_takes_the_most_saved_among_the_points_failing_at_most_the_target(
         dataset: Path, model: Path) -> None:
     """The table took, among the points failing exactly the target's share, the first in text order: the one
@@ -1074,6 +1117,28 @@ def test_matched_quality_takes_the_most_saved_among_the_points_failing_at_most_t
     for method, m in matched.items():
         pts = [(r["fail_share"], r["work_saved"]) for r in rep.sweep if r["method"] == method]
         assert m["work_saved"] == pytest.approx(saved_at(pts, m["fail_share"])), method
+
+
+def test_a_sweep_reads_the_best_of_its_points_that_fail_equally_often() -> None:
+    """saved_at and the matched table ran the line from a point towards the next one in (fail, saved) order: of two
+    points that fail equally often, the one that saves less, as if the other were not there ((1%, 50%), (3%, 40%),
+    (3%, 80%) read 50% at 2%, not 65%). And a NaN point was placed wherever sorting left it: the same points read 90%,
+    65% or None by the order given; it is refused."""
+    from rtp.evaluate import saved_at
+    from rtp.evaluate._evaluate import _matched
+
+    pts = [(0.01, 0.5), (0.03, 0.4), (0.03, 0.8)]
+    sweep = [{"method": "m", "parameter": f"t {p}", "fail_share": f, "work_saved": w} for p, (f, w) in zip((1, 2, 4), pts)]
+    for order in (1, -1):
+        assert saved_at(pts[::order], 0.02) == pytest.approx(0.65)
+        (row,) = _matched(sweep[::order], 0.02, {"m": 1.0})
+        assert row["work_saved"] == pytest.approx(0.65) and row["parameter"] == "between t 1 and t 4"
+    assert saved_at(pts, 0.03) == pytest.approx(0.8) and saved_at(pts, 0.01) == pytest.approx(0.5)
+    nan = float("nan")
+    for points, fail in (([(0.01, 0.5), (nan, 0.9), (0.03, 0.8)], 0.02), ([(0.03, 0.8), (nan, 0.9), (0.01, 0.5)], 0.02),
+                         ([(0.01, nan), (0.03, 0.8)], 0.02), ([(0.01, 0.5)], nan)):
+        with pytest.raises(sdk.ParameterError, match="not NaN"):
+            saved_at(points, fail)
 
 
 def test_a_threshold_at_either_end_of_its_range_is_evaluated(dataset: Path, model: Path,
