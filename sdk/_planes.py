@@ -25,6 +25,7 @@ from ._reproject import (
     DEFAULT_REPROJECTION_TOLERANCE,
     _affine_row,
     _cameras,
+    _check_depth_projection,
     _inverse,
     _positions,
     _reproject,
@@ -367,7 +368,9 @@ def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = Fa
     against f (z - n) / (z (f - n)); n / z against 1 - n / z for an infinite far plane), so both go through
     OpenGL's NDC depth, 2 w - 1, computed in float64 where 1 - r is exact for a float32 r. A ``projection``
     (named ``name``) with no inverse, or one through which a pixel's depth is no finite float32 view depth,
-    is a :class:`ParameterError`."""
+    is a :class:`ParameterError`, as is one that is neither a perspective nor an orthographic projection in
+    OpenGL's convention (:func:`_check_depth_projection`: a left-handed, reversed-Z or row-vector orthographic one)."""
+    _check_depth_projection(projection, name)
     inv = _inverse(projection, name)
     r = raw.astype(np.float64)
     z = 1.0 - 2.0 * r if reversed_z else r * 2.0 - 1.0
@@ -380,6 +383,19 @@ def _linear_depth(raw: np.ndarray, projection: np.ndarray, reversed_z: bool = Fa
         raise ParameterError(f"{name}: the depth buffer through its inverse gives no finite view depth at "
                              f"{int(bad.sum())} of {bad.size} pixels (its largest entry {np.abs(projection).max():g}): "
                              f"pass the projection the depth buffer was rendered with", name)
+    # Behind the camera: an orthographic projection whose near plane is at or behind the view's origin (glOrtho's
+    # near of -1) sees points of negative view depth, which rtp's depth (>= 0, 0 the background) cannot hold: they
+    # were negative depth values, taken as background. Within rounding of 0 (a near plane at 0), 0.
+    behind = linear < 0.0
+    if behind.any():
+        if float(linear.min()) < -1e-6 * float(np.abs(linear).max()):
+            raise ParameterError(f"{name}: the depth buffer through it gives a negative view depth (a point behind the "
+                                 f"camera, down to {float(linear.min()):.4g}) at {int(behind.sum())} of {behind.size} "
+                                 f"pixels: an orthographic projection whose near plane is behind the camera (glOrtho's "
+                                 f"near -1)? rtp's linear depth is >= 0 (0 on background): move the view's origin back "
+                                 f"along its axis past the nearest point, and the near and far planes forward by as much",
+                                 name)
+        linear = np.maximum(linear, 0.0)
     return linear.astype(np.float32)
 
 

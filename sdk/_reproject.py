@@ -148,6 +148,13 @@ def _orthographic(m: np.ndarray, name: str) -> None:
     """What the reprojection needs of an orthographic projection ``m`` (last row ``0, 0, 0, a``): clip y up, and
     the view depth rising with the clip depth (OpenGL's ``m[2][2] = -2 / (f - n)``), else a typed error."""
     _y_up(m, name)
+    _orthographic_depth(m, name)
+
+
+def _orthographic_depth(m: np.ndarray, name: str) -> None:
+    """An orthographic projection ``m``'s view depth rising with its clip depth (OpenGL's ``m[2][2] = -2 / (f - n)``),
+    finite: what reading a depth through it needs (the reprojection's expected depth, a depth buffer linearised),
+    else a typed error."""
     with np.errstate(over="ignore", invalid="ignore"):  # (extreme entries: an infinite or NaN product, judged below)
         dz = _inverse(m, name)[2, 2] * m[3, 3]  # d(view z) / d(NDC z) along the pixel's line: negative in OpenGL's
     if not np.isfinite(dz):
@@ -157,6 +164,23 @@ def _orthographic(m: np.ndarray, name: str) -> None:
         raise ParameterError(f"{name}: an orthographic projection whose clip depth does not rise away from the camera "
                              f"(m[2][2] = {m[2, 2]:g}, OpenGL's is -2 / (f - n)): a left-handed or reversed-Z one? rtp "
                              f"takes the OpenGL projection of the same near and far planes ({_CONVERSIONS})", name)
+
+
+def _check_depth_projection(m: np.ndarray, name: str) -> None:
+    """What linearising a hardware depth buffer (``depth_kind`` ``window`` or ``reversed``) needs of the projection
+    ``m`` (a float64 4x4, through :func:`check_projection`): a perspective's (checked there), or an orthographic
+    camera's whose clip depth rises away from the camera, as OpenGL's; else a typed error. Through a left-handed or
+    reversed-Z orthographic projection, or one for row vectors, the depth came out wrong or negative without one."""
+    if _w_row(m[3]):
+        return
+    if _affine_row(m[3]):
+        _orthographic_depth(m, name)
+        return
+    transposed = (" (its last column is (0, 0, 0, 1) and its last row holds the translation: a matrix for row "
+                  "vectors? rtp takes column vectors: pass its transpose)" if _affine_row(m[:, 3]) else "")
+    raise ParameterError(f"{name}: its last row {np.round(m[3], 4).tolist()} is neither a perspective's (0, 0, -1, 0) "
+                         f"nor an orthographic camera's (0, 0, 0, 1), the two a depth buffer is linearised through"
+                         f"{transposed} ({_CONVERSIONS})", name)
 
 
 def _cameras(projection: np.ndarray, prev_view_projection: np.ndarray, prev_projection: np.ndarray | None,

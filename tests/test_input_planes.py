@@ -423,6 +423,61 @@ def test_another_apis_projection_is_named_with_its_conversion() -> None:
         np.testing.assert_array_equal(sdk.check_projection(m), m)
 
 
+def test_a_depth_buffer_is_linearised_only_through_an_opengl_orthographic_projection() -> None:
+    """A hardware depth buffer read through an orthographic projection in another convention (left-handed or
+    reversed-Z, as Direct3D builds them; or for row vectors, not transposed) is a typed error naming the matrix, as a
+    perspective's is, also where no plane reprojects: the depth came out wrong (a left-handed one's 40 - 2 d for d),
+    or negative and every pixel background, without one. OpenGL's own gives the depth back."""
+    near, far = 0.1, 40.0
+    gl = np.diag([0.125, 0.2, -2 / (far - near), 1.0])
+    gl[2, 3] = -(far + near) / (far - near)
+    d = np.linspace(1.0, 30.0, 600).reshape(20, 30)
+    window = ((d - near) / (far - near)).astype(np.float32)  # an orthographic window depth is affine in d
+    np.testing.assert_allclose(sdk.input_planes(["depth"], depth=window, projection=gl, depth_kind="window")[0], d,
+                               rtol=1e-5)
+    left = np.diag([0.125, 0.2, 1 / (far - near), 1.0])  # XMMatrixOrthographicLH, as column vectors
+    left[2, 3] = -near / (far - near)
+    reversed_z = np.diag([0.125, 0.2, 1 / (far - near), 1.0])  # right-handed, reversed-Z: (f - d) / (f - n)
+    reversed_z[2, 3] = far / (far - near)
+    for kind, m, match in (("window", left, "does not rise away from the camera"),
+                           ("reversed", reversed_z, "does not rise away from the camera"),
+                           ("window", gl.T, r"neither a perspective's .* a matrix for row vectors")):
+        raw = window if kind == "window" else 1 - window
+        with pytest.raises(sdk.ParameterError, match=match):
+            sdk.input_planes(["depth", "depth.edge"], depth=raw, projection=m, depth_kind=kind)
+        with pytest.raises(sdk.ParameterError, match=match):
+            sdk.check_gbuffers(depth=raw, projection=m, depth_kind=kind)
+    # the previous frame's depth through its own projection, where given
+    with pytest.raises(sdk.ParameterError, match="prev_projection: an orthographic projection whose clip depth"):
+        sdk.input_planes(["seen"], depth=window, prev_depth=window, prev_colour=np.zeros((20, 30, 3)),
+                         view=np.eye(4), projection=gl, prev_view_projection=gl, prev_projection=left,
+                         depth_kind="window")
+
+
+def test_a_depth_buffer_of_points_behind_an_orthographic_camera_is_named() -> None:
+    """An orthographic projection whose near plane is behind the camera (glOrtho's near of -1) draws points of
+    negative view depth, which rtp's depth (>= 0, 0 on background) cannot hold: a typed error naming the projection,
+    not negative depth values taken as background. A near plane at 0 gives its own points 0 (background), no error."""
+    def ortho(near: float, far: float) -> np.ndarray:
+        m = np.diag([0.125, 0.2, -2 / (far - near), 1.0])
+        m[2, 3] = -(far + near) / (far - near)
+        return m
+
+    d = np.linspace(-0.5, 8.0, 600).reshape(20, 30)  # its first rows behind the camera
+    window = ((d + 1.0) / 11.0).astype(np.float32)  # near -1, far 10
+    for kind, raw in (("window", window), ("reversed", 1 - window)):
+        with pytest.raises(sdk.ParameterError, match=r"projection: .*negative view depth .* near plane is behind"):
+            sdk.input_planes(["depth"], depth=raw, projection=ortho(-1.0, 10.0), depth_kind=kind)
+    ahead = np.where(d >= 0.0, window, 1.0).astype(np.float32)  # the same camera, nothing behind it: its depth back
+    got = sdk.input_planes(["depth"], depth=ahead, projection=ortho(-1.0, 10.0), depth_kind="window")[0]
+    np.testing.assert_allclose(got, np.where(d >= 0.0, d, 0.0), atol=2e-6)
+    assert got.min() >= 0.0
+    at_zero = np.linspace(0.0, 0.5, 600).reshape(20, 30).astype(np.float32)  # near 0, far 7: the first pixel at 0
+    got = sdk.input_planes(["depth"], depth=at_zero, projection=ortho(0.0, 7.0), depth_kind="window")[0]
+    assert got.min() >= 0.0 and got[0, 0] == 0.0
+    np.testing.assert_allclose(got, at_zero * 7.0, atol=2e-6)
+
+
 def test_textures_read_back_as_rgba_or_with_one_channel_kept() -> None:
     """An engine reads RGBA textures back (RGBA8 albedo, RGBA16F normals): the alpha is not read. A single-channel
     G-buffer kept as (H, W, 1) is its (H, W). A matrix as 16 numbers in a row is named with how to shape it."""
