@@ -50,8 +50,11 @@ ALL_SCENES = "all scenes"
 def tile_unseen_share(seen: np.ndarray, tile: int) -> np.ndarray:
     """Share of unseen pixels per tile, ``1 - mean(seen)`` over the pixels each tile holds:
     ``(H, W)`` in [0, 1] -> ``(ceil(H/tile), ceil(W/tile))`` float64."""
-    s = np.asarray(seen, dtype=np.float64)
-    h, w = s.shape
+    shape: tuple[int, ...] = tuple(np.shape(seen))
+    s = real_values(seen, "seen").reshape(shape)
+    if len(shape) != 2:  # (a (1, H, W) plane was numpy's "too many values to unpack")
+        raise sdk.InputShapeError(f"seen: expected an (H, W) mask, got shape {shape}", shape, "(H, W)")
+    h, w = shape
     th, tw = sdk.tile_grid(h, w, tile)
     ph, pw = sdk.padded_size(h, w, tile)
     num = np.pad(s, ((0, ph - h), (0, pw - w))).reshape(th, tile, tw, tile).sum(axis=(1, 3))
@@ -356,7 +359,10 @@ for _r in sdk.ALL_RATES:
 
 def failing_tiles(codes: np.ndarray, truth: np.ndarray, threshold: float, higher_is_better: bool) -> np.ndarray:
     """Whether each tile's chosen rate fails the threshold by the true error (1x1 never fails). ``codes``: uint8
-    rate codes, a tile each; ``truth``: ``(6, *codes.shape)``, each predicted rate's true value."""
+    rate codes, a tile each; ``truth``: ``(6, *codes.shape)``, each predicted rate's true value. ``threshold`` is
+    one a selection takes (``sdk.check_threshold``), ``higher_is_better`` True or False, else a ParameterError."""
+    # (a NaN threshold failed every reduced rate, and higher_is_better="False" judged an error as a PSNR, silently)
+    threshold = sdk.check_threshold(threshold, higher_is_better)
     codes, truth = np.asarray(codes), np.asarray(truth)
     if truth.shape != (len(PREDICTED_RATES), *codes.shape):
         raise sdk.InputShapeError(f"truth: expected shape {(len(PREDICTED_RATES), *codes.shape)} (each predicted rate's "
@@ -911,11 +917,11 @@ def _matched(sweep: list[dict[str, Any]], target: float,
     """Per method, the work saved at fail share ``target`` read off its sweep as :func:`rtp.evaluate.saved_at`
     reads it (``rtp play``'s matched table and ``bench/report.py`` too): the most any point failing at most
     ``target`` saves, each interpolated linearly towards the next point that fails more where that one saves
-    more; NaN where the sweep never fails that rarely or never that often. The parameter is that point's
-    (``between A and B`` where interpolated); among points that save as much, the one nearest the method's
-    parameter in ``defaults`` (the decision table's), else the numerically smallest. (The first point at the
-    target's failing share in text order was taken: among ties in failures the one that saved the least,
-    "t 11.31" before "t 8".)"""
+    more (of points that fail equally often, the one that saves the most); NaN where the sweep never fails that
+    rarely or never that often. The parameter is that point's (``between A and B`` where interpolated); among
+    points that save as much, the one nearest the method's parameter in ``defaults`` (the decision table's), else
+    the numerically smallest. (The first point at the target's failing share in text order was taken: among ties
+    in failures the one that saved the least, "t 11.31" before "t 8".)"""
     defaults = defaults or {}
     out = []
     for method in dict.fromkeys(r["method"] for r in sweep):
@@ -928,12 +934,22 @@ def _matched(sweep: list[dict[str, Any]], target: float,
                         if pts else "no sweep"})
             continue
         default = float(defaults.get(method, math.nan))
+        # per failing share the points that save the most (the others, as often failing, are alternatives that save
+        # less), and of them the one a reading names (:func:`_tie_key`): the line from a point that fails less runs
+        # towards it (it ran towards the next point in order, the one of that share that saved the least)
+        top: dict[float, float] = {}
+        for f, w, _ in pts:
+            top[f] = max(w, top.get(f, w))
+        upper = [q for q in pts if q[1] == top[q[0]]]
+        named = {f: min((q for q in upper if q[0] == f), key=lambda q: _tie_key(q[2], default)) for f in top}
+        levels = sorted(top)
         best: tuple[float, str, tuple[float, float]] | None = None
-        for k, (f0, w0, p0) in enumerate(pts):
+        for f0, w0, p0 in upper:
             if f0 > target:
                 break
-            nxt = pts[k + 1] if k + 1 < len(pts) else None
-            if nxt is None or nxt[0] <= f0 or f0 == target or nxt[1] < w0:  # (towards one saving less: this one)
+            i = levels.index(f0)
+            nxt = named[levels[i + 1]] if i + 1 < len(levels) else None
+            if nxt is None or f0 == target or nxt[1] < w0:  # (towards one saving less: this one)
                 saved, param = w0, p0
             else:
                 frac = min(1.0, (target - f0) / (nxt[0] - f0))

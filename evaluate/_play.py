@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import reprlib
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -305,20 +306,32 @@ def saved_at(points: Sequence[tuple[float, float]], fail: float) -> float | None
     """Work saved at ``fail`` failing tiles along a sweep of ``(fail share, work saved)`` points: the
     best saving among points failing at most ``fail``, interpolated linearly towards the next point
     that fails more (never below the point's own saving: a next point that fails more and saves less leaves it
-    as it is). None when every point fails more than ``fail``."""
+    as it is). Points that fail equally often are alternatives: only the one that saves the most counts, as a
+    point of its own and as the next point of those that fail less. None when every point fails more than
+    ``fail``; a :class:`~rtp.sdk.ParameterError` for a NaN share or saving (it has no place on the sweep)."""
     try:
-        pts = sorted((float(f), float(w)) for f, w in points)
+        pairs = [(float(f), float(w)) for f, w in points]
         fail = float(fail)
     except (TypeError, ValueError, OverflowError):
         raise sdk.ParameterError(f"saved_at: expected (fail share, work saved) pairs of numbers and a fail share, got "
                                  f"{points!r} and {fail!r}") from None
+    # (a NaN point was placed wherever sorting left it: the same sweep read 90%, 65% or None by the order given)
+    if math.isnan(fail) or any(math.isnan(f) or math.isnan(w) for f, w in pairs):
+        raise sdk.ParameterError(f"saved_at: expected numbers, not NaN, for the fail share and every point's fail "
+                                 f"share and saving, got {reprlib.repr(pairs)} and {fail!r}")
+    # the most saved at each failing share (the line ran towards the point of the next share that saved the least:
+    # (1%, 50%), (3%, 40%), (3%, 80%) read 50% at 2%, not 65%)
+    top: dict[float, float] = {}
+    for f, w in pairs:
+        top[f] = max(w, top.get(f, w))
+    pts = sorted(top.items())
     if not pts or pts[0][0] > fail:
         return None
     best = None
     for (f0, w0), (f1, w1) in zip(pts, pts[1:] + [(math.inf, pts[-1][1])]):
         if f0 <= fail:
             # (towards a point that saves less the line falls below this one's saving, which runs at f0 <= fail)
-            w = w0 if f1 == math.inf or f1 <= f0 or w1 <= w0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
+            w = w0 if f1 == math.inf or w1 <= w0 else w0 + (w1 - w0) * min(1.0, (fail - f0) / (f1 - f0))
             best = w if best is None else max(best, w)
     return best
 
