@@ -41,7 +41,10 @@ Algorithm, per current pixel:
 
 The shader computes in float32, this reference in float64: their ``seen`` masks agree except where
 a position falls within rounding of a texel edge or of the tolerance (rare; tests compare away
-from depth edges).
+from depth edges). The exception: a previous frame at exactly twice or half this frame's size (or
+another even ratio) puts every pixel centre on a texel edge, where each side picks a neighbour by
+its own rounding: the texel fetched differs between them on about 43% of the pixels (the colour
+from one of two adjacent texels; ``seen`` agrees), and neither is "the one above" reliably.
 """
 
 from __future__ import annotations
@@ -286,7 +289,7 @@ def reproject_positions(
         ``(qx, qy, d)``, each ``(H, W)`` float64: the previous position in OpenGL window
         coordinates of the previous frame (its pixels, origin at the BOTTOM-left corner of the frame, as
         the shader sees it; the top-left y is ``H' - qy``, and the texel :func:`reproject` fetches, in
-        top-left rows and columns, ``(H' - 1 - floor(qy), floor(qx))``: on a texel's edge the one above)
+        top-left rows and columns, ``(H' - 1 - floor(qy), floor(qx))``: on a texel's edge the one above, up to rounding)
         and the expected previous linear depth (a perspective previous camera's clip ``w``); ``d <= 0``
         where the point was behind the previous camera (only its sign matters for background).
     """

@@ -123,6 +123,71 @@ def test_window_depth_world_normals_and_linear_albedo(frames, kind: str) -> None
     assert (x[5] != ref[5]).mean() < 0.002
 
 
+def test_a_depth_buffer_is_refused_through_the_projections_the_sdk_refuses(frames) -> None:
+    """A hardware depth buffer through an orthographic projection sdk.input_planes does not linearise (left-handed,
+    reversed-Z, for row vectors), or of points behind an orthographic camera (near -1, in the current or the
+    previous frame), is the SDK's ParameterError from the adapter too, whatever its channels and with or without a
+    previous frame: it drew wrong or negative depth (every pixel background) without a word where no plane
+    reprojected. A camera whose near plane is behind it but whose depth buffer holds nothing behind it gives the
+    SDK's planes."""
+    ctx = frames[0]
+    h, w = 20, 30
+    near, far = 0.1, 40.0
+
+    def ortho(n: float, f: float) -> np.ndarray:
+        m = np.diag([0.125, 0.2, -2 / (f - n), 1.0])
+        m[2, 3] = -(f + n) / (f - n)
+        return m
+
+    d = np.linspace(1.0, 30.0, h * w).reshape(h, w)
+    window = ((d - near) / (far - near)).astype(np.float32)
+    left = np.diag([0.125, 0.2, 1 / (far - near), 1.0])  # XMMatrixOrthographicLH, as column vectors
+    left[2, 3] = -near / (far - near)
+    reversed_z = np.diag([0.125, 0.2, 1 / (far - near), 1.0])
+    reversed_z[2, 3] = far / (far - near)
+    b = np.linspace(-0.5, 8.0, h * w).reshape(h, w)  # its first rows behind a near -1, far 10 camera
+    behind = ((b + 1.0) / 11.0).astype(np.float32)
+    grey = np.full((h, w, 3), 0.5, np.float32)
+    cases = [("window", window, left, "does not rise away from the camera"),
+             ("reversed", 1 - window, reversed_z, "does not rise away from the camera"),
+             ("window", window, ortho(near, far).T, "neither a perspective's"),
+             ("window", behind, ortho(-1.0, 10.0), "negative view depth .* near plane is behind"),
+             ("reversed", 1 - behind, ortho(-1.0, 10.0), "negative view depth .* near plane is behind")]
+    for kind, raw, m, match in cases:
+        for channels, prev in ((("depth",), False), (("albedo.r", "depth.edge"), False), (("albedo.r",), True),
+                               (("depth", "seen"), True)):
+            g: dict[str, Any] = {"depth": raw, "albedo": grey, "view": np.eye(4), "projection": m}
+            if prev:
+                g.update(prev_colour=grey, prev_depth=raw, prev_view_projection=m)
+            with pytest.raises(sdk.ParameterError, match=f"projection: .*{match}"):
+                sdk.input_planes(channels, **g, depth_kind=kind)
+            frame = GBufferTextures(albedo=_tex(ctx, grey), normal=_tex(ctx, grey), depth=_tex(ctx, raw),
+                                    view=np.eye(4), projection=m,
+                                    **({"prev_colour": _tex(ctx, grey), "prev_depth": _tex(ctx, raw),
+                                        "prev_view_projection": m} if prev else {}))
+            with Adapter(channels, w, h, ctx=ctx, depth_kind=kind) as a, \
+                    pytest.raises(sdk.ParameterError, match=f"projection: .*{match}"):
+                a.inputs(frame)
+    # the previous frame's depth buffer through its own projection, where a plane reads it
+    fine = np.where(b >= 0.0, behind, 1.0).astype(np.float32)  # the near -1 camera, nothing behind it
+    channels = ("depth", "seen", "reprojected.g")
+    g = {"depth": fine, "view": np.eye(4), "projection": ortho(-1.0, 10.0), "prev_colour": grey,
+         "prev_depth": behind, "prev_view_projection": ortho(-1.0, 10.0), "prev_projection": ortho(-1.0, 10.0)}
+    with pytest.raises(sdk.ParameterError, match="prev_projection: .*negative view depth"):
+        sdk.input_planes(channels, **g, depth_kind="window")
+    frame = GBufferTextures(albedo=_tex(ctx, grey), normal=_tex(ctx, grey), depth=_tex(ctx, fine), view=np.eye(4),
+                            projection=g["projection"], prev_colour=_tex(ctx, grey), prev_depth=_tex(ctx, behind),
+                            prev_view_projection=g["prev_view_projection"], prev_projection=g["prev_projection"])
+    with Adapter(channels, w, h, ctx=ctx, depth_kind="window") as a:
+        with pytest.raises(sdk.ParameterError, match="prev_projection: .*negative view depth"):
+            a.inputs(frame)
+        g["prev_depth"] = fine
+        got = a.inputs(replace(frame, prev_depth=_tex(ctx, fine)))
+    want = sdk.input_planes(channels, **g, depth_kind="window")
+    np.testing.assert_allclose(got, want, atol=2e-6)
+    assert got[0].min() >= 0.0 and got[1].mean() > 0.5
+
+
 def test_depth_edges_on_the_gpu_follow_the_sdk_definition(frames) -> None:
     ctx, prev, cur = frames
     a = Adapter(("depth.edge", "depth"), W, H, ctx=ctx)

@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection, check_reprojection, gbuffers_needed
+from rtp.sdk._planes import _linear_depth
+from rtp.sdk._reproject import _affine_row, _check_depth_projection
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -188,7 +190,10 @@ class Adapter(_AdapterBase[GBufferTextures]):
             inverse projection) or ``"reversed"`` (a reversed-Z depth buffer, 1 at the near plane and
             0 on background, as ``glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE)`` with a depth clear of
             0 and ``GL_GREATER`` makes; linearised with the inverse of the OpenGL ``projection`` of the
-            same near and far planes): ``sdk.DEPTH_KINDS``.
+            same near and far planes): ``sdk.DEPTH_KINDS``. With a depth buffer, a projection
+            ``sdk.input_planes`` would not linearise it through (an orthographic one not in OpenGL's
+            convention; one whose near plane is behind the camera, where the depth buffer holds points
+            behind it) is its ``ParameterError``, whatever the channels.
         clamp_colour: read the previous frame's colour clamped to [0, 1] (default True: display-encoded
             colour, an HDR frame not yet tonemapped kept in range); False passes any value through (the
             reference renderer reprojects pixel coordinates this way: ``Renderer.reprojection_source``).
@@ -343,6 +348,12 @@ class Adapter(_AdapterBase[GBufferTextures]):
         for c, tex, name in ((depth_component, depth, "depth_component"),
                              (prev_depth_component, prev_depth, "prev_depth_component")):
             _component(c, name, 0, 4 if tex is None else tex.components)
+        if self.depth_kind != "linear":  # a depth buffer is linearised through them, as in sdk.input_planes
+            self._check_depth_buffer(depth, projection, "projection", region, depth_component)
+            if has_prev and "prev_depth" in gbuffers_needed(self.channels):
+                prev_name = "projection" if prev_projection is None else "prev_projection"
+                self._check_depth_buffer(prev_depth, projection if prev_projection is None else prev_projection,
+                                         prev_name, prev_region, prev_depth_component)
         wanted = [c for c in self.channels if c in _MATERIAL]
         if wanted and material is None:
             raise ParameterError(f"the inputs {wanted} need the material texture (GBufferTextures.material: "
@@ -406,6 +417,23 @@ class Adapter(_AdapterBase[GBufferTextures]):
                 t.compare_func = func
             (bound if bound is not None and not is_released(bound) else self._default_framebuffer()).use()
             self.ctx.viewport = viewport
+
+    def _check_depth_buffer(self, tex: Any, projection: np.ndarray, name: str, region: tuple[int, int] | None,
+                            component: int) -> None:
+        """What ``sdk.input_planes`` refuses of a depth buffer (``depth_kind`` ``window`` or ``reversed``) linearised
+        through ``projection`` (named ``name``), refused here too: a projection neither a perspective nor an
+        orthographic one of OpenGL's convention (a left-handed, reversed-Z or row-vector orthographic one gave wrong
+        or negative depth, every pixel then background), and, through an orthographic projection whose near plane is
+        behind the camera (glOrtho's near -1), points behind it (negative depth, taken as background). Only for such a
+        projection is the depth texture read back (``region``, its ``component``), to find the points."""
+        _check_depth_projection(projection, name)
+        if not _affine_row(projection[3]):
+            return  # (a perspective's depth buffer holds no point behind its camera)
+        inv = np.linalg.inv(projection)
+        near = inv @ np.array([0.0, 0.0, -1.0, 1.0])  # the view point of the near plane's depth (window 0, reversed 1)
+        if -near[2] / near[3] < 0.0:
+            raw = read_texture(tex, size=region)[..., component]
+            _linear_depth(raw, projection, self.depth_kind == "reversed", name)
 
     def _default_framebuffer(self) -> Any:
         """The context's framebuffer 0 (what a standalone context has bound before anything is used)."""
