@@ -105,7 +105,8 @@ def _affine_row(v: np.ndarray) -> bool:
     return bool(v[3] != 0.0 and np.abs(v[:3]).max() <= 1e-9 * abs(v[3]))
 
 
-def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
+def check_projection(projection: Any, name: str = "projection", *, depth_kind: str = "linear",
+                     depth: Any = None) -> np.ndarray:
     """``projection`` as a float64 4x4 matrix, if it can be an OpenGL projection as rtp takes it (column
     vectors, right-handed view space looking down -z, clip y up, clip depth in [-1, 1]); else a
     :class:`ParameterError` naming ``name`` that says which other API's convention it looks like and how
@@ -119,7 +120,35 @@ def check_projection(projection: Any, name: str = "projection") -> np.ndarray:
     one of other near and far planes and passes: only its linearised window depth would be off. Any other
     matrix (an orthographic one, last row ``0, 0, 0, 1``) is taken as it is: :func:`check_reprojection`
     checks what the reprojection needs of an orthographic camera.
+
+    ``depth_kind`` ``"window"`` or ``"reversed"`` (:data:`DEPTH_KINDS`): the projection linearises a hardware depth
+    buffer of that kind, which needs OpenGL's convention of an orthographic camera too (a left-handed, reversed-Z or
+    row-vector one is refused, as :func:`input_planes` refuses it); ``depth``, that buffer (``(H, W)``), is linearised
+    through it too, which refuses points behind an orthographic camera (a near plane behind it). The moderngl
+    adapter checks its engine's projection and depth so, with ``sdk.input_planes``' words.
     """
+    m = _check_projection(projection, name)
+    from ._planes import DEPTH_KINDS, _linear_depth  # (_planes imports this module)
+
+    if not isinstance(depth_kind, str) or depth_kind not in DEPTH_KINDS:
+        raise ParameterError(f"depth_kind: expected one of {', '.join(DEPTH_KINDS)}, got {depth_kind!r}", "depth_kind")
+    if depth_kind == "linear":
+        if depth is not None:
+            raise ParameterError("depth: checked through the projection only for a hardware depth buffer "
+                                 "(depth_kind 'window' or 'reversed'), got depth_kind 'linear'", "depth")
+        return m
+    _check_depth_projection(m, name)
+    if depth is not None:
+        d = np.asarray(depth)
+        if d.ndim != 2 or d.dtype.kind not in "biuf":
+            raise InputShapeError(f"depth: expected an (H, W) depth buffer of numbers, got {d.dtype} {d.shape}",
+                                  d.shape, "(H, W)")
+        _linear_depth(d, m, depth_kind == "reversed", name)
+    return m
+
+
+def _check_projection(projection: Any, name: str) -> np.ndarray:
+    """:func:`check_projection`'s convention checks."""
     m = _matrix(projection, name)
     if not _w_row(m[3]):
         return m

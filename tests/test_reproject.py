@@ -471,3 +471,31 @@ def test_a_depth_in_any_memory_layout_reprojects_as_a_c_ordered_one(layout: str)
     assert (want[0][1][f["depth"] == 0] == 1).any()  # (sky reprojected by rotation: the comparison says something)
     for a, b in zip([*want[0], *want[1]], [*got[0], *got[1]]):
         np.testing.assert_array_equal(a, b)
+
+
+def test_check_projection_checks_what_a_depth_buffer_needs_of_it() -> None:
+    """``check_projection(..., depth_kind=, depth=)``: the public check the moderngl adapter refuses an engine's
+    depth-buffer projection with, in sdk.input_planes' words: an orthographic projection outside OpenGL's convention
+    only for a hardware depth buffer, and the buffer's points behind the camera only with the buffer."""
+    n, f = 1.0, 30.0
+    ortho = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -2 / (f - n), -(f + n) / (f - n)], [0, 0, 0, 1.0]])
+    left = ortho.copy()
+    left[2, 2] = -left[2, 2]
+    np.testing.assert_array_equal(sdk.check_projection(left), left)  # linear depth: nothing to linearise
+    for kind in ("window", "reversed"):
+        with pytest.raises(sdk.ParameterError, match="clip depth does not rise away from the camera"):
+            sdk.check_projection(left, depth_kind=kind)
+        np.testing.assert_array_equal(sdk.check_projection(ortho, depth_kind=kind), ortho)
+    behind = ortho.copy()  # glOrtho(near=-1): the near plane behind the camera
+    behind[2, 3] = -(f - 1.0) / (f + 1.0)
+    behind[2, 2] = -2 / (f + 1.0)
+    window = np.zeros((2, 2), np.float32)  # every pixel on the near plane: 1 behind the camera
+    with pytest.raises(sdk.ParameterError, match="behind"):
+        sdk.check_projection(behind, "prev_projection", depth_kind="window", depth=window)
+    sdk.check_projection(behind, depth_kind="window", depth=np.ones((2, 2), np.float32))  # background only
+    with pytest.raises(sdk.ParameterError, match="depth_kind: expected one of linear, window, reversed"):
+        sdk.check_projection(ortho, depth_kind="hardware")
+    with pytest.raises(sdk.ParameterError, match="depth: checked through the projection only"):
+        sdk.check_projection(ortho, depth=window)
+    with pytest.raises(sdk.InputShapeError, match=r"expected an \(H, W\) depth buffer"):
+        sdk.check_projection(ortho, depth_kind="window", depth=np.zeros((1, 2, 2)))

@@ -35,8 +35,6 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection, check_reprojection, gbuffers_needed
-from rtp.sdk._planes import _linear_depth
-from rtp.sdk._reproject import _affine_row, _check_depth_projection
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -426,14 +424,14 @@ class Adapter(_AdapterBase[GBufferTextures]):
         or negative depth, every pixel then background), and, through an orthographic projection whose near plane is
         behind the camera (glOrtho's near -1), points behind it (negative depth, taken as background). Only for such a
         projection is the depth texture read back (``region``, its ``component``), to find the points."""
-        _check_depth_projection(projection, name)
-        if not _affine_row(projection[3]):
+        m = check_projection(projection, name, depth_kind=self.depth_kind)  # (a perspective or an orthographic one)
+        if abs(m[3, 2]) > abs(m[3, 3]):
             return  # (a perspective's depth buffer holds no point behind its camera)
-        inv = np.linalg.inv(projection)
+        inv = np.linalg.inv(m)  # (invertible: check_projection's orthographic checks invert it)
         near = inv @ np.array([0.0, 0.0, -1.0, 1.0])  # the view point of the near plane's depth (window 0, reversed 1)
         if -near[2] / near[3] < 0.0:
             raw = read_texture(tex, size=region)[..., component]
-            _linear_depth(raw, projection, self.depth_kind == "reversed", name)
+            check_projection(projection, name, depth_kind=self.depth_kind, depth=raw)
 
     def _default_framebuffer(self) -> Any:
         """The context's framebuffer 0 (what a standalone context has bound before anything is used)."""
