@@ -350,7 +350,8 @@ class PathFrame:
     and ``seen`` are 0: each method reprojects its own history) and where each of its pixels was in the
     previous frame (``rows``, ``cols``: top-left indices, ``seen``: 1 where that pixel passed the
     depth test; all 0 on the first frame). ``reproject(image)`` fetches any image of the previous
-    frame the way the renderer's reprojection does."""
+    frame the way the renderer's reprojection does; ``source_size``, the previous frame's ``(H, W)`` (None on
+    the first frame, or where not known), is the size that image must have."""
 
     index: int
     frame: Any
@@ -362,17 +363,38 @@ class PathFrame:
     #: Terms the methods compute from this frame's motion and ``seen`` alone, shared among them (the
     #: classic methods' per-tile speeds: ``rtp.evaluate.Frame.terms``).
     terms: dict[Any, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    #: The previous frame's ``(H, W)``, the size of every image :meth:`reproject` takes (None: not known).
+    source_size: tuple[int, int] | None = None
 
     def reproject(self, image: np.ndarray) -> np.ndarray:
-        """``image`` (the previous frame's, ``(H', W', 3)`` at its own size) reprojected into this frame
-        (``(H, W, 3)``); 0 where unseen."""
+        """``image`` (the previous frame's, ``(H', W', C)`` or one plane ``(H', W')``, at its own size)
+        reprojected into this frame (``(H, W, C)`` or ``(H, W)``); 0 where unseen. An image of another size
+        than the previous frame's (:attr:`source_size`; where not known, one too small for the fetch
+        positions) is a ``ParameterError``: its pixels are not the ones the positions index."""
+        from rtp.sdk import ParameterError
+
         image = np.asarray(image, np.float32)
+        if image.ndim not in (2, 3):
+            raise ParameterError(f"image: expected the previous frame's (H, W, C) image or (H, W) plane, got shape "
+                                 f"{image.shape}", "image")
         key = image.shape[:2]
         cached = self._gather.get(key)
         if cached is None:  # the flat source index and the unseen pixels, once per frame (every method reuses them)
+            # (an image of another size was fetched from in silence: a larger one at the wrong pixels, a smaller one's
+            # indices clipped into it; under dynamic resolution, the current frame's size given for the previous one's)
+            if self.source_size is not None:
+                need, wrong, more = tuple(self.source_size), key != tuple(self.source_size), ""
+            else:  # (the previous frame's size not known: at least what the fetch positions index)
+                need = (int(self.rows.max()) + 1, int(self.cols.max()) + 1) if self.rows.size else (0, 0)
+                wrong, more = key[0] < need[0] or key[1] < need[1], " or more"
+            if wrong:
+                raise ParameterError(f"image: expected the previous frame's image, {need[1]}x{need[0]} pixels{more} "
+                                     f"(shape {need}), got {key[1]}x{key[0]} (shape {image.shape})", "image")
             cached = ((self.rows * image.shape[1] + self.cols).ravel(), np.flatnonzero(~(self.seen > 0)))
             self._gather[key] = cached
         index, unseen = cached
+        if image.ndim == 2:  # (one plane: it was reshaped as rows of width-long pixels, a ValueError)
+            return self.reproject(image[..., None])[..., 0]
         # The indices are in range by construction: mode="clip" only spares numpy's bounds check (2.5x
         # faster at 720p), and zeroing the unseen pixels by index beats multiplying every channel by a
         # broadcast mask; both give exactly the values of the gather-and-multiply (displayed values are
@@ -571,14 +593,19 @@ class PathPlayer:
                 yield PathFrame(i, frame, zeros, zeros, np.zeros((h, w), np.float32))
             elif prev.depth.shape == (h, w):
                 rows, cols, seen = self.renderer.reprojection_source(prev.depth, prev.camera)
-                yield PathFrame(i, frame, rows, cols, seen)
+                yield PathFrame(i, frame, rows, cols, seen, source_size=prev.depth.shape)
             else:  # (dynamic resolution: the previous frame at its own size)
-                yield PathFrame(i, frame, *_source_across_sizes(frame, prev))
+                yield PathFrame(i, frame, *_source_across_sizes(frame, prev), source_size=prev.depth.shape)
             prev = frame
 
     def shade(self, rates: np.ndarray, tile_size: int) -> np.ndarray:
-        """The current frame shaded per tile at ``rates`` (uint8 codes), tone-mapped and post-processed."""
+        """The current frame shaded per tile at ``rates`` (uint8 codes), tone-mapped and post-processed. Before
+        :meth:`frames` has given a frame there is none to shade: a ``RendererError``, in either shading."""
         if not self.exact:
+            if self._current is None:  # (an AttributeError of None's .colour; the renderer's pass says this)
+                from rtp.plugins.moderngl import RendererError
+
+                raise RendererError("shade works on the current frame of frames(); iterate frames() first")
             return composite(self._current.colour, rates, tile_size)
         return np.asarray(self.renderer.shade_rates(rates, tile_size))
 

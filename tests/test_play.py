@@ -380,6 +380,54 @@ def test_a_frame_of_another_size_reprojects_as_the_renderer_does(scene: Any) -> 
         mine.render(path.cameras[0])  # (and draws at it)
 
 
+def test_a_history_reprojects_from_the_previous_frames_size_only(scene: Any) -> None:
+    """PathFrame.reproject takes one plane (H, W) as it takes (H, W, C) (a plane was a ValueError of a reshape), and
+    refuses an image of another size than the previous frame's: it fetched from one in silence, a larger one at the
+    wrong pixels and a smaller one's indices clipped into it (under dynamic resolution, an image at the current
+    frame's size given for the previous one's read other pixels without a word)."""
+    rng = np.random.default_rng(0)
+    h, w = 6, 10
+    rows, cols = rng.integers(0, h, (h, w)), rng.integers(0, w, (h, w))
+    rows[0, 0], cols[0, 0] = h - 1, w - 1
+    seen = (rng.random((h, w)) > 0.3).astype(np.float32)
+    image = rng.random((h, w, 3), dtype=np.float32)
+    want = np.where(seen[..., None] > 0, image[rows, cols], 0)
+    for known in ((h, w), None):
+        pf = PathFrame(1, None, rows, cols, seen, source_size=known)
+        assert np.array_equal(pf.reproject(image[..., 1]), want[..., 1])  # (a plane before the image: its own shape)
+        assert np.array_equal(pf.reproject(image), want)
+        for shape in ((h - 1, w, 3), (h, w - 1), (h, w + 2, 3), (h + 1, w)):
+            if known is None and shape[0] >= h and shape[1] >= w:
+                continue  # (the size not known: only an image too small for the fetch positions is told apart)
+            with pytest.raises(sdk.ParameterError, match=f"previous frame's image, {w}x{h} pixels.*got "
+                                                         f"{shape[1]}x{shape[0]}"):
+                pf.reproject(np.zeros(shape, np.float32))
+        with pytest.raises(sdk.ParameterError, match="\\(H, W, C\\) image or \\(H, W\\) plane"):
+            pf.reproject(np.zeros((h, w, 3, 1), np.float32))
+    # the player gives each frame its previous frame's size: dynamic resolution's current size is refused
+    sc, blockers = scene
+    path = camera_path(sc, 3, "fast", seed=1, blockers=blockers)
+    sizes = []
+    with PathPlayer(sc, (W, H), exact=False, dynamic=DynamicResolution((1.0, 0.5), 1)) as player:
+        for pf in player.frames(path):
+            sizes.append((pf.source_size, pf.frame.depth.shape))
+            if pf.index > 0:  # (an image at this frame's size, not the previous one's)
+                with pytest.raises(sdk.ParameterError, match="previous frame's image"):
+                    pf.reproject(np.zeros((*pf.seen.shape, 3), np.float32))
+    assert sizes == [(None, (H, W)), ((H, W), (H // 2, W // 2)), ((H // 2, W // 2), (H, W))]
+
+
+def test_a_path_player_shades_no_frame_before_its_first(scene: Any) -> None:
+    """Shading before frames() gave one was an AttributeError of None's colour with composite shading; it is the
+    RendererError the renderer's own pass raises."""
+    from rtp.plugins.moderngl import RendererError
+
+    sc, _ = scene
+    for exact in (False, True):
+        with PathPlayer(sc, (W, H), exact=exact) as player, pytest.raises(RendererError, match="render\\(\\)|frames\\(\\)"):
+            player.shade(np.zeros(sdk.tile_grid(H, W, TILE), np.uint8), TILE)
+
+
 def test_dynamic_resolution_closes_the_loop_at_each_frames_size(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every history is the image the method displayed on the frame before, at that frame's size; prediction
     reuse carries across a change of size (the network still runs every k-th frame); the report says so."""
