@@ -81,7 +81,9 @@ def _feature_filter(ppd: float) -> np.ndarray:
     dg = -xx * g
     ddg = (xx * xx / (sd * sd) - np.float32(1.0)) * g
     g = g / g.sum()
-    with np.errstate(divide="ignore", invalid="ignore"):  # (below 1.7 ppd dg's taps are all 0: NaN, as FLIP.h's)
+    # (below 1.7 ppd dg's taps are all 0: NaN, as FLIP.h's; near 1.7 the positive taps are subnormal and the
+    # branch np.where discards overflows: a RuntimeWarning for the values it never uses)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         dg = np.where(dg > 0, dg / dg[dg > 0].sum(), dg / -dg[dg < 0].sum())
         ddg = np.where(ddg > 0, ddg / ddg[ddg > 0].sum(), ddg / -ddg[ddg < 0].sum())
     return np.stack([g, dg, ddg]).astype(np.float32)

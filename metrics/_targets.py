@@ -23,7 +23,7 @@ from rtp.sdk import (
 )
 
 from ._device import DEVICES, resolve_device
-from ._errors import MetricParameterError
+from ._errors import MetricDependencyError, MetricParameterError
 from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, image_ppd
 from ._image import as_batch
 from ._lpips import _check_quirk, _check_size, lpips_against, lpips_map, lpips_network
@@ -129,14 +129,30 @@ def _flip_backend(backend: str | None) -> str:
     return backend
 
 
+def _check_flip_torch(names: Iterable[str], backend: str) -> None:
+    """The torch FLIP port asked for FLIP without torch installed: a :class:`MetricDependencyError` naming the
+    install and the other backend (it was a bare ModuleNotFoundError from inside the port, or from the device)."""
+    if backend != "torch" or not {"flip", "jnflip"} & set(names):
+        return
+    try:
+        import torch  # noqa: F401
+    except ImportError as exc:
+        raise MetricDependencyError(
+            "flip_backend='torch' needs torch: pip install torch==2.13.0 (or rtp[metrics]), or pass "
+            "flip_backend='flip-evaluator' (or None, which picks it when torch is missing)"
+        ) from exc
+
+
 def targets_device(metrics: Iterable[str], device: str | None, flip_backend: str | None = None) -> Any:
     """The ``torch.device`` :func:`tile_targets` runs the torch work of ``metrics`` on (FLIP's port
     with the torch ``flip_backend``, LPIPS), or None where there is none or ``device`` is None.
     Raises :class:`MetricParameterError` as it would: a name that is no device, a device this torch
     cannot use (checked only where torch work is asked for: the numpy metrics need no torch), FLIP
-    through ``flip-evaluator`` asked to run on a GPU. A job checks its device with it before any work."""
+    through ``flip-evaluator`` asked to run on a GPU; and :class:`MetricDependencyError` for FLIP through the
+    torch backend without torch installed. A job checks its device with it before any work."""
     names = {_check_metric(m) for m in ([metrics] if isinstance(metrics, str) else metrics)}
     backend = _flip_backend(flip_backend)
+    _check_flip_torch(names, backend)
     if device is None:
         return None
     if not isinstance(device, str) or not (device in DEVICES or re.fullmatch(r"cuda:\d+", device)):

@@ -642,6 +642,38 @@ def test_low_ppd_targets_are_flip_evaluators_not_nan() -> None:
         np.testing.assert_allclose(out["flip"][i], M.tile_metric("flip", refimg, imgs[rate], 16, ppd="width"), atol=1e-4)
 
 
+def test_ppd_near_flips_edge_filter_underflow_warns_nothing() -> None:
+    """At 1.7 ppd the feature filter's positive second-derivative taps are subnormal: the branch np.where
+    discards overflowed, and `rtp targets --ppd 1.7` printed numpy's "overflow encountered in divide"
+    (an error under -W error) for targets that are right."""
+    import warnings
+
+    from rtp.metrics._flipbatch import _feature_filter
+
+    _feature_filter.cache_clear()  # (an earlier 1.7 ppd filter, cached, would warn nothing either way)
+    refimg = _textured(24, 40, 1)
+    imgs = {r: coarse(refimg, *_rate_wh(r)) for r in sdk.PREDICTED_RATES}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = M.tile_targets(refimg, imgs, ("flip",), 16, ppd=1.7, flip_backend="torch")
+    for i, rate in enumerate(sdk.PREDICTED_RATES):
+        np.testing.assert_allclose(out["flip"][i], M.tile_metric("flip", refimg, imgs[rate], 16, ppd=1.7), atol=1e-4)
+
+
+def test_torch_flip_backend_without_torch_is_a_dependency_error(
+        ref: np.ndarray, rates: dict[str, np.ndarray], monkeypatch: pytest.MonkeyPatch) -> None:
+    """flip_backend='torch' without torch installed was a bare ModuleNotFoundError from inside the port
+    (or from the device check), naming no install; metrics that need no torch still run."""
+    monkeypatch.setitem(sys.modules, "torch", None)  # (`import torch` raises ImportError)
+    for device in (None, "cpu"):
+        with pytest.raises(M.MetricDependencyError, match=r"flip_backend='torch' needs torch: pip install torch"):
+            M.tile_targets(ref, rates, ("psnr", "jnflip"), 16, flip_backend="torch", device=device)
+        with pytest.raises(M.MetricDependencyError, match="flip_backend='flip-evaluator'"):
+            M.targets_device(("flip",), device, "torch")
+    assert M.tile_targets(ref, rates, ("psnr",), 16, flip_backend="torch")["psnr"].shape[0] == 6
+    assert np.isfinite(M.tile_targets(ref, rates, ("flip",), 16)["flip"]).all()  # (None picks flip-evaluator)
+
+
 # --- contracts a direct caller meets (review of 2026-12) -----------------------------------------
 
 
