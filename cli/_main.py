@@ -65,15 +65,38 @@ def _out_file(text: str) -> str:
 
 def out_image(text: str) -> str:
     """An argparse type: an image file Pillow can write, in a place that can be written (public: the
-    examples check their ``--out`` the same way, before the work that makes the image)."""
+    examples check their ``--out`` the same way, before the work that makes the image). Without Pillow (the
+    runtime install) only the place is checked: the command that writes the image says, before its work, that
+    Pillow is missing (``_picture_modules``), where importing it here was a traceback while parsing."""
     from rtp.capture import check_image_output
     from rtp.sdk import ParameterError
 
+    try:
+        import PIL.Image  # noqa: F401 - the extensions it writes
+    except ModuleNotFoundError as err:
+        if err.name != "PIL":
+            raise
+        return _checked_path(text, folder=False)
     try:
         check_image_output(text, what="path")
     except ParameterError as err:
         raise argparse.ArgumentTypeError(str(err).removeprefix("path: ")) from None
     return text
+
+
+def _picture_modules(path: str | None, flag: str = "--out") -> None:
+    """Where ``path`` (an :func:`out_image`) is given: import what draws and writes it, Pillow and matplotlib
+    (``rtp[capture]``), and check its extension, before the command's work. A missing one is an ImportError that
+    the error policy says in one line naming the extra, exit 2 (:data:`rtp.cli._run.OPTIONAL_MODULES`)."""
+    if path is None:
+        return
+    import importlib
+
+    from rtp.capture import check_image_output
+
+    for name in ("PIL.Image", "matplotlib"):
+        importlib.import_module(name)
+    check_image_output(path, what=flag)  # (what out_image could not check without Pillow)
 
 
 #: The extensions an animation is written to (imageio through Pillow, which writes every frame to these and
@@ -102,6 +125,16 @@ def _path_text(text: str) -> str:
         os.fsencode(text)
     except UnicodeEncodeError:  # a lone surrogate no file system name decodes to (an in-process caller's)
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (not encodable as a file name)") from None
+    return text
+
+
+def _in_file(text: str) -> str:
+    """An argparse type: a file to read (``--metadata``'s sidecar, ``--splits``' lists), refused now where it cannot
+    be one: empty (``--splits ""`` said "split file not found: .", ``--metadata ""`` "Is a directory: '.'") or a
+    folder ("split file not found" of a folder that is there). A missing file is its reader's to say."""
+    _path_text(text)
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; expected a file path")
     return text
 
 
@@ -426,6 +459,7 @@ def _cmd_adapters_check(args: argparse.Namespace) -> int:
     if ":" in args.adapter and "" not in sys.path and os.getcwd() not in sys.path:
         sys.path.insert(0, os.getcwd())  # module:Class from the plugin's own checkout, as python -m would
     tolerances = dict(args.tolerance or [])
+    _picture_modules(args.image, "--image")
     report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model, image=args.image,
                            scene=args.scene)
     if args.json:
@@ -554,9 +588,16 @@ def _ray_option(parser: argparse.ArgumentParser) -> None:
 def _cmd_preview(args: argparse.Namespace) -> int:
     from rtp.capture import open_dataset, preview_sheet, save_image
 
+    _picture_modules(args.out)
     ds = open_dataset(_dataset_folder(args))
     if not ds.ids:
         raise _usage(f"{args.data} holds no samples")
+    out = Path(args.out).resolve()
+    if out.is_file() and out.parent.parent == Path(ds.root).resolve() and out.parent.name in ds.ids:
+        # (the paper's layout keeps a sample's buffers as images: `--out DATA/0000/output_1x1.png` replaced the
+        # sample's full-rate image with the sheet, and every later read of the sample failed on its size)
+        raise _usage(f"--out {args.out!r} is a file of sample {out.parent.name!r} of {args.data}: the sheet would replace "
+                     "it; write it to another path")
     sample_id = ds.ids[0] if args.sample is None else args.sample  # (--sample "" is no sample, not the first)
     save_image(args.out, preview_sheet(ds[sample_id], scale=args.scale))
     print(f"{args.out}: sample {sample_id} of {args.data}")
@@ -884,7 +925,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "$RTP_SCENE_CACHE sets the default")
 
     def splits(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("--splits", default=None, metavar="SCENES.yaml",
+        sp.add_argument("--splits", default=None, type=_in_file, metavar="SCENES.yaml",
                         help="the train/validation/test lists (default: the copy shipped with rtp)")
 
     def dataset_folder(sp: argparse.ArgumentParser, help: str) -> None:
@@ -896,7 +937,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the dataset folder, as DATA")
 
     def model_metadata(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("--metadata", default=None, metavar="SIDECAR.yaml",
+        sp.add_argument("--metadata", default=None, type=_in_file, metavar="SIDECAR.yaml",
                         help="metadata for a model that carries none (default: the model's own)")
 
     info = command("info", "show a model's metadata, inputs, outputs and provider", _cmd_info)

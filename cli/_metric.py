@@ -62,7 +62,12 @@ def _check_memory(args: argparse.Namespace) -> None:
 def run_metric(args: argparse.Namespace) -> int:
     from rtp import metrics, sdk
 
+    from ._main import _picture_modules
+
     params = _parameters(args)
+    if args.out:
+        _check_not_an_input(args)
+        _picture_modules(args.out)  # (without Pillow or matplotlib: said before the metric runs, not after)
     _check_memory(args)
     metrics.check_dependencies([args.metric])  # (a plugin's missing module was blamed on its error_map)
     ref, test = _read(args.reference), _read(args.test)
@@ -99,6 +104,23 @@ def run_metric(args: argparse.Namespace) -> int:
     if args.out:
         print(f"wrote {args.out}")
     return 0
+
+
+def _check_not_an_input(args: argparse.Namespace) -> None:
+    """``--out`` naming one of the two images compared (``rtp metric flip ref.png test.png --out test.png``, a
+    slip of the shell's history) replaced that image with the map: it is refused before any work."""
+    import os
+
+    from rtp import sdk
+
+    for which, path in (("reference", args.reference), ("test", args.test)):
+        try:
+            same = os.path.samefile(args.out, path)
+        except (OSError, ValueError):  # (either is not there, or not a path: nothing to overwrite, or _read says so)
+            continue
+        if same:
+            raise sdk.ParameterError(f"--out {args.out!r} is the {which} image itself; the map would replace it: write "
+                                     "it to another path")
 
 
 def _parameters(args: argparse.Namespace) -> dict[str, Any]:

@@ -289,6 +289,90 @@ def test_a_device_torch_cannot_use_is_said_with_its_flag(
     assert not out.exists() and not (tmp_path / "ds").exists()
 
 
+def test_metric_out_naming_an_input_image_is_refused_before_any_work(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp metric flip ref.png test.png --out test.png` (or the reference, under another spelling of its path)
+    replaced the image compared with the map, exit 0: refused, exit 2, the image as it was."""
+    a, b, _, _ = _image_pair(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    before = {p: p.read_bytes() for p in (a, b)}
+    for out, which in ((str(b), "test"), (f"./{b.name}", "test"), (str(tmp_path / "." / a.name), "reference")):
+        assert main(["metric", "psnr", str(a), str(b), "--out", out]) == 2, out
+        got = capsys.readouterr()
+        assert f"rtp metric: error: --out {out!r} is the {which} image itself" in got.err and got.out == "", got
+        assert {p: p.read_bytes() for p in (a, b)} == before
+    assert main(["metric", "psnr", str(a), str(b), "--out", "map.png"]) == 0 and (tmp_path / "map.png").is_file()
+
+
+def test_preview_out_naming_a_file_of_a_sample_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The paper's layout keeps each sample's buffers as PNGs: `rtp preview DATA --out DATA/0000/output_1x1.png`
+    replaced the sample's full-rate image with the sheet (exit 0), and every later read of the sample failed on its
+    size. Refused, exit 2, the file as it was; a new file beside the dataset is written as before."""
+    from rtp import sdk
+    from rtp.capture._dataset import write_png
+
+    folder = tmp_path / "Bistro ü" / "0000"
+    rng = np.random.default_rng(0)
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1",
+                 *(f"output_{r}" for r in sdk.ALL_RATES)]:
+        write_png(folder / f"{stem}.png", rng.integers(0, 256, (24, 32, 4), dtype=np.uint8))
+    target = folder / "output_1x1.png"
+    before = target.read_bytes()
+    assert main(["preview", str(folder.parent), "--out", str(target)]) == 2
+    got = capsys.readouterr()
+    assert f"rtp preview: error: --out {str(target)!r} is a file of sample '0000' of " in got.err and got.out == ""
+    assert target.read_bytes() == before
+    assert main(["preview", str(folder.parent), "--out", str(tmp_path / "sheet.png")]) == 0
+    assert (tmp_path / "sheet.png").is_file()
+
+
+def test_a_sidecar_or_split_list_that_is_no_file_is_a_usage_error_naming_its_flag(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--metadata ""` said "'': cannot be read as a UTF-8 YAML sidecar (Is a directory: '.')" and `--splits ""` or
+    `--splits FOLDER` "split file not found: ." or of a folder that is there: each is a usage error of its flag."""
+    for argv, flag, value, said in ((["info", "jnyang", "--metadata"], "--metadata", "", "expected a path, got ''"),
+                                    (["info", "jnyang", "--metadata"], "--metadata", str(tmp_path), "is a folder"),
+                                    (["scenes", "list", "--splits"], "--splits", "", "expected a path, got ''"),
+                                    (["scenes", "list", "--splits"], "--splits", str(tmp_path), "is a folder")):
+        with pytest.raises(SystemExit) as info:
+            main([*argv, value, "--cache-dir", str(tmp_path)] if argv[0] == "scenes" else [*argv, value])
+        assert info.value.code == 2
+        err = capsys.readouterr().err
+        assert f"error: argument {flag}: " in err and said in err and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("missing", ["PIL", "matplotlib"])
+def test_an_image_output_without_the_picture_packages_is_one_line_before_any_work(
+        missing: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """On the runtime install (no Pillow) `rtp preview --out`, `rtp metric --out` and `rtp adapters check --image`
+    ended in a ModuleNotFoundError traceback while the arguments were parsed (the argument's type imported Pillow to
+    check the extension); without matplotlib, `rtp metric --out` computed the metric first. Each says what to install
+    in one line, exit 2, before any work, writing nothing."""
+    import importlib.abc
+
+    class NotInstalled(importlib.abc.MetaPathFinder):
+        def find_spec(self, name: str, path: object, target: object = None) -> None:
+            if name.partition(".")[0] == missing:
+                raise ModuleNotFoundError(f"No module named {missing!r}", name=missing)
+
+    a, b, _, _ = _image_pair(tmp_path)
+    (tmp_path / "data").mkdir()
+    out = tmp_path / "out.png"
+    with monkeypatch.context() as m:
+        for module in [k for k in sys.modules if k.partition(".")[0] == missing]:
+            m.delitem(sys.modules, module)
+        m.setattr(sys, "meta_path", [NotInstalled(), *sys.meta_path])
+        for argv in (["preview", str(tmp_path / "data"), "--out", str(out)],
+                     ["metric", "psnr", str(a), str(b), "--out", str(out)],
+                     ["adapters", "check", "moderngl", "--image", str(out)]):
+            assert main(argv) == 2, argv
+            got = capsys.readouterr()
+            assert got.err == f"rtp {' '.join(argv[:2]) if argv[0] == 'adapters' else argv[0]}: error: this needs " \
+                              f"{missing}, which is not installed: pip install 'rtp[capture]'\n", got.err
+            assert got.out == "" and not out.exists(), argv
+
+
 def test_targets_of_an_empty_dataset_path_are_refused_not_the_current_folder(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp targets ""` (an unset shell variable) read the current folder as the dataset (". is not an rtp
