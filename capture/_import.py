@@ -39,6 +39,7 @@ from ._dataset import (
     _open_sample,
     sample_path,
 )
+from ._memory import check_memory
 
 __all__ = ["FINAL_KEYS", "ImportReport", "REQUIRED_GBUFFERS", "import_frames"]
 
@@ -58,6 +59,12 @@ OPTIONAL_BUFFERS = ("roughness", "metallic", "specular", "shadow", "emissive")
 OPTIONAL_ARRAYS = (*OPTIONAL_BUFFERS, "motion", "prev_projection")
 #: The command that writes example frames (the hints of the errors).
 EXAMPLE = "rtp import FRAMES --write-example --frames 8"
+#: The bytes an import holds besides its frame's arrays (Python, numpy, the SDK) and for each pixel of a frame (the
+#: arrays' float copies, the input planes and the reprojection, the encoded sample): the peak resident set of an
+#: import of 640x360, 1280x720 and 1920x1080 frames (uint8 final images, float32 G-buffers: 105 bytes a pixel read)
+#: was 165, 509 and 1083 MiB, 522 bytes a pixel.
+IMPORT_BASE = 64 * 2**20
+IMPORT_PER_PIXEL = 420.0
 #: ``profile``'s default (recorded in the manifest's settings only when another is given).
 DEFAULT_PROFILE = "engine"
 #: The manifest's ``settings["source"]`` of an imported dataset.
@@ -72,6 +79,7 @@ class ImportReport:
     absent: tuple[str, ...] = ()
     unseen: list[float] = field(default_factory=list)  # per new sample, the share of its geometry not seen
     warnings: dict[str, int] = field(default_factory=dict)  # sdk.check_gbuffers' warnings, by kind: frames with it
+    exchanged: int = 0  # new frames whose anisotropic rates' images look exchanged (final_1x2 and final_2x1, ...)
 
 
 def _scene_name(scene: str | None, file: str) -> str:
@@ -93,11 +101,13 @@ def _sample_id(scene: str, path: str) -> str:
     return sid
 
 
-def _members(path: str) -> dict[str, tuple[int, ...]]:
-    """The arrays of a frame file and their shapes, read from each array's header (not its data)."""
+def _members(path: str) -> tuple[dict[str, tuple[int, ...]], int]:
+    """The arrays of a frame file and their shapes, and the bytes its arrays hold in memory, read from each array's
+    header (not its data)."""
     import zipfile
 
     shapes: dict[str, tuple[int, ...]] = {}
+    nbytes = 0
     try:
         with zipfile.ZipFile(path) as z:
             for info in z.infolist():
@@ -107,11 +117,13 @@ def _members(path: str) -> dict[str, tuple[int, ...]]:
                     version = np.lib.format.read_magic(fh)
                     header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
                               else np.lib.format.read_array_header_2_0)
-                    shapes[info.filename[:-4]] = tuple(header(fh)[0])
+                    shape, _, dtype = header(fh)
+                    shapes[info.filename[:-4]] = tuple(shape)
+                    nbytes += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
     except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
         raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({type(err).__name__}: {err}; "
                              f"`{EXAMPLE}` writes frames)", "frames") from None
-    return shapes
+    return shapes, nbytes
 
 
 def _read(path: str) -> dict[str, Any]:
@@ -140,7 +152,8 @@ def _source(path: str) -> dict[str, Any]:
     """What a sample records of the frame file it was imported from: its size and time (a cheap check) and its
     bytes' SHA-256 (the check when the cheap one differs: a copy changes the time, not the frame)."""
     st = os.stat(path)
-    return {"bytes": int(st.st_size), "mtime_ns": int(st.st_mtime_ns), "sha256": _sha256(path)}
+    return {"bytes": int(st.st_size), "mtime_ns": int(st.st_mtime_ns), "sha256": _sha256(path),
+            "path": os.path.abspath(path)}
 
 
 def _sha256(path: str) -> str:
@@ -167,7 +180,9 @@ def _state(writer: DatasetWriter, sample_id: str, frame: str) -> str:
     is now; ``"changed"`` where it is of the frame file as it was; ``"missing"`` otherwise. One damaged since (cut
     short by a copy, a disk) is deleted, with a warning, and imported again rather than kept for ``rtp targets`` to
     fail on; one of a frame dumped again since (other bytes) is imported again, with a warning, replacing it (its
-    targets are then older than it, and ``rtp targets`` computes them again)."""
+    targets are then older than it, and ``rtp targets`` computes them again). One imported from another path whose
+    file is still there as it was imported (a folder of the same file names imported under the same ``scene``) is a
+    ParameterError, not replaced."""
     path = sample_path(writer.root, sample_id)
     if not path.is_file():
         return "missing"
@@ -177,7 +192,15 @@ def _state(writer: DatasetWriter, sample_id: str, frame: str) -> str:
         log.warning("%s; imported again", err)
         path.unlink(missing_ok=True)
         return "missing"
-    if not _same_source(sample.meta.get("source_file"), frame):
+    recorded = sample.meta.get("source_file")
+    if not _same_source(recorded, frame):
+        was = recorded.get("path") if isinstance(recorded, dict) else None
+        if isinstance(was, str) and was != os.path.abspath(frame) and os.path.isfile(was) and _same_source(
+                recorded, was):  # (another frame file, still there as imported: not this one dumped again)
+            raise ParameterError(f"{frame!r} would replace the sample {sample_id!r}, imported from {was!r}, another "
+                                 f"frame file, still there as imported (the same file name in two folders of one "
+                                 f"--scene?): give these frames another --scene, or delete {str(path)!r} to replace "
+                                 f"it", "frames")
         log.warning("%s changed since it was imported as sample %s (dumped again?): imported again", frame, sample_id)
         return "changed"
     return "kept"
@@ -203,6 +226,42 @@ def _final(path: str, key: str, a: Any, hw: tuple[int, int]) -> np.ndarray:
         raise ParameterError(f"{path!r}: {key} has values in [{v.min():.4g}, {v.max():.4g}]: expected display-encoded "
                              f"values in [0, 1], the frame as shown (tone-mapped, sRGB-encoded)", key)
     return np.clip(v, 0.0, 1.0)
+
+
+#: The frame file's arrays of the frame's own size, (H, W) or (H, W, C): checked from their headers before anything
+#: is written.
+_FRAME_SIZED = ("albedo", "normal", "roughness", "metallic", "specular", "shadow", "emissive", "motion")
+
+#: The anisotropic rates whose images are told apart, (wide, tall) and the block size along the long side.
+_ANISOTROPIC = (("2x1", "1x2", 2), ("4x2", "2x4", 4))
+#: The fewest pixels along each side for that check (fewer: too few blocks to tell, nothing said).
+_EXCHANGE_MIN_SIDE = 16
+
+
+def _blocked(luma: np.ndarray, axis: int, size: int) -> float:
+    """How much ``luma`` repeats in blocks of ``size`` pixels along ``axis``, whatever the blocks' phase: of the
+    mean differences between neighbours at each of the ``size`` offsets, the second largest over the largest (near 0:
+    blocks of that size, the one offset across their edges differing; near 1: none)."""
+    d = np.abs(np.diff(luma, axis=axis)).mean(axis=1 - axis)
+    phases = sorted(float(d[j::size].mean()) for j in range(size))
+    return phases[-2] / phases[-1] if phases[-1] > 1e-6 else 1.0
+
+
+def _exchanged(finals: dict[str, np.ndarray]) -> list[tuple[str, str]]:
+    """The pairs of anisotropic rates (wide, tall) whose final images look exchanged: the one named tall (1x2: 1
+    pixel wide, 2 tall) repeats side by side and not one above the other, and the one named wide the other way round.
+    A cheap check, both images of a pair needing clear evidence (one side's ratio under half the other's): on the
+    reference renderer's frames (procedural scenes, 33x19 to 160x90) the named rate's long side's ratio is under 0.15,
+    its short side's over 0.6."""
+    out = []
+    for wide, tall, size in _ANISOTROPIC:
+        t, v = (finals[f"final_{r}"].mean(axis=-1) for r in (tall, wide))
+        if min(t.shape) < max(_EXCHANGE_MIN_SIDE, 4 * size + 1):
+            continue
+        if (_blocked(t, 1, size) < 0.5 * _blocked(t, 0, size)
+                and _blocked(v, 0, size) < 0.5 * _blocked(v, 1, size)):
+            out.append((wide, tall))
+    return out
 
 
 #: Dataset buffer -> the input planes it stores, in its last axis' order.
@@ -259,7 +318,10 @@ def import_frames(
     Everything is checked before the first sample is written: the files, the arrays each holds, their
     size, and the dataset folder's settings (a folder imported with other conventions or G-buffers, or
     captured by the reference renderer, is refused rather than mixed). Each sample is written atomically;
-    ``sdk.check_gbuffers``' convention warnings are logged once per kind and counted in the report.
+    ``sdk.check_gbuffers``' convention warnings are logged once per kind and counted in the report, and so are
+    frames whose anisotropic rates' images look exchanged (``final_1x2`` repeating side by side and ``final_2x1``
+    one above the other; ``final_2x4`` and ``final_4x2``): ``exchanged``. Frames past the machine's memory are
+    refused before the first is read (``RTP_MEMORY_CHECK``).
     """
     files = frame_files(list(frames) if not isinstance(frames, (str, os.PathLike)) else [frames], example=EXAMPLE)
     if not files:
@@ -279,11 +341,12 @@ def import_frames(
                              f"import each folder with its own --scene", "frames")
 
     # the arrays of every frame and their size, before anything is written
-    members, sizes = {}, {}
+    members, sizes, frame_bytes = {}, {}, 0
     for f in files:
         if not Path(f).is_file():
             raise ParameterError(f"{f!r}: no such file (`{EXAMPLE}` writes frames of the reference renderer)", "frames")
-        members[f] = _members(f)
+        members[f], nbytes = _members(f)
+        frame_bytes = max(frame_bytes, nbytes)
         lacks = [k for k in (*REQUIRED_GBUFFERS, *FINAL_KEYS) if k not in members[f]]
         if lacks:
             raise ParameterError(f"{f!r} lacks {', '.join(lacks)}: a frame to train on holds "
@@ -298,6 +361,15 @@ def import_frames(
             got = members[f][key]
             if got[:2] != shape[:2] or (key != "depth" and (len(got) != 3 or got[2] not in (3, 4))):
                 raise ParameterError(f"{f!r}: {key} has shape {got}, expected {want}: final_1x1's size", key)
+        # the other planes of the frame's size, and the previous frame's two of one size (the SDK's check, found
+        # when the frame's turn came: the frames before it were written by then)
+        for key in _FRAME_SIZED:
+            if key in members[f] and (len(got := members[f][key]) not in (2, 3) or got[:2] != shape[:2]):
+                raise ParameterError(f"{f!r}: {key} has shape {got}, expected {GBUFFERS[key][0]} of final_1x1's "
+                                     f"size, (H, W) = ({shape[0]}, {shape[1]})", key)
+        if members[f]["prev_colour"][:2] != members[f]["prev_depth"][:2]:
+            raise ParameterError(f"{f!r}: prev_colour has shape {members[f]['prev_colour']}, expected prev_depth's "
+                                 f"size {members[f]['prev_depth'][:2]} (the previous frame's)", "prev_colour")
         sizes[f] = shape[:2]
     if len(set(sizes.values())) > 1:
         counts = Counter(sizes.values())
@@ -329,6 +401,12 @@ def import_frames(
                              f"{tolerance!r}", "tolerance")
     conventions = {"albedo_linear": albedo_linear, "normal_space": normal_space, "depth_kind": depth_kind,
                    "tolerance": float(tolerance)}
+    # the memory a frame's import holds (its arrays, their float copies, the planes, the sample), before the first
+    # frame is read: frames past the machine's memory were read until the system killed the import, or numpy's
+    # MemoryError was taken for a damaged file
+    need = int(IMPORT_BASE + IMPORT_PER_PIXEL * h * w + frame_bytes)
+    check_memory(need, f"an import of frames of {w}x{h} holds about {need / 2**30:.1f} GiB", "frames",
+                 "of memory: smaller frames (crop or scale the dumps)", job="the import")
     # the first frame made into a sample: its arrays, the conventions and the tolerance checked by the SDK
     # before the dataset's manifest records them
     _buffers(files[0], _read(files[0]), present, conventions)
@@ -380,6 +458,16 @@ def import_frames(
                 if warned[kind] == 1:
                     log.warning(f"{f}: {text}")  # (its own message: one template hid every kind after the first)
             buffers, seen = _buffers(f, arrays, present, conventions)
+            exchanged = _exchanged(buffers)
+            if exchanged:  # (a model trained on them picks 2x1 where 1x2 would do: nothing else catches it)
+                report.exchanged += 1
+                if report.exchanged == 1:
+                    pairs = " and ".join(f"final_{t} and final_{w}" for w, t in exchanged)
+                    log.warning(f"{f}: {pairs} look exchanged: final_{exchanged[0][1]}'s pixels repeat side by side "
+                                f"and final_{exchanged[0][0]}'s one above the other; final_WxH is the frame shaded at "
+                                f"blocks W pixels wide and H tall (D3D12_SHADING_RATE_1X2, Vulkan's fragment size "
+                                f"1x2: 1 wide, 2 tall): name the images so, or the model learns the wrong "
+                                f"anisotropic rate")
             geo = buffers["depth"] > 0
             unseen = float(1.0 - seen[geo].mean()) if geo.any() else 0.0
             writer.write(sid, buffers, {"scene": name, "profile": profile, "source": Path(f).name,

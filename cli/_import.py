@@ -57,6 +57,10 @@ def run_import(args: argparse.Namespace) -> int:
     if report.warnings:
         print(f"convention warnings on {max(report.warnings.values())} of {report.written} frames (logged above): "
               f"check --albedo-linear, --normal-space and --depth-kind", file=sys.stderr)
+    if report.exchanged:
+        print(f"rate images look exchanged on {report.exchanged} of {report.written} frames (logged above): check "
+              f"which is final_1x2 (1 pixel wide, 2 tall) and which final_2x1 (and final_2x4, final_4x2)",
+              file=sys.stderr)
     print(f"next: rtp targets {args.out}, then rtp train --data {args.out} --metric jnyang --out model.pt (validation "
           f"holds out whole levels: import two or more, and name one with --val-scenes)")
     return 0

@@ -427,3 +427,122 @@ def test_a_frame_dumped_again_is_imported_again_and_an_unchanged_copy_is_not(
     assert rtp_main(["import", str(level), "--out", str(data)]) == 0
     assert "1 frames imported (1 of them dumped again since their import: their samples replaced), 2 already there" \
         in capsys.readouterr().out
+
+
+def test_exchanged_anisotropic_rate_images_are_warned_once_and_counted(
+        dumps: Any, tmp_path: Path, caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str]) -> None:
+    """final_1x2 and final_2x1 exchanged in an engine's dump (its names for the rates the other way round) imported
+    without a word, and trained a model that picks 2x1 where 1x2 would do: the images' own blocks show it."""
+    root, _, _ = dumps
+    from rtp.capture._import import _exchanged
+    from rtp.cli._predict import _save_frame
+
+    report = import_frames([root / "level_a", root / "level_b"], tmp_path / "true")
+    assert (report.written, report.exchanged) == (6, 0)
+    for pair in (("1x2", "2x1"), ("2x4", "4x2")):
+        swapped = tmp_path / f"swapped_{pair[0]}"
+        swapped.mkdir()
+        for f in sorted((root / "level_a").glob("*.npz")):
+            arrays = dict(np.load(f))
+            a, b = (f"final_{r}" for r in pair)
+            arrays[a], arrays[b] = arrays[b], arrays[a]
+            _save_frame(swapped / f.name, arrays)
+        caplog.clear()
+        with caplog.at_level("WARNING", "rtp.capture"):
+            report = import_frames(swapped, tmp_path / f"data_{pair[0]}", scene="x")
+        assert (report.written, report.exchanged, report.warnings) == (3, 3, {})
+        (record,) = [r for r in caplog.records if r.name == "rtp.capture" and r.levelname == "WARNING"]
+        assert f"swapped_{pair[0]}/frame_0000.npz: final_{pair[0]} and final_{pair[1]} look exchanged" \
+            in record.getMessage()
+    assert rtp_main(["import", str(tmp_path / "swapped_1x2"), "--out", str(tmp_path / "cli")]) == 0
+    assert "rate images look exchanged on 3 of 3 frames" in capsys.readouterr().err
+    # the renderer's own rate images at sizes whose blocks start at another phase (odd sizes, GL's rows from the
+    # bottom) and in other scenes: nothing said
+    from rtp.capture import load_scene
+    from rtp.capture.paths import camera_path
+    from rtp.plugins.moderngl import Renderer
+
+    for scene, (w, h) in (("procedural:7", (75, 47)), ("procedural:5", (130, 66)), ("procedural:2", (33, 17))):
+        scn, blockers = load_scene(scene, None, None, None)
+        cams = camera_path(scn, 3, "fast", 0, blockers=blockers).cameras
+        with Renderer(w, h) as r:
+            r.load_scene(scn)
+            prev = r.render(cams[0])
+            for cam in cams[1:]:
+                cur = r.render(cam, prev)
+                finals = {f"final_{k}": np.round(v * 255) / 255 for k, v in cur.colour.items()}
+                assert _exchanged(finals) == [], scene
+                swapped = {**finals, "final_1x2": finals["final_2x1"], "final_2x1": finals["final_1x2"],
+                           "final_2x4": finals["final_4x2"], "final_4x2": finals["final_2x4"]}
+                assert _exchanged(swapped) == [("2x1", "1x2"), ("4x2", "2x4")], scene
+                prev = cur
+
+
+def test_a_later_frames_g_buffer_of_another_size_is_refused_before_anything_is_written(
+        dumps: Any, tmp_path: Path) -> None:
+    """Only the final images and the depth were checked against the frame's size before the import began: a later
+    frame's albedo of another size was found at its turn, the frames before it written (the docs: "before the first
+    sample is written, every frame is checked: ... its size")."""
+    import shutil
+
+    root, _, _ = dumps
+    from rtp.cli._predict import _save_frame
+
+    for key, cut in (("albedo", lambda a: a[:-2]), ("motion", lambda a: a[:, 1:]),
+                     ("prev_colour", lambda a: a[::2, ::2])):
+        level = tmp_path / f"lvl_{key}"
+        shutil.copytree(root / "level_a", level)
+        arrays = dict(np.load(level / "frame_0002.npz"))
+        arrays[key] = cut(arrays[key])
+        _save_frame(level / "frame_0002.npz", arrays)
+        with pytest.raises(sdk.ParameterError, match=rf"frame_0002.npz': {key} has shape \(") as err:
+            import_frames(level, tmp_path / f"data_{key}")
+        assert err.value.name == key
+        assert not (tmp_path / f"data_{key}").exists()
+
+
+def test_frames_past_the_machines_memory_are_refused_before_any_is_read(
+        dumps: Any, tmp_path: Path, machine_memory: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An import sized nothing: frames past the machine's memory were read until the system killed it, or numpy's
+    MemoryError was reported as a damaged frame file."""
+    root, _, _ = dumps
+    from rtp.capture import _import
+
+    read: list[Any] = []
+    real = _import.read_frame
+    monkeypatch.setattr(_import, "read_frame", lambda *a, **k: read.append(a) or real(*a, **k))
+    machine_memory(MemTotal=32 * 2**20)
+    with pytest.raises(sdk.ParameterError, match=r"frames: an import of frames of 96x64 holds about 0.1 GiB, more "
+                                                 r"than this machine's 0.0 GiB of memory: smaller frames") as err:
+        import_frames(root / "level_a", tmp_path / "data")
+    assert err.value.name == "frames" and not read and not (tmp_path / "data").exists()
+    machine_memory(MemTotal=4 * 2**30)  # (a 96x64 frame's import: about 67 MiB)
+    assert import_frames(root / "level_a", tmp_path / "data").written == 3
+
+
+def test_another_folders_frames_of_the_same_names_and_scene_do_not_replace_its_samples(
+        dumps: Any, tmp_path: Path) -> None:
+    """Two dump sessions of one level (each frame_0000.npz ...) imported one after the other with the same --scene:
+    the second's frames were taken for the first's dumped again, replacing its samples ("3 frames imported (3 of them
+    dumped again since their import: their samples replaced)"), the first session lost from the dataset."""
+    import shutil
+
+    root, _, _ = dumps
+    data = tmp_path / "data"
+    assert import_frames(root / "level_a", data, scene="arena").written == 3
+    before = {p.name: p.read_bytes() for p in (data / "samples").iterdir()}
+    with pytest.raises(sdk.ParameterError, match=r"level_b/frame_0000.npz' would replace the sample 'arena-frame_0000'"
+                                                 r", imported from '.*level_a/frame_0000.npz', another frame file, "
+                                                 r"still there as imported") as err:
+        import_frames(root / "level_b", data, scene="arena")
+    assert err.value.name == "frames"
+    assert {p.name: p.read_bytes() for p in (data / "samples").iterdir()} == before
+    # the first folder moved away (or dumped again in place): its frames' new bytes replace the samples, as before
+    moved = tmp_path / "session2"
+    shutil.copytree(root / "level_b", moved)
+    shutil.copytree(root / "level_a", tmp_path / "session1")
+    again = tmp_path / "again"
+    assert import_frames(tmp_path / "session1", again, scene="arena").written == 3
+    shutil.rmtree(tmp_path / "session1")
+    report = import_frames(moved, again, scene="arena")
+    assert (report.written, report.replaced) == (3, 3)
