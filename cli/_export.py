@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
+from ._main import _in_file, _out_file, _path_text
 from ._run import Formatter, Parser, add_common, carries_metadata, interruptible_start, option_flags, run
 
 __all__ = ["build_export_parser", "export_main"]
@@ -30,18 +31,18 @@ def build_export_parser() -> argparse.ArgumentParser:
         "foreign ONNX model by baking a metadata sidecar into it.",
     )
     add_common(p, top=True)
-    p.add_argument("checkpoint", nargs="?", help="checkpoint written by `rtp train` (model.pt)")
-    p.add_argument("-o", "--output", help="output .onnx path (default: the checkpoint path with .onnx)")
+    p.add_argument("checkpoint", nargs="?", type=_in_file, help="checkpoint written by `rtp train` (model.pt)")
+    p.add_argument("-o", "--output", type=_out_file, help="output .onnx path (default: the checkpoint path with .onnx)")
     p.add_argument("--opset", type=int, default=None, help=f"ONNX opset of a checkpoint's export (default: {DEFAULT_OPSET})")
-    p.add_argument("--metadata", metavar="SIDECAR.yaml",
+    p.add_argument("--metadata", metavar="SIDECAR.yaml", type=_in_file,
                    help="metadata fields: merged over the checkpoint's (not what the network was trained for, nor "
                    "what the export computes: input_multiple, finite_probe, tail, schema_version, digest), or the "
                    "whole sidecar with --adopt (default with --adopt: rtp's sidecar for a recognised published model)")
-    p.add_argument("--adopt", metavar="FOREIGN.onnx", help="bake --metadata into this ONNX model instead; the "
+    p.add_argument("--adopt", metavar="FOREIGN.onnx", type=_in_file, help="bake --metadata into this ONNX model instead; the "
                    "paper's six published models are recognised by their SHA-256 and need no --metadata")
     p.add_argument("--dynamic", action="store_true", help="with --adopt: make batch, height and width symbolic")
     p.add_argument("--replace", action="store_true", help="with --adopt: overwrite metadata the model already has")
-    p.add_argument("--restamp", metavar="MODEL.onnx", help="bring an rtp model exported by an older rtp up to "
+    p.add_argument("--restamp", metavar="MODEL.onnx", type=_in_file, help="bring an rtp model exported by an older rtp up to "
                    "this one's format: the digest of graph and weights, the finite probe where its first "
                    "layer allows one, and the input planes in today's groups (in place; predictions checked "
                    "unchanged)")
@@ -49,12 +50,15 @@ def build_export_parser() -> argparse.ArgumentParser:
                    "output (docs/export.md): for an engine that runs the file with its own onnxruntime session")
     p.add_argument("--one-input", action="store_true", help="export a checkpoint with every input plane in the one "
                    "input `input`, not in groups of at most seven (docs/export.md \"Input planes in groups\")")
-    p.add_argument("--strip-probe", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
+    p.add_argument("--strip-probe", metavar="MODEL", type=_path_text,
+                   help="write a copy of an rtp model (a path or a shipped model's "
                    "name) without its finite probe to -o OUTPUT.onnx (predictions unchanged)")
-    p.add_argument("--join-planes", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's "
+    p.add_argument("--join-planes", metavar="MODEL", type=_path_text,
+                   help="write a copy of an rtp model (a path or a shipped model's "
                    "name) whose planes come in groups with every plane in the one input `input` to -o OUTPUT.onnx "
                    "(predictions unchanged but for float rounding; docs/export.md \"Input planes in groups\")")
-    p.add_argument("--retune", metavar="MODEL", help="write a copy of an rtp model (a path or a shipped model's name) "
+    p.add_argument("--retune", metavar="MODEL", type=_path_text,
+                   help="write a copy of an rtp model (a path or a shipped model's name) "
                    "to -o OUTPUT.onnx whose decision fields (default_threshold, rate_factors, description) are those "
                    "of --metadata SIDECAR.yaml (predictions unchanged; e.g. the factors `python bench/per_rate.py "
                    "--sidecar` fits on validation data, docs/export.md)")

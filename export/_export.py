@@ -91,16 +91,18 @@ def _is_zip(path: Path) -> bool:
 
 
 def _is_onnx(path: Path) -> bool:
-    """Whether ``path`` parses as an ONNX model (its weights' external files, if any, not read)."""
+    """Whether ``path`` parses as an ONNX model (its weights' external files, if any, not read) that has an IR
+    version and a graph, as every model onnx's checker or onnxruntime takes has: protobuf parses many short texts
+    (``0``, ``x``, ``8``: a line of one) as a message of unknown fields, and such a file was replaced by an export."""
     if _is_zip(path):
         return False
     import onnx
 
     try:
-        onnx.load(str(path), load_external_data=False)
+        model = onnx.load(str(path), load_external_data=False)
     except Exception:  # (protobuf's DecodeError and its kin: anything that is no model)
         return False
-    return True
+    return bool(model.ir_version > 0 and model.HasField("graph"))
 
 
 def _path(value: Any, what: str) -> Path:

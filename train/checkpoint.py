@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import io
 import os
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,13 +158,19 @@ def load(path: str | os.PathLike[str]) -> Checkpoint:
         raise ModelNotFoundError(f"checkpoint {str(p)!r} is a folder, not a file" if p.is_dir()
                                  else f"no checkpoint at {str(p)!r}")
     try:
-        raw = torch.load(p, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # (a pickle of another program, protocol 4 or 5: torch's two-line warning
+            # "Detected pickle protocol 4 in the checkpoint ..." came before the one-line error it ends in)
+            warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
+            raw = torch.load(p, map_location="cpu", weights_only=True)
     except Exception as err:  # torch raises UnpicklingError, RuntimeError, EOFError, ... with pages of advice
         hint = ("; to bake a sidecar into a foreign ONNX model use "
                 "`rtp-export --adopt MODEL.onnx --metadata SIDECAR.yaml -o OUT.onnx`")
         if p.suffix.lower() in (".yaml", ".yml", ".json"):
             raise CheckpointError(f"{p} is a metadata file, not a checkpoint (the model.pt `rtp train` writes){hint}"
                                   ) from err
+        if p.suffix.lower() == ".onnx":  # ("torch cannot read it (UnpicklingError)" of a model exported already)
+            raise CheckpointError(f"{p}: not a checkpoint (the model.pt `rtp train` writes) but, by its name, an ONNX "
+                                  f"model, exported already (`rtp info` shows an rtp model's metadata){hint}") from err
         raise CheckpointError(  # torch's own message is pages of weights_only advice: -v shows it
             f"{p}: not a checkpoint (the model.pt `rtp train` writes): torch cannot read it ({type(err).__name__})"
         ) from err
