@@ -123,13 +123,33 @@ def _size_text(n: float) -> str:
     return f"{n / 1e12:,.1f} TB" if n >= 1e12 else f"{n / 1e9:,.1f} GB"
 
 
-def check_disk(out: str | os.PathLike[str], size: tuple[int, int], samples: int) -> None:
+def check_disk(out: str | os.PathLike[str], size: tuple[int, int], samples: int, *,
+               scene_names: Sequence[str] | None = None, profiles: Sequence[str] | None = None) -> None:
     """Refuse a capture of ``samples`` samples of ``size`` into ``out`` whose files could not fit on
     its disk even at their least (:data:`SAMPLE_BYTES_PER_PIXEL`), a :class:`ParameterError` naming
     ``per_scene``; warn where their typical size would not. Samples already in ``out`` count as
-    written (a resumed capture skips them)."""
+    written (a resumed capture skips them). Given the job's ``scene_names`` and ``profiles`` (``samples``
+    being ``per_scene`` for each scene and profile), only the job's own samples there count
+    (``<scene>-<profile>-<index>``, index below ``per_scene``): not other scenes' or profiles', which it
+    does not skip."""
     folder = Path(out)
-    have = sum(1 for _ in (folder / "samples").glob("*.npz")) if (folder / "samples").is_dir() else 0
+    files = sorted((folder / "samples").glob("*.npz")) if (folder / "samples").is_dir() else []
+    if scene_names is None and profiles is None:
+        have = len(files)
+    elif scene_names is None or profiles is None or not scene_names or not profiles:
+        raise ParameterError(f"scene_names and profiles: expected both, each one or more names, or neither; got "
+                             f"{scene_names!r} and {profiles!r}", "scene_names" if not scene_names else "profiles")
+    else:
+        jobs = len(scene_names) * len(profiles)
+        if samples % jobs:
+            raise ParameterError(f"samples: expected per_scene for each of the {jobs} scene and profile pairs "
+                                 f"(a multiple of {jobs}), got {samples}", "samples")
+        per_scene = samples // jobs
+        own = {f"{scene_id(s)}-{p}" for s in scene_names for p in profiles}
+        have = 0
+        for path in files:  # (the ids the job writes, as _ids makes them)
+            job, _, index = path.stem.rpartition("-")
+            have += job in own and index.isdigit() and int(index) < per_scene and f"{int(index):04d}" == index
     todo = max(0, samples - have)
     where = next((p for p in (folder, *folder.absolute().parents) if p.is_dir()), None)
     if not todo or where is None:
@@ -557,7 +577,8 @@ def capture(
         check_frame_size((w, h))
     for name in scene_names:  # every name now: not after the manifest, or an hour into the first map
         check_scene(name, cache_dir, split, None if splits is None else str(splits))
-    check_disk(out, (w, h), len(scene_names) * len(profiles) * per_scene)  # (the files are written here, Ray or not)
+    # (the files are written here, Ray or not; other scenes' samples in the folder are not this job's)
+    check_disk(out, (w, h), len(scene_names) * len(profiles) * per_scene, scene_names=scene_names, profiles=profiles)
     settings = {
         "size": [w, h],
         "renderer": "rtp.plugins.moderngl reference deferred renderer",

@@ -787,6 +787,14 @@ def export_checkpoint(
         log.warning("%s holds a training that has not finished (step %s; its safety margin, calibrated at the end, is "
                     "%g): the model is exported as it stands; the same rtp train command finishes it",
                     checkpoint, ckpt.training.get("step", "?"), ckpt.metadata.safety)
+    # (`rtp train` exits 1 on dead outputs and calls the checkpoint not fit to export; exporting it anyway was silent)
+    dead = ckpt.metadata.provenance.get("dead_outputs")
+    if isinstance(dead, (list, tuple)) and dead:
+        paper = ckpt.metadata.provenance.get("arch", "paper") == "paper"  # (the fast network has no --head)
+        log.warning("%s: output(s) %s predicted the same value on every validation tile when rtp train finished "
+                    "(provenance.dead_outputs): such a model picks rates blindly; it is exported as it stands (a dead "
+                    "output does not recover with more steps): train again with %s", checkpoint,
+                    ", ".join(map(str, dead)), "--head linear or another --seed" if paper else "another --seed")
     meta_dict = ckpt.metadata.to_dict()
     # (a sidecar's fields named no file: "default_threshold: expected a finite number, got nan")
     source = f"{extra_metadata}: " if isinstance(extra_metadata, (str, os.PathLike)) else ""

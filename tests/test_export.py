@@ -955,6 +955,25 @@ def test_an_unfinished_training_exports_with_a_warning(tmp_path: Path, caplog: p
                                          "rtp train command finishes it"])
 
 
+def test_a_checkpoint_with_dead_outputs_exports_with_a_warning(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """`rtp train` exits 1 on dead outputs and calls the checkpoint not fit to export; `rtp-export` exported it with
+    exit 0 and no word. It warns now, naming the outputs and what to do, and still exports; none dead says nothing."""
+    net = _trained_like_net()
+    for arch, dead, again in (("paper", ["2x1", "4x2"], "--head linear or another --seed"),
+                              ("fast", ["1x2"], "another --seed"), ("paper", [], None)):
+        meta = base_metadata(provenance={"arch": arch, "dead_outputs": dead})
+        ck = checkpoint.save(tmp_path / f"m{arch}{len(dead)}.pt", net, meta, {"done": True, "step": 250})
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp.export"):
+            out = export.export_checkpoint(ck, tmp_path / f"m{arch}{len(dead)}.onnx")
+        assert out.is_file()
+        said = [r.getMessage() for r in caplog.records if "dead_outputs" in r.getMessage()]
+        assert said == ([] if again is None else [
+            f"{ck}: output(s) {', '.join(dead)} predicted the same value on every validation tile when rtp train "
+            "finished (provenance.dead_outputs): such a model picks rates blindly; it is exported as it stands (a dead "
+            f"output does not recover with more steps): train again with {again}"])
+
+
 def test_metadata_errors_name_the_file_they_come_from(tmp_path: Path) -> None:
     """`rtp-export bad.pt` said `metric: expected a lower-case name ..., got None` and an empty sidecar
     `metric: ... got None` or `transform: required, missing`, naming no file; each names it now, the empty

@@ -163,6 +163,45 @@ def test_the_disk_check_counts_the_samples_already_written_and_warns_past_their_
     assert not caplog.text
 
 
+@pytest.mark.gl
+def test_the_disk_check_counts_only_the_jobs_own_samples_as_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A capture of a new scene into a folder holding another scene's samples counted those as its own, written:
+    1,000 samples of procedural:1 there and 1,000 of procedural:2 asked for were "nothing to write", and the capture
+    started on a disk they could not fit on. Only the job's own ids (scene, profile, index below per_scene) count."""
+    from rtp import sdk
+    from rtp.capture import capture, check_disk
+
+    out = tmp_path / "data"
+    (out / "samples").mkdir(parents=True)
+    for profile in ("slow", "fast"):
+        for i in range(500):
+            (out / "samples" / f"procedural_1-{profile}-{i:04d}.npz").write_bytes(b"")
+    _free(monkeypatch, 10**7)  # 10 MB: 1,000 samples at 160x96 take at least 0.08 GB
+
+    def started(total: int) -> None:
+        raise AssertionError(f"the capture of {total} samples started")
+
+    with pytest.raises(sdk.ParameterError, match=r"^per_scene: 1,000 samples at 160x96 take at least 0\.1 GB") as e:
+        capture(["procedural:2"], out, per_scene=500, size=(160, 96), starting=started)
+    assert e.value.name == "per_scene"
+    # the job's own samples count as written: procedural:1 resumed, its other profile and indices past per_scene not
+    check_disk(out, (160, 96), 1000, scene_names=["procedural:1"], profiles=["slow", "fast"])
+    with pytest.raises(sdk.ParameterError, match=r"^per_scene: 300 samples at 160x96"):
+        check_disk(out, (160, 96), 600, scene_names=["procedural:1"], profiles=["slow", "frame"])
+    _free(monkeypatch, 10**5)  # (2 samples: 0.15 MB at least)
+    with pytest.raises(sdk.ParameterError, match=r"^per_scene: 2 samples at 160x96"):
+        check_disk(out, (160, 96), 1002, scene_names=["procedural:1"], profiles=["slow", "fast"])
+    # (without the job's scenes and profiles, every sample in the folder counts, as before)
+    check_disk(out, (160, 96), 1000)
+    with pytest.raises(sdk.ParameterError, match=r"^samples: expected per_scene for each of the 2 scene and profile"):
+        check_disk(out, (160, 96), 1001, scene_names=["procedural:1"], profiles=["slow", "fast"])
+    with pytest.raises(sdk.ParameterError, match=r"^scene_names and profiles: expected both"):
+        check_disk(out, (160, 96), 1000, scene_names=["procedural:1"])
+    assert not (out / "manifest.json").exists()
+
+
 def test_a_killed_writes_temporary_file_is_removed_by_the_next_write(tmp_path: Path) -> None:
     """A write killed outright (kill -9: no cleanup ran) left `.model.onnx.XXXXXXXX.tmp` beside the file for good,
     every rerun adding another. The next write of the same file removes it once no live process holds it (each
