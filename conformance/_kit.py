@@ -379,6 +379,18 @@ def _within(plane: np.ndarray, ref: np.ndarray, tol: Tolerance, where: np.ndarra
 
 #: How well a plane must match one of :func:`_likely_cause`'s mistakes, on the geometry, for the kit to name it.
 _CAUSE_AGREEMENT = 0.9
+#: How closely the ranks of a depth plane in [0, 1] must follow the reference's view depth (Spearman's rho, either
+#: sign: a reversed-Z buffer falls with depth) for the kit to call it a depth buffer's values.
+_DEPTH_BUFFER_RANKS = 0.9
+
+
+def _follows_depth(values: np.ndarray, depth: np.ndarray) -> bool:
+    """Whether ``values`` rise (or fall) with ``depth`` across the pixels, as a depth buffer's do: a constant
+    plane (zeros in place of a depth buffer) or another channel's does not."""
+    if values.size < 2 or not (np.std(values) > 0 and np.std(depth) > 0):
+        return False
+    ranks = [np.argsort(np.argsort(v, kind="stable"), kind="stable").astype(np.float64) for v in (values, depth)]
+    return abs(float(np.corrcoef(ranks[0], ranks[1])[0, 1])) >= _DEPTH_BUFFER_RANKS
 
 
 def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Tolerance, share: float) -> str:
@@ -418,7 +430,8 @@ def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Toleranc
         radial = ref * np.sqrt(1.0 + xs[None, :] ** 2 + ys[:, None] ** 2)
         candidates.append(("the distance to the camera, not the view depth along -Z: divide by the length of "
                            "each pixel's ray at depth 1", radial, geo))
-        if geo.any() and float(ref[geo].max()) > 1.0 and float(np.abs(plane[geo]).max()) <= 1.0:
+        if (geo.any() and float(ref[geo].max()) > 1.0 and float(np.abs(plane[geo]).max()) <= 1.0
+                and _follows_depth(plane[geo], ref[geo])):  # (not any plane in [0, 1]: zeros, another channel)
             return (f"a depth buffer's values (in [0, 1], where the reference's reach {float(ref[geo].max()):.3g}), "
                     "not linear view depth in scene units: linearise it, or input_planes(depth_kind='window' or "
                     "'reversed')")
@@ -430,7 +443,8 @@ def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Toleranc
                 "depths in another convention (a transposed matrix, for row vectors; a depth buffer's values)? "
                 "sdk.check_gbuffers on one frame names such a mistake")
     for cause, expected, where in candidates:
-        if _within(plane, expected, tol, where) >= max(_CAUSE_AGREEMENT, share + 0.05):
+        # (clearly better than the reference's own plane: 5 points more, or every pixel where that is past 100%)
+        if _within(plane, expected, tol, where) >= min(1.0, max(_CAUSE_AGREEMENT, share + 0.05)):
             return cause
     return ""
 

@@ -392,7 +392,15 @@ def _with(**changed: Callable[[CpuFrame], Any]) -> Callable[[NumpyAdapter, CpuFr
 #: (None: it fails naming no cause).
 CAUSES: dict[str, tuple[Callable[[], type[NumpyAdapter]], dict[str, str | None]]] = {
     "green for luma": (lambda: NoLumaAdapter, {"albedo.y": None}),
-    "upside down": (BUGS["upside down"][0], {c: "the rows are upside down" for c in ("albedo.r", "normal.x", "depth")}),
+    # (seen: 96% of it agrees upside down, so its cause is named only where the flip matches every pixel: until
+    # 2026-12-07 a cause needed 5 points more than the plane's own share, past 100% for a share over 95%)
+    "upside down": (BUGS["upside down"][0], {c: "the rows are upside down" for c in ("albedo.r", "normal.x", "depth",
+                                                                                    "seen")}),
+    # a plane in [0, 1] that does not follow the depth is no depth buffer's (until 2026-12-07 the kit told an adapter
+    # filling depth with zeros, or handing another channel's plane in its place, to linearise its depth buffer)
+    "zeros for depth": (lambda: _broken("ZeroDepth", lambda a, f, x: _set(a, x, depth=np.zeros(x.shape[1:]))),
+                        {"depth": None}),
+    "planes in the adapter's own order": (BUGS["own order"][0], {"depth": None}),
     "linear albedo": (lambda: _broken("LinearAlbedo", inputs=_with(albedo=lambda f: sdk.srgb_to_linear(f.albedo))),
                       {f"albedo.{c}": "albedo in linear light" for c in "rgby"}),
     "world-space normals": (lambda: _broken("WorldNormals", inputs=_with(normal=lambda f: (
