@@ -361,6 +361,41 @@ def test_malformed_entity_values_fall_back(tmp_path: Path) -> None:
     assert light.colour == (1.0, 1.0, 1.0) and light.intensity == pytest.approx(10.0)
 
 
+
+def test_spawn_yaw_reads_angles_as_the_game_does(tmp_path: Path) -> None:
+    """The game sets a spawn point's facing from ``angle`` or from ``angles`` (pitch yaw roll), whichever
+    the entity sets last: an ``angles`` spawn faced Q3 angle 0 (yaw -90) whatever it said."""
+    spawn = '{{\n"classname" "info_player_deathmatch"\n"origin" "{x} 0 0"\n{keys}}}\n'
+    ents = "".join(spawn.format(x=10 * i, keys=keys) for i, keys in enumerate((
+        '"angles" "0 180 0"\n',  # yaw 180 -> 90
+        '"angle" "45"\n"angles" "10 270 0"\n',  # angles set last: 270 -> 180 (wrapped to -180)
+        '"angles" "0 270 0"\n"angle" "45"\n',  # angle set last: 45 -> -45
+        '"angles" "30"\n',  # no yaw in it: passed over, 0 -> -90
+    )))
+    scene = convert_bsp(_pk3(tmp_path / "angles.pk3", [("textures/test/wall", 0, 1)], ents)).scene
+    assert [sp.yaw for sp in scene.spawn_points] == pytest.approx([90.0, -180.0, -45.0, -90.0])
+
+
+def test_light_entity_values_as_q3map2_reads_them(tmp_path: Path) -> None:
+    """A light's value is q3map2's: ``_light`` before ``light``, a 0 falling back to the other and then to
+    300; a negative (darkening) light is no point light (it shone as a weak bright one); a colour of zeros
+    is white and a negative component none of that colour (``"1 -1 0"`` refused the whole map)."""
+    light = '{{\n"classname" "light"\n"origin" "{x} 0 64"\n{keys}}}\n'
+    ents = SPAWN + "".join(light.format(x=10 * i, keys=keys) for i, keys in enumerate((
+        '"light" "600"\n"_light" "900"\n',  # _light wins: 900
+        '"light" "0"\n',  # 0: the default 300
+        '"_light" "0"\n"light" "450"\n',  # _light 0: light's 450
+        '"light" "-500"\n',  # a dark light: none
+        '"light" "200"\n"_color" "0 0 0"\n',  # white
+        '"light" "150"\n"_color" "1 -1 0.5"\n',  # (1, 0, 0.5)
+    )))
+    scene = convert_bsp(_pk3(tmp_path / "values.pk3", [("textures/test/wall", 0, 1)], ents)).scene
+    lights = scene.point_lights
+    assert [round(pl.intensity * 30) for pl in lights] == [900, 300, 450, 200, 150]
+    assert [pl.position[0] for pl in lights] == pytest.approx([0.0, 10 * UNIT, 20 * UNIT, 40 * UNIT, 50 * UNIT])
+    assert lights[3].colour == (1.0, 1.0, 1.0) and lights[4].colour == pytest.approx((1.0, 0.0, 0.5))
+
+
 SKY_SHADER = """
 textures/skies/clouds
 {{
@@ -432,6 +467,20 @@ def test_texture_fallbacks(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> 
     assert lamp.texture is None
     (light,) = conv.scene.point_lights
     assert light.colour == (1.0, 1.0, 1.0)
+
+
+def test_a_dot_in_a_texture_name_is_part_of_it(tmp_path: Path) -> None:
+    """A name whose dot does not start an image extension (``ceil.blend``) gets one appended, as the engine
+    does (``ceil.blend.png``); it was read as ``ceil`` + extension ``.blend``, and the plain ``ceil.png``
+    beside it taken first. A name with an image extension the engine reads (``.bmp``) is taken as it is."""
+    bmp = io.BytesIO()
+    Image.new("RGB", (4, 4), (10, 20, 30)).save(bmp, format="BMP")
+    textures = [("textures/test/ceil.blend", 0, 1), ("textures/test/pic.bmp", 0, 1)]
+    extra = {"textures/test/ceil.png": _png(WALL_RGB), "textures/test/ceil.blend.png": _png(SKY_RGB),
+             "textures/test/pic.bmp": bmp.getvalue()}
+    blend, pic = convert_bsp(_pk3(tmp_path / "dots.pk3", textures, extra=extra)).scene.materials
+    assert blend.texture is not None and tuple(blend.texture[0, 0, :3]) == SKY_RGB
+    assert pic.texture is not None and tuple(pic.texture[0, 0, :3]) == (10, 20, 30)
 
 
 # -- malformed files ------------------------------------------------------------------------------------
@@ -515,6 +564,36 @@ def test_damaged_pk3_members(tmp_path: Path, caplog: pytest.LogCaptureFixture) -
         damage_zip_member(path, member)
         with pytest.raises(SceneFormatError, match=rf"{member} in .* is damaged \(Bad CRC-32.*\): replace the archive"):
             convert_bsp(path)
+
+
+def _set_member_header(archive: Path, member: str, *, method: int | None = None, flags: int | None = None) -> None:
+    """Member ``member`` of ``archive`` marked (in its local and central headers) with compression ``method``
+    or general-purpose ``flags``, its data unchanged."""
+    with zipfile.ZipFile(archive) as z:
+        offset = z.getinfo(member).header_offset
+    data = bytearray(archive.read_bytes())
+    central = data.rindex(b"PK\x01\x02")  # (the central header of the archive's only member)
+    for at, rel in ((offset, 0), (central, 2)):  # local: flags at 6, method at 8; central: at 8 and 10
+        if flags is not None:
+            struct.pack_into("<H", data, at + 6 + rel, flags)
+        if method is not None:
+            struct.pack_into("<H", data, at + 8 + rel, method)
+    archive.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize(("change", "why"), [
+    ({"method": 9}, "compression method is not supported"),  # Deflate64 (7-Zip, Windows)
+    ({"flags": 1}, "encrypted"),
+])
+def test_a_pk3_member_zipfile_cannot_read_is_a_scene_format_error(tmp_path: Path, change: dict, why: str) -> None:
+    """A map stored with a compression method zipfile lacks, or encrypted, raised zipfile's bare
+    NotImplementedError or RuntimeError: now a SceneFormatError naming the member and saying to repack."""
+    path = tmp_path / "packed.pk3"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("maps/m.bsp", _map([("textures/test/wall", 0, 1)], SPAWN))
+    _set_member_header(path, "maps/m.bsp", **change)
+    with pytest.raises(SceneFormatError, match=rf"maps/m\.bsp in .*packed\.pk3 cannot be read \(.*{why}.*\): .*repack"):
+        convert_bsp(path)
 
 
 def _set_vertices(data: bytes, **fields: object) -> bytes:

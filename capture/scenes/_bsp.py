@@ -17,7 +17,8 @@ Conversion rules (also in docs/scenes.md):
   ``noshader``; shaders made only of blended stages (no opaque stage, no lightmap, no alphaFunc:
   flares, beams, glass, energy fields). Sky surfaces (SURF_SKY 0x4 or ``surfaceparm sky``) are
   not drawn but returned as blocker triangles for viewpoint sampling, since they seal the level.
-* Textures: ``name + .jpg/.tga/.png`` in the archives, else the first non-``$lightmap`` map stage
+* Textures: ``name + .jpg/.tga/.png`` in the archives (a dot that starts no image extension is part of the
+  name, ``x.blend`` -> ``x.blend.tga``), else the first non-``$lightmap`` map stage
   of the shader script of that name (``map``/``clampMap``/``animMap``), else ``qer_editorimage``;
   a missing image gives a neutral grey material (logged).
 * Materials: :func:`~._materials.pbr_for_path`; ``alphaFunc`` or an alpha-blend stage sets
@@ -25,8 +26,9 @@ Conversion rules (also in docs/scenes.md):
   keeps the texels at or above the cutoff), other textures are made opaque (alpha 255).
 * Spawn points: ``info_player_deathmatch``, ``info_player_start``, ``team_CTF_*spawn`` and
   ``team_CTF_*player``; eye = origin + ``eye_height_units`` (9 units of spawn lift + 26 of view
-  height); Camera yaw = Q3 angle - 90 degrees.
-* Lights: ``light`` entities if the compiler kept them, else clusters of surface-light faces
+  height); Camera yaw = Q3 angle (or the yaw of ``angles``, whichever the entity sets last) - 90 degrees.
+* Lights: ``light`` entities if the compiler kept them (q3map2's value: ``_light``, else ``light``, else
+  300; negative, darkening lights skipped), else clusters of surface-light faces
   (``q3map_surfacelight``); the sun from the sky shader's ``q3map_sun``/``q3map_sunExt``.
 """
 
@@ -69,6 +71,8 @@ SPAWN_CLASSES = (
 )
 LIGHT_WORDS = ("light", "lamp", "flame", "torch", "fire", "lava")
 IMAGE_EXTS = (".jpg", ".tga", ".png", ".jpeg")
+#: Image extensions the engine also reads (a name ending so is tried as it is), never appended to a name.
+ENGINE_ONLY_EXTS = (".pcx", ".bmp")
 MAX_TEXTURE = 1024  # larger textures are downsampled (by powers of two) to this edge
 #: The largest ``patch_level``: 64 segments a side are 8192 triangles per 3x3 bezier block, far past any
 #: visible curvature (the default is 6); more only fills memory (10**6 asked for terabytes).
@@ -204,10 +208,16 @@ def _decode_image(data: bytes, name: str) -> np.ndarray | None:
 
 
 def _find_image(pk3: Pk3Set, path: str) -> str | None:
+    """The archive path of image ``path``, as the engine looks for it: a name with an image extension as it
+    is, then with the others in its place; any other name (none, or a dot that belongs to it, as in
+    ``ceil1_22a.blend``) with each image extension appended (``ceil1_22a.blend.tga``, never ``ceil1_22a.tga``)."""
     base = path.replace("\\", "/").lower()
-    stem, ext = (base.rsplit(".", 1) + [""])[:2] if "." in base.rsplit("/", 1)[-1] else (base, "")
-    cands = [base] if ext else []
-    cands += [stem + e for e in IMAGE_EXTS] + [base + e for e in IMAGE_EXTS]
+    leaf = base.rsplit("/", 1)[-1]
+    ext = "." + leaf.rsplit(".", 1)[1] if "." in leaf else ""
+    if ext in IMAGE_EXTS or ext in ENGINE_ONLY_EXTS:
+        cands = [base] + [base[: -len(ext)] + e for e in IMAGE_EXTS]
+    else:
+        cands = [base + e for e in IMAGE_EXTS]
     for c in cands:
         if c in pk3:
             return c
@@ -608,13 +618,34 @@ def _entities(entities: list[dict[str, str]], eye_units: float) -> tuple[list[Sp
             continue
         if cls in SPAWN_CLASSES:
             eye = q3_to_world(origin + np.array([0.0, 0.0, eye_units]))
-            spawns.append(SpawnPoint(_vec3(eye), yaw=q3_angle_to_yaw(_float(e.get("angle"), 0.0))))
+            spawns.append(SpawnPoint(_vec3(eye), yaw=q3_angle_to_yaw(_entity_yaw(e))))
         elif cls == "light":
-            val = _float(e.get("light", e.get("_light")), 300.0)
+            # q3map2's value: "_light", where it is 0 (or absent) "light", where that is 0 too 300
+            val = _float(e.get("_light"), 0.0) or _float(e.get("light"), 0.0) or 300.0
+            if val < 0:  # a negative light darkens (q3map2); as a point light it would shine
+                log.debug("skipping the negative light at %s (value %g)", e.get("origin"), val)
+                continue
             col = _vec(e.get("_color")) if e.get("_color") else np.ones(3)
-            col = col / max(float(np.max(col)), 1e-6) if col is not None else np.ones(3)
+            col = np.maximum(col, 0.0) if col is not None else np.ones(3)  # (a negative component: none of it)
+            col = col / float(np.max(col)) if np.max(col) > 1e-6 else np.ones(3)  # ("0 0 0": white, as q3map2)
             lights.append(_point_light(q3_to_world(origin), col, val))
     return spawns, lights
+
+
+def _entity_yaw(e: dict[str, str]) -> float:
+    """An entity's yaw in Q3 degrees, as the game reads it: ``angle``, or the second of ``angles`` (pitch yaw
+    roll), whichever of the two the entity sets last; 0 without either (an unreadable ``angle`` is 0, as the
+    game's ``atof`` makes it; an ``angles`` of fewer than two numbers is passed over)."""
+    yaw = 0.0
+    for key, value in e.items():  # (in the order the entity sets them)
+        if key == "angle":
+            yaw = _float(value, 0.0)
+        elif key == "angles":
+            try:
+                yaw = float(value.split()[1])
+            except (IndexError, ValueError):
+                pass
+    return yaw
 
 
 def _choose_lights(

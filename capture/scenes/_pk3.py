@@ -75,6 +75,9 @@ class Pk3Set:
             return self._zips[k].read(real)
         except (zipfile.BadZipFile, zlib.error, EOFError) as err:  # a damaged member: bad CRC, broken deflate stream
             raise SceneFormatError(f"{real} in {self.paths[k]} is damaged ({err}): replace the archive") from err
+        except (NotImplementedError, RuntimeError) as err:  # zipfile's words for a method it lacks, an encrypted member
+            raise SceneFormatError(f"{real} in {self.paths[k]} cannot be read ({err}): a pk3 member must be stored or "
+                                   "deflated, unencrypted, as the game reads it; repack the archive") from err
 
     def archive_of(self, path: str) -> Path:
         return self.paths[self._index[_key(path)][0]]
