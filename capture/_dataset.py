@@ -17,10 +17,10 @@ buffer                 stored as         channels (``sdk.CHANNELS`` names)
 ``reprojected``        uint8 (H, W, 3)   reprojected.r/g/b (display-encoded)
 ``seen``               uint8 (H, W)      seen (0 or 1, stored as 0 or 255)
 ``albedo``             uint8 (H, W, 3)   albedo.r/g/b (display-encoded)
-``normal``             float16 (H,W,3)   normal.x/y/z (view space)
+``normal``             float16 (H,W,3)   normal.x/y/z (unit, view space, the camera looking down -z)
 ``roughness`` ...      uint8 (H, W)      roughness, metallic, specular, shadow, emissive
 ``depth``              float16 (H, W)    depth (metres along -z)
-``motion``             float16 (H,W,2)   motion.x/y (pixels)
+``motion``             float16 (H,W,2)   motion.x/y (pixels: previous minus current position, x right, y down)
 ``final_<rate>``       uint8 (H, W, 3)   final display-encoded colour at each of the 7 rates
 =====================  ================  ===================================================
 
@@ -209,6 +209,8 @@ class Sample:
         self._loader = loader
         self._cache: dict[str, np.ndarray] = {}
         self._hw: tuple[int, int] | None = None
+        #: ``(H, W)`` the dataset's manifest gives its samples (``settings["size"]``), where it gives one.
+        self._manifest_hw: tuple[int, int] | None = None
 
     def buffer(self, name: str) -> np.ndarray:
         """A buffer as float32 ``(H, W)`` or ``(H, W, C)`` (see :data:`BUFFERS`).
@@ -231,6 +233,12 @@ class Sample:
         if self._hw is not None and hw != self._hw:
             raise DatasetError(f"{self._where}: buffer {name!r} is {hw[1]}x{hw[0]}, the sample's other buffers "
                                f"are {self._hw[1]}x{self._hw[0]}")
+        if self._manifest_hw is not None and hw != self._manifest_hw:
+            # (a sample of another dataset copied in, or captured at another size: read as it was, and rtp train
+            # refused the mix much later, or trained on one size of a dataset its manifest says is of another)
+            m = self._manifest_hw
+            raise DatasetError(f"{self._where}: buffer {name!r} is {hw[1]}x{hw[0]}, but the dataset's manifest says "
+                               f"its samples are {m[1]}x{m[0]} (settings size); {_REWRITE}")
         if not np.isfinite(a).all():
             raise DatasetError(f"{self._where}: buffer {name!r} holds NaN or infinite values")
         self._hw = hw
@@ -311,6 +319,16 @@ def encode_sample(sample_id: str, buffers: Mapping[str, np.ndarray], meta: Mappi
     return out.getvalue()
 
 
+def _header_hw(npz: Any, name: str) -> tuple[int, int] | None:
+    """``(H, W)`` of the buffer ``name`` of an open ``.npz`` archive, read from its array header (not its data);
+    None where its shape is not an image's."""
+    with npz.zip.open(f"{name}.npy") as fh:
+        version = np.lib.format.read_magic(fh)
+        header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape = tuple(header(fh)[0])
+    return (int(shape[0]), int(shape[1])) if len(shape) in (2, 3) else None
+
+
 class DatasetWriter:
     """Writes samples into a dataset folder; resumable (``has`` tells which ids exist).
 
@@ -340,6 +358,8 @@ class DatasetWriter:
                 raise DatasetError(
                     f"{self.root} was captured with other settings ({what}); use another folder or the same settings"
                 )
+        #: ``(H, W)`` of the samples as ``settings["size"]`` gives it (the folder's, where it has a manifest: the same)
+        self._hw = _settings_hw(settings)
         self.samples_dir.mkdir(parents=True, exist_ok=True)
         if not manifest.exists():
             self._write_manifest({"format": FORMAT, "format_version": FORMAT_VERSION, "settings": settings})
@@ -372,11 +392,16 @@ class DatasetWriter:
             with np.load(io.BytesIO(data), allow_pickle=False) as npz:
                 names = set(npz.files)
                 json.loads(bytes(npz["meta"]).decode())
+                hw = _header_hw(npz, "final_1x1") if "final_1x1" in names else None
         except Exception as err:  # numpy's reader on corrupted bytes; see _unreadable
             raise DatasetError(f"sample {sample_id}: the encoded sample is unreadable ({type(err).__name__}: {err})") from err
         missing = [b for b in BUFFERS if b not in names]
         if missing:
             raise DatasetError(f"sample {sample_id}: the encoded sample lacks buffers {missing}")
+        if self._hw is not None and hw != self._hw:  # (it was written, and every reader then refused it)
+            found = f"{hw[1]}x{hw[0]}" if hw is not None else "of no (H, W, 3) shape"
+            raise DatasetError(f"sample {sample_id}: its frames are {found}, but {self.root}'s samples are "
+                               f"{self._hw[1]}x{self._hw[0]} (its manifest's settings size); nothing written")
         path = sample_path(self.root, sample_id)
         with atomic_output(path) as tmp:
             tmp.write_bytes(data)
@@ -433,6 +458,15 @@ def _read_manifest(root: Path) -> dict[str, Any]:
         raise DatasetError(f"{path}: dataset format {version} is newer than this rtp reads ({FORMAT_VERSION}): "
                            f"upgrade rtp (pip install -U rtp) to read it")
     return data
+
+
+def _settings_hw(settings: Any) -> tuple[int, int] | None:
+    """``(H, W)`` from a manifest's ``settings`` whose ``size`` is ``[W, H]`` (positive integers), else None."""
+    size = settings.get("size") if isinstance(settings, dict) else None
+    if (isinstance(size, list) and len(size) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)):
+        return int(size[1]), int(size[0])
+    return None
 
 
 def _folder(root: object) -> Path:
@@ -504,7 +538,14 @@ class DatasetReader:
             raise DatasetError(f"no sample {sample_id!r} in {self.root}")
         sample = _open_sample(sample_id, path, path)
         sample.absent = self.absent
+        sample._manifest_hw = self._size
         return sample
+
+    @property
+    def _size(self) -> tuple[int, int] | None:
+        """``(H, W)`` of the samples as the manifest's ``settings["size"]`` (``[W, H]``) gives it; None where it
+        gives none (a folder written by :class:`DatasetWriter` without settings)."""
+        return _settings_hw(self.manifest.get("settings"))
 
     @property
     def absent(self) -> frozenset[str]:

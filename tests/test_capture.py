@@ -75,6 +75,47 @@ def test_parallel_capture_writes_what_one_process_writes(tmp_path: Path, caplog:
         for name in BUFFERS:
             np.testing.assert_array_equal(a[sid].buffer(name), b[sid].buffer(name), err_msg=f"{sid}/{name}")
 
+def test_a_capture_stopped_mid_sample_and_resumed_writes_what_an_uninterrupted_one_writes(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A capture stopped in the middle of a sample's write (its temporary file left as a kill -9 leaves it) and
+    resumed, with one worker and with two, holds the same sample ids, meta and buffers, byte for byte, and the same
+    manifest (but its versions) as one that ran through: each sample is rendered from its planned cameras alone,
+    whatever the renderer drew before it."""
+    import shutil
+
+    from rtp.capture import BUFFERS, _dataset
+
+    scenes, kw = ["procedural:3", "procedural:4"], {"per_scene": 2, "size": (48, 32)}
+    capture(scenes, tmp_path / "whole", **kw)
+    write, calls = _dataset.DatasetWriter.write_encoded, []
+
+    def stopped(self: _dataset.DatasetWriter, sample_id: str, data: bytes) -> Path:
+        calls.append(sample_id)
+        if len(calls) == 3:  # (half the bytes in the temporary file, as a process killed while writing leaves it)
+            (self.samples_dir / f".{sample_id}.npz.k2j4x9ab.tmp").write_bytes(data[: len(data) // 2])
+            raise KeyboardInterrupt
+        return write(self, sample_id, data)
+
+    monkeypatch.setattr(_dataset.DatasetWriter, "write_encoded", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        capture(scenes, tmp_path / "cut1", **kw)
+    monkeypatch.undo()
+    assert len(DatasetReader(tmp_path / "cut1")) == 2
+    shutil.copytree(tmp_path / "cut1", tmp_path / "cut2")
+    for folder, workers in (("cut1", 1), ("cut2", 2)):
+        again = capture(scenes, tmp_path / folder, workers=workers, **kw)
+        assert (again.written, again.skipped, again.recaptured) == (6, 2, 0), folder
+        assert not list((tmp_path / folder / "samples").glob(".*")), folder
+        a, b = DatasetReader(tmp_path / "whole"), DatasetReader(tmp_path / folder)
+        assert a.ids == b.ids and len(a) == 8
+        for sid in a.ids:
+            assert a[sid].meta == b[sid].meta, (folder, sid)
+            for name in BUFFERS:
+                np.testing.assert_array_equal(a[sid].buffer(name), b[sid].buffer(name), err_msg=f"{folder}/{sid}/{name}")
+        assert {k: v for k, v in a.manifest.items() if k != "versions"} == \
+            {k: v for k, v in b.manifest.items() if k != "versions"}, folder
+
+
 def test_capture_survives_a_kill(tmp_path: Path) -> None:
     out = tmp_path / "ds"
     cmd = [sys.executable, "-m", "rtp.cli", "capture", "--scene", "procedural:7", "--per-scene", "4",

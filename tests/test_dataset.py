@@ -334,6 +334,54 @@ def test_reopening_requires_the_same_settings(tmp_path: Path) -> None:
     assert sorted(p.name for p in (tmp_path / "theirs").iterdir()) == ["manifest.json"]
 
 
+def test_a_sample_of_another_size_than_the_manifests_is_refused_naming_the_file(tmp_path: Path) -> None:
+    """A sample of another size than the manifest's settings say (one of another dataset copied in, or written by
+    DatasetWriter with its settings' size not the frames') was written and read as it was: rtp train refused the mix
+    much later, or trained a dataset of one size whose manifest says another. The writer refuses it, nothing written,
+    and the reader names the file and both sizes."""
+    import shutil
+
+    w = DatasetWriter(tmp_path / "ds", settings={"size": [40, 24]})
+    w.write("s0", _buffers(), {"scene": "a"})
+    with pytest.raises(DatasetError, match=r"sample s1: its frames are 80x48, but .*ds's samples are 40x24 \(its "
+                                           r"manifest's settings size\); nothing written"):
+        w.write("s1", _buffers(48, 80), {"scene": "a"})
+    assert not w.has("s1") and not list(w.samples_dir.glob(".*.tmp"))
+    other = DatasetWriter(tmp_path / "other", settings={"size": [80, 48]})
+    other.write("s1", _buffers(48, 80), {"scene": "a"})
+    shutil.copy(other.samples_dir / "s1.npz", w.samples_dir / "s1.npz")
+    reader = DatasetReader(tmp_path / "ds")
+    assert reader.ids == ["s0", "s1"] and reader["s0"].size == (24, 40)
+    with pytest.raises(DatasetError, match=re.escape(f"{w.samples_dir / 's1.npz'}: buffer 'seen' is 80x48, but the "
+                                                     "dataset's manifest says its samples are 40x24 (settings size); "
+                                                     "a damaged or foreign sample file: delete it")):
+        reader["s1"].channel("seen")
+    # a folder whose manifest gives no size (DatasetWriter without settings) takes any size, as before
+    free = DatasetWriter(tmp_path / "free")
+    free.write("a", _buffers(), {})
+    free.write("b", _buffers(48, 80), {})
+    assert DatasetReader(tmp_path / "free")["b"].size == (48, 80)
+
+
+def test_the_formats_table_in_the_docs_is_what_the_writer_writes(tmp_path: Path) -> None:
+    """docs/dataset.md "Format (version 1)": every buffer a sample file holds is in its table, with the dtype and
+    the shape the writer stores it at, and nothing else is."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "dataset.md").read_text(encoding="utf-8")
+    section = text.split("## Format (version 1)", 1)[1].split("\n## ", 1)[0]
+    documented: dict[str, tuple[str, str]] = {}
+    for row in re.findall(r"^\| (`[^|]*) \| (\w+) (\([^)]*\)) \|", section, flags=re.M):
+        names = re.findall(r"`([a-z_<>0-9]+)`", row[0])
+        for name in names:
+            for n in ([f"final_{r}" for r in sdk.ALL_RATES] if name == "final_<rate>" else [name]):
+                documented[n] = (row[1], row[2].replace(" ", ""))
+    w = DatasetWriter(tmp_path / "ds", settings={"size": [40, 24]})
+    w.write("s0", _buffers(), {"scene": "a"})
+    with np.load(w.samples_dir / "s0.npz") as npz:
+        written = {k: (str(npz[k].dtype), "(" + ",".join(("H", "W", *map(str, npz[k].shape[2:]))) + ")")
+                   for k in npz.files if k != "meta"}
+    assert documented == written
+
+
 def test_reader_errors(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match="no dataset folder"):
         DatasetReader(tmp_path / "missing")
