@@ -449,6 +449,9 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
         if writer is None:
             writer = DatasetWriter(out, settings)
             guard.enter_context(_writer_lock(out))  # (a folder that existed: capture() holds its lock)
+            # (a folder without a manifest: capture() removed no stale files, and a killed write's stayed)
+            if writer.remove_stale():
+                log.info("removed temporary files of an interrupted capture in %s", out)
         if on_actors is not None:
             on_actors(actors)
         # Plan every scene (the worker that plans a scene keeps it loaded and renders it first).

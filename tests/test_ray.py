@@ -441,3 +441,17 @@ def test_rays_own_failures_name_the_sample_and_are_typed() -> None:
         _ray._drive(FakeRay, ["actor"], {"ref": (0, "procedural:3", ("procedural_3-slow-0001",))},
                     {"procedural:3": 1}, lambda i: False, lambda t, r: done.append(t), "sample", None)
     assert err.value.exit_code == 1 and done == []
+
+
+def test_a_ray_capture_into_a_folder_without_a_manifest_removes_a_killed_writes_files(
+        cluster: None, local: Path, tmp_path: Path) -> None:
+    """A folder that lost its manifest (or never got one) but holds a killed write's temporary file: the Ray
+    path makes its writer itself, and removed no stale files (capture() removes them only where it makes it)."""
+    out = tmp_path / "ray"
+    (out / "samples").mkdir(parents=True)
+    stale = out / "samples" / ".procedural-3-slow-0000.npz.k2j4x9ab.tmp"
+    stale.write_bytes(b"half a sample")
+    report = capture(SCENES, out, per_scene=2, size=SIZE, workers=2, ray="local")
+    assert (report.written, report.failed) == (8, [])
+    assert not stale.exists() and not list((out / "samples").glob(".*"))
+    assert DatasetReader(out).ids == DatasetReader(local).ids
