@@ -124,6 +124,10 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
     ("- 1\n- 2\n", "expected a mapping"),
     ("steps: [unclosed\n", "not valid YAML"),
     ("per_metric: 3\n", "per_metric must map"),
+    # (a falsy value of the wrong type was taken as no section at all, silently)
+    ("per_metric: []\n", "per_metric must map metric names to mappings of fields, got []"),
+    ("per_metric: false\n", "per_metric must map metric names to mappings of fields, got False"),
+    ("per_metric: ''\n", "per_metric must map metric names to mappings of fields, got ''"),
     ("val_split: 3\n", "'val_split': expected a split name"),
     ("metrics: jnyang\n", "'metrics': expected a list of metric names"),
     ("metrics: []\n", "'metrics': expected a list of metric names"),
@@ -204,7 +208,7 @@ def test_a_conflict_names_the_field_and_whether_the_recipe_or_the_caller_set_it(
 @pytest.mark.parametrize(("text", "key"), [
     ("out: m.pt\n", "out"), ("val_scenes: [a]\n", "val_scenes"), ("per_metric:\n  flip:\n    data: d\n", "data"),
     ("metric: flip\n", "metric"), ("metrics: [jnyng]\n", "metrics"), ("metrics: [flip]\n", "metrics"),
-    ("metrics: flip\n", "metrics"), ("per_metric: 3\n", "per_metric"),
+    ("metrics: flip\n", "metrics"), ("per_metric: 3\n", "per_metric"), ("per_metric: []\n", "per_metric"),
 ])
 def test_a_bad_recipe_names_the_key_at_fault(tmp_path: Path, text: str, key: str) -> None:
     path = tmp_path / "r.yaml"

@@ -131,6 +131,12 @@ def test_scores_and_safety() -> None:
         s, left = calibrate_safety(p2, g2, quantile=q)
         short2 = g2 - p2
         assert left <= q < np.mean(short2 > np.max(short2[short2 < s]))
+    # a quantile out of range is refused whatever the values: with none finite (or none at all) it was taken, and
+    # the margin 0 returned, where the same call on finite values raised
+    for pred, gt in ((np.zeros(4), short), (np.full(3, np.nan), np.full(3, np.nan)), (np.zeros(0), np.zeros(0))):
+        with pytest.raises(sdk.ParameterError, match=r"safety quantile: expected a number in \[0, 1\), got 1.5") as e:
+            calibrate_safety(pred, gt, quantile=1.5)
+        assert e.value.name == "quantile"
 
 
 @pytest.mark.slow
@@ -1563,8 +1569,12 @@ def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=8, **base))
     with pytest.raises(sdk.ParameterError, match="cannot be combined"):
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=16, augment=True, **base))
-    with pytest.raises(sdk.ParameterError, match=r"crop \+ 2 x context \(96\) is larger than the frames \(96x64\)"):
+    with pytest.raises(sdk.ParameterError, match=r"crop \+ 2 x context \(96\) is larger than the frames \(96x64\)") as e:
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=32, **base))
+    assert e.value.name == "context"  # (it named no field)
+    with pytest.raises(sdk.ParameterError, match=r"^crop \(80\) is larger than the frames \(96x64\)$") as e:
+        train(TrainConfig(out=str(tmp_path / "d.pt"), **{**base, "steps": 2, "crop": 80}))
+    assert e.value.name == "crop"
     assert not (tmp_path / "d.pt").exists()
 
 
@@ -2059,8 +2069,22 @@ def test_validation_that_holds_out_every_scene_is_refused_naming_what_held_them_
         train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, val_split="validation",
                           splits=str(splits)))
     assert e.value.name == "val_split" and not out.exists()
-    with pytest.raises(sdk.ParameterError, match=r"validation scenes \['scene9'\] are not in"):
+    with pytest.raises(sdk.ParameterError, match=r"validation scenes \['scene9'\] are not in") as e:
         train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, val_scenes=("scene9",)))
+    assert e.value.name == "val_scenes"
+
+
+def test_a_validation_scene_named_twice_is_refused(tmp_path: Path) -> None:
+    """``--val-scenes scene2,scene1,scene2`` read scene2's samples twice: each validated twice, and the model's
+    provenance said val_samples 6 of the 4 held out, val_scenes [scene1, scene2, scene2]. Now a ParameterError
+    naming val_scenes, before any sample is read."""
+    data = _dataset(tmp_path / "d", n=6)
+    out = tmp_path / "m.pt"
+    with pytest.raises(sdk.ParameterError, match=r"^val_scenes: expected distinct scene names, got scene2 more than "
+                                                 r"once$") as e:
+        train(TrainConfig(data=str(data), metric="jnyang", out=str(out), crop=32, batch=2, steps=1,
+                          val_scenes=("scene2", "scene1", "scene2")))
+    assert e.value.name == "val_scenes" and not out.exists()
 
 
 def test_the_default_validation_scene_is_the_last_in_natural_order() -> None:
@@ -2257,12 +2281,20 @@ def test_a_damaged_training_state_is_a_checkpoint_error_naming_the_file(tmp_path
                "history not JSON": {**good.training, "history": "not json"},
                "no optimizer state": {**good.training, "optimizer": {}},
                "a step that is no number": {**good.training, "step": "abc"},
-               "a negative step": {**good.training, "step": -5}}
+               "a negative step": {**good.training, "step": -5},
+               # (AttributeError and ValueError from the lines that read them, outside the check)
+               "history entries that are no mappings": {**good.training, "history": "[1, 2]"},
+               "a config that is no mapping": {**good.training, "config": ["data"]}}
     for why, state in damaged.items():
         path = checkpoint.save(tmp_path / "bad.pt", good.net, good.metadata, state)
         with pytest.raises(checkpoint.CheckpointError, match=r"bad\.pt: its training state cannot be resumed") as info:
             train(TrainConfig(out=str(path), steps=10, **cfg))
         assert sdk.exit_code(info.value) == sdk.EXIT_USAGE, why
+    # (read for the progress bar's first value: a ValueError once the command line's bar asked for it)
+    path = checkpoint.save(tmp_path / "bad.pt", good.net, good.metadata,
+                           {**good.training, "history": '[{"step": 5, "train_loss": "low"}]'})
+    with pytest.raises(checkpoint.CheckpointError, match=r"bad\.pt: its training state cannot be resumed \(ValueError"):
+        train(TrainConfig(out=str(path), steps=10, **cfg), progress=lambda step, steps, loss: None)
     path = checkpoint.save(tmp_path / "bare.pt", good.net, good.metadata)
     with pytest.raises(checkpoint.CheckpointError, match="bare.pt exists and holds a model without its training state"):
         train(TrainConfig(out=str(path), steps=10, **cfg))

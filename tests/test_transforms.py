@@ -60,6 +60,17 @@ def test_logistic_inverse_stays_finite_outside_its_domain() -> None:
     assert np.all(np.isfinite(out)) and out[0] < 0 < 0.25 < out[1]
 
 
+@pytest.mark.parametrize(("mu_y", "k"), [(0.8, 1000.0), (0.05, 20000.0), (0.5, 1e6)])
+def test_torch_twins_of_a_steep_logistic_match_the_sdk(mu_y: float, k: float) -> None:
+    """A logistic transform with ``k * mu_y`` past 709, which the SDK takes (its span over [0, 1] is about 1):
+    the torch twins' bounds were ``1 / (1 + exp(k * mu_y))``, an OverflowError at the first training step."""
+    t = sdk.Transform.logistic(mu_y, k)
+    y = np.array([0.0, mu_y - 1e-3, mu_y, mu_y + 1e-3, 1.0, 2.0])
+    p = np.array([0.0, 0.2, 0.5, 0.8, 1.0])
+    np.testing.assert_allclose(tt.forward(torch.tensor(y), t).numpy(), t.forward(y), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(tt.inverse(torch.tensor(p), t).numpy(), t.inverse(p), rtol=1e-9, atol=1e-12)
+
+
 def test_extrapolation_matches_hand_computed_paper_values(vectors: dict[str, Any]) -> None:
     for case in vectors["extrapolation"]:
         v = np.array(case["values"], dtype=np.float64).reshape(-1, 1, 1)

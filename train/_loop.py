@@ -501,7 +501,8 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
             log.warning("%s holds none of the %s maps; validating on its last scene instead", cfg.data, cfg.val_split)
     unknown = [v for v in val if v not in by_scene]
     if unknown:
-        raise sdk.ParameterError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}")
+        raise sdk.ParameterError(f"validation scenes {unknown} are not in {cfg.data}; it holds {', '.join(scenes)}",
+                                 "val_scenes")
     if not val:
         if len(scenes) < 2:
             # (not the one it holds: a capture names it procedural:N, which the check read as procedural_N only)
@@ -869,6 +870,10 @@ def check_config(cfg: TrainConfig) -> TrainConfig:
         raise sdk.ParameterError(f"aux_weight: expected a weight > 0, got {cfg.aux_weight}", "aux_weight")
     if not 0.0 <= cfg.ema < 1.0:
         raise sdk.ParameterError(f"ema: expected a decay in [0, 1) (0: off), got {cfg.ema}", "ema")
+    twice = sorted({v for v in cfg.val_scenes if cfg.val_scenes.count(v) > 1}, key=cfg.val_scenes.index)
+    if twice:  # (each of its samples was validated twice, and val_samples and val_scenes recorded so)
+        raise sdk.ParameterError(f"val_scenes: expected distinct scene names, got {', '.join(twice)} more than once",
+                                 "val_scenes")
     if cfg.max_samples is not None and cfg.max_samples < 1:  # (-1 left out the last sample, 0 kept them all)
         raise sdk.ParameterError(f"max_samples: expected None (every sample) or at least 1 training sample, got "
                                  f"{cfg.max_samples}", "max_samples")
@@ -1055,7 +1060,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
     if cfg.crop + 2 * cfg.context > min(full_h, full_w):
         what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
-        raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})")
+        raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})", "context" if cfg.context else "crop")
 
     transform = _make_transform(cfg, tr.y)
     aux_transforms = [_make_transform(cfg, [a[k] for a in tr.aux], f"{m} (aux_metrics)")
@@ -1148,9 +1153,16 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     config_key = json.loads(json.dumps(config_key))
     if prev is not None and prev.training:
         state = prev.training
+
+        def unresumable(why: str) -> ckpt.CheckpointError:
+            return ckpt.CheckpointError(f"{out}: its training state cannot be resumed ({why}); the file was damaged or "
+                                        "edited: delete it to train afresh, or export the model it holds (rtp-export)")
+
         before = state.get("config") or {}
-        if cfg.arch != "paper" and isinstance(before, dict):  # (a fast training begun with a head, which it never
-            before = {k: v for k, v in before.items() if k != "head"}  # read, is this run: it resumes)
+        if not isinstance(before, dict):  # (an AttributeError from the comparison below)
+            raise unresumable(f"config: expected a mapping, got {type(before).__name__}")
+        if cfg.arch != "paper":  # (a fast training begun with a head, which it never read, is this run: it resumes)
+            before = {k: v for k, v in before.items() if k != "head"}
         if before != config_key:
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
             raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
@@ -1165,19 +1177,23 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             step, history = int(state["step"]), list(json.loads(state["history"]))
             if step < 0:
                 raise ValueError(f"step {step}")
+            # (each entry is read for its step and loss: one that is no mapping, or a loss that is no number, was an
+            # AttributeError or ValueError from the lines below, or at the first interrupt)
+            if not all(isinstance(e, dict) and isinstance(e.get("step"), int) for e in history):
+                raise ValueError("history: expected a list of mappings, each with its step")
+            last = history[-1] if history else {}
+            last_loss = last.get("train_loss", last.get("train_l1"))  # train_l1: checkpoints from before --loss
+            if last_loss is not None:
+                last_loss = float(last_loss)
             owed = state.get("pending_validation")  # (an interrupt kept step's validation from the history)
             if owed is not None:
                 owed_loss = float(owed["train_loss"])
         except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
-            raise ckpt.CheckpointError(f"{out}: its training state cannot be resumed ({type(exc).__name__}: {exc}); "
-                                       "the file was damaged or edited: delete it to train afresh, or export the model it "
-                                       "holds (rtp-export)") from exc
+            raise unresumable(f"{type(exc).__name__}: {exc}") from exc
         if step > cfg.steps:
             raise sdk.ParameterError(f"steps: {out} holds step {step}, past this run's {cfg.steps}: give --steps {step} "
                                      "or more to go on training it, or another output path", "steps")
         log.info("resuming %s at step %d", out, step)
-        last = history[-1] if history else {}
-        last_loss = last.get("train_loss", last.get("train_l1"))  # train_l1: checkpoints from before --loss
         if owed_loss is not None:  # (the step's own loss, its validation not yet in the history)
             last_loss = owed_loss
         if progress and last_loss is not None:  # a resumed run's bar starts where it stopped

@@ -188,10 +188,13 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
     if keys:  # ("0:" is a key YAML reads as the number 0)
         raise RecipeError(f"recipe {name}: keys are field names, got {keys[0]!r}")
     data = dict(data)
-    per_metric = data.pop("per_metric", None) or {}
+    per_metric = data.pop("per_metric", None)
+    if per_metric is None:  # (``per_metric:`` with nothing under it; ``[]``, ``0`` or ``false`` were taken as none too)
+        per_metric = {}
     if not isinstance(per_metric, dict) or not all(isinstance(v, dict) and all(isinstance(k, str) for k in v)
                                                    for v in per_metric.values()):
-        raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields", "per_metric")
+        raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields, got "
+                          f"{reprlib.repr(per_metric)}", "per_metric")
     import difflib
 
     known = known_metrics()

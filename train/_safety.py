@@ -37,6 +37,8 @@ def calibrate_safety(
             number = False
         if not number:
             raise ParameterError(f"{key}: expected a finite number, got {reprlib.repr(value)}", key)
+    if quantile is not None and not 0.0 <= quantile < 1.0:  # (before the values: with none finite it was taken)
+        raise ParameterError(f"safety quantile: expected a number in [0, 1), got {quantile}", "quantile")
     ok = np.isfinite(p) & np.isfinite(g)
     short = worse * (g[ok] - p[ok])
     if short.size == 0:
@@ -44,8 +46,6 @@ def calibrate_safety(
     if quantile is None:
         s = float(np.maximum(short, 0.0).mean())
     else:
-        if not 0.0 <= quantile < 1.0:
-            raise ParameterError(f"safety quantile: expected a number in [0, 1), got {quantile}", "quantile")
         # at most floor(q n) values may stay above it: the margin is the next one down (numpy's "higher" quantile
         # of 1 - q was up to one value more, leaving fewer underestimated than q allows)
         above = min(math.floor(quantile * short.size), short.size - 1)

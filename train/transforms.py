@@ -16,9 +16,15 @@ from rtp.sdk import DEFAULT_EXTRAPOLATION_K, LOGIT_EPS, OUTPUT_SETS, ModelMetada
 __all__ = ["decode", "extrapolate", "forward", "inverse"]
 
 
+def _sigmoid(x: float) -> float:
+    """The logistic function as ``rtp.sdk`` computes it (through tanh: no overflow, where ``1 / (1 + exp(-x))``
+    raised OverflowError past ``|x|`` 709, as a valid transform with ``k * mu_y`` that large has)."""
+    return 0.5 * (1.0 + math.tanh(0.5 * x))
+
+
 def _s_bounds(t: Transform) -> tuple[float, float]:
-    s0 = 1.0 / (1.0 + math.exp(t.k * t.mu_y))  # type: ignore[operator]
-    s1 = 1.0 / (1.0 + math.exp(-t.k * (1.0 - t.mu_y)))  # type: ignore[operator]
+    s0 = _sigmoid(t.k * (0.0 - t.mu_y))  # type: ignore[operator]
+    s1 = _sigmoid(t.k * (1.0 - t.mu_y))  # type: ignore[operator]
     return s0, s1
 
 
