@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -352,6 +353,21 @@ def test_a_fast_training_begun_with_an_unread_head_resumes(tmp_path: Path) -> No
     assert train(TrainConfig(out=str(out), steps=4, **cfg)).steps == 4
     with pytest.raises(sdk.ParameterError, match="differs in: width"):  # (another configuration still is)
         train(TrainConfig(out=str(out), steps=6, **{**cfg, "width": 8}))
+
+
+def test_a_resume_with_the_data_folder_spelled_with_a_trailing_slash_resumes(tmp_path: Path) -> None:
+    """``--data data/train/`` (a shell's completion) resuming a run begun with ``data/train`` was refused as
+    another configuration (differs in: data); the same folders spelled otherwise resume, other folders do not."""
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = dict(metric="jnyang", crop=32, batch=4, val_every=2, save_every=2, arch="fast", val_scenes=("scene0",))
+    out = tmp_path / "m.pt"
+    train(TrainConfig(out=str(out), steps=2, data=str(data), **cfg))
+    assert train(TrainConfig(out=str(out), steps=4, data=str(data) + "/", **cfg)).steps == 4
+    assert train(TrainConfig(out=str(out), steps=6, data=f"{data}/./", **cfg)).steps == 6
+    other = tmp_path / "ds2"
+    shutil.copytree(data, other)
+    with pytest.raises(sdk.ParameterError, match="differs in: data"):
+        train(TrainConfig(out=str(out), steps=8, data=str(other), **cfg))
 
 
 def test_a_recipe_float_without_a_dot_is_a_number(tmp_path: Path) -> None:

@@ -323,6 +323,17 @@ def data_folders(data: str | os.PathLike[str]) -> list[str]:
     return folders
 
 
+def _same_folders(a: object, b: object) -> bool:
+    """Whether two ``data`` values name the same folders, spelled alike but for separators and dots
+    (``data/train/`` and ``data/train``; the samples' own check still holds a resume to the same ids)."""
+    if not isinstance(a, str) or not isinstance(b, str):
+        return False
+    try:
+        return [os.path.normpath(f) for f in data_folders(a)] == [os.path.normpath(f) for f in data_folders(b)]
+    except sdk.ParameterError:
+        return False
+
+
 class _Sources:
     """The samples and targets of one or more dataset folders as one dataset: what :func:`train` reads
     through ``DatasetReader`` and ``TargetStore``. The folders must not share a sample id, and each must
@@ -1163,6 +1174,8 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             raise unresumable(f"config: expected a mapping, got {type(before).__name__}")
         if cfg.arch != "paper":  # (a fast training begun with a head, which it never read, is this run: it resumes)
             before = {k: v for k, v in before.items() if k != "head"}
+        if before.get("data") != config_key["data"] and _same_folders(before.get("data"), config_key["data"]):
+            before = {**before, "data": config_key["data"]}  # ('data/train/' resuming 'data/train' was refused)
         if before != config_key:
             diff = sorted(k for k in set(before) | set(config_key) if before.get(k) != config_key.get(k))
             raise sdk.ParameterError(f"{out} exists and was trained with another configuration (differs in: {', '.join(diff)}); "
