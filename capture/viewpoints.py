@@ -271,9 +271,14 @@ class VoxelGrid:
             lo, hi = allt.reshape(-1, 3).min(0), allt.reshape(-1, 3).max(0)
         ext = hi - lo
         if np.prod(ext / voxel + 3) > max_voxels:
-            new = float((np.prod(ext) / max_voxels) ** (1 / 3)) * 1.05
+            new = max(voxel, float((np.prod(ext) / max_voxels) ** (1 / 3)) * 1.05)
+            # The volume's cube root leaves out the padding and a flat level's zero extent (a 10 km ground quad
+            # alone kept 0.25 m: 4.8e9 voxels, a MemoryError): coarser still until the grid itself fits. (No
+            # map of the scene cache comes here: their grids, and the datasets planned on them, are as they were.)
+            while np.prod(np.ceil(ext / new) + 3) > max_voxels and bool((ext > new).any()):
+                new *= 1.05
             log.info("voxel %.3f m gives more than %d voxels: using %.3f m", voxel, max_voxels, new)
-            voxel = max(voxel, new)
+            voxel = new
         self.voxel = float(voxel)
         self.origin = lo - voxel  # one padding voxel
         self.shape = tuple(int(x) for x in np.ceil(ext / voxel).astype(int) + 3)
@@ -807,9 +812,14 @@ def sample_viewpoints(
         if eye is not None:
             stats["eye_height"] = eye
     if len(out) < n:
+        if attempts and rejected["clearance"] == attempts:  # (more draws or a lower coverage change nothing)
+            hint = (f"no point drawn from the space reachable from the spawn points is {clearance:g} m from every "
+                    f"triangle (a level narrower than that, or spawn points in a closed corner of it): lower clearance")
+        else:
+            hint = "lower min_coverage or raise max_attempts"
         raise ViewpointError(
             f"only {len(out)} of {n} valid viewpoints in {scene.name!r} after {attempts} draws "
-            f"(coverage down to {levels[level]:.2f}; rejected: {rejected}); lower min_coverage or raise max_attempts"
+            f"(coverage down to {levels[level]:.2f}; rejected: {rejected}); {hint}"
         )
     log.info("%s: %d viewpoints (%s) from %d draws, rejected %s", scene.name, n, prof.name, attempts, rejected)
     return out

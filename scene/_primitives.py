@@ -108,11 +108,14 @@ def checker_texture(
     b: Sequence[int] = (40, 40, 40),
     alpha_holes: bool = False,
 ) -> np.ndarray:
-    """An ``(size, size, 4)`` uint8 sRGB checkerboard; with ``alpha_holes`` every other dark cell
-    has alpha 0 (for alpha-test tests). ``a``, ``b``: the two cells' RGB, integers in [0, 255]."""
+    """An ``(size, size, 4)`` uint8 sRGB checkerboard of ``cells`` x ``cells`` cells (1 to ``size``); with
+    ``alpha_holes`` every other dark cell has alpha 0 (for alpha-test tests). ``a``, ``b``: the two cells' RGB,
+    integers in [0, 255]."""
     for name, count in (("size", size), ("cells", cells)):
         if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
             raise ParameterError(f"checker_texture.{name}: expected an integer >= 1, got {count!r}", name)
+    if cells > size:  # (a cell narrower than a pixel: 8 cells over 4 pixels drew one plain colour, no checkers)
+        raise ParameterError(f"checker_texture.cells: expected at most size ({size}) cells, got {cells!r}", "cells")
     for name, colour in (("a", a), ("b", b)):
         vector("checker_texture", name, colour, 3, 0, 255)
         if any(float(c) != int(c) for c in colour):  # (0.5 was drawn as 0: a colour in [0, 1] read as bytes)

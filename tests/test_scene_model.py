@@ -91,6 +91,8 @@ BAD: list[tuple[str, Any, str]] = [
     ("quad uv_scale of 3", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (0, 1, 0), uv_scale=(1, 2, 3)), "quad_mesh.uv_scale"),
     ("quad uv_scale nan", lambda: quad_mesh((0, 0, 0), (1, 0, 0), (0, 1, 0), uv_scale=(math.nan, 1)), "quad_mesh.uv_scale"),
     ("checker size -1", lambda: checker_texture(-1), "checker_texture.size"),
+    # more cells than pixels: 8 cells over 4 pixels was one plain colour, no checkerboard
+    ("checker 8 cells of 4 pixels", lambda: checker_texture(4, 8), r"checker_texture.cells: expected at most size \(4\)"),
     ("checker colour 300", lambda: checker_texture(8, 2, a=(300, 0, 0)), r"checker_texture.a: .* \[0, 255\]"),
     # a colour in [0, 1] read as bytes: 0.5 was drawn as 0; "no" was taken for True
     ("checker colour 0.5", lambda: checker_texture(8, 2, b=(0.5, 0.5, 0.5)), r"checker_texture.b: expected integers"),
@@ -153,3 +155,40 @@ def test_cameras_are_frozen_values_of_floats() -> None:
     assert a == b and hash(a) == hash(b) and a.position == (0.0, 1.0, 2.0)
     assert all(type(v) is float for v in (*a.position, a.yaw, a.pitch, a.fov_y, a.near, a.far))
     json.dumps({"yaw": a.yaw, "pitch": a.pitch, "position": a.position})
+
+
+def test_a_checker_of_one_pixel_cells_alternates_every_pixel() -> None:
+    img = checker_texture(4, 4, a=(200, 200, 200), b=(10, 10, 10))
+    assert img[..., 0].tolist() == [[200, 10, 200, 10], [10, 200, 10, 200]] * 2
+
+
+def test_the_camera_keeps_the_documented_conventions() -> None:
+    """rtp.scene and docs/architecture.md: world right-handed, Y up; view space looks down -Z; yaw 0 looks down
+    world -Z, positive yaw turns left (counter-clockwise seen from above), positive pitch looks up; an OpenGL
+    projection (near plane to NDC z -1, far to +1); and the coverage rays of the viewpoint sampler (rows from the
+    top, columns from the left) land where the renderer's matrices put them."""
+    from rtp.capture.viewpoints import ray_grid
+
+    def in_view(cam: Camera, p: Any) -> np.ndarray:
+        return (cam.view() @ np.array([*p, 1.0]))[:3]
+
+    c = Camera((1.0, 2.0, 3.0))
+    np.testing.assert_allclose(c.forward, [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(in_view(c, (1, 2, -2)), [0, 0, -5], atol=1e-12)  # ahead: -Z
+    np.testing.assert_allclose(in_view(c, (2, 2, 3)), [1, 0, 0], atol=1e-12)  # world +X on the right
+    np.testing.assert_allclose(in_view(c, (1, 3, 3)), [0, 1, 0], atol=1e-12)  # world up is up
+    np.testing.assert_allclose(Camera((0, 0, 0), yaw=90.0).forward, [-1, 0, 0], atol=1e-12)  # left of -Z: -X
+    assert Camera((0, 0, 0), pitch=30.0).forward[1] > 0
+    for cam in (c, Camera((0, 0, 0), yaw=90.0), Camera((0, 0, 0), pitch=30.0), Camera((4, -1, 2), yaw=-140.0, pitch=-35.0)):
+        r = cam.rotation()
+        np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
+        assert np.linalg.det(r) == pytest.approx(1.0)  # right-handed
+        np.testing.assert_allclose(in_view(cam, np.add(cam.position, cam.forward)), [0, 0, -1], atol=1e-12)
+    m = c.projection(16 / 9)
+    for z, ndc in ((-c.near, -1.0), (-c.far, 1.0)):
+        clip = m @ np.array([0.0, 0.0, z, 1.0])
+        assert clip[2] / clip[3] == pytest.approx(ndc)
+    vp = c.view_projection(16, 9)
+    for ray, corner in zip(ray_grid(c, 16 / 9, 2, 2), [(-0.5, 0.5), (0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)]):
+        clip = vp @ np.array([*np.add(c.position, ray), 1.0])
+        np.testing.assert_allclose(clip[:2] / clip[3], corner, atol=1e-12)

@@ -285,3 +285,43 @@ def test_profiles_share_only_the_first_current_camera(scene):
     docs = " ".join((Path(__file__).resolve().parents[1] / "docs" / "scenes.md").read_text().split())
     assert "share the current cameras and differ only in the previous ones" not in docs
     assert "the same seed share the first current camera only" in docs
+
+
+@pytest.mark.parametrize("height", [0.0, 0.5])
+def test_a_flat_level_gets_a_grid_within_the_voxel_budget(height):
+    """The coarser voxel was the cube root of the bounds' volume over the budget, which leaves out the grid's
+    padding: a flat level (a ground quad, its height 0) kept 0.25 m voxels, a 10 km quad 4.8e9 of them (a
+    MemoryError), and a nearly flat one got grids several times the budget. Now the grid itself fits."""
+    tris = np.array([[[0, 0, 0], [200, height, 0], [0, 0, 200]], [[200, height, 0], [200, height, 200], [0, 0, 200]]],
+                    np.float64)
+    grid = VoxelGrid(tris, 0.25, max_voxels=20_000)
+    assert np.prod(grid.shape) <= 20_000 and grid.voxel > 0.25
+    assert (grid.occ == SOLID).any()
+    # a level the first guess fits keeps it (every map of the scene cache does: the datasets' grids)
+    box = np.array([[[0, 0, 0], [200, 100, 0], [0, 100, 200]]], np.float64)
+    assert VoxelGrid(box, 0.25, max_voxels=2_000_000).voxel == pytest.approx((4e6 / 2e6) ** (1 / 3) * 1.05)
+
+
+def test_a_level_narrower_than_the_clearance_says_so():
+    """A room narrower than twice the clearance fails every draw's clearance test, and the error advised a lower
+    min_coverage or more draws, which change nothing: it now names the clearance."""
+    b = MeshBuilder()
+    b.box(0, (0, 0, 0), (0.5, 0.5, 0.5))
+    tiny = Scene("tiny", b.meshes(), [Material("m")], spawn_points=[SpawnPoint((0.25, 0.25, 0.25))])
+    with pytest.raises(ViewpointError, match=r"'clearance': 40, .* is 0.3 m from every triangle .*: lower clearance"):
+        sample_viewpoints(tiny, 1, 0, max_attempts=40)
+    assert len(sample_viewpoints(tiny, 1, 0, clearance=0.1, min_coverage=0.5)) == 1
+
+
+def test_a_seed_gives_the_same_viewpoints_in_any_process():
+    """No set or dict order (hash randomisation) reaches the cameras: two interpreters with different hash seeds
+    plan the same pairs, in both placements."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from rtp.capture.scenes import procedural; from rtp.capture.viewpoints import sample_viewpoints; "
+            "s = procedural(1); print(repr([sample_viewpoints(s, 2, 3, 'fast', placement=p) for p in ('free', 'eye')]))")
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                           env={**os.environ, "PYTHONHASHSEED": h}).stdout for h in ("0", "1")]
+    assert runs[0] == runs[1] and "Camera(" in runs[0]
