@@ -441,7 +441,7 @@ def _load(
     tail = None if meta.tail is None else _tail_session(ort, props, meta.tail, model_path, opts, session)
     predictor = ShadingRatePredictor(session, meta, model_path, tile_size=tile_size, assume_finite=assume_finite,
                                      tail=tail)
-    _check_tile_grid(predictor, model_path)
+    _check_tile_grid(predictor, model_path, given=metadata is not None)
     # what a pickled copy is loaded again from, in the process that unpickles it (docs/runtime.md "Pickling and other processes")
     predictor._pickled = (data, {
         "providers": providers, "threads": threads, "metadata": None if metadata is None else meta,
@@ -462,15 +462,17 @@ def _load(
     return predictor
 
 
-def _check_tile_grid(predictor: ShadingRatePredictor, model_path: Path) -> None:
+def _check_tile_grid(predictor: ShadingRatePredictor, model_path: Path, *, given: bool = False) -> None:
     """Refuse, at load, a model whose graph maps pixels to tiles of another size than its metadata's
     ``tile_size`` (a sidecar of the 8-pixel model given to the 16-pixel one): a model of fixed size is
     checked from its shapes when the predictor is built; any other runs once on a blank frame of eight
     tiles a side (under a millisecond for the shipped models; a model that fails on it is left to ``predict``
-    to name, as it would have been)."""
+    to name, as it would have been). ``given``: the metadata came from ``load(..., metadata=)``, and the error
+    says so rather than blaming the file's own."""
     if predictor._static_hw is not None:
         return
     meta = predictor.metadata
+    whose = "the metadata given as metadata=" if given else f"{str(model_path)!r}'s metadata"
     t = meta.tile_size
     side, _ = padded_size(8 * t, 8 * t, meta.pad_multiple)
     try:
@@ -480,14 +482,14 @@ def _check_tile_grid(predictor: ShadingRatePredictor, model_path: Path) -> None:
         return
     if raw.ndim == 4 and tuple(raw.shape[2:]) != (side // t, side // t):
         raise MetadataError(
-            f"tile_size: {str(model_path)!r}'s metadata says {t}, but the model maps {side}x{side} pixels to "
+            f"tile_size: {whose} says {t}, but the model maps {side}x{side} pixels to "
             f"{raw.shape[3]}x{raw.shape[2]} tiles (tiles of {side // max(raw.shape[3], 1)} pixels): the metadata "
             "is another model's, or was edited",
             "tile_size",
         )
     if raw.ndim == 4 and raw.shape[1] != len(meta.outputs):
         raise MetadataError(
-            f"outputs: {str(model_path)!r}'s metadata declares {len(meta.outputs)} rates {list(meta.outputs)} but "
+            f"outputs: {whose} declares {len(meta.outputs)} rates {list(meta.outputs)} but "
             f"the model outputs {raw.shape[1]} channels",
             "outputs",
         )

@@ -561,7 +561,8 @@ class SavingSelection(NamedTuple):
     #: uint8 D3D12/Vulkan codes ``(th, tw)`` (``(N, th, tw)``), as :func:`select_rates` returns them.
     rates: np.ndarray
     #: The lowest threshold whose rates save the work asked for (metric units; dB for PSNR, the highest):
-    #: ``select_rates(values, threshold, ...)`` gives ``rates`` again.
+    #: ``select_rates(values, threshold, ...)`` gives ``rates`` again (a batch's: ``select_rates(values[i],
+    #: threshold[i], ...)`` gives ``rates[i]``; ``select_rates`` takes one threshold, a number).
     threshold: float | np.ndarray
     #: The fraction of the shading work ``rates`` saves (:func:`work_saved`): at least the saving asked for
     #: unless the predictions hold NaN, which never passes.

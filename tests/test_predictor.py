@@ -417,9 +417,13 @@ def test_metadata_that_does_not_fit_the_graph(tmp_path: Path) -> None:
 
 
 def test_tile_size_mismatch_on_a_dynamic_model_is_caught_at_load(tmp_path: Path) -> None:
+    """Caught at load (it was caught at the first predict), and blamed on the metadata the caller gave: the message
+    said "'m.onnx''s metadata says 16" of a sidecar passed as metadata=, sending the reader to the wrong file."""
     path = build_onnx(tmp_path / "m.onnx", weights=np.eye(4, dtype=np.float32), tile=8)
-    with pytest.raises(sdk.MetadataError, match="metadata says 16, but the model maps 128x128 pixels to 16x16 tiles"):
-        sdk.load(path, metadata=base_metadata(tile_size=16))  # (it was caught at the first predict)
+    with pytest.raises(sdk.MetadataError, match="the metadata given as metadata= says 16, but the model maps 128x128 "
+                                                "pixels to 16x16 tiles") as info:
+        sdk.load(path, metadata=base_metadata(tile_size=16))
+    assert "m.onnx'" not in str(info.value) and info.value.key == "tile_size"
 
 
 def test_fixed_size_model_pads_smaller_frames(tmp_path: Path) -> None:
