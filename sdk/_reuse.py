@@ -142,10 +142,15 @@ class Track:
     of those frames (-1: none there). ``shape`` is ``(H, W)`` of those frames, whose pixels the places
     are in and whose tiles ``lut`` lists: one size for all. ``origin`` is the size of the frame the
     network ran on whole, whose tiles are the first entries in row-major order (sky takes the entry of
-    its tile at the same place on the screen); None: ``shape``. On a frame of another size
-    (dynamic resolution) :class:`PredictionReuse` moves the track onto that frame: each kept pixel keeps
-    the entry its surface carries, its place where it is now, and ``lut``'s one row lists no tile (-1),
-    so that every pixel carries its own entry from there on."""
+    its tile at the same place on the screen); None: ``shape``. ``cell`` is what a row of ``lut``
+    lists: None, the tiles of ``shape``; a step ``s``, its kept pixels (the grid of
+    :func:`tile_index_map`, one of every ``s`` per axis). On a frame of another size (dynamic
+    resolution) :class:`PredictionReuse` moves the track onto that frame: each kept pixel keeps the
+    entry its surface carries and its place where it is now, and ``lut``'s one row lists each kept
+    pixel's entry (``cell`` the step), so that every surface carries its own entry from there on and,
+    as at one size, a place moved by offsets smaller than a step finds the entry it had (the fetched
+    kept pixel's own entry instead moved the estimates a whole step a frame against a pan of a pixel a
+    frame)."""
 
     index: np.ndarray
     place: np.ndarray
@@ -153,6 +158,7 @@ class Track:
     lut: np.ndarray
     shape: tuple[int, int]
     origin: tuple[int, int] | None = None
+    cell: int | None = None
 
 
 @functools.lru_cache(maxsize=8)
@@ -222,7 +228,8 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     the pixel it was at in the previous one (``rows``, ``cols``: top-left pixel indices of the previous
     frame, inside it); its surface was where the kept pixel at or above-left of that one (one of every
     ``step`` per axis) was, moved by the fetched pixel's offset from it, so it takes the entry of the tile
-    there (the kept pixel's own entry where that tile has none). Unseen pixels (``seen`` 0) get -1,
+    there, or of the kept pixel there on a track moved onto a frame of another size (``track.cell``;
+    the fetched kept pixel's own entry where that tile or kept pixel has none). Unseen pixels (``seen`` 0) get -1,
     background pixels the tile at their own position (the same place on the screen, on the grid of the
     frame the network ran on whole: ``track.origin``). Each tile then takes the worst, the mean or the
     upper quartile (towards the worse side) of the estimates over its known pixels, and tiles with more
@@ -262,12 +269,17 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
     else:
         ty, tx = (place >> PLACE_BITS) // tile, (place & ((1 << PLACE_BITS) - 1)) // tile
     cell = np.minimum(ty, pth - 1) * ptw + np.minimum(tx, ptw - 1)
-    if len(track.lut) == 1 and track.lut[0, 0] >= 0:  # only the whole-frame run's tiles: the tile is the entry
-        gen = track.gen if track.gen.shape == (gh, gw) else np.zeros((gh, gw), track.gen.dtype)
+    cells = pth * ptw
+    if track.cell is not None:  # lut lists the kept pixels of a frame of another size: the one at or above-left there
+        pgh = track.index.shape[0]
+        cy, cx = (place >> PLACE_BITS) // track.cell, (place & ((1 << PLACE_BITS) - 1)) // track.cell
+        cell, cells = np.minimum(cy, pgh - 1) * pgw + np.minimum(cx, pgw - 1), pgh * pgw
+    if track.cell is None and len(track.lut) == 1 and track.lut[0, 0] >= 0:  # only the whole-frame run's tiles: the
+        gen = track.gen if track.gen.shape == (gh, gw) else np.zeros((gh, gw), track.gen.dtype)  # tile is the entry
         new = np.where(known, cell, -1)
     else:  # and the tiles predicted afresh since, each frame of them a generation; none there: the kept pixel's
         gen = np.take(track.gen, k)
-        moved = np.take(track.lut, gen * (pth * ptw) + np.where(known, cell, 0))
+        moved = np.take(track.lut, gen * cells + np.where(known, cell, 0))
         new = np.where(known, np.where(moved >= 0, moved, np.take(track.index, k)), -1)
     place = np.where(known, place, -1)
     if background is not None:  # the estimate at its own screen position, on the whole-frame run's grid
@@ -324,8 +336,8 @@ def carry_estimates(est: np.ndarray, track: Track, rows: np.ndarray, cols: np.nd
             out = pick.reduce(pick.reduce(src.reshape(len(est), th, k, gw), axis=2).reshape(len(est), th, tw, k), axis=-1)
     missing = (1.0 - count / real > unseen_fraction) | ~np.isfinite(out).all(axis=0)
     out[:, missing] = -np.inf if higher_is_better else np.inf
-    return (np.ascontiguousarray(out, dtype=np.float32), Track(new, place, gen, track.lut, track.shape, track.origin),
-            missing)
+    return (np.ascontiguousarray(out, dtype=np.float32),
+            Track(new, place, gen, track.lut, track.shape, track.origin, track.cell), missing)
 
 
 def crop_alignment(predictor: ShadingRatePredictor, limit: int = MAX_MARGIN) -> int:
@@ -894,11 +906,12 @@ class PredictionReuse:
                                               self.unseen_fraction, self.reduce, self.step)
         resized = hw != self._shape
         if resized:  # dynamic resolution: the track moves onto this frame (Track): each kept pixel keeps the entry its
-            # surface carries (no tile's mean of them), its place where it is now, and no tile of lut's one row is an
-            # entry, so every pixel carries its own; the first entries stay the whole-frame run's tiles (sky's)
+            # surface carries (no tile's mean of them), its place where it is now, and lut's one row lists each kept
+            # pixel's entry, so every surface carries its own and small moves add up as at one size; the first entries
+            # stay the whole-frame run's tiles (sky's)
             here = start_track(hw, tile, self.step)
             track = Track(track.index, np.where(track.index >= 0, here.place, -1), np.zeros_like(track.gen),
-                          np.full((1, here.lut.shape[1]), -1, np.int32), hw, self._track.origin or self._track.shape)
+                          track.index.reshape(1, -1).copy(), hw, self._track.origin or self._track.shape, step)
             # (the size is kept with the track below, once the frame is through: set here, a frame refused further
             # on, an input function's or a crop's NaN, left the old size's track under the new size, and the same
             # frame given again had its fetch refused as out of the previous frame, or was carried unmoved)
@@ -947,9 +960,10 @@ class PredictionReuse:
             here = start_track(hw, tile, self.step)
             mine = slot[here.index]
             fresh = mine >= 0
+            row = slot if track.cell is None else mine.ravel()  # (lut's cells: the tiles, or the kept pixels)
             track = Track(np.where(fresh, mine, track.index), np.where(fresh, here.place, track.place),
-                          np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, slot[None]]),
-                          track.shape, track.origin)
+                          np.where(fresh, len(track.lut), track.gen), np.concatenate([track.lut, row[None]]),
+                          track.shape, track.origin, track.cell)
             missing = np.zeros_like(missing)  # (every tile the network's now)
         self._track = track
         self._shape = hw  # (with the track: another size's where dynamic resolution changed it)

@@ -505,6 +505,33 @@ def test_a_frame_of_another_render_resolution_is_carried(unseen: str) -> None:
             sdk.fetch_from_motion(zero, zero, prev_shape=bad)
 
 
+@pytest.mark.parametrize("step", [2, None])
+def test_small_motions_add_up_as_one_after_a_change_of_size(step: int | None) -> None:
+    """On the frames after a change of size (dynamic resolution) a camera panning a pixel a frame carries the
+    estimates by three pixels after three frames, as one three-pixel pan does, as at one size: each surface's place
+    is carried and finds the entry it had on the resized frame. Each kept pixel took the entry of the kept pixel at
+    or above-left of the one it fetched, so the estimates moved a whole step a frame there (twelve pixels for three)."""
+    pred = sdk.load("jnyang")
+    big, small = (64, 160), (32, 80)
+    x = np.random.default_rng(3).random((len(pred.metadata.inputs), *big), dtype=np.float32)
+    half = np.ascontiguousarray(x[:, ::2, ::2])
+    ones = np.ones(small, np.float32)
+    zero = np.zeros(small)
+    rows, cols = np.indices(small)
+
+    def pan(moves: list[int]) -> np.ndarray:
+        reuse = sdk.PredictionReuse(pred, 10, step=step)
+        reuse.predict(x)
+        reuse.predict(half, sdk.fetch_from_motion(zero, zero, prev_shape=big), ones)
+        for m in moves:
+            out = reuse.predict(half, (rows, np.clip(cols - m, 0, small[1] - 1)), ones)
+        assert reuse.age == 1 + len(moves) and reuse.work == 0.0
+        return out
+
+    for shift in (1, -1):
+        np.testing.assert_array_equal(pan([shift] * 3), pan([3 * shift]))
+
+
 def test_a_budget_on_carried_estimates() -> None:
     """``shading_rates(saving=)`` on a reuse: the budget over the estimates ``predict`` gives, tiles the network
     did not see at 1x1 and the others reduced further to make the saving; a bad saving moves nothing on."""
