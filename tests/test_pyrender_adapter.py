@@ -413,7 +413,8 @@ def test_scene_is_restored_and_errors_are_typed(caplog: pytest.LogCaptureFixture
         with pytest.raises(sdk.adapters.AdapterFrameError, match="SceneFrame"):
             adapter.inputs((scene, moved, np.eye(4), prev_u8))  # type: ignore[arg-type]
     for use in (lambda: adapter.inputs(SceneFrame(scene, moved, np.eye(4), prev_u8)),
-                lambda: adapter.render(scene, moved), lambda: adapter.gbuffers(scene, moved)):
+                lambda: adapter.render(scene, moved), lambda: adapter.gbuffers(scene, moved),
+                lambda: adapter.renderer):  # (the renderer: a PyrenderAdapterError, not the adapters' closed error)
         with pytest.raises(AdapterClosedError, match="pyrender adapter has been closed"):
             use()
     adapter.close()  # closing twice is fine
@@ -476,6 +477,12 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
                 own.inputs(SceneFrame(scene, np.eye(4), np.eye(4), before, before_depth))
         with pytest.raises(PyrenderAdapterError, match="64x48"):
             Adapter(["seen"], 32, 24, renderer=user)
+        # a frame source draws the displayed frame with a renderer of its own: pyrender's ValueError came out raw
+        from rtp.scene import Camera
+
+        with Adapter.frame_source(scene, 64, 48) as source, \
+                pytest.raises(PyrenderAdapterError, match="bound to another pyrender renderer.*no other renderer"):
+            source.frame(Camera((0.0, 0.0, 0.0)), Camera((0.0, 0.0, 0.1)))
         with Adapter(["seen", "albedo.g"], 64, 48, renderer=user) as adapter:
             x = adapter.inputs(SceneFrame(scene, np.eye(4), np.eye(4), before))  # prev depth: the adapter's own
             assert x[0].mean() == 1.0  # a static camera sees everything again
@@ -492,6 +499,15 @@ def test_borrowed_renderer_and_bound_scene_error() -> None:
             with Adapter(["seen"], 64, 48, renderer=user) as adapter, \
                     pytest.raises(PyrenderAdapterError, match="pose must be a rigid camera-to-world matrix"):
                 adapter.inputs(SceneFrame(scene, bad, np.eye(4), before))
+        # nor mirrored (orthonormal, determinant -1: a left-handed frame, its z axis turned): it was taken, and drew
+        # the frame mirrored with every two-sided normal turned away from the camera
+        with Adapter(["seen", "normal.z"], 64, 48, renderer=user) as adapter:
+            for where in ("pose", "prev_pose"):
+                frame = SceneFrame(scene, np.eye(4), np.eye(4), before)
+                with pytest.raises(PyrenderAdapterError, match=f"^{where} must be a rigid .*mirrors"):
+                    adapter.inputs(replace(frame, **{where: np.diag([1.0, 1.0, -1.0, 1.0])}))
+            with pytest.raises(PyrenderAdapterError, match="mirrors"):
+                adapter.render(scene, np.diag([-1.0, 1.0, 1.0, 1.0]))
     finally:
         _delete_renderer(user)  # not user.delete(): pyrender's terminates the EGL display every context shares
     # a deleted renderer was taken, and the first inputs() failed with an AttributeError from inside pyrender
@@ -677,6 +693,76 @@ def test_moving_objects_are_fetched_from_where_they_were(parent: bool, given_dep
     uncovered = (np.abs(prev_depth - 2.9) < 0.05) & (np.abs(depth - 5.0) < 0.1)  # wall where the box was
     assert uncovered.sum() > 20 and seen[uncovered].max() == 0.0
     assert np.abs(mx[np.abs(depth - 5.0) < 0.1]).max() < 1e-4  # the wall did not move
+
+
+@pytest.mark.parametrize("winding", ["front", "back", "mirrored"])
+def test_a_moving_double_sided_surface_seen_from_behind_has_its_motion(winding: str) -> None:
+    """A double-sided quad 3 m in front of a fixed camera moved 0.8 m: pyrender's segmentation pass culls back
+    faces whatever the material, so the quad seen from behind (or a mirrored node's, whose winding turns) was
+    missing there, its pixels took the wall's id (no motion) and about 80 % of it was unseen. The pass that turns
+    the winding leaves pyrender's own image as it was (the wall box is single-sided: culled as before)."""
+    import trimesh
+
+    from rtp.plugins.pyrender import Adapter, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    scene, _, box = _moving_box_scene(pyrender)
+    scene.remove_node(box)
+    corners = np.array([[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.5, 0.5, 0.0], [-0.5, 0.5, 0.0]])
+    faces = np.array([[0, 2, 1], [0, 3, 2]]) if winding == "back" else np.array([[0, 1, 2], [0, 2, 3]])
+    quad = pyrender.Mesh.from_trimesh(trimesh.Trimesh(corners, faces, process=False), smooth=False,
+                                      material=pyrender.MetallicRoughnessMaterial(baseColorFactor=(0.9, 0.1, 0.1, 1),
+                                                                                  doubleSided=True))
+    moved = scene.add(quad)
+    before = np.diag([-1.0 if winding == "mirrored" else 1.0, 1.0, 1.0, 1.0])
+    before[:3, 3] = (-0.4, 0.0, -3.0)
+    scene.set_pose(moved, before)  # (set_pose keeps a mirroring, which pyrender's add(pose=) takes apart)
+    w, h, eye = 160, 96, np.eye(4)
+    with Adapter(["seen", "motion.x", "motion.y", "depth"], w, h) as adapter:
+        prev_colour, _ = adapter.render(scene, eye)
+        after = before.copy()
+        after[0, 3] += 0.8
+        scene.set_pose(moved, after)
+        lit, lit_depth = adapter.render(scene, eye)
+        seen, mx, my, depth = adapter.inputs(SceneFrame(scene, eye, eye, prev_colour, prev_node_poses={moved: before}))
+        again, again_depth = adapter.render(scene, eye)
+        np.testing.assert_array_equal(again, lit)
+        np.testing.assert_array_equal(again_depth, lit_depth)
+    focal = (h / 2) / np.tan(np.radians(30.0))
+    quad_px = np.abs(depth - 3.0) < 0.05
+    assert quad_px.sum() > 500
+    assert seen[quad_px].mean() > 0.97, seen[quad_px].mean()
+    np.testing.assert_allclose(mx[quad_px], -0.8 * focal / 3.0, atol=0.05)
+    np.testing.assert_allclose(my[quad_px], 0.0, atol=0.05)
+    assert np.abs(mx[np.abs(depth - 4.95) < 0.1]).max() < 1e-4  # the wall did not move
+
+
+def test_a_mirrored_node_keeps_its_normals_facing_the_camera() -> None:
+    """A double-sided box whose node is mirrored (scale -1 on x, kept by ``scene.set_pose``) draws the same picture
+    as the plain box (the box is symmetric): its normals must be the same. Its triangles reach the screen with
+    the winding turned, gl_FrontFacing false on every face the camera sees, and the shader flipped them all
+    (normal.z -0.9 where the camera looks at the box's front)."""
+    import trimesh
+
+    from rtp.plugins.pyrender import Adapter
+
+    pyrender = pyrender_or_skip()
+    out = []
+    for mirror in (1.0, -1.0):
+        scene = pyrender.Scene(ambient_light=(0.3, 0.3, 0.3))
+        material = pyrender.MetallicRoughnessMaterial(baseColorFactor=(0.5, 0.5, 0.5, 1.0), doubleSided=True)
+        node = scene.add(pyrender.Mesh.from_trimesh(trimesh.creation.box((2.0, 2.0, 2.0)), smooth=False,
+                                                    material=material))
+        scene.set_pose(node, np.diag([mirror, 1.0, 1.0, 1.0]))
+        scene.add(pyrender.PerspectiveCamera(yfov=1.0, zfar=100.0))
+        pose = np.eye(4)
+        pose[:3, 3] = (0.0, 0.5, 5.0)
+        with Adapter(["normal.z"], 40, 30) as adapter:
+            out.append(adapter.gbuffers(scene, pose))
+    plain, mirrored = out
+    assert plain.normal[15, 20, 2] > 0.9  # (the box's front, seen from 5 m)
+    np.testing.assert_array_equal(mirrored.depth, plain.depth)
+    np.testing.assert_allclose(mirrored.normal, plain.normal, atol=1e-3)
 
 
 def test_an_orthographic_camera_pans_over_a_scene() -> None:

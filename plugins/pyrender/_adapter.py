@@ -67,6 +67,11 @@ def _pose(value: Any, name: str) -> np.ndarray:
         raise PyrenderAdapterError(f"{name} must be a rigid camera-to-world matrix (a rotation and a translation), "
                                    f"got one that scales or shears (its axes' lengths {np.round(scales, 4).tolist()}): "
                                    "depth, normals and motion would be read in a distorted view space")
+    if np.linalg.det(rotation) < 0.0:  # (orthonormal, but a reflection: a left-handed camera frame)
+        raise PyrenderAdapterError(f"{name} must be a rigid camera-to-world matrix (a rotation and a translation), "
+                                   "got one that mirrors (its rotation's determinant is -1): pyrender would draw the "
+                                   "frame mirrored, with the faces' winding and so culling and two-sided normals "
+                                   "turned; the camera's axes are right-handed (x right, y up, looking down -z)")
     return m
 
 
@@ -310,7 +315,9 @@ class Adapter(_BaseAdapter[SceneFrame]):
     # ------------------------------------------------------------------ rendering
     @property
     def renderer(self) -> Any:
-        """The ``pyrender.OffscreenRenderer`` the adapter draws with (its own or the borrowed one)."""
+        """The ``pyrender.OffscreenRenderer`` the adapter draws with (its own or the borrowed one);
+        :class:`rtp.sdk.adapters.AdapterClosedError` once the adapter is closed."""
+        self._check_open()
         return self._gbuf.renderer
 
     def render(self, scene: Any, pose: Any, *, camera: Any | None = None, flags: int | None = None) -> Any:
@@ -477,7 +484,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
             return None
         ids = {n: i + 1 for i, n in enumerate(deltas)}
         with self._posed(scene, camera, pose):  # which node each pixel shows: black for those that did not move
-            seg = self._gbuf.segment(scene, {n: _id_colour(ids.get(n, 0)) for n in meshes}).astype(np.int64)
+            seg = self._gbuf.segment(scene, {n: _id_colour(ids.get(n, 0)) for n in meshes}, depth).astype(np.int64)
         shown = seg[..., 0] | seg[..., 1] << 8 | seg[..., 2] << 16
         h, w = depth.shape
         xs = np.arange(w, dtype=np.float64)[None, :] + 0.5

@@ -108,6 +108,27 @@ def unpack12(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a.astype(np.float32) / 4095.0, c.astype(np.float32) / 4095.0
 
 
+def draw(renderer: Any, scene: Any, flags: int, seg_node_map: dict[Any, Any] | None = None, *, fix: str) -> Any:
+    """``renderer.render(scene, flags, seg_node_map)``, with pyrender's errors turned into
+    :class:`PyrenderAdapterError` (``fix``: what to do when the scene is bound to another renderer)."""
+    try:
+        return renderer.render(scene, flags, seg_node_map)
+    except ValueError as exc:
+        if "already bound to a context" in str(exc):
+            raise PyrenderAdapterError(
+                "this scene's meshes are bound to another pyrender renderer's GL context (pyrender binds a "
+                f"scene to one renderer at a time): {fix}") from exc
+        raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
+    except Exception as exc:
+        raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
+
+
+def _same_depth(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Where two linear depths of one view are the same surface (24-bit depth buffers, drawn by different
+    shaders): within 1e-4 relative, and neither background."""
+    return (a > 0.0) & (b > 0.0) & (np.abs(a - b) <= 1e-4 * np.maximum(a, b))
+
+
 def _program_cache_class() -> type:
     pyrender = import_pyrender()
     from OpenGL import GL
@@ -121,6 +142,7 @@ def _program_cache_class() -> type:
             super().__init__()  # pyrender's own shader folder for everything else
             self.defines: dict[str, int] | None = None  # the current pass; None: pyrender's shaders
             self.msaa = False
+            self.clockwise = False  # a pass that takes clockwise triangles for front faces (segment())
 
         def get_program(self, vertex_shader: str, fragment_shader: str, geometry_shader: str | None = None,
                         defines: dict[str, Any] | None = None) -> Any:
@@ -129,6 +151,8 @@ def _program_cache_class() -> type:
                 # its forward pass: the one place to turn it off without editing pyrender.
                 if not self.msaa:
                     GL.glDisable(GL.GL_MULTISAMPLE)
+                # (pyrender never sets the winding; segment() turns it for one pass and back after)
+                GL.glFrontFace(GL.GL_CW if self.clockwise else GL.GL_CCW)
                 if fragment_shader == "mesh.frag":
                     defines = {**(defines or {}), **self.defines}
                     fragment_shader = os.fspath(SHADER_DIR / "gbuffer.frag")  # absolute: os.path.join keeps it
@@ -266,22 +290,12 @@ class GBufferRenderer:
     def draw(self, scene: Any, flags: int | None = None, seg_node_map: dict[Any, Any] | None = None) -> Any:
         """pyrender's own ``render(scene, flags, seg_node_map)`` on this renderer (no G-buffer patch), with
         pyrender's errors turned into :class:`PyrenderAdapterError`."""
-        renderer = self.renderer
         flags = self._pyrender.RenderFlags.NONE if flags is None else flags
-        try:
-            out = renderer.render(scene, flags, seg_node_map)
-        except ValueError as exc:
-            if "already bound to a context" in str(exc):
-                raise PyrenderAdapterError(
-                    "this scene's meshes are bound to another pyrender renderer's GL context (pyrender binds a "
-                    "scene to one renderer at a time): pass that renderer to the adapter "
-                    "(Adapter(..., renderer=r)), or draw the displayed frames with adapter.render(...)"
-                ) from exc
-            raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
-        except Exception as exc:
-            raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
+        out = draw(self.renderer, scene, flags, seg_node_map,
+                   fix="pass that renderer to the adapter (Adapter(..., renderer=r)), or draw the displayed frames "
+                       "with adapter.render(...)")
         camera = scene.main_camera_node.camera
-        if not isinstance(camera, self._pyrender.OrthographicCamera) or flags & self._pyrender.RenderFlags.SEG:
+        if not isinstance(camera, self._pyrender.OrthographicCamera):
             return out
         if flags & self._pyrender.RenderFlags.DEPTH_ONLY:
             return orthographic_depth(out, camera)
@@ -301,19 +315,46 @@ class GBufferRenderer:
         colour, depth = out
         return np.ascontiguousarray(colour[..., :3]), np.ascontiguousarray(depth, dtype=np.float32)
 
-    def segment(self, scene: Any, colours: dict[Any, tuple[int, int, int]]) -> np.ndarray:
+    def segment(self, scene: Any, colours: dict[Any, tuple[int, int, int]], depth: np.ndarray | None = None
+                ) -> np.ndarray:
         """pyrender's segmentation image (``RenderFlags.SEG``) of the mesh nodes in ``colours`` (RGB, 0-255
         each), without multisampling, so that every pixel holds one node's colour, never a blend of two:
-        ``(H, W, 3)`` uint8, top-left origin, black on background."""
-        inner = self.renderer._renderer
+        ``(H, W, 3)`` uint8, top-left origin, black on background.
+
+        pyrender culls back faces in its segmentation pass whatever the material, so a double-sided surface
+        seen from behind (or a mirrored node's) is missing there and the pixel shows what lies behind it.
+        Given ``depth``, the G-buffers' depth (which draws such surfaces), the pixels whose segmentation depth
+        is not that depth take their colour from a second pass that draws the back faces, where its depth is."""
+        colour, seg_depth = self._segment_pass(scene, colours, clockwise=False)
+        if depth is None:
+            return colour
+        missed = (depth > 0.0) & ~_same_depth(seg_depth, depth)
+        if missed.any():
+            back, back_depth = self._segment_pass(scene, colours, clockwise=True)
+            take = missed & _same_depth(back_depth, depth)
+            colour[take] = back[take]
+            log.debug("segmentation: %d pixel(s) of back faces", int(take.sum()))
+        return colour
+
+    def _segment_pass(self, scene: Any, colours: dict[Any, tuple[int, int, int]], *, clockwise: bool
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        renderer = self.renderer
+        inner = renderer._renderer
         before, inner._program_cache = inner._program_cache, self._cache
         self._cache.defines = {}  # (a pass of ours: multisampling off; pyrender's segmentation shaders untouched)
+        self._cache.clockwise = clockwise
         try:
-            colour, _ = self.draw(scene, self._pyrender.RenderFlags.SEG, colours)
+            colour, depth = self.draw(scene, self._pyrender.RenderFlags.SEG, colours)
         finally:
             self._cache.defines = None
+            self._cache.clockwise = False
             inner._program_cache = before
-        return np.ascontiguousarray(colour[..., :3])
+            if clockwise:  # (the renderer's own draws take pyrender's counter-clockwise front faces)
+                from OpenGL import GL
+
+                renderer._platform.make_current()
+                GL.glFrontFace(GL.GL_CCW)
+        return np.array(colour[..., :3]), np.asarray(depth, np.float32)
 
     def render(self, scene: Any, *, albedo: bool = False, normals: Sequence[str] = (),
                material: Sequence[str] = ()) -> GBuffers:

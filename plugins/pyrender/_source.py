@@ -18,7 +18,7 @@ from rtp.sdk.adapters import FrameSource
 
 from ._adapter import SceneFrame
 from ._convert import to_pyrender_scene
-from ._gbuffer import _delete_renderer
+from ._gbuffer import _delete_renderer, draw
 from ._gl import import_pyrender, offscreen_renderer
 
 if TYPE_CHECKING:
@@ -78,7 +78,9 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         pose, prev_pose = np.linalg.inv(camera.view()), np.linalg.inv(prev_camera.view())
         self._node.camera = prev_cam
         self.scene.set_pose(self._node, prev_pose)
-        prev_colour, _ = self.renderer.render(self.scene)  # pyrender's lit image: the displayed frame
+        prev_colour, _ = draw(self.renderer, self.scene, self._pyrender.RenderFlags.NONE,  # the displayed frame
+                              fix="the source draws with a renderer of its own, so give it a scene no other "
+                                  "renderer draws, or build the SceneFrames yourself with Adapter(..., renderer=r)")
         self._node.camera = cam
         self.scene.set_pose(self._node, pose)
         return SceneFrame(scene=self.scene, pose=pose, prev_pose=prev_pose, prev_colour=prev_colour,

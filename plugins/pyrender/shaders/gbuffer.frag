@@ -52,6 +52,7 @@ struct Material {
 
 uniform Material material;
 uniform mat4 V;          // world -> view, set by pyrender for mesh.vert
+uniform mat4 M;          // the node's model -> world, set by pyrender for mesh.vert
 uniform vec3 cam_pos;
 
 in vec3 frag_position;   // world space
@@ -160,7 +161,10 @@ vec3 base_colour() {
 
 vec3 view_normal() {
     vec3 n = world_normal();
-    if (!gl_FrontFacing && !g_geometric) n = -n;  // two-sided surfaces: back faces show the flipped normal
+    // two-sided surfaces: back faces show the flipped normal. A mirrored node (negative determinant) turns its
+    // triangles' winding on screen, so its front faces arrive with gl_FrontFacing false
+    bool front = gl_FrontFacing != (determinant(mat3(M)) < 0.0);
+    if (!front && !g_geometric) n = -n;
     return normalize(mat3(V) * n);
 }
 
