@@ -493,14 +493,19 @@ class PlayReport:
                 lines.append(f"| {method} | " + " | ".join(
                     "-" if not np.isfinite(c["work_saved"]) else f"{'>= ' if c.get('capped') else ''}{100 * c['work_saved']:.1f}%"
                     for c in cells) + " |")
-            # (a saving of 0 is one: `or np.nan` read it as none and left the method out)
-            lows = [m for m in self.matched if m["path"] == path and _finite(m.get("work_saved_p05"))]
+            # (a saving of 0 is one: `or np.nan` read it as none and left the method out). A share the sweep never
+            # fails that rarely has no worst frames' saving either: "-", as in the matched table (a method that never
+            # failed under 5% was left out of this table); a method with a saving and no worst frames' saving is a path
+            # kept by an older run, which has none
+            here = [m for m in self.matched if m["path"] == path]
+            older = {m["method"] for m in here if _finite(m["work_saved"]) and not _finite(m.get("work_saved_p05"))}
+            lows = [m for m in here if _finite(m.get("work_saved_p05"))]
             if lows:
                 lines += ["", "The worst 5% of frames' saving where the method fails those shares of tiles (what a "
                           "frame-time budget plans for; a budget, `NAME@k:bS`, saves the same on every frame):", "",
                           "| method | " + " | ".join(f"worst frames at {100 * f:g}% fails" for f in FAIL_LEVELS) + " |",
                           "|---|" + "---:|" * len(FAIL_LEVELS)]
-                for method in dict.fromkeys(m["method"] for m in lows):
+                for method in dict.fromkeys(m["method"] for m in here if m["method"] not in older):
                     by_share = {m["fail_share"]: m for m in lows if m["method"] == method}
                     lines.append(f"| {method} | " + " | ".join(
                         "-" if f not in by_share else f"{'>= ' if by_share[f].get('capped') else ''}"
@@ -885,6 +890,11 @@ def _resume_key(job: dict[str, Any], predictors: dict[str, sdk.ShadingRatePredic
     return json.dumps({"job": settings, "models": models, "rtp": sdk.__version__}, sort_keys=True, default=str)
 
 
+#: The settings of the loop itself a run into a folder compares with the report there (besides the map, methods,
+#: paths, frames, ...), where that report records them (older ones do not record all of them).
+_LOOP_KEYS = ("sweep", "flip_every", "unseen_fraction", "shading", "history", "engine_rates")
+
+
 def _warn_of_another_report(outdir: Path, settings: dict[str, Any]) -> None:
     """Say, before the work, that ``outdir`` holds the report of a run with other settings, which this run's
     replaces when it ends (a ten-minute benchmark was overwritten without a word)."""
@@ -895,9 +905,14 @@ def _warn_of_another_report(outdir: Path, settings: dict[str, Any]) -> None:
         return
     try:
         before = json.loads(old.read_text(encoding="utf-8"))["settings"]
+        if not isinstance(before, dict):  # (a damaged report's settings: an AttributeError, rtp play's traceback)
+            raise TypeError("settings: not a mapping")
+        # (the loop's own settings too, where the old report records them: an --open-loop or --composite ablation, one
+        # beside an engine's rates or without the sweep, into the benchmark's folder replaced it without a word)
         differ = [k for k in ("scene", "methods", "paths", "frames", "fps", "size", "tile_size", "fail_metric", "fail_threshold",
-                              "seed", "models", "dynamic_resolution")
-                  if before.get(k) != json.loads(json.dumps(settings.get(k), default=str))]
+                              "seed", "models", "dynamic_resolution", *_LOOP_KEYS)
+                  if (k not in _LOOP_KEYS or k in before)
+                  and before.get(k) != json.loads(json.dumps(settings.get(k), default=str))]
     except (OSError, ValueError, KeyError, TypeError):
         differ = ["unreadable"]
     if differ:

@@ -961,6 +961,41 @@ def test_a_play_at_another_frame_rate_says_it_replaces_that_report(tmp_path: Pat
     assert warning.startswith(f"{tmp_path} holds the report of another run (fps differ)")
 
 
+def test_a_play_of_another_loop_setting_says_it_replaces_that_report(tmp_path: Path,
+                                                                     caplog: pytest.LogCaptureFixture) -> None:
+    """An --open-loop or --composite ablation, a run beside an engine's rates, without the sweep or with another
+    --flip-every into the benchmark's folder replaced its report at the end without the warning (only the map,
+    methods, paths, frames, ... were compared); a report that does not record such a setting (an older one) is not
+    said to differ in it, and a report whose settings are not a mapping is "unreadable", not an AttributeError."""
+    import logging
+
+    from rtp.evaluate._play import _warn_of_another_report
+
+    older = {"scene": "procedural:0", "methods": ["jnyang"], "paths": ["fast"], "frames": 3, "fps": 60.0,
+             "seed": 0, "size": [W, H], "tile_size": 16, "fail_metric": "jnyang", "fail_threshold": 0.25,
+             "models": {}, "dynamic_resolution": None}
+    settings = {**older, "sweep": True, "flip_every": 20, "unseen_fraction": 0.5, "shading": "renderer",
+                "history": "own displayed frame", "engine_rates": None}
+    (tmp_path / "play.json").write_text(json.dumps({"settings": settings}))
+    said = []
+    for change in ({}, {"history": "full-rate frame (open loop)"}, {"shading": "composite"}, {"sweep": False},
+                   {"engine_rates": {"image": "foveation", "combiner": "max"}}, {"flip_every": 0}):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="rtp.evaluate"):
+            _warn_of_another_report(tmp_path, {**settings, **change})
+        said.append([r.getMessage().split(": ")[0] for r in caplog.records if "another run" in r.getMessage()])
+    assert said == [[]] + [[f"{tmp_path} holds the report of another run ({k} differ)"]
+                           for k in ("history", "shading", "sweep", "engine_rates", "flip_every")]
+    (tmp_path / "play.json").write_text(json.dumps({"settings": older}))  # (a report from before they were recorded)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.evaluate"):
+        _warn_of_another_report(tmp_path, settings)
+        assert "another run" not in caplog.text
+        (tmp_path / "play.json").write_text(json.dumps({"settings": ["damaged"]}))
+        _warn_of_another_report(tmp_path, settings)
+    assert "another run (unreadable differ)" in caplog.text
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int

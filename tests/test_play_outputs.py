@@ -42,6 +42,26 @@ def test_the_worst_frames_table_keeps_a_saving_of_zero() -> None:
     assert "older" not in table
 
 
+def test_the_worst_frames_table_keeps_a_method_that_never_fails_that_rarely() -> None:
+    """A method whose sweep never fails as rarely as 5% reads "-" at every share of the matched table, and was left
+    out of the worst 5% of frames' table altogether (its worst frames' saving is unreadable there too): the two tables
+    named different methods. It reads "-" in both; a path kept by an older run (a saving, no worst frames') stays
+    out."""
+    rep = _report()
+    rep.unseen["fast"] = [1.0] + [0.0] * 7
+    nan = float("nan")
+    for method, saved, low in (("jnyang@4", [nan] * 3, [nan] * 3), ("jnyang", [0.5, 0.6, 0.7], [0.4, 0.5, 0.6]),
+                               ("yang2019", [nan, nan, 0.3], [nan, nan, 0.2]), ("older", [0.5] * 3, [None] * 3)):
+        rep.matched += [{"path": "fast", "method": method, "fail_share": f, "work_saved": w, "capped": False,
+                         "work_saved_p05": v} for f, w, v in zip(FAIL_LEVELS, saved, low)]
+    md = rep.to_markdown()
+    assert "| jnyang@4 | - | - | - |" in md.split("The worst 5% of frames")[0]
+    table = md.split("The worst 5% of frames")[1].split("Every run")[0]
+    assert [line.split(" | ")[0] for line in table.splitlines() if line.startswith("| ") and "---" not in line][1:] \
+        == ["| jnyang@4", "| jnyang", "| yang2019"]
+    assert "| jnyang@4 | - | - | - |" in table and "| yang2019 | - | - | 20.0% |" in table
+
+
 def test_full_shows_no_flip_where_none_was_measured() -> None:
     """With --flip-every 0 (or fewer frames than it) no FLIP is measured, and full's row read 0.0000 where
     every other method's reads "-"; full's FLIP is 0 on the frames FLIP is measured."""
@@ -63,6 +83,29 @@ def test_the_curves_name_the_side_on_which_tiles_fail(monkeypatch: pytest.Monkey
         plots.play_curves(rep)
     assert [f.axes[0].get_xlabel() for f in figures] == ["tiles failing (psnr ≤ 35), % (symlog)",
                                                           "tiles failing (jnyang ≥ 0.25), % (symlog)"]
+
+
+def test_the_curves_show_a_point_that_fails_on_no_tile_whole(monkeypatch: pytest.MonkeyPatch) -> None:
+    """play_curves.png's axis of failing tiles started at 0: the oracle's point (it fails on no tile) and its
+    default's ring sat on the axis, half cut off. Every marker lies inside its panel."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    figures = _figures(monkeypatch)
+    rep = _report()
+    rep.unseen["fast"] = [1.0, 0.0, 0.0]
+    rep.rows += [{"path": "fast", "method": "oracle", "fail_share": 0.0, "work_saved": 0.8, "default": True},
+                 {"path": "fast", "method": "jnyang", "fail_share": 0.0, "work_saved": 0.4, "default": False},
+                 {"path": "fast", "method": "jnyang", "fail_share": 0.05, "work_saved": 0.7, "default": True}]
+    plots.play_curves(rep)
+    (fig,) = figures
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[0]
+    marked = [line for line in ax.lines if line.get_marker() not in ("None", "", " ", None)]
+    assert len(marked) == 4  # (two curves, two rings)
+    for line in marked:
+        r = line.get_markersize() * fig.dpi / 72 / 2
+        for x, _ in ax.transData.transform(np.column_stack(line.get_data())):
+            assert ax.bbox.x0 <= x - r and x + r <= ax.bbox.x1, (line.get_label(), x, r, ax.bbox)
 
 
 def _drawn(ax: Any) -> set[float]:
