@@ -15,7 +15,9 @@ log10 of each: +26 to -12 dB), finer than ``rtp evaluate``'s sqrt(2) steps, whos
 across a wide step reads the saving at 1-5% failing tiles low. Prints per model the work saved at 1, 2, 5
 and 10% failing tiles, the failing share and saving at its own default threshold, and with ``--fail-share
 S`` the decision threshold at which it fails on S of the tiles (to set a default with ``rtp-export
---retune``). The work saved is the mean over tiles of 1 - 1/(W·H) of the chosen rate.
+--retune``). The work saved is the mean over tiles of 1 - 1/(W·H) of the chosen rate. A share the sweep never
+fails that rarely reads "-"; one it never fails that often reads ">=" before the sweep's best saving (a lower
+bound, as ``bench/report.py`` marks it), and its threshold "-" with the failing shares the sweep covers.
 """
 
 from __future__ import annotations
@@ -63,6 +65,30 @@ def outcome(pred: np.ndarray, truth: np.ndarray, decide: float, judge: float,
     return float(fail.mean()), float(saved.mean())
 
 
+def saved_cells(fails: np.ndarray, saved: np.ndarray, shares: tuple[float, ...]) -> list[str]:
+    """The work saved % at each of ``shares`` failing tiles, read off a sweep's points (``fails`` ascending, ``saved``
+    the best saving up to each): "-" where the sweep never fails that rarely, ">= " before its best saving where it
+    never fails that often (a lower bound: read plain, the sweep's end passed for the saving at that share)."""
+    out = []
+    for s in shares:
+        if fails[0] > s:
+            out.append("-")
+            continue
+        v = 100 * float(np.interp(s, fails, saved))
+        out.append(f"{'>= ' if fails[-1] < s else ''}{v:.1f}")
+    return out
+
+
+def threshold_at(fails: np.ndarray, thresholds: list[float], share: float) -> str:
+    """The decision threshold at which the sweep fails on ``share`` of the tiles (``fails``: the failing share of each
+    of ``thresholds``, from the strictest to the loosest), linear between the sweep's points; where the sweep never
+    fails on that share (its strictest fails more, or its loosest less), "-" and the shares it covers, not the end
+    threshold that ``np.interp`` clamps to."""
+    if not fails[0] <= share <= fails[-1]:
+        return f"- (the sweep fails on {100 * fails[0]:.1f}-{100 * fails[-1]:.1f}%)"
+    return f"{float(np.interp(share, fails, thresholds)):.4g}"
+
+
 def decision(judge: float, factor: float, higher_is_better: bool) -> float:
     """The decision threshold ``factor`` of the sweep stands for: ``judge x factor`` for an error, for PSNR
     ``judge - 20 log10(factor)`` dB (a factor on the error's amplitude, as ``rate_factors``)."""
@@ -99,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     truth = np.concatenate([store.load(i, metas[0].metric, tile).reshape(6, -1) for i in ids], axis=1)
     print(f"\n{metas[0].metric} on {tile}-pixel tiles: {len(ids)} samples of {args.data} ({args.scene}), a tile failing "
           f"{'under' if higher else 'over'} {judge:g}; work saved % at {' / '.join(f'{100 * s:g}' for s in SHARES)}% "
-          f"failing tiles (a sweep of {len(SWEEP)} thresholds)\n")
+          f"failing tiles (a sweep of {len(SWEEP)} thresholds; -: it never fails that rarely, >=: never that often, "
+          "a lower bound)\n")
     print("| model | model tiles | saved % at 1 / 2 / 5 / 10% failing | default threshold: failing / saved %"
           + (f" | threshold failing on {100 * args.fail_share:g}%" if args.fail_share is not None else "") + " |")
     print("|---|---:|---|---|" + ("---|" if args.fail_share is not None else ""))
@@ -110,15 +137,13 @@ def main(argv: list[str] | None = None) -> int:
         pts = sorted(outcome(est, truth, decision(judge, f, higher), judge, factors, higher) for f in SWEEP)
         fails = np.array([q[0] for q in pts])
         saved = np.maximum.accumulate(np.array([q[1] for q in pts]))
-        at = [float(np.interp(s, fails, saved)) if fails[0] <= s else float("nan") for s in SHARES]
         d = outcome(est, truth, m.default_threshold, judge, factors, higher)
-        row = (f"| {name} | {m.tile_size} | {' / '.join('-' if v != v else f'{100 * v:.1f}' for v in at)} | "
+        row = (f"| {name} | {m.tile_size} | {' / '.join(saved_cells(fails, saved, SHARES))} | "
                f"{m.default_threshold:g}: {100 * d[0]:.1f} / {100 * d[1]:.1f}")
         if args.fail_share is not None:
             thrs = [decision(judge, f, higher) for f in SWEEP]  # from the strictest to the loosest
-            by_thr = [outcome(est, truth, t, judge, factors, higher)[0] for t in thrs]
-            thr = float(np.interp(args.fail_share, by_thr, thrs))
-            row += f" | {thr:.4g}"
+            by_thr = np.array([outcome(est, truth, t, judge, factors, higher)[0] for t in thrs])
+            row += f" | {threshold_at(by_thr, thrs, args.fail_share)}"
         print(row + " |")
     return 0
 

@@ -136,7 +136,7 @@ def main() -> None:
     models = {name.removesuffix(".onnx"): sdk.load(name) for name in sdk.shipped_models()}
     print(f"rtp {sdk.__version__}, numpy {np.__version__}, {cpu_description()}, median of {args.repeats}\n")
     sizes = [f"{w}x{h}" for w, h in args.sizes]
-    print("| model | planes | " + " | ".join(f"input_planes {s} | predict {s}" for s in sizes) + " |")
+    print("| model | planes | " + " | ".join(f"input_planes {s} (ms) | predict {s} (ms)" for s in sizes) + " |")
     print("|---|---:|" + "---:|---:|" * len(sizes))
     frames = {(w, h): gbuffers(w, h) for w, h in args.sizes}
     for name, predictor in models.items():

@@ -75,7 +75,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     print(f"rtp {sdk.__version__}, numpy {np.__version__}, {cpu_description()}, "
           f"median of {args.repeats}\n")
-    print("| frame | luma of RGB | pixel_differences | block_variances | the same by definition | tile_variances | "
+    print("| ms | luma of RGB | pixel_differences | block_variances | the same by definition | tile_variances | "
           "tile_block_levels, two planes |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for w, h in args.sizes:

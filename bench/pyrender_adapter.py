@@ -63,7 +63,7 @@ def main() -> None:
     args = ap.parse_args()
     print(f"pyrender adapter, Adapter.inputs, median of {args.repeats}; {cpu_description()}\n")
     rows = {f"{w}x{h}": time_size(w, h, args.repeats) for w, h in args.sizes}
-    print("| model | planes | " + " | ".join(f"{s} frame loop | {s} first frame" for s in rows) + " |")
+    print("| model | planes | " + " | ".join(f"{s} frame loop (ms) | {s} first frame (ms)" for s in rows) + " |")
     print("|---|---:|" + "---:|---:|" * len(rows))
     for name in next(iter(rows.values())):
         planes = len(sdk.load(name).metadata.inputs)

@@ -59,7 +59,7 @@ def main() -> None:
     print(f"rtp {sdk.__version__}, onnxruntime {ort.__version__}, {platform.processor() or platform.machine()}, "
           f"{args.threads} threads, median of {args.repeats}, model {args.model}\n")
     blocks = any(c.endswith(".blocks") for c in pred.metadata.inputs)
-    print("| frame | network runs (sdk predict) | carried: mean | worst | upper | mean, step 2 | mean, step 8 | "
+    print("| ms | network runs (sdk predict) | carried: mean | worst | upper | mean, step 2 | mean, step 8 | "
           + ("mean, rescale 0.25 | " if blocks else "")
           + ("features carried, tail run | the same, step 8 | the tail alone | " if pred.splits else "")
           + " | ".join(f"fresh, {100 * s:g}% of the width new" for s in STRIPS) + " |")

@@ -7,7 +7,7 @@
 Both files are loaded with ``rtp.sdk.load`` and run on the input planes of every sample of ``--data``
 (a dataset folder of ``rtp capture``; no targets needed). Prints a Markdown table: the largest
 difference of the network's output (``predict_raw``, transformed space) and of ``predict`` (the
-metric's units), and the share of tiles whose rate code differs at 0.5, 1 and 2 times the model's
+metric's units), and the number of tiles whose rate code differs at 0.5, 1 and 2 times the model's
 default threshold (for PSNR: 3 dB under, at and 3 dB over it). Where the decisions differ, the
 evaluation's figures can too; where none does, every work-saved and failing-tile figure of
 ``rtp evaluate`` is the same.

@@ -373,3 +373,23 @@ def test_the_inference_bench_keeps_two_models_of_one_file_name(tmp_path: Path, m
     models = mod._models(tmp_path, 1, [*given, other, other])
     assert list(models) == ["paper's network (random weights)", *given, "other.onnx"], list(models)
     assert [str(p.path) for p, _ in list(models.values())[1:3]] == given
+
+
+def test_hardware_tiles_says_where_its_sweep_ends_instead_of_reading_its_last_point() -> None:
+    """bench/hardware_tiles.py read the saving at 10% failing tiles off a sweep that never failed that often as the
+    sweep's last point, printed plain (a lower bound read as the figure), and ``--fail-share S`` of a sweep that never
+    failed on S as the sweep's end threshold (``np.interp`` clamps): 4x the judging threshold, printed as the
+    threshold failing on S. The first is marked ">=" now (as bench/report.py marks it), the second is "-" with the
+    shares the sweep covers."""
+    import numpy as np
+
+    from .conftest import bench_module
+
+    mod = bench_module("hardware_tiles")
+    fails, saved = np.array([0.015, 0.03, 0.06]), np.array([0.40, 0.50, 0.60])
+    assert mod.saved_cells(fails, saved, (0.01, 0.02, 0.05, 0.10)) == ["-", "43.3", "56.7", ">= 60.0"]
+    thresholds = [0.1, 0.2, 0.3]
+    assert mod.threshold_at(fails, thresholds, 0.045) == "0.25"
+    assert mod.threshold_at(fails, thresholds, 0.015) == "0.1" and mod.threshold_at(fails, thresholds, 0.06) == "0.3"
+    assert mod.threshold_at(fails, thresholds, 0.08) == "- (the sweep fails on 1.5-6.0%)"
+    assert mod.threshold_at(fails, thresholds, 0.01) == "- (the sweep fails on 1.5-6.0%)"

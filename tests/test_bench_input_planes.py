@@ -31,6 +31,7 @@ def test_input_planes_a_row_per_shipped_model() -> None:
     out = _run("input_planes.py", "--sizes", "64x48,80x48", "--repeats", "1")
     assert out.returncode == 0, out.stderr
     assert _models(out.stdout, 4) == SHIPPED, out.stdout
+    assert "| model | planes | input_planes 64x48 (ms) | predict 64x48 (ms) | input_planes 80x48 (ms) |" in out.stdout
     assert re.search(r"^\| \(sdk\.reproject alone\) \| 4 \| [\d.]+ \|  \| [\d.]+ \|  \|$", out.stdout, re.M), out.stdout
     bad = _run("input_planes.py", "--sizes", "big", timeout=60)
     assert bad.returncode == 2 and "--sizes" in bad.stderr
@@ -61,5 +62,22 @@ def test_pyrender_adapter_a_row_per_shipped_model() -> None:
     out = _run("pyrender_adapter.py", "--sizes", "64x48", "--repeats", "1")
     assert out.returncode == 0, out.stderr
     assert _models(out.stdout, 2) == SHIPPED, out.stdout  # a frame loop and a first frame
+    assert "| model | planes | 64x48 frame loop (ms) | 64x48 first frame (ms) |" in out.stdout, out.stdout
     bad = _run("pyrender_adapter.py", "--repeats", "0", timeout=60)
     assert bad.returncode == 2 and "--repeats" in bad.stderr
+
+
+def test_the_planes_and_reuse_tables_name_their_unit() -> None:
+    """bench/planes.py and bench/reuse.py (and input_planes.py and pyrender_adapter.py, above) printed tables of
+    milliseconds whose header and columns named no unit ("| frame | luma of RGB | ...", "median of 7"): the corner
+    cell says ms now, as docs/performance.md's tables of them do."""
+    out = _run("planes.py", "--sizes", "16x16", "--repeats", "1", timeout=120)
+    assert out.returncode == 0, out.stderr
+    head = [line for line in out.stdout.splitlines() if line.startswith("| ")]
+    assert head[0].startswith("| ms | luma of RGB | pixel_differences | block_variances |"), out.stdout
+    assert re.fullmatch(r"\| 16x16 \|(?: [\d.]+ \|){6}", head[1]), out.stdout
+    out = _run("reuse.py", "--repeats", "1", timeout=300)
+    assert out.returncode == 0, out.stderr
+    head = [line for line in out.stdout.splitlines() if line.startswith("| ")]
+    assert head[0].startswith("| ms | network runs (sdk predict) | carried: mean |"), out.stdout
+    assert [r.split(" | ")[0] for r in head[1:]] == ["| 1920x1080", "| 1280x720"], out.stdout

@@ -2249,10 +2249,14 @@ def test_bench_hardware_tiles_compares_models_on_one_tile_size(tmp_path: Path, m
     assert "jnyang on 8-pixel tiles: 4 samples" in out
     rows = [line.split("|") for line in out.splitlines() if line.startswith(f"| {model}")]
     assert len(rows) == 2 and rows[0] == rows[1] and rows[0][2].strip() == "16"
-    v = [float(x) if x.strip() != "-" else None for x in rows[0][3].split("/")]
+    # ("-": the sweep never fails that rarely; ">=": never that often, its best saving a lower bound)
+    v = [float(x.strip().removeprefix(">= ")) if x.strip() != "-" else None for x in rows[0][3].split("/")]
     got = [x for x in v if x is not None]
-    assert got == sorted(got) and all(0.0 <= x <= 93.75 for x in got)
-    assert float(rows[0][5]) > 0.0  # the threshold failing on 5% of the tiles
+    assert got == sorted(got) and all(0.0 <= x <= 93.75 for x in got), out
+    # the threshold failing on 5% of the tiles, or, where the sweep of this 10-step model never fails that often, the
+    # shares it covers (the loosest threshold, 4x, was printed as if it failed on 5%)
+    cell = rows[0][5].strip()
+    assert cell.startswith("- (the sweep fails on ") or float(cell) > 0.0, out
     bad = subprocess.run([sys.executable, str(path), "psnr", "jnyang", "--data", str(data)], capture_output=True,
                          text=True)
     assert bad.returncode == 2 and "expected models of one metric, got jnyang, psnr" in bad.stderr
@@ -2275,7 +2279,7 @@ def test_bench_hardware_tiles_compares_models_on_one_tile_size(tmp_path: Path, m
     rows = {line.split("|")[1].strip(): line.split("|") for line in out.splitlines() if line.startswith("| psnr")}
     assert set(rows) == {"psnr", "psnr-8px"} and [rows[n][2].strip() for n in ("psnr", "psnr-8px")] == ["16", "8"]
     for row in rows.values():
-        got = [float(x) for x in row[3].split("/") if x.strip() != "-"]
+        got = [float(x.strip().removeprefix(">= ")) for x in row[3].split("/") if x.strip() != "-"]
         assert got == sorted(got) and all(0.0 <= x <= 93.75 for x in got)
         assert 35.0 - 20.0 * np.log10(4.0) <= float(row[5]) <= 35.0 - 20.0 * np.log10(0.05)  # dB inside the sweep
 
