@@ -565,7 +565,8 @@ class SavingSelection(NamedTuple):
     #: threshold[i], ...)`` gives ``rates[i]``; ``select_rates`` takes one threshold, a number).
     threshold: float | np.ndarray
     #: The fraction of the shading work ``rates`` saves (:func:`work_saved`): at least the saving asked for
-    #: unless the predictions hold NaN, which never passes.
+    #: unless the predictions hold values no threshold passes: NaN, an error of +inf or past :data:`MAX_THRESHOLD`
+    #: (a PSNR of -inf or below ``-MAX_THRESHOLD``).
     saved: float | np.ndarray
 
 
@@ -608,7 +609,8 @@ def select_rates_for_saving(
     or more, exactly, from the predictions alone: the worst predicted tile is as good as any choice of
     that saving allows, and every tile passes that threshold. ``saving`` is a share of the full-rate work
     in ``[0, 0.9375]`` (4x4 everywhere; less where ``allowed`` leaves out the coarse rates); 0 gives 1x1
-    everywhere. ``values``, ``higher_is_better``, ``allowed`` and ``factors`` are :func:`select_rates`'s;
+    everywhere (but on a tile whose predicted error is below 0: it passes the lowest threshold, 0). ``values``,
+    ``higher_is_better``, ``allowed`` and ``factors`` are :func:`select_rates`'s;
     ``frame_size = (H, W)`` and ``tile_size`` weigh partial edge tiles by their pixels, as in
     :func:`work_saved` (without them every tile counts alike). Returns a :class:`SavingSelection`.
 

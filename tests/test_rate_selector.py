@@ -665,3 +665,22 @@ def test_a_selector_whose_buffer_could_not_be_made_works_on(gl_context: Any) -> 
     finally:
         ctx.release()
         make_current(gl_context)
+
+
+def test_an_engine_rate_given_by_its_name_decides_as_by_its_code(gl_context: Any) -> None:
+    """``engine_rates="2x2"`` (a rate name, which ``sdk.select_rates`` takes as one code over the frame) failed in the
+    upload with a bare ValueError ("invalid literal for int()"), a budget beside it too; now it is the code's rates."""
+    pred = sdk.load("jnyang")
+    raw = np.random.default_rng(5).random((4, 3, 5)).astype(np.float32)
+    with RateSelector(pred, gl_context) as selector:
+        for name in ("2x1", "2x2", "1x1"):
+            for combiner in ("max", "min", "sum"):
+                by_code = selector.select(raw, engine_rates=sdk.RATE_CODES[name], combiner=combiner)
+                np.testing.assert_array_equal(selector.select(raw, engine_rates=name, combiner=combiner), by_code)
+                np.testing.assert_array_equal(by_code, sdk.select_rates(
+                    selector.decoded(), pred.metadata.default_threshold, factors=pred.metadata.rate_factors,
+                    engine_rates=name, combiner=combiner))
+        budget = selector.select(raw, saving=0.8, engine_rates=sdk.RATE_CODES["2x2"])
+        np.testing.assert_array_equal(selector.select(raw, saving=0.8, engine_rates="2x2"), budget)
+        with pytest.raises(sdk.ParameterError, match="engine_rates: unknown shading rate '3x3'"):
+            selector.select(raw, engine_rates="3x3")

@@ -485,3 +485,23 @@ def test_transposed_tiles_with_wide_and_tall_swapped_pick_the_transposed_rates(
                                 factors=None if factors is None else [factors[i] for i in swap])
     back = np.vectorize(lambda c: sdk.RATE_CODES[_MIRROR.get(sdk.RATE_NAMES[int(c)], sdk.RATE_NAMES[int(c)])])(got)
     np.testing.assert_array_equal(mirrored, back.T)
+
+
+def test_a_saving_beside_values_no_threshold_passes_or_below_the_lowest() -> None:
+    """What docs/runtime.md says of a budget's edges: values no threshold passes (an error of +inf or past
+    MAX_THRESHOLD, a PSNR of -inf) save less than asked, as NaN does; an error predicted below 0 passes the lowest
+    threshold, 0, so a saving of 0 reduces that tile (and only that one), as select_rates at 0 does."""
+    for bad in (np.inf, 2 * sdk.MAX_THRESHOLD):
+        values = np.full((6, 2, 2), 0.1)
+        values[:, 0, 0] = bad
+        sel = sdk.select_rates_for_saving(values, 0.9)
+        assert sel.rates[0, 0] == sdk.RATE_CODES["1x1"] and sel.saved == pytest.approx(0.9375 * 3 / 4)
+    psnr = np.full((6, 2, 2), 40.0)
+    psnr[:, 1, 1] = -np.inf
+    assert sdk.select_rates_for_saving(psnr, 0.9, higher_is_better=True).saved == pytest.approx(0.9375 * 3 / 4)
+    values = np.full((6, 2, 2), 0.1)
+    values[:, 1, 0] = -0.5
+    zero = sdk.select_rates_for_saving(values, 0.0)
+    assert zero.threshold == 0.0 and zero.rates[1, 0] == sdk.RATE_CODES["4x4"]
+    assert (np.delete(zero.rates.ravel(), 2) == sdk.RATE_CODES["1x1"]).all()
+    np.testing.assert_array_equal(sdk.select_rates(values, zero.threshold), zero.rates)

@@ -435,6 +435,8 @@ class RateSelector:
             return engine_rates
         sdk.select_rates(np.zeros((6, *grid), np.float32), thr, higher_is_better=self._meta.higher_is_better,
                          allowed=allowed, engine_rates=engine_rates, combiner=combiner)
+        if isinstance(engine_rates, str):  # a rate's name, one code over the frame (checked by the SDK just above)
+            engine_rates = sdk.RATE_CODES[engine_rates]
         return np.broadcast_to(np.asarray(engine_rates), grid)
 
     def decoded(self) -> np.ndarray:
