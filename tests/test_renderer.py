@@ -761,3 +761,60 @@ def test_shade_rates_whose_targets_could_not_be_made_works_on(gl_context: Any) -
     finally:
         ctx.release()
         make_current(gl_context)
+
+
+@pytest.mark.gl
+def test_a_borrowed_context_s_gl_state_does_not_change_what_the_renderer_draws(gl_context: Any) -> None:
+    """An engine that lends its context leaves its own GL state set between the renderer's calls. The passes took
+    it as they found it: clockwise front faces flipped every normal of the two-sided G-buffer, a reverse-Z depth
+    test ('>=') drew no geometry at all, wireframe drew edges, a depth range moved the shadow map's depths, a
+    sampler object bound to a texture unit overrode the shadow map's comparison and FXAA's filtering, blending
+    mixed shade_rates' composite and the reprojection with what their targets held, and a viewport or scissor the
+    engine set while the renderer's framebuffer was still bound (moderngl sets them on it) cut the next image to
+    that rectangle. Each call that draws now sets the state it assumes first: every frame, composite and
+    reprojection is the one GL's default state draws."""
+    import moderngl
+
+    from rtp.plugins.moderngl import create_context
+
+    ctx = create_context()
+    try:
+        with Renderer(97, 33, ctx=ctx, shadow_map_size=256) as r:
+            r.load_scene(_textured_scene())
+            cam, prev_cam = _front_camera(pitch=-8.0, yaw=4.0), _front_camera(pitch=-6.0)
+            prev = r.render(prev_cam)
+            codes = np.random.default_rng(0).choice([RATE_CODES[rate] for rate in RATES], (3, 7)).astype(np.uint8)
+            want = r.render(cam, prev)
+            want_vrs = r.shade_rates(codes, 16)
+            want_rp = r.reproject(prev.colour["1x1"], prev.depth, prev_cam)
+            other = np.full_like(codes, RATE_CODES["4x4"])
+
+            def engine_state() -> None:
+                ctx.enable(moderngl.BLEND)
+                ctx.blend_func = moderngl.ONE, moderngl.ONE
+                ctx.front_face = "cw"
+                ctx.depth_func = ">="
+                ctx.wireframe = True
+                ctx.depth_clamp_range = (0.25, 1.0)
+                ctx.viewport = ctx.scissor = (0, 0, 10, 10)  # (moderngl sets them on the bound framebuffer: the renderer's)
+                sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), repeat_x=True, repeat_y=True)
+                for unit in range(8):
+                    sampler.use(unit)
+
+            r.shade_rates(other, 16)  # (the composite's target then holds another image: blending mixed it in, and
+            engine_state()             # a viewport cut to 10x10 showed it around)
+            np.testing.assert_array_equal(r.shade_rates(codes, 16), want_vrs)
+            r.render(prev_cam)  # (the same: the targets hold another view)
+            engine_state()
+            got = r.render(cam, prev)
+            for name in ("normal", "depth", "albedo", "shadow", "ao", "reprojected", "seen"):
+                np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+            for rate in RATES:
+                np.testing.assert_array_equal(got.colour[rate], want.colour[rate], err_msg=rate)
+            r.reproject(np.ones_like(prev.colour["1x1"]), prev.depth, prev_cam)
+            engine_state()
+            for a, b in zip(r.reproject(prev.colour["1x1"], prev.depth, prev_cam), want_rp):
+                np.testing.assert_array_equal(a, b)
+    finally:
+        ctx.release()
+        make_current(gl_context)

@@ -1276,6 +1276,30 @@ class Renderer:
         if self._released:
             raise RendererError("this renderer has been released")
         self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
+        self._reset_gl_state()
+
+    def _reset_gl_state(self) -> None:
+        """The context's GL state the passes assume (GL's defaults), set before every call that draws: a borrowed
+        context keeps what its engine last set, and with blending on, clockwise front faces (the two-sided
+        G-buffer's ``gl_FrontFacing`` flips every normal), a reverse-Z depth test (nothing drawn), wireframe,
+        a depth range or sampler objects bound to the renderer's texture units, the frames came out wrong in
+        silence. Left so afterwards, as the bound framebuffer is (the engine sets its own again). The viewport and
+        scissor of every framebuffer of the renderer's are made whole again too: moderngl's ``ctx.viewport`` and
+        ``ctx.scissor`` set them on the bound framebuffer, which after a call is the renderer's (an engine that set
+        its window's viewport before binding its own framebuffer cut the next composite to that rectangle)."""
+        ctx, mgl = self.ctx, self._mgl
+        for obj in list(vars(self).values()) + list(self._vrs or ()):
+            for fbo in obj.values() if isinstance(obj, dict) else (obj,):
+                if isinstance(fbo, mgl.Framebuffer) and fbo is not ctx.screen:
+                    fbo.viewport, fbo.scissor = (0, 0, *fbo.size), None
+        ctx.enable_only(mgl.NOTHING)
+        ctx.front_face = "ccw"
+        ctx.cull_face = "back"
+        ctx.depth_func = "<"
+        ctx.wireframe = False
+        ctx.polygon_offset = (0.0, 0.0)
+        ctx.depth_clamp_range = None
+        ctx.clear_samplers()
 
     def release(self) -> None:
         """Free every GL resource (and the context, when the renderer created it). Idempotent; after the engine
