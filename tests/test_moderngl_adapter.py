@@ -11,7 +11,8 @@ import pytest
 
 from rtp import sdk
 from rtp.capture.scenes import procedural
-from rtp.plugins.moderngl import Adapter, Frame, GBufferTextures, Renderer
+from rtp.plugins.moderngl import Adapter, Frame, GBufferTextures, RateSelector, Renderer
+from rtp.plugins.moderngl._adapter import CHANNEL_IDS
 from rtp.plugins.moderngl._glio import is_released, write_texture
 from rtp.scene import Camera
 from tests.conftest import make_current
@@ -881,3 +882,112 @@ def test_an_adapter_whose_construction_fails_releases_what_it_made(gl_context: A
     finally:
         ctx.release()
         make_current(gl_context)
+
+
+_ENGINE_VS = "#version 330\nin vec2 p;\nvoid main() { gl_Position = vec4(p, 0.0, 1.0); }\n"
+_ENGINE_FS = "#version 330\nout vec4 c;\nvoid main() { c = vec4(0.25); }\n"
+
+
+def _engine_gl_state(ctx: Any, engine: Any, vao: Any) -> None:
+    """What an engine's frame leaves on its context before it calls the adapter: its framebuffer, program and
+    vertex array bound, blending ONE, ONE, clockwise front faces culled at the back, a reverse-Z depth test,
+    rasterizer discard, wireframe, a viewport and a small scissor, sampler objects (comparing, linear) bound to
+    the adapter's units, another active texture unit, a pixel-store alignment of 8."""
+    import moderngl
+
+    engine.use()
+    vao.render(vertices=3)
+    ctx.enable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.RASTERIZER_DISCARD)
+    ctx.blend_func = moderngl.ONE, moderngl.ONE
+    ctx.front_face, ctx.cull_face, ctx.depth_func = "cw", "back", ">"
+    ctx.wireframe = True
+    ctx.viewport, ctx.scissor = (3, 2, 40, 30), (5, 4, 16, 12)
+    for unit in range(10):
+        ctx.sampler(compare_func=">=", filter=(moderngl.LINEAR, moderngl.LINEAR)).use(unit)
+    ctx.texture((2, 2), 4).use(location=9)
+    ctx.texture((3, 3), 1).read(alignment=8)
+
+
+def test_an_engines_gl_state_changes_neither_the_planes_nor_the_rates_and_is_left_as_it_was(frames, tiny_model,
+                                                                                           gl_context: Any) -> None:
+    """Inside an engine's frame the adapter and RateSelector run on its context as the engine left it. Blending
+    ONE, ONE added each draw to the last one's planes; clockwise front faces culled the full-screen triangle, and
+    so did wireframe (edges only) and rasterizer discard: the planes were the last frame's or zeros. Now every plane
+    and rate is the same, bit for bit, as on a clean context, twice over, and the engine's framebuffer, viewport,
+    scissor, wireframe and enable flags are its own again afterwards, after an error inside the draw too."""
+    import moderngl
+
+    _, prev, cur = frames
+    channels = tuple(CHANNEL_IDS)  # (every one, a first pass for the lumas included)
+    pred = sdk.load(tiny_model())
+    p, pp = cur.camera.projection(W / H), prev.camera.projection(W / H)
+
+    def window(depth: np.ndarray, proj: np.ndarray) -> np.ndarray:
+        return np.where(depth > 0, (proj[2, 2] * -depth + proj[2, 3]) / np.where(depth > 0, depth, 1) * 0.5 + 0.5,
+                        1.0).astype(np.float32)
+
+    def run(dirty: bool) -> list[np.ndarray]:
+        ctx = moderngl.create_standalone_context(backend="egl", require=430)
+        try:
+            ctx.__enter__()
+            depth, prev_depth = ctx.depth_texture((W, H)), ctx.depth_texture((W, H))  # (comparing, by default)
+            write_texture(depth, window(cur.depth, p))
+            write_texture(prev_depth, window(prev.depth, pp))
+            frame = _engine_frame(ctx, prev, cur, depth=depth, prev_depth=prev_depth, material=_tex(ctx, cur.albedo),
+                                  motion=_tex(ctx, np.stack([cur.channel("motion.x"), cur.channel("motion.y")], -1)))
+            engine = ctx.framebuffer(color_attachments=[ctx.texture((W, H), 4, dtype="f4")])
+            prog = ctx.program(vertex_shader=_ENGINE_VS, fragment_shader=_ENGINE_FS)
+            cw = ctx.vertex_array(prog, [(ctx.buffer(np.array([-1, -1, -1, 3, 3, -1], "f4")), "2f", "p")])
+            ccw = ctx.vertex_array(prog, [(ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], "f4")), "2f", "p")])
+            out: list[np.ndarray] = []
+            with Adapter(channels, W, H, ctx=ctx, depth_kind="window") as a, RateSelector(pred, ctx) as selector:
+                if dirty:
+                    _engine_gl_state(ctx, engine, cw)
+                    assert ctx.error == "GL_NO_ERROR"
+                for _ in range(2):
+                    out.append(a.inputs(frame))
+                    raw = pred.predict_raw(np.stack([out[-1][channels.index(c)] for c in pred.metadata.inputs]))
+                    out += [selector.select(raw), selector.select(raw, saving=0.5), selector.decoded()]
+                if not dirty:
+                    return out
+                assert ctx.fbo is engine and ctx.viewport == (3, 2, 40, 30) and ctx.scissor == (5, 4, 16, 12)
+                assert ctx.wireframe and depth.compare_func == "<="
+
+                def engine_draws() -> np.ndarray:  # what the engine's own draws do after the call
+                    engine.use()
+                    write_texture(engine.color_attachments[0], np.zeros((H, W, 4), np.float32))
+                    cw.render(vertices=3)  # rasterizer discard: nothing
+                    ctx.disable(moderngl.RASTERIZER_DISCARD)
+                    ctx.wireframe = False
+                    for v in (cw, cw, ccw):  # blended twice: 0.5; the counter-clockwise one culled
+                        v.render(vertices=3)
+                    ctx.enable(moderngl.RASTERIZER_DISCARD)
+                    ctx.wireframe = True
+                    return np.frombuffer(engine.color_attachments[0].read(), np.float32).reshape(H, W, 4)[..., 0]
+
+                want = np.zeros((H, W), np.float32)
+                want[4:16, 5:21] = 0.5  # (the scissor's rectangle, inside the viewport)
+                np.testing.assert_array_equal(engine_draws(), want)
+
+                class Failing:  # an error inside the draw
+                    def render(self, **_: Any) -> None:
+                        raise RuntimeError("draw failed")
+
+                a._vao, vao = Failing(), a._vao
+                with pytest.raises(RuntimeError, match="draw failed"):
+                    a.inputs(frame)
+                a._vao = vao
+                assert ctx.fbo is engine and ctx.viewport == (3, 2, 40, 30) and ctx.scissor == (5, 4, 16, 12)
+                assert ctx.wireframe and depth.compare_func == "<="
+                np.testing.assert_array_equal(engine_draws(), want)
+                assert ctx.error == "GL_NO_ERROR"
+            return out
+        finally:
+            ctx.release()
+            make_current(gl_context)
+
+    clean, dirty = run(False), run(True)
+    assert len(clean) == len(dirty) == 8
+    for i, (c, d) in enumerate(zip(clean, dirty)):
+        np.testing.assert_array_equal(d, c, err_msg=f"output {i}")
+    assert clean[0][channels.index("seen")].any() and clean[0][channels.index("depth")].any()

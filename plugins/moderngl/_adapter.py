@@ -197,8 +197,11 @@ class Adapter(_AdapterBase[GBufferTextures]):
             reference renderer reprojects pixel coordinates this way: ``Renderer.reprojection_source``).
 
     The adapter draws in the current GL context, which must be ``ctx`` (it is in an engine of one
-    context; with several, make ``ctx`` current first). A draw binds the frame's textures to units
-    0-7 and leaves the engine's framebuffer binding and viewport as they were. Close it (or use it in
+    context; with several, make ``ctx`` current first). A draw runs with GL's default rasterisation
+    state whatever the engine left (blending, culling, depth test, rasterizer discard off, filled polygons),
+    binds the frame's textures to units 0-7 (with no sampler object), its program and vertex array, and puts
+    back the engine's framebuffer binding, viewport, wireframe and (moderngl's) enable flags, after an
+    error in the draw too (docs/adapters.md). Close it (or use it in
     a ``with`` block): an adapter dropped unclosed keeps its GL objects and says so with a
     ``ResourceWarning``.
     """
@@ -401,20 +404,39 @@ class Adapter(_AdapterBase[GBufferTextures]):
         self._region_drawn = region
         # The engine's framebuffer binding and viewport are put back after the draw (its next clear or draw goes
         # where it went before), and a depth texture's comparison mode is off while the shader reads its depth
-        # (texelFetch on a comparing sampler2D is undefined in GLSL; moderngl's depth textures compare by default).
-        bound, viewport = self.ctx.fbo, self.ctx.viewport
+        # (texelFetch on a comparing sampler2D is undefined in GLSL; moderngl's depth textures compare by default;
+        # a sampler object bound to the unit overrides the texture's mode, so units 0-7 are left with none).
+        # The draw's rasterisation is GL's default whatever the engine left: its enable flags (blending, culling,
+        # a depth test, rasterizer discard) are off for the draw through a moderngl scope, which puts back the
+        # flags moderngl tracks after it, and wireframe is off and put back (blending ONE, ONE added every
+        # draw to the last one's planes; clockwise front faces culled the full-screen triangle, so did wireframe
+        # and rasterizer discard, leaving the last frame's planes or zeros).
+        import moderngl
+
+        ctx = self.ctx
+        bound, viewport, wireframe = ctx.fbo, ctx.viewport, ctx.wireframe
+        if bound is None or is_released(bound):  # (the scope puts back the framebuffer bound when it is made)
+            bound = self._default_framebuffer()
+            bound.use()
         comparing = [(t, t.compare_func) for t in {id(t): t for t in textures.values()}.values()
                      if getattr(t, "depth", False) and t.compare_func]
-        for t, _ in comparing:
-            t.compare_func = ""
+        scope = None
         try:
-            self._fbo.use()
-            self._vao.render(vertices=3)
+            for t, _ in comparing:
+                t.compare_func = ""
+            ctx.clear_samplers(0, len(textures))
+            ctx.wireframe = False
+            scope = ctx.scope(self._fbo, enable_only=moderngl.NOTHING)
+            with scope:  # (binds the adapter's framebuffer; on leaving, the engine's flags and framebuffer)
+                self._vao.render(vertices=3)
         finally:
+            if scope is not None:
+                scope.release()
+            ctx.wireframe = wireframe
             for t, func in comparing:
                 t.compare_func = func
-            (bound if bound is not None and not is_released(bound) else self._default_framebuffer()).use()
-            self.ctx.viewport = viewport
+            bound.use()
+            ctx.viewport = viewport
 
     def _check_depth_buffer(self, tex: Any, projection: np.ndarray, name: str, region: tuple[int, int] | None,
                             component: int) -> None:
