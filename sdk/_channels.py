@@ -98,7 +98,7 @@ def depth_edges(depth: np.ndarray) -> np.ndarray:
         float32 ``(H, W)`` in [0, 1].
     """
     d = np.asarray(depth)
-    if d.ndim != 2 or 0 in d.shape or not np.issubdtype(d.dtype, np.number):
+    if d.ndim != 2 or 0 in d.shape or d.dtype.kind not in "iuf":  # (real numbers: not bool, not complex)
         raise InputShapeError(f"depth_edges: expected a numeric (H, W) depth plane, got shape {d.shape} dtype {d.dtype}",
                               tuple(d.shape), "(H, W)")
     d = d.astype(np.float32, copy=False)
@@ -121,7 +121,7 @@ def depth_edges(depth: np.ndarray) -> np.ndarray:
 def _finite_plane(plane: np.ndarray, fn: str, dtype: type[np.floating] | None) -> np.ndarray:
     """``plane`` as a finite ``(H, W)`` array of ``dtype`` (None: its own), or the typed error naming ``fn``."""
     p = np.asarray(plane)
-    if p.ndim != 2 or 0 in p.shape or not np.issubdtype(p.dtype, np.number):
+    if p.ndim != 2 or 0 in p.shape or p.dtype.kind not in "iuf":  # (real numbers: not bool, not complex)
         raise InputShapeError(f"{fn}: expected a numeric (H, W) plane, got shape {p.shape} dtype {p.dtype}",
                               tuple(p.shape), "(H, W)")
     if dtype is not None:

@@ -53,7 +53,7 @@ NORMAL_SPACES = ("view", "world")
 GBUFFERS: Mapping[str, tuple[str, str]] = {
     "depth": ("(H, W)", "linear view depth in scene units, >= 0; 0 on background"),
     "albedo": ("(H, W, 3)", "base colour, display-encoded sRGB in [0, 1]; 0 on background"),
-    "normal": ("(H, W, 3)", "view-space unit normal (right-handed, the camera looks down -z); 0 on background"),
+    "normal": ("(H, W, 3)", "view-space unit normal in [-1, 1] (right-handed, the camera looks down -z); 0 on background"),
     "roughness": ("(H, W)", "GGX perceptual roughness in [0, 1]"),
     "metallic": ("(H, W)", "metalness in [0, 1]"),
     "specular": ("(H, W)", "dielectric specular scale in [0, 1] (0.5 = F0 of 4%)"),
@@ -75,7 +75,7 @@ GBUFFERS: Mapping[str, tuple[str, str]] = {
 
 _REPROJECTION = ("depth", "view", "projection", "prev_colour", "prev_depth", "prev_view_projection")
 _MOTION = ("depth", "view", "projection", "prev_view_projection")
-_RANGES = {"albedo": (0.0, 1.0), "roughness": (0.0, 1.0), "metallic": (0.0, 1.0),
+_RANGES = {"albedo": (0.0, 1.0), "normal": (-1.0, 1.0), "roughness": (0.0, 1.0), "metallic": (0.0, 1.0),
            "specular": (0.0, 1.0), "shadow": (0.0, 1.0), "emissive": (0.0, 1.0), "prev_colour": (0.0, 1.0)}
 #: How far past its range a G-buffer's value may lie (float rounding of a renderer's output, an 8-bit normal's
 #: encoding) before it is refused.
@@ -190,7 +190,10 @@ def _buffer(name: str, value: Any, size: tuple[int, int] | None, window: float =
         raise NonFiniteInputError(f"{name}: holds NaN or infinite values ({meaning})")
     if lo < low - RANGE_SLACK or hi > high + RANGE_SLACK:
         hint = (": tone-map it and encode it as the display does (sdk.linear_to_srgb)"
-                if name in ("prev_colour", "albedo") and hi > 1.0 else "")
+                if name in ("prev_colour", "albedo") and hi > 1.0 else
+                ": an encoded normal texture copied to floats? decode it first, e.g. n / 255 * 2 - 1 for 8 bits"
+                if name == "normal" and lo >= 0.0 and hi > 2.0 else
+                ": vectors longer than 1? normalise them" if name == "normal" else "")
         raise ParameterError(f"{name}: expected values in [{low:g}, {high:g}] ({meaning}), got [{lo:.4g}, {hi:.4g}]"
                              f"{hint}", name)
     return a
@@ -231,7 +234,7 @@ def input_planes(
     vectors, ``motion``, where given, place each geometry pixel in the previous frame instead of the camera's
     move alone (objects that move: :func:`reproject`'s ``motion``) and are the ``motion.x/y`` planes. A channel whose
     G-buffer is not given, a G-buffer of another shape, or values outside its range (past a slack of
-    1e-3: an HDR ``prev_colour``, a window depth past 1) raise a typed error naming
+    1e-3: an HDR ``prev_colour``, a window depth past 1, a normal past [-1, 1]) raise a typed error naming
     it; G-buffers no channel reads are not looked at. A G-buffer of values in [0, 1] (albedo, the
     material planes, ``prev_colour``) may come as the ``uint8`` or ``uint16`` of a UNORM texture read
     back (its integers over 255 or 65535); integer normals are refused (an encoded normal texture:
@@ -240,7 +243,7 @@ def input_planes(
 
     As the moderngl adapter's shader does, the albedo, the normals and the material planes (roughness,
     metallic, specular) are 0 on background (where depth is 0); unlike it, the normals are taken as they
-    are, unit length or not (a caller may give only the components a model reads). The
+    are, unit length or not (within [-1, 1]) (a caller may give only the components a model reads). The
     engine's conventions the same adapter takes: ``albedo_linear=True`` for a linear albedo (encoded
     with :func:`linear_to_srgb`), ``normal_space="world"`` for world-space normals (rotated with
     ``view``), ``depth_kind="window"`` for a hardware depth buffer in [0, 1] or ``"reversed"`` for a
@@ -442,6 +445,8 @@ _RIGID_SLACK = 1e-3
 #: The share of surfaces whose normal may face away from the camera before it is named (normal maps and grazing
 #: angles turn a few away; the wrong space turns about half).
 _AWAY_SHARE = 0.25
+#: The share of surfaces whose normal may be 0 (not written: decals, particles) before it is named.
+_UNWRITTEN_SHARE = 0.5
 #: The share of surfaces that must reproject onto the previous frame before too few is named.
 _SEEN_SHARE = 0.5
 
@@ -463,10 +468,10 @@ def check_gbuffers(
     its own; the same call but the channels. Checked where the G-buffers are given: ``view`` is a rigid
     transform for column vectors (no translation in its last row, no scale, no reflection: a left-handed
     view); ``prev_view_projection``'s last row is a camera's viewing axis (a unit vector: not transposed, no
-    scale); ``normal`` (with ``view`` for ``normal_space="world"``, ``projection`` for facing) is unit length
-    and faces the camera on most surfaces (the wrong space, or a left-handed view space, turns about half
-    away); a ``linear`` depth is not a depth buffer's [0, 1] (its clear value 1 on some pixels, or half the
-    surfaces past 0.9); and, with the previous frame, most surfaces reproject onto it (else the matrices or
+    scale); ``normal`` (with ``view`` for ``normal_space="world"``, ``projection`` for facing) is written on most
+    surfaces (not 0), unit length, and faces the camera on most surfaces (the wrong space, or a left-handed view
+    space, turns about half away); a ``linear`` depth is not a depth buffer's [0, 1] (its clear value 1 on some
+    pixels, or half the surfaces past 0.9); and, with the previous frame, most surfaces reproject onto it (else the matrices or
     depth are another frame's or another convention's; with a hardware depth, where they do once the matrices
     are taken as clip depth in [0, 1], the warning names a Direct3D-style projection and its conversion). The
     other G-buffers (``albedo``, the material) and ``albedo_linear`` are not looked at; bad arrays raise
@@ -511,6 +516,10 @@ def check_gbuffers(
                                        projection=projection, **options)), -1)[geo]
         length = np.linalg.norm(n, axis=-1)
         drawn = length > 0.01
+        unwritten = float((~drawn).mean())
+        if unwritten > _UNWRITTEN_SHARE:
+            warnings.append(f"normal: {100 * unwritten:.0f}% of the surfaces have no normal (length 0): the normal "
+                            f"target not written, or another texture given?")
         if drawn.any() and float(np.abs(length[drawn] - 1.0).mean()) > 0.05:
             encoded = " with no component below 0: an encoded texture (n * 2 - 1)?" if n.min() >= 0.0 else ""
             warnings.append(f"normal: mean length {float(length[drawn].mean()):.3g}, not unit vectors{encoded}")

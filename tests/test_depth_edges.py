@@ -63,7 +63,8 @@ def test_it_is_a_registered_channel() -> None:
     (np.zeros((0, 3), np.float32), sdk.InputShapeError),
     (np.array([["a", "b"]]), sdk.InputShapeError),
     (np.array([[1.0, np.nan]], np.float32), sdk.NonFiniteInputError),
-], ids=["3-d", "empty", "strings", "nan"])
+    (np.array([[1.0, 2.0 + 1j, 3.0]]), sdk.InputShapeError),  # (its imaginary parts dropped in silence before)
+], ids=["3-d", "empty", "strings", "nan", "complex"])
 def test_bad_depth_is_a_typed_error(bad: np.ndarray, error: type[Exception]) -> None:
     with pytest.raises(error, match="depth_edges"):
         sdk.depth_edges(bad)

@@ -115,6 +115,12 @@ def _frame(h: int = 20, w: int = 30) -> dict[str, Any]:
     ({"albedo": np.zeros((20, 31, 3))}, sdk.InputShapeError, r"albedo: expected shape \(20, 30, 3\)"),
     ({"depth": np.zeros((20, 30, 2))}, sdk.InputShapeError, r"depth: expected shape \('H', 'W'\)"),  # ((H, W, 1): taken)
     ({"depth": -np.ones((20, 30))}, sdk.ParameterError, r"depth: expected values in \[0, inf\]"),
+    # normals past [-1, 1] (an encoded texture copied to floats undivided, vectors longer than 1) were taken as
+    # they were, normal.* planes outside their channel's range, although the docs refuse values out of range
+    ({"normal": np.full((20, 30, 3), 127.0)}, sdk.ParameterError,
+     r"normal: expected values in \[-1, 1\] .* got \[127, 127\].*n / 255 \* 2 - 1"),
+    ({"normal": np.dstack([np.zeros((20, 30, 2)), np.full((20, 30), -1.5)])}, sdk.ParameterError,
+     r"normal: expected values in \[-1, 1\] .* got \[-1\.5, 0\].*normalise"),
     ({"view": np.eye(3)}, sdk.InputShapeError, r"view: expected shape \(4, 4\)"),
     ({"roughness": np.full((20, 30), np.nan)}, sdk.NonFiniteInputError, "roughness: holds NaN"),
     ({"albedo": np.full((20, 30, 3), "a")}, sdk.InputDtypeError, "albedo: expected an array of numbers"),
@@ -663,3 +669,23 @@ def test_check_gbuffers_needs_depth_and_names_what_is_no_gbuffer() -> None:
         with pytest.raises(sdk.ParameterError, match="no finite view depth at 600 of 600 pixels") as err:
             call(*args, depth=window, projection=huge, depth_kind="window")
         assert err.value.name == "projection"
+
+
+def test_normals_left_unwritten_are_named() -> None:
+    """A normal G-buffer of zeros on the surfaces (the normal target never written, or another texture bound) makes
+    normal.* planes of 0 without an error; check_gbuffers named nothing, since it measured the length of the
+    written normals alone: none."""
+    g = _frame()
+    facing = np.zeros((*g["depth"].shape, 3), np.float32)
+    facing[..., 2] = 1.0
+    assert sdk.check_gbuffers(depth=g["depth"], normal=facing, projection=g["projection"]) == []
+    unwritten = facing.copy()
+    unwritten[:, 10:] = 0.0  # (two thirds of the surfaces)
+    warnings = sdk.check_gbuffers(depth=g["depth"], normal=unwritten, projection=g["projection"])
+    assert warnings == ["normal: 67% of the surfaces have no normal (length 0): the normal target not written, or "
+                        "another texture given?"], warnings
+    assert sdk.check_gbuffers(depth=g["depth"], normal=np.zeros_like(facing))[0].startswith(
+        "normal: 100% of the surfaces have no normal")
+    few = facing.copy()
+    few[:, :5] = 0.0  # (a few surfaces without one, as decals or particles may leave: not named)
+    assert sdk.check_gbuffers(depth=g["depth"], normal=few, projection=g["projection"]) == []

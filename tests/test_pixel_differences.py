@@ -153,6 +153,7 @@ def test_the_planes_are_registered_channels(fn: str, channels: tuple[str, ...]) 
     (np.array([["a"]]), sdk.InputShapeError),
     (np.array([[0.0, np.nan]], np.float32), sdk.NonFiniteInputError),
     (np.array([[0.0, np.inf]], np.float32), sdk.NonFiniteInputError),
+    (np.array([[0.5, 0.5 + 1j]]), sdk.InputShapeError),  # (its imaginary parts dropped in silence before)
 ])
 def test_bad_planes_are_typed_errors(fn: str, bad: np.ndarray, error: type[Exception]) -> None:
     with pytest.raises(error, match=fn):
@@ -165,6 +166,6 @@ def test_the_planes_benchmark_times_the_same_plane_as_the_definition() -> None:
     out = subprocess.run([sys.executable, str(script), "--sizes", "36x20", "--repeats", "1"],
                          capture_output=True, text=True, check=True).stdout
     row = [line for line in out.splitlines() if line.startswith("| 36x20 |")]
-    header = [line for line in out.splitlines() if line.startswith("| frame |")]
+    header = [line for line in out.splitlines() if line.startswith("| ms |")]  # (the unit names the size column)
     assert len(row) == 1 and len(header) == 1 and "tile_variances" in header[0], out
     assert len(row[0].split("|")) == len(header[0].split("|")) == 9, out  # seven timed columns
