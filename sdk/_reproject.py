@@ -32,7 +32,8 @@ Algorithm, per current pixel:
    its projection (``prev_proj``: its near and far planes map the clip z back to the view's).
    A geometry pixel is seen when the nearest previous texel is geometry and the expected depth is
    within ``tolerance * expected`` of either that texel's depth, or the bilinear depth of the 2x2 texel
-   footprint around the position, when all four texels are geometry: perspective-correct for a
+   footprint around the position (clamped to the frame's edge, as a GL sampler's clamp-to-edge: a footprint
+   past it repeats the edge texels), when all four texels are geometry: perspective-correct for a
    perspective previous camera (interpolating 1/depth, which is affine in screen space on a plane), plain
    for an orthographic one (whose depth is affine in screen space on a plane). The second test keeps
    grazing surfaces seen, whose depth changes by more than the tolerance from one pixel to the
