@@ -220,7 +220,7 @@ def _check_id_length(scene_names: Sequence[str], profiles: Sequence[str], per_sc
     for name in scene_names:
         sid = scene_id(name)
         if len(sid) + tail > MAX_ID_LENGTH:
-            part = "its file name without the extension" if Path(name).suffix.lower() in MESH_EXTENSIONS else "its name"
+            part = "its file name without the extension" if _is_scene_file(name) else "its name"
             raise ParameterError(
                 f"scene_names: {reprlib.repr(name)} makes sample ids of up to {len(sid) + tail} characters "
                 f"(<scene>-<profile>-<index>), more than the {MAX_ID_LENGTH} a sample id may have (its file name stays "
@@ -264,12 +264,19 @@ def _procedural_seed(name: str) -> int | None:
     return int(text)
 
 
+def _is_scene_file(name: str) -> bool:
+    """Whether :func:`load_scene` reads ``name`` as a scene file: a mesh extension, or an existing file (a PLY, an
+    STL: anything trimesh reads)."""
+    return Path(name).suffix.lower() in MESH_EXTENSIONS or Path(name).is_file()
+
+
 def scene_id(name: str) -> str:
     """The part of sample ids that names the scene: ``procedural:3`` -> ``procedural_3``; a file path
-    -> its stem (``levels/arena.glb`` -> ``arena``); a map name as it is. A procedural name whose seed is
-    not written in plain decimal digits (``procedural:01``) is refused, as :func:`load_scene` refuses it."""
+    -> its stem (``levels/arena.glb`` -> ``arena``, ``./room.ply`` -> ``room``: any file :func:`load_scene` reads);
+    a map name as it is. A procedural name whose seed is not written in plain decimal digits (``procedural:01``)
+    is refused, as :func:`load_scene` refuses it."""
     _procedural_seed(name)
-    if Path(name).suffix.lower() in MESH_EXTENSIONS:
+    if _is_scene_file(name):  # (a PLY's whole path was its id: ``./room.ply`` -> ``._room.ply``, a hidden file)
         name = Path(name).stem
     return re.sub(r"[^A-Za-z0-9_.]", "_", name)
 

@@ -344,6 +344,19 @@ def test_samples_from_other_cameras_are_recaptured_and_their_targets_recomputed(
     assert (again.written, again.skipped) == (0, 2)
 
 
+def test_a_scene_file_of_any_format_has_its_stem_as_its_id(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """load_scene reads any existing file as a scene (a PLY, an STL), but only a glTF / GLB / OBJ name lost its
+    folders and extension in its sample ids: ``room.ply`` and ``./room.ply`` were two scenes, ``room.ply`` and
+    ``._room.ply`` (a hidden file), and an absolute path made ids of the whole path. Every scene file's id is its
+    stem, so one file named two ways is the same scene (as ``a/arena.glb`` and ``./a/arena.glb`` are)."""
+    from rtp.capture import scene_id
+
+    (tmp_path / "room.ply").write_bytes(b"")
+    monkeypatch.chdir(tmp_path)
+    assert {scene_id("room.ply"), scene_id("./room.ply"), scene_id(str(tmp_path / "room.ply"))} == {"room"}
+    assert scene_id("levels/arena.glb") == "arena" and scene_id("oa_dm5") == "oa_dm5"
+
+
 def test_capture_takes_your_own_gltf_and_names_scenes_clearly(tmp_path: Path) -> None:
     from rtp.capture import load_scene, open_dataset, scene_id
     from rtp.capture.scenes import SceneNotFoundError, procedural

@@ -778,7 +778,7 @@ def test_mesh_file_format_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     with pytest.raises(SceneFormatError, match="trimesh could not read .*junk.glb"):
         scenes.load_mesh_file(tmp_path / "junk.glb")
     monkeypatch.setitem(sys.modules, "trimesh", None)
-    with pytest.raises(ImportError, match=r"needs trimesh and pillow: pip install 'rtp\[scenes\]'"):
+    with pytest.raises(ImportError, match=r"needs trimesh and pillow: pip install 'rtp\[capture\]'"):
         scenes.load_mesh_file(tmp_path / "junk.glb")
 
 
@@ -858,6 +858,49 @@ def test_a_gltfs_external_texture_is_found_where_it_names_it_or_named_in_a_warni
         else:
             assert mat.texture is not None and tuple(mat.texture[0, 0]) == texel, name
             assert not caplog.records
+
+
+def test_a_gltfs_metallic_roughness_and_emissive_textures_and_emissive_strength_scale_their_factors(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The scene holds one roughness, metalness and emission a material, and the loader took the glTF factors
+    alone: a material with a metallic-roughness texture (its factors left at 1, as Blender writes them) drew fully
+    metallic and fully rough, one with an emissive texture glowed all over at its factor, and one with
+    ``KHR_materials_emissive_strength`` 4 glowed a quarter as bright. The factors are multiplied by the textures'
+    means (roughness the green channel, metalness the blue, as stored; emission decoded from sRGB) and by the
+    strength; a strength that no name of the file holds alone is not applied, with a warning."""
+    mr = np.zeros((4, 4, 3), np.uint8)
+    mr[..., 1] = 51  # roughness 0.2
+    mr[:, :2, 2] = 255  # half of it metal
+    glow = np.zeros((4, 4, 3), np.uint8)
+    glow[:2, :, 0] = 255  # the top half red, the rest black
+    PIL.fromarray(mr).save(tmp_path / "mr.png")
+    PIL.fromarray(glow).save(tmp_path / "glow.png")
+    doc = _gltf_quad("mr.png")
+    doc["images"].append({"uri": "glow.png"})
+    doc["textures"].append({"source": 1})
+    doc["extensionsUsed"] = ["KHR_materials_emissive_strength"]
+    doc["materials"] = [{"name": "lamp", "pbrMetallicRoughness": {"metallicRoughnessTexture": {"index": 0}},
+                         "emissiveFactor": [1.0, 1.0, 1.0], "emissiveTexture": {"index": 1},
+                         "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}}}]
+    (tmp_path / "lamp.gltf").write_text(json.dumps(doc))
+    (mat,) = scenes.load_mesh_file(tmp_path / "lamp.gltf").materials
+    assert mat.roughness == pytest.approx(0.2) and mat.metallic == pytest.approx(0.5)
+    assert mat.emissive == pytest.approx((2.0, 0.0, 0.0))  # 1 x half red (linear 1 and 0) x 4
+    # the factors alone where there is no texture, nor a strength
+    doc["materials"] = [{"name": "plain", "pbrMetallicRoughness": {"metallicFactor": 0.25, "roughnessFactor": 0.5},
+                         "emissiveFactor": [0.5, 0.25, 0.0]}]
+    (tmp_path / "plain.gltf").write_text(json.dumps(doc))
+    (mat,) = scenes.load_mesh_file(tmp_path / "plain.gltf").materials
+    assert (mat.roughness, mat.metallic, *mat.emissive) == pytest.approx((0.5, 0.25, 0.5, 0.25, 0.0))
+    # an unnamed material's strength cannot be told from trimesh's materials: said, not applied
+    doc["materials"] = [{"emissiveFactor": [0.5, 0.25, 0.0],
+                         "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}}}]
+    (tmp_path / "unnamed.gltf").write_text(json.dumps(doc))
+    with caplog.at_level("WARNING", logger="rtp"):
+        (mat,) = scenes.load_mesh_file(tmp_path / "unnamed.gltf").materials
+    assert mat.emissive == pytest.approx((0.5, 0.25, 0.0))
+    assert "emissive strength (KHR_materials_emissive_strength) of 1 material(s) is not applied" in caplog.text
 
 
 def test_an_objs_material_library_is_found_where_trimesh_finds_it(tmp_path: Path, caplog: pytest.LogCaptureFixture):

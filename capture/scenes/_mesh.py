@@ -6,9 +6,11 @@
   glTF importer flips glTF's top-left ``v`` on load, OBJ is bottom-left already), so the
   loader writes ``v' = 1 - v`` for the renderer's top-left convention.
 * Normals: taken from the file when present, otherwise computed (area weighted).
-* Materials: glTF PBR (base colour factor and texture, roughness, metallic, alpha mode MASK →
-  ``alpha_cutoff``) and OBJ/MTL (Kd, map_Kd: the texture multiplied by Kd where the MTL states one;
-  roughness from the Phong exponent); vertex colours become a constant base colour (their mean).
+* Materials: glTF PBR (base colour factor and texture, roughness, metallic, emissive, alpha mode MASK →
+  ``alpha_cutoff``; the factors multiplied by the means of a metallic-roughness texture and of an emissive
+  one, the emission by ``KHR_materials_emissive_strength`` matched by material name) and OBJ/MTL (Kd, map_Kd:
+  the texture multiplied by Kd where the MTL states one; roughness from the Phong exponent);
+  vertex colours become a constant base colour (their mean).
 * Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same. Geometry more than
   131072 m from the origin (where float32 steps reach 1.6 cm) loads with a warning: it draws with
   coarse depth and reprojection.
@@ -29,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from rtp.scene import Material, Mesh, Scene, SpawnPoint
-from rtp.sdk import ParameterError
+from rtp.sdk import ParameterError, srgb_to_linear
 
 from .._images import image_values
 from ._errors import SceneFormatError, SceneNotFoundError
@@ -72,6 +74,64 @@ def _image_to_rgba(img) -> np.ndarray | None:
     except Exception as err:  # noqa: BLE001 - a broken image becomes "untextured"
         _warn("could not convert texture image: %s", err)
         return None
+
+
+def _texture_mean(img, what: str, srgb: bool = False) -> np.ndarray | None:
+    """The mean RGB of a glTF texture that the renderer has no map for (metallic-roughness, emissive), in [0, 1]: its
+    values as stored, or with ``srgb`` decoded to linear before they are averaged; the constant its factor is
+    multiplied with (None without one, or for one that cannot be read, with a warning: the factor then stands
+    alone)."""
+    if img is None:
+        return None
+    try:
+        values = image_values(img)
+    except Exception as err:  # noqa: BLE001 - a broken image: the factor alone
+        _warn("could not convert %s texture image: %s", what, err)
+        return None
+    if values.size == 0:
+        return None
+    values = np.asarray(values, np.float64).reshape(-1, 3)
+    return (srgb_to_linear(values) if srgb else values).mean(axis=0)
+
+
+def _emissive_strengths(p: Path) -> dict[str, float]:
+    """The ``KHR_materials_emissive_strength`` of a glTF / GLB file's materials, by material name (trimesh drops the
+    extension, and its materials keep only their names of the file): a lamp's emission of strength 4 loaded with its
+    factor alone, a quarter as bright. A strength that no name of the file's names alone (an unnamed material, two
+    of one name with other strengths) is not applied, with a warning; a file whose JSON cannot be read gives none."""
+    import json
+
+    try:
+        data = p.read_bytes()
+        if data[:4] == b"glTF":  # GLB: a 12-byte header, then the JSON chunk (length, type, bytes)
+            (length,) = np.frombuffer(data[12:16], "<u4")
+            data = data[20:20 + int(length)]
+        doc = json.loads(data.decode("utf-8"))
+        materials = doc.get("materials") or []
+    except (OSError, ValueError, TypeError, AttributeError):  # (trimesh says what it cannot read)
+        return {}
+    found: dict[str, set[float]] = {}
+    lost = 0
+    for mat in materials if isinstance(materials, list) else []:
+        exts = mat.get("extensions") if isinstance(mat, dict) else None
+        ext = exts.get("KHR_materials_emissive_strength") if isinstance(exts, dict) else None
+        if not isinstance(ext, dict):  # (not a material, or none of the extension: trimesh says what it cannot read)
+            continue
+        strength = ext.get("emissiveStrength", 1.0)
+        if not isinstance(strength, (int, float)) or isinstance(strength, bool) or not math.isfinite(strength) \
+                or strength < 0:
+            continue  # (not a strength: the factor alone)
+        name = mat.get("name")
+        if isinstance(name, str) and name:
+            found.setdefault(name, set()).add(float(strength))
+        elif strength != 1.0:
+            lost += 1
+    strengths = {name: next(iter(v)) for name, v in found.items() if len(v) == 1 and v != {1.0}}
+    lost += sum(1 for v in found.values() if len(v) > 1)
+    if lost:
+        _warn("%s: the emissive strength (KHR_materials_emissive_strength) of %d material(s) is not applied: they have "
+              "no name, or share it with another of another strength; give each its own name", p, lost)
+    return strengths
 
 
 def _colour01(c, default=(0.8, 0.8, 0.8, 1.0)) -> tuple[float, float, float, float]:
@@ -168,10 +228,12 @@ def _obj_library(p: Path, resolver: Any) -> tuple[Path | None, dict[str, str] | 
     return lib, textures
 
 
-def _material_of(geom: Any, name: str, library_lost: bool = False) -> tuple[Material, bool]:
+def _material_of(geom: Any, name: str, library_lost: bool = False,
+                 strengths: dict[str, float] | None = None) -> tuple[Material, bool]:
     """Material of a trimesh geometry and whether it carries texture coordinates (``library_lost``: the
     OBJ names no material library, or one that could not be read, so trimesh's placeholder material, a grey
-    2x2 texture, is dropped for the untextured default: a constant albedo of ``Material.base_color``)."""
+    2x2 texture, is dropped for the untextured default: a constant albedo of ``Material.base_color``;
+    ``strengths``: a glTF's emissive strengths by material name, :func:`_emissive_strengths`)."""
     vis: Any = getattr(geom, "visual", None)
     kind = getattr(vis, "kind", None)
     if kind == "texture" and getattr(vis, "material", None) is not None:
@@ -184,16 +246,30 @@ def _material_of(geom: Any, name: str, library_lost: bool = False) -> tuple[Mate
             cutoff = None
             if str(getattr(m, "alphaMode", "") or "").upper() == "MASK":
                 cutoff = float(m.alphaCutoff) if getattr(m, "alphaCutoff", None) is not None else 0.5
-            rough = getattr(m, "roughnessFactor", None)
-            metal = getattr(m, "metallicFactor", None)
+            rough = float(1.0 if getattr(m, "roughnessFactor", None) is None else m.roughnessFactor)
+            metal = float(1.0 if getattr(m, "metallicFactor", None) is None else m.metallicFactor)
+            # the factors multiply their textures (glTF): a metallic-roughness texture's green channel is roughness,
+            # its blue one metalness (linear), an emissive texture is sRGB; the scene holds one value a material, so
+            # the factors are multiplied by the textures' means (the factor alone, 1 by default, drew a material with
+            # a metallic-roughness texture fully metallic, and one with an emissive texture glowing all over)
+            mr_mean = _texture_mean(getattr(m, "metallicRoughnessTexture", None), "metallic-roughness")
+            if mr_mean is not None:
+                rough, metal = rough * float(mr_mean[1]), metal * float(mr_mean[2])
             emis = getattr(m, "emissiveFactor", None)
+            emissive = _rgb(emis) if emis is not None else (0.0, 0.0, 0.0)
+            if any(emissive):
+                e_mean = _texture_mean(getattr(m, "emissiveTexture", None), "emissive", srgb=True)
+                if e_mean is not None:
+                    emissive = _rgb(np.asarray(emissive) * e_mean)
+                strength = (strengths or {}).get(str(getattr(m, "name", None)), 1.0)
+                emissive = _rgb(np.asarray(emissive) * strength)
             return Material(
                 name=str(getattr(m, "name", None) or name),
                 base_color=_colour01(getattr(m, "baseColorFactor", None), (1.0, 1.0, 1.0, 1.0)),
                 texture=tex,
-                roughness=float(1.0 if rough is None else rough),
-                metallic=float(1.0 if metal is None else metal),
-                emissive=_rgb(emis) if emis is not None else (0.0, 0.0, 0.0),
+                roughness=rough,
+                metallic=metal,
+                emissive=emissive,
                 alpha_cutoff=cutoff,
             ), has_uv
         # SimpleMaterial (OBJ/MTL)
@@ -226,18 +302,19 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         SceneFormatError: trimesh cannot read it, it has no triangles, or a value in it is not one a scene may
             hold (a triangle indexing a vertex it does not have, a NaN or float32-overflowing vertex, a material
             factor outside [0, 1]), named with the file and geometry.
-        ImportError: trimesh is not installed (``pip install 'rtp[scenes]'``).
+        ImportError: trimesh is not installed (``pip install 'rtp[capture]'``).
     """
     try:
         import trimesh
     except ImportError as err:
-        raise ImportError("load_mesh_file needs trimesh and pillow: pip install 'rtp[scenes]'") from err
+        raise ImportError("load_mesh_file needs trimesh and pillow: pip install 'rtp[capture]'") from err
     p = Path(path)
     if not p.is_file():
         raise SceneNotFoundError(f"mesh file not found: {p}")
     resolver = _resolver(p)
     obj = p.suffix.lower() == ".obj"
     lib, textures = _obj_library(p, resolver) if obj else (None, {})
+    strengths = _emissive_strengths(p) if p.suffix.lower() in (".gltf", ".glb") else {}
     try:
         loaded: Any = trimesh.load(str(p), force="scene", process=False, resolver=resolver)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types
@@ -267,7 +344,8 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         with np.errstate(all="ignore"):  # (a NaN or infinite vertex or transform is refused by Mesh below)
             pos = v @ T[:3, :3].T + T[:3, 3]
         try:
-            mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=no_library or textures is None)
+            mat, has_uv = _material_of(geom, f"{p.stem}:{geom_name}", library_lost=no_library or textures is None,
+                                       strengths=strengths)
         except ParameterError as err:  # (a factor outside [0, 1]: "Material.roughness: ...", naming no file)
             raise SceneFormatError(f"{p}: geometry {geom_name!r}: its material: {err}") from err
         obj_mat = getattr(getattr(geom, "visual", None), "material", None)
