@@ -192,10 +192,13 @@ evaluate: $(STAMP)
 # make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
 # slow and fast paths at 1280x720 (the models' training size), every method swept, both paths at
 # once (2 processes), the frames composited from the uniform-rate images (--composite: several times
-# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP) (a mesh file's: play-
+# faster than the renderer's VRS pass on a CPU); pictures in $(DATA)/play-$(MAP) (a scene file's: play-
 # and its name without folder and extension, not a folder per folder of its path). The map is fetched
 # first (`rtp scenes fetch --map MAP`: its packages once, then a no-op; a name no split lists is refused
-# before any download), not for procedural:N or a mesh file.
+# before any download), not for procedural:N or a scene file: as rtp play reads one, a .glb, .gltf or .obj
+# in any case (room.OBJ) or any file that is there (a PLY, an STL: what trimesh reads). (Only a lowercase
+# .glb/.gltf/.obj was one: MAP=room.OBJ or MAP=room.ply went to the fetch, which refused the name, and never
+# played.)
 # (make's notdir and basename split on spaces: MAP's spaces are swapped for a mark while they run, else a
 # folder with a space, MAP="my scenes/room.glb", gave play-my room.)
 MAP    ?= 20kdm2
@@ -203,7 +206,9 @@ FRAMES ?= 150
 empty  :=
 space  := $(empty) $(empty)
 MAPWORD = $(subst $(space),^_^,$(MAP))
-MESH    = $(filter %.glb %.gltf %.obj,$(MAPWORD))
+# (lowered: the letters of .glb, .gltf and .obj in lower case, enough to compare a suffix with them)
+lowered = $(subst G,g,$(subst L,l,$(subst B,b,$(subst T,t,$(subst F,f,$(subst O,o,$(subst J,j,$1)))))))
+MESH    = $(if $(filter procedural:%,$(MAP)),,$(if $(filter .glb .gltf .obj,$(call lowered,$(suffix $(MAPWORD))))$(wildcard $(subst ^_^,\$(space),$(MAPWORD))),$(MAPWORD)))
 play: $(STAMP)
 	$(if $(MESH)$(filter procedural:%,$(MAP)),,$(RTP) scenes fetch --map "$(MAP)")
 	$(RTP) play "$(MAP)" --frames $(FRAMES) --composite --workers 2 --out "$(DATA)/play-$(if $(MESH),$(subst ^_^,$(space),$(basename $(notdir $(MAPWORD)))),$(MAP))"

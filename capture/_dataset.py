@@ -456,7 +456,7 @@ def _read_manifest(root: Path) -> dict[str, Any]:
         raise DatasetError(f"{path}: format_version must be a non-negative integer, got {version!r}")
     if version > FORMAT_VERSION:
         raise DatasetError(f"{path}: dataset format {version} is newer than this rtp reads ({FORMAT_VERSION}): "
-                           f"upgrade rtp (pip install -U rtp) to read it")
+                           f"upgrade rtp (a newer checkout of it: the rtp on PyPI is another project) to read it")
     return data
 
 

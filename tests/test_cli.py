@@ -458,3 +458,21 @@ def test_make_passes_its_variables_to_the_commands_whole() -> None:
         runs = _make_runs("play", f"MAP={scene}", "DATA=d")
         assert (runs[0][1:] == ["scenes", "fetch", "--map", scene]) == fetched, runs
         assert runs[-1][2] == scene and _after(runs[-1], "--out") == out, runs
+
+
+def test_make_play_plays_every_scene_file_rtp_play_reads(tmp_path: Path) -> None:
+    """rtp play reads a .glb, .gltf or .obj in any case and any file that is there (a PLY: what trimesh reads); `make
+    play` took only a lowercase .glb/.gltf/.obj for a file, so MAP=Room.GLB or MAP=room.ply went to `rtp scenes fetch
+    --map`, which refuses a name no split lists, and the play never ran."""
+    (tmp_path / "my scenes").mkdir()
+    for name in ("room.ply", "my scenes/hall.stl"):
+        (tmp_path / name).write_bytes(b"")
+    for scene, out in ((f"{tmp_path}/Room.GLB", "d/play-Room"), (f"{tmp_path}/hall.Gltf", "d/play-hall"),
+                       (f"{tmp_path}/x.OBJ", "d/play-x"), (f"{tmp_path}/room.ply", "d/play-room"),
+                       (f"{tmp_path}/my scenes/hall.stl", "d/play-hall")):
+        [run] = _make_runs("play", f"MAP={scene}", "DATA=d")
+        assert run[1:3] == ["play", scene] and _after(run, "--out") == out, run
+    # a name that is no file and no mesh extension is a map's, fetched first (which refuses one no split lists)
+    gone = f"{tmp_path}/gone.ply"
+    fetch, run = _make_runs("play", f"MAP={gone}", "DATA=d")
+    assert fetch[1:] == ["scenes", "fetch", "--map", gone] and run[2] == gone

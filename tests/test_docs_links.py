@@ -143,6 +143,40 @@ def test_make_help_names_every_target() -> None:
     assert not missing, f"make help names no line for: {', '.join(missing)}"
 
 
+# What a user is told to install: the pages, the rooms' messages and docstrings, the scripts, the Makefile (not the
+# tests, whose fakes name extras nobody declares).
+_INSTALLERS = PAGES + sorted(p for d in ("sdk", "scene", "capture", "metrics", "evaluate", "train", "export", "cli",
+                                         "conformance", "plugins", "bench", "examples")
+                             for p in (ROOT / d).rglob("*.py")) + [ROOT / "Makefile", ROOT / "pyproject.toml"]
+_EXTRA = re.compile(r"\brtp\[([\w,-]+)\]")
+# `pip install rtp` / `pip install -U rtp` by its bare name: PyPI's rtp, another project (`rtp @ git+URL` is rtp's).
+_PYPI_RTP = re.compile(r"pip install (?:-U |--upgrade )?['\"`]?rtp(?![\w\[.-])(?!\s*@)")
+
+
+def test_every_extra_named_is_one_pyproject_declares() -> None:
+    """Every `rtp[extra]` the docs and messages name is an extra of pyproject.toml, and none says to install rtp by
+    its bare name, PyPI's other project. load_mesh_file and the BSP texture reader said `pip install 'rtp[scenes]'`
+    (no such extra: pip warns and installs nothing, and `rtp capture --scene room.glb` without trimesh printed that
+    as its one-line error); a dataset of a newer format said `upgrade rtp (pip install -U rtp)`."""
+    import tomllib
+
+    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"])
+    named: dict[str, set[str]] = {}
+    to_pypi = []
+    for path in _INSTALLERS:
+        text = path.read_text(encoding="utf-8", errors="replace")
+        for group in _EXTRA.findall(text):
+            for extra in group.split(","):
+                named.setdefault(extra, set()).add(str(path.relative_to(ROOT)))
+        to_pypi += [f"{path.relative_to(ROOT)}: {line.strip()}" for line in text.splitlines()
+                    if _PYPI_RTP.search(line) and "another project" not in line]
+    assert {"capture", "ray", "train", "export", "metrics", "moderngl", "pyrender"} <= set(named)  # the scan finds them
+    unknown = {e: sorted(where) for e, where in named.items() if e not in extras}
+    assert not unknown, f"extras pyproject.toml does not declare: {unknown}"
+    assert not to_pypi, "told to install PyPI's rtp (another project):\n" + "\n".join(to_pypi)
+    assert _PYPI_RTP.search("upgrade rtp (pip install -U rtp)") and not _PYPI_RTP.search('pip install "rtp @ git+URL"')
+
+
 def test_the_training_pages_dataset_is_make_datasets() -> None:
     """docs/training.md's capture commands are `make dataset`'s, the shipped models' data (it said --per-scene 20
     where the Makefile and the shipped models' 1,224 + 72 samples are 12 a map and profile: 1.7 times the data and

@@ -47,6 +47,25 @@ def test_the_blocks_ci_runs_itself_are_in_ci() -> None:
     assert commands and all(c in ci for c in commands if c), commands
 
 
+def test_ci_finds_an_installed_osmesa_whatever_the_length_of_ldconfigs_list(tmp_path: Path) -> None:
+    """.ci/run asks ldconfig whether libOSMesa is there, under `set -euo pipefail`: `ldconfig -p | grep -q libOSMesa`
+    failed (141) where grep left at the match before ldconfig had written its list (more than a pipe holds), so an
+    installed OSMesa was called missing and apt-get ran, and the run failed where apt could not reach its mirrors."""
+    ci = (ROOT / ".ci" / "run").read_text()
+    [condition] = re.findall(r"^if (.*libOSMesa.*); then$", ci, re.M)
+    fake = tmp_path / "ldconfig"  # OSMesa first, then a megabyte more of the list
+    fake.write_text("#!/bin/sh\necho '\tlibOSMesa.so.8 (libc6,x86-64) => /lib/libOSMesa.so.8'\n"
+                    "head -c 1000000 /dev/zero | tr '\\0' 'x'\necho\n")
+    fake.chmod(0o755)
+    script = f"set -euo pipefail\nif {condition}; then echo missing; else echo found; fi\n"
+    for listed, said in ((True, "found"), (False, "missing")):
+        if not listed:
+            fake.write_text("#!/bin/sh\nhead -c 1000000 /dev/zero | tr '\\0' 'x'\necho\n")
+        r = subprocess.run(["bash", "-c", script], env={**os.environ, "PATH": f"{tmp_path}{os.pathsep}{os.environ['PATH']}"},
+                           capture_output=True, text=True, timeout=60)
+        assert (r.returncode, r.stdout.strip()) == (0, said), (listed, r)
+
+
 @pytest.mark.slow
 @pytest.mark.gl
 @pytest.mark.parametrize(("lang", "code", "line"), [

@@ -195,8 +195,8 @@ def _tessellate_patch(verts: np.ndarray, w: int, h: int, level: int) -> tuple[np
 def _decode_image(data: bytes, name: str) -> np.ndarray | None:
     try:
         from PIL import Image
-    except ImportError as err:  # pragma: no cover - pillow is a dependency of the scene extra
-        raise ImportError("reading BSP textures needs pillow: pip install 'rtp[scenes]'") from err
+    except ImportError as err:  # pragma: no cover - pillow is a dependency of the capture extra
+        raise ImportError("reading BSP textures needs pillow: pip install 'rtp[capture]'") from err
     try:
         im: Image.Image = Image.open(io.BytesIO(data)).convert("RGBA")
     except Exception as err:  # noqa: BLE001 - any decoder failure means "unusable texture"
