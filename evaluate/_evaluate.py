@@ -1032,10 +1032,12 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
         P.heatmaps(bright_is_worse(d["gt"]), bright_is_worse(d["pred"]), meta.tile_size, (h, w),
                    seen=sample.channel("seen"), scale=scale, label=label,
                    threshold=float(bright_is_worse(np.float64(threshold))),
-                   title=f"sample {sample.id}: true and predicted error per tile"),
+                   title=f"{stem} on sample {sample.id}: true and predicted {meta.metric} per {meta.tile_size}px tile"),
         P.scatter(p_all, g_all, label=scatter_label,
-                  title=f"{meta.metric}: predicted vs true, {p_all.size} tile values"),
-        P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale),
+                  title=f"{stem}: predicted vs true {meta.metric}, {p_all.size} tile values"),
+        P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale,
+                        title=f"rates chosen on sample {sample.id}; 'model': {stem} at {meta.metric} threshold "
+                              f"{threshold:g}"),
     ]
     for path, image in zip(paths, images, strict=True):
         P.save_image(path, image)

@@ -88,6 +88,25 @@ def colorize(values: np.ndarray, vmin: float = 0.0, vmax: float = 1.0, cmap: str
     return rgb
 
 
+def _check_scale(scale: object) -> None:
+    """A figure's ``scale`` (its panels drawn that many times smaller): an integer >= 1 (0 raised ZeroDivisionError,
+    a negative one matplotlib's error of a negative figure size)."""
+    if isinstance(scale, bool) or not isinstance(scale, (int, np.integer)) or scale < 1:
+        raise BaselineError(f"scale: expected an integer >= 1 (the panels drawn that many times smaller), got {scale!r}")
+
+
+def _frame_size(size: Any) -> tuple[int, int]:
+    """A frame's ``(H, W)``: two positive integers."""
+    try:
+        h, w = size
+    except (TypeError, ValueError):
+        raise BaselineError(f"size: expected the frame's (H, W), got {size!r}") from None
+    for v in (h, w):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise BaselineError(f"size: expected the frame's (H, W), two positive integers, got {size!r}")
+    return int(h), int(w)
+
+
 def upsample_tiles(values: np.ndarray, tile: int, size: tuple[int, int]) -> np.ndarray:
     """Per-tile values ``(th, tw)`` to pixels ``size = (H, W)`` (each tile a constant block)."""
     h, w = size
@@ -192,9 +211,18 @@ def heatmaps(
         raise BaselineError(f"heatmaps: expected rates among {', '.join(PREDICTED_RATES)}, got {list(rates)}")
     if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > vmin):
         raise BaselineError(f"colour range: expected finite vmin < vmax, got {vmin}, {vmax}")
+    _check_scale(scale)
+    h, w = _frame_size(size)
+    # (values of another grid than the frame's were drawn all the same, cut to the frame or short of it: a tile twice
+    # too large showed the top-left quarter of the map as the whole frame; a mask of another size, another frame's)
+    tiles = tile_grid(h, w, tile)
+    if truth.shape[1:] != tiles:
+        raise BaselineError(f"heatmaps: expected per-tile values (6, {tiles[0]}, {tiles[1]}) for a {w}x{h} frame of "
+                            f"{tile}-pixel tiles, got {truth.shape}")
+    if seen is not None and np.shape(seen) != (h, w):
+        raise BaselineError(f"heatmaps: expected a seen mask of the frame's size ({h}, {w}), got shape {np.shape(seen)}")
     import matplotlib.colors as mcolors
 
-    h, w = size
     cols = 3 if seen is not None else 2
     pw, ph = w / scale, h / scale
     zoom = _zoom(pw, ph, *MIN_PANEL)  # (small frames enlarged: titles ran into each other)
@@ -308,18 +336,21 @@ def _add_rate_legend(fig: Figure, ncols: int) -> None:
     fig.legend(handles=handles, loc="outside lower center", ncols=ncols, fontsize=8, frameon=False)
 
 
-def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1) -> np.ndarray:
+def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1,
+                  title: str = "") -> np.ndarray:
     """:func:`rtp.sdk.draw_rate_overlay` of each method's rate codes ``(th, tw)`` on the same
-    ``(H, W, 3)`` image, side by side, titled with the method and the shading work it saves (of the image's
-    pixels, a partial edge tile counting its real ones), with the legend of the rate colours below."""
+    ``(H, W, 3)`` image (an ``(H, W, 4)`` one's colour, its alpha left out), side by side, titled with the
+    method and the shading work it saves (of the image's pixels, a partial edge tile counting its real ones),
+    with the legend of the rate colours below and ``title``, if given, above."""
     if not rates:
         raise BaselineError("rate_overlays: no methods given")
+    _check_scale(scale)
     img = np.asarray(image)
     h, w = img.shape[:2]
     width = len(rates) * max(w / scale, 160) + 20
     # (the legend in as many columns as the figure holds: in one row it was cut off below a narrow figure)
     ncols = 4 if width >= _RATE_LEGEND_ROW else 2 if width >= _RATE_LEGEND_ROW / 2 else 1
-    fig = _figure(width, max(h / scale, 90) + 70 + 18 * (4 // ncols - 1))
+    fig = _figure(width, max(h / scale, 90) + 70 + 18 * (4 // ncols - 1) + (24 if title else 0))
     axes = np.atleast_1d(fig.subplots(1, len(rates)))
     for ax, (name, codes) in zip(axes, rates.items()):
         codes = np.asarray(codes)  # (checked by draw_rate_overlay: a uint8 cast made a code of 256 draw as 1x1)
@@ -327,10 +358,14 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
         drawn = draw_rate_overlay(img, codes, tile)
         saved = (0.0 if not codes.size else work_saved(codes, (h, w), tile) if codes.shape == tile_grid(h, w, tile)
                  else float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])))
-        ax.imshow(drawn, interpolation="nearest")
+        # (its colour only: an engine's (H, W, 4) frame kept its alpha, and an alpha of 0, a back buffer's, drew the
+        # panel blank, the page's white)
+        ax.imshow(drawn[..., :3], interpolation="nearest")
         ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
         _bare(ax)
     _add_rate_legend(fig, ncols)
+    if title:
+        fig.suptitle(title, fontsize=10)
     return figure_image(fig)
 
 

@@ -587,6 +587,37 @@ def test_figures_carry_their_colour_scale_and_legend() -> None:
         plots.rate_overlays(np.zeros((40, 60, 3), np.float32), {"a": np.full((3, 4), 256, np.int64)}, 16)
 
 
+def test_the_heatmaps_refuse_values_and_a_mask_of_another_grid_than_the_frames() -> None:
+    """Per-tile values of another grid than ``tile`` makes of ``size`` were drawn all the same, cut to the frame: with
+    32 for 16-pixel tiles the heatmaps showed the map's top-left quarter as the whole frame, and a seen mask of another
+    size was drawn as this frame's. Both are refused, as a scale of 0 (ZeroDivisionError) is, with what was expected."""
+    truth = np.random.default_rng(0).random((6, 3, 4))  # a 60x40 frame's 16-pixel tiles
+    plots.heatmaps(truth, truth, 16, (40, 60), seen=np.ones((40, 60)))
+    with pytest.raises(BaselineError, match=r"expected per-tile values \(6, 2, 2\) for a 60x40 frame of 32-pixel"):
+        plots.heatmaps(truth, truth, 32, (40, 60))
+    with pytest.raises(BaselineError, match=r"expected per-tile values \(6, 5, 8\)"):
+        plots.heatmaps(truth, truth, 8, (40, 60))
+    with pytest.raises(BaselineError, match=r"seen mask of the frame's size \(40, 60\), got shape \(20, 30\)"):
+        plots.heatmaps(truth, truth, 16, (40, 60), seen=np.ones((20, 30)))
+    for bad in (0, -2, 1.5):
+        with pytest.raises(BaselineError, match="scale: expected an integer >= 1"):
+            plots.heatmaps(truth, truth, 16, (40, 60), scale=bad)  # type: ignore[arg-type]
+        with pytest.raises(BaselineError, match="scale: expected an integer >= 1"):
+            plots.rate_overlays(np.zeros((40, 60, 3), np.float32), {"a": np.zeros((3, 4), np.uint8)}, 16,
+                                scale=bad)  # type: ignore[arg-type]
+    with pytest.raises(BaselineError, match="size: expected the frame's"):
+        plots.heatmaps(truth, truth, 16, (40, 0))
+
+
+def test_the_rate_overlays_of_a_frame_with_alpha_draw_its_colour() -> None:
+    """draw_rate_overlay keeps an (H, W, 4) frame's alpha, and rate_overlays drew its result as it was: an engine's
+    back buffer with an alpha of 0 came out as a blank panel, the page's white. The frame's colour is drawn."""
+    rgb = np.full((96, 160, 3), 60, np.uint8)
+    rgba = np.concatenate([rgb, np.zeros((96, 160, 1), np.uint8)], axis=2)
+    codes = np.zeros((6, 10), np.uint8)  # 1x1: untinted
+    np.testing.assert_array_equal(plots.rate_overlays(rgba, {"m": codes}, 16), plots.rate_overlays(rgb, {"m": codes}, 16))
+
+
 def test_heatmaps_draw_infinite_values_at_the_colour_ends_and_nan_grey(monkeypatch: pytest.MonkeyPatch) -> None:
     """An infinite value (a PSNR of identical tiles, +inf, negated by `rtp demo` so that bright is worse) was masked by
     matplotlib and drawn blank, the page's white: the best tiles as bright as the worst. It takes the colour at its end
@@ -1196,6 +1227,33 @@ def test_a_psnr_models_scatter_says_which_end_is_worst(dataset: Path, model: Pat
     assert labels == {"scatter": "psnr (clamped transform, 0 = worst)", "heatmaps": "psnr (clamped transform, 1 = worst)"}
     evaluate(model, dataset, baselines=False, plots_dir=tmp_path / "jnyang")
     assert labels["scatter"] == "jnyang (clamped transform, 1 = worst)"
+
+
+def test_each_evaluation_plot_names_its_model_and_sample(dataset: Path, model: Path, tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """The heatmaps were titled "sample s0: true and predicted error per tile", the scatter "jnyang: predicted vs
+    true" and the rate overlays not at all: two models' plots (or one copied into a document) did not say whose they
+    were. Each names the model (its plots' name), the heatmaps and the overlays the sample, the overlays the threshold
+    'model' decided at."""
+    import shutil
+
+    titles: dict[str, str] = {}
+    for name in ("heatmaps", "scatter", "rate_overlays"):
+        def record(*args: Any, _name: str = name, **kwargs: Any) -> np.ndarray:
+            titles[_name] = kwargs["title"]
+            return np.zeros((1, 1, 3), np.uint8)
+
+        monkeypatch.setattr(plots, name, record)
+    mine = shutil.copy(model, tmp_path / "my-model.onnx")
+    evaluate(mine, dataset, baselines=False, sweep=False, plots_dir=tmp_path / "plots", plot_sample="s1")
+    assert "my-model" in titles["heatmaps"] and "sample s1" in titles["heatmaps"], titles
+    assert titles["scatter"].startswith("my-model: predicted vs true jnyang"), titles
+    assert "sample s1" in titles["rate_overlays"] and "my-model at jnyang threshold 0.2" in titles["rate_overlays"]
+    img = np.zeros((40, 60, 3), np.float32)
+    codes = np.zeros((3, 4), np.uint8)
+    monkeypatch.undo()
+    titled = plots.rate_overlays(img, {"a": codes}, 16, title="rates chosen on sample s1")
+    assert titled.shape[0] > plots.rate_overlays(img, {"a": codes}, 16).shape[0]  # (room for the title above)
 
 
 def test_an_evaluation_folder_is_recognised_from_another_working_folder(
