@@ -326,6 +326,8 @@ def rate_legend() -> list[tuple[str, tuple[float, float, float] | None]]:
 
 #: The width in pixels the rate legend takes in one row (its four entries at 8 points).
 _RATE_LEGEND_ROW = 600
+#: The most panels :func:`rate_overlays` puts in a row (more go on further rows).
+_RATE_PANELS_PER_ROW = 3
 
 
 def _add_rate_legend(fig: Figure, ncols: int) -> None:
@@ -339,7 +341,8 @@ def _add_rate_legend(fig: Figure, ncols: int) -> None:
 def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1,
                   title: str = "") -> np.ndarray:
     """:func:`rtp.sdk.draw_rate_overlay` of each method's rate codes ``(th, tw)`` on the same
-    ``(H, W, 3)`` image (an ``(H, W, 4)`` one's colour, its alpha left out), side by side, titled with the
+    ``(H, W, 3)`` image (an ``(H, W, 4)`` one's colour, its alpha left out), side by side
+    (three a row at most), titled with the
     method and the shading work it saves (of the image's pixels, a partial edge tile counting its real ones),
     with the legend of the rate colours below and ``title``, if given, above."""
     if not rates:
@@ -347,11 +350,17 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
     _check_scale(scale)
     img = np.asarray(image)
     h, w = img.shape[:2]
-    width = len(rates) * max(w / scale, 160) + 20
+    # at most _RATE_PANELS_PER_ROW panels a row (the evaluation's six methods in one row made a 3860-pixel strip,
+    # its titles unreadable at a page's width)
+    per_row = min(len(rates), _RATE_PANELS_PER_ROW)
+    rows = -(-len(rates) // per_row)
+    width = per_row * max(w / scale, 160) + 20
     # (the legend in as many columns as the figure holds: in one row it was cut off below a narrow figure)
     ncols = 4 if width >= _RATE_LEGEND_ROW else 2 if width >= _RATE_LEGEND_ROW / 2 else 1
-    fig = _figure(width, max(h / scale, 90) + 70 + 18 * (4 // ncols - 1) + (24 if title else 0))
-    axes = np.atleast_1d(fig.subplots(1, len(rates)))
+    fig = _figure(width, rows * (max(h / scale, 90) + 30) + 40 + 18 * (4 // ncols - 1) + (24 if title else 0))
+    axes = np.atleast_1d(fig.subplots(rows, per_row)).ravel()
+    for ax in axes[len(rates):]:  # (the last row's empty places)
+        ax.set_axis_off()
     for ax, (name, codes) in zip(axes, rates.items()):
         codes = np.asarray(codes)  # (checked by draw_rate_overlay: a uint8 cast made a code of 256 draw as 1x1)
         # a share of the frame's pixels (a partial edge tile its real ones), as the decision table counts it

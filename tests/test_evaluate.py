@@ -1517,3 +1517,21 @@ def test_targets_of_another_weber_l_than_the_models_are_said(dataset: Path, mode
     with caplog.at_level("WARNING", logger="rtp.evaluate"):
         rep = evaluate(model, dataset, baselines=False, sweep=False)
     assert "environment luminance" not in caplog.text and not any("environment luminance" in n for n in rep.notes)
+
+
+def test_the_rate_overlays_of_many_methods_wrap_to_rows_of_three(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The evaluation's six methods were drawn in one row, a 3860-pixel strip whose titles could not be read at a
+    page's width: three panels a row at most, every method's panel drawn (titled), the empty places bare."""
+    figures: list[Any] = []
+    real = plots.figure_image
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or real(fig))
+    codes = np.zeros((3, 4), np.uint8)
+    img = np.zeros((40, 60, 3), np.float32)
+    plots.rate_overlays(img, {"a": codes}, 16)
+    three = plots.rate_overlays(img, {f"m{i}": codes for i in range(3)}, 16)
+    six = plots.rate_overlays(img, {f"m{i}": codes for i in range(6)}, 16)
+    five = plots.rate_overlays(img, {f"m{i}": codes for i in range(5)}, 16)
+    assert six.shape[1] == three.shape[1] == five.shape[1] and six.shape[0] > three.shape[0]
+    titled = [[ax.get_title() for ax in fig.axes if ax.get_title()] for fig in figures]
+    assert titled[2] == [f"m{i}: saves 0%" for i in range(6)] and len(titled[3]) == 5
+    assert [ax.axison for ax in figures[3].axes].count(False) == 1  # (the sixth place, empty)
