@@ -533,50 +533,96 @@ def _flood(scene: Scene, grid: VoxelGrid, max_height: float | None) -> tuple[np.
 #: loads.
 _SPAWN_VOXELS = 2_000_000
 
+#: The share of a free region's volume over another region (that region the lowest free space of the column)
+#: past which :func:`_roomiest_spawn` takes it for the outside of that one (the space over a dome's roof), not a
+#: level of its own.
+_ROOF_SHARE = 0.5
 
-def _roomiest_spawn(scene: Scene, target: Sequence[float] | np.ndarray, *, lattice: int = 5, voxel: float = 0.25,
-                   max_height: float | None = 6.0) -> tuple[np.ndarray, float, float] | None:
+#: The distance, metres, that :func:`_roomiest_spawn` keeps a moved spawn point from the geometry where it can.
+_SPAWN_CLEARANCE = 0.5
+
+
+def _regions(passable: np.ndarray) -> np.ndarray:
+    """The 6-connected regions of ``passable``: for each passable voxel the smallest flat index of its region,
+    -1 elsewhere (a flat int64 array). Minimum-label propagation with pointer jumping (numpy only)."""
+    n = passable.size
+    pas = passable.ravel()
+    lab = np.where(pas, np.arange(n, dtype=np.int64), n)
+    grid = lab.reshape(passable.shape)
+    while True:
+        before = lab.copy()
+        for axis in range(3):
+            lo = [slice(None)] * 3
+            hi = [slice(None)] * 3
+            lo[axis], hi[axis] = slice(None, -1), slice(1, None)
+            np.minimum(grid[tuple(hi)], grid[tuple(lo)], out=grid[tuple(hi)])
+            np.minimum(grid[tuple(lo)], grid[tuple(hi)], out=grid[tuple(lo)])
+            lab[~pas] = n  # (only passable voxels carry labels across)
+        while True:  # every label is a passable voxel's index: follow it to that voxel's label
+            jumped = lab[np.minimum(lab, n - 1)]
+            jumped[~pas] = n
+            if np.array_equal(jumped, lab):
+                break
+            lab[:] = jumped
+        if np.array_equal(lab, before):
+            return np.where(pas, lab, -1)
+
+
+def _roomiest_spawn(scene: Scene, target: Sequence[float] | np.ndarray, *, voxel: float = 0.25,
+                    max_height: float | None = 6.0) -> tuple[np.ndarray, float, float] | None:
     """Where the flood fill of a scene without spawn points of its own starts, near ``target`` (a mesh file's:
     the centre of its bounds, eye height over their bottom).
 
-    Floods the free space from ``target`` and from a ``lattice`` x ``lattice`` grid of points at its height
-    over the bounds, and returns ``(point, volume, own)``: ``target`` where it lies in the largest of the
-    regions they reach, else that region's point nearest to it; the region's volume; and ``target``'s own
-    region's (0 where it reaches none), in m³. None when no point reaches free space. (A target inside a
-    closed object, a sphere at the centre of a room, flooded the object's inside, and every viewpoint looked
-    at it from within.)
+    The free space of the scene's grid (``_SPAWN_VOXELS`` at most) at most ``max_height`` over drawn geometry
+    (free space over nothing but the bounds' bottom is outside the level: around an L-shaped corridor, below a
+    dome) falls into 6-connected regions. A region of which more than :data:`_ROOF_SHARE` of the volume lies
+    over another region (in columns whose lowest free space is that other one's) is that region's outside (the
+    space over a dome's roof, the inside of a ball standing in a room), not a level of its own; of the others the
+    largest is the level. Returns ``(point, volume, own)``: ``target`` where it lies in that region, else the
+    region's voxel nearest to it (at its height where the region has voxels there, and
+    :data:`_SPAWN_CLEARANCE` from the geometry where it can); the region's volume; and ``target``'s own
+    region's (0 where it lies in none), in m³. None when no free space lies over the geometry. (A target inside
+    a closed object flooded the object's inside; the bounds' empty corners around a dome or an L-shaped
+    corridor, the largest region where they counted, put the spawn point outside the level.)
     """
     tris = scene_triangles(scene)
     if len(tris) == 0:
         return None
-    lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
     grid = VoxelGrid(tris, voxel, max_voxels=_SPAWN_VOXELS)
-    passable = _passable(grid, max_height)
-    flat_passable = passable.ravel()
-    t = np.asarray(target, np.float64)
-    u = np.linspace(0.0, 1.0, lattice + 2)[1:-1]  # (inside the bounds, not on their faces)
-    points = np.concatenate([t[None], np.stack(np.meshgrid(lo[0] + u * (hi[0] - lo[0]), [t[1]],
-                                                           lo[2] + u * (hi[2] - lo[2]), indexing="ij"), -1).reshape(-1, 3)])
-    label = np.zeros(passable.size, np.int32)  # 0: not flooded yet; k: the k-th region
-    volumes: list[float] = []
-    of_point = np.zeros(len(points), np.int32)
-    for i, pt in enumerate(points):
-        start = grid.seed(pt, flat_passable)
-        if start is None:
-            continue
-        if not label[start]:
-            volumes.append(0.0)
-            region = grid.flood(pt, passable).ravel()
-            label[region] = len(volumes)
-            volumes[-1] = float(region.sum()) * grid.voxel ** 3
-        of_point[i] = label[start]
-    if not volumes:
+    ny = grid.shape[1]
+    last = np.maximum.accumulate(np.where(grid.occ == SOLID, np.arange(ny)[None, :, None], -1), axis=1)
+    passable = (grid.occ == FREE) & (last >= 0)  # (the OUTSIDE padding below the bounds is no floor)
+    if max_height is not None:  # (two voxels at least: a grid coarsened past max_height has free space over floors)
+        passable &= (np.arange(ny)[None, :, None] - last) * grid.voxel <= max(max_height, 2 * grid.voxel)
+    lab = _regions(passable)
+    flat = np.flatnonzero(lab >= 0)
+    if not len(flat):
         return None
-    best = 1 + int(np.argmax(volumes))
-    members = np.flatnonzero(of_point == best)
-    nearest = members[int(np.argmin(np.sum((points[members] - t) ** 2, axis=1)))]
-    own = volumes[of_point[0] - 1] if of_point[0] else 0.0
-    return points[nearest], volumes[best - 1], own
+    roots, region = np.unique(lab[flat], return_inverse=True)
+    volumes = np.bincount(region).astype(np.float64) * grid.voxel ** 3
+    # the lowest region of each column (x, z): the first passable voxel from the bottom
+    lab3 = lab.reshape(grid.shape)
+    has = passable.any(axis=1)
+    bottom = np.take_along_axis(lab3, np.argmax(passable, axis=1)[:, None, :], axis=1)[:, 0, :]
+    bottom = np.where(has, bottom, -1)
+    ix, _, iz = np.unravel_index(flat, grid.shape)
+    over = np.bincount(region, weights=(bottom[ix, iz] != lab[flat]).astype(np.float64)) * grid.voxel ** 3
+    level = volumes * (over <= _ROOF_SHARE * volumes)  # (roofs count 0; one at least is no roof: the lowest)
+    best = int(np.argmax(level if level.max() > 0 else volumes))
+    t = np.asarray(target, np.float64)
+    start = grid.seed(t, passable.ravel())
+    own = float(volumes[np.searchsorted(roots, lab[start])]) if start is not None else 0.0
+    if start is not None and lab[start] == roots[best]:
+        return t, float(volumes[best]), own
+    members = flat[region == best]
+    clear = ~grid.dilate(grid.occ != FREE, int(math.ceil(_SPAWN_CLEARANCE / grid.voxel))).ravel()[members]
+    layer = np.unravel_index(members, grid.shape)[1] == grid.index(t)[1]
+    pick = next(m for m in (layer & clear, layer, clear, np.ones(len(members), bool)) if m.any())
+    centres = grid.centre(members[pick])
+    if layer[pick].all():  # (the target's height, as a spawn point over the bounds' bottom stands)
+        centres[:, 1] = t[1]
+    point = centres[int(np.argmin(np.sum((centres - t) ** 2, axis=1)))]
+    return point, float(volumes[best]), own
 
 
 # -- standing on floors (eye-height viewpoints and the camera paths) --------------------------------

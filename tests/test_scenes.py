@@ -409,7 +409,7 @@ def test_a_mesh_files_spawn_point_is_not_inside_an_object(tmp_path: Path, caplog
     """A mesh file has no spawn points: the loader puts one at the centre of its bounds, eye height over their
     bottom. A room with a ball at its centre put it inside the ball, the flood fill flooded the ball's inside, and
     every viewpoint of `rtp capture --scene room.glb` looked at the ball from within. The spawn point moves to
-    the largest free region, the nearest lattice point of it; a room whose centre is free keeps it there."""
+    the room's free space, its voxel nearest the centre at that height; a room whose centre is free keeps it there."""
     import trimesh
 
     from rtp.capture.viewpoints import free_space
@@ -427,6 +427,102 @@ def test_a_mesh_files_spawn_point_is_not_inside_an_object(tmp_path: Path, caplog
     assert (np.linalg.norm(inside, axis=1) > 1.0).all() and len(inside) * grid.voxel ** 3 > 20.0  # the room
     (sp,) = scenes.load_mesh_file(tmp_path / "empty.glb").spawn_points
     np.testing.assert_allclose(sp.position, (0.0, 0.1, 0.0), atol=1e-6)
+
+
+def _boxes(trimesh: Any, *boxes: tuple[tuple[float, float, float], tuple[float, float, float]]) -> Any:
+    """Solid boxes ``(extents, centre)`` as one trimesh mesh (a level's slabs: floors, walls, ceilings)."""
+    parts = []
+    for ext, centre in boxes:
+        b = trimesh.creation.box(ext)
+        b.apply_translation(centre)
+        parts.append(b)
+    return trimesh.util.concatenate(parts)
+
+
+def test_a_mesh_files_spawn_point_lies_in_its_enclosed_space(tmp_path: Path):
+    """The spawn search counted the free space over the bounds' bottom for a floor and took the largest free
+    region: the empty corners of the bounds around a closed level, and the space over its roof. A dome (an
+    inward-facing sphere, radius 20) spawned outside it at (6.7, -18.4, 6.7), and an L-shaped corridor in the empty
+    square its legs enclose, where every viewpoint then looked at the corridor from outside. Free space over
+    nothing drawn is outside the level, and a region lying over another one is that one's outside: both now
+    spawn inside, and their flood stays there. A sealed shed at the centre of an open ground keeps the spawn point
+    on the ground (the largest region), and a small building with a far prop widening its bounds spawns inside it."""
+    import trimesh
+
+    from rtp.capture.viewpoints import free_space
+
+    dome = trimesh.creation.icosphere(subdivisions=3, radius=20.0)
+    dome.invert()  # (the faces toward the centre: a closed, inward-facing level)
+    dome.export(tmp_path / "dome.glb")
+    t = 0.2  # legs 2 m wide, 3 m high: x in [0, 30], z in [0, 2], and x in [28, 30], z in [0, 30]
+    _boxes(trimesh, ((30, t, 2), (15, -t / 2, 1)), ((30, t, 2), (15, 3 + t / 2, 1)), ((2, t, 28), (29, -t / 2, 16)),
+           ((2, t, 28), (29, 3 + t / 2, 16)), ((30, 3, t), (15, 1.5, -t / 2)), ((28, 3, t), (14, 1.5, 2 + t / 2)),
+           ((t, 3, 2), (-t / 2, 1.5, 1)), ((t, 3, 30), (30 + t / 2, 1.5, 15)), ((t, 3, 28), (28 - t / 2, 1.5, 16)),
+           ((2, 3, t), (29, 1.5, 30 + t / 2))).export(tmp_path / "corridor.glb")
+    shed = trimesh.creation.box((3.0, 2.5, 3.0))
+    shed.invert()
+    shed.apply_translation((0, 1.25, 0))
+    trimesh.util.concatenate([_boxes(trimesh, ((60, 0.2, 60), (0, -0.1, 0))), shed]).export(tmp_path / "ground.glb")
+    house = trimesh.creation.box((6.0, 3.0, 6.0))
+    house.invert()
+    house.apply_translation((10, 1.5, 10))
+    trimesh.util.concatenate([house, _boxes(trimesh, ((1, 12, 1), (-20, 6, -20)))]).export(tmp_path / "house.glb")
+
+    scene = scenes.load_mesh_file(tmp_path / "dome.glb")
+    (sp,) = scene.spawn_points
+    assert np.linalg.norm(sp.position) < 19.0
+    _, grid, reach, _ = free_space(scene, voxel=0.5)
+    assert reach.sum() > 1000 and (np.linalg.norm(grid.centre(np.flatnonzero(reach)), axis=1) < 20.0).all()
+
+    scene = scenes.load_mesh_file(tmp_path / "corridor.glb")
+    (sp,) = scene.spawn_points
+    x, y, z = sp.position
+    assert 0 < y < 3 and ((0 < x < 30 and 0 < z < 2) or (28 < x < 30 and 0 < z < 30)), sp.position
+    _, grid, reach, _ = free_space(scene)
+    x, y, z = grid.centre(np.flatnonzero(reach)).T
+    assert reach.sum() > 1000 and (((z < 2.1) | (x > 27.9)) & (y > -0.1) & (y < 3.1)).all()
+
+    (sp,) = scenes.load_mesh_file(tmp_path / "ground.glb").spawn_points
+    assert max(abs(sp.position[0]), abs(sp.position[2])) > 1.5 and sp.position[1] == pytest.approx(1.4)  # not in the shed
+    (sp,) = scenes.load_mesh_file(tmp_path / "house.glb").spawn_points
+    assert max(abs(sp.position[0] - 10), abs(sp.position[2] - 10)) < 3 and 0 < sp.position[1] < 3  # in the house
+
+
+def test_a_mesh_file_in_other_units_or_z_up_loads_with_a_warning(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    """Units and axes are taken as given: a level modelled in centimetres loaded 100 times too large, and a Z-up
+    one on its side, without a word. Both load as they are, with a warning naming the cause and the fix; the
+    level in metres, Y up, loads without one."""
+    import trimesh
+
+    t = 0.2  # a 20 x 4 x 12 m hall of slabs: floor, ceiling, four walls, and a dividing wall with a doorway
+    hall = _boxes(trimesh, ((20, t, 12), (0, -t / 2, 0)), ((20, t, 12), (0, 4 + t / 2, 0)),
+                  ((20, 4, t), (0, 2, -6 - t / 2)), ((20, 4, t), (0, 2, 6 + t / 2)), ((t, 4, 12), (-10 - t / 2, 2, 0)),
+                  ((t, 4, 12), (10 + t / 2, 2, 0)), ((t, 4, 5), (0, 2, -3.5)), ((t, 4, 5), (0, 2, 3.5)))
+    hall.export(tmp_path / "hall.glb")
+    cm = hall.copy()
+    cm.apply_scale(100.0)
+    cm.export(tmp_path / "hall_cm.glb")
+    km = hall.copy()
+    km.apply_scale(0.001)
+    km.export(tmp_path / "hall_km.glb")
+    zup = hall.copy()
+    zup.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (1, 0, 0)))  # Y up -> Z up
+    zup.export(tmp_path / "hall_zup.glb")
+
+    def said(name: str) -> list[str]:
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp"):
+            scenes.load_mesh_file(tmp_path / name)
+        return [r.getMessage() for r in caplog.records]
+
+    assert said("hall.glb") == []
+    for name, spans in (("hall_cm.glb", "2040 x 440 x 1240 m"), ("hall_km.glb", "0.0204 x 0.0044 x 0.0124 m")):
+        (units, *_) = said(name)
+        assert units.startswith(f"{name}: its geometry spans {spans}, implausible for a level in metres")
+        assert "export the level in metres, Y up" in units
+    (axes,) = said("hall_zup.glb")
+    assert axes.startswith("hall_zup.glb: it looks modelled with Z up (it spans 20.4 x 12.4 x 4.4 m, thinnest along Z")
+    assert "export the level in metres, Y up" in axes
 
 
 def test_mesh_file_errors(tmp_path: Path):
@@ -960,7 +1056,7 @@ def test_a_mesh_file_far_from_the_origin_loads_with_a_warning(tmp_path: Path, ca
         caplog.clear()
         with caplog.at_level("WARNING", logger="rtp"):
             scenes.load_mesh_file(tmp_path / "far.obj")
-        said = [r.getMessage() for r in caplog.records]
+        said = [r.getMessage() for r in caplog.records if "from the origin" in r.getMessage()]  # (a 1 m level: units)
         if warned:
             assert len(said) == 1 and "far.obj: its geometry lies up to 1000001 m from the origin" in said[0]
             assert "resolves only 0.062 m" in said[0]

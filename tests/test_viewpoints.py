@@ -325,3 +325,28 @@ def test_a_seed_gives_the_same_viewpoints_in_any_process():
     runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**os.environ, "PYTHONHASHSEED": h}).stdout for h in ("0", "1")]
     assert runs[0] == runs[1] and "Camera(" in runs[0]
+
+
+def test_spawn_search_regions_are_the_connected_components():
+    """The spawn search of a mesh file splits its free space into 6-connected regions with numpy alone (scipy
+    is no runtime dependency): the same partition as scipy's labelling, on a random grid (many small regions)
+    and on a one-voxel serpentine (one region, the longest path a label has to travel)."""
+    ndimage = pytest.importorskip("scipy.ndimage")
+    from rtp.capture.viewpoints import _regions
+
+    grid = np.random.default_rng(3).random((30, 20, 40)) < 0.45
+    snake = np.zeros((42, 3, 42), bool)
+    for i in range(1, 41, 2):
+        snake[i, 1, 1:41] = True
+        if i + 2 < 41:
+            snake[i + 1, 1, 40 if i % 4 == 1 else 1] = True
+    for passable in (grid, snake):
+        passable[[0, -1]] = passable[:, [0, -1]] = passable[:, :, [0, -1]] = False  # (the grid's OUTSIDE border)
+        lab = _regions(passable)
+        assert (lab[~passable.ravel()] == -1).all()
+        ours = lab[passable.ravel()]
+        theirs, k = ndimage.label(passable)
+        pairs = set(zip(ours.tolist(), theirs.ravel()[passable.ravel()].tolist()))
+        assert len(np.unique(ours)) == k == len(pairs)  # (one label of ours for each of theirs, and back)
+        assert (ours <= np.flatnonzero(passable.ravel())).all()  # (each the smallest flat index of its region)
+    assert len(np.unique(_regions(snake)[snake.ravel()])) == 1

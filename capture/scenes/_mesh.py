@@ -11,9 +11,10 @@
   one, the emission by ``KHR_materials_emissive_strength`` matched by material name) and OBJ/MTL (Kd, map_Kd:
   the texture multiplied by Kd where the MTL states one; roughness from the Phong exponent);
   vertex colours become a constant base colour (their mean).
-* Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same. Geometry more than
-  131072 m from the origin (where float32 steps reach 1.6 cm) loads with a warning: it draws with
-  coarse depth and reprojection.
+* Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same. A level whose largest
+  extent is over 2 km or under 1 m, or that looks Z-up, loads as it is with a warning (saying to export it in
+  metres, Y up). Geometry more than 131072 m from the origin (where float32 steps reach 1.6 cm) loads with a
+  warning: it draws with coarse depth and reprojection.
 """
 
 from __future__ import annotations
@@ -288,14 +289,50 @@ def _material_of(geom: Any, name: str, library_lost: bool = False,
     return Material(name=name), False
 
 
+#: The largest extents, metres, outside which a mesh file's level loads with a warning that it is in other units
+#: than metres: over 2 km (a 20 m level modelled in centimetres), under 1 m (a 50 m one scaled down 100 times
+#: once too often; a 1 m test quad or a small prop is no level either, but loads without a word).
+PLAUSIBLE_EXTENT = (1.0, 2000.0)
+
+#: The largest extent, metres, from which a mesh file's level is checked for a Z-up look (a single quad or a
+#: prop smaller than a room says nothing of its axes).
+AXES_CHECKED_FROM = 2.0
+
+
+def _check_units_and_axes(scene: Scene, file: str) -> None:
+    """Warn (nothing more) when ``scene`` looks modelled in other units than metres or with another axis than Y up:
+    its largest extent outside :data:`PLAUSIBLE_EXTENT`, or (from :data:`AXES_CHECKED_FROM` across) its thinnest
+    extent along X or Z (less than half its height) with more of its surface facing along that axis than up or
+    down (a Z-up level read as Y-up stands on its side: its floors face a horizontal axis)."""
+    lo, hi = (np.asarray(b, np.float64) for b in scene.bounds)
+    ext = hi - lo
+    fix = "rtp reads a mesh file as it is (no scale or axis option): export the level in metres, Y up"
+    if not PLAUSIBLE_EXTENT[0] <= float(ext.max()) <= PLAUSIBLE_EXTENT[1]:
+        _warn("%s: its geometry spans %s m, implausible for a level in metres (a level modelled in centimetres loads "
+              "100 times too large); %s", file, " x ".join(f"{v:.4g}" for v in ext), fix)
+    thin = int(np.argmin(ext))
+    if thin == 1 or ext[thin] >= 0.5 * ext[1] or float(ext.max()) < AXES_CHECKED_FROM:
+        return
+    tris = np.concatenate([m.positions.astype(np.float64)[m.indices.astype(np.int64)] for m in scene.meshes])
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    area = np.linalg.norm(n, axis=1)
+    facing = [float(area[np.abs(n[:, k]) > 0.9 * area].sum()) for k in range(3)]  # (within 26 degrees of the axis)
+    if facing[thin] > facing[1]:
+        axis = "XYZ"[thin]
+        _warn("%s: it looks modelled with %s up (it spans %s m, thinnest along %s, and more of its surface faces "
+              "along %s than up or down): it stands on its side, its spawn point and viewpoints with it; %s", file,
+              axis, " x ".join(f"{v:.4g}" for v in ext), axis, axis, fix)
+
+
 def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: float = 1.6) -> Scene:
     """Load a glTF/GLB/OBJ file (or any format trimesh reads) as a :class:`Scene`.
 
     One :class:`Mesh` and one :class:`Material` per geometry instance. There are no lights or
     spawn points in these formats: the scene keeps the default sun, no point lights, and one
-    spawn point at the centre of the bounds, ``eye_height`` above their bottom, unless the free space there is
-    not the largest region that points at that height across the bounds reach (the centre inside a closed
-    object): then at the nearest of those points in the largest region.
+    spawn point at the centre of the bounds, ``eye_height`` above their bottom, unless that point lies outside the
+    level's free space (inside a closed object, or outside a closed level: around a dome, beside an L-shaped
+    corridor): then at the nearest voxel of the level's free space (``viewpoints._roomiest_spawn``). A level in
+    implausible units (over 2 km or under 1 m across) or that looks Z-up loads as it is, with a warning.
 
     Raises:
         SceneNotFoundError: no such file.
@@ -390,14 +427,20 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
                     "with) resolves only %.3f m: depth, motion and reprojection are that coarse (a capture's unseen "
                     "share grows: 10%% at the origin, 20%% at 2e5 m, 66%% at 1e6 m for one room); move the model "
                     "near the origin", p.name, far, float(np.spacing(np.float32(far))))
+    _check_units_and_axes(scene, p.name)
     c = (lo + hi) / 2
     spawn = np.array([c[0], lo[1] + eye_height, c[2]], np.float64)
     from ..viewpoints import _roomiest_spawn
 
     found = _roomiest_spawn(scene, spawn)
-    if found is not None and not np.array_equal(found[0], spawn):  # the centre is in a smaller region than another
-        log.info("%s: the centre of its bounds lies in a free region of %.1f m³ (inside an object?); its spawn point "
-                 "is at (%.2f, %.2f, %.2f) instead, in the largest one (%.1f m³)", p.name, found[2], *found[0], found[1])
+    if found is None:  # (a flat quad, a prop; the capture then says where its spawn point lies and the level's bounds)
+        log.info("%s: within its bounds no free space lies over its geometry (at most 6 m over a floor, at the spawn "
+                 "search's resolution): its spawn point stays at the centre of the bounds, %.1f m over their bottom, "
+                 "and its viewpoints may lie outside the level, or none be found", p.name, eye_height)
+    elif not np.array_equal(found[0], spawn):  # the centre is not in the level's free space
+        log.info("%s: the centre of its bounds lies in a free region of %.1f m³ (inside an object, or outside the "
+                 "level); its spawn point is at (%.2f, %.2f, %.2f) instead, in the level's (%.1f m³)", p.name,
+                 found[2], *found[0], found[1])
         spawn = found[0]
     scene.spawn_points = [SpawnPoint((float(spawn[0]), float(spawn[1]), float(spawn[2])), 0.0)]
     log.info("loaded %s: %d triangles, %d materials", p.name, scene.triangle_count, len(materials))
