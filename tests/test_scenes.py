@@ -1192,8 +1192,9 @@ def test_fetch_downloads_unpacks_once_and_indexes(tmp_path: Path, monkeypatch: p
     cache = tmp_path / "cache"
     calls = _fake_apt(monkeypatch, _packages())
     out = scenes.fetch(cache, ["m1", "m2"], splits=splits, convert=True)
-    assert calls[0] == ["apt-get", "download", *scenes.PACKAGES]
-    assert sorted(c[2].rsplit("/", 1)[-1] for c in calls[1:]) == sorted(f"{p}_1.0_all.deb" for p in scenes.PACKAGES)
+    n = len(scenes.PACKAGES)
+    assert calls[:n] == [["apt-get", "download", p] for p in scenes.PACKAGES]  # one at a time, each kept as it arrives
+    assert sorted(c[2].rsplit("/", 1)[-1] for c in calls[n:]) == sorted(f"{p}_1.0_all.deb" for p in scenes.PACKAGES)
     index = json.loads((cache / "index.json").read_text())
     m1, tex, m2 = f"root/{OA}/map-m1.pk3", f"root/{OA}/pak-tex.pk3", "pk3/map-m2.pk3"
     assert index["maps"] == {"m1": m1, "m2": m2}
@@ -1250,7 +1251,6 @@ def test_a_failed_download_leaves_no_package_cut_short_and_a_damaged_one_is_fetc
     def full_disk(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
         if list(cmd[:2]) == ["apt-get", "download"]:
             (cwd / f"{cmd[2]}_1.0_all.deb").write_bytes(_pk3_bytes(packages[cmd[2]])[:100])  # cut short
-            (cwd / f"{cmd[3]}_1.0_all.deb").write_bytes(b"")
             raise scenes.FetchError("apt-get download ... failed with exit code 100: ... (28: No space left on device)")
         working(cmd, cwd)
 
@@ -1349,7 +1349,14 @@ def _fake_apt_get(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stderr: str) 
     ("E: Unable to locate package openarena-081-maps\n",
      r"E: Unable to locate package openarena-081-maps \(the system's package lists do not know them: run `sudo "
      r"apt-get update`"),
-], ids=["offline", "no-lists"])
+    ("E: Failed to fetch http://deb.debian.org/debian/pool/main/o/openarena-maps/openarena-081-maps_0.8.5split-14_all.deb"
+     "  404  Not Found [IP: 151.101.2.132 80]\n",
+     r"E: Failed to fetch http://deb\.debian\.org/\S+  404  Not Found \[IP: [\d.]+ 80\] \(the mirror does not have the "
+     r"version the system's package lists name, .*: run `sudo apt-get update`, then fetch again;"),
+    ("E: Failed to fetch http://deb.debian.org/debian/pool/main/o/x.deb  File has unexpected size (5120 != 40249856). "
+     "Mirror sync in progress? [IP: 151.101.2.132 80]\n",
+     r"E: Failed to fetch .*unexpected size .* \(the mirror does not have the version .*: run `sudo apt-get update`"),
+], ids=["offline", "no-lists", "404", "html-page"])
 def test_a_download_that_fails_offline_says_why_in_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                             stderr: str, why: str):
     """apt-get download with no network (or no package lists) failed with its last lines, apt's warnings among them
@@ -1363,9 +1370,72 @@ def test_a_download_that_fails_offline_says_why_in_one_line(tmp_path: Path, monk
         scenes.fetch(cache, ["m1"], splits=splits, progress=False)
     text = str(err.value)
     assert "\n" not in text and "W: " not in text, text
-    assert re.search(rf"^apt-get download {' '.join(scenes.PACKAGES)} failed with exit code 100: {why}", text), text
-    assert text.endswith(f"into {cache / 'debs'} and run `rtp scenes fetch` again)")
+    assert re.search(rf"^apt-get download {scenes.PACKAGES[0]} failed with exit code 100: {why}", text), text
+    assert text.endswith(f"`apt-get download {' '.join(scenes.PACKAGES)}`, into {cache / 'debs'} and run `rtp scenes "
+                         "fetch` again)")
     assert list((cache / "debs").iterdir()) == []
+
+
+def test_an_interrupted_download_keeps_the_packages_that_arrived_and_the_next_fetch_downloads_the_rest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    """One ``apt-get download`` of all four packages (177 MB) that failed or was interrupted (Ctrl-C, a dropped
+    connection) near its end kept nothing: the next fetch downloaded everything again, and on a flaky network
+    never got through. Packages are downloaded one at a time and each is kept as it arrives: the error says what
+    was kept and which packages remain, and the next fetch downloads only those."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    calls = _fake_apt(monkeypatch, _packages())
+    working = scenes._fetch._run
+    third = scenes.PACKAGES[2]
+
+    def drops(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
+        if list(cmd) == ["apt-get", "download", third]:
+            (cwd / f"{third}_1.0_all.deb").write_bytes(b"!<arch>\ncut")  # half of it, then the network went
+            raise scenes.FetchError(f"apt-get download {third} failed with exit code 100: E: Failed to fetch "
+                                    "http://deb.debian.org/x.deb  Connection timed out")
+        working(cmd, cwd)
+
+    monkeypatch.setattr(scenes._fetch, "_run", drops)
+    rest = " ".join(scenes.PACKAGES[2:])
+    with pytest.raises(scenes.FetchError, match=rf"Connection timed out \(no network, .*; kept the 2 packages downloaded "
+                                                rf"before it; or put .*`apt-get download {rest}`, into"):
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert sorted(p.name for p in (cache / "debs").iterdir()) == sorted(f"{p}_1.0_all.deb" for p in scenes.PACKAGES[:2])
+
+    def interrupted(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
+        if list(cmd) == ["apt-get", "download", third]:
+            working(cmd, cwd)
+            return
+        if list(cmd[:2]) == ["apt-get", "download"]:
+            raise KeyboardInterrupt  # Ctrl-C during the fourth
+        working(cmd, cwd)
+
+    calls.clear()
+    monkeypatch.setattr(scenes._fetch, "_run", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert sorted(p.name for p in (cache / "debs").iterdir()) == sorted(f"{p}_1.0_all.deb" for p in scenes.PACKAGES[:3])
+    monkeypatch.setattr(scenes._fetch, "_run", working)
+    calls.clear()
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
+    assert [c for c in calls if c[0] == "apt-get"] == [["apt-get", "download", scenes.PACKAGES[3]]]
+
+
+def test_a_download_folder_left_by_a_killed_fetch_is_removed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A fetch killed outright while downloading (kill -9, SIGTERM, a closed terminal: no cleanup runs) left its
+    ``debs/.download-*`` folder, with up to 177 MB of packages cut short in it, for good: every later fetch made a
+    new one beside it. The next fetch, which holds the cache's lock, removes it."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    stale = cache / "debs" / ".download-k2j4x9ab"
+    stale.mkdir(parents=True)
+    (stale / "openarena-081-textures_1.0_all.deb").write_bytes(b"!<arch>\n" + b"x" * 1000)
+    _fake_apt(monkeypatch, _packages())
+    assert scenes.fetch(cache, ["m1"], splits=splits, progress=False) == {"m1": cache / "root" / OA / "map-m1.pk3"}
+    assert sorted(p.name for p in (cache / "debs").iterdir()) == sorted(f"{p}_1.0_all.deb" for p in scenes.PACKAGES)
 
 
 def test_a_command_output_that_is_not_text_is_still_its_failure(tmp_path: Path):
@@ -1580,6 +1650,26 @@ def test_a_converted_scene_with_damaged_sky_triangles_is_converted_again(tmp_pat
     with pytest.raises(sdk.ParameterError, match=r"sky: expected finite triangles of shape \(K, 3, 3\)"):
         save_scene_npz(tmp_path / "x.npz", scenes.procedural(0), sky)
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_a_converted_scene_that_cannot_be_cached_is_still_returned(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                   caplog: pytest.LogCaptureFixture):
+    """A cache folder that is read-only (a shared cache) or on a full disk: scene_by_name converted the map, then
+    failed writing ``converted/<map>.npz`` with the system's error, and the scene was lost. The scene is returned,
+    with a warning that it could not be cached, and nothing half-written is left."""
+    import errno
+
+    cache = _fake_cache(tmp_path)
+
+    def read_only(path, *args, **kw):  # noqa: ANN001, ANN002, ANN003
+        raise PermissionError(errno.EACCES, "Permission denied", str(path))
+
+    monkeypatch.setattr(scenes._fetch, "save_scene_npz", read_only)
+    with caplog.at_level("WARNING", logger="rtp"):
+        assert scene_by_name("oa_dm1", cache).triangle_count == 79
+        assert scenes.scene_blockers("oa_dm1", cache).shape[1:] == (3, 3)
+    assert "could not cache the converted scene 'oa_dm1' ([Errno 13] Permission denied" in caplog.text
+    assert not (cache / "converted").exists() or not list((cache / "converted").iterdir())
 
 
 def test_scene_index_and_split_file_errors(tmp_path: Path, caplog: pytest.LogCaptureFixture):

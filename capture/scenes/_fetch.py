@@ -20,6 +20,7 @@ import gzip
 import json
 import logging
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -297,7 +298,7 @@ def _fetch_locked(cache: Path, names: list[str], splits: str | Path | None, conv
     missing = [p for p in PACKAGES if not list(debs.glob(f"{p}_*.deb"))]
     if missing:
         log.info("downloading %s into %s", " ".join(missing), debs)
-        _download(missing, debs)
+        _download(missing, debs, progress)
     stamp = root / ".unpacked"
     deb_files = sorted(debs.glob("*.deb"))
     have = stamp.read_text().split("\n") if stamp.exists() else []
@@ -352,26 +353,37 @@ def _deb_is_whole(path: Path) -> bool:
     return pos in (size, size + 1) and b"debian-binary" in names and any(n.startswith(b"data.tar") for n in names)
 
 
-def _download(packages: Sequence[str], debs: Path) -> None:
-    """``apt-get download`` of ``packages`` into a folder of its own inside ``debs``, each ``.deb`` moved
-    into ``debs`` once all are downloaded: a download that fails (a full disk, the network) leaves no
-    file cut short for the next fetch to take for a package."""
+def _download(packages: Sequence[str], debs: Path, progress: bool = False) -> None:
+    """``apt-get download`` of ``packages``, one at a time, into a folder of its own inside ``debs``, each ``.deb``
+    moved into ``debs`` as soon as apt-get has downloaded (and checked) it: a download that fails (a full disk, the
+    network, Ctrl-C) leaves no file cut short for the next fetch to take for a package, and keeps the packages that
+    arrived whole before it, so the next fetch downloads only the rest. ``progress``: a bar counting packages."""
+    for old in debs.glob(".download-*"):  # (a fetch killed outright, kill -9 or SIGTERM, left its folder with up to
+        if old.is_dir():                  # 177 MB in it for good; the caller holds the cache's lock: none is live)
+            shutil.rmtree(old, ignore_errors=True)
     part = Path(tempfile.mkdtemp(prefix=".download-", dir=debs))
     try:
-        try:
-            _run(["apt-get", "download", *packages], part, debs)
-        except FetchError as err:
-            if "not found: fetching needs" in str(err):  # (no apt-get: its message says what to do already)
-                raise
-            if "Unable to locate package" in str(err):
-                why = ("the system's package lists do not know them: run `sudo apt-get update` (on Ubuntu with the "
-                       "'universe' component enabled)")
-            else:
-                why = "no network, or no mirror reachable? check the connection (and apt's proxy settings)"
-            raise FetchError(f"{err} ({why}; or put the packages' .deb files, from any machine's `apt-get download "
-                             f"{' '.join(packages)}`, into {debs} and run `rtp scenes fetch` again)") from err
-        for f in sorted(part.glob("*.deb")):
-            os.replace(f, debs / f.name)
+        for i, pkg in enumerate(_progress(packages, desc="download", unit="package", disable=not progress)):
+            try:
+                _run(["apt-get", "download", pkg], part, debs)
+            except FetchError as err:
+                if "not found: fetching needs" in str(err):  # (no apt-get: its message says what to do already)
+                    raise
+                text = str(err)
+                if "Unable to locate package" in text:
+                    why = ("the system's package lists do not know them: run `sudo apt-get update` (on Ubuntu with the "
+                           "'universe' component enabled)")
+                elif re.search(r"\b404\s+Not Found|Hash Sum mismatch|unexpected size|Mirror sync", text):
+                    why = ("the mirror does not have the version the system's package lists name, or sent something "
+                           "else (a proxy's or captive portal's page): run `sudo apt-get update`, then fetch again")
+                else:
+                    why = "no network, or no mirror reachable? check the connection (and apt's proxy settings)"
+                rest = list(packages[i:])
+                kept = f"kept the {i} package{'' if i == 1 else 's'} downloaded before it; " if i else ""
+                raise FetchError(f"{err} ({why}; {kept}or put the packages' .deb files, from any machine's `apt-get "
+                                 f"download {' '.join(rest)}`, into {debs} and run `rtp scenes fetch` again)") from err
+            for f in sorted(part.glob("*.deb")):
+                os.replace(f, debs / f.name)
     finally:
         shutil.rmtree(part, ignore_errors=True)
 
@@ -418,7 +430,10 @@ def _load_cached(name: str, cache: Path, index: dict) -> tuple[Scene, np.ndarray
         except (SceneFormatError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
             log.warning("ignoring unreadable cache %s: %s", path, err)
     conv = convert_from_cache(name, cache, index)
-    save_scene_npz(path, conv.scene, conv.sky_triangles, conv.stats)
+    try:
+        save_scene_npz(path, conv.scene, conv.sky_triangles, conv.stats)
+    except OSError as err:  # (a read-only shared cache, a full disk: the scene, converted, was lost to the error)
+        log.warning("could not cache the converted scene %r (%s); it is converted again at its next load", name, err)
     return conv.scene, conv.sky_triangles
 
 
@@ -447,7 +462,8 @@ def scene_by_name(name: str, cache_dir: str | Path, *, split: str | None = None,
                   splits: str | Path | None = None) -> Scene:
     """Load a map listed in ``scenes.yaml`` (optionally required to be in ``split``).
 
-    The first call converts the BSP and caches it; later calls read the cache.
+    The first call converts the BSP and caches it (where the cache can be written: else a warning); later calls
+    read the cache.
 
     Raises:
         UnlistedMapError: the map is not listed (in that split).
