@@ -265,8 +265,8 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     if args.combiner is not None:
         if ENGINE_RATES_KEY not in frame:
             raise sdk.ParameterError(f"{path!r} has no {ENGINE_RATES_KEY!r} array: with --combiner each frame holds the "
-                                     f"engine's own shading rates, uint8 codes a tile ({len(values[0])}x"
-                                     f"{len(values[0][0])} here), which the device combines with rtp's", "frame")
+                                     f"engine's own shading rates, uint8 codes a tile (shape {tuple(np.shape(values)[1:])} "
+                                     "here, rows of tiles first), which the device combines with rtp's", "frame")
         engine = frame[ENGINE_RATES_KEY]
     combine: dict[str, Any] = {"engine_rates": engine, "combiner": args.combiner or "max"}
     if args.saving is None:
@@ -542,10 +542,27 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
 
     base = next((b for k in (COLOUR_KEY, "albedo", "prev_colour") if k in frame and (b := image(frame[k])) is not None),
                 np.zeros((*size, 3), np.float32))
-    picture = sdk.draw_rate_overlay(np.clip(np.nan_to_num(base), 0.0, 1.0), rates, tile, legend=True)
-    if width is not None:
-        step = -(-picture.shape[1] // width)
-        picture = picture[::step, ::step]
+    step = 1 if width is None else -(-size[1] // width)
+    # (shown at 1/step, the grid and the key are drawn at the size shown: drawn at full size and then sampled, a
+    # 1280x720 frame's GIF kept every third grid line, its tiles looking three times their size, and its key's
+    # 2-pixel letters lost one column in three, unreadable)
+    picture = sdk.draw_rate_overlay(np.clip(np.nan_to_num(base), 0.0, 1.0), rates, tile, grid=step == 1,
+                                    legend=step == 1)
+    if step > 1:
+        from rtp.sdk._overlay import _draw_legend
+
+        picture = np.array(picture[::step, ::step])
+        shown = tile / step
+        if tile >= 4 and shown >= 4:  # (as draw_rate_overlay: the first row and column shown of each tile darkened;
+            # none where a tile is shown under 4 pixels, where the lines would darken the frame more than mark it)
+            for axis, count in enumerate(rates.shape):
+                lines = np.unique(-(-np.arange(count) * tile // step))
+                lines = lines[lines < picture.shape[axis]]
+                if axis == 0:
+                    picture[lines] *= 0.75
+                else:
+                    picture[:, lines] *= 0.75
+        _draw_legend(picture, 0.45)  # (draw_rate_overlay's alpha)
     return np.round(np.clip(picture, 0.0, 1.0) * 255.0).astype(np.uint8)  # (a quarter of float32's memory)
 
 

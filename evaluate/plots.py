@@ -535,11 +535,20 @@ def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False,
     axes = fig.subplots(1, len(panels))
     t = np.arange(len(rows))
     for ax, (y, title) in zip(axes, panels):
-        ax.plot(t, y, marker="o" if len(rows) <= 30 else None, markersize=3, linewidth=1.0, color="#1f77b4")
+        # (unclipped: every point lies within the limits below, and a marker on 0, a frame whose rates did not
+        # change, was drawn as half a dot on the axis)
+        ax.plot(t, y, marker="o" if len(rows) <= 30 else None, markersize=3, linewidth=1.0, color="#1f77b4",
+                clip_on=False)
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("frame", fontsize=8)
         ax.set_xlim(-0.5, max(len(rows) - 0.5, 0.5))
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_ylim(bottom=0)
+        # from 0, with room above the highest point (matplotlib's margin is a share of the data's own spread: a
+        # series of 55-57% drew its top markers cut in half on the panel's edge, a constant one its whole line on
+        # it); a series all 0, or none (the first frame's change), on 0 to 1 rather than matplotlib's 0 to 0.055
+        finite = np.asarray(y, np.float64)[np.isfinite(np.asarray(y, np.float64))]
+        top = float(finite.max()) if finite.size else 0.0
+        low = min(0.0, float(finite.min()) if finite.size else 0.0)
+        ax.set_ylim(low, top + 0.08 * (top - low) if top > low else low + 1.0)
         ax.grid(alpha=0.3)
     return figure_image(fig)

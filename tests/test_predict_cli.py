@@ -7,6 +7,7 @@ import json
 import logging
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -664,7 +665,8 @@ def test_the_engines_own_rates_in_each_frame_file(frame: Path, tmp_path: Path, c
     assert main(["predict", str(with_engine), "--combiner", "sum"]) == 0
     assert "the engine's rates and rtp's combined by sum (the engine's alone: 25.0%)" in capsys.readouterr().out
     assert main(["predict", str(frame), "--combiner", "max"]) == 2
-    assert "has no 'engine_rates' array: with --combiner each frame holds" in capsys.readouterr().err
+    err = capsys.readouterr().err  # (its shape as numpy's: "6x10" read as 6 tiles wide, this command's WxH)
+    assert "has no 'engine_rates' array: with --combiner each frame holds" in err and "(shape (6, 10) here" in err
     np.savez(with_engine, **arrays, engine_rates=engine[:, :4])
     assert main(["predict", str(with_engine), "--combiner", "max"]) == 2
     assert "engine_rates: shape (6, 4) does not broadcast" in capsys.readouterr().err
@@ -732,3 +734,49 @@ def test_a_foreign_model_runs_with_its_sidecar(frame: Path, tmp_path: Path, caps
     assert got["model"] == "foreign.onnx" and got["tile_size"] == 8 and got["tiles"] == [12, 20]
     assert main(["predict", str(tmp_path / "example.npz"), "--write-example", "--metadata", str(sidecar)]) == 2
     assert "--metadata: not read with --write-example" in capsys.readouterr().err
+
+
+def test_a_wide_frames_gif_overlay_keeps_every_tiles_grid_line_and_a_readable_key() -> None:
+    """A frame wider than the GIF's 480 pixels was drawn at full size and then sampled: at 1280x720 (a third of its
+    size) the GIF kept every third grid line, its 16-pixel tiles looking three times their size, and its key's
+    2-pixel letters lost one column in three. The grid and the key are drawn at the size shown."""
+    from rtp.cli._predict import GIF_WIDTH, _overlay
+    from rtp.sdk._overlay import _draw_legend
+
+    h, w, tile = 720, 1280, 16
+    frame = {"depth": np.ones((h, w), np.float32), "colour": np.full((h, w, 3), 0.6, np.float32)}
+    picture = _overlay(frame, np.zeros((45, 80), np.uint8), tile, GIF_WIDTH)  # every tile 1x1: untinted
+    assert picture.shape == (240, 427, 3)
+    grey = round(0.6 * 255)
+    rows = np.flatnonzero(picture[:150, 200, 0] < grey)  # (a column of no grid line, above the key)
+    cols = np.flatnonzero(picture[100, :, 0] < grey)
+    assert rows.tolist() == [-(-k * tile // 3) for k in range(45) if -(-k * tile // 3) < 150]
+    assert cols.tolist() == [-(-k * tile // 3) for k in range(80)]  # a line at the first column shown of each tile
+    key = np.zeros((240, 427, 3), np.float32)
+    _draw_legend(key, 0.45)  # the key at the size shown: its letters whole
+    np.testing.assert_array_equal((picture == 255).all(-1), (key == 1.0).all(-1))
+    small = {"depth": np.ones((96, 160), np.float32), "colour": np.full((96, 160, 3), 0.6, np.float32)}
+    rates = np.zeros((6, 10), np.uint8)  # (a frame the GIF's width or narrower: drawn as draw_rate_overlay draws it)
+    np.testing.assert_array_equal(_overlay(small, rates, tile, GIF_WIDTH), np.round(
+        sdk.draw_rate_overlay(small["colour"], rates, tile, legend=True) * 255.0).astype(np.uint8))
+
+
+def test_the_curves_hold_their_points_whole_inside_the_panels(monkeypatch: pytest.MonkeyPatch) -> None:
+    """frames.png's panels ran from 0 to matplotlib's margin above the highest point, a share of the data's own
+    spread: work saved of 55-57% drew the top markers cut in half on the panel's edge, a constant series its whole
+    line on it, and a series all 0 (rates that never change) ran to 0.055. Each panel has room above its highest
+    point, a series all 0 runs to 1, and no marker is clipped."""
+    from rtp.evaluate import plots
+
+    axes: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: axes.extend(fig.axes) or np.zeros((1, 1, 3), np.uint8))
+    rows = [{"work_saved": 0.56, "changed": None if i == 0 else 0.0, "predict_ms": 0.4 + 0.01 * i, "threshold": 0.25}
+            for i in range(4)]
+    plots.sequence_curves(rows, thresholds=True)
+    assert len(axes) == 4
+    for ax in axes:
+        y = np.concatenate([line.get_ydata() for line in ax.get_lines()]).astype(np.float64)
+        low, top = ax.get_ylim()
+        assert low == 0.0 and np.nanmax(y) <= 0.95 * top, (ax.get_title(), ax.get_ylim())
+        assert not any(line.get_clip_on() for line in ax.get_lines())
+    assert axes[1].get_ylim() == (0.0, 1.0)  # (the change in %: 0 every frame)
