@@ -177,7 +177,10 @@ def block_variances(plane: np.ndarray) -> np.ndarray:
     whose first layer reads 4x4 cells (rtp's fast network) then reads the six values directly: a
     nonlinear measure its linear first layer cannot compute (docs/results.md "Differences inside
     the shading blocks"). A frame whose sides are not multiples of 4 is padded by repeating its
-    last row and column. Adapters that build the plane on a GPU follow this definition.
+    last row and column; the values of a partial last cell whose pixels lie past the frame's edge (a
+    width not a multiple of 4, a height of 4k + 1) are not stored, and a predictor logs a warning for
+    such frames (docs/runtime.md, padding rule). Adapters that build the plane on a GPU follow this
+    definition.
 
     Args:
         plane: ``(H, W)`` values in [0, 1], any float dtype (for example :func:`luma` of the albedo).

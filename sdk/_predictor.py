@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ._channels import BLOCK_TILE
+from ._channels import BLOCK_CELL, BLOCK_TILE
 from ._digest import external_tensors, model_digest
 from ._errors import (
     InferenceError,
@@ -57,8 +57,9 @@ FORCE_SPINNING_STOP = "session.force_spinning_stop"
 # Providers that onnxruntime lists as available but that run no local kernels (the Azure EP forwards
 # requests to a remote endpoint); never picked by default, never reported as the one that runs.
 _NON_COMPUTE = frozenset({"AzureExecutionProvider"})
-#: Guards the thresholds a predictor has warned of (``_warn_beyond_saturation``), so that threads sharing it
-#: (and its copies) log each once; taken only where a threshold is past saturation, never on the way to a frame.
+#: Guards the thresholds and frame sizes a predictor has warned of (``_warn_beyond_saturation``,
+#: ``_warn_cut_cells``), so that threads sharing it (and its copies) log each once; taken only where a threshold is
+#: past saturation or a frame cuts its packed planes' cells, never on the way to a frame of sides multiples of 4.
 _WARNED_LOCK = threading.Lock()
 
 
@@ -818,6 +819,8 @@ class ShadingRatePredictor:
         of that size is passed as it is (no copy when it is C-contiguous): at 1920x1080 a network
         with ``input_multiple`` 4 saves the 4 ms copy to 1088 rows."""
         _, _, h, w = x4.shape
+        if w % BLOCK_CELL or h % BLOCK_CELL == 1 or h % BLOCK_TILE in (1, 2):  # (W mod 16 of 1-3: W mod 4 too)
+            self._warn_cut_cells(h, w)
         if self._static_hw is not None:
             ph, pw = self._static_hw
         else:
@@ -830,6 +833,31 @@ class ShadingRatePredictor:
         out[:, :, h:, :w] = x4[:, :, h - 1 : h, :]
         out[:, :, :, w:] = out[:, :, :, w - 1 : w]
         return out
+
+    def _warn_cut_cells(self, h: int, w: int) -> None:
+        """Log once per frame size when a ``h x w`` frame has no pixel for some values of its ``.blocks`` planes'
+        last 4x4 cells (a width not a multiple of 4, a height of 4k + 1) or of its ``.tiles`` planes' last tiles
+        (``W mod 16`` of 1 to 3, ``H mod 16`` of 1 or 2): :func:`block_variances` packs a cell's six values on its
+        first two rows, four columns, so those past the frame's edge are lost, and the padding gives the network
+        copies of the last column or row in their place (a rate's value read as another's). The last tile column
+        or row, and the tiles beside it, are then predicted from wrong inputs."""
+        names = self._meta.inputs
+        cut = [c for c in names if (c.endswith(".blocks") and (w % BLOCK_CELL or h % BLOCK_CELL == 1))
+               or (c.endswith(".tiles") and (w % BLOCK_TILE in (1, 2, 3) or h % BLOCK_TILE in (1, 2)))]
+        if not cut:
+            return
+        with _WARNED_LOCK:
+            seen = self.__dict__.setdefault("_cut_cells_warned", set())
+            if (h, w) in seen:
+                return
+            seen.add((h, w))
+        blocks, tiles = any(c.endswith(".blocks") for c in cut), any(c.endswith(".tiles") for c in cut)
+        what = "4x4 cells and 16-pixel tiles" if blocks and tiles else "4x4 cells" if blocks else "16-pixel tiles"
+        log.warning("%s: a %dx%d frame cuts the last %s of its %s planes: the values they pack on pixels past the "
+                    "frame's edge are lost, the network reads copies of the frame's last column or row in their "
+                    "place, and predicts the last tile column or row (and the tiles beside it) from wrong inputs; "
+                    "render at a size whose sides are multiples of 4", self._path.name if self._path else "model",
+                    w, h, what, ", ".join(cut))
 
     def _feed(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """The session's inputs from one padded array: each graph input its consecutive planes (a view,

@@ -973,3 +973,34 @@ def test_big_endian_planes_and_a_combiner_without_engine_rates_are_named() -> No
     with pytest.raises(sdk.ParameterError, match="combiner: expected one of min, max, sum"):
         predictor.shading_rates(x, combiner="avg")
     assert predictor.shading_rates(x, combiner="min").shape == (2, 2)
+
+
+def test_frames_that_cut_packed_planes_warn_once_per_size(caplog: pytest.LogCaptureFixture) -> None:
+    """A .blocks plane packs each 4x4 cell's six values on its first two rows, four columns: a 97x33 frame's last
+    cell column is one pixel wide, so five of its values were lost and the network read copies of the last
+    column in their place (the shipped JNYang's last tile column moved by up to 0.48 in transformed space
+    against the planes of the edge-padded frame), with no word. A .tiles plane's twelve values need W mod 16
+    outside 1-3 and H mod 16 outside 1-2."""
+    rng = np.random.default_rng(0)
+
+    def warned(model: sdk.ShadingRatePredictor, h: int, w: int) -> list[str]:
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="rtp"):
+            model.predict(rng.random((len(model.metadata.inputs), h, w), dtype=np.float32))
+        return [r.getMessage() for r in caplog.records if "cuts the last" in r.getMessage()]
+
+    blocks, tiles, plain = sdk.load("jnyang"), sdk.load("jnyang-reuse"), sdk.load("lpips")
+    got = warned(blocks, 33, 97)
+    assert len(got) == 1 and "a 97x33 frame cuts the last 4x4 cells of its reprojected.y.blocks, albedo.y.blocks" \
+        in got[0] and "multiples of 4" in got[0]
+    assert warned(blocks, 33, 97) == []  # once per size
+    assert len(warned(blocks, 33, 96)) == 1  # a height of 4k + 1: the cells' second row (4x2, 4x4) is lost
+    assert len(warned(blocks, 36, 98)) == 1
+    for h, w in ((36, 96), (35, 96), (34, 100), (60, 100)):  # every value inside the frame
+        assert warned(blocks, h, w) == [], (h, w)
+    got = warned(tiles, 33, 96)
+    assert len(got) == 1 and "16-pixel tiles of its reprojected.y.tiles, albedo.y.tiles planes" in got[0]
+    assert len(warned(tiles, 32, 99)) == 1
+    for h, w in ((35, 97 + 3), (36, 100), (60, 100)):  # W mod 16 of 4, H mod 16 of 3: all twelve inside
+        assert warned(tiles, h, w) == [], (h, w)
+    assert warned(plain, 33, 97) == []  # no packed planes: nothing is cut
