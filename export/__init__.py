@@ -6,6 +6,7 @@ from ._export import (
     DEFAULT_OPSET,
     PLANES_PER_INPUT,
     PROBE_NODES,
+    RAW_RANGE,
     RETUNE_FIELDS,
     TRAINED_FIELDS,
     ExportError,
@@ -23,7 +24,8 @@ from ._export import (
 from ._published import PublishedModel, identify, published_models
 
 __all__ = [
-    "COMPUTED_FIELDS", "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS", "ExportError",
+    "COMPUTED_FIELDS", "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RAW_RANGE", "RETUNE_FIELDS", "TRAINED_FIELDS",
+    "ExportError",
     "PublishedModel", "add_finite_probe", "adopt", "export_checkpoint", "identify", "join_input_planes", "merge_slices",
     "published_models", "restamp", "retune", "split_input_planes", "strip_finite_probe", "write_metadata"
 ]

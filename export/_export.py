@@ -41,7 +41,7 @@ from rtp.sdk.files import atomic_output, check_output, yaml_problem
 
 from ._published import file_sha256, identify
 
-__all__ = ["COMPUTED_FIELDS", "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RETUNE_FIELDS", "TRAINED_FIELDS",
+__all__ = ["COMPUTED_FIELDS", "DEFAULT_OPSET", "PLANES_PER_INPUT", "PROBE_NODES", "RAW_RANGE", "RETUNE_FIELDS", "TRAINED_FIELDS",
            "ExportError", "add_finite_probe", "adopt", "export_checkpoint", "join_input_planes", "merge_slices", "restamp",
            "retune", "split_input_planes", "strip_finite_probe", "write_metadata"]
 
@@ -1097,6 +1097,49 @@ def _dims(value_info: Any) -> list[int | str]:
     return [d.dim_value if d.HasField("dim_value") else d.dim_param for d in value_info.type.tensor_type.shape.dim]
 
 
+#: The most bytes one serialized ONNX model (protobuf message) may hold: an adopted model keeps every
+#: tensor inside its file, which its digest covers (``sdk.load`` refuses weights in external data).
+PROTOBUF_LIMIT = 2**31 - 1
+#: The operator domains onnxruntime implements (ONNX's, ONNX-ML's, its own contrib operators).
+ONNXRUNTIME_DOMAINS = frozenset({"", "ai.onnx", "ai.onnx.ml", "com.microsoft"})
+#: Where an adopted model's raw outputs (transformed space, 0 to 1: docs/metadata.md) may lie on adopt's check
+#: frames; a model most of whose outputs lie outside predicts in another space (the metric's own units).
+RAW_RANGE = (-0.5, 1.5)
+
+
+def _size_inside(model: Any, path: Path) -> int:
+    """The bytes ``model`` (read without its external data) holds once its tensors in external data files beside
+    ``path`` are inside it: its own, and each such tensor's ``length`` (else its file's size past its ``offset``)."""
+    import onnx
+    from onnx.external_data_helper import ExternalDataInfo, uses_external_data
+
+    tensors = list(model.graph.initializer)
+    tensors += [a.t for n in model.graph.node for a in n.attribute if a.type == onnx.AttributeProto.TENSOR]
+    size = model.ByteSize()
+    for t in tensors:
+        if uses_external_data(t):
+            info = ExternalDataInfo(t)
+            data = path.parent / info.location
+            size += int(info.length) if info.length else max(data.stat().st_size - int(info.offset or 0), 0) \
+                if data.is_file() else 0
+    return size
+
+
+def _as_adopted(err: RtpError, tmp: Path, name: str, source: str) -> RtpError:
+    """``err`` (raised loading or running the adopted model's temporary file) of the same class and fields, its
+    message naming the model by ``name`` and its metadata by ``source`` (the sidecar) instead of the temporary
+    file, which is gone once adopt fails."""
+    import copy
+
+    text = str(err).replace(f"{str(tmp)!r}'s metadata", f"the metadata ({source})")
+    text = text.replace(": the metadata is another model's, or was edited", ": the metadata does not describe this "
+                        "model")
+    text = text.replace(repr(str(tmp)), repr(name)).replace(str(tmp), name)
+    new = copy.copy(err)
+    new.args = (text,)
+    return new
+
+
 def adopt(
     foreign: str | os.PathLike[str],
     metadata: Mapping[str, Any] | str | os.PathLike[str] | None,
@@ -1109,7 +1152,10 @@ def adopt(
 
     Checks that the model has one float input ``(N, C, H, W)`` with C = len(inputs) and one output
     ``(N, R, H/w, W/w)`` with R = len(outputs) wherever the dims are fixed. With ``dynamic`` the
-    batch, height and width become symbolic so any frame size runs (verified at a second size).
+    batch, height and width become symbolic so any frame size runs (verified at a second size). The result is
+    loaded and run on random frames and a frame of zeros: non-finite outputs, outputs mostly outside
+    :data:`RAW_RANGE` (not the transformed metric), a channels-last input, another tile size, operators onnxruntime
+    lacks and a model of more than 2 GB with its external data are refused, nothing written (docs/export.md).
 
     ``metadata`` (a sidecar path or a mapping) may be None for the paper's published models
     (:func:`published_models`): the file is recognised by its SHA-256 and gets the sidecar rtp ships
@@ -1125,7 +1171,16 @@ def adopt(
         raise ModelNotFoundError(f"no ONNX model at {str(src)!r}")
     out = _output(src, output)
     try:
+        size = _size_inside(onnx.load(str(src), load_external_data=False), src)
+        if size > PROTOBUF_LIMIT:  # (write_metadata's digest and the save failed on it in protobuf's own words)
+            raise ModelLoadError(
+                f"{src}: the model holds {size / 1e9:.2f} GB with its weights in external data, more than one ONNX "
+                f"file can hold ({PROTOBUF_LIMIT / 1e9:.2f} GB, protobuf's limit); an adopted model keeps every tensor "
+                "inside its file, which its digest covers (sdk.load refuses weights in external data): adopt a "
+                "smaller model")
         model = onnx.load(str(src))
+    except ModelLoadError:
+        raise
     except Exception as err:
         raise ModelLoadError(f"{src}: not a readable ONNX model ({err})") from err
     known = identify(src)
@@ -1177,6 +1232,13 @@ def adopt(
     di, do = _dims(i), _dims(o)
     if i.type.tensor_type.elem_type != onnx.TensorProto.FLOAT or len(di) != 4 or len(do) != 4:
         raise MetadataError(f"{src}: expected a float32 (N, C, H, W) input and a rank-4 output, got {di} and {do}")
+    c = len(meta.inputs)
+    if di[3] == c and di[1] != c:
+        # (channels last: the planes fed as (N, C, H, W) reached the graph as N x C rows x H columns x W planes)
+        raise MetadataError(
+            f"{src}: the model input {i.name!r} {di} is channels-last (N, H, W, C) with its {c} planes last; rtp "
+            f"feeds (N, C, H, W), the {c} planes of the sidecar's inputs {list(meta.inputs)} second: export the "
+            "model channels-first (without the input's transpose to NHWC)", "inputs")
     if isinstance(di[1], int) and di[1] != len(meta.inputs):
         raise MetadataError(
             f"inputs: the sidecar lists {len(meta.inputs)} channels {list(meta.inputs)}, the model input "
@@ -1212,7 +1274,15 @@ def adopt(
     write_metadata(model, meta)
     with atomic_output(out) as tmp:
         _check_and_save(model, tmp)
-        pred = sdk.load(tmp, providers=["CPUExecutionProvider"])
+        try:
+            pred = sdk.load(tmp, providers=["CPUExecutionProvider"])
+        except RtpError as err:  # (its message named the temporary file, gone by the time the user read it)
+            new = _as_adopted(err, tmp, str(src), source)
+            custom = sorted({f"{n.domain}:{n.op_type}" for n in graph.node if n.domain not in ONNXRUNTIME_DOMAINS})
+            if isinstance(err, ModelLoadError) and custom:
+                new.args = (f"{new}; the model uses operators onnxruntime does not implement ({', '.join(custom)}), and "
+                            "rtp runs a model on onnxruntime's own: export it with standard ONNX operators",)
+            raise new from err
         fixed = static_hw is not None and not dynamic  # (frames padded up to its one size)
         sizes = [static_hw] if static_hw is not None and fixed else [(t * 8, t * 12), (t * 5, t * 9)]
         if dynamic and static_hw:
@@ -1222,19 +1292,40 @@ def adopt(
         if partial is not None:  # the frames of partial tiles the sidecar says it takes (run as they are, not padded)
             sizes.append(partial)
         rng = np.random.default_rng(0)
-        for h, w in sizes:
-            x = rng.random((1, len(meta.inputs), h, w), dtype=np.float32)
+        # random frames, and a blank one (black, unseen, no normals: a frame of background), on which a model that
+        # divides by its input's statistics was adopted and then predicted NaN for every such frame
+        frames = [(f"a random frame at {w}x{h}", rng.random((1, len(meta.inputs), h, w), dtype=np.float32))
+                  for h, w in sizes]
+        frames.append((f"a frame of zeros at {sizes[0][1]}x{sizes[0][0]}",
+                       np.zeros((1, len(meta.inputs), *sizes[0]), np.float32)))
+        raws = []
+        for what, x in frames:
+            h, w = x.shape[-2:]
             try:
-                y = pred.predict(x)
+                raw = pred.predict_raw(x)
+                y = meta.decode(raw)
             except RtpError as err:
                 if (h, w) == partial:  # (adopted, it failed every predict of such a frame: 1920x1080 with tile 16)
                     raise MetadataError(
                         f"input_multiple: the metadata ({source}) says the model takes frames of multiples of {m} "
                         f"pixels, partial {t}-pixel tiles included, but it does not run at {w}x{h}: {err}; leave "
                         "input_multiple out (frames padded to whole tiles)", "input_multiple") from err
-                raise ExportError(f"the adopted model does not run at {w}x{h}: {err}") from err
-            if not np.all(np.isfinite(y)):
-                raise ExportError(f"the adopted model produced non-finite predictions at {w}x{h}")
+                raise ExportError(f"the adopted model does not run at {w}x{h} (fed float32 (N, C, H, W) planes, C = "
+                                  f"{len(meta.inputs)}): {err}") from err
+            if not np.all(np.isfinite(raw)) or not np.all(np.isfinite(y)):
+                raise ExportError(f"the adopted model produced non-finite predictions on {what}: a model rtp runs "
+                                  "must predict a finite value for every frame of finite planes")
+            raws.append(raw.ravel())
+        values = np.concatenate(raws)
+        lo, hi = RAW_RANGE
+        outside = float(np.mean((values < lo) | (values > hi)))
+        if outside > 0.5:
+            raise MetadataError(
+                f"transform: the metadata ({source}) says the model outputs its metric transformed ({meta.transform.type}), "
+                f"in 0 to 1 (docs/metadata.md, \"Transforms\"), but {outside:.0%} of its outputs on adopt's check frames "
+                f"lie outside {lo} to {hi} ({float(values.min()):.4g} to {float(values.max()):.4g}): it predicts in "
+                "other units (the metric's own?); give the transform that maps the metric to what the network outputs, "
+                "or add to the graph the operators that do", "transform")
     log.info("adopted %s -> %s", src, out)
     return out
 

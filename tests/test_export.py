@@ -443,6 +443,134 @@ def test_adopt_refuses_graphs_that_are_not_one_plane_input_to_one_grid(tmp_path:
     assert sdk.load(export.adopt(graph("fine"), PAPER_SIDECAR, out)).predict(np.zeros((4, 64, 96), np.float32)).shape \
         == (6, 4, 6)  # the same graph, one float input to one rank-4 grid
 
+def _researchers_model(tmp_path: Path, name: str, *, in_shape: list | None = None, before: list | None = None,
+                       after: list | None = None, domain: str = "", extra: list | None = None) -> Path:
+    """A per-tile predictor trained elsewhere, as onnx.helper writes it: ``input`` (N, 4, H, W) -> 1x1 Conv -> 16-pixel
+    average pool (ceil mode) -> ``metric`` (N, 4, H/16, W/16), with ``before`` nodes between the input and the
+    convolution (which reads ``x``) and ``after`` nodes between the pool (``p``) and the output."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    nodes = list(before or [helper.make_node("Identity", ["input"], ["x"])])
+    nodes += [helper.make_node("Conv", ["x", "W"], ["c"], kernel_shape=[1, 1]),
+              helper.make_node("AveragePool", ["c"], ["p"], kernel_shape=[16, 16], strides=[16, 16], ceil_mode=1)]
+    nodes += after or [helper.make_node("Sigmoid", ["p"], ["metric"])]
+    weights = np.random.default_rng(0).standard_normal(16).astype(np.float32) * 0.5
+    g = helper.make_graph(nodes, name, [helper.make_tensor_value_info("input", TensorProto.FLOAT,
+                                                                       in_shape or ["N", 4, "H", "W"])],
+                          [helper.make_tensor_value_info("metric", TensorProto.FLOAT, ["N", 4, "h", "w"])],
+                          initializer=[numpy_helper.from_array(weights.reshape(4, 4, 1, 1), "W"),  # (raw data)
+                                       *(extra or [])])
+    opsets = [helper.make_opsetid("", 17)] + ([helper.make_opsetid(domain, 1)] if domain else [])
+    model = helper.make_model(g, opset_imports=opsets)
+    model.ir_version = 8
+    path = tmp_path / f"{name}.onnx"
+    onnx.save(model, str(path))
+    return path
+
+
+def test_adopt_names_a_channels_last_input(tmp_path: Path) -> None:
+    """A model exported channels-last (N, H, W, C), its planes last: of symbolic size it passed every check of the
+    graph (its second dimension symbolic) and failed the first predict with onnxruntime's words (exit 1: "Input
+    channels C is not equal to kernel channels"); of fixed size it was told "the model input has 64" channels. Now
+    both are named channels-last before anything is written, exit 2."""
+    from onnx import helper
+
+    to_nchw = [helper.make_node("Transpose", ["input"], ["x"], perm=[0, 3, 1, 2])]
+    side = tmp_path / "side.yaml"
+    side.write_text(yaml.safe_dump(base_metadata()))
+    out = tmp_path / "a.onnx"
+    for shape in (["N", "H", "W", 4], [1, 64, 96, 4]):
+        src = _researchers_model(tmp_path, "nhwc", in_shape=shape, before=to_nchw)
+        with pytest.raises(sdk.MetadataError, match=r"channels-last \(N, H, W, C\).*rtp feeds \(N, C, H, W\)") as info:
+            export.adopt(src, base_metadata(), out, dynamic=True)
+        assert info.value.key == "inputs" and not out.exists()
+    r = _cli("--adopt", str(src), "--metadata", str(side), "-o", str(out), "--dynamic")
+    assert r.returncode == 2 and "channels-last" in r.stderr and not out.exists(), r.stderr
+    # channels-first, the same model adopts (a width of 4 pixels is no plane count: the model's own C is 4)
+    assert export.adopt(_researchers_model(tmp_path, "nchw"), base_metadata(), out, dynamic=True) == out
+
+
+def test_adopt_names_the_model_and_its_sidecar_not_a_temporary_file(tmp_path: Path) -> None:
+    """What sdk.load found in the adopted model (here: outputs at pixel resolution, where the sidecar says 16-pixel
+    tiles; an operator onnxruntime lacks) named adopt's temporary file ('.a.onnx.x1y2z3.tmp', gone when the user read
+    it) and blamed the file's metadata as "another model's, or was edited". Now the message names the model adopted
+    and the sidecar, with the same class and key, and a foreign operator says what to do."""
+    from onnx import helper
+
+    out = tmp_path / "a.onnx"
+    pixels = _researchers_model(tmp_path, "pixels", after=[helper.make_node("Sigmoid", ["c"], ["metric"])])
+    with pytest.raises(sdk.MetadataError, match=r"tile_size: the metadata \(given as a mapping\) says 16, but the "
+                                                r"model maps 128x128 pixels to 128x128 tiles") as info:
+        export.adopt(pixels, base_metadata(), out, dynamic=True)
+    assert info.value.key == "tile_size" and ".tmp" not in str(info.value) and "edited" not in str(info.value)
+    fancy = _researchers_model(tmp_path, "fancy", domain="com.example.research",
+                               after=[helper.make_node("FancyPool", ["p"], ["metric"], domain="com.example.research")])
+    with pytest.raises(sdk.ModelLoadError, match="com.example.research:FancyPool.*standard ONNX operators") as err:
+        export.adopt(fancy, base_metadata(), out)
+    assert ".tmp" not in str(err.value) and str(fancy) in str(err.value)
+    assert not out.exists() and not list(tmp_path.glob(".a.onnx.*"))
+
+
+def test_adopt_refuses_a_model_that_predicts_nan_on_a_blank_frame(tmp_path: Path) -> None:
+    """A model that divides by its input's statistics (here p / p) predicts finite values on random frames, the only
+    ones adopt ran, and NaN on a frame of zeros (background: black, unseen, no normals), which predict then returned
+    for every such frame. adopt now runs a frame of zeros too."""
+    from onnx import helper
+
+    src = _researchers_model(tmp_path, "ratio", after=[helper.make_node("Div", ["p", "p"], ["one"]),
+                                                        helper.make_node("Sigmoid", ["p"], ["s"]),
+                                                        helper.make_node("Mul", ["s", "one"], ["metric"])])
+    out = tmp_path / "a.onnx"
+    with pytest.raises(export.ExportError, match="non-finite predictions on a frame of zeros at 192x128"):
+        export.adopt(src, base_metadata(), out, dynamic=True)
+    assert not out.exists()
+
+
+def test_adopt_refuses_outputs_in_the_metrics_own_units(tmp_path: Path) -> None:
+    """A network trained on PSNR in dB (outputs 14 to 38 here) given a sidecar of a transform (outputs in 0 to 1)
+    was adopted, and predicted -2,500 to -800 dB (the linear transform's inverse is not clamped), every tile failing
+    every threshold. Now adopt names the transform and the outputs' range."""
+    from onnx import TensorProto, helper
+
+    db = helper.make_tensor("dB", TensorProto.FLOAT, [], [60.0])
+    src = _researchers_model(tmp_path, "decibels", extra=[db], after=[helper.make_node("Sigmoid", ["p"], ["s"]),
+                                                                     helper.make_node("Mul", ["s", "dB"], ["metric"])])
+    psnr = base_metadata(metric="psnr", weber_l=None, transform={"type": "linear", "factor": -0.015, "offset": 1.0},
+                         default_threshold=35.0)
+    out = tmp_path / "a.onnx"
+    with pytest.raises(sdk.MetadataError, match=r"transform: .*100% of its outputs .*outside -0.5 to 1.5 \(1\d\.\d+ to "
+                                                r"3\d\.\d+\)") as info:
+        export.adopt(src, psnr, out, dynamic=True)
+    assert info.value.key == "transform" and not out.exists()
+
+
+def test_adopt_takes_external_data_inside_and_refuses_a_model_too_large_for_one_file(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A model saved with its weights in a .data file beside it adopts with every tensor inside the one file (which its
+    digest covers) and predicts as onnxruntime runs the model it came from. One whose tensors exceed what one ONNX file
+    holds with them (protobuf's 2 GB; here the limit made small) was read in whole and then failed in protobuf's
+    serializer (exit 1); it is now refused before its weights are read, saying why, exit 2."""
+    import onnx
+    import onnxruntime as ort
+
+    src = _researchers_model(tmp_path, "plain")
+    ext = tmp_path / "ext.onnx"
+    onnx.save(onnx.load(str(src)), str(ext), save_as_external_data=True, location="ext.onnx.data", size_threshold=0)
+    assert (tmp_path / "ext.onnx.data").stat().st_size == 64
+    out = export.adopt(ext, base_metadata(), tmp_path / "a.onnx", dynamic=True)
+    assert not any(t.external_data for t in onnx.load(str(out), load_external_data=False).graph.initializer)
+    pred = sdk.load(out)
+    assert pred.metadata.digest and pred.metadata.provenance["adopted"]["file"] == "ext.onnx"
+    x = np.random.default_rng(3).random((2, 4, 64, 96), dtype=np.float32)  # (whole tiles: nothing padded)
+    raw = ort.InferenceSession(str(src), providers=["CPUExecutionProvider"]).run(None, {"input": x})[0]
+    assert np.array_equal(pred.predict_raw(x), raw)
+    monkeypatch.setattr(export._export, "PROTOBUF_LIMIT", ext.stat().st_size + 32)  # (the file fits; not its weights)
+    with pytest.raises(sdk.ModelLoadError, match="more than one ONNX file can hold.*adopt a smaller model"):
+        export.adopt(ext, base_metadata(), tmp_path / "b.onnx", dynamic=True)
+    assert not (tmp_path / "b.onnx").exists()
+
+
 # -- the paper's published models ---------------------------------------------------------------
 
 PUBLISHED = Path(__file__).parent / "data" / "published"  # the six files, as published (LICENSE.md there)
