@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import re
 import reprlib
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -769,6 +770,7 @@ def play(
             "another folder", "out"), remove=True))
     with guard:
         if outdir is not None:
+            _remove_temporaries(outdir)
             _warn_of_another_report(outdir, settings)
         job = {"scene": scene, "cache_dir": cache_dir, "checked": True, "methods": [m.name for m in specs], "frames": frames,
                "fps": fps,
@@ -869,6 +871,27 @@ def _remove_other_pictures(outdir: Path, files: Sequence[str]) -> None:
         (outdir / name).unlink(missing_ok=True)
     if gone:
         log.info("%s: removed %s, another run's pictures, which this run's report replaces", outdir, ", ".join(gone))
+
+
+def _remove_temporaries(outdir: Path) -> None:
+    """Remove the temporary files of rtp play's own outputs in ``outdir`` (``.play_slow.gif.k2j4x9ab.tmp``, the
+    names :func:`rtp.sdk.files.atomic_output` gives): an interrupted run's. Ctrl-C or SIGTERM terminates the worker
+    processes of ``--workers N``, in which no cleanup runs, so a worker stopped while writing its path's GIF left
+    the GIF's temporary file, and a rerun (its own write of the GIF younger than the minute after which
+    ``atomic_output`` takes another's for orphaned) left it beside its report, until a later run wrote that GIF
+    again; ``kill -9`` left the job's own. Called under the folder's writer lock, while no other play writes there;
+    no other file is touched."""
+    from rtp.capture.paths import PATH_PROFILES
+
+    ours = {"play.md", "play.json", "play_curves.png", "play_frames.png"}
+    ours |= {f"play_{p}.{ext}" for p in PATH_PROFILES for ext in ("gif", "png")}
+    ours |= {_PARTIAL.format(p).lstrip(".") for p in PATH_PROFILES}  # (their dot: the temporary's own, added below)
+    pattern = re.compile(rf"\.(?:{'|'.join(map(re.escape, sorted(ours)))})\.[A-Za-z0-9_]{{8}}\.tmp")
+    stale = sorted(p for p in outdir.iterdir() if pattern.fullmatch(p.name) and p.is_file())
+    for p in stale:
+        p.unlink(missing_ok=True)
+    if stale:
+        log.info("%s: removed %s, the temporary files of an interrupted run", outdir, ", ".join(p.name for p in stale))
 
 
 #: The hardware's combiners through which a method's rates reach the frame beside the engine's (``sdk.COMBINERS``' min,

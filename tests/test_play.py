@@ -1044,6 +1044,22 @@ def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
         assert played == ["slow"] and not list(tmp_path.glob(".play-*"))
 
 
+def test_an_interrupted_runs_temporary_files_are_removed_by_the_next(tmp_path: Path) -> None:
+    """Ctrl-C (or SIGTERM) of `rtp play --workers 2` terminates the workers, in which no cleanup runs: one stopped
+    while writing its path's GIF left `.play_slow.gif.XXXXXXXX.tmp`, and the rerun, its own GIF written within the
+    minute after which a write takes another's temporary file for orphaned, left it beside its report. The
+    next run into the folder removes the temporary files of rtp play's own outputs; no other file."""
+    stale = [".play_slow.gif.ol0cwqt6.tmp", ".play_fast.png.a1b2c3d4.tmp", ".play.json.zz_9xk2m.tmp",
+             ".play-slow.partial.json.q8w7e6r5.tmp", ".play_curves.png.abcdefgh.tmp"]
+    others = [".notes.txt.abcdefgh.tmp", "play_slow.gif.abcdefgh.tmp", ".play_slow.gif.short.tmp", "mine.txt"]
+    for name in stale + others:
+        (tmp_path / name).write_bytes(b"half a file")
+    play("procedural:0", "oracle", paths=("slow",), frames=3, size=(W, H), sweep=False, flip_every=0, plots=False,
+         out=tmp_path)
+    names = {f.name for f in tmp_path.iterdir()}
+    assert not names & set(stale) and set(others) <= names and "play.json" in names
+
+
 def test_a_path_ending_as_another_fails_in_its_worker_is_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """With --workers the paths end in worker processes, polled together: where one path failed (a GIF it could
     not write, a metric's error) in the same poll as the other ended, the error was raised first and the finished
