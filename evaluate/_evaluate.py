@@ -589,7 +589,7 @@ def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: st
     stale = [] if missing else [s.id for s in samples if store.stale(s.id, metric)]
     bad = missing or stale
     if bad:
-        what = "no" if missing else "outdated (older than the sample, captured again since)"
+        what = "no" if missing else "outdated (of the sample before it was captured again)"
         raise TargetError(
             f"{data}: {len(bad)} of the {len(samples)} samples to evaluate have {what} {metric} targets "
             f"({', '.join(map(repr, bad[:3]))}{', ...' if len(bad) > 3 else ''}); "

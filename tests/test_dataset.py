@@ -242,6 +242,69 @@ def test_a_sample_captured_again_while_its_targets_are_computed_leaves_them_stal
         store.write("s0", "psnr", np.ones((6, 6, 10), np.float32), (24, 40), sample_mtime_ns=1.5)  # type: ignore[arg-type]
 
 
+def test_targets_stay_fresh_when_the_dataset_is_copied_and_a_sample_written_again_is_still_caught(
+        tmp_path: Path) -> None:
+    """Staleness was the sample file being newer than its targets' file. A copy gives files new times in its own
+    order (`cp -r` or `rsync -r` without -p/-t, a checkout): targets copied before their samples were all stale (the
+    next `rtp targets` recomputed everything, `rtp evaluate` refused), and a sample captured again whose copy came
+    before its old targets' looked up to date (those of the old sample trained on). A target file records its
+    sample's fingerprint, and that decides, whatever the times."""
+    import shutil
+
+    from rtp.capture import TargetError, TargetStore, compute_targets
+
+    src, dst = tmp_path / "ds", tmp_path / "copy"
+    w = DatasetWriter(src)
+    for i in range(2):
+        w.write(f"s{i}", _buffers(seed=i), {"scene": "a"})
+    w.finalize()
+    assert compute_targets(src, ["psnr"]) == 2
+    shutil.copytree(src, dst)
+    later = 2_000_000_000 * 10**9  # (the copy's targets written first, its samples after: as `cp -r` may)
+    for f in (dst / "targets").rglob("*"):
+        os.utime(f, ns=(later, later))
+    for f in (dst / "samples").glob("*.npz"):
+        os.utime(f, ns=(later + 10**9, later + 10**9))
+    store = TargetStore(dst)
+    assert not store.stale("s0", "psnr") and store.has("s1", "psnr")
+    assert store.load("s0", "psnr", 8).shape == (6, 3, 5)
+    assert compute_targets(dst, ["psnr"]) == 0  # (nothing recomputed)
+    # s0 captured again (other content), then copied before its targets: its file older than theirs
+    DatasetWriter(dst).write("s0", _buffers(seed=5), {"scene": "a"})
+    os.utime(dst / "samples" / "s0.npz", ns=(later - 10**9, later - 10**9))
+    assert store.stale("s0", "psnr") and not store.has("s0", "psnr") and not store.stale("s1", "psnr")
+    with pytest.raises(TargetError, match="out of date"):
+        store.load("s0", "psnr", 8)
+    assert compute_targets(dst, ["psnr"]) == 1
+    assert store.has("s0", "psnr")
+
+
+def test_targets_without_a_sample_fingerprint_are_judged_by_their_times(tmp_path: Path) -> None:
+    """Target files of an rtp before fingerprints (every dataset computed so far) keep the rule they were written
+    under: fresh unless the sample file is newer, so none is recomputed by the upgrade; so does a file written with
+    only ``sample_mtime_ns``. A fingerprint that is not a string is refused."""
+    from rtp.capture import TargetError, TargetStore
+
+    w = DatasetWriter(tmp_path / "ds")
+    w.write("s0", _buffers(), {"scene": "a"})
+    w.finalize()
+    sample = tmp_path / "ds" / "samples" / "s0.npz"
+    store = TargetStore(tmp_path / "ds")
+    store.declare("psnr", {})
+    store.write("s0", "psnr", np.ones((6, 6, 10), np.float32), (24, 40), sample_mtime_ns=sample.stat().st_mtime_ns)
+    with np.load(store.path("s0", "psnr")) as z:
+        assert sorted(z.files) == ["size", "values"]  # (the layout of the files written before)
+    assert store.has("s0", "psnr")
+    t = store.path("s0", "psnr").stat().st_mtime_ns + 10**9
+    os.utime(sample, ns=(t, t))
+    assert store.stale("s0", "psnr")
+    store.write("s0", "psnr", np.ones((6, 6, 10), np.float32), (24, 40))  # (records the sample there now)
+    os.utime(sample, ns=(t + 10**9, t + 10**9))
+    assert store.has("s0", "psnr")
+    with pytest.raises(TargetError, match="fingerprint: expected"):
+        store.write("s0", "psnr", np.ones((6, 6, 10), np.float32), (24, 40), fingerprint=b"x")  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("corrupt", ["manifest", "manifest-json", "manifest-base", "npz", "npz-shape"])
 def test_corrupt_targets_are_target_errors(tmp_path: Path, corrupt: str) -> None:
     """A damaged targets manifest or file leaked JSONDecodeError / BadZipFile out of evaluate()."""

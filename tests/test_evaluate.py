@@ -1463,12 +1463,18 @@ def test_samples_without_up_to_date_targets_are_refused_before_the_first_is_eval
     assert rtp_main(two) != 0
     with pytest.raises(sdk.ParameterError, match="max_samples"):
         check_evaluation(model, dataset, max_samples=0)
-    # targets older than their sample
+    # targets of the sample before it was captured again: found by the sample's content, not its file's time (a
+    # copy of the dataset gives it any), so a sample only touched, or whose file is older, is no other sample
     store.write("s2", "jnyang", _truth(2).repeat(T // 4, 1).repeat(T // 4, 2), (H, W))
     sample = dataset / "samples" / "s1.npz"
     later = store.path("s1", "jnyang").stat().st_mtime + 10
     os.utime(sample, (later, later))
-    with pytest.raises(TargetError, match=r"have outdated \(older than the sample, captured again since\) jnyang "
+    check_evaluation(model, dataset)
+    bufs = {name: np.full((H, W, len(spec.channels) or 3) if (len(spec.channels) or 3) > 1 else (H, W), 0.5,
+                          np.float32) for name, spec in BUFFERS.items()}
+    DatasetWriter(dataset).write("s1", bufs, {"scene": "a"})
+    os.utime(sample, (1, 1))
+    with pytest.raises(TargetError, match=r"have outdated \(of the sample before it was captured again\) jnyang "
                                           r"targets \('s1'\)"):
         check_evaluation(model, dataset)
 
