@@ -100,6 +100,22 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
                                "start the head with `ray start --head` or pass --ray local") from exc
 
 
+def _auth_hint(exc: BaseException) -> str:
+    """What to do where ``exc`` (a failed ``ray.init``) came of the cluster's token authentication: a head
+    that ``ray start`` began (token authentication is on by default there in recent Ray: 2.60) wants a
+    token, which Ray sends to an address named to it only with ``RAY_AUTH_MODE=token``; the error said
+    only "Failed to connect to Ray cluster at ..." after 20 s, its cause under ``-v``. Empty otherwise."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        text = f"{type(seen).__name__}: {seen}"
+        if "AuthenticationError" in text or "InvalidAuthToken" in text or "Unauthenticated" in text:
+            return ("; the cluster asks for its authentication token (Ray's token authentication): set "
+                    "RAY_AUTH_MODE=token, with the head's token in ~/.ray/auth_token, RAY_AUTH_TOKEN_PATH or "
+                    "RAY_AUTH_TOKEN (`ray get-auth-token` on the head prints it)")
+        seen = seen.__cause__ or seen.__context__
+    return ""
+
+
 @contextlib.contextmanager
 def _native_stderr_to_log() -> Iterator[None]:
     """Ray's C++ client writes its connection retries straight to file descriptor 2 (a line a second
@@ -140,8 +156,11 @@ def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
             if address in (None, RAY_LOCAL):
                 # (its native start-up lines, "Token authentication is enabled for this Ray cluster ...",
                 # concern a cluster the user runs, not this private one: -v shows them)
+                # (address "local": without it ray.init joins the cluster RAY_ADDRESS names, or the one `ray start`
+                # began on this machine, and failed there on num_cpus: "When connecting to an existing cluster,
+                # num_cpus and num_gpus must not be provided")
                 with _native_stderr_to_log():
-                    ray.init(num_cpus=workers or cores(), **kwargs)
+                    ray.init(address=RAY_LOCAL, num_cpus=workers or cores(), **kwargs)
             else:
                 if address != "auto":
                     _check_reachable(address)
@@ -158,7 +177,8 @@ def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
             if not isinstance(exc, Exception):
                 raise
             # (ConnectionError, RuntimeError, ValueError from ray.init)
-            raise RayExecutorError(f"cannot start or reach Ray at {address or RAY_LOCAL!r}: {exc}") from exc
+            raise RayExecutorError(f"cannot start or reach Ray at {address or RAY_LOCAL!r}: {exc}"
+                                   + _auth_hint(exc)) from exc
         started = True
     try:
         n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
@@ -231,8 +251,13 @@ def _drive(ray: Any, actors: Sequence[Any], running: dict[Any, tuple[int, str, A
         try:
             result = ray.get(ref)
         except ray.exceptions.RayActorError as exc:
+            gone = _head_gone(ray)
+            if gone is not None:  # (it said "a Ray worker died 4 times": the cluster had been stopped under the job)
+                raise RayWorkerError(f"the Ray cluster is gone (its head at {gone} does not answer) while on {what} "
+                                     f"{task[0]!r}; everything finished before is saved: start the cluster again "
+                                     f"and rerun to resume") from exc
             raise RayWorkerError(f"a Ray worker died {MAX_RETRIES + 1} times on {what} {task[0]!r}; "
-                                   f"everything finished before is saved, rerun to resume: {exc}") from exc
+                                 f"everything finished before is saved, rerun to resume: {exc}") from exc
         except ray.exceptions.RayTaskError as exc:
             cause = exc.cause if isinstance(getattr(exc, "cause", None), BaseException) else None
             if isinstance(cause, RtpError):
@@ -243,6 +268,25 @@ def _drive(ray: Any, actors: Sequence[Any], running: dict[Any, tuple[int, str, A
                                  f"before is saved, rerun to resume: {exc}") from exc
         done(task, result)
         feed(i)
+
+
+def _head_gone(ray: Any, timeout: float = 2.0) -> str | None:
+    """The address of the cluster's head (its GCS server) where nothing answers there any more (``ray stop``
+    on the head, the head node lost), else None (it answers, or its address is unknown)."""
+    import socket
+
+    try:
+        address = str(ray.get_runtime_context().gcs_address)
+    except Exception:  # noqa: BLE001 (no address to probe: say what Ray said)
+        return None
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isdigit():
+        return None
+    try:
+        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout).close()
+    except OSError:
+        return address
+    return None
 
 
 def _kill(actors: Sequence[Any]) -> None:
@@ -531,7 +575,7 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
     """The Ray path of :func:`rtp.capture.compute_targets`: ``todo`` maps sample ids to the metrics
     they lack; results are written into the dataset's target store by this process."""
     from ._dataset import DatasetReader, sample_path
-    from ._targets import TargetError, TargetStore
+    from ._targets import TargetError, TargetStore, sample_fingerprint
 
     ray = _ray()
     store = TargetStore(data_root)
@@ -551,19 +595,23 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
         if on_actors is not None:
             on_actors(actors)
 
-        read_at: dict[str, int] = {}  # (each sample's time when its bytes were read: see TargetStore.write)
+        # (each sample's time and fingerprint when its bytes were read: see TargetStore.write)
+        read_at: dict[str, tuple[int | None, str | None]] = {}
 
         def submit(actor: Any, task: Any) -> Any:
             sid, metrics = task
             path = sample_path(data_root, sid)
-            read_at[sid] = path.stat().st_mtime_ns
-            return actor.compute.remote(sid, path.read_bytes(), metrics, params, store.base_tile, news.queue, str(path))
+            as_of = path.stat().st_mtime_ns
+            data = path.read_bytes()
+            read_at[sid] = as_of, sample_fingerprint(data)
+            return actor.compute.remote(sid, data, metrics, params, store.base_tile, news.queue, str(path))
 
         def done(task: Any, result: Any) -> None:
             sid, _ = task
             values, size = result
+            as_of, fingerprint = read_at.get(sid, (None, None))
             for m, v in values.items():
-                store.write(sid, m, v, size, sample_mtime_ns=read_at.get(sid))
+                store.write(sid, m, v, size, sample_mtime_ns=as_of, fingerprint=fingerprint)
             progress(1)
 
         # One queue: targets have no affinity (every worker holds the same network).

@@ -15,7 +15,9 @@ import pytest
 import ray
 
 from rtp.capture import BUFFERS, DatasetReader, TargetStore, capture, compute_targets
+from rtp.capture._dataset import sample_path
 from rtp.capture._ray import RayExecutorError, ray_cluster
+from rtp.capture._targets import sample_fingerprint
 
 #: How a refusal past memory ends (a regex): the variable that lets the job run anyway.
 HINT = r" \(RTP_MEMORY_CHECK=warn runs it anyway\)$"
@@ -29,7 +31,8 @@ METRICS = ("flip", "psnr", "lpips", "jnflip", "jnyang")
 
 @pytest.fixture(scope="module")
 def cluster() -> Iterator[None]:
-    ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
+    # (address "local": a private instance, not the cluster RAY_ADDRESS names or `ray start` began on this machine)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, configure_logging=False)
     yield
     ray.shutdown()
 
@@ -58,6 +61,9 @@ def assert_same_dataset(a: Path, b: Path, metrics: tuple[str, ...] = ()) -> None
     for sid in ra.ids:
         for m in metrics:
             np.testing.assert_array_equal(ta.load(sid, m, 4), tb.load(sid, m, 4), err_msg=f"{sid}/{m}")
+            # (each records its sample's fingerprint, as read: the Ray path's from the bytes it sent)
+            fingerprints = {str(np.load(t.path(sid, m))["sample"]) for t in (ta, tb)}
+            assert fingerprints == {str(sample_fingerprint(sample_path(b, sid)))}, (sid, m)
     assert not list((b / "samples").glob(".*")) and not list((b / "targets").rglob(".*.tmp"))
 
 
@@ -206,7 +212,7 @@ def test_ray_errors_are_typed(cluster: None, tmp_path: Path) -> None:
             capture(["procedural:0"], tmp_path / "new", per_scene=1, size=SIZE, ray="127.0.0.1:1")
         assert not (tmp_path / "new").exists()
     finally:
-        ray.init(num_cpus=2, include_dashboard=False, configure_logging=False)
+        ray.init(address="local", num_cpus=2, include_dashboard=False, configure_logging=False)
 
 
 def test_a_head_address_is_parsed_as_ray_parses_it_ipv6_in_brackets() -> None:
@@ -455,3 +461,109 @@ def test_a_ray_capture_into_a_folder_without_a_manifest_removes_a_killed_writes_
     assert (report.written, report.failed) == (8, [])
     assert not stale.exists() and not list((out / "samples").glob(".*"))
     assert DatasetReader(out).ids == DatasetReader(local).ids
+
+
+def test_a_private_instance_is_started_where_a_cluster_is_named_or_running(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--ray` alone starts a private instance (docs/scaling.md), but ray.init without an address joins the
+    cluster RAY_ADDRESS names, or the one `ray start --head` began on this machine, and failed there:
+    "cannot start or reach Ray at 'local': When connecting to an existing cluster, num_cpus and num_gpus must
+    not be provided". The private instance is started whatever the environment names."""
+    was = ray.is_initialized()
+    if was:
+        ray.shutdown()
+    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")
+    try:
+        with ray_cluster("local", 1) as n:
+            assert n == 1 and ray.cluster_resources().get("CPU") == 1
+        assert not ray.is_initialized()
+    finally:
+        monkeypatch.delenv("RAY_ADDRESS")
+        if was:
+            ray.init(address="local", num_cpus=2, include_dashboard=False, configure_logging=False)
+
+
+def test_a_cluster_that_wants_its_token_says_how_to_give_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A head that `ray start` began asks for its authentication token, which Ray sends to an address named to it
+    only with RAY_AUTH_MODE=token: the error said only "Failed to connect to Ray cluster at ..." (its cause,
+    the token, under -v). It now says what to set; another failure does not."""
+    from rtp.capture import _ray
+
+    class FakeRay:
+        raises: BaseException = RuntimeError("")
+
+        @staticmethod
+        def is_initialized() -> bool:
+            return False
+
+        @staticmethod
+        def init(**kwargs: Any) -> None:
+            raise FakeRay.raises
+
+        @staticmethod
+        def shutdown() -> None:
+            pass
+
+    def failed(cause: str) -> ConnectionError:
+        try:  # (as Ray 2.60 raises it: the AuthenticationError only in the text of the error under it)
+            try:
+                raise RuntimeError(f"Failed to connect to GCS. Last connection error: Traceback ...\n{cause}")
+            except RuntimeError as exc:
+                raise ConnectionError("Failed to connect to Ray cluster at 192.0.2.2:6390") from exc
+        except ConnectionError as exc:
+            return exc
+
+    monkeypatch.setattr(_ray, "_ray", lambda: FakeRay)
+    FakeRay.raises = failed("ray.exceptions.AuthenticationError: RPC error: InvalidAuthToken: Authentication token "
+                            "is missing or incorrect.")
+    with pytest.raises(RayExecutorError, match=r"^cannot start or reach Ray at 'auto': Failed to connect to Ray "
+                                               r"cluster at 192\.0\.2\.2:6390; .*authentication token.*: set "
+                                               r"RAY_AUTH_MODE=token, .*`ray get-auth-token`"):
+        with ray_cluster("auto", None):
+            pass
+    FakeRay.raises = failed("TimeoutError: the GCS did not answer")
+    with pytest.raises(RayExecutorError, match="Failed to connect") as err:
+        with ray_cluster("auto", None):
+            pass
+    assert "RAY_AUTH_MODE" not in str(err.value)
+
+
+def test_a_cluster_stopped_under_the_job_is_said_to_be_gone() -> None:
+    """`ray stop` on the head in the middle of a job said "a Ray worker died 4 times on sample ...": no worker had
+    died four times, the cluster was gone. Where its head no longer answers, the error says so (and how to
+    resume); where it answers, a dead worker is reported as before."""
+    import socket
+
+    from rtp.capture import _ray
+
+    class FakeRay:
+        exceptions = ray.exceptions
+        gcs_address = ""
+
+        @staticmethod
+        def wait(refs: list[Any], num_returns: int, timeout: float | None) -> tuple[list[Any], list[Any]]:
+            return refs[:1], refs[1:]
+
+        @staticmethod
+        def get(ref: Any) -> Any:
+            raise ray.exceptions.RayActorError()
+
+        @staticmethod
+        def get_runtime_context() -> Any:
+            return FakeRay
+
+    def drive() -> _ray.RayWorkerError:
+        with pytest.raises(_ray.RayWorkerError) as err:
+            _ray._drive(FakeRay, ["actor"], {"ref": (0, "procedural:3", ("procedural_3-slow-0001",))},
+                        {"procedural:3": 1}, lambda i: False, lambda t, r: None, "sample", None)
+        return err.value
+
+    with socket.socket() as head:
+        head.bind(("127.0.0.1", 0))
+        head.listen()
+        FakeRay.gcs_address = f"127.0.0.1:{head.getsockname()[1]}"
+        assert str(drive()).startswith("a Ray worker died 4 times on sample 'procedural_3-slow-0001'")
+    # (the port now closed: nothing answers there)
+    message = str(drive())
+    assert message.startswith(f"the Ray cluster is gone (its head at {FakeRay.gcs_address} does not answer) while "
+                              "on sample 'procedural_3-slow-0001'"), message
+    assert message.endswith("start the cluster again and rerun to resume")
