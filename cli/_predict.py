@@ -549,8 +549,6 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
     picture = sdk.draw_rate_overlay(np.clip(np.nan_to_num(base), 0.0, 1.0), rates, tile, grid=step == 1,
                                     legend=step == 1)
     if step > 1:
-        from rtp.sdk._overlay import _draw_legend
-
         picture = np.array(picture[::step, ::step])
         shown = tile / step
         if tile >= 4 and shown >= 4:  # (as draw_rate_overlay: the first row and column shown of each tile darkened;
@@ -562,7 +560,9 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
                     picture[lines] *= 0.75
                 else:
                     picture[:, lines] *= 0.75
-        _draw_legend(picture, 0.45)  # (draw_rate_overlay's alpha)
+        # the key at the size shown: the overlay of one-pixel tiles all 1x1 (untinted) draws its legend alone
+        picture = sdk.draw_rate_overlay(picture, np.full(picture.shape[:2], sdk.RATE_CODES["1x1"], np.uint8), 1,
+                                        grid=False, legend=True)
     return np.round(np.clip(picture, 0.0, 1.0) * 255.0).astype(np.uint8)  # (a quarter of float32's memory)
 
 
