@@ -200,9 +200,9 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
                   stem: str = "evaluation") -> list[Path]:
     """Write ``<stem>.md`` (each report's markdown in turn) and ``<stem>.json`` (a list of their
     ``to_dict()``: what ``rtp evaluate --out`` writes and ``bench/report.py`` reads) into ``out_dir``,
-    each atomically (an interrupted write leaves the previous file); returns their paths. The plots the
-    ``<stem>.json`` they replace listed in ``out_dir`` and these reports do not are removed (another
-    evaluation's, which no report shows any more); no other file."""
+    each atomically, and neither where either's text fails (an interrupted write leaves the previous files);
+    returns their paths. The plots the ``<stem>.json`` they replace listed in ``out_dir`` and these reports do
+    not are removed (another evaluation's, which no report shows any more); no other file."""
     from rtp.sdk.files import atomic_output
 
     reports = list(reports)
@@ -212,10 +212,13 @@ def write_reports(reports: Sequence[EvaluationReport], out_dir: str | os.PathLik
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{stem}.md", out / f"{stem}.json"]
     before = _listed_plots(paths[1])
-    with atomic_output(paths[0]) as tmp:
-        tmp.write_text("\n".join(r.to_markdown(out) for r in reports), encoding="utf-8")
-    with atomic_output(paths[1]) as tmp:
-        tmp.write_text(json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False), encoding="utf-8")
+    # both texts before either file (a report whose JSON failed, a NaN say, left the new .md beside the old .json:
+    # two evaluations' halves), and the two renames back to back, the .json (what tools read) last
+    texts = ["\n".join(r.to_markdown(out) for r in reports),
+             json.dumps([r.to_dict() for r in reports], indent=1, allow_nan=False)]
+    with atomic_output(paths[1]) as js_tmp, atomic_output(paths[0]) as md_tmp:  # (the inner one's rename first)
+        md_tmp.write_text(texts[0], encoding="utf-8")
+        js_tmp.write_text(texts[1], encoding="utf-8")
     # (`rtp evaluate psnr --out F` into jnyang's folder left jnyang_*.png beside psnr's report)
     gone = sorted(before - {Path(p).name for r in reports for p in r.plots})
     for name in gone:

@@ -972,6 +972,17 @@ def test_the_library_writes_the_files_the_cli_writes(dataset: Path, model: Path,
         with pytest.raises(sdk.ParameterError, match="expected one or more EvaluationReport"):
             write_reports(bad, tmp_path / "bad")  # type: ignore[arg-type]
     assert not (tmp_path / "bad").exists()
+    # a report whose JSON cannot be written leaves both files as they were (the new .md stood beside the old .json)
+    before = {p: p.read_bytes() for p in (md, js)}
+
+    def no_json() -> dict:
+        raise ValueError("Out of range float values are not JSON compliant")
+
+    b.to_dict = no_json  # type: ignore[method-assign]
+    with pytest.raises(ValueError, match="JSON compliant"):
+        write_reports([b, a], tmp_path / "two", stem="both")  # (another .md: b's first)
+    assert {p: p.read_bytes() for p in (md, js)} == before
+    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == ["both.json", "both.md"]
 
 def test_matched_quality_interpolates_along_the_sweep() -> None:
     from rtp.evaluate._evaluate import _matched
