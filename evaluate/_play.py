@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import os
 import re
 import reprlib
 import time
@@ -782,6 +783,8 @@ def play(
                                                                    dynamic_resolution.every]}
         # A path finished by an interrupted run of the same job into the same folder is read back, not
         # played again; each path is kept as it finishes, until the report is written.
+        if outdir is not None:  # (a level file edited between the runs: its kept paths were played on the old one)
+            job["scene_digest"] = _scene_digest(scene, cache_dir)
         key = _resume_key(job, predictors) if outdir is not None else ""
         results = {p: r for p in dict.fromkeys(paths)
                    if outdir is not None and (r := _load_path(outdir, p, key)) is not None}
@@ -911,6 +914,41 @@ def _resume_key(job: dict[str, Any], predictors: dict[str, sdk.ShadingRatePredic
     models = {k: hashlib.sha256(Path(str(p.path)).read_bytes()).hexdigest() for k, p in sorted(predictors.items())}
     settings = {k: v for k, v in job.items() if k not in ("gif", "threads")}
     return json.dumps({"job": settings, "models": models, "rtp": sdk.__version__}, sort_keys=True, default=str)
+
+
+def _scene_digest(scene: str, cache_dir: str | os.PathLike[str] | None) -> str | None:
+    """A hash of what a level file loads as (geometry, materials, textures, lights, spawn points: the files it
+    references too), or None for the procedural scene and the fetched maps (their content is rtp's, in its
+    version). A level file edited between an interrupted run and its rerun was resumed from the paths played on
+    the old level."""
+    import dataclasses
+    import hashlib
+
+    from rtp.capture import MESH_EXTENSIONS, PROCEDURAL_PREFIX, load_scene
+
+    procedural = scene == PROCEDURAL_PREFIX.rstrip(":") or scene.startswith(PROCEDURAL_PREFIX)
+    if procedural or not (Path(scene).suffix.lower() in MESH_EXTENSIONS or Path(scene).is_file()):
+        return None
+    h = hashlib.sha256()
+
+    def feed(v: Any) -> None:
+        if dataclasses.is_dataclass(v) and not isinstance(v, type):
+            h.update(f"<{type(v).__name__}".encode())
+            for f in dataclasses.fields(v):
+                h.update(f.name.encode())
+                feed(getattr(v, f.name))
+        elif isinstance(v, np.ndarray):
+            h.update(f"{v.dtype.str}{v.shape}".encode())
+            h.update(np.ascontiguousarray(v).data)
+        elif isinstance(v, (list, tuple)):
+            h.update(f"[{len(v)}".encode())
+            for x in v:
+                feed(x)
+        else:
+            h.update(repr(v).encode())
+
+    feed(load_scene(scene, cache_dir, None, None, checked=True)[0])  # (its warnings were said by check_scene)
+    return h.hexdigest()
 
 
 #: The settings of the loop itself a run into a folder compares with the report there (besides the map, methods,

@@ -1044,6 +1044,49 @@ def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
         assert played == ["slow"] and not list(tmp_path.glob(".play-*"))
 
 
+def test_a_level_file_edited_between_runs_is_played_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run on your own level, stopped on its second path, kept the first; the level edited (a texture
+    repainted, a wall moved) and the run resumed, the first path's results came from the old level. The
+    resume key holds a hash of what the file loads as, the files it references too."""
+    from rtp.capture.scenes import procedural
+    from rtp.evaluate import _play
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    level = tmp_path / "level.obj"
+    to_trimesh_scene(procedural(2, rooms=(1, 1), texture_size=16)).export(level)
+    out = tmp_path / "out"
+    kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (64, 48), "sweep": False, "flip_every": 0,
+                          "plots": False, "workers": 1, "out": out}
+    played: list[str] = []
+    real = _play._play_path
+
+    def stopped_on_fast(job: dict[str, Any], *rest: Any) -> dict[str, Any]:
+        played.append(job["path"])
+        if job["path"] == "fast":
+            raise KeyboardInterrupt
+        return real(job, *rest)
+
+    monkeypatch.setattr(_play, "_play_path", stopped_on_fast)
+    with pytest.raises(KeyboardInterrupt):
+        play(str(level), "full", **kw)
+    assert played == ["slow", "fast"] and (out / ".play-slow.partial.json").is_file()
+    digest = _play._scene_digest(str(level), None)
+    assert digest is not None and digest == _play._scene_digest(str(level), None)
+    assert _play._scene_digest("procedural:2", None) is None
+    # the texture the .mtl names repainted: the .obj's bytes are the same, the level is not
+    texture = next(f for f in tmp_path.iterdir() if f.suffix == ".png")
+    from PIL import Image
+
+    img = np.asarray(Image.open(texture)).copy()
+    img[..., :3] = 255 - img[..., :3]
+    Image.fromarray(img).save(texture)
+    assert _play._scene_digest(str(level), None) != digest
+    played.clear()
+    with pytest.raises(KeyboardInterrupt):
+        play(str(level), "full", **kw)
+    assert played == ["slow", "fast"]  # slow played again, on the repainted level
+
+
 def test_an_interrupted_runs_temporary_files_are_removed_by_the_next(tmp_path: Path) -> None:
     """Ctrl-C (or SIGTERM) of `rtp play --workers 2` terminates the workers, in which no cleanup runs: one stopped
     while writing its path's GIF left `.play_slow.gif.XXXXXXXX.tmp`, and the rerun, its own GIF written within the
