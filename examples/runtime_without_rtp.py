@@ -22,7 +22,11 @@ same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``
    ``rate_factors`` and ``finite_probe``.
 2. **Padding** (docs/runtime.md "predictor.predict(x)", step 2): the frame's bottom rows and right
    columns repeated up to ``input_multiple`` (whole tiles when there is none; a model with a fixed
-   input size up to that size).
+   input size up to that size). A model that reads ``.blocks`` planes wants a width that is a multiple
+   of 4 and a height other than 4k + 1; one that reads ``.tiles`` planes W mod 16 outside 1-3 and H mod 16
+   outside 1-2: those planes pack each cell's values on its first rows and columns, and a frame that
+   cuts a cell loses them (the network reads padding copies instead). As ``predict``, the port logs a
+   warning once per frame size where that happens (``cut_planes``); the rates are still given.
 3. **Inference**: the planes go to the graph's inputs in graph order, each input taking as many
    consecutive planes as its channel dimension (rtp-export splits eight or more planes into groups of
    at most seven: docs/export.md "Input planes in groups"). The output that is not the finite probe
@@ -55,15 +59,22 @@ same calls exist in onnxruntime's C and C++ API: ``LookupCustomMetadataMap``, ``
    candidate's step is that of the rate the device shades for it, adding only what the engine's rates do not
    save already.
 
+The ranges the SDK takes, which the command line checks as it does (``ParameterError`` there): a
+threshold finite, in [0, 1e6] for an error metric and [-1e6, 1e6] dB for PSNR; a saving in [0, 1 - 1/area]
+of the coarsest allowed rate (0.9375 with 4x4, 0 with none: a budget past what the allowed rates save
+cannot be reached); an engine's rate 1x1 or one of the allowed rates (a device shades a rate of its own
+choice for another).
+
 What is left out: checking the frame for NaN (the finite probe makes that one scalar: step 3's
-other output), batches of frames, and reusing a prediction across frames (``sdk.PredictionReuse``,
-docs/runtime.md).
+other output; the command line checks a ``--frame`` on the CPU), batches of frames, and reusing a
+prediction across frames (``sdk.PredictionReuse``, docs/runtime.md).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import sys
 from pathlib import Path
@@ -77,13 +88,18 @@ RATES = ("1x2", "2x1", "2x2", "2x4", "4x2", "4x4")
 CODES = {"1x1": 0, "1x2": 1, "2x1": 4, "2x2": 5, "2x4": 6, "4x2": 9, "4x4": 10}
 #: Where the logistic transform's inverse clips its sigmoid (docs/metadata.md "Transforms").
 LOGIT_EPS = 1e-7
+#: The largest threshold magnitude the SDK takes (``sdk.MAX_THRESHOLD``).
+MAX_THRESHOLD = 1e6
+
+log = logging.getLogger("runtime_without_rtp")
+_WARNED_CUTS: set[tuple[tuple[str, ...], int, int]] = set()  # (the cut planes, H, W) already warned of
 
 
 def read_metadata(session: ort.InferenceSession) -> dict:
     """Step 1: the model's rtp metadata, a JSON object."""
     text = session.get_modelmeta().custom_metadata_map.get("rtp.metadata")
     if text is None:
-        raise SystemExit("the model carries no rtp.metadata: export it with rtp-export, or adopt it with a sidecar")
+        raise ValueError("the model carries no rtp.metadata: export it with rtp-export, or adopt it with a sidecar")
     return json.loads(text)
 
 
@@ -93,9 +109,26 @@ def fixed_size(session: ort.InferenceSession) -> tuple[int, int] | None:
     return (fixed[0], fixed[1]) if all(isinstance(d, int) and d > 0 for d in fixed) else None
 
 
+def cut_planes(meta: dict, h: int, w: int) -> list[str]:
+    """Step 2's check: the model's ``.blocks`` and ``.tiles`` planes whose last cells a ``h x w`` frame cuts.
+    ``.blocks`` packs each 4x4 cell's six values on its first two rows, four columns (a width not a multiple of
+    4, or a height of 4k + 1, loses some); ``.tiles`` each 16-pixel tile's twelve on its first three rows, four
+    columns (W mod 16 of 1-3, H mod 16 of 1-2)."""
+    return [c for c in meta["inputs"] if (c.endswith(".blocks") and (w % 4 or h % 4 == 1))
+            or (c.endswith(".tiles") and (w % 16 in (1, 2, 3) or h % 16 in (1, 2)))]
+
+
 def pad(x: np.ndarray, meta: dict, session: ort.InferenceSession) -> np.ndarray:
-    """Step 2: (C, H, W) padded at the bottom and right by repeating the last row and column."""
+    """Step 2: (C, H, W) padded at the bottom and right by repeating the last row and column (a warning, once per
+    frame size, where the frame cuts the cells of its packed planes)."""
     _, h, w = x.shape
+    cut = cut_planes(meta, h, w)
+    if cut and (tuple(cut), h, w) not in _WARNED_CUTS:
+        _WARNED_CUTS.add((tuple(cut), h, w))
+        log.warning("a %dx%d frame cuts the last cells of its %s planes: the values they pack on pixels past the "
+                    "frame's edge are lost, the network reads copies of the frame's last column or row in their "
+                    "place, and predicts the last tile column or row (and the tiles beside it) from wrong inputs; "
+                    "render at a size whose sides are multiples of 4", w, h, ", ".join(cut))
     fixed = fixed_size(session)
     if fixed is not None:  # a model with a fixed input size: a larger frame does not fit
         ph, pw = fixed
@@ -416,16 +449,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--allowed", default=",".join(RATES), help="the reduced rates the hardware has (default: all six)")
     ap.add_argument("--check", action="store_true", help="compare with rtp.sdk's shading_rates on the same frame")
     a = ap.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(message)s")  # (step 2's warning; --check's SDK says it too)
 
     if not a.model.is_file():
         ap.error(f"no model file at {str(a.model)!r}")
-    session = ort.InferenceSession(str(a.model), providers=["CPUExecutionProvider"])
-    meta = read_metadata(session)
+    try:
+        session = ort.InferenceSession(str(a.model), providers=["CPUExecutionProvider"])
+        meta = read_metadata(session)
+    except Exception as err:  # (onnxruntime's errors are its own classes; a file that is no ONNX model, no metadata)
+        ap.error(f"{a.model}: cannot be read as an rtp ONNX model ({type(err).__name__}: {err})")
     if a.frame is not None:
-        x = np.load(a.frame)
-        if x.dtype != np.float32 or x.ndim != 3 or len(x) != len(meta["inputs"]):
-            ap.error(f"--frame: expected float32 planes ({len(meta['inputs'])}, H, W) for {meta['inputs']}, got "
-                     f"{x.dtype} {x.shape}")
+        try:
+            x = np.load(a.frame, allow_pickle=False)
+        except (OSError, ValueError) as err:  # a missing file, a folder, not a .npy (or a pickle)
+            ap.error(f"--frame: cannot read {str(a.frame)!r} as a .npy array ({type(err).__name__}: {err})")
+        if not isinstance(x, np.ndarray) or x.dtype != np.float32 or x.ndim != 3 or len(x) != len(meta["inputs"]) \
+                or 0 in x.shape:
+            ap.error(f"--frame: expected float32 planes ({len(meta['inputs'])}, H, W) for {meta['inputs']}, H and W at "
+                     f"least 1, got {getattr(x, 'dtype', type(x).__name__)} {getattr(x, 'shape', '')}")
+        bad = ~np.isfinite(x)
+        if bad.any():  # (the SDK refuses it: NonFiniteInputError; the port alone would give those tiles 1x1)
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            ap.error(f"--frame: holds {int(bad.sum())} NaN or infinite values (first at {where}, plane "
+                     f"{meta['inputs'][where[0]]!r})")
     else:
         try:
             w, h = (int(v) for v in a.size.lower().split("x"))
@@ -447,10 +493,18 @@ def main(argv: list[str] | None = None) -> int:
     twice = [r for r in dict.fromkeys(allowed) if allowed.count(r) > 1]
     if twice:
         ap.error(f"--allowed: each rate once, got {', '.join(twice)} more than once in {a.allowed!r}")
-    if a.threshold is not None and not np.isfinite(a.threshold):
-        ap.error(f"--threshold: expected a finite number, got {a.threshold:g}")
-    if a.saving is not None and not 0.0 <= a.saving <= 0.9375:
-        ap.error(f"--saving: expected a share of the shading work in [0, 0.9375], got {a.saving:g}")
+    better = bool(meta.get("higher_is_better", meta["metric"] == "psnr"))
+    low = -MAX_THRESHOLD if better else 0.0  # (an error below 0 or past 1e6 is refused by the SDK: ParameterError)
+    if a.threshold is not None and not low <= a.threshold <= MAX_THRESHOLD:
+        ap.error(f"--threshold: expected a finite number in [{low:g}, {MAX_THRESHOLD:g}] "
+                 f"{'dB (higher is better)' if better else 'for an error metric (lower is better)'}, got {a.threshold:g}")
+    top = max((1.0 - 1.0 / (SIZES[r][0] * SIZES[r][1]) for r in allowed), default=0.0)  # the coarsest allowed rate's
+    if a.saving is not None and not 0.0 <= a.saving <= top:
+        ap.error(f"--saving: expected a share of the shading work in [0, {top:g}] (what the coarsest allowed rate "
+                 f"saves), got {a.saving:g}")
+    if a.engine_rate is not None and a.engine_rate not in ("1x1", *allowed):
+        ap.error(f"--engine-rate: {a.engine_rate} is not among the rates allowed ({', '.join(('1x1', *allowed))}): a device "
+                 "shades a rate of its own choice for it")
     engine = None if a.engine_rate is None else np.uint8(CODES[a.engine_rate])
     rates = shading_rates(session, x, a.threshold, a.tile_size, allowed, a.saving, engine, a.combiner)
     names = {c: r for r, c in CODES.items()}

@@ -211,15 +211,77 @@ def test_the_ports_budget_beside_engine_rates_is_the_sdks(higher_is_better: bool
     (["--threshold", "nan"], "--threshold: expected a finite number"),
     (["--size", "abc"], "--size: expected WIDTHxHEIGHT"),
     (["--size", "0x0"], "--size: expected WIDTHxHEIGHT"),
+    # what the SDK refuses (ParameterError) the port ran: a budget past what the allowed rates save (every tile at
+    # 1x2, 50% saved for 90% asked, in silence), an error threshold below 0, an engine rate the device lacks
+    (["--allowed", "1x2", "--saving", "0.9"], "--saving: expected a share of the shading work in [0, 0.5]"),
+    (["--allowed", "", "--saving", "0.1"], "--saving: expected a share of the shading work in [0, 0]"),
+    (["--threshold", "-5"], "--threshold: expected a finite number in [0, 1e+06] for an error metric"),
+    (["--threshold", "2e6"], "--threshold: expected a finite number in [0, 1e+06]"),
+    (["--engine-rate", "4x4", "--allowed", "1x2"], "--engine-rate: 4x4 is not among the rates allowed (1x1, 1x2)"),
 ])
 def test_the_ports_command_line_refuses_what_it_cannot_run(port: ModuleType, args: list[str], words: str,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     """The file engines port ran a 7-pixel tile on the 8-pixel grid, an unknown rate and a NaN threshold in
     silence, and ended --size abc and 0x0 in tracebacks (a ZeroDivisionError for --tile-size 0); a rate
-    allowed twice (--allowed 2x2,2x2) ran as that rate alone, as rtp predict's did."""
+    allowed twice (--allowed 2x2,2x2) ran as that rate alone, as rtp predict's did. The ranges the SDK takes
+    it refuses as the SDK does (with --check these were the SDK's traceback after the port's rates)."""
     with pytest.raises(SystemExit) as info:
         port.main([str(sdk.load("jnyang").path), *args])
     assert info.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_the_ports_command_line_says_what_is_wrong_with_its_files(port: ModuleType, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A --frame that is not there, not a .npy, empty or holding a NaN, and a model file that is no ONNX model, were
+    tracebacks (FileNotFoundError, onnxruntime's InvalidProtobuf) or ran (a NaN frame, which the SDK refuses); each is
+    now a usage error, exit 2, naming the file and what was expected."""
+    model = str(sdk.load("jnyang").path)
+    nan = np.zeros((9, 20, 24), np.float32)
+    nan[7, 3, 5] = np.nan
+    np.save(tmp_path / "nan.npy", nan)
+    np.save(tmp_path / "empty.npy", np.zeros((9, 0, 24), np.float32))
+    (tmp_path / "text.npy").write_text("not an array")
+    (tmp_path / "model.onnx").write_text("not a model")
+    for args, words in (([model, "--frame", str(tmp_path / "none.npy")], "--frame: cannot read"),
+                        ([model, "--frame", str(tmp_path / "text.npy")], "--frame: cannot read"),
+                        ([model, "--frame", str(tmp_path / "empty.npy")], "H and W at least 1, got float32 (9, 0, 24)"),
+                        ([model, "--frame", str(tmp_path / "nan.npy")],
+                         "--frame: holds 1 NaN or infinite values (first at (7, 3, 5), plane 'reprojected.y.blocks')"),
+                        ([str(tmp_path / "model.onnx")], "cannot be read as an rtp ONNX model")):
+        with pytest.raises(SystemExit) as info:
+            port.main(args)
+        err = capsys.readouterr().err
+        assert info.value.code == 2 and words in err, (args, err)
+
+
+@pytest.mark.parametrize("name", ["jnyang", "jnyang-reuse", "jnflip"])
+def test_the_port_warns_where_the_frame_cuts_its_packed_planes(name: str, port: ModuleType,
+                                                                caplog: pytest.LogCaptureFixture) -> None:
+    """docs/runtime.md (step 2) says predict warns, once per frame size, where a frame cuts the cells of its .blocks
+    or .tiles planes; the port, what an engine ports, said nothing. It warns at the sizes the SDK does, once each."""
+    import logging
+
+    import onnxruntime as ort
+
+    p = sdk.load(name)
+    session = ort.InferenceSession(str(p.path), providers=["CPUExecutionProvider"])
+    port._WARNED_CUTS.clear()
+    for h, w in ((33, 97), (34, 97), (35, 98), (33, 100), (34, 96), (60, 100), (18, 19), (19, 16), (36, 99)):
+        x = np.random.default_rng(h * w).random((len(p.metadata.inputs), h, w), dtype=np.float32)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            p.predict(x)
+            sdk_warned = any("cuts the last" in r.getMessage() for r in caplog.records)
+            caplog.clear()
+            port.shading_rates(session, x)
+            port.shading_rates(session, x)  # (once per frame size)
+        ours = [r for r in caplog.records if r.name == "runtime_without_rtp"]
+        assert len(ours) == int(sdk_warned), (name, h, w, [r.getMessage() for r in ours])
+        assert bool(port.cut_planes(p.metadata.to_dict(), h, w)) == sdk_warned, (name, h, w)
+        if ours:
+            assert f"a {w}x{h} frame cuts the last cells of its" in ours[0].getMessage()
+    if name == "jnflip":  # (no packed planes: no warning at any size)
+        assert not port._WARNED_CUTS
 
 
 def _free_plane_count(path: Path) -> Path:
