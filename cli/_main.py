@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._run import Bar, Formatter, Parser, add_common, carries_metadata, interruptible_start, option_flags, run
+from ._run import Bar, Formatter, Parser, add_common, carries_metadata, interruptible_start, one_line, option_flags, run
 
 __all__ = ["build_parser", "main"]
 
@@ -306,9 +306,14 @@ def _cmd_info(args: argparse.Namespace) -> int:
     # the engine's motion vectors, where objects move: read by the planes that reproject or are motion
     optional = ["motion"] if "prev_colour" in needed or any(c.startswith("motion.") for c in m.inputs) else []
     if args.json:
-        print(json.dumps({"path": str(pred.path), "provider": pred.provider, "metadata": m.to_dict(),
+        # (the table's rows too: the JSON lacked the fixed input size, the providers, the hardware tiles, the rates
+        # predicted and the saturation, which a script could read only from the table)
+        print(json.dumps({"path": str(pred.path), "provider": pred.provider, "providers": list(pred.providers),
+                          "input_size": None if pred.static_size is None else [pred.static_size[1], pred.static_size[0]],
+                          "metadata": m.to_dict(), "hardware_tiles": list(sdk.hardware_tiles(m.tile_size)),
                           "graph_inputs": {name: list(planes) for name, planes in pred.graph_inputs},
-                          "gbuffers": list(needed), "gbuffers_optional": optional}, indent=2))
+                          "gbuffers": list(needed), "gbuffers_optional": optional, "rates": list(pred.rates),
+                          "saturation": m.saturation}, indent=2, allow_nan=False))
         return 0
     t = m.transform
     params = ", ".join(f"{k}={v:g}" for k, v in t.to_dict().items() if k != "type")
@@ -341,6 +346,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
     if m.description:
         rows.insert(1, ("description", m.description))
     rows += _flatten(m.provenance, "provenance")
+    # a row a line, whatever the model's own text holds: a description's newlines (a YAML block scalar's last one
+    # too) broke the table, and a foreign model's control characters (a terminal's escapes) reached the terminal
+    rows = [(one_line(k), one_line(v)) for k, v in rows]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
@@ -349,6 +357,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _flatten(d: object, prefix: str) -> list[tuple[str, str]]:
     if isinstance(d, Mapping):
+        if not d:  # (an empty mapping printed no row at all: psnr's provenance.target_parameters, in its JSON)
+            return [(prefix, "none")]
         out: list[tuple[str, str]] = []
         for k, v in d.items():
             out += _flatten(v, f"{prefix}.{k}")

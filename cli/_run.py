@@ -36,11 +36,23 @@ def version() -> str:
 
 
 def carries_metadata(path: str) -> bool:
-    """Whether ``path`` is an ONNX model that already holds rtp metadata (a file without it, or unreadable: False)."""
-    import onnx
-
+    """Whether ``path`` is an ONNX model that already holds rtp metadata (a file without it, or unreadable: False).
+    Read with onnx where it is installed, else with onnxruntime: the runtime install has no onnx (`rtp info` of a
+    model without metadata said "this needs onnx, which is not installed" instead of how to give it a sidecar)."""
     from rtp.sdk import METADATA_KEY
 
+    try:
+        import onnx
+    except ImportError:
+        import onnxruntime as ort
+
+        try:
+            opts = ort.SessionOptions()
+            opts.log_severity_level = 3
+            session = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+            return METADATA_KEY in session.get_modelmeta().custom_metadata_map
+        except Exception:  # not readable: the caller's load reports that
+            return False
     try:
         return any(p.key == METADATA_KEY for p in onnx.load(path, load_external_data=False).metadata_props)
     except Exception:  # not readable: the caller's load reports that

@@ -8,6 +8,7 @@ import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,10 +19,12 @@ from .conftest import base_metadata
 
 
 def test_info_prints_the_metadata(tiny_model: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
-    path = tiny_model(base_metadata(provenance={"scenes": ["oa_dm1", "kaos2"], "samples": 40, "dead_outputs": []}))
+    path = tiny_model(base_metadata(provenance={"scenes": ["oa_dm1", "kaos2"], "samples": 40, "dead_outputs": [],
+                                                "target_parameters": {}}))
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert re.search(r"provenance.dead_outputs +none\n", out), out  # (an empty list printed its name alone)
+    assert re.search(r"provenance.target_parameters +none\n", out), out  # (an empty mapping printed no row)
     for text in ("jnyang", "clamped (mu_y=0.25)", "16x16", "reprojected.r, seen, albedo.r, normal.z",
                  "1x2, 2x1, 2x2, 2x4, 4x2, 4x4", "CPUExecutionProvider", "provenance.scenes", "oa_dm1, kaos2"):
         assert text in out, text
@@ -37,6 +40,45 @@ def test_info_prints_the_metadata(tiny_model: Callable[..., Path], capsys: pytes
     assert main(["info", str(static), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["gbuffers_optional"] == []
 
+
+def test_info_json_holds_what_the_table_says(tiny_model: Callable[..., Path],
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp info --json` ("JSON instead of a table") left out rows of the table: a fixed input size, the providers,
+    the hardware tiles, the rates predicted and the saturation. Each is there, as sdk.load gives it, in strict JSON."""
+    from rtp import sdk
+
+    def strict(text: str) -> Any:
+        def refuse(constant: str) -> None:
+            raise ValueError(constant)
+        return json.loads(text, parse_constant=refuse)
+
+    sizes = []
+    for path in (tiny_model(base_metadata(), static=(1, 48, 64)), tiny_model(base_metadata()), "psnr"):
+        assert main(["info", str(path), "--json"]) == 0
+        got = strict(capsys.readouterr().out)
+        pred = sdk.load(path)
+        assert got["providers"] == pred.providers and got["provider"] == pred.provider
+        assert got["hardware_tiles"] == list(sdk.hardware_tiles(pred.metadata.tile_size))
+        assert got["rates"] == list(pred.rates) and got["saturation"] == pred.metadata.saturation
+        assert got["metadata"] == pred.metadata.to_dict()
+        sizes.append(got["input_size"])
+    assert sizes == [[64, 48], None, None]  # (W x H, as the table's "fixed 64x48")
+
+
+def test_info_table_is_a_row_a_line(tiny_model: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """A description of several lines (a YAML block scalar, ending in a newline) broke the table, and a foreign
+    model's control characters (a terminal's escape sequences) were printed as they were: each is written as its
+    escape, a row a line; the JSON keeps the text as it is."""
+    text = "Two lines.\nThe second \x1b[31mred\x1b[0m.\n"
+    path = tiny_model(base_metadata(description=text, provenance={"odd\nkey": "a\rb"}))
+    assert main(["info", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    desc = next(line for line in lines if line.startswith("description "))
+    assert desc.endswith(r"  Two lines.\nThe second \x1b[31mred\x1b[0m.\n"), desc
+    assert all(line.isprintable() for line in lines) and "" not in lines, lines
+    assert re.search(r"^provenance\.odd\\nkey +a\\rb$", "\n".join(lines), re.M), lines
+    assert main(["info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["metadata"]["description"] == text
 
 def test_info_errors_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["info", str(tmp_path / "missing.onnx")]) == 2

@@ -526,6 +526,28 @@ def test_info_on_a_foreign_model_speaks_in_flags(tmp_path: Path, capsys: pytest.
     assert "--metadata SIDECAR.yaml" in err and "metadata=" not in err
 
 
+def test_info_on_a_foreign_model_without_onnx_installed(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The runtime install has no onnx: `rtp info` of a model without metadata said "this needs onnx, which is not
+    installed" (the missing-metadata hint read the file with onnx), not how to give the model its sidecar. Broken
+    metadata is still said as broken."""
+    import onnx
+
+    from .conftest import build_onnx
+
+    path = build_onnx(tmp_path / "foreign.onnx", weights=np.zeros((4, 4), np.float32), metadata=None)
+    broken = onnx.load(path)
+    onnx.helper.set_model_props(broken, {sdk.METADATA_KEY: '{"metric": "jnyang", "tile_si'})
+    onnx.save(broken, tmp_path / "broken.onnx")
+    monkeypatch.setitem(sys.modules, "onnx", None)  # (import onnx: ModuleNotFoundError, as on the runtime install)
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "carries no rtp metadata: pass --metadata SIDECAR.yaml" in err and "not installed" not in err, err
+    assert main(["info", str(tmp_path / "broken.onnx")]) == 2
+    err = capsys.readouterr().err
+    assert "not valid JSON" in err and "carries no rtp metadata" not in err, err
+
+
 def test_info_on_a_published_model_says_it_adopts_without_a_sidecar(capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp info JNYang.onnx`, the paper's published file, told the user to write a sidecar; rtp ships one for each
     published model (docs/export.md "Published models"), and `rtp-export --adopt` bakes it in."""
