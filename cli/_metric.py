@@ -15,6 +15,10 @@ __all__ = ["run_metric"]
 
 log = logging.getLogger("rtp.cli")
 
+#: ``--out``: a pair smaller than 300 pixels on a side is drawn enlarged, its longer side to at most this many
+#: pixels (a larger image is drawn at one pixel a pixel)
+_MAX_ZOOMED = 2000.0
+
 
 def _read(path: str) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
@@ -162,9 +166,12 @@ def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     vmin, vmax = (0.0, max(hi, 1e-6)) if not info.higher_is_better else (lo, max(hi, lo + 1e-6))
     # (the picture at one pixel a pixel, enlarged to 3 inches on its shorter side where it is smaller:
-    # a 130x100 pair's colour bar label and title were cut off)
-    zoom = max(1.0, 300.0 / min(h, w))
-    fig = Figure(figsize=(w * zoom / 100 + 1.6, h * zoom / 100 + 0.6), dpi=100, layout="constrained")
+    # a 130x100 pair's colour bar label and title were cut off; but its longer side to no more than
+    # _MAX_ZOOMED pixels: a 400x2 strip was drawn 60,160 pixels wide, a 1000x1 one 300,160, 2.8 GB)
+    zoom = max(1.0, min(300.0 / min(h, w), _MAX_ZOOMED / max(h, w)))
+    wide = w * zoom >= 3 * max(h * zoom, 300)  # (a strip's colour bar, as high as the picture, was cut: below it)
+    fig = Figure(figsize=(w * zoom / 100 + (0.3 if wide else 1.6), h * zoom / 100 + (1.4 if wide else 0.6)), dpi=100,
+                 layout="constrained")
     ax = fig.subplots()
     import matplotlib
 
@@ -179,5 +186,6 @@ def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np
     ax.set_title(textwrap.fill(title, max(30, round((w * zoom + 120) / 6))), fontsize=9)  # (about 6 px a character)
     ax.set_xticks([])
     ax.set_yticks([])
-    fig.colorbar(im, ax=ax, label=f"{args.metric} ({info.units}); bright = worse")
+    fig.colorbar(im, ax=ax, label=f"{args.metric} ({info.units}); bright = worse",
+                 orientation="horizontal" if wide else "vertical", aspect=60 if wide else 20)  # (20: matplotlib's)
     save_image(args.out, figure_image(fig))

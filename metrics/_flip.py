@@ -105,8 +105,9 @@ def _flip_module() -> Any:
 def flip_pixels(reference: np.ndarray, test: np.ndarray, ppd: float) -> np.ndarray:
     """LDR-FLIP map of one validated pair: float32 ``(H, W, 3)`` in [0, 1] -> ``(H, W)`` float32 in [0, 1]."""
     flip = _flip_module()
-    ref = np.ascontiguousarray(reference, dtype=np.float32)
-    tst = np.ascontiguousarray(test, dtype=np.float32)
+    # (C-contiguous and writable: flip_evaluator's binding refuses a read-only array, as a TypeError of its own)
+    ref = np.require(reference, np.float32, ["C", "W"])
+    tst = np.require(test, np.float32, ["C", "W"])
     try:
         emap, _, _ = flip.evaluate(
             ref, tst, "LDR", inputsRGB=True, applyMagma=False, computeMeanError=False, parameters={"ppd": float(ppd)}

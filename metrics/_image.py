@@ -113,6 +113,9 @@ def as_batch(x: Any, name: str = "image", *, check_range: bool = True) -> ImageB
         batched = x.ndim == 4
         with np.errstate(over="ignore"):  # (float64 values past float32's range: refused below, saying so)
             arr = np.ascontiguousarray(x if batched else x[None], dtype=np.float32)
+        if not arr.flags.writeable:  # (a read-only float32 frame, np.frombuffer of a GPU readback or a memory-mapped
+            # .npy, is this view: flip_evaluator refused it, "flip_evaluator failed: incompatible function arguments")
+            arr = arr.copy()
     else:
         raise InputDtypeError(f"{name}: expected a numpy array or torch tensor, got {type(x).__name__}")
     if arr.shape[0] == 0 or arr.shape[1] == 0 or arr.shape[2] == 0:

@@ -101,3 +101,25 @@ def test_metric_ppd_width_of_a_narrow_image_refused(tmp_path: Path, capsys: pyte
         Image.fromarray(np.full((40, 40, 3), 100 if name == "a.png" else 120, np.uint8)).save(tmp_path / name)
     assert main(["metric", "flip", str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--ppd", "width"]) == 2
     assert "ppd='width' of a 40-pixel-wide image" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("size", [(1, 120), (120, 1), (3, 250)])
+def test_metric_out_of_a_strip_is_a_picture_of_ordinary_size(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                             size: tuple[int, int]) -> None:
+    """--out enlarged a pair under 300 pixels on its shorter side until that side was 300 pixels, whatever the
+    longer: a 120x1 strip was drawn 36,000 pixels long (a 1000x1 one 300,160 pixels, 2.8 GB and 17 s; a 400x2
+    one 60,160). Its longer side is now at most about 2,000 pixels, and the picture is still the map's."""
+    from PIL import Image
+
+    h, w = size
+    rng = np.random.default_rng(3)
+    ref = (rng.random((h, w, 3)) * 255).astype(np.uint8)
+    for name, image in (("a.png", ref), ("b.png", 255 - ref)):
+        Image.fromarray(image).save(tmp_path / name)
+    out = tmp_path / "map.png"
+    assert main(["metric", "flip", str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--out", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    with Image.open(out) as im:
+        picture = np.asarray(im.convert("RGB"))
+    assert max(picture.shape[:2]) <= 2200, picture.shape
+    assert min(picture.shape[:2]) >= 60 and picture.std() > 10, picture.shape  # (a figure, not a blank or a line)

@@ -254,6 +254,33 @@ def test_flip_equals_flip_evaluator(ppd: float | str, ref: np.ndarray, rates: di
     assert 0 < ours.max() <= 1
 
 
+def test_flip_of_read_only_frames(ref: np.ndarray, rates: dict[str, np.ndarray]) -> None:
+    """A read-only float32 frame (np.frombuffer of a GPU readback, a memory-mapped .npy) reached flip_evaluator
+    as it was, whose binding refuses a read-only array: flip_map, jnflip_map, tile_metric and tile_targets'
+    flip-evaluator backend raised "MetricError: flip_evaluator failed: incompatible function arguments". They
+    now give the values of a writable copy, and leave the frames as they were."""
+    import warnings
+
+    def read_only(a: np.ndarray) -> np.ndarray:
+        return np.frombuffer(a.tobytes(), np.float32).reshape(a.shape)
+
+    r, t = read_only(ref), read_only(rates["2x2"])
+    assert not r.flags.writeable and not t.flags.writeable
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (nor torch's warning of a non-writable array, from the torch port)
+        np.testing.assert_array_equal(M.flip_map(r, t), M.flip_map(ref, rates["2x2"]))
+        np.testing.assert_array_equal(M.flip_map(r[None], t[None])[0], M.flip_map(ref, rates["2x2"]))
+        np.testing.assert_array_equal(M.jnflip_map(r, t), M.jnflip_map(ref, rates["2x2"]))
+        np.testing.assert_array_equal(M.tile_metric("flip", r, t, 8), M.tile_metric("flip", ref, rates["2x2"], 8))
+        for backend in M.FLIP_BACKENDS:
+            got = M.tile_targets(r, {"2x2": t}, ("flip", "jnflip"), 8, missing="nan", flip_backend=backend)
+            want = M.tile_targets(ref, {"2x2": rates["2x2"]}, ("flip", "jnflip"), 8, missing="nan",
+                                  flip_backend=backend)
+            for metric in want:
+                np.testing.assert_array_equal(got[metric], want[metric], err_msg=f"{backend} {metric}")
+    np.testing.assert_array_equal(r, ref)
+
+
 def test_ppd_defaults() -> None:
     assert M.DEFAULT_PPD == M.FLIP_DEFAULT_PPD == pytest.approx(67.02, abs=0.01)
     assert M.ppd_from_width(1920) == pytest.approx(1920 * math.pi / 180)
