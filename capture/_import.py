@@ -101,13 +101,19 @@ def _sample_id(scene: str, path: str) -> str:
     return sid
 
 
+#: The arrays of a frame file an import reads (``_read``'s); others are named in a warning and left unread.
+_READ = frozenset((*GBUFFERS, *FINAL_KEYS, "colour"))
+
+
 def _members(path: str) -> tuple[dict[str, tuple[int, ...]], int]:
-    """The arrays of a frame file and their shapes, and the bytes its arrays hold in memory, read from each array's
-    header (not its data)."""
+    """The arrays of a frame file and their shapes, and the bytes the arrays an import reads hold in memory, read
+    from each array's header (not its data). An array it reads that is not of numbers (a pickled object array, which
+    is not loaded, strings) is a ParameterError naming it, found before the first frame is written."""
     import zipfile
 
     shapes: dict[str, tuple[int, ...]] = {}
     nbytes = 0
+    bad: tuple[str, np.dtype[Any]] | None = None
     try:
         with zipfile.ZipFile(path) as z:
             for info in z.infolist():
@@ -118,11 +124,23 @@ def _members(path: str) -> tuple[dict[str, tuple[int, ...]], int]:
                     header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
                               else np.lib.format.read_array_header_2_0)
                     shape, _, dtype = header(fh)
-                    shapes[info.filename[:-4]] = tuple(shape)
-                    nbytes += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+                key = info.filename[:-4]
+                shapes[key] = tuple(shape)
+                if key not in _READ:  # (not read: an engine's own extra array takes no memory of the import's)
+                    continue
+                if dtype.kind not in "biuf":
+                    bad = bad or (key, dtype)
+                nbytes += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
     except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
         raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({type(err).__name__}: {err}; "
                              f"`{EXAMPLE}` writes frames)", "frames") from None
+    if bad is not None:
+        key, dtype = bad
+        what = ("a pickled object array (as np.savez saves a dict, a list of arrays of unequal shapes or other Python "
+                "objects), which rtp does not load (allow_pickle=False: unpickling runs code the file holds)"
+                if dtype.hasobject else f"of dtype {dtype}")
+        raise ParameterError(f"{path!r}: {key} is {what}: expected an array of numbers (float, or uint8 / uint16 "
+                             f"UNORM for the colour images); `{EXAMPLE}` writes frames", key)
     return shapes, nbytes
 
 

@@ -449,6 +449,18 @@ _AWAY_SHARE = 0.25
 _UNWRITTEN_SHARE = 0.5
 #: The share of surfaces that must reproject onto the previous frame before too few is named.
 _SEEN_SHARE = 0.5
+#: The share of surfaces nearer than the projection's near plane (which no rendered surface is) past which a
+#: ``linear`` depth is named as not linear view depth (a reversed-Z buffer's n / z, a depth over the far plane).
+_NEAR_SHARE = 0.25
+#: The engine's motion vectors against the camera's move, on the surfaces the camera moves a pixel or more (on a
+#: static scene they are the same): named when they agree on under this share as given, and on at least
+#: :data:`_MOTION_FIT` (and twice as many) in another convention. On the reference renderer's frames (procedural
+#: scenes, 33x19 to 160x90, the ``fast`` camera path) they agree on all; the next best convention on under 45%.
+_MOTION_AGREE = 0.5
+_MOTION_FIT = 0.6
+#: The engine's motion conventions that are told apart: units (the scale to pixels, x and y) and their names.
+_MOTION_UNITS = (("pixels", lambda w, h: (1.0, 1.0)), ("NDC units (2 across the frame)", lambda w, h: (w / 2, h / 2)),
+                 ("UV units (1 across the frame)", lambda w, h: (float(w), float(h))))
 
 
 def check_gbuffers(
@@ -471,7 +483,11 @@ def check_gbuffers(
     scale); ``normal`` (with ``view`` for ``normal_space="world"``, ``projection`` for facing) is written on most
     surfaces (not 0), unit length, and faces the camera on most surfaces (the wrong space, or a left-handed view
     space, turns about half away); a ``linear`` depth is not a depth buffer's [0, 1] (its clear value 1 on some
-    pixels, or half the surfaces past 0.9); and, with the previous frame, most surfaces reproject onto it (else the matrices or
+    pixels, or half the surfaces past 0.9), and no surface nearer than ``projection``'s near plane (a reversed-Z
+    buffer's values or a depth over the far plane, 0 on background as linear depth's, are); the engine's ``motion``
+    (with the matrices) agrees with the camera's move on most surfaces it moves a pixel or more, not only once
+    scaled from NDC or UV units, negated or its y flipped (the warning names the convention and the factors that
+    convert it); and, with the previous frame, most surfaces reproject onto it (else the matrices or
     depth are another frame's or another convention's; with a hardware depth, where they do once the matrices
     are taken as clip depth in [0, 1], the warning names a Direct3D-style projection and its conversion). The
     other G-buffers (``albedo``, the material) and ``albedo_linear`` are not looked at; bad arrays raise
@@ -541,6 +557,22 @@ def check_gbuffers(
                              "wrong view")
                 warnings.append(f"normal: {100 * away:.0f}% of the surfaces face away from the camera: {hint}, or a "
                                 f"left-handed view space (negate z)?")
+    if depth_kind == "linear" and geo.any() and projection is not None:
+        try:
+            near = _near_plane(_buffer("projection", projection, None))
+        except RtpError:  # (a projection input_planes refuses: refused where a plane reads it, not here)
+            near = None
+        nearer = float((d[geo] < near * (1.0 - 1e-3)).mean()) if near is not None else 0.0
+        if nearer > _NEAR_SHARE:
+            warnings.append(f"depth: {100 * nearer:.0f}% of the surfaces are nearer than the projection's near plane "
+                            f"({near:.4g}), where nothing is drawn: not linear view depth in scene units; a reversed-Z "
+                            f"depth buffer (depth_kind='reversed'), or a depth divided by the far plane (Unity's "
+                            f"Linear01Depth: times far)?")
+    if (given["motion"] is not None and view is not None and projection is not None
+            and given["prev_view_projection"] is not None and geo.any()):
+        text = _motion_convention(given, d, options)
+        if text:
+            warnings.append(text)
     if depth_kind == "linear" and geo.any():
         raw = np.asarray(d, np.float64)
         at_one, middle = float((raw == 1.0).mean()), float(np.median(raw[geo]))
@@ -571,6 +603,54 @@ def check_gbuffers(
                                 f"pass its depth test: prev_depth and prev_view_projection the previous frame's, of the "
                                 f"same conventions and depth kind? (a camera cut or a fast turn does this too)")
     return warnings
+
+
+def _near_plane(projection: np.ndarray) -> float | None:
+    """The view depth of an OpenGL perspective ``projection``'s near plane (NDC z -1), or None for another (an
+    orthographic one, one of another convention whose near plane does not come out positive)."""
+    p = np.asarray(projection, np.float64)
+    if np.abs(p[3] - (0.0, 0.0, -1.0, 0.0)).max() > 1e-6 or p[2, 2] == 1.0:
+        return None
+    near = float(p[2, 3] / (p[2, 2] - 1.0))
+    return near if np.isfinite(near) and near > 0.0 else None
+
+
+def _motion_convention(given: Mapping[str, Any], depth: np.ndarray, options: Mapping[str, Any]) -> str | None:
+    """A warning where the engine's ``motion`` looks like another convention than rtp's (each pixel's previous
+    minus current position in pixels, x right, y down): on the surfaces the camera moves a pixel or more, it
+    disagrees with the camera's move as given and agrees once scaled from NDC or UV units, negated or its y flipped
+    (:data:`_MOTION_AGREE`, :data:`_MOTION_FIT`); None otherwise (too few such surfaces: nothing said)."""
+    h, w = depth.shape
+    camera = np.stack(list(input_planes(
+        ["motion.x", "motion.y"], depth=given["depth"], view=given["view"], projection=given["projection"],
+        prev_view_projection=given["prev_view_projection"], prev_projection=given["prev_projection"], **options)), -1)
+    motion = _buffer("motion", given["motion"], (h, w)).astype(np.float64)
+    length = np.linalg.norm(camera, axis=-1)
+    use = (depth > 0.0) & (length >= 1.0)
+    if int(use.sum()) < 16:
+        return None
+    camera, motion, length = camera[use], motion[use], length[use]
+
+    def agree(scale: tuple[float, float]) -> float:
+        return float((np.linalg.norm(motion * scale - camera, axis=-1) <= 0.5 + 0.1 * length).mean())
+
+    as_given = agree((1.0, 1.0))
+    if as_given >= _MOTION_AGREE:
+        return None
+    fits = []
+    for units, to_pixels in _MOTION_UNITS:
+        sx, sy = to_pixels(w, h)
+        for fx, fy in ((1, 1), (1, -1), (-1, -1), (-1, 1)):
+            if (units, fx, fy) != ("pixels", 1, 1):
+                fits.append((agree((sx * fx, sy * fy)), units, fx, fy, (sx * fx, sy * fy)))
+    share, units, fx, fy, scale = max(fits, key=lambda f: f[0])
+    if share < _MOTION_FIT or share < 2.0 * as_given:
+        return None
+    how = ", ".join([units] + (["current minus previous position"] if fx < 0 else [])
+                    + (["y up"] if fx * fy < 0 else []))
+    return (f"motion: agrees with the camera's move on {100 * as_given:.0f}% of the surfaces it moves, and on "
+            f"{100 * share:.0f}% taken as {how}: rtp's motion is each pixel's previous minus current position in pixels, "
+            f"x right, y down (multiply these by ({scale[0]:g}, {scale[1]:g}))")
 
 
 #: The constant that turns a clip depth in [0, 1] (Direct3D's, Vulkan's, Metal's) into OpenGL's [-1, 1]

@@ -285,7 +285,10 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
     others are named in a logged warning, with the name they may have meant, and not returned. A path that
     is no file or no ``.npz`` numpy reads is a :class:`ParameterError` (its hint: ``example``, a command that
     writes one), and so is a damaged ``.npz`` (a deflate stream, a CRC or an array header numpy cannot
-    read), naming the file and what numpy said."""
+    read), naming the file and what numpy said. Only the arrays returned are read: another array (an engine's
+    own metadata, saved as a pickled object array) is named and left unread; one returned that is a pickled object
+    array is a :class:`ParameterError` naming it (numpy's ``allow_pickle=False``: unpickling runs code the file
+    holds)."""
     from ._planes import GBUFFERS
 
     p = Path(path)
@@ -295,16 +298,33 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
                              f"the reference renderer)", "frame")
     if not zipfile.is_zipfile(p):
         raise ParameterError(f"{name!r}: not an .npz (numpy.savez's zip of arrays)", "frame")
+    known = (*GBUFFERS, *extra)
+    arrays: dict[str, Any] = {}
     try:
         with np.load(p, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
+            files = list(npz.files)
+            for key in files:
+                if key not in known:  # (not read: an engine's own extra array, pickled or huge, is no reason to refuse)
+                    continue
+                try:
+                    arrays[key] = npz[key]
+                except ValueError as err:
+                    if "allow_pickle" not in str(err):
+                        raise
+                    raise ParameterError(
+                        f"{name!r}: {key} is a pickled object array (numpy's dtype object, as np.savez saves a dict, "
+                        f"a list of arrays of unequal shapes or other Python objects), which rtp does not load "
+                        f"(allow_pickle=False: unpickling runs code the file holds): save it as an array of numbers, "
+                        f"e.g. np.asarray({key}, np.float32)",
+                        key) from None
+    except ParameterError:
+        raise
     except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError,
         # KeyError, a mangled header's SyntaxError, MemoryError from one claiming a huge shape, OSError, ...)
         raise ParameterError(f"{name!r}: a damaged .npz, numpy cannot read its arrays ({type(err).__name__}: {err})",
                              "frame") from None
-    known = (*GBUFFERS, *extra)
-    for key in sorted(set(arrays) - set(known)):
+    for key in sorted(set(files) - set(known)):
         close = difflib.get_close_matches(key, known, n=1)
         log.warning("%s: array %r is not a G-buffer and is not read%s; G-buffers: %s", name, key,
                     f" (did you mean {close[0]}?)" if close else "", ", ".join(known))
-    return {k: v for k, v in arrays.items() if k in known}
+    return arrays

@@ -546,3 +546,41 @@ def test_another_folders_frames_of_the_same_names_and_scene_do_not_replace_its_s
     shutil.rmtree(tmp_path / "session1")
     report = import_frames(moved, again, scene="arena")
     assert (report.written, report.replaced) == (3, 3)
+
+
+def test_a_pickled_array_is_named_before_anything_is_written_and_an_engines_own_is_not_read(
+        dumps: Any, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A later frame's G-buffer saved as a pickled object array was found at its turn, after the frames before it
+    were written, and called "a damaged .npz"; an engine's own metadata beside the arrays (``meta={...}``, pickled)
+    refused every frame."""
+    root, _, _ = dumps
+    level = tmp_path / "lvl"
+    level.mkdir()
+    for f in sorted((root / "level_a").glob("*.npz")):
+        np.savez(level / f.name, **dict(np.load(f)), meta={"engine": "mine", "frame": f.stem})
+    with caplog.at_level("WARNING"):
+        assert import_frames(level, tmp_path / "data").written == 3
+    assert "array 'meta' is not a G-buffer and is not read" in caplog.text
+    arrays = dict(np.load(root / "level_a" / "frame_0002.npz"))
+    np.savez(level / "frame_0002.npz", **{**arrays, "prev_depth": arrays["prev_depth"].astype(object)})
+    with pytest.raises(sdk.ParameterError, match=r"frame_0002.npz': prev_depth is a pickled object array") as err:
+        import_frames(level, tmp_path / "data2")
+    assert err.value.name == "prev_depth"
+    assert not (tmp_path / "data2" / "samples").exists() or not any((tmp_path / "data2" / "samples").iterdir())
+
+
+def test_motion_vectors_with_y_up_are_warned_once_and_counted(dumps: Any, tmp_path: Path,
+                                                              caplog: pytest.LogCaptureFixture) -> None:
+    """Motion vectors with y up (OpenGL's, Unity's) were imported without a word, and the samples' motion planes and
+    reprojection were wrong: the kind is named once and counted on every frame, with the conversion."""
+    root, _, _ = dumps
+    flipped = tmp_path / "flipped"
+    flipped.mkdir()
+    for f in sorted((root / "level_a").glob("*.npz")):
+        arrays = dict(np.load(f))
+        np.savez(flipped / f.name, **{**arrays, "motion": arrays["motion"] * np.float32([1, -1])})
+    with caplog.at_level("WARNING", "rtp.capture"):
+        report = import_frames(flipped, tmp_path / "data")
+    (kind,) = [k for k in report.warnings if k.startswith("motion: ")]
+    assert report.warnings[kind] == 3 and "y up" in kind
+    assert "multiply these by (1, -1)" in caplog.text

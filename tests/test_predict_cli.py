@@ -780,3 +780,55 @@ def test_the_curves_hold_their_points_whole_inside_the_panels(monkeypatch: pytes
         assert low == 0.0 and np.nanmax(y) <= 0.95 * top, (ax.get_title(), ax.get_ylim())
         assert not any(line.get_clip_on() for line in ax.get_lines())
     assert axes[1].get_ylim() == (0.0, 1.0)  # (the change in %: 0 every frame)
+
+
+def test_an_engines_own_pickled_array_is_not_read_and_a_pickled_g_buffer_is_named(
+        frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture) -> None:
+    """An engine that stashes its own metadata beside the G-buffers (``np.savez(..., meta={"frame": 12})``, a
+    pickled object array) had the whole frame refused as "a damaged .npz" (every array was loaded, the unknown ones
+    too); a G-buffer saved as an object array was called damaged without naming it."""
+    with np.load(frame) as npz:
+        arrays = dict(npz)
+    meta = tmp_path / "meta.npz"
+    np.savez(meta, **arrays, meta={"frame": 12, "engine": "mine"})
+    with caplog.at_level(logging.WARNING):
+        assert main(["predict", str(meta), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rates"]
+    assert "array 'meta' is not a G-buffer and is not read" in caplog.text
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, **{**arrays, "depth": arrays["depth"].astype(object)})
+    assert main(["predict", str(pickled), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert "pickled.npz': depth is a pickled object array" in err and "damaged" not in err, err
+
+
+def test_motion_and_depth_in_another_engines_convention_are_warned(frame: Path, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Motion vectors with y up, in NDC or UV units or current minus previous, and a reversed-Z depth buffer given as
+    linear depth (its values in [0, 1], 0 on background, as linear depth's) were taken without a word (or with a
+    "seen" warning that named the matrices): each is named, with the conversion; the reference frame is not."""
+    with np.load(frame) as npz:
+        arrays = dict(npz)
+    h, w = arrays["depth"].shape
+    motion = arrays["motion"]
+    p = arrays["projection"]
+    z = -arrays["depth"].astype(np.float64)  # reversed-Z: 1 - the window depth, 0 on background
+    reversed_z = np.where(arrays["depth"] > 0, 0.5 - 0.5 * (p[2, 2] * z + p[2, 3]) / -z, 0.0).astype(np.float32)
+    cases = {
+        "reference": ({}, None),
+        "y_up": ({"motion": motion * [1, -1]}, "taken as pixels, y up: .*multiply these by \\(1, -1\\)"),
+        "ndc": ({"motion": motion * [2 / w, -2 / h]}, f"taken as NDC units .*, y up: .*by \\({w // 2}, -{h // 2}\\)"),
+        "uv_negated": ({"motion": -motion * [1 / w, 1 / h]},
+                       f"UV units .*, current minus previous position: .*by \\(-{w}, -{h}\\)"),
+        "reversed_z": ({"depth": reversed_z}, r"depth: 9\d% of the surfaces are nearer than the projection's near "
+                                              r"plane .*\(--depth-kind reversed\)"),
+    }
+    for name, (change, match) in cases.items():
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **{**arrays, **change})
+        assert main(["predict", str(path), "--json"]) == 0, name
+        warnings = json.loads(capsys.readouterr().out)["warnings"]
+        if match is None:
+            assert warnings == [], warnings
+        else:
+            assert any(re.search(match, t) for t in warnings), (name, warnings)
