@@ -282,6 +282,54 @@ def _exchanged(finals: dict[str, np.ndarray]) -> list[tuple[str, str]]:
     return out
 
 
+#: The previous frame reprojected against final_1x1 on the surfaces seen in both (the same surfaces a frame apart):
+#: named as in linear light where the sRGB curve (encoding it; or decoding it, for final images in linear light)
+#: brings it nearer by this factor, and by :data:`_ENCODING_GAP`, in median difference. Given as shown, either curve
+#: took it 10x further off at least on the reference renderer's frames (144: procedural scenes 0-7, the ``fast`` and
+#: ``slow`` camera paths, 33x19 to 160x90, float and 8-bit) and 3.4x on 72 frames of three real maps at 1280x720
+#: (data/val720); given a linear prev_colour, encoding brought it nearer by 14x and 3.6x at least (0.07 and 0.27 of
+#: the difference as given, and at least 0.13 less), and given linear final images decoding by 13x and 3.3x.
+_ENCODING_RATIO = 0.5
+_ENCODING_GAP = 0.02
+#: The fewest surfaces seen in both frames for that check (fewer: nothing said).
+_ENCODING_MIN_PIXELS = 64
+
+
+def _encoding_errors(reprojected: np.ndarray, seen: np.ndarray, final: np.ndarray, geo: np.ndarray,
+                     ) -> tuple[float, float, float] | None:
+    """The median difference between ``final`` and ``reprojected`` on the surfaces ``seen`` in both frames: as
+    given, ``reprojected`` sRGB-encoded and sRGB-decoded (the median: a few surfaces lit otherwise a frame apart, or
+    reprojected from the wrong surface, do not move it); None where fewer than :data:`_ENCODING_MIN_PIXELS`."""
+    use = (seen > 0.5) & geo
+    if int(use.sum()) < _ENCODING_MIN_PIXELS:
+        return None
+    rep, fin = np.clip(reprojected[use], 0.0, 1.0).astype(np.float64), final[use].astype(np.float64)
+    return (float(np.median(np.abs(rep - fin))), float(np.median(np.abs(sdk.linear_to_srgb(rep) - fin))),
+            float(np.median(np.abs(sdk.srgb_to_linear(rep) - fin))))
+
+
+def _linear_light(reprojected: np.ndarray, seen: np.ndarray, final: np.ndarray, geo: np.ndarray) -> str | None:
+    """A warning where ``prev_colour`` (its reprojection, ``reprojected``) looks like linear light beside the frame
+    shown, ``final`` (final_1x1), or the final images like linear light beside ``prev_colour``: on the surfaces
+    ``seen`` in both frames, the sRGB curve brings the one nearer the other (:data:`_ENCODING_RATIO`); None
+    otherwise, and where both are in linear light (they agree: nothing to compare them with)."""
+    errors = _encoding_errors(reprojected, seen, final, geo)
+    if errors is None:
+        return None
+    as_given, encoded, decoded = errors
+    if encoded < _ENCODING_RATIO * as_given and as_given - encoded > _ENCODING_GAP:
+        return (f"prev_colour: looks like linear light: reprojected, it differs from final_1x1 by {as_given:.3f} "
+                f"(median) on the surfaces seen in both frames, and by {encoded:.3f} once sRGB-encoded; rtp takes "
+                f"prev_colour display-encoded, as shown (tone-mapped, sRGB): read the frame back after its sRGB "
+                f"conversion, or encode it (sdk.linear_to_srgb); a linear albedo likewise needs albedo_linear (--albedo-linear)")
+    if decoded < _ENCODING_RATIO * as_given and as_given - decoded > _ENCODING_GAP:
+        return (f"final_1x1: looks like linear light: it differs from prev_colour reprojected by {as_given:.3f} "
+                f"(median) on the surfaces seen in both frames, and by {decoded:.3f} from prev_colour sRGB-decoded; "
+                f"rtp takes the final_<rate> images display-encoded, as shown (tone-mapped, sRGB): read them back "
+                f"after their sRGB conversion, or encode them (sdk.linear_to_srgb)")
+    return None
+
+
 #: Dataset buffer -> the input planes it stores, in its last axis' order.
 _STORED = {name: spec.channels for name, spec in BUFFERS.items() if spec.channels}
 
@@ -338,7 +386,10 @@ def import_frames(
     captured by the reference renderer, is refused rather than mixed). Each sample is written atomically;
     ``sdk.check_gbuffers``' convention warnings are logged once per kind and counted in the report, and so are
     frames whose anisotropic rates' images look exchanged (``final_1x2`` repeating side by side and ``final_2x1``
-    one above the other; ``final_2x4`` and ``final_4x2``): ``exchanged``. Frames past the machine's memory are
+    one above the other; ``final_2x4`` and ``final_4x2``): ``exchanged``. So is colour in linear light where rtp
+    takes it sRGB-encoded, as shown: ``prev_colour`` (or the final images) in linear light beside the other, seen where
+    the previous frame reprojected matches ``final_1x1`` far better once sRGB-encoded (or decoded); colour all in linear
+    light agrees with itself and is not seen, nor is a linear ``albedo``. Frames past the machine's memory are
     refused before the first is read (``RTP_MEMORY_CHECK``).
     """
     files = frame_files(list(frames) if not isinstance(frames, (str, os.PathLike)) else [frames], example=EXAMPLE)
@@ -470,12 +521,13 @@ def import_frames(
                                        albedo_linear=albedo_linear, tolerance=tolerance)
             except RtpError as err:  # (named with the file it is about)
                 raise ParameterError(f"{f!r}: {err}", "frames") from err
-            for text in texts:
+            buffers, seen = _buffers(f, arrays, present, conventions)
+            encoding = _linear_light(buffers["reprojected"], seen, buffers["final_1x1"], buffers["depth"] > 0)
+            for text in [*texts, *([encoding] if encoding else [])]:
                 kind = re.sub(r"-?\d[\d.]*", "#", text)
                 warned[kind] = warned.get(kind, 0) + 1
                 if warned[kind] == 1:
                     log.warning(f"{f}: {text}")  # (its own message: one template hid every kind after the first)
-            buffers, seen = _buffers(f, arrays, present, conventions)
             exchanged = _exchanged(buffers)
             if exchanged:  # (a model trained on them picks 2x1 where 1x2 would do: nothing else catches it)
                 report.exchanged += 1

@@ -490,7 +490,8 @@ def check_gbuffers(
     convert it); and, with the previous frame, most surfaces reproject onto it (else the matrices or
     depth are another frame's or another convention's; with a hardware depth, where they do once the matrices
     are taken as clip depth in [0, 1], the warning names a Direct3D-style projection and its conversion). The
-    other G-buffers (``albedo``, the material) and ``albedo_linear`` are not looked at; bad arrays raise
+    other G-buffers (``albedo``, the material) and ``albedo_linear`` are not looked at, nor whether the colour is in
+    linear light (``rtp import``, which has the frame shown too, looks at that); bad arrays raise
     :func:`input_planes`' errors.
     """
     if not isinstance(albedo_linear, (bool, np.bool_)):

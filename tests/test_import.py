@@ -584,3 +584,48 @@ def test_motion_vectors_with_y_up_are_warned_once_and_counted(dumps: Any, tmp_pa
     (kind,) = [k for k in report.warnings if k.startswith("motion: ")]
     assert report.warnings[kind] == 3 and "y up" in kind
     assert "multiply these by (1, -1)" in caplog.text
+
+
+def test_colour_in_linear_light_is_warned_once_and_counted(dumps: Any, tmp_path: Path,
+                                                           caplog: pytest.LogCaptureFixture) -> None:
+    """prev_colour dumped in linear light (an HDR or linear target read back before its sRGB conversion) imported
+    without a word, and every sample's reprojected planes were darker than the frame shown: the reprojection against
+    final_1x1 names it, and final images in linear light beside an sRGB prev_colour; colour all in linear light
+    agrees with itself and is not named (docs/dataset.md)."""
+    root, _, _ = dumps
+    from rtp.capture._import import _linear_light
+
+    def linear(x: np.ndarray) -> np.ndarray:
+        return np.asarray(sdk.srgb_to_linear(x), np.float32)
+
+    mistakes = {"prev": lambda a: {"prev_colour": linear(a["prev_colour"])},
+                "finals": lambda a: {k: linear(a[k]) for k in a if k.startswith("final_")},
+                "all": lambda a: {k: linear(a[k]) for k in a if k.startswith("final_") or k == "prev_colour"}}
+    for name, change in mistakes.items():
+        folder = tmp_path / name
+        folder.mkdir()
+        for f in sorted((root / "level_a").glob("*.npz")):
+            arrays = dict(np.load(f))
+            np.savez(folder / f.name, **{**arrays, **change(arrays)})
+        caplog.clear()
+        with caplog.at_level("WARNING", "rtp.capture"):
+            report = import_frames(folder, tmp_path / f"data_{name}", scene="x")
+        assert report.written == 3
+        if name == "all":
+            assert report.warnings == {}, report.warnings
+            continue
+        (kind,) = report.warnings
+        assert report.warnings[kind] == 3
+        key = "prev_colour" if name == "prev" else "final_1x1"
+        assert kind.startswith(f"{key.replace('1x1', '#x#')}: looks like linear light"), kind  # (numbers as #)
+        (record,) = [r for r in caplog.records if r.name == "rtp.capture" and r.levelname == "WARNING"]
+        assert f"{name}/frame_0000.npz: {key}: looks like linear light" in record.getMessage()
+        assert "display-encoded, as shown (tone-mapped, sRGB)" in record.getMessage()
+        assert "sdk.linear_to_srgb" in record.getMessage()
+    # too few surfaces seen in both frames (a camera cut, a sky): nothing said
+    rep = np.full((8, 8, 3), 0.2, np.float32)
+    geo = np.ones((8, 8), bool)
+    assert _linear_light(rep, np.ones((8, 8), np.float32), np.asarray(sdk.linear_to_srgb(rep), np.float32), geo) \
+        is not None
+    assert _linear_light(rep, np.zeros((8, 8), np.float32), np.asarray(sdk.linear_to_srgb(rep), np.float32), geo) \
+        is None
