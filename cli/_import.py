@@ -56,7 +56,9 @@ def run_import(args: argparse.Namespace) -> int:
         print(f"absent: {', '.join(report.absent)} (not in the frames: a model reading them is refused)")
     if report.warnings:
         print(f"convention warnings on {max(report.warnings.values())} of {report.written} frames (logged above): "
-              f"check --albedo-linear, --normal-space and --depth-kind", file=sys.stderr)
+              f"check --albedo-linear, --normal-space and --depth-kind, and the dump itself (each warning says what "
+              f"it saw and what converts it: motion's units, colour read back before its sRGB conversion)",
+              file=sys.stderr)
     if report.exchanged:
         print(f"rate images look exchanged on {report.exchanged} of {report.written} frames (logged above): check "
               f"which is final_1x2 (1 pixel wide, 2 tall) and which final_2x1 (and final_2x4, final_4x2)",
