@@ -370,6 +370,24 @@ def test_a_resume_with_the_data_folder_spelled_with_a_trailing_slash_resumes(tmp
         train(TrainConfig(out=str(out), steps=8, data=str(other), **cfg))
 
 
+def test_a_resume_with_the_data_folder_spelled_absolute_or_through_a_link_resumes(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run begun with ``--data ds`` (relative) and resumed with the same folder's absolute path (a script, a
+    Makefile's abspath) or a link to it was refused as another configuration (differs in: data); another folder
+    with the same samples still is."""
+    data = _dataset(tmp_path / "ds", n=6)
+    cfg = dict(metric="jnyang", crop=32, batch=4, val_every=2, save_every=2, arch="fast", val_scenes=("scene0",))
+    out = tmp_path / "m.pt"
+    monkeypatch.chdir(tmp_path)
+    train(TrainConfig(out=str(out), steps=2, data="ds", **cfg))
+    assert train(TrainConfig(out=str(out), steps=4, data=str(data.resolve()), **cfg)).steps == 4
+    (tmp_path / "link").symlink_to(data, target_is_directory=True)
+    assert train(TrainConfig(out=str(out), steps=6, data="link", **cfg)).steps == 6
+    shutil.copytree(data, tmp_path / "ds2")
+    with pytest.raises(sdk.ParameterError, match="differs in: data"):
+        train(TrainConfig(out=str(out), steps=8, data="ds2", **cfg))
+
+
 def test_a_recipe_float_without_a_dot_is_a_number(tmp_path: Path) -> None:
     """PyYAML (YAML 1.1) reads ``lr: 5e-4`` as the string '5e-4': it was refused ("expected float, got '5e-4'").
     A string float() reads to a finite number is that number; others are refused, naming the key."""

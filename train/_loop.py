@@ -324,13 +324,25 @@ def data_folders(data: str | os.PathLike[str]) -> list[str]:
 
 
 def _same_folders(a: object, b: object) -> bool:
-    """Whether two ``data`` values name the same folders, spelled alike but for separators and dots
-    (``data/train/`` and ``data/train``; the samples' own check still holds a resume to the same ids)."""
+    """Whether two ``data`` values name the same folders: spelled alike but for separators and dots
+    (``data/train/`` and ``data/train``), or each pair the same folder on disk (``data/train`` and its absolute
+    path, or a link to it: a resume from a script that spells it absolute was refused as another configuration);
+    the samples' own check still holds a resume to the same ids."""
     if not isinstance(a, str) or not isinstance(b, str):
         return False
     try:
-        return [os.path.normpath(f) for f in data_folders(a)] == [os.path.normpath(f) for f in data_folders(b)]
+        was, now = data_folders(a), data_folders(b)
     except sdk.ParameterError:
+        return False
+    return len(was) == len(now) and all(os.path.normpath(x) == os.path.normpath(y) or _same_dir(x, y)
+                                        for x, y in zip(was, now))
+
+
+def _same_dir(a: str, b: str) -> bool:
+    """Whether ``a`` and ``b`` are one existing folder."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
         return False
 
 
