@@ -1603,12 +1603,19 @@ def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=8, **base))
     with pytest.raises(sdk.ParameterError, match="cannot be combined"):
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=16, augment=True, **base))
-    with pytest.raises(sdk.ParameterError, match=r"crop \+ 2 x context \(96\) is larger than the frames \(96x64\)") as e:
+    with pytest.raises(sdk.ParameterError, match=r"^crop \+ 2 x context \(96\) is larger than the frames \(96x64\): a "
+                                                r"context of at most 16 fits$") as e:
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, context=32, **base))
     assert e.value.name == "context"  # (it named no field)
-    with pytest.raises(sdk.ParameterError, match=r"^crop \(80\) is larger than the frames \(96x64\)$") as e:
+    # (what fits, said: a recipe that gives no crop took the default, and the message named a crop nobody gave)
+    with pytest.raises(sdk.ParameterError, match=r"^crop \(80\) is larger than the frames \(96x64\): a crop of at most 64 "
+                                                r"fits$") as e:
         train(TrainConfig(out=str(tmp_path / "d.pt"), **{**base, "steps": 2, "crop": 80}))
     assert e.value.name == "crop"
+    no_crop = {k: v for k, v in base.items() if k != "crop"}
+    with pytest.raises(sdk.ParameterError, match=r"^crop \(128\) is larger than the frames \(96x64\): a crop of at most "
+                                                r"64 fits \(128 is the default\)$"):
+        train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, **no_crop))
     assert not (tmp_path / "d.pt").exists()
 
 

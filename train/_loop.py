@@ -1083,7 +1083,13 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
     if cfg.crop + 2 * cfg.context > min(full_h, full_w):
         what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
-        raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h})", "context" if cfg.context else "crop")
+        # (what fits, said: a recipe without a crop took the default, 128, and the message named a crop nobody gave)
+        room = min(full_h, full_w) - 2 * cfg.context
+        fits = (f"a crop of at most {room} fits" + (f" ({cfg.crop} is the default)" if cfg.crop == TrainConfig.crop else "")
+                if room >= cfg.tile else
+                f"a context of at most {(min(full_h, full_w) - cfg.tile) // 2 // cfg.tile * cfg.tile} fits")
+        raise sdk.ParameterError(f"{what} is larger than the frames ({w}x{h}): {fits}",
+                                 "context" if cfg.context else "crop")
 
     transform = _make_transform(cfg, tr.y)
     aux_transforms = [_make_transform(cfg, [a[k] for a in tr.aux], f"{m} (aux_metrics)")
