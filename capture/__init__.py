@@ -27,7 +27,7 @@ from ._dataset import (
     write_png,
 )
 from ._images import check_image_output, figure_image, image_values, read_image_values, save_image
-from ._import import ImportReport, import_frames
+from ._import import ImportReport, import_frames, linear_light_warning
 from ._memory import check_frame_memory, check_memory, job_bytes
 from ._pool import WorkerDiedError, tick_queue, with_ticks, worker_pool, worker_threads
 from ._preview import preview_sheet
@@ -69,6 +69,7 @@ __all__ = [
     "import_frames",
     "read_image_values",
     "job_bytes",
+    "linear_light_warning",
     "load_scene",
     "open_dataset",
     "pool_targets",

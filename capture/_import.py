@@ -41,7 +41,7 @@ from ._dataset import (
 )
 from ._memory import check_memory
 
-__all__ = ["FINAL_KEYS", "ImportReport", "REQUIRED_GBUFFERS", "import_frames"]
+__all__ = ["FINAL_KEYS", "ImportReport", "REQUIRED_GBUFFERS", "import_frames", "linear_light_warning"]
 
 log = logging.getLogger("rtp.capture")
 
@@ -308,26 +308,33 @@ def _encoding_errors(reprojected: np.ndarray, seen: np.ndarray, final: np.ndarra
             float(np.median(np.abs(sdk.srgb_to_linear(rep) - fin))))
 
 
-def _linear_light(reprojected: np.ndarray, seen: np.ndarray, final: np.ndarray, geo: np.ndarray) -> str | None:
-    """A warning where ``prev_colour`` (its reprojection, ``reprojected``) looks like linear light beside the frame
-    shown, ``final`` (final_1x1), or the final images like linear light beside ``prev_colour``: on the surfaces
-    ``seen`` in both frames, the sRGB curve brings the one nearer the other (:data:`_ENCODING_RATIO`); None
-    otherwise, and where both are in linear light (they agree: nothing to compare them with)."""
-    errors = _encoding_errors(reprojected, seen, final, geo)
+def linear_light_warning(reprojected: np.ndarray, seen: np.ndarray, shown: np.ndarray, geo: np.ndarray, *,
+                         name: str = "final_1x1") -> str | None:
+    """A warning where ``prev_colour`` (its reprojection, ``reprojected``, float ``(H, W, 3)``) looks like linear light
+    beside the frame shown, ``shown`` (float ``(H, W, 3)`` in [0, 1]; the frame file's array ``name``: ``final_1x1``
+    of ``rtp import``, ``colour`` of ``rtp predict``), or ``shown`` like linear light beside ``prev_colour``: on the
+    surfaces ``seen`` in both frames (of ``geo``, the frame's geometry), the sRGB curve brings the one nearer the other
+    (:data:`_ENCODING_RATIO`); None otherwise, and where both are in linear light (they agree: nothing to compare them
+    with)."""
+    errors = _encoding_errors(reprojected, seen, shown, geo)
     if errors is None:
         return None
     as_given, encoded, decoded = errors
     if encoded < _ENCODING_RATIO * as_given and as_given - encoded > _ENCODING_GAP:
-        return (f"prev_colour: looks like linear light: reprojected, it differs from final_1x1 by {as_given:.3f} "
+        return (f"prev_colour: looks like linear light: reprojected, it differs from {name} by {as_given:.3f} "
                 f"(median) on the surfaces seen in both frames, and by {encoded:.3f} once sRGB-encoded; rtp takes "
                 f"prev_colour display-encoded, as shown (tone-mapped, sRGB): read the frame back after its sRGB "
                 f"conversion, or encode it (sdk.linear_to_srgb); a linear albedo likewise needs albedo_linear (--albedo-linear)")
     if decoded < _ENCODING_RATIO * as_given and as_given - decoded > _ENCODING_GAP:
-        return (f"final_1x1: looks like linear light: it differs from prev_colour reprojected by {as_given:.3f} "
+        images = ("the final_<rate> images", "them", "their") if name == "final_1x1" else (name, "it", "its")
+        return (f"{name}: looks like linear light: it differs from prev_colour reprojected by {as_given:.3f} "
                 f"(median) on the surfaces seen in both frames, and by {decoded:.3f} from prev_colour sRGB-decoded; "
-                f"rtp takes the final_<rate> images display-encoded, as shown (tone-mapped, sRGB): read them back "
-                f"after their sRGB conversion, or encode them (sdk.linear_to_srgb)")
+                f"rtp takes {images[0]} display-encoded, as shown (tone-mapped, sRGB): read {images[1]} back "
+                f"after {images[2]} sRGB conversion, or encode {images[1]} (sdk.linear_to_srgb)")
     return None
+
+
+_linear_light = linear_light_warning  # (its name before rtp predict used it too)
 
 
 #: Dataset buffer -> the input planes it stores, in its last axis' order.
@@ -522,7 +529,7 @@ def import_frames(
             except RtpError as err:  # (named with the file it is about)
                 raise ParameterError(f"{f!r}: {err}", "frames") from err
             buffers, seen = _buffers(f, arrays, present, conventions)
-            encoding = _linear_light(buffers["reprojected"], seen, buffers["final_1x1"], buffers["depth"] > 0)
+            encoding = linear_light_warning(buffers["reprojected"], seen, buffers["final_1x1"], buffers["depth"] > 0)
             for text in [*texts, *([encoding] if encoding else [])]:
                 kind = re.sub(r"-?\d[\d.]*", "#", text)
                 warned[kind] = warned.get(kind, 0) + 1

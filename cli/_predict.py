@@ -42,6 +42,67 @@ def _read_frame(path: str) -> dict[str, np.ndarray]:
     return {k: v for k, v in frame.items() if k not in finals}
 
 
+#: The bytes a prediction of a frame holds besides the arrays it reads (Python, numpy, onnxruntime, the model) and for
+#: each pixel of the frame (the arrays' float copies, the input planes and the reprojection, the checks' temporaries):
+#: the peak resident set of `rtp predict` (jnyang) on example frames of 320x180 and 1280x720 (84 bytes a pixel read)
+#: was 92 and 344 MiB, 306 bytes a pixel.
+PREDICT_BASE = 64 * 2**20
+PREDICT_PER_PIXEL = 220.0
+
+
+def _array_headers(path: str) -> dict[str, tuple[tuple[int, ...], np.dtype[Any]]] | None:
+    """The shape and dtype of each array of a frame file, read from the arrays' headers (no array is loaded); None
+    where the file is no .npz numpy reads (``read_frame`` names what is wrong with it at its turn)."""
+    import zipfile
+
+    out: dict[str, tuple[tuple[int, ...], np.dtype[Any]]] = {}
+    try:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with z.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                              else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = header(fh)
+                out[info.filename[:-4]] = (tuple(int(n) for n in shape), dtype)
+    except Exception:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
+        return None
+    return out
+
+
+def _check_frames_memory(files: list[str]) -> None:
+    """Refuse (``RTP_MEMORY_CHECK``, as ``rtp import``) a frame whose prediction would hold more than the machine's
+    memory, from its arrays' headers, before the first frame is read: an array whose header says a huge shape was read
+    until numpy's MemoryError, reported as a damaged file, or until the system killed the run."""
+    from rtp import sdk
+    from rtp.capture import check_memory
+
+    known = {*sdk.GBUFFERS, COLOUR_KEY, ENGINE_RATES_KEY}  # (what _read_frame reads: the final_<rate> are not)
+    worst: tuple[int, str, int, list[tuple[int, str, tuple[int, ...], np.dtype[Any]]]] | None = None
+    for path in files:
+        headers = _array_headers(path)
+        if not headers:
+            continue
+        sizes = [(int(np.prod(shape, dtype=np.float64)) * dtype.itemsize, key, shape, dtype)
+                 for key, (shape, dtype) in headers.items() if key in known]
+        depth = headers.get("depth", ((), np.dtype(np.float32)))[0]
+        pixels = int(np.prod(depth[:2], dtype=np.float64)) if len(depth) >= 2 else 0
+        read = sum(n for n, *_ in sizes)
+        need = int(PREDICT_BASE + PREDICT_PER_PIXEL * pixels + read)
+        if worst is None or need > worst[0]:
+            worst = (need, path, read, sizes)
+    if worst is None:
+        return
+    need, path, read, sizes = worst
+    n, key, shape, dtype = max(sizes, key=lambda s: s[0]) if sizes else (0, "", (), np.dtype(np.float32))
+    largest = f" (the largest, {key}: shape {shape}, {dtype}, {n / 2**30:.1f} GiB)" if sizes else ""
+    check_memory(need, f"{path!r}: a prediction of it holds about {need / 2**30:.1f} GiB ({need} bytes), its arrays "
+                       f"{read / 2**30:.1f} GiB{largest}", "frame",
+                 "of memory: smaller frames, or arrays of the shapes their headers should say", job="rtp predict")
+
+
 def _frame_arrays(prev: Any, cur: Any, prev_cam: Any, cam: Any, size: tuple[int, int]) -> dict[str, np.ndarray]:
     """A rendered frame's G-buffers named as ``sdk.input_planes`` takes them (and ``colour``)."""
     w, h = size
@@ -177,6 +238,27 @@ def _warn_of_order(files: list[str]) -> None:
 
 #: The planes prediction reuse reads besides a model's: where each pixel was (its motion) and the sky.
 _REUSE_PLANES = ("motion.x", "motion.y", "depth")
+#: The planes that tell a ``prev_colour`` (or a ``colour``) in linear light, made where a frame holds ``colour``: the
+#: previous frame reprojected, where it was seen, and the sky (``rtp.capture.linear_light_warning``, as ``rtp import``
+#: checks ``final_1x1``). The shipped models reproject anyway: one reprojection serves both.
+_ENCODING_PLANES = ("reprojected.r", "reprojected.g", "reprojected.b", "seen", "depth")
+
+
+def _shown(frame: dict[str, np.ndarray]) -> np.ndarray | None:
+    """A frame's ``colour`` as float ``(H, W, 3)`` in [0, 1] for the linear-light check: float display values or UNORM
+    integers (``uint8``, ``uint16``) of the depth's size, RGB or RGBA; None for anything else (an HDR colour, out of
+    [0, 1], is not the frame as shown: nothing to compare)."""
+    a = np.asarray(frame[COLOUR_KEY])
+    if a.ndim != 3 or a.shape[:2] != np.shape(frame["depth"])[:2] or a.shape[2] not in (3, 4):
+        return None
+    if a.dtype == np.uint8 or a.dtype == np.uint16:
+        return a[..., :3].astype(np.float32) / np.float32(np.iinfo(a.dtype).max)
+    if a.dtype.kind != "f":
+        return None
+    v = np.asarray(a[..., :3], np.float32)
+    if not np.isfinite(v).all() or (v.size and (v.min() < -1e-3 or v.max() > 1 + 1e-3)):
+        return None
+    return np.clip(v, 0.0, 1.0)
 
 
 # the SDK's options as its messages name them (normal_space='world'), and the flags that set them here
@@ -189,13 +271,14 @@ def _in_flags(text: str) -> str:
 
 
 def _warn_of_conventions(path: str, buffers: dict[str, Any], args: argparse.Namespace,
-                         warned: dict[str, list[Any]]) -> list[str]:
-    """``sdk.check_gbuffers``' warnings for a frame, logged each kind once (``warned``: per kind, the frames that
-    had it and its first text; the numbers in a warning differ from frame to frame); all of them returned."""
+                         warned: dict[str, list[Any]], more: list[str] | None = None) -> list[str]:
+    """``sdk.check_gbuffers``' warnings for a frame, and ``more`` (the linear-light check's), logged each kind once
+    (``warned``: per kind, the frames that had it and its first text; the numbers in a warning differ from frame to
+    frame); all of them returned."""
     from rtp import sdk
 
     texts = [_in_flags(t) for t in sdk.check_gbuffers(**buffers, normal_space=args.normal_space,
-                                                      depth_kind=args.depth_kind)]
+                                                      depth_kind=args.depth_kind)] + list(more or [])
     for text in texts:
         kind = warned.setdefault(re.sub(r"-?\d[\d.]*", "#", text), [0, f"{path}: {text}"])
         kind[0] += 1
@@ -224,14 +307,19 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
     """One frame file's summary, arrays, predicted values and rate codes; with ``reuse`` (an
     ``sdk.PredictionReuse``) its values, the network run or its estimates carried from the frame before
     along the frame's motion. What in the frame looks like a convention mistake is logged
-    (``sdk.check_gbuffers``), each kind once in ``warned``. With ``args.saving`` the rates save that share
-    of the work at the frame's lowest threshold, which the summary holds instead of ``threshold``."""
+    (``sdk.check_gbuffers``; where the frame holds ``colour``, a ``prev_colour`` or ``colour`` in linear light too),
+    each kind once in ``warned``. With ``args.saving`` the rates save that share of the work at the frame's lowest
+    threshold, which the summary holds instead of ``threshold``."""
     from rtp import sdk
+    from rtp.capture import linear_light_warning
 
     frame = _read_frame(path)
     inputs = predictor.metadata.inputs
     extra = [c for c in _REUSE_PLANES if c not in inputs] if reuse is not None else []
     buffers: dict[str, Any] = {k: v for k, v in frame.items() if k in sdk.GBUFFERS}
+    shown = _shown(frame) if COLOUR_KEY in frame and "depth" in frame else None
+    encoding = list(_ENCODING_PLANES) if shown is not None and all(
+        b in buffers for b in sdk.gbuffers_needed(_ENCODING_PLANES)) else []
     missing = [b for b in sdk.gbuffers_needed([*inputs, *extra]) if b not in buffers]
     if missing:
         reads = (f"{predictor.path.name if predictor.path else args.model}"
@@ -240,9 +328,16 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
             f"{path!r} has no {', '.join(repr(b) for b in missing)} array{'s' if len(missing) > 1 else ''}, which "
             f"{reads} reads: " + "; ".join(f"{b} {sdk.GBUFFERS[b][0]}, {sdk.GBUFFERS[b][1]}" for b in missing),
             "frame")
-    planes = sdk.input_planes([*inputs, *extra], **buffers, albedo_linear=args.albedo_linear,
+    planes = sdk.input_planes([*inputs, *extra, *encoding], **buffers, albedo_linear=args.albedo_linear,
                               normal_space=args.normal_space, depth_kind=args.depth_kind)
-    warnings = _warn_of_conventions(path, buffers, args, {} if warned is None else warned)
+    linear = None
+    if encoding and shown is not None:  # (the frame shown beside the previous one reprojected, as rtp import's final_1x1)
+        rep_r, rep_g, rep_b, seen, depth = planes[len(inputs) + len(extra):]
+        linear = linear_light_warning(np.stack([rep_r, rep_g, rep_b], axis=-1), seen, shown, depth > 0.0,
+                                      name=COLOUR_KEY)
+        planes = planes[:len(inputs) + len(extra)]
+    warnings = _warn_of_conventions(path, buffers, args, {} if warned is None else warned,
+                                    [linear] if linear else None)
     x = planes[:len(inputs)]
     h, w = x.shape[1:]
     start = time.perf_counter()
@@ -371,6 +466,7 @@ def run_predict(args: argparse.Namespace) -> int:
     if args.every is not None and not sequence:
         raise sdk.ParameterError(f"--every {args.every}: prediction reuse carries estimates from frame to frame; give "
                                  "a sequence (several frame files, or a folder of them)", "every")
+    _check_frames_memory(files)  # (from the arrays' headers: a frame past the machine's memory, before any work)
     from ._main import _load
 
     predictor = _load(args, tile_size=args.tile_size)  # (a foreign model's sidecar: --metadata)
@@ -397,7 +493,8 @@ def run_predict(args: argparse.Namespace) -> int:
         summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
                "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
-               "threshold": summary["threshold"], "saving": args.saving, "rates": summary["rates"],
+               "threshold": summary["threshold"], "threshold_given": args.threshold, "saving": args.saving,
+               "rates": summary["rates"],
                "work_saved": summary["work_saved"], "predict_ms": summary["predict_ms"], "warnings": summary["warnings"],
                **({} if args.combiner is None else {"combiner": args.combiner,
                                                     "engine_work_saved": summary["engine_work_saved"]})}
@@ -489,7 +586,9 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     changes = [r["changed"] for r in rows if r["changed"] is not None]
     summary: dict[str, Any] = {
         "frames": rows, "model": model, "metric": predictor.metadata.metric, "size": first_size,
-        "tile_size": predictor.tile_size, "threshold": threshold if args.saving is None else None, "saving": args.saving,
+        "tile_size": predictor.tile_size, "threshold": threshold if args.saving is None else None,
+        # (--threshold as given: with --saving the threshold the saving is a floor under, recorded nowhere else)
+        "threshold_given": args.threshold, "saving": args.saving,
         "work_saved": float(np.mean([r["work_saved"] for r in rows])),
         "changed": float(np.mean(changes)) if changes else None,
         "predict_ms": float(np.median([r["predict_ms"] for r in rows])),

@@ -288,7 +288,8 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
     read), naming the file and what numpy said. Only the arrays returned are read: another array (an engine's
     own metadata, saved as a pickled object array) is named and left unread; one returned that is a pickled object
     array is a :class:`ParameterError` naming it (numpy's ``allow_pickle=False``: unpickling runs code the file
-    holds)."""
+    holds), and so is one numpy cannot allocate (``MemoryError``: a frame too large for the machine, or a header that
+    says a wrong shape), naming the array."""
     from ._planes import GBUFFERS
 
     p = Path(path)
@@ -308,6 +309,11 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
                     continue
                 try:
                     arrays[key] = npz[key]
+                except MemoryError as err:  # (not damage: a frame too large, or a header that says a wrong shape)
+                    raise ParameterError(
+                        f"{name!r}: {key} does not fit in memory, numpy cannot allocate the array its header "
+                        f"describes ({err}): a frame too large for this machine, or a header that says a wrong shape",
+                        key) from None
                 except ValueError as err:
                     if "allow_pickle" not in str(err):
                         raise
@@ -320,7 +326,7 @@ def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),
     except ParameterError:
         raise
     except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError,
-        # KeyError, a mangled header's SyntaxError, MemoryError from one claiming a huge shape, OSError, ...)
+        # KeyError, a mangled header's SyntaxError, OSError, ...)
         raise ParameterError(f"{name!r}: a damaged .npz, numpy cannot read its arrays ({type(err).__name__}: {err})",
                              "frame") from None
     for key in sorted(set(files) - set(known)):

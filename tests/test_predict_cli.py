@@ -832,3 +832,131 @@ def test_motion_and_depth_in_another_engines_convention_are_warned(frame: Path, 
             assert warnings == [], warnings
         else:
             assert any(re.search(match, t) for t in warnings), (name, warnings)
+
+
+def test_colour_in_linear_light_is_warned_where_the_frame_shown_is_given(
+        frame: Path, sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A prev_colour dumped in linear light (a target read back before its sRGB conversion) darkens every reprojected
+    tone, and the work saved fell (48% to 9% on a reference frame) without a word: where the frame holds ``colour``,
+    the frame shown, the previous frame reprojected against it names the one in linear light, as rtp import's
+    final_1x1 does (an 8-bit RGBA read-back too); colour all in linear light, or no colour, says nothing."""
+    with np.load(frame) as npz:
+        arrays = dict(npz)
+
+    def linear(x: np.ndarray) -> np.ndarray:
+        return np.asarray(sdk.srgb_to_linear(x), np.float32)
+
+    rgba8 = np.dstack([np.round(arrays["colour"] * 255).astype(np.uint8), np.full(arrays["depth"].shape, 255, np.uint8)])
+    cases = {"reference": {}, "prev": {"prev_colour": linear(arrays["prev_colour"])},
+             "colour": {"colour": linear(arrays["colour"])},
+             "rgba8": {"prev_colour": linear(arrays["prev_colour"]), "colour": rgba8},
+             "all": {"prev_colour": linear(arrays["prev_colour"]), "colour": linear(arrays["colour"])},
+             "no_colour": {"prev_colour": linear(arrays["prev_colour"]), "colour": None}}
+    for name, change in cases.items():
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **{k: v for k, v in {**arrays, **change}.items() if v is not None})
+        assert main(["predict", str(path), "--json"]) == 0, name
+        warnings = json.loads(capsys.readouterr().out)["warnings"]
+        if name in ("reference", "all", "no_colour"):
+            assert warnings == [], (name, warnings)
+            continue
+        key = "colour" if name == "colour" else "prev_colour"
+        assert len(warnings) == 1 and warnings[0].startswith(f"{key}: looks like linear light"), (name, warnings)
+        assert "display-encoded, as shown (tone-mapped, sRGB)" in warnings[0] and "sdk.linear_to_srgb" in warnings[0]
+    # a sequence: logged once, with the count of the other frames
+    bad = tmp_path / "linear"
+    bad.mkdir()
+    for f in sorted(sequence.glob("*.npz")):
+        with np.load(f) as npz:
+            np.savez(bad / f.name, **{k: linear(npz[k]) if k == "prev_colour" else npz[k] for k in npz.files})
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.cli"):
+        assert main(["predict", str(bad)]) == 0
+    capsys.readouterr()
+    said = [r.getMessage() for r in caplog.records if "linear light" in r.getMessage()]
+    assert len(said) == 2 and said[0].startswith(f"{bad / 'frame_0000.npz'}: prev_colour: looks like linear light: "
+                                                 "reprojected, it differs from colour by "), said
+    assert said[1].startswith("... and on 3 more frames of the sequence: "), said
+
+
+def test_a_threshold_given_with_a_saving_is_in_the_json(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--threshold T --saving S on a sequence: the summary's threshold is null (each frame reached its own) and T was
+    nowhere in the JSON; it is ``threshold_given``, for a frame too (whose ``threshold`` is the one reached)."""
+    files = [str(f) for f in sorted(sequence.glob("*.npz"))[:2]]
+    assert main(["predict", *files, "--saving", "0.55", "--threshold", "0.2", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["threshold"] is None and got["threshold_given"] == 0.2 and got["saving"] == 0.55
+    assert main(["predict", files[0], "--saving", "0.55", "--threshold", "0.2", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["threshold_given"] == 0.2 and got["threshold"] >= 0.2
+    for options in ([], ["--saving", "0.55"]):
+        assert main(["predict", *files, *options, "--json"]) == 0
+        got = json.loads(capsys.readouterr().out)
+        assert got["threshold_given"] is None and (got["threshold"] is None) == bool(options)
+    assert main(["predict", *files, "--threshold", "0.3", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["threshold_given"] == 0.3 == got["threshold"]
+
+
+def _huge_header(frame: Path, path: Path, key: str, shape: tuple[int, ...]) -> None:
+    """``frame`` with ``key``'s header saying ``shape`` (its data as it was)."""
+    import io
+    import zipfile
+
+    with np.load(frame) as npz:
+        arrays = dict(npz)
+    with zipfile.ZipFile(path, "w") as z:
+        for k, v in arrays.items():
+            buf = io.BytesIO()
+            if k == key:
+                np.lib.format.write_array_header_1_0(buf, {"descr": v.dtype.str, "fortran_order": False, "shape": shape})
+                buf.write(v.tobytes())
+            else:
+                np.save(buf, v)
+            z.writestr(f"{k}.npy", buf.getvalue())
+
+
+def test_frames_past_the_machines_memory_are_refused_before_any_is_read(
+        frame: Path, sequence: Path, tmp_path: Path, machine_memory: Any, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A frame whose array's header says a huge shape was read until numpy's MemoryError, reported as "a damaged
+    .npz" (or, where the allocation succeeded, until the system killed the run): rtp predict sizes each frame from
+    its arrays' headers before any is read, as rtp import does (RTP_MEMORY_CHECK), naming the file, the array and
+    the bytes needed."""
+    from rtp.cli import _predict
+
+    read: list[Any] = []
+    real = _predict._read_frame
+    monkeypatch.setattr(_predict, "_read_frame", lambda p: read.append(p) or real(p))
+    huge = sequence.parent / "huge_frames"  # (a sequence whose third frame is the huge one)
+    huge.mkdir()
+    for i, f in enumerate(sorted(sequence.glob("*.npz"))[:3]):
+        if i == 2:
+            _huge_header(f, huge / f.name, "albedo", (100_000, 100_000, 3))
+        else:
+            (huge / f.name).write_bytes(f.read_bytes())
+    machine_memory(MemTotal=8 * 2**30)
+    assert main(["predict", str(huge)]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"rtp predict: error: frame: '[^']*frame_0002.npz': a prediction of it holds about 111.8 GiB "
+                     r"\(\d+ bytes\), its arrays 111.8 GiB \(the largest, albedo: shape \(100000, 100000, 3\), "
+                     r"float32, 111.8 GiB\), more than this machine's 8.0 GiB of memory: smaller frames.*"
+                     r"\(RTP_MEMORY_CHECK=warn runs it anyway\)$", err.strip()), err
+    assert read == []  # (refused before the first frame was read)
+    assert main(["predict", str(frame), "--json"]) == 0  # a 160x96 frame: about 69 MiB
+    capsys.readouterr()
+    machine_memory(MemTotal=32 * 2**20)
+    assert main(["predict", str(frame), "--json"]) == 2
+    assert "frame: " in capsys.readouterr().err and len(read) == 1
+    # past the check (RTP_MEMORY_CHECK=off), numpy's MemoryError names the array, not a damaged file
+    monkeypatch.setenv("RTP_MEMORY_CHECK", "off")
+
+    def no_memory(self: Any, key: str) -> Any:
+        raise MemoryError(f"Unable to allocate for {key}")
+
+    monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__", no_memory)
+    with pytest.raises(sdk.ParameterError, match=r"frame.npz': depth does not fit in memory, numpy cannot allocate the "
+                                                 r"array its header describes \(Unable to allocate for depth\)") as e:
+        sdk.files.read_frame(frame)
+    assert e.value.name == "depth" and "damaged" not in str(e.value)
