@@ -53,7 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--savings", default="0.5,0.6,0.7,0.8", help="budgets to try with the foveated periphery")
     args = ap.parse_args(argv)
     try:
-        savings = [float(s) for s in args.savings.split(",")]
+        # once each, in the order given (a saving given twice was tallied twice into one row: its failing tiles beyond
+        # the engine's doubled, and the row printed twice)
+        savings = list(dict.fromkeys(float(s) for s in args.savings.split(",")))
     except ValueError as err:
         raise UsageError(f"--savings: expected numbers, comma-separated, got {args.savings!r}") from err
     if not all(0.0 <= s <= sdk.MAX_SAVING for s in savings):  # (NaN fails too; before the samples are read)

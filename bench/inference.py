@@ -74,10 +74,12 @@ def _models(folder: Path, threads: int, extra: list[str]) -> dict[str, tuple[sdk
         add(f"shipped {name}", Path(str(pred.path)), arch)
     names = [Path(p).name for p in dict.fromkeys(extra)]
     for path in dict.fromkeys(extra):  # (a file given twice: one row)
-        arch = str(sdk.load(path).metadata.provenance.get("arch", "paper"))
+        given = sdk.load(path)
+        arch = str(given.metadata.provenance.get("arch", "paper"))
         # by its file name, or its path as given where two share a name (data/old/jnyang.onnx beside
-        # data/joined/jnyang.onnx: the one row of the last before)
-        add(Path(path).name if names.count(Path(path).name) == 1 else path, Path(path), arch)
+        # data/joined/jnyang.onnx: the one row of the last before); read from the file sdk.load found (a
+        # shipped model's name, `jnyang`, is no file in the working folder: its parameters were read there)
+        add(Path(path).name if names.count(Path(path).name) == 1 else path, Path(str(given.path)), arch)
     return out
 
 

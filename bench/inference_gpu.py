@@ -195,6 +195,16 @@ def _graphed(net: nn.Module, x: torch.Tensor):  # type: ignore[no-untyped-def]
     return graph.replay
 
 
+def given_models(models: list[str]) -> dict[str, Path]:
+    """The files of the models given (``MODEL.onnx`` or a shipped model's name, which is no file in the working
+    folder: rebuilt from the file ``sdk.load`` finds), each once, by file name, or by the path as given where two
+    share one (``data/old/jnyang.onnx`` beside ``data/joined/jnyang.onnx`` were one row, the last), as
+    ``bench/inference.py`` names them."""
+    found = {m: Path(str(sdk.load(m, providers=["CPUExecutionProvider"]).path)) for m in dict.fromkeys(models)}
+    names = [Path(m).name for m in found]
+    return {(Path(m).name if names.count(Path(m).name) == 1 else m): path for m, path in found.items()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=positive, default=200)
@@ -202,6 +212,7 @@ def main() -> None:
     ap.add_argument("models", nargs="*", help="more .onnx models to time")
     args = ap.parse_args()
     frames = args.frames
+    given = given_models(args.models)  # (a model that does not load: refused before the GPU is asked for)
     if not torch.cuda.is_available():
         print("bench/inference_gpu.py needs a CUDA GPU, and torch sees none (CPU timings: bench/inference.py)",
               file=sys.stderr)
@@ -211,7 +222,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         paths = {"paper's network (random weights)": paper_model(Path(d))[1]}
         paths.update({f"shipped {n}": Path(str(sdk.load(n).path)) for n in sdk.shipped_models()})
-        paths.update({Path(p).name: Path(p) for p in args.models})
+        paths.update(given)
         meta = {name: sdk.load(p).metadata for name, p in paths.items()}
         nets = {name: torch_from_onnx(p) for name, p in paths.items()}
         has_cuda_ep = "CUDAExecutionProvider" in ort.get_available_providers()

@@ -37,10 +37,13 @@ def _grid(thr: float, hib: bool) -> np.ndarray:
     return np.round(np.arange(thr - 25.0, thr + 25.01, 0.25), 2) if hib else thr * np.geomspace(1 / 16, 16, 161)
 
 
-def _score(preds: list[np.ndarray], gts: list[np.ndarray], t: float, thr: float, hib: bool) -> tuple[float, float]:
+def _score(preds: list[np.ndarray], gts: list[np.ndarray], t: float, thr: float, hib: bool,
+           factors: tuple[float, ...] | None = None) -> tuple[float, float]:
+    """(failing share, work saved) of the rates ``select_rates`` chooses at ``t`` (with ``factors``, a model's
+    ``rate_factors``, as that model decides) against the targets judged at ``thr``."""
     fails = saved = n = 0.0
     for p, g in zip(preds, gts, strict=True):
-        codes = sdk.select_rates(p, t, higher_is_better=hib)
+        codes = sdk.select_rates(p, t, higher_is_better=hib, factors=factors)
         fails += failing_tiles(codes, g, thr, hib).sum()
         saved += sdk.work_saved(codes, (p.shape[-2] * 16, p.shape[-1] * 16), 16) * codes.size
         n += codes.size
@@ -80,7 +83,8 @@ def main() -> None:
             store = TargetStore(args.data)
             gts = [store.load(i, metric, 16) for i in ids]
             x = [reader[i].inputs(ours.metadata.inputs) for i in ids]
-            f_ours, s_ours = _score([ours.predict(v) for v in x], gts, thr, thr, hib)
+            # (as the shipped model decides at its default: with its thresholds per rate; the published ones have none)
+            f_ours, s_ours = _score([ours.predict(v) for v in x], gts, thr, thr, hib, ours.metadata.rate_factors)
             adopted = export.adopt(Path(args.models) / name, None, Path(tmp) / name, dynamic=True)
             theirs = sdk.load(adopted, tile_size=16)
             gts_t = [TargetStore(args.data_l0).load(i, metric, 16) for i in ids] if metric == "jnyang" else gts

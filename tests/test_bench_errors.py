@@ -332,6 +332,45 @@ def test_published_checks_what_its_rows_read_before_the_first(tmp_path: Path, mo
     assert capsys.readouterr().out == ""
 
 
+def test_published_measures_the_shipped_model_as_it_decides(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """published.py's "rtp model" column, the failing share the published models' thresholds are fitted to, chose
+    the shipped model's rates with one threshold: since the shipped models carry thresholds per rate (`rate_factors`)
+    it was not the model at its default (flip on data/val720: 9.8% failing / 49.2% saved, where the model's own
+    decisions fail on 8.0% and save 50.4%; the published FLIP's threshold fitted to it 0.14, not 0.1218). It is
+    measured on the rates `shading_rates` gives now."""
+    from rtp import sdk
+    from rtp.capture import DatasetReader, TargetStore, capture, compute_targets
+    from rtp.evaluate import failing_tiles
+
+    from .conftest import bench_module
+
+    capture(["procedural:0"], tmp_path / "d", per_scene=2, size=(256, 160))
+    compute_targets(tmp_path / "d", ("jnyang",))
+    data = str(tmp_path / "d")
+    mod = bench_module("published", monkeypatch)
+    monkeypatch.setattr(mod, "load_splits", lambda: {"validation": ["procedural:0"]})
+    monkeypatch.setattr(mod, "FILES", {"jnyang": "JNYang.onnx"})
+    monkeypatch.setattr(sys, "argv", ["published.py", "--data", data, "--data-l0", data])
+    ours, reader, store = sdk.load("jnyang"), DatasetReader(data), TargetStore(data)
+    meta = ours.metadata
+    assert meta.rate_factors is not None and len(set(meta.rate_factors)) > 1
+    shown = {}
+    for factors in (meta.rate_factors, None):  # (what the model does, and one threshold: they differ here)
+        fails = saved = n = 0.0
+        for i in reader.ids:
+            est = ours.predict(reader[i].inputs(meta.inputs))
+            codes = sdk.select_rates(est, meta.default_threshold, factors=factors)
+            fails += failing_tiles(codes, store.load(i, "jnyang", 16), meta.default_threshold, False).sum()
+            saved += sdk.work_saved(codes, reader[i].size, 16) * codes.size
+            n += codes.size
+        shown[factors] = f"{100 * fails / n:.1f}% / {100 * saved / n:.1f}%"
+    assert shown[meta.rate_factors] != shown[None], shown
+    mod.main()
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| jnyang |"))
+    assert row.split("|")[3].strip() == shown[meta.rate_factors], (row, shown)
+
+
 def test_scaling_runs_the_pool_without_ray_and_names_the_extra_for_ray(monkeypatch: pytest.MonkeyPatch,
                                                                         capsys: pytest.CaptureFixture[str]) -> None:
     """scaling.py imported Ray at its top: `--modes pool` (docs/scaling.md) failed without the ray extra, and
@@ -373,6 +412,25 @@ def test_the_inference_bench_keeps_two_models_of_one_file_name(tmp_path: Path, m
     models = mod._models(tmp_path, 1, [*given, other, other])
     assert list(models) == ["paper's network (random weights)", *given, "other.onnx"], list(models)
     assert [str(p.path) for p, _ in list(models.values())[1:3]] == given
+
+
+def test_the_inference_bench_times_a_shipped_model_given_by_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`bench/inference.py jnyang` (a shipped model's name, as every rtp command takes it) passed the check before
+    timing, then, after the timing, read its parameters from a file `jnyang` in the working folder: "No such file or
+    directory: 'jnyang'". Its row is read from the file sdk.load finds."""
+    from rtp import sdk
+
+    from .conftest import bench_module
+
+    mod = bench_module("inference", monkeypatch)
+    shipped = Path(str(sdk.load("jnyang").path))
+    monkeypatch.setattr(mod, "paper_model", lambda *args, **kwargs: (None, shipped))
+    monkeypatch.setattr(mod, "FAST", ())
+    monkeypatch.setattr(mod.sdk, "shipped_models", lambda: [])
+    monkeypatch.chdir(tmp_path)
+    models = mod._models(tmp_path, 1, ["jnyang"])
+    assert list(models) == ["paper's network (random weights)", "jnyang"], list(models)
+    assert str(models["jnyang"][0].path) == str(shipped) and models["jnyang"][1] == ("fast", mod._params(shipped))
 
 
 def test_hardware_tiles_says_where_its_sweep_ends_instead_of_reading_its_last_point() -> None:

@@ -84,3 +84,27 @@ def test_without_a_gpu_the_benchmark_says_so_and_exits_2() -> None:
     bad = subprocess.run([sys.executable, str(BENCH / "inference_gpu.py"), "--frames", "1920by1080"],
                          capture_output=True, text=True, env=env, timeout=120)
     assert bad.returncode != 0 and "expected WIDTHxHEIGHT" in bad.stderr
+
+
+def test_the_models_given_are_read_from_their_files_each_once_and_apart(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """`bench/inference_gpu.py jnyang` (a shipped model's name) rebuilt the network from a file `jnyang` in the working
+    folder (FileNotFoundError, after the paper's network and every shipped model were exported and loaded), and two
+    given files of one name (`data/old/jnyang.onnx data/joined/jnyang.onnx`) were one row, the last. Each is found
+    as sdk.load finds it, named as bench/inference.py names them; one that is not there is refused first."""
+    import shutil
+
+    mod, _ = _bench_module()
+    shipped = Path(str(sdk.load("jnyang").path))
+    monkeypatch.chdir(tmp_path)
+    given = []
+    for folder in ("old", "joined"):
+        (tmp_path / folder).mkdir()
+        given.append(str(shutil.copy(shipped, tmp_path / folder / "jnyang.onnx")))
+    assert mod.given_models(["jnyang", *given, "jnyang"]) == {
+        "jnyang": shipped, given[0]: Path(given[0]), given[1]: Path(given[1])}
+    env = {**os.environ, "CUDA_VISIBLE_DEVICES": ""}
+    out = subprocess.run([sys.executable, str(BENCH / "inference_gpu.py"), "nosuchmodel"], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert out.returncode == 2 and out.stderr.startswith("inference_gpu.py: error: no model file at 'nosuchmodel'"), \
+        out.stderr
