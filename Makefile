@@ -66,15 +66,18 @@ lint: $(STAMP)
 	$(BIN)/ruff check $(SOURCES)
 
 # mypy cannot follow setuptools' package-dir mapping (sdk/ -> rtp.sdk, ...): link the rooms into an
-# rtp/ tree under build/ and check that package.
-TYPECHECK := build/typecheck
+# rtp/ tree under build/ and check that package. Each run links its own tree (two runs at once shared
+# one: the second's `ln -s` went through the first's links and left sdk/sdk, capture/capture, ... in the
+# rooms, and a tree removed under a running mypy crashed it); the cache is shared.
 typecheck: $(STAMP)
-	rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/rtp/plugins
-	for d in sdk scene capture metrics evaluate train export conformance cli models; do ln -s $(CURDIR)/$$d $(TYPECHECK)/rtp/$$d; done
-	for d in moderngl pyrender; do ln -s $(CURDIR)/plugins/$$d $(TYPECHECK)/rtp/plugins/$$d; done
-	ln -s $(CURDIR)/plugins/__init__.py $(TYPECHECK)/rtp/plugins/__init__.py
-	ln -s $(CURDIR)/cli/_package/__init__.py $(TYPECHECK)/rtp/__init__.py
-	cd $(TYPECHECK) && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml -p rtp
+	@mkdir -p build
+	set -e; tree=$$(mktemp -d $(CURDIR)/build/typecheck.XXXXXX); trap 'rm -rf "$$tree"' EXIT; \
+	mkdir -p $$tree/rtp/plugins; \
+	for d in sdk scene capture metrics evaluate train export conformance cli models; do ln -s $(CURDIR)/$$d $$tree/rtp/$$d; done; \
+	for d in moderngl pyrender; do ln -s $(CURDIR)/plugins/$$d $$tree/rtp/plugins/$$d; done; \
+	ln -s $(CURDIR)/plugins/__init__.py $$tree/rtp/plugins/__init__.py; \
+	ln -s $(CURDIR)/cli/_package/__init__.py $$tree/rtp/__init__.py; \
+	cd $$tree && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml --cache-dir $(CURDIR)/build/mypy-cache -p rtp
 
 check: lint typecheck test
 
