@@ -117,7 +117,8 @@ def load_scene(path: Path) -> Any:
     if tm.has_camera:  # the file's (first) camera is the start of the move, its pose and field of view
         cam = tm.camera
         scene.add(pyrender.PerspectiveCamera(yfov=math.radians(float(cam.fov[1])), znear=float(cam.z_near),
-                                             zfar=float(cam.z_far)), pose=np.asarray(tm.camera_transform), name=cam.name)
+                                             zfar=float(cam.z_far)), pose=_placement(tm.camera_transform, path),
+                  name=cam.name)
         log.info("--scene %s: the camera starts at the file's camera %r (%.0f degrees high)", path, cam.name,
                  float(cam.fov[1]))
     # pyrender's shading needs a light; a sun-like directional light from above
@@ -125,6 +126,21 @@ def load_scene(path: Path) -> Any:
     sun[:3, :3] = _rotation(yaw=30.0, pitch=-60.0)
     scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=3.0), pose=sun)
     return scene
+
+
+def _placement(transform: Any, path: Path) -> np.ndarray:
+    """A file camera's world transform without the scale its nodes give it (a root node scaled 0.01 to turn
+    centimetres into metres scales the camera too): its rotation and position, which is where it looks from. The
+    adapter takes rigid poses only; the scaled one was refused, and the example ended on such a file."""
+    m = np.asarray(transform, np.float64)
+    u, _, vt = np.linalg.svd(m[:3, :3])  # (the nearest rotation: the polar decomposition's)
+    rotation = u @ vt  # (a mirroring node stays one: the adapter refuses it, naming the mirror)
+    if not np.allclose(rotation, m[:3, :3], atol=1e-6):
+        log.info("--scene %s: the camera's nodes scale it (axes %s long): placed by their rotation and position only",
+                 path, np.round(np.linalg.norm(m[:3, :3], axis=0), 4).tolist())
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rotation, m[:3, 3]
+    return out
 
 
 def _rotation(yaw: float, pitch: float) -> np.ndarray:

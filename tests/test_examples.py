@@ -306,6 +306,34 @@ def test_pyrender_example_starts_at_the_cameras_of_the_scene_file(tmp_path: Path
     assert example.load_scene(tmp_path / "bare.glb").main_camera_node is None
 
 
+@pytest.mark.gl
+def test_pyrender_example_places_a_scaled_file_camera_by_its_rotation_and_position(tmp_path: Path) -> None:
+    """A glTF whose camera sits under a scaled node (a root scaled 0.01, centimetres to metres) gives a camera
+    transform with axes 0.01 long: ``load_scene`` put that pose on the camera and the adapter refused it as not
+    rigid, so the example ended on the file. The camera is now placed by its rotation and position."""
+    import numpy as np
+    import trimesh
+
+    example: Any = _pyrender_example()
+    level = trimesh.Scene(trimesh.creation.box((2.0, 2.0, 2.0)))
+    pose = np.diag([0.01, 0.01, 0.01, 1.0])
+    pose[:3, :3] = pose[:3, :3] @ trimesh.transformations.rotation_matrix(0.3, (0.0, 1.0, 0.0))[:3, :3]
+    pose[:3, 3] = (1.5, 0.3, 6.0)
+    level.camera_transform = pose
+    level.export(tmp_path / "level.glb")
+    scene = example.load_scene(tmp_path / "level.glb")
+    p0, _ = example.camera_poses(scene, None)
+    rigid = np.eye(4)
+    rigid[:3, :3] = trimesh.transformations.rotation_matrix(0.3, (0.0, 1.0, 0.0))[:3, :3]
+    rigid[:3, 3] = (1.5, 0.3, 6.0)
+    np.testing.assert_allclose(p0, rigid, atol=1e-6)
+    out = tmp_path / "vrs.png"
+    proc = subprocess.run([sys.executable, str(ROOT / "examples" / "pyrender_vrs.py"), "--scene", str(tmp_path / "level.glb"),
+                           "--size", "64x48", "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert out.is_file() and "placed by their rotation and position only" in proc.stderr
+
+
 def test_moderngl_examples_walk_goes_forward() -> None:
     """The walk was documented as 3 m/s forward but stepped along (+sin yaw, -cos yaw), the heading mirrored left to
     right (``Camera.forward`` is (-sin yaw, 0, -cos yaw)): from seed 3's spawn point, looking 49 degrees left of -Z,

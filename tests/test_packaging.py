@@ -21,7 +21,7 @@ DATA = {
     "models": ("rtp/models", "*.onnx"),
     "train/recipes": ("rtp/train/recipes", "*.yaml"),
     "plugins/moderngl/shaders": ("rtp/plugins/moderngl/shaders", "*.glsl"),
-    "plugins/pyrender/shaders": ("rtp/plugins/pyrender/shaders", "*.frag"),
+    "plugins/pyrender/shaders": ("rtp/plugins/pyrender/shaders", "gbuffer.*"),
     "capture/scenes": ("rtp/capture/scenes", "scenes.yaml"),
     "export": ("rtp/export", "published.yaml"),
 }

@@ -138,7 +138,9 @@ class SceneFrame:
             the previous ``inputs`` call when it was at ``prev_pose`` with the same scene and camera
             (the usual frame loop), else rendered (one extra pass). pyrender's own ``render()``
             depth comes from its 4x MSAA target (a sample off the pixel centre), which costs the
-            disocclusion test on grazing surfaces (docs/adapters.md).
+            disocclusion test on grazing surfaces (docs/adapters.md). With an ``OrthographicCamera`` that
+            depth is not linear depth at all (pyrender linearises every camera's as a perspective's):
+            :meth:`Adapter.render` gives it converted; a renderer's own needs ``n + f - n f / d``.
         camera, prev_camera: ``pyrender`` cameras (for their projections); default: the scene's
             main camera for both.
         prev_node_poses: the nodes that moved since the previous frame, each with its previous *local*

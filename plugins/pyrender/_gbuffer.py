@@ -4,7 +4,8 @@ pyrender has no G-buffer outputs and draws every mesh with ``mesh.vert`` + ``mes
 adapter's renderer keeps pyrender's whole pipeline (scene traversal, buffers, materials, culling,
 the main framebuffer and its read-back) and swaps only the fragment shader: a subclass of
 pyrender's ``ShaderProgramCache`` (``_program_cache_class``) hands out ``shaders/gbuffer.frag`` (a
-copy of ``mesh.frag`` that writes one G-buffer pass instead of lighting) with a define saying which pass.
+copy of ``mesh.frag`` that writes one G-buffer pass instead of lighting) with a define saying which pass,
+and ``shaders/gbuffer.vert`` for ``mesh.vert`` (the same, plus whether an instance's pose mirrors).
 
 Quirks handled here (costs measured in docs/adapters.md):
 
@@ -136,7 +137,8 @@ def _program_cache_class() -> type:
     base = pyrender.shader_program.ShaderProgramCache
 
     class _Cache(base):  # type: ignore[misc, valid-type]
-        """pyrender's program cache, serving ``gbuffer.frag`` in place of ``mesh.frag``."""
+        """pyrender's program cache, serving ``gbuffer.frag`` / ``gbuffer.vert`` in place of ``mesh.frag`` /
+        ``mesh.vert``."""
 
         def __init__(self) -> None:
             super().__init__()  # pyrender's own shader folder for everything else
@@ -156,6 +158,8 @@ def _program_cache_class() -> type:
                 if fragment_shader == "mesh.frag":
                     defines = {**(defines or {}), **self.defines}
                     fragment_shader = os.fspath(SHADER_DIR / "gbuffer.frag")  # absolute: os.path.join keeps it
+                    if vertex_shader == "mesh.vert":  # (mesh.vert + frag_mirrored: an instance's mirror, inst_m)
+                        vertex_shader = os.fspath(SHADER_DIR / "gbuffer.vert")
             return super().get_program(vertex_shader, fragment_shader, geometry_shader, defines)
 
     return _Cache

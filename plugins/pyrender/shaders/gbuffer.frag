@@ -1,7 +1,7 @@
 #version 330 core
 // rtp G-buffer variant of pyrender 0.1.45's shaders/mesh.frag (MIT licence, Matthew Matl).
-// It links with pyrender's own mesh.vert and receives the same defines and uniforms, so
-// pyrender's renderer binds it exactly like its lit shader. Instead of lighting it writes one
+// It links with gbuffer.vert (pyrender's mesh.vert plus frag_mirrored) and receives the same defines
+// and uniforms, so pyrender's renderer binds it exactly like its lit shader. Instead of lighting it writes one
 // G-buffer pass, chosen by RTP_GBUF_MODE, into pyrender's 8-bit RGB colour target:
 //   1: display-encoded (sRGB) base colour, 8 bits per channel;
 //   2: three scalars (slots RTP_SLOT_R, RTP_SLOT_G, RTP_SLOT_B), 8 bits each;
@@ -52,7 +52,6 @@ struct Material {
 
 uniform Material material;
 uniform mat4 V;          // world -> view, set by pyrender for mesh.vert
-uniform mat4 M;          // the node's model -> world, set by pyrender for mesh.vert
 uniform vec3 cam_pos;
 
 in vec3 frag_position;   // world space
@@ -75,6 +74,7 @@ in vec2 uv_1;
 #ifdef COLOR_0_LOC
 in vec4 color_multiplier;
 #endif
+flat in int frag_mirrored;  // gbuffer.vert: 1 where the node's pose times the instance's mirrors
 
 out vec4 frag_color;
 
@@ -161,9 +161,9 @@ vec3 base_colour() {
 
 vec3 view_normal() {
     vec3 n = world_normal();
-    // two-sided surfaces: back faces show the flipped normal. A mirrored node (negative determinant) turns its
-    // triangles' winding on screen, so its front faces arrive with gl_FrontFacing false
-    bool front = gl_FrontFacing != (determinant(mat3(M)) < 0.0);
+    // two-sided surfaces: back faces show the flipped normal. A mirrored node or instance (negative determinant
+    // of M * inst_m) turns its triangles' winding on screen, so its front faces arrive with gl_FrontFacing false
+    bool front = gl_FrontFacing != (frag_mirrored != 0);
     if (!front && !g_geometric) n = -n;
     return normalize(mat3(V) * n);
 }
