@@ -258,7 +258,7 @@ def _reaching(steps: np.ndarray, gain: np.ndarray, need: float, better: bool) ->
     they do not: NaN tiles never pass), as "smaller passes" turned back to the metric's direction."""
     lowest = -1e6 if better else 0.0  # the lowest threshold there is (as "smaller is better"), and the highest
     at, gain = steps.ravel(), gain.ravel()
-    useful = (at < np.inf) & (gain > 0)  # (NaN tiles never pass; a step that adds nothing is no step)
+    useful = (at < 1e6) & (gain > 0)  # (NaN tiles and values past 1e6 never pass; a step that adds nothing is no step)
     at, gain = at[useful], gain[useful]
     if need <= 0 or at.size == 0:
         return -lowest if better else lowest

@@ -566,7 +566,8 @@ class SavingSelection(NamedTuple):
     threshold: float | np.ndarray
     #: The fraction of the shading work ``rates`` saves (:func:`work_saved`): at least the saving asked for
     #: unless the predictions hold values no threshold passes: NaN, an error of +inf or past :data:`MAX_THRESHOLD`
-    #: (a PSNR of -inf or below ``-MAX_THRESHOLD``).
+    #: (a PSNR of -inf or below ``-MAX_THRESHOLD``), or beside ``engine_rates`` that cap what the image can add
+    #: (``min`` with an engine's finer rate); then the most any threshold saves, at the lowest threshold that does.
     saved: float | np.ndarray
 
 
@@ -724,7 +725,9 @@ def _threshold_reaching(steps: np.ndarray, classes: list[int], weights: np.ndarr
         if need <= 0.0:
             return lo
     at, gain = steps.ravel(), gain.ravel()
-    useful = (at < np.inf) & (gain > 0.0)  # (a NaN or an infinite value never passes)
+    # (a NaN, an infinite value or one at or past the highest threshold never passes: no step, else a frame that
+    # cannot reach the target would report that highest threshold rather than the lowest saving what it can)
+    useful = (at < hi) & (gain > 0.0)
     at, gain = at[useful], gain[useful]
     if float(gain.sum()) < need:  # NaN tiles: the most the frame can save, just past its last step
         return float(np.clip(np.nextafter(at.max(), np.inf), lo, hi)) if at.size else lo

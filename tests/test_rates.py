@@ -505,3 +505,97 @@ def test_a_saving_beside_values_no_threshold_passes_or_below_the_lowest() -> Non
     assert zero.threshold == 0.0 and zero.rates[1, 0] == sdk.RATE_CODES["4x4"]
     assert (np.delete(zero.rates.ravel(), 2) == sdk.RATE_CODES["1x1"]).all()
     np.testing.assert_array_equal(sdk.select_rates(values, zero.threshold), zero.rates)
+
+
+def test_a_budget_past_every_threshold_reports_the_lowest_threshold_saving_what_it_can() -> None:
+    """A tile predicted past MAX_THRESHOLD never passes, as NaN never does: a budget it leaves out of reach reports
+    the lowest threshold that saves what the frame can (as with NaN), not the highest threshold there is (until
+    2026-12-09 its unreachable step counted, and the threshold came back as 1e6, for PSNR -1e6 dB)."""
+    values = np.full((6, 1, 2), 0.1)
+    values[5, 0, 0] = 2e6  # (4x4 unreachable on one tile: 2x4 there, 4x4 on the other)
+    with_nan = values.copy()
+    with_nan[5, 0, 0] = np.nan
+    want = sdk.select_rates_for_saving(with_nan, sdk.MAX_SAVING)
+    assert want.threshold == np.nextafter(0.1, 1.0) and want.saved == pytest.approx((0.875 + 0.9375) / 2)
+    for kw in ({}, {"engine_rates": 0, "combiner": "max"}):
+        sel = sdk.select_rates_for_saving(values, sdk.MAX_SAVING, **kw)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(sel.rates, want.rates)
+        assert (sel.threshold, sel.saved) == (want.threshold, want.saved), kw
+        psnr = sdk.select_rates_for_saving(-values, sdk.MAX_SAVING, higher_is_better=True, **kw)  # type: ignore[arg-type]
+        assert (psnr.threshold, psnr.saved) == (-want.threshold, want.saved), kw
+
+
+_wide_predictions = st.tuples(st.integers(1, 4), st.integers(1, 4)).flatmap(  # (past the thresholds, signed, infinite)
+    lambda tiles: st.lists(st.one_of(st.sampled_from([0.0, -0.0, 0.25, -0.25, 1e6, -1e6, 2e6, np.inf, -np.inf, np.nan]),
+                                     st.floats(-2e6, 2e6), st.floats(0, 1)),
+                           min_size=6 * tiles[0] * tiles[1], max_size=6 * tiles[0] * tiles[1])
+    .map(lambda v: np.array(v, np.float64).reshape(6, *tiles)))
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(values=_wide_predictions, saving=st.one_of(st.just(1.0), st.floats(0, 1)),
+       allowed=st.one_of(st.none(), st.lists(st.sampled_from(sdk.ALL_RATES), unique=True)),
+       factors=st.one_of(st.none(), st.lists(st.sampled_from([0.5, 0.82, 1.16, 2.0]), min_size=6, max_size=6)),
+       hib=st.booleans(), engine=st.one_of(st.none(), st.sampled_from(sorted(sdk.RATE_NAMES))),
+       combiner=st.sampled_from(["min", "max", "sum"]))
+def test_a_budget_on_any_values_is_the_lowest_threshold_saving_what_any_threshold_can(
+        values: np.ndarray, saving: float, allowed: list[str] | None, factors: list[float] | None, hib: bool,
+        engine: int | None, combiner: str) -> None:
+    """Whatever the values (negative, past MAX_THRESHOLD, infinite, NaN) and beside any engine rate: the budget's
+    rates are select_rates' at its threshold, a threshold check_threshold takes; they save the saving asked or, where
+    no threshold reaches it, what the loosest threshold saves; and a threshold one ulp stricter saves less."""
+    supported = ("1x1", *sdk.resolve_allowed(allowed))
+    saving *= max(sdk.work_saved(r) for r in supported)
+    if engine is not None and sdk.RATE_NAMES[engine] not in supported:
+        engine = None
+    kw: dict = dict(higher_is_better=hib, allowed=allowed, factors=factors, engine_rates=engine, combiner=combiner)
+
+    def shaded_saving(threshold: float) -> float:
+        rates = sdk.select_rates(values, threshold, **kw)
+        return sdk.work_saved(rates if engine is None else sdk.combine_rates(engine, rates, combiner, allowed=allowed))
+
+    sel = sdk.select_rates_for_saving(values, saving, **kw)
+    assert sdk.check_threshold(sel.threshold, hib) == sel.threshold
+    np.testing.assert_array_equal(sel.rates, sdk.select_rates(values, sel.threshold, **kw))
+    assert sel.saved == pytest.approx(shaded_saving(sel.threshold), abs=1e-12)
+    reachable = min(saving, shaded_saving(-sdk.MAX_THRESHOLD if hib else sdk.MAX_THRESHOLD))
+    assert sel.saved >= reachable * (1 - 1e-12)
+    if sel.threshold != (sdk.MAX_THRESHOLD if hib else 0.0):  # (not the lowest threshold there is)
+        stricter = float(np.nextafter(sel.threshold, np.inf if hib else -np.inf))
+        assert shaded_saving(stricter) < reachable * (1 - 1e-12), (sel, reachable)
+
+
+@settings(max_examples=120, deadline=None, derandomize=True, database=None)
+@given(values=_predictions, threshold=_thresholds, allowed=st.one_of(st.none(), st.lists(st.sampled_from(sdk.ALL_RATES),
+       unique=True)), factors=st.one_of(st.none(), st.lists(st.sampled_from([0.5, 1.16, 2.0]), min_size=6, max_size=6)),
+       hib=st.booleans(), combiner=st.sampled_from(["min", "max", "sum"]), data=st.data())
+def test_beside_engine_rates_each_tile_shades_the_cheapest_reachable_rate_that_passes(
+        values: np.ndarray, threshold: float, allowed: list[str] | None, factors: list[float] | None, hib: bool,
+        combiner: str, data: st.DataObject) -> None:
+    """docs/runtime.md "The engine's own rates": per tile, over every allowed image rate, the rate the device shades
+    (combine_rates, clamped; the worse of two where a device may choose) is judged against the threshold, and the
+    tile shades the largest area of those that pass, else what the engine's rate forces alone; the image holds
+    allowed rates only, and with min and max it is the rate shaded."""
+    from rtp.sdk._rates import _combined
+    supported = ("1x1", *sdk.resolve_allowed(allowed))
+    th, tw = values.shape[1:]
+    engine = np.array(data.draw(st.lists(st.sampled_from([sdk.RATE_CODES[r] for r in supported]), min_size=th * tw,
+                                         max_size=th * tw)), np.uint8).reshape(th, tw)
+    if hib:
+        values, threshold = 40.0 - 10.0 * values, 40.0 - 10.0 * threshold
+    scale = np.asarray(factors or [1.0] * 6)
+    passes = (lambda v, i: v > threshold - 20 * np.log10(scale[i])) if hib else (lambda v, i: v < threshold * scale[i])
+    image = sdk.select_rates(values, threshold, higher_is_better=hib, allowed=allowed, factors=factors,
+                             engine_rates=engine, combiner=combiner)
+    shaded = sdk.combine_rates(engine, image, combiner, allowed=allowed)
+    assert {sdk.RATE_NAMES[int(c)] for c in np.unique(image)} <= set(supported)
+    if combiner != "sum":
+        np.testing.assert_array_equal(shaded, image)
+    for i, j in np.ndindex(th, tw):
+        best = 1
+        for c in supported:
+            may = _combined(combiner, sdk.RATE_NAMES[int(engine[i, j])], c, supported)
+            channels = [sdk.PREDICTED_RATES.index(r) for r in may if r != "1x1"]
+            if c == "1x1" or all(passes(values[k, i, j], k) for k in channels):
+                best = max(best, _AREA[sdk.RATE_CODES[may[0]]])
+        assert _AREA[int(shaded[i, j])] == best, (i, j, engine[i, j], image[i, j])

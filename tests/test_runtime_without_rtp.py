@@ -353,3 +353,16 @@ def test_the_port_refuses_a_frame_larger_than_a_fixed_size_model(port: ModuleTyp
         with pytest.raises(SystemExit) as info:
             port.main([str(path), *args])
         assert info.value.code == 2 and "the model has a fixed input of 48x32" in capsys.readouterr().err
+
+
+def test_the_ports_budget_past_every_threshold_is_the_sdks(port: ModuleType) -> None:
+    """A tile predicted past 1e6 never passes, as NaN never does: the port's budget, like the SDK's, reports the
+    lowest threshold saving what the frame can, not 1e6 (its unreachable step once counted)."""
+    values = np.full((6, 1, 2), 0.1)
+    values[5, 0, 0] = 2e6
+    for better in (False, True):
+        v = -values if better else values
+        meta = {"metric": "psnr" if better else "jnyang", "higher_is_better": better}
+        want = sdk.select_rates_for_saving(v, sdk.MAX_SAVING, higher_is_better=better)
+        got = port._budget(v, meta, sdk.MAX_SAVING, sdk.PREDICTED_RATES, None, None)
+        assert got == want.threshold == (-1 if better else 1) * np.nextafter(0.1, 1.0)
