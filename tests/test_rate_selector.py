@@ -483,6 +483,28 @@ def test_a_budget_decides_as_the_sdk(gl_context: Any, transform: dict[str, Any],
         assert saved >= saving - 1e-9  # the work asked for (NaN tiles can keep a frame short of it)
 
 
+@pytest.mark.parametrize("psnr", [False, True])
+def test_a_budget_past_every_threshold_reports_the_lowest_threshold_saving_what_it_can(gl_context: Any,
+                                                                                      psnr: bool) -> None:
+    """A value at or past MAX_THRESHOLD never passes, as a NaN does: the budget that cannot be reached reports the
+    lowest threshold that saves what the frame can, as sdk.select_rates_for_saving does (the shader counted such a
+    value as a step and reported MAX_THRESHOLD, PSNR -MAX_THRESHOLD: the number engines read as the cost)."""
+    sign = -1.0 if psnr else 1.0
+    meta = _generated_metadata({"type": "linear", "factor": sign * 1e-6, "offset": 0.0}, list(sdk.PREDICTED_RATES),
+                               2.0, 0.0, 1, None, psnr)
+    raw = np.full((6, 2, 4), 1e-7, np.float32)  # decoded 0.1 (PSNR -0.1 dB) everywhere
+    raw[5, 0, 0] = 2.0  # but one tile's 4x4: 2e6, past every threshold (PSNR -2e6 dB, below every one)
+    with RateSelector(meta, gl_context, tile_size=16) as selector:
+        gpu = selector.select(raw, saving=0.9375)
+        found, saved = selector.budget()
+        decoded = selector.decoded().astype(np.float64)
+    cpu = sdk.select_rates_for_saving(decoded, 0.9375, higher_is_better=meta.higher_is_better)
+    assert abs(float(cpu.threshold)) < 1.0 and abs(found) < 1.0, (found, float(cpu.threshold))
+    assert found == pytest.approx(float(cpu.threshold), rel=1e-6)
+    np.testing.assert_array_equal(gpu, cpu.rates)
+    assert saved == pytest.approx(float(cpu.saved)) and saved < 0.9375
+
+
 def test_a_budget_on_a_rendered_frame_and_its_refusals(frames, gl_context: Any) -> None:  # noqa: F811
     """Every shipped model's budget on a rendered frame, as predictor.shading_rates(x, saving=) chooses it; the
     threshold and the saving read back; what a budget on the GPU refuses, named."""

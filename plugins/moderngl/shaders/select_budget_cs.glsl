@@ -39,15 +39,17 @@ uniform int u_combiner;
 #include "combine.glsl"
 
 const int AREA[6] = int[6](2, 2, 4, 8, 8, 16);  // PREDICTED_RATES: 1x2 2x1 2x2 2x4 4x2 4x4
-const uint NAN_KEY = 0xffffffffu;              // NaN or +inf: never passes (-inf passes at any threshold)
+const uint NAN_KEY = 0xffffffffu;              // NaN, +inf or past u_hi: never passes (-inf passes at any threshold)
 
 shared uint s_sum[256];
 shared uint s_hist[256];
 shared uint s_digit, s_below, s_need;
 
-// float32 values in their order as unsigned integers (negative values' bits reversed, positive ones' sign set)
+// float32 values in their order as unsigned integers (negative values' bits reversed, positive ones' sign set); a
+// value at or past the highest threshold, which none passes, is no step (it was one, and a frame that could not reach
+// its need reported u_hi rather than the lowest threshold saving what it can, as the SDK does)
 uint key_of(float v) {
-    if (isnan(v) || (isinf(v) && v > 0.0)) return NAN_KEY;
+    if (isnan(v) || v >= u_hi) return NAN_KEY;
     uint b = floatBitsToUint(v);
     return (b & 0x80000000u) != 0u ? ~b : b | 0x80000000u;
 }
