@@ -526,8 +526,20 @@ def _check_max_samples(max_samples: object) -> None:
 def _targets_mismatch(meta: sdk.ModelMetadata, store: TargetStore) -> str:
     """What makes the dataset's targets another quantity than the one the model predicts: the environment luminance
     l of a Weber-corrected metric (JNYang, JNFLIP) the model was trained with (``metadata.weber_l``) against the one
-    its targets were computed with (``rtp targets --weber-l``); "" where they agree or either is not recorded."""
+    its targets were computed with (``rtp targets --weber-l``); a plugin metric's definition (its ``params`` and
+    pooling, which the model's ``provenance.target_parameters`` records of its training targets) against the one
+    the dataset's targets manifest records; "" where they agree or either is not recorded."""
     declared = store.metrics.get(meta.metric)
+    trained = meta.to_dict()["provenance"].get("target_parameters") if meta.metric not in sdk.METRICS else None
+    if isinstance(declared, dict) and isinstance(trained, dict) and "plugin" in trained and "plugin" in declared:
+        # (a model of the plugin's version 1 was scored against version 2's targets in silence)
+        keys = [k for k in ("plugin", "pooling") if k in trained and k in declared]
+        model_def, data_def = {k: trained[k] for k in keys}, {k: declared[k] for k in keys}
+        if model_def != data_def:
+            return (f"the model predicts the plugin metric {meta.metric} as defined by {model_def}, and the targets "
+                    f"it is judged against were computed with {data_def}: another definition, so its scores and "
+                    f"failing tiles are not its own (compute {meta.metric} targets with the model's definition "
+                    f"installed in a copy of the dataset: `rtp targets COPY --metrics {meta.metric}`)")
     targets_l = declared.get("weber_l") if isinstance(declared, dict) else None
     if meta.weber_l is None or isinstance(targets_l, bool) or not isinstance(targets_l, (int, float)):
         return ""

@@ -162,9 +162,9 @@ class Metric:
                               f"{reference.shape[0]} frames: {type(err).__name__}: {err}") from err
         try:
             a = np.asarray(out)
-        except (TypeError, ValueError) as err:
+        except Exception as err:  # (a torch tensor that requires grad raised its RuntimeError, naming no plugin)
             raise MetricError(f"the metric {self.name!r}'s error_map returned {type(out).__name__}, not an array "
-                              f"({err})") from err
+                              f"({type(err).__name__}: {err})") from err
         h, w = reference.shape[:2]
         if a.shape != (h, w) or a.dtype.kind not in "biuf":
             raise MetricError(f"the metric {self.name!r}'s error_map returned {a.dtype} {a.shape}; expected an "
@@ -199,15 +199,37 @@ def register_metric(metric: Metric) -> None:
 def check_worker_metrics(names: Any) -> None:
     """Refuse, before a job starts worker processes (``workers > 1``, Ray), a plugin metric of ``names``
     that only :func:`register_metric` made known: the workers are new processes, which find metrics
-    through entry points. A :class:`MetricParameterError` naming it and the ways out."""
+    through entry points; and one registered under an entry point's name whose ``params`` or pooling (its
+    definition, as the targets manifest records it) are not the entry point's metric's, which the workers
+    would compute. A :class:`MetricParameterError` naming it and the ways out."""
     names = [names] if isinstance(names, str) else list(names)
     with _lock:
-        alone = [m for m in names if m in _explicit and m not in _entry_points()]
-    if alone:
-        raise MetricParameterError(
-            f"the metric {alone[0]!r} is registered in this process only (rtp.metrics.register_metric), and worker "
-            f"processes do not see it: declare it in the {METRIC_ENTRY_POINT_GROUP!r} entry-point group of an "
-            f"installed package, or run the job in this process (one worker, no Ray)", "metrics")
+        explicit = {m: _registered[m] for m in names if m in _explicit and m in _registered}
+    for m, mine in explicit.items():
+        ep = _entry_points().get(m)
+        if ep is None:
+            raise MetricParameterError(
+                f"the metric {m!r} is registered in this process only (rtp.metrics.register_metric), and worker "
+                f"processes do not see it: declare it in the {METRIC_ENTRY_POINT_GROUP!r} entry-point group of an "
+                f"installed package, or run the job in this process (one worker, no Ray)", "metrics")
+        try:  # (the workers compute the entry point's metric: one of other params than the one registered here,
+            # which the targets manifest declared, stored its values under the registered one's definition)
+            theirs: Any = ep.load()
+        except Exception as err:
+            theirs = f"fails to load ({type(err).__name__}: {err})"
+        ours = {"params": dict(mine.params), "pooling": mine.pooling}
+        if isinstance(theirs, Metric):
+            defined = {"params": dict(theirs.params), "pooling": theirs.pooling}
+            what = f"defines it by {ours}, its entry point {ep.value!r}, which worker processes compute, by {defined}"
+        else:
+            defined = None
+            problem = theirs if isinstance(theirs, str) else f"is {type(theirs).__name__}, not a Metric"
+            what = f"is not its entry point {ep.value!r}'s, which worker processes compute, and which {problem}"
+        if defined != ours:
+            raise MetricParameterError(
+                f"the metric {m!r} registered in this process (rtp.metrics.register_metric) {what}: run the job in "
+                f"this process (one worker, no Ray), or install the registered definition as the entry point",
+                "metrics")
 
 
 @functools.cache

@@ -135,6 +135,13 @@ def test_plugin_targets_pool_its_map_and_leave_rtps_own_alone(registry: None, po
     np.testing.assert_array_equal(metrics.error_map("absdiff", ref, images["2x2"]), absdiff(ref, images["2x2"]))
 
 
+class _Unconvertible:
+    """What a learned metric's map gives as a torch tensor that requires grad: ``np.asarray`` raises RuntimeError."""
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        raise RuntimeError("Can't call numpy() on Tensor that requires grad. Use tensor.detach().numpy() instead.")
+
+
 @pytest.mark.parametrize("result, match", [
     (lambda r, t: np.zeros(r.shape[:2] + (1,)), r"returned float64 \(37, 53, 1\)"),
     (lambda r, t: np.zeros(5), r"returned float64 \(5,\)"),
@@ -142,6 +149,7 @@ def test_plugin_targets_pool_its_map_and_leave_rtps_own_alone(registry: None, po
     (lambda r, t: -np.ones(r.shape[:2]), "outside"),
     (lambda r, t: np.full(r.shape[:2], 1e300), "up to 1e\\+300, beyond float32's range"),  # (was "NaN, infinite")
     (lambda r, t: "map", "dtype|returned"),
+    (lambda r, t: _Unconvertible(), r"returned _Unconvertible, not an array \(RuntimeError: Can't call numpy"),
     (lambda r, t: 1 / 0, "error_map failed on 53x37 frames: ZeroDivisionError"),
     (lambda r, t: r.__setitem__(0, 0.0), "failed.*read-only"),  # (writing into the shared reference)
     (lambda r, t: sys.exit(3), "failed on 53x37 frames: SystemExit: 3"),  # (it ended rtp silently, exit 3)
@@ -430,3 +438,71 @@ def test_stored_targets_of_a_max_pooled_plugin_coarsen_by_their_maximum(registry
         for i, r in enumerate(RATES):
             np.testing.assert_array_equal(got[i], metrics.tile_metric("absdiff", ref, sample.final(r), 16))
     assert store.metrics["absdiff"] == {"plugin": {}, "pooling": "max"}
+
+
+def test_a_metric_registered_over_its_entry_point_is_refused_where_workers_compute_the_entry_points(
+        registry: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Registered in this process under an installed entry point's name with another definition (params
+    {"version": 2}), a targets job with workers declared the registered metric's params in the manifest while its
+    workers computed the entry point's (version 1): two definitions under one name, in silence. The entry point's
+    own metric registered again (or one of its params and pooling: its definition) is taken."""
+    from rtp.capture import TargetError, compute_targets
+
+    install_entry_points(tmp_path / "site", {"absdiff": "rtp_absdiff_v1:M"},
+                         {"rtp_absdiff_v1": "import numpy as np\nfrom rtp.metrics import Metric\n"
+                                            "M = Metric('absdiff', lambda r, t: np.abs(r - t).mean(-1), 0.05, "
+                                            "params={'version': 1})\n"})
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    _plugins._entry_points.cache_clear()
+    metrics.register_metric(metrics.Metric("absdiff", absdiff, 0.05, params={"version": 2}))
+    for kw in ({"workers": 2}, {"ray": "local"}):
+        with pytest.raises(TargetError, match=r"'absdiff' registered in this process \(rtp.metrics.register_metric\) "
+                                              r"defines it by \{'params': \{'version': 2\}, 'pooling': 'max'\}, its "
+                                              r"entry point 'rtp_absdiff_v1:M', which worker processes compute, by "
+                                              r"\{'params': \{'version': 1\}"):
+            compute_targets(tmp_path / "none", ("jnyang", "absdiff"), **kw)  # type: ignore[arg-type]
+    import rtp_absdiff_v1  # type: ignore[import-not-found]
+
+    metrics.register_metric(rtp_absdiff_v1.M)
+    metrics.check_worker_metrics(["absdiff", "flip"])
+
+
+def test_a_model_of_one_plugin_definition_judged_on_anothers_targets_is_said(
+        registry: None, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A model trained on a plugin metric's version-1 targets (its provenance.target_parameters) was evaluated
+    against a dataset whose targets the plugin's version 2 computed, and scored in silence; the run now warns and
+    the report's first note says so. Evaluating needs no plugin: the definitions are the recorded ones."""
+    from rtp.capture import BUFFERS, DatasetWriter, TargetStore
+    from rtp.evaluate import evaluate
+
+    from .conftest import base_metadata, build_onnx
+
+    h, w = 32, 48
+    data = tmp_path / "data"
+    writer, store = DatasetWriter(data), TargetStore(data)
+    metrics.register_metric(metrics.Metric("absdiff", absdiff, 0.05, params={"version": 2}))  # (to declare)
+    store.declare("absdiff", {"plugin": {"version": 2}, "pooling": "max"})
+    rng = np.random.default_rng(0)
+    for i in range(2):
+        writer.write(f"s{i}", {name: rng.random((h, w, len(spec.channels) or 3) if len(spec.channels) != 1
+                                                else (h, w), dtype=np.float32) for name, spec in BUFFERS.items()},
+                     {"scene": "a"})
+        store.write(f"s{i}", "absdiff", rng.uniform(0, 0.1, (6, h // 4, w // 4)).astype(np.float32), (h, w))
+    writer.finalize()
+    _plugins._registered.clear()  # (not installed where the model is evaluated)
+
+    def model(version: int) -> Path:
+        meta = base_metadata(metric="absdiff", higher_is_better=False, weber_l=None, default_threshold=0.05,
+                             transform={"type": "clamped", "mu_y": 0.05},
+                             provenance={"target_parameters": {"plugin": {"version": version}, "pooling": "max"}})
+        return build_onnx(tmp_path / f"v{version}.onnx", weights=np.zeros((4, 4), np.float32), metadata=meta)
+
+    words = ("the model predicts the plugin metric absdiff as defined by {'plugin': {'version': 1}, 'pooling': 'max'}, "
+             "and the targets it is judged against were computed with {'plugin': {'version': 2}, 'pooling': 'max'}")
+    with caplog.at_level("WARNING", logger="rtp.evaluate"):
+        rep = evaluate(model(1), data, baselines=False, sweep=False)
+    assert rep.notes[0].startswith(words) and words in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="rtp.evaluate"):
+        rep = evaluate(model(2), data, baselines=False, sweep=False)
+    assert "definition" not in caplog.text and not any("another definition" in n for n in rep.notes)
