@@ -278,6 +278,32 @@ def _session(ort: Any, model_path: Path, source: str | bytes, opts: Any, request
     return session
 
 
+def _utf8(text: str) -> bool:
+    """Whether ``text`` encodes as UTF-8: onnxruntime takes a file path only as UTF-8 text, and a POSIX file
+    name that is not valid UTF-8 reaches Python as a str holding lone surrogates (``os.fsdecode``)."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _bytes_for_unencodable_path(model_path: Path) -> bytes:
+    """The bytes of a model whose path onnxruntime cannot take (a file name that is not valid UTF-8, such as
+    ``b'\\xff.onnx'``): the session is built from them instead. A model whose weights are stored in files beside
+    it (ONNX external data) cannot be: onnxruntime finds those only from the model's path."""
+    data = _read_model(model_path)
+    names, _ = external_tensors(data)
+    if names:
+        raise ModelLoadError(
+            f"{str(model_path)!r}: its path is not valid UTF-8 text, which onnxruntime needs to find the "
+            f"weights it stores outside the .onnx file (ONNX external data, {len(names)} tensor"
+            f"{'s' if len(names) != 1 else ''}); rename the file (and keep it beside its external data)"
+        )
+    log.debug("%r: the path is not valid UTF-8; onnxruntime loads the model from its bytes", str(model_path))
+    return data
+
+
 def _not_a_model(path: Any) -> str:
     """What a file onnxruntime cannot parse looks like instead, for the message (empty where nothing is known)."""
     try:
@@ -401,6 +427,8 @@ def _load(
         # The worker threads stop spinning when a run ends (the tail's session, built with the same
         # options, too): the engine's own threads get the cores back between frames.
         opts.add_session_config_entry(FORCE_SPINNING_STOP, "1")
+    if data is None and not _utf8(str(model_path)):
+        data = _bytes_for_unencodable_path(model_path)
     source: str | bytes = str(model_path) if data is None else data
     session = _session(ort, model_path, source, opts, requested, strict)
     if data is None:

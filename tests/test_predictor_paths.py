@@ -96,6 +96,51 @@ def test_a_model_file_that_changes_under_load_is_a_model_load_error(
     assert isinstance(info.value.__cause__, OSError if change == "removed" else ValueError)
 
 
+def test_a_model_whose_file_name_is_not_utf8_loads_from_its_bytes(tmp_path: Path) -> None:
+    """A POSIX file name that is not valid UTF-8 (``b'\\xff.onnx'``, which Python reads as a str holding a lone
+    surrogate): onnxruntime takes a path only as UTF-8 text and refused it with pybind's "incompatible constructor
+    arguments"; ``load`` builds the session from the file's bytes instead, and predicts as the shipped model does."""
+    import os
+
+    shipped = sdk.load("jnyang")
+    path = Path(os.fsdecode(os.fsencode(tmp_path) + b"/\xff.onnx"))
+    try:
+        path.write_bytes(Path(shipped.path or "").read_bytes())
+    except (OSError, UnicodeError):  # a file system that takes only UTF-8 names
+        pytest.skip("the file system refuses a file name that is not UTF-8")
+    pred = sdk.load(path)
+    assert pred.path == path
+    x = np.random.default_rng(3).random((len(pred.metadata.inputs), 64, 96), dtype=np.float32)
+    np.testing.assert_array_equal(pred.predict(x), shipped.predict(x))
+
+
+def test_a_model_with_external_data_whose_file_name_is_not_utf8_names_the_path(tmp_path: Path) -> None:
+    """The same name on a model whose weights are stored beside it (ONNX external data, an adopted model that
+    records no digest): onnxruntime finds those files only from the model's path, so it cannot load from the
+    bytes: ``ModelLoadError`` saying the path is not UTF-8 and to rename the file, not pybind's message."""
+    import os
+
+    import onnx
+
+    model = onnx.load(str(sdk.load("jnyang").path))
+    values = {p.key: p.value for p in model.metadata_props}
+    meta = json.loads(values[sdk.METADATA_KEY])
+    meta.pop("digest", None)
+    values[sdk.METADATA_KEY] = json.dumps(meta)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, values)
+    path = Path(os.fsdecode(os.fsencode(tmp_path) + b"/\xff.onnx"))
+    try:
+        path.write_bytes(b"")
+    except (OSError, UnicodeError):
+        pytest.skip("the file system refuses a file name that is not UTF-8")
+    onnx.save_model(model, str(path), save_as_external_data=True, location="weights.data", size_threshold=0)
+    with pytest.raises(sdk.ModelLoadError, match=r"its path is not valid UTF-8 text.*external data.*rename the "
+                                                r"file") as info:
+        sdk.load(path)
+    assert type(info.value) is sdk.ModelLoadError and "incompatible" not in str(info.value)
+
+
 def test_a_model_whose_inputs_disagree_on_their_size_is_refused(tmp_path: Path) -> None:
     """A model whose planes come in two graph inputs that name their height differently (a foreign exporter
     naming each input's axes by itself): the SDK cannot feed both from one frame, so ``load`` refuses it with
