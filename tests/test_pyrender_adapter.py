@@ -462,6 +462,41 @@ def test_a_frame_source_gives_a_users_scene_back() -> None:
         assert adapter.msaa is True
 
 
+def test_previous_depth_is_reused_only_for_the_same_scene_and_camera(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With ``prev_depth=None`` the adapter reuses the previous ``inputs`` call's depth when the scene, the camera and
+    the pose match. They were matched by ``id()``: a new scene (and camera) at the address of a freed one was taken for
+    it and got the freed scene's depth. ``id`` is made to give every object the same number here, as a reused address
+    would: a scene with a box in front of the camera still gets its own depth (a static camera sees every pixel again),
+    and the same scene and camera still reuse theirs (one render a frame, not two)."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame, _adapter
+
+    pyrender = pyrender_or_skip()
+    import trimesh
+
+    first = _asymmetric_scene(pyrender)
+    second = _asymmetric_scene(pyrender)  # the same, and a box filling the middle of the view 1.5 m away
+    box = pyrender.Mesh.from_trimesh(trimesh.creation.box(extents=(1.5, 1.0, 0.1)), smooth=False)
+    second.add(box, pose=np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -1.5], [0, 0, 0, 1.0]]))
+    monkeypatch.setattr(_adapter, "id", lambda obj: 1, raising=False)
+    with Adapter(["seen"], 64, 48) as adapter:
+        renders = []
+        gbuffers = adapter.gbuffers
+
+        def counted(*args: Any, **kwargs: Any) -> Any:
+            renders.append(1)
+            return gbuffers(*args, **kwargs)
+
+        monkeypatch.setattr(adapter, "gbuffers", counted)
+        before, _ = adapter.render(first, np.eye(4))
+        assert adapter.inputs(SceneFrame(first, np.eye(4), np.eye(4), before))[0].mean() == 1.0
+        assert len(renders) == 2  # (no previous call: this frame's G-buffers and the previous depth)
+        assert adapter.inputs(SceneFrame(first, np.eye(4), np.eye(4), before))[0].mean() == 1.0
+        assert len(renders) == 3  # the same scene and camera: the previous depth reused
+        before, _ = adapter.render(second, np.eye(4))
+        assert adapter.inputs(SceneFrame(second, np.eye(4), np.eye(4), before))[0].mean() == 1.0
+        assert len(renders) == 5  # another scene: its own previous depth rendered
+
+
 def test_borrowed_renderer_and_bound_scene_error() -> None:
     """pyrender binds a scene to one renderer's context: borrow the user's, or say so clearly."""
     from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame

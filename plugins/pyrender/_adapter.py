@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+import weakref
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -248,7 +249,9 @@ class Adapter(_BaseAdapter[SceneFrame]):
         self._gbuf = GBufferRenderer(self.width, self.height, msaa=msaa, normal_bits=normal_bits, platform=platform,
                                      renderer=renderer)
         self.msaa, self.normal_bits = self._gbuf.msaa, self._gbuf.normal_bits
-        self._last: tuple[int, int, np.ndarray, np.ndarray] | None = None  # (scene id, camera id, pose, depth)
+        # the last inputs() call's (scene, camera, pose, depth): the scene and camera held by weak references, so
+        # that a later scene or camera given the address of a freed one (its id()) is not taken for it
+        self._last: tuple[weakref.ref[Any], weakref.ref[Any], np.ndarray, np.ndarray] | None = None
         self._warned: set[str] = set()  # frame fields already said to be out of [0, 1]
         log.debug("pyrender adapter %dx%d for %s (msaa=%s, normal_bits=%d)", self.width, self.height,
                   ", ".join(self.channels), self.msaa, self.normal_bits)
@@ -418,7 +421,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 buffers["prev_colour"] = self._frame(prev_colour, "prev_colour")
                 if prev_depth is None:
                     last = self._last
-                    if (last is not None and last[0] == id(scene) and last[1] == id(prev_cam)
+                    if (last is not None and last[0]() is scene and last[1]() is prev_cam
                             and np.array_equal(last[2], prev_pose)):
                         prev_depth = last[3]
                     else:
@@ -446,7 +449,10 @@ class Adapter(_BaseAdapter[SceneFrame]):
                 buffers["motion"] = motion
         # the planes from the G-buffers: what every CPU adapter does (sdk.input_planes)
         out = input_planes(self.channels, **buffers, tolerance=self.reprojection_tolerance)
-        self._last = (id(scene), id(cam), pose.copy(), g.depth)
+        try:
+            self._last = (weakref.ref(scene), weakref.ref(cam), pose.copy(), g.depth)
+        except TypeError:  # (a Scene or camera subclass with __slots__ and no __weakref__: no reuse)
+            self._last = None
         log.debug("inputs %s in %.3f s", out.shape, time.perf_counter() - t0)
         return out
 
