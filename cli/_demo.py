@@ -61,6 +61,33 @@ def _camera_path(scene: Any, frames: int, blockers: Any, aspect: float, seed: in
     return cams
 
 
+def _check_metric_installed(meta: sdk.ModelMetadata, path: Any) -> None:
+    """Refuse a model whose metric is a plugin's that is not installed here, naming the model, its metric and the
+    entry-point group (it said only "unknown metric", as of a name mistyped): the demo computes the true error with
+    the metric. A plugin that is installed but fails to load is left to ``check_dependencies`` to name."""
+    from importlib.metadata import entry_points
+
+    from rtp import metrics
+
+    if meta.metric in sdk.METRICS:
+        return
+    try:
+        metrics.metric_info(meta.metric)
+    except metrics.MetricParameterError:
+        if entry_points(group=metrics.METRIC_ENTRY_POINT_GROUP, name=meta.metric):
+            raise  # (installed, and broken: its own error names its entry point)
+        recorded = meta.to_dict().get("provenance", {}).get("target_parameters")
+        plugin = recorded.get("plugin") if isinstance(recorded, dict) else None
+        defined = f" (the model was trained on its targets as defined by {plugin})" if isinstance(plugin, dict) \
+            and plugin else ""
+        raise metrics.MetricParameterError(
+            f"{Path(str(path)).name}: the model's metric {meta.metric!r} is a plugin metric, not one of rtp's own "
+            f"({', '.join(sdk.METRICS)}), and no plugin of that name is installed here{defined}; the demo computes "
+            f"the true error with it: install the package that declares {meta.metric!r} in the "
+            f"{metrics.METRIC_ENTRY_POINT_GROUP!r} entry-point group (docs/metrics.md \"Your own metric\"). rtp info "
+            "and rtp evaluate read the model without it", "metric") from None
+
+
 def run_demo(
     out: str | Path,
     *,
@@ -95,6 +122,7 @@ def run_demo(
     tile = predictor.tile_size  # the hardware's tiles, which the rates are for
     # checked before any rendering, as every command checks a threshold (the SDK's range)
     thr = meta.default_threshold if threshold is None else sdk.check_threshold(threshold, meta.higher_is_better)
+    _check_metric_installed(meta, predictor.path)
     metrics.check_dependencies((meta.metric, "flip"))  # the true error map and the FLIP picture, before rendering
     check_frame_memory("demo", size, metrics=(meta.metric,))  # (not the system's OOM killer, minutes in)
     out = Path(out)

@@ -136,3 +136,30 @@ def test_a_demo_that_fails_drawing_its_pictures_leaves_the_last_runs_whole(tmp_p
     with pytest.raises(KeyboardInterrupt):
         run_demo(out, size=(64, 48), frames=2, timing_runs=1)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == dict.fromkeys(names, b"the previous run's")
+
+
+def test_demo_of_a_model_whose_plugin_metric_is_not_installed_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A model of a plugin metric (``absdiff``, its metadata recording the plugin's definition) where no plugin of
+    that name is installed: the demo said "unknown metric 'absdiff'", as of a mistyped name. It names the model, says
+    the metric is a plugin's that is not installed and the entry-point group to declare it in; nothing is written."""
+    import numpy as np
+
+    from rtp import metrics
+
+    from .conftest import base_metadata, build_onnx
+
+    assert "absdiff" not in metrics.known_metrics()  # (no such plugin here: the situation under test)
+    meta = base_metadata(metric="absdiff", higher_is_better=False, weber_l=None, default_threshold=0.05,
+                         transform={"type": "clamped", "mu_y": 0.05},
+                         provenance={"target_parameters": {"plugin": {"version": 1}, "pooling": "max"}})
+    model = build_onnx(tmp_path / "absdiff.onnx", weights=np.zeros((4, 4), np.float32), metadata=meta)
+    out = tmp_path / "demo"
+    assert rtp_main(["demo", "--model", str(model), "--size", "160x96", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert ("absdiff.onnx: the model's metric 'absdiff' is a plugin metric, not one of rtp's own (flip, jnflip, psnr, "
+            "lpips, yang, jnyang), and no plugin of that name is installed here (the model was trained on its targets "
+            "as defined by {'version': 1})") in err, err
+    assert "in the 'rtp.metrics' entry-point group" in err and "unknown metric" not in err
+    assert not out.exists()

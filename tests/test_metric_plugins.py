@@ -506,3 +506,46 @@ def test_a_model_of_one_plugin_definition_judged_on_anothers_targets_is_said(
     with caplog.at_level("WARNING", logger="rtp.evaluate"):
         rep = evaluate(model(2), data, baselines=False, sweep=False)
     assert "definition" not in caplog.text and not any("another definition" in n for n in rep.notes)
+
+
+def test_training_on_another_plugin_definitions_targets_warns_of_the_installed_threshold(
+        registry: None, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Targets computed by a plugin metric's version 1, version 2 installed at training (its default threshold 5.0,
+    in other units): the model learns the stored targets and records their definition, and took the installed
+    plugin's threshold in silence. It still takes it (the stored definition records none), and warns, naming both
+    definitions and ``--threshold``; not where the definitions agree, nor with a threshold given."""
+    from rtp.capture import BUFFERS, DatasetWriter, TargetStore
+    from rtp.train import TrainConfig, train
+    from rtp.train.checkpoint import load as load_checkpoint
+
+    h, w = 64, 96
+    data = tmp_path / "data"
+    writer, store = DatasetWriter(data), TargetStore(data)
+    metrics.register_metric(metrics.Metric("absdiff", absdiff, 0.05, params={"version": 1}))  # (to declare)
+    store.declare("absdiff", {"plugin": {"version": 1}, "pooling": "max"})
+    rng = np.random.default_rng(0)
+    for i in range(6):
+        writer.write(f"s{i}", {name: rng.random((h, w, len(spec.channels) or 3) if len(spec.channels) != 1
+                                                else (h, w), dtype=np.float32) for name, spec in BUFFERS.items()},
+                     {"scene": f"scene{i % 3}"})
+        store.write(f"s{i}", "absdiff", rng.uniform(0, 0.1, (6, h // 4, w // 4)).astype(np.float32), (h, w))
+    writer.finalize()
+    cfg = dict(data=str(data), metric="absdiff", steps=2, crop=32, batch=4, val_every=2, save_every=2, arch="fast",
+               val_scenes=("scene0",))
+    words = (f"the absdiff targets of {data} were computed by another definition of the plugin metric ({{'plugin': "
+             "{'version': 1}, 'pooling': 'max'}) than the one installed ({'plugin': {'version': 2}, 'pooling': "
+             "'max'}): the model learns them and records their definition, but takes its default_threshold, 5, from "
+             "the installed plugin")
+    for version, given, warned in ((2, None, True), (2, 0.05, False), (1, None, False)):
+        _plugins._registered.clear()
+        metrics.register_metric(metrics.Metric("absdiff", absdiff, 5.0, params={"version": version}))
+        out = tmp_path / f"v{version}-{given}.pt"
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="rtp.train"):
+            train(TrainConfig(out=str(out), default_threshold=given, **cfg))  # type: ignore[arg-type]
+        assert (words in caplog.text) == warned, caplog.text
+        if warned:
+            assert "rtp train --threshold" in caplog.text
+        meta = load_checkpoint(out).metadata
+        assert meta.default_threshold == (5.0 if given is None else given)
+        assert meta.to_dict()["provenance"]["target_parameters"] == {"plugin": {"version": 1}, "pooling": "max"}

@@ -30,7 +30,7 @@ from torch import nn
 from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore, check_memory
 from rtp.evaluate import scores
-from rtp.metrics import MetricParameterError, device_name, known_metrics, metric_info, resolve_device
+from rtp.metrics import MetricParameterError, device_name, known_metrics, metric_info, metric_plugins, resolve_device
 from rtp.sdk.files import check_output, writer_lock
 
 from . import checkpoint as ckpt
@@ -1052,6 +1052,33 @@ def _resumable(out: Path) -> ckpt.Checkpoint:
     return prev
 
 
+def _warn_other_plugin_definition(cfg: TrainConfig, stored: Any) -> None:
+    """Warn where the targets of a plugin metric were computed by another definition of it (``params`` or pooling:
+    the plugin's version 1, version 2 installed now) and the model would take its default threshold from the
+    installed one: the model learns the stored targets and records their definition
+    (``provenance.target_parameters``), but the threshold is the installed definition's, which may be in other
+    units; the stored definition records none to take instead. A ``default_threshold`` given is taken as is."""
+    if cfg.default_threshold is not None or cfg.metric in sdk.METRICS or not isinstance(stored, dict) \
+            or "plugin" not in stored:
+        return
+    own = metric_plugins().get(cfg.metric)
+    if own is None:
+        return
+    installed = {"plugin": dict(own.params), "pooling": own.pooling}
+    keys = [k for k in ("plugin", "pooling") if k in stored]
+    if {k: stored[k] for k in keys} == {k: installed[k] for k in keys}:
+        return
+    log.warning(
+        "the %s targets of %s were computed by another definition of the plugin metric (%s) than the one installed "
+        "(%s): the model learns them and records their definition, but takes its default_threshold, %g, from the "
+        "installed plugin, which may be in the other definition's units (and centres --focus on it): give the "
+        "threshold for these targets (rtp train --threshold, a recipe's default_threshold), or compute the targets "
+        "again with the installed plugin (in a copy of the dataset: `rtp targets COPY --metrics %s`)",
+        cfg.metric, cfg.data, {k: stored[k] for k in keys}, {k: installed[k] for k in keys}, own.default_threshold,
+        cfg.metric,
+    )
+
+
 def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
            loading: Callable[[int, int], None] | None = None) -> TrainResult:
     out = Path(cfg.out)
@@ -1060,6 +1087,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
     aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
+    _warn_other_plugin_definition(cfg, store.metrics.get(cfg.metric))
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     _check_fits_in_memory(reader, train_ids, val_ids, cfg)
     log.info("loading %d training and %d validation samples", len(train_ids), len(val_ids))
