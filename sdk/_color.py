@@ -17,8 +17,11 @@ LUMA_WEIGHTS: tuple[float, float, float] = (0.299, 0.587, 0.114)
 
 
 def luma(rgb: ArrayLike) -> np.ndarray:
-    """Rec.601 luma ``0.299 R + 0.587 G + 0.114 B`` of display values: ``(..., 3) -> (...)`` float32."""
+    """Rec.601 luma ``0.299 R + 0.587 G + 0.114 B`` of display values in [0, 1]: ``(..., 3) -> (...)`` float32
+    (``uint8`` and ``uint16`` arrays, a texture's integers, are refused, as by :func:`srgb_to_linear`: divide them
+    by 255 or 65535 first)."""
     r, g, b = LUMA_WEIGHTS
+    _refuse_texture_integers(rgb, "luma")  # (white uint8 was luma 255, not 1, without a word)
     a = as_numbers(rgb, "luma", np.float32)
     if a.ndim < 1 or a.shape[-1] != 3:  # a planar (3, H, W) image would be read as rows of pixels
         from ._errors import InputShapeError
@@ -42,10 +45,9 @@ def as_numbers(value: ArrayLike, what: str, dtype: type[np.floating]) -> np.ndar
         raise InputDtypeError(f"{what}: expected numbers, got {type(value).__name__} ({err})") from err
 
 
-def _unit_values(c: ArrayLike, what: str) -> np.ndarray:
-    """``c`` as float64 for the sRGB curves, which take values in [0, 1]: the ``uint8``/``uint16`` of a texture read
-    back (its 0-255 or 0-65535) is an :class:`~rtp.sdk.InputDtypeError` naming the division (255 came out as
-    524947 from ``srgb_to_linear``, without a word)."""
+def _refuse_texture_integers(c: ArrayLike, what: str) -> None:
+    """The ``uint8``/``uint16`` of a texture read back (its 0-255 or 0-65535) given for values in [0, 1]: an
+    :class:`~rtp.sdk.InputDtypeError` naming the division."""
     dtype = getattr(c, "dtype", None)
     if dtype is not None and np.dtype(dtype) in (np.uint8, np.uint16):
         from ._errors import InputDtypeError
@@ -53,6 +55,13 @@ def _unit_values(c: ArrayLike, what: str) -> np.ndarray:
         top = np.iinfo(np.dtype(dtype)).max
         raise InputDtypeError(f"{what}: expected values in [0, 1], got dtype {np.dtype(dtype)} (a texture's integers: "
                               f"{what}(c / {top}))")
+
+
+def _unit_values(c: ArrayLike, what: str) -> np.ndarray:
+    """``c`` as float64 for the sRGB curves, which take values in [0, 1]: the ``uint8``/``uint16`` of a texture read
+    back (its 0-255 or 0-65535) is an :class:`~rtp.sdk.InputDtypeError` naming the division (255 came out as
+    524947 from ``srgb_to_linear``, without a word)."""
+    _refuse_texture_integers(c, what)
     return as_numbers(c, what, np.float64)
 
 

@@ -104,9 +104,11 @@ TARGET_METRICS: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang")
 
 
 def psnr_from_mse(mse: ArrayLike) -> np.ndarray:
-    """PSNR in dB for a peak of 1: ``-10 log10(mse)``; ``+inf`` where ``mse == 0``. float32."""
+    """PSNR in dB for a peak of 1: ``-10 log10(mse)``; ``+inf`` where ``mse == 0``, ``0.0`` where ``mse == 1``
+    (black against white). float32."""
     with np.errstate(divide="ignore"):
-        return (-10.0 * np.log10(as_numbers(mse, "psnr_from_mse", np.float64))).astype(np.float32)
+        # (+ 0.0: -10 * log10(1) is -0.0, which printed as '-0' dB; every other value is unchanged by it)
+        return (-10.0 * np.log10(as_numbers(mse, "psnr_from_mse", np.float64)) + 0.0).astype(np.float32)
 
 
 def mse_from_psnr(psnr: ArrayLike) -> np.ndarray:

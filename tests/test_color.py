@@ -25,6 +25,18 @@ def test_luma_is_rec601_of_display_values() -> None:
     np.testing.assert_allclose(sdk.luma(rgb), want, rtol=1e-6)
 
 
+def test_luma_refuses_a_textures_integers() -> None:
+    """An 8- or 16-bit frame read back gave its luma in 0-255 (0-65535) as the display values' (white was 255, not
+    1), without a word, where the sRGB curves refuse it; a Yang or Weber term built on it was 255 times too large.
+    Floats of any width, Python numbers and the frame divided by 255 are taken as before."""
+    for dtype, top in ((np.uint8, 255), (np.uint16, 65535)):
+        with pytest.raises(sdk.InputDtypeError, match=rf"luma: .*dtype {np.dtype(dtype)} .*luma\(c / {top}\)"):
+            sdk.luma(np.full((2, 2, 3), top, dtype))
+    np.testing.assert_allclose(sdk.luma(np.full((2, 2, 3), 255, np.uint8) / 255), np.ones((2, 2)), rtol=1e-6)
+    assert float(sdk.luma([1, 1, 1])) == pytest.approx(1.0)
+    assert sdk.luma(np.ones((1, 3), np.float16)).dtype == np.float32
+
+
 def test_srgb_curves_invert_each_other_and_hit_the_standard_points() -> None:
     x = np.linspace(0.0, 1.0, 1001)
     np.testing.assert_allclose(sdk.linear_to_srgb(sdk.srgb_to_linear(x)), x, atol=1e-12)

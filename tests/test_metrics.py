@@ -133,6 +133,17 @@ def test_psnr_matches_formula_per_tile_including_edge_tiles() -> None:
     assert sdk.psnr_from_mse(np.array([1.0, 0.01, 0.0])).tolist() == [0.0, 20.0, np.inf]
 
 
+def test_psnr_of_black_against_white_is_plus_zero() -> None:
+    """An MSE of 1 (black against white) is 0 dB, not -0.0 (printed '-0' by `rtp metric psnr`, '-0.0' in its
+    JSON); the stored form (the tile MSE, 1.0) is the same either way, so no stored target moves."""
+    black, white = np.zeros((20, 27, 3), np.float32), np.ones((20, 27, 3), np.float32)
+    for got in (sdk.psnr_from_mse(1.0), sdk.psnr_from_mse(np.ones((2, 3))), M.psnr_tiles(black, white, 8),
+                M.tile_targets(black, {r: white for r in sdk.PREDICTED_RATES}, metrics=("psnr",), tile=8)["psnr"]):
+        assert (got == 0.0).all() and not np.signbit(got).any()
+    assert f"{float(sdk.psnr_from_mse(1.0)):g}" == "0"
+    assert float(sdk.mse_from_psnr(sdk.psnr_from_mse(1.0))) == 1.0
+
+
 # --- pooling -------------------------------------------------------------------------------------
 
 
