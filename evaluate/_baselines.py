@@ -567,8 +567,9 @@ class FidelityFX:
     sub-blocks of each rate (the largest range over the sub-blocks, i.e. the error of shading each
     sub-block once), minus ``|mv| * motion_factor``, tested against ``c`` in the order 4x4, 4x2,
     2x4, 2x2, 2x1, 1x2; then each block takes, per axis, the finest rate of itself and its 4
-    neighbours, and each tile the finest of its blocks. (FFX's own code computes "dy" like "dx" in
-    this path, takes the minimum of the rate codes instead of the finest rate per axis, and starts
+    neighbours, and each tile the finest of its blocks. (FFX's code takes the minimum of the rate codes
+    instead of the finest rate per axis, and the FidelityFX SDK's copy of it computes "dy" like "dx" in
+    this path, where FidelityFX-VariableShading 1.0 reads vertical pairs as rtp does; FFX starts
     the quarter-rate sub-blocks' min/max at ``(cutoff, 0)``; none of this is reproduced, nor its
     tile bookkeeping or its motion read at one pixel: docs/evaluation.md "Where it departs from FFX's
     shader".)

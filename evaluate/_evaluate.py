@@ -448,7 +448,8 @@ def evaluate(
     ``scenes`` restricts the samples (``meta["scene"]``; one name or a list; None or an empty list: all);
     ``threshold`` (metric units) replaces the model's ``default_threshold`` for the decision table;
     ``unseen_fraction`` is the seen/unseen rule. ``yang`` / ``fidelityfx`` replace the default baselines (built
-    at the model's tile size; Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25).
+    at the model's tile size; Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25,
+    and its environment luminance the JNYang model's ``weber_l``, else its own 0.02).
     ``sweep`` also sweeps every method's threshold (cutoff) to compare the work saved at the
     model's failure rate (``report.matched``). ``plots_dir`` writes the figures of
     :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the first sample).
@@ -637,10 +638,13 @@ def _baselines(
     shades unseen tiles fully) and FidelityFX (base and additional rates), or the ones given."""
     tile = meta.tile_size
     y_thr = thr if meta.metric == "jnyang" else YANG_THRESHOLD
+    # A JNYang model's environment luminance too: Yang's estimates E / (L + l) are then in the units of the model's
+    # threshold and of the targets (l = weber_l); with its own 0.02 a model at another l had them judged in others.
+    y_l: dict[str, Any] = {"env_luminance": float(meta.weber_l)} if meta.metric == "jnyang" and meta.weber_l is not None else {}
     # Motion off: the targets are errors of still frames, and a viewpoint pair is a jump, not one
     # frame of motion at 60 Hz, so the baselines' motion terms (which model motion blur hiding
     # error) would only make them look worse than they are.
-    yang = yang or Yang2019(tile, threshold=y_thr, unseen_fraction=unseen_fraction, motion=False)
+    yang = yang or Yang2019(tile, threshold=y_thr, unseen_fraction=unseen_fraction, motion=False, **y_l)
     yang_full = None
     if yang.unseen == "as_is":
         kw = {k: v for k, v in yang.params().items() if k not in ("luma", "tile_size")}
@@ -1009,10 +1013,14 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
                 f"sensitivity t = {selectors['yang2019'].threshold:g}."
                 + (" Its quality rows are left out: PSNR runs the other way." if hib else "")
             )
+        # (the variant's own share: built from a Yang2019 given to evaluate(yang=), it keeps that one's, and the note
+        # named the evaluation's --unseen-fraction, which it did not use)
+        full = selectors.get("yang2019-unseen-1x1")
+        full_frac = full.unseen_fraction if full is not None else frac
         notes.append(
             "Yang 2019 reads only the reprojected previous frame: unseen pixels are black there, so unseen tiles get "
             "a zero estimate and the coarsest rate (RT-Percept's YangVRS does the same); 'yang2019-unseen-1x1' "
-            f"instead shades tiles more than {100 * frac:g}% unseen at 1x1."
+            f"instead shades tiles more than {100 * full_frac:g}% unseen at 1x1."
         )
     if any(n.startswith("fidelityfx") for n in selectors):
         notes.append(

@@ -1372,6 +1372,52 @@ def test_each_sweep_at_the_methods_own_parameter_is_its_decision_row(dataset: Pa
         assert (point["fail_share"], point["work_saved"]) == pytest.approx((row["fail_share"], row["work_saved"])), method
 
 
+def test_yang_takes_a_jnyang_models_environment_luminance(tmp_path: Path) -> None:
+    """Yang 2019's estimates E / (L + l) are JNYang-like: the evaluation judges them at a JNYang model's threshold,
+    so at its ``weber_l`` too. It used its own l = 0.02 whatever the model's, so on a model (and targets) at l = 0.1
+    its dark tiles' estimates were in other units than the threshold they were held to: about twice as high at a
+    mean luma of 0.06, and 1x1 where Yang at the model's l shades them coarser."""
+    root = tmp_path / "dark"
+    writer, store = DatasetWriter(root), TargetStore(root)
+    store.declare("jnyang", {"weber_l": 0.1})
+    rng = np.random.default_rng(5)
+    for i in range(2):
+        bufs = _seen_whole(rng, H, W)
+        # dark, with steps that vary per tile: E / (0.06 + 0.02) and E / (0.06 + 0.1) straddle the threshold 0.2
+        step = rng.uniform(0.0, 0.04, (H // T, W // T)).repeat(T, 0).repeat(T, 1)
+        bufs["reprojected"] = grey(0.06 + step * (np.arange(W)[None, :] % 2 - 0.5))
+        writer.write(f"d{i}", bufs, {"scene": "d"})
+        store.write(f"d{i}", "jnyang", np.full((6, H // 4, W // 4), 0.01, np.float32), (H, W))
+    writer.finalize()
+    weights = np.zeros((2, 4), np.float32)
+    model = build_onnx(tmp_path / "l01.onnx", weights=weights, tile=T,
+                       metadata=base_metadata(outputs=["1x2", "2x1"], default_threshold=0.2, weber_l=0.1))
+    rep = evaluate(model, root, sweep=False)
+    assert rep.baselines["yang2019"]["env_luminance"] == 0.1 == rep.baselines["yang2019-unseen-1x1"]["env_luminance"]
+    from rtp.capture import DatasetReader
+
+    reader = DatasetReader(root)
+    own = Yang2019(T, threshold=0.2, env_luminance=0.1, motion=False)
+    codes = np.concatenate([own.shading_rates(reader[f"d{i}"]).ravel() for i in range(2)])
+    other = np.concatenate([Yang2019(T, threshold=0.2, motion=False).shading_rates(reader[f"d{i}"]).ravel()
+                            for i in range(2)])
+    assert (codes != other).any()  # (the case is not trivial: the two ls decide differently)
+    shares = rep.row("decisions", "yang2019")["rate_shares"]
+    assert shares == {r: pytest.approx(float(np.mean(codes == C[r]))) for r in sdk.ALL_RATES}
+
+
+def test_the_unseen_variants_note_names_the_share_it_used(dataset: Path, model: Path) -> None:
+    """'yang2019-unseen-1x1' built from a Yang2019 given to evaluate (yang=, to score it with motion, as the docs
+    suggest) keeps that one's unseen_fraction; the report's note named the evaluation's --unseen-fraction instead."""
+    rep = evaluate(model, dataset, yang=Yang2019(T, threshold=0.25, motion=False), unseen_fraction=0.3, sweep=False)
+    assert rep.baselines["yang2019-unseen-1x1"]["unseen_fraction"] == 0.5
+    (note,) = [n for n in rep.notes if "'yang2019-unseen-1x1'" in n]
+    assert "more than 50% unseen at 1x1" in note, note
+    default = evaluate(model, dataset, unseen_fraction=0.3, sweep=False)  # (the default variant: the evaluation's)
+    assert default.baselines["yang2019-unseen-1x1"]["unseen_fraction"] == 0.3
+    assert any("more than 30% unseen at 1x1" in n for n in default.notes)
+
+
 def _seen_whole(rng: np.random.Generator, h: int, w: int) -> dict[str, np.ndarray]:
     """A sample's buffers of random values, every pixel seen, no motion."""
     bufs = {}
