@@ -999,6 +999,149 @@ def test_a_gltfs_metallic_roughness_and_emissive_textures_and_emissive_strength_
     assert "emissive strength (KHR_materials_emissive_strength) of 1 material(s) is not applied" in caplog.text
 
 
+def _plain_quad() -> dict:
+    """:func:`_gltf_quad` untextured (its material the default PBR one)."""
+    doc = _gltf_quad("none.png")
+    del doc["images"], doc["textures"], doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
+    return doc
+
+
+def _with_accessor(doc: dict, data: np.ndarray, component: int, kind: str, **extra: Any) -> int:
+    """Append ``data`` to ``doc``'s embedded buffer as a new accessor (its index returned)."""
+    import base64
+
+    raw = base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1])
+    raw += b"\0" * (-len(raw) % 4)
+    blob = np.ascontiguousarray(data).tobytes()
+    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(raw), "byteLength": len(blob)})
+    raw += blob
+    doc["buffers"][0] = {"byteLength": len(raw),
+                         "uri": "data:application/octet-stream;base64," + base64.b64encode(raw).decode()}
+    doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": component,
+                             "count": len(data), "type": kind, **extra})
+    return len(doc["accessors"]) - 1
+
+
+def test_a_gltf_requiring_an_extension_rtp_does_not_read_is_refused_naming_it(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``extensionsRequired`` was not looked at: a Draco-compressed level (DracoPy not installed) loaded with every
+    vertex at the origin, after trimesh's warning only; a meshopt-compressed one was "trimesh could not read ...:
+    'uri'"; a ``KHR_mesh_quantization`` one loaded its normalized texture coordinates 65535 times too large. Each
+    is a SceneFormatError naming the file, the extension and what to do; an extension a file only uses (the glTF
+    specification's optional ones: texture transforms, lights) loads without it, with a warning saying what is
+    lost."""
+    from rtp.capture.scenes import _mesh
+
+    monkeypatch.setattr(_mesh, "_draco_readable", lambda: False, raising=False)  # (DracoPy absent)
+    draco = _plain_quad()
+    draco["extensionsUsed"] = draco["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    draco["meshes"][0]["primitives"][0]["extensions"] = {
+        "KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0, "TEXCOORD_0": 1}}}
+    for accessor in draco["accessors"]:
+        del accessor["bufferView"]
+    meshopt = _plain_quad()
+    meshopt["extensionsUsed"] = meshopt["extensionsRequired"] = ["EXT_meshopt_compression"]
+    meshopt["buffers"].append({"byteLength": 92, "extensions": {"EXT_meshopt_compression": {"fallback": True}}})
+    for view in meshopt["bufferViews"]:
+        view["extensions"] = {"EXT_meshopt_compression": {"buffer": 0, "byteOffset": view["byteOffset"],
+                                                          "byteLength": view["byteLength"], "byteStride": 4,
+                                                          "mode": "ATTRIBUTES", "count": 1}}
+        view["buffer"] = 1
+    quantized = _plain_quad()
+    quantized["extensionsUsed"] = quantized["extensionsRequired"] = ["KHR_mesh_quantization"]
+    uv = _with_accessor(quantized, np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.uint16) * 65535, 5123, "VEC2")
+    quantized["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = uv
+    custom = _plain_quad()
+    custom["extensionsUsed"] = custom["extensionsRequired"] = ["VENDOR_magic"]
+    for name, doc, message in (
+            ("draco", draco, "KHR_draco_mesh_compression, which rtp does not read (its Draco-compressed geometry "
+                             "is not decompressed): install DracoPy"),
+            ("meshopt", meshopt, "EXT_meshopt_compression, which rtp does not read (its meshopt-compressed buffers "
+                                 "are not decompressed): export it without meshopt compression, or decompress it"),
+            ("quantized", quantized, "KHR_mesh_quantization, which rtp does not read (its quantized (integer) "
+                                     "positions and texture coordinates are not dequantized): export it without"),
+            ("custom", custom, "VENDOR_magic, which rtp does not read: export it without it")):
+        (tmp_path / f"{name}.gltf").write_text(json.dumps(doc))
+        with pytest.raises(SceneFormatError, match=re.escape(f"{tmp_path / name}.gltf: it requires the glTF "
+                                                             f"extension {message}")):
+            scenes.load_mesh_file(tmp_path / f"{name}.gltf")
+    # used, not required: loaded without it, said
+    optional = _plain_quad()
+    optional["extensionsUsed"] = ["KHR_texture_transform", "KHR_lights_punctual", "KHR_materials_emissive_strength"]
+    (tmp_path / "optional.gltf").write_text(json.dumps(optional))
+    with caplog.at_level("WARNING", logger="rtp"):
+        scene = scenes.load_mesh_file(tmp_path / "optional.gltf")
+    assert scene.meshes[0].positions.tolist() == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+    assert [r.getMessage() for r in caplog.records if "extension" in r.getMessage()] == [
+        f"{tmp_path / 'optional.gltf'}: it uses glTF extension(s) rtp does not read, loaded without them: "
+        "KHR_texture_transform (texture offsets, scales and rotations are not applied); KHR_lights_punctual (its "
+        "lights are ignored (the scene keeps the default sun))"]
+
+
+def test_gltf_accessors_and_primitives_trimesh_misreads_are_refused_naming_them(tmp_path: Path) -> None:
+    """trimesh reads a sparse accessor's base values only (zeros without a buffer view), reads normalized integers
+    as the integers (texture coordinates 65535 times too large: core glTF allows them without an extension) and
+    drops triangle fans without a word (a level of fans "contained no triangles"). Each is a SceneFormatError
+    naming the file, mesh, primitive and accessor; a triangle strip loads, converted to triangles."""
+    sparse = _plain_quad()
+    indices = _with_accessor(sparse, np.array([2], np.uint32), 5125, "SCALAR")
+    values = _with_accessor(sparse, np.array([[5, 5, 5]], np.float32), 5126, "VEC3")
+    sparse["accessors"][0]["sparse"] = {
+        "count": 1, "indices": {"bufferView": sparse["accessors"][indices]["bufferView"], "componentType": 5125},
+        "values": {"bufferView": sparse["accessors"][values]["bufferView"]}}
+    normalized = _plain_quad()
+    uv = _with_accessor(normalized, np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.uint16) * 65535, 5123, "VEC2",
+                        normalized=True)
+    normalized["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = uv
+    fan = _plain_quad()
+    fan["meshes"][0]["primitives"][0]["mode"] = 6
+    fan["meshes"][0]["primitives"][0]["indices"] = _with_accessor(fan, np.array([0, 1, 2, 3], np.uint16), 5123,
+                                                                  "SCALAR")
+    for name, doc, message in (
+            ("sparse", sparse, "mesh 0 primitive 0: its POSITION is a sparse accessor (accessor 0), which rtp does "
+                               "not read"),
+            ("normalized", normalized, f"mesh 0 primitive 0: its TEXCOORD_0 is quantized (normalized integers, "
+                                       f"accessor {uv}), which rtp does not dequantize"),
+            ("fan", fan, "mesh 0 primitive 0 is a triangle fan (mode 6), which rtp does not read")):
+        (tmp_path / f"{name}.gltf").write_text(json.dumps(doc))
+        with pytest.raises(SceneFormatError, match=re.escape(f"{tmp_path / name}.gltf: {message}")):
+            scenes.load_mesh_file(tmp_path / f"{name}.gltf")
+    strip = _plain_quad()
+    strip["meshes"][0]["primitives"][0]["mode"] = 5
+    strip["meshes"][0]["primitives"][0]["indices"] = _with_accessor(strip, np.array([0, 1, 3, 2], np.uint16), 5123,
+                                                                    "SCALAR")
+    (tmp_path / "strip.gltf").write_text(json.dumps(strip))
+    (mesh,) = scenes.load_mesh_file(tmp_path / "strip.gltf").meshes
+    pos = mesh.positions.astype(np.float64)[mesh.indices.astype(np.int64)]
+    normals = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
+    assert len(mesh.indices) == 2 and normals[:, 2] == pytest.approx([1.0, 1.0])  # both counter-clockwise, facing +z
+
+
+def test_gltf_vertex_colours_multiply_the_base_colour(tmp_path: Path) -> None:
+    """glTF's ``COLOR_0`` multiplies the material's base colour; trimesh keeps it beside the material, and the
+    loader dropped it: a level painted with vertex colours (as many exporters bake lighting or tints) loaded in
+    its materials' plain factors. The base colour is now multiplied by the colours' mean, read as float, unsigned
+    8-bit or 16-bit normalized, RGB (alpha 1) or RGBA."""
+    for name, data, component in (
+            ("float", np.tile(np.array([[0.5, 1.0, 0.25, 1.0]], np.float32), (4, 1)), 5126),
+            ("unorm8", np.tile(np.array([[255, 255, 51, 0]], np.uint8), (4, 1)), 5121),
+            ("unorm16", np.tile(np.array([[65535, 13107, 65535, 32768]], np.uint16), (4, 1)), 5123)):
+        doc = _plain_quad()
+        doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [1.0, 0.2, 1.0, 1.0]
+        if name == "unorm8":  # RGB, in a 4-byte aligned buffer view
+            acc = _with_accessor(doc, data, component, "VEC3", normalized=True)
+            doc["bufferViews"][-1]["byteStride"] = 4
+        else:
+            acc = _with_accessor(doc, data, component, "VEC4", normalized=component != 5126)
+        doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = acc
+        (tmp_path / f"{name}.gltf").write_text(json.dumps(doc))
+        (mat,) = scenes.load_mesh_file(tmp_path / f"{name}.gltf").materials
+        expected = {"float": (0.5, 0.2, 0.25, 1.0), "unorm8": (1.0, 0.2, 0.2, 1.0),
+                    "unorm16": (1.0, 0.04, 1.0, 0.5)}[name]
+        assert mat.base_color == pytest.approx(expected, abs=0.003), name
+
+
 def test_an_objs_material_library_is_found_where_trimesh_finds_it(tmp_path: Path, caplog: pytest.LogCaptureFixture):
     """The loader read an OBJ's ``mtllib`` itself, trimesh by its own rules: a library in ``../materials/``
     (outside the OBJ's folder, which trimesh refuses) gave trimesh's grey placeholder texture, without a

@@ -10,7 +10,11 @@
   ``alpha_cutoff``; the factors multiplied by the means of a metallic-roughness texture and of an emissive
   one, the emission by ``KHR_materials_emissive_strength`` matched by material name) and OBJ/MTL (Kd, map_Kd:
   the texture multiplied by Kd where the MTL states one; roughness from the Phong exponent);
-  vertex colours become a constant base colour (their mean).
+  vertex colours become a constant base colour (their mean; a glTF's ``COLOR_0`` multiplies its material's base colour).
+* glTF features trimesh would read as wrong geometry are refused (:func:`_check_gltf`): an extension in
+  ``extensionsRequired`` that is not read (Draco without DracoPy, meshopt, mesh quantization, ...), triangle fans,
+  sparse accessors and normalized positions or texture coordinates; an extension only used is ignored with a warning
+  (texture transforms, unlit materials, KTX2 textures, punctual lights).
 * Units and axes as given: glTF is metres, Y up; OBJ is assumed to be the same. A level whose largest
   extent is over 2 km or under 1 m, or that looks Z-up, loads as it is with a warning (saying to export it in
   metres, Y up). Geometry more than 131072 m from the origin (where float32 steps reach 1.6 cm) loads with a
@@ -95,11 +99,8 @@ def _texture_mean(img, what: str, srgb: bool = False) -> np.ndarray | None:
     return (srgb_to_linear(values) if srgb else values).mean(axis=0)
 
 
-def _emissive_strengths(p: Path) -> dict[str, float]:
-    """The ``KHR_materials_emissive_strength`` of a glTF / GLB file's materials, by material name (trimesh drops the
-    extension, and its materials keep only their names of the file): a lamp's emission of strength 4 loaded with its
-    factor alone, a quarter as bright. A strength that no name of the file's names alone (an unnamed material, two
-    of one name with other strengths) is not applied, with a warning; a file whose JSON cannot be read gives none."""
+def _gltf_json(p: Path) -> dict[str, Any] | None:
+    """The JSON of a glTF / GLB file, None where it cannot be read (trimesh then says what it cannot read)."""
     import json
 
     try:
@@ -108,9 +109,114 @@ def _emissive_strengths(p: Path) -> dict[str, float]:
             (length,) = np.frombuffer(data[12:16], "<u4")
             data = data[20:20 + int(length)]
         doc = json.loads(data.decode("utf-8"))
-        materials = doc.get("materials") or []
-    except (OSError, ValueError, TypeError, AttributeError):  # (trimesh says what it cannot read)
-        return {}
+    except (OSError, ValueError, TypeError, AttributeError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+def _draco_readable() -> bool:
+    """Whether trimesh can decompress ``KHR_draco_mesh_compression`` here (its decoder, and DracoPy, installed)."""
+    import importlib.util
+
+    try:
+        from trimesh.exchange.gltf import extensions
+    except ImportError:
+        return False
+    return hasattr(extensions, "draco_decode") and importlib.util.find_spec("DracoPy") is not None
+
+
+#: The glTF extensions the loader reads (with trimesh), so a file may require them.
+_READ_EXTENSIONS = frozenset({"KHR_materials_emissive_strength", "EXT_texture_webp"})
+
+#: What is lost of a glTF extension the loader does not read, and what to do of a file that requires it (a file that
+#: only uses it loads without it, as the glTF specification intends, with a warning saying what is lost; one that
+#: requires it is refused).
+_TOOL = "a glTF tool (gltf-transform, gltfpack)"
+_IGNORED_EXTENSIONS = {
+    "KHR_draco_mesh_compression": ("its Draco-compressed geometry is not decompressed", "install DracoPy (pip install "
+                                   "DracoPy), through which trimesh decompresses it, or export it without Draco "
+                                   f"compression (Blender: untick Compression in the glTF exporter) or decompress it "
+                                   f"with {_TOOL}"),
+    "EXT_meshopt_compression": ("its meshopt-compressed buffers are not decompressed",
+                                f"export it without meshopt compression, or decompress it with {_TOOL}"),
+    "KHR_mesh_quantization": ("its quantized (integer) positions and texture coordinates are not dequantized",
+                              f"export it without quantization, or dequantize it with {_TOOL}"),
+    "KHR_texture_transform": ("texture offsets, scales and rotations are not applied",
+                              f"bake the transforms into the texture coordinates with {_TOOL}"),
+    "KHR_texture_basisu": ("KTX2 / Basis Universal textures are not read (a PNG or JPEG fallback is)",
+                           "export its textures as PNG or JPEG"),
+    "KHR_materials_unlit": ("unlit materials are drawn lit", "export its materials as PBR (metallic-roughness)"),
+    "KHR_lights_punctual": ("its lights are ignored (the scene keeps the default sun)", "export it without lights"),
+}
+
+#: The primitive attributes the loader reads (trimesh reads no sparse or normalized accessor values of them).
+_READ_ATTRIBUTES = ("POSITION", "NORMAL", "TEXCOORD_0", "COLOR_0")
+
+
+def _check_gltf(p: Path, doc: dict[str, Any]) -> None:
+    """Refuse a glTF / GLB file that trimesh would load as wrong geometry without a word, and warn of the extensions
+    it uses that are not read.
+
+    Refused (:class:`SceneFormatError` naming the file, the feature and what to do): an extension in
+    ``extensionsRequired`` that is not read (Draco geometry where DracoPy is not installed: trimesh loaded every
+    vertex at the origin; meshopt: a bare ``KeyError: 'uri'``; ``KHR_mesh_quantization``: normalized positions
+    32767 times too large); a triangle fan (``mode`` 6: trimesh dropped it, so a level of fans "contained no
+    triangles"); a sparse accessor (trimesh reads only its base values, or zeros) or a normalized integer
+    position or texture coordinate (read as the integers: texture coordinates 65535 times too large; core glTF
+    allows them without any extension) read by a triangle primitive."""
+    ext_used = doc.get("extensionsUsed")
+    ext_req = doc.get("extensionsRequired")
+    used = [e for e in ext_used if isinstance(e, str)] if isinstance(ext_used, list) else []
+    required = [e for e in ext_req if isinstance(e, str)] if isinstance(ext_req, list) else []
+    readable = _READ_EXTENSIONS | ({"KHR_draco_mesh_compression"} if _draco_readable() else set())
+    for ext in required:
+        if ext not in readable:
+            lost, fix = _IGNORED_EXTENSIONS.get(ext, ("", f"export it without it, or convert it with {_TOOL}"))
+            raise SceneFormatError(f"{p}: it requires the glTF extension {ext}, which rtp does not read"
+                                   f"{f' ({lost})' if lost else ''}: {fix}")
+    ignored = [e for e in dict.fromkeys(used) if e not in readable and e not in required]
+    if ignored:
+        _warn("%s: it uses glTF extension(s) rtp does not read, loaded without them: %s", p,
+              "; ".join(f"{e} ({_IGNORED_EXTENSIONS[e][0]})" if e in _IGNORED_EXTENSIONS else e for e in ignored))
+    accessors = doc.get("accessors")
+    accessors = accessors if isinstance(accessors, list) else []
+    meshes = doc.get("meshes")
+    for mi, mesh in enumerate(meshes if isinstance(meshes, list) else []):
+        prims = mesh.get("primitives") if isinstance(mesh, dict) else None
+        for pi, prim in enumerate(prims if isinstance(prims, list) else []):
+            if not isinstance(prim, dict):
+                continue
+            where = f"{p}: mesh {mesh.get('name', mi)!r} primitive {pi}"
+            mode = prim.get("mode", 4)
+            if mode == 6:
+                raise SceneFormatError(f"{where} is a triangle fan (mode 6), which rtp does not read: export it "
+                                       f"as triangles (mode 4) or convert it with {_TOOL}")
+            if mode not in (4, 5):
+                continue  # (points and lines: skipped, as there is nothing to draw of them)
+            attrs = prim.get("attributes")
+            used_by = [(k, v) for k, v in (attrs.items() if isinstance(attrs, dict) else ()) if k in _READ_ATTRIBUTES]
+            if "indices" in prim:
+                used_by.append(("indices", prim["indices"]))
+            for key, index in used_by:
+                a = accessors[index] if isinstance(index, int) and 0 <= index < len(accessors) else None
+                if not isinstance(a, dict):
+                    continue  # (trimesh says what it cannot read)
+                if "sparse" in a:
+                    raise SceneFormatError(f"{where}: its {key} is a sparse accessor (accessor {index}), which rtp "
+                                           f"does not read: write it as a plain one with {_TOOL}")
+                if a.get("normalized") and key in ("POSITION", "TEXCOORD_0"):
+                    raise SceneFormatError(f"{where}: its {key} is quantized (normalized integers, accessor "
+                                           f"{index}), which rtp does not dequantize: export it without quantization, "
+                                           f"or dequantize it with {_TOOL}")
+
+
+def _emissive_strengths(p: Path, doc: dict[str, Any] | None) -> dict[str, float]:
+    """The ``KHR_materials_emissive_strength`` of a glTF / GLB file's materials, by material name (trimesh drops the
+    extension, and its materials keep only their names of the file): a lamp's emission of strength 4 loaded with its
+    factor alone, a quarter as bright. A strength that no name of the file's names alone (an unnamed material, two
+    of one name with other strengths) is not applied, with a warning; a file whose JSON cannot be read (``doc``
+    None: :func:`_gltf_json`) gives none."""
+    materials = (doc or {}).get("materials") or []
     found: dict[str, set[float]] = {}
     lost = 0
     for mat in materials if isinstance(materials, list) else []:
@@ -144,6 +250,20 @@ def _colour01(c, default=(0.8, 0.8, 0.8, 1.0)) -> tuple[float, float, float, flo
     if a.max() > 1.0 or np.issubdtype(np.asarray(c).dtype, np.integer):
         a = a / 255.0
     return tuple(float(x) for x in np.clip(a[:4], 0.0, 1.0))  # type: ignore[return-value]
+
+
+def _vertex_colour_mean(colors: Any, n: int) -> np.ndarray | None:
+    """The mean RGBA, in [0, 1], of a glTF primitive's ``COLOR_0`` as trimesh reads it (float, or unsigned 8- or
+    16-bit integers standing for [0, 1]; RGB or RGBA, alpha 1 where there is none); None without one for each of its
+    ``n`` vertices."""
+    if colors is None:
+        return None
+    c = np.asarray(colors)
+    if c.ndim != 2 or c.shape[1] not in (3, 4) or len(c) != n or n == 0:
+        return None
+    scale = float(np.iinfo(c.dtype).max) if np.issubdtype(c.dtype, np.integer) else 1.0
+    mean = np.clip(c.astype(np.float64) / scale, 0.0, 1.0).mean(axis=0)
+    return np.append(mean, 1.0) if mean.size == 3 else mean
 
 
 def _rgb(value: Any) -> tuple[float, float, float]:
@@ -264,9 +384,13 @@ def _material_of(geom: Any, name: str, library_lost: bool = False,
                     emissive = _rgb(np.asarray(emissive) * e_mean)
                 strength = (strengths or {}).get(str(getattr(m, "name", None)), 1.0)
                 emissive = _rgb(np.asarray(emissive) * strength)
+            base = _colour01(getattr(m, "baseColorFactor", None), (1.0, 1.0, 1.0, 1.0))
+            vcol = _vertex_colour_mean((getattr(vis, "vertex_attributes", None) or {}).get("color"), len(geom.vertices))
+            if vcol is not None:  # (glTF: COLOR_0 multiplies the base colour; trimesh keeps it beside the material)
+                base = tuple(float(b * c) for b, c in zip(base, vcol))  # type: ignore[assignment]
             return Material(
                 name=str(getattr(m, "name", None) or name),
-                base_color=_colour01(getattr(m, "baseColorFactor", None), (1.0, 1.0, 1.0, 1.0)),
+                base_color=base,
                 texture=tex,
                 roughness=rough,
                 metallic=metal,
@@ -327,8 +451,9 @@ def _check_units_and_axes(scene: Scene, file: str) -> None:
 def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: float = 1.6) -> Scene:
     """Load a glTF/GLB/OBJ file (or any format trimesh reads) as a :class:`Scene`.
 
-    One :class:`Mesh` and one :class:`Material` per geometry instance. There are no lights or
-    spawn points in these formats: the scene keeps the default sun, no point lights, and one
+    One :class:`Mesh` and one :class:`Material` per geometry instance. No lights are read (a glTF's
+    ``KHR_lights_punctual`` ones are ignored, with a warning) and there are no spawn points in these formats: the scene
+    keeps the default sun, no point lights, and one
     spawn point at the centre of the bounds, ``eye_height`` above their bottom, unless that point lies outside the
     level's free space (inside a closed object, or outside a closed level: around a dome, beside an L-shaped
     corridor): then at the nearest voxel of the level's free space (``viewpoints._roomiest_spawn``). A level in
@@ -338,7 +463,9 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
         SceneNotFoundError: no such file.
         SceneFormatError: trimesh cannot read it, it has no triangles, or a value in it is not one a scene may
             hold (a triangle indexing a vertex it does not have, a NaN or float32-overflowing vertex, a material
-            factor outside [0, 1]), named with the file and geometry.
+            factor outside [0, 1]), named with the file and geometry; a glTF requiring an extension rtp does not
+            read, or with a triangle fan, a sparse accessor or a normalized position or texture coordinate
+            (:func:`_check_gltf`).
         ImportError: trimesh is not installed (``pip install 'rtp[capture]'``).
     """
     try:
@@ -351,7 +478,12 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
     resolver = _resolver(p)
     obj = p.suffix.lower() == ".obj"
     lib, textures = _obj_library(p, resolver) if obj else (None, {})
-    strengths = _emissive_strengths(p) if p.suffix.lower() in (".gltf", ".glb") else {}
+    strengths: dict[str, float] = {}
+    if p.suffix.lower() in (".gltf", ".glb"):
+        doc = _gltf_json(p)
+        if doc is not None:
+            _check_gltf(p, doc)
+        strengths = _emissive_strengths(p, doc)
     try:
         loaded: Any = trimesh.load(str(p), force="scene", process=False, resolver=resolver)
     except Exception as err:  # noqa: BLE001 - trimesh raises many types
