@@ -626,7 +626,8 @@ class PaperDatasetReader:
     Values are returned as stored: 8-bit sRGB-encoded PNG values in [0, 1]. In that layout the
     normals are view-space normals written through an sRGB target with negative components clamped
     to 0, roughness is the alpha of ``specular_1x1`` and the seen mask the alpha of
-    ``reproject_1x1``; ``metallic``, ``depth`` and ``motion`` do not exist there and raise.
+    ``reproject_1x1`` (an image of them without an alpha channel raises, rather than read as 1 everywhere);
+    ``metallic``, ``depth`` and ``motion`` do not exist there and raise. A sample's ``scene`` is the folder's name.
     """
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
@@ -659,9 +660,14 @@ class PaperDatasetReader:
                 raise DatasetError(f"the paper's layout has no {name!r} buffer")
             stem, sl = _PAPER_BUFFERS[name]
             img = _read_png(folder / f"{stem}.png")
+            if sl == 3 and not _has_alpha(folder / f"{stem}.png"):  # (its alpha read as 1: every pixel seen)
+                raise DatasetError(f"{folder / f'{stem}.png'}: no alpha channel, which holds the paper layout's "
+                                   f"{name} (expected an RGBA or greyscale-with-alpha image; re-saved without "
+                                   "its alpha, it read as 1 on every pixel)")
             return img[..., sl]
 
-        return Sample(sample_id, load, {"scene": self.root.name, "source": "paper"})
+        # (the folder's own name: of "." or "..", given as such, the scene was '' or '..'; a link keeps its name)
+        return Sample(sample_id, load, {"scene": Path(os.path.abspath(self.root)).name, "source": "paper"})
 
 
 def _read_png(path: Path) -> np.ndarray:
@@ -674,6 +680,18 @@ def _read_png(path: Path) -> np.ndarray:
             raise DatasetError(f"{path}: {err}") from None
     except DatasetError:
         raise
+    except Exception as err:  # Pillow on corrupted bytes; see _unreadable
+        raise _unreadable(path, "not a readable PNG", err) from err
+
+
+def _has_alpha(path: Path) -> bool:
+    """Whether the image file at ``path`` (already read) has an alpha channel, or a transparent colour (a PNG's
+    tRNS), which its reading gives as alpha; without either, the alpha it is read with is 1 everywhere."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return im.mode in ("RGBA", "RGBa", "LA", "La", "PA") or "transparency" in im.info
     except Exception as err:  # Pillow on corrupted bytes; see _unreadable
         raise _unreadable(path, "not a readable PNG", err) from err
 

@@ -693,6 +693,54 @@ def test_paper_layout(tmp_path: Path) -> None:
         open_dataset(tmp_path / "Lost")
 
 
+def test_paper_layout_refuses_a_mask_png_without_its_alpha(tmp_path: Path) -> None:
+    """The paper's layout keeps the seen mask in ``reproject_1x1``'s alpha and roughness in ``specular_1x1``'s: an
+    image re-saved without its alpha (RGB) read as alpha 1, every pixel seen and fully rough, in silence. It is a
+    DatasetError naming the file; the colour planes of the same files still read, and a palette image with a
+    transparent colour (a PNG's tRNS, read as alpha) is kept."""
+    from PIL import Image
+
+    folder = tmp_path / "Bistro" / "0000"
+    rng = np.random.default_rng(3)
+    imgs = {}
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1"] + [
+        f"output_{r}" for r in sdk.ALL_RATES
+    ]:
+        imgs[stem] = rng.integers(0, 256, (8, 12, 4), dtype=np.uint8)
+        write_png(folder / f"{stem}.png", imgs[stem])
+    for stem in ("reproject_1x1", "specular_1x1"):
+        Image.fromarray(imgs[stem][..., :3]).save(folder / f"{stem}.png")  # (RGB: its alpha dropped)
+    s = open_dataset(tmp_path / "Bistro")["0000"]
+    with pytest.raises(DatasetError, match=r"reproject_1x1\.png: no alpha channel, which holds the paper layout's seen"):
+        s.channel("seen")
+    with pytest.raises(DatasetError, match=r"specular_1x1\.png: no alpha channel, which holds the paper layout's "
+                                           "roughness"):
+        s.channel("roughness")
+    np.testing.assert_array_equal(np.round(s.channel("reprojected.g") * 255), imgs["reproject_1x1"][..., 1])
+    np.testing.assert_array_equal(np.round(s.channel("specular") * 255), imgs["specular_1x1"][..., 0])
+    palette = Image.fromarray(np.where(imgs["reproject_1x1"][..., :1] > 127, 255, 0).astype(np.uint8)[..., 0], "L")
+    palette.convert("P").save(folder / "reproject_1x1.png", transparency=0)  # (black transparent: unseen)
+    seen = open_dataset(tmp_path / "Bistro")["0000"].channel("seen")
+    np.testing.assert_array_equal(seen, (imgs["reproject_1x1"][..., 0] > 127).astype(np.float32))
+
+
+def test_paper_layout_scene_is_the_folders_name_given_as_dot(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A sample of the paper's layout is of the scene its folder names: opened as ``.`` (``rtp preview .`` inside
+    it) or ``..`` its scene was '' or '..' (the preview's title said "scene ,"); a link keeps the link's name."""
+    folder = tmp_path / "Bistro" / "0000"
+    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1"] + [
+        f"output_{r}" for r in sdk.ALL_RATES
+    ]:
+        write_png(folder / f"{stem}.png", np.zeros((4, 4, 4), np.uint8))
+    (tmp_path / "Link").symlink_to(tmp_path / "Bistro")
+    monkeypatch.chdir(tmp_path / "Bistro")
+    assert open_dataset(".")["0000"].meta["scene"] == "Bistro"
+    assert open_dataset("./")["0000"].meta["scene"] == "Bistro"
+    monkeypatch.chdir(folder)
+    assert open_dataset("..")["0000"].meta["scene"] == "Bistro"
+    assert open_dataset(tmp_path / "Link")["0000"].meta["scene"] == "Link"
+
+
 def test_paper_layout_reads_16_bit_and_float_pngs_by_their_values(tmp_path: Path) -> None:
     """A sample of the paper's layout written with 16-bit greyscale or float images reads the values
     they hold (Pillow's convert('RGBA') clipped 16 bits to white); a float image past [0, 1] is a
