@@ -19,7 +19,8 @@ method with prediction reuse (``NAME@k``, unseen tiles at 1x1 and no ``:rS`` ref
 on every k-th frame), the same two figures grouped by frames since the network ran (0: it ran), beside the
 method without reuse on the same frames: whether reuse's loss grows with the estimates' age.
 ``--worst-frames`` adds the worst 5% of frames' saving (each run's 5th percentile of its per-frame saving)
-read off each method's sweep at the same failing shares: what a frame-time budget plans for, and where a
+read off each method's sweep at the same failing shares (">=" where the sweep never failed that often: a lower
+bound, as in the matched table and play.md's): what a frame-time budget plans for, and where a
 budget (``NAME@k:bS``, the same saving on every frame) and a threshold part.
 With several paths the report ends with each reuse method's mean over them (kept share at each
 level, worst path, network work); ``--plot-reuse PNG`` draws the kept share at 5% against the work (refused,
@@ -344,11 +345,14 @@ def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any, group
     method's sweep at each failing share as the matched saving is (``evaluate.saved_at``), and the mean
     (one per tile size: ``grouped('mean', tile)`` names it)."""
     print("\nThe worst 5% of frames' saving % at " + " / ".join(f"{100 * v:g}" for v in LEVELS) + "% failing tiles "
-          "(each run's 5th percentile of its per-frame saving, read off the sweep; -: not readable, or a run from "
-          "before the figure):\n")
+          "(each run's 5th percentile of its per-frame saving, read off the sweep; >=: a lower bound, the method's "
+          "sweep never failed that often; -: not readable, or a run from before the figure):\n")
     print("| map | seed | path | " + " | ".join(head) + " |")
     print("|---|---:|---|" + "---|" * len(head))
     per: dict[str, list[list[float] | None]] = {meth: [] for meth in head}
+    # per method and path, at each level, whether the reading is a lower bound (the matched table's ">=": the sweep
+    # never failed that often; until 2026-12-07 it read here as a plain saving, and its mean as a plain mean)
+    low: dict[str, list[list[bool]]] = {meth: [] for meth in head}
     path_tiles: list[int] = []
     for rep in runs:
         s = rep["settings"]
@@ -358,14 +362,19 @@ def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any, group
             for meth in head:
                 pts = [(r["fail_share"], r.get("work_saved_p05")) for r in rep.get("rows", [])
                        if r["path"] == path and r["method"] == meth]
+                levels = LEVELS if meth not in ORACLES else LEVELS[:1]
+                # (as rtp play marks them: a swept method, not full nor an oracle, whose every point fails less)
+                most = max((f for f, _ in pts if f is not None and math.isfinite(f)), default=math.inf)
+                low[meth].append([meth not in (*ORACLES, "full") and most < lv for lv in levels])
                 if not pts or any(v is None or not math.isfinite(v) for _, v in pts):
                     per[meth].append(None)
                     cells.append("" if meth not in rep["_played"][path] else "-")
                     continue
-                got = [saved_at(pts, lv) for lv in (LEVELS if meth not in ORACLES else LEVELS[:1])]
+                got = [saved_at(pts, lv) for lv in levels]
                 values = [math.nan if v is None else v for v in got]
                 per[meth].append(values)
-                cells.append(" / ".join("-" if not math.isfinite(v) else f"{100 * v:.1f}" for v in values))
+                cells.append(" / ".join("-" if not math.isfinite(v) else f"{'>= ' if c else ''}{100 * v:.1f}"
+                                        for v, c in zip(values, low[meth][-1])))
             print(f"| {label(s)} | {s['seed']} | {path} | " + " | ".join(cells) + " |")
     for tile in sorted(set(path_tiles)):
         mine = [i for i, t in enumerate(path_tiles) if t == tile]
@@ -378,8 +387,9 @@ def _worst_frames(runs: list[dict[str, Any]], head: list[str], label: Any, group
                 means.append("-")
                 continue
             cols = list(zip(*[v for v in values if v is not None]))
-            means.append(" / ".join("-" if not all(math.isfinite(x) for x in c) else f"{100 * sum(c) / len(c):.1f}"
-                                    for c in cols))
+            bounds = [any(c) for c in zip(*[low[meth][i] for i in mine])]
+            means.append(" / ".join("-" if not all(math.isfinite(x) for x in c) else
+                                    f"{'>= ' if b else ''}{100 * sum(c) / len(c):.1f}" for c, b in zip(cols, bounds)))
         print(f"| {grouped('mean', tile)} | | | " + " | ".join(means) + " |")
 
 
@@ -471,7 +481,7 @@ def _by_age(runs: list[dict[str, Any]]) -> None:
         s = rep["settings"]
         for path, methods in rep.get("frames", {}).items():
             for meth, spec in s.get("reuse", {}).items():
-                base = meth.split("@", 1)[0]
+                base = meth.rsplit("@", 1)[0]  # (a model file's own "@" stays: model@v2.onnx@4 reuses model@v2.onnx)
                 # (a refresh share, :rS, runs the network early and restarts the interval: its frames' ages are not
                 # their index modulo k, and were reported as if they were)
                 if meth not in methods or spec.get("unseen", "full") != "full" or spec.get("refresh") is not None:
