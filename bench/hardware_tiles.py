@@ -15,7 +15,9 @@ log10 of each: +26 to -12 dB), finer than ``rtp evaluate``'s sqrt(2) steps, whos
 across a wide step reads the saving at 1-5% failing tiles low. Prints per model the work saved at 1, 2, 5
 and 10% failing tiles, the failing share and saving at its own default threshold, and with ``--fail-share
 S`` the decision threshold at which it fails on S of the tiles (to set a default with ``rtp-export
---retune``). The work saved is the mean over tiles of 1 - 1/(W·H) of the chosen rate. A share the sweep never
+--retune``). The work saved is the mean over tiles of 1 - 1/(W·H) of the chosen rate (``rtp evaluate`` weighs
+tiles by their pixels: the same wherever the frame is whole tiles, as 1280x720 on 8- and 16-pixel tiles, every run
+the docs quote; partial edge tiles count whole here). A share the sweep never
 fails that rarely reads "-"; one it never fails that often reads ">=" before the sweep's best saving (a lower
 bound, as ``bench/report.py`` marks it), and its threshold "-" with the failing shares the sweep covers.
 """
