@@ -109,31 +109,20 @@ def _members(path: str) -> tuple[dict[str, tuple[int, ...]], int]:
     """The arrays of a frame file and their shapes, and the bytes the arrays an import reads hold in memory, read
     from each array's header (not its data). An array it reads that is not of numbers (a pickled object array, which
     is not loaded, strings) is a ParameterError naming it, found before the first frame is written."""
-    import zipfile
-
     shapes: dict[str, tuple[int, ...]] = {}
     nbytes = 0
     bad: tuple[str, np.dtype[Any]] | None = None
     try:
-        with zipfile.ZipFile(path) as z:
-            for info in z.infolist():
-                if not info.filename.endswith(".npy"):
-                    continue
-                with z.open(info) as fh:
-                    version = np.lib.format.read_magic(fh)
-                    header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                              else np.lib.format.read_array_header_2_0)
-                    shape, _, dtype = header(fh)
-                key = info.filename[:-4]
-                shapes[key] = tuple(shape)
-                if key not in _READ:  # (not read: an engine's own extra array takes no memory of the import's)
-                    continue
-                if dtype.kind not in "biuf":
-                    bad = bad or (key, dtype)
-                nbytes += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
-    except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
-        raise ParameterError(f"{path!r}: not an .npz of arrays numpy can read ({type(err).__name__}: {err}; "
-                             f"`{EXAMPLE}` writes frames)", "frames") from None
+        headers = sdk.files.array_headers(path)
+    except ParameterError as err:
+        raise ParameterError(f"{err}; `{EXAMPLE}` writes frames", "frames") from None
+    for key, (shape, dtype) in headers.items():
+        shapes[key] = shape
+        if key not in _READ:  # (not read: an engine's own extra array takes no memory of the import's)
+            continue
+        if dtype.kind not in "biuf":
+            bad = bad or (key, dtype)
+        nbytes += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
     if bad is not None:
         key, dtype = bad
         what = ("a pickled object array (as np.savez saves a dict, a list of arrays of unequal shapes or other Python "

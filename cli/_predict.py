@@ -50,28 +50,6 @@ PREDICT_BASE = 64 * 2**20
 PREDICT_PER_PIXEL = 220.0
 
 
-def _array_headers(path: str) -> dict[str, tuple[tuple[int, ...], np.dtype[Any]]] | None:
-    """The shape and dtype of each array of a frame file, read from the arrays' headers (no array is loaded); None
-    where the file is no .npz numpy reads (``read_frame`` names what is wrong with it at its turn)."""
-    import zipfile
-
-    out: dict[str, tuple[tuple[int, ...], np.dtype[Any]]] = {}
-    try:
-        with zipfile.ZipFile(path) as z:
-            for info in z.infolist():
-                if not info.filename.endswith(".npy"):
-                    continue
-                with z.open(info) as fh:
-                    version = np.lib.format.read_magic(fh)
-                    header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                              else np.lib.format.read_array_header_2_0)
-                    shape, _, dtype = header(fh)
-                out[info.filename[:-4]] = (tuple(int(n) for n in shape), dtype)
-    except Exception:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
-        return None
-    return out
-
-
 def _check_frames_memory(files: list[str]) -> None:
     """Refuse (``RTP_MEMORY_CHECK``, as ``rtp import``) a frame whose prediction would hold more than the machine's
     memory, from its arrays' headers, before the first frame is read: an array whose header says a huge shape was read
@@ -82,7 +60,10 @@ def _check_frames_memory(files: list[str]) -> None:
     known = {*sdk.GBUFFERS, COLOUR_KEY, ENGINE_RATES_KEY}  # (what _read_frame reads: the final_<rate> are not)
     worst: tuple[int, str, int, list[tuple[int, str, tuple[int, ...], np.dtype[Any]]]] | None = None
     for path in files:
-        headers = _array_headers(path)
+        try:
+            headers: dict[str, tuple[tuple[int, ...], np.dtype[Any]]] | None = sdk.files.array_headers(path)
+        except sdk.ParameterError:  # (read_frame names what is wrong with it at its turn)
+            headers = None
         if not headers:
             continue
         sizes = [(int(np.prod(shape, dtype=np.float64)) * dtype.itemsize, key, shape, dtype)

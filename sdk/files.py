@@ -29,7 +29,8 @@ import numpy as np
 
 from ._errors import ParameterError
 
-__all__ = ["LOCK_NAME", "atomic_output", "check_output", "frame_files", "read_frame", "writer_lock", "yaml_problem"]
+__all__ = ["LOCK_NAME", "array_headers", "atomic_output", "check_output", "frame_files", "read_frame", "writer_lock",
+           "yaml_problem"]
 
 log = logging.getLogger("rtp.sdk.files")
 
@@ -277,6 +278,29 @@ def frame_files(paths: Iterable[str | os.PathLike[str]] | str | os.PathLike[str]
         else:
             files.append(os.fspath(path))
     return files
+
+
+def array_headers(path: str | os.PathLike[str]) -> dict[str, tuple[tuple[int, ...], np.dtype[Any]]]:
+    """The shape and dtype of each array of an ``.npz`` file (a frame of :func:`read_frame`), read from the arrays'
+    headers: no array is loaded (a pickled object array is not unpickled, a huge one takes no memory), so a tool can
+    check a file's arrays, and the memory they take, before it reads them. A file that is no ``.npz`` numpy can read
+    is a :class:`ParameterError` naming it and what zipfile or numpy said."""
+    out: dict[str, tuple[tuple[int, ...], np.dtype[Any]]] = {}
+    try:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with z.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                              else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = header(fh)
+                out[info.filename[:-4]] = (tuple(int(n) for n in shape), dtype)
+    except Exception as err:  # (zipfile and numpy on damaged bytes: BadZipFile, zlib.error, EOFError, ValueError, ...)
+        raise ParameterError(f"{os.fspath(path)!r}: not an .npz of arrays numpy can read ({type(err).__name__}: "
+                             f"{err})", "path") from None
+    return out
 
 
 def read_frame(path: str | os.PathLike[str], *, extra: Iterable[str] = (),

@@ -960,3 +960,17 @@ def test_frames_past_the_machines_memory_are_refused_before_any_is_read(
                                                  r"array its header describes \(Unable to allocate for depth\)") as e:
         sdk.files.read_frame(frame)
     assert e.value.name == "depth" and "damaged" not in str(e.value)
+
+
+def test_array_headers_reads_shapes_and_dtypes_without_loading(tmp_path: Path) -> None:
+    """sdk.files.array_headers, the one reader of an .npz's array headers that rtp predict's and rtp import's
+    checks before reading share: shapes and dtypes, a pickled array not unpickled, a file that is no .npz named."""
+    path = tmp_path / "f.npz"
+    np.savez(path, depth=np.zeros((3, 5), np.float32), colour=np.zeros((3, 5, 4), np.uint8),
+             meta=np.array([{"frame": 12}], dtype=object))
+    headers = sdk.files.array_headers(path)
+    assert headers["depth"] == ((3, 5), np.dtype(np.float32)) and headers["colour"] == ((3, 5, 4), np.dtype(np.uint8))
+    assert headers["meta"][1].hasobject
+    (tmp_path / "text.npz").write_text("not a zip")
+    with pytest.raises(sdk.ParameterError, match=r"text.npz': not an .npz of arrays numpy can read \(BadZipFile"):
+        sdk.files.array_headers(tmp_path / "text.npz")
