@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -10,7 +15,7 @@ import yaml
 
 from rtp.capture.scenes import map_names
 from rtp.sdk import ParameterError
-from rtp.train import SHIPPED_RECIPE, RecipeError, TrainConfig, load_recipe, train
+from rtp.train import SHIPPED_RECIPE, RecipeError, TrainConfig, load_recipe, packaged_recipes, train
 from rtp.train.checkpoint import load as load_checkpoint
 
 from .test_train import _dataset
@@ -313,6 +318,25 @@ def test_splits_without_a_val_split_is_refused_not_ignored(tmp_path: Path) -> No
 def test_a_missing_recipe_names_the_packaged_ones(tmp_path: Path) -> None:
     with pytest.raises(RecipeError, match="shipped, paper-net"):
         load_recipe(tmp_path / "nope.yaml", "jnyang")
+
+
+def test_a_packaged_recipe_reads_the_same_under_any_locale() -> None:
+    """A packaged recipe is UTF-8 (the R² of its comments), read as a user's recipe file is: under an ASCII locale
+    (LC_ALL=C without Python's UTF-8 mode) load_recipe('shipped') failed with a bare UnicodeDecodeError, and under
+    cp1252 or Latin-1 it read other text, so another digest went into the model's provenance."""
+    from importlib import resources
+
+    files = {name: resources.files("rtp.train").joinpath(f"recipes/{name}.yaml").read_bytes()
+             for name in packaged_recipes()}
+    assert any(not data.isascii() for data in files.values())  # (else this checks nothing)
+    want = {name: hashlib.sha256(data).hexdigest() for name, data in files.items()}
+    code = ("import json; from rtp.train import load_recipe, packaged_recipes; "
+            "print(json.dumps({n: load_recipe(n, 'jnyang' if n == 'reuse' else 'flip').sha256 for n in packaged_recipes()}))")
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert json.loads(proc.stdout.splitlines()[-1]) == want
+    assert {n: load_recipe(n, "jnyang" if n == "reuse" else "flip").sha256 for n in files} == want
 
 
 def test_the_recipe_is_recorded_in_the_model(tmp_path: Path) -> None:

@@ -70,7 +70,9 @@ def _recipe_text(source: str | os.PathLike[str]) -> tuple[str, str]:
                           f"got {type(source).__name__}", "recipe")
     path = Path(source)
     if not path.is_file() and str(source) in packaged_recipes():
-        return str(source), resources.files("rtp.train").joinpath(f"recipes/{source}.yaml").read_text()
+        # (UTF-8 as a user's recipe is read: the locale's encoding failed on the R² of the shipped recipes under an
+        # ASCII locale, and under cp1252 or Latin-1 gave other text, so another digest in the model's provenance)
+        return str(source), resources.files("rtp.train").joinpath(f"recipes/{source}.yaml").read_text(encoding="utf-8")
     if not path.is_file():
         raise RecipeError(f"recipe {str(source)!r}: no such file (or pass the name of one that ships with rtp: "
                           f"{', '.join(packaged_recipes())}; {SHIPPED_RECIPE!r} is the shipped models' recipe)")
