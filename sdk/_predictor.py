@@ -61,6 +61,11 @@ _NON_COMPUTE = frozenset({"AzureExecutionProvider"})
 #: ``_warn_cut_cells``), so that threads sharing it (and its copies) log each once; taken only where a threshold is
 #: past saturation or a frame cuts its packed planes' cells, never on the way to a frame of sides multiples of 4.
 _WARNED_LOCK = threading.Lock()
+#: The most thresholds, and the most frame sizes, a predictor logs its once-each warnings of (``_warn_beyond_saturation``,
+#: ``_warn_cut_cells``): the last one logged says that further ones are not. Each was kept for ever, so a threshold
+#: controller past saturation (a new float every frame) logged a warning every frame and grew the set by one every
+#: frame, and a dynamic-resolution engine's every new size did the same.
+MAX_WARNED = 16
 
 
 def _ort() -> Any:
@@ -863,29 +868,38 @@ class ShadingRatePredictor:
         return out
 
     def _warn_cut_cells(self, h: int, w: int) -> None:
-        """Log once per frame size when a ``h x w`` frame has no pixel for some values of its ``.blocks`` planes'
-        last 4x4 cells (a width not a multiple of 4, a height of 4k + 1) or of its ``.tiles`` planes' last tiles
-        (``W mod 16`` of 1 to 3, ``H mod 16`` of 1 or 2): :func:`block_variances` packs a cell's six values on its
-        first two rows, four columns, so those past the frame's edge are lost, and the padding gives the network
-        copies of the last column or row in their place (a rate's value read as another's). The last tile column
-        or row, and the tiles beside it, are then predicted from wrong inputs."""
+        """Log once per frame size (for the first :data:`MAX_WARNED` sizes) when a ``h x w`` frame has no pixel for
+        some values of its ``.blocks`` planes' last 4x4 cells (a width not a multiple of 4, a height of 4k + 1) or of
+        its ``.tiles`` planes' last tiles (``W mod 16`` of 1 to 3, ``H mod 16`` of 1 or 2): :func:`block_variances`
+        packs a cell's six values on its first two rows, four columns, so those past the frame's edge are lost, and
+        the padding gives the network copies of the last column or row in their place (a rate's value read as
+        another's). The last tile column or row, and the tiles beside it, are then predicted from wrong inputs."""
         names = self._meta.inputs
         cut = [c for c in names if (c.endswith(".blocks") and (w % BLOCK_CELL or h % BLOCK_CELL == 1))
                or (c.endswith(".tiles") and (w % BLOCK_TILE in (1, 2, 3) or h % BLOCK_TILE in (1, 2)))]
         if not cut:
             return
-        with _WARNED_LOCK:
-            seen = self.__dict__.setdefault("_cut_cells_warned", set())
-            if (h, w) in seen:
-                return
-            seen.add((h, w))
+        count = self._first_warning("_cut_cells_warned", (h, w))
+        if not count:
+            return
         blocks, tiles = any(c.endswith(".blocks") for c in cut), any(c.endswith(".tiles") for c in cut)
         what = "4x4 cells and 16-pixel tiles" if blocks and tiles else "4x4 cells" if blocks else "16-pixel tiles"
         log.warning("%s: a %dx%d frame cuts the last %s of its %s planes: the values they pack on pixels past the "
                     "frame's edge are lost, the network reads copies of the frame's last column or row in their "
                     "place, and predicts the last tile column or row (and the tiles beside it) from wrong inputs; "
-                    "render at a size whose sides are multiples of 4", self._path.name if self._path else "model",
-                    w, h, what, ", ".join(cut))
+                    "render at a size whose sides are multiples of 4%s", self._path.name if self._path else "model",
+                    w, h, what, ", ".join(cut), _last_said(count, "frame sizes"))
+
+    def _first_warning(self, kind: str, key: Any) -> int:
+        """Whether to log the warning ``kind`` (the name of the set of what it was logged for) of ``key``: its number
+        among them (1 for the first; :data:`MAX_WARNED` for the last), or 0 where it was logged before or
+        :data:`MAX_WARNED` keys were (the set then grows no more)."""
+        with _WARNED_LOCK:  # (the test and the add as one: two threads between them both logged it)
+            seen = self.__dict__.setdefault(kind, set())
+            if key in seen or len(seen) >= MAX_WARNED:
+                return 0
+            seen.add(key)
+            return len(seen)
 
     def _feed(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """The session's inputs from one padded array: each graph input its consecutive planes (a view,
@@ -1094,24 +1108,28 @@ class ShadingRatePredictor:
         return rates
 
     def _warn_beyond_saturation(self, threshold: float) -> None:
-        """Log once per threshold when every rate's threshold (its ``rate_factors`` share of it) lies beyond the
-        worst value the model can express: every tile then passes at the coarsest allowed rate (``load`` says so
-        of a default threshold)."""
+        """Log once per threshold, for the first :data:`MAX_WARNED` thresholds, when every rate's threshold (its
+        ``rate_factors`` share of it) lies beyond the worst value the model can express: every tile then passes at the
+        coarsest allowed rate (``load`` says so of a default threshold)."""
         meta, t = self._meta, float(threshold)
         if not _passes_everything(meta, t):
             return
-        with _WARNED_LOCK:  # (the test and the add as one: two threads between them both logged it)
-            seen = self.__dict__.setdefault("_saturation_warned", set())
-            if t in seen:
-                return
-            seen.add(t)
+        count = self._first_warning("_saturation_warned", t)
+        if not count:
+            return
         hib = meta.higher_is_better
         # past each rate's limit that rate passes every tile: the last rate to do so sets the limit
         limits = [sat + 20.0 * math.log10(f) if hib else sat / f for sat, f in zip(meta.rate_saturations,
                                                                                     meta.rate_factors)]
         log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
-                    "it at every rate; use one %s %g", self._path.name if self._path else "model", t,
-                    meta.saturation, "above" if hib else "below", min(limits) if hib else max(limits))
+                    "it at every rate; use one %s %g%s", self._path.name if self._path else "model", t,
+                    meta.saturation, "above" if hib else "below", min(limits) if hib else max(limits),
+                    _last_said(count, "thresholds"))
+
+
+def _last_said(count: int, what: str) -> str:
+    """The end of a once-each warning: where it is the :data:`MAX_WARNED`-th, that no more of them are logged."""
+    return f" (the {MAX_WARNED}th {what[:-1]} warned of: further {what} are not logged)" if count >= MAX_WARNED else ""
 
 
 def _passes_everything(meta: ModelMetadata, threshold: float) -> bool:

@@ -145,6 +145,36 @@ def test_threads_sharing_a_predictor_warn_of_a_threshold_once(tiny_model: Callab
     assert len(warned) == 1 and f"threshold {past:g} is beyond the worst value the model can express" in warned[0]
 
 
+def test_warn_once_sets_stay_bounded_for_a_threshold_controller_and_dynamic_resolution(
+        tiny_model: Callable[..., Path], caplog: pytest.LogCaptureFixture) -> None:
+    """An engine's threshold controller past saturation hands ``shading_rates`` a new float every frame, and a
+    dynamic-resolution engine a new frame size every few: each was logged once and kept for ever, so the warning came
+    every frame and the predictor's sets grew by one every frame, without bound. Now the first ``MAX_WARNED`` of each
+    are logged, the last saying that no more are, and the sets stay that size."""
+    from rtp.sdk import _predictor
+
+    limit = _predictor.MAX_WARNED
+    p = sdk.load(tiny_model(base_metadata()), threads=1)
+    meta = p.metadata
+    factor = min(meta.rate_factors or (1.0,))
+    past = meta.saturation + 20.0 * np.log10(factor) - 0.01 if meta.higher_is_better else meta.saturation / factor * 1.01
+    step = -1e-3 if meta.higher_is_better else 1e-3  # (further past saturation, frame after frame)
+    frame = np.random.default_rng(0).random((4, 32, 48), dtype=np.float32)
+    caplog.set_level(logging.WARNING, logger="rtp.sdk")
+    for i in range(3 * limit):
+        p.shading_rates(frame, past + i * step)
+    warned = [r.getMessage() for r in caplog.records if "beyond the worst value" in r.getMessage()]
+    assert len(warned) == limit and len(p.__dict__["_saturation_warned"]) == limit
+    assert "further thresholds are not logged" in warned[-1] and "not logged" not in warned[-2]
+    caplog.clear()
+    blocks = sdk.load("jnyang", threads=1)
+    for i in range(3 * limit):  # frame sizes that cut the .blocks planes' last cells (widths not multiples of 4)
+        blocks.predict(np.zeros((len(blocks.metadata.inputs), 32, 33 + 4 * i), np.float32))
+    cut = [r.getMessage() for r in caplog.records if "cuts the last" in r.getMessage()]
+    assert len(cut) == limit and len(blocks.__dict__["_cut_cells_warned"]) == limit
+    assert "further frame sizes are not logged" in cut[-1]
+
+
 def test_batched_and_single_frames_agree(tiny_model: Callable[..., Path]) -> None:
     p = sdk.load(tiny_model())
     x = np.random.default_rng(1).random((3, 4, 32, 32), dtype=np.float32)

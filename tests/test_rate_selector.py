@@ -240,6 +240,55 @@ def test_each_selector_runs_in_its_own_context_whichever_is_current(gl_context: 
         make_current(gl_context)
 
 
+def test_a_selector_dropped_unclosed_releases_the_context_it_made_and_says_so(gl_context: Any) -> None:
+    """An engine that made a ``RateSelector(predictor)`` per level load and dropped it unclosed kept every selector's
+    headless context with its programs, buffers and texture (about 4 MB each on llvmpipe, growing every level) and
+    was told nothing. A context the selector made is now released when it is collected, the engine's current context
+    left current, with a ResourceWarning; in a borrowed context its objects stay (the context need not be current to
+    free them in) and it says so."""
+    import gc
+    import warnings
+
+    meta = sdk.load("jnyang").metadata
+    raw = np.random.default_rng(5).random((4, 3, 5)).astype(np.float32)
+    want = sdk.select_rates(meta.decode(raw), meta.default_threshold, factors=meta.rate_factors)
+    ctx = make_current(gl_context)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            own = RateSelector(meta)  # (a context of its own, current after the call)
+            np.testing.assert_array_equal(own.select(raw), want)
+            made = own.ctx
+            make_current(gl_context)  # the engine's context current again, as the engine's next draw needs it
+            del own
+            gc.collect()
+            assert is_released(made) and not is_released(ctx)
+            assert [str(w.message) for w in caught if w.category is ResourceWarning] == [
+                "an unclosed rtp RateSelector released the headless GL context it made when it was collected: "
+                "close() it, or use it in a with block"]
+            probe = RateSelector(meta, gl_context)  # the engine's context still current and drawing
+            np.testing.assert_array_equal(probe.select(raw), want)
+            probe.close()
+            caught.clear()
+            borrowed = RateSelector(meta, gl_context)
+            np.testing.assert_array_equal(borrowed.select(raw), want)
+            kept = [borrowed._program, borrowed._budget, borrowed._decoded, borrowed._raw, borrowed._texture]
+            del borrowed
+            gc.collect()
+            assert not any(is_released(o) for o in kept)  # (not freed in whatever context is current)
+            assert [w for w in caught if w.category is ResourceWarning and "borrowed GL context" in str(w.message)]
+            for o in kept:
+                o.release()
+            caught.clear()
+            with RateSelector(meta) as closed:  # closed ones say nothing
+                closed.select(raw)
+            del closed
+            gc.collect()
+            assert not [w for w in caught if w.category is ResourceWarning]
+    finally:
+        make_current(gl_context)
+
+
 def test_a_numpy_integer_is_a_tile_size(gl_context: Any) -> None:
     """``tile_size=np.int64(8)`` (what a frame's grid arithmetic hands over) was refused as "expected one of [4, 8,
     16, 32], got np.int64(8)"."""

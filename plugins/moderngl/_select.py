@@ -13,6 +13,7 @@ the shader is 100 lines of GLSL 4.30 and its results are tested against the SDK'
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable
 from typing import Any
 
@@ -80,6 +81,10 @@ class RateSelector:
     The shader computes in float32 where the SDK decodes in float64, so a tile whose value lies within
     float32 rounding of the threshold (or of the other rate of its cost class) can decide the other
     way; everywhere else the codes are the SDK's.
+
+    Close it (or use it in a ``with`` block): :meth:`close` frees its GL objects, and the context when it made
+    its own. A selector dropped unclosed says so with a ``ResourceWarning``; a context it made is then released
+    with it, while in a borrowed one its objects stay until that context goes.
     """
 
     def __init__(self, model: sdk.ShadingRatePredictor | sdk.ModelMetadata, ctx: Any | None = None,
@@ -464,6 +469,31 @@ class RateSelector:
         if self._own_ctx and live:
             self.ctx.release()
             self._own_ctx = False  # closing twice releases nothing twice
+
+    def __del__(self) -> None:
+        # moderngl frees nothing a Python object held (its objects live until released): a selector dropped unclosed
+        # kept its programs, buffers and textures, and the headless context it made itself with them (about 4 MB
+        # each on llvmpipe: an engine that made one per level load grew by that every level), and said nothing.
+        # A context it made is its alone: released here with everything in it (the context current, the engine's,
+        # is not touched). In a borrowed one its objects stay until that context goes, as an unclosed Adapter's do:
+        # the engine's context need not be current when Python collects the selector, to free them in.
+        made = self.__dict__
+        if made.get("_program") is None:  # (closed; or a constructor that failed, which closed what it made)
+            return
+        ctx = made.get("ctx")
+        if ctx is None or is_released(ctx):  # (its objects went with the context)
+            return
+        own = bool(made.get("_own_ctx"))
+        if own:
+            try:
+                ctx.release()
+            except Exception:  # (the interpreter going down: nothing to do)
+                return
+            self._own_ctx = False
+        warnings.warn("an unclosed rtp RateSelector " + (
+            "released the headless GL context it made when it was collected" if own else
+            "keeps its compute programs, buffers and rate texture in the borrowed GL context until the context goes")
+            + ": close() it, or use it in a with block", ResourceWarning, stacklevel=2)
 
     def __enter__(self) -> RateSelector:
         return self
