@@ -996,6 +996,24 @@ def test_a_play_of_another_loop_setting_says_it_replaces_that_report(tmp_path: P
     assert "another run (unreadable differ)" in caplog.text
 
 
+def _stop_on_fast(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """rtp play's paths played in this process, Ctrl-C on the `fast` one (the `slow` one played to its end): the
+    list of the paths begun, which each test's later runs append to."""
+    from rtp.evaluate import _play
+
+    played: list[str] = []
+    real = _play._play_path
+
+    def stopped_on_fast(job: dict[str, Any], *rest: Any) -> dict[str, Any]:
+        played.append(job["path"])
+        if job["path"] == "fast":
+            raise KeyboardInterrupt
+        return real(job, *rest)
+
+    monkeypatch.setattr(_play, "_play_path", stopped_on_fast)
+    return played
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int
@@ -1007,16 +1025,8 @@ def test_an_interrupted_play_resumes_without_playing_its_finished_paths_again(
     kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (W, H), "sweep": False, "flip_every": 0,
                           "plots": False, "workers": workers}
     whole = play("procedural:0", "jnyang,yang2019", **kw)
-    played: list[str] = []
     real = _play._play_path
-
-    def stopped_on_fast(job: dict[str, Any], *rest: Any) -> dict[str, Any]:
-        played.append(job["path"])
-        if job["path"] == "fast":
-            raise KeyboardInterrupt
-        return real(job, *rest)
-
-    monkeypatch.setattr(_play, "_play_path", stopped_on_fast)
+    played = _stop_on_fast(monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         play("procedural:0", "jnyang,yang2019", out=tmp_path, **{**kw, "workers": 1})
     assert played == ["slow", "fast"] and [f.name for f in tmp_path.iterdir()] == [".play-slow.partial.json"]
@@ -1057,16 +1067,7 @@ def test_a_level_file_edited_between_runs_is_played_again(tmp_path: Path, monkey
     out = tmp_path / "out"
     kw: dict[str, Any] = {"paths": ("slow", "fast"), "frames": 3, "size": (64, 48), "sweep": False, "flip_every": 0,
                           "plots": False, "workers": 1, "out": out}
-    played: list[str] = []
-    real = _play._play_path
-
-    def stopped_on_fast(job: dict[str, Any], *rest: Any) -> dict[str, Any]:
-        played.append(job["path"])
-        if job["path"] == "fast":
-            raise KeyboardInterrupt
-        return real(job, *rest)
-
-    monkeypatch.setattr(_play, "_play_path", stopped_on_fast)
+    played = _stop_on_fast(monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         play(str(level), "full", **kw)
     assert played == ["slow", "fast"] and (out / ".play-slow.partial.json").is_file()
