@@ -135,9 +135,19 @@ def _image_bytes(a: np.ndarray, what: str) -> np.ndarray:
 
 
 def check_image_output(path: str | os.PathLike[str], what: str = "output") -> None:
-    """What :func:`save_image` would refuse at ``path`` (an extension Pillow cannot write, a folder,
-    a place that cannot be written), before the work that makes the image."""
-    _format(path)
+    """What :func:`save_image` would refuse at ``path`` for an RGB picture (an extension Pillow cannot write, or
+    cannot write RGB pixels to, a folder, a place that cannot be written), before the work that makes the image."""
+    import io
+
+    from PIL import Image
+
+    fmt = _format(path)
+    try:  # (.xbm, .msp, .palm take 1-bit pixels alone, .blp palette ones, .h5 and .emf a handler rtp has none of:
+        # each failed after the work, a traceback)
+        Image.new("RGB", (2, 2)).save(io.BytesIO(), format=fmt)
+    except Exception as err:  # noqa: BLE001 - Pillow's writers refuse with OSError, ValueError, KeyError, ...
+        raise ParameterError(f"{os.fspath(path)!r}: Pillow cannot write an RGB image as {fmt} ({err}); use .png, .jpg "
+                             f"or .webp") from None
     check_output(path, what=what)
 
 
@@ -145,7 +155,7 @@ def _format(path: str | os.PathLike[str]) -> str:
     from PIL import Image
 
     fmt = Image.registered_extensions().get(os.path.splitext(os.fspath(path))[1].lower())
-    if fmt is None:
+    if fmt is None or fmt not in Image.SAVE:  # (.psd, .fits, .cur: formats Pillow reads only, a KeyError at the save)
         raise ParameterError(f"{os.fspath(path)!r}: not an image extension Pillow can write (.png, .jpg, .webp, ...)")
     return str(fmt)
 

@@ -511,7 +511,10 @@ def _cmd_capture(args: argparse.Namespace) -> int:
 
     if bool(args.scene) == bool(args.split):
         raise _usage("give either --split NAME (every map of that split) or --scene NAME (repeatable)")
-    names = list(_names(args.scene)) if args.scene else map_names(args.split, args.splits)
+    # (a --scene that is a file is one scene whatever its name holds: "arena, v2.glb" was split at its comma, into
+    # the map '.../arena' that no split lists and 'v2.glb', and so could not be captured)
+    names = [s for v in args.scene for s in ((v,) if Path(v).is_file() else _names([v]))] if args.scene \
+        else map_names(args.split, args.splits)
     total = len(names) * len(args.profiles) * args.per_scene
     what = f"{len(names)} maps of the {args.split} split" if args.split else ", ".join(names)
     bars = contextlib.ExitStack()
@@ -1016,7 +1019,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="every map of this split of --splits")
     src.add_argument("--scene", action="append", default=None, type=_names_text,
                      help="a scene (repeatable, or comma-separated): procedural:<seed>, a map name of `rtp scenes list`, "
-                     "or your own .glb/.gltf/.obj file")
+                     "or your own .glb/.gltf/.obj file (an existing file's path is one scene, commas and all)")
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
     cap.add_argument("--out", type=_out_folder, required=True, help="dataset folder (created, or resumed)")
     cap.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT")

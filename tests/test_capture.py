@@ -240,6 +240,17 @@ def test_preview_writes_the_format_its_extension_names(tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as exc:  # refused while parsing, before the dataset is read
         rtp_main(["preview", str(out), "--out", str(tmp_path / "sheet.nope")])
     assert exc.value.code == 2 and not (tmp_path / "sheet.nope").exists()
+    # an extension Pillow reads and cannot write (.psd), or cannot write RGB pixels to (.xbm: 1-bit ones alone), is
+    # refused alike, not a KeyError or OSError traceback once the sheet was drawn
+    for name in ("sheet.psd", "sheet.fits", "sheet.xbm", "sheet.msp"):
+        with pytest.raises(SystemExit) as exc:
+            rtp_main(["preview", str(out), "--out", str(tmp_path / name)])
+        assert exc.value.code == 2 and not (tmp_path / name).exists()
+    from rtp.capture import save_image
+    from rtp.sdk import ParameterError
+
+    with pytest.raises(ParameterError, match="not an image extension Pillow can write"):
+        save_image(tmp_path / "x.psd", np.zeros((8, 8, 3), np.float32))
 
 
 def test_a_scene_without_valid_views_is_skipped_not_fatal(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -373,6 +384,26 @@ def test_capture_takes_your_own_gltf_and_names_scenes_clearly(tmp_path: Path) ->
     for name in ("procedural", "procedural:x"):
         with pytest.raises(SceneNotFoundError, match="procedural:0"):
             load_scene(name, None, None, None)
+
+
+def test_capture_cli_takes_a_scene_file_whose_name_holds_a_comma_whole(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--scene`` takes comma-separated lists; a file whose name holds a comma (``arena, v2.glb``) was split at it
+    into the map '.../arena', which no split lists (refused), so it could not be captured. A --scene that is a file
+    is one scene; a list of names is still a list."""
+    from rtp.capture.scenes import procedural
+    from rtp.cli import main as rtp_main
+    from rtp.plugins.pyrender import to_trimesh_scene
+
+    level = tmp_path / "lévels" / "arena, v2.glb"
+    level.parent.mkdir()
+    to_trimesh_scene(procedural(2, rooms=(2, 2), texture_size=32)).export(level)
+    out = tmp_path / "d s"
+    assert rtp_main(["capture", "-q", "--scene", str(level), "--scene", "procedural:1, procedural:2", "--per-scene",
+                     "1", "--size", "32x16", "--profiles", "slow", "--out", str(out)]) == 0
+    assert DatasetReader(out).ids == ["arena__v2-slow-0000", "procedural_1-slow-0000", "procedural_2-slow-0000"]
+    assert DatasetReader(out)["arena__v2-slow-0000"].meta["scene"] == str(level)
+    assert "3 samples written" in capsys.readouterr().out
 
 
 def test_a_level_exported_as_glb_keeps_its_alpha_tests(tmp_path: Path) -> None:
