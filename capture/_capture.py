@@ -20,7 +20,7 @@ import reprlib
 import shutil
 import time
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -510,6 +510,20 @@ def _writer_lock(out: str | os.PathLike[str]) -> Any:
         f"{out} is being written by another capture ({holder}): wait for it to end, or capture into another folder"))
 
 
+def _locked_writer(out: str | os.PathLike[str], settings: Mapping[str, Any], guard: contextlib.ExitStack) -> DatasetWriter:
+    """The :class:`DatasetWriter` of the dataset folder ``out`` (made where it is not), opened once ``guard`` holds
+    the folder's writer lock (:func:`_writer_lock`, until ``guard`` closes). Opened before the lock, a capture into
+    a folder without a manifest wrote its own (its settings) first, and then, refused, left it in place of the
+    manifest of the capture that held the lock, whose samples it then described with the other's size. A folder of
+    a manifest with other settings is refused before the lock's file is made in it (it is left as it was)."""
+    root = Path(out)
+    if (root / "manifest.json").exists() or (root.exists() and not root.is_dir()):
+        DatasetWriter(out, settings)  # (refuses other settings, or a file, writing nothing; else writes nothing)
+    root.mkdir(parents=True, exist_ok=True)
+    guard.enter_context(_writer_lock(out))
+    return DatasetWriter(out, settings)  # (a manifest another capture wrote since: its settings checked again)
+
+
 def capture(
     scene_names: Sequence[str],
     out: str | os.PathLike[str],
@@ -602,11 +616,9 @@ def capture(
     _check_unlisted_samples(out, (w, h))  # (before a manifest is written that would adopt them)
     _check_folder_scenes(out, scene_names)
     writer: DatasetWriter | None = None
-    guard = contextlib.ExitStack()
-    if ray is None or (Path(out) / "manifest.json").exists():
-        writer = DatasetWriter(out, settings)
-        guard.enter_context(_writer_lock(out))
-    with guard:
+    with contextlib.ExitStack() as guard:
+        if ray is None or (Path(out) / "manifest.json").exists():
+            writer = _locked_writer(out, settings, guard)
         if writer is not None and writer.remove_stale():
             log.info("removed temporary files of an interrupted capture in %s", out)
         total = len(scene_names) * len(profiles) * per_scene

@@ -473,7 +473,7 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
     ``planning`` hears of each job's pairs as its worker finds them (through the news queue, at most
     every ``PLAN_NEWS_S`` a job) and once more when the job is planned; the workers' log records come
     the same way."""
-    from ._capture import CaptureReport, _todo, _writer_lock
+    from ._capture import CaptureReport, _locked_writer, _todo
     from ._dataset import DatasetReader, DatasetWriter
 
     ray = _ray()
@@ -490,9 +490,8 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
         # every node's workers against its memory, before the folder is made or anything is drawn
         _check_node_memory(actors, job_bytes("capture", size), f"a capture at {size[0]}x{size[1]} holds", "size",
                            "a smaller size", ParameterError)
-        if writer is None:
-            writer = DatasetWriter(out, settings)
-            guard.enter_context(_writer_lock(out))  # (a folder that existed: capture() holds its lock)
+        if writer is None:  # (a folder that existed: capture() holds its lock)
+            writer = _locked_writer(out, settings, guard)
             # (a folder without a manifest: capture() removed no stale files, and a killed write's stayed)
             if writer.remove_stale():
                 log.info("removed temporary files of an interrupted capture in %s", out)

@@ -767,7 +767,7 @@ def play(
         guard.push(drop_if_empty)
         # a second play into the folder would read this one's kept paths and write its files among them
         guard.enter_context(writer_lock(outdir, "rtp play", lambda holder: PlayError(
-            f"out: {outdir} is being written by another closed loop ({holder}): wait for it to end, or play into "
+            f"out: {outdir} is being written by another job ({holder}): wait for it to end, or play into "
             "another folder", "out"), remove=True))
     with guard:
         if outdir is not None:

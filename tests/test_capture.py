@@ -177,6 +177,29 @@ def test_a_second_job_on_a_folder_being_written_is_refused_and_a_killed_one_leav
     assert compute_targets(out, ["psnr"]) == 30
 
 
+def test_a_capture_refused_by_the_lock_leaves_the_holders_folder_as_it_was(tmp_path: Path) -> None:
+    """A capture wrote its manifest (its settings) into the folder before it asked for the folder's lock: refused
+    by a capture that held the lock but had not written its manifest yet (two started at once into a new folder),
+    it left its own settings there, so the holder's later write of it was refused as "captured with other settings",
+    or, once past that check, described the holder's samples with the other's size. It asks for the lock first now
+    and writes nothing when refused."""
+    import json
+
+    from rtp.capture import DatasetError
+    from rtp.sdk.files import LOCK_NAME, writer_lock
+
+    out = tmp_path / "ds"
+    out.mkdir()
+    with writer_lock(out, "rtp capture", RuntimeError):  # (a capture that holds it, before its manifest)
+        with pytest.raises(DatasetError, match=f"^{out} is being written by another capture \\(rtp capture, pid "
+                                               f"{os.getpid()}\\)"):
+            capture(["procedural:7"], out, per_scene=1, size=(32, 32), profiles=("slow",))
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]  # no manifest, no samples folder
+    done = capture(["procedural:7"], out, per_scene=1, size=(48, 32), profiles=("slow",))
+    assert done.written == 1
+    assert json.loads((out / "manifest.json").read_text())["settings"]["size"] == [48, 32]
+
+
 def _children(pid: int) -> list[int]:
     """The live processes whose parent is ``pid`` (/proc; zombies are dead)."""
     out = []

@@ -843,6 +843,34 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
 
 
 
+def test_cli_evaluate_into_a_folder_another_job_writes_is_refused(dataset: Path, model: Path, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Two evaluations into one --out wrote their plots under one name (m_heatmaps.png), and the report written
+    last linked the other's pictures, of other scenes or data. An evaluation now holds the folder's writer lock
+    from its first plot to its report: a second job is refused naming the first and writes nothing; the lock's file
+    goes with the run, and a folder made for it goes with a run that failed before writing there."""
+    import os
+
+    from rtp.sdk.files import LOCK_NAME, writer_lock
+
+    out = tmp_path / "eval"
+    out.mkdir()
+    run = ["evaluate", str(model), "--data", str(dataset), "--out", str(out), "--plots", "--no-baselines"]
+    with writer_lock(out, "rtp evaluate", RuntimeError):  # (another process's, as far as flock goes)
+        capsys.readouterr()
+        assert rtp_main(run) == 2
+        shown = capsys.readouterr()
+        assert shown.err.strip() == (f"rtp evaluate: error: --out: {out} is being written by another job (rtp evaluate, "
+                                     f"pid {os.getpid()}): wait for it to end, or evaluate into another folder")
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]  # no plot, no report
+    assert rtp_main(run) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["evaluation.json", "evaluation.md", "m_heatmaps.png",
+                                                     "m_rates.png", "m_scatter.png"]
+    assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--out", str(tmp_path / "new" / "px"), "--plots",
+                     "--plot-sample", "nosuch", "--no-baselines"]) == 2
+    assert not (tmp_path / "new").exists()
+
+
 def test_bench_report_marks_a_saving_past_the_sweep_as_a_lower_bound(tmp_path: Path) -> None:
     """bench/report.py reads each sweep at 1 / 2 / 5 / 10 / 15% failing tiles with evaluate.saved_at, which gives the best
     saving where every point fails less: printed plain, a sweep that never fails 10% read as saving that much at 10%.

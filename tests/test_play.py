@@ -1367,7 +1367,7 @@ def test_a_second_play_into_a_folder_being_played_into_is_refused(tmp_path: Path
     out = tmp_path / "play"
     out.mkdir()
     with writer_lock(out, "rtp play", RuntimeError):
-        with pytest.raises(PlayError, match=rf"^out: {out} is being written by another closed loop \(rtp play, pid "
+        with pytest.raises(PlayError, match=rf"^out: {out} is being written by another job \(rtp play, pid "
                                             rf"{os.getpid()}\): wait for it to end, or play into another folder$") as e:
             play("procedural:0", "oracle", paths=("fast",), frames=3, size=(64, 48), sweep=False, plots=False, out=str(out))
         assert e.value.name == "out"
