@@ -29,7 +29,7 @@ def cpu_description() -> str:
     import platform
 
     try:
-        info = Path("/proc/cpuinfo").read_text()
+        info = Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace")
     except OSError:
         return platform.processor() or platform.machine()
     fields = dict(line.split(":", 1) for line in info.splitlines() if ":" in line)
@@ -379,7 +379,8 @@ def module_at_revision(rev: str, path: str, name: str, replace: dict[str, str] |
     import tempfile
 
     root = Path(__file__).resolve().parents[1]
-    src = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=root, capture_output=True, text=True)
+    src = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=root, capture_output=True, encoding="utf-8",
+                         errors="replace")  # (a source is UTF-8 whatever the locale: sdk/_errors.py's tree)
     if src.returncode:
         raise UsageError(f"--against {rev}: git cannot show {path} there "
                          f"({src.stderr.strip().splitlines()[-1] if src.stderr.strip() else 'no output'})")
@@ -390,7 +391,7 @@ def module_at_revision(rev: str, path: str, name: str, replace: dict[str, str] |
             if old not in text:
                 raise UsageError(f"--against {rev}: {path} there has no {old!r}")
             text = text.replace(old, new)
-        file.write_text(text)
+        file.write_text(text, encoding="utf-8")  # (Python reads a source as UTF-8)
         spec = importlib.util.spec_from_file_location(name, file)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)

@@ -39,7 +39,7 @@ def main() -> None:
             r = capture([args.scene], out, per_scene=1 + args.samples, size=(w, h), profiles=("slow",),
                         cache_dir=args.cache, workers=args.workers)
             dt = time.perf_counter() - t0
-            manifest = json.loads((out / "manifest.json").read_text())
+            manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
             rows.append((f"{w}x{h}", r.written / dt * 60, dt / r.written, setup, manifest["bytes_per_sample"] / 1e6))
     print(f"scene {args.scene}, {args.samples} samples per size, {args.workers} worker(s)\n")
     print("| size | samples/min | s/sample | first sample incl. set-up (s) | MB/sample |")

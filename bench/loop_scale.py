@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
                     "name it: another model file than --method, not a baseline")
     ap.add_argument("--sidecar", metavar="OUT.yaml", help="write the scaled factors for `rtp-export --retune`")
     args = ap.parse_args(argv)
-    runs = [json.loads(Path(p).read_text()) for p in args.runs]
+    runs = [json.loads(Path(p).read_text(encoding="utf-8")) for p in args.runs]
     models = {k: v for rep in runs for k, v in rep["settings"].get("models", {}).items()}
     for flag, name in (("--method", args.method), ("--one", args.one)):  # (a baseline such as yang2019: no model)
         if name not in models:

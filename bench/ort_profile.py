@@ -92,7 +92,7 @@ def profile(path: Path, n_inputs: int, size: tuple[int, int], repeats: int, thre
         feed = {i.name: x[:, a:b] for i, a, b in zip(ins, ends[:-1], ends[1:])}
         for _ in range(repeats + 1):
             session.run(None, feed)
-        events = json.loads(Path(session.end_profiling()).read_text())
+        events = json.loads(Path(session.end_profiling()).read_text(encoding="utf-8"))
     runs = sorted((e["ts"], e["ts"] + e["dur"]) for e in events if e.get("name") == "model_run")
     if len(runs) < 2:
         raise RuntimeError(f"onnxruntime recorded {len(runs)} runs of {path}, expected {repeats + 1}")

@@ -177,7 +177,7 @@ def main() -> None:
     args = ap.parse_args()
     model = args.model
     reuses = [r.strip() for r in (args.reuse or f"{model}@4").split(",") if r.strip()]
-    reports = [(run, json.loads(run.read_text())) for run in args.runs]
+    reports = [(run, json.loads(run.read_text(encoding="utf-8"))) for run in args.runs]
     _check_shared(reports)  # (before any table: one header, one mean, one set of windows)
     notes: list[str] = []  # (printed once the runs are known to make the tables asked for)
     runs: list[dict[str, Any]] = []

@@ -110,9 +110,9 @@ def _same_fs(a: Path, b: Path) -> bool:
 def _restrict_manifest(root: Path, ids: list[str]) -> None:
     import json
 
-    m = json.loads((root / "manifest.json").read_text())
+    m = json.loads((root / "manifest.json").read_text(encoding="utf-8"))
     m["samples"] = ids
-    (root / "manifest.json").write_text(json.dumps(m))
+    (root / "manifest.json").write_text(json.dumps(m), encoding="utf-8")
 
 
 def main() -> None:

@@ -366,7 +366,7 @@ class DatasetWriter:
 
     def _write_manifest(self, data: Mapping[str, Any]) -> None:
         with atomic_output(self.root / "manifest.json") as tmp:
-            tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
+            tmp.write_text(json.dumps(data, indent=1, sort_keys=True), encoding="utf-8")
 
     def remove_stale(self) -> int:
         """Delete temporary files a killed writer left behind; call only while no writer is active."""

@@ -199,7 +199,7 @@ class TargetStore:
         manifest = self.root / "manifest.json"
         if manifest.is_file():
             try:
-                d = json.loads(manifest.read_text())
+                d = json.loads(manifest.read_text(encoding="utf-8"))
             except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:  # (JSONDecodeError: a ValueError)
                 raise _unreadable(manifest, "not a readable targets manifest; delete the targets folder to "
                                   "recompute", e) from e
@@ -218,7 +218,7 @@ class TargetStore:
     def _save_manifest(self) -> None:
         data = {"format": FORMAT, "format_version": FORMAT_VERSION, "base_tile": self.base_tile, "metrics": self.metrics}
         with atomic_output(self.root / "manifest.json") as tmp:
-            tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
+            tmp.write_text(json.dumps(data, indent=1, sort_keys=True), encoding="utf-8")
 
     def declare(self, metric: str, params: Mapping[str, Any]) -> None:
         """Record the parameters a metric's targets are computed with; refuse a silent change."""

@@ -689,7 +689,7 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
                          f"{r['predict_ms']:.3f}", f"{r['network']:.4f}" if "network" in r else "", f"{r['threshold']:.6g}",
                          *(r["rates"].get(k, 0) for k in sdk.RATE_CODES)])
     with sdk.files.atomic_output(out / "frames.csv") as tmp:
-        tmp.write_text(text.getvalue())
+        tmp.write_text(text.getvalue(), encoding="utf-8")
     with sdk.files.atomic_output(out / "overlay.gif") as tmp:
         tmp.write_bytes(gif)
     save_image(out / "frames.png", curves)

@@ -10,6 +10,7 @@ exception outside the rtp tree is a bug: it propagates with its traceback (exit 
 from __future__ import annotations
 
 import argparse
+import codecs
 import contextlib
 import errno
 import logging
@@ -64,6 +65,102 @@ def one_line(message: str) -> str:
     typed, a lone surrogate) written as its escape, so that an error stays the one line docs/errors.md
     promises and says exactly what was typed."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
+#: ASCII for the characters rtp's own output holds (a table's "R² %" and "σ MAE", a status's " · "), written so on
+#: a console that cannot encode them (a C/POSIX locale, PYTHONIOENCODING=ascii, a Windows console's cp1252): "R^2 %"
+#: rather than a UnicodeEncodeError at the command's last line. Any other character such a console cannot show is
+#: written as its escape (\xe9 for an é), or as the stream's own handler writes it (surrogateescape: a path's raw bytes).
+#: (the keys, in order: ² ³ × · → ← – — ≤ ≥ ≈ ± µ μ σ ° … ‘ ’ “ ”)
+ASCII_FORMS = {"\u00b2": "^2", "\u00b3": "^3", "\u00d7": "x", "\u00b7": "*", "\u2192": "->", "\u2190": "<-",
+               "\u2013": "-", "\u2014": "--", "\u2264": "<=", "\u2265": ">=", "\u2248": "~", "\u00b1": "+/-",
+               "\u00b5": "u", "\u03bc": "u", "\u03c3": "sigma", "\u00b0": " deg", "\u2026": "...", "\u2018": "'",
+               "\u2019": "'", "\u201c": '"', "\u201d": '"'}
+_ERRORS = "rtp-ascii-forms"
+
+
+def _error_handler(prior: str) -> str:
+    """The name of the codecs error handler that writes :data:`ASCII_FORMS`, and what it does not hold as ``prior``
+    (a stream's handler until now) does, ``backslashreplace`` where that is ``strict`` or fails too."""
+    name = f"{_ERRORS}+{prior}"
+    try:
+        codecs.lookup_error(name)
+        return name
+    except LookupError:
+        pass
+    try:
+        fallback = codecs.lookup_error("backslashreplace" if prior == "strict" else prior)
+    except LookupError:
+        fallback = codecs.lookup_error("backslashreplace")
+    escape = codecs.lookup_error("backslashreplace")
+
+    def handler(err: UnicodeError) -> tuple[str | bytes, int]:
+        if not isinstance(err, UnicodeEncodeError):
+            raise err
+        text, start = err.object, err.start
+        if text[start] in ASCII_FORMS:
+            return ASCII_FORMS[text[start]], start + 1
+        stop = next((i for i in range(start, err.end) if text[i] in ASCII_FORMS), err.end)
+        part = UnicodeEncodeError(err.encoding, text, start, stop, err.reason)
+        try:
+            return fallback(part)
+        except UnicodeEncodeError:  # (surrogateescape, given a character that is not an escaped byte)
+            return escape(part)
+
+    codecs.register_error(name, handler)
+    return name
+
+
+@contextlib.contextmanager
+def console_text() -> Iterator[None]:
+    """While the block runs, stdout and stderr write what their encoding cannot as :data:`ASCII_FORMS` (else as
+    escapes) instead of raising UnicodeEncodeError; UTF-8 consoles write every character as it is. The streams'
+    own handlers are back afterwards (a caller's sys.stdout is left as it was). At the end, output that a closed
+    pipe no longer reads (``| head -1``) is dropped, where Python's own flush at exit said "Exception ignored ...
+    BrokenPipeError" and exited 120."""
+    swapped = []
+    for stream in (sys.stdout, sys.stderr):
+        errors = getattr(stream, "errors", None)
+        if not isinstance(errors, str) or errors.startswith(_ERRORS) or not hasattr(stream, "reconfigure"):
+            continue
+        try:
+            stream.reconfigure(errors=_error_handler(errors))
+        except (OSError, ValueError):  # (a closed or broken stream: left as it is)
+            continue
+        swapped.append((stream, errors))
+    try:
+        yield
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except BrokenPipeError:
+                _drop(stream)
+            except (AttributeError, OSError, ValueError):
+                pass
+        for stream, errors in swapped:
+            with contextlib.suppress(OSError, ValueError):
+                stream.reconfigure(errors=errors)
+
+
+def _drop(stream: Any) -> None:
+    """Point ``stream``'s file descriptor at the null device: its reader has gone (``| head -1``), and what is still
+    written to it, or left in its buffer for Python's flush at exit, must not fail again."""
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, stream.fileno())
+        finally:
+            os.close(null)
+
+
+def _say(line: str) -> None:
+    """``line`` on stderr; nothing where stderr's reader has gone (``2>&1 | head -1``): the exit code stays the
+    command's, where a BrokenPipeError from the error's own line replaced it."""
+    try:
+        print(line, file=sys.stderr)
+    except BrokenPipeError:
+        _drop(sys.stderr)
 
 
 class Parser(argparse.ArgumentParser):
@@ -157,7 +254,7 @@ class _Collapse(logging.Filter):
 
     def say(self) -> None:
         for line in self.summary():
-            print(f"WARNING (repeated): {line}", file=sys.stderr)
+            _say(f"WARNING (repeated): {line}")
 
 
 def _rtp_details(record: logging.LogRecord) -> bool:
@@ -476,12 +573,13 @@ def interruptible_start(prog: str, start: Callable[[], int]) -> int:
     :func:`run_guarded`. Ctrl-C before that (the imports and argparse take about half a second) says ``PROG:
     interrupted`` and returns 130, as it does once the command runs, instead of a traceback of the import it
     landed in; so does one that escapes the command's own policy (a second Ctrl-C while it says the first)."""
-    try:
-        return start()
-    except KeyboardInterrupt:  # (nothing imported here: the interrupt may have cut rtp.sdk's own import short)
-        with contextlib.suppress(KeyboardInterrupt, OSError):
-            print(f"{prog}: interrupted", file=sys.stderr)
-        return 128 + signal.SIGINT  # (the sdk's EXIT_INTERRUPTED)
+    with console_text():  # (argparse's help too: `rtp train -h` under LC_ALL=C)
+        try:
+            return start()
+        except KeyboardInterrupt:  # (nothing imported here: the interrupt may have cut rtp.sdk's own import short)
+            with contextlib.suppress(KeyboardInterrupt, OSError):
+                print(f"{prog}: interrupted", file=sys.stderr)
+            return 128 + signal.SIGINT  # (the sdk's EXIT_INTERRUPTED)
 
 
 def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = False,
@@ -494,6 +592,12 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     gives the command's own account (``args.on_interrupt``, set by a resumable command once it starts);
     a closed pipe 0.
     Anything else propagates with its traceback. The benchmark scripts under ``bench/`` run through it."""
+    with console_text():
+        return _run_guarded(prog, body, verbose=verbose, on_interrupt=on_interrupt)
+
+
+def _run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool,
+                 on_interrupt: Callable[[], Callable[[], str] | None] | None) -> int:
     from rtp.sdk import EXIT_FAILED, EXIT_USAGE, RtpError, exit_code
 
     try:
@@ -502,17 +606,15 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     except RtpError as err:
         if verbose:
             traceback.print_exc()
-        print(f"{prog}: error: {one_line(str(err))}", file=sys.stderr)
+        _say(f"{prog}: error: {one_line(str(err))}")
         return exit_code(err)
     except KeyboardInterrupt as err:
-        print(f"{prog}: {'terminated' if isinstance(err, Terminated) else 'interrupted'}{_kept(on_interrupt)}",
-              file=sys.stderr)
+        _say(f"{prog}: {'terminated' if isinstance(err, Terminated) else 'interrupted'}{_kept(on_interrupt)}")
         return 128 + signal.SIGTERM if isinstance(err, Terminated) else exit_code(err)
     except MemoryError as err:  # numpy's "Unable to allocate 30.5 GiB for an array ...": the machine's limit, not a bug
         if verbose:
             traceback.print_exc()
-        print(f"{prog}: error: out of memory: {one_line(str(err)) or 'an allocation failed'}{_notes(err)}",
-              file=sys.stderr)
+        _say(f"{prog}: error: out of memory: {one_line(str(err)) or 'an allocation failed'}{_notes(err)}")
         return EXIT_FAILED
     except ImportError as err:
         missing = _missing_install(prog, err)
@@ -520,10 +622,10 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
             raise
         if verbose:
             traceback.print_exc()
-        print(f"{prog}: error: {one_line(missing)}", file=sys.stderr)
+        _say(f"{prog}: error: {one_line(missing)}")
         return EXIT_USAGE
     except BrokenPipeError:  # output piped into a program that stopped reading (head, less)
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        _drop(sys.stdout)
         return 0
     except OSError as err:
         if err.filename is None:  # not about a path the user gave: a bug, with its traceback
@@ -533,5 +635,5 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
         if verbose:
             traceback.print_exc()
         where = f"{err.filename!r}" + (f" -> {err.filename2!r}" if err.filename2 else "")
-        print(f"{prog}: error: {err.strerror or type(err).__name__}: {where}{_notes(err)}", file=sys.stderr)
+        _say(f"{prog}: error: {err.strerror or type(err).__name__}: {where}{_notes(err)}")
         return EXIT_USAGE if err.errno in _PATH_ERRNOS else EXIT_FAILED

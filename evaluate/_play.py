@@ -988,7 +988,7 @@ def _save_path(outdir: Path, pname: str, key: str, res: dict[str, Any]) -> None:
         return v.item() if isinstance(v, np.generic) else v.tolist() if isinstance(v, np.ndarray) else str(v)
 
     with atomic_output(outdir / _PARTIAL.format(pname)) as tmp:
-        tmp.write_text(json.dumps({"key": key, "result": res}, default=plain))
+        tmp.write_text(json.dumps({"key": key, "result": res}, default=plain), encoding="utf-8")
 
 
 def _load_path(outdir: Path, pname: str, key: str) -> dict[str, Any] | None:
@@ -997,7 +997,7 @@ def _load_path(outdir: Path, pname: str, key: str) -> dict[str, Any] | None:
 
     f = outdir / _PARTIAL.format(pname)
     try:
-        kept = json.loads(f.read_text())
+        kept = json.loads(f.read_text(encoding="utf-8"))
     except FileNotFoundError:
         return None
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as err:

@@ -21,6 +21,7 @@ from rtp import sdk
 from rtp.cli import build_export_parser, build_parser, export_main, main
 from rtp.cli._run import option_flags
 
+from .conftest import base_metadata
 from .test_errors_doc import all_errors
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -967,3 +968,90 @@ def test_the_error_is_the_last_line_after_the_repeats_count(capsys: pytest.Captu
         lines = capsys.readouterr().err.splitlines()
         assert lines[-2:-1] == ["WARNING (repeated): 2 more like: sample a has no targets"], lines
         assert lines[-1].startswith(last) and len(lines) == 3, lines
+
+
+#: The consoles rtp's output must survive: an engine's or CI's C/POSIX locale (Python's UTF-8 mode off), a pipe
+#: told ASCII, a Windows console's cp1252; and UTF-8, where every character stays as it is.
+CONSOLES = {"C": ({"LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}, "ascii"),
+            "ascii": ({"PYTHONIOENCODING": "ascii"}, "ascii"), "cp1252": ({"PYTHONIOENCODING": "cp1252"}, "cp1252"),
+            "utf-8": ({"PYTHONIOENCODING": "utf-8"}, "utf-8")}
+
+
+def _rtp(argv: Sequence[str], env: dict[str, str] | None = None, **kw: Any) -> subprocess.CompletedProcess[bytes]:
+    """``python -m rtp ARGV`` as a user's shell runs it (output buffered: no PYTHONUNBUFFERED), in ``env``."""
+    import os
+
+    base = {k: v for k, v in os.environ.items()
+            if k not in ("PYTHONIOENCODING", "PYTHONUTF8", "PYTHONUNBUFFERED", "LC_ALL", "LC_CTYPE", "LANG")}
+    kw.setdefault("stdout", subprocess.PIPE)
+    kw.setdefault("stderr", subprocess.PIPE)
+    return subprocess.run([sys.executable, "-m", "rtp", *argv], env={**base, "COLUMNS": "200", **(env or {})},
+                          timeout=300, **kw)
+
+
+@pytest.mark.parametrize("console", sorted(CONSOLES))
+def test_output_on_a_console_that_is_not_utf8(console: str, tiny_model: Callable[..., Path]) -> None:
+    """Under LC_ALL=C (or PYTHONIOENCODING=ascii) `rtp evaluate` and `rtp train` crashed with a UnicodeEncodeError at
+    their last line, its "R²" (`rtp train -h` too, at "what R² scores"), after the whole job; cp1252 at the table's
+    "σ MAE". What the console cannot encode is written in ASCII ("R^2", "sigma", "<="), else as its escape; a
+    UTF-8 console, and a cp1252 one for what it holds, keep every character."""
+    env, encoding = CONSOLES[console]
+    path = tiny_model(base_metadata(description="R² 95% · σ 0.1 ≤ 0.2, café"))
+    info = _rtp(["info", str(path)], env)
+    assert info.returncode == 0 and not info.stderr, info.stderr.decode(errors="replace")[-2000:]
+    line = next(x for x in info.stdout.decode(encoding).splitlines() if x.startswith("description"))
+    want = {"ascii": r"R^2 95% * sigma 0.1 <= 0.2, caf\xe9", "cp1252": "R² 95% · sigma 0.1 <= 0.2, café",
+            "utf-8": "R² 95% · σ 0.1 ≤ 0.2, café"}[encoding]
+    assert line.endswith("  " + want), line
+    helped = _rtp(["train", "-h"], env)
+    assert helped.returncode == 0 and not helped.stderr, helped.stderr.decode(errors="replace")[-2000:]
+    assert f"(what R{'^2' if encoding == 'ascii' else '²'} scores)" in helped.stdout.decode(encoding)
+
+
+def test_the_console_handlers_are_put_back(tiny_model: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """In-process, main() writes through its own error handler and leaves a caller's streams as they were."""
+    import io
+
+    raw = io.BytesIO()
+    out = io.TextIOWrapper(raw, encoding="ascii", errors="strict", write_through=True)
+    path = tiny_model(base_metadata(description="R² σ"))
+    old = sys.stdout
+    sys.stdout = out
+    try:
+        assert main(["info", str(path)]) == 0
+    finally:
+        sys.stdout = old
+    assert out.errors == "strict"
+    assert b"R^2 sigma" in raw.getvalue(), raw.getvalue()
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["weights", "list"], ["scenes", "list"], ["info", "nope"],
+                                  ["info", "--bogus"]], ids=" ".join)
+def test_a_closed_pipe_ends_the_command_quietly(argv: list[str], tmp_path: Path) -> None:
+    """`rtp ... | head -1` where head has gone: Python's flush at exit said "Exception ignored ... BrokenPipeError"
+    and exited 120 (buffered output: any shell's, without PYTHONUNBUFFERED), and with stderr in the pipe too (`2>&1`)
+    the error's own line failed the same way, so `rtp info nope` exited 120, not 2. The command's exit code stays,
+    and nothing is said about the pipe."""
+    import os
+
+    code = {"info nope": 2, "info --bogus": 2}.get(" ".join(argv), 0)
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        said = _rtp(argv, stdout=write, stderr=subprocess.PIPE)  # stdout's reader gone
+        both = _rtp(argv, stdout=write, stderr=write)  # and stderr's
+    finally:
+        os.close(write)
+    assert said.returncode == code and "BrokenPipe" not in said.stderr.decode(), said.stderr.decode()[-2000:]
+    assert both.returncode == code
+
+
+def test_the_console_handler_keeps_the_streams_own_for_the_rest() -> None:
+    """Under a C locale stdout's handler is surrogateescape: a path's raw bytes (decoded as surrogates) are written
+    back as they were, rtp's own characters in ASCII and anything else as its escape, in any mix."""
+    from rtp.cli._run import _error_handler
+
+    text = "R²σ \udcff\udcfe é×≤"
+    assert text.encode("ascii", _error_handler("surrogateescape")) == b"R^2sigma \xff\xfe \\xe9x<="
+    assert text.encode("ascii", _error_handler("strict")) == b"R^2sigma \\udcff\\udcfe \\xe9x<="
+    assert text.encode("cp1252", _error_handler("strict")) == "R²sigma \\udcff\\udcfe é×<=".encode("cp1252")

@@ -162,6 +162,55 @@ def test_library_code_logs_and_never_prints() -> None:
     assert not bad, "library code prints (log through logging.getLogger(__name__) instead):\n" + "\n".join(bad)
 
 
+def _text_mode(mode: ast.expr | None) -> bool:
+    """Whether a file is opened in text mode: no mode given, or a literal one without ``b`` (a mode the code
+    computes counts as text: it must say its encoding, or be written as a literal)."""
+    return not (isinstance(mode, ast.Constant) and isinstance(mode.value, str) and "b" in mode.value)
+
+
+def _mode(call: ast.Call, position: int) -> ast.expr | None:
+    given = [k.value for k in call.keywords if k.arg == "mode"]
+    return given[0] if given else call.args[position] if len(call.args) > position else None
+
+
+def _unnamed_encodings(path: Path) -> list[str]:
+    """Files ``path`` reads or writes as text without naming an encoding: ``read_text`` / ``write_text``, ``open()``
+    and ``Path.open()`` in text mode, tempfile's and ``os.fdopen``'s text files."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if not isinstance(node, ast.Call) or any(k.arg == "encoding" for k in node.keywords):
+            continue
+        f = node.func
+        name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+        if name in ("read_text", "write_text"):
+            bad = True
+        elif name == "open" and isinstance(f, ast.Name):
+            bad = _text_mode(_mode(node, 1))
+        elif name == "open":  # Path.open(mode); a zip member's z.open("name") or os.open(path, flags) is bytes
+            mode = _mode(node, 0)
+            bad = (mode is None and not node.args or isinstance(mode, ast.Constant) and isinstance(mode.value, str)
+                   and set(mode.value) <= set("rwaxt+") and "b" not in mode.value)
+        elif name in ("NamedTemporaryFile", "TemporaryFile", "SpooledTemporaryFile"):
+            bad = _mode(node, 0) is not None and _text_mode(_mode(node, 0))  # (default: w+b)
+        elif name == "fdopen":
+            bad = _text_mode(_mode(node, 1))
+        else:
+            bad = False
+        if bad:
+            out.append(f"{path.relative_to(ROOT)}:{node.lineno}: {ast.unparse(node)[:80]}")
+    return out
+
+
+def test_text_files_name_their_encoding() -> None:
+    """A file read or written as text without ``encoding=`` uses the locale's: under LC_ALL=C (engines' and CI's
+    build machines) a non-ASCII character fails with a UnicodeError, and under a Windows cp1252 locale the same
+    bytes read as other text (shipped.yaml's 'R²' gave another digest). rtp's files are UTF-8 everywhere."""
+    folders = {ROOMS[room][0] for room in ROOMS} | {"plugins", "models", "bench", "examples"}
+    paths = sorted({p for folder in folders for p in (ROOT / folder).rglob("*.py")})
+    bad = [hit for path in paths for hit in _unnamed_encodings(path)]
+    assert not bad, "text files opened without encoding= (add encoding=\"utf-8\"):\n" + "\n".join(bad)
+
+
 def _top_level_names(tree: ast.Module) -> set[str]:
     """Names a module binds at its top level (also inside top-level ``if`` / ``try`` blocks)."""
     names: set[str] = set()

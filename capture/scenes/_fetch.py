@@ -301,7 +301,7 @@ def _fetch_locked(cache: Path, names: list[str], splits: str | Path | None, conv
         _download(missing, debs, progress)
     stamp = root / ".unpacked"
     deb_files = sorted(debs.glob("*.deb"))
-    have = stamp.read_text().split("\n") if stamp.exists() else []
+    have = stamp.read_text(encoding="utf-8").split("\n") if stamp.exists() else []
     todo = [d for d in deb_files if d.name not in have]
     for d in _progress(todo, desc="unpack", unit="deb", disable=not progress or not todo):
         try:
@@ -393,7 +393,7 @@ def _write_text(path: Path, text: str) -> None:
     from rtp.sdk.files import atomic_output
 
     with atomic_output(path) as tmp:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding="utf-8")
 
 
 # -- loading --------------------------------------------------------------------------------------
@@ -404,7 +404,7 @@ def _read_index(cache: Path) -> dict:
         raise SceneNotFoundError(f"no scene index at {p}: run `rtp scenes fetch --cache-dir {cache}` first")
     again = f"run `rtp scenes fetch --cache-dir {cache}` again"
     try:
-        index = json.loads(p.read_text())
+        index = json.loads(p.read_text(encoding="utf-8"))
     except ValueError as err:  # a truncated or overwritten file (also UnicodeDecodeError)
         raise SceneFormatError(f"{p} is not a scene index ({err}): {again}") from err
     if not isinstance(index, dict):
