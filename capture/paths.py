@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -419,13 +420,25 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
     what per-tile VRS shades (rate blocks never cross a tile); after it, pixels next to a tile of
     another rate differ slightly from FXAA run over the VRS image (``Renderer.shade_rates``).
     ``rates`` must be the frame's grid of ``tile``-pixel tiles (``sdk.tile_grid``, partial edge tiles
-    included), as ``Renderer.shade_rates`` wants it: another grid is a ``ParameterError``."""
+    included), as ``Renderer.shade_rates`` wants it: another grid is a ``ParameterError``, and so are a
+    ``tile`` that is no multiple of 4 (``shade_rates`` refuses it too: a 4x4 block would straddle two
+    tiles) and a chosen rate whose image is missing from ``colour`` or of another shape than ``"1x1"``'s."""
     from rtp import sdk
 
-    ref = colour["1x1"]
+    if not isinstance(colour, Mapping) or "1x1" not in colour:
+        raise sdk.ParameterError(f"colour: expected a frame's uniform-rate images by rate name (Frame.colour), with "
+                                 f"'1x1', got {type(colour).__name__}"
+                                 + (f" of {sorted(map(str, colour))}" if isinstance(colour, Mapping) else ""), "colour")
+    ref = np.asarray(colour["1x1"])
+    if ref.ndim not in (2, 3):
+        raise sdk.ParameterError(f"colour: expected (H, W, C) images or (H, W) planes, got '1x1' of shape {ref.shape}",
+                                 "colour")
     h, w = ref.shape[:2]
     grid = sdk.tile_grid(h, w, tile)  # (a tile that is no positive integer: its ParameterError)
     tile = int(tile)
+    if tile % 4:  # (the frame-aligned 4x4 blocks of colour["4x4"] straddled 6-pixel tiles: an image no VRS shades)
+        raise sdk.ParameterError(f"tile_size: expected a multiple of 4 pixels (the largest rate, 4x4, whole in every "
+                                 f"tile, as Renderer.shade_rates wants it), got {tile}", "tile_size")
     rates = np.asarray(rates)
     if rates.shape != grid:  # (a grid of other tiles: a larger one was cropped to its top-left corner in silence)
         raise sdk.ParameterError(f"rates: expected the {grid[1]}x{grid[0]} tile grid {grid} of {tile}-pixel tiles "
@@ -438,6 +451,14 @@ def composite(colour: dict[str, np.ndarray], rates: np.ndarray, tile: int) -> np
         got = sorted({int(c) for c in np.unique(rates)} - set(known)) if rates.dtype.kind in "iu" else rates.dtype
         raise sdk.ParameterError(f"rates: expected the rate codes of {', '.join(sdk.ALL_RATES)} ({known}), got {got}",
                                  "rates")
+    for used in np.flatnonzero(counts):  # (an image of another size with as many values, (W, H, C) for (H, W, C), was
+        # reshaped into tiles in silence: other pixels; a missing one was a bare KeyError)
+        name = sdk.RATE_NAMES[int(used)]
+        shape = np.shape(colour[name]) if name in colour else None
+        if shape != ref.shape:
+            raise sdk.ParameterError(f"colour[{name!r}]: expected an image of the shape of colour['1x1'], {ref.shape}, "
+                                     f"for the tiles at {name}, got " + ("none" if shape is None else f"shape {shape}"),
+                                     "colour")
     out = np.empty(ref.shape, ref.dtype)
     th, tw = h // tile, w // tile
     if h % tile or w % tile:  # ragged edge tiles: per pixel
@@ -469,7 +490,8 @@ class DynamicResolution:
     ``every`` frames. ``DynamicResolution((1.0, 0.75), 30)`` draws frames 0-29 at the full size, 30-59 at
     three quarters of it, 60-89 at the full size again, and so on; ``DynamicResolution.parse("1,0.75@30")``
     is the same (``rtp play --dynamic-resolution``). A frame's size is the full size times its scale,
-    rounded, at least 16 pixels a side (:meth:`size`). Bad values are a ``ParameterError``."""
+    rounded, at least 16 pixels a side (a side of the full size under 16 pixels: that side, never more than
+    the full size; :meth:`size`). Bad values are a ``ParameterError``."""
 
     scales: tuple[float, ...]
     every: int
@@ -517,7 +539,9 @@ class DynamicResolution:
     def size(self, index: int, full: tuple[int, int]) -> tuple[int, int]:
         """``(width, height)`` of frame ``index`` on a path drawn at ``full`` = ``(width, height)``."""
         scale = self.scales[(index // self.every) % len(self.scales)]
-        return max(16, round(full[0] * scale)), max(16, round(full[1] * scale))
+        # (16 pixels or the full side, the smaller: a 12x8 path drew 16x16 frames at scale 1, past its largest size)
+        w, h = full[0], full[1]
+        return max(min(16, w), round(w * scale)), max(min(16, h), round(h * scale))
 
     def sizes(self, full: tuple[int, int]) -> list[tuple[int, int]]:
         """Every size the schedule draws at ``full``, in the schedule's order, once each."""

@@ -97,6 +97,41 @@ def test_composite_refuses_a_rate_image_of_another_tile_grid(hw: tuple[int, int]
     assert np.array_equal(composite(colour, np.full((th, tw), 10, np.uint8), TILE), colour["4x4"])
 
 
+def test_composite_refuses_tiles_a_4x4_block_straddles_and_images_of_other_shapes() -> None:
+    """A tile that is no multiple of 4 is refused as Renderer.shade_rates refuses it: the frame-aligned 4x4 blocks of the
+    4x4 image straddled 6- (or 2-) pixel tiles, an image no per-tile VRS shades, returned in silence. A chosen rate's
+    image of another shape than 1x1's with as many values ((W, H, C) for (H, W, C)) was reshaped into tiles in silence
+    (other pixels), a missing one was a bare KeyError; both are a ParameterError naming the rate."""
+    rng = np.random.default_rng(2)
+    for tile in (2, 6, 12):
+        h, w = 2 * tile, 3 * tile
+        colour = {rate: rng.random((h, w, 3), dtype=np.float32) for rate in sdk.RATE_CODES}
+        codes = np.full(sdk.tile_grid(h, w, tile), sdk.RATE_CODES["4x4"], np.uint8)
+        codes[0, 0] = sdk.RATE_CODES["1x1"]
+        if tile % 4 == 0:  # (12: whole 4x4 blocks in every tile)
+            assert np.array_equal(composite(colour, codes, tile)[tile:, tile:], colour["4x4"][tile:, tile:])
+            continue
+        with pytest.raises(sdk.ParameterError, match=f"tile_size: expected a multiple of 4 pixels.*got {tile}"):
+            composite(colour, codes, tile)
+    h, w = 32, 48
+    colour = {rate: rng.random((h, w, 3), dtype=np.float32) for rate in sdk.RATE_CODES}
+    codes = np.full(sdk.tile_grid(h, w, TILE), sdk.RATE_CODES["1x1"], np.uint8)
+    codes[1, 2] = sdk.RATE_CODES["2x2"]
+    for image, got in ((rng.random((w, h, 3), dtype=np.float32), f"shape \\({w}, {h}, 3\\)"), (None, "none")):
+        bad = dict(colour)
+        if image is None:
+            del bad["2x2"]
+        else:
+            bad["2x2"] = image
+        with pytest.raises(sdk.ParameterError, match=f"colour\\['2x2'\\]: expected an image of the shape of "
+                                                     f"colour\\['1x1'\\], \\({h}, {w}, 3\\).*got {got}"):
+            composite(bad, codes, TILE)
+        codes_1x1 = np.zeros_like(codes)  # (a rate no tile takes need not be there)
+        assert np.array_equal(composite(bad, codes_1x1, TILE), colour["1x1"])
+    with pytest.raises(sdk.ParameterError, match="colour: expected a frame's uniform-rate images.*'1x1'"):
+        composite({"2x2": colour["2x2"]}, codes, TILE)
+
+
 def test_any_history_reprojects_like_the_renderer(rendered: Any) -> None:
     r, frames = rendered
     prev, cur = frames[-2], frames[-1]
@@ -264,6 +299,10 @@ def test_dynamic_resolution_is_a_schedule_of_sizes(capsys: pytest.CaptureFixture
                                                                       (1280, 720)]
     assert DynamicResolution((0.5, 1, 0.5), 1).sizes((100, 60)) == [(50, 30), (100, 60)]  # once each, in order
     assert DynamicResolution((0.01,), 1).size(0, (100, 60)) == (16, 16)  # at least 16 pixels a side
+    # never past the full size: a side under 16 pixels is kept (a 12x8 path at scale 1 drew 16x16 frames)
+    small = DynamicResolution((1.0, 0.5), 2)
+    assert [small.size(i, (12, 8)) for i in (0, 2)] == [(12, 8), (12, 8)]
+    assert small.sizes((40, 10)) == [(40, 10), (20, 10)] and small.size(2, (100, 20)) == (50, 16)
     for bad, match in (("0.75", "SCALES@FRAMES"), ("@3", "SCALES@FRAMES"), ("1,x@3", "SCALES@FRAMES"),
                        ("1@x", "SCALES@FRAMES"), ("1.5@3", r"in \(0, 1\]"), ("0@3", r"in \(0, 1\]"),
                        ("nan@3", r"in \(0, 1\]"), ("1@0", "integer >= 1")):
