@@ -101,22 +101,25 @@ def run_demo(
     timing_runs: int = 11,
     tile_size: int | None = None,
     metadata: Any = None,
+    palette: str = "paper",
 ) -> DemoResult:
     """Run the demo and write its pictures into ``out``. ``predict`` is timed as the median of
     ``timing_runs`` runs after a warm-up. ``tile_size`` is the hardware's VRS tile when it differs from
     the model's (``sdk.load(..., tile_size=)``: 8 for AMD's and Intel's); the rates, the true error and
-    the composite are then per hardware tile. ``metadata``: ``sdk.load``'s, for a model that carries none."""
+    the composite are then per hardware tile. ``metadata``: ``sdk.load``'s, for a model that carries none.
+    ``palette``: the rate overlay's colours, ``"paper"`` or ``"cvd"`` (:func:`rtp.sdk.draw_rate_overlay`'s)."""
     from rtp import metrics
     from rtp.capture import check_frame_memory, load_scene, save_image
     from rtp.capture.paths import MAX_FRAMES, composite
     from rtp.evaluate import failing_tiles
-    from rtp.evaluate.plots import heatmaps, rate_overlays, value_map
+    from rtp.evaluate.plots import heatmaps, rate_legend, rate_overlays, value_map
     from rtp.plugins.moderngl import Renderer
 
     if isinstance(frames, bool) or not isinstance(frames, int) or not 2 <= frames <= MAX_FRAMES:
         # (1 was taken and run as 2: the last frame needs the one before as its reprojected history)
         raise sdk.ParameterError(f"frames: expected an integer in [2, {MAX_FRAMES}] (the frame shown and at least "
                                  f"the one before it, its history), got {frames!r}", "frames")
+    rate_legend(palette)  # (an unknown palette refused before the model is loaded and the scene rendered)
     predictor = sdk.load(model, tile_size=tile_size, metadata=metadata)
     meta = predictor.metadata
     tile = predictor.tile_size  # the hardware's tiles, which the rates are for
@@ -161,7 +164,8 @@ def run_demo(
     # a failure or Ctrl-C in one left this run's first pictures beside the last run's others, of another model or
     # scene, in the same folder. (Each file is written atomically.)
     pictures: dict[str, np.ndarray] = {"frame.png": ref}
-    pictures["overlay.png"] = rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, tile)
+    pictures["overlay.png"] = rate_overlays(ref, {Path(str(predictor.path)).stem: rates}, tile,
+                                             palette=palette)
     # Heatmaps in metric units, bright = worse; the colour range ends at the threshold's double.
     # (PSNR is negated so that bright means worse there too.)
     if meta.higher_is_better:

@@ -819,7 +819,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     with _metadata_hint(args):  # (a foreign model's sidecar: --metadata)
         r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
                      frames=args.frames, cache_dir=args.cache_dir, seed=args.seed, tile_size=args.tile_size,
-                     metadata=args.metadata)
+                     metadata=args.metadata, palette=args.palette)
     shares = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r.rate_share.items() if v > 0)
     print(f"model      {r.model} ({r.metric}), threshold {r.threshold:g}")
     print(f"rates      {shares} of {r.tiles} tiles of {r.tile_size}x{r.tile_size} pixels")
@@ -942,6 +942,7 @@ def build_parser() -> argparse.ArgumentParser:
         DEFAULT_TILE_SIZE,
         METRICS,
         OUTPUT_SETS,
+        OVERLAY_PALETTES,
         TARGET_METRICS,
         TILE_SIZES,
     )
@@ -979,6 +980,12 @@ def build_parser() -> argparse.ArgumentParser:
     def model_metadata(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--metadata", default=None, type=_in_file, metavar="SIDECAR.yaml",
                         help="metadata for a model that carries none (default: the model's own)")
+
+    def palette(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--palette", choices=tuple(OVERLAY_PALETTES), default="paper",
+                        help="the rate overlay's colours: the paper's (fine green, medium yellow, coarse red) or, for "
+                        "colour-vision deficiency, sky blue, yellow and vermillion (apart under protanopia, "
+                        "deuteranopia and tritanopia, where the paper's green and yellow are not under protanopia)")
 
     info = command("info", "show a model's metadata, inputs, outputs and provider", _cmd_info)
     info.add_argument("model", help="an .onnx path or the name of a shipped model")
@@ -1267,6 +1274,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "shown, with the one before as its history)")
     dm.add_argument("--seed", type=_non_negative, default=0, help="which viewpoint of the scene")
     dm.add_argument("--out", type=_out_folder, default="rtp-demo", help="output folder")
+    palette(dm)
     dm.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size in pixels (default: "
                     "the model's: 16 for the shipped ones, NVIDIA's, 8 for the -8px ones, AMD's and Intel's; finer "
                     "than the model's, each takes its model tile's rate; coarser, the worst of those it covers)")
@@ -1405,6 +1413,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "six; 1x2,2x1,2x2 without the additional rates)")
     pr.add_argument("--out", type=_out_folder, default=None, help="write rates.npy, predictions.npy and overlay.png "
                     "into this folder (a sequence: frames.csv, overlay.gif and frames.png)")
+    palette(pr)
     _convention_options(pr)
     pr.add_argument("--every", type=_positive, default=None, metavar="K", help="a sequence with prediction reuse "
                     "(sdk.PredictionReuse): the network every K-th frame, its estimates (or a splitting model's "

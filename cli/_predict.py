@@ -372,7 +372,8 @@ def _predict_frame(predictor: Any, path: str, args: argparse.Namespace, threshol
 #: frame in the default conventions, and predicts nothing).
 _PREDICT_OPTIONS = {"model": "jnyang", "metadata": None, "threshold": None, "saving": None, "combiner": None,
                     "tile_size": None, "allowed": None, "out": None, "albedo_linear": False, "normal_space": "view",
-                    "depth_kind": "linear", "every": None, "json": False}
+                    "depth_kind": "linear", "every": None, "json": False,
+                    "palette": "paper"}
 #: ``--write-example``'s options and their values when not given (refused without it).
 _EXAMPLE_OPTIONS = {"size": (640, 360), "seed": 0}
 
@@ -480,7 +481,7 @@ def run_predict(args: argparse.Namespace) -> int:
                **({} if args.combiner is None else {"combiner": args.combiner,
                                                     "engine_work_saved": summary["engine_work_saved"]})}
     if args.out:
-        summary["wrote"] = _write_out(args.out, frame, values, rates, predictor.tile_size)
+        summary["wrote"] = _write_out(args.out, frame, values, rates, predictor.tile_size, args.palette)
     if args.json:
         print(json.dumps(summary))
         return 0
@@ -552,7 +553,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
             all_rates.append(rates)
             if args.out:
                 all_values.append(values)
-                overlays.append(_overlay(frame, rates, predictor.tile_size, GIF_WIDTH))
+                overlays.append(_overlay(frame, rates, predictor.tile_size, GIF_WIDTH, args.palette))
             if not args.json and not args.quiet:
                 changed = "" if row["changed"] is None else f"{100.0 * row['changed']:.1f}%"
                 network = "" if reuse is None else "  ran" if row["network"] >= 1.0 else (
@@ -607,9 +608,11 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     return 0
 
 
-def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: int | None = None) -> np.ndarray:
+def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: int | None = None,
+             palette: str = "paper") -> np.ndarray:
     """The rates over the frame's ``colour``, else its albedo or previous frame (black without any), legend
-    drawn, uint8; with ``width``, shown at the largest integer fraction of its size at most that wide."""
+    drawn, uint8, in ``palette``'s colours; with ``width``, shown at the largest integer fraction of its size at most
+    that wide."""
     from rtp import sdk
 
     size = np.shape(frame["depth"])[:2]
@@ -627,7 +630,7 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
     # 1280x720 frame's GIF kept every third grid line, its tiles looking three times their size, and its key's
     # 2-pixel letters lost one column in three, unreadable)
     picture = sdk.draw_rate_overlay(np.clip(np.nan_to_num(base), 0.0, 1.0), rates, tile, grid=step == 1,
-                                    legend=step == 1)
+                                    legend=step == 1, palette=palette)
     if step > 1:
         picture = np.array(picture[::step, ::step])
         shown = tile / step
@@ -642,7 +645,7 @@ def _overlay(frame: dict[str, np.ndarray], rates: np.ndarray, tile: int, width: 
                     picture[:, lines] *= 0.75
         # the key at the size shown: the overlay of one-pixel tiles all 1x1 (untinted) draws its legend alone
         picture = sdk.draw_rate_overlay(picture, np.full(picture.shape[:2], sdk.RATE_CODES["1x1"], np.uint8), 1,
-                                        grid=False, legend=True)
+                                        grid=False, legend=True, palette=palette)
     return np.round(np.clip(picture, 0.0, 1.0) * 255.0).astype(np.uint8)  # (a quarter of float32's memory)
 
 
@@ -706,13 +709,13 @@ def _holding(args: argparse.Namespace, threshold: float) -> str:
 
 
 def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, rates: np.ndarray,
-               tile: int) -> list[str]:
+               tile: int, palette: str = "paper") -> list[str]:
     """``rates.npy`` (uint8 codes), ``predictions.npy`` (float32 ``(6, th, tw)``, metric units) and
     ``overlay.png`` (the rates over the frame's ``colour``, else its albedo or previous frame)."""
     from rtp import sdk
     from rtp.capture import save_image
 
-    picture = _overlay(frame, rates, tile)  # (drawn before the arrays are written, as a sequence's pictures are)
+    picture = _overlay(frame, rates, tile, palette=palette)  # (drawn before the arrays are written, as a sequence's pictures are)
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     for name, array in (("rates.npy", rates), ("predictions.npy", values)):

@@ -15,7 +15,16 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from rtp.capture import figure_image, save_image
-from rtp.sdk import OVERLAY_COLOURS, PREDICTED_RATES, RATE_NAMES, draw_rate_overlay, rate_size, tile_grid, work_saved
+from rtp.sdk import (
+    OVERLAY_PALETTES,
+    PREDICTED_RATES,
+    RATE_NAMES,
+    ParameterError,
+    draw_rate_overlay,
+    rate_size,
+    tile_grid,
+    work_saved,
+)
 
 from ._baselines import BaselineError
 
@@ -313,14 +322,24 @@ def scatter(
     return figure_image(fig)
 
 
-def rate_legend() -> list[tuple[str, tuple[float, float, float] | None]]:
-    """The overlay's colour classes and the rates in each: ``[(label, colour or None for 1x1)]``."""
+#: The rate overlay's palettes (:func:`rtp.sdk.draw_rate_overlay`'s ``palette``): the paper's, the default, and one
+#: whose classes stay apart under colour-vision deficiency.
+PALETTES = tuple(OVERLAY_PALETTES)
+
+
+def rate_legend(palette: str = "paper") -> list[tuple[str, tuple[float, float, float] | None]]:
+    """The overlay's colour classes and the rates in each: ``[(label, colour or None for 1x1)]``, in ``palette``'s
+    colours (:data:`PALETTES`)."""
+    if not isinstance(palette, str) or palette not in OVERLAY_PALETTES:
+        raise ParameterError(f"palette: expected one of {', '.join(map(repr, OVERLAY_PALETTES))} (the rate overlay's "
+                             f"colours), got {palette!r}", "palette")
+    colours = OVERLAY_PALETTES[palette]
     classes: dict[str, list[str]] = {"fine": [], "medium": [], "coarse": []}
     for r in PREDICTED_RATES:
         w, h = rate_size(r)
         classes["fine" if w * h == 2 else "medium" if w * h == 4 else "coarse"].append(r)
     out: list[tuple[str, tuple[float, float, float] | None]] = [("1x1 (untinted)", None)]
-    out += [(f"{k}: {', '.join(v)}", OVERLAY_COLOURS[k]) for k, v in classes.items()]
+    out += [(f"{k}: {', '.join(v)}", colours[k]) for k, v in classes.items()]
     return out
 
 
@@ -330,23 +349,25 @@ _RATE_LEGEND_ROW = 600
 _RATE_PANELS_PER_ROW = 3
 
 
-def _add_rate_legend(fig: Figure, ncols: int) -> None:
+def _add_rate_legend(fig: Figure, ncols: int, palette: str = "paper") -> None:
     from matplotlib.patches import Patch
 
     handles = [Patch(facecolor=c if c is not None else "white", edgecolor="#404040", label=name)
-               for name, c in rate_legend()]
+               for name, c in rate_legend(palette)]
     fig.legend(handles=handles, loc="outside lower center", ncols=ncols, fontsize=8, frameon=False)
 
 
 def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int, *, scale: int = 1,
-                  title: str = "") -> np.ndarray:
+                  title: str = "", palette: str = "paper") -> np.ndarray:
     """:func:`rtp.sdk.draw_rate_overlay` of each method's rate codes ``(th, tw)`` on the same
     ``(H, W, 3)`` image (an ``(H, W, 4)`` one's colour, its alpha left out), side by side
     (three a row at most), titled with the
     method and the shading work it saves (of the image's pixels, a partial edge tile counting its real ones),
-    with the legend of the rate colours below and ``title``, if given, above."""
+    with the legend of the rate colours below and ``title``, if given, above; ``palette`` the overlay's colours
+    (:data:`PALETTES`)."""
     if not rates:
         raise BaselineError("rate_overlays: no methods given")
+    rate_legend(palette)  # (an unknown palette refused before any drawing)
     _check_scale(scale)
     img = np.asarray(image)
     h, w = img.shape[:2]
@@ -364,7 +385,7 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
     for ax, (name, codes) in zip(axes, rates.items()):
         codes = np.asarray(codes)  # (checked by draw_rate_overlay: a uint8 cast made a code of 256 draw as 1x1)
         # a share of the frame's pixels (a partial edge tile its real ones), as the decision table counts it
-        drawn = draw_rate_overlay(img, codes, tile)
+        drawn = draw_rate_overlay(img, codes, tile, palette=palette)
         saved = (0.0 if not codes.size else work_saved(codes, (h, w), tile) if codes.shape == tile_grid(h, w, tile)
                  else float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])))
         # (its colour only: an engine's (H, W, 4) frame kept its alpha, and an alpha of 0, a back buffer's, drew the
@@ -372,7 +393,7 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
         ax.imshow(drawn[..., :3], interpolation="nearest")
         ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
         _bare(ax)
-    _add_rate_legend(fig, ncols)
+    _add_rate_legend(fig, ncols, palette)
     if title:
         fig.suptitle(title, fontsize=10)
     return figure_image(fig)

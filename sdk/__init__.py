@@ -47,7 +47,7 @@ from ._errors import (
 )
 from ._metadata import FEATURES_NAME, METADATA_KEY, SCHEMA_VERSION, TAIL_KEY, ModelMetadata
 from ._metrics import METRIC_NAME_PATTERN, METRICS, TARGET_METRICS, MetricInfo, mse_from_psnr, psnr_from_mse
-from ._overlay import OVERLAY_COLOURS, draw_rate_overlay
+from ._overlay import OVERLAY_COLOURS, OVERLAY_PALETTES, draw_rate_overlay
 from ._planes import DEPTH_KINDS, GBUFFERS, NORMAL_SPACES, check_gbuffers, gbuffers_needed, input_planes
 from ._predictor import ShadingRatePredictor, load, shipped_models
 from ._rates import (
@@ -152,6 +152,7 @@ __all__ = [
     "NORMAL_SPACES",
     "OUTPUT_SETS",
     "OVERLAY_COLOURS",
+    "OVERLAY_PALETTES",
     "PREDICTED_RATES",
     "RATE_CODES",
     "RATE_NAMES",

@@ -8,14 +8,39 @@ from ._errors import InputDtypeError, InputShapeError, NonFiniteInputError, Para
 from ._rates import RATE_CODES, RATE_NAMES, rate_size
 from ._tiles import tile_grid
 
-__all__ = ["OVERLAY_COLOURS", "draw_rate_overlay"]
+__all__ = ["OVERLAY_COLOURS", "OVERLAY_PALETTES", "draw_rate_overlay"]
 
-#: Overlay colour (linear RGB in [0, 1]) by shaded area: 2 pixels = fine, 4 = medium, 8 or 16 = coarse.
+#: The paper's overlay colour (RGB in [0, 1], blended into the image's own values) by shaded area: 2 pixels =
+#: fine, 4 = medium, 8 or 16 = coarse.
 OVERLAY_COLOURS: dict[str, tuple[float, float, float]] = {
     "fine": (0.0, 0.85, 0.0),
     "medium": (1.0, 0.9, 0.0),
     "coarse": (1.0, 0.0, 0.0),
 }
+
+#: The overlay's palettes by name (``draw_rate_overlay(palette=)``), each its classes' colours: ``"paper"``,
+#: :data:`OVERLAY_COLOURS`, the default; ``"cvd"``, Okabe and Ito's sky blue, yellow and vermillion, told apart
+#: under protanopia, deuteranopia and tritanopia (the paper's fine green and medium yellow come within a CIEDE2000
+#: of about 4 of each other under simulated protanopia, blended at the default alpha; these stay about 10 or more
+#: apart under each, the untinted one too). Both are blended into the image's own values.
+OVERLAY_PALETTES: dict[str, dict[str, tuple[float, float, float]]] = {
+    "paper": OVERLAY_COLOURS,
+    "cvd": {
+        "fine": (86 / 255, 180 / 255, 233 / 255),
+        "medium": (240 / 255, 228 / 255, 66 / 255),
+        "coarse": (213 / 255, 94 / 255, 0.0),
+    },
+}
+
+
+def _overlay_colours(palette: object) -> dict[str, tuple[float, float, float]]:
+    """The class colours of ``palette`` (a name of :data:`OVERLAY_PALETTES`); a :class:`ParameterError` naming
+    them otherwise."""
+    if not isinstance(palette, str) or palette not in OVERLAY_PALETTES:
+        names = ", ".join(repr(p) for p in OVERLAY_PALETTES)
+        raise ParameterError(f"palette: expected one of {names} (the overlay's colours: 'paper' the paper's, 'cvd' "
+                             f"told apart under colour-vision deficiency), got {palette!r}", "palette")
+    return OVERLAY_PALETTES[palette]
 
 
 def _array(x: object, name: str) -> np.ndarray:
@@ -50,7 +75,7 @@ def _text_mask(text: str) -> np.ndarray:
     return np.concatenate(cols, axis=1)
 
 
-def _draw_legend(out: np.ndarray, alpha: float) -> None:
+def _draw_legend(out: np.ndarray, alpha: float, colours: dict[str, tuple[float, float, float]] = OVERLAY_COLOURS) -> None:
     """Draw the rate legend into the bottom-left corner of ``out`` ((H, W, 3) float in [0, 1]), in place:
     a dark box with one row per class, its swatch (tinted as the tiles are) and its rates. The legend
     scales with the image (one font pixel per 270 image rows, fewer where the image is too narrow for that
@@ -71,7 +96,7 @@ def _draw_legend(out: np.ndarray, alpha: float) -> None:
     for i, ((cls, _), mask) in enumerate(zip(LEGEND_ROWS, masks, strict=True)):
         top = y0 + pad + i * row_h
         sw = out[top:top + swatch, x0 + pad:x0 + pad + swatch]
-        sw[...] = grey if cls is None else grey * (1.0 - alpha) + np.array(OVERLAY_COLOURS[cls], np.float32) * alpha
+        sw[...] = grey if cls is None else grey * (1.0 - alpha) + np.array(colours[cls], np.float32) * alpha
         big = np.repeat(np.repeat(mask, s, 0), s, 1)
         left = x0 + pad + swatch + 2 * s
         out[top:top + big.shape[0], left:left + big.shape[1]][big] = 1.0
@@ -93,6 +118,7 @@ def draw_rate_overlay(
     alpha: float = 0.45,
     grid: bool = True,
     legend: bool = False,
+    palette: str = "paper",
 ) -> np.ndarray:
     """Tint each tile of ``image`` by the class of its shading rate.
 
@@ -102,6 +128,9 @@ def draw_rate_overlay(
     red, 2x2 yellow, 1x2 and 2x1 green, 1x1 is left as is. With ``grid`` a faint line marks the
     tiles. With ``legend`` a key in the bottom-left corner names the rates of each colour (full rate
     1x1 untinted; it is left out of images too small to hold it: narrower than 54 pixels or shorter than 33).
+    ``palette``: ``"paper"`` (the default, :data:`OVERLAY_COLOURS`) or ``"cvd"``, sky blue, yellow and vermillion,
+    whose classes stay apart under protanopia, deuteranopia and tritanopia (the paper's green and yellow do not under
+    protanopia).
     Returns a new image of the same dtype and shape (an ``(H, W, 4)`` image keeps its alpha as it is).
     """
     img = _array(image, "image")
@@ -118,6 +147,7 @@ def draw_rate_overlay(
     if isinstance(alpha, (bool, np.bool_)) or not isinstance(alpha, (int, float, np.integer, np.floating)) \
             or not 0.0 <= alpha <= 1.0:
         raise ParameterError(f"alpha: expected a number in [0, 1] (the tint's opacity), got {alpha!r}", "alpha")
+    colours = _overlay_colours(palette)
     h, w = img.shape[:2]
     th, tw = tile_grid(h, w, tile_size)
     rates = _array(rates, "rates")
@@ -145,7 +175,7 @@ def draw_rate_overlay(
         if cls is None:
             continue
         mask = rates == code
-        tint[mask] = OVERLAY_COLOURS[cls]
+        tint[mask] = colours[cls]
         weight[mask] = alpha
     tint_px = np.repeat(np.repeat(tint, tile_size, 0), tile_size, 1)[:h, :w]
     weight_px = np.repeat(np.repeat(weight, tile_size, 0), tile_size, 1)[:h, :w]
@@ -154,7 +184,7 @@ def draw_rate_overlay(
         out[::tile_size, :, :] *= 0.75
         out[:, ::tile_size, :] *= 0.75
     if legend:
-        _draw_legend(out, alpha)
+        _draw_legend(out, alpha, colours)
     out = np.clip(out, 0.0, 1.0)
     if is_uint8:
         res = np.round(out * 255.0).astype(np.uint8)

@@ -45,6 +45,7 @@ def test_sdk_all_is_pinned() -> None:
         "NORMAL_SPACES",
         "OUTPUT_SETS",
         "OVERLAY_COLOURS",
+        "OVERLAY_PALETTES",
         "PREDICTED_RATES",
         "RATE_CODES",
         "RATE_NAMES",

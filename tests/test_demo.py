@@ -192,3 +192,25 @@ def test_the_demo_figures_results_md_quotes_for_the_shipped_files_are_what_it_pr
         r = run_demo(tmp_path / f"{model}-{tile_size}", model=model, tile_size=tile_size, timing_runs=1)
         printed = (f"{100 * r.work_saved:.1f}", f"{100 * r.over_threshold:.1f}", f"{r.composite_flip_mean:.4f}")
         assert figures == printed, (model, tile_size, figures, printed)
+
+
+def test_demo_draws_its_overlay_in_the_palette_asked_for(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """`rtp demo --palette cvd` hands the palette to run_demo (the paper's by default), and run_demo refuses an unknown
+    one before it loads a model or renders (an unknown model name here would be its error otherwise)."""
+    from rtp import sdk
+    from rtp.cli import _demo
+
+    got: list[str] = []
+
+    def fake(out: object, **kw: object) -> None:
+        got.append(str(kw["palette"]))
+        raise sdk.ParameterError("stop")
+
+    monkeypatch.setattr(_demo, "run_demo", fake)
+    assert rtp_main(["demo", "--out", str(tmp_path / "a"), "--palette", "cvd"]) == 2
+    assert rtp_main(["demo", "--out", str(tmp_path / "b")]) == 2
+    assert got == ["cvd", "paper"]
+    monkeypatch.undo()
+    with pytest.raises(sdk.ParameterError, match="palette: expected one of 'paper', 'cvd'"):
+        _demo.run_demo(tmp_path / "c", model="no-such-model", palette="grey")
+    assert not (tmp_path / "c").exists()

@@ -618,6 +618,37 @@ def test_the_rate_overlays_of_a_frame_with_alpha_draw_its_colour() -> None:
     np.testing.assert_array_equal(plots.rate_overlays(rgba, {"m": codes}, 16), plots.rate_overlays(rgb, {"m": codes}, 16))
 
 
+def test_the_rate_overlays_draw_their_panels_and_legend_in_the_palette_asked_for(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """rate_overlays(palette="cvd") tints its panels as draw_rate_overlay(palette="cvd") does and its legend names
+    those colours (the legend's swatches are the palette's, not the paper's green, yellow and red); an unknown palette
+    is refused before anything is drawn."""
+    from matplotlib.patches import Patch
+
+    from rtp.capture import figure_image
+
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or figure_image(fig))
+    img = np.full((96, 160, 3), 90, np.uint8)
+    codes = np.array([[sdk.RATE_CODES[r] for r in ("1x1", "1x2", "2x2", "4x4", "2x4", "2x1")] * 2 + [0] * 8] * 6,
+                     np.uint8)[:, :10]
+    plots.rate_overlays(img, {"m": codes}, 16, palette="cvd")
+    fig = figures[-1]
+    shown = np.asarray(fig.axes[0].get_images()[0].get_array())
+    np.testing.assert_array_equal(shown, sdk.draw_rate_overlay(img, codes, 16, palette="cvd"))
+    swatches = [tuple(np.round(np.asarray(h.get_facecolor()[:3]), 3)) for h in fig.legends[0].legend_handles
+                if isinstance(h, Patch)]
+    white = sdk.draw_rate_overlay(np.ones((1, 3, 3), np.float32), np.array([[1, 5, 10]], np.uint8), 1, alpha=1.0,
+                                  grid=False, palette="cvd")[0]
+    assert swatches == [(1.0, 1.0, 1.0)] + [tuple(np.round(c.astype(np.float64), 3)) for c in white]
+    assert plots.rate_legend() == plots.rate_legend("paper")
+    assert [c for _, c in plots.rate_legend()][1:] == list(sdk.OVERLAY_COLOURS.values())
+    figures.clear()
+    with pytest.raises(sdk.ParameterError, match="palette"):
+        plots.rate_overlays(img, {"m": codes}, 16, palette="rainbow")
+    assert not figures
+
+
 def test_heatmaps_draw_infinite_values_at_the_colour_ends_and_nan_grey(monkeypatch: pytest.MonkeyPatch) -> None:
     """An infinite value (a PSNR of identical tiles, +inf, negated by `rtp demo` so that bright is worse) was masked by
     matplotlib and drawn blank, the page's white: the best tiles as bright as the worst. It takes the colour at its end

@@ -736,6 +736,33 @@ def test_a_foreign_model_runs_with_its_sidecar(frame: Path, tmp_path: Path, caps
     assert "--metadata: not read with --write-example" in capsys.readouterr().err
 
 
+def test_predict_draws_its_overlay_in_the_palette_asked_for(frame: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """--palette cvd: overlay.png's tints and key in the colour-vision-deficiency palette (sdk.draw_rate_overlay's
+    palette="cvd"); the paper's by default; with --write-example, which draws nothing, refused."""
+    from PIL import Image
+
+    from rtp.cli._predict import _overlay
+
+    pictures = {}
+    for palette in ("paper", "cvd"):
+        out = tmp_path / palette
+        assert main(["predict", str(frame), "--out", str(out), "--json", "--palette", palette]) == 0
+        capsys.readouterr()
+        pictures[palette] = np.asarray(Image.open(out / "overlay.png").convert("RGB"))
+        with np.load(frame) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+        np.testing.assert_array_equal(pictures[palette], _overlay(arrays, np.load(out / "rates.npy"), 16,
+                                                                  palette=palette))
+    assert (pictures["paper"] != pictures["cvd"]).any()
+    assert main(["predict", str(frame), "--out", str(tmp_path / "default"), "--json"]) == 0
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "default" / "overlay.png").convert("RGB")),
+                                  pictures["paper"])
+    capsys.readouterr()
+    assert main(["predict", str(tmp_path / "x.npz"), "--write-example", "--palette", "cvd"]) == 2
+    assert "--palette" in capsys.readouterr().err
+
+
 def test_a_wide_frames_gif_overlay_keeps_every_tiles_grid_line_and_a_readable_key() -> None:
     """A frame wider than the GIF's 480 pixels was drawn at full size and then sampled: at 1280x720 (a third of its
     size) the GIF kept every third grid line, its 16-pixel tiles looking three times their size, and its key's

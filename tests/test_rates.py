@@ -204,6 +204,83 @@ def test_overlay_legend_is_left_out_exactly_where_the_docstring_says() -> None:
         sdk.draw_rate_overlay(np.zeros((40, 60, 2), np.float32), np.zeros((3, 4), np.uint8), 16)
 
 
+# Machado, Oliveira and Fernandes (2009), severity 1.0, applied to linear RGB
+_MACHADO = {
+    "protanopia": [[0.152286, 1.052583, -0.204868], [0.114503, 0.786281, 0.099216], [-0.003882, -0.048116, 1.051998]],
+    "deuteranopia": [[0.367322, 0.860646, -0.227968], [0.280085, 0.672501, 0.047413], [-0.011820, 0.042940, 0.968881]],
+    "tritanopia": [[1.255528, -0.076749, -0.178779], [-0.078411, 0.930809, 0.147602], [0.004733, 0.691367, 0.303900]],
+}
+
+
+def _lab(srgb: np.ndarray) -> np.ndarray:
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    xyz = lin @ np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]).T
+    f = np.cbrt(xyz / np.array([0.95047, 1.0, 1.08883]))  # (no value here is below the linear segment's end)
+    return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1)
+
+
+def _ciede2000(lab1: np.ndarray, lab2: np.ndarray) -> float:
+    (l1, a1, b1), (l2, a2, b2) = lab1, lab2
+    cb = (np.hypot(a1, b1) + np.hypot(a2, b2)) / 2
+    g = 0.5 * (1 - np.sqrt(cb ** 7 / (cb ** 7 + 25 ** 7)))
+    a1, a2 = (1 + g) * a1, (1 + g) * a2
+    c1, c2 = np.hypot(a1, b1), np.hypot(a2, b2)
+    h1, h2 = np.degrees(np.arctan2(b1, a1)) % 360, np.degrees(np.arctan2(b2, a2)) % 360
+    dh = 0.0 if c1 * c2 == 0 else (h2 - h1 + 180) % 360 - 180
+    dhh = 2 * np.sqrt(c1 * c2) * np.sin(np.radians(dh / 2))
+    lb, cbp = (l1 + l2) / 2, (c1 + c2) / 2
+    hb = h1 + h2 if c1 * c2 == 0 else (h1 + h2) / 2 + (180 if abs(h1 - h2) > 180 else 0)
+    t = (1 - 0.17 * np.cos(np.radians(hb - 30)) + 0.24 * np.cos(np.radians(2 * hb))
+         + 0.32 * np.cos(np.radians(3 * hb + 6)) - 0.20 * np.cos(np.radians(4 * hb - 63)))
+    rt = -np.sin(np.radians(60 * np.exp(-(((hb % 360) - 275) / 25) ** 2))) * 2 * np.sqrt(cbp ** 7 / (cbp ** 7 + 25 ** 7))
+    sl = 1 + 0.015 * (lb - 50) ** 2 / np.sqrt(20 + (lb - 50) ** 2)
+    sc, sh = 1 + 0.045 * cbp, 1 + 0.015 * cbp * t
+    return float(np.sqrt(((l2 - l1) / sl) ** 2 + ((c2 - c1) / sc) ** 2 + (dhh / sh) ** 2
+                         + rt * ((c2 - c1) / sc) * (dhh / sh)))
+
+
+def _class_distances(palette: str, vision: str) -> dict[tuple[str, str], float]:
+    """The least CIEDE2000 between the overlay's classes (1x1 untinted, fine, medium, coarse) as drawn at the
+    default alpha over uint8 greys from dark to bright, as seen under ``vision`` (a Machado simulation)."""
+    names = ("1x1", "1x2", "2x2", "4x4")
+    codes = np.array([[sdk.RATE_CODES[r] for r in names]], np.uint8)
+    least: dict[tuple[str, str], float] = {}
+    for grey in range(13, 256, 24):
+        drawn = sdk.draw_rate_overlay(np.full((1, 4, 3), grey, np.uint8), codes, 1, grid=False, palette=palette)
+        srgb = drawn[0].astype(np.float64) / 255
+        lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+        seen = np.clip(lin @ np.array(_MACHADO[vision]).T, 0, 1)
+        lab = _lab(np.where(seen <= 0.0031308, seen * 12.92, 1.055 * seen ** (1 / 2.4) - 0.055))
+        for i in range(4):
+            for j in range(i + 1, 4):
+                d = _ciede2000(lab[i], lab[j])
+                least[names[i], names[j]] = min(least.get((names[i], names[j]), np.inf), d)
+    return least
+
+
+def test_the_cvd_palette_keeps_the_overlays_classes_apart_under_colour_vision_deficiency() -> None:
+    """The paper's fine green and medium yellow come within a CIEDE2000 of about 4 of each other under simulated
+    protanopia; palette="cvd" keeps every class (the untinted one too, over any grey) about 10 or more apart under each."""
+    assert _class_distances("paper", "protanopia")["1x2", "2x2"] < 5  # (why the palette is there)
+    for vision in _MACHADO:
+        distances = _class_distances("cvd", vision)
+        assert min(distances.values()) >= 9, (vision, distances)
+    # the default stays the paper's, and the legend's swatches take the palette's colours
+    codes = np.array([[1, 5, 10]], np.uint8)
+    img = np.full((1, 3, 3), 0.5, np.float32)
+    np.testing.assert_array_equal(sdk.draw_rate_overlay(img, codes, 1, grid=False),
+                                  sdk.draw_rate_overlay(img, codes, 1, grid=False, palette="paper"))
+    keyed = sdk.draw_rate_overlay(np.full((270, 480, 3), 200, np.uint8), np.zeros((17, 30), np.uint8), 16,
+                                  grid=False, legend=True, palette="cvd")
+    box = keyed[210:, :80].reshape(-1, 3).astype(int)
+    tinted = sdk.draw_rate_overlay(np.full((1, 3, 3), 128, np.uint8), codes, 1, grid=False, palette="cvd")[0]
+    for swatch in tinted.astype(int):
+        assert (np.abs(box - swatch).max(axis=1) <= 1).any(), swatch
+    for bad in ("CVD", "jet", None, 1):
+        with pytest.raises(sdk.ParameterError, match="palette: expected one of 'paper', 'cvd'"):
+            sdk.draw_rate_overlay(img, codes, 1, palette=bad)  # type: ignore[arg-type]
+
+
 def test_overlay_checks_the_tile_grid() -> None:
     with pytest.raises(sdk.InputShapeError, match=r"\(2, 3\)"):
         sdk.draw_rate_overlay(np.zeros((20, 40, 3), np.uint8), np.zeros((1, 3), np.uint8), 16)
