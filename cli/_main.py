@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import os
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -688,8 +689,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise RtpError(f"dead output(s) {', '.join(result.dead_outputs)} (see the warning above); {result.checkpoint} "
                        f"is kept, not fit to export: train again with {again}")
     v = result.val["transformed"]
-    # (R² in %, as `rtp evaluate` prints it: its 'model (no safety)' row on the validation scenes is this number)
-    print(f"{result.checkpoint}: {result.steps} steps; validation R² {100 * v['r2']:.1f}%, MAE {v['mae']:.4f} "
+    # (R² in %, as `rtp evaluate` prints it: its 'model (no safety)' row on the validation scenes is this number;
+    # undefined where every validation target is one value, which printed "R² nan%" without a word of why)
+    r2 = (f"{100 * v['r2']:.1f}%" if math.isfinite(v["r2"]) else
+          "undefined (every validation tile's target is the same value: the held-out scenes vary in nothing to explain)"
+          if v["n"] else "undefined (no validation tile was scored)")
+    print(f"{result.checkpoint}: {result.steps} steps; validation R² {r2}, MAE {v['mae']:.4f} "
           f"(transformed, without the safety margin); safety {result.safety:.4f} (underestimated tiles with it: "
           f"{100 * result.under_share:.1f}%)")
     return 0

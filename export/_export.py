@@ -858,8 +858,10 @@ def export_checkpoint(
 #: The metadata fields a checkpoint's network was trained for: the metric and its target parameters, the
 #: input planes in order, the predicted rates in order, the tile and the target transform. Extra metadata
 #: that changes one would describe another network (a model trained on luma told to read red, its 1x2
-#: output labelled 2x1): ``export_checkpoint`` refuses it (a sidecar may restate them).
-TRAINED_FIELDS = ("metric", "inputs", "outputs", "tile_size", "transform", "weber_l")
+#: output labelled 2x1): ``export_checkpoint`` refuses it (a sidecar may restate them). ``higher_is_better`` too: the
+#: safety margin was calibrated in the metric's worse direction, and a plugin metric's (which the SDK cannot check
+#: against rtp's own list) flipped by a sidecar applied the margin the optimistic way and inverted every decision.
+TRAINED_FIELDS = ("metric", "higher_is_better", "inputs", "outputs", "tile_size", "transform", "weber_l")
 
 
 def _check_trained_fields(trained: ModelMetadata, meta: ModelMetadata, source: str = "") -> None:
@@ -904,6 +906,8 @@ def _trained_field_error(key: str, was: Any, now: Any, source: str) -> MetadataE
 
 
 def _shown(value: Any) -> Any:
+    if isinstance(value, (bool, np.bool_)):  # (as the metadata and a sidecar spell it)
+        return "true" if value else "false"
     return ", ".join(map(str, value)) if isinstance(value, (tuple, list)) else value
 
 

@@ -185,6 +185,23 @@ def test_extra_metadata_cannot_change_what_the_network_was_trained_for(tmp_path:
     assert sdk.load(export.export_checkpoint(ck, tmp_path / "z.onnx", extra_metadata=tmp_path / "same.yaml")).tile_size == 16
 
 
+def test_extra_metadata_cannot_flip_a_plugin_metrics_direction(tmp_path: Path) -> None:
+    """The SDK checks higher_is_better only against rtp's own metrics: a sidecar's `higher_is_better: true` on a
+    checkpoint of a plugin error metric was exported, its safety margin then applied the optimistic way
+    (worse_direction -1) and every rate decision inverted."""
+    meta = base_metadata(metric="my_error", weber_l=None, higher_is_better=False, default_threshold=0.1)
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), meta)
+    (tmp_path / "extra.yaml").write_text("higher_is_better: true\n")
+    with pytest.raises(sdk.MetadataError, match=r"^.*extra\.yaml: higher_is_better: the checkpoint's network was "
+                                                r"trained for false, the extra metadata says true;") as err:
+        export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=tmp_path / "extra.yaml")
+    assert err.value.key == "higher_is_better" and not (tmp_path / "x.onnx").exists()
+    assert "higher_is_better" in export.TRAINED_FIELDS
+    (tmp_path / "extra.yaml").write_text("higher_is_better: false\ndescription: restated\n")  # restated: passes
+    m = sdk.load(export.export_checkpoint(ck, tmp_path / "x.onnx", extra_metadata=tmp_path / "extra.yaml")).metadata
+    assert m.higher_is_better is False and m.worse_direction == 1.0
+
+
 @pytest.mark.parametrize("extra, key", [
     ("input_multiple: 8\n", "input_multiple"),  # (the network's is 4: replaced without a word)
     ("finite_probe: finite_probe\n", "finite_probe"),  # (finite_probe=False kept it: failed once exported)

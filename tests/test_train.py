@@ -1442,6 +1442,48 @@ def test_validation_targets_of_one_value_leave_r2_null_and_the_model_saved(tmp_p
     assert all(h["val"]["r2"] is None for h in prov["history"])
 
 
+def test_training_targets_the_transform_cannot_fit_are_refused_naming_the_data(tmp_path: Path) -> None:
+    """Training targets all 0 (no error anywhere) were refused as metadata, "transform.mu_y: expected a number in
+    [1e-06, 1e+06] (the mean training target), got 0"; a logistic transform flat over targets of mean 132 as "choose
+    mu_y inside [0, 1] or a smaller k" (mu_y is measured, not chosen), and logistic_k 1e7 as "transform.k": the
+    targets' error names them, the logistic ones name logistic_k."""
+    from rtp.capture import TargetError
+
+    data = _dataset(tmp_path / "ds", n=6)
+    store = TargetStore(data)
+    base = dict(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), crop=32, steps=2, val_scenes=("scene0",))
+    for sid in ("s001", "s002", "s004", "s005"):  # every training sample's (scene1 and scene2)
+        store.write(sid, "jnyang", np.zeros((6, H // 4, W // 4), np.float32), (H, W))
+    with pytest.raises(TargetError, match=r"^the training targets \(jnyang\) have mean 0, which the clamped transform "
+                                          r"divides by \(its mu_y\): expected a number in \[1e-06, 1e\+06\] \(the mean "
+                                          r"training target\), got 0; every one is 0: the data holds no error to learn$"):
+        train(TrainConfig(**base))
+    for sid in ("s001", "s002", "s004", "s005"):
+        store.write(sid, "jnyang", np.full((6, H // 4, W // 4), 100.0, np.float32), (H, W))
+    with pytest.raises(sdk.ParameterError, match=r"^logistic_k: 10 does not fit the training targets \(jnyang\), of "
+                                                r"mean 100 \(the transform's mu_y\): the logistic transform is then "
+                                                r"flat") as e:
+        train(TrainConfig(**base, transform="logistic"))
+    assert e.value.name == "logistic_k"
+    with pytest.raises(sdk.ParameterError, match=r"^logistic_k: expected a finite number of magnitude <= 1e\+06, "
+                                                r"got 10000000.0 \(the logistic transform's growth rate\)$") as e:
+        train(TrainConfig(**base, transform="logistic", logistic_k=1e7))
+    assert e.value.name == "logistic_k" and not (tmp_path / "m.pt").exists()
+
+
+def test_rtp_train_says_why_the_validation_r2_is_undefined(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Validation targets all of one value leave R² undefined: `rtp train`'s report printed "validation R² nan%"
+    without a word of why; it says so."""
+    data = _dataset(tmp_path / "ds", n=6)
+    store = TargetStore(data)
+    for sid in ("s000", "s003"):  # scene0's samples: no error anywhere
+        store.write(sid, "jnyang", np.zeros((6, H // 4, W // 4), np.float32), (H, W))
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--arch", "fast", "--crop", "32", "--steps",
+                     "10", "--val-scenes", "scene0", "--out", str(tmp_path / "m.pt")]) == 0
+    out = capsys.readouterr().out
+    assert "validation R² undefined (every validation tile's target is the same value" in out and "nan" not in out
+
+
 def test_validation_predicts_a_partial_tile_row_as_the_exported_model_does(tmp_path: Path,
                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     # Validation padded every frame to whole tiles; the SDK pads the exported fast network's input only to its
@@ -1617,6 +1659,26 @@ def test_training_with_context_records_it_and_refuses_what_does_not_fit(tmp_path
                                                 r"64 fits \(128 is the default\)$"):
         train(TrainConfig(out=str(tmp_path / "d.pt"), steps=2, **no_crop))
     assert not (tmp_path / "d.pt").exists()
+
+
+def test_frames_smaller_than_a_tile_are_refused_naming_the_tile(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Frames that hold no whole tile (12x8 at 16-pixel tiles) were refused as "crop (32) is larger than the frames
+    (12x8): a context of at most -16 fits", of a training given no context; they name the tile, and what fits."""
+    monkeypatch.setitem(globals(), "H", 8)
+    monkeypatch.setitem(globals(), "W", 12)
+    data = _dataset(tmp_path / "ds", n=6)
+    for context in (0, 16):
+        with pytest.raises(sdk.ParameterError, match=r"^tile: the frames \(12x8\) hold no whole 16-pixel tile to crop; "
+                                                    r"expected frames of at least 16x16, or a tile of 1, 2, 4, 8$") as e:
+            train(TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), crop=16, context=context,
+                              steps=2, val_scenes=("scene0",)))
+        assert e.value.name == "tile"
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--steps", "2", "--val-scenes", "scene0",
+                     "--out", str(tmp_path / "m.pt")]) == 2
+    err = capsys.readouterr().err
+    assert "--tile-size: the frames (12x8) hold no whole 16-pixel tile" in err and "-16" not in err
+    assert not (tmp_path / "m.pt").exists()
 
 
 def test_bench_target_ceiling_finds_no_phase_noise_where_the_grids_align(tmp_path: Path) -> None:

@@ -562,11 +562,30 @@ def _make_transform(cfg: TrainConfig, targets: Sequence[np.ndarray], what: str =
     if allv.size == 0:
         raise TargetError(f"the {what} targets hold no finite value")
     mu = float(allv.mean())
-    if cfg.transform == "clamped":
-        return sdk.Transform.clamped(mu)
-    if cfg.transform == "logistic":
+    if cfg.transform not in ("clamped", "logistic"):
+        raise sdk.ParameterError(f"transform: expected clamped or logistic, got {cfg.transform!r}", "transform")
+    targets_of = f"the {what} targets" + (f" ({cfg.metric})" if what == "training" else "")
+    # (the transform's own refusal spoke of metadata: "transform.mu_y: expected a number in [1e-06, 1e+06] (the mean
+    # training target), got 0", of a dataset whose targets are all 0, or "choose mu_y inside [0, 1]", measured)
+    try:
+        if cfg.transform == "clamped":
+            return sdk.Transform.clamped(mu)
         return sdk.Transform.logistic(mu, cfg.logistic_k)
-    raise sdk.ParameterError(f"transform: expected clamped or logistic, got {cfg.transform!r}", "transform")
+    except sdk.MetadataError as err:  # (the sdk's ranges, one record of them: its message names them)
+        key = str(err.key)
+        if key.endswith(".mu_y"):
+            why = (f"every one is {allv[0]:g}: the data holds no error to learn" if bool((allv == allv[0]).all()) else
+                   "a metric whose typical value is not a positive number of that range")
+            raise TargetError(f"{targets_of} have mean {mu:g}, which the {cfg.transform} transform divides by (its "
+                              f"mu_y): {str(err).split(': ', 1)[-1]}; {why}") from None
+        if key.endswith(".k"):
+            raise sdk.ParameterError(f"logistic_k: {str(err).split(': ', 1)[-1]} (the logistic transform's growth "
+                                     "rate)", "logistic_k") from None
+        # (a logistic transform flat over [0, 1] around the measured mean)
+        raise sdk.ParameterError(f"logistic_k: {cfg.logistic_k:g} does not fit {targets_of}, of mean {mu:g} (the "
+                                 f"transform's mu_y): the logistic transform is then flat over [0, 1] and every "
+                                 f"network output would decode to one value: a smaller logistic_k (--k), or transform "
+                                 f"clamped", "logistic_k") from None
 
 
 def _predict_frames(net: Network, xs: Sequence[Frame], tile: int, n: int | None = None) -> list[np.ndarray]:
@@ -1109,6 +1128,11 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     log.info("%.1f GB of input planes in memory, read in %.1f s", sum(f.nbytes for f in (*tr.x, *va.x)) / 1e9,
              time.perf_counter() - start)
     full_h, full_w = (h // cfg.tile) * cfg.tile, (w // cfg.tile) * cfg.tile
+    if min(full_h, full_w) < cfg.tile:  # (no crop fits: it said "a context of at most -16 fits", of no context given)
+        smaller = [t for t in sdk.TILE_SIZES if t <= min(h, w)]
+        raise sdk.ParameterError(f"tile: the frames ({w}x{h}) hold no whole {cfg.tile}-pixel tile to crop; expected frames "
+                                 f"of at least {cfg.tile}x{cfg.tile}" + (f", or a tile of {', '.join(map(str, smaller))}"
+                                                                         if smaller else ""), "tile")
     if cfg.crop + 2 * cfg.context > min(full_h, full_w):
         what = f"crop ({cfg.crop})" if not cfg.context else f"crop + 2 x context ({cfg.crop + 2 * cfg.context})"
         # (what fits, said: a recipe without a crop took the default, 128, and the message named a crop nobody gave)
