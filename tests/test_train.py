@@ -2407,3 +2407,36 @@ def test_a_damaged_training_state_is_a_checkpoint_error_naming_the_file(tmp_path
         train(TrainConfig(out=str(path), steps=10, **cfg))
     with pytest.raises(sdk.ParameterError, match=r"steps: .*m\.pt holds step 5, past this run's 3: give --steps 5"):
         train(TrainConfig(out=str(out), steps=3, **cfg))
+
+
+def test_batchnorm_statistics_gone_non_finite_stop_the_training_at_their_step(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """BatchNorm's running statistics gone infinite (a large learning rate) leave a training-mode loss finite: the
+    training went on to its next save, which refused them naming its own step (4), not the one they went at (3)."""
+    from torch.nn.modules.batchnorm import _BatchNorm
+
+    from rtp.train import TrainingDivergedError
+
+    data = _dataset(tmp_path / "ds", n=6)
+    real_step, real_forward, seen, done = torch.optim.RMSprop.step, _BatchNorm.forward, [], [0]
+
+    def poisoned(self: torch.optim.Optimizer, *args: Any, **kwargs: Any) -> Any:
+        result = real_step(self, *args, **kwargs)
+        done[0] += 1
+        if done[0] == 3:  # (step 3's update: a BatchNorm layer's running variance goes infinite with it)
+            seen[-1].running_var.fill_(float("inf"))
+        return result
+
+    def kept(self: _BatchNorm, x: torch.Tensor) -> torch.Tensor:
+        if self.training:  # (the network trained, not its validation copy)
+            seen.append(self)
+        return real_forward(self, x)
+
+    monkeypatch.setattr(torch.optim.RMSprop, "step", poisoned)
+    monkeypatch.setattr(_BatchNorm, "forward", kept)
+    cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / "m.pt"), steps=8, crop=32, batch=2,
+                      val_every=100, save_every=4, val_scenes=("scene0",))
+    with pytest.raises(TrainingDivergedError, match=r"the weights \(.*running_var\) are not finite at step 3, "
+                                                    r"with learning rate .*; no checkpoint was written"):
+        train(cfg)
+    assert done[0] == 3 and not (tmp_path / "m.pt").exists()

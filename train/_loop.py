@@ -1423,6 +1423,13 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
             if cfg.ema:
                 _ema_update(avg, net, min(cfg.ema, (1.0 + step) / (10.0 + step)))
             boundary_gen, boundary_loss, boundary_buffers, updating = gen.get_state(), loss_value, buffers_now(), False
+            # (weights or BatchNorm statistics gone non-finite at this step: the statistics leave a training-mode loss
+            # finite, and were found at the next save, which named its own step)
+            # (one flag from the device, one wait for it a step: a GPU's update was waited on tensor by tensor)
+            tensors = [(k, v) for k, v in (*net.named_parameters(), *boundary_buffers.items()) if v.is_floating_point()]
+            if not bool(torch.stack([torch.isfinite(v).all() for _, v in tensors]).all()):
+                bad = next(k for k, v in tensors if not bool(torch.isfinite(v).all()))
+                raise diverged(f"the weights ({bad}) are not finite")
             if progress:
                 progress(step, cfg.steps, loss_value)
             if step % cfg.val_every == 0 or step == cfg.steps:
