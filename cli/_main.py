@@ -1068,7 +1068,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="parallel render processes (default 1; with --ray, Ray workers)")
     _ray_option(cap)
     cap.add_argument("--seed", type=int, default=0,
-                     help="viewpoint sampling seed (any integer; the same seed, the same viewpoints)")
+                     help="viewpoint sampling seed (any integer; the same seed, the same viewpoints, and so do seeds 2**31 "
+                     "apart: each scene's jobs draw from the seed modulo 2**31)")
     cap.add_argument("--placement", choices=tuple(PLACEMENTS), default="free",
                      help="where the cameras stand: 'free' anywhere in the viewpoint domain (up to 6 m over a floor; "
                      "every dataset before this option), 'eye' at the player's eye height over the floors, as the "
