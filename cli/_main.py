@@ -15,7 +15,18 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._run import Bar, Formatter, Parser, add_common, carries_metadata, interruptible_start, one_line, option_flags, run
+from ._run import (
+    Bar,
+    Formatter,
+    Parser,
+    add_common,
+    carries_metadata,
+    console_form,
+    interruptible_start,
+    one_line,
+    option_flags,
+    run,
+)
 
 __all__ = ["build_parser", "main"]
 
@@ -719,6 +730,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise _usage("--plots writes into --out; give an output folder")
     if args.plot_sample is not None and not args.plots:  # (it was taken and nothing drawn)
         raise _usage("--plot-sample picks the sample --plots draws: give --plots (and --out)")
+    if args.palette != "paper" and not args.plots:  # (as --plot-sample: taken and nothing drawn)
+        raise _usage(f"--palette {args.palette}: the colours of the rate overlays --plots draws: give --plots (and "
+                     "--out)")
     if args.metadata is not None and len(args.model) > 1:  # (every model was read with it, in place of its own)
         raise _usage(f"--metadata is one model's sidecar, and {len(args.model)} models were given: evaluate the "
                      "model that carries no metadata alone with it")
@@ -762,10 +776,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                     threshold=args.threshold, unseen_fraction=args.unseen_fraction, baselines=not args.no_baselines,
                     max_samples=args.max_samples, plots_dir=args.out if args.plots else None,
                     plot_sample=args.plot_sample, progress=bar.update_to, tile_size=args.tile_size,
-                    plot_name=names[model],
+                    plot_name=names[model], palette=args.palette,
                 )
             reports.append(rep)
-            print(rep.table() + "\n")
+            print(rep.table(console_form) + "\n")  # (measured as the console shows it: "R^2 %" under LC_ALL=C)
         if args.out:
             md, js = write_reports(reports, args.out)
             extra = [p for r in reports for p in r.plots]
@@ -843,6 +857,9 @@ def _cmd_play(args: argparse.Namespace) -> int:
     if args.combiner is not None and args.engine_rates is None:  # (it was taken and nothing combined)
         raise _usage(f"--combiner {args.combiner}: the hardware's combiner of --engine-rates' rates and each method's; "
                      "give --engine-rates (foveation or motion), or leave --combiner out")
+    if args.palette != "paper" and (args.no_plots or args.no_animation):  # (taken and nothing drawn in it)
+        raise _usage(f"--palette {args.palette}: the colours of the GIFs' rate overlays, which "
+                     f"{'--no-plots' if args.no_plots else '--no-animation'} leaves out: leave out one of the two")
     paths = _names(args.path) or ["slow", "fast"]
     done = [0]
     steps: dict[str, str] = {}  # path -> the step it is in, while it is not playing frames ("": the job's own)
@@ -878,7 +895,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
                    exact=not args.composite, cache_dir=args.cache_dir, out=args.out, plots=not args.no_plots,
                    animation=not args.no_animation, workers=args.workers, open_loop=args.open_loop,
                    engine_rates=args.engine_rates, combiner=args.combiner or "max",
-                   dynamic_resolution=args.dynamic_resolution, progress=progress, stage=stage, kept=kept.append)
+                   dynamic_resolution=args.dynamic_resolution, progress=progress, stage=stage, kept=kept.append,
+                   palette=args.palette)
     if args.out is not None:  # (the kept paths are gone with the report written)
         args.on_interrupt = lambda: f"the report is written in {args.out}"
     print(rep.to_markdown())
@@ -1263,6 +1281,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--no-baselines", action="store_true", help="score only the model and the oracle")
     ev.add_argument("--plots", action="store_true", help="write heatmaps, a scatter and rate overlays into --out")
     ev.add_argument("--plot-sample", default=None, help="sample the heatmaps and overlays show (default: the first)")
+    palette(ev)
     ev.add_argument("--max-samples", type=_positive, default=None, help="evaluate at most this many samples")
     ev.add_argument("--tile-size", type=_positive, default=None, help="the hardware's VRS tile size when it differs "
                     "from the model's: coarser (an 8-pixel model on NVIDIA's 16-pixel tiles: each takes the worst of "
@@ -1336,6 +1355,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--no-plots", action="store_true", help="no PNG curves and no animation")
     pl.add_argument("--no-animation", action="store_true", help="no GIF per path, nor its middle frame "
                     "(play_PATH.gif and play_PATH.png; the curves and per-frame PNGs are still drawn)")
+    palette(pl)
     pl.add_argument("--workers", type=_positive, default=1, help="play the paths in this many processes at once "
                     "(a process a path at most: more say so)")
     pl.add_argument("--open-loop", action="store_true", help="ablation: every method's history is the full-rate "

@@ -24,8 +24,8 @@ import traceback
 from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
 
-__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metadata", "one_line", "option_flags", "run",
-           "run_guarded", "states_default", "version"]
+__all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metadata", "console_form", "one_line",
+           "option_flags", "run", "run_guarded", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -141,6 +141,21 @@ def console_text() -> Iterator[None]:
         for stream, errors in swapped:
             with contextlib.suppress(OSError, ValueError):
                 stream.reconfigure(errors=errors)
+
+
+def console_form(text: str, stream: Any = None) -> str:
+    """``text`` as ``stream`` (default: stdout) writes it, read back: under :func:`console_text` on a console that is
+    not UTF-8, rtp's own characters in their :data:`ASCII_FORMS` ("R² %" as "R^2 %") and others as escapes; ``text``
+    itself where the stream writes it whole (or names no encoding). For text aligned by its length (a table's
+    columns), measured as it will be shown."""
+    stream = sys.stdout if stream is None else stream
+    encoding, errors = getattr(stream, "encoding", None), getattr(stream, "errors", None)
+    if not isinstance(encoding, str) or not isinstance(errors, str):
+        return text
+    try:
+        return text.encode(encoding, errors).decode(encoding, "replace")
+    except (LookupError, UnicodeError):  # (a strict stream outside console_text: it writes nothing of it anyway)
+        return text
 
 
 def _drop(stream: Any) -> None:

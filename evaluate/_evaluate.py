@@ -124,7 +124,7 @@ class EvaluationReport:
         raise KeyError(f"no {table} row for {method}/{scene}/{split}")
 
     # -- rendering ----------------------------------------------------------------------------
-    def _quality_table(self, markdown: bool) -> list[str]:
+    def _quality_table(self, markdown: bool, render: Callable[[str], str] | None = None) -> list[str]:
         head = ["scene", "split", "method", "n", "R² %", "MAE", "MAE under.", "σ MAE", "under %",
                 f"MAE [{self.model['metric']}]", "Spearman"]
         rows = [
@@ -132,16 +132,16 @@ class EvaluationReport:
              _e(r["sigma"]), _pct(r["under_share"]), _e(r["mae_metric"]), _f(r["spearman"])]
             for r in self.quality
         ]
-        return _table(head, rows, markdown)
+        return _table(head, rows, markdown, render)
 
-    def _decision_table(self, markdown: bool) -> list[str]:
+    def _decision_table(self, markdown: bool, render: Callable[[str], str] | None = None) -> list[str]:
         head = ["scene", "split", "method", "threshold", "n", "fails %", "work saved %", "rates (1x1/1x2/2x1/2x2/2x4/4x2/4x4 %)"]
         rows = [
             [r["scene"], r["split"], r["method"], f"{r['threshold']:g}", str(r["n"]), _pct(r["fail_share"]),
              _pct(r["work_saved"]), _shares(r["rate_shares"])]
             for r in self.decisions
         ]
-        return _table(head, rows, markdown)
+        return _table(head, rows, markdown, render)
 
     def _header(self) -> list[str]:
         m = self.model
@@ -157,10 +157,12 @@ class EvaluationReport:
             f"threshold {self.threshold:g}",
         ]
 
-    def table(self) -> str:
-        """Both tables as aligned plain text, for a terminal."""
-        lines = self._header() + ["", "Prediction quality"] + self._quality_table(False)
-        lines += ["", "VRS decisions"] + self._decision_table(False)
+    def table(self, render: Callable[[str], str] | None = None) -> str:
+        """Both tables as aligned plain text, for a terminal. ``render``: each cell as the terminal will show it,
+        measured so (``rtp evaluate``'s: "R² %" as "R^2 %" on a console that is not UTF-8, whose columns were measured
+        on the characters before and shifted)."""
+        lines = self._header() + ["", "Prediction quality"] + self._quality_table(False, render)
+        lines += ["", "VRS decisions"] + self._decision_table(False, render)
         lines += [""] + [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
@@ -301,7 +303,10 @@ def _shares(shares: dict[str, float | None]) -> str:
     return "/".join(f"{100 * v:.0f}" for v in values if v is not None)
 
 
-def _table(head: list[str], rows: list[list[str]], markdown: bool) -> list[str]:
+def _table(head: list[str], rows: list[list[str]], markdown: bool,
+           render: Callable[[str], str] | None = None) -> list[str]:
+    if render is not None and not markdown:  # (the cells as they will be shown, before they are measured)
+        head, rows = [render(c) for c in head], [[render(c) for c in r] for r in rows]
     if markdown:
         return ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"] + [
             "| " + " | ".join(r) + " |" for r in rows
@@ -442,6 +447,7 @@ def evaluate(
     sweep: bool = True,
     tile_size: int | None = None,
     plot_name: str | None = None,
+    palette: str = "paper",
 ) -> EvaluationReport:
     """Evaluate an ONNX model on a dataset with targets (``rtp targets``) for its metric and tile.
 
@@ -463,6 +469,8 @@ def evaluate(
     (:class:`_Run`: predictions and targets, quality values, every method's rates, the sweeps),
     then assemble the report and write the plots, named ``<plot_name>_heatmaps.png`` and so on (default: the
     model file's stem; two models whose files share a stem need names of their own in one ``plots_dir``).
+    ``palette``: the rate overlays' colours (``<plot_name>_rates.png``), ``"paper"`` or ``"cvd"``, told apart under
+    colour-vision deficiency (:data:`rtp.sdk.OVERLAY_PALETTES`).
     """
     if isinstance(unseen_fraction, bool) or not isinstance(unseen_fraction, (int, float, np.number)) \
             or not 0.0 <= unseen_fraction < 1.0:
@@ -478,6 +486,9 @@ def evaluate(
                                   or any(c in plot_name for c in "/\\\0")):
         raise ParameterError(f"plot_name must be None (the model file's stem) or a file name without a folder, got "
                              f"{plot_name!r}", "plot_name")
+    from .plots import rate_legend
+
+    rate_legend(palette)  # (an unknown palette refused before the model is loaded and the samples evaluated)
     predictor, meta, thr, store, samples = _prepare(model, data, scenes, metadata, threshold, max_samples, tile_size)
     mismatch = _targets_mismatch(meta, store)
     if mismatch:
@@ -495,7 +506,7 @@ def evaluate(
             progress(n, len(samples))
     report = run.report(data)
     if plots_dir is not None and plot_data is not None:
-        report.plots = run.plots(Path(plots_dir), plot_data, plot_name)
+        report.plots = run.plots(Path(plots_dir), plot_data, plot_name, palette)
     return report
 
 
@@ -906,13 +917,15 @@ class _Run:
                 })
         return out
 
-    def plots(self, plots_dir: Path, plot_data: dict[str, Any], name: str | None = None) -> list[str]:
+    def plots(self, plots_dir: Path, plot_data: dict[str, Any], name: str | None = None,
+              palette: str = "paper") -> list[str]:
         """Write the plot sample's figures and the scatter of every model value, named after ``name`` (default:
-        the model file's stem); returns their paths."""
+        the model file's stem), the rate overlays in ``palette``'s colours; returns their paths."""
         every = [self.quality[("model", sc)].merged() for sc in sorted(self.scene_counts)]
         scatter = (np.concatenate([e[0] for e in every]), np.concatenate([e[1] for e in every]))
         stem = Path(str(self.predictor.path)).stem if name is None else name
-        return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem, self.thr)]
+        return [str(p) for p in _write_plots(plots_dir, {**plot_data, "scatter": scatter}, self.meta, stem, self.thr,
+                                             palette)]
 
 
 def _parameter_value(label: str) -> float:
@@ -1030,7 +1043,8 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
     return notes
 
 
-def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: str, threshold: float) -> list[Path]:
+def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: str, threshold: float,
+                 palette: str = "paper") -> list[Path]:
     from . import plots as P
 
     out.mkdir(parents=True, exist_ok=True)
@@ -1058,7 +1072,7 @@ def _write_plots(out: Path, d: dict[str, Any], meta: sdk.ModelMetadata, stem: st
                    title=f"{stem} on sample {sample.id}: true and predicted {meta.metric} per {meta.tile_size}px tile"),
         P.scatter(p_all, g_all, label=scatter_label,
                   title=f"{stem}: predicted vs true {meta.metric}, {p_all.size} tile values"),
-        P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale,
+        P.rate_overlays(sample.final("1x1"), d["codes"], meta.tile_size, scale=scale, palette=palette,
                         title=f"rates chosen on sample {sample.id}; 'model': {stem} at {meta.metric} threshold "
                               f"{threshold:g}"),
     ]

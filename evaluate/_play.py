@@ -604,6 +604,7 @@ def play(
     progress: Callable[[int], None] | None = None,
     stage: Callable[[str], None] | None = None,
     kept: Callable[[str], None] | None = None,
+    palette: str = "paper",
 ) -> PlayReport:
     """Run the closed loop (module docstring) on ``scene`` (a map name or ``procedural:N``) along
     each of ``paths`` (profiles of :data:`~rtp.capture.paths.PATH_PROFILES`: one name or a list), every method swept over
@@ -629,10 +630,16 @@ def play(
     playing"`` once its frames count and ``"PATH: done"`` at its end (with ``workers``, which paths are
     in a step). ``kept(path)`` is called once a path's results are kept in ``out`` for the same call to resume
     from (as the path ends, or at the start for a path read back from an interrupted run): what an interrupted
-    run leaves."""
+    run leaves. ``palette``: the GIFs' rate overlays and key in :data:`rtp.sdk.OVERLAY_PALETTES`' colours, ``"paper"``
+    or ``"cvd"`` (told apart under colour-vision deficiency); it changes only those pictures, so a path kept by an
+    interrupted run with another palette is read back, not played again (its GIF kept in that palette, a warning
+    saying so)."""
     from rtp import metrics
     from rtp.capture.paths import PATH_PROFILES, DynamicResolution
 
+    if not isinstance(palette, str) or palette not in sdk.OVERLAY_PALETTES:
+        raise PlayError(f"palette: expected one of {', '.join(map(repr, sdk.OVERLAY_PALETTES))} (the GIFs' rate "
+                        f"overlay colours), got {palette!r}", "palette")
     specs = parse_methods(methods)
     _check(frames, fps, flip_every, size, (m.reuse for m in specs))
     if dynamic_resolution is not None and not isinstance(dynamic_resolution, DynamicResolution):
@@ -778,7 +785,7 @@ def play(
                "seed": seed, "size": tuple(size), "tile_size": tile_size, "fail_metric": fail_metric, "fail_thr": fail_thr,
                "sweep": sweep, "flip_every": flip_every, "unseen_fraction": unseen_fraction, "exact": exact,
                "open_loop": open_loop, "gif": str(outdir) if outdir is not None and plots and animation else None,
-               "engine_rates": engine_rates, "combiner": combiner,
+               "engine_rates": engine_rates, "combiner": combiner, "palette": palette,
                "dynamic": None if dynamic_resolution is None else [list(dynamic_resolution.scales),
                                                                    dynamic_resolution.every]}
         # A path finished by an interrupted run of the same job into the same folder is read back, not
@@ -792,7 +799,7 @@ def play(
             log.info("%s: %s played by an interrupted run of this job; playing the rest", outdir, ", ".join(results))
             assert outdir is not None
             for pname, res in results.items():
-                res["files"] = _kept_pictures(outdir, pname, res, job["gif"] is not None)
+                res["files"] = _kept_pictures(outdir, pname, res, job["gif"] is not None, palette)
                 if kept is not None:
                     kept(pname)
             if progress is not None:
@@ -841,10 +848,11 @@ def play(
     return report
 
 
-def _kept_pictures(outdir: Path, pname: str, res: dict[str, Any], animation: bool) -> list[str]:
+def _kept_pictures(outdir: Path, pname: str, res: dict[str, Any], animation: bool, palette: str = "paper") -> list[str]:
     """The pictures of path ``pname`` kept by an interrupted run (its GIF and middle frame) that this run reports:
     with ``animation``, those in ``outdir`` (and a warning naming the ones that are not: the kept results hold
-    no frames to draw them from, and a kept path is not played again); without, none (they are removed with the
+    no frames to draw them from, and a kept path is not played again; and one where they were drawn in another
+    ``palette`` than this run's, which they keep for the same reason); without, none (they are removed with the
     other runs' pictures when the report is written)."""
     if not animation:
         return []
@@ -858,6 +866,11 @@ def _kept_pictures(outdir: Path, pname: str, res: dict[str, Any], animation: boo
                     "or --no-plots, animation=False or plots=False, or the files were removed since), and its frames "
                     "are not kept: this run writes none; delete %s to play the path again with them", outdir, pname,
                     " or ".join(missing), outdir / _PARTIAL.format(pname))
+    drawn = res.get("palette", "paper")  # (a path kept before the palette was recorded: the only one there was)
+    if have and drawn != palette:
+        log.warning("%s: path %s is read back from an interrupted run that drew %s in the %r palette, and its frames "
+                    "are not kept: this run's %r palette is not theirs; delete %s to play the path again in it",
+                    outdir, pname, " and ".join(have), drawn, palette, outdir / _PARTIAL.format(pname))
     return have
 
 
@@ -912,7 +925,8 @@ def _resume_key(job: dict[str, Any], predictors: dict[str, sdk.ShadingRatePredic
     import json
 
     models = {k: hashlib.sha256(Path(str(p.path)).read_bytes()).hexdigest() for k, p in sorted(predictors.items())}
-    settings = {k: v for k, v in job.items() if k not in ("gif", "threads")}
+    # (nor the palette, which changes only the GIFs' colours: a path kept with another is not played again)
+    settings = {k: v for k, v in job.items() if k not in ("gif", "threads", "palette")}
     return json.dumps({"job": settings, "models": models, "rtp": sdk.__version__}, sort_keys=True, default=str)
 
 
@@ -1056,7 +1070,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
         start = time.perf_counter()
         unseen, anim = _run_path(player, path, loops, metrics, job["fail_metric"], job["fail_thr"], info.higher_is_better,
                                  tile, job["flip_every"], frame_done, job["gif"] is not None, job["open_loop"],
-                                 engine, combiner)
+                                 engine, combiner, job.get("palette", "paper"))
         took = time.perf_counter() - start
         log.info("%s: %d frames of %d loops played in %.1f s (%.2f s a frame)", pname, len(path), len(loops), took,
                  took / max(1, len(path)))
@@ -1072,6 +1086,7 @@ def _play_path(job: dict[str, Any], progress: Callable[[int], None] | None = Non
         "frames": {lp.method.name: {"saved": lp.saved, "fail": lp.fail, "change": lp.change, "flip": lp.flip,
                                     "ms": lp.ms} for lp in loops if lp.default},
         "files": files,
+        "palette": job.get("palette", "paper"),  # (the GIF's: a rerun that reads the path back says if it asks another)
     }
 
 
@@ -1273,7 +1288,7 @@ def _model(pred: Any, thr: float, reuse: int, tile: int, unseen_fraction: float,
 def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_metric: str, fail_thr: float, fail_hib: bool,
               tile: int, flip_every: int, progress: Callable[[int], None] | None,
               animate: bool, open_loop: bool = False, engine_image: str | None = None,
-              combiner: str = "max") -> tuple[list[float], list[np.ndarray]]:
+              combiner: str = "max", palette: str = "paper") -> tuple[list[float], list[np.ndarray]]:
     from rtp.capture.paths import frame_unseen_share
 
     unseen: list[float] = []
@@ -1331,7 +1346,7 @@ def _run_path(player: Any, path: Any, loops: list[_Loop], metrics: Any, fail_met
                 when += f", {pf.index / path.fps:.2f} s"
             if getattr(player, "dynamic", None) is not None:
                 when += f", {ref.shape[1]}x{ref.shape[0]}"
-            keep.append(_anim_frame(ref, shown, tile, when, getattr(player, "size", None)))
+            keep.append(_anim_frame(ref, shown, tile, when, getattr(player, "size", None), palette=palette))
         if progress is not None:
             progress(1)
     return unseen, keep
@@ -1346,18 +1361,20 @@ _ANIM_PANEL_WIDTH = 400  # each panel at most this wide
 
 
 def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]], tile: int,
-                when: str = "", full: tuple[int, int] | None = None) -> np.ndarray:
+                when: str = "", full: tuple[int, int] | None = None, *, palette: str = "paper") -> np.ndarray:
     """One GIF frame: the full-rate frame (labelled with ``when``, the frame's place on the path) and
     each method's displayed frame with its rate overlay, downscaled to panels at most
     ``_ANIM_PANEL_WIDTH`` wide, three per row, uint8; with ``full`` (the path's largest ``(width,
     height)``: dynamic resolution) each panel is the size a frame of that size gets, every GIF frame
     alike. The rates' colour key fills the first empty cell of the grid, legible at the panels' size;
-    where no cell is empty, the first overlay carries the overlay's own small key."""
+    where no cell is empty, the first overlay carries the overlay's own small key; overlays and key in ``palette``'s
+    colours (:data:`rtp.sdk.OVERLAY_PALETTES`)."""
     from PIL import Image
 
     spare = -(len(shown) + 1) % 3 if len(shown) + 1 > 3 else 0
     names = ["full rate (reference)" + (f", {when}" if when else ""), *shown]
-    panels = [_uint8(ref)] + [_uint8(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0 and not spare))
+    panels = [_uint8(ref)] + [_uint8(sdk.draw_rate_overlay(img, rates, tile, legend=i == 0 and not spare,
+                                                           palette=palette))
                               for i, (img, rates) in enumerate(shown.values())]
     h, w = panels[0].shape[:2]
     fw, fh = full if full is not None else (w, h)
@@ -1368,7 +1385,7 @@ def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]]
         h, w = panels[0].shape[:2]
     panels = [_label(p, name) for p, name in zip(panels, names)]  # (after the downscale: legible at its size)
     if spare:
-        panels.append(_rate_key(h, w))
+        panels.append(_rate_key(h, w, palette))
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
     grid = np.zeros((rows * h, cols * w, 3), np.uint8)
@@ -1378,8 +1395,9 @@ def _anim_frame(ref: np.ndarray, shown: dict[str, tuple[np.ndarray, np.ndarray]]
     return grid
 
 
-def _rate_key(h: int, w: int) -> np.ndarray:
-    """An ``h`` x ``w`` uint8 panel naming the overlay's colour classes (:func:`rtp.evaluate.plots.rate_legend`):
+def _rate_key(h: int, w: int, palette: str = "paper") -> np.ndarray:
+    """An ``h`` x ``w`` uint8 panel naming the overlay's colour classes in ``palette``'s colours
+    (:func:`rtp.evaluate.plots.rate_legend`):
     a swatch and its rates a row, white on black, as large as the panel holds (nothing where it is
     too small for one row)."""
     from PIL import Image, ImageDraw
@@ -1387,7 +1405,7 @@ def _rate_key(h: int, w: int) -> np.ndarray:
     from .plots import rate_legend
 
     im = Image.new("RGB", (w, h))
-    rows = [("rates each method chose", None, False)] + [(label, colour, True) for label, colour in rate_legend()]
+    rows = [("rates each method chose", None, False)] + [(label, colour, True) for label, colour in rate_legend(palette)]
     step = min(h // (len(rows) + 1), 28)
     if step < 8:
         return np.asarray(im)

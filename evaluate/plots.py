@@ -399,11 +399,30 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
     return figure_image(fig)
 
 
-def _method_colours(methods: Sequence[str]) -> dict[str, Any]:
+#: The markers and line styles that tell the methods of a closed-loop figure apart beside their colours (in greyscale
+#: and under colour-vision deficiency, where colours alone do not): the i-th method takes the i-th of each, cycling,
+#: so that no two methods of up to 28 (7 markers by 4 styles) share a marker and a style.
+_METHOD_MARKERS = ("o", "s", "^", "D", "v", "P", "X")
+_METHOD_LINESTYLES = ("-", "--", ":", "-.")
+
+
+def _method_styles(methods: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """Each method's ``color``, ``marker`` and ``linestyle`` (``Axes.plot``'s keywords), by its place in ``methods``:
+    the same in every figure of one run. Tab10's colours (the 11th method takes the first's again), and a marker and
+    a line style of their own for each of up to 28 methods."""
     import matplotlib
 
     cmap = matplotlib.colormaps["tab10"]
-    return {m: cmap(i % 10) for i, m in enumerate(methods)}
+    return {m: {"color": cmap(i % 10), "marker": _METHOD_MARKERS[i % len(_METHOD_MARKERS)],
+                "linestyle": _METHOD_LINESTYLES[i % len(_METHOD_LINESTYLES)]}
+            for i, m in enumerate(methods)}
+
+
+def _report_styles(report: Any, methods: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """:func:`_method_styles` of a closed-loop report's methods in the order its run names them (``settings``'
+    ``methods``), then any other of ``methods``: each method the same style in the curves and the per-frame plot."""
+    named = report.settings.get("methods") if isinstance(report.settings, Mapping) else None
+    return _method_styles(list(dict.fromkeys([*(named if isinstance(named, list) else []), *methods])))
 
 
 def _method_legend(fig: Figure, axes: Any, loc: Literal["outside right upper", "outside lower center"],
@@ -425,13 +444,13 @@ _CURVES_LEFT = 0.06
 
 def play_curves(report: Any) -> np.ndarray:
     """Closed-loop sweeps (:func:`rtp.evaluate.play`): per path, each method's work saved against
-    its share of failing tiles over its parameter sweep, the default parameter ringed, the matched
-    failing shares dashed."""
+    its share of failing tiles over its parameter sweep (each method its colour, marker and line style), the default
+    parameter ringed, the matched failing shares dashed."""
     from ._play import FAIL_LEVELS
 
     paths = list(report.unseen)
     methods = list(dict.fromkeys(r["method"] for r in report.rows))
-    colours = _method_colours(methods)
+    styles = _report_styles(report, methods)
     fig = _figure(520 * len(paths) + 220, 420)  # (220: the legend at the right)
     axes = np.atleast_1d(fig.subplots(1, len(paths), sharey=True))
     s = report.settings
@@ -442,11 +461,11 @@ def play_curves(report: Any) -> np.ndarray:
                 continue
             x = [100 * r["fail_share"] for r in rows]
             y = [100 * r["work_saved"] for r in rows]
-            ax.plot(x, y, marker="o", markersize=3, linewidth=1.2, color=colours[m], label=m)
+            ax.plot(x, y, markersize=4, linewidth=1.2, label=m, **styles[m])
             for r in rows:
                 if r["default"]:
                     ax.plot([100 * r["fail_share"]], [100 * r["work_saved"]], marker="o", markersize=8,
-                            markerfacecolor="none", color=colours[m])
+                            markerfacecolor="none", linestyle="none", color=styles[m]["color"])
         for f in FAIL_LEVELS:
             ax.axvline(100 * f, color="#999999", linewidth=0.8, linestyle="--")
         ax.set_xscale("symlog", linthresh=1.0)
@@ -475,22 +494,27 @@ def _failing(metric: str, threshold: float) -> str:
     return f"{metric} {'≤' if hib else '≥'} {threshold:g}"  # (failing_tiles: not better than the threshold)
 
 
-def _series(ax: Any, t: np.ndarray, y: np.ndarray, colour: Any, label: str) -> None:
-    """One method's per-frame series as a line, and each value with no finite neighbour as a dot: a line drew
-    nothing of it (rate changes under dynamic resolution with short holds: one value between NaNs)."""
-    ax.plot(t, y, linewidth=0.9, color=colour, label=label)
+def _series(ax: Any, t: np.ndarray, y: np.ndarray, style: Mapping[str, Any], label: str, place: float = 0.0) -> None:
+    """One method's per-frame series as a line in its ``style`` (:func:`_method_styles`), its marker on about ten of
+    its frames (from ``place``, a share of the spacing: methods apart, their markers not on one another), and each
+    value with no finite neighbour as a dot: a line drew nothing of it (rate changes under dynamic resolution with
+    short holds: one value between NaNs)."""
+    every = max(1, len(t) // 10)
+    ax.plot(t, y, linewidth=0.9, markersize=3.5, markevery=(min(round(place * every), every - 1), every),
+            label=label, **style)
     ok = np.isfinite(y)
     alone = ok & ~np.concatenate([[False], ok[:-1]]) & ~np.concatenate([ok[1:], [False]])
     if alone.any():
-        ax.plot(t[alone], y[alone], linestyle="none", marker="o", markersize=2.5, color=colour)
+        ax.plot(t[alone], y[alone], linestyle="none", marker=style["marker"], markersize=3, color=style["color"])
 
 
 def play_frames(report: Any) -> np.ndarray:
     """Closed-loop runs frame by frame at each method's default parameter: work saved, failing
-    tiles and the share of tiles whose rate changed, with the path's unseen share per frame."""
+    tiles and the share of tiles whose rate changed (each method its colour, marker and line style), with the path's
+    unseen share per frame."""
     paths = list(report.unseen)
     methods = list(dict.fromkeys(m for p in paths for m in report.frames[p]))
-    colours = _method_colours(methods)
+    styles = _report_styles(report, methods)
     s = report.settings
     fig = _figure(1300, 300 * len(paths) + 40 + 20 * -(-len(methods) // 7))  # (and the legend's rows below)
     axes = np.atleast_2d(fig.subplots(len(paths), 4, squeeze=False))
@@ -505,7 +529,8 @@ def play_frames(report: Any) -> np.ndarray:
                 # (frame 0 has no history; frame 1's rate change is from frame 0's rates: both left out, as the
                 # summaries leave them out)
                 first = 2 if key == "change" else 1
-                _series(ax, t[first:], 100 * np.asarray(series[key][first:], np.float64), colours[m], m)
+                _series(ax, t[first:], 100 * np.asarray(series[key][first:], np.float64), styles[m], m,
+                        methods.index(m) / len(methods))
         row[3].plot(t[1:], 100 * np.asarray(report.unseen[path][1:]), color="#333333", linewidth=0.9)
         for ax, title in zip(row, ("work saved, %", f"tiles failing ({s['fail_metric']}), %",
                                    "tiles whose rate changed, %", "unseen share of the frame, %")):

@@ -714,6 +714,46 @@ def test_the_closed_loop_plots_keep_their_legend_off_the_panels(monkeypatch: pyt
             assert ax.get_legend() is None and not box.overlaps(ax.get_window_extent()), ax.get_title()
 
 
+def test_the_closed_loop_plots_tell_their_methods_apart_without_colour(monkeypatch: pytest.MonkeyPatch) -> None:
+    """play's curves and per-frame plots told the methods apart by colour alone (every curve the same round marker and
+    solid line, every per-frame series a bare solid line): in greyscale, or under colour-vision deficiency, tab10's
+    neighbours could not be told apart. Each method's line has a marker and line style of its own beside its colour,
+    the same in both figures, in the order the run names the methods; past tab10's ten colours too."""
+    from matplotlib.colors import to_rgba
+
+    from rtp.evaluate._play import PlayReport
+
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
+    for n in (7, 12):
+        figures.clear()
+        methods = [f"m{i}" for i in range(n)]
+        report = PlayReport({"scene": "procedural:0", "frames": 30, "fps": 60.0, "fail_metric": "jnyang",
+                             "fail_threshold": 0.25, "methods": methods})
+        report.unseen["fast"] = [0.05] * 30
+        # (the per-frame series listed in another order than the run's: each method keeps its style all the same)
+        report.frames["fast"] = {m: {k: [0.6] * 30 for k in ("saved", "fail", "change")} for m in reversed(methods)}
+        report.rows += [{"path": "fast", "method": m, "fail_share": 0.01 * j, "work_saved": 0.1 * j,
+                         "default": j == 1} for m in methods for j in range(3)]
+        plots.play_curves(report)
+        plots.play_frames(report)
+        seen: dict[str, tuple[Any, ...]] = {}
+        for fig in figures:
+            for ax in fig.axes:
+                lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
+                if not lines:  # (the unseen share: no method's)
+                    continue
+                assert sorted(ln.get_label() for ln in lines) == sorted(methods), ax.get_title()
+                styles = {ln.get_label(): (tuple(np.round(to_rgba(ln.get_color()), 4)), ln.get_marker(),
+                                           ln.get_linestyle()) for ln in lines}
+                assert len(set(styles.values())) == n, (ax.get_title(), styles)
+                assert len({style[1:] for style in styles.values()}) == n, (ax.get_title(), styles)
+                assert all(style[1] not in ("None", "", " ", None) and style[2] not in ("None", "", " ")
+                           for style in styles.values())
+                for m, style in styles.items():
+                    assert seen.setdefault(m, style) == style, (m, ax.get_title())
+
+
 def test_the_figures_of_a_small_frame_keep_every_label_inside_and_apart(monkeypatch: pytest.MonkeyPatch) -> None:
     """At 160x96 (rtp demo --size 160x96) the heatmaps' panel titles ran into each other, the FLIP
     map's colour-bar label and the overlay's rate legend off the image: small frames are drawn larger
@@ -872,6 +912,71 @@ def test_cli_evaluate_writes_markdown_json_and_pngs(dataset: Path, model: Path, 
         assert shown.count(f"[{own // 2}-pixel tiles; the model's {own}]") >= 1 and "the model's" not in \
             shown.split(f"[{own // 2}-pixel")[0], (flag, shown)
 
+
+
+def test_evaluate_draws_its_rate_overlays_in_the_palette_asked_for(dataset: Path, model: Path, tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """evaluate(palette="cvd") and `rtp evaluate --plots --palette cvd` draw <model>_rates.png in the colour-vision
+    deficiency palette (the paper's by default); an unknown one is refused before any work (the library's before the
+    model is loaded: an unknown model would be its error otherwise; argparse's choices), and --palette without --plots,
+    which draws nothing, is refused as --plot-sample is."""
+    real = plots.rate_overlays
+    drawn: list[str] = []
+
+    def spy(*args: Any, **kw: Any) -> np.ndarray:
+        drawn.append(kw.get("palette", "paper"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(plots, "rate_overlays", spy)
+    evaluate(model, dataset, baselines=False, max_samples=1, plots_dir=tmp_path / "lib", palette="cvd")
+    evaluate(model, dataset, baselines=False, max_samples=1, plots_dir=tmp_path / "default")
+    assert drawn == ["cvd", "paper"]
+    from PIL import Image
+
+    with Image.open(tmp_path / "lib" / "m_rates.png") as a, Image.open(tmp_path / "default" / "m_rates.png") as b:
+        assert a.size == b.size and (np.asarray(a) != np.asarray(b)).any()
+    with pytest.raises(sdk.ParameterError, match="palette: expected one of 'paper', 'cvd'"):
+        evaluate(tmp_path / "no-such-model.onnx", dataset, plots_dir=tmp_path / "bad", palette="grey")
+    assert not (tmp_path / "bad").exists()
+    drawn.clear()
+    base = ["evaluate", str(model), "--data", str(dataset), "--no-baselines", "--max-samples", "1"]
+    assert rtp_main([*base, "--out", str(tmp_path / "cli"), "--plots", "--palette", "cvd"]) == 0
+    assert drawn == ["cvd"]
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as stop:
+        rtp_main([*base, "--out", str(tmp_path / "x"), "--plots", "--palette", "grey"])
+    assert stop.value.code == 2 and "--palette: invalid choice: 'grey' (choose from 'paper', 'cvd')" in capsys.readouterr().err
+    assert rtp_main([*base, "--out", str(tmp_path / "y"), "--palette", "cvd"]) == 2
+    assert "--palette cvd: the colours of the rate overlays --plots draws: give --plots" in capsys.readouterr().err
+    assert drawn == ["cvd"] and not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_cli_evaluate_aligns_its_table_on_a_console_that_is_not_utf8(dataset: Path, model: Path) -> None:
+    """Under LC_ALL=C (an ASCII stdout) the console writes the quality table's "R² %" and "σ MAE" as "R^2 %" and
+    "sigma MAE", longer than the widths measured on them: the header's columns ran past their values' from "R² %" on.
+    The cells are measured as the console shows them; a UTF-8 console's table keeps its characters."""
+    import io
+
+    def shown(encoding: str) -> list[str]:
+        raw = io.BytesIO()
+        out = io.TextIOWrapper(raw, encoding=encoding, errors="strict", write_through=True)
+        old, sys.stdout = sys.stdout, out
+        try:
+            assert rtp_main(["evaluate", str(model), "--data", str(dataset), "--no-baselines", "--max-samples", "1",
+                             "--no-progress"]) == 0
+        finally:
+            sys.stdout = old
+        text = raw.getvalue().decode(encoding)
+        return text.split("Prediction quality\n")[1].split("\n\n")[0].splitlines()
+
+    for encoding, head in (("ascii", "R^2 %"), ("utf-8", "R² %")):
+        table = shown(encoding)
+        assert head in table[0] and len(table) >= 3, table
+        # (every line as long as the others, and each column's right edge where the header's is)
+        assert len({len(line) for line in table}) == 1, table
+        end = table[0].index(head) + len(head)
+        assert all(line[end - 1] != " " and line[end] == " " for line in table), (encoding, table)
 
 
 def test_cli_evaluate_into_a_folder_another_job_writes_is_refused(dataset: Path, model: Path, tmp_path: Path,

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from rtp import sdk
 from rtp.cli import main as rtp_main
 from rtp.evaluate import PlayReport, _play, play, plots
 from rtp.evaluate._play import FAIL_LEVELS
@@ -164,8 +165,8 @@ def test_the_animation_leaves_out_the_first_frame(tmp_path: Path, monkeypatch: p
     out of every figure, and the GIF showed it."""
     whens: list[str] = []
     real = _play._anim_frame
-    monkeypatch.setattr(_play, "_anim_frame", lambda ref, shown, tile, when="", full=None:
-                        whens.append(when) or real(ref, shown, tile, when, full))
+    monkeypatch.setattr(_play, "_anim_frame", lambda ref, shown, tile, when="", full=None, **kw:
+                        whens.append(when) or real(ref, shown, tile, when, full, **kw))
     rep = play("procedural:0", "yang2019", paths=("fast",), out=tmp_path, **KW)
     assert [w.split(",")[0] for w in whens] == ["frame 1 of 3", "frame 2 of 3"]
     assert {"play_fast.gif", "play_fast.png"} <= set(rep.files)
@@ -260,3 +261,64 @@ def test_ctrl_c_says_which_paths_are_kept(tmp_path: Path, monkeypatch: pytest.Mo
         assert rtp_main(run) == 130
         assert capsys.readouterr().err == (f"rtp play: interrupted; the path played to its end (slow) is kept in {out}: "
                                            "the same command plays the rest (fast)\n")
+
+
+def test_the_animation_draws_its_overlays_in_the_palette_asked_for(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str],
+                                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """play(palette="cvd") and `rtp play --palette cvd` draw the GIFs' rate overlays and key in the colour-vision
+    deficiency palette (the paper's by default); an unknown one is refused before any work, and with --no-animation or
+    --no-plots, which draw no overlay, --palette cvd is refused. The palette changes only pictures, so it is not in
+    the resume key: a path kept by an interrupted run in another palette is read back, not played again, its GIF
+    kept in that palette and a warning saying so."""
+    palettes: list[str] = []
+    real = _play._anim_frame
+    monkeypatch.setattr(_play, "_anim_frame", lambda *a, **kw: palettes.append(kw["palette"]) or real(*a, **kw))
+    for palette in ("paper", "cvd"):
+        play("procedural:0", "oracle", paths=("fast",), out=tmp_path / palette, palette=palette, **KW)
+    assert palettes == ["paper"] * 2 + ["cvd"] * 2  # (frames 1 and 2 of 3)
+    from PIL import Image
+
+    stills = [np.asarray(Image.open(tmp_path / p / "play_fast.png").convert("RGB")) for p in ("paper", "cvd")]
+    assert stills[0].shape == stills[1].shape and (stills[0] != stills[1]).any()
+    key = {p: _play._rate_key(120, 300, p) for p in ("paper", "cvd")}
+    assert (key["paper"] != key["cvd"]).any()
+    cvd = tuple(round(255 * c) for c in sdk.OVERLAY_PALETTES["cvd"]["fine"])
+    assert (key["cvd"] == cvd).all(-1).any() and not (key["paper"] == cvd).all(-1).any()
+
+    with pytest.raises(_play.PlayError, match="palette: expected one of 'paper', 'cvd'"):
+        play("no-such-map", "oracle", out=tmp_path / "bad", palette="grey", **KW)
+    assert not (tmp_path / "bad").exists()
+
+    # resumed in another palette: the kept path read back (not played again), its GIF kept, a warning
+    kw = {**KW, "paths": ("slow", "fast")}
+    _stop_on(monkeypatch, "fast")
+    with pytest.raises(KeyboardInterrupt):
+        play("procedural:0", "oracle", out=tmp_path / "r", **kw)
+    played: list[str] = []
+    monkeypatch.setattr(_play, "_play_path", lambda job, *rest: played.append(job["path"]) or _PLAY_PATH(job, *rest))
+    palettes.clear()
+    with caplog.at_level(logging.WARNING, logger="rtp.evaluate"):
+        rep = play("procedural:0", "oracle", out=tmp_path / "r", palette="cvd", **kw)
+    assert played == ["fast"] and palettes == ["cvd"] * 2
+    assert {"play_slow.gif", "play_slow.png", "play_fast.gif"} <= set(rep.files)
+    (warning,) = [r.getMessage() for r in caplog.records if "palette" in r.getMessage()]
+    assert warning.startswith(f"{tmp_path / 'r'}: path slow is read back from an interrupted run that drew "
+                              "play_slow.gif and play_slow.png in the 'paper' palette")
+    assert warning.endswith(f"delete {tmp_path / 'r' / '.play-slow.partial.json'} to play the path again in it")
+
+    # the command line: passed on, refused where nothing is drawn in it, an unknown one refused by argparse
+    monkeypatch.setattr(_play, "_play_path", _PLAY_PATH)
+    run = ["play", "procedural:0", "--methods", "oracle", "--frames", "3", "--size", f"{W}x{H}", "--no-sweep",
+           "--flip-every", "0", "--path", "fast", "-q"]
+    palettes.clear()
+    assert rtp_main([*run, "--out", str(tmp_path / "cli"), "--palette", "cvd"]) == 0
+    assert palettes == ["cvd"] * 2
+    capsys.readouterr()
+    for flag in ("--no-animation", "--no-plots"):
+        assert rtp_main([*run, "--out", str(tmp_path / "none"), "--palette", "cvd", flag]) == 2
+        assert f"--palette cvd: the colours of the GIFs' rate overlays, which {flag} leaves out" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        rtp_main([*run, "--out", str(tmp_path / "none"), "--palette", "grey"])
+    assert stop.value.code == 2 and "--palette: invalid choice: 'grey'" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
