@@ -857,6 +857,7 @@ class _Run:
             report.matched = _matched(report.sweep, target, {
                 r["method"]: r["threshold"] for r in report.decisions if r["scene"] == scene_names[-1]})
         report.notes = _notes(self.metric, self.hib, self.thr, self.selectors, self.unseen_fraction, meta.outputs)
+        report.notes += _undefined_notes(report.quality)
         mismatch = _targets_mismatch(meta, self.store)
         if mismatch:
             report.notes.insert(0, mismatch)
@@ -1007,6 +1008,27 @@ def _method_threshold(method: str, thr: float, selectors: dict[str, Any]) -> flo
     if sel is None:
         return thr
     return float(getattr(sel, "threshold", getattr(sel, "cutoff", thr)))
+
+
+def _undefined_notes(quality: list[dict[str, Any]]) -> list[str]:
+    """Why rows of tiles (``n`` > 0) read "-" for R² % or Spearman (null in the JSON): the row's targets, or for
+    Spearman its predictions (a constant predictor's), are all one value. (They read "-" without a word of why.)"""
+    def where(rows: list[dict[str, Any]]) -> str:
+        names = [f"{r['scene']}/{r['split']}/{r['method']}" for r in rows]
+        return ", ".join(names[:3]) + (f", ... ({len(names)} rows)" if len(names) > 3 else "")
+
+    def undefined(key: str) -> list[dict[str, Any]]:
+        return [r for r in quality if r["n"] and (r[key] is None or not math.isfinite(r[key]))]
+
+    out = []
+    if r2 := undefined("r2"):
+        out.append("R² % reads '-' (null in evaluation.json) where a row's targets are all one value: R² is undefined "
+                   f"without variance to explain; here {where(r2)}.")
+    if rank := undefined("spearman"):
+        out.append("Spearman reads '-' (null in evaluation.json) where a row's predictions or targets are all one value "
+                   f"(a constant predictor's, say) or it holds one value: a rank correlation is undefined; here "
+                   f"{where(rank)}.")
+    return out
 
 
 def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: float, outputs: Sequence[str]) -> list[str]:

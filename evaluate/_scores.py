@@ -17,9 +17,10 @@ __all__ = ["Scores", "scores"]
 
 @dataclass(frozen=True)
 class Scores:
-    """``r2``: 1 - SS_res / SS_tot. ``mae``: mean |pred - gt|. ``mae_under``: mean shortfall
-    (gt - pred) over the tiles the prediction underestimates. ``under_share``: share of such tiles.
-    ``sigma``: standard deviation of |pred - gt|. ``n``: number of values."""
+    """``r2``: 1 - SS_res / SS_tot, NaN (undefined) where the values of ``gt`` are all one (or none).
+    ``mae``: mean |pred - gt|. ``mae_under``: mean shortfall (gt - pred) over the tiles the prediction
+    underestimates. ``under_share``: share of such tiles. ``sigma``: standard deviation of |pred - gt|.
+    ``n``: number of values."""
 
     r2: float
     mae: float
@@ -55,7 +56,9 @@ def scores(pred: np.ndarray, gt: np.ndarray, *, worse: float = 1.0) -> Scores:
         nan = float("nan")
         return Scores(nan, nan, nan, nan, nan, 0)
     d = np.abs(p - g)
-    ss_tot = float(np.sum((g - g.mean()) ** 2))
+    # undefined (NaN) where the targets are all one value: their mean's rounding left SS_tot at about 1e-31 for most
+    # values (ten 0.3s), and R² read as -1e29 % or beyond, a number where there is none
+    ss_tot = float(np.sum((g - g.mean()) ** 2)) if g.min() < g.max() else 0.0
     r2 = 1.0 - float(np.sum((p - g) ** 2)) / ss_tot if ss_tot > 0 else float("nan")
     short = worse * (g - p)
     under = short > 0

@@ -1727,6 +1727,41 @@ def test_an_empty_split_reads_as_no_value_in_every_column(tmp_path: Path, model:
     assert json.loads(json.dumps(rep.to_dict(), allow_nan=False))["decisions"][2]["rate_shares"]["1x1"] is None
 
 
+def test_targets_all_one_value_leave_r2_undefined_and_the_report_says_why(tmp_path: Path) -> None:
+    """Targets all one value have no variance to explain: R² is undefined. The mean's rounding left SS_tot at
+    about 1e-31 for most values (ten 0.3s; here 96 values of T(0.01)), and R² read -5e36 % in the table, a number
+    computed on nothing (rtp train's validation R² too). It is NaN now: "-" in the tables, null in evaluation.json,
+    and a note says why, as it does for Spearman's "-" (a constant predictor's)."""
+    from rtp.evaluate import scores
+
+    g = np.full(10, 0.3)
+    assert np.isnan(scores(g - 0.1, g).r2) and np.isnan(scores(np.full(7, 0.7), np.full(7, 0.7)).r2)
+    assert scores(g - 0.1, g + np.arange(10) * 1e-6).r2 < 0  # (varying, however little: defined)
+    h, w = 64, 64
+    root = tmp_path / "flat"
+    writer, store = DatasetWriter(root), TargetStore(root)
+    store.declare("jnyang", {"weber_l": 0.02})
+    rng = np.random.default_rng(4)
+    for i in range(3):
+        writer.write(f"f{i}", _seen_whole(rng, h, w), {"scene": "f"})
+        store.write(f"f{i}", "jnyang", np.full((6, h // 4, w // 4), 0.01, np.float32), (h, w))
+    writer.finalize()
+    # (mu_y 0.3: T(0.01) = 0.01 / 0.6, whose mean over these 96 values rounds; the fixture's 0.5 divides exactly)
+    weights = np.zeros((2, 4), np.float32)
+    weights[0, 2], weights[1, 2] = 4.0, -2.0
+    flat_model = build_onnx(tmp_path / "m3.onnx", weights=weights, tile=T,
+                            metadata={**META, "transform": {"type": "clamped", "mu_y": 0.3}})
+    rep = evaluate(flat_model, root, sweep=False)
+    row = rep.row("quality", "model")
+    assert row["n"] == 3 * 2 * 16 and np.isnan(row["r2"]) and np.isnan(row["spearman"]) and row["mae"] > 0
+    assert json.loads(json.dumps(rep.to_dict(), allow_nan=False))["quality"][0]["r2"] is None
+    line = next(x for x in rep.table().splitlines() if x.split()[:3] == ["f", "all", "model"])
+    assert line.split()[4] == "-", line
+    (why,) = [n for n in rep.notes if n.startswith("R² % reads '-'")]
+    assert "targets are all one value" in why and "f/all/model" in why and why in rep.to_markdown()
+    assert any(n.startswith("Spearman reads '-'") for n in rep.notes)
+
+
 def test_targets_of_another_weber_l_than_the_models_are_said(dataset: Path, model: Path, tmp_path: Path,
                                                              caplog: pytest.LogCaptureFixture) -> None:
     """A JNYang model trained at l = 1e-10 judged against the dataset's l = 0.02 targets (another quantity: the
