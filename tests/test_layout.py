@@ -211,6 +211,24 @@ def test_text_files_name_their_encoding() -> None:
     assert not bad, "text files opened without encoding= (add encoding=\"utf-8\"):\n" + "\n".join(bad)
 
 
+def test_library_log_messages_are_ascii() -> None:
+    """The rooms' log and warning messages are ASCII: an engine that imports rtp logs through its own handlers,
+    which under a C/POSIX locale or a Windows console's cp1252 print "--- Logging error ---" and a traceback for a
+    character their stream cannot encode ('m³' did; rtp's own commands write such characters in ASCII through
+    cli/_run.py's console handler, an engine's handlers do not)."""
+    folders = {ROOMS[room][0] for room in ROOMS} | {"plugins"}
+    bad = []
+    for path in sorted({p for folder in folders for p in (ROOT / folder).rglob("*.py")}):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in (
+                    "debug", "info", "warning", "error", "exception", "critical", "warn"):
+                chars = {c for n in ast.walk(node) if isinstance(n, ast.Constant) and isinstance(n.value, str)
+                         for c in n.value if ord(c) > 127}
+                if chars:
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: {''.join(sorted(chars))}")
+    assert not bad, "log messages with characters other than ASCII:\n" + "\n".join(bad)
+
+
 def _top_level_names(tree: ast.Module) -> set[str]:
     """Names a module binds at its top level (also inside top-level ``if`` / ``try`` blocks)."""
     names: set[str] = set()

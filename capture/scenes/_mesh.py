@@ -570,8 +570,8 @@ def load_mesh_file(path: str | Path, *, name: str | None = None, eye_height: flo
                  "search's resolution): its spawn point stays at the centre of the bounds, %.1f m over their bottom, "
                  "and its viewpoints may lie outside the level, or none be found", p.name, eye_height)
     elif not np.array_equal(found[0], spawn):  # the centre is not in the level's free space
-        log.info("%s: the centre of its bounds lies in a free region of %.1f m³ (inside an object, or outside the "
-                 "level); its spawn point is at (%.2f, %.2f, %.2f) instead, in the level's (%.1f m³)", p.name,
+        log.info("%s: the centre of its bounds lies in a free region of %.1f m^3 (inside an object, or outside the "
+                 "level); its spawn point is at (%.2f, %.2f, %.2f) instead, in the level's (%.1f m^3)", p.name,
                  found[2], *found[0], found[1])
         spawn = found[0]
     scene.spawn_points = [SpawnPoint((float(spawn[0]), float(spawn[1]), float(spawn[2])), 0.0)]
