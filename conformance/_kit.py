@@ -393,11 +393,13 @@ def _follows_depth(values: np.ndarray, depth: np.ndarray) -> bool:
     return abs(float(np.corrcoef(ranks[0], ranks[1])[0, 1])) >= _DEPTH_BUFFER_RANKS
 
 
-def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Tolerance, share: float) -> str:
+def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Tolerance, share: float,
+                  previous: Any = None) -> str:
     """What a plane that disagrees with the reference renderer's looks like, and the fix: the first of the usual
     convention mistakes (rows upside down, linear albedo, encoded or world-space normals, a depth buffer's values
-    or the distance to the camera, motion the wrong way) that, applied to the reference's plane, agrees with the
-    adapter's far better (empty: none does)."""
+    or the distance to the camera, motion the wrong way; for ``seen``, the engine's motion vectors in another
+    convention, reprojected through ``previous``, the reference renderer's previous frame) that, applied to the
+    reference's plane, agrees with the adapter's far better (empty: none does)."""
     ref = np.asarray(reference.channel(channel), np.float64)
     geo = np.asarray(reference.channel("depth")) > 0
     h, w = ref.shape
@@ -421,6 +423,11 @@ def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Toleranc
                         "(n * 2 - 1)", 0.5 * ref + 0.5, geo),
                        ("normals in world space: rotate them into view space with the view matrix "
                         "(input_planes(normal_space='world', view=...))", (n @ rotation)[..., k], geo),
+                       # (an engine's world-space normal target, 8-bit encoded, rotated as it was read back: the
+                       # view rotation of n_world * 0.5 + 0.5 is n_view * 0.5 plus half the rotation of (1, 1, 1))
+                       ("world-space normals still encoded to [0, 1] (n * 0.5 + 0.5) when rotated into view space: "
+                        "decode them (n * 2 - 1) before the rotation (before input_planes(normal_space='world'))",
+                        0.5 * ref + 0.5 * float(rotation[k].sum()), geo),
                        ("normals with the opposite sign: the contract's view space is right-handed, the camera "
                         "looking down -Z, z > 0 facing it (a left-handed view space negates z)", -ref, geo)]
     elif channel == "depth":
@@ -436,12 +443,36 @@ def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Toleranc
                     "not linear view depth in scene units: linearise it, or input_planes(depth_kind='window' or "
                     "'reversed')")
     elif kind == "motion":
-        candidates.append(("motion the wrong way: the contract's is the previous minus the current position, x right "
-                           "and y down", -ref, geo))
+        candidates.append(("motion the wrong way (the current minus the previous position, or for motion.y a y axis "
+                           "pointing up): the contract's is the previous minus the current position, x right and y "
+                           "down", -ref, geo))
     elif channel == "seen" and float(np.mean(plane > 0)) < 0.02 < float(np.mean(ref > 0)):
         return ("almost no pixel reprojects onto the previous frame: view, projection, prev_view_projection or the "
                 "depths in another convention (a transposed matrix, for row vectors; a depth buffer's values)? "
                 "sdk.check_gbuffers on one frame names such a mistake")
+    if channel == "seen" and previous is not None:
+        # an engine's own motion vectors handed to the reprojection (input_planes(motion=...)) in another convention:
+        # every geometry pixel is fetched from the wrong place, and the move's depth test fails where that is another
+        # surface (until 2026-12-07 seen failed naming no cause, and the previous-frame checks blamed a flipped frame)
+        motion = np.asarray(reference.motion, np.float64)
+        prev_depth = np.asarray(previous.depth, np.float32)
+        camera, prev_camera = reference.camera, previous.camera
+        motions = (
+            ("the engine's motion vectors with y up: the contract's are the previous minus the current position "
+             "in pixels, x right and y down (negate y; docs/runtime.md \"Objects that move\")", prev_depth,
+             motion * (1.0, -1.0)),
+            ("the engine's motion vectors the wrong way: the contract's are the previous minus the current "
+             "position in pixels, x right and y down (negate them; docs/runtime.md \"Objects that move\")",
+             prev_depth, -motion),
+            ("the engine's motion vectors upside down (a GL read-back hands the bottom row first): flip their rows "
+             "once, as the other G-buffers'", prev_depth, motion[::-1]),
+            ("the previous frame's depth upside down (a GL read-back hands the bottom row first): flip prev_depth's "
+             "rows once, where the adapter reads it back", np.ascontiguousarray(prev_depth[::-1]), None))
+        for cause, depth_before, moved in motions:
+            _, expected_seen = sdk.reproject(depth_before, depth_before, np.asarray(reference.depth, np.float32),
+                                             camera.view(), camera.projection(w / h), prev_camera.view_projection(w, h),
+                                             motion=None if moved is None else np.ascontiguousarray(moved, np.float32))
+            candidates.append((cause, expected_seen, None))
     for cause, expected, where in candidates:
         # (clearly better than the reference's own plane: 5 points more, or every pixel where that is past 100%)
         if _within(plane, expected, tol, where) >= min(1.0, max(_CAUSE_AGREEMENT, share + 0.05)):
@@ -450,7 +481,7 @@ def _likely_cause(channel: str, plane: np.ndarray, reference: Any, tol: Toleranc
 
 
 def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], reference: Any,
-                      tolerances: Mapping[str, Tolerance]) -> None:
+                      tolerances: Mapping[str, Tolerance], previous: Any = None) -> None:
     for plane, c in zip(x, channels):
         if c not in tolerances:
             continue
@@ -459,7 +490,7 @@ def _agreement_checks(run: _Run, x: np.ndarray, channels: Sequence[str], referen
             share = _within(plane, reference.channel(c), tol)
             within = f"within {tol.value:g}{' (relative)' if tol.relative else ''}"
             if share < MIN_AGREEMENT:  # (the usual mistakes named, with their fix)
-                cause = _likely_cause(c, plane, reference, tol, share)
+                cause = _likely_cause(c, plane, reference, tol, share, previous)
                 raise _Failed(f"{share:.1%} of the pixels {within}, needs {MIN_AGREEMENT:.0%}"
                               + (f"; it looks like {cause}" if cause else ""))
             note.append(f"{share:.1%} {within}")
@@ -489,6 +520,12 @@ def _previous_frame_checks(run: _Run, x: np.ndarray, channels: Sequence[str], re
         luma = sdk.luma(np.stack([x[index[f"reprojected.{c}"]] for c in "rgb"], axis=-1))
     else:
         luma = None
+    # (where seen itself disagrees, the reprojection fetches from the wrong place, which the checks below see first:
+    # until 2026-12-07 they named a flipped frame or a missing depth test for an engine's motion vectors with y up)
+    seen_failed = any(c.group == "agreement" and c.name.startswith("seen ") and c.status == "failed"
+                      for c in run.checks)
+    also = ("; seen disagrees with the reference renderer's too (its agreement line): the frame is fetched from where "
+            "the reprojection puts each pixel, so mend that first") if seen_failed else ""
     name = "the previous frame's edges line up with the reference renderer's"
     if luma is not None:
         mine, ref = _gradient(luma)[both], _gradient(reference.channel("reprojected.y"))[both]
@@ -499,7 +536,7 @@ def _previous_frame_checks(run: _Run, x: np.ndarray, channels: Sequence[str], re
                 r = float(np.corrcoef(mine, ref)[0, 1])
                 _expect(r >= MIN_EDGE_CORRELATION, f"the gradient magnitudes of its reprojected luma correlate "
                         f"{r:.2f} with the reference's, needs {MIN_EDGE_CORRELATION}: the previous frame handed over "
-                        "upside down (a GL texture's rows), mirrored or shifted?")
+                        "upside down (a GL texture's rows), mirrored or shifted?" + also)
                 note.append(f"correlation {r:.2f}")
     name = "pixels the previous frame hid are unseen (the depth test)"
     if "seen" in index:
@@ -516,7 +553,7 @@ def _previous_frame_checks(run: _Run, x: np.ndarray, channels: Sequence[str], re
                 share = float((~seen[hidden]).mean())
                 _expect(share >= MIN_OCCLUDED_UNSEEN, f"{share:.0%} of the {int(hidden.sum())} pixels the previous "
                         f"frame hid are unseen, needs {MIN_OCCLUDED_UNSEEN:.0%}: a disocclusion test that never "
-                        "fails (no depth comparison, or a tolerance too wide)?")
+                        "fails (no depth comparison, or a tolerance too wide)?" + also)
                 note.append(f"{share:.0%} of {int(hidden.sum())}")
 
 
@@ -645,7 +682,8 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     # engine's sources then start as in an engine, with their own context the current one
     with Renderer(w, h) as ref:
         ref.load_scene(drawn)
-        reference = ref.render(camera, ref.render(prev_camera))
+        previous = ref.render(prev_camera)
+        reference = ref.render(camera, previous)
 
     def draw(chans: Sequence[str], source: FrameSource[Any] | None = None) -> np.ndarray:
         own = source is None
@@ -672,7 +710,7 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     else:
         _plane_checks(run, x, channels, reference, size)
         if isinstance(x, np.ndarray) and x.shape == (len(channels), h, w):
-            _agreement_checks(run, x, channels, reference, tols)
+            _agreement_checks(run, x, channels, reference, tols, previous)
             _previous_frame_checks(run, x, channels, reference)
             if image is not None:
                 from rtp.capture import save_image

@@ -380,6 +380,13 @@ def _radial_depth(f: CpuFrame, d: np.ndarray) -> np.ndarray:
     return (d * np.sqrt(1 + xs[None] ** 2 + ys[:, None] ** 2)).astype(np.float32)
 
 
+def _motion_y_up(f: CpuFrame) -> np.ndarray:
+    """The camera's motion vectors of ``f`` as a GL engine keeps them: pixels, previous minus current, y up."""
+    mx, my = sdk.input_planes(("motion.x", "motion.y"), depth=f.depth, view=f.view, projection=f.projection,
+                              prev_view_projection=f.prev_view_projection)
+    return np.stack([mx, -my], axis=-1)
+
+
 def _with(**changed: Callable[[CpuFrame], Any]) -> Callable[[NumpyAdapter, CpuFrame], np.ndarray]:
     """An adapter's inputs from its frame with the G-buffers of ``changed`` (each made from the frame) replaced."""
     def inputs(a: NumpyAdapter, f: CpuFrame) -> np.ndarray:
@@ -407,6 +414,24 @@ CAUSES: dict[str, tuple[Callable[[], type[NumpyAdapter]], dict[str, str | None]]
         f.normal.astype(np.float64) @ _view_rotation(f)).astype(np.float32))),
                             {f"normal.{c}": "normals in world space" for c in "xyz"}),
     "encoded normals": (BUGS["encoded normals"][0], {f"normal.{c}": "normals encoded to [0, 1]" for c in "xyz"}),
+    # an engine's world-space normal target read back 8-bit encoded and rotated as it is (until 2026-12-07 no cause)
+    "encoded world-space normals": (lambda: _broken("EncodedWorldNormals", inputs=_with(
+        normal=lambda f: (f.normal.astype(np.float64) @ _view_rotation(f) * 0.5 + 0.5).astype(np.float32),
+        normal_space=lambda f: "world")),
+                                    {f"normal.{c}": "world-space normals still encoded to [0, 1]" for c in "xyz"}),
+    # a GL engine's own motion vectors (y up) handed to the reprojection unconverted: seen is wrong (until 2026-12-07
+    # with no cause named, and the previous-frame checks blamed an upside-down frame or a missing depth test)
+    "engine motion vectors with y up": (lambda: _broken("MotionYUp", inputs=_with(motion=_motion_y_up),
+                                                        supported_channels=NumpyAdapter.supported_channels
+                                                        | {"motion.x", "motion.y"}),
+                                        {"seen": "the engine's motion vectors with y up",
+                                         "motion.y": "motion the wrong way"}),
+    "engine motion vectors upside down": (lambda: _broken("MotionRowsUp", inputs=_with(
+        motion=lambda f: _motion_y_up(f)[::-1] * np.array([1.0, -1.0], np.float32))),
+                                          {"seen": "the engine's motion vectors upside down"}),
+    "previous depth upside down": (lambda: _broken("PrevDepthUpsideDown", inputs=_with(
+        prev_depth=lambda f: np.ascontiguousarray(f.prev_depth[::-1]))),
+                                   {"seen": "the previous frame's depth upside down"}),
     "left-handed normals": (lambda: _broken("NegatedNormals", inputs=_with(normal=lambda f: -f.normal)),
                             {f"normal.{c}": "normals with the opposite sign" for c in "yz"}),
     "a depth buffer's values": (lambda: _broken("WindowDepth", inputs=_with(
@@ -437,6 +462,24 @@ def test_the_kit_names_the_likely_convention_mistake_and_its_fix(registry: None,
             assert "it looks like" not in failed[channel], failed[channel]
         else:
             assert f"; it looks like {cause}" in failed[channel], (channel, str(report))
+
+
+@pytest.mark.gl
+def test_the_previous_frame_checks_point_at_a_seen_that_disagrees(registry: None,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """Motion vectors with y up fetch the previous frame from the wrong place: its edge and depth-test checks fail,
+    and say that seen disagrees too, rather than naming only an upside-down frame or a missing depth test."""
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, CAUSES["engine motion vectors with y up"][0]())
+    report = _report(THIRD_PARTY)
+    previous = [c for c in report.failures if c.group == "previous frame"]
+    assert previous, str(report)
+    assert all("seen disagrees with the reference renderer's too" in c.detail for c in previous), str(report)
+    # (a previous frame handed over upside down, seen right: no such pointer)
+    monkeypatch.setitem(adapters._registered, THIRD_PARTY, BUGS["previous frame upside down"][0]())
+    report = _report(THIRD_PARTY)
+    edges = [c for c in report.failures if c.group == "previous frame"]
+    assert edges and not any("seen disagrees" in c.detail for c in edges), str(report)
+
 
 def test_the_kit_checks_the_class_before_drawing(registry: None, monkeypatch: pytest.MonkeyPatch) -> None:
     class NoClose(Adapter[CpuFrame]):  # an abstract method left: nothing is drawn
