@@ -49,6 +49,11 @@ METRIC_ENTRY_POINT_GROUP = "rtp.metrics"
 POOLINGS = ("max", "mean")
 _NAME = re.compile(METRIC_NAME_PATTERN)
 _MAX_NAME = 64
+#: How far below 0 a map's value may lie and be taken as 0: float round-off (``1 - SSIM`` of equal pixels gives
+#: -1e-12), as images' values this close outside [0, 1] are clipped.
+ROUND_OFF = 1e-6
+#: The largest value, as a share of ``default_threshold``, a map of a frame against itself may give.
+EQUAL_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -64,7 +69,8 @@ class Metric:
             sRGB in [0, 1] (the full-rate frame and the same frame at a reduced rate), to an ``(H, W)``
             map of finite errors >= 0, 0 where the frames are equal; lower is better (a similarity
             such as SSIM is given as its dissimilarity, ``(1 - SSIM) / 2``). Numpy in, anything
-            ``np.asarray`` reads out.
+            ``np.asarray`` reads out. Round-off down to -1e-6 is taken as 0; a map of a frame against
+            itself above 1% of ``default_threshold`` is refused (checked on a process's first map).
         default_threshold: the threshold (metric units, > 0) a model trained for it records as its
             default: the tile's largest acceptable error.
         pooling: ``"max"`` (the paper's pooling: a tile is as bad as its worst pixel) or ``"mean"``.
@@ -72,7 +78,8 @@ class Metric:
         description: one line.
         params: what defines the metric's values beyond its name (a version, a window size): recorded
             with a dataset's targets, so that targets computed by another definition are refused
-            rather than mixed. JSON values.
+            rather than mixed. JSON values. rtp does not read the map's code: change ``params`` (the
+            version) whenever what the map computes changes, or its stored targets are kept as they are.
         requires: importable module names the map needs (``"scipy"``): checked before a job starts.
     """
 
@@ -146,37 +153,66 @@ class Metric:
 
     def map(self, reference: np.ndarray, test: np.ndarray) -> np.ndarray:
         """``error_map(reference, test)`` of two float32 ``(H, W, 3)`` frames (given read-only), checked:
-        float32 ``(H, W)``, finite (in float32 too), >= 0; else a
-        :class:`MetricError` naming the metric and what its map gave (a bug in the plugin)."""
+        float32 ``(H, W)``, finite (in float32 too), >= 0 (round-off down to ``-ROUND_OFF`` is taken as 0);
+        else a :class:`MetricError` naming the metric and what its map gave (a bug in the plugin). The first
+        call in a process also maps ``reference`` against itself, which must give 0 (at most 1% of
+        ``default_threshold``): a similarity given as it is (higher is better), or a map that is not 0 on equal
+        frames (an offset, noise), is a :class:`MetricError` rather than targets no threshold reads right."""
+        out = self._checked(self._call(reference, test), reference.shape[:2])
+        if not getattr(self, "_equal_checked", False):
+            same = self._checked(self._call(reference, reference), reference.shape[:2])
+            worst = float(same.max(initial=0.0))
+            if worst > EQUAL_SHARE * self.default_threshold:
+                raise MetricError(
+                    f"the metric {self.name!r}'s error_map of a frame against itself gives up to {worst:.3g} (mean "
+                    f"{float(same.mean()):.3g}), not 0: an error map is 0 where the frames are equal and grows with the "
+                    f"error, lower is better (a similarity such as SSIM is given as a dissimilarity, (1 - SSIM) / 2), "
+                    f"and gives the same map for the same frames; more than {EQUAL_SHARE:.0%} of its default_threshold "
+                    f"({self.default_threshold:g}) where nothing differs is refused")
+            object.__setattr__(self, "_equal_checked", True)  # (once a process: not twice the work a sample)
+        return out
+
+    def _call(self, reference: np.ndarray, test: np.ndarray) -> Any:
+        """``error_map`` of read-only views of the frames; what it raises is a :class:`MetricError`."""
         frames = []
         for image in (reference, test):  # read-only views: a map that wrote into them would change the others'
             view = image.view()
             view.flags.writeable = False
             frames.append(view)
         try:
-            out = self.error_map(*frames)
+            return self.error_map(*frames)
         except MetricError:
             raise
         except (Exception, SystemExit) as err:  # (a plugin's sys.exit ended rtp silently with its code)
             raise MetricError(f"the metric {self.name!r}'s error_map failed on {reference.shape[1]}x"
                               f"{reference.shape[0]} frames: {type(err).__name__}: {err}") from err
+
+    def _checked(self, out: Any, size: tuple[int, ...]) -> np.ndarray:
+        """What ``error_map`` returned as a float32 ``(H, W)`` map of ``size``, or a :class:`MetricError`."""
         try:
             a = np.asarray(out)
         except Exception as err:  # (a torch tensor that requires grad raised its RuntimeError, naming no plugin)
             raise MetricError(f"the metric {self.name!r}'s error_map returned {type(out).__name__}, not an array "
                               f"({type(err).__name__}: {err})") from err
-        h, w = reference.shape[:2]
+        h, w = size
         if a.shape != (h, w) or a.dtype.kind not in "biuf":
             raise MetricError(f"the metric {self.name!r}'s error_map returned {a.dtype} {a.shape}; expected an "
                               f"(H, W) = ({h}, {w}) map of numbers")
-        if not np.isfinite(a).all() or (a < 0).any():
-            raise MetricError(f"the metric {self.name!r}'s error_map returned values outside [0, inf) (NaN, "
-                              f"infinite or negative); an error map is finite and >= 0")
+        finite = np.isfinite(a)
+        negative = a < -ROUND_OFF
+        if not finite.all() or negative.any():
+            # (it said "NaN, infinite or negative" of 1 - SSIM's -7.6e-12 round-off on equal pixels, naming neither)
+            found = [f"{n} {what}" for n, what in ((int(np.isnan(a).sum()), "NaN"),
+                                                   (int(np.isinf(a).sum()), "infinite"),
+                                                   (int(negative.sum()), "negative")) if n]
+            low = f", down to {float(a[finite].min()):.3g}" if negative.any() else ""
+            raise MetricError(f"the metric {self.name!r}'s error_map returned values outside [0, inf) "
+                              f"({', '.join(found)} of {a.size} pixels{low}); an error map is finite and >= 0")
         if a.dtype.kind == "f" and a.dtype.itemsize > 4 and a.max(initial=0.0) > np.finfo(np.float32).max:
             # (the cast made them infinite, with numpy's overflow warning, and the error said "NaN, infinite")
             raise MetricError(f"the metric {self.name!r}'s error_map returned values up to {a.max():.3g}, beyond "
                               f"float32's range ({np.finfo(np.float32).max:.3g}), in which rtp stores errors")
-        return a.astype(np.float32)
+        return np.maximum(a, 0).astype(np.float32)  # (round-off below 0, such as 1 - SSIM's -1e-12, is 0)
 
 
 _lock = threading.RLock()

@@ -145,8 +145,13 @@ class _Unconvertible:
 @pytest.mark.parametrize("result, match", [
     (lambda r, t: np.zeros(r.shape[:2] + (1,)), r"returned float64 \(37, 53, 1\)"),
     (lambda r, t: np.zeros(5), r"returned float64 \(5,\)"),
-    (lambda r, t: np.full(r.shape[:2], np.nan), "outside"),
-    (lambda r, t: -np.ones(r.shape[:2]), "outside"),
+    (lambda r, t: np.full(r.shape[:2], np.nan), r"outside \[0, inf\) \(1961 NaN of 1961 pixels\)"),
+    (lambda r, t: -np.ones(r.shape[:2]), r"outside \[0, inf\) \(1961 negative of 1961 pixels, down to -1\)"),
+    # (these three were taken: targets of the similarity, the offset, the noise, which no threshold reads right)
+    (lambda r, t: np.exp(-np.abs(r - t).mean(axis=-1)), "of a frame against itself gives up to 1 .*not 0"),
+    (lambda r, t: np.abs(r - t).mean(axis=-1) + 0.002, "of a frame against itself gives up to 0.002 "),
+    (lambda r, t: np.abs(r - t).mean(axis=-1) + np.random.default_rng().uniform(0.01, 0.02, r.shape[:2]),
+     "against itself.*the same map for the same frames"),
     (lambda r, t: np.full(r.shape[:2], 1e300), "up to 1e\\+300, beyond float32's range"),  # (was "NaN, infinite")
     (lambda r, t: "map", "dtype|returned"),
     (lambda r, t: _Unconvertible(), r"returned _Unconvertible, not an array \(RuntimeError: Can't call numpy"),
@@ -161,6 +166,28 @@ def test_a_broken_map_is_the_plugins_error_not_wrong_targets(registry: None, res
     with pytest.raises(metrics.MetricError, match=f"the metric 'bad'.*({match})"):
         metrics.tile_targets(ref, images, ("jnyang", "bad"), 16)
     np.testing.assert_array_equal(ref, before)
+
+
+def test_a_maps_round_off_below_zero_is_zero_and_equal_frames_are_checked_once(registry: None) -> None:
+    # 1 - SSIM of equal pixels is -7.6e-12 and so on in float64: it was refused, "NaN, infinite or negative"
+    calls: list[bool] = []
+
+    def dissimilar(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
+        calls.append(bool(np.array_equal(reference, test)))
+        return np.abs(reference - test).mean(axis=-1) - 1e-12
+
+    metrics.register_metric(metrics.Metric("dssim", dissimilar, 0.1))
+    ref, images = frames()
+    got = metrics.tile_targets(ref, images, ("dssim",), 8)
+    assert got["dssim"].dtype == np.float32 and (got["dssim"] >= 0).all()
+    assert calls == [False, True, *[False] * 5]  # (the frame against itself once in a process, not every sample)
+    for i, r in enumerate(RATES):
+        want = np.maximum(np.abs(ref - images[r]).mean(axis=-1) - 1e-12, 0)
+        np.testing.assert_allclose(got["dssim"][i], metrics.pool_tiles(want, 8), rtol=1e-6)
+    np.testing.assert_array_equal(metrics.error_map("dssim", ref, ref), np.zeros(ref.shape[:2], np.float32))
+    # a map of equal frames up to 1% of the threshold is taken (a floor of round-off), as it is
+    metrics.register_metric(metrics.Metric("floor", lambda r, t: np.abs(r - t).mean(axis=-1) + 0.0009, 0.1))
+    np.testing.assert_allclose(metrics.error_map("floor", ref, ref), 0.0009, rtol=1e-6)
 
 
 def test_plugin_maps_take_one_numpy_frame_of_the_tests_size(registry: None) -> None:
