@@ -350,8 +350,14 @@ def sample_targets(sample: Any, metrics: tuple[str, ...], params: Mapping[str, A
 
     ref = sample.final("1x1")
     images = {r: sample.final(r) for r in PREDICTED_RATES}
-    values = M.tile_targets(ref, images, metrics, base_tile, ppd=params["ppd"], weber_l=params["weber_l"],
-                            flip_backend=params.get("flip_backend"), device=params.get("device"))
+    try:
+        values = M.tile_targets(ref, images, metrics, base_tile, ppd=params["ppd"], weber_l=params["weber_l"],
+                                flip_backend=params.get("flip_backend"), device=params.get("device"))
+    except M.MetricError as err:  # (a plugin's map refused, a backend failed: which sample, to look at it)
+        where = getattr(sample, "id", None)
+        if where is None:
+            raise
+        raise M.MetricError(f"sample {where!r}: {err}") from err
     out = {}
     for m in metrics:
         v = values[m]

@@ -576,3 +576,18 @@ def test_training_on_another_plugin_definitions_targets_warns_of_the_installed_t
         meta = load_checkpoint(out).metadata
         assert meta.default_threshold == (5.0 if given is None else given)
         assert meta.to_dict()["provenance"]["target_parameters"] == {"plugin": {"version": 1}, "pooling": "max"}
+
+
+@pytest.mark.gl
+def test_a_targets_job_refused_by_a_plugins_map_names_the_sample(registry: None, tmp_path: Path) -> None:
+    """A plugin's map refused in a targets job said what the map gave, not on which sample (only -v's traceback
+    did): the sample is named, to look at it."""
+    from rtp.capture import DatasetReader, capture, compute_targets
+
+    data = tmp_path / "ds"
+    capture(["procedural:3"], data, per_scene=1, size=(72, 40))
+    metrics.register_metric(metrics.Metric("nans", lambda a, b: np.full(a.shape[:2], np.nan), 0.05))
+    first = DatasetReader(data).ids[0]
+    with pytest.raises(metrics.MetricError, match=rf"^sample {first!r}: the metric 'nans''s error_map returned "
+                                                  r"values outside \[0, inf\) \(2880 NaN of 2880 pixels\)"):
+        compute_targets(data, ("nans",), workers=1)
