@@ -43,6 +43,7 @@ from ._tiles import (
     split_tiles,
     tile_grid,
 )
+from ._transforms import extrapolate
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 
@@ -1110,14 +1111,27 @@ class ShadingRatePredictor:
     def _warn_beyond_saturation(self, threshold: float) -> None:
         """Log once per threshold, for the first :data:`MAX_WARNED` thresholds, when every rate's threshold (its
         ``rate_factors`` share of it) lies beyond the worst value the model can express: every tile then passes at the
-        coarsest allowed rate (``load`` says so of a default threshold)."""
+        coarsest allowed rate (``load`` says so of a default threshold); or beyond the best value it can express
+        (:func:`_passes_nothing`): no tile then passes at any rate, and every tile gets 1x1 on every frame."""
         meta, t = self._meta, float(threshold)
+        hib = meta.higher_is_better
+        if _passes_nothing(meta, t):  # the other end: no tile can pass at any rate, every tile 1x1 on every frame
+            count = self._first_warning("_saturation_warned", t)
+            if count:
+                # below each rate's limit that rate passes no tile: the first rate to pass some sets the limit
+                limits = [best + 20.0 * math.log10(f) if hib else best / f for best, f in zip(_rate_bests(meta),
+                                                                                              meta.rate_factors)]
+                log.warning("%s: threshold %g is beyond the best value the model can express (%g): no tile passes it "
+                            "at any rate, every tile gets 1x1 on every frame; use one %s %g (a threshold in another "
+                            "metric's units?)%s", self._path.name if self._path else "model", t, _best(meta),
+                            "below" if hib else "above", max(limits) if hib else min(limits),
+                            _last_said(count, "thresholds"))
+            return
         if not _passes_everything(meta, t):
             return
         count = self._first_warning("_saturation_warned", t)
         if not count:
             return
-        hib = meta.higher_is_better
         # past each rate's limit that rate passes every tile: the last rate to do so sets the limit
         limits = [sat + 20.0 * math.log10(f) if hib else sat / f for sat, f in zip(meta.rate_saturations,
                                                                                     meta.rate_factors)]
@@ -1139,6 +1153,31 @@ def _passes_everything(meta: ModelMetadata, threshold: float) -> bool:
     hib, t = meta.higher_is_better, float(threshold)
     return all((t - 20.0 * math.log10(f) < sat) if hib else (t * f > sat)
                for sat, f in zip(meta.rate_saturations, meta.rate_factors))
+
+
+def _rate_bests(meta: ModelMetadata) -> tuple[float, ...]:
+    """The best value the model can express for each reduced rate (:data:`PREDICTED_RATES` order), the counterpart of
+    ``metadata.rate_saturations``: the network's best output (0, or 1 where a larger transformed value is better) plus
+    the margin, which moves every output towards the worse side, decoded and extrapolated as ``decode`` does."""
+    p = 0.0 if meta.worse_direction > 0 else 1.0
+    best = meta.transform.inverse(np.full((len(meta.outputs), 1, 1), p + meta.worse_direction * meta.safety))
+    full = extrapolate(best, meta.outputs, meta.extrapolation_k, higher_is_better=meta.higher_is_better)
+    return tuple(float(v) for v in full[:, 0, 0])
+
+
+def _best(meta: ModelMetadata) -> float:
+    """The best value the model can express at any rate (the best of :func:`_rate_bests`)."""
+    bests = _rate_bests(meta)
+    return max(bests) if meta.higher_is_better else min(bests)
+
+
+def _passes_nothing(meta: ModelMetadata, threshold: float) -> bool:
+    """Whether ``threshold``, with each rate's ``rate_factors`` share of it, lies beyond the best value the model can
+    express at every rate (:func:`_rate_bests`): no tile then passes at any rate and every tile gets 1x1, whatever the
+    frame. (Strictly beyond: at the best value itself a float32 prediction rounded below it could still pass.)"""
+    hib, t = meta.higher_is_better, float(threshold)
+    return all((t - 20.0 * math.log10(f) > best) if hib else (t * f < best)
+               for best, f in zip(_rate_bests(meta), meta.rate_factors))
 
 
 def _unpickle(path: str, data: bytes, args: dict[str, Any]) -> ShadingRatePredictor:

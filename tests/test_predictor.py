@@ -1034,3 +1034,39 @@ def test_frames_that_cut_packed_planes_warn_once_per_size(caplog: pytest.LogCapt
     for h, w in ((35, 97 + 3), (36, 100), (60, 100)):  # W mod 16 of 4, H mod 16 of 3: all twelve inside
         assert warned(tiles, h, w) == [], (h, w)
     assert warned(plain, 33, 97) == []  # no packed planes: nothing is cut
+
+
+def test_a_threshold_no_tile_can_pass_is_said(tiny_model: Callable[..., Path], caplog: pytest.LogCaptureFixture) -> None:
+    """A threshold beyond the best value the model can express (its margin moves every output towards the worse
+    side: clamped, mu 0.25, safety 0.1 predicts no error below 0.05) passes no tile at any rate: every tile got 1x1 on
+    every frame, and the predictor saved nothing without a word (a threshold in another metric's units, a percentage
+    read as a share). Now ``shading_rates`` says so once per threshold, through a ``PredictionReuse`` too, and names
+    the threshold to go past; a PSNR one beyond its best (highest) value the same."""
+    w = np.zeros((2, 4), np.float32)
+    w[:, 0] = -40.0  # sigmoid(-40 x): the best output, 0, where plane 0 is 1
+    x = np.zeros((4, 16, 16), np.float32)
+    x[0] = 1.0
+    p = sdk.load(tiny_model(base_metadata(outputs=["1x2", "2x1"], safety=0.1, default_threshold=0.2), weights=w))
+    assert float(p.predict(x).min()) == pytest.approx(0.05)
+    caplog.set_level(logging.WARNING, logger="rtp")
+    for _ in range(2):
+        assert p.shading_rates(x, threshold=0.04).tolist() == [[sdk.RATE_CODES["1x1"]]]
+    warned = [r.getMessage() for r in caplog.records]
+    assert len(warned) == 1 and "threshold 0.04 is beyond the best value the model can express (0.05)" in warned[0]
+    assert "no tile passes it at any rate" in warned[0] and "use one above 0.05" in warned[0]
+    caplog.clear()
+    assert p.shading_rates(x, threshold=0.06).tolist() == [[sdk.RATE_CODES["2x2"]]]  # (just past it: some pass)
+    assert p.shading_rates(x).tolist() == [[sdk.RATE_CODES["4x4"]]] and not caplog.records  # (0.2 > 2.13 x 0.05)
+    reuse = sdk.PredictionReuse(p, 2)
+    assert reuse.shading_rates(x, threshold=0.01).tolist() == [[sdk.RATE_CODES["1x1"]]]
+    assert len(caplog.records) == 1 and "threshold 0.01 is beyond the best value" in caplog.text
+    caplog.clear()
+    psnr = sdk.load(tiny_model(base_metadata(metric="psnr", higher_is_better=True, weber_l=None,
+                                             transform={"type": "clamped", "mu_y": 25.0}, safety=0.1,
+                                             outputs=["1x2", "2x1"], default_threshold=30.0), weights=-w))
+    assert float(psnr.predict(x).max()) == pytest.approx(45.0)  # (2 mu (1 - safety): the best PSNR it can say)
+    assert psnr.shading_rates(x, threshold=46.0).tolist() == [[sdk.RATE_CODES["1x1"]]]
+    assert "threshold 46 is beyond the best value the model can express (45)" in caplog.text
+    assert "use one below 45" in caplog.text
+    caplog.clear()
+    assert psnr.shading_rates(x, threshold=44.0).tolist() == [[sdk.RATE_CODES["2x2"]]] and not caplog.records
