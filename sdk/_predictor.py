@@ -33,7 +33,7 @@ from ._errors import (
     ProviderUnavailableError,
 )
 from ._metadata import DIGEST_RE, FEATURES_NAME, METADATA_KEY, TAIL_KEY, ModelMetadata
-from ._rates import PREDICTED_RATES, RateLike, select_rates, select_rates_for_saving
+from ._rates import PREDICTED_RATES, RateLike, check_threshold, select_rates, select_rates_for_saving
 from ._tiles import (
     DEFAULT_TILE_SIZE,
     MIN_HARDWARE_TILE,
@@ -1095,6 +1095,8 @@ class ShadingRatePredictor:
         with the engine's was never judged, and a ``saving`` counts the two together
         (:func:`~rtp.sdk.select_rates`, :func:`~rtp.sdk.combine_rates`).
         """
+        if threshold is not None:  # (before the network: a threshold it refuses came back after a whole frame's run)
+            check_threshold(threshold, self._meta.higher_is_better)
         if saving is not None:
             values = self.predict(x)  # (first: it refuses what is no frame, whose shape has no H and W)
             h, w = np.shape(x)[-2:]

@@ -1070,3 +1070,26 @@ def test_a_threshold_no_tile_can_pass_is_said(tiny_model: Callable[..., Path], c
     assert "use one below 45" in caplog.text
     caplog.clear()
     assert psnr.shading_rates(x, threshold=44.0).tolist() == [[sdk.RATE_CODES["2x2"]]] and not caplog.records
+
+
+def test_shading_rates_refuses_a_bad_threshold_before_the_network_runs(tiny_model: Callable[..., Path],
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A threshold shading_rates refuses (NaN, negative, past the metric's range) came back only after a whole frame's
+    network run: it is checked first, with or without a saving."""
+    p = sdk.load(tiny_model(base_metadata(outputs=["1x2", "2x1"])))
+    x = np.zeros((4, 16, 16), np.float32)
+    runs = [0]
+    real = type(p).predict
+
+    def counted(self: Any, *args: Any, **kwargs: Any) -> Any:
+        runs[0] += 1
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(type(p), "predict", counted)
+    for kw in ({}, {"saving": 0.5}):
+        for bad in (float("nan"), -1.0):
+            with pytest.raises(sdk.ParameterError, match="threshold"):
+                p.shading_rates(x, threshold=bad, **kw)
+    assert runs[0] == 0
+    p.shading_rates(x, threshold=0.2)
+    assert runs[0] == 1
