@@ -15,14 +15,16 @@ passed (atomic rename).
 from __future__ import annotations
 
 import base64
+import contextlib
 import dataclasses
 import datetime as _dt
 import logging
 import os
 import reprlib
+import tempfile
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -844,7 +846,8 @@ def export_checkpoint(
         if split_planes:  # after the probe, which reads the stem's output: the groups' sum keeps its name
             split_input_planes(model)
         if split:
-            tail = _tail_model(net, dummy, Path(str(tmp) + ".tail"), opset)
+            with _scratch_beside(out) as scratch:  # (not TMP.tail: a kill -9 left that beside the model for good)
+                tail = _tail_model(net, dummy, scratch, opset)
             onnx.helper.set_model_props(model, {**{p.key: p.value for p in model.metadata_props},
                                                 sdk.TAIL_KEY: base64.b64encode(tail).decode("ascii")})
             meta = dataclasses.replace(meta, tail=sdk.model_digest(tail))
@@ -949,6 +952,29 @@ def _with_features(net: Any) -> Any:
             return self.net.tail(h, x), h
 
     return WithFeatures().eval()
+
+
+@contextlib.contextmanager
+def _scratch_beside(out: Path) -> Iterator[Path]:
+    """A scratch file beside ``out`` named as :func:`~rtp.sdk.files.atomic_output` names its temporary files
+    (``.NAME.k2j4x9ab.tmp``), held by an ``flock`` while it lives (where the system has one) and removed at the end:
+    one that an export killed outright leaves (``kill -9``, the OOM killer: no cleanup ran) is an orphan the next
+    write of ``out`` removes, as it removes its own. A split network's tail was exported to ``TMP.tail``, a name no
+    sweep knew, which stayed beside the model for good."""
+    fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+    try:
+        import fcntl
+
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except (ImportError, OSError):  # (no flock: closed at once, as atomic_output does; Windows keeps an open file)
+        os.close(fd)
+        fd = -1
+    try:
+        yield Path(name)
+    finally:
+        Path(name).unlink(missing_ok=True)
+        if fd >= 0:
+            os.close(fd)
 
 
 def _tail_model(net: Any, dummy: Any, path: Path, opset: int) -> bytes:

@@ -22,7 +22,7 @@ from rtp.train import checkpoint
 from rtp.train import transforms as tt
 from rtp.train.model import MetricNet
 
-from .conftest import base_metadata, trained_like_fast_net
+from .conftest import base_metadata, split_model, trained_like_fast_net
 
 
 def _trained_like_net(out_channels: int = 4, tile: int = 16, seed: int = 0) -> MetricNet:
@@ -775,6 +775,37 @@ def test_a_stored_contrast_finer_than_the_tile_exports_as_one_graph(tmp_path: Pa
     assert not pred.splits and pred.metadata.tail is None and pred.metadata.input_multiple == 4
     x = np.random.default_rng(1).random((6, 52, 84), dtype=np.float32)
     np.testing.assert_allclose(pred.predict(x), _torch_pipeline_to(net, pred.metadata, x, 4), rtol=1e-5, atol=1e-5)
+
+
+def test_a_split_networks_tail_left_by_a_killed_export_is_removed_by_the_next(tmp_path: Path,
+                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """A split network's tail is exported to a scratch file beside the model; an export killed there (kill -9, the
+    OOM killer: no cleanup runs) leaves it. It was ``.m.onnx.XXXXXXXX.tmp.tail``, a name no later export knew: it
+    stayed beside the model for good, one more each kill. It is now named as atomic_output names its temporary files,
+    so the next export of the model removes it once it is an orphan (unlocked, a minute old), as it removes its own."""
+    import os
+
+    from rtp.export import _export as ex
+
+    split_model(tmp_path)  # (the checkpoint split-blocks.pt and its export)
+    out = tmp_path / "split-blocks.onnx"
+    scratch: list[Path] = []
+    real = ex._tail_model
+
+    def tail_model(net, dummy, path, opset):  # type: ignore[no-untyped-def]
+        scratch.append(Path(path))
+        return real(net, dummy, path, opset)
+
+    monkeypatch.setattr(ex, "_tail_model", tail_model)
+    export.export_checkpoint(tmp_path / "split-blocks.pt", out)
+    (left,) = scratch
+    assert left.parent == out.parent and not left.exists()
+    left.write_bytes(b"half a tail")  # what a kill inside the tail's export leaves
+    os.utime(left, (os.path.getmtime(out) - 3600,) * 2)  # (an hour ago: no live export's)
+    export.export_checkpoint(tmp_path / "split-blocks.pt", out)
+    assert not left.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["split-blocks.onnx", "split-blocks.pt"]
+    assert sdk.load(out).splits
 
 
 @pytest.mark.parametrize("argv, words", [
