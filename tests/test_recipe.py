@@ -154,6 +154,10 @@ def test_from_recipe_holds_out_the_split_and_flags_win(tmp_path: Path) -> None:
                                             "(rtp train --data"),
     # a typo'd metric in `metrics` said "is for jnyng (measured for those only), got metric 'jnyang'"
     ("metrics: [jnyng, flip]\n", "metrics names unknown metric(s) jnyng (jnyng: did you mean jnyang?)"),
+    # a top-level key inside a metric's section said "unknown key(s) metrics (metrics: did you mean metrics?)"
+    ("per_metric:\n  jnyang:\n    metrics: [jnyang]\n", "r.yaml: per_metric jnyang sets 'metrics', a key of the "
+                                                         "recipe's top level, not of a metric's section: move it out"),
+    ("per_metric:\n  flip:\n    per_metric: {}\n", "per_metric flip sets 'per_metric', a key of the recipe's top level"),
 ])
 def test_bad_recipes_are_refused_naming_the_key(tmp_path: Path, text: str, needle: str) -> None:
     path = tmp_path / "r.yaml"
@@ -214,6 +218,7 @@ def test_a_conflict_names_the_field_and_whether_the_recipe_or_the_caller_set_it(
     ("out: m.pt\n", "out"), ("val_scenes: [a]\n", "val_scenes"), ("per_metric:\n  flip:\n    data: d\n", "data"),
     ("metric: flip\n", "metric"), ("metrics: [jnyng]\n", "metrics"), ("metrics: [flip]\n", "metrics"),
     ("metrics: flip\n", "metrics"), ("per_metric: 3\n", "per_metric"), ("per_metric: []\n", "per_metric"),
+    ("per_metric:\n  psnr:\n    metrics: [psnr]\n", "metrics"),
 ])
 def test_a_bad_recipe_names_the_key_at_fault(tmp_path: Path, text: str, key: str) -> None:
     path = tmp_path / "r.yaml"

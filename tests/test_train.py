@@ -243,6 +243,25 @@ def test_train_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert "multiple of the tile size" in capsys.readouterr().err
 
 
+def test_a_tile_finer_than_the_stored_targets_is_refused_before_any_sample_is_read(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The targets are stored per 4-pixel base tile and a model's tile pools whole ones: --tile 1 and 2, which
+    `rtp train --help` offers, failed on the first sample's targets with a TargetError that named no tile that
+    would do; now a ParameterError naming tile, before the samples are read."""
+    data = _dataset(tmp_path / "ds", n=3)
+    read: list[int] = []
+    for tile in (1, 2):
+        cfg = TrainConfig(data=str(data), metric="jnyang", out=str(tmp_path / f"t{tile}.pt"), tile=tile, crop=32,
+                          steps=1, val_scenes=("scene0",))
+        with pytest.raises(sdk.ParameterError, match=f"^tile: the targets of {re.escape(str(data))} are stored per "
+                           f"4-pixel tile .*: expected 4, 8, 16, 32, got {tile}$") as err:
+            train(cfg, loading=lambda n, total: read.append(n))
+        assert err.value.name == "tile" and not read and not (tmp_path / f"t{tile}.pt").exists()
+    assert rtp_main(["train", "--data", str(data), "--metric", "jnyang", "--tile", "2", "--crop", "32",
+                     "--val-scenes", "scene0", "--out", str(tmp_path / "c.pt")]) == 2
+    assert "are stored per 4-pixel tile (rtp targets) and a model's tile pools whole ones" in capsys.readouterr().err
+
+
 def test_a_dataset_of_one_scene_is_told_how_to_add_a_second(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # a user's one level (rtp capture --scene level.glb): validation holds out whole scenes, so say how to add one
     one = _dataset(tmp_path / "one", n=1)

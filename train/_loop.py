@@ -1071,6 +1071,19 @@ def _resumable(out: Path) -> ckpt.Checkpoint:
     return prev
 
 
+def _check_tile_pools_targets(cfg: TrainConfig, sources: _Sources) -> None:
+    """Refuse, before any sample is read, a tile that is no multiple of a dataset's stored base tile (the targets are
+    pooled from whole base tiles: ``--tile 2`` on ``rtp targets``' 4-pixel tiles failed on the first sample's targets
+    with a TargetError that said nothing of which tiles would do)."""
+    for folder, targets in zip(sources.folders, sources.stores):
+        base = targets.base_tile
+        if cfg.tile % base:
+            fits = [t for t in sdk.TILE_SIZES if t % base == 0]
+            raise sdk.ParameterError(f"tile: the targets of {folder} are stored per {base}-pixel tile (rtp targets) and a "
+                                     f"model's tile pools whole ones: expected {', '.join(map(str, fits))}, got {cfg.tile}",
+                                     "tile")
+
+
 def _warn_other_plugin_definition(cfg: TrainConfig, stored: Any) -> None:
     """Warn where the targets of a plugin metric were computed by another definition of it (``params`` or pooling:
     the plugin's version 1, version 2 installed now) and the model would take its default threshold from the
@@ -1106,6 +1119,7 @@ def _train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None,
     loss_fn = _LOSSES[cfg.loss] if cfg.loss != "quantile" else _mean_pinball(cfg.quantile)
     aux_loss_fn = loss_fn  # the auxiliary metrics' loss: the same, without focus (their thresholds differ)
     reader = store = _Sources(cfg.data, cfg.metric, cfg.aux_metrics)
+    _check_tile_pools_targets(cfg, store)
     _warn_other_plugin_definition(cfg, store.metrics.get(cfg.metric))
     train_ids, val_ids, train_scenes, val_scenes = _split_ids(reader, cfg)
     _check_fits_in_memory(reader, train_ids, val_ids, cfg)

@@ -197,6 +197,11 @@ def load_recipe(source: str | os.PathLike[str], metric: str) -> Recipe:
                                                    for v in per_metric.values()):
         raise RecipeError(f"recipe {name}: per_metric must map metric names to mappings of fields, got "
                           f"{reprlib.repr(per_metric)}", "per_metric")
+    for section_metric, section in per_metric.items():
+        nested = [k for k in ("metrics", "per_metric") if k in section]
+        if nested:  # (was "unknown key(s) metrics (metrics: did you mean metrics?)": the key is right, its place is not)
+            raise RecipeError(f"recipe {name}: per_metric {section_metric} sets {nested[0]!r}, a key of the recipe's top "
+                              f"level, not of a metric's section: move it out of per_metric", nested[0])
     import difflib
 
     known = known_metrics()
