@@ -1,10 +1,12 @@
 """What every rtp command shares: the common options, logging through the progress bars, repeated
 warnings collapsed, progress bars, and the one error policy.
 
-Exit codes (``docs/errors.md``): 0 success; each :class:`~rtp.sdk.RtpError` its class's
-``exit_code`` (2 bad usage or inputs, 1 the job failed); 130 interrupted; argparse's 2 for usage
-errors it finds itself; 2 for an optional module that is not installed (:data:`OPTIONAL_MODULES`). An
-exception outside the rtp tree is a bug: it propagates with its traceback (exit 1).
+Exit codes (``docs/errors.md``): 0 success (and a closed pipe); each :class:`~rtp.sdk.RtpError` its class's
+``exit_code`` (2 bad usage or inputs, 1 the job failed); 130 interrupted (Ctrl-C), 143 terminated (SIGTERM);
+argparse's 2 for usage errors it finds itself; 2 for an optional module that is not installed
+(:data:`OPTIONAL_MODULES`); 1 for a ``MemoryError``; for an ``OSError`` that names a path, 2 where the path itself
+is wrong (its errno in ``_PATH_ERRNOS``) and 1 otherwise. Any other exception outside the rtp tree is a bug: it
+propagates with its traceback (exit 1).
 """
 
 from __future__ import annotations
@@ -603,9 +605,9 @@ def run_guarded(prog: str, body: Callable[[], int | None], *, verbose: bool = Fa
     ``PROG: error: MESSAGE``, and returns its class's exit code (``verbose``: the traceback above it); an
     ``OSError`` naming a path likewise (2 for a wrong path, 1 otherwise); a ``MemoryError`` one line
     (1); an optional module that is not installed (:data:`OPTIONAL_MODULES`) one line naming its extra (2);
-    Ctrl-C 130, saying ``PROG: interrupted`` and what of the job is kept where ``on_interrupt``
-    gives the command's own account (``args.on_interrupt``, set by a resumable command once it starts);
-    a closed pipe 0.
+    Ctrl-C 130 (SIGTERM 143, ``PROG: terminated``), saying ``PROG: interrupted`` and what of the job is kept where
+    ``on_interrupt`` gives the command's own account (``args.on_interrupt``, set by a resumable command once it
+    starts); a closed pipe 0.
     Anything else propagates with its traceback. The benchmark scripts under ``bench/`` run through it."""
     with console_text():
         return _run_guarded(prog, body, verbose=verbose, on_interrupt=on_interrupt)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -98,6 +99,42 @@ def test_room_imports_follow_the_design(room: str) -> None:
             elif any(p.startswith("_") for p in mod.split(".")[1 + other.count(".") + 1:]):
                 bad.append(f"{path.relative_to(ROOT)}:{line} imports {mod}, a private module of {other}")
     assert not bad, "\n".join(bad)
+
+
+#: Distribution names docs/architecture.md gives packages whose import name differs.
+_DISTRIBUTIONS = {"yaml": "pyyaml", "png": "pypng", "flip_evaluator": "flip-evaluator", "OpenGL": "PyOpenGL"}
+
+
+def _doc_rooms() -> dict[str, tuple[set[str], set[str]]]:
+    """docs/architecture.md's room table: import name -> (rooms it may import, third-party packages it names), the
+    remarks in parentheses left out."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    out = {}
+    for m in re.finditer(r"^\| `[\w/]+/` \| `rtp\.([\w.]+)` \|[^|]*\|([^|]*)\|([^|]*)\|$", text, re.M):
+        ours, theirs = m.group(2), m.group(3)
+        while re.search(r"\([^()]*\)", ours + theirs):
+            ours, theirs = (re.sub(r"\([^()]*\)", "", s) for s in (ours, theirs))
+        names = {w.strip().split(" ")[0] for w in ours.split(",") if w.strip()}
+        out[m.group(1)] = (names - {"nothing"}, {w.strip().split(" ")[0] for w in theirs.split(",") if w.strip()})
+    return out
+
+
+def test_the_architecture_page_says_what_each_room_imports() -> None:
+    """docs/architecture.md's table is "exact" (its words): the "may import (ours)" column is ROOMS', and the third-party
+    column names every package the room's code imports (the cli row lacked Pillow and matplotlib, which `rtp metric`,
+    `rtp predict --out` and `rtp adapters check --image` import)."""
+    doc = _doc_rooms()
+    assert set(doc) >= set(ROOMS), f"rooms missing from docs/architecture.md's table: {sorted(set(ROOMS) - set(doc))}"
+    bad = []
+    for room, (_, allowed) in ROOMS.items():
+        ours, theirs = doc[room]
+        if ours != set(allowed) and not (room == "cli" and "every" in ours):
+            bad.append(f"{room}: the page says it may import {sorted(ours)}, tests/test_layout.py {sorted(allowed)}")
+        used = {_DISTRIBUTIONS.get(top, top) for path, package in _sources(room) for mod, _ in _imports(path, package)
+                if (top := mod.split(".")[0]) not in sys.stdlib_module_names and top not in ("rtp", "__future__")}
+        if used - theirs:
+            bad.append(f"{room}: imports {sorted(used - theirs)}, which the page's third-party column does not name")
+    assert not bad, "docs/architecture.md:\n" + "\n".join(bad)
 
 
 def test_moderngl_adapter_does_not_import_the_renderer() -> None:
