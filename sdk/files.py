@@ -83,7 +83,12 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as err:  # (a read-only folder, a full disk: the error named the temporary file, not the one asked for)
+        if err.errno is None:
+            raise
+        raise OSError(err.errno, err.strerror or os.strerror(err.errno), str(target)) from err
     if not _hold(fd):  # (held while this write lives: a later write of the target can tell it is not orphaned)
         os.close(fd)  # (not held: closed at once, as before; Windows cannot replace a file left open)
         fd = -1

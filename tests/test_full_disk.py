@@ -45,6 +45,24 @@ def test_atomic_output_names_the_file_a_write_into_an_open_file_could_not_grow(t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["model.onnx"]
 
 
+def test_atomic_output_names_the_file_when_its_temporary_file_cannot_be_made(tmp_path: Path,
+                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """A folder that takes no new file (read-only, out of inodes): mkstemp's error named the temporary file
+    (".model.onnx.k2j4x9ab.tmp"), not the one the user asked for."""
+    import tempfile
+
+    target = tmp_path / "model.onnx"
+
+    def refused(*args: object, **kwargs: object) -> tuple[int, str]:
+        raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / ".model.onnx.k2j4x9ab.tmp"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refused)
+    with pytest.raises(PermissionError) as e:
+        with atomic_output(target):
+            pass
+    assert (e.value.errno, e.value.filename) == (errno.EACCES, str(target))
+
+
 def _limited(limit: int) -> None:
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))  # (CPython ignores SIGXFSZ: the write fails with EFBIG)
 
