@@ -186,12 +186,19 @@ def _scaled_places(shape: tuple[int, int], prev: tuple[int, int], tile: int, s: 
     return at.astype(np.int32), (py[:, None] << PLACE_BITS) | px[None, :]
 
 
-def start_track(shape: tuple[int, int], tile: int, step: int | None = None) -> Track:
-    """The track of the frame the network ran on: each kept pixel in its own tile, at its own place."""
+def check_track_size(shape: tuple[int, int]) -> None:
+    """An :class:`InputShapeError` for a frame too large for a track's packed places (:data:`PLACE_BITS`):
+    32768 rows or 65536 columns."""
     h, w = int(shape[0]), int(shape[1])
     if h >= 1 << (31 - PLACE_BITS) or w >= 1 << PLACE_BITS:
         raise InputShapeError(f"prediction reuse takes frames of fewer than {1 << (31 - PLACE_BITS)} rows and "
                               f"{1 << PLACE_BITS} columns, got {w}x{h}", (h, w), "(H, W)")
+
+
+def start_track(shape: tuple[int, int], tile: int, step: int | None = None) -> Track:
+    """The track of the frame the network ran on: each kept pixel in its own tile, at its own place."""
+    h, w = int(shape[0]), int(shape[1])
+    check_track_size((h, w))
     s = _check_step(step, tile)
     index = tile_index_map((h, w), tile, s)
     th, tw = tile_grid(h, w, tile)
@@ -788,14 +795,22 @@ class PredictionReuse:
             if x.shape[0] != len(names):
                 raise InputChannelError(f"expected {len(names)} channels {list(names)} on axis 0, got shape {x.shape}",
                                         tuple(x.shape), f"({len(names)}, H, W)")
-            return int(x.shape[1]), int(x.shape[2])
+            return self._non_empty(int(x.shape[1]), int(x.shape[2]), "the inputs")
         if not callable(x):
             raise InputDtypeError(f"expected the inputs as a float32 numpy array (C, H, W) or a function of a window, "
                                   f"got {type(x).__name__}")
         if not isinstance(seen, np.ndarray) or seen.ndim != 2:
             raise ParameterError("with inputs given as a function, pass seen, an (H, W) array (its shape is the "
                                  "frame's)", "seen")
-        return int(seen.shape[0]), int(seen.shape[1])
+        return self._non_empty(int(seen.shape[0]), int(seen.shape[1]), "seen")
+
+    @staticmethod
+    def _non_empty(h: int, w: int, what: str) -> tuple[int, int]:
+        """``(h, w)``, or an :class:`InputShapeError` for a frame without pixels, on every frame (on a carried frame
+        it was a ParameterError about a ``height`` never passed)."""
+        if h == 0 or w == 0:
+            raise InputShapeError(f"{what}: expected a frame of at least one pixel, got {w}x{h}", (h, w), "(H, W)")
+        return h, w
 
     def _run(self, x: Inputs, hw: tuple[int, int],
              carried: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -885,6 +900,10 @@ class PredictionReuse:
                  seen: np.ndarray | None, background: np.ndarray | None) -> np.ndarray:
         """:meth:`predict` on the model's own tiles."""
         hw = self._shape_of(x, seen)
+        if self.every > 1 or self.history > 0:  # a frame too large for the track is refused before the network runs:
+            # refused by the track after the run, it left that frame's estimates as the carry under the last frame's
+            # track, and the next frame carried another frame's estimates, silently
+            check_track_size(hw)
         runs = self._age + 1 >= self.every
         if fetch is not None:  # its kind every frame; its shape and range only where it is read
             self._check_fetch_kind(fetch)
