@@ -299,6 +299,7 @@ def input_planes(
     if "prev_view_projection" in g:  # (only read by the planes that reproject)
         prev_depth_proj = _cameras(g["projection"], g["prev_view_projection"], g.get("prev_projection"),
                                    ("projection", "prev_view_projection", "prev_projection"))
+        _inverse(g["view"], "view")  # (a singular one named as here, not as reproject's cur_view)
     if window:  # a depth buffer's [0, 1] to linear view depth, as the shader's linear_depth
         reversed_z = depth_kind == "reversed"
         _check_depth_kind(d, reversed_z)

@@ -228,9 +228,16 @@ def _cameras(projection: np.ndarray, prev_view_projection: np.ndarray, prev_proj
                                  f"cameras the reprojection (reprojected.*, seen, motion.x/y) follows pixels through",
                                  names[0])
         _orthographic(projection, names[0])
+    else:  # (every pixel's line comes through its inverse: a singular one, named as its caller names it)
+        _inverse(projection, names[0])
     w = prev_view_projection[3]
     if np.abs(w[:3]).max() > 1e-9 * abs(w[3]):  # its clip w reads the view's depth: a perspective's
         return None
+    if not w[3] > 0.0:  # (a zero last row, a matrix not set: every point "behind" it, every pixel unseen, silently)
+        raise ParameterError(f"{names[1]}: its last row {np.round(w, 4).tolist()} is neither a perspective camera's "
+                             f"(its viewing axis) nor an orthographic camera's (0, 0, 0, 1): no camera the reprojection "
+                             f"follows pixels into (a matrix not set? a first frame has no previous frame to reproject)",
+                             names[1])
     # An orthographic previous camera: its clip w is 1 everywhere, and its depth the clip z through its projection.
     depth = prev_projection if prev_projection is not None else projection
     named = names[2] if prev_projection is not None else names[0]
@@ -253,8 +260,9 @@ def check_reprojection(projection: Any, prev_view_projection: Any, prev_projecti
     the two cameras' kinds (each one of :data:`CAMERA_KINDS`, the current camera's first), or a
     :class:`ParameterError` naming the matrix where it cannot.
 
-    Each camera is a perspective (last row ``0, 0, -1, 0``, checked as by :func:`check_projection`) or an
-    orthographic one (``0, 0, 0, 1``: clip y up and OpenGL's depth row, ``-2 / (f - n)``, checked). A
+    Each camera is a perspective (last row ``0, 0, -1, 0``, checked as by :func:`check_projection`; for the
+    previous one, ``prev_view_projection``'s last row its viewing axis) or an orthographic one (``0, 0, 0, 1``:
+    clip y up and OpenGL's depth row, ``-2 / (f - n)``, checked); ``projection`` has an inverse. A
     perspective's previous depth is its clip ``w``; an orthographic previous camera's is read through the
     inverse of its projection, ``prev_projection``, or ``projection`` where that is None (the same near and far
     planes: a camera that pans, turns or zooms), which must then be orthographic too.

@@ -302,6 +302,13 @@ def test_a_grazing_plane_under_an_orthographic_camera_is_seen_through_plain_bili
     assert (seen[:, :W - 1] == 1).all()
 
 
+def _singular_perspective(p: np.ndarray) -> np.ndarray:
+    """A perspective projection with no inverse (its clip x row 0)."""
+    q = p.copy()
+    q[0] = 0.0
+    return q
+
+
 def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
     """A projection neither perspective nor orthographic, an orthographic one in another API's convention or with
     no inverse, and an orthographic previous camera whose projection is not at hand (a switch from a perspective): each a
@@ -327,9 +334,16 @@ def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
         (singular, prev_vp, None, "projection", "singular"),
         (proj, prev_vp, singular, "prev_projection", "singular"),
         (overflow, prev_vp, None, "projection", "depth scale is out of range"),
+        # a singular perspective (check_reprojection took it, input_planes named it reproject's cur_proj), and a
+        # previous view-projection whose last row is 0 (a matrix not set) or -1 (every point behind it): taken as an
+        # orthographic camera's, every pixel unseen without a word (or the error of a switch of cameras)
+        (_singular_perspective(persp), persp @ prev_view, None, "projection", "singular"),
+        (proj, np.zeros((4, 4)), None, "prev_view_projection", "neither a perspective camera's"),
+        (persp, np.zeros((4, 4)), None, "prev_view_projection", "neither a perspective camera's"),
+        (proj, -prev_vp, None, "prev_view_projection", "neither a perspective camera's"),
     ]
     g = {k: v for k, v in f.items() if k not in ("projection", "prev_view_projection")}
-    sdk_names = {"projection": "cur_proj", "prev_projection": "prev_proj"}
+    sdk_names = {"projection": "cur_proj", "prev_projection": "prev_proj", "prev_view_projection": "prev_view_proj"}
     for projection, previous, prev_projection, name, said in cases:
         calls = [
             (partial(sdk.check_reprojection, projection, previous, prev_projection), name),
@@ -354,6 +368,23 @@ def test_the_cameras_the_reprojection_cannot_follow_are_named() -> None:
     window = np.full((H, W), 0.5, np.float32)  # (a depth buffer linearised through the orthographic projection)
     depth = sdk.input_planes(["depth"], depth=window, projection=_orthographic(), depth_kind="window")[0]
     np.testing.assert_allclose(depth, 26.0, rtol=1e-6)  # -(z_ndc - c) / a: the middle of near 1 and far 51
+
+
+def test_a_singular_view_is_named_as_the_caller_names_it() -> None:
+    """A view with no inverse: ``view`` through ``input_planes`` (it said reproject's ``cur_view``), ``cur_view``
+    through ``reproject`` and ``reproject_positions``."""
+    f = _frames(3)
+    view = f["view"].copy()
+    view[1] = 0.0
+    g = {k: v for k, v in f.items() if k != "prev_view"}
+    for channels in (["seen"], ["motion.y"]):
+        with pytest.raises(sdk.ParameterError, match="singular") as err:
+            sdk.input_planes(channels, **{**g, "view": view})
+        assert err.value.name == "view"
+    for call in (partial(sdk.reproject, f["prev_colour"], f["prev_depth"]), sdk.reproject_positions):
+        with pytest.raises(sdk.ParameterError, match="singular") as err:
+            call(f["depth"], view, f["projection"], f["prev_view_projection"])
+        assert err.value.name == "cur_view"
 
 
 def test_check_gbuffers_takes_an_orthographic_frame_and_names_its_mistakes() -> None:
