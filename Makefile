@@ -100,7 +100,7 @@ FLOOR_VENV  ?= .venv-floor
 FLOOR_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_rates.py tests/test_metadata.py tests/test_reuse.py \
 	tests/test_integrity.py tests/test_transforms.py tests/test_pixel_differences.py tests/test_depth_edges.py \
 	tests/test_input_groups.py tests/test_ranges.py tests/test_adapters.py tests/test_fuzz.py tests/test_api.py \
-	tests/test_shipped_models.py
+	tests/test_shipped_models.py tests/test_reuse_properties.py tests/test_reproject_properties.py
 # The floor's virtualenv, made again when the floors or the dependencies change (CI makes it while the main
 # suite runs: .ci/run); rtp itself is installed into it by test-floor, each time (the code of now).
 FLOOR_STAMP := $(FLOOR_VENV)/.rtp-installed
@@ -141,7 +141,7 @@ test-floor-all:
 PY_VENV  ?= .venv-py
 PY_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_rates.py tests/test_metadata.py tests/test_ranges.py \
 	tests/test_integrity.py tests/test_pixel_differences.py tests/test_depth_edges.py tests/test_adapters.py \
-	tests/test_fuzz.py tests/test_api.py
+	tests/test_fuzz.py tests/test_api.py tests/test_reuse_properties.py tests/test_reproject_properties.py
 # (test-python-venv makes the virtualenv alone: CI makes it while the main suite runs; test-python makes it
 # again when it was made for another interpreter.)
 test-python-venv:
