@@ -446,6 +446,63 @@ class ModelMetadata:
         sat = self.rate_saturations
         return min(sat) if self.higher_is_better else max(sat)
 
+    @functools.cached_property  # (computed once, as rate_saturations: the runtimes ask on every frame)
+    def rate_bests(self) -> tuple[float, ...]:
+        """The best value the model can express for each reduced rate (:data:`PREDICTED_RATES` order), the
+        counterpart of :attr:`rate_saturations`: the network's best output (0, or 1 where a larger transformed value
+        is better) plus the margin, which moves every output towards the worse side, decoded and extrapolated as
+        :meth:`decode` does."""
+        p = 0.0 if self.worse_direction > 0 else 1.0
+        best = self.transform.inverse(np.full((len(self.outputs), 1, 1), p + self.worse_direction * self.safety))
+        full = extrapolate(best, self.outputs, self.extrapolation_k, higher_is_better=self.higher_is_better)
+        return tuple(float(v) for v in full[:, 0, 0])
+
+    def _passes_everything(self, threshold: float) -> bool:
+        """Whether ``threshold``, with each rate's ``rate_factors`` share of it (as ``select_rates`` applies them),
+        lies beyond the worst value the model can express at every rate (:attr:`rate_saturations`): every tile then
+        passes at every rate, whatever the frame."""
+        hib, t = self.higher_is_better, float(threshold)
+        return all((t - 20.0 * math.log10(f) < sat) if hib else (t * f > sat)
+                   for sat, f in zip(self.rate_saturations, self.rate_factors))
+
+    def _passes_nothing(self, threshold: float) -> bool:
+        """Whether ``threshold``, with each rate's ``rate_factors`` share of it, lies beyond the best value the model
+        can express at every rate (:attr:`rate_bests`): no tile then passes at any rate and every tile gets 1x1,
+        whatever the frame. (Strictly beyond: at the best value itself a float32 prediction rounded below it could
+        still pass.)"""
+        hib, t = self.higher_is_better, float(threshold)
+        return all((t - 20.0 * math.log10(f) > best) if hib else (t * f < best)
+                   for best, f in zip(self.rate_bests, self.rate_factors))
+
+    def threshold_warning(self, threshold: float, *, budget: bool = False) -> str | None:
+        """What a runtime warns of ``threshold`` where the model's output decides it alone, whatever the frame; None
+        where it does not (some tile may pass it and some fail). Beyond the worst value the model can express at
+        every rate (each rate's ``rate_factors`` share of it past :attr:`rate_saturations`) every tile passes it at
+        every rate; beyond the best value (past :attr:`rate_bests`) no tile passes it at any rate, every tile 1x1
+        (VRS off: often a threshold in another metric's units). The text names the threshold to go past.
+        ``ShadingRatePredictor.shading_rates``, ``PredictionReuse.shading_rates`` and the GPU ``RateSelector`` log
+        it once per threshold (the first 16 thresholds), after the model's name.
+
+        ``budget``: the threshold is a floor under a budget (``saving=``): only the first end is said, since below
+        the second the budget's rates are taken on every frame, as without a threshold."""
+        hib, t = self.higher_is_better, float(threshold)
+        if not budget and self._passes_nothing(t):
+            # below each rate's limit that rate passes no tile: the first rate to pass some sets the limit
+            limits = [best + 20.0 * math.log10(f) if hib else best / f
+                      for best, f in zip(self.rate_bests, self.rate_factors)]
+            best = max(self.rate_bests) if hib else min(self.rate_bests)
+            return (f"threshold {t:g} is beyond the best value the model can express ({best:g}): no tile passes it "
+                    f"at any rate, every tile gets 1x1 on every frame; use one {'below' if hib else 'above'} "
+                    f"{max(limits) if hib else min(limits):g} (a threshold in another metric's units?)")
+        if not self._passes_everything(t):
+            return None
+        # past each rate's limit that rate passes every tile: the last rate to do so sets the limit
+        limits = [sat + 20.0 * math.log10(f) if hib else sat / f for sat, f in zip(self.rate_saturations,
+                                                                                    self.rate_factors)]
+        return (f"threshold {t:g} is beyond the worst value the model can express ({self.saturation:g}): every tile "
+                f"passes it at every rate; use one {'above' if hib else 'below'} "
+                f"{min(limits) if hib else max(limits):g}")
+
     def decode(self, raw: np.ndarray) -> np.ndarray:
         """Network output (channels = :attr:`outputs`, axis -3) to metric units for all six rates.
 

@@ -43,7 +43,6 @@ from ._tiles import (
     split_tiles,
     tile_grid,
 )
-from ._transforms import extrapolate
 
 __all__ = ["ShadingRatePredictor", "load", "shipped_models"]
 
@@ -467,7 +466,7 @@ def _load(
             )
         meta = ModelMetadata.from_json(props[METADATA_KEY])
         _check_integrity(model_path, meta.digest, data)
-    if _passes_everything(meta, meta.default_threshold):
+    if meta._passes_everything(meta.default_threshold):
         log.warning(
             "%s: default_threshold %g is beyond the worst value the model can express (%g): every tile will "
             "pass it; %s the threshold or retrain with a larger transform range",
@@ -624,6 +623,11 @@ class ShadingRatePredictor:
         self._session = session
         #: the model's bytes and load()'s arguments, which __reduce__ pickles (load() sets them)
         self._pickled: tuple[bytes, dict[str, Any]] | None = None
+        # the thresholds and frame sizes warned of (_first_warning), made here so that copies share them (a copy
+        # shares this __dict__'s values): made on the first warning, a copy taken before it (each PredictionReuse's
+        # of a predictor on finer hardware tiles, one a view) had sets of its own and logged each warning again
+        self._saturation_warned: set[float] = set()
+        self._cut_cells_warned: set[tuple[int, int]] = set()
         self._meta = metadata
         self._path = path
         model_tile = metadata.tile_size
@@ -1100,86 +1104,38 @@ class ShadingRatePredictor:
         if saving is not None:
             values = self.predict(x)  # (first: it refuses what is no frame, whose shape has no H and W)
             h, w = np.shape(x)[-2:]
-            return select_rates_for_saving(values, saving, higher_is_better=self._meta.higher_is_better,
-                                           allowed=allowed, factors=self._meta.rate_factors, frame_size=(h, w),
-                                           tile_size=self._tile, threshold=threshold, engine_rates=engine_rates,
-                                           combiner=combiner).rates
+            chosen = select_rates_for_saving(values, saving, higher_is_better=self._meta.higher_is_better,
+                                             allowed=allowed, factors=self._meta.rate_factors, frame_size=(h, w),
+                                             tile_size=self._tile, threshold=threshold, engine_rates=engine_rates,
+                                             combiner=combiner).rates
+            if threshold is not None:  # (a floor past saturation took every tile to the coarsest rate in silence)
+                self._warn_beyond_saturation(threshold, budget=True)
+            return chosen
         thr = self._meta.default_threshold if threshold is None else threshold
         rates = select_rates(self.predict(x), thr, higher_is_better=self._meta.higher_is_better, allowed=allowed,
                              factors=self._meta.rate_factors, engine_rates=engine_rates, combiner=combiner)
         self._warn_beyond_saturation(thr)
         return rates
 
-    def _warn_beyond_saturation(self, threshold: float) -> None:
-        """Log once per threshold, for the first :data:`MAX_WARNED` thresholds, when every rate's threshold (its
-        ``rate_factors`` share of it) lies beyond the worst value the model can express: every tile then passes at the
-        coarsest allowed rate (``load`` says so of a default threshold); or beyond the best value it can express
-        (:func:`_passes_nothing`): no tile then passes at any rate, and every tile gets 1x1 on every frame."""
-        meta, t = self._meta, float(threshold)
-        hib = meta.higher_is_better
-        if _passes_nothing(meta, t):  # the other end: no tile can pass at any rate, every tile 1x1 on every frame
-            count = self._first_warning("_saturation_warned", t)
-            if count:
-                # below each rate's limit that rate passes no tile: the first rate to pass some sets the limit
-                limits = [best + 20.0 * math.log10(f) if hib else best / f for best, f in zip(_rate_bests(meta),
-                                                                                              meta.rate_factors)]
-                log.warning("%s: threshold %g is beyond the best value the model can express (%g): no tile passes it "
-                            "at any rate, every tile gets 1x1 on every frame; use one %s %g (a threshold in another "
-                            "metric's units?)%s", self._path.name if self._path else "model", t, _best(meta),
-                            "below" if hib else "above", max(limits) if hib else min(limits),
-                            _last_said(count, "thresholds"))
-            return
-        if not _passes_everything(meta, t):
+    def _warn_beyond_saturation(self, threshold: float, *, budget: bool = False) -> None:
+        """Log once per threshold, for the first :data:`MAX_WARNED` thresholds, what
+        :meth:`ModelMetadata.threshold_warning` says of it: every rate's threshold (its ``rate_factors`` share of it)
+        beyond the worst value the model can express, every tile then passing at the coarsest allowed rate (``load``
+        says so of a default threshold); or beyond the best value it can express, no tile then passing at any rate
+        and every tile 1x1 on every frame. ``budget``: the threshold is a floor under a budget (only the first end)."""
+        t = float(threshold)
+        message = self._meta.threshold_warning(t, budget=budget)
+        if message is None:
             return
         count = self._first_warning("_saturation_warned", t)
-        if not count:
-            return
-        # past each rate's limit that rate passes every tile: the last rate to do so sets the limit
-        limits = [sat + 20.0 * math.log10(f) if hib else sat / f for sat, f in zip(meta.rate_saturations,
-                                                                                    meta.rate_factors)]
-        log.warning("%s: threshold %g is beyond the worst value the model can express (%g): every tile passes "
-                    "it at every rate; use one %s %g%s", self._path.name if self._path else "model", t,
-                    meta.saturation, "above" if hib else "below", min(limits) if hib else max(limits),
-                    _last_said(count, "thresholds"))
+        if count:
+            log.warning("%s: %s%s", self._path.name if self._path else "model", message,
+                        _last_said(count, "thresholds"))
 
 
 def _last_said(count: int, what: str) -> str:
     """The end of a once-each warning: where it is the :data:`MAX_WARNED`-th, that no more of them are logged."""
     return f" (the {MAX_WARNED}th {what[:-1]} warned of: further {what} are not logged)" if count >= MAX_WARNED else ""
-
-
-def _passes_everything(meta: ModelMetadata, threshold: float) -> bool:
-    """Whether ``threshold``, with each rate's ``rate_factors`` share of it (as ``select_rates`` applies them), lies
-    beyond the worst value the model can express at every rate (``metadata.rate_saturations``): every tile then
-    passes at every rate, whatever the frame."""
-    hib, t = meta.higher_is_better, float(threshold)
-    return all((t - 20.0 * math.log10(f) < sat) if hib else (t * f > sat)
-               for sat, f in zip(meta.rate_saturations, meta.rate_factors))
-
-
-def _rate_bests(meta: ModelMetadata) -> tuple[float, ...]:
-    """The best value the model can express for each reduced rate (:data:`PREDICTED_RATES` order), the counterpart of
-    ``metadata.rate_saturations``: the network's best output (0, or 1 where a larger transformed value is better) plus
-    the margin, which moves every output towards the worse side, decoded and extrapolated as ``decode`` does."""
-    p = 0.0 if meta.worse_direction > 0 else 1.0
-    best = meta.transform.inverse(np.full((len(meta.outputs), 1, 1), p + meta.worse_direction * meta.safety))
-    full = extrapolate(best, meta.outputs, meta.extrapolation_k, higher_is_better=meta.higher_is_better)
-    return tuple(float(v) for v in full[:, 0, 0])
-
-
-def _best(meta: ModelMetadata) -> float:
-    """The best value the model can express at any rate (the best of :func:`_rate_bests`)."""
-    bests = _rate_bests(meta)
-    return max(bests) if meta.higher_is_better else min(bests)
-
-
-def _passes_nothing(meta: ModelMetadata, threshold: float) -> bool:
-    """Whether ``threshold``, with each rate's ``rate_factors`` share of it, lies beyond the best value the model can
-    express at every rate (:func:`_rate_bests`): no tile then passes at any rate and every tile gets 1x1, whatever the
-    frame. (Strictly beyond: at the best value itself a float32 prediction rounded below it could still pass.)"""
-    hib, t = meta.higher_is_better, float(threshold)
-    return all((t - 20.0 * math.log10(f) > best) if hib else (t * f < best)
-               for best, f in zip(_rate_bests(meta), meta.rate_factors))
 
 
 def _unpickle(path: str, data: bytes, args: dict[str, Any]) -> ShadingRatePredictor:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import functools
 import inspect
 import math
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -553,7 +554,8 @@ class PredictionReuse:
     :attr:`align` tiles, :func:`crop_alignment`'s measure: 2 for a coarse context). After each frame :attr:`work` is the
     network's work on it as a share of a whole-frame run (1, 0, or the crops' share; not counting the tail that
     ``carry="features"`` runs on a carried frame). One instance
-    per view; not thread-safe.
+    per view, one frame at a time: a call while another thread's holds the instance is a :class:`ParameterError`
+    (docs/runtime.md "Threads and several views").
 
     A predictor loaded for hardware tiles finer than the model's (``sdk.load(..., tile_size=8)`` of a
     16-pixel model, AMD's and Intel's VRS tiles) is reused on the model's tiles (runs, crops,
@@ -685,7 +687,26 @@ class PredictionReuse:
         self.history = weight
         self.refresh = limit
         self.work = 0.0
+        self._busy = threading.Lock()  # (held through a frame: a second caller meanwhile is refused, _enter)
         self.reset()
+
+    def __getstate__(self) -> dict[str, object]:
+        """Copied or pickled without its lock (a lock cannot be pickled, and a copy is another view's: its own)."""
+        return {k: v for k, v in self.__dict__.items() if k != "_busy"}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._busy = threading.Lock()
+
+    def _enter(self, what: str) -> None:
+        """Take the instance for one call (``what``), or refuse it where another call holds it: two threads at once
+        moved one carry in silence (another frame's estimates carried, the track of one size under another's), or
+        failed far inside it (an IndexError, a fetch refused as out of a frame it was not of)."""
+        if not self._busy.acquire(blocking=False):
+            raise ParameterError(f"PredictionReuse.{what}: this reuse is in a call already (another thread's, or its "
+                                 "own input function's): it holds one view's carry and takes one frame at a time; "
+                                 "give each thread its own PredictionReuse (they may share the predictor), or call "
+                                 "it from one thread at a time (docs/runtime.md \"Threads and several views\")")
 
     @staticmethod
     def _check_rescale(predictor: ShadingRatePredictor, rescale: object) -> tuple[float, list[int]]:
@@ -715,11 +736,15 @@ class PredictionReuse:
 
     def reset(self) -> None:
         """Forget the carried estimates: the next frame runs the network."""
-        self._cache: np.ndarray | None = None
-        self._track: Track | None = None
-        self._shape: tuple[int, int] | None = None
-        self._age = 0
-        self._zeros: np.ndarray | None = None
+        self._enter("reset")
+        try:
+            self._cache: np.ndarray | None = None
+            self._track: Track | None = None
+            self._shape: tuple[int, int] | None = None
+            self._age = 0
+            self._zeros: np.ndarray | None = None
+        finally:
+            self._busy.release()
 
     @property
     def age(self) -> int | None:
@@ -889,7 +914,19 @@ class PredictionReuse:
         alone, float32 ``(len(names), rows, cols)``: every plane where the network runs, the tail's
         (:attr:`ShadingRatePredictor.tail_inputs`) on a frame whose features are carried, the
         ``.blocks`` planes for ``rescale``. On a predictor loaded for hardware tiles finer than the
-        model's (``load(tile_size=8)``) the estimates are on those tiles, each its model tile's."""
+        model's (``load(tile_size=8)``) the estimates are on those tiles, each its model tile's.
+
+        One call at a time: a call while another holds this instance (another thread's) is a
+        :class:`ParameterError`, and the other call goes on unharmed."""
+        self._enter("predict")
+        try:
+            return self._estimates(x, fetch, seen, background)
+        finally:
+            self._busy.release()
+
+    def _estimates(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None, seen: np.ndarray | None,
+                   background: np.ndarray | None) -> np.ndarray:
+        """:meth:`predict` of a call that holds the instance."""
         est = self._predict(x, fetch, seen, background)
         if self._split == 1:
             return est
@@ -1000,7 +1037,17 @@ class PredictionReuse:
         budget: the rates that save that share of the frame's work at the lowest threshold that does
         (:func:`~rtp.sdk.select_rates_for_saving`; with a ``threshold`` too, a floor under its rates). With
         ``engine_rates`` and a ``combiner``, the rates the device shades where the engine's meet them are judged
-        (:meth:`ShadingRatePredictor.shading_rates`)."""
+        (:meth:`ShadingRatePredictor.shading_rates`). One call at a time, as :meth:`predict`."""
+        self._enter("shading_rates")
+        try:
+            return self._rates(x, fetch, seen, background, threshold, allowed, saving, engine_rates, combiner)
+        finally:
+            self._busy.release()
+
+    def _rates(self, x: Inputs, fetch: tuple[np.ndarray, np.ndarray] | None, seen: np.ndarray | None,
+               background: np.ndarray | None, threshold: float | None, allowed: Iterable[RateLike] | None,
+               saving: float | None, engine_rates: RateLike | np.ndarray | None, combiner: str | int) -> np.ndarray:
+        """:meth:`shading_rates` of a call that holds the instance."""
         meta = self._net.metadata
         # Every argument of the choice is refused before the frame moves the carry on (a bad threshold, rate or
         # combiner refused after predict() had aged the carry by a frame), and ``allowed`` is read once: an
@@ -1012,13 +1059,16 @@ class PredictionReuse:
             check_threshold(threshold, meta.higher_is_better)
         check_engine_rates(engine_rates, combiner, allowed,  # (the combiner too, without engine rates)
                            tile_grid(*self._shape_of(x, seen), self.predictor.tile_size))
-        estimates = self.predict(x, fetch, seen, background)
+        estimates = self._estimates(x, fetch, seen, background)
         if saving is not None:
             assert self._shape is not None  # (predict set it)
-            return select_rates_for_saving(estimates, saving, higher_is_better=meta.higher_is_better, allowed=allowed,
-                                           factors=meta.rate_factors, frame_size=self._shape,
-                                           tile_size=self.predictor.tile_size, threshold=threshold,
-                                           engine_rates=engine_rates, combiner=combiner).rates
+            chosen = select_rates_for_saving(estimates, saving, higher_is_better=meta.higher_is_better,
+                                             allowed=allowed, factors=meta.rate_factors, frame_size=self._shape,
+                                             tile_size=self.predictor.tile_size, threshold=threshold,
+                                             engine_rates=engine_rates, combiner=combiner).rates
+            if threshold is not None:  # (a floor past saturation, as the predictor's shading_rates says)
+                self.predictor._warn_beyond_saturation(threshold, budget=True)
+            return chosen
         thr = meta.default_threshold if threshold is None else threshold
         rates = select_rates(estimates, thr, higher_is_better=meta.higher_is_better, allowed=allowed,
                              factors=meta.rate_factors, engine_rates=engine_rates, combiner=combiner)

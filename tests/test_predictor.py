@@ -175,6 +175,30 @@ def test_warn_once_sets_stay_bounded_for_a_threshold_controller_and_dynamic_reso
     assert "further frame sizes are not logged" in cut[-1]
 
 
+def test_views_on_finer_hardware_tiles_warn_of_a_frame_size_once(caplog: pytest.LogCaptureFixture) -> None:
+    """docs/runtime.md "Threads and several views": each warning is logged once, whichever threads pass it. A
+    PredictionReuse of a predictor loaded for hardware tiles finer than the model's (AMD's and Intel's 8-pixel tiles)
+    runs a copy of it on the model's tiles, and a copy made before the predictor's first warning had sets of its own:
+    a frame size that cuts the .blocks planes' last cells was logged by the predictor, then again by each view's
+    reuse (three times for two views on their threads). Copies now share what was warned of, as they share the
+    session; the views' estimates are the predictor's."""
+    import copy
+    from concurrent.futures import ThreadPoolExecutor
+
+    p = sdk.load("jnyang", threads=1, tile_size=8)
+    views = [sdk.PredictionReuse(p, every=2) for _ in range(2)]
+    twin = copy.copy(p)
+    frame = np.random.default_rng(0).random((len(p.metadata.inputs), 32, 50), dtype=np.float32)  # (50: cut cells)
+    caplog.set_level(logging.WARNING, logger="rtp.sdk")
+    want = p.predict(frame)
+    with ThreadPoolExecutor(2) as pool:
+        for est in pool.map(lambda r: r.predict(frame), views):
+            np.testing.assert_array_equal(est, want)
+    np.testing.assert_array_equal(twin.predict(frame), want)
+    cut = [r.getMessage() for r in caplog.records if "cuts the last" in r.getMessage()]
+    assert len(cut) == 1 and "a 50x32 frame cuts the last 4x4 cells" in cut[0]
+
+
 def test_batched_and_single_frames_agree(tiny_model: Callable[..., Path]) -> None:
     p = sdk.load(tiny_model())
     x = np.random.default_rng(1).random((3, 4, 32, 32), dtype=np.float32)
@@ -1093,3 +1117,26 @@ def test_shading_rates_refuses_a_bad_threshold_before_the_network_runs(tiny_mode
     assert runs[0] == 0
     p.shading_rates(x, threshold=0.2)
     assert runs[0] == 1
+
+
+def test_a_budget_s_floor_past_saturation_is_said(tiny_model: Callable[..., Path],
+                                                   caplog: pytest.LogCaptureFixture) -> None:
+    """A ``threshold`` beside a ``saving`` is a floor under the budget: the rates of the looser of the two. A floor
+    beyond the worst value the model can express passes every tile at the coarsest rate on every frame, whatever the
+    budget, and shading_rates(saving=, threshold=) (and PredictionReuse's) said nothing, where the same threshold
+    alone is warned of. Now it is said once per threshold, in the same words; a floor beyond the best value is not
+    (the budget's rates are taken, as without a floor: nothing is switched off)."""
+    p = sdk.load(tiny_model(base_metadata(outputs=["1x2", "2x1"], safety=0.1, default_threshold=0.2)))
+    x = np.random.default_rng(0).random((4, 32, 32)).astype(np.float32)
+    caplog.set_level(logging.WARNING, logger="rtp")
+    for _ in range(2):
+        assert (p.shading_rates(x, threshold=100.0, saving=0.1) == sdk.RATE_CODES["4x4"]).all()
+    warned = [r.getMessage() for r in caplog.records]
+    assert len(warned) == 1 and "threshold 100 is beyond the worst value the model can express" in warned[0]
+    assert warned[0] == p.metadata.threshold_warning(100.0).join([f"{p.path.name}: ", ""])  # type: ignore[union-attr]
+    caplog.clear()
+    assert p.shading_rates(x, threshold=0.01, saving=0.5) is not None and not caplog.records  # (the budget decides)
+    assert p.metadata.threshold_warning(0.01) is not None and p.metadata.threshold_warning(0.01, budget=True) is None
+    reuse = sdk.PredictionReuse(p, 2)
+    assert (reuse.shading_rates(x, threshold=150.0, saving=0.1) == sdk.RATE_CODES["4x4"]).all()
+    assert len(caplog.records) == 1 and "threshold 150 is beyond the worst value" in caplog.text

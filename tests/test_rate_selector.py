@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import logging
 from typing import Any
 
 import numpy as np
@@ -755,3 +756,62 @@ def test_an_engine_rate_given_by_its_name_decides_as_by_its_code(gl_context: Any
         np.testing.assert_array_equal(selector.select(raw, saving=0.8, engine_rates="2x2"), budget)
         with pytest.raises(sdk.ParameterError, match="engine_rates: unknown shading rate '3x3'"):
             selector.select(raw, engine_rates="3x3")
+
+
+def test_a_threshold_the_model_cannot_reach_is_said_as_shading_rates_says_it(tiny_model, gl_context: Any,
+                                                                            caplog: pytest.LogCaptureFixture) -> None:
+    """A threshold beyond the worst value the model can express (every tile at the coarsest rate) or beyond the best
+    (no tile passes: every tile 1x1, VRS off, a threshold in another metric's units) was said by shading_rates and
+    PredictionReuse once per threshold and by the GPU selector never: an engine that keeps its predictions on the
+    GPU saved nothing, or everything, in silence. Now select and select_buffer log the same words once per threshold
+    (ModelMetadata.threshold_warning, one source for both), for the first 16 thresholds as the predictor does; a
+    budget's floor past saturation too (below the best value the budget's rates are taken, as without a floor)."""
+    w = np.zeros((2, 4), np.float32)
+    w[:, 0] = -40.0  # sigmoid(-40 x): the best output, 0, where plane 0 is 1 (clamped, mu 0.25, safety 0.1: 0.05)
+    x = np.zeros((4, 16, 32), np.float32)
+    x[0] = 1.0
+    pred = sdk.load(tiny_model(base_metadata(outputs=["1x2", "2x1"], safety=0.1, default_threshold=0.2), weights=w))
+    raw = pred.predict_raw(x)
+    caplog.set_level(logging.WARNING, logger="rtp")
+
+    def said(logger: str) -> list[str]:
+        return [r.getMessage() for r in caplog.records if r.name.startswith(logger)]
+
+    thresholds = (0.04, 0.2, 100.0, 0.04, 100.0, 0.06)  # beyond the best, fine, beyond the worst, again, fine
+    with RateSelector(pred, gl_context) as selector:
+        for t in thresholds:
+            np.testing.assert_array_equal(selector.select(raw, t), pred.shading_rates(x, threshold=t))
+        gpu, cpu = said("rtp.plugins.moderngl"), said("rtp.sdk")
+        assert len(gpu) == 2 and gpu == cpu, (gpu, cpu)
+        assert gpu[0].startswith(f"{pred.path.name}: threshold 0.04 is beyond the best value the model can express")
+        assert "use one above 0.05" in gpu[0] and "threshold 100 is beyond the worst value" in gpu[1]
+        caplog.clear()
+        selector.select(raw)  # the default, 0.2: nothing to say
+        # a budget's floor past saturation: every tile at the coarsest rate (a new threshold: said once more)
+        for _ in range(2):
+            np.testing.assert_array_equal(selector.select(raw, 200.0, saving=0.5),
+                                          pred.shading_rates(x, threshold=200.0, saving=0.5))
+        selector.select(raw, 0.01, saving=0.5)  # below the best value under a budget: the budget's rates, as without
+        pred.shading_rates(x, threshold=0.01, saving=0.5)
+        gpu, cpu = said("rtp.plugins.moderngl"), said("rtp.sdk")
+        assert len(gpu) == 1 and gpu == cpu and "threshold 200 is beyond the worst value" in gpu[0], (gpu, cpu)
+        caplog.clear()
+    # select_buffer (the engine's own buffer) says it too; a selector of metadata alone names no file
+    with RateSelector(pred.metadata, gl_context) as selector:
+        buffer = gl_context.buffer(np.ascontiguousarray(raw, np.float32).tobytes())
+        for _ in range(2):
+            selector.select_buffer(buffer, raw.shape[-2:], 0.04)
+        selector.select_buffer(buffer, raw.shape[-2:], 300.0, saving=0.5)
+        buffer.release()
+    gpu = said("rtp.plugins.moderngl")
+    assert len(gpu) == 2 and gpu[0].startswith("model: threshold 0.04 is beyond the best value"), gpu
+    assert gpu[1].startswith("model: threshold 300 is beyond the worst value"), gpu
+    caplog.clear()
+    # a controller that moves a threshold past saturation every frame: the first 16 said, the 16th saying so
+    fresh = sdk.load(pred.path)
+    with RateSelector(fresh, gl_context) as selector:
+        for i in range(20):
+            selector.select(raw, 1000.0 + i)
+            fresh.shading_rates(x, threshold=1000.0 + i)
+    gpu, cpu = said("rtp.plugins.moderngl"), said("rtp.sdk")
+    assert len(gpu) == 16 and gpu == cpu and "further thresholds are not logged" in gpu[-1]

@@ -1438,3 +1438,63 @@ def test_fetch_from_motion_is_the_texel_reproject_tests_on_a_texel_edge(prev_sha
         on = seen > 0
         assert on.sum() >= h * w // 2
         np.testing.assert_array_equal(index[rows, cols][on], rep[..., 0][on], err_msg=f"motion ({mx}, {my})")
+
+
+def test_one_reuse_called_from_a_second_thread_during_a_frame_refuses_that_call() -> None:
+    """docs/runtime.md "Threads and several views": a PredictionReuse holds one view's carry. Two threads calling one
+    at once moved it in silence (one frame's estimates carried under another's track) or failed far inside it (an
+    IndexError, an AssertionError, a fetch refused as out of a frame it was not of). Now a call (predict,
+    shading_rates, reset) while another thread's holds the instance is a ParameterError saying so, and the call under
+    way finishes as it would alone: its frame's estimates, and the carry the next frame reads, are the single-threaded
+    ones. The second thread is made to call while the first is inside its frame (its input function waits for it)."""
+    import copy
+    import pickle
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    pred = sdk.load("jnyang", threads=1)
+    rng = np.random.default_rng(0)
+    frames = [rng.random((len(pred.metadata.inputs), 48, 64), dtype=np.float32) for _ in range(3)]
+    fetch = sdk.fetch_from_motion(np.full((48, 64), 2.0), np.full((48, 64), -1.0))
+    # (rescale reads the inputs on a carried frame: the input function runs inside the first call)
+    alone = sdk.PredictionReuse(pred, every=4, rescale=0.5)
+    want = [alone.predict(frames[0]), *(alone.predict(f, fetch) for f in frames[1:])]
+    reuse = sdk.PredictionReuse(pred, every=4, rescale=0.5)
+    reuse.predict(frames[0])
+    inside, tried = threading.Event(), threading.Event()
+
+    def planes(ys: slice, xs: slice) -> np.ndarray:  # (the frame's inputs, read while the call holds the reuse)
+        inside.set()
+        assert tried.wait(20), "the second thread never called"
+        return frames[1][:, ys, xs]
+
+    refused: list[str] = []
+
+    def second(call: Any) -> None:
+        assert inside.wait(20), "the first call never read its inputs"
+        try:
+            call()
+        except sdk.ParameterError as err:
+            refused.append(str(err))
+        finally:
+            tried.set()
+
+    calls = [lambda: reuse.predict(frames[2], fetch), lambda: reuse.shading_rates(frames[2], fetch), reuse.reset]
+    for i, call in enumerate(calls):
+        inside.clear()
+        tried.clear()
+        with ThreadPoolExecutor(2) as pool:
+            first = pool.submit(reuse.predict, planes, fetch, np.ones((48, 64), np.float32))
+            pool.submit(second, call).result(timeout=30)
+            got = first.result(timeout=30)
+        assert len(refused) == i + 1 and "this reuse is in a call already (another thread's" in refused[-1]
+        if i == 0:
+            np.testing.assert_array_equal(got, want[1])
+            np.testing.assert_array_equal(reuse.predict(frames[2], fetch), want[2])  # (the carry as alone)
+        reuse.reset()
+        reuse.predict(frames[0])
+    # a copy (another view) or a pickled one has a lock of its own, free
+    twin, unpickled = copy.copy(reuse), pickle.loads(pickle.dumps(reuse))
+    assert twin._busy is not reuse._busy
+    for other in (twin, unpickled, copy.deepcopy(reuse)):
+        np.testing.assert_array_equal(other.predict(frames[1], fetch), want[1])

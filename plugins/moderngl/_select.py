@@ -12,6 +12,7 @@ the shader is 100 lines of GLSL 4.30 and its results are tested against the SDK'
 
 from __future__ import annotations
 
+import logging
 import math
 import warnings
 from collections.abc import Iterable
@@ -53,6 +54,10 @@ _TRANSFORMS = {"clamped": 0, "logistic": 1, "linear": 2}
 #: checks a name or value before it is looked up here).
 _COMBINER_VALUES: dict[str | int, int] = {"min": 2, "max": 3, "sum": 4, "mul": 4, 2: 2, 3: 3, 4: 4}
 _GROUP = 8  # the shader's local size, both axes
+#: The most thresholds a selector logs its once-each threshold warnings of, as the SDK's predictor (its MAX_WARNED): a
+#: controller that moves the threshold every frame is not warned every frame.
+_MAX_WARNED = 16
+log = logging.getLogger("rtp.plugins.moderngl")
 
 
 def _split_float32(value: float) -> tuple[float, float]:
@@ -103,6 +108,12 @@ class RateSelector:
                                      "tile_size")
         tile_size = int(tile_size)  # (numpy's integers, as a grid computation hands them, are tile sizes too)
         self._meta = meta
+        # what the threshold warnings name the model by (the predictor's file, as its own warnings do), the thresholds
+        # warned of and the last (threshold, budget) judged
+        path = model.path if isinstance(model, sdk.ShadingRatePredictor) else None
+        self._name = path.name if path is not None else "model"
+        self._warned: set[float] = set()
+        self._judged: tuple[float, bool] | None = None
         #: model tiles per hardware tile side (coarser hardware tiles; else 1)
         self.pool = max(1, tile_size // meta.tile_size)
         #: hardware tiles per model tile side (finer hardware tiles; else 1)
@@ -271,7 +282,29 @@ class RateSelector:
             self.ctx.memory_barrier()
             self._program["u_budget"].value = True
             self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
+        if saving is None:
+            self._warn_threshold(thr, budget=False)
+        elif threshold is not None:  # (a floor under the budget)
+            self._warn_threshold(float(threshold), budget=True)
         return self._texture
+
+    def _warn_threshold(self, threshold: float, *, budget: bool) -> None:
+        """Log once per threshold, for the first :data:`_MAX_WARNED` thresholds, what
+        ``ModelMetadata.threshold_warning`` says of it, as ``ShadingRatePredictor.shading_rates`` logs it (the same
+        words, after the model's name): a threshold past the worst value the model can express (every tile at the
+        coarsest rate), or past the best one (no tile passes: every tile 1x1, VRS off). Judged again only when the
+        threshold or the path changes: a frame at the threshold of the frame before costs one comparison."""
+        key = (threshold, budget)
+        if key == self._judged:
+            return
+        self._judged = key
+        message = self._meta.threshold_warning(threshold, budget=budget)
+        if message is None or threshold in self._warned or len(self._warned) >= _MAX_WARNED:
+            return
+        self._warned.add(threshold)
+        last = len(self._warned) >= _MAX_WARNED
+        log.warning("%s: %s%s", self._name, message,
+                    f" (the {_MAX_WARNED}th threshold warned of: further thresholds are not logged)" if last else "")
 
     def _check_budget(self, saving: float, threshold: float | None, allowed: Iterable[sdk.RateLike] | None,
                       grid: tuple[int, int], frame_size: tuple[int, int] | None) -> tuple[int, float]:
