@@ -490,7 +490,10 @@ def check_gbuffers(
     scaled from NDC or UV units, negated or its y flipped (the warning names the convention and the factors that
     convert it); and, with the previous frame, most surfaces reproject onto it (else the matrices or
     depth are another frame's or another convention's; with a hardware depth, where they do once the matrices
-    are taken as clip depth in [0, 1], the warning names a Direct3D-style projection and its conversion). The
+    are taken as clip depth in [0, 1], the warning names a Direct3D-style projection and its conversion; where they do
+    once ``depth`` and ``prev_depth`` are taken in another depth convention, a hardware depth's other kind or, for
+    values in [0, 1], one of the hardware kinds or a linear depth over the far plane, it names that one: a close-up
+    frame's depth buffer, which the values alone do not show). The
     other G-buffers (``albedo``, the material) and ``albedo_linear`` are not looked at, nor whether the colour is in
     linear light (``rtp import``, which has the frame shown too, looks at that); bad arrays raise
     :func:`input_planes`' errors.
@@ -601,9 +604,16 @@ def check_gbuffers(
                     f"D = {_ZERO_TO_ONE_TEXT} (depth row 2 z - w; {_CONVERSIONS}); the depth buffer itself needs "
                     f"no conversion")
             else:
-                warnings.append(f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame and "
-                                f"pass its depth test: prev_depth and prev_view_projection the previous frame's, of the "
-                                f"same conventions and depth kind? (a camera cut or a fast turn does this too)")
+                other = _other_depth_share(given, needed, options)
+                if other is not None and other[0] >= _SEEN_SHARE and other[0] > share:
+                    warnings.append(f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame "
+                                    f"and pass its depth test, and {100 * other[0]:.0f}% with depth and prev_depth "
+                                    f"taken as {other[1]}")
+                else:
+                    warnings.append(f"seen: only {100 * share:.0f}% of the surfaces reproject onto the previous frame "
+                                    f"and pass its depth test: prev_depth and prev_view_projection the previous "
+                                    f"frame's, of the same conventions and depth kind? (a camera cut or a fast turn "
+                                    f"does this too)")
     return warnings
 
 
@@ -653,6 +663,61 @@ def _motion_convention(given: Mapping[str, Any], depth: np.ndarray, options: Map
     return (f"motion: agrees with the camera's move on {100 * as_given:.0f}% of the surfaces it moves, and on "
             f"{100 * share:.0f}% taken as {how}: rtp's motion is each pixel's previous minus current position in pixels, "
             f"x right, y down (multiply these by ({scale[0]:g}, {scale[1]:g}))")
+
+
+def _other_depth_share(given: Mapping[str, Any], needed: tuple[str, ...],
+                       options: Mapping[str, Any]) -> tuple[float, str] | None:
+    """Where few surfaces reproject, the best share of its own surfaces ``seen`` with ``depth`` and ``prev_depth`` taken
+    in another depth convention than ``options``' ``depth_kind``, and what to say of it (the option, or the
+    conversion); None where none can be tried. A depth buffer given as ``linear`` depth (or one kind as the other) is
+    named by its values alone where they are past 0.9 or nearer than the near plane, not on a close-up frame (a
+    wall within a metre: a window depth about 0.86, a reversed-Z one about n / z, past the near plane), nor a depth
+    divided by the far plane (Unity's ``Linear01Depth``) of a scene far from the camera: there the reprojection
+    tells them apart."""
+    kind = options["depth_kind"]
+    frame = {b: given[b] for b in (*needed, "depth", "prev_projection", "motion")}
+    tries: list[tuple[dict[str, Any], str, str]] = []  # (G-buffers, depth_kind, what it is said to be)
+    try:  # (linear depth's values in [0, 1]: those of a hardware depth too; a hardware kind's are, input_planes saw)
+        unit = kind != "linear" or all(0.0 <= float(np.min(a)) and float(np.max(a)) <= 1.0 for a in (
+            np.asarray(frame[b], np.float64) for b in ("depth", "prev_depth")))
+    except (TypeError, ValueError):  # (arrays input_planes refused: not here)
+        return None
+    if unit:  # (a hardware depth's values: any kind may be tried but one they contradict, whose background value is
+        # nowhere and its near plane's somewhere: input_planes would log that as the depth_kind given, once a process)
+        raw = np.asarray(frame["depth"])
+        raw = raw / 65535.0 if raw.dtype == np.uint16 and kind != "linear" else raw  # (a D16 buffer read back)
+        tries += [(frame, k, f"a {'reversed-Z' if k == 'reversed' else 'standard'} depth buffer "
+                             f"(depth_kind={k!r})") for k in DEPTH_KINDS if k not in (kind, "linear")
+                  and ((raw == (0.0 if k == "reversed" else 1.0)).any() or not (raw == (k == "reversed")).any())]
+    if kind == "linear":  # a depth over the far plane (Unity's Linear01Depth): times far
+        projection = np.asarray(frame["projection"], np.float64)
+        far = _far_plane(projection) if projection.shape == (4, 4) else None
+        if far is not None and unit:
+            tries.append(({**frame, "depth": np.asarray(frame["depth"], np.float64) * far,
+                           "prev_depth": np.asarray(frame["prev_depth"], np.float64) * far}, "linear",
+                          f"a depth divided by the far plane (Unity's Linear01Depth): multiply both by far "
+                          f"({far:.4g})"))
+    best = None
+    for gbuffers, k, text in tries:
+        try:
+            seen, depth = input_planes(["seen", "depth"], **gbuffers, **{**options, "depth_kind": k})
+        except RtpError:  # (not values or matrices of that convention)
+            continue
+        geo = depth > 0.0
+        if geo.any():
+            share = float(seen[geo].mean())
+            if best is None or share > best[0]:
+                best = (share, text)
+    return best
+
+
+def _far_plane(projection: np.ndarray) -> float | None:
+    """The view depth of an OpenGL perspective ``projection``'s far plane (NDC z 1), or None for another (an
+    infinite far plane, an orthographic projection, another convention)."""
+    if _near_plane(projection) is None or projection[2, 2] == -1.0:
+        return None
+    far = float(projection[2, 3] / (projection[2, 2] + 1.0))
+    return far if np.isfinite(far) and far > 0.0 else None
 
 
 #: The constant that turns a clip depth in [0, 1] (Direct3D's, Vulkan's, Metal's) into OpenGL's [-1, 1]

@@ -630,6 +630,80 @@ def test_a_zero_to_one_depth_projection_with_a_window_depth_is_named_with_its_co
     assert warning.startswith("seen: only ") and "[0, 1]-depth" not in warning, warning
 
 
+def _close_wall(h: int = 36, w: int = 64) -> dict[str, Any]:
+    """Two frames of a slanted wall filling the view about 0.35 m in front of a camera that moves 5 cm towards it and turns
+    a degree (near plane 0.05, far 200): linear depth from rays cast at each pixel centre, no background."""
+    from rtp.scene import Camera
+
+    normal = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])
+    point = np.array([0.0, 1.5, -0.35])
+
+    def depth(camera: Camera) -> np.ndarray:
+        p = camera.projection(w / h)
+        xs = ((np.arange(w) + 0.5) / w * 2 - 1)[None, :].repeat(h, 0)
+        ys = (1 - (np.arange(h) + 0.5) / h * 2)[:, None].repeat(w, 1)
+        rays = np.stack([xs / p[0, 0], ys / p[1, 1], -np.ones_like(xs)], -1) @ camera.rotation().T  # (view z -1)
+        return (((point - np.asarray(camera.position)) @ normal) / (rays @ normal)).astype(np.float32)
+
+    prev, cur = Camera((0.0, 1.5, 0.0), yaw=0.0, pitch=0.0), Camera((0.02, 1.5, -0.05), yaw=1.0, pitch=0.5)
+    rng = np.random.default_rng(5)
+    return {"depth": depth(cur), "view": cur.view(), "projection": cur.projection(w / h),
+            "prev_colour": rng.random((h, w, 3)).astype(np.float32), "prev_depth": depth(prev),
+            "prev_view_projection": prev.view_projection(w, h)}
+
+
+def test_a_depth_convention_mistake_on_a_close_up_frame_is_named() -> None:
+    """A wall within a metre fills the view: a standard depth buffer's values there are about 0.84 (not past 0.9,
+    none at the clear value 1) and a reversed-Z one's 0.08 and over (past the near plane 0.05, the surfaces being
+    that near), so the values alone named nothing and only the generic `seen` warning was given, naming no depth
+    kind (nor for one kind given as the other, or a depth over the far plane); the reprojection in each other
+    convention now names the one it is."""
+    g = _close_wall()
+    assert sdk.check_gbuffers(**g) == []
+    proj = g["projection"]
+    window, prev_window = (_hardware_depth(g[k], proj, "window") for k in ("depth", "prev_depth"))
+    reversed_z, prev_reversed = (_hardware_depth(g[k], proj, "reversed") for k in ("depth", "prev_depth"))
+    assert 0.8 < float(np.median(window)) < 0.9 and float(reversed_z.min()) > 0.05  # (what the values show)
+    assert sdk.check_gbuffers(**{**g, "depth": window, "prev_depth": prev_window}, depth_kind="window") == []
+    assert sdk.check_gbuffers(**{**g, "depth": reversed_z, "prev_depth": prev_reversed}, depth_kind="reversed") == []
+    cases = [
+        ("linear", window, prev_window, "taken as a standard depth buffer (depth_kind='window')"),
+        ("linear", reversed_z, prev_reversed, "taken as a reversed-Z depth buffer (depth_kind='reversed')"),
+        ("window", reversed_z, prev_reversed, "taken as a reversed-Z depth buffer (depth_kind='reversed')"),
+        ("reversed", window, prev_window, "taken as a standard depth buffer (depth_kind='window')"),
+        ("linear", g["depth"] / 200.0, g["prev_depth"] / 200.0,
+         "taken as a depth divided by the far plane (Unity's Linear01Depth): multiply both by far (200)"),
+    ]
+    for kind, depth, prev_depth, named in cases:
+        warnings = sdk.check_gbuffers(**{**g, "depth": depth, "prev_depth": prev_depth}, depth_kind=kind)
+        seen = [w for w in warnings if w.startswith("seen: ")]
+        assert len(seen) == 1 and seen[0].startswith("seen: only ") and seen[0].endswith(named), (kind, named, warnings)
+    # another frame's previous buffers (a cut to another close-up): the plain warning, no depth kind guessed
+    from rtp.scene import Camera
+
+    moved = Camera((0.3, 1.2, 0.1), yaw=30.0, pitch=-20.0)
+    cut = {**g, "prev_view_projection": moved.view_projection(64, 36), "prev_depth": g["prev_depth"][::-1].copy()}
+    (warning,) = sdk.check_gbuffers(**cut)
+    assert warning.startswith("seen: only ") and "taken as" not in warning, warning
+
+
+def test_trying_other_depth_kinds_logs_nothing(caplog: pytest.LogCaptureFixture,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """check_gbuffers tries the other depth kinds where few surfaces reproject; trying reversed-Z on a standard
+    depth buffer with sky (1 on background, the reversed-Z near plane, none 0) must not log input_planes' once-a-process
+    'depth_kind='reversed', but ...' warning, which the caller never said and which a later real one then lacked."""
+    from rtp.sdk import _planes
+
+    monkeypatch.setattr(_planes, "_warned_kinds", set())
+    g = _close_wall()
+    g["depth"][:6], g["prev_depth"][:6] = 0.0, 0.0  # (some sky)
+    window, prev_window = (_hardware_depth(g[k], g["projection"], "window") for k in ("depth", "prev_depth"))
+    with caplog.at_level(logging.WARNING, logger="rtp.sdk"):
+        warnings = sdk.check_gbuffers(**{**g, "depth": window, "prev_depth": prev_window})
+    assert any(w.endswith("taken as a standard depth buffer (depth_kind='window')") for w in warnings), warnings
+    assert caplog.records == [] and _planes._warned_kinds == set()
+
+
 def test_a_gbuffer_at_another_resolution_is_named_with_its_likely_cause() -> None:
     """An upscaler's displayed frame (1.5x the render resolution) as prev_colour: the error says to give it at the
     G-buffers' resolution; a half-resolution albedo says every G-buffer is at the depth's."""
