@@ -395,8 +395,8 @@ class Yang2019:
 
     Estimates are Weber-normalised, ``E / (mean tile luma + env_luminance)``, i.e. in JNYang-like
     units, and multiplied by the motion factors ``b_H(v)`` (half rates) and ``b_Q(v)`` (quarter
-    rates, ``k = 2.13`` at rest) of the per-tile speed along the same axis. Channel ``WxH`` is the
-    larger of its two per-axis estimates, so ``shading_rates`` (the cheapest rate whose estimate is
+    rates, ``k = 2.13`` at rest; never below ``b_H``) of the per-tile speed along the same axis.
+    Channel ``WxH`` is the larger of its two per-axis estimates, so ``shading_rates`` (the cheapest rate whose estimate is
     below ``threshold``) equals the paper's per-axis decision OR-combined, with 4x1/1x4 demoted to
     2x1/1x2 (they are no D3D12 rates) and, with ``allow_4x4=False`` (NAS), 4x4 replaced by 2x4 or
     4x2 keeping the axis with the larger error finer.
@@ -516,8 +516,12 @@ class Yang2019:
         with np.errstate(divide="ignore", invalid="ignore"):
             n_y = np.where(denom > 0, e_y / np.where(denom > 0, denom, 1.0), np.where(e_y > 0, np.inf, 0.0))
             n_x = np.where(denom > 0, e_x / np.where(denom > 0, denom, 1.0), np.where(e_x > 0, np.inf, 0.0))
-        hy, hx = motion_factor_half(v_y) * n_y, motion_factor_half(v_x) * n_x
-        qy, qx = motion_factor_quarter(v_y, self.k) * n_y, motion_factor_quarter(v_x, self.k) * n_x
+        b_hy, b_hx = motion_factor_half(v_y), motion_factor_half(v_x)
+        hy, hx = b_hy * n_y, b_hx * n_x
+        # Eq. 16 shades an axis at quarter rate only where its half rate passes too: b_Q below b_H (speeds of
+        # thousands of pixels a frame, sooner with k near 1) made 4x4 pass where 2x2 failed
+        qy = np.maximum(motion_factor_quarter(v_y, self.k), b_hy) * n_y
+        qx = np.maximum(motion_factor_quarter(v_x, self.k), b_hx) * n_x
         est = np.stack([hy, hx, np.maximum(hy, hx), np.maximum(hx, qy), np.maximum(qx, hy), np.maximum(qx, qy)])
         if self.unseen == "full":
             if frame.seen is None:
