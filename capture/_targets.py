@@ -171,19 +171,22 @@ def pool_targets(values: np.ndarray, size: tuple[int, int], base: int, tile: int
     if f == 1:
         return values.astype(np.float32)
     th, tw = values.shape[-2:]
-    f = min(f, max(th, tw))  # any larger factor pools the same one tile (and would pad to its size)
-    oh, ow = tile_grid(th, tw, f)
-    ph, pw = oh * f - th, ow * f - tw
+    # a factor past an axis's tiles pools them all into one: clamped on each axis, the padding is never more than
+    # the last coarse tile's (one clamp for both padded a strip of 1x3000 base tiles read 3000 times coarser to
+    # 3000x3000 values)
+    fh, fw = min(f, th), min(f, tw)
+    oh, ow = -(-th // fh), -(-tw // fw)
+    ph, pw = oh * fh - th, ow * fw - tw
     pad = [(0, 0)] * (values.ndim - 2) + [(0, ph), (0, pw)]
     if not mse:
         v = np.pad(values.astype(np.float64), pad, constant_values=-np.inf)
-        v = v.reshape(*values.shape[:-2], oh, f, ow, f)
+        v = v.reshape(*values.shape[:-2], oh, fh, ow, fw)
         return v.max(axis=(-3, -1)).astype(np.float32)
     wts = np.outer(tile_extents(h, base), tile_extents(w, base)).astype(np.float64)
     wts = np.pad(wts, [(0, ph), (0, pw)])
     v = np.pad(values.astype(np.float64), pad) * wts
-    num = v.reshape(*values.shape[:-2], oh, f, ow, f).sum(axis=(-3, -1))
-    den = wts.reshape(oh, f, ow, f).sum(axis=(1, 3))
+    num = v.reshape(*values.shape[:-2], oh, fh, ow, fw).sum(axis=(-3, -1))
+    den = wts.reshape(oh, fh, ow, fw).sum(axis=(1, 3))
     return (num / den).astype(np.float32)
 
 

@@ -20,7 +20,6 @@ from rtp.sdk import (
     NonFiniteInputError,
     luma,
     tile_extents,
-    tile_grid,
 )
 
 from ._errors import InputRangeError, MetricParameterError
@@ -58,21 +57,23 @@ def _check_tile(tile: int) -> int:
 
 def _pool_np(values: np.ndarray, tile: int, reduce: Reduce) -> np.ndarray:
     h, w = values.shape[-2:]
-    tile = min(tile, max(h, w))  # any larger tile pools the same one tile (and would pad to its size)
-    th, tw = tile_grid(h, w, tile)
-    ph, pw = th * tile - h, tw * tile - w
+    # a tile past an axis's length pools it whole: clamped on each axis, the padding is never more than the last
+    # tile's (one clamp for both padded a 1x3000 map pooled by 3000 to 3000x3000 pixels)
+    tile_h, tile_w = min(tile, h), min(tile, w)
+    th, tw = -(-h // tile_h), -(-w // tile_w)
+    ph, pw = th * tile_h - h, tw * tile_w - w
     lead = values.shape[:-2]
     if reduce == "max":
         v = values
         if ph or pw:
             # Padding with -inf never wins a max, so partial tiles pool over real pixels only.
             v = np.pad(values, [(0, 0)] * len(lead) + [(0, ph), (0, pw)], constant_values=-np.inf)
-        return v.reshape(*lead, th, tile, tw, tile).max(axis=(-3, -1))
+        return v.reshape(*lead, th, tile_h, tw, tile_w).max(axis=(-3, -1))
     v = values.astype(np.float64)
     if ph or pw:
         v = np.pad(v, [(0, 0)] * len(lead) + [(0, ph), (0, pw)])
-    sums = v.reshape(*lead, th, tile, tw, tile).sum(axis=(-3, -1))
-    return sums / np.outer(tile_extents(h, tile), tile_extents(w, tile))
+    sums = v.reshape(*lead, th, tile_h, tw, tile_w).sum(axis=(-3, -1))
+    return sums / np.outer(tile_extents(h, tile_h), tile_extents(w, tile_w))
 
 
 def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:

@@ -71,16 +71,18 @@ def pool_tiles(values: np.ndarray, factor: int, *, higher_is_better: bool = Fals
     if f == 1:
         return v.copy()
     th, tw = v.shape[-2:]
-    f = min(f, max(th, tw))  # any larger factor pools the same one coarse tile (and would pad to its size)
-    ch, cw = -(-th // f), -(-tw // f)
+    # a factor past an axis's tiles pools them all into one: clamped on each axis, the padding is never more than
+    # the last coarse tile's (one clamp for both padded a 1x3000 strip pooled by 3000 to 3000x3000 values)
+    fh, fw = min(f, th), min(f, tw)
+    ch, cw = -(-th // fh), -(-tw // fw)
     # the padding never wins: +-inf, or the integer type's own extreme (in floats, int64 values past 2**53 were rounded)
     if v.dtype.kind in "iu":
         fill: object = np.iinfo(v.dtype).max if higher_is_better else np.iinfo(v.dtype).min
     else:
         fill = bool(higher_is_better) if v.dtype.kind == "b" else np.inf if higher_is_better else -np.inf
-    padded = np.full((*v.shape[:-2], ch * f, cw * f), fill, dtype=v.dtype)
+    padded = np.full((*v.shape[:-2], ch * fh, cw * fw), fill, dtype=v.dtype)
     padded[..., :th, :tw] = v
-    blocks = padded.reshape(*v.shape[:-2], ch, f, cw, f)
+    blocks = padded.reshape(*v.shape[:-2], ch, fh, cw, fw)
     return blocks.min(axis=(-3, -1)) if higher_is_better else blocks.max(axis=(-3, -1))
 
 
