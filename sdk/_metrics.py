@@ -105,10 +105,16 @@ TARGET_METRICS: tuple[str, ...] = ("flip", "psnr", "lpips", "jnflip", "jnyang")
 
 def psnr_from_mse(mse: ArrayLike) -> np.ndarray:
     """PSNR in dB for a peak of 1: ``-10 log10(mse)``; ``+inf`` where ``mse == 0``, ``0.0`` where ``mse == 1``
-    (black against white). float32."""
+    (black against white). float32. A negative MSE is an :class:`InputError` (it was NaN, with numpy's warning)."""
+    a = as_numbers(mse, "psnr_from_mse", np.float64)
+    if (a < 0).any():  # (a NaN with numpy's "invalid value in log10" warning: no PSNR has a negative MSE)
+        from ._errors import InputError
+
+        raise InputError(f"psnr_from_mse: expected mean squared errors >= 0, got {int((a < 0).sum())} negative, down "
+                         f"to {float(a.min()):g}")
     with np.errstate(divide="ignore"):
         # (+ 0.0: -10 * log10(1) is -0.0, which printed as '-0' dB; every other value is unchanged by it)
-        return (-10.0 * np.log10(as_numbers(mse, "psnr_from_mse", np.float64)) + 0.0).astype(np.float32)
+        return (-10.0 * np.log10(a) + 0.0).astype(np.float32)
 
 
 def mse_from_psnr(psnr: ArrayLike) -> np.ndarray:

@@ -133,6 +133,19 @@ def test_psnr_matches_formula_per_tile_including_edge_tiles() -> None:
     assert sdk.psnr_from_mse(np.array([1.0, 0.01, 0.0])).tolist() == [0.0, 20.0, np.inf]
 
 
+def test_psnr_of_a_negative_mse_is_refused() -> None:
+    """No PSNR has a negative MSE: psnr_from_mse returned NaN with numpy's 'invalid value in log10' warning."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(sdk.InputError, match=r"^psnr_from_mse: expected mean squared errors >= 0, got 1 negative, "
+                                                 r"down to -1e-18$"):
+            sdk.psnr_from_mse(np.array([0.5, -1e-18]))
+        assert np.isnan(sdk.psnr_from_mse(np.nan))  # (NaN, as before: no value to judge)
+        assert float(sdk.psnr_from_mse(-0.0)) == np.inf
+
+
 def test_psnr_of_black_against_white_is_plus_zero() -> None:
     """An MSE of 1 (black against white) is 0 dB, not -0.0 (printed '-0' by `rtp metric psnr`, '-0.0' in its
     JSON); the stored form (the tile MSE, 1.0) is the same either way, so no stored target moves."""
