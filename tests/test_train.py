@@ -2377,7 +2377,9 @@ def test_bench_hardware_tiles_compares_models_on_one_tile_size(tmp_path: Path, m
     store = TargetStore(data)
     store.declare("psnr", {})
     for sid in DatasetReader(data).ids:
-        store.write(sid, "psnr", (50.0 - 40.0 * store.load(sid, "jnyang", 4)).astype(np.float32), (H, W))
+        # (stored as the tile MSE, as rtp targets stores PSNR: a dB value written there read as a negative MSE)
+        store.write(sid, "psnr", sdk.mse_from_psnr(50.0 - 40.0 * store.load(sid, "jnyang", 4)).astype(np.float32),
+                    (H, W))
     out = subprocess.run([sys.executable, str(path), "psnr", "psnr-8px", "--data", str(data), "--scene",
                           "scene0,scene1", "--tile-size", "8", "--fail-share", "0.05"],
                          capture_output=True, text=True, check=True).stdout
