@@ -658,15 +658,20 @@ def test_bad_roots_and_ids_are_dataset_errors(tmp_path: Path) -> None:
         open_dataset(tmp_path / "paper")["x"].final("1x1")
 
 
-def test_paper_layout(tmp_path: Path) -> None:
-    folder = tmp_path / "Bistro" / "0000"
-    rng = np.random.default_rng(1)
+def _paper_sample(folder: Path, rng: np.random.Generator, size: tuple[int, int]) -> dict[str, np.ndarray]:
+    """A sample folder of the paper's layout: every PNG it holds, random RGBA of ``size`` (H, W); returns them."""
     imgs = {}
     for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1"] + [
         f"output_{r}" for r in sdk.ALL_RATES
     ]:
-        imgs[stem] = rng.integers(0, 256, (16, 32, 4), dtype=np.uint8)
+        imgs[stem] = rng.integers(0, 256, (*size, 4), dtype=np.uint8)
         write_png(folder / f"{stem}.png", imgs[stem])
+    return imgs
+
+
+def test_paper_layout(tmp_path: Path) -> None:
+    folder = tmp_path / "Bistro" / "0000"
+    imgs = _paper_sample(folder, np.random.default_rng(1), (16, 32))
     ds = open_dataset(tmp_path / "Bistro")
     assert isinstance(ds, PaperDatasetReader) and ds.ids == ["0000"]
     s = ds["0000"]
@@ -701,13 +706,7 @@ def test_paper_layout_refuses_a_mask_png_without_its_alpha(tmp_path: Path) -> No
     from PIL import Image
 
     folder = tmp_path / "Bistro" / "0000"
-    rng = np.random.default_rng(3)
-    imgs = {}
-    for stem in ["reproject_1x1", "diffuse_1x1", "specular_1x1", "emissive_1x1", "normals_1x1", "extra_1x1"] + [
-        f"output_{r}" for r in sdk.ALL_RATES
-    ]:
-        imgs[stem] = rng.integers(0, 256, (8, 12, 4), dtype=np.uint8)
-        write_png(folder / f"{stem}.png", imgs[stem])
+    imgs = _paper_sample(folder, np.random.default_rng(3), (8, 12))
     for stem in ("reproject_1x1", "specular_1x1"):
         Image.fromarray(imgs[stem][..., :3]).save(folder / f"{stem}.png")  # (RGB: its alpha dropped)
     s = open_dataset(tmp_path / "Bistro")["0000"]

@@ -1536,14 +1536,20 @@ def test_each_sweep_at_the_methods_own_parameter_is_its_decision_row(dataset: Pa
         assert (point["fail_share"], point["work_saved"]) == pytest.approx((row["fail_share"], row["work_saved"])), method
 
 
+def _jnyang_store(root: Path, weber_l: float) -> tuple[DatasetWriter, TargetStore]:
+    """A new dataset's writer and target store at ``root``, JNYang declared at ``weber_l``."""
+    writer, store = DatasetWriter(root), TargetStore(root)
+    store.declare("jnyang", {"weber_l": weber_l})
+    return writer, store
+
+
 def test_yang_takes_a_jnyang_models_environment_luminance(tmp_path: Path) -> None:
     """Yang 2019's estimates E / (L + l) are JNYang-like: the evaluation judges them at a JNYang model's threshold,
     so at its ``weber_l`` too. It used its own l = 0.02 whatever the model's, so on a model (and targets) at l = 0.1
     its dark tiles' estimates were in other units than the threshold they were held to: about twice as high at a
     mean luma of 0.06, and 1x1 where Yang at the model's l shades them coarser."""
     root = tmp_path / "dark"
-    writer, store = DatasetWriter(root), TargetStore(root)
-    store.declare("jnyang", {"weber_l": 0.1})
+    writer, store = _jnyang_store(root, 0.1)
     rng = np.random.default_rng(5)
     for i in range(2):
         bufs = _seen_whole(rng, H, W)
@@ -1601,8 +1607,7 @@ def test_the_work_saved_counts_a_partial_edge_tile_by_its_pixels(tmp_path: Path,
     work (the tiles' mean read 31.25%), in the decision table and in the sweep alike."""
     h, w = 40, 64  # 3 x 4 tiles of 16 px, the last row 8 px high
     root = tmp_path / "ragged"
-    writer, store = DatasetWriter(root), TargetStore(root)
-    store.declare("jnyang", {"weber_l": 0.02})
+    writer, store = _jnyang_store(root, 0.02)
     rng = np.random.default_rng(1)
     truth = np.full((6, h // 4, w // 4), 0.9, np.float32)  # at the 4-pixel base tile: every rate fails 0.2 ...
     truth[:, 8:, :] = 0.01  # ... but on the bottom row, where every rate passes
@@ -1705,8 +1710,7 @@ def test_an_empty_split_reads_as_no_value_in_every_column(tmp_path: Path, model:
     column read "nan/nan/nan/nan/nan/nan/nan", on the terminal and in evaluation.md."""
     h, w = 32, 64
     root = tmp_path / "whole"
-    writer, store = DatasetWriter(root), TargetStore(root)
-    store.declare("jnyang", {"weber_l": 0.02})
+    writer, store = _jnyang_store(root, 0.02)
     rng = np.random.default_rng(2)
     for i in range(2):
         bufs = _seen_whole(rng, h, w)
@@ -1739,8 +1743,7 @@ def test_targets_all_one_value_leave_r2_undefined_and_the_report_says_why(tmp_pa
     assert scores(g - 0.1, g + np.arange(10) * 1e-6).r2 < 0  # (varying, however little: defined)
     h, w = 64, 64
     root = tmp_path / "flat"
-    writer, store = DatasetWriter(root), TargetStore(root)
-    store.declare("jnyang", {"weber_l": 0.02})
+    writer, store = _jnyang_store(root, 0.02)
     rng = np.random.default_rng(4)
     for i in range(3):
         writer.write(f"f{i}", _seen_whole(rng, h, w), {"scene": "f"})

@@ -780,7 +780,8 @@ def test_a_stored_contrast_finer_than_the_tile_exports_as_one_graph(tmp_path: Pa
 def test_a_split_networks_tail_left_by_a_killed_export_is_removed_by_the_next(tmp_path: Path,
                                                                              monkeypatch: pytest.MonkeyPatch) -> None:
     """A split network's tail is exported to a scratch file beside the model; an export killed there (kill -9, the
-    OOM killer: no cleanup runs) leaves it. It was ``.m.onnx.XXXXXXXX.tmp.tail``, a name no later export knew: it
+    OOM killer: no cleanup runs) leaves it. It was ``.m.onnx.k2j4x9ab.tmp.tail`` (a mkstemp name plus ``.tail``), a
+    name no later export knew: it
     stayed beside the model for good, one more each kill. It is now named as atomic_output names its temporary files,
     so the next export of the model removes it once it is an orphan (unlocked, a minute old), as it removes its own."""
     import os

@@ -10,7 +10,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from importlib.metadata import entry_points
 from pathlib import Path
 from types import ModuleType
@@ -499,7 +499,7 @@ def test_a_model_of_one_plugin_definition_judged_on_anothers_targets_is_said(
     """A model trained on a plugin metric's version-1 targets (its provenance.target_parameters) was evaluated
     against a dataset whose targets the plugin's version 2 computed, and scored in silence; the run now warns and
     the report's first note says so. Evaluating needs no plugin: the definitions are the recorded ones."""
-    from rtp.capture import BUFFERS, DatasetWriter, TargetStore
+    from rtp.capture import DatasetWriter, TargetStore
     from rtp.evaluate import evaluate
 
     from .conftest import base_metadata, build_onnx
@@ -509,13 +509,7 @@ def test_a_model_of_one_plugin_definition_judged_on_anothers_targets_is_said(
     writer, store = DatasetWriter(data), TargetStore(data)
     metrics.register_metric(metrics.Metric("absdiff", absdiff, 0.05, params={"version": 2}))  # (to declare)
     store.declare("absdiff", {"plugin": {"version": 2}, "pooling": "max"})
-    rng = np.random.default_rng(0)
-    for i in range(2):
-        writer.write(f"s{i}", {name: rng.random((h, w, len(spec.channels) or 3) if len(spec.channels) != 1
-                                                else (h, w), dtype=np.float32) for name, spec in BUFFERS.items()},
-                     {"scene": "a"})
-        store.write(f"s{i}", "absdiff", rng.uniform(0, 0.1, (6, h // 4, w // 4)).astype(np.float32), (h, w))
-    writer.finalize()
+    _random_samples(writer, store, 2, (h, w), lambda i: "a")
     _plugins._registered.clear()  # (not installed where the model is evaluated)
 
     def model(version: int) -> Path:
@@ -535,13 +529,28 @@ def test_a_model_of_one_plugin_definition_judged_on_anothers_targets_is_said(
     assert "definition" not in caplog.text and not any("another definition" in n for n in rep.notes)
 
 
+def _random_samples(writer: Any, store: Any, n: int, size: tuple[int, int], scene: Callable[[int], str]) -> None:
+    """``n`` samples s0, s1, ... of random buffers of ``size`` (H, W) in ``scene(i)``, each with random absdiff
+    targets, written and the dataset finalised."""
+    from rtp.capture import BUFFERS
+
+    h, w = size
+    rng = np.random.default_rng(0)
+    for i in range(n):
+        writer.write(f"s{i}", {name: rng.random((h, w, len(spec.channels) or 3) if len(spec.channels) != 1
+                                                else (h, w), dtype=np.float32) for name, spec in BUFFERS.items()},
+                     {"scene": scene(i)})
+        store.write(f"s{i}", "absdiff", rng.uniform(0, 0.1, (6, h // 4, w // 4)).astype(np.float32), (h, w))
+    writer.finalize()
+
+
 def test_training_on_another_plugin_definitions_targets_warns_of_the_installed_threshold(
         registry: None, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     """Targets computed by a plugin metric's version 1, version 2 installed at training (its default threshold 5.0,
     in other units): the model learns the stored targets and records their definition, and took the installed
     plugin's threshold in silence. It still takes it (the stored definition records none), and warns, naming both
     definitions and ``--threshold``; not where the definitions agree, nor with a threshold given."""
-    from rtp.capture import BUFFERS, DatasetWriter, TargetStore
+    from rtp.capture import DatasetWriter, TargetStore
     from rtp.train import TrainConfig, train
     from rtp.train.checkpoint import load as load_checkpoint
 
@@ -550,13 +559,7 @@ def test_training_on_another_plugin_definitions_targets_warns_of_the_installed_t
     writer, store = DatasetWriter(data), TargetStore(data)
     metrics.register_metric(metrics.Metric("absdiff", absdiff, 0.05, params={"version": 1}))  # (to declare)
     store.declare("absdiff", {"plugin": {"version": 1}, "pooling": "max"})
-    rng = np.random.default_rng(0)
-    for i in range(6):
-        writer.write(f"s{i}", {name: rng.random((h, w, len(spec.channels) or 3) if len(spec.channels) != 1
-                                                else (h, w), dtype=np.float32) for name, spec in BUFFERS.items()},
-                     {"scene": f"scene{i % 3}"})
-        store.write(f"s{i}", "absdiff", rng.uniform(0, 0.1, (6, h // 4, w // 4)).astype(np.float32), (h, w))
-    writer.finalize()
+    _random_samples(writer, store, 6, (h, w), lambda i: f"scene{i % 3}")
     cfg = dict(data=str(data), metric="absdiff", steps=2, crop=32, batch=4, val_every=2, save_every=2, arch="fast",
                val_scenes=("scene0",))
     words = (f"the absdiff targets of {data} were computed by another definition of the plugin metric ({{'plugin': "
