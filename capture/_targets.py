@@ -307,6 +307,11 @@ class TargetStore:
             raise TargetError(f"{metric} targets of sample {sample_id!r}: {bad} of {values.size} values are NaN or "
                               f"infinite (the metric's map of this sample: check its final images, or the metric's "
                               f"code if it is your own); nothing is written")
+        if _stores_mse(metric) and (values < 0).any():  # (read back, each was a NaN PSNR until psnr_from_mse refused)
+            raise TargetError(f"{metric} targets of sample {sample_id!r}: expected the tile mean squared errors (>= 0, "
+                              f"the store keeps PSNR as its MSE), got {int((values < 0).sum())} negative, down to "
+                              f"{float(values.min()):g} (PSNRs in dB? store sdk.mse_from_psnr of them); nothing is "
+                              f"written")
         if fingerprint is None and sample_mtime_ns is None:
             fingerprint = sample_fingerprint(sample_path(self.root.parent, sample_id))
         stored: dict[str, np.ndarray] = {"values": values.astype(np.float32), "size": np.array([h, w], np.int64)}
@@ -339,6 +344,10 @@ class TargetStore:
         if bad:  # (written by an rtp before the write refused them, or damaged: not trained on in silence)
             raise TargetError(f"{p}: {bad} of {values.size} targets are NaN or infinite; delete the file and run "
                               f"`rtp targets {self.root.parent}` again, which computes it anew")
+        if _stores_mse(metric) and (values < 0).any():  # (written by an rtp before the write refused them)
+            raise TargetError(f"{p}: {int((values < 0).sum())} of {values.size} stored mean squared errors are "
+                              f"negative; delete the file and run `rtp targets {self.root.parent}` again, which "
+                              f"computes it anew")
         declared = self.metrics.get(metric)
         pooled = pool_targets(values, size, self.base_tile, tile,
                               mse=_mean_pooled(metric, declared if isinstance(declared, Mapping) else {}))

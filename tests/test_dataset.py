@@ -354,6 +354,32 @@ def test_targets_that_are_not_finite_are_refused_on_write_and_on_load(tmp_path: 
         store.load("a", "jnyang", 16)
 
 
+def test_negative_stored_mse_is_refused_on_write_and_on_load(tmp_path: Path) -> None:
+    """PSNR is stored as the tile MSE: a negative one was written in silence and read back as a NaN PSNR (then an
+    InputError of sdk.psnr_from_mse naming no file). Other metrics' negative values are theirs to judge."""
+    from rtp.capture import TargetError, TargetStore
+
+    DatasetWriter(tmp_path / "ds").write("a", _buffers(), {})
+    store = TargetStore(tmp_path / "ds")
+    store.declare("psnr", {})
+    store.declare("jnyang", {"weber_l": 0.02})
+    v = np.full((6, 6, 10), 1e-3, np.float32)
+    v[1, 2, 3] = -0.5
+    with pytest.raises(TargetError, match=r"psnr targets of sample 'a': expected the tile mean squared errors "
+                                          r"\(>= 0.*got 1 negative, down to -0.5.*nothing is written"):
+        store.write("a", "psnr", v, (24, 40))
+    assert not store.path("a", "psnr").exists()
+    store.write("a", "jnyang", v, (24, 40))  # (not an MSE)
+    assert store.load("a", "jnyang", 4).min() == np.float32(-0.5)
+    path = store.path("a", "psnr")  # (one an older rtp wrote)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        np.savez(f, values=v, size=np.array([24, 40]))
+    with pytest.raises(TargetError, match=re.escape(f"{path}: 1 of 360 stored mean squared errors are negative; "
+                                                    f"delete the file and run `rtp targets {tmp_path / 'ds'}` again")):
+        store.load("a", "psnr", 16)
+
+
 def test_targets_at_a_tile_past_the_frame_pool_without_padding(tmp_path: Path) -> None:
     """A tile far larger than the frame padded the base tiles to its size (tile**2 / 16 floats)."""
     from rtp.capture import TargetError, TargetStore
