@@ -695,8 +695,12 @@ def test_a_selector_whose_construction_fails_releases_what_it_made(gl_context: A
             programs.append(compile_shader(source))
             return programs[-1]
 
+        make = ctx.buffer
+
         def no_room(*args: Any, **kwargs: Any) -> Any:
-            raise MemoryError("no room for the budget's buffer")
+            if "reserve" in kwargs:
+                raise MemoryError("no room for the budget's buffer")
+            return make(*args, **kwargs)  # (the selector's 16-byte sentinel, made first)
 
         ctx.compute_shader, ctx.buffer = compiled, no_room
         with pytest.raises(MemoryError):
@@ -815,3 +819,98 @@ def test_a_threshold_the_model_cannot_reach_is_said_as_shading_rates_says_it(tin
             fresh.shading_rates(x, threshold=1000.0 + i)
     gpu, cpu = said("rtp.plugins.moderngl"), said("rtp.sdk")
     assert len(gpu) == 16 and gpu == cpu and "further thresholds are not logged" in gpu[-1]
+
+
+def test_a_call_ends_with_a_memory_barrier_before_its_writes_are_read(gl_context: Any) -> None:
+    """The dispatch writes the rate image and the decoded values through image stores and storage-buffer writes,
+    which GL makes visible to later reads only after a ``glMemoryBarrier``: ``select`` read the image back
+    (``glGetTexImage``), ``decoded()`` and ``budget()`` mapped the buffers, and an engine fetched ``select_buffer``'s
+    image, all with no barrier after the last dispatch (llvmpipe finishes a dispatch at once; a GPU may not). Now
+    every call's last dispatch is followed by a barrier over every kind of read, with a budget too."""
+    import moderngl
+
+    from rtp.plugins.moderngl import create_context
+
+    pred = sdk.load("jnyang")
+    raw = np.random.default_rng(7).random((4, 3, 5)).astype(np.float32)
+    ctx = create_context(430)
+    try:
+        with RateSelector(pred, ctx) as selector:
+            events: list[Any] = []
+            barrier, run = ctx.memory_barrier, selector._program.run
+
+            def recorded_barrier(barriers: int = moderngl.ALL_BARRIER_BITS, by_region: bool = False) -> None:
+                events.append(("barrier", barriers))
+                barrier(barriers, by_region)
+
+            def recorded_run(*args: Any, **kwargs: Any) -> None:
+                events.append(("run", None))
+                run(*args, **kwargs)
+
+            ctx.memory_barrier, selector._program.run = recorded_barrier, recorded_run
+            needed = (moderngl.TEXTURE_UPDATE_BARRIER_BIT | moderngl.BUFFER_UPDATE_BARRIER_BIT
+                      | moderngl.TEXTURE_FETCH_BARRIER_BIT | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+            for call in (lambda: selector.select(raw), lambda: selector.select(raw, saving=0.5),
+                         lambda: selector.select_buffer(selector._raw, (3, 5))):
+                events.clear()
+                call()
+                last_run = max(i for i, (kind, _) in enumerate(events) if kind == "run")
+                after = [bits for kind, bits in events[last_run + 1:] if kind == "barrier"]
+                assert after and after[0] & needed == needed, events
+    finally:
+        ctx.release()
+        make_current(gl_context)
+
+
+def test_a_call_from_a_thread_where_the_context_cannot_be_current_is_refused(gl_context: Any) -> None:
+    """A GL context is current in one thread at a time, and moderngl's ``ctx.__enter__()`` says nothing when EGL
+    refuses it: ``select`` from a worker thread while the engine's thread held the context ran in no context and
+    returned uninitialised memory as rate codes, in silence (``budget()`` a bare ``moderngl.Error``). Now such a call
+    is a RendererError naming the thread, and the context handed over (released in one thread, then used in the
+    other) works in either."""
+    import threading
+
+    from rtp.plugins.moderngl import create_context
+
+    pred = sdk.load("jnyang")
+    raw = np.random.default_rng(9).random((4, 5, 7)).astype(np.float32)
+
+    def in_thread(call: Any) -> Any:
+        out: dict[str, Any] = {}
+
+        def work() -> None:
+            try:
+                out["value"] = call()
+            except Exception as exc:  # (handed back to the test's thread)
+                out["error"] = exc
+
+        worker = threading.Thread(target=work, name="worker")
+        worker.start()
+        worker.join()
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
+
+    ctx = create_context(430)
+    try:
+        with RateSelector(pred, ctx) as selector:
+            want = selector.select(raw, saving=0.5)
+            for call in (lambda: selector.select(raw), selector.decoded, selector.budget,
+                         lambda: selector.select_buffer(selector._raw, (5, 7))):
+                with pytest.raises(RendererError, match="could not be made current in this thread .*'worker'"):
+                    in_thread(call)
+            np.testing.assert_array_equal(selector.select(raw, saving=0.5), want)  # (the engine's thread: as before)
+            ctx.__exit__(None, None, None)  # handed over: released here, made current there by the call
+
+            def there() -> np.ndarray:
+                rates = selector.select(raw, saving=0.5)
+                ctx.__exit__(None, None, None)  # (handed back)
+                return rates
+
+            np.testing.assert_array_equal(in_thread(there), want)
+            np.testing.assert_array_equal(selector.select(raw, saving=0.5), want)
+        with pytest.raises(RendererError, match="could not be made current"):
+            in_thread(lambda: RateSelector(pred, ctx))  # (a borrowed context current here: nothing made there)
+    finally:
+        ctx.release()
+        make_current(gl_context)

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import threading
 import warnings
 from collections.abc import Iterable
 from typing import Any
@@ -133,6 +135,11 @@ class RateSelector:
         self._budget_program: Any = None  # (compiled on the first budget)
         self._budget: Any = None
         self._budget_work: float | None = None  # the frame's work, in pixels (tiles), of the last budget
+        # A small buffer of random bytes that only this selector's context holds, read back where a call comes from
+        # another thread than the last: whether its context is the one current there (see _check_current).
+        self._sentinel: Any = None
+        self._magic = os.urandom(16)
+        self._thread: int | None = None
         self._own_ctx = False
         self.ctx = create_context(430) if ctx is None else ctx
         self._own_ctx = ctx is None
@@ -145,6 +152,13 @@ class RateSelector:
     def _build(self, meta: sdk.ModelMetadata) -> None:
         """The constructor's GL part: the decision's program and its uniforms, in the selector's context."""
         self.ctx.__enter__()  # (a borrowed context may not be the current one: the programs are made in it)
+        import moderngl
+
+        try:
+            self._sentinel = self.ctx.buffer(self._magic)
+        except moderngl.Error as exc:  # ("cannot create buffer": no context current in this thread)
+            raise RendererError(self._not_current()) from exc
+        self._thread = threading.get_ident()
         if self.ctx.version_code < 430:
             raise RendererError(f"RateSelector needs compute shaders (OpenGL 4.3), got a context of version "
                                 f"{self.ctx.version_code // 100}.{self.ctx.version_code % 100 // 10}")
@@ -282,6 +296,11 @@ class RateSelector:
             self.ctx.memory_barrier()
             self._program["u_budget"].value = True
             self._program.run(-(-gw // _GROUP), -(-gh // _GROUP))
+        # The dispatch wrote the rate image and the decoded values through image stores and storage-buffer writes,
+        # which GL makes visible to nothing after them without a barrier (OpenGL 4.6 section 7.13.2): select()'s
+        # glGetTexImage, decoded()'s and budget()'s buffer reads and the engine's own fetch of the image as a texture
+        # or a shading-rate image could read the last frame's on a GPU (llvmpipe runs a dispatch to the end at once).
+        self.ctx.memory_barrier()
         if saving is None:
             self._warn_threshold(thr, budget=False)
         elif threshold is not None:  # (a floor under the budget)
@@ -437,6 +456,28 @@ class RateSelector:
             raise AdapterFrameError("ctx: the moderngl context was released under this RateSelector; build a new "
                                     "selector in a live context")
         self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
+        if threading.get_ident() != self._thread:
+            self._check_current()
+
+    def _not_current(self) -> str:
+        return ("RateSelector: its moderngl context could not be made current in this thread (thread "
+                f"{threading.current_thread().name!r}): a GL context is current in one thread at a time, and the driver "
+                "refuses it to a second while the first holds it. Call the selector from the thread where the context "
+                "is current, or release it there first (ctx.__exit__(None, None, None)); or give each thread a "
+                "selector of its own context")
+
+    def _check_current(self) -> None:
+        """Raise unless the selector's context is current in the calling thread. moderngl's ``ctx.__enter__()``
+        does not say when the driver refused it (the context current in another thread): the calls then ran in no
+        context, or in the one this thread had, and returned another object's bytes (uninitialised memory as rate
+        codes, in silence) or a bare ``moderngl.Error``. The sentinel's bytes are this context's alone."""
+        try:
+            ok = self._sentinel.read() == self._magic
+        except Exception:  # (moderngl.Error "cannot map the buffer": no context current in this thread)
+            ok = False
+        if not ok:
+            raise RendererError(self._not_current())
+        self._thread = threading.get_ident()
 
     def _check_gl_object(self, obj: Any, name: str, what: str) -> None:
         """``obj`` (an engine's buffer or texture) is live and of the selector's context, else a
@@ -493,11 +534,11 @@ class RateSelector:
         if self._program is not None and live:
             self.ctx.__enter__()  # (its objects are freed in its own context)
         for obj in (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
-                    self._budget):
+                    self._budget, self._sentinel):
             if obj is not None and live:
                 obj.release()
         self._texture = self._decoded = self._raw = self._engine = self._program = None
-        self._budget_program = self._budget = None
+        self._budget_program = self._budget = self._sentinel = None
         self._tiles = None
         if self._own_ctx and live:
             self.ctx.release()
