@@ -44,23 +44,45 @@ def _read(path: str) -> np.ndarray:
         raise ParameterError(f"{path!r}: not an image Pillow can read ({err})") from None
 
 
-def _check_memory(args: argparse.Namespace) -> None:
-    """An image pair whose metric cannot be computed in this machine's memory is refused before it
-    is decoded (Pillow takes images up to 179 million pixels: about 32 GiB for LPIPS)."""
+def _header_size(path: str) -> tuple[int, int] | None:
+    """The (width, height) an image file's header gives, without decoding its pixels; None where Pillow cannot
+    open it (:func:`_read` says what is wrong with it)."""
     from PIL import Image
-
-    from rtp.capture import check_memory, job_bytes
 
     try:
         with warnings.catch_warnings():  # (Pillow's warning past 89 million pixels: _read gives it, once)
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            with Image.open(args.reference) as im:  # (the header only)
+            with Image.open(path) as im:  # (the header only)
                 w, h = im.size
-    except (OSError, ValueError, Image.DecompressionBombError):  # (_read says what is wrong with it)
+    except (OSError, ValueError, Image.DecompressionBombError):
+        return None
+    return int(w), int(h)
+
+
+def _check_memory(args: argparse.Namespace) -> None:
+    """An image pair of two sizes is refused from the two headers, before either image is decoded (it was
+    said after both were: a 1080p reference against an 8K test decoded the 8K image's 33 million pixels, and one
+    past the machine's memory was "out of memory", exit 1, rather than the pair's mistake); and an image pair
+    whose metric cannot be computed in this machine's memory is refused before it is decoded (Pillow takes images
+    up to 179 million pixels: about 32 GiB for LPIPS)."""
+    from rtp import sdk
+    from rtp.capture import check_memory, job_bytes
+
+    size = _header_size(args.reference)
+    if size is None:
         return
+    other = _header_size(args.test)
+    if other is not None and other != size:
+        raise sdk.ParameterError(_differ(size, other))
+    w, h = size
     need = job_bytes("metric", (w, h), metrics=(args.metric,))
     check_memory(need, f"{args.metric} of a {w}x{h} image pair takes about {need / 2**30:.1f} GiB", "reference",
                  "of memory: smaller images", job="rtp metric")
+
+
+def _differ(reference: tuple[int, int], test: tuple[int, int]) -> str:
+    """The error of an image pair of two sizes, each ``(width, height)``."""
+    return f"the images differ in size: {reference[0]}x{reference[1]} and {test[0]}x{test[1]}"
 
 
 def run_metric(args: argparse.Namespace) -> int:
@@ -76,10 +98,19 @@ def run_metric(args: argparse.Namespace) -> int:
     metrics.check_dependencies([args.metric])  # (a plugin's missing module was blamed on its error_map)
     ref, test = _read(args.reference), _read(args.test)
     if ref.shape != test.shape:
-        raise sdk.ParameterError(f"the images differ in size: {ref.shape[1]}x{ref.shape[0]} and "
-                                 f"{test.shape[1]}x{test.shape[0]}")
+        raise sdk.ParameterError(_differ((ref.shape[1], ref.shape[0]), (test.shape[1], test.shape[0])))
     if "ppd" in params:  # ('width' as its number, printed; of an image too narrow for it refused before FLIP runs)
-        params["ppd"] = metrics.image_ppd(params["ppd"], ref.shape[1])
+        try:
+            params["ppd"] = metrics.image_ppd(params["ppd"], ref.shape[1])
+        except metrics.MetricParameterError as err:
+            if params["ppd"] != "width":
+                raise
+            # (the library's words are Python's, "ppd='width' ...: for a crop pass ppd=ppd_from_width(...)": a
+            # command-line user has neither, only the flag)
+            found = str(err).partition(": for a crop")[0].replace("ppd='width'", "--ppd width", 1)
+            raise metrics.MetricParameterError(
+                f"{found}: give --ppd a number instead (for a crop of a wider frame, that frame's width-based value, "
+                "rtp.metrics.ppd_from_width(its width))") from None
     info = metrics.metric_info(args.metric)
     # the map once, pooled as tile_metric pools it (tile_metric and error_map both computed it: FLIP and LPIPS twice)
     pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test, **params)

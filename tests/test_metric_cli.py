@@ -100,7 +100,36 @@ def test_metric_ppd_width_of_a_narrow_image_refused(tmp_path: Path, capsys: pyte
     for name in ("a.png", "b.png"):
         Image.fromarray(np.full((40, 40, 3), 100 if name == "a.png" else 120, np.uint8)).save(tmp_path / name)
     assert main(["metric", "flip", str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--ppd", "width"]) == 2
-    assert "ppd='width' of a 40-pixel-wide image" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # in the command line's words: its flag, not the library's "ppd='width'" and "pass ppd=ppd_from_width(...)"
+    assert "--ppd width of a 40-pixel-wide image is 0.698 pixels per degree, outside FLIP's [1, 1000]" in err, err
+    assert "give --ppd a number" in err and "ppd=" not in err, err
+
+
+def test_metric_pair_of_two_sizes_refused_before_either_is_decoded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Two sizes were found after both images were decoded: a 1080p reference against an 8K test decoded 33 million
+    pixels first (one past the machine's memory was "out of memory", exit 1, not the pair's mistake). The headers
+    say it: no pixel is read. A pair of one size is still read and compared."""
+    from PIL import Image
+
+    import rtp.capture
+
+    a, _, _, _ = _pair(tmp_path)
+    Image.fromarray(np.zeros((30, 90, 3), np.uint8)).save(tmp_path / "other.png")
+    real = rtp.capture.read_image_values
+    decoded: list[str] = []
+
+    def counted(path, *args, **kwargs):  # type: ignore[no-untyped-def]
+        decoded.append(str(path))
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(rtp.capture, "read_image_values", counted)
+    assert main(["metric", "psnr", str(a), str(tmp_path / "other.png")]) == 2
+    assert "the images differ in size: 70x40 and 90x30" in capsys.readouterr().err
+    assert decoded == []
+    assert main(["metric", "psnr", str(a), str(a), "--json"]) == 0
+    assert decoded == [str(a), str(a)] and json.loads(capsys.readouterr().out)["metric"] == "psnr"
 
 
 @pytest.mark.parametrize("size", [(1, 120), (120, 1), (3, 250)])
