@@ -284,13 +284,16 @@ def _load(args: argparse.Namespace, tile_size: int | None = None) -> Any:
 @contextlib.contextmanager
 def _metadata_hint(args: argparse.Namespace) -> Iterator[None]:
     """The block's load of ``args.model`` refused for carrying no rtp metadata, said in the command line's words
-    (only when the file has none: metadata that is there but broken keeps the SDK's message of what is wrong)."""
+    (only when the file has none: metadata that is there but broken keeps the SDK's message of what is wrong). A
+    command without ``--metadata`` (``rtp adapters check --model``) is told of the way it has, adopting the model."""
     from rtp import sdk
 
+    sidecar_flag = hasattr(args, "metadata")
     try:
         yield
     except sdk.MetadataError as err:
-        if err.key == sdk.METADATA_KEY and args.metadata is None and not carries_metadata(args.model):
+        if (err.key == sdk.METADATA_KEY and getattr(args, "metadata", None) is None and args.model is not None
+                and not carries_metadata(args.model)):
             from rtp.export import identify
 
             # (one of the paper's published files was told to bring a sidecar: rtp ships one for each, docs/export.md)
@@ -302,7 +305,11 @@ def _metadata_hint(args: argparse.Namespace) -> Iterator[None]:
                 raise sdk.MetadataError(
                     f"{args.model} carries no rtp metadata; it is the paper's published {known.name} model, whose "
                     f"sidecar ships with rtp: `rtp-export --adopt {args.model} -o OUT.onnx` bakes it in (no sidecar "
-                    "to write)", err.key) from err
+                    f"to write){'' if sidecar_flag else ', then --model OUT.onnx'}", err.key) from err
+            if not sidecar_flag:  # (the SDK's "the commands' --metadata" named a flag this command does not have)
+                raise sdk.MetadataError(
+                    f"{args.model} carries no rtp metadata: bake its sidecar in with `rtp-export --adopt MODEL.onnx "
+                    "--metadata SIDECAR.yaml -o OUT.onnx`, then --model OUT.onnx", err.key) from err
             raise sdk.MetadataError(
                 f"{args.model} carries no rtp metadata: pass --metadata SIDECAR.yaml, or bake the sidecar in with "
                 "`rtp-export --adopt MODEL.onnx --metadata SIDECAR.yaml -o OUT.onnx`", err.key) from err
@@ -483,8 +490,9 @@ def _cmd_adapters_check(args: argparse.Namespace) -> int:
         sys.path.insert(0, os.getcwd())  # module:Class from the plugin's own checkout, as python -m would
     tolerances = dict(args.tolerance or [])
     _picture_modules(args.image, "--image")
-    report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model, image=args.image,
-                           scene=args.scene)
+    with _metadata_hint(args):  # (--model of a foreign file: the SDK's hint named a --metadata it does not have)
+        report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model,
+                               image=args.image, scene=args.scene)
     if args.json:
         print(json.dumps(report.to_dict(), indent=1))
     else:

@@ -559,6 +559,23 @@ def test_info_on_a_published_model_says_it_adopts_without_a_sidecar(capsys: pyte
     assert "--metadata SIDECAR.yaml" not in err
 
 
+def test_adapters_check_of_a_model_without_metadata_names_no_flag_it_lacks(tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp adapters check --model FOREIGN.onnx` passed on the SDK's hint, "pass its sidecar (sdk.load(...,
+    metadata=), the commands' --metadata SIDECAR.yaml)": the command has no --metadata, and the paper's published
+    files need no sidecar at all. It says how to adopt the model and give the adopted file to --model instead."""
+    from .conftest import build_onnx
+
+    foreign = build_onnx(tmp_path / "foreign.onnx", weights=np.zeros((4, 4), np.float32), metadata=None)
+    published = Path(__file__).parent / "data" / "published" / "JNYang.onnx"
+    for model in (foreign, published):
+        assert main(["adapters", "check", "moderngl", "--model", str(model)]) == 2
+        err = capsys.readouterr().err
+        assert f"{model} carries no rtp metadata" in err and "then --model OUT.onnx" in err, err
+        assert "pass --metadata" not in err and "metadata=" not in err and "the commands' --metadata" not in err, err
+    assert f"rtp-export --adopt {published} -o OUT.onnx" in err and "SIDECAR" not in err, err
+
+
 def test_info_on_broken_metadata_says_what_is_broken(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Metadata that is there but not JSON is not "no rtp metadata": the hint to bake a sidecar in would send
     the user to `rtp-export --adopt`, which refuses a file that already carries the key."""
