@@ -469,10 +469,18 @@ def run_predict(args: argparse.Namespace) -> int:
         sdk.select_rates(np.zeros((6, 1, 1)), threshold, allowed=allowed, factors=predictor.metadata.rate_factors,
                          higher_is_better=predictor.metadata.higher_is_better)
     model = predictor.path.name if predictor.path else args.model
-    if sequence:
-        return _run_sequence(args, files, predictor, threshold, allowed, model)
-    with _naming(files[0]):
-        summary, frame, values, rates = _predict_frame(predictor, files[0], args, threshold, allowed)
+    with _out_lock(Path(args.out)) if args.out else contextlib.nullcontext():
+        if sequence:
+            return _run_sequence(args, files, predictor, threshold, allowed, model)
+        return _run_frame(args, files[0], predictor, threshold, allowed, model)
+
+
+def _run_frame(args: argparse.Namespace, path: str, predictor: Any, threshold: float, allowed: list[str] | None,
+               model: str) -> int:
+    """A model on one frame file: its rates, the work they save and the predict time; with ``--out`` its
+    rates.npy, predictions.npy and overlay.png."""
+    with _naming(path):
+        summary, frame, values, rates = _predict_frame(predictor, path, args, threshold, allowed)
     summary = {"frame": summary["frame"], "model": model, "metric": predictor.metadata.metric,
                "size": summary["size"], "tile_size": predictor.tile_size, "tiles": summary["tiles"],
                "threshold": summary["threshold"], "threshold_given": args.threshold, "saving": args.saving,
@@ -672,18 +680,12 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
     import imageio.v3 as iio
 
     from rtp import sdk
-    from rtp.capture import save_image
     from rtp.evaluate.plots import sequence_curves
 
     # Everything is made before anything is written: the GIF's encoding or the curves' drawing failing (or a
     # Ctrl-C in them) after the arrays were written left this run's rates.npy beside the last run's pictures.
     gif = iio.imwrite("<bytes>", np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
     curves = sequence_curves(rows, thresholds=budget, higher_is_better=higher_is_better)
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
-    for name, array in (("rates.npy", np.stack(rates)), ("predictions.npy", np.stack(values))):
-        with sdk.files.atomic_output(out / name) as tmp, open(tmp, "wb") as f:
-            np.save(f, array)
     text = io.StringIO()
     writer = csv.writer(text, lineterminator="\n")
     writer.writerow(["frame", "work_saved", "changed", "predict_ms", "network", "threshold", *sdk.RATE_CODES])
@@ -691,12 +693,9 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
         writer.writerow([r["frame"], f"{r['work_saved']:.6f}", "" if r["changed"] is None else f"{r['changed']:.6f}",
                          f"{r['predict_ms']:.3f}", f"{r['network']:.4f}" if "network" in r else "", f"{r['threshold']:.6g}",
                          *(r["rates"].get(k, 0) for k in sdk.RATE_CODES)])
-    with sdk.files.atomic_output(out / "frames.csv") as tmp:
-        tmp.write_text(text.getvalue(), encoding="utf-8")
-    with sdk.files.atomic_output(out / "overlay.gif") as tmp:
-        tmp.write_bytes(gif)
-    save_image(out / "frames.png", curves)
-    return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "frames.csv", "overlay.gif", "frames.png"])
+    return _write_run(Path(folder), {"rates.npy": _npy(np.stack(rates)), "predictions.npy": _npy(np.stack(values)),
+                                     "frames.csv": _bytes(text.getvalue().encode("utf-8")), "overlay.gif": _bytes(gif),
+                                     "frames.png": _png(curves)})
 
 
 def _holding(args: argparse.Namespace, threshold: float) -> str:
@@ -712,30 +711,92 @@ def _write_out(folder: str, frame: dict[str, np.ndarray], values: np.ndarray, ra
                tile: int, palette: str = "paper") -> list[str]:
     """``rates.npy`` (uint8 codes), ``predictions.npy`` (float32 ``(6, th, tw)``, metric units) and
     ``overlay.png`` (the rates over the frame's ``colour``, else its albedo or previous frame)."""
-    from rtp import sdk
-    from rtp.capture import save_image
-
     picture = _overlay(frame, rates, tile, palette=palette)  # (drawn before the arrays are written, as a sequence's pictures are)
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
-    for name, array in (("rates.npy", rates), ("predictions.npy", values)):
-        with sdk.files.atomic_output(out / name) as tmp, open(tmp, "wb") as f:
-            np.save(f, array)
-    save_image(out / "overlay.png", picture)
-    return _drop_other_outputs(out, ["rates.npy", "predictions.npy", "overlay.png"])
+    return _write_run(Path(folder), {"rates.npy": _npy(rates), "predictions.npy": _npy(values),
+                                     "overlay.png": _png(picture)})
 
 
 #: Every file ``--out`` writes, for a frame or a sequence.
 _OUT_FILES = ("rates.npy", "predictions.npy", "overlay.png", "frames.csv", "overlay.gif", "frames.png")
 
 
-def _drop_other_outputs(out: Path, written: list[str]) -> list[str]:
-    """Remove from ``out`` the files of :data:`_OUT_FILES` this run did not write (a frame's overlay.png after a
-    sequence, a sequence's frames.csv, overlay.gif and frames.png after a frame: they described another run beside
-    this one's rates.npy), no other file; returns ``written``."""
-    gone = [name for name in _OUT_FILES if name not in written and (out / name).is_file()]
-    for name in gone:
-        (out / name).unlink(missing_ok=True)
-    if gone:
-        log.info("%s: removed %s, of the run this one replaced", out, ", ".join(gone))
-    return written
+def _npy(array: np.ndarray) -> Callable[[Path], None]:
+    """What writes ``array`` as an ``.npy`` file to the path it is given."""
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.save(f, array)
+    return write
+
+
+def _bytes(data: bytes) -> Callable[[Path], None]:
+    """What writes ``data`` to the path it is given."""
+    def write(tmp: Path) -> None:
+        tmp.write_bytes(data)
+    return write
+
+
+def _png(image: np.ndarray) -> Callable[[Path], None]:
+    """What writes ``image`` (uint8 RGB) as a PNG to the path it is given (a temporary file's name says no format)."""
+    def write(tmp: Path) -> None:
+        from PIL import Image
+
+        Image.fromarray(np.ascontiguousarray(image, np.uint8)).save(tmp, format="PNG")
+    return write
+
+
+@contextlib.contextmanager
+def _out_lock(out: Path) -> Iterator[None]:
+    """Hold ``--out``'s writer lock (``.rtp-writer.lock``, :func:`rtp.sdk.files.writer_lock`, removed at the end) for
+    a run: a second job writing there (another ``rtp predict``, an ``rtp evaluate`` or ``rtp play``) is refused,
+    naming the first, before its work (two runs at once each wrote their files and removed the other's: the folder
+    held one run's rates.npy beside the other's predictions.npy, and both said they wrote theirs). A folder made for
+    the lock is removed again where the run fails before writing into it."""
+    from rtp import sdk
+    from rtp.sdk.files import writer_lock
+
+    made = [d for d in (out, *out.parents) if not d.exists()]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:  # (check_output probed the nearest folder; a file made there since, a race)
+        raise sdk.ParameterError(f"out: cannot write {str(out)!r}: {err.strerror or err}", "out") from err
+    try:
+        with writer_lock(out, "rtp predict", lambda holder: sdk.ParameterError(
+                f"out: {out} is being written by another job ({holder}): wait for it to end, or write into another "
+                "folder", "out"), remove=True):
+            yield
+    except BaseException:
+        for d in made:  # (only the empty ones: the lock's file is gone by now)
+            with contextlib.suppress(OSError):
+                d.rmdir()
+        raise
+
+
+#: The temporary file of a write of one of :data:`_OUT_FILES` (``sdk.files.atomic_output``'s name for it).
+_TEMPORARY = re.compile(r"\.(" + "|".join(re.escape(n) for n in _OUT_FILES) + r")\.[A-Za-z0-9_]{8}\.tmp")
+
+
+def _write_run(out: Path, files: dict[str, Callable[[Path], None]]) -> list[str]:
+    """Write one run's files into ``out`` (held by :func:`_out_lock`; ``files``: each name and what writes its
+    content to the path it is given) so that the folder never holds them beside another run's: all of them are
+    written to their temporary files first; then the files of :data:`_OUT_FILES` there (an earlier run's, of this
+    kind or the other) are removed and this run's renamed into place, ``rates.npy`` last. A failure, a Ctrl-C or a
+    kill while they are written leaves the earlier run's files as they were; a kill in the moment of the renames
+    leaves part of this run's, without ``rates.npy``, and none of another's (before, a kill between two files left
+    this run's rates.npy beside the earlier run's predictions.npy, frames.csv and pictures, every file there). The
+    temporary files a killed run left are removed. Returns the names written."""
+    from rtp import sdk
+
+    for p in out.iterdir():  # (no other rtp job writes here while the lock is held: none is a live write's)
+        if _TEMPORARY.fullmatch(p.name) and p.is_file():
+            p.unlink(missing_ok=True)
+            log.info("%s: removed %s, the temporary file of a run that was killed", out, p.name)
+    with contextlib.ExitStack() as stack:
+        for name, write in files.items():  # (renamed in the reverse order: rates.npy, written first, last)
+            write(stack.enter_context(sdk.files.atomic_output(out / name)))
+        gone = [name for name in _OUT_FILES if (out / name).is_file()]
+        for name in gone:
+            (out / name).unlink(missing_ok=True)
+        if any(name not in files for name in gone):
+            log.info("%s: removed %s, of the run this one replaced", out,
+                     ", ".join(name for name in gone if name not in files))
+    return list(files)

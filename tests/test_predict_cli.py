@@ -543,6 +543,79 @@ def test_a_run_that_fails_drawing_leaves_the_last_runs_files_whole(sequence: Pat
         assert np.load(out / "rates.npy").tolist() != np.frombuffer(before["rates.npy"], np.uint8).tolist()
 
 
+def test_two_runs_into_one_out_the_second_is_refused_before_its_work(sequence: Path, frame: Path, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Two `rtp predict --out` into one folder at once each wrote their files and removed the other's (a frame's
+    run removed a sequence's frames.csv, overlay.gif and frames.png): the folder held one run's rates.npy beside the
+    other's predictions.npy, and both exited 0 saying they wrote theirs. A run holds the folder's writer lock: the
+    second is refused naming the first and writes nothing; the lock's file goes with the run, and a folder made for
+    it with a run that failed before writing there."""
+    import os
+
+    from rtp.sdk.files import LOCK_NAME, writer_lock
+
+    out = tmp_path / "out"
+    assert main(["predict", str(sequence), "--out", str(out), "--json"]) == 0
+    before = {f.name: f.read_bytes() for f in out.iterdir()}
+    capsys.readouterr()
+    with writer_lock(out, "rtp predict", RuntimeError):  # (another process's, as far as flock goes)
+        assert main(["predict", str(frame), "--out", str(out), "--json"]) == 2
+        got = capsys.readouterr()
+        assert got.err.strip() == (f"rtp predict: error: --out: {out} is being written by another job (rtp predict, "
+                                   f"pid {os.getpid()}): wait for it to end, or write into another folder"), got.err
+        assert got.out == ""  # (refused before its work: no frame predicted)
+    assert {f.name: f.read_bytes() for f in out.iterdir() if f.name != LOCK_NAME} == before
+    assert main(["predict", str(frame), "--out", str(out), "--json"]) == 0
+    assert {f.name for f in out.iterdir()} == {"rates.npy", "predictions.npy", "overlay.png"}  # (no lock file left)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    made = tmp_path / "new" / "out"
+    assert main(["predict", str(frame), str(bad), "--out", str(made)]) == 2  # (refused at the second frame)
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_run_killed_while_writing_out_leaves_no_mix_of_two_runs(sequence: Path, tmp_path: Path) -> None:
+    """SIGKILL between two files of --out over an earlier run's: the folder held this run's rates.npy beside the
+    earlier run's predictions.npy, frames.csv and pictures, every file of a run there, of two frame counts; and the
+    killed write's temporary file stayed after the same command was run again (atomic_output leaves one under a
+    minute old to its writer). Now every file is written to its temporary file first, the earlier run's files are
+    then removed and this run's renamed into place, rates.npy last: a kill leaves the earlier run whole, or part of
+    this one without rates.npy; the same command then writes the run that was not killed, no temporary file left."""
+    import subprocess
+    import sys
+
+    frames = sorted(str(f) for f in sequence.glob("*.npz"))
+    assert len(frames) == 4
+    want = tmp_path / "want"
+    assert main(["predict", *frames[:2], "--out", str(want), "--json"]) == 0
+    # a process that kills itself (SIGKILL: no cleanup runs) at its n-th rename into --out
+    killer = ("import os, signal, sys\n"
+              "from rtp.cli import main\n"
+              "n, replace = [int(sys.argv[1])], os.replace\n"
+              "def killing(a, b):\n"
+              "    replace(a, b)\n"
+              "    n[0] -= 1\n"
+              "    if n[0] == 0:\n"
+              "        os.kill(os.getpid(), signal.SIGKILL)\n"
+              "os.replace = killing\n"
+              "main(sys.argv[2:])\n")
+    for n in (1, 3):
+        out = tmp_path / f"out{n}"
+        assert main(["predict", *frames, "--out", str(out), "--json"]) == 0  # (the earlier run: 4 frames)
+        run = ["predict", *frames[:2], "--out", str(out), "--json"]
+        killed = subprocess.run([sys.executable, "-c", killer, str(n), *run], capture_output=True)
+        assert killed.returncode == -9, killed.stderr.decode()
+        counts = {name: int(np.load(out / name).shape[0]) for name in ("rates.npy", "predictions.npy")
+                  if (out / name).is_file()}
+        if (out / "frames.csv").is_file():
+            counts["frames.csv"] = len((out / "frames.csv").read_text().splitlines()) - 1
+        assert "rates.npy" not in counts and len(set(counts.values())) <= 1, (n, counts)  # (part of the new run)
+        assert main(run) == 0
+        assert sorted(f.name for f in out.iterdir()) == sorted(f.name for f in want.iterdir()), n
+        for name in ("rates.npy", "predictions.npy"):
+            np.testing.assert_array_equal(np.load(out / name), np.load(want / name))
+
+
 @pytest.mark.parametrize("model", ["jnyang", "jnyang-reuse"])
 def test_a_sequence_with_prediction_reuse_is_the_sdks(sequence: Path, tmp_path: Path, model: str,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
