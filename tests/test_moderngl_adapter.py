@@ -455,6 +455,120 @@ def test_a_frame_source_builds_its_adapters_in_its_own_context(frames) -> None:
                 np.testing.assert_array_equal(built_meanwhile.inputs(a.frame(cur.camera, prev.camera)), want)
 
 
+def _in_thread(call: Any) -> Any:
+    """``call()`` in a worker thread named "worker": its value, or its exception raised here."""
+    import threading
+
+    out: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            out["value"] = call()
+        except Exception as exc:  # (handed back to the test's thread)
+            out["error"] = exc
+
+    worker = threading.Thread(target=work, name="worker")
+    worker.start()
+    worker.join()
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
+def test_an_adapter_called_from_a_thread_where_its_context_is_not_current_is_refused(frames) -> None:
+    """A GL context is current in one thread at a time, and the adapter never makes its context current itself:
+    ``inputs`` from a worker thread while the engine's thread held the context (even after ``ctx.__enter__()`` there,
+    which EGL refuses in silence) drew in no context and returned all-zero planes (``[0. 0. 0.]`` for an albedo of
+    0.5), and ``read`` zeros. Now every GL call (``inputs``, ``run``, ``read``, ``check``, the constructor) is a
+    RendererError naming the thread, and the context handed over (released in one thread, made current in the other)
+    gives identical planes there."""
+    from rtp.plugins.moderngl import RendererError, create_context
+
+    _, prev, cur = frames
+    ctx = create_context()
+    try:
+        make_current(ctx)
+        frame = _engine_frame(ctx, prev, cur)
+        channels = ("albedo.r", "seen", "reprojected.y.dx", "depth")  # (.dx: a first pass, an adapter of its own)
+        with Adapter(channels, W, H, ctx=ctx) as a:
+            want = a.inputs(frame)
+            refused = "Adapter: its moderngl context is not current in this thread .*'worker'.*ctx.__exit__"
+
+            def entered(call: Any) -> Any:  # (the engine's own try: EGL refuses it, moderngl says nothing)
+                ctx.__enter__()
+                return call()
+
+            for call in (lambda: a.inputs(frame), lambda: entered(lambda: a.inputs(frame)), lambda: a.read(0),
+                         lambda: a.check(frame), lambda: a.run(**{f: getattr(frame, f) for f in ("albedo", "normal",
+                                                                  "depth", "view", "projection")}),
+                         lambda: Adapter(channels, W, H, ctx=ctx)):
+                with pytest.raises(RendererError, match=refused):
+                    _in_thread(call)
+            np.testing.assert_array_equal(a.inputs(frame), want)  # (the engine's thread: as before)
+            ctx.__exit__(None, None, None)  # handed over: released here, made current there
+
+            def there() -> tuple[np.ndarray, np.ndarray]:
+                ctx.__enter__()
+                try:
+                    return a.inputs(frame), a.read(0)
+                finally:
+                    ctx.__exit__(None, None, None)  # (handed back)
+
+            planes, plane = _in_thread(there)
+            np.testing.assert_array_equal(planes, want)
+            np.testing.assert_array_equal(plane, want[0])
+            with pytest.raises(RendererError, match="not current in this thread"):  # (held by no thread now)
+                a.inputs(frame)
+            make_current(ctx)
+            np.testing.assert_array_equal(a.inputs(frame), want)
+    finally:
+        ctx.release()
+        make_current(frames[0])
+
+
+def test_a_renderer_or_frame_source_called_from_a_thread_where_its_context_cannot_be_current_is_refused(
+        frames) -> None:
+    """The reference renderer and its frame source make their context current themselves, but EGL refuses it to a
+    worker thread while another thread holds it, and moderngl's ``ctx.__enter__()`` says nothing: ``render`` there drew
+    in no context and returned NaN frames, ``ReferenceFrameSource.frame`` NaN G-buffers. Now a RendererError naming the
+    thread, and the context handed over (released in the thread holding it) gives identical frames there."""
+    from rtp.plugins.moderngl import RendererError
+
+    _, prev, cur = frames
+    refused = "Renderer: its moderngl context could not be made current in this thread .*'worker'"
+    try:
+        with Renderer(W, H) as r:
+            r.load_scene(procedural(3))
+            first = r.render(prev.camera)
+            want = r.render(cur.camera, first)
+            for call in (lambda: r.render(cur.camera, first), lambda: r.load_scene(procedural(3)),
+                         lambda: r.reproject(first.colour["1x1"], first.depth, prev.camera)):
+                with pytest.raises(RendererError, match=refused):
+                    _in_thread(call)
+            r.ctx.__exit__(None, None, None)  # handed over
+
+            def there() -> Frame:
+                try:
+                    return r.render(cur.camera, first)
+                finally:
+                    r.ctx.__exit__(None, None, None)  # (handed back)
+
+            got = _in_thread(there)
+            for name in ("albedo", "depth", "reprojected", "seen"):
+                np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+            np.testing.assert_array_equal(r.render(cur.camera, first).colour["1x1"], want.colour["1x1"])
+        with Adapter.frame_source(procedural(3), W, H) as source:
+            adapter = source.adapter(("albedo.g", "seen"))
+            x = adapter.inputs(source.frame(cur.camera, prev.camera))
+            with pytest.raises(RendererError, match=refused):
+                _in_thread(lambda: source.frame(cur.camera, prev.camera))
+            with pytest.raises(RendererError, match="Adapter: its moderngl context is not current"):
+                _in_thread(lambda: source.adapter(("albedo.g", "seen")))
+            np.testing.assert_array_equal(adapter.inputs(source.frame(cur.camera, prev.camera)), x)
+    finally:
+        make_current(frames[0])
+
+
 def test_leaving_a_with_ctx_block_unbinds_every_context(gl_context) -> None:
     """Why the adapter runs in the current context instead of wrapping its passes in ``with ctx:``
     (docs/adapters.md "Frame sources"): on EGL, leaving the block makes no context current, not the

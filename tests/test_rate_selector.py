@@ -914,3 +914,24 @@ def test_a_call_from_a_thread_where_the_context_cannot_be_current_is_refused(gl_
     finally:
         ctx.release()
         make_current(gl_context)
+
+
+def test_the_selectors_own_rate_texture_as_the_engine_rates_of_a_budget_is_refused(gl_context: Any) -> None:
+    """``select(..., saving=, engine_rates=<the texture select_buffer returns>)``: the budget's first dispatch writes
+    that texture, and the budget's dispatch and the selection at its threshold then read the first dispatch's rates as
+    the engine's, in silence (rates of another saving than a copy of the same engine rates gives). Now a
+    ParameterError naming engine_rates; without a budget the texture is read as it is (each tile's own texel, before
+    the dispatch writes it), as before."""
+    pred = sdk.load("jnyang")
+    raw = np.random.default_rng(12).random((4, 5, 7)).astype(np.float32)
+    with RateSelector(pred, gl_context) as selector:
+        engine = selector.select(raw, 0.02)  # the engine's rates: last frame's image, copied
+        want = selector.select(raw, saving=0.5, engine_rates=engine)
+        texture = selector.select_buffer(selector._raw, (5, 7), 0.02)  # the selector's own texture holds them again
+        with pytest.raises(sdk.ParameterError, match="engine_rates: this is the selector's own rate texture"):
+            selector.select(raw, saving=0.5, engine_rates=texture)
+        with pytest.raises(sdk.ParameterError, match="engine_rates: this is the selector's own rate texture"):
+            selector.select_buffer(selector._raw, (5, 7), saving=0.5, engine_rates=texture)
+        np.testing.assert_array_equal(selector.select(raw, engine_rates=texture),  # (no budget: read as it is)
+                                      selector.select(raw, engine_rates=engine))
+        np.testing.assert_array_equal(selector.select(raw, saving=0.5, engine_rates=engine), want)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import sys
+import threading
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
@@ -38,7 +39,7 @@ from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
-from ._glio import is_released, max_texture_side, read_planes, read_texture
+from ._glio import CurrentCheck, is_released, max_texture_side, read_planes, read_texture
 from ._shaders import load_source
 
 if TYPE_CHECKING:
@@ -197,7 +198,10 @@ class Adapter(_AdapterBase[GBufferTextures]):
             reference renderer reprojects pixel coordinates this way: ``Renderer.reprojection_source``).
 
     The adapter draws in the current GL context, which must be ``ctx`` (it is in an engine of one
-    context; with several, make ``ctx`` current first). A draw runs with GL's default rasterisation
+    context; with several, make ``ctx`` current first). It never makes ``ctx`` current itself: called from a
+    thread where ``ctx`` is not current (another thread holds it), it is a :class:`RendererError` naming the
+    thread; hand the context over first (``ctx.__exit__(None, None, None)`` in the thread holding it, then
+    ``ctx.__enter__()`` in the calling one). A draw runs with GL's default rasterisation
     state whatever the engine left (blending, culling, depth test, rasterizer discard off, filled polygons),
     binds the frame's textures to units 0-7 (with no sampler object), its program and vertex array, and puts
     back the engine's framebuffer binding, viewport, wireframe and (moderngl's) enable flags, after an
@@ -267,6 +271,11 @@ class Adapter(_AdapterBase[GBufferTextures]):
         # writes every pixel's reprojected and albedo luma, instead of reprojecting each neighbour again.
         self._luma: Adapter | None = None
         self._framebuffer_zero: Any = None
+        # Whether the engine's context is the one current in the calling thread, read back where a call comes from
+        # another thread than the last (_glio.CurrentCheck): made current in no thread (EGL refuses a context another
+        # thread holds, and moderngl's ctx.__enter__() does not say so), the draw ran in no context and inputs()
+        # returned zeros or garbage planes, in silence.
+        self._current: CurrentCheck | None = None
         try:
             self._build(ids, flags, tolerance, albedo_linear, normal_space, depth_kind, clamp_colour, moderngl)
         except BaseException:  # (a shader that did not compile, no room for the targets: the caller never gets the
@@ -277,6 +286,11 @@ class Adapter(_AdapterBase[GBufferTextures]):
                depth_kind: str, clamp_colour: bool, moderngl: Any) -> None:
         """The constructor's GL part: the first pass (where wanted), the program for the channels, the targets."""
         ctx, width, height = self.ctx, self.width, self.height
+        self._current = CurrentCheck(
+            ctx, "Adapter", "is not current",
+            "The adapter draws in the context current in the calling thread and never makes it current itself: call "
+            "it from the thread where the engine's context is current, or hand the context over (ctx.__exit__(None, "
+            "None, None) in that thread, then ctx.__enter__() in this one, before the call)")
         if any(flags[f] for f in ("RTP_DIFFERENCES", "RTP_BLOCKS_REPROJECTED", "RTP_BLOCKS_ALBEDO",
                                   "RTP_TILES_REPROJECTED", "RTP_TILES_ALBEDO")):
             self._luma = Adapter(_LUMA_PASS, width, height, ctx=ctx, tolerance=tolerance, albedo_linear=albedo_linear,
@@ -462,11 +476,15 @@ class Adapter(_AdapterBase[GBufferTextures]):
         return self._framebuffer_zero
 
     def _check_live(self) -> None:
-        """:meth:`_check_open`, and the engine's context not released under the adapter."""
+        """:meth:`_check_open`, the engine's context not released under the adapter, and current in this thread (checked
+        where the call comes from another thread than the last)."""
         self._check_open()
         if is_released(self.ctx):
             raise AdapterFrameError("ctx: the engine's moderngl context was released under this adapter; build a new "
                                     "adapter in the live context")
+        current = self._current
+        if current is not None and threading.get_ident() != current.thread:  # (one comparison in the same thread)
+            current()
 
     def _region(self, size: Any) -> tuple[int, int]:
         """``(width, height)`` of a frame whose :class:`GBufferTextures` ``size`` is ``size``: the adapter's size where
@@ -598,7 +616,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
             fbo = made.get("_fbo")
             if fbo is not None and self.ctx.fbo is fbo:  # (a framebuffer deleted while bound leaves GL none to draw into)
                 self._default_framebuffer().use()
-            for obj in (fbo, *made.get("_targets", ()), made.get("_vao"), made.get("_prog")):
+            for obj in (fbo, *made.get("_targets", ()), made.get("_vao"), made.get("_prog"), made.get("_current")):
                 if obj is not None:
                     obj.release()
         if self._luma is not None:

@@ -10,11 +10,14 @@ with top-left uvs samples the right texel.
 
 from __future__ import annotations
 
+import os
+import threading
 from typing import Any
 
 import numpy as np
 
-__all__ = ["flip_rows", "is_released", "max_texture_side", "read_planes", "read_texture", "write_texture"]
+__all__ = ["CurrentCheck", "flip_rows", "is_released", "max_texture_side", "read_planes", "read_texture",
+           "write_texture"]
 
 #: What a texture's bytes hold, by moderngl dtype: floats, integers, and the normalised (UNORM / SNORM) formats, which
 #: an engine's G-buffers use (an RGBA8 frame, RGBA16 SNORM normals) and the adapter reads.
@@ -30,6 +33,56 @@ def is_released(obj: Any) -> bool:
     """Whether a moderngl object (a context) has been released: moderngl swaps its native object for
     an ``InvalidObject``, whose every attribute is then missing."""
     return type(getattr(obj, "mglo", None)).__name__ == "InvalidObject"
+
+
+class CurrentCheck:
+    """Whether a moderngl context is current in the calling thread, checked where a call comes from another thread
+    than the last (the same thread costs one comparison: ``if threading.get_ident() != check.thread: check()``).
+
+    A GL context is current in one thread at a time, and moderngl's ``ctx.__enter__()`` does not say when the driver
+    refused it (EGL, while another thread holds it): the calls then ran in no context (or in the one that thread
+    had) and read back another object's bytes, uninitialised memory or zeros, in silence, or failed as a bare
+    ``moderngl.Error``. A small buffer of random bytes that only this context holds tells: read back in the calling
+    thread, it is those bytes only where the context is the one current there. ``owner`` names the object in the
+    :class:`RendererError`, ``state`` says what went wrong and ``advice`` how to hand the context over.
+    Made in the thread where ``ctx`` is current (else that error)."""
+
+    def __init__(self, ctx: Any, owner: str, state: str, advice: str) -> None:
+        import moderngl
+
+        self._owner, self._state, self._advice = owner, state, advice
+        self._magic = os.urandom(16)
+        self.thread: int | None = None
+        self._buffer: Any = None
+        try:
+            self._buffer = ctx.buffer(self._magic)
+        except moderngl.Error as exc:  # ("cannot create buffer": no context current in this thread)
+            raise self.error() from exc
+        self.thread = threading.get_ident()
+
+    def error(self) -> Exception:
+        """The :class:`RendererError` of a call from a thread where the context is not current."""
+        from ._renderer import RendererError  # (here: _renderer imports this module)
+
+        return RendererError(f"{self._owner}: its moderngl context {self._state} in this thread (thread "
+                             f"{threading.current_thread().name!r}): a GL context is current in one thread at a time, "
+                             f"and the driver refuses it to a second while the first holds it. {self._advice}")
+
+    def __call__(self) -> None:
+        """Raise :meth:`error` unless the context is current in the calling thread; else remember the thread."""
+        try:
+            ok = self._buffer.read() == self._magic
+        except Exception:  # (moderngl.Error "cannot map the buffer": no context current in this thread)
+            ok = False
+        if not ok:
+            raise self.error()
+        self.thread = threading.get_ident()
+
+    def release(self) -> None:
+        """Free the buffer (in the context, which must be current)."""
+        if self._buffer is not None:
+            self._buffer.release()
+            self._buffer = None
 
 
 def max_texture_side(ctx: Any) -> int:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import threading
 import time
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -44,7 +45,7 @@ from rtp.sdk import (
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
-from ._glio import is_released, max_texture_side, read_texture, write_texture
+from ._glio import CurrentCheck, is_released, max_texture_side, read_texture, write_texture
 from ._shaders import load_source
 
 __all__ = ["Frame", "RenderResult", "Renderer", "RendererError", "create_context"]
@@ -478,8 +479,16 @@ class Renderer:
         self.width, self.height = int(width), int(height)
         self._owns_ctx = ctx is None
         self.ctx = create_context() if ctx is None else _check_ctx(ctx)
+        self._current: CurrentCheck | None = None
         try:  # (a refusal here releases the context the renderer made: the caller never gets the renderer)
             self.ctx.__enter__()  # (a borrowed context may not be the current one: its objects are made in it)
+            # whether it is current in the calling thread, read back where a call comes from another thread than the
+            # last: EGL refuses a context another thread holds, and moderngl's ctx.__enter__() does not say so (a
+            # render() from a worker thread drew in no context and returned NaN frames, in silence)
+            self._current = CurrentCheck(
+                self.ctx, "Renderer", "could not be made current",
+                "Call the renderer from the thread where its context is current, or release it there first "
+                "(renderer.ctx.__exit__(None, None, None)): each call makes it current in the calling thread")
             if self.ctx.version_code < 330:
                 raise RendererError(f"the renderer needs OpenGL >= 3.3, the context offers {self.ctx.version_code}")
             if shadow_map_size is None:
@@ -1272,10 +1281,14 @@ class Renderer:
     def _check_alive(self) -> None:
         """At the top of every public method that draws: the renderer is not released, and its context
         is the current one (moderngl never switches by itself: with a second renderer's context current,
-        a draw used that context's objects of the same names and could corrupt memory)."""
+        a draw used that context's objects of the same names and could corrupt memory), checked where the call
+        comes from another thread than the last (a RendererError where another thread holds the context)."""
         if self._released:
             raise RendererError("this renderer has been released")
         self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
+        current = self._current
+        if current is not None and threading.get_ident() != current.thread:  # (one comparison in the same thread)
+            current()
         self._reset_gl_state()
 
     def _reset_gl_state(self) -> None:
@@ -1326,6 +1339,8 @@ class Renderer:
             for obj in self._vrs or ():
                 obj.release()
             self._vrs = None
+            if self._current is not None:
+                self._current.release()
             for obj in list(vars(self).values()):
                 if isinstance(obj, dict):
                     for o in obj.values():

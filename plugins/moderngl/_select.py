@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import threading
 import warnings
 from collections.abc import Iterable
@@ -25,7 +24,7 @@ import numpy as np
 from rtp import sdk
 from rtp.sdk.adapters import AdapterFrameError
 
-from ._glio import is_released, max_texture_side
+from ._glio import CurrentCheck, is_released, max_texture_side
 from ._renderer import RendererError, create_context
 from ._shaders import load_source
 
@@ -135,11 +134,9 @@ class RateSelector:
         self._budget_program: Any = None  # (compiled on the first budget)
         self._budget: Any = None
         self._budget_work: float | None = None  # the frame's work, in pixels (tiles), of the last budget
-        # A small buffer of random bytes that only this selector's context holds, read back where a call comes from
-        # another thread than the last: whether its context is the one current there (see _check_current).
-        self._sentinel: Any = None
-        self._magic = os.urandom(16)
-        self._thread: int | None = None
+        # Whether its context is the one current in the calling thread, read back where a call comes from another
+        # thread than the last (_glio.CurrentCheck: moderngl's ctx.__enter__() does not say when the driver refused it)
+        self._current: CurrentCheck | None = None
         self._own_ctx = False
         self.ctx = create_context(430) if ctx is None else ctx
         self._own_ctx = ctx is None
@@ -152,13 +149,10 @@ class RateSelector:
     def _build(self, meta: sdk.ModelMetadata) -> None:
         """The constructor's GL part: the decision's program and its uniforms, in the selector's context."""
         self.ctx.__enter__()  # (a borrowed context may not be the current one: the programs are made in it)
-        import moderngl
-
-        try:
-            self._sentinel = self.ctx.buffer(self._magic)
-        except moderngl.Error as exc:  # ("cannot create buffer": no context current in this thread)
-            raise RendererError(self._not_current()) from exc
-        self._thread = threading.get_ident()
+        self._current = CurrentCheck(
+            self.ctx, "RateSelector", "could not be made current",
+            "Call the selector from the thread where the context is current, or release it there first "
+            "(ctx.__exit__(None, None, None)); or give each thread a selector of its own context")
         if self.ctx.version_code < 430:
             raise RendererError(f"RateSelector needs compute shaders (OpenGL 4.3), got a context of version "
                                 f"{self.ctx.version_code // 100}.{self.ctx.version_code % 100 // 10}")
@@ -234,7 +228,8 @@ class RateSelector:
         moderngl texture of them already on the GPU, which is read as it is) and ``combiner`` (``min``,
         ``max``, ``sum`` or its enum value): the engine's own rates, which the hardware's combiner meets with
         this image; the shader then judges the rate the device will shade, as ``sdk.select_rates(engine_rates=,
-        combiner=)`` does (docs/runtime.md "The engine's own rates: the hardware's combiners").
+        combiner=)`` does (docs/runtime.md "The engine's own rates: the hardware's combiners"). Under a budget it
+        may not be the selector's own rate texture (the one this returns), which the first dispatch overwrites.
 
         ``saving``: a budget instead of a threshold, as ``sdk.select_rates_for_saving`` and ``shading_rates(x,
         saving=)``: the rates of the lowest threshold that saves at least that share of the shading work, found on
@@ -261,7 +256,7 @@ class RateSelector:
         _frame_with_budget(saving, frame_size)
         thr = self._check_decision(None if saving is not None else threshold, allowed)
         budget = None if saving is None else self._check_budget(saving, threshold, allowed, grid, frame_size)
-        engine = self._engine_rates(engine_rates, combiner, allowed, grid, thr)
+        engine = self._engine_rates(engine_rates, combiner, allowed, grid, thr, budget=saving is not None)
         mask = sum(1 << sdk.PREDICTED_RATES.index(r) for r in sdk.resolve_allowed(allowed))
         self._targets(grid)
         self._program["u_combiner"].value = 0 if engine is None else _COMBINER_VALUES[
@@ -406,7 +401,7 @@ class RateSelector:
             g = self._grid((int(a.shape[1]), int(a.shape[2])), grid)
             if saving is not None:
                 self._check_budget(saving, threshold, allowed, g, frame_size)
-            self._engine_rates(engine_rates, combiner, allowed, g, thr)
+            self._engine_rates(engine_rates, combiner, allowed, g, thr, budget=saving is not None)
         if a.ndim != 3 or a.shape[0] != n or a.dtype.kind != "f" or 0 in a.shape:
             raise sdk.InputShapeError(
                 f"raw: expected the network's float output ({n}, th, tw) for outputs {list(self._meta.outputs)}, got "
@@ -456,28 +451,11 @@ class RateSelector:
             raise AdapterFrameError("ctx: the moderngl context was released under this RateSelector; build a new "
                                     "selector in a live context")
         self.ctx.__enter__()  # (moderngl's only call for it; cheap when it is current already)
-        if threading.get_ident() != self._thread:
-            self._check_current()
-
-    def _not_current(self) -> str:
-        return ("RateSelector: its moderngl context could not be made current in this thread (thread "
-                f"{threading.current_thread().name!r}): a GL context is current in one thread at a time, and the driver "
-                "refuses it to a second while the first holds it. Call the selector from the thread where the context "
-                "is current, or release it there first (ctx.__exit__(None, None, None)); or give each thread a "
-                "selector of its own context")
-
-    def _check_current(self) -> None:
-        """Raise unless the selector's context is current in the calling thread. moderngl's ``ctx.__enter__()``
-        does not say when the driver refused it (the context current in another thread): the calls then ran in no
-        context, or in the one this thread had, and returned another object's bytes (uninitialised memory as rate
-        codes, in silence) or a bare ``moderngl.Error``. The sentinel's bytes are this context's alone."""
-        try:
-            ok = self._sentinel.read() == self._magic
-        except Exception:  # (moderngl.Error "cannot map the buffer": no context current in this thread)
-            ok = False
-        if not ok:
-            raise RendererError(self._not_current())
-        self._thread = threading.get_ident()
+        current = self._current
+        if current is not None and threading.get_ident() != current.thread:
+            # moderngl's ctx.__enter__() does not say when the driver refused it (the context current in another
+            # thread): the calls then ran in no context and returned uninitialised memory as rate codes, in silence
+            current()
 
     def _check_gl_object(self, obj: Any, name: str, what: str) -> None:
         """``obj`` (an engine's buffer or texture) is live and of the selector's context, else a
@@ -498,12 +476,20 @@ class RateSelector:
         return float(thr)
 
     def _engine_rates(self, engine_rates: Any, combiner: str | int, allowed: Iterable[sdk.RateLike] | None,
-                      grid: tuple[int, int], thr: float) -> Any:
+                      grid: tuple[int, int], thr: float, *, budget: bool = False) -> Any:
         """None, an engine's texture as it is, or its rates as a ``grid`` array after the SDK's own checks and messages
-        for them and the combiner (``select_rates`` beside them on a grid of zeros)."""
+        for them and the combiner (``select_rates`` beside them on a grid of zeros). With a ``budget``, the selector's
+        own rate texture is refused: the first dispatch writes it before the budget's dispatch and the selection at
+        the budget's threshold read it as the engine's rates (they read the first dispatch's rates instead)."""
         if engine_rates is None:
             return None
         if callable(getattr(engine_rates, "bind_to_image", None)) or is_released(engine_rates):
+            if budget and engine_rates is self._texture:
+                raise sdk.ParameterError(
+                    "engine_rates: this is the selector's own rate texture, which a budget's first dispatch "
+                    "overwrites before the budget and the selection read it as the engine's rates: pass the "
+                    "engine's own rates (or a copy of the last frame's: select() returns one as an array)",
+                    "engine_rates")
             self._check_gl_object(engine_rates, "engine_rates", "texture")
             if tuple(engine_rates.size) != (grid[1], grid[0]) or engine_rates.dtype != "u1" or engine_rates.components != 1:
                 raise sdk.InputShapeError(f"engine_rates: expected an r8ui texture of {grid[1]}x{grid[0]} (one texel a "
@@ -534,11 +520,11 @@ class RateSelector:
         if self._program is not None and live:
             self.ctx.__enter__()  # (its objects are freed in its own context)
         for obj in (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
-                    self._budget, self._sentinel):
+                    self._budget, self._current):
             if obj is not None and live:
                 obj.release()
         self._texture = self._decoded = self._raw = self._engine = self._program = None
-        self._budget_program = self._budget = self._sentinel = None
+        self._budget_program = self._budget = self._current = None
         self._tiles = None
         if self._own_ctx and live:
             self.ctx.release()

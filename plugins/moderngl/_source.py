@@ -47,7 +47,10 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
 
     The textures are reused: a frame is valid until the next :meth:`frame` call. moderngl never
     switches contexts by itself, so :meth:`frame` makes the renderer's context current (and leaves
-    it current, for the adapter's ``inputs`` that follows), as pyrender does for its own.
+    it current, for the adapter's ``inputs`` that follows), as pyrender does for its own. From a thread
+    other than the one holding the context, :meth:`frame` and :meth:`adapter` are a
+    :class:`RendererError` naming the thread: release it there first (``renderer.ctx.__exit__(None, None,
+    None)``).
     """
 
     def __init__(self, adapter_class: type[Adapter], scene: Scene, width: int, height: int,
