@@ -25,6 +25,7 @@ from ._run import (
     interruptible_start,
     one_line,
     option_flags,
+    out_lock,
     run,
 )
 
@@ -773,7 +774,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             names = {m: f"{f.stem}_{i}" for i, (f, m) in enumerate(files.items(), 1)}
     # Held from the first plot to the report: two evaluations into one --out wrote each other's plots under one
     # name, and the report written last linked the other's pictures (of other scenes, samples or data).
-    with _evaluation_lock(Path(args.out)) if args.out else contextlib.nullcontext():
+    with out_lock(Path(args.out), "rtp evaluate", "evaluate into another folder") if args.out else contextlib.nullcontext():
         if args.out:
             _warn_of_another_evaluation(Path(args.out), args)
         reports = []
@@ -793,28 +794,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             extra = [p for r in reports for p in r.plots]
             print(f"wrote {md}, {js}" + (f" and {len(extra)} plots" if extra else ""))
     return 0
-
-
-@contextlib.contextmanager
-def _evaluation_lock(out: Path) -> Iterator[None]:
-    """Hold ``out``'s writer lock (``.rtp-writer.lock``, :func:`rtp.sdk.files.writer_lock`, removed at the end) for
-    an evaluation into it: a second job writing there (another ``rtp evaluate``, an ``rtp play``) is refused naming
-    the first. A folder made for the lock is removed again where the evaluation fails before writing into it."""
-    from rtp.sdk import ParameterError
-    from rtp.sdk.files import writer_lock
-
-    made = [d for d in (out, *out.parents) if not d.exists()]
-    out.mkdir(parents=True, exist_ok=True)
-    try:
-        with writer_lock(out, "rtp evaluate", lambda holder: ParameterError(
-                f"out: {out} is being written by another job ({holder}): wait for it to end, or evaluate into "
-                "another folder", "out"), remove=True):
-            yield
-    except BaseException:
-        for d in made:  # (only the empty ones: the lock's file is gone by now)
-            with contextlib.suppress(OSError):
-                d.rmdir()
-        raise
 
 
 def _warn_of_another_evaluation(out: Path, args: argparse.Namespace) -> None:

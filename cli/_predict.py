@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from ._run import out_lock
+
 __all__ = ["run_predict"]
 
 log = logging.getLogger("rtp.cli")
@@ -469,7 +471,7 @@ def run_predict(args: argparse.Namespace) -> int:
         sdk.select_rates(np.zeros((6, 1, 1)), threshold, allowed=allowed, factors=predictor.metadata.rate_factors,
                          higher_is_better=predictor.metadata.higher_is_better)
     model = predictor.path.name if predictor.path else args.model
-    with _out_lock(Path(args.out)) if args.out else contextlib.nullcontext():
+    with out_lock(Path(args.out), "rtp predict", "write into another folder") if args.out else contextlib.nullcontext():
         if sequence:
             return _run_sequence(args, files, predictor, threshold, allowed, model)
         return _run_frame(args, files[0], predictor, threshold, allowed, model)
@@ -744,39 +746,12 @@ def _png(image: np.ndarray) -> Callable[[Path], None]:
     return write
 
 
-@contextlib.contextmanager
-def _out_lock(out: Path) -> Iterator[None]:
-    """Hold ``--out``'s writer lock (``.rtp-writer.lock``, :func:`rtp.sdk.files.writer_lock`, removed at the end) for
-    a run: a second job writing there (another ``rtp predict``, an ``rtp evaluate`` or ``rtp play``) is refused,
-    naming the first, before its work (two runs at once each wrote their files and removed the other's: the folder
-    held one run's rates.npy beside the other's predictions.npy, and both said they wrote theirs). A folder made for
-    the lock is removed again where the run fails before writing into it."""
-    from rtp import sdk
-    from rtp.sdk.files import writer_lock
-
-    made = [d for d in (out, *out.parents) if not d.exists()]
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:  # (check_output probed the nearest folder; a file made there since, a race)
-        raise sdk.ParameterError(f"out: cannot write {str(out)!r}: {err.strerror or err}", "out") from err
-    try:
-        with writer_lock(out, "rtp predict", lambda holder: sdk.ParameterError(
-                f"out: {out} is being written by another job ({holder}): wait for it to end, or write into another "
-                "folder", "out"), remove=True):
-            yield
-    except BaseException:
-        for d in made:  # (only the empty ones: the lock's file is gone by now)
-            with contextlib.suppress(OSError):
-                d.rmdir()
-        raise
-
-
 #: The temporary file of a write of one of :data:`_OUT_FILES` (``sdk.files.atomic_output``'s name for it).
 _TEMPORARY = re.compile(r"\.(" + "|".join(re.escape(n) for n in _OUT_FILES) + r")\.[A-Za-z0-9_]{8}\.tmp")
 
 
 def _write_run(out: Path, files: dict[str, Callable[[Path], None]]) -> list[str]:
-    """Write one run's files into ``out`` (held by :func:`_out_lock`; ``files``: each name and what writes its
+    """Write one run's files into ``out`` (held by :func:`out_lock`; ``files``: each name and what writes its
     content to the path it is given) so that the folder never holds them beside another run's: all of them are
     written to their temporary files first; then the files of :data:`_OUT_FILES` there (an earlier run's, of this
     kind or the other) are removed and this run's renamed into place, ``rates.npy`` last. A failure, a Ctrl-C or a

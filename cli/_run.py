@@ -32,6 +32,33 @@ __all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metada
 log = logging.getLogger("rtp")
 
 
+@contextlib.contextmanager
+def out_lock(out: Any, job: str, elsewhere: str) -> Iterator[None]:
+    """Hold ``--out``'s writer lock (``.rtp-writer.lock``, :func:`rtp.sdk.files.writer_lock`, removed at the end) for
+    a command writing its files into the folder ``out`` (a Path; made here): a second job writing there (another
+    ``rtp predict``, ``rtp evaluate`` or ``rtp play``) is refused, naming the first, before its work.
+    ``elsewhere`` ends the refusal ("write into another folder"). A folder made for the lock is removed again
+    where the command fails before writing into it."""
+    from rtp import sdk
+    from rtp.sdk.files import writer_lock
+
+    made = [d for d in (out, *out.parents) if not d.exists()]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:  # (the folder was checked writable; a file made there since, a race)
+        raise sdk.ParameterError(f"out: cannot write {str(out)!r}: {err.strerror or err}", "out") from err
+    try:
+        with writer_lock(out, job, lambda holder: sdk.ParameterError(
+                f"out: {out} is being written by another job ({holder}): wait for it to end, or {elsewhere}", "out"),
+                remove=True):
+            yield
+    except BaseException:
+        for d in made:  # (only the empty ones: the lock's file is gone by now)
+            with contextlib.suppress(OSError):
+                d.rmdir()
+        raise
+
+
 def version() -> str:
     from rtp import sdk
 

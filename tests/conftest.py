@@ -219,6 +219,27 @@ def make_current(ctx: Any) -> Any:
     return ctx
 
 
+def in_thread(call: Callable[[], Any]) -> Any:
+    """``call()`` in a worker thread named "worker": its value, or its exception raised in the caller's thread (a GL
+    context current in the test's thread is not current there)."""
+    import threading
+
+    out: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            out["value"] = call()
+        except Exception as exc:  # (handed back to the test's thread)
+            out["error"] = exc
+
+    worker = threading.Thread(target=work, name="worker")
+    worker.start()
+    worker.join()
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
 @pytest.fixture(scope="session")
 def gl_context() -> Iterator[Any]:
     """The session's headless EGL moderngl context, created once; skips where EGL is missing."""

@@ -15,7 +15,7 @@ from rtp.plugins.moderngl import Adapter, Frame, GBufferTextures, RateSelector, 
 from rtp.plugins.moderngl._adapter import CHANNEL_IDS
 from rtp.plugins.moderngl._glio import is_released, write_texture
 from rtp.scene import Camera
-from tests.conftest import make_current
+from tests.conftest import in_thread, make_current
 
 W, H = 128, 80
 pytestmark = pytest.mark.gl
@@ -455,26 +455,6 @@ def test_a_frame_source_builds_its_adapters_in_its_own_context(frames) -> None:
                 np.testing.assert_array_equal(built_meanwhile.inputs(a.frame(cur.camera, prev.camera)), want)
 
 
-def _in_thread(call: Any) -> Any:
-    """``call()`` in a worker thread named "worker": its value, or its exception raised here."""
-    import threading
-
-    out: dict[str, Any] = {}
-
-    def work() -> None:
-        try:
-            out["value"] = call()
-        except Exception as exc:  # (handed back to the test's thread)
-            out["error"] = exc
-
-    worker = threading.Thread(target=work, name="worker")
-    worker.start()
-    worker.join()
-    if "error" in out:
-        raise out["error"]
-    return out["value"]
-
-
 def test_an_adapter_called_from_a_thread_where_its_context_is_not_current_is_refused(frames) -> None:
     """A GL context is current in one thread at a time, and the adapter never makes its context current itself:
     ``inputs`` from a worker thread while the engine's thread held the context (even after ``ctx.__enter__()`` there,
@@ -503,7 +483,7 @@ def test_an_adapter_called_from_a_thread_where_its_context_is_not_current_is_ref
                                                                   "depth", "view", "projection")}),
                          lambda: Adapter(channels, W, H, ctx=ctx)):
                 with pytest.raises(RendererError, match=refused):
-                    _in_thread(call)
+                    in_thread(call)
             np.testing.assert_array_equal(a.inputs(frame), want)  # (the engine's thread: as before)
             ctx.__exit__(None, None, None)  # handed over: released here, made current there
 
@@ -514,7 +494,7 @@ def test_an_adapter_called_from_a_thread_where_its_context_is_not_current_is_ref
                 finally:
                     ctx.__exit__(None, None, None)  # (handed back)
 
-            planes, plane = _in_thread(there)
+            planes, plane = in_thread(there)
             np.testing.assert_array_equal(planes, want)
             np.testing.assert_array_equal(plane, want[0])
             with pytest.raises(RendererError, match="not current in this thread"):  # (held by no thread now)
@@ -544,7 +524,7 @@ def test_a_renderer_or_frame_source_called_from_a_thread_where_its_context_canno
             for call in (lambda: r.render(cur.camera, first), lambda: r.load_scene(procedural(3)),
                          lambda: r.reproject(first.colour["1x1"], first.depth, prev.camera)):
                 with pytest.raises(RendererError, match=refused):
-                    _in_thread(call)
+                    in_thread(call)
             r.ctx.__exit__(None, None, None)  # handed over
 
             def there() -> Frame:
@@ -553,7 +533,7 @@ def test_a_renderer_or_frame_source_called_from_a_thread_where_its_context_canno
                 finally:
                     r.ctx.__exit__(None, None, None)  # (handed back)
 
-            got = _in_thread(there)
+            got = in_thread(there)
             for name in ("albedo", "depth", "reprojected", "seen"):
                 np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
             np.testing.assert_array_equal(r.render(cur.camera, first).colour["1x1"], want.colour["1x1"])
@@ -561,9 +541,9 @@ def test_a_renderer_or_frame_source_called_from_a_thread_where_its_context_canno
             adapter = source.adapter(("albedo.g", "seen"))
             x = adapter.inputs(source.frame(cur.camera, prev.camera))
             with pytest.raises(RendererError, match=refused):
-                _in_thread(lambda: source.frame(cur.camera, prev.camera))
+                in_thread(lambda: source.frame(cur.camera, prev.camera))
             with pytest.raises(RendererError, match="Adapter: its moderngl context is not current"):
-                _in_thread(lambda: source.adapter(("albedo.g", "seen")))
+                in_thread(lambda: source.adapter(("albedo.g", "seen")))
             np.testing.assert_array_equal(adapter.inputs(source.frame(cur.camera, prev.camera)), x)
     finally:
         make_current(frames[0])

@@ -15,7 +15,7 @@ from rtp import sdk
 from rtp.plugins.moderngl import RateSelector, RendererError
 from rtp.plugins.moderngl._glio import is_released
 from rtp.sdk.adapters import AdapterFrameError
-from tests.conftest import base_metadata, make_current
+from tests.conftest import base_metadata, in_thread, make_current
 from tests.test_moderngl_adapter import H, W, frames  # noqa: F401  (frames: a fixture)
 
 pytestmark = pytest.mark.gl
@@ -868,28 +868,10 @@ def test_a_call_from_a_thread_where_the_context_cannot_be_current_is_refused(gl_
     returned uninitialised memory as rate codes, in silence (``budget()`` a bare ``moderngl.Error``). Now such a call
     is a RendererError naming the thread, and the context handed over (released in one thread, then used in the
     other) works in either."""
-    import threading
-
     from rtp.plugins.moderngl import create_context
 
     pred = sdk.load("jnyang")
     raw = np.random.default_rng(9).random((4, 5, 7)).astype(np.float32)
-
-    def in_thread(call: Any) -> Any:
-        out: dict[str, Any] = {}
-
-        def work() -> None:
-            try:
-                out["value"] = call()
-            except Exception as exc:  # (handed back to the test's thread)
-                out["error"] = exc
-
-        worker = threading.Thread(target=work, name="worker")
-        worker.start()
-        worker.join()
-        if "error" in out:
-            raise out["error"]
-        return out["value"]
 
     ctx = create_context(430)
     try:
