@@ -23,6 +23,7 @@ test the shared ``gl_context`` of conftest.py, which skips without one) and pyre
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -960,3 +961,171 @@ def test_a_missing_gl_library_names_the_packages(monkeypatch: pytest.MonkeyPatch
     monkeypatch.setitem(sys.modules, "pyrender", None)  # (not installed)
     with pytest.raises(ImportError, match=r"needs pyrender 0\.1\.45; install the extra: pip install 'rtp\[pyrender\]'"):
         import_pyrender("egl")
+
+
+def _in_thread(fn: Any) -> Any:
+    """``fn()`` run in a thread of its own, joined: its value, or its exception raised here."""
+    import threading
+
+    out: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            out["value"] = fn()
+        except BaseException as exc:  # (handed back to the test's thread)
+            out["error"] = exc
+
+    t = threading.Thread(target=run, name="rtp-test-worker")
+    t.start()
+    t.join(300)
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
+def test_an_adapter_and_a_frame_source_built_in_one_thread_work_in_another(caplog: pytest.LogCaptureFixture) -> None:
+    """pyrender leaves a renderer's context current in the thread that last drew (its EGL ``make_uncurrent``
+    does nothing), and a context is current in one thread at a time. An adapter (or frame source) built in one
+    thread and called in a worker failed there ("pyrender failed to draw (EGLError ... EGL_BAD_ACCESS)"), and one
+    a worker had drawn with, closed in the first thread, kept its context (close() only logged at debug level).
+    The adapter's calls now leave current what was current before them: the worker's planes are the main
+    thread's, and close() in the main thread frees the context."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame, to_pyrender_scene
+    from rtp.scene import Camera, Material, Scene, box_mesh
+
+    pyrender = pyrender_or_skip()
+    scene = _asymmetric_scene(pyrender)
+    moved = np.eye(4)
+    moved[:3, 3] = (0.2, 0.0, 0.0)
+    channels = ["reprojected.r", "seen", "albedo.g", "normal.y", "depth", "motion.x"]
+    with caplog.at_level(logging.WARNING, logger="rtp.plugins.pyrender"):
+        adapter = Adapter(channels, 64, 48)
+        renderer = adapter.renderer
+
+        def frame() -> np.ndarray:
+            colour, _ = adapter.render(scene, np.eye(4))
+            return adapter.inputs(SceneFrame(scene, moved, np.eye(4), colour))
+
+        here = frame()
+        np.testing.assert_array_equal(_in_thread(frame), here)
+        np.testing.assert_array_equal(frame(), here)  # (and back)
+        _in_thread(frame)
+        adapter.close()
+        assert renderer._platform is None  # its context destroyed, not left behind
+
+        level = to_pyrender_scene(Scene("box", [box_mesh((-1, -1, -5), (1, 1, -3))], [Material("m")]))
+        cam = Camera((0.0, 0.0, 0.0), yaw=5.0, fov_y=50.0)
+        source = Adapter.frame_source(level, 32, 24)
+        x = _in_thread(lambda: source.adapter(["albedo.y", "seen"]).inputs(source.frame(cam, cam)))
+        assert x.shape == (2, 24, 32) and x[0].max() > 0.0 and x[1].min() == 1.0
+        renderer = source.renderer
+        source.close()
+        assert renderer._platform is None
+    assert not caplog.records, [r.getMessage() for r in caplog.records]
+
+
+def test_a_context_another_thread_holds_is_a_typed_error_naming_the_thread() -> None:
+    """A borrowed renderer that an engine thread drew with last is current there (pyrender never releases it):
+    the adapter's call from another thread says so, names the thread and the fix (it was "pyrender failed to
+    draw (EGLError(...EGL_BAD_ACCESS...))"), and works once that thread releases the context."""
+    import threading
+
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
+    from rtp.plugins.pyrender._gbuffer import _delete_renderer
+
+    pyrender = pyrender_or_skip()
+    if os.environ.get("PYOPENGL_PLATFORM") != "egl":
+        pytest.skip("EGL refuses a context current in another thread; OSMesa does not")
+    from OpenGL import EGL
+
+    scene = _asymmetric_scene(pyrender)
+    drawn, release, released = threading.Event(), threading.Event(), threading.Event()
+    made: dict[str, Any] = {}
+
+    def engine() -> None:  # the engine's thread: makes its renderer, draws, holds the context until told
+        made["renderer"] = user = pyrender.OffscreenRenderer(64, 48)
+        made["colour"], _ = user.render(scene)
+        drawn.set()
+        release.wait(300)
+        EGL.eglMakeCurrent(user._platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+        released.set()
+
+    t = threading.Thread(target=engine, name="engine-thread")
+    t.start()
+    try:
+        assert drawn.wait(300)
+        with Adapter(["seen", "albedo.g"], 64, 48, renderer=made["renderer"]) as adapter:
+            frame = SceneFrame(scene, np.eye(4), np.eye(4), made["colour"])
+            with pytest.raises(PyrenderAdapterError, match="cannot be made current in thread 'MainThread'.*EGL_BAD_ACCESS"
+                                                           ".*another thread holds this one.*release the context"):
+                adapter.inputs(frame)
+            release.set()
+            assert released.wait(300)
+            x = adapter.inputs(frame)
+            assert x[0].mean() == 1.0 and x[1].max() > 0.99  # (a static camera sees everything again; the green wall)
+    finally:
+        release.set()
+        t.join(300)
+        if "renderer" in made:
+            _delete_renderer(made["renderer"])
+
+
+def test_an_engines_context_stays_current_across_the_adapters_calls(gl_context: Any) -> None:
+    """pyrender's constructor and draws make its context current and leave it so: building a pyrender adapter
+    while an engine's own (moderngl) context was current left pyrender's current in its place, and the engine's
+    next GL calls went to the wrong context (here: "cannot map the buffer" reading one of its buffers back). The
+    adapter's construction, calls and close now give back the context that was current before them."""
+    from rtp.plugins.pyrender import Adapter, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    scene = _asymmetric_scene(pyrender)
+    buffer = make_current(gl_context).buffer(np.arange(4, dtype="f4").tobytes())
+    try:
+        adapter = Adapter(["albedo.r", "seen"], 32, 24)
+        np.testing.assert_array_equal(np.frombuffer(buffer.read(), "f4"), np.arange(4))
+        colour, _ = adapter.render(scene, np.eye(4))
+        adapter.inputs(SceneFrame(scene, np.eye(4), np.eye(4), colour))
+        np.testing.assert_array_equal(np.frombuffer(buffer.read(), "f4"), np.arange(4))
+        adapter.close()
+        np.testing.assert_array_equal(np.frombuffer(buffer.read(), "f4"), np.arange(4))
+    finally:
+        make_current(gl_context)
+        buffer.release()
+
+
+def test_a_borrowed_renderer_resized_after_is_refused() -> None:
+    """The adapter has one size; a borrowed renderer whose viewport was changed after it was borrowed drew at its
+    new size, and ``inputs`` failed with numpy's "could not broadcast input array" ValueError (``render`` returned
+    an image of the new size). Both now say what changed."""
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
+    from rtp.plugins.pyrender._gbuffer import _delete_renderer
+
+    pyrender = pyrender_or_skip()
+    scene = _asymmetric_scene(pyrender)
+    user = pyrender.OffscreenRenderer(64, 48)
+    try:
+        with Adapter(["seen", "albedo.r", "normal.z"], 64, 48, renderer=user) as adapter:
+            colour, _ = adapter.render(scene, np.eye(4))
+            user.viewport_width = 32
+            for call in (lambda: adapter.inputs(SceneFrame(scene, np.eye(4), np.eye(4), colour)),
+                         lambda: adapter.render(scene, np.eye(4))):
+                with pytest.raises(PyrenderAdapterError, match="renderer now draws 32x48, the adapter 64x48"):
+                    call()
+            user.viewport_width = 64  # its size back: the adapter draws again
+            assert adapter.inputs(SceneFrame(scene, np.eye(4), np.eye(4), colour)).shape == (3, 48, 64)
+    finally:
+        _delete_renderer(user)
+
+
+def test_python_optimize_is_a_typed_error_naming_it() -> None:
+    """pyrender 0.1.45 makes its context inside ``assert`` statements, which ``python -O`` strips: that failed as
+    "could not create a egl context (EGLError ...)" with the hint to apt-get install packages that were installed."""
+    import subprocess
+    import sys
+
+    pyrender_or_skip()
+    code = ("from rtp.plugins.pyrender import Adapter, PyrenderUnavailableError\n"
+            "try:\n    Adapter(['depth'], 8, 8)\nexcept PyrenderUnavailableError as exc:\n    print(exc)\n")
+    run = subprocess.run([sys.executable, "-O", "-c", code], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and "python -O / PYTHONOPTIMIZE strips: run without -O" in run.stdout, \
+        run.stdout[-2000:] + run.stderr[-2000:]

@@ -210,6 +210,12 @@ class Adapter(_BaseAdapter[SceneFrame]):
             renderer here, or draw the displayed frames with :meth:`render`. While borrowed its
             program cache is the adapter's; its own draws are unchanged (:meth:`close` restores it).
 
+    Each call (the constructor and :meth:`close` too) makes the renderer's GL context current and then
+    gives back what was current before in the calling thread (an engine's own context, or none), so the
+    adapter may be built in one thread and used or closed in another, one call at a time. A borrowed
+    renderer that pyrender drew with in another thread stays current there (pyrender never releases it):
+    the call is then a :class:`PyrenderAdapterError` naming the thread (docs/adapters.md).
+
     Example::
 
         with Adapter.for_predictor(predictor, 640, 360) as adapter:

@@ -26,6 +26,7 @@ Quirks handled here (costs measured in docs/adapters.md):
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 from collections.abc import Iterator, Sequence
@@ -39,7 +40,7 @@ import numpy as np
 from rtp.sdk import ParameterError
 
 from ._errors import PyrenderAdapterError
-from ._gl import import_pyrender, offscreen_renderer
+from ._gl import current, import_pyrender, offscreen_renderer
 
 __all__ = ["GBufferRenderer", "GBuffers", "unpack12"]
 
@@ -111,7 +112,16 @@ def unpack12(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def draw(renderer: Any, scene: Any, flags: int, seg_node_map: dict[Any, Any] | None = None, *, fix: str) -> Any:
     """``renderer.render(scene, flags, seg_node_map)``, with pyrender's errors turned into
-    :class:`PyrenderAdapterError` (``fix``: what to do when the scene is bound to another renderer)."""
+    :class:`PyrenderAdapterError` (``fix``: what to do when the scene is bound to another renderer).
+
+    The renderer's context is current only during the draw: what was current in this thread before (an
+    engine's context, or none) is current again after it (:func:`~._gl.current`), so that another thread may
+    draw with the renderer next."""
+    with current(renderer):
+        return _render(renderer, scene, flags, seg_node_map, fix)
+
+
+def _render(renderer: Any, scene: Any, flags: int, seg_node_map: dict[Any, Any] | None, fix: str) -> Any:
     try:
         return renderer.render(scene, flags, seg_node_map)
     except ValueError as exc:
@@ -176,12 +186,14 @@ def _delete_renderer(r: Any) -> None:
     platform = r._platform
     if platform is None:
         return
-    platform.make_current()
-    r._renderer.delete()  # GL objects; also unbinds the scene's meshes from this context
+    with current(r):  # (what was current in this thread before, an engine's context say, is current again after)
+        r._renderer.delete()  # GL objects; also unbinds the scene's meshes from this context
     if type(platform).__name__ == "EGLPlatform" and getattr(platform, "_egl_display", None) is not None:
         from OpenGL import EGL
 
-        EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+        if ctypes.cast(EGL.eglGetCurrentContext(), ctypes.c_void_p).value == \
+                ctypes.cast(platform._egl_context, ctypes.c_void_p).value:  # (destroyed only once released)
+            EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
         if platform._egl_context is not None:
             EGL.eglDestroyContext(platform._egl_display, platform._egl_context)
         platform._egl_context = None
@@ -250,15 +262,17 @@ class GBufferRenderer:
         if r is None:
             return
         try:
-            r._platform.make_current()
-            self._cache.clear()  # our programs live in the renderer's context
-            if not self._owns:
-                r._platform.make_uncurrent()
+            with current(r):
+                self._cache.clear()  # our programs live in the renderer's context
+        except PyrenderAdapterError as exc:  # (another thread holds the context: they are left in it)
+            log.warning("could not free the pyrender adapter's G-buffer programs: %s", exc)
         except Exception as exc:  # pragma: no cover - a context already gone
             log.debug("could not free the G-buffer programs: %s", exc)
         if self._owns:
             try:
                 _delete_renderer(r)
+            except PyrenderAdapterError as exc:
+                log.warning("could not delete the pyrender adapter's renderer (its GL context is left): %s", exc)
             except Exception as exc:  # (the shared EGL display terminated under it, by a renderer rtp did not make)
                 log.debug("could not delete the adapter's renderer: %s", exc)
 
@@ -295,7 +309,15 @@ class GBufferRenderer:
         """pyrender's own ``render(scene, flags, seg_node_map)`` on this renderer (no G-buffer patch), with
         pyrender's errors turned into :class:`PyrenderAdapterError`."""
         flags = self._pyrender.RenderFlags.NONE if flags is None else flags
-        out = draw(self.renderer, scene, flags, seg_node_map,
+        renderer = self.renderer
+        if (renderer.viewport_width, renderer.viewport_height) != (self.width, self.height):
+            # (a borrowed renderer resized since: its images came back at the new size, and inputs() failed
+            # with numpy's broadcast ValueError)
+            raise PyrenderAdapterError(
+                f"the renderer now draws {renderer.viewport_width}x{renderer.viewport_height}, the adapter "
+                f"{self.width}x{self.height}: its viewport was changed after the adapter borrowed it; make an "
+                "adapter of the new size (or give the renderer its size back)")
+        out = draw(renderer, scene, flags, seg_node_map,
                    fix="pass that renderer to the adapter (Adapter(..., renderer=r)), or draw the displayed frames "
                        "with adapter.render(...)")
         camera = scene.main_camera_node.camera
@@ -356,8 +378,8 @@ class GBufferRenderer:
             if clockwise:  # (the renderer's own draws take pyrender's counter-clockwise front faces)
                 from OpenGL import GL
 
-                renderer._platform.make_current()
-                GL.glFrontFace(GL.GL_CCW)
+                with current(renderer):
+                    GL.glFrontFace(GL.GL_CCW)
         return np.array(colour[..., :3]), np.asarray(depth, np.float32)
 
     def render(self, scene: Any, *, albedo: bool = False, normals: Sequence[str] = (),

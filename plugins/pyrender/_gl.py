@@ -14,10 +14,14 @@ pyrender 0.1.45 has two import-time quirks this module deals with, once, before 
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import numbers
 import os
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -25,9 +29,9 @@ import numpy as np
 
 from rtp.sdk import ParameterError
 
-from ._errors import PyrenderUnavailableError
+from ._errors import PyrenderAdapterError, PyrenderUnavailableError
 
-__all__ = ["PLATFORMS", "import_pyrender", "offscreen_renderer"]
+__all__ = ["PLATFORMS", "current", "import_pyrender", "offscreen_renderer"]
 
 log = logging.getLogger("rtp.plugins.pyrender")
 
@@ -141,6 +145,11 @@ def offscreen_renderer(pyrender: Any, width: int, height: int) -> Any:
     :class:`rtp.sdk.ParameterError` (pyrender makes its targets only at the first draw, where it failed)."""
     if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) and int(v) >= 1 for v in (width, height)):
         raise ParameterError(f"frame size: expected positive integers (pixels), got {width!r} x {height!r}", "size")
+    if sys.flags.optimize:  # (it failed below with the hint to install packages that are installed)
+        raise PyrenderUnavailableError(
+            "pyrender 0.1.45 sets up its GL context inside assert statements (eglInitialize, eglChooseConfig, "
+            "eglMakeCurrent; OSMesaMakeCurrent), which python -O / PYTHONOPTIMIZE strips: run without -O")
+    before = _egl_current()
     try:
         renderer = pyrender.OffscreenRenderer(int(width), int(height))
     except Exception as exc:
@@ -156,10 +165,94 @@ def offscreen_renderer(pyrender: Any, width: int, height: int) -> Any:
     # deleted (by close, by pyrender's own delete() or when dropped unclosed) without pyrender's eglTerminate, which
     # ends the EGL display every renderer of the process shares (the others then fail with EGL_BAD_DISPLAY)
     renderer.__class__ = _shared_display_class(type(renderer), _delete_renderer)
-    renderer._platform.make_current()
-    limit = min(int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE)), int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)))
+    # (pyrender's constructor left its context current in this thread: given back to what was current before, so
+    # that the renderer can be used from another thread, and an engine's own context is current again)
+    _restore(renderer._platform, before)
+    with current(renderer):
+        limit = min(int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE)), int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)))
     if max(int(width), int(height)) > limit:
         _delete_renderer(renderer)
         raise ParameterError(f"frame size: this OpenGL context draws at most {limit} pixels a side "
                              f"(GL_MAX_TEXTURE_SIZE), got {width}x{height}", "size")
     return renderer
+
+
+def _egl(platform: Any) -> bool:
+    """``platform`` is pyrender's EGL platform with a live context."""
+    return type(platform).__name__ == "EGLPlatform" and getattr(platform, "_egl_context", None) is not None
+
+
+def _address(pointer: Any) -> int | None:
+    return ctypes.cast(pointer, ctypes.c_void_p).value
+
+
+def _egl_current() -> tuple[Any, Any, Any, Any] | None:
+    """This thread's current EGL ``(display, draw surface, read surface, context)``; None where EGL is not the
+    platform (OSMesa) or nothing is current."""
+    if os.environ.get("PYOPENGL_PLATFORM") != "egl":
+        return None
+    from OpenGL import EGL
+
+    context = EGL.eglGetCurrentContext()
+    if not _address(context):
+        return None
+    return (EGL.eglGetCurrentDisplay(), EGL.eglGetCurrentSurface(EGL.EGL_DRAW),
+            EGL.eglGetCurrentSurface(EGL.EGL_READ), context)
+
+
+def _restore(platform: Any, before: tuple[Any, Any, Any, Any] | None) -> None:
+    """Make ``before`` (from :func:`_egl_current`) current again in this thread in place of ``platform``'s
+    context: another context (an engine's), or none, which lets another thread make ``platform``'s current."""
+    if not _egl(platform):
+        return
+    from OpenGL import EGL
+
+    if before is not None and _address(before[3]) == _address(platform._egl_context):
+        return  # (it was current here before the call: left so)
+    try:
+        if before is None:
+            EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+        else:
+            EGL.eglMakeCurrent(*before)
+    except Exception as exc:  # (the context current before was destroyed meanwhile, say)
+        log.warning("could not make the GL context current before the pyrender adapter's call current again: %s", exc)
+
+
+@contextmanager
+def current(renderer: Any) -> Iterator[None]:
+    """``renderer``'s (a ``pyrender.OffscreenRenderer``'s) context current in this thread for the block, and
+    what was current before (another context, or none) current again after it.
+
+    pyrender makes a renderer's context current before each draw and never releases it (its EGL
+    ``make_uncurrent`` does nothing), so a renderer used in one thread could not be used in another, where
+    ``eglMakeCurrent`` fails with EGL_BAD_ACCESS: that is a :class:`PyrenderAdapterError` naming the thread.
+    (OSMesa contexts are made current as pyrender does; nothing is restored.)"""
+    platform = renderer._platform
+    if platform is None:
+        raise PyrenderAdapterError("the pyrender renderer has been deleted (its delete() freed its GL context); "
+                                   "an adapter borrowing a renderer needs it alive until the adapter is closed")
+    if not _egl(platform):
+        platform.make_current()
+        yield
+        return
+    from OpenGL import EGL
+
+    before = _egl_current()
+    try:
+        made = bool(EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE,
+                                       platform._egl_context))
+        error = "" if made else f" (EGL error 0x{int(EGL.eglGetError()):04x})"
+    except EGL.EGLError as exc:
+        made, error = False, f" ({getattr(exc.err, 'name', exc.err)})"
+    if not made:
+        raise PyrenderAdapterError(
+            f"the pyrender renderer's GL context cannot be made current in thread "
+            f"{threading.current_thread().name!r}{error}: a context is current in one thread at a time, and "
+            "another thread holds this one (pyrender's own render() leaves it current in the thread that drew). "
+            "Call from the thread that draws with the renderer, or release the context there first "
+            "(OpenGL.EGL.eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)); the "
+            "adapter's own calls release it when they return")
+    try:
+        yield
+    finally:
+        _restore(platform, before)
