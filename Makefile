@@ -12,7 +12,8 @@ MAKEFILE := $(lastword $(MAKEFILE_LIST))
 # The dataset: every split of scenes.yaml, both motion profiles (docs/results.md). 12 pairs per
 # train map and profile (51 maps: 1,224 samples), 12 per validation map (72; they live beside the
 # training samples, train/recipes hold them out), 8 per test map (80). About 17 MB per sample.
-# RAY=1 runs capture and targets on a private Ray instance, RAY=HOST:PORT on a cluster (docs/scaling.md).
+# RAY=1 runs capture and targets on a private Ray instance, RAY=HOST:PORT on a cluster (docs/scaling.md); RAY=0 or
+# none, this machine's processes.
 # WORKERS: the processes on this machine (2); with RAY, Ray's workers: one per CPU of the instance or the
 # cluster unless WORKERS=N is given (a fixed 2 ran a cluster's capture on two of its CPUs).
 # (Paths are quoted in the commands: DATA, RECIPE, NAME and MAP may hold spaces.)
@@ -22,8 +23,10 @@ PER_SCENE ?= 12
 VAL_PER_SCENE ?= 12
 TEST_PER_SCENE ?= 8
 RAY       ?=
-WORKERS   ?= $(if $(RAY),,2)
-RAYFLAG    = $(if $(RAY),--ray $(if $(filter 1,$(RAY)),,"$(RAY)"))
+# (RAY=0 is off, as RAY unset: it was taken for an address, `--ray 0`, which Ray cannot reach)
+RAY_ON     = $(filter-out 0,$(strip $(RAY)))
+WORKERS   ?= $(if $(RAY_ON),,2)
+RAYFLAG    = $(if $(RAY_ON),--ray $(if $(filter 1,$(RAY_ON)),,"$(RAY_ON)"))
 JOBFLAGS   = $(if $(WORKERS),--workers $(WORKERS)) $(RAYFLAG)
 METRIC    ?= jnyang
 # The recipe the shipped models were trained with: train/recipes/shipped.yaml (steps, batch, crop,

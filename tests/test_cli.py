@@ -485,6 +485,8 @@ def test_make_passes_its_variables_to_the_commands_whole() -> None:
         assert len(jobs) == 5 and all("--workers" not in a for a in jobs), jobs
         assert all(_after([*a, "--out"], "--ray") == address for a in jobs), jobs
     assert all(_after(a, "--workers") == "8" for a in _make_runs("dataset", "RAY=1", "WORKERS=8")[1:])
+    # (RAY=0 is off, as no RAY: it ran `--ray 0`, an address Ray cannot reach)
+    assert _make_runs("dataset", "RAY=0", "DATA=my data") == local
     train, export = _make_runs("train", "METRIC=jnyang", "RECIPE=my recipe.yaml", "NAME=my model", "STEPS=5",
                                "DATA=my data")
     assert (_after(train, "--config"), _after(train, "--steps"), _after(train, "--out")) == (
