@@ -31,7 +31,7 @@ import numpy as np
 from rtp.sdk import ALL_RATES, ParameterError
 from rtp.sdk.files import writer_lock
 
-from ._dataset import MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter
+from ._dataset import MAX_ID_LENGTH, DatasetError, DatasetReader, DatasetWriter, _read_manifest, holds_nothing
 from ._memory import check_frame_memory
 from ._pool import WorkerDiedError, cores, name_task, tick_queue, unfinished, with_ticks, worker_died, worker_pool
 
@@ -515,9 +515,12 @@ def _locked_writer(out: str | os.PathLike[str], settings: Mapping[str, Any], gua
     the folder's writer lock (:func:`_writer_lock`, until ``guard`` closes). Opened before the lock, a capture into
     a folder without a manifest wrote its own (its settings) first, and then, refused, left it in place of the
     manifest of the capture that held the lock, whose samples it then described with the other's size. A folder of
-    a manifest with other settings is refused before the lock's file is made in it (it is left as it was)."""
+    a manifest with other settings is refused before the lock's file is made in it (it is left as it was). A folder
+    that holds nothing yet (:func:`holds_nothing`) has its manifest's settings replaced, under the lock only: replaced
+    before it, they were another capture's, which held the lock and had not written its first sample yet."""
     root = Path(out)
-    if (root / "manifest.json").exists() or (root.exists() and not root.is_dir()):
+    if (root.exists() and not root.is_dir()) or (
+            (root / "manifest.json").exists() and not holds_nothing(root, _read_manifest(root))):
         DatasetWriter(out, settings)  # (refuses other settings, or a file, writing nothing; else writes nothing)
     root.mkdir(parents=True, exist_ok=True)
     guard.enter_context(_writer_lock(out))

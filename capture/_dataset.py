@@ -56,7 +56,7 @@ from rtp.sdk import (
     pixel_differences,
     tile_variances,
 )
-from rtp.sdk.files import atomic_output
+from rtp.sdk.files import LOCK_NAME, atomic_output
 
 from ._images import _image_bytes, read_image_values
 
@@ -333,7 +333,9 @@ class DatasetWriter:
     """Writes samples into a dataset folder; resumable (``has`` tells which ids exist).
 
     ``settings`` (renderer settings, resolution, package versions) go into the manifest when the
-    folder is created; reopening a folder with different settings raises :class:`DatasetError`.
+    folder is created; reopening a folder with different settings raises :class:`DatasetError`, unless
+    it holds nothing made with them yet (no sample, no targets: :func:`holds_nothing`, a job killed or
+    refused before its first sample): then the new settings replace them, with a warning, as in a new folder.
     """
 
     def __init__(self, root: str | os.PathLike[str], settings: Mapping[str, Any] | None = None) -> None:
@@ -345,23 +347,23 @@ class DatasetWriter:
             if folder.exists() and not folder.is_dir():
                 raise DatasetError(f"{folder}: expected a folder{' of samples' if folder == self.samples_dir else ''}, "
                                    f"found a file: write the dataset into another folder")
+        replace = False
         if manifest.exists():  # (checked before anything is made: a refused folder is left as it was)
             current = _read_manifest(self.root)
             before = current.get("settings")
-            if before != settings:
-                # (the differing keys, not two whole dictionaries in which the user hunted for the one difference)
-                if isinstance(before, dict):
-                    differ = sorted(k for k in set(before) | set(settings) if before.get(k) != settings.get(k))
-                    what = "; ".join(f"{k}: {before.get(k)!r} there, {settings.get(k)!r} now" for k in differ)
-                else:
-                    what = f"existing: {before!r}, new: {settings!r}"
-                raise DatasetError(
-                    f"{self.root} was captured with other settings ({what}); use another folder or the same settings"
-                )
+            if before != settings and holds_nothing(self.root, current):
+                # (a job killed or refused before its first sample left its manifest: a rerun with a corrected
+                # option was refused as "captured with other settings" until the folder was deleted by hand)
+                replace = True
+                log.warning("%s holds no sample yet: its manifest's settings (%s) are replaced by this job's", self.root,
+                            _differ(before, settings))
+            elif before != settings:
+                raise DatasetError(f"{self.root} was captured with other settings ({_differ(before, settings)}); use "
+                                   f"another folder or the same settings")
         #: ``(H, W)`` of the samples as ``settings["size"]`` gives it (the folder's, where it has a manifest: the same)
         self._hw = _settings_hw(settings)
         self.samples_dir.mkdir(parents=True, exist_ok=True)
-        if not manifest.exists():
+        if replace or not manifest.exists():  # (replaced: a fresh manifest, as a new folder's)
             self._write_manifest({"format": FORMAT, "format_version": FORMAT_VERSION, "settings": settings})
 
     def _write_manifest(self, data: Mapping[str, Any]) -> None:
@@ -421,6 +423,35 @@ class DatasetWriter:
                 raise DatasetError(f"finalize: {reserved} are the manifest's own keys, not extra ones")
             data.update(_json_object(extra, "finalize"))
         self._write_manifest(data)
+
+
+def _differ(before: Any, settings: Mapping[str, Any]) -> str:
+    """The keys in which a manifest's settings ``before`` differ from ``settings``, with both values (not two whole
+    dictionaries in which the user hunted for the one difference)."""
+    if not isinstance(before, dict):
+        return f"existing: {before!r}, new: {dict(settings)!r}"
+    keys = sorted(k for k in set(before) | set(settings) if before.get(k) != settings.get(k))
+    return "; ".join(f"{k}: {before.get(k)!r} there, {settings.get(k)!r} now" for k in keys)
+
+
+def holds_nothing(root: str | os.PathLike[str], manifest: Mapping[str, Any]) -> bool:
+    """Whether the dataset folder ``root`` (of the manifest ``manifest``) holds nothing made with its settings: no
+    sample file in samples/ (a killed write's temporary files aside), none listed by the manifest, and no targets.
+    Such a folder's settings are replaced by those of the next job that writes it (:class:`DatasetWriter`), as a new
+    folder's would be."""
+    root = Path(root)
+    if manifest.get("samples"):
+        return False
+    try:
+        samples = root / "samples"
+        if samples.is_dir() and any(p.name.endswith(".npz") for p in samples.iterdir()):
+            return False
+        targets = root / "targets"
+        if targets.exists() and (not targets.is_dir() or any(p.name != LOCK_NAME for p in targets.iterdir())):
+            return False
+    except OSError:  # (unlistable: not known to be empty)
+        return False
+    return True
 
 
 def _listed_ids(folder: Path) -> list[str]:

@@ -37,6 +37,7 @@ from ._dataset import (
     DatasetReader,
     DatasetWriter,
     _open_sample,
+    holds_nothing,
     sample_path,
 )
 from ._memory import check_memory
@@ -480,8 +481,9 @@ def import_frames(
         settings["profile"] = profile
 
     root = check_output(out, folder=True, what="dataset folder")
-    if (root / "manifest.json").is_file():
-        reader = DatasetReader(root)
+    # (a folder that holds nothing yet, an import or capture killed or refused before its first sample: its settings,
+    # source and profile included, are replaced by this import's under the lock, as a new folder's would be)
+    if (root / "manifest.json").is_file() and not holds_nothing(root, (reader := DatasetReader(root)).manifest):
         before = reader.manifest.get("settings")
         if not isinstance(before, dict) or before.get("source") != SOURCE:
             raise DatasetError(f"{root}: a dataset the reference renderer captured; import an engine's frames into a "

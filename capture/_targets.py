@@ -24,6 +24,7 @@ import logging
 import numbers
 import os
 import re
+import shlex
 import zipfile
 from collections import deque
 from collections.abc import Mapping, Sequence
@@ -269,7 +270,7 @@ class TargetStore:
         is newer than it."""
         sample, stored = sample_path(self.root.parent, sample_id), self.path(sample_id, metric)
         if not stored.is_file():
-            raise TargetError(f"no {metric} targets for sample {sample_id!r}; run `rtp targets {self.root.parent}`")
+            raise TargetError(f"no {metric} targets for sample {sample_id!r}; run `{self._command}`")
         if not sample.is_file():
             return False
         recorded = _recorded_fingerprint(stored)
@@ -323,14 +324,19 @@ class TargetStore:
             if sample_mtime_ns is not None:
                 os.utime(tmp, ns=(sample_mtime_ns, sample_mtime_ns))
 
+    @property
+    def _command(self) -> str:
+        """The command that computes this dataset's targets, for the user to copy (its path quoted for a shell)."""
+        return f"rtp targets {shlex.quote(str(self.root.parent))}"
+
     def load(self, sample_id: str, metric: str, tile: int) -> np.ndarray:
         """Targets in metric units (PSNR in dB) at ``tile``: float32 ``(6, ceil(H/tile), ceil(W/tile))``."""
         p = self.path(sample_id, metric)
         if not p.is_file():
-            raise TargetError(f"no {metric} targets for sample {sample_id!r}; run `rtp targets {self.root.parent}`")
+            raise TargetError(f"no {metric} targets for sample {sample_id!r}; run `{self._command}`")
         if self.stale(sample_id, metric):
             raise TargetError(f"{metric} targets of sample {sample_id!r} are out of date, of the sample as it was "
-                              f"before it was captured again; run `rtp targets {self.root.parent}`")
+                              f"before it was captured again; run `{self._command}`")
         try:
             with np.load(p) as z:
                 values, size = np.asarray(z["values"]), tuple(int(v) for v in z["size"])
@@ -343,10 +349,10 @@ class TargetStore:
         bad = int(values.size - np.count_nonzero(np.isfinite(values)))
         if bad:  # (written by an rtp before the write refused them, or damaged: not trained on in silence)
             raise TargetError(f"{p}: {bad} of {values.size} targets are NaN or infinite; delete the file and run "
-                              f"`rtp targets {self.root.parent}` again, which computes it anew")
+                              f"`{self._command}` again, which computes it anew")
         if _stores_mse(metric) and (values < 0).any():  # (written by an rtp before the write refused them)
             raise TargetError(f"{p}: {int((values < 0).sum())} of {values.size} stored mean squared errors are "
-                              f"negative; delete the file and run `rtp targets {self.root.parent}` again, which "
+                              f"negative; delete the file and run `{self._command}` again, which "
                               f"computes it anew")
         declared = self.metrics.get(metric)
         pooled = pool_targets(values, size, self.base_tile, tile,
@@ -441,6 +447,7 @@ def compute_targets(
     ray: str | None = None,
     device: str | None = "auto",
     _on_ray_actors: Any = None,
+    _ppd_option: str = "ppd",
 ) -> int:
     """Compute (or complete) the per-tile targets of every sample of a dataset; returns how many
     samples were processed. Existing targets are kept, so an interrupted run resumes.
@@ -457,7 +464,10 @@ def compute_targets(
     ``"cuda:N"``, ``"mps"``; ``None``: the CPU. Checked before
     any work; every worker process uses it. Not a target parameter: a GPU gives the CPU's targets to
     float32 round-off, so a dataset may be completed on another device. A GPU with ``ray`` is refused
-    (Ray gives a task no GPU unless it asks for one, and rtp's tasks do not)."""
+    (Ray gives a task no GPU unless it asks for one, and rtp's tasks do not).
+
+    ``ppd="width"`` of samples under 58 pixels wide (under FLIP's 1 ppd) is refused before anything is
+    computed or declared (``_ppd_option``: the name its error gives the option, ``rtp targets``' ``--ppd``)."""
     from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
 
     from rtp import metrics as M
@@ -514,6 +524,9 @@ def compute_targets(
             raise ParameterError(f"weber_l: the environment luminance of {' and '.join(m for m in METRICS if METRICS[m].weber)}"
                                  f", which the metrics asked for ({', '.join(metrics)}) do not use", "weber_l")
     reader = DatasetReader(data_root)
+    if isinstance(ppd, str) and reader.ids:  # ('width' of frames too narrow for it: refused now, not declared in the
+        # manifest and then refused at the first sample's FLIP, in a worker, in Python's words on the command line)
+        M.image_ppd("width", (reader._size or reader[reader.ids[0]].size)[1], _ppd_option)  # (the one str taken above)
     # (locally a process a sample at most: --workers 8 on 2 samples was refused for 8 processes' memory; Ray
     # starts every worker it is given)
     _check_memory(reader, metrics, workers if workers is None or ray is not None else

@@ -5,6 +5,7 @@ reference renderer, to see the layout."""
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 
 __all__ = ["run_import"]
@@ -63,6 +64,7 @@ def run_import(args: argparse.Namespace) -> int:
         print(f"rate images look exchanged on {report.exchanged} of {report.written} frames (logged above): check "
               f"which is final_1x2 (1 pixel wide, 2 tall) and which final_2x1 (and final_2x4, final_4x2)",
               file=sys.stderr)
-    print(f"next: rtp targets {args.out}, then rtp train --data {args.out} --metric jnyang --out model.pt (validation "
+    out = shlex.quote(args.out)  # (a folder with a space: the commands, copied into a shell, failed)
+    print(f"next: rtp targets {out}, then rtp train --data {out} --metric jnyang --out model.pt (validation "
           f"holds out whole levels: import two or more, and name one with --val-scenes)")
     return 0

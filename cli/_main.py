@@ -295,6 +295,8 @@ def _metadata_hint(args: argparse.Namespace) -> Iterator[None]:
     except sdk.MetadataError as err:
         if (err.key == sdk.METADATA_KEY and getattr(args, "metadata", None) is None and args.model is not None
                 and not carries_metadata(args.model)):
+            import shlex
+
             from rtp.export import identify
 
             # (one of the paper's published files was told to bring a sidecar: rtp ships one for each, docs/export.md)
@@ -305,7 +307,7 @@ def _metadata_hint(args: argparse.Namespace) -> Iterator[None]:
             if known is not None:
                 raise sdk.MetadataError(
                     f"{args.model} carries no rtp metadata; it is the paper's published {known.name} model, whose "
-                    f"sidecar ships with rtp: `rtp-export --adopt {args.model} -o OUT.onnx` bakes it in (no sidecar "
+                    f"sidecar ships with rtp: `rtp-export --adopt {shlex.quote(args.model)} -o OUT.onnx` bakes it in (no sidecar "
                     f"to write){'' if sidecar_flag else ', then --model OUT.onnx'}", err.key) from err
             if not sidecar_flag:  # (the SDK's "the commands' --metadata" named a flag this command does not have)
                 raise sdk.MetadataError(
@@ -654,7 +656,7 @@ def _cmd_targets(args: argparse.Namespace) -> int:
 
     with _device_flag(), Bar(args, 0, "targets", "sample") as bar:
         n = compute_targets(args.data, args.metrics, ppd=ppd, weber_l=args.weber_l, workers=_workers(args),
-                            progress=progress, ray=args.ray, device=args.device)
+                            progress=progress, ray=args.ray, device=args.device, _ppd_option="--ppd")
     kept = done[1] - n  # (progress reports the dataset's size first: the samples that already had every target)
     print(f"{args.data}: targets computed for {_samples(n)} ({', '.join(dict.fromkeys(args.metrics))})"
           + (f"; {_samples(kept)} already had them" if kept > 0 else ""))

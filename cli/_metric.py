@@ -99,18 +99,9 @@ def run_metric(args: argparse.Namespace) -> int:
     ref, test = _read(args.reference), _read(args.test)
     if ref.shape != test.shape:
         raise sdk.ParameterError(_differ((ref.shape[1], ref.shape[0]), (test.shape[1], test.shape[0])))
-    if "ppd" in params:  # ('width' as its number, printed; of an image too narrow for it refused before FLIP runs)
-        try:
-            params["ppd"] = metrics.image_ppd(params["ppd"], ref.shape[1])
-        except metrics.MetricParameterError as err:
-            if params["ppd"] != "width":
-                raise
-            # (the library's words are Python's, "ppd='width' ...: for a crop pass ppd=ppd_from_width(...)": a
-            # command-line user has neither, only the flag)
-            found = str(err).partition(": for a crop")[0].replace("ppd='width'", "--ppd width", 1)
-            raise metrics.MetricParameterError(
-                f"{found}: give --ppd a number instead (for a crop of a wider frame, that frame's width-based value, "
-                "rtp.metrics.ppd_from_width(its width))") from None
+    if "ppd" in params:  # ('width' as its number, printed; of an image too narrow for it refused before FLIP runs,
+        # in the command line's words: a command-line user has no ppd= to pass, only the flag)
+        params["ppd"] = metrics.image_ppd(params["ppd"], ref.shape[1], "--ppd")
     info = metrics.metric_info(args.metric)
     # the map once, pooled as tile_metric pools it (tile_metric and error_map both computed it: FLIP and LPIPS twice)
     pixel_map: Any = None if info.pooling == "mse" else metrics.error_map(args.metric, ref, test, **params)

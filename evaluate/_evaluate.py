@@ -21,6 +21,7 @@ import logging
 import math
 import os
 import reprlib
+import shlex
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -599,7 +600,7 @@ def _load_samples(
     if meta.metric not in store.metrics:
         raise TargetError(
             f"{data} has no {meta.metric} targets (it has {', '.join(store.metrics) or 'none'}); "
-            f"run `rtp targets {data} --metrics {meta.metric}`"
+            f"run `rtp targets {shlex.quote(str(data))} --metrics {meta.metric}`"
         )
     if meta.tile_size % store.base_tile:
         raise TargetError(f"the model's tile {meta.tile_size} is not a multiple of the targets' base tile {store.base_tile}")
@@ -620,7 +621,7 @@ def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: st
         raise TargetError(
             f"{data}: {len(bad)} of the {len(samples)} samples to evaluate have {what} {metric} targets "
             f"({', '.join(map(repr, bad[:3]))}{', ...' if len(bad) > 3 else ''}); "
-            f"run `rtp targets {data} --metrics {metric}`")
+            f"run `rtp targets {shlex.quote(str(data))} --metrics {metric}`")
 
 
 def _select_samples(

@@ -80,15 +80,23 @@ def resolve_ppd(ppd: Ppd, width_px: int) -> float:
     return value
 
 
-def image_ppd(ppd: Ppd, width_px: int) -> float:
+def image_ppd(ppd: Ppd, width_px: int, option: str = "ppd") -> float:
     """:func:`resolve_ppd` for an image ``width_px`` wide that FLIP will score: ``"width"`` must give a
     value in FLIP's range too (an image under 58 pixels wide is under 1 ppd: the torch port's targets
-    were NaN). (``resolve_ppd(ppd, 1)`` stays the check of the argument alone, as ``rtp targets`` uses it.)"""
+    were NaN). (``resolve_ppd(ppd, 1)`` stays the check of the argument alone.)
+
+    ``option`` is the name the caller's user gives the argument, which the error is worded in: ``"ppd"``
+    (Python's, the default) or a command-line flag (``"--ppd"``: ``rtp metric``, ``rtp targets``)."""
     value = resolve_ppd(ppd, width_px)
     if isinstance(ppd, str) and not MIN_PPD <= value <= MAX_PPD:
-        raise MetricParameterError(
-            f"ppd='width' of a {width_px}-pixel-wide image is {value:.3g} pixels per degree, outside FLIP's "
-            f"[{MIN_PPD:g}, {MAX_PPD:g}]: for a crop pass ppd=ppd_from_width(the full frame's width), or a number")
+        found = (f"of a {width_px}-pixel-wide image is {value:.3g} pixels per degree, outside FLIP's "
+                 f"[{MIN_PPD:g}, {MAX_PPD:g}]")
+        if option == "ppd":
+            raise MetricParameterError(f"ppd='width' {found}: for a crop pass ppd=ppd_from_width(the full frame's "
+                                       f"width), or a number", "ppd")
+        raise MetricParameterError(f"{option} width {found}: give {option} a number instead (for a crop of a wider "
+                                   f"frame, that frame's width-based value, rtp.metrics.ppd_from_width(its width))",
+                                   "ppd")
     return value
 
 

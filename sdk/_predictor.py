@@ -10,6 +10,7 @@ import logging
 import math
 import os
 import reprlib
+import shlex
 import threading
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -317,7 +318,7 @@ def _not_a_model(path: Any) -> str:
     except (OSError, TypeError):
         return ""
     if head == b"PK\x03\x04":
-        return f" (a zip, as a training checkpoint is: export it first, rtp-export {path})"
+        return f" (a zip, as a training checkpoint is: export it first, rtp-export {shlex.quote(str(path))})"
     if str(path).lower().endswith((".yaml", ".yml")):
         return " (a metadata sidecar: load the .onnx model it describes)"
     return ""

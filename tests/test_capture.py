@@ -200,6 +200,29 @@ def test_a_capture_refused_by_the_lock_leaves_the_holders_folder_as_it_was(tmp_p
     assert json.loads((out / "manifest.json").read_text())["settings"]["size"] == [48, 32]
 
 
+def test_a_capture_into_a_folder_that_holds_nothing_yet_takes_its_settings(tmp_path: Path) -> None:
+    """A capture killed or refused before its first sample left its manifest: the rerun with a corrected option
+    was refused as "captured with other settings" until the folder was deleted. A folder that holds no sample takes
+    the rerun's settings, as a new folder would; but only under the writer lock: a capture that holds it and has
+    not written its first sample yet keeps its manifest (a second capture, refused, replaced it before asking)."""
+    import json
+
+    from rtp.capture import DatasetError, DatasetWriter
+    from rtp.sdk.files import writer_lock
+
+    out = tmp_path / "ds"
+    DatasetWriter(out, {"size": [32, 32], "renderer": "rtp.plugins.moderngl reference deferred renderer"})
+    with writer_lock(out, "rtp capture", RuntimeError):  # (the capture that wrote it, not yet at its first sample)
+        with pytest.raises(DatasetError, match="is being written by another capture"):
+            capture(["procedural:7"], out, per_scene=1, size=(48, 32), profiles=("slow",))
+        assert json.loads((out / "manifest.json").read_text())["settings"]["size"] == [32, 32]
+    done = capture(["procedural:7"], out, per_scene=1, size=(48, 32), profiles=("slow",))
+    assert done.written == 1
+    assert DatasetReader(out).manifest["settings"]["size"] == [48, 32]
+    with pytest.raises(DatasetError, match="other settings"):  # (a sample there: refused as before)
+        capture(["procedural:7"], out, per_scene=1, size=(32, 32), profiles=("slow",))
+
+
 def _children(pid: int) -> list[int]:
     """The live processes whose parent is ``pid`` (/proc; zombies are dead)."""
     out = []

@@ -331,6 +331,55 @@ def test_a_device_torch_cannot_use_is_said_with_its_flag(
     assert not out.exists() and not (tmp_path / "ds").exists()
 
 
+def test_targets_ppd_width_of_narrow_frames_is_refused_in_the_flags_words(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp targets --ppd width` on a dataset of frames under 58 pixels wide (under FLIP's 1 ppd) said the library's
+    "ppd='width' ...: for a crop pass ppd=ppd_from_width(...)", after it had declared 'width' in the targets'
+    manifest, at the first sample's FLIP. Refused before anything is written, in the command line's words (as `rtp
+    metric` says it: one function words both); the library's compute_targets in Python's."""
+    from rtp import metrics
+    from rtp.capture import DatasetWriter, compute_targets
+
+    from .test_dataset import _buffers
+
+    for settings in ({"size": [40, 24]}, None):  # (without a size in the manifest: the first sample's)
+        ds = tmp_path / f"ds{settings is None}"
+        DatasetWriter(ds, settings).write("a", _buffers(24, 40), {})
+        assert main(["targets", str(ds), "--metrics", "flip", "--ppd", "width"]) == 2
+        err = capsys.readouterr().err
+        assert ("rtp targets: error: --ppd width of a 40-pixel-wide image is 0.698 pixels per degree, outside FLIP's "
+                "[1, 1000]: give --ppd a number instead") in err, err
+        assert "ppd=" not in err, err
+        with pytest.raises(metrics.MetricParameterError, match=r"^ppd='width' of a 40-pixel-wide image .* pass "
+                                                               r"ppd=ppd_from_width"):
+            compute_targets(ds, ["flip"], ppd="width")
+        assert not (ds / "targets").exists()  # (nothing declared: a later run with a number is not refused by it)
+
+
+def test_the_commands_errors_tell_the_user_to_run_quote_the_dataset_path(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """"run `rtp targets my data`" (a dataset folder with a space) named two folders when copied into a shell, as
+    every command rtp tells its user to run did: their paths are quoted for a shell now."""
+    import shlex
+
+    from rtp.capture import DatasetWriter, TargetError, TargetStore
+
+    from .test_dataset import _buffers
+
+    ds = tmp_path / "my data" / "it's"
+    DatasetWriter(ds, {"size": [40, 24]}).write("a", _buffers(24, 40), {})
+
+    def command(text: str) -> list[str]:
+        return shlex.split(re.search(r"run `(rtp [^`]*)`", text)[1])  # type: ignore[index]
+
+    with pytest.raises(TargetError) as info:  # (what rtp train and rtp evaluate meet on a sample without targets)
+        TargetStore(ds).load("a", "jnyang", 4)
+    assert command(str(info.value)) == ["rtp", "targets", str(ds)], info.value
+    assert main(["train", "--data", str(ds), "--metric", "jnyang", "--out", str(tmp_path / "m.pt"), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert command(err) == ["rtp", "targets", str(ds), "--metrics", "jnyang"], err
+
+
 def test_metric_out_naming_an_input_image_is_refused_before_any_work(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp metric flip ref.png test.png --out test.png` (or the reference, under another spelling of its path)

@@ -15,6 +15,8 @@ import pytest
 from rtp import sdk
 from rtp.capture._dataset import (
     BUFFERS,
+    FORMAT,
+    FORMAT_VERSION,
     DatasetError,
     DatasetReader,
     DatasetWriter,
@@ -421,6 +423,40 @@ def test_reopening_requires_the_same_settings(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match="not an rtp dataset manifest"):
         DatasetWriter(tmp_path / "theirs")
     assert sorted(p.name for p in (tmp_path / "theirs").iterdir()) == ["manifest.json"]
+
+
+def test_a_folder_that_holds_nothing_yet_takes_the_new_settings(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A job killed or refused before its first sample left its manifest: a rerun with a corrected option into the
+    folder was refused as "captured with other settings" until the folder was deleted by hand, though nothing was
+    made with them. Its settings are now replaced (a fresh manifest, as a new folder's), with a warning; a folder
+    that holds a sample, a manifest listing one, or targets is refused as before."""
+    import logging
+
+    root = tmp_path / "ds"
+    first = DatasetWriter(root, settings={"size": [40, 24], "depth_kind": "linear"})
+    first.finalize({"failed": ["x/slow"]})
+    (root / "samples" / ".a.npz.abc.tmp").write_bytes(b"cut short")  # (a killed write of the first sample)
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        w = DatasetWriter(root, settings={"size": [40, 24], "depth_kind": "reversed"})
+    assert "holds no sample yet" in caplog.text and "depth_kind: 'linear' there, 'reversed' now" in caplog.text
+    manifest = json.loads((root / "manifest.json").read_text())
+    assert manifest == {"format": FORMAT, "format_version": FORMAT_VERSION,
+                        "settings": {"size": [40, 24], "depth_kind": "reversed"}}
+    w.write("a", _buffers(), {})
+    with pytest.raises(DatasetError, match="other settings"):  # (one sample: refused, and left as it was)
+        DatasetWriter(root, settings={"size": [40, 24]})
+    assert json.loads((root / "manifest.json").read_text())["settings"]["depth_kind"] == "reversed"
+    # the manifest lists samples (deleted since), or targets are there: refused too
+    w.finalize()
+    (root / "samples" / "a.npz").unlink()
+    with pytest.raises(DatasetError, match="other settings"):
+        DatasetWriter(root, settings={"size": [40, 24]})
+    other = tmp_path / "targeted"
+    DatasetWriter(other, settings={"size": [40, 24]})
+    (other / "targets").mkdir()
+    (other / "targets" / "manifest.json").write_text("{}")
+    with pytest.raises(DatasetError, match="other settings"):
+        DatasetWriter(other, settings={"size": [80, 48]})
 
 
 def test_a_sample_of_another_size_than_the_manifests_is_refused_naming_the_file(tmp_path: Path) -> None:

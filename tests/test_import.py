@@ -104,6 +104,64 @@ def test_an_import_resumes_and_refuses_to_mix(dumps: Any, tmp_path: Path) -> Non
     assert len(DatasetReader(captured).ids) == 2
 
 
+def test_an_import_into_a_folder_that_holds_nothing_yet_takes_its_settings(dumps: Any, tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """An import killed before its first sample left its manifest (its conventions); the rerun with a corrected
+    flag was refused as "captured with other settings" until the folder was deleted. A folder that holds no sample
+    takes the rerun's settings, source and profile included (a capture's folder, left empty), as a new one would;
+    under the writer lock only: while another job holds it, the folder is left as it was."""
+    import shutil
+
+    from rtp.capture import DatasetWriter
+    from rtp.sdk.files import writer_lock
+
+    root, _, _ = dumps
+    data = tmp_path / "data"
+
+    def killed(*a: Any, **k: Any) -> None:
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(DatasetWriter, "write", killed)
+        with pytest.raises(KeyboardInterrupt):
+            import_frames(root / "level_a", data)
+    assert DatasetReader(data).ids == []
+    with writer_lock(data, "rtp import", RuntimeError):  # (another job's: nothing replaced before the lock)
+        with pytest.raises(DatasetError, match="being written by another job"):
+            import_frames(root / "level_a", data, normal_space="world")
+    assert DatasetReader(data).manifest["settings"]["conventions"]["normal_space"] == "view"
+    report = import_frames(root / "level_a", data, normal_space="world")
+    assert report.written == 3
+    assert DatasetReader(data).manifest["settings"]["conventions"]["normal_space"] == "world"
+    # a capture's folder (another source), a folder of another profile, left empty: taken as new
+    for settings in ({"size": [W, H], "renderer": "rtp.plugins.moderngl reference deferred renderer"},
+                     {"size": [W, H], "source": "engine frames", "profile": "other", "absent": []}):
+        empty = tmp_path / "empty"
+        DatasetWriter(empty, settings)
+        assert import_frames(root / "level_a", empty).written == 3
+        assert DatasetReader(empty).manifest["settings"]["source"] == "engine frames"
+        assert "profile" not in DatasetReader(empty).manifest["settings"]
+        with pytest.raises(DatasetError, match="other settings"):  # (with samples: refused, as before)
+            import_frames(root / "level_a", empty, normal_space="world")
+        shutil.rmtree(empty)
+
+
+def test_the_next_commands_an_import_prints_quote_the_dataset_path(dumps: Any, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp import ... --out "out é/da ta"` ended with "next: rtp targets out é/da ta, ...": copied into a shell,
+    the command named two folders. The path is quoted for a shell (a plain one is printed as it is)."""
+    import shlex
+
+    root, _, _ = dumps
+    for out in (tmp_path / "out é" / "da ta", tmp_path / "plain"):
+        assert rtp_main(["import", str(root / "level_a"), "--out", str(out), "--quiet"]) == 0
+        line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("next: "))
+        targets, train = line.removeprefix("next: ").split(" (validation")[0].split(", then ")
+        assert shlex.split(targets) == ["rtp", "targets", str(out)], line
+        assert shlex.split(train) == ["rtp", "train", "--data", str(out), "--metric", "jnyang", "--out", "model.pt"]
+        assert (f"rtp targets {out}," in line) == (out.name == "plain"), line
+
+
 def test_a_resumed_import_with_another_profile_is_refused(dumps: Any, tmp_path: Path) -> None:
     """--profile was not in the manifest's settings: a resumed import with another one mixed both across the
     samples of one folder."""

@@ -16,6 +16,7 @@ import logging
 import math
 import os
 import platform
+import shlex
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -361,8 +362,8 @@ class _Sources:
             for want, what in (([metric], ""), (list(aux_metrics), " (aux_metrics)")):
                 absent = [m for m in want if m not in store.metrics]
                 if absent:
-                    raise TargetError(f"{f} has no {', '.join(absent)} targets{what}; run `rtp targets {f} --metrics "
-                                      f"{','.join(absent)}`")
+                    raise TargetError(f"{f} has no {', '.join(absent)} targets{what}; run `rtp targets "
+                                      f"{shlex.quote(str(f))} --metrics {','.join(absent)}`")
         for m in metrics:
             params = {f: s.metrics[m] for f, s in zip(self.folders, self.stores)}
             if len({json.dumps(v, sort_keys=True) for v in params.values()}) > 1:
@@ -532,7 +533,8 @@ def _split_ids(reader: _Sources, cfg: TrainConfig) -> tuple[list[str], list[str]
             seed = next(k for k in range(1, 100) if f"procedural_{k}" not in scenes and f"procedural:{k}" not in scenes)
             raise DatasetError(
                 f"{cfg.data} holds one scene ({scenes[0] if scenes else 'none'}); validation holds out whole scenes, "
-                f"so it needs two: capture another into it (rtp capture --scene procedural:{seed} --out {cfg.data} with "
+                f"so it needs two: capture another into it (rtp capture --scene procedural:{seed} --out "
+                f"{shlex.quote(str(cfg.data))} with "
                 "the same --size adds the built-in generator's, or --scene another of your files), or, of an engine's "
                 "frames, import another level's (rtp import FRAMES --scene LEVEL --out DATA)")
         # the last in the natural order of the names (procedural:10 after procedural:9, not before procedural:2)

@@ -21,6 +21,7 @@ import json
 import logging
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -156,7 +157,7 @@ def check_map(name: str, cache_dir: str | Path, *, split: str | None = None,
     cache = Path(cache_dir)
     if name not in _read_index(cache)["maps"]:
         raise SceneNotFoundError(f"map {name!r} is not in the scene cache {cache}: run `rtp scenes fetch --cache-dir "
-                                 f"{cache}` first")
+                                 f"{shlex.quote(str(cache))}` first")
 
 
 def _run(cmd: Sequence[str], cwd: Path, debs: Path | None = None) -> None:
@@ -182,8 +183,8 @@ def _run(cmd: Sequence[str], cwd: Path, debs: Path | None = None) -> None:
 def _unpack_again(cache: Path) -> str:
     """What to do about a damaged archive of the fetched cache ``cache``: unpack the packages again."""
     return (f"delete {cache / 'root' / '.unpacked'} and the folder {cache / 'pk3'}, then run `rtp scenes fetch "
-            f"--cache-dir {cache}` again: it unpacks the packages again (if the archive is still damaged, delete the "
-            f"packages in {cache / 'debs'} as well, to download them again)")
+            f"--cache-dir {shlex.quote(str(cache))}` again: it unpacks the packages again (if the archive is still "
+            f"damaged, delete the packages in {cache / 'debs'} as well, to download them again)")
 
 
 def _path_in_packages(archive: Path, root: Path, pk3_dir: Path) -> tuple[str, ...]:
@@ -401,8 +402,8 @@ def _write_text(path: Path, text: str) -> None:
 def _read_index(cache: Path) -> dict:
     p = cache / "index.json"
     if not p.is_file():
-        raise SceneNotFoundError(f"no scene index at {p}: run `rtp scenes fetch --cache-dir {cache}` first")
-    again = f"run `rtp scenes fetch --cache-dir {cache}` again"
+        raise SceneNotFoundError(f"no scene index at {p}: run `rtp scenes fetch --cache-dir {shlex.quote(str(cache))}` first")
+    again = f"run `rtp scenes fetch --cache-dir {shlex.quote(str(cache))}` again"
     try:
         index = json.loads(p.read_text(encoding="utf-8"))
     except ValueError as err:  # a truncated or overwritten file (also UnicodeDecodeError)
