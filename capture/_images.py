@@ -167,3 +167,28 @@ def figure_image(fig: Figure) -> np.ndarray:
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
     return np.array(canvas.buffer_rgba())[..., :3]
+
+
+def text_width(text: str, fontsize: float, dpi: float = 100.0) -> float:
+    """The width in pixels ``text`` takes drawn by matplotlib's Agg at ``fontsize`` points in a figure of ``dpi`` (its
+    widest line): what a figure is sized to where a title must fit (a guess of a few pixels a character ran wide
+    titles off the image)."""
+    from matplotlib.backends.backend_agg import RendererAgg
+    from matplotlib.font_manager import FontProperties
+
+    renderer, font = RendererAgg(1, 1, dpi), FontProperties(size=fontsize)
+    return max(renderer.get_text_width_height_descent(line, font, ismath=False)[0] for line in text.split("\n"))
+
+
+def wrap_to_width(text: str, width_px: float, fontsize: float, dpi: float = 100.0) -> str:
+    """``text`` wrapped (at its spaces, a longer word broken) into lines each at most ``width_px`` pixels wide as
+    :func:`text_width` measures them; one character a line at the narrowest."""
+    import textwrap
+
+    if text_width(text, fontsize, dpi) <= width_px:
+        return text
+    for chars in range(len(text) - 1, 0, -1):
+        wrapped = "\n".join(textwrap.wrap(text, chars))
+        if text_width(wrapped, fontsize, dpi) <= width_px:
+            return wrapped
+    return "\n".join(text)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import textwrap
 import warnings
 from typing import Any
 
@@ -181,6 +180,7 @@ def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np
     from matplotlib.figure import Figure
 
     from rtp.capture import figure_image, save_image
+    from rtp.capture._images import wrap_to_width
 
     h, w = ref.shape[:2]
     shown = pixel_map if pixel_map is not None else np.repeat(np.repeat(tiles, args.tile, 0), args.tile, 1)[:h, :w]
@@ -205,7 +205,11 @@ def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np
     if finite.size and finite.size < shown.size:
         same = f" (grey: identical, +inf {info.units})"
     title = f"{args.metric} {kind}: {args.reference} vs {args.test}{same}"
-    ax.set_title(textwrap.fill(title, max(30, round((w * zoom + 120) / 6))), fontsize=9)  # (about 6 px a character)
+    # (wrapped to the picture's width as the text is drawn: at a guess of 6 pixels a character, wider than 9-point
+    # text is, a 160x96 pair's title ran off both sides of the image, 'psnr per 16px tile' read 'r 16px tile')
+    # (no narrower than the figure beside its colour bar: a 1000x1 strip's title wrapped one character a line)
+    room = max(w * zoom, fig.get_figwidth() * fig.dpi - (30 if wide else 110))
+    ax.set_title(wrap_to_width(title, room, 9), fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     fig.colorbar(im, ax=ax, label=f"{args.metric} ({info.units}); bright = worse",

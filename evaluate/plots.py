@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from rtp.capture import figure_image, save_image
+from rtp.capture._images import text_width
 from rtp.sdk import (
     OVERLAY_PALETTES,
     PREDICTED_RATES,
@@ -375,23 +376,30 @@ def rate_overlays(image: np.ndarray, rates: Mapping[str, np.ndarray], tile: int,
     # its titles unreadable at a page's width)
     per_row = min(len(rates), _RATE_PANELS_PER_ROW)
     rows = -(-len(rates) // per_row)
-    width = per_row * max(w / scale, 160) + 20
+    panels = []
+    for name, codes in rates.items():
+        codes = np.asarray(codes)  # (checked by draw_rate_overlay: a uint8 cast made a code of 256 draw as 1x1)
+        # a share of the frame's pixels (a partial edge tile its real ones), as the decision table counts it
+        drawn = draw_rate_overlay(img, codes, tile, palette=palette)
+        saved = (0.0 if not codes.size else work_saved(codes, (h, w), tile) if codes.shape == tile_grid(h, w, tile)
+                 else float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])))
+        panels.append((drawn, f"{name}: saves {100 * saved:.0f}%"))
+    # (each cell as wide as its longest panel title, the figure as its title: a small frame's six methods, 160 pixels
+    # a panel, ran 'yang2019-unseen-1x1: saves 52%' into its neighbours' titles and the first and last off the image,
+    # and cut the figure's title at both ends)
+    cell = max(w / scale, 160, max(text_width(t, 9) for _, t in panels) + 12)
+    width = max(per_row * cell + 20, text_width(title, 10) + 24 if title else 0)
     # (the legend in as many columns as the figure holds: in one row it was cut off below a narrow figure)
     ncols = 4 if width >= _RATE_LEGEND_ROW else 2 if width >= _RATE_LEGEND_ROW / 2 else 1
     fig = _figure(width, rows * (max(h / scale, 90) + 30) + 40 + 18 * (4 // ncols - 1) + (24 if title else 0))
     axes = np.atleast_1d(fig.subplots(rows, per_row)).ravel()
     for ax in axes[len(rates):]:  # (the last row's empty places)
         ax.set_axis_off()
-    for ax, (name, codes) in zip(axes, rates.items()):
-        codes = np.asarray(codes)  # (checked by draw_rate_overlay: a uint8 cast made a code of 256 draw as 1x1)
-        # a share of the frame's pixels (a partial edge tile its real ones), as the decision table counts it
-        drawn = draw_rate_overlay(img, codes, tile, palette=palette)
-        saved = (0.0 if not codes.size else work_saved(codes, (h, w), tile) if codes.shape == tile_grid(h, w, tile)
-                 else float(np.mean([work_saved(RATE_NAMES[int(c)]) for c in codes.ravel()])))
+    for ax, (drawn, name) in zip(axes, panels):
         # (its colour only: an engine's (H, W, 4) frame kept its alpha, and an alpha of 0, a back buffer's, drew the
         # panel blank, the page's white)
         ax.imshow(drawn[..., :3], interpolation="nearest")
-        ax.set_title(f"{name}: saves {100 * saved:.0f}%", fontsize=9)
+        ax.set_title(name, fontsize=9)
         _bare(ax)
     _add_rate_legend(fig, ncols, palette)
     if title:
@@ -512,6 +520,8 @@ def play_frames(report: Any) -> np.ndarray:
     """Closed-loop runs frame by frame at each method's default parameter: work saved, failing
     tiles and the share of tiles whose rate changed (each method its colour, marker and line style), with the path's
     unseen share per frame."""
+    from matplotlib.ticker import MaxNLocator
+
     paths = list(report.unseen)
     methods = list(dict.fromkeys(m for p in paths for m in report.frames[p]))
     styles = _report_styles(report, methods)
@@ -535,6 +545,8 @@ def play_frames(report: Any) -> np.ndarray:
         for ax, title in zip(row, ("work saved, %", f"tiles failing ({s['fail_metric']}), %",
                                    "tiles whose rate changed, %", "unseen share of the frame, %")):
             ax.set_title(f"{path}: {title}", fontsize=9)
+            # (whole frames: a 3-frame run's axes read 1.0, 1.2, ... 2.0, its rate changes' 1.90 ... 2.10)
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
             ax.set_xlabel(f"frame ({s['fps']:g} Hz" + ("; grey: drawn at a smaller size)" if smaller else ")"),
                           fontsize=8)
             ax.grid(alpha=0.3)
@@ -588,7 +600,9 @@ def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False,
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("frame", fontsize=8)
         ax.set_xlim(-0.5, max(len(rows) - 0.5, 0.5))
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        # (whole frames only, one tick at the least: with fewer than two matplotlib's integer locator gave up, a
+        # folder of one frame's axis read -0.5, -0.4, ... 0.5)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
         # from 0, with room above the highest point (matplotlib's margin is a share of the data's own spread: a
         # series of 55-57% drew its top markers cut in half on the panel's edge, a constant one its whole line on
         # it); a series all 0, or none (the first frame's change), on 0 to 1 rather than matplotlib's 0 to 0.055

@@ -170,6 +170,33 @@ def test_metric_draws_its_map_and_refuses_images_of_two_sizes(tmp_path: Path, ca
         assert "expected a path, got '\\ud800' (not encodable as a file name)" in capsys.readouterr().err
 
 
+def test_metric_out_keeps_its_title_inside_the_picture(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The title was wrapped at a guess of 6 pixels a character, narrower than 9-point text is: a 160x96 pair's
+    'psnr per 16px tile: demo_small/frame.png vs demo_small/vrs_composite.png (grey: identical, +inf dB)', one
+    line, ran off both sides of the picture ('r 16px tile: ...'). It is wrapped to the picture's width as drawn."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    import rtp.capture
+
+    figures: list[Any] = []
+    real = rtp.capture.figure_image
+    monkeypatch.setattr(rtp.capture, "figure_image", lambda fig: figures.append(fig) or real(fig))
+    (tmp_path / "demo_small").mkdir()
+    a, b, _, _ = _image_pair(tmp_path / "demo_small", 160, 96)
+    a, b = a.rename(a.with_name("frame.png")), b.rename(b.with_name("vrs_composite.png"))
+    monkeypatch.chdir(tmp_path)
+    for metric in ("psnr", "flip"):
+        figures.clear()
+        assert main(["metric", metric, "demo_small/frame.png", "demo_small/vrs_composite.png", "--out", "m.png"]) == 0
+        (fig,) = figures
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        title = fig.axes[0].title
+        assert "demo_small/vrs_composite.png" in title.get_text().replace("\n", " ")
+        box = title.get_window_extent(canvas.get_renderer())
+        assert fig.bbox.contains(box.x0, box.y0) and fig.bbox.contains(box.x1, box.y1), (metric, title.get_text())
+
+
 def test_metric_json_with_out_prints_json_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--json with --out: stdout is one JSON document naming the picture written (a 'wrote PATH' line after it made
     `rtp metric psnr a.png b.png --json --out m.png | python -c 'json.load(...)'` fail on 'Extra data')."""

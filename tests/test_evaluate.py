@@ -787,6 +787,32 @@ def test_the_figures_of_a_small_frame_keep_every_label_inside_and_apart(monkeypa
             assert not ax.get_title() or ax.title.get_window_extent(renderer).width <= ax.get_window_extent().width
 
 
+def test_the_rate_overlays_of_a_small_frame_fit_the_evaluations_method_names(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp evaluate --plots` on a 160x96 dataset drew its six methods in 160-pixel panels: 'yang2019-unseen-1x1:
+    saves 52%' ran into its neighbours' titles, the first and last columns' titles off the image and the figure's
+    title was cut at both ends. Each cell is as wide as its longest title now, the figure as its title."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    figures: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
+    h, w = 96, 160
+    codes = np.zeros((h // 16, w // 16), np.uint8)
+    methods = ["model", "oracle", "yang2019", "yang2019-unseen-1x1", "fidelityfx", "fidelityfx-additional"]
+    plots.rate_overlays(np.zeros((h, w, 3), np.float32), dict.fromkeys(methods, codes), 16,
+                        title="rates chosen on sample procedural_0-fast-0000; 'model': jnyang at jnyang threshold 0.25")
+    (fig,) = figures
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    for t in (t for t in fig.findobj(lambda a: hasattr(a, "get_text")) if t.get_visible() and t.get_text()):
+        box = t.get_window_extent(renderer)
+        assert fig.bbox.contains(box.x0, box.y0) and fig.bbox.contains(box.x1, box.y1), t.get_text()
+    titles = [ax.title.get_window_extent(renderer) for ax in fig.axes if ax.get_title()]
+    assert len(titles) == len(methods)
+    for i, a in enumerate(titles):
+        assert not any(a.overlaps(b) for b in titles[i + 1:])
+
+
 def test_the_maps_of_a_strip_of_a_frame_stay_its_size_and_keep_their_labels_apart(monkeypatch: pytest.MonkeyPatch) -> None:
     """A very wide or very tall frame (1600x16, 16x1200) was enlarged until its short side reached plots.MIN_PANEL, its
     long side with it: the heatmaps of a 1600x16 frame 48110 pixels wide, a (1, 3000) map's 720130 (550 MB). No side is

@@ -142,6 +142,23 @@ def test_the_rate_change_panel_draws_lone_values_and_leaves_frame_1_out(monkeypa
     assert [t.get_text() for t in legend.get_texts()] == ["jnyang"]
 
 
+def test_the_per_frame_plot_of_a_short_run_counts_whole_frames(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 3-frame run (the fewest --frames takes) drew its frame axes at 1.0, 1.2, ... 2.0 and its rate changes, one
+    frame's, at 1.90 ... 2.10: fractions of a frame. Every frame axis is ticked at whole frames, one at the least."""
+    figures = _figures(monkeypatch)
+    rep = _report(frames=3)
+    rep.unseen["slow"] = [1.0, 0.02, 0.01]
+    rep.frames["slow"] = {"jnyang": {"saved": [0.5, 0.58, 0.54], "fail": [0.0, 0.23, 0.23],
+                                     "change": [float("nan"), 0.4, 0.33]}}
+    plots.play_frames(rep)
+    (fig,) = figures
+    fig.canvas.draw()
+    for ax in fig.axes:
+        lo, hi = ax.get_xlim()
+        ticks = [t for t in ax.get_xticks() if lo <= t <= hi]
+        assert ticks and all(float(t).is_integer() for t in ticks), (ax.get_title(), ticks)
+
+
 def test_a_rate_change_never_measured_reads_as_a_dash() -> None:
     """Under --dynamic-resolution 1,0.5@1 every frame is drawn at another size than the one before, so no rate
     change is measured (the tiles are others): play.md's column read "nan%" where the FLIP column reads "-"."""

@@ -882,6 +882,24 @@ def test_the_curves_hold_their_points_whole_inside_the_panels(monkeypatch: pytes
     assert axes[1].get_ylim() == (0.0, 1.0)  # (the change in %: 0 every frame)
 
 
+def test_the_curves_of_a_one_frame_folder_count_whole_frames(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A folder of one frame is a sequence: its frames.png's axes read -0.5, -0.4, ... 0.5 (matplotlib's integer
+    locator gives up under two whole numbers). Each panel is ticked at whole frames, its one frame's 0."""
+    from rtp.evaluate import plots
+
+    axes: list[Any] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: axes.extend(fig.axes) or np.zeros((1, 1, 3), np.uint8))
+    for n in (1, 2, 5):
+        axes.clear()
+        rows = [{"work_saved": 0.6, "changed": None if i == 0 else 0.3, "predict_ms": 2.0, "threshold": 0.25}
+                for i in range(n)]
+        plots.sequence_curves(rows, thresholds=True)
+        for ax in axes:
+            lo, hi = ax.get_xlim()
+            ticks = [t for t in ax.get_xticks() if lo <= t <= hi]
+            assert ticks == list(range(n)), (n, ax.get_title(), ticks)
+
+
 def test_an_engines_own_pickled_array_is_not_read_and_a_pickled_g_buffer_is_named(
         frame: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture) -> None:
     """An engine that stashes its own metadata beside the G-buffers (``np.savez(..., meta={"frame": 12})``, a
