@@ -10,6 +10,7 @@ argparse types below (:func:`positive`, :func:`positives`, :func:`count`, :func:
 
 from __future__ import annotations
 
+import shlex
 import statistics
 import time
 from collections.abc import Callable, Hashable, Sequence
@@ -56,14 +57,14 @@ def check_targets(store: Any, ids: Sequence[str], metric: str, tile: int, model:
     reads = f" for {model}" if model else ""
     if metric not in store.metrics:
         raise UsageError(f"{data} has no {metric} targets{reads} (it has {', '.join(store.metrics) or 'none'}): "
-                         f"run `rtp targets {data} --metrics {metric}`")
+                         f"run `rtp targets {shlex.quote(str(data))} --metrics {metric}`")
     if tile % store.base_tile:
         raise UsageError(f"{data}: {model or 'the model'}'s {tile}-pixel tiles are not a multiple of its targets' "
                          f"base tile {store.base_tile}")
     missing = [i for i in ids if not store.path(i, metric).is_file()]
     if missing:
         raise UsageError(f"{data} has {metric} targets{reads} on {len(ids) - len(missing)} of the {len(ids)} samples "
-                         f"read (none on {missing[0]}): run `rtp targets {data} --metrics {metric}`")
+                         f"read (none on {missing[0]}): run `rtp targets {shlex.quote(str(data))} --metrics {metric}`")
 
 
 def dataset_folder(text: str) -> str:
@@ -74,8 +75,8 @@ def dataset_folder(text: str) -> str:
     if not (Path(text) / "manifest.json").is_file():
         raise argparse.ArgumentTypeError(
             f"no dataset at {text!r}: capture one first, e.g. `rtp capture --split validation --per-scene 12 "
-            f"--size 1280x720 --out {text} && rtp targets {text}` (the validation maps), or `make dataset` "
-            "(data/train and data/test: about 3 hours)")
+            f"--size 1280x720 --out {shlex.quote(text)} && rtp targets {shlex.quote(text)}` (the validation maps), or "
+            "`make dataset` (data/train and data/test: about 3 hours)")
     from rtp.capture import open_dataset
     from rtp.sdk import RtpError
 

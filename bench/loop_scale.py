@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -129,7 +130,8 @@ def main(argv: list[str] | None = None) -> int:
             raise UsageError(f"a scaled factor leaves [1/{sdk.MAX_RATE_FACTOR:g}, {sdk.MAX_RATE_FACTOR:g}]")
         write_factors_sidecar(args.sidecar, scaled, "python bench/loop_scale.py " + " ".join(
             [*map(str, args.runs), "--method", args.method, "--one", args.one, "--sidecar", args.sidecar]))
-        print(f"wrote {args.sidecar}: rtp-export --retune {models[args.method]} --metadata {args.sidecar} -o OUT.onnx")
+        print(f"wrote {args.sidecar}: rtp-export --retune {shlex.quote(str(models[args.method]))} --metadata "
+              f"{shlex.quote(str(args.sidecar))} -o OUT.onnx")
     return 0
 
 

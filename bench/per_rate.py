@@ -38,6 +38,7 @@ estimates and the truth fall.
 from __future__ import annotations
 
 import argparse
+import shlex
 
 import numpy as np
 from _common import (  # bench/ is on sys.path when run as a script
@@ -204,7 +205,8 @@ def main(argv: list[str] | None = None) -> int:
               "with the factors")
         write_factors_sidecar(args.sidecar, f, f"python bench/per_rate.py {args.model} --data {args.data} --scene "
                        f"{','.join(scenes)} --fit {args.fit:g} --sidecar {args.sidecar}")
-        print(f"wrote {args.sidecar}: rtp-export --retune {args.model} --metadata {args.sidecar} -o OUT.onnx")
+        print(f"wrote {args.sidecar}: rtp-export --retune {shlex.quote(str(args.model))} --metadata "
+              f"{shlex.quote(str(args.sidecar))} -o OUT.onnx")
     return 0
 
 

@@ -37,3 +37,19 @@ def test_a_figure_stopped_while_written_leaves_the_one_before(tmp_path: Path, mo
     assert not plt.fignum_exists(fig.number)  # (closed all the same)
     common.save_figure(plt.figure(), tmp_path / "plot.svg")
     assert b"<svg" in (tmp_path / "plot.svg").read_bytes()[:400]
+
+
+def test_the_commands_a_dataset_error_tells_to_run_quote_the_path(tmp_path: Path) -> None:
+    """dataset_folder's error names the capture and targets commands with the folder as given: `my data` was printed
+    bare, and the command copied into a shell captured into `my` (shlex.split of it gives the path back now)."""
+    import argparse
+    import re
+    import shlex
+
+    common = bench_module("_common")
+    folder = str(tmp_path / "my data")
+    with pytest.raises(argparse.ArgumentTypeError) as err:
+        common.dataset_folder(folder)
+    [command] = re.findall(r"`(rtp capture [^`]*)`", str(err.value))
+    argv = shlex.split(command)
+    assert argv[argv.index("--out") + 1] == folder and argv[-1] == folder, argv
