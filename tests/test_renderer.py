@@ -385,6 +385,27 @@ def test_fixed_exposure_overrides_auto_exposure(renderer):
 
 
 @pytest.mark.gl
+def test_ao_strength_zero_turns_ambient_occlusion_off_where_it_was_total(gl_context: Any) -> None:
+    """``ao_strength`` is the exponent of the SSAO term, 0 allowed: x**0 is 1, AO off. GLSL leaves pow(0, 0)
+    undefined, and a fully occluded pixel (raw term 0: one sample, occluded) stayed 0 on llvmpipe (a black ambient
+    where every other pixel had none taken; a NaN, and through the exposure a NaN frame, where a driver computes
+    pow as exp2(y * log2 x)). Now every pixel's term is 1 and the frame is the one with no occlusion applied."""
+    from rtp.capture.scenes import procedural
+    from rtp.capture.viewpoints import sample_viewpoints
+
+    scene = procedural(0)
+    camera = sample_viewpoints(scene, 6, seed=0)[3][1]  # (a view with a fully occluded pixel under one sample)
+    with Renderer(64, 48, ctx=make_current(gl_context), shadow_map_size=256, ao_samples=1) as full, \
+            Renderer(64, 48, ctx=gl_context, shadow_map_size=256, ao_samples=1, ao_strength=0.0) as off:
+        full.load_scene(scene)
+        off.load_scene(scene)
+        assert (full.render(camera).ao == 0.0).any()  # (the case: a raw term of exactly 0)
+        f = off.render(camera)
+        assert np.all(f.ao == 1.0), np.argwhere(f.ao != 1.0)[:4].tolist()
+        assert all(np.isfinite(img).all() for img in f.colour.values())
+
+
+@pytest.mark.gl
 def test_past_max_point_lights_the_strongest_light_the_frame(gl_context):
     """With more point lights touching the view than max_point_lights, the frame is lit by the
     strongest (radiance over squared distance) as if the others did not exist; a light out of reach

@@ -174,7 +174,7 @@ class Frame:
     * ``depth`` ``(H, W)``: linear depth, metres along -Z.
     * ``shadow`` ``(H, W)``: sun shadow-map visibility (PCF), 1 = lit.
     * ``motion`` ``(H, W, 2)``: pixels, previous minus current position, x right, y down; 0 without
-      a previous camera and on background.
+      a previous camera, on background and where the point was behind the previous camera.
     * ``mask`` ``(H, W)``: coverage, 1 on geometry, 0 on background (sky).
     * ``ao`` ``(H, W)``: the SSAO term applied to the ambient light (1 = unoccluded, 1 on background).
 
@@ -420,7 +420,8 @@ class Renderer:
             512 up to 128).
         shadow_distance: cap (metres) on the part of the view frustum the shadow map covers;
             None covers up to the camera's far plane (always clipped to the scene bounds).
-        ao_samples, ao_radius, ao_strength: SSAO kernel size, radius (metres) and exponent.
+        ao_samples, ao_radius, ao_strength: SSAO kernel size, radius (metres) and exponent (0: no occlusion,
+            the term is 1 everywhere).
         anisotropy: maximum anisotropic filtering of material textures (clamped to the driver's).
             Ignored on Mesa's software rasterizers (llvmpipe, softpipe): llvmpipe 22.3 can spin
             forever in its anisotropic sampler on some views (seen at 1280x720), so textures

@@ -21,5 +21,7 @@ void main() {
         }
     }
     float ao = wsum > 0.0 ? sum / wsum : 1.0;
-    o_ao = pow(clamp(ao, 0.0, 1.0), u_strength);
+    // strength 0 turns AO off (x^0 = 1): GLSL leaves pow(0, 0) undefined (llvmpipe gives 0, exp2(0 * log2 0) is NaN
+    // on drivers that compute it so), so a fully occluded pixel stayed 0, or turned the frame NaN through exposure
+    o_ao = u_strength > 0.0 ? pow(clamp(ao, 0.0, 1.0), u_strength) : 1.0;
 }
