@@ -529,11 +529,12 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
     base = os.path.commonpath([os.path.abspath(Path(f).parent) for f in files])
     shown = [os.path.relpath(os.path.abspath(f), base) for f in files]  # (each frame's name under the folder)
     width = max(5, *map(len, shown))
+    held = (f"threshold {threshold:g}" if args.saving is None else f"a saving of {args.saving:g}" if args.threshold
+            is None else f"threshold {threshold:g} with a floor of {args.saving:g} saved")
+    # (what frames.png's title says: it named neither the model nor what its rates held)
+    what = f"{model} ({predictor.metadata.metric}), {held}, tiles of {predictor.tile_size}px, {len(files)} frames"
     if not args.json and not args.quiet:
-        held = (f"threshold {threshold:g}" if args.saving is None else f"a saving of {args.saving:g}" if args.threshold
-                is None else f"threshold {threshold:g} with a floor of {args.saving:g} saved")
-        print(f"{model} ({predictor.metadata.metric}), {held}, tiles of {predictor.tile_size}px, "
-              f"{len(files)} frames in {os.path.relpath(base) if base.startswith(os.getcwd()) else base}")
+        print(f"{what} in {os.path.relpath(base) if base.startswith(os.getcwd()) else base}")
         if reuse is not None:
             print(f"prediction reuse: the network every {args.every} frames, its {reuse.carry} carried between")
         print(f"{'frame':<{width}} {'saved':>7} {'changed':>8} {'predict':>9}" + ("  network" if reuse else "")
@@ -597,7 +598,7 @@ def _run_sequence(args: argparse.Namespace, files: list[str], predictor: Any, th
                                  "max": float(levels.max())}
     if args.out:
         summary["wrote"] = _write_sequence_out(args.out, rows, all_rates, all_values, overlays, args.saving is not None,
-                                               predictor.metadata.higher_is_better)
+                                               predictor.metadata.higher_is_better, title=what)
     if args.json:
         print(json.dumps(summary))
         return 0
@@ -672,10 +673,11 @@ def _picture_modules(sequence: bool) -> None:
 
 
 def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.ndarray], values: list[np.ndarray],
-                        overlays: list[np.ndarray], budget: bool = False, higher_is_better: bool = False) -> list[str]:
+                        overlays: list[np.ndarray], budget: bool = False, higher_is_better: bool = False,
+                        title: str = "") -> list[str]:
     """``rates.npy`` (uint8 ``(N, th, tw)``), ``predictions.npy`` (float32 ``(N, 6, th, tw)``), ``frames.csv``
-    (a row a frame), ``overlay.gif`` (the overlays at :data:`GIF_FPS`) and ``frames.png`` (the curves; with
-    ``budget``, the threshold each frame reached too)."""
+    (a row a frame), ``overlay.gif`` (the overlays at :data:`GIF_FPS`) and ``frames.png`` (the curves, ``title``
+    above them; with ``budget``, the threshold each frame reached too)."""
     import csv
     import io
 
@@ -687,7 +689,7 @@ def _write_sequence_out(folder: str, rows: list[dict[str, Any]], rates: list[np.
     # Everything is made before anything is written: the GIF's encoding or the curves' drawing failing (or a
     # Ctrl-C in them) after the arrays were written left this run's rates.npy beside the last run's pictures.
     gif = iio.imwrite("<bytes>", np.stack(overlays), extension=".gif", duration=1000 / GIF_FPS, loop=0)
-    curves = sequence_curves(rows, thresholds=budget, higher_is_better=higher_is_better)
+    curves = sequence_curves(rows, thresholds=budget, higher_is_better=higher_is_better, title=title)
     text = io.StringIO()
     writer = csv.writer(text, lineterminator="\n")
     writer.writerow(["frame", "work_saved", "changed", "predict_ms", "network", "threshold", *sdk.RATE_CODES])

@@ -1402,7 +1402,7 @@ def _rate_key(h: int, w: int, palette: str = "paper") -> np.ndarray:
     too small for one row)."""
     from PIL import Image, ImageDraw
 
-    from .plots import rate_legend
+    from .plots import UNTINTED_SWATCH, rate_legend
 
     im = Image.new("RGB", (w, h))
     rows = [("rates each method chose", None, False)] + [(label, colour, True) for label, colour in rate_legend(palette)]
@@ -1415,7 +1415,8 @@ def _rate_key(h: int, w: int, palette: str = "paper") -> np.ndarray:
         top = left + i * step
         x = left
         if swatch:
-            fill = (128, 128, 128) if colour is None else tuple(round(255 * c) for c in colour)
+            # (the untinted class's swatch as every rate key draws it: rtp.sdk's in a frame, the figures' legends)
+            fill = tuple(round(255 * c) for c in (UNTINTED_SWATCH if colour is None else colour))
             d.rectangle((x, top, x + font, top + font), fill=fill, outline=(255, 255, 255))
             x += font + left
         d.text((x, top), label, fill=(255, 255, 255), font_size=font)

@@ -318,7 +318,8 @@ def scatter(
     # (pairs with a NaN or infinite value have no place on the axes: said, not dropped silently under a title
     # that counts every value)
     dropped = int(ok.size - p.size)
-    ax.set_title((title or f"{p.size} tiles") + (f"\n({dropped} not finite, not drawn)" if dropped else ""), fontsize=10)
+    counted = f"{p.size} tile{'' if p.size == 1 else 's'}"  # ("1 tiles" it said of one)
+    ax.set_title((title or counted) + (f"\n({dropped} not finite, not drawn)" if dropped else ""), fontsize=10)
     fig.colorbar(mesh, ax=ax, label="tiles per bin (log)", shrink=0.85)
     return figure_image(fig)
 
@@ -328,9 +329,15 @@ def scatter(
 PALETTES = tuple(OVERLAY_PALETTES)
 
 
+#: The swatch of the untinted class (1x1, full rate) in every rate key: the mid grey of the key draw_rate_overlay draws
+#: into a frame (``legend=True``), the tints' swatches its palette's colours. (The figures' legends drew it white, the
+#: GIFs' key grey: one class, two colours.)
+UNTINTED_SWATCH = (0.5, 0.5, 0.5)
+
+
 def rate_legend(palette: str = "paper") -> list[tuple[str, tuple[float, float, float] | None]]:
     """The overlay's colour classes and the rates in each: ``[(label, colour or None for 1x1)]``, in ``palette``'s
-    colours (:data:`PALETTES`)."""
+    colours (:data:`PALETTES`); a key draws the None (untinted) class's swatch :data:`UNTINTED_SWATCH`."""
     if not isinstance(palette, str) or palette not in OVERLAY_PALETTES:
         raise ParameterError(f"palette: expected one of {', '.join(map(repr, OVERLAY_PALETTES))} (the rate overlay's "
                              f"colours), got {palette!r}", "palette")
@@ -353,7 +360,7 @@ _RATE_PANELS_PER_ROW = 3
 def _add_rate_legend(fig: Figure, ncols: int, palette: str = "paper") -> None:
     from matplotlib.patches import Patch
 
-    handles = [Patch(facecolor=c if c is not None else "white", edgecolor="#404040", label=name)
+    handles = [Patch(facecolor=c if c is not None else UNTINTED_SWATCH, edgecolor="#404040", label=name)
                for name, c in rate_legend(palette)]
     fig.legend(handles=handles, loc="outside lower center", ncols=ncols, fontsize=8, frameon=False)
 
@@ -434,13 +441,16 @@ def _report_styles(report: Any, methods: Sequence[str]) -> dict[str, dict[str, A
 
 
 def _method_legend(fig: Figure, axes: Any, loc: Literal["outside right upper", "outside lower center"],
-                   ncols: int = 1) -> None:
+                   ncols: int = 1, marks: Sequence[Any] = ()) -> None:
     """One legend of the methods of every panel, outside the panels (a legend inside one hid the
-    points and lines under it: on a short path most methods meet in the same corner)."""
+    points and lines under it: on a short path most methods meet in the same corner), then ``marks``, artists
+    labelled with what a figure's other marks mean."""
     handles: dict[str, Any] = {}
     for ax in np.ravel(axes):
         for h, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, h)
+    for h in marks:
+        handles.setdefault(h.get_label(), h)
     if handles:
         fig.legend(list(handles.values()), list(handles), loc=loc, ncols=ncols, fontsize=8, frameon=False)
 
@@ -453,7 +463,9 @@ _CURVES_LEFT = 0.06
 def play_curves(report: Any) -> np.ndarray:
     """Closed-loop sweeps (:func:`rtp.evaluate.play`): per path, each method's work saved against
     its share of failing tiles over its parameter sweep (each method its colour, marker and line style), the default
-    parameter ringed, the matched failing shares dashed."""
+    parameter ringed, the matched failing shares dashed; the legend names the methods, then those two marks."""
+    from matplotlib.lines import Line2D
+
     from ._play import FAIL_LEVELS
 
     paths = list(report.unseen)
@@ -484,7 +496,12 @@ def play_curves(report: Any) -> np.ndarray:
         ax.set_title(f"{s['scene']}, {path} path, {s['frames']} frames", fontsize=10)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("shading work saved, %")
-    _method_legend(fig, axes, "outside right upper")
+    # (the ring and the dashed lines were explained nowhere in the figure)
+    levels = ", ".join(f"{100 * f:g}" for f in FAIL_LEVELS)
+    marks = [Line2D([], [], marker="o", markersize=8, markerfacecolor="none", linestyle="none", color="#404040",
+                    label="default parameter"),
+             Line2D([], [], color="#999999", linewidth=0.8, linestyle="--", label=f"matched failing\n({levels}%)")]
+    _method_legend(fig, axes, "outside right upper", marks=marks)
     return figure_image(fig)
 
 
@@ -529,6 +546,7 @@ def play_frames(report: Any) -> np.ndarray:
     fig = _figure(1300, 300 * len(paths) + 40 + 20 * -(-len(methods) // 7))  # (and the legend's rows below)
     axes = np.atleast_2d(fig.subplots(len(paths), 4, squeeze=False))
     smaller = _smaller_frames(s, max((len(u) for u in report.unseen.values()), default=0))
+    failing = _failing(s["fail_metric"], s["fail_threshold"])
     for row, path in zip(axes, paths):
         t = np.arange(len(report.unseen[path]))
         for a, b in smaller:  # (dynamic resolution: the frames drawn below the largest size, shaded)
@@ -542,7 +560,8 @@ def play_frames(report: Any) -> np.ndarray:
                 _series(ax, t[first:], 100 * np.asarray(series[key][first:], np.float64), styles[m], m,
                         methods.index(m) / len(methods))
         row[3].plot(t[1:], 100 * np.asarray(report.unseen[path][1:]), color="#333333", linewidth=0.9)
-        for ax, title in zip(row, ("work saved, %", f"tiles failing ({s['fail_metric']}), %",
+        # (the failing panel names its threshold, as play_curves' axis does: "jnyang" alone did not say over what)
+        for ax, title in zip(row, ("work saved, %", f"tiles failing ({failing}), %",
                                    "tiles whose rate changed, %", "unseen share of the frame, %")):
             ax.set_title(f"{path}: {title}", fontsize=9)
             # (whole frames: a 3-frame run's axes read 1.0, 1.2, ... 2.0, its rate changes' 1.90 ... 2.10)
@@ -574,13 +593,14 @@ def _smaller_frames(settings: Mapping[str, Any], frames: int) -> list[tuple[int,
 
 
 def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False, *,
-                    higher_is_better: bool = False) -> np.ndarray:
+                    higher_is_better: bool = False, title: str = "") -> np.ndarray:
     """A model over a sequence of an engine's frames (``rtp predict`` on several frames), frame by frame: the
     shading work its rates save, the share of tiles whose rate changed from the frame before, and its
     predict time. ``rows``: one mapping a frame with ``work_saved``, ``changed`` (None on the first) and
     ``predict_ms``. ``thresholds``: a fourth panel, each frame's ``threshold`` (what a budget,
     ``--saving``, reached); ``higher_is_better``: the model's metric is (PSNR), its reduced tiles predicted above
-    the threshold (the panel's title said "below" for every metric)."""
+    the threshold (the panel's title said "below" for every metric). ``title``, if given, above the panels (``rtp
+    predict`` names the model, its metric and the threshold or budget held)."""
     from matplotlib.ticker import MaxNLocator
 
     panels = [([100 * r["work_saved"] for r in rows], "shading work saved, %"),
@@ -589,15 +609,16 @@ def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False,
     if thresholds:
         panels.append(([r["threshold"] for r in rows], "threshold reached (each reduced tile predicted "
                        f"{'above' if higher_is_better else 'below'} it)"))
-    fig = _figure(1300 if len(panels) == 3 else 1700, 300)
+    width = 1300 if len(panels) == 3 else 1700
+    fig = _figure(max(width, text_width(title, 10) + 24) if title else width, 300 + (24 if title else 0))
     axes = fig.subplots(1, len(panels))
     t = np.arange(len(rows))
-    for ax, (y, title) in zip(axes, panels):
+    for ax, (y, name) in zip(axes, panels):
         # (unclipped: every point lies within the limits below, and a marker on 0, a frame whose rates did not
         # change, was drawn as half a dot on the axis)
         ax.plot(t, y, marker="o" if len(rows) <= 30 else None, markersize=3, linewidth=1.0, color="#1f77b4",
                 clip_on=False)
-        ax.set_title(title, fontsize=9)
+        ax.set_title(name, fontsize=9)
         ax.set_xlabel("frame", fontsize=8)
         ax.set_xlim(-0.5, max(len(rows) - 0.5, 0.5))
         # (whole frames only, one tick at the least: with fewer than two matplotlib's integer locator gave up, a
@@ -611,4 +632,6 @@ def sequence_curves(rows: Sequence[Mapping[str, Any]], thresholds: bool = False,
         low = min(0.0, float(finite.min()) if finite.size else 0.0)
         ax.set_ylim(low, top + 0.08 * (top - low) if top > low else low + 1.0)
         ax.grid(alpha=0.3)
+    if title:
+        fig.suptitle(title, fontsize=10)
     return figure_image(fig)

@@ -640,7 +640,8 @@ def test_the_rate_overlays_draw_their_panels_and_legend_in_the_palette_asked_for
                 if isinstance(h, Patch)]
     white = sdk.draw_rate_overlay(np.ones((1, 3, 3), np.float32), np.array([[1, 5, 10]], np.uint8), 1, alpha=1.0,
                                   grid=False, palette="cvd")[0]
-    assert swatches == [(1.0, 1.0, 1.0)] + [tuple(np.round(c.astype(np.float64), 3)) for c in white]
+    # (1x1's swatch the grey of every rate key, the GIF's and the sdk's in a frame: it was white here, grey there)
+    assert swatches == [plots.UNTINTED_SWATCH] + [tuple(np.round(c.astype(np.float64), 3)) for c in white]
     assert plots.rate_legend() == plots.rate_legend("paper")
     assert [c for _, c in plots.rate_legend()][1:] == list(sdk.OVERLAY_COLOURS.values())
     figures.clear()
@@ -685,12 +686,16 @@ def test_heatmaps_draw_infinite_values_at_the_colour_ends_and_nan_grey(monkeypat
     figures.clear()
     plots.scatter(np.array([0.1, np.nan, np.inf, 0.5]), np.array([0.2, 0.3, 0.4, 0.6]), size=128)
     assert figures[-1].axes[0].get_title() == "2 tiles\n(2 not finite, not drawn)"
+    plots.scatter(np.array([0.1, np.nan]), np.array([0.2, 0.3]), size=128)  # (one tile: "1 tiles" it said)
+    assert figures[-1].axes[0].get_title() == "1 tile\n(1 not finite, not drawn)"
 
 
 def test_the_closed_loop_plots_keep_their_legend_off_the_panels(monkeypatch: pytest.MonkeyPatch) -> None:
     """play's curves and per-frame plots name the methods in one legend outside every panel: a legend
     inside the last panel hid the points in its corner (on a short path most methods' defaults meet
-    there) and, per frame, the lines under it."""
+    there) and, per frame, the lines under it. The curves' legend then says what their other marks are, the ring of
+    each method's default parameter and the dashed lines at the matched failing shares (explained nowhere before),
+    each drawn as the figure draws it."""
     from rtp.evaluate._play import PlayReport
 
     figures: list[Any] = []
@@ -705,10 +710,26 @@ def test_the_closed_loop_plots_keep_their_legend_off_the_panels(monkeypatch: pyt
                          "default": True} for i, m in enumerate(methods)]
     plots.play_curves(report)
     plots.play_frames(report)
-    for fig in figures:
-        fig.canvas.draw()
+    from rtp.evaluate._play import FAIL_LEVELS
+
+    marks = ["default parameter", f"matched failing\n({', '.join(f'{100 * f:g}' for f in FAIL_LEVELS)}%)"]
+    assert marks[1] == "matched failing\n(1, 2, 5%)"
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    for fig, want in zip(figures, (methods + marks, methods), strict=True):
+        FigureCanvasAgg(fig).draw()  # (laid out as drawn: a bare Figure's canvas.draw() draws nothing, lays out nothing)
         (legend,) = fig.legends
-        assert [t.get_text() for t in legend.get_texts()] == methods
+        assert [t.get_text() for t in legend.get_texts()] == want
+        if want != methods:
+            ring, dashed = legend.legend_handles[-2:]
+            ax = fig.axes[0]
+            rings = [ln for ln in ax.get_lines() if ln.get_markerfacecolor() == "none" and ln.get_linestyle() == "None"]
+            assert len(rings) == len(methods) and ring.get_marker() == rings[0].get_marker() == "o"
+            assert ring.get_markerfacecolor() == "none" and ring.get_linestyle() == "None"
+            assert ring.get_markersize() == rings[0].get_markersize()
+            assert dashed.get_linestyle() == "--" and dashed.get_color() == "#999999"
+            vlines = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--" and ln.get_color() == "#999999"]
+            assert sorted(ln.get_xdata()[0] for ln in vlines) == [100 * f for f in FAIL_LEVELS]
         box = legend.get_window_extent()
         for ax in fig.axes:
             assert ax.get_legend() is None and not box.overlaps(ax.get_window_extent()), ax.get_title()
@@ -851,7 +872,9 @@ def test_the_scatters_key_lies_off_the_data(monkeypatch: pytest.MonkeyPatch) -> 
     monkeypatch.setattr(plots, "figure_image", lambda fig: figures.append(fig) or np.zeros((1, 1, 3), np.uint8))
     plots.scatter(np.full(50, 0.95), np.full(50, 0.02))
     (fig,) = figures
-    fig.canvas.draw()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()  # (a bare Figure's canvas.draw() lays out nothing: the boxes below were the unlaid-out)
     (ax, _bar) = fig.axes
     assert ax.get_legend() is None
     (legend,) = fig.legends

@@ -86,6 +86,36 @@ def test_the_curves_name_the_side_on_which_tiles_fail(monkeypatch: pytest.Monkey
                                                           "tiles failing (jnyang ≥ 0.25), % (symlog)"]
 
 
+def test_the_per_frame_failing_panel_names_its_threshold(monkeypatch: pytest.MonkeyPatch) -> None:
+    """play_frames.png's failing panel read "tiles failing (jnyang), %": the metric but not the threshold over which a
+    tile fails. It names both, on the failing side, as play_curves' axis does."""
+    figures = _figures(monkeypatch)
+    for metric, threshold in (("psnr", 35.0), ("jnyang", 0.3)):
+        rep = _report(fail_metric=metric, fail_threshold=threshold, frames=3)
+        rep.unseen["fast"] = [1.0, 0.0, 0.0]
+        rep.frames["fast"] = {"oracle": {"saved": [0.5] * 3, "fail": [0.0] * 3, "change": [0.1] * 3}}
+        plots.play_frames(rep)
+    assert [f.axes[1].get_title() for f in figures] == ["fast: tiles failing (psnr ≤ 35), %",
+                                                         "fast: tiles failing (jnyang ≥ 0.3), %"]
+
+
+def test_the_gifs_rate_key_draws_each_swatch_as_the_figures_legend_and_the_sdks_key_do() -> None:
+    """The GIF's colour key drew the 1x1 (untinted) swatch grey, the figures' rate legend white: one class, two
+    colours. Each palette's key draws every swatch in rate_legend's colours, 1x1 plots.UNTINTED_SWATCH, the grey of
+    the key draw_rate_overlay draws into a frame."""
+    frame = sdk.draw_rate_overlay(np.zeros((40, 60, 3), np.float32), np.zeros((3, 4), np.uint8), 16, legend=True)
+    np.testing.assert_array_equal(frame[40 - 33 + 4, 4], plots.UNTINTED_SWATCH)  # (the sdk key's first swatch)
+    for palette in ("paper", "cvd"):
+        key = _play._rate_key(200, 400, palette)
+        rows = [label for label, _ in plots.rate_legend(palette)]
+        step = min(200 // (len(rows) + 2), 28)
+        font, left = max(6, round(step * 0.55)), step // 2
+        for i, (_, colour) in enumerate(plots.rate_legend(palette), start=1):
+            top = left + i * step
+            want = [round(255 * c) for c in (plots.UNTINTED_SWATCH if colour is None else colour)]
+            np.testing.assert_array_equal(key[top + font // 2, left + font // 2], want, err_msg=f"{palette} {i}")
+
+
 def test_the_curves_show_a_point_that_fails_on_no_tile_whole(monkeypatch: pytest.MonkeyPatch) -> None:
     """play_curves.png's axis of failing tiles started at 0: the oracle's point (it fails on no tile) and its
     default's ring sat on the axis, half cut off. Every marker lies inside its panel."""

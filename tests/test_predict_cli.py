@@ -341,6 +341,26 @@ def test_the_curves_of_a_budget_say_which_side_of_the_threshold_a_reduced_tile_i
         assert titles[-1] == f"threshold reached (each reduced tile predicted {side} it)", (model, titles)
 
 
+def test_the_curves_of_a_sequence_are_titled_with_the_model_and_what_its_rates_held(
+        sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """frames.png had no title: a picture of curves named neither the model nor the threshold or budget its rates held.
+    It is titled as the run's first line reads, model, metric, threshold or saving, tiles and frames."""
+    from rtp.evaluate import plots
+
+    titles: list[str] = []
+    monkeypatch.setattr(plots, "figure_image", lambda fig: titles.append(fig.get_suptitle())
+                        or np.zeros((1, 1, 3), np.uint8))
+    n = len(list(sequence.glob("*.npz")))
+    for extra, held in (([], "threshold 0.25"), (["--saving", "0.3"], "a saving of 0.3"),
+                        (["--threshold", "0.2", "--saving", "0.3"], "threshold 0.2 with a floor of 0.3 saved")):
+        titles.clear()
+        assert main(["predict", str(sequence), *extra, "--out", str(tmp_path / str(len(extra))), "-q"]) == 0
+        assert titles == [f"jnyang.onnx (jnyang), {held}, tiles of 16px, {n} frames"], extra
+    titles.clear()
+    plots.sequence_curves([{"work_saved": 0.5, "changed": None, "predict_ms": 1.0}])  # (no title given: none drawn)
+    assert titles == [""]
+
+
 def test_a_sequence_in_text_a_line_a_frame(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:
     files = sorted(sequence.glob("*.npz"))
     assert main(["predict", *map(str, files[:2])]) == 0  # several files are a sequence too
