@@ -39,6 +39,7 @@ from rtp.sdk import (
     ParameterError,
     RtpError,
 )
+from rtp.sdk._metadata import read_sidecar
 from rtp.sdk.files import atomic_output, check_output, yaml_problem
 
 from ._published import file_sha256, identify
@@ -144,6 +145,7 @@ def _merge(base: dict[str, Any], extra: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A metadata sidecar's fields, read as ``sdk.load(..., metadata=PATH)`` reads them (:func:`read_sidecar`)."""
     import yaml
 
     p = Path(path)
@@ -151,11 +153,12 @@ def _read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
         what = "is a folder, not a sidecar file" if p.is_dir() else "not found"
         raise ModelNotFoundError(f"metadata file {what}: {str(p)!r}")
     try:
-        d = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as err:
-        raise MetadataError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
+        d = read_sidecar(p.read_text(encoding="utf-8"))
     except UnicodeDecodeError as err:
         raise MetadataError(f"{p}: not a YAML sidecar, not even UTF-8 text ({err.reason} at byte {err.start})") from err
+    except (yaml.YAMLError, RecursionError, ValueError) as err:  # (nested too deep, a value PyYAML cannot build: a
+        # bare RecursionError or ValueError, with its traceback, where `rtp info --metadata` said "not valid YAML")
+        raise MetadataError(f"{p}: not valid YAML ({yaml_problem(err)})") from err
     if d is None:
         return {}
     if not isinstance(d, dict):
@@ -1241,12 +1244,16 @@ def adopt(
     if known is not None:
         adopted["published"] = known.origin
         log.info("%s is the paper's published %s model (%s, %s)", src.name, known.name, known.repository, known.path)
-    d["provenance"] = _merge(dict(d.get("provenance") or {}) if isinstance(d.get("provenance"), Mapping) else {},
-                             {"adopted": adopted})
+    given = d.get("provenance")
+    if given is not None and not isinstance(given, Mapping):
+        # (replaced by rtp's own entry: a sidecar's `provenance: trained on ...` was dropped without a word)
+        raise MetadataError(f"{source}: provenance: expected a mapping (rtp adds provenance.adopted to it), got "
+                            f"{reprlib.repr(given)}", "provenance")
+    d["provenance"] = _merge(dict(given or {}), {"adopted": adopted})
     try:
         meta = ModelMetadata.from_dict(d)
-    except MetadataError as err:
-        raise MetadataError(f"{source}: {err}") from err
+    except MetadataError as err:  # (the field's key kept, as export and retune keep it: it was None here)
+        raise MetadataError(f"{source}: {err}", err.key) from err
     if carries and not replace:
         raise MetadataError(
             f"{src} already carries {METADATA_KEY}; pass --replace to overwrite it", METADATA_KEY

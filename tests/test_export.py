@@ -1151,6 +1151,43 @@ def test_a_checkpoint_with_dead_outputs_exports_with_a_warning(tmp_path: Path, c
             f"output does not recover with more steps): train again with {again}"])
 
 
+def test_a_sidecar_pyyaml_cannot_build_is_a_metadata_error_and_reads_as_sdk_load_reads_it(
+        tmp_path: Path) -> None:
+    """rtp-export --metadata (and --retune, --adopt) read the sidecar apart from sdk.load: one nested too deep or a
+    value PyYAML cannot build (`!!float x`, a `date: 2026-02-30`) ended the command in a RecursionError or ValueError
+    traceback, exit 1, where `rtp info --metadata` said "not valid YAML"; and `default_threshold: 1e-2` was the
+    string '1e-2', a key given twice its last value without a word."""
+    ck = checkpoint.save(tmp_path / "m.pt", _trained_like_net(), base_metadata())
+    side = tmp_path / "extra.yaml"
+    for text in ("description: " + "[" * 5000 + "]" * 5000 + "\n", "default_threshold: !!float x\n"):
+        side.write_text(text)
+        with pytest.raises(sdk.MetadataError, match=r"extra\.yaml: not valid YAML"):
+            export.export_checkpoint(ck, tmp_path / "m.onnx", extra_metadata=side)
+        with pytest.raises(sdk.MetadataError, match=r"extra\.yaml: not valid YAML"):
+            export.adopt(_foreign(tmp_path, 64, 96), side, tmp_path / "a.onnx")
+    side.write_text("default_threshold: 0.1\ndescription: x\ndefault_threshold: 0.3\n")
+    with pytest.raises(sdk.MetadataError, match=r"'default_threshold' given twice, first on line 1"):
+        export.export_checkpoint(ck, tmp_path / "m.onnx", extra_metadata=side)
+    assert not (tmp_path / "m.onnx").exists() and not (tmp_path / "a.onnx").exists()
+    side.write_text("default_threshold: 1e-2\nprovenance: {trained: 2026-02-30}\n")
+    m = sdk.load(export.export_checkpoint(ck, tmp_path / "m.onnx", extra_metadata=side)).metadata
+    assert m.default_threshold == 0.01 and m.provenance["trained"] == "2026-02-30"
+
+
+def test_an_adopt_sidecars_error_keeps_its_key_and_its_provenance_is_not_dropped(tmp_path: Path) -> None:
+    """adopt's sidecar errors lost the field's key (`MetadataError.key` None, where export's and retune's keep it),
+    and a sidecar's `provenance` that is no mapping was replaced by rtp's own entry without a word."""
+    src = _foreign(tmp_path, 64, 96)
+    with pytest.raises(sdk.MetadataError, match=r"given as a mapping: default_threshold: expected") as info:
+        export.adopt(src, {**PAPER_SIDECAR, "default_threshold": -1}, tmp_path / "a.onnx")
+    assert info.value.key == "default_threshold"
+    with pytest.raises(sdk.MetadataError, match=r"provenance: expected a mapping .*'trained on oa_dm1'") as info:
+        export.adopt(src, {**PAPER_SIDECAR, "provenance": "trained on oa_dm1"}, tmp_path / "a.onnx")
+    assert info.value.key == "provenance" and not (tmp_path / "a.onnx").exists()
+    m = sdk.load(export.adopt(src, {**PAPER_SIDECAR, "provenance": {"scenes": ["oa_dm1"]}}, tmp_path / "a.onnx")).metadata
+    assert m.provenance["scenes"] == ("oa_dm1",) and m.provenance["adopted"]["file"] == "Model.onnx"
+
+
 def test_metadata_errors_name_the_file_they_come_from(tmp_path: Path) -> None:
     """`rtp-export bad.pt` said `metric: expected a lower-case name ..., got None` and an empty sidecar
     `metric: ... got None` or `transform: required, missing`, naming no file; each names it now, the empty

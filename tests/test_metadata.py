@@ -211,6 +211,26 @@ def test_yaml_sidecar(tmp_path: Path) -> None:
     assert info.value.key == "tile_size"
 
 
+def test_a_yaml_sidecar_reads_exponents_as_numbers_dates_as_text_and_refuses_a_key_given_twice(
+        tmp_path: Path) -> None:
+    """PyYAML reads YAML 1.1: `weber_l: 1e-10` (the paper's l as docs/export.md writes it) was the string '1e-10',
+    refused as "expected a finite number, got '1e-10'"; a provenance date a datetime.date, "not JSON serializable";
+    and a field given twice kept its last value without a word (a second `default_threshold:` line)."""
+    p = tmp_path / "side.yaml"
+    p.write_text("metric: jnyang\ntransform: {type: logistic, mu_y: 2.5E-1, k: 1e1}\ntile_size: 16\nsafety: 1e-3\n"
+                 "inputs: [reprojected.r, seen, albedo.r, normal.z]\noutputs: [1x2, 2x1]\ndefault_threshold: 2e-1\n"
+                 "weber_l: 1e-10\nprovenance: {trained: 2026-12-01, lr: -5e-4}\n")
+    m = sdk.ModelMetadata.from_yaml(p)
+    assert (m.transform.mu_y, m.transform.k, m.safety, m.default_threshold, m.weber_l) == (0.25, 10.0, 1e-3, 0.2, 1e-10)
+    assert m.provenance == {"trained": "2026-12-01", "lr": -5e-4}
+    p.write_text(p.read_text() + "default_threshold: 0.3\n")
+    with pytest.raises(sdk.MetadataError, match=r"'default_threshold' given twice, first on line 7 .*line 10"):
+        sdk.ModelMetadata.from_yaml(p)
+    p.write_text(p.read_text().replace("default_threshold: 0.3\n", "").replace("lr: -5e-4", "lr: 1, lr: 2"))
+    with pytest.raises(sdk.MetadataError, match=r"'lr' given twice"):
+        sdk.ModelMetadata.from_yaml(p)
+
+
 def test_decode_applies_safety_inverse_and_extrapolation() -> None:
     m = sdk.ModelMetadata.from_dict(base_metadata(safety=0.05, outputs=["1x2", "2x1"]))
     raw = np.array([0.2, 0.4]).reshape(2, 1, 1)
