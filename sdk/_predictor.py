@@ -663,9 +663,15 @@ class ShadingRatePredictor:
         if not inputs or len(outputs) != 1:
             besides = f" besides the finite probe {probe!r}" if probe is not None else ""
             besides += f" and the features {FEATURES_NAME!r}" if tail is not None else ""
+            # (a sidecar written without the model's own finite_probe: the scalar probe output was counted as a
+            # second output, and the error said nothing of the field)
+            scalars = [o.name for o in outputs if len(o.shape) == 0] if probe is None and inputs else []
+            hint = (f": the model's scalar output {scalars[0]!r} looks like a finite probe, which the metadata does "
+                    f"not name (metadata given beside the model replaces its own: add finite_probe: {scalars[0]})"
+                    if len(scalars) == 1 and len(outputs) == 2 else "")
             raise MetadataError(
                 f"expected a model with one output{besides} and its input planes in one or more inputs, got "
-                f"{len(inputs)} inputs and {len(outputs)} outputs"
+                f"{len(inputs)} inputs and {len(outputs)} outputs{hint}", "finite_probe" if hint else None
             )
         self._probe_name = probe
         o = outputs[0]

@@ -612,8 +612,12 @@ def test_the_finite_probe_must_be_an_output_and_the_only_extra_one(tiny_model: C
     with pytest.raises(sdk.MetadataError, match="finite_probe: the metadata names the output 'nowhere'") as info:
         sdk.load(_with_probe(tiny_model(), base_metadata(finite_probe="nowhere")))
     assert info.value.key == "finite_probe"
-    with pytest.raises(sdk.MetadataError, match="one output.* got 1 inputs and 2 outputs"):
-        sdk.load(_with_probe(tiny_model(), base_metadata()))  # a second output the metadata does not explain
+    # a second output the metadata does not explain: a scalar one is named as the finite probe a sidecar left out
+    # (the error said only "got 1 inputs and 2 outputs", nothing of the field)
+    with pytest.raises(sdk.MetadataError, match="one output.* got 1 inputs and 2 outputs: the model's scalar output "
+                                                r"'probe' looks like a finite probe, .*add finite_probe: probe\)") as info:
+        sdk.load(_with_probe(tiny_model(), base_metadata()))
+    assert info.value.key == "finite_probe"
 
 
 def test_no_bare_onnxruntime_error_escapes(tiny_model: Callable[..., Path]) -> None:
