@@ -336,7 +336,8 @@ class ModelMetadata:
                 f"weber_l: required for the Weber-corrected metric {metric!r} (the environment luminance l)", "weber_l"
             )
 
-        description = d.get("description", "")
+        # (null, as YAML reads an empty `description:`, is none, as rtp-export --retune takes it: it was refused here)
+        description = "" if d.get("description") is None else d["description"]
         if not isinstance(description, str):
             raise MetadataError(f"description: expected a string, got {description!r}", "description")
         provenance = d.get("provenance", {})

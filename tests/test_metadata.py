@@ -124,6 +124,20 @@ def test_defaults_and_frozen() -> None:
         m.provenance["x"] = 1  # type: ignore[index]
 
 
+def test_a_null_description_is_none_and_any_other_non_string_refused(tmp_path: Path) -> None:
+    """`description:` left empty in a sidecar (YAML's null) was refused by rtp-export --metadata and sdk.load
+    ("expected a string, got None") while rtp-export --retune took it for no description; it is none everywhere."""
+    assert sdk.ModelMetadata.from_dict(base_metadata(description=None)).description == ""
+    sidecar = tmp_path / "m.yaml"
+    sidecar.write_text("".join(f"{k}: {json.dumps(v)}\n" for k, v in base_metadata().items() if k != "description")
+                       + "description:\n", encoding="utf-8")
+    assert sdk.ModelMetadata.from_yaml(sidecar).description == ""
+    for bad in (0, False, 5, ["x"]):
+        with pytest.raises(sdk.MetadataError, match="^description: expected a string") as info:
+            sdk.ModelMetadata.from_dict(base_metadata(description=bad))
+        assert info.value.key == "description"
+
+
 def test_psnr_is_higher_is_better_by_default() -> None:
     m = sdk.ModelMetadata.from_dict(base_metadata(metric="psnr", weber_l=None, default_threshold=35.0))
     assert m.higher_is_better is True
