@@ -10,6 +10,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -779,23 +780,40 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     with out_lock(Path(args.out), "rtp evaluate", "evaluate into another folder") if args.out else contextlib.nullcontext():
         if args.out:
             _warn_of_another_evaluation(Path(args.out), args)
-        reports = []
-        for model in args.model:
-            with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:
-                rep = evaluate(
-                    model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
-                    threshold=args.threshold, unseen_fraction=args.unseen_fraction, baselines=not args.no_baselines,
-                    max_samples=args.max_samples, plots_dir=args.out if args.plots else None,
-                    plot_sample=args.plot_sample, progress=bar.update_to, tile_size=args.tile_size,
-                    plot_name=names[model], palette=args.palette,
-                )
-            reports.append(rep)
-            print(rep.table(console_form) + "\n")  # (measured as the console shows it: "R^2 %" under LC_ALL=C)
-        if args.out:
-            md, js = write_reports(reports, args.out)
-            extra = [p for r in reports for p in r.plots]
-            print(f"wrote {md}, {js}" + (f" and {len(extra)} plots" if extra else ""))
+        # The plots are drawn into a folder of their own in --out and take their places there only beside the report
+        # that shows them: a run stopped after the first model drew its plots (Ctrl-C, a failure in the next model)
+        # left them over the previous evaluation's pictures of that name, beside that evaluation's report.
+        stage = Path(args.out) / _PLOTS_STAGE if args.plots else None
+        try:
+            if stage is not None:
+                shutil.rmtree(stage, ignore_errors=True)  # (one a killed run left)
+            reports = []
+            for model in args.model:
+                with Bar(args, 0, f"evaluate {Path(model).stem}", "sample") as bar:
+                    rep = evaluate(
+                        model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
+                        threshold=args.threshold, unseen_fraction=args.unseen_fraction, baselines=not args.no_baselines,
+                        max_samples=args.max_samples, plots_dir=stage, plot_sample=args.plot_sample,
+                        progress=bar.update_to, tile_size=args.tile_size, plot_name=names[model], palette=args.palette,
+                    )
+                reports.append(rep)
+                print(rep.table(console_form) + "\n")  # (measured as the console shows it: "R^2 %" under LC_ALL=C)
+            if args.out:
+                drawn = {p: str(Path(args.out) / Path(p).name) for r in reports for p in r.plots}
+                for r in reports:
+                    r.plots = [drawn[p] for p in r.plots]
+                md, js = write_reports(reports, args.out)
+                for staged, final in drawn.items():
+                    os.replace(staged, final)
+                print(f"wrote {md}, {js}" + (f" and {len(drawn)} plots" if drawn else ""))
+        finally:
+            if stage is not None:
+                shutil.rmtree(stage, ignore_errors=True)
     return 0
+
+
+#: The folder in ``rtp evaluate --out`` its plots are drawn into until the report that shows them is written.
+_PLOTS_STAGE = ".rtp-evaluate-plots"
 
 
 def _warn_of_another_evaluation(out: Path, args: argparse.Namespace) -> None:

@@ -1547,6 +1547,46 @@ def test_a_failure_while_drawing_the_plots_leaves_the_previous_ones_whole(
     assert {p.name: p.read_bytes() for p in out.glob("*.png")} == before
 
 
+def test_a_run_stopped_after_its_first_models_plots_leaves_the_folder_as_it_was(
+        dataset: Path, model: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rtp evaluate a b --plots --out F` drew a's plots into F as soon as a was evaluated: stopped during b (Ctrl-C,
+    a failure), F held a's new pictures over the previous evaluation's of that name, beside that evaluation's report
+    (other numbers, other scenes). The plots now wait in a folder of their own until the report that shows them is
+    written; a stopped run leaves F as it was, and no folder of its own behind."""
+    import shutil
+
+    import rtp.evaluate as ev
+
+    out = tmp_path / "eval"
+    other = shutil.copy(model, tmp_path / "other.onnx")
+    run = ["--data", str(dataset), "--no-baselines", "--max-samples", "1", "--out", str(out), "--plots"]
+    assert rtp_main(["evaluate", str(model), *run]) == 0
+    for png in out.glob("*.png"):
+        png.write_bytes(b"the previous evaluation's " + png.name.encode())  # (this run draws the same names)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert len([n for n in before if n.endswith(".png")]) == 3
+    real = ev.evaluate
+
+    def second_stopped(m: Any, *args: Any, **kwargs: Any) -> Any:
+        if Path(m) == Path(other):
+            raise KeyboardInterrupt
+        return real(m, *args, **kwargs)
+
+    monkeypatch.setattr(ev, "evaluate", second_stopped)
+    assert rtp_main(["evaluate", str(model), str(other), *run]) == 130  # (Ctrl-C's exit status)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    monkeypatch.setattr(ev, "evaluate", real)
+    assert rtp_main(["evaluate", str(model), str(other), *run]) == 0  # a whole run: its plots beside its report
+    md = (out / "evaluation.md").read_text()
+    for name in ("m", "other"):
+        for kind in ("heatmaps", "scatter", "rates"):
+            png = out / f"{name}_{kind}.png"
+            assert png.read_bytes().startswith(b"\x89PNG") and f"]({png.name})" in md
+    assert json.loads((out / "evaluation.json").read_text())[0]["plots"] == [
+        str(out / f"m_{kind}.png") for kind in ("heatmaps", "scatter", "rates")]
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
 def test_a_reports_plot_links_reach_plots_drawn_into_another_folder(dataset: Path, model: Path, tmp_path: Path) -> None:
     """A library call drawing its plots into a plots_dir other than the folder the report is written into linked them
     by file name: every image of evaluation.md was broken. Linked relative to the report now; beside it, by name."""
