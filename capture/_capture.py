@@ -596,7 +596,11 @@ def capture(
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
     w, h = check_frame_size(size, renderer=False)
     if ray in (None, "local"):  # (on a cluster each node's workers are checked against its memory: ray_capture)
-        check_frame_memory("capture", (w, h), processes=min(workers or (cores() if ray == "local" else 1), len(scene_names)))
+        # (locally a process a scene at most; a private Ray's workers a sample at most, any scene's: counted as
+        # scenes, --ray --workers 1000 passed here and then started its 1000 workers, which it checked only once
+        # every one of them had started)
+        most = len(scene_names) if ray is None else len(scene_names) * len(profiles) * per_scene
+        check_frame_memory("capture", (w, h), processes=min(workers or (cores() if ray == "local" else 1), most))
     if ray is None:  # (a Ray driver may have no OpenGL: its workers say so)
         check_frame_size((w, h))
     for name in scene_names:  # every name now: not after the manifest, or an hour into the first map

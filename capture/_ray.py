@@ -139,16 +139,30 @@ def _native_stderr_to_log() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
+def ray_cluster(address: str | None, workers: int | None, tasks: int | None = None) -> Iterator[int]:
     """Connect to Ray (or start a private local instance); yields how many workers to start.
 
     ``workers`` None means one per CPU of the cluster (a private instance: one per core this process
     may run on, :func:`rtp.capture._pool.cores`, not every core of a machine that a container or a
     batch job shares). A Ray already initialised in this process (a notebook, a test) is used as it
     is and left running; one this function started is shut down on exit, and on a start that failed
-    or was interrupted."""
+    or was interrupted.
+
+    The workers are never more than ``tasks`` (the samples the job may have: a worker more holds
+    its renderer or network for nothing) nor more than the CPUs the cluster has, with a warning
+    (each worker takes one CPU: one more than the cluster has waited for a CPU for good, and the job
+    with it); a private instance of more workers than this machine's cores is warned of, as a local
+    pool of more processes is."""
     ray = _ray()
     started = False
+    if workers is not None and tasks is not None and workers > max(1, tasks):
+        log.info("Ray: %d worker(s) asked for %d sample(s): %d", workers, tasks, max(1, tasks))
+        workers = max(1, tasks)
+    if address in (None, RAY_LOCAL) and not ray.is_initialized() and workers is not None and workers > cores():
+        n_cores = cores()
+        log.warning("%d Ray workers on the %d core%s this process may run on: each is a whole renderer or metric "
+                    "process (hundreds of MB, torch's for targets), and more workers than cores add memory, not "
+                    "speed", workers, n_cores, "" if n_cores == 1 else "s")
     if not ray.is_initialized():
         kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.WARNING,
                                   "configure_logging": False}
@@ -181,7 +195,14 @@ def ray_cluster(address: str | None, workers: int | None) -> Iterator[int]:
                                    + _auth_hint(exc)) from exc
         started = True
     try:
-        n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        cpus = int(ray.cluster_resources().get("CPU", 0))
+        n = workers or max(1, cpus)
+        if tasks is not None:
+            n = min(n, max(1, tasks))
+        if 0 < cpus < n:  # (the workers past its CPUs were never placed: the job waited on their samples for good)
+            log.warning("%d Ray workers on a Ray cluster of %d CPU%s: %d workers (each takes one CPU; the others "
+                        "would wait for one for good)", n, cpus, "" if cpus == 1 else "s", cpus)
+            n = cpus
         log.info("Ray: %d worker(s) on %s", n, address or RAY_LOCAL)
         yield n
     finally:
@@ -481,7 +502,8 @@ def ray_capture(scene_names: Sequence[str], out: str, *, profiles: Sequence[str]
     # answers (an address that is not Ray's left a manifest and an empty folder behind).
     writer = DatasetWriter(out, settings) if (Path(out) / "manifest.json").exists() else None
     report = CaptureReport()
-    with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
+    with ray_cluster(address, workers, len(scene_names) * len(profiles) * per_scene) as n, \
+            contextlib.ExitStack() as guard:
         news = _News(guard, planning)
         level = logging.getLogger().getEffectiveLevel()
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_CaptureWorker)
@@ -581,7 +603,7 @@ def ray_targets(data_root: str, todo: dict[str, tuple[str, ...]], params: dict[s
     settings = DatasetReader(data_root).manifest.get("settings")
     size = settings.get("size") if isinstance(settings, dict) else None
     metrics = tuple(dict.fromkeys(m for ms in todo.values() for m in ms))
-    with ray_cluster(address, workers) as n, contextlib.ExitStack() as guard:
+    with ray_cluster(address, workers, len(todo)) as n, contextlib.ExitStack() as guard:
         news = _News(guard, None)
         level = logging.getLogger().getEffectiveLevel()
         cls = ray.remote(num_cpus=1, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)(_TargetWorker)

@@ -527,10 +527,9 @@ def compute_targets(
     if isinstance(ppd, str) and reader.ids:  # ('width' of frames too narrow for it: refused now, not declared in the
         # manifest and then refused at the first sample's FLIP, in a worker, in Python's words on the command line)
         M.image_ppd("width", (reader._size or reader[reader.ids[0]].size)[1], _ppd_option)  # (the one str taken above)
-    # (locally a process a sample at most: --workers 8 on 2 samples was refused for 8 processes' memory; Ray
-    # starts every worker it is given)
-    _check_memory(reader, metrics, workers if workers is None or ray is not None else
-                  min(workers, max(1, len(reader.ids))), ray)
+    # (a process or a Ray worker a sample at most: --workers 8 on 2 samples was refused for 8 processes' memory)
+    _check_memory(reader, metrics, None if workers is None and ray is None else
+                  min(workers or cores(), max(1, len(reader.ids))), ray)
     store = TargetStore(data_root)
     store.root.mkdir(exist_ok=True)
     # Held to the end: a second job on the same targets would compute them again, and its declare could

@@ -3,6 +3,7 @@ path, and a worker killed mid-task loses nothing (issue 10)."""
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import time
@@ -422,6 +423,84 @@ def test_a_ray_start_that_fails_or_is_interrupted_shuts_down_what_it_started(
         with ray_cluster(None, 2):
             pass
     assert calls == [2, "shutdown"]
+
+
+@pytest.mark.timeout(180)
+def test_more_workers_than_the_cluster_has_cpus_or_the_job_samples_start_what_can_work(
+        cluster: None, local: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A worker takes one of Ray's CPUs: `--ray auto --workers 3` on a cluster of 2 CPUs started a third
+    worker that was never placed, and the job waited on that worker's samples (and first on its memory
+    report) for good, without a word. It starts the 2 the cluster has, with a warning; and never more
+    workers than the job has samples (each holds a renderer or a network)."""
+    caplog.set_level(logging.INFO, logger="rtp.capture")
+    with ray_cluster("auto", 3) as n:
+        assert n == 2
+    assert "3 Ray workers on a Ray cluster of 2 CPUs: 2 workers" in caplog.text
+    with ray_cluster("auto", 3, 1) as n:
+        assert n == 1
+    with ray_cluster("auto", None, 1) as n:
+        assert n == 1
+    started: list[int] = []
+    out = tmp_path / "ds"
+    report = capture(SCENES[:1], out, per_scene=2, size=SIZE, workers=3, ray="auto",
+                     _on_ray_actors=lambda actors: started.append(len(actors)))
+    assert started == [2] and (report.written, report.skipped) == (4, 0)
+    for sid in DatasetReader(out).ids:
+        assert sample_path(out, sid).read_bytes() == sample_path(local, sid).read_bytes(), sid
+
+
+def test_a_private_instances_workers_are_counted_as_ray_starts_them(
+        local: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """`--ray --workers N` on this machine: the memory checked before Ray starts is that of the workers
+    Ray starts, a sample each at most, of any scene (capture counted a worker a scene: `--workers 1000` on
+    one scene passed as one process and then started 1000; targets counted all N for 8 samples), and
+    more workers than cores are warned of, as a local pool's processes are."""
+    from rtp.capture import _capture, _ray, _targets
+    from rtp.sdk import ParameterError
+
+    counted: list[Any] = []
+
+    def fake_check(job: str, size: Any, *, processes: int = 1, **kw: Any) -> None:
+        counted.append(processes)
+        raise ParameterError("stop here", "size")
+
+    monkeypatch.setattr(_capture, "check_frame_memory", fake_check)
+    with pytest.raises(ParameterError, match="stop here"):
+        capture(["procedural:1"], local.parent / "never", per_scene=3, size=SIZE, workers=1000, ray="local")
+    assert counted == [6]  # one scene x 2 profiles x 3 pairs
+
+    def fake_targets_check(reader: Any, metrics: Any, workers: int | None, ray: str | None) -> None:
+        counted.append(workers)
+        raise _targets.TargetError("stop here")
+
+    monkeypatch.setattr(_targets, "_check_memory", fake_targets_check)
+    counted.clear()
+    with pytest.raises(_targets.TargetError, match="stop here"):
+        compute_targets(local, ("psnr",), workers=1000, ray="local")
+    assert counted == [8]
+
+    inits: list[Any] = []
+
+    class FakeRay:
+        @staticmethod
+        def is_initialized() -> bool:
+            return False
+
+        @staticmethod
+        def init(**kwargs: Any) -> None:
+            inits.append(kwargs.get("num_cpus"))
+            raise RuntimeError("no start here")
+
+        @staticmethod
+        def shutdown() -> None:
+            pass
+
+    monkeypatch.setattr(_ray, "_ray", lambda: FakeRay)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    caplog.set_level(logging.WARNING, logger="rtp.capture")
+    with pytest.raises(RayExecutorError, match="no start here"), ray_cluster("local", 1000, 5):
+        pass
+    assert inits == [5] and "5 Ray workers on the 2 cores this process may run on" in caplog.text
 
 
 def test_rays_own_failures_name_the_sample_and_are_typed() -> None:
