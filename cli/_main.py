@@ -761,10 +761,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from rtp import sdk
         from rtp.evaluate import check_evaluation
 
+        # (all of them at once: the targets every model's metric lacks in one error, with one `rtp targets`: it named
+        # the first model's only, and the next metric's on the next try)
+        check_evaluation(args.model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
+                         threshold=args.threshold, tile_size=args.tile_size, max_samples=args.max_samples)
         files: dict[Path, str] = {}
         for model in args.model:
-            check_evaluation(model, args.data, scenes=_names(args.scene) or None, metadata=args.metadata,
-                             threshold=args.threshold, tile_size=args.tile_size, max_samples=args.max_samples)
             file = Path(str(sdk.load(model, metadata=args.metadata).path)).resolve()
             if file in files:  # (it was evaluated twice, its report written twice)
                 raise _usage(f"{files[file]} and {model} are the same model file ({file}): give each model once")

@@ -456,7 +456,9 @@ def evaluate(
     ``threshold`` (metric units) replaces the model's ``default_threshold`` for the decision table;
     ``unseen_fraction`` is the seen/unseen rule. ``yang`` / ``fidelityfx`` replace the default baselines (built
     at the model's tile size; Yang's sensitivity is the model's threshold when the metric is JNYang, else its own 0.25,
-    and its environment luminance the JNYang model's ``weber_l``, else its own 0.02).
+    and its environment luminance the JNYang model's ``weber_l``, else its own 0.02); a ``Yang2019`` given is one of
+    its two variants (``unseen="as_is"`` or ``"full"``), the other built from its parameters, so that both are
+    reported, the quality table scoring the ``as_is`` one.
     ``sweep`` also sweeps every method's threshold (cutoff) to compare the work saved at the
     model's failure rate (``report.matched``). ``plots_dir`` writes the figures of
     :mod:`rtp.evaluate.plots` for ``plot_sample`` (default: the first sample).
@@ -495,7 +497,8 @@ def evaluate(
     if mismatch:
         log.warning("%s: %s", predictor.path, mismatch)
     selectors = _baselines(meta, thr, unseen_fraction, yang, fidelityfx) if baselines else {}
-    yang_scored = baselines and not meta.higher_is_better and "yang2019" in selectors
+    # (by its kind, not its name: a Yang2019 given under another name had no quality rows)
+    yang_scored = None if meta.higher_is_better else _yang_variants(selectors)[0]
     run = _Run(predictor, store, thr, unseen_fraction, selectors, yang_scored, sweep)
     plot_id = _plot_sample_id(samples, plot_sample)
     plot_data: dict[str, Any] | None = None
@@ -512,7 +515,7 @@ def evaluate(
 
 
 def check_evaluation(
-    model: str | os.PathLike[str],
+    model: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     data: str | os.PathLike[str],
     *,
     scenes: Sequence[str] | None = None,
@@ -524,10 +527,23 @@ def check_evaluation(
     """What :func:`evaluate` would refuse before its first sample, without evaluating: the model
     (``sdk.load``), the threshold in its metric's units, the dataset, its targets for the model's
     metric and tile (on every sample to evaluate: the ``scenes``, the first ``max_samples`` of them), the
-    ``scenes``. ``rtp evaluate`` checks every model it is given so, before the first is evaluated (a dataset
-    without the last model's targets was refused only after the others had run)."""
+    ``scenes``. ``model``: one model, or a list of them, each checked so; the targets every model's metric lacks
+    are named in one :class:`~rtp.capture.TargetError` with the one ``rtp targets`` command that computes them all
+    (it named the first model's only: the next metric was learnt of on the next try). ``rtp evaluate`` checks every
+    model it is given so, before the first is evaluated (a dataset without the last model's targets was refused
+    only after the others had run)."""
+    models: list[Any] = list(model) if isinstance(model, (list, tuple)) else [model]
+    if not models:
+        raise ParameterError("model: expected a model or a list of one or more, got an empty list", "model")
     _check_max_samples(max_samples)
-    _prepare(model, data, scenes, metadata, threshold, max_samples, tile_size)
+    lacking: list[_LackingTargets] = []
+    for m in models:
+        try:
+            _prepare(m, data, scenes, metadata, threshold, max_samples, tile_size)
+        except _LackingTargets as err:  # (the next models' too, before saying what to compute)
+            lacking.append(err)
+    if lacking:
+        raise _LackingTargets.combined(data, lacking)
 
 
 def _check_max_samples(max_samples: object) -> None:
@@ -584,29 +600,62 @@ def _prepare(model: str | os.PathLike[str], data: str | os.PathLike[str], scenes
     # the metadata as evaluated: on the predictor's (hardware) tiles
     meta = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
     thr = meta.default_threshold if threshold is None else sdk.check_threshold(threshold, meta.higher_is_better)
-    store, samples = _load_samples(data, meta, scenes, max_samples)
+    # (the model's own tile, where tile_size asked for other hardware tiles: None where it did not)
+    model_tile = None if tile_size is None else predictor.metadata.tile_size
+    store, samples = _load_samples(data, meta, scenes, max_samples, model_tile)
     return predictor, meta, thr, store, samples
 
 
 def _load_samples(
-    data: str | os.PathLike[str], meta: sdk.ModelMetadata, scenes: Sequence[str] | None, max_samples: int | None
+    data: str | os.PathLike[str], meta: sdk.ModelMetadata, scenes: Sequence[str] | None, max_samples: int | None,
+    model_tile: int | None = None,
 ) -> tuple[TargetStore, list[Any]]:
     """The dataset's target store and the samples to evaluate, after checking that the targets
-    fit the model (metric, tile)."""
+    fit the model (metric, tile). ``meta``: on the tiles evaluated; ``model_tile``: the model's own, where those are
+    hardware tiles ``tile_size`` asked for (None: the model's)."""
     from rtp.capture import DatasetReader
 
     reader = DatasetReader(data)
     store = TargetStore(data)
     if meta.metric not in store.metrics:
-        raise TargetError(
-            f"{data} has no {meta.metric} targets (it has {', '.join(store.metrics) or 'none'}); "
-            f"run `rtp targets {shlex.quote(str(data))} --metrics {meta.metric}`"
-        )
+        raise _LackingTargets(data, [meta.metric], [f"no {meta.metric} targets"], list(store.metrics))
     if meta.tile_size % store.base_tile:
-        raise TargetError(f"the model's tile {meta.tile_size} is not a multiple of the targets' base tile {store.base_tile}")
+        base = store.base_tile
+        # (the hardware tile of tile_size / --tile-size was called "the model's tile", which it is not)
+        whose = f"the model's tile {meta.tile_size}" if model_tile is None else \
+            f"the hardware tile {meta.tile_size} asked for (tile_size, `rtp evaluate --tile-size`)"
+        own = "" if model_tile is None or model_tile % base else f" (the model's own {model_tile} is one)"
+        raise TargetError(f"{whose} is not a multiple of the targets' base tile {base} in {data}: their values cannot "
+                          f"be pooled to it; evaluate on a multiple of {base}{own}")
     samples = _select_samples([reader[i] for i in list(reader.ids)], data, scenes, max_samples)
     _check_targets(store, samples, meta.metric, data)
     return store, samples
+
+
+class _LackingTargets(TargetError):
+    """The dataset lacks (up-to-date) targets of the metrics to evaluate, which ``rtp targets DATA --metrics
+    METRICS`` computes. ``lacks``: each lack in words ("no psnr targets", "2 of the 3 samples ... have no jnyang
+    targets (...)"); ``have``: the metrics whose targets it has, where a metric has none at all."""
+
+    def __init__(self, data: str | os.PathLike[str], metrics: Sequence[str], lacks: Sequence[str],
+                 have: Sequence[str] | None = None) -> None:
+        self.data, self.metrics, self.lacks, self.have = data, list(metrics), list(lacks), have
+        where = f"{data} has " if len(self.lacks) == 1 and have is not None else \
+            f"{data}: " if len(self.lacks) == 1 else f"{data} lacks the targets of {len(self.metrics)} metrics: "
+        held = "" if have is None else f" (it has {', '.join(have) or 'none'})"
+        super().__init__(f"{where}{'; '.join(self.lacks)}{held}; run `rtp targets {shlex.quote(str(data))} --metrics "
+                         f"{','.join(self.metrics)}`")
+
+    @classmethod
+    def combined(cls, data: str | os.PathLike[str], errors: Sequence[_LackingTargets]) -> _LackingTargets:
+        """One error for the lacks of several models' metrics, with the one command that computes them all (the
+        error itself where there is one)."""
+        if len(errors) == 1:
+            return errors[0]
+        metrics = list(dict.fromkeys(m for e in errors for m in e.metrics))  # (two models of one metric: once)
+        lacks = list(dict.fromkeys(x for e in errors for x in e.lacks))
+        have = next((e.have for e in errors if e.have is not None), None)
+        return cls(data, metrics, lacks, have)
 
 
 def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: str | os.PathLike[str]) -> None:
@@ -618,10 +667,9 @@ def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: st
     bad = missing or stale
     if bad:
         what = "no" if missing else "outdated (of the sample before it was captured again)"
-        raise TargetError(
-            f"{data}: {len(bad)} of the {len(samples)} samples to evaluate have {what} {metric} targets "
-            f"({', '.join(map(repr, bad[:3]))}{', ...' if len(bad) > 3 else ''}); "
-            f"run `rtp targets {shlex.quote(str(data))} --metrics {metric}`")
+        raise _LackingTargets(data, [metric], [f"{len(bad)} of the {len(samples)} samples to evaluate have {what} "
+                                               f"{metric} targets ({', '.join(map(repr, bad[:3]))}"
+                                               f"{', ...' if len(bad) > 3 else ''})"])
 
 
 def _select_samples(
@@ -656,11 +704,17 @@ def _baselines(
     # Motion off: the targets are errors of still frames, and a viewpoint pair is a jump, not one
     # frame of motion at 60 Hz, so the baselines' motion terms (which model motion blur hiding
     # error) would only make them look worse than they are.
+    for key, given, kind in (("yang", yang, Yang2019), ("fidelityfx", fidelityfx, FidelityFX)):
+        if given is not None and not isinstance(given, kind):  # (an AttributeError deep in the run, or none at all)
+            raise ParameterError(f"{key}: expected None (the default) or a {kind.__name__}, got {reprlib.repr(given)}",
+                                 key)
     yang = yang or Yang2019(tile, threshold=y_thr, unseen_fraction=unseen_fraction, motion=False, **y_l)
-    yang_full = None
-    if yang.unseen == "as_is":
-        kw = {k: v for k, v in yang.params().items() if k not in ("luma", "tile_size")}
-        yang_full = Yang2019(yang.tile_size, **{**kw, "unseen": "full"})
+    # Both of its variants, built from the one given, whichever it is: as RT-Percept's (unseen tiles as they are:
+    # the row 'yang2019', whose estimates the quality table scores) and shading unseen tiles at 1x1. (Given
+    # Yang2019(unseen="full"), the report had no Yang quality rows and no Yang notes: both looked for 'yang2019'.)
+    kw = {k: v for k, v in yang.params().items() if k not in ("luma", "tile_size", "unseen")}
+    other = Yang2019(yang.tile_size, **kw, unseen="full" if yang.unseen == "as_is" else "as_is")
+    yang, yang_full = (yang, other) if yang.unseen == "as_is" else (other, yang)
     if fidelityfx is None:
         ffx_tile = tile if tile in (8, 16, 32) else None
         ffx = ([FidelityFX(ffx_tile, motion_factor=0.0), FidelityFX(ffx_tile, motion_factor=0.0, additional_rates=True)]
@@ -670,11 +724,11 @@ def _baselines(
     else:
         ffx = [fidelityfx]
     selectors: dict[str, Any] = {}
-    for sel in [yang, yang_full, *ffx]:
-        if sel is not None:
-            if sel.tile_size != tile:
-                raise ParameterError(f"baseline {sel.name} uses {sel.tile_size}-pixel tiles, the model {tile}")
-            selectors[sel.name] = sel
+    every: list[Yang2019 | FidelityFX] = [yang, yang_full, *ffx]
+    for sel in every:
+        if sel.tile_size != tile:
+            raise ParameterError(f"baseline {sel.name} uses {sel.tile_size}-pixel tiles, the model {tile}")
+        selectors[sel.name] = sel
     return selectors
 
 
@@ -753,7 +807,7 @@ class _Run:
     quality and decision tables are computed from."""
 
     def __init__(self, predictor: Any, store: TargetStore, thr: float, unseen_fraction: float,
-                 selectors: dict[str, Any], yang_scored: bool, sweep: bool) -> None:
+                 selectors: dict[str, Any], yang_scored: str | None, sweep: bool) -> None:
         self.predictor, self.store, self.thr, self.unseen_fraction = predictor, store, thr, unseen_fraction
         # the metadata on the predictor's tiles (coarser than the model's with load(tile_size=...))
         self.meta: sdk.ModelMetadata = dataclasses.replace(predictor.metadata, tile_size=predictor.tile_size)
@@ -813,9 +867,10 @@ class _Run:
         g_t = fwd(gt[rows])
         for name, p in (("model", pred), ("model (no safety)", pred0)):
             self.quality.setdefault((name, scene), _Quality()).add(fwd(p[rows]), g_t, p[rows], gt[rows], unseen)
-        if self.yang_scored:
-            est = self.selectors["yang2019"].predict(sample)
-            self.quality.setdefault(("yang2019", scene), _Quality()).add(fwd(est[rows]), g_t, est[rows], gt[rows], unseen)
+        if self.yang_scored is not None:
+            est = self.selectors[self.yang_scored].predict(sample)
+            self.quality.setdefault((self.yang_scored, scene), _Quality()).add(fwd(est[rows]), g_t, est[rows], gt[rows],
+                                                                               unseen)
 
     def _add_decisions(self, sample: Any, scene: str, pred: np.ndarray, gt: np.ndarray,
                        unseen: np.ndarray, pixels: np.ndarray) -> dict[str, np.ndarray]:
@@ -887,7 +942,7 @@ class _Run:
         """Quality rows of one scene: per scored method and split, the scores in transformed space
         and the MAE in metric units."""
         out = []
-        for method in ["model", "model (no safety)"] + (["yang2019"] if self.yang_scored else []):
+        for method in ["model", "model (no safety)"] + ([self.yang_scored] if self.yang_scored is not None else []):
             p, g, pm, gm, un = self._merged(self.quality, method, scene)
             for split, mask in _split_masks(un.astype(bool)).items():
                 s = scores(p[mask], g[mask], worse=self.worse_t)
@@ -1032,6 +1087,16 @@ def _undefined_notes(quality: list[dict[str, Any]]) -> list[str]:
     return out
 
 
+def _yang_variants(selectors: dict[str, Any]) -> tuple[str | None, str | None]:
+    """The names of the Yang 2019 selectors among ``selectors``, by their kind: the one that reads unseen tiles as
+    they are (``unseen="as_is"``, the one the quality table scores) and the one that shades them at 1x1; None for
+    either that is not there."""
+    def named(unseen: str) -> str | None:
+        return next((n for n, s in selectors.items() if isinstance(s, Yang2019) and s.unseen == unseen), None)
+
+    return named("as_is"), named("full")
+
+
 def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: float, outputs: Sequence[str]) -> list[str]:
     notes = [
         "R² %, MAE, MAE under., σ MAE and under % are in the model's transformed space (as the paper reports them); "
@@ -1041,21 +1106,22 @@ def _notes(metric: str, hib: bool, thr: float, selectors: dict[str, Any], frac: 
         "1x1 never fails. 'work saved %': 1 - 1/(W·H) of the chosen rate, averaged over the tiles weighted by the "
         "pixels each holds (a partial tile at the frame's edge its real ones).",
     ]
-    if "yang2019" in selectors:
+    as_is, full = _yang_variants(selectors)
+    if (either := as_is or full) is not None:
+        yang = selectors[either]
         if metric != "jnyang":
             notes.append(
                 f"Yang 2019 estimates a JNYang-like quantity (Weber-normalised luma difference of the previous frame), "
                 f"not {metric}: its scores measure how well that proxy tracks {metric}, and its decisions use its own "
-                f"sensitivity t = {selectors['yang2019'].threshold:g}."
+                f"sensitivity t = {yang.threshold:g}."
                 + (" Its quality rows are left out: PSNR runs the other way." if hib else "")
             )
         # (the variant's own share: built from a Yang2019 given to evaluate(yang=), it keeps that one's, and the note
         # named the evaluation's --unseen-fraction, which it did not use)
-        full = selectors.get("yang2019-unseen-1x1")
-        full_frac = full.unseen_fraction if full is not None else frac
+        full_frac = selectors[full].unseen_fraction if full is not None else frac
         notes.append(
             "Yang 2019 reads only the reprojected previous frame: unseen pixels are black there, so unseen tiles get "
-            "a zero estimate and the coarsest rate (RT-Percept's YangVRS does the same); 'yang2019-unseen-1x1' "
+            f"a zero estimate and the coarsest rate (RT-Percept's YangVRS does the same); '{full or 'yang2019-unseen-1x1'}' "
             f"instead shades tiles more than {100 * full_frac:g}% unseen at 1x1."
         )
     if any(n.startswith("fidelityfx") for n in selectors):

@@ -1889,3 +1889,81 @@ def test_the_rate_overlays_of_many_methods_wrap_to_rows_of_three(monkeypatch: py
     titled = [[ax.get_title() for ax in fig.axes if ax.get_title()] for fig in figures]
     assert titled[2] == [f"m{i}: saves 0%" for i in range(6)] and len(titled[3]) == 5
     assert [ax.axison for ax in figures[3].axes].count(False) == 1  # (the sixth place, empty)
+
+
+def test_every_models_lacking_targets_are_named_in_one_error_with_one_command(
+        dataset: Path, model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp evaluate flip psnr --data D` where neither metric has targets named flip's only (`rtp targets D --metrics
+    flip`): psnr's lack came out on the next try. Every model is checked before any work now, and one error names
+    every lacking metric with the one command (its path shell-quoted) that computes them all."""
+    import shlex
+    import shutil
+
+    from rtp.capture import TargetError
+    from rtp.evaluate import check_evaluation
+
+    data = tmp_path / "my data"  # (a space: the printed command quotes it)
+    shutil.copytree(dataset, data)
+    command = f"run `rtp targets {shlex.quote(str(data))} --metrics flip,psnr`"
+    assert rtp_main(["evaluate", "flip", "psnr", "--data", str(data)]) == 2
+    shown = capsys.readouterr()
+    assert shown.out == ""
+    assert f"{data} lacks the targets of 2 metrics: no flip targets; no psnr targets (it has jnyang); {command}" \
+        in shown.err, shown.err
+    # the library's check of several models likewise; a metric lacking on some samples and one lacking altogether
+    # in one error, one model of each metric named once (two models of one metric)
+    TargetStore(data).path("s2", "jnyang").unlink()
+    with pytest.raises(TargetError) as err:
+        check_evaluation([model, "psnr", "psnr-8px", model], data)
+    assert str(err.value) == (f"{data} lacks the targets of 2 metrics: 1 of the 3 samples to evaluate have no jnyang "
+                              f"targets ('s2'); no psnr targets (it has jnyang); run `rtp targets "
+                              f"{shlex.quote(str(data))} --metrics jnyang,psnr`")
+    # one model's lack reads as it did
+    with pytest.raises(TargetError, match=r"has no psnr targets \(it has jnyang\); run `rtp targets '.*' --metrics "
+                                          r"psnr`$"):
+        check_evaluation("psnr", data)
+    with pytest.raises(sdk.ParameterError, match="model: expected a model or a list"):
+        check_evaluation([], data)
+
+
+def test_a_hardware_tile_not_of_the_targets_base_tile_is_named_as_the_option_gave_it(
+        dataset: Path, model: Path) -> None:
+    """`rtp evaluate --tile-size 4` on targets of an 8-pixel base tile said "the model's tile 4 is not a multiple of
+    the targets' base tile 8": the model's tile is 16; 4 is the hardware tile the option asked for. Worded by where
+    the 4 came from now; the model's own tile still reads as the model's."""
+    from rtp.capture import TargetError
+
+    manifest = dataset / "targets" / "manifest.json"
+    manifest.write_text(json.dumps({**json.loads(manifest.read_text()), "base_tile": 8}))
+    with pytest.raises(TargetError) as err:
+        evaluate(model, dataset, tile_size=4, baselines=False, sweep=False)
+    text = str(err.value)
+    assert text.startswith("the hardware tile 4 asked for (tile_size, `rtp evaluate --tile-size`) is not a multiple "
+                           "of the targets' base tile 8") and "model's tile 4" not in text, text
+    assert text.endswith("evaluate on a multiple of 8 (the model's own 16 is one)"), text
+    manifest.write_text(json.dumps({**json.loads(manifest.read_text()), "base_tile": 32}))
+    with pytest.raises(TargetError, match=r"^the model's tile 16 is not a multiple of the targets' base tile 32 in "):
+        evaluate(model, dataset, baselines=False, sweep=False)
+
+
+def test_a_given_yang_that_shades_unseen_tiles_fully_is_scored_and_noted(dataset: Path, model: Path) -> None:
+    """evaluate(yang=Yang2019(unseen="full")) reported no Yang quality rows and no Yang notes (both looked for the
+    name 'yang2019', which only the unseen="as_is" variant carries), and no 'yang2019' decisions. The variants
+    follow their kind now: given either, the other is built from its parameters, so the report is the one the
+    other variant gives; a Yang2019 of another name is scored under its name; anything else is refused."""
+    kw: dict[str, Any] = {"threshold": 0.25, "motion": False, "unseen_fraction": 0.3}
+    full = evaluate(model, dataset, yang=Yang2019(T, unseen="full", **kw), sweep=False)
+    as_is = evaluate(model, dataset, yang=Yang2019(T, **kw), sweep=False)
+    assert {r["method"] for r in full.quality} == {"model", "model (no safety)", "yang2019"}
+    assert full.to_dict() == as_is.to_dict()  # (rows, notes, baselines: NaN as null)
+    assert any("more than 30% unseen at 1x1" in n for n in full.notes)
+
+    class NAS(Yang2019):
+        name = "nas"
+
+    nas = evaluate(model, dataset, yang=NAS(T, **kw), sweep=False)
+    scored = [{**r, "method": "yang2019"} for r in nas.to_dict()["quality"] if r["method"] == "nas"]
+    assert scored and scored == [r for r in as_is.to_dict()["quality"] if r["method"] == "yang2019"]
+    assert any("'yang2019-unseen-1x1' instead shades tiles" in n for n in nas.notes)
+    with pytest.raises(sdk.ParameterError, match=r"yang: expected None \(the default\) or a Yang2019, got 'fast'"):
+        evaluate(model, dataset, yang="fast")  # type: ignore[arg-type]
