@@ -536,14 +536,16 @@ def check_evaluation(
     if not models:
         raise ParameterError("model: expected a model or a list of one or more, got an empty list", "model")
     _check_max_samples(max_samples)
-    lacking: list[_LackingTargets] = []
+    lacking: list[TargetError] = []
     for m in models:
         try:
             _prepare(m, data, scenes, metadata, threshold, max_samples, tile_size)
-        except _LackingTargets as err:  # (the next models' too, before saying what to compute)
+        except TargetError as err:  # (the next models' too, before saying what to compute)
+            if not isinstance(getattr(err, "lack", None), _Lack):
+                raise
             lacking.append(err)
     if lacking:
-        raise _LackingTargets.combined(data, lacking)
+        raise _combined(data, lacking)
 
 
 def _check_max_samples(max_samples: object) -> None:
@@ -618,7 +620,7 @@ def _load_samples(
     reader = DatasetReader(data)
     store = TargetStore(data)
     if meta.metric not in store.metrics:
-        raise _LackingTargets(data, [meta.metric], [f"no {meta.metric} targets"], list(store.metrics))
+        raise _lacking(data, [meta.metric], [f"no {meta.metric} targets"], list(store.metrics))
     if meta.tile_size % store.base_tile:
         base = store.base_tile
         # (the hardware tile of tile_size / --tile-size was called "the model's tile", which it is not)
@@ -632,30 +634,42 @@ def _load_samples(
     return store, samples
 
 
-class _LackingTargets(TargetError):
-    """The dataset lacks (up-to-date) targets of the metrics to evaluate, which ``rtp targets DATA --metrics
-    METRICS`` computes. ``lacks``: each lack in words ("no psnr targets", "2 of the 3 samples ... have no jnyang
-    targets (...)"); ``have``: the metrics whose targets it has, where a metric has none at all."""
+@dataclasses.dataclass(frozen=True)
+class _Lack:
+    """What a dataset lacks of the targets of the metrics to evaluate, which ``rtp targets DATA --metrics METRICS``
+    computes: ``lacks``, each lack in words ("no psnr targets", "2 of the 3 samples ... have no jnyang targets
+    (...)"); ``have``, the metrics whose targets it has, where a metric has none at all. Carried by the
+    :class:`TargetError` :func:`_lacking` makes (a class of its own would be one more error class to document)."""
 
-    def __init__(self, data: str | os.PathLike[str], metrics: Sequence[str], lacks: Sequence[str],
-                 have: Sequence[str] | None = None) -> None:
-        self.data, self.metrics, self.lacks, self.have = data, list(metrics), list(lacks), have
-        where = f"{data} has " if len(self.lacks) == 1 and have is not None else \
-            f"{data}: " if len(self.lacks) == 1 else f"{data} lacks the targets of {len(self.metrics)} metrics: "
-        held = "" if have is None else f" (it has {', '.join(have) or 'none'})"
-        super().__init__(f"{where}{'; '.join(self.lacks)}{held}; run `rtp targets {shlex.quote(str(data))} --metrics "
-                         f"{','.join(self.metrics)}`")
+    data: str | os.PathLike[str]
+    metrics: tuple[str, ...]
+    lacks: tuple[str, ...]
+    have: tuple[str, ...] | None = None
 
-    @classmethod
-    def combined(cls, data: str | os.PathLike[str], errors: Sequence[_LackingTargets]) -> _LackingTargets:
-        """One error for the lacks of several models' metrics, with the one command that computes them all (the
-        error itself where there is one)."""
-        if len(errors) == 1:
-            return errors[0]
-        metrics = list(dict.fromkeys(m for e in errors for m in e.metrics))  # (two models of one metric: once)
-        lacks = list(dict.fromkeys(x for e in errors for x in e.lacks))
-        have = next((e.have for e in errors if e.have is not None), None)
-        return cls(data, metrics, lacks, have)
+
+def _lacking(data: str | os.PathLike[str], metrics: Sequence[str], lacks: Sequence[str],
+             have: Sequence[str] | None = None) -> TargetError:
+    """The :class:`TargetError` of a :class:`_Lack`, with it as its ``lack`` attribute."""
+    lack = _Lack(data, tuple(metrics), tuple(lacks), None if have is None else tuple(have))
+    where = f"{data} has " if len(lack.lacks) == 1 and have is not None else \
+        f"{data}: " if len(lack.lacks) == 1 else f"{data} lacks the targets of {len(lack.metrics)} metrics: "
+    held = "" if have is None else f" (it has {', '.join(have) or 'none'})"
+    err = TargetError(f"{where}{'; '.join(lack.lacks)}{held}; run `rtp targets {shlex.quote(str(data))} --metrics "
+                      f"{','.join(lack.metrics)}`")
+    err.lack = lack  # type: ignore[attr-defined]
+    return err
+
+
+def _combined(data: str | os.PathLike[str], errors: Sequence[TargetError]) -> TargetError:
+    """One error for the lacks of several models' metrics (each error of :func:`_lacking`), with the one command
+    that computes them all (the error itself where there is one)."""
+    if len(errors) == 1:
+        return errors[0]
+    lacks: list[_Lack] = [e.lack for e in errors]  # type: ignore[attr-defined]
+    metrics = list(dict.fromkeys(m for x in lacks for m in x.metrics))  # (two models of one metric: once)
+    words = list(dict.fromkeys(w for x in lacks for w in x.lacks))
+    have = next((x.have for x in lacks if x.have is not None), None)
+    return _lacking(data, metrics, words, have)
 
 
 def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: str | os.PathLike[str]) -> None:
@@ -667,7 +681,7 @@ def _check_targets(store: TargetStore, samples: list[Any], metric: str, data: st
     bad = missing or stale
     if bad:
         what = "no" if missing else "outdated (of the sample before it was captured again)"
-        raise _LackingTargets(data, [metric], [f"{len(bad)} of the {len(samples)} samples to evaluate have {what} "
+        raise _lacking(data, [metric], [f"{len(bad)} of the {len(samples)} samples to evaluate have {what} "
                                                f"{metric} targets ({', '.join(map(repr, bad[:3]))}"
                                                f"{', ...' if len(bad) > 3 else ''})"])
 
