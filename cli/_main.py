@@ -39,7 +39,7 @@ EXAMPLES = """examples:
   rtp predict frame.npz --out predicted           a model's rates for a frame of your engine's G-buffers
   rtp scenes list                                 the game levels, their split, and what is cached
   rtp adapters check myengine                     the adapter contract's checks on your engine's adapter
-  rtp capture --scene procedural:1 --per-scene 2 --out data/toy
+  rtp capture --scene procedural:1,procedural:2 --per-scene 2 --out data/toy   two scenes: train holds one out
   rtp targets data/toy && rtp train --data data/toy --metric jnyang --out toy.pt
   rtp import dumps/level1 dumps/level2 --out data/mine   a dataset of your engine's frames, to train on
 """
@@ -1300,7 +1300,8 @@ def build_parser() -> argparse.ArgumentParser:
     dm = command("demo", "render a scene, pick VRS rates with a shipped model, show the result", _cmd_demo)
     dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
     model_metadata(dm)
-    dm.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    dm.add_argument("--threshold", type=float, default=None, help="decision threshold in the model's metric units "
+                    "(default: the model's own)")
     dm.add_argument("--scene", default="procedural:0",
                     help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
     dm.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT")
@@ -1341,7 +1342,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"camera path profiles, repeatable or comma-separated: {', '.join(PATH_PROFILES)} "
                     "(default: slow,fast)")
     pl.add_argument("--frames", type=_positive, default=300, help="frames per path")
-    pl.add_argument("--fps", type=float, default=60.0, help="frame rate of the paths")
+    pl.add_argument("--fps", type=float, default=60.0, help="frame rate of the paths, in frames a second")
     pl.add_argument("--seed", type=_non_negative, default=0, help="which path through the map")
     pl.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT (the shipped models were trained at "
                     "1280x720; at other sizes a tile covers more or less of the scene than they learned)")
@@ -1353,8 +1354,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"{', '.join(METRICS)} or a plugin's: a tile fails when its true error in this metric, "
                     "computed on every frame for the six rates, is over --fail-threshold (PSNR: under; FLIP and LPIPS add "
                     "about a second a 720p frame)")
-    pl.add_argument("--fail-threshold", type=float, default=None, help="default: the metric's starting threshold "
-                    "(JNYang 0.25)")
+    pl.add_argument("--fail-threshold", type=float, default=None, help="the failure threshold, in --fail-metric's "
+                    "units (default: the metric's starting threshold, "
+                    "JNYang's 0.25)")
     pl.add_argument("--no-sweep", action="store_true", help="run each method at its default parameter only")
     pl.add_argument("--flip-every", type=int, default=20, help="FLIP of the displayed frames every N-th frame "
                     "(default parameters; 0: never)")
@@ -1402,7 +1404,7 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("--profile", default="engine", help="recorded as a capture's motion profile is (default: engine)")
     _convention_options(im)
     im.add_argument("--tolerance", type=float, default=DEFAULT_REPROJECTION_TOLERANCE, help="the reprojection's "
-                    "relative depth tolerance (disocclusion test)")
+                    "relative depth tolerance (disocclusion test), 0 to 1: a share of the depth expected")
     im.add_argument("--write-example", action="store_true", help="write frames of the reference renderer into the "
                     "folder given, every array in the layout read")
     # (--write-example's options default to None: given without it, they are refused rather than ignored)
@@ -1433,7 +1435,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "(written with --write-example), several, or a folder of them (taken in the order of their names)")
     pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
     model_metadata(pr)
-    pr.add_argument("--threshold", type=float, default=None, help="decision threshold (default: the model's own)")
+    pr.add_argument("--threshold", type=float, default=None, help="decision threshold in the model's metric units "
+                    "(default: the model's own)")
     pr.add_argument("--saving", type=float, default=None, metavar="SHARE", help="a budget instead of a threshold: "
                     "each frame's rates save at least this share of the shading work (0 to 0.9375), at the lowest "
                     "threshold that does (sdk.select_rates_for_saving), which is reported a frame; with --threshold, "

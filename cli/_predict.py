@@ -432,6 +432,9 @@ def run_predict(args: argparse.Namespace) -> int:
         print(f"wrote {path}: a {w}x{h} frame of the procedural scene, {len(arrays)} arrays: "
               + ", ".join(f"{k} {'x'.join(map(str, v.shape))}" for k, v in arrays.items()))
         return 0
+    if args.palette != "paper" and not args.out:  # (it was taken and nothing drawn, as rtp evaluate and rtp play refuse)
+        raise sdk.ParameterError(f"--palette {args.palette}: the colours of the rate overlay --out draws (overlay.png, "
+                                 "a sequence's overlay.gif): give --out DIR, or leave --palette out", "palette")
     if args.count != 1:
         raise sdk.ParameterError(f"--frames {args.count}: the number of frames --write-example writes; a sequence to "
                                  "predict is every frame file given (or every .npz of a folder)", "frames")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import ast
 import contextlib
+import re
 import subprocess
 import sys
 import time
@@ -74,6 +75,66 @@ def test_help_exits_0_and_shows_defaults(prog: str, command: tuple[str, ...], ca
         assert action.help, (command, action.dest)
         # the help states the default itself, or the formatter appends it
         assert "default:" in action.help or f"(default: {action.default})" in text, (command, action.dest)
+
+
+def _help_examples() -> list[tuple[str, tuple[str, ...], list[str]]]:
+    """``(prog, command, argv)`` of every example of every help's epilog (``examples:``, a command a line, its
+    description after two spaces or ``#``, commands joined by ``&&`` split)."""
+    import shlex
+
+    out = []
+    for prog, command in COMMANDS:
+        epilog = _subparser(ENTRY[prog][1](), command).epilog or ""
+        _, found, examples = epilog.partition("examples:\n")
+        assert found or "examples" not in epilog, (prog, command)
+        for line in examples.splitlines():
+            text = re.split(r"\s{2,}|\s#", line.strip())[0]
+            for part in text.split("&&"):
+                if part.strip().startswith(("rtp ", "rtp-export ")):
+                    out.append((prog, command, shlex.split(part)))
+    return out
+
+
+def test_the_examples_of_every_help_run_as_written(capsys: pytest.CaptureFixture[str]) -> None:
+    """Every example an epilog gives parses (its flags, choices and metrics exist), and a dataset an epilog captures
+    and then trains on holds two scenes or more: `rtp train` holds out whole scenes for validation, and `rtp --help`'s
+    `rtp capture --scene procedural:1 ... --out data/toy` then `rtp train --data data/toy` failed with "data/toy holds
+    one scene", the first time a reader followed it."""
+    from rtp.cli._main import _names
+
+    examples = _help_examples()
+    assert len(examples) >= 20 and {c for _, c, _ in examples} >= {(), ("import",), ("predict",), ("play",)}
+    for prog, command, argv in examples:
+        build = ENTRY[prog][1]
+        try:
+            args = build().parse_args(argv[1:])
+        except SystemExit:
+            pytest.fail(f"`{' '.join((prog, *command))} --help`'s example {' '.join(argv)!r} is refused: "
+                        f"{capsys.readouterr().err.strip().splitlines()[-1:]}")
+        if argv[1:2] == ["capture"]:  # what the same help then trains on
+            trained = [a for p, c, a in examples if (p, c) == (prog, command) and a[1:2] == ["train"]
+                       and build().parse_args(a[1:]).data == args.out]
+            if trained and not args.split:
+                assert len(_names(args.scene)) >= 2, f"{' '.join(argv)}: one scene, then {' '.join(trained[0])}"
+
+
+def test_a_palette_with_nothing_to_draw_is_refused_in_every_command(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """`--palette` colours a picture the command draws only with another option; given without it, it is refused
+    (exit 2, naming --palette), not taken and ignored: `rtp predict FRAME --palette cvd` without --out printed the
+    rates as if the colours had been used. Every command with --palette is here (rtp demo always draws)."""
+    nothing_drawn = {
+        ("evaluate",): ["evaluate", "jnyang", "--data", str(tmp_path / "data"), "--out", str(tmp_path / "ev")],
+        ("play",): ["play", "procedural:0", "--no-plots", "--out", str(tmp_path / "play")],
+        ("predict",): ["predict", str(tmp_path / "frame.npz")],
+    }
+    with_palette = {c for _, c in COMMANDS if any(a.dest == "palette" for a in _subparser(build_parser(), c)._actions)}
+    assert with_palette == {*nothing_drawn, ("demo",)}
+    for command, argv in nothing_drawn.items():
+        assert main([*argv, "--palette", "cvd"]) == 2, command
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        assert err.startswith(f"rtp {command[0]}: error: --palette cvd"), err
+    assert not any(tmp_path.iterdir())  # (refused before any work)
 
 
 def test_rtp_alone_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:

@@ -376,6 +376,27 @@ def test_options_not_read_are_refused_not_ignored(dumps: Any, tmp_path: Path, ca
     assert not (tmp_path / "ex").exists() and not (tmp_path / "data").exists()
 
 
+def test_a_tolerance_out_of_range_is_refused_naming_the_flag_not_a_frame(
+        dumps: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp import DUMPS --out DATA --tolerance 5` was refused by the first frame's reprojection, its error naming
+    that frame's file (`'dumps/level_a/frame_0000.npz': tolerance: ...`) as if the frame were wrong: the range is
+    checked with the other arguments, said with the flag, before anything is read or written; the SDK's own limit,
+    1, is taken."""
+    from rtp.sdk._reproject import MAX_REPROJECTION_TOLERANCE
+
+    root, _, _ = dumps
+    for bad in ("5", "-0.1", "nan", str(MAX_REPROJECTION_TOLERANCE * 1.01)):
+        assert rtp_main(["import", str(root / "level_a"), "--out", str(tmp_path / "data"), "--tolerance", bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        assert err.startswith(f"rtp import: error: --tolerance: expected a number in [0, {MAX_REPROJECTION_TOLERANCE:g}]"), err
+        assert "frame_0000" not in err
+        with pytest.raises(sdk.ParameterError, match=r"^tolerance: expected a number in \[0, 1\]") as exc:
+            import_frames(root / "level_a", tmp_path / "data", tolerance=float(bad))
+        assert exc.value.name == "tolerance"
+    assert not (tmp_path / "data").exists()
+    assert import_frames(root / "level_a", tmp_path / "data", tolerance=MAX_REPROJECTION_TOLERANCE).written == 3
+
+
 def test_each_kind_of_convention_warning_is_shown_by_the_command(dumps: Any, tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """Frames with two kinds of mistake (view matrices for row vectors, and so nothing reprojects) name both: every
