@@ -26,7 +26,15 @@ from ._dataset import (
     open_dataset,
     write_png,
 )
-from ._images import check_image_output, figure_image, image_values, read_image_values, save_image
+from ._images import (
+    check_image_output,
+    figure_image,
+    image_values,
+    read_image_values,
+    save_image,
+    text_width,
+    wrap_to_width,
+)
 from ._import import ImportReport, import_frames, linear_light_warning
 from ._memory import check_frame_memory, check_memory, job_bytes
 from ._pool import WorkerDiedError, tick_queue, with_ticks, worker_pool, worker_threads
@@ -76,5 +84,7 @@ __all__ = [
     "preview_sheet",
     "save_image",
     "scene_id",
+    "text_width",
+    "wrap_to_width",
     "write_png",
 ]

@@ -179,8 +179,7 @@ def _parameters(args: argparse.Namespace) -> dict[str, Any]:
 def _figure(args: argparse.Namespace, ref: np.ndarray, pixel_map: Any, tiles: np.ndarray, info: Any) -> None:
     from matplotlib.figure import Figure
 
-    from rtp.capture import figure_image, save_image
-    from rtp.capture._images import wrap_to_width
+    from rtp.capture import figure_image, save_image, wrap_to_width
 
     h, w = ref.shape[:2]
     shown = pixel_map if pixel_map is not None else np.repeat(np.repeat(tiles, args.tile, 0), args.tile, 1)[:h, :w]

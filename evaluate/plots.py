@@ -14,8 +14,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from rtp.capture import figure_image, save_image
-from rtp.capture._images import text_width
+from rtp.capture import figure_image, save_image, text_width
 from rtp.sdk import (
     OVERLAY_PALETTES,
     PREDICTED_RATES,

@@ -39,8 +39,7 @@ from rtp.sdk import (
     ParameterError,
     RtpError,
 )
-from rtp.sdk._metadata import read_sidecar
-from rtp.sdk.files import atomic_output, check_output, yaml_problem
+from rtp.sdk.files import atomic_output, check_output, read_sidecar, yaml_problem
 
 from ._published import file_sha256, identify
 

@@ -119,55 +119,6 @@ def _depth_over(value: Any, limit: int) -> bool:
     return False
 
 
-#: YAML 1.2's floats: PyYAML reads YAML 1.1, whose floats need a dot and a signed exponent, so a sidecar's
-#: ``safety: 1e-3`` or ``weber_l: 1e-10`` (as docs/export.md writes the paper's l) was the string '1e-3',
-#: refused as "expected a finite number, got '1e-3'".
-_YAML_FLOAT = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
-    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
-    |[-+]?\.[0-9][0-9_]*(?:[eE][-+]?[0-9]+)?
-    |[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+\.[0-9_]*
-    |[-+]?\.(?:inf|Inf|INF)
-    |\.(?:nan|NaN|NAN))$""", re.X)
-
-
-@functools.cache
-def _sidecar_loader() -> Any:
-    """PyYAML's safe loader as a metadata sidecar is read (:func:`read_sidecar`)."""
-    import yaml
-
-    float_tag, drop = "tag:yaml.org,2002:float", {"tag:yaml.org,2002:float", "tag:yaml.org,2002:timestamp"}
-
-    class SidecarLoader(yaml.SafeLoader):
-        def construct_mapping(self, node: Any, deep: bool = False) -> Any:
-            # (a key given twice: PyYAML keeps the last without a word, and a sidecar's second `rate_factors:` block
-            # or `default_threshold:` line silently replaced the first)
-            seen: dict[str, int] = {}
-            for key, _ in node.value if isinstance(node, yaml.MappingNode) else ():
-                if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
-                    if key.value in seen:
-                        raise yaml.constructor.ConstructorError(
-                            None, None, f"{key.value!r} given twice, first on line {seen[key.value] + 1} (YAML keeps "
-                            "only the last): give it once", key.start_mark)
-                    seen[key.value] = key.start_mark.line
-            return super().construct_mapping(node, deep=deep)
-
-    # (no timestamps, as YAML 1.2's core schema: a provenance date stays the text it is, a JSON value, where a date
-    # object was refused as "not JSON serializable" and 2026-02-30 raised a bare ValueError)
-    SidecarLoader.yaml_implicit_resolvers = {
-        first: [(tag, rx) for tag, rx in resolvers if tag not in drop]
-        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
-    SidecarLoader.add_implicit_resolver(float_tag, _YAML_FLOAT, list("-+0123456789."))
-    return SidecarLoader
-
-
-def read_sidecar(text: str) -> Any:
-    """A metadata sidecar's YAML ``text`` as Python values: PyYAML's safe loader, but floats as YAML 1.2 reads them
-    (``1e-3``), dates left as text and a key given twice in one mapping refused (``yaml.YAMLError``)."""
-    import yaml
-
-    return yaml.load(text, Loader=_sidecar_loader())  # noqa: S506  (a SafeLoader)
-
-
 def _freeze(value: Any) -> Any:
     if isinstance(value, Mapping):
         return MappingProxyType({k: _freeze(v) for k, v in value.items()})
@@ -417,6 +368,8 @@ class ModelMetadata:
             raise ModelNotFoundError(f"metadata sidecar not found: {path}") from err
         except (OSError, ValueError, TypeError) as err:  # unreadable, not UTF-8, a NUL byte in the path
             raise MetadataError(f"{reprlib.repr(str(path))}: cannot be read as a UTF-8 YAML sidecar ({err})") from err
+        from .files import read_sidecar
+
         try:
             d = read_sidecar(text)
         except (yaml.YAMLError, RecursionError, ValueError) as err:
