@@ -10,6 +10,7 @@ Imports only numpy, onnxruntime and pyyaml. See docs/quickstart.md and docs/runt
 from __future__ import annotations
 
 import logging
+import typing as _typing
 
 from . import adapters, files
 from ._channels import (
@@ -109,7 +110,7 @@ from ._transforms import (
 logging.getLogger("rtp").addHandler(logging.NullHandler())
 
 
-def __getattr__(name: str) -> str:
+def _module_attribute(name: str) -> str:
     if name == "__version__":
         from importlib.metadata import PackageNotFoundError, version
 
@@ -118,6 +119,14 @@ def __getattr__(name: str) -> str:
         except PackageNotFoundError:
             return "0+unknown"
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+# ``__version__`` is read on access (the installed distribution's). A type checker sees it declared, not a
+# module ``__getattr__``: that would make every other name, a misspelt one included, exist (as a str).
+if _typing.TYPE_CHECKING:
+    __version__: str
+else:
+    __getattr__ = _module_attribute
 
 
 __all__ = [

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import re
 import subprocess
 import sys
@@ -336,6 +337,206 @@ def test_every_package_is_typed() -> None:
             missing.append(f'pyproject.toml [tool.setuptools.package-data] "{package}" lacks "py.typed"')
     assert not missing, "\n".join(missing)
 
+
+
+#: An engine's program as docs/quickstart.md, runtime.md, adapters.md and metrics.md write it, under ``mypy
+#: --strict``: every call type-checks, and what the main calls return is the precise type (``assert_type``), not Any.
+_USER_PROGRAM = """
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, ClassVar, assert_type
+
+import numpy as np
+
+import rtp
+from rtp import conformance, metrics, sdk
+from rtp.plugins.moderngl import Adapter as GLAdapter
+from rtp.plugins.moderngl import GBufferTextures, RateSelector
+from rtp.sdk.adapters import Adapter, FrameSource
+
+log = logging.getLogger("engine")
+
+
+def frame(x: np.ndarray, prev_colour: np.ndarray, depth: np.ndarray, view: np.ndarray, projection: np.ndarray,
+          prev_view_projection: np.ndarray) -> np.ndarray:
+    predictor = sdk.load("jnyang", threads=2, providers=["CUDAExecutionProvider", ("CPUExecutionProvider", {})])
+    meta = predictor.metadata
+    assert_type(meta, sdk.ModelMetadata)
+    assert_type(meta.inputs, tuple[str, ...])
+    assert_type(meta.default_threshold, float)
+    assert_type(meta.higher_is_better, bool)
+    assert_type(meta.rate_factors, tuple[float, ...])
+    assert_type(meta.weber_l, float | None)
+    assert_type(meta.threshold_warning(0.2), str | None)
+    assert_type(predictor.tile_size, int)
+    assert_type(predictor.provider, str)
+    assert_type(predictor.rates, tuple[str, ...])
+    assert_type(predictor.path, Path | None)
+    assert_type(predictor.tiles(720, 1280), tuple[int, int])
+    assert_type(predictor.predict(x), np.ndarray)
+    rates = predictor.shading_rates(x)
+    assert_type(rates, np.ndarray)
+    rates = predictor.shading_rates(x, threshold=0.2, allowed=["1x2", "2x1", "2x2"])
+    rates = predictor.shading_rates(x, 0.2, (r for r in sdk.PREDICTED_RATES if r != "4x4"))
+    rates = predictor.shading_rates(x, saving=0.6)
+    engine_rates = np.full(rates.shape, sdk.RATE_CODES["2x1"], np.uint8)
+    image = predictor.shading_rates(x, engine_rates=engine_rates, combiner="max")
+    assert_type(sdk.combine_rates(engine_rates, image, "max"), np.ndarray)
+    budget = sdk.select_rates_for_saving(predictor.predict(x), 0.6, higher_is_better=meta.higher_is_better,
+                                         factors=meta.rate_factors, frame_size=(720, 1280),
+                                         tile_size=predictor.tile_size)
+    assert_type(budget, sdk.SavingSelection)
+    assert_type(budget.rates, np.ndarray)
+    assert_type(sdk.select_rates(predictor.predict(x), 0.2, allowed=["1x2", 5]), np.ndarray)
+    assert_type(sdk.work_saved(rates), float)
+    assert_type(sdk.draw_rate_overlay(prev_colour, rates, predictor.tile_size, legend=True), np.ndarray)
+    assert_type(sdk.gbuffers_needed(meta.inputs), tuple[str, ...])
+    for warning in sdk.check_gbuffers(depth=depth, view=view, projection=projection, prev_colour=prev_colour,
+                                      prev_depth=depth, prev_view_projection=prev_view_projection):
+        log.warning("%s", warning)
+    colour, seen = sdk.reproject(prev_colour, depth, depth, view, projection, prev_view_projection)
+    planes = sdk.input_planes(meta.inputs, depth=depth, view=view, projection=projection, prev_colour=prev_colour,
+                              prev_depth=depth, prev_view_projection=prev_view_projection)
+    assert_type(planes, np.ndarray)
+    reuse = sdk.PredictionReuse(predictor, every=4)
+    fetch = sdk.fetch_from_motion(planes[0], planes[1])
+    assert_type(reuse.shading_rates(planes, fetch=fetch, seen=seen, background=depth == 0), np.ndarray)
+    assert_type(reuse.age, int | None)
+    assert_type(rtp.__version__, str)
+    assert_type(sdk.__version__, str)
+    return rates
+
+
+def load_or_none(name: str) -> sdk.ShadingRatePredictor | None:
+    try:
+        return sdk.load(name, tile_size=8)
+    except sdk.ModelNotFoundError as err:
+        log.error("no model: %s", err)
+    except (sdk.ModelLoadError, sdk.MetadataError) as err:
+        log.error("bad model: %s", err)
+    except sdk.RtpError as err:
+        assert_type(sdk.exit_code(err), int)
+    return None
+
+
+def on_gpu(predictor: sdk.ShadingRatePredictor, ctx: Any, x: np.ndarray, tex: Any) -> None:
+    selector = RateSelector(predictor, ctx)
+    assert_type(selector.select(predictor.predict_raw(x)), np.ndarray)
+    selector.select_buffer(tex, (45, 80), threshold=0.2, allowed=["1x2", "2x1", "2x2"])
+    assert_type(selector.decoded(), np.ndarray)
+    with GLAdapter.for_predictor(predictor, 1280, 720, ctx=ctx) as adapter:
+        assert_type(adapter, GLAdapter)
+        textures = GBufferTextures(albedo=tex, normal=tex, depth=tex, view=np.eye(4), projection=np.eye(4),
+                                   prev_colour=tex, prev_depth=tex, prev_view_projection=np.eye(4))
+        assert_type(adapter.inputs(textures), np.ndarray)
+        assert_type(adapter.check(textures), list[str])
+
+
+def absdiff(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
+    return np.asarray(np.abs(reference - test), np.float32)
+
+
+MINE = metrics.Metric("absdiff", absdiff, default_threshold=0.05, pooling="max", params={"version": 1})
+
+
+class MyFrame:
+    depth: np.ndarray
+
+
+class MyEngineAdapter(Adapter[MyFrame]):
+    name: ClassVar[str] = "myengine"
+    supported_channels: ClassVar[frozenset[str]] = frozenset({"depth"})
+    frame_type: ClassVar[type] = MyFrame
+
+    def __init__(self, channels: Iterable[str], width: int, height: int, *, engine: Any = None) -> None:
+        super().__init__(channels, width, height)
+        self.engine = engine
+
+    def inputs(self, frame: MyFrame) -> np.ndarray:
+        return sdk.input_planes(self.channels, depth=frame.depth)
+
+    def close(self) -> None:
+        pass
+
+    @classmethod
+    def frame_source(cls, scene: Any, width: int, height: int, **options: Any) -> MyFrameSource:
+        return MyFrameSource(cls, width, height)
+
+
+class MyFrameSource(FrameSource[MyFrame]):
+    def frame(self, camera: Any, prev_camera: Any) -> MyFrame:
+        return MyFrame()
+
+    def close(self) -> None:
+        pass
+
+
+def conform(predictor: sdk.ShadingRatePredictor, frame: MyFrame) -> None:
+    sdk.adapters.register("myengine", MyEngineAdapter)
+    with MyEngineAdapter.for_predictor(predictor, 64, 48) as adapter:
+        assert_type(adapter, MyEngineAdapter)
+        assert_type(adapter.channels, tuple[str, ...])
+    with MyEngineAdapter.frame_source(None, 64, 48) as source, source.adapter(predictor.metadata.inputs) as a:
+        assert_type(a.inputs(source.frame(None, None)), np.ndarray)
+    report = conformance.check_adapter("myengine", tolerances={"albedo.r": 0.08})
+    assert_type(report.ok, bool)
+    assert_type(sdk.adapters.get("moderngl"), type[Adapter[Any]])
+"""
+
+#: Names a user may misspell: each line is an error of mypy's, where a module ``__getattr__`` made every name exist.
+_USER_TYPOS = """
+import rtp as package
+from rtp import sdk
+from rtp.sdk import PredictonReuse
+sdk.lod("jnyang")
+package.versoin
+"""
+
+
+def _package_tree(root: Path) -> Path:
+    """An ``rtp`` package tree of links to the rooms, as pyproject.toml's package-dir maps them (what a wheel holds,
+    which mypy cannot follow through the editable install's import hook); ``root`` returned for MYPYPATH."""
+    import tomllib
+
+    dirs = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
+    for package, folder in sorted(dirs.items(), key=lambda item: item[0].count(".")):
+        target = root.joinpath(*package.split("."))
+        if any(other.startswith(package + ".") for other in dirs):  # a package with subpackages mapped elsewhere
+            target.mkdir(parents=True)
+            for path in (ROOT / folder).iterdir():
+                if path.is_file():
+                    (target / path.name).symlink_to(path)
+        else:
+            target.symlink_to(ROOT / folder)
+    return root
+
+
+@pytest.mark.slow
+def test_a_users_type_checker_sees_the_public_api(tmp_path: Path) -> None:
+    """rtp ships py.typed: a user's ``mypy --strict`` takes the documented calls and sees precise types. Until
+    2026-12-08 ``rtp`` and ``rtp.sdk`` defined a module ``__getattr__`` (for ``__version__``), which a type checker
+    reads as "any other name exists, a str": ``from rtp.sdk import PredictonReuse`` and ``sdk.lod(...)`` passed."""
+    tree = _package_tree(tmp_path / "tree")
+    (tmp_path / "engine.py").write_text(_USER_PROGRAM)
+    (tmp_path / "typos.py").write_text(_USER_TYPOS)
+    (tmp_path / "mypy.ini").write_text(
+        "[mypy]\nstrict = True\npython_version = 3.11\n\n"
+        # as for an installed package: rtp's own code is read, its own errors not reported
+        "[mypy-rtp.*]\nfollow_imports = silent\n\n"
+        "[mypy-moderngl.*,onnxruntime.*,yaml.*,trimesh.*,PIL.*,flip_evaluator.*,matplotlib.*,scipy.*,tqdm.*]\n"
+        "ignore_missing_imports = True\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-m", "mypy", "--config-file", "mypy.ini", "--cache-dir", str(tmp_path / "cache"),
+         "--no-error-summary", "engine.py", "typos.py"],
+        cwd=tmp_path, env={**os.environ, "MYPYPATH": str(tree)}, capture_output=True, text=True, timeout=300,
+    )
+    errors = [line for line in proc.stdout.splitlines() if ": error:" in line]
+    assert not [e for e in errors if not e.startswith("typos.py:")], proc.stdout + proc.stderr
+    assert [e.split(":")[1] for e in errors] == ["4", "5", "6"], proc.stdout + proc.stderr
 
 #: Facts ``rtp.sdk`` holds, by a value no other room has a reason to write: value -> the name to use.
 SDK_FACTS = {2.13: "rtp.sdk.DEFAULT_EXTRAPOLATION_K", 0.299: "rtp.sdk.LUMA_WEIGHTS", 0.587: "rtp.sdk.LUMA_WEIGHTS",
