@@ -310,6 +310,37 @@ def _bytes_for_unencodable_path(model_path: Path) -> bytes:
     return data
 
 
+def _check_external_locations(model_path: Path, data: bytes) -> None:
+    """Refuse a model whose weights stored outside it (ONNX external data) are named by a file outside its folder:
+    an absolute ``location``, one with a ``..`` step, or one that a symbolic link leads out of the folder. A model
+    someone else made could name any file the user can read (``/home/me/.ssh/id_rsa``, ``../../secret``) as its
+    weights; onnxruntime refuses those since about 1.20, but the releases before it that the SDK supports read them
+    (and a model built from its bytes looks for them from the working folder)."""
+    import ntpath
+    import posixpath
+
+    _, locations = external_tensors(data)
+    if not locations:
+        return
+    folder = model_path.parent.resolve()
+    for loc in locations:
+        steps = loc.replace("\\", "/").split("/")
+        if posixpath.isabs(loc) or ntpath.isabs(loc) or ntpath.splitdrive(loc)[0]:
+            why = "an absolute path"
+        elif ".." in steps:
+            why = "a path with a '..' step"
+        elif not (folder / loc).resolve().is_relative_to(folder):
+            why = "a path that a symbolic link leads out of the model's folder"
+        else:
+            continue
+        raise ModelLoadError(
+            f"{str(model_path)!r}: its weights are stored outside the .onnx file (ONNX external data) in {loc!r}, "
+            f"{why}: rtp reads external data only from files inside the model's folder ({str(folder)!r}), so that a "
+            f"model cannot make it read any other file; keep the weights in the model (onnx.save_model(m, path), "
+            f"save_as_external_data=False) or in a file beside it"
+        )
+
+
 def _not_a_model(path: Any) -> str:
     """What a file onnxruntime cannot parse looks like instead, for the message (empty where nothing is known)."""
     try:
@@ -436,6 +467,9 @@ def _load(
     if data is None and not _utf8(str(model_path)):
         data = _bytes_for_unencodable_path(model_path)
     source: str | bytes = str(model_path) if data is None else data
+    # (before onnxruntime reads the weights it names; the digest is checked below on the bytes read after the session
+    # is built, as they were: a file replaced meanwhile is caught there)
+    _check_external_locations(model_path, _read_model(model_path) if data is None else data)
     session = _session(ort, model_path, source, opts, requested, strict)
     if data is None:
         data = _read_model(model_path)

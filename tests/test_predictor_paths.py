@@ -141,6 +141,66 @@ def test_a_model_with_external_data_whose_file_name_is_not_utf8_names_the_path(t
     assert type(info.value) is sdk.ModelLoadError and "incompatible" not in str(info.value)
 
 
+def _external_model(folder: Path, location: str, target: Path) -> Path:
+    """The shipped ``jnyang`` without its digest (as an adopted model records none), its first weight stored in
+    ``target`` and named by the ``location`` ``location`` (ONNX external data), saved as ``folder/model.onnx``."""
+    import onnx
+    from onnx import numpy_helper
+
+    model = onnx.load(str(sdk.load("jnyang").path))
+    values = {p.key: p.value for p in model.metadata_props}
+    meta = json.loads(values[sdk.METADATA_KEY])
+    meta.pop("digest", None)
+    values[sdk.METADATA_KEY] = json.dumps(meta)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, values)
+    tensor = model.graph.initializer[0]
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_bytes(numpy_helper.to_array(tensor).tobytes())
+    tensor.ClearField("raw_data")
+    tensor.ClearField("float_data")
+    tensor.data_location = onnx.TensorProto.EXTERNAL
+    for key, value in (("location", location), ("offset", "0"), ("length", str(target.stat().st_size))):
+        entry = tensor.external_data.add()
+        entry.key, entry.value = key, value
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "model.onnx"
+    path.write_bytes(model.SerializeToString())
+    return path
+
+
+@pytest.mark.parametrize("how", ["dotdot", "absolute", "symlink"])
+def test_external_data_outside_the_models_folder_is_refused_before_onnxruntime_reads_it(
+        tmp_path: Path, how: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A model someone else made names a file outside its folder as its weights (``../secret/w.bin``, an absolute
+    path, or a file beside it that is a symbolic link out of the folder): onnxruntime 1.17, which the SDK supports,
+    read it (a model could make rtp read any file the user can); ``load`` refuses it with ``ModelLoadError`` naming
+    the location, before any session is built, on every onnxruntime. A file inside the folder loads."""
+    from rtp.sdk import _predictor
+
+    secret = tmp_path / "secret" / "w.bin"
+    folder = tmp_path / "models"
+    if how == "symlink":
+        folder.mkdir()
+        try:
+            (folder / "w.bin").symlink_to(secret)
+        except OSError:
+            pytest.skip("no symbolic links here")
+    location = {"dotdot": "../secret/w.bin", "absolute": str(secret), "symlink": "w.bin"}[how]
+    path = _external_model(folder, location, secret)
+    built = []
+    real = _predictor._session
+    monkeypatch.setattr(_predictor, "_session", lambda *a, **k: built.append(a) or real(*a, **k))
+    with pytest.raises(sdk.ModelLoadError, match=r"stored outside the \.onnx file \(ONNX external data\) in "
+                                                  + re.escape(repr(location))) as info:
+        sdk.load(path)
+    assert type(info.value) is sdk.ModelLoadError and "inside the model's folder" in str(info.value)
+    assert built == []  # (refused before onnxruntime saw the file)
+
+    inside = _external_model(tmp_path / "ok", "w.bin", tmp_path / "ok" / "w.bin")
+    assert sdk.load(inside).metadata.digest is None
+
+
 def test_a_model_whose_inputs_disagree_on_their_size_is_refused(tmp_path: Path) -> None:
     """A model whose planes come in two graph inputs that name their height differently (a foreign exporter
     naming each input's axes by itself): the SDK cannot feed both from one frame, so ``load`` refuses it with

@@ -602,6 +602,26 @@ def test_fetch_cli_rejects_unlisted(tmp_path: Path, capsys):
 
 # -- pk3 archives and shader scripts --------------------------------------------------------------
 
+def test_a_pk3_member_that_unpacks_to_more_than_a_level_may_is_refused_unread(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A zip bomb in an archive someone handed over (a few MB of deflated zeros that unpack to gigabytes, as a
+    texture or a BSP): Pk3Set.read unpacked the whole member into memory. A member whose size, which zipfile
+    holds it to, is over ``MAX_MEMBER_BYTES`` is a SceneFormatError naming it and the archive, nothing unpacked;
+    one at the limit is read. (The limit is lowered here: a real bomb would take the test's memory.)"""
+    from rtp.capture.scenes import _pk3
+
+    monkeypatch.setattr(_pk3, "MAX_MEMBER_BYTES", 1000)
+    bomb = tmp_path / "bomb.pk3"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("maps/bomb.bsp", bytes(1001))
+        z.writestr("textures/ok.jpg", bytes(1000))
+    with Pk3Set([bomb]) as pk3:
+        with pytest.raises(SceneFormatError, match=r"maps/bomb.bsp in .*bomb.pk3 unpacks to 0 MiB, more than a pk3 "
+                                                   r"member of a level may \(0 MiB\): not read"):
+            pk3.read("maps/bomb.bsp")
+        assert pk3.read("textures/ok.jpg") == bytes(1000)
+
+
 def test_pk3_archives(tmp_path: Path):
     """Pk3Set: a missing archive is SceneNotFoundError, a file that is not a zip SceneFormatError, a
     path no archive holds SceneNotFoundError; paths are case-insensitive, the first archive holding one
@@ -926,6 +946,32 @@ def _gltf_quad(uri: str) -> dict:
                            "max": [1, 1, 0]},
                           {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
                           {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}]}
+
+
+def test_an_absolute_uri_is_not_read_where_it_points_but_beside_the_file(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+):
+    """A scene someone else made may name any file of this machine by an absolute path (a glTF image or buffer
+    URI ``/home/me/.ssh/id_rsa``, an OBJ's ``mtllib /etc/...``): the loader read it, into the scene's textures or
+    geometry (and on into a capture someone shares). An absolute name is a path of the machine the scene was made
+    on, as docs/scenes.md says: looked for by its last part beside the file (found there: read; not: a warning
+    naming it, the material untextured), never where it points."""
+    elsewhere = tmp_path / "home" / "me"
+    elsewhere.mkdir(parents=True)
+    PIL.new("RGBA", (4, 4), (255, 0, 0, 255)).save(elsewhere / "secret.png")
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "abs.gltf").write_text(json.dumps(_gltf_quad(str(elsewhere / "secret.png"))))
+    obj = "mtllib {}\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl red\nf 1 2 3\n"
+    (elsewhere / "room.mtl").write_text("newmtl red\nKd 1 0 0\n")
+    (tmp_path / "models" / "abs.obj").write_text(obj.format(elsewhere / "room.mtl"))
+    with caplog.at_level("WARNING", logger="rtp"):
+        (mat,) = scenes.load_mesh_file(tmp_path / "models" / "abs.gltf").materials
+        (lib,) = scenes.load_mesh_file(tmp_path / "models" / "abs.obj").materials
+    assert mat.texture is None and "secret.png" in caplog.text, caplog.text
+    assert lib.base_color != pytest.approx((1.0, 0.0, 0.0, 1.0)) and "room.mtl" in caplog.text
+    PIL.new("RGBA", (4, 4), (0, 0, 255, 255)).save(tmp_path / "models" / "secret.png")  # its name, beside the file
+    (mat,) = scenes.load_mesh_file(tmp_path / "models" / "abs.gltf").materials
+    assert mat.texture is not None and tuple(mat.texture[0, 0]) == (0, 0, 255, 255)
 
 
 def test_a_gltfs_external_texture_is_found_where_it_names_it_or_named_in_a_warning(

@@ -30,7 +30,7 @@ import math
 import re
 import urllib.parse
 from collections.abc import Iterator
-from pathlib import Path, PureWindowsPath
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 import numpy as np
@@ -293,7 +293,12 @@ def _resolver(p: Path) -> Any:
             for text in dict.fromkeys((name.strip(), urllib.parse.unquote(name.strip()))):
                 if not text:
                     continue
-                parts = (text, text.lstrip("/"), PureWindowsPath(text).name)
+                # (an absolute name is never read where it points: /etc/passwd or /home/me/.ssh/id_rsa of this
+                # machine was read as a buffer or texture, into the scene; it is a path of the machine the scene was
+                # made on, looked for below the scene's folder and by its last part)
+                absolute = PurePosixPath(text).is_absolute() or PureWindowsPath(text).anchor != ""
+                below = text[len(PureWindowsPath(text).drive):].lstrip("/\\") if absolute else text.lstrip("/")
+                parts = ((text,) if not absolute else ()) + (below, PureWindowsPath(text).name)
                 for base in (Path(self.parent), *self.also):
                     for part in dict.fromkeys(parts):
                         path = base / part
@@ -328,6 +333,8 @@ def _obj_library(p: Path, resolver: Any) -> tuple[Path | None, dict[str, str] | 
     found = resolver.where(m.group(1))
     lib = p.parent / m.group(1) if found is None else found
     try:
+        if found is None:  # (not read where it points: an absolute name of this machine, /etc/..., was read, and
+            raise FileNotFoundError(2, "No such file or directory")  # its folder searched for trimesh's library)
         mtl = lib.read_text(encoding="utf-8", errors="replace")
     except OSError as err:
         _warn("%s: its material library %s cannot be read (%s): its materials are dropped (the meshes "

@@ -17,6 +17,9 @@ __all__ = ["Pk3Set", "Shader", "Stage", "parse_shaders"]
 
 log = logging.getLogger("rtp.capture")
 
+#: The most bytes one pk3 member may unpack to (OpenArena's largest, a map's BSP, are a few tens of MB).
+MAX_MEMBER_BYTES = 512 * 2**20
+
 
 class Pk3Set:
     """Files of several pk3 archives under one case-insensitive namespace.
@@ -71,6 +74,11 @@ class Pk3Set:
             k, real = self._index[_key(path)]
         except KeyError:
             raise SceneNotFoundError(f"{path} is not in any of {[str(p) for p in self.paths]}") from None
+        size = self._zips[k].getinfo(real).file_size  # (zipfile stops at it: a member cannot unpack to more)
+        if size > MAX_MEMBER_BYTES:  # (a zip bomb: a few MB of deflated zeros unpacked into all the memory there is)
+            raise SceneFormatError(f"{real} in {self.paths[k]} unpacks to {size / 2**20:.0f} MiB, more than a pk3 "
+                                   f"member of a level may ({MAX_MEMBER_BYTES / 2**20:.0f} MiB): not read; the archive "
+                                   "is damaged or not a game's")
         try:
             return self._zips[k].read(real)
         except (zipfile.BadZipFile, zlib.error, EOFError) as err:  # a damaged member: bad CRC, broken deflate stream
