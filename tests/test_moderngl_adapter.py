@@ -549,6 +549,102 @@ def test_a_renderer_or_frame_source_called_from_a_thread_where_its_context_canno
         make_current(frames[0])
 
 
+def close_beside_another_context(close: Any) -> list[str]:
+    """``close()`` in a worker thread where another context is current, one holding buffers and textures of the
+    first GL names (each its own value): the ones whose contents ``close`` changed (deleted under it)."""
+    from rtp.plugins.moderngl import create_context
+    from rtp.plugins.moderngl._glio import read_texture
+
+    def work() -> list[str]:
+        other = make_current(create_context())
+        try:
+            buffers = [other.buffer(np.full(4, i, np.float32).tobytes()) for i in range(1, 17)]
+            textures = [other.texture((2, 2), 1, np.full(4, i, np.float32).tobytes(), dtype="f4") for i in range(1, 17)]
+            close()
+            changed = []
+            for i, (b, t) in enumerate(zip(buffers, textures), 1):
+                try:
+                    ok = np.frombuffer(b.read(), np.float32)[0] == i
+                except Exception:  # (a deleted buffer cannot be mapped)
+                    ok = False
+                changed += [] if ok else [f"buffer {b.glo}"]
+                changed += [] if read_texture(t)[0, 0, 0] == i else [f"texture {t.glo}"]
+            return changed
+        finally:
+            other.release()
+
+    return in_thread(work)
+
+
+def test_closing_from_a_thread_where_the_context_is_not_current_frees_nothing_and_says_so(
+        frames, caplog: pytest.LogCaptureFixture) -> None:
+    """An adapter (or a renderer of a borrowed context) closed in a worker thread while the engine's thread held its
+    context freed its GL objects by name in whatever context was current there: an engine's other context lost the
+    buffers and textures of those names (they read another's data, or failed to map), in silence; with none current
+    they leaked, in silence. Now nothing is freed there, one warning names the object, the thread and the fix, and
+    the object is closed all the same (no refusal: a close runs in a with block's exit, after an error)."""
+    import logging
+
+    from rtp.plugins.moderngl import RendererError, create_context
+
+    _, prev, cur = frames
+    ctx = make_current(create_context())  # (a context of few objects: its names are the other context's too)
+    try:
+        frame = _engine_frame(ctx, prev, cur)
+        with caplog.at_level(logging.WARNING, logger="rtp.plugins.moderngl"):
+            a = Adapter(("albedo.r", "reprojected.y.dx"), W, H, ctx=ctx)  # (.dx: a first pass, said with it)
+            a.inputs(frame)
+            assert close_beside_another_context(a.close) == []
+            assert a.closed
+            r = Renderer(W, H, ctx=ctx)
+            r.load_scene(procedural(3))
+            r.render(cur.camera)
+            assert close_beside_another_context(r.release) == []
+            with pytest.raises(RendererError, match="this renderer has been released"):
+                r.render(cur.camera)
+        said = [rec.getMessage() for rec in caplog.records]
+        assert len(said) == 2, said
+        assert said[0].startswith(f"an rtp moderngl Adapter ({W}x{H}, 2 channels) closed in thread 'worker', where its "
+                                  "moderngl context is not current: its GL program, targets and framebuffer were not "
+                                  "freed") and "ctx.__enter__()" in said[0], said[0]
+        assert said[1].startswith(f"an rtp moderngl Renderer ({W}x{H}) closed in thread 'worker'") \
+            and "renderer.ctx.__exit__(None, None, None)" in said[1], said[1]
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="rtp.plugins.moderngl"):
+            with Adapter(("albedo.r",), W, H, ctx=ctx) as b:  # (in the thread holding the context: freed, unsaid)
+                b.inputs(frame)
+        assert not caplog.records
+    finally:
+        ctx.release()
+        make_current(frames[0])
+
+
+def test_a_renderer_or_frame_source_of_its_own_context_closed_in_another_thread_releases_it(
+        frames, caplog: pytest.LogCaptureFixture) -> None:
+    """A renderer (and a frame source) that made its context: released from a worker thread while the building
+    thread held it, its objects were freed by name in the worker's current context (another context's buffers and
+    textures deleted). Now the context itself is released (any thread may; its objects go with it), nothing else
+    is touched, and nothing is said (nothing is left behind)."""
+    import logging
+
+    _, prev, cur = frames
+    try:
+        with caplog.at_level(logging.WARNING, logger="rtp.plugins.moderngl"):
+            r = Renderer(W, H)
+            r.load_scene(procedural(3))
+            r.render(cur.camera)
+            assert close_beside_another_context(r.release) == []
+            assert is_released(r.ctx)
+            source = Adapter.frame_source(procedural(3), W, H)
+            adapter = source.adapter(("albedo.g", "seen"))
+            adapter.inputs(source.frame(cur.camera, prev.camera))
+            assert close_beside_another_context(source.close) == []
+            assert source.closed and adapter.closed and is_released(source.renderer.ctx)
+        assert not caplog.records, [rec.getMessage() for rec in caplog.records]
+    finally:
+        make_current(frames[0])
+
+
 def test_leaving_a_with_ctx_block_unbinds_every_context(gl_context) -> None:
     """Why the adapter runs in the current context instead of wrapping its passes in ``with ctx:``
     (docs/adapters.md "Frame sources"): on EGL, leaving the block makes no context current, not the

@@ -481,13 +481,13 @@ def test_previous_depth_is_reused_only_for_the_same_scene_and_camera(monkeypatch
     monkeypatch.setattr(_adapter, "id", lambda obj: 1, raising=False)
     with Adapter(["seen"], 64, 48) as adapter:
         renders = []
-        gbuffers = adapter.gbuffers
+        gbuffers = adapter._gbuffers  # (what inputs draws its G-buffers with)
 
         def counted(*args: Any, **kwargs: Any) -> Any:
             renders.append(1)
             return gbuffers(*args, **kwargs)
 
-        monkeypatch.setattr(adapter, "gbuffers", counted)
+        monkeypatch.setattr(adapter, "_gbuffers", counted)
         before, _ = adapter.render(first, np.eye(4))
         assert adapter.inputs(SceneFrame(first, np.eye(4), np.eye(4), before))[0].mean() == 1.0
         assert len(renders) == 2  # (no previous call: this frame's G-buffers and the previous depth)
@@ -1068,6 +1068,115 @@ def test_a_context_another_thread_holds_is_a_typed_error_naming_the_thread() -> 
         t.join(300)
         if "renderer" in made:
             _delete_renderer(made["renderer"])
+
+
+def _held_first_draw(monkeypatch: pytest.MonkeyPatch) -> tuple[Any, Any]:
+    """``GBufferRenderer.render`` and ``.draw`` patched so that the first call of either stops before it draws (the
+    camera already moved to its pose) until ``go`` is set; ``inside`` is set once it is there. Later calls draw."""
+    import threading
+
+    from rtp.plugins.pyrender._gbuffer import GBufferRenderer
+
+    inside, go = threading.Event(), threading.Event()
+    first = [True]
+
+    def held(real: Any) -> Any:
+        def call(self: Any, *args: Any, **kwargs: Any) -> Any:
+            if first[0]:
+                first[0] = False
+                inside.set()
+                assert go.wait(300)
+            return real(self, *args, **kwargs)
+        return call
+
+    monkeypatch.setattr(GBufferRenderer, "render", held(GBufferRenderer.render))
+    monkeypatch.setattr(GBufferRenderer, "draw", held(GBufferRenderer.draw))
+    return inside, go
+
+
+def test_a_second_threads_call_while_one_is_under_way_is_refused_and_close_waits(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The adapter moves the scene's camera (and swaps the renderer's programs) outside the GL context, so a second
+    thread's call during a first one's went ahead: it moved the camera under the first one's draw (or drew from the
+    first one's pose) and both returned wrong planes in silence, unless EGL happened to refuse the context; and a
+    close() from another thread deleted the renderer under the call. Now the second call (``inputs``, ``render``,
+    ``gbuffers``) is a PyrenderAdapterError naming it, the first call's planes are what it gives alone, and close()
+    waits for it, then frees the context."""
+    import threading
+
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError, SceneFrame
+
+    pyrender = pyrender_or_skip()
+    scene = _asymmetric_scene(pyrender)
+    moved = np.eye(4)
+    moved[:3, 3] = (0.2, 0.0, 0.0)
+    adapter = Adapter(["reprojected.r", "seen", "albedo.g", "normal.y", "depth"], 64, 48)
+    renderer = adapter.renderer
+    colour, _ = adapter.render(scene, np.eye(4))
+    frame = SceneFrame(scene, moved, np.eye(4), colour)
+    want = adapter.inputs(frame)
+    inside, go = _held_first_draw(monkeypatch)
+    out: dict[str, Any] = {}
+
+    def first() -> None:
+        try:
+            out["x"] = adapter.inputs(frame)
+        except BaseException as exc:  # (handed back to the test's thread)
+            out["error"] = exc
+
+    t = threading.Thread(target=first, name="first")
+    t.start()
+    closer = threading.Thread(target=adapter.close, name="closer")
+    try:
+        assert inside.wait(300)  # (the first call holds the camera at its pose)
+        for name, call in (("inputs", lambda: adapter.inputs(frame)), ("render", lambda: adapter.render(scene, np.eye(4))),
+                           ("gbuffers", lambda: adapter.gbuffers(scene, np.eye(4)))):
+            with pytest.raises(PyrenderAdapterError, match=rf"pyrender Adapter\.{name}: its pyrender renderer is in a "
+                                                           r"call already \(another thread's\).*one thread at a time"):
+                _in_thread(call)
+        closer.start()
+        closer.join(0.5)
+        assert closer.is_alive()  # (waiting for the call under way)
+    finally:
+        go.set()
+        t.join(300)
+        if closer.ident is not None:
+            closer.join(300)
+    assert "error" not in out, out.get("error")
+    np.testing.assert_array_equal(out["x"], want)
+    assert adapter.closed and renderer._platform is None  # (freed once the call returned)
+
+
+def test_a_frame_sources_call_and_its_adapters_take_turns(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pyrender frame source and its adapters share one renderer and one camera node: ``frame`` from a second
+    thread while an adapter's ``inputs`` drew moved the node under it. Now it is a PyrenderAdapterError naming it,
+    and the adapter's call under way in another thread is refused the same way while ``frame`` draws."""
+    import threading
+
+    from rtp.plugins.pyrender import Adapter, PyrenderAdapterError
+    from rtp.scene import Camera, Material, Scene, box_mesh
+
+    pyrender_or_skip()
+    level = Scene("box", [box_mesh((-1, -1, -5), (1, 1, -3))], [Material("m")])
+    cam, prev = Camera((0.0, 0.0, 0.0), yaw=5.0, fov_y=50.0), Camera((0.1, 0.0, 0.0), yaw=5.0, fov_y=50.0)
+    with Adapter.frame_source(level, 32, 24) as source:
+        adapter = source.adapter(["albedo.y", "seen"])
+        frame = source.frame(cam, prev)
+        want = adapter.inputs(frame)
+        inside, go = _held_first_draw(monkeypatch)
+        out: dict[str, Any] = {}
+        t = threading.Thread(target=lambda: out.setdefault("x", adapter.inputs(frame)), name="first")
+        t.start()
+        try:
+            assert inside.wait(300)
+            with pytest.raises(PyrenderAdapterError, match=r"PyrenderFrameSource\.frame: its pyrender renderer is in "
+                                                           r"a call already"):
+                _in_thread(lambda: source.frame(cam, prev))
+        finally:
+            go.set()
+            t.join(300)
+        np.testing.assert_array_equal(out["x"], want)
+        np.testing.assert_array_equal(adapter.inputs(source.frame(cam, prev)), want)  # (one at a time: as before)
 
 
 def test_an_engines_context_stays_current_across_the_adapters_calls(gl_context: Any) -> None:

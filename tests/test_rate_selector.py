@@ -898,6 +898,39 @@ def test_a_call_from_a_thread_where_the_context_cannot_be_current_is_refused(gl_
         make_current(gl_context)
 
 
+def test_closing_from_a_thread_where_the_context_cannot_be_current_frees_nothing_of_another_context(
+        gl_context: Any, caplog: pytest.LogCaptureFixture) -> None:
+    """``close`` from a worker thread while the engine's thread held the selector's borrowed context: EGL refused its
+    ``ctx.__enter__()`` in silence and the selector freed its programs, buffers and texture by name in the worker's
+    current context (an engine's other context lost the buffers and textures of those names). Now nothing is freed
+    there, one warning names the selector, the thread and the fix, and the selector is closed; a selector's own
+    context is released from any thread (its objects go with it), unsaid."""
+    from rtp.plugins.moderngl import create_context
+    from tests.test_moderngl_adapter import close_beside_another_context
+
+    pred = sdk.load("jnyang")
+    raw = np.random.default_rng(9).random((4, 5, 7)).astype(np.float32)
+    ctx = create_context(430)
+    try:
+        with caplog.at_level(logging.WARNING, logger="rtp.plugins.moderngl"):
+            selector = RateSelector(pred, ctx)
+            selector.select(raw, saving=0.5)
+            assert close_beside_another_context(selector.close) == []
+            with pytest.raises(RendererError, match="RateSelector: closed"):
+                selector.select(raw)
+            own = RateSelector(pred)
+            own.select(raw, saving=0.5)
+            assert close_beside_another_context(own.close) == []
+            assert is_released(own.ctx)
+        said = [rec.getMessage() for rec in caplog.records]
+        assert len(said) == 1 and said[0].startswith(
+            "an rtp RateSelector closed in thread 'worker', where its moderngl context is not current: its compute "
+            "programs, buffers and rate texture were not freed") and "ctx.__exit__(None, None, None)" in said[0], said
+    finally:
+        ctx.release()
+        make_current(gl_context)
+
+
 def test_the_selectors_own_rate_texture_as_the_engine_rates_of_a_budget_is_refused(gl_context: Any) -> None:
     """``select(..., saving=, engine_rates=<the texture select_buffer returns>)``: the budget's first dispatch writes
     that texture, and the budget's dispatch and the selection at its threshold then read the first dispatch's rates as

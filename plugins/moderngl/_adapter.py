@@ -39,7 +39,7 @@ from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
-from ._glio import CurrentCheck, is_released, max_texture_side, read_planes, read_texture
+from ._glio import CurrentCheck, is_released, max_texture_side, read_planes, read_texture, warn_not_freed
 from ._shaders import load_source
 
 if TYPE_CHECKING:
@@ -610,9 +610,21 @@ class Adapter(_AdapterBase[GBufferTextures]):
 
     def close(self) -> None:
         """Free the adapter's program, targets and framebuffer (not the engine's context; where the engine
-        released its context first, they went with it)."""
+        released its context first, they went with it). In a thread where the context is not current (another
+        thread holds it, or another context is current here) nothing is freed: a warning says so, and the adapter
+        is closed all the same (close it where the context is current, or make it current first)."""
         made = self.__dict__  # (a constructor that failed part-way closes what it made so far)
-        if not is_released(self.ctx):
+        current = made.get("_current")  # (None: the constructor failed before it made anything)
+        here = not is_released(self.ctx) and (current is None or current.holds())
+        if not here and not is_released(self.ctx) and not made.get("_quiet_close"):
+            # (freed here, they were the same names in whatever context is current in this thread: an engine's own
+            # textures and buffers deleted under it, in silence)
+            warn_not_freed(f"an rtp moderngl Adapter ({self.width}x{self.height}, {len(self.channels)} channels)",
+                           "GL program, targets and framebuffer",
+                           "Close the adapter in the thread where its context is current, or make the context "
+                           "current there first (ctx.__enter__(), after ctx.__exit__(None, None, None) in the thread "
+                           "holding it)")
+        if here:
             fbo = made.get("_fbo")
             if fbo is not None and self.ctx.fbo is fbo:  # (a framebuffer deleted while bound leaves GL none to draw into)
                 self._default_framebuffer().use()
@@ -620,6 +632,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
                 if obj is not None:
                     obj.release()
         if self._luma is not None:
+            self._luma.__dict__["_quiet_close"] = True  # (said with this one's warning, where it was not freed)
             self._luma.close()
 
     def __del__(self) -> None:

@@ -10,6 +10,7 @@ with top-left uvs samples the right texel.
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
 from typing import Any
@@ -17,7 +18,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["CurrentCheck", "flip_rows", "is_released", "max_texture_side", "read_planes", "read_texture",
-           "write_texture"]
+           "warn_not_freed", "write_texture"]
 
 #: What a texture's bytes hold, by moderngl dtype: floats, integers, and the normalised (UNORM / SNORM) formats, which
 #: an engine's G-buffers use (an RGBA8 frame, RGBA16 SNORM normals) and the adapter reads.
@@ -68,13 +69,17 @@ class CurrentCheck:
                              f"{threading.current_thread().name!r}): a GL context is current in one thread at a time, "
                              f"and the driver refuses it to a second while the first holds it. {self._advice}")
 
+    def holds(self) -> bool:
+        """Whether the context is the one current in the calling thread, read back whatever thread called last (a
+        close checks it: one read, once)."""
+        try:
+            return bool(self._buffer.read() == self._magic)
+        except Exception:  # (moderngl.Error "cannot map the buffer": no context current in this thread)
+            return False
+
     def __call__(self) -> None:
         """Raise :meth:`error` unless the context is current in the calling thread; else remember the thread."""
-        try:
-            ok = self._buffer.read() == self._magic
-        except Exception:  # (moderngl.Error "cannot map the buffer": no context current in this thread)
-            ok = False
-        if not ok:
+        if not self.holds():
             raise self.error()
         self.thread = threading.get_ident()
 
@@ -83,6 +88,17 @@ class CurrentCheck:
         if self._buffer is not None:
             self._buffer.release()
             self._buffer = None
+
+
+def warn_not_freed(owner: str, objects: str, advice: str) -> None:
+    """Say (a warning on the ``rtp.plugins.moderngl`` logger) that ``owner`` was closed in a thread where its context is
+    not current, so that its GL ``objects`` were not freed. Freeing them there would delete nothing (no context
+    current) or the objects of the same names in the context current there (an engine's own textures and buffers).
+    Not raised: a close runs in a ``with`` block's exit and after an error, whose exception a refusal would hide."""
+    logging.getLogger("rtp.plugins.moderngl").warning(
+        "%s closed in thread %r, where its moderngl context is not current: its %s were not freed (in this thread "
+        "they would have been another context's, or none); they stay in the context until it is released. %s",
+        owner, threading.current_thread().name, objects, advice)
 
 
 def max_texture_side(ctx: Any) -> int:

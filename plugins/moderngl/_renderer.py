@@ -45,7 +45,7 @@ from rtp.sdk import (
 from rtp.sdk.adapters import UnsupportedChannelError
 
 from ._adapter import Adapter
-from ._glio import CurrentCheck, is_released, max_texture_side, read_texture, write_texture
+from ._glio import CurrentCheck, is_released, max_texture_side, read_texture, warn_not_freed, write_texture
 from ._shaders import load_source
 
 __all__ = ["Frame", "RenderResult", "Renderer", "RendererError", "create_context"]
@@ -1317,17 +1317,32 @@ class Renderer:
 
     def release(self) -> None:
         """Free every GL resource (and the context, when the renderer created it). Idempotent; after the engine
-        released a borrowed context first (its objects went with it) it only marks the renderer released."""
+        released a borrowed context first (its objects went with it) it only marks the renderer released. From a
+        thread where the context cannot be made current (another thread holds it) a borrowed context's objects are
+        not freed: a warning says so, and the renderer is released all the same; a context the renderer made is
+        released from any thread, and its objects go with it."""
         if self._released:
             return
-        if is_released(self.ctx):  # (a borrowed context its engine released first: every object went with it)
-            for obj in vars(self).values():  # (closed, not left to warn unclosed)
+        gone = is_released(self.ctx)  # (a borrowed context its engine released first: every object went with it)
+        if not gone:
+            self.ctx.__enter__()  # (its objects are freed in its own context)
+        if gone or (self._current is not None and not self._current.holds()):
+            # (the context not current here, EGL refusing it in silence: freed here, the objects were the same names
+            # in the context current in this thread, an engine's own textures and buffers deleted under it)
+            if not gone and self._owns_ctx:
+                self.ctx.release()  # (any thread may: the driver destroys it once the thread holding it lets go)
+            elif not gone and not self.__dict__.get("_quiet_close"):
+                warn_not_freed(f"an rtp moderngl Renderer ({self.width}x{self.height})",
+                               "meshes, textures, programs and framebuffers",
+                               "Release it in the thread where its context is current, or release the context there "
+                               "first (renderer.ctx.__exit__(None, None, None))")
+            for obj in vars(self).values():  # (closed, not left to warn unclosed; nothing freed: said above)
                 if isinstance(obj, Adapter):
+                    obj.__dict__["_quiet_close"] = True
                     obj.close()
             self._meshes, self._materials, self.scene, self._vrs = [], [], None, None
             self._released = True
             return
-        self.ctx.__enter__()  # (its objects are freed in its own context)
         self._release_scene()
         if self._owns_ctx:
             for obj in vars(self).values():  # (closed, not left to warn unclosed: their objects go with the context)

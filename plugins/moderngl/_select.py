@@ -24,7 +24,7 @@ import numpy as np
 from rtp import sdk
 from rtp.sdk.adapters import AdapterFrameError
 
-from ._glio import CurrentCheck, is_released, max_texture_side
+from ._glio import CurrentCheck, is_released, max_texture_side, warn_not_freed
 from ._renderer import RendererError, create_context
 from ._shaders import load_source
 
@@ -515,13 +515,24 @@ class RateSelector:
 
     def close(self) -> None:
         """Release the GPU objects (and the context when the selector made it; a borrowed context released first
-        took them with it)."""
+        took them with it). From a thread where the context cannot be made current (another thread holds it) a
+        borrowed context's objects are not freed: a warning says so, and the selector is closed all the same; a
+        context the selector made is released from any thread, and its objects go with it."""
         live = not is_released(self.ctx)
-        if self._program is not None and live:
+        objects = (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
+                   self._budget, self._current)
+        free = live and any(obj is not None for obj in objects)
+        if free:
             self.ctx.__enter__()  # (its objects are freed in its own context)
-        for obj in (self._texture, self._decoded, self._raw, self._engine, self._program, self._budget_program,
-                    self._budget, self._current):
-            if obj is not None and live:
+            # (refused in silence where another thread holds it: freed here, they were the same names in the context
+            # current in this thread, an engine's own buffers and textures deleted under it)
+            free = self._current is None or self._current.holds()
+            if not free and not self._own_ctx:
+                warn_not_freed("an rtp RateSelector", "compute programs, buffers and rate texture",
+                               "Close it in the thread where its context is current, or release the context there "
+                               "first (ctx.__exit__(None, None, None))")
+        for obj in objects:
+            if obj is not None and free:
                 obj.release()
         self._texture = self._decoded = self._raw = self._engine = self._program = None
         self._budget_program = self._budget = self._current = None

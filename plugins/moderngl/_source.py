@@ -19,7 +19,7 @@ from rtp.sdk.adapters import Adapter as SdkAdapter
 from rtp.sdk.adapters import FrameSource
 
 from ._adapter import GBufferTextures
-from ._glio import is_released, write_texture
+from ._glio import is_released, warn_not_freed, write_texture
 from ._renderer import Frame, Renderer
 
 if TYPE_CHECKING:
@@ -112,16 +112,38 @@ class ReferenceFrameSource(FrameSource[GBufferTextures]):
         self._use()
         return super().adapter(channels, **options)
 
+    def _here(self) -> bool:
+        """Make the renderer's context current, and say whether it is (EGL refuses it in silence where another
+        thread holds it); False where the context is released."""
+        renderer = self.renderer
+        if is_released(renderer.ctx) or renderer._released:
+            return False
+        self._use()
+        return renderer._current is None or renderer._current.holds()
+
     def _close_dependents(self) -> None:
-        if not is_released(self.renderer.ctx):
-            self._use()  # the adapters free their GL objects in this context
+        if not self._here():  # (the adapters free their GL objects in this context: not in another thread's)
+            for ref in self._adapters:
+                adapter = ref()
+                if adapter is not None:  # (said once, by close(); nothing freed)
+                    adapter.__dict__["_quiet_close"] = True
         super()._close_dependents()
 
     def close(self) -> None:
         """Free the textures and the renderer (and its context, unless it was borrowed; a borrowed context the
-        engine released first took them with it)."""
-        if not is_released(self.renderer.ctx):
-            self._use()
+        engine released first took them with it). From a thread where the context cannot be made current (another
+        thread holds it) a borrowed context's textures, renderer and adapters are not freed: a warning says so, and
+        the source is closed all the same; a context the renderer made is released from any thread, and everything
+        goes with it."""
+        renderer = self.renderer
+        if self._here():
             for t in self._textures.values():
                 t.release()
-        self.renderer.release()
+        elif not is_released(renderer.ctx) and not renderer._released:
+            if not renderer._owns_ctx:
+                warn_not_freed(f"an rtp ReferenceFrameSource ({self.width}x{self.height})",
+                               "textures, its renderer's GL objects and its adapters'",
+                               "Close it in the thread where its renderer's context is current, or release the "
+                               "context there first (source.renderer.ctx.__exit__(None, None, None))")
+            renderer.__dict__["_quiet_close"] = True
+        renderer.release()

@@ -17,7 +17,7 @@ from rtp.sdk.adapters import Adapter as _BaseAdapter
 from rtp.sdk.adapters import AdapterFrameError
 
 from ._errors import PyrenderAdapterError
-from ._gbuffer import MATERIAL, GBufferRenderer, GBuffers
+from ._gbuffer import MATERIAL, GBufferRenderer, GBuffers, one_call
 
 if TYPE_CHECKING:
     from ._source import PyrenderFrameSource
@@ -212,7 +212,10 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     Each call (the constructor and :meth:`close` too) makes the renderer's GL context current and then
     gives back what was current before in the calling thread (an engine's own context, or none), so the
-    adapter may be built in one thread and used or closed in another, one call at a time. A borrowed
+    adapter may be built in one thread and used or closed in another, one call at a time: a call (:meth:`inputs`,
+    :meth:`render`, :meth:`gbuffers`) while another thread's holds the renderer (this adapter's, another adapter's
+    borrowing it, or its frame source's) is a :class:`PyrenderAdapterError`, and the call under way goes on
+    unharmed; :meth:`close` waits for it. A borrowed
     renderer that pyrender drew with in another thread stays current there (pyrender never releases it):
     the call is then a :class:`PyrenderAdapterError` naming the thread (docs/adapters.md).
 
@@ -344,7 +347,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
                                   or flags < 0 or flags & ~all_flags):
             raise ParameterError(f"flags: expected None or pyrender.RenderFlags values combined with |, got {flags!r}",
                                  "flags")
-        with self._posed(scene, camera, pose):
+        with self._one_call("render"), self._posed(scene, camera, pose):
             return self._gbuf.draw(scene, flags)
 
     def gbuffers(self, scene: Any, pose: Any, *, camera: Any | None = None, albedo: bool = True,
@@ -358,6 +361,13 @@ class Adapter(_BaseAdapter[SceneFrame]):
             float32, top-left origin, 0 on background.
         """
         self._check_open()
+        with self._one_call("gbuffers"):
+            return self._gbuffers(scene, pose, camera=camera, albedo=albedo, normals=normals, material=material)
+
+    def _gbuffers(self, scene: Any, pose: Any, *, camera: Any | None = None, albedo: bool = True,
+                  normals: Iterable[str] = _NORMAL, material: Iterable[str] = ()) -> GBuffers:
+        """:meth:`gbuffers` of a call that holds the renderer (:meth:`inputs`' too: a close() waiting meanwhile in
+        another thread has marked the adapter closed, and the call under way finishes)."""
         self._check_scene(scene, camera)
         pose = _pose(pose, "pose")
         if not isinstance(albedo, (bool, np.bool_)):
@@ -366,6 +376,11 @@ class Adapter(_BaseAdapter[SceneFrame]):
         self._camera(scene, camera)  # (one whose depth the passes can read)
         with self._posed(scene, camera, pose):
             return self._gbuf.render(scene, albedo=bool(albedo), normals=normals, material=material)
+
+    def _one_call(self, what: str) -> Any:
+        """Hold the renderer for one call (``what``), or a :class:`PyrenderAdapterError` where another thread's
+        call holds it (:func:`~._gbuffer.one_call`)."""
+        return one_call(self._gbuf.busy, f"pyrender Adapter.{what}")
 
     def _frame(self, image: Any, name: str) -> np.ndarray:
         try:
@@ -394,6 +409,11 @@ class Adapter(_BaseAdapter[SceneFrame]):
     def inputs(self, frame: SceneFrame) -> np.ndarray:
         """The model input for ``frame`` (see :class:`SceneFrame`): float32 ``(C, H, W)`` in the
         order of :attr:`channels`, top-left origin."""
+        with self._one_call("inputs"):
+            return self._inputs(frame)
+
+    def _inputs(self, frame: SceneFrame) -> np.ndarray:
+        """:meth:`inputs` of a call that holds the renderer."""
         scene, pose, prev_pose, prev_colour, prev_depth = (frame.scene, frame.pose, frame.prev_pose,
                                                            frame.prev_colour, frame.prev_depth)
         camera, prev_camera = frame.camera, frame.prev_camera
@@ -411,7 +431,7 @@ class Adapter(_BaseAdapter[SceneFrame]):
         cam = self._camera(scene, camera)
         prev_cam = cam if prev_camera is None else self._camera(scene, prev_camera)
 
-        g = self.gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, *_ALBEDO_VARIANCES}),
+        g = self._gbuffers(scene, pose, camera=camera, albedo=bool(wanted & {*_ALBEDO, _ALBEDO_Y, *_ALBEDO_VARIANCES}),
                           normals=[c for c in _NORMAL if c in wanted], material=[c for c in MATERIAL if c in wanted])
         buffers: dict[str, Any] = {"depth": g.depth, "albedo": g.albedo, "normal": g.normal,
                                    **{name: getattr(g, name) for name in MATERIAL}}
@@ -433,8 +453,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
                     else:
                         log.debug("no prev_depth given: rendering it at prev_pose")
                         with _nodes_at(scene, node_poses):  # (objects that moved: where they were)
-                            prev_depth = self.gbuffers(scene, prev_pose, camera=prev_cam, albedo=False,
-                                                       normals=()).depth
+                            prev_depth = self._gbuffers(scene, prev_pose, camera=prev_cam, albedo=False,
+                                                        normals=()).depth
                 try:
                     pd = np.asarray(prev_depth)
                     real = pd.dtype.kind in "iuf"
@@ -520,7 +540,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
-        """Free the adapter's GL context, or give a borrowed renderer its program cache back."""
+        """Free the adapter's GL context, or give a borrowed renderer its program cache back. A call under way in
+        another thread (this adapter's, another's borrowing its renderer, its frame source's) is waited for."""
         self._gbuf.close()
 
     @classmethod

@@ -29,6 +29,8 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import threading
+import weakref
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -132,6 +134,39 @@ def _render(renderer: Any, scene: Any, flags: int, seg_node_map: dict[Any, Any] 
         raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
     except Exception as exc:
         raise PyrenderAdapterError(f"pyrender failed to draw ({type(exc).__name__}: {exc})") from exc
+
+
+#: One lock per pyrender renderer (weakly keyed), held by the adapter's and the frame source's calls that draw with it:
+#: a call moves the scene's camera node and swaps the renderer's program cache outside the GL context, so a second
+#: call meanwhile (another thread's) drew with the first one's camera or passes, or moved them under it.
+_BUSY: weakref.WeakKeyDictionary[Any, threading.RLock] = weakref.WeakKeyDictionary()
+_BUSY_GUARD = threading.Lock()
+
+
+def busy_lock(renderer: Any) -> threading.RLock:
+    """The lock of ``renderer`` (a ``pyrender.OffscreenRenderer``) that its callers here hold through a call: one
+    for every adapter borrowing the renderer and its frame source."""
+    with _BUSY_GUARD:
+        lock = _BUSY.get(renderer)
+        if lock is None:
+            lock = _BUSY[renderer] = threading.RLock()
+        return lock
+
+
+@contextmanager
+def one_call(lock: threading.RLock, what: str) -> Iterator[None]:
+    """Hold ``lock`` for the block, or refuse the call (``what``: the object and the method) with a
+    :class:`PyrenderAdapterError` where another thread's call holds it; the call under way goes on unharmed."""
+    if not lock.acquire(blocking=False):
+        raise PyrenderAdapterError(
+            f"{what}: its pyrender renderer is in a call already (another thread's): a call moves the scene's "
+            "camera and the renderer's shader programs while it draws, so it takes one call at a time (the "
+            "renderer's adapters and frame source together); call them from one thread at a time, or give each "
+            "thread an adapter with a renderer and a scene of its own (docs/adapters.md)")
+    try:
+        yield
+    finally:
+        lock.release()
 
 
 def _same_depth(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -244,6 +279,7 @@ class GBufferRenderer:
                 f"{self.width}x{self.height}"
             )
         self._renderer: Any | None = renderer
+        self.busy = busy_lock(renderer)  # (held through each call of the adapter's: one_call)
         # pyrender.Renderer owns one program cache; this one stands in for it during the G-buffer passes
         # (_render), so that adapters sharing a renderer each draw with their own
         self._cache = _program_cache_class()()
@@ -257,7 +293,12 @@ class GBufferRenderer:
         return self._renderer
 
     def close(self) -> None:
-        """Free the G-buffer programs and, unless the renderer is borrowed, the GL context. Idempotent."""
+        """Free the G-buffer programs and, unless the renderer is borrowed, the GL context. Idempotent. Waits for a
+        call under way in another thread (of any adapter borrowing the renderer, or its frame source) to return."""
+        with self.busy:
+            self._close()
+
+    def _close(self) -> None:
         r, self._renderer = self._renderer, None
         if r is None:
             return

@@ -18,7 +18,7 @@ from rtp.sdk.adapters import FrameSource
 
 from ._adapter import SceneFrame
 from ._convert import to_pyrender_scene
-from ._gbuffer import _delete_renderer, draw
+from ._gbuffer import _delete_renderer, busy_lock, draw, one_call
 from ._gl import import_pyrender, offscreen_renderer
 
 if TYPE_CHECKING:
@@ -44,7 +44,9 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         platform: ``"egl"`` (default) or ``"osmesa"``, see :func:`import_pyrender`.
 
     pyrender binds a scene to one renderer's GL context, so :meth:`adapter` lends the adapter this
-    source's renderer (``renderer=``); closing the source closes those adapters first.
+    source's renderer (``renderer=``); closing the source closes those adapters first. The source and its
+    adapters take one call at a time (they move one camera node): :meth:`frame` while another thread's call
+    holds the renderer is a :class:`PyrenderAdapterError`, and :meth:`close` waits for that call.
     """
 
     def __init__(self, adapter_class: type[Adapter], scene: Any, width: int, height: int, *,
@@ -53,6 +55,7 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         self._pyrender = pyrender = import_pyrender(platform)
         self.scene = scene if isinstance(scene, pyrender.Scene) else to_pyrender_scene(scene)
         self.renderer = offscreen_renderer(pyrender, self.width, self.height)
+        self._busy = busy_lock(self.renderer)  # (its adapters' too: they borrow the renderer)
         self._cameras: dict[tuple[float, float, float], Any] = {}
         self._own_main = self.scene.main_camera_node  # (a user's scene gets it back on close)
         self._camera0 = self._camera_for(None)  # (pyrender files the node under this camera: removed with it)
@@ -74,6 +77,10 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
         for name, cam in (("camera", camera), ("prev_camera", prev_camera)):
             if not isinstance(cam, Camera):
                 raise ParameterError(f"{name}: expected an rtp.scene.Camera, got {type(cam).__name__}", name)
+        with one_call(self._busy, "PyrenderFrameSource.frame"):  # (it moves the camera node its adapters move)
+            return self._frame(camera, prev_camera)
+
+    def _frame(self, camera: Camera, prev_camera: Camera) -> SceneFrame:
         cam, prev_cam = self._camera_for(camera), self._camera_for(prev_camera)
         pose, prev_pose = np.linalg.inv(camera.view()), np.linalg.inv(prev_camera.view())
         self._node.camera = prev_cam
@@ -89,7 +96,12 @@ class PyrenderFrameSource(FrameSource[SceneFrame]):
     def close(self) -> None:
         """Free the renderer's GL context (only its own: other renderers keep working), and take the camera node
         this source added out of the scene, whose main camera is again the one it had (a ``pyrender.Scene`` of
-        the caller's was left with a second camera, the source's, as its main one)."""
+        the caller's was left with a second camera, the source's, as its main one). A :meth:`frame` under way in
+        another thread is waited for."""
+        with self._busy:
+            self._close()
+
+    def _close(self) -> None:
         try:
             _delete_renderer(self.renderer)
         finally:
