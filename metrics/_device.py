@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ._errors import MetricParameterError
+
+if TYPE_CHECKING:  # (for a type checker only: importing rtp.metrics never imports torch)
+    import torch
 
 __all__ = ["DEVICES", "device_name", "full_float32", "resolve_device"]
 
@@ -19,7 +22,7 @@ __all__ = ["DEVICES", "device_name", "full_float32", "resolve_device"]
 DEVICES = ("auto", "cpu", "cuda", "mps")
 
 
-def resolve_device(name: str, what: str = "device") -> Any:
+def resolve_device(name: str, what: str = "device") -> torch.device:
     """The ``torch.device`` ``name`` names, once torch can run there (module docstring): else a
     :class:`MetricParameterError` (a :class:`rtp.sdk.ParameterError`) naming ``what`` and why (the
     CPU build of torch, no driver, ``cuda:3`` on a machine of two)."""
@@ -59,7 +62,7 @@ def resolve_device(name: str, what: str = "device") -> Any:
     return torch.device(dev.type)
 
 
-def device_name(dev: Any) -> str:
+def device_name(dev: torch.device) -> str:
     """A ``torch.device`` as logs and provenance name it: ``cuda:0 (NVIDIA H200)``, ``cpu``."""
     import torch
 

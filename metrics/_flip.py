@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 
 from ._errors import MetricDependencyError, MetricError, MetricParameterError
 from ._image import as_pair
+
+if TYPE_CHECKING:  # (for a type checker only: importing rtp.metrics never imports torch)
+    from torch import Tensor
 
 __all__ = ["DEFAULT_PPD", "FLIP_DEFAULT_PPD", "PPD_METRICS", "Ppd", "flip_map", "ppd_from_width", "resolve_ppd"]
 
@@ -130,6 +133,10 @@ def flip_pixels(reference: np.ndarray, test: np.ndarray, ppd: float) -> np.ndarr
     return emap.reshape(ref.shape[:2])
 
 
+@overload
+def flip_map(reference: np.ndarray, test: np.ndarray | Tensor, *, ppd: Ppd = ...) -> np.ndarray: ...
+@overload
+def flip_map(reference: Tensor, test: np.ndarray | Tensor, *, ppd: Ppd = ...) -> Tensor: ...
 def flip_map(reference: Any, test: Any, *, ppd: Ppd = DEFAULT_PPD) -> Any:
     """Per-pixel LDR-FLIP error between a reference and a test image (Andersson et al. 2020).
 

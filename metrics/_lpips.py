@@ -21,7 +21,7 @@ import logging
 import os
 import pickle
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
@@ -30,6 +30,10 @@ from rtp.sdk import InputShapeError
 from ._device import full_float32
 from ._errors import MetricDependencyError, MetricParameterError
 from ._image import ImageBatch, as_pair
+
+if TYPE_CHECKING:  # (for a type checker only: importing rtp.metrics never imports torch)
+    import torch
+    from torch import Tensor
 
 __all__ = [
     "FETCH_COMMAND",
@@ -310,7 +314,7 @@ def _cached_network(path: str | None) -> Any:
     return net
 
 
-def lpips_network(weights: str | os.PathLike[str] | None = None) -> Any:
+def lpips_network(weights: str | os.PathLike[str] | None = None) -> torch.nn.Module:
     """The cached LPIPS-alex ``torch.nn.Module`` (CPU, eval mode, frozen).
 
     ``net(x0, x1)`` takes NCHW float32 in LPIPS' input range [-1, 1] and returns the spatial map
@@ -383,6 +387,12 @@ def lpips_against(
         ]
 
 
+@overload
+def lpips_map(reference: np.ndarray, test: np.ndarray | Tensor, *, paper_quirk: bool = ...,
+              weights: str | os.PathLike[str] | None = ...) -> np.ndarray: ...
+@overload
+def lpips_map(reference: Tensor, test: np.ndarray | Tensor, *, paper_quirk: bool = ...,
+              weights: str | os.PathLike[str] | None = ...) -> Tensor: ...
 def lpips_map(
     reference: Any, test: Any, *, paper_quirk: bool = False, weights: str | os.PathLike[str] | None = None
 ) -> Any:

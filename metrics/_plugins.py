@@ -26,7 +26,7 @@ import logging
 import math
 import re
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from types import MappingProxyType
@@ -232,7 +232,7 @@ def register_metric(metric: Metric) -> None:
         _explicit.add(metric.name)
 
 
-def check_worker_metrics(names: Any) -> None:
+def check_worker_metrics(names: str | Iterable[str]) -> None:
     """Refuse, before a job starts worker processes (``workers > 1``, Ray), a plugin metric of ``names``
     that only :func:`register_metric` made known: the workers are new processes, which find metrics
     through entry points; and one registered under an entry point's name whose ``params`` or pooling (its

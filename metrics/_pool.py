@@ -9,7 +9,7 @@ or a mean).
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 
@@ -24,6 +24,10 @@ from rtp.sdk import (
 
 from ._errors import InputRangeError, MetricParameterError
 from ._image import RANGE_TOLERANCE, _is_torch, as_batch
+
+if TYPE_CHECKING:  # (for a type checker only: importing rtp.metrics never imports torch)
+    import numpy.typing as npt
+    from torch import Tensor
 
 __all__ = [
     "DEFAULT_WEBER_L",
@@ -76,6 +80,12 @@ def _pool_np(values: np.ndarray, tile: int, reduce: Reduce) -> np.ndarray:
     return sums / np.outer(tile_extents(h, tile_h), tile_extents(w, tile_w))
 
 
+@overload
+def pool_tiles(values: np.ndarray, tile: int, reduce: Reduce = ...) -> np.ndarray: ...
+@overload
+def pool_tiles(values: Tensor, tile: int, reduce: Reduce = ...) -> Tensor: ...
+@overload
+def pool_tiles(values: npt.ArrayLike, tile: int, reduce: Reduce = ...) -> np.ndarray: ...
 def pool_tiles(values: Any, tile: int, reduce: Reduce = "max") -> Any:
     """Pool a per-pixel map over ``tile x tile`` tiles.
 
@@ -136,6 +146,12 @@ def check_weber_l(weber_l: float) -> float:
     return value
 
 
+@overload
+def weber_denominator(reference: np.ndarray, weber_l: float = ...) -> np.ndarray: ...
+@overload
+def weber_denominator(reference: Tensor, weber_l: float = ...) -> Tensor: ...
+@overload
+def weber_denominator(reference: npt.ArrayLike, weber_l: float = ...) -> np.ndarray: ...
 def weber_denominator(reference: Any, weber_l: float = DEFAULT_WEBER_L) -> Any:
     """Per-pixel Weber denominator ``L + l`` of reference images.
 

@@ -7,7 +7,7 @@ import os
 import re
 import time
 from collections.abc import Iterable, Mapping
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 
@@ -31,6 +31,10 @@ from ._maps import jnflip_map, jnyang_map, psnr_tiles, yang_map
 from ._plugins import plugin
 from ._pool import DEFAULT_WEBER_L, _check_tile, _denominator, check_weber_l, pool_tiles
 
+if TYPE_CHECKING:  # (for a type checker only: importing rtp.metrics never imports torch)
+    import torch
+    from torch import Tensor
+
 __all__ = ["FLIP_BACKENDS", "error_map", "tile_metric", "tile_targets"]
 
 log = logging.getLogger("rtp.metrics")
@@ -42,6 +46,12 @@ def _check_metric(metric: str) -> str:
     return metric
 
 
+@overload
+def error_map(metric: str, reference: np.ndarray, test: np.ndarray | Tensor, *, ppd: Ppd = ..., weber_l: float = ...,
+              lpips_paper_quirk: bool = ...) -> np.ndarray: ...
+@overload
+def error_map(metric: str, reference: Tensor, test: np.ndarray | Tensor, *, ppd: Ppd = ..., weber_l: float = ...,
+              lpips_paper_quirk: bool = ...) -> Tensor: ...
 def error_map(
     metric: str,
     reference: Any,
@@ -78,6 +88,12 @@ def error_map(
     raise MetricParameterError("psnr has no per-pixel map; use tile_metric('psnr', ...) or psnr_tiles")
 
 
+@overload
+def tile_metric(metric: str, reference: np.ndarray, test: np.ndarray | Tensor, tile: int = ..., *, ppd: Ppd = ...,
+                weber_l: float = ..., lpips_paper_quirk: bool = ...) -> np.ndarray: ...
+@overload
+def tile_metric(metric: str, reference: Tensor, test: np.ndarray | Tensor, tile: int = ..., *, ppd: Ppd = ...,
+                weber_l: float = ..., lpips_paper_quirk: bool = ...) -> Tensor: ...
 def tile_metric(
     metric: str,
     reference: Any,
@@ -143,7 +159,7 @@ def _check_flip_torch(names: Iterable[str], backend: str) -> None:
         ) from exc
 
 
-def targets_device(metrics: Iterable[str], device: str | None, flip_backend: str | None = None) -> Any:
+def targets_device(metrics: Iterable[str], device: str | None, flip_backend: str | None = None) -> torch.device | None:
     """The ``torch.device`` :func:`tile_targets` runs the torch work of ``metrics`` on (FLIP's port
     with the torch ``flip_backend``, LPIPS), or None where there is none or ``device`` is None.
     Raises :class:`MetricParameterError` as it would: a name that is no device, a device this torch

@@ -147,7 +147,7 @@ test, i12, i21, i22, i24, i42, i44 = (np.clip(reference + 0.05 * rng.standard_no
 """,
         'assert emap.shape == (40, 56) and tiles.shape == psnr.shape == (3, 4) and targets["jnflip"].shape == (6, 3, 4)',
     ),
-    ("metrics.md", "def absdiff(reference, test):"): (
+    ("metrics.md", "def absdiff(reference: np.ndarray, test: np.ndarray) -> np.ndarray:"): (
         "",
         """
 metrics.register_metric(MINE)

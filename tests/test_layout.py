@@ -486,6 +486,74 @@ def conform(predictor: sdk.ShadingRatePredictor, frame: MyFrame) -> None:
     assert_type(sdk.adapters.get("moderngl"), type[Adapter[Any]])
 """
 
+#: ``rtp.metrics``' map functions as docs/metrics.md calls them: numpy in, numpy out; torch in, torch out (until
+#: 2026-12-08 each returned ``Any``: ``metrics.flip_map(ref, test).shpe`` passed). Their container is the reference's.
+_USER_METRICS = """
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import assert_type
+
+import numpy as np
+import numpy.typing as npt
+import torch
+
+from rtp import metrics, sdk
+
+
+def numpy_maps(reference: npt.NDArray[np.float32], test: np.ndarray, i12: np.ndarray) -> None:
+    emap = metrics.flip_map(reference, test)
+    assert_type(emap, np.ndarray)
+    assert_type(metrics.pool_tiles(emap, 16), np.ndarray)
+    assert_type(metrics.pool_tiles([[0.5, 1.0]], 16, "mean"), np.ndarray)
+    assert_type(metrics.psnr_tiles(reference, test, 16), np.ndarray)
+    assert_type(metrics.jnflip_map(reference, test, ppd="width", weber_l=metrics.PAPER_WEBER_L), np.ndarray)
+    assert_type(metrics.yang_map(reference, test), np.ndarray)
+    assert_type(metrics.jnyang_map(reference, test, weber_l=0.05), np.ndarray)
+    assert_type(metrics.squared_error_map(reference, test), np.ndarray)
+    assert_type(metrics.lpips_map(reference, test, paper_quirk=True), np.ndarray)
+    assert_type(metrics.error_map("jnflip", reference, test, ppd=33.5), np.ndarray)
+    assert_type(metrics.tile_metric("psnr", reference, test, 8), np.ndarray)
+    assert_type(metrics.weber_denominator(reference), np.ndarray)
+    assert_type(metrics.tile_targets(reference, {"1x2": i12}, ["jnflip", "psnr"], missing="nan"),
+                dict[str, np.ndarray])
+
+
+def torch_maps(reference: torch.Tensor, test: torch.Tensor, either: np.ndarray | torch.Tensor) -> None:
+    emap = metrics.flip_map(reference, test)
+    assert_type(emap, torch.Tensor)
+    assert_type(metrics.pool_tiles(emap, 16, "mean"), torch.Tensor)
+    assert_type(metrics.psnr_tiles(reference, test), torch.Tensor)
+    assert_type(metrics.jnflip_map(reference, test), torch.Tensor)
+    assert_type(metrics.yang_map(reference, test), torch.Tensor)
+    assert_type(metrics.jnyang_map(reference, test), torch.Tensor)
+    assert_type(metrics.squared_error_map(reference, test), torch.Tensor)
+    assert_type(metrics.lpips_map(reference, test), torch.Tensor)
+    assert_type(metrics.error_map("flip", reference, test), torch.Tensor)
+    assert_type(metrics.tile_metric("lpips", reference, test, 16, lpips_paper_quirk=True), torch.Tensor)
+    assert_type(metrics.weber_denominator(reference), torch.Tensor)
+    assert_type(metrics.yang_map(either, test), np.ndarray | torch.Tensor)
+    assert_type(metrics.resolve_device("auto"), torch.device)
+    assert_type(metrics.device_name(metrics.resolve_device("cpu")), str)
+    assert_type(metrics.targets_device(["lpips"], "auto"), torch.device | None)
+    assert_type(metrics.lpips_network(), torch.nn.Module)
+
+
+def own(metric: metrics.Metric, reference: np.ndarray) -> None:
+    metrics.register_metric(metric)
+    metrics.check_worker_metrics([metric.name, "flip"])
+    assert_type(metric.map(reference, reference), np.ndarray)
+    assert_type(metric.info, sdk.MetricInfo)
+    assert_type(metrics.metric_info(metric.name), sdk.MetricInfo)
+    assert_type(metrics.known_metrics(), tuple[str, ...])
+    assert_type(metrics.metric_plugins(), Mapping[str, metrics.Metric])
+
+
+def mistakes(reference: np.ndarray) -> None:  # each an error (strict's warn_unused_ignores: one that is not fails)
+    metrics.flip_map([[[0.5, 0.5, 0.5]]], reference)  # type: ignore[call-overload]  # a list: InputDtypeError
+    metrics.check_worker_metrics(5)  # type: ignore[arg-type]
+"""
+
 #: Names a user may misspell: each line is an error of mypy's, where a module ``__getattr__`` made every name exist.
 _USER_TYPOS = """
 import rtp as package
@@ -518,10 +586,17 @@ def _package_tree(root: Path) -> Path:
 def test_a_users_type_checker_sees_the_public_api(tmp_path: Path) -> None:
     """rtp ships py.typed: a user's ``mypy --strict`` takes the documented calls and sees precise types. Until
     2026-12-08 ``rtp`` and ``rtp.sdk`` defined a module ``__getattr__`` (for ``__version__``), which a type checker
-    reads as "any other name exists, a str": ``from rtp.sdk import PredictonReuse`` and ``sdk.lod(...)`` passed."""
+    reads as "any other name exists, a str": ``from rtp.sdk import PredictonReuse`` and ``sdk.lod(...)`` passed. Until
+    2026-12-08 ``rtp.metrics``' map functions returned ``Any`` (now numpy for numpy, torch for torch: ``maps.py``), and
+    docs/metrics.md's own metric and examples/metric_plugin, copied out, failed ``--strict``."""
     tree = _package_tree(tmp_path / "tree")
     (tmp_path / "engine.py").write_text(_USER_PROGRAM)
     (tmp_path / "typos.py").write_text(_USER_TYPOS)
+    (tmp_path / "maps.py").write_text(_USER_METRICS)
+    # docs/metrics.md's "your own metric" block, and the example plugin, as a user copies them out
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "metrics.md").read_text(), re.S)
+    (tmp_path / "own_metric.py").write_text(next(b for b in blocks if "metrics.Metric(" in b))
+    (tmp_path / "rtp_ssim.py").write_text((ROOT / "examples" / "metric_plugin" / "rtp_ssim.py").read_text())
     (tmp_path / "mypy.ini").write_text(
         "[mypy]\nstrict = True\npython_version = 3.11\n\n"
         # as for an installed package: rtp's own code is read, its own errors not reported
@@ -531,7 +606,7 @@ def test_a_users_type_checker_sees_the_public_api(tmp_path: Path) -> None:
     )
     proc = subprocess.run(
         [sys.executable, "-m", "mypy", "--config-file", "mypy.ini", "--cache-dir", str(tmp_path / "cache"),
-         "--no-error-summary", "engine.py", "typos.py"],
+         "--no-error-summary", "engine.py", "typos.py", "maps.py", "own_metric.py", "rtp_ssim.py"],
         cwd=tmp_path, env={**os.environ, "MYPYPATH": str(tree)}, capture_output=True, text=True, timeout=300,
     )
     errors = [line for line in proc.stdout.splitlines() if ": error:" in line]

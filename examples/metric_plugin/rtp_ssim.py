@@ -37,7 +37,7 @@ def _blur(a: np.ndarray) -> np.ndarray:
     h, w = a.shape
     p = np.pad(a, RADIUS, mode="symmetric")
     rows = sum(k * p[:, i:i + w] for i, k in enumerate(_TAPS))
-    return sum(k * rows[i:i + h, :] for i, k in enumerate(_TAPS))
+    return np.asarray(sum(k * rows[i:i + h, :] for i, k in enumerate(_TAPS)))  # (sum() is typed Any)
 
 
 def ssim_map(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
@@ -45,7 +45,7 @@ def ssim_map(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
     x, y = (luma(np.asarray(f)).astype(np.float64) for f in (reference, test))
     mx, my = _blur(x), _blur(y)
     sxx, syy, sxy = _blur(x * x) - mx * mx, _blur(y * y) - my * my, _blur(x * y) - mx * my
-    return ((2 * mx * my + C1) * (2 * sxy + C2)) / ((mx * mx + my * my + C1) * (sxx + syy + C2))
+    return np.asarray(((2 * mx * my + C1) * (2 * sxy + C2)) / ((mx * mx + my * my + C1) * (sxx + syy + C2)))
 
 
 def dssim_map(reference: np.ndarray, test: np.ndarray) -> np.ndarray:
