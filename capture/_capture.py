@@ -564,7 +564,8 @@ def capture(
 
     ``ray`` runs the capture on Ray instead (docs/scaling.md): ``"local"`` starts a private Ray
     instance with ``workers`` CPUs, ``"auto"`` or a head address joins a cluster (``workers`` None:
-    one worker per CPU of the cluster). Samples are the same as the local path's; workers send them
+    one worker per CPU of the cluster; an address of none of these forms is a ``RayExecutorError`` with the other
+    arguments, before ``starting``). Samples are the same as the local path's; workers send them
     back as bytes and this process writes them, so no shared filesystem is needed.
     """
     scene_names, profiles = _names("scene_names", scene_names), _names("profiles", profiles)
@@ -594,6 +595,11 @@ def capture(
                              + (" (empty; '.' is the current folder)" if out == "" else ""), "out")
     if placement not in PLACEMENTS:
         raise ParameterError(f"unknown placement {placement!r}; placements are {', '.join(PLACEMENTS)}", "placement")
+    from ._ray import check_ray_address
+
+    # (its form, without Ray or a connection: `--ray head.example`, with no port, was refused only on connecting,
+    # after `starting` had announced the job; whether anything answers there is still found there)
+    check_ray_address(ray)
     w, h = check_frame_size(size, renderer=False)
     if ray in (None, "local"):  # (on a cluster each node's workers are checked against its memory: ray_capture)
         # (locally a process a scene at most; a private Ray's workers a sample at most, any scene's: counted as

@@ -41,7 +41,7 @@ from rtp.sdk import EXIT_USAGE, ParameterError, RtpError
 from ._memory import job_bytes
 from ._pool import cores
 
-__all__ = ["MAX_RETRIES", "RAY_LOCAL", "RayExecutorError", "RayWorkerError", "ray_cluster"]
+__all__ = ["MAX_RETRIES", "RAY_LOCAL", "RayExecutorError", "RayWorkerError", "check_ray_address", "ray_cluster"]
 
 log = logging.getLogger("rtp.capture")
 
@@ -75,10 +75,23 @@ def _ray() -> Any:
     return ray
 
 
-def _check_reachable(address: str, timeout: float = 5.0) -> None:
-    """Fail in seconds, not minutes, on a head address nothing listens at (ray.init retries for long)."""
-    import socket
+def check_ray_address(address: object) -> tuple[str, int] | None:
+    """The form of a ``ray`` argument (``--ray ADDRESS``) checked without Ray and without connecting: None,
+    ``"local"`` or ``"auto"`` (None returned), or a head's ``HOST:PORT``, ``[IPV6]:PORT`` or ``ray://HOST:PORT``
+    (its host and port returned, the host ``""`` for ``:PORT``). :func:`rtp.capture.capture` and
+    :func:`rtp.capture.compute_targets` call it with their other arguments, so that a malformed address is
+    refused before the job is announced (it was refused only on connecting, after the "capture: ... = N samples"
+    line); whether anything answers there is :func:`ray_cluster`'s to find.
 
+    Raises:
+        RayExecutorError: the address is not text, or not of one of these forms (a port outside 1-65535, an IPv6
+            address without its brackets, no port, empty).
+    """
+    if address is None or address in (RAY_LOCAL, "auto"):
+        return None
+    if not isinstance(address, str):
+        raise RayExecutorError(f"Ray address: expected 'local', 'auto', HOST:PORT, [IPV6]:PORT or ray://HOST:PORT, "
+                               f"got {type(address).__name__} {address!r}")
     hostport = address.split("://", 1)[-1]
     if hostport.startswith("["):  # an IPv6 address, as Ray takes it: [::1]:6379 (the brackets were looked up as a name)
         host, close, rest = hostport[1:].partition("]")
@@ -93,6 +106,17 @@ def _check_reachable(address: str, timeout: float = 5.0) -> None:
     if not sep or not port.isdigit() or not 0 < int(port) < 65536:  # (99999 was taken as port 34463)
         raise RayExecutorError(f"Ray address {address!r}: expected 'local', 'auto', HOST:PORT, [IPV6]:PORT or "
                                "ray://HOST:PORT, a port in 1-65535")
+    return host, int(port)
+
+
+def _check_reachable(address: str, timeout: float = 5.0) -> None:
+    """Fail in seconds, not minutes, on a head address nothing listens at (ray.init retries for long)."""
+    import socket
+
+    parsed = check_ray_address(address)
+    if parsed is None:  # ('local' and 'auto' name no head to connect to)
+        return
+    host, port = parsed
     try:
         socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout).close()
     except OSError as exc:

@@ -486,6 +486,9 @@ def compute_targets(
         _check_name(m)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ParameterError(f"workers must be None or an integer >= 1, got {workers!r}", "workers")
+    from ._ray import check_ray_address
+
+    check_ray_address(ray)  # (its form, without Ray: a malformed address, before any sample is read or reported)
     if flip_backend is not None and flip_backend not in M.FLIP_BACKENDS:
         raise TargetError(f"flip_backend must be one of {', '.join(M.FLIP_BACKENDS)} or None, got {flip_backend!r}")
     M.check_dependencies(metrics)  # every missing package or weights file now, not after hours of work

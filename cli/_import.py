@@ -10,8 +10,9 @@ import sys
 
 __all__ = ["run_import"]
 
-#: ``--write-example``'s options and their values when not given (refused without it).
-EXAMPLE_OPTIONS = {"count": 8, "size": (640, 360), "seed": 0, "example_scene": "procedural:0"}
+#: ``--write-example``'s options and their values when not given (refused without it; ``cache_dir`` None: the
+#: default scene cache, ``rtp.capture.scenes.default_cache_dir()``).
+EXAMPLE_OPTIONS = {"count": 8, "size": (640, 360), "seed": 0, "example_scene": "procedural:0", "cache_dir": None}
 #: The options of an import, with the value each has when not given (refused with ``--write-example``, which writes
 #: frames in the default conventions and imports nothing; ``--tolerance``'s: sdk.DEFAULT_REPROJECTION_TOLERANCE).
 IMPORT_OPTIONS = {"out": None, "scene": None, "profile": "engine", "albedo_linear": False, "normal_space": "view",
@@ -33,7 +34,7 @@ def run_import(args: argparse.Namespace) -> int:
         w, h = args.size
         with Bar(args, args.count, "write frames", "frame") as bar:
             written = write_sequence(args.frames[0], args.size, args.seed, args.count, bar.update_to, rates=True,
-                                     scene_name=args.example_scene)
+                                     scene_name=args.example_scene, cache_dir=args.cache_dir)
         print(f"wrote {len(written)} frames of {w}x{h} along a camera path through {args.example_scene}, each with its "
               f"G-buffers and the frame shaded at every rate ({', '.join(sdk.ALL_RATES)}), in {args.frames[0]}: "
               f"{written[0]} ... {written[-1]}")

@@ -79,7 +79,8 @@ def _out_file(text: str) -> str:
 
 def out_image(text: str) -> str:
     """An argparse type: an image file Pillow can write, in a place that can be written (public: the
-    examples check their ``--out`` the same way, before the work that makes the image). Without Pillow (the
+    examples check their ``--out`` the same way, before the work that makes the image; a leading ``~`` is the
+    home folder, :func:`_home`). Without Pillow (the
     runtime install) only the place is checked: the command that writes the image says, before its work, that
     Pillow is missing (``_picture_modules``), where importing it here was a traceback while parsing."""
     from rtp.capture import check_image_output
@@ -91,6 +92,7 @@ def out_image(text: str) -> str:
         if err.name != "PIL":
             raise
         return _checked_path(text, folder=False)
+    text = _home(text)
     try:
         check_image_output(text, what="path")
     except ParameterError as err:
@@ -126,11 +128,19 @@ def out_animation(text: str) -> str:
     return out_image(text)
 
 
+def _home(text: str) -> str:
+    """A path option's text with a leading ``~`` (``~``, ``~/x``, ``~user/x``) made the home folder, as a shell
+    expands it unquoted, and as ``$RTP_SCENE_CACHE`` and ``$RTP_WEIGHTS_CACHE`` are read: quoted (``--cache-dir
+    '~/x'``, a path pasted from a config), it made a folder literally named ``~`` in the current folder, and
+    ``rtp weights fetch`` said to set RTP_WEIGHTS_CACHE='~/x', which names the home folder's ``x``. Every path
+    type of the commands' options takes it here; other text is returned as it is."""
+    return os.path.expanduser(text) if text.startswith("~") else text
+
+
 def _path_text(text: str) -> str:
     """An argparse type: a path that may be read or written later (a cache, perhaps read-only): only
-    text the system cannot take as a path (empty, a NUL byte) is refused now."""
-    import os
-
+    text the system cannot take as a path (empty, a NUL byte) is refused now. A leading ``~`` is the
+    home folder (:func:`_home`)."""
     if "\0" in text:
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (a NUL byte)")
     if not text:  # (--cache-dir "" made the current folder the scene cache: a fetch unpacked 400 MB there)
@@ -139,14 +149,20 @@ def _path_text(text: str) -> str:
         os.fsencode(text)
     except UnicodeEncodeError:  # a lone surrogate no file system name decodes to (an in-process caller's)
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (not encodable as a file name)") from None
-    return text
+    return _home(text)
+
+
+def _folders_csv(text: str) -> str:
+    """An argparse type: ``rtp train --data``'s folder, or several comma-separated, each with a leading ``~`` the
+    home folder (:func:`_home`); the text otherwise as typed (the recipe's reader splits and checks it)."""
+    return ",".join(_home(part.strip()) if part.strip().startswith("~") else part for part in text.split(","))
 
 
 def _in_file(text: str) -> str:
     """An argparse type: a file to read (``--metadata``'s sidecar, ``--splits``' lists), refused now where it cannot
     be one: empty (``--splits ""`` said "split file not found: .", ``--metadata ""`` "Is a directory: '.'") or a
     folder ("split file not found" of a folder that is there). A missing file is its reader's to say."""
-    _path_text(text)
+    text = _path_text(text)
     if os.path.isdir(text):
         raise argparse.ArgumentTypeError(f"{text!r} is a folder; expected a file path")
     return text
@@ -158,6 +174,7 @@ def _checked_path(text: str, *, folder: bool) -> str:
 
     if not text:  # (--out "", an unset shell variable, wrote the dataset, the demo, a play's report into the current folder)
         raise argparse.ArgumentTypeError("expected a path, got '' (empty; '.' is the current folder)")
+    text = _home(text)
     try:
         check_output(text, folder=folder, what="path")
     except ParameterError as err:
@@ -430,8 +447,10 @@ def _cmd_weights_fetch(args: argparse.Namespace) -> int:
     read = default_weights_cache()
     # (weights fetched into another folder were said fetched, and every command still missed them)
     elsewhere = args.cache_dir is not None and Path(args.cache_dir).resolve() != read.resolve()
+    # (the variable named absolute: a relative --cache-dir, named as given, served only commands run from here)
     print(f"LPIPS weights: {path}" + (f" (rtp reads its weights from {read}: set RTP_WEIGHTS_CACHE="
-                                      f"{shlex.quote(args.cache_dir)} for its commands to use these)" if elsewhere else ""))
+                                      f"{shlex.quote(os.path.abspath(args.cache_dir))} for its commands to use "
+                                      f"these)" if elsewhere else ""))
     return 0
 
 
@@ -496,7 +515,7 @@ def _cmd_adapters_check(args: argparse.Namespace) -> int:
     _picture_modules(args.image, "--image")
     with _metadata_hint(args):  # (--model of a foreign file: the SDK's hint named a --metadata it does not have)
         report = check_adapter(args.adapter, size=args.size, tolerances=tolerances, model=args.model,
-                               image=args.image, scene=args.scene)
+                               image=args.image, scene=args.scene, cache_dir=args.cache_dir)
     if args.json:
         print(json.dumps(report.to_dict(), indent=1))
     else:
@@ -1070,6 +1089,7 @@ def build_parser() -> argparse.ArgumentParser:
     chk.add_argument("--size", type=frame_size, default="64x48", help="WIDTHxHEIGHT of the frames drawn")
     chk.add_argument("--scene", default="procedural:0", type=_path_text, help="the scene drawn: procedural:<seed>, "
                      "your own .glb/.gltf/.obj file, or a map of `rtp scenes list` (fetched)")
+    cache_dir(chk)
     chk.add_argument("--model", default=None, help="the model for_predictor feeds: an .onnx path or a shipped "
                      "model's name (default: every shipped model the adapter can run)")
     chk.add_argument("--image", type=out_image, default=None, help="also write a picture: each channel of the "
@@ -1134,7 +1154,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr = command("train", "train a metric-prediction model on a captured dataset", _cmd_train,
                  epilog="Hyper-parameters come from --config (the shipped models' recipe by default: "
                  "train/recipes/shipped.yaml); a flag given here overrides the recipe's value.")
-    tr.add_argument("--data", required=True, help="dataset folder (with targets from `rtp targets`), or several, "
+    tr.add_argument("--data", required=True, type=_folders_csv, help="dataset folder (with targets from `rtp targets`), "
+                    "or several, "
                     "comma-separated, read as one (for example the usual pairs and 60 Hz ones: data/train,data/train-frame)")
     tr.add_argument("--metric", required=True, type=_metric_name, help="the metric whose targets the network "
                     f"learns (computed by `rtp targets`): {', '.join(METRICS)}, or a plugin's")
@@ -1414,6 +1435,11 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("--seed", type=_non_negative, default=None, help="--write-example's camera path (default: 0)")
     im.add_argument("--example-scene", default=None, help="--write-example's scene (procedural:<seed>, a map "
                     "name, or a .glb/.gltf/.obj file) (default: procedural:0)")
+    from rtp.capture.scenes import default_cache_dir
+
+    # (default None, as --write-example's other options: given without it, refused rather than ignored)
+    im.add_argument("--cache-dir", default=None, type=_path_text, help="--write-example's scene cache of `rtp scenes "
+                    f"fetch`; $RTP_SCENE_CACHE sets the default (default: {default_cache_dir()})")
 
     pr = command("predict", "a model's predictions and shading rates for frames of your engine's G-buffers "
                  "(.npz files)", _cmd_predict,

@@ -131,10 +131,11 @@ def write_example(path: str, size: tuple[int, int], seed: int) -> dict[str, np.n
 
 def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
                    progress: Callable[[int], None] | None = None, *, rates: bool = False,
-                   scene_name: str = "procedural:0") -> list[str]:
+                   scene_name: str = "procedural:0", cache_dir: str | None = None) -> list[str]:
     """``count`` consecutive frames at 60 Hz along a ``slow`` camera path through ``scene_name`` (the procedural
-    scene by default), as an engine would dump them (each frame's ``prev_colour`` the one before it as
-    displayed, at full rate), written to ``folder`` as ``frame_0000.npz`` ...; the names written
+    scene by default; a map is read from the scene cache ``cache_dir``, None for the default one), as an engine
+    would dump them (each frame's ``prev_colour`` the one before it as displayed, at full rate), written to
+    ``folder`` as ``frame_0000.npz`` ...; the names written
     (``progress`` is called with the count written after each). ``rates``: each frame also holds
     ``final_<rate>``, the frame shaded at every rate (what ``rtp import`` trains on)."""
     from rtp import sdk
@@ -155,7 +156,7 @@ def write_sequence(folder: str, size: tuple[int, int], seed: int, count: int,
             f"frame folder: {str(out)!r} holds {len(others)} other .npz frame{'s' if len(others) > 1 else ''} ("
             f"{', '.join(others[:3])}{', ...' if len(others) > 3 else ''}), which a run on the folder would take as "
             f"frames of these {count}: give an empty folder, or remove them", "frames")
-    scene, blockers = load_scene(scene_name, None, None, None)
+    scene, blockers = load_scene(scene_name, cache_dir, None, None)
     path = camera_path(scene, count + 1, "slow", seed, blockers=blockers)
     with Renderer(w, h) as r:
         r.load_scene(scene)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import logging
+import os
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -561,7 +562,8 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
                   tolerances: Mapping[str, float | Tolerance] | None = None,
                   model: str | Path | sdk.ShadingRatePredictor | None = None,
                   frame_source_options: Mapping[str, Any] | None = None,
-                  image: str | Path | None = None, scene: str = CONFORMANCE_SCENE) -> ConformanceReport:
+                  image: str | Path | None = None, scene: str = CONFORMANCE_SCENE,
+                  cache_dir: str | os.PathLike[str] | None = None) -> ConformanceReport:
     """Run every conformance check of docs/adapters.md on an adapter and report each.
 
     The adapter is driven only through the generic path (``frame_source`` -> ``adapter`` ->
@@ -581,6 +583,8 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
         frame_source_options: keyword arguments of the adapter's ``frame_source``.
         scene: the scene drawn, as ``rtp capture --scene`` names one: ``procedural:<seed>``, your
             own glTF / GLB / OBJ file, or a map of ``rtp scenes list`` (fetched).
+        cache_dir: the scene cache a map is read from (``rtp adapters check --cache-dir``); default
+            :func:`rtp.capture.scenes.default_cache_dir`.
         image: write a picture here (its extension names the format: ``.png``, ``.jpg``, ...): a
             row per channel, the adapter's plane beside the reference renderer's and their
             difference, red where it is past the channel's tolerance. Written whenever the adapter
@@ -631,9 +635,12 @@ def check_adapter(adapter: str | type[Adapter[Any]], *, size: tuple[int, int] = 
     if not isinstance(scene, str) or not scene:
         raise sdk.ParameterError(f"scene: expected a scene name such as {CONFORMANCE_SCENE!r} or a mesh file, got "
                                  f"{scene!r}", "scene")
+    if cache_dir is not None and (not isinstance(cache_dir, (str, os.PathLike)) or not os.fspath(cache_dir)):
+        raise sdk.ParameterError(f"cache_dir: expected the scene cache's folder path, or None for the default one, got "
+                                 f"{cache_dir!r}", "cache_dir")
     from rtp.capture import load_scene
 
-    drawn, _ = load_scene(scene, None, None, None)  # (SceneError names what is wrong with it)
+    drawn, _ = load_scene(scene, cache_dir, None, None)  # (SceneError names what is wrong with it)
     if not drawn.spawn_points:
         raise sdk.ParameterError(f"scene: {scene} has no spawn point to move the camera from", "scene")
     scene_name = scene

@@ -539,6 +539,20 @@ def test_the_kit_draws_another_scene_and_skips_what_its_move_cannot_show(monkeyp
             conformance.check_adapter(NumpyAdapter, scene=bad)
 
 
+def test_a_map_is_read_from_the_scene_cache_given(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """check_adapter(scene=MAP) read only the default scene cache (`rtp adapters check` had no --cache-dir): it
+    takes ``cache_dir`` now, the default cache when None; a cache_dir that is no path is a ParameterError."""
+    default, given = tmp_path / "default-cache", tmp_path / "given"
+    monkeypatch.setenv("RTP_SCENE_CACHE", str(default))
+    with pytest.raises(RtpError, match=f"no scene index at {given / 'index.json'}"):
+        conformance.check_adapter(NumpyAdapter, scene="oa_dm1", cache_dir=given)
+    with pytest.raises(RtpError, match=f"no scene index at {default / 'index.json'}"):
+        conformance.check_adapter(NumpyAdapter, scene="oa_dm1", cache_dir=None)
+    for bad in (3, ""):
+        with pytest.raises(sdk.ParameterError, match="cache_dir: expected the scene cache's folder path"):
+            conformance.check_adapter(NumpyAdapter, scene="oa_dm1", cache_dir=bad)  # type: ignore[arg-type]
+
+
 def test_resolving_an_adapter_says_what_was_expected() -> None:
     assert conformance.resolve_adapter(f"{__name__}:NumpyAdapter") == (NumpyAdapter, f"{__name__}:NumpyAdapter")
     assert conformance.resolve_adapter(NumpyAdapter)[0] is NumpyAdapter

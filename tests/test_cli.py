@@ -596,3 +596,28 @@ def test_make_play_plays_every_scene_file_rtp_play_reads(tmp_path: Path) -> None
     gone = f"{tmp_path}/gone.ply"
     fetch, run = _make_runs("play", f"MAP={gone}", "DATA=d")
     assert fetch[1:] == ["scenes", "fetch", "--map", gone] and run[2] == gone
+
+
+def test_adapters_check_reads_a_map_from_the_cache_dir_given(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp adapters check --scene MAP` read only the default scene cache: it had no --cache-dir, which every other
+    command that reads maps takes ("unrecognized arguments"). It takes it now, with their default and help."""
+    from rtp.cli import build_parser
+
+    default, given = tmp_path / "default-cache", tmp_path / "my cache"
+    monkeypatch.setenv("RTP_SCENE_CACHE", str(default))
+    assert main(["adapters", "check", "moderngl", "--scene", "oa_dm1", "--cache-dir", str(given)]) == 2
+    err = capsys.readouterr().err
+    assert f"no scene index at {given / 'index.json'}" in err and str(default) not in err, err
+    assert main(["adapters", "check", "moderngl", "--scene", "oa_dm1"]) == 2
+    assert f"no scene index at {default / 'index.json'}" in capsys.readouterr().err
+
+    def option(*command: str) -> Any:
+        parser: Any = build_parser()
+        for name in command:
+            parser = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction").choices[name]
+        return next(a for a in parser._actions if a.dest == "cache_dir")
+
+    ours, theirs = option("adapters", "check"), option("capture")
+    assert (ours.default, ours.help, ours.type) == (theirs.default, theirs.help, theirs.type) == \
+        (str(default), theirs.help, theirs.type)

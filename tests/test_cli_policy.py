@@ -1133,3 +1133,34 @@ def test_the_console_handler_keeps_the_streams_own_for_the_rest() -> None:
     assert text.encode("ascii", _error_handler("surrogateescape")) == b"R^2sigma \xff\xfe \\xe9x<="
     assert text.encode("ascii", _error_handler("strict")) == b"R^2sigma \\udcff\\udcfe \\xe9x<="
     assert text.encode("cp1252", _error_handler("strict")) == "R²sigma \\udcff\\udcfe é×<=".encode("cp1252")
+
+
+def test_a_quoted_tilde_in_every_path_option_is_the_home_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A `~` the shell did not expand (quoted, `--out '~/data'`, or pasted from a config) made a folder literally
+    named `~` in the current folder (`rtp scenes fetch --cache-dir '~/scenes'` unpacked 400 MB there), while
+    $RTP_SCENE_CACHE and $RTP_WEIGHTS_CACHE read the same text as the home folder. Every path option of every command
+    (each --cache-dir, --out, --data, DATA, --splits, --metadata, rtp-export's) now takes a leading `~` as the home
+    folder; nothing named `~` is made here."""
+    from rtp.cli._main import _checked_path, _folders_csv, _in_file, _path_text, out_animation, out_image
+
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(tmp_path)
+    path_types = {_path_text, _in_file, out_image, out_animation, _folders_csv}
+    seen: set[str] = set()
+    for _entry, build in ENTRY.values():
+        for command in _commands(build()):
+            for action in _subparser(build(), command)._actions:
+                kind = getattr(action.type, "__name__", "")
+                if action.type in path_types or kind in ("_out_folder", "_out_file"):
+                    text = "~/sub/x.gif" if action.type in (out_image, out_animation) else "~/sub/x"
+                    assert action.type(text) == str(home / "sub" / text[6:]), (command, action.dest)  # type: ignore[misc,operator]
+                    seen.add(action.dest)
+                elif action.dest in ("cache_dir", "out", "output", "data", "data_flag", "splits", "metadata"):
+                    raise AssertionError(f"{command} --{action.dest} takes no path type, so no ~ either")
+    assert {"cache_dir", "out", "output", "data", "data_flag", "splits", "metadata", "frames"} <= seen
+    assert _folders_csv("~/a, b,~/c") == f"{home / 'a'}, b,{home / 'c'}"  # (rtp train --data's list, each folder)
+    assert _checked_path("~", folder=True) == str(home)
+    assert _path_text("a~b") == "a~b" and _path_text("./~") == "./~"  # (only a leading ~ is the home folder)
+    assert not (tmp_path / "~").exists()

@@ -160,6 +160,43 @@ def test_weights_fetched_where_rtp_does_not_read_them_are_said_so(
         assert capsys.readouterr().out == f"LPIPS weights: {no_weights / _lpips.LPIPS_WEIGHTS_FILE}\n"
 
 
+def test_weights_fetch_takes_a_quoted_tilde_as_the_home_folder_and_names_the_variable_absolute(
+    no_weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`rtp weights fetch --cache-dir '~/w'` (quoted: the shell did not expand it) fetched into a folder named `~`
+    in the current folder and said to set RTP_WEIGHTS_CACHE='~/w', which rtp reads as the home folder's w: the
+    weights were where nothing looked. A leading `~` is now the home folder, as in the variable; and a relative
+    --cache-dir is named absolute in the hint (RTP_WEIGHTS_CACHE=w served only commands run from this folder)."""
+    import shlex
+
+    from rtp.cli import main as rtp_main
+
+    given: list[Path | None] = []
+
+    def fetched(cache_dir: Path | None = None, *, quiet: bool = False, progress: bool = True) -> Path:  # (no download)
+        given.append(cache_dir)
+        return Path(cache_dir if cache_dir is not None else metrics.default_weights_cache()) / _lpips.LPIPS_WEIGHTS_FILE
+
+    monkeypatch.setattr(metrics, "fetch_lpips_weights", fetched)
+    home, here = tmp_path / "home", tmp_path / "here"
+    home.mkdir()
+    here.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(here)
+    assert rtp_main(["weights", "fetch", "--cache-dir", "~/w"]) == 0
+    assert given == [str(home / "w")]
+    assert capsys.readouterr().out == (f"LPIPS weights: {home / 'w' / _lpips.LPIPS_WEIGHTS_FILE} (rtp reads its weights "
+                                       f"from {no_weights}: set RTP_WEIGHTS_CACHE={shlex.quote(str(home / 'w'))} for "
+                                       "its commands to use these)\n")
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", "~/w")  # (the variable's ~ is the home folder too: the same folder)
+    assert rtp_main(["weights", "fetch", "--cache-dir", "~/w"]) == 0
+    assert capsys.readouterr().out == f"LPIPS weights: {home / 'w' / _lpips.LPIPS_WEIGHTS_FILE}\n"
+    monkeypatch.setenv("RTP_WEIGHTS_CACHE", str(no_weights))
+    assert rtp_main(["weights", "fetch", "--cache-dir", "rel"]) == 0
+    assert f"set RTP_WEIGHTS_CACHE={shlex.quote(str(here / 'rel'))} for" in capsys.readouterr().out
+    assert not (here / "~").exists()
+
+
 @pytest.mark.parametrize("flags, quiet, bar", [
     ([], False, True), (["--no-progress"], False, False), (["-q"], True, False), (["-q", "--no-progress"], True, False),
 ])

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import signal
 import tempfile
 import threading
@@ -248,6 +249,9 @@ def _call(entry: Callable[[list[str]], int], argv: list[str]) -> tuple[int | Non
         old = signal.signal(signal.SIGALRM, alarm) if main_thread else None
         if main_thread:
             signal.setitimer(signal.ITIMER_REAL, HANG_S)
+        # (a path option's leading ~ is the home folder: `--out ~/x` writes in the scratch folder, not the real home)
+        home = os.environ.get("HOME")
+        os.environ["HOME"] = tmp
         try:
             with (contextlib.chdir(tmp), contextlib.redirect_stderr(err), contextlib.redirect_stdout(out),
                   warnings.catch_warnings()):
@@ -260,6 +264,10 @@ def _call(entry: Callable[[list[str]], int], argv: list[str]) -> tuple[int | Non
                 except Exception as exc:  # noqa: BLE001 - the point: any escape is a bug
                     return None, err.getvalue(), exc
         finally:
+            if home is None:
+                os.environ.pop("HOME", None)
+            else:
+                os.environ["HOME"] = home
             if main_thread:
                 signal.setitimer(signal.ITIMER_REAL, 0)
                 signal.signal(signal.SIGALRM, old)

@@ -708,3 +708,22 @@ def test_colour_in_linear_light_is_warned_once_and_counted(dumps: Any, tmp_path:
         is not None
     assert _linear_light(rep, np.zeros((8, 8), np.float32), np.asarray(sdk.linear_to_srgb(rep), np.float32), geo) \
         is None
+
+
+def test_write_example_reads_a_map_from_the_cache_dir_given(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp import --write-example --example-scene MAP` read only the default scene cache: it had no --cache-dir,
+    which every other command that reads maps takes ("unrecognized arguments"). It takes it now, as one of
+    --write-example's options (refused without it, as the others are), and reads the map from there."""
+    default, given = tmp_path / "default-cache", tmp_path / "my cache"
+    monkeypatch.setenv("RTP_SCENE_CACHE", str(default))
+    monkeypatch.chdir(tmp_path)
+    argv = ["import", "frames", "--write-example", "--frames", "2", "--size", "64x48", "--example-scene", "oa_dm1"]
+    assert rtp_main([*argv, "--cache-dir", str(given)]) == 2
+    err = capsys.readouterr().err
+    assert f"no scene index at {given / 'index.json'}" in err and str(default) not in err, err
+    assert rtp_main(argv) == 2  # (without it: the default cache, $RTP_SCENE_CACHE)
+    assert f"no scene index at {default / 'index.json'}" in capsys.readouterr().err
+    assert rtp_main(["import", "frames", "--out", "data", "--cache-dir", str(given)]) == 2
+    assert "--cache-dir: an option of --write-example" in capsys.readouterr().err
+    assert not (tmp_path / "frames").exists() and not (tmp_path / "data").exists()

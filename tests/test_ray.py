@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import signal
 import time
 from collections.abc import Iterator
@@ -308,6 +309,40 @@ def test_without_ray_installed_the_flag_says_what_to_install(tmp_path: Path, mon
                  "--no-progress", "--out", str(tmp_path / "ds")]) == 2
     assert "pip install 'rtp[ray]'" in capsys.readouterr().err
     assert not (tmp_path / "ds").exists()
+
+
+@pytest.mark.parametrize("address", ["head.example", ":99999", "::1:6379", "", "ray://", "[::1]6379"])
+def test_a_malformed_ray_address_is_refused_before_the_job_is_announced(
+    address: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`--ray head.example` (no port), `:99999`, `::1:6379` or `--ray ""` was refused only on connecting, after the
+    "capture: ... = N samples" line (a refusal `starting` promises never to follow), and not at all where a Ray was
+    already running in the process (it was used, whatever the address). The form is checked with the other
+    arguments now, without Ray (none can be imported here) and before any sample is read: capture and targets."""
+    import sys
+
+    from rtp.capture._ray import check_ray_address
+    from rtp.cli import main
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # (a syntax check: import ray would raise ImportError)
+    expected = r"Ray address .*(expected 'local', 'auto', HOST:PORT|IPv6 address goes in brackets)"
+    with pytest.raises(RayExecutorError, match=expected):
+        check_ray_address(address)
+    out = tmp_path / "ds"
+    assert main(["capture", "--scene", "procedural:0", "--per-scene", "1", "--size", "96x64", "--no-progress",
+                 "--out", str(out), "--ray", address]) == 2
+    err = capsys.readouterr().err
+    assert "samples at 96x64" not in err and len(err.splitlines()) == 1 and re.search(expected, err), err
+    assert not out.exists()
+    with pytest.raises(RayExecutorError, match=expected):  # (before the folder is read: it need not exist)
+        compute_targets(tmp_path / "no-dataset", ["psnr"], ray=address)
+    assert main(["targets", str(tmp_path / "no-dataset"), "--metrics", "psnr", "--no-progress", "--ray", address]) == 2
+    assert re.search(expected, capsys.readouterr().err.splitlines()[-1])
+    for fine in (None, "local", "auto"):
+        assert check_ray_address(fine) is None
+    assert check_ray_address("ray://[::1]:10001") == ("::1", 10001) and check_ray_address(":6379") == ("", 6379)
+    with pytest.raises(RayExecutorError, match="got int 6379"):
+        check_ray_address(6379)
 
 
 def test_each_ray_nodes_workers_are_sized_against_its_memory(cluster: None, local: Path, tmp_path: Path,
