@@ -13,7 +13,9 @@ weights, the folded BatchNorm and the ceil-mode pooling are the shipped ones. Ea
 on an input already on the GPU (an engine's G-buffers live there) in three ways:
 
 - ``fp32``: eager torch, float32, cuDNN's autotuner on, then the same replayed from a CUDA graph
-  (one launch per frame, as an engine records it: small networks at batch 1 are launch-bound eagerly);
+  (one launch per frame, as an engine records it: small networks at batch 1 are launch-bound eagerly),
+  in full float32: cuDNN's TF32 convolutions, torch's default on Ampere and later GPUs (10 bits of
+  mantissa, as fp16's), are off for these columns and for the reference the fp16 output is compared with;
 - ``fp16``: half precision, channels-last (the layout tensor cores want), eager and from a CUDA graph.
 
 Times are CUDA-event medians over ``--repeats`` frames after a warm-up. The largest difference between
@@ -26,9 +28,11 @@ includes the copies a numpy caller pays. Prints Markdown tables.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import tempfile
+from collections.abc import Iterator
 from functools import partial
 from pathlib import Path
 
@@ -195,6 +199,37 @@ def _graphed(net: nn.Module, x: torch.Tensor):  # type: ignore[no-untyped-def]
     return graph.replay
 
 
+@contextlib.contextmanager
+def full_float32() -> Iterator[None]:
+    """Convolutions and matrix products in full float32 while it lasts (torch's settings before restored after):
+    cuDNN's TF32 kernels, torch's default for convolutions, round a float32 convolution's inputs to 10 bits of
+    mantissa on Ampere and later GPUs, so the "fp32" columns timed TF32 and the fp16 difference was read against a
+    TF32 output (``rtp.metrics._device.full_float32`` does the same for the targets on a GPU)."""
+    before = torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32
+    torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 = False
+    try:
+        yield
+    finally:
+        torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = before
+
+
+def time_network(n32: nn.Module, n16: nn.Module, x32: torch.Tensor, repeats: int) -> tuple[float, float, float, float,
+                                                                                          float]:
+    """One network at one frame: ms of fp32 eager and replayed from a CUDA graph (full float32: :func:`full_float32`),
+    of fp16 channels-last eager and replayed, and the largest difference of the fp16 output from the fp32 one."""
+    with full_float32():  # (the graph is captured with the kernels chosen here: its replay stays float32)
+        with torch.inference_mode():
+            ref = n32(x32)
+            t32 = _cuda_ms(partial(n32, x32), repeats)
+        t32g = _cuda_ms(_graphed(n32, x32), repeats)
+    x16 = x32.half().contiguous(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        diff = float((n16(x16).float() - ref).abs().max())
+        t16 = _cuda_ms(partial(n16, x16), repeats)
+    t16g = _cuda_ms(_graphed(n16, x16), repeats)
+    return t32, t32g, t16, t16g, diff
+
+
 def given_models(models: list[str]) -> dict[str, Path]:
     """The files of the models given (``MODEL.onnx`` or a shipped model's name, which is no file in the working
     folder: rebuilt from the file ``sdk.load`` finds), each once, by file name, or by the path as given where two
@@ -237,17 +272,8 @@ def main() -> None:
                 gen = torch.Generator(device=dev).manual_seed(0)
                 x32 = torch.rand((1, c, hp, wp), device=dev, generator=gen)
                 n32 = net.to(dev).float()
-                with torch.inference_mode():
-                    ref = n32(x32)
-                    t32 = _cuda_ms(partial(n32, x32), args.repeats)
-                t32g = _cuda_ms(_graphed(n32, x32), args.repeats)
                 n16 = torch_from_onnx(paths[name]).to(dev).half().to(memory_format=torch.channels_last)
-                x16 = x32.half().contiguous(memory_format=torch.channels_last)
-                with torch.inference_mode():
-                    diff = float((n16(x16).float() - ref).abs().max())
-                    t16 = _cuda_ms(partial(n16, x16), args.repeats)
-                replay = _graphed(n16, x16)
-                tg = _cuda_ms(replay, args.repeats)
+                t32, t32g, t16, tg, diff = time_network(n32, n16, x32, args.repeats)
                 tort = None
                 if has_cuda_ep:
                     xh = np.random.default_rng(0).random((c, h, w), dtype=np.float32)
@@ -257,7 +283,8 @@ def main() -> None:
     props = torch.cuda.get_device_properties(0)
     print(f"rtp {sdk.__version__}, torch {torch.__version__}, CUDA {torch.version.cuda}, cuDNN "
           f"{torch.backends.cudnn.version()}, {props.name}, onnxruntime {ort.__version__} "
-          f"({'with' if has_cuda_ep else 'without'} its CUDA provider); batch 1, median of {args.repeats}\n")
+          f"({'with' if has_cuda_ep else 'without'} its CUDA provider); batch 1, median of {args.repeats}; fp32 in "
+          "full float32 (TF32 off)\n")
     ort_head = " | sdk predict, onnxruntime CUDA (ms)" if has_cuda_ep else ""
     print("| model | inputs | frame | fp32 eager (ms) | fp32 CUDA graph (ms) | fp16 eager (ms) | fp16 CUDA graph (ms) "
           f"| fp16 - fp32, largest |{ort_head}")

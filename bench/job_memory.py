@@ -158,10 +158,14 @@ def play_frames(text: str) -> int:
 def peak(argv: list[str]) -> int:
     """Run ``argv``; its peak resident set in bytes (its children's included), or an error that gives the command,
     its exit code and the last line it wrote to stderr."""
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    # stderr into a file, not a pipe: wait4 reads nothing while it waits, so a command that wrote more than the pipe
+    # holds (64 KiB on Linux: warnings, a traceback's chain) blocked on its write and this script waited for ever
+    with tempfile.TemporaryFile() as log:
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=log)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        log.seek(0)
+        err = log.read().decode(errors="replace")
     if proc.returncode != 0:
         lines = err.strip().splitlines()
         raise sdk.RtpError(f"{' '.join(argv[1:])}: exit {proc.returncode}" + (f": {lines[-1]}" if lines else ""))

@@ -53,8 +53,10 @@ from rtp import sdk
 
 
 def _one_run(pred: sdk.ShadingRatePredictor, threads: int) -> Callable[[np.ndarray], np.ndarray]:
-    """The batch as one run of a bare session (the model's own options: threads, no spinning), each
-    graph input fed a contiguous copy of its planes: the network's raw output."""
+    """The batch as one run of a bare session (the model's own options: threads, no spinning), padded as
+    ``predict`` pads it (the last row and column repeated up to ``metadata.pad_multiple``: a 1366x768 view
+    to 1368 columns for a model of ``input_multiple`` 4), each graph input fed a contiguous copy of its
+    planes: the network's raw output."""
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = threads
     opts.add_session_config_entry("session.force_spinning_stop", "1")
@@ -66,6 +68,11 @@ def _one_run(pred: sdk.ShadingRatePredictor, threads: int) -> Callable[[np.ndarr
     output = session.get_outputs()[0].name
 
     def run(xb: np.ndarray) -> np.ndarray:
+        # (unpadded, a size off the multiple ran a frame the SDK never runs, and its output read "differs!")
+        h, w = xb.shape[2:]
+        ph, pw = sdk.padded_size(h, w, pred.metadata.pad_multiple)
+        if (ph, pw) != (h, w):
+            xb = np.pad(xb, ((0, 0), (0, 0), (0, ph - h), (0, pw - w)), mode="edge")
         feed = {name: np.ascontiguousarray(xb[:, a:b]) for name, a, b in bounds}
         return session.run([output], feed)[0]
 

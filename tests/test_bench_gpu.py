@@ -108,3 +108,42 @@ def test_the_models_given_are_read_from_their_files_each_once_and_apart(tmp_path
                          text=True, env=env, timeout=120)
     assert out.returncode == 2 and out.stderr.startswith("inference_gpu.py: error: no model file at 'nosuchmodel'"), \
         out.stderr
+
+
+def test_the_fp32_columns_and_the_fp16_reference_run_in_full_float32(monkeypatch: pytest.MonkeyPatch) -> None:
+    """torch's default runs a float32 convolution on cuDNN's TF32 kernels (10 bits of mantissa, as fp16's) on the
+    Ampere and later GPUs this bench runs on: its "fp32" columns timed TF32, and "fp16 - fp32, largest" (docs'
+    "half precision is safe") was read against a TF32 output. The fp32 runs, the graph captured from them and the
+    reference now run with TF32 off; the fp16 ones as torch has it, and torch's settings are restored after."""
+    mod, _ = _bench_module()
+    seen: list[tuple[str, bool, bool]] = []
+
+    def timed(fn, repeats):  # type: ignore[no-untyped-def]
+        out = fn()
+        dtype = "fp16" if out.dtype == torch.float16 else "fp32"
+        seen.append((dtype, torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32))
+        return 1.0
+
+    def graphed(net, x):  # type: ignore[no-untyped-def]  (the capture is where cuDNN picks the kernels)
+        seen.append(("capture " + ("fp16" if x.dtype == torch.float16 else "fp32"), torch.backends.cudnn.allow_tf32,
+                     torch.backends.cuda.matmul.allow_tf32))
+        return lambda: net(x)
+
+    monkeypatch.setattr(mod, "_cuda_ms", timed)
+    monkeypatch.setattr(mod, "_graphed", graphed)
+    torch.manual_seed(0)
+    n32 = torch.nn.Sequential(torch.nn.Conv2d(4, 8, 3, padding=1), torch.nn.ReLU()).eval()
+    n16 = torch.nn.Sequential(torch.nn.Conv2d(4, 8, 3, padding=1), torch.nn.ReLU()).eval()
+    n16.load_state_dict(n32.state_dict())
+    n16 = n16.half().to(memory_format=torch.channels_last)
+    x32 = torch.rand((1, 4, 16, 16))
+    before = torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32
+    torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 = True  # (torch's default on cuDNN)
+    try:
+        *times, diff = mod.time_network(n32, n16, x32, 3)
+        assert torch.backends.cudnn.allow_tf32 and torch.backends.cuda.matmul.allow_tf32
+    finally:
+        torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = before
+    assert times == [1.0] * 4 and 0 <= diff < 1e-2
+    assert seen == [("fp32", False, False), ("capture fp32", False, False), ("fp32", False, False),
+                    ("fp16", True, True), ("capture fp16", True, True), ("fp16", True, True)]

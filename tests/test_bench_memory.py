@@ -78,3 +78,25 @@ def test_a_size_given_twice_is_measured_once(monkeypatch: pytest.MonkeyPatch, ca
     assert children and all(a[a.index("--sizes") + 1] == "64x64,32x32" for a in children)
     header = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| model | onnxruntime"))
     assert header.count("first runs at 64x64") == 1 and header.count("first runs at 32x32") == 1
+
+
+def test_job_memory_reads_a_command_that_writes_more_stderr_than_a_pipe_holds() -> None:
+    """bench/job_memory.py waits for each command with ``os.wait4`` (its peak resident set) and read its stderr from a
+    pipe only after: a command that wrote more than the pipe holds (64 KiB on Linux) blocked on its write, and the
+    benchmark with it, for ever. Its stderr goes to a file: the peak is read, and a failing command's last line is
+    still said."""
+    script = ("import sys\n"
+              "from tests.conftest import bench_module\n"
+              "peak = bench_module('job_memory').peak\n"
+              "print(peak([sys.executable, '-c', \"import sys; sys.stderr.write('w' * 300_000 + '\\\\n')\"]))\n"
+              "try:\n"
+              "    peak([sys.executable, '-c', \"import sys; sys.stderr.write('w\\\\n' * 100_000 + 'the last line\\\\n'); "
+              "raise SystemExit(3)\"])\n"
+              "except Exception as err:\n"
+              "    print(type(err).__name__, str(err)[-40:])\n")
+    root = BENCH.parents[1]
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, cwd=root)
+    assert out.returncode == 0, out.stderr
+    first, second = out.stdout.splitlines()
+    assert int(first) > 1_000_000  # (bytes: a Python process's peak)
+    assert second.startswith("RtpError") and second.endswith("exit 3: the last line"), second

@@ -56,3 +56,15 @@ def test_the_gil_table_takes_jnyang_by_the_model_loaded_not_by_its_name(
     monkeypatch.setattr(sys, "argv", ["views.py", *named, "--switch", "0.005"])
     views.main()
     assert timed == [expected]
+
+
+@pytest.mark.parametrize("size", [(70, 36), (64, 37)])
+def test_the_bare_batch_run_is_padded_as_predict_pads_it(size: tuple[int, int]) -> None:
+    """The third way (the batch as one onnxruntime run, its groups copied) fed the session the frames unpadded: at a
+    width or height off the model's ``input_multiple`` (1366x768: 1366 columns, a multiple of 4 is 1368) it ran a frame
+    the SDK never runs, and its cell read "(differs!)" for every model. It pads as ``predict`` pads (the last row and
+    column repeated), and gives ``predict_raw``'s output there too."""
+    views = bench_module("views")
+    for model in ("jnflip", "flip"):  # (one graph input; two)
+        row = views.views_table(model, size, 2, 1, 1)
+        assert row["same"] == dict.fromkeys(row["same"], True), (model, size, row["same"])
