@@ -27,6 +27,7 @@ from ._run import (
     one_line,
     option_flags,
     out_lock,
+    require_extra,
     run,
 )
 
@@ -863,6 +864,8 @@ def _warn_of_another_evaluation(out: Path, args: argparse.Namespace) -> None:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from ._demo import run_demo
 
+    # the renderer, the pictures and their FLIP map: rtp[capture], all named before any work (README, "Layout")
+    require_extra("rtp[capture]", ("moderngl", "PIL.Image", "matplotlib", "flip_evaluator"))
     with _metadata_hint(args):  # (a foreign model's sidecar: --metadata)
         r = run_demo(args.out, model=args.model, threshold=args.threshold, scene=args.scene, size=args.size,
                      frames=args.frames, cache_dir=args.cache_dir, seed=args.seed, tile_size=args.tile_size,
@@ -888,6 +891,14 @@ def _cmd_play(args: argparse.Namespace) -> int:
     if args.palette != "paper" and (args.no_plots or args.no_animation):  # (taken and nothing drawn in it)
         raise _usage(f"--palette {args.palette}: the colours of the GIFs' rate overlays, which "
                      f"{'--no-plots' if args.no_plots else '--no-animation'} leaves out: leave out one of the two")
+    # the renderer, the curves and GIFs, the frames' FLIP: rtp[capture], all named before the first frame is drawn
+    # (without Pillow the run drew every frame of its first path and then ended on the GIF's first one)
+    from rtp.metrics import METRIC_DEPENDENCIES
+
+    drawn = args.out is not None and not args.no_plots
+    flip = args.flip_every or "flip-evaluator" in METRIC_DEPENDENCIES.get(args.fail_metric, ())
+    require_extra("rtp[capture]", ("moderngl", *(("PIL.Image", "matplotlib") if drawn else ()),
+                                   *(("flip_evaluator",) if flip else ())))
     paths = _names(args.path) or ["slow", "fast"]
     done = [0]
     steps: dict[str, str] = {}  # path -> the step it is in, while it is not playing frames ("": the job's own)

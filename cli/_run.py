@@ -23,11 +23,11 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any, NoReturn
 
 __all__ = ["COMMON", "Bar", "Formatter", "Parser", "add_common", "carries_metadata", "console_form", "one_line",
-           "option_flags", "run", "run_guarded", "states_default", "version"]
+           "option_flags", "require_extra", "run", "run_guarded", "states_default", "version"]
 
 log = logging.getLogger("rtp")
 
@@ -507,6 +507,35 @@ OPTIONAL_MODULES = {"torch": "rtp[train]", "onnx": "rtp[export]", "moderngl": "r
                     "trimesh": "rtp[capture]", "tqdm": "rtp[capture]", "png": "rtp[capture]",
                     "flip_evaluator": "rtp[metrics]", "pyrender": "rtp[pyrender]", "OpenGL": "rtp[pyrender]",
                     "ray": "rtp[ray]"}
+
+
+#: The name pip installs an optional module by, where it is not the module's.
+_DISTRIBUTIONS = {"PIL": "Pillow", "flip_evaluator": "flip-evaluator", "png": "pypng", "OpenGL": "PyOpenGL"}
+
+
+def require_extra(extra: str, modules: Iterable[str]) -> None:
+    """Import each of ``modules`` (of :data:`OPTIONAL_MODULES`, such as ``"PIL.Image"``), what a command needs of
+    ``extra`` (``"rtp[capture]"``), before the command's work: those not installed are named together in one
+    ImportError naming ``extra``, which the error policy says in one line, exit 2. `rtp demo` on the runtime install
+    named flip-evaluator alone (``pip install flip-evaluator==1.7``), then with it moderngl (``rtp[moderngl]``), then,
+    after rendering and predicting, matplotlib: three installs, one at a time, where ``rtp[capture]`` brings them all."""
+    import importlib
+
+    missing: list[str] = []
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ModuleNotFoundError as err:
+            top = (err.name or "").partition(".")[0]
+            if top not in OPTIONAL_MODULES:
+                raise  # (installed, and broken: a module of its own is missing; its traceback says which)
+            missing.append(top)
+    if missing:
+        names = [_DISTRIBUTIONS.get(m, m) for m in dict.fromkeys(missing)]
+        listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+        raise ImportError(f"this needs {listed}, which {'is' if len(names) == 1 else 'are'} not installed: "
+                          f"pip install '{extra}'") from ModuleNotFoundError(f"No module named {missing[0]!r}",
+                                                                               name=missing[0])
 
 
 def _missing_install(prog: str, err: ImportError) -> str | None:

@@ -83,6 +83,11 @@ def main(argv: list[str] | None = None) -> int:
                     "save each frame (0-0.9375), the threshold found on the GPU; with --threshold, a floor under it")
     args = ap.parse_args(argv)
     args.out, args.gif = Path(args.out), None if args.gif is None else Path(args.gif)  # (checked: writable, a format)
+    # what writes the pictures (rtp[capture]), imported before the walk: without it (rtp[moderngl] alone) the walk ran
+    # to its end and then failed on imageio, which only --gif needs
+    import PIL.Image  # noqa: F401 - save_image's
+    if args.gif is not None:
+        import imageio.v3  # noqa: F401
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.frames < 1:
         ap.error(f"--frames: expected at least 1, got {args.frames}")
@@ -138,11 +143,11 @@ def main(argv: list[str] | None = None) -> int:
                      i, 100 * saved, int((rates == cpu).sum()), rates.size, ms)
     ctx.release()
 
-    import imageio.v3 as iio
-
     save_image(args.out, overlays[-1])  # atomic: an interrupted write leaves the file there before, not half of one
     log.info("wrote %s", args.out)
     if args.gif:
+        import imageio.v3 as iio
+
         with atomic_output(args.gif) as tmp:  # (renamed over --gif once whole; the extension names the format)
             iio.imwrite(tmp, np.stack(overlays), extension=args.gif.suffix.lower(), duration=1000 / 15, loop=0)
         log.info("wrote %s (%d frames)", args.gif, len(overlays))

@@ -491,6 +491,57 @@ def test_an_image_output_without_the_picture_packages_is_one_line_before_any_wor
             assert got.out == "" and not out.exists(), argv
 
 
+@pytest.mark.parametrize(("missing", "said"), [
+    (("moderngl", "PIL", "matplotlib", "flip_evaluator"), "moderngl, Pillow, matplotlib and flip-evaluator, which are"),
+    (("matplotlib",), "matplotlib, which is"),
+    (("PIL",), "Pillow, which is"),
+])
+def test_demo_and_play_without_the_capture_extra_name_it_once_before_any_work(
+        missing: tuple[str, ...], said: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """On the runtime install (README: the demo needs rtp[capture]) `rtp demo` named flip-evaluator alone (`pip
+    install flip-evaluator==1.7`), then, with it, moderngl (`rtp[moderngl]`), then, after rendering and predicting,
+    matplotlib; `rtp play` without Pillow or matplotlib drew its first path's frames and then ended on its GIF. Each
+    names everything it lacks and rtp[capture] in one line, exit 2, before any work: nothing written."""
+    import importlib.abc
+
+    class NotInstalled(importlib.abc.MetaPathFinder):
+        def find_spec(self, name: str, path: object, target: object = None) -> None:
+            top = name.partition(".")[0]
+            if top in missing:
+                raise ModuleNotFoundError(f"No module named {top!r}", name=top)
+
+    out = tmp_path / "out"
+    with monkeypatch.context() as m:
+        for module in [k for k in sys.modules if k.partition(".")[0] in missing]:
+            m.delitem(sys.modules, module)
+        m.setattr(sys, "meta_path", [NotInstalled(), *sys.meta_path])
+        for argv in (["demo", "--size", "64x48", "--frames", "2", "--out", str(out)],
+                     ["play", "procedural:0", "--frames", "4", "--size", "64x48", "--no-sweep", "--flip-every", "2",
+                      "--methods", "jnyang", "--out", str(out)]):
+            assert main(argv) == 2, argv
+            got = capsys.readouterr()
+            assert got.err == f"rtp {argv[0]}: error: this needs {said} not installed: pip install 'rtp[capture]'\n", \
+                got.err
+            assert got.out == "" and not out.exists(), argv
+
+
+def test_a_missing_module_of_an_installed_package_is_not_taken_for_a_missing_extra(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """require_extra names an extra for the optional modules it was asked for; an installed one whose own import
+    fails on a module of no extra (a broken install) keeps its error, with the module it lacks."""
+    import importlib
+
+    from rtp.cli._run import require_extra
+
+    def broken(name: str, package: str | None = None) -> object:
+        raise ModuleNotFoundError("No module named 'kiwisolver'", name="kiwisolver")
+
+    monkeypatch.setattr(importlib, "import_module", broken)
+    with pytest.raises(ModuleNotFoundError, match="kiwisolver"):
+        require_extra("rtp[capture]", ["matplotlib"])
+
+
 def test_targets_of_an_empty_dataset_path_are_refused_not_the_current_folder(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp targets ""` (an unset shell variable) read the current folder as the dataset (". is not an rtp

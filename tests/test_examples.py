@@ -278,6 +278,30 @@ def test_an_example_refuses_outputs_it_cannot_write_before_it_renders(name: str,
         assert ".onnx" not in r.stderr  # (refused before the model loads: the examples log its file first)
 
 
+@pytest.mark.parametrize(("missing", "argv"), [("PIL", []), ("imageio", ["--gif", "walk.gif"])])
+def test_the_moderngl_example_without_the_picture_packages_is_refused_before_it_renders(
+        missing: str, argv: list[str], tmp_path: Path) -> None:
+    """With rtp[moderngl] alone (no Pillow, no imageio) the example walked every frame and then failed on
+    `import imageio`, which only --gif needs: it now says what it lacks, one line naming rtp[capture], before the
+    model loads."""
+    blocked = f"""
+import runpy, sys
+class NotInstalled:
+    def find_spec(self, name, path=None, target=None):
+        if name.partition(".")[0] == {missing!r}:
+            raise ModuleNotFoundError("No module named {missing!r}", name={missing!r})
+sys.meta_path.insert(0, NotInstalled())
+sys.argv = sys.argv[1:]
+runpy.run_path(sys.argv[0], run_name="__main__")
+"""
+    r = subprocess.run([sys.executable, "-c", blocked, str(ROOT / "examples" / "moderngl_vrs.py"), "--frames", "2",
+                        "--out", str(tmp_path / "o.png"), *argv], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 2 and r.stderr.endswith(f"moderngl_vrs.py: error: this needs {missing}, which is not "
+                                                   "installed: pip install 'rtp[capture]'\n"), r.stderr
+    assert ".onnx" not in r.stderr and not (tmp_path / "o.png").exists()  # (refused before the model loads)
+
+
 @pytest.mark.gl
 def test_pyrender_example_starts_at_the_cameras_of_the_scene_file(tmp_path: Path) -> None:
     """The example's docs say the move starts at the scene's first camera if it has one, but ``load_scene`` copied the

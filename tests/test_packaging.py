@@ -99,6 +99,16 @@ def test_the_build_configuration_is_complete(wheel: tuple[set[str], str]) -> Non
 
 
 @pytest.mark.slow
+def test_the_wheel_carries_the_licence_it_declares(wheel: tuple[set[str], str]) -> None:
+    """pyproject.toml and the README say MIT, whose terms ask that its notice go with every copy: the checkout had
+    no licence file, so the wheel (and every install of it) carried none, only the word in its metadata."""
+    names, _ = wheel
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names), sorted(n for n in names if "dist-info" in n)
+    text = (ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert text.startswith("MIT License") and "rtp developers" in text
+
+
+@pytest.mark.slow
 def test_the_wheel_carries_every_module(wheel: tuple[set[str], str]) -> None:
     """A subpackage left out of pyproject.toml's ``packages`` ships none of its modules; the editable install
     imports them from the checkout all the same, so only a real install would fail (ImportError)."""
