@@ -134,8 +134,12 @@ def _home(text: str) -> str:
     expands it unquoted, and as ``$RTP_SCENE_CACHE`` and ``$RTP_WEIGHTS_CACHE`` are read: quoted (``--cache-dir
     '~/x'``, a path pasted from a config), it made a folder literally named ``~`` in the current folder, and
     ``rtp weights fetch`` said to set RTP_WEIGHTS_CACHE='~/x', which names the home folder's ``x``. Every path
-    type of the commands' options takes it here; other text is returned as it is."""
-    return os.path.expanduser(text) if text.startswith("~") else text
+    type of the commands' options takes it here; other text is returned as it is, and so is text with a NUL byte
+    (``~user`` then raised ValueError, which argparse said as "invalid _out_folder value": the option's own check
+    says what it expected)."""
+    if not text.startswith("~") or "\0" in text:
+        return text
+    return os.path.expanduser(text)
 
 
 def _path_text(text: str) -> str:
@@ -156,6 +160,27 @@ def _path_text(text: str) -> str:
 def _folders_csv(text: str) -> str:
     """An argparse type: ``rtp train --data``'s folder, or several comma-separated, each with a leading ``~`` the
     home folder (:func:`_home`); the text otherwise as typed (the recipe's reader splits and checks it)."""
+    return ",".join(_home(part.strip()) if part.strip().startswith("~") else part for part in text.split(","))
+
+
+def _name_or_path(text: str) -> str:
+    """An argparse type for an option that takes a name or a path (``--model``: a shipped model's name or an
+    ``.onnx``; a scene: ``procedural:N``, a map's name or a ``.glb``; ``--recipe``: a packaged recipe's name or a
+    YAML file). No name starts with ``~``, so a value that does is a path, its ``~`` the home folder
+    (:func:`_home`): quoted (``--model '~/m.onnx'``) it was looked for as a file named ``~`` in the current folder,
+    then said to be no shipped model. A name is returned as typed."""
+    return _home(text)
+
+
+def _names_or_paths(text: str) -> str:
+    """An argparse type for the comma lists of names or paths (``rtp capture --scene``, ``rtp train --teachers``,
+    ``rtp play --methods``): each item with a leading ``~`` the home folder (:func:`_name_or_path`), the others as
+    typed; refused, as :func:`_names_text`, when it names nothing. An existing file's path is one item, commas and
+    all, as the commands read it (``--scene '~/levels/a,b.glb'``)."""
+    text = _names_text(text)
+    whole = _home(text.strip())
+    if text.strip().startswith("~") and os.path.isfile(whole):
+        return whole
     return ",".join(_home(part.strip()) if part.strip().startswith("~") else part for part in text.split(","))
 
 
@@ -1050,7 +1075,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "deuteranopia and tritanopia, where the paper's green and yellow are not under protanopia)")
 
     info = command("info", "show a model's metadata, inputs, outputs and provider", _cmd_info)
-    info.add_argument("model", help="an .onnx path or the name of a shipped model")
+    info.add_argument("model", type=_name_or_path, help="an .onnx path or the name of a shipped model")
     model_metadata(info)
     info.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
@@ -1101,8 +1126,8 @@ def build_parser() -> argparse.ArgumentParser:
     chk.add_argument("--scene", default="procedural:0", type=_path_text, help="the scene drawn: procedural:<seed>, "
                      "your own .glb/.gltf/.obj file, or a map of `rtp scenes list` (fetched)")
     cache_dir(chk)
-    chk.add_argument("--model", default=None, help="the model for_predictor feeds: an .onnx path or a shipped "
-                     "model's name (default: every shipped model the adapter can run)")
+    chk.add_argument("--model", default=None, type=_name_or_path, help="the model for_predictor feeds: an .onnx path or "
+                     "a shipped model's name (default: every shipped model the adapter can run)")
     chk.add_argument("--image", type=out_image, default=None, help="also write a picture: each channel of the "
                      "adapter beside the reference renderer's, and their difference (red past the tolerance)")
     chk.add_argument("--tolerance", action="append", type=_tolerance, metavar="CHANNEL=VALUE",
@@ -1113,7 +1138,7 @@ def build_parser() -> argparse.ArgumentParser:
     src = cap.add_argument_group("what to capture (one of)")
     src.add_argument("--split", default=None, choices=_split_names(),
                      help="every map of this split of --splits")
-    src.add_argument("--scene", action="append", default=None, type=_names_text,
+    src.add_argument("--scene", action="append", default=None, type=_names_or_paths,
                      help="a scene (repeatable, or comma-separated): procedural:<seed>, a map name of `rtp scenes list`, "
                      "or your own .glb/.gltf/.obj file (an existing file's path is one scene, commas and all)")
     cap.add_argument("--per-scene", type=_positive, required=True, help="viewpoint pairs per scene and motion profile")
@@ -1171,7 +1196,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--metric", required=True, type=_metric_name, help="the metric whose targets the network "
                     f"learns (computed by `rtp targets`): {', '.join(METRICS)}, or a plugin's")
     tr.add_argument("--out", type=_out_file, required=True, help="checkpoint to write (resumed if it exists)")
-    tr.add_argument("--config", "--recipe", dest="config", default="shipped", metavar="RECIPE.yaml",
+    tr.add_argument("--config", "--recipe", dest="config", default="shipped", metavar="RECIPE.yaml", type=_name_or_path,
                     help="training recipe: a YAML file, or a packaged one: shipped (the shipped models' recipe), "
                          "reuse, tile8, paper-net (train/recipes); --recipe is the same flag")
     tr.add_argument("--device", default=None, metavar="DEVICE",
@@ -1265,7 +1290,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ema", type=float, default=None,
                    help="decay of a moving average of the weights, which is validated and saved (for example "
                    "0.999; default 0: off)")
-    r.add_argument("--teachers", action="append", default=None, type=_names_text,
+    r.add_argument("--teachers", action="append", default=None, type=_names_or_paths,
                    help="repeatable or comma-separated exported models (.onnx) of the same metric and data whose "
                    "mean prediction is mixed into the targets (knowledge distillation)")
     r.add_argument("--distill", type=float, default=None, help="weight of the teachers' mean in the targets (default 0.5)")
@@ -1307,8 +1332,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     ev = command("evaluate", "prediction quality and VRS decisions of models on a dataset, next to the Yang 2019 "
                  "and FidelityFX baselines", _cmd_evaluate)
-    ev.add_argument("model", nargs="+", help="one or more .onnx paths or shipped model names; each is scored on "
-                    "the targets of its own metric and tile size")
+    ev.add_argument("model", nargs="+", type=_name_or_path, help="one or more .onnx paths or shipped model names; each "
+                    "is scored on the targets of its own metric and tile size")
     ev.add_argument("--data", required=True, type=_path_text, help="dataset folder with targets from `rtp targets`")
     ev.add_argument("--out", type=_out_folder, default=None,
                     help="folder for evaluation.md, evaluation.json (and --plots)")
@@ -1330,11 +1355,11 @@ def build_parser() -> argparse.ArgumentParser:
                     "model tile's values), scored against targets of that tile size (default: the model's own)")
 
     dm = command("demo", "render a scene, pick VRS rates with a shipped model, show the result", _cmd_demo)
-    dm.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
+    dm.add_argument("--model", default="jnyang", type=_name_or_path, help="a shipped model name or an .onnx path")
     model_metadata(dm)
     dm.add_argument("--threshold", type=float, default=None, help="decision threshold in the model's metric units "
                     "(default: the model's own)")
-    dm.add_argument("--scene", default="procedural:0",
+    dm.add_argument("--scene", default="procedural:0", type=_name_or_path,
                     help="procedural:<seed>, a map name of `rtp scenes list`, or your own .glb/.gltf/.obj file")
     dm.add_argument("--size", type=frame_size, default="1280x720", help="WIDTHxHEIGHT")
     dm.add_argument("--frames", type=_positive, default=3, help="frames of the camera move, 2 or more (the last one is "
@@ -1367,8 +1392,9 @@ def build_parser() -> argparse.ArgumentParser:
                  "\n\nexamples:\n  rtp play 20kdm2 --path fast --frames 300 --methods jnyang,yang2019,fidelityfx --out play\n"
                  "  rtp play kaos --dynamic-resolution 1,0.75@10 --methods jnyang,jnyang-reuse@4:features,oracle   "
                  "the render resolution changing every ten frames")
-    pl.add_argument("scene", help="a map name of `rtp scenes list`, procedural:<seed>, or your own .glb/.gltf/.obj file")
-    pl.add_argument("--methods", default=DEFAULT_METHODS,
+    pl.add_argument("scene", type=_name_or_path,
+                    help="a map name of `rtp scenes list`, procedural:<seed>, or your own .glb/.gltf/.obj file")
+    pl.add_argument("--methods", default=DEFAULT_METHODS, type=_names_or_paths,
                     help=f"comma-separated methods (see below; default: {DEFAULT_METHODS})")
     pl.add_argument("--path", action="append", default=None, type=_names_text,
                     help=f"camera path profiles, repeatable or comma-separated: {', '.join(PATH_PROFILES)} "
@@ -1444,7 +1470,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "count (default: 8)")
     im.add_argument("--size", type=frame_size, default=None, help="--write-example's WIDTHxHEIGHT (default: 640x360)")
     im.add_argument("--seed", type=_non_negative, default=None, help="--write-example's camera path (default: 0)")
-    im.add_argument("--example-scene", default=None, help="--write-example's scene (procedural:<seed>, a map "
+    im.add_argument("--example-scene", default=None, type=_name_or_path, help="--write-example's scene (procedural:<seed>, a map "
                     "name, or a .glb/.gltf/.obj file) (default: procedural:0)")
     from rtp.capture.scenes import default_cache_dir
 
@@ -1470,7 +1496,7 @@ def build_parser() -> argparse.ArgumentParser:
                  "\n  rtp predict frames --saving 0.5   rates that save half the shading work every frame")
     pr.add_argument("frames", nargs="+", type=_path_text, metavar="frame", help="the .npz of a frame's G-buffers "
                     "(written with --write-example), several, or a folder of them (taken in the order of their names)")
-    pr.add_argument("--model", default="jnyang", help="a shipped model name or an .onnx path")
+    pr.add_argument("--model", default="jnyang", type=_name_or_path, help="a shipped model name or an .onnx path")
     model_metadata(pr)
     pr.add_argument("--threshold", type=float, default=None, help="decision threshold in the model's metric units "
                     "(default: the model's own)")

@@ -1140,27 +1140,120 @@ def test_a_quoted_tilde_in_every_path_option_is_the_home_folder(tmp_path: Path, 
     named `~` in the current folder (`rtp scenes fetch --cache-dir '~/scenes'` unpacked 400 MB there), while
     $RTP_SCENE_CACHE and $RTP_WEIGHTS_CACHE read the same text as the home folder. Every path option of every command
     (each --cache-dir, --out, --data, DATA, --splits, --metadata, rtp-export's) now takes a leading `~` as the home
-    folder; nothing named `~` is made here."""
-    from rtp.cli._main import _checked_path, _folders_csv, _in_file, _path_text, out_animation, out_image
+    folder; nothing named `~` is made here. So do the options that take a name or a path (--model, MODEL, a scene,
+    --recipe, --teachers, play's --methods: each item of a list), a name as typed; an option whose help names a file
+    kind (.onnx, .glb, YAML) without such a type fails here."""
+    from rtp.cli._main import (
+        _checked_path,
+        _folders_csv,
+        _in_file,
+        _name_or_path,
+        _names_or_paths,
+        _path_text,
+        out_animation,
+        out_image,
+    )
 
     home = tmp_path / "home"
     home.mkdir()
     monkeypatch.setenv("HOME", str(home))
     monkeypatch.chdir(tmp_path)
     path_types = {_path_text, _in_file, out_image, out_animation, _folders_csv}
+    # (the options that take a name or a path: --model, a scene, --recipe, --teachers, play's --methods; a name never
+    # starts with ~, so one that does is a path, and a name is kept as typed)
+    name_or_path_types = {_name_or_path, _names_or_paths}
+    file_kinds = re.compile(r"\.onnx|\.glb|\.gltf|\.ya?ml\b|YAML")  # (what a help says an option may name)
     seen: set[str] = set()
     for _entry, build in ENTRY.values():
         for command in _commands(build()):
             for action in _subparser(build(), command)._actions:
                 kind = getattr(action.type, "__name__", "")
-                if action.type in path_types or kind in ("_out_folder", "_out_file"):
+                if action.type in path_types or action.type in name_or_path_types or kind in ("_out_folder", "_out_file"):
                     text = "~/sub/x.gif" if action.type in (out_image, out_animation) else "~/sub/x"
                     assert action.type(text) == str(home / "sub" / text[6:]), (command, action.dest)  # type: ignore[misc,operator]
                     seen.add(action.dest)
-                elif action.dest in ("cache_dir", "out", "output", "data", "data_flag", "splits", "metadata"):
+                    if action.type in name_or_path_types:
+                        for name in ("jnyang", "procedural:3", "shipped", "jnyang@4:features"):
+                            assert action.type(name) == name, (command, action.dest)  # type: ignore[misc,operator]
+                elif action.dest in ("cache_dir", "out", "output", "data", "data_flag", "splits", "metadata", "model",
+                                     "scene", "config", "example_scene", "teachers", "methods") and command not in (
+                                         ("import",), ("evaluate",)):  # (their --scene: a level's name, no file)
                     raise AssertionError(f"{command} --{action.dest} takes no path type, so no ~ either")
-    assert {"cache_dir", "out", "output", "data", "data_flag", "splits", "metadata", "frames"} <= seen
+                elif file_kinds.search(action.help or ""):
+                    raise AssertionError(f"{command} {action.dest}: its help names a file it may be, so it takes a "
+                                         "leading ~ as the home folder: give it a path or name-or-path type")
+    assert {"cache_dir", "out", "output", "data", "data_flag", "splits", "metadata", "frames", "model", "scene",
+            "config", "example_scene", "teachers", "methods"} <= seen
+    assert _names_or_paths("~/a.glb, procedural:1,~/b.obj") == f"{home / 'a.glb'}, procedural:1,{home / 'b.obj'}"
+    assert _names_or_paths("~/m.onnx@4:features,yang2019") == f"{home / 'm.onnx'}@4:features,yang2019"
+    (home / "a,~").mkdir()  # (an existing file's path is one scene, commas and all, ~ and all)
+    (home / "a,~" / "b.glb").write_text("")
+    assert _names_or_paths("~/a,~/b.glb") == str(home / "a,~" / "b.glb") and _name_or_path("a~b") == "a~b"
     assert _folders_csv("~/a, b,~/c") == f"{home / 'a'}, b,{home / 'c'}"  # (rtp train --data's list, each folder)
     assert _checked_path("~", folder=True) == str(home)
+    for text in ("~a\x00", "~\x00/x"):  # (a ValueError out of the ~user lookup: "invalid _out_folder value")
+        with pytest.raises(argparse.ArgumentTypeError, match="expected a path"):
+            _checked_path(text, folder=True)
+        assert _name_or_path(text) == text  # (the loader says what it is not)
     assert _path_text("a~b") == "a~b" and _path_text("./~") == "./~"  # (only a leading ~ is the home folder)
     assert not (tmp_path / "~").exists()
+
+
+def _tilde_home(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(tmp_path)
+    return home
+
+
+def test_a_quoted_tilde_model_path_is_read_from_the_home_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp info '~/m.onnx'` (and --model, rtp evaluate's MODEL, play's --methods) looked for a file in a folder
+    named `~` of the current folder, then said "no model file at '~/m.onnx'"; a name never starts with `~`, so such a
+    value is the home folder's file. One that is not there is named expanded."""
+    import json
+    import shutil
+
+    home = _tilde_home(tmp_path, monkeypatch)
+    shutil.copy(ROOT / "models" / "jnyang.onnx", home / "m.onnx")
+    assert main(["info", "~/m.onnx", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["path"] == str(home / "m.onnx")
+    assert main(["info", "~/nope.onnx"]) == 2
+    assert f"no model file at '{home / 'nope.onnx'}'" in capsys.readouterr().err
+    assert main(["play", "procedural:0", "--methods", "full,~/nope.onnx@4", "--frames", "3", "--out", "p", "-q"]) == 2
+    assert f"no model file at '{home / 'nope.onnx'}'" in capsys.readouterr().err
+    assert not (tmp_path / "p").exists()
+
+
+def test_a_quoted_tilde_scene_file_is_read_from_the_home_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """Every option that takes a scene (a name, procedural:N, or a file) read `'~/level.obj'` as a folder `~` of the
+    current folder: "mesh file not found", "no such file". Now each reads the home folder's file (here one with no
+    triangles, which each says of the expanded path), as capture's comma list does for each of its items."""
+    home = _tilde_home(tmp_path, monkeypatch)
+    (home / "lines.obj").write_text("v 0 0 0\nv 1 0 0\nl 1 2\n")
+    small = ["--size", "64x48", "-q"]
+    for argv in (["demo", "--scene", "~/lines.obj", "--out", "o", *small],
+                 ["play", "~/lines.obj", "--frames", "3", "--methods", "full", "--out", "o", *small],
+                 ["capture", "--scene", "procedural:1,~/lines.obj", "--per-scene", "1", "--out", "o", *small],
+                 ["import", "frames", "--write-example", "--example-scene", "~/lines.obj", "--frames", "1", *small]):
+        assert main(argv) == 2, argv
+        assert f"{home / 'lines.obj'} contains no triangles" in capsys.readouterr().err, argv
+        assert not (tmp_path / "o").exists() and not (tmp_path / "frames").exists(), argv
+    assert main(["play", "~/missing.glb", "--frames", "3", "--out", "o", *small]) == 2
+    assert str(home / "missing.glb") in capsys.readouterr().err
+
+
+def test_a_quoted_tilde_recipe_is_read_from_the_home_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """`rtp train --recipe '~/r.yaml'` said "recipe '~/r.yaml': no such file (or pass the name of one that ships with
+    rtp ...)" of a file that is there; now the home folder's recipe is read (here one whose steps do not fit)."""
+    home = _tilde_home(tmp_path, monkeypatch)
+    (home / "r.yaml").write_text("steps: -5\n")
+    train = ["train", "--data", "data", "--metric", "jnyang", "--out", "m.pt", "-q"]
+    assert main([*train, "--recipe", "~/r.yaml"]) == 2
+    assert f"recipe {home / 'r.yaml'} sets steps: -5" in capsys.readouterr().err
+    assert main([*train, "--config", "~/nope.yaml"]) == 2
+    assert f"recipe '{home / 'nope.yaml'}': no such file" in capsys.readouterr().err
+    assert not (tmp_path / "m.pt").exists()
