@@ -32,7 +32,6 @@ import contextlib
 import statistics
 import sys
 import tempfile
-from collections.abc import Iterator
 from functools import partial
 from pathlib import Path
 
@@ -199,18 +198,15 @@ def _graphed(net: nn.Module, x: torch.Tensor):  # type: ignore[no-untyped-def]
     return graph.replay
 
 
-@contextlib.contextmanager
-def full_float32() -> Iterator[None]:
+def full_float32() -> contextlib.AbstractContextManager[None]:
     """Convolutions and matrix products in full float32 while it lasts (torch's settings before restored after):
     cuDNN's TF32 kernels, torch's default for convolutions, round a float32 convolution's inputs to 10 bits of
     mantissa on Ampere and later GPUs, so the "fp32" columns timed TF32 and the fp16 difference was read against a
-    TF32 output (``rtp.metrics._device.full_float32`` does the same for the targets on a GPU)."""
-    before = torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32
-    torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 = False
-    try:
-        yield
-    finally:
-        torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = before
+    TF32 output. The targets' own switch, ``rtp.metrics._device.full_float32``, for a CUDA device (torch's flags are
+    the process's, whatever the device)."""
+    from rtp.metrics._device import full_float32 as targets_float32
+
+    return targets_float32(torch.device("cuda"))
 
 
 def time_network(n32: nn.Module, n16: nn.Module, x32: torch.Tensor, repeats: int) -> tuple[float, float, float, float,

@@ -229,12 +229,12 @@ def in_thread(call: Callable[[], Any]) -> Any:
     def work() -> None:
         try:
             out["value"] = call()
-        except Exception as exc:  # (handed back to the test's thread)
+        except BaseException as exc:  # (handed back to the test's thread)
             out["error"] = exc
 
     worker = threading.Thread(target=work, name="worker")
     worker.start()
-    worker.join()
+    worker.join(300)  # (a call that never returns fails the test, not the run)
     if "error" in out:
         raise out["error"]
     return out["value"]

@@ -114,12 +114,8 @@ def test_a_model_whose_file_name_is_not_utf8_loads_from_its_bytes(tmp_path: Path
     np.testing.assert_array_equal(pred.predict(x), shipped.predict(x))
 
 
-def test_a_model_with_external_data_whose_file_name_is_not_utf8_names_the_path(tmp_path: Path) -> None:
-    """The same name on a model whose weights are stored beside it (ONNX external data, an adopted model that
-    records no digest): onnxruntime finds those files only from the model's path, so it cannot load from the
-    bytes: ``ModelLoadError`` saying the path is not UTF-8 and to rename the file, not pybind's message."""
-    import os
-
+def _jnyang_without_digest() -> Any:
+    """The shipped ``jnyang`` as an onnx ModelProto whose metadata records no digest (as an adopted model's)."""
     import onnx
 
     model = onnx.load(str(sdk.load("jnyang").path))
@@ -129,6 +125,18 @@ def test_a_model_with_external_data_whose_file_name_is_not_utf8_names_the_path(t
     values[sdk.METADATA_KEY] = json.dumps(meta)
     del model.metadata_props[:]
     onnx.helper.set_model_props(model, values)
+    return model
+
+
+def test_a_model_with_external_data_whose_file_name_is_not_utf8_names_the_path(tmp_path: Path) -> None:
+    """The same name on a model whose weights are stored beside it (ONNX external data, an adopted model that
+    records no digest): onnxruntime finds those files only from the model's path, so it cannot load from the
+    bytes: ``ModelLoadError`` saying the path is not UTF-8 and to rename the file, not pybind's message."""
+    import os
+
+    import onnx
+
+    model = _jnyang_without_digest()
     path = Path(os.fsdecode(os.fsencode(tmp_path) + b"/\xff.onnx"))
     try:
         path.write_bytes(b"")
@@ -147,13 +155,7 @@ def _external_model(folder: Path, location: str, target: Path) -> Path:
     import onnx
     from onnx import numpy_helper
 
-    model = onnx.load(str(sdk.load("jnyang").path))
-    values = {p.key: p.value for p in model.metadata_props}
-    meta = json.loads(values[sdk.METADATA_KEY])
-    meta.pop("digest", None)
-    values[sdk.METADATA_KEY] = json.dumps(meta)
-    del model.metadata_props[:]
-    onnx.helper.set_model_props(model, values)
+    model = _jnyang_without_digest()
     tensor = model.graph.initializer[0]
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_bytes(numpy_helper.to_array(tensor).tobytes())

@@ -33,7 +33,7 @@ import pytest
 
 from rtp import sdk
 from rtp.sdk.adapters import AdapterClosedError, UnsupportedChannelError
-from tests.conftest import make_current, pyrender_or_skip
+from tests.conftest import in_thread, make_current, pyrender_or_skip
 
 pytestmark = pytest.mark.gl
 
@@ -963,26 +963,6 @@ def test_a_missing_gl_library_names_the_packages(monkeypatch: pytest.MonkeyPatch
         import_pyrender("egl")
 
 
-def _in_thread(fn: Any) -> Any:
-    """``fn()`` run in a thread of its own, joined: its value, or its exception raised here."""
-    import threading
-
-    out: dict[str, Any] = {}
-
-    def run() -> None:
-        try:
-            out["value"] = fn()
-        except BaseException as exc:  # (handed back to the test's thread)
-            out["error"] = exc
-
-    t = threading.Thread(target=run, name="rtp-test-worker")
-    t.start()
-    t.join(300)
-    if "error" in out:
-        raise out["error"]
-    return out["value"]
-
-
 def test_an_adapter_and_a_frame_source_built_in_one_thread_work_in_another(caplog: pytest.LogCaptureFixture) -> None:
     """pyrender leaves a renderer's context current in the thread that last drew (its EGL ``make_uncurrent``
     does nothing), and a context is current in one thread at a time. An adapter (or frame source) built in one
@@ -1007,16 +987,16 @@ def test_an_adapter_and_a_frame_source_built_in_one_thread_work_in_another(caplo
             return adapter.inputs(SceneFrame(scene, moved, np.eye(4), colour))
 
         here = frame()
-        np.testing.assert_array_equal(_in_thread(frame), here)
+        np.testing.assert_array_equal(in_thread(frame), here)
         np.testing.assert_array_equal(frame(), here)  # (and back)
-        _in_thread(frame)
+        in_thread(frame)
         adapter.close()
         assert renderer._platform is None  # its context destroyed, not left behind
 
         level = to_pyrender_scene(Scene("box", [box_mesh((-1, -1, -5), (1, 1, -3))], [Material("m")]))
         cam = Camera((0.0, 0.0, 0.0), yaw=5.0, fov_y=50.0)
         source = Adapter.frame_source(level, 32, 24)
-        x = _in_thread(lambda: source.adapter(["albedo.y", "seen"]).inputs(source.frame(cam, cam)))
+        x = in_thread(lambda: source.adapter(["albedo.y", "seen"]).inputs(source.frame(cam, cam)))
         assert x.shape == (2, 24, 32) and x[0].max() > 0.0 and x[1].min() == 1.0
         renderer = source.renderer
         source.close()
@@ -1133,7 +1113,7 @@ def test_a_second_threads_call_while_one_is_under_way_is_refused_and_close_waits
                            ("gbuffers", lambda: adapter.gbuffers(scene, np.eye(4)))):
             with pytest.raises(PyrenderAdapterError, match=rf"pyrender Adapter\.{name}: its pyrender renderer is in a "
                                                            r"call already \(another thread's\).*one thread at a time"):
-                _in_thread(call)
+                in_thread(call)
         closer.start()
         closer.join(0.5)
         assert closer.is_alive()  # (waiting for the call under way)
@@ -1171,7 +1151,7 @@ def test_a_frame_sources_call_and_its_adapters_take_turns(monkeypatch: pytest.Mo
             assert inside.wait(300)
             with pytest.raises(PyrenderAdapterError, match=r"PyrenderFrameSource\.frame: its pyrender renderer is in "
                                                            r"a call already"):
-                _in_thread(lambda: source.frame(cam, prev))
+                in_thread(lambda: source.frame(cam, prev))
         finally:
             go.set()
             t.join(300)
