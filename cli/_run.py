@@ -501,12 +501,21 @@ def _kept(on_interrupt: Callable[[], Callable[[], str] | None] | None) -> str:
 
 #: The optional modules rtp's commands import as they run, and the extra of pyproject.toml that installs each: a
 #: command run without one (`rtp predict --out` on the runtime install, without Pillow; `rtp-export` without onnx) says
-#: so in one line and exits 2, a missing install (docs/errors.md), where it was a traceback and 1.
+#: so in one line and exits 2, a missing install (docs/errors.md), where it was a traceback and 1. Each is the extra
+#: with the fewest requirements among those that bring the module, one without torch where there is one
+#: (tests/test_dependencies.py checks them against pyproject.toml): flip-evaluator's is rtp[capture], not
+#: rtp[metrics], which has torch too. torch's is training's (the commands that import it bare are `rtp train`'s;
+#: `rtp-export`'s is rtp[export], and a metric's own check names rtp[metrics]).
 OPTIONAL_MODULES = {"torch": "rtp[train]", "onnx": "rtp[export]", "moderngl": "rtp[moderngl]", "glcontext": "rtp[moderngl]",
                     "PIL": "rtp[capture]", "imageio": "rtp[capture]", "matplotlib": "rtp[capture]",
                     "trimesh": "rtp[capture]", "tqdm": "rtp[capture]", "png": "rtp[capture]",
-                    "flip_evaluator": "rtp[metrics]", "pyrender": "rtp[pyrender]", "OpenGL": "rtp[pyrender]",
+                    "flip_evaluator": "rtp[capture]", "pyrender": "rtp[pyrender]", "OpenGL": "rtp[pyrender]",
                     "ray": "rtp[ray]"}
+
+#: What a missing torch's message adds: the pin of pyproject.toml may come from public PyPI as the CUDA build
+#: (README, "Set-up"); ``rtp.metrics``' messages say the same (tests/test_dependencies.py).
+_TORCH_CPU_NOTE = ("torch from public PyPI may be its CUDA build, gigabytes: for the CPU build add --extra-index-url "
+                   "https://download.pytorch.org/whl/cpu (README, Set-up)")
 
 
 #: The name pip installs an optional module by, where it is not the module's.
@@ -551,7 +560,8 @@ def _missing_install(prog: str, err: ImportError) -> str | None:
         return str(err)
     name = str(cause.name)
     extra = "rtp[export]" if prog == "rtp-export" and name in ("torch", "onnx") else OPTIONAL_MODULES[name]
-    return f"this needs {name}, which is not installed: pip install '{extra}'"
+    return f"this needs {name}, which is not installed: pip install '{extra}'" + (
+        f"; {_TORCH_CPU_NOTE}" if name == "torch" else "")
 
 
 #: The errors of a path that is wrong in itself (a usage error, exit 2), not of a job that failed.

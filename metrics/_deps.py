@@ -19,6 +19,28 @@ METRIC_DEPENDENCIES: dict[str, tuple[str, ...]] = {
     "jnyang": (),
 }
 
+#: The extra of pyproject.toml to install for each package of :data:`METRIC_DEPENDENCIES`, and the package's pin
+#: there, as a :class:`MetricDependencyError` names them (tests/test_dependencies.py checks both against
+#: pyproject.toml): the one with the fewest requirements among those that bring it, and one without torch where
+#: there is one. flip-evaluator's is ``rtp[capture]`` (FLIP, PSNR and the Yang metrics need no torch);
+#: ``rtp[metrics]`` has it too, with torch's gigabytes.
+METRIC_INSTALLS: dict[str, tuple[str, str]] = {
+    "flip-evaluator": ("rtp[capture]", "flip-evaluator==1.7"),
+    "torch": ("rtp[metrics]", "torch==2.13.0"),
+}
+
+#: What every message naming torch's install adds (README, "Set-up"); ``rtp.cli``'s says the same.
+TORCH_CPU_NOTE = ("torch from public PyPI may be its CUDA build, gigabytes: for the CPU build add --extra-index-url "
+                  "https://download.pytorch.org/whl/cpu (README, Set-up)")
+
+
+def install_hint(package: str) -> str:
+    """The install command a :class:`MetricDependencyError` names for ``package`` (of :data:`METRIC_INSTALLS`):
+    its extra, or the package alone at its pin; for torch, where its CPU build comes from."""
+    extra, pin = METRIC_INSTALLS[package]
+    hint = f"pip install '{extra}' (or {pin} alone)"
+    return f"{hint}; {TORCH_CPU_NOTE}" if package == "torch" else hint
+
 
 def check_dependencies(metrics: str | Iterable[str]) -> None:
     """Raise :class:`MetricDependencyError` listing every missing piece the ``metrics`` need (each with

@@ -107,9 +107,10 @@ def _flip_module() -> Any:
     try:
         import flip_evaluator
     except ImportError as exc:
-        raise MetricDependencyError(
-            "FLIP needs NVIDIA's flip-evaluator package: pip install flip-evaluator==1.7"
-        ) from exc
+        from ._deps import install_hint  # (not above: _deps imports this module)
+
+        raise MetricDependencyError(f"FLIP needs NVIDIA's flip-evaluator package: {install_hint('flip-evaluator')}") \
+            from exc
     return flip_evaluator
 
 

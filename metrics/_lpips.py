@@ -67,7 +67,9 @@ def _torch() -> Any:
     try:
         import torch
     except ImportError as exc:
-        raise MetricDependencyError("LPIPS needs torch: pip install torch==2.13.0 (or rtp[train])") from exc
+        from ._deps import install_hint  # (not above: _deps imports this module)
+
+        raise MetricDependencyError(f"LPIPS needs torch: {install_hint('torch')}") from exc
     return torch
 
 

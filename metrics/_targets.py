@@ -22,6 +22,7 @@ from rtp.sdk import (
     tile_grid,
 )
 
+from ._deps import install_hint
 from ._device import DEVICES, resolve_device
 from ._errors import MetricDependencyError, MetricParameterError
 from ._flip import DEFAULT_PPD, Ppd, flip_map, flip_pixels, image_ppd
@@ -154,8 +155,8 @@ def _check_flip_torch(names: Iterable[str], backend: str) -> None:
         import torch  # noqa: F401
     except ImportError as exc:
         raise MetricDependencyError(
-            "flip_backend='torch' needs torch: pip install torch==2.13.0 (or rtp[metrics]), or pass "
-            "flip_backend='flip-evaluator' (or None, which picks it when torch is missing)"
+            "flip_backend='torch' needs torch, or pass flip_backend='flip-evaluator' (or None, which picks it when "
+            f"torch is missing): {install_hint('torch')}"
         ) from exc
 
 

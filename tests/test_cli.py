@@ -542,6 +542,27 @@ def test_a_missing_module_of_an_installed_package_is_not_taken_for_a_missing_ext
         require_extra("rtp[capture]", ["matplotlib"])
 
 
+def test_a_missing_flip_evaluator_or_torch_names_the_smallest_extra(capsys: pytest.CaptureFixture[str]) -> None:
+    """flip-evaluator missing where no rtp module wrapped it named rtp[metrics], which pulls torch (gigabytes), where
+    rtp[capture] brings it without; a missing torch named its extra alone, and a bare torch pin from public PyPI
+    may be the CUDA build: it says where the CPU one comes from (README, Set-up)."""
+    from rtp.cli._run import run_guarded
+
+    def fails(name: str) -> Callable[[], int]:
+        def command() -> int:
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return command
+
+    assert run_guarded("rtp targets", fails("flip_evaluator")) == 2
+    assert capsys.readouterr().err == ("rtp targets: error: this needs flip_evaluator, which is not installed: "
+                                       "pip install 'rtp[capture]'\n")
+    assert run_guarded("rtp train", fails("torch")) == 2
+    assert capsys.readouterr().err == ("rtp train: error: this needs torch, which is not installed: pip install "
+                                       "'rtp[train]'; torch from public PyPI may be its CUDA build, gigabytes: for the "
+                                       "CPU build add --extra-index-url https://download.pytorch.org/whl/cpu (README, "
+                                       "Set-up)\n")
+
+
 def test_targets_of_an_empty_dataset_path_are_refused_not_the_current_folder(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """`rtp targets ""` (an unset shell variable) read the current folder as the dataset (". is not an rtp

@@ -250,6 +250,109 @@ def test_rtp_weights_list_reports_each_metric(no_weights: Path, capsys: pytest.C
     assert "rtp weights fetch" in rows["lpips"]["state"]
 
 
+def _extras() -> dict[str, dict[str, str]]:
+    """pyproject.toml's extras, each as {package: its requirement}, the extras it names (``rtp[x]``) unfolded."""
+    import re
+
+    import tomllib
+
+    own = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+
+    def unfold(extra: str) -> dict[str, str]:
+        out: dict[str, str] = {}
+        for req in own[extra]:
+            name = re.split(r"[<>=!~\[ ;]", req, maxsplit=1)[0].lower().replace("_", "-")
+            if name == "rtp":
+                for other in req[req.index("[") + 1:req.index("]")].split(","):
+                    out.update(unfold(other.strip()))
+            else:
+                out[name] = req
+        return out
+
+    return {f"rtp[{extra}]": unfold(extra) for extra in own}
+
+
+def _smallest(extras: dict[str, dict[str, str]], package: str) -> set[str]:
+    """The extras with the fewest requirements among those that bring ``package``, only those without torch where
+    one is (FLIP's flip-evaluator must not pull torch's gigabytes)."""
+    bring = {e: reqs for e, reqs in extras.items() if package in reqs}
+    light = {e: reqs for e, reqs in bring.items() if "torch" not in reqs} if package != "torch" else {}
+    pool = light or bring
+    fewest = min(len(reqs) for reqs in pool.values())
+    return {e for e, reqs in pool.items() if len(reqs) == fewest}
+
+
+def test_the_installs_messages_name_are_pyprojects_smallest_extras() -> None:
+    """A missing flip-evaluator said `pip install flip-evaluator==1.7` and rtp.cli's table gave it rtp[metrics],
+    which pulls torch, where rtp[capture] brings it without; a missing torch said `torch==2.13.0 (or rtp[train])`.
+    The tables the messages come from name, for each package, the smallest extra that brings it (without torch
+    where one does) and pyproject.toml's own pin."""
+    from rtp.cli._run import _DISTRIBUTIONS, OPTIONAL_MODULES
+    from rtp.metrics._deps import METRIC_DEPENDENCIES, METRIC_INSTALLS
+
+    extras = _extras()
+    pieces = {p for needs in METRIC_DEPENDENCIES.values() for p in needs} - {"LPIPS weights"}
+    assert set(METRIC_INSTALLS) == pieces
+    for package, (extra, pin) in METRIC_INSTALLS.items():
+        assert extras[extra][package] == pin, (package, extra, extras[extra].get(package))
+        assert extra in _smallest(extras, package), (package, extra, _smallest(extras, package))
+    # (glcontext and PyOpenGL come with moderngl and pyrender; torch's bare imports are training's: rtp[train])
+    through = {"glcontext": "moderngl", "OpenGL": "pyrender"}
+    for module, extra in OPTIONAL_MODULES.items():
+        package = through.get(module) or _DISTRIBUTIONS.get(module, module).lower()
+        assert package in extras[extra], (module, extra)
+        if module != "torch":
+            assert extra in _smallest(extras, package), (module, extra, _smallest(extras, package))
+    assert OPTIONAL_MODULES["flip_evaluator"] == METRIC_INSTALLS["flip-evaluator"][0]
+
+
+def test_a_missing_flip_evaluator_names_the_extra_without_torch(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without flip-evaluator, FLIP named its bare pin; it names rtp[capture] (no torch), and the pin, in the check
+    before a job, in flip_map and in `rtp weights list`."""
+    import numpy as np
+
+    from rtp.cli import main as rtp_main
+
+    monkeypatch.setitem(sys.modules, "flip_evaluator", None)  # (`import flip_evaluator` raises ImportError)
+    said = "FLIP needs NVIDIA's flip-evaluator package: pip install 'rtp[capture]' (or flip-evaluator==1.7 alone)"
+    with pytest.raises(metrics.MetricDependencyError) as err:
+        metrics.check_dependencies(["psnr", "flip", "jnflip"])
+    assert str(err.value) == f"missing before any work starts: flip, jnflip: {said}"
+    img = np.full((8, 8, 3), 0.5, np.float32)
+    with pytest.raises(metrics.MetricDependencyError, match=r"^FLIP needs .*'rtp\[capture\]'") as err:
+        metrics.flip_map(img, img)
+    assert "torch" not in str(err.value)
+    assert rtp_main(["weights", "list", "--json"]) == 0
+    rows = {r["metric"]: r for r in json.loads(capsys.readouterr().out)}
+    assert rows["flip"]["state"] == f"missing before any work starts: flip: {said}", rows["flip"]
+    assert rows["psnr"]["state"] == "ready"
+
+
+def test_a_missing_torch_names_the_metrics_extra_and_its_cpu_build(no_weights: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without torch, LPIPS said `pip install torch==2.13.0 (or rtp[train])`: the pin alone may pull the CUDA build
+    from public PyPI (gigabytes), and rtp[train] is more than LPIPS needs. It names rtp[metrics], the pin, and
+    where the CPU build comes from (README, Set-up)."""
+    from rtp.metrics import _deps
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # (`import torch` raises ImportError)
+    with pytest.raises(metrics.MetricDependencyError) as err:
+        metrics.check_dependencies(["lpips"])
+    said = str(err.value)
+    assert ("lpips: LPIPS needs torch: pip install 'rtp[metrics]' (or torch==2.13.0 alone); torch from public PyPI "
+            "may be its CUDA build, gigabytes: for the CPU build add --extra-index-url "
+            "https://download.pytorch.org/whl/cpu (README, Set-up)") in said
+    assert "rtp weights fetch" in said  # (the weights, missing too, in the same message)
+    assert "rtp[train]" not in said
+    # (rtp.cli's message for a missing torch says the same about the CPU build)
+    from rtp.cli import _run
+
+    assert _run._TORCH_CPU_NOTE == _deps.TORCH_CPU_NOTE
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert "https://download.pytorch.org/whl/cpu" in readme and "## Set-up" in readme
+
+
 _POOL_SCRIPT = """
 import os, sys, time
 from rtp.capture._pool import worker_pool

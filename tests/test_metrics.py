@@ -717,7 +717,7 @@ def test_torch_flip_backend_without_torch_is_a_dependency_error(
     (or from the device check), naming no install; metrics that need no torch still run."""
     monkeypatch.setitem(sys.modules, "torch", None)  # (`import torch` raises ImportError)
     for device in (None, "cpu"):
-        with pytest.raises(M.MetricDependencyError, match=r"flip_backend='torch' needs torch: pip install torch"):
+        with pytest.raises(M.MetricDependencyError, match=r"flip_backend='torch' needs torch, .*: pip install 'rtp\[metrics\]'"):
             M.tile_targets(ref, rates, ("psnr", "jnflip"), 16, flip_backend="torch", device=device)
         with pytest.raises(M.MetricDependencyError, match="flip_backend='flip-evaluator'"):
             M.targets_device(("flip",), device, "torch")
