@@ -68,9 +68,6 @@ IMPORT_BASE = 64 * 2**20
 IMPORT_PER_PIXEL = 420.0
 #: ``profile``'s default (recorded in the manifest's settings only when another is given).
 DEFAULT_PROFILE = "engine"
-#: The largest ``tolerance`` (the SDK reprojection's own limit: 1 already passes any previous depth up to twice the
-#: one expected), checked with the other arguments rather than by the first frame's reprojection.
-MAX_TOLERANCE = 1.0
 #: The manifest's ``settings["source"]`` of an imported dataset.
 SOURCE = "engine frames"
 
@@ -465,12 +462,13 @@ def import_frames(
     present = [b for b in BUFFERS if b not in OPTIONAL_BUFFERS or b in first]
     absent = tuple(b for b in OPTIONAL_BUFFERS if b not in present)
     h, w = next(iter(sizes.values()))
-    # (its range too, now: out of it, the first frame's reprojection refused it, the error naming that frame's file)
+    # (its range too, now: out of it, the first frame's reprojection refused it, the error naming that frame's file;
+    # the range is the SDK reprojection's own, sdk.MAX_REPROJECTION_TOLERANCE)
     if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, numbers.Real) \
-            or not 0.0 <= tolerance <= MAX_TOLERANCE:
-        raise ParameterError(f"tolerance: expected a number in [0, {MAX_TOLERANCE:g}] (the reprojection's relative "
-                             f"depth tolerance, {sdk.DEFAULT_REPROJECTION_TOLERANCE:g} by default), got {tolerance!r}",
-                             "tolerance")
+            or not 0.0 <= tolerance <= sdk.MAX_REPROJECTION_TOLERANCE:
+        raise ParameterError(f"tolerance: expected a number in [0, {sdk.MAX_REPROJECTION_TOLERANCE:g}] (the "
+                             f"reprojection's relative depth tolerance, {sdk.DEFAULT_REPROJECTION_TOLERANCE:g} by "
+                             f"default), got {tolerance!r}", "tolerance")
     conventions = {"albedo_linear": albedo_linear, "normal_space": normal_space, "depth_kind": depth_kind,
                    "tolerance": float(tolerance)}
     # the memory a frame's import holds (its arrays, their float copies, the planes, the sample), before the first

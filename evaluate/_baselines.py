@@ -24,12 +24,14 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
+from rtp.metrics import DEFAULT_WEBER_L
 from rtp.sdk import (
     DEFAULT_EXTRAPOLATION_K,
     DEFAULT_TILE_SIZE,
     EXIT_USAGE,
     LUMA_WEIGHTS,
     MAX_THRESHOLD,
+    METRICS,
     PREDICTED_RATES,
     RATE_CODES,
     InputDtypeError,
@@ -66,9 +68,10 @@ __all__ = [
 ]
 
 #: The baselines' default parameters, one home for the library, rtp evaluate and rtp play: Yang 2019's
-#: sensitivity (JNYang units, RT-Percept's 0.25), FidelityFX's cutoff (luma) and its motion factor (per pixel of
-#: motion per frame).
-YANG_THRESHOLD = 0.25
+#: sensitivity (JNYang units, RT-Percept's 0.25: JNYang's default threshold, ``sdk.METRICS["jnyang"]``), FidelityFX's
+#: cutoff (luma) and its motion factor (per pixel of motion per frame). Yang's environment luminance is the Weber
+#: ``l`` of the JN metrics, ``rtp.metrics.DEFAULT_WEBER_L``.
+YANG_THRESHOLD = METRICS["jnyang"].default_threshold
 FFX_CUTOFF = 0.05
 FFX_MOTION_FACTOR = 0.05
 
@@ -416,7 +419,7 @@ class Yang2019:
         tile_size: int = DEFAULT_TILE_SIZE,
         *,
         threshold: float = YANG_THRESHOLD,
-        env_luminance: float = 0.02,
+        env_luminance: float = DEFAULT_WEBER_L,
         norm: Norm = "max",
         k: float = DEFAULT_EXTRAPOLATION_K,
         motion: bool = True,

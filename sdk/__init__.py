@@ -73,6 +73,7 @@ from ._rates import (
 from ._reproject import (
     CAMERA_KINDS,
     DEFAULT_REPROJECTION_TOLERANCE,
+    MAX_REPROJECTION_TOLERANCE,
     check_projection,
     check_reprojection,
     reproject,
@@ -152,6 +153,7 @@ __all__ = [
     "LUMA_WEIGHTS",
     "MAX_CARRY_SCALE",
     "MAX_RATE_FACTOR",
+    "MAX_REPROJECTION_TOLERANCE",
     "MAX_RESCALE",
     "MAX_SAVING",
     "MAX_THRESHOLD",

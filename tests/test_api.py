@@ -36,6 +36,7 @@ def test_sdk_all_is_pinned() -> None:
         "LUMA_WEIGHTS",
         "MAX_CARRY_SCALE",
         "MAX_RATE_FACTOR",
+        "MAX_REPROJECTION_TOLERANCE",
         "MAX_RESCALE",
         "MAX_SAVING",
         "MAX_THRESHOLD",

@@ -869,7 +869,7 @@ def _pyrender_adapter_absurd(kw: dict[str, Any], size: tuple[int, int]) -> bool:
         not all(_count(kw[k]) and kw[k] >= 1 for k in ("width", "height"))
         or size != (kw["width"], kw["height"])
         or not _finite_number(kw.get("reprojection_tolerance", 0.0))
-        or kw.get("reprojection_tolerance", 0.0) < 0
+        or not 0 <= kw.get("reprojection_tolerance", 0.0) <= sdk.MAX_REPROJECTION_TOLERANCE
     )
 
 

@@ -632,3 +632,77 @@ def test_no_room_restates_the_sdks_facts() -> None:
             if isinstance(node, ast.Constant) and type(node.value) is float and node.value in SDK_FACTS:
                 bad.append(f"{path.relative_to(ROOT)}:{node.lineno} writes {node.value} (use {SDK_FACTS[node.value]})")
     assert not bad, "\n".join(bad)
+
+
+def _shared_facts() -> dict[str, object]:
+    """The named facts other rooms take from their home: the public numeric constants of ``rtp.sdk``,
+    ``rtp.sdk.files`` and ``rtp.metrics``, and ``rtp.sdk.files.LOCK_NAME``."""
+    from rtp import metrics, sdk
+    from rtp.sdk import files
+
+    out: dict[str, object] = {}
+    for mod in (sdk, files, metrics):
+        for name in mod.__all__:
+            value = getattr(mod, name)
+            if name.isupper() and isinstance(value, (int, float)) and not isinstance(value, bool):
+                out[name] = value
+    out["LOCK_NAME"] = files.LOCK_NAME
+    return out
+
+
+#: Constants and parameter defaults that merely coincide with a fact of the same value and a shared word (another
+#: meaning): the Weber denominator's 4x4 block (not block_variances' cell), BatchNorm's epsilon.
+_COINCIDENCES = {("metrics/_pool.py", "WEBER_BLOCK", "BLOCK_CELL"), ("train/model.py", "eps", "BLOCK_EPS")}
+
+
+def _fact_words(name: str) -> set[str]:
+    """A name's words that say what it is (not DEFAULT, MAX, MIN); ``env_luminance`` is the Weber ``l``."""
+    words = set(name.upper().strip("_").split("_")) - {"DEFAULT", "MAX", "MIN"}
+    return words | ({"WEBER", "L"} if {"ENV", "LUMINANCE"} & words else set())
+
+
+def test_no_room_restates_a_shared_fact() -> None:
+    """A fact has one home (docs/architecture.md): no room but its home writes the value again, as a module constant
+    or a parameter's default of the same meaning (the same value under a name with a word of the fact's). Found so:
+    capture/_import.py's ``MAX_TOLERANCE = 1.0`` beside sdk's reprojection limit, the moderngl adapter's and
+    renderer's ``tolerance=0.02``, Yang 2019's ``env_luminance=0.02`` (metrics' Weber l) and train's lock file name
+    ``.rtp-writer.lock`` spelt out."""
+    facts = _shared_facts()
+    bad = []
+    for room in sorted(ROOMS):
+        if room == "sdk":
+            continue
+        for path, _ in _sources(room):
+            rel = path.relative_to(ROOT).as_posix()
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            named: list[tuple[str, ast.expr, int]] = []  # (name, value, line): module constants, parameter defaults
+            for node in tree.body:
+                if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+                    named.append((node.targets[0].id, node.value, node.lineno))
+                elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.value is not None:
+                    named.append((node.target.id, node.value, node.lineno))
+            docstrings = set()
+            for node in ast.walk(tree):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                    a = node.args
+                    positional = a.posonlyargs + a.args
+                    named += [(p.arg, d, node.lineno) for p, d in zip(positional[len(positional) - len(a.defaults):],
+                                                                       a.defaults, strict=True)]
+                    named += [(p.arg, d, node.lineno) for p, d in zip(a.kwonlyargs, a.kw_defaults, strict=True)
+                              if d is not None]
+                if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
+                    docstrings.add(id(node.value))
+            for name, value, line in named:
+                if not isinstance(value, ast.Constant) or isinstance(value.value, (bool, str)) \
+                        or not isinstance(value.value, (int, float)):
+                    continue
+                for fact, v in facts.items():
+                    if v == value.value and _fact_words(name) & _fact_words(fact) \
+                            and not (room == "metrics" and fact in __import__("rtp.metrics").metrics.__all__) \
+                            and (rel, name, fact) not in _COINCIDENCES:
+                        bad.append(f"{rel}:{line} {name} = {value.value!r} (rtp's {fact})")
+            for node in ast.walk(tree):  # the lock file's name, in a string the code uses
+                if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings \
+                        and str(facts["LOCK_NAME"]) in node.value:
+                    bad.append(f"{rel}:{node.lineno} spells out the writer lock's name (rtp.sdk.files.LOCK_NAME)")
+    assert not bad, "facts written again rather than imported from their home:\n" + "\n".join(bad)

@@ -223,6 +223,9 @@ def test_msaa_costs_accuracy_at_edges(textured: _Setup, textured_inputs: list[np
                                  ({"msaa": "yes"}, sdk.ParameterError, "msaa"),
                                  ({"reprojection_tolerance": float("nan")}, sdk.ParameterError, "reprojection_tolerance"),
                                  ({"reprojection_tolerance": "x"}, sdk.ParameterError, "reprojection_tolerance"),
+                                 # (past sdk.input_planes' range: made, then every frame was refused, as "tolerance")
+                                 ({"reprojection_tolerance": sdk.MAX_REPROJECTION_TOLERANCE * 2}, sdk.ParameterError,
+                                  r"reprojection_tolerance: expected .* in \[0, 1\]"),
                                  ({"platform": 5}, PyrenderUnavailableError, "platform"),
                                  ({"renderer": object()}, sdk.adapters.AdapterFrameError, "renderer")):
         with pytest.raises(error, match=word):

@@ -32,7 +32,7 @@ from rtp import sdk
 from rtp.capture import DatasetError, DatasetReader, TargetError, TargetStore, check_memory
 from rtp.evaluate import scores
 from rtp.metrics import MetricParameterError, device_name, known_metrics, metric_info, metric_plugins, resolve_device
-from rtp.sdk.files import check_output, writer_lock
+from rtp.sdk.files import LOCK_NAME, check_output, writer_lock
 
 from . import checkpoint as ckpt
 from . import transforms as tt
@@ -1053,7 +1053,7 @@ def train(cfg: TrainConfig, progress: Callable[[int, int, float], None] | None =
     try:
         with writer_lock(out.parent, "rtp train", lambda holder: ckpt.CheckpointError(
                 f"{out} is being written by another training ({holder}): wait for it to end, or train into another "
-                f"file"), name=f".{out.name}.rtp-writer.lock", remove=True):
+                f"file"), name=f".{out.name}{LOCK_NAME}", remove=True):
             with _deterministic(resolve_device(cfg.device)):
                 return _train(cfg, progress, loading)
     finally:

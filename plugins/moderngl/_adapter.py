@@ -35,7 +35,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEPTH_KINDS, NORMAL_SPACES, ParameterError, check_projection, check_reprojection, gbuffers_needed
+from rtp.sdk import (
+    DEFAULT_REPROJECTION_TOLERANCE,
+    DEPTH_KINDS,
+    NORMAL_SPACES,
+    ParameterError,
+    check_projection,
+    check_reprojection,
+    gbuffers_needed,
+)
 from rtp.sdk.adapters import Adapter as _AdapterBase
 from rtp.sdk.adapters import AdapterFrameError, UnsupportedChannelError
 
@@ -221,7 +229,7 @@ class Adapter(_AdapterBase[GBufferTextures]):
         height: int,
         *,
         ctx: Any,
-        tolerance: float = 0.02,
+        tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
         albedo_linear: bool = False,
         normal_space: str = "view",
         depth_kind: str = "linear",

@@ -31,6 +31,7 @@ import numpy as np
 from rtp.scene import Camera, Scene
 from rtp.sdk import (
     ALL_RATES,
+    DEFAULT_REPROJECTION_TOLERANCE,
     RATE_CODES,
     ParameterError,
     RtpError,
@@ -464,7 +465,7 @@ class Renderer:
         fxaa: bool = True,
         max_point_lights: int = 32,
         exposure_key: float = 0.18,
-        reprojection_tolerance: float = 0.02,
+        reprojection_tolerance: float = DEFAULT_REPROJECTION_TOLERANCE,
         cull_back_faces: bool = False,
         profile: bool = False,
     ) -> None:

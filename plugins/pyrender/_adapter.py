@@ -12,7 +12,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from rtp.sdk import DEFAULT_REPROJECTION_TOLERANCE, ParameterError, input_planes, reproject_positions
+from rtp.sdk import (
+    DEFAULT_REPROJECTION_TOLERANCE,
+    MAX_REPROJECTION_TOLERANCE,
+    ParameterError,
+    input_planes,
+    reproject_positions,
+)
 from rtp.sdk.adapters import Adapter as _BaseAdapter
 from rtp.sdk.adapters import AdapterFrameError
 
@@ -201,7 +207,8 @@ class Adapter(_BaseAdapter[SceneFrame]):
             surfaces they cover); default off: point-sampled G-buffers like the reference renderer.
             Needs ``normal_bits=8``.
         normal_bits: 12 (default; two normal components per pass) or 8 (three per pass).
-        reprojection_tolerance: relative depth tolerance of the disocclusion test.
+        reprojection_tolerance: relative depth tolerance of the disocclusion test, in
+            [0, ``sdk.MAX_REPROJECTION_TOLERANCE``] (default ``sdk.DEFAULT_REPROJECTION_TOLERANCE``).
         platform: ``"egl"`` (default) or ``"osmesa"``; must be decided before anything imports
             PyOpenGL.
         renderer: the ``pyrender.OffscreenRenderer`` (same size) that draws the displayed frames,
@@ -248,9 +255,11 @@ class Adapter(_BaseAdapter[SceneFrame]):
     ) -> None:
         super().__init__(channels, width, height)
         tol = reprojection_tolerance
-        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not 0.0 <= tol < np.inf:
-            raise ParameterError(f"reprojection_tolerance: expected a finite relative depth tolerance >= 0, got {tol!r}",
-                                 "reprojection_tolerance")
+        # (the range sdk.input_planes takes, checked here: past it the adapter was made, then refused every frame)
+        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) \
+                or not 0.0 <= tol <= MAX_REPROJECTION_TOLERANCE:
+            raise ParameterError(f"reprojection_tolerance: expected a relative depth tolerance in "
+                                 f"[0, {MAX_REPROJECTION_TOLERANCE:g}], got {tol!r}", "reprojection_tolerance")
         if renderer is not None and not hasattr(renderer, "viewport_width"):
             raise AdapterFrameError(f"renderer: expected a pyrender.OffscreenRenderer to borrow, got "
                                     f"{type(renderer).__name__}")
