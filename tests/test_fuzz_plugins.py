@@ -296,6 +296,7 @@ def _renderer_absurd(kw: dict[str, Any], settings: dict[str, Any]) -> bool:
         or any(k in kw and kw[k] is not None and not _finite_number(kw[k]) for k in _RENDERER_FLOATS)
         or any(k in kw and not isinstance(kw[k], (bool, np.bool_)) for k in bools)
         or settings["size"] != [kw.get("width", 8), kw.get("height", 8)]
+        or not kw.get("reprojection_tolerance", 0.0) <= sdk.MAX_REPROJECTION_TOLERANCE
     )
 
 
@@ -540,7 +541,7 @@ def _adapter_absurd(kw: dict[str, Any], a: Any) -> bool:
     return bool(
         not all(_count(kw[k]) and kw[k] >= 1 for k in ("width", "height"))
         or not _finite_number(kw.get("tolerance", 0.0))
-        or kw.get("tolerance", 0.0) < 0
+        or not 0 <= kw.get("tolerance", 0.0) <= sdk.MAX_REPROJECTION_TOLERANCE
         or not isinstance(kw.get("albedo_linear", False), (bool, np.bool_))
         or (a.width, a.height) != (kw["width"], kw["height"])
     )

@@ -333,6 +333,10 @@ def test_no_previous_frame_and_channel_errors(frames) -> None:
                     {"tolerance": -1.0}, {"tolerance": "0.02"}):
         with pytest.raises(sdk.ParameterError):
             Adapter(("seen",), W, H, ctx=ctx, **options)
+    # the SDK's range: above it the GPU reprojected what sdk.input_planes and the adapter's own check() refused
+    with pytest.raises(sdk.ParameterError, match=r"tolerance: expected a relative depth tolerance in \[0, 1\]"):
+        Adapter(("seen",), W, H, ctx=ctx, tolerance=1.5)
+    Adapter(("seen",), W, H, ctx=ctx, tolerance=sdk.MAX_REPROJECTION_TOLERANCE).close()
     for size in ((2.7, H), ("abc", H), (W, None), (W, float("inf")), (0, H), (True, H)):
         with pytest.raises(sdk.ParameterError, match="positive integers"):
             Adapter(("seen",), *size, ctx=ctx)  # type: ignore[arg-type]

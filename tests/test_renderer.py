@@ -561,6 +561,9 @@ def test_renderer_errors_and_lifetime(gl_context):
         Renderer(16, 16, ctx=gone)
     with pytest.raises(RendererError, match="ctx: expected a moderngl.Context, got object"):
         Renderer(16, 16, ctx=object())
+    # the SDK's range (sdk.MAX_REPROJECTION_TOLERANCE): above it the renderer's adapter refused it at the first frame
+    with pytest.raises(RendererError, match=r"reprojection_tolerance: expected a number in \[0, 1\], got 1.5"):
+        Renderer(16, 16, ctx=ctx, reprojection_tolerance=1.5)
     make_current(ctx)
     # past the context's largest texture moderngl only said "the framebuffer is not complete"
     limit = Renderer.max_frame_side(ctx)

@@ -26,7 +26,6 @@ inputs come from one code path.
 from __future__ import annotations
 
 import logging
-import sys
 import threading
 import warnings
 from collections.abc import Iterable
@@ -38,6 +37,7 @@ import numpy as np
 from rtp.sdk import (
     DEFAULT_REPROJECTION_TOLERANCE,
     DEPTH_KINDS,
+    MAX_REPROJECTION_TOLERANCE,
     NORMAL_SPACES,
     ParameterError,
     check_projection,
@@ -245,9 +245,11 @@ class Adapter(_AdapterBase[GBufferTextures]):
             raise ParameterError(f"depth_kind must be one of {', '.join(DEPTH_KINDS)}, got {depth_kind!r}",
                                  "depth_kind")
         number = isinstance(tolerance, (int, float, np.integer, np.floating)) and not isinstance(tolerance, bool)
-        if not number or not 0.0 <= tolerance <= sys.float_info.max:  # (an int past float's range passed `< inf`)
-            raise ParameterError(f"tolerance: expected a finite relative depth tolerance >= 0, got {tolerance!r}",
-                                 "tolerance")
+        # (the SDK's range, as sdk.input_planes and check_gbuffers take it: above 1 the GPU reprojected what the CPU
+        # reference, and this adapter's own check(), refused)
+        if not number or not 0.0 <= tolerance <= MAX_REPROJECTION_TOLERANCE:
+            raise ParameterError(f"tolerance: expected a relative depth tolerance in [0, {MAX_REPROJECTION_TOLERANCE:g}] "
+                                 f"(sdk.MAX_REPROJECTION_TOLERANCE), got {tolerance!r}", "tolerance")
         for flag, value in (("albedo_linear", albedo_linear), ("clamp_colour", clamp_colour)):
             if not isinstance(value, (bool, np.bool_)):
                 raise ParameterError(f"{flag}: expected True or False, got {value!r}", flag)

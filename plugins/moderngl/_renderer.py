@@ -32,6 +32,7 @@ from rtp.scene import Camera, Scene
 from rtp.sdk import (
     ALL_RATES,
     DEFAULT_REPROJECTION_TOLERANCE,
+    MAX_REPROJECTION_TOLERANCE,
     RATE_CODES,
     ParameterError,
     RtpError,
@@ -570,7 +571,7 @@ class Renderer:
         ranges = {"ao_samples": (1, cls.MAX_AO_SAMPLES, True), "max_point_lights": (1, cls.MAX_POINT_LIGHTS, True),
                   "ao_radius": (0.0, math.inf, False), "ao_strength": (0.0, math.inf, False),
                   "anisotropy": (1.0, math.inf, False), "exposure_key": (0.0, math.inf, False),
-                  "reprojection_tolerance": (0.0, math.inf, False), "shadow_distance": (0.0, math.inf, False)}
+                  "reprojection_tolerance": (0.0, MAX_REPROJECTION_TOLERANCE, False), "shadow_distance": (0.0, math.inf, False)}
         for name, v in values.items():
             lo, hi, integral = ranges[name]
             if name == "shadow_distance" and v is None:
@@ -580,7 +581,8 @@ class Renderer:
                 ok = v > 0
             if not ok:
                 strict = name in ("ao_radius", "exposure_key", "shadow_distance")
-                bound = f"an integer in [{lo}, {hi}]" if integral else f"a finite number {'>' if strict else '>='} {lo:g}"
+                bound = f"an integer in [{lo}, {hi}]" if integral else f"a finite number {'>' if strict else '>='} {lo:g}" \
+                    if math.isinf(hi) else f"a number in [{lo:g}, {hi:g}]"
                 raise RendererError(f"{name}: expected {bound}, got {v!r}")
 
     # ------------------------------------------------------------------ set-up
