@@ -1517,6 +1517,114 @@ def test_a_full_disk_while_unpacking_keeps_the_whole_package(tmp_path: Path, mon
     assert scene_by_name("m1", cache, splits=splits).materials[0].texture is not None
 
 
+def test_a_fetch_that_unpacks_again_and_stops_leaves_no_index_of_the_earlier_one(tmp_path: Path,
+                                                                                 monkeypatch: pytest.MonkeyPatch):
+    """A fetch that unpacked the packages again (after a damaged archive, as its error says: delete ``root/.unpacked``
+    and ``pk3/``) and was interrupted (Ctrl-C, kill -9) or failed midway left the earlier fetch's ``index.json``:
+    `rtp scenes list` counted every map as fetched while their archives were cut short or gone, and loading one
+    failed on its archive ("BSP source not found: .../pk3/map-20kdm2.pk3"). The index is removed before the
+    archives change, so the cache reads as not fetched until a fetch ends; the next fetch writes it again."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    _fake_apt(monkeypatch, _packages())
+    working = scenes._fetch._run
+    scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    assert [r["fetched"] for r in scenes.scene_list(cache, splits)] == [True, True, False]
+
+    def interrupted(cmd, cwd: Path, debs: Path | None = None) -> None:  # noqa: ANN001
+        if list(cmd[:2]) == ["dpkg-deb", "-x"] and "maps" in cmd[2]:
+            (cache / "root" / OA / "map-m1.pk3").write_bytes(b"PK\x03\x04 cut")  # tar had written part of it
+            raise KeyboardInterrupt
+        working(cmd, cwd)
+
+    (cache / "root" / ".unpacked").unlink()
+    shutil.rmtree(cache / "pk3")
+    monkeypatch.setattr(scenes._fetch, "_run", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    assert not (cache / "index.json").exists()
+    assert [r["fetched"] for r in scenes.scene_list(cache, splits)] == [False, False, False]
+    with pytest.raises(scenes.SceneNotFoundError, match="run `rtp scenes fetch --cache-dir"):
+        scenes.check_map("m2", cache, splits=splits)
+    monkeypatch.setattr(scenes._fetch, "_run", working)
+    scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    assert [r["fetched"] for r in scenes.scene_list(cache, splits)] == [True, True, False]
+    # the gunzipped archive alone deleted (the packages unpacked): its gunzip interrupted leaves no index either
+
+    def no_gunzip(src, dst, *args) -> None:  # noqa: ANN001
+        raise KeyboardInterrupt
+
+    shutil.rmtree(cache / "pk3")
+    monkeypatch.setattr(scenes._fetch.shutil, "copyfileobj", no_gunzip)
+    with pytest.raises(KeyboardInterrupt):
+        scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    assert not (cache / "index.json").exists()
+    monkeypatch.undo()
+    _fake_apt(monkeypatch, _packages())
+    scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False)
+    assert scene_by_name("m2", cache, splits=splits).name == "m2"
+
+
+def test_a_fetch_into_a_cache_it_cannot_write_is_a_fetch_error_or_the_maps_fetched_there(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture):
+    """A fetch into a read-only scene cache (a shared one, which docs/scaling.md suggests) failed with the system's
+    bare OSError "Read-only file system: '.../.rtp-writer.lock'", even where the cache held every map asked for.
+    Those maps are now returned as fetched there, with a warning (and converted with ``convert=True``); a map the
+    cache lacks is a FetchError saying the folder cannot be written and what to
+    do, before anything is downloaded."""
+    import contextlib
+    import errno
+
+    import rtp.sdk.files
+
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    calls = _fake_apt(monkeypatch, _packages())
+    scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    calls.clear()
+
+    @contextlib.contextmanager
+    def read_only(folder, job, busy, **kw):  # noqa: ANN001, ANN003
+        raise OSError(errno.EROFS, "Read-only file system", str(Path(folder) / ".rtp-writer.lock"))
+        yield
+
+    monkeypatch.setattr(rtp.sdk.files, "writer_lock", read_only)
+    with caplog.at_level(logging.WARNING, logger="rtp.capture"):
+        assert scenes.fetch(cache, ["m1"], splits=splits, progress=False, convert=True) == {
+            "m1": cache / "root" / OA / "map-m1.pk3"}
+    assert "cannot be written (Read-only file system: " in caplog.text and calls == []
+    assert (cache / "converted" / f"m1.v{CACHE_VERSION}.npz").is_file()
+    with pytest.raises(scenes.FetchError, match=rf"cannot write to the scene cache {re.escape(str(cache.resolve()))} "
+                                                r"\(Read-only file system: .*\.rtp-writer\.lock\): fetch into a folder "
+                                                r"you can write"):
+        scenes.fetch(cache, ["m1", "m3"], splits=splits, progress=False)
+    with pytest.raises(scenes.FetchError, match="cannot write to the scene cache"):
+        scenes.fetch(tmp_path / "empty", ["m1"], splits=splits, progress=False)
+    assert calls == []
+
+
+def test_a_fetch_after_the_packages_were_deleted_downloads_none_that_is_unpacked(tmp_path: Path,
+                                                                                 monkeypatch: pytest.MonkeyPatch):
+    """The packages in ``debs/`` (169 MB) are only the source of ``root/``: with them deleted after a fetch, every
+    later fetch downloaded the four again (or failed offline) for archives it had. A package that ``root/.unpacked``
+    records is not downloaded again; with that record deleted too (as a damaged archive's error says), it is."""
+    splits = tmp_path / "scenes.yaml"
+    splits.write_text(SPLITS)
+    cache = tmp_path / "cache"
+    calls = _fake_apt(monkeypatch, _packages())
+    scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    shutil.rmtree(cache / "debs")
+    calls.clear()
+    assert scenes.fetch(cache, ["m1", "m2"], splits=splits, progress=False) == {
+        "m1": cache / "root" / OA / "map-m1.pk3", "m2": cache / "pk3" / "map-m2.pk3"}
+    assert calls == []
+    (cache / "root" / ".unpacked").unlink()
+    scenes.fetch(cache, ["m1"], splits=splits, progress=False)
+    assert [c for c in calls if c[0] == "apt-get"] == [["apt-get", "download", p] for p in scenes.PACKAGES]
+
+
 def _fake_apt_get(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stderr: str) -> None:
     """An ``apt-get`` first on PATH that prints ``stderr`` and fails as apt does (exit code 100)."""
     bin_dir = tmp_path / "bin"

@@ -16,6 +16,7 @@ Cache layout::
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import json
 import logging
@@ -39,7 +40,7 @@ from rtp.sdk import ParameterError
 
 from ._bsp import BspConversion, convert_bsp
 from ._cache import CACHE_VERSION, load_scene_npz, save_scene_npz
-from ._errors import FetchError, SceneFormatError, SceneNotFoundError, UnlistedMapError
+from ._errors import FetchError, SceneError, SceneFormatError, SceneNotFoundError, UnlistedMapError
 
 __all__ = [
     "DEFAULT_SPLITS",
@@ -198,13 +199,16 @@ def _path_in_packages(archive: Path, root: Path, pk3_dir: Path) -> tuple[str, ..
     return archive.parts
 
 
-def _scan_archives(root: Path, pk3_dir: Path) -> dict:
+def _scan_archives(root: Path, pk3_dir: Path, stale: Path | None = None) -> dict:
     """Find pk3 archives (gunzipping ``*.pk3.gz``, again where the ``.pk3`` is not a zip archive: cut short by
-    a full disk, say) and the maps inside them."""
+    a full disk, say) and the maps inside them. ``stale``: the index of an earlier fetch, removed before an archive
+    is gunzipped again (it lists the archive, which this fetch may not finish)."""
     pk3_dir.mkdir(parents=True, exist_ok=True)
     for gz in sorted(root.rglob("*.pk3.gz")):
         out = pk3_dir / gz.name[:-3]
         if not out.is_file() or not zipfile.is_zipfile(out):
+            if stale is not None:
+                stale.unlink(missing_ok=True)
             tmp = out.with_suffix(".tmp")
             try:
                 with gzip.open(gz, "rb") as src, open(tmp, "wb") as dst:
@@ -259,8 +263,10 @@ def fetch(
         ``{map name: pk3 archive}`` for the requested maps.
 
     Raises:
-        FetchError: apt-get/dpkg-deb failed, a requested map is not in the packages, or another fetch
-            into ``cache_dir`` is running (one at a time: the second is refused at once).
+        FetchError: apt-get/dpkg-deb failed, a requested map is not in the packages, another fetch
+            into ``cache_dir`` is running (one at a time: the second is refused at once), or ``cache_dir``
+            cannot be written and its index lacks a requested map (where it lists them all: they are
+            returned, with a warning).
         UnlistedMapError: a requested map is not listed in ``scenes.yaml``.
         ParameterError: ``maps`` is not a name or a non-empty list of names, or ``cache_dir`` is a file.
     """
@@ -279,7 +285,6 @@ def fetch(
     names = [m for m in wanted if isinstance(m, str)]
     for m in names:
         _check_listed(m, None, splits)
-    cache.mkdir(parents=True, exist_ok=True)
     from rtp.sdk.files import writer_lock
 
     # (two fetches into one cache unpacked into the same folder at once, and the second one's gunzip of 20kdm2 found
@@ -287,8 +292,33 @@ def fetch(
     busy = lambda holder: FetchError(  # noqa: E731
         f"another fetch into {cache} is running ({holder}): wait for it to end, then run `rtp scenes fetch` again "
         "(it finds the packages that one fetched)")
-    with writer_lock(cache, "rtp scenes fetch", busy):
+    with contextlib.ExitStack() as guard:
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+            guard.enter_context(writer_lock(cache, "rtp scenes fetch", busy))
+        except OSError as err:  # (a read-only shared cache: the bare "Read-only file system: '.../.rtp-writer.lock'")
+            return _fetched_read_only(cache, names, splits, convert, progress, err)
         return _fetch_locked(cache, names, splits, convert, progress)
+
+
+def _fetched_read_only(cache: Path, names: list[str], splits: str | Path | None, convert: bool, progress: bool,
+                       err: OSError) -> dict[str, Path]:
+    """:func:`fetch` into ``cache``, a folder it cannot write (``err``): the maps, where its index lists every one (a
+    shared cache fetched by someone else, read-only: nothing to do), else a :class:`FetchError` saying so."""
+    why = f"{err.strerror}: {err.filename}" if err.strerror and err.filename else str(err)
+    try:
+        index = _read_index(cache)
+    except (SceneError, OSError):
+        index = None
+    if index is not None and all(m in index["maps"] for m in names):
+        log.warning("the scene cache %s cannot be written (%s); its index lists every map asked for (%d), so they "
+                    "are used as fetched there", cache, why, len(names))
+        if convert:
+            for m in _progress(names, desc="convert", unit="map", disable=not progress):
+                _load_cached(m, cache, index)
+        return {m: cache / index["maps"][m] for m in names}
+    raise FetchError(f"cannot write to the scene cache {cache} ({why}): fetch into a folder you can write "
+                     f"(--cache-dir, or $RTP_SCENE_CACHE), or have the folder's owner run `rtp scenes fetch` there") from err
 
 
 def _fetch_locked(cache: Path, names: list[str], splits: str | Path | None, convert: bool,
@@ -296,14 +326,19 @@ def _fetch_locked(cache: Path, names: list[str], splits: str | Path | None, conv
     """:func:`fetch`'s work, once its arguments are checked and it holds the cache's lock."""
     debs, root = cache / "debs", cache / "root"
     debs.mkdir(parents=True, exist_ok=True)
-    missing = [p for p in PACKAGES if not list(debs.glob(f"{p}_*.deb"))]
+    stamp = root / ".unpacked"
+    have = stamp.read_text(encoding="utf-8").split("\n") if stamp.exists() else []
+    # (a package unpacked already needs no .deb: with debs/ deleted to free its 169 MB, every later fetch downloaded
+    # the four packages again, or failed offline, for archives it had)
+    missing = [p for p in PACKAGES if not list(debs.glob(f"{p}_*.deb")) and not any(n.startswith(f"{p}_") for n in have)]
     if missing:
         log.info("downloading %s into %s", " ".join(missing), debs)
         _download(missing, debs, progress)
-    stamp = root / ".unpacked"
     deb_files = sorted(debs.glob("*.deb"))
-    have = stamp.read_text(encoding="utf-8").split("\n") if stamp.exists() else []
     todo = [d for d in deb_files if d.name not in have]
+    if todo:  # (the archives change under the index of an earlier fetch: one that failed or was interrupted while it
+        # unpacked them again left it, and `rtp scenes list` counted every map as fetched, their archives cut short)
+        (cache / "index.json").unlink(missing_ok=True)
     for d in _progress(todo, desc="unpack", unit="deb", disable=not progress or not todo):
         try:
             _run(["dpkg-deb", "-x", str(d), str(root)], cache)
@@ -317,7 +352,7 @@ def _fetch_locked(cache: Path, names: list[str], splits: str | Path | None, conv
             raise FetchError(f"{err} (removed {d.name}: the next `rtp scenes fetch` downloads it again)") from err
         have.append(d.name)
         _write_text(stamp, "\n".join(have))
-    index = _scan_archives(root, cache / "pk3")
+    index = _scan_archives(root, cache / "pk3", cache / "index.json")
     _write_text(cache / "index.json", json.dumps(index, indent=1, sort_keys=True))
     absent = [m for m in names if m not in index["maps"]]
     if absent:
