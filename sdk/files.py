@@ -377,12 +377,20 @@ _YAML_FLOAT = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]
     |\.(?:nan|NaN|NAN))$""", re.X)
 
 
+#: The tag :func:`read_sidecar`'s loader gives a number YAML 1.2 reads and YAML 1.1 does not (``1e-3``).
+_FLOAT12_TAG = "tag:rtp,2026:float12"
+
+
+class _Float12(float):
+    """A number only YAML 1.2 reads (``1e-3``, ``4e12345``), with the text it was written as."""
+
+    text: str
+
+
 @functools.cache
 def _sidecar_loader() -> Any:
     """PyYAML's safe loader as a metadata sidecar is read (:func:`read_sidecar`)."""
     import yaml
-
-    float_tag, drop = "tag:yaml.org,2002:float", {"tag:yaml.org,2002:float", "tag:yaml.org,2002:timestamp"}
 
     class SidecarLoader(yaml.SafeLoader):
         def construct_mapping(self, node: Any, deep: bool = False) -> Any:
@@ -398,18 +406,42 @@ def _sidecar_loader() -> Any:
                     seen[key.value] = key.start_mark.line
             return super().construct_mapping(node, deep=deep)
 
+    def float12(loader: Any, node: Any) -> _Float12:
+        text = str(loader.construct_scalar(node))
+        number = _Float12(text.replace("_", ""))
+        number.text = text
+        return number
+
     # (no timestamps, as YAML 1.2's core schema: a provenance date stays the text it is, a JSON value, where a date
-    # object was refused as "not JSON serializable" and 2026-02-30 raised a bare ValueError)
+    # object was refused as "not JSON serializable" and 2026-02-30 raised a bare ValueError; YAML 1.1's own numbers
+    # as before, then YAML 1.2's others tagged, for read_sidecar to settle)
     SidecarLoader.yaml_implicit_resolvers = {
-        first: [(tag, rx) for tag, rx in resolvers if tag not in drop]
+        first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:timestamp"]
         for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
-    SidecarLoader.add_implicit_resolver(float_tag, _YAML_FLOAT, list("-+0123456789."))
+    SidecarLoader.add_implicit_resolver(_FLOAT12_TAG, _YAML_FLOAT, list("-+0123456789."))
+    SidecarLoader.add_constructor(_FLOAT12_TAG, float12)
     return SidecarLoader
+
+
+def _settle(value: Any, as_text: bool) -> Any:
+    """``value`` with each YAML 1.2-only number (:class:`_Float12`) a plain float, or, ``as_text``, the text it was."""
+    if isinstance(value, _Float12):
+        return value.text if as_text else float(value)
+    if isinstance(value, dict):
+        return {_settle(k, as_text): _settle(v, as_text) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_settle(v, as_text) for v in value]
+    return value
 
 
 def read_sidecar(text: str) -> Any:
     """A metadata sidecar's YAML ``text`` as Python values: PyYAML's safe loader, but floats as YAML 1.2 reads them
-    (``1e-3``), dates left as text and a key given twice in one mapping refused (``yaml.YAMLError``)."""
+    (``1e-3``), dates left as text and a key given twice in one mapping refused (``yaml.YAMLError``). Inside the
+    free-form ``provenance``, a number only YAML 1.2 reads stays the text it was, as YAML 1.1 reads it (an unquoted
+    git hash such as ``4e12345`` was the float inf, refused as not JSON)."""
     import yaml
 
-    return yaml.load(text, Loader=_sidecar_loader())  # noqa: S506  (a SafeLoader)
+    data = yaml.load(text, Loader=_sidecar_loader())  # noqa: S506  (a SafeLoader)
+    if isinstance(data, dict):
+        return {_settle(k, False): _settle(v, k == "provenance") for k, v in data.items()}
+    return _settle(data, False)

@@ -233,10 +233,13 @@ def test_a_yaml_sidecar_reads_exponents_as_numbers_dates_as_text_and_refuses_a_k
     p = tmp_path / "side.yaml"
     p.write_text("metric: jnyang\ntransform: {type: logistic, mu_y: 2.5E-1, k: 1e1}\ntile_size: 16\nsafety: 1e-3\n"
                  "inputs: [reprojected.r, seen, albedo.r, normal.z]\noutputs: [1x2, 2x1]\ndefault_threshold: 2e-1\n"
-                 "weber_l: 1e-10\nprovenance: {trained: 2026-12-01, lr: -5e-4}\n")
+                 "weber_l: 1e-10\nprovenance: {trained: 2026-12-01, lr: -5e-4, commit: 4e12345, step: 1.5}\n")
     m = sdk.ModelMetadata.from_yaml(p)
     assert (m.transform.mu_y, m.transform.k, m.safety, m.default_threshold, m.weber_l) == (0.25, 10.0, 1e-3, 0.2, 1e-10)
-    assert m.provenance == {"trained": "2026-12-01", "lr": -5e-4}
+    # (the free-form provenance keeps what only YAML 1.2 reads as a number as its text: an unquoted git hash such as
+    # 4e12345 was the float inf there, refused as "not JSON compliant")
+    assert m.provenance == {"trained": "2026-12-01", "lr": "-5e-4", "commit": "4e12345", "step": 1.5}
+    assert type(m.safety) is float and type(m.transform.k) is float
     p.write_text(p.read_text() + "default_threshold: 0.3\n")
     with pytest.raises(sdk.MetadataError, match=r"'default_threshold' given twice, first on line 7 .*line 10"):
         sdk.ModelMetadata.from_yaml(p)
