@@ -419,6 +419,24 @@ def test_a_finished_folder_needs_no_cluster(local: Path, tmp_path: Path, monkeyp
         capture(SCENES, out, per_scene=2, size=SIZE, ray="127.0.0.1:1")
 
 
+class _FakeRay:
+    """A stand-in for the ``ray`` module whose ``init`` records the CPUs asked for in ``calls`` and raises
+    ``raises``; ``shutdown`` records "shutdown"."""
+
+    def __init__(self, calls: list[Any], raises: BaseException) -> None:
+        self.calls, self.raises = calls, raises
+
+    def is_initialized(self) -> bool:
+        return False
+
+    def init(self, **kwargs: Any) -> None:
+        self.calls.append(kwargs.get("num_cpus"))
+        raise self.raises
+
+    def shutdown(self) -> None:
+        self.calls.append("shutdown")
+
+
 def test_a_ray_start_that_fails_or_is_interrupted_shuts_down_what_it_started(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A private instance whose ray.init failed or was interrupted half-way (its GCS server and raylet started)
@@ -428,24 +446,8 @@ def test_a_ray_start_that_fails_or_is_interrupted_shuts_down_what_it_started(
     from rtp.capture import _ray
 
     calls: list[Any] = []
-
-    class FakeRay:
-        raises: BaseException = RuntimeError("the raylet did not start in time")
-
-        @staticmethod
-        def is_initialized() -> bool:
-            return False
-
-        @staticmethod
-        def init(**kwargs: Any) -> None:
-            calls.append(kwargs.get("num_cpus"))
-            raise FakeRay.raises
-
-        @staticmethod
-        def shutdown() -> None:
-            calls.append("shutdown")
-
-    monkeypatch.setattr(_ray, "_ray", lambda: FakeRay)
+    fake = _FakeRay(calls, RuntimeError("the raylet did not start in time"))
+    monkeypatch.setattr(_ray, "_ray", lambda: fake)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2}, raising=False)
     monkeypatch.setattr(os, "cpu_count", lambda: 64)
     with pytest.raises(RayExecutorError, match="cannot start or reach Ray at 'local': the raylet did not start"):
@@ -453,7 +455,7 @@ def test_a_ray_start_that_fails_or_is_interrupted_shuts_down_what_it_started(
             pass
     assert calls == [3, "shutdown"]
     calls.clear()
-    FakeRay.raises = KeyboardInterrupt()
+    fake.raises = KeyboardInterrupt()
     with pytest.raises(KeyboardInterrupt):
         with ray_cluster(None, 2):
             pass
@@ -515,27 +517,12 @@ def test_a_private_instances_workers_are_counted_as_ray_starts_them(
     assert counted == [8]
 
     inits: list[Any] = []
-
-    class FakeRay:
-        @staticmethod
-        def is_initialized() -> bool:
-            return False
-
-        @staticmethod
-        def init(**kwargs: Any) -> None:
-            inits.append(kwargs.get("num_cpus"))
-            raise RuntimeError("no start here")
-
-        @staticmethod
-        def shutdown() -> None:
-            pass
-
-    monkeypatch.setattr(_ray, "_ray", lambda: FakeRay)
+    monkeypatch.setattr(_ray, "_ray", lambda: _FakeRay(inits, RuntimeError("no start here")))
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
     caplog.set_level(logging.WARNING, logger="rtp.capture")
     with pytest.raises(RayExecutorError, match="no start here"), ray_cluster("local", 1000, 5):
         pass
-    assert inits == [5] and "5 Ray workers on the 2 cores this process may run on" in caplog.text
+    assert inits == [5, "shutdown"] and "5 Ray workers on the 2 cores this process may run on" in caplog.text
 
 
 def test_rays_own_failures_name_the_sample_and_are_typed() -> None:
